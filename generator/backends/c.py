@@ -1,0 +1,53 @@
+"""C99 backend: a printer and the two files it renders (header, source)."""
+
+from __future__ import annotations
+
+import sympy as sm
+from sympy.printing.c import C99CodePrinter
+from sympy.printing.precedence import PRECEDENCE
+
+from gyrogen.backends.printing import statements, used_states
+from gyrogen.optimize import constants
+from gyrogen.render import render
+from gyrogen.unit import Unit
+
+
+class CPrinter(C99CodePrinter):
+    """C99 with the hoisted constants as c[k] and small integer powers as
+    products (x*x beats pow(x, 2))."""
+
+    def __init__(self, nc: int) -> None:
+        super().__init__()
+        self._names = {c.name: f"c[{k}]" for k, c in enumerate(constants(nc))}
+
+    def _print_Symbol(self, expr: sm.Symbol) -> str:
+        return self._names.get(expr.name) or str(super()._print_Symbol(expr))
+
+    def _print_Pow(self, expr: sm.Pow) -> str:
+        base, exp = expr.base, expr.exp
+        if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
+            b = self.parenthesize(base, PRECEDENCE["Mul"] + 1)
+            n = abs(int(exp))
+            if n == 1:
+                return f"1.0/{b}"
+            prod = "*".join([b] * n)
+            return prod if exp > 0 else f"1.0/({prod})"
+        return str(super()._print_Pow(expr))
+
+
+def files(unit: Unit) -> dict[str, str]:
+    printer = CPrinter(unit.nc)
+
+    def assign(lhs: str, expr: sm.Expr) -> str:
+        return f"{lhs} = {printer.doprint(expr)};"
+
+    ctx = {
+        "unit": unit,
+        "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
+        "rhs": statements(unit.optimized.rhs, lambda i: f"dxdt[{i}]", assign),
+        "rhs_states": used_states(unit.optimized.rhs, unit.states),
+    }
+    return {
+        f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),
+        f"{unit.prefix}.c": render("c/source.c.jinja", **ctx),
+    }

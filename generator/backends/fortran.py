@@ -1,0 +1,53 @@
+"""Fortran 2008 backend: a printer and the module it renders."""
+
+from __future__ import annotations
+
+import sympy as sm
+from sympy.printing.fortran import FCodePrinter
+
+from gyrogen.backends.printing import statements, used_states
+from gyrogen.errors import GyrogenError
+from gyrogen.optimize import constants
+from gyrogen.render import render
+from gyrogen.unit import Unit
+
+
+class FortranPrinter(FCodePrinter):
+    """Fortran 2008 free form (wrapped under 132 columns) with the hoisted
+    constants as c(k+1). Names are printed as they are: `_check_names`
+    refuses a function whose names differ only in case, where sympy would
+    mangle them silently."""
+
+    def __init__(self, nc: int) -> None:
+        super().__init__({"standard": 2008, "source_format": "free", "name_mangling": False})
+        self._names = {c.name: f"c({k + 1})" for k, c in enumerate(constants(nc))}
+
+    def _print_Symbol(self, expr: sm.Symbol) -> str:
+        return self._names.get(expr.name) or str(super()._print_Symbol(expr))
+
+
+def _check_names(names: list[str], where: str) -> None:
+    seen: dict[str, str] = {}
+    for n in names:
+        other = seen.setdefault(n.lower(), n)
+        if other != n:
+            raise GyrogenError(f"Fortran ignores case: {other!r} and {n!r} clash in {where}")
+
+
+def files(unit: Unit) -> dict[str, str]:
+    printer = FortranPrinter(unit.nc)
+
+    def assign(lhs: str, expr: sm.Expr) -> str:
+        return str(printer.doprint(expr, assign_to=sm.Symbol(lhs)))
+
+    ctx = {
+        "unit": unit,
+        "setup": statements(unit.optimized.setup, lambda k: f"c({k + 1})", assign),
+        "rhs": statements(unit.optimized.rhs, lambda i: f"dxdt({i + 1})", assign),
+        "rhs_states": used_states(unit.optimized.rhs, unit.states),
+    }
+    setup_locals = [p.name for p in unit.params] + [s.name for s in ctx["setup"] if s.declare]
+    rhs_locals = [x.name for x in unit.states] + [s.name for s in ctx["rhs"] if s.declare]
+    _check_names(["p", "c", "status", "half_gap", "largest", *setup_locals], "setup")
+    _check_names(["t", "x", "c", "dxdt", *rhs_locals], "rhs")
+    return {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}

@@ -1,0 +1,241 @@
+"""Compile generated sources and load them into Python through cffi.
+
+C: gcc compiles <prefix>.c to an object; Fortran: gfortran builds
+lib<prefix>_f.so. Either way a small cffi module (templates/cffi) links it and
+adds a loop over many states. Builds land in a cache directory keyed by a
+hash of the sources, the flags and the tool versions, so rebuilding unchanged
+sources costs nothing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Literal
+
+import cffi
+import numpy as np
+
+from gyrogen.errors import BuildError
+from gyrogen.render import render
+
+Language = Literal["c", "fortran"]
+
+C_FLAGS = (
+    "-std=c99",
+    "-O2",
+    "-fPIC",
+    "-fno-math-errno",
+    "-Wall",
+    "-Wextra",
+    "-Wpedantic",
+    "-Werror",
+)
+FORTRAN_FLAGS = ("-std=f2008", "-O2", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Werror")
+_PACKAGES = {"gcc": "gcc", "gfortran": "gfortran"}
+
+
+def cache_root() -> Path:
+    """$GYROGEN_CACHE, else $XDG_CACHE_HOME/gyrogen, else ~/.cache/gyrogen."""
+    if env := os.environ.get("GYROGEN_CACHE"):
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "gyrogen"
+
+
+def require(tool: str) -> str:
+    path = shutil.which(tool)
+    if path is None:
+        pkg = _PACKAGES.get(tool, tool)
+        raise BuildError(f"{tool} not found: install it with `apt-get install -y {pkg}`")
+    return path
+
+
+def _run(cmd: list[str], cwd: Path) -> None:
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        msg = (proc.stderr or proc.stdout).strip()
+        raise BuildError(f"{Path(cmd[0]).name} failed on {cmd[-1]}:\n{msg}")
+
+
+@dataclass(frozen=True)
+class Compiled:
+    """One backend loaded in this process: setup and rhs on numpy arrays."""
+
+    language: Language
+    manifest: dict[str, Any]
+    ffi: Any
+    lib: Any
+
+    @property
+    def nx(self) -> int:
+        return int(self.manifest["nx"])
+
+    @property
+    def nc(self) -> int:
+        return int(self.manifest["nc"])
+
+    def setup_code(self, p: np.ndarray) -> tuple[int, np.ndarray]:
+        p = np.ascontiguousarray(p, dtype=np.float64)
+        c = np.zeros(self.nc)
+        fn = getattr(self.lib, self.manifest["functions"][self.language]["setup"])
+        code = fn(self.ffi.from_buffer("double[]", p), self.ffi.from_buffer("double[]", c))
+        return int(code), c
+
+    def setup(self, p: np.ndarray) -> np.ndarray:
+        code, c = self.setup_code(p)
+        if code != 0:
+            raise ValueError(
+                f"setup refused the parameters: {self.manifest['setup_codes'][str(code)]}"
+            )
+        return c
+
+    def rhs(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """dx/dt for a batch of states x (n, nx) or one state (nx,)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        out = np.empty_like(x)
+        n = x.size // self.nx
+        self.lib.gyrogen_rhs_batch(
+            n,
+            t,
+            self.ffi.from_buffer("double[]", x),
+            self.ffi.from_buffer("double[]", np.ascontiguousarray(c, dtype=np.float64)),
+            self.ffi.from_buffer("double[]", out),
+        )
+        return out
+
+
+def _tool_version(tool: str) -> str:
+    out = subprocess.run([tool, "--version"], capture_output=True, text=True, check=False)
+    return out.stdout.splitlines()[0] if out.stdout else tool
+
+
+def _key(language: Language, sources: list[Path], glue: str, cdef: str) -> str:
+    h = hashlib.sha256()
+    tool = "gcc" if language == "c" else "gfortran"
+    flags = C_FLAGS if language == "c" else FORTRAN_FLAGS
+    for part in (language, _tool_version(tool), " ".join(flags), glue, cdef, sys.version):
+        h.update(part.encode() + b"\0")
+    h.update(cffi.__version__.encode())
+    for src in sources:
+        h.update(src.name.encode() + b"\0" + src.read_bytes() + b"\0")
+    return h.hexdigest()[:20]
+
+
+_LOADED: dict[str, ModuleType] = {}
+
+
+def _load(module_name: str, directory: Path) -> ModuleType:
+    if module_name in _LOADED:
+        return _LOADED[module_name]
+    (so,) = directory.glob(f"{module_name}*.so")
+    spec = importlib.util.spec_from_file_location(module_name, so)
+    if spec is None or spec.loader is None:
+        raise BuildError(f"cannot load the compiled module {so}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    _LOADED[module_name] = module
+    return module
+
+
+def build(source_dir: Path, language: Language) -> Compiled:
+    """Compile (or fetch from the cache) and load one backend of the
+    generated sources in source_dir (which holds manifest.json)."""
+    source_dir = Path(source_dir)
+    manifest_path = source_dir / "manifest.json"
+    if not manifest_path.is_file():
+        raise BuildError(f"no manifest.json in {source_dir}: run `gyrogen generate` first")
+    manifest = json.loads(manifest_path.read_text())
+    prefix = manifest["prefix"]
+    names = manifest["functions"][language]
+    tool = require("gcc")
+    if language == "fortran":
+        require("gfortran")
+    files = manifest["files"]
+    sources = [source_dir / files["c_header"], source_dir / files["c_source"]]
+    if language == "fortran":
+        sources = [source_dir / files["fortran"]]
+    ctx = {"setup": names["setup"], "rhs": names["rhs"], "nx": manifest["nx"]}
+    glue = render("cffi/glue.c.jinja", **ctx)
+    cdef = render("cffi/cdef.h.jinja", **ctx)
+    key = _key(language, sources, glue, cdef)
+    module_name = f"_gyrogen_{prefix}_{language}_{key}"
+    final = cache_root() / key
+    if not final.is_dir():
+        _compile(language, sources, glue, cdef, module_name, final, tool)
+    module = _load(module_name, final)
+    return Compiled(language, manifest, module.ffi, module.lib)
+
+
+def _compile(
+    language: Language,
+    sources: list[Path],
+    glue: str,
+    cdef: str,
+    module_name: str,
+    final: Path,
+    cc: str,
+) -> None:
+    final.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=".build-", dir=final.parent))
+    try:
+        for src in sources:
+            shutil.copy2(src, work / src.name)
+        ffi = cffi.FFI()
+        ffi.cdef(cdef)
+        if language == "c":
+            source = next(s for s in sources if s.suffix == ".c")
+            _run([cc, *C_FLAGS, "-c", "-o", "rhs.o", source.name], work)
+            ffi.set_source(module_name, glue, extra_objects=[str(work / "rhs.o")])
+        else:
+            lib = module_name + "_f"
+            src = sources[0]
+            gf = require("gfortran")
+            _run([gf, *FORTRAN_FLAGS, "-shared", "-J", ".", "-o", f"lib{lib}.so", src.name], work)
+            ffi.set_source(
+                module_name,
+                glue,
+                libraries=[lib],
+                library_dirs=[str(work)],
+                runtime_library_dirs=[str(final)],
+            )
+        _cffi_compile(ffi, work)
+        try:
+            work.rename(final)
+        except OSError:  # another process built the same key first
+            if not final.is_dir():
+                raise
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _cffi_compile(ffi: cffi.FFI, work: Path) -> None:
+    """cffi runs the compiler through setuptools; keep its chatter off the
+    terminal but show it when the glue does not compile."""
+    log = work / "cffi.log"
+    with open(log, "w") as fh:
+        saved = os.dup(1), os.dup(2)
+        try:
+            os.dup2(fh.fileno(), 1)
+            os.dup2(fh.fileno(), 2)
+            ffi.compile(tmpdir=str(work), verbose=False)
+        except Exception as exc:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            raise BuildError(
+                f"cffi could not build the glue module: {exc}\n{log.read_text()}"
+            ) from exc
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])

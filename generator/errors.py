@@ -1,0 +1,13 @@
+"""The one exception gyrogen raises for the user's mistakes and missing tools.
+
+Its message is a single line that names what is wrong and why; the CLI prints
+it and exits non-zero without a traceback.
+"""
+
+
+class GyrogenError(Exception):
+    exit_code = 1
+
+
+class BuildError(GyrogenError):
+    """A compiler is missing or refused the generated code."""

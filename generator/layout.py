@@ -1,0 +1,86 @@
+"""Names and order of the full model's states and parameters.
+
+Plain Python, no sympy: the numpy reference and the tests read these too, and
+they must not depend on the symbolic model they are meant to check.
+"""
+
+from __future__ import annotations
+
+STATES: tuple[str, ...] = tuple(f"q{i}" for i in range(1, 8)) + tuple(f"u{i}" for i in range(1, 8))
+"""q1..q3: 3-1-2 Euler angles of the carrier A in N; q4: rotor angle about a2
+relative to A; q5..q7: position of the mass center AB* in N; u1..u3: angular
+velocity of A (A-components); u4: a2 component of the rotor's absolute angular
+velocity; u5..u7: velocity of AB* (N-components)."""
+
+PARAMETERS: tuple[str, ...] = (
+    "m_a",
+    "m_b",
+    "I11",
+    "I22",
+    "I33",
+    "I13",
+    "I",
+    "J",
+    "l1",
+    "l3",
+    "g",
+    "T",
+)
+
+PARAMETER_DOC: dict[str, tuple[str, str]] = {
+    "m_a": ("kg", "mass of the carrier A"),
+    "m_b": ("kg", "mass of the rotor B"),
+    "I11": ("kg m^2", "carrier inertia about A*, a1a1"),
+    "I22": ("kg m^2", "carrier inertia about A*, a2a2"),
+    "I33": ("kg m^2", "carrier inertia about A*, a3a3"),
+    "I13": ("kg m^2", "carrier product of inertia about A*, a1a3"),
+    "I": ("kg m^2", "rotor transverse inertia about B*"),
+    "J": ("kg m^2", "rotor axial inertia about B* (axis a2)"),
+    "l1": ("m", "B* from A* along a1"),
+    "l3": ("m", "B* from A* along a3"),
+    "g": ("m/s^2", "gravity along +n3"),
+    "T": ("N m", "motor torque on B about a2 (minus on A)"),
+}
+
+STATE_DOC: dict[str, tuple[str, str]] = {
+    "q1": ("rad", "3-1-2 Euler angle 1 of A in N (about n3)"),
+    "q2": ("rad", "3-1-2 Euler angle 2 of A in N (about a1')"),
+    "q3": ("rad", "3-1-2 Euler angle 3 of A in N (about a2)"),
+    "q4": ("rad", "rotor angle about a2 relative to A"),
+    "q5": ("m", "AB* position, n1"),
+    "q6": ("m", "AB* position, n2"),
+    "q7": ("m", "AB* position, n3"),
+    "u1": ("rad/s", "angular velocity of A, a1"),
+    "u2": ("rad/s", "angular velocity of A, a2"),
+    "u3": ("rad/s", "angular velocity of A, a3"),
+    "u4": ("rad/s", "absolute angular velocity of B, a2"),
+    "u5": ("m/s", "velocity of AB*, n1"),
+    "u6": ("m/s", "velocity of AB*, n2"),
+    "u7": ("m/s", "velocity of AB*, n3"),
+}
+
+# Return codes of <prefix>_setup, checked in this order; the first failure wins.
+SETUP_CODES: dict[int, str] = {
+    0: "parameters accepted",
+    1: "a parameter is NaN or infinite",
+    2: "a mass (m_a or m_b) is not positive",
+    3: "a rotor inertia (I or J) is not positive",
+    4: "the carrier inertia is not positive definite",
+    5: "the carrier's principal moments violate the triangle inequality",
+    6: "the rotor violates the triangle inequality (2 I < J)",
+}
+
+# Macro suffixes of the setup codes: <PREFIX>_<suffix> in the C header.
+SETUP_CODE_NAMES: dict[int, str] = {
+    0: "OK",
+    1: "ERR_NONFINITE",
+    2: "ERR_MASS",
+    3: "ERR_ROTOR_INERTIA",
+    4: "ERR_CARRIER_NOT_PD",
+    5: "ERR_CARRIER_TRIANGLE",
+    6: "ERR_ROTOR_TRIANGLE",
+}
+
+# Relative slack of the triangle-inequality checks: equality is physical (a
+# lamina, a thin disc), and rounding must not refuse it.
+TRIANGLE_SLACK = 1e-12

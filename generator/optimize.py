@@ -1,0 +1,179 @@
+"""Turn M u' = F, q' = f into two blocks of straight-line code.
+
+``setup`` runs once per parameter set: the lumped inertias, the inverse of the
+constant mass matrix and every coefficient that depends on parameters only,
+stored as constants c0, c1, ...  ``rhs`` runs per call and reads states and
+constants only: it never solves a linear system.
+
+How: u' = M^-1 F is expanded as a polynomial in the states; each coefficient
+that involves parameters becomes a hoisted constant (shared when two terms
+have the same or the opposite coefficient); what remains is factored by
+Horner's scheme and then shares its common subexpressions.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+
+import sympy as sm
+
+from gyrogen.equations import Equations
+
+
+@dataclass(frozen=True)
+class Assignment:
+    lhs: sm.Symbol
+    rhs: sm.Expr
+
+
+@dataclass(frozen=True)
+class Block:
+    """Straight-line code: temporaries first, then one value per output."""
+
+    temporaries: tuple[Assignment, ...]
+    outputs: tuple[sm.Expr, ...]
+
+    @property
+    def ops(self) -> int:
+        return count_ops([a.rhs for a in self.temporaries], self.outputs)
+
+
+@dataclass(frozen=True)
+class Optimized:
+    setup: Block
+    """Outputs: the hoisted constants c0..c{nc-1}, in terms of parameters."""
+    rhs: Block
+    """Outputs: dx/dt in state order, in terms of states and constants."""
+    lumped: tuple[Assignment, ...]
+    """The lumped inertia scalars: named temporaries of setup."""
+
+    @property
+    def nc(self) -> int:
+        return len(self.setup.outputs)
+
+
+def count_ops(*groups: Iterable[sm.Expr]) -> int:
+    """The issue's measure: sympy.count_ops summed over every assignment.
+
+    A trig call counts once wherever CSE has left it: count_ops already
+    counts sin(x) as one operation.
+    """
+    return sum(int(sm.count_ops(e)) for group in groups for e in group)
+
+
+def constants(n: int) -> tuple[sm.Symbol, ...]:
+    return tuple(sm.Symbol(f"c{k}", real=True) for k in range(n))
+
+
+def _is_per_call(expr: sm.Expr, per_call: set[sm.Symbol]) -> bool:
+    return bool(expr.free_symbols & per_call)
+
+
+def block_inverse(m: sm.Matrix) -> sm.Matrix:
+    """Inverse of a constant matrix, one diagonal block at a time.
+
+    The mass matrix decouples (translation, rotor, carrier); inverting the
+    small blocks keeps the entries short where a full symbolic inverse
+    would not.
+    """
+    inv = sm.zeros(*m.shape)
+    for block in m.connected_components():
+        idx = sorted(block)
+        sub = m.extract(idx, idx)
+        sub_inv = sub.inv() if sub.shape[0] > 1 else sm.Matrix([[1 / sub[0, 0]]])
+        for a, i in enumerate(idx):
+            for b, j in enumerate(idx):
+                inv[i, j] = sm.factor(sm.cancel(sub_inv[a, b]))
+    return inv
+
+
+class _Hoister:
+    """Gives each parameter-only coefficient a constant, sharing equal ones."""
+
+    def __init__(self) -> None:
+        self.values: list[sm.Expr] = []
+        self._index: dict[sm.Expr, int] = {}
+
+    def symbol_for(self, coeff: sm.Expr) -> sm.Expr:
+        coeff = sm.factor(sm.cancel(coeff))
+        if coeff.is_number:
+            return coeff
+        if coeff in self._index:
+            return constants(self._index[coeff] + 1)[-1]
+        neg = sm.factor(-coeff)
+        if neg in self._index:
+            return -constants(self._index[neg] + 1)[-1]
+        self._index[coeff] = len(self.values)
+        self.values.append(coeff)
+        return constants(len(self.values))[-1]
+
+
+def _best_horner(poly_expr: sm.Expr, gens: Sequence[sm.Symbol]) -> sm.Expr:
+    """Horner's scheme in the variable order that leaves the fewest ops."""
+    if not gens:
+        return poly_expr
+    best: sm.Expr = poly_expr
+    best_ops = int(sm.count_ops(poly_expr))
+    for order in itertools.permutations(gens):
+        cand = sm.horner(poly_expr, *order)
+        ops = int(sm.count_ops(cand))
+        if ops < best_ops:
+            best, best_ops = cand, ops
+    return best
+
+
+def _hoist(expr: sm.Expr, per_call: Sequence[sm.Symbol], hoister: _Hoister) -> sm.Expr:
+    """Rewrite expr as a Horner form in the per-call symbols with hoisted
+    coefficients. Expressions that are not polynomial in them are left as
+    they are (the kinematics: they hold no parameters)."""
+    expr = sm.expand(expr)
+    gens = [s for s in per_call if s in expr.free_symbols]
+    try:
+        poly = sm.Poly(expr, *gens) if gens else None
+    except sm.PolynomialError:
+        return expr
+    if poly is None:
+        return hoister.symbol_for(expr)
+    if any(_is_per_call(c, set(per_call)) for c in poly.coeffs()):
+        return expr
+    rebuilt = sm.Add(
+        *(
+            hoister.symbol_for(coeff) * sm.Mul(*(g**k for g, k in zip(gens, monom, strict=True)))
+            for monom, coeff in poly.terms()
+        )
+    )
+    return _best_horner(rebuilt, gens)
+
+
+def _cse(exprs: Sequence[sm.Expr], names: Iterator[sm.Symbol]) -> Block:
+    temps, reduced = sm.cse(list(exprs), symbols=names)
+    return Block(tuple(Assignment(s, e) for s, e in temps), tuple(reduced))
+
+
+def _temporaries() -> Iterator[sm.Symbol]:
+    return sm.numbered_symbols("tmp", real=True)
+
+
+def optimize(eqs: Equations) -> Optimized:
+    """Lumped + hoisted + CSE: the variant gyrogen generates."""
+    minv = block_inverse(eqs.mass_matrix)
+    udot = minv * eqs.forcing
+    hoister = _Hoister()
+    per_call = list(eqs.states)
+    dyn = [_hoist(e, per_call, hoister) for e in udot]
+    rhs = _cse([*eqs.kinematics, *dyn], _temporaries())
+    # Two passes share one numbering: the lumped scalars come first, under
+    # their own names, because the constants are written in terms of them.
+    names = _temporaries()
+    first = _cse([eqs.lumped[s] for s in eqs.lumped], names)
+    second = _cse(hoister.values, names)
+    lumped = tuple(Assignment(s, v) for s, v in zip(eqs.lumped, first.outputs, strict=True))
+    setup = Block(first.temporaries + lumped + second.temporaries, second.outputs)
+    return Optimized(setup, rhs, lumped)
+
+
+def cse_only(exprs: Sequence[sm.Expr]) -> Block:
+    """Variant (ii): common subexpressions alone, nothing hoisted."""
+    return _cse(exprs, _temporaries())
