@@ -101,19 +101,43 @@ def _draw_parameters(rng: np.random.Generator, n: int) -> Array:
     return p
 
 
-def random_parameters(rng: np.random.Generator, n: int) -> Array:
+def lumped_condition(p: ArrayLike) -> Array:
+    """Condition number of the coupled block [[I~11, I~13], [I~13, I~33]] of the
+    mass matrix (the other rows decouple): how much any double-precision solve
+    of M u' = F may amplify rounding. Shape: p's batch shape."""
+    pa = np.asarray(p, dtype=float)
+    m_a, m_b = pa[..., _P["m_a"]], pa[..., _P["m_b"]]
+    l1, l3 = pa[..., _P["l1"]], pa[..., _P["l3"]]
+    mu = m_a * m_b / (m_a + m_b)
+    i_rot = pa[..., _P["I"]]
+    a11 = pa[..., _P["I11"]] + i_rot + mu * l3**2
+    a33 = pa[..., _P["I33"]] + i_rot + mu * l1**2
+    a13 = pa[..., _P["I13"]] - mu * l1 * l3
+    half_gap = np.sqrt(0.25 * (a11 - a33) ** 2 + a13**2)
+    largest = 0.5 * (a11 + a33) + half_gap
+    smallest = (a11 * a33 - a13**2) / largest  # not mean - half_gap: that cancels
+    return np.asarray(largest / smallest)
+
+
+def random_parameters(
+    rng: np.random.Generator, n: int, max_condition: float | None = None
+) -> Array:
     """``n`` physically valid parameter rows, shape ``(n, 12)``, in ``layout.PARAMETERS`` order.
 
     Masses log-uniform in [0.1, 1000]; carrier principal moments satisfying the
     triangle inequality (some laminae), rotated in the a1-a3 plane so I13 != 0; rotor
     ``J <= 2 I``; l1, l3 in [-2, 2]; g in [-20, 20]; T in [-10, 10]. Rows failing
     :func:`setup_code` (e.g. by rounding) are redrawn, so every row has code 0.
+    With ``max_condition``, rows whose :func:`lumped_condition` exceeds it are
+    redrawn too.
     """
     if n < 0:
         raise ValueError("n must be >= 0")
     p = _draw_parameters(rng, n)
     for _ in range(100):
         bad = np.array([setup_code(row) != 0 for row in p], dtype=bool)
+        if max_condition is not None:
+            bad |= lumped_condition(p) > max_condition
         if not bad.any():
             break
         p[bad] = _draw_parameters(rng, int(bad.sum()))

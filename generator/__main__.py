@@ -1,0 +1,3 @@
+from gyrogen.cli import main
+
+main()

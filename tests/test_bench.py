@@ -1,0 +1,60 @@
+"""Smoke test of gyrogen.bench on a tiny workload: it runs and reports sane numbers.
+
+Never asserts a speed: timings depend on the machine and its load.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+from gyrogen import bench
+
+pytestmark = pytest.mark.skipif(
+    shutil.which("gcc") is None or shutil.which("gfortran") is None,
+    reason="the benchmark builds the C and Fortran backends",
+)
+
+NAMES = [
+    "cffi_c_call",
+    "compiled_c_rhs",
+    "batch_c",
+    "cffi_fortran_call",
+    "compiled_fortran_rhs",
+    "batch_fortran",
+    "numpy_batch",
+    "numpy_call",
+]
+
+
+def _tiny(tmp: Path | None = None, **kw: bool) -> tuple[list[bench.Measurement], list[str]]:
+    lines: list[str] = []
+    ms = bench.run(out=tmp, repeats=1, echo=lines.append, calls=1000, batch=1000, **kw)
+    return ms, lines
+
+
+def test_tiny_run_reports_every_row(tmp_path: Path) -> None:
+    ms, lines = _tiny(tmp_path, pydy=False)
+    assert [m.name for m in ms] == NAMES
+    for m in ms:
+        assert math.isfinite(m.ns) and m.ns > 0, m
+        assert m.unit in ("call", "state")
+        assert "MISMATCH" not in m.detail
+    text = "\n".join(lines)
+    assert "one call through cffi (C) vs PyDy cython:" in text
+    assert "batched C:" in text
+    doc = json.loads((tmp_path / "bench.json").read_text())
+    assert [m["name"] for m in doc["measurements"]] == NAMES
+    assert doc["machine"]["c_flags"]
+
+
+def test_missing_pydy_skips_only_its_row(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "pydy", None)  # makes `import pydy...` raise ImportError
+    ms, lines = _tiny(pydy=True)
+    assert [m.name for m in ms] == NAMES
+    assert any("pip install -e '.[bench]'" in line for line in lines)
