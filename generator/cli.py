@@ -177,7 +177,9 @@ def run(out: Path | None, states: int, params: int, seed: int) -> None:
 
 
 @cli.command("bench-rhs")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), help="Write bench.json here.")
+@click.option(
+    "--out", type=click.Path(file_okay=False, path_type=Path), help="Write bench.json here."
+)
 @click.option("--repeats", default=5, show_default=True, help="Repeats per timing (best is kept).")
 def bench_rhs(out: Path | None, repeats: int) -> None:
     """Time the RHS: cffi calls, batched C, numpy, and PyDy's cython."""
