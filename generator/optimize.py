@@ -147,6 +147,55 @@ def _hoist(expr: sm.Expr, per_call: Sequence[sm.Symbol], hoister: _Hoister) -> s
     return _best_horner(rebuilt, gens)
 
 
+def _sincos(expr: sm.Expr) -> sm.Expr:
+    """tan(a) -> sin(a)/cos(a): the compiler then pairs sin and cos of one
+    angle into a single sincos call (twice as fast as tan plus cos here)."""
+    return expr.replace(sm.tan, lambda a: sm.sin(a) / sm.cos(a))
+
+
+def _linear(expr: sm.Expr, speeds: Sequence[sm.Symbol]) -> dict[sm.Expr, sm.Expr] | None:
+    """{u: coefficient, 1: constant} if expr is linear in the speeds."""
+    try:
+        poly = sm.Poly(sm.expand(expr), *speeds)
+    except sm.PolynomialError:
+        return None
+    if poly.total_degree() > 1:
+        return None
+    out: dict[sm.Expr, sm.Expr] = {}
+    for monom, coeff in poly.terms():
+        key = sm.Mul(*(u**k for u, k in zip(speeds, monom, strict=True)))
+        out[key] = coeff
+    return out
+
+
+def _reuse_earlier(exprs: Sequence[sm.Expr], speeds: Sequence[sm.Symbol]) -> list[sm.Expr]:
+    """Write an output as rest + k * (an earlier output) when that earlier
+    output's speed terms all appear in it with one common factor k.
+
+    The kinematic equations of 3-1-2 angles have this shape: q3' equals
+    u2 - sin(q2) q1'. CSE then computes q1' once instead of twice over.
+    """
+    forms = [_linear(e, speeds) for e in exprs]
+    out = list(exprs)
+    for j, fj in enumerate(forms):
+        if fj is None:
+            continue
+        for i, fi in enumerate(forms[:j]):
+            if fi is None:
+                continue
+            terms = [u for u in fi if u != 1]
+            if len(terms) < 2 or not all(u in fj for u in terms):
+                continue
+            k = sm.trigsimp(sm.cancel(fj[terms[0]] / fi[terms[0]]))
+            if any(sm.trigsimp(fj[u] - k * fi[u]) != 0 for u in terms):
+                continue
+            rest = sm.Add(*(c * u for u, c in fj.items() if u not in terms))
+            cand = rest + k * (exprs[i] - fi.get(1, 0))
+            if sm.count_ops(cand) < sm.count_ops(out[j]):
+                out[j] = cand
+    return out
+
+
 def _cse(exprs: Sequence[sm.Expr], names: Iterator[sm.Symbol]) -> Block:
     temps, reduced = sm.cse(list(exprs), symbols=names)
     return Block(tuple(Assignment(s, e) for s, e in temps), tuple(reduced))
@@ -163,7 +212,8 @@ def optimize(eqs: Equations) -> Optimized:
     hoister = _Hoister()
     per_call = list(eqs.states)
     dyn = [_hoist(e, per_call, hoister) for e in udot]
-    rhs = _cse([*eqs.kinematics, *dyn], _temporaries())
+    kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[len(eqs.kinematics) :])
+    rhs = _cse([*kin, *dyn], _temporaries())
     # Two passes share one numbering: the lumped scalars come first, under
     # their own names, because the constants are written in terms of them.
     names = _temporaries()

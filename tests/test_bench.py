@@ -7,18 +7,12 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import sys
 from pathlib import Path
 
 import pytest
 
 from gyrogen import bench
-
-pytestmark = pytest.mark.skipif(
-    shutil.which("gcc") is None or shutil.which("gfortran") is None,
-    reason="the benchmark builds the C and Fortran backends",
-)
 
 NAMES = [
     "cffi_c_call",

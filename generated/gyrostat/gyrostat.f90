@@ -6,7 +6,7 @@
 !
 ! Operation counts (sympy.count_ops, temporaries included):
 !   gyrostat_f_setup: 50 ops, once per parameter set
-!   gyrostat_f_rhs:   43 ops per call
+!   gyrostat_f_rhs:   40 ops per call
 !
 ! The same interface as gyrostat.h, callable from C under the bind(C)
 ! names gyrostat_f_setup and gyrostat_f_rhs. State order x(1:14):
@@ -162,7 +162,7 @@ contains
     status = GYROSTAT_OK
   end function gyrostat_setup
 
-  ! dxdt = f(t, x) for the constants c from gyrostat_setup (43 ops).
+  ! dxdt = f(t, x) for the constants c from gyrostat_setup (40 ops).
   ! Pure: no allocation, no saved state. Singular at cos(q2) = 0.
   subroutine gyrostat_rhs(t, x, c, dxdt) bind(C, name="gyrostat_f_rhs")
     real(c_double), value, intent(in) :: t
@@ -181,7 +181,6 @@ contains
     real(c_double) :: tmp0
     real(c_double) :: tmp1
     real(c_double) :: tmp2
-    real(c_double) :: tmp3
 
     associate (unused => t)  ! t is unused when the system is autonomous
     end associate
@@ -195,12 +194,11 @@ contains
     u6 = x(13)
     u7 = x(14)
     tmp0 = sin(q3)
-    tmp1 = tmp0*u1
-    tmp2 = cos(q3)
-    tmp3 = tan(q2)
-    dxdt(1) = (-tmp1 + tmp2*u3)/cos(q2)
-    dxdt(2) = tmp0*u3 + tmp2*u1
-    dxdt(3) = tmp1*tmp3 - tmp2*tmp3*u3 + u2
+    tmp1 = cos(q3)
+    tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
+    dxdt(1) = tmp2
+    dxdt(2) = tmp0*u3 + tmp1*u1
+    dxdt(3) = -tmp2*sin(q2) + u2
     dxdt(4) = -u2 + u4
     dxdt(5) = u5
     dxdt(6) = u6

@@ -7,7 +7,7 @@
  *
  * Operation counts (sympy.count_ops, temporaries included):
  *   gyrostat_setup: 50 ops, once per parameter set
- *   gyrostat_rhs:   43 ops per call
+ *   gyrostat_rhs:   40 ops per call
  */
 #ifndef GYROSTAT_H
 #define GYROSTAT_H
