@@ -94,9 +94,8 @@ class Compiled:
     def setup(self, p: np.ndarray) -> np.ndarray:
         code, c = self.setup_code(p)
         if code != 0:
-            raise ValueError(
-                f"setup refused the parameters: {self.manifest['setup_codes'][str(code)]}"
-            )
+            why = self.manifest["setup_codes"][str(code)]
+            raise ValueError(f"setup refused the parameters (code {code}): {why}")
         return c
 
     def rhs(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:

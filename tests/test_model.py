@@ -38,8 +38,9 @@ def test_mass_matrix_is_constant() -> None:
 
 
 def test_kinematics_as_printed_in_the_paper() -> None:
-    q1, q2, q3, q4, q5, q6, q7, u1, u2, u3, u4, u5, u6, u7 = equations.plain_states()
-    s2, c2, s3, c3, t2 = sm.sin(q2), sm.cos(q2), sm.sin(q3), sm.cos(q3), sm.tan(q2)
+    q = equations.plain_states()
+    q2, q3, u1, u2, u3, u4, u5, u6, u7 = q[1], q[2], *q[7:]
+    c2, s3, c3, t2 = sm.cos(q2), sm.sin(q3), sm.cos(q3), sm.tan(q2)
     paper = [
         -s3 * u1 / c2 + c3 * u3 / c2,
         c3 * u1 + s3 * u3,

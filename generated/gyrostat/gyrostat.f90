@@ -49,13 +49,20 @@ module gyrostat_mod
   integer, parameter, public :: GYROSTAT_NC = 11  ! hoisted constants
 
   ! Return codes of gyrostat_setup, checked in this order.
-  integer(c_int), parameter, public :: GYROSTAT_OK                      = 0  ! parameters accepted
-  integer(c_int), parameter, public :: GYROSTAT_ERR_NONFINITE           = 1  ! a parameter is NaN or infinite
-  integer(c_int), parameter, public :: GYROSTAT_ERR_MASS                = 2  ! a mass (m_a or m_b) is not positive
-  integer(c_int), parameter, public :: GYROSTAT_ERR_ROTOR_INERTIA       = 3  ! a rotor inertia (I or J) is not positive
-  integer(c_int), parameter, public :: GYROSTAT_ERR_CARRIER_NOT_PD      = 4  ! the carrier inertia is not positive definite
-  integer(c_int), parameter, public :: GYROSTAT_ERR_CARRIER_TRIANGLE    = 5  ! the carrier's principal moments violate the triangle inequality
-  integer(c_int), parameter, public :: GYROSTAT_ERR_ROTOR_TRIANGLE      = 6  ! the rotor violates the triangle inequality (2 I < J)
+  ! 0: parameters accepted
+  integer(c_int), parameter, public :: GYROSTAT_OK = 0
+  ! 1: a parameter is NaN or infinite
+  integer(c_int), parameter, public :: GYROSTAT_ERR_NONFINITE = 1
+  ! 2: a mass (m_a or m_b) is not positive
+  integer(c_int), parameter, public :: GYROSTAT_ERR_MASS = 2
+  ! 3: a rotor inertia (I or J) is not positive
+  integer(c_int), parameter, public :: GYROSTAT_ERR_ROTOR_INERTIA = 3
+  ! 4: the carrier inertia is not positive definite
+  integer(c_int), parameter, public :: GYROSTAT_ERR_CARRIER_NOT_PD = 4
+  ! 5: the carrier's principal moments violate the triangle inequality
+  integer(c_int), parameter, public :: GYROSTAT_ERR_CARRIER_TRIANGLE = 5
+  ! 6: the rotor violates the triangle inequality (2 I < J)
+  integer(c_int), parameter, public :: GYROSTAT_ERR_ROTOR_TRIANGLE = 6
 
 contains
 

@@ -1,0 +1,92 @@
+"""generated/ is what the generator renders today, byte for byte, and the
+rendered files say what they are."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import sympy
+
+import gyrogen
+from gyrogen.generate import generate
+from gyrogen.layout import PARAMETERS, STATES
+from gyrogen.scene import DEFAULT
+
+REPO = Path(__file__).resolve().parents[1]
+CHECKED_IN = REPO / "generated" / DEFAULT.name
+FILES = ["gyrostat.h", "gyrostat.c", "gyrostat.f90", "manifest.json"]
+
+
+def test_checked_in_sources_are_fresh(source_dir: Path) -> None:
+    """Run `make generate` when this fails: a template or the generator changed."""
+    assert sorted(p.name for p in CHECKED_IN.iterdir()) == sorted(FILES)
+    for name in FILES:
+        fresh = (source_dir / name).read_bytes()
+        assert (CHECKED_IN / name).read_bytes() == fresh, (
+            f"generated/{DEFAULT.name}/{name} is stale"
+        )
+
+
+def test_generation_is_deterministic(tmp_path: Path, source_dir: Path) -> None:
+    generate(DEFAULT, tmp_path / "again")
+    for name in FILES:
+        assert (tmp_path / "again" / name).read_bytes() == (source_dir / name).read_bytes()
+
+
+def test_no_absolute_paths_or_timestamps(source_dir: Path) -> None:
+    for name in FILES:
+        text = (source_dir / name).read_text()
+        assert str(source_dir) not in text and str(REPO) not in text
+        assert "2026" not in text and "UTC" not in text
+
+
+def test_preambles(source_dir: Path) -> None:
+    manifest = json.loads((source_dir / "manifest.json").read_text())
+    ops = manifest["ops"]
+    for name, template in [
+        ("gyrostat.h", "c/header.h.jinja"),
+        ("gyrostat.c", "c/source.c.jinja"),
+        ("gyrostat.f90", "fortran/module.f90.jinja"),
+    ]:
+        head = "\n".join((source_dir / name).read_text().splitlines()[:12])
+        assert template in head
+        assert "Do not edit" in head
+        assert f"{ops['setup']} ops" in head and f"{ops['rhs']} ops" in head
+
+
+def test_header_interface(source_dir: Path) -> None:
+    h = (source_dir / "gyrostat.h").read_text()
+    assert "#define GYROSTAT_NX 14" in h
+    assert "#define GYROSTAT_NP 12" in h
+    assert "#define GYROSTAT_NC " in h
+    assert "int  gyrostat_setup(const double *p, double *c);" in h
+    assert "void gyrostat_rhs(double t, const double *x, const double *c, double *dxdt);" in h
+    assert 'extern "C"' in h
+    for i, name in enumerate(STATES):
+        assert f"x[{i:2d}]  {name}" in h
+    for j, name in enumerate(PARAMETERS):
+        assert f"p[{j:2d}]  {name}" in h
+
+
+def test_fortran_interface(source_dir: Path) -> None:
+    f = (source_dir / "gyrostat.f90").read_text()
+    assert 'bind(C, name="gyrostat_f_setup")' in f
+    assert 'bind(C, name="gyrostat_f_rhs")' in f
+    assert "use, intrinsic :: iso_c_binding" in f
+    assert max(len(line) for line in f.splitlines()) <= 132
+
+
+def test_manifest(source_dir: Path) -> None:
+    m = json.loads((source_dir / "manifest.json").read_text())
+    assert m["prefix"] == "gyrostat"
+    assert m["states"] == list(STATES)
+    assert m["parameters"] == list(PARAMETERS)
+    assert (m["nx"], m["np"]) == (14, 12)
+    assert m["nc"] > 0
+    assert m["functions"]["c"] == {"setup": "gyrostat_setup", "rhs": "gyrostat_rhs"}
+    assert m["functions"]["fortran"]["setup"] == "gyrostat_f_setup"
+    assert m["functions"]["fortran"]["rhs"] == "gyrostat_f_rhs"
+    assert m["ops"]["rhs"] <= 50 and m["ops"]["setup"] > 0
+    assert m["versions"] == {"gyrogen": gyrogen.__version__, "sympy": sympy.__version__}
+    assert m["setup_codes"]["0"] and len(m["setup_codes"]) == 7

@@ -1,0 +1,117 @@
+"""Hoisting and CSE: the per-call code reads states and constants only, is
+small, and computes the same numbers as solving M u' = F directly."""
+
+from __future__ import annotations
+
+import numpy as np
+import sympy as sm
+
+from gyrogen import equations, model, optimize, sampling
+from gyrogen.opcounts import variants
+
+RHS_GOAL = 50
+
+
+def _evaluate(opt: optimize.Optimized, eqs: equations.Equations, p: np.ndarray, x: np.ndarray):
+    """Run the two straight-line blocks in Python, as the C would."""
+    env: dict[sm.Symbol, float] = dict(zip(eqs.params, p, strict=True))
+    for a in opt.setup.temporaries:
+        env[a.lhs] = float(a.rhs.evalf(subs=env))
+    c = [float(e.evalf(subs=env)) for e in opt.setup.outputs]
+    env2: dict[sm.Symbol, float] = dict(zip(optimize.constants(opt.nc), c, strict=True))
+    env2.update(zip(eqs.states, x, strict=True))
+    for a in opt.rhs.temporaries:
+        env2[a.lhs] = float(a.rhs.evalf(subs=env2))
+    return np.array([float(sm.sympify(e).evalf(subs=env2)) for e in opt.rhs.outputs])
+
+
+def _direct(eqs: equations.Equations, p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The unoptimized path: numbers into M and F, then a numeric solve."""
+    subs = dict(zip(eqs.params, p, strict=True))
+    subs.update({s: float(v.subs(subs)) for s, v in eqs.lumped.items()})
+    subs.update(zip(eqs.states, x, strict=True))
+    mm = np.array(eqs.mass_matrix.subs(subs).evalf(), dtype=float)
+    f = np.array(eqs.forcing.subs(subs).evalf(), dtype=float).ravel()
+    kin = np.array(eqs.kinematics.subs(subs).evalf(), dtype=float).ravel()
+    return np.concatenate([kin, np.linalg.solve(mm, f)])
+
+
+def test_optimized_equals_direct_solve() -> None:
+    eqs = equations.full_model()
+    opt = optimize.optimize(eqs)
+    rng = np.random.default_rng(3)
+    params = sampling.random_parameters(rng, 4, max_condition=100)
+    states = sampling.random_states(rng, 4)
+    for p, x in zip(params, states, strict=True):
+        np.testing.assert_allclose(
+            _evaluate(opt, eqs, p, x), _direct(eqs, p, x), rtol=1e-11, atol=1e-11
+        )
+
+
+def test_rhs_reads_only_states_and_constants() -> None:
+    eqs = equations.full_model()
+    opt = optimize.optimize(eqs)
+    allowed = set(eqs.states) | set(optimize.constants(opt.nc))
+    allowed |= {a.lhs for a in opt.rhs.temporaries}
+    used = set().union(*(e.free_symbols for e in opt.rhs.outputs))
+    used |= set().union(*(a.rhs.free_symbols for a in opt.rhs.temporaries))
+    assert used <= allowed, used - allowed
+    assert not used & set(eqs.params), "a parameter leaked into the per-call code"
+
+
+def test_rhs_never_solves_a_linear_system() -> None:
+    """No division by anything that depends on parameters or states except
+    cos(q2) of the kinematics: the inverse of M lives in setup."""
+    eqs = equations.full_model()
+    opt = optimize.optimize(eqs)
+    q2 = eqs.states[1]
+    for expr in [*opt.rhs.outputs, *(a.rhs for a in opt.rhs.temporaries)]:
+        for pw in sm.preorder_traversal(expr):
+            if isinstance(pw, sm.Pow) and pw.exp.is_negative:
+                assert pw.base == sm.cos(q2), f"division by {pw.base} per call"
+
+
+def test_setup_reads_only_parameters() -> None:
+    eqs = equations.full_model()
+    opt = optimize.optimize(eqs)
+    used = set().union(*(a.rhs.free_symbols for a in opt.setup.temporaries))
+    used |= set().union(*(e.free_symbols for e in opt.setup.outputs))
+    assert not used & set(eqs.states)
+
+
+def test_rhs_op_count_meets_goal() -> None:
+    opt = optimize.optimize(equations.full_model())
+    assert opt.rhs.ops <= RHS_GOAL
+
+
+def test_variants_shrink_in_order() -> None:
+    by = {v.key: v.ops for v in variants()}
+    assert by["i"] > by["lu"] > by["ii"] > by["iii"]
+    assert by["iii"] <= RHS_GOAL
+
+
+def test_count_ops_counts_each_trig_once() -> None:
+    a, b = sm.symbols("a b")
+    assert optimize.count_ops([sm.sin(a)], [sm.cos(a) * b]) == 3
+
+
+def test_block_inverse_matches_full_inverse() -> None:
+    m = equations.full_model().mass_matrix
+    inv = optimize.block_inverse(m)
+    assert sm.simplify(inv * m - sm.eye(7)) == sm.zeros(7, 7)
+
+
+def test_kinematics_reuse_earlier_output() -> None:
+    """q3' is written through q1' (u2 - sin(q2) q1'), and no tan is left."""
+    opt = optimize.optimize(equations.full_model())
+    text = " ".join(str(a.rhs) for a in opt.rhs.temporaries) + " ".join(map(str, opt.rhs.outputs))
+    assert "tan" not in text
+    q1dot = opt.rhs.outputs[0]
+    assert q1dot.is_Symbol and q1dot in opt.rhs.outputs[2].free_symbols
+
+
+def test_lumped_scalars_are_named_in_setup() -> None:
+    opt = optimize.optimize(equations.full_model())
+    names = [a.lhs for a in opt.lumped]
+    assert names == list(model.symbols().lumped)
+    assert set(names) <= {a.lhs for a in opt.setup.temporaries}
