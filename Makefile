@@ -1,0 +1,68 @@
+# gyrogen: make targets. `make run` and `make test` set everything up first
+# (compilers through apt-get when root, Python packages into .venv).
+
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+SCENE_DIR := generated/gyrostat
+
+.PHONY: setup system-deps run test lint generate check-generated bench clean distclean
+
+## setup: compilers (gcc, g++, gfortran) and the Python environment in .venv
+setup: system-deps $(STAMP)
+
+system-deps:
+	@missing=""; \
+	for tool in gcc g++ gfortran; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing$$missing (apt-get)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq$$missing >/dev/null || exit 1; \
+	  else \
+	    echo "missing compilers:$$missing; install them with: sudo apt-get update && sudo apt-get install -y$$missing" >&2; \
+	    exit 1; \
+	  fi; \
+	fi
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	@touch $@
+
+## run: the main job on the default scene: generate, build, verify, summary
+run: setup
+	$(BIN)/gyrogen run --out $(SCENE_DIR)
+
+## test: lint, then the whole test suite (compiled tests included)
+test: setup lint
+	$(BIN)/python -m pytest
+
+lint: setup
+	$(BIN)/ruff check generator tests
+	$(BIN)/ruff format --check generator tests
+	$(BIN)/mypy
+
+## generate: rewrite generated/ from the templates and the generator
+generate: setup
+	$(BIN)/gyrogen generate --out $(SCENE_DIR)
+
+## check-generated: fail if generated/ differs from a fresh rendering
+check-generated: setup
+	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
+	$(BIN)/gyrogen generate --out "$$tmp/gyrostat" >/dev/null && \
+	diff -r "$$tmp/gyrostat" $(SCENE_DIR) && echo "generated/ is up to date"
+
+## bench: RHS timings (cffi, batched C and Fortran, numpy, PyDy cython)
+bench: setup
+	$(BIN)/python -m pip install -q -e '.[bench]'
+	$(BIN)/gyrogen bench-rhs --out bench-out
+
+clean:
+	rm -rf build bench-out .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	find generator templates tests -name __pycache__ -type d -prune -exec rm -rf {} +
+	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
+
+distclean: clean
+	rm -rf $(VENV)
