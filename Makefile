@@ -25,9 +25,13 @@ system-deps:
 	  fi; \
 	fi
 
+# The venv gets its packages from the outer pip (pip --python, pip >= 22.3):
+# ensurepip was seen to leave a broken pip in a freshly cloned tree here.
+PIP := $(PYTHON) -m pip --python $(BIN)/python
+
 $(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(PYTHON) -m venv --without-pip $(VENV)
+	$(PIP) install -q -e '.[test]'
 	@touch $@
 
 ## run: the main job on the default scene: generate, build, verify, summary
@@ -55,7 +59,7 @@ check-generated: setup
 
 ## bench: RHS timings (cffi, batched C and Fortran, numpy, PyDy cython)
 bench: setup
-	$(BIN)/python -m pip install -q -e '.[bench]'
+	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-rhs --out bench-out
 
 clean:
