@@ -25,12 +25,10 @@ system-deps:
 	  fi; \
 	fi
 
-# The venv gets its packages from the outer pip (pip --python, pip >= 22.3):
-# ensurepip was seen to leave a broken pip in a freshly cloned tree here.
-PIP := $(PYTHON) -m pip --python $(BIN)/python
+PIP := $(BIN)/python -m pip
 
 $(STAMP): pyproject.toml
-	$(PYTHON) -m venv --without-pip $(VENV)
+	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q -e '.[test]'
 	@touch $@
 
