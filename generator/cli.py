@@ -93,12 +93,9 @@ def _print_ops(rows: Iterable[Any]) -> None:
         click.echo(f"({v.key}){'':<{6 - len(v.key)}} {v.ops:6d}  {v.what}")
 
 
-def _progress(label: str) -> Any:
-    def wrap(items: Iterable[np.ndarray]) -> Iterable[np.ndarray]:
-        with click.progressbar(list(items), label=label, file=sys.stderr) as bar:
-            yield from bar
-
-    return wrap
+def _progress(label: str, items: Iterable[np.ndarray]) -> Iterable[np.ndarray]:
+    with click.progressbar(list(items), label=f"comparing, {label}", file=sys.stderr) as bar:
+        yield from bar
 
 
 def _verify(source: Path, states: int, params: int, seed: int) -> bool:
@@ -107,7 +104,7 @@ def _verify(source: Path, states: int, params: int, seed: int) -> bool:
 
     click.echo("building C (gcc) and Fortran (gfortran) through cffi ...")
     backends = [build.build(source, "c"), build.build(source, "fortran")]
-    report = compare(backends, states, params, seed=seed, progress=_progress("comparing"))
+    report = compare(backends, states, params, seed=seed, progress=_progress)
     click.echo(
         f"{states} random states x {report.n_params['well']} well-conditioned and "
         f"{report.n_params['ill']} ill-conditioned parameter sets; scaled error |a-b|/(1+|b|):"

@@ -25,6 +25,9 @@ WELL_CONDITIONED = 100.0
 ILL_CONDITIONED_ULPS = 1000.0
 EPS = float(np.finfo(float).eps)
 
+Progress = Callable[[str, Iterable[np.ndarray]], Iterable[np.ndarray]]
+"""(label, parameter sets) -> the same sets, reporting progress as they go."""
+
 
 def scaled_error(a: np.ndarray, b: np.ndarray) -> float:
     """max |a - b| / (1 + |b|): relative for large values, absolute near 0."""
@@ -80,10 +83,10 @@ def _group(
     states: np.ndarray,
     params: np.ndarray,
     bar: Callable[[float], float],
-    progress: Callable[[Iterable[np.ndarray]], Iterable[np.ndarray]],
+    progress: Progress,
 ) -> list[Row]:
     worst: dict[str, tuple[float, float, float]] = {}  # pair -> (margin, error, cond)
-    for p in progress(params):
+    for p in progress(name, params):
         cond = float(sampling.lumped_condition(p))
         for pair, err in _pairs(backends, states, p):
             margin = err / bar(cond)
@@ -98,7 +101,7 @@ def compare(
     n_params: int = 100,
     n_ill: int = 20,
     seed: int = 0,
-    progress: Callable[[Iterable[np.ndarray]], Iterable[np.ndarray]] = iter,
+    progress: Progress = lambda label, items: items,
 ) -> Report:
     rng = np.random.default_rng(seed)
     states = sampling.random_states(rng, n_states)
