@@ -1,0 +1,1 @@
+"""The `gyrogen` commands, one module per family; cli.py assembles them."""
