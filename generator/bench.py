@@ -26,7 +26,7 @@ import numpy as np
 
 from gyrogen import build, model, reference, sampling
 from gyrogen.generate import generate
-from gyrogen.scene import DEFAULT
+from gyrogen.scene import default
 
 Array = np.ndarray
 Echo = Callable[[str], None]
@@ -284,7 +284,7 @@ def run(
     inp = _Inputs(p=p, x=xs[0].copy(), xs=xs)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="gyrogen-bench-") as tmp:
-        generate(DEFAULT, Path(tmp))
+        generate(default(), Path(tmp))
         backends = [build.build(Path(tmp), lang) for lang in ("c", "fortran")]
     echo(f"generated and built the default scene in {time.perf_counter() - t0:.1f} s")
     ms: list[Measurement] = []

@@ -98,6 +98,24 @@ class Compiled:
             raise ValueError(f"setup refused the parameters (code {code}): {why}")
         return c
 
+    def output(self, name: str, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """An output function (kinetic_energy, angular_momentum, power) for a
+        batch of states (n, nx): shape (n, size)."""
+        x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, self.nx)
+        size = int(self.manifest["outputs"][name])
+        out = np.empty((x.shape[0], size))
+        fn = self.ffi.addressof(self.lib, self.manifest["functions"][self.language][name])
+        self.lib.gyrogen_batch(
+            fn,
+            x.shape[0],
+            size,
+            t,
+            self.ffi.from_buffer("double[]", x),
+            self.ffi.from_buffer("double[]", np.ascontiguousarray(c, dtype=np.float64)),
+            self.ffi.from_buffer("double[]", out),
+        )
+        return out
+
     def rhs(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
         """dx/dt for a batch of states x (n, nx) or one state (nx,)."""
         x = np.ascontiguousarray(x, dtype=np.float64)
@@ -159,11 +177,16 @@ def build(source_dir: Path, language: Language) -> Compiled:
     tool = require("gcc")
     if language == "fortran":
         require("gfortran")
+    if language not in manifest["targets"]:
+        raise BuildError(
+            f"scene {prefix} has no {language} target (targets: {manifest['targets']})"
+        )
     files = manifest["files"]
     sources = [source_dir / files["c_header"], source_dir / files["c_source"]]
     if language == "fortran":
         sources = [source_dir / files["fortran"]]
-    ctx = {"setup": names["setup"], "rhs": names["rhs"], "nx": manifest["nx"]}
+    per_call = ["rhs", *manifest["outputs"]]
+    ctx = {"setup": names["setup"], "functions": [names[f] for f in per_call], "nx": manifest["nx"]}
     glue = render("cffi/glue.c.jinja", **ctx)
     cdef = render("cffi/cdef.h.jinja", **ctx)
     key = _key(language, sources, glue, cdef)

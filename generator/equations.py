@@ -1,11 +1,12 @@
-"""The equations gyrogen generates code for: M u' = F and q' = f.
+"""The equations gyrogen generates code for: M u' = F, q' = f, and the
+optional outputs, for the states a scene keeps.
 
 Plain symbols (q1, not q1(t)), so printers and CSE see ordinary variables.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import sympy as sm
 import sympy.physics.mechanics as me
@@ -16,14 +17,23 @@ from gyrogen import model
 @dataclass(frozen=True)
 class Equations:
     states: tuple[sm.Symbol, ...]
+    """Kept states, in x[] order."""
     params: tuple[sm.Symbol, ...]
+    """Runtime parameters, in p[] order; every other parameter is folded."""
     mass_matrix: sm.Matrix
     """Constant: depends on parameters and lumped scalars only."""
     forcing: sm.Matrix
     kinematics: sm.Matrix
-    """q' for the coordinates, in state order."""
+    """q' for the kept coordinates, in state order."""
     lumped: dict[sm.Symbol, sm.Expr]
-    """Lumped inertia scalars in terms of the parameters, in paper order."""
+    """Lumped inertia scalars that depend on runtime parameters, in terms of
+    them (the others are numbers, already substituted)."""
+    inputs: tuple[sm.Symbol, ...] = ()
+    """Per-call values that are not states: the torque of a T(t) table."""
+    outputs: dict[str, tuple[sm.Expr, ...]] = field(default_factory=dict)
+    """Optional extra functions, by name, in states, inputs and parameters."""
+    checks: dict[str, sm.Expr] = field(default_factory=dict)
+    """The parameters setup checks, by name: a runtime symbol or a number."""
 
 
 def plain(expr: sm.Expr | sm.Matrix) -> sm.Expr | sm.Matrix:
@@ -39,14 +49,7 @@ def plain_states() -> tuple[sm.Symbol, ...]:
 
 
 def full_model() -> Equations:
-    """The paper's full model from the lumped formulation (b)."""
-    kane = model.lumped()
-    s = model.symbols()
-    return Equations(
-        states=plain_states(),
-        params=s.params,
-        mass_matrix=plain(kane.mass_matrix),
-        forcing=plain(kane.forcing),
-        kinematics=plain(kane.kinematics),
-        lumped=model.lumped_values(),
-    )
+    """The paper's full model (the default scene)."""
+    from gyrogen import scene, specialize
+
+    return specialize.specialize(scene.default())

@@ -11,3 +11,9 @@ class GyrogenError(Exception):
 
 class BuildError(GyrogenError):
     """A compiler is missing or refused the generated code."""
+
+
+class SceneError(GyrogenError):
+    """A scene file that cannot be read or is not physical."""
+
+    exit_code = 2

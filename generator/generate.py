@@ -5,45 +5,71 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from functools import cache
 from pathlib import Path
 from typing import Any
 
+from gyrogen import library
 from gyrogen.backends import c, fortran
 from gyrogen.errors import GyrogenError
 from gyrogen.scene import Scene
+from gyrogen.scene import default as default_scene
 from gyrogen.unit import Unit, make_unit
 
 
 def manifest(unit: Unit) -> dict[str, Any]:
     """What tools and tests read instead of parsing C."""
     p = unit.prefix
+    files: dict[str, str] = {}
+    if "c" in unit.scene.targets:
+        files.update(c_header=f"{p}.h", c_source=f"{p}.c")
+    if "fortran" in unit.scene.targets:
+        files["fortran"] = f"{p}.f90"
+    full = full_model_unit()
     return {
         "prefix": p,
         "description": unit.scene.description,
+        "scene": unit.scene.model_dump(mode="json"),
+        "build_id": unit.build_id,
         "states": [s.name for s in unit.states],
         "parameters": [s.name for s in unit.params],
+        "folded": unit.scene.folded(),
         "nx": unit.nx,
         "np": unit.np,
         "nc": unit.nc,
+        "outputs": {o.name: o.size for o in unit.outputs},
+        "targets": list(unit.scene.targets),
         "functions": unit.functions,
         "signatures": {
             "setup": "int setup(const double *p, double *c)",
             "rhs": "void rhs(double t, const double *x, const double *c, double *dxdt)",
+            "outputs": "void output(double t, const double *x, const double *c, double *out)",
         },
         "setup_codes": {str(code.value): code.doc for code in unit.codes},
         "ops": unit.ops,
-        "files": {
-            "c_header": f"{p}.h",
-            "c_source": f"{p}.c",
-            "fortran": f"{p}.f90",
-        },
+        "full_model": {"nx": full.nx, "np": full.np, "ops": full.ops},
+        "files": files,
         "versions": unit.versions,
     }
 
 
-def render_all(unit: Unit) -> dict[str, str]:
-    files = {**c.files(unit), **fortran.files(unit)}
-    files["manifest.json"] = json.dumps(manifest(unit), indent=2, sort_keys=True) + "\n"
+@cache
+def full_model_unit() -> Unit:
+    """The paper's full model, for comparison in every manifest and table."""
+    return make_unit(default_scene())
+
+
+def render_all(unit: Unit, lib: bool = False) -> dict[str, str]:
+    """Every file of the scene; with lib, also CMakeLists.txt and <prefix>.mk."""
+    files: dict[str, str] = {}
+    if "c" in unit.scene.targets:
+        files.update(c.files(unit))
+    if "fortran" in unit.scene.targets:
+        files.update(fortran.files(unit))
+    data = manifest(unit)
+    files["manifest.json"] = json.dumps(data, indent=2, sort_keys=True) + "\n"
+    if lib:
+        files.update(library.files(data))
     return files
 
 
@@ -69,7 +95,7 @@ def write_atomic(out: Path, files: dict[str, str]) -> None:
         raise GyrogenError(f"cannot write to {out}: {exc.strerror}") from exc
 
 
-def generate(scene: Scene, out: Path) -> Unit:
+def generate(scene: Scene, out: Path, lib: bool = False) -> Unit:
     unit = make_unit(scene)
-    write_atomic(out, render_all(unit))
+    write_atomic(out, render_all(unit, lib))
     return unit

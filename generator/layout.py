@@ -40,6 +40,8 @@ PARAMETER_DOC: dict[str, tuple[str, str]] = {
     "l3": ("m", "B* from A* along a3"),
     "g": ("m/s^2", "gravity along +n3"),
     "T": ("N m", "motor torque on B about a2 (minus on A)"),
+    "k": ("N m s", "speed controller gain: T = -k (u4 - u2 - w_ref)"),
+    "w_ref": ("rad/s", "speed controller: commanded rate of B relative to A"),
 }
 
 STATE_DOC: dict[str, tuple[str, str]] = {

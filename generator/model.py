@@ -154,6 +154,13 @@ def lumped() -> KaneEquations:
     return _solve(s, f, [carrier, rotor], loads, "lumped carrier + massless rotor")
 
 
+@cache
+def direction_cosines() -> sm.Matrix:
+    """C with a_i = sum_j C[i, j] n_j (NOTES.md, Table 1), in q1(t)..q3(t)."""
+    f = _kinematics(symbols())
+    return sm.Matrix(f.A.dcm(f.N))
+
+
 def lumped_values() -> dict[sm.Symbol, sm.Expr]:
     """The paper's lumped inertia scalars in terms of the parameters (NOTES.md)."""
     s = symbols()

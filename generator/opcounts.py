@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from gyrogen import equations, model
 from gyrogen.optimize import count_ops, cse_only
-from gyrogen.scene import DEFAULT
+from gyrogen.scene import default
 from gyrogen.unit import make_unit
 
 
@@ -25,7 +25,7 @@ def variants() -> list[Variant]:
     sep = model.separate()
     mm, f, kin = (equations.plain(m) for m in (sep.mass_matrix, sep.forcing, sep.kinematics))
     lu = mm.LUsolve(f)
-    unit = make_unit(DEFAULT)
+    unit = make_unit(default())
     return [
         Variant("i", "separate bodies: raw mass matrix and forcing", count_ops(mm, f)),
         Variant(

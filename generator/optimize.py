@@ -13,13 +13,13 @@ Horner's scheme and then shares its common subexpressions.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import sympy as sm
 
 from gyrogen.equations import Equations
+from gyrogen.hoist import Hoister, hoist
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,8 @@ class Optimized:
     """Outputs: dx/dt in state order, in terms of states and constants."""
     lumped: tuple[Assignment, ...]
     """The lumped inertia scalars: named temporaries of setup."""
+    outputs: dict[str, Block] = field(default_factory=dict)
+    """Optional extra functions (energy, momentum, power), per call."""
 
     @property
     def nc(self) -> int:
@@ -61,14 +63,6 @@ def count_ops(*groups: Iterable[sm.Expr]) -> int:
     counts sin(x) as one operation.
     """
     return sum(int(sm.count_ops(e)) for group in groups for e in group)
-
-
-def constants(n: int) -> tuple[sm.Symbol, ...]:
-    return tuple(sm.Symbol(f"c{k}", real=True) for k in range(n))
-
-
-def _is_per_call(expr: sm.Expr, per_call: set[sm.Symbol]) -> bool:
-    return bool(expr.free_symbols & per_call)
 
 
 def block_inverse(m: sm.Matrix) -> sm.Matrix:
@@ -87,64 +81,6 @@ def block_inverse(m: sm.Matrix) -> sm.Matrix:
             for b, j in enumerate(idx):
                 inv[i, j] = sm.factor(sm.cancel(sub_inv[a, b]))
     return inv
-
-
-class _Hoister:
-    """Gives each parameter-only coefficient a constant, sharing equal ones."""
-
-    def __init__(self) -> None:
-        self.values: list[sm.Expr] = []
-        self._index: dict[sm.Expr, int] = {}
-
-    def symbol_for(self, coeff: sm.Expr) -> sm.Expr:
-        coeff = sm.factor(sm.cancel(coeff))
-        if coeff.is_number:
-            return coeff
-        if coeff in self._index:
-            return constants(self._index[coeff] + 1)[-1]
-        neg = sm.factor(-coeff)
-        if neg in self._index:
-            return -constants(self._index[neg] + 1)[-1]
-        self._index[coeff] = len(self.values)
-        self.values.append(coeff)
-        return constants(len(self.values))[-1]
-
-
-def _best_horner(poly_expr: sm.Expr, gens: Sequence[sm.Symbol]) -> sm.Expr:
-    """Horner's scheme in the variable order that leaves the fewest ops."""
-    if not gens:
-        return poly_expr
-    best: sm.Expr = poly_expr
-    best_ops = int(sm.count_ops(poly_expr))
-    for order in itertools.permutations(gens):
-        cand = sm.horner(poly_expr, *order)
-        ops = int(sm.count_ops(cand))
-        if ops < best_ops:
-            best, best_ops = cand, ops
-    return best
-
-
-def _hoist(expr: sm.Expr, per_call: Sequence[sm.Symbol], hoister: _Hoister) -> sm.Expr:
-    """Rewrite expr as a Horner form in the per-call symbols with hoisted
-    coefficients. Expressions that are not polynomial in them are left as
-    they are (the kinematics: they hold no parameters)."""
-    expr = sm.expand(expr)
-    gens = [s for s in per_call if s in expr.free_symbols]
-    try:
-        poly = sm.Poly(expr, *gens) if gens else None
-    except sm.PolynomialError:
-        return expr
-    if poly is None:
-        return hoister.symbol_for(expr)
-    if any(_is_per_call(c, set(per_call)) for c in poly.coeffs()):
-        return expr
-    rebuilt = sm.Add(
-        *(
-            hoister.symbol_for(coeff) * sm.Mul(*(g**k for g, k in zip(gens, monom, strict=True)))
-            for monom, coeff in poly.terms()
-        )
-    )
-    return _best_horner(rebuilt, gens)
 
 
 def _sincos(expr: sm.Expr) -> sm.Expr:
@@ -207,21 +143,35 @@ def _temporaries() -> Iterator[sm.Symbol]:
 
 def optimize(eqs: Equations) -> Optimized:
     """Lumped + hoisted + CSE: the variant gyrogen generates."""
-    minv = block_inverse(eqs.mass_matrix)
-    udot = minv * eqs.forcing
-    hoister = _Hoister()
-    per_call = list(eqs.states)
-    dyn = [_hoist(e, per_call, hoister) for e in udot]
-    kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[len(eqs.kinematics) :])
+    udot = block_inverse(eqs.mass_matrix) * eqs.forcing
+    hoister = Hoister()
+    per_call = [*eqs.states, *eqs.inputs]
+    dyn = [hoist(e, per_call, hoister) for e in udot]
+    n_q = len(eqs.kinematics)
+    kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
     rhs = _cse([*kin, *dyn], _temporaries())
-    # Two passes share one numbering: the lumped scalars come first, under
-    # their own names, because the constants are written in terms of them.
+    outputs = {
+        name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
+        for name, exprs in eqs.outputs.items()
+    }
+    setup, lumped = _setup(eqs, hoister.values)
+    return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs)
+
+
+def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignment, ...]]:
+    """The constants, after the lumped scalars they are written in.
+
+    Two CSE passes share one numbering: the lumped scalars come first, under
+    their own names; only those some constant uses are computed.
+    """
+    used = set().union(*(v.free_symbols for v in values)) if values else set()
+    names_used = [s for s in eqs.lumped if s in used]
     names = _temporaries()
-    first = _cse([eqs.lumped[s] for s in eqs.lumped], names)
-    second = _cse(hoister.values, names)
-    lumped = tuple(Assignment(s, v) for s, v in zip(eqs.lumped, first.outputs, strict=True))
+    first = _cse([eqs.lumped[s] for s in names_used], names)
+    second = _cse(values, names)
+    lumped = tuple(Assignment(s, v) for s, v in zip(names_used, first.outputs, strict=True))
     setup = Block(first.temporaries + lumped + second.temporaries, second.outputs)
-    return Optimized(setup, rhs, lumped)
+    return setup, lumped
 
 
 def cse_only(exprs: Sequence[sm.Expr]) -> Block:

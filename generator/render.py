@@ -9,10 +9,20 @@ from typing import Any
 import jinja2
 
 
+def c_double(value: float) -> str:
+    """A double as C writes it: the shortest text that reads back exactly."""
+    return repr(float(value))
+
+
+def f_double(value: float) -> str:
+    """The same for Fortran, with the c_double kind."""
+    return f"{float(value)!r}_c_double"
+
+
 @cache
 def environment() -> jinja2.Environment:
     root = files("gyrogen.templates")
-    return jinja2.Environment(
+    env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(root)),
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
@@ -20,6 +30,8 @@ def environment() -> jinja2.Environment:
         keep_trailing_newline=True,
         autoescape=False,
     )
+    env.filters.update(c_double=c_double, f_double=f_double)
+    return env
 
 
 def render(template: str, **context: Any) -> str:

@@ -1,37 +1,255 @@
-"""What the user wants to generate. The foundation knows one scene: the
-paper's full model with every parameter supplied at run time."""
+"""Scenes: what a user wants to simulate, read from TOML and validated.
+
+A scene names the parameters it folds into the code (numbers) and those it
+keeps as entries of p[] ("runtime"), the effects it needs (translation, rotor
+angle, torque law), optional output functions, target languages and a
+simulation setup. Validation is pydantic's; the physical checks of folded
+values are the same as the generated setup's (layout.SETUP_CODES).
+"""
 
 from __future__ import annotations
 
-import keyword
-import re
-from dataclasses import dataclass
+import itertools
+import math
+import tomllib
+from functools import cache
+from importlib.resources import files
+from pathlib import Path
+from typing import Annotated, Literal
 
-from gyrogen.errors import GyrogenError
+import pydantic
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from gyrogen.errors import SceneError
+from gyrogen.layout import PARAMETERS, STATES, TRIANGLE_SLACK
 
 _C_KEYWORDS = frozenset(
-    (
-        "auto break case char const continue default do double else enum extern float for "
-        "goto if inline int long register restrict return short signed sizeof static struct "
-        "switch typedef union unsigned void volatile while _Bool _Complex _Imaginary"
-    ).split()
+    "auto break case char const continue default do double else enum extern float for goto if "
+    "inline int long register restrict return short signed sizeof static struct switch typedef "
+    "union unsigned void volatile while _Bool _Complex _Imaginary".split()
 )
+CONTROLLER_PARAMETERS = ("k", "w_ref")
+"""Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s)."""
+
+Value = float | Literal["runtime"]
 
 
-@dataclass(frozen=True)
-class Scene:
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class Effects(_Strict):
+    translation: bool = True
+    """Keep q5..q7, u5..u7 (they never couple to the rest; gravity acts only on them)."""
+    rotor_angle: bool = True
+    """Keep q4 (ignorable: nothing depends on it)."""
+    torque: Literal["none", "constant", "speed_controller", "table"] = "constant"
+    torque_table: list[tuple[float, float]] | None = None
+    """(t, T) points of a piecewise-linear T(t), held constant outside."""
+
+    @model_validator(mode="after")
+    def _table(self) -> Effects:
+        table = self.torque_table
+        if self.torque != "table":
+            if table is not None:
+                raise ValueError("torque_table is only used with torque = 'table'")
+            return self
+        if table is None or len(table) < 2:
+            raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
+        times = [t for t, _ in table]
+        if any(b <= a for a, b in itertools.pairwise(times)):
+            raise ValueError("torque_table times must increase strictly")
+        return self
+
+
+class Outputs(_Strict):
+    kinetic_energy: bool = False
+    angular_momentum: bool = False
+    """Angular momentum about AB* in N components (uses the direction cosines)."""
+    power: bool = False
+    """Power of the motor torque, T (u4 - u2)."""
+
+
+class Simulate(_Strict):
+    initial: dict[str, float] = Field(default_factory=dict)
+    """Initial state by name; states not named start at 0."""
+    parameters: dict[str, float] = Field(default_factory=dict)
+    """Values of the runtime parameters for `gyrogen simulate`."""
+    t_end: Annotated[float, Field(gt=0)] = 10.0
+    dt: Annotated[float, Field(gt=0)] = 0.01
+    """Output step of the trajectory."""
+    rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-10
+    atol: Annotated[float, Field(gt=0)] = 1e-10
+
+
+class Scene(_Strict):
     name: str
     """Also the prefix of every generated C symbol and file."""
     description: str
+    parameters: dict[str, Value]
+    effects: Effects = Effects()
+    outputs: Outputs = Outputs()
+    targets: list[Literal["c", "fortran"]] = ["c", "fortran"]
+    attitude: Literal["euler312"] = "euler312"
+    """Room for "quaternion" (another issue): only 3-1-2 Euler angles so far."""
+    simulate: Simulate = Simulate()
 
-    def __post_init__(self) -> None:
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", self.name):
-            raise GyrogenError(f"scene name {self.name!r} is not a valid C identifier")
-        if self.name in _C_KEYWORDS or keyword.iskeyword(self.name):
-            raise GyrogenError(f"scene name {self.name!r} is a reserved word")
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        if not v.isascii() or not (v.replace("_", "a").isalnum() and not v[0].isdigit()):
+            raise ValueError(f"{v!r} is not a valid C identifier")
+        if v in _C_KEYWORDS:
+            raise ValueError(f"{v!r} is a C keyword")
+        return v
+
+    @field_validator("targets")
+    @classmethod
+    def _targets(cls, v: list[str]) -> list[str]:
+        if not v or len(set(v)) != len(v):
+            raise ValueError("list c, fortran or both, once each")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Scene:
+        _check_parameter_names(self)
+        _check_physics(self.parameters)
+        bad = sorted(set(self.simulate.initial) - set(self.states))
+        if bad:
+            raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
+        bad = sorted(set(self.simulate.parameters) - set(self.runtime))
+        if bad:
+            raise ValueError(
+                f"simulate.parameters: {', '.join(bad)} is not a runtime parameter of this scene"
+            )
+        _check_physics({**self.parameters, **self.simulate.parameters})
+        return self
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """The kept states, in x[] order."""
+        drop = set()
+        if not self.effects.translation:
+            drop |= {"q5", "q6", "q7", "u5", "u6", "u7"}
+        if not self.effects.rotor_angle:
+            drop.add("q4")
+        return tuple(s for s in STATES if s not in drop)
+
+    @property
+    def runtime(self) -> tuple[str, ...]:
+        """Runtime parameters, in p[] order (the model's order, then k, w_ref)."""
+        order = (*PARAMETERS, *CONTROLLER_PARAMETERS)
+        return tuple(n for n in order if self.parameters.get(n) == "runtime")
+
+    def folded(self) -> dict[str, float]:
+        return {k: v for k, v in self.parameters.items() if not isinstance(v, str)}
 
 
-DEFAULT = Scene(
-    name="gyrostat",
-    description="the paper's full model: 14 states, all 12 parameters at run time",
-)
+def required_parameters(effects: Effects) -> tuple[str, ...]:
+    names = ["m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J", "l1", "l3"]
+    if effects.translation:
+        names.append("g")
+    if effects.torque == "constant":
+        names.append("T")
+    if effects.torque == "speed_controller":
+        names += list(CONTROLLER_PARAMETERS)
+    return tuple(names)
+
+
+def _check_parameter_names(scene: Scene) -> None:
+    need = required_parameters(scene.effects)
+    missing = [n for n in need if n not in scene.parameters]
+    if missing:
+        raise ValueError(f"parameters: missing {', '.join(missing)}")
+    for n in scene.parameters:
+        if n not in need:
+            raise ValueError(f"parameters.{n}: {_why_not(n, scene.effects)}")
+
+
+def _why_not(name: str, effects: Effects) -> str:
+    if name == "g":
+        return "gravity has no effect without translation (effects.translation = false)"
+    if name == "T":
+        return f"only used with effects.torque = 'constant' (not {effects.torque!r})"
+    if name in CONTROLLER_PARAMETERS:
+        return "only used with effects.torque = 'speed_controller'"
+    return "unknown parameter (see `gyrogen new` for the list)"
+
+
+def _check_physics(p: dict[str, Value]) -> None:
+    """The generated setup's checks, for the values folded at generation."""
+    v = {k: x for k, x in p.items() if not isinstance(x, str)}
+
+    def known(*names: str) -> bool:
+        return all(n in v for n in names)
+
+    for n in ("m_a", "m_b", "I", "J"):
+        if n in v and v[n] <= 0:
+            raise ValueError(f"parameters.{n}: must be positive (got {v[n]})")
+    if known("I11", "I22", "I33", "I13"):
+        i11, i22, i33, i13 = v["I11"], v["I22"], v["I33"], v["I13"]
+        if min(i11, i22, i33) <= 0 or i11 * i33 - i13 * i13 <= 0:
+            raise ValueError(
+                "parameters.I11, I22, I33, I13: carrier inertia is not positive definite"
+            )
+        gap = math.sqrt(0.25 * (i11 - i33) ** 2 + i13 * i13)
+        moments = sorted([i22, 0.5 * (i11 + i33) + gap, 0.5 * (i11 + i33) - gap])
+        if moments[2] - moments[0] - moments[1] > TRIANGLE_SLACK * sum(moments):
+            shown = ", ".join(f"{m:.6g}" for m in moments)
+            raise ValueError(
+                f"parameters.I11, I22, I33, I13: principal moments ({shown}) "
+                "violate the triangle inequality"
+            )
+    if known("I", "J") and v["J"] - 2 * v["I"] > TRIANGLE_SLACK * (2 * v["I"] + v["J"]):
+        raise ValueError(f"parameters.J: rotor needs J <= 2 I (I = {v['I']}, J = {v['J']})")
+
+
+def _one_line(exc: pydantic.ValidationError) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(x) for x in err["loc"])
+    msg = str(err["msg"]).removeprefix("Value error, ")
+    if err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    return f"{loc}: {msg}" if loc else msg
+
+
+def parse(text: str, source: str) -> Scene:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    try:
+        return Scene.model_validate(data)
+    except pydantic.ValidationError as exc:
+        raise SceneError(f"{source}: {_one_line(exc)}") from exc
+
+
+@cache
+def builtin_names() -> tuple[str, ...]:
+    root = files("gyrogen.scenes")
+    return tuple(sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml")))
+
+
+def builtin_text(name: str) -> str:
+    return (files("gyrogen.scenes") / f"{name}.toml").read_text(encoding="utf-8")
+
+
+def load(arg: str) -> Scene:
+    """A built-in scene by name, or a .toml file by path."""
+    if arg in builtin_names():
+        return parse(builtin_text(arg), f"{arg} (built-in)")
+    path = Path(arg)
+    if not path.is_file():
+        names = ", ".join(builtin_names())
+        raise SceneError(f"{arg}: no such file, and no built-in scene of that name ({names})")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{arg}: cannot read: {exc}") from exc
+    return parse(text, arg)
+
+
+@cache
+def default() -> Scene:
+    """The paper's full model, every parameter at run time."""
+    return load("gyrostat")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass
 from functools import cached_property
 from importlib.metadata import version
@@ -9,7 +11,7 @@ from importlib.metadata import version
 import sympy as sm
 
 import gyrogen
-from gyrogen import equations
+from gyrogen.equations import Equations
 from gyrogen.layout import (
     PARAMETER_DOC,
     SETUP_CODE_NAMES,
@@ -17,8 +19,15 @@ from gyrogen.layout import (
     STATE_DOC,
     TRIANGLE_SLACK,
 )
-from gyrogen.optimize import Optimized, optimize
+from gyrogen.optimize import Block, Optimized, optimize
 from gyrogen.scene import Scene
+from gyrogen.specialize import specialize
+
+OUTPUT_DOC = {
+    "kinetic_energy": ("J", "kinetic energy of the system"),
+    "angular_momentum": ("kg m^2/s", "angular momentum about AB*, N components h[0..2]"),
+    "power": ("W", "power of the motor torque, T (u4 - u2)"),
+}
 
 
 @dataclass(frozen=True)
@@ -37,11 +46,39 @@ class Code:
 
 
 @dataclass(frozen=True)
+class Local:
+    """A parameter setup reads: from p[index] (runtime) or a folded value."""
+
+    name: str
+    index: int | None
+    value: float | None
+
+
+@dataclass(frozen=True)
+class Output:
+    name: str
+    block: Block
+    unit: str
+    doc: str
+
+    @property
+    def size(self) -> int:
+        return len(self.block.outputs)
+
+
+@dataclass(frozen=True)
 class Unit:
     scene: Scene
-    states: tuple[sm.Symbol, ...]
-    params: tuple[sm.Symbol, ...]
+    equations: Equations
     optimized: Optimized
+
+    @property
+    def states(self) -> tuple[sm.Symbol, ...]:
+        return self.equations.states
+
+    @property
+    def params(self) -> tuple[sm.Symbol, ...]:
+        return self.equations.params
 
     @property
     def prefix(self) -> str:
@@ -65,7 +102,25 @@ class Unit:
 
     @cached_property
     def ops(self) -> dict[str, int]:
-        return {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
+        ops = {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
+        ops.update({o.name: o.block.ops for o in self.outputs})
+        return ops
+
+    @property
+    def outputs(self) -> list[Output]:
+        return [Output(n, b, *OUTPUT_DOC[n]) for n, b in self.optimized.outputs.items()]
+
+    @property
+    def torque_table(self) -> list[tuple[float, float]] | None:
+        return self.scene.effects.torque_table
+
+    @property
+    def folded_summary(self) -> str:
+        return ", ".join(f"{n} = {v!r}" for n, v in self.scene.folded().items())
+
+    @property
+    def uses_time(self) -> bool:
+        return bool(self.equations.inputs)
 
     @property
     def state_rows(self) -> list[Row]:
@@ -75,6 +130,17 @@ class Unit:
     def param_rows(self) -> list[Row]:
         return [Row(i, s.name, *PARAMETER_DOC[s.name]) for i, s in enumerate(self.params)]
 
+    @cached_property
+    def setup_locals(self) -> list[Local]:
+        """The checked parameters, then the runtime ones the constants use."""
+        runtime = {s.name: i for i, s in enumerate(self.params)}
+        folded = self.scene.folded()
+        used = set().union(*(a.rhs.free_symbols for a in self.optimized.setup.temporaries))
+        used |= set().union(*(e.free_symbols for e in self.optimized.setup.outputs))
+        names = list(self.equations.checks)
+        names += [s.name for s in self.params if s in used and s.name not in names]
+        return [Local(n, runtime.get(n), folded.get(n)) for n in names]
+
     @property
     def codes(self) -> list[Code]:
         return [Code(v, f"{self.macro}_{SETUP_CODE_NAMES[v]}", SETUP_CODES[v]) for v in SETUP_CODES]
@@ -83,6 +149,12 @@ class Unit:
     def triangle_slack(self) -> str:
         return repr(TRIANGLE_SLACK)
 
+    @cached_property
+    def build_id(self) -> str:
+        """Hash of the scene and the tool versions: which build a binary is from."""
+        text = json.dumps([self.scene.model_dump(mode="json"), self.versions], sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
     @property
     def versions(self) -> dict[str, str]:
         return {"gyrogen": gyrogen.__version__, "sympy": version("sympy")}
@@ -90,12 +162,14 @@ class Unit:
     @property
     def functions(self) -> dict[str, dict[str, str]]:
         p = self.prefix
-        return {
-            "c": {"setup": f"{p}_setup", "rhs": f"{p}_rhs"},
-            "fortran": {"module": f"{p}_mod", "setup": f"{p}_f_setup", "rhs": f"{p}_f_rhs"},
-        }
+        c = {"setup": f"{p}_setup", "rhs": f"{p}_rhs"}
+        f = {"module": f"{p}_mod", "setup": f"{p}_f_setup", "rhs": f"{p}_f_rhs"}
+        for o in self.outputs:
+            c[o.name] = f"{p}_{o.name}"
+            f[o.name] = f"{p}_f_{o.name}"
+        return {"c": c, "fortran": f}
 
 
 def make_unit(scene: Scene) -> Unit:
-    eqs = equations.full_model()
-    return Unit(scene, eqs.states, eqs.params, optimize(eqs))
+    eqs = specialize(scene)
+    return Unit(scene, eqs, optimize(eqs))

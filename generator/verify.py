@@ -17,8 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gyrogen import reference, sampling
+from gyrogen import sampling, witness
 from gyrogen.build import Compiled
+from gyrogen.layout import PARAMETERS
+from gyrogen.scene import Scene
 
 TOLERANCE = 1e-12
 WELL_CONDITIONED = 100.0
@@ -67,36 +69,59 @@ def _label(b: Compiled) -> str:
 
 
 def _pairs(
-    backends: list[Compiled], states: np.ndarray, p: np.ndarray
+    backends: list[Compiled], scene: Scene, states: np.ndarray, p: np.ndarray, t: float
 ) -> Iterator[tuple[str, float]]:
-    ref = reference.rhs(states, p)
-    out = {_label(b): b.rhs(states, b.setup(p)) for b in backends}
-    for name, value in out.items():
-        yield f"{name} vs reference", scaled_error(value, ref)
-    if len(out) == 2:
-        yield "C vs Fortran", scaled_error(out["C"], out["Fortran"])
+    """Every backend against the reference, and the backends against each
+    other: the rhs, then each output function."""
+    names = ["rhs", *(n for n, on in scene.outputs.model_dump().items() if on)]
+    for name in names:
+        tag = "" if name == "rhs" else f" {name}"
+        if name == "rhs":
+            ref = witness.rhs(scene, states, p, t)
+            out = {_label(b): b.rhs(states, b.setup(p), t) for b in backends}
+        else:
+            ref = witness.output(scene, name, states, p, t)
+            out = {_label(b): b.output(name, states, b.setup(p), t) for b in backends}
+        for label, value in out.items():
+            yield f"{label} vs reference{tag}", scaled_error(value, ref)
+        if len(out) == 2:
+            yield f"C vs Fortran{tag}", scaled_error(out["C"], out["Fortran"])
 
 
 def _group(
     name: str,
     backends: list[Compiled],
+    scene: Scene,
     states: np.ndarray,
     params: np.ndarray,
     bar: Callable[[float], float],
     progress: Progress,
+    rng: np.random.Generator,
 ) -> list[Row]:
     worst: dict[str, tuple[float, float, float]] = {}  # pair -> (margin, error, cond)
     for p in progress(name, params):
-        cond = float(sampling.lumped_condition(p))
-        for pair, err in _pairs(backends, states, p):
+        full = witness.full_parameters(scene, p, np.zeros((1, 14)), 0.0)[0]
+        cond = float(sampling.lumped_condition(full))
+        t = float(rng.uniform(*_time_span(scene)))
+        for pair, err in _pairs(backends, scene, states, p, t):
             margin = err / bar(cond)
             if pair not in worst or margin > worst[pair][0]:
                 worst[pair] = (margin, err, cond)
     return [Row(name, pair, err, bar(cond), cond) for pair, (_, err, cond) in worst.items()]
 
 
+def _time_span(scene: Scene) -> tuple[float, float]:
+    """Times to evaluate at: across a T(t) table and beyond both its ends."""
+    table = scene.effects.torque_table
+    if not table:
+        return (0.0, 1.0)
+    t0, t1 = table[0][0], table[-1][0]
+    return (t0 - 0.1 * (t1 - t0) - 1.0, t1 + 0.1 * (t1 - t0) + 1.0)
+
+
 def compare(
     backends: list[Compiled],
+    scene: Scene,
     n_states: int = 10_000,
     n_params: int = 100,
     n_ill: int = 20,
@@ -104,29 +129,60 @@ def compare(
     progress: Progress = lambda label, items: items,
 ) -> Report:
     rng = np.random.default_rng(seed)
-    states = sampling.random_states(rng, n_states)
-    well = sampling.random_parameters(rng, n_params, max_condition=WELL_CONDITIONED)
-    draws = sampling.random_parameters(rng, 50 * n_ill)
-    ill = draws[np.argsort(sampling.lumped_condition(draws))[-n_ill:]]  # the worst of many
+    states = sampling.random_states(rng, n_states)[:, witness.state_index(scene)]
+    well = witness.random_runtime(scene, rng, n_params, max_condition=WELL_CONDITIONED)
+    draws = witness.random_runtime(scene, rng, 50 * n_ill)
+    conds = [_condition(scene, p) for p in draws]
+    ill = draws[[i for i in np.argsort(conds)[-n_ill:] if conds[i] > WELL_CONDITIONED]]
     report = Report(n_states, {"well": len(well), "ill": len(ill)})
-    report.rows += _group(
-        f"cond <= {WELL_CONDITIONED:g}", backends, states, well, lambda c: TOLERANCE, progress
-    )
-    report.rows += _group(
-        f"cond > {WELL_CONDITIONED:g}",
-        backends,
-        states,
-        ill,
-        lambda c: ILL_CONDITIONED_ULPS * c * EPS,
-        progress,
-    )
-    _check_refusals(backends, well[:3], report)
+    label = f"cond <= {WELL_CONDITIONED:g}"
+    report.rows += _group(label, backends, scene, states, well, lambda c: TOLERANCE, progress, rng)
+    if len(ill):
+        report.rows += _group(
+            f"cond > {WELL_CONDITIONED:g}",
+            backends,
+            scene,
+            states,
+            ill,
+            lambda c: ILL_CONDITIONED_ULPS * c * EPS,
+            progress,
+            rng,
+        )
+    _check_refusals(backends, scene, well[:3], report)
     return report
 
 
-def _check_refusals(backends: list[Compiled], bases: np.ndarray, report: Report) -> None:
+def _condition(scene: Scene, p: np.ndarray) -> float:
+    full = witness.full_parameters(scene, p, np.zeros((1, 14)), 0.0)[0]
+    return float(sampling.lumped_condition(full))
+
+
+def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
+    """Invalid p[] vectors for a scene, with the code setup must return: the
+    full model's invalid cases that change runtime entries only, and NaN in
+    each runtime parameter."""
+    full = witness.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
+    index = {n: i for i, n in enumerate(PARAMETERS)}
+    cases = []
+    for what, p_full, code in sampling.invalid_parameters(full):
+        changed = {PARAMETERS[i] for i in np.flatnonzero(~(p_full == full))}
+        if changed and changed <= set(scene.runtime):
+            p = np.array(
+                [p_full[index[r]] if r in index else base[j] for j, r in enumerate(scene.runtime)]
+            )
+            cases.append((what, p, code))
+    for j, name in enumerate(scene.runtime):
+        p = base.copy()
+        p[j] = np.nan
+        cases.append((f"{name} = NaN", p, 1))
+    return cases
+
+
+def _check_refusals(
+    backends: list[Compiled], scene: Scene, bases: np.ndarray, report: Report
+) -> None:
     for base in bases:
-        for what, p, expected in sampling.invalid_parameters(base):
+        for what, p, expected in invalid_runtime(scene, base):
             for b in backends:
                 code, _ = b.setup_code(p)
                 report.refusals_checked += 1

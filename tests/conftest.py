@@ -9,7 +9,7 @@ import pytest
 
 from gyrogen import build
 from gyrogen.generate import generate
-from gyrogen.scene import DEFAULT
+from gyrogen.scene import default
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -21,8 +21,8 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def source_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("generated") / DEFAULT.name
-    generate(DEFAULT, out)
+    out = tmp_path_factory.mktemp("generated") / default().name
+    generate(default(), out)
     return out
 
 

@@ -12,7 +12,7 @@ import pytest
 from gyrogen import generate as generate_module
 from gyrogen.cli import main
 from gyrogen.errors import GyrogenError
-from gyrogen.scene import DEFAULT
+from gyrogen.scene import default
 
 
 def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -30,7 +30,7 @@ def test_generate_writes_the_four_files(tmp_path: Path, capsys) -> None:
     assert code == 0
     names = sorted(p.name for p in (tmp_path / "o").iterdir())
     assert names == ["gyrostat.c", "gyrostat.f90", "gyrostat.h", "manifest.json"]
-    assert "ops: setup" in out
+    assert "gyrostat" in out and "(full model)" in out
 
 
 def test_unknown_option_is_one_line_exit_2(capsys) -> None:
@@ -85,7 +85,7 @@ def test_render_failure_writes_nothing(tmp_path: Path, monkeypatch: pytest.Monke
 
     monkeypatch.setattr(generate_module.fortran, "files", broken)
     with pytest.raises(GyrogenError):
-        generate_module.generate(DEFAULT, tmp_path / "o")
+        generate_module.generate(default(), tmp_path / "o")
     assert not (tmp_path / "o").exists()
 
 
@@ -134,3 +134,11 @@ def test_missing_compiler_from_the_command_line(tmp_path: Path) -> None:
     assert (
         proc.stderr == "gyrogen: error: gcc not found: install it with `apt-get install -y gcc`\n"
     )
+
+
+def test_generate_lib_writes_build_files(tmp_path: Path, capsys) -> None:
+    code, _, _ = run(["generate", "--lib", "--out", str(tmp_path / "o")], capsys)
+    assert code == 0
+    names = {p.name for p in (tmp_path / "o").iterdir()}
+    assert {"CMakeLists.txt", "gyrostat.mk", "gyrostat.c", "manifest.json"} <= names
+    assert "Do not edit" in (tmp_path / "o" / "CMakeLists.txt").read_text()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import sympy as sm
 
-from gyrogen import equations, model, optimize, sampling
+from gyrogen import equations, hoist, model, optimize, sampling
 from gyrogen.opcounts import variants
 
 RHS_GOAL = 50
@@ -18,7 +18,7 @@ def _evaluate(opt: optimize.Optimized, eqs: equations.Equations, p: np.ndarray, 
     for a in opt.setup.temporaries:
         env[a.lhs] = float(a.rhs.evalf(subs=env))
     c = [float(e.evalf(subs=env)) for e in opt.setup.outputs]
-    env2: dict[sm.Symbol, float] = dict(zip(optimize.constants(opt.nc), c, strict=True))
+    env2: dict[sm.Symbol, float] = dict(zip(hoist.constants(opt.nc), c, strict=True))
     env2.update(zip(eqs.states, x, strict=True))
     for a in opt.rhs.temporaries:
         env2[a.lhs] = float(a.rhs.evalf(subs=env2))
@@ -51,7 +51,7 @@ def test_optimized_equals_direct_solve() -> None:
 def test_rhs_reads_only_states_and_constants() -> None:
     eqs = equations.full_model()
     opt = optimize.optimize(eqs)
-    allowed = set(eqs.states) | set(optimize.constants(opt.nc))
+    allowed = set(eqs.states) | set(hoist.constants(opt.nc))
     allowed |= {a.lhs for a in opt.rhs.temporaries}
     used = set().union(*(e.free_symbols for e in opt.rhs.outputs))
     used |= set().union(*(a.rhs.free_symbols for a in opt.rhs.temporaries))

@@ -8,11 +8,14 @@ import pytest
 
 from gyrogen import reference, sampling
 from gyrogen.build import Compiled
+from gyrogen.scene import default
 from gyrogen.verify import TOLERANCE, compare, scaled_error
 
 
 def test_compare_passes_at_the_issue_bar(backends: dict[str, Compiled]) -> None:
-    report = compare(list(backends.values()), n_states=2000, n_params=20, n_ill=5, seed=7)
+    report = compare(
+        list(backends.values()), default(), n_states=2000, n_params=20, n_ill=5, seed=7
+    )
     assert report.passed, report
     well = [r for r in report.rows if r.group.startswith("cond <=")]
     assert {r.pair for r in well} == {"C vs reference", "Fortran vs reference", "C vs Fortran"}
@@ -32,7 +35,7 @@ def test_compare_catches_a_wrong_backend(
         return out
 
     monkeypatch.setattr(reference, "rhs", off)
-    report = compare([backends["c"]], n_states=200, n_params=3, n_ill=1, seed=1)
+    report = compare([backends["c"]], default(), n_states=200, n_params=3, n_ill=1, seed=1)
     assert not report.passed
 
 

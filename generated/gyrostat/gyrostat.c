@@ -5,6 +5,9 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
+ * Build id 1371188a4d58f91f: a hash of the scene, gyrogen and sympy
+ * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
+ *
  * Operation counts (sympy.count_ops, temporaries included):
  *   gyrostat_setup: 50 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
@@ -84,7 +87,8 @@ int gyrostat_setup(const double *p, double *c)
 /* 40 ops per call. */
 void gyrostat_rhs(double t, const double *x, const double *c, double *dxdt)
 {
-    (void)t;  /* unused when the system is autonomous */
+    (void)t;  /* unused when the scene is autonomous */
+    (void)c;  /* unused when every value is folded */
     const double q2 = x[1];
     const double q3 = x[2];
     const double u1 = x[7];

@@ -4,6 +4,9 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
+! Build id 1371188a4d58f91f: a hash of the scene, gyrogen and sympy versions
+! (also in manifest.json and as GYROSTAT_BUILD_ID).
+!
 ! Operation counts (sympy.count_ops, temporaries included):
 !   gyrostat_f_setup: 50 ops, once per parameter set
 !   gyrostat_f_rhs:   40 ops per call
@@ -25,25 +28,27 @@
 !   x(13)  u6   m/s     velocity of AB*, n2
 !   x(14)  u7   m/s     velocity of AB*, n3
 ! Parameter order p(1:12):
-!   p( 1)  m_a  kg      mass of the carrier A
-!   p( 2)  m_b  kg      mass of the rotor B
-!   p( 3)  I11  kg m^2  carrier inertia about A*, a1a1
-!   p( 4)  I22  kg m^2  carrier inertia about A*, a2a2
-!   p( 5)  I33  kg m^2  carrier inertia about A*, a3a3
-!   p( 6)  I13  kg m^2  carrier product of inertia about A*, a1a3
-!   p( 7)  I    kg m^2  rotor transverse inertia about B*
-!   p( 8)  J    kg m^2  rotor axial inertia about B* (axis a2)
-!   p( 9)  l1   m       B* from A* along a1
-!   p(10)  l3   m       B* from A* along a3
-!   p(11)  g    m/s^2   gravity along +n3
-!   p(12)  T    N m     motor torque on B about a2 (minus on A)
+!   p( 1)  m_a   kg      mass of the carrier A
+!   p( 2)  m_b   kg      mass of the rotor B
+!   p( 3)  I11   kg m^2  carrier inertia about A*, a1a1
+!   p( 4)  I22   kg m^2  carrier inertia about A*, a2a2
+!   p( 5)  I33   kg m^2  carrier inertia about A*, a3a3
+!   p( 6)  I13   kg m^2  carrier product of inertia about A*, a1a3
+!   p( 7)  I     kg m^2  rotor transverse inertia about B*
+!   p( 8)  J     kg m^2  rotor axial inertia about B* (axis a2)
+!   p( 9)  l1    m       B* from A* along a1
+!   p(10)  l3    m       B* from A* along a3
+!   p(11)  g     m/s^2   gravity along +n3
+!   p(12)  T     N m     motor torque on B about a2 (minus on A)
 module gyrostat_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   implicit none
   private
-  public :: gyrostat_setup, gyrostat_rhs
+  public :: gyrostat_setup
+  public :: gyrostat_rhs
 
+  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "1371188a4d58f91f"
   integer, parameter, public :: GYROSTAT_NX = 14  ! states
   integer, parameter, public :: GYROSTAT_NP = 12  ! parameters
   integer, parameter, public :: GYROSTAT_NC = 11  ! hoisted constants
@@ -189,7 +194,7 @@ contains
     real(c_double) :: tmp1
     real(c_double) :: tmp2
 
-    associate (unused => t)  ! t is unused when the system is autonomous
+    associate (unused_t => t, unused_c => c)  ! unused in some scenes
     end associate
     q2 = x(2)
     q3 = x(3)

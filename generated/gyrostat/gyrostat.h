@@ -5,6 +5,9 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
+ * Build id 1371188a4d58f91f: a hash of the scene, gyrogen and sympy
+ * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
+ *
  * Operation counts (sympy.count_ops, temporaries included):
  *   gyrostat_setup: 50 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
@@ -15,6 +18,8 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+#define GYROSTAT_BUILD_ID "1371188a4d58f91f"
 
 #define GYROSTAT_NX 14   /* states */
 #define GYROSTAT_NP 12   /* parameters */
@@ -38,18 +43,18 @@ extern "C" {
  *   x[13]  u7   m/s     velocity of AB*, n3
  *
  * Parameter vector p[GYROSTAT_NP] (SI units):
- *   p[ 0]  m_a  kg      mass of the carrier A
- *   p[ 1]  m_b  kg      mass of the rotor B
- *   p[ 2]  I11  kg m^2  carrier inertia about A*, a1a1
- *   p[ 3]  I22  kg m^2  carrier inertia about A*, a2a2
- *   p[ 4]  I33  kg m^2  carrier inertia about A*, a3a3
- *   p[ 5]  I13  kg m^2  carrier product of inertia about A*, a1a3
- *   p[ 6]  I    kg m^2  rotor transverse inertia about B*
- *   p[ 7]  J    kg m^2  rotor axial inertia about B* (axis a2)
- *   p[ 8]  l1   m       B* from A* along a1
- *   p[ 9]  l3   m       B* from A* along a3
- *   p[10]  g    m/s^2   gravity along +n3
- *   p[11]  T    N m     motor torque on B about a2 (minus on A)
+ *   p[ 0]  m_a   kg      mass of the carrier A
+ *   p[ 1]  m_b   kg      mass of the rotor B
+ *   p[ 2]  I11   kg m^2  carrier inertia about A*, a1a1
+ *   p[ 3]  I22   kg m^2  carrier inertia about A*, a2a2
+ *   p[ 4]  I33   kg m^2  carrier inertia about A*, a3a3
+ *   p[ 5]  I13   kg m^2  carrier product of inertia about A*, a1a3
+ *   p[ 6]  I     kg m^2  rotor transverse inertia about B*
+ *   p[ 7]  J     kg m^2  rotor axial inertia about B* (axis a2)
+ *   p[ 8]  l1    m       B* from A* along a1
+ *   p[ 9]  l3    m       B* from A* along a3
+ *   p[10]  g     m/s^2   gravity along +n3
+ *   p[11]  T     N m     motor torque on B about a2 (minus on A)
  */
 
 /* Return codes of gyrostat_setup, checked in this order. */

@@ -6,15 +6,15 @@ import sympy as sm
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 
-from gyrogen.backends.printing import statements, used_states
-from gyrogen.optimize import constants
+from gyrogen.backends.printing import functions, statements
+from gyrogen.hoist import constants
 from gyrogen.render import render
 from gyrogen.unit import Unit
 
 
 class CPrinter(C99CodePrinter):
-    """C99 with the hoisted constants as c[k] and small integer powers as
-    products (x*x beats pow(x, 2))."""
+    """C99 with the hoisted constants as c[k], doubles in their shortest
+    exact form, and small integer powers as products (x*x beats pow(x, 2))."""
 
     def __init__(self, nc: int) -> None:
         super().__init__()
@@ -22,6 +22,9 @@ class CPrinter(C99CodePrinter):
 
     def _print_Symbol(self, expr: sm.Symbol) -> str:
         return self._names.get(expr.name) or str(super()._print_Symbol(expr))
+
+    def _print_Float(self, expr: sm.Float) -> str:
+        return repr(float(expr))
 
     def _print_Pow(self, expr: sm.Pow) -> str:
         base, exp = expr.base, expr.exp
@@ -41,11 +44,12 @@ def files(unit: Unit) -> dict[str, str]:
     def assign(lhs: str, expr: sm.Expr) -> str:
         return f"{lhs} = {printer.doprint(expr)};"
 
+    rhs, *outputs = functions(unit, lambda a, i: f"{a}[{i}]", assign)
     ctx = {
         "unit": unit,
         "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
-        "rhs": statements(unit.optimized.rhs, lambda i: f"dxdt[{i}]", assign),
-        "rhs_states": used_states(unit.optimized.rhs, unit.states),
+        "rhs": rhs,
+        "outputs": outputs,
     }
     return {
         f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),

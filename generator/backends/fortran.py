@@ -5,10 +5,10 @@ from __future__ import annotations
 import sympy as sm
 from sympy.printing.fortran import FCodePrinter
 
-from gyrogen.backends.printing import statements, used_states
+from gyrogen.backends.printing import functions, statements
 from gyrogen.errors import GyrogenError
-from gyrogen.optimize import constants
-from gyrogen.render import render
+from gyrogen.hoist import constants
+from gyrogen.render import f_double, render
 from gyrogen.unit import Unit
 
 
@@ -25,6 +25,9 @@ class FortranPrinter(FCodePrinter):
     def _print_Symbol(self, expr: sm.Symbol) -> str:
         return self._names.get(expr.name) or str(super()._print_Symbol(expr))
 
+    def _print_Float(self, expr: sm.Float) -> str:
+        return f_double(float(expr))
+
 
 def _check_names(names: list[str], where: str) -> None:
     seen: dict[str, str] = {}
@@ -40,14 +43,18 @@ def files(unit: Unit) -> dict[str, str]:
     def assign(lhs: str, expr: sm.Expr) -> str:
         return str(printer.doprint(expr, assign_to=sm.Symbol(lhs)))
 
-    ctx = {
-        "unit": unit,
-        "setup": statements(unit.optimized.setup, lambda k: f"c({k + 1})", assign),
-        "rhs": statements(unit.optimized.rhs, lambda i: f"dxdt({i + 1})", assign),
-        "rhs_states": used_states(unit.optimized.rhs, unit.states),
-    }
-    setup_locals = [p.name for p in unit.params] + [s.name for s in ctx["setup"] if s.declare]
-    rhs_locals = [x.name for x in unit.states] + [s.name for s in ctx["rhs"] if s.declare]
-    _check_names(["p", "c", "status", "half_gap", "largest", *setup_locals], "setup")
-    _check_names(["t", "x", "c", "dxdt", *rhs_locals], "rhs")
+    rhs, *outputs = functions(unit, lambda a, i: f"{a}({i + 1})", assign)
+    setup = statements(unit.optimized.setup, lambda k: f"c({k + 1})", assign)
+    _check_names(
+        ["p", "c", "status", "half_gap", "largest", *(v.name for v in unit.setup_locals)]
+        + [s.name for s in setup if s.declare],
+        "setup",
+    )
+    for fn in (rhs, *outputs):
+        names = [unit.states[i].name for i in fn.states] + ["torque"] * fn.torque
+        _check_names(
+            ["t", "x", "c", "out", "dxdt", *names] + [s.name for s in fn.statements if s.declare],
+            fn.name,
+        )
+    ctx = {"unit": unit, "setup": setup, "rhs": rhs, "outputs": outputs}
     return {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}

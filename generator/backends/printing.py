@@ -7,10 +7,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import sympy as sm
 
 from gyrogen.optimize import Block
+from gyrogen.unit import Unit
 
 
 @dataclass(frozen=True)
@@ -20,6 +22,20 @@ class Statement:
     """The whole assignment as the language writes it (possibly several lines)."""
     declare: bool
     """A new local (true) or a store into an output array (false)."""
+
+
+@dataclass(frozen=True)
+class Function:
+    """One per-call function (rhs or an output) ready for a template."""
+
+    name: str
+    doc: str
+    unit: str
+    statements: list[Statement]
+    states: list[int]
+    """Indices of the states it reads: only those become locals."""
+    torque: bool
+    """Reads the tabulated torque T(t)."""
 
 
 Assign = Callable[[str, sm.Expr], str]
@@ -35,12 +51,30 @@ def statements(block: Block, output: Callable[[int], str], assign: Assign) -> li
     return temps + stores
 
 
-def used_states(block: Block, states: tuple[sm.Symbol, ...]) -> list[int]:
-    """Indices of the states that appear in the block: only those become
-    locals, so the compilers see no unused variable."""
+def _free(block: Block) -> set[sm.Basic]:
     free: set[sm.Basic] = set()
     for a in block.temporaries:
         free |= a.rhs.free_symbols
     for e in block.outputs:
         free |= e.free_symbols
-    return [i for i, s in enumerate(states) if s in free]
+    return free
+
+
+def functions(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> list[Function]:
+    """rhs first, then the scene's outputs; array(name, i) spells name[i]."""
+    blocks = [("rhs", unit.optimized.rhs, "dxdt", "dx/dt", "")]
+    blocks += [(o.name, o.block, "out", o.doc, o.unit) for o in unit.outputs]
+    out = []
+    for name, block, arr, doc, units in blocks:
+        free = _free(block)
+        out.append(
+            Function(
+                name=name,
+                doc=doc,
+                unit=units,
+                statements=statements(block, partial(array, arr), assign),
+                states=[i for i, s in enumerate(unit.states) if s in free],
+                torque=any(s in free for s in unit.equations.inputs),
+            )
+        )
+    return out
