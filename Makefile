@@ -7,20 +7,20 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench clean distclean
+.PHONY: setup system-deps run test lint generate check-generated bench clean distclean examples strict
 
-## setup: compilers (gcc, g++, gfortran) and the Python environment in .venv
+## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake) and the Python environment in .venv
 setup: system-deps $(STAMP)
 
 system-deps:
 	@missing=""; \
-	for tool in gcc g++ gfortran; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	for tool in gcc g++ gfortran clang valgrind cmake; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
 	    echo "installing$$missing (apt-get)"; \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq$$missing >/dev/null || exit 1; \
 	  else \
-	    echo "missing compilers:$$missing; install them with: sudo apt-get update && sudo apt-get install -y$$missing" >&2; \
+	    echo "missing build tools:$$missing; install them with: sudo apt-get update && sudo apt-get install -y$$missing" >&2; \
 	    exit 1; \
 	  fi; \
 	fi
@@ -45,15 +45,15 @@ lint: setup
 	$(BIN)/ruff format --check generator tests
 	$(BIN)/mypy
 
-## generate: rewrite generated/ from the templates and the generator
+## generate: rewrite generated/ (every built-in scene) from the templates and the generator
 generate: setup
-	$(BIN)/gyrogen generate --out $(SCENE_DIR)
+	$(BIN)/gyrogen generate --all --out generated
 
 ## check-generated: fail if generated/ differs from a fresh rendering
 check-generated: setup
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
-	$(BIN)/gyrogen generate --out "$$tmp/gyrostat" >/dev/null && \
-	diff -r "$$tmp/gyrostat" $(SCENE_DIR) && echo "generated/ is up to date"
+	$(BIN)/gyrogen generate --all --out "$$tmp" >/dev/null 2>&1 && \
+	diff -r "$$tmp" generated && echo "generated/ is up to date"
 
 ## bench: RHS timings (cffi, batched C and Fortran, numpy, PyDy cython)
 bench: setup
@@ -61,9 +61,17 @@ bench: setup
 	$(BIN)/gyrogen bench-rhs --out bench-out
 
 clean:
-	rm -rf build bench-out .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	rm -rf build examples/build bench-out .pytest_cache .mypy_cache .ruff_cache *.egg-info
 	find generator templates tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 
 distclean: clean
 	rm -rf $(VENV)
+
+## examples: build and run the embedding examples (C, Fortran, C++) against generated/
+examples: setup
+	$(MAKE) -C examples run
+
+## strict: the strictness matrix (gcc/clang c99/c11, g++, gfortran, sanitizers, valgrind)
+strict: setup
+	$(BIN)/pytest tests/test_strict.py

@@ -1,0 +1,120 @@
+"""The embedding examples (examples/) build with their own Makefile, against
+generated sources only, and print what the Python path computes: the same
+RK4 run with the numpy reference as the right-hand side."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrogen import layout, reference
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+
+# The run the examples document: parameters in layout.PARAMETERS order, the
+# initial state (everything else zero), and the fixed RK4 step.
+PARAMS = np.array([500.0, 10.0, 100.0, 80.0, 120.0, 5.0, 0.05, 0.1, 0.2, -0.1, 0.0, 0.01])
+INITIAL = {"u1": 0.01, "u2": 0.5, "u3": -0.02, "u4": 100.0}
+DT, STEPS = 1e-3, 10_000
+H_NAMES = ("H_n1", "H_n2", "H_n3")
+
+
+def initial_state() -> np.ndarray:
+    x = np.zeros(len(layout.STATES))
+    for name, value in INITIAL.items():
+        x[layout.STATES.index(name)] = value
+    return x
+
+
+def rk4(x: np.ndarray, p: np.ndarray, dt: float, steps: int) -> np.ndarray:
+    """The examples' integrator, step for step, on the reference RHS."""
+    for _ in range(steps):
+        k1 = reference.rhs(x, p)
+        k2 = reference.rhs(x + 0.5 * dt * k1, p)
+        k3 = reference.rhs(x + 0.5 * dt * k2, p)
+        k4 = reference.rhs(x + dt * k3, p)
+        x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return x
+
+
+def parse(stdout: str) -> dict[str, float]:
+    """'name value' lines, in order (dicts keep it)."""
+    pairs = [line.split() for line in stdout.splitlines()]
+    assert all(len(pair) == 2 for pair in pairs), stdout
+    return {name: float(value) for name, value in pairs}
+
+
+def run(program: Path) -> dict[str, float]:
+    proc = subprocess.run([str(program)], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
+    return parse(proc.stdout)
+
+
+@pytest.fixture(scope="module")
+def programs(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """examples/Makefile's `all`, into a temporary BUILD so the tree stays clean."""
+    build = tmp_path_factory.mktemp("examples")
+    proc = subprocess.run(
+        ["make", "-C", str(EXAMPLES), f"BUILD={build}", f"GEN={source_dir}", "all"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return build
+
+
+@pytest.fixture(scope="module")
+def python_final() -> np.ndarray:
+    return rk4(initial_state(), PARAMS, DT, STEPS)
+
+
+@pytest.mark.parametrize("program", ["embed_c", "embed_fortran"])
+def test_final_state_matches_python(programs: Path, python_final: np.ndarray, program: str) -> None:
+    out = run(programs / program)
+    assert list(out) == [*layout.STATES, *H_NAMES, "H_norm"]
+    x = np.array([out[name] for name in layout.STATES])
+    np.testing.assert_allclose(x, python_final, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("program", ["embed_c", "embed_fortran"])
+def test_angular_momentum(programs: Path, python_final: np.ndarray, program: str) -> None:
+    """The printed H is NOTES.md's, at the final state, and (T internal, g = 0)
+    the one the run started with."""
+    out = run(programs / program)
+    h = np.array([out[name] for name in H_NAMES])
+    np.testing.assert_allclose(h, reference.angular_momentum_n(python_final, PARAMS), rtol=1e-9)
+    h0 = reference.angular_momentum_n(initial_state(), PARAMS)
+    assert np.linalg.norm(h - h0) <= 1e-9 * np.linalg.norm(h0)
+    assert out["H_norm"] == pytest.approx(np.linalg.norm(h), rel=1e-15)
+
+
+def test_c_and_fortran_agree(programs: Path) -> None:
+    c, f = run(programs / "embed_c"), run(programs / "embed_fortran")
+    assert list(c) == list(f)
+    np.testing.assert_allclose(list(f.values()), list(c.values()), rtol=1e-12, atol=1e-15)
+
+
+def test_cpp_prints_the_reference_rhs(programs: Path) -> None:
+    out = run(programs / "embed_cpp")
+    assert list(out) == [f"d{name}" for name in layout.STATES]
+    expected = reference.rhs(initial_state(), PARAMS)
+    np.testing.assert_allclose(list(out.values()), expected, rtol=1e-12, atol=1e-15)
+
+
+def test_make_run_prints_each_program(source_dir: Path, tmp_path: Path) -> None:
+    """`make -C examples run` (what `make examples` calls) builds and runs all three."""
+    proc = subprocess.run(
+        ["make", "-s", "-C", str(EXAMPLES), f"BUILD={tmp_path}", f"GEN={source_dir}", "run"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    headers = [line for line in proc.stdout.splitlines() if line.startswith("== ")]
+    assert [Path(h[3:]).name for h in headers] == ["embed_c", "embed_fortran", "embed_cpp"]

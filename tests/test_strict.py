@@ -1,0 +1,110 @@
+"""The strictness matrix of issue 6 on the generated default scene: two C
+compilers, two standards, every warning an error; the header from C++; the
+Fortran module; and the examples under AddressSanitizer + UBSan and valgrind.
+
+No test here is skipped for a missing tool: `make setup` installs clang and
+valgrind, so a missing one is a failure that says what to install.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+C_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror")
+
+
+def tool(name: str) -> str:
+    path = shutil.which(name)
+    if path is None:
+        pytest.fail(f"{name} not found: `make setup` installs it (apt-get install -y {name})")
+    return path
+
+
+def clean(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> str:
+    """Run cmd; it must succeed and say nothing on stderr. Returns stdout."""
+    proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, f"{' '.join(cmd)}\n{proc.stdout}{proc.stderr}"
+    assert proc.stderr == "", proc.stderr
+    return proc.stdout
+
+
+@pytest.mark.parametrize("std", ["c99", "c11"])
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_generated_c(source_dir: Path, tmp_path: Path, cc: str, std: str) -> None:
+    clean([tool(cc), f"-std={std}", *C_WARNINGS, "-c", str(source_dir / "gyrostat.c"),
+           "-o", str(tmp_path / "g.o")], tmp_path)  # fmt: skip
+
+
+@pytest.mark.parametrize("std", ["c99", "c11"])
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_c_example(source_dir: Path, tmp_path: Path, cc: str, std: str) -> None:
+    """The example holds itself to the same flags as the code it embeds."""
+    main = EXAMPLES / "embed_c" / "main.c"
+    clean([tool(cc), f"-std={std}", *C_WARNINGS, f"-I{source_dir}", "-c", str(main),
+           "-o", str(tmp_path / "main.o")], tmp_path)  # fmt: skip
+
+
+def test_header_from_cxx(source_dir: Path, tmp_path: Path) -> None:
+    """A C++ translation unit that includes the header and takes both functions."""
+    tu = tmp_path / "tu.cpp"
+    tu.write_text(
+        '#include "gyrostat.h"\n'
+        "int (*const setup)(const double *, double *) = gyrostat_setup;\n"
+        "void (*const rhs)(double, const double *, const double *, double *) = gyrostat_rhs;\n"
+    )
+    clean([tool("g++"), "-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
+           f"-I{source_dir}", "-c", str(tu), "-o", "tu.o"], tmp_path)  # fmt: skip
+
+
+def test_cpp_example(source_dir: Path, tmp_path: Path) -> None:
+    clean([tool("g++"), "-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
+           f"-I{source_dir}", "-c", str(EXAMPLES / "embed_cpp" / "main.cpp"), "-o", "m.o"],
+          tmp_path)  # fmt: skip
+
+
+def test_fortran(source_dir: Path, tmp_path: Path) -> None:
+    """The module and the example that uses it."""
+    flags = ["-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror", "-J", "."]
+    gf = tool("gfortran")
+    clean([gf, *flags, "-c", str(source_dir / "gyrostat.f90"), "-o", "g.o"], tmp_path)
+    clean([gf, *flags, "-c", str(EXAMPLES / "embed_fortran" / "main.f90"), "-o", "m.o"], tmp_path)
+
+
+def build_examples(source_dir: Path, build: Path, *overrides: str, target: str = "all") -> None:
+    clean(["make", "-s", "-C", str(EXAMPLES), f"BUILD={build}", f"GEN={source_dir}",
+           *overrides, target], EXAMPLES)  # fmt: skip
+
+
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_c_example_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str) -> None:
+    sanitize = "-fsanitize=address,undefined -fno-omit-frame-pointer"
+    build_examples(
+        source_dir,
+        tmp_path,
+        f"CC={tool(cc)}",
+        f"CFLAGS=-std=c99 -O1 -g {sanitize}",
+        f"LDFLAGS={sanitize}",
+        target=str(tmp_path / "embed_c"),
+    )
+    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1")
+    out = clean([str(tmp_path / "embed_c")], tmp_path, env)
+    assert out.count("\n") == 18  # 14 states, 3 components of H, its norm
+
+
+@pytest.mark.parametrize("program", ["embed_c", "embed_fortran"])
+def test_examples_under_valgrind(source_dir: Path, tmp_path: Path, program: str) -> None:
+    build_examples(source_dir, tmp_path, target=str(tmp_path / program))
+    proc = subprocess.run(
+        [tool("valgrind"), "-q", "--error-exitcode=1", "--leak-check=full",
+         str(tmp_path / program)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == "", proc.stderr  # -q: memcheck speaks only of errors
