@@ -158,7 +158,7 @@ def _bench_numpy(inp: _Inputs, calls: int, repeats: int) -> list[Measurement]:
     ]
 
 
-def _pydy_rhs(echo: Echo) -> Callable[..., Array] | None:
+def pydy_rhs(echo: Echo) -> Callable[..., Array] | None:
     """PyDy's cython ODE function of model.separate(), or None if PyDy is missing."""
     try:
         import Cython  # noqa: F401  (pydy's cython generator fails late without it)
@@ -291,7 +291,7 @@ def run(
     for comp in backends:
         ms += _bench_backend(comp, inp, calls, repeats, echo)
     ms += _bench_numpy(inp, calls // 100, repeats)
-    rhs = _pydy_rhs(echo) if pydy else None
+    rhs = pydy_rhs(echo) if pydy else None
     if rhs is not None:
         ms.append(_bench_pydy(rhs, inp, calls // 10, repeats, echo))
     info = machine()

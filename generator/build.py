@@ -18,6 +18,7 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Literal
@@ -42,6 +43,18 @@ C_FLAGS = (
 )
 FORTRAN_FLAGS = ("-std=f2008", "-O2", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Werror")
 _PACKAGES = {"gcc": "gcc", "gfortran": "gfortran"}
+
+STATS_FIELDS = ("t", "h", "accepted", "rejected", "rhs_calls", "jac_calls", "decompositions")
+"""The fields of <prefix>_stats (gyrogen_stats in the cffi glue), in order."""
+ODE_CODES = {
+    0: "ok",
+    1: "step size underflow",
+    2: "max_steps reached",
+    3: "non-finite state or derivative",
+    4: "singular iteration matrix",
+    5: "bad argument",
+}
+"""The integrators' return codes (<PREFIX>_ODE_* in <prefix>_ode.h)."""
 
 
 def cache_root() -> Path:
@@ -101,8 +114,16 @@ class Compiled:
     def output(self, name: str, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
         """An output function (kinetic_energy, angular_momentum, power) for a
         batch of states (n, nx): shape (n, size)."""
+        return self._apply(name, int(self.manifest["outputs"][name]), x, c, t)
+
+    def jacobian(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """d(dx/dt)/dx at one state: shape (nx, nx) (scenes with rodas4)."""
+        if "jac" not in self.manifest["functions"][self.language]:
+            raise BuildError(f"scene {self.manifest['prefix']} has no Jacobian (add rodas4)")
+        return self._apply("jac", self.nx * self.nx, x, c, t).reshape(self.nx, self.nx)
+
+    def _apply(self, name: str, size: int, x: np.ndarray, c: np.ndarray, t: float) -> np.ndarray:
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, self.nx)
-        size = int(self.manifest["outputs"][name])
         out = np.empty((x.shape[0], size))
         fn = self.ffi.addressof(self.lib, self.manifest["functions"][self.language][name])
         self.lib.gyrogen_batch(
@@ -129,6 +150,90 @@ class Compiled:
             self.ffi.from_buffer("double[]", out),
         )
         return out
+
+    def integrate(
+        self,
+        method: str,
+        x0: np.ndarray,
+        c: np.ndarray,
+        t0: float,
+        t1: float,
+        *,
+        rtol: float = 1e-8,
+        atol: float = 1e-8,
+        h0: float = 0.0,
+        max_steps: int = 10**7,
+        steps: int | None = None,
+    ) -> tuple[np.ndarray, dict[str, float | int], int]:
+        """One compiled integration of x0 (nx,) from t0 to t1: the final state
+        (the last good one on failure), the statistics (STATS_FIELDS) and the
+        return code (ODE_CODES). rk4 takes `steps`; the others rtol, atol, h0
+        (<= 0: automatic) and max_steps."""
+        x, stats, codes = self.integrate_batch(
+            method, np.reshape(x0, (1, -1)), c, t0, t1,
+            rtol=rtol, atol=atol, h0=h0, max_steps=max_steps, steps=steps,
+        )  # fmt: skip
+        return x[0], {name: stats[name][0].item() for name in STATS_FIELDS}, int(codes[0])
+
+    def integrate_batch(
+        self,
+        method: str,
+        x0s: np.ndarray,
+        c: np.ndarray,
+        t0: float,
+        t1: float,
+        *,
+        rtol: float = 1e-8,
+        atol: float = 1e-8,
+        h0: float = 0.0,
+        max_steps: int = 10**7,
+        steps: int | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """integrate() for many initial states (n, nx) in one compiled call:
+        final states (n, nx), statistics as a structured array (n,) with the
+        fields STATS_FIELDS, and return codes (n,)."""
+        if method not in self.manifest["integrators"]:
+            raise ValueError(
+                f"no integrator {method!r} in this build "
+                f"(scene integrators: {', '.join(self.manifest['integrators'])})"
+            )
+        if (steps is None) == (method == "rk4"):
+            raise ValueError("rk4 takes steps= and only rk4 does")
+        x = np.array(x0s, dtype=np.float64, order="C", ndmin=2)  # a copy: integrated in place
+        if x.ndim != 2 or x.shape[1] != self.nx:
+            raise ValueError(f"initial states must have shape (n, {self.nx}), not {x.shape}")
+        n = x.shape[0]
+        stats = np.zeros(n, dtype=self._stats_dtype)
+        codes = np.zeros(n, dtype=np.intc)
+        fn = getattr(self.lib, self.manifest["functions"][self.language][f"{method}_batch"])
+        tail = (
+            self.ffi.from_buffer("double[]", x),
+            self.ffi.from_buffer("double[]", np.ascontiguousarray(c, dtype=np.float64)),
+        )
+        args: tuple[Any, ...]
+        if method == "rk4":
+            args = (n, t0, t1, steps, *tail)
+        else:
+            args = (n, t0, t1, *tail, rtol, atol, h0, max_steps)
+        fn(
+            *args,
+            self.ffi.from_buffer("gyrogen_stats[]", stats),
+            self.ffi.from_buffer("int[]", codes),
+        )
+        return x, stats, codes
+
+    @cached_property
+    def _stats_dtype(self) -> np.dtype:
+        """gyrogen_stats as numpy sees it, offsets and size from cffi."""
+        long = f"i{self.ffi.sizeof('long')}"
+        return np.dtype(
+            {
+                "names": list(STATS_FIELDS),
+                "formats": ["f8", "f8"] + [long] * (len(STATS_FIELDS) - 2),
+                "offsets": [self.ffi.offsetof("gyrogen_stats", f) for f in STATS_FIELDS],
+                "itemsize": self.ffi.sizeof("gyrogen_stats"),
+            }
+        )
 
 
 def _tool_version(tool: str) -> str:
@@ -182,11 +287,20 @@ def build(source_dir: Path, language: Language) -> Compiled:
             f"scene {prefix} has no {language} target (targets: {manifest['targets']})"
         )
     files = manifest["files"]
-    sources = [source_dir / files["c_header"], source_dir / files["c_source"]]
+    wanted = ["c_header", "c_source", "c_ode_header", "c_ode_source"]
     if language == "fortran":
-        sources = [source_dir / files["fortran"]]
+        wanted = ["fortran", "fortran_ode"]  # in this order: the second uses the first
+    sources = [source_dir / files[k] for k in wanted if k in files]
     per_call = ["rhs", *manifest["outputs"]]
-    ctx = {"setup": names["setup"], "functions": [names[f] for f in per_call], "nx": manifest["nx"]}
+    if "jac" in names:
+        per_call.append("jac")
+    ctx = {
+        "prefix": prefix,
+        "setup": names["setup"],
+        "functions": [names[f] for f in per_call],
+        "methods": [(m, names[m], names[f"{m}_batch"]) for m in manifest["integrators"]],
+        "nx": manifest["nx"],
+    }
     glue = render("cffi/glue.c.jinja", **ctx)
     cdef = render("cffi/cdef.h.jinja", **ctx)
     key = _key(language, sources, glue, cdef)
@@ -215,14 +329,17 @@ def _compile(
         ffi = cffi.FFI()
         ffi.cdef(cdef)
         if language == "c":
-            source = next(s for s in sources if s.suffix == ".c")
-            _run([cc, *C_FLAGS, "-c", "-o", "rhs.o", source.name], work)
-            ffi.set_source(module_name, glue, extra_objects=[str(work / "rhs.o")])
+            objects = []
+            for src in (s for s in sources if s.suffix == ".c"):
+                obj = work / f"{src.stem}.o"
+                _run([cc, *C_FLAGS, "-c", "-o", obj.name, src.name], work)
+                objects.append(str(obj))
+            ffi.set_source(module_name, glue, extra_objects=objects)
         else:
             lib = module_name + "_f"
-            src = sources[0]
             gf = require("gfortran")
-            _run([gf, *FORTRAN_FLAGS, "-shared", "-J", ".", "-o", f"lib{lib}.so", src.name], work)
+            names = [src.name for src in sources]
+            _run([gf, *FORTRAN_FLAGS, "-shared", "-J", ".", "-o", f"lib{lib}.so", *names], work)
             ffi.set_source(
                 module_name,
                 glue,

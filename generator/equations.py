@@ -34,6 +34,8 @@ class Equations:
     """Optional extra functions, by name, in states, inputs and parameters."""
     checks: dict[str, sm.Expr] = field(default_factory=dict)
     """The parameters setup checks, by name: a runtime symbol or a number."""
+    coupled: sm.Matrix = field(default_factory=lambda: sm.eye(2))
+    """The mass matrix's coupled block (rows and columns of u1, u3)."""
 
 
 def plain(expr: sm.Expr | sm.Matrix) -> sm.Expr | sm.Matrix:

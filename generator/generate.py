@@ -21,10 +21,15 @@ def manifest(unit: Unit) -> dict[str, Any]:
     """What tools and tests read instead of parsing C."""
     p = unit.prefix
     files: dict[str, str] = {}
+    ode = bool(unit.scene.integrators)
     if "c" in unit.scene.targets:
         files.update(c_header=f"{p}.h", c_source=f"{p}.c")
+        if ode:
+            files.update(c_ode_header=f"{p}_ode.h", c_ode_source=f"{p}_ode.c")
     if "fortran" in unit.scene.targets:
         files["fortran"] = f"{p}.f90"
+        if ode:
+            files["fortran_ode"] = f"{p}_ode.f90"
     full = full_model_unit()
     return {
         "prefix": p,
@@ -38,6 +43,7 @@ def manifest(unit: Unit) -> dict[str, Any]:
         "np": unit.np,
         "nc": unit.nc,
         "outputs": {o.name: o.size for o in unit.outputs},
+        "integrators": list(unit.scene.integrators),
         "targets": list(unit.scene.targets),
         "functions": unit.functions,
         "signatures": {

@@ -49,6 +49,10 @@ STATE_DOC: dict[str, tuple[str, str]] = {
     "q2": ("rad", "3-1-2 Euler angle 2 of A in N (about a1')"),
     "q3": ("rad", "3-1-2 Euler angle 3 of A in N (about a2)"),
     "q4": ("rad", "rotor angle about a2 relative to A"),
+    "e0": ("-", "Euler parameter (quaternion) of A in N, scalar part"),
+    "e1": ("-", "Euler parameter of A in N, vector part along a1"),
+    "e2": ("-", "Euler parameter of A in N, vector part along a2"),
+    "e3": ("-", "Euler parameter of A in N, vector part along a3"),
     "q5": ("m", "AB* position, n1"),
     "q6": ("m", "AB* position, n2"),
     "q7": ("m", "AB* position, n3"),
@@ -70,6 +74,7 @@ SETUP_CODES: dict[int, str] = {
     4: "the carrier inertia is not positive definite",
     5: "the carrier's principal moments violate the triangle inequality",
     6: "the rotor violates the triangle inequality (2 I < J)",
+    7: "the mass matrix is not numerically positive definite (condition number above 1e13)",
 }
 
 # Macro suffixes of the setup codes: <PREFIX>_<suffix> in the C header.
@@ -81,8 +86,23 @@ SETUP_CODE_NAMES: dict[int, str] = {
     4: "ERR_CARRIER_NOT_PD",
     5: "ERR_CARRIER_TRIANGLE",
     6: "ERR_ROTOR_TRIANGLE",
+    7: "ERR_MASS_SINGULAR",
 }
+
+# The condition number of the mass matrix's coupled block [[I~11, I~13],
+# [I~13, I~33]] (the other rows are diagonal and solved exactly): setup
+# refuses it above MAX_CONDITION, `gyrogen check` warns above WARN_CONDITION.
+MAX_CONDITION = 1e13
+WARN_CONDITION = 1e8
 
 # Relative slack of the triangle-inequality checks: equality is physical (a
 # lamina, a thin disc), and rounding must not refuse it.
 TRIANGLE_SLACK = 1e-12
+
+# The compiled integrators a scene may ask for (scene key `integrators`).
+INTEGRATORS: dict[str, str] = {
+    "rk4": "Classic Runge-Kutta, order 4, fixed step.",
+    "dopri5": "Dormand-Prince 5(4), adaptive, PI step-size control.",
+    "dop853": "DOP853 (Hairer's coefficients and error estimator), adaptive.",
+    "rodas4": "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
+}

@@ -161,6 +161,41 @@ def direction_cosines() -> sm.Matrix:
     return sm.Matrix(f.A.dcm(f.N))
 
 
+@dataclass(frozen=True)
+class Quaternion:
+    """Euler parameters e0..e3 of A in N (scalar first), the alternative to
+    the 3-1-2 angles: no singularity, one more state, unit norm to keep."""
+
+    e: tuple[sm.Symbol, ...]
+    kinematics: tuple[sm.Expr, ...]
+    """e' in terms of e and u1..u3 (plain symbols), for |e| = 1."""
+    dcm: sm.Matrix
+    """C with a_i = sum_j C[i, j] n_j, in e (plain symbols)."""
+
+
+@cache
+def quaternion() -> Quaternion:
+    """Derived like the angles: orient A by Euler parameters, ask sympy for
+    omega of A in N in terms of e', and solve for e' with omega = (u1, u2,
+    u3) and e.e' = 0 (the norm is constant); then set |e| = 1."""
+    e_t = me.dynamicsymbols("e0:4")
+    t = me.dynamicsymbols._t
+    ed = [x.diff(t) for x in e_t]
+    N = me.ReferenceFrame("N")
+    A = N.orientnew("A", "Quaternion", e_t)
+    w = A.ang_vel_in(N)
+    u = sm.symbols("u1:4", real=True)
+    eqs = [w.dot(A.x) - u[0], w.dot(A.y) - u[1], w.dot(A.z) - u[2]]
+    eqs.append(sum(a * b for a, b in zip(e_t, ed, strict=True)))
+    sol = sm.solve(eqs, ed, dict=True)[0]
+    e = sm.symbols("e0:4", real=True)
+    plain = dict(zip(e_t, e, strict=True))
+    norm = sum(x**2 for x in e)
+    kin = tuple(sm.factor(sm.cancel(sol[d].subs(plain) * norm)) for d in ed)
+    dcm = sm.Matrix(A.dcm(N)).subs(plain)
+    return Quaternion(tuple(e), kin, dcm)
+
+
 def lumped_values() -> dict[sm.Symbol, sm.Expr]:
     """The paper's lumped inertia scalars in terms of the parameters (NOTES.md)."""
     s = symbols()

@@ -50,6 +50,8 @@ class Optimized:
     """The lumped inertia scalars: named temporaries of setup."""
     outputs: dict[str, Block] = field(default_factory=dict)
     """Optional extra functions (energy, momentum, power), per call."""
+    jacobian: Block | None = None
+    """d(dx/dt)/dx, row-major, when an implicit integrator needs it."""
 
     @property
     def nc(self) -> int:
@@ -141,8 +143,9 @@ def _temporaries() -> Iterator[sm.Symbol]:
     return sm.numbered_symbols("tmp", real=True)
 
 
-def optimize(eqs: Equations) -> Optimized:
-    """Lumped + hoisted + CSE: the variant gyrogen generates."""
+def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
+    """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
+    also d(dx/dt)/dx for the implicit integrators."""
     udot = block_inverse(eqs.mass_matrix) * eqs.forcing
     hoister = Hoister()
     per_call = [*eqs.states, *eqs.inputs]
@@ -154,8 +157,26 @@ def optimize(eqs: Equations) -> Optimized:
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
         for name, exprs in eqs.outputs.items()
     }
-    setup, lumped = _setup(eqs, hoister.values)
-    return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs)
+    jac = _jacobian([*kin, *dyn], eqs.states) if jacobian else None
+    setup, lumped = _setup(eqs, [*hoister.values, condition(eqs.coupled)])
+    return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
+
+
+def condition(block: sm.Matrix) -> sm.Expr:
+    """lambda_max / lambda_min of a symmetric positive 2x2 block, the last
+    constant of setup. lambda_min = det / lambda_max: the difference of the
+    two terms of lambda_min would cancel for a badly conditioned block."""
+    a, b, d = block[0, 0], block[0, 1], block[1, 1]
+    big = (a + d) / 2 + sm.sqrt((a - d) ** 2 / 4 + b**2)
+    cond = big**2 / (a * d - b**2)
+    return sm.Float(float(cond)) if cond.is_number else cond
+
+
+def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
+    """Row-major d f_i / d x_j of the hoisted right-hand side: it reads the
+    same constants, so setup covers it too."""
+    entries = [sm.diff(fi, xj) for fi in f for xj in x]
+    return _cse(entries, _temporaries())
 
 
 def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignment, ...]]:

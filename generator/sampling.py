@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gyrogen import layout
+from gyrogen.layout import MAX_CONDITION
 
 __all__ = ["invalid_parameters", "random_parameters", "random_states", "setup_code"]
 
@@ -33,7 +34,8 @@ def setup_code(p: ArrayLike) -> int:
     ``J <= 0``; 4 the carrier inertia ``[[I11, 0, I13], [0, I22, 0], [I13, 0, I33]]`` is not
     positive definite; 5 its principal moments (I22 and the eigenvalues of
     ``[[I11, I13], [I13, I33]]``) violate the triangle inequality by more than
-    ``1e-12 * (sum of the three)``; 6 ``J > 2 I`` by more than ``1e-12 * (2 I + J)``.
+    ``1e-12 * (sum of the three)``; 6 ``J > 2 I`` by more than ``1e-12 * (2 I + J)``;
+    7 the mass matrix's coupled block has a condition number above ``MAX_CONDITION``.
     Returns 0 if all checks pass.
     """
     pa = np.asarray(p, dtype=np.float64)
@@ -58,6 +60,8 @@ def setup_code(p: ArrayLike) -> int:
     I, J = v["I"], v["J"]
     if J - 2.0 * I > REL_TOL * (2.0 * I + J):
         return 6
+    if not float(lumped_condition(pa)) <= MAX_CONDITION:
+        return 7
     return 0
 
 
@@ -115,8 +119,9 @@ def lumped_condition(p: ArrayLike) -> Array:
     a13 = pa[..., _P["I13"]] - mu * l1 * l3
     half_gap = np.sqrt(0.25 * (a11 - a33) ** 2 + a13**2)
     largest = 0.5 * (a11 + a33) + half_gap
-    smallest = (a11 * a33 - a13**2) / largest  # not mean - half_gap: that cancels
-    return np.asarray(largest / smallest)
+    # largest / smallest with smallest = det / largest (mean - half_gap would
+    # cancel), written as the generated setup computes it.
+    return np.asarray(largest**2 / (a11 * a33 - a13**2))
 
 
 def random_parameters(
@@ -228,5 +233,10 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
         ),
         ("rotor 2 I < J", variant(J=2.5 * I), 6),
         ("rotor 2 I < J by 1e-9 relative", variant(J=2.0 * I * (1.0 + 1e-9)), 6),
+        (
+            "mass matrix numerically singular: a 1e-14 carrier and rotor far off A*",
+            variant(I11=1e-14, I22=1e-14, I33=1e-14, I13=0.0, I=1e-14, J=1e-14, l1=1.0, l3=1.0),
+            7,
+        ),
     ]
     return cases

@@ -90,8 +90,16 @@ class Scene(_Strict):
     effects: Effects = Effects()
     outputs: Outputs = Outputs()
     targets: list[Literal["c", "fortran"]] = ["c", "fortran"]
-    attitude: Literal["euler312"] = "euler312"
-    """Room for "quaternion" (another issue): only 3-1-2 Euler angles so far."""
+    integrators: list[Literal["rk4", "dopri5", "dop853", "rodas4"]] = [
+        "rk4",
+        "dopri5",
+        "dop853",
+        "rodas4",
+    ]
+    """Compiled integrators to render beside the RHS (rodas4 adds the Jacobian)."""
+    attitude: Literal["euler312", "quaternion"] = "euler312"
+    """3-1-2 Euler angles q1..q3 (singular at q2 = +-pi/2), or Euler parameters
+    e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
     simulate: Simulate = Simulate()
 
     @field_validator("name")
@@ -108,6 +116,13 @@ class Scene(_Strict):
     def _targets(cls, v: list[str]) -> list[str]:
         if not v or len(set(v)) != len(v):
             raise ValueError("list c, fortran or both, once each")
+        return v
+
+    @field_validator("integrators")
+    @classmethod
+    def _integrators(cls, v: list[str]) -> list[str]:
+        if len(set(v)) != len(v):
+            raise ValueError("list each integrator once")
         return v
 
     @model_validator(mode="after")
@@ -133,7 +148,16 @@ class Scene(_Strict):
             drop |= {"q5", "q6", "q7", "u5", "u6", "u7"}
         if not self.effects.rotor_angle:
             drop.add("q4")
-        return tuple(s for s in STATES if s not in drop)
+        kept = tuple(s for s in STATES if s not in drop)
+        if self.attitude == "quaternion":
+            kept = ("e0", "e1", "e2", "e3", *kept[3:])
+        return kept
+
+    def initial_state(self) -> tuple[float, ...]:
+        """simulate.initial in state order; unnamed states start at 0, except
+        e0 (the identity attitude, e = (1, 0, 0, 0))."""
+        start = {"e0": 1.0, **self.simulate.initial}
+        return tuple(start.get(s, 0.0) for s in self.states)
 
     @property
     def runtime(self) -> tuple[str, ...]:

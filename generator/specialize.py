@@ -54,15 +54,23 @@ def specialize(scene: Scene) -> Equations:
     numeric = {s: e for s, e in lumped.items() if e.is_number}
     subs.update(numeric)
 
-    keep = [i for i, s in enumerate(states) if s.name in scene.states]
+    names = set(scene.states)
+    if scene.attitude == "quaternion":  # derive as with angles, swap them for e below
+        names |= {"q1", "q2", "q3"}
+    keep = [i for i, s in enumerate(states) if s.name in names]
     keep_u = [i - 7 for i in keep if i >= 7]
     keep_q = [i for i in keep if i < 7]
     mm = equations.plain(full.mass_matrix).subs(subs).extract(keep_u, keep_u)
     f = equations.plain(full.forcing).subs(subs).extract(keep_u, [0])
     kin = equations.plain(full.kinematics).extract(keep_q, [0])
+    kept = [states[i] for i in keep]
+    if scene.attitude == "quaternion":  # e0..e3 in place of q1..q3
+        quat = model.quaternion()
+        kept = [*quat.e, *kept[3:]]
+        kin = sm.Matrix([*quat.kinematics, *kin[3:]])
     runtime = tuple(sym[n] for n in scene.runtime)
     return Equations(
-        states=tuple(states[i] for i in keep),
+        states=tuple(kept),
         params=runtime,
         mass_matrix=mm,
         forcing=f,
@@ -71,6 +79,7 @@ def specialize(scene: Scene) -> Equations:
         inputs=(torque,) if scene.effects.torque == "table" else (),
         outputs=_outputs(scene, subs, by_name, torque),
         checks={n: v[n] for n in CHECKED},
+        coupled=mm.extract([0, 2], [0, 2]),  # u1..u4 are always kept
     )
 
 
@@ -92,7 +101,10 @@ def _outputs(
         out["kinetic_energy"] = (k,)
     if scene.outputs.angular_momentum:
         h = sm.Matrix([IA11 * u1 + IA13 * u3, IA22 * u2 + J * u4, IA13 * u1 + IA33 * u3])
-        dcm = equations.plain(model.direction_cosines())
+        if scene.attitude == "quaternion":
+            dcm = model.quaternion().dcm
+        else:
+            dcm = equations.plain(model.direction_cosines())
         out["angular_momentum"] = tuple(
             sm.Add(*(dcm[i, j] * h[i] for i in range(3)), evaluate=False) for j in range(3)
         )

@@ -13,6 +13,8 @@ import sympy as sm
 import gyrogen
 from gyrogen.equations import Equations
 from gyrogen.layout import (
+    INTEGRATORS,
+    MAX_CONDITION,
     PARAMETER_DOC,
     SETUP_CODE_NAMES,
     SETUP_CODES,
@@ -42,6 +44,12 @@ class Row:
 class Code:
     value: int
     macro: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
     doc: str
 
 
@@ -104,7 +112,13 @@ class Unit:
     def ops(self) -> dict[str, int]:
         ops = {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
         ops.update({o.name: o.block.ops for o in self.outputs})
+        if self.optimized.jacobian is not None:
+            ops["jac"] = self.optimized.jacobian.ops
         return ops
+
+    @property
+    def methods(self) -> list[Method]:
+        return [Method(m, INTEGRATORS[m]) for m in self.scene.integrators]
 
     @property
     def outputs(self) -> list[Output]:
@@ -146,6 +160,15 @@ class Unit:
         return [Code(v, f"{self.macro}_{SETUP_CODE_NAMES[v]}", SETUP_CODES[v]) for v in SETUP_CODES]
 
     @property
+    def cond_index(self) -> int:
+        """c[cond_index] holds the condition number of the coupled block."""
+        return self.nc - 1
+
+    @property
+    def max_condition(self) -> str:
+        return repr(MAX_CONDITION)
+
+    @property
     def triangle_slack(self) -> str:
         return repr(TRIANGLE_SLACK)
 
@@ -167,9 +190,14 @@ class Unit:
         for o in self.outputs:
             c[o.name] = f"{p}_{o.name}"
             f[o.name] = f"{p}_f_{o.name}"
+        if self.optimized.jacobian is not None:
+            c["jac"], f["jac"] = f"{p}_jac", f"{p}_f_jac"
+        for m in self.scene.integrators:
+            c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
+            c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"
         return {"c": c, "fortran": f}
 
 
 def make_unit(scene: Scene) -> Unit:
     eqs = specialize(scene)
-    return Unit(scene, eqs, optimize(eqs))
+    return Unit(scene, eqs, optimize(eqs, jacobian="rodas4" in scene.integrators))

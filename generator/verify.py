@@ -129,7 +129,7 @@ def compare(
     progress: Progress = lambda label, items: items,
 ) -> Report:
     rng = np.random.default_rng(seed)
-    states = sampling.random_states(rng, n_states)[:, witness.state_index(scene)]
+    states = witness.random_states(scene, rng, n_states)
     well = witness.random_runtime(scene, rng, n_params, max_condition=WELL_CONDITIONED)
     draws = witness.random_runtime(scene, rng, 50 * n_ill)
     conds = [_condition(scene, p) for p in draws]

@@ -16,17 +16,61 @@ from gyrogen.scene import CONTROLLER_PARAMETERS, Scene
 _P = {n: i for i, n in enumerate(PARAMETERS)}
 
 
+QUATERNION = ("e0", "e1", "e2", "e3")
+
+
 def state_index(scene: Scene) -> np.ndarray:
-    return np.array([STATES.index(s) for s in scene.states])
+    """Where each kept state sits in the full model's 14 (-1 for e0..e3)."""
+    return np.array([STATES.index(s) if s in STATES else -1 for s in scene.states])
 
 
 def full_states(scene: Scene, xs: np.ndarray) -> np.ndarray:
     """(n, nx) kept states -> (n, 14), the dropped ones at 0 (they couple to
-    nothing the scene keeps)."""
+    nothing the scene keeps; nor do the angles, which stand at 0 for e)."""
     xs = np.atleast_2d(xs)
     full = np.zeros((xs.shape[0], len(STATES)))
-    full[:, state_index(scene)] = xs
+    idx = state_index(scene)
+    full[:, idx[idx >= 0]] = xs[:, idx >= 0]
     return full
+
+
+def quaternion_rates(e: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """e' = 1/2 e (x) (0, w) for Euler parameters of A in N (scalar first) and
+    w the angular velocity of A in A-components (Kane, Likins and Levinson,
+    Spacecraft Dynamics, 1983, eq. 1.13.6)."""
+    e0, e1, e2, e3 = e.T
+    w1, w2, w3 = w.T
+    return 0.5 * np.stack(
+        [
+            -e1 * w1 - e2 * w2 - e3 * w3,
+            e0 * w1 - e3 * w2 + e2 * w3,
+            e3 * w1 + e0 * w2 - e1 * w3,
+            -e2 * w1 + e1 * w2 + e0 * w3,
+        ],
+        axis=-1,
+    )
+
+
+def quaternion_dcm(e: np.ndarray) -> np.ndarray:
+    """C with a_i = sum_j C[i, j] n_j, from Euler parameters (same source)."""
+    e0, e1, e2, e3 = np.moveaxis(e, -1, 0)
+    return np.stack(
+        [
+            np.stack(
+                [e0**2 + e1**2 - e2**2 - e3**2, 2 * (e1 * e2 + e0 * e3), 2 * (e1 * e3 - e0 * e2)],
+                -1,
+            ),
+            np.stack(
+                [2 * (e1 * e2 - e0 * e3), e0**2 - e1**2 + e2**2 - e3**2, 2 * (e2 * e3 + e0 * e1)],
+                -1,
+            ),
+            np.stack(
+                [2 * (e1 * e3 + e0 * e2), 2 * (e2 * e3 - e0 * e1), e0**2 - e1**2 - e2**2 + e3**2],
+                -1,
+            ),
+        ],
+        axis=-2,
+    )
 
 
 def torque(scene: Scene, values: dict[str, float], x_full: np.ndarray, t: float) -> np.ndarray:
@@ -66,9 +110,16 @@ def full_parameters(
 
 
 def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
+    xs = np.atleast_2d(xs)
     x_full = full_states(scene, xs)
-    out = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))
-    return out[:, state_index(scene)]
+    full = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))
+    idx = state_index(scene)
+    out = np.empty_like(xs, dtype=float)
+    out[:, idx >= 0] = full[:, idx[idx >= 0]]
+    if scene.attitude == "quaternion":
+        w = x_full[:, [STATES.index(f"u{i}") for i in (1, 2, 3)]]
+        out[:, :4] = quaternion_rates(xs[:, :4], w)
+    return out
 
 
 def output(
@@ -80,6 +131,13 @@ def output(
     if name == "kinetic_energy":
         return reference.kinetic_energy(x_full, p)[:, None]
     if name == "angular_momentum":
+        if scene.attitude == "quaternion":  # H in A from the reference, turned into N here
+            h_a = np.einsum(
+                "nij,nj->ni",
+                reference.direction_cosines(x_full),
+                reference.angular_momentum_n(x_full, p),
+            )
+            return np.einsum("nij,ni->nj", quaternion_dcm(np.atleast_2d(xs)[:, :4]), h_a)
         return reference.angular_momentum_n(x_full, p)
     if name == "power":
         u2, u4 = x_full[:, STATES.index("u2")], x_full[:, STATES.index("u4")]
@@ -120,3 +178,16 @@ def random_runtime(
         if len(rows) >= n:
             return np.array(rows[:n])
     raise RuntimeError(f"could not draw valid runtime parameters for scene {scene.name}")
+
+
+def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
+    """n random states of the scene: sampling.random_states restricted to the
+    kept ones, with random unit quaternions for e0..e3."""
+    full = sampling.random_states(rng, n)
+    idx = state_index(scene)
+    out = np.zeros((n, len(scene.states)))
+    out[:, idx >= 0] = full[:, idx[idx >= 0]]
+    if scene.attitude == "quaternion":
+        e = rng.normal(size=(n, 4))
+        out[:, :4] = e / np.linalg.norm(e, axis=1, keepdims=True)
+    return out

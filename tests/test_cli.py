@@ -25,11 +25,14 @@ def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, 
     return code, out, err
 
 
-def test_generate_writes_the_four_files(tmp_path: Path, capsys) -> None:
+def test_generate_writes_sources_and_manifest(tmp_path: Path, capsys) -> None:
     code, out, _ = run(["generate", "--out", str(tmp_path / "o")], capsys)
     assert code == 0
     names = sorted(p.name for p in (tmp_path / "o").iterdir())
-    assert names == ["gyrostat.c", "gyrostat.f90", "gyrostat.h", "manifest.json"]
+    assert names == [
+        "gyrostat.c", "gyrostat.f90", "gyrostat.h",
+        "gyrostat_ode.c", "gyrostat_ode.f90", "gyrostat_ode.h", "manifest.json",
+    ]  # fmt: skip
     assert "gyrostat" in out and "(full model)" in out
 
 

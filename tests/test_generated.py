@@ -17,6 +17,7 @@ from gyrogen.scene import builtin_names, default, load
 REPO = Path(__file__).resolve().parents[1]
 CHECKED_IN = REPO / "generated" / default().name
 FILES = ["gyrostat.h", "gyrostat.c", "gyrostat.f90", "manifest.json"]
+FILES += ["gyrostat_ode.h", "gyrostat_ode.c", "gyrostat_ode.f90"]  # the integrators
 
 
 def test_checked_in_default_scene_is_fresh(source_dir: Path) -> None:
@@ -103,9 +104,15 @@ def test_manifest(source_dir: Path) -> None:
     assert m["parameters"] == list(PARAMETERS)
     assert (m["nx"], m["np"]) == (14, 12)
     assert m["nc"] > 0
-    assert m["functions"]["c"] == {"setup": "gyrostat_setup", "rhs": "gyrostat_rhs"}
+    methods = {f"{i}{b}": f"gyrostat_{i}{b}" for i in m["integrators"] for b in ("", "_batch")}
+    assert m["functions"]["c"] == {
+        "setup": "gyrostat_setup",
+        "rhs": "gyrostat_rhs",
+        "jac": "gyrostat_jac",
+        **methods,
+    }
     assert m["functions"]["fortran"]["setup"] == "gyrostat_f_setup"
     assert m["functions"]["fortran"]["rhs"] == "gyrostat_f_rhs"
     assert m["ops"]["rhs"] <= 50 and m["ops"]["setup"] > 0
     assert m["versions"] == {"gyrogen": gyrogen.__version__, "sympy": sympy.__version__}
-    assert m["setup_codes"]["0"] and len(m["setup_codes"]) == 7
+    assert m["setup_codes"]["0"] and len(m["setup_codes"]) == 8

@@ -247,7 +247,7 @@ def test_invalid_parameters_codes() -> None:
     for base in bases:
         cases = sampling.invalid_parameters(base)
         assert len(cases) >= 12
-        assert {code for _, _, code in cases} == set(range(1, 7))
+        assert {code for _, _, code in cases} == set(range(1, 8))
         for description, vector, code in cases:
             assert sampling.setup_code(vector) == code, description
             assert code in layout.SETUP_CODES

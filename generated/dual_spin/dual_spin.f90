@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 5baad199dc718dba: a hash of the scene, gyrogen and sympy versions
+! Build id e64d8a89b8ec052a: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as DUAL_SPIN_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -31,10 +31,12 @@ module dual_spin_mod
   public :: dual_spin_kinetic_energy
   public :: dual_spin_angular_momentum
 
-  character(len=*), parameter, public :: DUAL_SPIN_BUILD_ID = "5baad199dc718dba"
+  character(len=*), parameter, public :: DUAL_SPIN_BUILD_ID = "e64d8a89b8ec052a"
   integer, parameter, public :: DUAL_SPIN_NX = 7  ! states
   integer, parameter, public :: DUAL_SPIN_NP = 0  ! parameters
-  integer, parameter, public :: DUAL_SPIN_NC = 0  ! hoisted constants
+  integer, parameter, public :: DUAL_SPIN_NC = 1  ! hoisted constants
+  ! c(DUAL_SPIN_COND): condition number of the mass matrix's coupled block
+  integer, parameter, public :: DUAL_SPIN_COND = 1
 
   ! Return codes of dual_spin_setup, checked in this order.
   ! 0: parameters accepted
@@ -51,6 +53,8 @@ module dual_spin_mod
   integer(c_int), parameter, public :: DUAL_SPIN_ERR_CARRIER_TRIANGLE = 5
   ! 6: the rotor violates the triangle inequality (2 I < J)
   integer(c_int), parameter, public :: DUAL_SPIN_ERR_ROTOR_TRIANGLE = 6
+  ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
+  integer(c_int), parameter, public :: DUAL_SPIN_ERR_MASS_SINGULAR = 7
 
 contains
 
@@ -59,7 +63,7 @@ contains
   ! the first failing check's code; c is then not to be used.
   function dual_spin_setup(p, c) result(status) bind(C, name="dual_spin_f_setup")
     real(c_double), intent(in) :: p(0)
-    real(c_double), intent(out) :: c(0)
+    real(c_double), intent(out) :: c(1)
     integer(c_int) :: status
     real(c_double) :: m_a
     real(c_double) :: m_b
@@ -111,6 +115,11 @@ contains
       return
     end if
 
+    c(1) = 1.1679946825887533_c_double
+    if (.not. (c(1) <= 10000000000000.0_c_double)) then
+      status = DUAL_SPIN_ERR_MASS_SINGULAR
+      return
+    end if
     status = DUAL_SPIN_OK
   end function dual_spin_setup
 
@@ -119,7 +128,7 @@ contains
   subroutine dual_spin_rhs(t, x, c, dxdt) bind(C, name="dual_spin_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(0)
+    real(c_double), intent(in) :: c(1)
     real(c_double), intent(out) :: dxdt(7)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -162,7 +171,7 @@ contains
   subroutine dual_spin_kinetic_energy(t, x, c, out) bind(C, name="dual_spin_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(0)
+    real(c_double), intent(in) :: c(1)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -184,7 +193,7 @@ contains
   subroutine dual_spin_angular_momentum(t, x, c, out) bind(C, name="dual_spin_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(0)
+    real(c_double), intent(in) :: c(1)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: q1
     real(c_double) :: q2

@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 5baad199dc718dba: a hash of the scene, gyrogen and sympy
+ * Build id e64d8a89b8ec052a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as DUAL_SPIN_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,12 +19,14 @@
 extern "C" {
 #endif
 
-#define DUAL_SPIN_BUILD_ID "5baad199dc718dba"
+#define DUAL_SPIN_BUILD_ID "e64d8a89b8ec052a"
 
 #define DUAL_SPIN_NX 7   /* states */
 #define DUAL_SPIN_NP 0   /* parameters */
-#define DUAL_SPIN_NC 0   /* hoisted constants */
-/* A size of 0 means the array is not read or written: pass NULL. */
+#define DUAL_SPIN_NC 1   /* hoisted constants */
+#define DUAL_SPIN_COND 0  /* c[DUAL_SPIN_COND]: condition number of the mass
+                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
+/* No runtime parameters: p is not read (pass NULL). */
 
 /*
  * State vector x[DUAL_SPIN_NX] (SI units):
@@ -51,6 +53,7 @@ extern "C" {
 #define DUAL_SPIN_ERR_CARRIER_NOT_PD     4  /* the carrier inertia is not positive definite */
 #define DUAL_SPIN_ERR_CARRIER_TRIANGLE   5  /* the carrier's principal moments violate the triangle inequality */
 #define DUAL_SPIN_ERR_ROTOR_TRIANGLE     6  /* the rotor violates the triangle inequality (2 I < J) */
+#define DUAL_SPIN_ERR_MASS_SINGULAR      7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*
  * Checks p and computes the constants c[DUAL_SPIN_NC] that

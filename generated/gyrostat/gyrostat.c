@@ -5,18 +5,18 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 1371188a4d58f91f: a hash of the scene, gyrogen and sympy
+ * Build id 719a3b3e738b84d4: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   gyrostat_setup: 50 ops, once per parameter set
+ *   gyrostat_setup: 61 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
  */
 #include "gyrostat.h"
 
 #include <math.h>
 
-/* 50 ops, plus the checks. */
+/* 61 ops, plus the checks. */
 int gyrostat_setup(const double *p, double *c)
 {
     int i;
@@ -70,17 +70,22 @@ int gyrostat_setup(const double *p, double *c)
     const double tmp5 = IA13*tmp4;
     const double tmp6 = J*tmp4;
     const double tmp7 = 1.0/IA22;
+    const double tmp8 = IA11 - IA33;
     c[0] = -tmp5*(IA11 - IA22 + IA33);
     c[1] = J*tmp5;
     c[2] = -tmp4*(-IA22*IA33 + IA33*IA33 + tmp3);
     c[3] = IA33*tmp6;
     c[4] = IA13*tmp7;
-    c[5] = -tmp7*(IA11 - IA33);
+    c[5] = -tmp7*tmp8;
     c[6] = -T*tmp7;
     c[7] = tmp4*(IA11*IA11 - IA11*IA22 + tmp3);
     c[8] = -IA11*tmp6;
     c[9] = T/J;
     c[10] = g;
+    c[11] = tmp4*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(tmp3 + (1.0/4.0)*tmp8*tmp8))*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(tmp3 + (1.0/4.0)*tmp8*tmp8));
+    if (!(c[GYROSTAT_COND] <= 10000000000000.0)) {
+        return GYROSTAT_ERR_MASS_SINGULAR;
+    }
     return GYROSTAT_OK;
 }
 

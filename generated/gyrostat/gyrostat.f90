@@ -4,11 +4,11 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 1371188a4d58f91f: a hash of the scene, gyrogen and sympy versions
+! Build id 719a3b3e738b84d4: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as GYROSTAT_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
-!   gyrostat_f_setup: 50 ops, once per parameter set
+!   gyrostat_f_setup: 61 ops, once per parameter set
 !   gyrostat_f_rhs:   40 ops per call
 !
 ! The same interface as gyrostat.h, callable from C under the bind(C)
@@ -48,10 +48,12 @@ module gyrostat_mod
   public :: gyrostat_setup
   public :: gyrostat_rhs
 
-  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "1371188a4d58f91f"
+  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "719a3b3e738b84d4"
   integer, parameter, public :: GYROSTAT_NX = 14  ! states
   integer, parameter, public :: GYROSTAT_NP = 12  ! parameters
-  integer, parameter, public :: GYROSTAT_NC = 11  ! hoisted constants
+  integer, parameter, public :: GYROSTAT_NC = 12  ! hoisted constants
+  ! c(GYROSTAT_COND): condition number of the mass matrix's coupled block
+  integer, parameter, public :: GYROSTAT_COND = 12
 
   ! Return codes of gyrostat_setup, checked in this order.
   ! 0: parameters accepted
@@ -68,15 +70,17 @@ module gyrostat_mod
   integer(c_int), parameter, public :: GYROSTAT_ERR_CARRIER_TRIANGLE = 5
   ! 6: the rotor violates the triangle inequality (2 I < J)
   integer(c_int), parameter, public :: GYROSTAT_ERR_ROTOR_TRIANGLE = 6
+  ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
+  integer(c_int), parameter, public :: GYROSTAT_ERR_MASS_SINGULAR = 7
 
 contains
 
   ! Checks p and computes the constants c that gyrostat_rhs needs
-  ! (50 ops, plus the checks). Returns GYROSTAT_OK or
+  ! (61 ops, plus the checks). Returns GYROSTAT_OK or
   ! the first failing check's code; c is then not to be used.
   function gyrostat_setup(p, c) result(status) bind(C, name="gyrostat_f_setup")
     real(c_double), intent(in) :: p(12)
-    real(c_double), intent(out) :: c(11)
+    real(c_double), intent(out) :: c(12)
     integer(c_int) :: status
     real(c_double) :: m_a
     real(c_double) :: m_b
@@ -103,6 +107,7 @@ contains
     real(c_double) :: tmp5
     real(c_double) :: tmp6
     real(c_double) :: tmp7
+    real(c_double) :: tmp8
 
     c = 0.0_c_double
     if (.not. all(ieee_is_finite(p))) then
@@ -160,17 +165,24 @@ contains
     tmp5 = IA13*tmp4
     tmp6 = J*tmp4
     tmp7 = 1d0/IA22
+    tmp8 = IA11 - IA33
     c(1) = -tmp5*(IA11 - IA22 + IA33)
     c(2) = J*tmp5
     c(3) = -tmp4*(-IA22*IA33 + IA33**2 + tmp3)
     c(4) = IA33*tmp6
     c(5) = IA13*tmp7
-    c(6) = -tmp7*(IA11 - IA33)
+    c(6) = -tmp7*tmp8
     c(7) = -T*tmp7
     c(8) = tmp4*(IA11**2 - IA11*IA22 + tmp3)
     c(9) = -IA11*tmp6
     c(10) = T/J
     c(11) = g
+    c(12) = tmp4*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(tmp3 + ( &
+          1.0d0/4.0d0)*tmp8**2))**2
+    if (.not. (c(12) <= 10000000000000.0_c_double)) then
+      status = GYROSTAT_ERR_MASS_SINGULAR
+      return
+    end if
     status = GYROSTAT_OK
   end function gyrostat_setup
 
@@ -179,7 +191,7 @@ contains
   subroutine gyrostat_rhs(t, x, c, dxdt) bind(C, name="gyrostat_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(14)
-    real(c_double), intent(in) :: c(11)
+    real(c_double), intent(in) :: c(12)
     real(c_double), intent(out) :: dxdt(14)
     real(c_double) :: q2
     real(c_double) :: q3

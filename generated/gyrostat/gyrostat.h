@@ -5,11 +5,11 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 1371188a4d58f91f: a hash of the scene, gyrogen and sympy
+ * Build id 719a3b3e738b84d4: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   gyrostat_setup: 50 ops, once per parameter set
+ *   gyrostat_setup: 61 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
  */
 #ifndef GYROSTAT_H
@@ -19,11 +19,13 @@
 extern "C" {
 #endif
 
-#define GYROSTAT_BUILD_ID "1371188a4d58f91f"
+#define GYROSTAT_BUILD_ID "719a3b3e738b84d4"
 
 #define GYROSTAT_NX 14   /* states */
 #define GYROSTAT_NP 12   /* parameters */
-#define GYROSTAT_NC 11   /* hoisted constants */
+#define GYROSTAT_NC 12   /* hoisted constants */
+#define GYROSTAT_COND 11  /* c[GYROSTAT_COND]: condition number of the mass
+                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
 
 /*
  * State vector x[GYROSTAT_NX] (SI units):
@@ -65,6 +67,7 @@ extern "C" {
 #define GYROSTAT_ERR_CARRIER_NOT_PD      4  /* the carrier inertia is not positive definite */
 #define GYROSTAT_ERR_CARRIER_TRIANGLE    5  /* the carrier's principal moments violate the triangle inequality */
 #define GYROSTAT_ERR_ROTOR_TRIANGLE      6  /* the rotor violates the triangle inequality (2 I < J) */
+#define GYROSTAT_ERR_MASS_SINGULAR       7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*
  * Checks p and computes the constants c[GYROSTAT_NC] that

@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 8bf7893d89d64bcc: a hash of the scene, gyrogen and sympy
+ * Build id 19f9d3382b0b6a28: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -65,6 +65,10 @@ int speed_controlled_setup(const double *p, double *c)
     c[4] = -k;
     c[5] = 2*k;
     c[6] = -k*w_ref;
+    c[7] = 1.1080962681823885;
+    if (!(c[SPEED_CONTROLLED_COND] <= 10000000000000.0)) {
+        return SPEED_CONTROLLED_ERR_MASS_SINGULAR;
+    }
     return SPEED_CONTROLLED_OK;
 }
 

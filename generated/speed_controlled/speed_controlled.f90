@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 8bf7893d89d64bcc: a hash of the scene, gyrogen and sympy versions
+! Build id 19f9d3382b0b6a28: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -35,10 +35,12 @@ module speed_controlled_mod
   public :: speed_controlled_angular_momentum
   public :: speed_controlled_power
 
-  character(len=*), parameter, public :: SPEED_CONTROLLED_BUILD_ID = "8bf7893d89d64bcc"
+  character(len=*), parameter, public :: SPEED_CONTROLLED_BUILD_ID = "19f9d3382b0b6a28"
   integer, parameter, public :: SPEED_CONTROLLED_NX = 8  ! states
   integer, parameter, public :: SPEED_CONTROLLED_NP = 2  ! parameters
-  integer, parameter, public :: SPEED_CONTROLLED_NC = 7  ! hoisted constants
+  integer, parameter, public :: SPEED_CONTROLLED_NC = 8  ! hoisted constants
+  ! c(SPEED_CONTROLLED_COND): condition number of the mass matrix's coupled block
+  integer, parameter, public :: SPEED_CONTROLLED_COND = 8
 
   ! Return codes of speed_controlled_setup, checked in this order.
   ! 0: parameters accepted
@@ -55,6 +57,8 @@ module speed_controlled_mod
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE = 5
   ! 6: the rotor violates the triangle inequality (2 I < J)
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE = 6
+  ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
+  integer(c_int), parameter, public :: SPEED_CONTROLLED_ERR_MASS_SINGULAR = 7
 
 contains
 
@@ -63,7 +67,7 @@ contains
   ! the first failing check's code; c is then not to be used.
   function speed_controlled_setup(p, c) result(status) bind(C, name="speed_controlled_f_setup")
     real(c_double), intent(in) :: p(2)
-    real(c_double), intent(out) :: c(7)
+    real(c_double), intent(out) :: c(8)
     integer(c_int) :: status
     real(c_double) :: m_a
     real(c_double) :: m_b
@@ -131,6 +135,11 @@ contains
     c(5) = -k
     c(6) = 2*k
     c(7) = -k*w_ref
+    c(8) = 1.1080962681823885_c_double
+    if (.not. (c(8) <= 10000000000000.0_c_double)) then
+      status = SPEED_CONTROLLED_ERR_MASS_SINGULAR
+      return
+    end if
     status = SPEED_CONTROLLED_OK
   end function speed_controlled_setup
 
@@ -139,7 +148,7 @@ contains
   subroutine speed_controlled_rhs(t, x, c, dxdt) bind(C, name="speed_controlled_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
+    real(c_double), intent(in) :: c(8)
     real(c_double), intent(out) :: dxdt(8)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -183,7 +192,7 @@ contains
   subroutine speed_controlled_kinetic_energy(t, x, c, out) bind(C, name="speed_controlled_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
+    real(c_double), intent(in) :: c(8)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -205,7 +214,7 @@ contains
   subroutine speed_controlled_angular_momentum(t, x, c, out) bind(C, name="speed_controlled_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
+    real(c_double), intent(in) :: c(8)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: q1
     real(c_double) :: q2
@@ -261,7 +270,7 @@ contains
   subroutine speed_controlled_power(t, x, c, out) bind(C, name="speed_controlled_f_power")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
+    real(c_double), intent(in) :: c(8)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u2
     real(c_double) :: u4

@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 8bf7893d89d64bcc: a hash of the scene, gyrogen and sympy
+ * Build id 19f9d3382b0b6a28: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,11 +19,13 @@
 extern "C" {
 #endif
 
-#define SPEED_CONTROLLED_BUILD_ID "8bf7893d89d64bcc"
+#define SPEED_CONTROLLED_BUILD_ID "19f9d3382b0b6a28"
 
 #define SPEED_CONTROLLED_NX 8   /* states */
 #define SPEED_CONTROLLED_NP 2   /* parameters */
-#define SPEED_CONTROLLED_NC 7   /* hoisted constants */
+#define SPEED_CONTROLLED_NC 8   /* hoisted constants */
+#define SPEED_CONTROLLED_COND 7  /* c[SPEED_CONTROLLED_COND]: condition number of the mass
+                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
 
 /*
  * State vector x[SPEED_CONTROLLED_NX] (SI units):
@@ -53,6 +55,7 @@ extern "C" {
 #define SPEED_CONTROLLED_ERR_CARRIER_NOT_PD 4  /* the carrier inertia is not positive definite */
 #define SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
 #define SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE 6  /* the rotor violates the triangle inequality (2 I < J) */
+#define SPEED_CONTROLLED_ERR_MASS_SINGULAR 7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*
  * Checks p and computes the constants c[SPEED_CONTROLLED_NC] that

@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 78ef32617e5bf2fa: a hash of the scene, gyrogen and sympy
+ * Build id d11607b5628bb2ac: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as TORQUE_FREE_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -48,8 +48,11 @@ int torque_free_setup(const double *p, double *c)
     if (J - 2.0*I > 1e-12*(2.0*I + J)) {
         return TORQUE_FREE_ERR_ROTOR_TRIANGLE;
     }
-    (void)c;  /* no constants: every value is folded */
 
+    c[0] = 1.0;
+    if (!(c[TORQUE_FREE_COND] <= 10000000000000.0)) {
+        return TORQUE_FREE_ERR_MASS_SINGULAR;
+    }
     return TORQUE_FREE_OK;
 }
 

@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 78ef32617e5bf2fa: a hash of the scene, gyrogen and sympy versions
+! Build id d11607b5628bb2ac: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as TORQUE_FREE_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -31,10 +31,12 @@ module torque_free_mod
   public :: torque_free_kinetic_energy
   public :: torque_free_angular_momentum
 
-  character(len=*), parameter, public :: TORQUE_FREE_BUILD_ID = "78ef32617e5bf2fa"
+  character(len=*), parameter, public :: TORQUE_FREE_BUILD_ID = "d11607b5628bb2ac"
   integer, parameter, public :: TORQUE_FREE_NX = 7  ! states
   integer, parameter, public :: TORQUE_FREE_NP = 0  ! parameters
-  integer, parameter, public :: TORQUE_FREE_NC = 0  ! hoisted constants
+  integer, parameter, public :: TORQUE_FREE_NC = 1  ! hoisted constants
+  ! c(TORQUE_FREE_COND): condition number of the mass matrix's coupled block
+  integer, parameter, public :: TORQUE_FREE_COND = 1
 
   ! Return codes of torque_free_setup, checked in this order.
   ! 0: parameters accepted
@@ -51,6 +53,8 @@ module torque_free_mod
   integer(c_int), parameter, public :: TORQUE_FREE_ERR_CARRIER_TRIANGLE = 5
   ! 6: the rotor violates the triangle inequality (2 I < J)
   integer(c_int), parameter, public :: TORQUE_FREE_ERR_ROTOR_TRIANGLE = 6
+  ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
+  integer(c_int), parameter, public :: TORQUE_FREE_ERR_MASS_SINGULAR = 7
 
 contains
 
@@ -59,7 +63,7 @@ contains
   ! the first failing check's code; c is then not to be used.
   function torque_free_setup(p, c) result(status) bind(C, name="torque_free_f_setup")
     real(c_double), intent(in) :: p(0)
-    real(c_double), intent(out) :: c(0)
+    real(c_double), intent(out) :: c(1)
     integer(c_int) :: status
     real(c_double) :: m_a
     real(c_double) :: m_b
@@ -111,6 +115,11 @@ contains
       return
     end if
 
+    c(1) = 1.0_c_double
+    if (.not. (c(1) <= 10000000000000.0_c_double)) then
+      status = TORQUE_FREE_ERR_MASS_SINGULAR
+      return
+    end if
     status = TORQUE_FREE_OK
   end function torque_free_setup
 
@@ -119,7 +128,7 @@ contains
   subroutine torque_free_rhs(t, x, c, dxdt) bind(C, name="torque_free_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(0)
+    real(c_double), intent(in) :: c(1)
     real(c_double), intent(out) :: dxdt(7)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -157,7 +166,7 @@ contains
   subroutine torque_free_kinetic_energy(t, x, c, out) bind(C, name="torque_free_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(0)
+    real(c_double), intent(in) :: c(1)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -178,7 +187,7 @@ contains
   subroutine torque_free_angular_momentum(t, x, c, out) bind(C, name="torque_free_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(0)
+    real(c_double), intent(in) :: c(1)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: q1
     real(c_double) :: q2

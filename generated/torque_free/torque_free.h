@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 78ef32617e5bf2fa: a hash of the scene, gyrogen and sympy
+ * Build id d11607b5628bb2ac: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as TORQUE_FREE_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,12 +19,14 @@
 extern "C" {
 #endif
 
-#define TORQUE_FREE_BUILD_ID "78ef32617e5bf2fa"
+#define TORQUE_FREE_BUILD_ID "d11607b5628bb2ac"
 
 #define TORQUE_FREE_NX 7   /* states */
 #define TORQUE_FREE_NP 0   /* parameters */
-#define TORQUE_FREE_NC 0   /* hoisted constants */
-/* A size of 0 means the array is not read or written: pass NULL. */
+#define TORQUE_FREE_NC 1   /* hoisted constants */
+#define TORQUE_FREE_COND 0  /* c[TORQUE_FREE_COND]: condition number of the mass
+                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
+/* No runtime parameters: p is not read (pass NULL). */
 
 /*
  * State vector x[TORQUE_FREE_NX] (SI units):
@@ -51,6 +53,7 @@ extern "C" {
 #define TORQUE_FREE_ERR_CARRIER_NOT_PD   4  /* the carrier inertia is not positive definite */
 #define TORQUE_FREE_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
 #define TORQUE_FREE_ERR_ROTOR_TRIANGLE   6  /* the rotor violates the triangle inequality (2 I < J) */
+#define TORQUE_FREE_ERR_MASS_SINGULAR    7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*
  * Checks p and computes the constants c[TORQUE_FREE_NC] that

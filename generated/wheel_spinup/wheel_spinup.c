@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id a86c5f728b86f1cd: a hash of the scene, gyrogen and sympy
+ * Build id ae05ef069b8d0086: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -58,6 +58,10 @@ int wheel_spinup_setup(const double *p, double *c)
     c[0] = -11033630824386508710627304699592704.0/279085956146246984853370192600760325.0*T;
     c[1] = (72057594037927936.0/1080863910568919.0)*T;
     c[2] = -T;
+    c[3] = 1.10709823420372;
+    if (!(c[WHEEL_SPINUP_COND] <= 10000000000000.0)) {
+        return WHEEL_SPINUP_ERR_MASS_SINGULAR;
+    }
     return WHEEL_SPINUP_OK;
 }
 

@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id a86c5f728b86f1cd: a hash of the scene, gyrogen and sympy versions
+! Build id ae05ef069b8d0086: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -34,10 +34,12 @@ module wheel_spinup_mod
   public :: wheel_spinup_angular_momentum
   public :: wheel_spinup_power
 
-  character(len=*), parameter, public :: WHEEL_SPINUP_BUILD_ID = "a86c5f728b86f1cd"
+  character(len=*), parameter, public :: WHEEL_SPINUP_BUILD_ID = "ae05ef069b8d0086"
   integer, parameter, public :: WHEEL_SPINUP_NX = 8  ! states
   integer, parameter, public :: WHEEL_SPINUP_NP = 1  ! parameters
-  integer, parameter, public :: WHEEL_SPINUP_NC = 3  ! hoisted constants
+  integer, parameter, public :: WHEEL_SPINUP_NC = 4  ! hoisted constants
+  ! c(WHEEL_SPINUP_COND): condition number of the mass matrix's coupled block
+  integer, parameter, public :: WHEEL_SPINUP_COND = 4
 
   ! Return codes of wheel_spinup_setup, checked in this order.
   ! 0: parameters accepted
@@ -54,6 +56,8 @@ module wheel_spinup_mod
   integer(c_int), parameter, public :: WHEEL_SPINUP_ERR_CARRIER_TRIANGLE = 5
   ! 6: the rotor violates the triangle inequality (2 I < J)
   integer(c_int), parameter, public :: WHEEL_SPINUP_ERR_ROTOR_TRIANGLE = 6
+  ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
+  integer(c_int), parameter, public :: WHEEL_SPINUP_ERR_MASS_SINGULAR = 7
 
 contains
 
@@ -62,7 +66,7 @@ contains
   ! the first failing check's code; c is then not to be used.
   function wheel_spinup_setup(p, c) result(status) bind(C, name="wheel_spinup_f_setup")
     real(c_double), intent(in) :: p(1)
-    real(c_double), intent(out) :: c(3)
+    real(c_double), intent(out) :: c(4)
     integer(c_int) :: status
     real(c_double) :: m_a
     real(c_double) :: m_b
@@ -120,6 +124,11 @@ contains
           279085956146246984853370192600760325.0d0*T
     c(2) = (72057594037927936.0d0/1080863910568919.0d0)*T
     c(3) = -T
+    c(4) = 1.10709823420372_c_double
+    if (.not. (c(4) <= 10000000000000.0_c_double)) then
+      status = WHEEL_SPINUP_ERR_MASS_SINGULAR
+      return
+    end if
     status = WHEEL_SPINUP_OK
   end function wheel_spinup_setup
 
@@ -128,7 +137,7 @@ contains
   subroutine wheel_spinup_rhs(t, x, c, dxdt) bind(C, name="wheel_spinup_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(3)
+    real(c_double), intent(in) :: c(4)
     real(c_double), intent(out) :: dxdt(8)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -172,7 +181,7 @@ contains
   subroutine wheel_spinup_kinetic_energy(t, x, c, out) bind(C, name="wheel_spinup_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(3)
+    real(c_double), intent(in) :: c(4)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -194,7 +203,7 @@ contains
   subroutine wheel_spinup_angular_momentum(t, x, c, out) bind(C, name="wheel_spinup_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(3)
+    real(c_double), intent(in) :: c(4)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: q1
     real(c_double) :: q2
@@ -250,7 +259,7 @@ contains
   subroutine wheel_spinup_power(t, x, c, out) bind(C, name="wheel_spinup_f_power")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(3)
+    real(c_double), intent(in) :: c(4)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u2
     real(c_double) :: u4

@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id a86c5f728b86f1cd: a hash of the scene, gyrogen and sympy
+ * Build id ae05ef069b8d0086: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,11 +19,13 @@
 extern "C" {
 #endif
 
-#define WHEEL_SPINUP_BUILD_ID "a86c5f728b86f1cd"
+#define WHEEL_SPINUP_BUILD_ID "ae05ef069b8d0086"
 
 #define WHEEL_SPINUP_NX 8   /* states */
 #define WHEEL_SPINUP_NP 1   /* parameters */
-#define WHEEL_SPINUP_NC 3   /* hoisted constants */
+#define WHEEL_SPINUP_NC 4   /* hoisted constants */
+#define WHEEL_SPINUP_COND 3  /* c[WHEEL_SPINUP_COND]: condition number of the mass
+                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
 
 /*
  * State vector x[WHEEL_SPINUP_NX] (SI units):
@@ -52,6 +54,7 @@ extern "C" {
 #define WHEEL_SPINUP_ERR_CARRIER_NOT_PD  4  /* the carrier inertia is not positive definite */
 #define WHEEL_SPINUP_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
 #define WHEEL_SPINUP_ERR_ROTOR_TRIANGLE  6  /* the rotor violates the triangle inequality (2 I < J) */
+#define WHEEL_SPINUP_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*
  * Checks p and computes the constants c[WHEEL_SPINUP_NC] that

@@ -6,9 +6,10 @@ import sympy as sm
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 
-from gyrogen.backends.printing import functions, statements
+from gyrogen.backends.printing import functions, jacobian, statements
 from gyrogen.hoist import constants
 from gyrogen.render import render
+from gyrogen.tableaus import TABLEAUS
 from gyrogen.unit import Unit
 
 
@@ -37,6 +38,19 @@ class CPrinter(C99CodePrinter):
             return prod if exp > 0 else f"1.0/({prod})"
         return str(super()._print_Pow(expr))
 
+    def _print_Mul(self, expr: sm.Mul) -> str:
+        """sympy writes a lone denominator bare (a/b**2 as "a/" + Pow), trusting
+        a power to bind tighter than "/"; the products above do not, so
+        a/b**2 must read a/(b*b), not a/b*b."""
+        den = [f for f in expr.args if f.is_Pow and f.exp.is_Rational and f.exp.is_negative]
+        if len(den) != 1 or not (den[0].exp.is_Integer and -3 <= den[0].exp <= -2):
+            return str(super()._print_Mul(expr))
+        if expr.as_coeff_Mul()[0] < 0:
+            return "-" + self._print(-expr)
+        num = sm.Mul(*(f for f in expr.args if f is not den[0]))
+        text = self.parenthesize(num, PRECEDENCE["Mul"], strict=True)
+        return f"{text}/({self._print(1 / den[0])})"
+
 
 def files(unit: Unit) -> dict[str, str]:
     printer = CPrinter(unit.nc)
@@ -50,8 +64,15 @@ def files(unit: Unit) -> dict[str, str]:
         "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
         "rhs": rhs,
         "outputs": outputs,
+        "jac": jacobian(unit, lambda a, i: f"{a}[{i}]", assign),
+        "methods": unit.methods,
+        "tableaus": TABLEAUS,
     }
-    return {
+    out = {
         f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),
         f"{unit.prefix}.c": render("c/source.c.jinja", **ctx),
     }
+    if unit.methods:
+        out[f"{unit.prefix}_ode.h"] = render("c/ode.h.jinja", **ctx)
+        out[f"{unit.prefix}_ode.c"] = render("c/ode.c.jinja", **ctx)
+    return out

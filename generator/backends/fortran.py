@@ -5,10 +5,11 @@ from __future__ import annotations
 import sympy as sm
 from sympy.printing.fortran import FCodePrinter
 
-from gyrogen.backends.printing import functions, statements
+from gyrogen.backends.printing import functions, jacobian, statements
 from gyrogen.errors import GyrogenError
 from gyrogen.hoist import constants
 from gyrogen.render import f_double, render
+from gyrogen.tableaus import TABLEAUS
 from gyrogen.unit import Unit
 
 
@@ -56,5 +57,22 @@ def files(unit: Unit) -> dict[str, str]:
             ["t", "x", "c", "out", "dxdt", *names] + [s.name for s in fn.statements if s.declare],
             fn.name,
         )
-    ctx = {"unit": unit, "setup": setup, "rhs": rhs, "outputs": outputs}
-    return {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}
+    jac = jacobian(unit, lambda a, i: f"{a}({i + 1})", assign)
+    if jac is not None:
+        names = [unit.states[i].name for i in jac.states]
+        _check_names(
+            ["t", "x", "c", "J", *names] + [s.name for s in jac.statements if s.declare], "jac"
+        )
+    ctx = {
+        "unit": unit,
+        "setup": setup,
+        "rhs": rhs,
+        "outputs": outputs,
+        "jac": jac,
+        "methods": unit.methods,
+        "tableaus": TABLEAUS,
+    }
+    out = {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}
+    if unit.methods:
+        out[f"{unit.prefix}_ode.f90"] = render("fortran/ode.f90.jinja", **ctx)
+    return out

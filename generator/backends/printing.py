@@ -64,17 +64,33 @@ def functions(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> l
     """rhs first, then the scene's outputs; array(name, i) spells name[i]."""
     blocks = [("rhs", unit.optimized.rhs, "dxdt", "dx/dt", "")]
     blocks += [(o.name, o.block, "out", o.doc, o.unit) for o in unit.outputs]
-    out = []
-    for name, block, arr, doc, units in blocks:
-        free = _free(block)
-        out.append(
-            Function(
-                name=name,
-                doc=doc,
-                unit=units,
-                statements=statements(block, partial(array, arr), assign),
-                states=[i for i, s in enumerate(unit.states) if s in free],
-                torque=any(s in free for s in unit.equations.inputs),
-            )
-        )
-    return out
+    return [_function(unit, array, assign, *b) for b in blocks]
+
+
+def jacobian(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> Function | None:
+    """d(dx/dt)/dx into J, row-major (J[i*NX + j] = d f_i / d x_j)."""
+    block = unit.optimized.jacobian
+    if block is None:
+        return None
+    return _function(unit, array, assign, "jac", block, "J", "d(dx/dt)/dx, row-major", "1/s")
+
+
+def _function(
+    unit: Unit,
+    array: Callable[[str, int], str],
+    assign: Assign,
+    name: str,
+    block: Block,
+    arr: str,
+    doc: str,
+    units: str,
+) -> Function:
+    free = _free(block)
+    return Function(
+        name=name,
+        doc=doc,
+        unit=units,
+        statements=statements(block, partial(array, arr), assign),
+        states=[i for i, s in enumerate(unit.states) if s in free],
+        torque=any(s in free for s in unit.equations.inputs),
+    )

@@ -1,0 +1,474 @@
+"""The compiled integrators (rk4, dopri5, dop853, rodas4), in C and Fortran:
+against scipy's DOP853 on the numpy reference, against the torque-free closed
+form, their convergence orders, their failure codes, batch against single
+calls, their counters, a stiff case Rodas4 must win, and the strict builds."""
+
+from __future__ import annotations
+
+import itertools
+import subprocess
+from collections.abc import Callable, Iterator
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from gyrogen import build, tableaus, witness
+from gyrogen.generate import generate
+from gyrogen.scene import Scene, load, parse
+
+REPO = Path(__file__).resolve().parents[1]
+LANGUAGES = ["c", "fortran"]
+SCENES = ["gyrostat", "torque_free", "speed_controlled"]
+ADAPTIVE = ["dopri5", "dop853", "rodas4"]
+OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT = range(6)
+
+Get = Callable[[str, str], build.Compiled]
+
+# A small scene for the tests that render their own: the wheel of
+# speed_controlled under a tabled torque T(t) (f depends on t).
+TABLED = """
+name = "tabled"
+description = "momentum wheel under a tabled torque"
+integrators = {integrators}
+
+[parameters]
+m_a = 300.0
+m_b = 4.0
+I11 = 60.0
+I22 = 75.0
+I33 = 55.0
+I13 = 1.5
+I   = 0.02
+J   = 0.03
+l1  = 0.1
+l3  = 0.25
+
+[effects]
+translation = false
+torque = "table"
+torque_table = [[0.0, 0.0], [0.5, 0.4], [1.5, -0.3]]
+
+[simulate]
+initial = {{ u1 = 0.02, u2 = 0.1, u3 = -0.01, u4 = 10.0 }}
+"""
+
+
+def tabled(integrators: list[str]) -> Scene:
+    return parse(TABLED.format(integrators=str(integrators).replace("'", '"')), "tabled")
+
+
+@pytest.fixture(scope="module")
+def compiled(backends: dict[str, build.Compiled], cache_dir: Path) -> Iterator[Get]:
+    """(scene, language) -> the backend, built once from generated/<scene>
+    (the default scene from the session's fresh copy)."""
+    built = {("gyrostat", lang): backends[lang] for lang in LANGUAGES}
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+
+    def get(scene: str, language: str) -> build.Compiled:
+        if (scene, language) not in built:
+            built[scene, language] = build.build(REPO / "generated" / scene, language)
+        return built[scene, language]
+
+    yield get
+    mp.undo()
+
+
+def problem(name: str) -> tuple[Scene, np.ndarray, np.ndarray]:
+    """The scene's simulate section: initial state and runtime parameters."""
+    scene = load(name)
+    x0 = np.array([scene.simulate.initial.get(s, 0.0) for s in scene.states])
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    return scene, x0, p
+
+
+@cache
+def scipy_reference(name: str, t1: float) -> np.ndarray:
+    scene, x0, p = problem(name)
+    sol = solve_ivp(
+        lambda t, x: witness.rhs(scene, x, p, t)[0],
+        (0.0, t1), x0, method="DOP853", rtol=1e-12, atol=1e-12,
+    )  # fmt: skip
+    assert sol.success
+    return sol.y[:, -1]
+
+
+def mixed_error(x: np.ndarray, ref: np.ndarray) -> float:
+    return float(np.max(np.abs(x - ref) / (1.0 + np.abs(ref))))
+
+
+# --- accuracy ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+@pytest.mark.parametrize("name", SCENES)
+def test_agrees_with_scipy_dop853(compiled: Get, name: str, language: str) -> None:
+    b = compiled(name, language)
+    _, x0, p = problem(name)
+    t1 = 5.0
+    ref = scipy_reference(name, t1)
+    c = b.setup(p)
+    for method in ADAPTIVE:
+        x, stats, code = b.integrate(method, x0, c, 0.0, t1, rtol=1e-10, atol=1e-10)
+        assert code == OK and stats["t"] == t1
+        assert mixed_error(x, ref) < 1e-8, method
+    x, stats, code = b.integrate("rk4", x0, c, 0.0, t1, steps=2000)
+    assert code == OK and stats["t"] == t1
+    assert mixed_error(x, ref) < 1e-8
+
+
+def torque_free_closed_form(t: float) -> tuple[np.ndarray, np.ndarray]:
+    """u1..u4 of the torque-free axisymmetric gyrostat (NOTES.md): u2 and u4
+    constant, (u1, u3) rotating at lambda = ((I~22 - I_t) u2 + J u4) / I_t,
+    with I_t = I11 + I and I~22 = I22 (l1 = l3 = 0)."""
+    scene, x0, _ = problem("torque_free")
+    v = scene.folded()
+    u1, u2, u3, u4 = (x0[scene.states.index(n)] for n in ("u1", "u2", "u3", "u4"))
+    i_t = v["I11"] + v["I"]
+    lam = ((v["I22"] - i_t) * u2 + v["J"] * u4) / i_t
+    cl, sl = np.cos(lam * t), np.sin(lam * t)
+    u = np.array([u1 * cl + u3 * sl, u2, u3 * cl - u1 * sl, u4])
+    return u, np.array([scene.states.index(n) for n in ("u1", "u2", "u3", "u4")])
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_torque_free_closed_form(compiled: Get, language: str) -> None:
+    b = compiled("torque_free", language)
+    _, x0, p = problem("torque_free")
+    t1 = 20.0
+    exact, idx = torque_free_closed_form(t1)
+    x, _, code = b.integrate("dop853", x0, b.setup(p), 0.0, t1, rtol=1e-12, atol=1e-12)
+    assert code == OK
+    np.testing.assert_allclose(x[idx], exact, rtol=0, atol=1e-10)
+
+
+def test_time_dependent_torque(tmp_path: Path, cache_dir: Path) -> None:
+    """A torque table makes f depend on t: Rodas4 adds df/dt (a forward
+    difference). The table's kinks cost every method accuracy (scipy's RK45
+    as much), so the reference integrates piece by piece."""
+    scene = tabled(ADAPTIVE)
+    generate(scene, tmp_path / "tabled")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    try:
+        b = build.build(tmp_path / "tabled", "c")
+    finally:
+        mp.undo()
+    x0 = np.array([scene.simulate.initial.get(s, 0.0) for s in scene.states])
+    p = np.zeros(0)
+    ref = x0
+    for span in [(0.0, 0.5), (0.5, 1.5), (1.5, 2.0)]:
+        ref = solve_ivp(
+            lambda t, x: witness.rhs(scene, x, p, t)[0],
+            span, ref, method="DOP853", rtol=1e-13, atol=1e-13,
+        ).y[:, -1]  # fmt: skip
+    for method in ADAPTIVE:
+        x, stats, code = b.integrate(method, x0, b.setup(p), 0.0, 2.0, rtol=1e-10, atol=1e-10)
+        assert code == OK
+        assert mixed_error(x, ref) < {"rodas4": 2e-9}.get(method, 1e-7), method
+    # one rhs call more per accepted step: the time derivative
+    _, stats, _ = b.integrate("rodas4", x0, b.setup(p), 0.0, 2.0, rtol=1e-6, atol=1e-6)
+    steps = stats["accepted"] + stats["rejected"]
+    assert stats["rhs_calls"] == 2 + 5 * steps + 2 * stats["accepted"] - 1
+
+
+# --- convergence order --------------------------------------------------------
+
+
+def log_slope(n: list[int], err: list[float]) -> float:
+    return float(np.polyfit(np.log(n), np.log(err), 1)[0])
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_rk4_is_fourth_order(compiled: Get, language: str) -> None:
+    """Step halving on the torque-free scene against its closed form: the
+    error falls by 16 per halving."""
+    b = compiled("torque_free", language)
+    _, x0, p = problem("torque_free")
+    exact, idx = torque_free_closed_form(20.0)
+    steps = [200, 400, 800, 1600]
+    err = []
+    for n in steps:
+        x, _, code = b.integrate("rk4", x0, b.setup(p), 0.0, 20.0, steps=n)
+        assert code == OK
+        err.append(float(np.max(np.abs(x[idx] - exact))))
+    assert abs(log_slope(steps, err) + 4.0) < 0.3
+    assert all(14.0 < a / b < 18.0 for a, b in itertools.pairwise(err))
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+@pytest.mark.parametrize(
+    ("method", "order", "slack", "tolerances"),
+    [
+        ("dopri5", 5, 0.7, [1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11]),
+        ("dop853", 8, 1.5, [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12]),
+    ],
+)
+def test_adaptive_order(
+    compiled: Get, language: str, method: str, order: int, slack: float, tolerances: list[float]
+) -> None:
+    """Over a tolerance sweep, log(error) against log(steps) has slope -order."""
+    b = compiled("torque_free", language)
+    _, x0, p = problem("torque_free")
+    exact, idx = torque_free_closed_form(20.0)
+    steps, err = [], []
+    for tol in tolerances:
+        x, stats, code = b.integrate(method, x0, b.setup(p), 0.0, 20.0, rtol=tol, atol=tol)
+        assert code == OK
+        steps.append(stats["accepted"])
+        err.append(float(np.max(np.abs(x[idx] - exact))))
+    assert abs(log_slope(steps, err) + order) < slack
+
+
+# --- failures -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_bad_arguments(compiled: Get, language: str) -> None:
+    b = compiled("torque_free", language)
+    _, x0, p = problem("torque_free")
+    c = b.setup(p)
+    for method in ADAPTIVE:
+        for kw in (
+            {"t1": -1.0},
+            {"t1": np.nan},
+            {"rtol": 0.0},
+            {"atol": -1e-9},
+            {"rtol": np.nan},
+            {"max_steps": 0},
+        ):
+            args = {"t1": 1.0, "rtol": 1e-8, "atol": 1e-8, "max_steps": 100} | kw
+            t1 = args.pop("t1")
+            x, stats, code = b.integrate(method, x0, c, 0.0, t1, **args)
+            assert code == ARGUMENT, (method, kw)
+            assert np.array_equal(x, x0) and stats["t"] == 0.0 and stats["rhs_calls"] == 0
+    assert b.integrate("rk4", x0, c, 0.0, 1.0, steps=0)[2] == ARGUMENT
+    assert b.integrate("rk4", x0, c, 1.0, 0.0, steps=10)[2] == ARGUMENT
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_max_steps(compiled: Get, language: str) -> None:
+    b = compiled("gyrostat", language)
+    _, x0, p = problem("gyrostat")
+    for method in ADAPTIVE:
+        x, stats, code = b.integrate(method, x0, b.setup(p), 0.0, 10.0, max_steps=10)
+        assert code == MAX_STEPS
+        assert stats["accepted"] + stats["rejected"] == 10
+        assert 0.0 < stats["t"] < 10.0 and np.all(np.isfinite(x))
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_near_gimbal_lock_is_never_nan(compiled: Get, language: str) -> None:
+    """q2 a hair below pi/2 with u1 large: the Euler-angle rates are ~1e12.
+    The methods either step through (the angular momentum in N, a function
+    of the angles, is then conserved) or stop with a code, a finite state and
+    the time reached."""
+    b = compiled("gyrostat", language)
+    scene, _, p = problem("gyrostat")
+    x0 = np.zeros(b.nx)
+    for name, value in {"q2": np.pi / 2 - 1e-12, "u1": 10.0, "u2": 1.0, "u3": 1.0}.items():
+        x0[scene.states.index(name)] = value
+    c = b.setup(p)
+    h0 = witness.output(scene, "angular_momentum", x0, p)
+    for method in ["dopri5", "dop853"]:
+        x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, rtol=1e-10, atol=1e-10)
+        assert code == OK and np.all(np.isfinite(x))
+        h1 = witness.output(scene, "angular_momentum", x, p)
+        np.testing.assert_allclose(h1, h0, rtol=0, atol=1e-6)
+    for method in ADAPTIVE:
+        x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, max_steps=50)
+        assert code == MAX_STEPS and stats["t"] < 1.0 and np.all(np.isfinite(x))
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_step_underflow(compiled: Get, language: str) -> None:
+    """A tolerance no double can meet: h shrinks below 16 eps |t|."""
+    b = compiled("torque_free", language)
+    _, x0, p = problem("torque_free")
+    for method in ADAPTIVE:
+        x, stats, code = b.integrate(method, x0, b.setup(p), 1.0, 2.0, rtol=1e-300, atol=1e-300)
+        assert code == UNDERFLOW and stats["t"] == 1.0 and np.array_equal(x, x0)
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_nonfinite(compiled: Get, language: str) -> None:
+    """A NaN state, or a derivative that overflows: code 3 at t0, x as given."""
+    b = compiled("torque_free", language)
+    scene, x0, p = problem("torque_free")
+    c = b.setup(p)
+    nan = x0.copy()
+    nan[0] = np.nan
+    huge = x0.copy()
+    for name in ("u1", "u2", "u3"):
+        huge[scene.states.index(name)] = 1e200  # their products overflow
+    for bad in (nan, huge):
+        for method in ADAPTIVE:
+            x, stats, code = b.integrate(method, bad, c, 0.0, 1.0)
+            assert code == NONFINITE and stats["t"] == 0.0
+            np.testing.assert_array_equal(x, bad)
+    x, stats, code = b.integrate("rk4", huge, c, 0.0, 1.0, steps=10)
+    assert code == NONFINITE and stats["t"] == 0.0 and np.array_equal(x, huge)
+
+
+# --- batch, counters ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_batch_equals_single_calls(compiled: Get, language: str) -> None:
+    b = compiled("gyrostat", language)
+    _, x0, p = problem("gyrostat")
+    c = b.setup(p)
+    rng = np.random.default_rng(4)
+    x0s = x0 + 0.1 * rng.standard_normal((3, b.nx))
+    x0s[2, 0] = np.nan  # one failure in the batch
+    for method in ["rk4", *ADAPTIVE]:
+        kw = {"steps": 100} if method == "rk4" else {"rtol": 1e-8, "atol": 1e-8}
+        xs, stats, codes = b.integrate_batch(method, x0s, c, 0.0, 2.0, **kw)
+        for i in range(3):
+            x, st, code = b.integrate(method, x0s[i], c, 0.0, 2.0, **kw)
+            np.testing.assert_array_equal(xs[i], x)
+            assert code == codes[i]
+            assert {k: stats[k][i] for k in build.STATS_FIELDS} == st
+        assert list(codes[:2]) == [OK, OK] and codes[2] != OK
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_batch_accepts_null_stats_and_codes(compiled: Get, language: str) -> None:
+    b = compiled("gyrostat", language)
+    _, x0, p = problem("gyrostat")
+    c = np.ascontiguousarray(b.setup(p))
+    xs = np.array([x0, x0, x0])
+    xs[1, 0] = np.nan
+    names = b.manifest["functions"][language]
+    ffi = b.ffi
+    buf = ffi.from_buffer("double[]", xs)
+    cb = ffi.from_buffer("double[]", c)
+    fn = getattr(b.lib, names["dop853_batch"])
+    assert fn(3, 0.0, 1.0, buf, cb, 1e-8, 1e-8, 0.0, 1000, ffi.NULL, ffi.NULL) == 1
+    fn = getattr(b.lib, names["rk4_batch"])
+    assert fn(3, 0.0, 1.0, 10, buf, cb, ffi.NULL, ffi.NULL) == 1
+    expected, _, _ = b.integrate("dop853", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    expected, _, _ = b.integrate("rk4", expected, c, 0.0, 1.0, steps=10)
+    np.testing.assert_array_equal(xs[0], expected)
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_counters(compiled: Get, language: str) -> None:
+    """What each step costs: rhs calls, Jacobians and decompositions."""
+    b = compiled("gyrostat", language)
+    _, x0, p = problem("gyrostat")
+    c = b.setup(p)
+    _, st, _ = b.integrate("rk4", x0, c, 0.0, 1.0, steps=37)
+    assert (st["accepted"], st["rejected"], st["rhs_calls"], st["h"]) == (37, 0, 148, 1.0 / 37)
+    for method, h0, first in (("dopri5", 0.0, 2), ("dopri5", 1e-3, 1), ("dop853", 0.0, 2)):
+        _, st, code = b.integrate(method, x0, c, 0.0, 3.0, rtol=1e-9, atol=1e-9, h0=h0)
+        trials = st["accepted"] + st["rejected"]
+        assert code == OK and st["jac_calls"] == st["decompositions"] == 0
+        if method == "dopri5":  # 6 new stages a trial, the 7th is the next step's first
+            assert st["rhs_calls"] == first + 6 * trials
+        else:  # 11 new stages a trial, then f at each accepted point but t1
+            assert st["rhs_calls"] == first + 11 * trials + st["accepted"] - 1
+    _, st, code = b.integrate("rodas4", x0, c, 0.0, 3.0, rtol=1e-7, atol=1e-7)
+    trials = st["accepted"] + st["rejected"]
+    assert code == OK and st["accepted"] > 10
+    assert st["jac_calls"] == st["accepted"] and st["decompositions"] == trials
+    assert st["rhs_calls"] == 2 + 5 * trials + st["accepted"] - 1
+
+
+# --- stiffness --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_stiff_wheel_favours_rodas4(compiled: Get, language: str) -> None:
+    """k/J = 1e5: the explicit methods crawl at their stability limit."""
+    b = compiled("speed_controlled", language)
+    scene, x0, _ = problem("speed_controlled")
+    p = np.array([1e5 * float(scene.parameters["J"]), 200.0])
+    c = b.setup(p)
+    xr, sr, code_r = b.integrate("rodas4", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    xd, sd, code_d = b.integrate("dopri5", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    assert code_r == code_d == OK
+    assert sr["accepted"] < sd["accepted"] / 20
+    assert mixed_error(xr, xd) < 1e-6
+    ref = solve_ivp(
+        lambda t, x: witness.rhs(scene, x, p, t)[0], (0.0, 1.0), x0, method="Radau",
+        jac=lambda t, x: b_jac(b, c, x), rtol=1e-10, atol=1e-10,
+    ).y[:, -1]  # fmt: skip
+    assert mixed_error(xr, ref) < 1e-7
+
+
+def b_jac(b: build.Compiled, c: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The generated Jacobian through cffi, row-major (nx, nx)."""
+    out = np.empty(b.nx * b.nx)
+    fn = getattr(b.lib, b.manifest["functions"][b.language]["jac"])
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    fn(0.0, b.ffi.from_buffer("double[]", x), b.ffi.from_buffer("double[]", c),
+       b.ffi.from_buffer("double[]", out))  # fmt: skip
+    return out.reshape(b.nx, b.nx)
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+@pytest.mark.parametrize("name", SCENES)
+def test_jacobian_matches_differences(compiled: Get, name: str, language: str) -> None:
+    b = compiled(name, language)
+    _, x0, p = problem(name)
+    c = b.setup(p)
+    x = x0 + 0.3 * np.random.default_rng(1).standard_normal(b.nx)
+    step = 1e-6 * (1.0 + np.abs(x))
+    fd = np.empty((b.nx, b.nx))
+    for j in range(b.nx):
+        e = np.zeros(b.nx)
+        e[j] = step[j]
+        fd[:, j] = (b.rhs(x + e, c) - b.rhs(x - e, c)) / (2 * step[j])
+    np.testing.assert_allclose(b_jac(b, c, x), fd, rtol=1e-6, atol=1e-6)
+
+
+# --- the sources ----------------------------------------------------------------
+
+
+def test_tableaus_match_scipy() -> None:
+    """The pairs' coefficients are scipy's (RK45 = DOPRI5, DOP853)."""
+    from scipy.integrate import DOP853, RK45
+
+    for s in range(1, 6):
+        assert tableaus.DOPRI5.a[s] == tuple(RK45.A[s, :s])
+    assert tableaus.DOPRI5.b == (*RK45.B, 0.0)
+    np.testing.assert_array_equal(tableaus.DOPRI5.e, -RK45.E)
+    for s in range(1, 12):
+        assert tableaus.DOP853.a[s] == tuple(DOP853.A[s, :s])
+    assert tableaus.DOP853.b == tuple(DOP853.B)
+    assert tableaus.DOP853.nodes == tuple(DOP853.C)
+    assert tableaus.DOP853.e == tuple(DOP853.E5[:12])
+    assert tableaus.DOP853.e3 == tuple(DOP853.E3[:12])
+
+
+STRICT_C = [
+    ["gcc", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"],
+    ["clang", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"],
+    ["g++", "-x", "c++", "-std=c++17", "-Wall", "-Wextra", "-Werror"],
+]
+FORTRAN = ["gfortran", "-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror"]
+
+
+def _run(cmd: list[str], cwd: Path) -> None:
+    proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+@pytest.mark.parametrize("integrators", [None, ["rk4"], ["dop853"], ["dopri5", "rodas4"]], ids=str)
+def test_strict_builds(integrators: list[str] | None, tmp_path: Path) -> None:
+    """The default scene (all four methods) and subsets of the methods on a
+    time-dependent scene compile clean: no helper is left unused."""
+    if integrators is None:
+        src = REPO / "generated" / "gyrostat"
+    else:
+        src = tmp_path / "src"
+        generate(tabled(integrators), src)
+    name = next(src.glob("*_ode.c")).name[: -len("_ode.c")]
+    for cc in STRICT_C:
+        _run([*cc, "-c", f"{name}_ode.c", "-o", str(tmp_path / "ode.o")], src)
+    for f in (f"{name}.f90", f"{name}_ode.f90"):
+        _run([*FORTRAN, "-J", str(tmp_path), "-c", f, "-o", str(tmp_path / f"{f}.o")], src)
