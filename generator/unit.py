@@ -133,6 +133,11 @@ class Unit:
         return ", ".join(f"{n} = {v!r}" for n, v in self.scene.folded().items())
 
     @property
+    def quaternion(self) -> bool:
+        """The attitude is Euler parameters, x[0..3]."""
+        return self.scene.attitude == "quaternion"
+
+    @property
     def uses_time(self) -> bool:
         return bool(self.equations.inputs)
 

@@ -1,0 +1,89 @@
+"""check: numerical stability on the built-in stiff and extreme cases."""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import click
+
+from gyrogen.errors import GyrogenError
+from gyrogen.stability import Result
+
+
+@click.command()
+@click.argument("names", nargs=-1)
+@click.option("--all", "every", is_flag=True, help="Every case (the default with no NAMES).")
+@click.option("--quick", is_flag=True, help="Fewer and shorter cases (for CI, under a minute).")
+@click.option(
+    "--plots",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Write one PNG per case into this directory.",
+)
+@click.option("--list", "listing", is_flag=True, help="List the cases and exit.")
+def check(
+    names: tuple[str, ...], every: bool, quick: bool, plots: Path | None, listing: bool
+) -> None:
+    """Run stiff and extreme cases: pass or fail, invariant drift, stiffness,
+    conditioning, step statistics, method, and a diagnosis. NAMES select
+    cases whose name contains them."""
+    from gyrogen import build, checks, stability
+    from gyrogen.generate import generate, write_atomic
+
+    suite = checks.cases(quick)
+    if names and not every:
+        suite = [c for c in suite if any(n in c.name for n in names)]
+        if not suite:
+            raise GyrogenError(f"no case matches {', '.join(names)} (see gyrogen check --list)")
+    if listing:
+        for case in suite:
+            click.echo(f"{case.name:<48} expect {case.expect:<9} scene {case.scene.name}")
+        return
+    if plots is not None:
+        write_atomic(plots, {})  # fail early, with one line, if plots is not writable
+    compiled = {}
+    results = []
+    with (
+        tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp,
+        click.progressbar(suite, label="checking", file=sys.stderr) as bar,
+    ):
+        for case in bar:
+            if case.scene.name not in compiled:
+                src = Path(tmp) / case.scene.name
+                generate(case.scene, src)
+                compiled[case.scene.name] = build.build(src, "c")
+            res = stability.run_case(case, compiled[case.scene.name])
+            results.append(res)
+            if plots is not None:
+                stability.plot(res, plots / f"{_slug(case.name)}.png")
+    _table(results)
+    failed = [r for r in results if not r.passed]
+    if failed:
+        raise GyrogenError(f"{len(failed)} of {len(results)} cases did not behave as expected")
+
+
+def _slug(name: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in name).strip("_")
+
+
+def _table(results: list[Result]) -> None:
+    click.echo(
+        f"{'case':<46} {'result':<9} {'drift':>8} {'stiff':>8} {'cond':>8} "
+        f"{'method':<7} {'steps':>9} {'rhs':>10}"
+    )
+    for r in results:
+        drift = max(r.drift.values()) if r.drift else float("nan")
+        mark = "ok" if r.passed else "FAIL"
+        steps = r.stats.get("accepted", 0)
+        click.echo(
+            f"{r.case.name[:46]:<46} {r.verdict:<9} {drift:8.1e} {r.stiffness:8.1e} "
+            f"{r.condition:8.1e} {r.method:<7} {steps:>9} {r.stats.get('rhs_calls', 0):>10} {mark}"
+        )
+        for line in (r.recommended if r.recommended.startswith("implicit") else "", r.diagnosis):
+            if line:
+                click.echo(f"    {line}")
+
+
+COMMANDS = [check]
