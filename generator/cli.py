@@ -8,7 +8,7 @@ import sys
 import click
 
 from gyrogen import __version__
-from gyrogen.commands import check, codegen, derive, perf
+from gyrogen.commands import check, codegen, derive, perf, simulate, stability
 from gyrogen.errors import GyrogenError
 
 
@@ -19,7 +19,7 @@ def cli() -> None:
     Kane's method, as fast, verified C and Fortran right-hand sides."""
 
 
-for _module in (codegen, derive, check, perf):
+for _module in (codegen, derive, check, perf, simulate, stability):
     for _command in _module.COMMANDS:
         cli.add_command(_command)
 

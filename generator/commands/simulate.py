@@ -1,0 +1,83 @@
+"""simulate: integrate a scene with its compiled RHS and write the trajectory."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import click
+
+from gyrogen.commands.options import SCENE
+from gyrogen.scene import Scene
+
+POSITIVE = click.FloatRange(min=0.0, min_open=True)
+
+
+@contextmanager
+def time_bar(label: str) -> Iterator[Callable[[int], None]]:
+    """A progress bar on stderr in percent of the simulated time."""
+    with click.progressbar(length=100, label=label, file=sys.stderr) as bar:
+        yield bar.update
+
+
+@click.command()
+@click.argument("scene", type=SCENE)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Directory for the trajectory, summary, figure and sources [default: sim/<scene>].",
+)
+@click.option("--t-end", type=POSITIVE, default=None, help="End time, s [default: the scene's].")
+@click.option("--dt", type=POSITIVE, default=None, help="Output step, s [default: the scene's].")
+@click.option(
+    "--method",
+    type=click.Choice(["DOP853", "Radau", "LSODA", "RK45"], case_sensitive=False),
+    default="DOP853",
+    show_default=True,
+    help="scipy solve_ivp method.",
+)
+@click.option(
+    "--max-nfev",
+    type=click.IntRange(min=1),
+    default=10**7,
+    show_default=True,
+    help="Give up after this many RHS calls.",
+)
+@click.option("--no-plot", is_flag=True, help="Skip trajectory.png.")
+def simulate(
+    scene: Scene,
+    out: Path | None,
+    t_end: float | None,
+    dt: float | None,
+    method: str,
+    max_nfev: int,
+    no_plot: bool,
+) -> None:
+    """Generate SCENE, build its RHS, integrate it with scipy's solve_ivp from
+    simulate.initial, and write trajectory.csv, trajectory.npz, summary.json
+    and trajectory.png with the invariants |H| in N and the energy balance."""
+    from gyrogen import simulate as sim
+
+    settings = sim.Settings(
+        t_end=t_end or scene.simulate.t_end,
+        dt=dt or scene.simulate.dt,
+        method=method,
+        plot=not no_plot,
+        max_nfev=max_nfev,
+    )
+    if settings.dt > settings.t_end:
+        raise click.BadParameter(
+            f"output step {settings.dt:g} s is longer than the span {settings.t_end:g} s",
+            param_hint="'--dt'",
+        )
+    out = out or Path("sim") / scene.name
+    echo = lambda s: click.echo(s, err=True)  # noqa: E731
+    result = sim.run(scene, out, settings, progress=time_bar, echo=echo)
+    for line in sim.summary_lines(result):
+        click.echo(line)
+
+
+COMMANDS = [simulate]

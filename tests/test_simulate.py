@@ -1,0 +1,222 @@
+"""gyrogen simulate: the trajectory files agree, match the closed form and the
+invariants of NOTES.md; the figure is a real image; every error is one line."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from gyrogen import plots, reference, witness
+from gyrogen.cli import main
+from gyrogen.errors import GyrogenError
+from gyrogen.scene import builtin_text, load
+from gyrogen.simulate import COLUMNS, check_solution
+
+
+@dataclass(frozen=True)
+class Run:
+    code: int
+    out: str
+    err: str
+    dir: Path
+
+
+def simulate(argv: list[str], out: Path) -> Run:
+    """main() with stdout and stderr captured (usable in module fixtures, unlike capsys)."""
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        try:
+            main(["simulate", *argv, "--out", str(out)])
+            code = 0
+        except SystemExit as exc:
+            code = int(exc.code or 0)
+    return Run(code, stdout.getvalue(), stderr.getvalue(), out)
+
+
+@pytest.fixture(scope="module")
+def cache(cache_dir: Path) -> Iterator[None]:
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    yield
+    mp.undo()
+
+
+@pytest.fixture(scope="module")
+def torque_free(tmp_path_factory: pytest.TempPathFactory, cache: None) -> Run:
+    out = tmp_path_factory.mktemp("sim") / "torque_free"
+    run = simulate(["torque_free", "--t-end", "2", "--dt", "0.01"], out)
+    assert run.code == 0, run.err
+    return run
+
+
+@pytest.fixture(scope="module")
+def spinup(tmp_path_factory: pytest.TempPathFactory, cache: None) -> Run:
+    out = tmp_path_factory.mktemp("sim") / "wheel_spinup"
+    run = simulate(["wheel_spinup", "--t-end", "5", "--dt", "0.05", "--no-plot"], out)
+    assert run.code == 0, run.err
+    return run
+
+
+def _load(run: Run) -> tuple[np.lib.npyio.NpzFile, dict, list[str], np.ndarray]:
+    npz = np.load(run.dir / "trajectory.npz")
+    summary = json.loads((run.dir / "summary.json").read_text())
+    text = (run.dir / "trajectory.csv").read_text()
+    header = text.splitlines()[0].split(",")
+    return npz, summary, header, np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1)
+
+
+def test_files_exist_and_agree(torque_free: Run) -> None:
+    npz, summary, header, csv = _load(torque_free)
+    scene = load("torque_free")
+    assert header == ["t", *scene.states, *COLUMNS]
+    assert list(npz["names"]) == list(scene.states)
+    assert npz["t"].shape == (201,) and npz["x"].shape == (201, len(scene.states))
+    np.testing.assert_array_equal(csv[:, 0], npz["t"])  # %.17g: the same doubles
+    np.testing.assert_array_equal(csv[:, 1 : 1 + len(scene.states)], npz["x"])
+    invariants = np.column_stack([npz[name] for name in COLUMNS])  # same names in both
+    np.testing.assert_array_equal(csv[:, -len(COLUMNS) :], invariants)
+    manifest = json.loads((torque_free.dir / "src" / "manifest.json").read_text())
+    assert summary["scene"] == "torque_free" and summary["build_id"] == manifest["build_id"]
+    assert (summary["method"], summary["backend"]) == ("DOP853", "c")
+    assert (summary["rtol"], summary["atol"]) == (scene.simulate.rtol, scene.simulate.atol)
+    assert summary["nfev"] > 0 and summary["wall_time_s"] > 0 and summary["t_end"] == 2.0
+    worst = summary["invariants"]
+    assert worst["H_norm_relative_drift"] == np.max(np.abs(npz["H_drift"]))
+    assert worst["energy_balance_relative_residual"] == np.max(np.abs(npz["energy_residual"]))
+    assert "Gauss-Legendre" in summary["quadrature"]
+    files = ["trajectory.csv", "trajectory.npz", "summary.json", "trajectory.png"]
+    assert summary["files"] == files
+    assert not list(torque_free.dir.glob(".*"))  # no temporary file left behind
+
+
+def test_printed_summary(torque_free: Run) -> None:
+    lines = torque_free.out.splitlines()
+    assert lines[0].startswith("torque_free: DOP853 (rtol 1e-10, atol 1e-10) on the C RHS")
+    assert "final time      2 s (201 points" in torque_free.out
+    for word in ("nfev", "wall time", "|H| in N", "energy balance", "u4 check"):
+        assert word in torque_free.out
+    assert lines[-1].startswith(f"wrote {torque_free.dir}/ (trajectory.csv, trajectory.npz")
+
+
+def test_closed_form_of_the_axisymmetric_gyrostat(torque_free: Run) -> None:
+    """NOTES.md: u2, u4 constant; (u1, u3) rotate at lambda = ((I~22 - I_t) u2 + J u4)/I_t,
+    I_t = I11 + I here (l1 = l3 = 0, I13 = 0, I11 = I33)."""
+    npz = np.load(torque_free.dir / "trajectory.npz")
+    scene = load("torque_free")
+    v, s0 = scene.folded(), scene.simulate.initial
+    i_t = v["I11"] + v["I"]
+    lam = ((v["I22"] - i_t) * s0["u2"] + v["J"] * s0["u4"]) / i_t
+    t, x = npz["t"], npz["x"]
+    u = {n: x[:, scene.states.index(n)] for n in ("u1", "u2", "u3", "u4")}
+    c, s = np.cos(lam * t), np.sin(lam * t)
+    np.testing.assert_allclose(u["u1"], s0["u1"] * c + s0["u3"] * s, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(u["u3"], s0["u3"] * c - s0["u1"] * s, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(u["u2"], s0["u2"], rtol=1e-8)
+    np.testing.assert_allclose(u["u4"], s0["u4"], rtol=1e-8)
+
+
+def test_angular_momentum_is_conserved(torque_free: Run) -> None:
+    npz = np.load(torque_free.dir / "trajectory.npz")
+    scene = load("torque_free")
+    full = witness.full_states(scene, npz["x"])
+    h = reference.angular_momentum_n(full, witness.full_parameters(scene, np.zeros(0), full, 0))
+    np.testing.assert_allclose(npz["H"], h, rtol=1e-14, atol=1e-14)
+    norm = np.linalg.norm(h, axis=1)
+    assert np.max(np.abs(norm / norm[0] - 1)) < 1e-9
+    assert np.max(np.abs(npz["H_drift"])) < 1e-9
+
+
+def test_figure_is_a_real_image_of_the_expected_size(torque_free: Run) -> None:
+    image = imread(torque_free.dir / "trajectory.png")
+    assert image.shape[:2] == plots.PIXELS == (800, 1200)
+    assert image[..., :3].std() > 0.05  # not blank
+
+
+def test_wheel_spinup_rotor_rate_and_energy_balance(spinup: Run) -> None:
+    """J u4' = T: u4 = u4(0) + T t / J; dK/dt = T (u4 - u2)."""
+    npz, summary, _, _ = _load(spinup)
+    scene = load("wheel_spinup")
+    torque, j = scene.simulate.parameters["T"], scene.folded()["J"]
+    u4 = npz["x"][:, scene.states.index("u4")]
+    expected = scene.simulate.initial["u4"] + torque * npz["t"] / j
+    assert np.max(np.abs(u4 - expected)) <= 1e-9 * np.max(np.abs(expected))
+    assert summary["invariants"]["energy_balance_relative_residual"] < 1e-9
+    assert summary["invariants"]["u4_relative_residual"] < 1e-9
+    assert summary["parameters"] == {"T": torque}
+    assert not (spinup.dir / "trajectory.png").exists()  # --no-plot
+    assert "trajectory.png" not in summary["files"]
+
+
+def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None) -> None:
+    text = builtin_text("wheel_spinup")
+    assert "parameters = { T = 0.02 }\n" in text
+    scene = tmp_path / "no_torque.toml"
+    scene.write_text(text.replace("parameters = { T = 0.02 }\n", ""))
+    run = simulate([str(scene)], tmp_path / "out")
+    assert run.code == 2 and run.out == ""
+    assert run.err == (
+        "gyrogen: error: wheel_spinup: simulate.parameters: no value for runtime parameter T "
+        "(set it under [simulate] parameters)\n"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cache: None) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    run = simulate(["torque_free"], blocker / "sub")
+    assert run.code == 1 and run.out == ""
+    assert run.err == (
+        f"gyrogen: error: cannot create output directory {blocker / 'sub'}: Not a directory\n"
+    )
+
+
+def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path) -> None:
+    run = simulate(["torque_free", "--t-end", "1", "--dt", "2"], tmp_path / "out")
+    assert run.code == 2 and run.err.count("\n") == 1
+    assert "output step 2 s is longer than the span 1 s" in run.err
+    assert not (tmp_path / "out").exists()
+
+
+def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: None) -> None:
+    run = simulate(["torque_free", "--max-nfev", "100"], tmp_path / "out")
+    assert run.code == 1 and run.out == ""
+    errors = [line for line in run.err.splitlines() if "error" in line]
+    assert len(errors) == 1 and run.err.endswith(errors[0] + "\n")
+    assert errors[0].startswith("gyrogen: error: DOP853 failed at t = ")
+    assert "of 20: 100 RHS calls (--max-nfev) spent" in errors[0]
+    assert not (tmp_path / "out" / "trajectory.csv").exists()
+
+
+def test_failed_or_non_finite_solution_is_one_line() -> None:
+    failed = SimpleNamespace(status=-1, message="Required step size is too small.")
+    with pytest.raises(GyrogenError, match=r"^Radau failed at t = 1\.5 s of 3: Required step"):
+        check_solution(failed, "Radau", 1.5, 3.0, 10)
+    y = np.ones((2, 4))
+    y[1, 2] = np.nan
+    nan = SimpleNamespace(status=0, t=np.array([0.0, 0.5, 1.0, 1.5]), y=y)
+    with pytest.raises(GyrogenError, match=r"^LSODA: non-finite state at t = 1 s$"):
+        check_solution(nan, "LSODA", 1.5, 3.0, 10)
+
+
+def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None) -> None:
+    text = builtin_text("torque_free").replace(
+        'targets = ["c", "fortran"]', 'targets = ["fortran"]'
+    )
+    scene = tmp_path / "fortran_only.toml"
+    scene.write_text(text)
+    run = simulate([str(scene), "--t-end", "1", "--method", "radau", "--no-plot"], tmp_path / "o")
+    assert run.code == 0, run.err
+    summary = json.loads((run.dir / "summary.json").read_text())
+    assert (summary["backend"], summary["method"]) == ("fortran", "Radau")
+    assert summary["invariants"]["H_norm_relative_drift"] < 1e-8
+    assert "on the Fortran RHS" in run.out
