@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench clean distclean examples strict
+.PHONY: setup system-deps run test lint generate check-generated bench report check clean distclean examples strict
 
 ## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -60,8 +60,18 @@ bench: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-rhs --out bench-out
 
+## report: work-precision reports (figure, tables, summary) for the default and the stiff scene
+report: setup
+	$(PIP) install -q -e '.[bench]'
+	$(BIN)/gyrogen bench gyrostat --out report/gyrostat
+	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
+
+## check: numerical stability on every stiff and extreme case
+check: setup
+	$(BIN)/gyrogen check --all --plots report/check
+
 clean:
-	rm -rf build examples/build bench-out .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	rm -rf build examples/build bench-out report sim .pytest_cache .mypy_cache .ruff_cache *.egg-info
 	find generator templates tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 

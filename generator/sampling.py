@@ -109,7 +109,11 @@ def lumped_condition(p: ArrayLike) -> Array:
     """Condition number of the coupled block [[I~11, I~13], [I~13, I~33]] of the
     mass matrix (the other rows decouple): how much any double-precision solve
     of M u' = F may amplify rounding. Shape: p's batch shape."""
-    pa = np.asarray(p, dtype=float)
+    with np.errstate(all="ignore"):  # extreme vectors give inf or NaN: not conditioned
+        return _condition(np.asarray(p, dtype=float))
+
+
+def _condition(pa: Array) -> Array:
     m_a, m_b = pa[..., _P["m_a"]], pa[..., _P["m_b"]]
     l1, l3 = pa[..., _P["l1"]], pa[..., _P["l3"]]
     mu = m_a * m_b / (m_a + m_b)
