@@ -151,7 +151,7 @@ def figure(prob: Problem, runs: list[Run], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(14, 7), dpi=100)
     labels = sorted({r.label for r in runs})
     for i, label in enumerate(labels):
-        pts = sorted((r.seconds, r.error) for r in _by(runs, label) if r.status == "ok")
+        pts = sorted((r.seconds, r.error) for r in _by(runs, label) if r.status.startswith("ok"))
         if not pts:
             continue
         style = "-o" if "scipy" not in label else "--s"

@@ -214,9 +214,40 @@ def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None) -> None:
     )
     scene = tmp_path / "fortran_only.toml"
     scene.write_text(text)
-    run = simulate([str(scene), "--t-end", "1", "--method", "radau", "--no-plot"], tmp_path / "o")
+    run = simulate([str(scene), "--t-end", "1", "--method", "Radau", "--no-plot"], tmp_path / "o")
     assert run.code == 0, run.err
     summary = json.loads((run.dir / "summary.json").read_text())
     assert (summary["backend"], summary["method"]) == ("fortran", "Radau")
     assert summary["invariants"]["H_norm_relative_drift"] < 1e-8
     assert "on the Fortran RHS" in run.out
+
+
+def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
+    """--method dop853 runs the generated integrator between output points:
+    no interpolation, so the invariants hold to the tolerance."""
+    from gyrogen import scene as scenes
+    from gyrogen import simulate
+
+    res = simulate.run(
+        scenes.load("torque_free"),
+        tmp_path / "out",
+        simulate.Settings(t_end=2.0, dt=0.05, method="dop853", plot=False),
+    )
+    assert res.trajectory.nfev > 0 and res.trajectory.x.shape == (41, 7)
+    assert res.invariants.worst()["H_norm_relative_drift"] < 1e-12
+
+
+def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
+    from gyrogen import scene as scenes
+    from gyrogen import simulate
+    from gyrogen.errors import SceneError
+
+    text = scenes.builtin_text("torque_free").replace(
+        'targets = ["c", "fortran"]', 'targets = ["c"]\nintegrators = ["rk4"]'
+    )
+    with pytest.raises(SceneError, match="rodas4 is not among the scene's integrators"):
+        simulate.run(
+            scenes.parse(text, "t.toml"),
+            tmp_path / "out",
+            simulate.Settings(t_end=1.0, dt=0.1, method="rodas4", plot=False),
+        )

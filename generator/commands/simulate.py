@@ -34,10 +34,10 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 @click.option("--dt", type=POSITIVE, default=None, help="Output step, s [default: the scene's].")
 @click.option(
     "--method",
-    type=click.Choice(["DOP853", "Radau", "LSODA", "RK45"], case_sensitive=False),
+    type=click.Choice(["DOP853", "Radau", "LSODA", "RK45", "rk4", "dopri5", "dop853", "rodas4"]),
     default="DOP853",
     show_default=True,
-    help="scipy solve_ivp method.",
+    help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators.",
 )
 @click.option(
     "--max-nfev",
