@@ -121,6 +121,9 @@ def cases(quick: bool = False) -> list[Case]:
             )
         )
     steps = 10**6 if quick else 10**7
+    # Fixed steps of 1e-4 s: the truncation error is negligible, and what
+    # drifts is rounding, about eps per step (no compensated summation):
+    # 2e-11 after 1e6 steps, 4e-10 after 1e7. Held to 1e-9, reported as is.
     out.append(
         Case(
             f"long run: {steps:.0e} RK4 steps",
@@ -131,6 +134,7 @@ def cases(quick: bool = False) -> list[Case]:
             "pass",
             "rk4",
             steps=steps,
+            drift_bar=1e-9,
         )
     )
     for u4 in (0.0, 15.0, 25.0, -40.0):
