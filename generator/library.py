@@ -38,7 +38,17 @@ def _context(manifest: dict[str, Any]) -> dict[str, Any]:
         raise GyrogenError(
             f"scene {prefix} has no C sources: the library build files need the c target"
         )
-    return {**ctx, "c_source": names["c_source"], "c_header": names["c_header"]}
+    c_sources = [names[k] for k in ("c_source", "c_ode_source") if k in names]
+    c_headers = [names[k] for k in ("c_header", "c_ode_header") if k in names]
+    fortran = [names[k] for k in ("fortran", "fortran_ode") if k in names]  # module order
+    return {
+        **ctx,
+        "c_source": names["c_source"],
+        "c_header": names["c_header"],
+        "c_sources": c_sources,
+        "c_headers": c_headers,
+        "fortran_sources": fortran,
+    }
 
 
 def files(manifest: dict[str, Any]) -> dict[str, str]:

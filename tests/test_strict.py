@@ -70,10 +70,11 @@ def test_cpp_example(source_dir: Path, tmp_path: Path) -> None:
 
 
 def test_fortran(source_dir: Path, tmp_path: Path) -> None:
-    """The module and the example that uses it."""
+    """The modules and the example that uses them."""
     flags = ["-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror", "-J", "."]
     gf = tool("gfortran")
     clean([gf, *flags, "-c", str(source_dir / "gyrostat.f90"), "-o", "g.o"], tmp_path)
+    clean([gf, *flags, "-c", str(source_dir / "gyrostat_ode.f90"), "-o", "o.o"], tmp_path)
     clean([gf, *flags, "-c", str(EXAMPLES / "embed_fortran" / "main.f90"), "-o", "m.o"], tmp_path)
 
 

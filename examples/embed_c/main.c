@@ -1,10 +1,10 @@
 /*
  * Embedding the generated C in a plain C99 program: no Python, no gyrogen,
- * only gyrostat.h and gyrostat.c from generated/gyrostat/.
+ * only gyrostat.{h,c} and gyrostat_ode.{h,c} from generated/gyrostat/.
  *
  * A dual-spin-like gyrostat (a 500 kg carrier with a 10 kg momentum wheel
  * spinning at 100 rad/s, driven by a 0.01 N m motor) is integrated for 10 s
- * with a fixed-step classical RK4 (dt = 1e-3 s). The program prints the final
+ * with the generated fixed-step classical RK4 (dt = 1e-3 s). The program prints the final
  * state, one "name value" per line in the header's state order, then the
  * angular momentum about AB* in N components and its norm. With g = 0 and an
  * internal motor torque, that momentum is conserved: its drift is a check on
@@ -15,6 +15,7 @@
  *   u4 = 100 rad/s (rotor's absolute rate about a2).
  */
 #include "gyrostat.h"
+#include "gyrostat_ode.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -40,25 +41,6 @@ static const char *setup_message(int code)
         return "the carrier's principal moments violate the triangle inequality";
     case GYROSTAT_ERR_ROTOR_TRIANGLE: return "the rotor violates the triangle inequality (2 I < J)";
     default: return "unknown code";
-    }
-}
-
-/* One classical RK4 step of size h from (t, x), in place. */
-static void rk4_step(double t, double h, double *x, const double *c)
-{
-    double k1[GYROSTAT_NX], k2[GYROSTAT_NX], k3[GYROSTAT_NX], k4[GYROSTAT_NX];
-    double xs[GYROSTAT_NX];
-    int i;
-
-    gyrostat_rhs(t, x, c, k1);
-    for (i = 0; i < GYROSTAT_NX; ++i) xs[i] = x[i] + 0.5 * h * k1[i];
-    gyrostat_rhs(t + 0.5 * h, xs, c, k2);
-    for (i = 0; i < GYROSTAT_NX; ++i) xs[i] = x[i] + 0.5 * h * k2[i];
-    gyrostat_rhs(t + 0.5 * h, xs, c, k3);
-    for (i = 0; i < GYROSTAT_NX; ++i) xs[i] = x[i] + h * k3[i];
-    gyrostat_rhs(t + h, xs, c, k4);
-    for (i = 0; i < GYROSTAT_NX; ++i) {
-        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     }
 }
 
@@ -106,6 +88,7 @@ int main(void)
     double c[GYROSTAT_NC];
     double x[GYROSTAT_NX] = {0.0};
     double H[3];
+    gyrostat_stats stats;
     int code, k;
 
     code = gyrostat_setup(p, c);
@@ -118,7 +101,12 @@ int main(void)
     x[8] = 0.5;    /* u2 */
     x[9] = -0.02;  /* u3 */
     x[10] = 100.0; /* u4 */
-    for (k = 0; k < STEPS; ++k) rk4_step(k * DT, DT, x, c);
+    /* The generated classic RK4: STEPS equal steps of DT over [0, 10 s]. */
+    code = gyrostat_rk4(0.0, STEPS * DT, STEPS, x, c, &stats);
+    if (code != GYROSTAT_ODE_OK) {
+        fprintf(stderr, "gyrostat_rk4 failed (code %d) at t = %g\n", code, stats.t);
+        return 1;
+    }
 
     for (k = 0; k < GYROSTAT_NX; ++k) printf("%s %.17g\n", state_names[k], x[k]);
     angular_momentum_n(p, x, H);

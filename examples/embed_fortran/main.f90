@@ -1,10 +1,11 @@
 ! Embedding the generated Fortran 2008 module in a plain Fortran program: no
-! Python, no gyrogen, only gyrostat.f90 from generated/gyrostat/.
+! Python, no gyrogen, only gyrostat.f90 and gyrostat_ode.f90 from
+! generated/gyrostat/.
 !
 ! The same run as examples/embed_c/main.c, so the two outputs can be compared
 ! line by line: a dual-spin-like gyrostat (a 500 kg carrier with a 10 kg
 ! momentum wheel spinning at 100 rad/s, driven by a 0.01 N m motor) for 10 s
-! with a fixed-step classical RK4 (dt = 1e-3 s). Prints the final state, one
+! with the generated fixed-step classical RK4 (dt = 1e-3 s). Prints the final state, one
 ! "name value" per line in the module's state order, then the angular momentum
 ! about AB* in N components and its norm (conserved: g = 0, and the motor
 ! torque is internal).
@@ -13,10 +14,10 @@
 !   u1 = 0.01, u2 = 0.5, u3 = -0.02 rad/s (carrier rates, A components),
 !   u4 = 100 rad/s (rotor's absolute rate about a2).
 program embed_fortran
-  use, intrinsic :: iso_c_binding, only: c_double, c_int
+  use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long
   use, intrinsic :: iso_fortran_env, only: error_unit
-  use gyrostat_mod, only: gyrostat_setup, gyrostat_rhs, GYROSTAT_NX, GYROSTAT_NP, &
-                          GYROSTAT_NC, GYROSTAT_OK
+  use gyrostat_mod, only: gyrostat_setup, GYROSTAT_NX, GYROSTAT_NP, GYROSTAT_NC, GYROSTAT_OK
+  use gyrostat_ode_mod, only: gyrostat_rk4, gyrostat_stats, GYROSTAT_ODE_OK
   implicit none
 
   real(c_double), parameter :: dt = 1.0e-3_c_double
@@ -31,6 +32,7 @@ program embed_fortran
     100.0_c_double, 80.0_c_double, 120.0_c_double, 5.0_c_double, 0.05_c_double, &
     0.1_c_double, 0.2_c_double, -0.1_c_double, 0.0_c_double, 0.01_c_double]
   real(c_double) :: c(GYROSTAT_NC), x(GYROSTAT_NX), h(3)
+  type(gyrostat_stats) :: stats
   integer(c_int) :: code
   integer :: k
 
@@ -46,9 +48,12 @@ program embed_fortran
   x(9) = 0.5_c_double     ! u2
   x(10) = -0.02_c_double  ! u3
   x(11) = 100.0_c_double  ! u4
-  do k = 0, steps - 1
-    call rk4_step(k*dt, dt, x, c)
-  end do
+  ! The generated classic RK4: `steps` equal steps of dt over [0, 10 s].
+  code = gyrostat_rk4(0.0_c_double, steps*dt, int(steps, c_long), x, c, stats)
+  if (code /= GYROSTAT_ODE_OK) then
+    write (*, '(a, i0)') 'gyrostat_rk4 failed with code ', code
+    error stop 1
+  end if
 
   do k = 1, GYROSTAT_NX
     write (*, '(a, 1x, g0.17)') trim(state_names(k)), x(k)
@@ -76,17 +81,6 @@ contains
     end select
   end function setup_message
 
-  ! One classical RK4 step of size dt_ from (t, y), in place.
-  subroutine rk4_step(t, dt_, y, cc)
-    real(c_double), intent(in) :: t, dt_, cc(GYROSTAT_NC)
-    real(c_double), intent(inout) :: y(GYROSTAT_NX)
-    real(c_double), dimension(GYROSTAT_NX) :: k1, k2, k3, k4
-    call gyrostat_rhs(t, y, cc, k1)
-    call gyrostat_rhs(t + 0.5_c_double*dt_, y + 0.5_c_double*dt_*k1, cc, k2)
-    call gyrostat_rhs(t + 0.5_c_double*dt_, y + 0.5_c_double*dt_*k2, cc, k3)
-    call gyrostat_rhs(t + dt_, y + dt_*k3, cc, k4)
-    y = y + dt_/6.0_c_double*(k1 + 2.0_c_double*k2 + 2.0_c_double*k3 + k4)
-  end subroutine rk4_step
 
   ! Angular momentum about AB* in N components (NOTES.md). The module keeps the
   ! lumped inertias inside setup's constants, so they are recomputed here:
