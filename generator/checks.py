@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import math
 from functools import cache
+from pathlib import Path
 
-from gyrogen.scene import Scene, default, load
+from gyrogen.scene import Scene, builtin_names, default, load
 from gyrogen.stability import Case
 
 # A moderate spacecraft: lumped inertia about (12, 9.5, 15), rotor J = 0.03.
@@ -169,3 +170,14 @@ def _dumbbell(tiny: float) -> dict[str, float]:
     """A tiny carrier and rotor far from A*: the lumped block tends to the
     rank-one mu (l3, -l1)(l3, -l1)^T."""
     return _with(I11=tiny, I22=tiny, I33=tiny, I13=0.0, I=tiny, J=tiny, l1=1.0, l3=1.0, T=0.0)
+
+
+def is_scene(name: str) -> bool:
+    return name in builtin_names() or (name.endswith(".toml") and Path(name).is_file())
+
+
+def scene_case(name: str) -> Case:
+    """A scene's own simulation ([simulate]) as a check case."""
+    scene = load(name)
+    sim = scene.simulate
+    return Case(f"scene {scene.name}", scene, sim.parameters, sim.initial, sim.t_end, "pass")

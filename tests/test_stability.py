@@ -68,4 +68,26 @@ def test_check_unknown_case(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as info:
         main(["check", "no-such-case"])
     assert info.value.code == 1
-    assert "no case matches no-such-case" in capsys.readouterr().err
+    assert "no case or scene matches no-such-case" in capsys.readouterr().err
+
+
+def test_check_all_quick_from_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+    """What CI runs: every quick case, one table, exit 0."""
+    try:
+        main(["check", "--all", "--quick"])
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, _ = capsys.readouterr()
+    assert code == 0, out
+    assert out.count(" ok") >= len(QUICK) and "FAIL" not in out
+
+
+def test_check_a_scene_file(capsys: pytest.CaptureFixture[str]) -> None:
+    try:
+        main(["check", "torque_free"])
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, _ = capsys.readouterr()
+    assert code == 0 and "scene torque_free" in out

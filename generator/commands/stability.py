@@ -28,15 +28,20 @@ def check(
 ) -> None:
     """Run stiff and extreme cases: pass or fail, invariant drift, stiffness,
     conditioning, step statistics, method, and a diagnosis. NAMES select
-    cases whose name contains them."""
+    the built-in cases whose name contains them, or name a scene (built-in or
+    .toml) to check its own simulate settings."""
     from gyrogen import build, checks, stability
     from gyrogen.generate import generate, write_atomic
 
     suite = checks.cases(quick)
     if names and not every:
-        suite = [c for c in suite if any(n in c.name for n in names)]
+        scenes = [checks.scene_case(n) for n in names if checks.is_scene(n)]
+        picked = [c for c in suite if any(n in c.name for n in names)]
+        suite = scenes + picked
         if not suite:
-            raise GyrogenError(f"no case matches {', '.join(names)} (see gyrogen check --list)")
+            raise GyrogenError(
+                f"no case or scene matches {', '.join(names)} (see gyrogen check --list)"
+            )
     if listing:
         for case in suite:
             click.echo(f"{case.name:<48} expect {case.expect:<9} scene {case.scene.name}")
