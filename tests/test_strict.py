@@ -109,3 +109,49 @@ def test_examples_under_valgrind(source_dir: Path, tmp_path: Path, program: str)
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == "", proc.stderr  # -q: memcheck speaks only of errors
+
+
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_verify_path_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str) -> None:
+    """setup, rhs and two integrators on random valid and invalid inputs,
+    built with ASan and UBSan and checked against the numpy reference."""
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    from gyrogen import reference, sampling
+
+    rng = np.random.default_rng(12)
+    valid = sampling.random_parameters(rng, 8, max_condition=100)
+    invalid = [p for _, p, _ in sampling.invalid_parameters(valid[0])]
+    params = np.vstack([valid, invalid])
+    states = sampling.random_states(rng, 50)
+    states[:, 10] = np.clip(states[:, 10], -20, 20)  # keep the short integrations cheap
+    blob = np.array([len(params), len(states)], dtype=np.int32).tobytes()
+    (tmp_path / "in.bin").write_bytes(blob + params.tobytes() + states.tobytes())
+    sanitize = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-g", "-O1"]
+    harness = Path(__file__).parent / "harness" / "verify.c"
+    sources = [str(source_dir / n) for n in ("gyrostat.c", "gyrostat_ode.c")]
+    clean([tool(cc), "-std=c99", *sanitize, f"-I{source_dir}", str(harness), *sources, "-lm",
+           "-o", "verify"], tmp_path)  # fmt: skip
+    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1")
+    clean([str(tmp_path / "verify"), "in.bin", "out.bin"], tmp_path, env)
+    out, pos = (tmp_path / "out.bin").read_bytes(), 0
+    nx = 14
+    for p in params:
+        code = int(np.frombuffer(out, np.int32, 1, pos)[0])
+        pos += 4
+        assert code == sampling.setup_code(p)
+        if code:
+            continue
+        got = np.frombuffer(out, np.float64, len(states) * nx, pos).reshape(-1, nx)
+        pos += got.nbytes
+        ref = reference.rhs(states, p)
+        assert np.max(np.abs(got - ref) / (1 + np.abs(ref))) < 1e-12
+        finals = np.frombuffer(out, np.float64, 6 * nx, pos).reshape(6, nx)
+        pos += finals.nbytes
+        for k in range(3):
+            sol = solve_ivp(lambda t, y, p=p: reference.rhs(y, p), (0, 0.5), states[k],
+                            method="DOP853", rtol=1e-12, atol=1e-12)  # fmt: skip
+            for final in (finals[k], finals[3 + k]):
+                assert np.max(np.abs(final - sol.y[:, -1]) / (1 + np.abs(sol.y[:, -1]))) < 1e-7
+    assert pos == len(out)
