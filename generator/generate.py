@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -79,9 +80,10 @@ def render_all(unit: Unit, lib: bool = False) -> dict[str, str]:
     return files
 
 
-def write_atomic(out: Path, files: dict[str, str]) -> None:
+def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
     """Every file goes to a temporary name in out, then all are renamed: a
-    failure leaves out without any half-written file."""
+    failure leaves out without any half-written file. Text is UTF-8 with
+    newlines as written."""
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -91,8 +93,8 @@ def write_atomic(out: Path, files: dict[str, str]) -> None:
         for name, text in files.items():
             fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
             temps[name] = tmp
-            with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-                fh.write(text)
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(text.encode("utf-8") if isinstance(text, str) else text)
         for name, tmp in temps.items():
             os.replace(tmp, out / name)
     except OSError as exc:

@@ -22,8 +22,6 @@ from __future__ import annotations
 import io
 import itertools
 import json
-import os
-import tempfile
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
@@ -36,7 +34,7 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import build, plots, witness
 from gyrogen.errors import GyrogenError, SceneError
-from gyrogen.generate import generate
+from gyrogen.generate import generate, write_atomic
 from gyrogen.layout import STATES
 from gyrogen.scene import Scene
 
@@ -232,12 +230,18 @@ def integrate_compiled(
         pct = int(100 * b / grid[-1])
         advance(pct - shown)
         shown = pct
-    wall = time.perf_counter() - t0
-    ys = np.array(y)
+    return _trajectory(grid, samples, np.array(y), nfev, time.perf_counter() - t0)
+
+
+def _trajectory(
+    grid: np.ndarray, samples: np.ndarray, y: np.ndarray, nfev: int, wall: float
+) -> Trajectory:
+    """Split the states at the sample times into the output grid and the
+    quadrature nodes inside each interval."""
     step, n = QUAD_NODES + 1, len(grid)
-    inner = ys[:-1].reshape(n - 1, step, -1)[:, 1:]
+    inner = y[:-1].reshape(n - 1, step, -1)[:, 1:]  # drop the grid point opening each interval
     t_nodes = samples[:-1].reshape(n - 1, step)[:, 1:]
-    return Trajectory(grid, ys[::step], t_nodes, inner, nfev, wall)
+    return Trajectory(grid, y[::step], t_nodes, inner, nfev, wall)
 
 
 def integrate(
@@ -263,11 +267,7 @@ def integrate(
     wall = time.perf_counter() - t0
     check_solution(sol, settings.method, f.t_max, grid[-1], settings.max_nfev)
     f.finish()
-    y = np.ascontiguousarray(sol.y.T)
-    step, n = QUAD_NODES + 1, len(grid)
-    inner = y[:-1].reshape(n - 1, step, -1)[:, 1:]  # drop the grid point opening each interval
-    t_nodes = samples[:-1].reshape(n - 1, step)[:, 1:]
-    return Trajectory(grid, y[::step], t_nodes, inner, int(sol.nfev), wall)
+    return _trajectory(grid, samples, np.ascontiguousarray(sol.y.T), int(sol.nfev), wall)
 
 
 def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: int) -> None:
@@ -402,24 +402,6 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
     }
 
 
-def write_all(out: Path, files: dict[str, bytes]) -> None:
-    """generate.write_atomic for bytes: every file to a temporary name in out,
-    then all renamed, so a failure leaves no half-written file."""
-    temps: dict[str, str] = {}
-    try:
-        for name, data in files.items():
-            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
-            temps[name] = tmp
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-        for name, tmp in temps.items():
-            os.replace(tmp, out / name)
-    except OSError as exc:
-        for tmp in temps.values():
-            Path(tmp).unlink(missing_ok=True)
-        raise GyrogenError(f"cannot write to {out}: {exc.strerror}") from exc
-
-
 def _make_dir(out: Path) -> None:
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -460,7 +442,7 @@ def run(
     names += ["trajectory.png"] if settings.plot else []
     files = tuple(out / n for n in names)
     res = Result(scene, out, comp.language, build_id, settings, traj, inv, files)
-    write_all(out, _contents(res, p))
+    write_atomic(out, _contents(res, p))
     return res
 
 
