@@ -13,7 +13,7 @@ from functools import cache
 from pathlib import Path
 
 from gyrogen.scene import Scene, builtin_names, default, load
-from gyrogen.stability import Case
+from gyrogen.stability import Case, spin_prediction
 
 # A moderate spacecraft: lumped inertia about (12, 9.5, 15), rotor J = 0.03.
 NOMINAL = {
@@ -140,10 +140,7 @@ def cases(quick: bool = False) -> list[Case]:
     )
     for u4 in (0.0, 15.0, 25.0, -40.0):
         initial = {"u1": 1e-4, "u2": 1.0, "u3": 0.0, "u4": u4}
-        v = dict(SPIN)
-        from gyrogen.stability import spin_prediction
-
-        expect = spin_prediction(v, 1.0, u4)
+        expect = spin_prediction(SPIN, 1.0, u4)
         out.append(
             Case(
                 f"spin stability u4={u4:g}: predicted {expect}",

@@ -68,14 +68,10 @@ class Result:
 
     @property
     def passed(self) -> bool:
-        return self.verdict == self.case.expect or (
-            self.case.expect == "pass" and self.verdict in ("stable",)
-        )
+        return self.verdict == self.case.expect
 
 
-def _vector(
-    scene: Scene, values: dict[str, float], names: tuple[str, ...], fill: float
-) -> np.ndarray:
+def _vector(values: dict[str, float], names: tuple[str, ...], fill: float) -> np.ndarray:
     return np.array([values.get(n, fill) for n in names], dtype=float)
 
 
@@ -126,7 +122,7 @@ def invariants(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> d
 def run_case(case: Case, comp: Compiled) -> Result:
     res = Result(case)
     scene = case.scene
-    p = _vector(scene, case.params, scene.runtime, math.nan)
+    p = _vector(case.params, scene.runtime, math.nan)
     x0 = np.array([{"e0": 1.0, **case.initial}.get(s, 0.0) for s in scene.states])
     res.setup_code, c = comp.setup_code(p)
     if res.setup_code != 0:
