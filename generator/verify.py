@@ -100,8 +100,7 @@ def _group(
 ) -> list[Row]:
     worst: dict[str, tuple[float, float, float]] = {}  # pair -> (margin, error, cond)
     for p in progress(name, params):
-        full = witness.full_parameters(scene, p, np.zeros((1, 14)), 0.0)[0]
-        cond = float(sampling.lumped_condition(full))
+        cond = _condition(scene, p)
         t = float(rng.uniform(*_time_span(scene)))
         for pair, err in _pairs(backends, scene, states, p, t):
             margin = err / bar(cond)
