@@ -21,6 +21,7 @@ from gyrogen.layout import (
     STATE_DOC,
     TRIANGLE_SLACK,
 )
+from gyrogen.lu_blocks import Blocks, diagonal_blocks
 from gyrogen.optimize import Block, Optimized, optimize
 from gyrogen.scene import Scene
 from gyrogen.specialize import specialize
@@ -115,6 +116,12 @@ class Unit:
         if self.optimized.jacobian is not None:
             ops["jac"] = self.optimized.jacobian.ops
         return ops
+
+    @cached_property
+    def lu_blocks(self) -> Blocks | None:
+        """The diagonal blocks the implicit method's LU works in."""
+        jac = self.optimized.jacobian
+        return None if jac is None else diagonal_blocks(jac.outputs, self.nx)
 
     @property
     def methods(self) -> list[Method]:

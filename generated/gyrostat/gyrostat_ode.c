@@ -744,15 +744,23 @@ int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rto
     return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
 }
 
+/* E = I/(h gamma) - J is block upper triangular in state order (see
+   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14).
+   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
+static const int lu_start[GYROSTAT_NX] = {0, 1, 1, 3, 4, 5, 6, 7, 7, 7, 10, 11, 12, 13};
+static const int lu_end[GYROSTAT_NX] = {1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14};
+
 /* In-place LU decomposition with partial pivoting of a row-major
-   GYROSTAT_NX x GYROSTAT_NX matrix (L unit lower, U upper, row k swapped with
-   piv[k]); 1 when a pivot is zero: the matrix is singular. */
+   GYROSTAT_NX x GYROSTAT_NX block upper triangular matrix: L unit lower, nonzero
+   within the diagonal blocks only; U upper with 1/u_kk stored on the
+   diagonal; row k swapped with piv[k], a row of the same block. 1 when a
+   pivot is zero: the matrix is singular. */
 static int lu_decompose(double *a, int *piv)
 {
     int i, j, k, p;
     for (k = 0; k < GYROSTAT_NX; ++k) {
         p = k;
-        for (i = k + 1; i < GYROSTAT_NX; ++i) {
+        for (i = k + 1; i < lu_end[k]; ++i) {
             if (fabs(a[i * GYROSTAT_NX + k]) > fabs(a[p * GYROSTAT_NX + k])) {
                 p = i;
             }
@@ -761,13 +769,16 @@ static int lu_decompose(double *a, int *piv)
         if (!(fabs(a[p * GYROSTAT_NX + k]) > 0.0)) {
             return 1;
         }
-        for (j = 0; j < GYROSTAT_NX; ++j) {
-            const double swap = a[k * GYROSTAT_NX + j];
-            a[k * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
-            a[p * GYROSTAT_NX + j] = swap;
+        if (p != k) {
+            for (j = lu_start[k]; j < GYROSTAT_NX; ++j) {
+                const double swap = a[k * GYROSTAT_NX + j];
+                a[k * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
+                a[p * GYROSTAT_NX + j] = swap;
+            }
         }
-        for (i = k + 1; i < GYROSTAT_NX; ++i) {
-            const double l = a[i * GYROSTAT_NX + k] / a[k * GYROSTAT_NX + k];
+        a[k * GYROSTAT_NX + k] = 1.0 / a[k * GYROSTAT_NX + k];
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            const double l = a[i * GYROSTAT_NX + k] * a[k * GYROSTAT_NX + k];
             a[i * GYROSTAT_NX + k] = l;
             for (j = k + 1; j < GYROSTAT_NX; ++j) {
                 a[i * GYROSTAT_NX + j] -= l * a[k * GYROSTAT_NX + j];
@@ -777,24 +788,35 @@ static int lu_decompose(double *a, int *piv)
     return 0;
 }
 
-/* b := A^-1 b from lu_decompose's factors. */
+/* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
+   and U that can be nonzero. */
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
-    int i, j;
+    int i;
     for (i = 0; i < GYROSTAT_NX; ++i) {
         const double swap = b[i];
         b[i] = b[piv[i]];
         b[piv[i]] = swap;
-        for (j = 0; j < i; ++j) {
-            b[i] -= lu[i * GYROSTAT_NX + j] * b[j];
-        }
     }
-    for (i = GYROSTAT_NX - 1; i >= 0; --i) {
-        for (j = i + 1; j < GYROSTAT_NX; ++j) {
-            b[i] -= lu[i * GYROSTAT_NX + j] * b[j];
-        }
-        b[i] /= lu[i * GYROSTAT_NX + i];
-    }
+    b[2] = b[2] - lu[29] * b[1];
+    b[8] = b[8] - lu[119] * b[7];
+    b[9] = b[9] - lu[133] * b[7] - lu[134] * b[8];
+    b[13] *= lu[195];
+    b[12] *= lu[180];
+    b[11] *= lu[165];
+    b[10] *= lu[150];
+    b[9] = (b[9] - lu[136] * b[10]) * lu[135];
+    b[8] = (b[8] - lu[121] * b[9] - lu[122] * b[10]) * lu[120];
+    b[7] = (b[7] - lu[106] * b[8] - lu[107] * b[9] - lu[108] * b[10]) * lu[105];
+    b[6] = (b[6] - lu[97] * b[13]) * lu[90];
+    b[5] = (b[5] - lu[82] * b[12]) * lu[75];
+    b[4] = (b[4] - lu[67] * b[11]) * lu[60];
+    b[3] = (b[3] - lu[50] * b[8] - lu[52] * b[10]) * lu[45];
+    b[2] = (b[2] - lu[35] * b[7] - lu[36] * b[8] - lu[37] * b[9]) * lu[30];
+    b[1] = (b[1] - lu[16] * b[2] - lu[21] * b[7] - lu[22] * b[8]
+            - lu[23] * b[9]) * lu[15];
+    b[0] = (b[0] - lu[1] * b[1] - lu[2] * b[2] - lu[7] * b[7]
+            - lu[9] * b[9]) * lu[0];
 }
 
 /* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of

@@ -611,15 +611,23 @@ int speed_controlled_dop853(double t0, double t1, double *x, const double *c, do
     return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
 }
 
+/* E = I/(h gamma) - J is block upper triangular in state order (see
+   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 8).
+   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
+static const int lu_start[SPEED_CONTROLLED_NX] = {0, 1, 1, 3, 4, 4, 4, 4};
+static const int lu_end[SPEED_CONTROLLED_NX] = {1, 3, 3, 4, 8, 8, 8, 8};
+
 /* In-place LU decomposition with partial pivoting of a row-major
-   SPEED_CONTROLLED_NX x SPEED_CONTROLLED_NX matrix (L unit lower, U upper, row k swapped with
-   piv[k]); 1 when a pivot is zero: the matrix is singular. */
+   SPEED_CONTROLLED_NX x SPEED_CONTROLLED_NX block upper triangular matrix: L unit lower, nonzero
+   within the diagonal blocks only; U upper with 1/u_kk stored on the
+   diagonal; row k swapped with piv[k], a row of the same block. 1 when a
+   pivot is zero: the matrix is singular. */
 static int lu_decompose(double *a, int *piv)
 {
     int i, j, k, p;
     for (k = 0; k < SPEED_CONTROLLED_NX; ++k) {
         p = k;
-        for (i = k + 1; i < SPEED_CONTROLLED_NX; ++i) {
+        for (i = k + 1; i < lu_end[k]; ++i) {
             if (fabs(a[i * SPEED_CONTROLLED_NX + k]) > fabs(a[p * SPEED_CONTROLLED_NX + k])) {
                 p = i;
             }
@@ -628,13 +636,16 @@ static int lu_decompose(double *a, int *piv)
         if (!(fabs(a[p * SPEED_CONTROLLED_NX + k]) > 0.0)) {
             return 1;
         }
-        for (j = 0; j < SPEED_CONTROLLED_NX; ++j) {
-            const double swap = a[k * SPEED_CONTROLLED_NX + j];
-            a[k * SPEED_CONTROLLED_NX + j] = a[p * SPEED_CONTROLLED_NX + j];
-            a[p * SPEED_CONTROLLED_NX + j] = swap;
+        if (p != k) {
+            for (j = lu_start[k]; j < SPEED_CONTROLLED_NX; ++j) {
+                const double swap = a[k * SPEED_CONTROLLED_NX + j];
+                a[k * SPEED_CONTROLLED_NX + j] = a[p * SPEED_CONTROLLED_NX + j];
+                a[p * SPEED_CONTROLLED_NX + j] = swap;
+            }
         }
-        for (i = k + 1; i < SPEED_CONTROLLED_NX; ++i) {
-            const double l = a[i * SPEED_CONTROLLED_NX + k] / a[k * SPEED_CONTROLLED_NX + k];
+        a[k * SPEED_CONTROLLED_NX + k] = 1.0 / a[k * SPEED_CONTROLLED_NX + k];
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            const double l = a[i * SPEED_CONTROLLED_NX + k] * a[k * SPEED_CONTROLLED_NX + k];
             a[i * SPEED_CONTROLLED_NX + k] = l;
             for (j = k + 1; j < SPEED_CONTROLLED_NX; ++j) {
                 a[i * SPEED_CONTROLLED_NX + j] -= l * a[k * SPEED_CONTROLLED_NX + j];
@@ -644,24 +655,30 @@ static int lu_decompose(double *a, int *piv)
     return 0;
 }
 
-/* b := A^-1 b from lu_decompose's factors. */
+/* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
+   and U that can be nonzero. */
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
-    int i, j;
+    int i;
     for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
         const double swap = b[i];
         b[i] = b[piv[i]];
         b[piv[i]] = swap;
-        for (j = 0; j < i; ++j) {
-            b[i] -= lu[i * SPEED_CONTROLLED_NX + j] * b[j];
-        }
     }
-    for (i = SPEED_CONTROLLED_NX - 1; i >= 0; --i) {
-        for (j = i + 1; j < SPEED_CONTROLLED_NX; ++j) {
-            b[i] -= lu[i * SPEED_CONTROLLED_NX + j] * b[j];
-        }
-        b[i] /= lu[i * SPEED_CONTROLLED_NX + i];
-    }
+    b[2] = b[2] - lu[17] * b[1];
+    b[5] = b[5] - lu[44] * b[4];
+    b[6] = b[6] - lu[52] * b[4] - lu[53] * b[5];
+    b[7] = b[7] - lu[60] * b[4] - lu[61] * b[5] - lu[62] * b[6];
+    b[7] *= lu[63];
+    b[6] = (b[6] - lu[55] * b[7]) * lu[54];
+    b[5] = (b[5] - lu[46] * b[6] - lu[47] * b[7]) * lu[45];
+    b[4] = (b[4] - lu[37] * b[5] - lu[38] * b[6] - lu[39] * b[7]) * lu[36];
+    b[3] = (b[3] - lu[29] * b[5] - lu[31] * b[7]) * lu[27];
+    b[2] = (b[2] - lu[20] * b[4] - lu[21] * b[5] - lu[22] * b[6]) * lu[18];
+    b[1] = (b[1] - lu[10] * b[2] - lu[12] * b[4] - lu[13] * b[5]
+            - lu[14] * b[6]) * lu[9];
+    b[0] = (b[0] - lu[1] * b[1] - lu[2] * b[2] - lu[4] * b[4]
+            - lu[6] * b[6]) * lu[0];
 }
 
 /* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of

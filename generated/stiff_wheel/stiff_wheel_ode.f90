@@ -642,31 +642,41 @@ contains
                           max_steps, stats)
   end function stiff_wheel_dop853
 
-  ! In-place LU decomposition with partial pivoting (L unit lower, U upper,
-  ! row k swapped with piv(k)); .true. when a pivot is zero: singular.
+  ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
+  ! block upper triangular in state order (see gyrogen/lu_blocks.py): blocks
+  ! (0, 1), (1, 3), (3, 4), (4, 8) (0-based, end excluded). L is unit lower and
+  ! nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the
+  ! diagonal; row k swapped with piv(k), a row of the same block. .true. when
+  ! a pivot is zero: singular.
   logical function lu_decompose(a, piv) result(singular)
     real(c_double), intent(inout) :: a(nx, nx)
     integer, intent(out) :: piv(nx)
+    integer, parameter :: block_end(nx) = [1, 3, 3, 4, 8, 8, 8, 8]
     real(c_double) :: row(nx)
-    integer :: j, k, p
+    integer :: e, j, k, p
 
     singular = .true.
     do k = 1, nx
-      p = k - 1 + maxloc(abs(a(k:, k)), dim=1)
+      e = block_end(k)
+      p = k - 1 + maxloc(abs(a(k:e, k)), dim=1)
       piv(k) = p
       if (.not. (abs(a(p, k)) > 0)) return
-      row = a(k, :)
-      a(k, :) = a(p, :)
-      a(p, :) = row
-      a(k + 1:, k) = a(k + 1:, k) / a(k, k)
+      if (p /= k) then
+        row = a(k, :)
+        a(k, :) = a(p, :)
+        a(p, :) = row
+      end if
+      a(k, k) = 1 / a(k, k)
+      a(k + 1:e, k) = a(k + 1:e, k) * a(k, k)
       do j = k + 1, nx
-        a(k + 1:, j) = a(k + 1:, j) - a(k + 1:, k) * a(k, j)
+        a(k + 1:e, j) = a(k + 1:e, j) - a(k + 1:e, k) * a(k, j)
       end do
     end do
     singular = .false.
   end function lu_decompose
 
-  ! b := A^-1 b from lu_decompose's factors.
+  ! b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
+  ! and U that can be nonzero.
   subroutine lu_solve(lu, piv, b)
     real(c_double), intent(in) :: lu(nx, nx)
     integer, intent(in) :: piv(nx)
@@ -679,13 +689,20 @@ contains
       b(j) = b(piv(j))
       b(piv(j)) = swap
     end do
-    do j = 1, nx - 1
-      b(j + 1:) = b(j + 1:) - lu(j + 1:, j) * b(j)
-    end do
-    do j = nx, 1, -1
-      b(j) = b(j) / lu(j, j)
-      b(:j - 1) = b(:j - 1) - lu(:j - 1, j) * b(j)
-    end do
+    b(3) = b(3) - lu(3, 2) * b(2)
+    b(6) = b(6) - lu(6, 5) * b(5)
+    b(7) = b(7) - lu(7, 5) * b(5) - lu(7, 6) * b(6)
+    b(8) = b(8) - lu(8, 5) * b(5) - lu(8, 6) * b(6) - lu(8, 7) * b(7)
+    b(8) = b(8) * lu(8, 8)
+    b(7) = (b(7) - lu(7, 8) * b(8)) * lu(7, 7)
+    b(6) = (b(6) - lu(6, 7) * b(7) - lu(6, 8) * b(8)) * lu(6, 6)
+    b(5) = (b(5) - lu(5, 6) * b(6) - lu(5, 7) * b(7) - lu(5, 8) * b(8)) * lu(5, 5)
+    b(4) = (b(4) - lu(4, 6) * b(6) - lu(4, 8) * b(8)) * lu(4, 4)
+    b(3) = (b(3) - lu(3, 5) * b(5) - lu(3, 6) * b(6) - lu(3, 7) * b(7)) * lu(3, 3)
+    b(2) = (b(2) - lu(2, 3) * b(3) - lu(2, 5) * b(5) - lu(2, 6) * b(6) &
+         - lu(2, 7) * b(7)) * lu(2, 2)
+    b(1) = (b(1) - lu(1, 2) * b(2) - lu(1, 3) * b(3) - lu(1, 5) * b(5) &
+         - lu(1, 7) * b(7)) * lu(1, 1)
   end subroutine lu_solve
 
   ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of

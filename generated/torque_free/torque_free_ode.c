@@ -596,15 +596,23 @@ int torque_free_dop853(double t0, double t1, double *x, const double *c, double 
     return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
 }
 
+/* E = I/(h gamma) - J is block upper triangular in state order (see
+   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 6), (6, 7).
+   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
+static const int lu_start[TORQUE_FREE_NX] = {0, 1, 1, 3, 3, 3, 6};
+static const int lu_end[TORQUE_FREE_NX] = {1, 3, 3, 6, 6, 6, 7};
+
 /* In-place LU decomposition with partial pivoting of a row-major
-   TORQUE_FREE_NX x TORQUE_FREE_NX matrix (L unit lower, U upper, row k swapped with
-   piv[k]); 1 when a pivot is zero: the matrix is singular. */
+   TORQUE_FREE_NX x TORQUE_FREE_NX block upper triangular matrix: L unit lower, nonzero
+   within the diagonal blocks only; U upper with 1/u_kk stored on the
+   diagonal; row k swapped with piv[k], a row of the same block. 1 when a
+   pivot is zero: the matrix is singular. */
 static int lu_decompose(double *a, int *piv)
 {
     int i, j, k, p;
     for (k = 0; k < TORQUE_FREE_NX; ++k) {
         p = k;
-        for (i = k + 1; i < TORQUE_FREE_NX; ++i) {
+        for (i = k + 1; i < lu_end[k]; ++i) {
             if (fabs(a[i * TORQUE_FREE_NX + k]) > fabs(a[p * TORQUE_FREE_NX + k])) {
                 p = i;
             }
@@ -613,13 +621,16 @@ static int lu_decompose(double *a, int *piv)
         if (!(fabs(a[p * TORQUE_FREE_NX + k]) > 0.0)) {
             return 1;
         }
-        for (j = 0; j < TORQUE_FREE_NX; ++j) {
-            const double swap = a[k * TORQUE_FREE_NX + j];
-            a[k * TORQUE_FREE_NX + j] = a[p * TORQUE_FREE_NX + j];
-            a[p * TORQUE_FREE_NX + j] = swap;
+        if (p != k) {
+            for (j = lu_start[k]; j < TORQUE_FREE_NX; ++j) {
+                const double swap = a[k * TORQUE_FREE_NX + j];
+                a[k * TORQUE_FREE_NX + j] = a[p * TORQUE_FREE_NX + j];
+                a[p * TORQUE_FREE_NX + j] = swap;
+            }
         }
-        for (i = k + 1; i < TORQUE_FREE_NX; ++i) {
-            const double l = a[i * TORQUE_FREE_NX + k] / a[k * TORQUE_FREE_NX + k];
+        a[k * TORQUE_FREE_NX + k] = 1.0 / a[k * TORQUE_FREE_NX + k];
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            const double l = a[i * TORQUE_FREE_NX + k] * a[k * TORQUE_FREE_NX + k];
             a[i * TORQUE_FREE_NX + k] = l;
             for (j = k + 1; j < TORQUE_FREE_NX; ++j) {
                 a[i * TORQUE_FREE_NX + j] -= l * a[k * TORQUE_FREE_NX + j];
@@ -629,24 +640,28 @@ static int lu_decompose(double *a, int *piv)
     return 0;
 }
 
-/* b := A^-1 b from lu_decompose's factors. */
+/* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
+   and U that can be nonzero. */
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
-    int i, j;
+    int i;
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
         const double swap = b[i];
         b[i] = b[piv[i]];
         b[piv[i]] = swap;
-        for (j = 0; j < i; ++j) {
-            b[i] -= lu[i * TORQUE_FREE_NX + j] * b[j];
-        }
     }
-    for (i = TORQUE_FREE_NX - 1; i >= 0; --i) {
-        for (j = i + 1; j < TORQUE_FREE_NX; ++j) {
-            b[i] -= lu[i * TORQUE_FREE_NX + j] * b[j];
-        }
-        b[i] /= lu[i * TORQUE_FREE_NX + i];
-    }
+    b[2] = b[2] - lu[15] * b[1];
+    b[4] = b[4] - lu[31] * b[3];
+    b[5] = b[5] - lu[38] * b[3] - lu[39] * b[4];
+    b[6] *= lu[48];
+    b[5] = (b[5] - lu[41] * b[6]) * lu[40];
+    b[4] = (b[4] - lu[33] * b[5] - lu[34] * b[6]) * lu[32];
+    b[3] = (b[3] - lu[25] * b[4] - lu[26] * b[5] - lu[27] * b[6]) * lu[24];
+    b[2] = (b[2] - lu[17] * b[3] - lu[18] * b[4] - lu[19] * b[5]) * lu[16];
+    b[1] = (b[1] - lu[9] * b[2] - lu[10] * b[3] - lu[11] * b[4]
+            - lu[12] * b[5]) * lu[8];
+    b[0] = (b[0] - lu[1] * b[1] - lu[2] * b[2] - lu[3] * b[3]
+            - lu[5] * b[5]) * lu[0];
 }
 
 /* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of

@@ -1,0 +1,67 @@
+"""The diagonal blocks of the implicit method's iteration matrix.
+
+Rodas4 solves E k = b with E = I/(h gamma) - J at every stage. In state order
+the gyrostat's J is block upper triangular: the speeds' derivatives do not
+depend on the attitude or the position, and among the angles only q2 and q3
+feed back on each other. Partial pivoting then never needs a row from a
+later block and L has no entry outside the diagonal blocks, so the generated
+LU eliminates within a block only and the forward substitution stops at the
+block's first column: about sum(size^2) n work instead of n^3 / 3. The
+solves are unrolled over the entries that can be nonzero.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import sympy as sm
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """The diagonal blocks [start, end) of a matrix with J's pattern."""
+
+    spans: tuple[tuple[int, int], ...]
+    upper: tuple[tuple[int, ...], ...]
+    """Per row i: the columns j > i where U can be nonzero: the rest of the
+    block (fill-in), and beyond it any column some row of the block uses."""
+
+    @property
+    def start(self) -> list[int]:
+        """Per row: the first row (and column) of its block."""
+        return [s for s, e in self.spans for _ in range(s, e)]
+
+    @property
+    def end(self) -> list[int]:
+        """Per row: one past the last row of its block."""
+        return [e for s, e in self.spans for _ in range(s, e)]
+
+    @property
+    def lower(self) -> list[list[int]]:
+        """Per row i: the columns j < i where L can be nonzero (its block's)."""
+        return [list(range(s, i)) for i, s in enumerate(self.start)]
+
+    @property
+    def sizes(self) -> list[int]:
+        return [e - s for s, e in self.spans]
+
+
+def diagonal_blocks(entries: Sequence[sm.Expr], n: int) -> Blocks:
+    """The finest partition of range(n) into intervals such that every
+    nonzero J[i][j] below the diagonal (j < i, row-major entries) has i and j
+    in one interval. A full pattern gives one block: the dense LU."""
+    if len(entries) != n * n:
+        raise ValueError(f"expected {n * n} Jacobian entries, got {len(entries)}")
+    lowest = [max([j, *(i for i in range(j + 1, n) if entries[i * n + j] != 0)]) for j in range(n)]
+    spans, start, end = [], 0, 0
+    for k in range(n):
+        end = max(end, lowest[k] + 1)
+        if k + 1 == end:
+            spans.append((start, end))
+            start = end
+    upper = []
+    for s, e in spans:
+        used = {j for r in range(s, e) for j in range(e, n) if entries[r * n + j] != 0}
+        upper += [tuple(j for j in range(i + 1, n) if j < e or j in used) for i in range(s, e)]
+    return Blocks(tuple(spans), tuple(upper))
