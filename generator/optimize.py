@@ -158,18 +158,59 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
         for name, exprs in eqs.outputs.items()
     }
     jac = _jacobian([*kin, *dyn], eqs.states) if jacobian else None
-    setup, lumped = _setup(eqs, [*hoister.values, condition(eqs.coupled)])
+    values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
+    det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
+    setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
 
 
-def condition(block: sm.Matrix) -> sm.Expr:
+def condition(block: sm.Matrix, det: sm.Expr | None = None) -> sm.Expr:
     """lambda_max / lambda_min of a symmetric positive 2x2 block, the last
     constant of setup. lambda_min = det / lambda_max: the difference of the
-    two terms of lambda_min would cancel for a badly conditioned block."""
+    two terms of lambda_min would cancel for a badly conditioned block
+    (det: the block's determinant in a form that does not)."""
     a, b, d = block[0, 0], block[0, 1], block[1, 1]
     big = (a + d) / 2 + sm.sqrt((a - d) ** 2 / 4 + b**2)
-    cond = big**2 / (a * d - b**2)
+    cond = big**2 / (a * d - b**2 if det is None else det)
     return sm.Float(float(cond)) if cond.is_number else cond
+
+
+MU = sm.Symbol("mu", positive=True)
+"""The reduced mass m_a m_b / (m_a + m_b), a named scalar of setup."""
+
+
+def _multiplied_out(value: sm.Expr, lumped: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
+    """value with the products of lumped scalars it reads multiplied out.
+
+    Each coupled lumped inertia is a carrier-plus-rotor part plus the rank-one
+    mu (l3, -l1)(l3, -l1)^T, so in a product such as I~11 I~33 - I~13^2 the
+    mu^2 terms cancel; in rounding that costs as many digits as the block's
+    condition number has (1e-7 of the constants at cond 5e9, which the
+    integrators then turn into invariant drift). Multiplied out over a common
+    denominator, they cancel in sympy instead. A numerator or denominator
+    linear in the lumped scalars keeps its lumped form.
+    """
+    if not value.free_symbols & set(lumped):
+        return value
+    defs = _in_reduced_mass(lumped)
+    num, den = sm.fraction(sm.together(value))
+    return _products_out(num, defs) / _products_out(den, defs)
+
+
+def _in_reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
+    """The lumped definitions with m_a m_b / (m_a + m_b) as the symbol MU."""
+    free = {s.name for e in lumped.values() for s in e.free_symbols}
+    if not {"m_a", "m_b"} <= free:
+        return lumped  # a folded mass: the reduced mass is a number
+    mu = _reduced_mass(lumped)
+    return {s: e.subs(mu, MU) for s, e in lumped.items()}
+
+
+def _products_out(poly: sm.Expr, defs: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
+    lumped = list(poly.free_symbols & set(defs))
+    if not lumped or sm.Poly(poly, *lumped).total_degree() < 2:
+        return poly
+    return sm.expand(poly.xreplace(defs))
 
 
 def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
@@ -180,19 +221,29 @@ def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
 
 
 def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignment, ...]]:
-    """The constants, after the lumped scalars they are written in.
+    """The constants, after the named scalars they are written in.
 
-    Two CSE passes share one numbering: the lumped scalars come first, under
-    their own names; only those some constant uses are computed.
+    Two CSE passes share one numbering: the reduced mass mu and the lumped
+    scalars come first, under their own names; only those some constant uses
+    are computed.
     """
     used = set().union(*(v.free_symbols for v in values)) if values else set()
+    defs = _in_reduced_mass(eqs.lumped)
     names_used = [s for s in eqs.lumped if s in used]
+    used |= set().union(*(defs[s].free_symbols for s in names_used)) if names_used else set()
+    named = {MU: _reduced_mass(eqs.lumped)} if MU in used else {}
+    named.update({s: defs[s] for s in names_used})
     names = _temporaries()
-    first = _cse([eqs.lumped[s] for s in names_used], names)
+    first = _cse(list(named.values()), names)
     second = _cse(values, names)
-    lumped = tuple(Assignment(s, v) for s, v in zip(names_used, first.outputs, strict=True))
-    setup = Block(first.temporaries + lumped + second.temporaries, second.outputs)
-    return setup, lumped
+    scalars = tuple(Assignment(s, v) for s, v in zip(named, first.outputs, strict=True))
+    setup = Block(first.temporaries + scalars + second.temporaries, second.outputs)
+    return setup, tuple(a for a in scalars if a.lhs in eqs.lumped)
+
+
+def _reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
+    free = {s.name: s for e in lumped.values() for s in e.free_symbols}
+    return free["m_a"] * free["m_b"] / (free["m_a"] + free["m_b"])
 
 
 def cse_only(exprs: Sequence[sm.Expr]) -> Block:

@@ -124,8 +124,11 @@ def _condition(pa: Array) -> Array:
     half_gap = np.sqrt(0.25 * (a11 - a33) ** 2 + a13**2)
     largest = 0.5 * (a11 + a33) + half_gap
     # largest / smallest with smallest = det / largest (mean - half_gap would
-    # cancel), written as the generated setup computes it.
-    return np.asarray(largest**2 / (a11 * a33 - a13**2))
+    # cancel). det multiplied out as the generated setup has it: in
+    # a11 a33 - a13^2 the mu^2 terms would cancel in rounding.
+    i11, i33, i13 = pa[..., _P["I11"]] + i_rot, pa[..., _P["I33"]] + i_rot, pa[..., _P["I13"]]
+    det = i11 * i33 - i13**2 + mu * (l1**2 * i11 + l3**2 * i33 + 2 * i13 * l1 * l3)
+    return np.asarray(largest**2 / det)
 
 
 def random_parameters(
