@@ -110,7 +110,7 @@ def cases(quick: bool = False) -> list[Case]:
         Case("negative mass", full, _with(m_a=-1.0), START, 1.0, "refused"),
     ]
     ctrl = load("speed_controlled")
-    for ratio in (1e1, 1e3, 1e5) if quick else (1e1, 1e2, 1e3, 1e4, 1e5, 1e6):
+    for ratio in (1e1, 1e3, 1e6) if quick else (1e1, 1e2, 1e3, 1e4, 1e5, 1e6):
         params = {"k": ratio * 0.03, "w_ref": 150.0}
         out.append(
             Case(

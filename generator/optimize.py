@@ -148,16 +148,18 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     also d(dx/dt)/dx for the implicit integrators."""
     udot = block_inverse(eqs.mass_matrix) * eqs.forcing
     hoister = Hoister()
-    per_call = [*eqs.states, *eqs.inputs]
+    per_call = [*eqs.states, *eqs.inputs, *eqs.shared]
     dyn = [hoist(e, per_call, hoister) for e in udot]
+    shared = {s: hoist(e, per_call, hoister) for s, e in eqs.shared.items()}
     n_q = len(eqs.kinematics)
     kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
     rhs = _cse([*kin, *dyn], _temporaries())
+    rhs = Block(tuple(Assignment(s, e) for s, e in shared.items()) + rhs.temporaries, rhs.outputs)
     outputs = {
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
         for name, exprs in eqs.outputs.items()
     }
-    jac = _jacobian([*kin, *dyn], eqs.states) if jacobian else None
+    jac = _jacobian([e.xreplace(shared) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])

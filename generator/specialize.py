@@ -28,6 +28,18 @@ def _values(scene: Scene, sym: dict[str, sm.Symbol]) -> dict[str, sm.Expr]:
     return {n: sym[n] if v == "runtime" else sm.Rational(v) for n, v in scene.parameters.items()}
 
 
+SLIP = sm.Symbol("slip", real=True)
+"""The speed controller's u4 - u2 - w_ref (rad/s), named: see Equations.shared."""
+
+
+def _shared(
+    scene: Scene, v: dict[str, sm.Expr], u: dict[str, sm.Symbol]
+) -> dict[sm.Symbol, sm.Expr]:
+    if scene.effects.torque == "speed_controller":
+        return {SLIP: u["u4"] - u["u2"] - v["w_ref"]}
+    return {}
+
+
 def _torque(scene: Scene, v: dict[str, sm.Expr], u: dict[str, sm.Symbol]) -> sm.Expr:
     law = scene.effects.torque
     if law == "none":
@@ -35,7 +47,7 @@ def _torque(scene: Scene, v: dict[str, sm.Expr], u: dict[str, sm.Symbol]) -> sm.
     if law == "constant":
         return v["T"]
     if law == "speed_controller":
-        return -v["k"] * (u["u4"] - u["u2"] - v["w_ref"])
+        return -v["k"] * SLIP
     return sm.Symbol("torque", real=True)  # table: a per-call input computed from t
 
 
@@ -46,6 +58,7 @@ def specialize(scene: Scene) -> Equations:
     states = equations.plain_states()
     by_name = {s.name: s for s in states}
     torque = _torque(scene, v, by_name)
+    shared = _shared(scene, v, by_name)
     subs: dict[sm.Basic, sm.Expr] = {sym[n]: x for n, x in v.items() if x != sym[n]}
     subs[sym["T"]] = torque
     if "g" not in scene.parameters:  # no translation: gravity has nothing to act on
@@ -77,7 +90,8 @@ def specialize(scene: Scene) -> Equations:
         kinematics=kin,
         lumped={s: e for s, e in lumped.items() if s not in numeric},
         inputs=(torque,) if scene.effects.torque == "table" else (),
-        outputs=_outputs(scene, subs, by_name, torque),
+        outputs=_outputs(scene, subs, by_name, torque.xreplace(shared)),
+        shared=shared,
         checks={n: v[n] for n in CHECKED},
         coupled=mm.extract([0, 2], [0, 2]),  # u1..u4 are always kept
     )

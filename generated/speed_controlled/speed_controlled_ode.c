@@ -9,8 +9,8 @@
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   speed_controlled_setup: 12 ops, once per parameter set
- *   speed_controlled_rhs:   47 ops per call
+ *   speed_controlled_setup: 10 ops, once per parameter set
+ *   speed_controlled_rhs:   43 ops per call
  */
 #include "speed_controlled_ode.h"
 
@@ -87,9 +87,9 @@ void speed_controlled_jac(double t, const double *x, const double *c, double *J)
     J[42] = 0;
     J[43] = 0;
     J[44] = 0.037226373050203175*u1 - 0.06916590204045965*u3;
-    J[45] = c[0];
+    J[45] = -c[0];
     J[46] = -0.06916590204045965*u1 - 0.037226373050203175*u3;
-    J[47] = -c[0];
+    J[47] = c[0];
     J[48] = 0;
     J[49] = 0;
     J[50] = 0;
@@ -103,9 +103,9 @@ void speed_controlled_jac(double t, const double *x, const double *c, double *J)
     J[58] = 0;
     J[59] = 0;
     J[60] = 0;
-    J[61] = c[2];
+    J[61] = -c[1];
     J[62] = 0;
-    J[63] = -c[2];
+    J[63] = c[1];
 }
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */

@@ -73,7 +73,7 @@ contains
   subroutine speed_controlled_jac(t, x, c, J) bind(C, name="speed_controlled_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(8)
+    real(c_double), intent(in) :: c(7)
     real(c_double), intent(out) :: J(64)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -166,10 +166,10 @@ contains
     J(44) = 0
     J(45) = 0.037226373050203175_c_double*u1 - 0.06916590204045965_c_double* &
           u3
-    J(46) = c(1)
+    J(46) = -c(1)
     J(47) = -0.06916590204045965_c_double*u1 - 0.037226373050203175_c_double &
           *u3
-    J(48) = -c(1)
+    J(48) = c(1)
     J(49) = 0
     J(50) = 0
     J(51) = 0
@@ -186,9 +186,9 @@ contains
     J(59) = 0
     J(60) = 0
     J(61) = 0
-    J(62) = c(3)
+    J(62) = -c(2)
     J(63) = 0
-    J(64) = -c(3)
+    J(64) = c(2)
   end subroutine speed_controlled_jac
 
   ! Counters at zero, at the start time (also the time reached if nothing is).

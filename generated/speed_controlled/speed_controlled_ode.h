@@ -9,8 +9,8 @@
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   speed_controlled_setup: 12 ops, once per parameter set
- *   speed_controlled_rhs:   47 ops per call
+ *   speed_controlled_setup: 10 ops, once per parameter set
+ *   speed_controlled_rhs:   43 ops per call
  */
 #ifndef SPEED_CONTROLLED_ODE_H
 #define SPEED_CONTROLLED_ODE_H

@@ -9,14 +9,14 @@
  * versions (also in manifest.json and as STIFF_WHEEL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   stiff_wheel_setup: 12 ops, once per parameter set
- *   stiff_wheel_rhs:   47 ops per call
+ *   stiff_wheel_setup: 10 ops, once per parameter set
+ *   stiff_wheel_rhs:   43 ops per call
  */
 #include "stiff_wheel.h"
 
 #include <math.h>
 
-/* 12 ops, plus the checks. */
+/* 10 ops, plus the checks. */
 int stiff_wheel_setup(const double *p, double *c)
 {
     int i;
@@ -56,23 +56,20 @@ int stiff_wheel_setup(const double *p, double *c)
         return STIFF_WHEEL_ERR_ROTOR_TRIANGLE;
     }
 
-    const double tmp0 = (24663410078040431235519857563795456.0/1856814034395103124079609351789084675.0)*k;
-    const double tmp1 = (36028797018963968.0/1080863910568919.0)*k;
-    c[0] = -tmp0;
-    c[1] = -tmp0*w_ref;
-    c[2] = tmp1;
-    c[3] = tmp1*w_ref;
-    c[4] = -k;
-    c[5] = 2*k;
-    c[6] = -k*w_ref;
-    c[7] = 1.1080962681823885;
+    c[0] = (24663410078040431235519857563795456.0/1856814034395103124079609351789084675.0)*k;
+    c[1] = -36028797018963968.0/1080863910568919.0*k;
+    c[2] = -w_ref;
+    c[3] = -k;
+    c[4] = 2*k;
+    c[5] = -k*w_ref;
+    c[6] = 1.1080962681823885;
     if (!(c[STIFF_WHEEL_COND] <= 10000000000000.0)) {
         return STIFF_WHEEL_ERR_MASS_SINGULAR;
     }
     return STIFF_WHEEL_OK;
 }
 
-/* 47 ops per call. */
+/* 43 ops per call. */
 void stiff_wheel_rhs(double t, const double *x, const double *c, double *dxdt)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -84,6 +81,7 @@ void stiff_wheel_rhs(double t, const double *x, const double *c, double *dxdt)
     const double u3 = x[6];
     const double u4 = x[7];
 
+    const double slip = c[2] - u2 + u4;
     const double tmp0 = sin(q3);
     const double tmp1 = cos(q3);
     const double tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2);
@@ -93,9 +91,9 @@ void stiff_wheel_rhs(double t, const double *x, const double *c, double *dxdt)
     dxdt[2] = -tmp2*sin(q2) + u2;
     dxdt[3] = -u2 + u4;
     dxdt[4] = -tmp3*u1 + u3*(0.33522655090705017*u2 + 0.0004980820048148975*u4);
-    dxdt[5] = c[0]*u2 - c[0]*u4 + c[1] + 0.018613186525101588*u1*u1 - 0.06916590204045965*u1*u3 - 0.018613186525101588*u3*u3;
+    dxdt[5] = c[0]*slip + 0.018613186525101588*u1*u1 - 0.06916590204045965*u1*u3 - 0.018613186525101588*u3*u3;
     dxdt[6] = tmp3*u3 + u1*(-0.2723557574878444*u2 - 0.0005451879938902264*u4);
-    dxdt[7] = c[2]*u2 - c[2]*u4 + c[3];
+    dxdt[7] = c[1]*slip;
 }
 
 /* kinetic energy of the system (J): 13 ops. */
@@ -150,5 +148,5 @@ void stiff_wheel_power(double t, const double *x, const double *c, double *out)
     const double u2 = x[5];
     const double u4 = x[7];
 
-    out[0] = u2*(c[4]*u2 + c[5]*u4 + c[6]) + u4*(c[4]*u4 - c[6]);
+    out[0] = u2*(c[3]*u2 + c[4]*u4 + c[5]) + u4*(c[3]*u4 - c[5]);
 }

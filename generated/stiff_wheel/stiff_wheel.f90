@@ -8,8 +8,8 @@
 ! (also in manifest.json and as STIFF_WHEEL_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
-!   stiff_wheel_f_setup: 12 ops, once per parameter set
-!   stiff_wheel_f_rhs:   47 ops per call
+!   stiff_wheel_f_setup: 10 ops, once per parameter set
+!   stiff_wheel_f_rhs:   43 ops per call
 !
 ! The same interface as stiff_wheel.h, callable from C under the bind(C)
 ! names stiff_wheel_f_setup and stiff_wheel_f_rhs. State order x(1:8):
@@ -38,9 +38,9 @@ module stiff_wheel_mod
   character(len=*), parameter, public :: STIFF_WHEEL_BUILD_ID = "305c067e46347215"
   integer, parameter, public :: STIFF_WHEEL_NX = 8  ! states
   integer, parameter, public :: STIFF_WHEEL_NP = 2  ! parameters
-  integer, parameter, public :: STIFF_WHEEL_NC = 8  ! hoisted constants
+  integer, parameter, public :: STIFF_WHEEL_NC = 7  ! hoisted constants
   ! c(STIFF_WHEEL_COND): condition number of the mass matrix's coupled block
-  integer, parameter, public :: STIFF_WHEEL_COND = 8
+  integer, parameter, public :: STIFF_WHEEL_COND = 7
 
   ! Return codes of stiff_wheel_setup, checked in this order.
   ! 0: parameters accepted
@@ -63,11 +63,11 @@ module stiff_wheel_mod
 contains
 
   ! Checks p and computes the constants c that stiff_wheel_rhs needs
-  ! (12 ops, plus the checks). Returns STIFF_WHEEL_OK or
+  ! (10 ops, plus the checks). Returns STIFF_WHEEL_OK or
   ! the first failing check's code; c is then not to be used.
   function stiff_wheel_setup(p, c) result(status) bind(C, name="stiff_wheel_f_setup")
     real(c_double), intent(in) :: p(2)
-    real(c_double), intent(out) :: c(8)
+    real(c_double), intent(out) :: c(7)
     integer(c_int) :: status
     real(c_double) :: m_a
     real(c_double) :: m_b
@@ -80,8 +80,6 @@ contains
     real(c_double) :: k
     real(c_double) :: w_ref
     real(c_double) :: half_gap, largest
-    real(c_double) :: tmp0
-    real(c_double) :: tmp1
 
     c = 0.0_c_double
     if (.not. all(ieee_is_finite(p))) then
@@ -125,30 +123,27 @@ contains
       return
     end if
 
-    tmp0 = (24663410078040431235519857563795456.0d0/ &
+    c(1) = (24663410078040431235519857563795456.0d0/ &
           1856814034395103124079609351789084675.0d0)*k
-    tmp1 = (36028797018963968.0d0/1080863910568919.0d0)*k
-    c(1) = -tmp0
-    c(2) = -tmp0*w_ref
-    c(3) = tmp1
-    c(4) = tmp1*w_ref
-    c(5) = -k
-    c(6) = 2*k
-    c(7) = -k*w_ref
-    c(8) = 1.1080962681823885_c_double
-    if (.not. (c(8) <= 10000000000000.0_c_double)) then
+    c(2) = -36028797018963968.0d0/1080863910568919.0d0*k
+    c(3) = -w_ref
+    c(4) = -k
+    c(5) = 2*k
+    c(6) = -k*w_ref
+    c(7) = 1.1080962681823885_c_double
+    if (.not. (c(7) <= 10000000000000.0_c_double)) then
       status = STIFF_WHEEL_ERR_MASS_SINGULAR
       return
     end if
     status = STIFF_WHEEL_OK
   end function stiff_wheel_setup
 
-  ! dxdt = f(t, x) for the constants c from stiff_wheel_setup (47 ops).
+  ! dxdt = f(t, x) for the constants c from stiff_wheel_setup (43 ops).
   ! Pure: no allocation, no saved state. Singular at cos(q2) = 0.
   subroutine stiff_wheel_rhs(t, x, c, dxdt) bind(C, name="stiff_wheel_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(8)
+    real(c_double), intent(in) :: c(7)
     real(c_double), intent(out) :: dxdt(8)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -156,6 +151,7 @@ contains
     real(c_double) :: u2
     real(c_double) :: u3
     real(c_double) :: u4
+    real(c_double) :: slip
     real(c_double) :: tmp0
     real(c_double) :: tmp1
     real(c_double) :: tmp2
@@ -169,6 +165,7 @@ contains
     u2 = x(6)
     u3 = x(7)
     u4 = x(8)
+    slip = c(3) - u2 + u4
     tmp0 = sin(q3)
     tmp1 = cos(q3)
     tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
@@ -180,19 +177,19 @@ contains
     dxdt(4) = -u2 + u4
     dxdt(5) = -tmp3*u1 + u3*(0.33522655090705017_c_double*u2 + &
           0.0004980820048148975_c_double*u4)
-    dxdt(6) = c(1)*u2 - c(1)*u4 + c(2) + 0.018613186525101588_c_double*u1**2 &
-          - 0.06916590204045965_c_double*u1*u3 - &
+    dxdt(6) = c(1)*slip + 0.018613186525101588_c_double*u1**2 - &
+          0.06916590204045965_c_double*u1*u3 - &
           0.018613186525101588_c_double*u3**2
     dxdt(7) = tmp3*u3 + u1*(-0.2723557574878444_c_double*u2 - &
           0.0005451879938902264_c_double*u4)
-    dxdt(8) = c(3)*u2 - c(3)*u4 + c(4)
+    dxdt(8) = c(2)*slip
   end subroutine stiff_wheel_rhs
 
   ! out = kinetic energy of the system (J): 13 ops.
   subroutine stiff_wheel_kinetic_energy(t, x, c, out) bind(C, name="stiff_wheel_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(8)
+    real(c_double), intent(in) :: c(7)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -214,7 +211,7 @@ contains
   subroutine stiff_wheel_angular_momentum(t, x, c, out) bind(C, name="stiff_wheel_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(8)
+    real(c_double), intent(in) :: c(7)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: q1
     real(c_double) :: q2
@@ -270,7 +267,7 @@ contains
   subroutine stiff_wheel_power(t, x, c, out) bind(C, name="stiff_wheel_f_power")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(8)
+    real(c_double), intent(in) :: c(7)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u2
     real(c_double) :: u4
@@ -279,7 +276,7 @@ contains
     end associate
     u2 = x(6)
     u4 = x(8)
-    out(1) = u2*(c(5)*u2 + c(6)*u4 + c(7)) + u4*(c(5)*u4 - c(7))
+    out(1) = u2*(c(4)*u2 + c(5)*u4 + c(6)) + u4*(c(4)*u4 - c(6))
   end subroutine stiff_wheel_power
 
 end module stiff_wheel_mod

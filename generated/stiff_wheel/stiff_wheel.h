@@ -9,8 +9,8 @@
  * versions (also in manifest.json and as STIFF_WHEEL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   stiff_wheel_setup: 12 ops, once per parameter set
- *   stiff_wheel_rhs:   47 ops per call
+ *   stiff_wheel_setup: 10 ops, once per parameter set
+ *   stiff_wheel_rhs:   43 ops per call
  */
 #ifndef STIFF_WHEEL_H
 #define STIFF_WHEEL_H
@@ -23,8 +23,8 @@ extern "C" {
 
 #define STIFF_WHEEL_NX 8   /* states */
 #define STIFF_WHEEL_NP 2   /* parameters */
-#define STIFF_WHEEL_NC 8   /* hoisted constants */
-#define STIFF_WHEEL_COND 7  /* c[STIFF_WHEEL_COND]: condition number of the mass
+#define STIFF_WHEEL_NC 7   /* hoisted constants */
+#define STIFF_WHEEL_COND 6  /* c[STIFF_WHEEL_COND]: condition number of the mass
                            matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
 
 /*

@@ -9,8 +9,8 @@
  * versions (also in manifest.json and as STIFF_WHEEL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   stiff_wheel_setup: 12 ops, once per parameter set
- *   stiff_wheel_rhs:   47 ops per call
+ *   stiff_wheel_setup: 10 ops, once per parameter set
+ *   stiff_wheel_rhs:   43 ops per call
  */
 #ifndef STIFF_WHEEL_ODE_H
 #define STIFF_WHEEL_ODE_H
