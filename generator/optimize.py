@@ -237,7 +237,9 @@ def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignme
     named.update({s: defs[s] for s in names_used})
     names = _temporaries()
     first = _cse(list(named.values()), names)
-    second = _cse(values, names)
+    # what the first pass computed (l3**2, ...), the second reads by name
+    done = {a.rhs: a.lhs for a in first.temporaries}
+    second = _cse([v.xreplace(done) for v in values], names)
     scalars = tuple(Assignment(s, v) for s, v in zip(named, first.outputs, strict=True))
     setup = Block(first.temporaries + scalars + second.temporaries, second.outputs)
     return setup, tuple(a for a in scalars if a.lhs in eqs.lumped)

@@ -9,14 +9,14 @@
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   gyrostat_setup: 130 ops, once per parameter set
+ *   gyrostat_setup: 128 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
  */
 #include "gyrostat.h"
 
 #include <math.h>
 
-/* 130 ops, plus the checks. */
+/* 128 ops, plus the checks. */
 int gyrostat_setup(const double *p, double *c)
 {
     int i;
@@ -70,34 +70,32 @@ int gyrostat_setup(const double *p, double *c)
     const double tmp4 = I13*I13;
     const double tmp5 = I*I11;
     const double tmp6 = I*I33;
-    const double tmp7 = l3*l3;
-    const double tmp8 = I*mu;
-    const double tmp9 = tmp7*tmp8;
-    const double tmp10 = l1*l1;
-    const double tmp11 = mu*tmp10;
-    const double tmp12 = I11*tmp11;
-    const double tmp13 = mu*tmp7;
-    const double tmp14 = tmp2*tmp3;
-    const double tmp15 = I*I;
-    const double tmp16 = tmp10*tmp8;
-    const double tmp17 = tmp15 + tmp16;
-    const double tmp18 = 1.0/(I11*I33 + I33*tmp13 + tmp12 + tmp14 + tmp17 - tmp4 + tmp5 + tmp6 + tmp9);
-    const double tmp19 = J*tmp18;
-    const double tmp20 = -I*I22 - tmp14 + tmp4;
-    const double tmp21 = 1.0/IA22;
-    const double tmp22 = IA11 - IA33;
-    c[0] = tmp18*(2*I*l1*l3*mu - I*tmp2 - I11*I13 + I11*l1*l3*mu + I13*I22 - I13*I33 - I22*tmp3 + I33*l1*l3*mu);
-    c[1] = IA13*tmp19;
-    c[2] = tmp18*(I*mu*tmp7 + I22*I33 + I22*mu*tmp10 - I33*I33 + I33*mu*tmp7 - I33*tmp11 - tmp17 - tmp20 - 2*tmp6);
-    c[3] = IA33*tmp19;
-    c[4] = IA13*tmp21;
-    c[5] = -tmp21*tmp22;
-    c[6] = -T*tmp21;
-    c[7] = tmp18*(I11*I11 - I11*I22 + I11*tmp13 - I22*tmp13 - tmp12 + tmp15 - tmp16 + tmp20 + 2*tmp5 + tmp9);
-    c[8] = -IA11*tmp19;
+    const double tmp7 = I*mu;
+    const double tmp8 = tmp0*tmp7;
+    const double tmp9 = mu*tmp1;
+    const double tmp10 = I11*tmp9;
+    const double tmp11 = mu*tmp0;
+    const double tmp12 = tmp2*tmp3;
+    const double tmp13 = I*I;
+    const double tmp14 = tmp1*tmp7;
+    const double tmp15 = tmp13 + tmp14;
+    const double tmp16 = 1.0/(I11*I33 + I33*tmp11 + tmp10 + tmp12 + tmp15 - tmp4 + tmp5 + tmp6 + tmp8);
+    const double tmp17 = J*tmp16;
+    const double tmp18 = -I*I22 - tmp12 + tmp4;
+    const double tmp19 = 1.0/IA22;
+    const double tmp20 = IA11 - IA33;
+    c[0] = tmp16*(2*I*l1*l3*mu - I*tmp2 - I11*I13 + I11*l1*l3*mu + I13*I22 - I13*I33 - I22*tmp3 + I33*l1*l3*mu);
+    c[1] = IA13*tmp17;
+    c[2] = tmp16*(I*mu*tmp0 + I22*I33 + I22*mu*tmp1 - I33*I33 + I33*mu*tmp0 - I33*tmp9 - tmp15 - tmp18 - 2*tmp6);
+    c[3] = IA33*tmp17;
+    c[4] = IA13*tmp19;
+    c[5] = -tmp19*tmp20;
+    c[6] = -T*tmp19;
+    c[7] = tmp16*(I11*I11 - I11*I22 + I11*tmp11 - I22*tmp11 - tmp10 + tmp13 - tmp14 + tmp18 + 2*tmp5 + tmp8);
+    c[8] = -IA11*tmp17;
     c[9] = T/J;
     c[10] = g;
-    c[11] = tmp18*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*tmp22*tmp22))*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*tmp22*tmp22));
+    c[11] = tmp16*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*tmp20*tmp20))*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*tmp20*tmp20));
     if (!(c[GYROSTAT_COND] <= 10000000000000.0)) {
         return GYROSTAT_ERR_MASS_SINGULAR;
     }
