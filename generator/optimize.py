@@ -182,21 +182,27 @@ MU = sm.Symbol("mu", positive=True)
 
 
 def _multiplied_out(value: sm.Expr, lumped: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
-    """value with the products of lumped scalars it reads multiplied out.
+    """value with each sum of lumped scalars multiplied out in the parameters.
 
     Each coupled lumped inertia is a carrier-plus-rotor part plus the rank-one
-    mu (l3, -l1)(l3, -l1)^T, so in a product such as I~11 I~33 - I~13^2 the
-    mu^2 terms cancel; in rounding that costs as many digits as the block's
-    condition number has (1e-7 of the constants at cond 5e9, which the
-    integrators then turn into invariant drift). Multiplied out over a common
-    denominator, they cancel in sympy instead. A numerator or denominator
-    linear in the lumped scalars keeps its lumped form.
+    mu (l3, -l1)(l3, -l1)^T, so in a sum such as I~11 I~33 - I~13^2 (or
+    I~11 - I~22 + I~33) the mu terms cancel; in rounding that costs as many
+    digits as the block's condition number has (1e-7 of the constants at
+    cond 5e9, which the integrators then turn into invariant drift).
+    Multiplied out, they cancel in sympy instead. Products and quotients
+    keep their shape: only the sums change.
     """
-    if not value.free_symbols & set(lumped):
+    names = set(lumped)
+    if not value.free_symbols & names:
         return value
     defs = _in_reduced_mass(lumped)
-    num, den = sm.fraction(sm.together(value))
-    return _products_out(num, defs) / _products_out(den, defs)
+
+    def walk(e: sm.Expr) -> sm.Expr:
+        if e.is_Add and e.free_symbols & names:
+            return sm.expand(e.xreplace(defs))
+        return e.func(*(walk(a) for a in e.args)) if e.args else e
+
+    return walk(value)
 
 
 def _in_reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
@@ -206,13 +212,6 @@ def _in_reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Exp
         return lumped  # a folded mass: the reduced mass is a number
     mu = _reduced_mass(lumped)
     return {s: e.subs(mu, MU) for s, e in lumped.items()}
-
-
-def _products_out(poly: sm.Expr, defs: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
-    lumped = list(poly.free_symbols & set(defs))
-    if not lumped or sm.Poly(poly, *lumped).total_degree() < 2:
-        return poly
-    return sm.expand(poly.xreplace(defs))
 
 
 def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:

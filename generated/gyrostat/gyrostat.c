@@ -9,14 +9,14 @@
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   gyrostat_setup: 128 ops, once per parameter set
+ *   gyrostat_setup: 110 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
  */
 #include "gyrostat.h"
 
 #include <math.h>
 
-/* 128 ops, plus the checks. */
+/* 110 ops, plus the checks. */
 int gyrostat_setup(const double *p, double *c)
 {
     int i;
@@ -65,37 +65,35 @@ int gyrostat_setup(const double *p, double *c)
     const double IA22 = I22 + mu*(tmp0 + tmp1);
     const double IA33 = I + I33 + mu*tmp1;
     const double IA13 = I13 - l1*l3*mu;
-    const double tmp2 = 2*I13;
-    const double tmp3 = l1*l3*mu;
-    const double tmp4 = I13*I13;
-    const double tmp5 = I*I11;
-    const double tmp6 = I*I33;
-    const double tmp7 = I*mu;
-    const double tmp8 = tmp0*tmp7;
-    const double tmp9 = mu*tmp1;
-    const double tmp10 = I11*tmp9;
-    const double tmp11 = mu*tmp0;
-    const double tmp12 = tmp2*tmp3;
-    const double tmp13 = I*I;
-    const double tmp14 = tmp1*tmp7;
-    const double tmp15 = tmp13 + tmp14;
-    const double tmp16 = 1.0/(I11*I33 + I33*tmp11 + tmp10 + tmp12 + tmp15 - tmp4 + tmp5 + tmp6 + tmp8);
-    const double tmp17 = J*tmp16;
-    const double tmp18 = -I*I22 - tmp12 + tmp4;
-    const double tmp19 = 1.0/IA22;
-    const double tmp20 = IA11 - IA33;
-    c[0] = tmp16*(2*I*l1*l3*mu - I*tmp2 - I11*I13 + I11*l1*l3*mu + I13*I22 - I13*I33 - I22*tmp3 + I33*l1*l3*mu);
-    c[1] = IA13*tmp17;
-    c[2] = tmp16*(I*mu*tmp0 + I22*I33 + I22*mu*tmp1 - I33*I33 + I33*mu*tmp0 - I33*tmp9 - tmp15 - tmp18 - 2*tmp6);
+    const double tmp2 = I13*I13;
+    const double tmp3 = I*I11;
+    const double tmp4 = I*I33;
+    const double tmp5 = mu*tmp0;
+    const double tmp6 = I*tmp5;
+    const double tmp7 = mu*tmp1;
+    const double tmp8 = I11*tmp7;
+    const double tmp9 = I33*tmp5;
+    const double tmp10 = 2*I13*l1*l3*mu;
+    const double tmp11 = I*I;
+    const double tmp12 = I*tmp7;
+    const double tmp13 = tmp11 + tmp12;
+    const double tmp14 = 1.0/(I11*I33 + tmp10 + tmp13 - tmp2 + tmp3 + tmp4 + tmp6 + tmp8 + tmp9);
+    const double tmp15 = IA13*tmp14;
+    const double tmp16 = -I*I22 - tmp10 + tmp2;
+    const double tmp17 = J*tmp14;
+    const double tmp18 = 1.0/IA22;
+    c[0] = -tmp15*(2*I + I11 - I22 + I33);
+    c[1] = J*tmp15;
+    c[2] = -tmp14*(-I22*I33 - I22*tmp7 + I33*I33 + I33*tmp7 + tmp13 + tmp16 + 2*tmp4 - tmp6 - tmp9);
     c[3] = IA33*tmp17;
-    c[4] = IA13*tmp19;
-    c[5] = -tmp19*tmp20;
-    c[6] = -T*tmp19;
-    c[7] = tmp16*(I11*I11 - I11*I22 + I11*tmp11 - I22*tmp11 - tmp10 + tmp13 - tmp14 + tmp18 + 2*tmp5 + tmp8);
+    c[4] = IA13*tmp18;
+    c[5] = -tmp18*(I11 - I33 + tmp5 - tmp7);
+    c[6] = -T*tmp18;
+    c[7] = tmp14*(I11*I11 - I11*I22 + I11*tmp5 - I22*tmp5 + tmp11 - tmp12 + tmp16 + 2*tmp3 + tmp6 - tmp8);
     c[8] = -IA11*tmp17;
     c[9] = T/J;
     c[10] = g;
-    c[11] = tmp16*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*tmp20*tmp20))*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*tmp20*tmp20));
+    c[11] = tmp14*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*(IA11 - IA33)*(IA11 - IA33)))*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*(IA11 - IA33)*(IA11 - IA33)));
     if (!(c[GYROSTAT_COND] <= 10000000000000.0)) {
         return GYROSTAT_ERR_MASS_SINGULAR;
     }

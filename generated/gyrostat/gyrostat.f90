@@ -8,7 +8,7 @@
 ! (also in manifest.json and as GYROSTAT_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
-!   gyrostat_f_setup: 128 ops, once per parameter set
+!   gyrostat_f_setup: 110 ops, once per parameter set
 !   gyrostat_f_rhs:   40 ops per call
 !
 ! The same interface as gyrostat.h, callable from C under the bind(C)
@@ -76,7 +76,7 @@ module gyrostat_mod
 contains
 
   ! Checks p and computes the constants c that gyrostat_rhs needs
-  ! (128 ops, plus the checks). Returns GYROSTAT_OK or
+  ! (110 ops, plus the checks). Returns GYROSTAT_OK or
   ! the first failing check's code; c is then not to be used.
   function gyrostat_setup(p, c) result(status) bind(C, name="gyrostat_f_setup")
     real(c_double), intent(in) :: p(12)
@@ -119,8 +119,6 @@ contains
     real(c_double) :: tmp16
     real(c_double) :: tmp17
     real(c_double) :: tmp18
-    real(c_double) :: tmp19
-    real(c_double) :: tmp20
 
     c = 0.0_c_double
     if (.not. all(ieee_is_finite(p))) then
@@ -173,42 +171,39 @@ contains
     IA22 = I22 + mu*(tmp0 + tmp1)
     IA33 = I + I33 + mu*tmp1
     IA13 = I13 - l1*l3*mu
-    tmp2 = 2*I13
-    tmp3 = l1*l3*mu
-    tmp4 = I13**2
-    tmp5 = I*I11
-    tmp6 = I*I33
-    tmp7 = I*mu
-    tmp8 = tmp0*tmp7
-    tmp9 = mu*tmp1
-    tmp10 = I11*tmp9
-    tmp11 = mu*tmp0
-    tmp12 = tmp2*tmp3
-    tmp13 = I**2
-    tmp14 = tmp1*tmp7
-    tmp15 = tmp13 + tmp14
-    tmp16 = 1d0/(I11*I33 + I33*tmp11 + tmp10 + tmp12 + tmp15 - tmp4 + tmp5 + &
-          tmp6 + tmp8)
-    tmp17 = J*tmp16
-    tmp18 = -I*I22 - tmp12 + tmp4
-    tmp19 = 1d0/IA22
-    tmp20 = IA11 - IA33
-    c(1) = tmp16*(2*I*l1*l3*mu - I*tmp2 - I11*I13 + I11*l1*l3*mu + I13*I22 - &
-          I13*I33 - I22*tmp3 + I33*l1*l3*mu)
-    c(2) = IA13*tmp17
-    c(3) = tmp16*(I*mu*tmp0 + I22*I33 + I22*mu*tmp1 - I33**2 + I33*mu*tmp0 - &
-          I33*tmp9 - tmp15 - tmp18 - 2*tmp6)
+    tmp2 = I13**2
+    tmp3 = I*I11
+    tmp4 = I*I33
+    tmp5 = mu*tmp0
+    tmp6 = I*tmp5
+    tmp7 = mu*tmp1
+    tmp8 = I11*tmp7
+    tmp9 = I33*tmp5
+    tmp10 = 2*I13*l1*l3*mu
+    tmp11 = I**2
+    tmp12 = I*tmp7
+    tmp13 = tmp11 + tmp12
+    tmp14 = 1d0/(I11*I33 + tmp10 + tmp13 - tmp2 + tmp3 + tmp4 + tmp6 + tmp8 &
+          + tmp9)
+    tmp15 = IA13*tmp14
+    tmp16 = -I*I22 - tmp10 + tmp2
+    tmp17 = J*tmp14
+    tmp18 = 1d0/IA22
+    c(1) = -tmp15*(2*I + I11 - I22 + I33)
+    c(2) = J*tmp15
+    c(3) = -tmp14*(-I22*I33 - I22*tmp7 + I33**2 + I33*tmp7 + tmp13 + tmp16 + &
+          2*tmp4 - tmp6 - tmp9)
     c(4) = IA33*tmp17
-    c(5) = IA13*tmp19
-    c(6) = -tmp19*tmp20
-    c(7) = -T*tmp19
-    c(8) = tmp16*(I11**2 - I11*I22 + I11*tmp11 - I22*tmp11 - tmp10 + tmp13 - &
-          tmp14 + tmp18 + 2*tmp5 + tmp8)
+    c(5) = IA13*tmp18
+    c(6) = -tmp18*(I11 - I33 + tmp5 - tmp7)
+    c(7) = -T*tmp18
+    c(8) = tmp14*(I11**2 - I11*I22 + I11*tmp5 - I22*tmp5 + tmp11 - tmp12 + &
+          tmp16 + 2*tmp3 + tmp6 - tmp8)
     c(9) = -IA11*tmp17
     c(10) = T/J
     c(11) = g
-    c(12) = tmp16*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(IA13**2 + &
-          (1.0d0/4.0d0)*tmp20**2))**2
+    c(12) = tmp14*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(IA13**2 + &
+          (1.0d0/4.0d0)*(IA11 - IA33)**2))**2
     if (.not. (c(12) <= 10000000000000.0_c_double)) then
       status = GYROSTAT_ERR_MASS_SINGULAR
       return

@@ -9,7 +9,7 @@
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   gyrostat_setup: 128 ops, once per parameter set
+ *   gyrostat_setup: 110 ops, once per parameter set
  *   gyrostat_rhs:   40 ops per call
  */
 #include "gyrostat_ode.h"
