@@ -125,7 +125,7 @@ def cases(quick: bool = False) -> list[Case]:
     steps = 10**6 if quick else 10**7
     # Fixed steps of 1e-4 s: the truncation error is negligible and what
     # could drift is rounding, about eps per step with plain adds (4e-10
-    # after 1e7); the RK4 sums its increments with compensation instead.
+    # after 1e7); the integrators sum their steps with compensation instead.
     out.append(
         Case(
             f"long run: {steps:.0e} RK4 steps",

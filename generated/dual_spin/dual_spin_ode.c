@@ -116,14 +116,25 @@ static int all_finite(const double *v, int n)
     return 1;
 }
 
-/* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal
-   steps. The steps' increments are summed with compensation: over 1e7 steps
-   plain adds would let the rounding drift the invariants by ~1e-9. (A build
-   with -ffast-math may optimize the compensation away.) */
+/* x := xnew, the step's x + dx. Every method sums its steps with Kahan's
+   compensation: comp keeps what this add lost and the next step takes it
+   back from its dx, so the rounding of 1e7 adds does not pile up in the
+   invariants (a build with -ffast-math may optimize it away). */
+static void accept_step(double *x, const double *xnew, const double *dx, double *comp)
+{
+    int i;
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        comp[i] = (xnew[i] - x[i]) - dx[i];
+        x[i] = xnew[i];
+    }
+}
+
+/* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
 int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c,
         dual_spin_stats *stats)
 {
-    double k[4][DUAL_SPIN_NX], y[DUAL_SPIN_NX], xnew[DUAL_SPIN_NX], comp[DUAL_SPIN_NX] = {0.0};
+    double k[4][DUAL_SPIN_NX], y[DUAL_SPIN_NX], xnew[DUAL_SPIN_NX], dx[DUAL_SPIN_NX];
+    double comp[DUAL_SPIN_NX] = {0.0};
     double t, h;
     long n;
     int i;
@@ -156,24 +167,20 @@ int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c,
         }
         dual_spin_rhs(t + h, y, c, k[3]);
 
-        /* the new solution x + dx, summed with Kahan's compensation: comp
-           carries the rounding of each add into the next step's dx */
+        /* the new solution */
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
-            const double dx = h * (0.16666666666666666 * k[0][i]
-                                  + 0.3333333333333333 * k[1][i]
-                                  + 0.3333333333333333 * k[2][i]
-                                  + 0.16666666666666666 * k[3][i]) - comp[i];
-            xnew[i] = x[i] + dx;
-            comp[i] = (xnew[i] - x[i]) - dx;
+            dx[i] = h * (0.16666666666666666 * k[0][i]
+                         + 0.3333333333333333 * k[1][i]
+                         + 0.3333333333333333 * k[2][i]
+                         + 0.16666666666666666 * k[3][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
         }
 
         stats->rhs_calls += 4;
         if (!all_finite(xnew, DUAL_SPIN_NX)) {
             return DUAL_SPIN_ODE_ERR_NONFINITE;
         }
-        for (i = 0; i < DUAL_SPIN_NX; ++i) {
-            x[i] = xnew[i];
-        }
+        accept_step(x, xnew, dx, comp);
         stats->accepted += 1;
         stats->t = n + 1 == steps ? t1 : t + h;
     }
@@ -262,10 +269,11 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 }
 
 /* One trial step of an explicit embedded pair from (t, x), k[0] = f(t, x):
-   fills the other stages and xnew, and returns the error norm (NaN or Inf
-   when a stage is). */
+   fills the other stages, xnew = x + dx (comp: see accept_step), and returns
+   the error norm (NaN or Inf when a stage is). */
 typedef double (*pair_trial)(double t, double h, const double *x, const double *c,
-                             double rtol, double atol, double (*k)[DUAL_SPIN_NX], double *xnew);
+                             double rtol, double atol, const double *comp,
+                             double (*k)[DUAL_SPIN_NX], double *dx, double *xnew);
 
 /* A pair and its step-size control: h_new / h = safety err^-alpha
    err_old^beta within [facmin, facmax] (Hairer's PI controller; beta = 0 is
@@ -286,7 +294,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
                           const double *c, double rtol, double atol, double h0, long max_steps,
                           dual_spin_stats *stats)
 {
-    double k[13][DUAL_SPIN_NX], xnew[DUAL_SPIN_NX];
+    double k[13][DUAL_SPIN_NX], xnew[DUAL_SPIN_NX], dx[DUAL_SPIN_NX], comp[DUAL_SPIN_NX] = {0.0};
     double t = t0, h, err, fac, err_old = 1e-4;
     int i, last, rejected_last = 0, nonfinite = 0;
 
@@ -316,7 +324,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
             h = t1 - t;
         }
         stats->h = h;
-        err = m->trial(t, h, x, c, rtol, atol, k, xnew);
+        err = m->trial(t, h, x, c, rtol, atol, comp, k, dx, xnew);
         stats->rhs_calls += m->calls;
         nonfinite = !isfinite(err) || !all_finite(xnew, DUAL_SPIN_NX);
         if (!nonfinite && err <= 1.0 && !m->fsal && !last) {
@@ -333,9 +341,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
         fac = pow(err, m->alpha) / m->safety;
         if (err <= 1.0) {
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                x[i] = xnew[i];
-            }
+            accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
             stats->accepted += 1;
@@ -364,7 +370,8 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
    Solving ODEs I, Table II.5.2): seven stages, the seventh at the new
    solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat. */
 static double dopri5_trial(double t, double h, const double *x, const double *c,
-                           double rtol, double atol, double (*k)[DUAL_SPIN_NX], double *xnew)
+                           double rtol, double atol, const double *comp,
+                           double (*k)[DUAL_SPIN_NX], double *dx, double *xnew)
 {
     double y[DUAL_SPIN_NX], err[DUAL_SPIN_NX];
     int i;
@@ -409,13 +416,14 @@ static double dopri5_trial(double t, double h, const double *x, const double *c,
     }
     dual_spin_rhs(t + h, y, c, k[5]);
 
-    /* stage 7: t + h */
+    /* stage 7: t + h, the new solution */
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
-        xnew[i] = x[i] + h * (0.09114583333333333 * k[0][i]
-                            + 0.44923629829290207 * k[2][i]
-                            + 0.6510416666666666 * k[3][i]
-                            - 0.322376179245283 * k[4][i]
-                            + 0.13095238095238096 * k[5][i]);
+        dx[i] = h * (0.09114583333333333 * k[0][i]
+                     + 0.44923629829290207 * k[2][i]
+                     + 0.6510416666666666 * k[3][i]
+                     - 0.322376179245283 * k[4][i]
+                     + 0.13095238095238096 * k[5][i]) - comp[i];
+        xnew[i] = x[i] + dx[i];
     }
     dual_spin_rhs(t + h, xnew, c, k[6]);
 
@@ -445,7 +453,8 @@ int dual_spin_dopri5(double t0, double t1, double *x, const double *c, double rt
    3rd-order one err3 = h sum_j e3_j k_j as
    |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm. */
 static double dop853_trial(double t, double h, const double *x, const double *c,
-                           double rtol, double atol, double (*k)[DUAL_SPIN_NX], double *xnew)
+                           double rtol, double atol, const double *comp,
+                           double (*k)[DUAL_SPIN_NX], double *dx, double *xnew)
 {
     double y[DUAL_SPIN_NX], err5 = 0.0, err3 = 0.0, deno;
     int i;
@@ -557,14 +566,15 @@ static double dop853_trial(double t, double h, const double *x, const double *c,
 
     /* the new solution */
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
-        xnew[i] = x[i] + h * (0.054293734116568765 * k[0][i]
-                            + 4.450312892752409 * k[5][i]
-                            + 1.8915178993145003 * k[6][i]
-                            - 5.801203960010585 * k[7][i]
-                            + 0.3111643669578199 * k[8][i]
-                            - 0.1521609496625161 * k[9][i]
-                            + 0.20136540080403034 * k[10][i]
-                            + 0.04471061572777259 * k[11][i]);
+        dx[i] = h * (0.054293734116568765 * k[0][i]
+                     + 4.450312892752409 * k[5][i]
+                     + 1.8915178993145003 * k[6][i]
+                     - 5.801203960010585 * k[7][i]
+                     + 0.3111643669578199 * k[8][i]
+                     - 0.1521609496625161 * k[9][i]
+                     + 0.20136540080403034 * k[10][i]
+                     + 0.04471061572777259 * k[11][i]) - comp[i];
+        xnew[i] = x[i] + dx[i];
     }
 
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -678,7 +688,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
    when a stage is). */
 static double rodas4_trial(double t, double h, const double *x, const double *f0,
                            const double *lu, const int *piv, const double *c, double rtol,
-                           double atol, double (*k)[DUAL_SPIN_NX], double *xnew)
+                           double atol, const double *comp, double (*k)[DUAL_SPIN_NX],
+                           double *dx, double *xnew)
 {
     double y[DUAL_SPIN_NX], fy[DUAL_SPIN_NX];
     const double inv_h = 1.0 / h;
@@ -742,13 +753,14 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     }
     lu_solve(lu, piv, k[4]);
 
-    /* stage 6: t + h */
+    /* stage 6: t + h, on the embedded solution */
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
-        y[i] = x[i] + 1.221224509226641 * k[0][i]
-                    + 6.019134481288629 * k[1][i]
-                    + 12.53708332932087 * k[2][i]
-                    - 0.687886036105895 * k[3][i]
-                    + k[4][i];
+        dx[i] = 1.221224509226641 * k[0][i]
+                + 6.019134481288629 * k[1][i]
+                + 12.53708332932087 * k[2][i]
+                - 0.687886036105895 * k[3][i]
+                + k[4][i];
+        y[i] = x[i] + dx[i];
     }
     dual_spin_rhs(t + h, y, c, fy);
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -760,8 +772,10 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     }
     lu_solve(lu, piv, k[5]);
 
+    /* the new solution x + dx: the embedded one plus k_6 */
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
-        xnew[i] = y[i] + k[5][i];
+        dx[i] = (dx[i] + k[5][i]) - comp[i];
+        xnew[i] = x[i] + dx[i];
     }
     return error_norm(k[5], x, xnew, rtol, atol);
 }
@@ -776,7 +790,7 @@ int dual_spin_rodas4(double t0, double t1, double *x, const double *c, double rt
         double h0, long max_steps, dual_spin_stats *stats)
 {
     double J[DUAL_SPIN_NX * DUAL_SPIN_NX], lu[DUAL_SPIN_NX * DUAL_SPIN_NX], k[6][DUAL_SPIN_NX];
-    double f0[DUAL_SPIN_NX], fnew[DUAL_SPIN_NX], xnew[DUAL_SPIN_NX];
+    double f0[DUAL_SPIN_NX], fnew[DUAL_SPIN_NX], xnew[DUAL_SPIN_NX], dx[DUAL_SPIN_NX], comp[DUAL_SPIN_NX] = {0.0};
     int piv[DUAL_SPIN_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
@@ -834,7 +848,8 @@ int dual_spin_rodas4(double t0, double t1, double *x, const double *c, double rt
         }
         singular = 0;
 
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, k, xnew);
+        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx,
+                           xnew);
         stats->rhs_calls += 5;
         nonfinite = !isfinite(err) || !all_finite(xnew, DUAL_SPIN_NX);
         if (!nonfinite && err <= 1.0 && !last) {
@@ -857,9 +872,7 @@ int dual_spin_rodas4(double t0, double t1, double *x, const double *c, double rt
             }
             h_acc = h;
             err_acc = fmax(1e-2, err);
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                x[i] = xnew[i];
-            }
+            accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
             stats->accepted += 1;

@@ -57,12 +57,13 @@ module speed_controlled_ode_mod
 
   abstract interface
     ! One trial step of a pair from (t, x), k(:, 1) = f(t, x): fills the other
-    ! stages and xnew, and returns the error norm (NaN or Inf when a stage is).
-    function pair_trial(t, h, x, c, rtol, atol, k, xnew) result(err)
+    ! stages, xnew = x + dx (comp: see accept_step), and returns the error
+    ! norm (NaN or Inf when a stage is).
+    function pair_trial(t, h, x, c, rtol, atol, comp, k, dx, xnew) result(err)
       import :: c_double, nx, nc
-      real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol
+      real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol, comp(nx)
       real(c_double), intent(inout) :: k(nx, 13)
-      real(c_double), intent(out) :: xnew(nx)
+      real(c_double), intent(out) :: dx(nx), xnew(nx)
       real(c_double) :: err
     end function pair_trial
   end interface
@@ -191,6 +192,18 @@ contains
     J(64) = c(2)
   end subroutine speed_controlled_jac
 
+  ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
+  ! compensation: comp keeps what this add lost and the next step takes it
+  ! back from its dx, so the rounding of 1e7 adds does not pile up in the
+  ! invariants (a build with -ffast-math may optimize it away).
+  subroutine accept_step(x, xnew, dx, comp)
+    real(c_double), intent(inout) :: x(nx), comp(nx)
+    real(c_double), intent(in) :: xnew(nx), dx(nx)
+
+    comp = (xnew - x) - dx
+    x = xnew
+  end subroutine accept_step
+
   ! Counters at zero, at the start time (also the time reached if nothing is).
   subroutine stats_start(stats, t0)
     type(speed_controlled_stats), intent(out) :: stats
@@ -205,10 +218,7 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal
-  ! steps. The steps' increments are summed with compensation: over 1e7 steps
-  ! plain adds would let the rounding drift the invariants by ~1e-9. (A build
-  ! with -ffast-math may optimize the compensation away.)
+  ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
   function speed_controlled_rk4(t0, t1, steps, x, c, stats) result(code) bind(C, name="speed_controlled_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
     integer(c_long), value, intent(in) :: steps
@@ -244,21 +254,19 @@ contains
       y = x + h * (k(:, 3))
       call speed_controlled_rhs(t + h, y, c, k(:, 4))
 
-      ! the new solution x + dx, summed with Kahan's compensation: comp
-      ! carries the rounding of each add into the next step's dx
+      ! the new solution
       dx = h * (0.16666666666666666_c_double * k(:, 1) &
                 + 0.3333333333333333_c_double * k(:, 2) &
                 + 0.3333333333333333_c_double * k(:, 3) &
                 + 0.16666666666666666_c_double * k(:, 4)) - comp
       xnew = x + dx
-      comp = (xnew - x) - dx
 
       stats%rhs_calls = stats%rhs_calls + 4
       if (.not. all(ieee_is_finite(xnew))) then
         code = SPEED_CONTROLLED_ODE_ERR_NONFINITE
         return
       end if
-      x = xnew
+      call accept_step(x, xnew, dx, comp)
       stats%accepted = stats%accepted + 1
       stats%t = merge(t1, t + h, n + 1 == steps)
     end do
@@ -365,7 +373,7 @@ contains
     integer(c_long), intent(in) :: max_steps
     type(speed_controlled_stats), intent(out) :: stats
     integer(c_int) :: code
-    real(c_double) :: k(nx, 13), xnew(nx), t, h, err, fac, err_old
+    real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
     logical :: last, rejected_last, nonfinite
 
     call stats_start(stats, t0)
@@ -377,6 +385,7 @@ contains
     if (.not. (t1 > t0)) return
     t = t0
     err_old = 1e-4_c_double
+    comp = 0
     rejected_last = .false.
     nonfinite = .false.
     call speed_controlled_rhs(t, x, c, k(:, 1))
@@ -402,7 +411,7 @@ contains
       last = t + 1.01_c_double * h >= t1
       if (last) h = t1 - t
       stats%h = h
-      err = trial(t, h, x, c, rtol, atol, k, xnew)
+      err = trial(t, h, x, c, rtol, atol, comp, k, dx, xnew)
       stats%rhs_calls = stats%rhs_calls + m%calls
       nonfinite = .not. (ieee_is_finite(err) .and. all(ieee_is_finite(xnew)))
       if (.not. nonfinite .and. err <= 1 .and. .not. m%fsal .and. .not. last) then
@@ -419,7 +428,7 @@ contains
       ! fac = h / h_new, in Hairer's form (no division by a zero error)
       fac = err**m%alpha / m%safety
       if (err <= 1) then
-        x = xnew
+        call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
         stats%accepted = stats%accepted + 1
@@ -441,10 +450,10 @@ contains
   ! Dormand-Prince 5(4) (Dormand & Prince 1980; Hairer, Norsett & Wanner,
   ! Solving ODEs I, Table II.5.2): seven stages, the seventh at the new
   ! solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat.
-  function dopri5_trial(t, h, x, c, rtol, atol, k, xnew) result(err)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol
+  function dopri5_trial(t, h, x, c, rtol, atol, comp, k, dx, xnew) result(err)
+    real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol, comp(nx)
     real(c_double), intent(inout) :: k(nx, 13)
-    real(c_double), intent(out) :: xnew(nx)
+    real(c_double), intent(out) :: dx(nx), xnew(nx)
     real(c_double) :: err
     real(c_double) :: y(nx), e(nx)
 
@@ -478,12 +487,13 @@ contains
               - 0.2735313036020583_c_double * k(:, 5))
     call speed_controlled_rhs(t + h, y, c, k(:, 6))
 
-    ! stage 7: t + h
-    xnew = x + h * (0.09114583333333333_c_double * k(:, 1) &
-                 + 0.44923629829290207_c_double * k(:, 3) &
-                 + 0.6510416666666666_c_double * k(:, 4) &
-                 - 0.322376179245283_c_double * k(:, 5) &
-                 + 0.13095238095238096_c_double * k(:, 6))
+    ! stage 7: t + h, the new solution
+    dx = h * (0.09114583333333333_c_double * k(:, 1) &
+              + 0.44923629829290207_c_double * k(:, 3) &
+              + 0.6510416666666666_c_double * k(:, 4) &
+              - 0.322376179245283_c_double * k(:, 5) &
+              + 0.13095238095238096_c_double * k(:, 6)) - comp
+    xnew = x + dx
     call speed_controlled_rhs(t + h, xnew, c, k(:, 7))
 
     e = h * (0.0012326388888888888_c_double * k(:, 1) &
@@ -513,10 +523,10 @@ contains
   ! error combines a 5th-order estimate err5 = h sum_j e5_j k_j and a
   ! 3rd-order one err3 = h sum_j e3_j k_j as
   ! |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm.
-  function dop853_trial(t, h, x, c, rtol, atol, k, xnew) result(err)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol
+  function dop853_trial(t, h, x, c, rtol, atol, comp, k, dx, xnew) result(err)
+    real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol, comp(nx)
     real(c_double), intent(inout) :: k(nx, 13)
-    real(c_double), intent(out) :: xnew(nx)
+    real(c_double), intent(out) :: dx(nx), xnew(nx)
     real(c_double) :: err
     real(c_double) :: y(nx), sk(nx), err5, err3, deno
 
@@ -604,14 +614,15 @@ contains
     call speed_controlled_rhs(t + h, y, c, k(:, 12))
 
     ! the new solution
-    xnew = x + h * (0.054293734116568765_c_double * k(:, 1) &
-                 + 4.450312892752409_c_double * k(:, 6) &
-                 + 1.8915178993145003_c_double * k(:, 7) &
-                 - 5.801203960010585_c_double * k(:, 8) &
-                 + 0.3111643669578199_c_double * k(:, 9) &
-                 - 0.1521609496625161_c_double * k(:, 10) &
-                 + 0.20136540080403034_c_double * k(:, 11) &
-                 + 0.04471061572777259_c_double * k(:, 12))
+    dx = h * (0.054293734116568765_c_double * k(:, 1) &
+              + 4.450312892752409_c_double * k(:, 6) &
+              + 1.8915178993145003_c_double * k(:, 7) &
+              - 5.801203960010585_c_double * k(:, 8) &
+              + 0.3111643669578199_c_double * k(:, 9) &
+              - 0.1521609496625161_c_double * k(:, 10) &
+              + 0.20136540080403034_c_double * k(:, 11) &
+              + 0.04471061572777259_c_double * k(:, 12)) - comp
+    xnew = x + dx
 
     sk = atol + rtol * max(abs(x), abs(xnew))
     err5 = sum(((0.01312004499419488_c_double * k(:, 1) &
@@ -718,10 +729,11 @@ contains
   ! Stiffly accurate: stage 6 sits on the embedded solution and the step is
   ! that plus k_6, so k_6 is the error estimate. Returns its norm (NaN or Inf
   ! when a stage is).
-  function rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, k, xnew) result(err)
-    real(c_double), intent(in) :: t, h, x(nx), f0(nx), lu(nx, nx), c(nc), rtol, atol
+  function rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, &
+                        xnew) result(err)
+    real(c_double), intent(in) :: t, h, x(nx), f0(nx), lu(nx, nx), c(nc), rtol, atol, comp(nx)
     integer, intent(in) :: piv(nx)
-    real(c_double), intent(out) :: k(nx, 6), xnew(nx)
+    real(c_double), intent(out) :: k(nx, 6), dx(nx), xnew(nx)
     real(c_double) :: err, y(nx), fy(nx), inv_h
 
     inv_h = 1 / h
@@ -766,12 +778,13 @@ contains
                               + 11.7089089320616_c_double * k(:, 4))
     call lu_solve(lu, piv, k(:, 5))
 
-    ! stage 6: t + h
-    y = x + 1.221224509226641_c_double * k(:, 1) &
-          + 6.019134481288629_c_double * k(:, 2) &
-          + 12.53708332932087_c_double * k(:, 3) &
-          - 0.687886036105895_c_double * k(:, 4) &
-          + k(:, 5)
+    ! stage 6: t + h, on the embedded solution
+    dx = 1.221224509226641_c_double * k(:, 1) &
+         + 6.019134481288629_c_double * k(:, 2) &
+         + 12.53708332932087_c_double * k(:, 3) &
+         - 0.687886036105895_c_double * k(:, 4) &
+         + k(:, 5)
+    y = x + dx
     call speed_controlled_rhs(t + h, y, c, fy)
     k(:, 6) = fy + inv_h * (8.083246795921522_c_double * k(:, 1) &
                               - 7.981132988064893_c_double * k(:, 2) &
@@ -780,7 +793,9 @@ contains
                               - 6.058818238834054_c_double * k(:, 5))
     call lu_solve(lu, piv, k(:, 6))
 
-    xnew = y + k(:, 6)
+    ! the new solution x + dx: the embedded one plus k_6
+    dx = (dx + k(:, 6)) - comp
+    xnew = x + dx
     err = error_norm(k(:, 6), x, xnew, rtol, atol)
   end function rodas4_trial
 
@@ -799,6 +814,7 @@ contains
     type(speed_controlled_stats), intent(out) :: stats
     integer(c_int) :: code
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
+    real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
     integer :: piv(nx), i, j, singular
     logical :: last, rejected_last, nonfinite, new_point
@@ -813,6 +829,7 @@ contains
     t = t0
     h_acc = 0
     err_acc = 1e-2_c_double
+    comp = 0
     rejected_last = .false.
     nonfinite = .false.
     new_point = .true.
@@ -871,7 +888,8 @@ contains
       end if
       singular = 0
 
-      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, k, xnew)
+      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, &
+                         xnew)
       stats%rhs_calls = stats%rhs_calls + 5
       nonfinite = .not. (ieee_is_finite(err) .and. all(ieee_is_finite(xnew)))
       if (.not. nonfinite .and. err <= 1 .and. .not. last) then
@@ -894,7 +912,7 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        x = xnew
+        call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
         stats%accepted = stats%accepted + 1
