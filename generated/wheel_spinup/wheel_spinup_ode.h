@@ -32,6 +32,9 @@ extern "C" {
  * failed; there (only there) stats or codes may be NULL when not wanted.
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Coefficients and sources: gyrogen/tableaus.py.
+ * The steps are summed with Kahan's compensation, so that long runs keep
+ * their invariants to rounding: compile without -ffast-math (or
+ * -Ofast), which would optimize the compensation away.
  */
 
 /* What an integration did, and where it stopped. */
