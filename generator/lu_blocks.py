@@ -42,10 +42,6 @@ class Blocks:
         """Per row i: the columns j < i where L can be nonzero (its block's)."""
         return [list(range(s, i)) for i, s in enumerate(self.start)]
 
-    @property
-    def sizes(self) -> list[int]:
-        return [e - s for s, e in self.spans]
-
 
 def diagonal_blocks(entries: Sequence[sm.Expr], n: int) -> Blocks:
     """The finest partition of range(n) into intervals such that every

@@ -29,7 +29,6 @@ class Symbols:
     q: tuple[sm.Symbol, ...]
     u: tuple[sm.Symbol, ...]
     qd: tuple[sm.Symbol, ...]
-    ud: tuple[sm.Symbol, ...]
     params: tuple[sm.Symbol, ...]
     lumped: tuple[sm.Symbol, ...]
     """IA11, IA22, IA33, IA13: the inertia scalars of A~ (J~ = J)."""
@@ -53,21 +52,14 @@ class KaneEquations:
     """q' for q1..q7, solved from the kinematic differential equations."""
 
 
-def _time_symbols(names: str) -> tuple[sm.Symbol, ...]:
-    """Dynamic symbols are functions of t; we keep them as plain symbols in
-    the generated code, so this module converts at the boundary."""
-    return tuple(me.dynamicsymbols(names))
-
-
 @cache
 def symbols() -> Symbols:
     q = me.dynamicsymbols("q1:8")
     u = me.dynamicsymbols("u1:8")
     qd = [qi.diff(me.dynamicsymbols._t) for qi in q]
-    ud = [ui.diff(me.dynamicsymbols._t) for ui in u]
     params = sm.symbols(PARAMETERS, real=True)
     lumped = sm.symbols("IA11 IA22 IA33 IA13", real=True)
-    return Symbols(tuple(q), tuple(u), tuple(qd), tuple(ud), tuple(params), tuple(lumped))
+    return Symbols(tuple(q), tuple(u), tuple(qd), tuple(params), tuple(lumped))
 
 
 @dataclass(frozen=True)

@@ -166,14 +166,14 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
 
 
-def condition(block: sm.Matrix, det: sm.Expr | None = None) -> sm.Expr:
+def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     """lambda_max / lambda_min of a symmetric positive 2x2 block, the last
     constant of setup. lambda_min = det / lambda_max: the difference of the
     two terms of lambda_min would cancel for a badly conditioned block
     (det: the block's determinant in a form that does not)."""
     a, b, d = block[0, 0], block[0, 1], block[1, 1]
     big = (a + d) / 2 + sm.sqrt((a - d) ** 2 / 4 + b**2)
-    cond = big**2 / (a * d - b**2 if det is None else det)
+    cond = big**2 / det
     return sm.Float(float(cond)) if cond.is_number else cond
 
 

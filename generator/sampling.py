@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gyrogen import layout
-from gyrogen.layout import MAX_CONDITION
+from gyrogen.layout import MAX_CONDITION, TRIANGLE_SLACK
 
 __all__ = ["invalid_parameters", "random_parameters", "random_states", "setup_code"]
 
@@ -21,9 +21,6 @@ Array = NDArray[np.float64]
 N_STATES = len(layout.STATES)
 N_PARAMETERS = len(layout.PARAMETERS)
 _P = {name: k for k, name in enumerate(layout.PARAMETERS)}
-
-REL_TOL = 1e-12
-"""Relative tolerance of the two triangle-inequality checks (equality is allowed)."""
 
 
 def setup_code(p: ArrayLike) -> int:
@@ -55,10 +52,10 @@ def setup_code(p: ArrayLike) -> int:
     radius = math.hypot(0.5 * (I11 - I33), I13)
     moments = (I22, mean + radius, mean - radius)
     total = sum(moments)
-    if 2.0 * max(moments) - total > REL_TOL * total:
+    if 2.0 * max(moments) - total > TRIANGLE_SLACK * total:
         return 5
     I, J = v["I"], v["J"]
-    if J - 2.0 * I > REL_TOL * (2.0 * I + J):
+    if J - 2.0 * I > TRIANGLE_SLACK * (2.0 * I + J):
         return 6
     if not float(lumped_condition(pa)) <= MAX_CONDITION:
         return 7

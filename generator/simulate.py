@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from gyrogen import build, plots, witness
+from gyrogen import build, witness
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.generate import generate, write_atomic
 from gyrogen.layout import STATES
@@ -454,6 +454,8 @@ def _contents(res: Result, p: np.ndarray) -> dict[str, bytes]:
         "summary.json": (json.dumps(summary(res, p), indent=2) + "\n").encode(),
     }
     if res.settings.plot:
+        from gyrogen import plots  # matplotlib: loaded only when a plot is wanted
+
         blobs["trajectory.png"] = plots.trajectory_png(scene, traj.t, traj.x, _drifts(inv))
     return blobs
 

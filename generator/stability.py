@@ -28,6 +28,7 @@ STIFF = 1e3
 """Stiffness index (largest decay rate x time span) above which an explicit
 method spends most of its steps on stability: implicit it is."""
 DRIFT_BAR = 1e-10
+"""The invariants' relative drift allowed at rtol 1e-12."""
 
 
 @dataclass(frozen=True)
@@ -44,9 +45,6 @@ class Case:
     steps: int = 0
     """For method 'rk4': the number of steps."""
     samples: int = 20
-    drift_bar: float = 1e-10
-    """The invariants' relative drift allowed (DRIFT_BAR at rtol 1e-12)."""
-    note: str = ""
 
 
 @dataclass
@@ -172,11 +170,9 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
     res.stiffness = max(res.stiffness, later)
     if case.expect in ("stable", "unstable"):
         res.verdict = _spin_verdict(scene, xs)
-    elif max(res.drift.values(), default=0.0) > case.drift_bar:
+    elif max(res.drift.values(), default=0.0) > DRIFT_BAR:
         res.verdict = "drift"
-        res.diagnosis = (
-            f"an invariant drifted above {case.drift_bar:g}: tighten rtol or change method"
-        )
+        res.diagnosis = f"an invariant drifted above {DRIFT_BAR:g}: tighten rtol or change method"
     if res.condition > WARN_CONDITION:
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
             f"warning: mass matrix condition number {res.condition:.2g} > {WARN_CONDITION:g}"

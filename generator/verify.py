@@ -74,14 +74,15 @@ def _pairs(
     """Every backend against the reference, and the backends against each
     other: the rhs, then each output function."""
     names = ["rhs", *(n for n, on in scene.outputs.model_dump().items() if on)]
+    constants = {_label(b): b.setup(p) for b in backends}
     for name in names:
         tag = "" if name == "rhs" else f" {name}"
         if name == "rhs":
             ref = witness.rhs(scene, states, p, t)
-            out = {_label(b): b.rhs(states, b.setup(p), t) for b in backends}
+            out = {_label(b): b.rhs(states, constants[_label(b)], t) for b in backends}
         else:
             ref = witness.output(scene, name, states, p, t)
-            out = {_label(b): b.output(name, states, b.setup(p), t) for b in backends}
+            out = {_label(b): b.output(name, states, constants[_label(b)], t) for b in backends}
         for label, value in out.items():
             yield f"{label} vs reference{tag}", scaled_error(value, ref)
         if len(out) == 2:

@@ -16,9 +16,6 @@ from gyrogen.scene import CONTROLLER_PARAMETERS, Scene
 _P = {n: i for i, n in enumerate(PARAMETERS)}
 
 
-QUATERNION = ("e0", "e1", "e2", "e3")
-
-
 def state_index(scene: Scene) -> np.ndarray:
     """Where each kept state sits in the full model's 14 (-1 for e0..e3)."""
     return np.array([STATES.index(s) if s in STATES else -1 for s in scene.states])

@@ -23,6 +23,7 @@ from scipy.integrate import solve_ivp
 from gyrogen import witness
 from gyrogen.build import Compiled
 from gyrogen.scene import Scene
+from gyrogen.verify import scaled_error
 
 ADAPTIVE = ("dopri5", "dop853", "rodas4")
 SCIPY = ("RK45", "DOP853", "Radau", "LSODA")
@@ -96,10 +97,6 @@ class Problem:
     """Reference cross-checks: name -> mixed difference."""
 
 
-def mixed_error(x: np.ndarray, ref: np.ndarray) -> float:
-    return float(np.max(np.abs(x - ref) / (1.0 + np.abs(ref))))
-
-
 def best_time(fn: Callable[[], Any], repeats: int, min_total: float = 0.02) -> float:
     """Best time of one call: each repeat runs fn often enough to last
     min_total seconds, so microsecond runs are timed as well as long ones."""
@@ -128,9 +125,9 @@ def reference(prob: Problem) -> None:
     prob.ref = x
     rhs = _cffi_rhs(comp, prob.c)
     sol = solve_ivp(rhs, (0.0, prob.t1), prob.x0, method="DOP853", rtol=REF_TOL, atol=REF_TOL)
-    prob.checks["scipy DOP853 (compiled RHS) at 1e-13"] = mixed_error(sol.y[:, -1], x)
+    prob.checks["scipy DOP853 (compiled RHS) at 1e-13"] = scaled_error(sol.y[:, -1], x)
     if prob.scene.name == "torque_free":
-        prob.checks["closed form (NOTES.md)"] = mixed_error(closed_form(prob), x)
+        prob.checks["closed form (NOTES.md)"] = scaled_error(closed_form(prob), x)
 
 
 def closed_form(prob: Problem) -> np.ndarray:
@@ -186,7 +183,7 @@ def _compiled_run(
     if code != 0:
         return Run(method, backend, setting, math.inf, 0.0, stats["rhs_calls"], f"code {code}")
     secs = best_time(_raw_call(comp, method, prob, kw), repeats)
-    return Run(method, backend, setting, mixed_error(x, prob.ref), secs, stats["rhs_calls"])
+    return Run(method, backend, setting, scaled_error(x, prob.ref), secs, stats["rhs_calls"])
 
 
 def _raw_call(comp: Compiled, method: str, prob: Problem, kw: dict[str, Any]) -> Callable[[], Any]:
@@ -275,7 +272,9 @@ def _scipy_run(
     # Repeat only what is quick to repeat: a run of seconds is timed well enough once.
     secs = once if once > SLOW else best_time(solve, max(1, cfg.repeats // 2), min_total=0.0)
     status = "ok" if once <= TOO_SLOW else "ok, slow"
-    return Run(label, backend, tol, mixed_error(sol.y[:, -1], prob.ref), min(secs, once), n, status)
+    return Run(
+        label, backend, tol, scaled_error(sol.y[:, -1], prob.ref), min(secs, once), n, status
+    )
 
 
 def numpy_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:

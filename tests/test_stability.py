@@ -30,7 +30,7 @@ def test_case_verdict(case: stability.Case, compiled: dict[str, build.Compiled])
     res = stability.run_case(case, compiled[case.scene.name])
     assert res.passed, (res.verdict, res.diagnosis, res.drift)
     if case.expect == "pass":
-        assert max(res.drift.values()) <= case.drift_bar
+        assert max(res.drift.values()) <= stability.DRIFT_BAR
 
 
 def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Compiled]) -> None:

@@ -8,7 +8,7 @@ from sympy.printing.precedence import PRECEDENCE
 
 from gyrogen.backends.printing import functions, jacobian, statements
 from gyrogen.hoist import constants
-from gyrogen.render import render
+from gyrogen.render import c_double, render
 from gyrogen.tableaus import TABLEAUS
 from gyrogen.unit import Unit
 
@@ -25,7 +25,7 @@ class CPrinter(C99CodePrinter):
         return self._names.get(expr.name) or str(super()._print_Symbol(expr))
 
     def _print_Float(self, expr: sm.Float) -> str:
-        return repr(float(expr))
+        return c_double(float(expr))
 
     def _print_Pow(self, expr: sm.Pow) -> str:
         base, exp = expr.base, expr.exp

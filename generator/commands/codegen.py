@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import keyword
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from gyrogen.commands.options import SCENE, default_out, out_dir, progress
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.scene import Scene, builtin_names, default, load
-from gyrogen.unit import Unit
+
+if TYPE_CHECKING:
+    from gyrogen.unit import Unit
 
 
 def _row(unit: Unit, full: Unit) -> str:

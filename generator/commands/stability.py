@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
-import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from gyrogen.commands.options import progress
 from gyrogen.errors import GyrogenError
-from gyrogen.stability import Result
+
+if TYPE_CHECKING:
+    from gyrogen.stability import Result
 
 
 @click.command()
@@ -50,11 +53,8 @@ def check(
         write_atomic(plots, {})  # fail early, with one line, if plots is not writable
     compiled = {}
     results = []
-    with (
-        tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp,
-        click.progressbar(suite, label="checking", file=sys.stderr) as bar,
-    ):
-        for case in bar:
+    with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
+        for case in progress("checking", suite):
             if case.scene.name not in compiled:
                 src = Path(tmp) / case.scene.name
                 generate(case.scene, src)
