@@ -20,6 +20,7 @@ from gyrogen.errors import SceneError
 from gyrogen.generate import generate, write_atomic
 from gyrogen.layout import STATES
 from gyrogen.scene import Scene
+from gyrogen.simulate import runtime_values
 from gyrogen.workprec import Config, Problem, Run
 
 LEVELS = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -27,9 +28,7 @@ Echo = Callable[[str], None]
 
 
 def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
-    missing = [n for n in scene.runtime if n not in scene.simulate.parameters]
-    if missing:
-        raise SceneError(f"{scene.name}: simulate.parameters lacks {', '.join(missing)}")
+    p = runtime_values(scene)
     generate(scene, src)
     langs = {"C": "c", "Fortran": "fortran"}
     if not cfg.fortran:
@@ -37,8 +36,7 @@ def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
     compiled = {k: build.build(src, v) for k, v in langs.items() if v in scene.targets}
     if "C" not in compiled:
         raise SceneError(f"{scene.name}: the work-precision report needs the c target")
-    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
-    x0 = np.array([scene.simulate.initial.get(s, 0.0) for s in scene.states])
+    x0 = np.array(scene.initial_state())
     c = compiled["C"].setup(p)
     return Problem(scene, compiled, p, c, x0, scene.simulate.t_end)
 
