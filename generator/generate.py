@@ -104,6 +104,7 @@ def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
 
 
 def generate(scene: Scene, out: Path, lib: bool = False) -> Unit:
-    unit = make_unit(scene)
+    # the default scene's unit is the full model every manifest compares with: build it once
+    unit = full_model_unit() if scene == default_scene() else make_unit(scene)
     write_atomic(out, render_all(unit, lib))
     return unit

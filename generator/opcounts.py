@@ -9,9 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from gyrogen import equations, model
+from gyrogen.generate import full_model_unit
 from gyrogen.optimize import count_ops, cse_only
-from gyrogen.scene import default
-from gyrogen.unit import make_unit
 
 
 @dataclass(frozen=True)
@@ -25,7 +24,7 @@ def variants() -> list[Variant]:
     sep = model.separate()
     mm, f, kin = (equations.plain(m) for m in (sep.mass_matrix, sep.forcing, sep.kinematics))
     lu = mm.LUsolve(f)
-    unit = make_unit(default())
+    unit = full_model_unit()
     return [
         Variant("i", "separate bodies: raw mass matrix and forcing", count_ops(mm, f)),
         Variant(
