@@ -39,6 +39,12 @@ class Block:
     def ops(self) -> int:
         return count_ops([a.rhs for a in self.temporaries], self.outputs)
 
+    @property
+    def free_symbols(self) -> set[sm.Basic]:
+        """What the block reads (its own temporaries included)."""
+        exprs = [*(a.rhs for a in self.temporaries), *self.outputs]
+        return set().union(*(e.free_symbols for e in exprs))
+
 
 @dataclass(frozen=True)
 class Optimized:

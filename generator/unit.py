@@ -161,8 +161,7 @@ class Unit:
         """The checked parameters, then the runtime ones the constants use."""
         runtime = {s.name: i for i, s in enumerate(self.params)}
         folded = self.scene.folded()
-        used = set().union(*(a.rhs.free_symbols for a in self.optimized.setup.temporaries))
-        used |= set().union(*(e.free_symbols for e in self.optimized.setup.outputs))
+        used = self.optimized.setup.free_symbols
         names = list(self.equations.checks)
         names += [s.name for s in self.params if s in used and s.name not in names]
         return [Local(n, runtime.get(n), folded.get(n)) for n in names]

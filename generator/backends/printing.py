@@ -51,15 +51,6 @@ def statements(block: Block, output: Callable[[int], str], assign: Assign) -> li
     return temps + stores
 
 
-def _free(block: Block) -> set[sm.Basic]:
-    free: set[sm.Basic] = set()
-    for a in block.temporaries:
-        free |= a.rhs.free_symbols
-    for e in block.outputs:
-        free |= e.free_symbols
-    return free
-
-
 def functions(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> list[Function]:
     """rhs first, then the scene's outputs; array(name, i) spells name[i]."""
     blocks = [("rhs", unit.optimized.rhs, "dxdt", "dx/dt", "")]
@@ -85,7 +76,7 @@ def _function(
     doc: str,
     units: str,
 ) -> Function:
-    free = _free(block)
+    free = block.free_symbols
     return Function(
         name=name,
         doc=doc,
