@@ -614,8 +614,7 @@ int dual_spin_dop853(double t0, double t1, double *x, const double *c, double rt
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
    gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 6), (6, 7).
-   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
-static const int lu_start[DUAL_SPIN_NX] = {0, 1, 1, 3, 3, 3, 6};
+   Row i's block ends before row lu_end[i]. */
 static const int lu_end[DUAL_SPIN_NX] = {1, 3, 3, 6, 6, 6, 7};
 
 /* In-place LU decomposition with partial pivoting of a row-major
@@ -638,7 +637,7 @@ static int lu_decompose(double *a, int *piv)
             return 1;
         }
         if (p != k) {
-            for (j = lu_start[k]; j < DUAL_SPIN_NX; ++j) {
+            for (j = 0; j < DUAL_SPIN_NX; ++j) {
                 const double swap = a[k * DUAL_SPIN_NX + j];
                 a[k * DUAL_SPIN_NX + j] = a[p * DUAL_SPIN_NX + j];
                 a[p * DUAL_SPIN_NX + j] = swap;

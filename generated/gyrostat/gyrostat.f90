@@ -204,7 +204,7 @@ contains
     c(11) = g
     c(12) = tmp14*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(IA13**2 + &
           (1.0d0/4.0d0)*(IA11 - IA33)**2))**2
-    if (.not. (c(12) <= 10000000000000.0_c_double)) then
+    if (.not. (c(GYROSTAT_COND) <= 10000000000000.0_c_double)) then
       status = GYROSTAT_ERR_MASS_SINGULAR
       return
     end if

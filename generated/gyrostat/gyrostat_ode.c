@@ -762,8 +762,7 @@ int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rto
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
    gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14).
-   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
-static const int lu_start[GYROSTAT_NX] = {0, 1, 1, 3, 4, 5, 6, 7, 7, 7, 10, 11, 12, 13};
+   Row i's block ends before row lu_end[i]. */
 static const int lu_end[GYROSTAT_NX] = {1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14};
 
 /* In-place LU decomposition with partial pivoting of a row-major
@@ -786,7 +785,7 @@ static int lu_decompose(double *a, int *piv)
             return 1;
         }
         if (p != k) {
-            for (j = lu_start[k]; j < GYROSTAT_NX; ++j) {
+            for (j = 0; j < GYROSTAT_NX; ++j) {
                 const double swap = a[k * GYROSTAT_NX + j];
                 a[k * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
                 a[p * GYROSTAT_NX + j] = swap;

@@ -131,7 +131,7 @@ contains
     c(5) = 2*k
     c(6) = -k*w_ref
     c(7) = 1.1080962681823885_c_double
-    if (.not. (c(7) <= 10000000000000.0_c_double)) then
+    if (.not. (c(STIFF_WHEEL_COND) <= 10000000000000.0_c_double)) then
       status = STIFF_WHEEL_ERR_MASS_SINGULAR
       return
     end if

@@ -629,8 +629,7 @@ int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double 
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
    gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 8).
-   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
-static const int lu_start[STIFF_WHEEL_NX] = {0, 1, 1, 3, 4, 4, 4, 4};
+   Row i's block ends before row lu_end[i]. */
 static const int lu_end[STIFF_WHEEL_NX] = {1, 3, 3, 4, 8, 8, 8, 8};
 
 /* In-place LU decomposition with partial pivoting of a row-major
@@ -653,7 +652,7 @@ static int lu_decompose(double *a, int *piv)
             return 1;
         }
         if (p != k) {
-            for (j = lu_start[k]; j < STIFF_WHEEL_NX; ++j) {
+            for (j = 0; j < STIFF_WHEEL_NX; ++j) {
                 const double swap = a[k * STIFF_WHEEL_NX + j];
                 a[k * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
                 a[p * STIFF_WHEEL_NX + j] = swap;

@@ -71,7 +71,8 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
  * is accepted when their RMS is <= 1.
  * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
  * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 only if that persists to underflow. */
+ * is rejected and h shrunk: code 3 if that persists to underflow, or at
+ * once when x, f(t0, x) is not finite. */
 int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats);
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x,
@@ -83,7 +84,8 @@ size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x,
  * is accepted when their RMS is <= 1 (Hairer's blend of a 5th- and a 3rd-order estimate).
  * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
  * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 only if that persists to underflow. */
+ * is rejected and h shrunk: code 3 if that persists to underflow, or at
+ * once when x, f(t0, x) is not finite. */
 int stiff_wheel_dop853(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats);
 size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x,
@@ -95,7 +97,8 @@ size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x,
  * is accepted when their RMS is <= 1.
  * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
  * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 only if that persists to underflow. */
+ * is rejected and h shrunk: code 3 if that persists to underflow, or at
+ * once when x, f(t0, x) or the Jacobian is not finite. */
 int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats);
 size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x,

@@ -116,7 +116,7 @@ contains
     end if
 
     c(1) = 1.0_c_double
-    if (.not. (c(1) <= 10000000000000.0_c_double)) then
+    if (.not. (c(TORQUE_FREE_COND) <= 10000000000000.0_c_double)) then
       status = TORQUE_FREE_ERR_MASS_SINGULAR
       return
     end if

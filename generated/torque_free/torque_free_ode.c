@@ -614,8 +614,7 @@ int torque_free_dop853(double t0, double t1, double *x, const double *c, double 
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
    gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 6), (6, 7).
-   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
-static const int lu_start[TORQUE_FREE_NX] = {0, 1, 1, 3, 3, 3, 6};
+   Row i's block ends before row lu_end[i]. */
 static const int lu_end[TORQUE_FREE_NX] = {1, 3, 3, 6, 6, 6, 7};
 
 /* In-place LU decomposition with partial pivoting of a row-major
@@ -638,7 +637,7 @@ static int lu_decompose(double *a, int *piv)
             return 1;
         }
         if (p != k) {
-            for (j = lu_start[k]; j < TORQUE_FREE_NX; ++j) {
+            for (j = 0; j < TORQUE_FREE_NX; ++j) {
                 const double swap = a[k * TORQUE_FREE_NX + j];
                 a[k * TORQUE_FREE_NX + j] = a[p * TORQUE_FREE_NX + j];
                 a[p * TORQUE_FREE_NX + j] = swap;

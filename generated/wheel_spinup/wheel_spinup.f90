@@ -125,7 +125,7 @@ contains
     c(2) = (72057594037927936.0d0/1080863910568919.0d0)*T
     c(3) = -T
     c(4) = 1.10709823420372_c_double
-    if (.not. (c(4) <= 10000000000000.0_c_double)) then
+    if (.not. (c(WHEEL_SPINUP_COND) <= 10000000000000.0_c_double)) then
       status = WHEEL_SPINUP_ERR_MASS_SINGULAR
       return
     end if

@@ -629,8 +629,7 @@ int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
    gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8).
-   Row i's block spans rows and columns lu_start[i] .. lu_end[i] - 1. */
-static const int lu_start[WHEEL_SPINUP_NX] = {0, 1, 1, 3, 4, 4, 4, 7};
+   Row i's block ends before row lu_end[i]. */
 static const int lu_end[WHEEL_SPINUP_NX] = {1, 3, 3, 4, 7, 7, 7, 8};
 
 /* In-place LU decomposition with partial pivoting of a row-major
@@ -653,7 +652,7 @@ static int lu_decompose(double *a, int *piv)
             return 1;
         }
         if (p != k) {
-            for (j = lu_start[k]; j < WHEEL_SPINUP_NX; ++j) {
+            for (j = 0; j < WHEEL_SPINUP_NX; ++j) {
                 const double swap = a[k * WHEEL_SPINUP_NX + j];
                 a[k * WHEEL_SPINUP_NX + j] = a[p * WHEEL_SPINUP_NX + j];
                 a[p * WHEEL_SPINUP_NX + j] = swap;
