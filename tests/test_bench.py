@@ -48,7 +48,9 @@ def test_tiny_run_reports_every_row(tmp_path: Path) -> None:
 
 
 def test_missing_pydy_skips_only_its_row(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "pydy", None)  # makes `import pydy...` raise ImportError
+    # None makes `import pydy...` raise ImportError, also when an earlier test loaded it
+    for name in ("pydy", "pydy.codegen", "pydy.codegen.ode_function_generators"):
+        monkeypatch.setitem(sys.modules, name, None)
     ms, lines = _tiny(pydy=True)
     assert [m.name for m in ms] == NAMES
     assert any("pip install -e '.[bench]'" in line for line in lines)
