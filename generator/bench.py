@@ -25,7 +25,7 @@ from typing import Any, Literal
 import numpy as np
 
 from gyrogen import build, model, reference, sampling
-from gyrogen.generate import generate
+from gyrogen.generate import generate, write_atomic
 from gyrogen.scene import default
 
 Array = np.ndarray
@@ -258,11 +258,9 @@ def report(ms: list[Measurement], info: dict[str, str], echo: Echo) -> None:
 
 
 def _write_json(out: Path, ms: list[Measurement], info: dict[str, str], repeats: int) -> Path:
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "bench.json"
     doc = {"machine": info, "repeats": repeats, "measurements": [asdict(m) for m in ms]}
-    path.write_text(json.dumps(doc, indent=2) + "\n")
-    return path
+    write_atomic(out, {"bench.json": json.dumps(doc, indent=2) + "\n"})
+    return out / "bench.json"
 
 
 def run(

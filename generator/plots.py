@@ -81,6 +81,12 @@ def trajectory_png(
     for ax in (c, d):
         ax.set_xlabel("t (s)")
     fig.suptitle(f"{scene.name}: {scene.description}")
+    return png_bytes(fig)
+
+
+def png_bytes(fig: Figure) -> bytes:
+    """The figure as PNG at its own size and dpi (no bbox_inches="tight": the
+    size stays fixed), for write_atomic."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)  # no bbox_inches="tight": the size stays fixed
+    fig.savefig(buf, format="png", dpi=fig.dpi)
     return buf.getvalue()

@@ -14,7 +14,6 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -207,14 +206,14 @@ def spin_prediction(v: dict[str, float], omega: float, u4: float) -> str:
     return "stable" if (h_a - it1 * omega) * (h_a - it3 * omega) > 0 else "unstable"
 
 
-def plot(res: Result, path: Path) -> None:
-    """Invariant drift and the states along the run, one PNG per case."""
-    import matplotlib
+def plot(res: Result) -> bytes:
+    """Invariant drift and the states along the run: one PNG per case."""
+    from matplotlib.figure import Figure  # matplotlib: loaded only for plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gyrogen.plots import png_bytes
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5), dpi=100)
+    fig = Figure(figsize=(12, 4.5), dpi=100)
+    a, b = fig.subplots(1, 2)
     if res.trajectory is not None and res.times is not None:
         for i, s in enumerate(res.case.scene.states):
             if s.startswith("u"):
@@ -236,7 +235,4 @@ def plot(res: Result, path: Path) -> None:
     )
     fig.suptitle(f"gyrogen check: {res.case.name}")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, format="png")
-    plt.close(fig)
-    tmp.replace(path)
+    return png_bytes(fig)

@@ -140,30 +140,29 @@ def table_json(prob: Problem, runs: list[Run]) -> str:
     return json.dumps(data, indent=2, sort_keys=True) + "\n"
 
 
-def figure(prob: Problem, runs: list[Run], path: Path) -> None:
-    import matplotlib
+def figure(prob: Problem, runs: list[Run]) -> bytes:
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure  # matplotlib: loaded only for the figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from gyrogen.plots import png_bytes
 
-    fig, ax = plt.subplots(figsize=(14, 7), dpi=100)
+    fig = Figure(figsize=(14, 7), dpi=100)
+    ax = fig.subplots()
+    palette = colormaps["tab20"]
     labels = sorted({r.label for r in runs})
     for i, label in enumerate(labels):
         pts = sorted((r.seconds, r.error) for r in _by(runs, label) if r.status.startswith("ok"))
         if not pts:
             continue
         style = "-o" if "scipy" not in label else "--s"
-        ax.loglog(*zip(*pts, strict=True), style, label=label, color=plt.cm.tab20(i % 20), ms=4)
+        ax.loglog(*zip(*pts, strict=True), style, label=label, color=palette(i % 20), ms=4)
     ax.set_xlabel("wall time per integration (s)")
     ax.set_ylabel("mixed error at t1: max |x - ref| / (1 + |ref|)")
     ax.set_title(f"Work-precision, scene {prob.scene.name} (t1 = {prob.t1:g} s)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="method (backend)")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, format="png")
-    plt.close(fig)
-    tmp.replace(path)
+    return png_bytes(fig)
 
 
 def write(prob: Problem, runs: list[Run], out: Path) -> list[Path]:
@@ -174,9 +173,9 @@ def write(prob: Problem, runs: list[Run], out: Path) -> list[Path]:
             "workprecision.csv": table_csv(runs),
             "workprecision.json": table_json(prob, runs),
             "summary.md": md,
+            "workprecision.png": figure(prob, runs),
         },
     )
-    figure(prob, runs, out / "workprecision.png")
     return [
         out / n
         for n in ("workprecision.png", "workprecision.csv", "workprecision.json", "summary.md")

@@ -62,7 +62,7 @@ def check(
             res = stability.run_case(case, compiled[case.scene.name])
             results.append(res)
             if plots is not None:
-                stability.plot(res, plots / f"{_slug(case.name)}.png")
+                write_atomic(plots, {f"{_slug(case.name)}.png": stability.plot(res)})
     _table(results)
     failed = [r for r in results if not r.passed]
     if failed:
