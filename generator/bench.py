@@ -129,8 +129,8 @@ def _bench_backend(
     # Pointers made once: from_buffer per call would be timed along with the RHS.
     xp, cp, op = (ffi.from_buffer("double[]", a) for a in (x, c, out))
     xsp, outsp = ffi.from_buffer("double[]", xs), ffi.from_buffer("double[]", outs)
-    rhs_name = comp.manifest["functions"][lang]["rhs"]
-    f = getattr(lib, rhs_name)
+    rhs_name = comp.symbol("rhs")
+    f = comp.function("rhs")
     batch_fn = lib.gyrogen_rhs_batch
     n = len(xs)
 

@@ -97,10 +97,19 @@ class Compiled:
     def nc(self) -> int:
         return int(self.manifest["nc"])
 
+    def symbol(self, name: str) -> str:
+        """The exported name of a function: setup, rhs, jac, an output or an
+        integrator (rk4, dop853_batch, ...), as the manifest lists it."""
+        return str(self.manifest["functions"][self.language][name])
+
+    def function(self, name: str) -> Any:
+        """That function, callable through cffi."""
+        return getattr(self.lib, self.symbol(name))
+
     def setup_code(self, p: np.ndarray) -> tuple[int, np.ndarray]:
         p = np.ascontiguousarray(p, dtype=np.float64)
         c = np.zeros(self.nc)
-        fn = getattr(self.lib, self.manifest["functions"][self.language]["setup"])
+        fn = self.function("setup")
         code = fn(self.ffi.from_buffer("double[]", p), self.ffi.from_buffer("double[]", c))
         return int(code), c
 
@@ -125,7 +134,7 @@ class Compiled:
     def _apply(self, name: str, size: int, x: np.ndarray, c: np.ndarray, t: float) -> np.ndarray:
         x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, self.nx)
         out = np.empty((x.shape[0], size))
-        fn = self.ffi.addressof(self.lib, self.manifest["functions"][self.language][name])
+        fn = self.ffi.addressof(self.lib, self.symbol(name))
         self.lib.gyrogen_batch(
             fn,
             x.shape[0],
@@ -205,7 +214,7 @@ class Compiled:
         n = x.shape[0]
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)
-        fn = getattr(self.lib, self.manifest["functions"][self.language][f"{method}_batch"])
+        fn = self.function(f"{method}_batch")
         tail = (
             self.ffi.from_buffer("double[]", x),
             self.ffi.from_buffer("double[]", np.ascontiguousarray(c, dtype=np.float64)),

@@ -159,7 +159,7 @@ class _Rhs:
         self, comp: build.Compiled, c: np.ndarray, t_end: float, advance: Advance, budget: int
     ):
         ffi = comp.ffi
-        self.fn = getattr(comp.lib, comp.manifest["functions"][comp.language]["rhs"])
+        self.fn = comp.function("rhs")
         self.c = np.ascontiguousarray(c, dtype=np.float64)
         self.x, self.out = np.empty(comp.nx), np.empty(comp.nx)
         self.xp, self.cp, self.op = (

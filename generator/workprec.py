@@ -149,7 +149,7 @@ def closed_form(prob: Problem) -> np.ndarray:
 def _cffi_rhs(comp: Compiled, c: np.ndarray) -> Callable[[float, np.ndarray], np.ndarray]:
     """f(t, x) through cffi with preallocated buffers: the cheapest path
     from Python into the generated C."""
-    ffi, fn = comp.ffi, getattr(comp.lib, comp.manifest["functions"][comp.language]["rhs"])
+    ffi, fn = comp.ffi, comp.function("rhs")
     cbuf = ffi.from_buffer("double[]", np.ascontiguousarray(c))
     out = np.empty(comp.nx)
     obuf = ffi.from_buffer("double[]", out)
@@ -191,7 +191,7 @@ def _raw_call(comp: Compiled, method: str, prob: Problem, kw: dict[str, Any]) ->
     embedding the C would call it: Compiled.integrate's conveniences (a
     copy, a stats dict) cost ~6 us a call, half of a fast integration."""
     ffi = comp.ffi
-    fn = getattr(comp.lib, comp.manifest["functions"][comp.language][method])
+    fn = comp.function(method)
     x = prob.x0.copy()
     xb, cb = (
         ffi.from_buffer("double[]", x),
