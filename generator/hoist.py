@@ -9,15 +9,11 @@ from collections.abc import Sequence
 
 import sympy as sm
 
+from gyrogen.literals import as_double
+
 
 def constants(n: int) -> tuple[sm.Symbol, ...]:
     return tuple(sm.Symbol(f"c{k}", real=True) for k in range(n))
-
-
-def _number(value: sm.Expr) -> sm.Expr:
-    """Folded numbers are exact rationals during the derivation; the code
-    gets the nearest double (Python's float() of a Rational rounds right)."""
-    return value if value.is_Integer else sm.Float(float(value))
 
 
 class Hoister:
@@ -31,7 +27,7 @@ class Hoister:
     def symbol_for(self, coeff: sm.Expr) -> sm.Expr:
         coeff = sm.factor(sm.cancel(coeff))
         if coeff.is_number:
-            return _number(coeff)
+            return as_double(coeff)
         if coeff in self._index:
             return constants(self._index[coeff] + 1)[-1]
         neg = sm.factor(-coeff)

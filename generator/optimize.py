@@ -20,6 +20,7 @@ import sympy as sm
 
 from gyrogen.equations import Equations
 from gyrogen.hoist import Hoister, hoist
+from gyrogen.literals import as_double, writable_form
 
 
 @dataclass(frozen=True)
@@ -141,7 +142,9 @@ def _reuse_earlier(exprs: Sequence[sm.Expr], speeds: Sequence[sm.Symbol]) -> lis
 
 
 def _cse(exprs: Sequence[sm.Expr], names: Iterator[sm.Symbol]) -> Block:
-    temps, reduced = sm.cse(list(exprs), symbols=names)
+    """Common subexpressions of exprs, with every number in a form the code
+    can write (literals.writable_form: before CSE, so it shares those)."""
+    temps, reduced = sm.cse([writable_form(e) for e in exprs], symbols=names)
     return Block(tuple(Assignment(s, e) for s, e in temps), tuple(reduced))
 
 
@@ -180,7 +183,7 @@ def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     a, b, d = block[0, 0], block[0, 1], block[1, 1]
     big = (a + d) / 2 + sm.sqrt((a - d) ** 2 / 4 + b**2)
     cond = big**2 / det
-    return sm.Float(float(cond)) if cond.is_number else cond
+    return as_double(cond, integers=False) if cond.is_number else cond
 
 
 MU = sm.Symbol("mu", positive=True)

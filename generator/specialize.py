@@ -22,10 +22,14 @@ def _symbols(scene: Scene) -> dict[str, sm.Symbol]:
 
 
 def _values(scene: Scene, sym: dict[str, sm.Symbol]) -> dict[str, sm.Expr]:
-    """Each parameter as the code sees it: its symbol (runtime) or its exact
-    value (folded; sm.Rational keeps the double's value exactly, so zeros
-    cancel terms exactly)."""
-    return {n: sym[n] if v == "runtime" else sm.Rational(v) for n, v in scene.parameters.items()}
+    """Each parameter as the code sees it: its symbol (runtime) or its value
+    (folded) as the exact rational of the decimal the scene writes (0.05 is
+    1/20, not the double's 3602879701896397/2**56): zeros and equal values
+    cancel exactly, and the numbers stay as short as the user wrote them."""
+    return {
+        n: sym[n] if v == "runtime" else sm.Rational(repr(float(v)))
+        for n, v in scene.parameters.items()
+    }
 
 
 SLIP = sm.Symbol("slip", real=True)

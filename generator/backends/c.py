@@ -6,14 +6,14 @@ import sympy as sm
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 
-from gyrogen.backends.printing import functions, jacobian, statements
+from gyrogen.backends.printing import WritableNumbers, functions, jacobian, statements
 from gyrogen.hoist import constants
 from gyrogen.render import c_double, render
 from gyrogen.tableaus import TABLEAUS
 from gyrogen.unit import Unit
 
 
-class CPrinter(C99CodePrinter):
+class CPrinter(WritableNumbers, C99CodePrinter):
     """C99 with the hoisted constants as c[k], doubles in their shortest
     exact form, and small integer powers as products (x*x beats pow(x, 2))."""
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sympy as sm
 from sympy.printing.fortran import FCodePrinter
 
-from gyrogen.backends.printing import functions, jacobian, statements
+from gyrogen.backends.printing import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
 from gyrogen.hoist import constants
 from gyrogen.render import f_double, render
@@ -13,7 +13,7 @@ from gyrogen.tableaus import TABLEAUS
 from gyrogen.unit import Unit
 
 
-class FortranPrinter(FCodePrinter):
+class FortranPrinter(WritableNumbers, FCodePrinter):
     """Fortran 2008 free form (wrapped under 132 columns) with the hoisted
     constants as c(k+1). Names are printed as they are: `_check_names`
     refuses a function whose names differ only in case, where sympy would

@@ -11,8 +11,28 @@ from functools import partial
 
 import sympy as sm
 
+from gyrogen.literals import LiteralError, writable
 from gyrogen.optimize import Block
 from gyrogen.unit import Unit
+
+
+class WritableNumbers:
+    """A printer mixin: a number the target cannot write as it is (see
+    gyrogen.literals) is an error here, never a truncated literal. optimize
+    puts every expression in writable form first, so this is the last guard."""
+
+    def _print_Integer(self, expr: sm.Integer) -> str:
+        self._check(expr)
+        return str(super()._print_Integer(expr))  # type: ignore[misc]
+
+    def _print_Rational(self, expr: sm.Rational) -> str:
+        self._check(expr)
+        return str(super()._print_Rational(expr))  # type: ignore[misc]
+
+    @staticmethod
+    def _check(expr: sm.Rational) -> None:
+        if not writable(expr):
+            raise LiteralError(f"internal: the number {expr} reached a printer unconverted")
 
 
 @dataclass(frozen=True)
