@@ -99,6 +99,26 @@ WARN_CONDITION = 1e8
 # lamina, a thin disc), and rounding must not refuse it.
 TRIANGLE_SLACK = 1e-12
 
+# A scene's name is the prefix of every generated identifier. Fortran allows
+# 63 characters in one, and gyrogen appends up to 26 (<NAME>_ODE_ERR_ATTITUDE_SINGULAR):
+# 32 leaves room, and keeps every generated Fortran line within 132 columns.
+NAME_MAX_LENGTH = 32
+
+# A description is data: it reaches the generated files only inside comments,
+# wrapped and escaped for each target, so it may hold any text but control
+# characters; this many characters at most.
+DESCRIPTION_MAX_LENGTH = 2000
+
+# A folded value is 0 or has a magnitude in [FOLDED_MIN, FOLDED_MAX]: the
+# constants of setup multiply up to about six parameters, and must stay
+# within double range (runtime values are checked by setup at run time).
+FOLDED_MIN = 1e-50
+FOLDED_MAX = 1e50
+
+# Euler parameters e0..e3 given as a start state must have |e| within this of
+# 1; gyrogen then normalizes them exactly. A larger miss is a typo, refused.
+QUATERNION_NORM_SLACK = 1e-6
+
 # The compiled integrators a scene may ask for (scene key `integrators`).
 INTEGRATORS: dict[str, str] = {
     "rk4": "Classic Runge-Kutta, order 4, fixed step.",

@@ -18,10 +18,29 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    field_validator,
+    model_validator,
+)
 
 from gyrogen.errors import SceneError
-from gyrogen.layout import PARAMETERS, STATES, TRIANGLE_SLACK
+from gyrogen.layout import (
+    DESCRIPTION_MAX_LENGTH,
+    FOLDED_MAX,
+    FOLDED_MIN,
+    MAX_CONDITION,
+    NAME_MAX_LENGTH,
+    PARAMETERS,
+    QUATERNION_NORM_SLACK,
+    STATES,
+    TRIANGLE_SLACK,
+)
 
 _C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if "
@@ -31,7 +50,31 @@ _C_KEYWORDS = frozenset(
 CONTROLLER_PARAMETERS = ("k", "w_ref")
 """Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s)."""
 
-Value = float | Literal["runtime"]
+
+def _parameter(v: object) -> object:
+    """A parameter is a number (folded into the code) or "runtime"; a TOML
+    boolean or a quoted number is neither (pydantic would take true as 1.0)."""
+    if v == "runtime":
+        return v
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f'expected a number or "runtime", not {v!r}')
+    try:
+        x = float(v)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        raise ValueError(f"{v!r} is not a finite number")
+    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
+        raise ValueError(
+            f"{x!r}: a folded value must be 0 or of magnitude {FOLDED_MIN:g} to "
+            f'{FOLDED_MAX:g} (its products must stay doubles); make it "runtime"'
+        )
+    return x
+
+
+Value = Annotated[float | Literal["runtime"], BeforeValidator(_parameter)]
+Number = StrictFloat
+"""A TOML integer or float, never a boolean or a string."""
 
 
 class _Strict(BaseModel):
@@ -39,12 +82,12 @@ class _Strict(BaseModel):
 
 
 class Effects(_Strict):
-    translation: bool = True
+    translation: StrictBool = True
     """Keep q5..q7, u5..u7 (they never couple to the rest; gravity acts only on them)."""
-    rotor_angle: bool = True
+    rotor_angle: StrictBool = True
     """Keep q4 (ignorable: nothing depends on it)."""
     torque: Literal["none", "constant", "speed_controller", "table"] = "constant"
-    torque_table: list[tuple[float, float]] | None = None
+    torque_table: list[tuple[Number, Number]] | None = None
     """(t, T) points of a piecewise-linear T(t), held constant outside."""
 
     @model_validator(mode="after")
@@ -63,23 +106,23 @@ class Effects(_Strict):
 
 
 class Outputs(_Strict):
-    kinetic_energy: bool = False
-    angular_momentum: bool = False
+    kinetic_energy: StrictBool = False
+    angular_momentum: StrictBool = False
     """Angular momentum about AB* in N components (uses the direction cosines)."""
-    power: bool = False
+    power: StrictBool = False
     """Power of the motor torque, T (u4 - u2)."""
 
 
 class Simulate(_Strict):
-    initial: dict[str, float] = Field(default_factory=dict)
+    initial: dict[str, Number] = Field(default_factory=dict)
     """Initial state by name; states not named start at 0."""
-    parameters: dict[str, float] = Field(default_factory=dict)
+    parameters: dict[str, Number] = Field(default_factory=dict)
     """Values of the runtime parameters for `gyrogen simulate`."""
-    t_end: Annotated[float, Field(gt=0)] = 10.0
-    dt: Annotated[float, Field(gt=0)] = 0.01
+    t_end: Annotated[Number, Field(gt=0)] = 10.0
+    dt: Annotated[Number, Field(gt=0)] = 0.01
     """Output step of the trajectory."""
-    rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-10
-    atol: Annotated[float, Field(gt=0)] = 1e-10
+    rtol: Annotated[Number, Field(gt=0, lt=1)] = 1e-10
+    atol: Annotated[Number, Field(gt=0)] = 1e-10
 
 
 class Scene(_Strict):
@@ -105,11 +148,13 @@ class Scene(_Strict):
     @field_validator("name")
     @classmethod
     def _name(cls, v: str) -> str:
-        if not v.isascii() or not (v.replace("_", "a").isalnum() and not v[0].isdigit()):
-            raise ValueError(f"{v!r} is not a valid C identifier")
-        if v in _C_KEYWORDS:
-            raise ValueError(f"{v!r} is a C keyword")
+        check_name(v)
         return v
+
+    @field_validator("description")
+    @classmethod
+    def _description(cls, v: str) -> str:
+        return check_description(v)
 
     @field_validator("targets")
     @classmethod
@@ -138,6 +183,8 @@ class Scene(_Strict):
                 f"simulate.parameters: {', '.join(bad)} is not a runtime parameter of this scene"
             )
         _check_physics({**self.parameters, **self.simulate.parameters})
+        if self.attitude == "quaternion":
+            _check_quaternion(self.simulate.initial)
         return self
 
     @property
@@ -155,8 +202,12 @@ class Scene(_Strict):
 
     def initial_state(self) -> tuple[float, ...]:
         """simulate.initial in state order; unnamed states start at 0, except
-        e0 (the identity attitude, e = (1, 0, 0, 0))."""
+        e0 (the identity attitude, e = (1, 0, 0, 0)). Euler parameters are
+        normalized (validation has held them within QUATERNION_NORM_SLACK)."""
         start = {"e0": 1.0, **self.simulate.initial}
+        if self.attitude == "quaternion":
+            norm = math.sqrt(sum(start.get(e, 0.0) ** 2 for e in QUATERNION))
+            start.update({e: start.get(e, 0.0) / norm for e in QUATERNION})
         return tuple(start.get(s, 0.0) for s in self.states)
 
     @property
@@ -167,6 +218,58 @@ class Scene(_Strict):
 
     def folded(self) -> dict[str, float]:
         return {k: v for k, v in self.parameters.items() if not isinstance(v, str)}
+
+
+QUATERNION = ("e0", "e1", "e2", "e3")
+
+
+def check_name(v: str) -> None:
+    """The scene's name prefixes every identifier gyrogen writes, in C (and
+    C++, through the header) and Fortran: a letter, then letters, digits and
+    single underscores, never ending in one (prefix + "_" would make "__",
+    which C++ reserves), at most NAME_MAX_LENGTH characters."""
+    shown = repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
+    if not v:
+        raise ValueError("must not be empty")
+    if len(v) > NAME_MAX_LENGTH:
+        raise ValueError(
+            f"{shown} is longer than {NAME_MAX_LENGTH} characters (Fortran identifiers "
+            "stop at 63, and gyrogen appends up to 26)"
+        )
+    if not (v.isascii() and v[0].isalpha() and v.replace("_", "a").isalnum()):
+        raise ValueError(
+            f"{shown} is not an identifier in C and Fortran: a letter, then letters, "
+            "digits and underscores"
+        )
+    if "__" in v or v.endswith("_"):
+        raise ValueError(f"{shown} has a double or trailing underscore (C++ reserves '__')")
+    if v in _C_KEYWORDS:
+        raise ValueError(f"{shown} is a C keyword")
+
+
+def check_description(v: str) -> str:
+    """Any text but control characters (newlines and tabs are fine), at most
+    DESCRIPTION_MAX_LENGTH characters; CR LF is read as a newline."""
+    v = v.replace("\r\n", "\n")
+    if len(v) > DESCRIPTION_MAX_LENGTH:
+        raise ValueError(f"{len(v)} characters; at most {DESCRIPTION_MAX_LENGTH}")
+    for i, ch in enumerate(v):
+        if ch not in "\n\t" and (ord(ch) < 32 or 127 <= ord(ch) < 160):
+            raise ValueError(f"control character U+{ord(ch):04X} at position {i}")
+    return v
+
+
+def _check_quaternion(initial: dict[str, float]) -> None:
+    """Euler parameters start on |e| = 1 (e0 = 1 when not given)."""
+    e = [initial.get(n, 1.0 if n == "e0" else 0.0) for n in QUATERNION]
+    norm = math.sqrt(sum(x * x for x in e))
+    if norm == 0.0:
+        raise ValueError("simulate.initial: e0..e3 are all zero: not an attitude")
+    if abs(norm - 1.0) > QUATERNION_NORM_SLACK:
+        raise ValueError(
+            f"simulate.initial: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
+            f"{norm:.9g}, not 1 (within {QUATERNION_NORM_SLACK:g}): give a unit quaternion"
+        )
 
 
 def required_parameters(effects: Effects) -> tuple[str, ...]:
@@ -226,11 +329,24 @@ def _check_physics(p: dict[str, Value]) -> None:
             )
     if known("I", "J") and v["J"] - 2 * v["I"] > TRIANGLE_SLACK * (2 * v["I"] + v["J"]):
         raise ValueError(f"parameters.J: rotor needs J <= 2 I (I = {v['I']}, J = {v['J']})")
+    coupled = ("m_a", "m_b", "I11", "I33", "I13", "I", "l1", "l3")
+    if known(*coupled):
+        from gyrogen.sampling import lumped_condition  # numpy: only when needed
+
+        full = [v.get(n, 1.0) for n in PARAMETERS]
+        cond = float(lumped_condition(full))
+        if not cond <= MAX_CONDITION:
+            raise ValueError(
+                f"parameters: the mass matrix's coupled block has condition number "
+                f"{cond:.3g} > {MAX_CONDITION:g}: numerically singular"
+            )
 
 
 def _one_line(exc: pydantic.ValidationError) -> str:
     err = exc.errors()[0]
-    loc = ".".join(str(x) for x in err["loc"])
+    # a union's member ("float", "literal['runtime']") is not a key the user wrote
+    keys = [str(x) for x in err["loc"] if not str(x).startswith(("float", "literal["))]
+    loc = ".".join(keys)
     msg = str(err["msg"]).removeprefix("Value error, ")
     if err["type"] == "extra_forbidden":
         msg = "unknown key"

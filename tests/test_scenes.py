@@ -52,7 +52,64 @@ BAD = [
     (
         "bad name",
         edit('name = "wheel_spinup"', 'name = "2fast"'),
-        "name: '2fast' is not a valid C identifier",
+        "name: '2fast' is not an identifier in C and Fortran",
+    ),
+    ("name _x", edit('name = "wheel_spinup"', 'name = "_x"'), "name: '_x' is not an identifier"),
+    ("name a__b", edit('name = "wheel_spinup"', 'name = "a__b"'), "double or trailing underscore"),
+    ("name a_", edit('name = "wheel_spinup"', 'name = "a_"'), "double or trailing underscore"),
+    ("name empty", edit('name = "wheel_spinup"', 'name = ""'), "name: must not be empty"),
+    ("name non-ASCII", edit('name = "wheel_spinup"', 'name = "r\u00f6tor"'), "not an identifier"),
+    (
+        "name 33 characters",
+        edit('name = "wheel_spinup"', f'name = "{"a" * 33}"'),
+        "is longer than 32 characters",
+    ),
+    (
+        "name 300 characters",
+        edit('name = "wheel_spinup"', f'name = "{"b" * 300}"'),
+        "... (300 characters) is longer than 32",
+    ),
+    (
+        "description NUL",
+        edit('description = "', 'description = "a\\u0000b '),
+        "description: control character U+0000 at position 1",
+    ),
+    (
+        "description escape",
+        edit('description = "', 'description = "\\u001b[31m'),
+        "description: control character U+001B",
+    ),
+    (
+        "description too long",
+        edit('description = "', f'description = "{"x" * 2001}'),
+        "description: 2",
+    ),
+    (
+        "number true",
+        edit("m_a = 150.0", "m_a = true"),
+        'parameters.m_a: expected a number or "runtime", not True',
+    ),
+    ("number quoted", edit("m_a = 150.0", 'm_a = "150"'), "parameters.m_a: expected a number"),
+    ("folded 1e308", edit("m_a = 150.0", "m_a = 1e308"), "parameters.m_a: 1e+308: a folded value"),
+    ("folded 1e-60", edit("l1  = 0.3", "l1 = 1e-60"), "parameters.l1: 1e-60: a folded value"),
+    (
+        "flag as number",
+        edit("rotor_angle = true", "rotor_angle = 1"),
+        "effects.rotor_angle: Input should be a valid boolean",
+    ),
+    ("flag as string", edit("rotor_angle = true", 'rotor_angle = "false"'), "effects.rotor_angle"),
+    ("t_end as string", edit("t_end = ", 't_end = "5" #'), "simulate.t_end"),
+    (
+        "folded singular",
+        edit("I11 = ", "I11 = 1e-15 #")
+        .replace("I22 = 25.0", "I22 = 1e-15")
+        .replace("I33 = 18.0", "I33 = 1e-15")
+        .replace("I13 = 0.5", "I13 = 0.0")
+        .replace("I   = 0.01", "I = 1e-15")
+        .replace("J   = 0.015", "J = 1e-15")
+        .replace("l3  = 0.1", "l3 = 1.0")
+        .replace("l1  = 0.3", "l1 = 1.0"),
+        "condition number",
     ),
     ("C keyword", edit('name = "wheel_spinup"', 'name = "double"'), "is a C keyword"),
     ("g unused", edit("T   = ", "g = 9.81\nT   = "), "parameters.g: gravity has no effect"),

@@ -61,7 +61,8 @@ contains
   ! Checks p and computes the constants c that dual_spin_rhs needs
   ! (0 ops, plus the checks). Returns DUAL_SPIN_OK or
   ! the first failing check's code; c is then not to be used.
-  function dual_spin_setup(p, c) result(status) bind(C, name="dual_spin_f_setup")
+  function dual_spin_setup(p, c) result(status) &
+      bind(C, name="dual_spin_f_setup")
     real(c_double), intent(in) :: p(0)
     real(c_double), intent(out) :: c(1)
     integer(c_int) :: status
@@ -124,7 +125,8 @@ contains
   end function dual_spin_setup
 
   ! dxdt = f(t, x) for the constants c from dual_spin_setup (36 ops).
-  ! Pure: no allocation, no saved state. Singular at cos(q2) = 0.
+  ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
+  ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
   subroutine dual_spin_rhs(t, x, c, dxdt) bind(C, name="dual_spin_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
@@ -168,7 +170,8 @@ contains
   end subroutine dual_spin_rhs
 
   ! out = kinetic energy of the system (J): 13 ops.
-  subroutine dual_spin_kinetic_energy(t, x, c, out) bind(C, name="dual_spin_f_kinetic_energy")
+  subroutine dual_spin_kinetic_energy(t, x, c, out) &
+      bind(C, name="dual_spin_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
     real(c_double), intent(in) :: c(1)
@@ -190,7 +193,8 @@ contains
   end subroutine dual_spin_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.
-  subroutine dual_spin_angular_momentum(t, x, c, out) bind(C, name="dual_spin_f_angular_momentum")
+  subroutine dual_spin_angular_momentum(t, x, c, out) &
+      bind(C, name="dual_spin_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
     real(c_double), intent(in) :: c(1)

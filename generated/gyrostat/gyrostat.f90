@@ -78,7 +78,8 @@ contains
   ! Checks p and computes the constants c that gyrostat_rhs needs
   ! (110 ops, plus the checks). Returns GYROSTAT_OK or
   ! the first failing check's code; c is then not to be used.
-  function gyrostat_setup(p, c) result(status) bind(C, name="gyrostat_f_setup")
+  function gyrostat_setup(p, c) result(status) &
+      bind(C, name="gyrostat_f_setup")
     real(c_double), intent(in) :: p(12)
     real(c_double), intent(out) :: c(12)
     integer(c_int) :: status
@@ -212,7 +213,8 @@ contains
   end function gyrostat_setup
 
   ! dxdt = f(t, x) for the constants c from gyrostat_setup (40 ops).
-  ! Pure: no allocation, no saved state. Singular at cos(q2) = 0.
+  ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
+  ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
   subroutine gyrostat_rhs(t, x, c, dxdt) bind(C, name="gyrostat_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(14)

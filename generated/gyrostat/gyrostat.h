@@ -57,6 +57,9 @@ extern "C" {
  *   p[ 9]  l3    m       B* from A* along a3
  *   p[10]  g     m/s^2   gravity along +n3
  *   p[11]  T     N m     motor torque on B about a2 (minus on A)
+ *
+ * Motor torque T, constant: on B about a2, and -T on A.
+ * Translation: the mass center AB* moves under gravity g along +n3.
  */
 
 /* Return codes of gyrostat_setup, checked in this order. */
@@ -81,7 +84,8 @@ int  gyrostat_setup(const double *p, double *c);
 /*
  * dxdt = f(t, x) for the constants c from gyrostat_setup. Pure: no
  * allocation, no global state, re-entrant; x and dxdt must not overlap.
- * Singular at cos(q2) = 0 (gimbal lock of the 3-1-2 angles).
+ * The attitude is 3-1-2 Euler angles x[0..2]: singular at cos(q2) = 0
+ * (gimbal lock); near it use a scene with attitude = "quaternion".
  */
 void gyrostat_rhs(double t, const double *x, const double *c, double *dxdt);
 

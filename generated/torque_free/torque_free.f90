@@ -61,7 +61,8 @@ contains
   ! Checks p and computes the constants c that torque_free_rhs needs
   ! (0 ops, plus the checks). Returns TORQUE_FREE_OK or
   ! the first failing check's code; c is then not to be used.
-  function torque_free_setup(p, c) result(status) bind(C, name="torque_free_f_setup")
+  function torque_free_setup(p, c) result(status) &
+      bind(C, name="torque_free_f_setup")
     real(c_double), intent(in) :: p(0)
     real(c_double), intent(out) :: c(1)
     integer(c_int) :: status
@@ -124,7 +125,8 @@ contains
   end function torque_free_setup
 
   ! dxdt = f(t, x) for the constants c from torque_free_setup (19 ops).
-  ! Pure: no allocation, no saved state. Singular at cos(q2) = 0.
+  ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
+  ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
   subroutine torque_free_rhs(t, x, c, dxdt) bind(C, name="torque_free_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
@@ -163,7 +165,8 @@ contains
   end subroutine torque_free_rhs
 
   ! out = kinetic energy of the system (J): 11 ops.
-  subroutine torque_free_kinetic_energy(t, x, c, out) bind(C, name="torque_free_f_kinetic_energy")
+  subroutine torque_free_kinetic_energy(t, x, c, out) &
+      bind(C, name="torque_free_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
     real(c_double), intent(in) :: c(1)
@@ -184,7 +187,8 @@ contains
   end subroutine torque_free_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 42 ops.
-  subroutine torque_free_angular_momentum(t, x, c, out) bind(C, name="torque_free_f_angular_momentum")
+  subroutine torque_free_angular_momentum(t, x, c, out) &
+      bind(C, name="torque_free_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
     real(c_double), intent(in) :: c(1)

@@ -43,6 +43,10 @@ extern "C" {
  * Folded into the code:
  *   m_a = 10.0, m_b = 2.0, I11 = 3.0, I22 = 4.0, I33 = 3.0, I13 = 0.0, I =
  *   0.05, J = 0.08, l1 = 0.0, l3 = 0.0
+ *
+ * No motor torque: the rotor spins freely about a2 (u4 stays constant).
+ * No translation: AB* is at rest (its position and velocity are not states).
+ * The rotor angle q4 is not a state: nothing depends on it.
  */
 
 /* Return codes of torque_free_setup, checked in this order. */
@@ -67,7 +71,8 @@ int  torque_free_setup(const double *p, double *c);
 /*
  * dxdt = f(t, x) for the constants c from torque_free_setup. Pure: no
  * allocation, no global state, re-entrant; x and dxdt must not overlap.
- * Singular at cos(q2) = 0 (gimbal lock of the 3-1-2 angles).
+ * The attitude is 3-1-2 Euler angles x[0..2]: singular at cos(q2) = 0
+ * (gimbal lock); near it use a scene with attitude = "quaternion".
  */
 void torque_free_rhs(double t, const double *x, const double *c, double *dxdt);
 

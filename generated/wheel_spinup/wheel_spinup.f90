@@ -64,7 +64,8 @@ contains
   ! Checks p and computes the constants c that wheel_spinup_rhs needs
   ! (6 ops, plus the checks). Returns WHEEL_SPINUP_OK or
   ! the first failing check's code; c is then not to be used.
-  function wheel_spinup_setup(p, c) result(status) bind(C, name="wheel_spinup_f_setup")
+  function wheel_spinup_setup(p, c) result(status) &
+      bind(C, name="wheel_spinup_f_setup")
     real(c_double), intent(in) :: p(1)
     real(c_double), intent(out) :: c(4)
     integer(c_int) :: status
@@ -120,9 +121,8 @@ contains
       return
     end if
 
-    c(1) = -11033630824386508710627304699592704.0d0/ &
-          279085956146246984853370192600760325.0d0*T
-    c(2) = (72057594037927936.0d0/1080863910568919.0d0)*T
+    c(1) = -17.0d0/430.0d0*T
+    c(2) = (200.0d0/3.0d0)*T
     c(3) = -T
     c(4) = 1.10709823420372_c_double
     if (.not. (c(WHEEL_SPINUP_COND) <= 10000000000000.0_c_double)) then
@@ -133,7 +133,8 @@ contains
   end function wheel_spinup_setup
 
   ! dxdt = f(t, x) for the constants c from wheel_spinup_setup (39 ops).
-  ! Pure: no allocation, no saved state. Singular at cos(q2) = 0.
+  ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
+  ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
   subroutine wheel_spinup_rhs(t, x, c, dxdt) bind(C, name="wheel_spinup_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
@@ -178,7 +179,8 @@ contains
   end subroutine wheel_spinup_rhs
 
   ! out = kinetic energy of the system (J): 13 ops.
-  subroutine wheel_spinup_kinetic_energy(t, x, c, out) bind(C, name="wheel_spinup_f_kinetic_energy")
+  subroutine wheel_spinup_kinetic_energy(t, x, c, out) &
+      bind(C, name="wheel_spinup_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
     real(c_double), intent(in) :: c(4)
@@ -200,7 +202,8 @@ contains
   end subroutine wheel_spinup_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.
-  subroutine wheel_spinup_angular_momentum(t, x, c, out) bind(C, name="wheel_spinup_f_angular_momentum")
+  subroutine wheel_spinup_angular_momentum(t, x, c, out) &
+      bind(C, name="wheel_spinup_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
     real(c_double), intent(in) :: c(4)
@@ -256,7 +259,8 @@ contains
   end subroutine wheel_spinup_angular_momentum
 
   ! out = power of the motor torque, T (u4 - u2) (W): 3 ops.
-  subroutine wheel_spinup_power(t, x, c, out) bind(C, name="wheel_spinup_f_power")
+  subroutine wheel_spinup_power(t, x, c, out) &
+      bind(C, name="wheel_spinup_f_power")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(8)
     real(c_double), intent(in) :: c(4)

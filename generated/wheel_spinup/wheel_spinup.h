@@ -44,6 +44,9 @@ extern "C" {
  * Folded into the code:
  *   m_a = 150.0, m_b = 3.0, I11 = 20.0, I22 = 25.0, I33 = 18.0, I13 = 0.5,
  *   I = 0.01, J = 0.015, l1 = 0.3, l3 = 0.1
+ *
+ * Motor torque T, constant: on B about a2, and -T on A.
+ * No translation: AB* is at rest (its position and velocity are not states).
  */
 
 /* Return codes of wheel_spinup_setup, checked in this order. */
@@ -68,7 +71,8 @@ int  wheel_spinup_setup(const double *p, double *c);
 /*
  * dxdt = f(t, x) for the constants c from wheel_spinup_setup. Pure: no
  * allocation, no global state, re-entrant; x and dxdt must not overlap.
- * Singular at cos(q2) = 0 (gimbal lock of the 3-1-2 angles).
+ * The attitude is 3-1-2 Euler angles x[0..2]: singular at cos(q2) = 0
+ * (gimbal lock); near it use a scene with attitude = "quaternion".
  */
 void wheel_spinup_rhs(double t, const double *x, const double *c, double *dxdt);
 
