@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import time
 from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
@@ -13,6 +14,7 @@ from typing import Any
 from gyrogen import library
 from gyrogen.backends import c, fortran
 from gyrogen.errors import GyrogenError
+from gyrogen.literals import LiteralError
 from gyrogen.scene import Scene
 from gyrogen.scene import default as default_scene
 from gyrogen.unit import Unit, make_unit
@@ -103,8 +105,59 @@ def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
         raise GyrogenError(f"cannot write to {out}: {exc.strerror}") from exc
 
 
-def generate(scene: Scene, out: Path, lib: bool = False) -> Unit:
-    # the default scene's unit is the full model every manifest compares with: build it once
-    unit = full_model_unit() if scene == default_scene() else make_unit(scene)
-    write_atomic(out, render_all(unit, lib))
+CHECK_STATES = 200
+CHECK_PARAMS = 5
+CHECK_ILL = 2
+"""What `gyrogen generate` compares before it writes: states x parameter
+sets (well-conditioned, ill-conditioned), as `gyrogen verify` does in full."""
+
+
+def check(unit: Unit, files: Mapping[str, str]) -> float:
+    """Compile every target in files (C with the strict flags, Fortran with
+    -std=f2008 -Werror) and compare the rhs, outputs and Jacobian with the
+    numpy reference; raise GyrogenError naming the scene and what differs.
+    Returns the seconds it took."""
+    from gyrogen import build, verify
+
+    t0 = time.perf_counter()
+    name = unit.scene.name
+    with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
+        for file, text in files.items():
+            (Path(tmp) / file).write_text(text, encoding="utf-8")
+        try:
+            backends = [build.build(Path(tmp), lang) for lang in unit.scene.targets]
+        except GyrogenError as exc:
+            raise GyrogenError(f"{name}: generated code that does not compile: {exc}") from exc
+        report = verify.compare(backends, unit.scene, CHECK_STATES, CHECK_PARAMS, CHECK_ILL, seed=0)
+    if report.refusal_failures:
+        raise GyrogenError(f"{name}: the generated setup differs: {report.refusal_failures[0]}")
+    failed = [r for r in report.rows if not r.passed]
+    if failed:
+        r = max(failed, key=lambda r: r.error / r.bar)
+        raise GyrogenError(
+            f"{name}: the generated code differs from the reference: {r.pair}, error "
+            f"{r.error:.2e} above {r.bar:.2e} (cond {r.worst_condition:.3g})"
+        )
+    return time.perf_counter() - t0
+
+
+def unit_of(scene: Scene) -> Unit:
+    """The scene's unit; the default scene's is the full model every
+    manifest compares with: built once."""
+    if scene == default_scene():
+        return full_model_unit()
+    try:
+        return make_unit(scene)
+    except LiteralError as exc:
+        raise LiteralError(f"{scene.name}: {exc}") from exc
+
+
+def generate(scene: Scene, out: Path, lib: bool = False, checked: bool = False) -> Unit:
+    """Render the scene into out, all or nothing; with checked, first compile
+    and compare what would be written (see check): a failure writes nothing."""
+    unit = unit_of(scene)
+    files = render_all(unit, lib)
+    if checked:
+        check(unit, files)
+    write_atomic(out, files)
     return unit

@@ -44,12 +44,25 @@ def print_table(units: list[Unit]) -> None:
 @click.option(
     "--lib", is_flag=True, help="Also write CMakeLists.txt and <prefix>.mk to build a library."
 )
+@click.option(
+    "--no-check",
+    is_flag=True,
+    help="Write without compiling and comparing first (see above): faster, unchecked.",
+)
 @out_dir
-def generate(scenes: tuple[Scene, ...], every: bool, lib: bool, out: Path | None) -> None:
+def generate(
+    scenes: tuple[Scene, ...], every: bool, lib: bool, no_check: bool, out: Path | None
+) -> None:
     """Write C, Fortran and manifest.json for each SCENE (a built-in name or a
     .toml file; default gyrostat). With one scene, --out is its directory;
-    with several, --out is the parent of one directory per scene."""
-    from gyrogen.generate import generate as run_generate
+    with several, --out is the parent of one directory per scene.
+
+    Before writing, each scene's code is compiled (C with the strict flags,
+    Fortran with -std=f2008 -Werror) and its rhs, outputs and Jacobian are
+    compared with the numpy reference at a sample of states and parameter
+    sets; on any failure nothing is written and the exit code is 1.
+    --no-check skips this."""
+    from gyrogen.generate import check, render_all, unit_of, write_atomic
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
     units = []
@@ -58,7 +71,16 @@ def generate(scenes: tuple[Scene, ...], every: bool, lib: bool, out: Path | None
             target = out or default_out(scene)
         else:
             target = (out or Path("generated")) / scene.name
-        units.append(run_generate(scene, target, lib))
+        unit = unit_of(scene)
+        files = render_all(unit, lib)
+        if not no_check:
+            seconds = check(unit, files)
+            click.echo(
+                f"checked {scene.name}: {', '.join(scene.targets)} compiled and compared "
+                f"with the reference in {seconds:.1f} s"
+            )
+        write_atomic(target, files)
+        units.append(unit)
         click.echo(f"wrote {target}/")
     print_table(units)
 

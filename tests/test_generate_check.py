@@ -1,0 +1,118 @@
+"""`gyrogen generate` checks what it hands out: it compiles every target and
+compares the rhs, the outputs and the Jacobian with the numpy reference
+before writing; a failure names the scene and what differs, exits 1 and
+writes nothing. And verify's bars hold correct code and catch wrong code."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sm
+
+from gyrogen import build, verify, witness
+from gyrogen.backends.c import CPrinter
+from gyrogen.cli import main
+from gyrogen.generate import generate
+from gyrogen.scene import load
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    try:
+        main(argv)
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_generate_checks_before_it_writes(tmp_path: Path, capsys) -> None:
+    code, out, _ = run(["generate", "wheel_spinup", "--out", str(tmp_path / "o")], capsys)
+    assert code == 0
+    assert "checked wheel_spinup: c, fortran compiled and compared with the reference in" in out
+    assert (tmp_path / "o" / "manifest.json").is_file()
+
+
+def test_no_check_skips_the_check(tmp_path: Path, capsys) -> None:
+    code, out, _ = run(["generate", "torque_free", "--no-check", "--out", str(tmp_path)], capsys)
+    assert code == 0 and "checked" not in out and (tmp_path / "manifest.json").is_file()
+
+
+def test_wrong_code_is_not_written(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every C double one part in 1e9 off: C differs from the reference and
+    from the (right) Fortran; nothing is written."""
+    real = CPrinter._print_Float
+
+    def off(self: CPrinter, expr: sm.Float) -> str:
+        return str(real(self, sm.Float(float(expr) * (1 + 1e-9))))
+
+    monkeypatch.setattr(CPrinter, "_print_Float", off)
+    out = tmp_path / "o"
+    code, _, err = run(["generate", "wheel_spinup", "--out", str(out)], capsys)
+    assert code == 1, err
+    assert err.startswith("gyrogen: error: wheel_spinup: the generated code differs from the ")
+    assert "from the reference: C vs " in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_code_that_does_not_compile_is_not_written(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gyrogen.backends import c
+
+    real = c.files
+
+    def broken(unit):  # type: ignore[no-untyped-def]
+        files = real(unit)
+        files[f"{unit.prefix}.c"] += "\nint broken(void) { return undeclared; }\n"
+        return files
+
+    monkeypatch.setattr(c, "files", broken)
+    out = tmp_path / "o"
+    code, _, err = run(["generate", "torque_free", "--out", str(out)], capsys)
+    assert code == 1
+    assert err.startswith("gyrogen: error: torque_free: generated code that does not compile:")
+    assert "undeclared" in err
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def controlled(tmp_path_factory: pytest.TempPathFactory) -> tuple[build.Compiled, object]:
+    scene = load("speed_controlled")
+    src = tmp_path_factory.mktemp("speed_controlled")
+    generate(scene, src)
+    return build.build(src, "c"), scene
+
+
+def test_size_scaled_bar_holds_correct_code_where_terms_cancel(controlled) -> None:  # type: ignore[no-untyped-def]
+    """The speed controller's slip u4 - u2 - w_ref near zero: a plain
+    relative error is large for correct code; scaled by the sizes, small."""
+    comp, scene = controlled
+    p = np.array([8.0, 199.0])  # k, w_ref
+    x = np.zeros((50, comp.nx))
+    idx = {s: i for i, s in enumerate(scene.states)}
+    x[:, idx["u2"]] = np.linspace(-5, 5, 50)
+    x[:, idx["u4"]] = 199.0 + x[:, idx["u2"]] + np.linspace(-1e-9, 1e-9, 50)  # slip ~ 1e-9
+    ref = witness.rhs(scene, x, p)
+    got = comp.rhs(x, comp.setup(p))
+    f = lambda xs, q: witness.rhs(scene, xs, q)  # noqa: E731
+    assert verify.size_scaled_error(got, ref, f, x, p) < verify.TOLERANCE
+    # and a real error of one part in 1e9 is caught whatever the sizes
+    wrong = got.copy()
+    wrong[:, idx["u1"]] += 1e-9 * (1 + np.abs(ref[:, idx["u1"]]))
+    assert verify.size_scaled_error(wrong, ref, f, x, p) > 100 * verify.TOLERANCE
+
+
+def test_jacobian_error_catches_a_wrong_entry(controlled) -> None:  # type: ignore[no-untyped-def]
+    comp, scene = controlled
+    p = np.array([0.5, 30.0])
+    rng = np.random.default_rng(2)
+    x = witness.random_states(scene, rng, 20)
+    c = comp.setup(p)
+    jac = np.array([comp.jacobian(xi, c) for xi in x])
+    f = lambda xs, q: witness.rhs(scene, xs, q)  # noqa: E731
+    assert verify.jacobian_error(jac, f, x, p) < 1e-7
+    jac[:, 5, 6] *= 1.001
+    assert verify.jacobian_error(jac, f, x, p) > verify.JAC_TOLERANCE
