@@ -27,6 +27,7 @@ import numpy as np
 
 from gyrogen import sampling, witness
 from gyrogen.build import Compiled
+from gyrogen.errors import GyrogenError
 from gyrogen.layout import PARAMETERS
 from gyrogen.scene import Scene
 
@@ -216,11 +217,24 @@ def compare(
     n_ill: int = 20,
     seed: int = 0,
     progress: Progress = lambda label, items: items,
+    given: np.ndarray | None = None,
 ) -> Report:
+    """Compare at n_states random states and random runtime parameters (and
+    the sets given, e.g. the scene's own): well-conditioned ones at the
+    issue's bar, the n_ill worst-conditioned of many draws at cond(M) eps."""
     rng = np.random.default_rng(seed)
     states = witness.random_states(scene, rng, n_states)
     well = witness.random_runtime(scene, rng, n_params, max_condition=WELL_CONDITIONED)
     draws = witness.random_runtime(scene, rng, 50 * n_ill)
+    if given is not None and len(given):
+        draws = np.vstack([draws, given])
+        fine = [p for p in given if _condition(scene, p) <= WELL_CONDITIONED]
+        well = np.vstack([well, np.reshape(fine, (-1, given.shape[1]))])
+    if not len(well) and not len(draws):
+        raise GyrogenError(
+            f"{scene.name}: no valid runtime parameter values found at random: give "
+            "[simulate] parameters to compare at"
+        )
     conds = [_condition(scene, p) for p in draws]
     ill = draws[[i for i in np.argsort(conds)[-n_ill:] if conds[i] > WELL_CONDITIONED]]
     report = Report(n_states, {"well": len(well), "ill": len(ill)})
@@ -237,8 +251,17 @@ def compare(
             progress,
             rng,
         )
-    _check_refusals(backends, scene, well[:3], report)
+    bases = well if len(well) else draws
+    _check_refusals(backends, scene, bases[:3], report)
     return report
+
+
+def given_parameters(scene: Scene) -> np.ndarray | None:
+    """The scene's [simulate] parameters as one runtime vector, if complete."""
+    values = scene.simulate.parameters
+    if not all(n in values for n in scene.runtime):
+        return None
+    return np.array([[values[n] for n in scene.runtime]])
 
 
 def _condition(scene: Scene, p: np.ndarray) -> float:

@@ -145,14 +145,17 @@ def output(
 def random_runtime(
     scene: Scene, rng: np.random.Generator, n: int, max_condition: float | None = None
 ) -> np.ndarray:
-    """n runtime parameter vectors that, with the scene's folded values, make a
-    physically valid system (and a well-conditioned one with max_condition)."""
+    """Up to n runtime parameter vectors that, with the scene's folded values,
+    make a physically valid system (and a well-conditioned one with
+    max_condition). Fewer (maybe none) when the folded values leave the
+    valid runtime values a sliver the draws rarely hit."""
     if not scene.runtime:
         return np.zeros((1, 0))
     rows: list[np.ndarray] = []
     folded = scene.folded()
-    for _ in range(1000):
+    for _ in range(200):
         draw = sampling.random_parameters(rng, max(4 * n, 16))
+        _near_folded(draw, folded, rng)
         for name, value in folded.items():
             if name in _P:
                 draw[:, _P[name]] = value
@@ -173,8 +176,32 @@ def random_runtime(
                 )
             )
         if len(rows) >= n:
-            return np.array(rows[:n])
-    raise RuntimeError(f"could not draw valid runtime parameters for scene {scene.name}")
+            break
+    return np.array(rows[:n]).reshape(-1, len(scene.runtime))
+
+
+_CARRIER = ("I11", "I22", "I33", "I13")
+
+
+def _near_folded(draw: np.ndarray, folded: dict[str, float], rng: np.random.Generator) -> None:
+    """In half of the rows, draw the runtime carrier and rotor inertias on the
+    scale of the folded ones (a carrier's triangle inequality, the rotor's
+    J <= 2 I), so that a split of those groups still finds valid values."""
+    half = rng.random(len(draw)) < 0.5
+    m = int(half.sum())
+    scale = [abs(folded[k]) for k in _CARRIER if folded.get(k)]
+    if scale and m:
+        s = float(np.mean(scale))
+        for k in _CARRIER:
+            if k not in folded:
+                if k == "I13":
+                    draw[half, _P[k]] = rng.uniform(-s, s, m)
+                else:
+                    draw[half, _P[k]] = s * np.exp(rng.uniform(-np.log(20), np.log(20), m))
+    if m and "I" in folded and "J" not in folded:
+        draw[half, _P["J"]] = 2.0 * folded["I"] * rng.uniform(0.05, 1.0, m)
+    if m and "J" in folded and "I" not in folded:
+        draw[half, _P["I"]] = folded["J"] / 2.0 * np.exp(rng.uniform(0.0, np.log(20), m))
 
 
 def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -16,7 +16,7 @@ from gyrogen.scene import Scene, default
 def verify_sources(scene: Scene, source: Path, states: int, params: int, seed: int) -> bool:
     """Build every target of the scene in source and compare; print the table."""
     from gyrogen import build
-    from gyrogen.verify import compare
+    from gyrogen.verify import compare, given_parameters
 
     click.echo(f"building {', '.join(scene.targets)} through cffi ...")
     backends = [build.build(source, lang) for lang in scene.targets]
@@ -27,6 +27,7 @@ def verify_sources(scene: Scene, source: Path, states: int, params: int, seed: i
         params,
         seed=seed,
         progress=lambda label, items: progress(f"comparing, {label}", items),
+        given=given_parameters(scene),
     )
     click.echo(
         f"{scene.name}: {states} random states x {report.n_params['well']} well-conditioned and "
