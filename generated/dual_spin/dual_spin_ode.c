@@ -136,9 +136,13 @@ int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c,
     double k[4][DUAL_SPIN_NX], y[DUAL_SPIN_NX], xnew[DUAL_SPIN_NX], dx[DUAL_SPIN_NX];
     double comp[DUAL_SPIN_NX] = {0.0};
     double t, h;
+    dual_spin_stats own;
     long n;
     int i;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return DUAL_SPIN_ODE_ERR_ARGUMENT;
@@ -191,11 +195,10 @@ int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c,
 size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, dual_spin_stats *stats, int *codes)
 {
-    dual_spin_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = dual_spin_rk4(t0, t1, steps, x + i * DUAL_SPIN_NX, c,
-                                    stats ? stats + i : &own);
+                                    stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -445,7 +448,9 @@ static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.
 int dual_spin_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, dual_spin_stats *stats)
 {
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    dual_spin_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
@@ -609,7 +614,9 @@ static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 
 int dual_spin_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, dual_spin_stats *stats)
 {
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    dual_spin_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -792,8 +799,12 @@ int dual_spin_rodas4(double t0, double t1, double *x, const double *c, double rt
     double f0[DUAL_SPIN_NX], fnew[DUAL_SPIN_NX], xnew[DUAL_SPIN_NX], dx[DUAL_SPIN_NX], comp[DUAL_SPIN_NX] = {0.0};
     int piv[DUAL_SPIN_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    dual_spin_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
         return DUAL_SPIN_ODE_ERR_ARGUMENT;
@@ -898,11 +909,10 @@ int dual_spin_rodas4(double t0, double t1, double *x, const double *c, double rt
 size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    dual_spin_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = dual_spin_dopri5(t0, t1, x + i * DUAL_SPIN_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -917,11 +927,10 @@ size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const d
 size_t dual_spin_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    dual_spin_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = dual_spin_dop853(t0, t1, x + i * DUAL_SPIN_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -936,11 +945,10 @@ size_t dual_spin_dop853_batch(size_t n, double t0, double t1, double *x, const d
 size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    dual_spin_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = dual_spin_rodas4(t0, t1, x + i * DUAL_SPIN_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

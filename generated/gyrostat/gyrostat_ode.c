@@ -284,9 +284,13 @@ int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c,
     double k[4][GYROSTAT_NX], y[GYROSTAT_NX], xnew[GYROSTAT_NX], dx[GYROSTAT_NX];
     double comp[GYROSTAT_NX] = {0.0};
     double t, h;
+    gyrostat_stats own;
     long n;
     int i;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
@@ -339,11 +343,10 @@ int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c,
 size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, gyrostat_stats *stats, int *codes)
 {
-    gyrostat_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = gyrostat_rk4(t0, t1, steps, x + i * GYROSTAT_NX, c,
-                                    stats ? stats + i : &own);
+                                    stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -593,7 +596,9 @@ static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.
 int gyrostat_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, gyrostat_stats *stats)
 {
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    gyrostat_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
@@ -757,7 +762,9 @@ static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 
 int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, gyrostat_stats *stats)
 {
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    gyrostat_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -947,8 +954,12 @@ int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rto
     double f0[GYROSTAT_NX], fnew[GYROSTAT_NX], xnew[GYROSTAT_NX], dx[GYROSTAT_NX], comp[GYROSTAT_NX] = {0.0};
     int piv[GYROSTAT_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    gyrostat_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
@@ -1053,11 +1064,10 @@ int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rto
 size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    gyrostat_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = gyrostat_dopri5(t0, t1, x + i * GYROSTAT_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -1072,11 +1082,10 @@ size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const do
 size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    gyrostat_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = gyrostat_dop853(t0, t1, x + i * GYROSTAT_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -1091,11 +1100,10 @@ size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x, const do
 size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    gyrostat_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = gyrostat_rodas4(t0, t1, x + i * GYROSTAT_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

@@ -26,10 +26,10 @@ extern "C" {
 /*
  * Integrators that run entirely in compiled code, for the constants c from
  * gyrostat_setup. Each integrates one state x[GYROSTAT_NX] in place from
- * t0 to t1 (t1 >= t0) and returns a code below; stats must not be NULL. The
- * _batch variants integrate n states stored one after another
+ * t0 to t1 (t1 >= t0) and returns a code below; stats may be NULL when not
+ * wanted. The _batch variants integrate n states stored one after another
  * (x[i*GYROSTAT_NX + j]), fill stats[i] and codes[i], and return how many
- * failed; there (only there) stats or codes may be NULL when not wanted.
+ * failed; stats or codes may be NULL there too.
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Coefficients and sources: gyrogen/tableaus.py.
  * The steps are summed with Kahan's compensation, so that long runs keep

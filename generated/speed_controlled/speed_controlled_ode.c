@@ -151,9 +151,13 @@ int speed_controlled_rk4(double t0, double t1, long steps, double *x, const doub
     double k[4][SPEED_CONTROLLED_NX], y[SPEED_CONTROLLED_NX], xnew[SPEED_CONTROLLED_NX], dx[SPEED_CONTROLLED_NX];
     double comp[SPEED_CONTROLLED_NX] = {0.0};
     double t, h;
+    speed_controlled_stats own;
     long n;
     int i;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return SPEED_CONTROLLED_ODE_ERR_ARGUMENT;
@@ -206,11 +210,10 @@ int speed_controlled_rk4(double t0, double t1, long steps, double *x, const doub
 size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, speed_controlled_stats *stats, int *codes)
 {
-    speed_controlled_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = speed_controlled_rk4(t0, t1, steps, x + i * SPEED_CONTROLLED_NX, c,
-                                    stats ? stats + i : &own);
+                                    stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -460,7 +463,9 @@ static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.
 int speed_controlled_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, speed_controlled_stats *stats)
 {
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    speed_controlled_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
@@ -624,7 +629,9 @@ static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 
 int speed_controlled_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, speed_controlled_stats *stats)
 {
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    speed_controlled_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -809,8 +816,12 @@ int speed_controlled_rodas4(double t0, double t1, double *x, const double *c, do
     double f0[SPEED_CONTROLLED_NX], fnew[SPEED_CONTROLLED_NX], xnew[SPEED_CONTROLLED_NX], dx[SPEED_CONTROLLED_NX], comp[SPEED_CONTROLLED_NX] = {0.0};
     int piv[SPEED_CONTROLLED_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    speed_controlled_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
         return SPEED_CONTROLLED_ODE_ERR_ARGUMENT;
@@ -915,11 +926,10 @@ int speed_controlled_rodas4(double t0, double t1, double *x, const double *c, do
 size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
 {
-    speed_controlled_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = speed_controlled_dopri5(t0, t1, x + i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -934,11 +944,10 @@ size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x, 
 size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
 {
-    speed_controlled_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = speed_controlled_dop853(t0, t1, x + i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -953,11 +962,10 @@ size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x, 
 size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
 {
-    speed_controlled_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = speed_controlled_rodas4(t0, t1, x + i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

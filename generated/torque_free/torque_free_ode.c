@@ -136,9 +136,13 @@ int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c
     double k[4][TORQUE_FREE_NX], y[TORQUE_FREE_NX], xnew[TORQUE_FREE_NX], dx[TORQUE_FREE_NX];
     double comp[TORQUE_FREE_NX] = {0.0};
     double t, h;
+    torque_free_stats own;
     long n;
     int i;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return TORQUE_FREE_ODE_ERR_ARGUMENT;
@@ -191,11 +195,10 @@ int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c
 size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_rk4(t0, t1, steps, x + i * TORQUE_FREE_NX, c,
-                                    stats ? stats + i : &own);
+                                    stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -445,7 +448,9 @@ static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.
 int torque_free_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, torque_free_stats *stats)
 {
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    torque_free_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
@@ -609,7 +614,9 @@ static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 
 int torque_free_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, torque_free_stats *stats)
 {
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    torque_free_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -792,8 +799,12 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
     double f0[TORQUE_FREE_NX], fnew[TORQUE_FREE_NX], xnew[TORQUE_FREE_NX], dx[TORQUE_FREE_NX], comp[TORQUE_FREE_NX] = {0.0};
     int piv[TORQUE_FREE_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    torque_free_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
         return TORQUE_FREE_ODE_ERR_ARGUMENT;
@@ -898,11 +909,10 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_dopri5(t0, t1, x + i * TORQUE_FREE_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -917,11 +927,10 @@ size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const
 size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_dop853(t0, t1, x + i * TORQUE_FREE_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -936,11 +945,10 @@ size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x, const
 size_t torque_free_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_rodas4(t0, t1, x + i * TORQUE_FREE_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

@@ -7,9 +7,14 @@
 ! Build id d11607b5628bb2ac. The same interface as torque_free_ode.h, under
 ! the bind(C) names torque_free_f_<method> and torque_free_f_<method>_batch.
 ! Coefficients and sources as in torque_free_ode.c (gyrogen/tableaus.py).
+!
+! Every integrator takes its statistics as type(c_ptr), value: C passes a
+! torque_free_stats * or NULL, Fortran c_loc(stats) (stats declared with the
+! target attribute) or c_null_ptr when they are not wanted. The _batch
+! variants take an array of n of them, and the codes, the same way.
 module torque_free_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
-                                         c_associated, c_f_pointer
+                                         c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use torque_free_mod, only: torque_free_rhs, nx => TORQUE_FREE_NX, nc => TORQUE_FREE_NC
   implicit none
@@ -195,16 +200,21 @@ contains
   end subroutine stats_start
 
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
-  function torque_free_rk4(t0, t1, steps, x, c, stats) result(code) bind(C, name="torque_free_f_rk4")
+  function torque_free_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
+      bind(C, name="torque_free_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
     integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    type(torque_free_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a torque_free_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
+    type(torque_free_stats), pointer :: stats
+    type(torque_free_stats), target :: own
     integer(c_long) :: n
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
     if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) &
         .or. steps < 1) then
@@ -261,7 +271,6 @@ contains
     integer(c_size_t) :: failed
     type(torque_free_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(torque_free_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -271,9 +280,9 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_rk4(t0, t1, steps, x(:, i), c, stats_out(i))
+        code = torque_free_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
-        code = torque_free_rk4(t0, t1, steps, x(:, i), c, own)
+        code = torque_free_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -482,15 +491,19 @@ contains
   end function dopri5_trial
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
-  function torque_free_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function torque_free_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="torque_free_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(torque_free_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a torque_free_stats, or NULL
     integer(c_int) :: code
+    type(torque_free_stats), pointer :: stats
+    type(torque_free_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dopri5_trial, dopri5_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function torque_free_dopri5
@@ -623,15 +636,19 @@ contains
   end function dop853_trial
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
-  function torque_free_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function torque_free_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="torque_free_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(torque_free_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a torque_free_stats, or NULL
     integer(c_int) :: code
+    type(torque_free_stats), pointer :: stats
+    type(torque_free_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dop853_trial, dop853_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function torque_free_dop853
@@ -779,20 +796,24 @@ contains
   ! 0.9 err^-1/4 within [0.2, 6], and Gustafsson's predictive controller
   ! after an accepted step. A singular E is retried with h halved, five
   ! times in a row at most.
-  function torque_free_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function torque_free_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="torque_free_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(torque_free_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a torque_free_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
     real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
+    type(torque_free_stats), pointer :: stats
+    type(torque_free_stats), target :: own
     integer :: piv(nx), i, j, singular
     logical :: last, rejected_last, nonfinite, new_point
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
       code = TORQUE_FREE_ODE_ERR_ARGUMENT
@@ -915,7 +936,6 @@ contains
     integer(c_size_t) :: failed
     type(torque_free_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(torque_free_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -925,9 +945,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = torque_free_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = torque_free_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = torque_free_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -946,7 +967,6 @@ contains
     integer(c_size_t) :: failed
     type(torque_free_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(torque_free_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -956,9 +976,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = torque_free_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = torque_free_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = torque_free_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -977,7 +998,6 @@ contains
     integer(c_size_t) :: failed
     type(torque_free_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(torque_free_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -987,9 +1007,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = torque_free_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = torque_free_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = torque_free_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1

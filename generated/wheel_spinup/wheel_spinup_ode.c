@@ -151,9 +151,13 @@ int wheel_spinup_rk4(double t0, double t1, long steps, double *x, const double *
     double k[4][WHEEL_SPINUP_NX], y[WHEEL_SPINUP_NX], xnew[WHEEL_SPINUP_NX], dx[WHEEL_SPINUP_NX];
     double comp[WHEEL_SPINUP_NX] = {0.0};
     double t, h;
+    wheel_spinup_stats own;
     long n;
     int i;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return WHEEL_SPINUP_ODE_ERR_ARGUMENT;
@@ -206,11 +210,10 @@ int wheel_spinup_rk4(double t0, double t1, long steps, double *x, const double *
 size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, wheel_spinup_stats *stats, int *codes)
 {
-    wheel_spinup_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = wheel_spinup_rk4(t0, t1, steps, x + i * WHEEL_SPINUP_NX, c,
-                                    stats ? stats + i : &own);
+                                    stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -460,7 +463,9 @@ static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.
 int wheel_spinup_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, wheel_spinup_stats *stats)
 {
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
@@ -624,7 +629,9 @@ static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 
 int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, wheel_spinup_stats *stats)
 {
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -808,8 +815,12 @@ int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double
     double f0[WHEEL_SPINUP_NX], fnew[WHEEL_SPINUP_NX], xnew[WHEEL_SPINUP_NX], dx[WHEEL_SPINUP_NX], comp[WHEEL_SPINUP_NX] = {0.0};
     int piv[WHEEL_SPINUP_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    wheel_spinup_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
         return WHEEL_SPINUP_ODE_ERR_ARGUMENT;
@@ -914,11 +925,10 @@ int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double
 size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
 {
-    wheel_spinup_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = wheel_spinup_dopri5(t0, t1, x + i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -933,11 +943,10 @@ size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, cons
 size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
 {
-    wheel_spinup_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = wheel_spinup_dop853(t0, t1, x + i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -952,11 +961,10 @@ size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x, cons
 size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
 {
-    wheel_spinup_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = wheel_spinup_rodas4(t0, t1, x + i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

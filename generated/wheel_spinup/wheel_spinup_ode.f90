@@ -7,9 +7,14 @@
 ! Build id ae05ef069b8d0086. The same interface as wheel_spinup_ode.h, under
 ! the bind(C) names wheel_spinup_f_<method> and wheel_spinup_f_<method>_batch.
 ! Coefficients and sources as in wheel_spinup_ode.c (gyrogen/tableaus.py).
+!
+! Every integrator takes its statistics as type(c_ptr), value: C passes a
+! wheel_spinup_stats * or NULL, Fortran c_loc(stats) (stats declared with the
+! target attribute) or c_null_ptr when they are not wanted. The _batch
+! variants take an array of n of them, and the codes, the same way.
 module wheel_spinup_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
-                                         c_associated, c_f_pointer
+                                         c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use wheel_spinup_mod, only: wheel_spinup_rhs, nx => WHEEL_SPINUP_NX, nc => WHEEL_SPINUP_NC
   implicit none
@@ -219,16 +224,21 @@ contains
   end subroutine stats_start
 
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
-  function wheel_spinup_rk4(t0, t1, steps, x, c, stats) result(code) bind(C, name="wheel_spinup_f_rk4")
+  function wheel_spinup_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
     integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
     integer(c_long) :: n
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
     if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) &
         .or. steps < 1) then
@@ -285,7 +295,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -295,9 +304,9 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, stats_out(i))
+        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
-        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, own)
+        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -506,15 +515,19 @@ contains
   end function dopri5_trial
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
-  function wheel_spinup_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function wheel_spinup_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dopri5_trial, dopri5_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function wheel_spinup_dopri5
@@ -647,15 +660,19 @@ contains
   end function dop853_trial
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
-  function wheel_spinup_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function wheel_spinup_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dop853_trial, dop853_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function wheel_spinup_dop853
@@ -804,20 +821,24 @@ contains
   ! 0.9 err^-1/4 within [0.2, 6], and Gustafsson's predictive controller
   ! after an accepted step. A singular E is retried with h halved, five
   ! times in a row at most.
-  function wheel_spinup_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function wheel_spinup_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
     real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
     integer :: piv(nx), i, j, singular
     logical :: last, rejected_last, nonfinite, new_point
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
     if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
       code = WHEEL_SPINUP_ODE_ERR_ARGUMENT
@@ -940,7 +961,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -950,9 +970,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -971,7 +992,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -981,9 +1001,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -1002,7 +1023,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -1012,9 +1032,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
