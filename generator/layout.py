@@ -99,6 +99,16 @@ WARN_CONDITION = 1e8
 # lamina, a thin disc), and rounding must not refuse it.
 TRIANGLE_SLACK = 1e-12
 
+# The adaptive integrators refuse rtol <= MIN_RTOL (and atol <= 0) with
+# <PREFIX>_ODE_ERR_ARGUMENT, by Hairer's rule (his codes stop with
+# "TOLERANCES ARE TOO SMALL" when RTOL <= 10 UROUND): a step's error is
+# measured against atol + rtol |x|, and every stage rounds x by up to
+# DBL_EPSILON/2 |x|, so a relative tolerance within ten roundings cannot be
+# met and the step size shrinks until max_steps or underflow ends the run.
+MIN_RTOL = 10 * 2.0**-52
+"""10 DBL_EPSILON = 2.220446049250313e-15: rtol must exceed it, in the
+integrators and in a scene's simulate.rtol."""
+
 # The compiled integrators a scene may ask for (scene key `integrators`).
 INTEGRATORS: dict[str, str] = {
     "rk4": "Classic Runge-Kutta, order 4, fixed step.",

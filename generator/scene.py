@@ -21,7 +21,7 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from gyrogen.errors import SceneError
-from gyrogen.layout import PARAMETERS, STATES, TRIANGLE_SLACK
+from gyrogen.layout import MIN_RTOL, PARAMETERS, STATES, TRIANGLE_SLACK
 
 _C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if "
@@ -78,8 +78,19 @@ class Simulate(_Strict):
     t_end: Annotated[float, Field(gt=0)] = 10.0
     dt: Annotated[float, Field(gt=0)] = 0.01
     """Output step of the trajectory."""
-    rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-10
+    rtol: Annotated[float, Field(lt=1)] = 1e-10
+    """Above layout.MIN_RTOL, as the compiled integrators require."""
     atol: Annotated[float, Field(gt=0)] = 1e-10
+
+    @field_validator("rtol")
+    @classmethod
+    def _rtol(cls, v: float) -> float:
+        if not v > MIN_RTOL:
+            raise ValueError(
+                f"must be above {MIN_RTOL:.4g} (10 machine epsilons): "
+                "no double arithmetic meets a tighter relative tolerance"
+            )
+        return v
 
 
 class Scene(_Strict):

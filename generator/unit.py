@@ -15,6 +15,7 @@ from gyrogen.equations import Equations
 from gyrogen.layout import (
     INTEGRATORS,
     MAX_CONDITION,
+    MIN_RTOL,
     PARAMETER_DOC,
     SETUP_CODE_NAMES,
     SETUP_CODES,
@@ -182,6 +183,11 @@ class Unit:
     @property
     def triangle_slack(self) -> str:
         return repr(TRIANGLE_SLACK)
+
+    @property
+    def min_rtol(self) -> str:
+        """The integrators refuse rtol at or below it (layout.MIN_RTOL)."""
+        return repr(MIN_RTOL)
 
     @cached_property
     def build_id(self) -> str:

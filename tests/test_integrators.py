@@ -238,6 +238,9 @@ def test_bad_arguments(compiled: Get, language: str) -> None:
             {"rtol": 0.0},
             {"atol": -1e-9},
             {"rtol": np.nan},
+            {"rtol": 1e-20},
+            {"atol": 0.0},
+            {"h0": np.nan},
             {"max_steps": 0},
         ):
             args = {"t1": 1.0, "rtol": 1e-8, "atol": 1e-8, "max_steps": 100} | kw
@@ -285,12 +288,17 @@ def test_near_gimbal_lock_is_never_nan(compiled: Get, language: str) -> None:
 
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_step_underflow(compiled: Get, language: str) -> None:
-    """A tolerance no double can meet: h shrinks below 16 eps |t|."""
+    """At t0 = 2^45 s, 16 eps |t| = 0.12 s: the steps rtol = 1e-12 needs
+    (~0.05 s) are lost in the rounding of t, and h shrinks below it."""
     b = compiled("torque_free", language)
     _, x0, p = problem("torque_free")
+    t0 = 2.0**45
     for method in ADAPTIVE:
-        x, stats, code = b.integrate(method, x0, b.setup(p), 1.0, 2.0, rtol=1e-300, atol=1e-300)
-        assert code == UNDERFLOW and stats["t"] == 1.0 and np.array_equal(x, x0)
+        x, stats, code = b.integrate(
+            method, x0, b.setup(p), t0, t0 + 1000.0, rtol=1e-12, atol=1e-12, h0=1.0
+        )
+        assert code == UNDERFLOW and stats["rejected"] > 0
+        assert stats["t"] == t0 and np.array_equal(x, x0)
 
 
 @pytest.mark.parametrize("language", LANGUAGES)

@@ -357,11 +357,14 @@ size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
     return failed;
 }
 
-/* The arguments every adaptive method refuses (NaN included). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, long max_steps)
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
+   double arithmetic can meet (rtol <= GYROSTAT_ODE_MIN_RTOL, atol <= 0), max_steps
+   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double h0,
+                         long max_steps)
 {
-    return !(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || !(rtol > 0.0) || !(atol > 0.0)
-        || max_steps < 1;
+    return !(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || !(rtol > GYROSTAT_ODE_MIN_RTOL)
+        || !isfinite(rtol) || !(atol > 0.0) || !isfinite(atol) || !isfinite(h0) || max_steps < 1;
 }
 
 /* h is lost in the rounding of t: the solution cannot be resolved further. */
@@ -450,7 +453,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
     int i, last, rejected_last = 0, nonfinite = 0;
 
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
     if (!(t1 > t0)) {
@@ -961,7 +964,7 @@ int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rto
         stats = &own;  /* not wanted */
     }
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
     if (!(t1 > t0)) {

@@ -42,7 +42,13 @@ module speed_controlled_ode_mod
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ODE_ERR_MAX_STEPS = 2
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ODE_ERR_NONFINITE = 3
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ODE_ERR_SINGULAR = 4
+  ! 5: t1 < t0, steps or max_steps < 1, rtol <= SPEED_CONTROLLED_ODE_MIN_RTOL, atol <= 0,
+  ! or t0, t1, rtol, atol or h0 NaN or infinite
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ODE_ERR_ARGUMENT = 5
+
+  ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
+  ! double arithmetic meets it and the steps would shrink until max_steps ran out.
+  real(c_double), parameter, public :: SPEED_CONTROLLED_ODE_MIN_RTOL = 2.220446049250313e-15_c_double
 
   ! An explicit embedded pair's step-size control: h_new / h = safety
   ! err^-alpha err_old^beta within [facmin, facmax] (Hairer's PI controller).
@@ -313,14 +319,17 @@ contains
     end do
   end function speed_controlled_rk4_batch
 
-  ! The arguments every adaptive method refuses (NaN included).
-  pure logical function bad_arguments(t0, t1, rtol, atol, max_steps)
-    real(c_double), intent(in) :: t0, t1, rtol, atol
+  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
+  ! double arithmetic can meet (rtol <= SPEED_CONTROLLED_ODE_MIN_RTOL, atol <= 0), max_steps
+  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
+  pure logical function bad_arguments(t0, t1, rtol, atol, h0, max_steps)
+    real(c_double), intent(in) :: t0, t1, rtol, atol, h0
     integer(c_long), intent(in) :: max_steps
 
     bad_arguments = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) &
-        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > 0) .or. .not. (atol > 0) &
-        .or. max_steps < 1
+        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > SPEED_CONTROLLED_ODE_MIN_RTOL) &
+        .or. .not. ieee_is_finite(rtol) .or. .not. (atol > 0) .or. .not. ieee_is_finite(atol) &
+        .or. .not. ieee_is_finite(h0) .or. max_steps < 1
   end function bad_arguments
 
   ! h is lost in the rounding of t: the solution cannot be resolved further.
@@ -386,7 +395,7 @@ contains
     logical :: last, rejected_last, nonfinite
 
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = SPEED_CONTROLLED_ODE_ERR_ARGUMENT
       return
     end if
@@ -841,7 +850,7 @@ contains
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = SPEED_CONTROLLED_ODE_ERR_ARGUMENT
       return
     end if

@@ -54,7 +54,13 @@ typedef struct {
 #define SPEED_CONTROLLED_ODE_ERR_MAX_STEPS      2  /* max_steps steps were not enough */
 #define SPEED_CONTROLLED_ODE_ERR_NONFINITE      3  /* the state or its derivative is NaN or Inf */
 #define SPEED_CONTROLLED_ODE_ERR_SINGULAR       4  /* the iteration matrix is singular */
-#define SPEED_CONTROLLED_ODE_ERR_ARGUMENT       5  /* t1 < t0, rtol or atol <= 0, steps or max_steps < 1, NaN */
+/* 5: t1 < t0, steps or max_steps < 1, rtol <= SPEED_CONTROLLED_ODE_MIN_RTOL, atol <= 0,
+   or t0, t1, rtol, atol or h0 NaN or infinite */
+#define SPEED_CONTROLLED_ODE_ERR_ARGUMENT       5
+
+/* rtol must exceed 10 DBL_EPSILON (Hairer's rule): tighter, no double
+   arithmetic meets it and the steps would shrink until max_steps ran out. */
+#define SPEED_CONTROLLED_ODE_MIN_RTOL 2.220446049250313e-15
 
 /* d(dx/dt)/dx, row-major: J[i*SPEED_CONTROLLED_NX + j] = d f_i / d x_j (62 ops). */
 void speed_controlled_jac(double t, const double *x, const double *c, double *J);
@@ -69,10 +75,10 @@ size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, do
 /* Dormand-Prince 5(4), adaptive, PI step-size control.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
  * is accepted when their RMS is <= 1.
- * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
- * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 if that persists to underflow, or at
- * once when x, f(t0, x) is not finite. */
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
+ * persists to underflow, or at once when x, f(t0, x) is not finite. */
 int speed_controlled_dopri5(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x,
@@ -82,10 +88,10 @@ size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x,
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
  * is accepted when their RMS is <= 1 (Hairer's blend of a 5th- and a 3rd-order estimate).
- * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
- * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 if that persists to underflow, or at
- * once when x, f(t0, x) is not finite. */
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
+ * persists to underflow, or at once when x, f(t0, x) is not finite. */
 int speed_controlled_dop853(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x,
@@ -95,10 +101,10 @@ size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x,
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
  * is accepted when their RMS is <= 1.
- * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
- * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 if that persists to underflow, or at
- * once when x, f(t0, x) or the Jacobian is not finite. */
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
+ * persists to underflow, or at once when x, f(t0, x) or the Jacobian is not finite. */
 int speed_controlled_rodas4(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x,
