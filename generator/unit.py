@@ -13,6 +13,7 @@ import sympy as sm
 import gyrogen
 from gyrogen.equations import Equations
 from gyrogen.layout import (
+    GIMBAL_LOCK_COS,
     INTEGRATORS,
     MAX_CONDITION,
     MIN_RTOL,
@@ -188,6 +189,11 @@ class Unit:
     def min_rtol(self) -> str:
         """The integrators refuse rtol at or below it (layout.MIN_RTOL)."""
         return repr(MIN_RTOL)
+
+    @property
+    def gimbal_lock_cos(self) -> str:
+        """3-1-2 scenes: the integrators stop where |cos q2| falls below it."""
+        return repr(GIMBAL_LOCK_COS)
 
     @cached_property
     def build_id(self) -> str:

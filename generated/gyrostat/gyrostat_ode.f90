@@ -12,6 +12,13 @@
 ! gyrostat_stats * or NULL, Fortran c_loc(stats) (stats declared with the
 ! target attribute) or c_null_ptr when they are not wanted. The _batch
 ! variants take an array of n of them, and the codes, the same way.
+!
+! The attitude is 3-1-2 Euler angles x(1:3) = q1, q2, q3, whose kinematics
+! divide by cos(q2): every integrator returns GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR
+! when |cos q2| < GYROSTAT_ODE_GIMBAL_LOCK_COS at the start or at the end of an
+! accepted step, or when cos q2 changes sign across one (the path crossed
+! q2 = +-pi/2, where q1 and q3 jump); x is then the state before that step
+! (at the start: as given) and stats%t its time.
 module gyrostat_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
@@ -45,10 +52,17 @@ module gyrostat_ode_mod
   ! 5: t1 < t0, steps or max_steps < 1, rtol <= GYROSTAT_ODE_MIN_RTOL, atol <= 0,
   ! or t0, t1, rtol, atol or h0 NaN or infinite
   integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_ARGUMENT = 5
+  ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
+  ! (3-1-2 scenes only; see above)
+  integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR = 6
 
   ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
   ! double arithmetic meets it and the steps would shrink until max_steps ran out.
   real(c_double), parameter, public :: GYROSTAT_ODE_MIN_RTOL = 2.220446049250313e-15_c_double
+  ! 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
+  ! about epsilon |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so the
+  ! kinematic rates q1' and q3' in the 7th digit.
+  real(c_double), parameter, public :: GYROSTAT_ODE_GIMBAL_LOCK_COS = 1e-09_c_double
 
   ! An explicit embedded pair's step-size control: h_new / h = safety
   ! err^-alpha err_old^beta within [facmin, facmax] (Hairer's PI controller).
@@ -328,6 +342,20 @@ contains
     J(196) = 0
   end subroutine gyrostat_jac
 
+  ! The attitude is 3-1-2 angles, q2 = x(2): their kinematics divide by
+  ! cos(q2). .true. when the step to xnew reaches gimbal lock, |cos q2| <
+  ! GYROSTAT_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
+  ! passed q2 = +-pi/2, where q1 and q3 jump); else cos_q2 = cos(xnew(2)).
+  logical function gimbal_lock(xnew, cos_q2)
+    real(c_double), intent(in) :: xnew(nx)
+    real(c_double), intent(inout) :: cos_q2
+    real(c_double) :: cq
+
+    cq = cos(xnew(2))
+    gimbal_lock = abs(cq) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. ((cq > 0) .neqv. (cos_q2 > 0))
+    if (.not. gimbal_lock) cos_q2 = cq
+  end function gimbal_lock
+
   ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
   ! compensation: comp keeps what this add lost and the next step takes it
   ! back from its dx, so the rounding of 1e7 adds does not pile up in the
@@ -364,6 +392,7 @@ contains
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
+    real(c_double) :: cos_q2
     type(gyrostat_stats), pointer :: stats
     type(gyrostat_stats), target :: own
     integer(c_long) :: n
@@ -374,6 +403,11 @@ contains
     if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) &
         .or. steps < 1) then
       code = GYROSTAT_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) then
+      code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     h = (t1 - t0) / real(steps, c_double)
@@ -405,6 +439,10 @@ contains
       stats%rhs_calls = stats%rhs_calls + 4
       if (.not. all(ieee_is_finite(xnew))) then
         code = GYROSTAT_ODE_ERR_NONFINITE
+        return
+      end if
+      if (gimbal_lock(xnew, cos_q2)) then
+        code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
         return
       end if
       call accept_step(x, xnew, dx, comp)
@@ -517,11 +555,17 @@ contains
     type(gyrostat_stats), intent(out) :: stats
     integer(c_int) :: code
     real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
+    real(c_double) :: cos_q2
     logical :: last, rejected_last, nonfinite
 
     call stats_start(stats, t0)
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = GYROSTAT_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) then
+      code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     code = GYROSTAT_ODE_OK
@@ -571,6 +615,10 @@ contains
       ! fac = h / h_new, in Hairer's form (no division by a zero error)
       fac = err**m%alpha / m%safety
       if (err <= 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -972,6 +1020,7 @@ contains
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
     real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
+    real(c_double) :: cos_q2
     type(gyrostat_stats), pointer :: stats
     type(gyrostat_stats), target :: own
     integer :: piv(nx), i, j, singular
@@ -982,6 +1031,11 @@ contains
     call stats_start(stats, t0)
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = GYROSTAT_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) then
+      code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     code = GYROSTAT_ODE_OK
@@ -1066,6 +1120,10 @@ contains
       ! fac = h / h_new
       fac = max(1 / 6.0_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))
       if (err <= 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
         if (stats%accepted > 0) then
           gus = (h_acc / h) * (err * err / err_acc)**0.25_c_double / 0.9_c_double
           fac = max(fac, 1 / 6.0_c_double, min(5.0_c_double, gus))

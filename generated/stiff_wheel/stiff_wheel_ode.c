@@ -120,6 +120,20 @@ static void stats_start(stiff_wheel_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
+/* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
+   cos(q2). 1 when the step to xnew reaches gimbal lock, |cos q2| <
+   STIFF_WHEEL_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
+   passed q2 = +-pi/2, where q1 and q3 jump); else *cos_q2 := cos(xnew[1]). */
+static int gimbal_lock(const double *xnew, double *cos_q2)
+{
+    const double cq = cos(xnew[1]);
+    if (fabs(cq) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (*cos_q2 > 0.0)) {
+        return 1;
+    }
+    *cos_q2 = cq;
+    return 0;
+}
+
 static int all_finite(const double *v, int n)
 {
     int i;
@@ -151,6 +165,7 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
     double k[4][STIFF_WHEEL_NX], y[STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX];
     double comp[STIFF_WHEEL_NX] = {0.0};
     double t, h;
+    double cos_q2 = cos(x[1]);
     stiff_wheel_stats own;
     long n;
     int i;
@@ -161,6 +176,9 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
+    }
+    if (fabs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     h = (t1 - t0) / (double)steps;
     stats->h = h;
@@ -198,6 +216,9 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
         stats->rhs_calls += 4;
         if (!all_finite(xnew, STIFF_WHEEL_NX)) {
             return STIFF_WHEEL_ODE_ERR_NONFINITE;
+        }
+        if (gimbal_lock(xnew, &cos_q2)) {
+            return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
         }
         accept_step(x, xnew, dx, comp);
         stats->accepted += 1;
@@ -317,11 +338,15 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
 {
     double k[13][STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX], comp[STIFF_WHEEL_NX] = {0.0};
     double t = t0, h, err, fac, err_old = 1e-4;
+    double cos_q2 = cos(x[1]);
     int i, last, rejected_last = 0, nonfinite = 0;
 
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
+    }
+    if (fabs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
         return STIFF_WHEEL_ODE_OK;
@@ -362,6 +387,9 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
         fac = pow(err, m->alpha) / m->safety;
         if (err <= 1.0) {
+            if (gimbal_lock(xnew, &cos_q2)) {
+                return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
@@ -819,6 +847,7 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
     double f0[STIFF_WHEEL_NX], fnew[STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX], comp[STIFF_WHEEL_NX] = {0.0};
     int piv[STIFF_WHEEL_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    double cos_q2 = cos(x[1]);
     stiff_wheel_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
@@ -828,6 +857,9 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
+    }
+    if (fabs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
         return STIFF_WHEEL_ODE_OK;
@@ -896,6 +928,9 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
         /* fac = h / h_new */
         fac = fmax(1.0 / 6.0, fmin(5.0, pow(err, 0.25) / 0.9));
         if (err <= 1.0) {
+            if (gimbal_lock(xnew, &cos_q2)) {
+                return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
             if (stats->accepted > 0) {
                 const double gus = (h_acc / h) * pow(err * err / err_acc, 0.25) / 0.9;
                 fac = fmax(fac, fmax(1.0 / 6.0, fmin(5.0, gus)));

@@ -35,6 +35,14 @@ extern "C" {
  * The steps are summed with Kahan's compensation, so that long runs keep
  * their invariants to rounding: compile without -ffast-math (or
  * -Ofast), which would optimize the compensation away.
+ *
+ * The attitude is 3-1-2 Euler angles x[0..2] = q1, q2, q3, whose kinematics
+ * divide by cos(q2) (gimbal lock at q2 = +-pi/2). Every integrator returns
+ * code 6 when |cos q2| < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS at the start or at the end
+ * of an accepted step, or when cos q2 changes sign across an accepted step
+ * (the path crossed q2 = +-pi/2, where q1 and q3 jump); x is then the state
+ * before that step (at the start: as given) and stats.t its time. The check
+ * costs one cos per step; f is not called on a start state it refuses.
  */
 
 /* What an integration did, and where it stopped. */
@@ -57,10 +65,17 @@ typedef struct {
 /* 5: t1 < t0, steps or max_steps < 1, rtol <= WHEEL_SPINUP_ODE_MIN_RTOL, atol <= 0,
    or t0, t1, rtol, atol or h0 NaN or infinite */
 #define WHEEL_SPINUP_ODE_ERR_ARGUMENT       5
+/* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
+   (3-1-2 scenes only; see above) */
+#define WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR 6
 
 /* rtol must exceed 10 DBL_EPSILON (Hairer's rule): tighter, no double
    arithmetic meets it and the steps would shrink until max_steps ran out. */
 #define WHEEL_SPINUP_ODE_MIN_RTOL 2.220446049250313e-15
+/* 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
+   about DBL_EPSILON |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so
+   the kinematic rates q1' and q3' in the 7th digit. */
+#define WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS 1e-09
 
 /* d(dx/dt)/dx, row-major: J[i*WHEEL_SPINUP_NX + j] = d f_i / d x_j (60 ops). */
 void wheel_spinup_jac(double t, const double *x, const double *c, double *J);
