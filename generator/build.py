@@ -46,6 +46,8 @@ _PACKAGES = {"gcc": "gcc", "gfortran": "gfortran"}
 
 STATS_FIELDS = ("t", "h", "accepted", "rejected", "rhs_calls", "jac_calls", "decompositions")
 """The fields of <prefix>_stats (gyrogen_stats in the cffi glue), in order."""
+ODE_ATTITUDE_SINGULAR = 6
+"""<PREFIX>_ODE_ERR_ATTITUDE_SINGULAR: 3-1-2 angles at gimbal lock (layout.GIMBAL_LOCK_COS)."""
 ODE_CODES = {
     0: "ok",
     1: "step size underflow",
@@ -53,6 +55,7 @@ ODE_CODES = {
     3: "non-finite state or derivative",
     4: "singular iteration matrix",
     5: "bad argument",
+    ODE_ATTITUDE_SINGULAR: 'the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"',
 }
 """The integrators' return codes (<PREFIX>_ODE_* in <prefix>_ode.h)."""
 

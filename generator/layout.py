@@ -119,6 +119,28 @@ FOLDED_MAX = 1e50
 # 1; gyrogen then normalizes them exactly. A larger miss is a typo, refused.
 QUATERNION_NORM_SLACK = 1e-6
 
+# The adaptive integrators refuse rtol <= MIN_RTOL (and atol <= 0) with
+# <PREFIX>_ODE_ERR_ARGUMENT, by Hairer's rule (his codes stop with
+# "TOLERANCES ARE TOO SMALL" when RTOL <= 10 UROUND): a step's error is
+# measured against atol + rtol |x|, and every stage rounds x by up to
+# DBL_EPSILON/2 |x|, so a relative tolerance within ten roundings cannot be
+# met and the step size shrinks until max_steps or underflow ends the run.
+MIN_RTOL = 10 * 2.0**-52
+"""10 DBL_EPSILON = 2.220446049250313e-15: rtol must exceed it, in the
+integrators and in a scene's simulate.rtol."""
+
+# The 3-1-2 attitude's kinematics divide by cos(q2): its integrators stop
+# with <PREFIX>_ODE_ERR_ATTITUDE_SINGULAR when |cos q2| < GIMBAL_LOCK_COS,
+# or when cos q2 changes sign across a step (the path crossed q2 = +-pi/2).
+GIMBAL_LOCK_COS = 1e-9
+"""Near q2 = pi/2 a double q2 carries a rounding error of about
+DBL_EPSILON |q2| = 3.5e-16 rad (one ulp there is 2.2e-16), and cos(q2) moves
+by as much: at |cos q2| = 1e-9 the rounding of q2 alone changes 1/cos(q2),
+and so the kinematic rates q1' and q3', in the 7th digit (3.5e-7). Closer,
+the rates are noise at the tolerances the integrators accept, and the steps
+shrink toward underflow; Euler parameters (attitude = "quaternion") have no
+such point."""
+
 # The compiled integrators a scene may ask for (scene key `integrators`).
 INTEGRATORS: dict[str, str] = {
     "rk4": "Classic Runge-Kutta, order 4, fixed step.",

@@ -35,6 +35,7 @@ from gyrogen.layout import (
     FOLDED_MAX,
     FOLDED_MIN,
     MAX_CONDITION,
+    MIN_RTOL,
     NAME_MAX_LENGTH,
     PARAMETERS,
     QUATERNION_NORM_SLACK,
@@ -121,8 +122,19 @@ class Simulate(_Strict):
     t_end: Annotated[Number, Field(gt=0)] = 10.0
     dt: Annotated[Number, Field(gt=0)] = 0.01
     """Output step of the trajectory."""
-    rtol: Annotated[Number, Field(gt=0, lt=1)] = 1e-10
+    rtol: Annotated[Number, Field(lt=1)] = 1e-10
+    """Above layout.MIN_RTOL, as the compiled integrators require."""
     atol: Annotated[Number, Field(gt=0)] = 1e-10
+
+    @field_validator("rtol")
+    @classmethod
+    def _rtol(cls, v: float) -> float:
+        if not v > MIN_RTOL:
+            raise ValueError(
+                f"must be above {MIN_RTOL:.4g} (10 machine epsilons): "
+                "no double arithmetic meets a tighter relative tolerance"
+            )
+        return v
 
 
 class Scene(_Strict):

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen import witness
-from gyrogen.build import Compiled
+from gyrogen.build import ODE_ATTITUDE_SINGULAR, ODE_CODES, Compiled
 from gyrogen.layout import SETUP_CODES, WARN_CONDITION
 from gyrogen.scene import Scene
 
@@ -156,13 +156,18 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
     xs = res.trajectory
     assert xs is not None and res.times is not None
     if res.code != 0:
-        where = res.stats.get("t", math.nan)
-        res.verdict = "singular" if _near_gimbal_lock(scene, xs[-1]) else "failed"
-        res.diagnosis = f"integrator code {res.code} at t = {where:.6g} s" + (
-            ": 3-1-2 angles at gimbal lock, use attitude = 'quaternion'"
-            if res.verdict == "singular"
-            else ""
-        )
+        where = f"integrator code {res.code} at t = {res.stats.get('t', math.nan):.6g} s"
+        if res.code == ODE_ATTITUDE_SINGULAR:  # the integrator saw gimbal lock itself
+            res.verdict = "singular"
+            res.diagnosis = f"{where}: {ODE_CODES[res.code]}"
+        elif _near_gimbal_lock(scene, xs[-1]):  # another failure, near it
+            res.verdict = "singular"
+            res.diagnosis = f"{where} ({ODE_CODES.get(res.code, '?')}) near gimbal lock: " + (
+                'the 3-1-2 angles fail there, use attitude = "quaternion"'
+            )
+        else:
+            res.verdict = "failed"
+            res.diagnosis = f"{where}: {ODE_CODES.get(res.code, 'unknown code')}"
         return
     res.drift = invariants(scene, p, xs, res.times)
     later, _ = stiffness(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)

@@ -13,8 +13,10 @@ import sympy as sm
 import gyrogen
 from gyrogen.equations import Equations
 from gyrogen.layout import (
+    GIMBAL_LOCK_COS,
     INTEGRATORS,
     MAX_CONDITION,
+    MIN_RTOL,
     PARAMETER_DOC,
     SETUP_CODE_NAMES,
     SETUP_CODES,
@@ -182,6 +184,16 @@ class Unit:
     @property
     def triangle_slack(self) -> str:
         return repr(TRIANGLE_SLACK)
+
+    @property
+    def min_rtol(self) -> str:
+        """The integrators refuse rtol at or below it (layout.MIN_RTOL)."""
+        return repr(MIN_RTOL)
+
+    @property
+    def gimbal_lock_cos(self) -> str:
+        """3-1-2 scenes: the integrators stop where |cos q2| falls below it."""
+        return repr(GIMBAL_LOCK_COS)
 
     @cached_property
     def build_id(self) -> str:

@@ -23,7 +23,7 @@ REPO = Path(__file__).resolve().parents[1]
 LANGUAGES = ["c", "fortran"]
 SCENES = ["gyrostat", "torque_free", "speed_controlled"]
 ADAPTIVE = ["dopri5", "dop853", "rodas4"]
-OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT = range(6)
+OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT, ATTITUDE = range(7)
 
 Get = Callable[[str, str], build.Compiled]
 
@@ -238,6 +238,9 @@ def test_bad_arguments(compiled: Get, language: str) -> None:
             {"rtol": 0.0},
             {"atol": -1e-9},
             {"rtol": np.nan},
+            {"rtol": 1e-20},
+            {"atol": 0.0},
+            {"h0": np.nan},
             {"max_steps": 0},
         ):
             args = {"t1": 1.0, "rtol": 1e-8, "atol": 1e-8, "max_steps": 100} | kw
@@ -262,35 +265,44 @@ def test_max_steps(compiled: Get, language: str) -> None:
 
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_near_gimbal_lock_is_never_nan(compiled: Get, language: str) -> None:
-    """q2 a hair below pi/2 with u1 large: the Euler-angle rates are ~1e12.
-    The methods either step through (the angular momentum in N, a function
-    of the angles, is then conserved) or stop with a code, a finite state and
-    the time reached."""
+    """q2 a hair below pi/2 with u1 large: the Euler-angle rates are ~1e8.
+    From 1e-6 below, the methods step through (the angular momentum in N, a
+    function of the angles, is then conserved); from 1e-8 below, the path
+    comes within GIMBAL_LOCK_COS of cos q2 = 0 and they stop with code 6, a
+    finite state on the trajectory (H still conserved) and the time reached.
+    With too few steps allowed, code 2, as finite."""
     b = compiled("gyrostat", language)
     scene, _, p = problem("gyrostat")
-    x0 = np.zeros(b.nx)
-    for name, value in {"q2": np.pi / 2 - 1e-12, "u1": 10.0, "u2": 1.0, "u3": 1.0}.items():
-        x0[scene.states.index(name)] = value
     c = b.setup(p)
-    h0 = witness.output(scene, "angular_momentum", x0, p)
-    for method in ["dopri5", "dop853"]:
-        x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, rtol=1e-10, atol=1e-10)
-        assert code == OK and np.all(np.isfinite(x))
-        h1 = witness.output(scene, "angular_momentum", x, p)
-        np.testing.assert_allclose(h1, h0, rtol=0, atol=1e-6)
-    for method in ADAPTIVE:
-        x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, max_steps=50)
-        assert code == MAX_STEPS and stats["t"] < 1.0 and np.all(np.isfinite(x))
+    for eps, expected in ((1e-6, OK), (1e-8, ATTITUDE)):
+        x0 = np.zeros(b.nx)
+        for name, value in {"q2": np.pi / 2 - eps, "u1": 10.0, "u2": 1.0, "u3": 1.0}.items():
+            x0[scene.states.index(name)] = value
+        h0 = witness.output(scene, "angular_momentum", x0, p)
+        for method in ADAPTIVE:
+            x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, rtol=1e-10, atol=1e-10)
+            assert code == expected and np.all(np.isfinite(x)), (method, eps)
+            assert (stats["t"] == 1.0) == (expected == OK)
+            h1 = witness.output(scene, "angular_momentum", x, p)
+            np.testing.assert_allclose(h1, h0, rtol=0, atol=1e-6)
+        for method in ADAPTIVE:
+            x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, max_steps=50)
+            assert code in (MAX_STEPS, expected) and stats["t"] < 1.0 and np.all(np.isfinite(x))
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_step_underflow(compiled: Get, language: str) -> None:
-    """A tolerance no double can meet: h shrinks below 16 eps |t|."""
+    """At t0 = 2^45 s, 16 eps |t| = 0.12 s: the steps rtol = 1e-12 needs
+    (~0.05 s) are lost in the rounding of t, and h shrinks below it."""
     b = compiled("torque_free", language)
     _, x0, p = problem("torque_free")
+    t0 = 2.0**45
     for method in ADAPTIVE:
-        x, stats, code = b.integrate(method, x0, b.setup(p), 1.0, 2.0, rtol=1e-300, atol=1e-300)
-        assert code == UNDERFLOW and stats["t"] == 1.0 and np.array_equal(x, x0)
+        x, stats, code = b.integrate(
+            method, x0, b.setup(p), t0, t0 + 1000.0, rtol=1e-12, atol=1e-12, h0=1.0
+        )
+        assert code == UNDERFLOW and stats["rejected"] > 0
+        assert stats["t"] == t0 and np.array_equal(x, x0)
 
 
 @pytest.mark.parametrize("language", LANGUAGES)

@@ -123,6 +123,16 @@ BAD = [
     ("no target", edit('targets = ["c", "fortran"]', "targets = []"), "targets"),
     ("attitude", edit('targets = ["c"', 'attitude = "rodrigues"\ntargets = ["c"'), "attitude"),
     ("initial", edit("initial = { u1", "initial = { u9 = 1.0, u1"), "u9 is not a state"),
+    (
+        "rtol no double meets",
+        edit("[simulate]", "[simulate]\nrtol = 1e-20"),
+        "simulate.rtol: must be above 2.22e-15",
+    ),
+    (
+        "rtol at the bound",
+        edit("[simulate]", "[simulate]\nrtol = 2.220446049250313e-15"),
+        "simulate.rtol",
+    ),
     ("bad toml", "name = ", "invalid TOML"),
 ]
 

@@ -237,6 +237,24 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-12
 
 
+def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: None) -> None:
+    """A 3-1-2 scene started at q2 = pi/2: the compiled integrator's code 6
+    becomes one line with its meaning; nothing is written."""
+    text = builtin_text("torque_free").replace(
+        "initial = { u1", "initial = { q2 = 1.5707963267948966, u1"
+    )
+    scene = tmp_path / "locked.toml"
+    scene.write_text(text)
+    run = simulate([str(scene), "--method", "dop853", "--t-end", "1", "--no-plot"], tmp_path / "o")
+    assert run.code == 1 and run.out == ""
+    errors = [line for line in run.err.splitlines() if "error" in line]
+    assert errors == [
+        "gyrogen: error: dop853 failed at t = 0 s: the 3-1-2 attitude reached gimbal lock: "
+        'use attitude = "quaternion"'
+    ]
+    assert not (tmp_path / "o" / "trajectory.csv").exists()
+
+
 def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
     from gyrogen import scene as scenes
     from gyrogen import simulate

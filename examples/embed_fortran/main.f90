@@ -14,7 +14,7 @@
 !   u1 = 0.01, u2 = 0.5, u3 = -0.02 rad/s (carrier rates, A components),
 !   u4 = 100 rad/s (rotor's absolute rate about a2).
 program embed_fortran
-  use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long
+  use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_loc
   use, intrinsic :: iso_fortran_env, only: error_unit
   use gyrostat_mod, only: gyrostat_setup, GYROSTAT_NX, GYROSTAT_NP, GYROSTAT_NC, GYROSTAT_OK
   use gyrostat_ode_mod, only: gyrostat_rk4, gyrostat_stats, GYROSTAT_ODE_OK
@@ -32,7 +32,7 @@ program embed_fortran
     100.0_c_double, 80.0_c_double, 120.0_c_double, 5.0_c_double, 0.05_c_double, &
     0.1_c_double, 0.2_c_double, -0.1_c_double, 0.0_c_double, 0.01_c_double]
   real(c_double) :: c(GYROSTAT_NC), x(GYROSTAT_NX), h(3)
-  type(gyrostat_stats) :: stats
+  type(gyrostat_stats), target :: stats  ! passed as c_loc(stats); c_null_ptr when not wanted
   integer(c_int) :: code
   integer :: k
 
@@ -49,9 +49,9 @@ program embed_fortran
   x(10) = -0.02_c_double  ! u3
   x(11) = 100.0_c_double  ! u4
   ! The generated classic RK4: `steps` equal steps of dt over [0, 10 s].
-  code = gyrostat_rk4(0.0_c_double, steps*dt, int(steps, c_long), x, c, stats)
+  code = gyrostat_rk4(0.0_c_double, steps*dt, int(steps, c_long), x, c, c_loc(stats))
   if (code /= GYROSTAT_ODE_OK) then
-    write (*, '(a, i0)') 'gyrostat_rk4 failed with code ', code
+    write (*, '(a, i0, a, g0)') 'gyrostat_rk4 failed with code ', code, ' at t = ', stats%t
     error stop 1
   end if
 

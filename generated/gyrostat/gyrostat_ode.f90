@@ -7,9 +7,21 @@
 ! Build id 719a3b3e738b84d4. The same interface as gyrostat_ode.h, under
 ! the bind(C) names gyrostat_f_<method> and gyrostat_f_<method>_batch.
 ! Coefficients and sources as in gyrostat_ode.c (gyrogen/tableaus.py).
+!
+! Every integrator takes its statistics as type(c_ptr), value: C passes a
+! gyrostat_stats * or NULL, Fortran c_loc(stats) (stats declared with the
+! target attribute) or c_null_ptr when they are not wanted. The _batch
+! variants take an array of n of them, and the codes, the same way.
+!
+! The attitude is 3-1-2 Euler angles x(1:3) = q1, q2, q3, whose kinematics
+! divide by cos(q2): every integrator returns GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR
+! when |cos q2| < GYROSTAT_ODE_GIMBAL_LOCK_COS at the start or at the end of an
+! accepted step, or when cos q2 changes sign across one (the path crossed
+! q2 = +-pi/2, where q1 and q3 jump); x is then the state before that step
+! (at the start: as given) and stats%t its time.
 module gyrostat_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
-                                         c_associated, c_f_pointer
+                                         c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use gyrostat_mod, only: gyrostat_rhs, nx => GYROSTAT_NX, nc => GYROSTAT_NC
   implicit none
@@ -37,7 +49,20 @@ module gyrostat_ode_mod
   integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_MAX_STEPS = 2
   integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_NONFINITE = 3
   integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_SINGULAR = 4
+  ! 5: t1 < t0, steps or max_steps < 1, rtol <= GYROSTAT_ODE_MIN_RTOL, atol <= 0,
+  ! or t0, t1, rtol, atol or h0 NaN or infinite
   integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_ARGUMENT = 5
+  ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
+  ! (3-1-2 scenes only; see above)
+  integer(c_int), parameter, public :: GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR = 6
+
+  ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
+  ! double arithmetic meets it and the steps would shrink until max_steps ran out.
+  real(c_double), parameter, public :: GYROSTAT_ODE_MIN_RTOL = 2.220446049250313e-15_c_double
+  ! 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
+  ! about epsilon |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so the
+  ! kinematic rates q1' and q3' in the 7th digit.
+  real(c_double), parameter, public :: GYROSTAT_ODE_GIMBAL_LOCK_COS = 1e-09_c_double
 
   ! An explicit embedded pair's step-size control: h_new / h = safety
   ! err^-alpha err_old^beta within [facmin, facmax] (Hairer's PI controller).
@@ -317,6 +342,20 @@ contains
     J(196) = 0
   end subroutine gyrostat_jac
 
+  ! The attitude is 3-1-2 angles, q2 = x(2): their kinematics divide by
+  ! cos(q2). .true. when the step to xnew reaches gimbal lock, |cos q2| <
+  ! GYROSTAT_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
+  ! passed q2 = +-pi/2, where q1 and q3 jump); else cos_q2 = cos(xnew(2)).
+  logical function gimbal_lock(xnew, cos_q2)
+    real(c_double), intent(in) :: xnew(nx)
+    real(c_double), intent(inout) :: cos_q2
+    real(c_double) :: cq
+
+    cq = cos(xnew(2))
+    gimbal_lock = abs(cq) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. ((cq > 0) .neqv. (cos_q2 > 0))
+    if (.not. gimbal_lock) cos_q2 = cq
+  end function gimbal_lock
+
   ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
   ! compensation: comp keeps what this add lost and the next step takes it
   ! back from its dx, so the rounding of 1e7 adds does not pile up in the
@@ -344,20 +383,31 @@ contains
   end subroutine stats_start
 
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
-  function gyrostat_rk4(t0, t1, steps, x, c, stats) result(code) bind(C, name="gyrostat_f_rk4")
+  function gyrostat_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
+      bind(C, name="gyrostat_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
     integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    type(gyrostat_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
+    real(c_double) :: cos_q2
+    type(gyrostat_stats), pointer :: stats
+    type(gyrostat_stats), target :: own
     integer(c_long) :: n
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
     if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) &
         .or. steps < 1) then
       code = GYROSTAT_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) then
+      code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     h = (t1 - t0) / real(steps, c_double)
@@ -391,6 +441,10 @@ contains
         code = GYROSTAT_ODE_ERR_NONFINITE
         return
       end if
+      if (gimbal_lock(xnew, cos_q2)) then
+        code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+        return
+      end if
       call accept_step(x, xnew, dx, comp)
       stats%accepted = stats%accepted + 1
       stats%t = merge(t1, t + h, n + 1 == steps)
@@ -410,7 +464,6 @@ contains
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(gyrostat_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -420,23 +473,26 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_rk4(t0, t1, steps, x(:, i), c, stats_out(i))
+        code = gyrostat_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
-        code = gyrostat_rk4(t0, t1, steps, x(:, i), c, own)
+        code = gyrostat_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
     end do
   end function gyrostat_rk4_batch
 
-  ! The arguments every adaptive method refuses (NaN included).
-  pure logical function bad_arguments(t0, t1, rtol, atol, max_steps)
-    real(c_double), intent(in) :: t0, t1, rtol, atol
+  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
+  ! double arithmetic can meet (rtol <= GYROSTAT_ODE_MIN_RTOL, atol <= 0), max_steps
+  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
+  pure logical function bad_arguments(t0, t1, rtol, atol, h0, max_steps)
+    real(c_double), intent(in) :: t0, t1, rtol, atol, h0
     integer(c_long), intent(in) :: max_steps
 
     bad_arguments = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) &
-        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > 0) .or. .not. (atol > 0) &
-        .or. max_steps < 1
+        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > GYROSTAT_ODE_MIN_RTOL) &
+        .or. .not. ieee_is_finite(rtol) .or. .not. (atol > 0) .or. .not. ieee_is_finite(atol) &
+        .or. .not. ieee_is_finite(h0) .or. max_steps < 1
   end function bad_arguments
 
   ! h is lost in the rounding of t: the solution cannot be resolved further.
@@ -499,11 +555,17 @@ contains
     type(gyrostat_stats), intent(out) :: stats
     integer(c_int) :: code
     real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
+    real(c_double) :: cos_q2
     logical :: last, rejected_last, nonfinite
 
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = GYROSTAT_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) then
+      code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     code = GYROSTAT_ODE_OK
@@ -553,6 +615,10 @@ contains
       ! fac = h / h_new, in Hairer's form (no division by a zero error)
       fac = err**m%alpha / m%safety
       if (err <= 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -631,15 +697,19 @@ contains
   end function dopri5_trial
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
-  function gyrostat_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function gyrostat_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(gyrostat_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
+    type(gyrostat_stats), pointer :: stats
+    type(gyrostat_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dopri5_trial, dopri5_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function gyrostat_dopri5
@@ -772,15 +842,19 @@ contains
   end function dop853_trial
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
-  function gyrostat_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function gyrostat_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(gyrostat_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
+    type(gyrostat_stats), pointer :: stats
+    type(gyrostat_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dop853_trial, dop853_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function gyrostat_dop853
@@ -935,23 +1009,33 @@ contains
   ! 0.9 err^-1/4 within [0.2, 6], and Gustafsson's predictive controller
   ! after an accepted step. A singular E is retried with h halved, five
   ! times in a row at most.
-  function gyrostat_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function gyrostat_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(gyrostat_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
     real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
+    real(c_double) :: cos_q2
+    type(gyrostat_stats), pointer :: stats
+    type(gyrostat_stats), target :: own
     integer :: piv(nx), i, j, singular
     logical :: last, rejected_last, nonfinite, new_point
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = GYROSTAT_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) then
+      code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     code = GYROSTAT_ODE_OK
@@ -1036,6 +1120,10 @@ contains
       ! fac = h / h_new
       fac = max(1 / 6.0_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))
       if (err <= 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
         if (stats%accepted > 0) then
           gus = (h_acc / h) * (err * err / err_acc)**0.25_c_double / 0.9_c_double
           fac = max(fac, 1 / 6.0_c_double, min(5.0_c_double, gus))
@@ -1071,7 +1159,6 @@ contains
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(gyrostat_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -1081,9 +1168,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -1102,7 +1190,6 @@ contains
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(gyrostat_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -1112,9 +1199,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -1133,7 +1221,6 @@ contains
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(gyrostat_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -1143,9 +1230,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1

@@ -105,6 +105,20 @@ static void stats_start(torque_free_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
+/* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
+   cos(q2). 1 when the step to xnew reaches gimbal lock, |cos q2| <
+   TORQUE_FREE_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
+   passed q2 = +-pi/2, where q1 and q3 jump); else *cos_q2 := cos(xnew[1]). */
+static int gimbal_lock(const double *xnew, double *cos_q2)
+{
+    const double cq = cos(xnew[1]);
+    if (fabs(cq) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (*cos_q2 > 0.0)) {
+        return 1;
+    }
+    *cos_q2 = cq;
+    return 0;
+}
+
 static int all_finite(const double *v, int n)
 {
     int i;
@@ -136,12 +150,20 @@ int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c
     double k[4][TORQUE_FREE_NX], y[TORQUE_FREE_NX], xnew[TORQUE_FREE_NX], dx[TORQUE_FREE_NX];
     double comp[TORQUE_FREE_NX] = {0.0};
     double t, h;
+    double cos_q2 = cos(x[1]);
+    torque_free_stats own;
     long n;
     int i;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return TORQUE_FREE_ODE_ERR_ARGUMENT;
+    }
+    if (fabs(cos_q2) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS) {
+        return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     h = (t1 - t0) / (double)steps;
     stats->h = h;
@@ -180,6 +202,9 @@ int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c
         if (!all_finite(xnew, TORQUE_FREE_NX)) {
             return TORQUE_FREE_ODE_ERR_NONFINITE;
         }
+        if (gimbal_lock(xnew, &cos_q2)) {
+            return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+        }
         accept_step(x, xnew, dx, comp);
         stats->accepted += 1;
         stats->t = n + 1 == steps ? t1 : t + h;
@@ -191,11 +216,10 @@ int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c
 size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_rk4(t0, t1, steps, x + i * TORQUE_FREE_NX, c,
-                                    stats ? stats + i : &own);
+                                    stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -206,11 +230,14 @@ size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double 
     return failed;
 }
 
-/* The arguments every adaptive method refuses (NaN included). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, long max_steps)
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
+   double arithmetic can meet (rtol <= TORQUE_FREE_ODE_MIN_RTOL, atol <= 0), max_steps
+   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double h0,
+                         long max_steps)
 {
-    return !(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || !(rtol > 0.0) || !(atol > 0.0)
-        || max_steps < 1;
+    return !(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || !(rtol > TORQUE_FREE_ODE_MIN_RTOL)
+        || !isfinite(rtol) || !(atol > 0.0) || !isfinite(atol) || !isfinite(h0) || max_steps < 1;
 }
 
 /* h is lost in the rounding of t: the solution cannot be resolved further. */
@@ -296,11 +323,15 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
 {
     double k[13][TORQUE_FREE_NX], xnew[TORQUE_FREE_NX], dx[TORQUE_FREE_NX], comp[TORQUE_FREE_NX] = {0.0};
     double t = t0, h, err, fac, err_old = 1e-4;
+    double cos_q2 = cos(x[1]);
     int i, last, rejected_last = 0, nonfinite = 0;
 
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return TORQUE_FREE_ODE_ERR_ARGUMENT;
+    }
+    if (fabs(cos_q2) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS) {
+        return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
         return TORQUE_FREE_ODE_OK;
@@ -341,6 +372,9 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
         fac = pow(err, m->alpha) / m->safety;
         if (err <= 1.0) {
+            if (gimbal_lock(xnew, &cos_q2)) {
+                return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
@@ -445,7 +479,9 @@ static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.
 int torque_free_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, torque_free_stats *stats)
 {
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    torque_free_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
@@ -609,7 +645,9 @@ static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 
 int torque_free_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, torque_free_stats *stats)
 {
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps, stats);
+    torque_free_stats own;  /* when stats is NULL: not wanted */
+    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
+                          stats ? stats : &own);
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -792,11 +830,19 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
     double f0[TORQUE_FREE_NX], fnew[TORQUE_FREE_NX], xnew[TORQUE_FREE_NX], dx[TORQUE_FREE_NX], comp[TORQUE_FREE_NX] = {0.0};
     int piv[TORQUE_FREE_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
+    double cos_q2 = cos(x[1]);
+    torque_free_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
+    if (stats == NULL) {
+        stats = &own;  /* not wanted */
+    }
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return TORQUE_FREE_ODE_ERR_ARGUMENT;
+    }
+    if (fabs(cos_q2) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS) {
+        return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
         return TORQUE_FREE_ODE_OK;
@@ -865,6 +911,9 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
         /* fac = h / h_new */
         fac = fmax(1.0 / 6.0, fmin(5.0, pow(err, 0.25) / 0.9));
         if (err <= 1.0) {
+            if (gimbal_lock(xnew, &cos_q2)) {
+                return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
             if (stats->accepted > 0) {
                 const double gus = (h_acc / h) * pow(err * err / err_acc, 0.25) / 0.9;
                 fac = fmax(fac, fmax(1.0 / 6.0, fmin(5.0, gus)));
@@ -898,11 +947,10 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_dopri5(t0, t1, x + i * TORQUE_FREE_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -917,11 +965,10 @@ size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const
 size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_dop853(t0, t1, x + i * TORQUE_FREE_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -936,11 +983,10 @@ size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x, const
 size_t torque_free_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
 {
-    torque_free_stats own;
     size_t i, failed = 0;
     for (i = 0; i < n; ++i) {
         const int code = torque_free_rodas4(t0, t1, x + i * TORQUE_FREE_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : &own);
+                                           stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

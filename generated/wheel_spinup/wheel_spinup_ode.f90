@@ -7,9 +7,21 @@
 ! Build id ae05ef069b8d0086. The same interface as wheel_spinup_ode.h, under
 ! the bind(C) names wheel_spinup_f_<method> and wheel_spinup_f_<method>_batch.
 ! Coefficients and sources as in wheel_spinup_ode.c (gyrogen/tableaus.py).
+!
+! Every integrator takes its statistics as type(c_ptr), value: C passes a
+! wheel_spinup_stats * or NULL, Fortran c_loc(stats) (stats declared with the
+! target attribute) or c_null_ptr when they are not wanted. The _batch
+! variants take an array of n of them, and the codes, the same way.
+!
+! The attitude is 3-1-2 Euler angles x(1:3) = q1, q2, q3, whose kinematics
+! divide by cos(q2): every integrator returns WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR
+! when |cos q2| < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS at the start or at the end of an
+! accepted step, or when cos q2 changes sign across one (the path crossed
+! q2 = +-pi/2, where q1 and q3 jump); x is then the state before that step
+! (at the start: as given) and stats%t its time.
 module wheel_spinup_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
-                                         c_associated, c_f_pointer
+                                         c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use wheel_spinup_mod, only: wheel_spinup_rhs, nx => WHEEL_SPINUP_NX, nc => WHEEL_SPINUP_NC
   implicit none
@@ -37,7 +49,20 @@ module wheel_spinup_ode_mod
   integer(c_int), parameter, public :: WHEEL_SPINUP_ODE_ERR_MAX_STEPS = 2
   integer(c_int), parameter, public :: WHEEL_SPINUP_ODE_ERR_NONFINITE = 3
   integer(c_int), parameter, public :: WHEEL_SPINUP_ODE_ERR_SINGULAR = 4
+  ! 5: t1 < t0, steps or max_steps < 1, rtol <= WHEEL_SPINUP_ODE_MIN_RTOL, atol <= 0,
+  ! or t0, t1, rtol, atol or h0 NaN or infinite
   integer(c_int), parameter, public :: WHEEL_SPINUP_ODE_ERR_ARGUMENT = 5
+  ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
+  ! (3-1-2 scenes only; see above)
+  integer(c_int), parameter, public :: WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR = 6
+
+  ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
+  ! double arithmetic meets it and the steps would shrink until max_steps ran out.
+  real(c_double), parameter, public :: WHEEL_SPINUP_ODE_MIN_RTOL = 2.220446049250313e-15_c_double
+  ! 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
+  ! about epsilon |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so the
+  ! kinematic rates q1' and q3' in the 7th digit.
+  real(c_double), parameter, public :: WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS = 1e-09_c_double
 
   ! An explicit embedded pair's step-size control: h_new / h = safety
   ! err^-alpha err_old^beta within [facmin, facmax] (Hairer's PI controller).
@@ -192,6 +217,20 @@ contains
     J(64) = 0
   end subroutine wheel_spinup_jac
 
+  ! The attitude is 3-1-2 angles, q2 = x(2): their kinematics divide by
+  ! cos(q2). .true. when the step to xnew reaches gimbal lock, |cos q2| <
+  ! WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
+  ! passed q2 = +-pi/2, where q1 and q3 jump); else cos_q2 = cos(xnew(2)).
+  logical function gimbal_lock(xnew, cos_q2)
+    real(c_double), intent(in) :: xnew(nx)
+    real(c_double), intent(inout) :: cos_q2
+    real(c_double) :: cq
+
+    cq = cos(xnew(2))
+    gimbal_lock = abs(cq) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS .or. ((cq > 0) .neqv. (cos_q2 > 0))
+    if (.not. gimbal_lock) cos_q2 = cq
+  end function gimbal_lock
+
   ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
   ! compensation: comp keeps what this add lost and the next step takes it
   ! back from its dx, so the rounding of 1e7 adds does not pile up in the
@@ -219,20 +258,31 @@ contains
   end subroutine stats_start
 
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
-  function wheel_spinup_rk4(t0, t1, steps, x, c, stats) result(code) bind(C, name="wheel_spinup_f_rk4")
+  function wheel_spinup_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
     integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
+    real(c_double) :: cos_q2
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
     integer(c_long) :: n
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
     if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) &
         .or. steps < 1) then
       code = WHEEL_SPINUP_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS) then
+      code = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     h = (t1 - t0) / real(steps, c_double)
@@ -266,6 +316,10 @@ contains
         code = WHEEL_SPINUP_ODE_ERR_NONFINITE
         return
       end if
+      if (gimbal_lock(xnew, cos_q2)) then
+        code = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+        return
+      end if
       call accept_step(x, xnew, dx, comp)
       stats%accepted = stats%accepted + 1
       stats%t = merge(t1, t + h, n + 1 == steps)
@@ -285,7 +339,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -295,23 +348,26 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, stats_out(i))
+        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
-        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, own)
+        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
     end do
   end function wheel_spinup_rk4_batch
 
-  ! The arguments every adaptive method refuses (NaN included).
-  pure logical function bad_arguments(t0, t1, rtol, atol, max_steps)
-    real(c_double), intent(in) :: t0, t1, rtol, atol
+  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
+  ! double arithmetic can meet (rtol <= WHEEL_SPINUP_ODE_MIN_RTOL, atol <= 0), max_steps
+  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
+  pure logical function bad_arguments(t0, t1, rtol, atol, h0, max_steps)
+    real(c_double), intent(in) :: t0, t1, rtol, atol, h0
     integer(c_long), intent(in) :: max_steps
 
     bad_arguments = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) &
-        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > 0) .or. .not. (atol > 0) &
-        .or. max_steps < 1
+        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > WHEEL_SPINUP_ODE_MIN_RTOL) &
+        .or. .not. ieee_is_finite(rtol) .or. .not. (atol > 0) .or. .not. ieee_is_finite(atol) &
+        .or. .not. ieee_is_finite(h0) .or. max_steps < 1
   end function bad_arguments
 
   ! h is lost in the rounding of t: the solution cannot be resolved further.
@@ -374,11 +430,17 @@ contains
     type(wheel_spinup_stats), intent(out) :: stats
     integer(c_int) :: code
     real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
+    real(c_double) :: cos_q2
     logical :: last, rejected_last, nonfinite
 
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = WHEEL_SPINUP_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS) then
+      code = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     code = WHEEL_SPINUP_ODE_OK
@@ -428,6 +490,10 @@ contains
       ! fac = h / h_new, in Hairer's form (no division by a zero error)
       fac = err**m%alpha / m%safety
       if (err <= 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -506,15 +572,19 @@ contains
   end function dopri5_trial
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
-  function wheel_spinup_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function wheel_spinup_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dopri5_trial, dopri5_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function wheel_spinup_dopri5
@@ -647,15 +717,19 @@ contains
   end function dop853_trial
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
-  function wheel_spinup_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function wheel_spinup_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = pair_integrate(dop853_trial, dop853_control, t0, t1, x, c, rtol, atol, h0, &
                           max_steps, stats)
   end function wheel_spinup_dop853
@@ -804,23 +878,33 @@ contains
   ! 0.9 err^-1/4 within [0.2, 6], and Gustafsson's predictive controller
   ! after an accepted step. A singular E is retried with h halved, five
   ! times in a row at most.
-  function wheel_spinup_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code) &
+  function wheel_spinup_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
     integer(c_long), value, intent(in) :: max_steps
-    type(wheel_spinup_stats), intent(out) :: stats
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
     real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
+    real(c_double) :: cos_q2
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
     integer :: piv(nx), i, j, singular
     logical :: last, rejected_last, nonfinite, new_point
 
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
       code = WHEEL_SPINUP_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS) then
+      code = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
     code = WHEEL_SPINUP_ODE_OK
@@ -905,6 +989,10 @@ contains
       ! fac = h / h_new
       fac = max(1 / 6.0_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))
       if (err <= 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
         if (stats%accepted > 0) then
           gus = (h_acc / h) * (err * err / err_acc)**0.25_c_double / 0.9_c_double
           fac = max(fac, 1 / 6.0_c_double, min(5.0_c_double, gus))
@@ -940,7 +1028,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -950,9 +1037,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -971,7 +1059,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -981,9 +1068,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -1002,7 +1090,6 @@ contains
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
     integer(c_int), pointer :: codes_out(:)
-    type(wheel_spinup_stats) :: own
     integer(c_size_t) :: i
     integer(c_int) :: code
 
@@ -1012,9 +1099,10 @@ contains
     failed = 0
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, stats_out(i))
+        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
       else
-        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, own)
+        code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1

@@ -26,15 +26,23 @@ extern "C" {
 /*
  * Integrators that run entirely in compiled code, for the constants c from
  * wheel_spinup_setup. Each integrates one state x[WHEEL_SPINUP_NX] in place from
- * t0 to t1 (t1 >= t0) and returns a code below; stats must not be NULL. The
- * _batch variants integrate n states stored one after another
+ * t0 to t1 (t1 >= t0) and returns a code below; stats may be NULL when not
+ * wanted. The _batch variants integrate n states stored one after another
  * (x[i*WHEEL_SPINUP_NX + j]), fill stats[i] and codes[i], and return how many
- * failed; there (only there) stats or codes may be NULL when not wanted.
+ * failed; stats or codes may be NULL there too.
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Coefficients and sources: gyrogen/tableaus.py.
  * The steps are summed with Kahan's compensation, so that long runs keep
  * their invariants to rounding: compile without -ffast-math (or
  * -Ofast), which would optimize the compensation away.
+ *
+ * The attitude is 3-1-2 Euler angles x[0..2] = q1, q2, q3, whose kinematics
+ * divide by cos(q2) (gimbal lock at q2 = +-pi/2). Every integrator returns
+ * code 6 when |cos q2| < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS at the start or at the end
+ * of an accepted step, or when cos q2 changes sign across an accepted step
+ * (the path crossed q2 = +-pi/2, where q1 and q3 jump); x is then the state
+ * before that step (at the start: as given) and stats.t its time. The check
+ * costs one cos per step; f is not called on a start state it refuses.
  */
 
 /* What an integration did, and where it stopped. */
@@ -54,7 +62,20 @@ typedef struct {
 #define WHEEL_SPINUP_ODE_ERR_MAX_STEPS      2  /* max_steps steps were not enough */
 #define WHEEL_SPINUP_ODE_ERR_NONFINITE      3  /* the state or its derivative is NaN or Inf */
 #define WHEEL_SPINUP_ODE_ERR_SINGULAR       4  /* the iteration matrix is singular */
-#define WHEEL_SPINUP_ODE_ERR_ARGUMENT       5  /* t1 < t0, rtol or atol <= 0, steps or max_steps < 1, NaN */
+/* 5: t1 < t0, steps or max_steps < 1, rtol <= WHEEL_SPINUP_ODE_MIN_RTOL, atol <= 0,
+   or t0, t1, rtol, atol or h0 NaN or infinite */
+#define WHEEL_SPINUP_ODE_ERR_ARGUMENT       5
+/* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
+   (3-1-2 scenes only; see above) */
+#define WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR 6
+
+/* rtol must exceed 10 DBL_EPSILON (Hairer's rule): tighter, no double
+   arithmetic meets it and the steps would shrink until max_steps ran out. */
+#define WHEEL_SPINUP_ODE_MIN_RTOL 2.220446049250313e-15
+/* 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
+   about DBL_EPSILON |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so
+   the kinematic rates q1' and q3' in the 7th digit. */
+#define WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS 1e-09
 
 /* d(dx/dt)/dx, row-major: J[i*WHEEL_SPINUP_NX + j] = d f_i / d x_j (60 ops). */
 void wheel_spinup_jac(double t, const double *x, const double *c, double *J);
@@ -69,10 +90,10 @@ size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double
 /* Dormand-Prince 5(4), adaptive, PI step-size control.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
  * is accepted when their RMS is <= 1.
- * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
- * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 if that persists to underflow, or at
- * once when x, f(t0, x) is not finite. */
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
+ * persists to underflow, or at once when x, f(t0, x) is not finite. */
 int wheel_spinup_dopri5(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x,
@@ -82,10 +103,10 @@ size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x,
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
  * is accepted when their RMS is <= 1 (Hairer's blend of a 5th- and a 3rd-order estimate).
- * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
- * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 if that persists to underflow, or at
- * once when x, f(t0, x) is not finite. */
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
+ * persists to underflow, or at once when x, f(t0, x) is not finite. */
 int wheel_spinup_dop853(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x,
@@ -95,10 +116,10 @@ size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x,
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
  * is accepted when their RMS is <= 1.
- * h0 <= 0 picks the first step (Hairer's HINIT), h0 > 0 is tried first; at
- * most max_steps steps (accepted + rejected). A trial step with a NaN or Inf
- * is rejected and h shrunk: code 3 if that persists to underflow, or at
- * once when x, f(t0, x) or the Jacobian is not finite. */
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
+ * persists to underflow, or at once when x, f(t0, x) or the Jacobian is not finite. */
 int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x,
