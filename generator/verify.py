@@ -229,7 +229,7 @@ def compare(
     if given is not None and len(given):
         draws = np.vstack([draws, given])
         fine = [p for p in given if _condition(scene, p) <= WELL_CONDITIONED]
-        well = np.vstack([well, np.reshape(fine, (-1, given.shape[1]))])
+        well = np.vstack([well, np.array(fine).reshape(len(fine), given.shape[1])])
     if not len(well) and not len(draws):
         raise GyrogenError(
             f"{scene.name}: no valid runtime parameter values found at random: give "

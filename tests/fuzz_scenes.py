@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from scene_space import run_shard  # noqa: E402
 
-SHARD = 25
+SHARD = 100
 """Examples per task: small enough that the progress line moves."""
 
 
@@ -44,7 +44,9 @@ def main() -> int:
     if args.examples < 1 or args.jobs < 1:
         ap.error("--examples and --jobs must be at least 1")
     base = args.seed if args.seed is not None else random.SystemRandom().randrange(2**31)
-    sizes = [SHARD] * (args.examples // SHARD) + ([args.examples % SHARD] if args.examples % SHARD else [])
+    sizes = [SHARD] * (args.examples // SHARD) + (
+        [args.examples % SHARD] if args.examples % SHARD else []
+    )
     print(f"fuzz: {args.examples} scenes, seed {base}, {args.jobs} jobs, failures to {args.out}/")
     totals = {"examples": 0, "checked": 0, "refused": 0, "failed": 0}
     failures: list[str] = []

@@ -23,7 +23,8 @@ module gyrostat_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
-  use gyrostat_mod, only: gyrostat_rhs, nx => GYROSTAT_NX, nc => GYROSTAT_NC
+  use gyrostat_mod, only: gyrostat_rhs, nx => GYROSTAT_NX, &
+                         nc => GYROSTAT_NC
   implicit none
   private
   public :: gyrostat_jac
@@ -588,7 +589,8 @@ contains
     end if
     do
       if (step_underflow(h, t)) then
-        code = merge(GYROSTAT_ODE_ERR_NONFINITE, GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        code = merge(GYROSTAT_ODE_ERR_NONFINITE, &
+                     GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
         return
       end if
       if (stats%accepted + stats%rejected >= max_steps) then
@@ -860,9 +862,11 @@ contains
   end function gyrostat_dop853
 
   ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
-  ! block upper triangular in state order (see gyrogen/lu_blocks.py): blocks
-  ! (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14) (0-based, end excluded). L is unit lower and
-  ! nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the
+  ! block upper triangular in state order (see gyrogen/lu_blocks.py), with
+  ! the diagonal blocks (0-based, end excluded)
+  ! (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12),
+  ! (12, 13), (13, 14).
+  ! L is unit lower and nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the
   ! diagonal; row k swapped with piv(k), a row of the same block. .true. when
   ! a pivot is zero: singular.
   logical function lu_decompose(a, piv) result(singular)
@@ -1070,7 +1074,8 @@ contains
         new_point = .false.
       end if
       if (step_underflow(h, t)) then
-        code = merge(GYROSTAT_ODE_ERR_NONFINITE, GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        code = merge(GYROSTAT_ODE_ERR_NONFINITE, &
+                     GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
         return
       end if
       if (stats%accepted + stats%rejected >= max_steps) then

@@ -23,7 +23,8 @@ module torque_free_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
-  use torque_free_mod, only: torque_free_rhs, nx => TORQUE_FREE_NX, nc => TORQUE_FREE_NC
+  use torque_free_mod, only: torque_free_rhs, nx => TORQUE_FREE_NX, &
+                         nc => TORQUE_FREE_NC
   implicit none
   private
   public :: torque_free_jac
@@ -439,7 +440,8 @@ contains
     end if
     do
       if (step_underflow(h, t)) then
-        code = merge(TORQUE_FREE_ODE_ERR_NONFINITE, TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        code = merge(TORQUE_FREE_ODE_ERR_NONFINITE, &
+                     TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW, nonfinite)
         return
       end if
       if (stats%accepted + stats%rejected >= max_steps) then
@@ -711,9 +713,10 @@ contains
   end function torque_free_dop853
 
   ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
-  ! block upper triangular in state order (see gyrogen/lu_blocks.py): blocks
-  ! (0, 1), (1, 3), (3, 6), (6, 7) (0-based, end excluded). L is unit lower and
-  ! nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the
+  ! block upper triangular in state order (see gyrogen/lu_blocks.py), with
+  ! the diagonal blocks (0-based, end excluded)
+  ! (0, 1), (1, 3), (3, 6), (6, 7).
+  ! L is unit lower and nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the
   ! diagonal; row k swapped with piv(k), a row of the same block. .true. when
   ! a pivot is zero: singular.
   logical function lu_decompose(a, piv) result(singular)
@@ -914,7 +917,8 @@ contains
         new_point = .false.
       end if
       if (step_underflow(h, t)) then
-        code = merge(TORQUE_FREE_ODE_ERR_NONFINITE, TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        code = merge(TORQUE_FREE_ODE_ERR_NONFINITE, &
+                     TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW, nonfinite)
         return
       end if
       if (stats%accepted + stats%rejected >= max_steps) then
