@@ -106,3 +106,7 @@ INTEGRATORS: dict[str, str] = {
     "dop853": "DOP853 (Hairer's coefficients and error estimator), adaptive.",
     "rodas4": "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
 }
+
+# Lines of a failed compiler's output shown in its error; the whole output is
+# kept under the build cache's logs/ directory.
+COMPILER_LOG_LINES = 10
