@@ -141,3 +141,29 @@ def test_two_scenes_of_one_name_get_a_build_each(
     assert sorted(built) == [7, 8]
     assert [line.split()[:2] for line in out.splitlines()[1:]] == [["scene", "torque_free"]] * 2
     assert out.count(" ok\n") == 2
+
+
+@pytest.mark.parametrize(
+    ("change", "add"),
+    [
+        ('targets = ["fortran"]', "c to targets"),
+        ('targets = ["c"]\nintegrators = ["rodas4"]', "dop853 to integrators"),
+        (
+            'targets = ["fortran"]\nintegrators = ["rk4"]',
+            "c to targets and dop853, rodas4 to integrators",
+        ),
+    ],
+)
+def test_scene_check_cannot_run_is_one_line_exit_2(
+    change: str, add: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = builtin_text("torque_free")
+    assert 'targets = ["c", "fortran"]' in text
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text.replace('targets = ["c", "fortran"]', change))
+    code, out, err = _check([str(scene)], capsys)
+    assert (code, out) == (2, "")
+    assert err == (
+        f"gyrogen: error: {scene}: gyrogen check needs the scene's C build with dop853 and "
+        f"rodas4 (and its Jacobian): add {add}\n"
+    )
