@@ -327,3 +327,47 @@ def test_new_over_a_directory_is_one_line(
         "(see --help)\n"
     )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["my_sat.toml"]
+
+
+NUMBERS = [
+    (
+        ["verify", "--states", "0"],
+        "Invalid value for '--states': 0 is not in the range 1<=x<=1000000.",
+    ),
+    (["verify", "--states", "1000001"], "'--states': 1000001 is not in the range 1<=x<=1000000."),
+    (
+        ["verify", "--params", "0"],
+        "Invalid value for '--params': 0 is not in the range 1<=x<=10000.",
+    ),
+    (["verify", "--seed", "-1"], "Invalid value for '--seed': -1 is not in the range x>=0."),
+    (
+        ["run", "--states", "-5"],
+        "Invalid value for '--states': -5 is not in the range 1<=x<=1000000.",
+    ),
+    (["simulate", "torque_free", "--t-end", "nan"], "'--t-end': 'nan' is not a finite number."),
+    (["simulate", "torque_free", "--t-end", "inf"], "'--t-end': 'inf' is not a finite number."),
+    (["simulate", "torque_free", "--dt", "nan"], "'--dt': 'nan' is not a finite number."),
+    (["simulate", "torque_free", "--dt", "-inf"], "'--dt': -inf is not in the range x>0.0."),
+    (["simulate", "torque_free", "--dt", "0"], "'--dt': 0.0 is not in the range x>0.0."),
+    (["simulate", "torque_free", "--max-nfev", "0"], "'--max-nfev': 0 is not in the range"),
+    (
+        ["simulate", "torque_free", "--max-nfev", "10000000000000"],
+        "'--max-nfev': 10000000000000 is not in the range 1<=x<=1000000000000.",
+    ),
+    (
+        ["bench-rhs", "--repeats", "0"],
+        "Invalid value for '--repeats': 0 is not in the range 1<=x<=1000.",
+    ),
+    (["bench-rhs", "--repeats", "1001"], "'--repeats': 1001 is not in the range 1<=x<=1000."),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), NUMBERS, ids=[" ".join(a) for a, _ in NUMBERS])
+def test_number_out_of_range_is_one_line_exit_2(
+    argv: list[str], message: str, tmp_path: Path, capsys
+) -> None:
+    code, out, err = run([*argv, "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and out == ""
+    assert err.startswith(f"gyrogen {argv[0]}: error: ") and err.count("\n") == 1
+    assert message in err, err
+    assert not (tmp_path / "o").exists()

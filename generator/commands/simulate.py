@@ -9,10 +9,9 @@ from pathlib import Path
 
 import click
 
-from gyrogen.commands.options import SCENE
+from gyrogen.commands.options import POSITIVE, SCENE
+from gyrogen.layout import MAX_RHS_CALLS
 from gyrogen.scene import Scene
-
-POSITIVE = click.FloatRange(min=0.0, min_open=True)
 
 
 @contextmanager
@@ -41,7 +40,7 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 )
 @click.option(
     "--max-nfev",
-    type=click.IntRange(min=1),
+    type=click.IntRange(1, MAX_RHS_CALLS),
     default=10**7,
     show_default=True,
     help="Give up after this many RHS calls.",
