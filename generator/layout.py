@@ -123,3 +123,7 @@ MAX_REPEATS = 1000
 MAX_RHS_CALLS = 10**12
 """`gyrogen simulate --max-nfev`: days of RHS calls; the compiled integrators take it
 as a C long, which a larger Python int would overflow."""
+MAX_OUTPUT_POINTS = 10**6
+"""Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
+simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
+text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""

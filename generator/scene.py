@@ -18,10 +18,22 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from gyrogen.errors import SceneError
-from gyrogen.layout import PARAMETERS, STATES, TRIANGLE_SLACK
+from gyrogen.layout import (
+    MAX_OUTPUT_POINTS,
+    PARAMETERS,
+    STATES,
+    TRIANGLE_SLACK,
+)
 
 _C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if "
@@ -77,9 +89,29 @@ class Simulate(_Strict):
     """Values of the runtime parameters for `gyrogen simulate`."""
     t_end: Annotated[float, Field(gt=0)] = 10.0
     dt: Annotated[float, Field(gt=0)] = 0.01
-    """Output step of the trajectory."""
+    """Output step of the trajectory: at most t_end, and at most MAX_OUTPUT_POINTS of them in it."""
     rtol: Annotated[float, Field(gt=0, lt=1)] = 1e-10
     atol: Annotated[float, Field(gt=0)] = 1e-10
+
+    @field_validator("dt")
+    @classmethod
+    def _points(cls, dt: float, info: ValidationInfo) -> float:
+        if "t_end" in info.data:  # else t_end failed its own check
+            check_output_grid(info.data["t_end"], dt)
+        return dt
+
+
+def check_output_grid(t_end: float, dt: float) -> None:
+    """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
+    (and at least once)."""
+    if dt > t_end:
+        raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
+    steps = t_end / dt
+    if not steps <= MAX_OUTPUT_POINTS:
+        raise ValueError(
+            f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
+            f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
+        )
 
 
 class Scene(_Strict):

@@ -13,6 +13,7 @@ from gyrogen import build, witness
 from gyrogen.cli import main
 from gyrogen.errors import BuildError, SceneError
 from gyrogen.generate import generate
+from gyrogen.layout import MAX_OUTPUT_POINTS
 from gyrogen.scene import builtin_names, builtin_text, load, parse
 from gyrogen.verify import compare
 
@@ -67,6 +68,21 @@ BAD = [
     ("attitude", edit('targets = ["c"', 'attitude = "rodrigues"\ntargets = ["c"'), "attitude"),
     ("initial", edit("initial = { u1", "initial = { u9 = 1.0, u1"), "u9 is not a state"),
     ("bad toml", "name = ", "invalid TOML"),
+    (
+        "dt longer than t_end",
+        edit("dt = 0.05", "dt = 61.0"),
+        "simulate.dt: output step 61 s is longer than the span 60 s",
+    ),
+    (
+        "huge t_end",
+        edit("t_end = 60.0", "t_end = 1e300"),
+        "simulate.dt: t_end/dt = 1e+300 s/0.05 s is 2e+301 output steps",
+    ),
+    (
+        "just over the point limit",
+        edit("t_end = 60.0", "t_end = 50000.05"),
+        "simulate.dt: t_end/dt = 50000.1 s/0.05 s is 1000001 output steps, more than the limit",
+    ),
 ]
 
 
@@ -82,6 +98,11 @@ def test_bad_scene_is_one_line_exit_2_nothing_written(
     assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: ")
     assert message in err, err
     assert not out.exists() and stdout == ""
+
+
+def test_output_points_at_the_limit_are_accepted() -> None:
+    scene = parse(edit("t_end = 60.0", "t_end = 50000.0"), "x.toml")
+    assert scene.simulate.t_end / scene.simulate.dt == MAX_OUTPUT_POINTS
 
 
 def test_table_torque_needs_increasing_times() -> None:
