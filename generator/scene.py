@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
+import stat
 import tomllib
 from functools import cache
 from importlib.resources import files
-from pathlib import Path
 from typing import Annotated, Literal
 
 import pydantic
@@ -30,6 +31,7 @@ from pydantic import (
 from gyrogen.errors import SceneError
 from gyrogen.layout import (
     MAX_OUTPUT_POINTS,
+    MAX_SCENE_BYTES,
     PARAMETERS,
     STATES,
     TRIANGLE_SLACK,
@@ -274,6 +276,8 @@ def parse(text: str, source: str) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    except RecursionError as exc:  # tomllib recurses once per level of nesting
+        raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
     try:
         return Scene.model_validate(data)
     except pydantic.ValidationError as exc:
@@ -294,15 +298,40 @@ def load(arg: str) -> Scene:
     """A built-in scene by name, or a .toml file by path."""
     if arg in builtin_names():
         return parse(builtin_text(arg), f"{arg} (built-in)")
-    path = Path(arg)
-    if not path.is_file():
-        names = ", ".join(builtin_names())
-        raise SceneError(f"{arg}: no such file, and no built-in scene of that name ({names})")
+    return parse(_read(arg), arg)
+
+
+def _read(path: str) -> str:
+    """A scene file's text: a regular file (opened without blocking, so a
+    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8."""
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{arg}: cannot read: {exc}") from exc
-    return parse(text, arg)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError as exc:
+        names = ", ".join(builtin_names())
+        raise SceneError(
+            f"{path}: no such file, and no built-in scene of that name ({names})"
+        ) from exc
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from exc
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            what = "a directory" if stat.S_ISDIR(mode) else "a device, FIFO or socket"
+            raise SceneError(f"{path}: is {what}, not a scene file")
+        with open(fd, "rb", closefd=False) as fh:
+            data = fh.read(MAX_SCENE_BYTES + 1)
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from exc
+    finally:
+        os.close(fd)
+    if len(data) > MAX_SCENE_BYTES:
+        raise SceneError(f"{path}: more than {MAX_SCENE_BYTES:,} bytes, the limit for a scene file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(
+            f"{path}: cannot read: not UTF-8 ({exc.reason} at byte {exc.start})"
+        ) from exc
 
 
 @cache
