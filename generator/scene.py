@@ -250,8 +250,10 @@ def _check_physics(p: dict[str, Value]) -> None:
             raise ValueError(
                 "parameters.I11, I22, I33, I13: carrier inertia is not positive definite"
             )
-        gap = math.sqrt(0.25 * (i11 - i33) ** 2 + i13 * i13)
+        gap = math.hypot(0.5 * (i11 - i33), i13)  # no OverflowError, unlike ** 2
         moments = sorted([i22, 0.5 * (i11 + i33) + gap, 0.5 * (i11 + i33) - gap])
+        if not all(math.isfinite(m) for m in moments):
+            raise ValueError("parameters.I11, I22, I33, I13: the principal moments overflow")
         if moments[2] - moments[0] - moments[1] > TRIANGLE_SLACK * sum(moments):
             shown = ", ".join(f"{m:.6g}" for m in moments)
             raise ValueError(

@@ -96,6 +96,16 @@ BAD = [
         edit("t_end = 60.0", "t_end = 50000.05"),
         "simulate.dt: t_end/dt = 50000.1 s/0.05 s is 1000001 output steps, more than the limit",
     ),
+    (
+        "moments overflow",
+        edit("I11 = 20.0", "I11 = 1.7e308", edit("I33 = 18.0", "I33 = 1.7e308")),
+        "parameters.I11, I22, I33, I13: the principal moments overflow",
+    ),
+    (
+        "huge I11",
+        edit("I11 = 20.0", "I11 = 1e308"),
+        "parameters.I11, I22, I33, I13: principal moments (0, 25, 1e+308) violate the triangle",
+    ),
 ]
 
 
