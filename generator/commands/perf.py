@@ -44,6 +44,7 @@ def bench(scene: Scene | None, quick: bool, out: Path | None) -> None:
     from gyrogen import workprec, workprec_report
 
     scene = scene or default()
+    workprec_report.check_scene(scene)  # before the first line of progress
     out = out or Path("report") / scene.name
     cfg = workprec.QUICK if quick else workprec.FULL
     step = [0]
