@@ -76,8 +76,13 @@ def cache_root() -> Path:
     made absolute (a Fortran module finds its library by this path)."""
     if env := os.environ.get("GYROGEN_CACHE"):
         return Path(env).absolute()
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return (Path(base) / "gyrogen").absolute()
+    if base := os.environ.get("XDG_CACHE_HOME"):
+        return (Path(base) / "gyrogen").absolute()
+    try:
+        home = Path.home()
+    except RuntimeError as exc:  # no HOME and no entry in the password database
+        raise BuildError("no home directory for the build cache: set GYROGEN_CACHE") from exc
+    return (home / ".cache" / "gyrogen").absolute()
 
 
 def require(tool: str) -> str:

@@ -267,6 +267,21 @@ def test_relative_cache_root_is_made_absolute(
     assert build.cache_root() == tmp_path / "xdg" / "gyrogen"
 
 
+def test_no_home_directory_asks_for_gyrogen_cache(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def no_home() -> Path:
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.delenv("GYROGEN_CACHE", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setattr(build.Path, "home", staticmethod(no_home))
+    with pytest.raises(
+        BuildError, match=r"^no home directory for the build cache: set GYROGEN_CACHE$"
+    ):
+        build.build(source_dir, "c")
+
+
 @pytest.fixture(scope="module")
 def built(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """A cache entry of its own, built once: the tests below damage it."""
