@@ -12,6 +12,7 @@ import math
 from functools import cache
 from pathlib import Path
 
+from gyrogen.errors import SceneError
 from gyrogen.layout import GIMBAL_LOCK_COS
 from gyrogen.scene import Scene, builtin_names, default, load
 from gyrogen.stability import Case, spin_prediction
@@ -190,7 +191,16 @@ def is_scene(name: str) -> bool:
 
 
 def scene_case(name: str) -> Case:
-    """A scene's own simulation ([simulate]) as a check case."""
+    """A scene's own simulation ([simulate]) as a check case: it needs the C
+    target and both integrators the stiffness analysis may pick."""
     scene = load(name)
+    lacking = [m for m in ("dop853", "rodas4") if m not in scene.integrators]
+    add = [] if "c" in scene.targets else ["c to targets"]
+    add += [f"{', '.join(lacking)} to integrators"] if lacking else []
+    if add:
+        raise SceneError(
+            f"{name}: gyrogen check needs the scene's C build with dop853 and rodas4 "
+            f"(and its Jacobian): add {' and '.join(add)}"
+        )
     sim = scene.simulate
     return Case(f"scene {scene.name}", scene, sim.parameters, sim.initial, sim.t_end, "pass")

@@ -1,4 +1,5 @@
-"""Names and order of the full model's states and parameters.
+"""Names and order of the full model's states and parameters, the setup
+codes, numerical thresholds and the limits on what a user may ask for.
 
 Plain Python, no sympy: the numpy reference and the tests read these too, and
 they must not depend on the symbolic model they are meant to check.
@@ -148,3 +149,25 @@ INTEGRATORS: dict[str, str] = {
     "dop853": "DOP853 (Hairer's coefficients and error estimator), adaptive.",
     "rodas4": "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
 }
+
+# Lines of a failed compiler's output shown in its error; the whole output is
+# kept under the build cache's logs/ directory.
+COMPILER_LOG_LINES = 10
+
+# Limits on what a user may ask for, each where a larger value would exhaust
+# memory or time before failing; a refusal is one line naming the limit.
+MAX_STATES = 10**6
+"""`gyrogen verify --states`: random states held at once (0.75 GB at the limit)."""
+MAX_PARAMETER_SETS = 10**4
+"""`gyrogen verify --params`: random parameter sets, each run over every state."""
+MAX_REPEATS = 1000
+"""`gyrogen bench-rhs --repeats`: repeats per timing."""
+MAX_RHS_CALLS = 10**12
+"""`gyrogen simulate --max-nfev`: days of RHS calls; the compiled integrators take it
+as a C long, which a larger Python int would overflow."""
+MAX_OUTPUT_POINTS = 10**6
+"""Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
+simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
+text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""
+MAX_SCENE_BYTES = 1 << 20
+"""Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""

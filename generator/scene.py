@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
+import stat
 import tomllib
 from functools import cache
 from importlib.resources import files
-from pathlib import Path
 from typing import Annotated, Literal
 
 import pydantic
@@ -25,6 +26,7 @@ from pydantic import (
     Field,
     StrictBool,
     StrictFloat,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -35,6 +37,8 @@ from gyrogen.layout import (
     FOLDED_MAX,
     FOLDED_MIN,
     MAX_CONDITION,
+    MAX_OUTPUT_POINTS,
+    MAX_SCENE_BYTES,
     MIN_RTOL,
     NAME_MAX_LENGTH,
     PARAMETERS,
@@ -121,7 +125,7 @@ class Simulate(_Strict):
     """Values of the runtime parameters for `gyrogen simulate`."""
     t_end: Annotated[Number, Field(gt=0)] = 10.0
     dt: Annotated[Number, Field(gt=0)] = 0.01
-    """Output step of the trajectory."""
+    """Output step of the trajectory: at most t_end, and at most MAX_OUTPUT_POINTS of them in it."""
     rtol: Annotated[Number, Field(lt=1)] = 1e-10
     """Above layout.MIN_RTOL, as the compiled integrators require."""
     atol: Annotated[Number, Field(gt=0)] = 1e-10
@@ -135,6 +139,26 @@ class Simulate(_Strict):
                 "no double arithmetic meets a tighter relative tolerance"
             )
         return v
+
+    @field_validator("dt")
+    @classmethod
+    def _points(cls, dt: float, info: ValidationInfo) -> float:
+        if "t_end" in info.data:  # else t_end failed its own check
+            check_output_grid(info.data["t_end"], dt)
+        return dt
+
+
+def check_output_grid(t_end: float, dt: float) -> None:
+    """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
+    (and at least once)."""
+    if dt > t_end:
+        raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
+    steps = t_end / dt
+    if not steps <= MAX_OUTPUT_POINTS:
+        raise ValueError(
+            f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
+            f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
+        )
 
 
 class Scene(_Strict):
@@ -331,8 +355,10 @@ def _check_physics(p: dict[str, Value]) -> None:
             raise ValueError(
                 "parameters.I11, I22, I33, I13: carrier inertia is not positive definite"
             )
-        gap = math.sqrt(0.25 * (i11 - i33) ** 2 + i13 * i13)
+        gap = math.hypot(0.5 * (i11 - i33), i13)  # no OverflowError, unlike ** 2
         moments = sorted([i22, 0.5 * (i11 + i33) + gap, 0.5 * (i11 + i33) - gap])
+        if not all(math.isfinite(m) for m in moments):
+            raise ValueError("parameters.I11, I22, I33, I13: the principal moments overflow")
         if moments[2] - moments[0] - moments[1] > TRIANGLE_SLACK * sum(moments):
             shown = ", ".join(f"{m:.6g}" for m in moments)
             raise ValueError(
@@ -370,6 +396,8 @@ def parse(text: str, source: str) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    except RecursionError as exc:  # tomllib recurses once per level of nesting
+        raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
     try:
         return Scene.model_validate(data)
     except pydantic.ValidationError as exc:
@@ -390,15 +418,40 @@ def load(arg: str) -> Scene:
     """A built-in scene by name, or a .toml file by path."""
     if arg in builtin_names():
         return parse(builtin_text(arg), f"{arg} (built-in)")
-    path = Path(arg)
-    if not path.is_file():
-        names = ", ".join(builtin_names())
-        raise SceneError(f"{arg}: no such file, and no built-in scene of that name ({names})")
+    return parse(_read(arg), arg)
+
+
+def _read(path: str) -> str:
+    """A scene file's text: a regular file (opened without blocking, so a
+    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8."""
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{arg}: cannot read: {exc}") from exc
-    return parse(text, arg)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError as exc:
+        names = ", ".join(builtin_names())
+        raise SceneError(
+            f"{path}: no such file, and no built-in scene of that name ({names})"
+        ) from exc
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from exc
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            what = "a directory" if stat.S_ISDIR(mode) else "a device, FIFO or socket"
+            raise SceneError(f"{path}: is {what}, not a scene file")
+        with open(fd, "rb", closefd=False) as fh:
+            data = fh.read(MAX_SCENE_BYTES + 1)
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from exc
+    finally:
+        os.close(fd)
+    if len(data) > MAX_SCENE_BYTES:
+        raise SceneError(f"{path}: more than {MAX_SCENE_BYTES:,} bytes, the limit for a scene file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(
+            f"{path}: cannot read: not UTF-8 ({exc.reason} at byte {exc.start})"
+        ) from exc
 
 
 @cache

@@ -34,7 +34,7 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import build, witness
 from gyrogen.errors import GyrogenError, SceneError
-from gyrogen.generate import generate, write_atomic
+from gyrogen.generate import generate, make_dir, write_atomic
 from gyrogen.layout import STATES
 from gyrogen.scene import Scene
 
@@ -402,13 +402,6 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
     }
 
 
-def _make_dir(out: Path) -> None:
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise GyrogenError(f"cannot create output directory {out}: {exc.strerror}") from exc
-
-
 def _prepare(scene: Scene, out: Path) -> tuple[build.Compiled, str]:
     """Sources into out/src (kept beside the trajectory they made), then the
     C backend, or Fortran when the scene builds no C."""
@@ -425,7 +418,7 @@ def run(
     echo: Callable[[str], None] = lambda s: None,
 ) -> Result:
     p = runtime_values(scene)  # first: a scene error must leave nothing behind
-    _make_dir(out)
+    make_dir(out)
     echo(f"generating and building {scene.name} in {out / 'src'} ...")
     comp, build_id = _prepare(scene, out)
     try:

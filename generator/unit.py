@@ -197,13 +197,11 @@ class Unit:
 
     @cached_property
     def build_id(self) -> str:
-        """Hash of the scene and the tool versions: which build a binary is from."""
-        text = json.dumps([self.scene.model_dump(mode="json"), self.versions], sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        return build_id(self.scene)
 
     @property
     def versions(self) -> dict[str, str]:
-        return {"gyrogen": gyrogen.__version__, "sympy": version("sympy")}
+        return versions()
 
     @property
     def functions(self) -> dict[str, dict[str, str]]:
@@ -219,6 +217,17 @@ class Unit:
             c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
             c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"
         return {"c": c, "fortran": f}
+
+
+def versions() -> dict[str, str]:
+    return {"gyrogen": gyrogen.__version__, "sympy": version("sympy")}
+
+
+def build_id(scene: Scene) -> str:
+    """Hash of the scene and the tool versions: which build a binary is from.
+    A function of the scene alone, known before its unit is made."""
+    text = json.dumps([scene.model_dump(mode="json"), versions()], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def make_unit(scene: Scene) -> Unit:

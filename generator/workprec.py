@@ -21,7 +21,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from gyrogen import witness
-from gyrogen.build import Compiled
+from gyrogen.build import ODE_CODES, Compiled
+from gyrogen.errors import GyrogenError
 from gyrogen.scene import Scene
 from gyrogen.verify import scaled_error
 
@@ -121,7 +122,10 @@ def reference(prob: Problem) -> None:
         "dop853", prob.x0, prob.c, 0.0, prob.t1, rtol=REF_TOL, atol=REF_TOL
     )
     if code != 0:
-        raise RuntimeError(f"reference DOP853 failed with code {code} at t = {stats['t']}")
+        why = ODE_CODES.get(code, f"code {code}")
+        raise GyrogenError(
+            f"{prob.scene.name}: reference DOP853 failed at t = {stats['t']:.6g} s: {why}"
+        )
     prob.ref = x
     rhs = _cffi_rhs(comp, prob.c)
     sol = solve_ivp(rhs, (0.0, prob.t1), prob.x0, method="DOP853", rtol=REF_TOL, atol=REF_TOL)

@@ -27,15 +27,23 @@ LEVELS = (1e-4, 1e-6, 1e-8, 1e-10)
 Echo = Callable[[str], None]
 
 
+def check_scene(scene: Scene) -> np.ndarray:
+    """SceneError unless the report can run on scene; its runtime values."""
+    if "c" not in scene.targets or "dop853" not in scene.integrators:
+        raise SceneError(
+            f"{scene.name}: the work-precision report needs the c target and the dop853 "
+            "integrator (its reference)"
+        )
+    return runtime_values(scene)
+
+
 def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
-    p = runtime_values(scene)
+    p = check_scene(scene)
     generate(scene, src)
     langs = {"C": "c", "Fortran": "fortran"}
     if not cfg.fortran:
         langs.pop("Fortran")
     compiled = {k: build.build(src, v) for k, v in langs.items() if v in scene.targets}
-    if "C" not in compiled:
-        raise SceneError(f"{scene.name}: the work-precision report needs the c target")
     x0 = np.array(scene.initial_state())
     c = compiled["C"].setup(p)
     return Problem(scene, compiled, p, c, x0, scene.simulate.t_end)

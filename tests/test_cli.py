@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -77,9 +78,163 @@ def test_failed_write_leaves_nothing_half_written(
 
     monkeypatch.setattr(generate_module.os, "replace", fail_second)
     code, _, err = run(["generate", "--out", str(out_dir)], capsys)
-    assert code == 1 and err.startswith("gyrogen: error: cannot write to") and err.count("\n") == 1
+    assert code == 1
+    assert (
+        err == f"gyrogen: error: cannot write {out_dir / 'gyrostat.h'}: No space left on device\n"
+    )
     assert sorted(p.name for p in out_dir.iterdir()) == ["gyrostat.c"]
     assert (out_dir / "gyrostat.c").read_text() == "old"
+
+
+def _old_sources(out_dir: Path) -> dict[str, str]:
+    """An earlier generation's gyrostat.c and manifest.json in out_dir."""
+    out_dir.mkdir()
+    old = {"gyrostat.c": "old source", "manifest.json": "old manifest"}
+    for name, text in old.items():
+        (out_dir / name).write_text(text)
+    return old
+
+
+def _contents(out_dir: Path) -> dict[str, str]:
+    return {p.name: p.read_text() for p in out_dir.iterdir() if p.is_file()}
+
+
+def test_directory_in_the_way_writes_nothing(tmp_path: Path, capsys) -> None:
+    out_dir = tmp_path / "o"
+    old = _old_sources(out_dir)
+    (out_dir / "gyrostat_ode.c").mkdir()
+    code, out, err = run(["generate", "--out", str(out_dir)], capsys)
+    assert code == 1 and out == ""
+    assert err == f"gyrogen: error: cannot write {out_dir / 'gyrostat_ode.c'}: Is a directory\n"
+    assert _contents(out_dir) == old  # no new file, no temporary, the old ones as they were
+    assert (out_dir / "gyrostat_ode.c").is_dir()
+
+
+def test_fifo_in_the_way_writes_nothing(tmp_path: Path, capsys) -> None:
+    out_dir = tmp_path / "o"
+    old = _old_sources(out_dir)
+    os.mkfifo(out_dir / "gyrostat.h")
+    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    assert code == 1
+    assert err == f"gyrogen: error: cannot write {out_dir / 'gyrostat.h'}: Not a regular file\n"
+    assert _contents(out_dir) == old
+
+
+def _fail_on(monkeypatch: pytest.MonkeyPatch, target: Path, exc: BaseException) -> None:
+    """os.replace raises exc the first time it would put a file at target."""
+    real_replace = os.replace
+    raised = []
+
+    def replace(src: str, dst: str | Path) -> None:
+        if Path(dst) == target and not raised:
+            raised.append(exc)
+            raise exc
+        real_replace(src, dst)
+
+    monkeypatch.setattr(generate_module.os, "replace", replace)
+
+
+def test_failed_rename_puts_every_old_file_back(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The rename of the sixth of seven files fails: the five already in
+    place are taken back, the old gyrostat.c comes back from its temporary
+    name, and manifest.json (renamed last) was never touched."""
+    out_dir = tmp_path / "o"
+    old = _old_sources(out_dir)
+    failing = out_dir / "gyrostat_ode.f90"
+    _fail_on(monkeypatch, failing, PermissionError(13, "Permission denied"))
+    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    assert code == 1
+    assert err == f"gyrogen: error: cannot write {failing}: Permission denied\n"
+    assert _contents(out_dir) == old
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(old)
+
+
+def test_interrupt_while_writing_puts_every_old_file_back(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C (KeyboardInterrupt) in the middle of the renames: exit 130,
+    the old files as they were, no temporary file left."""
+    out_dir = tmp_path / "o"
+    old = _old_sources(out_dir)
+    _fail_on(monkeypatch, out_dir / "manifest.json", KeyboardInterrupt())
+    code, out, err = run(["generate", "--out", str(out_dir)], capsys)
+    assert code == 130 and out == ""
+    assert err.endswith("gyrogen: aborted\n") and "Traceback" not in err
+    assert _contents(out_dir) == old
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(old)
+
+
+def test_full_disk_while_staging_leaves_no_temporary(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The third temporary file cannot be created: the two already written
+    are removed, and nothing was renamed."""
+    out_dir = tmp_path / "o"
+    old = _old_sources(out_dir)
+    real_mkstemp = generate_module.tempfile.mkstemp
+    made = []
+
+    def mkstemp(**kwargs: Any) -> tuple[int, str]:
+        made.append(kwargs["prefix"])
+        if len(made) == 3:
+            raise OSError(28, "No space left on device")
+        return real_mkstemp(**kwargs)
+
+    monkeypatch.setattr(generate_module.tempfile, "mkstemp", mkstemp)
+    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    assert code == 1 and made[2] == ".gyrostat_ode.h."
+    assert (
+        err
+        == f"gyrogen: error: cannot write {out_dir / 'gyrostat_ode.h'}: No space left on device\n"
+    )
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(old) and _contents(out_dir) == old
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o027, 0o077])
+def test_written_files_have_the_mode_open_gives(
+    mask: int, tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """0o666 less the umask, for new and replaced files, generate and new
+    alike; also where /proc/self/status does not tell the umask."""
+    saved = os.umask(mask)
+    try:
+        run(["generate", "--out", str(tmp_path / "o")], capsys)
+        run(["generate", "--out", str(tmp_path / "o")], capsys)  # replaces each file
+        run(["new", "my_sat", "--out", str(tmp_path / "my_sat.toml")], capsys)
+        monkeypatch.setattr(generate_module, "_PROC_STATUS", tmp_path / "no_such_status")
+        generate_module._umask_once.cache_clear()
+        run(["new", "my_sat2", "--out", str(tmp_path / "my_sat2.toml")], capsys)
+    finally:
+        os.umask(saved)
+        generate_module._umask_once.cache_clear()
+    written = [*(tmp_path / "o").iterdir(), tmp_path / "my_sat.toml", tmp_path / "my_sat2.toml"]
+    assert len(written) == 9
+    assert {oct(p.stat().st_mode & 0o777) for p in written} == {oct(0o666 & ~mask)}
+
+
+def test_umask_is_read_without_changing_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    saved = os.umask(0o037)
+    try:
+        calls = []
+        monkeypatch.setattr(generate_module.os, "umask", lambda m: calls.append(m) or 0o037)
+        assert generate_module.umask() == 0o037 and calls == []  # from /proc/self/status
+    finally:
+        monkeypatch.undo()  # the real os.umask again, to restore the mask
+        os.umask(saved)
+
+
+def test_out_naming_a_file_is_a_usage_error(tmp_path: Path, capsys) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("mine")
+    code, _, err = run(["generate", "--out", str(blocker)], capsys)
+    assert code == 2
+    assert err == (
+        f"gyrogen generate: error: Invalid value for '--out': Directory '{blocker}' is a file. "
+        "(see --help)\n"
+    )
+    assert blocker.read_text() == "mine"
 
 
 def test_render_failure_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -145,3 +300,74 @@ def test_generate_lib_writes_build_files(tmp_path: Path, capsys) -> None:
     names = {p.name for p in (tmp_path / "o").iterdir()}
     assert {"CMakeLists.txt", "gyrostat.mk", "gyrostat.c", "manifest.json"} <= names
     assert "Do not edit" in (tmp_path / "o" / "CMakeLists.txt").read_text()
+
+
+def test_new_into_a_missing_directory_creates_it(tmp_path: Path, capsys) -> None:
+    target = tmp_path / "a" / "b" / "my_sat.toml"
+    code, out, _ = run(["new", "my_sat", "--out", str(target)], capsys)
+    assert code == 0 and out == f"wrote {target}: edit it, then `gyrogen generate {target}`\n"
+    assert target.is_file() and sorted(p.name for p in target.parent.iterdir()) == ["my_sat.toml"]
+
+
+def test_new_over_a_directory_is_one_line(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_sat.toml").mkdir()
+    code, _, err = run(["new", "my_sat"], capsys)
+    assert (code, err) == (
+        1,
+        "gyrogen: error: my_sat.toml exists: choose another name or pass --force\n",
+    )
+    code, _, err = run(["new", "my_sat", "--force"], capsys)
+    assert (code, err) == (1, "gyrogen: error: cannot write my_sat.toml: Is a directory\n")
+    code, _, err = run(["new", "my_sat", "--out", "my_sat.toml"], capsys)
+    assert code == 2 and err == (
+        "gyrogen new: error: Invalid value for '--out': File 'my_sat.toml' is a directory. "
+        "(see --help)\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["my_sat.toml"]
+
+
+NUMBERS = [
+    (
+        ["verify", "--states", "0"],
+        "Invalid value for '--states': 0 is not in the range 1<=x<=1000000.",
+    ),
+    (["verify", "--states", "1000001"], "'--states': 1000001 is not in the range 1<=x<=1000000."),
+    (
+        ["verify", "--params", "0"],
+        "Invalid value for '--params': 0 is not in the range 1<=x<=10000.",
+    ),
+    (["verify", "--seed", "-1"], "Invalid value for '--seed': -1 is not in the range x>=0."),
+    (
+        ["run", "--states", "-5"],
+        "Invalid value for '--states': -5 is not in the range 1<=x<=1000000.",
+    ),
+    (["simulate", "torque_free", "--t-end", "nan"], "'--t-end': 'nan' is not a finite number."),
+    (["simulate", "torque_free", "--t-end", "inf"], "'--t-end': 'inf' is not a finite number."),
+    (["simulate", "torque_free", "--dt", "nan"], "'--dt': 'nan' is not a finite number."),
+    (["simulate", "torque_free", "--dt", "-inf"], "'--dt': -inf is not in the range x>0.0."),
+    (["simulate", "torque_free", "--dt", "0"], "'--dt': 0.0 is not in the range x>0.0."),
+    (["simulate", "torque_free", "--max-nfev", "0"], "'--max-nfev': 0 is not in the range"),
+    (
+        ["simulate", "torque_free", "--max-nfev", "10000000000000"],
+        "'--max-nfev': 10000000000000 is not in the range 1<=x<=1000000000000.",
+    ),
+    (
+        ["bench-rhs", "--repeats", "0"],
+        "Invalid value for '--repeats': 0 is not in the range 1<=x<=1000.",
+    ),
+    (["bench-rhs", "--repeats", "1001"], "'--repeats': 1001 is not in the range 1<=x<=1000."),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), NUMBERS, ids=[" ".join(a) for a, _ in NUMBERS])
+def test_number_out_of_range_is_one_line_exit_2(
+    argv: list[str], message: str, tmp_path: Path, capsys
+) -> None:
+    code, out, err = run([*argv, "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and out == ""
+    assert err.startswith(f"gyrogen {argv[0]}: error: ") and err.count("\n") == 1
+    assert message in err, err
+    assert not (tmp_path / "o").exists()

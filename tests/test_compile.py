@@ -3,14 +3,22 @@ C++, and the build cache and its errors behave."""
 
 from __future__ import annotations
 
+import hashlib
+import importlib.machinery
+import json
+import os
 import shutil
 import subprocess
+import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gyrogen import build
 from gyrogen.errors import BuildError
+from gyrogen.layout import COMPILER_LOG_LINES
 
 
 def _compile(cmd: list[str], cwd: Path) -> None:
@@ -109,20 +117,267 @@ def test_missing_compiler_names_the_package(
         build.build(source_dir, language)  # type: ignore[arg-type]
 
 
+def _fresh(source_dir: Path, tmp_path: Path, tag: str) -> Path:
+    """A copy of the sources with a comment of its own: a cache key no
+    other test (and nothing loaded in this process) has."""
+    src = tmp_path / f"src-{tag}"
+    shutil.copytree(source_dir, src)
+    with open(src / "gyrostat.c", "a") as fh:
+        fh.write(f"/* {tag} */\n")
+    return src
+
+
+def _break(src: Path, extra: str = "") -> None:
+    text = (src / "gyrostat.c").read_text().replace("return GYROSTAT_OK;", "return GYROSTAT_OK")
+    (src / "gyrostat.c").write_text(text + extra)
+
+
 def test_compile_error_shows_the_compiler_message(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
     src = tmp_path / "src"
     shutil.copytree(source_dir, src)
-    text = (src / "gyrostat.c").read_text().replace("return GYROSTAT_OK;", "return GYROSTAT_OK")
-    (src / "gyrostat.c").write_text(text)
+    _break(src)
     with pytest.raises(BuildError) as info:
         build.build(src, "c")
-    msg = str(info.value)
-    assert msg.startswith("gcc failed on gyrostat.c:")
-    assert "error: expected" in msg and "before" in msg
-    assert not [p for p in (tmp_path / "cache").iterdir() if not p.name.startswith(".")]
+    first, *rest = str(info.value).splitlines()
+    plan = build._plan(src, "c")
+    log = tmp_path / "cache" / "logs" / f"{plan.key}-gyrostat.c.log"
+    assert first == f"gcc failed on gyrostat.c (exit status 1); full output in {log}:"
+    assert "\n".join(rest) == log.read_text().strip()  # short: shown whole
+    assert any("error: expected" in line and "before" in line for line in rest)
+    assert [p.name for p in (tmp_path / "cache").iterdir()] == ["logs"]  # no entry, no temp
+
+
+def test_long_compiler_output_shows_its_start_and_keeps_the_log(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    src = tmp_path / "src"
+    shutil.copytree(source_dir, src)
+    _break(src, "".join(f"int broken_{i} = ;\n" for i in range(200)))
+    with pytest.raises(BuildError) as info:
+        build.build(src, "c")
+    first, *rest = str(info.value).splitlines()
+    log = tmp_path / "cache" / "logs" / f"{build._plan(src, 'c').key}-gyrostat.c.log"
+    everything = log.read_text().strip().splitlines()
+    assert len(everything) > 200
+    assert first == (
+        f"gcc failed on gyrostat.c (exit status 1); full output in {log}; "
+        f"its first {COMPILER_LOG_LINES} of {len(everything)} lines:"
+    )
+    assert rest == everything[:COMPILER_LOG_LINES]
+
+
+def test_glue_that_does_not_compile_shows_its_start(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    real_render = build.render
+
+    def broken_glue(name: str, **ctx: object) -> str:
+        text = real_render(name, **ctx)
+        return text + "\n#error broken glue\n" if name.startswith("cffi/glue") else text
+
+    monkeypatch.setattr(build, "render", broken_glue)
+    with pytest.raises(BuildError) as info:
+        build.build(source_dir, "c")
+    first, *rest = str(info.value).splitlines()
+    log = tmp_path / "cache" / "logs" / f"{build._plan(source_dir, 'c').key}-cffi.log"
+    assert first.startswith("cffi could not build the glue module (")
+    assert f"; full output in {log}" in first and len(rest) <= COMPILER_LOG_LINES
+    assert "#error broken glue" in log.read_text()
+
+
+def test_gyrogen_cache_naming_a_file_is_one_line(tmp_path: Path) -> None:
+    """From the command line, before anything is compiled: exit 1."""
+    blocker = tmp_path / "file"
+    blocker.write_text("not a cache")
+    env = dict(os.environ, GYROGEN_CACHE=str(blocker))
+    proc = subprocess.run(
+        [sys.executable, "-m", "gyrogen", "verify", "--states", "10", "--params", "1"],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=False,
+    )
+    assert proc.returncode == 1
+    assert proc.stderr == (
+        f"gyrogen: error: GYROGEN_CACHE={blocker}: cannot use it as the build cache: "
+        "Not a directory\n"
+    )
+    assert blocker.read_text() == "not a cache"
+
+
+def test_cache_below_a_file_names_gyrogen_cache(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "file" / "cache"))
+    with pytest.raises(BuildError) as info:
+        build.build(source_dir, "c")
+    assert str(info.value) == (
+        f"GYROGEN_CACHE={tmp_path / 'file' / 'cache'}: cannot use it as the build cache: "
+        "Not a directory"
+    )
+
+
+def test_default_cache_in_the_way_says_how_to_move_it(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.delenv("GYROGEN_CACHE", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "file"))
+    (tmp_path / "file").write_text("")
+    with pytest.raises(BuildError) as info:
+        build.build(source_dir, "c")
+    assert str(info.value) == (
+        f"cannot use {tmp_path / 'file' / 'gyrogen'} as the build cache: Not a directory "
+        "(set GYROGEN_CACHE to another directory)"
+    )
+
+
+def test_unwritable_cache_is_one_line(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    src = _fresh(source_dir, tmp_path, "unwritable")
+
+    def refuse(*args: object, **kwargs: object) -> str:
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(build.tempfile, "mkdtemp", refuse)
+    with pytest.raises(BuildError) as info:
+        build.build(src, "c")
+    assert str(info.value) == (
+        f"GYROGEN_CACHE={tmp_path / 'cache'}: cannot use it as the build cache: Permission denied"
+    )
+
+
+def test_relative_cache_root_is_made_absolute(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A Fortran module finds its library by the entry's path (rpath): a
+    relative one would break from another directory."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("GYROGEN_CACHE", "rel/cache")
+    assert build.cache_root() == tmp_path / "rel" / "cache"
+    monkeypatch.delenv("GYROGEN_CACHE")
+    monkeypatch.setenv("XDG_CACHE_HOME", "xdg")
+    assert build.cache_root() == tmp_path / "xdg" / "gyrogen"
+
+
+def test_no_home_directory_asks_for_gyrogen_cache(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def no_home() -> Path:
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.delenv("GYROGEN_CACHE", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setattr(build.Path, "home", staticmethod(no_home))
+    with pytest.raises(
+        BuildError, match=r"^no home directory for the build cache: set GYROGEN_CACHE$"
+    ):
+        build.build(source_dir, "c")
+
+
+@pytest.fixture(scope="module")
+def built(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A cache entry of its own, built once: the tests below damage it."""
+    mp = pytest.MonkeyPatch()
+    tmp = tmp_path_factory.mktemp("damaged")
+    mp.setenv("GYROGEN_CACHE", str(tmp / "cache"))
+    src = _fresh(source_dir, tmp, "damaged")
+    build.build(src, "c")
+    yield src
+    mp.undo()
+
+
+def _module(entry: Path) -> Path:
+    return entry / json.loads((entry / build.MARKER).read_text())["module"]
+
+
+def _truncate(entry: Path) -> None:
+    so = _module(entry)
+    so.write_bytes(so.read_bytes()[:4096])
+
+
+DAMAGES = [
+    (lambda entry: (entry / build.MARKER).unlink(), "no readable complete.json"),
+    (lambda entry: _module(entry).unlink(), "{name} is missing or not as built"),
+    (_truncate, "{name} is missing or not as built"),
+]
+
+
+@pytest.mark.parametrize(("damage", "why"), DAMAGES, ids=["no marker", "no module", "truncated"])
+def test_damaged_entry_is_rebuilt_with_one_warning(
+    built: Path,
+    damage: Callable[[Path], None],
+    why: str,
+    backends: dict[str, build.Compiled],
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("GYROGEN_CACHE", str(built.parent / "cache"))
+    entry = build.cache_dir() / build._plan(built, "c").key
+    name = _module(entry).name
+    damage(entry)
+    comp = build.build(built, "c")
+    err = capsys.readouterr().err
+    assert err.startswith(f"gyrogen: warning: rebuilding cache entry {entry}: ")
+    assert why.format(name=name) in err and err.count("\n") == 1
+    assert build._verified(entry) == entry / name  # whole again
+    _agrees(comp, backends["c"])
+
+
+def _agrees(comp: build.Compiled, reference: build.Compiled) -> None:
+    p = np.array([10, 2, 3, 4, 5, 0.3, 0.5, 0.8, 0.2, -0.1, 9.81, 0.5])
+    x = np.linspace(-0.5, 0.5, 14)
+    np.testing.assert_array_equal(comp.rhs(x, comp.setup(p)), reference.rhs(x, reference.setup(p)))
+
+
+def _garbage_module(entry: Path, module_name: str) -> None:
+    """An entry whose marker matches a module that is not a shared object."""
+    entry.mkdir(parents=True)
+    so = entry / f"{module_name}{importlib.machinery.EXTENSION_SUFFIXES[0]}"
+    so.write_bytes(b"not an ELF file")
+    digest = hashlib.sha256(so.read_bytes()).hexdigest()
+    marker = {"module": so.name, "sha256": {so.name: digest}}
+    (entry / build.MARKER).write_text(json.dumps(marker))
+
+
+@pytest.mark.parametrize(
+    ("make", "why"),
+    [
+        (lambda entry, name: entry.mkdir(parents=True), "no readable complete.json"),
+        (_garbage_module, "cannot load"),
+    ],
+    ids=["empty", "not loadable"],
+)
+def test_entry_never_loaded_is_checked_too(
+    make: Callable[[Path, str], None],
+    why: str,
+    source_dir: Path,
+    tmp_path: Path,
+    backends: dict[str, build.Compiled],
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An entry left by a build cut short (an empty directory, where the
+    old code failed with a traceback), or one that matches its marker but
+    does not load: rebuilt, with one warning."""
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    src = _fresh(source_dir, tmp_path, why.replace(" ", "_"))
+    plan = build._plan(src, "c")
+    entry = tmp_path / "cache" / plan.key
+    make(entry, plan.module_name)
+    comp = build.build(src, "c")
+    err = capsys.readouterr().err
+    assert err.startswith(f"gyrogen: warning: rebuilding cache entry {entry}: {why}")
+    assert err.count("\n") == 1
+    assert build._verified(entry).name.startswith(plan.module_name)
+    _agrees(comp, backends["c"])
 
 
 def test_missing_manifest(tmp_path: Path) -> None:

@@ -4,6 +4,8 @@ scene checked against the numpy reference in C and Fortran."""
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,7 @@ from gyrogen import build, witness
 from gyrogen.cli import main
 from gyrogen.errors import BuildError, SceneError
 from gyrogen.generate import generate
+from gyrogen.layout import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
 from gyrogen.scene import builtin_names, builtin_text, load, parse
 from gyrogen.verify import compare
 
@@ -134,6 +137,42 @@ BAD = [
         "simulate.rtol",
     ),
     ("bad toml", "name = ", "invalid TOML"),
+    (
+        "nested too deeply",
+        "a = " + "[" * 5000 + "]" * 5000,
+        "invalid TOML: arrays or tables nested too deeply",
+    ),
+    (
+        "tiny dt",
+        edit("dt = 0.05", "dt = 1e-300"),
+        "simulate.dt: t_end/dt = 60 s/1e-300 s is 6e+301 output steps, "
+        "more than the limit of 1,000,000: raise dt or lower t_end",
+    ),
+    (
+        "dt longer than t_end",
+        edit("dt = 0.05", "dt = 61.0"),
+        "simulate.dt: output step 61 s is longer than the span 60 s",
+    ),
+    (
+        "huge t_end",
+        edit("t_end = 60.0", "t_end = 1e300"),
+        "simulate.dt: t_end/dt = 1e+300 s/0.05 s is 2e+301 output steps",
+    ),
+    (
+        "just over the point limit",
+        edit("t_end = 60.0", "t_end = 50000.05"),
+        "simulate.dt: t_end/dt = 50000.1 s/0.05 s is 1000001 output steps, more than the limit",
+    ),
+    (
+        "moments overflow",
+        edit("I11 = 20.0", "I11 = 1.7e308", edit("I33 = 18.0", "I33 = 1.7e308")),
+        "parameters.I11, I22, I33, I13: the principal moments overflow",
+    ),
+    (
+        "huge I11",
+        edit("I11 = 20.0", "I11 = 1e308"),
+        "parameters.I11, I22, I33, I13: principal moments (0, 25, 1e+308) violate the triangle",
+    ),
 ]
 
 
@@ -149,6 +188,53 @@ def test_bad_scene_is_one_line_exit_2_nothing_written(
     assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: ")
     assert message in err, err
     assert not out.exists() and stdout == ""
+
+
+def test_output_points_at_the_limit_are_accepted() -> None:
+    scene = parse(edit("t_end = 60.0", "t_end = 50000.0"), "x.toml")
+    assert scene.simulate.t_end / scene.simulate.dt == MAX_OUTPUT_POINTS
+
+
+def _directory(path: Path) -> None:
+    path.mkdir()
+
+
+def _fifo(path: Path) -> None:
+    os.mkfifo(path)
+
+
+def _huge(path: Path) -> None:
+    path.write_text(GOOD + "#" * MAX_SCENE_BYTES)
+
+
+def _latin1(path: Path) -> None:
+    path.write_bytes(GOOD.replace("reaction wheel", "r\u00e9action wheel").encode("latin-1"))
+
+
+UNREADABLE = [
+    (_directory, "is a directory, not a scene file"),
+    (_fifo, "is a device, FIFO or socket, not a scene file"),  # refused, not waited on
+    (_huge, "more than 1,048,576 bytes, the limit for a scene file"),
+    (_latin1, "cannot read: not UTF-8 (invalid continuation byte at byte 5)"),
+]
+
+
+@pytest.mark.parametrize(("make", "why"), UNREADABLE, ids=[u[0].__name__ for u in UNREADABLE])
+def test_unreadable_scene_file_is_one_line_exit_2(
+    make: Callable[[Path], None], why: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "scene.toml"
+    make(path)
+    code, out, err = run(["generate", str(path), "--out", str(tmp_path / "out")], capsys)
+    assert (code, out, err) == (2, "", f"gyrogen: error: {path}: {why}\n")
+    assert not (tmp_path / "out").exists()
+
+
+def test_scene_of_exactly_the_size_limit_is_read(tmp_path: Path) -> None:
+    path = tmp_path / "scene.toml"
+    path.write_text(GOOD + "#" * (MAX_SCENE_BYTES - len(GOOD.encode()) - 1) + "\n")
+    assert path.stat().st_size == MAX_SCENE_BYTES
+    assert load(str(path)).name == "wheel_spinup"
 
 
 def test_table_torque_needs_increasing_times() -> None:

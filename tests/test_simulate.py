@@ -185,6 +185,33 @@ def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path) -> None:
     assert run.code == 2 and run.err.count("\n") == 1
     assert "output step 2 s is longer than the span 1 s" in run.err
     assert not (tmp_path / "out").exists()
+    run = simulate(["torque_free", "--t-end", "0.001"], tmp_path / "out")  # the scene's dt
+    assert run.code == 2 and run.err == (
+        "gyrogen simulate: error: Invalid value for '--t-end': output step 0.01 s is longer "
+        "than the span 0.001 s (see --help)\n"
+    )
+
+
+@pytest.mark.parametrize(
+    ("options", "blamed", "pair", "steps"),
+    [
+        (["--t-end", "1e8"], "'--t-end'", "1e+08 s/0.01 s", "1e+10"),
+        (["--dt", "1e-7"], "'--dt'", "20 s/1e-07 s", "2e+08"),
+        (["--t-end", "1e300", "--dt", "1e-300"], "'--t-end' / '--dt'", "1e+300 s/1e-300 s", "inf"),
+    ],
+)
+def test_too_many_output_points_is_a_usage_error(
+    options: list[str], blamed: str, pair: str, steps: str, tmp_path: Path
+) -> None:
+    """Refused before anything is generated (numpy would be asked for a
+    74.5 GiB grid by the first)."""
+    run = simulate(["torque_free", *options], tmp_path / "out")
+    assert (run.code, run.out) == (2, "")
+    assert run.err == (
+        f"gyrogen simulate: error: Invalid value for {blamed}: t_end/dt = {pair} is {steps} "
+        "output steps, more than the limit of 1,000,000: raise dt or lower t_end (see --help)\n"
+    )
+    assert not (tmp_path / "out").exists()
 
 
 def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: None) -> None:

@@ -11,6 +11,7 @@ import pytest
 from gyrogen import build, checks, stability
 from gyrogen.cli import main
 from gyrogen.generate import generate
+from gyrogen.scene import builtin_text
 
 QUICK = checks.cases(quick=True)
 
@@ -141,3 +142,66 @@ def test_compensated_summation_keeps_a_long_run(
     case = next(c for c in QUICK if c.name.startswith("long run"))
     res = stability.run_case(case, backends[language])
     assert res.passed and max(res.drift.values()) < 1e-13, res.drift
+
+
+def _check(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    try:
+        main(["check", *argv])
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_two_scenes_of_one_name_get_a_build_each(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A user's scene named like the built-in torque_free, with one more
+    state and another I22: its own build (keyed by build id, not name)."""
+    text = builtin_text("torque_free").replace("t_end = 20.0", "t_end = 1.0")
+    mine = tmp_path / "mine.toml"
+    mine.write_text(text.replace("rotor_angle = false", "rotor_angle = true").replace(
+        "I22 = 4.0", "I22 = 4.5"
+    ))  # fmt: skip
+    (tmp_path / "builtin.toml").write_text(text)
+    real_build = build.build
+    built: list[int] = []
+
+    def counting(source: Path, language: build.Language) -> build.Compiled:
+        comp = real_build(source, language)
+        built.append(comp.nx)
+        return comp
+
+    monkeypatch.setattr(build, "build", counting)
+    code, out, _ = _check([str(tmp_path / "builtin.toml"), str(mine)], capsys)
+    assert code == 0, out
+    assert sorted(built) == [7, 8]
+    assert [line.split()[:2] for line in out.splitlines()[1:]] == [["scene", "torque_free"]] * 2
+    assert out.count(" ok\n") == 2
+
+
+@pytest.mark.parametrize(
+    ("change", "add"),
+    [
+        ('targets = ["fortran"]', "c to targets"),
+        ('targets = ["c"]\nintegrators = ["rodas4"]', "dop853 to integrators"),
+        (
+            'targets = ["fortran"]\nintegrators = ["rk4"]',
+            "c to targets and dop853, rodas4 to integrators",
+        ),
+    ],
+)
+def test_scene_check_cannot_run_is_one_line_exit_2(
+    change: str, add: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    text = builtin_text("torque_free")
+    assert 'targets = ["c", "fortran"]' in text
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text.replace('targets = ["c", "fortran"]', change))
+    code, out, err = _check([str(scene)], capsys)
+    assert (code, out) == (2, "")
+    assert err == (
+        f"gyrogen: error: {scene}: gyrogen check needs the scene's C build with dop853 and "
+        f"rodas4 (and its Jacobian): add {add}\n"
+    )

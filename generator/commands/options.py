@@ -1,7 +1,9 @@
-"""What several commands share: the scene argument, output options, progress."""
+"""What several commands share: the scene argument, output options, the
+types of number options (each with its range), progress."""
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -9,6 +11,7 @@ from typing import Any, TypeVar
 
 import click
 
+from gyrogen.layout import MAX_PARAMETER_SETS, MAX_STATES
 from gyrogen.scene import Scene, load
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -25,6 +28,21 @@ class SceneType(click.ParamType):
 
 SCENE = SceneType()
 
+
+class FiniteFloat(click.FloatRange):
+    """A FloatRange that also refuses nan and inf (click's lets nan through
+    every bound, and inf through an open one)."""
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return float(number)
+
+
+POSITIVE = FiniteFloat(min=0.0, min_open=True)
+"""A finite number > 0."""
+
 out_dir = click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
@@ -40,9 +58,27 @@ def default_out(scene: Scene) -> Path:
 def verify_options(f: F) -> F:
     for opt in reversed(
         [
-            click.option("--states", default=10_000, show_default=True, help="Random states."),
-            click.option("--params", default=100, show_default=True, help="Random parameter sets."),
-            click.option("--seed", default=0, show_default=True, help="Random seed."),
+            click.option(
+                "--states",
+                type=click.IntRange(1, MAX_STATES),
+                default=10_000,
+                show_default=True,
+                help="Random states.",
+            ),
+            click.option(
+                "--params",
+                type=click.IntRange(1, MAX_PARAMETER_SETS),
+                default=100,
+                show_default=True,
+                help="Random parameter sets.",
+            ),
+            click.option(
+                "--seed",
+                type=click.IntRange(min=0),
+                default=0,
+                show_default=True,
+                help="Random seed (numpy's: >= 0).",
+            ),
         ]
     ):
         f = opt(f)

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from gyrogen.commands.options import SCENE
+from gyrogen.layout import MAX_REPEATS
 from gyrogen.scene import Scene, default
 
 
@@ -14,7 +15,13 @@ from gyrogen.scene import Scene, default
 @click.option(
     "--out", type=click.Path(file_okay=False, path_type=Path), help="Write bench.json here."
 )
-@click.option("--repeats", default=5, show_default=True, help="Repeats per timing (best is kept).")
+@click.option(
+    "--repeats",
+    type=click.IntRange(1, MAX_REPEATS),
+    default=5,
+    show_default=True,
+    help="Repeats per timing (best is kept).",
+)
 def bench_rhs(out: Path | None, repeats: int) -> None:
     """Time the RHS: cffi calls, batched C, numpy, and PyDy's cython."""
     from gyrogen import bench
@@ -37,6 +44,7 @@ def bench(scene: Scene | None, quick: bool, out: Path | None) -> None:
     from gyrogen import workprec, workprec_report
 
     scene = scene or default()
+    workprec_report.check_scene(scene)  # before the first line of progress
     out = out or Path("report") / scene.name
     cfg = workprec.QUICK if quick else workprec.FULL
     step = [0]

@@ -9,10 +9,9 @@ from pathlib import Path
 
 import click
 
-from gyrogen.commands.options import SCENE
-from gyrogen.scene import Scene
-
-POSITIVE = click.FloatRange(min=0.0, min_open=True)
+from gyrogen.commands.options import POSITIVE, SCENE
+from gyrogen.layout import MAX_OUTPUT_POINTS, MAX_RHS_CALLS
+from gyrogen.scene import Scene, check_output_grid
 
 
 @contextmanager
@@ -31,7 +30,12 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
     help="Directory for the trajectory, summary, figure and sources [default: sim/<scene>].",
 )
 @click.option("--t-end", type=POSITIVE, default=None, help="End time, s [default: the scene's].")
-@click.option("--dt", type=POSITIVE, default=None, help="Output step, s [default: the scene's].")
+@click.option(
+    "--dt",
+    type=POSITIVE,
+    default=None,
+    help=f"Output step, s, at most {MAX_OUTPUT_POINTS:,} in --t-end [default: the scene's].",
+)
 @click.option(
     "--method",
     type=click.Choice(["DOP853", "Radau", "LSODA", "RK45", "rk4", "dopri5", "dop853", "rodas4"]),
@@ -41,7 +45,7 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 )
 @click.option(
     "--max-nfev",
-    type=click.IntRange(min=1),
+    type=click.IntRange(1, MAX_RHS_CALLS),
     default=10**7,
     show_default=True,
     help="Give up after this many RHS calls.",
@@ -68,11 +72,11 @@ def simulate(
         plot=not no_plot,
         max_nfev=max_nfev,
     )
-    if settings.dt > settings.t_end:
-        raise click.BadParameter(
-            f"output step {settings.dt:g} s is longer than the span {settings.t_end:g} s",
-            param_hint="'--dt'",
-        )
+    try:
+        check_output_grid(settings.t_end, settings.dt)
+    except ValueError as exc:  # the scene's own pair passed: an option is to blame
+        given = [f"'{n}'" for n, v in (("--t-end", t_end), ("--dt", dt)) if v is not None]
+        raise click.BadParameter(str(exc), param_hint=" / ".join(given)) from exc
     out = out or Path("sim") / scene.name
     echo = lambda s: click.echo(s, err=True)  # noqa: E731
     result = sim.run(scene, out, settings, progress=time_bar, echo=echo)

@@ -35,6 +35,7 @@ def check(
     .toml) to check its own simulate settings."""
     from gyrogen import build, checks, stability
     from gyrogen.generate import generate, write_atomic
+    from gyrogen.unit import build_id
 
     suite = checks.cases(quick)
     if names and not every:
@@ -51,15 +52,16 @@ def check(
         return
     if plots is not None:
         write_atomic(plots, {})  # fail early, with one line, if plots is not writable
-    compiled = {}
+    compiled: dict[str, build.Compiled] = {}  # by build id: two scenes may share a name
     results = []
     with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
         for case in progress("checking", suite):
-            if case.scene.name not in compiled:
-                src = Path(tmp) / case.scene.name
+            key = build_id(case.scene)
+            if key not in compiled:
+                src = Path(tmp) / key
                 generate(case.scene, src)
-                compiled[case.scene.name] = build.build(src, "c")
-            res = stability.run_case(case, compiled[case.scene.name])
+                compiled[key] = build.build(src, "c")
+            res = stability.run_case(case, compiled[key])
             results.append(res)
             if plots is not None:
                 write_atomic(plots, {f"{_slug(case.name)}.png": stability.plot(res)})
