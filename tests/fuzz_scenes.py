@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from scene_space import run_shard  # noqa: E402
+from scene_space import run_shard
 
 SHARD = 100
 """Examples per task: small enough that the progress line moves."""

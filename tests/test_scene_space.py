@@ -9,7 +9,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from scene_space import run_shard
 
 SHARDS = 4
