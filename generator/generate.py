@@ -128,10 +128,7 @@ def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
     anywhere (a full disk, a refused rename, an interrupt) puts every old
     version back and removes the new files. Text is UTF-8 as written."""
     make_dir(out)
-    targets = {name: out / name for name in files}
-    for target in targets.values():
-        if why := _obstacle(target):
-            raise GyrogenError(f"cannot write {target}: {why}")
+    targets = can_write(out, files)
     staged: dict[Path, Path] = {}
     saved: dict[Path, Path] = {}
     placed: list[Path] = []
@@ -153,6 +150,19 @@ def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
             raise GyrogenError(f"cannot write {current}: {exc.strerror or exc}") from exc
         raise
     _remove(saved.values())
+
+
+def can_write(out: Path, names: Iterable[str]) -> dict[str, Path]:
+    """Check that each named file can be put in out (nothing in the way that
+    a file cannot replace); the target paths by name."""
+    existing = next(d for d in (out, *out.parents) if os.path.lexists(d))
+    if not existing.is_dir():
+        raise GyrogenError(f"cannot create output directory {out}: Not a directory")
+    targets = {name: out / name for name in names}
+    for target in targets.values():
+        if why := _obstacle(target):
+            raise GyrogenError(f"cannot write {target}: {why}")
+    return targets
 
 
 def _obstacle(target: Path) -> str | None:
@@ -268,6 +278,7 @@ def generate(scene: Scene, out: Path, lib: bool = False, checked: bool = False) 
     unit = unit_of(scene)
     files = render_all(unit, lib)
     if checked:
+        can_write(out, files)  # before the check's seconds, not after
         check(unit, files)
     write_atomic(out, files)
     return unit

@@ -165,13 +165,17 @@ BAD = [
     ),
     (
         "moments overflow",
-        edit("I11 = 20.0", "I11 = 1.7e308", edit("I33 = 18.0", "I33 = 1.7e308")),
+        edit(
+            "parameters = { T = 0.02 }",
+            "parameters = { T = 0.02, I11 = 1.7e308, I33 = 1.7e308 }",
+            edit("I11 = 20.0", 'I11 = "runtime"', edit("I33 = 18.0", 'I33 = "runtime"')),
+        ),
         "parameters.I11, I22, I33, I13: the principal moments overflow",
     ),
     (
         "huge I11",
         edit("I11 = 20.0", "I11 = 1e308"),
-        "parameters.I11, I22, I33, I13: principal moments (0, 25, 1e+308) violate the triangle",
+        "parameters.I11: 1e+308: a folded value must be 0 or of magnitude 1e-50 to 1e+50",
     ),
 ]
 

@@ -62,7 +62,7 @@ def generate(
     compared with the numpy reference at a sample of states and parameter
     sets; on any failure nothing is written and the exit code is 1.
     --no-check skips this."""
-    from gyrogen.generate import check, render_all, unit_of, write_atomic
+    from gyrogen.generate import can_write, check, render_all, unit_of, write_atomic
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
     units = []
@@ -74,6 +74,7 @@ def generate(
         unit = unit_of(scene)
         files = render_all(unit, lib)
         if not no_check:
+            can_write(target, files)  # before the check's seconds, not after
             seconds = check(unit, files)
             click.echo(
                 f"checked {scene.name}: {', '.join(scene.targets)} compiled and compared "
