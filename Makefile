@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench report check clean distclean examples strict
+.PHONY: setup system-deps run test lint generate check-generated bench report check fuzz clean distclean examples strict
 
 ## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -66,12 +66,18 @@ report: setup
 	$(BIN)/gyrogen bench gyrostat --out report/gyrostat
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 
+## fuzz: the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes with a
+## fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
+FUZZ_EXAMPLES ?= 2000
+fuzz: setup
+	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
+
 ## check: numerical stability on every stiff and extreme case
 check: setup
 	$(BIN)/gyrogen check --all --plots report/check
 
 clean:
-	rm -rf build examples/build bench-out report sim .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	rm -rf build examples/build bench-out report sim fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
 	find generator templates tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 
