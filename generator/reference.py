@@ -1,9 +1,9 @@
 """Independent numpy witness of the gyrostat's equations of motion.
 
-Written by hand from the paper's *first* formulation (``shared/seed/gyrostat-eom.md``,
+Written by hand from the paper's *first* formulation (``docs/gyrostat-eom.md``,
 "Equations of motion": the carrier A and the rotor B treated as two separate
 bodies, with the offsets l1a, l3a, l1b, l3b of their mass centers from AB*), with
-misprint 1 of ``NOTES.md`` fixed. It deliberately uses neither sympy nor any other
+misprint 1 of ``docs/NOTES.md`` fixed. It deliberately uses neither sympy nor any other
 gyrogen module except :mod:`gyrogen.layout`, so that it can check the generated code.
 
 Every function is vectorized: states have shape ``(..., 14)`` in ``layout.STATES``

@@ -31,7 +31,8 @@ def verify_sources(scene: Scene, source: Path, states: int, params: int, seed: i
     )
     click.echo(
         f"{scene.name}: {states} random states x {report.n_params['well']} well-conditioned and "
-        f"{report.n_params['ill']} ill-conditioned parameter sets; scaled error |a-b|/(1+|b|):"
+        f"{report.n_params['ill']} ill-conditioned parameter sets; error |a-b|/(1+|b|+S), S the "
+        "sizes of the terms (see gyrogen.verify):"
     )
     for r in report.rows:
         mark = "ok" if r.passed else "FAIL"
