@@ -249,8 +249,24 @@ def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignme
     done = {a.rhs: a.lhs for a in first.temporaries}
     second = _cse([v.xreplace(done) for v in values], names)
     scalars = tuple(Assignment(s, v) for s, v in zip(named, first.outputs, strict=True))
-    setup = Block(first.temporaries + scalars + second.temporaries, second.outputs)
+    setup = Block(_in_order(first.temporaries + scalars) + second.temporaries, second.outputs)
     return setup, tuple(a for a in scalars if a.lhs in eqs.lumped)
+
+
+def _in_order(assignments: tuple[Assignment, ...]) -> tuple[Assignment, ...]:
+    """The assignments with each after those it reads, otherwise as given: a
+    temporary of the first pass may read mu (two lumped scalars sharing
+    mu l1^2 when l3 is folded to 0), which the pass assigns after them."""
+    defined = {a.lhs for a in assignments}
+    done: set[sm.Symbol] = set()
+    out: list[Assignment] = []
+    waiting = list(assignments)
+    while waiting:
+        ready = next(a for a in waiting if not (a.rhs.free_symbols & defined) - done)
+        waiting.remove(ready)
+        out.append(ready)
+        done.add(ready.lhs)
+    return tuple(out)
 
 
 def _reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> sm.Expr:

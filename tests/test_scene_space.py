@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from scene_space import run_shard
+from scene_space import Draw, check, run_shard
 
 SHARDS = 4
 EXAMPLES = 25
@@ -24,3 +24,16 @@ def test_every_drawn_scene_keeps_the_promise(
     counts, failures = run_shard(1000 + shard, EXAMPLES, tmp_path / "failures")
     assert not failures, "\n\n".join(failures)
     assert counts["examples"] == EXAMPLES and counts["checked"] >= EXAMPLES // 2, counts
+
+
+REGRESSIONS = sorted((Path(__file__).parent / "regressions").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", REGRESSIONS, ids=[p.stem for p in REGRESSIONS])
+def test_scenes_the_fuzzing_broke_keep_the_promise(
+    path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each failure `make fuzz` found, as a scene file (its first lines say
+    what broke and what fixed it)."""
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    assert check(Draw(path.read_text(encoding="utf-8"), True, "")) == "checked"
