@@ -78,7 +78,7 @@ check: setup
 
 clean:
 	rm -rf build examples/build bench-out report sim fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
-	find generator templates tests -name __pycache__ -type d -prune -exec rm -rf {} +
+	find generator tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 
 distclean: clean

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from gyrogen import build
-from gyrogen.generate import generate
+from gyrogen.codegen.generate import generate
+from gyrogen.runtime import build
 from gyrogen.scene import default
 
 REPO = Path(__file__).resolve().parents[1]

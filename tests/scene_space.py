@@ -13,7 +13,7 @@ is predicted independently: a regular expression for names, the numpy
 mirror of setup's checks, sampling.setup_code, for the parameters). Each
 valid scene is generated and compiled by gcc and clang (C99, -Werror) and
 gfortran (-std=f2008 -Werror), its rhs, outputs and Jacobian are compared
-with the numpy reference (verify.compare, setup's refusal codes included),
+with the numpy reference (compare.compare, setup's refusal codes included),
 every Fortran line fits in 132 columns, and each of its integrators follows
 scipy's DOP853 on the reference for a short span.
 """
@@ -34,10 +34,11 @@ from hypothesis import HealthCheck, Phase, given, seed, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from gyrogen import build, sampling, verify, witness
+from gyrogen.abi import DESCRIPTION_MAX_LENGTH, NAME_MAX_LENGTH, PARAMETERS
+from gyrogen.codegen.generate import render_all, unit_of, write_atomic
 from gyrogen.errors import SceneError
-from gyrogen.generate import render_all, unit_of, write_atomic
-from gyrogen.layout import DESCRIPTION_MAX_LENGTH, NAME_MAX_LENGTH, PARAMETERS
+from gyrogen.oracle import compare, sampling, scene_view
+from gyrogen.runtime import build
 from gyrogen.scene import Scene, parse
 
 INTEGRATORS = ("rk4", "dopri5", "dop853", "rodas4")
@@ -294,8 +295,8 @@ def _pipeline(scene: Scene) -> None:
         for c_file in src.glob("*.c"):
             _compile(["clang", *C_STRICT, "-c", c_file.name, "-o", "clang.o"], src)
         backends = [build.build(src, lang) for lang in scene.targets]  # gcc, gfortran, -Werror
-        given = verify.given_parameters(scene)
-        report = verify.compare(backends, scene, 100, 2, 1, seed=0, given=given)
+        given = compare.given_parameters(scene)
+        report = compare.compare(backends, scene, 100, 2, 1, seed=0, given=given)
         failed = [r for r in report.rows if not r.passed] + report.refusal_failures
         assert not failed, f"differs from the reference: {failed}"
         if given is not None:
@@ -316,7 +317,7 @@ def _integrators(scene: Scene, comp: build.Compiled, p: np.ndarray) -> None:
     t1 = 0.05
 
     def f(t: float, x: np.ndarray) -> np.ndarray:
-        return witness.rhs(scene, x[None, :], p, t)[0]
+        return scene_view.rhs(scene, x[None, :], p, t)[0]
 
     rate = _largest_rate(f, x0)
     steps = max(200, math.ceil(rate * t1 / 0.02))  # rk4 to about 1e-7 where it is stable

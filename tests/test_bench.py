@@ -1,4 +1,4 @@
-"""Smoke test of gyrogen.bench on a tiny workload: it runs and reports sane numbers.
+"""Smoke test of gyrogen.analysis.bench_rhs on a tiny workload: it runs and reports sane numbers.
 
 Never asserts a speed: timings depend on the machine and its load.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from gyrogen import bench
+from gyrogen.analysis import bench_rhs
 
 NAMES = [
     "cffi_c_call",
@@ -26,9 +26,9 @@ NAMES = [
 ]
 
 
-def _tiny(tmp: Path | None = None, **kw: bool) -> tuple[list[bench.Measurement], list[str]]:
+def _tiny(tmp: Path | None = None, **kw: bool) -> tuple[list[bench_rhs.Measurement], list[str]]:
     lines: list[str] = []
-    ms = bench.run(out=tmp, repeats=1, echo=lines.append, calls=1000, batch=1000, **kw)
+    ms = bench_rhs.run(out=tmp, repeats=1, echo=lines.append, calls=1000, batch=1000, **kw)
     return ms, lines
 
 

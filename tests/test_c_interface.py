@@ -10,10 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from gyrogen import build, layout
+from gyrogen import abi
+from gyrogen.runtime import build
 
 # A valid, realistic parameter set (the embedding examples' dual spinner).
-VALID = dict(zip(layout.PARAMETERS, (500.0, 10.0, 100.0, 80.0, 120.0, 5.0,
+VALID = dict(zip(abi.PARAMETERS, (500.0, 10.0, 100.0, 80.0, 120.0, 5.0,
                                      0.05, 0.1, 0.2, -0.1, 0.0, 0.01), strict=True))  # fmt: skip
 
 # The codes gyrostat.h documents (GYROSTAT_OK, GYROSTAT_ERR_*).
@@ -41,7 +42,7 @@ LANGUAGES = ["c", "fortran"]
 
 
 def params(**changes: float) -> np.ndarray:
-    return np.array([changes.get(name, VALID[name]) for name in layout.PARAMETERS])
+    return np.array([changes.get(name, VALID[name]) for name in abi.PARAMETERS])
 
 
 def test_the_codes_are_the_documented_ones(backends: dict[str, build.Compiled]) -> None:
@@ -61,7 +62,7 @@ def test_valid_parameters_are_accepted(backends: dict[str, build.Compiled], lang
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf], ids=["nan", "+inf", "-inf"])
-@pytest.mark.parametrize("name", layout.PARAMETERS)
+@pytest.mark.parametrize("name", abi.PARAMETERS)
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_nonfinite(
     backends: dict[str, build.Compiled], language: str, name: str, bad: float
@@ -70,7 +71,7 @@ def test_nonfinite(
     assert code == NONFINITE
 
 
-@pytest.mark.parametrize("name", layout.PARAMETERS)
+@pytest.mark.parametrize("name", abi.PARAMETERS)
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_negative(backends: dict[str, build.Compiled], language: str, name: str) -> None:
     code, _ = backends[language].setup_code(params(**{name: -abs(VALID[name]) or -1.0}))

@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from gyrogen import generate as generate_module
 from gyrogen.cli import main
+from gyrogen.codegen import generate as generate_module
 from gyrogen.errors import GyrogenError
 from gyrogen.scene import default
 

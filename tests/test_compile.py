@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen import build
+from gyrogen.abi import COMPILER_LOG_LINES
 from gyrogen.errors import BuildError
-from gyrogen.layout import COMPILER_LOG_LINES
+from gyrogen.runtime import build
 
 
 def _compile(cmd: list[str], cwd: Path) -> None:

@@ -10,12 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen import layout, reference
+from gyrogen import abi
+from gyrogen.oracle import reference
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
 
-# The run the examples document: parameters in layout.PARAMETERS order, the
+# The run the examples document: parameters in abi.PARAMETERS order, the
 # initial state (everything else zero), and the fixed RK4 step.
 PARAMS = np.array([500.0, 10.0, 100.0, 80.0, 120.0, 5.0, 0.05, 0.1, 0.2, -0.1, 0.0, 0.01])
 INITIAL = {"u1": 0.01, "u2": 0.5, "u3": -0.02, "u4": 100.0}
@@ -24,9 +25,9 @@ H_NAMES = ("H_n1", "H_n2", "H_n3")
 
 
 def initial_state() -> np.ndarray:
-    x = np.zeros(len(layout.STATES))
+    x = np.zeros(len(abi.STATES))
     for name, value in INITIAL.items():
-        x[layout.STATES.index(name)] = value
+        x[abi.STATES.index(name)] = value
     return x
 
 
@@ -77,8 +78,8 @@ def python_final() -> np.ndarray:
 @pytest.mark.parametrize("program", ["embed_c", "embed_fortran"])
 def test_final_state_matches_python(programs: Path, python_final: np.ndarray, program: str) -> None:
     out = run(programs / program)
-    assert list(out) == [*layout.STATES, *H_NAMES, "H_norm"]
-    x = np.array([out[name] for name in layout.STATES])
+    assert list(out) == [*abi.STATES, *H_NAMES, "H_norm"]
+    x = np.array([out[name] for name in abi.STATES])
     np.testing.assert_allclose(x, python_final, rtol=1e-9, atol=1e-12)
 
 
@@ -102,7 +103,7 @@ def test_c_and_fortran_agree(programs: Path) -> None:
 
 def test_cpp_prints_the_reference_rhs(programs: Path) -> None:
     out = run(programs / "embed_cpp")
-    assert list(out) == [f"d{name}" for name in layout.STATES]
+    assert list(out) == [f"d{name}" for name in abi.STATES]
     expected = reference.rhs(initial_state(), PARAMS)
     np.testing.assert_allclose(list(out.values()), expected, rtol=1e-12, atol=1e-15)
 

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import sympy as sm
 
-from gyrogen import build, verify, witness
-from gyrogen.backends.c import CPrinter
 from gyrogen.cli import main
-from gyrogen.generate import generate
+from gyrogen.codegen.backends.c import CPrinter
+from gyrogen.codegen.generate import generate
+from gyrogen.oracle import compare, scene_view
+from gyrogen.runtime import build
 from gyrogen.scene import load
 
 
@@ -60,7 +61,7 @@ def test_wrong_code_is_not_written(tmp_path: Path, capsys, monkeypatch: pytest.M
 def test_code_that_does_not_compile_is_not_written(
     tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from gyrogen.backends import c
+    from gyrogen.codegen.backends import c
 
     real = c.files
 
@@ -95,24 +96,24 @@ def test_size_scaled_bar_holds_correct_code_where_terms_cancel(controlled) -> No
     idx = {s: i for i, s in enumerate(scene.states)}
     x[:, idx["u2"]] = np.linspace(-5, 5, 50)
     x[:, idx["u4"]] = 199.0 + x[:, idx["u2"]] + np.linspace(-1e-9, 1e-9, 50)  # slip ~ 1e-9
-    ref = witness.rhs(scene, x, p)
+    ref = scene_view.rhs(scene, x, p)
     got = comp.rhs(x, comp.setup(p))
-    f = lambda xs, q: witness.rhs(scene, xs, q)  # noqa: E731
-    assert verify.size_scaled_error(got, ref, f, x, p) < verify.TOLERANCE
+    f = lambda xs, q: scene_view.rhs(scene, xs, q)  # noqa: E731
+    assert compare.size_scaled_error(got, ref, f, x, p) < compare.TOLERANCE
     # and a real error of one part in 1e9 is caught whatever the sizes
     wrong = got.copy()
     wrong[:, idx["u1"]] += 1e-9 * (1 + np.abs(ref[:, idx["u1"]]))
-    assert verify.size_scaled_error(wrong, ref, f, x, p) > 100 * verify.TOLERANCE
+    assert compare.size_scaled_error(wrong, ref, f, x, p) > 100 * compare.TOLERANCE
 
 
 def test_jacobian_error_catches_a_wrong_entry(controlled) -> None:  # type: ignore[no-untyped-def]
     comp, scene = controlled
     p = np.array([0.5, 30.0])
     rng = np.random.default_rng(2)
-    x = witness.random_states(scene, rng, 20)
+    x = scene_view.random_states(scene, rng, 20)
     c = comp.setup(p)
     jac = np.array([comp.jacobian(xi, c) for xi in x])
-    f = lambda xs, q: witness.rhs(scene, xs, q)  # noqa: E731
-    assert verify.jacobian_error(jac, f, x, p) < 1e-7
+    f = lambda xs, q: scene_view.rhs(scene, xs, q)  # noqa: E731
+    assert compare.jacobian_error(jac, f, x, p) < 1e-7
     jac[:, 5, 6] *= 1.001
-    assert verify.jacobian_error(jac, f, x, p) > verify.JAC_TOLERANCE
+    assert compare.jacobian_error(jac, f, x, p) > compare.JAC_TOLERANCE

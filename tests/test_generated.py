@@ -10,8 +10,8 @@ import pytest
 import sympy
 
 import gyrogen
-from gyrogen.generate import generate
-from gyrogen.layout import PARAMETERS, STATES
+from gyrogen.abi import PARAMETERS, STATES
+from gyrogen.codegen.generate import generate
 from gyrogen.scene import builtin_names, default, load
 
 REPO = Path(__file__).resolve().parents[1]

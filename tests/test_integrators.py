@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gyrogen import build, tableaus, witness
-from gyrogen.generate import generate
+from gyrogen import methods
+from gyrogen.codegen.generate import generate
+from gyrogen.oracle import scene_view
+from gyrogen.runtime import build
 from gyrogen.scene import Scene, load, parse
 
 REPO = Path(__file__).resolve().parents[1]
@@ -89,7 +91,7 @@ def problem(name: str) -> tuple[Scene, np.ndarray, np.ndarray]:
 def scipy_reference(name: str, t1: float) -> np.ndarray:
     scene, x0, p = problem(name)
     sol = solve_ivp(
-        lambda t, x: witness.rhs(scene, x, p, t)[0],
+        lambda t, x: scene_view.rhs(scene, x, p, t)[0],
         (0.0, t1), x0, method="DOP853", rtol=1e-12, atol=1e-12,
     )  # fmt: skip
     assert sol.success
@@ -162,7 +164,7 @@ def test_time_dependent_torque(tmp_path: Path, cache_dir: Path) -> None:
     ref = x0
     for span in [(0.0, 0.5), (0.5, 1.5), (1.5, 2.0)]:
         ref = solve_ivp(
-            lambda t, x: witness.rhs(scene, x, p, t)[0],
+            lambda t, x: scene_view.rhs(scene, x, p, t)[0],
             span, ref, method="DOP853", rtol=1e-13, atol=1e-13,
         ).y[:, -1]  # fmt: skip
     for method in ADAPTIVE:
@@ -278,12 +280,12 @@ def test_near_gimbal_lock_is_never_nan(compiled: Get, language: str) -> None:
         x0 = np.zeros(b.nx)
         for name, value in {"q2": np.pi / 2 - eps, "u1": 10.0, "u2": 1.0, "u3": 1.0}.items():
             x0[scene.states.index(name)] = value
-        h0 = witness.output(scene, "angular_momentum", x0, p)
+        h0 = scene_view.output(scene, "angular_momentum", x0, p)
         for method in ADAPTIVE:
             x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, rtol=1e-10, atol=1e-10)
             assert code == expected and np.all(np.isfinite(x)), (method, eps)
             assert (stats["t"] == 1.0) == (expected == OK)
-            h1 = witness.output(scene, "angular_momentum", x, p)
+            h1 = scene_view.output(scene, "angular_momentum", x, p)
             np.testing.assert_allclose(h1, h0, rtol=0, atol=1e-6)
         for method in ADAPTIVE:
             x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, max_steps=50)
@@ -406,7 +408,7 @@ def test_stiff_wheel_favours_rodas4(compiled: Get, language: str) -> None:
     assert sr["accepted"] < sd["accepted"] / 20
     assert mixed_error(xr, xd) < 1e-6
     ref = solve_ivp(
-        lambda t, x: witness.rhs(scene, x, p, t)[0], (0.0, 1.0), x0, method="Radau",
+        lambda t, x: scene_view.rhs(scene, x, p, t)[0], (0.0, 1.0), x0, method="Radau",
         jac=lambda t, x: b_jac(b, c, x), rtol=1e-10, atol=1e-10,
     ).y[:, -1]  # fmt: skip
     assert mixed_error(xr, ref) < 1e-7
@@ -446,15 +448,15 @@ def test_tableaus_match_scipy() -> None:
     from scipy.integrate import DOP853, RK45
 
     for s in range(1, 6):
-        assert tableaus.DOPRI5.a[s] == tuple(RK45.A[s, :s])
-    assert tableaus.DOPRI5.b == (*RK45.B, 0.0)
-    np.testing.assert_array_equal(tableaus.DOPRI5.e, -RK45.E)
+        assert methods.DOPRI5.a[s] == tuple(RK45.A[s, :s])
+    assert methods.DOPRI5.b == (*RK45.B, 0.0)
+    np.testing.assert_array_equal(methods.DOPRI5.e, -RK45.E)
     for s in range(1, 12):
-        assert tableaus.DOP853.a[s] == tuple(DOP853.A[s, :s])
-    assert tableaus.DOP853.b == tuple(DOP853.B)
-    assert tableaus.DOP853.nodes == tuple(DOP853.C)
-    assert tableaus.DOP853.e == tuple(DOP853.E5[:12])
-    assert tableaus.DOP853.e3 == tuple(DOP853.E3[:12])
+        assert methods.DOP853.a[s] == tuple(DOP853.A[s, :s])
+    assert methods.DOP853.b == tuple(DOP853.B)
+    assert methods.DOP853.nodes == tuple(DOP853.C)
+    assert methods.DOP853.e == tuple(DOP853.E5[:12])
+    assert methods.DOP853.e3 == tuple(DOP853.E3[:12])
 
 
 STRICT_C = [

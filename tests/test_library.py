@@ -1,4 +1,4 @@
-"""The library build files (gyrogen.library.files): a CMakeLists.txt that
+"""The library build files (gyrogen.codegen.buildfiles.files): a CMakeLists.txt that
 builds lib<prefix>.a and .so alone or under add_subdirectory, and a Makefile
 fragment that builds the same with make. The libraries are checked by
 calling them, against the cffi-built backend."""
@@ -15,8 +15,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gyrogen import build, library
+from gyrogen.codegen import buildfiles
 from gyrogen.errors import GyrogenError
+from gyrogen.runtime import build
 
 REPO = Path(__file__).resolve().parents[1]
 P = np.array([500.0, 10.0, 100.0, 80.0, 120.0, 5.0, 0.05, 0.1, 0.2, -0.1, 0.0, 0.01])
@@ -31,7 +32,7 @@ def lib_dir(source_dir: Path, tmp_path: Path) -> Path:
     """A copy of the generated sources with the build files written beside them."""
     out = tmp_path / "gyrostat"
     shutil.copytree(source_dir, out)
-    for name, text in library.files(manifest(source_dir)).items():
+    for name, text in buildfiles.files(manifest(source_dir)).items():
         (out / name).write_text(text)
     return out
 
@@ -53,20 +54,20 @@ def check_shared(so: Path, backend: build.Compiled) -> None:
 
 
 def test_every_file_says_where_it_came_from(source_dir: Path) -> None:
-    out = library.files(manifest(source_dir))
+    out = buildfiles.files(manifest(source_dir))
     assert set(out) == {"CMakeLists.txt", "gyrostat.mk"}
     for name, text in out.items():
         head = "\n".join(text.splitlines()[:6])
         assert head.startswith(f"# {name}:")
         assert "Do not edit" in head
         assert "template lib/" in head
-    assert library.files(manifest(source_dir)) == out  # deterministic
+    assert buildfiles.files(manifest(source_dir)) == out  # deterministic
 
 
 def test_without_fortran_there_is_no_fortran_library(source_dir: Path) -> None:
     m = manifest(source_dir)
     m["files"] = {k: v for k, v in m["files"].items() if k != "fortran"}
-    out = library.files(m)
+    out = buildfiles.files(m)
     assert "gyrostat_f" not in out["CMakeLists.txt"]
     assert "gyrostat_f" not in out["gyrostat.mk"]
 
@@ -75,14 +76,14 @@ def test_a_manifest_without_files_is_an_error(source_dir: Path) -> None:
     m = manifest(source_dir)
     del m["files"]
     with pytest.raises(GyrogenError, match=r"manifest\.json lacks 'files'"):
-        library.files(m)
+        buildfiles.files(m)
 
 
 def test_a_scene_without_c_is_an_error(source_dir: Path) -> None:
     m = manifest(source_dir)
     m["files"] = {"fortran": "gyrostat.f90"}
     with pytest.raises(GyrogenError, match="has no C sources"):
-        library.files(m)
+        buildfiles.files(m)
 
 
 def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, build.Compiled]) -> None:

@@ -1,5 +1,5 @@
 """Numbers the generated code writes: never a literal its compiler reads as
-something else (gyrogen.literals), and folded decimals that compute the
+something else (gyrogen.symbolic.literals), and folded decimals that compute the
 physics they mean."""
 
 from __future__ import annotations
@@ -12,13 +12,20 @@ import numpy as np
 import pytest
 import sympy as sm
 
-from gyrogen import build, witness
-from gyrogen.backends.c import CPrinter
-from gyrogen.backends.fortran import FortranPrinter
-from gyrogen.generate import generate
-from gyrogen.literals import INT_LITERAL_MAX, LiteralError, as_double, writable, writable_form
+from gyrogen.codegen.backends.c import CPrinter
+from gyrogen.codegen.backends.fortran import FortranPrinter
+from gyrogen.codegen.generate import generate
+from gyrogen.oracle import scene_view
+from gyrogen.oracle.compare import compare
+from gyrogen.runtime import build
 from gyrogen.scene import parse
-from gyrogen.verify import compare
+from gyrogen.symbolic.literals import (
+    INT_LITERAL_MAX,
+    LiteralError,
+    as_double,
+    writable,
+    writable_form,
+)
 
 x, y, t = sm.symbols("x y t", real=True)
 BIG = sm.Integer(2**112)
@@ -119,5 +126,5 @@ def test_folded_decimals_compile_everywhere_and_hold_momentum(tmp_path: Path) ->
         xk, _, code = backends[0].integrate("dop853", xs[-1], c, k, k + 1.0, rtol=1e-12, atol=1e-12)
         assert code == 0
         xs.append(xk)
-    h = np.linalg.norm(witness.output(scene, "angular_momentum", np.array(xs), p), axis=1)
+    h = np.linalg.norm(scene_view.output(scene, "angular_momentum", np.array(xs), p), axis=1)
     assert np.max(np.abs(h - h[0])) / h[0] < 1e-12

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import sympy as sm
 
-from gyrogen import witness
-from gyrogen.checks import quaternion_scene
-from gyrogen.lu_blocks import diagonal_blocks
+from gyrogen.analysis.check_cases import quaternion_scene
+from gyrogen.codegen.context import make_unit
+from gyrogen.oracle import scene_view
 from gyrogen.scene import Scene, builtin_names, load
-from gyrogen.unit import make_unit
+from gyrogen.symbolic.blocks import diagonal_blocks
 
 
 def pattern(rows: list[str]) -> list[sm.Expr]:
@@ -57,7 +57,7 @@ def numeric_jacobian(scene: Scene) -> np.ndarray:
     for j in range(n):
         e = np.zeros(n)
         e[j] = 1e-6
-        jac[:, j] = (witness.rhs(scene, x + e, p)[0] - witness.rhs(scene, x - e, p)[0]) / 2e-6
+        jac[:, j] = (scene_view.rhs(scene, x + e, p)[0] - scene_view.rhs(scene, x - e, p)[0]) / 2e-6
     return jac
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import sympy as sm
 
-from gyrogen import equations, model
-from gyrogen.proof import prove
+from gyrogen.symbolic import equations, model, specialize
+from gyrogen.symbolic.proof import prove
 
 
 def test_lumped_formulation_equals_separate_bodies() -> None:
@@ -33,7 +33,7 @@ def test_proof_detects_a_difference(monkeypatch) -> None:
 
 
 def test_mass_matrix_is_constant() -> None:
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     assert not eqs.mass_matrix.free_symbols & set(eqs.states)
 
 
@@ -50,13 +50,13 @@ def test_kinematics_as_printed_in_the_paper() -> None:
         u6,
         u7,
     ]
-    kin = equations.full_model().kinematics
+    kin = specialize.full_model().kinematics
     assert [sm.simplify(k - p) for k, p in zip(kin, paper, strict=True)] == [0] * 7
 
 
 def test_lumped_equations_as_printed_in_the_paper() -> None:
     """The paper's four lumped equations, moved to M u' = F form."""
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     IA11, IA22, IA33, IA13 = model.symbols().lumped
     u1, u2, u3, u4 = eqs.states[7:11]
     J, T = model.symbols().p("J"), model.symbols().p("T")
@@ -73,7 +73,7 @@ def test_lumped_equations_as_printed_in_the_paper() -> None:
 
 
 def test_translation_reduces_to_gravity() -> None:
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     m_a, m_b, g = (model.symbols().p(n) for n in ("m_a", "m_b", "g"))
     udot = eqs.mass_matrix[4:, 4:].inv() * eqs.forcing[4:, :]
     assert list(udot) == [0, 0, g]

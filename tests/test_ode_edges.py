@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gyrogen import build, layout, reference, witness
-from gyrogen.generate import generate
+from gyrogen import abi
+from gyrogen.codegen.generate import generate
+from gyrogen.oracle import reference, scene_view
+from gyrogen.runtime import build
 from gyrogen.scene import Scene, load
 
 REPO = Path(__file__).resolve().parents[1]
@@ -25,7 +27,7 @@ LANGUAGES = ["c", "fortran"]
 ADAPTIVE = ["dopri5", "dop853", "rodas4"]
 METHODS = ["rk4", *ADAPTIVE]
 OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT, ATTITUDE = range(7)
-G = layout.GIMBAL_LOCK_COS
+G = abi.GIMBAL_LOCK_COS
 
 # torque_free turning about a1 (u2 = u4 = 0): its lumped inertia is
 # axisymmetric about a2, so any rate (u1, 0, u3) is a steady rotation about a
@@ -105,7 +107,7 @@ def exact_dcm(u1: float, u3: float, t: float) -> np.ndarray:
 
 
 def angle_dcm(scene: Scene, x: np.ndarray) -> np.ndarray:
-    return reference.direction_cosines(witness.full_states(scene, x)[0])
+    return reference.direction_cosines(scene_view.full_states(scene, x)[0])
 
 
 # --- NULL statistics -------------------------------------------------------------
@@ -157,7 +159,7 @@ def test_null_stats_gives_the_same_state(
 
 BAD = [
     {"rtol": 1e-20},
-    {"rtol": layout.MIN_RTOL},
+    {"rtol": abi.MIN_RTOL},
     {"rtol": math.nan},
     {"rtol": math.inf},
     {"atol": 0.0},
@@ -186,7 +188,7 @@ def test_tolerances_no_double_meets_and_a_bad_first_step(
             x, stats, code = b.integrate(method, x0, c, 0.5, 1.5, **kw)
             assert code == ARGUMENT, (method, bad)
             assert np.array_equal(x, x0) and stats["t"] == 0.5 and stats["rhs_calls"] == 0
-        just_above = float(np.nextafter(layout.MIN_RTOL, 1.0))
+        just_above = float(np.nextafter(abi.MIN_RTOL, 1.0))
         x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, rtol=just_above, atol=1e-12)
         assert code == OK and stats["t"] == 1.0
         auto = b.integrate(method, x0, c, 0.0, 1.0, h0=0.0)
@@ -292,7 +294,7 @@ def test_euler_parameters_pass_where_the_angles_stop(
             assert code == OK and stats["t"] == 1.0, method
             assert abs(np.linalg.norm(x[:4]) - 1.0) < 1e-15
             np.testing.assert_allclose(
-                witness.quaternion_dcm(x[:4]), exact_dcm(1.0, u3, 1.0), rtol=0, atol=1e-9
+                scene_view.quaternion_dcm(x[:4]), exact_dcm(1.0, u3, 1.0), rtol=0, atol=1e-9
             )
 
 
@@ -304,7 +306,7 @@ def test_header_and_module_carry_the_registry(source_dir: Path) -> None:
     the codes are build.ODE_CODES."""
     h = (source_dir / "gyrostat_ode.h").read_text()
     f = (source_dir / "gyrostat_ode.f90").read_text()
-    for name, value in (("MIN_RTOL", layout.MIN_RTOL), ("GIMBAL_LOCK_COS", G)):
+    for name, value in (("MIN_RTOL", abi.MIN_RTOL), ("GIMBAL_LOCK_COS", G)):
         (c_text,) = re.findall(rf"#define GYROSTAT_ODE_{name} (\S+)", h)
         (f_text,) = re.findall(rf"GYROSTAT_ODE_{name} = (\S+)_c_double", f)
         assert float(c_text) == float(f_text) == value

@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 import sympy as sm
 
-from gyrogen import build, equations, hoist, model, optimize, sampling
-from gyrogen.opcounts import variants
+from gyrogen.oracle import sampling
+from gyrogen.runtime import build
+from gyrogen.symbolic import equations, hoist, model, optimize, specialize
+from gyrogen.symbolic.opcounts import variants
 
 RHS_GOAL = 50
 
@@ -38,7 +40,7 @@ def _direct(eqs: equations.Equations, p: np.ndarray, x: np.ndarray) -> np.ndarra
 
 
 def test_optimized_equals_direct_solve() -> None:
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     opt = optimize.optimize(eqs)
     rng = np.random.default_rng(3)
     params = sampling.random_parameters(rng, 4, max_condition=100)
@@ -50,7 +52,7 @@ def test_optimized_equals_direct_solve() -> None:
 
 
 def test_rhs_reads_only_states_and_constants() -> None:
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     opt = optimize.optimize(eqs)
     allowed = set(eqs.states) | set(hoist.constants(opt.nc))
     allowed |= {a.lhs for a in opt.rhs.temporaries}
@@ -63,7 +65,7 @@ def test_rhs_reads_only_states_and_constants() -> None:
 def test_rhs_never_solves_a_linear_system() -> None:
     """No division by anything that depends on parameters or states except
     cos(q2) of the kinematics: the inverse of M lives in setup."""
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     opt = optimize.optimize(eqs)
     q2 = eqs.states[1]
     for expr in [*opt.rhs.outputs, *(a.rhs for a in opt.rhs.temporaries)]:
@@ -73,7 +75,7 @@ def test_rhs_never_solves_a_linear_system() -> None:
 
 
 def test_setup_reads_only_parameters() -> None:
-    eqs = equations.full_model()
+    eqs = specialize.full_model()
     opt = optimize.optimize(eqs)
     used = set().union(*(a.rhs.free_symbols for a in opt.setup.temporaries))
     used |= set().union(*(e.free_symbols for e in opt.setup.outputs))
@@ -81,7 +83,7 @@ def test_setup_reads_only_parameters() -> None:
 
 
 def test_rhs_op_count_meets_goal() -> None:
-    opt = optimize.optimize(equations.full_model())
+    opt = optimize.optimize(specialize.full_model())
     assert opt.rhs.ops <= RHS_GOAL
 
 
@@ -97,14 +99,14 @@ def test_count_ops_counts_each_trig_once() -> None:
 
 
 def test_block_inverse_matches_full_inverse() -> None:
-    m = equations.full_model().mass_matrix
+    m = specialize.full_model().mass_matrix
     inv = optimize.block_inverse(m)
     assert sm.simplify(inv * m - sm.eye(7)) == sm.zeros(7, 7)
 
 
 def test_kinematics_reuse_earlier_output() -> None:
     """q3' is written through q1' (u2 - sin(q2) q1'), and no tan is left."""
-    opt = optimize.optimize(equations.full_model())
+    opt = optimize.optimize(specialize.full_model())
     text = " ".join(str(a.rhs) for a in opt.rhs.temporaries) + " ".join(map(str, opt.rhs.outputs))
     assert "tan" not in text
     q1dot = opt.rhs.outputs[0]
@@ -112,7 +114,7 @@ def test_kinematics_reuse_earlier_output() -> None:
 
 
 def test_lumped_scalars_are_named_in_setup() -> None:
-    opt = optimize.optimize(equations.full_model())
+    opt = optimize.optimize(specialize.full_model())
     names = [a.lhs for a in opt.lumped]
     assert names == list(model.symbols().lumped)
     assert set(names) <= {a.lhs for a in opt.setup.temporaries}
@@ -126,11 +128,11 @@ def test_setup_constants_survive_a_nearly_singular_lumped_block(
     one, cond ~ 1/tiny): the constants are still within a few ulp of their
     exact values for the given doubles, in C and Fortran, because the mu^2
     terms cancel in sympy rather than in rounding."""
-    from gyrogen.checks import _dumbbell
+    from gyrogen.analysis.check_cases import _dumbbell
 
     values = _dumbbell(tiny)
     p = np.array([values[s.name] for s in model.symbols().params])
-    opt = optimize.optimize(equations.full_model())
+    opt = optimize.optimize(specialize.full_model())
     exact: dict[sm.Basic, sm.Expr] = {
         s: sm.Rational(values[s.name]) for s in model.symbols().params
     }
@@ -149,7 +151,7 @@ def test_speed_controller_torque_is_rounded_once() -> None:
     u4 - u2 - w_ref, not each its own expansion of k (u4 - u2 - w_ref): the
     angular momentum they exchange then cancels in rounding too."""
     from gyrogen.scene import load
-    from gyrogen.specialize import SLIP, specialize
+    from gyrogen.symbolic.specialize import SLIP, specialize
 
     eqs = specialize(load("speed_controlled"))
     opt = optimize.optimize(eqs, jacobian=True)

@@ -10,9 +10,9 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gyrogen import reference, sampling
-from gyrogen.build import Compiled
-from gyrogen.layout import PARAMETERS
+from gyrogen.abi import PARAMETERS
+from gyrogen.oracle import reference, sampling
+from gyrogen.runtime.build import Compiled
 
 P = {n: i for i, n in enumerate(PARAMETERS)}
 positive = st.floats(1e-3, 1e3, allow_nan=False, allow_infinity=False)
@@ -74,7 +74,7 @@ def test_valid_parameters_accepted_and_rhs_agrees(
         assert np.all(np.isfinite(out))
         ref = reference.rhs(x, p)
         scale = 1.0 + np.abs(ref)
-        # Two correct codes agree to about cond(M) eps (see gyrogen.verify),
+        # Two correct codes agree to about cond(M) eps (see gyrogen.oracle.compare),
         # and, over ranges this wide, to the cancellation of coefficients such
         # as I~33 - I~11 when the two are close: 1e-10 rather than verify's
         # 1e-12 on realistic parameters.

@@ -1,4 +1,4 @@
-"""Physics checks of the numpy reference (gyrogen.reference) and of gyrogen.sampling.
+"""Physics checks of the numpy reference (gyrogen.oracle.reference) and of gyrogen.oracle.sampling.
 
 The reference is checked against conservation laws, closed forms and the lumped
 formulation of NOTES.md, computed independently here, never against itself.
@@ -11,10 +11,11 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from gyrogen import layout, reference, sampling
+from gyrogen import abi
+from gyrogen.oracle import reference, sampling
 
-P = {name: k for k, name in enumerate(layout.PARAMETERS)}
-S = {name: k for k, name in enumerate(layout.STATES)}
+P = {name: k for k, name in enumerate(abi.PARAMETERS)}
+S = {name: k for k, name in enumerate(abi.STATES)}
 U = slice(S["u1"], S["u7"] + 1)
 
 
@@ -250,7 +251,7 @@ def test_invalid_parameters_codes() -> None:
         assert {code for _, _, code in cases} == set(range(1, 8))
         for description, vector, code in cases:
             assert sampling.setup_code(vector) == code, description
-            assert code in layout.SETUP_CODES
+            assert code in abi.SETUP_CODES
 
 
 def test_setup_code_boundaries() -> None:

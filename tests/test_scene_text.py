@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from gyrogen.generate import generate
-from gyrogen.layout import NAME_MAX_LENGTH
-from gyrogen.render import c_comment, f_comment, hash_comment
+from gyrogen.abi import NAME_MAX_LENGTH
+from gyrogen.codegen.generate import generate
+from gyrogen.codegen.render import c_comment, f_comment, hash_comment
 from gyrogen.scene import builtin_text, load, parse
 
 HOSTILE = (

@@ -11,13 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen import build, witness
+from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
 from gyrogen.cli import main
+from gyrogen.codegen.generate import generate
 from gyrogen.errors import BuildError, SceneError
-from gyrogen.generate import generate
-from gyrogen.layout import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
+from gyrogen.oracle import scene_view
+from gyrogen.oracle.compare import compare
+from gyrogen.runtime import build
 from gyrogen.scene import builtin_names, builtin_text, load, parse
-from gyrogen.verify import compare
 
 GOOD = builtin_text("wheel_spinup")
 
@@ -290,7 +291,7 @@ def test_specialization_drops_states_and_parameters(tmp_path: Path) -> None:
 def test_torque_free_principal_scene_meets_the_op_goal() -> None:
     """Torque-free, no translation, principal axes, every value folded: at
     most 20 ops in rhs (trig calls included here, so stricter than asked)."""
-    from gyrogen.unit import make_unit
+    from gyrogen.codegen.context import make_unit
 
     assert make_unit(load("torque_free")).ops["rhs"] <= 20
 
@@ -336,7 +337,7 @@ def test_table_torque_scene_matches_the_reference(tmp_path: Path) -> None:
         du4 = c.rhs(x, np.zeros(0), t)[0, scene.states.index("u4")]
         assert du4 == pytest.approx(torque / 0.015, rel=1e-12, abs=1e-15)
     np.testing.assert_allclose(
-        c.rhs(x, np.zeros(0), 2.5), witness.rhs(scene, x, np.zeros(0), 2.5), rtol=1e-13
+        c.rhs(x, np.zeros(0), 2.5), scene_view.rhs(scene, x, np.zeros(0), 2.5), rtol=1e-13
     )
 
 

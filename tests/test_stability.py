@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen import build, checks, stability
+from gyrogen.analysis import check_cases, check_engine
 from gyrogen.cli import main
-from gyrogen.generate import generate
+from gyrogen.codegen.generate import generate
+from gyrogen.runtime import build
 from gyrogen.scene import builtin_text
 
-QUICK = checks.cases(quick=True)
+QUICK = check_cases.cases(quick=True)
 
 
 @pytest.fixture(scope="module")
@@ -28,11 +29,11 @@ def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, build.Compil
 
 
 @pytest.mark.parametrize("case", QUICK, ids=[c.name for c in QUICK])
-def test_case_verdict(case: stability.Case, compiled: dict[str, build.Compiled]) -> None:
-    res = stability.run_case(case, compiled[case.scene.name])
+def test_case_verdict(case: check_engine.Case, compiled: dict[str, build.Compiled]) -> None:
+    res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.passed, (res.verdict, res.diagnosis, res.drift)
     if case.expect == "pass":
-        assert max(res.drift.values()) <= stability.DRIFT_BAR
+        assert max(res.drift.values()) <= check_engine.DRIFT_BAR
 
 
 def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Compiled]) -> None:
@@ -43,7 +44,7 @@ def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Comp
     at a higher cost than Euler parameters."""
     by_name = {c.name: c for c in QUICK}
     runs = {
-        name: stability.run_case(by_name[name], compiled[by_name[name].scene.name])
+        name: check_engine.run_case(by_name[name], compiled[by_name[name].scene.name])
         for name in (
             f"gimbal lock eps={eps} ({kind})"
             for eps in ("1e-06", "0.01")
@@ -71,11 +72,11 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, build.Compi
     ones whose closest approach, ~17 eps^2 in |cos q2|, is below
     GIMBAL_LOCK_COS stop with code 6; the others, and the pass over the pole
     (|cos q2| >= 0.008), succeed, as do all their quaternion twins."""
-    full = [c for c in checks.cases() if "gimbal" in c.name or "through" in c.name]
+    full = [c for c in check_cases.cases() if "gimbal" in c.name or "through" in c.name]
     assert len(full) == 10
     singular = set()
     for case in full:
-        res = stability.run_case(case, compiled[case.scene.name])
+        res = check_engine.run_case(case, compiled[case.scene.name])
         assert res.passed, (case.name, res.verdict, res.diagnosis)
         if res.verdict == "singular":
             assert res.code == build.ODE_ATTITUDE_SINGULAR
@@ -85,7 +86,7 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, build.Compi
 
 def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, build.Compiled]) -> None:
     case = next(c for c in QUICK if c.name == "speed controller k/J=1e+06")
-    res = stability.run_case(case, compiled[case.scene.name])
+    res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.method == "rodas4" and res.recommended.startswith("implicit")
 
 
@@ -140,7 +141,7 @@ def test_compensated_summation_keeps_a_long_run(
     summed with compensation (accept_step), by rounding alone, in both
     languages (gfortran honours the parentheses that carry it)."""
     case = next(c for c in QUICK if c.name.startswith("long run"))
-    res = stability.run_case(case, backends[language])
+    res = check_engine.run_case(case, backends[language])
     assert res.passed and max(res.drift.values()) < 1e-13, res.drift
 
 

@@ -119,7 +119,7 @@ def test_verify_path_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str)
     import numpy as np
     from scipy.integrate import solve_ivp
 
-    from gyrogen import reference, sampling
+    from gyrogen.oracle import reference, sampling
 
     rng = np.random.default_rng(12)
     valid = sampling.random_parameters(rng, 8, max_condition=100)

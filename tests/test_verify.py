@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrogen import reference, sampling
-from gyrogen.build import Compiled
 from gyrogen.cli import main
+from gyrogen.oracle import reference, sampling
+from gyrogen.oracle.compare import TOLERANCE, compare, scaled_error
+from gyrogen.runtime.build import Compiled
 from gyrogen.scene import builtin_names, default
-from gyrogen.verify import TOLERANCE, compare, scaled_error
 
 
 def test_compare_passes_at_the_issue_bar(backends: dict[str, Compiled]) -> None:

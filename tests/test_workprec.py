@@ -45,7 +45,7 @@ def test_bench_quick_default_scene(tmp_path: Path, capsys: pytest.CaptureFixture
 
 def test_dop853_converges_to_the_reference(tmp_path: Path) -> None:
     """Tighter tolerances give smaller errors against the reference."""
-    from gyrogen import workprec, workprec_report
+    from gyrogen.analysis import workprec, workprec_report
     from gyrogen.scene import default
 
     prob = workprec_report.problem(default(), tmp_path / "src", workprec.QUICK)

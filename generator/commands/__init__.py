@@ -1,1 +1,0 @@
-"""The `gyrogen` commands, one module per family; cli.py assembles them."""

@@ -1,0 +1,243 @@
+"""`gyrogen check`: numerical stability on stiff and extreme cases.
+
+Each case is a scene with parameter values and an initial state. For it:
+does setup accept it, and how well conditioned is the mass matrix; how stiff
+is the system (eigenvalues of the generated Jacobian at the start and along
+the run) and so which method it calls for; then an integration with the
+compiled integrators at rtol = 1e-12, watching the invariants of NOTES.md:
+|H| in N (always constant), the energy balance and u4 = u4(0) + T t / J
+(exact forms for a constant torque), and non-finite values.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gyrogen.abi import SETUP_CODES, WARN_CONDITION
+from gyrogen.oracle import scene_view
+from gyrogen.runtime.build import ODE_ATTITUDE_SINGULAR, ODE_CODES, Compiled
+from gyrogen.scene import Scene
+
+STIFF = 1e3
+"""Stiffness index (largest decay rate x time span) above which an explicit
+method spends most of its steps on stability: implicit it is."""
+DRIFT_BAR = 1e-10
+"""The invariants' relative drift allowed at rtol 1e-12."""
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    scene: Scene
+    params: dict[str, float]
+    initial: dict[str, float]
+    t_end: float
+    expect: str
+    """'pass', 'refused', 'singular' (the angles fail: gimbal lock), 'stable' or 'unstable'."""
+    method: str | None = None
+    """None: the method the stiffness analysis recommends."""
+    steps: int = 0
+    """For method 'rk4': the number of steps."""
+    samples: int = 20
+
+
+@dataclass
+class Result:
+    case: Case
+    verdict: str = "pass"
+    setup_code: int = 0
+    condition: float = math.nan
+    stiffness: float = math.nan
+    """Largest decay rate (1/s) times the time span, at the start and along the run."""
+    recommended: str = ""
+    method: str = ""
+    drift: dict[str, float] = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
+    code: int = 0
+    diagnosis: str = ""
+    trajectory: np.ndarray | None = None
+    times: np.ndarray | None = None
+
+    @property
+    def passed(self) -> bool:
+        return self.verdict == self.case.expect
+
+
+def _vector(values: dict[str, float], names: tuple[str, ...], fill: float) -> np.ndarray:
+    return np.array([values.get(n, fill) for n in names], dtype=float)
+
+
+def stiffness(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> tuple[float, str]:
+    """max over the states of (largest decay rate) x span, and the method
+    it calls for with the reason."""
+    worst = 0.0
+    for x in np.atleast_2d(xs):
+        jac = comp.jacobian(x, c)
+        rate = max(0.0, float(-np.min(np.linalg.eigvals(jac).real)))
+        worst = max(worst, rate * span)
+    if worst > STIFF:
+        why = (
+            f"implicit (rodas4): decay rates up to {worst / span:.3g} 1/s over {span:g} s "
+            f"would hold an explicit method to steps of ~{3.0 * span / worst:.2g} s"
+        )
+        return worst, why
+    return worst, f"explicit (dop853): stiffness index {worst:.3g} <= {STIFF:g}"
+
+
+def invariants(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> dict[str, float]:
+    """Relative drift of each invariant over the samples xs at times ts."""
+    out = {}
+    h = scene_view.output(scene, "angular_momentum", xs, p)
+    hn = np.linalg.norm(h, axis=1)
+    out["|H| in N"] = float(np.max(np.abs(hn - hn[0])) / max(hn[0], 1e-300))
+    v = scene_view.values(scene, p)
+    if scene.effects.torque in ("none", "constant"):
+        torque = v.get("T", 0.0)
+        idx = {s: i for i, s in enumerate(scene.states)}
+        k = scene_view.output(scene, "kinetic_energy", xs, p)[:, 0]
+        work = np.zeros_like(k)
+        if torque and "q4" in idx:  # integral of T (u4 - u2) dt = T (q4 - q4(0))
+            work += torque * (xs[:, idx["q4"]] - xs[0, idx["q4"]])
+        if scene.effects.translation:  # integral of M g u7 dt = M g (q7 - q7(0))
+            work += (v["m_a"] + v["m_b"]) * v["g"] * (xs[:, idx["q7"]] - xs[0, idx["q7"]])
+        scale = max(float(np.max(np.abs(k))), 1e-300)
+        if torque == 0 or "q4" in idx:
+            out["energy balance"] = float(np.max(np.abs(k - k[0] - work)) / scale)
+        u4 = xs[:, idx["u4"]]
+        expect = u4[0] + torque * (ts - ts[0]) / v["J"]
+        out["u4 = u4(0) + T t / J"] = float(
+            np.max(np.abs(u4 - expect)) / max(np.max(np.abs(u4)), 1e-300)
+        )
+    return out
+
+
+def run_case(case: Case, comp: Compiled) -> Result:
+    res = Result(case)
+    scene = case.scene
+    p = _vector(case.params, scene.runtime, math.nan)
+    x0 = np.array([{"e0": 1.0, **case.initial}.get(s, 0.0) for s in scene.states])
+    res.setup_code, c = comp.setup_code(p)
+    if res.setup_code != 0:
+        res.verdict = "refused"
+        res.diagnosis = f"setup refused the parameters: {SETUP_CODES[res.setup_code]}"
+        return res
+    res.condition = float(c[-1])
+    res.stiffness, res.recommended = stiffness(comp, c, x0, case.t_end)
+    res.method = case.method or ("rodas4" if res.stiffness > STIFF else "dop853")
+    ts = np.linspace(0.0, case.t_end, case.samples + 1)
+    xs = [x0]
+    x = x0.copy()
+    totals: dict[str, Any] = {}
+    for t0, t1 in itertools.pairwise(ts):
+        kw: dict[str, Any] = {"rtol": 1e-12, "atol": 1e-12, "max_steps": 10**8}
+        if res.method == "rk4":
+            kw = {"steps": max(1, case.steps // case.samples)}
+        x, stats, code = comp.integrate(res.method, x, c, float(t0), float(t1), **kw)
+        for k in ("accepted", "rejected", "rhs_calls", "jac_calls"):
+            totals[k] = totals.get(k, 0) + stats[k]
+        if code != 0:
+            res.code = code
+            totals["t"] = stats["t"]
+            break
+        xs.append(x.copy())
+    res.stats = totals
+    res.trajectory, res.times = np.array(xs), ts[: len(xs)]
+    _judge(res, p, c, comp)
+    return res
+
+
+def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
+    case, scene = res.case, res.case.scene
+    xs = res.trajectory
+    assert xs is not None and res.times is not None
+    if res.code != 0:
+        where = f"integrator code {res.code} at t = {res.stats.get('t', math.nan):.6g} s"
+        if res.code == ODE_ATTITUDE_SINGULAR:  # the integrator saw gimbal lock itself
+            res.verdict = "singular"
+            res.diagnosis = f"{where}: {ODE_CODES[res.code]}"
+        elif _near_gimbal_lock(scene, xs[-1]):  # another failure, near it
+            res.verdict = "singular"
+            res.diagnosis = f"{where} ({ODE_CODES.get(res.code, '?')}) near gimbal lock: " + (
+                'the 3-1-2 angles fail there, use attitude = "quaternion"'
+            )
+        else:
+            res.verdict = "failed"
+            res.diagnosis = f"{where}: {ODE_CODES.get(res.code, 'unknown code')}"
+        return
+    res.drift = invariants(scene, p, xs, res.times)
+    later, _ = stiffness(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)
+    res.stiffness = max(res.stiffness, later)
+    if case.expect in ("stable", "unstable"):
+        res.verdict = _spin_verdict(scene, xs)
+    elif max(res.drift.values(), default=0.0) > DRIFT_BAR:
+        res.verdict = "drift"
+        res.diagnosis = f"an invariant drifted above {DRIFT_BAR:g}: tighten rtol or change method"
+    if res.condition > WARN_CONDITION:
+        res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
+            f"warning: mass matrix condition number {res.condition:.2g} > {WARN_CONDITION:g}"
+        )
+    if _near_gimbal_lock(scene, xs).any() and not res.diagnosis:
+        res.diagnosis = "passes near gimbal lock: quaternions would be cheaper"
+
+
+def _near_gimbal_lock(scene: Scene, xs: np.ndarray) -> np.ndarray:
+    if scene.attitude != "euler312":
+        return np.zeros(len(np.atleast_2d(xs)), dtype=bool)
+    q2 = np.atleast_2d(xs)[:, scene.states.index("q2")]
+    return np.abs(np.cos(q2)) < 0.05  # within 3 degrees of the pole
+
+
+def _spin_verdict(scene: Scene, xs: np.ndarray) -> str:
+    """Unstable if the transverse rate grew a hundredfold."""
+    idx = {s: i for i, s in enumerate(scene.states)}
+    trans = np.hypot(xs[:, idx["u1"]], xs[:, idx["u3"]])
+    return "unstable" if np.max(trans) > 100 * max(trans[0], 1e-300) else "stable"
+
+
+def spin_prediction(v: dict[str, float], omega: float, u4: float) -> str:
+    """NOTES.md: stable iff (H_a - I_t1 Omega)(H_a - I_t3 Omega) > 0."""
+    mu = v["m_a"] * v["m_b"] / (v["m_a"] + v["m_b"])
+    a11 = v["I11"] + v["I"] + mu * v["l3"] ** 2
+    a33 = v["I33"] + v["I"] + mu * v["l1"] ** 2
+    a13 = v["I13"] - mu * v["l1"] * v["l3"]
+    a22 = v["I22"] + mu * (v["l1"] ** 2 + v["l3"] ** 2)
+    it1, it3 = np.linalg.eigvalsh([[a11, a13], [a13, a33]])
+    h_a = a22 * omega + v["J"] * u4
+    return "stable" if (h_a - it1 * omega) * (h_a - it3 * omega) > 0 else "unstable"
+
+
+def plot(res: Result) -> bytes:
+    """Invariant drift and the states along the run: one PNG per case."""
+    from matplotlib.figure import Figure  # matplotlib: loaded only for plots
+
+    from gyrogen.analysis.plots import png_bytes
+
+    fig = Figure(figsize=(12, 4.5), dpi=100)
+    a, b = fig.subplots(1, 2)
+    if res.trajectory is not None and res.times is not None:
+        for i, s in enumerate(res.case.scene.states):
+            if s.startswith("u"):
+                a.plot(res.times[: len(res.trajectory)], res.trajectory[:, i], label=s)
+        a.set_xlabel("t (s)")
+        a.set_ylabel("generalized speeds (rad/s, m/s)")
+        a.legend(fontsize=8)
+    b.axis("off")
+    lines = [f"{res.case.name}: {res.verdict} (expected {res.case.expect})", res.recommended]
+    lines += [f"{k}: {v:.2e}" for k, v in res.drift.items()] + [res.diagnosis]
+    b.text(
+        0.0,
+        1.0,
+        "\n".join(x for x in lines if x),
+        va="top",
+        family="monospace",
+        fontsize=9,
+        wrap=True,
+    )
+    fig.suptitle(f"gyrogen check: {res.case.name}")
+    fig.tight_layout()
+    return png_bytes(fig)

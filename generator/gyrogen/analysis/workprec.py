@@ -1,0 +1,296 @@
+"""Error against run time: every way of integrating a scene, measured.
+
+For one scene: a reference solution (DOP853 in C at rtol = atol = 1e-13,
+cross-checked against scipy and, for the torque-free scene, the closed form),
+then each method at a ladder of tolerances (step counts for RK4): the
+compiled integrators in C and Fortran, scipy's solve_ivp with the numpy
+reference and with the compiled RHS through cffi, and PyDy's cython RHS when
+it is installed. Wall times are the best of several repeats, compilation
+excluded. workprec_report.py writes the tables and the figure.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from gyrogen.errors import GyrogenError
+from gyrogen.oracle import scene_view
+from gyrogen.oracle.compare import scaled_error
+from gyrogen.runtime.build import ODE_CODES, Compiled
+from gyrogen.scene import Scene
+
+ADAPTIVE = ("dopri5", "dop853", "rodas4")
+SCIPY = ("RK45", "DOP853", "Radau", "LSODA")
+REF_TOL = 1e-13
+SLOW = 2.0
+"""A scipy run slower than this (s) is timed once."""
+TOO_SLOW = 20.0
+"""After a scipy run slower than this (s), tighter tolerances are skipped."""
+
+
+@dataclass(frozen=True)
+class Config:
+    tolerances: tuple[float, ...]
+    rk4_steps: tuple[int, ...]
+    scipy_tolerances: tuple[float, ...]
+    repeats: int
+    max_calls: int
+    """Give a scipy run up after this many RHS calls (RK45 on a stiff scene)."""
+    fortran: bool
+
+
+FULL = Config(
+    tolerances=tuple(10.0**-k for k in range(3, 13)),
+    rk4_steps=(100, 200, 400, 800, 1600, 3200, 6400, 12800, 25600, 51200),
+    scipy_tolerances=tuple(10.0**-k for k in range(3, 13)),
+    repeats=5,
+    max_calls=1_000_000,
+    fortran=True,
+)
+QUICK = Config(
+    tolerances=(1e-3, 1e-5, 1e-7, 1e-9, 1e-11, 1e-12),
+    rk4_steps=(200, 800, 3200, 12800),
+    scipy_tolerances=(1e-3, 1e-6, 1e-9),
+    repeats=2,
+    max_calls=200_000,
+    fortran=False,
+)
+
+
+@dataclass(frozen=True)
+class Run:
+    method: str
+    backend: str
+    setting: float
+    """Tolerance (rtol = atol), or the number of steps for RK4."""
+    error: float
+    """Mixed error max_i |x_i - ref_i| / (atol/rtol + |ref_i|) at t1 (atol = rtol)."""
+    seconds: float
+    rhs_calls: int
+    status: str = "ok"
+
+    @property
+    def label(self) -> str:
+        return f"{self.method} ({self.backend})"
+
+    @property
+    def digits(self) -> float:
+        return -math.log10(self.error) if self.error > 0 else 16.0
+
+
+@dataclass
+class Problem:
+    scene: Scene
+    compiled: dict[str, Compiled]
+    p: np.ndarray
+    c: np.ndarray
+    x0: np.ndarray
+    t1: float
+    ref: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    checks: dict[str, float] = field(default_factory=dict)
+    """Reference cross-checks: name -> mixed difference."""
+
+
+def best_time(fn: Callable[[], Any], repeats: int, min_total: float = 0.02) -> float:
+    """Best time of one call: each repeat runs fn often enough to last
+    min_total seconds, so microsecond runs are timed as well as long ones."""
+    t0 = time.perf_counter()
+    fn()
+    once = time.perf_counter() - t0
+    loops = max(1, int(min_total / max(once, 1e-9)))
+    best = once
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(loops):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / loops)
+    return best
+
+
+def reference(prob: Problem) -> None:
+    """DOP853 in C at 1e-13, checked against scipy at the same tolerance
+    (Radau with the compiled Jacobian for a stiff scene) and the closed form."""
+    comp = prob.compiled["C"]
+    x, stats, code = comp.integrate(
+        "dop853", prob.x0, prob.c, 0.0, prob.t1, rtol=REF_TOL, atol=REF_TOL
+    )
+    if code != 0:
+        why = ODE_CODES.get(code, f"code {code}")
+        raise GyrogenError(
+            f"{prob.scene.name}: reference DOP853 failed at t = {stats['t']:.6g} s: {why}"
+        )
+    prob.ref = x
+    rhs = _cffi_rhs(comp, prob.c)
+    sol = solve_ivp(rhs, (0.0, prob.t1), prob.x0, method="DOP853", rtol=REF_TOL, atol=REF_TOL)
+    prob.checks["scipy DOP853 (compiled RHS) at 1e-13"] = scaled_error(sol.y[:, -1], x)
+    if prob.scene.name == "torque_free":
+        prob.checks["closed form (NOTES.md)"] = scaled_error(closed_form(prob), x)
+
+
+def closed_form(prob: Problem) -> np.ndarray:
+    """Axisymmetric, torque-free: u2, u4 constant, (u1, u3) rotating at lambda.
+    Compared on the speeds only (the angles have no closed form here)."""
+    v = scene_view.values(prob.scene, prob.p)
+    i_t = v["I11"] + v["I"]
+    idx = {s: i for i, s in enumerate(prob.scene.states)}
+    u1, u2, u3, u4 = (prob.x0[idx[f"u{k}"]] for k in range(1, 5))
+    lam = ((v["I22"] - i_t) * u2 + v["J"] * u4) / i_t
+    t = prob.t1
+    out = prob.ref.copy()
+    out[idx["u1"]] = u1 * math.cos(lam * t) + u3 * math.sin(lam * t)
+    out[idx["u3"]] = u3 * math.cos(lam * t) - u1 * math.sin(lam * t)
+    out[idx["u2"]], out[idx["u4"]] = u2, u4
+    return out
+
+
+def _cffi_rhs(comp: Compiled, c: np.ndarray) -> Callable[[float, np.ndarray], np.ndarray]:
+    """f(t, x) through cffi with preallocated buffers: the cheapest path
+    from Python into the generated C."""
+    ffi, fn = comp.ffi, comp.function("rhs")
+    cbuf = ffi.from_buffer("double[]", np.ascontiguousarray(c))
+    out = np.empty(comp.nx)
+    obuf = ffi.from_buffer("double[]", out)
+
+    def f(t: float, x: np.ndarray) -> np.ndarray:
+        fn(t, ffi.from_buffer("double[]", np.ascontiguousarray(x)), cbuf, obuf)
+        return out.copy()
+
+    return f
+
+
+def compiled_runs(prob: Problem, cfg: Config, progress: Callable[[str], None]) -> list[Run]:
+    runs = []
+    for backend, comp in prob.compiled.items():
+        for method in prob.scene.integrators:
+            progress(f"{method} ({backend})")
+            settings = cfg.rk4_steps if method == "rk4" else cfg.tolerances
+            for s in settings:
+                runs.append(_compiled_run(prob, comp, backend, method, s, cfg.repeats))
+    return runs
+
+
+def _compiled_run(
+    prob: Problem, comp: Compiled, backend: str, method: str, setting: float, repeats: int
+) -> Run:
+    if method == "rk4":
+        kw: dict[str, Any] = {"steps": int(setting)}
+    else:
+        kw = {"rtol": setting, "atol": setting, "max_steps": 10**8}
+    x, stats, code = comp.integrate(method, prob.x0, prob.c, 0.0, prob.t1, **kw)
+    if code != 0:
+        return Run(method, backend, setting, math.inf, 0.0, int(stats["rhs_calls"]), f"code {code}")
+    secs = best_time(_raw_call(comp, method, prob, kw), repeats)
+    return Run(method, backend, setting, scaled_error(x, prob.ref), secs, int(stats["rhs_calls"]))
+
+
+def _raw_call(comp: Compiled, method: str, prob: Problem, kw: dict[str, Any]) -> Callable[[], Any]:
+    """One integration through cffi on preallocated buffers, as a program
+    embedding the C would call it: Compiled.integrate's conveniences (a
+    copy, a stats dict) cost ~6 us a call, half of a fast integration."""
+    ffi = comp.ffi
+    fn = comp.function(method)
+    x = prob.x0.copy()
+    xb, cb = (
+        ffi.from_buffer("double[]", x),
+        ffi.from_buffer("double[]", np.ascontiguousarray(prob.c)),
+    )
+    stats = ffi.new("gyrogen_stats *")
+    x0, t1 = prob.x0, prob.t1
+    if method == "rk4":
+        steps = kw["steps"]
+
+        def run_rk4() -> Any:
+            x[:] = x0
+            return fn(0.0, t1, steps, xb, cb, stats)
+
+        return run_rk4
+    rtol, atol, max_steps = kw["rtol"], kw["atol"], kw["max_steps"]
+
+    def run() -> Any:
+        x[:] = x0
+        return fn(0.0, t1, xb, cb, rtol, atol, 0.0, max_steps, stats)
+
+    return run
+
+
+class _GiveUp(Exception):
+    pass
+
+
+def scipy_runs(
+    prob: Problem,
+    backend: str,
+    rhs: Callable[[float, np.ndarray], np.ndarray],
+    cfg: Config,
+    progress: Callable[[str], None],
+    methods: tuple[str, ...] = SCIPY,
+) -> list[Run]:
+    runs = []
+    for method in methods:
+        progress(f"solve_ivp {method} ({backend})")
+        for tol in cfg.scipy_tolerances:
+            run = _scipy_run(prob, backend, rhs, method, tol, cfg)
+            runs.append(run)
+            if run.status != "ok":
+                break  # tighter tolerances only cost more (a stiff scene: as much again)
+    return runs
+
+
+def _scipy_run(
+    prob: Problem,
+    backend: str,
+    rhs: Callable[[float, np.ndarray], np.ndarray],
+    method: str,
+    tol: float,
+    cfg: Config,
+) -> Run:
+    calls = [0]
+
+    def counted(t: float, x: np.ndarray) -> np.ndarray:
+        calls[0] += 1
+        if calls[0] > cfg.max_calls:
+            raise _GiveUp
+        return rhs(t, x)
+
+    def solve() -> Any:
+        calls[0] = 0
+        return solve_ivp(counted, (0.0, prob.t1), prob.x0, method=method, rtol=tol, atol=tol)
+
+    label = f"scipy {method}"
+    t0 = time.perf_counter()
+    try:
+        sol = solve()
+    except _GiveUp:
+        return Run(label, backend, tol, math.inf, 0.0, calls[0], f"gave up after {calls[0]} calls")
+    once = time.perf_counter() - t0
+    if not sol.success:
+        return Run(label, backend, tol, math.inf, 0.0, calls[0], f"failed: {sol.message}")
+    n = calls[0]
+    # Repeat only what is quick to repeat: a run of seconds is timed well enough once.
+    secs = once if once > SLOW else best_time(solve, max(1, cfg.repeats // 2), min_total=0.0)
+    status = "ok" if once <= TOO_SLOW else "ok, slow"
+    return Run(
+        label, backend, tol, scaled_error(sol.y[:, -1], prob.ref), min(secs, once), n, status
+    )
+
+
+def numpy_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
+    scene, p = prob.scene, prob.p
+    return lambda t, x: scene_view.rhs(scene, x[None, :], p, t)[0]
+
+
+def compiled_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
+    return _cffi_rhs(prob.compiled["C"], prob.c)
+
+
+def time_at(runs: list[Run], level: float) -> Run | None:
+    """The fastest run of a list that reaches an error of at most level."""
+    good = [r for r in runs if r.status.startswith("ok") and r.error <= level]
+    return min(good, key=lambda r: r.seconds) if good else None

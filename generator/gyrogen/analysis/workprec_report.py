@@ -1,0 +1,191 @@
+"""`gyrogen bench SCENE`: run the work-precision measurements of workprec.py
+and write them as a table (CSV, JSON), a markdown summary and a PNG figure."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrogen.abi import STATES
+from gyrogen.analysis import workprec
+from gyrogen.analysis.bench_rhs import machine, pydy_rhs
+from gyrogen.analysis.simulate import runtime_values
+from gyrogen.analysis.workprec import Config, Problem, Run
+from gyrogen.codegen.generate import generate, write_atomic
+from gyrogen.errors import SceneError
+from gyrogen.runtime import build
+from gyrogen.scene import Scene
+
+LEVELS = (1e-4, 1e-6, 1e-8, 1e-10)
+Echo = Callable[[str], None]
+
+
+def check_scene(scene: Scene) -> np.ndarray:
+    """SceneError unless the report can run on scene; its runtime values."""
+    if "c" not in scene.targets or "dop853" not in scene.integrators:
+        raise SceneError(
+            f"{scene.name}: the work-precision report needs the c target and the dop853 "
+            "integrator (its reference)"
+        )
+    return runtime_values(scene)
+
+
+def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
+    p = check_scene(scene)
+    generate(scene, src)
+    langs = {"C": "c", "Fortran": "fortran"}
+    if not cfg.fortran:
+        langs.pop("Fortran")
+    compiled = {k: build.build(src, v) for k, v in langs.items() if v in scene.targets}
+    x0 = np.array(scene.initial_state())
+    c = compiled["C"].setup(p)
+    return Problem(scene, compiled, p, c, x0, scene.simulate.t_end)
+
+
+def measure(scene: Scene, cfg: Config, echo: Echo, progress: Echo) -> tuple[Problem, list[Run]]:
+    with tempfile.TemporaryDirectory(prefix="gyrogen-wp-") as tmp:
+        prob = problem(scene, Path(tmp) / scene.name, cfg)
+        workprec.reference(prob)
+        runs = workprec.compiled_runs(prob, cfg, progress)
+        runs += workprec.scipy_runs(prob, "numpy RHS", workprec.numpy_rhs(prob), cfg, progress)
+        runs += workprec.scipy_runs(
+            prob, "C RHS via cffi", workprec.compiled_rhs(prob), cfg, progress
+        )
+        runs += _pydy_runs(prob, cfg, echo, progress)
+    return prob, runs
+
+
+def _pydy_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[Run]:
+    """PyDy's RHS is built from the full model: only the default scene matches it."""
+    if list(prob.scene.states) != list(STATES) or prob.scene.name != "gyrostat":
+        return []
+    rhs = pydy_rhs(echo)
+    if rhs is None:
+        return []
+    p = prob.p.copy()
+
+    def f(t: float, x: np.ndarray) -> np.ndarray:
+        return np.array(rhs(x, t, p), copy=True)  # PyDy reuses its output buffer
+
+    return workprec.scipy_runs(prob, "PyDy cython RHS", f, cfg, progress, methods=("DOP853",))
+
+
+def summary(prob: Problem, runs: list[Run]) -> list[str]:
+    """Markdown: the fastest method at each accuracy, and the issue's goals."""
+    lines = [f"# Work-precision: {prob.scene.name}", "", prob.scene.description, ""]
+    lines += [f"- t in [0, {prob.t1:g}] s; reference: DOP853 in C at rtol = atol = 1e-13"]
+    lines += [f"- reference check, {k}: {v:.2e}" for k, v in prob.checks.items()]
+    lines += ["", "| error at most | fastest | time | RHS calls |", "|---|---|---|---|"]
+    for level in LEVELS:
+        best = workprec.time_at(runs, level)
+        if best:
+            lines.append(f"| {level:.0e} | {best.label} | {_ms(best.seconds)} | {best.rhs_calls} |")
+    lines += ["", *goals(prob, runs)]
+    return lines
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.3g} ms"
+
+
+def _by(runs: list[Run], label: str) -> list[Run]:
+    return [r for r in runs if r.label == label]
+
+
+def goals(prob: Problem, runs: list[Run]) -> list[str]:
+    out = []
+    c853 = workprec.time_at(_by(runs, "dop853 (C)"), 1e-8)
+    pydy = workprec.time_at(_by(runs, "scipy DOP853 (PyDy cython RHS)"), 1e-8)
+    if c853 and pydy:
+        out.append(
+            f"- at error 1e-8: DOP853 in C {_ms(c853.seconds)}, solve_ivp(DOP853) with PyDy's "
+            f"cython RHS {_ms(pydy.seconds)}: {pydy.seconds / c853.seconds:.0f}x faster "
+            "(goal >= 300x)"
+        )
+    scipy = [r for r in runs if r.method.startswith("scipy")]
+    implicit = _by(runs, "rodas4 (C)")
+    for level in LEVELS:
+        mine, theirs = workprec.time_at(implicit, level), workprec.time_at(scipy, level)
+        if mine and theirs:
+            out.append(
+                f"- at error {level:.0e}: Rodas4 in C {_ms(mine.seconds)}, fastest scipy run "
+                f"{theirs.label} {_ms(theirs.seconds)}: {theirs.seconds / mine.seconds:.1f}x"
+            )
+    return out
+
+
+def table_csv(runs: list[Run]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(
+        ["method", "backend", "setting", "error", "digits", "seconds", "rhs_calls", "status"]
+    )
+    for r in runs:
+        w.writerow(
+            [r.method, r.backend, f"{r.setting:g}", f"{r.error:.3e}", f"{r.digits:.2f}",
+             f"{r.seconds:.6e}", r.rhs_calls, r.status]
+        )  # fmt: skip
+    return buf.getvalue()
+
+
+def table_json(prob: Problem, runs: list[Run]) -> str:
+    data: dict[str, Any] = {
+        "scene": prob.scene.name,
+        "t1": prob.t1,
+        "reference_checks": prob.checks,
+        "machine": machine(),
+        "runs": [
+            {**r.__dict__, "error": r.error if math.isfinite(r.error) else None} for r in runs
+        ],
+    }
+    return json.dumps(data, indent=2, sort_keys=True) + "\n"
+
+
+def figure(prob: Problem, runs: list[Run]) -> bytes:
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure  # matplotlib: loaded only for the figure
+
+    from gyrogen.analysis.plots import png_bytes
+
+    fig = Figure(figsize=(14, 7), dpi=100)
+    ax = fig.subplots()
+    palette = colormaps["tab20"]
+    labels = sorted({r.label for r in runs})
+    for i, label in enumerate(labels):
+        pts = sorted((r.seconds, r.error) for r in _by(runs, label) if r.status.startswith("ok"))
+        if not pts:
+            continue
+        style = "-o" if "scipy" not in label else "--s"
+        ax.loglog(*zip(*pts, strict=True), style, label=label, color=palette(i % 20), ms=4)
+    ax.set_xlabel("wall time per integration (s)")
+    ax.set_ylabel("mixed error at t1: max |x - ref| / (1 + |ref|)")
+    ax.set_title(f"Work-precision, scene {prob.scene.name} (t1 = {prob.t1:g} s)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="method (backend)")
+    fig.tight_layout()
+    return png_bytes(fig)
+
+
+def write(prob: Problem, runs: list[Run], out: Path) -> list[Path]:
+    md = "\n".join(summary(prob, runs)) + "\n"
+    write_atomic(
+        out,
+        {
+            "workprecision.csv": table_csv(runs),
+            "workprecision.json": table_json(prob, runs),
+            "summary.md": md,
+            "workprecision.png": figure(prob, runs),
+        },
+    )
+    return [
+        out / n
+        for n in ("workprecision.png", "workprecision.csv", "workprecision.json", "summary.md")
+    ]

@@ -1,0 +1,78 @@
+"""C99 backend: a printer and the two files it renders (header, source)."""
+
+from __future__ import annotations
+
+import sympy as sm
+from sympy.printing.c import C99CodePrinter
+from sympy.printing.precedence import PRECEDENCE
+
+from gyrogen.codegen.context import Unit
+from gyrogen.codegen.render import c_double, render
+from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
+from gyrogen.methods import TABLEAUS
+from gyrogen.symbolic.hoist import constants
+
+
+class CPrinter(WritableNumbers, C99CodePrinter):
+    """C99 with the hoisted constants as c[k], doubles in their shortest
+    exact form, and small integer powers as products (x*x beats pow(x, 2))."""
+
+    def __init__(self, nc: int) -> None:
+        super().__init__()
+        self._names = {c.name: f"c[{k}]" for k, c in enumerate(constants(nc))}
+
+    def _print_Symbol(self, expr: sm.Symbol) -> str:
+        return self._names.get(expr.name) or str(super()._print_Symbol(expr))
+
+    def _print_Float(self, expr: sm.Float) -> str:
+        return c_double(float(expr))
+
+    def _print_Pow(self, expr: sm.Pow) -> str:
+        base, exp = expr.base, expr.exp
+        if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
+            b = self.parenthesize(base, PRECEDENCE["Mul"] + 1)
+            n = abs(int(exp))
+            if n == 1:
+                return f"1.0/{b}"
+            prod = "*".join([b] * n)
+            return prod if exp > 0 else f"1.0/({prod})"
+        return str(super()._print_Pow(expr))
+
+    def _print_Mul(self, expr: sm.Mul) -> str:
+        """sympy writes a lone denominator bare (a/b**2 as "a/" + Pow), trusting
+        a power to bind tighter than "/"; the products above do not, so
+        a/b**2 must read a/(b*b), not a/b*b."""
+        den = [f for f in expr.args if f.is_Pow and f.exp.is_Rational and f.exp.is_negative]
+        if len(den) != 1 or not (den[0].exp.is_Integer and -3 <= den[0].exp <= -2):
+            return str(super()._print_Mul(expr))
+        if expr.as_coeff_Mul()[0] < 0:
+            return "-" + self._print(-expr)
+        num = sm.Mul(*(f for f in expr.args if f is not den[0]))
+        text = self.parenthesize(num, PRECEDENCE["Mul"], strict=True)
+        return f"{text}/({self._print(1 / den[0])})"
+
+
+def files(unit: Unit) -> dict[str, str]:
+    printer = CPrinter(unit.nc)
+
+    def assign(lhs: str, expr: sm.Expr) -> str:
+        return f"{lhs} = {printer.doprint(expr)};"
+
+    rhs, *outputs = functions(unit, lambda a, i: f"{a}[{i}]", assign)
+    ctx = {
+        "unit": unit,
+        "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
+        "rhs": rhs,
+        "outputs": outputs,
+        "jac": jacobian(unit, lambda a, i: f"{a}[{i}]", assign),
+        "methods": unit.methods,
+        "tableaus": TABLEAUS,
+    }
+    out = {
+        f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),
+        f"{unit.prefix}.c": render("c/source.c.jinja", **ctx),
+    }
+    if unit.methods:
+        out[f"{unit.prefix}_ode.h"] = render("c/ode.h.jinja", **ctx)
+        out[f"{unit.prefix}_ode.c"] = render("c/ode.c.jinja", **ctx)
+    return out

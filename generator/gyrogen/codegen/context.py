@@ -1,0 +1,235 @@
+"""Everything one scene's generated files need, language-neutral."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from functools import cached_property
+from importlib.metadata import version
+
+import sympy as sm
+
+import gyrogen
+from gyrogen.abi import (
+    GIMBAL_LOCK_COS,
+    INTEGRATORS,
+    MAX_CONDITION,
+    MIN_RTOL,
+    PARAMETER_DOC,
+    SETUP_CODE_NAMES,
+    SETUP_CODES,
+    STATE_DOC,
+    TRIANGLE_SLACK,
+)
+from gyrogen.scene import Scene
+from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
+from gyrogen.symbolic.equations import Equations
+from gyrogen.symbolic.optimize import Block, Optimized, optimize
+from gyrogen.symbolic.specialize import specialize
+
+OUTPUT_DOC = {
+    "kinetic_energy": ("J", "kinetic energy of the system"),
+    "angular_momentum": ("kg m^2/s", "angular momentum about AB*, N components h[0..2]"),
+    "power": ("W", "power of the motor torque, T (u4 - u2)"),
+}
+
+
+@dataclass(frozen=True)
+class Row:
+    index: int
+    name: str
+    unit: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Code:
+    value: int
+    macro: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Local:
+    """A parameter setup reads: from p[index] (runtime) or a folded value."""
+
+    name: str
+    index: int | None
+    value: float | None
+
+
+@dataclass(frozen=True)
+class Output:
+    name: str
+    block: Block
+    unit: str
+    doc: str
+
+    @property
+    def size(self) -> int:
+        return len(self.block.outputs)
+
+
+@dataclass(frozen=True)
+class Unit:
+    scene: Scene
+    equations: Equations
+    optimized: Optimized
+
+    @property
+    def states(self) -> tuple[sm.Symbol, ...]:
+        return self.equations.states
+
+    @property
+    def params(self) -> tuple[sm.Symbol, ...]:
+        return self.equations.params
+
+    @property
+    def prefix(self) -> str:
+        return self.scene.name
+
+    @property
+    def macro(self) -> str:
+        return self.scene.name.upper()
+
+    @property
+    def nx(self) -> int:
+        return len(self.states)
+
+    @property
+    def np(self) -> int:
+        return len(self.params)
+
+    @property
+    def nc(self) -> int:
+        return self.optimized.nc
+
+    @cached_property
+    def ops(self) -> dict[str, int]:
+        ops = {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
+        ops.update({o.name: o.block.ops for o in self.outputs})
+        if self.optimized.jacobian is not None:
+            ops["jac"] = self.optimized.jacobian.ops
+        return ops
+
+    @cached_property
+    def lu_blocks(self) -> Blocks | None:
+        """The diagonal blocks the implicit method's LU works in."""
+        jac = self.optimized.jacobian
+        return None if jac is None else diagonal_blocks(jac.outputs, self.nx)
+
+    @property
+    def methods(self) -> list[Method]:
+        return [Method(m, INTEGRATORS[m]) for m in self.scene.integrators]
+
+    @property
+    def outputs(self) -> list[Output]:
+        return [Output(n, b, *OUTPUT_DOC[n]) for n, b in self.optimized.outputs.items()]
+
+    @property
+    def torque_table(self) -> list[tuple[float, float]] | None:
+        return self.scene.effects.torque_table
+
+    @property
+    def folded_summary(self) -> str:
+        return ", ".join(f"{n} = {v!r}" for n, v in self.scene.folded().items())
+
+    @property
+    def quaternion(self) -> bool:
+        """The attitude is Euler parameters, x[0..3]."""
+        return self.scene.attitude == "quaternion"
+
+    @property
+    def uses_time(self) -> bool:
+        return bool(self.equations.inputs)
+
+    @property
+    def state_rows(self) -> list[Row]:
+        return [Row(i, s.name, *STATE_DOC[s.name]) for i, s in enumerate(self.states)]
+
+    @property
+    def param_rows(self) -> list[Row]:
+        return [Row(i, s.name, *PARAMETER_DOC[s.name]) for i, s in enumerate(self.params)]
+
+    @cached_property
+    def setup_locals(self) -> list[Local]:
+        """The checked parameters, then the runtime ones the constants use."""
+        runtime = {s.name: i for i, s in enumerate(self.params)}
+        folded = self.scene.folded()
+        used = self.optimized.setup.free_symbols
+        names = list(self.equations.checks)
+        names += [s.name for s in self.params if s in used and s.name not in names]
+        return [Local(n, runtime.get(n), folded.get(n)) for n in names]
+
+    @property
+    def codes(self) -> list[Code]:
+        return [Code(v, f"{self.macro}_{SETUP_CODE_NAMES[v]}", SETUP_CODES[v]) for v in SETUP_CODES]
+
+    @property
+    def cond_index(self) -> int:
+        """c[cond_index] holds the condition number of the coupled block."""
+        return self.nc - 1
+
+    @property
+    def max_condition(self) -> str:
+        return repr(MAX_CONDITION)
+
+    @property
+    def triangle_slack(self) -> str:
+        return repr(TRIANGLE_SLACK)
+
+    @property
+    def min_rtol(self) -> str:
+        """The integrators refuse rtol at or below it (layout.MIN_RTOL)."""
+        return repr(MIN_RTOL)
+
+    @property
+    def gimbal_lock_cos(self) -> str:
+        """3-1-2 scenes: the integrators stop where |cos q2| falls below it."""
+        return repr(GIMBAL_LOCK_COS)
+
+    @cached_property
+    def build_id(self) -> str:
+        return build_id(self.scene)
+
+    @property
+    def versions(self) -> dict[str, str]:
+        return versions()
+
+    @property
+    def functions(self) -> dict[str, dict[str, str]]:
+        p = self.prefix
+        c = {"setup": f"{p}_setup", "rhs": f"{p}_rhs"}
+        f = {"module": f"{p}_mod", "setup": f"{p}_f_setup", "rhs": f"{p}_f_rhs"}
+        for o in self.outputs:
+            c[o.name] = f"{p}_{o.name}"
+            f[o.name] = f"{p}_f_{o.name}"
+        if self.optimized.jacobian is not None:
+            c["jac"], f["jac"] = f"{p}_jac", f"{p}_f_jac"
+        for m in self.scene.integrators:
+            c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
+            c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"
+        return {"c": c, "fortran": f}
+
+
+def versions() -> dict[str, str]:
+    return {"gyrogen": gyrogen.__version__, "sympy": version("sympy")}
+
+
+def build_id(scene: Scene) -> str:
+    """Hash of the scene and the tool versions: which build a binary is from.
+    A function of the scene alone, known before its unit is made."""
+    text = json.dumps([scene.model_dump(mode="json"), versions()], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def make_unit(scene: Scene) -> Unit:
+    eqs = specialize(scene)
+    return Unit(scene, eqs, optimize(eqs, jacobian="rodas4" in scene.integrators))

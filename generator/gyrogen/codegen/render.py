@@ -1,0 +1,90 @@
+"""The Jinja environment: templates lay out whole files, printers fill them."""
+
+from __future__ import annotations
+
+import re
+import textwrap
+from functools import cache
+from importlib.resources import files
+from typing import Any
+
+import jinja2
+
+
+def c_double(value: float) -> str:
+    """A double as C writes it: the shortest text that reads back exactly."""
+    return repr(float(value))
+
+
+def f_double(value: float) -> str:
+    """The same for Fortran, with the c_double kind."""
+    return f"{float(value)!r}_c_double"
+
+
+COMMENT_WIDTH = 72
+"""Columns of scene text in a generated comment (the description)."""
+
+
+def comment_lines(text: str) -> list[str]:
+    """Scene text as comment lines: tabs expanded, each paragraph wrapped
+    (long words broken, so no line outgrows Fortran's 132 columns)."""
+    lines: list[str] = []
+    for para in text.expandtabs(4).split("\n"):
+        wrapped = textwrap.wrap(para, COMMENT_WIDTH, break_on_hyphens=False)
+        lines += wrapped or [""]
+    while lines and not lines[-1]:
+        lines.pop()
+    return lines or ["(no description)"]
+
+
+def _unbroken(text: str, pattern: str, fix: str) -> str:
+    while re.search(pattern, text):
+        text = re.sub(pattern, fix, text)
+    return text
+
+
+def c_comment(text: str) -> str:
+    """Text for a /* */ comment, continued with " * ": no "*/" that would end
+    it, no "/*" (-Wcomment) and no "??" (a trigraph, -std=c99)."""
+    out = []
+    for line in comment_lines(text):
+        for pattern, fix in (("\\*/", "* /"), ("/\\*", "/ *"), ("\\?\\?", "? ?")):
+            line = _unbroken(line, pattern, fix)
+        out.append(line)
+    return "\n * ".join(out).replace(" * \n", " *\n")
+
+
+def f_comment(text: str) -> str:
+    """Text for Fortran ! comments (anything goes after the !)."""
+    return "\n! ".join(comment_lines(text)).replace("! \n", "!\n")
+
+
+def hash_comment(text: str) -> str:
+    """Text for # comments (CMake, make): a line each."""
+    return "\n# ".join(comment_lines(text)).replace("# \n", "#\n")
+
+
+@cache
+def environment() -> jinja2.Environment:
+    root = files("gyrogen") / "templates"
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(str(root)),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
+    env.filters.update(
+        c_double=c_double,
+        f_double=f_double,
+        c_comment=c_comment,
+        f_comment=f_comment,
+        hash_comment=hash_comment,
+    )
+    return env
+
+
+def render(template: str, **context: Any) -> str:
+    """Render one template; the template's own name goes into its preamble."""
+    return environment().get_template(template).render(template_name=template, **context)

@@ -1,0 +1,107 @@
+"""What the two backends share: one statement list per generated function.
+
+A printer turns one expression into text; the templates lay out the file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+
+import sympy as sm
+
+from gyrogen.codegen.context import Unit
+from gyrogen.symbolic.literals import LiteralError, writable
+from gyrogen.symbolic.optimize import Block
+
+
+class WritableNumbers:
+    """A printer mixin: a number the target cannot write as it is (see
+    gyrogen.symbolic.literals) is an error here, never a truncated literal. optimize
+    puts every expression in writable form first, so this is the last guard."""
+
+    def _print_Integer(self, expr: sm.Integer) -> str:
+        self._check(expr)
+        return str(super()._print_Integer(expr))  # type: ignore[misc]
+
+    def _print_Rational(self, expr: sm.Rational) -> str:
+        self._check(expr)
+        return str(super()._print_Rational(expr))  # type: ignore[misc]
+
+    @staticmethod
+    def _check(expr: sm.Rational) -> None:
+        if not writable(expr):
+            raise LiteralError(f"internal: the number {expr} reached a printer unconverted")
+
+
+@dataclass(frozen=True)
+class Statement:
+    name: str
+    code: str
+    """The whole assignment as the language writes it (possibly several lines)."""
+    declare: bool
+    """A new local (true) or a store into an output array (false)."""
+
+
+@dataclass(frozen=True)
+class Function:
+    """One per-call function (rhs or an output) ready for a template."""
+
+    name: str
+    doc: str
+    unit: str
+    statements: list[Statement]
+    states: list[int]
+    """Indices of the states it reads: only those become locals."""
+    torque: bool
+    """Reads the tabulated torque T(t)."""
+
+
+Assign = Callable[[str, sm.Expr], str]
+
+
+def statements(block: Block, output: Callable[[int], str], assign: Assign) -> list[Statement]:
+    """Temporaries as locals, then one store per output."""
+    temps = [Statement(str(a.lhs), assign(str(a.lhs), a.rhs), True) for a in block.temporaries]
+    stores = []
+    for i, e in enumerate(block.outputs):
+        lhs = output(i)
+        stores.append(Statement(lhs, assign(lhs, e), False))
+    return temps + stores
+
+
+def functions(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> list[Function]:
+    """rhs first, then the scene's outputs; array(name, i) spells name[i]."""
+    blocks = [("rhs", unit.optimized.rhs, "dxdt", "dx/dt", "")]
+    blocks += [(o.name, o.block, "out", o.doc, o.unit) for o in unit.outputs]
+    return [_function(unit, array, assign, *b) for b in blocks]
+
+
+def jacobian(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> Function | None:
+    """d(dx/dt)/dx into J, row-major (J[i*NX + j] = d f_i / d x_j)."""
+    block = unit.optimized.jacobian
+    if block is None:
+        return None
+    return _function(unit, array, assign, "jac", block, "J", "d(dx/dt)/dx, row-major", "1/s")
+
+
+def _function(
+    unit: Unit,
+    array: Callable[[str, int], str],
+    assign: Assign,
+    name: str,
+    block: Block,
+    arr: str,
+    doc: str,
+    units: str,
+) -> Function:
+    free = block.free_symbols
+    return Function(
+        name=name,
+        doc=doc,
+        unit=units,
+        statements=statements(block, partial(array, arr), assign),
+        states=[i for i, s in enumerate(unit.states) if s in free],
+        torque=any(s in free for s in unit.equations.inputs),
+    )

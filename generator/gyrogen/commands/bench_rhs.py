@@ -1,0 +1,30 @@
+"""`gyrogen bench-rhs`: how fast the generated right-hand side is."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from gyrogen.abi import MAX_REPEATS
+
+
+@click.command("bench-rhs")
+@click.option(
+    "--out", type=click.Path(file_okay=False, path_type=Path), help="Write bench_rhs.json here."
+)
+@click.option(
+    "--repeats",
+    type=click.IntRange(1, MAX_REPEATS),
+    default=5,
+    show_default=True,
+    help="Repeats per timing (best is kept).",
+)
+def bench_rhs(out: Path | None, repeats: int) -> None:
+    """Time the RHS: cffi calls, batched C, numpy, and PyDy's cython."""
+    from gyrogen.analysis import bench_rhs
+
+    bench_rhs.run(out=out, repeats=repeats, echo=click.echo)
+
+
+command = bench_rhs

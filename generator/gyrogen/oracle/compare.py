@@ -1,0 +1,313 @@
+"""C, Fortran and the numpy reference, compared at random states and
+random physically valid parameters; and setup's refusals of bad ones.
+
+Two correct double-precision codes agree only to rounding, and rounding
+scales with the sizes of what is added, not with the result: where terms
+cancel (the speed controller's slip u4 - u2 - w_ref, a power T (u4 - u2))
+a relative error of 1e-12 in the result is correct code. So an element's
+error is |a - b| / (1 + |b| + S), S the sizes of the terms involved: the sum
+over every input v_j (state or parameter) of |d f / d v_j| |v_j|, measured
+on the reference by perturbing each input in turn. (S is measured only for
+the states whose plain error is above SUSPECT; elsewhere it cannot change
+the verdict.) And the solve of the mass matrix's coupled block loses up to
+cond(M) eps: the bar TOLERANCE applies to parameter sets with cond(M) <= 100;
+a second group with ill-conditioned carriers (a tiny carrier with a heavy
+offset rotor is nearly a dumbbell) is held to 1000 cond(M) eps.
+
+The Jacobian is compared with central differences of the reference's rhs,
+to JAC_TOLERANCE of its row's sizes (a wrong entry is wrong by O(1)).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gyrogen.abi import PARAMETERS
+from gyrogen.errors import GyrogenError
+from gyrogen.oracle import sampling, scene_view
+from gyrogen.runtime.build import Compiled
+from gyrogen.scene import Scene
+
+TOLERANCE = 1e-12
+JAC_TOLERANCE = 1e-6
+SUSPECT = 1e-14
+"""Rows with a plain scaled error above this get their term sizes measured."""
+STEP = 1e-6
+"""Relative perturbation of an input, for term sizes and the Jacobian."""
+WELL_CONDITIONED = 100.0
+ILL_CONDITIONED_ULPS = 1000.0
+EPS = float(np.finfo(float).eps)
+
+Progress = Callable[[str, Iterable[np.ndarray]], Iterable[np.ndarray]]
+"""(label, parameter sets) -> the same sets, reporting progress as they go."""
+
+
+def scaled_error(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b| / (1 + |b|): relative for large values, absolute near 0."""
+    return float(np.max(np.abs(a - b) / (1.0 + np.abs(b))))
+
+
+Function = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""(states (n, nx), runtime parameters) -> values (n, m), vectorized."""
+
+
+def term_sizes(f: Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """S for each value of f at each state: sum_j |df/dv_j| |v_j| over the
+    states' entries and the runtime parameters, by forward differences."""
+    base = f(states, p)
+    size = np.zeros_like(base)
+    for j in range(states.shape[1]):
+        moved = states.copy()
+        moved[:, j] *= 1.0 + STEP
+        size += np.abs(f(moved, p) - base)
+    for j in range(len(p)):
+        q = p.copy()
+        q[j] *= 1.0 + STEP
+        size += np.abs(f(states, q) - base)
+    return size / STEP
+
+
+def size_scaled_error(a: np.ndarray, b: np.ndarray, f: Function, states: np.ndarray,
+                      p: np.ndarray) -> float:  # fmt: skip
+    """max |a - b| / (1 + |b| + S) over every element (see the module's docstring)."""
+    a, b = np.atleast_2d(a), np.atleast_2d(b)
+    err = np.abs(a - b) / (1.0 + np.abs(b))
+    rows = np.flatnonzero(np.max(err, axis=1) > SUSPECT)
+    if len(rows):
+        sizes = term_sizes(f, states[rows], p)
+        err[rows] = np.abs(a[rows] - b[rows]) / (1.0 + np.abs(b[rows]) + sizes)
+    return float(np.max(err))
+
+
+def jacobian_error(jac: np.ndarray, f: Function, states: np.ndarray, p: np.ndarray) -> float:
+    """max |J - J_fd| / (1 + row sizes + fd error), J (n, nx, nx) against
+    central differences of f with steps STEP (1 + |x_j|). The differences'
+    own error (truncation and rounding) is estimated by the gap to those with
+    twice the step, and allowed for: the bar then measures the code, not the
+    reference's differencing of a stiff or tiny-scaled system."""
+    fine, coarse = _differences(f, states, p, 1.0), _differences(f, states, p, 2.0)
+    rows = 1.0 + np.sum(np.abs(fine) * (1.0 + np.abs(states[:, None, :])), axis=2, keepdims=True)
+    slack = np.abs(fine - coarse) / JAC_TOLERANCE
+    return float(np.max(np.abs(jac - fine) / (rows + slack)))
+
+
+def _differences(f: Function, states: np.ndarray, p: np.ndarray, scale: float) -> np.ndarray:
+    n, nx = states.shape
+    fd = np.empty((n, nx, nx))
+    for j in range(nx):
+        h = scale * STEP * (1.0 + np.abs(states[:, j]))
+        up, down = states.copy(), states.copy()
+        up[:, j] += h
+        down[:, j] -= h
+        fd[:, :, j] = (f(up, p) - f(down, p)) / (2.0 * h[:, None])
+    return fd
+
+
+@dataclass(frozen=True)
+class Row:
+    group: str
+    pair: str
+    error: float
+    """Largest scaled error over the group."""
+    bar: float
+    """The largest error allowed for this group (for the worst set's cond)."""
+    worst_condition: float
+
+    @property
+    def passed(self) -> bool:
+        return self.error <= self.bar
+
+
+@dataclass
+class Report:
+    n_states: int
+    n_params: dict[str, int] = field(default_factory=dict)
+    rows: list[Row] = field(default_factory=list)
+    refusals_checked: int = 0
+    refusal_failures: list[str] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return all(r.passed for r in self.rows) and not self.refusal_failures
+
+
+def _label(b: Compiled) -> str:
+    return "C" if b.language == "c" else "Fortran"
+
+
+def _pairs(
+    backends: list[Compiled], scene: Scene, states: np.ndarray, p: np.ndarray, t: float
+) -> Iterator[tuple[str, float]]:
+    """Every backend against the reference, and the backends against each
+    other: the rhs, each output function, and the Jacobian."""
+    names = ["rhs", *(n for n, on in scene.outputs.model_dump().items() if on)]
+    constants = {_label(b): b.setup(p) for b in backends}
+    for name in names:
+        tag = "" if name == "rhs" else f" {name}"
+        f = _reference(scene, name, t)
+        ref = f(states, p)
+        if name == "rhs":
+            out = {_label(b): b.rhs(states, constants[_label(b)], t) for b in backends}
+        else:
+            out = {_label(b): b.output(name, states, constants[_label(b)], t) for b in backends}
+        for label, value in out.items():
+            yield f"{label} vs reference{tag}", size_scaled_error(value, ref, f, states, p)
+        if len(out) == 2:
+            c_vs_f = size_scaled_error(out["C"], out["Fortran"], f, states, p)
+            yield f"C vs Fortran{tag}", c_vs_f
+    for b in backends:
+        if "jac" in b.manifest["functions"][b.language]:
+            few = states[:JAC_STATES]
+            jac = np.array([b.jacobian(x, constants[_label(b)], t) for x in few])
+            yield (
+                f"{_label(b)} vs reference jac",
+                jacobian_error(jac, _reference(scene, "rhs", t), few, p),
+            )
+
+
+JAC_STATES = 200
+"""States at which the Jacobian is compared (one compiled call each)."""
+
+
+def _reference(scene: Scene, name: str, t: float) -> Function:
+    if name == "rhs":
+        return lambda xs, p: scene_view.rhs(scene, xs, p, t)
+    return lambda xs, p: scene_view.output(scene, name, xs, p, t)
+
+
+def _group(
+    name: str,
+    backends: list[Compiled],
+    scene: Scene,
+    states: np.ndarray,
+    params: np.ndarray,
+    bar: Callable[[float], float],
+    progress: Progress,
+    rng: np.random.Generator,
+) -> list[Row]:
+    worst: dict[str, tuple[float, float, float]] = {}  # pair -> (margin, error, cond)
+    for p in progress(name, params):
+        cond = _condition(scene, p)
+        t = float(rng.uniform(*_time_span(scene)))
+        for pair, err in _pairs(backends, scene, states, p, t):
+            margin = err / _bar(pair, cond, bar)
+            if pair not in worst or margin > worst[pair][0]:
+                worst[pair] = (margin, err, cond)
+    return [
+        Row(name, pair, err, _bar(pair, cond, bar), cond) for pair, (_, err, cond) in worst.items()
+    ]
+
+
+def _bar(pair: str, cond: float, bar: Callable[[float], float]) -> float:
+    """The group's bar; for the Jacobian JAC_TOLERANCE, or the rounding of
+    the reference's differences (cond eps / STEP) when that is larger."""
+    if pair.endswith(" jac"):
+        return max(JAC_TOLERANCE, 10.0 * cond * EPS / STEP)
+    return bar(cond)
+
+
+def _time_span(scene: Scene) -> tuple[float, float]:
+    """Times to evaluate at: across a T(t) table and beyond both its ends."""
+    table = scene.effects.torque_table
+    if not table:
+        return (0.0, 1.0)
+    t0, t1 = table[0][0], table[-1][0]
+    return (t0 - 0.1 * (t1 - t0) - 1.0, t1 + 0.1 * (t1 - t0) + 1.0)
+
+
+def compare(
+    backends: list[Compiled],
+    scene: Scene,
+    n_states: int = 10_000,
+    n_params: int = 100,
+    n_ill: int = 20,
+    seed: int = 0,
+    progress: Progress = lambda label, items: items,
+    given: np.ndarray | None = None,
+) -> Report:
+    """Compare at n_states random states and random runtime parameters (and
+    the sets given, e.g. the scene's own): well-conditioned ones at the
+    issue's bar, the n_ill worst-conditioned of many draws at cond(M) eps."""
+    rng = np.random.default_rng(seed)
+    states = scene_view.random_states(scene, rng, n_states)
+    well = scene_view.random_runtime(scene, rng, n_params, max_condition=WELL_CONDITIONED)
+    draws = scene_view.random_runtime(scene, rng, 50 * n_ill)
+    if given is not None and len(given):
+        draws = np.vstack([draws, given])
+        fine = [p for p in given if _condition(scene, p) <= WELL_CONDITIONED]
+        well = np.vstack([well, np.array(fine).reshape(len(fine), given.shape[1])])
+    if not len(well) and not len(draws):
+        raise GyrogenError(
+            f"{scene.name}: no valid runtime parameter values found at random: give "
+            "[simulate] parameters to compare at"
+        )
+    conds = [_condition(scene, p) for p in draws]
+    ill = draws[[i for i in np.argsort(conds)[-n_ill:] if conds[i] > WELL_CONDITIONED]]
+    report = Report(n_states, {"well": len(well), "ill": len(ill)})
+    label = f"cond <= {WELL_CONDITIONED:g}"
+    report.rows += _group(label, backends, scene, states, well, lambda c: TOLERANCE, progress, rng)
+    if len(ill):
+        report.rows += _group(
+            f"cond > {WELL_CONDITIONED:g}",
+            backends,
+            scene,
+            states,
+            ill,
+            lambda c: ILL_CONDITIONED_ULPS * c * EPS,
+            progress,
+            rng,
+        )
+    bases = well if len(well) else draws
+    _check_refusals(backends, scene, bases[:3], report)
+    return report
+
+
+def given_parameters(scene: Scene) -> np.ndarray | None:
+    """The scene's [simulate] parameters as one runtime vector, if complete."""
+    values = scene.simulate.parameters
+    if not all(n in values for n in scene.runtime):
+        return None
+    return np.array([[values[n] for n in scene.runtime]])
+
+
+def _condition(scene: Scene, p: np.ndarray) -> float:
+    full = scene_view.full_parameters(scene, p, np.zeros((1, 14)), 0.0)[0]
+    return float(sampling.lumped_condition(full))
+
+
+def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
+    """Invalid p[] vectors for a scene, with the code setup must return: the
+    full model's invalid cases that change runtime entries only, and NaN in
+    each runtime parameter."""
+    full = scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
+    index = {n: i for i, n in enumerate(PARAMETERS)}
+    cases = []
+    for what, p_full, code in sampling.invalid_parameters(full):
+        changed = {PARAMETERS[i] for i in np.flatnonzero(~(p_full == full))}
+        if changed and changed <= set(scene.runtime):
+            p = np.array(
+                [p_full[index[r]] if r in index else base[j] for j, r in enumerate(scene.runtime)]
+            )
+            cases.append((what, p, code))
+    for j, name in enumerate(scene.runtime):
+        p = base.copy()
+        p[j] = np.nan
+        cases.append((f"{name} = NaN", p, 1))
+    return cases
+
+
+def _check_refusals(
+    backends: list[Compiled], scene: Scene, bases: np.ndarray, report: Report
+) -> None:
+    for base in bases:
+        for what, p, expected in invalid_runtime(scene, base):
+            for b in backends:
+                code, _ = b.setup_code(p)
+                report.refusals_checked += 1
+                if code != expected:
+                    report.refusal_failures.append(
+                        f"{b.language} setup returned {code} for {what} (expected {expected})"
+                    )

@@ -1,0 +1,217 @@
+"""The numpy reference seen through a scene: the full model with the scene's
+folded values, its torque law, and only the states it keeps.
+
+Like reference.py, this never touches the sympy model: it reads the scene
+(names and numbers) and fills in the full state and parameter vectors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gyrogen.abi import PARAMETERS, STATES
+from gyrogen.oracle import reference, sampling
+from gyrogen.scene import CONTROLLER_PARAMETERS, Scene
+
+_P = {n: i for i, n in enumerate(PARAMETERS)}
+
+
+def state_index(scene: Scene) -> np.ndarray:
+    """Where each kept state sits in the full model's 14 (-1 for e0..e3)."""
+    return np.array([STATES.index(s) if s in STATES else -1 for s in scene.states])
+
+
+def full_states(scene: Scene, xs: np.ndarray) -> np.ndarray:
+    """(n, nx) kept states -> (n, 14), the dropped ones at 0 (they couple to
+    nothing the scene keeps; nor do the angles, which stand at 0 for e)."""
+    xs = np.atleast_2d(xs)
+    full = np.zeros((xs.shape[0], len(STATES)))
+    idx = state_index(scene)
+    full[:, idx[idx >= 0]] = xs[:, idx >= 0]
+    return full
+
+
+def quaternion_rates(e: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """e' = 1/2 e (x) (0, w) for Euler parameters of A in N (scalar first) and
+    w the angular velocity of A in A-components (Kane, Likins and Levinson,
+    Spacecraft Dynamics, 1983, eq. 1.13.6)."""
+    e0, e1, e2, e3 = e.T
+    w1, w2, w3 = w.T
+    return 0.5 * np.stack(
+        [
+            -e1 * w1 - e2 * w2 - e3 * w3,
+            e0 * w1 - e3 * w2 + e2 * w3,
+            e3 * w1 + e0 * w2 - e1 * w3,
+            -e2 * w1 + e1 * w2 + e0 * w3,
+        ],
+        axis=-1,
+    )
+
+
+def quaternion_dcm(e: np.ndarray) -> np.ndarray:
+    """C with a_i = sum_j C[i, j] n_j, from Euler parameters (same source)."""
+    e0, e1, e2, e3 = np.moveaxis(e, -1, 0)
+    return np.stack(
+        [
+            np.stack(
+                [e0**2 + e1**2 - e2**2 - e3**2, 2 * (e1 * e2 + e0 * e3), 2 * (e1 * e3 - e0 * e2)],
+                -1,
+            ),
+            np.stack(
+                [2 * (e1 * e2 - e0 * e3), e0**2 - e1**2 + e2**2 - e3**2, 2 * (e2 * e3 + e0 * e1)],
+                -1,
+            ),
+            np.stack(
+                [2 * (e1 * e3 + e0 * e2), 2 * (e2 * e3 - e0 * e1), e0**2 - e1**2 - e2**2 + e3**2],
+                -1,
+            ),
+        ],
+        axis=-2,
+    )
+
+
+def torque(scene: Scene, values: dict[str, float], x_full: np.ndarray, t: float) -> np.ndarray:
+    law = scene.effects.torque
+    n = x_full.shape[0]
+    if law == "none":
+        return np.zeros(n)
+    if law == "constant":
+        return np.full(n, values["T"])
+    if law == "speed_controller":
+        u2, u4 = x_full[:, STATES.index("u2")], x_full[:, STATES.index("u4")]
+        return -values["k"] * (u4 - u2 - values["w_ref"])
+    table = np.array(scene.effects.torque_table)
+    return np.full(n, np.interp(t, table[:, 0], table[:, 1]))
+
+
+def values(scene: Scene, p_runtime: np.ndarray) -> dict[str, float]:
+    """Every parameter by name: the folded ones and p[] in manifest order."""
+    out = {k: float(v) for k, v in scene.folded().items()}
+    out.update(zip(scene.runtime, map(float, p_runtime), strict=True))
+    return out
+
+
+def full_parameters(
+    scene: Scene, p_runtime: np.ndarray, x_full: np.ndarray, t: float
+) -> np.ndarray:
+    """(n, 12) parameters of the full model: T follows the scene's law, g is
+    0 when the scene has no translation."""
+    v = values(scene, p_runtime)
+    p = np.zeros((x_full.shape[0], len(PARAMETERS)))
+    for name, i in _P.items():
+        if name not in ("T", "g"):
+            p[:, i] = v[name]
+    p[:, _P["g"]] = v.get("g", 0.0)
+    p[:, _P["T"]] = torque(scene, v, x_full, t)
+    return p
+
+
+def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
+    xs = np.atleast_2d(xs)
+    x_full = full_states(scene, xs)
+    full = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))
+    idx = state_index(scene)
+    out = np.empty_like(xs, dtype=float)
+    out[:, idx >= 0] = full[:, idx[idx >= 0]]
+    if scene.attitude == "quaternion":
+        w = x_full[:, [STATES.index(f"u{i}") for i in (1, 2, 3)]]
+        out[:, :4] = quaternion_rates(xs[:, :4], w)
+    return out
+
+
+def output(
+    scene: Scene, name: str, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0
+) -> np.ndarray:
+    """An output function of the scene, from the reference: shape (n, size)."""
+    x_full = full_states(scene, xs)
+    p = full_parameters(scene, p_runtime, x_full, t)
+    if name == "kinetic_energy":
+        return reference.kinetic_energy(x_full, p)[:, None]
+    if name == "angular_momentum":
+        if scene.attitude == "quaternion":  # H in A from the reference, turned into N here
+            h_a = np.einsum(
+                "nij,nj->ni",
+                reference.direction_cosines(x_full),
+                reference.angular_momentum_n(x_full, p),
+            )
+            return np.einsum("nij,ni->nj", quaternion_dcm(np.atleast_2d(xs)[:, :4]), h_a)
+        return reference.angular_momentum_n(x_full, p)
+    if name == "power":
+        u2, u4 = x_full[:, STATES.index("u2")], x_full[:, STATES.index("u4")]
+        return (p[:, _P["T"]] * (u4 - u2))[:, None]
+    raise KeyError(name)
+
+
+def random_runtime(
+    scene: Scene, rng: np.random.Generator, n: int, max_condition: float | None = None
+) -> np.ndarray:
+    """Up to n runtime parameter vectors that, with the scene's folded values,
+    make a physically valid system (and a well-conditioned one with
+    max_condition). Fewer (maybe none) when the folded values leave the
+    valid runtime values a sliver the draws rarely hit."""
+    if not scene.runtime:
+        return np.zeros((1, 0))
+    rows: list[np.ndarray] = []
+    folded = scene.folded()
+    for _ in range(200):
+        draw = sampling.random_parameters(rng, max(4 * n, 16))
+        _near_folded(draw, folded, rng)
+        for name, value in folded.items():
+            if name in _P:
+                draw[:, _P[name]] = value
+        ok = np.array([sampling.setup_code(row) == 0 for row in draw])
+        if max_condition is not None:
+            ok &= sampling.lumped_condition(draw) <= max_condition
+        extra = {
+            "k": np.exp(rng.uniform(np.log(1e-2), np.log(10.0), len(draw))),
+            "w_ref": rng.uniform(-300.0, 300.0, len(draw)),
+        }
+        for i in np.flatnonzero(ok):
+            rows.append(
+                np.array(
+                    [
+                        extra[r][i] if r in CONTROLLER_PARAMETERS else draw[i, _P[r]]
+                        for r in scene.runtime
+                    ]
+                )
+            )
+        if len(rows) >= n:
+            break
+    return np.array(rows[:n]).reshape(-1, len(scene.runtime))
+
+
+_CARRIER = ("I11", "I22", "I33", "I13")
+
+
+def _near_folded(draw: np.ndarray, folded: dict[str, float], rng: np.random.Generator) -> None:
+    """In half of the rows, draw the runtime carrier and rotor inertias on the
+    scale of the folded ones (a carrier's triangle inequality, the rotor's
+    J <= 2 I), so that a split of those groups still finds valid values."""
+    half = rng.random(len(draw)) < 0.5
+    m = int(half.sum())
+    scale = [abs(folded[k]) for k in _CARRIER if folded.get(k)]
+    if scale and m:
+        s = float(np.mean(scale))
+        for k in _CARRIER:
+            if k not in folded:
+                if k == "I13":
+                    draw[half, _P[k]] = rng.uniform(-s, s, m)
+                else:
+                    draw[half, _P[k]] = s * np.exp(rng.uniform(-np.log(20), np.log(20), m))
+    if m and "I" in folded and "J" not in folded:
+        draw[half, _P["J"]] = 2.0 * folded["I"] * rng.uniform(0.05, 1.0, m)
+    if m and "J" in folded and "I" not in folded:
+        draw[half, _P["I"]] = folded["J"] / 2.0 * np.exp(rng.uniform(0.0, np.log(20), m))
+
+
+def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
+    """n random states of the scene: sampling.random_states restricted to the
+    kept ones, with random unit quaternions for e0..e3."""
+    full = sampling.random_states(rng, n)
+    idx = state_index(scene)
+    out = np.zeros((n, len(scene.states)))
+    out[:, idx >= 0] = full[:, idx[idx >= 0]]
+    if scene.attitude == "quaternion":
+        e = rng.normal(size=(n, 4))
+        out[:, :4] = e / np.linalg.norm(e, axis=1, keepdims=True)
+    return out

@@ -1,0 +1,460 @@
+"""Scenes: what a user wants to simulate, read from TOML and validated.
+
+A scene names the parameters it folds into the code (numbers) and those it
+keeps as entries of p[] ("runtime"), the effects it needs (translation, rotor
+angle, torque law), optional output functions, target languages and a
+simulation setup. Validation is pydantic's; the physical checks of folded
+values are the same as the generated setup's (layout.SETUP_CODES).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import stat
+import tomllib
+from functools import cache
+from importlib.resources import files
+from typing import Annotated, Literal
+
+import pydantic
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from gyrogen.abi import (
+    DESCRIPTION_MAX_LENGTH,
+    FOLDED_MAX,
+    FOLDED_MIN,
+    MAX_CONDITION,
+    MAX_OUTPUT_POINTS,
+    MAX_SCENE_BYTES,
+    MIN_RTOL,
+    NAME_MAX_LENGTH,
+    PARAMETERS,
+    QUATERNION_NORM_SLACK,
+    STATES,
+    TRIANGLE_SLACK,
+)
+from gyrogen.errors import SceneError
+
+_C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if "
+    "inline int long register restrict return short signed sizeof static struct switch typedef "
+    "union unsigned void volatile while _Bool _Complex _Imaginary".split()
+)
+CONTROLLER_PARAMETERS = ("k", "w_ref")
+"""Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s)."""
+
+
+def _parameter(v: object) -> object:
+    """A parameter is a number (folded into the code) or "runtime"; a TOML
+    boolean or a quoted number is neither (pydantic would take true as 1.0)."""
+    if v == "runtime":
+        return v
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f'expected a number or "runtime", not {v!r}')
+    try:
+        x = float(v)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        raise ValueError(f"{v!r} is not a finite number")
+    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
+        raise ValueError(
+            f"{x!r}: a folded value must be 0 or of magnitude {FOLDED_MIN:g} to "
+            f'{FOLDED_MAX:g} (its products must stay doubles); make it "runtime"'
+        )
+    return x
+
+
+Value = Annotated[float | Literal["runtime"], BeforeValidator(_parameter)]
+Number = StrictFloat
+"""A TOML integer or float, never a boolean or a string."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class Effects(_Strict):
+    translation: StrictBool = True
+    """Keep q5..q7, u5..u7 (they never couple to the rest; gravity acts only on them)."""
+    rotor_angle: StrictBool = True
+    """Keep q4 (ignorable: nothing depends on it)."""
+    torque: Literal["none", "constant", "speed_controller", "table"] = "constant"
+    torque_table: list[tuple[Number, Number]] | None = None
+    """(t, T) points of a piecewise-linear T(t), held constant outside."""
+
+    @model_validator(mode="after")
+    def _table(self) -> Effects:
+        table = self.torque_table
+        if self.torque != "table":
+            if table is not None:
+                raise ValueError("torque_table is only used with torque = 'table'")
+            return self
+        if table is None or len(table) < 2:
+            raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
+        times = [t for t, _ in table]
+        if any(b <= a for a, b in itertools.pairwise(times)):
+            raise ValueError("torque_table times must increase strictly")
+        return self
+
+
+class Outputs(_Strict):
+    kinetic_energy: StrictBool = False
+    angular_momentum: StrictBool = False
+    """Angular momentum about AB* in N components (uses the direction cosines)."""
+    power: StrictBool = False
+    """Power of the motor torque, T (u4 - u2)."""
+
+
+class Simulate(_Strict):
+    initial: dict[str, Number] = Field(default_factory=dict)
+    """Initial state by name; states not named start at 0."""
+    parameters: dict[str, Number] = Field(default_factory=dict)
+    """Values of the runtime parameters for `gyrogen simulate`."""
+    t_end: Annotated[Number, Field(gt=0)] = 10.0
+    dt: Annotated[Number, Field(gt=0)] = 0.01
+    """Output step of the trajectory: at most t_end, and at most MAX_OUTPUT_POINTS of them in it."""
+    rtol: Annotated[Number, Field(lt=1)] = 1e-10
+    """Above layout.MIN_RTOL, as the compiled integrators require."""
+    atol: Annotated[Number, Field(gt=0)] = 1e-10
+
+    @field_validator("rtol")
+    @classmethod
+    def _rtol(cls, v: float) -> float:
+        if not v > MIN_RTOL:
+            raise ValueError(
+                f"must be above {MIN_RTOL:.4g} (10 machine epsilons): "
+                "no double arithmetic meets a tighter relative tolerance"
+            )
+        return v
+
+    @field_validator("dt")
+    @classmethod
+    def _points(cls, dt: float, info: ValidationInfo) -> float:
+        if "t_end" in info.data:  # else t_end failed its own check
+            check_output_grid(info.data["t_end"], dt)
+        return dt
+
+
+def check_output_grid(t_end: float, dt: float) -> None:
+    """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
+    (and at least once)."""
+    if dt > t_end:
+        raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
+    steps = t_end / dt
+    if not steps <= MAX_OUTPUT_POINTS:
+        raise ValueError(
+            f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
+            f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
+        )
+
+
+class Scene(_Strict):
+    name: str
+    """Also the prefix of every generated C symbol and file."""
+    description: str
+    parameters: dict[str, Value]
+    effects: Effects = Effects()
+    outputs: Outputs = Outputs()
+    targets: list[Literal["c", "fortran"]] = ["c", "fortran"]
+    integrators: list[Literal["rk4", "dopri5", "dop853", "rodas4"]] = [
+        "rk4",
+        "dopri5",
+        "dop853",
+        "rodas4",
+    ]
+    """Compiled integrators to render beside the RHS (rodas4 adds the Jacobian)."""
+    attitude: Literal["euler312", "quaternion"] = "euler312"
+    """3-1-2 Euler angles q1..q3 (singular at q2 = +-pi/2), or Euler parameters
+    e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
+    simulate: Simulate = Simulate()
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        check_name(v)
+        return v
+
+    @field_validator("description")
+    @classmethod
+    def _description(cls, v: str) -> str:
+        return check_description(v)
+
+    @field_validator("targets")
+    @classmethod
+    def _targets(cls, v: list[str]) -> list[str]:
+        if not v or len(set(v)) != len(v):
+            raise ValueError("list c, fortran or both, once each")
+        return v
+
+    @field_validator("integrators")
+    @classmethod
+    def _integrators(cls, v: list[str]) -> list[str]:
+        if len(set(v)) != len(v):
+            raise ValueError("list each integrator once")
+        return v
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Scene:
+        _check_parameter_names(self)
+        _check_physics(self.parameters)
+        bad = sorted(set(self.simulate.initial) - set(self.states))
+        if bad:
+            raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
+        bad = sorted(set(self.simulate.parameters) - set(self.runtime))
+        if bad:
+            raise ValueError(
+                f"simulate.parameters: {', '.join(bad)} is not a runtime parameter of this scene"
+            )
+        _check_physics({**self.parameters, **self.simulate.parameters})
+        if self.attitude == "quaternion":
+            _check_quaternion(self.simulate.initial)
+        return self
+
+    @property
+    def states(self) -> tuple[str, ...]:
+        """The kept states, in x[] order."""
+        drop = set()
+        if not self.effects.translation:
+            drop |= {"q5", "q6", "q7", "u5", "u6", "u7"}
+        if not self.effects.rotor_angle:
+            drop.add("q4")
+        kept = tuple(s for s in STATES if s not in drop)
+        if self.attitude == "quaternion":
+            kept = ("e0", "e1", "e2", "e3", *kept[3:])
+        return kept
+
+    def initial_state(self) -> tuple[float, ...]:
+        """simulate.initial in state order; unnamed states start at 0, except
+        e0 (the identity attitude, e = (1, 0, 0, 0)). Euler parameters are
+        normalized (validation has held them within QUATERNION_NORM_SLACK)."""
+        start = {"e0": 1.0, **self.simulate.initial}
+        if self.attitude == "quaternion":
+            norm = math.sqrt(sum(start.get(e, 0.0) ** 2 for e in QUATERNION))
+            start.update({e: start.get(e, 0.0) / norm for e in QUATERNION})
+        return tuple(start.get(s, 0.0) for s in self.states)
+
+    @property
+    def runtime(self) -> tuple[str, ...]:
+        """Runtime parameters, in p[] order (the model's order, then k, w_ref)."""
+        order = (*PARAMETERS, *CONTROLLER_PARAMETERS)
+        return tuple(n for n in order if self.parameters.get(n) == "runtime")
+
+    def folded(self) -> dict[str, float]:
+        return {k: v for k, v in self.parameters.items() if not isinstance(v, str)}
+
+
+QUATERNION = ("e0", "e1", "e2", "e3")
+
+
+def check_name(v: str) -> None:
+    """The scene's name prefixes every identifier gyrogen writes, in C (and
+    C++, through the header) and Fortran: a letter, then letters, digits and
+    single underscores, never ending in one (prefix + "_" would make "__",
+    which C++ reserves), at most NAME_MAX_LENGTH characters."""
+    shown = repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
+    if not v:
+        raise ValueError("must not be empty")
+    if len(v) > NAME_MAX_LENGTH:
+        raise ValueError(
+            f"{shown} is longer than {NAME_MAX_LENGTH} characters (Fortran identifiers "
+            "stop at 63, and gyrogen appends up to 26)"
+        )
+    if not (v.isascii() and v[0].isalpha() and v.replace("_", "a").isalnum()):
+        raise ValueError(
+            f"{shown} is not an identifier in C and Fortran: a letter, then letters, "
+            "digits and underscores"
+        )
+    if "__" in v or v.endswith("_"):
+        raise ValueError(f"{shown} has a double or trailing underscore (C++ reserves '__')")
+    if v in _C_KEYWORDS:
+        raise ValueError(f"{shown} is a C keyword")
+
+
+def check_description(v: str) -> str:
+    """Any text but control characters (newlines and tabs are fine), at most
+    DESCRIPTION_MAX_LENGTH characters; CR LF is read as a newline."""
+    v = v.replace("\r\n", "\n")
+    if len(v) > DESCRIPTION_MAX_LENGTH:
+        raise ValueError(f"{len(v)} characters; at most {DESCRIPTION_MAX_LENGTH}")
+    for i, ch in enumerate(v):
+        if ch not in "\n\t" and (ord(ch) < 32 or 127 <= ord(ch) < 160):
+            raise ValueError(f"control character U+{ord(ch):04X} at position {i}")
+    return v
+
+
+def _check_quaternion(initial: dict[str, float]) -> None:
+    """Euler parameters start on |e| = 1 (e0 = 1 when not given)."""
+    e = [initial.get(n, 1.0 if n == "e0" else 0.0) for n in QUATERNION]
+    norm = math.sqrt(sum(x * x for x in e))
+    if norm == 0.0:
+        raise ValueError("simulate.initial: e0..e3 are all zero: not an attitude")
+    if abs(norm - 1.0) > QUATERNION_NORM_SLACK:
+        raise ValueError(
+            f"simulate.initial: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
+            f"{norm:.9g}, not 1 (within {QUATERNION_NORM_SLACK:g}): give a unit quaternion"
+        )
+
+
+def required_parameters(effects: Effects) -> tuple[str, ...]:
+    names = ["m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J", "l1", "l3"]
+    if effects.translation:
+        names.append("g")
+    if effects.torque == "constant":
+        names.append("T")
+    if effects.torque == "speed_controller":
+        names += list(CONTROLLER_PARAMETERS)
+    return tuple(names)
+
+
+def _check_parameter_names(scene: Scene) -> None:
+    need = required_parameters(scene.effects)
+    missing = [n for n in need if n not in scene.parameters]
+    if missing:
+        raise ValueError(f"parameters: missing {', '.join(missing)}")
+    for n in scene.parameters:
+        if n not in need:
+            raise ValueError(f"parameters.{n}: {_why_not(n, scene.effects)}")
+
+
+def _why_not(name: str, effects: Effects) -> str:
+    if name == "g":
+        return "gravity has no effect without translation (effects.translation = false)"
+    if name == "T":
+        return f"only used with effects.torque = 'constant' (not {effects.torque!r})"
+    if name in CONTROLLER_PARAMETERS:
+        return "only used with effects.torque = 'speed_controller'"
+    return "unknown parameter (see `gyrogen new` for the list)"
+
+
+def _check_physics(p: dict[str, Value]) -> None:
+    """The generated setup's checks, for the values folded at generation."""
+    v = {k: x for k, x in p.items() if not isinstance(x, str)}
+
+    def known(*names: str) -> bool:
+        return all(n in v for n in names)
+
+    for n in ("m_a", "m_b", "I", "J"):
+        if n in v and v[n] <= 0:
+            raise ValueError(f"parameters.{n}: must be positive (got {v[n]})")
+    if known("I11", "I22", "I33", "I13"):
+        i11, i22, i33, i13 = v["I11"], v["I22"], v["I33"], v["I13"]
+        if min(i11, i22, i33) <= 0 or i11 * i33 - i13 * i13 <= 0:
+            raise ValueError(
+                "parameters.I11, I22, I33, I13: carrier inertia is not positive definite"
+            )
+        gap = math.hypot(0.5 * (i11 - i33), i13)  # no OverflowError, unlike ** 2
+        moments = sorted([i22, 0.5 * (i11 + i33) + gap, 0.5 * (i11 + i33) - gap])
+        if not all(math.isfinite(m) for m in moments):
+            raise ValueError("parameters.I11, I22, I33, I13: the principal moments overflow")
+        if moments[2] - moments[0] - moments[1] > TRIANGLE_SLACK * sum(moments):
+            shown = ", ".join(f"{m:.6g}" for m in moments)
+            raise ValueError(
+                f"parameters.I11, I22, I33, I13: principal moments ({shown}) "
+                "violate the triangle inequality"
+            )
+    if known("I", "J") and v["J"] - 2 * v["I"] > TRIANGLE_SLACK * (2 * v["I"] + v["J"]):
+        raise ValueError(f"parameters.J: rotor needs J <= 2 I (I = {v['I']}, J = {v['J']})")
+    coupled = ("m_a", "m_b", "I11", "I33", "I13", "I", "l1", "l3")
+    if known(*coupled):
+        from gyrogen.oracle.sampling import lumped_condition  # numpy: only when needed
+
+        full = [v.get(n, 1.0) for n in PARAMETERS]
+        cond = float(lumped_condition(full))
+        if not cond <= MAX_CONDITION:
+            raise ValueError(
+                f"parameters: the mass matrix's coupled block has condition number "
+                f"{cond:.3g} > {MAX_CONDITION:g}: numerically singular"
+            )
+
+
+def _one_line(exc: pydantic.ValidationError) -> str:
+    err = exc.errors()[0]
+    # a union's member ("float", "literal['runtime']") is not a key the user wrote
+    keys = [str(x) for x in err["loc"] if not str(x).startswith(("float", "literal["))]
+    loc = ".".join(keys)
+    msg = str(err["msg"]).removeprefix("Value error, ")
+    if err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    return f"{loc}: {msg}" if loc else msg
+
+
+def parse(text: str, source: str) -> Scene:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    except RecursionError as exc:  # tomllib recurses once per level of nesting
+        raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
+    try:
+        return Scene.model_validate(data)
+    except pydantic.ValidationError as exc:
+        raise SceneError(f"{source}: {_one_line(exc)}") from exc
+
+
+@cache
+def builtin_names() -> tuple[str, ...]:
+    root = files("gyrogen") / "scenes"
+    return tuple(sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml")))
+
+
+def builtin_text(name: str) -> str:
+    return (files("gyrogen") / "scenes" / f"{name}.toml").read_text(encoding="utf-8")
+
+
+def load(arg: str) -> Scene:
+    """A built-in scene by name, or a .toml file by path."""
+    if arg in builtin_names():
+        return parse(builtin_text(arg), f"{arg} (built-in)")
+    return parse(_read(arg), arg)
+
+
+def _read(path: str) -> str:
+    """A scene file's text: a regular file (opened without blocking, so a
+    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError as exc:
+        names = ", ".join(builtin_names())
+        raise SceneError(
+            f"{path}: no such file, and no built-in scene of that name ({names})"
+        ) from exc
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from exc
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            what = "a directory" if stat.S_ISDIR(mode) else "a device, FIFO or socket"
+            raise SceneError(f"{path}: is {what}, not a scene file")
+        with open(fd, "rb", closefd=False) as fh:
+            data = fh.read(MAX_SCENE_BYTES + 1)
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read: {exc.strerror}") from exc
+    finally:
+        os.close(fd)
+    if len(data) > MAX_SCENE_BYTES:
+        raise SceneError(f"{path}: more than {MAX_SCENE_BYTES:,} bytes, the limit for a scene file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SceneError(
+            f"{path}: cannot read: not UTF-8 ({exc.reason} at byte {exc.start})"
+        ) from exc
+
+
+@cache
+def default() -> Scene:
+    """The paper's full model, every parameter at run time."""
+    return load("gyrostat")

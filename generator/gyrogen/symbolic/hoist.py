@@ -1,0 +1,93 @@
+"""Hoisting: every coefficient that depends on parameters only becomes a
+constant computed once in setup; what is left per call is a polynomial in
+the states with constant coefficients, shaped by Horner's scheme."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+
+import sympy as sm
+
+from gyrogen.symbolic.literals import as_double
+
+
+def constants(n: int) -> tuple[sm.Symbol, ...]:
+    return tuple(sm.Symbol(f"c{k}", real=True) for k in range(n))
+
+
+class Hoister:
+    """Gives each parameter-only coefficient a constant, sharing equal ones
+    and ones that differ only in sign."""
+
+    def __init__(self) -> None:
+        self.values: list[sm.Expr] = []
+        self._index: dict[sm.Expr, int] = {}
+
+    def symbol_for(self, coeff: sm.Expr) -> sm.Expr:
+        coeff = sm.factor(sm.cancel(coeff))
+        if coeff.is_number:
+            return as_double(coeff)
+        if coeff in self._index:
+            return constants(self._index[coeff] + 1)[-1]
+        neg = sm.factor(-coeff)
+        if neg in self._index:
+            return -constants(self._index[neg] + 1)[-1]
+        self._index[coeff] = len(self.values)
+        self.values.append(coeff)
+        return constants(len(self.values))[-1]
+
+
+_EXHAUSTIVE = 5
+"""Up to this many variables every Horner order is tried (5! = 120)."""
+
+
+def _orders(poly: sm.Poly) -> list[tuple[sm.Expr, ...]]:
+    gens = poly.gens
+    if len(gens) <= _EXHAUSTIVE:
+        return list(itertools.permutations(gens))
+    # Too many to try: the variables in the most terms first.
+    counts = [sum(1 for m in poly.monoms() if m[i]) for i in range(len(gens))]
+    ranked = sorted(range(len(gens)), key=lambda i: (-counts[i], str(gens[i])))
+    return [tuple(gens[i] for i in ranked)]
+
+
+def _best_horner(expr: sm.Expr, gens: Sequence[sm.Expr]) -> sm.Expr:
+    """Horner's scheme in the variable order that leaves the fewest ops."""
+    if not gens:
+        return expr
+    best, best_ops = expr, int(sm.count_ops(expr))
+    for order in _orders(sm.Poly(expr, *gens)):
+        cand = sm.horner(expr, *order)
+        ops = int(sm.count_ops(cand))
+        if ops < best_ops:
+            best, best_ops = cand, ops
+    return best
+
+
+def hoist(expr: sm.Expr, per_call: Sequence[sm.Symbol], hoister: Hoister) -> sm.Expr:
+    """expr with its parameter-only work replaced by constants.
+
+    A polynomial in the per-call symbols becomes a Horner form with hoisted
+    coefficients. Anything else (trig of angles times a polynomial, say) is
+    taken apart and each argument hoisted in turn. Folded numbers become
+    doubles on the way.
+    """
+    per = set(per_call)
+    if not expr.free_symbols & per:
+        return hoister.symbol_for(expr)
+    expanded = sm.expand(expr)
+    gens = [s for s in per_call if s in expanded.free_symbols]
+    try:
+        poly = sm.Poly(expanded, *gens)
+    except sm.PolynomialError:
+        poly = None
+    if poly is None or any(c.free_symbols & per for c in poly.coeffs()):
+        return expr.func(*(hoist(a, per_call, hoister) for a in expr.args))
+    rebuilt = sm.Add(
+        *(
+            hoister.symbol_for(coeff) * sm.Mul(*(g**k for g, k in zip(gens, monom, strict=True)))
+            for monom, coeff in poly.terms()
+        )
+    )
+    return _best_horner(rebuilt, gens)

@@ -1,0 +1,279 @@
+"""Turn M u' = F, q' = f into two blocks of straight-line code.
+
+``setup`` runs once per parameter set: the lumped inertias, the inverse of the
+constant mass matrix and every coefficient that depends on parameters only,
+stored as constants c0, c1, ...  ``rhs`` runs per call and reads states and
+constants only: it never solves a linear system.
+
+How: u' = M^-1 F is expanded as a polynomial in the states; each coefficient
+that involves parameters becomes a hoisted constant (shared when two terms
+have the same or the opposite coefficient); what remains is factored by
+Horner's scheme and then shares its common subexpressions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+
+import sympy as sm
+
+from gyrogen.symbolic.equations import Equations
+from gyrogen.symbolic.hoist import Hoister, hoist
+from gyrogen.symbolic.literals import as_double, writable_form
+
+
+@dataclass(frozen=True)
+class Assignment:
+    lhs: sm.Symbol
+    rhs: sm.Expr
+
+
+@dataclass(frozen=True)
+class Block:
+    """Straight-line code: temporaries first, then one value per output."""
+
+    temporaries: tuple[Assignment, ...]
+    outputs: tuple[sm.Expr, ...]
+
+    @property
+    def ops(self) -> int:
+        return count_ops([a.rhs for a in self.temporaries], self.outputs)
+
+    @property
+    def free_symbols(self) -> set[sm.Basic]:
+        """What the block reads (its own temporaries included)."""
+        exprs = [*(a.rhs for a in self.temporaries), *self.outputs]
+        return set().union(*(e.free_symbols for e in exprs))
+
+
+@dataclass(frozen=True)
+class Optimized:
+    setup: Block
+    """Outputs: the hoisted constants c0..c{nc-1}, in terms of parameters."""
+    rhs: Block
+    """Outputs: dx/dt in state order, in terms of states and constants."""
+    lumped: tuple[Assignment, ...]
+    """The lumped inertia scalars: named temporaries of setup."""
+    outputs: dict[str, Block] = field(default_factory=dict)
+    """Optional extra functions (energy, momentum, power), per call."""
+    jacobian: Block | None = None
+    """d(dx/dt)/dx, row-major, when an implicit integrator needs it."""
+
+    @property
+    def nc(self) -> int:
+        return len(self.setup.outputs)
+
+
+def count_ops(*groups: Iterable[sm.Expr]) -> int:
+    """The issue's measure: sympy.count_ops summed over every assignment.
+
+    A trig call counts once wherever CSE has left it: count_ops already
+    counts sin(x) as one operation.
+    """
+    return sum(int(sm.count_ops(e)) for group in groups for e in group)
+
+
+def block_inverse(m: sm.Matrix) -> sm.Matrix:
+    """Inverse of a constant matrix, one diagonal block at a time.
+
+    The mass matrix decouples (translation, rotor, carrier); inverting the
+    small blocks keeps the entries short where a full symbolic inverse
+    would not.
+    """
+    inv = sm.zeros(*m.shape)
+    for block in m.connected_components():
+        idx = sorted(block)
+        sub = m.extract(idx, idx)
+        sub_inv = sub.inv() if sub.shape[0] > 1 else sm.Matrix([[1 / sub[0, 0]]])
+        for a, i in enumerate(idx):
+            for b, j in enumerate(idx):
+                inv[i, j] = sm.factor(sm.cancel(sub_inv[a, b]))
+    return inv
+
+
+def _sincos(expr: sm.Expr) -> sm.Expr:
+    """tan(a) -> sin(a)/cos(a): the compiler then pairs sin and cos of one
+    angle into a single sincos call (twice as fast as tan plus cos here)."""
+    return expr.replace(sm.tan, lambda a: sm.sin(a) / sm.cos(a))
+
+
+def _linear(expr: sm.Expr, speeds: Sequence[sm.Symbol]) -> dict[sm.Expr, sm.Expr] | None:
+    """{u: coefficient, 1: constant} if expr is linear in the speeds."""
+    try:
+        poly = sm.Poly(sm.expand(expr), *speeds)
+    except sm.PolynomialError:
+        return None
+    if poly.total_degree() > 1:
+        return None
+    out: dict[sm.Expr, sm.Expr] = {}
+    for monom, coeff in poly.terms():
+        key = sm.Mul(*(u**k for u, k in zip(speeds, monom, strict=True)))
+        out[key] = coeff
+    return out
+
+
+def _reuse_earlier(exprs: Sequence[sm.Expr], speeds: Sequence[sm.Symbol]) -> list[sm.Expr]:
+    """Write an output as rest + k * (an earlier output) when that earlier
+    output's speed terms all appear in it with one common factor k.
+
+    The kinematic equations of 3-1-2 angles have this shape: q3' equals
+    u2 - sin(q2) q1'. CSE then computes q1' once instead of twice over.
+    """
+    forms = [_linear(e, speeds) for e in exprs]
+    out = list(exprs)
+    for j, fj in enumerate(forms):
+        if fj is None:
+            continue
+        for i, fi in enumerate(forms[:j]):
+            if fi is None:
+                continue
+            terms = [u for u in fi if u != 1]
+            if len(terms) < 2 or not all(u in fj for u in terms):
+                continue
+            k = sm.trigsimp(sm.cancel(fj[terms[0]] / fi[terms[0]]))
+            if any(sm.trigsimp(fj[u] - k * fi[u]) != 0 for u in terms):
+                continue
+            rest = sm.Add(*(c * u for u, c in fj.items() if u not in terms))
+            cand = rest + k * (exprs[i] - fi.get(1, 0))
+            if sm.count_ops(cand) < sm.count_ops(out[j]):
+                out[j] = cand
+    return out
+
+
+def _cse(exprs: Sequence[sm.Expr], names: Iterator[sm.Symbol]) -> Block:
+    """Common subexpressions of exprs, with every number in a form the code
+    can write (literals.writable_form: before CSE, so it shares those)."""
+    temps, reduced = sm.cse([writable_form(e) for e in exprs], symbols=names)
+    return Block(tuple(Assignment(s, e) for s, e in temps), tuple(reduced))
+
+
+def _temporaries() -> Iterator[sm.Symbol]:
+    return sm.numbered_symbols("tmp", real=True)
+
+
+def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
+    """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
+    also d(dx/dt)/dx for the implicit integrators."""
+    udot = block_inverse(eqs.mass_matrix) * eqs.forcing
+    hoister = Hoister()
+    per_call = [*eqs.states, *eqs.inputs, *eqs.shared]
+    dyn = [hoist(e, per_call, hoister) for e in udot]
+    shared = {s: hoist(e, per_call, hoister) for s, e in eqs.shared.items()}
+    n_q = len(eqs.kinematics)
+    kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
+    rhs = _cse([*kin, *dyn], _temporaries())
+    rhs = Block(tuple(Assignment(s, e) for s, e in shared.items()) + rhs.temporaries, rhs.outputs)
+    outputs = {
+        name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
+        for name, exprs in eqs.outputs.items()
+    }
+    jac = _jacobian([e.xreplace(shared) for e in (*kin, *dyn)], eqs.states) if jacobian else None
+    values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
+    det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
+    setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
+    return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
+
+
+def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
+    """lambda_max / lambda_min of a symmetric positive 2x2 block, the last
+    constant of setup. lambda_min = det / lambda_max: the difference of the
+    two terms of lambda_min would cancel for a badly conditioned block
+    (det: the block's determinant in a form that does not)."""
+    a, b, d = block[0, 0], block[0, 1], block[1, 1]
+    big = (a + d) / 2 + sm.sqrt((a - d) ** 2 / 4 + b**2)
+    cond = big**2 / det
+    return as_double(cond, integers=False) if cond.is_number else cond
+
+
+MU = sm.Symbol("mu", positive=True)
+"""The reduced mass m_a m_b / (m_a + m_b), a named scalar of setup."""
+
+
+def _multiplied_out(value: sm.Expr, lumped: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
+    """value with each sum of lumped scalars multiplied out in the parameters.
+
+    Each coupled lumped inertia is a carrier-plus-rotor part plus the rank-one
+    mu (l3, -l1)(l3, -l1)^T, so in a sum such as I~11 I~33 - I~13^2 (or
+    I~11 - I~22 + I~33) the mu terms cancel; in rounding that costs as many
+    digits as the block's condition number has (1e-7 of the constants at
+    cond 5e9, which the integrators then turn into invariant drift).
+    Multiplied out, they cancel in sympy instead. Products and quotients
+    keep their shape: only the sums change.
+    """
+    names = set(lumped)
+    if not value.free_symbols & names:
+        return value
+    defs = _in_reduced_mass(lumped)
+
+    def walk(e: sm.Expr) -> sm.Expr:
+        if e.is_Add and e.free_symbols & names:
+            return sm.expand(e.xreplace(defs))
+        return e.func(*(walk(a) for a in e.args)) if e.args else e
+
+    return walk(value)
+
+
+def _in_reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
+    """The lumped definitions with m_a m_b / (m_a + m_b) as the symbol MU."""
+    free = {s.name for e in lumped.values() for s in e.free_symbols}
+    if not {"m_a", "m_b"} <= free:
+        return lumped  # a folded mass: the reduced mass is a number
+    mu = _reduced_mass(lumped)
+    return {s: e.subs(mu, MU) for s, e in lumped.items()}
+
+
+def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
+    """Row-major d f_i / d x_j of the hoisted right-hand side: it reads the
+    same constants, so setup covers it too."""
+    entries = [sm.diff(fi, xj) for fi in f for xj in x]
+    return _cse(entries, _temporaries())
+
+
+def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignment, ...]]:
+    """The constants, after the named scalars they are written in.
+
+    Two CSE passes share one numbering: the reduced mass mu and the lumped
+    scalars come first, under their own names; only those some constant uses
+    are computed.
+    """
+    used = set().union(*(v.free_symbols for v in values)) if values else set()
+    defs = _in_reduced_mass(eqs.lumped)
+    names_used = [s for s in eqs.lumped if s in used]
+    used |= set().union(*(defs[s].free_symbols for s in names_used)) if names_used else set()
+    named = {MU: _reduced_mass(eqs.lumped)} if MU in used else {}
+    named.update({s: defs[s] for s in names_used})
+    names = _temporaries()
+    first = _cse(list(named.values()), names)
+    # what the first pass computed (l3**2, ...), the second reads by name
+    done = {a.rhs: a.lhs for a in first.temporaries}
+    second = _cse([v.xreplace(done) for v in values], names)
+    scalars = tuple(Assignment(s, v) for s, v in zip(named, first.outputs, strict=True))
+    setup = Block(_in_order(first.temporaries + scalars) + second.temporaries, second.outputs)
+    return setup, tuple(a for a in scalars if a.lhs in eqs.lumped)
+
+
+def _in_order(assignments: tuple[Assignment, ...]) -> tuple[Assignment, ...]:
+    """The assignments with each after those it reads, otherwise as given: a
+    temporary of the first pass may read mu (two lumped scalars sharing
+    mu l1^2 when l3 is folded to 0), which the pass assigns after them."""
+    defined = {a.lhs for a in assignments}
+    done: set[sm.Symbol] = set()
+    out: list[Assignment] = []
+    waiting = list(assignments)
+    while waiting:
+        ready = next(a for a in waiting if not (a.rhs.free_symbols & defined) - done)
+        waiting.remove(ready)
+        out.append(ready)
+        done.add(ready.lhs)
+    return tuple(out)
+
+
+def _reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> sm.Expr:
+    free = {s.name: s for e in lumped.values() for s in e.free_symbols}
+    return free["m_a"] * free["m_b"] / (free["m_a"] + free["m_b"])
+
+
+def cse_only(exprs: Sequence[sm.Expr]) -> Block:
+    """Variant (ii): common subexpressions alone, nothing hoisted."""
+    return _cse(exprs, _temporaries())
