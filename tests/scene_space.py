@@ -35,8 +35,9 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from gyrogen.abi import DESCRIPTION_MAX_LENGTH, NAME_MAX_LENGTH, PARAMETERS
-from gyrogen.codegen.generate import render_all, unit_of, write_atomic
+from gyrogen.codegen.generate import render_all, unit_of
 from gyrogen.errors import SceneError
+from gyrogen.files import write_atomic
 from gyrogen.oracle import compare, sampling, scene_view
 from gyrogen.runtime import build
 from gyrogen.scene import Scene, parse

@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from gyrogen import files as files_module
 from gyrogen.cli import main
 from gyrogen.codegen import generate as generate_module
 from gyrogen.errors import GyrogenError
@@ -76,7 +77,7 @@ def test_failed_write_leaves_nothing_half_written(
             raise OSError(28, "No space left on device")
         real_replace(src, dst)
 
-    monkeypatch.setattr(generate_module.os, "replace", fail_second)
+    monkeypatch.setattr(files_module.os, "replace", fail_second)
     code, _, err = run(["generate", "--out", str(out_dir)], capsys)
     assert code == 1
     assert (
@@ -131,7 +132,7 @@ def _fail_on(monkeypatch: pytest.MonkeyPatch, target: Path, exc: BaseException) 
             raise exc
         real_replace(src, dst)
 
-    monkeypatch.setattr(generate_module.os, "replace", replace)
+    monkeypatch.setattr(files_module.os, "replace", replace)
 
 
 def test_failed_rename_puts_every_old_file_back(
@@ -173,7 +174,7 @@ def test_full_disk_while_staging_leaves_no_temporary(
     are removed, and nothing was renamed."""
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
-    real_mkstemp = generate_module.tempfile.mkstemp
+    real_mkstemp = files_module.tempfile.mkstemp
     made = []
 
     def mkstemp(**kwargs: Any) -> tuple[int, str]:
@@ -182,7 +183,7 @@ def test_full_disk_while_staging_leaves_no_temporary(
             raise OSError(28, "No space left on device")
         return real_mkstemp(**kwargs)
 
-    monkeypatch.setattr(generate_module.tempfile, "mkstemp", mkstemp)
+    monkeypatch.setattr(files_module.tempfile, "mkstemp", mkstemp)
     code, _, err = run(["generate", "--out", str(out_dir)], capsys)
     assert code == 1 and made[2] == ".gyrostat_ode.h."
     assert (
@@ -203,12 +204,12 @@ def test_written_files_have_the_mode_open_gives(
         run(["generate", "--out", str(tmp_path / "o")], capsys)
         run(["generate", "--out", str(tmp_path / "o")], capsys)  # replaces each file
         run(["new", "my_sat", "--out", str(tmp_path / "my_sat.toml")], capsys)
-        monkeypatch.setattr(generate_module, "_PROC_STATUS", tmp_path / "no_such_status")
-        generate_module._umask_once.cache_clear()
+        monkeypatch.setattr(files_module, "_PROC_STATUS", tmp_path / "no_such_status")
+        files_module._umask_once.cache_clear()
         run(["new", "my_sat2", "--out", str(tmp_path / "my_sat2.toml")], capsys)
     finally:
         os.umask(saved)
-        generate_module._umask_once.cache_clear()
+        files_module._umask_once.cache_clear()
     written = [*(tmp_path / "o").iterdir(), tmp_path / "my_sat.toml", tmp_path / "my_sat2.toml"]
     assert len(written) == 9
     assert {oct(p.stat().st_mode & 0o777) for p in written} == {oct(0o666 & ~mask)}
@@ -218,8 +219,8 @@ def test_umask_is_read_without_changing_it(monkeypatch: pytest.MonkeyPatch) -> N
     saved = os.umask(0o037)
     try:
         calls = []
-        monkeypatch.setattr(generate_module.os, "umask", lambda m: calls.append(m) or 0o037)
-        assert generate_module.umask() == 0o037 and calls == []  # from /proc/self/status
+        monkeypatch.setattr(files_module.os, "umask", lambda m: calls.append(m) or 0o037)
+        assert files_module.umask() == 0o037 and calls == []  # from /proc/self/status
     finally:
         monkeypatch.undo()  # the real os.umask again, to restore the mask
         os.umask(saved)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gyrogen import methods
+from gyrogen import abi, methods
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
@@ -345,7 +345,7 @@ def test_batch_equals_single_calls(compiled: Get, language: str) -> None:
             x, st, code = b.integrate(method, x0s[i], c, 0.0, 2.0, **kw)
             np.testing.assert_array_equal(xs[i], x)
             assert code == codes[i]
-            assert {k: stats[k][i] for k in build.STATS_FIELDS} == st
+            assert {f.name: stats[f.name][i] for f in abi.STATS_FIELDS} == st
         assert list(codes[:2]) == [OK, OK] and codes[2] != OK
 
 

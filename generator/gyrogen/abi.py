@@ -1,11 +1,16 @@
-"""Names and order of the full model's states and parameters, the setup
-codes, numerical thresholds and the limits on what a user may ask for.
+"""The interface every generated file shares, in one registry: the names,
+units and order of states and parameters, the return codes of setup and of
+the integrators, the fields of the step statistics, and the thresholds and
+limits the generated code, the scene validator and the command line apply.
 
 Plain Python, no sympy: the numpy reference and the tests read these too, and
-they must not depend on the symbolic model they are meant to check.
+they must not depend on the symbolic model they are meant to check. The
+templates read them through the render context (codegen.context).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 STATES: tuple[str, ...] = tuple(f"q{i}" for i in range(1, 8)) + tuple(f"u{i}" for i in range(1, 8))
 """q1..q3: 3-1-2 Euler angles of the carrier A in N; q4: rotor angle about a2
@@ -66,29 +71,111 @@ STATE_DOC: dict[str, tuple[str, str]] = {
     "u7": ("m/s", "velocity of AB*, n3"),
 }
 
-# Return codes of <prefix>_setup, checked in this order; the first failure wins.
-SETUP_CODES: dict[int, str] = {
-    0: "parameters accepted",
-    1: "a parameter is NaN or infinite",
-    2: "a mass (m_a or m_b) is not positive",
-    3: "a rotor inertia (I or J) is not positive",
-    4: "the carrier inertia is not positive definite",
-    5: "the carrier's principal moments violate the triangle inequality",
-    6: "the rotor violates the triangle inequality (2 I < J)",
-    7: "the mass matrix is not numerically positive definite (condition number above 1e13)",
-}
+CONTROLLER_PARAMETERS = ("k", "w_ref")
+"""Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s);
+runtime ones follow PARAMETERS in p[]."""
 
-# Macro suffixes of the setup codes: <PREFIX>_<suffix> in the C header.
-SETUP_CODE_NAMES: dict[int, str] = {
-    0: "OK",
-    1: "ERR_NONFINITE",
-    2: "ERR_MASS",
-    3: "ERR_ROTOR_INERTIA",
-    4: "ERR_CARRIER_NOT_PD",
-    5: "ERR_CARRIER_TRIANGLE",
-    6: "ERR_ROTOR_TRIANGLE",
-    7: "ERR_MASS_SINGULAR",
+OUTPUT_DOC: dict[str, tuple[str, str]] = {
+    "kinetic_energy": ("J", "kinetic energy of the system"),
+    "angular_momentum": ("kg m^2/s", "angular momentum about AB*, N components h[0..2]"),
+    "power": ("W", "power of the motor torque, T (u4 - u2)"),
 }
+"""The optional output functions: unit and what they compute."""
+
+
+@dataclass(frozen=True)
+class Code:
+    """A return code: its value, the macro suffix (<PREFIX>_<name>), the one
+    line Python says, and the comment the headers give it."""
+
+    value: int
+    name: str
+    message: str
+    note: tuple[str, ...] = ()
+    """Lines of a comment above the macro; {macro} is the scene's prefix."""
+    doc: str = ""
+    """A comment after the macro (C), when there is no note."""
+
+
+SETUP_CODES: tuple[Code, ...] = (
+    Code(0, "OK", "parameters accepted"),
+    Code(1, "ERR_NONFINITE", "a parameter is NaN or infinite"),
+    Code(2, "ERR_MASS", "a mass (m_a or m_b) is not positive"),
+    Code(3, "ERR_ROTOR_INERTIA", "a rotor inertia (I or J) is not positive"),
+    Code(4, "ERR_CARRIER_NOT_PD", "the carrier inertia is not positive definite"),
+    Code(
+        5, "ERR_CARRIER_TRIANGLE", "the carrier's principal moments violate the triangle inequality"
+    ),
+    Code(6, "ERR_ROTOR_TRIANGLE", "the rotor violates the triangle inequality (2 I < J)"),
+    Code(
+        7,
+        "ERR_MASS_SINGULAR",
+        "the mass matrix is not numerically positive definite (condition number above 1e13)",
+    ),
+)
+"""Return codes of <prefix>_setup, checked in this order; the first failure wins."""
+
+ODE_CODES: tuple[Code, ...] = (
+    Code(0, "ODE_OK", "ok"),
+    Code(1, "ODE_ERR_STEP_UNDERFLOW", "step size underflow",
+         doc="step size fell below 16 eps |t|"),
+    Code(2, "ODE_ERR_MAX_STEPS", "max_steps reached", doc="max_steps steps were not enough"),
+    Code(3, "ODE_ERR_NONFINITE", "non-finite state or derivative",
+         doc="the state or its derivative is NaN or Inf"),
+    Code(4, "ODE_ERR_SINGULAR", "singular iteration matrix",
+         doc="the iteration matrix is singular"),
+    Code(
+        5,
+        "ODE_ERR_ARGUMENT",
+        "bad argument",
+        note=(
+            "5: t1 < t0, steps or max_steps < 1, rtol <= {macro}_ODE_MIN_RTOL, atol <= 0,",
+            "or t0, t1, rtol, atol or h0 NaN or infinite",
+        ),
+    ),
+    Code(
+        6,
+        "ODE_ERR_ATTITUDE_SINGULAR",
+        'the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"',
+        note=(
+            '6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"',
+            "(3-1-2 scenes only; see above)",
+        ),
+    ),
+)  # fmt: skip
+"""Return codes of the compiled integrators (<PREFIX>_ODE_* in <prefix>_ode.h);
+on failure x holds the last good state."""
+
+ODE_ATTITUDE_SINGULAR = 6
+"""<PREFIX>_ODE_ERR_ATTITUDE_SINGULAR: 3-1-2 angles at gimbal lock (GIMBAL_LOCK_COS)."""
+
+
+def message(codes: tuple[Code, ...], value: int) -> str:
+    """The one line a code means, or 'code N' for one not in the registry."""
+    return next((c.message for c in codes if c.value == value), f"code {value}")
+
+
+@dataclass(frozen=True)
+class StatsField:
+    """A field of <prefix>_stats (and of the Fortran bind(C) type, and of
+    gyrogen_stats in the cffi glue), in order."""
+
+    name: str
+    ctype: str
+    """double or long"""
+    doc: str
+    """{prefix} is the scene's prefix."""
+
+
+STATS_FIELDS: tuple[StatsField, ...] = (
+    StatsField("t", "double", "time reached (t1 on success)"),
+    StatsField("h", "double", "last step size tried"),
+    StatsField("accepted", "long", "accepted steps"),
+    StatsField("rejected", "long", "rejected steps (error too large, or non-finite trial)"),
+    StatsField("rhs_calls", "long", "calls of {prefix}_rhs"),
+    StatsField("jac_calls", "long", "calls of {prefix}_jac"),
+    StatsField("decompositions", "long", "LU decompositions of the iteration matrix"),
+)
 
 # The condition number of the mass matrix's coupled block [[I~11, I~13],
 # [I~13, I~33]] (the other rows are diagonal and solved exactly): setup
@@ -141,14 +228,6 @@ and so the kinematic rates q1' and q3', in the 7th digit (3.5e-7). Closer,
 the rates are noise at the tolerances the integrators accept, and the steps
 shrink toward underflow; Euler parameters (attitude = "quaternion") have no
 such point."""
-
-# The compiled integrators a scene may ask for (scene key `integrators`).
-INTEGRATORS: dict[str, str] = {
-    "rk4": "Classic Runge-Kutta, order 4, fixed step.",
-    "dopri5": "Dormand-Prince 5(4), adaptive, PI step-size control.",
-    "dop853": "DOP853 (Hairer's coefficients and error estimator), adaptive.",
-    "rodas4": "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
-}
 
 # Lines of a failed compiler's output shown in its error; the whole output is
 # kept under the build cache's logs/ directory.

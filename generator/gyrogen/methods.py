@@ -1,4 +1,9 @@
-"""Coefficients of the compiled integrators, as the templates render them.
+"""The compiled integrators, in one registry: each method's name, what it
+is, its coefficients (as the templates render them) and its step-size
+control. The scene validator, the command line, simulate, workprec, check and
+both languages' templates read it.
+
+Coefficients:
 
 One source for C and Fortran: every value is a double (the correctly rounded
 value of the published fraction or decimal) and the templates print it with
@@ -228,9 +233,83 @@ RODAS4 = Rosenbrock(
 
 # fmt: on
 
-TABLEAUS: dict[str, Explicit | Rosenbrock] = {
-    "rk4": RK4,
-    "dopri5": DOPRI5,
-    "dop853": DOP853,
-    "rodas4": RODAS4,
+
+@dataclass(frozen=True)
+class PairControl:
+    """An explicit pair's step size: h_new / h = safety err^-alpha
+    err_old^beta within [facmin, facmax] (Hairer's PI controller; beta = 0 is
+    the classic one)."""
+
+    alpha: float
+    beta: float
+    safety: float
+    facmin: float
+    facmax: float
+
+
+@dataclass(frozen=True)
+class Method:
+    """A compiled integrator a scene may ask for (scene key `integrators`)."""
+
+    name: str
+    doc: str
+    tableau: Explicit | Rosenbrock
+    control: PairControl | None = None
+    """The step-size control of an explicit pair; None for the others."""
+
+    @property
+    def fixed_step(self) -> bool:
+        """Takes a number of equal steps (steps=), not tolerances."""
+        return isinstance(self.tableau, Explicit) and not self.tableau.e
+
+    @property
+    def implicit(self) -> bool:
+        """Needs the scene's Jacobian."""
+        return isinstance(self.tableau, Rosenbrock)
+
+    @property
+    def pair(self) -> bool:
+        """An explicit embedded pair (the adaptive explicit methods)."""
+        return self.control is not None
+
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method("rk4", "Classic Runge-Kutta, order 4, fixed step.", RK4),
+        Method(
+            "dopri5",
+            "Dormand-Prince 5(4), adaptive, PI step-size control.",
+            DOPRI5,
+            # Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
+            PairControl(alpha=0.17, beta=0.04, safety=0.9, facmin=0.2, facmax=10.0),
+        ),
+        Method(
+            "dop853",
+            "DOP853 (Hairer's coefficients and error estimator), adaptive.",
+            DOP853,
+            # Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
+            PairControl(alpha=0.125, beta=0.0, safety=0.9, facmin=0.333, facmax=6.0),
+        ),
+        Method(
+            "rodas4",
+            "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
+            RODAS4,
+        ),
+    )
 }
+"""Every compiled integrator, in the order scenes list them by default."""
+
+NAMES: tuple[str, ...] = tuple(METHODS)
+ADAPTIVE: tuple[str, ...] = tuple(n for n, m in METHODS.items() if not m.fixed_step)
+
+SCIPY: tuple[str, ...] = ("RK45", "DOP853", "Radau", "LSODA")
+"""scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""
+
+
+def get(name: str) -> Method:
+    """A method by name; ValueError naming the known ones otherwise."""
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise ValueError(f"no integrator {name!r} (integrators: {', '.join(NAMES)})") from None

@@ -4,7 +4,7 @@ A scene names the parameters it folds into the code (numbers) and those it
 keeps as entries of p[] ("runtime"), the effects it needs (translation, rotor
 angle, torque law), optional output functions, target languages and a
 simulation setup. Validation is pydantic's; the physical checks of folded
-values are the same as the generated setup's (layout.SETUP_CODES).
+values are the same as the generated setup's (abi.SETUP_CODES).
 """
 
 from __future__ import annotations
@@ -31,7 +31,9 @@ from pydantic import (
     model_validator,
 )
 
+from gyrogen import methods
 from gyrogen.abi import (
+    CONTROLLER_PARAMETERS,
     DESCRIPTION_MAX_LENGTH,
     FOLDED_MAX,
     FOLDED_MIN,
@@ -52,8 +54,6 @@ _C_KEYWORDS = frozenset(
     "inline int long register restrict return short signed sizeof static struct switch typedef "
     "union unsigned void volatile while _Bool _Complex _Imaginary".split()
 )
-CONTROLLER_PARAMETERS = ("k", "w_ref")
-"""Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s)."""
 
 
 def _parameter(v: object) -> object:
@@ -127,7 +127,7 @@ class Simulate(_Strict):
     dt: Annotated[Number, Field(gt=0)] = 0.01
     """Output step of the trajectory: at most t_end, and at most MAX_OUTPUT_POINTS of them in it."""
     rtol: Annotated[Number, Field(lt=1)] = 1e-10
-    """Above layout.MIN_RTOL, as the compiled integrators require."""
+    """Above abi.MIN_RTOL, as the compiled integrators require."""
     atol: Annotated[Number, Field(gt=0)] = 1e-10
 
     @field_validator("rtol")
@@ -169,13 +169,9 @@ class Scene(_Strict):
     effects: Effects = Effects()
     outputs: Outputs = Outputs()
     targets: list[Literal["c", "fortran"]] = ["c", "fortran"]
-    integrators: list[Literal["rk4", "dopri5", "dop853", "rodas4"]] = [
-        "rk4",
-        "dopri5",
-        "dop853",
-        "rodas4",
-    ]
-    """Compiled integrators to render beside the RHS (rodas4 adds the Jacobian)."""
+    integrators: list[str] = Field(default_factory=lambda: list(methods.NAMES))
+    """Compiled integrators to render beside the RHS (gyrogen.methods; an
+    implicit one adds the Jacobian)."""
     attitude: Literal["euler312", "quaternion"] = "euler312"
     """3-1-2 Euler angles q1..q3 (singular at q2 = +-pi/2), or Euler parameters
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
@@ -202,6 +198,9 @@ class Scene(_Strict):
     @field_validator("integrators")
     @classmethod
     def _integrators(cls, v: list[str]) -> list[str]:
+        for i, name in enumerate(v):
+            if name not in methods.NAMES:
+                raise ValueError(f"[{i}] {name!r}: not one of {', '.join(methods.NAMES)}")
         if len(set(v)) != len(v):
             raise ValueError("list each integrator once")
         return v

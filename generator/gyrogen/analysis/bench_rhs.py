@@ -24,7 +24,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from gyrogen.codegen.generate import generate, write_atomic
+from gyrogen.codegen.generate import generate
+from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
 from gyrogen.runtime import build
 from gyrogen.scene import default

@@ -18,9 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.abi import SETUP_CODES, WARN_CONDITION
+from gyrogen import methods
+from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
 from gyrogen.oracle import scene_view
-from gyrogen.runtime.build import ODE_ATTITUDE_SINGULAR, ODE_CODES, Compiled
+from gyrogen.runtime.build import Compiled
 from gyrogen.scene import Scene
 
 STIFF = 1e3
@@ -124,7 +125,7 @@ def run_case(case: Case, comp: Compiled) -> Result:
     res.setup_code, c = comp.setup_code(p)
     if res.setup_code != 0:
         res.verdict = "refused"
-        res.diagnosis = f"setup refused the parameters: {SETUP_CODES[res.setup_code]}"
+        res.diagnosis = f"setup refused the parameters: {message(SETUP_CODES, res.setup_code)}"
         return res
     res.condition = float(c[-1])
     res.stiffness, res.recommended = stiffness(comp, c, x0, case.t_end)
@@ -135,7 +136,7 @@ def run_case(case: Case, comp: Compiled) -> Result:
     totals: dict[str, Any] = {}
     for t0, t1 in itertools.pairwise(ts):
         kw: dict[str, Any] = {"rtol": 1e-12, "atol": 1e-12, "max_steps": 10**8}
-        if res.method == "rk4":
+        if methods.get(res.method).fixed_step:
             kw = {"steps": max(1, case.steps // case.samples)}
         x, stats, code = comp.integrate(res.method, x, c, float(t0), float(t1), **kw)
         for k in ("accepted", "rejected", "rhs_calls", "jac_calls"):
@@ -159,15 +160,15 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
         where = f"integrator code {res.code} at t = {res.stats.get('t', math.nan):.6g} s"
         if res.code == ODE_ATTITUDE_SINGULAR:  # the integrator saw gimbal lock itself
             res.verdict = "singular"
-            res.diagnosis = f"{where}: {ODE_CODES[res.code]}"
+            res.diagnosis = f"{where}: {message(ODE_CODES, res.code)}"
         elif _near_gimbal_lock(scene, xs[-1]):  # another failure, near it
             res.verdict = "singular"
-            res.diagnosis = f"{where} ({ODE_CODES.get(res.code, '?')}) near gimbal lock: " + (
+            res.diagnosis = f"{where} ({message(ODE_CODES, res.code)}) near gimbal lock: " + (
                 'the 3-1-2 angles fail there, use attitude = "quaternion"'
             )
         else:
             res.verdict = "failed"
-            res.diagnosis = f"{where}: {ODE_CODES.get(res.code, 'unknown code')}"
+            res.diagnosis = f"{where}: {message(ODE_CODES, res.code)}"
         return
     res.drift = invariants(scene, p, xs, res.times)
     later, _ = stiffness(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)

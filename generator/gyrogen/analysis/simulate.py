@@ -32,9 +32,11 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from gyrogen.abi import STATES
-from gyrogen.codegen.generate import generate, make_dir, write_atomic
+from gyrogen import methods
+from gyrogen.abi import ODE_CODES, STATES, message
+from gyrogen.codegen.generate import generate
 from gyrogen.errors import GyrogenError, SceneError
+from gyrogen.files import make_dir, write_atomic
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
 from gyrogen.scene import Scene
@@ -193,10 +195,6 @@ class _Rhs:
         self.shown = 100
 
 
-COMPILED = ("rk4", "dopri5", "dop853", "rodas4")
-"""Methods run by the generated integrators (the scene must render them)."""
-
-
 def integrate_compiled(
     comp: build.Compiled,
     c: np.ndarray,
@@ -220,12 +218,12 @@ def integrate_compiled(
     t0 = time.perf_counter()
     for a, b in itertools.pairwise(samples):
         kw: dict[str, Any] = {"rtol": tol[0], "atol": tol[1], "max_steps": settings.max_nfev}
-        if method == "rk4":
+        if methods.get(method).fixed_step:
             kw = {"steps": 100}
         x, stats, code = comp.integrate(method, x, c, float(a), float(b), **kw)
         nfev += int(stats["rhs_calls"])
         if code != 0:
-            why = build.ODE_CODES.get(code, f"code {code}")
+            why = message(ODE_CODES, code)
             raise GyrogenError(f"{method} failed at t = {stats['t']:.6g} s: {why}")
         y.append(x.copy())
         pct = int(100 * b / grid[-1])
@@ -255,7 +253,7 @@ def integrate(
 ) -> Trajectory:
     """solve_ivp from 0 to the grid's end, sampled on the grid and the
     quadrature nodes; a failure is one line with the time reached."""
-    if settings.method in COMPILED:
+    if settings.method in methods.NAMES:
         return integrate_compiled(comp, c, x0, settings, tol, advance)
     grid = output_grid(settings.t_end, settings.dt)
     f = _Rhs(comp, c, grid[-1], advance, settings.max_nfev)
@@ -475,7 +473,7 @@ def summary_lines(res: Result) -> list[str]:
         f"  final time      {traj.t[-1]:g} s ({len(traj.t)} points, dt {res.settings.dt:g} s)",
         f"  nfev            {traj.nfev}",
         f"  wall time       {traj.wall:.3f} s "
-        + ("(compiled integrator)" if res.settings.method in COMPILED else "(solve_ivp)"),
+        + ("(compiled integrator)" if res.settings.method in methods.NAMES else "(solve_ivp)"),
         f"  |H| in N        relative drift {worst['H_norm_relative_drift']:.2e} "
         f"(vector H: {worst['H_vector_relative_drift']:.2e})",
         f"  energy balance  K - K(0) - int P dt: {worst['energy_balance_relative_residual']:.2e}"

@@ -20,14 +20,14 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from gyrogen import methods
+from gyrogen.abi import ODE_CODES, message
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import scaled_error
-from gyrogen.runtime.build import ODE_CODES, Compiled
+from gyrogen.runtime.build import Compiled
 from gyrogen.scene import Scene
 
-ADAPTIVE = ("dopri5", "dop853", "rodas4")
-SCIPY = ("RK45", "DOP853", "Radau", "LSODA")
 REF_TOL = 1e-13
 SLOW = 2.0
 """A scipy run slower than this (s) is timed once."""
@@ -122,7 +122,7 @@ def reference(prob: Problem) -> None:
         "dop853", prob.x0, prob.c, 0.0, prob.t1, rtol=REF_TOL, atol=REF_TOL
     )
     if code != 0:
-        why = ODE_CODES.get(code, f"code {code}")
+        why = message(ODE_CODES, code)
         raise GyrogenError(
             f"{prob.scene.name}: reference DOP853 failed at t = {stats['t']:.6g} s: {why}"
         )
@@ -170,7 +170,7 @@ def compiled_runs(prob: Problem, cfg: Config, progress: Callable[[str], None]) -
     for backend, comp in prob.compiled.items():
         for method in prob.scene.integrators:
             progress(f"{method} ({backend})")
-            settings = cfg.rk4_steps if method == "rk4" else cfg.tolerances
+            settings = cfg.rk4_steps if methods.get(method).fixed_step else cfg.tolerances
             for s in settings:
                 runs.append(_compiled_run(prob, comp, backend, method, s, cfg.repeats))
     return runs
@@ -179,7 +179,7 @@ def compiled_runs(prob: Problem, cfg: Config, progress: Callable[[str], None]) -
 def _compiled_run(
     prob: Problem, comp: Compiled, backend: str, method: str, setting: float, repeats: int
 ) -> Run:
-    if method == "rk4":
+    if methods.get(method).fixed_step:
         kw: dict[str, Any] = {"steps": int(setting)}
     else:
         kw = {"rtol": setting, "atol": setting, "max_steps": 10**8}
@@ -203,7 +203,7 @@ def _raw_call(comp: Compiled, method: str, prob: Problem, kw: dict[str, Any]) ->
     )
     stats = ffi.new("gyrogen_stats *")
     x0, t1 = prob.x0, prob.t1
-    if method == "rk4":
+    if methods.get(method).fixed_step:
         steps = kw["steps"]
 
         def run_rk4() -> Any:
@@ -230,10 +230,10 @@ def scipy_runs(
     rhs: Callable[[float, np.ndarray], np.ndarray],
     cfg: Config,
     progress: Callable[[str], None],
-    methods: tuple[str, ...] = SCIPY,
+    which: tuple[str, ...] = methods.SCIPY,
 ) -> list[Run]:
     runs = []
-    for method in methods:
+    for method in which:
         progress(f"solve_ivp {method} ({backend})")
         for tol in cfg.scipy_tolerances:
             run = _scipy_run(prob, backend, rhs, method, tol, cfg)

@@ -19,8 +19,9 @@ from gyrogen.analysis import workprec
 from gyrogen.analysis.bench_rhs import machine, pydy_rhs
 from gyrogen.analysis.simulate import runtime_values
 from gyrogen.analysis.workprec import Config, Problem, Run
-from gyrogen.codegen.generate import generate, write_atomic
+from gyrogen.codegen.generate import generate
 from gyrogen.errors import SceneError
+from gyrogen.files import write_atomic
 from gyrogen.runtime import build
 from gyrogen.scene import Scene
 
@@ -75,7 +76,7 @@ def _pydy_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[R
     def f(t: float, x: np.ndarray) -> np.ndarray:
         return np.array(rhs(x, t, p), copy=True)  # PyDy reuses its output buffer
 
-    return workprec.scipy_runs(prob, "PyDy cython RHS", f, cfg, progress, methods=("DOP853",))
+    return workprec.scipy_runs(prob, "PyDy cython RHS", f, cfg, progress, which=("DOP853",))
 
 
 def summary(prob: Problem, runs: list[Run]) -> list[str]:

@@ -13,26 +13,20 @@ import sympy as sm
 import gyrogen
 from gyrogen.abi import (
     GIMBAL_LOCK_COS,
-    INTEGRATORS,
     MAX_CONDITION,
     MIN_RTOL,
+    OUTPUT_DOC,
     PARAMETER_DOC,
-    SETUP_CODE_NAMES,
     SETUP_CODES,
     STATE_DOC,
     TRIANGLE_SLACK,
 )
+from gyrogen.methods import METHODS, Method
 from gyrogen.scene import Scene
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
 from gyrogen.symbolic.specialize import specialize
-
-OUTPUT_DOC = {
-    "kinetic_energy": ("J", "kinetic energy of the system"),
-    "angular_momentum": ("kg m^2/s", "angular momentum about AB*, N components h[0..2]"),
-    "power": ("W", "power of the motor torque, T (u4 - u2)"),
-}
 
 
 @dataclass(frozen=True)
@@ -47,12 +41,6 @@ class Row:
 class Code:
     value: int
     macro: str
-    doc: str
-
-
-@dataclass(frozen=True)
-class Method:
-    name: str
     doc: str
 
 
@@ -127,7 +115,8 @@ class Unit:
 
     @property
     def methods(self) -> list[Method]:
-        return [Method(m, INTEGRATORS[m]) for m in self.scene.integrators]
+        """The scene's integrators, from the registry (gyrogen.methods)."""
+        return [METHODS[m] for m in self.scene.integrators]
 
     @property
     def outputs(self) -> list[Output]:
@@ -170,7 +159,7 @@ class Unit:
 
     @property
     def codes(self) -> list[Code]:
-        return [Code(v, f"{self.macro}_{SETUP_CODE_NAMES[v]}", SETUP_CODES[v]) for v in SETUP_CODES]
+        return [Code(c.value, f"{self.macro}_{c.name}", c.message) for c in SETUP_CODES]
 
     @property
     def cond_index(self) -> int:

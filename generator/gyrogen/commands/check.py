@@ -35,7 +35,8 @@ def check(
     .toml) to check its own simulate settings."""
     from gyrogen.analysis import check_cases, check_engine
     from gyrogen.codegen.context import build_id
-    from gyrogen.codegen.generate import generate, write_atomic
+    from gyrogen.codegen.generate import generate
+    from gyrogen.files import write_atomic
     from gyrogen.runtime import build
 
     suite = check_cases.cases(quick)

@@ -60,7 +60,9 @@ def generate(
     compared with the numpy reference at a sample of states and parameter
     sets; on any failure nothing is written and the exit code is 1.
     --no-check skips this."""
-    from gyrogen.codegen.generate import can_write, check, render_all, unit_of, write_atomic
+    from gyrogen.codegen.generate import render_all, unit_of
+    from gyrogen.files import can_write, write_atomic
+    from gyrogen.oracle.compare import check_rendered
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
     units = []
@@ -73,7 +75,7 @@ def generate(
         files = render_all(unit, lib)
         if not no_check:
             can_write(target, files)  # before the check's seconds, not after
-            seconds = check(unit, files)
+            seconds = check_rendered(unit, files)
             click.echo(
                 f"checked {scene.name}: {', '.join(scene.targets)} compiled and compared "
                 f"with the reference in {seconds:.1f} s"

@@ -22,8 +22,8 @@ if TYPE_CHECKING:
 @click.option("--force", is_flag=True, help="Overwrite an existing file.")
 def new(name: str, out: Path | None, force: bool) -> None:
     """Write a commented starter scene NAME.toml to edit."""
-    from gyrogen.codegen.generate import write_atomic
     from gyrogen.codegen.render import render
+    from gyrogen.files import write_atomic
     from gyrogen.scene import parse
 
     if not name.isidentifier() or keyword.iskeyword(name) or not name.isascii():

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import click
 
+from gyrogen import methods
 from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_RHS_CALLS
 from gyrogen.commands.options import POSITIVE, SCENE
 from gyrogen.scene import Scene, check_output_grid
@@ -38,7 +39,7 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 )
 @click.option(
     "--method",
-    type=click.Choice(["DOP853", "Radau", "LSODA", "RK45", "rk4", "dopri5", "dop853", "rodas4"]),
+    type=click.Choice([*methods.SCIPY, *methods.NAMES]),
     default="DOP853",
     show_default=True,
     help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators.",

@@ -20,15 +20,19 @@ to JAC_TOLERANCE of its row's sizes (a wrong entry is wrong by O(1)).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from gyrogen.abi import PARAMETERS
+from gyrogen.codegen.context import Unit
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import sampling, scene_view
-from gyrogen.runtime.build import Compiled
+from gyrogen.runtime.build import Compiled, build
 from gyrogen.scene import Scene
 
 TOLERANCE = 1e-12
@@ -311,3 +315,40 @@ def _check_refusals(
                     report.refusal_failures.append(
                         f"{b.language} setup returned {code} for {what} (expected {expected})"
                     )
+
+
+CHECK_STATES = 200
+CHECK_PARAMS = 5
+CHECK_ILL = 2
+"""What `gyrogen generate` compares before it writes: states x parameter
+sets (well-conditioned, ill-conditioned), as `gyrogen verify` does in full."""
+
+
+def check_rendered(unit: Unit, files: Mapping[str, str]) -> float:
+    """Compile every target in files (C with the strict flags, Fortran with
+    -std=f2008 -Werror) and compare the rhs, outputs and Jacobian with the
+    numpy reference; raise GyrogenError naming the scene and what differs.
+    Returns the seconds it took."""
+    t0 = time.perf_counter()
+    name = unit.scene.name
+    with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
+        for file, text in files.items():
+            (Path(tmp) / file).write_text(text, encoding="utf-8")
+        try:
+            backends = [build(Path(tmp), lang) for lang in unit.scene.targets]
+        except GyrogenError as exc:
+            raise GyrogenError(f"{name}: generated code that does not compile: {exc}") from exc
+        given = given_parameters(unit.scene)
+        report = compare(
+            backends, unit.scene, CHECK_STATES, CHECK_PARAMS, CHECK_ILL, seed=0, given=given
+        )
+    if report.refusal_failures:
+        raise GyrogenError(f"{name}: the generated setup differs: {report.refusal_failures[0]}")
+    failed = [r for r in report.rows if not r.passed]
+    if failed:
+        r = max(failed, key=lambda r: r.error / r.bar)
+        raise GyrogenError(
+            f"{name}: the generated code differs from the reference: {r.pair}, error "
+            f"{r.error:.2e} above {r.bar:.2e} (cond {r.worst_condition:.3g})"
+        )
+    return time.perf_counter() - t0

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gyrogen.abi import PARAMETERS, STATES
+from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
 from gyrogen.oracle import reference, sampling
-from gyrogen.scene import CONTROLLER_PARAMETERS, Scene
+from gyrogen.scene import Scene
 
 _P = {n: i for i, n in enumerate(PARAMETERS)}
 

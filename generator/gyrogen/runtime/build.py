@@ -31,6 +31,7 @@ from typing import Any, Literal
 import cffi
 import numpy as np
 
+from gyrogen import abi, methods
 from gyrogen.abi import COMPILER_LOG_LINES
 from gyrogen.codegen.render import render
 from gyrogen.errors import BuildError
@@ -49,22 +50,6 @@ C_FLAGS = (
 )
 FORTRAN_FLAGS = ("-std=f2008", "-O2", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Werror")
 _PACKAGES = {"gcc": "gcc", "gfortran": "gfortran"}
-
-STATS_FIELDS = ("t", "h", "accepted", "rejected", "rhs_calls", "jac_calls", "decompositions")
-"""The fields of <prefix>_stats (gyrogen_stats in the cffi glue), in order."""
-ODE_ATTITUDE_SINGULAR = 6
-"""<PREFIX>_ODE_ERR_ATTITUDE_SINGULAR: 3-1-2 angles at gimbal lock (layout.GIMBAL_LOCK_COS)."""
-ODE_CODES = {
-    0: "ok",
-    1: "step size underflow",
-    2: "max_steps reached",
-    3: "non-finite state or derivative",
-    4: "singular iteration matrix",
-    5: "bad argument",
-    ODE_ATTITUDE_SINGULAR: 'the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"',
-}
-"""The integrators' return codes (<PREFIX>_ODE_* in <prefix>_ode.h)."""
-
 
 CACHE_FORMAT = "2"
 """Part of every cache key. 2: entries carry MARKER, so the entries of
@@ -191,14 +176,15 @@ class Compiled:
         steps: int | None = None,
     ) -> tuple[np.ndarray, dict[str, float | int], int]:
         """One compiled integration of x0 (nx,) from t0 to t1: the final state
-        (the last good one on failure), the statistics (STATS_FIELDS) and the
-        return code (ODE_CODES). rk4 takes `steps`; the others rtol, atol, h0
+        (the last good one on failure), the statistics (abi.STATS_FIELDS) and the
+        return code (abi.ODE_CODES). rk4 takes `steps`; the others rtol, atol, h0
         (<= 0: automatic) and max_steps."""
         x, stats, codes = self.integrate_batch(
             method, np.reshape(x0, (1, -1)), c, t0, t1,
             rtol=rtol, atol=atol, h0=h0, max_steps=max_steps, steps=steps,
         )  # fmt: skip
-        return x[0], {name: stats[name][0].item() for name in STATS_FIELDS}, int(codes[0])
+        fields = (f.name for f in abi.STATS_FIELDS)
+        return x[0], {name: stats[name][0].item() for name in fields}, int(codes[0])
 
     def integrate_batch(
         self,
@@ -216,14 +202,17 @@ class Compiled:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """integrate() for many initial states (n, nx) in one compiled call:
         final states (n, nx), statistics as a structured array (n,) with the
-        fields STATS_FIELDS, and return codes (n,)."""
+        fields of abi.STATS_FIELDS, and return codes (n,)."""
         if method not in self.manifest["integrators"]:
             raise ValueError(
                 f"no integrator {method!r} in this build "
                 f"(scene integrators: {', '.join(self.manifest['integrators'])})"
             )
-        if (steps is None) == (method == "rk4"):
-            raise ValueError("rk4 takes steps= and only rk4 does")
+        fixed = methods.get(method).fixed_step
+        if (steps is None) == fixed:
+            raise ValueError(
+                f"{method}: steps= goes with the fixed-step methods, and only with them"
+            )
         x = np.array(x0s, dtype=np.float64, order="C", ndmin=2)  # a copy: integrated in place
         if x.ndim != 2 or x.shape[1] != self.nx:
             raise ValueError(f"initial states must have shape (n, {self.nx}), not {x.shape}")
@@ -235,11 +224,10 @@ class Compiled:
             self.ffi.from_buffer("double[]", x),
             self.ffi.from_buffer("double[]", np.ascontiguousarray(c, dtype=np.float64)),
         )
-        args: tuple[Any, ...]
-        if method == "rk4":
-            args = (n, t0, t1, steps, *tail)
-        else:
-            args = (n, t0, t1, *tail, rtol, atol, h0, max_steps)
+        tolerances = (rtol, atol, h0, max_steps)
+        args: tuple[Any, ...] = (
+            (n, t0, t1, steps, *tail) if fixed else (n, t0, t1, *tail, *tolerances)
+        )
         fn(
             *args,
             self.ffi.from_buffer("gyrogen_stats[]", stats),
@@ -251,11 +239,12 @@ class Compiled:
     def _stats_dtype(self) -> np.dtype:
         """gyrogen_stats as numpy sees it, offsets and size from cffi."""
         long = f"i{self.ffi.sizeof('long')}"
+        fields = abi.STATS_FIELDS
         return np.dtype(
             {
-                "names": list(STATS_FIELDS),
-                "formats": ["f8", "f8"] + [long] * (len(STATS_FIELDS) - 2),
-                "offsets": [self.ffi.offsetof("gyrogen_stats", f) for f in STATS_FIELDS],
+                "names": [f.name for f in fields],
+                "formats": ["f8" if f.ctype == "double" else long for f in fields],
+                "offsets": [self.ffi.offsetof("gyrogen_stats", f.name) for f in fields],
                 "itemsize": self.ffi.sizeof("gyrogen_stats"),
             }
         )
@@ -337,7 +326,11 @@ def _plan(source_dir: Path, language: Language) -> _Plan:
         "prefix": prefix,
         "setup": names["setup"],
         "functions": [names[f] for f in per_call],
-        "methods": [(m, names[m], names[f"{m}_batch"]) for m in manifest["integrators"]],
+        "methods": [
+            (m, names[m], names[f"{m}_batch"], methods.get(m).fixed_step)
+            for m in manifest["integrators"]
+        ],
+        "abi": abi,
         "nx": manifest["nx"],
     }
     glue = render("cffi/glue.c.jinja", **ctx)

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import sympy as sm
 
-from gyrogen.scene import CONTROLLER_PARAMETERS, Scene
+from gyrogen.abi import CONTROLLER_PARAMETERS
+from gyrogen.scene import Scene
 from gyrogen.symbolic import equations, model
 from gyrogen.symbolic.equations import Equations
 
 CHECKED = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J")
-"""Parameters the generated setup checks (layout.SETUP_CODES)."""
+"""Parameters the generated setup checks (abi.SETUP_CODES)."""
 
 
 def _symbols(scene: Scene) -> dict[str, sm.Symbol]:

@@ -6,10 +6,11 @@ import sympy as sm
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 
+from gyrogen import abi
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
-from gyrogen.methods import TABLEAUS
+from gyrogen.methods import METHODS
 from gyrogen.symbolic.hoist import constants
 
 
@@ -66,7 +67,8 @@ def files(unit: Unit) -> dict[str, str]:
         "outputs": outputs,
         "jac": jacobian(unit, lambda a, i: f"{a}[{i}]", assign),
         "methods": unit.methods,
-        "tableaus": TABLEAUS,
+        "tableaus": {name: m.tableau for name, m in METHODS.items()},
+        "abi": abi,
     }
     out = {
         f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),

@@ -5,11 +5,12 @@ from __future__ import annotations
 import sympy as sm
 from sympy.printing.fortran import FCodePrinter
 
+from gyrogen import abi
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
-from gyrogen.methods import TABLEAUS
+from gyrogen.methods import METHODS
 from gyrogen.symbolic.hoist import constants
 
 
@@ -70,7 +71,8 @@ def files(unit: Unit) -> dict[str, str]:
         "outputs": outputs,
         "jac": jac,
         "methods": unit.methods,
-        "tableaus": TABLEAUS,
+        "tableaus": {name: m.tableau for name, m in METHODS.items()},
+        "abi": abi,
     }
     out = {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}
     if unit.methods:

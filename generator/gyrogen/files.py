@@ -1,0 +1,154 @@
+"""Writing files: all or nothing, with the modes open() would give them.
+
+Every command that writes (generate, simulate, bench, check --plots, new)
+goes through write_atomic; can_write checks the way is clear first.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import tempfile
+from collections.abc import Iterable, Mapping
+from contextlib import suppress
+from functools import cache
+from pathlib import Path
+
+from gyrogen.errors import GyrogenError
+
+NEW_FILE_MODE = 0o666
+"""What open(path, "w") asks for a new file; the umask takes its bits away."""
+_PROC_STATUS = Path("/proc/self/status")
+
+
+def umask() -> int:
+    """The process's umask, read without changing it: the Umask line of
+    /proc/self/status (Linux 4.7 and later), read anew each time. Elsewhere
+    os.umask is the only way, and it sets the mask while reading it: done
+    once per process (_umask_once), so the window where another thread
+    could create a file under the wrong mask opens only once."""
+    try:
+        with _PROC_STATUS.open() as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return _umask_once()
+
+
+@cache
+def _umask_once() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def make_dir(out: Path) -> None:
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise GyrogenError(f"cannot create output directory {out}: {exc.strerror}") from exc
+
+
+def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
+    """Write every file into out, or none. A target that is not a regular
+    file (a directory, a FIFO) is refused before anything is written. Each
+    file goes to a temporary name in out first, with the mode open() would
+    give it (NEW_FILE_MODE less the umask); then each target's old version is
+    moved aside to a temporary name and the new one renamed in. A failure
+    anywhere (a full disk, a refused rename, an interrupt) puts every old
+    version back and removes the new files. Text is UTF-8 as written."""
+    make_dir(out)
+    targets = can_write(out, files)
+    staged: dict[Path, Path] = {}
+    saved: dict[Path, Path] = {}
+    placed: list[Path] = []
+    current = out
+    try:
+        for name, data in files.items():
+            current = targets[name]
+            staged[current] = _stage(current, data)
+        for target, tmp in staged.items():
+            current = target
+            if os.path.lexists(target):
+                saved[target] = _move_aside(target)
+            os.replace(tmp, target)
+            placed.append(target)
+    except BaseException as exc:
+        _roll_back(placed, saved)
+        _remove(staged.values())
+        if isinstance(exc, OSError):
+            raise GyrogenError(f"cannot write {current}: {exc.strerror or exc}") from exc
+        raise
+    _remove(saved.values())
+
+
+def can_write(out: Path, names: Iterable[str]) -> dict[str, Path]:
+    """Check that each named file can be put in out (nothing in the way that
+    a file cannot replace); the target paths by name."""
+    existing = next(d for d in (out, *out.parents) if os.path.lexists(d))
+    if not existing.is_dir():
+        raise GyrogenError(f"cannot create output directory {out}: Not a directory")
+    targets = {name: out / name for name in names}
+    for target in targets.values():
+        if why := _obstacle(target):
+            raise GyrogenError(f"cannot write {target}: {why}")
+    return targets
+
+
+def _obstacle(target: Path) -> str | None:
+    """Why target cannot be replaced by a file, or None (absent, a regular
+    file, or a symbolic link, which is replaced itself)."""
+    try:
+        mode = os.lstat(target).st_mode
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        return exc.strerror
+    if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+        return None
+    return "Is a directory" if stat.S_ISDIR(mode) else "Not a regular file"
+
+
+def _stage(target: Path, data: str | bytes) -> Path:
+    """data in a new temporary file beside target, with the mode of a new file."""
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".new", dir=target.parent)
+    tmp = Path(name)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), NEW_FILE_MODE & ~umask())
+            fh.write(data.encode("utf-8") if isinstance(data, str) else data)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def _move_aside(target: Path) -> Path:
+    """Rename target to a fresh temporary name beside it; that name."""
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent)
+    os.close(fd)
+    try:
+        os.replace(target, name)
+    except BaseException:
+        os.unlink(name)
+        raise
+    return Path(name)
+
+
+def _roll_back(placed: list[Path], saved: dict[Path, Path]) -> None:
+    """Best effort: each target as it was before write_atomic began."""
+    for target in placed:
+        if target not in saved:
+            with suppress(OSError):
+                target.unlink()
+    for target, old in saved.items():
+        with suppress(OSError):
+            os.replace(old, target)
+
+
+def _remove(paths: Iterable[Path]) -> None:
+    for path in paths:
+        with suppress(OSError):
+            path.unlink(missing_ok=True)
