@@ -31,7 +31,7 @@ from pydantic import (
     model_validator,
 )
 
-from gyrogen import methods
+from gyrogen import methods, physics
 from gyrogen.abi import (
     CONTROLLER_PARAMETERS,
     DESCRIPTION_MAX_LENGTH,
@@ -48,6 +48,7 @@ from gyrogen.abi import (
     TRIANGLE_SLACK,
 )
 from gyrogen.errors import SceneError
+from gyrogen.physics import coupled_determinant, lumped_inertias
 
 _C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if "
@@ -256,6 +257,8 @@ class Scene(_Strict):
 
 
 QUATERNION = ("e0", "e1", "e2", "e3")
+LUMPED_FROM = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
+"""The parameters physics.lumped_inertias takes, in its order."""
 
 
 def check_name(v: str) -> None:
@@ -368,10 +371,9 @@ def _check_physics(p: dict[str, Value]) -> None:
         raise ValueError(f"parameters.J: rotor needs J <= 2 I (I = {v['I']}, J = {v['J']})")
     coupled = ("m_a", "m_b", "I11", "I33", "I13", "I", "l1", "l3")
     if known(*coupled):
-        from gyrogen.oracle.sampling import lumped_condition  # numpy: only when needed
-
-        full = [v.get(n, 1.0) for n in PARAMETERS]
-        cond = float(lumped_condition(full))
+        a11, _, a33, a13 = lumped_inertias(*(v.get(n, 0.0) for n in LUMPED_FROM))
+        det = coupled_determinant(*(v[n] for n in coupled))
+        cond = physics.condition(a11, a13, a33, det, math.sqrt) if det > 0 else math.inf
         if not cond <= MAX_CONDITION:
             raise ValueError(
                 f"parameters: the mass matrix's coupled block has condition number "

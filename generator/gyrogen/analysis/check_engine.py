@@ -21,6 +21,7 @@ import numpy as np
 from gyrogen import methods
 from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
 from gyrogen.oracle import scene_view
+from gyrogen.physics import lumped_inertias
 from gyrogen.runtime.build import Compiled
 from gyrogen.scene import Scene
 
@@ -202,11 +203,8 @@ def _spin_verdict(scene: Scene, xs: np.ndarray) -> str:
 
 def spin_prediction(v: dict[str, float], omega: float, u4: float) -> str:
     """NOTES.md: stable iff (H_a - I_t1 Omega)(H_a - I_t3 Omega) > 0."""
-    mu = v["m_a"] * v["m_b"] / (v["m_a"] + v["m_b"])
-    a11 = v["I11"] + v["I"] + mu * v["l3"] ** 2
-    a33 = v["I33"] + v["I"] + mu * v["l1"] ** 2
-    a13 = v["I13"] - mu * v["l1"] * v["l3"]
-    a22 = v["I22"] + mu * (v["l1"] ** 2 + v["l3"] ** 2)
+    names = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
+    a11, a22, a33, a13 = lumped_inertias(*(v[n] for n in names))
     it1, it3 = np.linalg.eigvalsh([[a11, a13], [a13, a33]])
     h_a = a22 * omega + v["J"] * u4
     return "stable" if (h_a - it1 * omega) * (h_a - it3 * omega) > 0 else "unstable"

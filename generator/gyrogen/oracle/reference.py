@@ -137,7 +137,7 @@ def rhs(x: ArrayLike, p: ArrayLike) -> Array:
     return out
 
 
-def _lumped(pa: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
+def lumped(pa: Array) -> tuple[Array, Array, Array, Array, Array, Array]:
     """Lumped inertia scalars of NOTES.md: (I~11, I~22, I~33, I~13, J, M), via mu = m_a m_b / M."""
     m_a, m_b, I11, I22, I33, I13, I, J, l1, l3 = (pa[..., k] for k in range(10))
     M = m_a + m_b
@@ -158,7 +158,7 @@ def angular_momentum_n(x: ArrayLike, p: ArrayLike) -> Array:
     """
     xa, pa, batch = _split(x, p)
     u1, u2, u3, u4 = (xa[..., 7 + k] for k in range(4))
-    t11, t22, t33, t13, J, _ = _lumped(pa)
+    t11, t22, t33, t13, J, _ = lumped(pa)
     h = np.empty((*batch, 3))
     h[..., 0] = t11 * u1 + t13 * u3
     h[..., 1] = t22 * u2 + J * u4
@@ -174,7 +174,7 @@ def kinetic_energy(x: ArrayLike, p: ArrayLike) -> Array:
     """
     xa, pa, batch = _split(x, p)
     u1, u2, u3, u4, u5, u6, u7 = (xa[..., 7 + k] for k in range(7))
-    t11, t22, t33, t13, J, M = _lumped(pa)
+    t11, t22, t33, t13, J, M = lumped(pa)
     rot = t11 * u1**2 + t22 * u2**2 + t33 * u3**2 + 2.0 * t13 * u1 * u3
     K = 0.5 * (rot + J * u4**2 + M * (u5**2 + u6**2 + u7**2))
     return np.asarray(np.broadcast_to(K, batch), dtype=np.float64)

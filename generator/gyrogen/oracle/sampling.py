@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from gyrogen import abi
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
+from gyrogen.oracle.reference import lumped
 
 __all__ = ["invalid_parameters", "random_parameters", "random_states", "setup_code"]
 
@@ -115,9 +116,7 @@ def _condition(pa: Array) -> Array:
     l1, l3 = pa[..., _P["l1"]], pa[..., _P["l3"]]
     mu = m_a * m_b / (m_a + m_b)
     i_rot = pa[..., _P["I"]]
-    a11 = pa[..., _P["I11"]] + i_rot + mu * l3**2
-    a33 = pa[..., _P["I33"]] + i_rot + mu * l1**2
-    a13 = pa[..., _P["I13"]] - mu * l1 * l3
+    a11, _, a33, a13, _, _ = lumped(pa)  # the reference's lumped inertias
     half_gap = np.sqrt(0.25 * (a11 - a33) ** 2 + a13**2)
     largest = 0.5 * (a11 + a33) + half_gap
     # largest / smallest with smallest = det / largest (mean - half_gap would

@@ -20,6 +20,7 @@ import sympy as sm
 import sympy.physics.mechanics as me
 
 from gyrogen.abi import PARAMETERS
+from gyrogen.physics import lumped_inertias
 
 
 @dataclass(frozen=True)
@@ -192,11 +193,6 @@ def lumped_values() -> dict[sm.Symbol, sm.Expr]:
     """The paper's lumped inertia scalars in terms of the parameters (NOTES.md)."""
     s = symbols()
     m_a, m_b, I11, I22, I33, I13, I, _J, l1, l3, _g, _T = s.params
-    mu = m_a * m_b / (m_a + m_b)
-    IA11, IA22, IA33, IA13 = s.lumped
-    return {
-        IA11: I11 + I + mu * l3**2,
-        IA22: I22 + mu * (l1**2 + l3**2),
-        IA33: I33 + I + mu * l1**2,
-        IA13: I13 - mu * l1 * l3,
-    }
+    return dict(
+        zip(s.lumped, lumped_inertias(m_a, m_b, I11, I22, I33, I13, I, l1, l3), strict=True)
+    )

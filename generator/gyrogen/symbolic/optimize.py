@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import sympy as sm
 
+from gyrogen import physics
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.hoist import Hoister, hoist
 from gyrogen.symbolic.literals import as_double, writable_form
@@ -180,9 +181,7 @@ def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     constant of setup. lambda_min = det / lambda_max: the difference of the
     two terms of lambda_min would cancel for a badly conditioned block
     (det: the block's determinant in a form that does not)."""
-    a, b, d = block[0, 0], block[0, 1], block[1, 1]
-    big = (a + d) / 2 + sm.sqrt((a - d) ** 2 / 4 + b**2)
-    cond = big**2 / det
+    cond = physics.condition(block[0, 0], block[0, 1], block[1, 1], det, sm.sqrt)
     return as_double(cond, integers=False) if cond.is_number else cond
 
 
