@@ -156,6 +156,37 @@ def message(codes: tuple[Code, ...], value: int) -> str:
 
 
 @dataclass(frozen=True)
+class Signature:
+    """A generated function's C signature (the Fortran bind(C) one takes the
+    same arguments under the same names)."""
+
+    returns: str
+    args: tuple[tuple[str, str], ...]
+    """(C type, name) in order."""
+
+    def c(self, name: str) -> str:
+        """'void name(double t, const double *x, ...)'."""
+        args = ", ".join(t + n if t.endswith("*") else f"{t} {n}" for t, n in self.args)
+        return f"{self.returns} {name}({args})"
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(n for _, n in self.args)
+
+
+_PER_CALL = (("double", "t"), ("const double *", "x"), ("const double *", "c"))
+SIGNATURES: dict[str, Signature] = {
+    "setup": Signature("int", (("const double *", "p"), ("double *", "c"))),
+    "rhs": Signature("void", (*_PER_CALL, ("double *", "dxdt"))),
+    "output": Signature("void", (*_PER_CALL, ("double *", "out"))),
+    "jac": Signature("void", (*_PER_CALL, ("double *", "J"))),
+}
+"""setup, rhs, each output function (energy, momentum, power) and the Jacobian."""
+SETUP_RESULT = "status"
+"""The name of setup's result in Fortran (a function with result(status))."""
+
+
+@dataclass(frozen=True)
 class StatsField:
     """A field of <prefix>_stats (and of the Fortran bind(C) type, and of
     gyrogen_stats in the cffi glue), in order."""

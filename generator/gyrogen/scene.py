@@ -31,13 +31,12 @@ from pydantic import (
     model_validator,
 )
 
-from gyrogen import methods, physics
+from gyrogen import methods
 from gyrogen.abi import (
     CONTROLLER_PARAMETERS,
     DESCRIPTION_MAX_LENGTH,
     FOLDED_MAX,
     FOLDED_MIN,
-    MAX_CONDITION,
     MAX_OUTPUT_POINTS,
     MAX_SCENE_BYTES,
     MIN_RTOL,
@@ -45,10 +44,9 @@ from gyrogen.abi import (
     PARAMETERS,
     QUATERNION_NORM_SLACK,
     STATES,
-    TRIANGLE_SLACK,
 )
 from gyrogen.errors import SceneError
-from gyrogen.physics import coupled_determinant, lumped_inertias
+from gyrogen.setup_checks import first_failure
 
 _C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if "
@@ -257,8 +255,6 @@ class Scene(_Strict):
 
 
 QUATERNION = ("e0", "e1", "e2", "e3")
-LUMPED_FROM = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
-"""The parameters physics.lumped_inertias takes, in its order."""
 
 
 def check_name(v: str) -> None:
@@ -342,43 +338,12 @@ def _why_not(name: str, effects: Effects) -> str:
 
 
 def _check_physics(p: dict[str, Value]) -> None:
-    """The generated setup's checks, for the values folded at generation."""
-    v = {k: x for k, x in p.items() if not isinstance(x, str)}
-
-    def known(*names: str) -> bool:
-        return all(n in v for n in names)
-
-    for n in ("m_a", "m_b", "I", "J"):
-        if n in v and v[n] <= 0:
-            raise ValueError(f"parameters.{n}: must be positive (got {v[n]})")
-    if known("I11", "I22", "I33", "I13"):
-        i11, i22, i33, i13 = v["I11"], v["I22"], v["I33"], v["I13"]
-        if min(i11, i22, i33) <= 0 or i11 * i33 - i13 * i13 <= 0:
-            raise ValueError(
-                "parameters.I11, I22, I33, I13: carrier inertia is not positive definite"
-            )
-        gap = math.hypot(0.5 * (i11 - i33), i13)  # no OverflowError, unlike ** 2
-        moments = sorted([i22, 0.5 * (i11 + i33) + gap, 0.5 * (i11 + i33) - gap])
-        if not all(math.isfinite(m) for m in moments):
-            raise ValueError("parameters.I11, I22, I33, I13: the principal moments overflow")
-        if moments[2] - moments[0] - moments[1] > TRIANGLE_SLACK * sum(moments):
-            shown = ", ".join(f"{m:.6g}" for m in moments)
-            raise ValueError(
-                f"parameters.I11, I22, I33, I13: principal moments ({shown}) "
-                "violate the triangle inequality"
-            )
-    if known("I", "J") and v["J"] - 2 * v["I"] > TRIANGLE_SLACK * (2 * v["I"] + v["J"]):
-        raise ValueError(f"parameters.J: rotor needs J <= 2 I (I = {v['I']}, J = {v['J']})")
-    coupled = ("m_a", "m_b", "I11", "I33", "I13", "I", "l1", "l3")
-    if known(*coupled):
-        a11, _, a33, a13 = lumped_inertias(*(v.get(n, 0.0) for n in LUMPED_FROM))
-        det = coupled_determinant(*(v[n] for n in coupled))
-        cond = physics.condition(a11, a13, a33, det, math.sqrt) if det > 0 else math.inf
-        if not cond <= MAX_CONDITION:
-            raise ValueError(
-                f"parameters: the mass matrix's coupled block has condition number "
-                f"{cond:.3g} > {MAX_CONDITION:g}: numerically singular"
-            )
+    """The generated setup's checks (gyrogen.setup_checks), made on the
+    values known at generation: the folded ones, and the [simulate]
+    parameters with them."""
+    failed = first_failure({k: x for k, x in p.items() if not isinstance(x, str)})
+    if failed is not None:
+        raise ValueError(failed[1])
 
 
 def _one_line(exc: pydantic.ValidationError) -> str:

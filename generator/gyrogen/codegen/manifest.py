@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from gyrogen.abi import SIGNATURES
 from gyrogen.codegen.context import Unit
 
 
@@ -37,9 +38,9 @@ def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
         "targets": list(unit.scene.targets),
         "functions": unit.functions,
         "signatures": {
-            "setup": "int setup(const double *p, double *c)",
-            "rhs": "void rhs(double t, const double *x, const double *c, double *dxdt)",
-            "outputs": "void output(double t, const double *x, const double *c, double *out)",
+            "setup": SIGNATURES["setup"].c("setup"),
+            "rhs": SIGNATURES["rhs"].c("rhs"),
+            "outputs": SIGNATURES["output"].c("output"),
         },
         "setup_codes": {str(code.value): code.doc for code in unit.codes},
         "ops": unit.ops,

@@ -8,11 +8,9 @@ import sympy as sm
 
 from gyrogen.abi import CONTROLLER_PARAMETERS
 from gyrogen.scene import Scene
+from gyrogen.setup_checks import checked_parameters
 from gyrogen.symbolic import equations, model
 from gyrogen.symbolic.equations import Equations
-
-CHECKED = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J")
-"""Parameters the generated setup checks (abi.SETUP_CODES)."""
 
 
 def _symbols(scene: Scene) -> dict[str, sm.Symbol]:
@@ -97,7 +95,7 @@ def specialize(scene: Scene) -> Equations:
         inputs=(torque,) if scene.effects.torque == "table" else (),
         outputs=_outputs(scene, subs, by_name, torque.xreplace(shared)),
         shared=shared,
-        checks={n: v[n] for n in CHECKED},
+        checks={n: v[n] for n in checked_parameters()},
         coupled=mm.extract([0, 2], [0, 2]),  # u1..u4 are always kept
     )
 

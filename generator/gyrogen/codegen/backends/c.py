@@ -7,6 +7,7 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 
 from gyrogen import abi
+from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
@@ -69,6 +70,8 @@ def files(unit: Unit) -> dict[str, str]:
         "methods": unit.methods,
         "tableaus": {name: m.tableau for name, m in METHODS.items()},
         "abi": abi,
+        "checks": printed("c", unit.macro),
+        "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }
     out = {
         f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),

@@ -6,11 +6,14 @@ import sympy as sm
 from sympy.printing.fortran import FCodePrinter
 
 from gyrogen import abi
+from gyrogen.abi import SETUP_RESULT, SIGNATURES
+from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
 from gyrogen.methods import METHODS
+from gyrogen.setup_checks import local_names
 from gyrogen.symbolic.hoist import constants
 
 
@@ -47,23 +50,17 @@ def files(unit: Unit) -> dict[str, str]:
 
     rhs, *outputs = functions(unit, lambda a, i: f"{a}({i + 1})", assign)
     setup = statements(unit.optimized.setup, lambda k: f"c({k + 1})", assign)
+    setup_names = [*SIGNATURES["setup"].names, SETUP_RESULT, *local_names()]
     _check_names(
-        ["p", "c", "status", "half_gap", "largest", *(v.name for v in unit.setup_locals)]
-        + [s.name for s in setup if s.declare],
+        [*setup_names, *(v.name for v in unit.setup_locals), *(s.name for s in setup if s.declare)],
         "setup",
     )
-    for fn in (rhs, *outputs):
-        names = [unit.states[i].name for i in fn.states] + ["torque"] * fn.torque
-        _check_names(
-            ["t", "x", "c", "out", "dxdt", *names] + [s.name for s in fn.statements if s.declare],
-            fn.name,
-        )
     jac = jacobian(unit, lambda a, i: f"{a}({i + 1})", assign)
-    if jac is not None:
-        names = [unit.states[i].name for i in jac.states]
-        _check_names(
-            ["t", "x", "c", "J", *names] + [s.name for s in jac.statements if s.declare], "jac"
-        )
+    signature = {"rhs": "rhs", "jac": "jac"}
+    for fn in (rhs, *outputs, *([jac] if jac else [])):
+        names = [unit.states[i].name for i in fn.states] + ["torque"] * fn.torque
+        args = SIGNATURES[signature.get(fn.name, "output")].names
+        _check_names([*args, *names, *(s.name for s in fn.statements if s.declare)], fn.name)
     ctx = {
         "unit": unit,
         "setup": setup,
@@ -73,6 +70,9 @@ def files(unit: Unit) -> dict[str, str]:
         "methods": unit.methods,
         "tableaus": {name: m.tableau for name, m in METHODS.items()},
         "abi": abi,
+        "checks": printed("fortran", unit.macro),
+        "code_names": {c.value: c.name for c in abi.SETUP_CODES},
+        "check_locals": local_names(),
     }
     out = {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}
     if unit.methods:

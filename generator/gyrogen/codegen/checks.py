@@ -1,0 +1,106 @@
+"""The setup checks (gyrogen.setup_checks) as C and Fortran text.
+
+A printer per language turns the checks' small expressions into code: the
+same precedence rules for both, the languages' own spelling of numbers,
+squares and the maximum. The templates lay the checks out.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+from gyrogen.abi import TRIANGLE_SLACK
+from gyrogen.codegen.render import c_double, f_double
+from gyrogen.setup_checks import CHECKS, Call, Expr, Num, Op, Sym
+
+Language = Literal["c", "fortran"]
+_PRECEDENCE = {"+": 1, "-": 1, "*": 2}
+FORTRAN_WRAP = 100
+"""A Fortran condition continues on a new line before it would pass this column."""
+
+
+@dataclass(frozen=True)
+class Printed:
+    """One check, as a template lays it out."""
+
+    code: int
+    kind: str
+    condition: str
+    """True when the check fails (C: the whole if condition; Fortran: the same)."""
+    locals: tuple[tuple[str, str], ...]
+    comment: tuple[str, ...]
+
+
+class Printer:
+    def __init__(self, language: Language, macro: str) -> None:
+        self.language = language
+        self.macro = macro
+        self.number: Callable[[float], str] = c_double if language == "c" else f_double
+
+    def __call__(self, e: Expr, parent: int = 0, right: bool = False) -> str:
+        if isinstance(e, Num):
+            return self.number(e.value)
+        if isinstance(e, Sym):
+            return self._symbol(e.name)
+        if isinstance(e, Call):
+            return self._call(e)
+        assert isinstance(e, Op)
+        prec = _PRECEDENCE[e.op]
+        glue = "*" if e.op == "*" else f" {e.op} "
+        text = glue.join(self(a, prec, i > 0 and e.op == "-") for i, a in enumerate(e.args))
+        return f"({text})" if prec < parent or (right and prec == parent) else text
+
+    def _symbol(self, name: str) -> str:
+        if name == "cond":
+            return f"c[{self.macro}_COND]" if self.language == "c" else f"c({self.macro}_COND)"
+        return name
+
+    def _call(self, e: Call) -> str:
+        if e.fn == "square":
+            base = self(e.args[0], 3)
+            return f"{base}*{base}" if self.language == "c" else f"{base}**2"
+        name = {"sqrt": "sqrt", "max": "fmax" if self.language == "c" else "max"}[e.fn]
+        return f"{name}({', '.join(self(a) for a in e.args)})"
+
+    def condition(self, kind: str, exprs: tuple[Expr, ...]) -> str:
+        """The text that is true when the check fails."""
+        if kind == "positive":
+            zero = self.number(0.0)
+            if self.language == "c":
+                return " || ".join(f"!({self(e)} > {zero})" for e in exprs)
+            return f".not. ({self._wrapped([f'{self(e)} > {zero}' for e in exprs])})"
+        a, b = exprs
+        if kind == "slack":
+            return f"{self(a)} > {self(Num(TRIANGLE_SLACK) * b)}"
+        negate = "!" if self.language == "c" else ".not. "
+        return f"{negate}({self(a)} <= {self(b)})"
+
+    def _wrapped(self, parts: list[str]) -> str:
+        """parts joined by .and., continued with & before FORTRAN_WRAP."""
+        lines, line = [], "    if (.not. (" + parts[0]
+        for part in parts[1:]:
+            if len(line) + len(part) + len(" .and. )) then") > FORTRAN_WRAP:
+                lines.append(line + " &")
+                line = " " * 15 + ".and. " + part
+            else:
+                line += " .and. " + part
+        lines.append(line)
+        return "\n".join(lines).removeprefix("    if (.not. (")
+
+
+def printed(language: Language, macro: str) -> list[Printed]:
+    """Every check but 'finite' (the templates loop over p for that one)."""
+    p = Printer(language, macro)
+    return [
+        Printed(
+            c.code,
+            c.kind,
+            p.condition(c.kind, c.exprs),
+            tuple((name, p(e)) for name, e in c.locals),
+            c.comment,
+        )
+        for c in CHECKS
+        if c.kind != "finite"
+    ]
