@@ -6,7 +6,7 @@
 !
 ! Build id e64d8a89b8ec052a. The same interface as dual_spin_ode.h, under
 ! the bind(C) names dual_spin_f_<method> and dual_spin_f_<method>_batch.
-! Coefficients and sources as in dual_spin_ode.c (gyrogen/tableaus.py).
+! Coefficients and sources as in dual_spin_ode.c (gyrogen/methods.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! dual_spin_stats * or NULL, Fortran c_loc(stats) (stats declared with the
@@ -722,7 +722,7 @@ contains
   end function dual_spin_dop853
 
   ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
-  ! block upper triangular in state order (see gyrogen/lu_blocks.py), with
+  ! block upper triangular in state order (see gyrogen/symbolic/blocks.py), with
   ! the diagonal blocks (0-based, end excluded)
   ! (0, 1), (1, 3), (3, 6), (6, 7).
   ! L is unit lower and nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the

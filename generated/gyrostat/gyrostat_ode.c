@@ -799,7 +799,7 @@ int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rto
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
-   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14).
+   gyrogen/symbolic/blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14).
    Row i's block ends before row lu_end[i]. */
 static const int lu_end[GYROSTAT_NX] = {1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14};
 

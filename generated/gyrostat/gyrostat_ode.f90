@@ -6,7 +6,7 @@
 !
 ! Build id 719a3b3e738b84d4. The same interface as gyrostat_ode.h, under
 ! the bind(C) names gyrostat_f_<method> and gyrostat_f_<method>_batch.
-! Coefficients and sources as in gyrostat_ode.c (gyrogen/tableaus.py).
+! Coefficients and sources as in gyrostat_ode.c (gyrogen/methods.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! gyrostat_stats * or NULL, Fortran c_loc(stats) (stats declared with the
@@ -862,7 +862,7 @@ contains
   end function gyrostat_dop853
 
   ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
-  ! block upper triangular in state order (see gyrogen/lu_blocks.py), with
+  ! block upper triangular in state order (see gyrogen/symbolic/blocks.py), with
   ! the diagonal blocks (0-based, end excluded)
   ! (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12),
   ! (12, 13), (13, 14).

@@ -667,7 +667,7 @@ int speed_controlled_dop853(double t0, double t1, double *x, const double *c, do
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
-   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 8).
+   gyrogen/symbolic/blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 8).
    Row i's block ends before row lu_end[i]. */
 static const int lu_end[SPEED_CONTROLLED_NX] = {1, 3, 3, 4, 8, 8, 8, 8};
 

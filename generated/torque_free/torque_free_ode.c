@@ -651,7 +651,7 @@ int torque_free_dop853(double t0, double t1, double *x, const double *c, double 
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
-   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 6), (6, 7).
+   gyrogen/symbolic/blocks.py): blocks (0, 1), (1, 3), (3, 6), (6, 7).
    Row i's block ends before row lu_end[i]. */
 static const int lu_end[TORQUE_FREE_NX] = {1, 3, 3, 6, 6, 6, 7};
 

@@ -666,7 +666,7 @@ int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
-   gyrogen/lu_blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8).
+   gyrogen/symbolic/blocks.py): blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8).
    Row i's block ends before row lu_end[i]. */
 static const int lu_end[WHEEL_SPINUP_NX] = {1, 3, 3, 4, 7, 7, 7, 8};
 

@@ -6,7 +6,7 @@
 !
 ! Build id ae05ef069b8d0086. The same interface as wheel_spinup_ode.h, under
 ! the bind(C) names wheel_spinup_f_<method> and wheel_spinup_f_<method>_batch.
-! Coefficients and sources as in wheel_spinup_ode.c (gyrogen/tableaus.py).
+! Coefficients and sources as in wheel_spinup_ode.c (gyrogen/methods.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! wheel_spinup_stats * or NULL, Fortran c_loc(stats) (stats declared with the
@@ -737,7 +737,7 @@ contains
   end function wheel_spinup_dop853
 
   ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
-  ! block upper triangular in state order (see gyrogen/lu_blocks.py), with
+  ! block upper triangular in state order (see gyrogen/symbolic/blocks.py), with
   ! the diagonal blocks (0-based, end excluded)
   ! (0, 1), (1, 3), (3, 4), (4, 7), (7, 8).
   ! L is unit lower and nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the

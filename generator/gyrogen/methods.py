@@ -245,6 +245,45 @@ class PairControl:
     safety: float
     facmin: float
     facmax: float
+    note: str = ""
+    """Where the values come from (a comment above them in the code)."""
+
+
+@dataclass(frozen=True)
+class RosenbrockControl:
+    """A Rosenbrock method's step size, as Hairer's rodas.f: h_new / h =
+    safety err^-exponent within [facmin, facmax], with Gustafsson's
+    predictive controller after an accepted step."""
+
+    safety: float = 0.9
+    exponent: float = 0.25
+    """1 / the order of the embedded error estimate plus one (rodas4: 1/4)."""
+    facmin: float = 0.2
+    facmax: float = 6.0
+    err_floor: float = 1e-2
+    """The last accepted error in Gustafsson's formula is at least this."""
+    nonfinite_shrink: float = 0.2
+    """A trial with a NaN or Inf: h times this."""
+    singular_shrink: float = 0.5
+    """A singular iteration matrix: h times this, ..."""
+    singular_tries: int = 5
+    """... this many times in a row at most."""
+
+
+PAIR_ERR_FLOOR = 1e-4
+"""Hairer's facold: an explicit pair's previous error starts at, and is never
+taken below, this (the PI controller's err_old)."""
+LAST_STEP_SLACK = 1.01
+"""A step that would end within 1% of t1 is stretched to end on it."""
+
+
+def literal(value: float) -> str:
+    """A control constant as the templates write it: a power of ten below
+    0.1 as 1e-N, anything else as the shortest text that reads back."""
+    for k in range(2, 20):
+        if value == 10.0**-k:
+            return f"1e-{k}"
+    return repr(float(value))
 
 
 @dataclass(frozen=True)
@@ -254,8 +293,11 @@ class Method:
     name: str
     doc: str
     tableau: Explicit | Rosenbrock
-    control: PairControl | None = None
-    """The step-size control of an explicit pair; None for the others."""
+    control: PairControl | RosenbrockControl | None = None
+    """The step-size control of an adaptive method; None for a fixed step."""
+    notes: tuple[str, ...] = ()
+    """What the method is and where it comes from: the comment lines above
+    its code (the same in C and Fortran)."""
 
     @property
     def fixed_step(self) -> bool:
@@ -270,31 +312,73 @@ class Method:
     @property
     def pair(self) -> bool:
         """An explicit embedded pair (the adaptive explicit methods)."""
-        return self.control is not None
+        return isinstance(self.control, PairControl)
+
+    @property
+    def trial_calls(self) -> int:
+        """rhs calls of one trial step of a pair (the first stage is given)."""
+        return self.tableau.stages - 1
+
+    @property
+    def fnew(self) -> int:
+        """The stage row that holds f(t + h, xnew): a first-same-as-last
+        pair's last stage, else the row after the stages."""
+        tab = self.tableau
+        assert isinstance(tab, Explicit)
+        return tab.stages - 1 if tab.fsal else tab.stages
 
 
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
-        Method("rk4", "Classic Runge-Kutta, order 4, fixed step.", RK4),
+        Method(
+            "rk4",
+            "Classic Runge-Kutta, order 4, fixed step.",
+            RK4,
+            notes=("Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.",),
+        ),
         Method(
             "dopri5",
             "Dormand-Prince 5(4), adaptive, PI step-size control.",
             DOPRI5,
-            # Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
-            PairControl(alpha=0.17, beta=0.04, safety=0.9, facmin=0.2, facmax=10.0),
+            PairControl(
+                alpha=0.17,
+                beta=0.04,
+                safety=0.9,
+                facmin=0.2,
+                facmax=10.0,
+                note="Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.",
+            ),
+            notes=(
+                "Dormand-Prince 5(4) (Dormand & Prince 1980; Hairer, Norsett & Wanner,",
+                "Solving ODEs I, Table II.5.2): seven stages, the seventh at the new",
+                "solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat.",
+            ),
         ),
         Method(
             "dop853",
             "DOP853 (Hairer's coefficients and error estimator), adaptive.",
             DOP853,
-            # Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
-            PairControl(alpha=0.125, beta=0.0, safety=0.9, facmin=0.333, facmax=6.0),
+            PairControl(
+                alpha=0.125,
+                beta=0.0,
+                safety=0.9,
+                facmin=0.333,
+                facmax=6.0,
+                note="Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].",
+            ),
+            notes=(
+                "DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the",
+                "error combines a 5th-order estimate err5 = h sum_j e5_j k_j and a",
+                "3rd-order one err3 = h sum_j e3_j k_j as",
+                "|h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm.",
+            ),
         ),
         Method(
             "rodas4",
             "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
             RODAS4,
+            RosenbrockControl(),
         ),
     )
 }

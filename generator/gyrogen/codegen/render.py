@@ -10,6 +10,8 @@ from typing import Any
 
 import jinja2
 
+from gyrogen.methods import literal
+
 
 def c_double(value: float) -> str:
     """A double as C writes it: the shortest text that reads back exactly."""
@@ -76,6 +78,8 @@ def environment() -> jinja2.Environment:
         autoescape=False,
     )
     env.filters.update(
+        c_literal=literal,
+        f_literal=lambda v: f"{literal(v)}_c_double",
         c_double=c_double,
         f_double=f_double,
         c_comment=c_comment,

@@ -7,11 +7,11 @@ from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import PRECEDENCE
 
 from gyrogen import abi
+from gyrogen import methods as methods_registry
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
-from gyrogen.methods import METHODS
 from gyrogen.symbolic.hoist import constants
 
 
@@ -68,8 +68,8 @@ def files(unit: Unit) -> dict[str, str]:
         "outputs": outputs,
         "jac": jacobian(unit, lambda a, i: f"{a}[{i}]", assign),
         "methods": unit.methods,
-        "tableaus": {name: m.tableau for name, m in METHODS.items()},
         "abi": abi,
+        "registry": methods_registry,
         "checks": printed("c", unit.macro),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }

@@ -6,13 +6,13 @@ import sympy as sm
 from sympy.printing.fortran import FCodePrinter
 
 from gyrogen import abi
+from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
-from gyrogen.methods import METHODS
 from gyrogen.setup_checks import local_names
 from gyrogen.symbolic.hoist import constants
 
@@ -68,8 +68,8 @@ def files(unit: Unit) -> dict[str, str]:
         "outputs": outputs,
         "jac": jac,
         "methods": unit.methods,
-        "tableaus": {name: m.tableau for name, m in METHODS.items()},
         "abi": abi,
+        "registry": methods_registry,
         "checks": printed("fortran", unit.macro),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
         "check_locals": local_names(),
