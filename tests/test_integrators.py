@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gyrogen import abi, methods
+from gyrogen import abi, tableaus
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
@@ -448,15 +448,15 @@ def test_tableaus_match_scipy() -> None:
     from scipy.integrate import DOP853, RK45
 
     for s in range(1, 6):
-        assert methods.DOPRI5.a[s] == tuple(RK45.A[s, :s])
-    assert methods.DOPRI5.b == (*RK45.B, 0.0)
-    np.testing.assert_array_equal(methods.DOPRI5.e, -RK45.E)
+        assert tableaus.DOPRI5.a[s] == tuple(RK45.A[s, :s])
+    assert tableaus.DOPRI5.b == (*RK45.B, 0.0)
+    np.testing.assert_array_equal(tableaus.DOPRI5.e, -RK45.E)
     for s in range(1, 12):
-        assert methods.DOP853.a[s] == tuple(DOP853.A[s, :s])
-    assert methods.DOP853.b == tuple(DOP853.B)
-    assert methods.DOP853.nodes == tuple(DOP853.C)
-    assert methods.DOP853.e == tuple(DOP853.E5[:12])
-    assert methods.DOP853.e3 == tuple(DOP853.E3[:12])
+        assert tableaus.DOP853.a[s] == tuple(DOP853.A[s, :s])
+    assert tableaus.DOP853.b == tuple(DOP853.B)
+    assert tableaus.DOP853.nodes == tuple(DOP853.C)
+    assert tableaus.DOP853.e == tuple(DOP853.E5[:12])
+    assert tableaus.DOP853.e3 == tuple(DOP853.E3[:12])
 
 
 STRICT_C = [

@@ -6,7 +6,7 @@
 !
 ! Build id e64d8a89b8ec052a. The same interface as dual_spin_ode.h, under
 ! the bind(C) names dual_spin_f_<method> and dual_spin_f_<method>_batch.
-! Coefficients and sources as in dual_spin_ode.c (gyrogen/methods.py).
+! Coefficients and sources as in dual_spin_ode.c (gyrogen/tableaus.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! dual_spin_stats * or NULL, Fortran c_loc(stats) (stats declared with the

@@ -6,7 +6,7 @@
 !
 ! Build id 719a3b3e738b84d4. The same interface as gyrostat_ode.h, under
 ! the bind(C) names gyrostat_f_<method> and gyrostat_f_<method>_batch.
-! Coefficients and sources as in gyrostat_ode.c (gyrogen/methods.py).
+! Coefficients and sources as in gyrostat_ode.c (gyrogen/tableaus.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! gyrostat_stats * or NULL, Fortran c_loc(stats) (stats declared with the

@@ -31,7 +31,7 @@ extern "C" {
  * (x[i*GYROSTAT_NX + j]), fill stats[i] and codes[i], and return how many
  * failed; stats or codes may be NULL there too.
  * No allocation, no globals: the work arrays live on the stack, and the
- * functions are re-entrant. Coefficients and sources: gyrogen/methods.py.
+ * functions are re-entrant. Coefficients and sources: gyrogen/tableaus.py.
  * The steps are summed with Kahan's compensation, so that long runs keep
  * their invariants to rounding: compile without -ffast-math (or
  * -Ofast), which would optimize the compensation away.

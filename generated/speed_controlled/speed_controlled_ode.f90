@@ -6,7 +6,7 @@
 !
 ! Build id 19f9d3382b0b6a28. The same interface as speed_controlled_ode.h, under
 ! the bind(C) names speed_controlled_f_<method> and speed_controlled_f_<method>_batch.
-! Coefficients and sources as in speed_controlled_ode.c (gyrogen/methods.py).
+! Coefficients and sources as in speed_controlled_ode.c (gyrogen/tableaus.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! speed_controlled_stats * or NULL, Fortran c_loc(stats) (stats declared with the

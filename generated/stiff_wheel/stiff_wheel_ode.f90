@@ -6,7 +6,7 @@
 !
 ! Build id 305c067e46347215. The same interface as stiff_wheel_ode.h, under
 ! the bind(C) names stiff_wheel_f_<method> and stiff_wheel_f_<method>_batch.
-! Coefficients and sources as in stiff_wheel_ode.c (gyrogen/methods.py).
+! Coefficients and sources as in stiff_wheel_ode.c (gyrogen/tableaus.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! stiff_wheel_stats * or NULL, Fortran c_loc(stats) (stats declared with the

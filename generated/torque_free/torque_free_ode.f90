@@ -6,7 +6,7 @@
 !
 ! Build id d11607b5628bb2ac. The same interface as torque_free_ode.h, under
 ! the bind(C) names torque_free_f_<method> and torque_free_f_<method>_batch.
-! Coefficients and sources as in torque_free_ode.c (gyrogen/methods.py).
+! Coefficients and sources as in torque_free_ode.c (gyrogen/tableaus.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! torque_free_stats * or NULL, Fortran c_loc(stats) (stats declared with the

@@ -6,7 +6,7 @@
 !
 ! Build id ae05ef069b8d0086. The same interface as wheel_spinup_ode.h, under
 ! the bind(C) names wheel_spinup_f_<method> and wheel_spinup_f_<method>_batch.
-! Coefficients and sources as in wheel_spinup_ode.c (gyrogen/methods.py).
+! Coefficients and sources as in wheel_spinup_ode.c (gyrogen/tableaus.py).
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! wheel_spinup_stats * or NULL, Fortran c_loc(stats) (stats declared with the

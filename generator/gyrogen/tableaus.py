@@ -1,0 +1,230 @@
+"""Coefficients of the compiled integrators, as the templates render them.
+
+One source for C and Fortran: every value is a double (the correctly rounded
+value of the published fraction or decimal) and the templates print it with
+`c_double` / `f_double`, which read back exactly. The stage code is rendered
+straight-line, one term per nonzero coefficient, so the tables below say
+which k_j each stage reads; `terms` drops the zeros. gyrogen.methods names
+the methods that use them.
+
+Sources:
+- RK4: the classic fourth-order method (Kutta 1901).
+- DOPRI5: Dormand & Prince, J. Comp. Appl. Math. 6 (1980); Hairer, Norsett &
+  Wanner, Solving ODEs I, Table II.5.2 (the same fractions as Hairer's
+  dopri5.f and scipy's RK45).
+- DOP853: Hairer's dop853.f (the decimals of its DATA statements, as scipy's
+  `_ivp/dop853_coefficients.py` reproduces them): 12 stages, the 8th-order
+  weights b, and the 5th- and 3rd-order error weights e5 and e3 = b - bhh.
+- RODAS4: Hairer & Wanner, Solving ODEs II, Sec. IV.7, and the RODAS4
+  coefficients of Hairer's rodas.f (subroutine ROCOE, METH = 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction as F
+
+Terms = list[tuple[int, float]]
+
+
+def terms(values: tuple[float, ...]) -> Terms:
+    """(j, value) for the nonzero entries: what a rendered sum reads."""
+    return [(j, v) for j, v in enumerate(values) if v != 0.0]
+
+
+def _floats(*values: float | F) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
+
+
+@dataclass(frozen=True)
+class Explicit:
+    """An explicit Runge-Kutta method: stage s evaluates k_s = f(t + c_s h,
+    x + h sum_j a[s][j] k_j) (row a[s] has s entries), and the step is
+    x + h sum_j b_j k_j. An embedded pair adds error weights: the local error
+    estimate is h sum_j e_j k_j (and DOP853 a second one with e3)."""
+
+    order: int
+    nodes: tuple[float, ...]
+    a: tuple[tuple[float, ...], ...]
+    b: tuple[float, ...]
+    e: tuple[float, ...] = ()
+    e3: tuple[float, ...] = ()
+
+    @property
+    def stages(self) -> int:
+        return len(self.nodes)
+
+    @property
+    def fsal(self) -> bool:
+        """The last stage is evaluated at the new solution (first same as last):
+        its k is f(t + h, x_new), the next step's k_0."""
+        return self.a[-1] == self.b[: len(self.a[-1])] and self.nodes[-1] == 1.0
+
+    def stage(self, s: int) -> Terms:
+        return terms(self.a[s])
+
+    def weights(self) -> Terms:
+        return terms(self.b)
+
+    def error(self) -> Terms:
+        return terms(self.e)
+
+    def error3(self) -> Terms:
+        return terms(self.e3)
+
+
+@dataclass(frozen=True)
+class Rosenbrock:
+    """A Rosenbrock method in Hairer & Wanner's form (Solving ODEs II, IV.7.25):
+    with E = I/(h gamma) - J, stage s solves
+
+        E k_s = f(t + c_s h, x + sum_j a[s][j] k_j) + sum_j (g[s][j]/h) k_j + h d_s f_t
+
+    The method is stiffly accurate: stage 6 is evaluated at x5 + k5 (the
+    embedded solution, order 3) and the step is x5 + k5 + k6, so k6 itself is
+    the local error estimate."""
+
+    order: int
+    gamma: float
+    nodes: tuple[float, ...]
+    a: tuple[tuple[float, ...], ...]
+    g: tuple[tuple[float, ...], ...]
+    d: tuple[float, ...]
+
+    @property
+    def stages(self) -> int:
+        return len(self.nodes)
+
+    def stage(self, s: int) -> Terms:
+        return terms(self.a[s])
+
+    def feedback(self, s: int) -> Terms:
+        return terms(self.g[s])
+
+
+RK4 = Explicit(
+    order=4,
+    nodes=_floats(0, F(1, 2), F(1, 2), 1),
+    a=((), _floats(F(1, 2)), _floats(0, F(1, 2)), _floats(0, 0, 1)),
+    b=_floats(F(1, 6), F(1, 3), F(1, 3), F(1, 6)),
+)
+
+# fmt: off
+_DOPRI5_B = (F(35, 384), F(0), F(500, 1113), F(125, 192), F(-2187, 6784), F(11, 84), F(0))
+_DOPRI5_BHAT = (
+    F(5179, 57600), F(0), F(7571, 16695), F(393, 640), F(-92097, 339200), F(187, 2100), F(1, 40)
+)
+DOPRI5 = Explicit(
+    order=5,
+    nodes=_floats(0, F(1, 5), F(3, 10), F(4, 5), F(8, 9), 1, 1),
+    a=(
+        (),
+        _floats(F(1, 5)),
+        _floats(F(3, 40), F(9, 40)),
+        _floats(F(44, 45), F(-56, 15), F(32, 9)),
+        _floats(F(19372, 6561), F(-25360, 2187), F(64448, 6561), F(-212, 729)),
+        _floats(F(9017, 3168), F(-355, 33), F(46732, 5247), F(49, 176), F(-5103, 18656)),
+        _floats(*_DOPRI5_B[:6]),
+    ),
+    b=_floats(*_DOPRI5_B),
+    e=_floats(*(b - bh for b, bh in zip(_DOPRI5_B, _DOPRI5_BHAT, strict=True))),
+)
+
+_DOP853_B = (
+    5.42937341165687622380535766363e-2, 0.0, 0.0, 0.0, 0.0,
+    4.45031289275240888144113950566, 1.89151789931450038304281599044,
+    -5.8012039600105847814672114227, 3.1116436695781989440891606237e-1,
+    -1.52160949662516078556178806805e-1, 2.01365400804030348374776537501e-1,
+    4.47106157277725905176885569043e-2,
+)
+_DOP853_BHH = (
+    0.244094488188976377952755905512, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    0.733846688281611857341361741547, 0.0, 0.0, 0.220588235294117647058823529412e-1,
+)
+DOP853 = Explicit(
+    order=8,
+    nodes=(
+        0.0,
+        0.526001519587677318785587544488e-1,
+        0.789002279381515978178381316732e-1,
+        0.118350341907227396726757197510,
+        0.281649658092772603273242802490,
+        0.333333333333333333333333333333,
+        0.25,
+        0.307692307692307692307692307692,
+        0.651282051282051282051282051282,
+        0.6,
+        0.857142857142857142857142857142,
+        1.0,
+    ),
+    a=(
+        (),
+        (5.26001519587677318785587544488e-2,),
+        (1.97250569845378994544595329183e-2, 5.91751709536136983633785987549e-2),
+        (2.95875854768068491816892993775e-2, 0.0, 8.87627564304205475450678981324e-2),
+        (2.41365134159266685502369798665e-1, 0.0, -8.84549479328286085344864962717e-1,
+         9.24834003261792003115737966543e-1),
+        (3.7037037037037037037037037037e-2, 0.0, 0.0, 1.70828608729473871279604482173e-1,
+         1.25467687566822425016691814123e-1),
+        (3.7109375e-2, 0.0, 0.0, 1.70252211019544039314978060272e-1,
+         6.02165389804559606850219397283e-2, -1.7578125e-2),
+        (3.70920001185047927108779319836e-2, 0.0, 0.0, 1.70383925712239993810214054705e-1,
+         1.07262030446373284651809199168e-1, -1.53194377486244017527936158236e-2,
+         8.27378916381402288758473766002e-3),
+        (6.24110958716075717114429577812e-1, 0.0, 0.0, -3.36089262944694129406857109825,
+         -8.68219346841726006818189891453e-1, 2.75920996994467083049415600797e1,
+         2.01540675504778934086186788979e1, -4.34898841810699588477366255144e1),
+        (4.77662536438264365890433908527e-1, 0.0, 0.0, -2.48811461997166764192642586468,
+         -5.90290826836842996371446475743e-1, 2.12300514481811942347288949897e1,
+         1.52792336328824235832596922938e1, -3.32882109689848629194453265587e1,
+         -2.03312017085086261358222928593e-2),
+        (-9.3714243008598732571704021658e-1, 0.0, 0.0, 5.18637242884406370830023853209,
+         1.09143734899672957818500254654, -8.14978701074692612513997267357,
+         -1.85200656599969598641566180701e1, 2.27394870993505042818970056734e1,
+         2.49360555267965238987089396762, -3.0467644718982195003823669022),
+        (2.27331014751653820792359768449, 0.0, 0.0, -1.05344954667372501984066689879e1,
+         -2.00087205822486249909675718444, -1.79589318631187989172765950534e1,
+         2.79488845294199600508499808837e1, -2.85899827713502369474065508674,
+         -8.87285693353062954433549289258, 1.23605671757943030647266201528e1,
+         6.43392746015763530355970484046e-1),
+    ),
+    b=_DOP853_B,
+    e=(
+        0.1312004499419488073250102996e-1, 0.0, 0.0, 0.0, 0.0,
+        -0.1225156446376204440720569753e1, -0.4957589496572501915214079952,
+        0.1664377182454986536961530415e1, -0.3503288487499736816886487290,
+        0.3341791187130174790297318841, 0.8192320648511571246570742613e-1,
+        -0.2235530786388629525884427845e-1,
+    ),
+    e3=tuple(b - bhh for b, bhh in zip(_DOP853_B, _DOP853_BHH, strict=True)),
+)
+
+_RODAS4_A5 = (
+    0.1221224509226641e1, 0.6019134481288629e1, 0.1253708332932087e2, -0.6878860361058950
+)
+RODAS4 = Rosenbrock(
+    order=4,
+    gamma=0.25,
+    nodes=(0.0, 0.386, 0.21, 0.63, 1.0, 1.0),
+    a=(
+        (),
+        (0.1544e1,),
+        (0.9466785280815826, 0.2557011698983284),
+        (0.3314825187068521e1, 0.2896124015972201e1, 0.9986419139977817),
+        _RODAS4_A5,
+        (*_RODAS4_A5, 1.0),  # stage 6 at x5 + k5
+    ),
+    g=(
+        (),
+        (-0.56688e1,),
+        (-0.2430093356833875e1, -0.2063599157091915),
+        (-0.1073529058151375, -0.9594562251023355e1, -0.2047028614809616e2),
+        (0.7496443313967647e1, -0.1024680431464352e2, -0.3399990352819905e2,
+         0.1170890893206160e2),
+        (0.8083246795921522e1, -0.7981132988064893e1, -0.3152159432874371e2,
+         0.1631930543123136e2, -0.6058818238834054e1),
+    ),
+    d=(0.25, -0.1043, 0.1035, -0.3620000000000023e-1, 0.0, 0.0),
+)
+
+# fmt: on
