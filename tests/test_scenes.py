@@ -262,6 +262,14 @@ def test_builtin_scenes_listed(capsys: pytest.CaptureFixture[str]) -> None:
     assert set(builtin_names()) >= {
         "gyrostat", "dual_spin", "torque_free", "wheel_spinup", "speed_controlled"
     }  # fmt: skip
+    assert "runtime m_a, m_b, I11" in out and "integrators rk4, dopri5, dop853, rodas4" in out
+    assert "ops setup" not in out  # listing does not derive
+
+
+def test_builtin_scenes_with_their_op_counts(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(["scenes", "--ops"], capsys)
+    assert code == 0 and out.count("ops setup") == len(builtin_names())
+    assert "torque_free" in out and "ops setup 0, rhs 19" in out
 
 
 def test_new_writes_a_valid_commented_scene(

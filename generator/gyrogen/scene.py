@@ -34,49 +34,23 @@ from pydantic import (
 from gyrogen import methods
 from gyrogen.abi import (
     CONTROLLER_PARAMETERS,
-    DESCRIPTION_MAX_LENGTH,
-    FOLDED_MAX,
-    FOLDED_MIN,
-    MAX_OUTPUT_POINTS,
     MAX_SCENE_BYTES,
     MIN_RTOL,
-    NAME_MAX_LENGTH,
     PARAMETERS,
-    QUATERNION_NORM_SLACK,
     STATES,
 )
 from gyrogen.errors import SceneError
-from gyrogen.setup_checks import first_failure
-
-_C_KEYWORDS = frozenset(
-    "auto break case char const continue default do double else enum extern float for goto if "
-    "inline int long register restrict return short signed sizeof static struct switch typedef "
-    "union unsigned void volatile while _Bool _Complex _Imaginary".split()
+from gyrogen.scene_rules import (
+    QUATERNION,
+    check_description,
+    check_name,
+    check_output_grid,
+    check_physics,
+    check_quaternion,
+    parameter_value,
 )
 
-
-def _parameter(v: object) -> object:
-    """A parameter is a number (folded into the code) or "runtime"; a TOML
-    boolean or a quoted number is neither (pydantic would take true as 1.0)."""
-    if v == "runtime":
-        return v
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise ValueError(f'expected a number or "runtime", not {v!r}')
-    try:
-        x = float(v)
-    except OverflowError:
-        x = math.inf
-    if not math.isfinite(x):
-        raise ValueError(f"{v!r} is not a finite number")
-    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
-        raise ValueError(
-            f"{x!r}: a folded value must be 0 or of magnitude {FOLDED_MIN:g} to "
-            f'{FOLDED_MAX:g} (its products must stay doubles); make it "runtime"'
-        )
-    return x
-
-
-Value = Annotated[float | Literal["runtime"], BeforeValidator(_parameter)]
+Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
 Number = StrictFloat
 """A TOML integer or float, never a boolean or a string."""
 
@@ -147,19 +121,6 @@ class Simulate(_Strict):
         return dt
 
 
-def check_output_grid(t_end: float, dt: float) -> None:
-    """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
-    (and at least once)."""
-    if dt > t_end:
-        raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
-    steps = t_end / dt
-    if not steps <= MAX_OUTPUT_POINTS:
-        raise ValueError(
-            f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
-            f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
-        )
-
-
 class Scene(_Strict):
     name: str
     """Also the prefix of every generated C symbol and file."""
@@ -207,7 +168,7 @@ class Scene(_Strict):
     @model_validator(mode="after")
     def _consistent(self) -> Scene:
         _check_parameter_names(self)
-        _check_physics(self.parameters)
+        check_physics(self.parameters)
         bad = sorted(set(self.simulate.initial) - set(self.states))
         if bad:
             raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
@@ -216,9 +177,9 @@ class Scene(_Strict):
             raise ValueError(
                 f"simulate.parameters: {', '.join(bad)} is not a runtime parameter of this scene"
             )
-        _check_physics({**self.parameters, **self.simulate.parameters})
+        check_physics({**self.parameters, **self.simulate.parameters})
         if self.attitude == "quaternion":
-            _check_quaternion(self.simulate.initial)
+            check_quaternion(self.simulate.initial)
         return self
 
     @property
@@ -254,58 +215,6 @@ class Scene(_Strict):
         return {k: v for k, v in self.parameters.items() if not isinstance(v, str)}
 
 
-QUATERNION = ("e0", "e1", "e2", "e3")
-
-
-def check_name(v: str) -> None:
-    """The scene's name prefixes every identifier gyrogen writes, in C (and
-    C++, through the header) and Fortran: a letter, then letters, digits and
-    single underscores, never ending in one (prefix + "_" would make "__",
-    which C++ reserves), at most NAME_MAX_LENGTH characters."""
-    shown = repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
-    if not v:
-        raise ValueError("must not be empty")
-    if len(v) > NAME_MAX_LENGTH:
-        raise ValueError(
-            f"{shown} is longer than {NAME_MAX_LENGTH} characters (Fortran identifiers "
-            "stop at 63, and gyrogen appends up to 26)"
-        )
-    if not (v.isascii() and v[0].isalpha() and v.replace("_", "a").isalnum()):
-        raise ValueError(
-            f"{shown} is not an identifier in C and Fortran: a letter, then letters, "
-            "digits and underscores"
-        )
-    if "__" in v or v.endswith("_"):
-        raise ValueError(f"{shown} has a double or trailing underscore (C++ reserves '__')")
-    if v in _C_KEYWORDS:
-        raise ValueError(f"{shown} is a C keyword")
-
-
-def check_description(v: str) -> str:
-    """Any text but control characters (newlines and tabs are fine), at most
-    DESCRIPTION_MAX_LENGTH characters; CR LF is read as a newline."""
-    v = v.replace("\r\n", "\n")
-    if len(v) > DESCRIPTION_MAX_LENGTH:
-        raise ValueError(f"{len(v)} characters; at most {DESCRIPTION_MAX_LENGTH}")
-    for i, ch in enumerate(v):
-        if ch not in "\n\t" and (ord(ch) < 32 or 127 <= ord(ch) < 160):
-            raise ValueError(f"control character U+{ord(ch):04X} at position {i}")
-    return v
-
-
-def _check_quaternion(initial: dict[str, float]) -> None:
-    """Euler parameters start on |e| = 1 (e0 = 1 when not given)."""
-    e = [initial.get(n, 1.0 if n == "e0" else 0.0) for n in QUATERNION]
-    norm = math.sqrt(sum(x * x for x in e))
-    if norm == 0.0:
-        raise ValueError("simulate.initial: e0..e3 are all zero: not an attitude")
-    if abs(norm - 1.0) > QUATERNION_NORM_SLACK:
-        raise ValueError(
-            f"simulate.initial: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
-            f"{norm:.9g}, not 1 (within {QUATERNION_NORM_SLACK:g}): give a unit quaternion"
-        )
-
-
 def required_parameters(effects: Effects) -> tuple[str, ...]:
     names = ["m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J", "l1", "l3"]
     if effects.translation:
@@ -335,15 +244,6 @@ def _why_not(name: str, effects: Effects) -> str:
     if name in CONTROLLER_PARAMETERS:
         return "only used with effects.torque = 'speed_controller'"
     return "unknown parameter (see `gyrogen new` for the list)"
-
-
-def _check_physics(p: dict[str, Value]) -> None:
-    """The generated setup's checks (gyrogen.setup_checks), made on the
-    values known at generation: the folded ones, and the [simulate]
-    parameters with them."""
-    failed = first_failure({k: x for k, x in p.items() if not isinstance(x, str)})
-    if failed is not None:
-        raise ValueError(failed[1])
 
 
 def _one_line(exc: pydantic.ValidationError) -> str:

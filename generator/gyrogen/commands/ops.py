@@ -11,9 +11,10 @@ import click
 @click.command()
 def ops() -> None:
     """Op counts of the raw, CSE-only and lumped + hoisted + CSE variants."""
+    from gyrogen.codegen.generate import full_model_unit
     from gyrogen.symbolic.opcounts import variants
 
-    print_ops(variants())
+    print_ops(variants(full_model_unit().ops))
 
 
 def print_ops(rows: Iterable[Any]) -> None:

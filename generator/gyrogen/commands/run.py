@@ -27,7 +27,7 @@ def run(out: Path | None, states: int, params: int, seed: int) -> None:
     click.echo(f"generated {out}/ ({', '.join(sorted(p.name for p in out.iterdir()))})")
     ok = verify_sources(scene, out, states, params, seed)
     click.echo("op counts of the full model (sympy.count_ops, temporaries included):")
-    print_ops(variants())
+    print_ops(variants(unit.ops))
     if not ok:
         raise GyrogenError("verification failed: see the table above")
     click.echo(f"all checks passed; sources in {out}/ (build id {unit.build_id})")

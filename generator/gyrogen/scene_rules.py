@@ -1,0 +1,121 @@
+"""The rules a scene's values follow beyond their types: names and
+descriptions that are data in every target, folded values of a size setup
+can multiply, unit quaternions, a sane output grid, and setup's own checks
+(gyrogen.setup_checks) on the values known at generation. Each raises
+ValueError with the one line pydantic shows under the key."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from gyrogen.abi import (
+    DESCRIPTION_MAX_LENGTH,
+    FOLDED_MAX,
+    FOLDED_MIN,
+    MAX_OUTPUT_POINTS,
+    NAME_MAX_LENGTH,
+    QUATERNION_NORM_SLACK,
+)
+from gyrogen.setup_checks import first_failure
+
+_C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if "
+    "inline int long register restrict return short signed sizeof static struct switch typedef "
+    "union unsigned void volatile while _Bool _Complex _Imaginary".split()
+)
+
+
+def parameter_value(v: object) -> object:
+    """A parameter is a number (folded into the code) or "runtime"; a TOML
+    boolean or a quoted number is neither (pydantic would take true as 1.0)."""
+    if v == "runtime":
+        return v
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f'expected a number or "runtime", not {v!r}')
+    try:
+        x = float(v)
+    except OverflowError:
+        x = math.inf
+    if not math.isfinite(x):
+        raise ValueError(f"{v!r} is not a finite number")
+    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
+        raise ValueError(
+            f"{x!r}: a folded value must be 0 or of magnitude {FOLDED_MIN:g} to "
+            f'{FOLDED_MAX:g} (its products must stay doubles); make it "runtime"'
+        )
+    return x
+
+
+def check_output_grid(t_end: float, dt: float) -> None:
+    """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
+    (and at least once)."""
+    if dt > t_end:
+        raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
+    steps = t_end / dt
+    if not steps <= MAX_OUTPUT_POINTS:
+        raise ValueError(
+            f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
+            f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
+        )
+
+
+QUATERNION = ("e0", "e1", "e2", "e3")
+
+
+def check_name(v: str) -> None:
+    """The scene's name prefixes every identifier gyrogen writes, in C (and
+    C++, through the header) and Fortran: a letter, then letters, digits and
+    single underscores, never ending in one (prefix + "_" would make "__",
+    which C++ reserves), at most NAME_MAX_LENGTH characters."""
+    shown = repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
+    if not v:
+        raise ValueError("must not be empty")
+    if len(v) > NAME_MAX_LENGTH:
+        raise ValueError(
+            f"{shown} is longer than {NAME_MAX_LENGTH} characters (Fortran identifiers "
+            "stop at 63, and gyrogen appends up to 26)"
+        )
+    if not (v.isascii() and v[0].isalpha() and v.replace("_", "a").isalnum()):
+        raise ValueError(
+            f"{shown} is not an identifier in C and Fortran: a letter, then letters, "
+            "digits and underscores"
+        )
+    if "__" in v or v.endswith("_"):
+        raise ValueError(f"{shown} has a double or trailing underscore (C++ reserves '__')")
+    if v in _C_KEYWORDS:
+        raise ValueError(f"{shown} is a C keyword")
+
+
+def check_description(v: str) -> str:
+    """Any text but control characters (newlines and tabs are fine), at most
+    DESCRIPTION_MAX_LENGTH characters; CR LF is read as a newline."""
+    v = v.replace("\r\n", "\n")
+    if len(v) > DESCRIPTION_MAX_LENGTH:
+        raise ValueError(f"{len(v)} characters; at most {DESCRIPTION_MAX_LENGTH}")
+    for i, ch in enumerate(v):
+        if ch not in "\n\t" and (ord(ch) < 32 or 127 <= ord(ch) < 160):
+            raise ValueError(f"control character U+{ord(ch):04X} at position {i}")
+    return v
+
+
+def check_quaternion(initial: dict[str, float]) -> None:
+    """Euler parameters start on |e| = 1 (e0 = 1 when not given)."""
+    e = [initial.get(n, 1.0 if n == "e0" else 0.0) for n in QUATERNION]
+    norm = math.sqrt(sum(x * x for x in e))
+    if norm == 0.0:
+        raise ValueError("simulate.initial: e0..e3 are all zero: not an attitude")
+    if abs(norm - 1.0) > QUATERNION_NORM_SLACK:
+        raise ValueError(
+            f"simulate.initial: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
+            f"{norm:.9g}, not 1 (within {QUATERNION_NORM_SLACK:g}): give a unit quaternion"
+        )
+
+
+def check_physics(p: Mapping[str, float | str]) -> None:
+    """The generated setup's checks (gyrogen.setup_checks), made on the
+    values known at generation: the folded ones, and the [simulate]
+    parameters with them."""
+    failed = first_failure({k: x for k, x in p.items() if not isinstance(x, str)})
+    if failed is not None:
+        raise ValueError(failed[1])
