@@ -9,6 +9,7 @@ import pytest
 
 from gyrogen.codegen.generate import generate
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import default
 
 REPO = Path(__file__).resolve().parents[1]
@@ -27,7 +28,7 @@ def source_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def backends(source_dir: Path, cache_dir: Path) -> dict[str, build.Compiled]:
+def backends(source_dir: Path, cache_dir: Path) -> dict[str, Compiled]:
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:

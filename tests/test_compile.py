@@ -18,7 +18,8 @@ import pytest
 
 from gyrogen.abi import COMPILER_LOG_LINES
 from gyrogen.errors import BuildError
-from gyrogen.runtime import build
+from gyrogen.runtime import build, cache
+from gyrogen.runtime.compiled import Compiled
 
 
 def _compile(cmd: list[str], cwd: Path) -> None:
@@ -86,7 +87,7 @@ def test_rebuild_hits_the_cache(
     def no_compile(*args: object, **kwargs: object) -> None:
         raise AssertionError("unchanged sources were compiled again")
 
-    monkeypatch.setattr(build, "_compile", no_compile)
+    monkeypatch.setattr(cache, "build_entry", no_compile)
     second = build.build(source_dir, "c")
     assert second.lib is first.lib
     assert sorted((tmp_path / "cache").iterdir()) == entries
@@ -246,7 +247,7 @@ def test_unwritable_cache_is_one_line(
     def refuse(*args: object, **kwargs: object) -> str:
         raise PermissionError(13, "Permission denied")
 
-    monkeypatch.setattr(build.tempfile, "mkdtemp", refuse)
+    monkeypatch.setattr(cache.tempfile, "mkdtemp", refuse)
     with pytest.raises(BuildError) as info:
         build.build(src, "c")
     assert str(info.value) == (
@@ -261,10 +262,10 @@ def test_relative_cache_root_is_made_absolute(
     relative one would break from another directory."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("GYROGEN_CACHE", "rel/cache")
-    assert build.cache_root() == tmp_path / "rel" / "cache"
+    assert cache.cache_root() == tmp_path / "rel" / "cache"
     monkeypatch.delenv("GYROGEN_CACHE")
     monkeypatch.setenv("XDG_CACHE_HOME", "xdg")
-    assert build.cache_root() == tmp_path / "xdg" / "gyrogen"
+    assert cache.cache_root() == tmp_path / "xdg" / "gyrogen"
 
 
 def test_no_home_directory_asks_for_gyrogen_cache(
@@ -275,7 +276,7 @@ def test_no_home_directory_asks_for_gyrogen_cache(
 
     monkeypatch.delenv("GYROGEN_CACHE", raising=False)
     monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
-    monkeypatch.setattr(build.Path, "home", staticmethod(no_home))
+    monkeypatch.setattr(cache.Path, "home", staticmethod(no_home))
     with pytest.raises(
         BuildError, match=r"^no home directory for the build cache: set GYROGEN_CACHE$"
     ):
@@ -295,7 +296,7 @@ def built(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterato
 
 
 def _module(entry: Path) -> Path:
-    return entry / json.loads((entry / build.MARKER).read_text())["module"]
+    return entry / json.loads((entry / cache.MARKER).read_text())["module"]
 
 
 def _truncate(entry: Path) -> None:
@@ -304,7 +305,7 @@ def _truncate(entry: Path) -> None:
 
 
 DAMAGES = [
-    (lambda entry: (entry / build.MARKER).unlink(), "no readable complete.json"),
+    (lambda entry: (entry / cache.MARKER).unlink(), "no readable complete.json"),
     (lambda entry: _module(entry).unlink(), "{name} is missing or not as built"),
     (_truncate, "{name} is missing or not as built"),
 ]
@@ -315,23 +316,23 @@ def test_damaged_entry_is_rebuilt_with_one_warning(
     built: Path,
     damage: Callable[[Path], None],
     why: str,
-    backends: dict[str, build.Compiled],
+    backends: dict[str, Compiled],
     capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setenv("GYROGEN_CACHE", str(built.parent / "cache"))
-    entry = build.cache_dir() / build._plan(built, "c").key
+    entry = cache.cache_dir() / build._plan(built, "c").key
     name = _module(entry).name
     damage(entry)
     comp = build.build(built, "c")
     err = capsys.readouterr().err
     assert err.startswith(f"gyrogen: warning: rebuilding cache entry {entry}: ")
     assert why.format(name=name) in err and err.count("\n") == 1
-    assert build._verified(entry) == entry / name  # whole again
+    assert cache.verified(entry) == entry / name  # whole again
     _agrees(comp, backends["c"])
 
 
-def _agrees(comp: build.Compiled, reference: build.Compiled) -> None:
+def _agrees(comp: Compiled, reference: Compiled) -> None:
     p = np.array([10, 2, 3, 4, 5, 0.3, 0.5, 0.8, 0.2, -0.1, 9.81, 0.5])
     x = np.linspace(-0.5, 0.5, 14)
     np.testing.assert_array_equal(comp.rhs(x, comp.setup(p)), reference.rhs(x, reference.setup(p)))
@@ -344,7 +345,7 @@ def _garbage_module(entry: Path, module_name: str) -> None:
     so.write_bytes(b"not an ELF file")
     digest = hashlib.sha256(so.read_bytes()).hexdigest()
     marker = {"module": so.name, "sha256": {so.name: digest}}
-    (entry / build.MARKER).write_text(json.dumps(marker))
+    (entry / cache.MARKER).write_text(json.dumps(marker))
 
 
 @pytest.mark.parametrize(
@@ -360,7 +361,7 @@ def test_entry_never_loaded_is_checked_too(
     why: str,
     source_dir: Path,
     tmp_path: Path,
-    backends: dict[str, build.Compiled],
+    backends: dict[str, Compiled],
     capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -376,7 +377,7 @@ def test_entry_never_loaded_is_checked_too(
     err = capsys.readouterr().err
     assert err.startswith(f"gyrogen: warning: rebuilding cache entry {entry}: {why}")
     assert err.count("\n") == 1
-    assert build._verified(entry).name.startswith(plan.module_name)
+    assert cache.verified(entry).name.startswith(plan.module_name)
     _agrees(comp, backends["c"])
 
 

@@ -16,6 +16,7 @@ from gyrogen.codegen.backends.c import CPrinter
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import compare, scene_view
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import load
 
 
@@ -80,7 +81,7 @@ def test_code_that_does_not_compile_is_not_written(
 
 
 @pytest.fixture(scope="module")
-def controlled(tmp_path_factory: pytest.TempPathFactory) -> tuple[build.Compiled, object]:
+def controlled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Compiled, object]:
     scene = load("speed_controlled")
     src = tmp_path_factory.mktemp("speed_controlled")
     generate(scene, src)

@@ -13,13 +13,14 @@ from gyrogen.analysis import check_cases, check_engine
 from gyrogen.cli import main
 from gyrogen.codegen.generate import generate
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import builtin_text
 
 QUICK = check_cases.cases(quick=True)
 
 
 @pytest.fixture(scope="module")
-def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, build.Compiled]:
+def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
     out = {}
     for case in QUICK:
         if case.scene.name not in out:
@@ -30,14 +31,14 @@ def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, build.Compil
 
 
 @pytest.mark.parametrize("case", QUICK, ids=[c.name for c in QUICK])
-def test_case_verdict(case: check_engine.Case, compiled: dict[str, build.Compiled]) -> None:
+def test_case_verdict(case: check_engine.Case, compiled: dict[str, Compiled]) -> None:
     res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.passed, (res.verdict, res.diagnosis, res.drift)
     if case.expect == "pass":
         assert max(res.drift.values()) <= check_engine.DRIFT_BAR
 
 
-def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Compiled]) -> None:
+def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, Compiled]) -> None:
     """The issue's goal. eps = 1e-6: the 3-1-2 angles come within
     GIMBAL_LOCK_COS of cos q2 = 0 after ~1e-4 s and DOP853 stops there with
     code 6 (it cost 6.6e6 RHS calls to push through before it did); Euler
@@ -68,7 +69,7 @@ def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Comp
     assert "quaternions would be cheaper" in near.diagnosis
 
 
-def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, build.Compiled]) -> None:
+def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) -> None:
     """The full suite's 3-1-2 cases (the quick one runs two of them): the
     ones whose closest approach, ~17 eps^2 in |cos q2|, is below
     GIMBAL_LOCK_COS stop with code 6; the others, and the pass over the pole
@@ -85,7 +86,7 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, build.Compi
     assert singular == {f"gimbal lock eps={e} (3-1-2 angles)" for e in ("1e-06", "1e-08")}
 
 
-def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, build.Compiled]) -> None:
+def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = next(c for c in QUICK if c.name == "speed controller k/J=1e+06")
     res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.method == "rodas4" and res.recommended.startswith("implicit")
@@ -136,7 +137,7 @@ def test_check_a_scene_file(capsys: pytest.CaptureFixture[str]) -> None:
 
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_compensated_summation_keeps_a_long_run(
-    language: str, backends: dict[str, build.Compiled]
+    language: str, backends: dict[str, Compiled]
 ) -> None:
     """1e6 RK4 steps: with plain adds the rounding drifts |H| by ~2e-11;
     summed with compensation (accept_step), by rounding alone, in both
@@ -170,7 +171,7 @@ def test_two_scenes_of_one_name_get_a_build_each(
     real_build = build.build
     built: list[int] = []
 
-    def counting(source: Path, language: build.Language) -> build.Compiled:
+    def counting(source: Path, language: Language) -> Compiled:
         comp = real_build(source, language)
         built.append(comp.nx)
         return comp

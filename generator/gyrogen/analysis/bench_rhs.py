@@ -28,6 +28,7 @@ from gyrogen.codegen.generate import generate
 from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import default
 from gyrogen.symbolic import model
 
@@ -121,7 +122,7 @@ def _check(label: str, got: Array, want: Array, echo: Echo) -> str:
 
 
 def _bench_backend(
-    comp: build.Compiled, inp: _Inputs, calls: int, repeats: int, echo: Echo
+    comp: Compiled, inp: _Inputs, calls: int, repeats: int, echo: Echo
 ) -> list[Measurement]:
     """The raw cffi call, Compiled.rhs and the batched loop of one backend."""
     lang = comp.language

@@ -22,7 +22,7 @@ from gyrogen import methods
 from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
 from gyrogen.oracle import scene_view
 from gyrogen.physics import lumped_inertias
-from gyrogen.runtime.build import Compiled
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene
 
 STIFF = 1e3

@@ -39,6 +39,7 @@ from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import make_dir, write_atomic
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import Scene
 
 MAX_NFEV = 10**7
@@ -158,9 +159,7 @@ class _Rhs:
     solve_ivp passes will do), advancing the progress bar by simulated time
     at most once per percent (the bookkeeping adds ~0.1 us a call)."""
 
-    def __init__(
-        self, comp: build.Compiled, c: np.ndarray, t_end: float, advance: Advance, budget: int
-    ):
+    def __init__(self, comp: Compiled, c: np.ndarray, t_end: float, advance: Advance, budget: int):
         ffi = comp.ffi
         self.fn = comp.function("rhs")
         self.c = np.ascontiguousarray(c, dtype=np.float64)
@@ -196,7 +195,7 @@ class _Rhs:
 
 
 def integrate_compiled(
-    comp: build.Compiled,
+    comp: Compiled,
     c: np.ndarray,
     x0: np.ndarray,
     settings: Settings,
@@ -244,7 +243,7 @@ def _trajectory(
 
 
 def integrate(
-    comp: build.Compiled,
+    comp: Compiled,
     c: np.ndarray,
     x0: np.ndarray,
     settings: Settings,
@@ -401,11 +400,11 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
     }
 
 
-def _prepare(scene: Scene, out: Path) -> tuple[build.Compiled, str]:
+def _prepare(scene: Scene, out: Path) -> tuple[Compiled, str]:
     """Sources into out/src (kept beside the trajectory they made), then the
     C backend, or Fortran when the scene builds no C."""
     unit = generate(scene, out / "src")
-    language: build.Language = "c" if "c" in scene.targets else "fortran"
+    language: Language = "c" if "c" in scene.targets else "fortran"
     return build.build(out / "src", language), unit.build_id
 
 

@@ -25,7 +25,7 @@ from gyrogen.abi import ODE_CODES, message
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import scaled_error
-from gyrogen.runtime.build import Compiled
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene
 
 REF_TOL = 1e-13

@@ -38,6 +38,7 @@ def check(
     from gyrogen.codegen.generate import generate
     from gyrogen.files import write_atomic
     from gyrogen.runtime import build
+    from gyrogen.runtime.compiled import Compiled
 
     suite = check_cases.cases(quick)
     if names and not every:
@@ -54,7 +55,7 @@ def check(
         return
     if plots is not None:
         write_atomic(plots, {})  # fail early, with one line, if plots is not writable
-    compiled: dict[str, build.Compiled] = {}  # by build id: two scenes may share a name
+    compiled: dict[str, Compiled] = {}  # by build id: two scenes may share a name
     results = []
     with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
         for case in progress("checking", suite):
