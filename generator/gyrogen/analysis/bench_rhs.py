@@ -29,6 +29,7 @@ from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.rhs import RawRhs
 from gyrogen.scene import default
 from gyrogen.symbolic import model
 
@@ -126,21 +127,17 @@ def _bench_backend(
 ) -> list[Measurement]:
     """The raw cffi call, Compiled.rhs and the batched loop of one backend."""
     lang = comp.language
-    ffi, lib = comp.ffi, comp.lib
     c = comp.setup(inp.p)
-    x, out = inp.x.copy(), np.empty_like(inp.x)
+    raw = RawRhs(comp, c)  # pointers made once: from_buffer per call would be timed too
+    raw.x[:] = inp.x
     xs, outs = np.ascontiguousarray(inp.xs), np.empty_like(inp.xs)
-    # Pointers made once: from_buffer per call would be timed along with the RHS.
-    xp, cp, op = (ffi.from_buffer("double[]", a) for a in (x, c, out))
-    xsp, outsp = ffi.from_buffer("double[]", xs), ffi.from_buffer("double[]", outs)
-    rhs_name = comp.symbol("rhs")
-    f = comp.function("rhs")
-    batch_fn = lib.gyrogen_rhs_batch
-    n = len(xs)
+    xsp, outsp = comp.doubles(xs), comp.doubles(outs)
+    batch_fn, cp = comp.lib.gyrogen_rhs_batch, raw.pointers[1]
+    n, rhs_name = len(xs), comp.symbol("rhs")
 
-    one = _per_call_ns(f, (0.0, xp, cp, op), calls, repeats)
-    note = _check(f"{lang} one call", out, reference.rhs(x, inp.p), echo)  # out: the loop's
-    conv = _per_call_ns(comp.rhs, (x, c), calls // 10, repeats)
+    one = _per_call_ns(raw.function, (0.0, *raw.pointers), calls, repeats)
+    note = _check(f"{lang} one call", raw.out, reference.rhs(raw.x, inp.p), echo)  # the loop's
+    conv = _per_call_ns(comp.rhs, (raw.x, c), calls // 10, repeats)
     batch = _best(lambda: batch_fn(n, 0.0, xsp, cp, outsp), repeats) / n * 1e9
     bnote = _check(f"{lang} batch", outs, reference.rhs(xs, inp.p), echo)
     return [

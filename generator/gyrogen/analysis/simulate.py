@@ -40,6 +40,7 @@ from gyrogen.files import make_dir, write_atomic
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled, Language
+from gyrogen.runtime.rhs import RawRhs
 from gyrogen.scene import Scene
 
 MAX_NFEV = 10**7
@@ -153,27 +154,19 @@ class _Exhausted(Exception):
     pass
 
 
-class _Rhs:
-    """f(t, x) for solve_ivp: the raw cffi function on preallocated buffers
-    (0.6 us a call here, Compiled.rhs 1.4 us; x is copied in, so any view
-    solve_ivp passes will do), advancing the progress bar by simulated time
-    at most once per percent (the bookkeeping adds ~0.1 us a call)."""
+class _Rhs(RawRhs):
+    """The raw rhs for solve_ivp, advancing the progress bar by simulated
+    time at most once per percent (the bookkeeping adds ~0.1 us a call), and
+    giving up after budget calls."""
 
     def __init__(self, comp: Compiled, c: np.ndarray, t_end: float, advance: Advance, budget: int):
-        ffi = comp.ffi
-        self.fn = comp.function("rhs")
-        self.c = np.ascontiguousarray(c, dtype=np.float64)
-        self.x, self.out = np.empty(comp.nx), np.empty(comp.nx)
-        self.xp, self.cp, self.op = (
-            ffi.from_buffer("double[]", a) for a in (self.x, self.c, self.out)
-        )
+        super().__init__(comp, c)
         self.t_end, self.advance = t_end, advance
         self.shown, self.mark, self.t_max = 0, t_end / 100, 0.0
         self.calls, self.budget = 0, budget
 
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
-        self.x[:] = x
-        self.fn(t, self.xp, self.cp, self.op)
+        out = super().__call__(t, x)
         self.calls += 1
         if self.calls > self.budget:
             raise _Exhausted
@@ -181,7 +174,7 @@ class _Rhs:
             self.t_max = t
             if t >= self.mark:
                 self._tick(t)
-        return self.out.copy()  # solve_ivp keeps the result: the buffer is reused
+        return out
 
     def _tick(self, t: float) -> None:
         pct = min(int(100 * t / self.t_end), 100)

@@ -26,6 +26,7 @@ from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.rhs import RawRhs
 from gyrogen.scene import Scene
 
 REF_TOL = 1e-13
@@ -127,7 +128,7 @@ def reference(prob: Problem) -> None:
             f"{prob.scene.name}: reference DOP853 failed at t = {stats['t']:.6g} s: {why}"
         )
     prob.ref = x
-    rhs = _cffi_rhs(comp, prob.c)
+    rhs = RawRhs(comp, prob.c)
     sol = solve_ivp(rhs, (0.0, prob.t1), prob.x0, method="DOP853", rtol=REF_TOL, atol=REF_TOL)
     prob.checks["scipy DOP853 (compiled RHS) at 1e-13"] = scaled_error(sol.y[:, -1], x)
     if prob.scene.name == "torque_free":
@@ -148,21 +149,6 @@ def closed_form(prob: Problem) -> np.ndarray:
     out[idx["u3"]] = u3 * math.cos(lam * t) - u1 * math.sin(lam * t)
     out[idx["u2"]], out[idx["u4"]] = u2, u4
     return out
-
-
-def _cffi_rhs(comp: Compiled, c: np.ndarray) -> Callable[[float, np.ndarray], np.ndarray]:
-    """f(t, x) through cffi with preallocated buffers: the cheapest path
-    from Python into the generated C."""
-    ffi, fn = comp.ffi, comp.function("rhs")
-    cbuf = ffi.from_buffer("double[]", np.ascontiguousarray(c))
-    out = np.empty(comp.nx)
-    obuf = ffi.from_buffer("double[]", out)
-
-    def f(t: float, x: np.ndarray) -> np.ndarray:
-        fn(t, ffi.from_buffer("double[]", np.ascontiguousarray(x)), cbuf, obuf)
-        return out.copy()
-
-    return f
 
 
 def compiled_runs(prob: Problem, cfg: Config, progress: Callable[[str], None]) -> list[Run]:
@@ -287,7 +273,7 @@ def numpy_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
 
 
 def compiled_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
-    return _cffi_rhs(prob.compiled["C"], prob.c)
+    return RawRhs(prob.compiled["C"], prob.c)
 
 
 def time_at(runs: list[Run], level: float) -> Run | None:
