@@ -11,18 +11,17 @@ compiled integrators at rtol = 1e-12, watching the invariants of NOTES.md:
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from gyrogen import methods
 from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
 from gyrogen.oracle import scene_view
 from gyrogen.physics import lumped_inertias
-from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.compiled import Compiled, controls
+from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
 STIFF = 1e3
@@ -132,23 +131,11 @@ def run_case(case: Case, comp: Compiled) -> Result:
     res.stiffness, res.recommended = stiffness(comp, c, x0, case.t_end)
     res.method = case.method or ("rodas4" if res.stiffness > STIFF else "dop853")
     ts = np.linspace(0.0, case.t_end, case.samples + 1)
-    xs = [x0]
-    x = x0.copy()
-    totals: dict[str, Any] = {}
-    for t0, t1 in itertools.pairwise(ts):
-        kw: dict[str, Any] = {"rtol": 1e-12, "atol": 1e-12, "max_steps": 10**8}
-        if methods.get(res.method).fixed_step:
-            kw = {"steps": max(1, case.steps // case.samples)}
-        x, stats, code = comp.integrate(res.method, x, c, float(t0), float(t1), **kw)
-        for k in ("accepted", "rejected", "rhs_calls", "jac_calls"):
-            totals[k] = totals.get(k, 0) + stats[k]
-        if code != 0:
-            res.code = code
-            totals["t"] = stats["t"]
-            break
-        xs.append(x.copy())
-    res.stats = totals
-    res.trajectory, res.times = np.array(xs), ts[: len(xs)]
+    steps = max(1, case.steps // case.samples)
+    given = controls(res.method, steps=steps, rtol=1e-12, atol=1e-12, max_steps=10**8)
+    seg = integrate_segments(comp, res.method, x0, c, ts, given)
+    res.stats, res.code = seg.totals, seg.code
+    res.trajectory, res.times = seg.states, ts[: len(seg.states)]
     _judge(res, p, c, comp)
     return res
 

@@ -20,7 +20,6 @@ show it. They measure the trajectory as written, not only the steps.
 from __future__ import annotations
 
 import io
-import itertools
 import json
 import time
 from collections.abc import Callable
@@ -39,8 +38,9 @@ from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import make_dir, write_atomic
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
-from gyrogen.runtime.compiled import Compiled, Language
+from gyrogen.runtime.compiled import Compiled, Language, controls
 from gyrogen.runtime.rhs import RawRhs
+from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
 MAX_NFEV = 10**7
@@ -206,22 +206,21 @@ def integrate_compiled(
         )
     grid = output_grid(settings.t_end, settings.dt)
     samples = sample_times(grid)
-    y, x, nfev, shown = [x0.copy()], x0.copy(), 0, 0
+    shown = [0]
+
+    def reached(t: float) -> None:
+        pct = int(100 * t / grid[-1])
+        advance(pct - shown[0])
+        shown[0] = pct
+
+    given = controls(method, steps=100, rtol=tol[0], atol=tol[1], max_steps=settings.max_nfev)
     t0 = time.perf_counter()
-    for a, b in itertools.pairwise(samples):
-        kw: dict[str, Any] = {"rtol": tol[0], "atol": tol[1], "max_steps": settings.max_nfev}
-        if methods.get(method).fixed_step:
-            kw = {"steps": 100}
-        x, stats, code = comp.integrate(method, x, c, float(a), float(b), **kw)
-        nfev += int(stats["rhs_calls"])
-        if code != 0:
-            why = message(ODE_CODES, code)
-            raise GyrogenError(f"{method} failed at t = {stats['t']:.6g} s: {why}")
-        y.append(x.copy())
-        pct = int(100 * b / grid[-1])
-        advance(pct - shown)
-        shown = pct
-    return _trajectory(grid, samples, np.array(y), nfev, time.perf_counter() - t0)
+    seg = integrate_segments(comp, method, x0, c, samples, given, reached)
+    wall = time.perf_counter() - t0
+    if seg.code != 0:
+        why = message(ODE_CODES, seg.code)
+        raise GyrogenError(f"{method} failed at t = {seg.totals['t']:.6g} s: {why}")
+    return _trajectory(grid, samples, seg.states, int(seg.totals["rhs_calls"]), wall)
 
 
 def _trajectory(
