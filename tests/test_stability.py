@@ -12,7 +12,7 @@ from gyrogen import abi
 from gyrogen.analysis import check_cases, check_engine
 from gyrogen.cli import main
 from gyrogen.codegen.generate import generate
-from gyrogen.runtime import build
+from gyrogen.runtime import build, scene_build
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import builtin_text
 
@@ -168,7 +168,7 @@ def test_two_scenes_of_one_name_get_a_build_each(
         "I22 = 4.0", "I22 = 4.5"
     ))  # fmt: skip
     (tmp_path / "builtin.toml").write_text(text)
-    real_build = build.build
+    real_build = scene_build.build
     built: list[int] = []
 
     def counting(source: Path, language: Language) -> Compiled:
@@ -176,7 +176,7 @@ def test_two_scenes_of_one_name_get_a_build_each(
         built.append(comp.nx)
         return comp
 
-    monkeypatch.setattr(build, "build", counting)
+    monkeypatch.setattr(scene_build, "build", counting)
     code, out, _ = _check([str(tmp_path / "builtin.toml"), str(mine)], capsys)
     assert code == 0, out
     assert sorted(built) == [7, 8]

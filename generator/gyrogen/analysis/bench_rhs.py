@@ -24,12 +24,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from gyrogen.codegen.generate import generate
 from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.rhs import RawRhs
+from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import default
 from gyrogen.symbolic import model
 
@@ -283,11 +283,10 @@ def run(
     inp = _Inputs(p=p, x=xs[0].copy(), xs=xs)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="gyrogen-bench-") as tmp:
-        generate(default(), Path(tmp))
-        backends = [build.build(Path(tmp), lang) for lang in ("c", "fortran")]
+        _, backends = build_scene(default(), Path(tmp), ("c", "fortran"))
     echo(f"generated and built the default scene in {time.perf_counter() - t0:.1f} s")
     ms: list[Measurement] = []
-    for comp in backends:
+    for comp in backends.values():
         ms += _bench_backend(comp, inp, calls, repeats, echo)
     ms += _bench_numpy(inp, calls // 100, repeats)
     rhs = pydy_rhs(echo) if pydy else None

@@ -33,13 +33,12 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import methods
 from gyrogen.abi import ODE_CODES, STATES, message
-from gyrogen.codegen.generate import generate
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import make_dir, write_atomic
 from gyrogen.oracle import scene_view
-from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled, Language, controls
 from gyrogen.runtime.rhs import RawRhs
+from gyrogen.runtime.scene_build import build_scene
 from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
@@ -395,9 +394,9 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
 def _prepare(scene: Scene, out: Path) -> tuple[Compiled, str]:
     """Sources into out/src (kept beside the trajectory they made), then the
     C backend, or Fortran when the scene builds no C."""
-    unit = generate(scene, out / "src")
     language: Language = "c" if "c" in scene.targets else "fortran"
-    return build.build(out / "src", language), unit.build_id
+    unit, built = build_scene(scene, out / "src", [language])
+    return built[language], unit.build_id
 
 
 def run(

@@ -35,10 +35,9 @@ def check(
     .toml) to check its own simulate settings."""
     from gyrogen.analysis import check_cases, check_engine
     from gyrogen.codegen.context import build_id
-    from gyrogen.codegen.generate import generate
     from gyrogen.files import write_atomic
-    from gyrogen.runtime import build
     from gyrogen.runtime.compiled import Compiled
+    from gyrogen.runtime.scene_build import build_scene
 
     suite = check_cases.cases(quick)
     if names and not every:
@@ -61,9 +60,8 @@ def check(
         for case in progress("checking", suite):
             key = build_id(case.scene)
             if key not in compiled:
-                src = Path(tmp) / key
-                generate(case.scene, src)
-                compiled[key] = build.build(src, "c")
+                _, built = build_scene(case.scene, Path(tmp) / key, ["c"])
+                compiled[key] = built["c"]
             res = check_engine.run_case(case, compiled[key])
             results.append(res)
             if plots is not None:
