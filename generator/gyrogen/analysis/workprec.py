@@ -22,6 +22,7 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import methods
 from gyrogen.abi import ODE_CODES, message
+from gyrogen.analysis.timing import best_time
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import scaled_error
@@ -98,22 +99,6 @@ class Problem:
     ref: np.ndarray = field(default_factory=lambda: np.zeros(0))
     checks: dict[str, float] = field(default_factory=dict)
     """Reference cross-checks: name -> mixed difference."""
-
-
-def best_time(fn: Callable[[], Any], repeats: int, min_total: float = 0.02) -> float:
-    """Best time of one call: each repeat runs fn often enough to last
-    min_total seconds, so microsecond runs are timed as well as long ones."""
-    t0 = time.perf_counter()
-    fn()
-    once = time.perf_counter() - t0
-    loops = max(1, int(min_total / max(once, 1e-9)))
-    best = once
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(loops):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / loops)
-    return best
 
 
 def reference(prob: Problem) -> None:
