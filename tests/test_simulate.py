@@ -16,7 +16,8 @@ import pytest
 from matplotlib.image import imread
 
 from gyrogen.analysis import plots
-from gyrogen.analysis.simulate import COLUMNS, check_solution
+from gyrogen.analysis.simulate import check_solution
+from gyrogen.analysis.simulate_files import COLUMNS
 from gyrogen.cli import main
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import reference, scene_view
