@@ -120,66 +120,77 @@ class _Rhs(RawRhs):
         self.shown = 100
 
 
-def integrate_compiled(
-    comp: Compiled,
-    c: np.ndarray,
-    x0: np.ndarray,
-    settings: Settings,
-    tol: tuple[float, float],
-    advance: Advance,
-) -> Trajectory:
+@dataclass(frozen=True)
+class Start:
+    """What an integration starts from: the backend and its constants, the
+    state at t = 0, and the scene's (rtol, atol)."""
+
+    comp: Compiled
+    c: np.ndarray
+    x0: np.ndarray
+    tol: tuple[float, float]
+
+
+def integrate(start: Start, settings: Settings, advance: Advance) -> Trajectory:
+    """From 0 to the grid's end, sampled on the grid and the quadrature
+    nodes, by solve_ivp or a compiled integrator (settings.method); a
+    failure is one line with the time reached."""
+    grid = output_grid(settings.t_end, settings.dt)
+    samples = sample_times(grid)
+    compiled = settings.method in methods.NAMES
+    y, nfev, wall = (_by_integrator if compiled else _by_solve_ivp)(
+        start, samples, settings, advance
+    )
+    return from_samples(grid, samples, y, nfev, wall)
+
+
+def _by_integrator(
+    start: Start, samples: np.ndarray, settings: Settings, advance: Advance
+) -> tuple[np.ndarray, int, float]:
     """The generated integrator from each sample time to the next: every
     output is a step end, so no interpolation error (rk4: 100 steps an
-    interval)."""
-    method = settings.method
+    interval). The states, the RHS calls and the seconds it took."""
+    comp, method = start.comp, settings.method
     if method not in comp.manifest["integrators"]:
         raise SceneError(
             f"{comp.manifest['prefix']}: method {method} is not among the scene's integrators "
             f"({', '.join(comp.manifest['integrators']) or 'none'})"
         )
-    grid = output_grid(settings.t_end, settings.dt)
-    samples = sample_times(grid)
     shown = [0]
 
     def reached(t: float) -> None:
-        pct = int(100 * t / grid[-1])
+        pct = int(100 * t / samples[-1])
         advance(pct - shown[0])
         shown[0] = pct
 
-    given = controls(method, steps=100, rtol=tol[0], atol=tol[1], max_steps=settings.max_nfev)
+    rtol, atol = start.tol
+    given = controls(method, steps=100, rtol=rtol, atol=atol, max_steps=settings.max_nfev)
     t0 = time.perf_counter()
-    seg = integrate_segments(comp, method, x0, c, samples, given, reached)
+    seg = integrate_segments(comp, method, start.x0, start.c, samples, given, reached)
     wall = time.perf_counter() - t0
     if seg.code != 0:
         why = message(ODE_CODES, seg.code)
         raise GyrogenError(f"{method} failed at t = {seg.totals['t']:.6g} s: {why}")
-    return from_samples(grid, samples, seg.states, int(seg.totals["rhs_calls"]), wall)
+    return seg.states, int(seg.totals["rhs_calls"]), wall
 
 
-def integrate(
-    comp: Compiled,
-    c: np.ndarray,
-    x0: np.ndarray,
-    settings: Settings,
-    tol: tuple[float, float],
-    advance: Advance,
-) -> Trajectory:
-    """solve_ivp from 0 to the grid's end, sampled on the grid and the
-    quadrature nodes; a failure is one line with the time reached."""
-    if settings.method in methods.NAMES:
-        return integrate_compiled(comp, c, x0, settings, tol, advance)
-    grid = output_grid(settings.t_end, settings.dt)
-    f = _Rhs(comp, c, grid[-1], advance, settings.max_nfev)
-    samples = sample_times(grid)
+def _by_solve_ivp(
+    start: Start, samples: np.ndarray, settings: Settings, advance: Advance
+) -> tuple[np.ndarray, int, float]:
+    """solve_ivp through the raw rhs, its dense output at the sample times:
+    the states, the RHS calls and the seconds it took."""
+    t_end = samples[-1]
+    f = _Rhs(start.comp, start.c, t_end, advance, settings.max_nfev)
+    rtol, atol = start.tol
     t0 = time.perf_counter()
     try:
-        sol = solve_ivp(f, (0.0, grid[-1]), x0, settings.method, samples, rtol=tol[0], atol=tol[1])
+        sol = solve_ivp(f, (0.0, t_end), start.x0, settings.method, samples, rtol=rtol, atol=atol)
     except _Exhausted:
         sol = None
     wall = time.perf_counter() - t0
-    check_solution(sol, settings.method, f.t_max, grid[-1], settings.max_nfev)
+    check_solution(sol, settings.method, f.t_max, t_end, settings.max_nfev)
     f.finish()
-    return from_samples(grid, samples, np.ascontiguousarray(sol.y.T), int(sol.nfev), wall)
+    return np.ascontiguousarray(sol.y.T), int(sol.nfev), wall
 
 
 def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: int) -> None:
@@ -221,11 +232,12 @@ def run(
         c = comp.setup(p)
     except ValueError as exc:
         raise SceneError(f"{scene.name}: simulate.parameters: {exc}") from exc
-    tol = (scene.simulate.rtol, scene.simulate.atol)
-    x0 = np.array(scene.initial_state())
+    start = Start(
+        comp, c, np.array(scene.initial_state()), (scene.simulate.rtol, scene.simulate.atol)
+    )
     end = output_grid(settings.t_end, settings.dt)[-1]
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:
-        traj = integrate(comp, c, x0, settings, tol, advance)
+        traj = integrate(start, settings, advance)
     inv = along_trajectory(scene, p, traj)
     files = tuple(out / n for n in simulate_files.file_names(settings.plot))
     res = Result(scene, out, comp.language, build_id, settings, traj, inv, files)

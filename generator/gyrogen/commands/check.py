@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gyrogen.commands.options import progress
+from gyrogen.commands.options import directory, progress
 from gyrogen.errors import GyrogenError
 
 if TYPE_CHECKING:
@@ -19,12 +19,7 @@ if TYPE_CHECKING:
 @click.argument("names", nargs=-1)
 @click.option("--all", "every", is_flag=True, help="Every case (the default with no NAMES).")
 @click.option("--quick", is_flag=True, help="Fewer and shorter cases (for CI, under a minute).")
-@click.option(
-    "--plots",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Write one PNG per case into this directory.",
-)
+@directory("--plots", "Write one PNG per case into this directory.")
 @click.option("--list", "listing", is_flag=True, help="List the cases and exit.")
 def check(
     names: tuple[str, ...], every: bool, quick: bool, plots: Path | None, listing: bool

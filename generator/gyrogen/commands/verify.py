@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gyrogen.commands.options import SCENE, progress, verify_options
+from gyrogen.commands.options import SCENE, directory, progress, verify_options
 from gyrogen.errors import GyrogenError
 from gyrogen.scene import Scene, default
 
@@ -71,9 +71,7 @@ def _compare(scene: Scene, backends: list[Compiled], states: int, params: int, s
 
 @click.command()
 @click.argument("scene", type=SCENE, required=False)
-@click.option(
-    "--out", type=click.Path(file_okay=False, path_type=Path), help="Keep the sources here."
-)
+@directory("--out", "Keep the sources here.")
 @verify_options
 def verify(scene: Scene | None, out: Path | None, states: int, params: int, seed: int) -> None:
     """Generate SCENE (default gyrostat), build it, compare with the reference."""
