@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
-from gyrogen.cli import main
 from gyrogen.codegen.generate import generate
 from gyrogen.errors import BuildError, SceneError
 from gyrogen.oracle import scene_view
@@ -21,16 +20,6 @@ from gyrogen.runtime import build
 from gyrogen.scene import builtin_names, builtin_text, load, parse
 
 GOOD = builtin_text("wheel_spinup")
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def edit(old: str, new: str, text: str = GOOD) -> str:
@@ -183,12 +172,12 @@ BAD = [
 
 @pytest.mark.parametrize(("case", "text", "message"), BAD, ids=[b[0] for b in BAD])
 def test_bad_scene_is_one_line_exit_2_nothing_written(
-    case: str, text: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    case: str, text: str, message: str, tmp_path: Path, cli
 ) -> None:
     path = tmp_path / "scene.toml"
     path.write_text(text)
     out = tmp_path / "out"
-    code, stdout, err = run(["generate", str(path), "--out", str(out)], capsys)
+    code, stdout, err = cli(["generate", str(path), "--out", str(out)])
     assert code == 2, (case, err)
     assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: ")
     assert message in err, err
@@ -226,11 +215,11 @@ UNREADABLE = [
 
 @pytest.mark.parametrize(("make", "why"), UNREADABLE, ids=[u[0].__name__ for u in UNREADABLE])
 def test_unreadable_scene_file_is_one_line_exit_2(
-    make: Callable[[Path], None], why: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    make: Callable[[Path], None], why: str, tmp_path: Path, cli
 ) -> None:
     path = tmp_path / "scene.toml"
     make(path)
-    code, out, err = run(["generate", str(path), "--out", str(tmp_path / "out")], capsys)
+    code, out, err = cli(["generate", str(path), "--out", str(tmp_path / "out")])
     assert (code, out, err) == (2, "", f"gyrogen: error: {path}: {why}\n")
     assert not (tmp_path / "out").exists()
 
@@ -248,13 +237,13 @@ def test_table_torque_needs_increasing_times() -> None:
         parse(edit('T   = "runtime"   # N m\n', "", text), "x.toml")
 
 
-def test_unknown_scene_name_lists_the_builtins(capsys: pytest.CaptureFixture[str]) -> None:
-    code, _, err = run(["generate", "no_such_scene"], capsys)
+def test_unknown_scene_name_lists_the_builtins(cli) -> None:
+    code, _, err = cli(["generate", "no_such_scene"])
     assert code == 2 and "no such file, and no built-in scene" in err and "dual_spin" in err
 
 
-def test_builtin_scenes_listed(capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, _ = run(["scenes"], capsys)
+def test_builtin_scenes_listed(cli) -> None:
+    code, out, _ = cli(["scenes"])
     assert code == 0
     for name in builtin_names():
         assert name in out
@@ -263,18 +252,16 @@ def test_builtin_scenes_listed(capsys: pytest.CaptureFixture[str]) -> None:
     }  # fmt: skip
 
 
-def test_new_writes_a_valid_commented_scene(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_new_writes_a_valid_commented_scene(tmp_path: Path, cli) -> None:
     target = tmp_path / "my_sat.toml"
-    code, out, _ = run(["new", "my_sat", "--out", str(target)], capsys)
+    code, out, _ = cli(["new", "my_sat", "--out", str(target)])
     assert code == 0 and "wrote" in out
     text = target.read_text()
     assert text.count("#") > 20
     assert load(str(target)).name == "my_sat"
-    code, _, err = run(["new", "my_sat", "--out", str(target)], capsys)
+    code, _, err = cli(["new", "my_sat", "--out", str(target)])
     assert code == 1 and "exists" in err
-    code, _, err = run(["new", "2bad", "--out", str(tmp_path / "x.toml")], capsys)
+    code, _, err = cli(["new", "2bad", "--out", str(tmp_path / "x.toml")])
     assert code == 2 and "not a valid scene name" in err
 
 
