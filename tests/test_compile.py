@@ -44,36 +44,27 @@ def test_source_compiles_as_cxx(source_dir: Path, tmp_path: Path) -> None:
     )  # fmt: skip
 
 
-def test_header_from_cxx(source_dir: Path, tmp_path: Path) -> None:
-    """A C++ program includes the header, links the C object, and calls it."""
-    main = tmp_path / "main.cpp"
-    main.write_text(
-        '#include "gyrostat.h"\n#include <cstdio>\n'
-        "int main() {\n"
-        "  double p[GYROSTAT_NP] = {10, 2, 3, 4, 5, 0.3, 0.5, 0.8, 0.2, -0.1, 9.81, 0.5};\n"
-        "  double c[GYROSTAT_NC], x[GYROSTAT_NX] = {0}, d[GYROSTAT_NX];\n"
-        "  if (gyrostat_setup(p, c) != GYROSTAT_OK) return 1;\n"
-        "  gyrostat_rhs(0.0, x, c, d);\n"
-        '  std::printf("%.6f\\n", d[13]);\n  return 0;\n}\n'
-    )
-    _compile(
-        ["gcc", "-std=c99", "-O2", "-c", str(source_dir / "gyrostat.c"), "-o", "g.o"], tmp_path
-    )
-    _compile(
-        ["g++", "-std=c++17", "-Wall", "-Wextra", "-Werror", f"-I{source_dir}", "main.cpp", "g.o",
-         "-lm", "-o", "main"],
-        tmp_path,
-    )  # fmt: skip
-    out = subprocess.run([str(tmp_path / "main")], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "9.810000"
-
-
 def test_fortran_2008_strict(source_dir: Path, tmp_path: Path) -> None:
     _compile(
         ["gfortran", "-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror",
          "-J", str(tmp_path), "-c", str(source_dir / "gyrostat.f90"), "-o", str(tmp_path / "f.o")],
         source_dir,
     )  # fmt: skip
+
+
+def _fresh(source_dir: Path, tmp_path: Path, tag: str) -> Path:
+    """A copy of the sources with a comment of its own: a cache key no
+    other test (and nothing loaded in this process) has."""
+    src = tmp_path / f"src-{tag}"
+    shutil.copytree(source_dir, src)
+    with open(src / "gyrostat.c", "a") as fh:
+        fh.write(f"/* {tag} */\n")
+    return src
+
+
+def _break(src: Path, extra: str = "") -> None:
+    text = (src / "gyrostat.c").read_text().replace("return GYROSTAT_OK;", "return GYROSTAT_OK")
+    (src / "gyrostat.c").write_text(text + extra)
 
 
 def test_rebuild_hits_the_cache(
@@ -97,8 +88,7 @@ def test_changed_source_gets_a_new_cache_entry(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
-    src = tmp_path / "src"
-    shutil.copytree(source_dir, src)
+    src = _fresh(source_dir, tmp_path, "changed")
     build.build(src, "c")
     with open(src / "gyrostat.c", "a") as fh:
         fh.write("/* touched */\n")
@@ -118,27 +108,11 @@ def test_missing_compiler_names_the_package(
         build.build(source_dir, language)  # type: ignore[arg-type]
 
 
-def _fresh(source_dir: Path, tmp_path: Path, tag: str) -> Path:
-    """A copy of the sources with a comment of its own: a cache key no
-    other test (and nothing loaded in this process) has."""
-    src = tmp_path / f"src-{tag}"
-    shutil.copytree(source_dir, src)
-    with open(src / "gyrostat.c", "a") as fh:
-        fh.write(f"/* {tag} */\n")
-    return src
-
-
-def _break(src: Path, extra: str = "") -> None:
-    text = (src / "gyrostat.c").read_text().replace("return GYROSTAT_OK;", "return GYROSTAT_OK")
-    (src / "gyrostat.c").write_text(text + extra)
-
-
 def test_compile_error_shows_the_compiler_message(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
-    src = tmp_path / "src"
-    shutil.copytree(source_dir, src)
+    src = _fresh(source_dir, tmp_path, "error")
     _break(src)
     with pytest.raises(BuildError) as info:
         build.build(src, "c")
@@ -155,8 +129,7 @@ def test_long_compiler_output_shows_its_start_and_keeps_the_log(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
-    src = tmp_path / "src"
-    shutil.copytree(source_dir, src)
+    src = _fresh(source_dir, tmp_path, "long")
     _break(src, "".join(f"int broken_{i} = ;\n" for i in range(200)))
     with pytest.raises(BuildError) as info:
         build.build(src, "c")
@@ -211,30 +184,33 @@ def test_gyrogen_cache_naming_a_file_is_one_line(tmp_path: Path) -> None:
     assert blocker.read_text() == "not a cache"
 
 
-def test_cache_below_a_file_names_gyrogen_cache(
-    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+@pytest.mark.parametrize(
+    ("variable", "value", "root"),
+    [("GYROGEN_CACHE", "file/cache", "file/cache"), ("XDG_CACHE_HOME", "file", "file/gyrogen")],
+)
+def test_cache_below_a_file_is_one_line(
+    variable: str,
+    value: str,
+    root: str,
+    source_dir: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
 ) -> None:
+    """The cache root is a file or below one: one line naming it, and
+    GYROGEN_CACHE: either because it chose the root, or as the way out."""
     (tmp_path / "file").write_text("")
-    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "file" / "cache"))
-    with pytest.raises(BuildError) as info:
-        build.build(source_dir, "c")
-    assert str(info.value) == (
-        f"GYROGEN_CACHE={tmp_path / 'file' / 'cache'}: cannot use it as the build cache: "
-        "Not a directory"
-    )
-
-
-def test_default_cache_in_the_way_says_how_to_move_it(
-    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
     monkeypatch.delenv("GYROGEN_CACHE", raising=False)
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "file"))
-    (tmp_path / "file").write_text("")
+    monkeypatch.setenv(variable, str(tmp_path / value))
     with pytest.raises(BuildError) as info:
         build.build(source_dir, "c")
-    assert str(info.value) == (
-        f"cannot use {tmp_path / 'file' / 'gyrogen'} as the build cache: Not a directory "
-        "(set GYROGEN_CACHE to another directory)"
+    where, why = tmp_path / root, "Not a directory"
+    assert (
+        str(info.value)
+        == {
+            "GYROGEN_CACHE": f"GYROGEN_CACHE={where}: cannot use it as the build cache: {why}",
+            "XDG_CACHE_HOME": f"cannot use {where} as the build cache: {why} "
+            "(set GYROGEN_CACHE to another directory)",
+        }[variable]
     )
 
 
