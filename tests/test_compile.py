@@ -276,8 +276,13 @@ def _module(entry: Path) -> Path:
 
 
 def _truncate(entry: Path) -> None:
+    """The module cut to its first 4 KiB, as a new file put in its place:
+    cutting the file itself would pull the pages from under this process
+    when the module is the one it has loaded (SIGBUS at the next call)."""
     so = _module(entry)
-    so.write_bytes(so.read_bytes()[:4096])
+    cut = so.with_name(so.name + ".cut")
+    cut.write_bytes(so.read_bytes()[:4096])
+    cut.replace(so)
 
 
 DAMAGES = [
