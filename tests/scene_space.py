@@ -40,6 +40,7 @@ from gyrogen.errors import SceneError
 from gyrogen.files import write_atomic
 from gyrogen.oracle import compare, sampling, scene_view
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, parse
 
 INTEGRATORS = ("rk4", "dopri5", "dop853", "rodas4")
@@ -310,7 +311,7 @@ def _compile(cmd: list[str], cwd: Path) -> None:
     assert proc.returncode == 0, f"{' '.join(cmd)}:\n{proc.stderr[:2000]}"
 
 
-def _integrators(scene: Scene, comp: build.Compiled, p: np.ndarray) -> None:
+def _integrators(scene: Scene, comp: Compiled, p: np.ndarray) -> None:
     """Each integrator over a short span against scipy's LSODA on the
     reference, from the scene's start; an explicit method the problem is too
     stiff for (more than 1e4 adaptive or 1e5 fixed steps) is skipped."""
@@ -345,7 +346,7 @@ def _spiky(scene: Scene) -> bool:
 
 
 def _rk4_converges(
-    comp: build.Compiled, x0: np.ndarray, c: np.ndarray, t1: float, steps: int, ref: np.ndarray
+    comp: Compiled, x0: np.ndarray, c: np.ndarray, t1: float, steps: int, ref: np.ndarray
 ) -> None:
     """RK4 with n and 2n steps: the finer one is off the reference by no more
     than the two differ (a torque table's kink can cost it its order, not

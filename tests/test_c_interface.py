@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gyrogen import abi
-from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 
 # A valid, realistic parameter set (the embedding examples' dual spinner).
 VALID = dict(zip(abi.PARAMETERS, (500.0, 10.0, 100.0, 80.0, 120.0, 5.0,
@@ -45,7 +45,7 @@ def params(**changes: float) -> np.ndarray:
     return np.array([changes.get(name, VALID[name]) for name in abi.PARAMETERS])
 
 
-def test_the_codes_are_the_documented_ones(backends: dict[str, build.Compiled]) -> None:
+def test_the_codes_are_the_documented_ones(backends: dict[str, Compiled]) -> None:
     codes = backends["c"].manifest["setup_codes"]
     assert "accepted" in codes[str(OK)]
     assert "NaN or infinite" in codes[str(NONFINITE)]
@@ -55,7 +55,7 @@ def test_the_codes_are_the_documented_ones(backends: dict[str, build.Compiled]) 
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_valid_parameters_are_accepted(backends: dict[str, build.Compiled], language: str) -> None:
+def test_valid_parameters_are_accepted(backends: dict[str, Compiled], language: str) -> None:
     code, c = backends[language].setup_code(params())
     assert code == OK
     assert np.all(np.isfinite(c))
@@ -64,31 +64,27 @@ def test_valid_parameters_are_accepted(backends: dict[str, build.Compiled], lang
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf], ids=["nan", "+inf", "-inf"])
 @pytest.mark.parametrize("name", abi.PARAMETERS)
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_nonfinite(
-    backends: dict[str, build.Compiled], language: str, name: str, bad: float
-) -> None:
+def test_nonfinite(backends: dict[str, Compiled], language: str, name: str, bad: float) -> None:
     code, _ = backends[language].setup_code(params(**{name: bad}))
     assert code == NONFINITE
 
 
 @pytest.mark.parametrize("name", abi.PARAMETERS)
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_negative(backends: dict[str, build.Compiled], language: str, name: str) -> None:
+def test_negative(backends: dict[str, Compiled], language: str, name: str) -> None:
     code, _ = backends[language].setup_code(params(**{name: -abs(VALID[name]) or -1.0}))
     assert code == NEGATIVE[name]
 
 
 @pytest.mark.parametrize("name", ["m_a", "m_b", "I", "J"])
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_zero_is_not_positive(
-    backends: dict[str, build.Compiled], language: str, name: str
-) -> None:
+def test_zero_is_not_positive(backends: dict[str, Compiled], language: str, name: str) -> None:
     code, _ = backends[language].setup_code(params(**{name: 0.0}))
     assert code == NEGATIVE[name]
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_first_failing_check_wins(backends: dict[str, build.Compiled], language: str) -> None:
+def test_first_failing_check_wins(backends: dict[str, Compiled], language: str) -> None:
     """Checked in the documented order: a NaN beats a negative mass, which
     beats a negative rotor inertia."""
     setup = backends[language].setup_code

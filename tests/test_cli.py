@@ -11,24 +11,13 @@ from typing import Any
 import pytest
 
 from gyrogen import files as files_module
-from gyrogen.cli import main
 from gyrogen.codegen import generate as generate_module
 from gyrogen.errors import GyrogenError
 from gyrogen.scene import default
 
 
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def test_generate_writes_sources_and_manifest(tmp_path: Path, capsys) -> None:
-    code, out, _ = run(["generate", "--out", str(tmp_path / "o")], capsys)
+def test_generate_writes_sources_and_manifest(tmp_path: Path, cli) -> None:
+    code, out, _ = cli(["generate", "--out", str(tmp_path / "o")])
     assert code == 0
     names = sorted(p.name for p in (tmp_path / "o").iterdir())
     assert names == [
@@ -38,22 +27,22 @@ def test_generate_writes_sources_and_manifest(tmp_path: Path, capsys) -> None:
     assert "gyrostat" in out and "(full model)" in out
 
 
-def test_unknown_option_is_one_line_exit_2(capsys) -> None:
-    code, out, err = run(["generate", "--bogus"], capsys)
+def test_unknown_option_is_one_line_exit_2(cli) -> None:
+    code, out, err = cli(["generate", "--bogus"])
     assert code == 2
     assert err.count("\n") == 1 and "No such option" in err and "--bogus" in err
     assert out == ""
 
 
-def test_unknown_command_is_one_line_exit_2(capsys) -> None:
-    code, _, err = run(["frobnicate"], capsys)
+def test_unknown_command_is_one_line_exit_2(cli) -> None:
+    code, _, err = cli(["frobnicate"])
     assert code == 2 and err.count("\n") == 1 and "frobnicate" in err
 
 
-def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, capsys) -> None:
+def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cli) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
-    code, _, err = run(["generate", "--out", str(blocker / "sub")], capsys)
+    code, _, err = cli(["generate", "--out", str(blocker / "sub")])
     assert code == 1
     assert (
         err
@@ -63,7 +52,7 @@ def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, capsys) -> None:
 
 
 def test_failed_write_leaves_nothing_half_written(
-    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out_dir = tmp_path / "o"
     out_dir.mkdir()
@@ -78,7 +67,7 @@ def test_failed_write_leaves_nothing_half_written(
         real_replace(src, dst)
 
     monkeypatch.setattr(files_module.os, "replace", fail_second)
-    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    code, _, err = cli(["generate", "--out", str(out_dir)])
     assert code == 1
     assert (
         err == f"gyrogen: error: cannot write {out_dir / 'gyrostat.h'}: No space left on device\n"
@@ -100,22 +89,22 @@ def _contents(out_dir: Path) -> dict[str, str]:
     return {p.name: p.read_text() for p in out_dir.iterdir() if p.is_file()}
 
 
-def test_directory_in_the_way_writes_nothing(tmp_path: Path, capsys) -> None:
+def test_directory_in_the_way_writes_nothing(tmp_path: Path, cli) -> None:
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
     (out_dir / "gyrostat_ode.c").mkdir()
-    code, out, err = run(["generate", "--out", str(out_dir)], capsys)
+    code, out, err = cli(["generate", "--out", str(out_dir)])
     assert code == 1 and out == ""
     assert err == f"gyrogen: error: cannot write {out_dir / 'gyrostat_ode.c'}: Is a directory\n"
     assert _contents(out_dir) == old  # no new file, no temporary, the old ones as they were
     assert (out_dir / "gyrostat_ode.c").is_dir()
 
 
-def test_fifo_in_the_way_writes_nothing(tmp_path: Path, capsys) -> None:
+def test_fifo_in_the_way_writes_nothing(tmp_path: Path, cli) -> None:
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
     os.mkfifo(out_dir / "gyrostat.h")
-    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    code, _, err = cli(["generate", "--out", str(out_dir)])
     assert code == 1
     assert err == f"gyrogen: error: cannot write {out_dir / 'gyrostat.h'}: Not a regular file\n"
     assert _contents(out_dir) == old
@@ -136,7 +125,7 @@ def _fail_on(monkeypatch: pytest.MonkeyPatch, target: Path, exc: BaseException) 
 
 
 def test_failed_rename_puts_every_old_file_back(
-    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The rename of the sixth of seven files fails: the five already in
     place are taken back, the old gyrostat.c comes back from its temporary
@@ -145,7 +134,7 @@ def test_failed_rename_puts_every_old_file_back(
     old = _old_sources(out_dir)
     failing = out_dir / "gyrostat_ode.f90"
     _fail_on(monkeypatch, failing, PermissionError(13, "Permission denied"))
-    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    code, _, err = cli(["generate", "--out", str(out_dir)])
     assert code == 1
     assert err == f"gyrogen: error: cannot write {failing}: Permission denied\n"
     assert _contents(out_dir) == old
@@ -153,14 +142,14 @@ def test_failed_rename_puts_every_old_file_back(
 
 
 def test_interrupt_while_writing_puts_every_old_file_back(
-    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Ctrl-C (KeyboardInterrupt) in the middle of the renames: exit 130,
     the old files as they were, no temporary file left."""
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
     _fail_on(monkeypatch, out_dir / "manifest.json", KeyboardInterrupt())
-    code, out, err = run(["generate", "--no-check", "--out", str(out_dir)], capsys)
+    code, out, err = cli(["generate", "--no-check", "--out", str(out_dir)])
     assert code == 130 and out == ""
     assert err.endswith("gyrogen: aborted\n") and "Traceback" not in err
     assert _contents(out_dir) == old
@@ -168,7 +157,7 @@ def test_interrupt_while_writing_puts_every_old_file_back(
 
 
 def test_full_disk_while_staging_leaves_no_temporary(
-    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The third temporary file cannot be created: the two already written
     are removed, and nothing was renamed."""
@@ -184,7 +173,7 @@ def test_full_disk_while_staging_leaves_no_temporary(
         return real_mkstemp(**kwargs)
 
     monkeypatch.setattr(files_module.tempfile, "mkstemp", mkstemp)
-    code, _, err = run(["generate", "--out", str(out_dir)], capsys)
+    code, _, err = cli(["generate", "--out", str(out_dir)])
     assert code == 1 and made[2] == ".gyrostat_ode.h."
     assert (
         err
@@ -195,18 +184,18 @@ def test_full_disk_while_staging_leaves_no_temporary(
 
 @pytest.mark.parametrize("mask", [0o022, 0o027, 0o077])
 def test_written_files_have_the_mode_open_gives(
-    mask: int, tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    mask: int, tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """0o666 less the umask, for new and replaced files, generate and new
     alike; also where /proc/self/status does not tell the umask."""
     saved = os.umask(mask)
     try:
-        run(["generate", "--out", str(tmp_path / "o")], capsys)
-        run(["generate", "--out", str(tmp_path / "o")], capsys)  # replaces each file
-        run(["new", "my_sat", "--out", str(tmp_path / "my_sat.toml")], capsys)
+        cli(["generate", "--out", str(tmp_path / "o")])
+        cli(["generate", "--out", str(tmp_path / "o")])  # replaces each file
+        cli(["new", "my_sat", "--out", str(tmp_path / "my_sat.toml")])
         monkeypatch.setattr(files_module, "_PROC_STATUS", tmp_path / "no_such_status")
         files_module._umask_once.cache_clear()
-        run(["new", "my_sat2", "--out", str(tmp_path / "my_sat2.toml")], capsys)
+        cli(["new", "my_sat2", "--out", str(tmp_path / "my_sat2.toml")])
     finally:
         os.umask(saved)
         files_module._umask_once.cache_clear()
@@ -226,10 +215,10 @@ def test_umask_is_read_without_changing_it(monkeypatch: pytest.MonkeyPatch) -> N
         os.umask(saved)
 
 
-def test_out_naming_a_file_is_a_usage_error(tmp_path: Path, capsys) -> None:
+def test_out_naming_a_file_is_a_usage_error(tmp_path: Path, cli) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("mine")
-    code, _, err = run(["generate", "--out", str(blocker)], capsys)
+    code, _, err = cli(["generate", "--out", str(blocker)])
     assert code == 2
     assert err == (
         f"gyrogen generate: error: Invalid value for '--out': Directory '{blocker}' is a file. "
@@ -248,32 +237,30 @@ def test_render_failure_writes_nothing(tmp_path: Path, monkeypatch: pytest.Monke
     assert not (tmp_path / "o").exists()
 
 
-def test_prove(capsys) -> None:
-    code, out, _ = run(["prove"], capsys)
+def test_prove(cli) -> None:
+    code, out, _ = cli(["prove"])
     assert code == 0
     assert "mass matrix (7x7)" in out and "forcing (7)" in out
     assert "The two formulations are identical." in out
 
 
-def test_equations_text_and_latex(capsys) -> None:
-    code, out, _ = run(["equations"], capsys)
+def test_equations_text_and_latex(cli) -> None:
+    code, out, _ = cli(["equations"])
     assert code == 0
     assert "(a) Separate bodies" in out and "(b) Lumped carrier" in out
     assert "IA11 = I + I11 + l3**2*m_a*m_b/(m_a + m_b)" in out
-    code, out, _ = run(["equations", "--latex"], capsys)
+    code, out, _ = cli(["equations", "--latex"])
     assert code == 0 and r"\begin{align}" in out and r"I_{\tilde{A}11}" in out
 
 
-def test_ops_table(capsys) -> None:
-    code, out, _ = run(["ops"], capsys)
+def test_ops_table(cli) -> None:
+    code, out, _ = cli(["ops"])
     assert code == 0
     assert all(f"({k})" in out for k in ("i", "ii", "iii", "lu", "setup"))
 
 
-def test_verify_small(tmp_path: Path, capsys) -> None:
-    code, out, _ = run(
-        ["verify", "--out", str(tmp_path / "v"), "--states", "500", "--params", "5"], capsys
-    )
+def test_verify_small(tmp_path: Path, cli) -> None:
+    code, out, _ = cli(["verify", "--out", str(tmp_path / "v"), "--states", "500", "--params", "5"])
     assert code == 0, out
     assert "C vs reference" in out and "Fortran vs reference" in out and "C vs Fortran" in out
     assert "setup refusals:" in out
@@ -295,34 +282,34 @@ def test_missing_compiler_from_the_command_line(tmp_path: Path) -> None:
     )
 
 
-def test_generate_lib_writes_build_files(tmp_path: Path, capsys) -> None:
-    code, _, _ = run(["generate", "--lib", "--out", str(tmp_path / "o")], capsys)
+def test_generate_lib_writes_build_files(tmp_path: Path, cli) -> None:
+    code, _, _ = cli(["generate", "--lib", "--out", str(tmp_path / "o")])
     assert code == 0
     names = {p.name for p in (tmp_path / "o").iterdir()}
     assert {"CMakeLists.txt", "gyrostat.mk", "gyrostat.c", "manifest.json"} <= names
     assert "Do not edit" in (tmp_path / "o" / "CMakeLists.txt").read_text()
 
 
-def test_new_into_a_missing_directory_creates_it(tmp_path: Path, capsys) -> None:
+def test_new_into_a_missing_directory_creates_it(tmp_path: Path, cli) -> None:
     target = tmp_path / "a" / "b" / "my_sat.toml"
-    code, out, _ = run(["new", "my_sat", "--out", str(target)], capsys)
+    code, out, _ = cli(["new", "my_sat", "--out", str(target)])
     assert code == 0 and out == f"wrote {target}: edit it, then `gyrogen generate {target}`\n"
     assert target.is_file() and sorted(p.name for p in target.parent.iterdir()) == ["my_sat.toml"]
 
 
 def test_new_over_a_directory_is_one_line(
-    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.chdir(tmp_path)
     (tmp_path / "my_sat.toml").mkdir()
-    code, _, err = run(["new", "my_sat"], capsys)
+    code, _, err = cli(["new", "my_sat"])
     assert (code, err) == (
         1,
         "gyrogen: error: my_sat.toml exists: choose another name or pass --force\n",
     )
-    code, _, err = run(["new", "my_sat", "--force"], capsys)
+    code, _, err = cli(["new", "my_sat", "--force"])
     assert (code, err) == (1, "gyrogen: error: cannot write my_sat.toml: Is a directory\n")
-    code, _, err = run(["new", "my_sat", "--out", "my_sat.toml"], capsys)
+    code, _, err = cli(["new", "my_sat", "--out", "my_sat.toml"])
     assert code == 2 and err == (
         "gyrogen new: error: Invalid value for '--out': File 'my_sat.toml' is a directory. "
         "(see --help)\n"
@@ -365,9 +352,9 @@ NUMBERS = [
 
 @pytest.mark.parametrize(("argv", "message"), NUMBERS, ids=[" ".join(a) for a, _ in NUMBERS])
 def test_number_out_of_range_is_one_line_exit_2(
-    argv: list[str], message: str, tmp_path: Path, capsys
+    argv: list[str], message: str, tmp_path: Path, cli
 ) -> None:
-    code, out, err = run([*argv, "--out", str(tmp_path / "o")], capsys)
+    code, out, err = cli([*argv, "--out", str(tmp_path / "o")])
     assert code == 2 and out == ""
     assert err.startswith(f"gyrogen {argv[0]}: error: ") and err.count("\n") == 1
     assert message in err, err

@@ -11,37 +11,27 @@ import numpy as np
 import pytest
 import sympy as sm
 
-from gyrogen.cli import main
 from gyrogen.codegen.backends.c import CPrinter
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import compare, scene_view
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import load
 
 
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def test_generate_checks_before_it_writes(tmp_path: Path, capsys) -> None:
-    code, out, _ = run(["generate", "wheel_spinup", "--out", str(tmp_path / "o")], capsys)
+def test_generate_checks_before_it_writes(tmp_path: Path, cli) -> None:
+    code, out, _ = cli(["generate", "wheel_spinup", "--out", str(tmp_path / "o")])
     assert code == 0
     assert "checked wheel_spinup: c, fortran compiled and compared with the reference in" in out
     assert (tmp_path / "o" / "manifest.json").is_file()
 
 
-def test_no_check_skips_the_check(tmp_path: Path, capsys) -> None:
-    code, out, _ = run(["generate", "torque_free", "--no-check", "--out", str(tmp_path)], capsys)
+def test_no_check_skips_the_check(tmp_path: Path, cli) -> None:
+    code, out, _ = cli(["generate", "torque_free", "--no-check", "--out", str(tmp_path)])
     assert code == 0 and "checked" not in out and (tmp_path / "manifest.json").is_file()
 
 
-def test_wrong_code_is_not_written(tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_wrong_code_is_not_written(tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every C double one part in 1e9 off: C differs from the reference and
     from the (right) Fortran; nothing is written."""
     real = CPrinter._print_Float
@@ -51,7 +41,7 @@ def test_wrong_code_is_not_written(tmp_path: Path, capsys, monkeypatch: pytest.M
 
     monkeypatch.setattr(CPrinter, "_print_Float", off)
     out = tmp_path / "o"
-    code, _, err = run(["generate", "wheel_spinup", "--out", str(out)], capsys)
+    code, _, err = cli(["generate", "wheel_spinup", "--out", str(out)])
     assert code == 1, err
     assert err.startswith("gyrogen: error: wheel_spinup: the generated code differs from the ")
     assert "from the reference: C vs " in err and err.count("\n") == 1
@@ -59,7 +49,7 @@ def test_wrong_code_is_not_written(tmp_path: Path, capsys, monkeypatch: pytest.M
 
 
 def test_code_that_does_not_compile_is_not_written(
-    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from gyrogen.codegen.backends import c
 
@@ -72,7 +62,7 @@ def test_code_that_does_not_compile_is_not_written(
 
     monkeypatch.setattr(c, "files", broken)
     out = tmp_path / "o"
-    code, _, err = run(["generate", "torque_free", "--out", str(out)], capsys)
+    code, _, err = cli(["generate", "torque_free", "--out", str(out)])
     assert code == 1
     assert err.startswith("gyrogen: error: torque_free: generated code that does not compile:")
     assert "undeclared" in err
@@ -80,7 +70,7 @@ def test_code_that_does_not_compile_is_not_written(
 
 
 @pytest.fixture(scope="module")
-def controlled(tmp_path_factory: pytest.TempPathFactory) -> tuple[build.Compiled, object]:
+def controlled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Compiled, object]:
     scene = load("speed_controlled")
     src = tmp_path_factory.mktemp("speed_controlled")
     generate(scene, src)

@@ -19,6 +19,7 @@ from gyrogen import abi, tableaus
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load, parse
 
 REPO = Path(__file__).resolve().parents[1]
@@ -27,7 +28,7 @@ SCENES = ["gyrostat", "torque_free", "speed_controlled"]
 ADAPTIVE = ["dopri5", "dop853", "rodas4"]
 OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT, ATTITUDE = range(7)
 
-Get = Callable[[str, str], build.Compiled]
+Get = Callable[[str, str], Compiled]
 
 # A small scene for the tests that render their own: the wheel of
 # speed_controlled under a tabled torque T(t) (f depends on t).
@@ -63,14 +64,14 @@ def tabled(integrators: list[str]) -> Scene:
 
 
 @pytest.fixture(scope="module")
-def compiled(backends: dict[str, build.Compiled], cache_dir: Path) -> Iterator[Get]:
+def compiled(backends: dict[str, Compiled], cache_dir: Path) -> Iterator[Get]:
     """(scene, language) -> the backend, built once from generated/<scene>
     (the default scene from the session's fresh copy)."""
     built = {("gyrostat", lang): backends[lang] for lang in LANGUAGES}
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
 
-    def get(scene: str, language: str) -> build.Compiled:
+    def get(scene: str, language: str) -> Compiled:
         if (scene, language) not in built:
             built[scene, language] = build.build(REPO / "generated" / scene, language)
         return built[scene, language]
@@ -414,7 +415,7 @@ def test_stiff_wheel_favours_rodas4(compiled: Get, language: str) -> None:
     assert mixed_error(xr, ref) < 1e-7
 
 
-def b_jac(b: build.Compiled, c: np.ndarray, x: np.ndarray) -> np.ndarray:
+def b_jac(b: Compiled, c: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The generated Jacobian through cffi, row-major (nx, nx)."""
     out = np.empty(b.nx * b.nx)
     fn = getattr(b.lib, b.manifest["functions"][b.language]["jac"])

@@ -17,7 +17,7 @@ import pytest
 
 from gyrogen.codegen import buildfiles
 from gyrogen.errors import GyrogenError
-from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 
 REPO = Path(__file__).resolve().parents[1]
 P = np.array([500.0, 10.0, 100.0, 80.0, 120.0, 5.0, 0.05, 0.1, 0.2, -0.1, 0.0, 0.01])
@@ -43,7 +43,7 @@ def run(cmd: list[str], cwd: Path) -> str:
     return proc.stdout
 
 
-def check_shared(so: Path, backend: build.Compiled) -> None:
+def check_shared(so: Path, backend: Compiled) -> None:
     """Load the shared library and call setup: the same constants as cffi's."""
     lib = ctypes.CDLL(str(so))
     c = np.zeros(backend.nc)
@@ -86,7 +86,7 @@ def test_a_scene_without_c_is_an_error(source_dir: Path) -> None:
         buildfiles.files(m)
 
 
-def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, build.Compiled]) -> None:
+def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
     out = tmp_path / "build"
     run(["cmake", "-S", str(lib_dir), "-B", str(out)], tmp_path)
     run(["cmake", "--build", str(out)], tmp_path)
@@ -124,7 +124,7 @@ def test_cmake_add_subdirectory(lib_dir: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(values[1], values[0], rtol=1e-12, atol=1e-15)
 
 
-def test_make_fragment(lib_dir: Path, tmp_path: Path, backends: dict[str, build.Compiled]) -> None:
+def test_make_fragment(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
     """Included from a user's Makefile in another directory, outputs elsewhere."""
     user = tmp_path / "user"
     user.mkdir()

@@ -20,6 +20,7 @@ from gyrogen import abi
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import reference, scene_view
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,7 +39,7 @@ T_CROSS = math.pi / 2 - Q2
 
 
 @pytest.fixture(scope="module")
-def angles(cache_dir: Path) -> Iterator[dict[str, build.Compiled]]:
+def angles(cache_dir: Path) -> Iterator[dict[str, Compiled]]:
     """torque_free (3-1-2 angles), from generated/."""
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
@@ -55,7 +56,7 @@ def quaternion_twin() -> Scene:
 @pytest.fixture(scope="module")
 def euler_parameters(
     tmp_path_factory: pytest.TempPathFactory, cache_dir: Path
-) -> Iterator[dict[str, build.Compiled]]:
+) -> Iterator[dict[str, Compiled]]:
     """The same scene with Euler parameters for the attitude."""
     src = tmp_path_factory.mktemp("quat") / "torque_free_quat"
     generate(quaternion_twin(), src)
@@ -74,7 +75,7 @@ def kwargs(method: str) -> dict[str, Any]:
 
 
 def raw(
-    b: build.Compiled,
+    b: Compiled,
     method: str,
     x: np.ndarray,
     c: np.ndarray,
@@ -114,9 +115,7 @@ def angle_dcm(scene: Scene, x: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_null_stats_gives_the_same_state(
-    backends: dict[str, build.Compiled], language: str
-) -> None:
+def test_null_stats_gives_the_same_state(backends: dict[str, Compiled], language: str) -> None:
     """Every single-trajectory integrator takes NULL stats, succeeding or
     failing: the same x and code as with them."""
     b = backends[language]
@@ -173,7 +172,7 @@ BAD = [
 
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_tolerances_no_double_meets_and_a_bad_first_step(
-    angles: dict[str, build.Compiled], language: str
+    angles: dict[str, Compiled], language: str
 ) -> None:
     """rtol <= 10 DBL_EPSILON, atol <= 0, a NaN or infinite tolerance or h0:
     code 5 at once (x as given, nothing called). The first rtol above the
@@ -201,7 +200,7 @@ def test_tolerances_no_double_meets_and_a_bad_first_step(
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_start_at_gimbal_lock(angles: dict[str, build.Compiled], language: str) -> None:
+def test_start_at_gimbal_lock(angles: dict[str, Compiled], language: str) -> None:
     """|cos q2| < GIMBAL_LOCK_COS at the start: code 6 before anything is
     called, x as given, for every method (an empty interval too); just
     outside the bound, and for a NaN q2 (code 3), it is not."""
@@ -228,7 +227,7 @@ def test_start_at_gimbal_lock(angles: dict[str, build.Compiled], language: str) 
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_a_step_across_q2_pi_over_2(angles: dict[str, build.Compiled], language: str) -> None:
+def test_a_step_across_q2_pi_over_2(angles: dict[str, Compiled], language: str) -> None:
     """q2 = 1.4 + t crosses pi/2 at T_CROSS (q1 = q3 = 0, the rates exact):
     the step that takes cos q2 below zero is refused with code 6, and x is
     the exact state at stats.t, before the crossing. RK4's last good state
@@ -253,7 +252,7 @@ def test_a_step_across_q2_pi_over_2(angles: dict[str, build.Compiled], language:
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_a_pass_closer_than_the_bound(angles: dict[str, build.Compiled], language: str) -> None:
+def test_a_pass_closer_than_the_bound(angles: dict[str, Compiled], language: str) -> None:
     """u3 = 1e-10 tilts the axis: a2 passes n3 at |cos q2| = 1.7e-11, below
     GIMBAL_LOCK_COS, while q1' and q3' grow as 1/cos q2. Every method stops
     with code 6 before the closest approach, x a finite state on the
@@ -279,7 +278,7 @@ def test_a_pass_closer_than_the_bound(angles: dict[str, build.Compiled], languag
 
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_euler_parameters_pass_where_the_angles_stop(
-    euler_parameters: dict[str, build.Compiled], language: str
+    euler_parameters: dict[str, Compiled], language: str
 ) -> None:
     """The same two motions with Euler parameters: every method reaches
     t1 = 1 with code 0 and the exact attitude; code 6 never comes."""

@@ -9,7 +9,7 @@ import sympy as sm
 
 from gyrogen.codegen.generate import full_model_unit
 from gyrogen.oracle import sampling
-from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.symbolic import equations, hoist, model, optimize, specialize
 from gyrogen.symbolic.opcounts import variants
 
@@ -123,7 +123,7 @@ def test_lumped_scalars_are_named_in_setup() -> None:
 
 @pytest.mark.parametrize("tiny", [5e-6, 1e-9, 1e-12])
 def test_setup_constants_survive_a_nearly_singular_lumped_block(
-    backends: dict[str, build.Compiled], tiny: float
+    backends: dict[str, Compiled], tiny: float
 ) -> None:
     """A tiny carrier and rotor far from A* (the lumped block tends to rank
     one, cond ~ 1/tiny): the constants are still within a few ulp of their

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
-from gyrogen.cli import main
 from gyrogen.codegen.generate import generate
 from gyrogen.errors import BuildError, SceneError
 from gyrogen.oracle import scene_view
@@ -23,22 +22,54 @@ from gyrogen.scene import builtin_names, builtin_text, load, parse
 GOOD = builtin_text("wheel_spinup")
 
 
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def edit(old: str, new: str, text: str = GOOD) -> str:
     assert old in text, old
     return text.replace(old, new, 1)
 
 
+def named(value: str) -> str:
+    return edit('name = "wheel_spinup"', f'name = "{value}"')
+
+
+def described(start: str) -> str:
+    return edit('description = "', f'description = "{start}')
+
+
+def simulating(line: str) -> str:
+    return edit("[simulate]", f"[simulate]\n{line}")
+
+
+FOLDED_SINGULAR = edit("I11 = ", "I11 = 1e-15 #")
+for _old, _new in [
+    ("I22 = 25.0", "I22 = 1e-15"), ("I33 = 18.0", "I33 = 1e-15"), ("I13 = 0.5", "I13 = 0.0"),
+    ("I   = 0.01", "I = 1e-15"), ("J   = 0.015", "J = 1e-15"), ("l3  = 0.1", "l3 = 1.0"),
+    ("l1  = 0.3", "l1 = 1.0"),
+]:  # fmt: skip
+    FOLDED_SINGULAR = FOLDED_SINGULAR.replace(_old, _new)
+HUGE_MOMENTS = edit(
+    "parameters = { T = 0.02 }",
+    "parameters = { T = 0.02, I11 = 1.7e308, I33 = 1.7e308 }",
+    edit("I11 = 20.0", 'I11 = "runtime"', edit("I33 = 18.0", 'I33 = "runtime"')),
+)
+NESTED = "a = " + "[" * 5000 + "]" * 5000
+CONTROLLED = edit('torque = "constant"', 'torque = "speed_controller"')
+# Expected messages too long for a row of BAD:
+NOT_DEFINITE = "carrier inertia is not positive definite"
+NUL_AT_1 = "description: control character U+0000 at position 1"
+NOT_A_NUMBER = 'parameters.m_a: expected a number or "runtime", not True'
+NOT_A_FLAG = "effects.rotor_angle: Input should be a valid boolean"
+STEPS = "simulate.dt: t_end/dt = "
+LIMIT = "more than the limit of 1,000,000: raise dt or lower t_end"
+TINY_DT = f"{STEPS}60 s/1e-300 s is 6e+301 output steps, {LIMIT}"
+HUGE_T_END = f"{STEPS}1e+300 s/0.05 s is 2e+301 output steps"
+JUST_OVER = f"{STEPS}50000.1 s/0.05 s is 1000001 output steps, more than the limit"
+LONGER = "simulate.dt: output step 61 s is longer than the span 60 s"
+# the generated setup's arithmetic overflows to a NaN condition number: code 7
+OVERFLOW = "parameters: the mass matrix's coupled block has condition number nan > 1e+13"
+FOLDED_RANGE = "a folded value must be 0 or of magnitude 1e-50 to 1e+50"
+
 BAD = [
+    # (case, scene text, a part of the message), rows of one form kept together
     ("unknown key", edit("[effects]", "[effects]\nwobble = true"), "effects.wobble: unknown key"),
     ("wrong type", edit("m_a = 150.0", 'm_a = "heavy"'), "parameters.m_a"),
     ("missing value", edit("I33 = 18.0\n", ""), "parameters: missing I33"),
@@ -46,150 +77,57 @@ BAD = [
     ("nan", edit("l1  = 0.3", "l1 = nan"), "parameters.l1"),
     ("negative mass", edit("m_b = 3.0", "m_b = -3.0"), "parameters.m_b: must be positive"),
     ("zero J", edit("J   = 0.015", "J = 0.0"), "parameters.J: must be positive"),
-    (
-        "not positive definite",
-        edit("I13 = 0.5", "I13 = 30.0"),
-        "carrier inertia is not positive definite",
-    ),
     ("triangle", edit("I22 = 25.0", "I22 = 45.0"), "violate the triangle inequality"),
     ("rotor 2I < J", edit("J   = 0.015", "J = 0.05"), "parameters.J: rotor needs J <= 2 I"),
-    (
-        "bad name",
-        edit('name = "wheel_spinup"', 'name = "2fast"'),
-        "name: '2fast' is not an identifier in C and Fortran",
-    ),
-    ("name _x", edit('name = "wheel_spinup"', 'name = "_x"'), "name: '_x' is not an identifier"),
-    ("name a__b", edit('name = "wheel_spinup"', 'name = "a__b"'), "double or trailing underscore"),
-    ("name a_", edit('name = "wheel_spinup"', 'name = "a_"'), "double or trailing underscore"),
-    ("name empty", edit('name = "wheel_spinup"', 'name = ""'), "name: must not be empty"),
-    ("name non-ASCII", edit('name = "wheel_spinup"', 'name = "r\u00f6tor"'), "not an identifier"),
-    (
-        "name 33 characters",
-        edit('name = "wheel_spinup"', f'name = "{"a" * 33}"'),
-        "is longer than 32 characters",
-    ),
-    (
-        "name 300 characters",
-        edit('name = "wheel_spinup"', f'name = "{"b" * 300}"'),
-        "... (300 characters) is longer than 32",
-    ),
-    (
-        "description NUL",
-        edit('description = "', 'description = "a\\u0000b '),
-        "description: control character U+0000 at position 1",
-    ),
-    (
-        "description escape",
-        edit('description = "', 'description = "\\u001b[31m'),
-        "description: control character U+001B",
-    ),
-    (
-        "description too long",
-        edit('description = "', f'description = "{"x" * 2001}'),
-        "description: 2",
-    ),
-    (
-        "number true",
-        edit("m_a = 150.0", "m_a = true"),
-        'parameters.m_a: expected a number or "runtime", not True',
-    ),
     ("number quoted", edit("m_a = 150.0", 'm_a = "150"'), "parameters.m_a: expected a number"),
     ("folded 1e308", edit("m_a = 150.0", "m_a = 1e308"), "parameters.m_a: 1e+308: a folded value"),
     ("folded 1e-60", edit("l1  = 0.3", "l1 = 1e-60"), "parameters.l1: 1e-60: a folded value"),
-    (
-        "flag as number",
-        edit("rotor_angle = true", "rotor_angle = 1"),
-        "effects.rotor_angle: Input should be a valid boolean",
-    ),
     ("flag as string", edit("rotor_angle = true", 'rotor_angle = "false"'), "effects.rotor_angle"),
     ("t_end as string", edit("t_end = ", 't_end = "5" #'), "simulate.t_end"),
-    (
-        "folded singular",
-        edit("I11 = ", "I11 = 1e-15 #")
-        .replace("I22 = 25.0", "I22 = 1e-15")
-        .replace("I33 = 18.0", "I33 = 1e-15")
-        .replace("I13 = 0.5", "I13 = 0.0")
-        .replace("I   = 0.01", "I = 1e-15")
-        .replace("J   = 0.015", "J = 1e-15")
-        .replace("l3  = 0.1", "l3 = 1.0")
-        .replace("l1  = 0.3", "l1 = 1.0"),
-        "condition number",
-    ),
-    ("C keyword", edit('name = "wheel_spinup"', 'name = "double"'), "is a C keyword"),
     ("g unused", edit("T   = ", "g = 9.81\nT   = "), "parameters.g: gravity has no effect"),
     ("T unused", edit('torque = "constant"', 'torque = "none"'), "parameters.T: only used"),
-    (
-        "controller needs k",
-        edit('torque = "constant"', 'torque = "speed_controller"'),
-        "parameters: missing k, w_ref",
-    ),
     ("bad target", edit('targets = ["c", "fortran"]', 'targets = ["rust"]'), "targets.0"),
     ("no target", edit('targets = ["c", "fortran"]', "targets = []"), "targets"),
     ("attitude", edit('targets = ["c"', 'attitude = "rodrigues"\ntargets = ["c"'), "attitude"),
     ("initial", edit("initial = { u1", "initial = { u9 = 1.0, u1"), "u9 is not a state"),
-    (
-        "rtol no double meets",
-        edit("[simulate]", "[simulate]\nrtol = 1e-20"),
-        "simulate.rtol: must be above 2.22e-15",
-    ),
-    (
-        "rtol at the bound",
-        edit("[simulate]", "[simulate]\nrtol = 2.220446049250313e-15"),
-        "simulate.rtol",
-    ),
+    ("huge I11", edit("I11 = 20.0", "I11 = 1e308"), f"parameters.I11: 1e+308: {FOLDED_RANGE}"),
+    ("not positive definite", edit("I13 = 0.5", "I13 = 30.0"), NOT_DEFINITE),
+    ("number true", edit("m_a = 150.0", "m_a = true"), NOT_A_NUMBER),
+    ("flag as number", edit("rotor_angle = true", "rotor_angle = 1"), NOT_A_FLAG),
+    ("tiny dt", edit("dt = 0.05", "dt = 1e-300"), TINY_DT),
+    ("dt longer than t_end", edit("dt = 0.05", "dt = 61.0"), LONGER),
+    ("huge t_end", edit("t_end = 60.0", "t_end = 1e300"), HUGE_T_END),
+    ("just over the point limit", edit("t_end = 60.0", "t_end = 50000.05"), JUST_OVER),
+    ("folded singular", FOLDED_SINGULAR, "condition number"),
+    ("controller needs k", CONTROLLED, "parameters: missing k, w_ref"),
+    ("nested too deeply", NESTED, "invalid TOML: arrays or tables nested too deeply"),
+    ("moments overflow", HUGE_MOMENTS, OVERFLOW),
     ("bad toml", "name = ", "invalid TOML"),
-    (
-        "nested too deeply",
-        "a = " + "[" * 5000 + "]" * 5000,
-        "invalid TOML: arrays or tables nested too deeply",
-    ),
-    (
-        "tiny dt",
-        edit("dt = 0.05", "dt = 1e-300"),
-        "simulate.dt: t_end/dt = 60 s/1e-300 s is 6e+301 output steps, "
-        "more than the limit of 1,000,000: raise dt or lower t_end",
-    ),
-    (
-        "dt longer than t_end",
-        edit("dt = 0.05", "dt = 61.0"),
-        "simulate.dt: output step 61 s is longer than the span 60 s",
-    ),
-    (
-        "huge t_end",
-        edit("t_end = 60.0", "t_end = 1e300"),
-        "simulate.dt: t_end/dt = 1e+300 s/0.05 s is 2e+301 output steps",
-    ),
-    (
-        "just over the point limit",
-        edit("t_end = 60.0", "t_end = 50000.05"),
-        "simulate.dt: t_end/dt = 50000.1 s/0.05 s is 1000001 output steps, more than the limit",
-    ),
-    (
-        "moments overflow",
-        edit(
-            "parameters = { T = 0.02 }",
-            "parameters = { T = 0.02, I11 = 1.7e308, I33 = 1.7e308 }",
-            edit("I11 = 20.0", 'I11 = "runtime"', edit("I33 = 18.0", 'I33 = "runtime"')),
-        ),
-        # the generated setup's arithmetic overflows to a NaN condition number: code 7
-        "parameters: the mass matrix's coupled block has condition number nan > 1e+13",
-    ),
-    (
-        "huge I11",
-        edit("I11 = 20.0", "I11 = 1e308"),
-        "parameters.I11: 1e+308: a folded value must be 0 or of magnitude 1e-50 to 1e+50",
-    ),
+    ("bad name", named("2fast"), "name: '2fast' is not an identifier in C and Fortran"),
+    ("name _x", named("_x"), "name: '_x' is not an identifier"),
+    ("name a__b", named("a__b"), "double or trailing underscore"),
+    ("name a_", named("a_"), "double or trailing underscore"),
+    ("name empty", named(""), "name: must not be empty"),
+    ("name non-ASCII", named("r\u00f6tor"), "not an identifier"),
+    ("C keyword", named("double"), "is a C keyword"),
+    ("description escape", described("\\u001b[31m"), "description: control character U+001B"),
+    ("rtol no double meets", simulating("rtol = 1e-20"), "simulate.rtol: must be above 2.22e-15"),
+    ("rtol at the bound", simulating("rtol = 2.220446049250313e-15"), "simulate.rtol"),
+    ("name 33 characters", named("a" * 33), "is longer than 32 characters"),
+    ("name 300 characters", named("b" * 300), "... (300 characters) is longer than 32"),
+    ("description too long", described("x" * 2001), "description: 2"),
+    ("description NUL", described("a\\u0000b "), NUL_AT_1),
 ]
 
 
 @pytest.mark.parametrize(("case", "text", "message"), BAD, ids=[b[0] for b in BAD])
 def test_bad_scene_is_one_line_exit_2_nothing_written(
-    case: str, text: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    case: str, text: str, message: str, tmp_path: Path, cli
 ) -> None:
     path = tmp_path / "scene.toml"
     path.write_text(text)
     out = tmp_path / "out"
-    code, stdout, err = run(["generate", str(path), "--out", str(out)], capsys)
+    code, stdout, err = cli(["generate", str(path), "--out", str(out)])
     assert code == 2, (case, err)
     assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: ")
     assert message in err, err
@@ -227,11 +165,11 @@ UNREADABLE = [
 
 @pytest.mark.parametrize(("make", "why"), UNREADABLE, ids=[u[0].__name__ for u in UNREADABLE])
 def test_unreadable_scene_file_is_one_line_exit_2(
-    make: Callable[[Path], None], why: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    make: Callable[[Path], None], why: str, tmp_path: Path, cli
 ) -> None:
     path = tmp_path / "scene.toml"
     make(path)
-    code, out, err = run(["generate", str(path), "--out", str(tmp_path / "out")], capsys)
+    code, out, err = cli(["generate", str(path), "--out", str(tmp_path / "out")])
     assert (code, out, err) == (2, "", f"gyrogen: error: {path}: {why}\n")
     assert not (tmp_path / "out").exists()
 
@@ -249,13 +187,13 @@ def test_table_torque_needs_increasing_times() -> None:
         parse(edit('T   = "runtime"   # N m\n', "", text), "x.toml")
 
 
-def test_unknown_scene_name_lists_the_builtins(capsys: pytest.CaptureFixture[str]) -> None:
-    code, _, err = run(["generate", "no_such_scene"], capsys)
+def test_unknown_scene_name_lists_the_builtins(cli) -> None:
+    code, _, err = cli(["generate", "no_such_scene"])
     assert code == 2 and "no such file, and no built-in scene" in err and "dual_spin" in err
 
 
-def test_builtin_scenes_listed(capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, _ = run(["scenes"], capsys)
+def test_builtin_scenes_listed(cli) -> None:
+    code, out, _ = cli(["scenes"])
     assert code == 0
     for name in builtin_names():
         assert name in out
@@ -266,24 +204,22 @@ def test_builtin_scenes_listed(capsys: pytest.CaptureFixture[str]) -> None:
     assert "ops setup" not in out  # listing does not derive
 
 
-def test_builtin_scenes_with_their_op_counts(capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, _ = run(["scenes", "--ops"], capsys)
+def test_builtin_scenes_with_their_op_counts(cli) -> None:
+    code, out, _ = cli(["scenes", "--ops"])
     assert code == 0 and out.count("ops setup") == len(builtin_names())
     assert "torque_free" in out and "ops setup 0, rhs 19" in out
 
 
-def test_new_writes_a_valid_commented_scene(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_new_writes_a_valid_commented_scene(tmp_path: Path, cli) -> None:
     target = tmp_path / "my_sat.toml"
-    code, out, _ = run(["new", "my_sat", "--out", str(target)], capsys)
+    code, out, _ = cli(["new", "my_sat", "--out", str(target)])
     assert code == 0 and "wrote" in out
     text = target.read_text()
     assert text.count("#") > 20
     assert load(str(target)).name == "my_sat"
-    code, _, err = run(["new", "my_sat", "--out", str(target)], capsys)
+    code, _, err = cli(["new", "my_sat", "--out", str(target)])
     assert code == 1 and "exists" in err
-    code, _, err = run(["new", "2bad", "--out", str(tmp_path / "x.toml")], capsys)
+    code, _, err = cli(["new", "2bad", "--out", str(tmp_path / "x.toml")])
     assert code == 2 and "not a valid scene name" in err
 
 

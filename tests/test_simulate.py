@@ -3,10 +3,9 @@ invariants of NOTES.md; the figure is a real image; every error is one line."""
 
 from __future__ import annotations
 
-import contextlib
 import io
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -16,8 +15,8 @@ import pytest
 from matplotlib.image import imread
 
 from gyrogen.analysis import plots
-from gyrogen.analysis.simulate import COLUMNS, check_solution
-from gyrogen.cli import main
+from gyrogen.analysis.simulate import check_solution
+from gyrogen.analysis.simulate_files import COLUMNS
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import reference, scene_view
 from gyrogen.scene import builtin_names, builtin_text, load
@@ -31,16 +30,17 @@ class Run:
     dir: Path
 
 
-def simulate(argv: list[str], out: Path) -> Run:
-    """main() with stdout and stderr captured (usable in module fixtures, unlike capsys)."""
-    stdout, stderr = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        try:
-            main(["simulate", *argv, "--out", str(out)])
-            code = 0
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    return Run(code, stdout.getvalue(), stderr.getvalue(), out)
+def simulate(cli: Callable[[list[str]], tuple[int, str, str]], argv: list[str], out: Path) -> Run:
+    """gyrogen simulate ARGV --out OUT."""
+    return Run(*cli(["simulate", *argv, "--out", str(out)]), out)
+
+
+def torque_free_with(path: Path, old: str, new: str) -> str:
+    """The built-in torque_free with old replaced by new, written to path."""
+    text = builtin_text("torque_free")
+    assert old in text, old
+    path.write_text(text.replace(old, new))
+    return str(path)
 
 
 @pytest.fixture(scope="module")
@@ -52,17 +52,17 @@ def cache(cache_dir: Path) -> Iterator[None]:
 
 
 @pytest.fixture(scope="module")
-def torque_free(tmp_path_factory: pytest.TempPathFactory, cache: None) -> Run:
+def torque_free(tmp_path_factory: pytest.TempPathFactory, cache: None, cli) -> Run:
     out = tmp_path_factory.mktemp("sim") / "torque_free"
-    run = simulate(["torque_free", "--t-end", "2", "--dt", "0.01"], out)
+    run = simulate(cli, ["torque_free", "--t-end", "2", "--dt", "0.01"], out)
     assert run.code == 0, run.err
     return run
 
 
 @pytest.fixture(scope="module")
-def spinup(tmp_path_factory: pytest.TempPathFactory, cache: None) -> Run:
+def spinup(tmp_path_factory: pytest.TempPathFactory, cache: None, cli) -> Run:
     out = tmp_path_factory.mktemp("sim") / "wheel_spinup"
-    run = simulate(["wheel_spinup", "--t-end", "5", "--dt", "0.05", "--no-plot"], out)
+    run = simulate(cli, ["wheel_spinup", "--t-end", "5", "--dt", "0.05", "--no-plot"], out)
     assert run.code == 0, run.err
     return run
 
@@ -157,12 +157,12 @@ def test_wheel_spinup_rotor_rate_and_energy_balance(spinup: Run) -> None:
     assert "trajectory.png" not in summary["files"]
 
 
-def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None) -> None:
+def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None, cli) -> None:
     text = builtin_text("wheel_spinup")
     assert "parameters = { T = 0.02 }\n" in text
     scene = tmp_path / "no_torque.toml"
     scene.write_text(text.replace("parameters = { T = 0.02 }\n", ""))
-    run = simulate([str(scene)], tmp_path / "out")
+    run = simulate(cli, [str(scene)], tmp_path / "out")
     assert run.code == 2 and run.out == ""
     assert run.err == (
         "gyrogen: error: wheel_spinup: simulate.parameters: no value for runtime parameter T "
@@ -171,22 +171,22 @@ def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None) -
     assert not (tmp_path / "out").exists()
 
 
-def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cache: None) -> None:
+def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cache: None, cli) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
-    run = simulate(["torque_free"], blocker / "sub")
+    run = simulate(cli, ["torque_free"], blocker / "sub")
     assert run.code == 1 and run.out == ""
     assert run.err == (
         f"gyrogen: error: cannot create output directory {blocker / 'sub'}: Not a directory\n"
     )
 
 
-def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path) -> None:
-    run = simulate(["torque_free", "--t-end", "1", "--dt", "2"], tmp_path / "out")
+def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path, cli) -> None:
+    run = simulate(cli, ["torque_free", "--t-end", "1", "--dt", "2"], tmp_path / "out")
     assert run.code == 2 and run.err.count("\n") == 1
     assert "output step 2 s is longer than the span 1 s" in run.err
     assert not (tmp_path / "out").exists()
-    run = simulate(["torque_free", "--t-end", "0.001"], tmp_path / "out")  # the scene's dt
+    run = simulate(cli, ["torque_free", "--t-end", "0.001"], tmp_path / "out")  # the scene's dt
     assert run.code == 2 and run.err == (
         "gyrogen simulate: error: Invalid value for '--t-end': output step 0.01 s is longer "
         "than the span 0.001 s (see --help)\n"
@@ -202,11 +202,11 @@ def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path) -> None:
     ],
 )
 def test_too_many_output_points_is_a_usage_error(
-    options: list[str], blamed: str, pair: str, steps: str, tmp_path: Path
+    options: list[str], blamed: str, pair: str, steps: str, tmp_path: Path, cli
 ) -> None:
     """Refused before anything is generated (numpy would be asked for a
     74.5 GiB grid by the first)."""
-    run = simulate(["torque_free", *options], tmp_path / "out")
+    run = simulate(cli, ["torque_free", *options], tmp_path / "out")
     assert (run.code, run.out) == (2, "")
     assert run.err == (
         f"gyrogen simulate: error: Invalid value for {blamed}: t_end/dt = {pair} is {steps} "
@@ -215,8 +215,8 @@ def test_too_many_output_points_is_a_usage_error(
     assert not (tmp_path / "out").exists()
 
 
-def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: None) -> None:
-    run = simulate(["torque_free", "--max-nfev", "100"], tmp_path / "out")
+def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: None, cli) -> None:
+    run = simulate(cli, ["torque_free", "--max-nfev", "100"], tmp_path / "out")
     assert run.code == 1 and run.out == ""
     errors = [line for line in run.err.splitlines() if "error" in line]
     assert len(errors) == 1 and run.err.endswith(errors[0] + "\n")
@@ -236,13 +236,11 @@ def test_failed_or_non_finite_solution_is_one_line() -> None:
         check_solution(nan, "LSODA", 1.5, 3.0, 10)
 
 
-def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None) -> None:
-    text = builtin_text("torque_free").replace(
-        'targets = ["c", "fortran"]', 'targets = ["fortran"]'
+def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None, cli) -> None:
+    scene = torque_free_with(
+        tmp_path / "fortran_only.toml", 'targets = ["c", "fortran"]', 'targets = ["fortran"]'
     )
-    scene = tmp_path / "fortran_only.toml"
-    scene.write_text(text)
-    run = simulate([str(scene), "--t-end", "1", "--method", "Radau", "--no-plot"], tmp_path / "o")
+    run = simulate(cli, [scene, "--t-end", "1", "--method", "Radau", "--no-plot"], tmp_path / "o")
     assert run.code == 0, run.err
     summary = json.loads((run.dir / "summary.json").read_text())
     assert (summary["backend"], summary["method"]) == ("fortran", "Radau")
@@ -265,15 +263,13 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-12
 
 
-def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: None) -> None:
+def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: None, cli) -> None:
     """A 3-1-2 scene started at q2 = pi/2: the compiled integrator's code 6
     becomes one line with its meaning; nothing is written."""
-    text = builtin_text("torque_free").replace(
-        "initial = { u1", "initial = { q2 = 1.5707963267948966, u1"
+    scene = torque_free_with(
+        tmp_path / "locked.toml", "initial = { u1", "initial = { q2 = 1.5707963267948966, u1"
     )
-    scene = tmp_path / "locked.toml"
-    scene.write_text(text)
-    run = simulate([str(scene), "--method", "dop853", "--t-end", "1", "--no-plot"], tmp_path / "o")
+    run = simulate(cli, [scene, "--method", "dop853", "--t-end", "1", "--no-plot"], tmp_path / "o")
     assert run.code == 1 and run.out == ""
     errors = [line for line in run.err.splitlines() if "error" in line]
     assert errors == [

@@ -10,16 +10,16 @@ import pytest
 
 from gyrogen import abi
 from gyrogen.analysis import check_cases, check_engine
-from gyrogen.cli import main
 from gyrogen.codegen.generate import generate
-from gyrogen.runtime import build
+from gyrogen.runtime import build, scene_build
+from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import builtin_text
 
 QUICK = check_cases.cases(quick=True)
 
 
 @pytest.fixture(scope="module")
-def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, build.Compiled]:
+def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
     out = {}
     for case in QUICK:
         if case.scene.name not in out:
@@ -30,14 +30,14 @@ def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, build.Compil
 
 
 @pytest.mark.parametrize("case", QUICK, ids=[c.name for c in QUICK])
-def test_case_verdict(case: check_engine.Case, compiled: dict[str, build.Compiled]) -> None:
+def test_case_verdict(case: check_engine.Case, compiled: dict[str, Compiled]) -> None:
     res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.passed, (res.verdict, res.diagnosis, res.drift)
     if case.expect == "pass":
         assert max(res.drift.values()) <= check_engine.DRIFT_BAR
 
 
-def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Compiled]) -> None:
+def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, Compiled]) -> None:
     """The issue's goal. eps = 1e-6: the 3-1-2 angles come within
     GIMBAL_LOCK_COS of cos q2 = 0 after ~1e-4 s and DOP853 stops there with
     code 6 (it cost 6.6e6 RHS calls to push through before it did); Euler
@@ -68,7 +68,7 @@ def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, build.Comp
     assert "quaternions would be cheaper" in near.diagnosis
 
 
-def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, build.Compiled]) -> None:
+def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) -> None:
     """The full suite's 3-1-2 cases (the quick one runs two of them): the
     ones whose closest approach, ~17 eps^2 in |cos q2|, is below
     GIMBAL_LOCK_COS stop with code 6; the others, and the pass over the pole
@@ -85,58 +85,42 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, build.Compi
     assert singular == {f"gimbal lock eps={e} (3-1-2 angles)" for e in ("1e-06", "1e-08")}
 
 
-def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, build.Compiled]) -> None:
+def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = next(c for c in QUICK if c.name == "speed controller k/J=1e+06")
     res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.method == "rodas4" and res.recommended.startswith("implicit")
 
 
-def test_check_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_check_command(tmp_path: Path, cli) -> None:
     plots = tmp_path / "plots"
-    try:
-        main(["check", "--quick", "spin", "nominal", "--plots", str(plots)])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, _ = capsys.readouterr()
+    code, out, _ = cli(["check", "--quick", "spin", "nominal", "--plots", str(plots)])
     assert code == 0, out
     assert "spin stability u4=15: predicted unstable" in out and "nominal" in out
     pngs = sorted(plots.glob("*.png"))
     assert len(pngs) == 5 and all(p.stat().st_size > 10_000 for p in pngs)
 
 
-def test_check_unknown_case(capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit) as info:
-        main(["check", "no-such-case"])
-    assert info.value.code == 1
-    assert "no case or scene matches no-such-case" in capsys.readouterr().err
+def test_check_unknown_case(cli) -> None:
+    code, _, err = cli(["check", "no-such-case"])
+    assert code == 1
+    assert "no case or scene matches no-such-case" in err
 
 
-def test_check_all_quick_from_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+def test_check_all_quick_from_the_command_line(cli) -> None:
     """What CI runs: every quick case, one table, exit 0."""
-    try:
-        main(["check", "--all", "--quick"])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, _ = capsys.readouterr()
+    code, out, _ = cli(["check", "--all", "--quick"])
     assert code == 0, out
     assert out.count(" ok") >= len(QUICK) and "FAIL" not in out
 
 
-def test_check_a_scene_file(capsys: pytest.CaptureFixture[str]) -> None:
-    try:
-        main(["check", "torque_free"])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, _ = capsys.readouterr()
+def test_check_a_scene_file(cli) -> None:
+    code, out, _ = cli(["check", "torque_free"])
     assert code == 0 and "scene torque_free" in out
 
 
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_compensated_summation_keeps_a_long_run(
-    language: str, backends: dict[str, build.Compiled]
+    language: str, backends: dict[str, Compiled]
 ) -> None:
     """1e6 RK4 steps: with plain adds the rounding drifts |H| by ~2e-11;
     summed with compensation (accept_step), by rounding alone, in both
@@ -146,18 +130,8 @@ def test_compensated_summation_keeps_a_long_run(
     assert res.passed and max(res.drift.values()) < 1e-13, res.drift
 
 
-def _check(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main(["check", *argv])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def test_two_scenes_of_one_name_get_a_build_each(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A user's scene named like the built-in torque_free, with one more
     state and another I22: its own build (keyed by build id, not name)."""
@@ -167,16 +141,16 @@ def test_two_scenes_of_one_name_get_a_build_each(
         "I22 = 4.0", "I22 = 4.5"
     ))  # fmt: skip
     (tmp_path / "builtin.toml").write_text(text)
-    real_build = build.build
+    real_build = scene_build.build
     built: list[int] = []
 
-    def counting(source: Path, language: build.Language) -> build.Compiled:
+    def counting(source: Path, language: Language) -> Compiled:
         comp = real_build(source, language)
         built.append(comp.nx)
         return comp
 
-    monkeypatch.setattr(build, "build", counting)
-    code, out, _ = _check([str(tmp_path / "builtin.toml"), str(mine)], capsys)
+    monkeypatch.setattr(scene_build, "build", counting)
+    code, out, _ = cli(["check", str(tmp_path / "builtin.toml"), str(mine)])
     assert code == 0, out
     assert sorted(built) == [7, 8]
     assert [line.split()[:2] for line in out.splitlines()[1:]] == [["scene", "torque_free"]] * 2
@@ -195,13 +169,13 @@ def test_two_scenes_of_one_name_get_a_build_each(
     ],
 )
 def test_scene_check_cannot_run_is_one_line_exit_2(
-    change: str, add: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    change: str, add: str, tmp_path: Path, cli
 ) -> None:
     text = builtin_text("torque_free")
     assert 'targets = ["c", "fortran"]' in text
     scene = tmp_path / "scene.toml"
     scene.write_text(text.replace('targets = ["c", "fortran"]', change))
-    code, out, err = _check([str(scene)], capsys)
+    code, out, err = cli(["check", str(scene)])
     assert (code, out) == (2, "")
     assert err == (
         f"gyrogen: error: {scene}: gyrogen check needs the scene's C build with dop853 and "

@@ -53,15 +53,25 @@ def test_c_example(source_dir: Path, tmp_path: Path, cc: str, std: str) -> None:
 
 
 def test_header_from_cxx(source_dir: Path, tmp_path: Path) -> None:
-    """A C++ translation unit that includes the header and takes both functions."""
-    tu = tmp_path / "tu.cpp"
-    tu.write_text(
-        '#include "gyrostat.h"\n'
+    """A C++ program includes the header, takes both functions by their
+    types, links the C object and calls them."""
+    main = tmp_path / "main.cpp"
+    main.write_text(
+        '#include "gyrostat.h"\n#include <cstdio>\n'
         "int (*const setup)(const double *, double *) = gyrostat_setup;\n"
         "void (*const rhs)(double, const double *, const double *, double *) = gyrostat_rhs;\n"
+        "int main() {\n"
+        "  double p[GYROSTAT_NP] = {10, 2, 3, 4, 5, 0.3, 0.5, 0.8, 0.2, -0.1, 9.81, 0.5};\n"
+        "  double c[GYROSTAT_NC], x[GYROSTAT_NX] = {0}, d[GYROSTAT_NX];\n"
+        "  if (setup(p, c) != GYROSTAT_OK) return 1;\n"
+        "  rhs(0.0, x, c, d);\n"
+        '  std::printf("%.6f\\n", d[13]);\n  return 0;\n}\n'
     )
+    clean([tool("gcc"), "-std=c99", "-O2", "-c", str(source_dir / "gyrostat.c"), "-o", "g.o"],
+          tmp_path)  # fmt: skip
     clean([tool("g++"), "-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
-           f"-I{source_dir}", "-c", str(tu), "-o", "tu.o"], tmp_path)  # fmt: skip
+           f"-I{source_dir}", "main.cpp", "g.o", "-lm", "-o", "main"], tmp_path)  # fmt: skip
+    assert clean([str(tmp_path / "main")], tmp_path).strip() == "9.810000"
 
 
 def test_cpp_example(source_dir: Path, tmp_path: Path) -> None:

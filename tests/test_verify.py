@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrogen.cli import main
 from gyrogen.oracle import reference, sampling
 from gyrogen.oracle.compare import TOLERANCE, compare, scaled_error
 from gyrogen.runtime.build import Compiled
@@ -77,15 +76,8 @@ def test_single_state_matches_reference(backends: dict[str, Compiled]) -> None:
 
 
 @pytest.mark.parametrize("name", builtin_names())
-def test_verify_command_passes_on_every_builtin_scene(
-    name: str, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_verify_command_passes_on_every_builtin_scene(name: str, cli) -> None:
     """`gyrogen verify SCENE` as a user runs it (default counts): exit 0."""
-    try:
-        main(["verify", name])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
+    code, out, err = cli(["verify", name])
     assert code == 0, out + err
     assert "FAIL" not in out and " ok" in out

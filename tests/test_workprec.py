@@ -11,18 +11,12 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from gyrogen.cli import main
 from gyrogen.scene import builtin_text
 
 
-def test_bench_quick_default_scene(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
     out = tmp_path / "report"
-    try:
-        main(["bench", "--quick", "--out", str(out)])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    text, _ = capsys.readouterr()
+    code, text, _ = cli(["bench", "--quick", "--out", str(out)])
     assert code == 0, text
     assert "| error at most | fastest |" in text
     img = matplotlib.image.imread(out / "workprecision.png")
@@ -58,26 +52,14 @@ def test_dop853_converges_to_the_reference(tmp_path: Path) -> None:
     assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-9
 
 
-def _bench(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    try:
-        main(["bench", "--quick", *argv])
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def test_scene_without_the_reference_integrator_is_one_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_scene_without_the_reference_integrator_is_one_line(tmp_path: Path, cli) -> None:
     """Refused before any progress line (it reached a ValueError traceback)."""
     scene = tmp_path / "scene.toml"
     text = builtin_text("torque_free")
     scene.write_text(
         text.replace('targets = ["c", "fortran"]', 'targets = ["c"]\nintegrators = ["rk4"]')
     )
-    code, out, err = _bench([str(scene), "--out", str(tmp_path / "r")], capsys)
+    code, out, err = cli(["bench", "--quick", str(scene), "--out", str(tmp_path / "r")])
     assert (code, out) == (2, "")
     assert err == (
         "gyrogen: error: torque_free: the work-precision report needs the c target and the "
@@ -88,7 +70,7 @@ def test_scene_without_the_reference_integrator_is_one_line(
 
 def test_failed_reference_run_is_one_line(
     tmp_path: Path,
-    capsys: pytest.CaptureFixture[str],
+    cli,
     cache_dir: Path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -97,7 +79,7 @@ def test_failed_reference_run_is_one_line(
     monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
     scene = tmp_path / "scene.toml"
     scene.write_text(builtin_text("torque_free").replace("u4 = 40.0", "u4 = 1e300"))
-    code, out, err = _bench([str(scene), "--out", str(tmp_path / "r")], capsys)
+    code, out, err = cli(["bench", "--quick", str(scene), "--out", str(tmp_path / "r")])
     assert (code, out) == (1, "")
     assert err.splitlines()[-1] == (
         "gyrogen: error: torque_free: reference DOP853 failed at t = 0 s: step size underflow"

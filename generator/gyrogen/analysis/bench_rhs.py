@@ -11,23 +11,25 @@ once, so a fast but wrong row cannot pass unnoticed.
 from __future__ import annotations
 
 import json
-import math
 import os
 import platform
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
-from gyrogen.codegen.generate import generate
+from gyrogen.analysis.timing import best_of, per_call_ns
 from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
 from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.rhs import RawRhs
+from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import default
 from gyrogen.symbolic import model
 
@@ -63,46 +65,6 @@ class _Inputs:
     """The batch, shape (batch, 14)."""
 
 
-def _best(body: Callable[[], object], repeats: int) -> float:
-    """Shortest wall time of ``repeats`` runs of body, in seconds."""
-    best = math.inf
-    for _ in range(max(repeats, 1)):
-        t0 = time.perf_counter()
-        body()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
-# One loop per arity: unpacking *args inside the loop would add its own cost to every row.
-def _loop2(f: Callable[..., object], a: Sequence[Any], n: int) -> None:
-    a0, a1 = a
-    for _ in range(n):
-        f(a0, a1)
-
-
-def _loop3(f: Callable[..., object], a: Sequence[Any], n: int) -> None:
-    a0, a1, a2 = a
-    for _ in range(n):
-        f(a0, a1, a2)
-
-
-def _loop4(f: Callable[..., object], a: Sequence[Any], n: int) -> None:
-    a0, a1, a2, a3 = a
-    for _ in range(n):
-        f(a0, a1, a2, a3)
-
-
-_LOOPS = {2: _loop2, 3: _loop3, 4: _loop4}
-
-
-def _per_call_ns(f: Callable[..., object], args: Sequence[Any], calls: int, repeats: int) -> float:
-    """ns per call of f(*args) in a plain Python loop (the loop's own cost included:
-    it is what any Python caller pays)."""
-    loop = _LOOPS[len(args)]
-    calls = max(calls, 1)
-    return _best(lambda: loop(f, args, calls), repeats) / calls * 1e9
-
-
 def _mismatch(got: Array, want: Array) -> float:
     """Largest error relative to the largest component of the same state."""
     got, want = np.atleast_2d(got), np.atleast_2d(want)
@@ -121,26 +83,22 @@ def _check(label: str, got: Array, want: Array, echo: Echo) -> str:
 
 
 def _bench_backend(
-    comp: build.Compiled, inp: _Inputs, calls: int, repeats: int, echo: Echo
+    comp: Compiled, inp: _Inputs, calls: int, repeats: int, echo: Echo
 ) -> list[Measurement]:
     """The raw cffi call, Compiled.rhs and the batched loop of one backend."""
     lang = comp.language
-    ffi, lib = comp.ffi, comp.lib
     c = comp.setup(inp.p)
-    x, out = inp.x.copy(), np.empty_like(inp.x)
+    raw = RawRhs(comp, c)  # pointers made once: from_buffer per call would be timed too
+    raw.x[:] = inp.x
     xs, outs = np.ascontiguousarray(inp.xs), np.empty_like(inp.xs)
-    # Pointers made once: from_buffer per call would be timed along with the RHS.
-    xp, cp, op = (ffi.from_buffer("double[]", a) for a in (x, c, out))
-    xsp, outsp = ffi.from_buffer("double[]", xs), ffi.from_buffer("double[]", outs)
-    rhs_name = comp.symbol("rhs")
-    f = comp.function("rhs")
-    batch_fn = lib.gyrogen_rhs_batch
-    n = len(xs)
+    xsp, outsp = comp.doubles(xs), comp.doubles(outs)
+    batch_fn, cp = comp.lib.gyrogen_rhs_batch, raw.pointers[1]
+    n, rhs_name = len(xs), comp.symbol("rhs")
 
-    one = _per_call_ns(f, (0.0, xp, cp, op), calls, repeats)
-    note = _check(f"{lang} one call", out, reference.rhs(x, inp.p), echo)  # out: the loop's
-    conv = _per_call_ns(comp.rhs, (x, c), calls // 10, repeats)
-    batch = _best(lambda: batch_fn(n, 0.0, xsp, cp, outsp), repeats) / n * 1e9
+    one = per_call_ns(raw.function, (0.0, *raw.pointers), calls, repeats)
+    note = _check(f"{lang} one call", raw.out, reference.rhs(raw.x, inp.p), echo)  # the loop's
+    conv = per_call_ns(comp.rhs, (raw.x, c), calls // 10, repeats)
+    batch = best_of(lambda: batch_fn(n, 0.0, xsp, cp, outsp), repeats) / n * 1e9
     bnote = _check(f"{lang} batch", outs, reference.rhs(xs, inp.p), echo)
     return [
         Measurement(
@@ -153,8 +111,8 @@ def _bench_backend(
 
 def _bench_numpy(inp: _Inputs, calls: int, repeats: int) -> list[Measurement]:
     n = len(inp.xs)
-    batch = _best(lambda: reference.rhs(inp.xs, inp.p), repeats) / n * 1e9
-    one = _per_call_ns(reference.rhs, (inp.x, inp.p), calls, repeats)
+    batch = best_of(lambda: reference.rhs(inp.xs, inp.p), repeats) / n * 1e9
+    one = per_call_ns(reference.rhs, (inp.x, inp.p), calls, repeats)
     return [
         Measurement("numpy_batch", batch, "state", f"reference.rhs vectorized, {n} states"),
         Measurement("numpy_call", one, "call", "reference.rhs on one state"),
@@ -192,7 +150,7 @@ def _bench_pydy(
     rhs: Callable[..., Array], inp: _Inputs, calls: int, repeats: int, echo: Echo
 ) -> Measurement:
     x, p = inp.x.copy(), inp.p.copy()
-    ns = _per_call_ns(rhs, (x, 0.0, p), calls, repeats)
+    ns = per_call_ns(rhs, (x, 0.0, p), calls, repeats)
     # PyDy returns the same buffer on every call: copy each result before the next.
     xs = inp.xs[:1000]
     got = np.array([rhs(row, 0.0, p).copy() for row in xs])
@@ -285,11 +243,10 @@ def run(
     inp = _Inputs(p=p, x=xs[0].copy(), xs=xs)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="gyrogen-bench-") as tmp:
-        generate(default(), Path(tmp))
-        backends = [build.build(Path(tmp), lang) for lang in ("c", "fortran")]
+        _, backends = build_scene(default(), Path(tmp), ("c", "fortran"))
     echo(f"generated and built the default scene in {time.perf_counter() - t0:.1f} s")
     ms: list[Measurement] = []
-    for comp in backends:
+    for comp in backends.values():
         ms += _bench_backend(comp, inp, calls, repeats, echo)
     ms += _bench_numpy(inp, calls // 100, repeats)
     rhs = pydy_rhs(echo) if pydy else None

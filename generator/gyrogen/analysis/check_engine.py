@@ -11,18 +11,17 @@ compiled integrators at rtol = 1e-12, watching the invariants of NOTES.md:
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from gyrogen import methods
 from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
-from gyrogen.oracle import scene_view
+from gyrogen.analysis.invariants import at_samples
 from gyrogen.physics import lumped_inertias
-from gyrogen.runtime.build import Compiled
+from gyrogen.runtime.compiled import Compiled, controls
+from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
 STIFF = 1e3
@@ -91,33 +90,6 @@ def stiffness(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> tup
     return worst, f"explicit (dop853): stiffness index {worst:.3g} <= {STIFF:g}"
 
 
-def invariants(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> dict[str, float]:
-    """Relative drift of each invariant over the samples xs at times ts."""
-    out = {}
-    h = scene_view.output(scene, "angular_momentum", xs, p)
-    hn = np.linalg.norm(h, axis=1)
-    out["|H| in N"] = float(np.max(np.abs(hn - hn[0])) / max(hn[0], 1e-300))
-    v = scene_view.values(scene, p)
-    if scene.effects.torque in ("none", "constant"):
-        torque = v.get("T", 0.0)
-        idx = {s: i for i, s in enumerate(scene.states)}
-        k = scene_view.output(scene, "kinetic_energy", xs, p)[:, 0]
-        work = np.zeros_like(k)
-        if torque and "q4" in idx:  # integral of T (u4 - u2) dt = T (q4 - q4(0))
-            work += torque * (xs[:, idx["q4"]] - xs[0, idx["q4"]])
-        if scene.effects.translation:  # integral of M g u7 dt = M g (q7 - q7(0))
-            work += (v["m_a"] + v["m_b"]) * v["g"] * (xs[:, idx["q7"]] - xs[0, idx["q7"]])
-        scale = max(float(np.max(np.abs(k))), 1e-300)
-        if torque == 0 or "q4" in idx:
-            out["energy balance"] = float(np.max(np.abs(k - k[0] - work)) / scale)
-        u4 = xs[:, idx["u4"]]
-        expect = u4[0] + torque * (ts - ts[0]) / v["J"]
-        out["u4 = u4(0) + T t / J"] = float(
-            np.max(np.abs(u4 - expect)) / max(np.max(np.abs(u4)), 1e-300)
-        )
-    return out
-
-
 def run_case(case: Case, comp: Compiled) -> Result:
     res = Result(case)
     scene = case.scene
@@ -132,23 +104,11 @@ def run_case(case: Case, comp: Compiled) -> Result:
     res.stiffness, res.recommended = stiffness(comp, c, x0, case.t_end)
     res.method = case.method or ("rodas4" if res.stiffness > STIFF else "dop853")
     ts = np.linspace(0.0, case.t_end, case.samples + 1)
-    xs = [x0]
-    x = x0.copy()
-    totals: dict[str, Any] = {}
-    for t0, t1 in itertools.pairwise(ts):
-        kw: dict[str, Any] = {"rtol": 1e-12, "atol": 1e-12, "max_steps": 10**8}
-        if methods.get(res.method).fixed_step:
-            kw = {"steps": max(1, case.steps // case.samples)}
-        x, stats, code = comp.integrate(res.method, x, c, float(t0), float(t1), **kw)
-        for k in ("accepted", "rejected", "rhs_calls", "jac_calls"):
-            totals[k] = totals.get(k, 0) + stats[k]
-        if code != 0:
-            res.code = code
-            totals["t"] = stats["t"]
-            break
-        xs.append(x.copy())
-    res.stats = totals
-    res.trajectory, res.times = np.array(xs), ts[: len(xs)]
+    steps = max(1, case.steps // case.samples)
+    given = controls(res.method, steps=steps, rtol=1e-12, atol=1e-12, max_steps=10**8)
+    seg = integrate_segments(comp, res.method, x0, c, ts, given)
+    res.stats, res.code = seg.totals, seg.code
+    res.trajectory, res.times = seg.states, ts[: len(seg.states)]
     _judge(res, p, c, comp)
     return res
 
@@ -171,7 +131,7 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
             res.verdict = "failed"
             res.diagnosis = f"{where}: {message(ODE_CODES, res.code)}"
         return
-    res.drift = invariants(scene, p, xs, res.times)
+    res.drift = at_samples(scene, p, xs, res.times)
     later, _ = stiffness(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)
     res.stiffness = max(res.stiffness, later)
     if case.expect in ("stable", "unstable"):

@@ -22,10 +22,13 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import methods
 from gyrogen.abi import ODE_CODES, message
+from gyrogen.analysis.timing import best_time
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import scaled_error
-from gyrogen.runtime.build import Compiled
+from gyrogen.runtime.compiled import Compiled, Controls, controls
+from gyrogen.runtime.rhs import RawRhs
+from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
 REF_TOL = 1e-13
@@ -98,36 +101,19 @@ class Problem:
     """Reference cross-checks: name -> mixed difference."""
 
 
-def best_time(fn: Callable[[], Any], repeats: int, min_total: float = 0.02) -> float:
-    """Best time of one call: each repeat runs fn often enough to last
-    min_total seconds, so microsecond runs are timed as well as long ones."""
-    t0 = time.perf_counter()
-    fn()
-    once = time.perf_counter() - t0
-    loops = max(1, int(min_total / max(once, 1e-9)))
-    best = once
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(loops):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / loops)
-    return best
-
-
 def reference(prob: Problem) -> None:
     """DOP853 in C at 1e-13, checked against scipy at the same tolerance
     (Radau with the compiled Jacobian for a stiff scene) and the closed form."""
     comp = prob.compiled["C"]
-    x, stats, code = comp.integrate(
-        "dop853", prob.x0, prob.c, 0.0, prob.t1, rtol=REF_TOL, atol=REF_TOL
-    )
-    if code != 0:
-        why = message(ODE_CODES, code)
+    given = Controls(rtol=REF_TOL, atol=REF_TOL)
+    seg = integrate_segments(comp, "dop853", prob.x0, prob.c, (0.0, prob.t1), given)
+    if seg.code != 0:
+        why = message(ODE_CODES, seg.code)
         raise GyrogenError(
-            f"{prob.scene.name}: reference DOP853 failed at t = {stats['t']:.6g} s: {why}"
+            f"{prob.scene.name}: reference DOP853 failed at t = {seg.totals['t']:.6g} s: {why}"
         )
-    prob.ref = x
-    rhs = _cffi_rhs(comp, prob.c)
+    prob.ref = x = seg.states[-1]
+    rhs = RawRhs(comp, prob.c)
     sol = solve_ivp(rhs, (0.0, prob.t1), prob.x0, method="DOP853", rtol=REF_TOL, atol=REF_TOL)
     prob.checks["scipy DOP853 (compiled RHS) at 1e-13"] = scaled_error(sol.y[:, -1], x)
     if prob.scene.name == "torque_free":
@@ -150,21 +136,6 @@ def closed_form(prob: Problem) -> np.ndarray:
     return out
 
 
-def _cffi_rhs(comp: Compiled, c: np.ndarray) -> Callable[[float, np.ndarray], np.ndarray]:
-    """f(t, x) through cffi with preallocated buffers: the cheapest path
-    from Python into the generated C."""
-    ffi, fn = comp.ffi, comp.function("rhs")
-    cbuf = ffi.from_buffer("double[]", np.ascontiguousarray(c))
-    out = np.empty(comp.nx)
-    obuf = ffi.from_buffer("double[]", out)
-
-    def f(t: float, x: np.ndarray) -> np.ndarray:
-        fn(t, ffi.from_buffer("double[]", np.ascontiguousarray(x)), cbuf, obuf)
-        return out.copy()
-
-    return f
-
-
 def compiled_runs(prob: Problem, cfg: Config, progress: Callable[[str], None]) -> list[Run]:
     runs = []
     for backend, comp in prob.compiled.items():
@@ -179,18 +150,16 @@ def compiled_runs(prob: Problem, cfg: Config, progress: Callable[[str], None]) -
 def _compiled_run(
     prob: Problem, comp: Compiled, backend: str, method: str, setting: float, repeats: int
 ) -> Run:
-    if methods.get(method).fixed_step:
-        kw: dict[str, Any] = {"steps": int(setting)}
-    else:
-        kw = {"rtol": setting, "atol": setting, "max_steps": 10**8}
-    x, stats, code = comp.integrate(method, prob.x0, prob.c, 0.0, prob.t1, **kw)
-    if code != 0:
-        return Run(method, backend, setting, math.inf, 0.0, int(stats["rhs_calls"]), f"code {code}")
+    kw = controls(method, steps=int(setting), rtol=setting, atol=setting, max_steps=10**8)
+    seg = integrate_segments(comp, method, prob.x0, prob.c, (0.0, prob.t1), kw)
+    calls = int(seg.totals["rhs_calls"])
+    if seg.code != 0:
+        return Run(method, backend, setting, math.inf, 0.0, calls, f"code {seg.code}")
     secs = best_time(_raw_call(comp, method, prob, kw), repeats)
-    return Run(method, backend, setting, scaled_error(x, prob.ref), secs, int(stats["rhs_calls"]))
+    return Run(method, backend, setting, scaled_error(seg.states[-1], prob.ref), secs, calls)
 
 
-def _raw_call(comp: Compiled, method: str, prob: Problem, kw: dict[str, Any]) -> Callable[[], Any]:
+def _raw_call(comp: Compiled, method: str, prob: Problem, kw: Controls) -> Callable[[], Any]:
     """One integration through cffi on preallocated buffers, as a program
     embedding the C would call it: Compiled.integrate's conveniences (a
     copy, a stats dict) cost ~6 us a call, half of a fast integration."""
@@ -287,7 +256,7 @@ def numpy_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
 
 
 def compiled_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
-    return _cffi_rhs(prob.compiled["C"], prob.c)
+    return RawRhs(prob.compiled["C"], prob.c)
 
 
 def time_at(runs: list[Run], level: float) -> Run | None:

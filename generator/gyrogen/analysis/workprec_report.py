@@ -19,13 +19,14 @@ from gyrogen.analysis import workprec
 from gyrogen.analysis.bench_rhs import machine, pydy_rhs
 from gyrogen.analysis.simulate import runtime_values
 from gyrogen.analysis.workprec import Config, Problem, Run
-from gyrogen.codegen.generate import generate
 from gyrogen.errors import SceneError
 from gyrogen.files import write_atomic
-from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Language
+from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import Scene
 
 LEVELS = (1e-4, 1e-6, 1e-8, 1e-10)
+_LABELS = {"c": "C", "fortran": "Fortran"}
 Echo = Callable[[str], None]
 
 
@@ -41,11 +42,9 @@ def check_scene(scene: Scene) -> np.ndarray:
 
 def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
     p = check_scene(scene)
-    generate(scene, src)
-    langs = {"C": "c", "Fortran": "fortran"}
-    if not cfg.fortran:
-        langs.pop("Fortran")
-    compiled = {k: build.build(src, v) for k, v in langs.items() if v in scene.targets}
+    wanted: tuple[Language, ...] = ("c", "fortran") if cfg.fortran else ("c",)
+    _, built = build_scene(scene, src, [lang for lang in wanted if lang in scene.targets])
+    compiled = {_LABELS[lang]: comp for lang, comp in built.items()}
     x0 = np.array(scene.initial_state())
     c = compiled["C"].setup(p)
     return Problem(scene, compiled, p, c, x0, scene.simulate.t_end)

@@ -6,19 +6,14 @@ from pathlib import Path
 
 import click
 
-from gyrogen.commands.options import SCENE
+from gyrogen.commands.options import SCENE, directory
 from gyrogen.scene import Scene, default
 
 
 @click.command("bench")
 @click.argument("scene", type=SCENE, required=False)
 @click.option("--quick", is_flag=True, help="Fewer tolerances and repeats, C only (for CI).")
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Where to write the figure and tables [default: report/<scene>].",
-)
+@directory("--out", "Where to write the figure and tables [default: report/<scene>].")
 def bench(scene: Scene | None, quick: bool, out: Path | None) -> None:
     """Work-precision report: error against run time for every integrator of
     SCENE (default gyrostat) and for scipy and PyDy, in one run."""

@@ -7,12 +7,11 @@ from pathlib import Path
 import click
 
 from gyrogen.abi import MAX_REPEATS
+from gyrogen.commands.options import directory
 
 
 @click.command("bench-rhs")
-@click.option(
-    "--out", type=click.Path(file_okay=False, path_type=Path), help="Write bench_rhs.json here."
-)
+@directory("--out", "Write bench_rhs.json here.")
 @click.option(
     "--repeats",
     type=click.IntRange(1, MAX_REPEATS),

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from gyrogen.commands.options import progress
+from gyrogen.commands.options import directory, progress
 from gyrogen.errors import GyrogenError
 
 if TYPE_CHECKING:
@@ -19,12 +19,7 @@ if TYPE_CHECKING:
 @click.argument("names", nargs=-1)
 @click.option("--all", "every", is_flag=True, help="Every case (the default with no NAMES).")
 @click.option("--quick", is_flag=True, help="Fewer and shorter cases (for CI, under a minute).")
-@click.option(
-    "--plots",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Write one PNG per case into this directory.",
-)
+@directory("--plots", "Write one PNG per case into this directory.")
 @click.option("--list", "listing", is_flag=True, help="List the cases and exit.")
 def check(
     names: tuple[str, ...], every: bool, quick: bool, plots: Path | None, listing: bool
@@ -35,9 +30,9 @@ def check(
     .toml) to check its own simulate settings."""
     from gyrogen.analysis import check_cases, check_engine
     from gyrogen.codegen.context import build_id
-    from gyrogen.codegen.generate import generate
     from gyrogen.files import write_atomic
-    from gyrogen.runtime import build
+    from gyrogen.runtime.compiled import Compiled
+    from gyrogen.runtime.scene_build import build_scene
 
     suite = check_cases.cases(quick)
     if names and not every:
@@ -54,15 +49,14 @@ def check(
         return
     if plots is not None:
         write_atomic(plots, {})  # fail early, with one line, if plots is not writable
-    compiled: dict[str, build.Compiled] = {}  # by build id: two scenes may share a name
+    compiled: dict[str, Compiled] = {}  # by build id: two scenes may share a name
     results = []
     with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
         for case in progress("checking", suite):
             key = build_id(case.scene)
             if key not in compiled:
-                src = Path(tmp) / key
-                generate(case.scene, src)
-                compiled[key] = build.build(src, "c")
+                _, built = build_scene(case.scene, Path(tmp) / key, ["c"])
+                compiled[key] = built["c"]
             res = check_engine.run_case(case, compiled[key])
             results.append(res)
             if plots is not None:

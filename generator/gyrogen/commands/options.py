@@ -43,11 +43,16 @@ class FiniteFloat(click.FloatRange):
 POSITIVE = FiniteFloat(min=0.0, min_open=True)
 """A finite number > 0."""
 
-out_dir = click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for the scene's sources and manifest.json [default: generated/<scene>].",
+
+def directory(flag: str, help: str) -> Callable[[F], F]:
+    """An option naming a directory to write into (None when not given)."""
+    return click.option(
+        flag, type=click.Path(file_okay=False, path_type=Path), default=None, help=help
+    )
+
+
+out_dir = directory(
+    "--out", "Directory for the scene's sources and manifest.json [default: generated/<scene>]."
 )
 
 
@@ -55,30 +60,19 @@ def default_out(scene: Scene) -> Path:
     return Path("generated") / scene.name
 
 
+def _counted(flag: str, kind: click.IntRange, default: int, help: str) -> Callable[[F], F]:
+    return click.option(flag, type=kind, default=default, show_default=True, help=help)
+
+
 def verify_options(f: F) -> F:
+    """--states, --params and --seed: how much verify compares."""
     for opt in reversed(
         [
-            click.option(
-                "--states",
-                type=click.IntRange(1, MAX_STATES),
-                default=10_000,
-                show_default=True,
-                help="Random states.",
+            _counted("--states", click.IntRange(1, MAX_STATES), 10_000, "Random states."),
+            _counted(
+                "--params", click.IntRange(1, MAX_PARAMETER_SETS), 100, "Random parameter sets."
             ),
-            click.option(
-                "--params",
-                type=click.IntRange(1, MAX_PARAMETER_SETS),
-                default=100,
-                show_default=True,
-                help="Random parameter sets.",
-            ),
-            click.option(
-                "--seed",
-                type=click.IntRange(min=0),
-                default=0,
-                show_default=True,
-                help="Random seed (numpy's: >= 0).",
-            ),
+            _counted("--seed", click.IntRange(min=0), 0, "Random seed (numpy's: >= 0)."),
         ]
     ):
         f = opt(f)

@@ -11,7 +11,7 @@ import click
 
 from gyrogen import methods
 from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_RHS_CALLS
-from gyrogen.commands.options import POSITIVE, SCENE
+from gyrogen.commands.options import POSITIVE, SCENE, directory
 from gyrogen.scene import Scene, check_output_grid
 
 
@@ -24,11 +24,8 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 
 @click.command()
 @click.argument("scene", type=SCENE)
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for the trajectory, summary, figure and sources [default: sim/<scene>].",
+@directory(
+    "--out", "Directory for the trajectory, summary, figure and sources [default: sim/<scene>]."
 )
 @click.option("--t-end", type=POSITIVE, default=None, help="End time, s [default: the scene's].")
 @click.option(

@@ -3,22 +3,43 @@
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from gyrogen.commands.options import SCENE, progress, verify_options
+from gyrogen.commands.options import SCENE, directory, progress, verify_options
 from gyrogen.errors import GyrogenError
 from gyrogen.scene import Scene, default
 
+if TYPE_CHECKING:
+    from gyrogen.codegen.context import Unit
+    from gyrogen.runtime.compiled import Compiled
 
-def verify_sources(scene: Scene, source: Path, states: int, params: int, seed: int) -> bool:
-    """Build every target of the scene in source and compare; print the table."""
+
+def verify_scene(
+    scene: Scene,
+    directory: Path,
+    counts: tuple[int, int, int],
+    written: Callable[[Unit], None] = lambda unit: None,
+) -> tuple[Unit, bool]:
+    """Generate the scene into directory (written is told), build every
+    target, compare with the reference at counts (states, parameter sets,
+    seed) and print the table: the unit, and whether everything passed."""
+    from gyrogen.runtime.scene_build import build_scene
+
+    def announce(unit: Unit) -> None:
+        written(unit)
+        click.echo(f"building {', '.join(scene.targets)} through cffi ...")
+
+    unit, backends = build_scene(scene, directory, scene.targets, announce)
+    return unit, _compare(scene, list(backends.values()), *counts)
+
+
+def _compare(scene: Scene, backends: list[Compiled], states: int, params: int, seed: int) -> bool:
     from gyrogen.oracle.compare import compare, given_parameters
-    from gyrogen.runtime import build
 
-    click.echo(f"building {', '.join(scene.targets)} through cffi ...")
-    backends = [build.build(source, lang) for lang in scene.targets]
     report = compare(
         backends,
         scene,
@@ -50,19 +71,14 @@ def verify_sources(scene: Scene, source: Path, states: int, params: int, seed: i
 
 @click.command()
 @click.argument("scene", type=SCENE, required=False)
-@click.option(
-    "--out", type=click.Path(file_okay=False, path_type=Path), help="Keep the sources here."
-)
+@directory("--out", "Keep the sources here.")
 @verify_options
 def verify(scene: Scene | None, out: Path | None, states: int, params: int, seed: int) -> None:
     """Generate SCENE (default gyrostat), build it, compare with the reference."""
-    from gyrogen.codegen.generate import generate
-
     scene = scene or default()
     with tempfile.TemporaryDirectory(prefix="gyrogen-") as tmp:
-        source = out or Path(tmp)
-        generate(scene, source)
-        if not verify_sources(scene, source, states, params, seed):
+        _, ok = verify_scene(scene, out or Path(tmp), (states, params, seed))
+        if not ok:
             raise GyrogenError("verification failed: see the table above")
 
 

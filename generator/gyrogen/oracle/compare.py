@@ -32,7 +32,8 @@ from gyrogen.abi import PARAMETERS
 from gyrogen.codegen.context import Unit
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import sampling, scene_view
-from gyrogen.runtime.build import Compiled, build
+from gyrogen.runtime.build import build
+from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene
 
 TOLERANCE = 1e-12

@@ -1,0 +1,145 @@
+"""The invariants of NOTES.md, from the numpy reference (never from the
+generated code under test), all relative:
+
+- |H| in N is constant (and so is the vector H): (|H| - |H(0)|) / |H(0)|;
+- the energy balance K(t) - K(0) - int_0^t P dt is 0, P = T (u4 - u2) + M g u7
+  the power: over max |K|;
+- u4(t) - u4(0) - int_0^t T dt / J is 0 (J u4' = T): over max |u4|.
+
+`along_trajectory` takes the integrals by quadrature over a simulated trajectory (any
+torque law); `at_samples` takes them exactly for a constant torque, at the
+samples of a check case. A scale that is zero (H(0) = 0, K or u4 zero
+throughout) leaves the residual absolute.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyrogen.abi import STATES
+from gyrogen.analysis.trajectory import Trajectory, running_integrals
+from gyrogen.oracle import scene_view
+from gyrogen.scene import Scene
+
+
+def peak(a: np.ndarray) -> float:
+    """The largest |a|, 0 for no values."""
+    return float(np.max(np.abs(a))) if a.size else 0.0
+
+
+def _scale(a: np.ndarray) -> float:
+    """The largest |a|, or 1 when a is all zero (then the residual is absolute)."""
+    return float(np.max(np.abs(a))) or 1.0
+
+
+def momentum(scene: Scene, p: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """(n, 3): the angular momentum about AB* in N at the states xs."""
+    return scene_view.output(scene, "angular_momentum", xs, p)
+
+
+def kinetic(scene: Scene, p: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """(n,): the kinetic energy at the states xs."""
+    return scene_view.output(scene, "kinetic_energy", xs, p)[:, 0]
+
+
+def momentum_drifts(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(|H| - |H(0)|) / |H(0)| and |H - H(0)| / |H(0)| for H (n, 3); the
+    second also sees errors of the attitude, which |H| does not."""
+    norm = np.linalg.norm(h, axis=1)
+    h0 = norm[0] or _scale(norm)
+    return (norm - norm[0]) / h0, np.linalg.norm(h - h[0], axis=1) / h0
+
+
+def balance(quantity: np.ndarray, integral: np.ndarray) -> np.ndarray:
+    """(q - q(0) - integral) / max |q|: a balance q(t) = q(0) + int rate dt."""
+    return (quantity - quantity[0] - integral) / _scale(quantity)
+
+
+def rates(scene: Scene, p: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(m, 2): the power P = dK/dt and the torque T at times t (m,), states
+    x (m, nx), from the scene's torque law as the reference applies it."""
+    v = scene_view.values(scene, p)
+    full = scene_view.full_states(scene, x)
+    if scene.effects.torque == "table":  # scene_view.torque takes one t; the table needs each
+        table = np.array(scene.effects.torque_table)
+        torque = np.interp(t, table[:, 0], table[:, 1])
+    else:
+        torque = scene_view.torque(scene, v, full, 0.0)
+    u2, u4, u7 = (full[:, STATES.index(s)] for s in ("u2", "u4", "u7"))
+    power = torque * (u4 - u2) + (v["m_a"] + v["m_b"]) * v.get("g", 0.0) * u7
+    return np.column_stack([power, torque])
+
+
+@dataclass(frozen=True)
+class Invariants:
+    h: np.ndarray
+    """(n, 3) angular momentum about AB* in N."""
+    kinetic: np.ndarray
+    power: np.ndarray
+    """T (u4 - u2) + M g u7: dK/dt."""
+    h_drift: np.ndarray
+    """(|H| - |H(0)|) / |H(0)|."""
+    h_vector_drift: np.ndarray
+    """|H - H(0)| / |H(0)|: also sees errors of the attitude, which |H| does not."""
+    energy: np.ndarray
+    """(K - K(0) - int P dt) / max |K|."""
+    u4: np.ndarray
+    """(u4 - u4(0) - int T dt / J) / max |u4|."""
+
+    def worst(self) -> dict[str, float]:
+        return {
+            "H_norm_relative_drift": peak(self.h_drift),
+            "H_vector_relative_drift": peak(self.h_vector_drift),
+            "energy_balance_relative_residual": peak(self.energy),
+            "u4_relative_residual": peak(self.u4),
+        }
+
+
+def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariants:
+    """Every invariant at each grid time of traj, its integrals of P and T
+    by quadrature on the nodes inside the intervals."""
+    x = traj.x
+    h, k = momentum(scene, p, x), kinetic(scene, p, x)
+    work = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs))
+    h_drift, h_vector_drift = momentum_drifts(h)
+    u4 = x[:, scene.states.index("u4")]
+    return Invariants(
+        h=h,
+        kinetic=k,
+        power=rates(scene, p, traj.t, x)[:, 0],
+        h_drift=h_drift,
+        h_vector_drift=h_vector_drift,
+        energy=balance(k, work[:, 0]),
+        u4=balance(u4, work[:, 1] / scene_view.values(scene, p)["J"]),
+    )
+
+
+def at_samples(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> dict[str, float]:
+    """The largest relative drift of each invariant over the samples xs at
+    times ts: |H| always; with no torque or a constant one, also the energy
+    balance (when the rotor angle q4 gives the motor's work) and u4 = u4(0)
+    + T t / J, their integrals in closed form."""
+    out = {"|H| in N": peak(momentum_drifts(momentum(scene, p, xs))[0])}
+    if scene.effects.torque not in ("none", "constant"):
+        return out
+    v = scene_view.values(scene, p)
+    torque = v.get("T", 0.0)
+    idx = {s: i for i, s in enumerate(scene.states)}
+    if torque == 0 or "q4" in idx:
+        out["energy balance"] = peak(balance(kinetic(scene, p, xs), _work(scene, v, xs)))
+    out["u4 = u4(0) + T t / J"] = peak(balance(xs[:, idx["u4"]], torque * (ts - ts[0]) / v["J"]))
+    return out
+
+
+def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:
+    """int_0^t P dt for a constant torque: T (q4 - q4(0)) + M g (q7 - q7(0))."""
+    idx = {s: i for i, s in enumerate(scene.states)}
+    torque = v.get("T", 0.0)
+    work = np.zeros(len(xs))
+    if torque and "q4" in idx:  # integral of T (u4 - u2) dt = T (q4 - q4(0))
+        work += torque * (xs[:, idx["q4"]] - xs[0, idx["q4"]])
+    if scene.effects.translation:  # integral of M g u7 dt = M g (q7 - q7(0))
+        work += (v["m_a"] + v["m_b"]) * v["g"] * (xs[:, idx["q7"]] - xs[0, idx["q7"]])
+    return work

@@ -1,0 +1,54 @@
+"""A compiled integrator run from each of a list of times to the next:
+every time is a step end (no interpolation), the statistics are totalled,
+and the run stops at the first failure code."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gyrogen import abi
+from gyrogen.runtime.compiled import Compiled, Controls
+
+COUNTERS = tuple(f.name for f in abi.STATS_FIELDS if f.ctype == "long")
+"""The statistics that add up over segments (steps, calls, decompositions)."""
+
+
+@dataclass(frozen=True)
+class Segments:
+    states: np.ndarray
+    """(k, nx): the initial state, then the state at each time reached
+    (a failed segment's is left out)."""
+    totals: dict[str, float | int]
+    """The COUNTERS summed over the segments run, and t, the time reached."""
+    code: int
+    """0, or the return code (abi.ODE_CODES) of the segment that failed."""
+
+
+def integrate_segments(
+    comp: Compiled,
+    method: str,
+    x0: np.ndarray,
+    c: np.ndarray,
+    times: Sequence[float] | np.ndarray,
+    given: Controls,
+    reached: Callable[[float], None] = lambda t: None,
+) -> Segments:
+    """comp's integrator method from x0 at times[0] to each later time in
+    turn; reached(t) after each time reached."""
+    x = np.array(x0, dtype=np.float64)
+    states = [x.copy()]
+    totals: dict[str, float | int] = dict.fromkeys(COUNTERS, 0)
+    for a, b in itertools.pairwise(times):
+        x, stats, code = comp.integrate(method, x, c, float(a), float(b), **given)
+        for name in COUNTERS:
+            totals[name] += stats[name]
+        totals["t"] = stats["t"]
+        if code != 0:
+            return Segments(np.array(states), totals, code)
+        states.append(x.copy())
+        reached(float(b))
+    return Segments(np.array(states), totals, 0)
