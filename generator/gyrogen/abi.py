@@ -33,7 +33,8 @@ PARAMETERS: tuple[str, ...] = (
     "T",
 )
 
-PARAMETER_DOC: dict[str, tuple[str, str]] = {
+UNITS: dict[str, tuple[str, str]] = {
+    # parameters, in p[] order (PARAMETERS, then CONTROLLER_PARAMETERS)
     "m_a": ("kg", "mass of the carrier A"),
     "m_b": ("kg", "mass of the rotor B"),
     "I11": ("kg m^2", "carrier inertia about A*, a1a1"),
@@ -48,9 +49,7 @@ PARAMETER_DOC: dict[str, tuple[str, str]] = {
     "T": ("N m", "motor torque on B about a2 (minus on A)"),
     "k": ("N m s", "speed controller gain: T = -k (u4 - u2 - w_ref)"),
     "w_ref": ("rad/s", "speed controller: commanded rate of B relative to A"),
-}
-
-STATE_DOC: dict[str, tuple[str, str]] = {
+    # states, in x[] order (STATES, with e0..e3 for a quaternion attitude)
     "q1": ("rad", "3-1-2 Euler angle 1 of A in N (about n3)"),
     "q2": ("rad", "3-1-2 Euler angle 2 of A in N (about a1')"),
     "q3": ("rad", "3-1-2 Euler angle 3 of A in N (about a2)"),
@@ -70,6 +69,8 @@ STATE_DOC: dict[str, tuple[str, str]] = {
     "u6": ("m/s", "velocity of AB*, n2"),
     "u7": ("m/s", "velocity of AB*, n3"),
 }
+"""Every parameter's and state's unit and meaning, as the headers document them."""
+
 
 CONTROLLER_PARAMETERS = ("k", "w_ref")
 """Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s);

@@ -105,60 +105,34 @@ class Method:
         return tab.stages - 1 if tab.fsal else tab.stages
 
 
-METHODS: dict[str, Method] = {
-    m.name: m
-    for m in (
-        Method(
-            "rk4",
-            "Classic Runge-Kutta, order 4, fixed step.",
-            RK4,
-            notes=("Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.",),
-        ),
-        Method(
-            "dopri5",
-            "Dormand-Prince 5(4), adaptive, PI step-size control.",
-            DOPRI5,
-            PairControl(
-                alpha=0.17,
-                beta=0.04,
-                safety=0.9,
-                facmin=0.2,
-                facmax=10.0,
-                note="Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.",
-            ),
-            notes=(
-                "Dormand-Prince 5(4) (Dormand & Prince 1980; Hairer, Norsett & Wanner,",
-                "Solving ODEs I, Table II.5.2): seven stages, the seventh at the new",
-                "solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat.",
-            ),
-        ),
-        Method(
-            "dop853",
-            "DOP853 (Hairer's coefficients and error estimator), adaptive.",
-            DOP853,
-            PairControl(
-                alpha=0.125,
-                beta=0.0,
-                safety=0.9,
-                facmin=0.333,
-                facmax=6.0,
-                note="Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].",
-            ),
-            notes=(
-                "DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the",
-                "error combines a 5th-order estimate err5 = h sum_j e5_j k_j and a",
-                "3rd-order one err3 = h sum_j e3_j k_j as",
-                "|h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm.",
-            ),
-        ),
-        Method(
-            "rodas4",
-            "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
-            RODAS4,
-            RosenbrockControl(),
-        ),
-    )
+_NOTES = {
+    "rk4": ("Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.",),
+    "dopri5": (
+        "Dormand-Prince 5(4) (Dormand & Prince 1980; Hairer, Norsett & Wanner,",
+        "Solving ODEs I, Table II.5.2): seven stages, the seventh at the new",
+        "solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat.",
+    ),
+    "dop853": (
+        "DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the",
+        "error combines a 5th-order estimate err5 = h sum_j e5_j k_j and a",
+        "3rd-order one err3 = h sum_j e3_j k_j as",
+        "|h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm.",
+    ),
 }
+_DOPRI5_DEFAULTS = "Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta."
+_DOP853_DEFAULTS = "Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6]."
+
+# fmt: off
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("rk4", "Classic Runge-Kutta, order 4, fixed step.", RK4, notes=_NOTES["rk4"]),
+    Method("dopri5", "Dormand-Prince 5(4), adaptive, PI step-size control.", DOPRI5,
+           PairControl(0.17, 0.04, 0.9, 0.2, 10.0, _DOPRI5_DEFAULTS), _NOTES["dopri5"]),
+    Method("dop853", "DOP853 (Hairer's coefficients and error estimator), adaptive.", DOP853,
+           PairControl(0.125, 0.0, 0.9, 0.333, 6.0, _DOP853_DEFAULTS), _NOTES["dop853"]),
+    Method("rodas4", "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
+           RODAS4, RosenbrockControl()),
+)}
+# fmt: on
 """Every compiled integrator, in the order scenes list them by default."""
 
 NAMES: tuple[str, ...] = tuple(METHODS)

@@ -12,14 +12,8 @@ import sympy as sm
 
 import gyrogen
 from gyrogen.abi import (
-    GIMBAL_LOCK_COS,
-    MAX_CONDITION,
-    MIN_RTOL,
     OUTPUT_DOC,
-    PARAMETER_DOC,
-    SETUP_CODES,
-    STATE_DOC,
-    TRIANGLE_SLACK,
+    UNITS,
 )
 from gyrogen.methods import METHODS, Method
 from gyrogen.scene import Scene
@@ -34,13 +28,6 @@ class Row:
     index: int
     name: str
     unit: str
-    doc: str
-
-
-@dataclass(frozen=True)
-class Code:
-    value: int
-    macro: str
     doc: str
 
 
@@ -141,11 +128,11 @@ class Unit:
 
     @property
     def state_rows(self) -> list[Row]:
-        return [Row(i, s.name, *STATE_DOC[s.name]) for i, s in enumerate(self.states)]
+        return [Row(i, s.name, *UNITS[s.name]) for i, s in enumerate(self.states)]
 
     @property
     def param_rows(self) -> list[Row]:
-        return [Row(i, s.name, *PARAMETER_DOC[s.name]) for i, s in enumerate(self.params)]
+        return [Row(i, s.name, *UNITS[s.name]) for i, s in enumerate(self.params)]
 
     @cached_property
     def setup_locals(self) -> list[Local]:
@@ -158,31 +145,9 @@ class Unit:
         return [Local(n, runtime.get(n), folded.get(n)) for n in names]
 
     @property
-    def codes(self) -> list[Code]:
-        return [Code(c.value, f"{self.macro}_{c.name}", c.message) for c in SETUP_CODES]
-
-    @property
     def cond_index(self) -> int:
         """c[cond_index] holds the condition number of the coupled block."""
         return self.nc - 1
-
-    @property
-    def max_condition(self) -> str:
-        return repr(MAX_CONDITION)
-
-    @property
-    def triangle_slack(self) -> str:
-        return repr(TRIANGLE_SLACK)
-
-    @property
-    def min_rtol(self) -> str:
-        """The integrators refuse rtol at or below it (layout.MIN_RTOL)."""
-        return repr(MIN_RTOL)
-
-    @property
-    def gimbal_lock_cos(self) -> str:
-        """3-1-2 scenes: the integrators stop where |cos q2| falls below it."""
-        return repr(GIMBAL_LOCK_COS)
 
     @cached_property
     def build_id(self) -> str:
