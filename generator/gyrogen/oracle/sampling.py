@@ -194,6 +194,8 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
     I11, I22, I33, I13 = (float(b[_P[k]]) for k in ("I11", "I22", "I33", "I13"))
     I = float(b[_P["I"]])
     nan, inf = math.nan, math.inf
+    # cond(M) ~ mu / tiny with l1 = l3 = 1: far above MAX_CONDITION whatever the masses
+    tiny = 1e-15 * b[_P["m_a"]] * b[_P["m_b"]] / (b[_P["m_a"]] + b[_P["m_b"]])
     sign13 = 1.0 if I13 >= 0.0 else -1.0
     cases: list[tuple[str, Array, int]] = [
         ("m_a is NaN", variant(m_a=nan), 1),
@@ -237,8 +239,8 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
         ("rotor 2 I < J", variant(J=2.5 * I), 6),
         ("rotor 2 I < J by 1e-9 relative", variant(J=2.0 * I * (1.0 + 1e-9)), 6),
         (
-            "mass matrix numerically singular: a 1e-14 carrier and rotor far off A*",
-            variant(I11=1e-14, I22=1e-14, I33=1e-14, I13=0.0, I=1e-14, J=1e-14, l1=1.0, l3=1.0),
+            "mass matrix numerically singular: a carrier and rotor 1e-15 mu tiny, far off A*",
+            variant(I11=tiny, I22=tiny, I33=tiny, I13=0.0, I=tiny, J=tiny, l1=1.0, l3=1.0),
             7,
         ),
     ]
