@@ -11,17 +11,32 @@ from gyrogen import methods as methods_registry
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import c_double, render
-from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
+from gyrogen.codegen.statements import (
+    Function,
+    WritableNumbers,
+    functions,
+    jacobian,
+    statements,
+)
 from gyrogen.symbolic.hoist import constants
 
 
 class CPrinter(WritableNumbers, C99CodePrinter):
     """C99 with the hoisted constants as c[k], doubles in their shortest
-    exact form, and small integer powers as products (x*x beats pow(x, 2))."""
+    exact form, small integer powers as products (x*x beats pow(x, 2)), and
+    sin and cos as the file's own <prefix>_sin, <prefix>_cos (c/_trig.jinja:
+    inline, branch-free, so that a loop over lanes vectorizes)."""
 
-    def __init__(self, nc: int) -> None:
+    def __init__(self, nc: int, prefix: str) -> None:
         super().__init__()
         self._names = {c.name: f"c[{k}]" for k, c in enumerate(constants(nc))}
+        self._prefix = prefix
+
+    def _print_sin(self, expr: sm.sin) -> str:
+        return f"{self._prefix}_sin({self._print(expr.args[0])})"
+
+    def _print_cos(self, expr: sm.cos) -> str:
+        return f"{self._prefix}_cos({self._print(expr.args[0])})"
 
     def _print_Symbol(self, expr: sm.Symbol) -> str:
         return self._names.get(expr.name) or str(super()._print_Symbol(expr))
@@ -54,19 +69,36 @@ class CPrinter(WritableNumbers, C99CodePrinter):
         return f"{text}/({self._print(1 / den[0])})"
 
 
+def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
+    """Which of <prefix>_sin and <prefix>_cos the functions call: a file
+    defines only those (clang warns of an unused static inline function)."""
+    text = " ".join(s.code for f in fns if f is not None for s in f.statements)
+    return [name for name in ("sin", "cos") if f"{prefix}_{name}(" in text]
+
+
 def files(unit: Unit) -> dict[str, str]:
-    printer = CPrinter(unit.nc)
+    printer = CPrinter(unit.nc, unit.prefix)
 
     def assign(lhs: str, expr: sm.Expr) -> str:
         return f"{lhs} = {printer.doprint(expr)};"
 
     rhs, *outputs = functions(unit, lambda a, i: f"{a}[{i}]", assign)
+    lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign)[0]
+    lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign)[0]
+    jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
+    ode_trig = trig_used(unit.prefix, [jac])
+    if not unit.quaternion and "cos" not in ode_trig:
+        ode_trig.append("cos")  # the gimbal-lock check
     ctx = {
         "unit": unit,
         "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
         "rhs": rhs,
+        "rhs_lanes": lanes,
+        "rhs_lanes_ode": lanes_ode,
         "outputs": outputs,
-        "jac": jacobian(unit, lambda a, i: f"{a}[{i}]", assign),
+        "jac": jac,
+        "source_trig": trig_used(unit.prefix, [rhs, *outputs]),
+        "ode_trig": ode_trig,
         "methods": unit.methods,
         "abi": abi,
         "registry": methods_registry,
