@@ -16,6 +16,104 @@
 
 #include <math.h>
 
+#ifdef _OPENMP
+#define DUAL_SPIN_SIMD _Pragma("omp simd")
+#else
+#define DUAL_SPIN_SIMD
+#endif
+#ifdef __cplusplus
+#define DUAL_SPIN_RESTRICT
+#else
+#define DUAL_SPIN_RESTRICT restrict
+#endif
+
+/* x = n pi/2 + r, |r| <= pi/4 (a little more when x 2/pi is near a half
+   integer), r as r + *tail to about 2^-118 |x|, and *quad = n mod 4 (0..3,
+   as a double). The reduction of fdlibm's __rem_pio2 for "medium" |x|
+   (pi/2 in three pieces of 33 bits and their tails), all three rounds taken
+   every time: n pio2_1 is exact for |n| < 2^20, so r is accurate for |x| <=
+   2^20 pi/2 = 1.6e6. Beyond, n pio2_1 rounds and the result is sin or cos
+   of a point within half an ulp of x (an absolute error <= ulp(x)/2, the
+   uncertainty of x itself); beyond 2^50 (1.1e15) n is no longer exact and
+   the functions return NaN, as they do for an infinite or NaN x. */
+static inline double dual_spin_reduce(double x, double *tail, double *quad)
+{
+    const double toint = 6755399441055744.0;  /* 1.5 2^52: adding it rounds to an integer */
+    const double invpio2 = 6.36619772367581382433e-01;
+    const double pio2_1 = 1.57079632673412561417e+00;
+    const double pio2_2 = 6.07710050630396597660e-11;
+    const double pio2_2t = 2.02226624879595063154e-21;
+    const double pio2_3 = 2.02226624871116645580e-21;
+    const double pio2_3t = 8.47842766036889956997e-32;
+    const double n = (x * invpio2 + toint) - toint;
+    double r = x - n * pio2_1, t = r, w = n * pio2_2, y;
+    r = t - w;
+    w = n * pio2_2t - ((t - r) - w);
+    t = r;
+    w = n * pio2_3;
+    r = t - w;
+    w = n * pio2_3t - ((t - r) - w);
+    y = r - w;
+    *tail = (r - y) - w;
+    /* n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer */
+    *quad = n - 4.0 * (((n - 1.5) * 0.25 + toint) - toint);
+    return y;
+}
+
+/* sin(x + y) and cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's
+   __kernel_sin and __kernel_cos (musl's form), errors below 1 ulp. */
+static inline double dual_spin_ksin(double x, double y)
+{
+    const double S1 = -1.66666666666666324348e-01, S2 = 8.33333333332248946124e-03,
+                 S3 = -1.98412698298579493134e-04, S4 = 2.75573137070700676789e-06,
+                 S5 = -2.50507602534068634195e-08, S6 = 1.58969099521155010221e-10;
+    const double z = x * x, w = z * z, v = z * x;
+    const double r = S2 + z * (S3 + z * S4) + z * w * (S5 + z * S6);
+    return x - ((z * (0.5 * y - v * r) - y) - v * S1);
+}
+
+static inline double dual_spin_kcos(double x, double y)
+{
+    const double C1 = 4.16666666666666019037e-02, C2 = -1.38888888888741095749e-03,
+                 C3 = 2.48015872894767294178e-05, C4 = -2.75573143513906633035e-07,
+                 C5 = 2.08757232129817482790e-09, C6 = -1.13596475577881948265e-11;
+    const double z = x * x, w = z * z, hz = 0.5 * z, u = 1.0 - hz;
+    const double r = z * (C1 + z * (C2 + z * C3)) + w * w * (C4 + z * (C5 + z * C6));
+    return u + (((1.0 - u) - hz) + (z * r - x * y));
+}
+
+/* The largest |x| the reduction takes (2^50); past it, NaN. */
+#define DUAL_SPIN_TRIG_MAX 1125899906842624.0
+
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. */
+static inline double dual_spin_sin(double x)
+{
+    double y, q;
+    const double r = dual_spin_reduce(x, &y, &q);
+    const double s = dual_spin_ksin(r, y), c = dual_spin_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? c : s;
+    const double f = q >= 2.0 ? -v : v;
+    return fabs(x) <= DUAL_SPIN_TRIG_MAX ? f : (double)NAN;
+}
+
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. */
+static inline double dual_spin_cos(double x)
+{
+    double y, q;
+    const double r = dual_spin_reduce(x, &y, &q);
+    const double s = dual_spin_ksin(r, y), c = dual_spin_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? s : c;
+    const double f = q == 1.0 || q == 2.0 ? -v : v;
+    return fabs(x) <= DUAL_SPIN_TRIG_MAX ? f : (double)NAN;
+}
+
+
 /* 0 ops, plus the checks. */
 int dual_spin_setup(const double *p, double *c)
 {
@@ -68,17 +166,48 @@ void dual_spin_rhs(double t, const double *x, const double *c, double *dxdt)
     const double u3 = x[5];
     const double u4 = x[6];
 
-    const double tmp0 = sin(q3);
-    const double tmp1 = cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2);
+    const double tmp0 = dual_spin_sin(q3);
+    const double tmp1 = dual_spin_cos(q3);
+    const double tmp2 = (-tmp0*u1 + tmp1*u3)/dual_spin_cos(q2);
     const double tmp3 = 0.015471973456719416*u2 - 1.1900419543364779e-06*u4;
     dxdt[0] = tmp2;
     dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*sin(q2) + u2;
+    dxdt[2] = -tmp2*dual_spin_sin(q2) + u2;
     dxdt[3] = -tmp3*u1 + u3*(0.4092155481941839*u2 + 4.5440763299219775e-05*u4);
     dxdt[4] = u1*(0.01775954828743408*u1 - 0.10773983913066638*u3) - 0.01775954828743408*u3*u3;
     dxdt[5] = tmp3*u3 + u1*(-0.3153534800671272*u2 - 5.266025597120826e-05*u4);
     dxdt[6] = 0;
+}
+
+/* dual_spin_rhs on n lanes: the same statements, lane by lane. */
+void dual_spin_rhs_lanes(int n, const double *DUAL_SPIN_RESTRICT t,
+        const double *DUAL_SPIN_RESTRICT x, const double *DUAL_SPIN_RESTRICT c,
+        double *DUAL_SPIN_RESTRICT dxdt)
+{
+    int l;
+    (void)t;  /* unused when the scene is autonomous */
+    (void)c;  /* unused when every value is folded */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < n; ++l) {
+        const double q2 = x[1 * n + l];
+        const double q3 = x[2 * n + l];
+        const double u1 = x[3 * n + l];
+        const double u2 = x[4 * n + l];
+        const double u3 = x[5 * n + l];
+        const double u4 = x[6 * n + l];
+
+        const double tmp0 = dual_spin_sin(q3);
+        const double tmp1 = dual_spin_cos(q3);
+        const double tmp2 = (-tmp0*u1 + tmp1*u3)/dual_spin_cos(q2);
+        const double tmp3 = 0.015471973456719416*u2 - 1.1900419543364779e-06*u4;
+        dxdt[0 * n + l] = tmp2;
+        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
+        dxdt[2 * n + l] = -tmp2*dual_spin_sin(q2) + u2;
+        dxdt[3 * n + l] = -tmp3*u1 + u3*(0.4092155481941839*u2 + 4.5440763299219775e-05*u4);
+        dxdt[4 * n + l] = u1*(0.01775954828743408*u1 - 0.10773983913066638*u3) - 0.01775954828743408*u3*u3;
+        dxdt[5 * n + l] = tmp3*u3 + u1*(-0.3153534800671272*u2 - 5.266025597120826e-05*u4);
+        dxdt[6 * n + l] = 0;
+    }
 }
 
 /* kinetic energy of the system (J): 13 ops. */
@@ -107,16 +236,16 @@ void dual_spin_angular_momentum(double t, const double *x, const double *c, doub
     const double u3 = x[5];
     const double u4 = x[6];
 
-    const double tmp0 = sin(q1);
+    const double tmp0 = dual_spin_sin(q1);
     const double tmp1 = 1400.9701492537313*u2 + 0.05*u4;
-    const double tmp2 = cos(q2);
+    const double tmp2 = dual_spin_cos(q2);
     const double tmp3 = tmp1*tmp2;
     const double tmp4 = 24.880597014925375*u1 + 950.0449253731343*u3;
-    const double tmp5 = sin(q3);
-    const double tmp6 = cos(q1);
+    const double tmp5 = dual_spin_sin(q3);
+    const double tmp6 = dual_spin_cos(q1);
     const double tmp7 = tmp5*tmp6;
-    const double tmp8 = sin(q2);
-    const double tmp9 = cos(q3);
+    const double tmp8 = dual_spin_sin(q2);
+    const double tmp9 = dual_spin_cos(q3);
     const double tmp10 = tmp0*tmp9;
     const double tmp11 = 1100.985223880597*u1 + 24.880597014925375*u3;
     const double tmp12 = tmp0*tmp5;

@@ -332,6 +332,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = dual_spin_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
@@ -341,6 +343,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function dual_spin_rk4_batch
 
   ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
@@ -1023,6 +1026,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = dual_spin_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1033,6 +1038,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function dual_spin_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1054,6 +1060,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = dual_spin_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1064,6 +1072,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function dual_spin_dop853_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1085,6 +1094,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = dual_spin_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1095,6 +1106,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function dual_spin_rodas4_batch
 
 end module dual_spin_ode_mod

@@ -69,6 +69,16 @@ typedef struct {
    (3-1-2 scenes only; see above) */
 #define DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR 6
 
+/* The _batch variants of the adaptive explicit pairs advance this many
+   trajectories at once, one in each SIMD lane of the same loops (a finished
+   lane takes the next trajectory); 8 fills two AVX2 or one AVX-512 vector of
+   doubles. Any value >= 1 gives the same results, bit for bit: each lane does
+   what the single call does for its trajectory. Define it when compiling
+   dual_spin_ode.c (-DDUAL_SPIN_LANES=4) to change it. */
+#ifndef DUAL_SPIN_LANES
+#define DUAL_SPIN_LANES 8
+#endif
+
 /* rtol must exceed 10 DBL_EPSILON (Hairer's rule): tighter, no double
    arithmetic meets it and the steps would shrink until max_steps ran out. */
 #define DUAL_SPIN_ODE_MIN_RTOL 2.220446049250313e-15

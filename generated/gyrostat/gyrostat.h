@@ -89,6 +89,16 @@ int  gyrostat_setup(const double *p, double *c);
  */
 void gyrostat_rhs(double t, const double *x, const double *c, double *dxdt);
 
+/*
+ * gyrostat_rhs for n states at once, stored by state: x[i*n + l] is
+ * state i of lane l, t[l] its time, dxdt[i*n + l] its rate. Lane l gets
+ * exactly what gyrostat_rhs(t[l], ...) would give; the loop over the
+ * lanes vectorizes (the _batch integrators advance that many trajectories
+ * at once). No argument may overlap dxdt.
+ */
+void gyrostat_rhs_lanes(int n, const double *t, const double *x, const double *c,
+        double *dxdt);
+
 #ifdef __cplusplus
 }
 #endif

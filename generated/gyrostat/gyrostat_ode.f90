@@ -472,6 +472,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = gyrostat_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
@@ -481,6 +483,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function gyrostat_rk4_batch
 
   ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
@@ -1171,6 +1174,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1181,6 +1186,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function gyrostat_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1202,6 +1208,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1212,6 +1220,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function gyrostat_dop853_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1233,6 +1242,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1243,6 +1254,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function gyrostat_rodas4_batch
 
 end module gyrostat_ode_mod

@@ -79,6 +79,16 @@ int  speed_controlled_setup(const double *p, double *c);
  */
 void speed_controlled_rhs(double t, const double *x, const double *c, double *dxdt);
 
+/*
+ * speed_controlled_rhs for n states at once, stored by state: x[i*n + l] is
+ * state i of lane l, t[l] its time, dxdt[i*n + l] its rate. Lane l gets
+ * exactly what speed_controlled_rhs(t[l], ...) would give; the loop over the
+ * lanes vectorizes (the _batch integrators advance that many trajectories
+ * at once). No argument may overlap dxdt.
+ */
+void speed_controlled_rhs_lanes(int n, const double *t, const double *x, const double *c,
+        double *dxdt);
+
 /* out[0] = kinetic energy of the system (J); 13 ops. */
 void speed_controlled_kinetic_energy(double t, const double *x, const double *c, double *out);
 

@@ -79,6 +79,16 @@ int  stiff_wheel_setup(const double *p, double *c);
  */
 void stiff_wheel_rhs(double t, const double *x, const double *c, double *dxdt);
 
+/*
+ * stiff_wheel_rhs for n states at once, stored by state: x[i*n + l] is
+ * state i of lane l, t[l] its time, dxdt[i*n + l] its rate. Lane l gets
+ * exactly what stiff_wheel_rhs(t[l], ...) would give; the loop over the
+ * lanes vectorizes (the _batch integrators advance that many trajectories
+ * at once). No argument may overlap dxdt.
+ */
+void stiff_wheel_rhs_lanes(int n, const double *t, const double *x, const double *c,
+        double *dxdt);
+
 /* out[0] = kinetic energy of the system (J); 13 ops. */
 void stiff_wheel_kinetic_energy(double t, const double *x, const double *c, double *out);
 

@@ -347,6 +347,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
@@ -356,6 +358,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= STIFF_WHEEL_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function stiff_wheel_rk4_batch
 
   ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
@@ -1040,6 +1043,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1050,6 +1055,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= STIFF_WHEEL_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function stiff_wheel_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1071,6 +1077,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1081,6 +1089,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= STIFF_WHEEL_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function stiff_wheel_dop853_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1102,6 +1111,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1112,6 +1123,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= STIFF_WHEEL_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function stiff_wheel_rodas4_batch
 
 end module stiff_wheel_ode_mod

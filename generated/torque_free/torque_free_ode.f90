@@ -323,6 +323,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = torque_free_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
@@ -332,6 +334,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function torque_free_rk4_batch
 
   ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
@@ -1014,6 +1017,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = torque_free_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1024,6 +1029,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function torque_free_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1045,6 +1051,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = torque_free_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1055,6 +1063,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function torque_free_dop853_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1076,6 +1085,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = torque_free_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1086,6 +1097,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function torque_free_rodas4_batch
 
 end module torque_free_ode_mod

@@ -16,6 +16,108 @@
 
 #include <float.h>
 #include <math.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#ifdef _OPENMP
+#define WHEEL_SPINUP_SIMD _Pragma("omp simd")
+#else
+#define WHEEL_SPINUP_SIMD
+#endif
+#ifdef __cplusplus
+#define WHEEL_SPINUP_RESTRICT
+#else
+#define WHEEL_SPINUP_RESTRICT restrict
+#endif
+
+/* x = n pi/2 + r, |r| <= pi/4 (a little more when x 2/pi is near a half
+   integer), r as r + *tail to about 2^-118 |x|, and *quad = n mod 4 (0..3,
+   as a double). The reduction of fdlibm's __rem_pio2 for "medium" |x|
+   (pi/2 in three pieces of 33 bits and their tails), all three rounds taken
+   every time: n pio2_1 is exact for |n| < 2^20, so r is accurate for |x| <=
+   2^20 pi/2 = 1.6e6. Beyond, n pio2_1 rounds and the result is sin or cos
+   of a point within half an ulp of x (an absolute error <= ulp(x)/2, the
+   uncertainty of x itself); beyond 2^50 (1.1e15) n is no longer exact and
+   the functions return NaN, as they do for an infinite or NaN x. */
+static inline double wheel_spinup_reduce(double x, double *tail, double *quad)
+{
+    const double toint = 6755399441055744.0;  /* 1.5 2^52: adding it rounds to an integer */
+    const double invpio2 = 6.36619772367581382433e-01;
+    const double pio2_1 = 1.57079632673412561417e+00;
+    const double pio2_2 = 6.07710050630396597660e-11;
+    const double pio2_2t = 2.02226624879595063154e-21;
+    const double pio2_3 = 2.02226624871116645580e-21;
+    const double pio2_3t = 8.47842766036889956997e-32;
+    const double n = (x * invpio2 + toint) - toint;
+    double r = x - n * pio2_1, t = r, w = n * pio2_2, y;
+    r = t - w;
+    w = n * pio2_2t - ((t - r) - w);
+    t = r;
+    w = n * pio2_3;
+    r = t - w;
+    w = n * pio2_3t - ((t - r) - w);
+    y = r - w;
+    *tail = (r - y) - w;
+    /* n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer */
+    *quad = n - 4.0 * (((n - 1.5) * 0.25 + toint) - toint);
+    return y;
+}
+
+/* sin(x + y) and cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's
+   __kernel_sin and __kernel_cos (musl's form), errors below 1 ulp. */
+static inline double wheel_spinup_ksin(double x, double y)
+{
+    const double S1 = -1.66666666666666324348e-01, S2 = 8.33333333332248946124e-03,
+                 S3 = -1.98412698298579493134e-04, S4 = 2.75573137070700676789e-06,
+                 S5 = -2.50507602534068634195e-08, S6 = 1.58969099521155010221e-10;
+    const double z = x * x, w = z * z, v = z * x;
+    const double r = S2 + z * (S3 + z * S4) + z * w * (S5 + z * S6);
+    return x - ((z * (0.5 * y - v * r) - y) - v * S1);
+}
+
+static inline double wheel_spinup_kcos(double x, double y)
+{
+    const double C1 = 4.16666666666666019037e-02, C2 = -1.38888888888741095749e-03,
+                 C3 = 2.48015872894767294178e-05, C4 = -2.75573143513906633035e-07,
+                 C5 = 2.08757232129817482790e-09, C6 = -1.13596475577881948265e-11;
+    const double z = x * x, w = z * z, hz = 0.5 * z, u = 1.0 - hz;
+    const double r = z * (C1 + z * (C2 + z * C3)) + w * w * (C4 + z * (C5 + z * C6));
+    return u + (((1.0 - u) - hz) + (z * r - x * y));
+}
+
+/* The largest |x| the reduction takes (2^50); past it, NaN. */
+#define WHEEL_SPINUP_TRIG_MAX 1125899906842624.0
+
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see wheel_spinup_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. */
+static inline double wheel_spinup_sin(double x)
+{
+    double y, q;
+    const double r = wheel_spinup_reduce(x, &y, &q);
+    const double s = wheel_spinup_ksin(r, y), c = wheel_spinup_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? c : s;
+    const double f = q >= 2.0 ? -v : v;
+    return fabs(x) <= WHEEL_SPINUP_TRIG_MAX ? f : (double)NAN;
+}
+
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see wheel_spinup_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. */
+static inline double wheel_spinup_cos(double x)
+{
+    double y, q;
+    const double r = wheel_spinup_reduce(x, &y, &q);
+    const double s = wheel_spinup_ksin(r, y), c = wheel_spinup_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? s : c;
+    const double f = q == 1.0 || q == 2.0 ? -v : v;
+    return fabs(x) <= WHEEL_SPINUP_TRIG_MAX ? f : (double)NAN;
+}
+
 
 /* d(dx/dt)/dx, row-major (60 ops). */
 void wheel_spinup_jac(double t, const double *x, const double *c, double *J)
@@ -29,11 +131,11 @@ void wheel_spinup_jac(double t, const double *x, const double *c, double *J)
     const double u3 = x[6];
     const double u4 = x[7];
 
-    const double tmp0 = sin(q2);
-    const double tmp1 = cos(q2);
-    const double tmp2 = sin(q3);
+    const double tmp0 = wheel_spinup_sin(q2);
+    const double tmp1 = wheel_spinup_cos(q2);
+    const double tmp2 = wheel_spinup_sin(q3);
     const double tmp3 = tmp2*u1;
-    const double tmp4 = cos(q3);
+    const double tmp4 = wheel_spinup_cos(q3);
     const double tmp5 = tmp4*u3;
     const double tmp6 = -tmp3 + tmp5;
     const double tmp7 = tmp6/(tmp1*tmp1);
@@ -126,7 +228,7 @@ static void stats_start(wheel_spinup_stats *stats, double t0)
    passed q2 = +-pi/2, where q1 and q3 jump); else *cos_q2 := cos(xnew[1]). */
 static int gimbal_lock(const double *xnew, double *cos_q2)
 {
-    const double cq = cos(xnew[1]);
+    const double cq = wheel_spinup_cos(xnew[1]);
     if (fabs(cq) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (*cos_q2 > 0.0)) {
         return 1;
     }
@@ -165,7 +267,7 @@ int wheel_spinup_rk4(double t0, double t1, long steps, double *x, const double *
     double k[4][WHEEL_SPINUP_NX], y[WHEEL_SPINUP_NX], xnew[WHEEL_SPINUP_NX], dx[WHEEL_SPINUP_NX];
     double comp[WHEEL_SPINUP_NX] = {0.0};
     double t, h;
-    double cos_q2 = cos(x[1]);
+    double cos_q2 = wheel_spinup_cos(x[1]);
     wheel_spinup_stats own;
     long n;
     int i;
@@ -227,20 +329,22 @@ int wheel_spinup_rk4(double t0, double t1, long steps, double *x, const double *
     return WHEEL_SPINUP_ODE_OK;
 }
 
-/* NULL stats or codes: not wanted. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
         const double *c, wheel_spinup_stats *stats, int *codes)
 {
-    size_t i, failed = 0;
-    for (i = 0; i < n; ++i) {
-        const int code = wheel_spinup_rk4(t0, t1, steps, x + i * WHEEL_SPINUP_NX, c,
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = wheel_spinup_rk4(t0, t1, steps, x + (size_t)i * WHEEL_SPINUP_NX, c,
                                     stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
-        if (code != WHEEL_SPINUP_ODE_OK) {
-            ++failed;
-        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
     }
     return failed;
 }
@@ -327,7 +431,49 @@ struct pair {
     int fnew;       /* the row of k that holds f(t + h, xnew) */
     int fsal;       /* the trial computes that row itself (first same as last) */
     double alpha, beta, safety, facmin, facmax;
+    int roots;      /* alpha = 2^-roots: err^alpha by square roots; 0: by pow */
 };
+
+/* err^alpha, by square roots when alpha is 1/2, 1/4, 1/8 ... (a libm pow
+   costs as much as a fifth of a dop853 step on the lanes). */
+static double err_power(const struct pair *m, double err)
+{
+    int j;
+    if (m->roots == 0) {
+        return pow(err, m->alpha);
+    }
+    for (j = 0; j < m->roots; ++j) {
+        err = sqrt(err);
+    }
+    return err;
+}
+
+/* A pair's start: the arguments, the attitude and f0 = f(t0, x) checked,
+   and the first step *h. -1 to go on from there, else the code to return
+   (x as given). */
+static int pair_start(int order, double t0, double t1, const double *x, const double *c,
+                      double rtol, double atol, double h0, long max_steps, double *f0,
+                      double *h, double *cos_q2, wheel_spinup_stats *stats)
+{
+    stats_start(stats, t0);
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+        return WHEEL_SPINUP_ODE_ERR_ARGUMENT;
+    }
+    *cos_q2 = wheel_spinup_cos(x[1]);
+    if (fabs(*cos_q2) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS) {
+        return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
+    }
+    if (!(t1 > t0)) {
+        return WHEEL_SPINUP_ODE_OK;
+    }
+    wheel_spinup_rhs(t0, x, c, f0);
+    stats->rhs_calls = 1;
+    if (!all_finite(x, WHEEL_SPINUP_NX) || !all_finite(f0, WHEEL_SPINUP_NX)) {
+        return WHEEL_SPINUP_ODE_ERR_NONFINITE;
+    }
+    *h = h0 > 0.0 ? fmin(h0, t1 - t0) : initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+    return -1;
+}
 
 /* Any embedded pair to t1, with Hairer's step-size strategy: the last step
    clipped to end on t1, no growth right after a rejection, and a non-finite
@@ -337,27 +483,15 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
                           wheel_spinup_stats *stats)
 {
     double k[13][WHEEL_SPINUP_NX], xnew[WHEEL_SPINUP_NX], dx[WHEEL_SPINUP_NX], comp[WHEEL_SPINUP_NX] = {0.0};
-    double t = t0, h, err, fac, err_old = 1e-4;
-    double cos_q2 = cos(x[1]);
+    double t = t0, h = 0.0, err, fac, err_old = 1e-4;
+    double cos_q2 = 1.0;
     int i, last, rejected_last = 0, nonfinite = 0;
+    const int start = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
+                                 &cos_q2, stats);
 
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return WHEEL_SPINUP_ODE_ERR_ARGUMENT;
+    if (start >= 0) {
+        return start;
     }
-    if (fabs(cos_q2) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS) {
-        return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return WHEEL_SPINUP_ODE_OK;
-    }
-    wheel_spinup_rhs(t, x, c, k[0]);
-    stats->rhs_calls = 1;
-    if (!all_finite(x, WHEEL_SPINUP_NX) || !all_finite(k[0], WHEEL_SPINUP_NX)) {
-        return WHEEL_SPINUP_ODE_ERR_NONFINITE;
-    }
-    h = h0 > 0.0 ? fmin(h0, t1 - t0)
-                 : initial_step(m->order, t0, t1, x, k[0], c, rtol, atol, stats);
     for (;;) {
         if (step_underflow(h, t)) {
             return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
@@ -385,7 +519,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
             continue;
         }
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
-        fac = pow(err, m->alpha) / m->safety;
+        fac = err_power(m, err) / m->safety;
         if (err <= 1.0) {
             if (gimbal_lock(xnew, &cos_q2)) {
                 return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
@@ -400,7 +534,8 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
             for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                 k[0][i] = k[m->fnew][i];
             }
-            fac = fmax(1.0 / m->facmax, fmin(1.0 / m->facmin, fac / pow(err_old, m->beta)));
+            fac = m->beta == 0.0 ? fac : fac / pow(err_old, m->beta);
+            fac = fmax(1.0 / m->facmax, fmin(1.0 / m->facmin, fac));
             if (rejected_last) {
                 fac = fmax(fac, 1.0);
             }
@@ -488,7 +623,7 @@ static double dopri5_trial(double t, double h, const double *x, const double *c,
 }
 
 /* Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta. */
-static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.9, 0.2, 10.0};
+static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.9, 0.2, 10.0, 0};
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
 int wheel_spinup_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
@@ -654,7 +789,7 @@ static double dop853_trial(double t, double h, const double *x, const double *c,
 }
 
 /* Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6]. */
-static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 0.9, 0.333, 6.0};
+static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 0.9, 0.333, 6.0, 3};
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
 int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
@@ -663,6 +798,670 @@ int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
                           stats ? stats : &own);
+}
+
+/* What the lanes of an explicit pair hold: per lane, the state and stages
+   of pair_integrate (stored by state: [i][l] is x_i of lane l) and its
+   scalars. A lane is busy with trajectory traj until code >= 0. */
+struct lanes {
+    double x[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES], xnew[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES], dx[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
+    double comp[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES], y[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES], k[13][WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
+    double t[WHEEL_SPINUP_LANES], h[WHEEL_SPINUP_LANES], ts[WHEEL_SPINUP_LANES], err[WHEEL_SPINUP_LANES], err_old[WHEEL_SPINUP_LANES], cos_q2[WHEEL_SPINUP_LANES];
+    double stats_t[WHEEL_SPINUP_LANES], stats_h[WHEEL_SPINUP_LANES];
+    long accepted[WHEEL_SPINUP_LANES], rejected[WHEEL_SPINUP_LANES], rhs_calls[WHEEL_SPINUP_LANES];
+    int busy[WHEEL_SPINUP_LANES], code[WHEEL_SPINUP_LANES], last[WHEEL_SPINUP_LANES], nonfinite[WHEEL_SPINUP_LANES], rejected_last[WHEEL_SPINUP_LANES];
+    int ok[WHEEL_SPINUP_LANES];
+    size_t traj[WHEEL_SPINUP_LANES];
+};
+
+/* wheel_spinup_rhs_lanes on WHEEL_SPINUP_LANES lanes, for the compiler to see that the rows
+   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
+static void rhs_lanes(const double *WHEEL_SPINUP_RESTRICT t,
+                      double (*WHEEL_SPINUP_RESTRICT x)[WHEEL_SPINUP_LANES],
+                      const double *WHEEL_SPINUP_RESTRICT c,
+                      double (*WHEEL_SPINUP_RESTRICT dxdt)[WHEEL_SPINUP_LANES])
+{
+    int l;
+    (void)t;  /* unused when the scene is autonomous */
+    (void)c;  /* unused when every value is folded */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        const double q2 = x[1][l];
+        const double q3 = x[2][l];
+        const double u1 = x[4][l];
+        const double u2 = x[5][l];
+        const double u3 = x[6][l];
+        const double u4 = x[7][l];
+
+        const double tmp0 = wheel_spinup_sin(q3);
+        const double tmp1 = wheel_spinup_cos(q3);
+        const double tmp2 = (-tmp0*u1 + tmp1*u3)/wheel_spinup_cos(q2);
+        const double tmp3 = 0.014646230145692387*u2 - 1.6873537034207817e-05*u4;
+        dxdt[0][l] = tmp2;
+        dxdt[1][l] = tmp0*u3 + tmp1*u1;
+        dxdt[2][l] = -tmp2*wheel_spinup_sin(q2) + u2;
+        dxdt[3][l] = -u2 + u4;
+        dxdt[4][l] = -tmp3*u1 + u3*(0.3499793829482495*u2 + 0.0007488716786310489*u4);
+        dxdt[5][l] = c[0] + 0.01627906976744186*u1*u1 - 0.06976744186046512*u1*u3 - 0.01627906976744186*u3*u3;
+        dxdt[6][l] = tmp3*u3 + u1*(-0.2872098251809964*u2 - 0.0008211868373490824*u4);
+        dxdt[7][l] = c[1];
+    }
+}
+
+/* One trial step on every lane (pair_trial's work): L->xnew, L->dx, L->err. */
+typedef void (*lanes_trial)(struct lanes *L, const double *c, double rtol, double atol);
+
+/* dopri5_trial on every lane. */
+static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, double atol)
+{
+    double sum[WHEEL_SPINUP_LANES];
+    int i, l;
+
+    /* stage 2 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2 * L->k[0][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l]
+                                                 + 0.225 * L->k[1][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l]
+                                                 - 3.7333333333333334 * L->k[1][i][l]
+                                                 + 3.5555555555555554 * L->k[2][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l]
+                                                 - 11.595793324188385 * L->k[1][i][l]
+                                                 + 9.822892851699436 * L->k[2][i][l]
+                                                 - 0.2908093278463649 * L->k[3][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8888888888888888 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l]
+                                                 - 10.757575757575758 * L->k[1][i][l]
+                                                 + 8.906422717743473 * L->k[2][i][l]
+                                                 + 0.2784090909090909 * L->k[3][i][l]
+                                                 - 0.2735313036020583 * L->k[4][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7, the new solution */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l]
+                                    + 0.44923629829290207 * L->k[2][i][l]
+                                    + 0.6510416666666666 * L->k[3][i][l]
+                                    - 0.322376179245283 * L->k[4][i][l]
+                                    + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->xnew, c, L->k[6]);
+
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        sum[l] = 0.0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            const double err = L->h[l] * (0.0012326388888888888 * L->k[0][i][l]
+                                          - 0.0042527702905061394 * L->k[2][i][l]
+                                          + 0.03697916666666667 * L->k[3][i][l]
+                                          - 0.05086379716981132 * L->k[4][i][l]
+                                          + 0.0419047619047619 * L->k[5][i][l]
+                                          - 0.025 * L->k[6][i][l]);
+            const double e = err / (atol + rtol * fmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+            sum[l] += e * e;
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->err[l] = sqrt(sum[l] / WHEEL_SPINUP_NX);
+    }
+}
+
+/* dop853_trial on every lane. */
+static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, double atol)
+{
+    double err5[WHEEL_SPINUP_LANES], err3[WHEEL_SPINUP_LANES];
+    int i, l;
+
+    /* stage 2 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.05260015195876773 * L->k[0][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.05260015195876773 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l]
+                                                 + 0.0591751709536137 * L->k[1][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.0789002279381516 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l]
+                                                 + 0.08876275643042054 * L->k[2][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.1183503419072274 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l]
+                                                 - 0.8845494793282861 * L->k[2][i][l]
+                                                 + 0.924834003261792 * L->k[3][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2816496580927726 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l]
+                                                 + 0.17082860872947386 * L->k[3][i][l]
+                                                 + 0.12546768756682242 * L->k[4][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3333333333333333 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l]
+                                                 + 0.17025221101954405 * L->k[3][i][l]
+                                                 + 0.06021653898045596 * L->k[4][i][l]
+                                                 - 0.017578125 * L->k[5][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.25 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[6]);
+
+    /* stage 8 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l]
+                                                 + 0.17038392571223998 * L->k[3][i][l]
+                                                 + 0.10726203044637328 * L->k[4][i][l]
+                                                 - 0.015319437748624402 * L->k[5][i][l]
+                                                 + 0.008273789163814023 * L->k[6][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3076923076923077 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[7]);
+
+    /* stage 9 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l]
+                                                 - 3.3608926294469414 * L->k[3][i][l]
+                                                 - 0.868219346841726 * L->k[4][i][l]
+                                                 + 27.59209969944671 * L->k[5][i][l]
+                                                 + 20.154067550477894 * L->k[6][i][l]
+                                                 - 43.48988418106996 * L->k[7][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6512820512820513 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[8]);
+
+    /* stage 10 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l]
+                                                 - 2.4881146199716677 * L->k[3][i][l]
+                                                 - 0.590290826836843 * L->k[4][i][l]
+                                                 + 21.230051448181193 * L->k[5][i][l]
+                                                 + 15.279233632882423 * L->k[6][i][l]
+                                                 - 33.28821096898486 * L->k[7][i][l]
+                                                 - 0.020331201708508627 * L->k[8][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[9]);
+
+    /* stage 11 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l]
+                                                 + 5.186372428844064 * L->k[3][i][l]
+                                                 + 1.0914373489967295 * L->k[4][i][l]
+                                                 - 8.149787010746927 * L->k[5][i][l]
+                                                 - 18.52006565999696 * L->k[6][i][l]
+                                                 + 22.739487099350505 * L->k[7][i][l]
+                                                 + 2.4936055526796523 * L->k[8][i][l]
+                                                 - 3.0467644718982196 * L->k[9][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8571428571428571 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[10]);
+
+    /* stage 12 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l]
+                                                 - 10.53449546673725 * L->k[3][i][l]
+                                                 - 2.0008720582248625 * L->k[4][i][l]
+                                                 - 17.9589318631188 * L->k[5][i][l]
+                                                 + 27.94888452941996 * L->k[6][i][l]
+                                                 - 2.8589982771350235 * L->k[7][i][l]
+                                                 - 8.87285693353063 * L->k[8][i][l]
+                                                 + 12.360567175794303 * L->k[9][i][l]
+                                                 + 0.6433927460157636 * L->k[10][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[11]);
+
+    /* the new solution */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l]
+                                    + 4.450312892752409 * L->k[5][i][l]
+                                    + 1.8915178993145003 * L->k[6][i][l]
+                                    - 5.801203960010585 * L->k[7][i][l]
+                                    + 0.3111643669578199 * L->k[8][i][l]
+                                    - 0.1521609496625161 * L->k[9][i][l]
+                                    + 0.20136540080403034 * L->k[10][i][l]
+                                    + 0.04471061572777259 * L->k[11][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        err5[l] = 0.0;
+        err3[l] = 0.0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            const double sk = atol + rtol * fmax(fabs(L->x[i][l]), fabs(L->xnew[i][l]));
+            const double e5 = (0.01312004499419488 * L->k[0][i][l]
+                                - 1.2251564463762044 * L->k[5][i][l]
+                                - 0.4957589496572502 * L->k[6][i][l]
+                                + 1.6643771824549864 * L->k[7][i][l]
+                                - 0.35032884874997366 * L->k[8][i][l]
+                                + 0.3341791187130175 * L->k[9][i][l]
+                                + 0.08192320648511571 * L->k[10][i][l]
+                                - 0.022355307863886294 * L->k[11][i][l]) / sk;
+            const double e3 = (-0.18980075407240762 * L->k[0][i][l]
+                                + 4.450312892752409 * L->k[5][i][l]
+                                + 1.8915178993145003 * L->k[6][i][l]
+                                - 5.801203960010585 * L->k[7][i][l]
+                                - 0.4226823213237919 * L->k[8][i][l]
+                                - 0.1521609496625161 * L->k[9][i][l]
+                                + 0.20136540080403034 * L->k[10][i][l]
+                                + 0.02265179219836082 * L->k[11][i][l]) / sk;
+            err5[l] += e5 * e5;
+            err3[l] += e3 * e3;
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        const double deno = err5[l] + 0.01 * err3[l];
+        L->err[l] = deno > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(WHEEL_SPINUP_NX * deno) : 0.0;
+    }
+}
+
+/* A trajectory into lane l, with pair_start's checks: -1 when the lane took
+   it, else the code it ended with at once (x as given, stats set). */
+static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj, double t0,
+                      double t1, double *xs, const double *c, double rtol, double atol,
+                      double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    const double *x = xs + traj * WHEEL_SPINUP_NX;
+    double f0[WHEEL_SPINUP_NX], h = 0.0, cos_q2 = 1.0;
+    int i;
+    const int code = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+                                &cos_q2, stats);
+    if (code >= 0) {
+        return code;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        L->x[i][l] = x[i];
+        L->k[0][i][l] = f0[i];
+        L->comp[i][l] = 0.0;
+    }
+    L->t[l] = t0;
+    L->h[l] = h;
+    L->err_old[l] = 1e-4;
+    L->cos_q2[l] = cos_q2;
+    L->stats_t[l] = t0;
+    L->stats_h[l] = stats->h;
+    L->accepted[l] = 0;
+    L->rejected[l] = 0;
+    L->rhs_calls[l] = stats->rhs_calls;
+    L->busy[l] = 1;
+    L->code[l] = -1;
+    L->nonfinite[l] = 0;
+    L->rejected_last[l] = 0;
+    L->traj[l] = traj;
+    return -1;
+}
+
+/* The start of each lane's step, as pair_integrate's loop begins: a lane
+   whose step size underflowed or whose steps ran out gets its code; the
+   others clip a last step to end on t1. */
+static void lanes_begin(struct lanes *L, double t1, long max_steps)
+{
+    int l;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        const int underflow = L->h[l] < 16.0 * DBL_EPSILON * fabs(L->t[l]) || L->h[l] < DBL_MIN;
+        const int spent = L->accepted[l] + L->rejected[l] >= max_steps;
+        const int nonfinite = L->nonfinite[l];
+        const int code = underflow ? (nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW)
+                                   : spent ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1;
+        const int last = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->code[l] = L->busy[l] ? code : L->code[l];
+        L->last[l] = last;
+        L->h[l] = code < 0 && last ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = code < 0 ? L->h[l] : L->stats_h[l];
+    }
+}
+
+/* After the trial: f(t + h, xnew) where a lane's step will be accepted and
+   is not the last (for a pair that is not first same as last), the
+   non-finite mask, and the counters. */
+static void lanes_check(const struct pair *m, struct lanes *L, const double *c)
+{
+    int i, l, need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        const int run = L->busy[l] && L->code[l] < 0;
+        L->nonfinite[l] = !(fabs(L->err[l]) <= DBL_MAX);
+        L->rhs_calls[l] += run ? m->calls : 0;
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] |= !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ok[l] = L->busy[l] && L->code[l] < 0 && !L->nonfinite[l] && L->err[l] <= 1.0
+                   && !m->fsal && !L->last[l];
+    }
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= L->ok[l];
+    }
+    if (!need) {
+        return;
+    }
+    rhs_lanes(L->ts, L->xnew, c, L->k[m->fnew]);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] |= L->ok[l] && !(fabs(L->k[m->fnew][i][l]) <= DBL_MAX);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->rhs_calls[l] += L->ok[l];
+    }
+}
+
+/* pair_integrate's accept or reject on every lane, by masks: the new h, the
+   counters, and L->ok where the step is taken (a lane that stops on the
+   attitude or on t1 gets its code). */
+static void lanes_control(const struct pair *m, struct lanes *L, double t1)
+{
+    int l;
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {  /* err_power, pow: scalar calls */
+        const int run = L->busy[l] && L->code[l] < 0;
+        const int nonfinite = L->nonfinite[l];
+        const double err = L->err[l], h = L->h[l];
+        const int take = run && !nonfinite && err <= 1.0;
+        const double cq = wheel_spinup_cos(L->xnew[1][l]);
+        const int lock = fabs(cq) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (L->cos_q2[l] > 0.0);
+        const int ok = take && !lock;
+        const double fac = err_power(m, err) / m->safety;
+        double grow = m->beta == 0.0 ? fac : fac / pow(L->err_old[l], m->beta);
+        grow = fmax(1.0 / m->facmax, fmin(1.0 / m->facmin, grow));
+        grow = L->rejected_last[l] ? fmax(grow, 1.0) : grow;
+        L->code[l] = take && lock ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR
+                   : ok && L->last[l] ? WHEEL_SPINUP_ODE_OK : L->code[l];
+        L->cos_q2[l] = ok ? cq : L->cos_q2[l];
+        L->t[l] = ok ? (L->last[l] ? t1 : L->t[l] + h) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->accepted[l] += ok;
+        L->rejected[l] += run && !take;
+        L->err_old[l] = ok ? fmax(err, 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok ? 0 : run && !take ? 1 : L->rejected_last[l];
+        L->h[l] = !run || (take && lock) ? h
+                : nonfinite ? h * m->facmin
+                : ok ? h / grow : h / fmin(1.0 / m->facmin, fac);
+        L->ok[l] = ok;
+    }
+}
+
+/* accept_step on the lanes that took their step, and f(t + h, xnew) as the
+   next step's first stage. */
+static void lanes_accept(const struct pair *m, struct lanes *L)
+{
+    int i, l;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            const int ok = L->ok[l];
+            L->comp[i][l] = ok ? (L->xnew[i][l] - L->x[i][l]) - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok ? L->xnew[i][l] : L->x[i][l];
+            L->k[0][i][l] = ok ? L->k[m->fnew][i][l] : L->k[0][i][l];
+        }
+    }
+}
+
+/* Trajectory traj's results: its statistics and code (x is in place). */
+static void put_result(size_t traj, int code, const wheel_spinup_stats *st, wheel_spinup_stats *stats,
+                       int *codes)
+{
+    if (stats) {
+        stats[traj] = *st;
+    }
+    if (codes) {
+        codes[traj] = code;
+    }
+}
+
+/* The lanes that have a code: their state and statistics out, the lane free. */
+static size_t lanes_finish(struct lanes *L, double t0, double *xs, wheel_spinup_stats *stats,
+                           int *codes)
+{
+    size_t failed = 0;
+    int i, l;
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        if (L->busy[l] && L->code[l] >= 0) {
+            wheel_spinup_stats st;
+            stats_start(&st, t0);
+            st.t = L->stats_t[l];
+            st.h = L->stats_h[l];
+            st.accepted = L->accepted[l];
+            st.rejected = L->rejected[l];
+            st.rhs_calls = L->rhs_calls[l];
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                xs[L->traj[l] * WHEEL_SPINUP_NX + (size_t)i] = L->x[i][l];
+            }
+            put_result(L->traj[l], L->code[l], &st, stats, codes);
+            failed += (size_t)(L->code[l] != WHEEL_SPINUP_ODE_OK);
+            L->busy[l] = 0;
+        }
+    }
+    return failed;
+}
+
+/* Trajectories begin..end-1 of a batch, WHEEL_SPINUP_LANES at a time: a lane that
+   finishes takes the next trajectory. Returns how many failed. */
+static size_t pair_lanes(const struct pair *m, lanes_trial trial, size_t begin, size_t end,
+                         double t0, double t1, double *xs, const double *c, double rtol,
+                         double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+{
+    struct lanes L;
+    size_t next = begin, failed = 0;
+    int l, busy;
+    memset(&L, 0, sizeof L);  /* idle lanes compute on zeros, not on garbage */
+    for (;;) {
+        busy = 0;
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            while (!L.busy[l] && next < end) {
+                wheel_spinup_stats st;
+                const int code = lane_start(m, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
+                                            max_steps, &st);
+                if (code >= 0) {
+                    put_result(next, code, &st, stats, codes);
+                    failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+                }
+                ++next;
+            }
+            busy += L.busy[l];
+        }
+        if (!busy) {
+            return failed;
+        }
+        lanes_begin(&L, t1, max_steps);
+        trial(&L, c, rtol, atol);
+        lanes_check(m, &L, c);
+        lanes_control(m, &L, t1);
+        lanes_accept(m, &L);
+        failed += lanes_finish(&L, t0, xs, stats, codes);
+    }
+}
+
+/* A batch over every core when compiled with OpenMP: chunks of about an
+   eighth of a thread's share, taken in turn (a chunk's trajectories are the
+   same whichever thread runs it); else one chunk. */
+static size_t pair_batch(const struct pair *m, lanes_trial trial, size_t n, double t0,
+                         double t1, double *xs, const double *c, double rtol, double atol,
+                         double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+#ifdef _OPENMP
+    const size_t share = n / (8 * (size_t)omp_get_max_threads()) + 1;
+    const size_t chunk = (share + WHEEL_SPINUP_LANES - 1) / WHEEL_SPINUP_LANES * WHEEL_SPINUP_LANES;
+    const long chunks = (long)((n + chunk - 1) / chunk);
+    long b;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (chunks > 1)
+    for (b = 0; b < chunks; ++b) {
+        const size_t begin = (size_t)b * chunk;
+        const size_t end = n - begin < chunk ? n : begin + chunk;
+        failed += pair_lanes(m, trial, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
+                             stats, codes);
+    }
+#else
+    failed = pair_lanes(m, trial, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
+#endif
+    return failed;
 }
 
 /* E = I/(h gamma) - J is block upper triangular in state order (see
@@ -959,56 +1758,41 @@ int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double
     }
 }
 
-/* NULL stats or codes: not wanted. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
+   every core under OpenMP. */
 size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
 {
-    size_t i, failed = 0;
-    for (i = 0; i < n; ++i) {
-        const int code = wheel_spinup_dopri5(t0, t1, x + i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        if (code != WHEEL_SPINUP_ODE_OK) {
-            ++failed;
-        }
-    }
-    return failed;
+    return pair_batch(&dopri5_pair, dopri5_trial_lanes, n, t0, t1, x, c, rtol, atol, h0,
+                      max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
+   every core under OpenMP. */
 size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
 {
-    size_t i, failed = 0;
-    for (i = 0; i < n; ++i) {
-        const int code = wheel_spinup_dop853(t0, t1, x + i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        if (code != WHEEL_SPINUP_ODE_OK) {
-            ++failed;
-        }
-    }
-    return failed;
+    return pair_batch(&dop853_pair, dop853_trial_lanes, n, t0, t1, x, c, rtol, atol, h0,
+                      max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted. */
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
 size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
 {
-    size_t i, failed = 0;
-    for (i = 0; i < n; ++i) {
-        const int code = wheel_spinup_rodas4(t0, t1, x + i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
-                                           stats ? stats + i : NULL);
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = wheel_spinup_rodas4(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0,
+                                           max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
-        if (code != WHEEL_SPINUP_ODE_OK) {
-            ++failed;
-        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
     }
     return failed;
 }

@@ -347,6 +347,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
@@ -356,6 +358,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function wheel_spinup_rk4_batch
 
   ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
@@ -1039,6 +1042,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1049,6 +1054,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function wheel_spinup_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1070,6 +1076,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1080,6 +1088,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function wheel_spinup_dop853_batch
 
   ! stats, codes: NULL when not wanted.
@@ -1101,6 +1110,8 @@ contains
     if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1111,6 +1122,7 @@ contains
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
     end do
+    !$omp end parallel do
   end function wheel_spinup_rodas4_batch
 
 end module wheel_spinup_ode_mod

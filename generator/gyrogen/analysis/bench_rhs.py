@@ -26,7 +26,7 @@ import numpy as np
 from gyrogen.analysis.timing import best_of, per_call_ns
 from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
-from gyrogen.runtime import build
+from gyrogen.runtime import flags
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_scene
@@ -187,8 +187,8 @@ def machine() -> dict[str, str]:
         "numpy": np.__version__,
         "gcc": _cmd_first_line(["gcc", "--version"]),
         "gfortran": _cmd_first_line(["gfortran", "--version"]),
-        "c_flags": " ".join(build.C_FLAGS),
-        "fortran_flags": " ".join(build.FORTRAN_FLAGS),
+        "c_flags": " ".join(flags.c_flags()),
+        "fortran_flags": " ".join(flags.fortran_flags()),
     }
 
 

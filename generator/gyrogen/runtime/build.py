@@ -25,20 +25,9 @@ import cffi
 from gyrogen import abi, methods
 from gyrogen.codegen.render import render
 from gyrogen.errors import BuildError
-from gyrogen.runtime import cache
+from gyrogen.runtime import cache, flags
 from gyrogen.runtime.compiled import Compiled, Language
 
-C_FLAGS = (
-    "-std=c99",
-    "-O2",
-    "-fPIC",
-    "-fno-math-errno",
-    "-Wall",
-    "-Wextra",
-    "-Wpedantic",
-    "-Werror",
-)
-FORTRAN_FLAGS = ("-std=f2008", "-O2", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Werror")
 _PACKAGES = {"gcc": "gcc", "gfortran": "gfortran"}
 
 
@@ -127,8 +116,8 @@ def _tool_version(tool: str) -> str:
 
 def _key(language: Language, sources: list[Path], glue: str, cdef: str) -> str:
     tool = "gcc" if language == "c" else "gfortran"
-    flags = C_FLAGS if language == "c" else FORTRAN_FLAGS
-    return cache.entry_key((language, _tool_version(tool), " ".join(flags), glue, cdef), sources)
+    used = flags.c_flags() if language == "c" else flags.fortran_flags()
+    return cache.entry_key((language, _tool_version(tool), " ".join(used), glue, cdef), sources)
 
 
 def _compile(plan: _Plan, work: Path, final: Path) -> None:
@@ -141,15 +130,15 @@ def _compile(plan: _Plan, work: Path, final: Path) -> None:
         objects = []
         for src in (s for s in plan.sources if s.suffix == ".c"):
             obj = work / f"{src.stem}.o"
-            cmd = [plan.cc, *C_FLAGS, "-c", "-o", obj.name, src.name]
+            cmd = [plan.cc, *flags.c_flags(), "-c", "-o", obj.name, src.name]
             _run(cmd, work, cache.log_path(final, src.name))
             objects.append(str(obj))
-        ffi.set_source(plan.module_name, plan.glue, extra_objects=objects)
+        ffi.set_source(plan.module_name, plan.glue, extra_objects=objects, **_openmp_args())
     else:
         lib = plan.module_name + "_f"
         gf = require("gfortran")
         names = [src.name for src in plan.sources]
-        cmd = [gf, *FORTRAN_FLAGS, "-shared", "-J", ".", "-o", f"lib{lib}.so", *names]
+        cmd = [gf, *flags.fortran_flags(), "-shared", "-J", ".", "-o", f"lib{lib}.so", *names]
         _run(cmd, work, cache.log_path(final, names[-1]))
         ffi.set_source(
             plan.module_name,
@@ -157,8 +146,17 @@ def _compile(plan: _Plan, work: Path, final: Path) -> None:
             libraries=[lib],
             library_dirs=[str(work)],
             runtime_library_dirs=[str(final)],
+            **_openmp_args(),
         )
     _cffi_compile(ffi, work, cache.log_path(final, "cffi"))
+
+
+def _openmp_args() -> dict[str, list[str]]:
+    """The glue's flags: -fopenmp when the C compiler has OpenMP, so that it
+    links the runtime and can set the thread count (gyrogen_threads)."""
+    if not flags.openmp("gcc", "c"):
+        return {}
+    return {"extra_compile_args": [flags.OPENMP], "extra_link_args": [flags.OPENMP]}
 
 
 def _run(cmd: list[str], cwd: Path, log: Path) -> None:

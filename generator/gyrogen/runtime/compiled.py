@@ -3,6 +3,8 @@ the Jacobian and the integrators, called through cffi on numpy arrays."""
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Literal, TypedDict, Unpack
@@ -36,6 +38,13 @@ def controls(method: str, *, steps: int, rtol: float, atol: float, max_steps: in
     if methods.get(method).fixed_step:
         return Controls(steps=steps)
     return Controls(rtol=rtol, atol=atol, max_steps=max_steps)
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 @dataclass(frozen=True)
@@ -120,12 +129,26 @@ class Compiled:
         t1: float,
         **given: Unpack[Controls],
     ) -> tuple[np.ndarray, dict[str, float | int], int]:
-        """One compiled integration of x0 (nx,) from t0 to t1: the final state
-        (the last good one on failure), the statistics (abi.STATS_FIELDS) and the
-        return code (abi.ODE_CODES). The controls (Controls) as keywords."""
-        x, stats, codes = self.integrate_batch(method, np.reshape(x0, (1, -1)), c, t0, t1, **given)
-        fields = (f.name for f in abi.STATS_FIELDS)
-        return x[0], {name: stats[name][0].item() for name in fields}, int(codes[0])
+        """One compiled integration of x0 (nx,) from t0 to t1 by the single
+        trajectory's function: the final state (the last good one on
+        failure), the statistics (abi.STATS_FIELDS) and the return code
+        (abi.ODE_CODES). The controls (Controls) as keywords."""
+        fixed = self._check_method(method, given.get("steps"))
+        ctl = Controls(**{**DEFAULT_CONTROLS, **given})
+        x = np.array(x0, dtype=np.float64).reshape(-1)  # a copy: integrated in place
+        if x.shape != (self.nx,):
+            raise ValueError(f"the initial state must have shape ({self.nx},), not {x.shape}")
+        stats = np.zeros(1, dtype=self._stats_dtype)
+        head = (t0, t1, ctl["steps"]) if fixed else (t0, t1)
+        tail = () if fixed else (ctl["rtol"], ctl["atol"], ctl["h0"], ctl["max_steps"])
+        code = self.function(method)(
+            *head,
+            self.doubles(x),
+            self.doubles(np.ascontiguousarray(c, dtype=np.float64)),
+            *tail,
+            self.ffi.from_buffer("gyrogen_stats[]", stats),
+        )
+        return x, {f.name: stats[f.name][0].item() for f in abi.STATS_FIELDS}, int(code)
 
     def integrate_batch(
         self,
@@ -134,11 +157,15 @@ class Compiled:
         c: np.ndarray,
         t0: float,
         t1: float,
+        threads: int | None = None,
         **given: Unpack[Controls],
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """integrate() for many initial states (n, nx) in one compiled call:
-        final states (n, nx), statistics as a structured array (n,) with the
-        fields of abi.STATS_FIELDS, and return codes (n,)."""
+        """integrate() for many initial states (n, nx): final states (n, nx),
+        statistics as a structured array (n,) with the fields of
+        abi.STATS_FIELDS, and return codes (n,). threads: how many cores
+        (None: every one, 1: this one); a build with OpenMP splits the batch
+        in C, one without it in slices called from Python threads (cffi
+        releases the GIL). The results do not depend on it, bit for bit."""
         fixed = self._check_method(method, given.get("steps"))
         ctl = Controls(**{**DEFAULT_CONTROLS, **given})
         x = np.array(x0s, dtype=np.float64, order="C", ndmin=2)  # a copy: integrated in place
@@ -147,16 +174,29 @@ class Compiled:
         n = x.shape[0]
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)
-        tail = (self.doubles(x), self.doubles(np.ascontiguousarray(c, dtype=np.float64)))
+        cb = self.doubles(np.ascontiguousarray(c, dtype=np.float64))
+        fn = self.function(f"{method}_batch")
         tolerances = (ctl["rtol"], ctl["atol"], ctl["h0"], ctl["max_steps"])
-        args: tuple[Any, ...] = (
-            (n, t0, t1, ctl["steps"], *tail) if fixed else (n, t0, t1, *tail, *tolerances)
-        )
-        self.function(f"{method}_batch")(
-            *args,
-            self.ffi.from_buffer("gyrogen_stats[]", stats),
-            self.ffi.from_buffer("int[]", codes),
-        )
+
+        def run(lo: int, hi: int) -> None:
+            tail = (self.doubles(x[lo:hi]), cb)
+            args = (hi - lo, t0, t1, ctl["steps"], *tail) if fixed else (hi - lo, t0, t1, *tail)
+            fn(
+                *args,
+                *(() if fixed else tolerances),
+                self.ffi.from_buffer("gyrogen_stats[]", stats[lo:hi]),
+                self.ffi.from_buffer("int[]", codes[lo:hi]),
+            )
+
+        count = cores() if threads is None else threads
+        if count < 1:
+            raise ValueError(f"threads must be at least 1, not {count}")
+        if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
+            run(0, n)  # OpenMP, or one thread
+        else:
+            edges = np.linspace(0, n, min(count, n) + 1).astype(int)
+            with ThreadPoolExecutor(len(edges) - 1) as pool:
+                list(pool.map(run, edges[:-1], edges[1:]))
         return x, stats, codes
 
     def _check_method(self, method: str, steps: int | None) -> bool:

@@ -1,0 +1,67 @@
+"""The compiler flags of a local build (the cffi backends): the strict base
+every build uses, plus what makes this machine's code fast where the
+compiler takes it: -O3 -march=native -ffp-contract=fast (FMA), and -fopenmp
+(the _batch integrators then run on every core). Each optional flag is
+probed once per process with the compiler itself. The portable build files
+(`gyrogen generate --lib`) keep plain -O2."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import tempfile
+from functools import cache
+from pathlib import Path
+
+C_BASE = ("-std=c99", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
+FORTRAN_BASE = ("-std=f2008", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Werror")
+FAST = ("-O3", "-march=native", "-ffp-contract=fast")
+"""-ffp-contract=fast lets a * b + c be one FMA (gcc's ISO C modes forbid it
+otherwise): the same in the single and the lane-batched integrators, so
+their results stay equal bit for bit."""
+OPENMP = "-fopenmp"
+
+_PROBES = {
+    "c": ("probe.c", "int main(void) { return 0; }\n"),
+    "fortran": ("probe.f90", "program probe\nend program probe\n"),
+}
+_OPENMP_PROBES = {
+    "c": ("probe.c", "#include <omp.h>\nint main(void) { return omp_get_max_threads() < 1; }\n"),
+    "fortran": ("probe.f90", "program probe\n  use omp_lib\n  print *, omp_get_max_threads()\nend program probe\n"),
+}
+
+
+@cache
+def accepts(tool: str, language: str, flag: str) -> bool:
+    """Whether tool compiles and links a small program with flag."""
+    path = shutil.which(tool)
+    if path is None:
+        return False
+    name, text = (_OPENMP_PROBES if flag == OPENMP else _PROBES)[language]
+    with tempfile.TemporaryDirectory(prefix="gyrogen-flags-") as tmp:
+        (Path(tmp) / name).write_text(text)
+        proc = subprocess.run(
+            [path, flag, "-Werror", name, "-o", "probe"],
+            cwd=tmp,
+            capture_output=True,
+            check=False,
+        )
+    return proc.returncode == 0
+
+
+def _optional(tool: str, language: str) -> tuple[str, ...]:
+    fast = tuple(f for f in FAST if accepts(tool, language, f))
+    return (fast or ("-O2",)) + ((OPENMP,) if openmp(tool, language) else ())
+
+
+def openmp(tool: str, language: str) -> bool:
+    """Whether tool builds OpenMP code (omp.h and the runtime present)."""
+    return accepts(tool, language, OPENMP)
+
+
+def c_flags(tool: str = "gcc") -> tuple[str, ...]:
+    return C_BASE + _optional(tool, "c")
+
+
+def fortran_flags(tool: str = "gfortran") -> tuple[str, ...]:
+    return FORTRAN_BASE + _optional(tool, "fortran")
