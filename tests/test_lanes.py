@@ -1,0 +1,125 @@
+"""The lane-batched integrators (issue 12): each trajectory's result does
+not depend on the lane width, on the thread count or on the build's
+OpenMP, bit for bit, and equals the single-trajectory call's; the codes of
+failing lanes (a NaN, gimbal lock, the step budget) are theirs alone; and
+the generated sin and cos keep to their documented accuracy.
+
+The C harnesses (tests/harness/lanes.c, trig.c) are built here with gcc.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrogen import abi
+from gyrogen.runtime import flags
+from gyrogen.runtime.compiled import Compiled
+
+REPO = Path(__file__).resolve().parents[1]
+HARNESS = REPO / "tests" / "harness"
+N = 37  # not a multiple of any lane width: the last lanes run idle
+NX = 14
+NAN_TRAJ, LOCKED_TRAJ = 3, 5
+NONFINITE, MAX_STEPS, ATTITUDE = 3, 2, 6
+FAST = [f for f in flags.c_flags() if f in (*flags.FAST, flags.OPENMP)]
+
+
+def _build(source_dir: Path, out: Path, lanes: int, extra: list[str]) -> Path:
+    cmd = ["gcc", "-std=c99", *extra, f"-DGYROSTAT_LANES={lanes}", f"-I{source_dir}",
+           str(HARNESS / "lanes.c"), str(source_dir / "gyrostat.c"),
+           str(source_dir / "gyrostat_ode.c"), "-o", str(out), "-lm"]  # fmt: skip
+    subprocess.run(cmd, check=True, capture_output=True)
+    return out
+
+
+def _run(exe: Path, tmp: Path, threads: int = 1) -> tuple[bytes, bytes]:
+    """(the batches' bytes, the single calls' bytes)."""
+    out = tmp / f"{exe.name}-{threads}.bin"
+    env = {**os.environ, "OMP_NUM_THREADS": str(threads)}
+    subprocess.run([str(exe), str(N), str(out)], check=True, env=env)
+    data = out.read_bytes()
+    return data[: len(data) // 2], data[len(data) // 2 :]
+
+
+def _codes(block: bytes, which: int) -> np.ndarray:
+    """The codes of the which-th batch in a run's bytes."""
+    size = N * NX * 8 + N * 8 * len(abi.STATS_FIELDS) + N * 4
+    part = block[which * size : (which + 1) * size]
+    return np.frombuffer(part[-N * 4 :], dtype=np.int32)
+
+
+@pytest.mark.parametrize("build", ["fast", "portable"])
+def test_results_do_not_depend_on_lanes_or_threads(
+    source_dir: Path, tmp_path: Path, build: str
+) -> None:
+    """One build's flags (this machine's fast ones with OpenMP, or plain
+    -O2): lane widths 1, 4 and 8, one and two threads, every batch equal to
+    the single-trajectory calls, bit for bit; stats and codes included."""
+    extra = FAST if build == "fast" else ["-O2"]
+    runs = []
+    for lanes in (1, 4, 8):
+        exe = _build(source_dir, tmp_path / f"lanes{lanes}", lanes, extra)
+        runs += [_run(exe, tmp_path, threads) for threads in (1, 2)]
+    batch, single = runs[0]
+    assert batch == single
+    for other in runs[1:]:
+        assert other == (batch, single)
+    dop853, budget, rk4 = _codes(batch, 0), _codes(batch, 1), _codes(batch, 3)
+    assert dop853[NAN_TRAJ] == NONFINITE and np.count_nonzero(dop853) == 1
+    assert set(budget) == {0, MAX_STEPS, NONFINITE}
+    assert rk4[LOCKED_TRAJ] == ATTITUDE and np.count_nonzero(rk4) == 2
+
+
+def test_batch_agrees_with_single_through_python(backends: dict[str, Compiled]) -> None:
+    """Compiled.integrate_batch on one and on two threads against
+    Compiled.integrate (the single-trajectory function) for each method."""
+    b = backends["c"]
+    p = np.array([100, 5, 12, 9, 15, 0.8, 0.02, 0.03, 0.2, -0.1, 9.81, 0.01])
+    c = b.setup(p)
+    x0 = np.zeros(NX)
+    x0[[1, 7, 8, 9, 10, 11]] = 0.1, 0.2, 1.0, -0.1, 50.0, 1.0
+    x0s = x0 * (1 + 0.1 * np.random.default_rng(3).uniform(-1, 1, (50, NX)))
+    for method in ("dopri5", "dop853", "rk4"):
+        kw = {"steps": 300} if method == "rk4" else {"rtol": 1e-8, "atol": 1e-8}
+        one = b.integrate_batch(method, x0s, c, 0.0, 5.0, threads=1, **kw)
+        two = b.integrate_batch(method, x0s, c, 0.0, 5.0, threads=2, **kw)
+        for got, want in zip(one, two, strict=True):
+            np.testing.assert_array_equal(got, want)
+        for i in range(0, 50, 7):
+            x, st, code = b.integrate(method, x0s[i], c, 0.0, 5.0, **kw)
+            assert code == one[2][i] == 0 and st["rhs_calls"] == one[1]["rhs_calls"][i]
+            np.testing.assert_allclose(one[0][i], x, rtol=1e-12, atol=1e-12)
+
+
+def test_threads_must_be_positive(backends: dict[str, Compiled]) -> None:
+    b = backends["c"]
+    with pytest.raises(ValueError, match="threads must be at least 1, not 0"):
+        b.integrate_batch("rk4", np.zeros((2, NX)), np.zeros(b.nc), 0.0, 1.0, threads=0, steps=1)
+
+
+def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
+    """<prefix>_sin and _cos against glibc: within 1 ulp (2 allowed) up to
+    2^20 pi/2, near every k pi/2 there too; beyond, within half an ulp of x
+    in the argument; NaN past 2^50 and for Inf and NaN."""
+    exe = tmp_path / "trig"
+    subprocess.run(["gcc", "-std=c99", "-O2", f"-I{source_dir}", str(HARNESS / "trig.c"),
+                    "-o", str(exe), "-lm"], check=True)  # fmt: skip
+    ranges = ["1e-300", "1e-8", "1e-8", "1", "1", "100", "100", "1e4", "1e4", "1.6e6",
+              "1.6e6", "1e9", "1e9", "1.1e15"]  # fmt: skip
+    out = subprocess.run([str(exe), "200000", *ranges], check=True, capture_output=True, text=True)
+    rows = {(r[0], r[1]): (float(r[2]), float(r[3])) for r in map(str.split, out.stdout.splitlines())}
+    for lo, hi in zip(ranges[::2], ranges[1::2], strict=True):
+        ulp, backward = rows[(f"{float(lo):g}", f"{float(hi):g}")]
+        if float(hi) <= 1.6e6:
+            assert ulp <= 2.0, (lo, hi, ulp)
+        else:
+            assert backward <= 0.5, (lo, hi, backward)
+    assert rows[("near_k_pi/2", "-")][0] <= 2.0
+    special = out.stdout.splitlines()[-1].split()[1:]
+    assert special[:2] == ["-0", "1"] and special[2:4] == ["nan", "nan"]
+    assert abs(float(special[4])) <= 1.0 and special[5] == "nan"
