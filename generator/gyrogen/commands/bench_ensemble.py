@@ -1,0 +1,24 @@
+"""`gyrogen bench-ensemble`: the lane-batched ensembles and the single
+trajectory against numbalsoda and diffrax (issue 12's measurements)."""
+
+from __future__ import annotations
+
+import click
+
+from gyrogen.abi import MAX_REPEATS
+
+
+@click.command("bench-ensemble")
+@click.option("--n", "n", type=click.IntRange(16, 10**6), default=10_000, show_default=True,
+              help="Ensemble members.")  # fmt: skip
+@click.option("--repeats", type=click.IntRange(1, MAX_REPEATS), default=5, show_default=True,
+              help="Repeats per timing (best is kept).")  # fmt: skip
+@click.option("--no-peers", is_flag=True, help="Skip numbalsoda and diffrax.")
+def bench_ensemble(n: int, repeats: int, no_peers: bool) -> None:
+    """Ensembles (error <= 1e-8) and the single trajectory, side by side."""
+    from gyrogen.analysis import ensemble_report
+
+    ensemble_report.run(n, repeats, peers_on=not no_peers, echo=click.echo)
+
+
+command = bench_ensemble
