@@ -112,7 +112,9 @@ def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
     ranges = ["1e-300", "1e-8", "1e-8", "1", "1", "100", "100", "1e4", "1e4", "1.6e6",
               "1.6e6", "1e9", "1e9", "1.1e15"]  # fmt: skip
     out = subprocess.run([str(exe), "200000", *ranges], check=True, capture_output=True, text=True)
-    rows = {(r[0], r[1]): (float(r[2]), float(r[3])) for r in map(str.split, out.stdout.splitlines())}
+    rows = {
+        (r[0], r[1]): (float(r[2]), float(r[3])) for r in map(str.split, out.stdout.splitlines())
+    }
     for lo, hi in zip(ranges[::2], ranges[1::2], strict=True):
         ulp, backward = rows[(f"{float(lo):g}", f"{float(hi):g}")]
         if float(hi) <= 1.6e6:
@@ -123,3 +125,13 @@ def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
     special = out.stdout.splitlines()[-1].split()[1:]
     assert special[:2] == ["-0", "1"] and special[2:4] == ["nan", "nan"]
     assert abs(float(special[4])) <= 1.0 and special[5] == "nan"
+
+
+def test_bench_ensemble_prints_its_figures(cli) -> None:
+    """The command runs end to end on a small ensemble (no peers: their
+    compiles take a minute); the figures are for the reader, not asserted."""
+    out = cli(["bench-ensemble", "--n", "16", "--repeats", "1", "--no-peers"])
+    assert out.code == 0, out.err
+    assert "single trajectory, default scene" in out.out
+    assert "lanes on 1 core vs the single-trajectory loop" in out.out
+    assert "N =     16, 1 thread(s)" in out.out

@@ -29,6 +29,8 @@ REF_TOL = 1e-13
 LADDER = tuple(10.0 ** (-k / 2) for k in range(8, 25))
 """Tolerances tried (1e-4 .. 1e-12, half decades), loosest first."""
 MAX_STEPS = 10**7
+PEER_LOOPS = 200
+"""numbalsoda integrations per timed @njit call."""
 
 
 @dataclass(frozen=True)
@@ -146,9 +148,12 @@ def single_runs(
         runs.append(SingleRun("gyrogen", tol, scaled_error(x, ref), best_time(gyro, repeats) * 1e6))
         if numbalsoda is not None:
             got = numbalsoda(prob.x0, prob.t1, tol, 1)
-            loops = 200
-            secs = best_time(lambda t=tol: numbalsoda(prob.x0, prob.t1, t, loops), repeats)
-            runs.append(SingleRun("numbalsoda", tol, scaled_error(got, ref), secs / loops * 1e6))
+
+            def peer(tol: float = tol) -> None:
+                numbalsoda(prob.x0, prob.t1, tol, PEER_LOOPS)
+
+            secs = best_time(peer, repeats) / PEER_LOOPS
+            runs.append(SingleRun("numbalsoda", tol, scaled_error(got, ref), secs * 1e6))
     return runs
 
 

@@ -51,6 +51,21 @@ def _peer_tol(run: Callable[[np.ndarray, float], np.ndarray], x0s: np.ndarray, r
     raise RuntimeError("no tolerance reaches the error level")
 
 
+def _diffrax(
+    dfx: Any, solver: str, t1: float, data: tuple[np.ndarray, ...], tol: float, repeats: int,
+    every: int,
+) -> tuple[str, float]:  # fmt: skip
+    """A diffrax solver's row: its tolerance for the error level, its time."""
+    x0s, few, few_ref = data
+
+    def run(x: np.ndarray, tl: float) -> np.ndarray:
+        return np.asarray(dfx(x, t1, tl, solver))
+
+    t = _peer_tol(run, few, few_ref, tol * 10)
+    secs = best_time(lambda: run(x0s, t), repeats, min_total=0.0)
+    return f"diffrax {solver} jit(vmap), {every} cores (tol {t:g})", secs / len(x0s) * 1e6
+
+
 def ensemble(prob: ens.Problem, n: int, nbs: Any, dfx: Any, repeats: int, echo: Echo) -> None:
     x0s = ens.members(prob, n)
     ref = ens.finals(prob, x0s, ens.REF_TOL)
@@ -61,7 +76,8 @@ def ensemble(prob: ens.Problem, n: int, nbs: Any, dfx: Any, repeats: int, echo: 
     rows = [
         ("gyrogen dop853, single-trajectory loop, 1 core", ens.loop_us(prob, x0s, tol, repeats)),
         ("gyrogen dop853_batch (lanes), 1 core", ens.batch_us(prob, x0s, tol, 1, repeats)),
-        (f"gyrogen dop853_batch (lanes), {every} cores", ens.batch_us(prob, x0s, tol, every, repeats)),
+        (f"gyrogen dop853_batch (lanes), {every} cores",
+         ens.batch_us(prob, x0s, tol, every, repeats)),
     ]  # fmt: skip
     few, few_ref = x0s[:CHECKED], ref[:CHECKED]
     if nbs:
@@ -71,9 +87,7 @@ def ensemble(prob: ens.Problem, n: int, nbs: Any, dfx: Any, repeats: int, echo: 
         rows.append((f"numbalsoda DOP853 prange, {every} threads (tol {t:g})", secs / n * 1e6))
     if dfx:
         for solver in ("Tsit5", "Dopri8"):
-            t = _peer_tol(lambda x, tl, s=solver: dfx(x, prob.t1, tl, s), few, few_ref, tol * 10)
-            secs = best_time(lambda s=solver, tl=t: dfx(x0s, prob.t1, tl, s), repeats, 0.0)
-            rows.append((f"diffrax {solver} jit(vmap), {every} cores (tol {t:g})", secs / n * 1e6))
+            rows.append(_diffrax(dfx, solver, prob.t1, (x0s, few, few_ref), tol, repeats, every))
     for label, us in rows:
         echo(f"  {label:<58} {us:>8.2f}")
     loop, one, all_ = rows[0][1], rows[1][1], rows[2][1]

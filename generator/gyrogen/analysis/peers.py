@@ -98,7 +98,7 @@ def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
 
     rates_njit = nb.njit(rates)
 
-    @nb.cfunc(lsoda_sig)  # type: ignore[misc]
+    @nb.cfunc(lsoda_sig)
     def rhs(t: float, u: Any, du: Any, data: Any) -> None:
         q2, q3 = u[1], u[2]
         out = rates_njit(u, data, math.sin(q2), math.cos(q2), math.sin(q3), math.cos(q3))
@@ -115,7 +115,7 @@ def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
     check("numba", call, p, echo)
     ptr = rhs.address
 
-    @nb.njit  # type: ignore[misc]
+    @nb.njit
     def single(x0: Array, t1: float, tol: float, loops: int) -> Array:
         t_eval = np.array([0.0, t1])
         out = x0.copy()
@@ -124,7 +124,7 @@ def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
             out = usol[-1]
         return out
 
-    @nb.njit(parallel=True)  # type: ignore[misc]
+    @nb.njit(parallel=True)
     def many(x0s: Array, t1: float, tol: float) -> Array:
         t_eval = np.array([0.0, t1])
         out = np.empty_like(x0s)

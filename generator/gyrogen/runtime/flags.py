@@ -27,7 +27,10 @@ _PROBES = {
 }
 _OPENMP_PROBES = {
     "c": ("probe.c", "#include <omp.h>\nint main(void) { return omp_get_max_threads() < 1; }\n"),
-    "fortran": ("probe.f90", "program probe\n  use omp_lib\n  print *, omp_get_max_threads()\nend program probe\n"),
+    "fortran": (
+        "probe.f90",
+        "program probe\n  use omp_lib\n  print *, omp_get_max_threads()\nend program probe\n",
+    ),
 }
 
 
