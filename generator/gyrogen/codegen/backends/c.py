@@ -86,7 +86,8 @@ def files(unit: Unit) -> dict[str, str]:
     lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign)[0]
     lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign)[0]
     jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
-    ode_trig = trig_used(unit.prefix, [jac])
+    inlined = [lanes_ode] if any(m.pair for m in unit.methods) and not lanes_ode.torque else []
+    ode_trig = trig_used(unit.prefix, [jac, *inlined])  # rhs_lanes is inlined in ode.c
     if not unit.quaternion and "cos" not in ode_trig:
         ode_trig.append("cos")  # the gimbal-lock check
     ctx = {
