@@ -105,7 +105,9 @@ def test_threads_must_be_positive(backends: dict[str, Compiled]) -> None:
 def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
     """<prefix>_sin and _cos against glibc: within 1 ulp (2 allowed) up to
     2^20 pi/2, near every k pi/2 there too; beyond, within half an ulp of x
-    in the argument; NaN past 2^50 and for Inf and NaN."""
+    in the argument; NaN past 2^50 and for Inf and NaN. The scalar functions
+    (a shortcut for |x| <= pi/4) and their branch-free _lanes twins give the
+    same bits for every argument tried."""
     exe = tmp_path / "trig"
     subprocess.run(["gcc", "-std=c99", "-O2", f"-I{source_dir}", str(HARNESS / "trig.c"),
                     "-o", str(exe), "-lm"], check=True)  # fmt: skip
@@ -113,7 +115,9 @@ def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
               "1.6e6", "1e9", "1e9", "1.1e15"]  # fmt: skip
     out = subprocess.run([str(exe), "200000", *ranges], check=True, capture_output=True, text=True)
     rows = {
-        (r[0], r[1]): (float(r[2]), float(r[3])) for r in map(str.split, out.stdout.splitlines())
+        (r[0], r[1]): (float(r[2]), float(r[3]))
+        for r in map(str.split, out.stdout.splitlines())
+        if len(r) == 4
     }
     for lo, hi in zip(ranges[::2], ranges[1::2], strict=True):
         ulp, backward = rows[(f"{float(lo):g}", f"{float(hi):g}")]
@@ -122,7 +126,8 @@ def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
         else:
             assert backward <= 0.5, (lo, hi, backward)
     assert rows[("near_k_pi/2", "-")][0] <= 2.0
-    special = out.stdout.splitlines()[-1].split()[1:]
+    assert out.stdout.splitlines()[-1] == "lanes_twins_differ 0"
+    special = out.stdout.splitlines()[-2].split()[1:]
     assert special[:2] == ["-0", "1"] and special[2:4] == ["nan", "nan"]
     assert abs(float(special[4])) <= 1.0 and special[5] == "nan"
 

@@ -91,6 +91,12 @@ static inline double dual_spin_kcos(double x, double y)
 static inline double dual_spin_sin(double x)
 {
     double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return dual_spin_ksin(x, x - x);
     const double r = dual_spin_reduce(x, &y, &q);
     const double s = dual_spin_ksin(r, y), c = dual_spin_kcos(r, y);
     const int odd = q == 1.0 || q == 3.0;
@@ -103,6 +109,40 @@ static inline double dual_spin_sin(double x)
    both kernels, then the quadrant picks one and its sign. sin and cos of
    one angle share the reduction and the kernels once inlined. */
 static inline double dual_spin_cos(double x)
+{
+    double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return dual_spin_kcos(x, x - x);
+    const double r = dual_spin_reduce(x, &y, &q);
+    const double s = dual_spin_ksin(r, y), c = dual_spin_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? s : c;
+    const double f = q == 1.0 || q == 2.0 ? -v : v;
+    return fabs(x) <= DUAL_SPIN_TRIG_MAX ? f : (double)NAN;
+}
+
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double dual_spin_sin_lanes(double x)
+{
+    double y, q;
+    const double r = dual_spin_reduce(x, &y, &q);
+    const double s = dual_spin_ksin(r, y), c = dual_spin_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? c : s;
+    const double f = q >= 2.0 ? -v : v;
+    return fabs(x) <= DUAL_SPIN_TRIG_MAX ? f : (double)NAN;
+}
+
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double dual_spin_cos_lanes(double x)
 {
     double y, q;
     const double r = dual_spin_reduce(x, &y, &q);
@@ -196,13 +236,13 @@ void dual_spin_rhs_lanes(int n, const double *DUAL_SPIN_RESTRICT t,
         const double u3 = x[5 * n + l];
         const double u4 = x[6 * n + l];
 
-        const double tmp0 = dual_spin_sin(q3);
-        const double tmp1 = dual_spin_cos(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/dual_spin_cos(q2);
+        const double tmp0 = dual_spin_sin_lanes(q3);
+        const double tmp1 = dual_spin_cos_lanes(q3);
+        const double tmp2 = (-tmp0*u1 + tmp1*u3)/dual_spin_cos_lanes(q2);
         const double tmp3 = 0.015471973456719416*u2 - 1.1900419543364779e-06*u4;
         dxdt[0 * n + l] = tmp2;
         dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*dual_spin_sin(q2) + u2;
+        dxdt[2 * n + l] = -tmp2*dual_spin_sin_lanes(q2) + u2;
         dxdt[3 * n + l] = -tmp3*u1 + u3*(0.4092155481941839*u2 + 4.5440763299219775e-05*u4);
         dxdt[4 * n + l] = u1*(0.01775954828743408*u1 - 0.10773983913066638*u3) - 0.01775954828743408*u3*u3;
         dxdt[5 * n + l] = tmp3*u3 + u1*(-0.3153534800671272*u2 - 5.266025597120826e-05*u4);

@@ -91,6 +91,12 @@ static inline double gyrostat_kcos(double x, double y)
 static inline double gyrostat_sin(double x)
 {
     double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return gyrostat_ksin(x, x - x);
     const double r = gyrostat_reduce(x, &y, &q);
     const double s = gyrostat_ksin(r, y), c = gyrostat_kcos(r, y);
     const int odd = q == 1.0 || q == 3.0;
@@ -103,6 +109,40 @@ static inline double gyrostat_sin(double x)
    both kernels, then the quadrant picks one and its sign. sin and cos of
    one angle share the reduction and the kernels once inlined. */
 static inline double gyrostat_cos(double x)
+{
+    double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return gyrostat_kcos(x, x - x);
+    const double r = gyrostat_reduce(x, &y, &q);
+    const double s = gyrostat_ksin(r, y), c = gyrostat_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? s : c;
+    const double f = q == 1.0 || q == 2.0 ? -v : v;
+    return fabs(x) <= GYROSTAT_TRIG_MAX ? f : (double)NAN;
+}
+
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double gyrostat_sin_lanes(double x)
+{
+    double y, q;
+    const double r = gyrostat_reduce(x, &y, &q);
+    const double s = gyrostat_ksin(r, y), c = gyrostat_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? c : s;
+    const double f = q >= 2.0 ? -v : v;
+    return fabs(x) <= GYROSTAT_TRIG_MAX ? f : (double)NAN;
+}
+
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double gyrostat_cos_lanes(double x)
 {
     double y, q;
     const double r = gyrostat_reduce(x, &y, &q);
@@ -252,12 +292,12 @@ void gyrostat_rhs_lanes(int n, const double *GYROSTAT_RESTRICT t,
         const double u6 = x[12 * n + l];
         const double u7 = x[13 * n + l];
 
-        const double tmp0 = gyrostat_sin(q3);
-        const double tmp1 = gyrostat_cos(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos(q2);
+        const double tmp0 = gyrostat_sin_lanes(q3);
+        const double tmp1 = gyrostat_cos_lanes(q3);
+        const double tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos_lanes(q2);
         dxdt[0 * n + l] = tmp2;
         dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*gyrostat_sin(q2) + u2;
+        dxdt[2 * n + l] = -tmp2*gyrostat_sin_lanes(q2) + u2;
         dxdt[3 * n + l] = -u2 + u4;
         dxdt[4 * n + l] = u5;
         dxdt[5 * n + l] = u6;

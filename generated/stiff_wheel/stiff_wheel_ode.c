@@ -97,6 +97,12 @@ static inline double stiff_wheel_kcos(double x, double y)
 static inline double stiff_wheel_sin(double x)
 {
     double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return stiff_wheel_ksin(x, x - x);
     const double r = stiff_wheel_reduce(x, &y, &q);
     const double s = stiff_wheel_ksin(r, y), c = stiff_wheel_kcos(r, y);
     const int odd = q == 1.0 || q == 3.0;
@@ -109,6 +115,40 @@ static inline double stiff_wheel_sin(double x)
    both kernels, then the quadrant picks one and its sign. sin and cos of
    one angle share the reduction and the kernels once inlined. */
 static inline double stiff_wheel_cos(double x)
+{
+    double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return stiff_wheel_kcos(x, x - x);
+    const double r = stiff_wheel_reduce(x, &y, &q);
+    const double s = stiff_wheel_ksin(r, y), c = stiff_wheel_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? s : c;
+    const double f = q == 1.0 || q == 2.0 ? -v : v;
+    return fabs(x) <= STIFF_WHEEL_TRIG_MAX ? f : (double)NAN;
+}
+
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see stiff_wheel_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double stiff_wheel_sin_lanes(double x)
+{
+    double y, q;
+    const double r = stiff_wheel_reduce(x, &y, &q);
+    const double s = stiff_wheel_ksin(r, y), c = stiff_wheel_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? c : s;
+    const double f = q >= 2.0 ? -v : v;
+    return fabs(x) <= STIFF_WHEEL_TRIG_MAX ? f : (double)NAN;
+}
+
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see stiff_wheel_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double stiff_wheel_cos_lanes(double x)
 {
     double y, q;
     const double r = stiff_wheel_reduce(x, &y, &q);
@@ -835,13 +875,13 @@ static void rhs_lanes(const double *STIFF_WHEEL_RESTRICT t,
         const double u4 = x[7][l];
 
         const double slip = c[2] - u2 + u4;
-        const double tmp0 = stiff_wheel_sin(q3);
-        const double tmp1 = stiff_wheel_cos(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/stiff_wheel_cos(q2);
+        const double tmp0 = stiff_wheel_sin_lanes(q3);
+        const double tmp1 = stiff_wheel_cos_lanes(q3);
+        const double tmp2 = (-tmp0*u1 + tmp1*u3)/stiff_wheel_cos_lanes(q2);
         const double tmp3 = 0.016919114337701612*u2 - 1.2676659094182028e-05*u4;
         dxdt[0][l] = tmp2;
         dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*stiff_wheel_sin(q2) + u2;
+        dxdt[2][l] = -tmp2*stiff_wheel_sin_lanes(q2) + u2;
         dxdt[3][l] = -u2 + u4;
         dxdt[4][l] = -tmp3*u1 + u3*(0.33522655090705017*u2 + 0.0004980820048148975*u4);
         dxdt[5][l] = c[0]*slip + 0.018613186525101588*u1*u1 - 0.06916590204045965*u1*u3 - 0.018613186525101588*u3*u3;
@@ -1326,7 +1366,7 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         const int nonfinite = L->nonfinite[l];
         const double err = L->err[l], h = L->h[l];
         const int take = run && !nonfinite && err <= 1.0;
-        const double cq = stiff_wheel_cos(L->xnew[1][l]);
+        const double cq = stiff_wheel_cos_lanes(L->xnew[1][l]);
         const int lock = fabs(cq) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (L->cos_q2[l] > 0.0);
         const int ok = take && !lock;
         const double fac = err_power(m, err) / m->safety;

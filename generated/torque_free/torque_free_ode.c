@@ -96,6 +96,12 @@ static inline double torque_free_kcos(double x, double y)
 static inline double torque_free_sin(double x)
 {
     double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return torque_free_ksin(x, x - x);
     const double r = torque_free_reduce(x, &y, &q);
     const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
     const int odd = q == 1.0 || q == 3.0;
@@ -108,6 +114,40 @@ static inline double torque_free_sin(double x)
    both kernels, then the quadrant picks one and its sign. sin and cos of
    one angle share the reduction and the kernels once inlined. */
 static inline double torque_free_cos(double x)
+{
+    double y, q;
+    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
+       passed is x - x (+0 here), not a literal 0.0, so that the compiler
+       fuses the kernel's multiply-adds as it does in the _lanes twin and
+       both give the same bits under -ffp-contract=fast too. */
+    if (fabs(x) <= 0.78539816339744828)
+        return torque_free_kcos(x, x - x);
+    const double r = torque_free_reduce(x, &y, &q);
+    const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? s : c;
+    const double f = q == 1.0 || q == 2.0 ? -v : v;
+    return fabs(x) <= TORQUE_FREE_TRIG_MAX ? f : (double)NAN;
+}
+
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double torque_free_sin_lanes(double x)
+{
+    double y, q;
+    const double r = torque_free_reduce(x, &y, &q);
+    const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
+    const int odd = q == 1.0 || q == 3.0;
+    const double v = odd ? c : s;
+    const double f = q >= 2.0 ? -v : v;
+    return fabs(x) <= TORQUE_FREE_TRIG_MAX ? f : (double)NAN;
+}
+
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
+   both kernels, then the quadrant picks one and its sign. sin and cos of
+   one angle share the reduction and the kernels once inlined. Branch-free. */
+static inline double torque_free_cos_lanes(double x)
 {
     double y, q;
     const double r = torque_free_reduce(x, &y, &q);
@@ -818,13 +858,13 @@ static void rhs_lanes(const double *TORQUE_FREE_RESTRICT t,
         const double u3 = x[5][l];
         const double u4 = x[6][l];
 
-        const double tmp0 = torque_free_sin(q3);
-        const double tmp1 = torque_free_cos(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/torque_free_cos(q2);
+        const double tmp0 = torque_free_sin_lanes(q3);
+        const double tmp1 = torque_free_cos_lanes(q3);
+        const double tmp2 = (-tmp0*u1 + tmp1*u3)/torque_free_cos_lanes(q2);
         const double tmp3 = 0.3114754098360656*u2 + 0.02622950819672131*u4;
         dxdt[0][l] = tmp2;
         dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*torque_free_sin(q2) + u2;
+        dxdt[2][l] = -tmp2*torque_free_sin_lanes(q2) + u2;
         dxdt[3][l] = tmp3*u3;
         dxdt[4][l] = 0;
         dxdt[5][l] = -tmp3*u1;
@@ -1308,7 +1348,7 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         const int nonfinite = L->nonfinite[l];
         const double err = L->err[l], h = L->h[l];
         const int take = run && !nonfinite && err <= 1.0;
-        const double cq = torque_free_cos(L->xnew[1][l]);
+        const double cq = torque_free_cos_lanes(L->xnew[1][l]);
         const int lock = fabs(cq) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (L->cos_q2[l] > 0.0);
         const int ok = take && !lock;
         const double fac = err_power(m, err) / m->safety;

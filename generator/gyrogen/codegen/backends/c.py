@@ -25,18 +25,19 @@ class CPrinter(WritableNumbers, C99CodePrinter):
     """C99 with the hoisted constants as c[k], doubles in their shortest
     exact form, small integer powers as products (x*x beats pow(x, 2)), and
     sin and cos as the file's own <prefix>_sin, <prefix>_cos (c/_trig.jinja:
-    inline, branch-free, so that a loop over lanes vectorizes)."""
+    inline), or with ``lanes`` their branch-free twins <prefix>_sin_lanes,
+    <prefix>_cos_lanes, so that a loop over lanes vectorizes."""
 
-    def __init__(self, nc: int, prefix: str) -> None:
+    def __init__(self, nc: int, prefix: str, lanes: bool = False) -> None:
         super().__init__()
         self._names = {c.name: f"c[{k}]" for k, c in enumerate(constants(nc))}
-        self._prefix = prefix
+        self._trig = prefix + "_{}" + ("_lanes" if lanes else "")
 
     def _print_sin(self, expr: sm.sin) -> str:
-        return f"{self._prefix}_sin({self._print(expr.args[0])})"
+        return f"{self._trig.format('sin')}({self._print(expr.args[0])})"
 
     def _print_cos(self, expr: sm.cos) -> str:
-        return f"{self._prefix}_cos({self._print(expr.args[0])})"
+        return f"{self._trig.format('cos')}({self._print(expr.args[0])})"
 
     def _print_Symbol(self, expr: sm.Symbol) -> str:
         return self._names.get(expr.name) or str(super()._print_Symbol(expr))
@@ -69,27 +70,38 @@ class CPrinter(WritableNumbers, C99CodePrinter):
         return f"{text}/({self._print(1 / den[0])})"
 
 
+TRIG = ("sin", "cos", "sin_lanes", "cos_lanes")
+"""The trig functions c/_trig.jinja defines, in the order a file defines them."""
+
+
 def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
-    """Which of <prefix>_sin and <prefix>_cos the functions call: a file
-    defines only those (clang warns of an unused static inline function)."""
+    """Which of <prefix>_sin, <prefix>_cos and their _lanes twins the
+    functions call: a file defines only those (clang warns of an unused
+    static inline function)."""
     text = " ".join(s.code for f in fns if f is not None for s in f.statements)
-    return [name for name in ("sin", "cos") if f"{prefix}_{name}(" in text]
+    return [name for name in TRIG if f"{prefix}_{name}(" in text]
 
 
 def files(unit: Unit) -> dict[str, str]:
     printer = CPrinter(unit.nc, unit.prefix)
+    lanes_printer = CPrinter(unit.nc, unit.prefix, lanes=True)
 
     def assign(lhs: str, expr: sm.Expr) -> str:
         return f"{lhs} = {printer.doprint(expr)};"
 
+    def assign_lanes(lhs: str, expr: sm.Expr) -> str:
+        return f"{lhs} = {lanes_printer.doprint(expr)};"
+
     rhs, *outputs = functions(unit, lambda a, i: f"{a}[{i}]", assign)
-    lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign)[0]
-    lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign)[0]
+    lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign_lanes)[0]
+    lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign_lanes)[0]
     jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
-    inlined = [lanes_ode] if any(m.pair for m in unit.methods) and not lanes_ode.torque else []
+    has_lanes = any(m.pair for m in unit.methods)
+    inlined = [lanes_ode] if has_lanes and not lanes_ode.torque else []
     ode_trig = trig_used(unit.prefix, [jac, *inlined])  # rhs_lanes is inlined in ode.c
-    if not unit.quaternion and "cos" not in ode_trig:
-        ode_trig.append("cos")  # the gimbal-lock check
+    gimbal_checks = ["cos", "cos_lanes"] if has_lanes else ["cos"]
+    if not unit.quaternion:  # the gimbal-lock checks
+        ode_trig = [n for n in TRIG if n in ode_trig + gimbal_checks]
     ctx = {
         "unit": unit,
         "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
@@ -98,7 +110,7 @@ def files(unit: Unit) -> dict[str, str]:
         "rhs_lanes_ode": lanes_ode,
         "outputs": outputs,
         "jac": jac,
-        "source_trig": trig_used(unit.prefix, [rhs, *outputs]),
+        "source_trig": trig_used(unit.prefix, [rhs, lanes, *outputs]),
         "ode_trig": ode_trig,
         "methods": unit.methods,
         "abi": abi,
