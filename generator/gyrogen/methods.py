@@ -210,7 +210,27 @@ def needs_jacobian(names: Iterable[str]) -> bool:
     """Whether a scene with these integrators renders its Jacobian."""
     return any(n in IMPLICIT for n in names)
 
+
+STIFF_CHOICE: tuple[str, ...] = ("radau5", "rodas4")
+"""The implicit methods gyrogen runs a stiff problem with, best first: radau5
+is faster than rodas4 at every error from 1e-4 to 1e-13 on stiff_wheel
+(`make report`, the stiff work-precision table)."""
+EXPLICIT_CHOICE: tuple[str, ...] = ("dop853", "dopri5")
+"""The explicit pairs for a problem that is not stiff, best first."""
+
+
+def pick(available: Iterable[str], stiff: bool) -> str | None:
+    """The best of a build's integrators for a stiff problem or one that is
+    not; None when it has none of that kind."""
+    have = set(available)
+    return next((m for m in (STIFF_CHOICE if stiff else EXPLICIT_CHOICE) if m in have), None)
+
+
 SCIPY: tuple[str, ...] = ("RK45", "DOP853", "Radau", "LSODA")
+AUTO = "auto"
+"""The method simulate picks itself: for a stiff scene (analysis/stiffness.py)
+the build's best implicit integrator (scipy's Radau if it has none), else
+scipy's DOP853."""
 """scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""
 
 
