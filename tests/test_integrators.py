@@ -1,4 +1,4 @@
-"""The compiled integrators (rk4, dopri5, dop853, rodas4), in C and Fortran:
+"""The compiled integrators (gyrogen.methods), in C and Fortran:
 against scipy's DOP853 on the numpy reference, against the torque-free closed
 form, their convergence orders, their failure codes, batch against single
 calls, their counters, a stiff case Rodas4 must win, and the strict builds."""
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from gyrogen import abi, tableaus
+from gyrogen import abi, methods, tableaus
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
@@ -25,7 +25,7 @@ from gyrogen.scene import Scene, load, parse
 REPO = Path(__file__).resolve().parents[1]
 LANGUAGES = ["c", "fortran"]
 SCENES = ["gyrostat", "torque_free", "speed_controlled"]
-ADAPTIVE = ["dopri5", "dop853", "rodas4"]
+ADAPTIVE = list(methods.ADAPTIVE)
 OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT, ATTITUDE = range(7)
 
 Get = Callable[[str, str], Compiled]
@@ -208,6 +208,7 @@ def test_rk4_is_fourth_order(compiled: Get, language: str) -> None:
     [
         ("dopri5", 5, 0.7, [1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11]),
         ("dop853", 8, 1.5, [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12]),
+        ("radau5", 5, 0.7, [1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11]),
     ],
 )
 def test_adaptive_order(
@@ -391,19 +392,33 @@ def test_counters(compiled: Get, language: str) -> None:
     assert code == OK and st["accepted"] > 10
     assert st["jac_calls"] == st["accepted"] and st["decompositions"] == trials
     assert st["rhs_calls"] == 2 + 5 * trials + st["accepted"] - 1
+    # radau5 keeps J while Newton contracts fast, and E1, E2 while h does not
+    # change; 3 rhs calls a Newton iteration (1 to 7 a trial), f at each
+    # accepted point but t1, and at most one more a trial for the error
+    _, st, code = b.integrate("radau5", x0, c, 0.0, 3.0, rtol=1e-7, atol=1e-7)
+    trials = st["accepted"] + st["rejected"]
+    assert code == OK and st["accepted"] > 5
+    assert (
+        1 <= st["jac_calls"] < st["accepted"] and st["jac_calls"] <= st["decompositions"] <= trials
+    )
+    base = 2 + st["accepted"] - 1
+    assert base + 3 * trials <= st["rhs_calls"] <= base + (3 * 7 + 1) * trials
 
 
 # --- stiffness --------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
-def test_stiff_wheel_favours_rodas4(compiled: Get, language: str) -> None:
+@pytest.mark.parametrize("method", methods.IMPLICIT)
+def test_stiff_wheel_favours_the_implicit_methods(
+    compiled: Get, language: str, method: str
+) -> None:
     """k/J = 1e5: the explicit methods crawl at their stability limit."""
     b = compiled("speed_controlled", language)
     scene, x0, _ = problem("speed_controlled")
     p = np.array([1e5 * float(scene.parameters["J"]), 200.0])
     c = b.setup(p)
-    xr, sr, code_r = b.integrate("rodas4", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    xr, sr, code_r = b.integrate(method, x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
     xd, sd, code_d = b.integrate("dopri5", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
     assert code_r == code_d == OK
     assert sr["accepted"] < sd["accepted"] / 20
@@ -458,6 +473,29 @@ def test_tableaus_match_scipy() -> None:
     assert tableaus.DOP853.nodes == tuple(DOP853.C)
     assert tableaus.DOP853.e == tuple(DOP853.E5[:12])
     assert tableaus.DOP853.e3 == tuple(DOP853.E3[:12])
+
+
+def test_radau5_constants() -> None:
+    """Radau IIA 5: the nodes, the eigenvalues of A^-1 and the error weights
+    are scipy's Radau's; T (radau5.f's DATA decimals) diagonalizes A^-1 to
+    blocks (gamma) and (alpha -beta; beta alpha), and TI is its inverse."""
+    from scipy.integrate._ivp import radau
+
+    r = tableaus.RADAU5
+    np.testing.assert_allclose(r.nodes, radau.C, rtol=2e-16)
+    np.testing.assert_allclose(r.e, radau.E, rtol=1e-15)  # scipy rounds in double arithmetic
+    np.testing.assert_allclose(r.gamma, radau.MU_REAL, rtol=2e-16)
+    np.testing.assert_allclose(r.alpha + 1j * r.beta, np.conj(radau.MU_COMPLEX), rtol=2e-16)
+    s6 = np.sqrt(6.0)
+    a = np.array([
+        [(88 - 7 * s6) / 360, (296 - 169 * s6) / 1800, (-2 + 3 * s6) / 225],
+        [(296 + 169 * s6) / 1800, (88 + 7 * s6) / 360, (-2 - 3 * s6) / 225],
+        [(16 - s6) / 36, (16 + s6) / 36, 1 / 9],
+    ])  # fmt: skip
+    t, ti = np.array(r.t), np.array(r.ti)
+    np.testing.assert_allclose(t @ ti, np.eye(3), rtol=0, atol=2e-15)
+    blocks = [[r.gamma, 0, 0], [0, r.alpha, -r.beta], [0, r.beta, r.alpha]]
+    np.testing.assert_allclose(ti @ np.linalg.inv(a) @ t, blocks, rtol=0, atol=5e-15)
 
 
 STRICT_C = [

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import sympy as sm
 
+from gyrogen import methods
 from gyrogen.analysis.check_cases import quaternion_scene
 from gyrogen.codegen.context import make_unit
 from gyrogen.oracle import scene_view
@@ -61,7 +62,7 @@ def numeric_jacobian(scene: Scene) -> np.ndarray:
     return jac
 
 
-SCENES = [name for name in builtin_names() if "rodas4" in load(name).integrators]
+SCENES = [name for name in builtin_names() if methods.needs_jacobian(load(name).integrators)]
 
 
 @pytest.mark.parametrize("name", [*SCENES, "quaternion"])

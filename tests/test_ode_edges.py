@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gyrogen import abi
+from gyrogen import abi, methods
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import reference, scene_view
 from gyrogen.runtime import build
@@ -25,8 +25,8 @@ from gyrogen.scene import Scene, load
 
 REPO = Path(__file__).resolve().parents[1]
 LANGUAGES = ["c", "fortran"]
-ADAPTIVE = ["dopri5", "dop853", "rodas4"]
-METHODS = ["rk4", *ADAPTIVE]
+ADAPTIVE = list(methods.ADAPTIVE)
+METHODS = list(methods.NAMES)
 OK, UNDERFLOW, MAX_STEPS, NONFINITE, SINGULAR, ARGUMENT, ATTITUDE = range(7)
 G = abi.GIMBAL_LOCK_COS
 

@@ -297,13 +297,20 @@ def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("name", builtin_names())
 def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
-    """Each built-in scene generates, builds and simulates (a short span; the
-    stiff one with the compiled Rodas4 its stiffness calls for)."""
+    """Each built-in scene generates, builds and simulates (a short span)
+    with the method it picks (the default, auto): the stiff one with the
+    compiled Radau IIA its stiffness calls for, and says why; the others with
+    scipy's DOP853."""
     from gyrogen.analysis import simulate
 
     scene = load(name)
-    method = "rodas4" if name == "stiff_wheel" else "DOP853"
     t_end = min(1.0, scene.simulate.t_end)
-    res = simulate.run(scene, tmp_path / "o", simulate.Settings(t_end, t_end / 20, method, False))
+    said: list[str] = []
+    res = simulate.run(
+        scene, tmp_path / "o", simulate.Settings(t_end, t_end / 20, plot=False), echo=said.append
+    )
+    method = "radau5" if name == "stiff_wheel" else "DOP853"
+    assert res.settings.method == method
+    assert any(line.startswith(f"method {method}: ") for line in said)
     assert np.all(np.isfinite(res.trajectory.x)) and res.trajectory.x.shape[0] == 21
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-9

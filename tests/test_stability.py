@@ -88,7 +88,7 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) 
 def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = next(c for c in QUICK if c.name == "speed controller k/J=1e+06")
     res = check_engine.run_case(case, compiled[case.scene.name])
-    assert res.method == "rodas4" and res.recommended.startswith("implicit")
+    assert res.method == "radau5" and res.recommended.startswith("implicit (radau5)")
 
 
 def test_check_command(tmp_path: Path, cli) -> None:
@@ -162,9 +162,10 @@ def test_two_scenes_of_one_name_get_a_build_each(
     [
         ('targets = ["fortran"]', "c to targets"),
         ('targets = ["c"]\nintegrators = ["rodas4"]', "dop853 to integrators"),
+        ('targets = ["c"]\nintegrators = ["dopri5"]', "radau5 to integrators"),
         (
             'targets = ["fortran"]\nintegrators = ["rk4"]',
-            "c to targets and dop853, rodas4 to integrators",
+            "c to targets and dop853, radau5 to integrators",
         ),
     ],
 )
@@ -178,6 +179,7 @@ def test_scene_check_cannot_run_is_one_line_exit_2(
     code, out, err = cli(["check", str(scene)])
     assert (code, out) == (2, "")
     assert err == (
-        f"gyrogen: error: {scene}: gyrogen check needs the scene's C build with dop853 and "
-        f"rodas4 (and its Jacobian): add {add}\n"
+        f"gyrogen: error: {scene}: gyrogen check needs the scene's C build with an explicit "
+        "pair (dop853 or dopri5) and an implicit method (radau5 or rodas4, with the "
+        f"Jacobian): add {add}\n"
     )

@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 719a3b3e738b84d4: a hash of the scene, gyrogen and sympy versions
+! Build id 434b88cb74663f0a: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as GYROSTAT_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -48,7 +48,7 @@ module gyrostat_mod
   public :: gyrostat_setup
   public :: gyrostat_rhs
 
-  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "719a3b3e738b84d4"
+  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "434b88cb74663f0a"
   integer, parameter, public :: GYROSTAT_NX = 14  ! states
   integer, parameter, public :: GYROSTAT_NP = 12  ! parameters
   integer, parameter, public :: GYROSTAT_NC = 12  ! hoisted constants

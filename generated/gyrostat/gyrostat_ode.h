@@ -5,7 +5,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 719a3b3e738b84d4: a hash of the scene, gyrogen and sympy
+ * Build id 434b88cb74663f0a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -133,6 +133,21 @@ size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x,
 int gyrostat_rodas4(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats);
 size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        gyrostat_stats *stats, int *codes);
+
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+ * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
+ * rtol' = 0.1 rtol^(2/3), atol' = rtol' atol/rtol (the global error
+ * then comes out near rtol); a step is accepted when their RMS is < 1.
+ * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
+ * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
+ * A step whose Newton iterations meet a NaN or Inf is retried with h
+ * halved: code 3 if that persists to underflow, or at once when x, f(t0, x)
+ * or the Jacobian is not finite. */
+int gyrostat_radau5(double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats);
+size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         gyrostat_stats *stats, int *codes);
 

@@ -5,7 +5,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 305c067e46347215: a hash of the scene, gyrogen and sympy versions
+! Build id 3d4873f5f49f3099: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as STIFF_WHEEL_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -36,7 +36,7 @@ module stiff_wheel_mod
   public :: stiff_wheel_angular_momentum
   public :: stiff_wheel_power
 
-  character(len=*), parameter, public :: STIFF_WHEEL_BUILD_ID = "305c067e46347215"
+  character(len=*), parameter, public :: STIFF_WHEEL_BUILD_ID = "3d4873f5f49f3099"
   integer, parameter, public :: STIFF_WHEEL_NX = 8  ! states
   integer, parameter, public :: STIFF_WHEEL_NP = 2  ! parameters
   integer, parameter, public :: STIFF_WHEEL_NC = 7  ! hoisted constants

@@ -6,7 +6,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 305c067e46347215: a hash of the scene, gyrogen and sympy
+ * Build id 3d4873f5f49f3099: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as STIFF_WHEEL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -20,7 +20,7 @@
 extern "C" {
 #endif
 
-#define STIFF_WHEEL_BUILD_ID "305c067e46347215"
+#define STIFF_WHEEL_BUILD_ID "3d4873f5f49f3099"
 
 #define STIFF_WHEEL_NX 8   /* states */
 #define STIFF_WHEEL_NP 2   /* parameters */

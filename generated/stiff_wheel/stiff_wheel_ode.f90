@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 305c067e46347215. The same interface as stiff_wheel_ode.h, under
+! Build id 3d4873f5f49f3099. The same interface as stiff_wheel_ode.h, under
 ! the bind(C) names stiff_wheel_f_<method> and stiff_wheel_f_<method>_batch.
 ! Coefficients and sources as in stiff_wheel_ode.c (gyrogen/tableaus.py).
 !
@@ -32,6 +32,7 @@ module stiff_wheel_ode_mod
   public :: stiff_wheel_dopri5, stiff_wheel_dopri5_batch
   public :: stiff_wheel_dop853, stiff_wheel_dop853_batch
   public :: stiff_wheel_rodas4, stiff_wheel_rodas4_batch
+  public :: stiff_wheel_radau5, stiff_wheel_radau5_batch
 
   ! What an integration did, and where it stopped: stiff_wheel_stats of stiff_wheel_ode.h.
   type, bind(C), public :: stiff_wheel_stats
@@ -743,9 +744,10 @@ contains
   ! block upper triangular in state order (see gyrogen/symbolic/blocks.py), with
   ! the diagonal blocks (0-based, end excluded)
   ! (0, 1), (1, 3), (3, 4), (4, 8).
-  ! L is unit lower and nonzero within the diagonal blocks only; U upper with 1/u_kk stored on the
-  ! diagonal; row k swapped with piv(k), a row of the same block. .true. when
-  ! a pivot is zero: singular.
+  ! L is unit lower and nonzero within the diagonal blocks only; U = D V, stored
+  ! as 1/u_kk on the diagonal and V's u_kj/u_kk above it (each row of the back
+  ! substitution then waits on one multiply-add); row k swapped with piv(k), a
+  ! row of the same block. .true. when a pivot is zero: singular.
   logical function lu_decompose(a, piv) result(singular)
     real(c_double), intent(inout) :: a(nx, nx)
     integer, intent(out) :: piv(nx)
@@ -769,12 +771,13 @@ contains
       do j = k + 1, nx
         a(k + 1:e, j) = a(k + 1:e, j) - a(k + 1:e, k) * a(k, j)
       end do
+      a(k, k + 1:nx) = a(k, k + 1:nx) * a(k, k)  ! u_kj / u_kk
     end do
     singular = .false.
   end function lu_decompose
 
   ! b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
-  ! and U that can be nonzero.
+  ! and V that can be nonzero; each row subtracts the latest b(j) last.
   subroutine lu_solve(lu, piv, b)
     real(c_double), intent(in) :: lu(nx, nx)
     integer, intent(in) :: piv(nx)
@@ -792,16 +795,77 @@ contains
     b(7) = b(7) - lu(7, 5) * b(5) - lu(7, 6) * b(6)
     b(8) = b(8) - lu(8, 5) * b(5) - lu(8, 6) * b(6) - lu(8, 7) * b(7)
     b(8) = b(8) * lu(8, 8)
-    b(7) = (b(7) - lu(7, 8) * b(8)) * lu(7, 7)
-    b(6) = (b(6) - lu(6, 7) * b(7) - lu(6, 8) * b(8)) * lu(6, 6)
-    b(5) = (b(5) - lu(5, 6) * b(6) - lu(5, 7) * b(7) - lu(5, 8) * b(8)) * lu(5, 5)
-    b(4) = (b(4) - lu(4, 6) * b(6) - lu(4, 8) * b(8)) * lu(4, 4)
-    b(3) = (b(3) - lu(3, 5) * b(5) - lu(3, 6) * b(6) - lu(3, 7) * b(7)) * lu(3, 3)
-    b(2) = (b(2) - lu(2, 3) * b(3) - lu(2, 5) * b(5) - lu(2, 6) * b(6) &
-         - lu(2, 7) * b(7)) * lu(2, 2)
-    b(1) = (b(1) - lu(1, 2) * b(2) - lu(1, 3) * b(3) - lu(1, 5) * b(5) &
-         - lu(1, 7) * b(7)) * lu(1, 1)
+    b(7) = b(7) * lu(7, 7) - lu(7, 8) * b(8)
+    b(6) = b(6) * lu(6, 6) - lu(6, 8) * b(8) - lu(6, 7) * b(7)
+    b(5) = b(5) * lu(5, 5) - lu(5, 8) * b(8) - lu(5, 7) * b(7) - lu(5, 6) * b(6)
+    b(4) = b(4) * lu(4, 4) - lu(4, 8) * b(8) - lu(4, 6) * b(6)
+    b(3) = b(3) * lu(3, 3) - lu(3, 7) * b(7) - lu(3, 6) * b(6) - lu(3, 5) * b(5)
+    b(2) = b(2) * lu(2, 2) - lu(2, 7) * b(7) - lu(2, 6) * b(6) - lu(2, 5) * b(5) &
+         - lu(2, 3) * b(3)
+    b(1) = b(1) * lu(1, 1) - lu(1, 7) * b(7) - lu(1, 5) * b(5) - lu(1, 3) * b(3) &
+         - lu(1, 2) * b(2)
   end subroutine lu_solve
+
+
+  ! lu_decompose for a complex matrix, the pivot the entry of largest |re| +
+  ! |im| (as radau5.f's DECOMC).
+  logical function lu_decompose_complex(a, piv) result(singular)
+    complex(c_double), intent(inout) :: a(nx, nx)
+    integer, intent(out) :: piv(nx)
+    integer, parameter :: block_end(nx) = [1, 3, 3, 4, 8, 8, 8, 8]
+    complex(c_double) :: row(nx)
+    integer :: e, j, k, p
+
+    singular = .true.
+    do k = 1, nx
+      e = block_end(k)
+      p = k - 1 + maxloc((abs(real(a(k:e, k))) + abs(aimag(a(k:e, k)))), dim=1)
+      piv(k) = p
+      if (.not. ((abs(real(a(p, k))) + abs(aimag(a(p, k)))) > 0)) return
+      if (p /= k) then
+        row = a(k, :)
+        a(k, :) = a(p, :)
+        a(p, :) = row
+      end if
+      a(k, k) = 1 / a(k, k)
+      a(k + 1:e, k) = a(k + 1:e, k) * a(k, k)
+      do j = k + 1, nx
+        a(k + 1:e, j) = a(k + 1:e, j) - a(k + 1:e, k) * a(k, j)
+      end do
+      a(k, k + 1:nx) = a(k, k + 1:nx) * a(k, k)  ! u_kj / u_kk
+    end do
+    singular = .false.
+  end function lu_decompose_complex
+
+  ! lu_solve for lu_decompose_complex's factors.
+  subroutine lu_solve_complex(lu, piv, b)
+    complex(c_double), intent(in) :: lu(nx, nx)
+    integer, intent(in) :: piv(nx)
+    complex(c_double), intent(inout) :: b(nx)
+    complex(c_double) :: swap
+    integer :: j
+
+    do j = 1, nx
+      swap = b(j)
+      b(j) = b(piv(j))
+      b(piv(j)) = swap
+    end do
+    b(3) = b(3) - lu(3, 2) * b(2)
+    b(6) = b(6) - lu(6, 5) * b(5)
+    b(7) = b(7) - lu(7, 5) * b(5) - lu(7, 6) * b(6)
+    b(8) = b(8) - lu(8, 5) * b(5) - lu(8, 6) * b(6) - lu(8, 7) * b(7)
+    b(8) = b(8) * lu(8, 8)
+    b(7) = b(7) * lu(7, 7) - lu(7, 8) * b(8)
+    b(6) = b(6) * lu(6, 6) - lu(6, 8) * b(8) - lu(6, 7) * b(7)
+    b(5) = b(5) * lu(5, 5) - lu(5, 8) * b(8) - lu(5, 7) * b(7) - lu(5, 6) * b(6)
+    b(4) = b(4) * lu(4, 4) - lu(4, 8) * b(8) - lu(4, 6) * b(6)
+    b(3) = b(3) * lu(3, 3) - lu(3, 7) * b(7) - lu(3, 6) * b(6) - lu(3, 5) * b(5)
+    b(2) = b(2) * lu(2, 2) - lu(2, 7) * b(7) - lu(2, 6) * b(6) - lu(2, 5) * b(5) &
+         - lu(2, 3) * b(3)
+    b(1) = b(1) * lu(1, 1) - lu(1, 7) * b(7) - lu(1, 5) * b(5) - lu(1, 3) * b(3) &
+         - lu(1, 2) * b(2)
+  end subroutine lu_solve_complex
+
 
   ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
   ! Hairer's rodas.f): with E = I/(h gamma) - J, gamma = 0.25, stage s solves
@@ -1024,6 +1088,368 @@ contains
     end do
   end function stiff_wheel_rodas4
 
+  ! Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,
+  ! Sec. IV.8): Hairer's radau5.f for an ODE without mass matrix.
+  ! The stage increments z_k = x(t + c_k h) - x at c = (0.1550510257216822, 0.6449489742783178, 1)
+  ! solve z = h (A (x) I) F(z). With w = (T^-1 (x) I) z the simplified Newton
+  ! iterations split into a real system, E1 = (gamma/h) I - J, and a complex
+  ! one, E2 = ((alpha + i beta)/h) I - J, the eigenvalues of A^-1 being gamma
+  ! = 3.637834252744496 and alpha +- i beta = 2.6810828736277523 +- 3.0504301992474105 i.
+  ! The step is x + z3.
+
+  ! E1 and E2 for this h, factored; .true. when either is singular. jac is
+  ! row-major.
+  logical function radau5_factor(jac, h, e1, piv1, e2, piv2) result(singular)
+    real(c_double), intent(in) :: jac(nx * nx), h
+    real(c_double), intent(out) :: e1(nx, nx)
+    complex(c_double), intent(out) :: e2(nx, nx)
+    integer, intent(out) :: piv1(nx), piv2(nx)
+    integer :: i, j
+
+    do j = 1, nx
+      do i = 1, nx
+        e1(i, j) = -jac((i - 1) * nx + j)
+      end do
+      e2(:, j) = e1(:, j)
+      e1(j, j) = e1(j, j) + 3.637834252744496_c_double / h
+      e2(j, j) = e2(j, j) + cmplx(2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, c_double)
+    end do
+    singular = lu_decompose(e1, piv1)
+    if (.not. singular) singular = lu_decompose_complex(e2, piv2)
+  end function radau5_factor
+
+  ! One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
+  ! F at the three stages, then the corrections to w solved into z1..z3.
+  ! Returns their RMS over scal (NaN or Inf when a stage is).
+  real(c_double) function radau5_newton(t, h, x, c, e1, piv1, e2, piv2, scal, z1, z2, z3, &
+                                         w1, w2, w3) result(dyno)
+    real(c_double), intent(in) :: t, h, x(nx), c(nc), e1(nx, nx), scal(nx), w1(nx), w2(nx), w3(nx)
+    complex(c_double), intent(in) :: e2(nx, nx)
+    integer, intent(in) :: piv1(nx), piv2(nx)
+    real(c_double), intent(inout) :: z1(nx), z2(nx), z3(nx)
+    real(c_double) :: a1(nx), a2(nx), a3(nx)
+    complex(c_double) :: v(nx)
+
+    call stiff_wheel_rhs(t + 0.1550510257216822_c_double * h, x + z1, c, a1)
+    call stiff_wheel_rhs(t + 0.6449489742783178_c_double * h, x + z2, c, a2)
+    call stiff_wheel_rhs(t + h, x + z3, c, a3)
+    z1 = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + 0.5417705399358749_c_double * a3 &
+         - (3.637834252744496_c_double / h) * w1
+    z2 = -4.178718591551905_c_double * a1 - 0.32768282076106237_c_double * a2 + 0.47662355450055044_c_double * a3 &
+         - (2.6810828736277523_c_double / h) * w2 + (3.0504301992474105_c_double / h) * w3
+    z3 = -0.5028726349457868_c_double * a1 + 2.571926949855605_c_double * a2 - 0.5960392048282249_c_double * a3 &
+         - (2.6810828736277523_c_double / h) * w3 - (3.0504301992474105_c_double / h) * w2
+    call lu_solve(e1, piv1, z1)
+    v = cmplx(z2, z3, c_double)
+    call lu_solve_complex(e2, piv2, v)
+    z2 = real(v, c_double)
+    z3 = aimag(v)
+    dyno = sqrt(sum((z1 / scal)**2 + (z2 / scal)**2 + (z3 / scal)**2) / (3 * nx))
+  end function radau5_newton
+
+  ! The local error estimate E1^-1 (f0 + (e1 z1 + e2 z2 + e3 z3)/h), its RMS
+  ! over scal, at least 1e-10_c_double (NaN or Inf when it is). On the first step
+  ! or after a rejection an estimate >= 1 is taken again through f at x + err
+  ! (radau5.f's ESTRAD): one more rhs call.
+  real(c_double) function radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, again, &
+                                        stats) result(norm)
+    real(c_double), intent(in) :: t, h, x(nx), c(nc), f0(nx), e1(nx, nx), scal(nx)
+    real(c_double), intent(in) :: z1(nx), z2(nx), z3(nx)
+    integer, intent(in) :: piv1(nx)
+    logical, intent(in) :: again
+    type(stiff_wheel_stats), intent(inout) :: stats
+    real(c_double) :: g(nx), err(nx)
+
+    g = (-10.048809399827416_c_double * z1 + 1.382142733160749_c_double * z2 - 0.3333333333333333_c_double * z3) / h
+    err = f0 + g
+    call lu_solve(e1, piv1, err)
+    norm = sqrt(sum((err / scal)**2) / nx)
+    if (norm >= 1 .and. again) then
+      call stiff_wheel_rhs(t, x + err, c, err)
+      stats%rhs_calls = stats%rhs_calls + 1
+      err = err + g
+      call lu_solve(e1, piv1, err)
+      norm = sqrt(sum((err / scal)**2) / nx)
+    end if
+    if (norm < 1e-10_c_double) norm = 1e-10_c_double
+  end function radau5_error
+
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Hairer's radau5.f strategy: the error test's tolerances are rtol' =
+  ! 0.1 rtol^(2/3) and atol' = rtol' atol/rtol; h_new/h = fac err^-1/4 within
+  ! [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+  ! Gustafsson's predictive controller after an accepted step. J is kept
+  ! while the Newton iterations contract by <= 1e-3 a step, and h, E1
+  ! and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+  ! diverge, take more than 7, or meet a NaN or Inf retry with h halved
+  ! (slow ones with a smaller h); a singular E1 or E2 too, 5 times in a row at
+  ! most.
+  function stiff_wheel_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+      bind(C, name="stiff_wheel_f_radau5")
+    real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a stiff_wheel_stats, or NULL
+    integer(c_int) :: code
+    real(c_double) :: jac(nx * nx), e1(nx, nx)
+    complex(c_double) :: e2(nx, nx)
+    real(c_double) :: z1(nx), z2(nx), z3(nx), w1(nx), w2(nx), w3(nx), a1(nx), a2(nx), a3(nx)
+    real(c_double) :: ak1(nx), ak2(nx), ak3(nx)  ! the collocation polynomial of the last step
+    real(c_double) :: f0(nx), fnew(nx), scal(nx), xnew(nx), dx(nx), comp(nx)
+    real(c_double) :: t, h, h_old, h_new, h_acc, err_acc, rtol_e, atol_e, newton_tol, err, quot
+    real(c_double) :: rate, theta, theta_old, dyno, dyno_old, thq, predicted, c1q, c2q, c3q
+    real(c_double) :: cos_q2
+    type(stiff_wheel_stats), pointer :: stats
+    type(stiff_wheel_stats), target :: own
+    integer :: piv1(nx), piv2(nx), newt, outcome, singular
+    logical :: last, first, reject, fresh_jac, need_jac, need_lu, nonfinite
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    call stats_start(stats, t0)
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
+      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
+      return
+    end if
+    cos_q2 = cos(x(2))
+    if (abs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) then
+      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
+      return
+    end if
+    code = STIFF_WHEEL_ODE_OK
+    if (.not. (t1 > t0)) return
+    t = t0
+    call stiff_wheel_rhs(t, x, c, f0)
+    stats%rhs_calls = 1
+    if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then
+      code = STIFF_WHEEL_ODE_ERR_NONFINITE
+      return
+    end if
+    rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
+    atol_e = rtol_e * (atol / rtol)
+    newton_tol = max(10.0_c_double * (0.5_c_double * epsilon(1.0_c_double)) / rtol_e, min(0.03_c_double, sqrt(rtol_e)))
+    if (h0 > 0) then
+      h = min(h0, t1 - t0)
+    else
+      h = initial_step(5, t0, t1, x, f0, c, rtol, atol, stats)
+    end if
+    last = t + 1.01_c_double * h >= t1
+    if (last) h = t1 - t
+    scal = atol_e + rtol_e * abs(x)
+    h_old = 1
+    h_acc = 0
+    err_acc = 1e-2_c_double
+    rate = 1
+    theta_old = 1
+    dyno_old = 1
+    comp = 0
+    first = .true.
+    reject = .false.
+    fresh_jac = .false.
+    need_jac = .true.
+    need_lu = .true.
+    nonfinite = .false.
+    singular = 0
+    do
+      if (need_jac) then
+        call stiff_wheel_jac(t, x, c, jac)
+        stats%jac_calls = stats%jac_calls + 1
+        if (.not. all(ieee_is_finite(jac))) then
+          code = STIFF_WHEEL_ODE_ERR_NONFINITE
+          return
+        end if
+        fresh_jac = .true.
+        need_jac = .false.
+        need_lu = .true.
+      end if
+      if (step_underflow(h, t)) then
+        code = merge(STIFF_WHEEL_ODE_ERR_NONFINITE, &
+                     STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        code = STIFF_WHEEL_ODE_ERR_MAX_STEPS
+        return
+      end if
+      if (need_lu) then
+        stats%decompositions = stats%decompositions + 1
+        if (radau5_factor(jac, h, e1, piv1, e2, piv2)) then
+          singular = singular + 1
+          if (singular == 5) then
+            code = STIFF_WHEEL_ODE_ERR_SINGULAR
+            return
+          end if
+          stats%rejected = stats%rejected + 1
+          reject = .true.
+          last = .false.
+          h = h * 0.5_c_double
+          need_jac = .not. fresh_jac
+          cycle
+        end if
+        singular = 0
+        need_lu = .false.
+      end if
+      stats%h = h
+
+      ! the Newton iterations start from the last step's collocation
+      ! polynomial, continued
+      if (first) then
+        z1 = 0
+        z2 = 0
+        z3 = 0
+        w1 = 0
+        w2 = 0
+        w3 = 0
+      else
+        c3q = h / h_old
+        c1q = 0.1550510257216822_c_double * c3q
+        c2q = 0.6449489742783178_c_double * c3q
+        a1 = c1q * (ak1 + (c1q + 0.35505102572168223_c_double) * (ak2 + (c1q + 0.8449489742783178_c_double) * ak3))
+        a2 = c2q * (ak1 + (c2q + 0.35505102572168223_c_double) * (ak2 + (c2q + 0.8449489742783178_c_double) * ak3))
+        a3 = c3q * (ak1 + (c3q + 0.35505102572168223_c_double) * (ak2 + (c3q + 0.8449489742783178_c_double) * ak3))
+        z1 = a1
+        z2 = a2
+        z3 = a3
+        w1 = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + 0.5417705399358749_c_double * a3
+        w2 = -4.178718591551905_c_double * a1 - 0.32768282076106237_c_double * a2 + 0.47662355450055044_c_double * a3
+        w3 = -0.5028726349457868_c_double * a1 + 2.571926949855605_c_double * a2 - 0.5960392048282249_c_double * a3
+      end if
+
+      ! outcome: 0 converged, 1 too slowly (h reduced), 2 failed
+      outcome = 0
+      rate = max(rate, (0.5_c_double * epsilon(1.0_c_double)))**0.8_c_double
+      theta = 1e-3_c_double
+      newt = 0
+      do
+        if (newt >= 7) then
+          outcome = 2
+          exit
+        end if
+        dyno = radau5_newton(t, h, x, c, e1, piv1, e2, piv2, scal, z1, z2, z3, w1, w2, w3)
+        stats%rhs_calls = stats%rhs_calls + 3
+        newt = newt + 1
+        if (.not. ieee_is_finite(dyno)) then
+          nonfinite = .true.
+          outcome = 2
+          exit
+        end if
+        if (newt > 1 .and. newt < 7) then
+          thq = dyno / dyno_old
+          if (newt == 2) then
+            theta = thq
+          else
+            theta = sqrt(thq * theta_old)
+          end if
+          theta_old = thq
+          if (.not. (theta < 0.99_c_double)) then
+            outcome = 2
+            exit
+          end if
+          rate = theta / (1 - theta)
+          predicted = rate * dyno * theta**(6 - newt) / newton_tol
+          if (predicted >= 1) then
+            h = h * 0.8_c_double * max(1e-4_c_double, min(20.0_c_double, predicted)) &
+                **(-1 / real(10 - newt, c_double))
+            outcome = 1
+            exit
+          end if
+        end if
+        dyno_old = max(dyno, (0.5_c_double * epsilon(1.0_c_double)))
+        a1 = w1 + z1
+        a2 = w2 + z2
+        a3 = w3 + z3
+        w1 = a1
+        w2 = a2
+        w3 = a3
+        z1 = 0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2 - 0.030029194105147424_c_double * a3
+        z2 = 0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2 + 0.3829421127572619_c_double * a3
+        z3 = 0.966048182615093_c_double * a1 + a2
+        if (.not. (rate * dyno > newton_tol)) exit
+      end do
+      if (outcome == 0) then
+        err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        dx = z3 - comp
+        xnew = x + dx
+        if (err < 1 .and. .not. last) then
+          call stiff_wheel_rhs(t + h, xnew, c, fnew)  ! where the next step starts
+          stats%rhs_calls = stats%rhs_calls + 1
+          nonfinite = .not. all(ieee_is_finite(fnew))
+        else
+          nonfinite = .not. ieee_is_finite(err)
+        end if
+        nonfinite = nonfinite .or. .not. all(ieee_is_finite(xnew))
+        if (nonfinite) outcome = 2
+      end if
+      if (outcome /= 0) then
+        stats%rejected = stats%rejected + 1
+        reject = .true.
+        last = .false.
+        if (outcome == 2) h = h * 0.5_c_double
+        need_lu = .true.
+        need_jac = .not. fresh_jac
+        cycle
+      end if
+
+      ! h_new = h / quot
+      quot = max(1 / 8.0_c_double, min(5.0_c_double, err**0.25_c_double &
+                 / min(0.9_c_double, 13.5_c_double / (newt + 14))))
+      h_new = h / quot
+      if (err < 1) then
+        if (gimbal_lock(xnew, cos_q2)) then
+          code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        first = .false.
+        if (stats%accepted > 0) then
+          quot = max(quot, 1 / 8.0_c_double, min(5.0_c_double, &
+                     (h_acc / h) * (err * err / err_acc)**0.25_c_double / 0.9_c_double))
+          h_new = h / quot
+        end if
+        h_acc = h
+        err_acc = max(1e-2_c_double, err)
+        h_old = h
+        a1 = (z2 - z1) / 0.4898979485566356_c_double
+        ak1 = (z3 - z2) / 0.35505102572168223_c_double
+        ak2 = (ak1 - a1) / 0.8449489742783178_c_double
+        ak3 = ak2 - (a1 - z1 / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
+        call accept_step(x, xnew, dx, comp)
+        t = merge(t1, t + h, last)
+        stats%t = t
+        stats%accepted = stats%accepted + 1
+        if (last) return
+        f0 = fnew
+        scal = atol_e + rtol_e * abs(x)
+        fresh_jac = .false.
+        h_new = min(h_new, t1 - t0)
+        if (reject) h_new = min(h_new, h)
+        reject = .false.
+        if (t + 1.01_c_double * h_new >= t1) then
+          h = t1 - t
+          last = .true.
+        else if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h &
+                 .and. h_new <= 1.2_c_double * h) then
+          cycle  ! the same h: J, E1 and E2 as they are
+        else
+          h = h_new
+        end if
+        need_lu = .true.
+        need_jac = theta > 1e-3_c_double
+      else
+        stats%rejected = stats%rejected + 1
+        reject = .true.
+        last = .false.
+        if (first) then
+          h = h * 0.1_c_double
+        else
+          h = h_new
+        end if
+        need_lu = .true.
+        need_jac = .not. fresh_jac
+      end if
+    end do
+  end function stiff_wheel_radau5
+
   ! stats, codes: NULL when not wanted.
   function stiff_wheel_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
       result(failed) bind(C, name="stiff_wheel_f_dopri5_batch")
@@ -1125,5 +1551,39 @@ contains
     end do
     !$omp end parallel do
   end function stiff_wheel_rodas4_batch
+
+  ! stats, codes: NULL when not wanted.
+  function stiff_wheel_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
+      result(failed) bind(C, name="stiff_wheel_f_radau5_batch")
+    integer(c_size_t), value, intent(in) :: n
+    real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(stiff_wheel_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = stiff_wheel_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
+      else
+        code = stiff_wheel_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= STIFF_WHEEL_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function stiff_wheel_radau5_batch
 
 end module stiff_wheel_ode_mod

@@ -6,9 +6,10 @@ templates read it: a method is added here, once.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
-from gyrogen.tableaus import DOP853, DOPRI5, RK4, RODAS4, Explicit, Rosenbrock
+from gyrogen.tableaus import DOP853, DOPRI5, RADAU5, RK4, RODAS4, Explicit, Radau, Rosenbrock
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,51 @@ class RosenbrockControl:
     """... this many times in a row at most."""
 
 
+@dataclass(frozen=True)
+class RadauControl:
+    """Radau IIA's step size and Newton iterations: the defaults of Hairer's
+    radau5.f (RADCOR), whose names are in brackets."""
+
+    safety: float = 0.9
+    """[SAFE], lowered to (1 + 2 newton_max) safety / (iterations + 2 newton_max)
+    when the Newton iterations took many."""
+    facmin: float = 0.2
+    """h_new/h >= this [1/FACL] ..."""
+    facmax: float = 8.0
+    """... and <= this [1/FACR]: err^-1/4 (the embedded estimate has order 3)."""
+    newton_max: int = 7
+    """Simplified Newton iterations per step at most [NIT]."""
+    jacobian_reuse: float = 1e-3
+    """The next step keeps J when the Newton contraction rate was at most this [THET]."""
+    keep_h: tuple[float, float] = (1.0, 1.2)
+    """... and keeps h, E1 and E2 too when h_new/h is within this [QUOT1, QUOT2]."""
+    tol_factor: float = 0.1
+    tol_power: float = 2.0 / 3.0
+    """The error test's tolerance is tol_factor rtol^tol_power, atol in proportion
+    (radau5.f's transformation: the global error then comes out near rtol)."""
+    newton_tol: tuple[float, float] = (10.0, 0.03)
+    """Newton stops when its estimated error is below max(a eps/rtol', min(b, rtol'^1/2))
+    [FNEWT], rtol' the transformed tolerance."""
+    err_floor: float = 1e-2
+    """The last accepted error in Gustafsson's formula is at least this."""
+    err_min: float = 1e-10
+    """The error estimate is at least this."""
+    newton_diverged: float = 0.99
+    """A contraction rate at least this: the iterations diverge."""
+    newton_slow: tuple[float, float, float] = (0.8, 1e-4, 20.0)
+    """Iterations that converge too slowly to meet the tolerance in newton_max:
+    h times a qn^(-1/(4 + newton_max - 1 - n)), qn their predicted error over
+    the tolerance within [b, c]."""
+    rate_power: float = 0.8
+    """The first iteration's rate estimate: the last step's, to this power."""
+    first_reject: float = 0.1
+    """A rejected first step: h times this."""
+    newton_shrink: float = 0.5
+    """Newton iterations that diverge or do not converge in newton_max: h times this."""
+    singular_tries: int = 5
+    """Singular E1 or E2 with h halved this many times in a row: an error."""
+
+
 PAIR_ERR_FLOOR = 1e-4
 """Hairer's facold: an explicit pair's previous error starts at, and is never
 taken below, this (the PI controller's err_old)."""
@@ -69,8 +115,8 @@ class Method:
 
     name: str
     doc: str
-    tableau: Explicit | Rosenbrock
-    control: PairControl | RosenbrockControl | None = None
+    tableau: Explicit | Rosenbrock | Radau
+    control: PairControl | RosenbrockControl | RadauControl | None = None
     """The step-size control of an adaptive method; None for a fixed step."""
     notes: tuple[str, ...] = ()
     """What the method is and where it comes from: the comment lines above
@@ -84,7 +130,16 @@ class Method:
     @property
     def implicit(self) -> bool:
         """Needs the scene's Jacobian."""
+        return self.rosenbrock or self.radau
+
+    @property
+    def rosenbrock(self) -> bool:
         return isinstance(self.tableau, Rosenbrock)
+
+    @property
+    def radau(self) -> bool:
+        """Radau IIA, by simplified Newton iterations."""
+        return isinstance(self.tableau, Radau)
 
     @property
     def pair(self) -> bool:
@@ -118,6 +173,14 @@ _NOTES = {
         "3rd-order one err3 = h sum_j e3_j k_j as",
         "|h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm.",
     ),
+    "rodas4": (
+        "Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of",
+        "Hairer's rodas.f)",
+    ),
+    "radau5": (
+        "Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,",
+        "Sec. IV.8): Hairer's radau5.f for an ODE without mass matrix",
+    ),
 }
 _DOPRI5_DEFAULTS = "Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta."
 _DOP853_DEFAULTS = "Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6]."
@@ -130,15 +193,44 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("dop853", "DOP853 (Hairer's coefficients and error estimator), adaptive.", DOP853,
            PairControl(0.125, 0.0, 0.9, 0.333, 6.0, _DOP853_DEFAULTS), _NOTES["dop853"]),
     Method("rodas4", "Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.",
-           RODAS4, RosenbrockControl()),
+           RODAS4, RosenbrockControl(), _NOTES["rodas4"]),
+    Method("radau5", "Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.",
+           RADAU5, RadauControl(), _NOTES["radau5"]),
 )}
 # fmt: on
 """Every compiled integrator, in the order scenes list them by default."""
 
 NAMES: tuple[str, ...] = tuple(METHODS)
 ADAPTIVE: tuple[str, ...] = tuple(n for n, m in METHODS.items() if not m.fixed_step)
+IMPLICIT: tuple[str, ...] = tuple(n for n, m in METHODS.items() if m.implicit)
+"""The methods that need the scene's analytic Jacobian."""
+
+
+def needs_jacobian(names: Iterable[str]) -> bool:
+    """Whether a scene with these integrators renders its Jacobian."""
+    return any(n in IMPLICIT for n in names)
+
+
+STIFF_CHOICE: tuple[str, ...] = ("radau5", "rodas4")
+"""The implicit methods gyrogen runs a stiff problem with, best first: radau5
+is faster than rodas4 at every error from 1e-4 to 1e-13 on stiff_wheel
+(`make report`, the stiff work-precision table)."""
+EXPLICIT_CHOICE: tuple[str, ...] = ("dop853", "dopri5")
+"""The explicit pairs for a problem that is not stiff, best first."""
+
+
+def pick(available: Iterable[str], stiff: bool) -> str | None:
+    """The best of a build's integrators for a stiff problem or one that is
+    not; None when it has none of that kind."""
+    have = set(available)
+    return next((m for m in (STIFF_CHOICE if stiff else EXPLICIT_CHOICE) if m in have), None)
+
 
 SCIPY: tuple[str, ...] = ("RK45", "DOP853", "Radau", "LSODA")
+AUTO = "auto"
+"""The method simulate picks itself: for a stiff scene (analysis/stiffness.py)
+the build's best implicit integrator (scipy's Radau if it has none), else
+scipy's DOP853."""
 """scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""
 
 

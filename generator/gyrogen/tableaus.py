@@ -17,12 +17,18 @@ Sources:
   weights b, and the 5th- and 3rd-order error weights e5 and e3 = b - bhh.
 - RODAS4: Hairer & Wanner, Solving ODEs II, Sec. IV.7, and the RODAS4
   coefficients of Hairer's rodas.f (subroutine ROCOE, METH = 1).
+- RADAU5: Radau IIA of order 5 in the transformed form of Hairer & Wanner,
+  Solving ODEs II, Sec. IV.8, as Hairer's radau5.f (subroutine RADCOR): the
+  nodes, eigenvalues and error weights from their closed forms (evaluated
+  at 40 digits, then rounded), T and T^-1 the decimals of its DATA lines.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction as F
+
+import mpmath
 
 Terms = list[tuple[int, float]]
 
@@ -100,6 +106,60 @@ class Rosenbrock:
 
     def feedback(self, s: int) -> Terms:
         return terms(self.g[s])
+
+
+@dataclass(frozen=True)
+class Radau:
+    """Radau IIA with three stages (order 5, stiffly accurate, L-stable),
+    solved by simplified Newton iterations in Hairer's transformed form: with
+    the stage increments Z = (z1, z2, z3) at the nodes (c1, c2, 1) and W =
+    T^-1 Z, the Newton matrix of A^-1 splits into a real system with E1 =
+    (gamma/h) I - J and a complex one with E2 = ((alpha + i beta)/h) I - J,
+    gamma and alpha +- i beta the eigenvalues of A^-1 (A the Radau IIA
+    matrix; T its eigenvectors, third row (t31, 1, 0)). The step is x + z3.
+    The local error estimate is E1^-1 (f(t, x) + (e1 z1 + e2 z2 + e3 z3)/h),
+    gamma/h times Hairer & Wanner's (IV.8.19)."""
+
+    order: int
+    nodes: tuple[float, float, float]
+    gamma: float
+    alpha: float
+    beta: float
+    t: tuple[tuple[float, float, float], ...]
+    ti: tuple[tuple[float, float, float], ...]
+    e: tuple[float, float, float]
+
+    @property
+    def stages(self) -> int:
+        return len(self.nodes)
+
+
+def _radau5() -> Radau:
+    mp = mpmath.mp.clone()
+    mp.dps = 40
+    sq6, cbrt81, cbrt9 = mp.sqrt(6), mp.cbrt(81), mp.cbrt(9)
+    gamma = (6 + cbrt81 - cbrt9) / 30  # the eigenvalues of A, inverted below
+    alpha = (12 - cbrt81 + cbrt9) / 60
+    beta = (cbrt81 + cbrt9) * mp.sqrt(3) / 60
+    norm = alpha**2 + beta**2
+    return Radau(
+        order=5,
+        nodes=(float((4 - sq6) / 10), float((4 + sq6) / 10), 1.0),
+        gamma=float(1 / gamma),
+        alpha=float(alpha / norm),
+        beta=float(beta / norm),
+        t=(
+            (9.1232394870892942792e-02, -0.14125529502095420843, -3.0029194105147424492e-02),
+            (0.24171793270710701896, 0.20412935229379993199, 0.38294211275726193779),
+            (0.96604818261509293619, 1.0, 0.0),
+        ),
+        ti=(
+            (4.3255798900631553510, 0.33919925181580986954, 0.54177053993587487119),
+            (-4.1787185915519047273, -0.32768282076106238708, 0.47662355450055045196),
+            (-0.50287263494578687595, 2.5719269498556054292, -0.59603920482822492497),
+        ),
+        e=(float(-(13 + 7 * sq6) / 3), float((-13 + 7 * sq6) / 3), float(mp.mpf(-1) / 3)),
+    )
 
 
 RK4 = Explicit(
@@ -228,3 +288,5 @@ RODAS4 = Rosenbrock(
 )
 
 # fmt: on
+
+RADAU5 = _radau5()

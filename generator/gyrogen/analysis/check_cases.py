@@ -12,6 +12,7 @@ import math
 from functools import cache
 from pathlib import Path
 
+from gyrogen import methods
 from gyrogen.abi import GIMBAL_LOCK_COS
 from gyrogen.analysis.check_engine import Case, spin_prediction
 from gyrogen.errors import SceneError
@@ -35,7 +36,11 @@ CLOSEST_APPROACH = 17.0
 @cache
 def quaternion_scene() -> Scene:
     data = default().model_dump()
-    data.update(name="gyrostat_quat", attitude="quaternion", integrators=["dop853", "rodas4"])
+    data.update(
+        name="gyrostat_quat",
+        attitude="quaternion",
+        integrators=[methods.EXPLICIT_CHOICE[0], methods.STIFF_CHOICE[0]],
+    )
     data["description"] = "the full model with Euler parameters for the attitude"
     start = data["simulate"]["initial"]
     data["simulate"]["initial"] = {k: v for k, v in start.items() if k not in ("q1", "q2", "q3")}
@@ -182,15 +187,18 @@ def is_scene(name: str) -> bool:
 
 def scene_case(name: str) -> Case:
     """A scene's own simulation ([simulate]) as a check case: it needs the C
-    target and both integrators the stiffness analysis may pick."""
+    target, and an integrator of each kind the stiffness analysis may ask
+    for (gyrogen.methods.EXPLICIT_CHOICE, STIFF_CHOICE)."""
     scene = load(name)
-    lacking = [m for m in ("dop853", "rodas4") if m not in scene.integrators]
+    kinds = {False: methods.EXPLICIT_CHOICE[0], True: methods.STIFF_CHOICE[0]}
+    lacking = [m for stiff, m in kinds.items() if methods.pick(scene.integrators, stiff) is None]
     add = [] if "c" in scene.targets else ["c to targets"]
     add += [f"{', '.join(lacking)} to integrators"] if lacking else []
     if add:
         raise SceneError(
-            f"{name}: gyrogen check needs the scene's C build with dop853 and rodas4 "
-            f"(and its Jacobian): add {' and '.join(add)}"
+            f"{name}: gyrogen check needs the scene's C build with an explicit pair "
+            f"({' or '.join(methods.EXPLICIT_CHOICE)}) and an implicit method "
+            f"({' or '.join(methods.STIFF_CHOICE)}, with the Jacobian): add {' and '.join(add)}"
         )
     sim = scene.simulate
     return Case(f"scene {scene.name}", scene, sim.parameters, sim.initial, sim.t_end, "pass")

@@ -18,15 +18,13 @@ from typing import Any
 import numpy as np
 
 from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
+from gyrogen.analysis import stiffness
 from gyrogen.analysis.invariants import at_samples
 from gyrogen.physics import lumped_inertias
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
-STIFF = 1e3
-"""Stiffness index (largest decay rate x time span) above which an explicit
-method spends most of its steps on stability: implicit it is."""
 DRIFT_BAR = 1e-10
 """The invariants' relative drift allowed at rtol 1e-12."""
 
@@ -73,23 +71,6 @@ def _vector(values: dict[str, float], names: tuple[str, ...], fill: float) -> np
     return np.array([values.get(n, fill) for n in names], dtype=float)
 
 
-def stiffness(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> tuple[float, str]:
-    """max over the states of (largest decay rate) x span, and the method
-    it calls for with the reason."""
-    worst = 0.0
-    for x in np.atleast_2d(xs):
-        jac = comp.jacobian(x, c)
-        rate = max(0.0, float(-np.min(np.linalg.eigvals(jac).real)))
-        worst = max(worst, rate * span)
-    if worst > STIFF:
-        why = (
-            f"implicit (rodas4): decay rates up to {worst / span:.3g} 1/s over {span:g} s "
-            f"would hold an explicit method to steps of ~{3.0 * span / worst:.2g} s"
-        )
-        return worst, why
-    return worst, f"explicit (dop853): stiffness index {worst:.3g} <= {STIFF:g}"
-
-
 def run_case(case: Case, comp: Compiled) -> Result:
     res = Result(case)
     scene = case.scene
@@ -101,8 +82,9 @@ def run_case(case: Case, comp: Compiled) -> Result:
         res.diagnosis = f"setup refused the parameters: {message(SETUP_CODES, res.setup_code)}"
         return res
     res.condition = float(c[-1])
-    res.stiffness, res.recommended = stiffness(comp, c, x0, case.t_end)
-    res.method = case.method or ("rodas4" if res.stiffness > STIFF else "dop853")
+    choice = stiffness.choose(comp, c, x0, case.t_end)
+    res.stiffness, res.recommended = choice.stiffness, choice.why
+    res.method = case.method or choice.method or ""
     ts = np.linspace(0.0, case.t_end, case.samples + 1)
     steps = max(1, case.steps // case.samples)
     given = controls(res.method, steps=steps, rtol=1e-12, atol=1e-12, max_steps=10**8)
@@ -132,7 +114,7 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
             res.diagnosis = f"{where}: {message(ODE_CODES, res.code)}"
         return
     res.drift = at_samples(scene, p, xs, res.times)
-    later, _ = stiffness(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)
+    later = stiffness.index(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)
     res.stiffness = max(res.stiffness, later)
     if case.expect in ("stable", "unstable"):
         res.verdict = _spin_verdict(scene, xs)

@@ -1,5 +1,6 @@
 """Simulate a scene: generate, build, integrate with scipy's solve_ivp through
-the compiled RHS (or with a compiled integrator), check the invariants with
+the compiled RHS (or with a compiled integrator: by default the best
+implicit one for a stiff scene, analysis/stiffness.py), check the invariants with
 the numpy reference (analysis/invariants.py), and write the trajectory (CSV,
 npz), a summary and a figure (analysis/simulate_files.py), all or nothing.
 
@@ -17,7 +18,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import methods
 from gyrogen.abi import ODE_CODES, message
-from gyrogen.analysis import simulate_files
+from gyrogen.analysis import simulate_files, stiffness
 from gyrogen.analysis.invariants import Invariants, along_trajectory
 from gyrogen.analysis.trajectory import Trajectory, from_samples, output_grid, sample_times
 from gyrogen.errors import GyrogenError, SceneError
@@ -54,7 +55,7 @@ def _no_progress(label: str) -> AbstractContextManager[Advance]:
 class Settings:
     t_end: float
     dt: float
-    method: str = "DOP853"
+    method: str = methods.AUTO
     plot: bool = True
     max_nfev: int = MAX_NFEV
 
@@ -236,6 +237,11 @@ def run(
         comp, c, np.array(scene.initial_state()), (scene.simulate.rtol, scene.simulate.atol)
     )
     end = output_grid(settings.t_end, settings.dt)[-1]
+    if settings.method == methods.AUTO:
+        choice = stiffness.choose(comp, c, start.x0, end)
+        method = (choice.method or "Radau") if choice.stiff else "DOP853"
+        echo(f"method {method}: {choice.why}")
+        settings = replace(settings, method=method)
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:
         traj = integrate(start, settings, advance)
     inv = along_trajectory(scene, p, traj)

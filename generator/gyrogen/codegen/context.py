@@ -15,7 +15,7 @@ from gyrogen.abi import (
     OUTPUT_DOC,
     UNITS,
 )
-from gyrogen.methods import METHODS, Method
+from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
@@ -186,4 +186,4 @@ def build_id(scene: Scene) -> str:
 
 def make_unit(scene: Scene) -> Unit:
     eqs = specialize(scene)
-    return Unit(scene, eqs, optimize(eqs, jacobian="rodas4" in scene.integrators))
+    return Unit(scene, eqs, optimize(eqs, jacobian=needs_jacobian(scene.integrators)))

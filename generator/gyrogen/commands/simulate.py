@@ -36,10 +36,12 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 )
 @click.option(
     "--method",
-    type=click.Choice([*methods.SCIPY, *methods.NAMES]),
-    default="DOP853",
+    type=click.Choice([methods.AUTO, *methods.SCIPY, *methods.NAMES]),
+    default=methods.AUTO,
     show_default=True,
-    help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators.",
+    help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators; "
+    "auto: the best compiled implicit one if the scene is stiff (else scipy's Radau), "
+    "scipy's DOP853 if it is not.",
 )
 @click.option(
     "--max-nfev",

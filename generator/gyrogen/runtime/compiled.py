@@ -96,9 +96,13 @@ class Compiled:
         return self._apply(name, int(self.manifest["outputs"][name]), x, c, t)
 
     def jacobian(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """d(dx/dt)/dx at one state: shape (nx, nx) (scenes with rodas4)."""
+        """d(dx/dt)/dx at one state: shape (nx, nx) (scenes with an implicit
+        integrator, gyrogen.methods.IMPLICIT)."""
         if "jac" not in self.manifest["functions"][self.language]:
-            raise BuildError(f"scene {self.manifest['prefix']} has no Jacobian (add rodas4)")
+            raise BuildError(
+                f"scene {self.manifest['prefix']} has no Jacobian (add one of "
+                f"{', '.join(methods.IMPLICIT)} to its integrators)"
+            )
         return self._apply("jac", self.nx * self.nx, x, c, t).reshape(self.nx, self.nx)
 
     def _apply(self, name: str, size: int, x: np.ndarray, c: np.ndarray, t: float) -> np.ndarray:
