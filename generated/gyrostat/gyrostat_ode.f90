@@ -1356,6 +1356,9 @@ contains
     code = GYROSTAT_ODE_OK
     if (.not. (t1 > t0)) return
     t = t0
+    ak1 = 0.0_c_double  ! read only after a first accepted step; set for -Wmaybe-uninitialized
+    ak2 = 0.0_c_double
+    ak3 = 0.0_c_double
     call gyrostat_rhs(t, x, c, f0)
     stats%rhs_calls = 1
     if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then
