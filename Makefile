@@ -47,12 +47,12 @@ lint: setup
 
 ## generate: rewrite generated/ (every built-in scene) from the templates and the generator
 generate: setup
-	$(BIN)/gyrogen generate --all --out generated
+	$(BIN)/gyrogen generate --all --lib --out generated
 
 ## check-generated: fail if generated/ differs from a fresh rendering
 check-generated: setup
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
-	$(BIN)/gyrogen generate --all --out "$$tmp" >/dev/null 2>&1 && \
+	$(BIN)/gyrogen generate --all --lib --out "$$tmp" >/dev/null 2>&1 && \
 	diff -r "$$tmp" generated && echo "generated/ is up to date"
 
 ## bench: RHS timings (cffi, batched C and Fortran, numpy, PyDy cython)
