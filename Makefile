@@ -7,14 +7,14 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench report check fuzz clean distclean examples strict
+.PHONY: setup system-deps run test lint generate check-generated bench report check fuzz clean distclean examples strict fmu-agreement
 
-## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake) and the Python environment in .venv
+## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake, pkg-config) and the Python environment in .venv
 setup: system-deps $(STAMP)
 
 system-deps:
 	@missing=""; \
-	for tool in gcc g++ gfortran clang valgrind cmake; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	for tool in gcc g++ gfortran clang valgrind cmake pkg-config; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
 	    echo "installing$$missing (apt-get)"; \
@@ -71,6 +71,11 @@ report: setup
 FUZZ_EXAMPLES ?= 2000
 fuzz: setup
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
+
+## fmu-agreement: the FMUs of the default, quaternion and stiff scenes in FMPy (Co-Simulation
+## and Model Exchange) against `gyrogen simulate` over each scene's t_end (the suite runs 1 s)
+fmu-agreement: setup
+	$(BIN)/python tests/fmu_agreement.py
 
 ## check: numerical stability on every stiff and extreme case
 check: setup

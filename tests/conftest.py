@@ -55,33 +55,33 @@ def shared_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 
 
+def built_once(
+    tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], None]
+) -> Path:
+    """shared_dir/name, made by make(it) once per run: the first worker to
+    ask makes it, the others wait for it and reuse it."""
+    shared = shared_dir(tmp_path_factory)
+    out = shared / name
+    with open(shared / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (shared / f"{name}.complete").is_file():
+            make(out)
+            (shared / f"{name}.complete").touch()
+    return out
+
+
 @pytest.fixture(scope="session")
 def examples_build(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """examples/Makefile's `all` with its own flags (the default scene's
     library configured, built and installed by CMake, then the programs
-    through find_package), built once per run: the first worker builds,
-    the others wait for it and reuse it."""
-    shared = shared_dir(tmp_path_factory)
-    build = shared / "examples-default"
-    with open(shared / "examples-default.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (build / "complete").is_file():
-            proc = subprocess.run(
-                [
-                    "make",
-                    "-C",
-                    str(REPO / "examples"),
-                    f"BUILD={build}",
-                    f"GEN={source_dir}",
-                    "all",
-                ],
-                capture_output=True,
-                text=True,
-                check=False,
-            )
-            assert proc.returncode == 0, proc.stdout + proc.stderr
-            (build / "complete").touch()
-    return build
+    through find_package), built once per run."""
+
+    def make(build: Path) -> None:
+        command = ["make", "-C", str(REPO / "examples"), f"BUILD={build}", f"GEN={source_dir}"]
+        proc = subprocess.run([*command, "all"], capture_output=True, text=True, check=False)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+
+    return built_once(tmp_path_factory, "examples-default", make)
 
 
 class Outcome(NamedTuple):

@@ -342,5 +342,9 @@ MAX_OUTPUT_POINTS = 10**6
 """Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
 simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
 text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""
+FMU_MAX_STEPS = 10**7
+"""Steps (accepted and rejected) one Co-Simulation step of an FMU may take
+before it fails with max_steps reached: as `gyrogen simulate --max-nfev`'s
+default, a bound on a run that blows up rather than a cost to plan for."""
 MAX_SCENE_BYTES = 1 << 20
 """Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""

@@ -78,6 +78,15 @@ def f_string(text: str) -> str:
     return '"' + text.replace('"', '""') + '"'
 
 
+def xml_attr(text: str) -> str:
+    """A quoted XML attribute value: markup escaped, and newlines and tabs as
+    character references (a parser would turn them into spaces)."""
+    escaped = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    for char, reference in (('"', "&quot;"), ("\n", "&#10;"), ("\t", "&#9;"), ("\r", "&#13;")):
+        escaped = escaped.replace(char, reference)
+    return f'"{escaped}"'
+
+
 PROTOTYPE_WIDTH = 90
 """Columns of a generated C declaration before it wraps."""
 
@@ -114,6 +123,7 @@ def environment() -> jinja2.Environment:
         hash_comment=hash_comment,
         c_string=c_string,
         f_string=f_string,
+        xml_attr=xml_attr,
     )
     env.globals.update(c_prototype=c_prototype)
     return env
