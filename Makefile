@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench report check fuzz clean distclean examples strict fmu-agreement
+.PHONY: setup system-deps run test lint generate check-generated bench report check fuzz clean distclean examples strict fmu-agreement bench-lib
 
 ## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake, pkg-config) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -76,6 +76,11 @@ fuzz: setup
 ## and Model Exchange) against `gyrogen simulate` over each scene's t_end (the suite runs 1 s)
 fmu-agreement: setup
 	$(BIN)/python tests/fmu_agreement.py
+
+## bench-lib: ns per rhs call of the CMake package under add_subdirectory: no build type
+## (the package's -O2), Release, and None (no -O flag: the flags before issue 15)
+bench-lib: setup
+	$(BIN)/python tests/bench_cmake_default.py
 
 ## check: numerical stability on every stiff and extreme case
 check: setup

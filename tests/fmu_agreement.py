@@ -6,8 +6,13 @@ or Radau on the stiff scene), over each scene's whole t_end.
     python tests/fmu_agreement.py [--t-end T] [--out DIR]
 
 Prints, per scene and mode, the largest difference over the output grid and
-the states, |fmu - simulate| / (1 + |simulate|) and absolute. Exit 1 if a
-scaled one exceeds BAR. tests/test_fmu.py runs the same on a 1 s slice.
+the states, |fmu - simulate| / (1 + |simulate|) and absolute. Exit 1 if
+either exceeds BAR. tests/test_fmu.py runs the same on a 1 s slice.
+
+Model Exchange runs CVODE at a tenth of the scene's rtol (CVODE_SHARPER):
+the FMU gives only derivatives there, and at the scene's own rtol CVODE's
+error, not the FMU's, is what shows (1.1e-8 absolute on the quaternion
+scene over 10 s, shrinking to 3.6e-9 at a tenth).
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ from gyrogen.scene import Scene, default, load
 
 BAR = 1e-8
 MODES = ("CoSimulation", "ModelExchange")
+CVODE_SHARPER = 10.0
+"""Model Exchange: CVODE's rtol is the scene's divided by this."""
 
 
 @dataclass(frozen=True)
@@ -68,15 +75,17 @@ def reference(case: Case, t_end: float, out: Path) -> np.ndarray:
 
 
 def by_fmpy(case: Case, fmu: Path, mode: str, t_end: float) -> np.ndarray:
-    """The states on the same grid, at the scene's rtol (CVODE's atol is
-    rtol times the nominal 1)."""
+    """The states on the same grid: Co-Simulation at the scene's rtol,
+    Model Exchange at CVODE_SHARPER times finer (CVODE's atol is rtol times
+    the nominal 1)."""
     sim = case.scene.simulate
+    rtol = sim.rtol if mode == "CoSimulation" else sim.rtol / CVODE_SHARPER
     result = fmpy.simulate_fmu(
         str(fmu),
         fmi_type=mode,
         stop_time=t_end,
         output_interval=sim.dt,
-        relative_tolerance=sim.rtol,
+        relative_tolerance=rtol,
         output=list(case.scene.states),
     )
     return np.column_stack([result[name] for name in case.scene.states])
@@ -109,11 +118,12 @@ def main() -> int:
                 t0 = time.perf_counter()
                 x = by_fmpy(case, fmu, mode, t_end)
                 scaled, absolute = differences(x, ref)
-                worst = max(worst, scaled)
-                what = case.method if mode == "CoSimulation" else "FMPy's CVODE"
+                worst = max(worst, scaled, absolute)
+                cvode = f"FMPy's CVODE, rtol / {CVODE_SHARPER:g}"
+                what = case.method if mode == "CoSimulation" else cvode
                 print(f"  {mode:14s} ({what}): {scaled:.2e} scaled, {absolute:.2e} absolute, "
                       f"{time.perf_counter() - t0:.2f} s")  # fmt: skip
-    print(f"largest scaled difference {worst:.2e} (bar {BAR:g})")
+    print(f"largest difference {worst:.2e} (bar {BAR:g})")
     return 0 if worst <= BAR else 1
 
 
