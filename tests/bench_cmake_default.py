@@ -64,7 +64,7 @@ def build(parent: Path, build_type: str | None, out: Path) -> tuple[Path, str]:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=10)
     ap.add_argument("--out", type=Path, default=None, help="default: a temporary directory")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="gyrogen-bench-lib-") as tmp:
