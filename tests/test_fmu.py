@@ -200,6 +200,46 @@ def test_sources_compile_strictly(fmus: dict[str, Path], tmp_path: Path, compile
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
 
 
+DRIVER = Path(__file__).resolve().parent / "consumers" / "fmi2_driver.c"
+MISUSE = {
+    "wrong_guid", "step_before_initialization", "set_nowhere", "exit_refused", "set_refused",
+    "get_nowhere", "unknown_category", "step_nan", "step_backwards", "other_status",
+    "step_after_terminate", "states_too_many", "set_states_too_few", "derivatives_too_many",
+    "fmu_state",
+}  # fmt: skip
+"""What tests/consumers/fmi2_driver.c does wrong: each an fmi2Error (3) with
+a logged line; every other call is fmi2OK (0)."""
+
+
+def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """The FMU's sources and a driver that misuses them, under ASan and
+    UBSan: each misuse an error with its reason logged, never a crash."""
+    with zipfile.ZipFile(fmus["default"]) as zf:
+        zf.extractall(tmp_path)
+    md = fmpy.read_model_description(str(fmus["default"]))
+    p0 = next(v.valueReference for v in md.modelVariables if v.causality == "parameter")
+    sanitize = ["-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
+                "-fno-sanitize-recover=all", "-g"]  # fmt: skip
+    sources = sorted(str(f) for f in (tmp_path / "sources").glob("*.c"))
+    subprocess.run(
+        ["gcc", "-std=c99", *sanitize, f"-I{fmi_headers()}", "-Isources", *sources, str(DRIVER),
+         "-o", "driver", "-lm"], cwd=tmp_path, check=True)  # fmt: skip
+    proc = subprocess.run(
+        [str(tmp_path / "driver"), md.guid, str(p0), str(md.numberOfContinuousStates)],
+        capture_output=True, text=True, check=False)  # fmt: skip
+    assert (proc.returncode, proc.stderr) == (0, "")
+    lines = proc.stdout.splitlines()
+    calls = [(i, *line.split()) for i, line in enumerate(lines) if not line.startswith("log ")]
+    assert len(calls) == 35 and {what for _, what, _ in calls} >= MISUSE
+    for i, what, status in calls:
+        assert status == ("3" if what in MISUSE else "0"), what
+        assert lines[i - 1].startswith("log 3 ") == (what in MISUSE), what
+    refused = "log 3 gyrostat_setup refused the parameters (code 2): "
+    assert refused + abi.message(abi.SETUP_CODES, 2) in lines
+    failed = "log 3 gyrostat_dop853 failed at t = 0.10000000000000001 (code 5): "
+    assert failed + abi.message(abi.ODE_CODES, 5) in lines
+
+
 def test_fmpy_rebuilds_the_binary_from_the_sources(fmus: dict[str, Path], tmp_path: Path) -> None:
     """The sources inside are enough: FMPy's own build (CMake, its headers)
     makes a new binary from them, which runs as the shipped one (other flags:
