@@ -12,8 +12,9 @@ configured three ways side by side:
 - None: a build type with no flags, i.e. `-std=c99 -fPIC` alone, the
   library's flags before issue 15 (the peer).
 
-Each program reports its best of 7 runs of 2e6 calls; the programs run in
-turn for N rounds and the best of each is printed, in ns per rhs call.
+Each program reports its best of 7 runs of 2e6 calls, timed by the
+process's CPU time (the machine is shared); the programs run in turn for N
+rounds and the best of each is printed, in ns per rhs call.
 """
 
 from __future__ import annotations
