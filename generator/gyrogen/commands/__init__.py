@@ -14,4 +14,5 @@ NAMES = (
     "equations",
     "ops",
     "bench_rhs",
+    "sweep",
 )

@@ -1,0 +1,208 @@
+"""One chunk of a sweep: its trajectories integrated by the compiled batch
+integrator (Compiled.integrate_batch) and reduced to one row each.
+
+The trajectories are grouped by their runtime parameters: setup runs once
+per group, and each group is one batch call per sample interval (a
+Monte Carlo over parameters makes groups of one). The sampled metrics look
+at the states at metrics.samples equal intervals of t_end; the integrator
+is restarted at each (every sample is a step end, as in runtime/segment.py).
+
+The columns (one row per trajectory):
+
+- sample, then each swept name: the inputs;
+- setup_code (abi.SETUP_CODES), code (abi.ODE_CODES; -1: not integrated,
+  setup refused the parameters), t: the time reached;
+- stats: the counters of abi.STATS_FIELDS summed over the intervals;
+- final_state: final_<state> for each state (the last good one on failure);
+- max_nutation: the largest angle (rad) between the carrier's axis a2 and
+  the angular momentum H about AB*, from H's A components (I~ omega + J u4
+  a2, physics.body_momentum): 0 for a pure spin about a2, pi/2 when H is
+  transverse; nutation_0 the angle at the start; max_rate: the largest
+  |omega| of the carrier (rad/s);
+- invariant_drift: H_drift, the largest | |H| - |H(0)| | / |H(0)| (|H| is
+  conserved for every torque law: the motor's torque is internal and
+  gravity acts at AB*);
+- time_to: time_to_<quantity>, the first sample time at which the quantity
+  (nutation, rate, or a state) is on the other side of its threshold from
+  where it started (0 if it starts on it; NaN if never).
+
+A failed run's metrics cover the samples it reached.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from gyrogen.analysis.sweep_draws import inputs
+from gyrogen.physics import body_momentum, lumped_inertias
+from gyrogen.runtime.compiled import Compiled, controls
+from gyrogen.runtime.segment import COUNTERS
+from gyrogen.sweep_spec import Spec
+
+NOT_RUN = -1
+"""code of a trajectory whose parameters setup refused."""
+_LUMPED = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
+
+
+def columns(spec: Spec) -> dict[str, np.dtype]:
+    """The name and type of every column a chunk of this sweep has."""
+    keep = spec.sweep.metrics.keep
+    cols: dict[str, np.dtype] = {"sample": np.dtype(np.int64)}
+    cols |= dict.fromkeys(spec.variables, np.dtype(np.float64))
+    cols |= {"setup_code": np.dtype(np.int32), "code": np.dtype(np.int32)}
+    cols["t"] = np.dtype(np.float64)
+    if "stats" in keep:
+        cols |= dict.fromkeys(COUNTERS, np.dtype(np.int64))
+    if "final_state" in keep:
+        cols |= {f"final_{s}": np.dtype(np.float64) for s in spec.scene.states}
+    names = {
+        "max_nutation": ("nutation_0", "max_nutation"),
+        "max_rate": ("max_rate",),
+        "invariant_drift": ("H_drift",),
+    }
+    cols |= {col: np.dtype(np.float64) for key in keep for col in names.get(key, ())}
+    cols |= {f"time_to_{q}": np.dtype(np.float64) for q in spec.sweep.metrics.time_to}
+    return cols
+
+
+def _blank(spec: Spec, n: int) -> dict[str, np.ndarray]:
+    out = {}
+    for name, dtype in columns(spec).items():
+        fill = np.nan if dtype.kind == "f" else 0
+        out[name] = np.full(n, NOT_RUN if name == "code" else fill, dtype=dtype)
+    return out
+
+
+def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np.ndarray]:
+    """The rows of trajectories start..stop-1, as columns."""
+    inp = inputs(spec, start, stop)
+    cols = _blank(spec, len(inp.sample))
+    cols["sample"][:] = inp.sample
+    for name, values in inp.values.items():
+        cols[name][:] = values
+    if inp.p.shape[1]:
+        groups, which = np.unique(inp.p, axis=0, return_inverse=True)
+        which = which.reshape(-1)
+    else:
+        groups, which = np.zeros((1, 0)), np.zeros(len(inp.sample), dtype=np.intp)
+    for g, p in enumerate(groups):
+        rows = np.flatnonzero(which == g)
+        code, c = comp.setup_code(p)
+        cols["setup_code"][rows] = code
+        if code == 0:
+            given = {n: float(v) for n, v in zip(spec.scene.runtime, p, strict=True)}
+            _integrate(comp, spec, c, {**spec.scene.folded(), **given}, inp.x0[rows], rows, cols)
+    return cols
+
+
+class _Watch:
+    """The sampled metrics of a group's trajectories, updated sample by sample."""
+
+    def __init__(self, spec: Spec, values: dict[str, float], x0: np.ndarray) -> None:
+        states = spec.scene.states
+        self.u = [states.index(f"u{i}") for i in range(1, 5)]
+        self.lumped = lumped_inertias(*(values[n] for n in _LUMPED))
+        self.J = values["J"]
+        self.thresholds = spec.sweep.metrics.time_to
+        self.states = states
+        self.nutation, self.rate, self.h0 = self._look(x0)
+        self.nutation_0 = self.nutation.copy()
+        self.drift = np.zeros(len(x0))
+        self.start = {q: self._quantity(q, x0) - thr for q, thr in self.thresholds.items()}
+        self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
+
+    def _momentum(self, x: np.ndarray) -> np.ndarray:
+        u1, u2, u3, u4 = (x[:, i] for i in self.u)
+        return np.array(body_momentum(self.lumped, self.J, u1, u2, u3, u4))
+
+    def _look(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The nutation angle, |omega| and |H| at the states x."""
+        h = self._momentum(x)
+        transverse = np.hypot(h[0], h[2])
+        rate = np.sqrt(np.sum(x[:, self.u[:3]] ** 2, axis=1))
+        return np.arctan2(transverse, h[1]), rate, np.hypot(transverse, h[1])
+
+    def _quantity(self, q: str, x: np.ndarray) -> np.ndarray:
+        if q in ("nutation", "rate"):
+            return self._look(x)[0 if q == "nutation" else 1]
+        return x[:, self.states.index(q)]
+
+    def see(self, t: float, x: np.ndarray, live: np.ndarray) -> None:
+        """The states x[live] at time t."""
+        xs = x[live]
+        nutation, rate, norm = self._look(xs)
+        self.nutation[live] = np.fmax(self.nutation[live], nutation)
+        self.rate[live] = np.fmax(self.rate[live], rate)
+        h0 = self.h0[live]
+        drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
+        self.drift[live] = np.fmax(self.drift[live], drift)
+        for q, thr in self.thresholds.items():
+            crossed = np.sign(self._quantity(q, xs) - thr) != np.sign(self.start[q][live])
+            first = live[crossed & np.isnan(self.time_to[q][live])]
+            self.time_to[q][first] = t
+
+
+def _integrate(
+    comp: Compiled,
+    spec: Spec,
+    c: np.ndarray,
+    values: dict[str, float],
+    x0: np.ndarray,
+    rows: np.ndarray,
+    cols: dict[str, np.ndarray],
+) -> None:
+    """One group (one parameter set) from 0 to t_end, interval by interval;
+    its metrics into cols at rows."""
+    sweep = spec.sweep
+    n_samples = sweep.metrics.points
+    times = np.linspace(0.0, sweep.t_end, n_samples + 1)
+    per_interval = -(-(sweep.steps or 1) // n_samples)
+    given = controls(
+        sweep.method,
+        steps=per_interval,
+        rtol=sweep.rtol,
+        atol=sweep.atol,
+        max_steps=sweep.max_steps,
+    )
+    x, live = x0.copy(), np.arange(len(x0))
+    code, reached = np.zeros(len(x0), dtype=np.int32), np.zeros(len(x0))
+    totals = {name: np.zeros(len(x0), dtype=np.int64) for name in COUNTERS}
+    watch = _Watch(spec, values, x0)
+    for t0, t1 in itertools.pairwise(times):
+        xl, stats, codes = comp.integrate_batch(sweep.method, x[live], c, t0, t1, **given)
+        x[live], reached[live] = xl, stats["t"]
+        for name in COUNTERS:
+            totals[name][live] += stats[name]
+        code[live] = codes
+        live = live[codes == 0]
+        watch.see(float(t1), x, live)
+        if not live.size:
+            break
+    _store(spec, cols, rows, x, code, reached, totals, watch)
+
+
+def _store(
+    spec: Spec,
+    cols: dict[str, np.ndarray],
+    rows: np.ndarray,
+    x: np.ndarray,
+    code: np.ndarray,
+    reached: np.ndarray,
+    totals: dict[str, np.ndarray],
+    watch: _Watch,
+) -> None:
+    cols["code"][rows], cols["t"][rows] = code, reached
+    found = {
+        **{f"final_{s}": x[:, i] for i, s in enumerate(spec.scene.states)},
+        **totals,
+        "nutation_0": watch.nutation_0,
+        "max_nutation": watch.nutation,
+        "max_rate": watch.rate,
+        "H_drift": watch.drift,
+        **{f"time_to_{q}": t for q, t in watch.time_to.items()},
+    }
+    for name, values in found.items():
+        if name in cols:
+            cols[name][rows] = values
