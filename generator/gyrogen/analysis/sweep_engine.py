@@ -20,6 +20,7 @@ import json
 import os
 import re
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -69,7 +70,7 @@ def parquet_bytes(cols: dict[str, Any]) -> bytes:
     import pyarrow.parquet as pq
 
     sink = pa.BufferOutputStream()
-    pq.write_table(pa.table(cols), sink, compression="zstd")
+    pq.write_table(pa.table(cols), sink, compression="snappy")
     return bytes(sink.getvalue().to_pybytes())
 
 
@@ -172,6 +173,8 @@ def run(
     chunk = chunk or spec.sweep.chunk
     make_dir(out)
     done = _claim(out, spec, chunk)
+    if scheduler is None:  # pyarrow's first write loads its codecs: not on the tasks' path
+        threading.Thread(target=parquet_bytes, args=({"warm": [0.0]},), daemon=True).start()
     job = Job(spec, scene_sources(spec.scene), chunk)
     todo = [k for k in range(job.chunks) if k not in done]
     with engine(scheduler, threads) as (client, name, n):

@@ -82,11 +82,7 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
     cols["sample"][:] = inp.sample
     for name, values in inp.values.items():
         cols[name][:] = values
-    if inp.p.shape[1]:
-        groups, which = np.unique(inp.p, axis=0, return_inverse=True)
-        which = which.reshape(-1)
-    else:
-        groups, which = np.zeros((1, 0)), np.zeros(len(inp.sample), dtype=np.intp)
+    groups, which = parameter_sets(inp.p)
     for g, p in enumerate(groups):
         rows = np.flatnonzero(which == g)
         code, c = comp.setup_code(p)
@@ -95,6 +91,14 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
             given = {n: float(v) for n, v in zip(spec.scene.runtime, p, strict=True)}
             _integrate(comp, spec, c, {**spec.scene.folded(), **given}, inp.x0[rows], rows, cols)
     return cols
+
+
+def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of p (n, np), and which of them each row is."""
+    if not p.size or (p == p[0]).all():
+        return p[:1].reshape(1, -1), np.zeros(len(p), dtype=np.intp)
+    groups, which = np.unique(p, axis=0, return_inverse=True)
+    return groups, which.reshape(-1)
 
 
 class _Watch:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,10 +25,12 @@ from gyrogen.abi import UNITS
 from gyrogen.analysis.check_engine import spin_axes, spin_stable
 from gyrogen.analysis.sweep_draws import axis_values
 from gyrogen.analysis.sweep_engine import PARTS, Run
-from gyrogen.analysis.sweep_plots import MapData, histograms_png, map_png
 from gyrogen.files import write_atomic
 from gyrogen.physics import lumped_inertias
 from gyrogen.sweep_spec import Spec
+
+if TYPE_CHECKING:
+    from gyrogen.analysis.sweep_plots import MapData
 
 HISTOGRAMS = ("max_nutation", "max_rate", "H_drift", "rhs_calls")
 """Metric columns shown as histograms (with every time_to_ column)."""
@@ -191,6 +193,8 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     data = summary(spec, record, columns)
     files: dict[str, str | bytes] = {"summary.md": markdown(data)}
     if plots:
+        from gyrogen.analysis.sweep_plots import histograms_png, map_png  # matplotlib
+
         shown = {c: read(record.out, [c])[c] for c in metric_columns(spec, columns)}
         files["histograms.png"] = histograms_png(f"sweep {spec.name}", shown)
         if (grid := map_data(spec, record.out, columns)) is not None:
@@ -205,6 +209,8 @@ def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
     """A 2-D product grid's map of its first metric (the median over the
     draws of each cell), with NOTES.md's boundary when the sweep has the
     spin criterion; None for other sweeps."""
+    from gyrogen.analysis.sweep_plots import MapData
+
     sweep = spec.sweep
     metric = next((c for c in HISTOGRAMS if c in columns), None)
     if len(sweep.grid) != 2 or sweep.combine != "product" or metric is None:

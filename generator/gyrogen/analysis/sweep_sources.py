@@ -1,8 +1,8 @@
 """A sweep's generated sources, on the client and on the workers.
 
 The client renders the scene's sources in memory (kept in the build cache
-under sources/, keyed by the build id and a digest of gyrogen's own code and
-templates, so a rerun skips the derivation) and ships them to the workers
+under sources/, keyed by the scene, the sympy version and a digest of
+gyrogen's own code and templates, so a rerun skips the derivation) and ships them to the workers
 through the task graph: a worker needs gyrogen installed, not a checkout or
 a shared file system. A worker process writes them once into its build
 cache and builds them there (runtime/build.py: a cache hit costs nothing),
@@ -19,11 +19,10 @@ import tempfile
 import threading
 from dataclasses import dataclass
 from functools import cache
+from importlib.metadata import version
 from pathlib import Path
 
 import gyrogen
-from gyrogen.codegen.context import build_id
-from gyrogen.codegen.generate import render_all, unit_of
 from gyrogen.runtime.build import build
 from gyrogen.runtime.cache import cache_dir
 from gyrogen.runtime.compiled import Compiled, Language
@@ -52,17 +51,24 @@ def _code_digest() -> str:
 
 
 def scene_sources(scene: Scene) -> Sources:
-    """The scene's rendered sources (C when it has a C target, else Fortran)."""
+    """The scene's rendered sources (C when it has a C target, else Fortran):
+    from the cache when this gyrogen and sympy rendered them before (then
+    sympy is not even imported), else derived and rendered, and kept."""
     language: Language = "c" if "c" in scene.targets else "fortran"
-    bid = build_id(scene)
-    stored = cache_dir() / "sources" / f"{bid}-{_code_digest()}.json"
+    text = json.dumps([scene.model_dump(mode="json"), _code_digest(), version("sympy")])
+    key = hashlib.sha256(text.encode()).hexdigest()[:24]
+    stored = cache_dir() / "sources" / f"{key}.json"
     try:
-        return Sources(bid, language, json.loads(stored.read_text(encoding="utf-8")))
-    except (OSError, ValueError):
+        held = json.loads(stored.read_text(encoding="utf-8"))
+        return Sources(str(held["build_id"]), language, dict(held["files"]))
+    except (OSError, ValueError, KeyError, TypeError):
         pass
+    from gyrogen.codegen.context import build_id  # sympy: only when rendering
+    from gyrogen.codegen.generate import render_all, unit_of
+
     files = render_all(unit_of(scene))
-    _store(stored, json.dumps(files))
-    return Sources(bid, language, files)
+    _store(stored, json.dumps({"build_id": build_id(scene), "files": files}))
+    return Sources(build_id(scene), language, files)
 
 
 def _store(path: Path, text: str) -> None:

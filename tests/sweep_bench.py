@@ -1,0 +1,162 @@
+"""`make sweep-bench`: the sweep's figures on this machine, printed.
+
+- the error of the chosen tolerance: the worst scaled error (workprec's)
+  of 300 trajectories' final states against DOP853 at 1e-13;
+- the bare batch compute: Compiled.integrate_batch on the same start states
+  in chunks, on 1 and on 2 threads (the peer: no Dask, no metrics, no files);
+- end to end: `gyrogen sweep` as a user runs it (a new process, Parquet,
+  summary and figures) with --workers 1 and 2, interleaved, best of
+  --repeats; the overhead beyond the bare compute on as many threads;
+- the scheduler's rate for empty tasks (the cluster estimate's input);
+- with --memory N: the peak RSS of a sweep of N trajectories (/usr/bin/time -v).
+
+    python tests/sweep_bench.py --trajectories 1000000 --memory 10000000
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from gyrogen import api
+from gyrogen.analysis.sweep_draws import inputs
+from gyrogen.oracle.compare import scaled_error
+
+GYROGEN = str(Path(sys.executable).with_name("gyrogen"))
+SWEEP = """# make sweep-bench: Monte Carlo over the default scene's initial rates
+scene = "gyrostat"
+method = "dop853"
+t_end = 10.0
+rtol = {tol}
+atol = {tol}
+chunk = {chunk}
+[draws]
+seed = 1
+count = {count}
+u1 = {{ uniform = [-0.3, 0.3] }}
+u3 = {{ uniform = [-0.3, 0.3] }}
+u4 = {{ normal = [50.0, 5.0] }}
+[metrics]
+keep = ["final_state", "stats"]
+"""
+
+
+def error_of(spec: api.Spec, tol: float) -> float:
+    model = api.compile(spec.scene)
+    inp = inputs(spec, 0, 300)
+    c = model.setup(inp.p[0])
+    ref, _, _ = model.integrate_batch("dop853", inp.x0, c, 0.0, 10.0, rtol=1e-13, atol=1e-13)
+    x, _, codes = model.integrate_batch("dop853", inp.x0, c, 0.0, 10.0, rtol=tol, atol=tol)
+    assert not codes.any()
+    return max(scaled_error(a, b) for a, b in zip(x, ref, strict=True))
+
+
+def bare(spec: api.Spec, tol: float, threads: int, chunk: int) -> float:
+    """Seconds for integrate_batch over every start state, chunk by chunk."""
+    model = api.compile(spec.scene)
+    starts = [inputs(spec, a, min(spec.size, a + chunk)) for a in range(0, spec.size, chunk)]
+    c = model.setup(starts[0].p[0])
+
+    def one(k: int) -> None:
+        model.integrate_batch("dop853", starts[k].x0, c, 0.0, 10.0, rtol=tol, atol=tol)
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(threads) as pool:
+        list(pool.map(one, range(len(starts))))
+    return time.perf_counter() - t0
+
+
+def end_to_end(sweep_file: Path, out: Path, workers: int) -> tuple[float, dict]:
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [GYROGEN, "sweep", str(sweep_file), "--out", str(out), "--quiet"]
+    t0 = time.perf_counter()
+    subprocess.run([*cmd, "--workers", str(workers)], check=True, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    return wall, json.loads((out / "summary.json").read_text())
+
+
+def scheduler_rate(tasks: int) -> float:
+    """Empty tasks per second through a local dask.distributed scheduler."""
+    from distributed import Client, LocalCluster
+
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                     dashboard_address=None) as cluster,
+        Client(cluster) as client,
+    ):  # fmt: skip
+        client.gather(client.map(abs, range(100)))
+        t0 = time.perf_counter()
+        client.gather(client.map(abs, range(1, tasks + 1)))
+        return tasks / (time.perf_counter() - t0)
+
+
+def peak_rss(sweep_file: Path, out: Path) -> tuple[float, float]:
+    """(max RSS in MB, wall seconds) of a sweep under /usr/bin/time -v."""
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = ["/usr/bin/time", "-v", GYROGEN, "sweep", str(sweep_file), "--out", str(out), "--quiet"]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
+    return kb / 1024, wall
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--trajectories", type=int, default=10**6)
+    ap.add_argument("--tol", type=float, default=1e-9)
+    ap.add_argument("--chunk", type=int, default=20_000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--memory", type=int, default=0, help="trajectories of the memory run")
+    args = ap.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="sweep-bench-"))
+    text = SWEEP.format(tol=args.tol, chunk=args.chunk, count=args.trajectories)
+    sweep_file = work / "bench.toml"
+    sweep_file.write_text(text)
+    spec = api.load_sweep(text, "bench")
+    print(f"load: {os.getloadavg()}  cores: {os.cpu_count()}")
+    print(f"error at rtol = atol = {args.tol:g}: {error_of(spec, args.tol):.3g} (300 trajectories)")
+    bare_s = {
+        n: min(bare(spec, args.tol, n, args.chunk) for _ in range(args.repeats)) for n in (1, 2)
+    }
+    for n, s in bare_s.items():
+        print(f"bare integrate_batch, {n} thread(s): {s:.2f} s ({s / spec.size * 1e6:.2f} us/traj)")
+    runs: dict[int, list[tuple[float, dict]]] = {1: [], 2: []}
+    for _ in range(args.repeats):
+        for n in (2, 1):
+            runs[n].append(end_to_end(sweep_file, work / f"e2e-{n}", n))
+    for n, got in runs.items():
+        wall, summary = min(got, key=lambda r: r[0])
+        run = summary["run"]
+        every = ", ".join(f"{w:.2f}" for w, _ in got)
+        print(
+            f"end to end, --workers {n}: {wall:.2f} s (all: {every})"
+            f"; start-up {run['startup_s']:.2f} s, compute {run['wall_s']:.2f} s, tasks "
+            f"{run['chunks_computed']} x {run['task_s_mean']:.3f} s, busy {run['busy_share']:.3f}"
+            f"; overhead beyond bare ({n} thread(s)): {100 * (wall / bare_s[n] - 1):.1f}%"
+        )
+    best = {n: min(w for w, _ in got) for n, got in runs.items()}
+    print(f"scaling 1 -> 2 workers (end to end): {best[1] / best[2]:.2f}x")
+    parts = sum(p.stat().st_size for p in (work / "e2e-2" / "parts").iterdir())
+    print(f"Parquet: {parts / spec.size:.1f} bytes per trajectory ({parts / 1e6:.1f} MB)")
+    print(f"scheduler: {scheduler_rate(5000):,.0f} empty tasks per second (local, 2 processes)")
+    if args.memory:
+        big = work / "memory.toml"
+        big.write_text(SWEEP.format(tol=args.tol, chunk=args.chunk, count=args.memory))
+        mb, wall = peak_rss(big, work / "memory")
+        print(f"peak RSS, {args.memory:,} trajectories: {mb:.0f} MB ({wall:.1f} s)")
+    print(f"load: {os.getloadavg()}")
+    shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
