@@ -90,7 +90,7 @@ def scheduler_rate(tasks: int) -> float:
 
     with (
         LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                     dashboard_address=None) as cluster,
+                     dashboard_address=":0") as cluster,
         Client(cluster) as client,
     ):  # fmt: skip
         client.gather(client.map(abs, range(100)))

@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import socket
 import sys
 import threading
 import time
@@ -36,7 +37,8 @@ from gyrogen.sweep_spec import Spec
 
 PARTS = "parts"
 STATE_FILE = "sweep.json"
-CONNECT_TIMEOUT = "10s"
+CONNECT_TIMEOUT = 10.0
+"""Seconds to reach the scheduler."""
 _PART = re.compile(r"part-(\d+)\.parquet")
 
 
@@ -141,16 +143,19 @@ def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, st
         n = threads or os.cpu_count() or 1
         with (
             LocalCluster(
-                n_workers=1, threads_per_worker=n, processes=False, dashboard_address=None
+                n_workers=1, threads_per_worker=n, processes=False, dashboard_address=":0"
             ) as cluster,
             Client(cluster) as client,
         ):
             yield client, f"local ({n} threads)", n
         return
+    host, port = scheduler.removeprefix("tcp://").rsplit(":", 1)
     try:
+        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT).close()
         client = Client(scheduler, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {exc}") from exc
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {why}") from exc
     with client:
         workers = client.scheduler_info(n_workers=-1)["workers"].values()
         n = sum(int(w.get("nthreads", 1)) for w in workers)

@@ -2,8 +2,9 @@
 integrator (Compiled.integrate_batch) and reduced to one row each.
 
 The trajectories are grouped by their runtime parameters: setup runs once
-per group, and each group is one batch call per sample interval (a
-Monte Carlo over parameters makes groups of one). The sampled metrics look
+per parameter set, and each set is one batch call per sample interval (a
+Monte Carlo over parameters makes sets of one: a call per trajectory and
+interval, ~6 us each). The sampled metrics look
 at the states at metrics.samples equal intervals of t_end; the integrator
 is restarted at each (every sample is a step end, as in runtime/segment.py).
 
@@ -32,6 +33,8 @@ A failed run's metrics cover the samples it reached.
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -83,13 +86,15 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
     for name, values in inp.values.items():
         cols[name][:] = values
     groups, which = parameter_sets(inp.p)
-    for g, p in enumerate(groups):
-        rows = np.flatnonzero(which == g)
-        code, c = comp.setup_code(p)
-        cols["setup_code"][rows] = code
-        if code == 0:
-            given = {n: float(v) for n, v in zip(spec.scene.runtime, p, strict=True)}
-            _integrate(comp, spec, c, {**spec.scene.folded(), **given}, inp.x0[rows], rows, cols)
+    setups = [comp.setup_code(p) for p in groups]
+    cols["setup_code"][:] = [setups[g][0] for g in which]
+    ran = np.flatnonzero(cols["setup_code"] == 0)
+    if ran.size:
+        members = [np.flatnonzero(which[ran] == g) for g in range(len(groups))]
+        batches = [(c, m) for (code, c), m in zip(setups, members, strict=True) if code == 0]
+        runtime = dict(zip(spec.scene.runtime, inp.p[ran].T, strict=True))
+        known = {**spec.scene.folded(), **runtime}
+        _store(spec, cols, ran, _integrate(comp, spec, batches, known, inp.x0[ran]))
     return cols
 
 
@@ -102,9 +107,10 @@ def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Watch:
-    """The sampled metrics of a group's trajectories, updated sample by sample."""
+    """The sampled metrics of a chunk's trajectories, updated sample by
+    sample; values: each parameter, a number or one per trajectory."""
 
-    def __init__(self, spec: Spec, values: dict[str, float], x0: np.ndarray) -> None:
+    def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray) -> None:
         states = spec.scene.states
         self.u = [states.index(f"u{i}") for i in range(1, 5)]
         self.lumped = lumped_inertias(*(values[n] for n in _LUMPED))
@@ -148,59 +154,64 @@ class _Watch:
             self.time_to[q][first] = t
 
 
+@dataclass
+class _Runs:
+    """The trajectories setup accepted, run so far."""
+
+    x: np.ndarray
+    code: np.ndarray
+    reached: np.ndarray
+    totals: dict[str, np.ndarray]
+    watch: _Watch
+
+
 def _integrate(
     comp: Compiled,
     spec: Spec,
-    c: np.ndarray,
-    values: dict[str, float],
+    batches: list[tuple[np.ndarray, np.ndarray]],
+    values: dict[str, Any],
     x0: np.ndarray,
-    rows: np.ndarray,
-    cols: dict[str, np.ndarray],
-) -> None:
-    """One group (one parameter set) from 0 to t_end, interval by interval;
-    its metrics into cols at rows."""
+) -> _Runs:
+    """Every trajectory from 0 to t_end, interval by interval: each
+    parameter set's (constants c, rows) live rows in one batch call, then
+    the metrics of all rows at the interval's end in one look."""
     sweep = spec.sweep
     n_samples = sweep.metrics.points
     times = np.linspace(0.0, sweep.t_end, n_samples + 1)
     per_interval = -(-(sweep.steps or 1) // n_samples)
     given = controls(
-        sweep.method,
-        steps=per_interval,
-        rtol=sweep.rtol,
-        atol=sweep.atol,
+        sweep.method, steps=per_interval, rtol=sweep.rtol, atol=sweep.atol,
         max_steps=sweep.max_steps,
-    )
-    x, live = x0.copy(), np.arange(len(x0))
-    code, reached = np.zeros(len(x0), dtype=np.int32), np.zeros(len(x0))
-    totals = {name: np.zeros(len(x0), dtype=np.int64) for name in COUNTERS}
-    watch = _Watch(spec, values, x0)
+    )  # fmt: skip
+    n = len(x0)
+    runs = _Runs(
+        x0.copy(), np.zeros(n, dtype=np.int32), np.zeros(n),
+        {name: np.zeros(n, dtype=np.int64) for name in COUNTERS}, _Watch(spec, values, x0),
+    )  # fmt: skip
+    alive = np.ones(n, dtype=bool)
     for t0, t1 in itertools.pairwise(times):
-        xl, stats, codes = comp.integrate_batch(sweep.method, x[live], c, t0, t1, **given)
-        x[live], reached[live] = xl, stats["t"]
-        for name in COUNTERS:
-            totals[name][live] += stats[name]
-        code[live] = codes
-        live = live[codes == 0]
-        watch.see(float(t1), x, live)
-        if not live.size:
+        for c, rows in batches:
+            live = rows[alive[rows]]
+            if not live.size:
+                continue
+            xl, stats, codes = comp.integrate_batch(sweep.method, runs.x[live], c, t0, t1, **given)
+            runs.x[live], runs.reached[live], runs.code[live] = xl, stats["t"], codes
+            for name in COUNTERS:
+                runs.totals[name][live] += stats[name]
+        alive &= runs.code == 0
+        if not alive.any():
             break
-    _store(spec, cols, rows, x, code, reached, totals, watch)
+        runs.watch.see(float(t1), runs.x, np.flatnonzero(alive))
+    return runs
 
 
-def _store(
-    spec: Spec,
-    cols: dict[str, np.ndarray],
-    rows: np.ndarray,
-    x: np.ndarray,
-    code: np.ndarray,
-    reached: np.ndarray,
-    totals: dict[str, np.ndarray],
-    watch: _Watch,
-) -> None:
-    cols["code"][rows], cols["t"][rows] = code, reached
+def _store(spec: Spec, cols: dict[str, np.ndarray], rows: np.ndarray, runs: _Runs) -> None:
+    watch = runs.watch
     found = {
-        **{f"final_{s}": x[:, i] for i, s in enumerate(spec.scene.states)},
-        **totals,
+        "code": runs.code,
+        "t": runs.reached,
+        **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},
+        **runs.totals,
         "nutation_0": watch.nutation_0,
         "max_nutation": watch.nutation,
         "max_rate": watch.rate,

@@ -218,6 +218,8 @@ def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
     (y_name, y_axis), (x_name, x_axis) = sweep.grid.items()
     y, x = axis_values(y_axis), axis_values(x_axis)
     z = read(out, [metric])[metric].reshape(len(y), len(x), sweep.count)
+    ys, xs = np.argsort(y, kind="stable"), np.argsort(x, kind="stable")  # listed in any order
+    y, x, z = y[ys], x[xs], z[ys][:, xs]
     x_label, y_label = (f"{n} ({UNITS[n][0]})" if n in UNITS else n for n in (x_name, y_name))
     data = MapData(
         f"sweep {spec.name}: {metric}", x_label, x, y_label, y, metric, np.median(z, axis=2)
