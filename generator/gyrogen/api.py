@@ -98,7 +98,7 @@ def read(out: str | Path) -> pd.DataFrame:
     """The rows of the sweep in out, in sample order."""
     import pandas as pd
 
-    from gyrogen.analysis.sweep_engine import PARTS
+    from gyrogen.analysis.sweep_columns import PARTS
 
     frame = pd.read_parquet(Path(out) / PARTS)
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)

@@ -29,13 +29,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gyrogen.analysis.sweep_columns import PARTS
 from gyrogen.analysis.sweep_metrics import run_chunk
 from gyrogen.analysis.sweep_sources import Sources, compiled, scene_sources
 from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
 from gyrogen.sweep_spec import Spec
 
-PARTS = "parts"
 STATE_FILE = "sweep.json"
 CONNECT_TIMEOUT = 10.0
 """Seconds to reach the scheduler."""

@@ -14,35 +14,26 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from gyrogen.analysis.plots import png_bytes
+from gyrogen.analysis.sweep_columns import Histogram, log_scale
 
-BINS = 50
 Scale = Callable[[Any], Any]
-LOG_SPAN = 100.0
-"""A positive metric spanning more than this factor is shown on a log scale."""
 
 
-def _log_scale(values: np.ndarray) -> bool:
-    return bool(values.size and values.min() > 0 and values.max() > LOG_SPAN * values.min())
-
-
-def histograms_png(title: str, columns: dict[str, np.ndarray]) -> bytes:
-    """One panel per column (its finite values), log-binned when it spans
-    decades."""
-    n = max(1, len(columns))
+def histograms_png(title: str, histograms: dict[str, Histogram]) -> bytes:
+    """One panel per histogram, on a log axis when it was binned so."""
+    n = max(1, len(histograms))
     cols = min(3, n)
     rows = -(-n // cols)
     fig = Figure(figsize=(4.5 * cols, 3.2 * rows), dpi=100, layout="constrained")
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
-    for ax, (name, values) in zip(axes, columns.items(), strict=False):
-        finite = values[np.isfinite(values)]
-        if _log_scale(finite):
-            ax.hist(finite, bins=np.logspace(np.log10(finite.min()), np.log10(finite.max()), BINS))
+    for ax, (name, h) in zip(axes, histograms.items(), strict=False):
+        if h.counts.size:
+            ax.stairs(h.counts, h.edges, fill=True)
+        if h.log:
             ax.set_xscale("log")
-        else:
-            ax.hist(finite, bins=BINS)
-        ax.set(title=f"{name} ({finite.size:,} finite of {values.size:,})", ylabel="trajectories")
+        ax.set(title=f"{name} ({h.finite:,} finite of {h.total:,})", ylabel="trajectories")
         ax.grid(True, alpha=0.3)
-    for ax in axes[len(columns) :]:
+    for ax in axes[len(histograms) :]:
         ax.axis("off")
     fig.suptitle(title)
     return png_bytes(fig)
@@ -70,7 +61,7 @@ def map_png(data: MapData) -> bytes:
     fig = Figure(figsize=(9.0, 7.0), dpi=100, layout="constrained")
     ax = fig.subplots()
     finite = data.z[np.isfinite(data.z)]
-    norm = LogNorm(finite.min(), finite.max()) if _log_scale(finite) else None
+    norm = LogNorm(finite.min(), finite.max()) if log_scale(finite.min(), finite.max()) else None
     mesh = ax.pcolormesh(data.x, data.y, data.z, shading="nearest", norm=norm, cmap="viridis")
     fig.colorbar(mesh, ax=ax, label=data.z_name)
     if data.boundary is not None:

@@ -2,8 +2,7 @@
 summary.md (the run's figures, return codes, each metric's spread, the
 criterion's agreement share), histograms.png and, for a 2-D grid, map.png.
 
-The parts are read back a few columns at a time, so a sweep of 10^7
-trajectories is summarized in ~100 MB, not all of its rows at once.
+The parts are read back one column at a time (analysis/sweep_columns.py).
 
 The spin-stability criterion (NOTES.md, analysis/check_engine.spin_axes):
 a trajectory is observed unstable when its max nutation angle exceeds
@@ -23,8 +22,16 @@ import numpy as np
 
 from gyrogen.abi import UNITS
 from gyrogen.analysis.check_engine import spin_axes, spin_stable
+from gyrogen.analysis.sweep_columns import (
+    Histogram,
+    column,
+    counts,
+    in_order,
+    part_files,
+    spread,
+)
 from gyrogen.analysis.sweep_draws import axis_values
-from gyrogen.analysis.sweep_engine import PARTS, Run
+from gyrogen.analysis.sweep_engine import Run
 from gyrogen.files import write_atomic
 from gyrogen.physics import lumped_inertias
 from gyrogen.sweep_spec import Spec
@@ -36,29 +43,6 @@ HISTOGRAMS = ("max_nutation", "max_rate", "H_drift", "rhs_calls")
 """Metric columns shown as histograms (with every time_to_ column)."""
 SPIN_NAMES = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J", "l1", "l3", "u2", "u4")
 MESH = 200
-
-
-def read(out: Path, names: list[str]) -> dict[str, np.ndarray]:
-    """Columns of the sweep in out, in sample order."""
-    import pyarrow.parquet as pq
-
-    table = pq.read_table(out / PARTS, columns=sorted({"sample", *names}))
-    order = np.argsort(table.column("sample").to_numpy(), kind="stable")
-    return {n: table.column(n).to_numpy()[order] for n in names}
-
-
-def spread(values: np.ndarray) -> dict[str, float | int]:
-    finite = values[np.isfinite(values)]
-    out: dict[str, float | int] = {"finite": int(finite.size)}
-    if finite.size:
-        q = np.quantile(finite, [0.0, 0.5, 0.99, 1.0])
-        out |= {"min": q[0], "median": q[1], "p99": q[2], "max": q[3], "mean": finite.mean()}
-    return {k: float(v) if isinstance(v, np.floating) else v for k, v in out.items()}
-
-
-def _counts(values: np.ndarray) -> dict[str, int]:
-    keys, counts = np.unique(values, return_counts=True)
-    return {str(int(k)): int(c) for k, c in zip(keys, counts, strict=True)}
 
 
 def spin_values(spec: Spec, data: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -73,7 +57,7 @@ def spin_agreement(spec: Spec, out: Path) -> dict[str, Any]:
     crit = spec.sweep.criterion.spin_stability
     assert crit is not None
     swept = [n for n in SPIN_NAMES if n in spec.variables]
-    data = read(out, [*swept, "code", "nutation_0", "max_nutation"])
+    data = in_order(out, [*swept, "code", "nutation_0", "max_nutation"])
     v = spin_values(spec, data)
     omega = np.broadcast_to(v["u2"], data["code"].shape)
     spinning = omega != 0
@@ -125,9 +109,11 @@ def metric_columns(spec: Spec, columns: list[str]) -> list[str]:
     return [c for c in wanted if c in columns]
 
 
-def summary(spec: Spec, record: Run, columns: list[str]) -> dict[str, Any]:
+def summary(
+    spec: Spec, record: Run, shown: list[str]
+) -> tuple[dict[str, Any], dict[str, Histogram]]:
+    """The summary's data, and the histograms of the metric columns shown."""
     out, sweep = record.out, spec.sweep
-    codes = read(out, ["setup_code", "code"])
     data: dict[str, Any] = {
         "sweep": spec.name,
         "scene": spec.scene.name,
@@ -141,13 +127,16 @@ def summary(spec: Spec, record: Run, columns: list[str]) -> dict[str, Any]:
         "chunk": record.job.chunk,
         "chunks": record.job.chunks,
         "run": timing(record),
-        "setup_codes": _counts(codes["setup_code"]),
-        "integrator_codes": _counts(codes["code"]),
-        "metrics": {c: spread(read(out, [c])[c]) for c in metric_columns(spec, columns)},
+        "setup_codes": counts(out, "setup_code"),
+        "integrator_codes": counts(out, "code"),
+        "metrics": {},
     }
+    histograms = {}
+    for name in shown:  # one column in memory at a time
+        data["metrics"][name], histograms[name] = spread(column(out, name))
     if sweep.criterion.spin_stability is not None:
         data["spin_stability"] = spin_agreement(spec, out)
-    return data
+    return data, histograms
 
 
 def markdown(data: dict[str, Any]) -> str:
@@ -189,14 +178,13 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     """summary.json, summary.md and the figures into the sweep's directory."""
     import pyarrow.parquet as pq
 
-    columns = list(pq.read_schema(next((record.out / PARTS).glob("part-*.parquet"))).names)
-    data = summary(spec, record, columns)
+    columns = list(pq.read_schema(part_files(record.out)[0]).names)
+    data, histograms = summary(spec, record, metric_columns(spec, columns))
     files: dict[str, str | bytes] = {"summary.md": markdown(data)}
     if plots:
         from gyrogen.analysis.sweep_plots import histograms_png, map_png  # matplotlib
 
-        shown = {c: read(record.out, [c])[c] for c in metric_columns(spec, columns)}
-        files["histograms.png"] = histograms_png(f"sweep {spec.name}", shown)
+        files["histograms.png"] = histograms_png(f"sweep {spec.name}", histograms)
         if (grid := map_data(spec, record.out, columns)) is not None:
             files["map.png"] = map_png(grid)
     data["files"] = ["summary.json", *files]
@@ -217,7 +205,7 @@ def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
         return None
     (y_name, y_axis), (x_name, x_axis) = sweep.grid.items()
     y, x = axis_values(y_axis), axis_values(x_axis)
-    z = read(out, [metric])[metric].reshape(len(y), len(x), sweep.count)
+    z = in_order(out, [metric])[metric].reshape(len(y), len(x), sweep.count)
     ys, xs = np.argsort(y, kind="stable"), np.argsort(x, kind="stable")  # listed in any order
     y, x, z = y[ys], x[xs], z[ys][:, xs]
     x_label, y_label = (f"{n} ({UNITS[n][0]})" if n in UNITS else n for n in (x_name, y_name))
