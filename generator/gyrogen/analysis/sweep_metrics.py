@@ -42,7 +42,7 @@ from gyrogen.analysis.sweep_draws import inputs
 from gyrogen.physics import body_momentum, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.segment import COUNTERS
-from gyrogen.sweep_spec import Spec
+from gyrogen.sweep_spec import SAMPLED, Spec
 
 NOT_RUN = -1
 """code of a trajectory whose parameters setup refused."""
@@ -162,7 +162,8 @@ class _Runs:
     code: np.ndarray
     reached: np.ndarray
     totals: dict[str, np.ndarray]
-    watch: _Watch
+    watch: _Watch | None
+    """None when the sweep keeps no sampled metric: nothing to look at."""
 
 
 def _integrate(
@@ -186,7 +187,8 @@ def _integrate(
     n = len(x0)
     runs = _Runs(
         x0.copy(), np.zeros(n, dtype=np.int32), np.zeros(n),
-        {name: np.zeros(n, dtype=np.int64) for name in COUNTERS}, _Watch(spec, values, x0),
+        {name: np.zeros(n, dtype=np.int64) for name in COUNTERS},
+        _Watch(spec, values, x0) if set(sweep.metrics.keep) & set(SAMPLED) else None,
     )  # fmt: skip
     alive = np.ones(n, dtype=bool)
     for t0, t1 in itertools.pairwise(times):
@@ -201,7 +203,8 @@ def _integrate(
         alive &= runs.code == 0
         if not alive.any():
             break
-        runs.watch.see(float(t1), runs.x, np.flatnonzero(alive))
+        if runs.watch is not None:
+            runs.watch.see(float(t1), runs.x, np.flatnonzero(alive))
     return runs
 
 
@@ -212,12 +215,15 @@ def _store(spec: Spec, cols: dict[str, np.ndarray], rows: np.ndarray, runs: _Run
         "t": runs.reached,
         **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},
         **runs.totals,
-        "nutation_0": watch.nutation_0,
-        "max_nutation": watch.nutation,
-        "max_rate": watch.rate,
-        "H_drift": watch.drift,
-        **{f"time_to_{q}": t for q, t in watch.time_to.items()},
     }
+    if watch is not None:
+        found |= {
+            "nutation_0": watch.nutation_0,
+            "max_nutation": watch.nutation,
+            "max_rate": watch.rate,
+            "H_drift": watch.drift,
+            **{f"time_to_{q}": t for q, t in watch.time_to.items()},
+        }
     for name, values in found.items():
         if name in cols:
             cols[name][rows] = values
