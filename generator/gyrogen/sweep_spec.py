@@ -14,7 +14,7 @@ metrics to keep; validated like scenes (one line, exit 2, nothing written).
     [draws]                       # seed, count, NAME = { uniform | normal | lognormal = [a, b],
                                   #   truncate = [lo, hi] }
     [metrics]                     # keep = [...], samples, time_to = { QUANTITY = threshold }
-    [criterion]                   # spin_stability = { unstable_above = rad, band = 0.05 }
+    [criterion]                   # spin_stability = { grows_by = 10.0, band = 0.05 }
 
 Trajectory i is grid point i // count with draw i % count; its draws are a
 function of (seed, i) alone (analysis/sweep_draws.py).
