@@ -72,7 +72,9 @@ def parquet_bytes(cols: dict[str, Any]) -> bytes:
     import pyarrow.parquet as pq
 
     sink = pa.BufferOutputStream()
-    pq.write_table(pa.table(cols), sink, compression="snappy")
+    # no dictionaries: a sweep's columns are mostly distinct doubles, whose
+    # dictionary pyarrow builds and then drops (4x the time, 12% larger)
+    pq.write_table(pa.table(cols), sink, compression="snappy", use_dictionary=False)
     return bytes(sink.getvalue().to_pybytes())
 
 
