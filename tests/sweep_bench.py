@@ -126,15 +126,17 @@ def main() -> None:
     spec = api.load_sweep(text, "bench")
     print(f"load: {os.getloadavg()}  cores: {os.cpu_count()}")
     print(f"error at rtol = atol = {args.tol:g}: {error_of(spec, args.tol):.3g} (300 trajectories)")
-    bare_s = {
-        n: min(bare(spec, args.tol, n, args.chunk) for _ in range(args.repeats)) for n in (1, 2)
-    }
-    for n, s in bare_s.items():
-        print(f"bare integrate_batch, {n} thread(s): {s:.2f} s ({s / spec.size * 1e6:.2f} us/traj)")
+    bares: dict[int, list[float]] = {1: [], 2: []}
     runs: dict[int, list[tuple[float, dict]]] = {1: [], 2: []}
-    for _ in range(args.repeats):
+    for _ in range(args.repeats):  # interleaved: each repeat sees the same load
         for n in (2, 1):
+            bares[n].append(bare(spec, args.tol, n, args.chunk))
             runs[n].append(end_to_end(sweep_file, work / f"e2e-{n}", n))
+    bare_s = {n: min(got) for n, got in bares.items()}
+    for n, s in bare_s.items():
+        every = ", ".join(f"{w:.2f}" for w in bares[n])
+        print(f"bare integrate_batch, {n} thread(s): {s:.2f} s ({s / spec.size * 1e6:.2f} us/traj)"
+              f" (all: {every})")  # fmt: skip
     for n, got in runs.items():
         wall, summary = min(got, key=lambda r: r[0])
         run = summary["run"]
@@ -146,7 +148,8 @@ def main() -> None:
             f"; overhead beyond bare ({n} thread(s)): {100 * (wall / bare_s[n] - 1):.1f}%"
         )
     best = {n: min(w for w, _ in got) for n, got in runs.items()}
-    print(f"scaling 1 -> 2 workers (end to end): {best[1] / best[2]:.2f}x")
+    print(f"scaling 1 -> 2 workers (end to end): {best[1] / best[2]:.2f}x"
+          f"; bare: {bare_s[1] / bare_s[2]:.2f}x")  # fmt: skip
     parts = sum(p.stat().st_size for p in (work / "e2e-2" / "parts").iterdir())
     print(f"Parquet: {parts / spec.size:.1f} bytes per trajectory ({parts / 1e6:.1f} MB)")
     print(f"scheduler: {scheduler_rate(5000):,.0f} empty tasks per second (local, 2 processes)")

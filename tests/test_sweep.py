@@ -24,10 +24,10 @@ from gyrogen.sweep_spec import load
 
 @pytest.fixture(scope="module")
 def cache(cache_dir: Path) -> Iterator[None]:
-    mp = pytest.MonkeyPatch()
-    mp.setenv("GYROGEN_CACHE", str(cache_dir))
-    yield
-    mp.undo()
+    """The session's build cache for this module's runs."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("GYROGEN_CACHE", str(cache_dir))
+        yield
 
 
 @pytest.fixture(scope="module")
