@@ -20,6 +20,7 @@ import json
 import logging
 import os
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -27,6 +28,7 @@ import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 from gyrogen import api
 from gyrogen.analysis.sweep_draws import inputs
@@ -61,8 +63,20 @@ def error_of(spec: api.Spec, tol: float) -> float:
     return max(scaled_error(a, b) for a, b in zip(x, ref, strict=True))
 
 
-def bare(spec: api.Spec, tol: float, threads: int, chunk: int) -> float:
-    """Seconds for integrate_batch over every start state, chunk by chunk."""
+class Timed(NamedTuple):
+    wall: float
+    cpu: float
+    """CPU seconds (user + system) of every thread: what the load of the
+    machine's other users changes least."""
+    summary: dict
+
+
+def wall_of(timed: Timed) -> float:
+    return timed.wall
+
+
+def bare(spec: api.Spec, tol: float, threads: int, chunk: int) -> Timed:
+    """integrate_batch over every start state, chunk by chunk."""
     model = api.compile(spec.scene)
     starts = [inputs(spec, a, min(spec.size, a + chunk)) for a in range(0, spec.size, chunk)]
     c = model.setup(starts[0].p[0])
@@ -70,19 +84,24 @@ def bare(spec: api.Spec, tol: float, threads: int, chunk: int) -> float:
     def one(k: int) -> None:
         model.integrate_batch("dop853", starts[k].x0, c, 0.0, 10.0, rtol=tol, atol=tol)
 
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     with ThreadPoolExecutor(threads) as pool:
         list(pool.map(one, range(len(starts))))
-    return time.perf_counter() - t0
+    return Timed(time.perf_counter() - t0, time.process_time() - cpu0, {})
 
 
-def end_to_end(sweep_file: Path, out: Path, workers: int) -> tuple[float, dict]:
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def end_to_end(sweep_file: Path, out: Path, workers: int) -> Timed:
     shutil.rmtree(out, ignore_errors=True)
     cmd = [GYROGEN, "sweep", str(sweep_file), "--out", str(out), "--quiet"]
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), _children_cpu()
     subprocess.run([*cmd, "--workers", str(workers)], check=True, stdout=subprocess.DEVNULL)
-    wall = time.perf_counter() - t0
-    return wall, json.loads((out / "summary.json").read_text())
+    wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
+    return Timed(wall, cpu, json.loads((out / "summary.json").read_text()))
 
 
 def scheduler_rate(tasks: int) -> float:
@@ -107,8 +126,34 @@ def peak_rss(sweep_file: Path, out: Path) -> tuple[float, float]:
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, check=True, capture_output=True, text=True)
     wall = time.perf_counter() - t0
-    kb = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr).group(1))
+    found = re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr)
+    assert found, proc.stderr
+    kb = int(found.group(1))
     return kb / 1024, wall
+
+
+def report(size: int, bares: dict[int, list[Timed]], runs: dict[int, list[Timed]]) -> None:
+    """Each figure best of the repeats, with every repeat shown."""
+    best = {n: min(got, key=wall_of) for n, got in bares.items()}
+    for n, got in bares.items():
+        wall, cpu = best[n].wall, min(t.cpu for t in got)
+        every = ", ".join(f"{t.wall:.2f}" for t in got)
+        print(f"bare integrate_batch, {n} thread(s): {wall:.2f} s ({wall / size * 1e6:.2f} us/traj)"
+              f" (all: {every}); CPU {cpu:.2f} s")  # fmt: skip
+    for n, got in runs.items():
+        wall, cpu, summary = min(got, key=wall_of)
+        run, cpu = summary["run"], min(t.cpu for t in got)
+        every = ", ".join(f"{t.wall:.2f}" for t in got)
+        print(
+            f"end to end, --workers {n}: {wall:.2f} s (all: {every})"
+            f"; start-up {run['startup_s']:.2f} s, compute {run['wall_s']:.2f} s, tasks "
+            f"{run['chunks_computed']} x {run['task_s_mean']:.3f} s, busy {run['busy_share']:.3f}"
+            f"; overhead beyond bare ({n} thread(s)): wall {100 * (wall / best[n].wall - 1):.1f}%"
+            f", CPU {cpu:.2f} s: {100 * (cpu / min(t.cpu for t in bares[n]) - 1):.1f}%"
+        )
+    e2e = {n: min(got, key=wall_of).wall for n, got in runs.items()}
+    print(f"scaling 1 -> 2 workers (end to end): {e2e[1] / e2e[2]:.2f}x"
+          f"; bare: {best[1].wall / best[2].wall:.2f}x")  # fmt: skip
 
 
 def main() -> None:
@@ -126,30 +171,13 @@ def main() -> None:
     spec = api.load_sweep(text, "bench")
     print(f"load: {os.getloadavg()}  cores: {os.cpu_count()}")
     print(f"error at rtol = atol = {args.tol:g}: {error_of(spec, args.tol):.3g} (300 trajectories)")
-    bares: dict[int, list[float]] = {1: [], 2: []}
-    runs: dict[int, list[tuple[float, dict]]] = {1: [], 2: []}
+    bares: dict[int, list[Timed]] = {1: [], 2: []}
+    runs: dict[int, list[Timed]] = {1: [], 2: []}
     for _ in range(args.repeats):  # interleaved: each repeat sees the same load
         for n in (2, 1):
             bares[n].append(bare(spec, args.tol, n, args.chunk))
             runs[n].append(end_to_end(sweep_file, work / f"e2e-{n}", n))
-    bare_s = {n: min(got) for n, got in bares.items()}
-    for n, s in bare_s.items():
-        every = ", ".join(f"{w:.2f}" for w in bares[n])
-        print(f"bare integrate_batch, {n} thread(s): {s:.2f} s ({s / spec.size * 1e6:.2f} us/traj)"
-              f" (all: {every})")  # fmt: skip
-    for n, got in runs.items():
-        wall, summary = min(got, key=lambda r: r[0])
-        run = summary["run"]
-        every = ", ".join(f"{w:.2f}" for w, _ in got)
-        print(
-            f"end to end, --workers {n}: {wall:.2f} s (all: {every})"
-            f"; start-up {run['startup_s']:.2f} s, compute {run['wall_s']:.2f} s, tasks "
-            f"{run['chunks_computed']} x {run['task_s_mean']:.3f} s, busy {run['busy_share']:.3f}"
-            f"; overhead beyond bare ({n} thread(s)): {100 * (wall / bare_s[n] - 1):.1f}%"
-        )
-    best = {n: min(w for w, _ in got) for n, got in runs.items()}
-    print(f"scaling 1 -> 2 workers (end to end): {best[1] / best[2]:.2f}x"
-          f"; bare: {bare_s[1] / bare_s[2]:.2f}x")  # fmt: skip
+    report(spec.size, bares, runs)
     parts = sum(p.stat().st_size for p in (work / "e2e-2" / "parts").iterdir())
     print(f"Parquet: {parts / spec.size:.1f} bytes per trajectory ({parts / 1e6:.1f} MB)")
     print(f"scheduler: {scheduler_rate(5000):,.0f} empty tasks per second (local, 2 processes)")
