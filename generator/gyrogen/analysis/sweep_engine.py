@@ -139,11 +139,13 @@ def _claim(out: Path, spec: Spec, chunk: int) -> set[int]:
 def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, str, int]]:
     """A dask.distributed client: on scheduler, or on a local cluster of
     threads in this process. Yields (client, engine name, worker threads)."""
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is None:
         n = threads or os.cpu_count() or 1
-        with (
+        with (  # no sampling profiler in the worker's threads: nobody reads it
+            dask.config.set({"distributed.worker.profile.enabled": False}),
             LocalCluster(
                 n_workers=1, threads_per_worker=n, processes=False, dashboard_address=":0"
             ) as cluster,
