@@ -8,7 +8,8 @@
   summary and figures) with --workers 1 and 2, interleaved, best of
   --repeats; the overhead beyond the bare compute on as many threads;
 - the scheduler's rate for empty tasks (the cluster estimate's input);
-- with --memory N: the peak RSS of a sweep of N trajectories (/usr/bin/time -v).
+- with --memory N: the peak RSS of a sweep of N trajectories (its max RSS,
+  getrusage's, as /usr/bin/time -v gives it).
 
     python tests/sweep_bench.py --trajectories 1000000 --memory 10000000
 """
@@ -19,7 +20,6 @@ import argparse
 import json
 import logging
 import os
-import re
 import resource
 import shutil
 import subprocess
@@ -119,17 +119,23 @@ def scheduler_rate(tasks: int) -> float:
         return tasks / (time.perf_counter() - t0)
 
 
+RSS_PROBE = (
+    "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
+    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+)
+"""A process whose one child is the sweep: its children's max RSS (KB on
+Linux) is the sweep's (what /usr/bin/time -v reports, with no system package)."""
+
+
 def peak_rss(sweep_file: Path, out: Path) -> tuple[float, float]:
-    """(max RSS in MB, wall seconds) of a sweep under /usr/bin/time -v."""
+    """(max RSS in MB, wall seconds) of a sweep in a process of its own."""
     shutil.rmtree(out, ignore_errors=True)
-    cmd = ["/usr/bin/time", "-v", GYROGEN, "sweep", str(sweep_file), "--out", str(out), "--quiet"]
+    cmd = [GYROGEN, "sweep", str(sweep_file), "--out", str(out), "--quiet"]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-c", RSS_PROBE, *cmd], check=True,
+                          capture_output=True, text=True)  # fmt: skip
     wall = time.perf_counter() - t0
-    found = re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr)
-    assert found, proc.stderr
-    kb = int(found.group(1))
-    return kb / 1024, wall
+    return int(proc.stdout.split()[-1]) / 1024, wall
 
 
 def report(size: int, bares: dict[int, list[Timed]], runs: dict[int, list[Timed]]) -> None:
