@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib
+.PHONY: setup system-deps run test lint generate check-generated bench bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
 
 ## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake, pkg-config) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -87,12 +87,24 @@ fmu-agreement: setup
 bench-lib: setup
 	$(BIN)/python tests/bench_cmake_default.py
 
+## sweep-bench: the sweep's figures: 10^6 trajectories end to end against the bare batch
+## compute, 1 -> 2 workers, the scheduler's task rate, and the peak memory of 10^7
+SWEEP_TRAJECTORIES ?= 1000000
+SWEEP_MEMORY ?= 10000000
+sweep-bench: setup
+	$(BIN)/python tests/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY)
+
+## sweep-map: the stability map of NOTES.md and the Monte Carlo example, into report/
+sweep-map: setup
+	$(BIN)/gyrogen sweep stability_map --out report/stability_map
+	$(BIN)/gyrogen sweep monte_carlo --out report/monte_carlo
+
 ## check: numerical stability on every stiff and extreme case
 check: setup
 	$(BIN)/gyrogen check --all --plots report/check
 
 clean:
-	rm -rf build examples/build bench-out report sim fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	rm -rf build examples/build bench-out report sim sweep fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
 	find generator tests -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 

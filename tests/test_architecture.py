@@ -11,13 +11,13 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "generator" / "gyrogen"
 STAGES = (
     ("errors", "abi", "methods", "tableaus", "physics", "setup_checks", "files"),
-    ("scene", "scene_rules"),
+    ("scene", "scene_rules", "sweep_spec"),
     ("symbolic",),
     ("codegen",),
     ("runtime",),
     ("oracle",),
     ("analysis",),
-    ("commands",),
+    ("commands", "api"),
     ("cli", "__main__"),
 )
 """In the order the flow runs; a module may import its own stage and earlier ones."""

@@ -348,3 +348,15 @@ before it fails with max_steps reached: as `gyrogen simulate --max-nfev`'s
 default, a bound on a run that blows up rather than a cost to plan for."""
 MAX_SCENE_BYTES = 1 << 20
 """Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""
+MAX_SWEEP_TRAJECTORIES = 10**10
+"""Trajectories in one sweep (grid points times draws): the sample index is a
+64-bit integer in the Parquet rows and in the draws' counter, and 10^10 rows
+of ~30 doubles are 2.4 TB; a larger sweep is a typo."""
+MAX_SWEEP_AXIS = 10**6
+"""Values on one grid axis (list, linspace or logspace)."""
+MAX_SWEEP_SAMPLES = 10**4
+"""Points along each trajectory where the sweep's metrics look (metrics.samples):
+each is a restart of the integrator on the whole chunk."""
+MAX_SWEEP_CHUNK = 10**6
+"""Trajectories per task: a chunk's states and metrics are in memory at once
+(10^6 rows of ~40 doubles: 0.3 GB)."""

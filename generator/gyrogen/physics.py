@@ -55,3 +55,13 @@ def condition(
     conditioned block)."""
     big = (a11 + a33) / 2 + sqrt((a11 - a33) ** 2 / 4 + a13**2)
     return big**2 / det
+
+
+def body_momentum(
+    lumped: tuple[Value, Value, Value, Value], J: Value, u1: Value, u2: Value, u3: Value, u4: Value
+) -> tuple[Value, Value, Value]:
+    """The angular momentum about AB* in A components, from the lumped
+    inertias (I~11, I~22, I~33, I~13): I~ (u1, u2, u3) + J u4 a2. Its a2
+    component is NOTES.md's H_a of the spin-stability criterion."""
+    a11, a22, a33, a13 = lumped
+    return a11 * u1 + a13 * u3, a22 * u2 + J * u4, a13 * u1 + a33 * u3

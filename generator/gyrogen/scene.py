@@ -246,7 +246,7 @@ def _why_not(name: str, effects: Effects) -> str:
     return "unknown parameter (see `gyrogen new` for the list)"
 
 
-def _one_line(exc: pydantic.ValidationError) -> str:
+def one_line(exc: pydantic.ValidationError) -> str:
     err = exc.errors()[0]
     # a union's member ("float", "literal['runtime']") is not a key the user wrote
     keys = [str(x) for x in err["loc"] if not str(x).startswith(("float", "literal["))]
@@ -267,7 +267,7 @@ def parse(text: str, source: str) -> Scene:
     try:
         return Scene.model_validate(data)
     except pydantic.ValidationError as exc:
-        raise SceneError(f"{source}: {_one_line(exc)}") from exc
+        raise SceneError(f"{source}: {one_line(exc)}") from exc
 
 
 @cache
@@ -284,10 +284,10 @@ def load(arg: str) -> Scene:
     """A built-in scene by name, or a .toml file by path."""
     if arg in builtin_names():
         return parse(builtin_text(arg), f"{arg} (built-in)")
-    return parse(_read(arg), arg)
+    return parse(read_file(arg), arg)
 
 
-def _read(path: str) -> str:
+def read_file(path: str) -> str:
     """A scene file's text: a regular file (opened without blocking, so a
     FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8."""
     try:

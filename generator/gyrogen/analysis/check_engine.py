@@ -143,13 +143,26 @@ def _spin_verdict(scene: Scene, xs: np.ndarray) -> str:
     return "unstable" if np.max(trans) > 100 * max(trans[0], 1e-300) else "stable"
 
 
-def spin_prediction(v: dict[str, float], omega: float, u4: float) -> str:
-    """NOTES.md: stable iff (H_a - I_t1 Omega)(H_a - I_t3 Omega) > 0."""
+def spin_axes(v: dict[str, Any], omega: Any, u4: Any) -> tuple[Any, Any, Any]:
+    """NOTES.md's spin-stability terms: H_a / Omega (H_a = I~22 Omega + J
+    u4) and the transverse inertias I_t1 <= I_t3, the eigenvalues of
+    [[I~11, I~13], [I~13, I~33]]; numbers or numpy arrays alike."""
     names = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
     a11, a22, a33, a13 = lumped_inertias(*(v[n] for n in names))
-    it1, it3 = np.linalg.eigvalsh([[a11, a13], [a13, a33]])
-    h_a = a22 * omega + v["J"] * u4
-    return "stable" if (h_a - it1 * omega) * (h_a - it3 * omega) > 0 else "unstable"
+    block = np.stack(np.broadcast_arrays(a11, a13, a13, a33), axis=-1)
+    it = np.linalg.eigvalsh(block.reshape((*block.shape[:-1], 2, 2)))
+    return (a22 * omega + v["J"] * u4) / omega, it[..., 0], it[..., 1]
+
+
+def spin_stable(v: dict[str, Any], omega: Any, u4: Any) -> Any:
+    """NOTES.md: stable iff (H_a - I_t1 Omega)(H_a - I_t3 Omega) > 0."""
+    sigma, it1, it3 = spin_axes(v, omega, u4)
+    return (sigma - it1) * (sigma - it3) * omega**2 > 0
+
+
+def spin_prediction(v: dict[str, float], omega: float, u4: float) -> str:
+    """spin_stable as a check case's expected verdict."""
+    return "stable" if spin_stable(v, omega, u4) else "unstable"
 
 
 def plot(res: Result) -> bytes:

@@ -16,4 +16,5 @@ NAMES = (
     "bench_rhs",
     "bench_ensemble",
     "fmu",
+    "sweep",
 )

@@ -1,0 +1,109 @@
+"""The inputs of a sweep's trajectories start..stop-1: grid values, draws,
+start states and runtime parameters, computed from the sweep alone.
+
+Trajectory i is grid point i // count (the axes in the order written, the
+last varying fastest, or zipped) with draw i % count. Its draws are a
+function of (seed, i) alone: Philox, a counter-based generator, keyed by the
+seed, gives trajectory i the 64-bit words of its counter blocks i * B to
+(i + 1) * B - 1 (B blocks of 4 words hold one word per drawn variable), and
+each word becomes a value through the inverse of its distribution's CDF
+(truncated: restricted to [F(lo), F(hi)]). One word per value, never a
+rejection loop, so no value depends on another trajectory, on the chunking,
+the worker count or the engine.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtri
+
+from gyrogen.sweep_spec import Axis, Distribution, Spec
+
+WORDS_PER_BLOCK = 4
+"""A Philox counter block gives four 64-bit words."""
+
+
+@dataclass(frozen=True)
+class Inputs:
+    sample: np.ndarray
+    """(n,) int64: the trajectories' indices in the sweep."""
+    values: dict[str, np.ndarray]
+    """Each swept name's (n,) values: the grid's, then the drawn ones."""
+    x0: np.ndarray
+    """(n, nx) start states."""
+    p: np.ndarray
+    """(n, np) runtime parameters, in the scene's p[] order."""
+
+
+def axis_values(axis: Axis) -> np.ndarray:
+    if axis.values is not None:
+        return np.array(axis.values, dtype=np.float64)
+    a, b, n = axis.spaced
+    return np.linspace(a, b, n) if axis.linspace is not None else np.logspace(a, b, n)
+
+
+def grid_values(spec: Spec, points: np.ndarray) -> dict[str, np.ndarray]:
+    """Each grid axis's value at the grid points (indices into the grid)."""
+    axes = {name: axis_values(axis) for name, axis in spec.sweep.grid.items()}
+    if spec.sweep.combine == "zip":
+        return {name: values[points] for name, values in axes.items()}
+    shape = tuple(len(v) for v in axes.values())
+    index = np.unravel_index(points, shape) if shape else ()
+    return {name: values[i] for (name, values), i in zip(axes.items(), index, strict=True)}
+
+
+def uniforms(seed: int, start: int, stop: int, k: int) -> np.ndarray:
+    """(stop - start, k) numbers in (0, 1): row i - start is trajectory i's,
+    from its own counter blocks of Philox keyed by seed."""
+    blocks = -(-k // WORDS_PER_BLOCK)
+    words = blocks * WORDS_PER_BLOCK
+    gen = np.random.Philox(key=seed, counter=start * blocks)
+    raw = gen.random_raw((stop - start) * words).reshape(stop - start, words)[:, :k]
+    return ((raw >> np.uint64(11)).astype(np.float64) + 0.5) * 2.0**-53
+
+
+def inverse_cdf(dist: Distribution, u: np.ndarray) -> np.ndarray:
+    """The values of quantiles u in (0, 1) of dist (truncated if it says so)."""
+    if dist.truncate is not None:
+        lo, hi = dist.truncate
+        f_lo, f_hi = dist.cdf(lo), dist.cdf(hi)
+        u = f_lo + u * (f_hi - f_lo)
+    a, b = dist.args
+    if dist.kind == "uniform":
+        x = a + u * (b - a)
+    elif dist.kind == "normal":
+        x = a + b * ndtri(u)
+    else:
+        x = np.exp(a + b * ndtri(u))
+    if dist.truncate is not None:
+        x = np.clip(x, *dist.truncate)
+    return np.asarray(x, dtype=np.float64)
+
+
+def drawn_values(spec: Spec, start: int, stop: int) -> dict[str, np.ndarray]:
+    draws = spec.sweep.draws
+    if draws is None or not draws.variables:
+        return {}
+    u = uniforms(draws.seed, start, stop, len(draws.variables))
+    return {name: inverse_cdf(d, u[:, j]) for j, (name, d) in enumerate(draws.variables.items())}
+
+
+def inputs(spec: Spec, start: int, stop: int) -> Inputs:
+    """Everything trajectories start..stop-1 start from."""
+    sample = np.arange(start, stop, dtype=np.int64)
+    values = {**grid_values(spec, sample // spec.sweep.count), **drawn_values(spec, start, stop)}
+    scene = spec.scene
+    base = scene.model_copy(
+        update={"simulate": scene.simulate.model_copy(update={"initial": spec.base_state()})}
+    )
+    x0 = np.tile(np.array(base.initial_state(), dtype=np.float64), (len(sample), 1))
+    params = spec.base_parameters()
+    p = np.tile(np.array([params.get(n, np.nan) for n in scene.runtime]), (len(sample), 1))
+    for name, v in values.items():
+        if name in scene.states:
+            x0[:, scene.states.index(name)] = v
+        else:
+            p[:, scene.runtime.index(name)] = v
+    return Inputs(sample, values, x0, p)

@@ -1,0 +1,232 @@
+"""One chunk of a sweep: its trajectories integrated by the compiled batch
+integrator (Compiled.integrate_batch) and reduced to one row each.
+
+The trajectories are grouped by their runtime parameters: setup runs once
+per parameter set, and each set is one batch call per sample interval (a
+Monte Carlo over parameters makes sets of one: a call per trajectory and
+interval, ~6 us each). The sampled metrics look
+at the states at metrics.samples equal intervals of t_end; the integrator
+is restarted at each (every sample is a step end, as in runtime/segment.py).
+
+The columns (one row per trajectory):
+
+- sample, then each swept name: the inputs;
+- setup_code (abi.SETUP_CODES), code (abi.ODE_CODES; -1: not integrated,
+  setup refused the parameters), t: the time reached;
+- stats: the counters of abi.STATS_FIELDS summed over the intervals;
+- final_state: final_<state> for each state (the last good one on failure);
+- max_nutation: the largest angle (rad) between the carrier's axis a2 and
+  the angular momentum H about AB*, from H's A components (I~ omega + J u4
+  a2, physics.body_momentum): 0 for a pure spin about a2, pi/2 when H is
+  transverse; nutation_0 the angle at the start; max_rate: the largest
+  |omega| of the carrier (rad/s);
+- invariant_drift: H_drift, the largest | |H| - |H(0)| | / |H(0)| (|H| is
+  conserved for every torque law: the motor's torque is internal and
+  gravity acts at AB*);
+- time_to: time_to_<quantity>, the first sample time at which the quantity
+  (nutation, rate, or a state) is on the other side of its threshold from
+  where it started (0 if it starts on it; NaN if never).
+
+A failed run's metrics cover the samples it reached.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gyrogen.analysis.sweep_draws import inputs
+from gyrogen.physics import body_momentum, lumped_inertias
+from gyrogen.runtime.compiled import Compiled, controls
+from gyrogen.runtime.segment import COUNTERS
+from gyrogen.sweep_spec import SAMPLED, Spec
+
+NOT_RUN = -1
+"""code of a trajectory whose parameters setup refused."""
+_LUMPED = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
+
+
+def columns(spec: Spec) -> dict[str, np.dtype]:
+    """The name and type of every column a chunk of this sweep has."""
+    keep = spec.sweep.metrics.keep
+    cols: dict[str, np.dtype] = {"sample": np.dtype(np.int64)}
+    cols |= dict.fromkeys(spec.variables, np.dtype(np.float64))
+    cols |= {"setup_code": np.dtype(np.int32), "code": np.dtype(np.int32)}
+    cols["t"] = np.dtype(np.float64)
+    if "stats" in keep:
+        cols |= dict.fromkeys(COUNTERS, np.dtype(np.int64))
+    if "final_state" in keep:
+        cols |= {f"final_{s}": np.dtype(np.float64) for s in spec.scene.states}
+    names = {
+        "max_nutation": ("nutation_0", "max_nutation"),
+        "max_rate": ("max_rate",),
+        "invariant_drift": ("H_drift",),
+    }
+    cols |= {col: np.dtype(np.float64) for key in keep for col in names.get(key, ())}
+    cols |= {f"time_to_{q}": np.dtype(np.float64) for q in spec.sweep.metrics.time_to}
+    return cols
+
+
+def _blank(spec: Spec, n: int) -> dict[str, np.ndarray]:
+    out = {}
+    for name, dtype in columns(spec).items():
+        fill = np.nan if dtype.kind == "f" else 0
+        out[name] = np.full(n, NOT_RUN if name == "code" else fill, dtype=dtype)
+    return out
+
+
+def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np.ndarray]:
+    """The rows of trajectories start..stop-1, as columns."""
+    inp = inputs(spec, start, stop)
+    cols = _blank(spec, len(inp.sample))
+    cols["sample"][:] = inp.sample
+    for name, values in inp.values.items():
+        cols[name][:] = values
+    groups, which = parameter_sets(inp.p)
+    setups = [comp.setup_code(p) for p in groups]
+    cols["setup_code"][:] = [setups[g][0] for g in which]
+    ran = np.flatnonzero(cols["setup_code"] == 0)
+    if ran.size:
+        members = [np.flatnonzero(which[ran] == g) for g in range(len(groups))]
+        batches = [(c, m) for (code, c), m in zip(setups, members, strict=True) if code == 0]
+        runtime = dict(zip(spec.scene.runtime, inp.p[ran].T, strict=True))
+        known = {**spec.scene.folded(), **runtime}
+        _store(spec, cols, ran, _integrate(comp, spec, batches, known, inp.x0[ran]))
+    return cols
+
+
+def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of p (n, np), and which of them each row is."""
+    if not p.size or (p == p[0]).all():
+        return p[:1].reshape(1, -1), np.zeros(len(p), dtype=np.intp)
+    groups, which = np.unique(p, axis=0, return_inverse=True)
+    return groups, which.reshape(-1)
+
+
+class _Watch:
+    """The sampled metrics of a chunk's trajectories, updated sample by
+    sample; values: each parameter, a number or one per trajectory."""
+
+    def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray) -> None:
+        states = spec.scene.states
+        self.u = [states.index(f"u{i}") for i in range(1, 5)]
+        self.lumped = lumped_inertias(*(values[n] for n in _LUMPED))
+        self.J = values["J"]
+        self.thresholds = spec.sweep.metrics.time_to
+        self.states = states
+        self.nutation, self.rate, self.h0 = self._look(x0)
+        self.nutation_0 = self.nutation.copy()
+        self.drift = np.zeros(len(x0))
+        self.start = {q: self._quantity(q, x0) - thr for q, thr in self.thresholds.items()}
+        self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
+
+    def _momentum(self, x: np.ndarray) -> np.ndarray:
+        u1, u2, u3, u4 = (x[:, i] for i in self.u)
+        return np.array(body_momentum(self.lumped, self.J, u1, u2, u3, u4))
+
+    def _look(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The nutation angle, |omega| and |H| at the states x."""
+        h = self._momentum(x)
+        transverse = np.hypot(h[0], h[2])
+        rate = np.sqrt(np.sum(x[:, self.u[:3]] ** 2, axis=1))
+        return np.arctan2(transverse, h[1]), rate, np.hypot(transverse, h[1])
+
+    def _quantity(self, q: str, x: np.ndarray) -> np.ndarray:
+        if q in ("nutation", "rate"):
+            return self._look(x)[0 if q == "nutation" else 1]
+        return x[:, self.states.index(q)]
+
+    def see(self, t: float, x: np.ndarray, live: np.ndarray) -> None:
+        """The states x[live] at time t."""
+        xs = x[live]
+        nutation, rate, norm = self._look(xs)
+        self.nutation[live] = np.fmax(self.nutation[live], nutation)
+        self.rate[live] = np.fmax(self.rate[live], rate)
+        h0 = self.h0[live]
+        drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
+        self.drift[live] = np.fmax(self.drift[live], drift)
+        for q, thr in self.thresholds.items():
+            crossed = np.sign(self._quantity(q, xs) - thr) != np.sign(self.start[q][live])
+            first = live[crossed & np.isnan(self.time_to[q][live])]
+            self.time_to[q][first] = t
+
+
+@dataclass
+class _Runs:
+    """The trajectories setup accepted, run so far."""
+
+    x: np.ndarray
+    code: np.ndarray
+    reached: np.ndarray
+    totals: dict[str, np.ndarray]
+    watch: _Watch | None
+    """None when the sweep keeps no sampled metric: nothing to look at."""
+
+
+def _integrate(
+    comp: Compiled,
+    spec: Spec,
+    batches: list[tuple[np.ndarray, np.ndarray]],
+    values: dict[str, Any],
+    x0: np.ndarray,
+) -> _Runs:
+    """Every trajectory from 0 to t_end, interval by interval: each
+    parameter set's (constants c, rows) live rows in one batch call, then
+    the metrics of all rows at the interval's end in one look."""
+    sweep = spec.sweep
+    n_samples = sweep.metrics.points
+    times = np.linspace(0.0, sweep.t_end, n_samples + 1)
+    per_interval = -(-(sweep.steps or 1) // n_samples)
+    given = controls(
+        sweep.method, steps=per_interval, rtol=sweep.rtol, atol=sweep.atol,
+        max_steps=sweep.max_steps,
+    )  # fmt: skip
+    n = len(x0)
+    runs = _Runs(
+        x0.copy(), np.zeros(n, dtype=np.int32), np.zeros(n),
+        {name: np.zeros(n, dtype=np.int64) for name in COUNTERS},
+        _Watch(spec, values, x0) if set(sweep.metrics.keep) & set(SAMPLED) else None,
+    )  # fmt: skip
+    alive = np.ones(n, dtype=bool)
+    for t0, t1 in itertools.pairwise(times):
+        for c, rows in batches:
+            live = rows[alive[rows]]
+            if not live.size:
+                continue
+            # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
+            xl, stats, codes = comp.integrate_batch(
+                sweep.method, runs.x[live], c, t0, t1, threads=1, **given
+            )
+            runs.x[live], runs.reached[live], runs.code[live] = xl, stats["t"], codes
+            for name in COUNTERS:
+                runs.totals[name][live] += stats[name]
+        alive &= runs.code == 0
+        if not alive.any():
+            break
+        if runs.watch is not None:
+            runs.watch.see(float(t1), runs.x, np.flatnonzero(alive))
+    return runs
+
+
+def _store(spec: Spec, cols: dict[str, np.ndarray], rows: np.ndarray, runs: _Runs) -> None:
+    watch = runs.watch
+    found = {
+        "code": runs.code,
+        "t": runs.reached,
+        **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},
+        **runs.totals,
+    }
+    if watch is not None:
+        found |= {
+            "nutation_0": watch.nutation_0,
+            "max_nutation": watch.nutation,
+            "max_rate": watch.rate,
+            "H_drift": watch.drift,
+            **{f"time_to_{q}": t for q, t in watch.time_to.items()},
+        }
+    for name, values in found.items():
+        if name in cols:
+            cols[name][rows] = values

@@ -1,0 +1,104 @@
+"""gyrogen from Python (a notebook): compile a scene, simulate it, sweep it.
+
+    from gyrogen import api
+    model = api.compile("gyrostat")                   # runtime.compiled.Compiled
+    c = model.setup(p)                                 # p in the scene's p[] order
+    x, stats, code = model.integrate("dop853", x0, c, 0.0, 10.0, rtol=1e-9, atol=1e-9)
+    trajectory = api.simulate("dual_spin", method="dop853")   # pandas: t and the states
+    df = api.sweep("stability_map")                    # pandas: one row per trajectory
+    df = api.sweep(api.load_sweep(toml_text, name="mine"), workers=2)
+
+The same code as the command line: `compile` is what a sweep's workers do
+(sources rendered once and cached, built through the build cache),
+`simulate` is `gyrogen simulate`, `sweep` is `gyrogen sweep` (Parquet parts,
+summary and figures in out, resumable), then its rows read back.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from gyrogen.analysis.sweep_sources import compiled, scene_sources
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.scene import Scene
+from gyrogen.scene import load as load_scene
+from gyrogen.sweep_spec import Spec, parse
+from gyrogen.sweep_spec import load as load_spec
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+
+def _scene(scene: str | Scene) -> Scene:
+    return scene if isinstance(scene, Scene) else load_scene(scene)
+
+
+def compile(scene: str | Scene = "gyrostat") -> Compiled:
+    """The scene (a built-in name, a .toml path or a Scene) generated and
+    built, C when it has a C target: setup, rhs, outputs, integrators."""
+    return compiled(scene_sources(_scene(scene)))
+
+
+def simulate(
+    scene: str | Scene = "gyrostat",
+    *,
+    method: str = "DOP853",
+    t_end: float | None = None,
+    dt: float | None = None,
+    out: str | Path | None = None,
+) -> pd.DataFrame:
+    """`gyrogen simulate`: the trajectory on the output grid as columns t
+    and the scene's states (files in out, else in a temporary directory)."""
+    import pandas as pd
+
+    from gyrogen.analysis import simulate as sim
+
+    chosen = _scene(scene)
+    settings = sim.Settings(
+        t_end=t_end or chosen.simulate.t_end, dt=dt or chosen.simulate.dt, method=method
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        result = sim.run(chosen, Path(out) if out else Path(tmp), settings)
+    traj = result.trajectory
+    return pd.DataFrame({"t": traj.t, **{s: traj.x[:, i] for i, s in enumerate(chosen.states)}})
+
+
+def load_sweep(text: str, name: str = "sweep", here: str | Path = ".") -> Spec:
+    """A sweep from TOML text (scene paths in it start from here)."""
+    return parse(text, name, name, Path(here))
+
+
+def sweep(
+    spec: str | Path | Spec,
+    *,
+    out: str | Path | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    chunk: int | None = None,
+    progress: bool = False,
+    plots: bool = True,
+) -> pd.DataFrame:
+    """`gyrogen sweep`: every trajectory of spec (a built-in sweep, a sweep
+    file or a Spec) into out [default: sweep/<name>], resuming what is there;
+    its rows, one per trajectory, in sample order."""
+    from gyrogen.analysis import sweep_engine, sweep_report
+
+    chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
+    where = Path(out) if out is not None else Path("sweep") / chosen.name
+    record = sweep_engine.run(
+        chosen, where, scheduler=scheduler, threads=workers, chunk=chunk, progress=progress
+    )
+    sweep_report.write(chosen, record, plots=plots)
+    return read(where)
+
+
+def read(out: str | Path) -> pd.DataFrame:
+    """The rows of the sweep in out, in sample order."""
+    import pandas as pd
+
+    from gyrogen.analysis.sweep_columns import PARTS
+
+    frame = pd.read_parquet(Path(out) / PARTS)
+    return frame.sort_values("sample", kind="stable").reset_index(drop=True)

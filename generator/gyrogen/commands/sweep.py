@@ -1,0 +1,85 @@
+"""sweep: many trajectories of a scene over grids and Monte Carlo draws, on
+this machine's cores or an existing Dask cluster, into Parquet."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import click
+
+from gyrogen.abi import MAX_SWEEP_CHUNK
+from gyrogen.commands.options import directory
+
+ADDRESS = re.compile(r"tcp://[^\s:/]+:\d{1,5}")
+
+
+class SweepType(click.ParamType):
+    """A built-in sweep name or a path to a sweep file (.toml)."""
+
+    name = "SWEEP"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        from gyrogen.sweep_spec import load
+
+        return load(str(value))
+
+
+def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+    if value is not None and not ADDRESS.fullmatch(value):
+        raise click.BadParameter(f"{value!r} is not tcp://HOST:PORT", ctx, param)
+    return value
+
+
+@click.command()
+@click.argument("spec", metavar="SWEEP", type=SweepType())
+@directory("--out", "Directory for the Parquet parts, summary and figures [default: sweep/<name>].")
+@click.option(
+    "--scheduler",
+    callback=_address,
+    help="Run on this dask.distributed scheduler (tcp://HOST:PORT) [default: this machine].",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 1024),
+    help="Threads of the local engine [default: one per core].",
+)
+@click.option(
+    "--chunk",
+    type=click.IntRange(1, MAX_SWEEP_CHUNK),
+    help="Trajectories per task [default: the sweep's chunk].",
+)
+@click.option("--no-plots", is_flag=True, help="Skip histograms.png and map.png.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def sweep(
+    spec: Any,
+    out: Path | None,
+    scheduler: str | None,
+    workers: int | None,
+    chunk: int | None,
+    no_plots: bool,
+    quiet: bool,
+) -> None:
+    """Integrate every trajectory of SWEEP (a built-in sweep: stability_map,
+    monte_carlo; or a sweep file naming a scene) with the scene's compiled
+    batch integrator, one Parquet row per trajectory with its inputs and
+    metrics, written chunk by chunk; then summary.json, summary.md and
+    figures. Rerun into the same --out to resume: the chunks written are
+    skipped."""
+    from gyrogen.analysis import sweep_engine, sweep_report
+
+    if scheduler is not None and workers is not None:
+        raise click.UsageError("--workers sizes the local engine: not with --scheduler")
+    out = out or Path("sweep") / spec.name
+    record = sweep_engine.run(
+        spec, out, scheduler=scheduler, threads=workers, chunk=chunk, progress=not quiet
+    )
+    data = sweep_report.write(spec, record, plots=not no_plots)
+    for line in sweep_report.markdown(data).splitlines()[2:]:
+        if line and not line.startswith("|"):
+            click.echo(line)
+    click.echo(f"wrote {out}/ ({', '.join(data['files'])}; rows in {sweep_engine.PARTS}/)")
+
+
+command = sweep

@@ -1,0 +1,390 @@
+"""Sweeps: a TOML file naming a scene, with grids over its runtime
+parameters and initial states, Monte Carlo draws, the integration and the
+metrics to keep; validated like scenes (one line, exit 2, nothing written).
+
+    scene = "gyrostat"            # a built-in scene, or a path from this file
+    method = "dop853"             # one of the scene's integrators
+    t_end = 10.0                  # s; rtol, atol, max_steps; steps for rk4
+    chunk = 10000                 # trajectories per task
+    combine = "product"           # the grid axes: "product" or "zip"
+    [parameters]                  # runtime values over the scene's simulate.parameters
+    [initial]                     # the start state (else the scene's simulate.initial)
+    [grid]                        # NAME = { list = [...] | linspace = [a, b, n]
+                                  #   | logspace = [a, b, n] }
+    [draws]                       # seed, count, NAME = { uniform | normal | lognormal = [a, b],
+                                  #   truncate = [lo, hi] }
+    [metrics]                     # keep = [...], samples, time_to = { QUANTITY = threshold }
+    [criterion]                   # spin_stability = { grows_by = 10.0, band = 0.05 }
+
+Trajectory i is grid point i // count with draw i % count; its draws are a
+function of (seed, i) alone (analysis/sweep_draws.py).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from functools import cache
+from importlib.resources import files
+from pathlib import Path
+from typing import Annotated, Literal
+
+import pydantic
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, model_validator
+
+from gyrogen import methods
+from gyrogen.abi import (
+    MAX_SWEEP_AXIS,
+    MAX_SWEEP_CHUNK,
+    MAX_SWEEP_SAMPLES,
+    MAX_SWEEP_TRAJECTORIES,
+    MIN_RTOL,
+)
+from gyrogen.errors import SceneError
+from gyrogen.scene import Number, Scene, builtin_names, one_line, read_file
+from gyrogen.scene import load as load_scene
+from gyrogen.scene_rules import QUATERNION
+
+METRICS = ("final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to")
+"""What a sweep may keep of each trajectory (analysis/sweep_metrics.py)."""
+SAMPLED = ("max_nutation", "max_rate", "invariant_drift", "time_to")
+"""The metrics that look along the run, at metrics.samples points."""
+QUANTITIES = ("nutation", "rate")
+"""time_to's quantities besides the states: the nutation angle and |omega|."""
+DEFAULT_SAMPLES = 100
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def _normal_cdf(x: float) -> float:
+    return 0.5 * math.erfc(-x / math.sqrt(2.0))
+
+
+class Distribution(_Strict):
+    """One of uniform (low, high), normal (mean, sd), lognormal (mu, sigma of
+    the log), optionally truncated to [lo, hi]."""
+
+    uniform: tuple[Number, Number] | None = None
+    normal: tuple[Number, Number] | None = None
+    lognormal: tuple[Number, Number] | None = None
+    truncate: tuple[Number, Number] | None = None
+
+    @property
+    def kind(self) -> str:
+        return next(k for k in ("uniform", "normal", "lognormal") if getattr(self, k) is not None)
+
+    @property
+    def args(self) -> tuple[float, float]:
+        value: tuple[float, float] = getattr(self, self.kind)
+        return value
+
+    def cdf(self, x: float) -> float:
+        a, b = self.args
+        if self.kind == "uniform":
+            return min(max((x - a) / (b - a), 0.0), 1.0)
+        if self.kind == "lognormal":
+            return 0.0 if x <= 0 else _normal_cdf((math.log(x) - a) / b)
+        return _normal_cdf((x - a) / b)
+
+    @model_validator(mode="after")
+    def _one(self) -> Distribution:
+        given = [k for k in ("uniform", "normal", "lognormal") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of uniform, normal, lognormal")
+        a, b = self.args
+        if self.kind == "uniform" and not a < b:
+            raise ValueError(f"uniform = [{a:g}, {b:g}]: low must be below high")
+        if self.kind != "uniform" and not b > 0:
+            raise ValueError(f"{self.kind} = [{a:g}, {b:g}]: the spread must be > 0")
+        if self.truncate is not None:
+            lo, hi = self.truncate
+            if not lo < hi:
+                raise ValueError(f"truncate = [{lo:g}, {hi:g}]: lo must be below hi")
+            if not self.cdf(hi) - self.cdf(lo) > 1e-12:
+                raise ValueError(f"truncate = [{lo:g}, {hi:g}] leaves no probability")
+        return self
+
+
+class Axis(_Strict):
+    """The values of one grid axis."""
+
+    values: list[Number] | None = Field(default=None, alias="list")
+    linspace: tuple[Number, Number, StrictInt] | None = None
+    logspace: tuple[Number, Number, StrictInt] | None = None
+    """10**a to 10**b."""
+
+    @model_validator(mode="after")
+    def _one(self) -> Axis:
+        given = [x for x in (self.values, self.linspace, self.logspace) if x is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of list, linspace, logspace")
+        n = len(self.values) if self.values is not None else self.spaced[2]
+        if not 1 <= n <= MAX_SWEEP_AXIS:
+            raise ValueError(f"{n} values: from 1 to {MAX_SWEEP_AXIS:,}")
+        if self.logspace is not None and max(map(abs, self.logspace[:2])) > 300:
+            raise ValueError("logspace exponents beyond +-300 leave double range")
+        return self
+
+    @property
+    def spaced(self) -> tuple[float, float, int]:
+        value = self.linspace if self.linspace is not None else self.logspace
+        assert value is not None
+        return value
+
+    @property
+    def size(self) -> int:
+        return len(self.values) if self.values is not None else self.spaced[2]
+
+
+class Draws(_Strict):
+    seed: Annotated[StrictInt, Field(ge=0, lt=2**64)]
+    count: Annotated[StrictInt, Field(ge=1, le=MAX_SWEEP_TRAJECTORIES)]
+    variables: dict[str, Distribution] = Field(default_factory=dict)
+    """Every other key of [draws]: NAME = distribution."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _gather(cls, data: object) -> object:
+        if isinstance(data, dict) and "variables" not in data:
+            own = {k: v for k, v in data.items() if k in ("seed", "count")}
+            return {**own, "variables": {k: v for k, v in data.items() if k not in own}}
+        return data
+
+
+class Metrics(_Strict):
+    keep: list[Literal[METRICS]] = ["final_state", "stats"]  # type: ignore[valid-type]
+    samples: Annotated[StrictInt, Field(ge=1, le=MAX_SWEEP_SAMPLES)] | None = None
+    """Equal intervals of t_end the sampled metrics look at [default: 100, or
+    1 when none is kept]."""
+    time_to: dict[str, Number] = Field(default_factory=dict)
+    """QUANTITY = threshold: the first sample time at which it is reached."""
+
+    @property
+    def points(self) -> int:
+        if self.samples is not None:
+            return self.samples
+        return DEFAULT_SAMPLES if set(self.keep) & set(SAMPLED) else 1
+
+
+class SpinStability(_Strict):
+    grows_by: Annotated[Number, Field(gt=1)] = 10.0
+    """A cell whose max nutation angle exceeds its start's this many times
+    over is unstable."""
+    band: Annotated[Number, Field(gt=0, lt=1)] = 0.05
+    """Cells whose H_a/Omega is within this fraction of a transverse
+    inertia are left out of the agreement share."""
+
+
+class Criterion(_Strict):
+    spin_stability: SpinStability | None = None
+
+
+class Sweep(_Strict):
+    scene: str
+    method: str = "dop853"
+    t_end: Annotated[Number, Field(gt=0)] = 10.0
+    rtol: Annotated[Number, Field(lt=1)] = 1e-8
+    """Above abi.MIN_RTOL, as the compiled integrators require."""
+    atol: Annotated[Number, Field(gt=0)] = 1e-8
+    steps: Annotated[StrictInt, Field(ge=1, le=10**9)] | None = None
+    """rk4 only: equal steps over t_end."""
+    max_steps: Annotated[StrictInt, Field(ge=1, le=10**9)] = 10**6
+    chunk: Annotated[StrictInt, Field(ge=1, le=MAX_SWEEP_CHUNK)] = 10_000
+    combine: Literal["product", "zip"] = "product"
+    parameters: dict[str, Number] = Field(default_factory=dict)
+    initial: dict[str, Number] | None = None
+    grid: dict[str, Axis] = Field(default_factory=dict)
+    draws: Draws | None = None
+    metrics: Metrics = Metrics()
+    criterion: Criterion = Criterion()
+
+    @field_validator("rtol")
+    @classmethod
+    def _rtol(cls, v: float) -> float:
+        if not v > MIN_RTOL:
+            raise ValueError(f"must be above {MIN_RTOL:.4g} (10 machine epsilons)")
+        return v
+
+    @model_validator(mode="after")
+    def _shape(self) -> Sweep:
+        sizes = {name: axis.size for name, axis in self.grid.items()}
+        if self.combine == "zip" and len(set(sizes.values())) > 1:
+            shown = ", ".join(f"{k} {n}" for k, n in sizes.items())
+            raise ValueError(f"combine = 'zip' needs axes of one length, not {shown}")
+        both = sorted(set(self.grid) & set(self.draws.variables if self.draws else ()))
+        if both:
+            raise ValueError(f"{', '.join(both)}: both on the grid and drawn")
+        for name in self.metrics.time_to:
+            if "time_to" not in self.metrics.keep:
+                raise ValueError(f"metrics.time_to.{name}: add 'time_to' to metrics.keep")
+        return self
+
+    @property
+    def grid_size(self) -> int:
+        sizes = [axis.size for axis in self.grid.values()]
+        if self.combine == "zip":
+            return sizes[0] if sizes else 1
+        return math.prod(sizes)
+
+    @property
+    def count(self) -> int:
+        return self.draws.count if self.draws else 1
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A validated sweep with its scene."""
+
+    name: str
+    sweep: Sweep
+    scene: Scene
+
+    @property
+    def size(self) -> int:
+        return self.sweep.grid_size * self.sweep.count
+
+    @property
+    def variables(self) -> tuple[str, ...]:
+        """The swept names: the grid's, then the drawn ones."""
+        drawn = self.sweep.draws.variables if self.sweep.draws else {}
+        return (*self.sweep.grid, *drawn)
+
+    def base_parameters(self) -> dict[str, float]:
+        """The runtime parameters' values before the grid and the draws."""
+        return {**self.scene.simulate.parameters, **self.sweep.parameters}
+
+    def base_state(self) -> dict[str, float]:
+        """The start state by name before the grid and the draws."""
+        given = self.sweep.initial
+        return dict(self.scene.simulate.initial if given is None else given)
+
+    def fingerprint(self) -> str:
+        """Which sweep a results directory holds: its description and scene."""
+        text = self.sweep.model_dump_json() + self.scene.model_dump_json()
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def parse(text: str, source: str, name: str, here: Path | None) -> Spec:
+    """A sweep from its TOML text; here: the directory scene paths start
+    from (None for a built-in sweep, which names built-in scenes only)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    except RecursionError as exc:
+        raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
+    try:
+        sweep = Sweep.model_validate(data)
+    except pydantic.ValidationError as exc:
+        raise SceneError(f"{source}: {one_line(exc).replace('.variables', '')}") from exc
+    scene = _scene(sweep.scene, source, here)
+    try:
+        check_against(sweep, scene)
+    except ValueError as exc:
+        raise SceneError(f"{source}: {exc}") from exc
+    return Spec(name, sweep, scene)
+
+
+def _scene(ref: str, source: str, here: Path | None) -> Scene:
+    if ref in builtin_names() or here is None:
+        if ref not in builtin_names():
+            raise SceneError(f"{source}: scene: {ref!r} is not a built-in scene")
+        return load_scene(ref)
+    path = Path(ref) if Path(ref).is_absolute() else here / ref
+    if not os.path.lexists(path):
+        raise SceneError(f"{source}: scene: {path}: no such file, and no built-in scene {ref!r}")
+    return load_scene(str(path))
+
+
+def check_against(sweep: Sweep, scene: Scene) -> None:
+    """ValueError (key: why) unless the sweep fits its scene."""
+    if sweep.method not in scene.integrators:
+        listed = ", ".join(scene.integrators)
+        raise ValueError(
+            f"method: {sweep.method!r} is not among the scene's integrators ({listed})"
+        )
+    if methods.get(sweep.method).fixed_step != (sweep.steps is not None):
+        raise ValueError("steps: give it for rk4 (equal steps over t_end), and only for rk4")
+    if sweep.steps is not None and sweep.steps < sweep.metrics.points:
+        raise ValueError(f"steps: {sweep.steps} is fewer than metrics.samples")
+    size = sweep.grid_size * sweep.count
+    if size > MAX_SWEEP_TRAJECTORIES:
+        raise ValueError(f"{size:,} trajectories: at most {MAX_SWEEP_TRAJECTORIES:,}")
+    drawn = sweep.draws.variables if sweep.draws else {}
+    for key, names in (("grid", list(sweep.grid)), ("draws", list(drawn))):
+        for name in names:
+            _check_variable(scene, f"{key}.{name}", name)
+    _check_names(scene, sweep)
+    for name in sweep.metrics.time_to:
+        if name not in QUANTITIES and name not in scene.states:
+            choices = ", ".join((*QUANTITIES, *scene.states))
+            raise ValueError(f"metrics.time_to.{name}: not one of {choices}")
+    if sweep.criterion.spin_stability is not None:
+        _check_spin(sweep, scene)
+
+
+def _check_variable(scene: Scene, key: str, name: str) -> None:
+    if name in QUATERNION and scene.attitude == "quaternion":
+        raise ValueError(
+            f"{key}: Euler parameters cannot be swept (they must stay a unit quaternion)"
+        )
+    if name in scene.states or name in scene.runtime:
+        return
+    value = scene.parameters.get(name)
+    if value is not None:
+        raise ValueError(
+            f'{key}: folded into the code as {value!r}: make it "runtime" in the scene to sweep it'
+        )
+    raise ValueError(
+        f"{key}: not a state or runtime parameter of scene {scene.name} "
+        f"(states {', '.join(scene.states)}; runtime {', '.join(scene.runtime) or 'none'})"
+    )
+
+
+def _check_names(scene: Scene, sweep: Sweep) -> None:
+    for name in sweep.parameters:
+        if name not in scene.runtime:
+            raise ValueError(f"parameters.{name}: not a runtime parameter of scene {scene.name}")
+    for name in sweep.initial or {}:
+        if name not in scene.states:
+            raise ValueError(f"initial.{name}: not a state of scene {scene.name}")
+    swept = set(sweep.grid) | set(sweep.draws.variables if sweep.draws else ())
+    known = {**scene.simulate.parameters, **sweep.parameters}
+    missing = [n for n in scene.runtime if n not in known and n not in swept]
+    if missing:
+        raise ValueError(f"parameters: no value for runtime parameter {', '.join(missing)}")
+
+
+def _check_spin(sweep: Sweep, scene: Scene) -> None:
+    """NOTES.md's criterion is for a torque-free spin, watched by its nutation."""
+    why = "criterion.spin_stability"
+    if "max_nutation" not in sweep.metrics.keep:
+        raise ValueError(f"{why}: add 'max_nutation' to metrics.keep")
+    torque = scene.effects.torque
+    t_value = {**scene.folded(), **scene.simulate.parameters, **sweep.parameters}.get("T", 0.0)
+    swept_t = "T" in sweep.grid or (sweep.draws is not None and "T" in sweep.draws.variables)
+    if torque not in ("none", "constant") or t_value != 0.0 or swept_t:
+        raise ValueError(f"{why}: the criterion is for a torque-free spin (T = 0)")
+
+
+@cache
+def builtin_sweeps() -> tuple[str, ...]:
+    root = files("gyrogen") / "sweeps"
+    return tuple(sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml")))
+
+
+def load(arg: str) -> Spec:
+    """A built-in sweep by name, or a sweep file by path."""
+    if arg in builtin_sweeps():
+        text = (files("gyrogen") / "sweeps" / f"{arg}.toml").read_text(encoding="utf-8")
+        return parse(text, f"{arg} (built-in)", arg, None)
+    if not os.path.lexists(arg):
+        names = ", ".join(builtin_sweeps())
+        raise SceneError(f"{arg}: no such file, and no built-in sweep of that name ({names})")
+    path = Path(arg)
+    return parse(read_file(arg), arg, path.stem, path.parent)

@@ -1,0 +1,56 @@
+"""What the sweep tests share: small sweep files, a free port, and a
+sweep's rows read back."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+import pandas as pd
+
+from gyrogen import api
+
+SMALL = """
+scene = "gyrostat"
+method = "dop853"
+t_end = {t_end}
+rtol = 1e-9
+atol = 1e-9
+chunk = {chunk}
+[grid]
+I22 = {{ list = [8.0, 9.0, 10.0] }}
+u4 = {{ linspace = [0.0, 100.0, 5] }}
+[draws]
+seed = 11
+count = {count}
+u1 = {{ normal = [0.2, 0.05] }}
+u3 = {{ uniform = [-0.2, 0.2] }}
+m_a = {{ normal = [100.0, 5.0], truncate = [90.0, 110.0] }}
+[metrics]
+keep = ["final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to"]
+samples = 10
+time_to = {{ nutation = 0.3, u1 = 0.25 }}
+"""
+"""Grid x draws over the default scene: a drawn mass makes every trajectory
+its own parameter set, the grid's I22 and u4 a parameter and a state."""
+
+
+def small(path: Path, t_end: float = 2.0, chunk: int = 25, count: int = 4) -> Path:
+    path.write_text(SMALL.format(t_end=t_end, chunk=chunk, count=count))
+    return path
+
+
+def long(path: Path) -> Path:
+    """41 chunks of 100 trajectories, ~0.03 s each: long enough to stop or
+    kill something in the middle of it."""
+    return small(path, t_end=30.0, chunk=100, count=4000 // 15 + 1)
+
+
+def rows(out: Path) -> pd.DataFrame:
+    return api.read(out)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])

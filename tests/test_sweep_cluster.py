@@ -1,0 +1,141 @@
+"""gyrogen sweep on real engines: a `dask scheduler` and two `dask worker`
+processes on 127.0.0.1 give the local run's rows bit for bit, each worker
+builds the sources once, and a worker killed mid-sweep loses nothing; a
+client interrupted with SIGINT resumes without recomputing what it wrote."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from sweep_cases import free_port, long, rows
+
+from gyrogen.analysis.sweep_sources import builds
+
+DASK = str(Path(sys.executable).with_name("dask"))
+CHUNKS = 41
+
+
+def _environment(cache_dir: Path) -> dict[str, str]:
+    return {**os.environ, "GYROGEN_CACHE": str(cache_dir)}
+
+
+@pytest.fixture
+def cache(cache_dir: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
+    return cache_dir
+
+
+@pytest.fixture
+def cluster(tmp_path: Path, cache: Path) -> Iterator[tuple[str, list[subprocess.Popen]]]:
+    """A scheduler and two single-thread workers (no nanny: a killed worker
+    stays dead), started here and stopped at the end."""
+    from distributed import Client
+
+    address = f"tcp://127.0.0.1:{free_port()}"
+    env, log = _environment(cache), open(tmp_path / "dask.log", "w")  # noqa: SIM115
+    common = {"env": env, "stdout": log, "stderr": subprocess.STDOUT, "cwd": tmp_path}
+    port = address.rsplit(":", 1)[1]
+    procs = [
+        subprocess.Popen(
+            [DASK, "scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"],
+            **common,  # type: ignore[call-overload]
+        )
+    ]
+    try:
+        for name in ("w1", "w2"):
+            cmd = [DASK, "worker", address, "--name", name, "--nthreads", "1", "--no-nanny"]
+            cmd += ["--no-dashboard", "--host", "127.0.0.1", "--local-directory", str(tmp_path)]
+            procs.append(subprocess.Popen(cmd, **common))  # type: ignore[call-overload]
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address, procs
+    finally:
+        for proc in reversed(procs):  # the workers first, then the scheduler
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        log.close()
+
+
+def _kill_when(parts: Path, count: int, proc: subprocess.Popen, seen: list[int]) -> None:
+    """SIGKILL proc once parts holds count files; seen gets how many it held."""
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        written = len(list(parts.glob("part-*.parquet"))) if parts.is_dir() else 0
+        if written >= count:
+            proc.send_signal(signal.SIGKILL)
+            seen.append(written)
+            return
+        time.sleep(0.01)
+
+
+def test_cluster_gives_the_local_rows_and_survives_a_killed_worker(
+    tmp_path: Path, cluster: tuple[str, list[subprocess.Popen]], cli
+) -> None:
+    from distributed import Client
+
+    address, procs = cluster
+    sweep = long(tmp_path / "long.toml")
+    local, remote, killed = (tmp_path / n for n in ("local", "remote", "killed"))
+    assert cli(["sweep", str(sweep), "--out", str(local), "--no-plots", "--quiet"]).code == 0
+    code, stdout, err = cli(["sweep", str(sweep), "--out", str(remote), "--scheduler", address])
+    assert code == 0, err
+    assert f"dask.distributed at {address} (2 worker threads); {CHUNKS} chunks computed" in stdout
+    assert rows(remote).equals(rows(local))
+
+    seen: list[int] = []
+    watcher = threading.Thread(target=_kill_when, args=(killed / "parts", 3, procs[2], seen))
+    watcher.start()
+    code, _, err = cli(["sweep", str(sweep), "--out", str(killed), "--scheduler", address])
+    watcher.join()
+    assert code == 0, err
+    assert procs[2].wait(timeout=10) == -signal.SIGKILL and seen and seen[0] < CHUNKS
+    assert rows(killed).equals(rows(local))
+    with Client(address) as client:  # the survivor built once for three sweeps
+        assert list(client.run(builds).values()) == [[_build_id(local)]]
+
+
+def _build_id(out: Path) -> str:
+    return str(json.loads((out / "summary.json").read_text())["build_id"])
+
+
+def test_interrupted_client_resumes_without_recomputing(tmp_path: Path, cache: Path, cli) -> None:
+    sweep = long(tmp_path / "long.toml")
+    out, parts = tmp_path / "out", tmp_path / "out" / "parts"
+    cmd = [sys.executable, "-m", "gyrogen", "sweep", str(sweep), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*cmd, "--workers", "1", "--quiet", "--no-plots"],
+        env=_environment(cache),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(list(parts.glob("part-*"))) < 2:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.rstrip().endswith("gyrogen: aborted")
+    before = {p.name: p.stat().st_mtime_ns for p in parts.glob("part-*.parquet")}
+    assert 2 <= len(before) < CHUNKS
+    code, stdout, err = cli([*cmd[3:], "--quiet", "--no-plots"])
+    assert code == 0, err
+    assert f"{CHUNKS - len(before)} chunks computed, {len(before)} already written" in stdout
+    after = {p.name: p.stat().st_mtime_ns for p in parts.glob("part-*.parquet")}
+    assert len(after) == CHUNKS and all(after[n] == ns for n, ns in before.items())
+    fresh = tmp_path / "fresh"
+    assert cli([*cmd[3:5], "--out", str(fresh), "--quiet", "--no-plots"]).code == 0
+    assert rows(out).equals(rows(fresh))
