@@ -159,6 +159,22 @@ static inline double torque_free_cos_lanes(double x)
 }
 
 
+/* fmax and fmin, inline (NaN: the other argument, as fmax and fmin), for
+   the implicit methods. The library's are calls to legacy-SSE code: after
+   AVX-512 arithmetic (gcc -O3 -march=native) each call paid a state
+   transition, and Rodas4 ran 4.8x slower. The explicit pairs keep the
+   library's: inline, they let the compiler fuse multiply-adds differently
+   in the single and the lane code, 1 ulp apart. */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
+
+static inline double dmin(double a, double b)
+{
+    return a < b || b != b ? a : b;
+}
+
 const char *torque_free_ode_strerror(int code)
 {
     switch (code) {
@@ -1859,7 +1875,7 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
     if (!all_finite(x, TORQUE_FREE_NX) || !all_finite(f0, TORQUE_FREE_NX)) {
         return TORQUE_FREE_ODE_ERR_NONFINITE;
     }
-    h = h0 > 0.0 ? fmin(h0, t1 - t0) : initial_step(4, t0, t1, x, f0, c, rtol, atol, stats);
+    h = h0 > 0.0 ? dmin(h0, t1 - t0) : initial_step(4, t0, t1, x, f0, c, rtol, atol, stats);
     for (;;) {
         if (new_point) {
             torque_free_jac(t, x, c, J);
@@ -1916,17 +1932,17 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
             continue;
         }
         /* fac = h / h_new */
-        fac = fmax(1.0 / 6.0, fmin(5.0, pow(err, 0.25) / 0.9));
+        fac = dmax(1.0 / 6.0, dmin(5.0, pow(err, 0.25) / 0.9));
         if (err <= 1.0) {
             if (gimbal_lock(xnew, &cos_q2)) {
                 return TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             if (stats->accepted > 0) {
                 const double gus = (h_acc / h) * pow(err * err / err_acc, 0.25) / 0.9;
-                fac = fmax(fac, fmax(1.0 / 6.0, fmin(5.0, gus)));
+                fac = dmax(fac, dmax(1.0 / 6.0, dmin(5.0, gus)));
             }
             h_acc = h;
-            err_acc = fmax(1e-2, err);
+            err_acc = dmax(1e-2, err);
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
@@ -1939,7 +1955,7 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
             }
             new_point = 1;
             if (rejected_last) {
-                fac = fmax(fac, 1.0);
+                fac = dmax(fac, 1.0);
             }
             rejected_last = 0;
         } else {
@@ -2108,8 +2124,8 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
     }
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
-    newton_tol = fmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, fmin(0.03, sqrt(rtol_e)));
-    h = h0 > 0.0 ? fmin(h0, t1 - t0) : initial_step(5, t0, t1, x, f0, c, rtol, atol, stats);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+    h = h0 > 0.0 ? dmin(h0, t1 - t0) : initial_step(5, t0, t1, x, f0, c, rtol, atol, stats);
     if (t + 1.01 * h >= t1) {
         h = t1 - t;
         last = 1;
@@ -2176,7 +2192,7 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
 
         /* outcome: 0 converged, 1 too slowly (h reduced), 2 failed */
         outcome = 0;
-        rate = pow(fmax(rate, (0.5 * DBL_EPSILON)), 0.8);
+        rate = pow(dmax(rate, (0.5 * DBL_EPSILON)), 0.8);
         theta = 1e-3;
         for (newt = 0;;) {
             if (newt >= 7) {
@@ -2204,14 +2220,14 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
                 {
                     const double predicted = rate * dyno * pow(theta, 6 - newt) / newton_tol;
                     if (predicted >= 1.0) {
-                        const double q = fmax(1e-4, fmin(20.0, predicted));
+                        const double q = dmax(1e-4, dmin(20.0, predicted));
                         h *= 0.8 * pow(q, -1.0 / (10 - newt));
                         outcome = 1;
                         break;
                     }
                 }
             }
-            dyno_old = fmax(dyno, (0.5 * DBL_EPSILON));
+            dyno_old = dmax(dyno, (0.5 * DBL_EPSILON));
             for (i = 0; i < TORQUE_FREE_NX; ++i) {
                 const double a1 = w1[i] + z1[i], a2 = w2[i] + z2[i], a3 = w3[i] + z3[i];
                 w1[i] = a1;
@@ -2256,7 +2272,7 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
         }
 
         /* h_new = h / quot */
-        quot = fmax(1.0 / 8.0, fmin(5.0, pow(err, 0.25) / fmin(0.9, 13.5 / (newt + 14))));
+        quot = dmax(1.0 / 8.0, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));
         h_new = h / quot;
         if (err < 1.0) {
             if (gimbal_lock(xnew, &cos_q2)) {
@@ -2265,11 +2281,11 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
             first = 0;
             if (stats->accepted > 0) {
                 const double gus = (h_acc / h) * pow(err * err / err_acc, 0.25) / 0.9;
-                quot = fmax(quot, fmax(1.0 / 8.0, fmin(5.0, gus)));
+                quot = dmax(quot, dmax(1.0 / 8.0, dmin(5.0, gus)));
                 h_new = h / quot;
             }
             h_acc = h;
-            err_acc = fmax(1e-2, err);
+            err_acc = dmax(1e-2, err);
             h_old = h;
             for (i = 0; i < TORQUE_FREE_NX; ++i) {
                 const double ak = (z2[i] - z1[i]) / 0.4898979485566356;
@@ -2289,9 +2305,9 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
                 scal[i] = atol_e + rtol_e * fabs(x[i]);
             }
             fresh_jac = 0;
-            h_new = fmin(h_new, t1 - t0);
+            h_new = dmin(h_new, t1 - t0);
             if (reject) {
-                h_new = fmin(h_new, h);
+                h_new = dmin(h_new, h);
             }
             reject = 0;
             if (t + 1.01 * h_new >= t1) {
