@@ -11,6 +11,7 @@ Imported only when plots are asked for (matplotlib is slow to load).
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -20,7 +21,12 @@ from gyrogen.abi import ODE_CODES, SETUP_CODES, Code, message
 from gyrogen.analysis.check_engine import Result
 from gyrogen.analysis.plots import DPI, FLOOR, SIZE_INCHES, invariant_drifts, png_bytes
 
-TEXT = {"family": "monospace", "fontsize": 10, "va": "top", "wrap": True}
+
+def _words(ax: Axes, y: float, text: str, size: float = 10, width: int = 68) -> None:
+    """Monospaced lines from the top left of ax, at height y (axes
+    fraction), folded at width characters."""
+    folded = "\n".join(textwrap.fill(line, width) or line for line in text.split("\n"))
+    ax.text(0.02, y, folded, transform=ax.transAxes, family="monospace", fontsize=size, va="top")
 
 
 def png(res: Result) -> bytes:
@@ -65,7 +71,7 @@ def _refused(ax: Axes, res: Result) -> None:
     ]
     if case.extreme is not None and case.extreme.values is None:
         lines += ["", case.extreme.label]
-    ax.text(0.02, 0.95, "\n".join(lines), transform=ax.transAxes, **{**TEXT, "fontsize": 13})
+    _words(ax, 0.95, "\n".join(lines), 13, width=100)
 
 
 def _interval_ends(res: Result) -> np.ndarray:
@@ -105,7 +111,7 @@ def _drift(ax: Axes, res: Result) -> None:
     if not res.drift_series or res.times is None:
         ax.axis("off")
         words = f"not judged: the run stopped at t = {res.stats.get('t', math.nan):.3g} s"
-        ax.text(0.02, 0.9, words, transform=ax.transAxes, **{**TEXT, "fontsize": 12})
+        _words(ax, 0.9, words, 12)
         ax.set(title="invariants")
         return
     invariant_drifts(ax, res.times, res.drift_series)
@@ -117,7 +123,7 @@ def _extreme(ax: Axes, res: Result) -> None:
         ax.axis("off")
         words = extreme.label if extreme else f"{res.case.scene.description}"
         ax.set_title("what makes the case extreme (constant along the run)")
-        ax.text(0.02, 0.9, words, transform=ax.transAxes, **{**TEXT, "fontsize": 12})
+        _words(ax, 0.9, words, 12)
         return
     assert res.times is not None
     times, states = res.times, res.trajectory
@@ -157,4 +163,4 @@ def _summary(ax: Axes, res: Result) -> None:
     if res.diagnosis:
         lines += ["", res.diagnosis]
     ax.set_title("summary")
-    ax.text(0.0, 1.0, "\n".join(lines), transform=ax.transAxes, **TEXT)
+    _words(ax, 1.0, "\n".join(lines))
