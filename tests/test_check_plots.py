@@ -13,8 +13,6 @@ from matplotlib.image import imread
 
 from gyrogen.analysis import check_cases, check_engine
 from gyrogen.analysis.plots import PIXELS
-from gyrogen.codegen.generate import generate
-from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 
 EVERY = check_cases.cases()
@@ -49,27 +47,16 @@ def test_every_built_in_case_declares_its_extreme_quantity() -> None:
     assert all(case.extreme.label for case in EVERY if case.extreme is not None)
 
 
-@pytest.fixture(scope="module")
-def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
-    out = {}
-    for case in EVERY:
-        if case.scene.name not in out:
-            src = tmp_path_factory.mktemp(case.scene.name)
-            generate(case.scene, src)
-            out[case.scene.name] = build.build(src, "c")
-    return out
-
-
 @pytest.mark.parametrize(
     "case",
     [c for c in EVERY if c.extreme is not None and c.extreme.values is not None],
     ids=lambda c: c.name,
 )
 def test_extreme_quantity_is_finite_on_a_short_run(
-    case: check_engine.Case, compiled: dict[str, Compiled]
+    case: check_engine.Case, check_builds: dict[str, Compiled]
 ) -> None:
     short = replace(case, t_end=min(case.t_end, 0.01), samples=4, steps=min(case.steps, 400))
-    res = check_engine.run_case(short, compiled[case.scene.name])
+    res = check_engine.run_case(short, check_builds[case.scene.name])
     assert res.trajectory is not None and case.extreme is not None and case.extreme.values
     values = case.extreme.values(case, res.trajectory)
     assert values.shape == (len(res.trajectory),) and np.all(np.isfinite(values))
