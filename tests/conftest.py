@@ -108,3 +108,17 @@ def run_cli(argv: list[str]) -> Outcome:
 def cli() -> Callable[[list[str]], Outcome]:
     """cli(argv) -> (code, out, err): the command line, run in this process."""
     return run_cli
+
+
+@pytest.fixture(scope="session")
+def check_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
+    """The C build of each scene the `gyrogen check` cases use, by scene name."""
+    from gyrogen.analysis.check_cases import cases
+
+    out = {}
+    for case in cases():
+        if case.scene.name not in out:
+            src = tmp_path_factory.mktemp(case.scene.name)
+            generate(case.scene, src)
+            out[case.scene.name] = build.build(src, "c")
+    return out

@@ -10,8 +10,7 @@ import pytest
 
 from gyrogen import abi
 from gyrogen.analysis import check_cases, check_engine
-from gyrogen.codegen.generate import generate
-from gyrogen.runtime import build, scene_build
+from gyrogen.runtime import scene_build
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import builtin_text
 
@@ -19,14 +18,8 @@ QUICK = check_cases.cases(quick=True)
 
 
 @pytest.fixture(scope="module")
-def compiled(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
-    out = {}
-    for case in QUICK:
-        if case.scene.name not in out:
-            src = tmp_path_factory.mktemp(case.scene.name)
-            generate(case.scene, src)
-            out[case.scene.name] = build.build(src, "c")
-    return out
+def compiled(check_builds: dict[str, Compiled]) -> dict[str, Compiled]:
+    return check_builds
 
 
 @pytest.mark.parametrize("case", QUICK, ids=[c.name for c in QUICK])

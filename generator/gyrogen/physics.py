@@ -22,6 +22,10 @@ def reduced_mass(m_a: Value, m_b: Value) -> Value:
     return m_a * m_b / (m_a + m_b)
 
 
+LUMPED_FROM = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
+"""The parameters lumped_inertias takes, in its order."""
+
+
 def lumped_inertias(
     m_a: Value, m_b: Value, I11: Value, I22: Value, I33: Value, I13: Value, I: Value,
     l1: Value, l3: Value,

@@ -9,13 +9,18 @@ Euler parameters.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
+import numpy as np
+
 from gyrogen import methods
 from gyrogen.abi import GIMBAL_LOCK_COS
-from gyrogen.analysis.check_engine import Case, spin_prediction
+from gyrogen.analysis.check_engine import Case, Extreme, spin_prediction
 from gyrogen.errors import SceneError
+from gyrogen.oracle.scene_view import quaternion_dcm
+from gyrogen.physics import LUMPED_FROM, lumped_inertias
 from gyrogen.scene import Scene, builtin_names, default, load
 
 # A moderate spacecraft: lumped inertia about (12, 9.5, 15), rotor J = 0.03.
@@ -31,6 +36,64 @@ START = {"u1": 0.2, "u2": 1.0, "u3": -0.1, "u4": 50.0}
 CLOSEST_APPROACH = 17.0
 """The gimbal-lock cases started eps below q2 = pi/2 come within about
 17 eps^2 of |cos q2| = 0 (see _gimbal)."""
+
+
+def _speeds(case: Case, xs: np.ndarray, *names: str) -> list[np.ndarray]:
+    return [xs[:, case.scene.states.index(n)] for n in names]
+
+
+def rotor_ratio(case: Case, xs: np.ndarray) -> np.ndarray:
+    """J |u4| / |I~ w|: the rotor's axial momentum over the carrier's, with
+    the lumped inertia I~ of carrier and rotor (NOTES.md)."""
+    a11, a22, a33, a13 = lumped_inertias(*(case.params[n] for n in LUMPED_FROM))
+    u1, u2, u3, u4 = _speeds(case, xs, "u1", "u2", "u3", "u4")
+    carrier = np.linalg.norm([a11 * u1 + a13 * u3, a22 * u2, a13 * u1 + a33 * u3], axis=0)
+    return case.params["J"] * np.abs(u4) / carrier
+
+
+def cos_q2(case: Case, xs: np.ndarray) -> np.ndarray:
+    """|cos q2| of the 3-1-2 angles, also from Euler parameters: the length
+    of a2's projection on the n1-n2 plane, |(C21, C22)|; 0 at gimbal lock."""
+    states = case.scene.states
+    if case.scene.attitude == "euler312":
+        return np.abs(np.cos(xs[:, states.index("q2")]))
+    dcm = quaternion_dcm(xs[:, [states.index(e) for e in ("e0", "e1", "e2", "e3")]])
+    return np.hypot(dcm[:, 1, 0], dcm[:, 1, 1])
+
+
+def slip(case: Case, xs: np.ndarray) -> np.ndarray:
+    """u4 - u2 - w_ref: the speed controller's error, which k/J drives to 0."""
+    u2, u4 = _speeds(case, xs, "u2", "u4")
+    return u4 - u2 - case.params["w_ref"]
+
+
+def transverse_rate(case: Case, xs: np.ndarray) -> np.ndarray:
+    """|(u1, u3)|: the nutation about the spin axis a2, which grows if unstable."""
+    u1, u3 = _speeds(case, xs, "u1", "u3")
+    return np.hypot(u1, u3)
+
+
+ROTOR = Extreme("rotor to carrier momentum J |u4| / |I~ w|", rotor_ratio, log=True)
+GIMBAL = Extreme(
+    "|cos q2| (3-1-2 angles; 0 at gimbal lock)",
+    cos_q2,
+    log=True,
+    marks=((GIMBAL_LOCK_COS, "GIMBAL_LOCK_COS: the angles' integrators stop"),),
+)
+SLIP = Extreme("controller slip |u4 - u2 - w_ref| (rad/s)", slip, log=True)
+NUTATION = Extreme("transverse rate |(u1, u3)| (rad/s)", transverse_rate, log=True)
+
+
+def proportions(params: dict[str, float]) -> Extreme:
+    """Where nothing varies in time: the mass ratio, the condition number of
+    the lumped inertia's coupled block, and the rotor's share of it."""
+    a11, a22, a33, a13 = lumped_inertias(*(params[n] for n in LUMPED_FROM))
+    cond = np.linalg.cond([[a11, a13], [a13, a33]])
+    return Extreme(
+        f"m_b / m_a = {params['m_b'] / params['m_a']:.3g}\n"
+        f"cond [[I~11, I~13], [I~13, I~33]] = {cond:.3g}\n"
+        f"J / I~22 = {params['J'] / a22:.3g}"
+    )
 
 
 @cache
@@ -71,13 +134,14 @@ def _gimbal(eps: float, quaternion: bool) -> Case:
     kind = "quaternion" if quaternion else "3-1-2 angles"
     locks = not quaternion and CLOSEST_APPROACH * eps**2 < GIMBAL_LOCK_COS
     expect = "singular" if locks else "pass"
-    return Case(f"gimbal lock eps={eps:g} ({kind})", scene, NOMINAL, initial, 2.0, expect, "dop853")
+    name = f"gimbal lock eps={eps:g} ({kind})"
+    return Case(name, scene, NOMINAL, initial, 2.0, expect, "dop853", extreme=GIMBAL)
 
 
 def cases(quick: bool = False) -> list[Case]:
     """Every case in table order; quick: fewer and shorter ones (for CI)."""
     return [
-        Case("nominal", default(), NOMINAL, START, 10.0, "pass"),
+        Case("nominal", default(), NOMINAL, START, 10.0, "pass", extreme=ROTOR),
         *_fast_rotor(quick),
         *_attitude(quick),
         *_extreme_values(),
@@ -94,7 +158,8 @@ def _fast_rotor(quick: bool) -> list[Case]:
         u4 = ratio * 12.0 / NOMINAL["J"]
         t_end = 0.05 if ratio > 1e3 else 1.0
         name = f"fast rotor J u4/(I|w|)={ratio:g}"
-        out.append(Case(name, default(), NOMINAL, {**START, "u4": u4}, t_end, "pass"))
+        initial = {**START, "u4": u4}
+        out.append(Case(name, default(), NOMINAL, initial, t_end, "pass", extreme=ROTOR))
     return out
 
 
@@ -110,32 +175,47 @@ def _attitude(quick: bool) -> list[Case]:
     # with small steps rather than stop.
     through = {"q2": 1.4, "u1": 1.0, "u2": 0.0, "u3": 0.05, "u4": 0.0}
     name = "through q2 = pi/2"
-    out.append(Case(f"{name} (3-1-2 angles)", default(), NOMINAL, through, 1.0, "pass", "dop853"))
+    angles = Case(f"{name} (3-1-2 angles)", default(), NOMINAL, through, 1.0, "pass", "dop853")
     half = 0.7  # q2 = 1.4: a rotation of 1.4 about a1
     quat = {"e0": math.cos(half), "e1": math.sin(half), "u1": 1.0, "u3": 0.05}
     scene = quaternion_scene()
-    out.append(Case(f"{name} (quaternion)", scene, NOMINAL, quat, 1.0, "pass", "dop853"))
-    return out
+    quaternions = Case(f"{name} (quaternion)", scene, NOMINAL, quat, 1.0, "pass", "dop853")
+    return out + [replace(c, extreme=GIMBAL) for c in (angles, quaternions)]
 
 
 def _extreme_values() -> list[Case]:
     full = default()
     return [
-        Case("mass ratio m_b/m_a = 1e-9", full, _with(m_b=1e-7), START, 5.0, "pass"),
-        Case("mass ratio m_b/m_a = 1e9", full, _with(m_a=5e-9), START, 5.0, "pass"),
-        Case("rotor J = 1e-12", full, _with(J=1e-12, I=1e-12, T=1e-14), START, 5.0, "pass"),
-        Case("inertias at 1e-9", full, _scaled(1e-9), START, 5.0, "pass"),
-        Case("inertias at 1e9", full, _scaled(1e9), START, 5.0, "pass"),
-        Case(
-            "ill-conditioned lumped inertia (cond ~1e6)", full, _dumbbell(5e-6), START, 1.0, "pass"
-        ),
-        # Above the warning level: setup multiplies the lumped products out
-        # (optimize._multiplied_out), so the constants keep full accuracy.
-        Case(
-            "nearly singular lumped inertia (cond ~5e9)", full, _dumbbell(1e-9), START, 1.0, "pass"
-        ),
-        Case("numerically singular lumped inertia", full, _dumbbell(1e-15), START, 1.0, "refused"),
-        Case("negative mass", full, _with(m_a=-1.0), START, 1.0, "refused"),
+        replace(case, extreme=proportions(case.params))
+        for case in (
+            Case("mass ratio m_b/m_a = 1e-9", full, _with(m_b=1e-7), START, 5.0, "pass"),
+            Case("mass ratio m_b/m_a = 1e9", full, _with(m_a=5e-9), START, 5.0, "pass"),
+            Case("rotor J = 1e-12", full, _with(J=1e-12, I=1e-12, T=1e-14), START, 5.0, "pass"),
+            Case("inertias at 1e-9", full, _scaled(1e-9), START, 5.0, "pass"),
+            Case("inertias at 1e9", full, _scaled(1e9), START, 5.0, "pass"),
+            Case(
+                "ill-conditioned lumped inertia (cond ~1e6)",
+                full,
+                _dumbbell(5e-6),
+                START,
+                1.0,
+                "pass",
+            ),
+            # Above the warning level: setup multiplies the lumped products out
+            # (optimize._multiplied_out), so the constants keep full accuracy.
+            Case(
+                "nearly singular lumped inertia (cond ~5e9)",
+                full,
+                _dumbbell(1e-9),
+                START,
+                1.0,
+                "pass",
+            ),
+            Case(
+                "numerically singular lumped inertia", full, _dumbbell(1e-15), START, 1.0, "refused"
+            ),
+            Case("negative mass", full, _with(m_a=-1.0), START, 1.0, "refused"),
+        )
     ]
 
 
@@ -145,7 +225,8 @@ def _speed_controller(quick: bool) -> list[Case]:
     for ratio in (1e1, 1e3, 1e6) if quick else (1e1, 1e2, 1e3, 1e4, 1e5, 1e6):
         params = {"k": ratio * 0.03, "w_ref": 150.0}
         initial = {"u2": 0.1, "u1": 0.02}
-        out.append(Case(f"speed controller k/J={ratio:g}", ctrl, params, initial, 2.0, "pass"))
+        name = f"speed controller k/J={ratio:g}"
+        out.append(Case(name, ctrl, params, initial, 2.0, "pass", extreme=SLIP))
     return out
 
 
@@ -155,7 +236,13 @@ def _long_run(quick: bool) -> Case:
     after 1e7); the integrators sum their steps with compensation instead."""
     steps = 10**6 if quick else 10**7
     name = f"long run: {steps:.0e} RK4 steps"
-    return Case(name, default(), NOMINAL, START, steps * 1e-4, "pass", "rk4", steps=steps)
+    rounding = Extreme(
+        f"{steps:.0e} fixed steps of 1e-4 s: plain adds of t and x would drift\n"
+        f"by rounding, ~eps per step ({steps * 2.2e-16:.0e} after {steps:.0e})"
+    )
+    return Case(
+        name, default(), NOMINAL, START, steps * 1e-4, "pass", "rk4", steps=steps, extreme=rounding
+    )
 
 
 def _spin_stability() -> list[Case]:
@@ -164,7 +251,8 @@ def _spin_stability() -> list[Case]:
         initial = {"u1": 1e-4, "u2": 1.0, "u3": 0.0, "u4": u4}
         expect = spin_prediction(SPIN, 1.0, u4)
         name = f"spin stability u4={u4:g}: predicted {expect}"
-        out.append(Case(name, default(), SPIN, initial, 200.0, expect, "dop853", samples=400))
+        case = Case(name, default(), SPIN, initial, 200.0, expect, "dop853", samples=400)
+        out.append(replace(case, extreme=NUTATION))
     return out
 
 

@@ -12,6 +12,7 @@ compiled integrators at rtol = 1e-12, watching the invariants of NOTES.md:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,14 +20,28 @@ import numpy as np
 
 from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
 from gyrogen.analysis import stiffness
-from gyrogen.analysis.invariants import at_samples
-from gyrogen.physics import lumped_inertias
+from gyrogen.analysis.invariants import peak, series_at_samples
+from gyrogen.physics import LUMPED_FROM, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
 DRIFT_BAR = 1e-10
 """The invariants' relative drift allowed at rtol 1e-12."""
+
+
+@dataclass(frozen=True)
+class Extreme:
+    """What makes a case extreme, as its figure shows it: a quantity along
+    the run (values(case, states) -> one value per state), or, where
+    nothing varies in time, a fixed one stated in words (values None)."""
+
+    label: str
+    values: Callable[[Case, np.ndarray], np.ndarray] | None = None
+    log: bool = False
+    """Plot |values| on a log axis."""
+    marks: tuple[tuple[float, str], ...] = ()
+    """Horizontal lines (value, what it is): a threshold the run is judged by."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +58,8 @@ class Case:
     steps: int = 0
     """For method 'rk4': the number of steps."""
     samples: int = 20
+    extreme: Extreme | None = None
+    """None: the figure states the scene's description instead."""
 
 
 @dataclass
@@ -61,6 +78,12 @@ class Result:
     diagnosis: str = ""
     trajectory: np.ndarray | None = None
     times: np.ndarray | None = None
+    intervals: tuple[dict[str, Any], ...] = ()
+    """Each output interval's integrator statistics, a failed one last."""
+    drift_series: dict[str, np.ndarray] = field(default_factory=dict)
+    """Each invariant's relative drift at the times (drift holds the peaks)."""
+    stopped: np.ndarray | None = None
+    """A failed run's last good state, at stats["t"]."""
 
     @property
     def passed(self) -> bool:
@@ -89,7 +112,8 @@ def run_case(case: Case, comp: Compiled) -> Result:
     steps = max(1, case.steps // case.samples)
     given = controls(res.method, steps=steps, rtol=1e-12, atol=1e-12, max_steps=10**8)
     seg = integrate_segments(comp, res.method, x0, c, ts, given)
-    res.stats, res.code = seg.totals, seg.code
+    res.stats, res.code, res.intervals = seg.totals, seg.code, seg.intervals
+    res.stopped = seg.stopped
     res.trajectory, res.times = seg.states, ts[: len(seg.states)]
     _judge(res, p, c, comp)
     return res
@@ -113,7 +137,8 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
             res.verdict = "failed"
             res.diagnosis = f"{where}: {message(ODE_CODES, res.code)}"
         return
-    res.drift = at_samples(scene, p, xs, res.times)
+    res.drift_series = series_at_samples(scene, p, xs, res.times)
+    res.drift = {name: peak(values) for name, values in res.drift_series.items()}
     later = stiffness.index(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)
     res.stiffness = max(res.stiffness, later)
     if case.expect in ("stable", "unstable"):
@@ -147,8 +172,7 @@ def spin_axes(v: dict[str, Any], omega: Any, u4: Any) -> tuple[Any, Any, Any]:
     """NOTES.md's spin-stability terms: H_a / Omega (H_a = I~22 Omega + J
     u4) and the transverse inertias I_t1 <= I_t3, the eigenvalues of
     [[I~11, I~13], [I~13, I~33]]; numbers or numpy arrays alike."""
-    names = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
-    a11, a22, a33, a13 = lumped_inertias(*(v[n] for n in names))
+    a11, a22, a33, a13 = lumped_inertias(*(v[n] for n in LUMPED_FROM))
     block = np.stack(np.broadcast_arrays(a11, a13, a13, a33), axis=-1)
     it = np.linalg.eigvalsh(block.reshape((*block.shape[:-1], 2, 2)))
     return (a22 * omega + v["J"] * u4) / omega, it[..., 0], it[..., 1]
@@ -163,35 +187,3 @@ def spin_stable(v: dict[str, Any], omega: Any, u4: Any) -> Any:
 def spin_prediction(v: dict[str, float], omega: float, u4: float) -> str:
     """spin_stable as a check case's expected verdict."""
     return "stable" if spin_stable(v, omega, u4) else "unstable"
-
-
-def plot(res: Result) -> bytes:
-    """Invariant drift and the states along the run: one PNG per case."""
-    from matplotlib.figure import Figure  # matplotlib: loaded only for plots
-
-    from gyrogen.analysis.plots import png_bytes
-
-    fig = Figure(figsize=(12, 4.5), dpi=100)
-    a, b = fig.subplots(1, 2)
-    if res.trajectory is not None and res.times is not None:
-        for i, s in enumerate(res.case.scene.states):
-            if s.startswith("u"):
-                a.plot(res.times[: len(res.trajectory)], res.trajectory[:, i], label=s)
-        a.set_xlabel("t (s)")
-        a.set_ylabel("generalized speeds (rad/s, m/s)")
-        a.legend(fontsize=8)
-    b.axis("off")
-    lines = [f"{res.case.name}: {res.verdict} (expected {res.case.expect})", res.recommended]
-    lines += [f"{k}: {v:.2e}" for k, v in res.drift.items()] + [res.diagnosis]
-    b.text(
-        0.0,
-        1.0,
-        "\n".join(x for x in lines if x),
-        va="top",
-        family="monospace",
-        fontsize=9,
-        wrap=True,
-    )
-    fig.suptitle(f"gyrogen check: {res.case.name}")
-    fig.tight_layout()
-    return png_bytes(fig)

@@ -7,7 +7,7 @@ generated code under test), all relative:
 - u4(t) - u4(0) - int_0^t T dt / J is 0 (J u4' = T): over max |u4|.
 
 `along_trajectory` takes the integrals by quadrature over a simulated trajectory (any
-torque law); `at_samples` takes them exactly for a constant torque, at the
+torque law); `series_at_samples` takes them exactly for a constant torque, at the
 samples of a check case. A scale that is zero (H(0) = 0, K or u4 zero
 throughout) leaves the residual absolute.
 """
@@ -116,20 +116,22 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
     )
 
 
-def at_samples(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> dict[str, float]:
-    """The largest relative drift of each invariant over the samples xs at
-    times ts: |H| always; with no torque or a constant one, also the energy
-    balance (when the rotor angle q4 gives the motor's work) and u4 = u4(0)
-    + T t / J, their integrals in closed form."""
-    out = {"|H| in N": peak(momentum_drifts(momentum(scene, p, xs))[0])}
+def series_at_samples(
+    scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The relative drift of each invariant at the samples xs at times ts:
+    |H| always; with no torque or a constant one, also the energy balance
+    (when the rotor angle q4 gives the motor's work) and u4 = u4(0) + T t /
+    J, their integrals in closed form."""
+    out = {"|H| in N": momentum_drifts(momentum(scene, p, xs))[0]}
     if scene.effects.torque not in ("none", "constant"):
         return out
     v = scene_view.values(scene, p)
     torque = v.get("T", 0.0)
     idx = {s: i for i, s in enumerate(scene.states)}
     if torque == 0 or "q4" in idx:
-        out["energy balance"] = peak(balance(kinetic(scene, p, xs), _work(scene, v, xs)))
-    out["u4 = u4(0) + T t / J"] = peak(balance(xs[:, idx["u4"]], torque * (ts - ts[0]) / v["J"]))
+        out["energy balance"] = balance(kinetic(scene, p, xs), _work(scene, v, xs))
+    out["u4 = u4(0) + T t / J"] = balance(xs[:, idx["u4"]], torque * (ts - ts[0]) / v["J"])
     return out
 
 

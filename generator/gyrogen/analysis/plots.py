@@ -50,7 +50,7 @@ def _attitude(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
     ax.set(title="3-1-2 Euler angles of A in N (unwrapped)", ylabel="deg")
 
 
-def _invariants(ax: Axes, t: np.ndarray, drifts: dict[str, np.ndarray]) -> None:
+def invariant_drifts(ax: Axes, t: np.ndarray, drifts: dict[str, np.ndarray]) -> None:
     top = FLOOR
     for label, values in drifts.items():
         shown = np.maximum(np.abs(values), FLOOR)
@@ -72,7 +72,7 @@ def trajectory_png(
     _body_rates(a, scene, t, x)
     _rotor(b, scene, t, x)
     _attitude(c, scene, t, x)
-    _invariants(d, t, drifts)
+    invariant_drifts(d, t, drifts)
     for ax in (a, b, c):
         ax.ticklabel_format(axis="y", useOffset=False)  # 599.95, not 0.05 + 5.999e2
         ax.legend(loc="best", fontsize="small")

@@ -60,7 +60,9 @@ def check(
             res = check_engine.run_case(case, compiled[key])
             results.append(res)
             if plots is not None:
-                write_atomic(plots, {f"{_slug(case.name)}.png": check_engine.plot(res)})
+                from gyrogen.analysis import check_plots  # matplotlib: only for plots
+
+                write_atomic(plots, {f"{_slug(case.name)}.png": check_plots.png(res)})
     _table(results)
     failed = [r for r in results if not r.passed]
     if failed:

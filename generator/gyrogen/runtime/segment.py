@@ -26,6 +26,10 @@ class Segments:
     """The COUNTERS summed over the segments run, and t, the time reached."""
     code: int
     """0, or the return code (abi.ODE_CODES) of the segment that failed."""
+    intervals: tuple[dict[str, float | int], ...] = ()
+    """Each segment's own statistics (abi.STATS_FIELDS), the failed one last."""
+    stopped: np.ndarray | None = None
+    """On failure: the last good state, at totals["t"]."""
 
 
 def integrate_segments(
@@ -42,13 +46,15 @@ def integrate_segments(
     x = np.array(x0, dtype=np.float64)
     states = [x.copy()]
     totals: dict[str, float | int] = dict.fromkeys(COUNTERS, 0)
+    intervals = []
     for a, b in itertools.pairwise(times):
         x, stats, code = comp.integrate(method, x, c, float(a), float(b), **given)
+        intervals.append(stats)
         for name in COUNTERS:
             totals[name] += stats[name]
         totals["t"] = stats["t"]
         if code != 0:
-            return Segments(np.array(states), totals, code)
+            return Segments(np.array(states), totals, code, tuple(intervals), x.copy())
         states.append(x.copy())
         reached(float(b))
-    return Segments(np.array(states), totals, 0)
+    return Segments(np.array(states), totals, 0, tuple(intervals))
