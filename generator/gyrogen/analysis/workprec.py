@@ -263,3 +263,32 @@ def time_at(runs: list[Run], level: float) -> Run | None:
     """The fastest run of a list that reaches an error of at most level."""
     good = [r for r in runs if r.status.startswith("ok") and r.error <= level]
     return min(good, key=lambda r: r.seconds) if good else None
+
+
+def front(runs: list[Run]) -> list[Run]:
+    """The work-precision front of one contender's runs: by time, each run
+    more accurate than every faster one (a run both slower and less
+    accurate than another says nothing of what the method costs)."""
+    out: list[Run] = []
+    for r in sorted((r for r in runs if r.status.startswith("ok") and r.error > 0),
+                    key=lambda r: (r.seconds, r.error)):  # fmt: skip
+        if not out or r.error < out[-1].error:
+            out.append(r)
+    return out
+
+
+def seconds_at(runs: list[Run], level: float) -> float | None:
+    """What one contender needs for an error of level, read along its front:
+    interpolated in log-log between the two runs around level; a contender
+    whose fastest run is already below level is charged that run (no
+    extrapolation); None when no run reaches level."""
+    pts = front(runs)
+    if not pts or pts[-1].error > level:
+        return None
+    if pts[0].error <= level:
+        return pts[0].seconds
+    for slow, fast in zip(pts[1:], pts, strict=False):
+        if slow.error <= level:
+            w = math.log(fast.error / level) / math.log(fast.error / slow.error)
+            return math.exp((1 - w) * math.log(fast.seconds) + w * math.log(slow.seconds))
+    return None  # unreachable: pts[-1].error <= level
