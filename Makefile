@@ -7,14 +7,14 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench bench-ensemble report check fuzz clean distclean examples strict
+.PHONY: setup system-deps run test lint generate check-generated bench bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib
 
-## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake) and the Python environment in .venv
+## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake, pkg-config) and the Python environment in .venv
 setup: system-deps $(STAMP)
 
 system-deps:
 	@missing=""; \
-	for tool in gcc g++ gfortran clang valgrind cmake; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	for tool in gcc g++ gfortran clang valgrind cmake pkg-config; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
 	    echo "installing$$missing (apt-get)"; \
@@ -47,12 +47,12 @@ lint: setup
 
 ## generate: rewrite generated/ (every built-in scene) from the templates and the generator
 generate: setup
-	$(BIN)/gyrogen generate --all --out generated
+	$(BIN)/gyrogen generate --all --lib --out generated
 
 ## check-generated: fail if generated/ differs from a fresh rendering
 check-generated: setup
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
-	$(BIN)/gyrogen generate --all --out "$$tmp" >/dev/null 2>&1 && \
+	$(BIN)/gyrogen generate --all --lib --out "$$tmp" >/dev/null 2>&1 && \
 	diff -r "$$tmp" generated && echo "generated/ is up to date"
 
 ## bench: RHS timings (cffi, batched C and Fortran, numpy, PyDy cython)
@@ -77,6 +77,16 @@ report: setup
 FUZZ_EXAMPLES ?= 2000
 fuzz: setup
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
+
+## fmu-agreement: the FMUs of the default, quaternion and stiff scenes in FMPy (Co-Simulation
+## and Model Exchange) against `gyrogen simulate` over each scene's t_end (the suite runs 1 s)
+fmu-agreement: setup
+	$(BIN)/python tests/fmu_agreement.py
+
+## bench-lib: ns per rhs call of the CMake package under add_subdirectory: no build type
+## (the package's -O2), Release, and None (no -O flag: the flags before issue 15)
+bench-lib: setup
+	$(BIN)/python tests/bench_cmake_default.py
 
 ## check: numerical stability on every stiff and extreme case
 check: setup

@@ -5,7 +5,10 @@ the command line as a test calls it (`cli`)."""
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import io
+import os
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
@@ -28,8 +31,10 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def source_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default scene as `make generate` writes it: sources, manifest and
+    the --lib build files."""
     out = tmp_path_factory.mktemp("generated") / default().name
-    generate(default(), out)
+    generate(default(), out, lib=True)
     return out
 
 
@@ -41,6 +46,42 @@ def backends(source_dir: Path, cache_dir: Path) -> dict[str, Compiled]:
         return {lang: build.build(source_dir, lang) for lang in ("c", "fortran")}
     finally:
         mp.undo()
+
+
+def shared_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A directory every xdist worker of this run sees (the run's own when
+    there are no workers)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+def built_once(
+    tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], None]
+) -> Path:
+    """shared_dir/name, made by make(it) once per run: the first worker to
+    ask makes it, the others wait for it and reuse it."""
+    shared = shared_dir(tmp_path_factory)
+    out = shared / name
+    with open(shared / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (shared / f"{name}.complete").is_file():
+            make(out)
+            (shared / f"{name}.complete").touch()
+    return out
+
+
+@pytest.fixture(scope="session")
+def examples_build(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """examples/Makefile's `all` with its own flags (the default scene's
+    library configured, built and installed by CMake, then the programs
+    through find_package), built once per run."""
+
+    def make(build: Path) -> None:
+        command = ["make", "-C", str(REPO / "examples"), f"BUILD={build}", f"GEN={source_dir}"]
+        proc = subprocess.run([*command, "all"], capture_output=True, text=True, check=False)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+
+    return built_once(tmp_path_factory, "examples-default", make)
 
 
 class Outcome(NamedTuple):

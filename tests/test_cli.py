@@ -21,7 +21,7 @@ def test_generate_writes_sources_and_manifest(tmp_path: Path, cli) -> None:
     assert code == 0
     names = sorted(p.name for p in (tmp_path / "o").iterdir())
     assert names == [
-        "gyrostat.c", "gyrostat.f90", "gyrostat.h",
+        "gyrostat.c", "gyrostat.f90", "gyrostat.h", "gyrostat_f.h",
         "gyrostat_ode.c", "gyrostat_ode.f90", "gyrostat_ode.h", "manifest.json",
     ]  # fmt: skip
     assert "gyrostat" in out and "(full model)" in out
@@ -200,7 +200,7 @@ def test_written_files_have_the_mode_open_gives(
         os.umask(saved)
         files_module._umask_once.cache_clear()
     written = [*(tmp_path / "o").iterdir(), tmp_path / "my_sat.toml", tmp_path / "my_sat2.toml"]
-    assert len(written) == 9
+    assert len(written) == 10
     assert {oct(p.stat().st_mode & 0o777) for p in written} == {oct(0o666 & ~mask)}
 
 

@@ -1,6 +1,6 @@
-"""The embedding examples (examples/) build with their own Makefile, against
-generated sources only, and print what the Python path computes: the same
-RK4 run with the numpy reference as the right-hand side."""
+"""The embedding examples (examples/) build with their own Makefile through
+the generated library's CMake package, and print what the Python path
+computes: the same RK4 run with the numpy reference as the right-hand side."""
 
 from __future__ import annotations
 
@@ -56,18 +56,10 @@ def run(program: Path) -> dict[str, float]:
     return parse(proc.stdout)
 
 
-@pytest.fixture(scope="module")
-def programs(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """examples/Makefile's `all`, into a temporary BUILD so the tree stays clean."""
-    build = tmp_path_factory.mktemp("examples")
-    proc = subprocess.run(
-        ["make", "-C", str(EXAMPLES), f"BUILD={build}", f"GEN={source_dir}", "all"],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return build
+@pytest.fixture
+def programs(examples_build: Path) -> Path:
+    """examples/Makefile's `all` (conftest.examples_build), outside the tree."""
+    return examples_build
 
 
 @pytest.fixture(scope="module")
@@ -108,10 +100,11 @@ def test_cpp_prints_the_reference_rhs(programs: Path) -> None:
     np.testing.assert_allclose(list(out.values()), expected, rtol=1e-12, atol=1e-15)
 
 
-def test_make_run_prints_each_program(source_dir: Path, tmp_path: Path) -> None:
-    """`make -C examples run` (what `make examples` calls) builds and runs all three."""
+def test_make_run_prints_each_program(source_dir: Path, programs: Path) -> None:
+    """`make -C examples run` (what `make examples` calls) builds and runs all
+    three (in the build directory `programs` made, so nothing is rebuilt)."""
     proc = subprocess.run(
-        ["make", "-s", "-C", str(EXAMPLES), f"BUILD={tmp_path}", f"GEN={source_dir}", "run"],
+        ["make", "-s", "-C", str(EXAMPLES), f"BUILD={programs}", f"GEN={source_dir}", "run"],
         capture_output=True,
         text=True,
         check=False,
@@ -119,3 +112,10 @@ def test_make_run_prints_each_program(source_dir: Path, tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     headers = [line for line in proc.stdout.splitlines() if line.startswith("== ")]
     assert [Path(h[3:]).name for h in headers] == ["embed_c", "embed_fortran", "embed_cpp"]
+
+
+def test_programs_come_from_the_installed_package(programs: Path) -> None:
+    """The examples link the library CMake installed, found by find_package."""
+    cache = (programs / "app" / "CMakeCache.txt").read_text()
+    assert f"gyrostat_DIR:PATH={programs}/prefix/lib/cmake/gyrostat" in cache
+    assert (programs / "prefix" / "include" / "gyrostat" / "gyrostat_mod.mod").is_file()

@@ -16,8 +16,9 @@ from gyrogen.scene import builtin_names, default, load
 
 REPO = Path(__file__).resolve().parents[1]
 CHECKED_IN = REPO / "generated" / default().name
-FILES = ["gyrostat.h", "gyrostat.c", "gyrostat.f90", "manifest.json"]
+FILES = ["gyrostat.h", "gyrostat.c", "gyrostat.f90", "gyrostat_f.h", "manifest.json"]
 FILES += ["gyrostat_ode.h", "gyrostat_ode.c", "gyrostat_ode.f90"]  # the integrators
+FILES += ["CMakeLists.txt", "gyrostat.mk", "gyrostatConfig.cmake.in", "gyrostat.pc.in"]  # --lib
 
 
 def test_checked_in_default_scene_is_fresh(source_dir: Path) -> None:
@@ -33,7 +34,7 @@ def test_checked_in_default_scene_is_fresh(source_dir: Path) -> None:
 @pytest.mark.parametrize("name", [n for n in builtin_names() if n != default().name])
 def test_checked_in_scene_is_fresh(name: str, tmp_path: Path) -> None:
     """Every built-in scene has its sources in generated/<scene>/, up to date."""
-    generate(load(name), tmp_path)
+    generate(load(name), tmp_path, lib=True)
     checked_in = REPO / "generated" / name
     assert sorted(p.name for p in checked_in.iterdir()) == sorted(
         p.name for p in tmp_path.iterdir()
@@ -49,7 +50,7 @@ def test_generated_holds_only_builtin_scenes() -> None:
 
 
 def test_generation_is_deterministic(tmp_path: Path, source_dir: Path) -> None:
-    generate(default(), tmp_path / "again")
+    generate(default(), tmp_path / "again", lib=True)
     for name in FILES:
         assert (tmp_path / "again" / name).read_bytes() == (source_dir / name).read_bytes()
 
@@ -108,8 +109,10 @@ def test_manifest(source_dir: Path) -> None:
     assert m["functions"]["c"] == {
         "setup": "gyrostat_setup",
         "rhs": "gyrostat_rhs",
+        "strerror": "gyrostat_strerror",
         "jac": "gyrostat_jac",
         **methods,
+        "ode_strerror": "gyrostat_ode_strerror",
     }
     assert m["functions"]["fortran"]["setup"] == "gyrostat_f_setup"
     assert m["functions"]["fortran"]["rhs"] == "gyrostat_f_rhs"

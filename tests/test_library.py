@@ -55,7 +55,12 @@ def check_shared(so: Path, backend: Compiled) -> None:
 
 def test_every_file_says_where_it_came_from(source_dir: Path) -> None:
     out = buildfiles.files(manifest(source_dir))
-    assert set(out) == {"CMakeLists.txt", "gyrostat.mk"}
+    assert set(out) == {
+        "CMakeLists.txt",
+        "gyrostat.mk",
+        "gyrostatConfig.cmake.in",
+        "gyrostat.pc.in",
+    }
     for name, text in out.items():
         head = "\n".join(text.splitlines()[:6])
         assert head.startswith(f"# {name}:")
@@ -86,42 +91,71 @@ def test_a_scene_without_c_is_an_error(source_dir: Path) -> None:
         buildfiles.files(m)
 
 
+COMPILE_COMMANDS = "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON"
+
+
+def compile_flags(build: Path, source: str) -> str:
+    """The command CMake compiles a source file with (compile_commands.json)."""
+    commands = json.loads((build / "compile_commands.json").read_text())
+    return next(c["command"] for c in commands if c["file"].endswith(f"/{source}"))
+
+
 def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
+    """On its own: Release, one static C library, no Fortran unless asked for;
+    with BUILD_SHARED_LIBS a shared one with a SOVERSION."""
     out = tmp_path / "build"
-    run(["cmake", "-S", str(lib_dir), "-B", str(out)], tmp_path)
+    run(
+        ["cmake", "-S", str(lib_dir), "-B", str(out), "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON"],
+        tmp_path,
+    )
     run(["cmake", "--build", str(out)], tmp_path)
-    assert (out / "libgyrostat.a").is_file()
-    assert (out / "libgyrostat_f.a").is_file()  # gfortran is there, so the option is on
-    check_shared(out / "libgyrostat.so", backends["c"])
+    assert sorted(p.name for p in out.glob("lib*")) == ["libgyrostat.a"]
+    assert "-O3" in compile_flags(out, "gyrostat.c")  # CMake's Release
+    assert "GYROSTAT_FORTRAN:BOOL=OFF" in (out / "CMakeCache.txt").read_text()
+    shared = tmp_path / "shared"
+    run(["cmake", "-S", str(lib_dir), "-B", str(shared), "-DBUILD_SHARED_LIBS=ON"], tmp_path)
+    run(["cmake", "--build", str(shared)], tmp_path)
+    assert sorted(p.name for p in shared.glob("lib*")) == [
+        "libgyrostat.so",
+        "libgyrostat.so.0.1",
+        "libgyrostat.so.0.1.0",
+    ]
+    assert "SONAME               libgyrostat.so.0.1" in run(
+        ["objdump", "-p", str(shared / "libgyrostat.so")], tmp_path
+    )
+    check_shared(shared / "libgyrostat.so", backends["c"])
 
 
 def test_cmake_add_subdirectory(lib_dir: Path, tmp_path: Path) -> None:
-    """A parent project links the examples against the three library targets;
-    all print the same, and the same as the examples' own Makefile would."""
+    """A parent project that enables Fortran gets both libraries through
+    their alias targets; the C and Fortran examples print the same. The
+    parent gives no build type, and the library is still optimised."""
     parent = tmp_path / "parent"
     parent.mkdir()
     shutil.move(lib_dir, parent / "gyrostat")
     shutil.copy(REPO / "examples" / "embed_c" / "main.c", parent / "app.c")
     shutil.copy(REPO / "examples" / "embed_fortran" / "main.f90", parent / "fapp.f90")
     (parent / "CMakeLists.txt").write_text(
-        "cmake_minimum_required(VERSION 3.13)\n"
+        "cmake_minimum_required(VERSION 3.15)\n"
         "project(app LANGUAGES C Fortran)\n"
         "add_subdirectory(gyrostat)\n"
-        "add_executable(app_static app.c)\n"
-        "target_link_libraries(app_static PRIVATE gyrostat)\n"
-        "add_executable(app_shared app.c)\n"
-        "target_link_libraries(app_shared PRIVATE gyrostat_shared)\n"
+        "add_executable(app app.c)\n"
+        "target_link_libraries(app PRIVATE gyrostat::gyrostat)\n"
         "add_executable(fapp fapp.f90)\n"
-        "target_link_libraries(fapp PRIVATE gyrostat_f)\n"
+        "target_link_libraries(fapp PRIVATE gyrostat::gyrostat_f)\n"
     )
     out = tmp_path / "build"
-    run(["cmake", "-S", str(parent), "-B", str(out)], tmp_path)
+    run(
+        ["cmake", "-S", str(parent), "-B", str(out), "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON"], tmp_path
+    )
     run(["cmake", "--build", str(out)], tmp_path)
-    static = run([str(out / "app_static")], tmp_path)
-    assert run([str(out / "app_shared")], tmp_path) == static
+    assert "-O2" in compile_flags(out, "gyrostat_ode.c")
+    assert "-O" not in compile_flags(out, "app.c")  # the parent's own choice is left alone
+    c = run([str(out / "app")], tmp_path)
     fortran = run([str(out / "fapp")], tmp_path)
-    values = [[float(line.split()[1]) for line in o.splitlines()] for o in (static, fortran)]
+    values = [[float(line.split()[1]) for line in o.splitlines()] for o in (c, fortran)]
     np.testing.assert_allclose(values[1], values[0], rtol=1e-12, atol=1e-15)
+    assert not list((out / "gyrostat" / "include").glob("*.c"))  # headers only
 
 
 def test_make_fragment(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:

@@ -111,11 +111,11 @@ def test_c_example_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str) -
 
 
 @pytest.mark.parametrize("program", ["embed_c", "embed_fortran"])
-def test_examples_under_valgrind(source_dir: Path, tmp_path: Path, program: str) -> None:
-    build_examples(source_dir, tmp_path, target=str(tmp_path / program))
+def test_examples_under_valgrind(examples_build: Path, program: str) -> None:
+    """The examples as `make examples` builds them (conftest.examples_build)."""
     proc = subprocess.run(
         [tool("valgrind"), "-q", "--error-exitcode=1", "--leak-check=full",
-         str(tmp_path / program)],
+         str(examples_build / program)],
         capture_output=True, text=True, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr

@@ -1,6 +1,7 @@
 /*
  * Embedding the generated C in a plain C99 program: no Python, no gyrogen,
- * only gyrostat.{h,c} and gyrostat_ode.{h,c} from generated/gyrostat/.
+ * only the library built from generated/gyrostat/ (its CMake package:
+ * examples/CMakeLists.txt links gyrostat::gyrostat).
  *
  * A dual-spin-like gyrostat (a 500 kg carrier with a 10 kg momentum wheel
  * spinning at 100 rad/s, driven by a 0.01 N m motor) is integrated for 10 s
@@ -28,21 +29,6 @@ static const char *const state_names[GYROSTAT_NX] = {
     "q1", "q2", "q3", "q4", "q5", "q6", "q7",
     "u1", "u2", "u3", "u4", "u5", "u6", "u7",
 };
-
-/* The meanings documented in gyrostat.h, for a readable failure. */
-static const char *setup_message(int code)
-{
-    switch (code) {
-    case GYROSTAT_ERR_NONFINITE: return "a parameter is NaN or infinite";
-    case GYROSTAT_ERR_MASS: return "a mass (m_a or m_b) is not positive";
-    case GYROSTAT_ERR_ROTOR_INERTIA: return "a rotor inertia (I or J) is not positive";
-    case GYROSTAT_ERR_CARRIER_NOT_PD: return "the carrier inertia is not positive definite";
-    case GYROSTAT_ERR_CARRIER_TRIANGLE:
-        return "the carrier's principal moments violate the triangle inequality";
-    case GYROSTAT_ERR_ROTOR_TRIANGLE: return "the rotor violates the triangle inequality (2 I < J)";
-    default: return "unknown code";
-    }
-}
 
 /*
  * Angular momentum about AB* in N components (NOTES.md). The generated code
@@ -93,7 +79,7 @@ int main(void)
 
     code = gyrostat_setup(p, c);
     if (code != GYROSTAT_OK) {
-        fprintf(stderr, "gyrostat_setup failed (code %d): %s\n", code, setup_message(code));
+        fprintf(stderr, "gyrostat_setup failed (code %d): %s\n", code, gyrostat_strerror(code));
         return 1;
     }
 
@@ -104,7 +90,8 @@ int main(void)
     /* The generated classic RK4: STEPS equal steps of DT over [0, 10 s]. */
     code = gyrostat_rk4(0.0, STEPS * DT, STEPS, x, c, &stats);
     if (code != GYROSTAT_ODE_OK) {
-        fprintf(stderr, "gyrostat_rk4 failed (code %d) at t = %g\n", code, stats.t);
+        fprintf(stderr, "gyrostat_rk4 failed (code %d) at t = %g: %s\n", code, stats.t,
+                gyrostat_ode_strerror(code));
         return 1;
     }
 

@@ -1,6 +1,6 @@
 // Embedding the generated C in a C++17 program: the header's extern "C"
-// guards let C++ call the C object directly (compile gyrostat.c with a C
-// compiler and link it in). Sets up the same gyrostat as the C and Fortran
+// guards let C++ call the C library directly (examples/CMakeLists.txt links
+// gyrostat::gyrostat from the installed CMake package). Sets up the same gyrostat as the C and Fortran
 // examples, evaluates the right-hand side once at their initial state and
 // prints dxdt, one "name value" per line in the header's state order.
 #include "gyrostat.h"
@@ -27,8 +27,8 @@ int main()
 
     const int code = gyrostat_setup(p.data(), c.data());
     if (code != GYROSTAT_OK) {
-        // The codes' meanings are listed in gyrostat.h.
-        std::fprintf(stderr, "gyrostat_setup failed with code %d (see gyrostat.h)\n", code);
+        std::fprintf(stderr, "gyrostat_setup failed with code %d: %s\n", code,
+                     gyrostat_strerror(code));
         return 1;
     }
     x[7] = 0.01;    // u1

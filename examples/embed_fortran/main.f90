@@ -1,6 +1,6 @@
 ! Embedding the generated Fortran 2008 module in a plain Fortran program: no
-! Python, no gyrogen, only gyrostat.f90 and gyrostat_ode.f90 from
-! generated/gyrostat/.
+! Python, no gyrogen, only the Fortran library built from generated/gyrostat/
+! (its CMake package: examples/CMakeLists.txt links gyrostat::gyrostat_f).
 !
 ! The same run as examples/embed_c/main.c, so the two outputs can be compared
 ! line by line: a dual-spin-like gyrostat (a 500 kg carrier with a 10 kg
@@ -16,8 +16,9 @@
 program embed_fortran
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_loc
   use, intrinsic :: iso_fortran_env, only: error_unit
-  use gyrostat_mod, only: gyrostat_setup, GYROSTAT_NX, GYROSTAT_NP, GYROSTAT_NC, GYROSTAT_OK
-  use gyrostat_ode_mod, only: gyrostat_rk4, gyrostat_stats, GYROSTAT_ODE_OK
+  use gyrostat_mod, only: gyrostat_setup, gyrostat_strerror, GYROSTAT_NX, GYROSTAT_NP, &
+                          GYROSTAT_NC, GYROSTAT_OK
+  use gyrostat_ode_mod, only: gyrostat_rk4, gyrostat_ode_strerror, gyrostat_stats, GYROSTAT_ODE_OK
   implicit none
 
   real(c_double), parameter :: dt = 1.0e-3_c_double
@@ -39,7 +40,7 @@ program embed_fortran
   code = gyrostat_setup(p, c)
   if (code /= GYROSTAT_OK) then
     write (error_unit, '(a, i0, a, a)') 'gyrostat_setup failed (code ', code, '): ', &
-      trim(setup_message(code))
+      trim(gyrostat_strerror(code))
     error stop 1
   end if
 
@@ -51,7 +52,8 @@ program embed_fortran
   ! The generated classic RK4: `steps` equal steps of dt over [0, 10 s].
   code = gyrostat_rk4(0.0_c_double, steps*dt, int(steps, c_long), x, c, c_loc(stats))
   if (code /= GYROSTAT_ODE_OK) then
-    write (*, '(a, i0, a, g0)') 'gyrostat_rk4 failed with code ', code, ' at t = ', stats%t
+    write (error_unit, '(a, i0, a, g0, a, a)') 'gyrostat_rk4 failed with code ', code, ' at t = ', &
+      stats%t, ': ', trim(gyrostat_ode_strerror(code))
     error stop 1
   end if
 
@@ -65,22 +67,6 @@ program embed_fortran
   write (*, '(a, 1x, g0.17)') trim(h_names(4)), norm2(h)
 
 contains
-
-  ! The meanings documented in the module, for a readable failure.
-  function setup_message(status) result(msg)
-    integer(c_int), intent(in) :: status
-    character(len=80) :: msg
-    select case (status)
-    case (1); msg = 'a parameter is NaN or infinite'
-    case (2); msg = 'a mass (m_a or m_b) is not positive'
-    case (3); msg = 'a rotor inertia (I or J) is not positive'
-    case (4); msg = 'the carrier inertia is not positive definite'
-    case (5); msg = "the carrier's principal moments violate the triangle inequality"
-    case (6); msg = 'the rotor violates the triangle inequality (2 I < J)'
-    case default; msg = 'unknown code'
-    end select
-  end function setup_message
-
 
   ! Angular momentum about AB* in N components (NOTES.md). The module keeps the
   ! lumped inertias inside setup's constants, so they are recomputed here:

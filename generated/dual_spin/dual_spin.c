@@ -194,6 +194,30 @@ int dual_spin_setup(const double *p, double *c)
     return DUAL_SPIN_OK;
 }
 
+const char *dual_spin_strerror(int code)
+{
+    switch (code) {
+    case DUAL_SPIN_OK:
+        return "parameters accepted";
+    case DUAL_SPIN_ERR_NONFINITE:
+        return "a parameter is NaN or infinite";
+    case DUAL_SPIN_ERR_MASS:
+        return "a mass (m_a or m_b) is not positive";
+    case DUAL_SPIN_ERR_ROTOR_INERTIA:
+        return "a rotor inertia (I or J) is not positive";
+    case DUAL_SPIN_ERR_CARRIER_NOT_PD:
+        return "the carrier inertia is not positive definite";
+    case DUAL_SPIN_ERR_CARRIER_TRIANGLE:
+        return "the carrier's principal moments violate the triangle inequality";
+    case DUAL_SPIN_ERR_ROTOR_TRIANGLE:
+        return "the rotor violates the triangle inequality (2 I < J)";
+    case DUAL_SPIN_ERR_MASS_SINGULAR:
+        return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    default:
+        return "unknown return code";
+    }
+}
+
 /* 36 ops per call. */
 void dual_spin_rhs(double t, const double *x, const double *c, double *dxdt)
 {

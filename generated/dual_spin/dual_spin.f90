@@ -12,7 +12,8 @@
 !   dual_spin_f_rhs:   36 ops per call
 !
 ! The same interface as dual_spin.h, callable from C under the bind(C)
-! names dual_spin_f_setup and dual_spin_f_rhs. State order x(1:7):
+! names dual_spin_f_setup and dual_spin_f_rhs (declared for C in
+! dual_spin_f.h). State order x(1:7):
 !   x( 1)  q1   rad     3-1-2 Euler angle 1 of A in N (about n3)
 !   x( 2)  q2   rad     3-1-2 Euler angle 2 of A in N (about a1')
 !   x( 3)  q3   rad     3-1-2 Euler angle 3 of A in N (about a2)
@@ -28,6 +29,7 @@ module dual_spin_mod
   private
   public :: dual_spin_setup
   public :: dual_spin_rhs
+  public :: dual_spin_strerror
   public :: dual_spin_kinetic_energy
   public :: dual_spin_angular_momentum
 
@@ -123,6 +125,34 @@ contains
     end if
     status = DUAL_SPIN_OK
   end function dual_spin_setup
+
+  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  pure function dual_spin_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=82) :: msg
+
+    select case (code)
+    case (DUAL_SPIN_OK)
+      msg = "parameters accepted"
+    case (DUAL_SPIN_ERR_NONFINITE)
+      msg = "a parameter is NaN or infinite"
+    case (DUAL_SPIN_ERR_MASS)
+      msg = "a mass (m_a or m_b) is not positive"
+    case (DUAL_SPIN_ERR_ROTOR_INERTIA)
+      msg = "a rotor inertia (I or J) is not positive"
+    case (DUAL_SPIN_ERR_CARRIER_NOT_PD)
+      msg = "the carrier inertia is not positive definite"
+    case (DUAL_SPIN_ERR_CARRIER_TRIANGLE)
+      msg = "the carrier's principal moments violate the triangle inequality"
+    case (DUAL_SPIN_ERR_ROTOR_TRIANGLE)
+      msg = "the rotor violates the triangle inequality (2 I < J)"
+    case (DUAL_SPIN_ERR_MASS_SINGULAR)
+      msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case default
+      msg = "unknown return code"
+    end select
+  end function dual_spin_strerror
+
 
   ! dxdt = f(t, x) for the constants c from dual_spin_setup (36 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at

@@ -59,6 +59,10 @@ extern "C" {
 #define DUAL_SPIN_ERR_ROTOR_TRIANGLE     6  /* the rotor violates the triangle inequality (2 I < J) */
 #define DUAL_SPIN_ERR_MASS_SINGULAR      7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
+/* The one line a return code of dual_spin_setup means ("unknown return code"
+   for another): a string literal, not to be freed or changed. */
+const char *dual_spin_strerror(int code);
+
 /*
  * Checks p and computes the constants c[DUAL_SPIN_NC] that
  * dual_spin_rhs needs: the lumped inertias, the inverse of the constant

@@ -6,7 +6,8 @@
 !
 ! Build id d34fb83f3161e6a2. The same interface as dual_spin_ode.h, under
 ! the bind(C) names dual_spin_f_<method> and dual_spin_f_<method>_batch.
-! Coefficients and sources as in dual_spin_ode.c (gyrogen/tableaus.py).
+! Coefficients and their published sources as above each method in dual_spin_ode.c.
+! dual_spin_f.h declares these bind(C) procedures for C callers.
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! dual_spin_stats * or NULL, Fortran c_loc(stats) (stats declared with the
@@ -33,6 +34,7 @@ module dual_spin_ode_mod
   public :: dual_spin_dop853, dual_spin_dop853_batch
   public :: dual_spin_rodas4, dual_spin_rodas4_batch
   public :: dual_spin_radau5, dual_spin_radau5_batch
+  public :: dual_spin_ode_strerror
 
   ! What an integration did, and where it stopped: dual_spin_stats of dual_spin_ode.h.
   type, bind(C), public :: dual_spin_stats
@@ -97,7 +99,36 @@ module dual_spin_ode_mod
 
 contains
 
+  ! The message for a return code, blank-padded to 67 characters: trim() it.
+  pure function dual_spin_ode_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=67) :: msg
+
+    select case (code)
+    case (DUAL_SPIN_ODE_OK)
+      msg = "ok"
+    case (DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW)
+      msg = "step size underflow"
+    case (DUAL_SPIN_ODE_ERR_MAX_STEPS)
+      msg = "max_steps reached"
+    case (DUAL_SPIN_ODE_ERR_NONFINITE)
+      msg = "non-finite state or derivative"
+    case (DUAL_SPIN_ODE_ERR_SINGULAR)
+      msg = "singular iteration matrix"
+    case (DUAL_SPIN_ODE_ERR_ARGUMENT)
+      msg = "bad argument"
+    case (DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR)
+      msg = "the 3-1-2 attitude reached gimbal lock: use attitude = ""quaternion"""
+    case default
+      msg = "unknown return code"
+    end select
+  end function dual_spin_ode_strerror
+
+
   ! d(dx/dt)/dx, row-major (59 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
+  ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
+  ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   subroutine dual_spin_jac(t, x, c, J) bind(C, name="dual_spin_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
@@ -1201,6 +1232,9 @@ contains
     code = DUAL_SPIN_ODE_OK
     if (.not. (t1 > t0)) return
     t = t0
+    ak1 = 0.0_c_double  ! read only after a first accepted step; set for -Wmaybe-uninitialized
+    ak2 = 0.0_c_double
+    ak3 = 0.0_c_double
     call dual_spin_rhs(t, x, c, f0)
     stats%rhs_calls = 1
     if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then

@@ -238,6 +238,30 @@ int gyrostat_setup(const double *p, double *c)
     return GYROSTAT_OK;
 }
 
+const char *gyrostat_strerror(int code)
+{
+    switch (code) {
+    case GYROSTAT_OK:
+        return "parameters accepted";
+    case GYROSTAT_ERR_NONFINITE:
+        return "a parameter is NaN or infinite";
+    case GYROSTAT_ERR_MASS:
+        return "a mass (m_a or m_b) is not positive";
+    case GYROSTAT_ERR_ROTOR_INERTIA:
+        return "a rotor inertia (I or J) is not positive";
+    case GYROSTAT_ERR_CARRIER_NOT_PD:
+        return "the carrier inertia is not positive definite";
+    case GYROSTAT_ERR_CARRIER_TRIANGLE:
+        return "the carrier's principal moments violate the triangle inequality";
+    case GYROSTAT_ERR_ROTOR_TRIANGLE:
+        return "the rotor violates the triangle inequality (2 I < J)";
+    case GYROSTAT_ERR_MASS_SINGULAR:
+        return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    default:
+        return "unknown return code";
+    }
+}
+
 /* 40 ops per call. */
 void gyrostat_rhs(double t, const double *x, const double *c, double *dxdt)
 {

@@ -12,7 +12,8 @@
 !   gyrostat_f_rhs:   40 ops per call
 !
 ! The same interface as gyrostat.h, callable from C under the bind(C)
-! names gyrostat_f_setup and gyrostat_f_rhs. State order x(1:14):
+! names gyrostat_f_setup and gyrostat_f_rhs (declared for C in
+! gyrostat_f.h). State order x(1:14):
 !   x( 1)  q1   rad     3-1-2 Euler angle 1 of A in N (about n3)
 !   x( 2)  q2   rad     3-1-2 Euler angle 2 of A in N (about a1')
 !   x( 3)  q3   rad     3-1-2 Euler angle 3 of A in N (about a2)
@@ -47,6 +48,7 @@ module gyrostat_mod
   private
   public :: gyrostat_setup
   public :: gyrostat_rhs
+  public :: gyrostat_strerror
 
   character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "434b88cb74663f0a"
   integer, parameter, public :: GYROSTAT_NX = 14  ! states
@@ -211,6 +213,34 @@ contains
     end if
     status = GYROSTAT_OK
   end function gyrostat_setup
+
+  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  pure function gyrostat_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=82) :: msg
+
+    select case (code)
+    case (GYROSTAT_OK)
+      msg = "parameters accepted"
+    case (GYROSTAT_ERR_NONFINITE)
+      msg = "a parameter is NaN or infinite"
+    case (GYROSTAT_ERR_MASS)
+      msg = "a mass (m_a or m_b) is not positive"
+    case (GYROSTAT_ERR_ROTOR_INERTIA)
+      msg = "a rotor inertia (I or J) is not positive"
+    case (GYROSTAT_ERR_CARRIER_NOT_PD)
+      msg = "the carrier inertia is not positive definite"
+    case (GYROSTAT_ERR_CARRIER_TRIANGLE)
+      msg = "the carrier's principal moments violate the triangle inequality"
+    case (GYROSTAT_ERR_ROTOR_TRIANGLE)
+      msg = "the rotor violates the triangle inequality (2 I < J)"
+    case (GYROSTAT_ERR_MASS_SINGULAR)
+      msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case default
+      msg = "unknown return code"
+    end select
+  end function gyrostat_strerror
+
 
   ! dxdt = f(t, x) for the constants c from gyrostat_setup (40 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at

@@ -72,6 +72,10 @@ extern "C" {
 #define GYROSTAT_ERR_ROTOR_TRIANGLE      6  /* the rotor violates the triangle inequality (2 I < J) */
 #define GYROSTAT_ERR_MASS_SINGULAR       7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
+/* The one line a return code of gyrostat_setup means ("unknown return code"
+   for another): a string literal, not to be freed or changed. */
+const char *gyrostat_strerror(int code);
+
 /*
  * Checks p and computes the constants c[GYROSTAT_NC] that
  * gyrostat_rhs needs: the lumped inertias, the inverse of the constant

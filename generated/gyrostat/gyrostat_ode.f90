@@ -6,7 +6,8 @@
 !
 ! Build id 434b88cb74663f0a. The same interface as gyrostat_ode.h, under
 ! the bind(C) names gyrostat_f_<method> and gyrostat_f_<method>_batch.
-! Coefficients and sources as in gyrostat_ode.c (gyrogen/tableaus.py).
+! Coefficients and their published sources as above each method in gyrostat_ode.c.
+! gyrostat_f.h declares these bind(C) procedures for C callers.
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! gyrostat_stats * or NULL, Fortran c_loc(stats) (stats declared with the
@@ -33,6 +34,7 @@ module gyrostat_ode_mod
   public :: gyrostat_dop853, gyrostat_dop853_batch
   public :: gyrostat_rodas4, gyrostat_rodas4_batch
   public :: gyrostat_radau5, gyrostat_radau5_batch
+  public :: gyrostat_ode_strerror
 
   ! What an integration did, and where it stopped: gyrostat_stats of gyrostat_ode.h.
   type, bind(C), public :: gyrostat_stats
@@ -97,7 +99,36 @@ module gyrostat_ode_mod
 
 contains
 
+  ! The message for a return code, blank-padded to 67 characters: trim() it.
+  pure function gyrostat_ode_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=67) :: msg
+
+    select case (code)
+    case (GYROSTAT_ODE_OK)
+      msg = "ok"
+    case (GYROSTAT_ODE_ERR_STEP_UNDERFLOW)
+      msg = "step size underflow"
+    case (GYROSTAT_ODE_ERR_MAX_STEPS)
+      msg = "max_steps reached"
+    case (GYROSTAT_ODE_ERR_NONFINITE)
+      msg = "non-finite state or derivative"
+    case (GYROSTAT_ODE_ERR_SINGULAR)
+      msg = "singular iteration matrix"
+    case (GYROSTAT_ODE_ERR_ARGUMENT)
+      msg = "bad argument"
+    case (GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR)
+      msg = "the 3-1-2 attitude reached gimbal lock: use attitude = ""quaternion"""
+    case default
+      msg = "unknown return code"
+    end select
+  end function gyrostat_ode_strerror
+
+
   ! d(dx/dt)/dx, row-major (58 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
+  ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
+  ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   subroutine gyrostat_jac(t, x, c, J) bind(C, name="gyrostat_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(14)
@@ -1356,6 +1387,9 @@ contains
     code = GYROSTAT_ODE_OK
     if (.not. (t1 > t0)) return
     t = t0
+    ak1 = 0.0_c_double  ! read only after a first accepted step; set for -Wmaybe-uninitialized
+    ak2 = 0.0_c_double
+    ak3 = 0.0_c_double
     call gyrostat_rhs(t, x, c, f0)
     stats%rhs_calls = 1
     if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then

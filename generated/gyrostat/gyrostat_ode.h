@@ -31,7 +31,8 @@ extern "C" {
  * (x[i*GYROSTAT_NX + j]), fill stats[i] and codes[i], and return how many
  * failed; stats or codes may be NULL there too.
  * No allocation, no globals: the work arrays live on the stack, and the
- * functions are re-entrant. Coefficients and sources: gyrogen/tableaus.py.
+ * functions are re-entrant. Each method's coefficients and their published
+ * source are above its code in gyrostat_ode.c.
  * The steps are summed with Kahan's compensation, so that long runs keep
  * their invariants to rounding: compile without -ffast-math (or
  * -Ofast), which would optimize the compensation away.
@@ -46,6 +47,8 @@ extern "C" {
  */
 
 /* What an integration did, and where it stopped. */
+#ifndef GYROSTAT_STATS_DEFINED
+#define GYROSTAT_STATS_DEFINED
 typedef struct {
     double t;              /* time reached (t1 on success) */
     double h;              /* last step size tried */
@@ -55,6 +58,7 @@ typedef struct {
     long jac_calls;        /* calls of gyrostat_jac */
     long decompositions;   /* LU decompositions of the iteration matrix */
 } gyrostat_stats;
+#endif
 
 /* Return codes; on failure x holds the state at stats.t, the last good point. */
 #define GYROSTAT_ODE_OK                 0
@@ -68,6 +72,10 @@ typedef struct {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR 6
+
+/* The one line an integrator's return code means ("unknown return code" for
+   another): a string literal, not to be freed or changed. */
+const char *gyrostat_ode_strerror(int code);
 
 /* The _batch variants of the adaptive explicit pairs advance this many
    trajectories at once, one in each SIMD lane of the same loops (a finished
@@ -104,11 +112,11 @@ size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
  * persists to underflow, or at once when x, f(t0, x) is not finite. */
-int gyrostat_dopri5(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats);
-size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps,
-        gyrostat_stats *stats, int *codes);
+int gyrostat_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, gyrostat_stats *stats);
+size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
+        int *codes);
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -117,11 +125,11 @@ size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x,
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
  * persists to underflow, or at once when x, f(t0, x) is not finite. */
-int gyrostat_dop853(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats);
-size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps,
-        gyrostat_stats *stats, int *codes);
+int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, gyrostat_stats *stats);
+size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
+        int *codes);
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -130,11 +138,11 @@ size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x,
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
  * persists to underflow, or at once when x, f(t0, x) or the Jacobian is not finite. */
-int gyrostat_rodas4(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats);
-size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps,
-        gyrostat_stats *stats, int *codes);
+int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, gyrostat_stats *stats);
+size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
+        int *codes);
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
  * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
@@ -145,11 +153,11 @@ size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x,
  * A step whose Newton iterations meet a NaN or Inf is retried with h
  * halved: code 3 if that persists to underflow, or at once when x, f(t0, x)
  * or the Jacobian is not finite. */
-int gyrostat_radau5(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats);
-size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps,
-        gyrostat_stats *stats, int *codes);
+int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, gyrostat_stats *stats);
+size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
+        int *codes);
 
 #ifdef __cplusplus
 }

@@ -208,6 +208,30 @@ int speed_controlled_setup(const double *p, double *c)
     return SPEED_CONTROLLED_OK;
 }
 
+const char *speed_controlled_strerror(int code)
+{
+    switch (code) {
+    case SPEED_CONTROLLED_OK:
+        return "parameters accepted";
+    case SPEED_CONTROLLED_ERR_NONFINITE:
+        return "a parameter is NaN or infinite";
+    case SPEED_CONTROLLED_ERR_MASS:
+        return "a mass (m_a or m_b) is not positive";
+    case SPEED_CONTROLLED_ERR_ROTOR_INERTIA:
+        return "a rotor inertia (I or J) is not positive";
+    case SPEED_CONTROLLED_ERR_CARRIER_NOT_PD:
+        return "the carrier inertia is not positive definite";
+    case SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE:
+        return "the carrier's principal moments violate the triangle inequality";
+    case SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE:
+        return "the rotor violates the triangle inequality (2 I < J)";
+    case SPEED_CONTROLLED_ERR_MASS_SINGULAR:
+        return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    default:
+        return "unknown return code";
+    }
+}
+
 /* 43 ops per call. */
 void speed_controlled_rhs(double t, const double *x, const double *c, double *dxdt)
 {

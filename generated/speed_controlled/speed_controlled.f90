@@ -13,7 +13,8 @@
 !   speed_controlled_f_rhs:   43 ops per call
 !
 ! The same interface as speed_controlled.h, callable from C under the bind(C)
-! names speed_controlled_f_setup and speed_controlled_f_rhs. State order x(1:8):
+! names speed_controlled_f_setup and speed_controlled_f_rhs (declared for C in
+! speed_controlled_f.h). State order x(1:8):
 !   x( 1)  q1   rad     3-1-2 Euler angle 1 of A in N (about n3)
 !   x( 2)  q2   rad     3-1-2 Euler angle 2 of A in N (about a1')
 !   x( 3)  q3   rad     3-1-2 Euler angle 3 of A in N (about a2)
@@ -32,6 +33,7 @@ module speed_controlled_mod
   private
   public :: speed_controlled_setup
   public :: speed_controlled_rhs
+  public :: speed_controlled_strerror
   public :: speed_controlled_kinetic_energy
   public :: speed_controlled_angular_momentum
   public :: speed_controlled_power
@@ -138,6 +140,34 @@ contains
     end if
     status = SPEED_CONTROLLED_OK
   end function speed_controlled_setup
+
+  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  pure function speed_controlled_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=82) :: msg
+
+    select case (code)
+    case (SPEED_CONTROLLED_OK)
+      msg = "parameters accepted"
+    case (SPEED_CONTROLLED_ERR_NONFINITE)
+      msg = "a parameter is NaN or infinite"
+    case (SPEED_CONTROLLED_ERR_MASS)
+      msg = "a mass (m_a or m_b) is not positive"
+    case (SPEED_CONTROLLED_ERR_ROTOR_INERTIA)
+      msg = "a rotor inertia (I or J) is not positive"
+    case (SPEED_CONTROLLED_ERR_CARRIER_NOT_PD)
+      msg = "the carrier inertia is not positive definite"
+    case (SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE)
+      msg = "the carrier's principal moments violate the triangle inequality"
+    case (SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE)
+      msg = "the rotor violates the triangle inequality (2 I < J)"
+    case (SPEED_CONTROLLED_ERR_MASS_SINGULAR)
+      msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case default
+      msg = "unknown return code"
+    end select
+  end function speed_controlled_strerror
+
 
   ! dxdt = f(t, x) for the constants c from speed_controlled_setup (43 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at

@@ -62,6 +62,10 @@ extern "C" {
 #define SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE 6  /* the rotor violates the triangle inequality (2 I < J) */
 #define SPEED_CONTROLLED_ERR_MASS_SINGULAR 7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
+/* The one line a return code of speed_controlled_setup means ("unknown return code"
+   for another): a string literal, not to be freed or changed. */
+const char *speed_controlled_strerror(int code);
+
 /*
  * Checks p and computes the constants c[SPEED_CONTROLLED_NC] that
  * speed_controlled_rhs needs: the lumped inertias, the inverse of the constant

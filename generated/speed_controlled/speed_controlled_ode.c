@@ -160,6 +160,29 @@ static inline double speed_controlled_cos_lanes(double x)
 }
 
 
+const char *speed_controlled_ode_strerror(int code)
+{
+    switch (code) {
+    case SPEED_CONTROLLED_ODE_OK:
+        return "ok";
+    case SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW:
+        return "step size underflow";
+    case SPEED_CONTROLLED_ODE_ERR_MAX_STEPS:
+        return "max_steps reached";
+    case SPEED_CONTROLLED_ODE_ERR_NONFINITE:
+        return "non-finite state or derivative";
+    case SPEED_CONTROLLED_ODE_ERR_SINGULAR:
+        return "singular iteration matrix";
+    case SPEED_CONTROLLED_ODE_ERR_ARGUMENT:
+        return "bad argument";
+    case SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR:
+        return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
+    default:
+        return "unknown return code";
+    }
+}
+
+
 /* d(dx/dt)/dx, row-major (62 ops). */
 void speed_controlled_jac(double t, const double *x, const double *c, double *J)
 {

@@ -32,7 +32,8 @@ extern "C" {
  * (x[i*SPEED_CONTROLLED_NX + j]), fill stats[i] and codes[i], and return how many
  * failed; stats or codes may be NULL there too.
  * No allocation, no globals: the work arrays live on the stack, and the
- * functions are re-entrant. Coefficients and sources: gyrogen/tableaus.py.
+ * functions are re-entrant. Each method's coefficients and their published
+ * source are above its code in speed_controlled_ode.c.
  * The steps are summed with Kahan's compensation, so that long runs keep
  * their invariants to rounding: compile without -ffast-math (or
  * -Ofast), which would optimize the compensation away.
@@ -47,6 +48,8 @@ extern "C" {
  */
 
 /* What an integration did, and where it stopped. */
+#ifndef SPEED_CONTROLLED_STATS_DEFINED
+#define SPEED_CONTROLLED_STATS_DEFINED
 typedef struct {
     double t;              /* time reached (t1 on success) */
     double h;              /* last step size tried */
@@ -56,6 +59,7 @@ typedef struct {
     long jac_calls;        /* calls of speed_controlled_jac */
     long decompositions;   /* LU decompositions of the iteration matrix */
 } speed_controlled_stats;
+#endif
 
 /* Return codes; on failure x holds the state at stats.t, the last good point. */
 #define SPEED_CONTROLLED_ODE_OK                 0
@@ -69,6 +73,10 @@ typedef struct {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR 6
+
+/* The one line an integrator's return code means ("unknown return code" for
+   another): a string literal, not to be freed or changed. */
+const char *speed_controlled_ode_strerror(int code);
 
 /* The _batch variants of the adaptive explicit pairs advance this many
    trajectories at once, one in each SIMD lane of the same loops (a finished
@@ -105,8 +113,8 @@ size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, do
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
  * persists to underflow, or at once when x, f(t0, x) is not finite. */
-int speed_controlled_dopri5(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
+int speed_controlled_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
@@ -118,8 +126,8 @@ size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x,
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
  * persists to underflow, or at once when x, f(t0, x) is not finite. */
-int speed_controlled_dop853(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
+int speed_controlled_dop853(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
@@ -131,8 +139,8 @@ size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x,
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A trial step with a NaN or Inf is rejected and h shrunk: code 3 if that
  * persists to underflow, or at once when x, f(t0, x) or the Jacobian is not finite. */
-int speed_controlled_rodas4(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
+int speed_controlled_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
@@ -146,8 +154,8 @@ size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x,
  * A step whose Newton iterations meet a NaN or Inf is retried with h
  * halved: code 3 if that persists to underflow, or at once when x, f(t0, x)
  * or the Jacobian is not finite. */
-int speed_controlled_radau5(double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats);
+int speed_controlled_radau5(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);

@@ -208,6 +208,30 @@ int stiff_wheel_setup(const double *p, double *c)
     return STIFF_WHEEL_OK;
 }
 
+const char *stiff_wheel_strerror(int code)
+{
+    switch (code) {
+    case STIFF_WHEEL_OK:
+        return "parameters accepted";
+    case STIFF_WHEEL_ERR_NONFINITE:
+        return "a parameter is NaN or infinite";
+    case STIFF_WHEEL_ERR_MASS:
+        return "a mass (m_a or m_b) is not positive";
+    case STIFF_WHEEL_ERR_ROTOR_INERTIA:
+        return "a rotor inertia (I or J) is not positive";
+    case STIFF_WHEEL_ERR_CARRIER_NOT_PD:
+        return "the carrier inertia is not positive definite";
+    case STIFF_WHEEL_ERR_CARRIER_TRIANGLE:
+        return "the carrier's principal moments violate the triangle inequality";
+    case STIFF_WHEEL_ERR_ROTOR_TRIANGLE:
+        return "the rotor violates the triangle inequality (2 I < J)";
+    case STIFF_WHEEL_ERR_MASS_SINGULAR:
+        return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    default:
+        return "unknown return code";
+    }
+}
+
 /* 43 ops per call. */
 void stiff_wheel_rhs(double t, const double *x, const double *c, double *dxdt)
 {

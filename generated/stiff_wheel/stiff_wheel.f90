@@ -13,7 +13,8 @@
 !   stiff_wheel_f_rhs:   43 ops per call
 !
 ! The same interface as stiff_wheel.h, callable from C under the bind(C)
-! names stiff_wheel_f_setup and stiff_wheel_f_rhs. State order x(1:8):
+! names stiff_wheel_f_setup and stiff_wheel_f_rhs (declared for C in
+! stiff_wheel_f.h). State order x(1:8):
 !   x( 1)  q1   rad     3-1-2 Euler angle 1 of A in N (about n3)
 !   x( 2)  q2   rad     3-1-2 Euler angle 2 of A in N (about a1')
 !   x( 3)  q3   rad     3-1-2 Euler angle 3 of A in N (about a2)
@@ -32,6 +33,7 @@ module stiff_wheel_mod
   private
   public :: stiff_wheel_setup
   public :: stiff_wheel_rhs
+  public :: stiff_wheel_strerror
   public :: stiff_wheel_kinetic_energy
   public :: stiff_wheel_angular_momentum
   public :: stiff_wheel_power
@@ -138,6 +140,34 @@ contains
     end if
     status = STIFF_WHEEL_OK
   end function stiff_wheel_setup
+
+  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  pure function stiff_wheel_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=82) :: msg
+
+    select case (code)
+    case (STIFF_WHEEL_OK)
+      msg = "parameters accepted"
+    case (STIFF_WHEEL_ERR_NONFINITE)
+      msg = "a parameter is NaN or infinite"
+    case (STIFF_WHEEL_ERR_MASS)
+      msg = "a mass (m_a or m_b) is not positive"
+    case (STIFF_WHEEL_ERR_ROTOR_INERTIA)
+      msg = "a rotor inertia (I or J) is not positive"
+    case (STIFF_WHEEL_ERR_CARRIER_NOT_PD)
+      msg = "the carrier inertia is not positive definite"
+    case (STIFF_WHEEL_ERR_CARRIER_TRIANGLE)
+      msg = "the carrier's principal moments violate the triangle inequality"
+    case (STIFF_WHEEL_ERR_ROTOR_TRIANGLE)
+      msg = "the rotor violates the triangle inequality (2 I < J)"
+    case (STIFF_WHEEL_ERR_MASS_SINGULAR)
+      msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case default
+      msg = "unknown return code"
+    end select
+  end function stiff_wheel_strerror
+
 
   ! dxdt = f(t, x) for the constants c from stiff_wheel_setup (43 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at

@@ -62,6 +62,10 @@ extern "C" {
 #define STIFF_WHEEL_ERR_ROTOR_TRIANGLE   6  /* the rotor violates the triangle inequality (2 I < J) */
 #define STIFF_WHEEL_ERR_MASS_SINGULAR    7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
+/* The one line a return code of stiff_wheel_setup means ("unknown return code"
+   for another): a string literal, not to be freed or changed. */
+const char *stiff_wheel_strerror(int code);
+
 /*
  * Checks p and computes the constants c[STIFF_WHEEL_NC] that
  * stiff_wheel_rhs needs: the lumped inertias, the inverse of the constant

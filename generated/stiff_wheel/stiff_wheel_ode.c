@@ -160,6 +160,29 @@ static inline double stiff_wheel_cos_lanes(double x)
 }
 
 
+const char *stiff_wheel_ode_strerror(int code)
+{
+    switch (code) {
+    case STIFF_WHEEL_ODE_OK:
+        return "ok";
+    case STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW:
+        return "step size underflow";
+    case STIFF_WHEEL_ODE_ERR_MAX_STEPS:
+        return "max_steps reached";
+    case STIFF_WHEEL_ODE_ERR_NONFINITE:
+        return "non-finite state or derivative";
+    case STIFF_WHEEL_ODE_ERR_SINGULAR:
+        return "singular iteration matrix";
+    case STIFF_WHEEL_ODE_ERR_ARGUMENT:
+        return "bad argument";
+    case STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR:
+        return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
+    default:
+        return "unknown return code";
+    }
+}
+
+
 /* d(dx/dt)/dx, row-major (62 ops). */
 void stiff_wheel_jac(double t, const double *x, const double *c, double *J)
 {

@@ -194,6 +194,30 @@ int torque_free_setup(const double *p, double *c)
     return TORQUE_FREE_OK;
 }
 
+const char *torque_free_strerror(int code)
+{
+    switch (code) {
+    case TORQUE_FREE_OK:
+        return "parameters accepted";
+    case TORQUE_FREE_ERR_NONFINITE:
+        return "a parameter is NaN or infinite";
+    case TORQUE_FREE_ERR_MASS:
+        return "a mass (m_a or m_b) is not positive";
+    case TORQUE_FREE_ERR_ROTOR_INERTIA:
+        return "a rotor inertia (I or J) is not positive";
+    case TORQUE_FREE_ERR_CARRIER_NOT_PD:
+        return "the carrier inertia is not positive definite";
+    case TORQUE_FREE_ERR_CARRIER_TRIANGLE:
+        return "the carrier's principal moments violate the triangle inequality";
+    case TORQUE_FREE_ERR_ROTOR_TRIANGLE:
+        return "the rotor violates the triangle inequality (2 I < J)";
+    case TORQUE_FREE_ERR_MASS_SINGULAR:
+        return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    default:
+        return "unknown return code";
+    }
+}
+
 /* 19 ops per call. */
 void torque_free_rhs(double t, const double *x, const double *c, double *dxdt)
 {

@@ -12,7 +12,8 @@
 !   torque_free_f_rhs:   19 ops per call
 !
 ! The same interface as torque_free.h, callable from C under the bind(C)
-! names torque_free_f_setup and torque_free_f_rhs. State order x(1:7):
+! names torque_free_f_setup and torque_free_f_rhs (declared for C in
+! torque_free_f.h). State order x(1:7):
 !   x( 1)  q1   rad     3-1-2 Euler angle 1 of A in N (about n3)
 !   x( 2)  q2   rad     3-1-2 Euler angle 2 of A in N (about a1')
 !   x( 3)  q3   rad     3-1-2 Euler angle 3 of A in N (about a2)
@@ -28,6 +29,7 @@ module torque_free_mod
   private
   public :: torque_free_setup
   public :: torque_free_rhs
+  public :: torque_free_strerror
   public :: torque_free_kinetic_energy
   public :: torque_free_angular_momentum
 
@@ -123,6 +125,34 @@ contains
     end if
     status = TORQUE_FREE_OK
   end function torque_free_setup
+
+  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  pure function torque_free_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=82) :: msg
+
+    select case (code)
+    case (TORQUE_FREE_OK)
+      msg = "parameters accepted"
+    case (TORQUE_FREE_ERR_NONFINITE)
+      msg = "a parameter is NaN or infinite"
+    case (TORQUE_FREE_ERR_MASS)
+      msg = "a mass (m_a or m_b) is not positive"
+    case (TORQUE_FREE_ERR_ROTOR_INERTIA)
+      msg = "a rotor inertia (I or J) is not positive"
+    case (TORQUE_FREE_ERR_CARRIER_NOT_PD)
+      msg = "the carrier inertia is not positive definite"
+    case (TORQUE_FREE_ERR_CARRIER_TRIANGLE)
+      msg = "the carrier's principal moments violate the triangle inequality"
+    case (TORQUE_FREE_ERR_ROTOR_TRIANGLE)
+      msg = "the rotor violates the triangle inequality (2 I < J)"
+    case (TORQUE_FREE_ERR_MASS_SINGULAR)
+      msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case default
+      msg = "unknown return code"
+    end select
+  end function torque_free_strerror
+
 
   ! dxdt = f(t, x) for the constants c from torque_free_setup (19 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at

@@ -159,6 +159,29 @@ static inline double torque_free_cos_lanes(double x)
 }
 
 
+const char *torque_free_ode_strerror(int code)
+{
+    switch (code) {
+    case TORQUE_FREE_ODE_OK:
+        return "ok";
+    case TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW:
+        return "step size underflow";
+    case TORQUE_FREE_ODE_ERR_MAX_STEPS:
+        return "max_steps reached";
+    case TORQUE_FREE_ODE_ERR_NONFINITE:
+        return "non-finite state or derivative";
+    case TORQUE_FREE_ODE_ERR_SINGULAR:
+        return "singular iteration matrix";
+    case TORQUE_FREE_ODE_ERR_ARGUMENT:
+        return "bad argument";
+    case TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR:
+        return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
+    default:
+        return "unknown return code";
+    }
+}
+
+
 /* d(dx/dt)/dx, row-major (38 ops). */
 void torque_free_jac(double t, const double *x, const double *c, double *J)
 {

@@ -6,7 +6,8 @@
 !
 ! Build id 3d272e3cedf3ee38. The same interface as torque_free_ode.h, under
 ! the bind(C) names torque_free_f_<method> and torque_free_f_<method>_batch.
-! Coefficients and sources as in torque_free_ode.c (gyrogen/tableaus.py).
+! Coefficients and their published sources as above each method in torque_free_ode.c.
+! torque_free_f.h declares these bind(C) procedures for C callers.
 !
 ! Every integrator takes its statistics as type(c_ptr), value: C passes a
 ! torque_free_stats * or NULL, Fortran c_loc(stats) (stats declared with the
@@ -33,6 +34,7 @@ module torque_free_ode_mod
   public :: torque_free_dop853, torque_free_dop853_batch
   public :: torque_free_rodas4, torque_free_rodas4_batch
   public :: torque_free_radau5, torque_free_radau5_batch
+  public :: torque_free_ode_strerror
 
   ! What an integration did, and where it stopped: torque_free_stats of torque_free_ode.h.
   type, bind(C), public :: torque_free_stats
@@ -97,7 +99,36 @@ module torque_free_ode_mod
 
 contains
 
+  ! The message for a return code, blank-padded to 67 characters: trim() it.
+  pure function torque_free_ode_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=67) :: msg
+
+    select case (code)
+    case (TORQUE_FREE_ODE_OK)
+      msg = "ok"
+    case (TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW)
+      msg = "step size underflow"
+    case (TORQUE_FREE_ODE_ERR_MAX_STEPS)
+      msg = "max_steps reached"
+    case (TORQUE_FREE_ODE_ERR_NONFINITE)
+      msg = "non-finite state or derivative"
+    case (TORQUE_FREE_ODE_ERR_SINGULAR)
+      msg = "singular iteration matrix"
+    case (TORQUE_FREE_ODE_ERR_ARGUMENT)
+      msg = "bad argument"
+    case (TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR)
+      msg = "the 3-1-2 attitude reached gimbal lock: use attitude = ""quaternion"""
+    case default
+      msg = "unknown return code"
+    end select
+  end function torque_free_ode_strerror
+
+
   ! d(dx/dt)/dx, row-major (38 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
+  ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
+  ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   subroutine torque_free_jac(t, x, c, J) bind(C, name="torque_free_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(7)
@@ -1192,6 +1223,9 @@ contains
     code = TORQUE_FREE_ODE_OK
     if (.not. (t1 > t0)) return
     t = t0
+    ak1 = 0.0_c_double  ! read only after a first accepted step; set for -Wmaybe-uninitialized
+    ak2 = 0.0_c_double
+    ak3 = 0.0_c_double
     call torque_free_rhs(t, x, c, f0)
     stats%rhs_calls = 1
     if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then

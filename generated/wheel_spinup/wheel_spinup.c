@@ -203,6 +203,30 @@ int wheel_spinup_setup(const double *p, double *c)
     return WHEEL_SPINUP_OK;
 }
 
+const char *wheel_spinup_strerror(int code)
+{
+    switch (code) {
+    case WHEEL_SPINUP_OK:
+        return "parameters accepted";
+    case WHEEL_SPINUP_ERR_NONFINITE:
+        return "a parameter is NaN or infinite";
+    case WHEEL_SPINUP_ERR_MASS:
+        return "a mass (m_a or m_b) is not positive";
+    case WHEEL_SPINUP_ERR_ROTOR_INERTIA:
+        return "a rotor inertia (I or J) is not positive";
+    case WHEEL_SPINUP_ERR_CARRIER_NOT_PD:
+        return "the carrier inertia is not positive definite";
+    case WHEEL_SPINUP_ERR_CARRIER_TRIANGLE:
+        return "the carrier's principal moments violate the triangle inequality";
+    case WHEEL_SPINUP_ERR_ROTOR_TRIANGLE:
+        return "the rotor violates the triangle inequality (2 I < J)";
+    case WHEEL_SPINUP_ERR_MASS_SINGULAR:
+        return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    default:
+        return "unknown return code";
+    }
+}
+
 /* 39 ops per call. */
 void wheel_spinup_rhs(double t, const double *x, const double *c, double *dxdt)
 {

@@ -12,7 +12,8 @@
 !   wheel_spinup_f_rhs:   39 ops per call
 !
 ! The same interface as wheel_spinup.h, callable from C under the bind(C)
-! names wheel_spinup_f_setup and wheel_spinup_f_rhs. State order x(1:8):
+! names wheel_spinup_f_setup and wheel_spinup_f_rhs (declared for C in
+! wheel_spinup_f.h). State order x(1:8):
 !   x( 1)  q1   rad     3-1-2 Euler angle 1 of A in N (about n3)
 !   x( 2)  q2   rad     3-1-2 Euler angle 2 of A in N (about a1')
 !   x( 3)  q3   rad     3-1-2 Euler angle 3 of A in N (about a2)
@@ -30,6 +31,7 @@ module wheel_spinup_mod
   private
   public :: wheel_spinup_setup
   public :: wheel_spinup_rhs
+  public :: wheel_spinup_strerror
   public :: wheel_spinup_kinetic_energy
   public :: wheel_spinup_angular_momentum
   public :: wheel_spinup_power
@@ -131,6 +133,34 @@ contains
     end if
     status = WHEEL_SPINUP_OK
   end function wheel_spinup_setup
+
+  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  pure function wheel_spinup_strerror(code) result(msg)
+    integer(c_int), intent(in) :: code
+    character(len=82) :: msg
+
+    select case (code)
+    case (WHEEL_SPINUP_OK)
+      msg = "parameters accepted"
+    case (WHEEL_SPINUP_ERR_NONFINITE)
+      msg = "a parameter is NaN or infinite"
+    case (WHEEL_SPINUP_ERR_MASS)
+      msg = "a mass (m_a or m_b) is not positive"
+    case (WHEEL_SPINUP_ERR_ROTOR_INERTIA)
+      msg = "a rotor inertia (I or J) is not positive"
+    case (WHEEL_SPINUP_ERR_CARRIER_NOT_PD)
+      msg = "the carrier inertia is not positive definite"
+    case (WHEEL_SPINUP_ERR_CARRIER_TRIANGLE)
+      msg = "the carrier's principal moments violate the triangle inequality"
+    case (WHEEL_SPINUP_ERR_ROTOR_TRIANGLE)
+      msg = "the rotor violates the triangle inequality (2 I < J)"
+    case (WHEEL_SPINUP_ERR_MASS_SINGULAR)
+      msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case default
+      msg = "unknown return code"
+    end select
+  end function wheel_spinup_strerror
+
 
   ! dxdt = f(t, x) for the constants c from wheel_spinup_setup (39 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at

@@ -59,6 +59,10 @@ extern "C" {
 #define WHEEL_SPINUP_ERR_ROTOR_TRIANGLE  6  /* the rotor violates the triangle inequality (2 I < J) */
 #define WHEEL_SPINUP_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
+/* The one line a return code of wheel_spinup_setup means ("unknown return code"
+   for another): a string literal, not to be freed or changed. */
+const char *wheel_spinup_strerror(int code);
+
 /*
  * Checks p and computes the constants c[WHEEL_SPINUP_NC] that
  * wheel_spinup_rhs needs: the lumped inertias, the inverse of the constant

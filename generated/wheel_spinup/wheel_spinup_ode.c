@@ -159,6 +159,29 @@ static inline double wheel_spinup_cos_lanes(double x)
 }
 
 
+const char *wheel_spinup_ode_strerror(int code)
+{
+    switch (code) {
+    case WHEEL_SPINUP_ODE_OK:
+        return "ok";
+    case WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW:
+        return "step size underflow";
+    case WHEEL_SPINUP_ODE_ERR_MAX_STEPS:
+        return "max_steps reached";
+    case WHEEL_SPINUP_ODE_ERR_NONFINITE:
+        return "non-finite state or derivative";
+    case WHEEL_SPINUP_ODE_ERR_SINGULAR:
+        return "singular iteration matrix";
+    case WHEEL_SPINUP_ODE_ERR_ARGUMENT:
+        return "bad argument";
+    case WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR:
+        return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
+    default:
+        return "unknown return code";
+    }
+}
+
+
 /* d(dx/dt)/dx, row-major (60 ops). */
 void wheel_spinup_jac(double t, const double *x, const double *c, double *J)
 {

@@ -151,9 +151,25 @@ ODE_ATTITUDE_SINGULAR = 6
 """<PREFIX>_ODE_ERR_ATTITUDE_SINGULAR: 3-1-2 angles at gimbal lock (GIMBAL_LOCK_COS)."""
 
 
+UNKNOWN_CODE = "unknown return code"
+"""What <prefix>_strerror and <prefix>_ode_strerror say for a code not listed."""
+
+
 def message(codes: tuple[Code, ...], value: int) -> str:
     """The one line a code means, or 'code N' for one not in the registry."""
     return next((c.message for c in codes if c.value == value), f"code {value}")
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One argument of a generated function."""
+
+    ctype: str
+    """Its C type; {prefix} is the scene's prefix (the stats struct)."""
+    name: str
+    length: tuple[str, ...] = ()
+    """A pointer's element count, as factors: "nx", "np", "nc", "out" (the
+    output's size), "n" (a batch's count of states); () for a scalar."""
 
 
 @dataclass(frozen=True)
@@ -162,27 +178,73 @@ class Signature:
     same arguments under the same names)."""
 
     returns: str
-    args: tuple[tuple[str, str], ...]
-    """(C type, name) in order."""
+    args: tuple[Arg, ...]
 
-    def c(self, name: str) -> str:
+    def c(self, name: str, prefix: str = "") -> str:
         """'void name(double t, const double *x, ...)'."""
-        args = ", ".join(t + n if t.endswith("*") else f"{t} {n}" for t, n in self.args)
-        return f"{self.returns} {name}({args})"
+        args = ", ".join(
+            a.ctype.format(prefix=prefix) + ("" if a.ctype.endswith("*") else " ") + a.name
+            for a in self.args
+        )
+        lead = self.returns + ("" if self.returns.endswith("*") else " ")
+        return f"{lead}{name}({args})"
 
     @property
     def names(self) -> tuple[str, ...]:
-        return tuple(n for _, n in self.args)
+        return tuple(a.name for a in self.args)
 
 
-_PER_CALL = (("double", "t"), ("const double *", "x"), ("const double *", "c"))
+def _args(*specs: str) -> tuple[Arg, ...]:
+    """Args from 'ctype name[:factor*factor]' specs, e.g. 'double *x:n*nx'."""
+    out = []
+    for spec in specs:
+        decl, _, length = spec.partition(":")
+        ctype, name = decl.rsplit(" ", 1)
+        pointer = name.startswith("*")
+        out.append(
+            Arg(
+                ctype + " *" if pointer else ctype,
+                name.lstrip("*"),
+                tuple(length.split("*")) if length else (),
+            )
+        )
+    return tuple(out)
+
+
+_PER_CALL = ("double t", "const double *x:nx", "const double *c:nc")
+_SPAN = ("double t0", "double t1")
+_TOLERANCES = ("double rtol", "double atol", "double h0", "long max_steps")
 SIGNATURES: dict[str, Signature] = {
-    "setup": Signature("int", (("const double *", "p"), ("double *", "c"))),
-    "rhs": Signature("void", (*_PER_CALL, ("double *", "dxdt"))),
-    "output": Signature("void", (*_PER_CALL, ("double *", "out"))),
-    "jac": Signature("void", (*_PER_CALL, ("double *", "J"))),
-}
-"""setup, rhs, each output function (energy, momentum, power) and the Jacobian."""
+    "setup": Signature("int", _args("const double *p:np", "double *c:nc")),
+    "rhs": Signature("void", _args(*_PER_CALL, "double *dxdt:nx")),
+    "output": Signature("void", _args(*_PER_CALL, "double *out:out")),
+    "jac": Signature("void", _args(*_PER_CALL, "double *J:nx*nx")),
+    "strerror": Signature("const char *", _args("int code")),
+    "fixed_step": Signature(
+        "int",
+        _args(*_SPAN, "long steps", "double *x:nx", "const double *c:nc",
+              "{prefix}_stats *stats:1"),
+    ),
+    "fixed_step_batch": Signature(
+        "size_t",
+        _args("size_t n", *_SPAN, "long steps", "double *x:n*nx", "const double *c:nc",
+              "{prefix}_stats *stats:n", "int *codes:n"),
+    ),
+    "adaptive": Signature(
+        "int",
+        _args(*_SPAN, "double *x:nx", "const double *c:nc", *_TOLERANCES,
+              "{prefix}_stats *stats:1"),
+    ),
+    "adaptive_batch": Signature(
+        "size_t",
+        _args("size_t n", *_SPAN, "double *x:n*nx", "const double *c:nc", *_TOLERANCES,
+              "{prefix}_stats *stats:n", "int *codes:n"),
+    ),
+}  # fmt: skip
+"""setup, rhs, each output function (energy, momentum, power), the Jacobian,
+the two strerror functions (setup's codes, the integrators'), and the
+integrators: fixed-step (rk4) or adaptive, each with its _batch variant.
+The integrators' stats and codes may be NULL."""
 SETUP_RESULT = "status"
 """The name of setup's result in Fortran (a function with result(status))."""
 
@@ -280,5 +342,9 @@ MAX_OUTPUT_POINTS = 10**6
 """Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
 simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
 text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""
+FMU_MAX_STEPS = 10**7
+"""Steps (accepted and rejected) one Co-Simulation step of an FMU may take
+before it fails with max_steps reached: as `gyrogen simulate --max-nfev`'s
+default, a bound on a run that blows up rather than a cost to plan for."""
 MAX_SCENE_BYTES = 1 << 20
 """Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
-from gyrogen.abi import ODE_CODES, message
+from gyrogen.abi import ODE_CODES, STATES, message
 from gyrogen.analysis.timing import best_time
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
@@ -99,6 +99,12 @@ class Problem:
     ref: np.ndarray = field(default_factory=lambda: np.zeros(0))
     checks: dict[str, float] = field(default_factory=dict)
     """Reference cross-checks: name -> mixed difference."""
+
+
+def full_model(scene: Scene) -> bool:
+    """The default scene, every state kept: the hand-written peer RHSs
+    (PyDy's, the numba one of peers.py) integrate exactly its equations."""
+    return scene.name == "gyrostat" and list(scene.states) == list(STATES)
 
 
 def reference(prob: Problem) -> None:

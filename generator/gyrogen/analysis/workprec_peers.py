@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis import peers
+from gyrogen.analysis import peers, workprec
 from gyrogen.analysis.timing import best_of
 from gyrogen.analysis.workprec import Config, Problem, Run
 from gyrogen.oracle.compare import scaled_error
@@ -65,10 +65,11 @@ def _numbalsoda_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> 
     def gyrogen_rhs(t: float, u: Any, du: Any, data: Any) -> None:
         c_rhs(t, u, data, du)
 
-    rhs = {"gyrogen's C RHS": (gyrogen_rhs.address, np.ascontiguousarray(prob.c))}
-    if prob.scene.name == "gyrostat" and prob.scene.integrators:
+    address: Any = gyrogen_rhs.address  # numba types it loosely
+    rhs = {"gyrogen's C RHS": (int(address), np.ascontiguousarray(prob.c))}
+    if workprec.full_model(prob.scene):
         hand, k = peers.numba_rhs(prob.p)
-        rhs["numba RHS"] = (hand.address, k)
+        rhs["numba RHS"] = (int(hand.address), k)
     solvers = {"DOP853": dop853, "LSODA": lsoda}
     out = []
     for solver_name, solver in solvers.items():

@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.abi import STATES
 from gyrogen.analysis import stiffness, workprec, workprec_peers
 from gyrogen.analysis.bench_rhs import machine, pydy_rhs
 from gyrogen.analysis.simulate import runtime_values
@@ -68,7 +67,7 @@ def measure(scene: Scene, cfg: Config, echo: Echo, progress: Echo) -> tuple[Prob
 
 def _pydy_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[Run]:
     """PyDy's RHS is built from the full model: only the default scene matches it."""
-    if list(prob.scene.states) != list(STATES) or prob.scene.name != "gyrostat":
+    if not workprec.full_model(prob.scene):
         return []
     rhs = pydy_rhs(echo)
     if rhs is None:
@@ -103,7 +102,7 @@ def summary(prob: Problem, runs: list[Run]) -> list[str]:
         if known:
             best = min(known, key=lambda lb: known[lb])
             lines.append(f"| {level:.0e} | {best} | {_time(known[best])} |")
-    return lines + ["", *against_peers(runs)]
+    return [*lines, "", *against_peers(runs)]
 
 
 def _time(seconds: float) -> str:
@@ -140,8 +139,11 @@ def against_peers(runs: list[Run]) -> list[str]:
             t = workprec.seconds_at(_by(runs, peer), level)
             cells.append("-" if t is None else f"{_time(t)} ({_ratio(t / mine[1])})")
         fastest = _fastest(scipy, level)
-        cells.append("-" if fastest is None else
-                     f"{fastest[0]} {_time(fastest[1])} ({_ratio(fastest[1] / mine[1])})")  # fmt: skip
+        if fastest is None:
+            cells.append("-")
+        else:
+            label, t = fastest
+            cells.append(f"{label} {_time(t)} ({_ratio(t / mine[1])})")
         out.append("| " + " | ".join(cells) + " |")
     return [
         "## gyrogen against its peers (peer time, and in brackets peer / gyrogen)",

@@ -1,9 +1,11 @@
 """Build files that turn a generated directory into a library.
 
-From the directory's manifest.json: a CMakeLists.txt (static and shared C
-libraries, the Fortran module library when there is Fortran, usable by
-`add_subdirectory`) and a Makefile fragment `<prefix>.mk` to `include`. Both
-are templates (templates/lib); this module only gathers their context.
+From the directory's manifest.json: a CMakeLists.txt (the C library, the
+Fortran module library when there is Fortran and the parent enables it,
+usable by `add_subdirectory` or installed as a CMake package), the package's
+`<prefix>Config.cmake.in` and pkg-config's `<prefix>.pc.in` that it
+configures, and a Makefile fragment `<prefix>.mk` to `include`. All are
+templates (templates/lib); this module only gathers their context.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ def _context(manifest: dict[str, Any]) -> dict[str, Any]:
             "build_id": manifest.get("build_id"),
             # A scene may render C only; then there is no Fortran library.
             "fortran": names.get("fortran"),
+            "fortran_header": names.get("fortran_c_header"),
+            **_versions(manifest["versions"]["gyrogen"]),
         }
     except KeyError as exc:
         why = f"manifest.json lacks {exc}: regenerate it with `gyrogen generate`"
@@ -51,12 +55,28 @@ def _context(manifest: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _versions(gyrogen: str) -> dict[str, str]:
+    """The library's version is gyrogen's; its SOVERSION the major, or
+    0.minor before 1.0 (where a minor release may change the interface)."""
+    major, minor = gyrogen.split(".")[:2]
+    return {"version": gyrogen, "soversion": major if major != "0" else f"0.{minor}"}
+
+
+TEMPLATES = {
+    "CMakeLists.txt": "lib/CMakeLists.txt.jinja",
+    "{prefix}.mk": "lib/library.mk.jinja",
+    "{prefix}Config.cmake.in": "lib/Config.cmake.in.jinja",
+    "{prefix}.pc.in": "lib/pc.in.jinja",
+}
+"""Each build file's name and its template."""
+
+
 def files(manifest: dict[str, Any]) -> dict[str, str]:
-    """File name -> text: `CMakeLists.txt` and `<prefix>.mk`, to be written
-    beside the generated sources the manifest describes."""
+    """File name -> text: the files of TEMPLATES, to be written beside the
+    generated sources the manifest describes."""
     ctx = _context(manifest)
-    mk = f"{ctx['prefix']}.mk"
-    return {
-        "CMakeLists.txt": render("lib/CMakeLists.txt.jinja", filename="CMakeLists.txt", **ctx),
-        mk: render("lib/library.mk.jinja", filename=mk, **ctx),
-    }
+    out = {}
+    for pattern, template in TEMPLATES.items():
+        name = pattern.format(prefix=ctx["prefix"])
+        out[name] = render(template, filename=name, **ctx)
+    return out

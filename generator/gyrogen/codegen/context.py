@@ -11,10 +11,7 @@ from importlib.metadata import version
 import sympy as sm
 
 import gyrogen
-from gyrogen.abi import (
-    OUTPUT_DOC,
-    UNITS,
-)
+from gyrogen.abi import OUTPUT_DOC, SIGNATURES, UNITS, Signature
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
@@ -109,6 +106,10 @@ class Unit:
     def outputs(self) -> list[Output]:
         return [Output(n, b, *OUTPUT_DOC[n]) for n, b in self.optimized.outputs.items()]
 
+    def outputs_size(self, function: str) -> int:
+        """The size of an output function's out[], 0 for any other function."""
+        return next((o.size for o in self.outputs if o.name == function), 0)
+
     @property
     def torque_table(self) -> list[tuple[float, float]] | None:
         return self.scene.effects.torque_table
@@ -159,8 +160,11 @@ class Unit:
 
     @property
     def functions(self) -> dict[str, dict[str, str]]:
+        """Exported names by language: C's, and Fortran's module and bind(C)
+        names (its strerror functions return a character, so they are
+        Fortran-only and not listed)."""
         p = self.prefix
-        c = {"setup": f"{p}_setup", "rhs": f"{p}_rhs"}
+        c = {"setup": f"{p}_setup", "rhs": f"{p}_rhs", "strerror": f"{p}_strerror"}
         f = {"module": f"{p}_mod", "setup": f"{p}_f_setup", "rhs": f"{p}_f_rhs"}
         for o in self.outputs:
             c[o.name] = f"{p}_{o.name}"
@@ -170,7 +174,21 @@ class Unit:
         for m in self.scene.integrators:
             c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
             c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"
+        if self.scene.integrators:
+            c["ode_strerror"] = f"{p}_ode_strerror"
         return {"c": c, "fortran": f}
+
+
+def signature_of(function: str) -> Signature:
+    """The C signature of a function, by its key in Unit.functions."""
+    batch = function.endswith("_batch")
+    method = METHODS.get(function.removesuffix("_batch"))
+    if method is not None:
+        kind = "fixed_step" if method.fixed_step else "adaptive"
+        return SIGNATURES[kind + "_batch" * batch]
+    if function.endswith("strerror"):
+        return SIGNATURES["strerror"]
+    return SIGNATURES.get(function) or SIGNATURES["output"]
 
 
 def versions() -> dict[str, str]:

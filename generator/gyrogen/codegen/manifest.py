@@ -1,27 +1,21 @@
-"""manifest.json: a generated directory described for tools and tests."""
+"""manifest.json: a generated directory described for tools and tests,
+down to each function's C signature and the stats struct's layout, so that
+an FFI (ctypes, say) can be driven from it alone."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
-from gyrogen.abi import SETUP_CODES, SIGNATURES
-from gyrogen.codegen.context import Unit
+from gyrogen.abi import ODE_CODES, SETUP_CODES, STATS_FIELDS, Code
+from gyrogen.codegen.context import Unit, signature_of
 
 
 def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
     """What tools and tests read instead of parsing C; full, the paper's full
     model, is what the scene is compared with (its caller derives it)."""
     p = unit.prefix
-    files: dict[str, str] = {}
     ode = bool(unit.scene.integrators)
-    if "c" in unit.scene.targets:
-        files.update(c_header=f"{p}.h", c_source=f"{p}.c")
-        if ode:
-            files.update(c_ode_header=f"{p}_ode.h", c_ode_source=f"{p}_ode.c")
-    if "fortran" in unit.scene.targets:
-        files["fortran"] = f"{p}.f90"
-        if ode:
-            files["fortran_ode"] = f"{p}_ode.f90"
     return {
         "prefix": p,
         "description": unit.scene.description,
@@ -38,13 +32,59 @@ def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
         "targets": list(unit.scene.targets),
         "functions": unit.functions,
         "signatures": {
-            "setup": SIGNATURES["setup"].c("setup"),
-            "rhs": SIGNATURES["rhs"].c("rhs"),
-            "outputs": SIGNATURES["output"].c("output"),
+            language: {key: _signature(unit, key, name) for key, name in names.items()}
+            for language, names in _exported(unit).items()
         },
-        "setup_codes": {str(code.value): code.message for code in SETUP_CODES},
+        "structs": {f"{p}_stats": [{"name": f.name, "ctype": f.ctype} for f in STATS_FIELDS]}
+        if ode
+        else {},
+        "setup_codes": _codes(SETUP_CODES),
+        "ode_codes": _codes(ODE_CODES) if ode else {},
         "ops": unit.ops,
         "full_model": {"nx": full.nx, "np": full.np, "ops": full.ops},
-        "files": files,
+        "files": _files(unit),
         "versions": unit.versions,
     }
+
+
+def _files(unit: Unit) -> dict[str, str]:
+    p, ode = unit.prefix, bool(unit.scene.integrators)
+    files: dict[str, str] = {}
+    if "c" in unit.scene.targets:
+        files.update(c_header=f"{p}.h", c_source=f"{p}.c")
+        if ode:
+            files.update(c_ode_header=f"{p}_ode.h", c_ode_source=f"{p}_ode.c")
+    if "fortran" in unit.scene.targets:
+        files.update(fortran=f"{p}.f90", fortran_c_header=f"{p}_f.h")
+        if ode:
+            files["fortran_ode"] = f"{p}_ode.f90"
+    return files
+
+
+def _exported(unit: Unit) -> dict[str, dict[str, str]]:
+    """The functions of each target the scene builds, by key: exported name."""
+    names = unit.functions
+    return {
+        lang: {k: n for k, n in names[lang].items() if k != "module"}
+        for lang in ("c", "fortran")
+        if lang in unit.scene.targets
+    }
+
+
+def _signature(unit: Unit, key: str, name: str) -> dict[str, Any]:
+    """One function's C declaration, and its arguments for an FFI: each
+    pointer's element count ("count", times the batch's n when per_state)."""
+    sig = signature_of(key)
+    sizes = {"nx": unit.nx, "np": unit.np, "nc": unit.nc, "out": unit.outputs_size(key)}
+    args: list[dict[str, Any]] = []
+    for arg in sig.args:
+        entry: dict[str, Any] = {"name": arg.name, "ctype": arg.ctype.format(prefix=unit.prefix)}
+        if arg.length:
+            factors = [sizes[f] if f in sizes else int(f) for f in arg.length if f != "n"]
+            entry.update(count=math.prod(factors), per_state="n" in arg.length)
+        args.append(entry)
+    return {"c": sig.c(name, unit.prefix), "returns": sig.returns, "args": args}
+
+
+def _codes(codes: tuple[Code, ...]) -> dict[str, str]:
+    return {str(code.value): code.message for code in codes}

@@ -10,6 +10,7 @@ from typing import Any
 
 import jinja2
 
+from gyrogen.abi import Signature
 from gyrogen.methods import literal
 
 
@@ -66,6 +67,41 @@ def hash_comment(text: str) -> str:
     return "\n# ".join(comment_lines(text)).replace("# \n", "#\n")
 
 
+def c_string(text: str) -> str:
+    """A C string literal: backslashes and quotes escaped, no "??" (a trigraph)."""
+    body = text.replace("\\", "\\\\").replace('"', '\\"')
+    return '"' + _unbroken(body, "\\?\\?", '?" "?') + '"'
+
+
+def f_string(text: str) -> str:
+    """A Fortran character literal (a quote doubled)."""
+    return '"' + text.replace('"', '""') + '"'
+
+
+def xml_attr(text: str) -> str:
+    """A quoted XML attribute value: markup escaped, and newlines and tabs as
+    character references (a parser would turn them into spaces)."""
+    escaped = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    for char, reference in (('"', "&quot;"), ("\n", "&#10;"), ("\t", "&#9;"), ("\r", "&#13;")):
+        escaped = escaped.replace(char, reference)
+    return f'"{escaped}"'
+
+
+PROTOTYPE_WIDTH = 90
+"""Columns of a generated C declaration before it wraps."""
+
+
+def c_prototype(signature: Signature, name: str, prefix: str) -> str:
+    """A declaration of name with the signature, wrapped after a comma with
+    an indent of 8 where it outgrows PROTOTYPE_WIDTH."""
+    lines = [""]
+    for piece in re.split(r"(?<=,) ", signature.c(name, prefix) + ";"):
+        if lines[-1] and len(lines[-1]) + 1 + len(piece) > PROTOTYPE_WIDTH:
+            lines.append(" " * 7)
+        lines[-1] += (" " if lines[-1] else "") + piece
+    return "\n".join(lines)
+
+
 @cache
 def environment() -> jinja2.Environment:
     root = files("gyrogen") / "templates"
@@ -85,7 +121,11 @@ def environment() -> jinja2.Environment:
         c_comment=c_comment,
         f_comment=f_comment,
         hash_comment=hash_comment,
+        c_string=c_string,
+        f_string=f_string,
+        xml_attr=xml_attr,
     )
+    env.globals.update(c_prototype=c_prototype)
     return env
 
 

@@ -15,4 +15,5 @@ NAMES = (
     "ops",
     "bench_rhs",
     "bench_ensemble",
+    "fmu",
 )

@@ -22,7 +22,8 @@ from typing import Any
 
 import cffi
 
-from gyrogen import abi, methods
+from gyrogen import abi
+from gyrogen.codegen.context import signature_of
 from gyrogen.codegen.render import render
 from gyrogen.errors import BuildError
 from gyrogen.runtime import cache, flags
@@ -91,19 +92,16 @@ def _plan(source_dir: Path, language: Language) -> _Plan:
 
 def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any]:
     """What the cffi templates print: the setup, the per-call functions and
-    the integrators of the build, by their exported names."""
+    the integrators of the build, by their exported names and signatures."""
     names = manifest["functions"][language]
     per_call = ["rhs", *manifest["outputs"]]
     if "jac" in names:
         per_call.append("jac")
+    integrators = [n for m in manifest["integrators"] for n in (m, f"{m}_batch")]
     return {
-        "prefix": manifest["prefix"],
-        "setup": names["setup"],
         "functions": [names[f] for f in per_call],
-        "methods": [
-            (m, names[m], names[f"{m}_batch"], methods.get(m).fixed_step)
-            for m in manifest["integrators"]
-        ],
+        "declared": [(signature_of(k), names[k]) for k in ["setup", *per_call, *integrators]],
+        "methods": manifest["integrators"],
         "abi": abi,
         "nx": manifest["nx"],
     }

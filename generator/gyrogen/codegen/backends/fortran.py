@@ -9,7 +9,7 @@ from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import printed
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import Unit, signature_of
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
@@ -73,8 +73,12 @@ def files(unit: Unit) -> dict[str, str]:
         "checks": printed("fortran", unit.macro),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
         "check_locals": local_names(),
+        "signature_of": signature_of,
     }
-    out = {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}
+    out = {
+        f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx),
+        f"{unit.prefix}_f.h": render("fortran/bindings.h.jinja", **ctx),
+    }
     if unit.methods:
         out[f"{unit.prefix}_ode.f90"] = render("fortran/ode.f90.jinja", **ctx)
     return out

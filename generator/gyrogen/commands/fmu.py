@@ -1,0 +1,58 @@
+"""`gyrogen fmu`: a scene as a Functional Mock-up Unit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from gyrogen import methods
+from gyrogen.commands.options import SCENE, directory
+from gyrogen.scene import Scene
+
+
+@click.command()
+@click.argument("scene", type=SCENE)
+@directory("--out", "Directory to write <scene>.fmu into [default: the current directory].")
+@click.option(
+    "--method",
+    type=click.Choice(methods.ADAPTIVE),
+    default=None,
+    help="The compiled integrator Co-Simulation steps with, one of the scene's "
+    "[default: dop853 if the scene has it, else its first adaptive one].",
+)
+def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
+    """Write SCENE as <scene>.fmu: FMI 2.0, Model Exchange and Co-Simulation,
+    built for this machine with its sources inside. States, derivatives and
+    outputs are variables with units, the runtime parameters tunable
+    parameters (starting at the scene's simulate.parameters), the start
+    state the scene's simulate.initial. Co-Simulation steps with the
+    scene's compiled integrator at its simulate.rtol and atol. The FMI
+    headers come from FMPy, which must be installed."""
+    from gyrogen.analysis.simulate import runtime_values
+    from gyrogen.codegen.fmu import default_method
+    from gyrogen.codegen.fmu_model import FmuModel, Stepping
+    from gyrogen.codegen.generate import unit_of
+    from gyrogen.files import can_write, write_atomic
+    from gyrogen.runtime import fmu_build
+
+    target = out or Path(".")
+    fmu_build.fmi_headers()  # refusals first, before the seconds of deriving and compiling
+    can_write(target, [f"{scene.name}.fmu"])
+    chosen = default_method(scene)
+    if method is not None and method not in scene.integrators:
+        raise click.BadParameter(
+            f"{method} is not among the scene's integrators ({', '.join(scene.integrators)})",
+            param_hint="'--method'",
+        )
+    sim = scene.simulate
+    stepping = Stepping(method or chosen, sim.rtol, sim.atol, sim.t_end, sim.dt)
+    model = FmuModel(unit_of(scene), tuple(runtime_values(scene)), stepping)
+    write_atomic(target, fmu_build.build(model, target))
+    click.echo(
+        f"wrote {target / (scene.name + '.fmu')}: FMI 2.0, Model Exchange and Co-Simulation "
+        f"({stepping.method}), {len(model.variables)} variables"
+    )
+
+
+command = fmu

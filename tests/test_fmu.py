@@ -1,0 +1,318 @@
+"""`gyrogen fmu` (issue 15): the FMU passes FMPy's checks, FMPy simulates it
+in both modes in agreement with `gyrogen simulate` (on a 1 s slice here;
+`make fmu-agreement` runs the whole t_end), bad parameter values through
+the FMI setters are FMI errors with a logged reason, its sources compile
+under the strict flags, and the command's refusals are one line each."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import zipfile
+from collections.abc import Callable
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import fmpy
+import numpy as np
+import pytest
+from conftest import built_once
+from fmpy.build import build_platform_binary
+from fmpy.fmi1 import FMICallException
+from fmpy.simulation import instantiate_fmu
+from fmpy.validation import validate_fmu
+from fmu_agreement import BAR, MODES, build, by_fmpy, cases, differences, reference
+
+from gyrogen import abi
+from gyrogen.runtime.fmu_build import fmi_headers
+
+SLICE = 1.0
+"""Seconds simulated here; `make fmu-agreement` runs each scene's t_end."""
+CASES = {case.label: case for case in cases()}
+SCENES = Path(__file__).resolve().parents[1] / "generator" / "gyrogen" / "scenes"
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory: pytest.TempPathFactory, cli) -> dict[str, Path]:
+    """The three FMUs, built once per run: the default and the stiff scene's
+    through the command line, the quaternion scene's (no built-in) through
+    its API."""
+
+    def make(root: Path) -> None:
+        code, out, err = cli(["fmu", "gyrostat", "--out", str(root / "default")])
+        assert code == 0, err
+        assert "wrote" in out and "FMI 2.0" in out and "(dop853)" in out
+        code, _, err = cli(
+            ["fmu", "stiff_wheel", "--method", "rodas4", "--out", str(root / "stiff")]
+        )
+        assert code == 0, err
+        build(CASES["quaternion"], root / "quaternion")
+
+    root = built_once(tmp_path_factory, "fmus", make)
+    return {
+        "default": root / "default" / "gyrostat.fmu",
+        "stiff": root / "stiff" / "stiff_wheel.fmu",
+        "quaternion": root / "quaternion" / "gyrostat_quat.fmu",
+    }
+
+
+@cache
+def simulated(label: str, root: Path) -> Any:
+    """`gyrogen simulate`'s trajectory over SLICE, once per case."""
+    return reference(CASES[label], SLICE, root / f"simulate-{label}")
+
+
+@pytest.mark.parametrize("label", list(CASES))
+def test_fmpy_finds_no_problem(fmus: dict[str, Path], label: str) -> None:
+    assert validate_fmu(str(fmus[label])) == []
+
+
+def test_contents(fmus: dict[str, Path]) -> None:
+    """Model description, the binary for this machine, and the sources;
+    variables with units, parameters tunable, starts from the scene."""
+    with zipfile.ZipFile(fmus["stiff"]) as zf:
+        names = set(zf.namelist())
+    assert names == {
+        "modelDescription.xml",
+        f"binaries/{fmpy.platform}/stiff_wheel.so",
+        *(f"sources/stiff_wheel{s}" for s in (".c", ".h", "_ode.c", "_ode.h", "_fmi2.c")),
+    }
+    md = fmpy.read_model_description(str(fmus["stiff"]))
+    assert md.modelExchange is not None and md.coSimulation is not None
+    by_name = {v.name: v for v in md.modelVariables}
+    scene = CASES["stiff"].scene
+    assert by_name["k"].causality == "parameter" and by_name["k"].variability == "tunable"
+    assert float(by_name["k"].start) == scene.simulate.parameters["k"]
+    assert (by_name["k"].unit, by_name["u2"].unit, by_name["der(u2)"].unit) == (
+        abi.UNITS["k"][0], "rad/s", "rad/s^2")  # fmt: skip
+    assert by_name["angular_momentum[3]"].unit == abi.OUTPUT_DOC["angular_momentum"][0]
+    assert float(by_name["u1"].start) == scene.simulate.initial["u1"]
+    assert md.defaultExperiment.stopTime == str(scene.simulate.t_end)
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("label", list(CASES))
+def test_agrees_with_simulate(
+    fmus: dict[str, Path], label: str, mode: str, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    ref = simulated(label, tmp_path_factory.getbasetemp())
+    scaled, absolute = differences(by_fmpy(CASES[label], fmus[label], mode, SLICE), ref)
+    assert scaled <= BAR and absolute <= BAR
+
+
+class Log:
+    """The FMU's logger: what it said, by status."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[int, str]] = []
+
+    def __call__(self, env: object, name: bytes, status: int, category: bytes, msg: bytes) -> None:
+        self.lines.append((status, msg.decode()))
+
+
+def instantiate(fmu: Path, mode: str, tmp_path: Path) -> tuple[Any, Log]:
+    """An instance as FMPy makes one, with Log as its logger."""
+    md = fmpy.read_model_description(str(fmu))
+    unzipped = fmpy.extract(str(fmu), str(tmp_path / "unzipped"))
+    log = Log()
+    return instantiate_fmu(unzipped, md, fmi_type=mode, logger=log), log
+
+
+def refused(call: object, log: Log, message: str) -> None:
+    """call() is an FMI error, and the FMU logged message as one."""
+    with pytest.raises(FMICallException):
+        call()  # type: ignore[operator]
+    assert (3, message) in [(s, m[-len(message) :]) for s, m in log.lines]
+
+
+def initialized(fmu: Path, mode: str, tmp_path: Path, **experiment: float) -> tuple[Any, Log]:
+    """An instance through initialization, from t = 0."""
+    instance, log = instantiate(fmu, mode, tmp_path)
+    instance.setupExperiment(startTime=0.0, **experiment)
+    instance.enterInitializationMode()
+    instance.exitInitializationMode()
+    return instance, log
+
+
+def vr(fmu: Path, *names: str) -> list[int]:
+    md = fmpy.read_model_description(str(fmu))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    return [refs[n] for n in names]
+
+
+def test_bad_start_parameters_fail_initialization(fmus: dict[str, Path], tmp_path: Path) -> None:
+    slave, log = instantiate(fmus["default"], "CoSimulation", tmp_path)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.setReal(vr(fmus["default"], "m_a"), [-1.0])
+    refused(slave.exitInitializationMode, log, abi.message(abi.SETUP_CODES, 2))
+    slave.freeInstance()
+
+
+def test_bad_parameters_between_steps_leave_the_old_ones(
+    fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """Each refused, logged, and stepping goes on as if nothing was set."""
+    fmu = fmus["default"]
+    slave, log = initialized(fmu, "CoSimulation", tmp_path / "a")
+    refused(lambda: slave.setReal(vr(fmu, "I11"), [math.nan]), log, abi.message(abi.SETUP_CODES, 1))
+    refused(lambda: slave.setReal(vr(fmu, "I22"), [1e3]), log, abi.message(abi.SETUP_CODES, 5))
+    refused(
+        lambda: slave.setReal(vr(fmu, "q1"), [0.5]), log, "q1 is set before initialization only"
+    )
+    refused(lambda: slave.setReal(vr(fmu, "der(q1)"), [0.5]), log, "der(q1) is computed, not set")
+    clean, _ = initialized(fmu, "CoSimulation", tmp_path / "b")
+    for instance in (slave, clean):
+        instance.doStep(0.0, 0.5)
+    assert slave.getReal(vr(fmu, "q1", "u4")) == clean.getReal(vr(fmu, "q1", "u4"))
+    for instance in (slave, clean):
+        instance.freeInstance()
+
+
+def test_bad_parameters_in_event_mode(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """Model Exchange: refused in event mode, and a good value taken."""
+    fmu = fmus["stiff"]
+    model, log = initialized(fmu, "ModelExchange", tmp_path)
+    refused(lambda: model.setReal(vr(fmu, "k"), [-math.inf]), log, abi.message(abi.SETUP_CODES, 1))
+    model.setReal(vr(fmu, "k"), [10.0])
+    assert model.getReal(vr(fmu, "k")) == [10.0]
+    model.freeInstance()
+
+
+def test_a_failed_step_is_an_fmi_error(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """A tolerance the integrator refuses (below MIN_RTOL): the step fails."""
+    slave, log = initialized(fmus["default"], "CoSimulation", tmp_path, tolerance=1e-20)
+    refused(lambda: slave.doStep(0.0, 0.1), log, abi.message(abi.ODE_CODES, 5))
+    slave.freeInstance()
+
+
+@pytest.mark.parametrize("compiler", ["gcc", "clang", "g++"])
+def test_sources_compile_strictly(fmus: dict[str, Path], tmp_path: Path, compiler: str) -> None:
+    """The FMI wrapper holds to the generated code's flags, and compiles as C++."""
+    with zipfile.ZipFile(fmus["default"]) as zf:
+        zf.extractall(tmp_path)
+    language = ["-x", "c++"] if compiler == "g++" else ["-std=c99"]
+    strict = ["-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
+    cmd = [compiler, *language, *strict, f"-I{fmi_headers()}", "-c", "sources/gyrostat_fmi2.c"]
+    proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+DRIVER = Path(__file__).resolve().parent / "consumers" / "fmi2_driver.c"
+MISUSE = {
+    "wrong_guid", "step_before_initialization", "set_nowhere", "exit_refused", "set_refused",
+    "get_nowhere", "unknown_category", "step_nan", "step_backwards", "other_status",
+    "step_after_terminate", "states_too_many", "set_states_too_few", "derivatives_too_many",
+    "fmu_state",
+}  # fmt: skip
+"""What tests/consumers/fmi2_driver.c does wrong: each an fmi2Error (3) with
+a logged line; every other call is fmi2OK (0)."""
+
+
+def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """The FMU's sources and a driver that misuses them, under ASan and
+    UBSan: each misuse an error with its reason logged, never a crash."""
+    with zipfile.ZipFile(fmus["default"]) as zf:
+        zf.extractall(tmp_path)
+    md = fmpy.read_model_description(str(fmus["default"]))
+    p0 = next(v.valueReference for v in md.modelVariables if v.causality == "parameter")
+    sanitize = ["-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
+                "-fno-sanitize-recover=all", "-g"]  # fmt: skip
+    sources = sorted(str(f) for f in (tmp_path / "sources").glob("*.c"))
+    subprocess.run(
+        ["gcc", "-std=c99", *sanitize, f"-I{fmi_headers()}", "-Isources", *sources, str(DRIVER),
+         "-o", "driver", "-lm"], cwd=tmp_path, check=True)  # fmt: skip
+    proc = subprocess.run(
+        [str(tmp_path / "driver"), md.guid, str(p0), str(md.numberOfContinuousStates)],
+        capture_output=True, text=True, check=False)  # fmt: skip
+    assert (proc.returncode, proc.stderr) == (0, "")
+    lines = proc.stdout.splitlines()
+    calls = [(i, *line.split()) for i, line in enumerate(lines) if not line.startswith("log ")]
+    assert len(calls) == 35 and {what for _, what, _ in calls} >= MISUSE
+    for i, what, status in calls:
+        assert status == ("3" if what in MISUSE else "0"), what
+        assert lines[i - 1].startswith("log 3 ") == (what in MISUSE), what
+    refused = "log 3 gyrostat_setup refused the parameters (code 2): "
+    assert refused + abi.message(abi.SETUP_CODES, 2) in lines
+    failed = "log 3 gyrostat_dop853 failed at t = 0.10000000000000001 (code 5): "
+    assert failed + abi.message(abi.ODE_CODES, 5) in lines
+
+
+def test_fmpy_rebuilds_the_binary_from_the_sources(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """The sources inside are enough: FMPy's own build (CMake, its headers)
+    makes a new binary from them, which runs as the shipped one (other flags:
+    FMPy builds Release; so to 1e-12, not to the bit, though it is equal here)."""
+    unzipped = Path(fmpy.extract(str(fmus["stiff"]), str(tmp_path / "unzipped")))
+    binary = unzipped / "binaries" / fmpy.platform / "stiff_wheel.so"
+    binary.unlink()
+    (tmp_path / "build").mkdir()
+    build_platform_binary(unzipped, build_dir=tmp_path / "build")
+    assert binary.is_file()
+    rebuilt = fmpy.simulate_fmu(str(unzipped), fmi_type="CoSimulation", stop_time=SLICE)
+    original = fmpy.simulate_fmu(str(fmus["stiff"]), fmi_type="CoSimulation", stop_time=SLICE)
+    assert rebuilt.dtype.names == original.dtype.names and len(rebuilt) > 10
+    for name in original.dtype.names:
+        np.testing.assert_allclose(rebuilt[name], original[name], rtol=1e-12, atol=1e-12)
+
+
+def scene_file(tmp_path: Path, edit: Callable[[str], str]) -> str:
+    """gyrostat.toml, edited."""
+    path = tmp_path / "edited.toml"
+    path.write_text(edit((SCENES / "gyrostat.toml").read_text()))
+    return str(path)
+
+
+def targets(line: str) -> Callable[[str], str]:
+    return lambda text: text.replace('targets = ["c", "fortran"]', line)
+
+
+@pytest.mark.parametrize(
+    ("edit", "args", "message"),
+    [
+        (targets('targets = ["fortran"]'), [],
+         'an FMU is built from the C sources: add "c" to targets'),
+        (targets('targets = ["c"]\nintegrators = ["rk4"]'), [],
+         "the scene has none (integrators: rk4)"),
+        (lambda text: text.split("[simulate.parameters]")[0], [],
+         "no value for runtime parameter m_a, m_b"),
+        (None, ["gyrostat", "--method", "rk4"], "'rk4' is not one of"),
+        (targets('targets = ["c"]\nintegrators = ["dop853"]'), ["--method", "rodas4"],
+         "rodas4 is not among the scene's integrators (dop853)"),
+    ],
+)  # fmt: skip
+def test_refusals(
+    tmp_path: Path, cli, edit: Callable[[str], str] | None, args: list[str], message: str
+) -> None:
+    """A scene or an option that cannot make an FMU: one line, exit 2, nothing written."""
+    scene = [scene_file(tmp_path, edit)] if edit else []
+    code, out, err = cli(["fmu", *scene, *args, "--out", str(tmp_path / "out")])
+    assert (code, out) == (2, "") and message in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_unwritable_out(tmp_path: Path, cli) -> None:
+    (tmp_path / "file").write_text("mine")
+    code, _, err = cli(["fmu", "torque_free", "--out", str(tmp_path / "file" / "sub")])
+    assert code == 1 and err.count("\n") == 1
+    assert err.startswith("gyrogen: error: cannot create output directory")
+    assert (tmp_path / "file").read_text() == "mine"
+
+
+def test_without_fmpy_there_are_no_headers(tmp_path: Path) -> None:
+    """Python with FMPy unimportable (as where it is not installed)."""
+    run = ("import sys; sys.modules['fmpy'] = None; from gyrogen.cli import main; "
+           f"main(['fmu', 'torque_free', '--out', {str(tmp_path)!r}])")  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", run], capture_output=True, text=True, check=False)
+    assert proc.returncode == 1
+    assert proc.stderr == (
+        "gyrogen: error: building an FMU needs the FMI headers, taken from FMPy, which is "
+        "not installed: pip install fmpy (or gyrogen's fmu extra)\n"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_same_scene_makes_the_same_bytes(fmus: dict[str, Path], tmp_path: Path, cli) -> None:
+    assert cli(["fmu", "gyrostat", "--out", str(tmp_path)]).code == 0
+    assert (tmp_path / "gyrostat.fmu").read_bytes() == fmus["default"].read_bytes()
