@@ -65,11 +65,12 @@ bench-ensemble: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-ensemble
 
-## report: work-precision reports (figure, tables, summary) for the default and the stiff scene
+## report: work-precision reports (figure, tables, summary) for the default and the stiff scene against the compiled peers, and the ensembles
 report: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench gyrostat --out report/gyrostat
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
+	$(BIN)/gyrogen bench-ensemble --out report
 
 ## fuzz: the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes with a
 ## fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/

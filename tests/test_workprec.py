@@ -11,6 +11,8 @@ import matplotlib.image
 import numpy as np
 import pytest
 
+from gyrogen.analysis import workprec
+from gyrogen.analysis.workprec import Run
 from gyrogen.scene import builtin_text
 
 
@@ -27,6 +29,11 @@ def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
         assert (m, "C") in labels
     for m in ("RK45", "DOP853", "Radau", "LSODA"):
         assert (f"scipy {m}", "numpy RHS") in labels and (f"scipy {m}", "C RHS via cffi") in labels
+    for m in ("DOP853", "LSODA"):  # the compiled peers (the test extra installs them)
+        for rhs in ("gyrogen's C RHS", "numba RHS"):
+            assert (f"numbalsoda {m}", rhs) in labels
+    assert any(m == "CasADi cvodes Adams" for m, _ in labels)
+    assert "## gyrogen against its peers" in text and "numbalsoda DOP853 (numba RHS)" in text
     ok = [r for r in rows if r["status"] == "ok"]
     assert all(float(r["seconds"]) > 0 and float(r["error"]) >= 0 for r in ok)
     data = json.loads((out / "workprecision.json").read_text())
@@ -85,3 +92,21 @@ def test_failed_reference_run_is_one_line(
         "gyrogen: error: torque_free: reference DOP853 failed at t = 0 s: step size underflow"
     )
     assert "Traceback" not in err and not (tmp_path / "r").exists()
+
+
+def _run(error: float, seconds: float) -> Run:
+    return Run("m", "C", 0.0, error, seconds, 0)
+
+
+def test_time_at_an_error_is_read_along_the_front() -> None:
+    """Interpolated in log-log between the two front runs around the level;
+    a slower and less accurate run is off the front; a contender already
+    below the level is charged its fastest run; none reaching it: None."""
+    runs = [_run(1e-3, 1e-6), _run(1e-5, 4e-6), _run(1e-4, 9e-6), _run(1e-7, 16e-6)]
+    assert [r.seconds for r in workprec.front(runs)] == [1e-6, 4e-6, 16e-6]
+    assert workprec.seconds_at(runs, 1e-4) == pytest.approx(2e-6)  # halfway in log: sqrt(1*4)
+    assert workprec.seconds_at(runs, 1e-6) == pytest.approx(8e-6)
+    assert workprec.seconds_at(runs, 1e-2) == 1e-6
+    assert workprec.seconds_at(runs, 1e-8) is None
+    failed = Run("m", "C", 0.0, 1e-9, 1e-9, 0, "code 2")
+    assert workprec.seconds_at([*runs, failed], 1e-8) is None

@@ -78,23 +78,14 @@ def check(name: str, rhs: Callable[[Array], Array], p: Array, echo: Callable[[st
         raise ValueError(f"{name} RHS differs from reference.rhs by {err:.1e}")
 
 
-def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
-    """(single, ensemble) callables around numbalsoda.dop853 with a numba
-    @cfunc RHS, or None when numbalsoda or numba is missing. single(x0, t1,
-    tol, loops) runs loops integrations inside one @njit call and returns
-    the final state; ensemble(x0s, t1, tol, threads) integrates every row
-    under numba's prange and returns the final states."""
-    try:
-        import ctypes
-        import math
+def numba_rhs(p: Array) -> tuple[Any, Array]:
+    """(cfunc, data): the default scene's rates as a numba @cfunc of
+    numbalsoda's signature f(t, u, du, data), data the constants k of p.
+    numba must be installed."""
+    import math
 
-        import numba as nb
-        from numbalsoda import dop853, lsoda_sig
-    except ImportError as exc:
-        echo(f"numbalsoda skipped ({exc}): pip install -e '.[bench]'")
-        return None
-    k = constants(p)
-    t0 = time.perf_counter()
+    import numba as nb
+    from numbalsoda import lsoda_sig
 
     rates_njit = nb.njit(rates)
 
@@ -104,6 +95,26 @@ def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
         out = rates_njit(u, data, math.sin(q2), math.cos(q2), math.sin(q3), math.cos(q3))
         for i in range(14):
             du[i] = out[i]
+
+    return rhs, constants(p)
+
+
+def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
+    """(single, ensemble) callables around numbalsoda.dop853 with a numba
+    @cfunc RHS, or None when numbalsoda or numba is missing. single(x0, t1,
+    tol, loops) runs loops integrations inside one @njit call and returns
+    the final state; ensemble(x0s, t1, tol, threads) integrates every row
+    under numba's prange and returns the final states."""
+    try:
+        import ctypes
+
+        import numba as nb
+        from numbalsoda import dop853
+    except ImportError as exc:
+        echo(f"numbalsoda skipped ({exc}): pip install -e '.[bench]'")
+        return None
+    t0 = time.perf_counter()
+    rhs, k = numba_rhs(p)
 
     def call(x: Array) -> Array:
         du = np.empty(14)

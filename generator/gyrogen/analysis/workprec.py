@@ -21,7 +21,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
-from gyrogen.abi import ODE_CODES, message
+from gyrogen.abi import ODE_CODES, STATES, message
 from gyrogen.analysis.timing import best_time
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
@@ -99,6 +99,12 @@ class Problem:
     ref: np.ndarray = field(default_factory=lambda: np.zeros(0))
     checks: dict[str, float] = field(default_factory=dict)
     """Reference cross-checks: name -> mixed difference."""
+
+
+def full_model(scene: Scene) -> bool:
+    """The default scene, every state kept: the hand-written peer RHSs
+    (PyDy's, the numba one of peers.py) integrate exactly its equations."""
+    return scene.name == "gyrostat" and list(scene.states) == list(STATES)
 
 
 def reference(prob: Problem) -> None:
@@ -263,3 +269,32 @@ def time_at(runs: list[Run], level: float) -> Run | None:
     """The fastest run of a list that reaches an error of at most level."""
     good = [r for r in runs if r.status.startswith("ok") and r.error <= level]
     return min(good, key=lambda r: r.seconds) if good else None
+
+
+def front(runs: list[Run]) -> list[Run]:
+    """The work-precision front of one contender's runs: by time, each run
+    more accurate than every faster one (a run both slower and less
+    accurate than another says nothing of what the method costs)."""
+    out: list[Run] = []
+    for r in sorted((r for r in runs if r.status.startswith("ok") and r.error > 0),
+                    key=lambda r: (r.seconds, r.error)):  # fmt: skip
+        if not out or r.error < out[-1].error:
+            out.append(r)
+    return out
+
+
+def seconds_at(runs: list[Run], level: float) -> float | None:
+    """What one contender needs for an error of level, read along its front:
+    interpolated in log-log between the two runs around level; a contender
+    whose fastest run is already below level is charged that run (no
+    extrapolation); None when no run reaches level."""
+    pts = front(runs)
+    if not pts or pts[-1].error > level:
+        return None
+    if pts[0].error <= level:
+        return pts[0].seconds
+    for slow, fast in zip(pts[1:], pts, strict=False):
+        if slow.error <= level:
+            w = math.log(fast.error / level) / math.log(fast.error / slow.error)
+            return math.exp((1 - w) * math.log(fast.seconds) + w * math.log(slow.seconds))
+    return None  # unreachable: pts[-1].error <= level

@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.abi import STATES
-from gyrogen.analysis import workprec
+from gyrogen.analysis import stiffness, workprec, workprec_peers
 from gyrogen.analysis.bench_rhs import machine, pydy_rhs
 from gyrogen.analysis.simulate import runtime_values
 from gyrogen.analysis.workprec import Config, Problem, Run
@@ -60,12 +59,15 @@ def measure(scene: Scene, cfg: Config, echo: Echo, progress: Echo) -> tuple[Prob
             prob, "C RHS via cffi", workprec.compiled_rhs(prob), cfg, progress
         )
         runs += _pydy_runs(prob, cfg, echo, progress)
+        comp = prob.compiled["C"]
+        stiff = stiffness.index(comp, prob.c, prob.x0, prob.t1) > stiffness.STIFF
+        runs += workprec_peers.runs(prob, cfg, stiff, echo, progress)
     return prob, runs
 
 
 def _pydy_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[Run]:
     """PyDy's RHS is built from the full model: only the default scene matches it."""
-    if list(prob.scene.states) != list(STATES) or prob.scene.name != "gyrostat":
+    if not workprec.full_model(prob.scene):
         return []
     rhs = pydy_rhs(echo)
     if rhs is None:
@@ -79,47 +81,85 @@ def _pydy_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[R
 
 
 def summary(prob: Problem, runs: list[Run]) -> list[str]:
-    """Markdown: the fastest method at each accuracy, and the issue's goals."""
+    """Markdown: the fastest contender at each error, and gyrogen against
+    each peer, both read along the contenders' work-precision curves."""
+    info = machine()
     lines = [f"# Work-precision: {prob.scene.name}", "", prob.scene.description, ""]
     lines += [f"- t in [0, {prob.t1:g}] s; reference: DOP853 in C at rtol = atol = 1e-13"]
     lines += [f"- reference check, {k}: {v:.2e}" for k, v in prob.checks.items()]
-    lines += ["", "| error at most | fastest | time | RHS calls |", "|---|---|---|---|"]
+    lines += [f"- machine: {info['cpu']}; C flags {info['c_flags']}"]
+    lines += [
+        "- each contender's time at an error level is read along its curve (the runs no "
+        "faster run beats in accuracy), interpolated in log-log between the runs around it",
+        "",
+        "| error at most | fastest | time |",
+        "|---|---|---|",
+    ]
+    labels = sorted({r.label for r in runs})
     for level in LEVELS:
-        best = workprec.time_at(runs, level)
-        if best:
-            lines.append(f"| {level:.0e} | {best.label} | {_ms(best.seconds)} | {best.rhs_calls} |")
-    lines += ["", *goals(prob, runs)]
-    return lines
+        times = {lb: workprec.seconds_at(_by(runs, lb), level) for lb in labels}
+        known = {lb: t for lb, t in times.items() if t is not None}
+        if known:
+            best = min(known, key=lambda lb: known[lb])
+            lines.append(f"| {level:.0e} | {best} | {_time(known[best])} |")
+    return [*lines, "", *against_peers(runs)]
 
 
-def _ms(seconds: float) -> str:
-    return f"{seconds * 1e3:.3g} ms"
+def _time(seconds: float) -> str:
+    return f"{seconds * 1e6:.3g} us" if seconds < 1e-3 else f"{seconds * 1e3:.3g} ms"
+
+
+def _ratio(r: float) -> str:
+    return f"{r:.2f}x" if r < 10 else f"{r:.0f}x"
 
 
 def _by(runs: list[Run], label: str) -> list[Run]:
     return [r for r in runs if r.label == label]
 
 
-def goals(prob: Problem, runs: list[Run]) -> list[str]:
-    out = []
-    c853 = workprec.time_at(_by(runs, "dop853 (C)"), 1e-8)
-    pydy = workprec.time_at(_by(runs, "scipy DOP853 (PyDy cython RHS)"), 1e-8)
-    if c853 and pydy:
-        out.append(
-            f"- at error 1e-8: DOP853 in C {_ms(c853.seconds)}, solve_ivp(DOP853) with PyDy's "
-            f"cython RHS {_ms(pydy.seconds)}: {pydy.seconds / c853.seconds:.0f}x faster "
-            "(goal >= 300x)"
-        )
-    scipy = [r for r in runs if r.method.startswith("scipy")]
-    implicit = _by(runs, "rodas4 (C)")
+def _peers(runs: list[Run]) -> list[str]:
+    """The peers' labels: the compiled ones, PyDy, then scipy's fastest."""
+    labels = sorted({r.label for r in runs if r.method.startswith(("numbalsoda", "CasADi"))})
+    return labels + sorted({r.label for r in runs if "PyDy" in r.backend})
+
+
+def against_peers(runs: list[Run]) -> list[str]:
+    """Markdown: per error level, gyrogen's fastest compiled C run and each
+    peer's time with the ratio peer / gyrogen."""
+    peers = _peers(runs)
+    scipy = [r for r in runs if r.method.startswith("scipy") and "PyDy" not in r.backend]
+    head = ["error", "gyrogen (fastest C integrator)", *peers, "fastest scipy solve_ivp"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for level in LEVELS:
-        mine, theirs = workprec.time_at(implicit, level), workprec.time_at(scipy, level)
-        if mine and theirs:
-            out.append(
-                f"- at error {level:.0e}: Rodas4 in C {_ms(mine.seconds)}, fastest scipy run "
-                f"{theirs.label} {_ms(theirs.seconds)}: {theirs.seconds / mine.seconds:.1f}x"
-            )
-    return out
+        mine = _fastest([r for r in runs if r.backend == "C"], level)
+        if mine is None:
+            continue
+        cells = [f"{level:.0e}", f"{mine[0]} {_time(mine[1])}"]
+        for peer in peers:
+            t = workprec.seconds_at(_by(runs, peer), level)
+            cells.append("-" if t is None else f"{_time(t)} ({_ratio(t / mine[1])})")
+        fastest = _fastest(scipy, level)
+        if fastest is None:
+            cells.append("-")
+        else:
+            label, t = fastest
+            cells.append(f"{label} {_time(t)} ({_ratio(t / mine[1])})")
+        out.append("| " + " | ".join(cells) + " |")
+    return [
+        "## gyrogen against its peers (peer time, and in brackets peer / gyrogen)",
+        "",
+        *out,
+        "",
+        "numbalsoda runs inside one @njit loop (no Python per integration); gyrogen "
+        "through cffi (its call and a state copy included); CasADi one Function call each.",
+    ]
+
+
+def _fastest(runs: list[Run], level: float) -> tuple[str, float] | None:
+    """The contender of runs fastest at level: (label, seconds)."""
+    times = {lb: workprec.seconds_at(_by(runs, lb), level) for lb in {r.label for r in runs}}
+    known = {lb: t for lb, t in times.items() if t is not None}
+    return min(known.items(), key=lambda kv: kv[1]) if known else None
 
 
 def table_csv(runs: list[Run]) -> str:

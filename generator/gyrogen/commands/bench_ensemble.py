@@ -3,9 +3,12 @@ trajectory against numbalsoda and diffrax (issue 12's measurements)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from gyrogen.abi import MAX_REPEATS
+from gyrogen.commands.options import directory
 
 
 @click.command("bench-ensemble")
@@ -14,11 +17,23 @@ from gyrogen.abi import MAX_REPEATS
 @click.option("--repeats", type=click.IntRange(1, MAX_REPEATS), default=5, show_default=True,
               help="Repeats per timing (best is kept).")  # fmt: skip
 @click.option("--no-peers", is_flag=True, help="Skip numbalsoda and diffrax.")
-def bench_ensemble(n: int, repeats: int, no_peers: bool) -> None:
+@directory("--out", "Also write the report into this directory, as ensemble.md.")
+def bench_ensemble(n: int, repeats: int, no_peers: bool, out: Path | None) -> None:
     """Ensembles (error <= 1e-8) and the single trajectory, side by side."""
     from gyrogen.analysis import ensemble_report
+    from gyrogen.files import write_atomic
 
-    ensemble_report.run(n, repeats, peers_on=not no_peers, echo=click.echo)
+    lines: list[str] = []
+
+    def echo(line: str) -> None:
+        lines.append(line)
+        click.echo(line)
+
+    ensemble_report.run(n, repeats, peers_on=not no_peers, echo=echo)
+    if out is not None:
+        text = "# Ensembles: gyrogen's lanes against numbalsoda and diffrax\n\n```\n"
+        write_atomic(out, {"ensemble.md": text + "\n".join(lines) + "\n```\n"})
+        click.echo(f"wrote {out / 'ensemble.md'}")
 
 
 command = bench_ensemble

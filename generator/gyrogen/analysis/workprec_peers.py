@@ -1,0 +1,211 @@
+"""The compiled peers of the work-precision report (the `bench` extra):
+numbalsoda's DOP853 and LSODA, and CasADi's cvodes (Adams for a
+non-stiff scene, BDF with Newton for a stiff one).
+
+Each peer integrates the scene's own equations, with no Python in its
+loop:
+- numbalsoda calls a numba ``@cfunc`` RHS. For every scene that cfunc calls
+  gyrogen's compiled ``<prefix>_rhs`` (the same code gyrogen's integrators
+  call, so the integrators are compared and not the RHS); for the default
+  scene, also the hand-written numba RHS of peers.py, as a numba user would
+  write it. Timed inside one ``@njit`` loop of many integrations.
+- CasADi builds its SX graph from gyrogen's optimized rhs block (the same
+  arithmetic), JIT-compiled with gcc when that works, else its virtual
+  machine; one call of the integrator Function per integration.
+
+A missing package skips its peer with a line saying how to install it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from gyrogen.analysis import peers, workprec
+from gyrogen.analysis.timing import best_of
+from gyrogen.analysis.workprec import Config, Problem, Run
+from gyrogen.oracle.compare import scaled_error
+
+Echo = Callable[[str], None]
+MIN_TIMED = 0.02
+"""Seconds each timed repeat lasts at least (loops of fast integrations)."""
+
+
+def runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
+    """Every installed peer at the ladder of tolerances."""
+    return _numbalsoda_runs(prob, cfg, echo, progress) + _casadi_runs(
+        prob, cfg, stiff, echo, progress
+    )
+
+
+def _c_rhs_address(prob: Problem) -> int:
+    comp = prob.compiled["C"]
+    fn = comp.ffi.addressof(comp.lib, comp.symbol("rhs"))
+    return int(comp.ffi.cast("uintptr_t", fn))
+
+
+def _numbalsoda_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[Run]:
+    try:
+        import ctypes
+
+        import numba as nb
+        from numbalsoda import dop853, lsoda, lsoda_sig
+    except ImportError as exc:
+        echo(f"numbalsoda skipped ({exc}): pip install -e '.[bench]'")
+        return []
+    dp = ctypes.POINTER(ctypes.c_double)
+    proto = ctypes.CFUNCTYPE(None, ctypes.c_double, dp, dp, dp)
+    c_rhs = proto(_c_rhs_address(prob))
+
+    @nb.cfunc(lsoda_sig)
+    def gyrogen_rhs(t: float, u: Any, du: Any, data: Any) -> None:
+        c_rhs(t, u, data, du)
+
+    address: Any = gyrogen_rhs.address  # numba types it loosely
+    rhs = {"gyrogen's C RHS": (int(address), np.ascontiguousarray(prob.c))}
+    if workprec.full_model(prob.scene):
+        hand, k = peers.numba_rhs(prob.p)
+        rhs["numba RHS"] = (int(hand.address), k)
+    solvers = {"DOP853": dop853, "LSODA": lsoda}
+    out = []
+    for solver_name, solver in solvers.items():
+        loop = _njit_loop(nb, solver)
+        for rhs_name, (address, data) in rhs.items():
+            progress(f"numbalsoda {solver_name} ({rhs_name})")
+            for tol in cfg.tolerances:
+                out.append(_loop_run(prob, loop, address, data, solver_name, rhs_name, tol, cfg))
+    return out
+
+
+def _njit_loop(nb: Any, solver: Any) -> Any:
+    @nb.njit
+    def loop(address: int, x0: Any, t1: float, data: Any, tol: float, n: int) -> Any:
+        t_eval = np.array([0.0, t1])
+        last = x0.copy()
+        ok = True
+        for _ in range(n):
+            usol, ok = solver(address, x0, t_eval, data, tol, tol, 10**8)
+            last = usol[-1]
+        return last, ok
+
+    return loop
+
+
+def _loop_run(
+    prob: Problem, loop: Any, address: int, data: Any, solver: str, rhs: str, tol: float,
+    cfg: Config,
+) -> Run:  # fmt: skip
+    label = f"numbalsoda {solver}"
+    t0 = time.perf_counter()
+    x, ok = loop(address, prob.x0, prob.t1, data, tol, 1)
+    once = time.perf_counter() - t0
+    if not ok or not np.all(np.isfinite(x)):
+        return Run(label, rhs, tol, math.inf, 0.0, 0, "failed")
+    n = max(1, int(MIN_TIMED / max(once, 1e-7)))
+    secs = best_of(lambda: loop(address, prob.x0, prob.t1, data, tol, n), cfg.repeats) / n
+    return Run(label, rhs, tol, scaled_error(x, prob.ref), min(secs, once), 0)
+
+
+def _casadi_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
+    try:
+        import casadi as ca
+    except ImportError as exc:
+        echo(f"CasADi skipped ({exc}): pip install -e '.[bench]'")
+        return []
+    from gyrogen.codegen.generate import unit_of
+
+    unit = unit_of(prob.scene)
+    if unit.uses_time:
+        echo(f"CasADi skipped: {prob.scene.name}'s torque table depends on t")
+        return []
+    x = ca.SX.sym("x", unit.nx)
+    c = ca.SX.sym("c", unit.nc)
+    ode = _sx_rhs(ca, unit, x, c)
+    _check_sx(ca.Function("rhs", [x, c], [ode]), prob, echo)
+    variant = "BDF" if stiff else "Adams"
+    label = f"CasADi cvodes {variant}"
+    opts: dict[str, Any] = {
+        "linear_multistep_method": variant.lower(),
+        "max_num_steps": 10**8,
+    }
+    if not stiff:
+        opts["nonlinear_solver_iteration"] = "functional"
+    jit = _jit_options(ca, x, c, ode, echo)
+    backend = "JIT" if jit else "VM"
+    progress(f"{label} ({backend})")
+    out = []
+    for tol in cfg.tolerances:
+        f = ca.integrator(
+            "F", "cvodes", {"x": x, "p": c, "ode": ode}, 0.0, prob.t1,
+            {**opts, **jit, "abstol": tol, "reltol": tol},
+        )  # fmt: skip
+        out.append(_casadi_run(prob, f, label, backend, tol, cfg))
+        if out[-1].status != "ok":
+            break
+    return out
+
+
+def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:
+    """gyrogen's optimized rhs block, statement by statement, in SX."""
+    import sympy as sm
+
+    from gyrogen.symbolic.hoist import constants
+
+    env: dict[Any, Any] = {s: x[i] for i, s in enumerate(unit.states)}
+    env.update({k: c[i] for i, k in enumerate(constants(unit.nc))})
+    funcs = [{"sin": ca.sin, "cos": ca.cos, "sqrt": ca.sqrt}, "math"]
+
+    def value(expr: sm.Expr) -> Any:
+        args = sorted(expr.free_symbols, key=str)
+        return sm.lambdify(args, expr, modules=funcs)(*(env[a] for a in args))
+
+    block = unit.optimized.rhs
+    for a in block.temporaries:
+        env[a.lhs] = value(a.rhs)
+    return ca.vertcat(*(value(e) for e in block.outputs))
+
+
+def _check_sx(f: Any, prob: Problem, echo: Echo) -> None:
+    """The SX rhs against the compiled one at x0 and 20 states near it;
+    ValueError past 1e-12 (mixed)."""
+    comp = prob.compiled["C"]
+    rng = np.random.default_rng(3)
+    xs = [prob.x0, *(prob.x0 + 0.1 * rng.standard_normal(prob.x0.shape) for _ in range(20))]
+    err = max(scaled_error(np.asarray(f(x, prob.c)).ravel(), comp.rhs(x, prob.c)) for x in xs)
+    echo(f"check CasADi's SX rhs against the compiled rhs: max difference {err:.1e}")
+    if not err <= 1e-12:
+        raise ValueError(f"CasADi's SX rhs differs from the compiled rhs by {err:.1e}")
+
+
+def _jit_options(ca: Any, x: Any, c: Any, ode: Any, echo: Echo) -> dict[str, Any]:
+    """CasADi's JIT through gcc ("shell" compiler) when it works here."""
+    opts = {"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O3"]}}
+    try:
+        f = ca.Function("probe", [x, c], [ode], opts)
+        f(np.zeros(x.shape[0]), np.zeros(c.shape[0]))
+    except RuntimeError as exc:
+        echo(f"CasADi JIT unavailable ({str(exc).splitlines()[0]}): its virtual machine is timed")
+        return {}
+    return opts
+
+
+def _casadi_run(prob: Problem, f: Any, label: str, backend: str, tol: float, cfg: Config) -> Run:
+    x0, c = prob.x0, prob.c
+    try:
+        t0 = time.perf_counter()
+        xf = np.asarray(f(x0=x0, p=c)["xf"]).ravel()
+        once = time.perf_counter() - t0
+    except RuntimeError as exc:
+        return Run(label, backend, tol, math.inf, 0.0, 0, f"failed: {str(exc).splitlines()[0]}")
+    n = max(1, int(MIN_TIMED / max(once, 1e-7)))
+
+    def repeat() -> None:
+        for _ in range(n):
+            f(x0=x0, p=c)
+
+    secs = best_of(repeat, max(1, cfg.repeats // 2)) / n
+    return Run(label, backend, tol, scaled_error(xf, prob.ref), min(secs, once), 0)
