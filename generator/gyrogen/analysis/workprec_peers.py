@@ -4,7 +4,7 @@ non-stiff scene, BDF with Newton for a stiff one).
 
 Each peer integrates the scene's own equations, with no Python in its
 loop:
-- numbalsoda calls a numba ``@cfunc`` RHS. For every scene that cfunc calls
+- numbalsoda (DOP853 and LSODA; LSODA alone on a stiff scene) calls a numba ``@cfunc`` RHS. For every scene that cfunc calls
   gyrogen's compiled ``<prefix>_rhs`` (the same code gyrogen's integrators
   call, so the integrators are compared and not the RHS); for the default
   scene, also the hand-written numba RHS of peers.py, as a numba user would
@@ -37,7 +37,7 @@ MIN_TIMED = 0.02
 
 def runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
     """Every installed peer at the ladder of tolerances."""
-    return _numbalsoda_runs(prob, cfg, echo, progress) + _casadi_runs(
+    return _numbalsoda_runs(prob, cfg, stiff, echo, progress) + _casadi_runs(
         prob, cfg, stiff, echo, progress
     )
 
@@ -48,7 +48,11 @@ def _c_rhs_address(prob: Problem) -> int:
     return int(comp.ffi.cast("uintptr_t", fn))
 
 
-def _numbalsoda_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[Run]:
+def _numbalsoda_runs(
+    prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo
+) -> list[Run]:
+    """DOP853 and LSODA; LSODA alone on a stiff scene (where DOP853 crawls
+    and prints a line per run that the problem seems stiff)."""
     try:
         import ctypes
 
@@ -70,7 +74,7 @@ def _numbalsoda_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> 
     if workprec.full_model(prob.scene):
         hand, k = peers.numba_rhs(prob.p)
         rhs["numba RHS"] = (int(hand.address), k)
-    solvers = {"DOP853": dop853, "LSODA": lsoda}
+    solvers = {"LSODA": lsoda} if stiff else {"DOP853": dop853, "LSODA": lsoda}
     out = []
     for solver_name, solver in solvers.items():
         loop = _njit_loop(nb, solver)
