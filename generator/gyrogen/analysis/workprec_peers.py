@@ -4,7 +4,8 @@ non-stiff scene, BDF with Newton for a stiff one).
 
 Each peer integrates the scene's own equations, with no Python in its
 loop:
-- numbalsoda (DOP853 and LSODA; LSODA alone on a stiff scene) calls a numba ``@cfunc`` RHS. For every scene that cfunc calls
+- numbalsoda (DOP853 and LSODA; LSODA alone on a stiff scene) calls a
+  numba ``@cfunc`` RHS. For every scene that cfunc calls
   gyrogen's compiled ``<prefix>_rhs`` (the same code gyrogen's integrators
   call, so the integrators are compared and not the RHS); for the default
   scene, also the hand-written numba RHS of peers.py, as a numba user would
