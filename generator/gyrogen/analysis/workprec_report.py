@@ -203,13 +203,19 @@ def figure(prob: Problem, runs: list[Run]) -> bytes:
         pts = sorted((r.seconds, r.error) for r in _by(runs, label) if r.status.startswith("ok"))
         if not pts:
             continue
-        style = "-o" if "scipy" not in label else "--s"
+        peer = label.startswith(("numbalsoda", "CasADi"))
+        style = "--s" if "scipy" in label else ":D" if peer else "-o"  # gyrogen: solid
         ax.loglog(*zip(*pts, strict=True), style, label=label, color=palette(i % 20), ms=4)
     ax.set_xlabel("wall time per integration (s)")
     ax.set_ylabel("mixed error at t1: max |x - ref| / (1 + |ref|)")
     ax.set_title(f"Work-precision, scene {prob.scene.name} (t1 = {prob.t1:g} s)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="method (backend)")
+    ax.legend(
+        fontsize=8,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        title="method (backend): gyrogen solid, compiled peers dotted, scipy dashed",
+    )
     fig.tight_layout()
     return png_bytes(fig)
 
