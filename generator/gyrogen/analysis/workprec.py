@@ -50,7 +50,7 @@ class Config:
 
 
 FULL = Config(
-    tolerances=tuple(10.0**-k for k in range(3, 13)),
+    tolerances=tuple(10.0 ** (-k / 2) for k in range(4, 25)),  # 1e-2 .. 1e-12, half decades
     rk4_steps=(100, 200, 400, 800, 1600, 3200, 6400, 12800, 25600, 51200),
     scipy_tolerances=tuple(10.0**-k for k in range(3, 13)),
     repeats=5,
