@@ -41,6 +41,8 @@ UNITS: dict[str, tuple[str, str]] = {
     "I22": ("kg m^2", "carrier inertia about A*, a2a2"),
     "I33": ("kg m^2", "carrier inertia about A*, a3a3"),
     "I13": ("kg m^2", "carrier product of inertia about A*, a1a3"),
+    "I12": ("kg m^2", "carrier product of inertia about A*, a1a2 (clusters)"),
+    "I23": ("kg m^2", "carrier product of inertia about A*, a2a3 (clusters)"),
     "I": ("kg m^2", "rotor transverse inertia about B*"),
     "J": ("kg m^2", "rotor axial inertia about B* (axis a2)"),
     "l1": ("m", "B* from A* along a1"),
@@ -71,6 +73,56 @@ UNITS: dict[str, tuple[str, str]] = {
 }
 """Every parameter's and state's unit and meaning, as the headers document them."""
 
+# Reaction-wheel clusters ([[rotors]] in a scene): names derived from the
+# scene, rotor k = 1..N. The carrier's full tensor adds I12 and I23.
+CLUSTER_CARRIER = ("m_a", "I11", "I22", "I33", "I12", "I13", "I23")
+"""The carrier's keys in a cluster scene's [parameters] (I12, I23 default to 0)."""
+ROTOR_KEYS: dict[str, tuple[str, str]] = {
+    "m": ("kg", "mass of rotor B{k}"),
+    "I": ("kg m^2", "transverse inertia of rotor B{k} about B{k}*"),
+    "J": ("kg m^2", "axial inertia of rotor B{k} about B{k}*"),
+    "b": ("N m s", "viscous friction of rotor B{k}: torque -b{k} (w{k} - g{k}.w_A)"),
+    "T": ("N m", "motor torque on rotor B{k} about g{k} (minus on A)"),
+    "k": ("N m s", "speed controller gain of rotor B{k}: T = -k (w{k} - g{k}.w_A - w_ref)"),
+    "w_ref": ("rad/s", "speed controller of rotor B{k}: commanded rate relative to A"),
+    "tau_max": ("N m", "torque limit of rotor B{k}: the motor torque is clamped to +-tau_max"),
+}
+"""A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
+ROTOR_RUNTIME = ("T", "k", "w_ref")
+"""The rotor keys that may be "runtime" (the others are folded: setup then
+holds the inverse of the constant inertia as numbers)."""
+MAX_ROTORS = 6
+"""Rotors a cluster scene may have."""
+AXIS_NORM_SLACK = 1e-3
+"""A rotor axis must have length within this of 1; it is then normalized
+exactly (a longer miss is a typo, refused)."""
+
+
+def rotor_name(key: str, k: int) -> str:
+    """The name of rotor k's key in p[] and in the code: T_2, w_ref_3."""
+    return f"{key}_{k}"
+
+
+def cluster_states(n: int, quaternion: bool, angles: bool) -> tuple[str, ...]:
+    """A cluster's states in x[] order: attitude, rotor angles th1..thN (if
+    kept), body rates u1..u3, absolute wheel rates w1..wN."""
+    attitude = ("e0", "e1", "e2", "e3") if quaternion else ("q1", "q2", "q3")
+    th = tuple(f"th{k}" for k in range(1, n + 1)) if angles else ()
+    return (*attitude, *th, "u1", "u2", "u3", *(f"w{k}" for k in range(1, n + 1)))
+
+
+def unit_and_doc(name: str) -> tuple[str, str]:
+    """A state's or parameter's unit and meaning: UNITS, or a cluster's derived name."""
+    if name in UNITS:
+        return UNITS[name]
+    if name.startswith("th") and name[2:].isdigit():
+        return ("rad", f"angle of rotor B{name[2:]} about g{name[2:]} relative to A")
+    if name.startswith("w") and name[1:].isdigit():
+        return ("rad/s", f"absolute angular velocity of rotor B{name[1:]}, along g{name[1:]}")
+    key, _, k = name.rpartition("_")
+    unit, doc = ROTOR_KEYS[key]
+    return unit, doc.format(k=k)
+
 
 CONTROLLER_PARAMETERS = ("k", "w_ref")
 """Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s);
@@ -82,6 +134,12 @@ OUTPUT_DOC: dict[str, tuple[str, str]] = {
     "power": ("W", "power of the motor torque, T (u4 - u2)"),
 }
 """The optional output functions: unit and what they compute."""
+CLUSTER_OUTPUT_DOC: dict[str, tuple[str, str]] = {
+    **OUTPUT_DOC,
+    "angular_momentum": ("kg m^2/s", "angular momentum about the mass center, N components h[0..2]"),
+    "power": ("W", "power of each motor, T_k (w_k - g_k.w_A), out[k-1]"),
+}
+"""The output functions of a rotor cluster."""
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,9 @@ import sympy as sm
 
 import gyrogen
 from gyrogen.abi import (
+    CLUSTER_OUTPUT_DOC,
     OUTPUT_DOC,
-    UNITS,
+    unit_and_doc,
 )
 from gyrogen.methods import METHODS, Method
 from gyrogen.scene import Scene
@@ -107,7 +108,13 @@ class Unit:
 
     @property
     def outputs(self) -> list[Output]:
-        return [Output(n, b, *OUTPUT_DOC[n]) for n, b in self.optimized.outputs.items()]
+        doc = CLUSTER_OUTPUT_DOC if self.cluster else OUTPUT_DOC
+        return [Output(n, b, *doc[n]) for n, b in self.optimized.outputs.items()]
+
+    @property
+    def cluster(self) -> bool:
+        """A reaction-wheel cluster (the scene's [[rotors]]), not the paper's one rotor."""
+        return bool(self.scene.rotors)
 
     @property
     def torque_table(self) -> list[tuple[float, float]] | None:
@@ -128,11 +135,11 @@ class Unit:
 
     @property
     def state_rows(self) -> list[Row]:
-        return [Row(i, s.name, *UNITS[s.name]) for i, s in enumerate(self.states)]
+        return [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states)]
 
     @property
     def param_rows(self) -> list[Row]:
-        return [Row(i, s.name, *UNITS[s.name]) for i, s in enumerate(self.params)]
+        return [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.params)]
 
     @cached_property
     def setup_locals(self) -> list[Local]:

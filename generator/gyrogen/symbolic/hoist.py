@@ -56,8 +56,11 @@ def _best_horner(expr: sm.Expr, gens: Sequence[sm.Expr]) -> sm.Expr:
     """Horner's scheme in the variable order that leaves the fewest ops."""
     if not gens:
         return expr
+    poly = sm.Poly(expr, *gens)
+    if poly.total_degree() <= 1:  # linear: no order leaves fewer ops
+        return expr
     best, best_ops = expr, int(sm.count_ops(expr))
-    for order in _orders(sm.Poly(expr, *gens)):
+    for order in _orders(poly):
         cand = sm.horner(expr, *order)
         ops = int(sm.count_ops(cand))
         if ops < best_ops:

@@ -180,7 +180,11 @@ def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     """lambda_max / lambda_min of a symmetric positive 2x2 block, the last
     constant of setup. lambda_min = det / lambda_max: the difference of the
     two terms of lambda_min would cancel for a badly conditioned block
-    (det: the block's determinant in a form that does not)."""
+    (det: the block's determinant in a form that does not). A rotor
+    cluster's 3x3 block, folded: ||M||_F ||M^-1||_F (physics.frobenius_condition)."""
+    if block.shape[0] == 3:
+        cond = physics.frobenius_condition(block.tolist(), sm.sqrt)
+        return as_double(cond, integers=False)
     cond = physics.condition(block[0, 0], block[0, 1], block[1, 1], det, sm.sqrt)
     return as_double(cond, integers=False) if cond.is_number else cond
 

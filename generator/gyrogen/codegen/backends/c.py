@@ -70,7 +70,7 @@ def files(unit: Unit) -> dict[str, str]:
         "methods": unit.methods,
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("c", unit.macro),
+        "checks": printed("c", unit.macro, unit.cluster),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }
     out = {

@@ -70,9 +70,9 @@ def files(unit: Unit) -> dict[str, str]:
         "methods": unit.methods,
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("fortran", unit.macro),
+        "checks": printed("fortran", unit.macro, unit.cluster),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
-        "check_locals": local_names(),
+        "check_locals": () if unit.cluster else local_names(),
     }
     out = {f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx)}
     if unit.methods:
