@@ -279,18 +279,17 @@ def given_parameters(scene: Scene) -> np.ndarray | None:
 
 
 def _condition(scene: Scene, p: np.ndarray) -> float:
-    full = scene_view.full_parameters(scene, p, np.zeros((1, 14)), 0.0)[0]
-    return float(sampling.lumped_condition(full))
+    return scene_view.condition(scene, p)
 
 
 def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
     """Invalid p[] vectors for a scene, with the code setup must return: the
     full model's invalid cases that change runtime entries only, and NaN in
     each runtime parameter."""
-    full = scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
+    full = None if scene.rotors else scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
     index = {n: i for i, n in enumerate(PARAMETERS)}
     cases = []
-    for what, p_full, code in sampling.invalid_parameters(full):
+    for what, p_full, code in [] if scene.rotors else sampling.invalid_parameters(full):
         changed = {PARAMETERS[i] for i in np.flatnonzero(~(p_full == full))}
         if changed and changed <= set(scene.runtime):
             p = np.array(

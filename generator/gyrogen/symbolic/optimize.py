@@ -169,11 +169,21 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
         for name, exprs in eqs.outputs.items()
     }
-    jac = _jacobian([e.xreplace(shared) for e in (*kin, *dyn)], eqs.states) if jacobian else None
+    inline = _inlined(shared)
+    jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
+
+
+def _inlined(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
+    """Each named value in states alone: a later one may read an earlier one
+    (a wheel's net torque reads its relative rate)."""
+    out: dict[sm.Symbol, sm.Expr] = {}
+    for name, value in shared.items():
+        out[name] = value.xreplace(out)
+    return out
 
 
 def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:

@@ -29,6 +29,10 @@ class CPrinter(WritableNumbers, C99CodePrinter):
     def _print_Float(self, expr: sm.Float) -> str:
         return c_double(float(expr))
 
+    def _print_Heaviside(self, expr: sm.Heaviside) -> str:
+        """A torque limit's slope in the Jacobian: 1 inside the clamp, 0 outside."""
+        return f"(({self._print(expr.args[0])}) > 0.0 ? 1.0 : 0.0)"
+
     def _print_Pow(self, expr: sm.Pow) -> str:
         base, exp = expr.base, expr.exp
         if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
