@@ -136,7 +136,10 @@ OUTPUT_DOC: dict[str, tuple[str, str]] = {
 """The optional output functions: unit and what they compute."""
 CLUSTER_OUTPUT_DOC: dict[str, tuple[str, str]] = {
     **OUTPUT_DOC,
-    "angular_momentum": ("kg m^2/s", "angular momentum about the mass center, N components h[0..2]"),
+    "angular_momentum": (
+        "kg m^2/s",
+        "angular momentum about the mass center, N components h[0..2]",
+    ),
     "power": ("W", "power of each motor, T_k (w_k - g_k.w_A), out[k-1]"),
 }
 """The output functions of a rotor cluster."""

@@ -69,12 +69,16 @@ def cluster_inertia(m_a: Value, carrier: Matrix3, rotors: list[Rotor]) -> Matrix
     axial inertias J stay with the wheel rates."""
     total = m_a + sum(m for m, _, _, _ in rotors)
     c = [sum(m * r[i] for m, _, _, r in rotors) / total for i in range(3)]
-    points = [(m_a, [-x for x in c])] + [(m, [r[i] - c[i] for i in range(3)]) for m, _, _, r in rotors]
+    points = [(m_a, [-x for x in c])] + [
+        (m, [r[i] - c[i] for i in range(3)]) for m, _, _, r in rotors
+    ]
     out = [[carrier[i][j] for j in range(3)] for i in range(3)]
     for i in range(3):
         for j in range(3):
             for m, rho in points:
-                out[i][j] += m * ((rho[0] ** 2 + rho[1] ** 2 + rho[2] ** 2) * int(i == j) - rho[i] * rho[j])
+                out[i][j] += m * (
+                    (rho[0] ** 2 + rho[1] ** 2 + rho[2] ** 2) * int(i == j) - rho[i] * rho[j]
+                )
             for _, inertia, g, _ in rotors:
                 out[i][j] += inertia * (int(i == j) - g[i] * g[j])
     return out
@@ -82,10 +86,12 @@ def cluster_inertia(m_a: Value, carrier: Matrix3, rotors: list[Rotor]) -> Matrix
 
 def adjugate(a: Matrix3) -> Matrix3:
     """The adjugate of a 3x3 matrix (its inverse times its determinant)."""
+
     def cof(i: int, j: int) -> Value:
         r = [k for k in range(3) if k != i]
         s = [k for k in range(3) if k != j]
         return a[r[0]][s[0]] * a[r[1]][s[1]] - a[r[0]][s[1]] * a[r[1]][s[0]]
+
     return [[(-1) ** (i + j) * cof(j, i) for j in range(3)] for i in range(3)]
 
 

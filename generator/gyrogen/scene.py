@@ -32,7 +32,7 @@ from pydantic import (
     model_validator,
 )
 
-from gyrogen import methods
+from gyrogen import methods, scene_rotors
 from gyrogen.abi import (
     CONTROLLER_PARAMETERS,
     MAX_ROTORS,
@@ -42,7 +42,6 @@ from gyrogen.abi import (
     STATES,
 )
 from gyrogen.errors import SceneError
-from gyrogen import scene_rotors
 from gyrogen.scene_rotors import Rotor
 from gyrogen.scene_rules import (
     QUATERNION,

@@ -13,6 +13,7 @@ spacecraft). Each rule raises ValueError with the line pydantic shows.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from fractions import Fraction
 from typing import Annotated, Literal
 
@@ -36,7 +37,7 @@ def _folded(v: object) -> object:
     if v == "runtime":
         raise ValueError(
             "a rotor's mass, inertias, friction and limit are folded: only "
-            f"{', '.join(ROTOR_RUNTIME)} may be \"runtime\""
+            f'{", ".join(ROTOR_RUNTIME)} may be "runtime"'
         )
     return parameter_value(v)
 
@@ -53,7 +54,7 @@ class Rotor(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     m: Folded
-    I: Folded  # noqa: E741 (the paper's name)
+    I: Folded
     J: Folded
     axis: Vector
     """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
@@ -117,7 +118,7 @@ def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ..
 
 
 def check_cluster(
-    parameters: dict[str, float | str], rotors: list[Rotor], effects_set: set[str]
+    parameters: Mapping[str, float | str], rotors: list[Rotor], effects_set: set[str]
 ) -> None:
     """The cluster scene's rules: carrier keys, no translation, no scene-wide
     torque law, physical values, a well-conditioned inertia."""
@@ -136,7 +137,7 @@ def check_cluster(
                 f"({', '.join(CLUSTER_CARRIER)}; each rotor's keys go in its [[rotors]] table)"
             )
         if v == "runtime":
-            raise ValueError(f"parameters.{n}: a cluster's carrier is folded, not \"runtime\"")
+            raise ValueError(f'parameters.{n}: a cluster\'s carrier is folded, not "runtime"')
     carrier = carrier_tensor(parameters)
     if not parameters["m_a"] > 0:  # type: ignore[operator]
         raise ValueError(f"parameters.m_a: must be positive (got {parameters['m_a']})")
@@ -156,7 +157,7 @@ def check_cluster(
         )
 
 
-def carrier_tensor(parameters: dict[str, float | str]) -> list[list[float]]:
+def carrier_tensor(parameters: Mapping[str, float | str]) -> list[list[float]]:
     v = {n: float(parameters.get(n, 0.0)) for n in CLUSTER_CARRIER}
     return [
         [v["I11"], v["I12"], v["I13"]],
@@ -165,7 +166,7 @@ def carrier_tensor(parameters: dict[str, float | str]) -> list[list[float]]:
     ]
 
 
-def lumped_inertia(parameters: dict[str, float | str], rotors: list[Rotor]) -> list[list[float]]:
+def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -> list[list[float]]:
     """The lumped carrier's inertia about the system's mass center, in floats."""
     return physics.cluster_inertia(
         float(parameters["m_a"]),

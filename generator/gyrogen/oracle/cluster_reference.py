@@ -34,7 +34,7 @@ class Values:
     m_a: float
     carrier: np.ndarray
     m: np.ndarray
-    I: np.ndarray  # noqa: E741
+    I: np.ndarray
     J: np.ndarray
     g: np.ndarray
     """(N, 3) unit axes in A."""

@@ -286,16 +286,23 @@ def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
     """Invalid p[] vectors for a scene, with the code setup must return: the
     full model's invalid cases that change runtime entries only, and NaN in
     each runtime parameter."""
-    full = None if scene.rotors else scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
-    index = {n: i for i, n in enumerate(PARAMETERS)}
     cases = []
-    for what, p_full, code in [] if scene.rotors else sampling.invalid_parameters(full):
+    if scene.rotors:  # only the torque laws are runtime: any finite value is valid
+        return _nan_cases(scene, base)
+    full = scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
+    index = {n: i for i, n in enumerate(PARAMETERS)}
+    for what, p_full, code in sampling.invalid_parameters(full):
         changed = {PARAMETERS[i] for i in np.flatnonzero(~(p_full == full))}
         if changed and changed <= set(scene.runtime):
             p = np.array(
                 [p_full[index[r]] if r in index else base[j] for j, r in enumerate(scene.runtime)]
             )
             cases.append((what, p, code))
+    return cases + _nan_cases(scene, base)
+
+
+def _nan_cases(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
+    cases = []
     for j, name in enumerate(scene.runtime):
         p = base.copy()
         p[j] = np.nan

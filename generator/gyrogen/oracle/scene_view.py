@@ -111,7 +111,9 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     if scene.rotors:
         out = cluster_reference.rhs(scene, xs, values(scene, p_runtime))
         if scene.attitude == "quaternion":
-            out[:, :4] = quaternion_rates(xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)])
+            out[:, :4] = quaternion_rates(
+                xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)]
+            )
         return out
     x_full = full_states(scene, xs)
     full = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))

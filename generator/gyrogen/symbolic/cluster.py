@@ -147,7 +147,9 @@ def _derive(scene: Scene) -> Equations:
     st = dict(zip(names, _plain(names), strict=True))
     w_a = sm.Matrix([st["u1"], st["u2"], st["u3"]])
     wheels = [st[f"w{k}"] for k in range(1, n + 1)]
-    h_value = inertia * w_a + sum((axial[k] * wheels[k] * axes[k] for k in range(n)), sm.zeros(3, 1))
+    h_value = inertia * w_a + sum(
+        (axial[k] * wheels[k] * axes[k] for k in range(n)), sm.zeros(3, 1)
+    )
     # Kane's forcing, proven equal to the momentum form, entry by entry
     tau_a = sum((net[k] * axes[k] for k in range(n)), sm.zeros(3, 1))
     momentum = [*(h_value.cross(w_a) - tau_a), *net]
@@ -176,7 +178,11 @@ def _equations(
 ) -> Equations:
     """The Equations of the states the scene keeps."""
     n = len(axes)
-    kin = dict(zip([*(f"q{i}" for i in (1, 2, 3)), *(f"th{k}" for k in range(1, n + 1))], qdot))
+    kin = dict(
+        zip(
+            [*(f"q{i}" for i in (1, 2, 3)), *(f"th{k}" for k in range(1, n + 1))], qdot, strict=True
+        )
+    )
     quaternion = scene.attitude == "quaternion"
     if quaternion:
         quat = model.quaternion()
@@ -213,7 +219,9 @@ def _outputs(
     out: dict[str, tuple[sm.Expr, ...]] = {}
     if scene.outputs.kinetic_energy:
         axial = [mass[3 + k, 3 + k] for k in range(n)]
-        energy = (w_a.T * mass[:3, :3] * w_a)[0] + sum(j * w**2 for j, w in zip(axial, wheels))
+        energy = (w_a.T * mass[:3, :3] * w_a)[0] + sum(
+            j * w**2 for j, w in zip(axial, wheels, strict=True)
+        )
         out["kinetic_energy"] = (energy / 2,)
     if scene.outputs.angular_momentum:
         h = [sm.expand(e) for e in list(shared.values())[:3]]
@@ -225,8 +233,7 @@ def _outputs(
     if scene.outputs.power:
         full = _expanded(shared)
         out["power"] = tuple(
-            motor.xreplace(full) * (wheels[k] - axes[k].dot(w_a))
-            for k, motor in enumerate(motors)
+            motor.xreplace(full) * (wheels[k] - axes[k].dot(w_a)) for k, motor in enumerate(motors)
         )
     return out
 
