@@ -110,7 +110,8 @@ def random_cluster(rng: np.random.Generator, n: int) -> str:
         r = [float(x) for x in rng.uniform(-0.5, 0.5, 3)]
         i = float(rng.uniform(0.01, 0.05))
         rows.append(
-            f"[[rotors]]\nm = {float(rng.uniform(1, 10))!r}\nI = {i!r}\nJ = {float(rng.uniform(0.5, 2)) * i!r}\n"
+            f"[[rotors]]\nm = {float(rng.uniform(1, 10))!r}\nI = {i!r}\n"
+            f"J = {float(rng.uniform(0.5, 2)) * i!r}\n"
             f"axis = [{g[0]!r}, {g[1]!r}, {g[2]!r}]\nposition = [{r[0]!r}, {r[1]!r}, {r[2]!r}]\n"
             f"b = {float(rng.choice([0.0, 1e-4]))!r}\n"
         )
