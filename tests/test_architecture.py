@@ -11,7 +11,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "generator" / "gyrogen"
 STAGES = (
     ("errors", "abi", "methods", "tableaus", "physics", "setup_checks", "files"),
-    ("scene", "scene_rules"),
+    ("scene", "scene_rules", "scene_rotors"),
     ("symbolic",),
     ("codegen",),
     ("runtime",),
