@@ -162,3 +162,12 @@ def outputs(scene: Scene, name: str, xs: np.ndarray, runtime: dict[str, float],
     if name == "power":
         return mo.motor * mo.rel
     raise KeyError(name)
+
+
+def power_and_torque(scene: Scene, xs: np.ndarray, runtime: dict[str, float]) -> np.ndarray:
+    """(n, 2): dK/dt (sum of net torque times relative rate: motors and
+    friction) and wheel 1's net torque (its J w1' = net_1)."""
+    v = values(scene)
+    mo = motion(scene, np.atleast_2d(xs), runtime)
+    net = mo.motor - v.b * mo.rel
+    return np.column_stack([(net * mo.rel).sum(1), net[:, 0]])
