@@ -275,6 +275,11 @@ STATS_FIELDS: tuple[StatsField, ...] = (
 # refuses it above MAX_CONDITION, `gyrogen check` warns above WARN_CONDITION.
 MAX_CONDITION = 1e13
 WARN_CONDITION = 1e8
+AXES_SPAN_WARN = 1e-3
+"""`gyrogen check` warns when a cluster's axes nearly fail to span space:
+the smallest over the largest singular value of G = [g_1 .. g_N] below this
+(the wheels cannot then exert torque about some direction; the dynamics is
+unaffected unless the carrier's own inertia is small, see MAX_CONDITION)."""
 
 # Relative slack of the triangle-inequality checks: equality is physical (a
 # lamina, a thin disc), and rounding must not refuse it.

@@ -286,6 +286,11 @@ def parse(text: str, source: str) -> Scene:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
     except RecursionError as exc:  # tomllib recurses once per level of nesting
         raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
+    return validate(data, source)
+
+
+def validate(data: dict[str, Any], source: str) -> Scene:
+    """A scene from its tables (as TOML reads them), or SceneError with the one line."""
     try:
         return Scene.model_validate(data)
     except pydantic.ValidationError as exc:

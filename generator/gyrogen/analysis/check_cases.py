@@ -13,6 +13,7 @@ from functools import cache
 from pathlib import Path
 
 from gyrogen.abi import GIMBAL_LOCK_COS
+from gyrogen.analysis import check_clusters
 from gyrogen.analysis.check_engine import Case, spin_prediction
 from gyrogen.errors import SceneError
 from gyrogen.scene import Scene, builtin_names, default, load
@@ -79,6 +80,7 @@ def cases(quick: bool = False) -> list[Case]:
         *_speed_controller(quick),
         _long_run(quick),
         *_spin_stability(),
+        *check_clusters.cases(quick),
     ]
 
 

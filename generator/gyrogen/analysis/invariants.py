@@ -124,6 +124,10 @@ def at_samples(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> d
     balance (when the rotor angle q4 gives the motor's work) and u4 = u4(0)
     + T t / J, their integrals in closed form."""
     out = {"|H| in N": peak(momentum_drifts(momentum(scene, p, xs))[0])}
+    if scene.rotors:  # a cluster's energy is constant when no wheel has torque or friction
+        if all(r.torque == "none" and r.b == 0 for r in scene.rotors):
+            out["energy balance"] = peak(balance(kinetic(scene, p, xs), np.zeros(len(xs))))
+        return out
     if scene.effects.torque not in ("none", "constant"):
         return out
     v = scene_view.values(scene, p)
@@ -133,6 +137,18 @@ def at_samples(scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray) -> d
         out["energy balance"] = peak(balance(kinetic(scene, p, xs), _work(scene, v, xs)))
     out["u4 = u4(0) + T t / J"] = peak(balance(xs[:, idx["u4"]], torque * (ts - ts[0]) / v["J"]))
     return out
+
+
+def by_quadrature(scene: Scene, p: np.ndarray, traj: Trajectory) -> dict[str, float]:
+    """at_samples' drifts for any torque law (a clamp, friction): the
+    integrals of P and of the first rotor's torque by quadrature along traj."""
+    worst = along_trajectory(scene, p, traj).worst()
+    rate = "w1 = w1(0) + int net_1 dt / J_1" if scene.rotors else "u4 = u4(0) + int T dt / J"
+    return {
+        "|H| in N": worst["H_norm_relative_drift"],
+        "energy balance": worst["energy_balance_relative_residual"],
+        rate: worst["u4_relative_residual"],
+    }
 
 
 def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:

@@ -89,6 +89,15 @@ def condition(scene: Scene) -> float:
 def motor_torques(scene: Scene, runtime: dict[str, float], rel: np.ndarray) -> np.ndarray:
     """(n, N) motor torques from each rotor's law, clamped to its limit; rel
     (n, N) are the wheels' rates relative to A."""
+    out = demanded_torques(scene, runtime, rel)
+    for k, rotor in enumerate(scene.rotors):
+        if rotor.tau_max is not None:
+            out[:, k] = np.clip(out[:, k], -rotor.tau_max, rotor.tau_max)
+    return out
+
+
+def demanded_torques(scene: Scene, runtime: dict[str, float], rel: np.ndarray) -> np.ndarray:
+    """(n, N) what each rotor's law asks of its motor, before the clamp."""
     out = np.zeros_like(rel)
     for k, rotor in enumerate(scene.rotors):
         law = {key: runtime.get(f"{key}_{k + 1}", val) for key, val in rotor.law().items()}
@@ -96,9 +105,16 @@ def motor_torques(scene: Scene, runtime: dict[str, float], rel: np.ndarray) -> n
             out[:, k] = float(law["T"])
         elif rotor.torque == "speed_controller":
             out[:, k] = -float(law["k"]) * (rel[:, k] - float(law["w_ref"]))
-        if rotor.tau_max is not None:
-            out[:, k] = np.clip(out[:, k], -rotor.tau_max, rotor.tau_max)
     return out
+
+
+def clamp_margins(scene: Scene, xs: np.ndarray, runtime: dict[str, float]) -> np.ndarray:
+    """(n, N) |demanded torque| - tau_max per wheel (-inf without a limit):
+    positive where the clamp holds the motor; its sign changes where the
+    power's slope jumps."""
+    mo = motion(scene, np.atleast_2d(xs), runtime)
+    limit = np.array([np.inf if r.tau_max is None else r.tau_max for r in scene.rotors])
+    return np.abs(demanded_torques(scene, runtime, mo.rel)) - limit
 
 
 @dataclass(frozen=True)
