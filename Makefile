@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench report check fuzz clean distclean examples strict
+.PHONY: setup system-deps run test lint generate check-generated bench bench-clusters report check fuzz clean distclean examples strict
 
 ## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -59,6 +59,11 @@ check-generated: setup
 bench: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-rhs --out bench-out
+	$(BIN)/python tests/bench_clusters.py
+
+## bench-clusters: the cluster scenes' rhs, hoisted against an M-solve per call (ops, ns per state), ops vs N
+bench-clusters: setup
+	$(BIN)/python tests/bench_clusters.py
 
 ## report: work-precision reports (figure, tables, summary) for the default and the stiff scene
 report: setup

@@ -9,14 +9,14 @@
  * versions (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   rw3_orthogonal_setup: 13 ops, once per parameter set
- *   rw3_orthogonal_rhs:   92 ops per call
+ *   rw3_orthogonal_setup: 3 ops, once per parameter set
+ *   rw3_orthogonal_rhs:   65 ops per call
  */
 #include "rw3_orthogonal.h"
 
 #include <math.h>
 
-/* 13 ops, plus the checks. */
+/* 3 ops, plus the checks. */
 int rw3_orthogonal_setup(const double *p, double *c)
 {
     int i;
@@ -28,19 +28,16 @@ int rw3_orthogonal_setup(const double *p, double *c)
     const double T_2 = p[0];
 
 
-    c[0] = (8.0/6826860039508183.0)*(16260057550.0*T_2 - 56572084313.0);
-    c[1] = -8.0/6826860039508183.0*(2426248655650.0*T_2 - 325201151);
-    c[2] = (2.0/6826860039508183.0)*(52901076450.0*T_2 - 2844477271.0);
-    c[3] = (200.0/7.0)*T_2;
-    c[4] = -T_2;
-    c[5] = 3.1152076698594064;
+    c[0] = (200.0/7.0)*T_2;
+    c[1] = -T_2;
+    c[2] = 3.1152076698594064;
     if (!(c[RW3_ORTHOGONAL_COND] <= 10000000000000.0)) {
         return RW3_ORTHOGONAL_ERR_MASS_SINGULAR;
     }
     return RW3_ORTHOGONAL_OK;
 }
 
-/* 92 ops per call. */
+/* 65 ops per call. */
 void rw3_orthogonal_rhs(double t, const double *x, const double *c, double *dxdt)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -54,29 +51,29 @@ void rw3_orthogonal_rhs(double t, const double *x, const double *c, double *dxdt
     const double w2 = x[7];
     const double w3 = x[8];
 
+    const double tmp0 = sin(q3);
+    const double tmp1 = cos(q3);
+    const double tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2);
     const double h1 = 301.7396875*u1 + 2.005*u2 - 3.15125*u3 + 0.035*w1;
     const double h2 = 2.005*u1 + 351.7396875*u2 + 1.34875*u3 + 0.035*w2;
     const double h3 = -3.15125*u1 + 1.34875*u2 + 251.31*u3 + 0.035*w3;
     const double rel3 = -u3 + w3;
     const double net3 = -0.0001*rel3;
-    const double tmp0 = sin(q3);
-    const double tmp1 = cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2);
-    const double tmp3 = 4.166596729006503e-05*u2;
-    const double tmp4 = 1.9054215209804005e-05*u3;
-    const double tmp5 = 1.5497923245489903e-05*u1;
+    const double f1 = h2*u3 - h3*u2 - 0.02;
+    const double f2 = c[1] - h1*u3 + h3*u1;
+    const double f3 = h1*u2 - h2*u1 - net3;
     dxdt[0] = tmp2;
     dxdt[1] = tmp0*u3 + tmp1*u1;
     dxdt[2] = -tmp2*sin(q2) + u2;
-    dxdt[3] = 1.0*c[0] + h1*(tmp3 + tmp4) + h2*(-4.166596729006503e-05*u1 + 0.0033146766733524852*u3) + h3*(-1.9054215209804005e-05*u1 - 0.0033146766733524852*u2) - 4.166596729006503e-05*net3;
-    dxdt[4] = 1.0*c[1] + h1*(-1.5497923245489903e-05*u2 - 0.0028431796071504527*u3) + h2*(-tmp4 + tmp5) + h3*(0.0028431796071504527*u1 + 1.9054215209804005e-05*u2) + 1.5497923245489903e-05*net3;
-    dxdt[5] = 1.0*c[2] + h1*(0.003979754895162947*u2 + 1.5497923245489903e-05*u3) + h2*(-0.003979754895162947*u1 + 4.166596729006503e-05*u3) + h3*(-tmp3 - tmp5) - 0.003979754895162947*net3;
+    dxdt[3] = 0.0033146766733524852*f1 - 1.9054215209804005e-05*f2 + 4.166596729006503e-05*f3;
+    dxdt[4] = -1.9054215209804005e-05*f1 + 0.0028431796071504527*f2 - 1.5497923245489903e-05*f3;
+    dxdt[5] = 4.166596729006503e-05*f1 - 1.5497923245489903e-05*f2 + 0.003979754895162947*f3;
     dxdt[6] = 0.5714285714285714;
-    dxdt[7] = c[3];
+    dxdt[7] = c[0];
     dxdt[8] = 28.571428571428573*net3;
 }
 
-/* kinetic energy of the system (J): 23 ops. */
+/* kinetic energy of the system (J): 21 ops. */
 void rw3_orthogonal_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -88,7 +85,7 @@ void rw3_orthogonal_kinetic_energy(double t, const double *x, const double *c, d
     const double w2 = x[7];
     const double w3 = x[8];
 
-    out[0] = u1*(150.86984375*u1 + 2.005*u2 - 3.15125*u3) + u2*(175.86984375*u2 + 1.34875*u3) + 125.655*u3*u3 + 0.0175*w1*w1 + 0.0175*w2*w2 + 0.0175*w3*w3;
+    out[0] = u1*(150.86984375*u1 + 2.005*u2 - 3.15125*u3) + u2*(175.86984375*u2 + 1.34875*u3) + 125.655*u3*u3 + 0.0175*(w1*w1 + w2*w2 + w3*w3);
 }
 
 /* angular momentum about the mass center, N components h[0..2] (kg m^2/s): 58 ops. */
@@ -124,7 +121,7 @@ void rw3_orthogonal_angular_momentum(double t, const double *x, const double *c,
     out[2] = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9;
 }
 
-/* power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 6 ops. */
+/* power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 5 ops. */
 void rw3_orthogonal_power(double t, const double *x, const double *c, double *out)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -134,7 +131,7 @@ void rw3_orthogonal_power(double t, const double *x, const double *c, double *ou
     const double w1 = x[6];
     const double w2 = x[7];
 
-    out[0] = -0.02*u1 + 0.02*w1;
-    out[1] = c[4]*u2 - c[4]*w2;
+    out[0] = 0.02*(-u1 + w1);
+    out[1] = c[1]*u2 - c[1]*w2;
     out[2] = 0;
 }

@@ -8,8 +8,8 @@
 ! (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
-!   rw3_orthogonal_f_setup: 13 ops, once per parameter set
-!   rw3_orthogonal_f_rhs:   92 ops per call
+!   rw3_orthogonal_f_setup: 3 ops, once per parameter set
+!   rw3_orthogonal_f_rhs:   65 ops per call
 !
 ! The same interface as rw3_orthogonal.h, callable from C under the bind(C)
 ! names rw3_orthogonal_f_setup and rw3_orthogonal_f_rhs. State order x(1:9):
@@ -38,9 +38,9 @@ module rw3_orthogonal_mod
   character(len=*), parameter, public :: RW3_ORTHOGONAL_BUILD_ID = "c08cf1ff7972af76"
   integer, parameter, public :: RW3_ORTHOGONAL_NX = 9  ! states
   integer, parameter, public :: RW3_ORTHOGONAL_NP = 1  ! parameters
-  integer, parameter, public :: RW3_ORTHOGONAL_NC = 6  ! hoisted constants
+  integer, parameter, public :: RW3_ORTHOGONAL_NC = 3  ! hoisted constants
   ! c(RW3_ORTHOGONAL_COND): condition number of the mass matrix's coupled block
-  integer, parameter, public :: RW3_ORTHOGONAL_COND = 6
+  integer, parameter, public :: RW3_ORTHOGONAL_COND = 3
 
   ! Return codes of rw3_orthogonal_setup, checked in this order.
   ! 0: parameters accepted
@@ -63,12 +63,12 @@ module rw3_orthogonal_mod
 contains
 
   ! Checks p and computes the constants c that rw3_orthogonal_rhs needs
-  ! (13 ops, plus the checks). Returns RW3_ORTHOGONAL_OK or
+  ! (3 ops, plus the checks). Returns RW3_ORTHOGONAL_OK or
   ! the first failing check's code; c is then not to be used.
   function rw3_orthogonal_setup(p, c) result(status) &
       bind(C, name="rw3_orthogonal_f_setup")
     real(c_double), intent(in) :: p(1)
-    real(c_double), intent(out) :: c(6)
+    real(c_double), intent(out) :: c(3)
     integer(c_int) :: status
     real(c_double) :: T_2
 
@@ -80,15 +80,9 @@ contains
     T_2 = p(1)
 
 
-    c(1) = (8.0d0/6826860039508183.0d0)*(16260057550.0_c_double*T_2 - &
-          56572084313.0_c_double)
-    c(2) = -8.0d0/6826860039508183.0d0*(2426248655650.0_c_double*T_2 - &
-          325201151)
-    c(3) = (2.0d0/6826860039508183.0d0)*(52901076450.0_c_double*T_2 - &
-          2844477271.0_c_double)
-    c(4) = (200.0d0/7.0d0)*T_2
-    c(5) = -T_2
-    c(6) = 3.1152076698594064_c_double
+    c(1) = (200.0d0/7.0d0)*T_2
+    c(2) = -T_2
+    c(3) = 3.1152076698594064_c_double
     if (.not. (c(RW3_ORTHOGONAL_COND) <= 10000000000000.0_c_double)) then
       status = RW3_ORTHOGONAL_ERR_MASS_SINGULAR
       return
@@ -96,13 +90,13 @@ contains
     status = RW3_ORTHOGONAL_OK
   end function rw3_orthogonal_setup
 
-  ! dxdt = f(t, x) for the constants c from rw3_orthogonal_setup (92 ops).
+  ! dxdt = f(t, x) for the constants c from rw3_orthogonal_setup (65 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
   subroutine rw3_orthogonal_rhs(t, x, c, dxdt) bind(C, name="rw3_orthogonal_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(6)
+    real(c_double), intent(in) :: c(3)
     real(c_double), intent(out) :: dxdt(9)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -112,17 +106,17 @@ contains
     real(c_double) :: w1
     real(c_double) :: w2
     real(c_double) :: w3
+    real(c_double) :: tmp0
+    real(c_double) :: tmp1
+    real(c_double) :: tmp2
     real(c_double) :: h1
     real(c_double) :: h2
     real(c_double) :: h3
     real(c_double) :: rel3
     real(c_double) :: net3
-    real(c_double) :: tmp0
-    real(c_double) :: tmp1
-    real(c_double) :: tmp2
-    real(c_double) :: tmp3
-    real(c_double) :: tmp4
-    real(c_double) :: tmp5
+    real(c_double) :: f1
+    real(c_double) :: f2
+    real(c_double) :: f3
 
     associate (unused_t => t, unused_c => c)  ! unused in some scenes
     end associate
@@ -134,6 +128,9 @@ contains
     w1 = x(7)
     w2 = x(8)
     w3 = x(9)
+    tmp0 = sin(q3)
+    tmp1 = cos(q3)
+    tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
     h1 = 301.7396875_c_double*u1 + 2.005_c_double*u2 - 3.15125_c_double*u3 + &
           0.035_c_double*w1
     h2 = 2.005_c_double*u1 + 351.7396875_c_double*u2 + 1.34875_c_double*u3 + &
@@ -142,42 +139,32 @@ contains
           0.035_c_double*w3
     rel3 = -u3 + w3
     net3 = -0.0001_c_double*rel3
-    tmp0 = sin(q3)
-    tmp1 = cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
-    tmp3 = 4.166596729006503e-05_c_double*u2
-    tmp4 = 1.9054215209804005e-05_c_double*u3
-    tmp5 = 1.5497923245489903e-05_c_double*u1
+    f1 = h2*u3 - h3*u2 - 0.02_c_double
+    f2 = c(2) - h1*u3 + h3*u1
+    f3 = h1*u2 - h2*u1 - net3
     dxdt(1) = tmp2
     dxdt(2) = tmp0*u3 + tmp1*u1
     dxdt(3) = -tmp2*sin(q2) + u2
-    dxdt(4) = 1.0_c_double*c(1) + h1*(tmp3 + tmp4) + h2*( &
-          -4.166596729006503e-05_c_double*u1 + &
-          0.0033146766733524852_c_double*u3) + h3*( &
-          -1.9054215209804005e-05_c_double*u1 - &
-          0.0033146766733524852_c_double*u2) - &
-          4.166596729006503e-05_c_double*net3
-    dxdt(5) = 1.0_c_double*c(2) + h1*(-1.5497923245489903e-05_c_double*u2 - &
-          0.0028431796071504527_c_double*u3) + h2*(-tmp4 + tmp5) + h3*( &
-          0.0028431796071504527_c_double*u1 + &
-          1.9054215209804005e-05_c_double*u2) + &
-          1.5497923245489903e-05_c_double*net3
-    dxdt(6) = 1.0_c_double*c(3) + h1*(0.003979754895162947_c_double*u2 + &
-          1.5497923245489903e-05_c_double*u3) + h2*( &
-          -0.003979754895162947_c_double*u1 + &
-          4.166596729006503e-05_c_double*u3) + h3*(-tmp3 - tmp5) - &
-          0.003979754895162947_c_double*net3
+    dxdt(4) = 0.0033146766733524852_c_double*f1 - &
+          1.9054215209804005e-05_c_double*f2 + &
+          4.166596729006503e-05_c_double*f3
+    dxdt(5) = -1.9054215209804005e-05_c_double*f1 + &
+          0.0028431796071504527_c_double*f2 - &
+          1.5497923245489903e-05_c_double*f3
+    dxdt(6) = 4.166596729006503e-05_c_double*f1 - &
+          1.5497923245489903e-05_c_double*f2 + &
+          0.003979754895162947_c_double*f3
     dxdt(7) = 0.5714285714285714_c_double
-    dxdt(8) = c(4)
+    dxdt(8) = c(1)
     dxdt(9) = 28.571428571428573_c_double*net3
   end subroutine rw3_orthogonal_rhs
 
-  ! out = kinetic energy of the system (J): 23 ops.
+  ! out = kinetic energy of the system (J): 21 ops.
   subroutine rw3_orthogonal_kinetic_energy(t, x, c, out) &
       bind(C, name="rw3_orthogonal_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(6)
+    real(c_double), intent(in) :: c(3)
     real(c_double), intent(out) :: out(1)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -196,8 +183,8 @@ contains
     w3 = x(9)
     out(1) = u1*(150.86984375_c_double*u1 + 2.005_c_double*u2 - &
           3.15125_c_double*u3) + u2*(175.86984375_c_double*u2 + &
-          1.34875_c_double*u3) + 125.655_c_double*u3**2 + 0.0175_c_double* &
-          w1**2 + 0.0175_c_double*w2**2 + 0.0175_c_double*w3**2
+          1.34875_c_double*u3) + 125.655_c_double*u3**2 + 0.0175_c_double*( &
+          w1**2 + w2**2 + w3**2)
   end subroutine rw3_orthogonal_kinetic_energy
 
   ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 58 ops.
@@ -205,7 +192,7 @@ contains
       bind(C, name="rw3_orthogonal_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(6)
+    real(c_double), intent(in) :: c(3)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: q1
     real(c_double) :: q2
@@ -264,12 +251,12 @@ contains
     out(3) = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9
   end subroutine rw3_orthogonal_angular_momentum
 
-  ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 6 ops.
+  ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 5 ops.
   subroutine rw3_orthogonal_power(t, x, c, out) &
       bind(C, name="rw3_orthogonal_f_power")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(6)
+    real(c_double), intent(in) :: c(3)
     real(c_double), intent(out) :: out(3)
     real(c_double) :: u1
     real(c_double) :: u2
@@ -282,8 +269,8 @@ contains
     u2 = x(5)
     w1 = x(7)
     w2 = x(8)
-    out(1) = -0.02_c_double*u1 + 0.02_c_double*w1
-    out(2) = c(5)*u2 - c(5)*w2
+    out(1) = 0.02_c_double*(-u1 + w1)
+    out(2) = c(2)*u2 - c(2)*w2
     out(3) = 0
   end subroutine rw3_orthogonal_power
 

@@ -9,8 +9,8 @@
  * versions (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   rw3_orthogonal_setup: 13 ops, once per parameter set
- *   rw3_orthogonal_rhs:   92 ops per call
+ *   rw3_orthogonal_setup: 3 ops, once per parameter set
+ *   rw3_orthogonal_rhs:   65 ops per call
  */
 #ifndef RW3_ORTHOGONAL_H
 #define RW3_ORTHOGONAL_H
@@ -23,8 +23,8 @@ extern "C" {
 
 #define RW3_ORTHOGONAL_NX 9   /* states */
 #define RW3_ORTHOGONAL_NP 1   /* parameters */
-#define RW3_ORTHOGONAL_NC 6   /* hoisted constants */
-#define RW3_ORTHOGONAL_COND 5  /* c[RW3_ORTHOGONAL_COND]: condition number of the mass
+#define RW3_ORTHOGONAL_NC 3   /* hoisted constants */
+#define RW3_ORTHOGONAL_COND 2  /* c[RW3_ORTHOGONAL_COND]: condition number of the mass
                            matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
 
 /*
@@ -78,13 +78,13 @@ int  rw3_orthogonal_setup(const double *p, double *c);
  */
 void rw3_orthogonal_rhs(double t, const double *x, const double *c, double *dxdt);
 
-/* out[0] = kinetic energy of the system (J); 23 ops. */
+/* out[0] = kinetic energy of the system (J); 21 ops. */
 void rw3_orthogonal_kinetic_energy(double t, const double *x, const double *c, double *out);
 
 /* out[0..2] = angular momentum about the mass center, N components h[0..2] (kg m^2/s); 58 ops. */
 void rw3_orthogonal_angular_momentum(double t, const double *x, const double *c, double *out);
 
-/* out[0..2] = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W); 6 ops. */
+/* out[0..2] = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W); 5 ops. */
 void rw3_orthogonal_power(double t, const double *x, const double *c, double *out);
 
 #ifdef __cplusplus

@@ -100,7 +100,7 @@ contains
   subroutine rw3_orthogonal_jac(t, x, c, J) bind(C, name="rw3_orthogonal_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(6)
+    real(c_double), intent(in) :: c(3)
     real(c_double), intent(out) :: J(81)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -188,13 +188,13 @@ contains
     J(29) = 0
     J(30) = 0
     J(31) = -tmp12 - tmp13 - 4.699133747337101e-05_c_double*u1 + &
-          0.008336377129634545_c_double*u2 + 0.007550627875277421_c_double* &
+          0.008336377129634543_c_double*u2 + 0.007550627875277421_c_double* &
           u3
     J(32) = 0.008336377129634545_c_double*u1 - 0.008774259797535168_c_double &
           *u2 + 0.3327988462904027_c_double*u3 + &
           1.458308855152276e-06_c_double*w1 - 0.000116013683567337_c_double &
           *w3
-    J(33) = 0.007550627875277421_c_double*u1 + 0.3327988462904027_c_double* &
+    J(33) = 0.007550627875277421_c_double*u1 + 0.3327988462904026_c_double* &
           u2 + 0.00882125113500854_c_double*u3 + &
           6.668975323431402e-07_c_double*w1 + 0.000116013683567337_c_double &
           *w2 - 4.166596729006503e-09_c_double
@@ -207,10 +207,10 @@ contains
     J(38) = 0
     J(39) = 0
     J(40) = -0.017856992801851313_c_double*u1 + &
-          0.004549590061738774_c_double*u2 - 0.1433979599724884_c_double*u3 &
-          + 5.424273135921467e-07_c_double*w2 + &
+          0.004549590061738773_c_double*u2 - 0.14339795997248841_c_double* &
+          u3 + 5.424273135921467e-07_c_double*w2 + &
           9.951128625026586e-05_c_double*w3
-    J(41) = tmp13 - tmp16 + 0.004549590061738774_c_double*u1 - &
+    J(41) = tmp13 - tmp16 + 0.004549590061738772_c_double*u1 - &
           1.0747926685968213e-05_c_double*u2 - &
           0.007565346160787671_c_double*u3
     J(42) = -0.1433979599724884_c_double*u1 - 0.007565346160787671_c_double* &
@@ -231,12 +231,12 @@ contains
           *u2 - 0.004502598724265401_c_double*u3 - &
           0.00013929142133070315_c_double*w2 - &
           5.424273135921467e-07_c_double*w3
-    J(50) = -0.19887734770270193_c_double*u1 + 0.015846423182838465_c_double &
+    J(50) = -0.19887734770270185_c_double*u1 + 0.015846423182838465_c_double &
           *u2 - 0.008325629202948576_c_double*u3 + &
           0.00013929142133070315_c_double*w1 - &
           1.458308855152276e-06_c_double*w3
-    J(51) = tmp12 + tmp16 - 0.004502598724265401_c_double*u1 - &
-          0.008325629202948576_c_double*u2 + &
+    J(51) = tmp12 + tmp16 - 0.0045025987242654_c_double*u1 - &
+          0.008325629202948574_c_double*u2 + &
           1.4718285510250293e-05_c_double*u3 - &
           3.979754895162947e-07_c_double
     J(52) = 0.00013929142133070315_c_double*u2 + &

@@ -9,8 +9,8 @@
  * versions (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   rw3_orthogonal_setup: 13 ops, once per parameter set
- *   rw3_orthogonal_rhs:   92 ops per call
+ *   rw3_orthogonal_setup: 3 ops, once per parameter set
+ *   rw3_orthogonal_rhs:   65 ops per call
  */
 #ifndef RW3_ORTHOGONAL_ODE_H
 #define RW3_ORTHOGONAL_ODE_H

@@ -10,7 +10,7 @@
 !
 ! Operation counts (sympy.count_ops, temporaries included):
 !   rw4_pyramid_f_setup: 4 ops, once per parameter set
-!   rw4_pyramid_f_rhs:   154 ops per call
+!   rw4_pyramid_f_rhs:   114 ops per call
 !
 ! The same interface as rw4_pyramid.h, callable from C under the bind(C)
 ! names rw4_pyramid_f_setup and rw4_pyramid_f_rhs. State order x(1:10):
@@ -103,7 +103,7 @@ contains
     status = RW4_PYRAMID_OK
   end function rw4_pyramid_setup
 
-  ! dxdt = f(t, x) for the constants c from rw4_pyramid_setup (154 ops).
+  ! dxdt = f(t, x) for the constants c from rw4_pyramid_setup (114 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
   subroutine rw4_pyramid_rhs(t, x, c, dxdt) bind(C, name="rw4_pyramid_f_rhs")
@@ -120,6 +120,13 @@ contains
     real(c_double) :: w2
     real(c_double) :: w3
     real(c_double) :: w4
+    real(c_double) :: tmp0
+    real(c_double) :: tmp1
+    real(c_double) :: tmp2
+    real(c_double) :: tmp3
+    real(c_double) :: tmp4
+    real(c_double) :: tmp5
+    real(c_double) :: tmp6
     real(c_double) :: h1
     real(c_double) :: h2
     real(c_double) :: h3
@@ -131,12 +138,9 @@ contains
     real(c_double) :: net3
     real(c_double) :: rel4
     real(c_double) :: net4
-    real(c_double) :: tmp0
-    real(c_double) :: tmp1
-    real(c_double) :: tmp2
-    real(c_double) :: tmp3
-    real(c_double) :: tmp4
-    real(c_double) :: tmp5
+    real(c_double) :: f1
+    real(c_double) :: f2
+    real(c_double) :: f3
 
     associate (unused_t => t, unused_c => c)  ! unused in some scenes
     end associate
@@ -149,72 +153,54 @@ contains
     w2 = x(8)
     w3 = x(9)
     w4 = x(10)
+    tmp0 = 0.5773502691896258_c_double*u1
+    tmp1 = 0.8164965809277259_c_double*u3
+    tmp2 = 0.5773502691896258_c_double*u2
+    tmp3 = -tmp1
+    tmp4 = sin(q3)
+    tmp5 = cos(q3)
+    tmp6 = (-tmp4*u1 + tmp5*u3)/cos(q2)
     h1 = 421.76382113821137_c_double*u1 - 4*u2 + 6*u3 + &
-          0.025980762113533163_c_double*w1 - 0.025980762113533163_c_double* &
-          w3
+          0.025980762113533163_c_double*(w1 - w3)
     h2 = -4*u1 + 381.76382113821137_c_double*u2 + 2.5_c_double*u3 + &
-          0.025980762113533163_c_double*w2 - 0.025980762113533163_c_double* &
-          w4
+          0.025980762113533163_c_double*(w2 - w4)
     h3 = 6*u1 + 2.5_c_double*u2 + 301.8333333333333_c_double*u3 + &
-          0.036742346141747664_c_double*w1 + 0.036742346141747664_c_double* &
-          w2 + 0.036742346141747664_c_double*w3 + &
-          0.036742346141747664_c_double*w4
-    rel1 = -0.5773502691896258_c_double*u1 - 0.8164965809277259_c_double*u3 &
-          + w1
+          0.036742346141747664_c_double*(w1 + w2 + w3 + w4)
+    rel1 = -tmp0 - tmp1 + w1
     net1 = -2e-05_c_double*rel1 + min(0.2_c_double, max(-0.2_c_double, c(1) &
           - 0.05_c_double*rel1))
-    rel2 = -0.5773502691896258_c_double*u2 - 0.8164965809277259_c_double*u3 &
-          + w2
+    rel2 = -tmp1 - tmp2 + w2
     net2 = -2e-05_c_double*rel2 + min(0.2_c_double, max(-0.2_c_double, c(2) &
           - 0.05_c_double*rel2))
-    rel3 = 0.5773502691896258_c_double*u1 - 0.8164965809277259_c_double*u3 + &
-          w3
+    rel3 = tmp0 + tmp3 + w3
     net3 = -2e-05_c_double*rel3 + min(0.2_c_double, max(-0.2_c_double, c(3) &
           - 0.05_c_double*rel3))
-    rel4 = 0.5773502691896258_c_double*u2 - 0.8164965809277259_c_double*u3 + &
-          w4
+    rel4 = tmp2 + tmp3 + w4
     net4 = -2e-05_c_double*rel4 + min(0.2_c_double, max(-0.2_c_double, c(4) &
           - 0.05_c_double*rel4))
-    tmp0 = sin(q3)
-    tmp1 = cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
-    tmp3 = 4.735842396728992e-05_c_double*u2
-    tmp4 = 2.5162222823731624e-05_c_double*u3
-    tmp5 = 2.2199493971044426e-05_c_double*u1
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*sin(q2) + u2
-    dxdt(4) = h1*(-tmp3 - tmp4) + h2*(4.735842396728992e-05_c_double*u1 + &
-          0.002371907568400169_c_double*u3) + h3*( &
-          2.5162222823731624e-05_c_double*u1 - &
-          0.002371907568400169_c_double*u2) - &
-          0.0013307534818613306_c_double*net1 + &
-          2.4140575126727092e-05_c_double*net2 + &
-          0.0014080894643561663_c_double*net3 + &
-          5.3195407368108696e-05_c_double*net4
-    dxdt(5) = h1*(-2.2199493971044426e-05_c_double*u2 - &
-          0.0026198295706604748_c_double*u3) + h2*(tmp4 + tmp5) + h3*( &
-          0.0026198295706604748_c_double*u1 - &
-          2.5162222823731624e-05_c_double*u2) + &
-          3.5983948049926387e-06_c_double*net1 - &
-          0.0014944334969260835_c_double*net2 + &
-          3.265322704637424e-05_c_double*net3 + &
-          0.0015306851187774505_c_double*net4
-    dxdt(6) = h1*(0.003314211979940579_c_double*u2 + &
-          2.2199493971044426e-05_c_double*u3) + h2*( &
-          -0.003314211979940579_c_double*u1 - &
-          4.735842396728992e-05_c_double*u3) + h3*(tmp3 - tmp5) - &
-          0.0026787003512652803_c_double*net1 - &
-          0.0026932258662711356_c_double*net2 - &
-          0.0027333851489171027_c_double*net3 - &
-          0.0027188596339112474_c_double*net4
+    f1 = h2*u3 - h3*u2 + 0.5773502691896258_c_double*(-net1 + net3)
+    f2 = -h1*u3 + h3*u1 + 0.5773502691896258_c_double*(-net2 + net4)
+    f3 = h1*u2 - h2*u1 - 0.8164965809277259_c_double*(net1 + net2 + net3 + &
+          net4)
+    dxdt(1) = tmp6
+    dxdt(2) = tmp4*u3 + tmp5*u1
+    dxdt(3) = -tmp6*sin(q2) + u2
+    dxdt(4) = 0.002371907568400169_c_double*f1 + &
+          2.5162222823731624e-05_c_double*f2 - &
+          4.735842396728992e-05_c_double*f3
+    dxdt(5) = 2.5162222823731624e-05_c_double*f1 + &
+          0.0026198295706604748_c_double*f2 - &
+          2.2199493971044426e-05_c_double*f3
+    dxdt(6) = -4.735842396728992e-05_c_double*f1 - &
+          2.2199493971044426e-05_c_double*f2 + &
+          0.003314211979940579_c_double*f3
     dxdt(7) = 22.22222222222222_c_double*net1
     dxdt(8) = 22.22222222222222_c_double*net2
     dxdt(9) = 22.22222222222222_c_double*net3
     dxdt(10) = 22.22222222222222_c_double*net4
   end subroutine rw4_pyramid_rhs
 
-  ! out = kinetic energy of the system (J): 26 ops.
+  ! out = kinetic energy of the system (J): 23 ops.
   subroutine rw4_pyramid_kinetic_energy(t, x, c, out) &
       bind(C, name="rw4_pyramid_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
@@ -241,11 +227,10 @@ contains
     out(1) = u1*(210.88191056910568_c_double*u1 - 4.0_c_double*u2 + &
           6.0_c_double*u3) + u2*(190.88191056910568_c_double*u2 + &
           2.5_c_double*u3) + 150.91666666666666_c_double*u3**2 + &
-          0.0225_c_double*w1**2 + 0.0225_c_double*w2**2 + 0.0225_c_double* &
-          w3**2 + 0.0225_c_double*w4**2
+          0.0225_c_double*(w1**2 + w2**2 + w3**2 + w4**2)
   end subroutine rw4_pyramid_kinetic_energy
 
-  ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 68 ops.
+  ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 63 ops.
   subroutine rw4_pyramid_angular_momentum(t, x, c, out) &
       bind(C, name="rw4_pyramid_f_angular_momentum")
     real(c_double), value, intent(in) :: t
@@ -290,29 +275,25 @@ contains
     w4 = x(10)
     tmp0 = sin(q1)
     tmp1 = -4*u1 + 381.76382113821137_c_double*u2 + 2.5_c_double*u3 + &
-          0.025980762113533163_c_double*w2 - 0.025980762113533163_c_double* &
-          w4
+          0.025980762113533163_c_double*(w2 - w4)
     tmp2 = cos(q2)
     tmp3 = tmp1*tmp2
-    tmp4 = cos(q1)
-    tmp5 = cos(q3)
-    tmp6 = sin(q2)
-    tmp7 = sin(q3)
-    tmp8 = tmp0*tmp7
-    tmp9 = 421.76382113821137_c_double*u1 - 4*u2 + 6*u3 + &
-          0.025980762113533163_c_double*w1 - 0.025980762113533163_c_double* &
-          w3
-    tmp10 = tmp4*tmp7
-    tmp11 = tmp0*tmp5
-    tmp12 = 6*u1 + 2.5_c_double*u2 + 301.8333333333333_c_double*u3 + &
-          0.036742346141747664_c_double*w1 + 0.036742346141747664_c_double* &
-          w2 + 0.036742346141747664_c_double*w3 + &
-          0.036742346141747664_c_double*w4
-    out(1) = -tmp0*tmp3 + tmp12*(tmp10 + tmp11*tmp6) + tmp9*(tmp4*tmp5 - &
-          tmp6*tmp8)
-    out(2) = tmp12*(-tmp4*tmp5*tmp6 + tmp8) + tmp3*tmp4 + tmp9*(tmp10*tmp6 + &
-          tmp11)
-    out(3) = tmp1*tmp6 + tmp12*tmp2*tmp5 - tmp2*tmp7*tmp9
+    tmp4 = sin(q3)
+    tmp5 = cos(q1)
+    tmp6 = tmp4*tmp5
+    tmp7 = sin(q2)
+    tmp8 = cos(q3)
+    tmp9 = tmp0*tmp8
+    tmp10 = 6*u1 + 2.5_c_double*u2 + 301.8333333333333_c_double*u3 + &
+          0.036742346141747664_c_double*(w1 + w2 + w3 + w4)
+    tmp11 = tmp0*tmp4
+    tmp12 = 421.76382113821137_c_double*u1 - 4*u2 + 6*u3 + &
+          0.025980762113533163_c_double*(w1 - w3)
+    out(1) = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + &
+          tmp5*tmp8)
+    out(2) = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + &
+          tmp3*tmp5
+    out(3) = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4
   end subroutine rw4_pyramid_angular_momentum
 
   ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 43 ops.

@@ -11,7 +11,7 @@
  *
  * Operation counts (sympy.count_ops, temporaries included):
  *   rw4_pyramid_setup: 4 ops, once per parameter set
- *   rw4_pyramid_rhs:   154 ops per call
+ *   rw4_pyramid_rhs:   114 ops per call
  */
 #ifndef RW4_PYRAMID_H
 #define RW4_PYRAMID_H
@@ -83,10 +83,10 @@ int  rw4_pyramid_setup(const double *p, double *c);
  */
 void rw4_pyramid_rhs(double t, const double *x, const double *c, double *dxdt);
 
-/* out[0] = kinetic energy of the system (J); 26 ops. */
+/* out[0] = kinetic energy of the system (J); 23 ops. */
 void rw4_pyramid_kinetic_energy(double t, const double *x, const double *c, double *out);
 
-/* out[0..2] = angular momentum about the mass center, N components h[0..2] (kg m^2/s); 68 ops. */
+/* out[0..2] = angular momentum about the mass center, N components h[0..2] (kg m^2/s); 63 ops. */
 void rw4_pyramid_angular_momentum(double t, const double *x, const double *c, double *out);
 
 /* out[0..3] = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W); 43 ops. */

@@ -11,7 +11,7 @@
  *
  * Operation counts (sympy.count_ops, temporaries included):
  *   rw4_pyramid_setup: 4 ops, once per parameter set
- *   rw4_pyramid_rhs:   154 ops per call
+ *   rw4_pyramid_rhs:   114 ops per call
  */
 #ifndef RW4_PYRAMID_ODE_H
 #define RW4_PYRAMID_ODE_H

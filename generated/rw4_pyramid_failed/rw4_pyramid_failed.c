@@ -11,7 +11,7 @@
  *
  * Operation counts (sympy.count_ops, temporaries included):
  *   rw4_pyramid_failed_setup: 3 ops, once per parameter set
- *   rw4_pyramid_failed_rhs:   150 ops per call
+ *   rw4_pyramid_failed_rhs:   110 ops per call
  */
 #include "rw4_pyramid_failed.h"
 
@@ -41,7 +41,7 @@ int rw4_pyramid_failed_setup(const double *p, double *c)
     return RW4_PYRAMID_FAILED_OK;
 }
 
-/* 150 ops per call. */
+/* 110 ops per call. */
 void rw4_pyramid_failed_rhs(double t, const double *x, const double *c, double *dxdt)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -56,36 +56,40 @@ void rw4_pyramid_failed_rhs(double t, const double *x, const double *c, double *
     const double w3 = x[8];
     const double w4 = x[9];
 
-    const double h1 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*w1 - 0.025980762113533163*w3;
-    const double h2 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*w2 - 0.025980762113533163*w4;
-    const double h3 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*w1 + 0.036742346141747664*w2 + 0.036742346141747664*w3 + 0.036742346141747664*w4;
-    const double rel1 = -0.5773502691896258*u1 - 0.8164965809277259*u3 + w1;
+    const double tmp0 = 0.5773502691896258*u1;
+    const double tmp1 = 0.8164965809277259*u3;
+    const double tmp2 = 0.5773502691896258*u2;
+    const double tmp3 = -tmp1;
+    const double tmp4 = sin(q3);
+    const double tmp5 = cos(q3);
+    const double tmp6 = (-tmp4*u1 + tmp5*u3)/cos(q2);
+    const double h1 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*(w1 - w3);
+    const double h2 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*(w2 - w4);
+    const double h3 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*(w1 + w2 + w3 + w4);
+    const double rel1 = -tmp0 - tmp1 + w1;
     const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[0] - 0.05*rel1));
-    const double rel2 = -0.5773502691896258*u2 - 0.8164965809277259*u3 + w2;
+    const double rel2 = -tmp1 - tmp2 + w2;
     const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[1] - 0.05*rel2));
-    const double rel3 = 0.5773502691896258*u1 - 0.8164965809277259*u3 + w3;
+    const double rel3 = tmp0 + tmp3 + w3;
     const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[2] - 0.05*rel3));
-    const double rel4 = 0.5773502691896258*u2 - 0.8164965809277259*u3 + w4;
+    const double rel4 = tmp2 + tmp3 + w4;
     const double net4 = -2e-05*rel4;
-    const double tmp0 = sin(q3);
-    const double tmp1 = cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2);
-    const double tmp3 = 4.735842396728992e-05*u2;
-    const double tmp4 = 2.5162222823731624e-05*u3;
-    const double tmp5 = 2.2199493971044426e-05*u1;
-    dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*sin(q2) + u2;
-    dxdt[3] = h1*(-tmp3 - tmp4) + h2*(4.735842396728992e-05*u1 + 0.002371907568400169*u3) + h3*(2.5162222823731624e-05*u1 - 0.002371907568400169*u2) - 0.0013307534818613306*net1 + 2.4140575126727092e-05*net2 + 0.0014080894643561663*net3 + 5.3195407368108696e-05*net4;
-    dxdt[4] = h1*(-2.2199493971044426e-05*u2 - 0.0026198295706604748*u3) + h2*(tmp4 + tmp5) + h3*(0.0026198295706604748*u1 - 2.5162222823731624e-05*u2) + 3.5983948049926387e-06*net1 - 0.0014944334969260835*net2 + 3.265322704637424e-05*net3 + 0.0015306851187774505*net4;
-    dxdt[5] = h1*(0.003314211979940579*u2 + 2.2199493971044426e-05*u3) + h2*(-0.003314211979940579*u1 - 4.735842396728992e-05*u3) + h3*(tmp3 - tmp5) - 0.0026787003512652803*net1 - 0.0026932258662711356*net2 - 0.0027333851489171027*net3 - 0.0027188596339112474*net4;
+    const double f1 = h2*u3 - h3*u2 + 0.5773502691896258*(-net1 + net3);
+    const double f2 = -h1*u3 + h3*u1 + 0.5773502691896258*(-net2 + net4);
+    const double f3 = h1*u2 - h2*u1 - 0.8164965809277259*(net1 + net2 + net3 + net4);
+    dxdt[0] = tmp6;
+    dxdt[1] = tmp4*u3 + tmp5*u1;
+    dxdt[2] = -tmp6*sin(q2) + u2;
+    dxdt[3] = 0.002371907568400169*f1 + 2.5162222823731624e-05*f2 - 4.735842396728992e-05*f3;
+    dxdt[4] = 2.5162222823731624e-05*f1 + 0.0026198295706604748*f2 - 2.2199493971044426e-05*f3;
+    dxdt[5] = -4.735842396728992e-05*f1 - 2.2199493971044426e-05*f2 + 0.003314211979940579*f3;
     dxdt[6] = 22.22222222222222*net1;
     dxdt[7] = 22.22222222222222*net2;
     dxdt[8] = 22.22222222222222*net3;
     dxdt[9] = 22.22222222222222*net4;
 }
 
-/* kinetic energy of the system (J): 26 ops. */
+/* kinetic energy of the system (J): 23 ops. */
 void rw4_pyramid_failed_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -98,10 +102,10 @@ void rw4_pyramid_failed_kinetic_energy(double t, const double *x, const double *
     const double w3 = x[8];
     const double w4 = x[9];
 
-    out[0] = u1*(210.88191056910568*u1 - 4.0*u2 + 6.0*u3) + u2*(190.88191056910568*u2 + 2.5*u3) + 150.91666666666666*u3*u3 + 0.0225*w1*w1 + 0.0225*w2*w2 + 0.0225*w3*w3 + 0.0225*w4*w4;
+    out[0] = u1*(210.88191056910568*u1 - 4.0*u2 + 6.0*u3) + u2*(190.88191056910568*u2 + 2.5*u3) + 150.91666666666666*u3*u3 + 0.0225*(w1*w1 + w2*w2 + w3*w3 + w4*w4);
 }
 
-/* angular momentum about the mass center, N components h[0..2] (kg m^2/s): 68 ops. */
+/* angular momentum about the mass center, N components h[0..2] (kg m^2/s): 63 ops. */
 void rw4_pyramid_failed_angular_momentum(double t, const double *x, const double *c, double *out)
 {
     (void)t;  /* unused when the scene is autonomous */
@@ -118,21 +122,21 @@ void rw4_pyramid_failed_angular_momentum(double t, const double *x, const double
     const double w4 = x[9];
 
     const double tmp0 = sin(q1);
-    const double tmp1 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*w2 - 0.025980762113533163*w4;
+    const double tmp1 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*(w2 - w4);
     const double tmp2 = cos(q2);
     const double tmp3 = tmp1*tmp2;
-    const double tmp4 = cos(q1);
-    const double tmp5 = cos(q3);
-    const double tmp6 = sin(q2);
-    const double tmp7 = sin(q3);
-    const double tmp8 = tmp0*tmp7;
-    const double tmp9 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*w1 - 0.025980762113533163*w3;
-    const double tmp10 = tmp4*tmp7;
-    const double tmp11 = tmp0*tmp5;
-    const double tmp12 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*w1 + 0.036742346141747664*w2 + 0.036742346141747664*w3 + 0.036742346141747664*w4;
-    out[0] = -tmp0*tmp3 + tmp12*(tmp10 + tmp11*tmp6) + tmp9*(tmp4*tmp5 - tmp6*tmp8);
-    out[1] = tmp12*(-tmp4*tmp5*tmp6 + tmp8) + tmp3*tmp4 + tmp9*(tmp10*tmp6 + tmp11);
-    out[2] = tmp1*tmp6 + tmp12*tmp2*tmp5 - tmp2*tmp7*tmp9;
+    const double tmp4 = sin(q3);
+    const double tmp5 = cos(q1);
+    const double tmp6 = tmp4*tmp5;
+    const double tmp7 = sin(q2);
+    const double tmp8 = cos(q3);
+    const double tmp9 = tmp0*tmp8;
+    const double tmp10 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*(w1 + w2 + w3 + w4);
+    const double tmp11 = tmp0*tmp4;
+    const double tmp12 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*(w1 - w3);
+    out[0] = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + tmp5*tmp8);
+    out[1] = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + tmp3*tmp5;
+    out[2] = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4;
 }
 
 /* power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 33 ops. */

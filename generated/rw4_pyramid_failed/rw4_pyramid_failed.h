@@ -11,7 +11,7 @@
  *
  * Operation counts (sympy.count_ops, temporaries included):
  *   rw4_pyramid_failed_setup: 3 ops, once per parameter set
- *   rw4_pyramid_failed_rhs:   150 ops per call
+ *   rw4_pyramid_failed_rhs:   110 ops per call
  */
 #ifndef RW4_PYRAMID_FAILED_H
 #define RW4_PYRAMID_FAILED_H
@@ -82,10 +82,10 @@ int  rw4_pyramid_failed_setup(const double *p, double *c);
  */
 void rw4_pyramid_failed_rhs(double t, const double *x, const double *c, double *dxdt);
 
-/* out[0] = kinetic energy of the system (J); 26 ops. */
+/* out[0] = kinetic energy of the system (J); 23 ops. */
 void rw4_pyramid_failed_kinetic_energy(double t, const double *x, const double *c, double *out);
 
-/* out[0..2] = angular momentum about the mass center, N components h[0..2] (kg m^2/s); 68 ops. */
+/* out[0..2] = angular momentum about the mass center, N components h[0..2] (kg m^2/s); 63 ops. */
 void rw4_pyramid_failed_angular_momentum(double t, const double *x, const double *c, double *out);
 
 /* out[0..3] = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W); 33 ops. */

@@ -11,7 +11,7 @@
  *
  * Operation counts (sympy.count_ops, temporaries included):
  *   rw4_pyramid_failed_setup: 3 ops, once per parameter set
- *   rw4_pyramid_failed_rhs:   150 ops per call
+ *   rw4_pyramid_failed_rhs:   110 ops per call
  */
 #ifndef RW4_PYRAMID_FAILED_ODE_H
 #define RW4_PYRAMID_FAILED_ODE_H

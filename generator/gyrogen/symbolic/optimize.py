@@ -157,14 +157,13 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
     also d(dx/dt)/dx for the implicit integrators."""
     udot = block_inverse(eqs.mass_matrix) * eqs.forcing
-    hoister = Hoister()
+    hoister = Hoister(eqs.gather)
     per_call = [*eqs.states, *eqs.inputs, *eqs.shared]
     dyn = [hoist(e, per_call, hoister) for e in udot]
     shared = {s: hoist(e, per_call, hoister) for s, e in eqs.shared.items()}
     n_q = len(eqs.kinematics)
     kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
-    rhs = _cse([*kin, *dyn], _temporaries())
-    rhs = Block(tuple(Assignment(s, e) for s, e in shared.items()) + rhs.temporaries, rhs.outputs)
+    rhs = _rhs_block(shared, [*kin, *dyn], eqs.gather)
     outputs = {
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
         for name, exprs in eqs.outputs.items()
@@ -175,6 +174,20 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
+
+
+def _rhs_block(shared: dict[sm.Symbol, sm.Expr], f: list[sm.Expr], gather: bool) -> Block:
+    """The named values first, then dx/dt by CSE; with gather (a cluster),
+    one CSE over both, so the wheels' relative rates share their common
+    terms too, each assignment after those it reads."""
+    named = tuple(Assignment(s, e) for s, e in shared.items())
+    if not gather:
+        rhs = _cse(f, _temporaries())
+        return Block(named + rhs.temporaries, rhs.outputs)
+    both = _cse([*shared.values(), *f], _temporaries())
+    n = len(shared)
+    named = tuple(Assignment(s, e) for s, e in zip(shared, both.outputs[:n], strict=True))
+    return Block(_in_order(both.temporaries + named), both.outputs[n:])
 
 
 def _inlined(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
