@@ -375,10 +375,13 @@ def _largest_rate(f: object, x0: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(jac))))
 
 
-def run_shard(seed_: int, examples: int, failures: Path | None) -> tuple[dict[str, int], list[str]]:
-    """Draw and check `examples` scenes from seed_, without stopping or
-    shrinking at a failure: every failure is kept (a TOML each in failures).
-    Returns the counts (examples, checked, refused, failed) and the messages."""
+def run_shard(
+    seed_: int, examples: int, failures: Path | None, drawn: object = None
+) -> tuple[dict[str, int], list[str]]:
+    """Draw and check `examples` scenes from seed_ (drawn: the strategy,
+    scenes() unless given), without stopping or shrinking at a failure:
+    every failure is kept (a TOML each in failures). Returns the counts
+    (examples, checked, refused, failed) and the messages."""
     counts = {"examples": 0, "checked": 0, "refused": 0, "failed": 0}
     found: list[str] = []
 
@@ -390,7 +393,7 @@ def run_shard(seed_: int, examples: int, failures: Path | None) -> tuple[dict[st
         phases=[Phase.generate],
         suppress_health_check=list(HealthCheck),
     )
-    @given(scenes())
+    @given(drawn if drawn is not None else scenes())
     def one(drawn: Draw) -> None:
         counts["examples"] += 1
         try:
