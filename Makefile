@@ -71,11 +71,13 @@ report: setup
 	$(BIN)/gyrogen bench gyrostat --out report/gyrostat
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 
-## fuzz: the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes with a
+## fuzz: the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS clusters) with a
 ## fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
 FUZZ_EXAMPLES ?= 2000
+FUZZ_CLUSTERS ?= 200
 fuzz: setup
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
+	$(BIN)/python tests/fuzz_scenes.py --clusters --examples $(FUZZ_CLUSTERS) --out fuzz-failures
 
 ## check: numerical stability on every stiff and extreme case
 check: setup
