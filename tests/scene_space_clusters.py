@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 from hypothesis import strategies as st
-from scene_space import INTEGRATORS, Draw, to_toml, toml_value
+from scene_space import INTEGRATOR_LISTS, TARGET_LISTS, Draw, to_toml, toml_value
 
 from gyrogen.abi import MAX_ROTORS
 
@@ -97,11 +97,9 @@ def clusters(draw: st.DrawFn) -> Draw:
         "name": f"cluster{n}",
         "description": f"a drawn cluster of {n} rotors",
         "attitude": attitude,
-        "targets": draw(st.permutations(["c", "fortran"]).flatmap(
-            lambda t: st.integers(1, 2).map(lambda k: t[:k]))),
-        "integrators": draw(st.permutations(INTEGRATORS).flatmap(
-            lambda t: st.integers(0, 4).map(lambda k: t[:k]))),
-    }  # fmt: skip
+        "targets": draw(TARGET_LISTS),
+        "integrators": draw(INTEGRATOR_LISTS),
+    }
     tables = {
         "parameters": carrier,
         "effects": {"rotor_angle": draw(st.booleans())},
