@@ -161,3 +161,21 @@ def test_bench_clusters_slice() -> None:
     assert set(times) == {"hoisted_ns", "msolve_ns", "batch_ns"}
     for scene in (rw3, random_cluster(2, 7)):
         assert unit_of(scene).ops["rhs"] < msolve_ops(scene)
+
+
+def test_the_cluster_header_documents_its_rotors_and_codes() -> None:
+    """rw4_pyramid.h: each rotor's axis, law and limit; no translation, no
+    q4; only the codes its setup returns (0, 1 and the condition bound, 7),
+    in the header, the Fortran module and the manifest alike."""
+    import json
+
+    out = Path(__file__).resolve().parents[1] / "generated" / "rw4_pyramid"
+    header, module = (out / "rw4_pyramid.h").read_text(), (out / "rw4_pyramid.f90").read_text()
+    assert "Rotor B4: axis g4 = (0, -0.57735, 0.816497) in A" in header
+    assert "w_ref = p[w_ref_4];\n *   friction b = 2e-05 N m s, |T| clamped to 0.2 N m." in header
+    assert "gravity" not in header and "q4" not in header
+    for text in (header, module):
+        assert "ERR_NONFINITE" in text and "ERR_MASS_SINGULAR" in text
+        assert "ERR_MASS " not in text and "ERR_ROTOR_TRIANGLE" not in text
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert set(manifest["setup_codes"]) == {"0", "1", "7"}

@@ -24,8 +24,8 @@ extern "C" {
 #define RW3_ORTHOGONAL_NX 9   /* states */
 #define RW3_ORTHOGONAL_NP 1   /* parameters */
 #define RW3_ORTHOGONAL_NC 3   /* hoisted constants */
-#define RW3_ORTHOGONAL_COND 2  /* c[RW3_ORTHOGONAL_COND]: condition number of the mass
-                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
+#define RW3_ORTHOGONAL_COND 2  /* c[RW3_ORTHOGONAL_COND]: condition number of the lumped
+                           inertia I~ (3x3), ||I~||_F ||I~^-1||_F */
 
 /*
  * State vector x[RW3_ORTHOGONAL_NX] (SI units):
@@ -46,19 +46,22 @@ extern "C" {
  *   m_a = 500.0, I11 = 300.0, I22 = 350.0, I33 = 250.0, I12 = 2.0, I13 =
  *   -3.0, I23 = 1.5
  *
- * Motor torque T, constant: on B about a2, and -T on A.
- * Translation: the mass center AB* moves under gravity g along +n3.
- * The rotor angle q4 is not a state: nothing depends on it.
+ * Rotor B1: axis g1 = (1, 0, 0) in A, B1* at (0.4, 0, 0.1) m from A*;
+ *   motor torque T = 0.02 N m;
+ *   friction b = 0 N m s.
+ * Rotor B2: axis g2 = (0, 1, 0) in A, B2* at (0, 0.4, 0.1) m from A*;
+ *   motor torque T = p[T_2] N m;
+ *   friction b = 0 N m s.
+ * Rotor B3: axis g3 = (0, 0, 1) in A, B3* at (0, 0, 0.5) m from A*;
+ *   no motor torque;
+ *   friction b = 0.0001 N m s.
+ * No translation: the system's mass center is fixed in A and free in N.
+ * The rotor angles are not states: nothing depends on them.
  */
 
 /* Return codes of rw3_orthogonal_setup, checked in this order. */
 #define RW3_ORTHOGONAL_OK                0  /* parameters accepted */
 #define RW3_ORTHOGONAL_ERR_NONFINITE     1  /* a parameter is NaN or infinite */
-#define RW3_ORTHOGONAL_ERR_MASS          2  /* a mass (m_a or m_b) is not positive */
-#define RW3_ORTHOGONAL_ERR_ROTOR_INERTIA 3  /* a rotor inertia (I or J) is not positive */
-#define RW3_ORTHOGONAL_ERR_CARRIER_NOT_PD 4  /* the carrier inertia is not positive definite */
-#define RW3_ORTHOGONAL_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
-#define RW3_ORTHOGONAL_ERR_ROTOR_TRIANGLE 6  /* the rotor violates the triangle inequality (2 I < J) */
 #define RW3_ORTHOGONAL_ERR_MASS_SINGULAR 7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*

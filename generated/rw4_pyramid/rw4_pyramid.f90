@@ -44,7 +44,7 @@ module rw4_pyramid_mod
   integer, parameter, public :: RW4_PYRAMID_NX = 10  ! states
   integer, parameter, public :: RW4_PYRAMID_NP = 4  ! parameters
   integer, parameter, public :: RW4_PYRAMID_NC = 5  ! hoisted constants
-  ! c(RW4_PYRAMID_COND): condition number of the mass matrix's coupled block
+  ! c(RW4_PYRAMID_COND): condition number of the lumped inertia I~ (3x3)
   integer, parameter, public :: RW4_PYRAMID_COND = 5
 
   ! Return codes of rw4_pyramid_setup, checked in this order.
@@ -52,16 +52,6 @@ module rw4_pyramid_mod
   integer(c_int), parameter, public :: RW4_PYRAMID_OK = 0
   ! 1: a parameter is NaN or infinite
   integer(c_int), parameter, public :: RW4_PYRAMID_ERR_NONFINITE = 1
-  ! 2: a mass (m_a or m_b) is not positive
-  integer(c_int), parameter, public :: RW4_PYRAMID_ERR_MASS = 2
-  ! 3: a rotor inertia (I or J) is not positive
-  integer(c_int), parameter, public :: RW4_PYRAMID_ERR_ROTOR_INERTIA = 3
-  ! 4: the carrier inertia is not positive definite
-  integer(c_int), parameter, public :: RW4_PYRAMID_ERR_CARRIER_NOT_PD = 4
-  ! 5: the carrier's principal moments violate the triangle inequality
-  integer(c_int), parameter, public :: RW4_PYRAMID_ERR_CARRIER_TRIANGLE = 5
-  ! 6: the rotor violates the triangle inequality (2 I < J)
-  integer(c_int), parameter, public :: RW4_PYRAMID_ERR_ROTOR_TRIANGLE = 6
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: RW4_PYRAMID_ERR_MASS_SINGULAR = 7
 

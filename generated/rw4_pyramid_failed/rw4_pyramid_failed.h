@@ -25,8 +25,8 @@ extern "C" {
 #define RW4_PYRAMID_FAILED_NX 10   /* states */
 #define RW4_PYRAMID_FAILED_NP 3   /* parameters */
 #define RW4_PYRAMID_FAILED_NC 4   /* hoisted constants */
-#define RW4_PYRAMID_FAILED_COND 3  /* c[RW4_PYRAMID_FAILED_COND]: condition number of the mass
-                           matrix's coupled block [[I~11, I~13], [I~13, I~33]] */
+#define RW4_PYRAMID_FAILED_COND 3  /* c[RW4_PYRAMID_FAILED_COND]: condition number of the lumped
+                           inertia I~ (3x3), ||I~||_F ||I~^-1||_F */
 
 /*
  * State vector x[RW4_PYRAMID_FAILED_NX] (SI units):
@@ -50,19 +50,25 @@ extern "C" {
  *   m_a = 800.0, I11 = 420.0, I22 = 380.0, I33 = 300.0, I12 = -4.0, I13 =
  *   6.0, I23 = 2.5
  *
- * Motor torque T, constant: on B about a2, and -T on A.
- * Translation: the mass center AB* moves under gravity g along +n3.
- * The rotor angle q4 is not a state: nothing depends on it.
+ * Rotor B1: axis g1 = (0.57735, 0, 0.816497) in A, B1* at (0.3, 0, -0.2) m from A*;
+ *   speed controller T = -k (w1 - g1.w_A - w_ref), k = 0.05, w_ref = p[w_ref_1];
+ *   friction b = 2e-05 N m s, |T| clamped to 0.2 N m.
+ * Rotor B2: axis g2 = (0, 0.57735, 0.816497) in A, B2* at (0, 0.3, -0.2) m from A*;
+ *   speed controller T = -k (w2 - g2.w_A - w_ref), k = 0.05, w_ref = p[w_ref_2];
+ *   friction b = 2e-05 N m s, |T| clamped to 0.2 N m.
+ * Rotor B3: axis g3 = (-0.57735, 0, 0.816497) in A, B3* at (-0.3, 0, -0.2) m from A*;
+ *   speed controller T = -k (w3 - g3.w_A - w_ref), k = 0.05, w_ref = p[w_ref_3];
+ *   friction b = 2e-05 N m s, |T| clamped to 0.2 N m.
+ * Rotor B4: axis g4 = (0, -0.57735, 0.816497) in A, B4* at (0, -0.3, -0.2) m from A*;
+ *   no motor torque;
+ *   friction b = 2e-05 N m s.
+ * No translation: the system's mass center is fixed in A and free in N.
+ * The rotor angles are not states: nothing depends on them.
  */
 
 /* Return codes of rw4_pyramid_failed_setup, checked in this order. */
 #define RW4_PYRAMID_FAILED_OK            0  /* parameters accepted */
 #define RW4_PYRAMID_FAILED_ERR_NONFINITE 1  /* a parameter is NaN or infinite */
-#define RW4_PYRAMID_FAILED_ERR_MASS      2  /* a mass (m_a or m_b) is not positive */
-#define RW4_PYRAMID_FAILED_ERR_ROTOR_INERTIA 3  /* a rotor inertia (I or J) is not positive */
-#define RW4_PYRAMID_FAILED_ERR_CARRIER_NOT_PD 4  /* the carrier inertia is not positive definite */
-#define RW4_PYRAMID_FAILED_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
-#define RW4_PYRAMID_FAILED_ERR_ROTOR_TRIANGLE 6  /* the rotor violates the triangle inequality (2 I < J) */
 #define RW4_PYRAMID_FAILED_ERR_MASS_SINGULAR 7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 
 /*

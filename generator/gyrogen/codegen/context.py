@@ -14,10 +14,13 @@ import gyrogen
 from gyrogen.abi import (
     CLUSTER_OUTPUT_DOC,
     OUTPUT_DOC,
+    SETUP_CODES,
+    Code,
     unit_and_doc,
 )
 from gyrogen.methods import METHODS, Method
 from gyrogen.scene import Scene
+from gyrogen.setup_checks import CHECKS
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
@@ -117,6 +120,27 @@ class Unit:
         return bool(self.scene.rotors)
 
     @property
+    def setup_codes(self) -> list[Code]:
+        """The codes setup can return: a cluster's inertial values are folded
+        and checked by the scene validator, so its setup makes only the
+        'finite' and 'bound' checks (codegen.checks.printed)."""
+        made = {c.code for c in CHECKS if not self.cluster or c.kind in ("finite", "bound")}
+        return [code for code in SETUP_CODES if code.value == 0 or code.value in made]
+
+    @property
+    def rotor_doc(self) -> list[str]:
+        """A cluster's rotors for the header: axis, position, law, friction, limit."""
+        out = []
+        for k, r in enumerate(self.scene.rotors, 1):
+            g = ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
+            at = ", ".join(f"{x:.6g}" for x in r.position)
+            out.append(f"Rotor B{k}: axis g{k} = ({g}) in A, B{k}* at ({at}) m from A*;")
+            out.append(f"  {_law_doc(r.law(), r.torque, k)};")
+            limit = "" if r.tau_max is None else f", |T| clamped to {r.tau_max:g} N m"
+            out.append(f"  friction b = {r.b:g} N m s{limit}.")
+        return out
+
+    @property
     def torque_table(self) -> list[tuple[float, float]] | None:
         return self.scene.effects.torque_table
 
@@ -194,3 +218,14 @@ def build_id(scene: Scene) -> str:
 def make_unit(scene: Scene) -> Unit:
     eqs = specialize(scene)
     return Unit(scene, eqs, optimize(eqs, jacobian="rodas4" in scene.integrators))
+
+
+def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:
+    """A rotor's torque law in words, its values or their p[] names."""
+    v = {key: f"p[{key}_{k}]" if val == "runtime" else f"{val:g}" for key, val in law.items()}
+    if torque == "constant":
+        return f"motor torque T = {v['T']} N m"
+    if torque == "speed_controller":
+        return (f"speed controller T = -k (w{k} - g{k}.w_A - w_ref), k = {v['k']}, "
+                f"w_ref = {v['w_ref']}")  # fmt: skip
+    return "no motor torque"

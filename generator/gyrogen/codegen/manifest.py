@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from gyrogen.abi import SETUP_CODES, SIGNATURES
+from gyrogen.abi import SIGNATURES
 from gyrogen.codegen.context import Unit
 
 
@@ -42,7 +42,7 @@ def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
             "rhs": SIGNATURES["rhs"].c("rhs"),
             "outputs": SIGNATURES["output"].c("output"),
         },
-        "setup_codes": {str(code.value): code.message for code in SETUP_CODES},
+        "setup_codes": {str(code.value): code.message for code in unit.setup_codes},
         "ops": unit.ops,
         "full_model": {"nx": full.nx, "np": full.np, "ops": full.ops},
         "files": files,
