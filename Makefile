@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
+.PHONY: setup system-deps run test lint generate check-generated bench bench-clusters bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
 
 ## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake, pkg-config) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -59,6 +59,11 @@ check-generated: setup
 bench: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-rhs --out bench-out
+	$(BIN)/python tests/bench_clusters.py
+
+## bench-clusters: the cluster scenes' rhs, hoisted against an M-solve per call (ops, ns per state), ops vs N
+bench-clusters: setup
+	$(BIN)/python tests/bench_clusters.py
 
 ## bench-ensemble: lane-batched ensembles and the single trajectory against numbalsoda and diffrax
 bench-ensemble: setup
@@ -72,11 +77,13 @@ report: setup
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 	$(BIN)/gyrogen bench-ensemble --out report
 
-## fuzz: the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes with a
+## fuzz: the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS clusters) with a
 ## fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
 FUZZ_EXAMPLES ?= 2000
+FUZZ_CLUSTERS ?= 200
 fuzz: setup
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
+	$(BIN)/python tests/fuzz_scenes.py --clusters --examples $(FUZZ_CLUSTERS) --out fuzz-failures
 
 ## fmu-agreement: the FMUs of the default, quaternion and stiff scenes in FMPy (Co-Simulation
 ## and Model Exchange) against `gyrogen simulate` over each scene's t_end (the suite runs 1 s)

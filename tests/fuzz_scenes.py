@@ -1,6 +1,6 @@
 """`make fuzz`: the scene-space property test at scale, with a fresh seed.
 
-    python tests/fuzz_scenes.py [--examples N] [--jobs J] [--seed S] [--out DIR]
+    python tests/fuzz_scenes.py [--examples N] [--jobs J] [--seed S] [--out DIR] [--clusters]
 
 Draws N scenes (default 2000) in J processes (default: every core), each a
 shard of tests/scene_space.py's strategy with its own seed, checks each
@@ -23,15 +23,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from scene_space import run_shard
+from scene_space_clusters import clusters
 
 SHARD = 100
 """Examples per task: small enough that the progress line moves."""
 
 
-def _task(seed: int, examples: int, out: str) -> tuple[dict[str, int], list[str]]:
+def _task(seed: int, examples: int, out: str, clustered: bool) -> tuple[dict[str, int], list[str]]:
     with tempfile.TemporaryDirectory(prefix="gyrogen-fuzz-cache-") as cache:
         os.environ["GYROGEN_CACHE"] = cache  # builds die with the task: the disk stays clean
-        return run_shard(seed, examples, Path(out))
+        return run_shard(seed, examples, Path(out), clusters() if clustered else None)
 
 
 def main() -> int:
@@ -40,6 +41,7 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=len(os.sched_getaffinity(0)))
     ap.add_argument("--seed", type=int, default=None, help="default: a fresh one")
     ap.add_argument("--out", type=Path, default=Path("fuzz-failures"))
+    ap.add_argument("--clusters", action="store_true", help="draw [[rotors]] clusters instead")
     args = ap.parse_args()
     if args.examples < 1 or args.jobs < 1:
         ap.error("--examples and --jobs must be at least 1")
@@ -52,7 +54,10 @@ def main() -> int:
     failures: list[str] = []
     t0 = time.monotonic()
     with ProcessPoolExecutor(args.jobs) as pool:
-        futures = [pool.submit(_task, base + i, n, str(args.out)) for i, n in enumerate(sizes)]
+        futures = [
+            pool.submit(_task, base + i, n, str(args.out), args.clusters)
+            for i, n in enumerate(sizes)
+        ]
         for fut in as_completed(futures):
             counts, found = fut.result()
             for k, v in counts.items():

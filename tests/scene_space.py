@@ -188,6 +188,12 @@ SPECIAL.update({n: [1.0, 0.5] for n in ("m_a", "m_b")})
 """Round values a user writes, where they keep the system physical."""
 
 
+TARGET_LISTS = st.permutations(["c", "fortran"]).flatmap(
+    lambda t: st.integers(1, 2).map(lambda k: t[:k]))  # fmt: skip
+INTEGRATOR_LISTS = st.permutations(INTEGRATORS).flatmap(
+    lambda t: st.integers(0, len(t)).map(lambda k: t[:k]))  # fmt: skip
+
+
 @st.composite
 def scenes(draw: st.DrawFn) -> Draw:
     name, description = draw(names), draw(descriptions)
@@ -226,11 +232,9 @@ def scenes(draw: st.DrawFn) -> Draw:
         "name": name,
         "description": description,
         "attitude": attitude,
-        "targets": draw(st.permutations(["c", "fortran"]).flatmap(
-            lambda t: st.integers(1, 2).map(lambda k: t[:k]))),
-        "integrators": draw(st.permutations(INTEGRATORS).flatmap(
-            lambda t: st.integers(0, len(t)).map(lambda k: t[:k]))),
-    }  # fmt: skip
+        "targets": draw(TARGET_LISTS),
+        "integrators": draw(INTEGRATOR_LISTS),
+    }
     tables = {
         "parameters": {n: "runtime" if n in runtime else values[n] for n in needed},
         "effects": effects,
@@ -376,9 +380,11 @@ def _largest_rate(f: object, x0: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(jac))))
 
 
-def run_shard(seed_: int, examples: int, failures: Path | None) -> tuple[dict[str, int], list[str]]:
-    """Draw and check `examples` scenes from seed_, without stopping or
-    shrinking at a failure: every failure is kept (a TOML each in failures).
+def run_shard(
+    seed_: int, examples: int, failures: Path | None, drawn: object = None
+) -> tuple[dict[str, int], list[str]]:
+    """Draw (from drawn, else scenes()) and check `examples` scenes from seed_, not stopping
+    or shrinking at a failure: every failure is kept (a TOML each in failures).
     Returns the counts (examples, checked, refused, failed) and the messages."""
     counts = {"examples": 0, "checked": 0, "refused": 0, "failed": 0}
     found: list[str] = []
@@ -391,7 +397,7 @@ def run_shard(seed_: int, examples: int, failures: Path | None) -> tuple[dict[st
         phases=[Phase.generate],
         suppress_health_check=list(HealthCheck),
     )
-    @given(scenes())
+    @given(drawn if drawn is not None else scenes())
     def one(drawn: Draw) -> None:
         counts["examples"] += 1
         try:

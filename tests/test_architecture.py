@@ -10,8 +10,8 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "generator" / "gyrogen"
 STAGES = (
-    ("errors", "abi", "methods", "tableaus", "physics", "setup_checks", "files"),
-    ("scene", "scene_rules", "sweep_spec"),
+    ("errors", "abi_rotors", "abi", "methods", "tableaus", "physics", "setup_checks", "files"),
+    ("scene", "scene_rules", "scene_rotors", "sweep_spec"),
     ("symbolic",),
     ("codegen",),
     ("runtime",),

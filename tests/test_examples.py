@@ -4,6 +4,7 @@ computes: the same RK4 run with the numpy reference as the right-hand side."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -11,7 +12,8 @@ import numpy as np
 import pytest
 
 from gyrogen import abi
-from gyrogen.oracle import reference
+from gyrogen.oracle import reference, scene_view
+from gyrogen.scene import load
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
@@ -102,7 +104,7 @@ def test_cpp_prints_the_reference_rhs(programs: Path) -> None:
 
 def test_make_run_prints_each_program(source_dir: Path, programs: Path) -> None:
     """`make -C examples run` (what `make examples` calls) builds and runs all
-    three (in the build directory `programs` made, so nothing is rebuilt)."""
+    four (in the build directory `programs` made, so nothing is rebuilt)."""
     proc = subprocess.run(
         ["make", "-s", "-C", str(EXAMPLES), f"BUILD={programs}", f"GEN={source_dir}", "run"],
         capture_output=True,
@@ -111,7 +113,8 @@ def test_make_run_prints_each_program(source_dir: Path, programs: Path) -> None:
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     headers = [line for line in proc.stdout.splitlines() if line.startswith("== ")]
-    assert [Path(h[3:]).name for h in headers] == ["embed_c", "embed_fortran", "embed_cpp"]
+    names = [Path(h[3:]).name for h in headers]
+    assert names == ["embed_c", "embed_fortran", "embed_cpp", "embed_cluster"]
 
 
 def test_programs_come_from_the_installed_package(programs: Path) -> None:
@@ -119,3 +122,59 @@ def test_programs_come_from_the_installed_package(programs: Path) -> None:
     cache = (programs / "app" / "CMakeCache.txt").read_text()
     assert f"gyrostat_DIR:PATH={programs}/prefix/lib/cmake/gyrostat" in cache
     assert (programs / "prefix" / "include" / "gyrostat" / "gyrostat_mod.mod").is_file()
+    assert f"rw4_pyramid_DIR:PATH={programs}/prefix/lib/cmake/rw4_pyramid" in cache
+
+
+CLUSTER = "rw4_pyramid"
+CLUSTER_P = np.array([100.0, -50.0, 80.0, 30.0])
+CLUSTER_X0 = np.array([0.0, 0.0, 0.0, 0.01, 0.02, -0.01, 90.0, -40.0, 60.0, 30.0])
+
+
+def test_cluster_example_matches_python(programs: Path) -> None:
+    """embed_cluster: the same RK4 run on the cluster's numpy reference; H
+    about the mass center held (the clamped motors are internal torques);
+    each motor's power as the reference has it."""
+    scene = load(CLUSTER)
+    out = run(programs / "embed_cluster")
+    assert list(out) == [*scene.states, *H_NAMES, "H_norm", "H_drift", "P1", "P2", "P3", "P4"]
+    x = CLUSTER_X0
+    for _ in range(STEPS):  # the example's RK4, step for step, on the reference
+        k1 = scene_view.rhs(scene, x, CLUSTER_P)[0]
+        k2 = scene_view.rhs(scene, x + 0.5 * DT * k1, CLUSTER_P)[0]
+        k3 = scene_view.rhs(scene, x + 0.5 * DT * k2, CLUSTER_P)[0]
+        k4 = scene_view.rhs(scene, x + DT * k3, CLUSTER_P)[0]
+        x = x + DT / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    got = np.array([out[name] for name in scene.states])
+    np.testing.assert_allclose(got, x, rtol=1e-9, atol=1e-12)
+    assert out["H_drift"] <= 1e-12 * out["H_norm"]
+    power = scene_view.output(scene, "power", x[None, :], CLUSTER_P)[0]
+    np.testing.assert_allclose([out[f"P{k}"] for k in (1, 2, 3, 4)], power, rtol=1e-9, atol=1e-12)
+
+
+def test_cluster_example_links_the_lib_package(programs: Path, tmp_path: Path, cli) -> None:
+    """`gyrogen generate rw4_pyramid --lib`: a parent CMake project adds the
+    package and links embed_cluster against it, built static and shared
+    (BUILD_SHARED_LIBS); both print what the installed-package program prints."""
+    parent = tmp_path / "parent"
+    code, _, err = cli(["generate", CLUSTER, "--lib", "--out", str(parent / CLUSTER)])
+    assert code == 0, err
+    shutil.copy(EXAMPLES / "embed_cluster" / "main.c", parent / "app.c")
+    (parent / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.15)\n"
+        "project(app LANGUAGES C)\n"
+        f"add_subdirectory({CLUSTER})\n"
+        "add_executable(app app.c)\n"
+        f"target_link_libraries(app PRIVATE {CLUSTER}::{CLUSTER} m)\n"
+    )
+    made = run(programs / "embed_cluster")
+    for shared in ("OFF", "ON"):
+        build = tmp_path / f"build-{shared}"
+        for cmd in (
+            ["cmake", "-S", str(parent), "-B", str(build), f"-DBUILD_SHARED_LIBS={shared}"],
+            ["cmake", "--build", str(build)],
+        ):
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            assert proc.returncode == 0, proc.stdout + proc.stderr
+        linked = run(build / "app")
+        assert list(linked) == list(made)
+        np.testing.assert_allclose(list(linked.values()), list(made.values()), rtol=1e-12)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 from scene_space import Draw, check, run_shard
+from scene_space_clusters import clusters
 
 SHARDS = 4
 EXAMPLES = 25
@@ -24,6 +25,19 @@ def test_every_drawn_scene_keeps_the_promise(
     counts, failures = run_shard(1000 + shard, EXAMPLES, tmp_path / "failures")
     assert not failures, "\n\n".join(failures)
     assert counts["examples"] == EXAMPLES and counts["checked"] >= EXAMPLES // 2, counts
+
+
+CLUSTER_EXAMPLES = 4
+"""Drawn cluster scenes in CI (N = 1..6 rotors: each derived with KanesMethod)."""
+
+
+def test_every_drawn_cluster_keeps_the_promise(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    counts, failures = run_shard(2000, CLUSTER_EXAMPLES, tmp_path / "failures", clusters())
+    assert not failures, "\n\n".join(failures)
+    assert counts["examples"] == CLUSTER_EXAMPLES and counts["checked"] >= 1, counts
 
 
 REGRESSIONS = sorted((Path(__file__).parent / "regressions").glob("*.toml"))

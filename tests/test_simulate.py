@@ -314,3 +314,15 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     assert any(line.startswith(f"method {method}: ") for line in said)
     assert np.all(np.isfinite(res.trajectory.x)) and res.trajectory.x.shape[0] == 21
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-9
+
+
+def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
+    """rw4_pyramid's figure: its rotor panel shows the four wheels' rates
+    relative to the carrier (a cluster has no u4)."""
+    from matplotlib.image import imread
+
+    from gyrogen.analysis import plots, simulate
+
+    scene = load("rw4_pyramid")
+    simulate.run(scene, tmp_path / "o", simulate.Settings(2.0, 0.1, "dop853", True))
+    assert imread(tmp_path / "o" / "trajectory.png").shape[:2] == plots.PIXELS

@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen import abi
+from gyrogen import abi, methods
 from gyrogen.analysis import check_cases, check_engine
+from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.runtime import scene_build
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import builtin_text
@@ -176,3 +177,48 @@ def test_scene_check_cannot_run_is_one_line_exit_2(
         "pair (dop853 or dopri5) and an implicit method (radau5 or rodas4, with the "
         f"Jacobian): add {add}\n"
     )
+
+
+def _quick(name: str) -> check_engine.Case:
+    return next(c for c in QUICK if c.name.startswith(name))
+
+
+def test_cluster_saturation_clamps_then_releases_with_the_energy_balanced(
+    compiled: dict[str, Compiled],
+) -> None:
+    """rw4_pyramid from w1..w3 10 rad/s off their w_ref: the clamp holds their
+    motors at the start and lets go before the end; the times it switches are
+    among the samples, so the quadrature of the clamped power keeps the
+    energy balance to rounding."""
+    case = _quick("cluster wheel saturation")
+    res = check_engine.run_case(case, compiled[case.scene.name])
+    assert res.passed and res.trajectory is not None and res.times is not None
+    p = np.array([case.params[n] for n in case.scene.runtime])
+    runtime = scene_view.values(case.scene, p)
+    held = cluster_reference.clamp_margins(case.scene, res.trajectory, runtime) > 0
+    assert held[0, :3].all() and not held[-1].any()  # wheel 4 starts at its w_ref
+    assert len(res.times) > case.samples + 1  # the switching times, added
+    assert res.drift["energy balance"] < 1e-13 and res.drift["|H| in N"] < 1e-13
+
+
+def test_cluster_stiff_controllers_take_the_implicit_method(compiled: dict[str, Compiled]) -> None:
+    case = _quick("cluster speed controllers k/J=100000")
+    res = check_engine.run_case(case, compiled[case.scene.name])
+    assert res.method == methods.STIFF_CHOICE[0] and res.recommended.startswith("implicit")
+    assert res.stiffness > 1e5 and max(res.drift.values()) < 1e-13
+
+
+def test_cluster_parallel_axes_warned_then_refused(compiled: dict[str, Compiled]) -> None:
+    """On the real carrier, parallel axes leave the dynamics well conditioned
+    (only the torque span is warned); on a tiny carrier the lumped inertia
+    loses the common axis: warned above 1e8, refused above 1e13."""
+    span, warned, refused = (
+        _quick(f"cluster ~parallel: tilt {t}") for t in ("0.01", "1e-5", "1e-8")
+    )
+    res = check_engine.run_case(span, compiled[span.scene.name])
+    assert res.condition < 10 and "wheel axes nearly fail to span space" in res.diagnosis
+    res = check_engine.run_case(warned, compiled[warned.scene.name])
+    assert res.passed and "mass matrix condition number 1.4e+10 > 1e+08" in res.diagnosis
+    res = check_engine.run_case(refused, None)
+    assert res.verdict == "refused" and res.passed
+    assert "rotors: the lumped inertia has condition number 4.71e+14 > 1e+13" in res.diagnosis

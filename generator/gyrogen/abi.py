@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from gyrogen.abi_rotors import ROTOR_KEYS
+
 STATES: tuple[str, ...] = tuple(f"q{i}" for i in range(1, 8)) + tuple(f"u{i}" for i in range(1, 8))
 """q1..q3: 3-1-2 Euler angles of the carrier A in N; q4: rotor angle about a2
 relative to A; q5..q7: position of the mass center AB* in N; u1..u3: angular
@@ -41,6 +43,8 @@ UNITS: dict[str, tuple[str, str]] = {
     "I22": ("kg m^2", "carrier inertia about A*, a2a2"),
     "I33": ("kg m^2", "carrier inertia about A*, a3a3"),
     "I13": ("kg m^2", "carrier product of inertia about A*, a1a3"),
+    "I12": ("kg m^2", "carrier product of inertia about A*, a1a2 (clusters)"),
+    "I23": ("kg m^2", "carrier product of inertia about A*, a2a3 (clusters)"),
     "I": ("kg m^2", "rotor transverse inertia about B*"),
     "J": ("kg m^2", "rotor axial inertia about B* (axis a2)"),
     "l1": ("m", "B* from A* along a1"),
@@ -72,6 +76,19 @@ UNITS: dict[str, tuple[str, str]] = {
 """Every parameter's and state's unit and meaning, as the headers document them."""
 
 
+def unit_and_doc(name: str) -> tuple[str, str]:
+    """A state's or parameter's unit and meaning: UNITS, or a cluster's derived name."""
+    if name in UNITS:
+        return UNITS[name]
+    if name.startswith("th") and name[2:].isdigit():
+        return ("rad", f"angle of rotor B{name[2:]} about g{name[2:]} relative to A")
+    if name.startswith("w") and name[1:].isdigit():
+        return ("rad/s", f"absolute angular velocity of rotor B{name[1:]}, along g{name[1:]}")
+    key, _, k = name.rpartition("_")
+    unit, doc = ROTOR_KEYS[key]
+    return unit, doc.format(k=k)
+
+
 CONTROLLER_PARAMETERS = ("k", "w_ref")
 """Speed controller T = -k (u4 - u2 - w_ref): gain (N m s) and reference rate (rad/s);
 runtime ones follow PARAMETERS in p[]."""
@@ -82,6 +99,15 @@ OUTPUT_DOC: dict[str, tuple[str, str]] = {
     "power": ("W", "power of the motor torque, T (u4 - u2)"),
 }
 """The optional output functions: unit and what they compute."""
+CLUSTER_OUTPUT_DOC: dict[str, tuple[str, str]] = {
+    **OUTPUT_DOC,
+    "angular_momentum": (
+        "kg m^2/s",
+        "angular momentum about the mass center, N components h[0..2]",
+    ),
+    "power": ("W", "power of each motor, T_k (w_k - g_k.w_A), out[k-1]"),
+}
+"""The output functions of a rotor cluster."""
 
 
 @dataclass(frozen=True)
@@ -276,6 +302,11 @@ STATS_FIELDS: tuple[StatsField, ...] = (
 # refuses it above MAX_CONDITION, `gyrogen check` warns above WARN_CONDITION.
 MAX_CONDITION = 1e13
 WARN_CONDITION = 1e8
+AXES_SPAN_WARN = 1e-3
+"""`gyrogen check` warns when a cluster's axes nearly fail to span space:
+the smallest over the largest singular value of G = [g_1 .. g_N] below this
+(the wheels cannot then exert torque about some direction; the dynamics is
+unaffected unless the carrier's own inertia is small, see MAX_CONDITION)."""
 
 # Relative slack of the triangle-inequality checks: equality is physical (a
 # lamina, a thin disc), and rounding must not refuse it.

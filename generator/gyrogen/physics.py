@@ -69,3 +69,53 @@ def body_momentum(
     component is NOTES.md's H_a of the spin-stability criterion."""
     a11, a22, a33, a13 = lumped
     return a11 * u1 + a13 * u3, a22 * u2 + J * u4, a13 * u1 + a33 * u3
+
+
+Matrix3 = list[list[Value]]
+Rotor = tuple[Value, Value, Any, Any]
+"""(m, I, g, r): mass, transverse inertia, unit axis and B* from A* (3-sequences)."""
+
+
+def cluster_inertia(m_a: Value, carrier: Matrix3, rotors: list[Rotor]) -> Matrix3:
+    """A rotor cluster's lumped inertia about its mass center C, A-components:
+    the carrier about A* and each rotor's transverse inertia I (1 - g g^T),
+    plus every mass's offset from C (A* at the origin, C = sum m r / M); the
+    axial inertias J stay with the wheel rates."""
+    total = m_a + sum(m for m, _, _, _ in rotors)
+    c = [sum(m * r[i] for m, _, _, r in rotors) / total for i in range(3)]
+    points = [(m_a, [-x for x in c])] + [
+        (m, [r[i] - c[i] for i in range(3)]) for m, _, _, r in rotors
+    ]
+    out = [[carrier[i][j] for j in range(3)] for i in range(3)]
+    for i in range(3):
+        for j in range(3):
+            for m, rho in points:
+                out[i][j] += m * (
+                    (rho[0] ** 2 + rho[1] ** 2 + rho[2] ** 2) * int(i == j) - rho[i] * rho[j]
+                )
+            for _, inertia, g, _ in rotors:
+                out[i][j] += inertia * (int(i == j) - g[i] * g[j])
+    return out
+
+
+def adjugate(a: Matrix3) -> Matrix3:
+    """The adjugate of a 3x3 matrix (its inverse times its determinant)."""
+
+    def cof(i: int, j: int) -> Value:
+        r = [k for k in range(3) if k != i]
+        s = [k for k in range(3) if k != j]
+        return a[r[0]][s[0]] * a[r[1]][s[1]] - a[r[0]][s[1]] * a[r[1]][s[0]]
+
+    return [[(-1) ** (i + j) * cof(j, i) for j in range(3)] for i in range(3)]
+
+
+def frobenius_condition(a: Matrix3, sqrt: Callable[[Value], Value] = lambda x: x**0.5) -> Value:
+    """||A||_F ||A^-1||_F of a 3x3 matrix: at least its condition number and at
+    most 3 times it; infinite for a singular one (floats)."""
+    adj = adjugate(a)
+    det = sum(a[0][j] * adj[j][0] for j in range(3))
+    norm = sqrt(sum(x**2 for row in a for x in row))
+    norm_adj = sqrt(sum(x**2 for row in adj for x in row))
+    if det == 0:
+        return float("inf")
+    return norm * norm_adj / abs(det)

@@ -16,7 +16,7 @@ import stat
 import tomllib
 from functools import cache
 from importlib.resources import files
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import pydantic
 from pydantic import (
@@ -28,10 +28,11 @@ from pydantic import (
     StrictFloat,
     ValidationInfo,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
-from gyrogen import methods
+from gyrogen import methods, scene_rotors
 from gyrogen.abi import (
     CONTROLLER_PARAMETERS,
     MAX_SCENE_BYTES,
@@ -39,7 +40,9 @@ from gyrogen.abi import (
     PARAMETERS,
     STATES,
 )
+from gyrogen.abi_rotors import MAX_ROTORS
 from gyrogen.errors import SceneError
+from gyrogen.scene_rotors import Rotor
 from gyrogen.scene_rules import (
     QUATERNION,
     check_description,
@@ -136,6 +139,16 @@ class Scene(_Strict):
     """3-1-2 Euler angles q1..q3 (singular at q2 = +-pi/2), or Euler parameters
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
     simulate: Simulate = Simulate()
+    rotors: Annotated[list[Rotor], Field(max_length=MAX_ROTORS)] = Field(default_factory=list)
+    """A reaction-wheel cluster (gyrogen.scene_rotors); none: the paper's one rotor on a2."""
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: Any) -> Any:
+        """Without rotors, the dump of a scene before clusters existed (its build id)."""
+        data = handler(self)
+        if not self.rotors:
+            data.pop("rotors", None)
+        return data
 
     @field_validator("name")
     @classmethod
@@ -167,8 +180,11 @@ class Scene(_Strict):
 
     @model_validator(mode="after")
     def _consistent(self) -> Scene:
-        _check_parameter_names(self)
-        check_physics(self.parameters)
+        if self.rotors:
+            scene_rotors.check_cluster(self.parameters, self.rotors, self.effects.model_fields_set)
+        else:
+            _check_parameter_names(self)
+            check_physics(self.parameters)
         bad = sorted(set(self.simulate.initial) - set(self.states))
         if bad:
             raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
@@ -177,7 +193,8 @@ class Scene(_Strict):
             raise ValueError(
                 f"simulate.parameters: {', '.join(bad)} is not a runtime parameter of this scene"
             )
-        check_physics({**self.parameters, **self.simulate.parameters})
+        if not self.rotors:
+            check_physics({**self.parameters, **self.simulate.parameters})
         if self.attitude == "quaternion":
             check_quaternion(self.simulate.initial)
         return self
@@ -185,6 +202,9 @@ class Scene(_Strict):
     @property
     def states(self) -> tuple[str, ...]:
         """The kept states, in x[] order."""
+        if self.rotors:
+            quaternion = self.attitude == "quaternion"
+            return scene_rotors.states(self.rotors, quaternion, self.effects.rotor_angle)
         drop = set()
         if not self.effects.translation:
             drop |= {"q5", "q6", "q7", "u5", "u6", "u7"}
@@ -208,6 +228,8 @@ class Scene(_Strict):
     @property
     def runtime(self) -> tuple[str, ...]:
         """Runtime parameters, in p[] order (the model's order, then k, w_ref)."""
+        if self.rotors:
+            return scene_rotors.runtime_names(self.rotors)
         order = (*PARAMETERS, *CONTROLLER_PARAMETERS)
         return tuple(n for n in order if self.parameters.get(n) == "runtime")
 
@@ -264,6 +286,11 @@ def parse(text: str, source: str) -> Scene:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
     except RecursionError as exc:  # tomllib recurses once per level of nesting
         raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
+    return validate(data, source)
+
+
+def validate(data: dict[str, Any], source: str) -> Scene:
+    """A scene from its tables (as TOML reads them), or SceneError with the one line."""
     try:
         return Scene.model_validate(data)
     except pydantic.ValidationError as exc:

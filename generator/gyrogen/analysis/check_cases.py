@@ -17,6 +17,7 @@ import numpy as np
 
 from gyrogen import methods
 from gyrogen.abi import GIMBAL_LOCK_COS
+from gyrogen.analysis import check_clusters
 from gyrogen.analysis.check_engine import Case, Extreme, spin_prediction
 from gyrogen.errors import SceneError
 from gyrogen.oracle.scene_view import quaternion_dcm
@@ -148,6 +149,7 @@ def cases(quick: bool = False) -> list[Case]:
         *_speed_controller(quick),
         _long_run(quick),
         *_spin_stability(),
+        *check_clusters.cases(quick),
     ]
 
 

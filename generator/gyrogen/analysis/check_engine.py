@@ -18,12 +18,21 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.abi import ODE_ATTITUDE_SINGULAR, ODE_CODES, SETUP_CODES, WARN_CONDITION, message
-from gyrogen.analysis import stiffness
-from gyrogen.analysis.invariants import peak, series_at_samples
+from gyrogen.abi import (
+    AXES_SPAN_WARN,
+    ODE_ATTITUDE_SINGULAR,
+    ODE_CODES,
+    SETUP_CODES,
+    WARN_CONDITION,
+    message,
+)
+from gyrogen.analysis import invariants, stiffness
+from gyrogen.analysis.trajectory import QUAD_NODES, from_samples, sample_times
+from gyrogen.oracle import scene_view
+from gyrogen.oracle.cluster_reference import clamp_margins
 from gyrogen.physics import LUMPED_FROM, lumped_inertias
-from gyrogen.runtime.compiled import Compiled, controls
-from gyrogen.runtime.segment import integrate_segments
+from gyrogen.runtime.compiled import Compiled, Controls, controls
+from gyrogen.runtime.segment import COUNTERS, integrate_segments
 from gyrogen.scene import Scene
 
 DRIFT_BAR = 1e-10
@@ -60,6 +69,14 @@ class Case:
     samples: int = 20
     extreme: Extreme | None = None
     """None: the figure states the scene's description instead."""
+    quadrature: bool = False
+    """Judge the energy balance and the first rotor's rate by Gauss-Legendre
+    quadrature along the run (any torque law: a clamp, friction) rather than
+    in closed form; the run is sampled at the quadrature nodes too."""
+    refused_by: str = ""
+    """The scene's own validation refused the case's values (folded into the
+    code, they are checked when it is generated): its one line. Nothing is
+    built or run; scene is the nearest valid one."""
 
 
 @dataclass
@@ -94,8 +111,13 @@ def _vector(values: dict[str, float], names: tuple[str, ...], fill: float) -> np
     return np.array([values.get(n, fill) for n in names], dtype=float)
 
 
-def run_case(case: Case, comp: Compiled) -> Result:
+def run_case(case: Case, comp: Compiled | None) -> Result:
+    """comp: the case's scene built (None when the case is refused_by its scene)."""
     res = Result(case)
+    if case.refused_by or comp is None:
+        res.verdict = "refused"
+        res.diagnosis = f"generation refused the scene: {case.refused_by}"
+        return res
     scene = case.scene
     p = _vector(case.params, scene.runtime, math.nan)
     x0 = np.array([{"e0": 1.0, **case.initial}.get(s, 0.0) for s in scene.states])
@@ -111,12 +133,54 @@ def run_case(case: Case, comp: Compiled) -> Result:
     ts = np.linspace(0.0, case.t_end, case.samples + 1)
     steps = max(1, case.steps // case.samples)
     given = controls(res.method, steps=steps, rtol=1e-12, atol=1e-12, max_steps=10**8)
-    seg = integrate_segments(comp, res.method, x0, c, ts, given)
-    res.stats, res.code, res.intervals = seg.totals, seg.code, seg.intervals
-    res.stopped = seg.stopped
-    res.trajectory, res.times = seg.states, ts[: len(seg.states)]
+    if case.quadrature:
+        ts = _with_clamp_switches(comp, res.method, (x0, c, p), ts, given, scene)
+    times = sample_times(ts) if case.quadrature else ts
+    seg = integrate_segments(comp, res.method, x0, c, times, given)
+    res.stats, res.code, res.stopped = seg.totals, seg.code, seg.stopped
+    every = QUAD_NODES + 1 if case.quadrature else 1
+    res.intervals = _merged(seg.intervals, every)
+    res.trajectory, res.times = seg.states[::every], ts[: len(seg.states[::every])]
+    if case.quadrature and seg.code == 0:
+        traj = from_samples(ts, times, seg.states, 0, 0.0)
+        res.drift_series = invariants.by_quadrature(scene, p, traj)
     _judge(res, p, c, comp)
     return res
+
+
+def _merged(intervals: tuple[dict[str, Any], ...], every: int) -> tuple[dict[str, Any], ...]:
+    """Each run of `every` consecutive intervals' statistics as one: the
+    counters summed, the time reached and the last step of its last."""
+    out = []
+    for i in range(0, len(intervals), every):
+        group = intervals[i : i + every]
+        out.append({**group[-1], **{k: sum(s[k] for s in group) for k in COUNTERS}})
+    return tuple(out)
+
+
+def _with_clamp_switches(
+    comp: Compiled, method: str, start: tuple[np.ndarray, ...], ts: np.ndarray,
+    given: Controls, scene: Scene,
+) -> np.ndarray:  # fmt: skip
+    """ts and the times a wheel's motor enters or leaves its clamp, found by
+    bisection on the integrated state to rounding: the power's slope jumps
+    there, and quadrature keeps its order only on either side of a jump."""
+    x0, c, p = start
+    if not any(r.tau_max is not None for r in scene.rotors):
+        return ts
+    runtime = scene_view.values(scene, p)
+    xs = integrate_segments(comp, method, x0, c, ts, given).states
+    held = clamp_margins(scene, xs, runtime) > 0
+    switches = []
+    for i, k in zip(*np.nonzero(held[1:] != held[:-1]), strict=True):
+        a, b = float(ts[i]), float(ts[i + 1])
+        while a < (mid := 0.5 * (a + b)) < b:
+            x, _, _ = comp.integrate(method, xs[i], c, float(ts[i]), mid, **given)
+            a, b = (
+                (mid, b) if (clamp_margins(scene, x, runtime)[0, k] > 0) == held[i, k] else (a, mid)
+            )
+        switches.append(0.5 * (a + b))
+    return np.union1d(ts, switches)
 
 
 def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
@@ -137,8 +201,9 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
             res.verdict = "failed"
             res.diagnosis = f"{where}: {message(ODE_CODES, res.code)}"
         return
-    res.drift_series = series_at_samples(scene, p, xs, res.times)
-    res.drift = {name: peak(values) for name, values in res.drift_series.items()}
+    if not case.quadrature:
+        res.drift_series = invariants.series_at_samples(scene, p, xs, res.times)
+    res.drift = {name: invariants.peak(values) for name, values in res.drift_series.items()}
     later = stiffness.index(comp, c, xs[:: max(1, len(xs) // 5)], case.t_end)
     res.stiffness = max(res.stiffness, later)
     if case.expect in ("stable", "unstable"):
@@ -150,8 +215,24 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
             f"warning: mass matrix condition number {res.condition:.2g} > {WARN_CONDITION:g}"
         )
+    span = axes_span(scene)
+    if span < AXES_SPAN_WARN:
+        res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
+            f"warning: the wheel axes nearly fail to span space (singular values of "
+            f"[g_1 .. g_N] in ratio {span:.2g} < {AXES_SPAN_WARN:g}): "
+            "too little torque about some direction"
+        )
     if _near_gimbal_lock(scene, xs).any() and not res.diagnosis:
         res.diagnosis = "passes near gimbal lock: quaternions would be cheaper"
+
+
+def axes_span(scene: Scene) -> float:
+    """Smallest over largest singular value of a cluster's axes [g_1 .. g_N]
+    (1 below three wheels, which cannot span space anyway, and without rotors)."""
+    if len(scene.rotors) < 3:
+        return 1.0
+    sv = np.linalg.svd(np.array([r.unit_axis for r in scene.rotors], dtype=float), compute_uv=False)
+    return float(sv[-1] / sv[0])
 
 
 def _near_gimbal_lock(scene: Scene, xs: np.ndarray) -> np.ndarray:

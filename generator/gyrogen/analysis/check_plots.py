@@ -33,7 +33,7 @@ def png(res: Result) -> bytes:
     """The case's figure as PNG bytes of exactly plots.PIXELS."""
     fig = Figure(figsize=SIZE_INCHES, dpi=DPI, layout="constrained")
     fig.suptitle(f"gyrogen check: {res.case.name}")
-    if res.setup_code != 0:
+    if res.setup_code != 0 or res.case.refused_by:
         _refused(fig.subplots(), res)
         return png_bytes(fig)
     (steps, drift), (extreme, summary) = fig.subplots(2, 2)
@@ -69,6 +69,12 @@ def _refused(ax: Axes, res: Result) -> None:
         "parameters: " + params,
         f"scene: {case.scene.name}",
     ]
+    if case.refused_by:  # the scene's own rules refused the values folded into it
+        lines = [
+            f"REFUSED at generation, {verdict}: nothing was built or integrated.",
+            "",
+            case.refused_by,
+        ]
     if case.extreme is not None and case.extreme.values is None:
         lines += ["", case.extreme.label]
     _words(ax, 0.95, "\n".join(lines), 13, width=100)

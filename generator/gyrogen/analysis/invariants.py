@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrogen.abi import STATES
 from gyrogen.analysis.trajectory import Trajectory, running_integrals
-from gyrogen.oracle import scene_view
+from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.scene import Scene
 
 
@@ -61,6 +61,8 @@ def rates(scene: Scene, p: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarr
     """(m, 2): the power P = dK/dt and the torque T at times t (m,), states
     x (m, nx), from the scene's torque law as the reference applies it."""
     v = scene_view.values(scene, p)
+    if scene.rotors:  # dK/dt: every net torque times its wheel's relative rate; wheel 1's
+        return cluster_reference.power_and_torque(scene, x, v)
     full = scene_view.full_states(scene, x)
     if scene.effects.torque == "table":  # scene_view.torque takes one t; the table needs each
         table = np.array(scene.effects.torque_table)
@@ -104,7 +106,7 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
     h, k = momentum(scene, p, x), kinetic(scene, p, x)
     work = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs))
     h_drift, h_vector_drift = momentum_drifts(h)
-    u4 = x[:, scene.states.index("u4")]
+    u4 = x[:, scene.states.index("w1" if scene.rotors else "u4")]
     return Invariants(
         h=h,
         kinetic=k,
@@ -112,7 +114,7 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
         h_drift=h_drift,
         h_vector_drift=h_vector_drift,
         energy=balance(k, work[:, 0]),
-        u4=balance(u4, work[:, 1] / scene_view.values(scene, p)["J"]),
+        u4=balance(u4, work[:, 1] / _axial(scene, p)),
     )
 
 
@@ -124,6 +126,10 @@ def series_at_samples(
     (when the rotor angle q4 gives the motor's work) and u4 = u4(0) + T t /
     J, their integrals in closed form."""
     out = {"|H| in N": momentum_drifts(momentum(scene, p, xs))[0]}
+    if scene.rotors:  # a cluster's energy is constant when no wheel has torque or friction
+        if all(r.torque == "none" and r.b == 0 for r in scene.rotors):
+            out["energy balance"] = balance(kinetic(scene, p, xs), np.zeros(len(xs)))
+        return out
     if scene.effects.torque not in ("none", "constant"):
         return out
     v = scene_view.values(scene, p)
@@ -133,6 +139,15 @@ def series_at_samples(
         out["energy balance"] = balance(kinetic(scene, p, xs), _work(scene, v, xs))
     out["u4 = u4(0) + T t / J"] = balance(xs[:, idx["u4"]], torque * (ts - ts[0]) / v["J"])
     return out
+
+
+def by_quadrature(scene: Scene, p: np.ndarray, traj: Trajectory) -> dict[str, np.ndarray]:
+    """series_at_samples' drifts at traj's grid times for any torque law (a
+    clamp, friction): the integrals of P and of the first rotor's torque by
+    quadrature along traj."""
+    along = along_trajectory(scene, p, traj)
+    rate = "w1 = w1(0) + int net_1 dt / J_1" if scene.rotors else "u4 = u4(0) + int T dt / J"
+    return {"|H| in N": along.h_drift, "energy balance": along.energy, rate: along.u4}
 
 
 def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:
@@ -145,3 +160,8 @@ def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:
     if scene.effects.translation:  # integral of M g u7 dt = M g (q7 - q7(0))
         work += (v["m_a"] + v["m_b"]) * v["g"] * (xs[:, idx["q7"]] - xs[0, idx["q7"]])
     return work
+
+
+def _axial(scene: Scene, p: np.ndarray) -> float:
+    """J of the rotor whose rate the u4 residual follows (a cluster's wheel 1)."""
+    return scene.rotors[0].J if scene.rotors else scene_view.values(scene, p)["J"]

@@ -33,10 +33,22 @@ def _body_rates(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
 
 
 def _rotor(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
+    if scene.rotors:
+        _wheels(ax, scene, t, x)
+        return
     u2, u4 = _column(scene, x, "u2"), _column(scene, x, "u4")
     ax.plot(t, u4, label="u4 (absolute)")
     ax.plot(t, u4 - u2, "--", label="u4 - u2 (relative to carrier)")
     ax.set(title="rotor rate about a2", ylabel="rad/s")
+
+
+def _wheels(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
+    """A cluster: each wheel's rate relative to the carrier, w_k - g_k . w_A."""
+    w_a = np.column_stack([_column(scene, x, f"u{i}") for i in (1, 2, 3)])
+    for k, rotor in enumerate(scene.rotors, 1):
+        g = np.array(rotor.unit_axis, dtype=float)
+        ax.plot(t, _column(scene, x, f"w{k}") - w_a @ g, label=f"w{k} - g{k}.w_A")
+    ax.set(title="wheel rates relative to the carrier", ylabel="rad/s")
 
 
 def _attitude(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:

@@ -11,9 +11,18 @@ from importlib.metadata import version
 import sympy as sm
 
 import gyrogen
-from gyrogen.abi import OUTPUT_DOC, SIGNATURES, UNITS, Signature
+from gyrogen.abi import (
+    CLUSTER_OUTPUT_DOC,
+    OUTPUT_DOC,
+    SETUP_CODES,
+    SIGNATURES,
+    Code,
+    Signature,
+    unit_and_doc,
+)
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
+from gyrogen.setup_checks import CHECKS
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
@@ -104,7 +113,34 @@ class Unit:
 
     @property
     def outputs(self) -> list[Output]:
-        return [Output(n, b, *OUTPUT_DOC[n]) for n, b in self.optimized.outputs.items()]
+        doc = CLUSTER_OUTPUT_DOC if self.cluster else OUTPUT_DOC
+        return [Output(n, b, *doc[n]) for n, b in self.optimized.outputs.items()]
+
+    @property
+    def cluster(self) -> bool:
+        """A reaction-wheel cluster (the scene's [[rotors]]), not the paper's one rotor."""
+        return bool(self.scene.rotors)
+
+    @property
+    def setup_codes(self) -> list[Code]:
+        """The codes setup can return: a cluster's inertial values are folded
+        and checked by the scene validator, so its setup makes only the
+        'finite' and 'bound' checks (codegen.checks.printed)."""
+        made = {c.code for c in CHECKS if not self.cluster or c.kind in ("finite", "bound")}
+        return [code for code in SETUP_CODES if code.value == 0 or code.value in made]
+
+    @property
+    def rotor_doc(self) -> list[str]:
+        """A cluster's rotors for the header: axis, position, law, friction, limit."""
+        out = []
+        for k, r in enumerate(self.scene.rotors, 1):
+            g = ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
+            at = ", ".join(f"{x:.6g}" for x in r.position)
+            out.append(f"Rotor B{k}: axis g{k} = ({g}) in A, B{k}* at ({at}) m from A*;")
+            out.append(f"  {_law_doc(r.law(), r.torque, k)};")
+            limit = "" if r.tau_max is None else f", |T| clamped to {r.tau_max:g} N m"
+            out.append(f"  friction b = {r.b:g} N m s{limit}.")
+        return out
 
     def outputs_size(self, function: str) -> int:
         """The size of an output function's out[], 0 for any other function."""
@@ -129,11 +165,11 @@ class Unit:
 
     @property
     def state_rows(self) -> list[Row]:
-        return [Row(i, s.name, *UNITS[s.name]) for i, s in enumerate(self.states)]
+        return [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states)]
 
     @property
     def param_rows(self) -> list[Row]:
-        return [Row(i, s.name, *UNITS[s.name]) for i, s in enumerate(self.params)]
+        return [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.params)]
 
     @cached_property
     def setup_locals(self) -> list[Local]:
@@ -205,3 +241,14 @@ def build_id(scene: Scene) -> str:
 def make_unit(scene: Scene) -> Unit:
     eqs = specialize(scene)
     return Unit(scene, eqs, optimize(eqs, jacobian=needs_jacobian(scene.integrators)))
+
+
+def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:
+    """A rotor's torque law in words, its values or their p[] names."""
+    v = {key: f"p[{key}_{k}]" if val == "runtime" else f"{val:g}" for key, val in law.items()}
+    if torque == "constant":
+        return f"motor torque T = {v['T']} N m"
+    if torque == "speed_controller":
+        return (f"speed controller T = -k (w{k} - g{k}.w_A - w_ref), k = {v['k']}, "
+                f"w_ref = {v['w_ref']}")  # fmt: skip
+    return "no motor torque"

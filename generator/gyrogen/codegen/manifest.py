@@ -5,9 +5,10 @@ an FFI (ctypes, say) can be driven from it alone."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
-from gyrogen.abi import ODE_CODES, SETUP_CODES, STATS_FIELDS, Code
+from gyrogen.abi import ODE_CODES, STATS_FIELDS, Code
 from gyrogen.codegen.context import Unit, signature_of
 
 
@@ -38,7 +39,7 @@ def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
         "structs": {f"{p}_stats": [{"name": f.name, "ctype": f.ctype} for f in STATS_FIELDS]}
         if ode
         else {},
-        "setup_codes": _codes(SETUP_CODES),
+        "setup_codes": _codes(unit.setup_codes),
         "ode_codes": _codes(ODE_CODES) if ode else {},
         "ops": unit.ops,
         "full_model": {"nx": full.nx, "np": full.np, "ops": full.ops},
@@ -86,5 +87,5 @@ def _signature(unit: Unit, key: str, name: str) -> dict[str, Any]:
     return {"c": sig.c(name, unit.prefix), "returns": sig.returns, "args": args}
 
 
-def _codes(codes: tuple[Code, ...]) -> dict[str, str]:
+def _codes(codes: Sequence[Code]) -> dict[str, str]:
     return {str(code.value): code.message for code in codes}

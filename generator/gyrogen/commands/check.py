@@ -54,10 +54,10 @@ def check(
     with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
         for case in progress("checking", suite):
             key = build_id(case.scene)
-            if key not in compiled:
+            if key not in compiled and not case.refused_by:
                 _, built = build_scene(case.scene, Path(tmp) / key, ["c"])
                 compiled[key] = built["c"]
-            res = check_engine.run_case(case, compiled[key])
+            res = check_engine.run_case(case, compiled.get(key))
             results.append(res)
             if plots is not None:
                 from gyrogen.analysis import check_plots  # matplotlib: only for plots

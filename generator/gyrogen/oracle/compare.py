@@ -279,17 +279,18 @@ def given_parameters(scene: Scene) -> np.ndarray | None:
 
 
 def _condition(scene: Scene, p: np.ndarray) -> float:
-    full = scene_view.full_parameters(scene, p, np.zeros((1, 14)), 0.0)[0]
-    return float(sampling.lumped_condition(full))
+    return scene_view.condition(scene, p)
 
 
 def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
     """Invalid p[] vectors for a scene, with the code setup must return: the
     full model's invalid cases that change runtime entries only, and NaN in
     each runtime parameter."""
+    cases = []
+    if scene.rotors:  # only the torque laws are runtime: any finite value is valid
+        return _nan_cases(scene, base)
     full = scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
     index = {n: i for i, n in enumerate(PARAMETERS)}
-    cases = []
     for what, p_full, code in sampling.invalid_parameters(full):
         changed = {PARAMETERS[i] for i in np.flatnonzero(~(p_full == full))}
         if changed and changed <= set(scene.runtime):
@@ -297,6 +298,11 @@ def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
                 [p_full[index[r]] if r in index else base[j] for j, r in enumerate(scene.runtime)]
             )
             cases.append((what, p, code))
+    return cases + _nan_cases(scene, base)
+
+
+def _nan_cases(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
+    cases = []
     for j, name in enumerate(scene.runtime):
         p = base.copy()
         p[j] = np.nan

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
-from gyrogen.oracle import reference, sampling
+from gyrogen.oracle import cluster_reference, reference, sampling
 from gyrogen.scene import Scene
 
 _P = {n: i for i, n in enumerate(PARAMETERS)}
@@ -108,6 +108,13 @@ def full_parameters(
 
 def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     xs = np.atleast_2d(xs)
+    if scene.rotors:
+        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime))
+        if scene.attitude == "quaternion":
+            out[:, :4] = quaternion_rates(
+                xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)]
+            )
+        return out
     x_full = full_states(scene, xs)
     full = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))
     idx = state_index(scene)
@@ -123,6 +130,15 @@ def output(
     scene: Scene, name: str, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0
 ) -> np.ndarray:
     """An output function of the scene, from the reference: shape (n, size)."""
+    if scene.rotors:
+        xs = np.atleast_2d(xs)
+        if scene.attitude == "quaternion":
+            dcm = quaternion_dcm(xs[:, :4])
+        else:
+            angles = np.zeros((len(xs), len(STATES)))
+            angles[:, :3] = xs[:, :3]
+            dcm = reference.direction_cosines(angles)
+        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm)
     x_full = full_states(scene, xs)
     p = full_parameters(scene, p_runtime, x_full, t)
     if name == "kinetic_energy":
@@ -151,6 +167,8 @@ def random_runtime(
     valid runtime values a sliver the draws rarely hit."""
     if not scene.runtime:
         return np.zeros((1, 0))
+    if scene.rotors:
+        return _cluster_runtime(scene, rng, n)
     rows: list[np.ndarray] = []
     folded = scene.folded()
     for _ in range(200):
@@ -207,6 +225,8 @@ def _near_folded(draw: np.ndarray, folded: dict[str, float], rng: np.random.Gene
 def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
     """n random states of the scene: sampling.random_states restricted to the
     kept ones, with random unit quaternions for e0..e3."""
+    if scene.rotors:
+        return _cluster_states(scene, rng, n)
     full = sampling.random_states(rng, n)
     idx = state_index(scene)
     out = np.zeros((n, len(scene.states)))
@@ -214,4 +234,43 @@ def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
     if scene.attitude == "quaternion":
         e = rng.normal(size=(n, 4))
         out[:, :4] = e / np.linalg.norm(e, axis=1, keepdims=True)
+    return out
+
+
+def condition(scene: Scene, p_runtime: np.ndarray) -> float:
+    """The condition number compare groups parameter sets by: the coupled
+    block's (a cluster's: its folded inertia's, ||A||_F ||A^-1||_F)."""
+    if scene.rotors:
+        return cluster_reference.condition(scene)
+    full = full_parameters(scene, p_runtime, np.zeros((1, len(STATES))), 0.0)[0]
+    return float(sampling.lumped_condition(full))
+
+
+_CLUSTER_DRAWS = {
+    "T": lambda rng, n: rng.uniform(-0.5, 0.5, n),
+    "k": lambda rng, n: np.exp(rng.uniform(np.log(1e-2), np.log(10.0), n)),
+    "w_ref": lambda rng, n: rng.uniform(-300.0, 300.0, n),
+}
+
+
+def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
+    """A cluster's runtime values are torque laws' (T, k, w_ref): any draw is valid."""
+    cols = [_CLUSTER_DRAWS[name.rsplit("_", 1)[0]](rng, n) for name in scene.runtime]
+    return np.stack(cols, axis=1)
+
+
+def _cluster_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
+    """Attitudes away from gimbal lock (or unit quaternions), rotor angles,
+    body rates of order 1 rad/s and wheel rates up to 300 rad/s."""
+    out = np.zeros((n, len(scene.states)))
+    k = len(scene.rotors)
+    if scene.attitude == "quaternion":
+        e = rng.normal(size=(n, 4))
+        out[:, :4] = e / np.linalg.norm(e, axis=1, keepdims=True)
+    else:
+        out[:, :3] = rng.uniform(-1.4, 1.4, (n, 3))
+    if scene.effects.rotor_angle:
+        out[:, -3 - 2 * k : -3 - k] = rng.uniform(-np.pi, np.pi, (n, k))
+    out[:, -3 - k : -k] = rng.normal(size=(n, 3))
+    out[:, -k:] = rng.uniform(-300.0, 300.0, (n, k))
     return out

@@ -20,7 +20,9 @@ class Hoister:
     """Gives each parameter-only coefficient a constant, sharing equal ones
     and ones that differ only in sign."""
 
-    def __init__(self) -> None:
+    def __init__(self, gather: bool = False) -> None:
+        self.gather = gather
+        """Shape linear sums with gathered (Equations.gather)."""
         self.values: list[sm.Expr] = []
         self._index: dict[sm.Expr, int] = {}
 
@@ -52,17 +54,47 @@ def _orders(poly: sm.Poly) -> list[tuple[sm.Expr, ...]]:
     return [tuple(gens[i] for i in ranked)]
 
 
-def _best_horner(expr: sm.Expr, gens: Sequence[sm.Expr]) -> sm.Expr:
+def _best_horner(expr: sm.Expr, gens: Sequence[sm.Expr], gather: bool) -> sm.Expr:
     """Horner's scheme in the variable order that leaves the fewest ops."""
     if not gens:
         return expr
+    poly = sm.Poly(expr, *gens)
+    shape = gathered if gather else (lambda e: e)
+    if poly.total_degree() <= 1:  # linear: no order leaves fewer ops
+        return shape(expr)
     best, best_ops = expr, int(sm.count_ops(expr))
-    for order in _orders(sm.Poly(expr, *gens)):
+    for order in _orders(poly):
         cand = sm.horner(expr, *order)
         ops = int(sm.count_ops(cand))
         if ops < best_ops:
             best, best_ops = cand, ops
-    return best
+    return shape(best)
+
+
+def gathered(linear: sm.Expr) -> sm.Expr:
+    """A linear form with the terms of one |coefficient| summed before one
+    multiply: k (x - y + z) for k x - k y + k z (a cluster's symmetric
+    axes give such sums)."""
+    groups: dict[sm.Expr, list[sm.Expr]] = {}
+    rest = []
+    for term in sm.Add.make_args(linear):
+        coeff, var = term.as_coeff_Mul()
+        if coeff.is_number and var.free_symbols and abs(coeff) != 1:
+            groups.setdefault(abs(coeff), []).append(sm.sign(coeff) * var)
+        else:
+            rest.append(term)
+    if all(len(terms) < 2 for terms in groups.values()):
+        return linear
+    parts = [_times(k, terms) if len(terms) > 1 else k * terms[0] for k, terms in groups.items()]
+    return sm.Add(*rest, *parts)
+
+
+def _times(k: sm.Expr, terms: list[sm.Expr]) -> sm.Expr:
+    """k times the sum of terms, unevaluated (sympy would distribute a number
+    over a sum); -k times the negated sum when most terms are negative."""
+    if 2 * sum(t.could_extract_minus_sign() for t in terms) > len(terms):
+        k, terms = -k, [-t for t in terms]
+    return sm.Mul(k, sm.Add(*terms), evaluate=False)
 
 
 def hoist(expr: sm.Expr, per_call: Sequence[sm.Symbol], hoister: Hoister) -> sm.Expr:
@@ -90,4 +122,4 @@ def hoist(expr: sm.Expr, per_call: Sequence[sm.Symbol], hoister: Hoister) -> sm.
             for monom, coeff in poly.terms()
         )
     )
-    return _best_horner(rebuilt, gens)
+    return _best_horner(rebuilt, gens, hoister.gather)

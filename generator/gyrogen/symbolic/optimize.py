@@ -157,30 +157,57 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
     also d(dx/dt)/dx for the implicit integrators."""
     udot = block_inverse(eqs.mass_matrix) * eqs.forcing
-    hoister = Hoister()
+    hoister = Hoister(eqs.gather)
     per_call = [*eqs.states, *eqs.inputs, *eqs.shared]
     dyn = [hoist(e, per_call, hoister) for e in udot]
     shared = {s: hoist(e, per_call, hoister) for s, e in eqs.shared.items()}
     n_q = len(eqs.kinematics)
     kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
-    rhs = _cse([*kin, *dyn], _temporaries())
-    rhs = Block(tuple(Assignment(s, e) for s, e in shared.items()) + rhs.temporaries, rhs.outputs)
+    rhs = _rhs_block(shared, [*kin, *dyn], eqs.gather)
     outputs = {
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
         for name, exprs in eqs.outputs.items()
     }
-    jac = _jacobian([e.xreplace(shared) for e in (*kin, *dyn)], eqs.states) if jacobian else None
+    inline = _inlined(shared)
+    jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
 
 
+def _rhs_block(shared: dict[sm.Symbol, sm.Expr], f: list[sm.Expr], gather: bool) -> Block:
+    """The named values first, then dx/dt by CSE; with gather (a cluster),
+    one CSE over both, so the wheels' relative rates share their common
+    terms too, each assignment after those it reads."""
+    named = tuple(Assignment(s, e) for s, e in shared.items())
+    if not gather:
+        rhs = _cse(f, _temporaries())
+        return Block(named + rhs.temporaries, rhs.outputs)
+    both = _cse([*shared.values(), *f], _temporaries())
+    n = len(shared)
+    named = tuple(Assignment(s, e) for s, e in zip(shared, both.outputs[:n], strict=True))
+    return Block(_in_order(both.temporaries + named), both.outputs[n:])
+
+
+def _inlined(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
+    """Each named value in states alone: a later one may read an earlier one
+    (a wheel's net torque reads its relative rate)."""
+    out: dict[sm.Symbol, sm.Expr] = {}
+    for name, value in shared.items():
+        out[name] = value.xreplace(out)
+    return out
+
+
 def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     """lambda_max / lambda_min of a symmetric positive 2x2 block, the last
     constant of setup. lambda_min = det / lambda_max: the difference of the
     two terms of lambda_min would cancel for a badly conditioned block
-    (det: the block's determinant in a form that does not)."""
+    (det: the block's determinant in a form that does not). A rotor
+    cluster's 3x3 block, folded: ||M||_F ||M^-1||_F (physics.frobenius_condition)."""
+    if block.shape[0] == 3:
+        cond = physics.frobenius_condition(block.tolist(), sm.sqrt)
+        return as_double(cond, integers=False)
     cond = physics.condition(block[0, 0], block[0, 1], block[1, 1], det, sm.sqrt)
     return as_double(cond, integers=False) if cond.is_number else cond
 

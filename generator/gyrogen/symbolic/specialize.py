@@ -9,7 +9,7 @@ import sympy as sm
 from gyrogen.abi import CONTROLLER_PARAMETERS
 from gyrogen.scene import Scene
 from gyrogen.setup_checks import checked_parameters
-from gyrogen.symbolic import equations, model
+from gyrogen.symbolic import cluster, equations, model
 from gyrogen.symbolic.equations import Equations
 
 
@@ -55,6 +55,8 @@ def _torque(scene: Scene, v: dict[str, sm.Expr], u: dict[str, sm.Symbol]) -> sm.
 
 
 def specialize(scene: Scene) -> Equations:
+    if scene.rotors:
+        return cluster.derive(scene)
     sym = _symbols(scene)
     v = _values(scene, sym)
     full = model.lumped()

@@ -45,6 +45,10 @@ class CPrinter(WritableNumbers, C99CodePrinter):
     def _print_Float(self, expr: sm.Float) -> str:
         return c_double(float(expr))
 
+    def _print_Heaviside(self, expr: sm.Heaviside) -> str:
+        """A torque limit's slope in the Jacobian: 1 inside the clamp, 0 outside."""
+        return f"(({self._print(expr.args[0])}) > 0.0 ? 1.0 : 0.0)"
+
     def _print_Pow(self, expr: sm.Pow) -> str:
         base, exp = expr.base, expr.exp
         if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
@@ -115,7 +119,7 @@ def files(unit: Unit) -> dict[str, str]:
         "methods": unit.methods,
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("c", unit.macro),
+        "checks": printed("c", unit.macro, unit.cluster),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }
     out = {

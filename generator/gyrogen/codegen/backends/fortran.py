@@ -33,6 +33,11 @@ class FortranPrinter(WritableNumbers, FCodePrinter):
     def _print_Float(self, expr: sm.Float) -> str:
         return f_double(float(expr))
 
+    def _print_Heaviside(self, expr: sm.Heaviside) -> str:
+        """A torque limit's slope in the Jacobian: 1 inside the clamp, 0 outside."""
+        one, zero = f_double(1.0), f_double(0.0)
+        return f"merge({one}, {zero}, {self._print(expr.args[0])} > {zero})"
+
 
 def _check_names(names: list[str], where: str) -> None:
     seen: dict[str, str] = {}
@@ -70,9 +75,9 @@ def files(unit: Unit) -> dict[str, str]:
         "methods": unit.methods,
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("fortran", unit.macro),
+        "checks": printed("fortran", unit.macro, unit.cluster),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
-        "check_locals": local_names(),
+        "check_locals": () if unit.cluster else local_names(),
         "signature_of": signature_of,
     }
     out = {

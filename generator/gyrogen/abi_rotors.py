@@ -1,0 +1,42 @@
+"""The names of a reaction-wheel cluster (a scene's [[rotors]]), derived
+from the scene: rotor k = 1..N. gyrogen.abi holds the single-rotor model's
+names and reads ROTOR_KEYS for a cluster's units."""
+
+from __future__ import annotations
+
+# Reaction-wheel clusters ([[rotors]] in a scene): names derived from the
+# scene, rotor k = 1..N. The carrier's full tensor adds I12 and I23.
+CLUSTER_CARRIER = ("m_a", "I11", "I22", "I33", "I12", "I13", "I23")
+"""The carrier's keys in a cluster scene's [parameters] (I12, I23 default to 0)."""
+ROTOR_KEYS: dict[str, tuple[str, str]] = {
+    "m": ("kg", "mass of rotor B{k}"),
+    "I": ("kg m^2", "transverse inertia of rotor B{k} about B{k}*"),
+    "J": ("kg m^2", "axial inertia of rotor B{k} about B{k}*"),
+    "b": ("N m s", "viscous friction of rotor B{k}: torque -b{k} (w{k} - g{k}.w_A)"),
+    "T": ("N m", "motor torque on rotor B{k} about g{k} (minus on A)"),
+    "k": ("N m s", "speed controller gain of rotor B{k}: T = -k (w{k} - g{k}.w_A - w_ref)"),
+    "w_ref": ("rad/s", "speed controller of rotor B{k}: commanded rate relative to A"),
+    "tau_max": ("N m", "torque limit of rotor B{k}: the motor torque is clamped to +-tau_max"),
+}
+"""A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
+ROTOR_RUNTIME = ("T", "k", "w_ref")
+"""The rotor keys that may be "runtime" (the others are folded: setup then
+holds the inverse of the constant inertia as numbers)."""
+MAX_ROTORS = 6
+"""Rotors a cluster scene may have."""
+AXIS_NORM_SLACK = 1e-3
+"""A rotor axis must have length within this of 1; it is then normalized
+exactly (a longer miss is a typo, refused)."""
+
+
+def rotor_name(key: str, k: int) -> str:
+    """The name of rotor k's key in p[] and in the code: T_2, w_ref_3."""
+    return f"{key}_{k}"
+
+
+def cluster_states(n: int, quaternion: bool, angles: bool) -> tuple[str, ...]:
+    """A cluster's states in x[] order: attitude, rotor angles th1..thN (if
+    kept), body rates u1..u3, absolute wheel rates w1..wN."""
+    attitude = ("e0", "e1", "e2", "e3") if quaternion else ("q1", "q2", "q3")
+    th = tuple(f"th{k}" for k in range(1, n + 1)) if angles else ()
+    return (*attitude, *th, "u1", "u2", "u3", *(f"w{k}" for k in range(1, n + 1)))

@@ -1,0 +1,197 @@
+"""Reaction-wheel clusters: a scene's [[rotors]] tables and their rules.
+
+A cluster scene has a carrier A (mass m_a, a full symmetric inertia tensor
+about A*) and N rotors, each with its own mass, inertias, spin axis g_k
+(fixed in A, normalized exactly), position of B_k* from A*, viscous friction,
+torque law and optional torque limit. Mass, inertias and geometry are folded
+into the code (setup then holds the inverse of the constant inertia as
+numbers); the torque laws' T, k and w_ref may be "runtime". No translation:
+the system's mass center is fixed in A and free in N (a free-floating
+spacecraft). Each rule raises ValueError with the line pydantic shows.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from fractions import Fraction
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictFloat, model_validator
+
+from gyrogen import physics
+from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
+from gyrogen.abi_rotors import (
+    AXIS_NORM_SLACK,
+    CLUSTER_CARRIER,
+    ROTOR_RUNTIME,
+    cluster_states,
+    rotor_name,
+)
+from gyrogen.scene_rules import parameter_value
+
+
+def _folded(v: object) -> object:
+    if v == "runtime":
+        raise ValueError(
+            "a rotor's mass, inertias, friction and limit are folded: only "
+            f'{", ".join(ROTOR_RUNTIME)} may be "runtime"'
+        )
+    return parameter_value(v)
+
+
+Folded = Annotated[float, BeforeValidator(_folded)]
+Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
+Vector = tuple[StrictFloat, StrictFloat, StrictFloat]
+
+LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref")}
+"""The keys each torque law needs (and allows)."""
+
+
+class Rotor(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    m: Folded
+    I: Folded
+    J: Folded
+    axis: Vector
+    """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
+    position: Vector = (0.0, 0.0, 0.0)
+    """B_k* from A*, in A-components (m)."""
+    b: Annotated[Folded, Field(ge=0)] = 0.0
+    torque: Literal["none", "constant", "speed_controller"] = "none"
+    T: Value | None = None
+    k: Value | None = None
+    w_ref: Value | None = None
+    tau_max: Annotated[Folded, Field(ge=0)] | None = None
+    """|T| is clamped to tau_max (a saturating motor); refused when negative."""
+
+    @model_validator(mode="after")
+    def _rules(self) -> Rotor:
+        for name in ("m", "I", "J"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name}: must be positive (got {getattr(self, name)})")
+        if self.J > 2.0 * self.I * (1.0 + TRIANGLE_SLACK):
+            raise ValueError(f"J: rotor needs J <= 2 I (I = {self.I}, J = {self.J})")
+        norm = math.sqrt(sum(x * x for x in self.axis))
+        if norm == 0.0:
+            raise ValueError("axis: has length 0: not a direction")
+        if abs(norm - 1.0) > AXIS_NORM_SLACK:
+            raise ValueError(
+                f"axis: length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
+            )
+        need = LAW_KEYS[self.torque]
+        for key in ("T", "k", "w_ref"):
+            given = getattr(self, key) is not None
+            if given and key not in need:
+                raise ValueError(f"{key}: not used with torque = {self.torque!r}")
+            if not given and key in need:
+                raise ValueError(f"torque = {self.torque!r} needs {key}")
+        return self
+
+    @property
+    def unit_axis(self) -> tuple[Fraction, Fraction, Fraction]:
+        """g_k normalized exactly: the rational point of the unit sphere
+        nearest the axis given (within 1e-15), so that |g| = 1 holds in the
+        algebra of the generator and the mass matrix stays block-diagonal."""
+        return exact_unit(self.axis)
+
+    def law(self) -> dict[str, float | str]:
+        """The torque law's parameters by key."""
+        return {key: v for key in LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None}
+
+
+def runtime_names(rotors: list[Rotor]) -> tuple[str, ...]:
+    """p[] of a cluster: each rotor's runtime keys, rotor by rotor."""
+    return tuple(
+        rotor_name(key, k)
+        for k, r in enumerate(rotors, 1)
+        for key, v in r.law().items()
+        if v == "runtime"
+    )
+
+
+def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:
+    return cluster_states(len(rotors), quaternion, angles)
+
+
+def check_cluster(
+    parameters: Mapping[str, float | str], rotors: list[Rotor], effects_set: set[str]
+) -> None:
+    """The cluster scene's rules: carrier keys, no translation, no scene-wide
+    torque law, physical values, a well-conditioned inertia."""
+    if "translation" in effects_set or "torque" in effects_set or "torque_table" in effects_set:
+        raise ValueError(
+            "effects: with [[rotors]] there is no translation and each rotor has its own "
+            "torque law (rotors[k].torque); set only effects.rotor_angle"
+        )
+    for n in ("m_a", "I11", "I22", "I33"):
+        if n not in parameters:
+            raise ValueError(f"parameters: missing {n}")
+    for n, v in parameters.items():
+        if n not in CLUSTER_CARRIER:
+            raise ValueError(
+                f"parameters.{n}: not a carrier key of a cluster scene "
+                f"({', '.join(CLUSTER_CARRIER)}; each rotor's keys go in its [[rotors]] table)"
+            )
+        if v == "runtime":
+            raise ValueError(f'parameters.{n}: a cluster\'s carrier is folded, not "runtime"')
+    carrier = carrier_tensor(parameters)
+    if not parameters["m_a"] > 0:  # type: ignore[operator]
+        raise ValueError(f"parameters.m_a: must be positive (got {parameters['m_a']})")
+    moments = [float(x) for x in np.linalg.eigvalsh(np.array(carrier))]
+    if not min(moments) > 0:
+        raise ValueError("parameters.I11..I23: carrier inertia is not positive definite")
+    if 2.0 * max(moments) - sum(moments) > TRIANGLE_SLACK * sum(moments):
+        text = ", ".join(f"{m:.6g}" for m in sorted(moments))
+        raise ValueError(
+            f"parameters.I11..I23: principal moments ({text}) violate the triangle inequality"
+        )
+    cond = physics.frobenius_condition(lumped_inertia(parameters, rotors))
+    if not cond <= MAX_CONDITION:
+        raise ValueError(
+            f"rotors: the lumped inertia has condition number {cond:.3g} > {MAX_CONDITION:g}: "
+            "numerically singular"
+        )
+
+
+def carrier_tensor(parameters: Mapping[str, float | str]) -> list[list[float]]:
+    v = {n: float(parameters.get(n, 0.0)) for n in CLUSTER_CARRIER}
+    return [
+        [v["I11"], v["I12"], v["I13"]],
+        [v["I12"], v["I22"], v["I23"]],
+        [v["I13"], v["I23"], v["I33"]],
+    ]
+
+
+def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -> list[list[float]]:
+    """The lumped carrier's inertia about the system's mass center, in floats."""
+    return physics.cluster_inertia(
+        float(parameters["m_a"]),
+        carrier_tensor(parameters),
+        [(r.m, r.I, [float(x) for x in r.unit_axis], r.position) for r in rotors],
+    )
+
+
+DENOMINATOR = 10**9
+"""The stereographic coordinates of an axis are rationals with at most this
+denominator: the point they map to is within about 1e-17 of the axis."""
+
+
+def exact_unit(v: tuple[float, float, float]) -> tuple[Fraction, Fraction, Fraction]:
+    """A rational unit vector along v: v normalized in floats, projected
+    stereographically from the pole opposite its largest component, the two
+    coordinates rounded to rationals, and mapped back (a rational point of
+    the sphere: its squares sum to 1 exactly). Axes along a1, a2, a3 stay exact."""
+    norm = math.sqrt(sum(x * x for x in v))
+    g = [x / norm for x in v]
+    big = max(range(3), key=lambda i: abs(g[i]))
+    sign = 1 if g[big] > 0 else -1
+    others = [i for i in range(3) if i != big]
+    s, t = (Fraction(g[i] / (1.0 + abs(g[big]))).limit_denominator(DENOMINATOR) for i in others)
+    d = 1 + s * s + t * t
+    out = [Fraction(0)] * 3
+    out[others[0]], out[others[1]] = 2 * s / d, 2 * t / d
+    out[big] = sign * (1 - s * s - t * t) / d
+    return (out[0], out[1], out[2])

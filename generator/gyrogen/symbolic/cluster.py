@@ -1,0 +1,273 @@
+"""A reaction-wheel cluster's equations: the carrier A plus N axisymmetric
+rotors B_k on axes g_k fixed in A (a scene's [[rotors]]).
+
+KanesMethod derives them with lumped inertias: a carrier A~ at the system's
+mass center C (fixed in A) with the lumped inertia I~ (gyrogen.physics.
+cluster_inertia), and massless rotors B~_k at C with axial inertia J_k only.
+The speeds are u1..u3 (A's rates, A-components) and w_k = g_k . omega_Bk,
+each rotor's absolute spin rate, so the mass matrix is the constant
+block-diagonal diag(I~, J_1..J_N). The code does not expand Kane's forcing:
+it uses the momentum form Kane's forcing is proven equal to here, entry by
+entry,
+
+    I~ u' = h x w_A - sum_k net_k g_k,   J_k w_k' = net_k,
+    h = I~ w_A + sum_k J_k w_k g_k,      net_k = T_k - b_k (w_k - g_k . w_A),
+
+with h and each rotor's torque named values of the rhs (Equations.shared),
+so the momentum the carrier and a wheel exchange is one rounded number.
+Every inertial value is folded, so I~^-1 is numbers in the code.
+"""
+
+from __future__ import annotations
+
+import sympy as sm
+import sympy.physics.mechanics as me
+
+from gyrogen import physics
+from gyrogen.abi_rotors import cluster_states, rotor_name
+from gyrogen.scene import Scene
+from gyrogen.scene_rotors import Rotor
+from gyrogen.symbolic import equations, model
+from gyrogen.symbolic.equations import Equations
+
+
+def _number(v: float) -> sm.Expr:
+    """A folded value as the exact rational of the decimal written."""
+    return sm.Rational(repr(float(v)))
+
+
+def _axis(r: Rotor) -> sm.Matrix:
+    """g_k normalized exactly (scene_rotors.exact_unit): |g| = 1 in the algebra."""
+    return sm.Matrix([sm.Rational(x.numerator, x.denominator) for x in r.unit_axis])
+
+
+def _carrier(scene: Scene) -> list[list[sm.Expr]]:
+    v = {n: _number(x) for n, x in scene.folded().items()}
+    z = sm.S.Zero
+    i12, i13, i23 = v.get("I12", z), v.get("I13", z), v.get("I23", z)
+    return [[v["I11"], i12, i13], [i12, v["I22"], i23], [i13, i23, v["I33"]]]
+
+
+def lumped_inertia(scene: Scene) -> sm.Matrix:
+    """I~ about the mass center C, exact."""
+    rotors = [
+        (_number(r.m), _number(r.I), list(_axis(r)), [_number(x) for x in r.position])
+        for r in scene.rotors
+    ]
+    m_a = _number(float(scene.parameters["m_a"]))
+    return sm.Matrix(physics.cluster_inertia(m_a, _carrier(scene), rotors))
+
+
+def _plain(names: tuple[str, ...]) -> tuple[sm.Symbol, ...]:
+    return tuple(sm.Symbol(n, real=True) for n in names)
+
+
+def kane(inertia: sm.Matrix, axes: list[sm.Matrix], axial: list[sm.Expr]) -> tuple:
+    """KanesMethod on the lumped cluster with net torques net1..netN:
+    (mass matrix, forcing, q' in u and w), in plain symbols."""
+    n = len(axes)
+    q = me.dynamicsymbols(f"q1:4 th1:{n + 1}")
+    u = me.dynamicsymbols(f"u1:4 w1:{n + 1}")
+    t = me.dynamicsymbols._t
+    net = sm.symbols(f"net1:{n + 1}", real=True)
+    N = me.ReferenceFrame("N")
+    A = N.orientnew("A", "Body", q[:3], "312")
+    w_A = A.ang_vel_in(N)
+    g = [ax[0] * A.x + ax[1] * A.y + ax[2] * A.z for ax in axes]
+    kd = [w_A.dot(A.x) - u[0], w_A.dot(A.y) - u[1], w_A.dot(A.z) - u[2]]
+    omega = u[0] * A.x + u[1] * A.y + u[2] * A.z
+    kd += [q[3 + k].diff(t) - (u[3 + k] - g[k].dot(omega)) for k in range(n)]
+    A.set_ang_vel(N, omega)
+    C = me.Point("C")
+    C.set_vel(N, 0)
+    (i11, i12, i13), (_, i22, i23), (_, _, i33) = inertia.tolist()
+    bodies = [me.RigidBody("A~", C, A, 1, (me.inertia(A, i11, i22, i33, i12, i23, i13), C))]
+    loads = [(A, -sum((net[k] * g[k] for k in range(n)), sm.S.Zero * A.x))]
+    for k in range(n):
+        B = A.orientnew(f"B{k + 1}", "Axis", [q[3 + k], g[k]])
+        B.set_ang_vel(N, omega + (u[3 + k] - g[k].dot(omega)) * g[k])
+        dyadic = axial[k] * (g[k] | g[k])
+        bodies.append(me.RigidBody(f"B~{k + 1}", C, B, 0, (dyadic, C)))
+        loads.append((B, net[k] * g[k]))
+    km = me.KanesMethod(N, q_ind=q, u_ind=u, kd_eqs=kd)
+    km.kanes_equations(bodies, loads)
+    kin = km.kindiffdict()
+    plain = {f: sm.Symbol(f.func.__name__, real=True) for f in (*q, *u)}
+    at_zero = {f: 0 for f in q[3:]}  # the rotor angles are ignorable
+    mm = me.msubs(km.mass_matrix.subs(at_zero), plain)
+    forcing = me.msubs(km.forcing.subs(at_zero), plain)
+    qdot = sm.Matrix([sm.trigsimp(me.msubs(kin[x.diff(t)], plain)) for x in q])
+    return mm, forcing, qdot, net
+
+
+SLIP, NET, MOMENTUM, FORCING = "rel", "net", "h", "f"
+"""Named values of the rhs: each wheel's relative rate and net torque, the
+momentum h, and f = h x w_A - sum_k net_k g_k (= I~ u'): I~^-1 then
+multiplies three numbers, where multiplying out h x w_A costs ~20 ops more."""
+
+
+def _by_axis_component(nets: list[sm.Expr], axes: list[sm.Matrix]) -> sm.Matrix:
+    """sum_k net_k g_k with the nets of equal |g_k,i| summed before one
+    multiply (a pyramid's s (net1 - net3) rather than s net1 - s net3)."""
+    out = []
+    for i in range(3):
+        groups: dict[sm.Expr, list[sm.Expr]] = {}
+        for net, g in zip(nets, axes, strict=True):
+            if g[i] != 0:
+                groups.setdefault(abs(g[i]), []).append(sm.sign(g[i]) * net)
+        out.append(sm.Add(*(size * sm.Add(*terms) for size, terms in groups.items())))
+    return sm.Matrix(out)
+
+
+def _torques(scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix]) -> dict:
+    """Each rotor's net torque, and the named values it reads: rel_k (the
+    rate relative to A) when friction or a speed controller needs it."""
+    w_a = sm.Matrix([states["u1"], states["u2"], states["u3"]])
+    shared: dict[sm.Symbol, sm.Expr] = {}
+    nets: list[sm.Expr] = []
+    motors: list[sm.Expr] = []
+    for k, (r, g) in enumerate(zip(scene.rotors, axes, strict=True), 1):
+        law = {key: _param(rotor_name(key, k), v) for key, v in r.law().items()}
+        rel = sm.Symbol(f"{SLIP}{k}", real=True)
+        if r.b or r.torque == "speed_controller":
+            shared[rel] = states[f"w{k}"] - g.dot(w_a)
+        motor = sm.S.Zero
+        if r.torque == "constant":
+            motor = law["T"]
+        elif r.torque == "speed_controller":
+            motor = -law["k"] * (rel - law["w_ref"])
+        if r.tau_max is not None:
+            limit = _number(r.tau_max)
+            motor = sm.Min(sm.Max(motor, -limit), limit)
+        motors.append(motor)
+        net = motor - _number(r.b) * rel
+        if net.free_symbols & set(shared):
+            name = sm.Symbol(f"{NET}{k}", real=True)
+            shared[name] = net
+            net = name
+        nets.append(net)
+    return {"shared": shared, "nets": nets, "motors": motors}
+
+
+def _param(name: str, value: float | str) -> sm.Expr:
+    return sm.Symbol(name, real=True) if value == "runtime" else _number(float(value))
+
+
+def _derive(scene: Scene) -> Equations:
+    inertia = lumped_inertia(scene)
+    axes = [_axis(r) for r in scene.rotors]
+    axial = [_number(r.J) for r in scene.rotors]
+    n = len(axes)
+    mm, forcing, qdot, net = kane(inertia, axes, axial)
+    names = cluster_states(n, False, True)
+    st = dict(zip(names, _plain(names), strict=True))
+    w_a = sm.Matrix([st["u1"], st["u2"], st["u3"]])
+    wheels = [st[f"w{k}"] for k in range(1, n + 1)]
+    h_value = inertia * w_a + sum(
+        (axial[k] * wheels[k] * axes[k] for k in range(n)), sm.zeros(3, 1)
+    )
+    # Kane's forcing, proven equal to the momentum form, entry by entry
+    tau_a = sum((net[k] * axes[k] for k in range(n)), sm.zeros(3, 1))
+    momentum = [*(h_value.cross(w_a) - tau_a), *net]
+    expected = sm.diag(inertia, *axial)
+    if sm.expand(mm - expected) != sm.zeros(3 + n) or any(
+        sm.expand(a - b) != 0 for a, b in zip(forcing, momentum, strict=True)
+    ):
+        raise AssertionError("internal: Kane's cluster equations differ from the momentum form")
+    torques = _torques(scene, st, axes)
+    h = sm.Matrix(_plain(("h1", "h2", "h3")))
+    f = sm.Matrix(_plain(tuple(f"{FORCING}{i}" for i in (1, 2, 3))))
+    f_value = h.cross(w_a) - _by_axis_component(torques["nets"], axes)
+    coded = sm.Matrix([*f, *torques["nets"]])
+    shared = {
+        **dict(zip(h, h_value, strict=True)),
+        **torques["shared"],
+        **dict(zip(f, f_value, strict=True)),
+    }
+    return _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
+
+
+def _equations(
+    scene: Scene,
+    st: dict[str, sm.Symbol],
+    mass: sm.Matrix,
+    forcing: sm.Matrix,
+    qdot: sm.Matrix,
+    shared: dict[sm.Symbol, sm.Expr],
+    motors: list[sm.Expr],
+    axes: list[sm.Matrix],
+) -> Equations:
+    """The Equations of the states the scene keeps."""
+    n = len(axes)
+    kin = dict(
+        zip(
+            [*(f"q{i}" for i in (1, 2, 3)), *(f"th{k}" for k in range(1, n + 1))], qdot, strict=True
+        )
+    )
+    quaternion = scene.attitude == "quaternion"
+    if quaternion:
+        quat = model.quaternion()
+        kin.update(zip((e.name for e in quat.e), quat.kinematics, strict=True))
+        st.update({e.name: e for e in quat.e})
+    kept = scene.states
+    n_q = len(kept) - 3 - n
+    return Equations(
+        states=tuple(st[s] for s in kept),
+        params=tuple(sm.Symbol(name, real=True) for name in scene.runtime),
+        mass_matrix=mass,
+        forcing=forcing,
+        kinematics=sm.Matrix([kin[s] for s in kept[:n_q]]),
+        lumped={},
+        outputs=_outputs(scene, st, mass, shared, motors, axes),
+        shared=shared,
+        checks={},
+        coupled=mass.extract([0, 1, 2], [0, 1, 2]),
+        gather=True,
+    )
+
+
+def _outputs(
+    scene: Scene,
+    st: dict[str, sm.Symbol],
+    mass: sm.Matrix,
+    shared: dict[sm.Symbol, sm.Expr],
+    motors: list[sm.Expr],
+    axes: list[sm.Matrix],
+) -> dict[str, tuple[sm.Expr, ...]]:
+    """Energy, angular momentum about C in N, each motor's power."""
+    n = len(axes)
+    w_a = sm.Matrix([st["u1"], st["u2"], st["u3"]])
+    wheels = [st[f"w{k}"] for k in range(1, n + 1)]
+    out: dict[str, tuple[sm.Expr, ...]] = {}
+    if scene.outputs.kinetic_energy:
+        axial = [mass[3 + k, 3 + k] for k in range(n)]
+        energy = (w_a.T * mass[:3, :3] * w_a)[0] + sum(
+            j * w**2 for j, w in zip(axial, wheels, strict=True)
+        )
+        out["kinetic_energy"] = (energy / 2,)
+    if scene.outputs.angular_momentum:
+        h = [sm.expand(e) for e in list(shared.values())[:3]]
+        quaternion = scene.attitude == "quaternion"
+        dcm = model.quaternion().dcm if quaternion else equations.plain(model.direction_cosines())
+        out["angular_momentum"] = tuple(
+            sm.Add(*(dcm[i, j] * h[i] for i in range(3)), evaluate=False) for j in range(3)
+        )
+    if scene.outputs.power:
+        full = _expanded(shared)
+        out["power"] = tuple(
+            motor.xreplace(full) * (wheels[k] - axes[k].dot(w_a)) for k, motor in enumerate(motors)
+        )
+    return out
+
+
+def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
+    """Each named value in states and parameters only (later ones read earlier ones)."""
+    out: dict[sm.Symbol, sm.Expr] = {}
+    for name, value in shared.items():
+        out[name] = value.xreplace(out)
+    return out
+
+
+def derive(scene: Scene) -> Equations:
+    """The equations of a cluster scene (scene.rotors not empty)."""
+    return _derive(scene)
