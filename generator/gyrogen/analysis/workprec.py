@@ -265,12 +265,6 @@ def compiled_rhs(prob: Problem) -> Callable[[float, np.ndarray], np.ndarray]:
     return RawRhs(prob.compiled["C"], prob.c)
 
 
-def time_at(runs: list[Run], level: float) -> Run | None:
-    """The fastest run of a list that reaches an error of at most level."""
-    good = [r for r in runs if r.status.startswith("ok") and r.error <= level]
-    return min(good, key=lambda r: r.seconds) if good else None
-
-
 def front(runs: list[Run]) -> list[Run]:
     """The work-precision front of one contender's runs: by time, each run
     more accurate than every faster one (a run both slower and less

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis import peers, workprec
-from gyrogen.analysis.timing import best_of
+from gyrogen.analysis.timing import best_of, best_time
 from gyrogen.analysis.workprec import Config, Problem, Run
 from gyrogen.oracle.compare import scaled_error
 
@@ -206,11 +206,5 @@ def _casadi_run(prob: Problem, f: Any, label: str, backend: str, tol: float, cfg
         once = time.perf_counter() - t0
     except RuntimeError as exc:
         return Run(label, backend, tol, math.inf, 0.0, 0, f"failed: {str(exc).splitlines()[0]}")
-    n = max(1, int(MIN_TIMED / max(once, 1e-7)))
-
-    def repeat() -> None:
-        for _ in range(n):
-            f(x0=x0, p=c)
-
-    secs = best_of(repeat, max(1, cfg.repeats // 2)) / n
+    secs = best_time(lambda: f(x0=x0, p=c), max(1, cfg.repeats // 2), min_total=MIN_TIMED)
     return Run(label, backend, tol, scaled_error(xf, prob.ref), min(secs, once), 0)
