@@ -9,18 +9,28 @@ SCENE_DIR := generated/gyrostat
 
 .PHONY: setup system-deps run test lint generate check-generated bench bench-clusters bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
 
-## setup: build tools (gcc, g++, gfortran, clang, valgrind, cmake, pkg-config) and the Python environment in .venv
+## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
+
+# Every system package a test or a command uses: compilers, clang's sanitizer runtime (a separate
+# package on Debian), valgrind, CMake, pkg-config, make and binutils (objdump).
+SYSTEM_PACKAGES := gcc g++ gfortran clang libclang-rt-dev valgrind cmake pkg-config make binutils
 
 system-deps:
 	@missing=""; \
-	for tool in gcc g++ gfortran clang valgrind cmake pkg-config; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	if command -v dpkg-query >/dev/null 2>&1; then \
+	  for pkg in $(SYSTEM_PACKAGES); do \
+	    dpkg-query -W -f='$${Status}' $$pkg 2>/dev/null | grep -q 'ok installed' || missing="$$missing $$pkg"; \
+	  done; \
+	else \
+	  for tool in gcc g++ gfortran clang valgrind cmake pkg-config make objdump; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	fi; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    echo "installing$$missing (apt-get)"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq$$missing >/dev/null || exit 1; \
+	    echo "setup: installing$$missing (apt-get update, then apt-get install)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -q$$missing || exit 1; \
 	  else \
-	    echo "missing build tools:$$missing; install them with: sudo apt-get update && sudo apt-get install -y$$missing" >&2; \
+	    echo "missing system packages:$$missing; install them with: sudo apt-get update && sudo apt-get install -y$$missing" >&2; \
 	    exit 1; \
 	  fi; \
 	fi
@@ -28,8 +38,10 @@ system-deps:
 PIP := $(BIN)/python -m pip
 
 $(STAMP): pyproject.toml
+	@echo "setup: creating the Python environment in $(VENV)"
 	$(PYTHON) -m venv $(VENV)
-	$(PIP) install -q -e '.[test]'
+	@echo "setup: installing gyrogen and its test dependencies into $(VENV) (a few minutes on a new machine)"
+	$(PIP) install --progress-bar on -e '.[test]'
 	@touch $@
 
 ## run: the main job on the default scene: generate, build, verify, summary
