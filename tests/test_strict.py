@@ -27,6 +27,28 @@ def tool(name: str) -> str:
     return path
 
 
+SANITIZE = ("-fsanitize=address,undefined", "-fno-omit-frame-pointer")
+SANITIZER_RUNTIME = {"gcc": "libgcc-12-dev", "clang": "libclang-rt-dev"}
+"""The Debian package that holds each compiler's sanitizer runtime (the
+Makefile's SYSTEM_PACKAGES installs both): clang's is a separate package."""
+
+
+def sanitizer(cc: str, tmp_path: Path) -> str:
+    """cc's path, once a small program built with SANITIZE links; else a
+    failure that names the package to install."""
+    path = tool(cc)
+    (tmp_path / "probe.c").write_text("int main(void) { return 0; }\n")
+    proc = subprocess.run([path, *SANITIZE, "probe.c", "-o", "probe"], cwd=tmp_path,
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    if proc.returncode != 0:
+        pkg = SANITIZER_RUNTIME[cc]
+        pytest.fail(
+            f"{cc} cannot link with {' '.join(SANITIZE)}: its sanitizer runtime is missing: "
+            f"`make setup` installs it (apt-get install -y {pkg})\n{proc.stderr}"
+        )
+    return path
+
+
 def clean(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> str:
     """Run cmd; it must succeed and say nothing on stderr. Returns stdout."""
     proc = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, check=False)
@@ -96,11 +118,11 @@ def build_examples(source_dir: Path, build: Path, *overrides: str, target: str =
 
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
 def test_c_example_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str) -> None:
-    sanitize = "-fsanitize=address,undefined -fno-omit-frame-pointer"
+    sanitize = " ".join(SANITIZE)
     build_examples(
         source_dir,
         tmp_path,
-        f"CC={tool(cc)}",
+        f"CC={sanitizer(cc, tmp_path)}",
         f"CFLAGS=-std=c99 -O1 -g {sanitize}",
         f"LDFLAGS={sanitize}",
         target=str(tmp_path / "embed_c"),
@@ -139,10 +161,11 @@ def test_verify_path_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str)
     states[:, 10] = np.clip(states[:, 10], -20, 20)  # keep the short integrations cheap
     blob = np.array([len(params), len(states)], dtype=np.int32).tobytes()
     (tmp_path / "in.bin").write_bytes(blob + params.tobytes() + states.tobytes())
-    sanitize = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-g", "-O1"]
+    sanitize = [*SANITIZE, "-g", "-O1"]
     harness = Path(__file__).parent / "harness" / "verify.c"
     sources = [str(source_dir / n) for n in ("gyrostat.c", "gyrostat_ode.c")]
-    clean([tool(cc), "-std=c99", *sanitize, f"-I{source_dir}", str(harness), *sources, "-lm",
+    cc_path = sanitizer(cc, tmp_path)
+    clean([cc_path, "-std=c99", *sanitize, f"-I{source_dir}", str(harness), *sources, "-lm",
            "-o", "verify"], tmp_path)  # fmt: skip
     env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1")
     clean([str(tmp_path / "verify"), "in.bin", "out.bin"], tmp_path, env)
