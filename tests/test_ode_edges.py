@@ -7,6 +7,7 @@ the Euler-parameter twin of the same motions integrates through them."""
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections.abc import Iterator
 from pathlib import Path
@@ -274,6 +275,54 @@ def test_a_pass_closer_than_the_bound(angles: dict[str, Compiled], language: str
         np.testing.assert_allclose(x[3:6], x0[3:6], rtol=0, atol=1e-14)  # u1, u2, u3
         if method in ("dop853", "rodas4"):
             assert math.cos(x[1]) < 1e-8, method
+
+
+GIMBAL_DRAWS = int(os.environ.get("GYROGEN_GIMBAL_DRAWS", "500"))
+"""(start, step) pairs the gimbal property test draws: 500 in CI, 10,000 in
+`make fuzz` (which sets GYROGEN_GIMBAL_DRAWS and a fresh seed)."""
+
+
+def crosses_gimbal_lock(q2a: float, q2b: float) -> bool:
+    """Whether [q2a, q2b] (either order) holds a point pi/2 + k pi."""
+    lo, hi = min(q2a, q2b), max(q2a, q2b)
+    k = math.ceil((lo - math.pi / 2) / math.pi)
+    return math.pi / 2 + k * math.pi <= hi
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_gimbal_lock_is_never_stepped_over(angles: dict[str, Compiled], language: str) -> None:
+    """q2 = q2(0) + u1 t exactly (torque_free about a1, q1 = q3 = 0): drawn
+    starts, rates and step sizes, steps of a whole turn and more among them
+    (RK4 with 1 to 3 steps, the adaptive methods from a first step h0 up to
+    the interval). Every method, single and in a batch: code 6 with x short
+    of the first crossing exactly when [q2(0), q2(t1)] holds a point pi/2 +
+    k pi, else code 0 at t1."""
+    b = angles[language]
+    scene = load("torque_free")
+    c = b.setup(np.zeros(0))
+    seed = int(os.environ.get("GYROGEN_GIMBAL_SEED", "20"))
+    rng = np.random.default_rng(seed)
+    for n in range(GIMBAL_DRAWS):
+        method = METHODS[n % len(METHODS)]
+        q2, u1 = rng.uniform(-1.5, 1.5), rng.choice([-1, 1]) * 10 ** rng.uniform(-2, 1.5)
+        t1 = 10 ** rng.uniform(-2, 1)
+        end = q2 + u1 * t1
+        if min(abs(math.cos(end)), abs(math.cos(q2))) < 1e-6:
+            continue  # within reach of the lock's bar at an end: either code is right
+        if method == "rk4":
+            kw: dict[str, Any] = {"steps": int(rng.integers(1, 4))}
+        else:
+            kw = {"rtol": 1e-8, "atol": 1e-8, "h0": t1 * 10 ** rng.uniform(-3, 0)}
+        x0 = state(scene, q2=q2, u1=u1)
+        x, stats, code = b.integrate(method, x0, c, 0.0, t1, **kw)
+        why = (seed, n, method, q2, u1, t1, kw, code, stats["t"])
+        if crosses_gimbal_lock(q2, end):
+            assert code == ATTITUDE, why
+            assert stats["t"] < t1 and not crosses_gimbal_lock(q2, x[1]), why
+        else:
+            assert code == OK and stats["t"] == t1, why
+        xs, _, codes = b.integrate_batch(method, np.tile(x0, (3, 1)), c, 0.0, t1, **kw)
+        assert np.array_equal(xs, np.tile(x, (3, 1))) and set(codes) == {code}, why
 
 
 @pytest.mark.parametrize("language", LANGUAGES)

@@ -38,10 +38,11 @@ extern "C" {
  * -Ofast), which would optimize the compensation away.
  *
  * The attitude is 3-1-2 Euler angles x[0..2] = q1, q2, q3, whose kinematics
- * divide by cos(q2) (gimbal lock at q2 = +-pi/2). Every integrator returns
+ * divide by cos(q2) (gimbal lock at q2 = pi/2 + k pi). Every integrator returns
  * code 6 when |cos q2| < DUAL_SPIN_ODE_GIMBAL_LOCK_COS at the start or at the end
- * of an accepted step, or when cos q2 changes sign across an accepted step
- * (the path crossed q2 = +-pi/2, where q1 and q3 jump); x is then the state
+ * of an accepted step, or when the step's two ends lie on two sides of a point
+ * pi/2 + k pi, however long the step (the path crossed gimbal lock, where q1
+ * and q3 jump); x is then the state
  * before that step (at the start: as given) and stats.t its time. The check
  * costs one cos per step; f is not called on a start state it refuses.
  */

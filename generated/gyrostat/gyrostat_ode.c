@@ -435,17 +435,28 @@ static void stats_start(gyrostat_stats *stats, double t0)
 }
 
 /* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
-   cos(q2). 1 when the step to xnew reaches gimbal lock, |cos q2| <
-   GYROSTAT_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
-   passed q2 = +-pi/2, where q1 and q3 jump); else *cos_q2 := cos(xnew[1]). */
-static int gimbal_lock(const double *xnew, double *cos_q2)
+   cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
+   two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered j
+   = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
+   unless the step passed a point of gimbal lock, however long the step
+   (whole turns included). Where the rounding of q2/pi could misplace q2 by
+   an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6. */
+static double gimbal_interval(double q2)
 {
-    const double cq = gyrostat_cos(xnew[1]);
-    if (fabs(cq) < GYROSTAT_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (*cos_q2 > 0.0)) {
-        return 1;
-    }
-    *cos_q2 = cq;
-    return 0;
+    return floor(q2 * 0.3183098861837907 + 0.5);
+}
+
+/* 1 when x is at gimbal lock, |cos q2| < GYROSTAT_ODE_GIMBAL_LOCK_COS. */
+static int gimbal_lock_at(const double *x)
+{
+    return fabs(gyrostat_cos(x[1])) < GYROSTAT_ODE_GIMBAL_LOCK_COS;
+}
+
+/* 1 when the step from x to xnew ends at gimbal lock or passes a point of
+   it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
+static int gimbal_lock(const double *x, const double *xnew)
+{
+    return gimbal_lock_at(xnew) || gimbal_interval(x[1]) != gimbal_interval(xnew[1]);
 }
 
 static int all_finite(const double *v, int n)
@@ -478,7 +489,6 @@ int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c,
     double k[4][GYROSTAT_NX], y[GYROSTAT_NX], xnew[GYROSTAT_NX], dx[GYROSTAT_NX];
     double comp[GYROSTAT_NX] = {0.0};
     double t, h;
-    double cos_q2 = gyrostat_cos(x[1]);
     gyrostat_stats own;
     long n;
     int i;
@@ -490,7 +500,7 @@ int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c,
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     h = (t1 - t0) / (double)steps;
@@ -530,7 +540,7 @@ int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c,
         if (!all_finite(xnew, GYROSTAT_NX)) {
             return GYROSTAT_ODE_ERR_NONFINITE;
         }
-        if (gimbal_lock(xnew, &cos_q2)) {
+        if (gimbal_lock(x, xnew)) {
             return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
         }
         accept_step(x, xnew, dx, comp);
@@ -664,14 +674,13 @@ static double err_power(const struct pair *m, double err)
    (x as given). */
 static int pair_start(int order, double t0, double t1, const double *x, const double *c,
                       double rtol, double atol, double h0, long max_steps, double *f0,
-                      double *h, double *cos_q2, gyrostat_stats *stats)
+                      double *h, gyrostat_stats *stats)
 {
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
-    *cos_q2 = gyrostat_cos(x[1]);
-    if (fabs(*cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -695,10 +704,9 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
 {
     double k[13][GYROSTAT_NX], xnew[GYROSTAT_NX], dx[GYROSTAT_NX], comp[GYROSTAT_NX] = {0.0};
     double t = t0, h = 0.0, err, fac, err_old = 1e-4;
-    double cos_q2 = 1.0;
     int i, last, rejected_last = 0, nonfinite = 0;
     const int start = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
-                                 &cos_q2, stats);
+                                 stats);
 
     if (start >= 0) {
         return start;
@@ -732,7 +740,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
         fac = err_power(m, err) / m->safety;
         if (err <= 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             accept_step(x, xnew, dx, comp);
@@ -1017,7 +1025,7 @@ int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rto
 struct lanes {
     double x[GYROSTAT_NX][GYROSTAT_LANES], xnew[GYROSTAT_NX][GYROSTAT_LANES], dx[GYROSTAT_NX][GYROSTAT_LANES];
     double comp[GYROSTAT_NX][GYROSTAT_LANES], y[GYROSTAT_NX][GYROSTAT_LANES], k[13][GYROSTAT_NX][GYROSTAT_LANES];
-    double t[GYROSTAT_LANES], h[GYROSTAT_LANES], ts[GYROSTAT_LANES], err[GYROSTAT_LANES], err_old[GYROSTAT_LANES], cos_q2[GYROSTAT_LANES];
+    double t[GYROSTAT_LANES], h[GYROSTAT_LANES], ts[GYROSTAT_LANES], err[GYROSTAT_LANES], err_old[GYROSTAT_LANES];
     double stats_t[GYROSTAT_LANES], stats_h[GYROSTAT_LANES];
     long accepted[GYROSTAT_LANES], rejected[GYROSTAT_LANES], rhs_calls[GYROSTAT_LANES];
     int busy[GYROSTAT_LANES], code[GYROSTAT_LANES], last[GYROSTAT_LANES], nonfinite[GYROSTAT_LANES], rejected_last[GYROSTAT_LANES];
@@ -1439,10 +1447,10 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
                       double h0, long max_steps, gyrostat_stats *stats)
 {
     const double *x = xs + traj * GYROSTAT_NX;
-    double f0[GYROSTAT_NX], h = 0.0, cos_q2 = 1.0;
+    double f0[GYROSTAT_NX], h = 0.0;
     int i;
     const int code = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
-                                &cos_q2, stats);
+                                stats);
     if (code >= 0) {
         return code;
     }
@@ -1454,7 +1462,6 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
     L->t[l] = t0;
     L->h[l] = h;
     L->err_old[l] = 1e-4;
-    L->cos_q2[l] = cos_q2;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->accepted[l] = 0;
@@ -1544,7 +1551,8 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         const double err = L->err[l], h = L->h[l];
         const int take = run && !nonfinite && err <= 1.0;
         const double cq = gyrostat_cos_lanes(L->xnew[1][l]);
-        const int lock = fabs(cq) < GYROSTAT_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (L->cos_q2[l] > 0.0);
+        const int lock = fabs(cq) < GYROSTAT_ODE_GIMBAL_LOCK_COS  /* gimbal_lock, in lanes */
+                         || gimbal_interval(L->x[1][l]) != gimbal_interval(L->xnew[1][l]);
         const int ok = take && !lock;
         const double fac = err_power(m, err) / m->safety;
         double grow = m->beta == 0.0 ? fac : fac / pow(L->err_old[l], m->beta);
@@ -1552,7 +1560,6 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         grow = L->rejected_last[l] ? fmax(grow, 1.0) : grow;
         L->code[l] = take && lock ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR
                    : ok && L->last[l] ? GYROSTAT_ODE_OK : L->code[l];
-        L->cos_q2[l] = ok ? cq : L->cos_q2[l];
         L->t[l] = ok ? (L->last[l] ? t1 : L->t[l] + h) : L->t[l];
         L->stats_t[l] = L->t[l];
         L->accepted[l] += ok;
@@ -2054,7 +2061,6 @@ int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rto
     double f0[GYROSTAT_NX], fnew[GYROSTAT_NX], xnew[GYROSTAT_NX], dx[GYROSTAT_NX], comp[GYROSTAT_NX] = {0.0};
     int piv[GYROSTAT_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
-    double cos_q2 = cos(x[1]);
     gyrostat_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
@@ -2065,7 +2071,7 @@ int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rto
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -2135,7 +2141,7 @@ int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rto
         /* fac = h / h_new */
         fac = dmax(1.0 / 6.0, dmin(5.0, pow(err, 0.25) / 0.9));
         if (err <= 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             if (stats->accepted > 0) {
@@ -2300,7 +2306,6 @@ int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rto
     double t = t0, h, h_old = 1.0, h_new, h_acc = 0.0, err_acc = 1e-2;
     double rtol_e, atol_e, newton_tol, err, quot, rate = 1.0, theta, theta_old = 1.0;
     double dyno, dyno_old = 1.0;
-    double cos_q2 = cos(x[1]);
     gyrostat_stats own;
     int i, newt, outcome, last = 0, first = 1, reject = 0, fresh_jac = 0, need_jac = 1;
     int need_lu = 1, singular = 0, nonfinite = 0;
@@ -2312,7 +2317,7 @@ int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rto
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < GYROSTAT_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -2476,7 +2481,7 @@ int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rto
         quot = dmax(1.0 / 8.0, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));
         h_new = h / quot;
         if (err < 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             first = 0;

@@ -17,8 +17,9 @@
 ! The attitude is 3-1-2 Euler angles x(1:3) = q1, q2, q3, whose kinematics
 ! divide by cos(q2): every integrator returns RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR
 ! when |cos q2| < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS at the start or at the end of an
-! accepted step, or when cos q2 changes sign across one (the path crossed
-! q2 = +-pi/2, where q1 and q3 jump); x is then the state before that step
+! accepted step, or when the step's two ends lie on two sides of a point
+! pi/2 + k pi, however long the step (the path crossed gimbal lock, where q1
+! and q3 jump); x is then the state before that step
 ! (at the start: as given) and stats%t its time.
 module rw4_pyramid_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
@@ -456,17 +457,35 @@ contains
   end subroutine rw4_pyramid_jac
 
   ! The attitude is 3-1-2 angles, q2 = x(2): their kinematics divide by
-  ! cos(q2). .true. when the step to xnew reaches gimbal lock, |cos q2| <
-  ! RW4_PYRAMID_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
-  ! passed q2 = +-pi/2, where q1 and q3 jump); else cos_q2 = cos(xnew(2)).
-  logical function gimbal_lock(xnew, cos_q2)
-    real(c_double), intent(in) :: xnew(nx)
-    real(c_double), intent(inout) :: cos_q2
-    real(c_double) :: cq
+  ! cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
+  ! two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered j
+  ! = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
+  ! unless the step passed a point of gimbal lock, however long the step
+  ! (whole turns included). Where the rounding of q2/pi could misplace q2 by
+  ! an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6.
+  pure real(c_double) function gimbal_interval(q2)
+    real(c_double), intent(in) :: q2
+    real(c_double) :: y
 
-    cq = cos(xnew(2))
-    gimbal_lock = abs(cq) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. ((cq > 0) .neqv. (cos_q2 > 0))
-    if (.not. gimbal_lock) cos_q2 = cq
+    y = q2 * 0.3183098861837907_c_double + 0.5_c_double
+    gimbal_interval = aint(y)  ! floor(y), as a real: no integer overflow
+    if (y < gimbal_interval) gimbal_interval = gimbal_interval - 1
+  end function gimbal_interval
+
+  ! .true. when x is at gimbal lock, |cos q2| < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS.
+  pure logical function gimbal_lock_at(x)
+    real(c_double), intent(in) :: x(nx)
+
+    gimbal_lock_at = abs(cos(x(2))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS
+  end function gimbal_lock_at
+
+  ! .true. when the step from x to xnew ends at gimbal lock or passes a
+  ! point of it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump).
+  pure logical function gimbal_lock(x, xnew)
+    real(c_double), intent(in) :: x(nx), xnew(nx)
+
+    gimbal_lock = gimbal_lock_at(xnew) &
+                  .or. abs(gimbal_interval(x(2)) - gimbal_interval(xnew(2))) >= 1  ! not equal
   end function gimbal_lock
 
   ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
@@ -505,7 +524,6 @@ contains
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
     real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
-    real(c_double) :: cos_q2
     type(rw4_pyramid_stats), pointer :: stats
     type(rw4_pyramid_stats), target :: own
     integer(c_long) :: n
@@ -518,8 +536,7 @@ contains
       code = RW4_PYRAMID_ODE_ERR_ARGUMENT
       return
     end if
-    cos_q2 = cos(x(2))
-    if (abs(cos_q2) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS) then
+    if (gimbal_lock_at(x)) then
       code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
@@ -554,7 +571,7 @@ contains
         code = RW4_PYRAMID_ODE_ERR_NONFINITE
         return
       end if
-      if (gimbal_lock(xnew, cos_q2)) then
+      if (gimbal_lock(x, xnew)) then
         code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
         return
       end if
@@ -671,7 +688,6 @@ contains
     type(rw4_pyramid_stats), intent(out) :: stats
     integer(c_int) :: code
     real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
-    real(c_double) :: cos_q2
     logical :: last, rejected_last, nonfinite
 
     call stats_start(stats, t0)
@@ -679,8 +695,7 @@ contains
       code = RW4_PYRAMID_ODE_ERR_ARGUMENT
       return
     end if
-    cos_q2 = cos(x(2))
-    if (abs(cos_q2) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS) then
+    if (gimbal_lock_at(x)) then
       code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
@@ -732,7 +747,7 @@ contains
       ! fac = h / h_new, in Hairer's form (no division by a zero error)
       fac = err**m%alpha / m%safety
       if (err <= 1) then
-        if (gimbal_lock(xnew, cos_q2)) then
+        if (gimbal_lock(x, xnew)) then
           code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
           return
         end if
@@ -1218,7 +1233,6 @@ contains
     real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
     real(c_double) :: dx(nx), comp(nx)
     real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
-    real(c_double) :: cos_q2
     type(rw4_pyramid_stats), pointer :: stats
     type(rw4_pyramid_stats), target :: own
     integer :: piv(nx), i, j, singular
@@ -1231,8 +1245,7 @@ contains
       code = RW4_PYRAMID_ODE_ERR_ARGUMENT
       return
     end if
-    cos_q2 = cos(x(2))
-    if (abs(cos_q2) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS) then
+    if (gimbal_lock_at(x)) then
       code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
@@ -1319,7 +1332,7 @@ contains
       ! fac = h / h_new
       fac = max(1 / 6.0_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))
       if (err <= 1) then
-        if (gimbal_lock(xnew, cos_q2)) then
+        if (gimbal_lock(x, xnew)) then
           code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
           return
         end if
@@ -1457,7 +1470,6 @@ contains
     real(c_double) :: f0(nx), fnew(nx), scal(nx), xnew(nx), dx(nx), comp(nx)
     real(c_double) :: t, h, h_old, h_new, h_acc, err_acc, rtol_e, atol_e, newton_tol, err, quot
     real(c_double) :: rate, theta, theta_old, dyno, dyno_old, thq, predicted, c1q, c2q, c3q
-    real(c_double) :: cos_q2
     type(rw4_pyramid_stats), pointer :: stats
     type(rw4_pyramid_stats), target :: own
     integer :: piv1(nx), piv2(nx), newt, outcome, singular
@@ -1470,8 +1482,7 @@ contains
       code = RW4_PYRAMID_ODE_ERR_ARGUMENT
       return
     end if
-    cos_q2 = cos(x(2))
-    if (abs(cos_q2) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS) then
+    if (gimbal_lock_at(x)) then
       code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
     end if
@@ -1657,7 +1668,7 @@ contains
                  / min(0.9_c_double, 13.5_c_double / (newt + 14))))
       h_new = h / quot
       if (err < 1) then
-        if (gimbal_lock(xnew, cos_q2)) then
+        if (gimbal_lock(x, xnew)) then
           code = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
           return
         end if

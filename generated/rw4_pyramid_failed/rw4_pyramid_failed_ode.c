@@ -364,17 +364,28 @@ static void stats_start(rw4_pyramid_failed_stats *stats, double t0)
 }
 
 /* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
-   cos(q2). 1 when the step to xnew reaches gimbal lock, |cos q2| <
-   RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
-   passed q2 = +-pi/2, where q1 and q3 jump); else *cos_q2 := cos(xnew[1]). */
-static int gimbal_lock(const double *xnew, double *cos_q2)
+   cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
+   two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered j
+   = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
+   unless the step passed a point of gimbal lock, however long the step
+   (whole turns included). Where the rounding of q2/pi could misplace q2 by
+   an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6. */
+static double gimbal_interval(double q2)
 {
-    const double cq = rw4_pyramid_failed_cos(xnew[1]);
-    if (fabs(cq) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (*cos_q2 > 0.0)) {
-        return 1;
-    }
-    *cos_q2 = cq;
-    return 0;
+    return floor(q2 * 0.3183098861837907 + 0.5);
+}
+
+/* 1 when x is at gimbal lock, |cos q2| < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS. */
+static int gimbal_lock_at(const double *x)
+{
+    return fabs(rw4_pyramid_failed_cos(x[1])) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS;
+}
+
+/* 1 when the step from x to xnew ends at gimbal lock or passes a point of
+   it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
+static int gimbal_lock(const double *x, const double *xnew)
+{
+    return gimbal_lock_at(xnew) || gimbal_interval(x[1]) != gimbal_interval(xnew[1]);
 }
 
 static int all_finite(const double *v, int n)
@@ -407,7 +418,6 @@ int rw4_pyramid_failed_rk4(double t0, double t1, long steps, double *x, const do
     double k[4][RW4_PYRAMID_FAILED_NX], y[RW4_PYRAMID_FAILED_NX], xnew[RW4_PYRAMID_FAILED_NX], dx[RW4_PYRAMID_FAILED_NX];
     double comp[RW4_PYRAMID_FAILED_NX] = {0.0};
     double t, h;
-    double cos_q2 = rw4_pyramid_failed_cos(x[1]);
     rw4_pyramid_failed_stats own;
     long n;
     int i;
@@ -419,7 +429,7 @@ int rw4_pyramid_failed_rk4(double t0, double t1, long steps, double *x, const do
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     h = (t1 - t0) / (double)steps;
@@ -459,7 +469,7 @@ int rw4_pyramid_failed_rk4(double t0, double t1, long steps, double *x, const do
         if (!all_finite(xnew, RW4_PYRAMID_FAILED_NX)) {
             return RW4_PYRAMID_FAILED_ODE_ERR_NONFINITE;
         }
-        if (gimbal_lock(xnew, &cos_q2)) {
+        if (gimbal_lock(x, xnew)) {
             return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
         }
         accept_step(x, xnew, dx, comp);
@@ -593,14 +603,13 @@ static double err_power(const struct pair *m, double err)
    (x as given). */
 static int pair_start(int order, double t0, double t1, const double *x, const double *c,
                       double rtol, double atol, double h0, long max_steps, double *f0,
-                      double *h, double *cos_q2, rw4_pyramid_failed_stats *stats)
+                      double *h, rw4_pyramid_failed_stats *stats)
 {
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT;
     }
-    *cos_q2 = rw4_pyramid_failed_cos(x[1]);
-    if (fabs(*cos_q2) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -624,10 +633,9 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
 {
     double k[13][RW4_PYRAMID_FAILED_NX], xnew[RW4_PYRAMID_FAILED_NX], dx[RW4_PYRAMID_FAILED_NX], comp[RW4_PYRAMID_FAILED_NX] = {0.0};
     double t = t0, h = 0.0, err, fac, err_old = 1e-4;
-    double cos_q2 = 1.0;
     int i, last, rejected_last = 0, nonfinite = 0;
     const int start = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
-                                 &cos_q2, stats);
+                                 stats);
 
     if (start >= 0) {
         return start;
@@ -661,7 +669,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
         fac = err_power(m, err) / m->safety;
         if (err <= 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             accept_step(x, xnew, dx, comp);
@@ -946,7 +954,7 @@ int rw4_pyramid_failed_dop853(double t0, double t1, double *x, const double *c, 
 struct lanes {
     double x[RW4_PYRAMID_FAILED_NX][RW4_PYRAMID_FAILED_LANES], xnew[RW4_PYRAMID_FAILED_NX][RW4_PYRAMID_FAILED_LANES], dx[RW4_PYRAMID_FAILED_NX][RW4_PYRAMID_FAILED_LANES];
     double comp[RW4_PYRAMID_FAILED_NX][RW4_PYRAMID_FAILED_LANES], y[RW4_PYRAMID_FAILED_NX][RW4_PYRAMID_FAILED_LANES], k[13][RW4_PYRAMID_FAILED_NX][RW4_PYRAMID_FAILED_LANES];
-    double t[RW4_PYRAMID_FAILED_LANES], h[RW4_PYRAMID_FAILED_LANES], ts[RW4_PYRAMID_FAILED_LANES], err[RW4_PYRAMID_FAILED_LANES], err_old[RW4_PYRAMID_FAILED_LANES], cos_q2[RW4_PYRAMID_FAILED_LANES];
+    double t[RW4_PYRAMID_FAILED_LANES], h[RW4_PYRAMID_FAILED_LANES], ts[RW4_PYRAMID_FAILED_LANES], err[RW4_PYRAMID_FAILED_LANES], err_old[RW4_PYRAMID_FAILED_LANES];
     double stats_t[RW4_PYRAMID_FAILED_LANES], stats_h[RW4_PYRAMID_FAILED_LANES];
     long accepted[RW4_PYRAMID_FAILED_LANES], rejected[RW4_PYRAMID_FAILED_LANES], rhs_calls[RW4_PYRAMID_FAILED_LANES];
     int busy[RW4_PYRAMID_FAILED_LANES], code[RW4_PYRAMID_FAILED_LANES], last[RW4_PYRAMID_FAILED_LANES], nonfinite[RW4_PYRAMID_FAILED_LANES], rejected_last[RW4_PYRAMID_FAILED_LANES];
@@ -1382,10 +1390,10 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
                       double h0, long max_steps, rw4_pyramid_failed_stats *stats)
 {
     const double *x = xs + traj * RW4_PYRAMID_FAILED_NX;
-    double f0[RW4_PYRAMID_FAILED_NX], h = 0.0, cos_q2 = 1.0;
+    double f0[RW4_PYRAMID_FAILED_NX], h = 0.0;
     int i;
     const int code = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
-                                &cos_q2, stats);
+                                stats);
     if (code >= 0) {
         return code;
     }
@@ -1397,7 +1405,6 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
     L->t[l] = t0;
     L->h[l] = h;
     L->err_old[l] = 1e-4;
-    L->cos_q2[l] = cos_q2;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->accepted[l] = 0;
@@ -1487,7 +1494,8 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         const double err = L->err[l], h = L->h[l];
         const int take = run && !nonfinite && err <= 1.0;
         const double cq = rw4_pyramid_failed_cos_lanes(L->xnew[1][l]);
-        const int lock = fabs(cq) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (L->cos_q2[l] > 0.0);
+        const int lock = fabs(cq) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS  /* gimbal_lock, in lanes */
+                         || gimbal_interval(L->x[1][l]) != gimbal_interval(L->xnew[1][l]);
         const int ok = take && !lock;
         const double fac = err_power(m, err) / m->safety;
         double grow = m->beta == 0.0 ? fac : fac / pow(L->err_old[l], m->beta);
@@ -1495,7 +1503,6 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         grow = L->rejected_last[l] ? fmax(grow, 1.0) : grow;
         L->code[l] = take && lock ? RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR
                    : ok && L->last[l] ? RW4_PYRAMID_FAILED_ODE_OK : L->code[l];
-        L->cos_q2[l] = ok ? cq : L->cos_q2[l];
         L->t[l] = ok ? (L->last[l] ? t1 : L->t[l] + h) : L->t[l];
         L->stats_t[l] = L->t[l];
         L->accepted[l] += ok;
@@ -2041,7 +2048,6 @@ int rw4_pyramid_failed_rodas4(double t0, double t1, double *x, const double *c, 
     double f0[RW4_PYRAMID_FAILED_NX], fnew[RW4_PYRAMID_FAILED_NX], xnew[RW4_PYRAMID_FAILED_NX], dx[RW4_PYRAMID_FAILED_NX], comp[RW4_PYRAMID_FAILED_NX] = {0.0};
     int piv[RW4_PYRAMID_FAILED_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
-    double cos_q2 = cos(x[1]);
     rw4_pyramid_failed_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
@@ -2052,7 +2058,7 @@ int rw4_pyramid_failed_rodas4(double t0, double t1, double *x, const double *c, 
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -2122,7 +2128,7 @@ int rw4_pyramid_failed_rodas4(double t0, double t1, double *x, const double *c, 
         /* fac = h / h_new */
         fac = dmax(1.0 / 6.0, dmin(5.0, pow(err, 0.25) / 0.9));
         if (err <= 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             if (stats->accepted > 0) {
@@ -2287,7 +2293,6 @@ int rw4_pyramid_failed_radau5(double t0, double t1, double *x, const double *c, 
     double t = t0, h, h_old = 1.0, h_new, h_acc = 0.0, err_acc = 1e-2;
     double rtol_e, atol_e, newton_tol, err, quot, rate = 1.0, theta, theta_old = 1.0;
     double dyno, dyno_old = 1.0;
-    double cos_q2 = cos(x[1]);
     rw4_pyramid_failed_stats own;
     int i, newt, outcome, last = 0, first = 1, reject = 0, fresh_jac = 0, need_jac = 1;
     int need_lu = 1, singular = 0, nonfinite = 0;
@@ -2299,7 +2304,7 @@ int rw4_pyramid_failed_radau5(double t0, double t1, double *x, const double *c, 
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -2463,7 +2468,7 @@ int rw4_pyramid_failed_radau5(double t0, double t1, double *x, const double *c, 
         quot = dmax(1.0 / 8.0, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));
         h_new = h / quot;
         if (err < 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             first = 0;

@@ -303,17 +303,28 @@ static void stats_start(stiff_wheel_stats *stats, double t0)
 }
 
 /* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
-   cos(q2). 1 when the step to xnew reaches gimbal lock, |cos q2| <
-   STIFF_WHEEL_ODE_GIMBAL_LOCK_COS, or crosses it (cos q2 changes sign: the path
-   passed q2 = +-pi/2, where q1 and q3 jump); else *cos_q2 := cos(xnew[1]). */
-static int gimbal_lock(const double *xnew, double *cos_q2)
+   cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
+   two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered j
+   = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
+   unless the step passed a point of gimbal lock, however long the step
+   (whole turns included). Where the rounding of q2/pi could misplace q2 by
+   an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6. */
+static double gimbal_interval(double q2)
 {
-    const double cq = stiff_wheel_cos(xnew[1]);
-    if (fabs(cq) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (*cos_q2 > 0.0)) {
-        return 1;
-    }
-    *cos_q2 = cq;
-    return 0;
+    return floor(q2 * 0.3183098861837907 + 0.5);
+}
+
+/* 1 when x is at gimbal lock, |cos q2| < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS. */
+static int gimbal_lock_at(const double *x)
+{
+    return fabs(stiff_wheel_cos(x[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS;
+}
+
+/* 1 when the step from x to xnew ends at gimbal lock or passes a point of
+   it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
+static int gimbal_lock(const double *x, const double *xnew)
+{
+    return gimbal_lock_at(xnew) || gimbal_interval(x[1]) != gimbal_interval(xnew[1]);
 }
 
 static int all_finite(const double *v, int n)
@@ -346,7 +357,6 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
     double k[4][STIFF_WHEEL_NX], y[STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX];
     double comp[STIFF_WHEEL_NX] = {0.0};
     double t, h;
-    double cos_q2 = stiff_wheel_cos(x[1]);
     stiff_wheel_stats own;
     long n;
     int i;
@@ -358,7 +368,7 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
     if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     h = (t1 - t0) / (double)steps;
@@ -398,7 +408,7 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
         if (!all_finite(xnew, STIFF_WHEEL_NX)) {
             return STIFF_WHEEL_ODE_ERR_NONFINITE;
         }
-        if (gimbal_lock(xnew, &cos_q2)) {
+        if (gimbal_lock(x, xnew)) {
             return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
         }
         accept_step(x, xnew, dx, comp);
@@ -532,14 +542,13 @@ static double err_power(const struct pair *m, double err)
    (x as given). */
 static int pair_start(int order, double t0, double t1, const double *x, const double *c,
                       double rtol, double atol, double h0, long max_steps, double *f0,
-                      double *h, double *cos_q2, stiff_wheel_stats *stats)
+                      double *h, stiff_wheel_stats *stats)
 {
     stats_start(stats, t0);
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
     }
-    *cos_q2 = stiff_wheel_cos(x[1]);
-    if (fabs(*cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -563,10 +572,9 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
 {
     double k[13][STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX], comp[STIFF_WHEEL_NX] = {0.0};
     double t = t0, h = 0.0, err, fac, err_old = 1e-4;
-    double cos_q2 = 1.0;
     int i, last, rejected_last = 0, nonfinite = 0;
     const int start = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
-                                 &cos_q2, stats);
+                                 stats);
 
     if (start >= 0) {
         return start;
@@ -600,7 +608,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
         /* fac = h / h_new, in Hairer's form (no division by a zero error) */
         fac = err_power(m, err) / m->safety;
         if (err <= 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             accept_step(x, xnew, dx, comp);
@@ -885,7 +893,7 @@ int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double 
 struct lanes {
     double x[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], xnew[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], dx[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
     double comp[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], y[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], k[13][STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
-    double t[STIFF_WHEEL_LANES], h[STIFF_WHEEL_LANES], ts[STIFF_WHEEL_LANES], err[STIFF_WHEEL_LANES], err_old[STIFF_WHEEL_LANES], cos_q2[STIFF_WHEEL_LANES];
+    double t[STIFF_WHEEL_LANES], h[STIFF_WHEEL_LANES], ts[STIFF_WHEEL_LANES], err[STIFF_WHEEL_LANES], err_old[STIFF_WHEEL_LANES];
     double stats_t[STIFF_WHEEL_LANES], stats_h[STIFF_WHEEL_LANES];
     long accepted[STIFF_WHEEL_LANES], rejected[STIFF_WHEEL_LANES], rhs_calls[STIFF_WHEEL_LANES];
     int busy[STIFF_WHEEL_LANES], code[STIFF_WHEEL_LANES], last[STIFF_WHEEL_LANES], nonfinite[STIFF_WHEEL_LANES], rejected_last[STIFF_WHEEL_LANES];
@@ -1300,10 +1308,10 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
                       double h0, long max_steps, stiff_wheel_stats *stats)
 {
     const double *x = xs + traj * STIFF_WHEEL_NX;
-    double f0[STIFF_WHEEL_NX], h = 0.0, cos_q2 = 1.0;
+    double f0[STIFF_WHEEL_NX], h = 0.0;
     int i;
     const int code = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
-                                &cos_q2, stats);
+                                stats);
     if (code >= 0) {
         return code;
     }
@@ -1315,7 +1323,6 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
     L->t[l] = t0;
     L->h[l] = h;
     L->err_old[l] = 1e-4;
-    L->cos_q2[l] = cos_q2;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->accepted[l] = 0;
@@ -1405,7 +1412,8 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         const double err = L->err[l], h = L->h[l];
         const int take = run && !nonfinite && err <= 1.0;
         const double cq = stiff_wheel_cos_lanes(L->xnew[1][l]);
-        const int lock = fabs(cq) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS || (cq > 0.0) != (L->cos_q2[l] > 0.0);
+        const int lock = fabs(cq) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS  /* gimbal_lock, in lanes */
+                         || gimbal_interval(L->x[1][l]) != gimbal_interval(L->xnew[1][l]);
         const int ok = take && !lock;
         const double fac = err_power(m, err) / m->safety;
         double grow = m->beta == 0.0 ? fac : fac / pow(L->err_old[l], m->beta);
@@ -1413,7 +1421,6 @@ static void lanes_control(const struct pair *m, struct lanes *L, double t1)
         grow = L->rejected_last[l] ? fmax(grow, 1.0) : grow;
         L->code[l] = take && lock ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR
                    : ok && L->last[l] ? STIFF_WHEEL_ODE_OK : L->code[l];
-        L->cos_q2[l] = ok ? cq : L->cos_q2[l];
         L->t[l] = ok ? (L->last[l] ? t1 : L->t[l] + h) : L->t[l];
         L->stats_t[l] = L->t[l];
         L->accepted[l] += ok;
@@ -1886,7 +1893,6 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
     double f0[STIFF_WHEEL_NX], fnew[STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX], comp[STIFF_WHEEL_NX] = {0.0};
     int piv[STIFF_WHEEL_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
-    double cos_q2 = cos(x[1]);
     stiff_wheel_stats own;
     int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
 
@@ -1897,7 +1903,7 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -1967,7 +1973,7 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
         /* fac = h / h_new */
         fac = dmax(1.0 / 6.0, dmin(5.0, pow(err, 0.25) / 0.9));
         if (err <= 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             if (stats->accepted > 0) {
@@ -2132,7 +2138,6 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
     double t = t0, h, h_old = 1.0, h_new, h_acc = 0.0, err_acc = 1e-2;
     double rtol_e, atol_e, newton_tol, err, quot, rate = 1.0, theta, theta_old = 1.0;
     double dyno, dyno_old = 1.0;
-    double cos_q2 = cos(x[1]);
     stiff_wheel_stats own;
     int i, newt, outcome, last = 0, first = 1, reject = 0, fresh_jac = 0, need_jac = 1;
     int need_lu = 1, singular = 0, nonfinite = 0;
@@ -2144,7 +2149,7 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
     if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
     }
-    if (fabs(cos_q2) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS) {
+    if (gimbal_lock_at(x)) {
         return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
     if (!(t1 > t0)) {
@@ -2308,7 +2313,7 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
         quot = dmax(1.0 / 8.0, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));
         h_new = h / quot;
         if (err < 1.0) {
-            if (gimbal_lock(xnew, &cos_q2)) {
+            if (gimbal_lock(x, xnew)) {
                 return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             first = 0;

@@ -10,6 +10,7 @@ templates read them through the render context (codegen.context).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from gyrogen.abi_rotors import ROTOR_KEYS
@@ -344,7 +345,12 @@ integrators and in a scene's simulate.rtol."""
 
 # The 3-1-2 attitude's kinematics divide by cos(q2): its integrators stop
 # with <PREFIX>_ODE_ERR_ATTITUDE_SINGULAR when |cos q2| < GIMBAL_LOCK_COS,
-# or when cos q2 changes sign across a step (the path crossed q2 = +-pi/2).
+# or when a step's two ends lie on two sides of a point q2 = pi/2 + k pi
+# (any integer k: a step of a whole turn or more too), numbered by
+# floor(q2 GIMBAL_INTERVALS + 1/2).
+GIMBAL_INTERVALS = 1 / math.pi
+"""Gimbal-lock intervals per radian of q2: one between each two points
+pi/2 + k pi."""
 GIMBAL_LOCK_COS = 1e-9
 """Near q2 = pi/2 a double q2 carries a rounding error of about
 DBL_EPSILON |q2| = 3.5e-16 rad (one ulp there is 2.2e-16), and cos(q2) moves
