@@ -359,3 +359,44 @@ def test_number_out_of_range_is_one_line_exit_2(
     assert err.startswith(f"gyrogen {argv[0]}: error: ") and err.count("\n") == 1
     assert message in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_two_scenes_never_mix_in_one_out(tmp_path: Path, cli) -> None:
+    """A second scene into a directory that holds another's sources is one
+    line, exit 2, and the first scene's files stay as they were."""
+    out = tmp_path / "gen"
+    assert cli(["generate", "gyrostat", "--lib", "--no-check", "--out", str(out)]).code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    for argv in (["generate", "rw4_pyramid", "--lib", "--no-check"], ["verify", "torque_free"]):
+        code, _, err = cli([*argv, "--out", str(out)])
+        assert code == 2, err
+        name = argv[1]
+        assert err == (
+            f"gyrogen: error: {out} holds the sources of scene 'gyrostat' (its manifest.json): "
+            f"writing {name!r} there would mix two scenes' files; give another --out\n"
+        )
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert cli(["generate", "gyrostat", "--no-check", "--out", str(out)]).code == 0  # itself
+
+
+def test_runtime_masses_that_sum_to_zero_are_one_line(tmp_path: Path, cli) -> None:
+    """m_a runtime at -5 beside a folded m_b = 5: setup's positive-mass check
+    refuses it before the reduced mass divides by m_a + m_b = 0."""
+    text = (Path(__file__).parents[1] / "generator/gyrogen/scenes/gyrostat.toml").read_text()
+    head, tail = text.split("[simulate.parameters]")
+    head = head.replace('m_b = "runtime"', "m_b = 5.0")
+    tail = tail.replace("m_a = 100.0", "m_a = -5.0").replace("m_b = 5.0\n", "")
+    path = tmp_path / "neg.toml"
+    path.write_text(head + "[simulate.parameters]" + tail)
+    code, out, err = cli(["generate", str(path), "--out", str(tmp_path / "out")])
+    assert (code, out) == (2, "")
+    assert err == f"gyrogen: error: {path}: parameters.m_a: must be positive (got -5.0)\n"
+    assert not (tmp_path / "out").exists()
+
+
+def test_cluster_manifest_records_the_effects_it_has() -> None:
+    import json
+
+    manifest = json.loads((Path(__file__).parents[1] / "generated/rw4_pyramid/manifest.json")
+                          .read_text())  # fmt: skip
+    assert manifest["scene"]["effects"] == {"rotor_angle": False}

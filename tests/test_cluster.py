@@ -38,6 +38,12 @@ BAD = [
     ("rotor J > 2 I", edit("J = 0.035", "J = 0.05"), "rotor needs J <= 2 I"),
     ("carrier", edit("I33 = 250.0", "I33 = 800.0"), "violate the triangle inequality"),
     ("seven rotors", edit("[simulate]", LAST_ROTOR * 4 + "[simulate]"), "at most 6 items"),
+    ("no rotors", edit("[parameters]", "rotors = []\n[parameters]").split("\n[[rotors]]")[0],
+     "rotors: empty: a cluster needs at least one [[rotors]] table"),
+    ("torque table", edit('torque = "constant"', 'torque = "table"'),
+     "'table': torque tables are not supported for a cluster's rotors"),
+    ("far position", edit("position = [0.4, 0.0, 0.1]", "position = [1e200, 0.0, 0.1]"),
+     "rotors: the lumped inertia overflows a double"),
 ]  # fmt: skip
 
 

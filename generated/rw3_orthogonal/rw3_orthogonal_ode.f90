@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 3be041fff5f60067. The same interface as rw3_orthogonal_ode.h, under
+! Build id da419102bf70fc39. The same interface as rw3_orthogonal_ode.h, under
 ! the bind(C) names rw3_orthogonal_f_<method> and rw3_orthogonal_f_<method>_batch.
 ! Coefficients and their published sources as above each method in rw3_orthogonal_ode.c.
 ! rw3_orthogonal_f.h declares these bind(C) procedures for C callers.

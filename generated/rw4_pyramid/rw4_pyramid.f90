@@ -5,7 +5,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 1c563435a880c9bb: a hash of the scene, gyrogen and sympy versions
+! Build id ce6b615e0d92c3a8: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as RW4_PYRAMID_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -42,7 +42,7 @@ module rw4_pyramid_mod
   public :: rw4_pyramid_angular_momentum
   public :: rw4_pyramid_power
 
-  character(len=*), parameter, public :: RW4_PYRAMID_BUILD_ID = "1c563435a880c9bb"
+  character(len=*), parameter, public :: RW4_PYRAMID_BUILD_ID = "ce6b615e0d92c3a8"
   integer, parameter, public :: RW4_PYRAMID_NX = 10  ! states
   integer, parameter, public :: RW4_PYRAMID_NP = 4  ! parameters
   integer, parameter, public :: RW4_PYRAMID_NC = 5  ! hoisted constants

@@ -6,7 +6,7 @@
  * template c/ode.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 1c563435a880c9bb: a hash of the scene, gyrogen and sympy
+ * Build id ce6b615e0d92c3a8: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as RW4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 1c563435a880c9bb. The same interface as rw4_pyramid_ode.h, under
+! Build id ce6b615e0d92c3a8. The same interface as rw4_pyramid_ode.h, under
 ! the bind(C) names rw4_pyramid_f_<method> and rw4_pyramid_f_<method>_batch.
 ! Coefficients and their published sources as above each method in rw4_pyramid_ode.c.
 ! rw4_pyramid_f.h declares these bind(C) procedures for C callers.

@@ -5,7 +5,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id b767c837751018c0: a hash of the scene, gyrogen and sympy versions
+! Build id 080fbe33d52d2f1d: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as RW4_PYRAMID_FAILED_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -41,7 +41,7 @@ module rw4_pyramid_failed_mod
   public :: rw4_pyramid_failed_angular_momentum
   public :: rw4_pyramid_failed_power
 
-  character(len=*), parameter, public :: RW4_PYRAMID_FAILED_BUILD_ID = "b767c837751018c0"
+  character(len=*), parameter, public :: RW4_PYRAMID_FAILED_BUILD_ID = "080fbe33d52d2f1d"
   integer, parameter, public :: RW4_PYRAMID_FAILED_NX = 10  ! states
   integer, parameter, public :: RW4_PYRAMID_FAILED_NP = 3  ! parameters
   integer, parameter, public :: RW4_PYRAMID_FAILED_NC = 4  ! hoisted constants

@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id b767c837751018c0. The same interface as rw4_pyramid_failed_ode.h, under
+! Build id 080fbe33d52d2f1d. The same interface as rw4_pyramid_failed_ode.h, under
 ! the bind(C) names rw4_pyramid_failed_f_<method> and rw4_pyramid_failed_f_<method>_batch.
 ! Coefficients and their published sources as above each method in rw4_pyramid_failed_ode.c.
 ! rw4_pyramid_failed_f.h declares these bind(C) procedures for C callers.

@@ -6,7 +6,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id b767c837751018c0: a hash of the scene, gyrogen and sympy
+ * Build id 080fbe33d52d2f1d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as RW4_PYRAMID_FAILED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

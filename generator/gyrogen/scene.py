@@ -144,10 +144,13 @@ class Scene(_Strict):
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: Any) -> Any:
-        """Without rotors, the dump of a scene before clusters existed (its build id)."""
+        """Without rotors, the dump of a scene before clusters existed (its build
+        id); with them, only the effects a cluster has (the others are refused)."""
         data = handler(self)
         if not self.rotors:
             data.pop("rotors", None)
+        elif isinstance(data.get("effects"), dict):  # a cluster has only these effects
+            data["effects"] = {"rotor_angle": self.effects.rotor_angle}
         return data
 
     @field_validator("name")
@@ -180,6 +183,11 @@ class Scene(_Strict):
 
     @model_validator(mode="after")
     def _consistent(self) -> Scene:
+        if "rotors" in self.model_fields_set and not self.rotors:
+            raise ValueError(
+                "rotors: empty: a cluster needs at least one [[rotors]] table "
+                "(leave rotors out for the paper's single rotor on a2)"
+            )
         if self.rotors:
             scene_rotors.check_cluster(self.parameters, self.rotors, self.effects.model_fields_set)
         else:

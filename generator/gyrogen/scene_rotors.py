@@ -18,7 +18,15 @@ from fractions import Fraction
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictFloat, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    StrictFloat,
+    field_validator,
+    model_validator,
+)
 
 from gyrogen import physics
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
@@ -60,12 +68,25 @@ class Rotor(BaseModel):
     position: Vector = (0.0, 0.0, 0.0)
     """B_k* from A*, in A-components (m)."""
     b: Annotated[Folded, Field(ge=0)] = 0.0
-    torque: Literal["none", "constant", "speed_controller"] = "none"
+    torque: str = "none"
+    """One of CLUSTER_LAWS (a string here, so that the refusal can say why)."""
     T: Value | None = None
     k: Value | None = None
     w_ref: Value | None = None
     tau_max: Annotated[Folded, Field(ge=0)] | None = None
     """|T| is clamped to tau_max (a saturating motor); refused when negative."""
+
+    @field_validator("torque")
+    @classmethod
+    def _law(cls, v: str) -> str:
+        if v == "table":
+            raise ValueError(
+                "'table': torque tables are not supported for a cluster's rotors "
+                f"(one of {', '.join(map(repr, LAW_KEYS))}; the single-rotor scene has tables)"
+            )
+        if v not in LAW_KEYS:
+            raise ValueError(f"{v!r}: not one of {', '.join(map(repr, LAW_KEYS))}")
+        return v
 
     @model_validator(mode="after")
     def _rules(self) -> Rotor:
@@ -148,7 +169,15 @@ def check_cluster(
         raise ValueError(
             f"parameters.I11..I23: principal moments ({text}) violate the triangle inequality"
         )
-    cond = physics.frobenius_condition(lumped_inertia(parameters, rotors))
+    try:
+        lumped = lumped_inertia(parameters, rotors)
+    except OverflowError:
+        lumped = [[math.inf] * 3] * 3
+    if not all(math.isfinite(x) for row in lumped for x in row):
+        raise ValueError(
+            "rotors: the lumped inertia overflows a double: masses, inertias or positions too large"
+        )
+    cond = physics.frobenius_condition(lumped)
     if not cond <= MAX_CONDITION:
         raise ValueError(
             f"rotors: the lumped inertia has condition number {cond:.3g} > {MAX_CONDITION:g}: "

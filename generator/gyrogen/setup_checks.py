@@ -249,15 +249,20 @@ def first_failure(v: Values) -> tuple[int, str] | None:
     condition number computed as setup computes it, when v has what it
     reads), or None."""
     values = dict(v)
-    if all(n in values for n in COUPLED):
-        lumped = physics.lumped_inertias(*(values.get(n, 0.0) for n in LUMPED_FROM))
-        a11, _, a33, a13 = lumped
-        det = physics.coupled_determinant(*(values[n] for n in COUPLED))
-        values["cond"] = physics.condition(a11, a13, a33, det, math.sqrt) if det > 0 else math.inf
     for check in CHECKS:
+        reads_cond = any("cond" in symbols(e) for e in check.exprs)
+        if reads_cond and all(n in values for n in COUPLED):
+            values["cond"] = _condition(values)  # the checks before it passed: masses positive
         if (why := failure(check, values)) is not None:
             return check.code, why
     return None
+
+
+def _condition(values: Values) -> float:
+    """The coupled block's condition number as setup computes it."""
+    a11, _, a33, a13 = physics.lumped_inertias(*(values.get(n, 0.0) for n in LUMPED_FROM))
+    det = physics.coupled_determinant(*(values[n] for n in COUPLED))
+    return float(physics.condition(a11, a13, a33, det, math.sqrt)) if det > 0 else math.inf
 
 
 LUMPED_FROM = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")

@@ -60,7 +60,7 @@ def generate(
     compared with the numpy reference at a sample of states and parameter
     sets; on any failure nothing is written and the exit code is 1.
     --no-check skips this."""
-    from gyrogen.codegen.generate import render_all, unit_of
+    from gyrogen.codegen.generate import claim, render_all, unit_of
     from gyrogen.files import can_write, write_atomic
     from gyrogen.oracle.compare import check_rendered
 
@@ -71,6 +71,7 @@ def generate(
             target = out or default_out(scene)
         else:
             target = (out or Path("generated")) / scene.name
+        claim(target, scene.name)
         unit = unit_of(scene)
         files = render_all(unit, lib)
         if not no_check:
