@@ -42,6 +42,7 @@ from gyrogen.files import write_atomic
 from gyrogen.oracle import compare, sampling, scene_view
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.flags import C_WARNINGS
 from gyrogen.scene import Scene, parse
 
 INTEGRATORS = methods.NAMES
@@ -52,7 +53,7 @@ C_KEYWORDS = {"auto", "break", "case", "char", "const", "continue", "default", "
               "switch", "typedef", "union", "unsigned", "void", "volatile", "while"}  # fmt: skip
 NAME = re.compile(r"[A-Za-z](?:[A-Za-z0-9]|_(?=[A-Za-z0-9]))*")
 """A valid scene name, written independently of scene.check_name."""
-C_STRICT = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror"]
+C_STRICT = ["-std=c99", "-O2", *C_WARNINGS]
 
 
 @dataclass(frozen=True)

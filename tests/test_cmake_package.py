@@ -22,6 +22,7 @@ import pytest
 
 from gyrogen import abi
 from gyrogen.oracle import reference
+from gyrogen.runtime.flags import C_WARNINGS
 
 CONSUMERS = Path(__file__).resolve().parent / "consumers"
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -104,7 +105,7 @@ def test_pkg_config(prefix: Path, tmp_path: Path) -> None:
     assert f"-I{prefix}/lib/pkgconfig/../../include/gyrostat" in flags
     libdir = run(["pkg-config", "--variable=libdir", "gyrostat"], tmp_path, env).strip()
     app = tmp_path / "app"
-    run(["gcc", "-std=c99", "-Wall", "-Werror", str(EXAMPLES / "embed_c" / "main.c"), "-o",
+    run(["gcc", "-std=c99", *C_WARNINGS, str(EXAMPLES / "embed_c" / "main.c"), "-o",
          str(app), *flags, "-lm", f"-Wl,-rpath,{libdir}"], tmp_path)  # fmt: skip
     lines = run([str(app)], tmp_path).splitlines()
     assert [line.split()[0] for line in lines][:2] == ["q1", "q2"] and len(lines) == 18

@@ -20,6 +20,7 @@ from gyrogen.abi import COMPILER_LOG_LINES
 from gyrogen.errors import BuildError
 from gyrogen.runtime import build, cache
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.flags import C_WARNINGS, FORTRAN_STRICT
 
 
 def _compile(cmd: list[str], cwd: Path) -> None:
@@ -30,7 +31,7 @@ def _compile(cmd: list[str], cwd: Path) -> None:
 
 def test_c99_strict(source_dir: Path, tmp_path: Path) -> None:
     _compile(
-        ["gcc", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-c",
+        ["gcc", "-std=c99", *C_WARNINGS, "-c",
          str(source_dir / "gyrostat.c"), "-o", str(tmp_path / "g.o")],
         source_dir,
     )  # fmt: skip
@@ -38,7 +39,7 @@ def test_c99_strict(source_dir: Path, tmp_path: Path) -> None:
 
 def test_source_compiles_as_cxx(source_dir: Path, tmp_path: Path) -> None:
     _compile(
-        ["g++", "-x", "c++", "-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-c",
+        ["g++", "-x", "c++", "-std=c++17", *C_WARNINGS, "-c",
          str(source_dir / "gyrostat.c"), "-o", str(tmp_path / "g.o")],
         source_dir,
     )  # fmt: skip
@@ -46,8 +47,8 @@ def test_source_compiles_as_cxx(source_dir: Path, tmp_path: Path) -> None:
 
 def test_fortran_2008_strict(source_dir: Path, tmp_path: Path) -> None:
     _compile(
-        ["gfortran", "-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror",
-         "-J", str(tmp_path), "-c", str(source_dir / "gyrostat.f90"), "-o", str(tmp_path / "f.o")],
+        ["gfortran", *FORTRAN_STRICT, "-J", str(tmp_path), "-c", str(source_dir / "gyrostat.f90"),
+         "-o", str(tmp_path / "f.o")],
         source_dir,
     )  # fmt: skip
 

@@ -26,6 +26,7 @@ from fmpy.validation import validate_fmu
 from fmu_agreement import BAR, MODES, build, by_fmpy, cases, differences, reference
 
 from gyrogen import abi
+from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
 from gyrogen.runtime.fmu_build import fmi_headers
 
 SLICE = 1.0
@@ -194,7 +195,7 @@ def test_sources_compile_strictly(fmus: dict[str, Path], tmp_path: Path, compile
     with zipfile.ZipFile(fmus["default"]) as zf:
         zf.extractall(tmp_path)
     language = ["-x", "c++"] if compiler == "g++" else ["-std=c99"]
-    strict = ["-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
+    strict = list(C_STRICT[1:])
     cmd = [compiler, *language, *strict, f"-I{fmi_headers()}", "-c", "sources/gyrostat_fmi2.c"]
     proc = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, check=False)
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
@@ -218,7 +219,7 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
         zf.extractall(tmp_path)
     md = fmpy.read_model_description(str(fmus["default"]))
     p0 = next(v.valueReference for v in md.modelVariables if v.causality == "parameter")
-    sanitize = ["-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
+    sanitize = [*C_WARNINGS, "-fsanitize=address,undefined",
                 "-fno-sanitize-recover=all", "-g"]  # fmt: skip
     sources = sorted(str(f) for f in (tmp_path / "sources").glob("*.c"))
     subprocess.run(

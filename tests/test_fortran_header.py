@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from gyrogen import abi
+from gyrogen.runtime.flags import FORTRAN_STRICT
 
 PROTOTYPE = re.compile(r"([A-Za-z_][\w ]*?\**)\s*\b(\w+)\s*\(([^()]*)\)\s*;")
 
@@ -73,7 +74,7 @@ def strerror_program(source_dir: Path, tmp_path: Path) -> Path:
         "end program codes\n"
     )
     sources = [str(source_dir / f) for f in ("gyrostat.f90", "gyrostat_ode.f90")]
-    run(["gfortran", "-std=f2008", "-Wall", "-Werror", "-O0", *sources, "codes.f90", "-o", "codes"],
+    run(["gfortran", *FORTRAN_STRICT, "-O0", *sources, "codes.f90", "-o", "codes"],
         tmp_path)  # fmt: skip
     return tmp_path / "codes"
 

@@ -18,7 +18,7 @@ from scipy.integrate import solve_ivp
 from gyrogen import abi, methods, tableaus
 from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
-from gyrogen.runtime import build
+from gyrogen.runtime import build, flags
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load, parse
 
@@ -499,11 +499,11 @@ def test_radau5_constants() -> None:
 
 
 STRICT_C = [
-    ["gcc", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"],
-    ["clang", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"],
-    ["g++", "-x", "c++", "-std=c++17", "-Wall", "-Wextra", "-Werror"],
+    ["gcc", *flags.C_STRICT],
+    ["clang", *flags.C_STRICT],
+    ["g++", "-x", "c++", "-std=c++17", *flags.C_WARNINGS],
 ]
-FORTRAN = ["gfortran", "-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror"]
+FORTRAN = ["gfortran", *flags.FORTRAN_STRICT]
 
 
 def _run(cmd: list[str], cwd: Path) -> None:

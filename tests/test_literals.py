@@ -18,6 +18,7 @@ from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import compare
 from gyrogen.runtime import build
+from gyrogen.runtime.flags import C_WARNINGS
 from gyrogen.scene import parse
 from gyrogen.symbolic.literals import (
     INT_LITERAL_MAX,
@@ -111,7 +112,7 @@ def test_folded_decimals_compile_everywhere_and_hold_momentum(tmp_path: Path) ->
     for cc in ("gcc", "clang"):
         for src in ("folded_decimals.c", "folded_decimals_ode.c"):
             subprocess.run(
-                [cc, "-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-c", src,
+                [cc, "-std=c99", "-O2", *C_WARNINGS, "-c", src,
                  "-o", f"{cc}.o"], cwd=tmp_path, check=True, capture_output=True,
             )  # fmt: skip
     backends = [build.build(tmp_path, lang) for lang in scene.targets]

@@ -12,6 +12,7 @@ import pytest
 from gyrogen.abi import NAME_MAX_LENGTH
 from gyrogen.codegen.generate import generate
 from gyrogen.codegen.render import c_comment, f_comment, hash_comment
+from gyrogen.runtime.flags import C_STRICT, C_WARNINGS, FORTRAN_STRICT
 from gyrogen.scene import builtin_text, load, parse
 
 HOSTILE = (
@@ -19,7 +20,7 @@ HOSTILE = (
     "trailing backslash \\\n\ttab, and a word " + "w" * 150 + "\n\n"
     "add_subdirectory(evil)\nunicode d\u00e9j\u00e0 vu \u6f22\u5b57"
 )
-C_FLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow"]
+C_FLAGS = ["-O2", *C_STRICT]
 
 
 def hostile_scene(name: str, attitude: str) -> str:
@@ -54,11 +55,11 @@ def test_hostile_text_and_longest_name_compile_cleanly(tmp_path: Path, attitude:
     generate(scene, tmp_path, lib=True)
     for cc in ("gcc", "clang"):
         for src in (f"{name}.c", f"{name}_ode.c"):
-            subprocess.run([cc, *C_FLAGS, "-Werror", "-c", src, "-o", "x.o"], cwd=tmp_path,
+            subprocess.run([cc, *C_FLAGS, "-c", src, "-o", "x.o"], cwd=tmp_path,
                            check=True, capture_output=True)  # fmt: skip
-    subprocess.run(["g++", "-x", "c++", "-Wall", "-Wextra", "-Werror", "-fsyntax-only",
+    subprocess.run(["g++", "-x", "c++", *C_WARNINGS, "-fsyntax-only",
                     f"{name}_ode.h"], cwd=tmp_path, check=True, capture_output=True)  # fmt: skip
-    subprocess.run(["gfortran", "-std=f2008", "-Wall", "-Wextra", "-Werror", "-c",
+    subprocess.run(["gfortran", *FORTRAN_STRICT, "-c",
                     f"{name}.f90", f"{name}_ode.f90"], cwd=tmp_path, check=True,
                    capture_output=True)  # fmt: skip
     for f in tmp_path.glob("*.f90"):

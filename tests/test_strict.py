@@ -15,9 +15,12 @@ from pathlib import Path
 
 import pytest
 
+from gyrogen.runtime.flags import C_STRICT, FORTRAN_STRICT
+from gyrogen.runtime.flags import C_WARNINGS as CXX_WARNINGS
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
-C_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror")
+C_WARNINGS = C_STRICT[1:]  # the standard is each test's own
 
 
 def tool(name: str) -> str:
@@ -91,20 +94,20 @@ def test_header_from_cxx(source_dir: Path, tmp_path: Path) -> None:
     )
     clean([tool("gcc"), "-std=c99", "-O2", "-c", str(source_dir / "gyrostat.c"), "-o", "g.o"],
           tmp_path)  # fmt: skip
-    clean([tool("g++"), "-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
+    clean([tool("g++"), "-std=c++17", *CXX_WARNINGS,
            f"-I{source_dir}", "main.cpp", "g.o", "-lm", "-o", "main"], tmp_path)  # fmt: skip
     assert clean([str(tmp_path / "main")], tmp_path).strip() == "9.810000"
 
 
 def test_cpp_example(source_dir: Path, tmp_path: Path) -> None:
-    clean([tool("g++"), "-std=c++17", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
+    clean([tool("g++"), "-std=c++17", *CXX_WARNINGS,
            f"-I{source_dir}", "-c", str(EXAMPLES / "embed_cpp" / "main.cpp"), "-o", "m.o"],
           tmp_path)  # fmt: skip
 
 
 def test_fortran(source_dir: Path, tmp_path: Path) -> None:
     """The modules and the example that uses them."""
-    flags = ["-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror", "-J", "."]
+    flags = [*FORTRAN_STRICT, "-J", "."]
     gf = tool("gfortran")
     clean([gf, *flags, "-c", str(source_dir / "gyrostat.f90"), "-o", "g.o"], tmp_path)
     clean([gf, *flags, "-c", str(source_dir / "gyrostat_ode.f90"), "-o", "o.o"], tmp_path)

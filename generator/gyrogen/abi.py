@@ -174,7 +174,7 @@ ODE_CODES: tuple[Code, ...] = (
 """Return codes of the compiled integrators (<PREFIX>_ODE_* in <prefix>_ode.h);
 on failure x holds the last good state."""
 
-ODE_ATTITUDE_SINGULAR = 6
+ODE_ATTITUDE_SINGULAR = next(c.value for c in ODE_CODES if c.name == "ODE_ERR_ATTITUDE_SINGULAR")
 """<PREFIX>_ODE_ERR_ATTITUDE_SINGULAR: 3-1-2 angles at gimbal lock (GIMBAL_LOCK_COS)."""
 
 
@@ -379,10 +379,12 @@ MAX_OUTPUT_POINTS = 10**6
 """Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
 simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
 text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""
-FMU_MAX_STEPS = 10**7
-"""Steps (accepted and rejected) one Co-Simulation step of an FMU may take
-before it fails with max_steps reached: as `gyrogen simulate --max-nfev`'s
-default, a bound on a run that blows up rather than a cost to plan for."""
+MAX_STEPS = 10**7
+"""Steps (accepted and rejected) an adaptive integration may take by default
+before it fails with max_steps reached (the Python API, the benchmarks, one
+Co-Simulation step of an FMU), and the RHS calls `gyrogen simulate
+--max-nfev` allows scipy by default: a bound on a run that blows up rather
+than a cost to plan for."""
 MAX_SCENE_BYTES = 1 << 20
 """Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""
 MAX_SWEEP_TRAJECTORIES = 10**10

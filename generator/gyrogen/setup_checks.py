@@ -21,6 +21,7 @@ from typing import Literal
 
 from gyrogen import physics
 from gyrogen.abi import CONTROLLER_PARAMETERS, MAX_CONDITION, PARAMETERS, TRIANGLE_SLACK
+from gyrogen.physics import LUMPED_FROM
 
 
 @dataclass(frozen=True)
@@ -263,7 +264,3 @@ def _condition(values: Values) -> float:
     a11, _, a33, a13 = physics.lumped_inertias(*(values.get(n, 0.0) for n in LUMPED_FROM))
     det = physics.coupled_determinant(*(values[n] for n in COUPLED))
     return float(physics.condition(a11, a13, a33, det, math.sqrt)) if det > 0 else math.inf
-
-
-LUMPED_FROM = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
-"""physics.lumped_inertias's arguments, in its order."""

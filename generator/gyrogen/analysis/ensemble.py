@@ -18,17 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
+from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.simulate import runtime_values
 from gyrogen.analysis.timing import best_time
+from gyrogen.analysis.workprec import REF_TOL
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled, cores
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import default
 
-REF_TOL = 1e-13
 LADDER = tuple(10.0 ** (-k / 2) for k in range(8, 25))
 """Tolerances tried (1e-4 .. 1e-12, half decades), loosest first."""
-MAX_STEPS = 10**7
 PEER_LOOPS = 200
 """numbalsoda integrations per timed @njit call."""
 

@@ -16,6 +16,7 @@ from gyrogen.analysis import ensemble as ens
 from gyrogen.analysis import peers
 from gyrogen.analysis.bench_rhs import machine
 from gyrogen.analysis.timing import best_time
+from gyrogen.analysis.workprec import REF_TOL
 from gyrogen.runtime.compiled import cores
 
 Echo = Callable[[str], None]
@@ -68,7 +69,7 @@ def _diffrax(
 
 def ensemble(prob: ens.Problem, n: int, nbs: Any, dfx: Any, repeats: int, echo: Echo) -> None:
     x0s = ens.members(prob, n)
-    ref = ens.finals(prob, x0s, ens.REF_TOL)
+    ref = ens.finals(prob, x0s, REF_TOL)
     tol = ens.loosest(lambda t: ens.ensemble_error(ref, ens.finals(prob, x0s, t)), ENSEMBLE_LEVEL)
     every = cores()
     echo(f"ensemble: {n} members, u1..u3 +-10 %, error <= {ENSEMBLE_LEVEL:g} "

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrogen.abi import MAX_STEPS
 from gyrogen.oracle import reference
 
 Array = np.ndarray
@@ -131,7 +132,7 @@ def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
         t_eval = np.array([0.0, t1])
         out = x0.copy()
         for _ in range(loops):
-            usol, _ok = dop853(ptr, x0, t_eval, k, tol, tol, 10**7)
+            usol, _ok = dop853(ptr, x0, t_eval, k, tol, tol, MAX_STEPS)
             out = usol[-1]
         return out
 
@@ -140,7 +141,7 @@ def numbalsoda_peer(p: Array, echo: Callable[[str], None]) -> Any | None:
         t_eval = np.array([0.0, t1])
         out = np.empty_like(x0s)
         for i in nb.prange(x0s.shape[0]):
-            usol, _ok = dop853(ptr, x0s[i], t_eval, k, tol, tol, 10**7)
+            usol, _ok = dop853(ptr, x0s[i], t_eval, k, tol, tol, MAX_STEPS)
             out[i] = usol[-1]
         return out
 

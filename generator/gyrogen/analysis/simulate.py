@@ -26,7 +26,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
-from gyrogen.abi import ODE_CODES, message
+from gyrogen.abi import MAX_STEPS, ODE_CODES, message
 from gyrogen.analysis import simulate_files, stiffness
 from gyrogen.analysis.invariants import Invariants, along_trajectory
 from gyrogen.analysis.trajectory import Trajectory, from_samples, output_grid, sample_times
@@ -38,7 +38,7 @@ from gyrogen.runtime.scene_build import build_scene
 from gyrogen.runtime.segment import integrate_segments
 from gyrogen.scene import Scene
 
-MAX_NFEV = 10**7
+MAX_NFEV = MAX_STEPS
 """RHS calls before giving up: a run that blows up can crawl for hours
 without solve_ivp ever failing (its steps shrink as the state grows)."""
 Advance = Callable[[int], None]

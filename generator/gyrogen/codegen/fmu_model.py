@@ -57,7 +57,7 @@ class Stepping:
     atol: float
     t_end: float
     dt: float
-    max_steps: int = abi.FMU_MAX_STEPS
+    max_steps: int = abi.MAX_STEPS
 
 
 @dataclass(frozen=True)

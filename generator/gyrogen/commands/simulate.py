@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 
 from gyrogen import methods
-from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_RHS_CALLS
+from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_RHS_CALLS, MAX_STEPS
 from gyrogen.commands.options import POSITIVE, SCENE, directory
 from gyrogen.scene import Scene, check_output_grid
 
@@ -46,7 +46,7 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
 @click.option(
     "--max-nfev",
     type=click.IntRange(1, MAX_RHS_CALLS),
-    default=10**7,
+    default=MAX_STEPS,
     show_default=True,
     help="Give up after this many RHS calls.",
 )

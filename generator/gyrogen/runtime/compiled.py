@@ -29,7 +29,7 @@ class Controls(TypedDict, total=False):
     steps: int | None
 
 
-DEFAULT_CONTROLS = Controls(rtol=1e-8, atol=1e-8, h0=0.0, max_steps=10**7, steps=None)
+DEFAULT_CONTROLS = Controls(rtol=1e-8, atol=1e-8, h0=0.0, max_steps=abi.MAX_STEPS, steps=None)
 
 
 def controls(method: str, *, steps: int, rtol: float, atol: float, max_steps: int) -> Controls:

@@ -13,8 +13,16 @@ import tempfile
 from functools import cache
 from pathlib import Path
 
-C_BASE = ("-std=c99", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Wpedantic", "-Werror")
-FORTRAN_BASE = ("-std=f2008", "-fPIC", "-fno-math-errno", "-Wall", "-Wextra", "-Werror")
+C_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Werror")
+"""Every warning an error: what gyrogen's own builds and the C++ view of a
+header are held to."""
+C_STRICT = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror")
+"""The strictness matrix's C (README): the generated C compiles clean under it."""
+FORTRAN_WARNINGS = ("-Wall", "-Wextra", "-Werror")
+FORTRAN_STRICT = ("-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror")
+"""The strictness matrix's Fortran."""
+C_BASE = ("-std=c99", "-fPIC", "-fno-math-errno", *C_WARNINGS)
+FORTRAN_BASE = ("-std=f2008", "-fPIC", "-fno-math-errno", *FORTRAN_WARNINGS)
 FAST = ("-O3", "-march=native", "-ffp-contract=fast")
 """-ffp-contract=fast lets a * b + c be one FMA (gcc's ISO C modes forbid it
 otherwise): the same in the single and the lane-batched integrators, so
