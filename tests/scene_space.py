@@ -117,7 +117,8 @@ def name_is_valid(name: str) -> bool:
 def description_is_valid(text: str) -> bool:
     text = text.replace("\r\n", "\n")
     bad = any(c not in "\n\t" and (ord(c) < 32 or 127 <= ord(c) < 160) for c in text)
-    return len(text) <= DESCRIPTION_MAX_LENGTH and not bad
+    not_xml = any(c in "\ufffe\uffff" or "\ud800" <= c <= "\udfff" for c in text)  # XML 1.0's Char
+    return len(text) <= DESCRIPTION_MAX_LENGTH and not bad and not not_xml
 
 
 def _mostly(
@@ -139,7 +140,9 @@ descriptions = _mostly(
         alphabet=st.characters(exclude_categories=("Cs", "Cc"), include_characters="\n\t"),
         max_size=300,
     ),
-    st.sampled_from(["", "*/ #error x", "a\n\nb", "??/\n\\", "/* c */", "\t", "x" * 2001]),
+    st.sampled_from(
+        ["", "*/ #error x", "a\n\nb", "??/\n\\", "/* c */", "\t", "x" * 2001, "a\ufffeb", "\uffff"]
+    ),
     st.text(alphabet="*/?\\#!&\n\t $\"'", max_size=300),
     st.text(max_size=200),
 )

@@ -6,6 +6,7 @@ under the strict flags, and the command's refusals are one line each."""
 
 from __future__ import annotations
 
+import ctypes
 import math
 import subprocess
 import sys
@@ -183,10 +184,70 @@ def test_bad_parameters_in_event_mode(fmus: dict[str, Path], tmp_path: Path) -> 
 
 
 def test_a_failed_step_is_an_fmi_error(fmus: dict[str, Path], tmp_path: Path) -> None:
-    """A tolerance the integrator refuses (below MIN_RTOL): the step fails."""
-    slave, log = initialized(fmus["default"], "CoSimulation", tmp_path, tolerance=1e-20)
-    refused(lambda: slave.doStep(0.0, 0.1), log, abi.message(abi.ODE_CODES, 5))
+    """A step the integrator refuses (backwards in time): the step fails."""
+    slave, log = initialized(fmus["default"], "CoSimulation", tmp_path)
+    refused(lambda: slave.doStep(0.0, -0.1), log, abi.message(abi.ODE_CODES, 5))
     slave.freeInstance()
+
+
+@pytest.mark.parametrize("tolerance", [math.nan, -1.0, 0.0, 1e-20, 1.0, math.inf])
+def test_a_tolerance_the_integrator_cannot_meet_is_refused(
+    fmus: dict[str, Path], tmp_path: Path, tolerance: float
+) -> None:
+    """fmi2SetupExperiment checks the tolerance and says why (before: fmi2OK,
+    then every doStep failed with "bad argument")."""
+    slave, log = instantiate(fmus["default"], "CoSimulation", tmp_path)
+    refused(
+        lambda: slave.setupExperiment(tolerance=tolerance, startTime=0.0),
+        log,
+        f"fmi2SetupExperiment: tolerance {tolerance:g} is not a relative tolerance the "
+        f"integrator can meet (above {abi.MIN_RTOL:g} and below 1)".replace("inf", "inf"),
+    )
+    slave.freeInstance()
+
+
+@pytest.mark.parametrize(("t", "h"), [(0.0, 0.1), (5.0, 0.1), (0.1 + 1e-9, 0.1)])
+def test_a_step_from_another_time_is_refused(
+    fmus: dict[str, Path], tmp_path: Path, t: float, h: float
+) -> None:
+    """FMI 2.0: doStep's communication point is the FMU's time (where the
+    last step ended). After one step to 0.1, a step from t is refused, the
+    state untouched; the step from 0.1 is taken."""
+    fmu = fmus["default"]
+    slave, log = initialized(fmu, "CoSimulation", tmp_path)
+    slave.doStep(0.0, 0.1)
+    before = slave.getReal(vr(fmu, "q1", "u4"))
+    refused(
+        lambda: slave.doStep(t, h),
+        log,
+        f"fmi2DoStep: the communication point {t:.17g} is not the FMU's time 0.10000000000000001",
+    )
+    assert slave.getReal(vr(fmu, "q1", "u4")) == before
+    slave.doStep(0.1, 0.1)
+    slave.freeInstance()
+
+
+def test_model_exchange_refuses_non_finite_states(fmus: dict[str, Path], tmp_path: Path) -> None:
+    fmu = fmus["default"]
+    model, log = initialized(fmu, "ModelExchange", tmp_path)
+    model.enterContinuousTimeMode()
+    n = len(fmpy.read_model_description(str(fmu)).derivatives)
+    x, after = (ctypes.c_double * n)(), (ctypes.c_double * n)()
+    model.getContinuousStates(x, n)
+    bad = (ctypes.c_double * n)(*x)
+    bad[1] = math.nan
+    refused(lambda: model.setContinuousStates(bad, n), log,
+            "fmi2SetContinuousStates: q2 = nan is not finite")  # fmt: skip
+    model.getContinuousStates(after, n)
+    assert list(after) == list(x)
+    model.freeInstance()
+
+
+def test_co_simulation_steps_a_stiff_scene_implicitly(tmp_path: Path, cli) -> None:
+    """As `simulate --method auto`: radau5 for stiff_wheel (was dop853)."""
+    code, out, err = cli(["fmu", "stiff_wheel", "--out", str(tmp_path)])
+    assert code == 0, err
+    assert "Co-Simulation (radau5)" in out
 
 
 @pytest.mark.parametrize("compiler", ["gcc", "clang", "g++"])
@@ -206,7 +267,7 @@ MISUSE = {
     "wrong_guid", "step_before_initialization", "set_nowhere", "exit_refused", "set_refused",
     "get_nowhere", "unknown_category", "step_nan", "step_backwards", "other_status",
     "step_after_terminate", "states_too_many", "set_states_too_few", "derivatives_too_many",
-    "fmu_state",
+    "fmu_state", "set_nan_states",
 }  # fmt: skip
 """What tests/consumers/fmi2_driver.c does wrong: each an fmi2Error (3) with
 a logged line; every other call is fmi2OK (0)."""
@@ -281,6 +342,10 @@ def targets(line: str) -> Callable[[str], str]:
         (None, ["gyrostat", "--method", "rk4"], "'rk4' is not one of"),
         (targets('targets = ["c"]\nintegrators = ["dop853"]'), ["--method", "rodas4"],
          "rodas4 is not among the scene's integrators (dop853)"),
+        (lambda text: text.replace('name = "gyrostat"', 'name = "fmi2Functions"'), [],
+         "the scene's header fmi2Functions.h would shadow the FMI header of that name"),
+        (lambda text: text.replace("the paper's full model", "the paper's \ufffe model"), [],
+         "U+FFFE at position 12 is not a character: XML (an FMU's modelDescription.xml)"),
     ],
 )  # fmt: skip
 def test_refusals(

@@ -88,7 +88,9 @@ def check_name(v: str) -> None:
 
 
 def check_description(v: str) -> str:
-    """Any text but control characters (newlines and tabs are fine), at most
+    """Any text but control characters (newlines and tabs are fine) and what
+    XML 1.0 cannot hold (U+FFFE, U+FFFF, lone surrogates: an FMU's
+    modelDescription.xml carries the description), at most
     DESCRIPTION_MAX_LENGTH characters; CR LF is read as a newline."""
     v = v.replace("\r\n", "\n")
     if len(v) > DESCRIPTION_MAX_LENGTH:
@@ -96,6 +98,11 @@ def check_description(v: str) -> str:
     for i, ch in enumerate(v):
         if ch not in "\n\t" and (ord(ch) < 32 or 127 <= ord(ch) < 160):
             raise ValueError(f"control character U+{ord(ch):04X} at position {i}")
+        if ord(ch) in (0xFFFE, 0xFFFF) or 0xD800 <= ord(ch) <= 0xDFFF:
+            raise ValueError(
+                f"U+{ord(ch):04X} at position {i} is not a character: XML (an FMU's "
+                "modelDescription.xml) cannot hold it"
+            )
     return v
 
 

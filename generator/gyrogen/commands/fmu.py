@@ -19,7 +19,8 @@ from gyrogen.scene import Scene
     type=click.Choice(methods.ADAPTIVE),
     default=None,
     help="The compiled integrator Co-Simulation steps with, one of the scene's "
-    "[default: dop853 if the scene has it, else its first adaptive one].",
+    "[default: the one `gyrogen simulate --method auto` would choose for the scene's "
+    "start: an implicit one for a stiff scene, else dop853 if the scene has it].",
 )
 def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
     """Write SCENE as <scene>.fmu: FMI 2.0, Model Exchange and Co-Simulation,
@@ -46,6 +47,8 @@ def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
             param_hint="'--method'",
         )
     sim = scene.simulate
+    if method is None:
+        chosen = _by_stiffness(scene, chosen)
     stepping = Stepping(method or chosen, sim.rtol, sim.atol, sim.t_end, sim.dt)
     model = FmuModel(unit_of(scene), tuple(runtime_values(scene)), stepping)
     write_atomic(target, fmu_build.build(model, target))
@@ -53,6 +56,28 @@ def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
         f"wrote {target / (scene.name + '.fmu')}: FMI 2.0, Model Exchange and Co-Simulation "
         f"({stepping.method}), {len(model.variables)} variables"
     )
+
+
+def _by_stiffness(scene: Scene, explicit: str) -> str:
+    """What `simulate --method auto` chooses at the scene's start over its
+    t_end (analysis.stiffness): the scene's best implicit integrator for a
+    stiff problem, else explicit (the default_method)."""
+    import tempfile
+
+    import numpy as np
+
+    from gyrogen.analysis import stiffness
+    from gyrogen.analysis.simulate import runtime_values
+    from gyrogen.runtime.scene_build import build_scene
+
+    with tempfile.TemporaryDirectory(prefix="gyrogen-fmu-") as tmp:
+        _, built = build_scene(scene, Path(tmp) / scene.name, ["c"])
+    comp = built["c"]
+    c = comp.setup(np.array(runtime_values(scene)))
+    choice = stiffness.choose(comp, c, np.array(scene.initial_state()), scene.simulate.t_end)
+    if choice.stiff and choice.method is None:
+        click.echo(f"{scene.name} is stiff, and the scene has no implicit integrator: {explicit}")
+    return choice.method if choice.stiff and choice.method else explicit
 
 
 command = fmu
