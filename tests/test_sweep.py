@@ -93,6 +93,19 @@ def test_refused_parameters_are_rows_with_their_code(tmp_path: Path, cache: None
     assert (frame.loc[~bad, "setup_code"] == 0).all()
 
 
+def test_a_grid_setup_refuses_throughout_is_reported(tmp_path: Path, cache: None, cli) -> None:
+    """Every parameter set refused by setup (a 2-D grid of I22 < 0): the rows
+    carry the code, the summary and histograms are written, and the map,
+    with no value to show, is left out (it was a traceback)."""
+    text = small(tmp_path / "s.toml").read_text().replace("[8.0, 9.0, 10.0]", "[-2.0, -1.0]")
+    (tmp_path / "s.toml").write_text(text)
+    code, _, err = cli(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--quiet"])
+    assert (code, err) == (0, "")
+    assert (rows(tmp_path / "o")["setup_code"] == 4).all()
+    names = {p.name for p in (tmp_path / "o").iterdir()}
+    assert {"summary.json", "summary.md", "histograms.png"} <= names and "map.png" not in names
+
+
 def test_rerun_skips_the_parts_written(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
     path, done = swept
     out = tmp_path / "out"

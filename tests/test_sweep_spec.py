@@ -174,6 +174,27 @@ BAD = [
      'grid.I22: folded into the code as 4.0: make it "runtime" in the scene'),
     ("no value", 'scene = "tf.toml"\n[grid]\nu4 = { list = [1.0] }',
      "parameters: no value for runtime parameter I22"),
+    ("cluster metric", 'scene = "rw4_pyramid"\n[metrics]\nkeep = ["max_nutation", "max_rate"]',
+     "metrics.keep: max_nutation, max_rate read the paper's single rotor; a cluster scene keeps"),
+    ("setup refuses", sweep_text(tail="[parameters]\nm_a = -1.0"),
+     "parameters.m_a: must be positive (got -1.0)"),
+    ("setup refuses carrier", sweep_text(tail="[parameters]\nI11 = -1.0"),
+     "parameters.I11, I22, I33, I13: carrier inertia is not positive definite"),
+    ("huge linspace", sweep_text().replace("[0.0, 10.0, 3]", "[-1e308, 1e308, 3]"),
+     "grid.u4: values beyond +-1e+300 leave double range on the map"),
+    ("huge list", sweep_text().replace("linspace = [0.0, 10.0, 3]", "list = [1e301]"),
+     "grid.u4: values beyond +-1e+300"),
+    ("lognormal overflow", sweep_text(tail="J = { lognormal = [700.0, 1.0] }"),
+     "draws.J: lognormal = [700, 1]: draws would reach inf, beyond 1e+300"),
+    ("normal overflow", sweep_text(tail="u3 = { normal = [0.0, 1e300] }"),
+     "draws.u3: normal = [0, 1e+300]: draws would reach 9e+300, beyond 1e+300"),
+    ("uniform overflow", sweep_text(tail="u3 = { uniform = [-1e308, 1e308] }"),
+     "draws.u3: uniform = [-1e+308, 1e+308]: draws would reach inf"),
+    ("zero quaternion", 'scene = "tfq.toml"\n[parameters]\nI22 = 4.0\n[initial]\ne0 = 0.0',
+     "initial: e0..e3 are all zero: not an attitude"),
+    ("long quaternion",
+     'scene = "tfq.toml"\n[parameters]\nI22 = 4.0\n[initial]\ne0 = 1.0\ne1 = 1.0',
+     "initial: e0..e3 = (1, 1, 0, 0) has norm 1.41421356, not 1"),
 ]  # fmt: skip
 
 
@@ -182,6 +203,9 @@ def test_bad_sweep_is_one_line_exit_2_nothing_written(
     case: str, text: str, message: str, tmp_path: Path, cli
 ) -> None:
     (tmp_path / "tf.toml").write_text(TORQUE_FREE_RUNTIME)
+    (tmp_path / "tfq.toml").write_text(
+        TORQUE_FREE_RUNTIME.replace('name = "tf_runtime"', 'name = "tfq"\nattitude = "quaternion"')
+    )  # fmt: skip
     path = tmp_path / "bad.toml"
     path.write_text(text)
     out = tmp_path / "out"

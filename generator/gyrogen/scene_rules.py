@@ -106,15 +106,16 @@ def check_description(v: str) -> str:
     return v
 
 
-def check_quaternion(initial: dict[str, float]) -> None:
-    """Euler parameters start on |e| = 1 (e0 = 1 when not given)."""
+def check_quaternion(initial: dict[str, float], key: str = "simulate.initial") -> None:
+    """Euler parameters start on |e| = 1 (e0 = 1 when not given); key: where
+    the start state was given (a scene's simulate.initial, a sweep's initial)."""
     e = [initial.get(n, 1.0 if n == "e0" else 0.0) for n in QUATERNION]
     norm = math.sqrt(sum(x * x for x in e))
     if norm == 0.0:
-        raise ValueError("simulate.initial: e0..e3 are all zero: not an attitude")
+        raise ValueError(f"{key}: e0..e3 are all zero: not an attitude")
     if abs(norm - 1.0) > QUATERNION_NORM_SLACK:
         raise ValueError(
-            f"simulate.initial: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
+            f"{key}: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
             f"{norm:.9g}, not 1 (within {QUATERNION_NORM_SLACK:g}): give a unit quaternion"
         )
 

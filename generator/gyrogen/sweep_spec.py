@@ -46,7 +46,8 @@ from gyrogen.abi import (
 from gyrogen.errors import SceneError
 from gyrogen.scene import Number, Scene, builtin_names, one_line, read_file
 from gyrogen.scene import load as load_scene
-from gyrogen.scene_rules import QUATERNION
+from gyrogen.scene_rules import QUATERNION, check_quaternion
+from gyrogen.setup_checks import first_failure
 
 METRICS = ("final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to")
 """What a sweep may keep of each trajectory (analysis/sweep_metrics.py)."""
@@ -55,6 +56,15 @@ SAMPLED = ("max_nutation", "max_rate", "invariant_drift", "time_to")
 QUANTITIES = ("nutation", "rate")
 """time_to's quantities besides the states: the nutation angle and |omega|."""
 DEFAULT_SAMPLES = 100
+SINGLE_ROTOR_METRICS = SAMPLED
+"""The sampled metrics read the paper's single rotor (u4 on a2, its lumped
+inertia): a cluster scene keeps final_state and stats."""
+MAX_VALUE = 1e300
+"""The largest magnitude a grid value or a draw may reach: the map's cell
+edges and the draws' arithmetic stay inside double range (1.8e308)."""
+TAIL = 9.0
+"""Standard deviations within which a normal or lognormal draw falls (the
+draws' 64-bit uniforms reach about 9.4 at their extremes, beyond in 1e-19)."""
 
 
 class _Strict(BaseModel):
@@ -101,6 +111,16 @@ class Distribution(_Strict):
             raise ValueError(f"uniform = [{a:g}, {b:g}]: low must be below high")
         if self.kind != "uniform" and not b > 0:
             raise ValueError(f"{self.kind} = [{a:g}, {b:g}]: the spread must be > 0")
+        reach = {
+            "uniform": max(abs(a), abs(b), abs(b - a)),
+            "normal": abs(a) + TAIL * b,
+            "lognormal": math.exp(min(a + TAIL * b, 709.0)) if a + TAIL * b < 709.0 else math.inf,
+        }[self.kind]
+        if not reach <= MAX_VALUE:
+            raise ValueError(
+                f"{self.kind} = [{a:g}, {b:g}]: draws would reach {reach:.3g}, beyond "
+                f"{MAX_VALUE:g} (double range)"
+            )
         if self.truncate is not None:
             lo, hi = self.truncate
             if not lo < hi:
@@ -128,6 +148,9 @@ class Axis(_Strict):
             raise ValueError(f"{n} values: from 1 to {MAX_SWEEP_AXIS:,}")
         if self.logspace is not None and max(map(abs, self.logspace[:2])) > 300:
             raise ValueError("logspace exponents beyond +-300 leave double range")
+        ends = self.values or (self.linspace[:2] if self.linspace is not None else ())
+        if ends and not max(map(abs, ends)) <= MAX_VALUE:
+            raise ValueError(f"values beyond +-{MAX_VALUE:g} leave double range on the map")
         return self
 
     @property
@@ -320,6 +343,13 @@ def check_against(sweep: Sweep, scene: Scene) -> None:
         for name in names:
             _check_variable(scene, f"{key}.{name}", name)
     _check_names(scene, sweep)
+    _check_values(scene, sweep)
+    cluster_only = sorted(set(sweep.metrics.keep) & set(SINGLE_ROTOR_METRICS))
+    if scene.rotors and cluster_only:
+        raise ValueError(
+            f"metrics.keep: {', '.join(cluster_only)} read the paper's single rotor; a cluster "
+            "scene keeps final_state and stats"
+        )
     for name in sweep.metrics.time_to:
         if name not in QUANTITIES and name not in scene.states:
             choices = ", ".join((*QUANTITIES, *scene.states))
@@ -358,6 +388,21 @@ def _check_names(scene: Scene, sweep: Sweep) -> None:
     missing = [n for n in scene.runtime if n not in known and n not in swept]
     if missing:
         raise ValueError(f"parameters: no value for runtime parameter {', '.join(missing)}")
+
+
+def _check_values(scene: Scene, sweep: Sweep) -> None:
+    """The values every trajectory shares, checked as a scene file's are: the
+    start's Euler parameters, and setup's checks on the parameters that are
+    neither on the grid nor drawn (a grid or a draw may still reach values
+    setup refuses: those rows carry its code)."""
+    swept = set(sweep.grid) | set(sweep.draws.variables if sweep.draws else ())
+    if scene.attitude == "quaternion" and sweep.initial is not None:
+        check_quaternion(sweep.initial, "initial")
+    if not scene.rotors:
+        fixed = {**scene.folded(), **scene.simulate.parameters, **sweep.parameters}
+        failed = first_failure({k: v for k, v in fixed.items() if k not in swept})
+        if failed is not None:
+            raise ValueError(failed[1])
 
 
 def _check_spin(sweep: Sweep, scene: Scene) -> None:

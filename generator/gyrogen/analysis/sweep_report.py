@@ -196,7 +196,8 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
 def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
     """A 2-D product grid's map of its first metric (the median over the
     draws of each cell), with NOTES.md's boundary when the sweep has the
-    spin criterion; None for other sweeps."""
+    spin criterion; None for other sweeps, and when no cell has a value
+    (setup refused every parameter set, say)."""
     from gyrogen.analysis.sweep_plots import MapData
 
     sweep = spec.sweep
@@ -208,6 +209,8 @@ def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
     z = in_order(out, [metric])[metric].reshape(len(y), len(x), sweep.count)
     ys, xs = np.argsort(y, kind="stable"), np.argsort(x, kind="stable")  # listed in any order
     y, x, z = y[ys], x[xs], z[ys][:, xs]
+    if not np.isfinite(z).any():
+        return None
     x_label, y_label = (f"{n} ({UNITS[n][0]})" if n in UNITS else n for n in (x_name, y_name))
     data = MapData(
         f"sweep {spec.name}: {metric}", x_label, x, y_label, y, metric, np.median(z, axis=2)
