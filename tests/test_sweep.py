@@ -144,6 +144,100 @@ def test_no_scheduler_there_is_one_line_exit_1(tmp_path: Path, cache: None, cli)
     assert err.count("\n") == 1
 
 
+def test_no_scheduler_writes_nothing(tmp_path: Path, cache: None, cli) -> None:
+    """Refused before the output directory is touched (it held sweep.json)."""
+    out = tmp_path / "o"
+    address = f"tcp://127.0.0.1:{free_port()}"
+    code, _, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--scheduler", address,
+                        "--out", str(out)])  # fmt: skip
+    assert code == 1 and not out.exists(), err
+
+
+@pytest.mark.parametrize("port", ["0", "65536", "99999"])
+def test_a_port_out_of_range_is_a_usage_error(tmp_path: Path, cli, port: str) -> None:
+    address, out = f"tcp://127.0.0.1:{port}", tmp_path / "o"
+    code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--scheduler", address,
+                             "--out", str(out)])  # fmt: skip
+    assert (code, stdout) == (2, "") and not out.exists()
+    assert err == (
+        f"gyrogen sweep: error: Invalid value for '--scheduler': '{address}': the port must be "
+        "1 to 65535 (see --help)\n"
+    )
+
+
+def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
+    tmp_path: Path, cache: None, cli
+) -> None:
+    """An HTTP server on the port takes the connection and never speaks Dask:
+    distributed alone waited for ever; now one line within 2 CONNECT_TIMEOUT."""
+    import http.server
+    import threading
+    import time
+
+    from gyrogen.analysis.sweep_engine import CONNECT_TIMEOUT
+
+    class Quiet(http.server.BaseHTTPRequestHandler):
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    address, out = f"tcp://127.0.0.1:{server.server_address[1]}", tmp_path / "o"
+    try:
+        t0 = time.monotonic()
+        code, _, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--scheduler", address,
+                            "--out", str(out)])  # fmt: skip
+        waited = time.monotonic() - t0
+    finally:
+        server.shutdown()
+    assert code == 1 and not out.exists()
+    assert err == (
+        f"gyrogen: error: --scheduler {address}: no Dask scheduler answered within "
+        f"{2 * CONNECT_TIMEOUT:g} s (is something else listening on that port?)\n"
+    )
+    assert waited < 4 * CONNECT_TIMEOUT  # bounded, not a speed figure: it hung for ever
+
+
+@pytest.mark.parametrize(
+    ("obstacle", "message"),
+    [("parts", "{out}/parts: not a directory"), ("state", "{out}/sweep.json: not a sweep's state")],
+)
+def test_obstacles_in_out_are_refused_before_any_work(
+    tmp_path: Path, cli, obstacle: str, message: str
+) -> None:
+    out = tmp_path / "o"
+    out.mkdir()
+    if obstacle == "parts":
+        (out / "parts").write_text("mine")
+    else:
+        (out / "sweep.json").write_text("[1, 2]")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", str(out)])
+    assert (code, stdout) == (1, "") and err.count("\n") == 1
+    assert err.startswith("gyrogen: error: " + message.format(out=out)), err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+@pytest.mark.parametrize("size", [0, 100])
+def test_a_damaged_part_is_computed_again(
+    swept: tuple[Path, Path], tmp_path: Path, cli, size: int
+) -> None:
+    """A part cut short (0 or 100 bytes: a crash, a full disk) is detected by
+    its footer on the rerun and computed again; the rows equal a clean run
+    (before: an ArrowInvalid traceback on every rerun)."""
+    path, done = swept
+    out = tmp_path / "out"
+    assert cli(["sweep", str(path), "--out", str(out), "--quiet"]).code == 0
+    damaged = sorted((out / "parts").iterdir())[1]
+    with damaged.open("r+b") as fh:
+        fh.truncate(size)
+    code, stdout, err = cli(["sweep", str(path), "--out", str(out), "--quiet"])
+    assert code == 0, err
+    assert err == f"{damaged}: damaged or cut short: computing it again\n"
+    assert "1 chunks computed, 2 already written" in stdout
+    assert rows(out).equals(rows(done))
+
+
 def test_stability_map_agrees_with_notes(tmp_path: Path, cache: None, cli) -> None:
     out = tmp_path / "map"
     code, stdout, err = cli(["sweep", "stability_map", "--out", str(out), "--quiet"])

@@ -82,6 +82,17 @@ def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
             raise GyrogenError(f"cannot write {current}: {exc.strerror or exc}") from exc
         raise
     _remove(saved.values())
+    _sync_dir(out)
+
+
+def _sync_dir(out: Path) -> None:
+    """The renames on disk too (best effort: some file systems refuse)."""
+    with suppress(OSError):
+        fd = os.open(out, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def can_write(out: Path, names: Iterable[str]) -> dict[str, Path]:
@@ -119,6 +130,8 @@ def _stage(target: Path, data: str | bytes) -> Path:
         with os.fdopen(fd, "wb") as fh:
             os.fchmod(fh.fileno(), NEW_FILE_MODE & ~umask())
             fh.write(data.encode("utf-8") if isinstance(data, str) else data)
+            fh.flush()
+            os.fsync(fh.fileno())  # on disk before the rename makes it the file
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -122,33 +122,73 @@ def written(out: Path) -> set[int]:
         names = os.listdir(out / PARTS)
     except FileNotFoundError:
         return set()
+    except OSError as exc:
+        raise GyrogenError(f"{out / PARTS}: cannot list it: {exc.strerror or exc}") from exc
     return {int(m.group(1)) for n in names if (m := _PART.fullmatch(n))}
 
 
-def _claim(out: Path, spec: Spec, chunk: int) -> set[int]:
-    """out for this sweep: its state file written (or checked, when out
-    holds a sweep already); the chunks already written."""
+def whole(path: Path, rows: int) -> bool:
+    """Whether the part at path is a complete Parquet file of rows rows (its
+    footer read back): a part cut short by a crash or a full disk is not."""
+    import pyarrow.parquet as pq
+
+    try:
+        return bool(pq.ParquetFile(path).metadata.num_rows == rows)
+    except Exception:  # pyarrow's errors for a damaged file vary: ArrowInvalid, OSError
+        return False
+
+
+def _state(out: Path) -> dict[str, Any] | None:
+    """The sweep state out holds (None: none yet); obstacles refused."""
+    parts, path = out / PARTS, out / STATE_FILE
+    if os.path.lexists(parts) and not parts.is_dir():
+        raise GyrogenError(f"{parts}: not a directory: remove it or use another --out")
+    if not os.path.lexists(path):
+        return None
+    try:
+        held = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        why = getattr(exc, "strerror", None) or exc
+        raise GyrogenError(f"{path}: unreadable ({why}): remove it or use another --out") from exc
+    if not isinstance(held, dict):
+        raise GyrogenError(f"{path}: not a sweep's state: remove it or use another --out")
+    return held
+
+
+def _check_out(out: Path, spec: Spec, chunk: int) -> dict[str, Any]:
+    """Before any work: out can hold this sweep (nothing in the way, no other
+    sweep in it); the state file to write."""
     state = {"sweep": spec.name, "fingerprint": spec.fingerprint(), "chunk": chunk}
     state |= {"trajectories": spec.size, "scene": spec.scene.name}
-    path = out / STATE_FILE
-    if path.is_file():
-        try:
-            held = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise GyrogenError(
-                f"{path}: unreadable ({exc}): remove it or use another --out"
-            ) from exc
-        if held != state:
-            raise GyrogenError(
-                f"{out} holds another sweep ({held.get('sweep')}, {held.get('trajectories')} "
-                f"trajectories in chunks of {held.get('chunk')}): use another --out or remove it"
-            )
-        return written(out)
-    if written(out):
-        raise GyrogenError(f"{out / PARTS} holds parts but no {STATE_FILE}: remove it first")
-    can_write(out, [STATE_FILE])
-    write_atomic(out, {STATE_FILE: json.dumps(state, indent=1) + "\n"})
-    return set()
+    held = _state(out)
+    if held is None:
+        if written(out):
+            raise GyrogenError(f"{out / PARTS} holds parts but no {STATE_FILE}: remove it first")
+        can_write(out, [STATE_FILE])
+    elif held != state:
+        raise GyrogenError(
+            f"{out} holds another sweep ({held.get('sweep')}, {held.get('trajectories')} "
+            f"trajectories in chunks of {held.get('chunk')}): use another --out or remove it"
+        )
+    return state
+
+
+def _claim(out: Path, job: Job, state: dict[str, Any]) -> set[int]:
+    """out for this sweep: its state file written; the chunks whose parts
+    are whole (a damaged one is removed, to be computed again)."""
+    if _state(out) is None:
+        write_atomic(out, {STATE_FILE: json.dumps(state, indent=1) + "\n"})
+        return set()
+    done = set()
+    for index in written(out):
+        a, b = job.bounds(index)
+        path = out / PARTS / part_name(index)
+        if index < job.chunks and whole(path, b - a):
+            done.add(index)
+        else:
+            print(f"{path}: damaged or cut short: computing it again", file=sys.stderr)
+            path.unlink(missing_ok=True)
+    return done
 
 
 @contextmanager
@@ -162,26 +202,58 @@ def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, st
         n = threads or os.cpu_count() or 1
         with (  # no sampling profiler in the worker's threads: nobody reads it
             dask.config.set({"distributed.worker.profile.enabled": False}),
-            LocalCluster(
-                n_workers=1, threads_per_worker=n, processes=False, dashboard_address=":0"
+            LocalCluster(  # the dashboard on this machine only
+                n_workers=1,
+                threads_per_worker=n,
+                processes=False,
+                dashboard_address="127.0.0.1:0",
             ) as cluster,
             Client(cluster) as client,
         ):
             yield client, f"local ({n} threads)", n
         return
-    host, port = scheduler.removeprefix("tcp://").rsplit(":", 1)
-    try:
-        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT).close()
-        client = Client(scheduler, timeout=CONNECT_TIMEOUT)
-    except (OSError, TimeoutError, ValueError) as exc:
-        why = getattr(exc, "strerror", None) or str(exc)
-        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {why}") from exc
-    with client:
+    with _connect(Client, scheduler) as client:
         workers = client.scheduler_info(n_workers=-1)["workers"].values()
         n = sum(int(w.get("nthreads", 1)) for w in workers)
         if n == 0:
             raise GyrogenError(f"--scheduler {scheduler}: the cluster has no workers")
         yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+
+
+@contextmanager
+def _connect(client_type: Any, scheduler: str) -> Iterator[Any]:
+    """A client of the scheduler, or one line: the TCP connection and then
+    the handshake each within CONNECT_TIMEOUT, whatever answers on the port
+    (an HTTP server takes the connection and never speaks Dask: distributed
+    itself would wait for ever)."""
+    host, port = scheduler.removeprefix("tcp://").rsplit(":", 1)
+    try:
+        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT).close()
+    except (OSError, ValueError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {why}") from exc
+    made: dict[str, Any] = {}
+
+    def connect() -> None:
+        try:
+            made["client"] = client_type(scheduler, timeout=CONNECT_TIMEOUT)
+        except Exception as exc:  # reported below, in one line
+            made["error"] = exc
+
+    thread = threading.Thread(target=connect, daemon=True)  # daemon: never holds the exit
+    thread.start()
+    thread.join(2 * CONNECT_TIMEOUT)
+    if thread.is_alive():
+        raise GyrogenError(
+            f"--scheduler {scheduler}: no Dask scheduler answered within "
+            f"{2 * CONNECT_TIMEOUT:g} s (is something else listening on that port?)"
+        )
+    if "error" in made:
+        error = made["error"]
+        why = getattr(error, "strerror", None) or str(error) or type(error).__name__
+        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {why}") from error
+    with made["client"] as client:
+        yield client
 
 
 def run(
@@ -196,29 +268,32 @@ def run(
     """Every chunk of spec not yet in out, computed and written."""
     began = time.perf_counter()
     chunk = chunk or spec.sweep.chunk
-    make_dir(out)
-    done = _claim(out, spec, chunk)
+    state = _check_out(out, spec, chunk)  # refusals first, before any work
     if scheduler is None:  # pyarrow's first write loads its codecs: not on the tasks' path
         threading.Thread(target=parquet_bytes, args=({"warm": np.zeros(1)},), daemon=True).start()
     job = Job(spec, scene_sources(spec.scene), chunk)
-    todo = [k for k in range(job.chunks) if k not in done]
     with engine(scheduler, threads) as (client, name, n):
+        make_dir(out)
+        done = _claim(out, job, state)
+        todo = (k for k in range(job.chunks) if k not in done)  # lazily: 10^9 chunks fit
         record = Run(out, job, name, n, skipped=len(done))
         shared = client.scatter(job, broadcast=True, hash=False)
         record.startup = time.perf_counter() - began
         started = time.perf_counter()
-        _compute(client, shared, record, todo, progress)
+        _compute(client, shared, record, done, todo, progress)
         record.wall = time.perf_counter() - started
     return record
 
 
-def _compute(client: Any, shared: Any, record: Run, todo: list[int], progress: bool) -> None:
+def _compute(
+    client: Any, shared: Any, record: Run, done: set[int], todo: Iterator[int], progress: bool
+) -> None:
     from distributed import as_completed
     from tqdm import tqdm
 
     job, parts = record.job, record.out / PARTS
-    done_rows = sum(b - a for a, b in map(job.bounds, set(range(job.chunks)) - set(todo)))
-    pending = iter(todo)
+    done_rows = sum(b - a for a, b in map(job.bounds, done))
+    pending = todo
     futures = as_completed()
     key = f"gyrogen-sweep-{job.spec.fingerprint()}-{job.chunk}"
 

@@ -29,6 +29,8 @@ class SweepType(click.ParamType):
 def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     if value is not None and not ADDRESS.fullmatch(value):
         raise click.BadParameter(f"{value!r} is not tcp://HOST:PORT", ctx, param)
+    if value is not None and not 1 <= int(value.rsplit(":", 1)[1]) <= 65535:
+        raise click.BadParameter(f"{value!r}: the port must be 1 to 65535", ctx, param)
     return value
 
 
