@@ -126,6 +126,16 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     return out
 
 
+def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray) -> np.ndarray:
+    """(n, K) values whose signs change exactly where the rhs is not smooth
+    in the state: a cluster's torque clamps (cluster_reference.clamp_margins);
+    none (K = 0) for the paper's scenes, smooth in the state."""
+    xs = np.atleast_2d(xs)
+    if not scene.rotors:
+        return np.zeros((len(xs), 0))
+    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime))
+
+
 def output(
     scene: Scene, name: str, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0
 ) -> np.ndarray:
