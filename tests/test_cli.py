@@ -400,3 +400,18 @@ def test_cluster_manifest_records_the_effects_it_has() -> None:
     manifest = json.loads((Path(__file__).parents[1] / "generated/rw4_pyramid/manifest.json")
                           .read_text())  # fmt: skip
     assert manifest["scene"]["effects"] == {"rotor_angle": False}
+
+
+def test_a_crlf_description_is_held_with_lf_as_the_readme_says(tmp_path: Path, cli) -> None:
+    import json
+
+    text = (Path(__file__).parents[1] / "generator/gyrogen/scenes/torque_free.toml").read_text()
+    head, tail = text.split("description = ", 1)
+    path = tmp_path / "crlf.toml"
+    crlf = head + 'description = """two\r\nlines"""\n' + tail.split("\n", 1)[1]
+    path.write_bytes(crlf.encode())
+    assert cli(["generate", str(path), "--no-check", "--out", str(tmp_path / "o")]).code == 0
+    manifest = json.loads((tmp_path / "o" / "manifest.json").read_text())
+    assert manifest["scene"]["description"] == "two\nlines"
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert "a CR LF\n  is read as LF" in readme
