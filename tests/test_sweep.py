@@ -257,3 +257,85 @@ def test_api_sweep_is_the_command_lines(swept: tuple[Path, Path], tmp_path: Path
     assert isinstance(frame, pd.DataFrame) and frame.equals(rows(out))
     spec = api.load_sweep(path.read_text(), name="text", here=path.parent)
     assert api.sweep(spec, out=tmp_path / "text", chunk=60, plots=False).equals(frame)
+
+
+def test_a_resume_never_mixes_two_builds(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
+    """A sweep begun by another build (here: its state says other generated
+    sources) is refused with what changed; --restart computes it anew, and
+    the rows are a clean run's (before: it resumed, old rows beside new)."""
+    import json
+    import shutil
+
+    path, done = swept
+    out = tmp_path / "out"
+    shutil.copytree(done, out)
+    state = json.loads((out / "sweep.json").read_text())
+    state["identity"]["sources"] = "0" * 16
+    (out / "sweep.json").write_text(json.dumps(state))
+    before = {p.name: p.read_bytes() for p in (out / "parts").iterdir()}
+    code, stdout, err = cli(["sweep", str(path), "--out", str(out), "--quiet"])
+    assert (code, stdout) == (1, "")
+    assert err == (
+        f"gyrogen: error: {out} holds this sweep begun with another build (changed: sources): "
+        "its rows would mix two codes; --restart computes it anew, or use another --out\n"
+    )
+    assert {p.name: p.read_bytes() for p in (out / "parts").iterdir()} == before
+    code, stdout, err = cli(["sweep", str(path), "--out", str(out), "--quiet", "--restart"])
+    assert code == 0, err
+    assert "3 chunks computed, 0 already written" in stdout
+    assert rows(out).equals(rows(done))
+
+
+def test_a_part_of_another_build_is_computed_again(
+    swept: tuple[Path, Path], tmp_path: Path, cli
+) -> None:
+    """Each part records the identity it was computed with; a resume keeps
+    only the parts of its own."""
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    path, done = swept
+    out = tmp_path / "out"
+    shutil.copytree(done, out)
+    part = sorted((out / "parts").iterdir())[0]
+    table = pq.read_table(part)
+    meta = json.loads(table.schema.metadata[b"gyrogen"])
+    meta["identity"]["code"] = "0" * 16
+    pq.write_table(table.replace_schema_metadata({"gyrogen": json.dumps(meta)}), part)
+    code, _, err = cli(["sweep", str(path), "--out", str(out), "--quiet"])
+    assert code == 0 and err == f"{part}: damaged or cut short: computing it again\n"
+    assert rows(out).equals(rows(done))
+
+
+def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
+    """Without gyrogen: each part's fields carry unit and meaning, its schema
+    the sweep's identity, spec, seed and scene; summary.json too."""
+    import pyarrow.parquet as pq
+
+    _, out = swept
+    schema = pq.read_schema(sorted((out / "parts").iterdir())[0])
+    assert schema.field("final_u4").metadata == {
+        b"unit": b"rad/s",
+        b"meaning": b"final value (the last good one on failure) of: absolute angular velocity "
+        b"of B, a2",
+    }
+    assert schema.field("max_nutation").metadata[b"unit"] == b"rad"
+    meta = json.loads(schema.metadata[b"gyrogen"])
+    assert meta["sweep"] == "small" and meta["scene"] == "gyrostat" and meta["seed"] == 11
+    assert meta["spec"]["draws"]["count"] == 4 and meta["chunk"] == 25
+    assert set(meta["identity"]) == {"gyrogen", "code", "build_id", "sources", "flags"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["seed"] == 11 and summary["identity"] == meta["identity"]
+    assert summary["spec"] == meta["spec"]
+
+
+def test_the_local_engine_listens_on_this_machine_only() -> None:
+    import psutil
+
+    from gyrogen.analysis.sweep_engine import engine
+
+    with engine(None, 1):
+        listening = [c for c in psutil.Process().net_connections("inet")
+                     if c.status == psutil.CONN_LISTEN]  # fmt: skip
+    assert listening and {c.laddr.ip for c in listening} == {"127.0.0.1"}

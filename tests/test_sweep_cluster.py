@@ -107,6 +107,37 @@ def test_cluster_gives_the_local_rows_and_survives_a_killed_worker(
         assert list(client.run(builds).values()) == [[_build_id(local)]]
 
 
+def test_two_clients_at_once_share_no_task(
+    tmp_path: Path, cluster: tuple[str, list[subprocess.Popen]], cli
+) -> None:
+    """The same sweep from two clients on one scheduler: task keys are unique
+    to a run (they were the sweep's fingerprint and chunk, and the
+    scheduler warned of different run_specs under one key), so each gets its
+    own rows, equal to a local run's."""
+    address, _ = cluster
+    sweep = long(tmp_path / "long.toml")
+    local = tmp_path / "local"
+    assert cli(["sweep", str(sweep), "--out", str(local), "--no-plots", "--quiet"]).code == 0
+    cmd = [sys.executable, "-m", "gyrogen", "sweep", str(sweep), "--scheduler", address]
+    env = _environment(Path(os.environ["GYROGEN_CACHE"]))
+    runs = [
+        subprocess.Popen(
+            [*cmd, "--out", str(tmp_path / n), "--quiet", "--no-plots"],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for n in ("a", "b")
+    ]
+    for proc in runs:
+        _, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err
+    for n in ("a", "b"):
+        assert rows(tmp_path / n).equals(rows(local))
+    assert "Detected different `run_spec`" not in (tmp_path / "dask.log").read_text()
+
+
 def _build_id(out: Path) -> str:
     return str(json.loads((out / "summary.json").read_text())["build_id"])
 

@@ -23,6 +23,7 @@ import socket
 import sys
 import threading
 import time
+import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -31,11 +32,19 @@ from typing import Any
 
 import numpy as np
 
+from gyrogen import __version__
 from gyrogen.analysis.sweep_columns import PARTS
-from gyrogen.analysis.sweep_metrics import run_chunk
-from gyrogen.analysis.sweep_sources import Sources, compiled, scene_sources
+from gyrogen.analysis.sweep_metrics import column_docs, run_chunk
+from gyrogen.analysis.sweep_sources import (
+    Sources,
+    code_digest,
+    compiled,
+    scene_sources,
+    sources_digest,
+)
 from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
+from gyrogen.runtime import flags
 from gyrogen.sweep_spec import Spec
 
 STATE_FILE = "sweep.json"
@@ -46,11 +55,13 @@ _PART = re.compile(r"part-(\d+)\.parquet")
 
 @dataclass(frozen=True)
 class Job:
-    """What every worker gets once: the sweep, its sources, the chunk size."""
+    """What every worker gets once: the sweep, its sources, the chunk size,
+    and the identity each part records."""
 
     spec: Spec
     sources: Sources
     chunk: int
+    identity: dict[str, str] = field(default_factory=dict)
 
     @property
     def chunks(self) -> int:
@@ -60,24 +71,62 @@ class Job:
         return index * self.chunk, min(self.spec.size, (index + 1) * self.chunk)
 
 
+def identity(spec: Spec, sources: Sources) -> dict[str, str]:
+    """What a sweep's rows depend on besides its spec: gyrogen's version and
+    code (the metrics, the draws), the generated sources (the integrators)
+    and the flags they are built with. A resume continues only the same."""
+    language = sources.language
+    used = flags.c_flags() if language == "c" else flags.fortran_flags()
+    return {
+        "gyrogen": __version__,
+        "code": code_digest(),
+        "build_id": sources.build_id,
+        "sources": sources_digest(sources),
+        "flags": " ".join(used),
+    }
+
+
 def chunk_task(job: Job, index: int) -> tuple[bytes, float]:
     """On a worker: chunk index's rows as Parquet bytes, and the seconds
     they took (build excluded: it happens once per process)."""
     comp = compiled(job.sources)
     t0 = time.perf_counter()
     cols = run_chunk(comp, job.spec, *job.bounds(index))
-    return parquet_bytes(cols), time.perf_counter() - t0
+    return parquet_bytes(cols, part_metadata(job)), time.perf_counter() - t0
 
 
-def parquet_bytes(cols: dict[str, np.ndarray]) -> bytes:
+def part_metadata(job: Job) -> dict[str, Any]:
+    """What a part says of itself (Parquet schema metadata, readable without
+    gyrogen): each column's unit and meaning, and the sweep's identity,
+    spec, seed and scene."""
+    spec = job.spec
+    return {
+        "columns": {n: {"unit": u, "meaning": m} for n, (u, m) in column_docs(spec).items()},
+        "gyrogen": {
+            "identity": job.identity,
+            "sweep": spec.name,
+            "spec": json.loads(spec.sweep.model_dump_json()),
+            "seed": spec.sweep.draws.seed if spec.sweep.draws else None,
+            "scene": spec.scene.name,
+            "chunk": job.chunk,
+        },
+    }
+
+
+def parquet_bytes(cols: dict[str, np.ndarray], metadata: dict[str, Any] | None = None) -> bytes:
     """The columns as one Parquet file (snappy, no dictionaries: a sweep's
     columns are mostly distinct doubles, whose dictionary pyarrow builds and
-    then drops: 4x the write time, 12% larger)."""
+    then drops: 4x the write time, 12% larger); metadata (part_metadata):
+    the fields' units and meanings, and the schema's "gyrogen" entry."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     names = list(cols)
-    table = pa.Table.from_arrays([arrow_array(cols[n]) for n in names], names=names)
+    docs = (metadata or {}).get("columns", {})
+    fields = [pa.field(n, pa.from_numpy_dtype(cols[n].dtype), metadata=docs.get(n)) for n in names]
+    schema = pa.schema(fields, metadata={"gyrogen": json.dumps(metadata["gyrogen"])}
+                       if metadata else None)  # fmt: skip
+    table = pa.Table.from_arrays([arrow_array(cols[n]) for n in names], schema=schema)
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="snappy", use_dictionary=False)
     return bytes(sink.getvalue().to_pybytes())
@@ -127,13 +176,16 @@ def written(out: Path) -> set[int]:
     return {int(m.group(1)) for n in names if (m := _PART.fullmatch(n))}
 
 
-def whole(path: Path, rows: int) -> bool:
+def whole(path: Path, rows: int, ident: dict[str, str]) -> bool:
     """Whether the part at path is a complete Parquet file of rows rows (its
-    footer read back): a part cut short by a crash or a full disk is not."""
+    footer read back) computed with this identity: a part cut short by a
+    crash or a full disk is not."""
     import pyarrow.parquet as pq
 
     try:
-        return bool(pq.ParquetFile(path).metadata.num_rows == rows)
+        meta = pq.ParquetFile(path).metadata
+        held = json.loads(meta.metadata[b"gyrogen"])["identity"]
+        return bool(meta.num_rows == rows and held == ident)
     except Exception:  # pyarrow's errors for a damaged file vary: ArrowInvalid, OSError
         return False
 
@@ -155,9 +207,12 @@ def _state(out: Path) -> dict[str, Any] | None:
     return held
 
 
-def _check_out(out: Path, spec: Spec, chunk: int) -> dict[str, Any]:
+def _check_out(
+    out: Path, spec: Spec, chunk: int, ident: dict[str, str], restart: bool
+) -> dict[str, Any]:
     """Before any work: out can hold this sweep (nothing in the way, no other
-    sweep in it); the state file to write."""
+    sweep in it, and a sweep begun there was computed with the same
+    identity, unless restart); the state file to write."""
     state = {"sweep": spec.name, "fingerprint": spec.fingerprint(), "chunk": chunk}
     state |= {"trajectories": spec.size, "scene": spec.scene.name}
     held = _state(out)
@@ -165,25 +220,34 @@ def _check_out(out: Path, spec: Spec, chunk: int) -> dict[str, Any]:
         if written(out):
             raise GyrogenError(f"{out / PARTS} holds parts but no {STATE_FILE}: remove it first")
         can_write(out, [STATE_FILE])
-    elif held != state:
+    elif {k: held.get(k) for k in state} != state:
         raise GyrogenError(
             f"{out} holds another sweep ({held.get('sweep')}, {held.get('trajectories')} "
             f"trajectories in chunks of {held.get('chunk')}): use another --out or remove it"
         )
-    return state
+    elif held.get("identity") != ident and not restart:
+        was = held.get("identity") or {}
+        changed = [k for k in ident if was.get(k) != ident[k]]
+        raise GyrogenError(
+            f"{out} holds this sweep begun with another build (changed: {', '.join(changed)}): "
+            "its rows would mix two codes; --restart computes it anew, or use another --out"
+        )
+    return state | {"identity": ident}
 
 
 def _claim(out: Path, job: Job, state: dict[str, Any]) -> set[int]:
     """out for this sweep: its state file written; the chunks whose parts
     are whole (a damaged one is removed, to be computed again)."""
-    if _state(out) is None:
+    if _state(out) != state:  # new, or begun by another build and restarted
+        for index in written(out):
+            (out / PARTS / part_name(index)).unlink(missing_ok=True)
         write_atomic(out, {STATE_FILE: json.dumps(state, indent=1) + "\n"})
         return set()
     done = set()
     for index in written(out):
         a, b = job.bounds(index)
         path = out / PARTS / part_name(index)
-        if index < job.chunks and whole(path, b - a):
+        if index < job.chunks and whole(path, b - a, job.identity):
             done.add(index)
         else:
             print(f"{path}: damaged or cut short: computing it again", file=sys.stderr)
@@ -207,6 +271,7 @@ def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, st
                 threads_per_worker=n,
                 processes=False,
                 dashboard_address="127.0.0.1:0",
+                worker_dashboard_address="127.0.0.1:0",
             ) as cluster,
             Client(cluster) as client,
         ):
@@ -264,14 +329,18 @@ def run(
     threads: int | None = None,
     chunk: int | None = None,
     progress: bool = True,
+    restart: bool = False,
 ) -> Run:
-    """Every chunk of spec not yet in out, computed and written."""
+    """Every chunk of spec not yet in out, computed and written; restart:
+    begin anew where out holds this sweep begun by another build."""
     began = time.perf_counter()
     chunk = chunk or spec.sweep.chunk
-    state = _check_out(out, spec, chunk)  # refusals first, before any work
+    sources = scene_sources(spec.scene)
+    ident = identity(spec, sources)
+    state = _check_out(out, spec, chunk, ident, restart)  # refusals first, before any work
     if scheduler is None:  # pyarrow's first write loads its codecs: not on the tasks' path
         threading.Thread(target=parquet_bytes, args=({"warm": np.zeros(1)},), daemon=True).start()
-    job = Job(spec, scene_sources(spec.scene), chunk)
+    job = Job(spec, sources, chunk, ident)
     with engine(scheduler, threads) as (client, name, n):
         make_dir(out)
         done = _claim(out, job, state)
@@ -295,7 +364,8 @@ def _compute(
     done_rows = sum(b - a for a, b in map(job.bounds, done))
     pending = todo
     futures = as_completed()
-    key = f"gyrogen-sweep-{job.spec.fingerprint()}-{job.chunk}"
+    # unique to this run: two clients on one scheduler never share a task
+    key = f"gyrogen-sweep-{job.spec.fingerprint()}-{uuid.uuid4().hex[:12]}-{job.chunk}"
 
     def submit() -> None:
         index = next(pending, None)

@@ -38,15 +38,15 @@ from typing import Any
 
 import numpy as np
 
+from gyrogen.abi import unit_and_doc
 from gyrogen.analysis.sweep_draws import inputs
-from gyrogen.physics import body_momentum, lumped_inertias
+from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.segment import COUNTERS
 from gyrogen.sweep_spec import SAMPLED, Spec
 
 NOT_RUN = -1
 """code of a trajectory whose parameters setup refused."""
-_LUMPED = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3")
 
 
 def columns(spec: Spec) -> dict[str, np.dtype]:
@@ -68,6 +68,36 @@ def columns(spec: Spec) -> dict[str, np.dtype]:
     cols |= {col: np.dtype(np.float64) for key in keep for col in names.get(key, ())}
     cols |= {f"time_to_{q}": np.dtype(np.float64) for q in spec.sweep.metrics.time_to}
     return cols
+
+
+_METRIC_DOCS = {
+    "sample": ("1", "the trajectory's index in the sweep (its draws depend on seed and it alone)"),
+    "setup_code": ("1", "setup's return code (0: accepted)"),
+    "code": ("1", "the integrator's return code (-1: not run, setup refused the parameters)"),
+    "t": ("s", "the time reached"),
+    "nutation_0": ("rad", "angle between a2 and H at the start"),
+    "max_nutation": ("rad", "largest angle between a2 and H over the samples"),
+    "max_rate": ("rad/s", "largest |omega| of the carrier over the samples"),
+    "H_drift": ("1", "largest relative change of |H| over the samples"),
+}
+
+
+def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
+    """Each column's unit and meaning (the Parquet fields carry them)."""
+    docs = {}
+    for name in columns(spec):
+        if name in _METRIC_DOCS:
+            docs[name] = _METRIC_DOCS[name]
+        elif name in COUNTERS:
+            docs[name] = ("1", f"{name} of the integrator, summed over the samples' intervals")
+        elif name.startswith("final_"):
+            unit, doc = unit_and_doc(name[len("final_") :])
+            docs[name] = (unit, f"final value (the last good one on failure) of: {doc}")
+        elif name.startswith("time_to_"):
+            docs[name] = ("s", f"first sample time {name[len('time_to_') :]} crossed its threshold")
+        else:
+            docs[name] = unit_and_doc(name)  # an input: a state or a runtime parameter
+    return docs
 
 
 def _blank(spec: Spec, n: int) -> dict[str, np.ndarray]:
@@ -113,7 +143,7 @@ class _Watch:
     def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray) -> None:
         states = spec.scene.states
         self.u = [states.index(f"u{i}") for i in range(1, 5)]
-        self.lumped = lumped_inertias(*(values[n] for n in _LUMPED))
+        self.lumped = lumped_inertias(*(values[n] for n in LUMPED_FROM))
         self.J = values["J"]
         self.thresholds = spec.sweep.metrics.time_to
         self.states = states

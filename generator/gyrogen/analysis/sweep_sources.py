@@ -39,7 +39,7 @@ class Sources:
 
 
 @cache
-def _code_digest() -> str:
+def code_digest() -> str:
     """A digest of gyrogen's own modules and templates: rendered sources
     cached by an older generator are never reused."""
     root = Path(gyrogen.__file__).parent
@@ -55,7 +55,7 @@ def scene_sources(scene: Scene) -> Sources:
     from the cache when this gyrogen and sympy rendered them before (then
     sympy is not even imported), else derived and rendered, and kept."""
     language: Language = "c" if "c" in scene.targets else "fortran"
-    text = json.dumps([scene.model_dump(mode="json"), _code_digest(), version("sympy")])
+    text = json.dumps([scene.model_dump(mode="json"), code_digest(), version("sympy")])
     key = hashlib.sha256(text.encode()).hexdigest()[:24]
     stored = cache_dir() / "sources" / f"{key}.json"
     try:
@@ -93,7 +93,7 @@ _LOCK = threading.Lock()
 def compiled(sources: Sources) -> Compiled:
     """The sources built in this process: once per build id (threads wait
     for the first)."""
-    key = f"{sources.build_id}-{_digest(sources)}"
+    key = f"{sources.build_id}-{sources_digest(sources)}"
     with _LOCK:
         if key not in _BUILT:
             directory = cache_dir() / "sweep-sources" / key
@@ -109,7 +109,7 @@ def builds() -> list[str]:
     return list(_BUILDS)
 
 
-def _digest(sources: Sources) -> str:
+def sources_digest(sources: Sources) -> str:
     text = json.dumps(sources.files, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

@@ -54,6 +54,12 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
 )
 @click.option("--no-plots", is_flag=True, help="Skip histograms.png and map.png.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option(
+    "--restart",
+    is_flag=True,
+    help="Compute anew where --out holds this sweep begun by another build (another gyrogen, "
+    "generated code or flags): a resume continues only the same.",
+)
 def sweep(
     spec: Any,
     out: Path | None,
@@ -62,20 +68,28 @@ def sweep(
     chunk: int | None,
     no_plots: bool,
     quiet: bool,
+    restart: bool,
 ) -> None:
     """Integrate every trajectory of SWEEP (a built-in sweep: stability_map,
     monte_carlo; or a sweep file naming a scene) with the scene's compiled
     batch integrator, one Parquet row per trajectory with its inputs and
     metrics, written chunk by chunk; then summary.json, summary.md and
     figures. Rerun into the same --out to resume: the chunks written are
-    skipped."""
+    skipped, if this gyrogen, its generated code and its build flags are
+    those that began the sweep (else refused: --restart)."""
     from gyrogen.analysis import sweep_engine, sweep_report
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the local engine: not with --scheduler")
     out = out or Path("sweep") / spec.name
     record = sweep_engine.run(
-        spec, out, scheduler=scheduler, threads=workers, chunk=chunk, progress=not quiet
+        spec,
+        out,
+        scheduler=scheduler,
+        threads=workers,
+        chunk=chunk,
+        progress=not quiet,
+        restart=restart,
     )
     data = sweep_report.write(spec, record, plots=not no_plots)
     for line in sweep_report.markdown(data).splitlines()[2:]:
