@@ -10,8 +10,9 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "generator" / "gyrogen"
 STAGES = (
-    ("errors", "abi_rotors", "abi", "methods", "tableaus", "physics", "setup_checks", "files"),
-    ("scene", "scene_rules", "scene_rotors", "sweep_spec"),
+    ("errors", "abi_rotors", "abi", "limits", "methods", "tableaus", "physics", "setup_checks",
+     "files"),
+    ("scene", "scene_rules", "scene_rotors", "sweep_values", "sweep_spec"),
     ("symbolic",),
     ("codegen",),
     ("runtime",),
@@ -60,3 +61,18 @@ def test_every_module_has_a_stage() -> None:
 @pytest.mark.parametrize("path", modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_no_module_over_400_lines(path: Path) -> None:
     assert len(path.read_text().splitlines()) <= 400
+
+
+def test_running_compiled_code_never_imports_sympy() -> None:
+    """runtime/ and what a sweep worker imports need no sympy (it cost every
+    process 0.8 s of imports): a new interpreter imports them, and sympy is
+    not among its modules."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gyrogen.runtime.build, gyrogen.runtime.compiled, "
+        "gyrogen.analysis.sweep_engine; print('sympy' in sys.modules)"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.strip() == "False", proc.stderr

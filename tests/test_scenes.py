@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
 from gyrogen.codegen.generate import generate
 from gyrogen.errors import BuildError, SceneError
+from gyrogen.limits import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import compare
 from gyrogen.runtime import build

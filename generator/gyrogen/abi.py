@@ -364,38 +364,9 @@ such point."""
 # kept under the build cache's logs/ directory.
 COMPILER_LOG_LINES = 10
 
-# Limits on what a user may ask for, each where a larger value would exhaust
-# memory or time before failing; a refusal is one line naming the limit.
-MAX_STATES = 10**6
-"""`gyrogen verify --states`: random states held at once (0.75 GB at the limit)."""
-MAX_PARAMETER_SETS = 10**4
-"""`gyrogen verify --params`: random parameter sets, each run over every state."""
-MAX_REPEATS = 1000
-"""`gyrogen bench-rhs --repeats`: repeats per timing."""
-MAX_RHS_CALLS = 10**12
-"""`gyrogen simulate --max-nfev`: days of RHS calls; the compiled integrators take it
-as a C long, which a larger Python int would overflow."""
-MAX_OUTPUT_POINTS = 10**6
-"""Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
-simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
-text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""
 MAX_STEPS = 10**7
 """Steps (accepted and rejected) an adaptive integration may take by default
 before it fails with max_steps reached (the Python API, the benchmarks, one
 Co-Simulation step of an FMU), and the RHS calls `gyrogen simulate
 --max-nfev` allows scipy by default: a bound on a run that blows up rather
 than a cost to plan for."""
-MAX_SCENE_BYTES = 1 << 20
-"""Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""
-MAX_SWEEP_TRAJECTORIES = 10**10
-"""Trajectories in one sweep (grid points times draws): the sample index is a
-64-bit integer in the Parquet rows and in the draws' counter, and 10^10 rows
-of ~30 doubles are 2.4 TB; a larger sweep is a typo."""
-MAX_SWEEP_AXIS = 10**6
-"""Values on one grid axis (list, linspace or logspace)."""
-MAX_SWEEP_SAMPLES = 10**4
-"""Points along each trajectory where the sweep's metrics look (metrics.samples):
-each is a restart of the integrator on the whole chunk."""
-MAX_SWEEP_CHUNK = 10**6
-"""Trajectories per task: a chunk's states and metrics are in memory at once
-(10^6 rows of ~40 doubles: 0.3 GB)."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from gyrogen.abi import SIGNATURES, Signature
 from gyrogen.tableaus import DOP853, DOPRI5, RADAU5, RK4, RODAS4, Explicit, Radau, Rosenbrock
 
 
@@ -240,3 +241,16 @@ def get(name: str) -> Method:
         return METHODS[name]
     except KeyError:
         raise ValueError(f"no integrator {name!r} (integrators: {', '.join(NAMES)})") from None
+
+
+def signature_of(function: str) -> Signature:
+    """The C signature of a function, by its key in a manifest's functions
+    (codegen.context.Unit.functions): an integrator's by its kind."""
+    batch = function.endswith("_batch")
+    method = METHODS.get(function.removesuffix("_batch"))
+    if method is not None:
+        kind = "fixed_step" if method.fixed_step else "adaptive"
+        return SIGNATURES[kind + "_batch" * batch]
+    if function.endswith("strerror"):
+        return SIGNATURES["strerror"]
+    return SIGNATURES.get(function) or SIGNATURES["output"]

@@ -33,15 +33,10 @@ from pydantic import (
 )
 
 from gyrogen import methods, scene_rotors
-from gyrogen.abi import (
-    CONTROLLER_PARAMETERS,
-    MAX_SCENE_BYTES,
-    MIN_RTOL,
-    PARAMETERS,
-    STATES,
-)
+from gyrogen.abi import CONTROLLER_PARAMETERS, MIN_RTOL, PARAMETERS, STATES
 from gyrogen.abi_rotors import MAX_ROTORS
 from gyrogen.errors import SceneError
+from gyrogen.limits import MAX_SCENE_BYTES
 from gyrogen.scene_rotors import Rotor
 from gyrogen.scene_rules import (
     QUATERNION,

@@ -13,10 +13,10 @@ from gyrogen.abi import (
     DESCRIPTION_MAX_LENGTH,
     FOLDED_MAX,
     FOLDED_MIN,
-    MAX_OUTPUT_POINTS,
     NAME_MAX_LENGTH,
     QUATERNION_NORM_SLACK,
 )
+from gyrogen.limits import MAX_OUTPUT_POINTS
 from gyrogen.setup_checks import first_failure
 
 _C_KEYWORDS = frozenset(

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-from gyrogen.sweep_spec import Axis, Distribution, Spec
+from gyrogen.sweep_spec import Spec
+from gyrogen.sweep_values import Axis, Distribution
 
 WORDS_PER_BLOCK = 4
 """A Philox counter block gives four 64-bit words."""

@@ -15,9 +15,7 @@ from gyrogen.abi import (
     CLUSTER_OUTPUT_DOC,
     OUTPUT_DOC,
     SETUP_CODES,
-    SIGNATURES,
     Code,
-    Signature,
     unit_and_doc,
 )
 from gyrogen.methods import METHODS, Method, needs_jacobian
@@ -213,18 +211,6 @@ class Unit:
         if self.scene.integrators:
             c["ode_strerror"] = f"{p}_ode_strerror"
         return {"c": c, "fortran": f}
-
-
-def signature_of(function: str) -> Signature:
-    """The C signature of a function, by its key in Unit.functions."""
-    batch = function.endswith("_batch")
-    method = METHODS.get(function.removesuffix("_batch"))
-    if method is not None:
-        kind = "fixed_step" if method.fixed_step else "adaptive"
-        return SIGNATURES[kind + "_batch" * batch]
-    if function.endswith("strerror"):
-        return SIGNATURES["strerror"]
-    return SIGNATURES.get(function) or SIGNATURES["output"]
 
 
 def versions() -> dict[str, str]:

@@ -9,7 +9,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from gyrogen.abi import ODE_CODES, STATS_FIELDS, Code
-from gyrogen.codegen.context import Unit, signature_of
+from gyrogen.codegen.context import Unit
+from gyrogen.methods import signature_of
 
 
 def manifest(unit: Unit, full: Unit) -> dict[str, Any]:

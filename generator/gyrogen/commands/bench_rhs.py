@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from gyrogen.abi import MAX_REPEATS
 from gyrogen.commands.options import directory
+from gyrogen.limits import MAX_REPEATS
 
 
 @click.command("bench-rhs")

@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 
 import click
 
-from gyrogen.abi import MAX_PARAMETER_SETS, MAX_STATES
+from gyrogen.limits import MAX_PARAMETER_SETS, MAX_STATES
 from gyrogen.scene import Scene, load
 
 F = TypeVar("F", bound=Callable[..., Any])

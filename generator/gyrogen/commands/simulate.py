@@ -10,8 +10,9 @@ from pathlib import Path
 import click
 
 from gyrogen import methods
-from gyrogen.abi import MAX_OUTPUT_POINTS, MAX_RHS_CALLS, MAX_STEPS
+from gyrogen.abi import MAX_STEPS
 from gyrogen.commands.options import POSITIVE, SCENE, directory
+from gyrogen.limits import MAX_OUTPUT_POINTS, MAX_RHS_CALLS
 from gyrogen.scene import Scene, check_output_grid
 
 

@@ -9,8 +9,8 @@ from typing import Any
 
 import click
 
-from gyrogen.abi import MAX_SWEEP_CHUNK
 from gyrogen.commands.options import directory
+from gyrogen.limits import MAX_SWEEP_CHUNK
 
 ADDRESS = re.compile(r"tcp://[^\s:/]+:\d{1,5}")
 

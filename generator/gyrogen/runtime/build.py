@@ -23,9 +23,9 @@ from typing import Any
 import cffi
 
 from gyrogen import abi
-from gyrogen.codegen.context import signature_of
 from gyrogen.codegen.render import render
 from gyrogen.errors import BuildError
+from gyrogen.methods import signature_of
 from gyrogen.runtime import cache, flags
 from gyrogen.runtime.compiled import Compiled, Language
 

@@ -9,10 +9,11 @@ from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import printed
-from gyrogen.codegen.context import Unit, signature_of
+from gyrogen.codegen.context import Unit
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
+from gyrogen.methods import signature_of
 from gyrogen.setup_checks import local_names
 from gyrogen.symbolic.hoist import constants
 
