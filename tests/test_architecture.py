@@ -10,8 +10,17 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "generator" / "gyrogen"
 STAGES = (
-    ("errors", "abi_rotors", "abi", "limits", "methods", "tableaus", "physics", "setup_checks",
-     "files"),
+    (
+        "errors",
+        "abi_rotors",
+        "abi",
+        "limits",
+        "methods",
+        "tableaus",
+        "physics",
+        "setup_checks",
+        "files",
+    ),
     ("scene", "scene_rules", "scene_rotors", "sweep_values", "sweep_spec"),
     ("symbolic",),
     ("codegen",),

@@ -87,7 +87,7 @@ def test_files_exist_and_agree(torque_free: Run) -> None:
     np.testing.assert_array_equal(csv[:, -len(COLUMNS) :], invariants)
     manifest = json.loads((torque_free.dir / "src" / "manifest.json").read_text())
     assert summary["scene"] == "torque_free" and summary["build_id"] == manifest["build_id"]
-    assert (summary["method"], summary["backend"]) == ("DOP853", "c")
+    assert (summary["method"], summary["backend"]) == ("dop853", "c")  # auto: compiled
     assert (summary["rtol"], summary["atol"]) == (scene.simulate.rtol, scene.simulate.atol)
     assert summary["nfev"] > 0 and summary["wall_time_s"] > 0 and summary["t_end"] == 2.0
     worst = summary["invariants"]
@@ -101,7 +101,7 @@ def test_files_exist_and_agree(torque_free: Run) -> None:
 
 def test_printed_summary(torque_free: Run) -> None:
     lines = torque_free.out.splitlines()
-    assert lines[0].startswith("torque_free: DOP853 (rtol 1e-10, atol 1e-10) on the C RHS")
+    assert lines[0].startswith("torque_free: dop853 (rtol 1e-10, atol 1e-10)")
     assert "final time      2 s (201 points" in torque_free.out
     for word in ("nfev", "wall time", "|H| in N", "energy balance", "u4 check"):
         assert word in torque_free.out
@@ -216,7 +216,8 @@ def test_too_many_output_points_is_a_usage_error(
 
 
 def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: None, cli) -> None:
-    run = simulate(cli, ["torque_free", "--max-nfev", "100"], tmp_path / "out")
+    argv = ["torque_free", "--method", "DOP853", "--max-nfev", "100"]  # scipy's budget
+    run = simulate(cli, argv, tmp_path / "out")
     assert run.code == 1 and run.out == ""
     errors = [line for line in run.err.splitlines() if "error" in line]
     assert len(errors) == 1 and run.err.endswith(errors[0] + "\n")
@@ -300,7 +301,7 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     """Each built-in scene generates, builds and simulates (a short span)
     with the method it picks (the default, auto): the stiff one with the
     compiled Radau IIA its stiffness calls for, and says why; the others with
-    scipy's DOP853."""
+    the compiled dop853 (scipy's only where a scene compiled no pair)."""
     from gyrogen.analysis import simulate
 
     scene = load(name)
@@ -309,7 +310,7 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     res = simulate.run(
         scene, tmp_path / "o", simulate.Settings(t_end, t_end / 20, plot=False), echo=said.append
     )
-    method = "radau5" if name == "stiff_wheel" else "DOP853"
+    method = "radau5" if name == "stiff_wheel" else "dop853"
     assert res.settings.method == method
     assert any(line.startswith(f"method {method}: ") for line in said)
     assert np.all(np.isfinite(res.trajectory.x)) and res.trajectory.x.shape[0] == 21

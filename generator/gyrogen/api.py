@@ -44,7 +44,7 @@ def compile(scene: str | Scene = "gyrostat") -> Compiled:
 def simulate(
     scene: str | Scene = "gyrostat",
     *,
-    method: str = "DOP853",
+    method: str = "auto",
     t_end: float | None = None,
     dt: float | None = None,
     out: str | Path | None = None,

@@ -239,7 +239,9 @@ def run(
     end = output_grid(settings.t_end, settings.dt)[-1]
     if settings.method == methods.AUTO:
         choice = stiffness.choose(comp, c, start.x0, end)
-        method = (choice.method or "Radau") if choice.stiff else "DOP853"
+        # the scene's best compiled integrator of the kind the problem calls
+        # for (its steps end on the output grid); scipy's only without one
+        method = choice.method or ("Radau" if choice.stiff else "DOP853")
         echo(f"method {method}: {choice.why}")
         settings = replace(settings, method=method)
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:

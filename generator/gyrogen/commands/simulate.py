@@ -41,8 +41,9 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
     default=methods.AUTO,
     show_default=True,
     help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators; "
-    "auto: the best compiled implicit one if the scene is stiff (else scipy's Radau), "
-    "scipy's DOP853 if it is not.",
+    "auto: the scene's best compiled integrator of the kind its stiffness calls for "
+    "(radau5 or rodas4 if stiff, else dop853 or dopri5), scipy's Radau or DOP853 only "
+    "when the scene compiled none of that kind.",
 )
 @click.option(
     "--max-nfev",
