@@ -30,6 +30,7 @@ class Controls(TypedDict, total=False):
 
 
 DEFAULT_CONTROLS = Controls(rtol=1e-8, atol=1e-8, h0=0.0, max_steps=abi.MAX_STEPS, steps=None)
+_STATS_NAMES = tuple(f.name for f in abi.STATS_FIELDS)
 
 
 def controls(method: str, *, steps: int, rtol: float, atol: float, max_steps: int) -> Controls:
@@ -56,11 +57,11 @@ class Compiled:
     ffi: Any
     lib: Any
 
-    @property
+    @cached_property
     def nx(self) -> int:
         return int(self.manifest["nx"])
 
-    @property
+    @cached_property
     def nc(self) -> int:
         return int(self.manifest["nc"])
 
@@ -136,23 +137,41 @@ class Compiled:
         """One compiled integration of x0 (nx,) from t0 to t1 by the single
         trajectory's function: the final state (the last good one on
         failure), the statistics (abi.STATS_FIELDS) and the return code
-        (abi.ODE_CODES). The controls (Controls) as keywords."""
-        fixed = self._check_method(method, given.get("steps"))
-        ctl = Controls(**{**DEFAULT_CONTROLS, **given})
+        (abi.ODE_CODES). The controls (Controls) as keywords.
+
+        The method's function and kind are looked up once per build
+        (_integrators), so a call costs little more than the C call itself."""
+        try:
+            fn, fixed = self._integrators[method]
+        except KeyError:
+            self._check_method(method, given.get("steps"))  # raises, saying why
+            raise
+        steps = given.get("steps")
+        if (steps is None) == fixed:
+            self._check_method(method, steps)
         x = np.array(x0, dtype=np.float64).reshape(-1)  # a copy: integrated in place
         if x.shape != (self.nx,):
             raise ValueError(f"the initial state must have shape ({self.nx},), not {x.shape}")
-        stats = np.zeros(1, dtype=self._stats_dtype)
-        head = (t0, t1, ctl["steps"]) if fixed else (t0, t1)
-        tail = () if fixed else (ctl["rtol"], ctl["atol"], ctl["h0"], ctl["max_steps"])
-        code = self.function(method)(
-            *head,
-            self.doubles(x),
-            self.doubles(np.ascontiguousarray(c, dtype=np.float64)),
-            *tail,
-            self.ffi.from_buffer("gyrogen_stats[]", stats),
-        )
-        return x, {f.name: stats[f.name][0].item() for f in abi.STATS_FIELDS}, int(code)
+        if not (type(c) is np.ndarray and c.dtype == np.float64 and c.flags.c_contiguous):
+            c = np.ascontiguousarray(c, dtype=np.float64)
+        stats = self.ffi.new("gyrogen_stats *")
+        if fixed:
+            code = fn(t0, t1, steps, self.doubles(x), self.doubles(c), stats)
+        else:
+            get = given.get
+            d = DEFAULT_CONTROLS
+            code = fn(t0, t1, self.doubles(x), self.doubles(c), get("rtol", d["rtol"]),
+                      get("atol", d["atol"]), get("h0", d["h0"]),
+                      get("max_steps", d["max_steps"]), stats)  # fmt: skip
+        return x, {name: getattr(stats, name) for name in _STATS_NAMES}, int(code)
+
+    @cached_property
+    def _integrators(self) -> dict[str, tuple[Any, bool]]:
+        """Each integrator of this build: its cffi function, and whether it
+        is a fixed-step method."""
+        return {
+            m: (self.function(m), methods.get(m).fixed_step) for m in self.manifest["integrators"]
+        }
 
     def integrate_batch(
         self,
