@@ -79,6 +79,7 @@ T = "runtime"
 """
 
 
+@pytest.mark.slow
 def test_one_rotor_on_a2_reduces_to_the_papers_reference() -> None:
     cluster = parse(ONE_ROTOR, "one")
     paper = load("wheel_spinup")  # T at run time, no translation, the rotor angle kept
@@ -123,6 +124,7 @@ def random_cluster(rng: np.random.Generator, n: int) -> str:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", range(1, 7))
 def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
     n: int, tmp_path: Path
@@ -147,6 +149,7 @@ def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
     assert cluster_reference.condition(scene) < 100
 
 
+@pytest.mark.slow
 def test_bench_clusters_slice() -> None:
     """`make bench-clusters` on a slice: both variants compiled into one
     library agree with the reference on 200 states (measure exits otherwise),
@@ -163,6 +166,7 @@ def test_bench_clusters_slice() -> None:
         assert unit_of(scene).ops["rhs"] < msolve_ops(scene)
 
 
+@pytest.mark.slow
 def test_the_cluster_header_documents_its_rotors_and_codes() -> None:
     """rw4_pyramid.h: each rotor's axis, law and limit; no translation, no
     q4; only the codes its setup returns (0, 1 and the condition bound, 7),

@@ -23,6 +23,8 @@ import pytest
 from gyrogen import abi
 from gyrogen.oracle import reference
 
+pytestmark = pytest.mark.slow  # the CMake package configured, built and installed
+
 CONSUMERS = Path(__file__).resolve().parent / "consumers"
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

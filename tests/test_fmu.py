@@ -28,6 +28,8 @@ from fmu_agreement import BAR, MODES, build, by_fmpy, cases, differences, refere
 from gyrogen import abi
 from gyrogen.runtime.fmu_build import fmi_headers
 
+pytestmark = pytest.mark.slow  # FMUs built and simulated with FMPy
+
 SLICE = 1.0
 """Seconds simulated here; `make fmu-agreement` runs each scene's t_end."""
 CASES = {case.label: case for case in cases()}

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # every compiler and standard, sanitizers, valgrind
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
 C_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror")

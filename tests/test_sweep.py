@@ -41,6 +41,7 @@ def swept(tmp_path_factory: pytest.TempPathFactory, cache: None, cli) -> tuple[P
     return path, out
 
 
+@pytest.mark.slow
 def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path]) -> None:
     path, out = swept
     spec, frame = load(str(path)), rows(out)
@@ -60,6 +61,7 @@ def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path])
         )
 
 
+@pytest.mark.slow
 def test_metrics_are_what_their_names_say(swept: tuple[Path, Path]) -> None:
     frame = rows(swept[1])
     assert (frame["max_nutation"] >= frame["nutation_0"]).all()
@@ -81,6 +83,7 @@ def test_body_momentum_has_the_reference_magnitude() -> None:
     assert np.allclose(np.linalg.norm(h, axis=0), expected, rtol=1e-13)
 
 
+@pytest.mark.slow
 def test_refused_parameters_are_rows_with_their_code(tmp_path: Path, cache: None, cli) -> None:
     text = small(tmp_path / "s.toml").read_text().replace("[8.0, 9.0, 10.0]", "[9.0, -1.0, 9.5]")
     (tmp_path / "s.toml").write_text(text)
@@ -93,6 +96,7 @@ def test_refused_parameters_are_rows_with_their_code(tmp_path: Path, cache: None
     assert (frame.loc[~bad, "setup_code"] == 0).all()
 
 
+@pytest.mark.slow
 def test_rerun_skips_the_parts_written(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
     path, done = swept
     out = tmp_path / "out"
@@ -109,6 +113,7 @@ def test_rerun_skips_the_parts_written(swept: tuple[Path, Path], tmp_path: Path,
     assert rows(out).equals(rows(done))
 
 
+@pytest.mark.slow
 def test_another_sweep_in_out_is_refused(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
     path, out = swept
     other = small(tmp_path / "other.toml", t_end=3.0)
@@ -131,6 +136,7 @@ def test_no_scheduler_there_is_one_line_exit_1(tmp_path: Path, cache: None, cli)
     assert err.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_stability_map_agrees_with_notes(tmp_path: Path, cache: None, cli) -> None:
     out = tmp_path / "map"
     code, stdout, err = cli(["sweep", "stability_map", "--out", str(out), "--quiet"])
@@ -144,6 +150,7 @@ def test_stability_map_agrees_with_notes(tmp_path: Path, cache: None, cli) -> No
     assert "agree with the criterion" in stdout
 
 
+@pytest.mark.slow
 def test_api_sweep_is_the_command_lines(swept: tuple[Path, Path], tmp_path: Path) -> None:
     path, out = swept
     frame = api.sweep(str(path), out=tmp_path / "api", workers=1, plots=False)
