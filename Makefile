@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test lint generate check-generated bench bench-clusters bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -51,6 +51,11 @@ run: setup
 ## test: lint, then the whole test suite (compiled tests included)
 test: setup lint
 	$(BIN)/python -m pytest
+
+## test-fast: lint, then the suite without the tests marked slow (the default scene still derived,
+## generated, compiled as C and Fortran and checked against the reference): 30-50 s on 2 cores
+test-fast: setup lint
+	$(BIN)/python -m pytest -m "not slow"
 
 lint: setup
 	$(BIN)/ruff check generator tests

@@ -14,6 +14,8 @@ import pytest
 
 from gyrogen.analysis import bench_rhs
 
+pytestmark = pytest.mark.slow  # the benchmark command on a tiny run
+
 NAMES = [
     "cffi_c_call",
     "compiled_c_rhs",

@@ -15,6 +15,8 @@ from gyrogen.analysis import check_cases, check_engine
 from gyrogen.analysis.plots import PIXELS
 from gyrogen.runtime.compiled import Compiled
 
+pytestmark = pytest.mark.slow  # every check case integrated and drawn
+
 EVERY = check_cases.cases()
 ONE_OF_EACH_KIND = {
     "nominal": "nominal.png",

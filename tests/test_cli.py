@@ -244,6 +244,7 @@ def test_prove(cli) -> None:
     assert "The two formulations are identical." in out
 
 
+@pytest.mark.slow
 def test_equations_text_and_latex(cli) -> None:
     code, out, _ = cli(["equations"])
     assert code == 0

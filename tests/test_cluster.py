@@ -85,6 +85,7 @@ T = "runtime"
 """
 
 
+@pytest.mark.slow
 def test_one_rotor_on_a2_reduces_to_the_papers_reference() -> None:
     cluster = parse(ONE_ROTOR, "one")
     paper = load("wheel_spinup")  # T at run time, no translation, the rotor angle kept
@@ -129,6 +130,7 @@ def random_cluster(rng: np.random.Generator, n: int) -> str:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", range(1, 7))
 def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
     n: int, tmp_path: Path
@@ -153,6 +155,7 @@ def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
     assert cluster_reference.condition(scene) < 100
 
 
+@pytest.mark.slow
 def test_bench_clusters_slice() -> None:
     """`make bench-clusters` on a slice: both variants compiled into one
     library agree with the reference on 200 states (measure exits otherwise),
@@ -169,6 +172,7 @@ def test_bench_clusters_slice() -> None:
         assert unit_of(scene).ops["rhs"] < msolve_ops(scene)
 
 
+@pytest.mark.slow
 def test_the_cluster_header_documents_its_rotors_and_codes() -> None:
     """rw4_pyramid.h: each rotor's axis, law and limit; no translation, no
     q4; only the codes its setup returns (0, 1 and the condition bound, 7),
@@ -187,6 +191,7 @@ def test_the_cluster_header_documents_its_rotors_and_codes() -> None:
     assert set(manifest["setup_codes"]) == {"0", "1", "7"}
 
 
+@pytest.mark.slow
 def test_the_jacobian_is_not_compared_across_a_torque_clamp(tmp_path: Path) -> None:
     """rw4_pyramid with wheel 1 along a1 (issue 21: `verify` failed for some
     seeds): wheel 1 sits 1e-6 rad/s past its clamp's kink, |k (rel - w_ref)|

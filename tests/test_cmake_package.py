@@ -24,6 +24,8 @@ from gyrogen import abi
 from gyrogen.oracle import reference
 from gyrogen.runtime.flags import C_WARNINGS
 
+pytestmark = pytest.mark.slow  # the CMake package configured, built and installed
+
 CONSUMERS = Path(__file__).resolve().parent / "consumers"
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -68,6 +68,7 @@ def _break(src: Path, extra: str = "") -> None:
     (src / "gyrostat.c").write_text(text + extra)
 
 
+@pytest.mark.slow
 def test_rebuild_hits_the_cache(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -85,6 +86,7 @@ def test_rebuild_hits_the_cache(
     assert sorted((tmp_path / "cache").iterdir()) == entries
 
 
+@pytest.mark.slow
 def test_changed_source_gets_a_new_cache_entry(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -145,6 +147,7 @@ def test_long_compiler_output_shows_its_start_and_keeps_the_log(
     assert rest == everything[:COMPILER_LOG_LINES]
 
 
+@pytest.mark.slow
 def test_glue_that_does_not_compile_shows_its_start(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -293,6 +296,7 @@ DAMAGES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("damage", "why"), DAMAGES, ids=["no marker", "no module", "truncated"])
 def test_damaged_entry_is_rebuilt_with_one_warning(
     built: Path,
@@ -330,6 +334,7 @@ def _garbage_module(entry: Path, module_name: str) -> None:
     (entry / cache.MARKER).write_text(json.dumps(marker))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("make", "why"),
     [

@@ -15,6 +15,8 @@ from gyrogen import abi
 from gyrogen.oracle import reference, scene_view
 from gyrogen.scene import load
 
+pytestmark = pytest.mark.slow  # the embedding examples built with CMake and run
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
 

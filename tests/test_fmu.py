@@ -30,6 +30,8 @@ from gyrogen import abi
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
 from gyrogen.runtime.fmu_build import fmi_headers
 
+pytestmark = pytest.mark.slow  # FMUs built and simulated with FMPy
+
 SLICE = 1.0
 """Seconds simulated here; `make fmu-agreement` runs each scene's t_end."""
 CASES = {case.label: case for case in cases()}

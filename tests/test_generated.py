@@ -31,6 +31,7 @@ def test_checked_in_default_scene_is_fresh(source_dir: Path) -> None:
         )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [n for n in builtin_names() if n != default().name])
 def test_checked_in_scene_is_fresh(name: str, tmp_path: Path) -> None:
     """Every built-in scene has its sources in generated/<scene>/, up to date."""

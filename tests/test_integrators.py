@@ -22,6 +22,8 @@ from gyrogen.runtime import build, flags
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load, parse
 
+pytestmark = pytest.mark.slow  # every compiled integrator against scipy's
+
 REPO = Path(__file__).resolve().parents[1]
 LANGUAGES = ["c", "fortran"]
 SCENES = ["gyrostat", "torque_free", "speed_controlled"]

@@ -20,6 +20,8 @@ from gyrogen import abi
 from gyrogen.runtime import flags
 from gyrogen.runtime.compiled import Compiled
 
+pytestmark = pytest.mark.slow  # the lane-batched integrators of several scenes, compiled and run
+
 REPO = Path(__file__).resolve().parents[1]
 HARNESS = REPO / "tests" / "harness"
 N = 37  # not a multiple of any lane width: the last lanes run idle

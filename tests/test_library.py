@@ -100,6 +100,7 @@ def compile_flags(build: Path, source: str) -> str:
     return next(c["command"] for c in commands if c["file"].endswith(f"/{source}"))
 
 
+@pytest.mark.slow
 def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
     """On its own: Release, one static C library, no Fortran unless asked for;
     with BUILD_SHARED_LIBS a shared one with a SOVERSION."""
@@ -126,6 +127,7 @@ def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled
     check_shared(shared / "libgyrostat.so", backends["c"])
 
 
+@pytest.mark.slow
 def test_cmake_add_subdirectory(lib_dir: Path, tmp_path: Path) -> None:
     """A parent project that enables Fortran gets both libraries through
     their alias targets; the C and Fortran examples print the same. The
@@ -158,6 +160,7 @@ def test_cmake_add_subdirectory(lib_dir: Path, tmp_path: Path) -> None:
     assert not list((out / "gyrostat" / "include").glob("*.c"))  # headers only
 
 
+@pytest.mark.slow
 def test_make_fragment(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
     """Included from a user's Makefile in another directory, outputs elsewhere."""
     user = tmp_path / "user"

@@ -101,6 +101,7 @@ T = 0.0
 """
 
 
+@pytest.mark.slow
 def test_folded_decimals_compile_everywhere_and_hold_momentum(tmp_path: Path) -> None:
     scene = parse(FOLDED_DECIMALS, "folded_decimals.toml")
     generate(scene, tmp_path)

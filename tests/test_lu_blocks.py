@@ -65,6 +65,7 @@ def numeric_jacobian(scene: Scene) -> np.ndarray:
 SCENES = [name for name in builtin_names() if methods.needs_jacobian(load(name).integrators)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [*SCENES, "quaternion"])
 def test_blocks_cover_the_witness_jacobian(name: str) -> None:
     """What the template leaves out of the LU is zero in the paper's model:

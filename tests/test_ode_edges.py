@@ -24,6 +24,8 @@ from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load
 
+pytestmark = pytest.mark.slow  # integrations at the integrators' edges, several scenes compiled
+
 REPO = Path(__file__).resolve().parents[1]
 LANGUAGES = ["c", "fortran"]
 ADAPTIVE = list(methods.ADAPTIVE)

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # a wheel built and installed into a fresh venv
+
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "generator" / "gyrogen"
 

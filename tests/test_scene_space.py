@@ -13,6 +13,8 @@ import pytest
 from scene_space import Draw, check, run_shard
 from scene_space_clusters import clusters
 
+pytestmark = pytest.mark.slow  # hundreds of drawn scenes, each generated, compiled and compared
+
 SHARDS = 4
 EXAMPLES = 25
 """SHARDS x EXAMPLES drawn scenes in CI (pytest-xdist spreads the shards)."""

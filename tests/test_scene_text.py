@@ -47,6 +47,7 @@ def test_comment_filters_escape_what_each_syntax_reads() -> None:
     assert max(len(line) for line in c.split("\n")) <= 80
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attitude", ["euler312", "quaternion"])
 def test_hostile_text_and_longest_name_compile_cleanly(tmp_path: Path, attitude: str) -> None:
     name = "N" + "a1_" * ((NAME_MAX_LENGTH - 1) // 3)

@@ -204,6 +204,7 @@ def test_builtin_scenes_listed(cli) -> None:
     assert "ops setup" not in out  # listing does not derive
 
 
+@pytest.mark.slow
 def test_builtin_scenes_with_their_op_counts(cli) -> None:
     code, out, _ = cli(["scenes", "--ops"])
     assert code == 0 and out.count("ops setup") == len(builtin_names())
@@ -241,6 +242,7 @@ def test_torque_free_principal_scene_meets_the_op_goal() -> None:
     assert make_unit(load("torque_free")).ops["rhs"] <= 20
 
 
+@pytest.mark.slow
 def test_c_only_scene_builds_no_fortran(tmp_path: Path) -> None:
     scene = parse(edit('targets = ["c", "fortran"]', 'targets = ["c"]'), "c_only.toml")
     generate(scene, tmp_path)
@@ -249,6 +251,7 @@ def test_c_only_scene_builds_no_fortran(tmp_path: Path) -> None:
         build.build(tmp_path, "fortran")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
 def test_builtin_scene_matches_the_reference(name: str, tmp_path: Path) -> None:
     scene = load(name)

@@ -75,6 +75,7 @@ def _load(run: Run) -> tuple[np.lib.npyio.NpzFile, dict, list[str], np.ndarray]:
     return npz, summary, header, np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1)
 
 
+@pytest.mark.slow
 def test_files_exist_and_agree(torque_free: Run) -> None:
     npz, summary, header, csv = _load(torque_free)
     scene = load("torque_free")
@@ -99,6 +100,7 @@ def test_files_exist_and_agree(torque_free: Run) -> None:
     assert not list(torque_free.dir.glob(".*"))  # no temporary file left behind
 
 
+@pytest.mark.slow
 def test_printed_summary(torque_free: Run) -> None:
     lines = torque_free.out.splitlines()
     assert lines[0].startswith("torque_free: dop853 (rtol 1e-10, atol 1e-10)")
@@ -108,6 +110,7 @@ def test_printed_summary(torque_free: Run) -> None:
     assert lines[-1].startswith(f"wrote {torque_free.dir}/ (trajectory.csv, trajectory.npz")
 
 
+@pytest.mark.slow
 def test_closed_form_of_the_axisymmetric_gyrostat(torque_free: Run) -> None:
     """NOTES.md: u2, u4 constant; (u1, u3) rotate at lambda = ((I~22 - I_t) u2 + J u4)/I_t,
     I_t = I11 + I here (l1 = l3 = 0, I13 = 0, I11 = I33)."""
@@ -125,6 +128,7 @@ def test_closed_form_of_the_axisymmetric_gyrostat(torque_free: Run) -> None:
     np.testing.assert_allclose(u["u4"], s0["u4"], rtol=1e-8)
 
 
+@pytest.mark.slow
 def test_angular_momentum_is_conserved(torque_free: Run) -> None:
     npz = np.load(torque_free.dir / "trajectory.npz")
     scene = load("torque_free")
@@ -136,12 +140,14 @@ def test_angular_momentum_is_conserved(torque_free: Run) -> None:
     assert np.max(np.abs(npz["H_drift"])) < 1e-9
 
 
+@pytest.mark.slow
 def test_figure_is_a_real_image_of_the_expected_size(torque_free: Run) -> None:
     image = imread(torque_free.dir / "trajectory.png")
     assert image.shape[:2] == plots.PIXELS == (800, 1200)
     assert image[..., :3].std() > 0.05  # not blank
 
 
+@pytest.mark.slow
 def test_wheel_spinup_rotor_rate_and_energy_balance(spinup: Run) -> None:
     """J u4' = T: u4 = u4(0) + T t / J; dK/dt = T (u4 - u2)."""
     npz, summary, _, _ = _load(spinup)
@@ -171,6 +177,7 @@ def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None, c
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cache: None, cli) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
@@ -215,6 +222,7 @@ def test_too_many_output_points_is_a_usage_error(
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: None, cli) -> None:
     argv = ["torque_free", "--method", "DOP853", "--max-nfev", "100"]  # scipy's budget
     run = simulate(cli, argv, tmp_path / "out")
@@ -237,6 +245,7 @@ def test_failed_or_non_finite_solution_is_one_line() -> None:
         check_solution(nan, "LSODA", 1.5, 3.0, 10)
 
 
+@pytest.mark.slow
 def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None, cli) -> None:
     scene = torque_free_with(
         tmp_path / "fortran_only.toml", 'targets = ["c", "fortran"]', 'targets = ["fortran"]'
@@ -249,6 +258,7 @@ def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None, cli) -> None
     assert "on the Fortran RHS" in run.out
 
 
+@pytest.mark.slow
 def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     """--method dop853 runs the generated integrator between output points:
     no interpolation, so the invariants hold to the tolerance."""
@@ -264,6 +274,7 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-12
 
 
+@pytest.mark.slow
 def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: None, cli) -> None:
     """A 3-1-2 scene started at q2 = pi/2: the compiled integrator's code 6
     becomes one line with its meaning; nothing is written."""
@@ -280,6 +291,7 @@ def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: N
     assert not (tmp_path / "o" / "trajectory.csv").exists()
 
 
+@pytest.mark.slow
 def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
     from gyrogen import scene as scenes
     from gyrogen.analysis import simulate
@@ -296,6 +308,7 @@ def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
         )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
 def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     """Each built-in scene generates, builds and simulates (a short span)
@@ -317,6 +330,7 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-9
 
 
+@pytest.mark.slow
 def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
     """rw4_pyramid's figure: its rotor panel shows the four wheels' rates
     relative to the carrier (a cluster has no u4)."""

@@ -23,6 +23,7 @@ def compiled(check_builds: dict[str, Compiled]) -> dict[str, Compiled]:
     return check_builds
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", QUICK, ids=[c.name for c in QUICK])
 def test_case_verdict(case: check_engine.Case, compiled: dict[str, Compiled]) -> None:
     res = check_engine.run_case(case, compiled[case.scene.name])
@@ -31,6 +32,7 @@ def test_case_verdict(case: check_engine.Case, compiled: dict[str, Compiled]) ->
         assert max(res.drift.values()) <= check_engine.DRIFT_BAR
 
 
+@pytest.mark.slow
 def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, Compiled]) -> None:
     """The issue's goal. eps = 1e-6: the 3-1-2 angles come within
     GIMBAL_LOCK_COS of cos q2 = 0 after ~1e-4 s and DOP853 stops there with
@@ -62,6 +64,7 @@ def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, Compiled])
     assert "quaternions would be cheaper" in near.diagnosis
 
 
+@pytest.mark.slow
 def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) -> None:
     """The full suite's 3-1-2 cases (the quick one runs two of them): the
     ones whose closest approach, ~17 eps^2 in |cos q2|, is below
@@ -79,12 +82,14 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) 
     assert singular == {f"gimbal lock eps={e} (3-1-2 angles)" for e in ("1e-06", "1e-08")}
 
 
+@pytest.mark.slow
 def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = next(c for c in QUICK if c.name == "speed controller k/J=1e+06")
     res = check_engine.run_case(case, compiled[case.scene.name])
     assert res.method == "radau5" and res.recommended.startswith("implicit (radau5)")
 
 
+@pytest.mark.slow
 def test_check_command(tmp_path: Path, cli) -> None:
     plots = tmp_path / "plots"
     code, out, _ = cli(["check", "--quick", "spin", "nominal", "--plots", str(plots)])
@@ -100,6 +105,7 @@ def test_check_unknown_case(cli) -> None:
     assert "no case or scene matches no-such-case" in err
 
 
+@pytest.mark.slow
 def test_check_all_quick_from_the_command_line(cli) -> None:
     """What CI runs: every quick case, one table, exit 0."""
     code, out, _ = cli(["check", "--all", "--quick"])
@@ -107,11 +113,13 @@ def test_check_all_quick_from_the_command_line(cli) -> None:
     assert out.count(" ok") >= len(QUICK) and "FAIL" not in out
 
 
+@pytest.mark.slow
 def test_check_a_scene_file(cli) -> None:
     code, out, _ = cli(["check", "torque_free"])
     assert code == 0 and "scene torque_free" in out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_compensated_summation_keeps_a_long_run(
     language: str, backends: dict[str, Compiled]
@@ -124,6 +132,7 @@ def test_compensated_summation_keeps_a_long_run(
     assert res.passed and max(res.drift.values()) < 1e-13, res.drift
 
 
+@pytest.mark.slow
 def test_two_scenes_of_one_name_get_a_build_each(
     tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -183,6 +192,7 @@ def _quick(name: str) -> check_engine.Case:
     return next(c for c in QUICK if c.name.startswith(name))
 
 
+@pytest.mark.slow
 def test_cluster_saturation_clamps_then_releases_with_the_energy_balanced(
     compiled: dict[str, Compiled],
 ) -> None:
@@ -201,6 +211,7 @@ def test_cluster_saturation_clamps_then_releases_with_the_energy_balanced(
     assert res.drift["energy balance"] < 1e-13 and res.drift["|H| in N"] < 1e-13
 
 
+@pytest.mark.slow
 def test_cluster_stiff_controllers_take_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = _quick("cluster speed controllers k/J=100000")
     res = check_engine.run_case(case, compiled[case.scene.name])
@@ -208,6 +219,7 @@ def test_cluster_stiff_controllers_take_the_implicit_method(compiled: dict[str, 
     assert res.stiffness > 1e5 and max(res.drift.values()) < 1e-13
 
 
+@pytest.mark.slow
 def test_cluster_parallel_axes_warned_then_refused(compiled: dict[str, Compiled]) -> None:
     """On the real carrier, parallel axes leave the dynamics well conditioned
     (only the torque span is warned); on a tiny carrier the lumped inertia

@@ -18,6 +18,8 @@ import pytest
 from gyrogen.runtime.flags import C_STRICT, FORTRAN_STRICT
 from gyrogen.runtime.flags import C_WARNINGS as CXX_WARNINGS
 
+pytestmark = pytest.mark.slow  # every compiler and standard, sanitizers, valgrind
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
 C_WARNINGS = C_STRICT[1:]  # the standard is each test's own

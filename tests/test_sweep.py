@@ -41,6 +41,7 @@ def swept(tmp_path_factory: pytest.TempPathFactory, cache: None, cli) -> tuple[P
     return path, out
 
 
+@pytest.mark.slow
 def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path]) -> None:
     path, out = swept
     spec, frame = load(str(path)), rows(out)
@@ -60,6 +61,7 @@ def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path])
         )
 
 
+@pytest.mark.slow
 def test_metrics_are_what_their_names_say(swept: tuple[Path, Path]) -> None:
     frame = rows(swept[1])
     assert (frame["max_nutation"] >= frame["nutation_0"]).all()
@@ -81,6 +83,7 @@ def test_body_momentum_has_the_reference_magnitude() -> None:
     assert np.allclose(np.linalg.norm(h, axis=0), expected, rtol=1e-13)
 
 
+@pytest.mark.slow
 def test_refused_parameters_are_rows_with_their_code(tmp_path: Path, cache: None, cli) -> None:
     text = small(tmp_path / "s.toml").read_text().replace("[8.0, 9.0, 10.0]", "[9.0, -1.0, 9.5]")
     (tmp_path / "s.toml").write_text(text)
@@ -93,6 +96,7 @@ def test_refused_parameters_are_rows_with_their_code(tmp_path: Path, cache: None
     assert (frame.loc[~bad, "setup_code"] == 0).all()
 
 
+@pytest.mark.slow
 def test_a_grid_setup_refuses_throughout_is_reported(tmp_path: Path, cache: None, cli) -> None:
     """Every parameter set refused by setup (a 2-D grid of I22 < 0): the rows
     carry the code, the summary and histograms are written, and the map,
@@ -106,6 +110,7 @@ def test_a_grid_setup_refuses_throughout_is_reported(tmp_path: Path, cache: None
     assert {"summary.json", "summary.md", "histograms.png"} <= names and "map.png" not in names
 
 
+@pytest.mark.slow
 def test_rerun_skips_the_parts_written(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
     path, done = swept
     out = tmp_path / "out"
@@ -122,6 +127,7 @@ def test_rerun_skips_the_parts_written(swept: tuple[Path, Path], tmp_path: Path,
     assert rows(out).equals(rows(done))
 
 
+@pytest.mark.slow
 def test_another_sweep_in_out_is_refused(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
     path, out = swept
     other = small(tmp_path / "other.toml", t_end=3.0)
@@ -165,6 +171,7 @@ def test_a_port_out_of_range_is_a_usage_error(tmp_path: Path, cli, port: str) ->
     )
 
 
+@pytest.mark.slow
 def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
     tmp_path: Path, cache: None, cli
 ) -> None:
@@ -218,6 +225,7 @@ def test_obstacles_in_out_are_refused_before_any_work(
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("size", [0, 100])
 def test_a_damaged_part_is_computed_again(
     swept: tuple[Path, Path], tmp_path: Path, cli, size: int
@@ -238,6 +246,7 @@ def test_a_damaged_part_is_computed_again(
     assert rows(out).equals(rows(done))
 
 
+@pytest.mark.slow
 def test_stability_map_agrees_with_notes(tmp_path: Path, cache: None, cli) -> None:
     out = tmp_path / "map"
     code, stdout, err = cli(["sweep", "stability_map", "--out", str(out), "--quiet"])
@@ -251,6 +260,7 @@ def test_stability_map_agrees_with_notes(tmp_path: Path, cache: None, cli) -> No
     assert "agree with the criterion" in stdout
 
 
+@pytest.mark.slow
 def test_api_sweep_is_the_command_lines(swept: tuple[Path, Path], tmp_path: Path) -> None:
     path, out = swept
     frame = api.sweep(str(path), out=tmp_path / "api", workers=1, plots=False)
@@ -259,6 +269,7 @@ def test_api_sweep_is_the_command_lines(swept: tuple[Path, Path], tmp_path: Path
     assert api.sweep(spec, out=tmp_path / "text", chunk=60, plots=False).equals(frame)
 
 
+@pytest.mark.slow
 def test_a_resume_never_mixes_two_builds(swept: tuple[Path, Path], tmp_path: Path, cli) -> None:
     """A sweep begun by another build (here: its state says other generated
     sources) is refused with what changed; --restart computes it anew, and
@@ -286,6 +297,7 @@ def test_a_resume_never_mixes_two_builds(swept: tuple[Path, Path], tmp_path: Pat
     assert rows(out).equals(rows(done))
 
 
+@pytest.mark.slow
 def test_a_part_of_another_build_is_computed_again(
     swept: tuple[Path, Path], tmp_path: Path, cli
 ) -> None:
@@ -308,6 +320,7 @@ def test_a_part_of_another_build_is_computed_again(
     assert rows(out).equals(rows(done))
 
 
+@pytest.mark.slow
 def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
     """Without gyrogen: each part's fields carry unit and meaning, its schema
     the sweep's identity, spec, seed and scene; summary.json too."""

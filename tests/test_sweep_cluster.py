@@ -20,6 +20,8 @@ from sweep_cases import free_port, long, rows
 
 from gyrogen.analysis.sweep_sources import builds
 
+pytestmark = pytest.mark.slow  # sweeps of a cluster scene on Dask workers
+
 DASK = str(Path(sys.executable).with_name("dask"))
 CHUNKS = 41
 

@@ -75,6 +75,7 @@ def test_single_state_matches_reference(backends: dict[str, Compiled]) -> None:
         assert scaled_error(b.rhs(x, b.setup(p)), reference.rhs(x, p)) < TOLERANCE
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
 def test_verify_command_passes_on_every_builtin_scene(name: str, cli) -> None:
     """`gyrogen verify SCENE` as a user runs it (default counts): exit 0."""

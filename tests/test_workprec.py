@@ -16,6 +16,7 @@ from gyrogen.analysis.workprec import Run
 from gyrogen.scene import builtin_text
 
 
+@pytest.mark.slow
 def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
     out = tmp_path / "report"
     code, text, _ = cli(["bench", "--quick", "--out", str(out)])
@@ -44,6 +45,7 @@ def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
     assert summary.startswith("# Work-precision: gyrostat")
 
 
+@pytest.mark.slow
 def test_dop853_converges_to_the_reference(tmp_path: Path) -> None:
     """Tighter tolerances give smaller errors against the reference."""
     from gyrogen.analysis import workprec, workprec_report
@@ -75,6 +77,7 @@ def test_scene_without_the_reference_integrator_is_one_line(tmp_path: Path, cli)
     assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.slow
 def test_failed_reference_run_is_one_line(
     tmp_path: Path,
     cli,

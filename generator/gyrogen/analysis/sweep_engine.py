@@ -335,6 +335,7 @@ def run(
     begin anew where out holds this sweep begun by another build."""
     began = time.perf_counter()
     chunk = chunk or spec.sweep.chunk
+    _state(out)  # obstacles first, before the seconds of deriving the sources
     sources = scene_sources(spec.scene)
     ident = identity(spec, sources)
     state = _check_out(out, spec, chunk, ident, restart)  # refusals first, before any work
