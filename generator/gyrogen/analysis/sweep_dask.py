@@ -1,0 +1,83 @@
+"""The Dask client a sweep runs on: a local cluster of threads in this
+process (its dashboards on 127.0.0.1 only), or an existing dask.distributed
+scheduler reached within a bound whatever answers on its port."""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from gyrogen.errors import GyrogenError
+
+CONNECT_TIMEOUT = 10.0
+"""Seconds to reach the scheduler (the TCP connection; the handshake gets as long again)."""
+
+
+@contextmanager
+def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, str, int]]:
+    """A dask.distributed client: on scheduler, or on a local cluster of
+    threads in this process. Yields (client, engine name, worker threads)."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is None:
+        n = threads or os.cpu_count() or 1
+        with (  # no sampling profiler in the worker's threads: nobody reads it
+            dask.config.set({"distributed.worker.profile.enabled": False}),
+            LocalCluster(  # the dashboard on this machine only
+                n_workers=1,
+                threads_per_worker=n,
+                processes=False,
+                dashboard_address="127.0.0.1:0",
+                worker_dashboard_address="127.0.0.1:0",
+            ) as cluster,
+            Client(cluster) as client,
+        ):
+            yield client, f"local ({n} threads)", n
+        return
+    with _connect(Client, scheduler) as client:
+        workers = client.scheduler_info(n_workers=-1)["workers"].values()
+        n = sum(int(w.get("nthreads", 1)) for w in workers)
+        if n == 0:
+            raise GyrogenError(f"--scheduler {scheduler}: the cluster has no workers")
+        yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+
+
+@contextmanager
+def _connect(client_type: Any, scheduler: str) -> Iterator[Any]:
+    """A client of the scheduler, or one line: the TCP connection and then
+    the handshake each within CONNECT_TIMEOUT, whatever answers on the port
+    (an HTTP server takes the connection and never speaks Dask: distributed
+    itself would wait for ever)."""
+    host, port = scheduler.removeprefix("tcp://").rsplit(":", 1)
+    try:
+        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT).close()
+    except (OSError, ValueError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {why}") from exc
+    made: dict[str, Any] = {}
+
+    def connect() -> None:
+        try:
+            made["client"] = client_type(scheduler, timeout=CONNECT_TIMEOUT)
+        except Exception as exc:  # reported below, in one line
+            made["error"] = exc
+
+    thread = threading.Thread(target=connect, daemon=True)  # daemon: never holds the exit
+    thread.start()
+    thread.join(2 * CONNECT_TIMEOUT)
+    if thread.is_alive():
+        raise GyrogenError(
+            f"--scheduler {scheduler}: no Dask scheduler answered within "
+            f"{2 * CONNECT_TIMEOUT:g} s (is something else listening on that port?)"
+        )
+    if "error" in made:
+        error = made["error"]
+        why = getattr(error, "strerror", None) or str(error) or type(error).__name__
+        raise GyrogenError(f"--scheduler {scheduler}: cannot connect: {why}") from error
+    with made["client"] as client:
+        yield client
