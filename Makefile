@@ -13,8 +13,8 @@ SCENE_DIR := generated/gyrostat
 setup: system-deps $(STAMP)
 
 # Every system package a test or a command uses: compilers, clang's sanitizer runtime (a separate
-# package on Debian), valgrind, CMake, pkg-config, make and binutils (objdump).
-SYSTEM_PACKAGES := gcc g++ gfortran clang libclang-rt-dev valgrind cmake pkg-config make binutils
+# package on Debian), valgrind, CMake, pkg-config and binutils (objdump); make itself runs this.
+SYSTEM_PACKAGES := gcc g++ gfortran clang libclang-rt-dev valgrind cmake pkg-config binutils
 
 system-deps:
 	@missing=""; \
@@ -23,7 +23,7 @@ system-deps:
 	    dpkg-query -W -f='$${Status}' $$pkg 2>/dev/null | grep -q 'ok installed' || missing="$$missing $$pkg"; \
 	  done; \
 	else \
-	  for tool in gcc g++ gfortran clang valgrind cmake pkg-config make objdump; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
+	  for tool in gcc g++ gfortran clang valgrind cmake pkg-config objdump; do command -v $$tool >/dev/null 2>&1 || missing="$$missing $$tool"; done; \
 	fi; \
 	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
