@@ -80,8 +80,8 @@ def test_running_compiled_code_never_imports_sympy() -> None:
     import sys
 
     code = (
-        "import sys, gyrogen.runtime.build, gyrogen.runtime.compiled, "
-        "gyrogen.analysis.sweep_engine; print('sympy' in sys.modules)"
+        "import sys, gyrogen.runtime.build, gyrogen.runtime.compiled, gyrogen.runtime.rhs, "
+        "gyrogen.runtime.segment, gyrogen.analysis.sweep_engine; print('sympy' in sys.modules)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert proc.stdout.strip() == "False", proc.stderr
