@@ -239,11 +239,6 @@ def scenes(draw: st.DrawFn) -> Draw:
         "targets": draw(TARGET_LISTS),
         "integrators": draw(INTEGRATOR_LISTS),
     }
-    if attitude == "quaternion" and "fortran" in top["targets"] and len(top["integrators"]) > 1:
-        # Known bug, not fixed: Fortran radau5 can underflow its step on a
-        # quaternion scene where C radau5 does not (tests/known_bugs/,
-        # test_scene_space.py's strict xfail says when it is fixed).
-        top["integrators"] = [m for m in top["integrators"] if m != "radau5"] or ["rodas4"]
     tables = {
         "parameters": {n: "runtime" if n in runtime else values[n] for n in needed},
         "effects": effects,

@@ -914,74 +914,186 @@ contains
          - lu(1, 2) * b(2)
   end subroutine lu_solve
 
+  ! 1/(re + i im) as inv_re + i inv_im, by Smith's division (no overflow in
+  ! re^2 + im^2).
+  pure subroutine complex_inverse(re, im, inv_re, inv_im)
+    real(c_double), intent(in) :: re, im
+    real(c_double), intent(out) :: inv_re, inv_im
+    real(c_double) :: r, d
 
-  ! lu_decompose for a complex matrix, the pivot the entry of largest |re| +
-  ! |im| (as radau5.f's DECOMC).
-  logical function lu_decompose_complex(a, piv) result(singular)
-    complex(c_double), intent(inout) :: a(nx, nx)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      inv_re = 1 / d
+      inv_im = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      inv_re = r / d
+      inv_im = (-1) / d
+    end if
+  end subroutine complex_inverse
+
+  ! lu_decompose for the complex matrix ar + i ai, stored the same way: the
+  ! pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC).
+  logical function lu_decompose_complex(ar, ai, piv) result(singular)
+    real(c_double), intent(inout) :: ar(nx, nx), ai(nx, nx)
     integer, intent(out) :: piv(nx)
     integer, parameter :: block_end(nx) = [1, 3, 3, 9, 9, 9, 9, 9, 9]
-    complex(c_double) :: row(nx)
-    integer :: e, j, k, p
+    real(c_double) :: row(nx), inv_re, inv_im, lr, li, ur, ui
+    integer :: e, i, j, k, p
 
     singular = .true.
     do k = 1, nx
       e = block_end(k)
-      p = k - 1 + maxloc((abs(real(a(k:e, k))) + abs(aimag(a(k:e, k)))), dim=1)
+      p = k - 1 + maxloc(abs(ar(k:e, k)) + abs(ai(k:e, k)), dim=1)
       piv(k) = p
-      if (.not. ((abs(real(a(p, k))) + abs(aimag(a(p, k)))) > 0)) return
+      if (.not. (abs(ar(p, k)) + abs(ai(p, k)) > 0)) return
       if (p /= k) then
-        row = a(k, :)
-        a(k, :) = a(p, :)
-        a(p, :) = row
+        row = ar(k, :)
+        ar(k, :) = ar(p, :)
+        ar(p, :) = row
+        row = ai(k, :)
+        ai(k, :) = ai(p, :)
+        ai(p, :) = row
       end if
-      a(k, k) = 1 / a(k, k)
-      a(k + 1:e, k) = a(k + 1:e, k) * a(k, k)
-      do j = k + 1, nx
-        a(k + 1:e, j) = a(k + 1:e, j) - a(k + 1:e, k) * a(k, j)
+      call complex_inverse(ar(k, k), ai(k, k), inv_re, inv_im)
+      ar(k, k) = inv_re
+      ai(k, k) = inv_im
+      do i = k + 1, e
+        lr = ar(i, k) * ar(k, k) - ai(i, k) * ai(k, k)
+        li = ar(i, k) * ai(k, k) + ai(i, k) * ar(k, k)
+        ar(i, k) = lr
+        ai(i, k) = li
+        do j = k + 1, nx
+          ur = ar(k, j)
+          ui = ai(k, j)
+          ar(i, j) = ar(i, j) - (lr * ur - li * ui)
+          ai(i, j) = ai(i, j) - (lr * ui + li * ur)
+        end do
       end do
-      a(k, k + 1:nx) = a(k, k + 1:nx) * a(k, k)  ! u_kj / u_kk
+      do j = k + 1, nx  ! u_kj / u_kk
+        ur = ar(k, j)
+        ui = ai(k, j)
+        ar(k, j) = ur * ar(k, k) - ui * ai(k, k)
+        ai(k, j) = ur * ai(k, k) + ui * ar(k, k)
+      end do
     end do
     singular = .false.
   end function lu_decompose_complex
 
-  ! lu_solve for lu_decompose_complex's factors.
-  subroutine lu_solve_complex(lu, piv, b)
-    complex(c_double), intent(in) :: lu(nx, nx)
+  ! lu_solve for lu_decompose_complex's factors: b = br + i bi.
+  subroutine lu_solve_complex(ar, ai, piv, br, bi)
+    real(c_double), intent(in) :: ar(nx, nx), ai(nx, nx)
     integer, intent(in) :: piv(nx)
-    complex(c_double), intent(inout) :: b(nx)
-    complex(c_double) :: swap
+    real(c_double), intent(inout) :: br(nx), bi(nx)
+    real(c_double) :: swap, re
     integer :: j
 
     do j = 1, nx
-      swap = b(j)
-      b(j) = b(piv(j))
-      b(piv(j)) = swap
+      swap = br(j)
+      br(j) = br(piv(j))
+      br(piv(j)) = swap
+      swap = bi(j)
+      bi(j) = bi(piv(j))
+      bi(piv(j)) = swap
     end do
-    b(3) = b(3) - lu(3, 2) * b(2)
-    b(5) = b(5) - lu(5, 4) * b(4)
-    b(6) = b(6) - lu(6, 4) * b(4) - lu(6, 5) * b(5)
-    b(7) = b(7) - lu(7, 4) * b(4) - lu(7, 5) * b(5) - lu(7, 6) * b(6)
-    b(8) = b(8) - lu(8, 4) * b(4) - lu(8, 5) * b(5) - lu(8, 6) * b(6) &
-         - lu(8, 7) * b(7)
-    b(9) = b(9) - lu(9, 4) * b(4) - lu(9, 5) * b(5) - lu(9, 6) * b(6) &
-         - lu(9, 7) * b(7) - lu(9, 8) * b(8)
-    b(9) = b(9) * lu(9, 9)
-    b(8) = b(8) * lu(8, 8) - lu(8, 9) * b(9)
-    b(7) = b(7) * lu(7, 7) - lu(7, 9) * b(9) - lu(7, 8) * b(8)
-    b(6) = b(6) * lu(6, 6) - lu(6, 9) * b(9) - lu(6, 8) * b(8) - lu(6, 7) * b(7)
-    b(5) = b(5) * lu(5, 5) - lu(5, 9) * b(9) - lu(5, 8) * b(8) - lu(5, 7) * b(7) &
-         - lu(5, 6) * b(6)
-    b(4) = b(4) * lu(4, 4) - lu(4, 9) * b(9) - lu(4, 8) * b(8) - lu(4, 7) * b(7) &
-         - lu(4, 6) * b(6) - lu(4, 5) * b(5)
-    b(3) = b(3) * lu(3, 3) - lu(3, 6) * b(6) - lu(3, 5) * b(5) - lu(3, 4) * b(4)
-    b(2) = b(2) * lu(2, 2) - lu(2, 6) * b(6) - lu(2, 5) * b(5) - lu(2, 4) * b(4) &
-         - lu(2, 3) * b(3)
-    b(1) = b(1) * lu(1, 1) - lu(1, 6) * b(6) - lu(1, 4) * b(4) - lu(1, 3) * b(3) &
-         - lu(1, 2) * b(2)
+    br(3) = br(3) - ar(3, 2) * br(2) + ai(3, 2) * bi(2)
+    bi(3) = bi(3) - ar(3, 2) * bi(2) - ai(3, 2) * br(2)
+    br(5) = br(5) - ar(5, 4) * br(4) + ai(5, 4) * bi(4)
+    bi(5) = bi(5) - ar(5, 4) * bi(4) - ai(5, 4) * br(4)
+    br(6) = br(6) - ar(6, 4) * br(4) + ai(6, 4) * bi(4) &
+        - ar(6, 5) * br(5) + ai(6, 5) * bi(5)
+    bi(6) = bi(6) - ar(6, 4) * bi(4) - ai(6, 4) * br(4) &
+        - ar(6, 5) * bi(5) - ai(6, 5) * br(5)
+    br(7) = br(7) - ar(7, 4) * br(4) + ai(7, 4) * bi(4) &
+        - ar(7, 5) * br(5) + ai(7, 5) * bi(5) &
+        - ar(7, 6) * br(6) + ai(7, 6) * bi(6)
+    bi(7) = bi(7) - ar(7, 4) * bi(4) - ai(7, 4) * br(4) &
+        - ar(7, 5) * bi(5) - ai(7, 5) * br(5) &
+        - ar(7, 6) * bi(6) - ai(7, 6) * br(6)
+    br(8) = br(8) - ar(8, 4) * br(4) + ai(8, 4) * bi(4) &
+        - ar(8, 5) * br(5) + ai(8, 5) * bi(5) &
+        - ar(8, 6) * br(6) + ai(8, 6) * bi(6) &
+        - ar(8, 7) * br(7) + ai(8, 7) * bi(7)
+    bi(8) = bi(8) - ar(8, 4) * bi(4) - ai(8, 4) * br(4) &
+        - ar(8, 5) * bi(5) - ai(8, 5) * br(5) &
+        - ar(8, 6) * bi(6) - ai(8, 6) * br(6) &
+        - ar(8, 7) * bi(7) - ai(8, 7) * br(7)
+    br(9) = br(9) - ar(9, 4) * br(4) + ai(9, 4) * bi(4) &
+        - ar(9, 5) * br(5) + ai(9, 5) * bi(5) &
+        - ar(9, 6) * br(6) + ai(9, 6) * bi(6) &
+        - ar(9, 7) * br(7) + ai(9, 7) * bi(7) &
+        - ar(9, 8) * br(8) + ai(9, 8) * bi(8)
+    bi(9) = bi(9) - ar(9, 4) * bi(4) - ai(9, 4) * br(4) &
+        - ar(9, 5) * bi(5) - ai(9, 5) * br(5) &
+        - ar(9, 6) * bi(6) - ai(9, 6) * br(6) &
+        - ar(9, 7) * bi(7) - ai(9, 7) * br(7) &
+        - ar(9, 8) * bi(8) - ai(9, 8) * br(8)
+    re = br(9) * ar(9, 9) - bi(9) * ai(9, 9)
+    bi(9) = bi(9) * ar(9, 9) + br(9) * ai(9, 9)
+    br(9) = re
+    re = br(8) * ar(8, 8) - bi(8) * ai(8, 8) - ar(8, 9) * br(9) + ai(8, 9) * bi(9)
+    bi(8) = bi(8) * ar(8, 8) + br(8) * ai(8, 8) - ar(8, 9) * bi(9) - ai(8, 9) * br(9)
+    br(8) = re
+    re = br(7) * ar(7, 7) - bi(7) * ai(7, 7) - ar(7, 9) * br(9) + ai(7, 9) * bi(9) &
+        - ar(7, 8) * br(8) + ai(7, 8) * bi(8)
+    bi(7) = bi(7) * ar(7, 7) + br(7) * ai(7, 7) - ar(7, 9) * bi(9) - ai(7, 9) * br(9) &
+        - ar(7, 8) * bi(8) - ai(7, 8) * br(8)
+    br(7) = re
+    re = br(6) * ar(6, 6) - bi(6) * ai(6, 6) - ar(6, 9) * br(9) + ai(6, 9) * bi(9) &
+        - ar(6, 8) * br(8) + ai(6, 8) * bi(8) &
+        - ar(6, 7) * br(7) + ai(6, 7) * bi(7)
+    bi(6) = bi(6) * ar(6, 6) + br(6) * ai(6, 6) - ar(6, 9) * bi(9) - ai(6, 9) * br(9) &
+        - ar(6, 8) * bi(8) - ai(6, 8) * br(8) &
+        - ar(6, 7) * bi(7) - ai(6, 7) * br(7)
+    br(6) = re
+    re = br(5) * ar(5, 5) - bi(5) * ai(5, 5) - ar(5, 9) * br(9) + ai(5, 9) * bi(9) &
+        - ar(5, 8) * br(8) + ai(5, 8) * bi(8) &
+        - ar(5, 7) * br(7) + ai(5, 7) * bi(7) &
+        - ar(5, 6) * br(6) + ai(5, 6) * bi(6)
+    bi(5) = bi(5) * ar(5, 5) + br(5) * ai(5, 5) - ar(5, 9) * bi(9) - ai(5, 9) * br(9) &
+        - ar(5, 8) * bi(8) - ai(5, 8) * br(8) &
+        - ar(5, 7) * bi(7) - ai(5, 7) * br(7) &
+        - ar(5, 6) * bi(6) - ai(5, 6) * br(6)
+    br(5) = re
+    re = br(4) * ar(4, 4) - bi(4) * ai(4, 4) - ar(4, 9) * br(9) + ai(4, 9) * bi(9) &
+        - ar(4, 8) * br(8) + ai(4, 8) * bi(8) &
+        - ar(4, 7) * br(7) + ai(4, 7) * bi(7) &
+        - ar(4, 6) * br(6) + ai(4, 6) * bi(6) &
+        - ar(4, 5) * br(5) + ai(4, 5) * bi(5)
+    bi(4) = bi(4) * ar(4, 4) + br(4) * ai(4, 4) - ar(4, 9) * bi(9) - ai(4, 9) * br(9) &
+        - ar(4, 8) * bi(8) - ai(4, 8) * br(8) &
+        - ar(4, 7) * bi(7) - ai(4, 7) * br(7) &
+        - ar(4, 6) * bi(6) - ai(4, 6) * br(6) &
+        - ar(4, 5) * bi(5) - ai(4, 5) * br(5)
+    br(4) = re
+    re = br(3) * ar(3, 3) - bi(3) * ai(3, 3) - ar(3, 6) * br(6) + ai(3, 6) * bi(6) &
+        - ar(3, 5) * br(5) + ai(3, 5) * bi(5) &
+        - ar(3, 4) * br(4) + ai(3, 4) * bi(4)
+    bi(3) = bi(3) * ar(3, 3) + br(3) * ai(3, 3) - ar(3, 6) * bi(6) - ai(3, 6) * br(6) &
+        - ar(3, 5) * bi(5) - ai(3, 5) * br(5) &
+        - ar(3, 4) * bi(4) - ai(3, 4) * br(4)
+    br(3) = re
+    re = br(2) * ar(2, 2) - bi(2) * ai(2, 2) - ar(2, 6) * br(6) + ai(2, 6) * bi(6) &
+        - ar(2, 5) * br(5) + ai(2, 5) * bi(5) &
+        - ar(2, 4) * br(4) + ai(2, 4) * bi(4) &
+        - ar(2, 3) * br(3) + ai(2, 3) * bi(3)
+    bi(2) = bi(2) * ar(2, 2) + br(2) * ai(2, 2) - ar(2, 6) * bi(6) - ai(2, 6) * br(6) &
+        - ar(2, 5) * bi(5) - ai(2, 5) * br(5) &
+        - ar(2, 4) * bi(4) - ai(2, 4) * br(4) &
+        - ar(2, 3) * bi(3) - ai(2, 3) * br(3)
+    br(2) = re
+    re = br(1) * ar(1, 1) - bi(1) * ai(1, 1) - ar(1, 6) * br(6) + ai(1, 6) * bi(6) &
+        - ar(1, 4) * br(4) + ai(1, 4) * bi(4) &
+        - ar(1, 3) * br(3) + ai(1, 3) * bi(3) &
+        - ar(1, 2) * br(2) + ai(1, 2) * bi(2)
+    bi(1) = bi(1) * ar(1, 1) + br(1) * ai(1, 1) - ar(1, 6) * bi(6) - ai(1, 6) * br(6) &
+        - ar(1, 4) * bi(4) - ai(1, 4) * br(4) &
+        - ar(1, 3) * bi(3) - ai(1, 3) * br(3) &
+        - ar(1, 2) * bi(2) - ai(1, 2) * br(2)
+    br(1) = re
   end subroutine lu_solve_complex
-
-
   ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
   ! Hairer's rodas.f): with E = I/(h gamma) - J, gamma = 0.25, stage s solves
   ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
@@ -1212,36 +1324,41 @@ contains
 
   ! E1 and E2 for this h, factored; .true. when either is singular. jac is
   ! row-major.
-  logical function radau5_factor(jac, h, e1, piv1, e2, piv2) result(singular)
+  logical function radau5_factor(jac, h, e1, piv1, e2r, e2i, piv2) result(singular)
     real(c_double), intent(in) :: jac(nx * nx), h
-    real(c_double), intent(out) :: e1(nx, nx)
-    complex(c_double), intent(out) :: e2(nx, nx)
+    real(c_double), intent(out) :: e1(nx, nx), e2r(nx, nx), e2i(nx, nx)
     integer, intent(out) :: piv1(nx), piv2(nx)
+    real(c_double) :: gamma_h, alpha_h
     integer :: i, j
 
+    gamma_h = 3.637834252744496_c_double / h
+    alpha_h = 2.6810828736277523_c_double / h
     do j = 1, nx
       do i = 1, nx
         e1(i, j) = -jac((i - 1) * nx + j)
       end do
-      e2(:, j) = e1(:, j)
-      e1(j, j) = e1(j, j) + 3.637834252744496_c_double / h
-      e2(j, j) = e2(j, j) + cmplx(2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, c_double)
+      e2r(:, j) = e1(:, j)
+      e2i(:, j) = 0
+    end do
+    do j = 1, nx
+      e1(j, j) = e1(j, j) + gamma_h
+      e2r(j, j) = e2r(j, j) + alpha_h
+      e2i(j, j) = 3.0504301992474105_c_double / h
     end do
     singular = lu_decompose(e1, piv1)
-    if (.not. singular) singular = lu_decompose_complex(e2, piv2)
+    if (.not. singular) singular = lu_decompose_complex(e2r, e2i, piv2)
   end function radau5_factor
 
   ! One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
   ! F at the three stages, then the corrections to w solved into z1..z3.
   ! Returns their RMS over scal (NaN or Inf when a stage is).
-  real(c_double) function radau5_newton(t, h, x, c, e1, piv1, e2, piv2, scal, z1, z2, z3, &
-                                         w1, w2, w3) result(dyno)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), e1(nx, nx), scal(nx), w1(nx), w2(nx), w3(nx)
-    complex(c_double), intent(in) :: e2(nx, nx)
+  real(c_double) function radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, &
+                                         z3, w1, w2, w3) result(dyno)
+    real(c_double), intent(in) :: t, h, x(nx), c(nc), e1(nx, nx), e2r(nx, nx), e2i(nx, nx)
+    real(c_double), intent(in) :: scal(nx), w1(nx), w2(nx), w3(nx)
     integer, intent(in) :: piv1(nx), piv2(nx)
     real(c_double), intent(inout) :: z1(nx), z2(nx), z3(nx)
     real(c_double) :: a1(nx), a2(nx), a3(nx)
-    complex(c_double) :: v(nx)
 
     call rw3_orthogonal_rhs(t + 0.1550510257216822_c_double * h, x + z1, c, a1)
     call rw3_orthogonal_rhs(t + 0.6449489742783178_c_double * h, x + z2, c, a2)
@@ -1253,10 +1370,7 @@ contains
     z3 = -0.5028726349457868_c_double * a1 + 2.571926949855605_c_double * a2 - 0.5960392048282249_c_double * a3 &
          - (2.6810828736277523_c_double / h) * w3 - (3.0504301992474105_c_double / h) * w2
     call lu_solve(e1, piv1, z1)
-    v = cmplx(z2, z3, c_double)
-    call lu_solve_complex(e2, piv2, v)
-    z2 = real(v, c_double)
-    z3 = aimag(v)
+    call lu_solve_complex(e2r, e2i, piv2, z2, z3)
     dyno = sqrt(sum((z1 / scal)**2 + (z2 / scal)**2 + (z3 / scal)**2) / (3 * nx))
   end function radau5_newton
 
@@ -1305,8 +1419,7 @@ contains
     integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
-    real(c_double) :: jac(nx * nx), e1(nx, nx)
-    complex(c_double) :: e2(nx, nx)
+    real(c_double) :: jac(nx * nx), e1(nx, nx), e2r(nx, nx), e2i(nx, nx)
     real(c_double) :: z1(nx), z2(nx), z3(nx), w1(nx), w2(nx), w3(nx), a1(nx), a2(nx), a3(nx)
     real(c_double) :: ak1(nx), ak2(nx), ak3(nx)  ! the collocation polynomial of the last step
     real(c_double) :: f0(nx), fnew(nx), scal(nx), xnew(nx), dx(nx), comp(nx)
@@ -1388,7 +1501,7 @@ contains
       end if
       if (need_lu) then
         stats%decompositions = stats%decompositions + 1
-        if (radau5_factor(jac, h, e1, piv1, e2, piv2)) then
+        if (radau5_factor(jac, h, e1, piv1, e2r, e2i, piv2)) then
           singular = singular + 1
           if (singular == 5) then
             code = RW3_ORTHOGONAL_ODE_ERR_SINGULAR
@@ -1440,7 +1553,8 @@ contains
           outcome = 2
           exit
         end if
-        dyno = radau5_newton(t, h, x, c, e1, piv1, e2, piv2, scal, z1, z2, z3, w1, w2, w3)
+        dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2, &
+                                  w3)
         stats%rhs_calls = stats%rhs_calls + 3
         newt = newt + 1
         if (.not. ieee_is_finite(dyno)) then
@@ -1461,10 +1575,10 @@ contains
             exit
           end if
           rate = theta / (1 - theta)
-          predicted = rate * dyno * theta**(6 - newt) / newton_tol
+          predicted = rate * dyno * theta**real(6 - newt, c_double) / newton_tol
           if (predicted >= 1) then
-            h = h * 0.8_c_double * max(1e-4_c_double, min(20.0_c_double, predicted)) &
-                **(-1 / real(10 - newt, c_double))
+            h = h * (0.8_c_double * max(1e-4_c_double, min(20.0_c_double, predicted)) &
+                **(-1 / real(10 - newt, c_double)))
             outcome = 1
             exit
           end if

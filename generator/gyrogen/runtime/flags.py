@@ -1,9 +1,11 @@
 """The compiler flags of a local build (the cffi backends): the strict base
 every build uses, plus what makes this machine's code fast where the
-compiler takes it: -O3 -march=native -ffp-contract=fast (FMA), and -fopenmp
-(the _batch integrators then run on every core). Each optional flag is
-probed once per process with the compiler itself. The portable build files
-(`gyrogen generate --lib`) keep plain -O2."""
+compiler takes it: -O3 -march=native, and -fopenmp (the _batch integrators
+then run on every core), with nothing fused into an FMA
+(-ffp-contract=off -fno-tree-slp-vectorize, see FAST), so that the numbers
+do not depend on the CPU model. Each optional flag is probed once per
+process with the compiler itself. The portable build files (`gyrogen
+generate --lib`) keep plain -O2."""
 
 from __future__ import annotations
 
@@ -23,10 +25,17 @@ FORTRAN_STRICT = ("-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-We
 """The strictness matrix's Fortran."""
 C_BASE = ("-std=c99", "-fPIC", "-fno-math-errno", *C_WARNINGS)
 FORTRAN_BASE = ("-std=f2008", "-fPIC", "-fno-math-errno", *FORTRAN_WARNINGS)
-FAST = ("-O3", "-march=native", "-ffp-contract=fast")
-"""-ffp-contract=fast lets a * b + c be one FMA (gcc's ISO C modes forbid it
-otherwise): the same in the single and the lane-batched integrators, so
-their results stay equal bit for bit."""
+FAST = ("-O3", "-march=native", "-ffp-contract=off", "-fno-tree-slp-vectorize")
+"""-ffp-contract=off: each a * b + c rounds twice, in C and in Fortran,
+whatever -march=native selects; with contraction (=fast, gcc's default for
+Fortran and GNU C) which products become FMAs depends on the code the
+vectorizer and the -march's cost model choose. -fno-tree-slp-vectorize:
+gcc 12's straight-line (SLP) vectorizer fuses a * b - c, a * b + c in
+neighbouring lanes into one vfmaddsub/vfmsubadd even under
+-ffp-contract=off, and only under some -march (Intel's and x86-64-v3, not
+znver3). Either made Fortran radau5 step differently from C on an Intel
+CPU (issue 19); loops are still vectorized."""
+
 OPENMP = "-fopenmp"
 
 _PROBES = {
