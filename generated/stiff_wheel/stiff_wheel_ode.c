@@ -503,6 +503,32 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     return fmin(fmin(100.0 * h, h1), hmax);
 }
 
+/* An adaptive method's start (every pair, rodas4, radau5): the arguments,
+   the attitude and f0 = f(t0, x) checked, and the first step *h. -1 to go
+   on from there, else the code to return (x as given). */
+static int ode_start(int order, double t0, double t1, const double *x, const double *c,
+                     double rtol, double atol, double h0, long max_steps, double *f0,
+                     double *h, stiff_wheel_stats *stats)
+{
+    stats_start(stats, t0);
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+        return STIFF_WHEEL_ODE_ERR_ARGUMENT;
+    }
+    if (gimbal_lock_at(x)) {
+        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
+    }
+    if (!(t1 > t0)) {
+        return STIFF_WHEEL_ODE_OK;
+    }
+    stiff_wheel_rhs(t0, x, c, f0);
+    stats->rhs_calls = 1;
+    if (!all_finite(x, STIFF_WHEEL_NX) || !all_finite(f0, STIFF_WHEEL_NX)) {
+        return STIFF_WHEEL_ODE_ERR_NONFINITE;
+    }
+    *h = h0 > 0.0 ? fmin(h0, t1 - t0) : initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+    return -1;
+}
+
 /* One trial step of an explicit embedded pair from (t, x), k[0] = f(t, x):
    fills the other stages, xnew = x + dx (comp: see accept_step), and returns
    the error norm (NaN or Inf when a stage is). */
@@ -537,31 +563,6 @@ static double err_power(const struct pair *m, double err)
     return err;
 }
 
-/* A pair's start: the arguments, the attitude and f0 = f(t0, x) checked,
-   and the first step *h. -1 to go on from there, else the code to return
-   (x as given). */
-static int pair_start(int order, double t0, double t1, const double *x, const double *c,
-                      double rtol, double atol, double h0, long max_steps, double *f0,
-                      double *h, stiff_wheel_stats *stats)
-{
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return STIFF_WHEEL_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return STIFF_WHEEL_ODE_OK;
-    }
-    stiff_wheel_rhs(t0, x, c, f0);
-    stats->rhs_calls = 1;
-    if (!all_finite(x, STIFF_WHEEL_NX) || !all_finite(f0, STIFF_WHEEL_NX)) {
-        return STIFF_WHEEL_ODE_ERR_NONFINITE;
-    }
-    *h = h0 > 0.0 ? fmin(h0, t1 - t0) : initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
-    return -1;
-}
 
 /* Any embedded pair to t1, with Hairer's step-size strategy: the last step
    clipped to end on t1, no growth right after a rejection, and a non-finite
@@ -573,7 +574,7 @@ static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
     double k[13][STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX], comp[STIFF_WHEEL_NX] = {0.0};
     double t = t0, h = 0.0, err, fac, err_old = 1e-4;
     int i, last, rejected_last = 0, nonfinite = 0;
-    const int start = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
+    const int start = ode_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
                                  stats);
 
     if (start >= 0) {
@@ -1301,7 +1302,7 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
 }
 
-/* A trajectory into lane l, with pair_start's checks: -1 when the lane took
+/* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
 static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj, double t0,
                       double t1, double *xs, const double *c, double rtol, double atol,
@@ -1310,7 +1311,7 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
     const double *x = xs + traj * STIFF_WHEEL_NX;
     double f0[STIFF_WHEEL_NX], h = 0.0;
     int i;
-    const int code = pair_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+    const int code = ode_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
                                 stats);
     if (code >= 0) {
         return code;
@@ -1894,27 +1895,15 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
     int piv[STIFF_WHEEL_NX];
     double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
     stiff_wheel_stats own;
-    int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1;
+    int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1, start;
 
     if (stats == NULL) {
         stats = &own;  /* not wanted */
     }
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return STIFF_WHEEL_ODE_ERR_ARGUMENT;
+    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (start >= 0) {
+        return start;
     }
-    if (gimbal_lock_at(x)) {
-        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return STIFF_WHEEL_ODE_OK;
-    }
-    stiff_wheel_rhs(t, x, c, f0);
-    stats->rhs_calls = 1;
-    if (!all_finite(x, STIFF_WHEEL_NX) || !all_finite(f0, STIFF_WHEEL_NX)) {
-        return STIFF_WHEEL_ODE_ERR_NONFINITE;
-    }
-    h = h0 > 0.0 ? dmin(h0, t1 - t0) : initial_step(4, t0, t1, x, f0, c, rtol, atol, stats);
     for (;;) {
         if (new_point) {
             stiff_wheel_jac(t, x, c, J);
@@ -2140,30 +2129,18 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
     double dyno, dyno_old = 1.0;
     stiff_wheel_stats own;
     int i, newt, outcome, last = 0, first = 1, reject = 0, fresh_jac = 0, need_jac = 1;
-    int need_lu = 1, singular = 0, nonfinite = 0;
+    int need_lu = 1, singular = 0, nonfinite = 0, start;
 
     if (stats == NULL) {
         stats = &own;  /* not wanted */
     }
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return STIFF_WHEEL_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return STIFF_WHEEL_ODE_OK;
-    }
-    stiff_wheel_rhs(t, x, c, f0);
-    stats->rhs_calls = 1;
-    if (!all_finite(x, STIFF_WHEEL_NX) || !all_finite(f0, STIFF_WHEEL_NX)) {
-        return STIFF_WHEEL_ODE_ERR_NONFINITE;
+    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (start >= 0) {
+        return start;
     }
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
     newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
-    h = h0 > 0.0 ? dmin(h0, t1 - t0) : initial_step(5, t0, t1, x, f0, c, rtol, atol, stats);
     if (t + 1.01 * h >= t1) {
         h = t1 - t;
         last = 1;

@@ -470,6 +470,44 @@ contains
     h = min(100 * h, h1, t1 - t0)
   end function initial_step
 
+  ! An adaptive method's start (every pair, rodas4, radau5): the arguments,
+  ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
+  ! on from there, else the code to return (x as given).
+  integer(c_int) function ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
+                                    stats) result(code)
+    integer, intent(in) :: order
+    real(c_double), intent(in) :: t0, t1, x(nx), c(nc), rtol, atol, h0
+    integer(c_long), intent(in) :: max_steps
+    real(c_double), intent(out) :: f0(nx), h
+    type(stiff_wheel_stats), intent(inout) :: stats
+
+    h = 0
+    f0 = 0
+    call stats_start(stats, t0)
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
+      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
+      return
+    end if
+    if (gimbal_lock_at(x)) then
+      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
+      return
+    end if
+    code = STIFF_WHEEL_ODE_OK
+    if (.not. (t1 > t0)) return
+    call stiff_wheel_rhs(t0, x, c, f0)
+    stats%rhs_calls = 1
+    if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then
+      code = STIFF_WHEEL_ODE_ERR_NONFINITE
+      return
+    end if
+    if (h0 > 0) then
+      h = min(h0, t1 - t0)
+    else
+      h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats)
+    end if
+    code = -1
+  end function ode_start
+
   ! Any embedded pair to t1, with Hairer's step-size strategy: the last step
   ! clipped to end on t1, no growth right after a rejection, and a non-finite
   ! trial rejected with h shrunk by facmin.
@@ -485,33 +523,14 @@ contains
     real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
     logical :: last, rejected_last, nonfinite
 
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
+    code = ode_start(m%order, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 1), h, stats)
+    if (code >= 0) return
     code = STIFF_WHEEL_ODE_OK
-    if (.not. (t1 > t0)) return
     t = t0
     err_old = 1e-4_c_double
     comp = 0
     rejected_last = .false.
     nonfinite = .false.
-    call stiff_wheel_rhs(t, x, c, k(:, 1))
-    stats%rhs_calls = 1
-    if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(k(:, 1))))) then
-      code = STIFF_WHEEL_ODE_ERR_NONFINITE
-      return
-    end if
-    if (h0 > 0) then
-      h = min(h0, t1 - t0)
-    else
-      h = initial_step(m%order, t0, t1, x, k(:, 1), c, rtol, atol, stats)
-    end if
     do
       if (step_underflow(h, t)) then
         code = merge(STIFF_WHEEL_ODE_ERR_NONFINITE, &
@@ -1099,17 +1118,9 @@ contains
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
+    code = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (code >= 0) return
     code = STIFF_WHEEL_ODE_OK
-    if (.not. (t1 > t0)) return
     t = t0
     h_acc = 0
     err_acc = 1e-2_c_double
@@ -1118,17 +1129,6 @@ contains
     nonfinite = .false.
     new_point = .true.
     singular = 0
-    call stiff_wheel_rhs(t, x, c, f0)
-    stats%rhs_calls = 1
-    if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then
-      code = STIFF_WHEEL_ODE_ERR_NONFINITE
-      return
-    end if
-    if (h0 > 0) then
-      h = min(h0, t1 - t0)
-    else
-      h = initial_step(4, t0, t1, x, f0, c, rtol, atol, stats)
-    end if
     do
       if (new_point) then
         call stiff_wheel_jac(t, x, c, jac)
@@ -1337,35 +1337,16 @@ contains
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
+    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (code >= 0) return
     code = STIFF_WHEEL_ODE_OK
-    if (.not. (t1 > t0)) return
     t = t0
     ak1 = 0.0_c_double  ! read only after a first accepted step; set for -Wmaybe-uninitialized
     ak2 = 0.0_c_double
     ak3 = 0.0_c_double
-    call stiff_wheel_rhs(t, x, c, f0)
-    stats%rhs_calls = 1
-    if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then
-      code = STIFF_WHEEL_ODE_ERR_NONFINITE
-      return
-    end if
     rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
     atol_e = rtol_e * (atol / rtol)
     newton_tol = max(10.0_c_double * (0.5_c_double * epsilon(1.0_c_double)) / rtol_e, min(0.03_c_double, sqrt(rtol_e)))
-    if (h0 > 0) then
-      h = min(h0, t1 - t0)
-    else
-      h = initial_step(5, t0, t1, x, f0, c, rtol, atol, stats)
-    end if
     last = t + 1.01_c_double * h >= t1
     if (last) h = t1 - t
     scal = atol_e + rtol_e * abs(x)
