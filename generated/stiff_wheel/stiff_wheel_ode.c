@@ -160,12 +160,10 @@ static inline double stiff_wheel_cos_lanes(double x)
 }
 
 
-/* fmax and fmin, inline (NaN: the other argument, as fmax and fmin), for
-   the implicit methods. The library's are calls to legacy-SSE code: after
-   AVX-512 arithmetic (gcc -O3 -march=native) each call paid a state
-   transition, and Rodas4 ran 4.8x slower. The explicit pairs keep the
-   library's: inline, they let the compiler fuse multiply-adds differently
-   in the single and the lane code, 1 ulp apart. */
+/* fmax and fmin, inline (NaN: the other argument, as fmax and fmin). The
+   library's are calls to legacy-SSE code: after AVX-512 arithmetic (gcc -O3
+   -march=native) each call paid a state transition (Rodas4 ran 4.8x
+   slower), and in a loop over lanes a call stops the vectorizer. */
 static inline double dmax(double a, double b)
 {
     return a > b || b != b ? a : b;
@@ -302,39 +300,17 @@ static void stats_start(stiff_wheel_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
-/* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
-   cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
-   two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered j
-   = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
-   unless the step passed a point of gimbal lock, however long the step
-   (whole turns included). Where the rounding of q2/pi could misplace q2 by
-   an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6. */
-static double gimbal_interval(double q2)
-{
-    return floor(q2 * 0.3183098861837907 + 0.5);
-}
-
-/* 1 when x is at gimbal lock, |cos q2| < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS. */
-static int gimbal_lock_at(const double *x)
-{
-    return fabs(stiff_wheel_cos(x[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS;
-}
-
-/* 1 when the step from x to xnew ends at gimbal lock or passes a point of
-   it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
-static int gimbal_lock(const double *x, const double *xnew)
-{
-    return gimbal_lock_at(xnew) || gimbal_interval(x[1]) != gimbal_interval(xnew[1]);
-}
-
+/* 1 when no element of v is NaN or Inf. */
 static int all_finite(const double *v, int n)
 {
-    double zero = 0.0;  /* v_i - v_i is 0, or NaN when v_i is Inf or NaN */
     int i;
+
     for (i = 0; i < n; ++i) {
-        zero += v[i] - v[i];
+        if (!(fabs(v[i]) <= DBL_MAX)) {
+            return 0;
+        }
     }
-    return zero == 0.0;
+    return 1;
 }
 
 /* x := xnew, the step's x + dx. Every method sums its steps with Kahan's
@@ -344,28 +320,164 @@ static int all_finite(const double *v, int n)
 static void accept_step(double *x, const double *xnew, const double *dx, double *comp)
 {
     int i;
+
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        comp[i] = (xnew[i] - x[i]) - dx[i];
+        comp[i] = xnew[i] - x[i] - dx[i];
         x[i] = xnew[i];
     }
 }
 
-/* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
-int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c,
-        stiff_wheel_stats *stats)
+/* The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
+   cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
+   two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered
+   j = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
+   unless the step passed a point of gimbal lock, however long the step
+   (whole turns included). Where the rounding of q2/pi could misplace q2 by
+   an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6. */
+static double gimbal_interval(double q2)
 {
-    double k[4][STIFF_WHEEL_NX], y[STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX];
-    double comp[STIFF_WHEEL_NX] = {0.0};
-    double t, h;
-    stiff_wheel_stats own;
-    long n;
+    return floor(q2 * 0.3183098861837907 + 0.5);
+}
+
+/* 1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS. */
+static int gimbal_lock_at(const double *x)
+{
+    return fabs(stiff_wheel_cos(x[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS;
+}
+
+/* 1 when the step from x to xnew ends at gimbal lock or passes a point of
+   it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
+static int gimbal_lock(const double *x, const double *xnew)
+{
+    return fabs(stiff_wheel_cos(xnew[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS ||
+            fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+}
+
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
+   double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
+   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double h0, long max_steps)
+{
+    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol >
+            STIFF_WHEEL_ODE_MIN_RTOL) || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) ||
+            !(fabs(atol) <= DBL_MAX) || !(fabs(h0) <= DBL_MAX) || max_steps < 1;
+}
+
+/* h is lost in the rounding of t: the solution cannot be resolved further. */
+static int step_underflow(double h, double t)
+{
+    return h < 16.0 * DBL_EPSILON * fabs(t) || h < DBL_MIN;
+}
+
+/* The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
+   sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1. */
+static double error_norm(const double *err, const double *x, const double *xnew, double rtol,
+                         double atol)
+{
+    double total;
     int i;
 
-    if (stats == NULL) {
-        stats = &own;  /* not wanted */
+    total = 0.0;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        double e;
+        e = err[i] / (atol + rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+        total = total + e * e;
     }
+    return sqrt(total / STIFF_WHEEL_NX);
+}
+
+/* Hairer's HINIT (dopri5.f): the first step h such that
+   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step. */
+static double initial_step(int order, double t0, double t1, const double *x, const double *f0,
+                           const double *c, double rtol, double atol, stiff_wheel_stats *stats)
+{
+    double x1[STIFF_WHEEL_NX];
+    double f1[STIFF_WHEEL_NX];
+    double dnf;
+    double dny;
+    double der2;
+    double der12;
+    double h;
+    double h1;
+    int i;
+
+    dnf = 0.0;
+    dny = 0.0;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        double sk;
+        sk = atol + rtol * fabs(x[i]);
+        dnf = dnf + f0[i] / sk * (f0[i] / sk);
+        dny = dny + x[i] / sk * (x[i] / sk);
+    }
+    h = dnf <= 1e-10 || dny <= 1e-10 ? 1e-6 : 1e-2 * sqrt(dny / dnf);
+    h = dmin(h, t1 - t0);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        x1[i] = x[i] + h * f0[i];
+    }
+    stiff_wheel_rhs(t0 + h, x1, c, f1);
+    stats->rhs_calls = stats->rhs_calls + 1;
+    der2 = 0.0;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        double d;
+        d = (f1[i] - f0[i]) / (atol + rtol * fabs(x[i]));
+        der2 = der2 + d * d;
+    }
+    der2 = sqrt(der2) / h;
+    if (!(fabs(der2) <= DBL_MAX)) {
+        der2 = 0.0;  /* the Euler step left the domain of f: trust |f| alone */
+    }
+    der12 = dmax(der2, sqrt(dnf));
+    h1 = der12 <= 1e-15 ? dmax(1e-6, h * 1e-3) : pow(1e-2 / der12, 1.0 / order);
+    return dmin(dmin(100.0 * h, h1), t1 - t0);
+}
+
+/* An adaptive method's start (every pair, rodas4, radau5): the arguments,
+   the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
+   on from there, else the code to return (x as given). */
+static int ode_start(int order, double t0, double t1, const double *x, const double *c,
+                     double rtol, double atol, double h0, long max_steps, double *f0, double *h,
+                     stiff_wheel_stats *stats)
+{
+    *h = 0.0;
     stats_start(stats, t0);
-    if (!(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || steps < 1) {
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+        return STIFF_WHEEL_ODE_ERR_ARGUMENT;
+    }
+    if (gimbal_lock_at(x)) {
+        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
+    }
+    if (!(t1 > t0)) {
+        return STIFF_WHEEL_ODE_OK;
+    }
+    stiff_wheel_rhs(t0, x, c, f0);
+    stats->rhs_calls = 1;
+    if (!all_finite(x, STIFF_WHEEL_NX) || !all_finite(f0, STIFF_WHEEL_NX)) {
+        return STIFF_WHEEL_ODE_ERR_NONFINITE;
+    }
+    if (h0 > 0.0) {
+        *h = dmin(h0, t1 - t0);
+    } else {
+        *h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+    }
+    return -1;
+}
+
+/* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
+static int rk4_steps(double t0, double t1, long steps, double *x, const double *c,
+                     stiff_wheel_stats *stats)
+{
+    double k[4][STIFF_WHEEL_NX];
+    double y[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX] = {0.0};
+    double t;
+    double h;
+    int i;
+    long n;
+
+    stats_start(stats, t0);
+    if (!(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || steps < 1) {
         return STIFF_WHEEL_ODE_ERR_ARGUMENT;
     }
     if (gimbal_lock_at(x)) {
@@ -391,20 +503,17 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
 
         /* stage 4: t + h */
         for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-            y[i] = x[i] + h * (k[2][i]);
+            y[i] = x[i] + h * k[2][i];
         }
         stiff_wheel_rhs(t + h, y, c, k[3]);
 
         /* the new solution */
         for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-            dx[i] = h * (0.16666666666666666 * k[0][i]
-                         + 0.3333333333333333 * k[1][i]
-                         + 0.3333333333333333 * k[2][i]
-                         + 0.16666666666666666 * k[3][i]) - comp[i];
+            dx[i] = h * (0.16666666666666666 * k[0][i] + 0.3333333333333333 * k[1][i] +
+                    0.3333333333333333 * k[2][i] + 0.16666666666666666 * k[3][i]) - comp[i];
             xnew[i] = x[i] + dx[i];
         }
-
-        stats->rhs_calls += 4;
+        stats->rhs_calls = stats->rhs_calls + 4;
         if (!all_finite(xnew, STIFF_WHEEL_NX)) {
             return STIFF_WHEEL_ODE_ERR_NONFINITE;
         }
@@ -412,10 +521,18 @@ int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c
             return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
         }
         accept_step(x, xnew, dx, comp);
-        stats->accepted += 1;
+        stats->accepted = stats->accepted + 1;
         stats->t = n + 1 == steps ? t1 : t + h;
     }
     return STIFF_WHEEL_ODE_OK;
+}
+
+/* Classic Runge-Kutta, order 4, fixed step. */
+int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c,
+        stiff_wheel_stats *stats)
+{
+    stiff_wheel_stats own;  /* when stats is NULL: not wanted */
+    return rk4_steps(t0, t1, steps, x, c, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -438,467 +555,419 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
     return failed;
 }
 
-/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
-   double arithmetic can meet (rtol <= STIFF_WHEEL_ODE_MIN_RTOL, atol <= 0), max_steps
-   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, double h0,
-                         long max_steps)
+/* dopri5 to t1, with Hairer's step-size strategy: the last step clipped
+   to end on t1, no growth right after a rejection, and a non-finite trial
+   rejected with h shrunk by facmin.
+   Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta. */
+static int dopri5_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
-    return !(t1 >= t0) || !isfinite(t0) || !isfinite(t1) || !(rtol > STIFF_WHEEL_ODE_MIN_RTOL)
-        || !isfinite(rtol) || !(atol > 0.0) || !isfinite(atol) || !isfinite(h0) || max_steps < 1;
-}
-
-/* h is lost in the rounding of t: the solution cannot be resolved further. */
-static int step_underflow(double h, double t)
-{
-    return h < 16.0 * DBL_EPSILON * fabs(t) || h < DBL_MIN;
-}
-
-/* The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
-   sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1. */
-static double error_norm(const double *err, const double *x, const double *xnew, double rtol,
-                         double atol)
-{
-    double sum = 0.0;
-    int i;
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        const double e = err[i] / (atol + rtol * fmax(fabs(x[i]), fabs(xnew[i])));
-        sum += e * e;
-    }
-    return sqrt(sum / STIFF_WHEEL_NX);
-}
-
-/* Hairer's HINIT (dopri5.f): the first step h such that
-   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step. */
-static double initial_step(int order, double t0, double t1, const double *x, const double *f0,
-                           const double *c, double rtol, double atol, stiff_wheel_stats *stats)
-{
-    double x1[STIFF_WHEEL_NX], f1[STIFF_WHEEL_NX];
-    double dnf = 0.0, dny = 0.0, der2 = 0.0, der12, h, h1;
-    const double hmax = t1 - t0;
+    double k[13][STIFF_WHEEL_NX];
+    double y[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX];
+    int code;
+    double t;
+    double h;
+    double err_old;
+    int nonfinite;
+    int rejected_last;
+    int last;
+    double err;
+    int run;
+    int take;
+    int lock;
+    int ok;
+    double fac;
+    double grow;
+    double total;
     int i;
 
+    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    if (code >= 0) {
+        return code;
+    }
+    t = t0;
+    err_old = 1e-4;
+    nonfinite = 0;
+    rejected_last = 0;
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        const double sk = atol + rtol * fabs(x[i]);
-        dnf += (f0[i] / sk) * (f0[i] / sk);
-        dny += (x[i] / sk) * (x[i] / sk);
-    }
-    h = dnf <= 1e-10 || dny <= 1e-10 ? 1e-6 : 0.01 * sqrt(dny / dnf);
-    h = fmin(h, hmax);
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        x1[i] = x[i] + h * f0[i];
-    }
-    stiff_wheel_rhs(t0 + h, x1, c, f1);
-    stats->rhs_calls += 1;
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        const double d = (f1[i] - f0[i]) / (atol + rtol * fabs(x[i]));
-        der2 += d * d;
-    }
-    der2 = sqrt(der2) / h;
-    if (!isfinite(der2)) {
-        der2 = 0.0;  /* the Euler step left the domain of f: trust |f| alone */
-    }
-    der12 = fmax(der2, sqrt(dnf));
-    h1 = der12 <= 1e-15 ? fmax(1e-6, h * 1e-3) : pow(0.01 / der12, 1.0 / order);
-    return fmin(fmin(100.0 * h, h1), hmax);
-}
-
-/* An adaptive method's start (every pair, rodas4, radau5): the arguments,
-   the attitude and f0 = f(t0, x) checked, and the first step *h. -1 to go
-   on from there, else the code to return (x as given). */
-static int ode_start(int order, double t0, double t1, const double *x, const double *c,
-                     double rtol, double atol, double h0, long max_steps, double *f0,
-                     double *h, stiff_wheel_stats *stats)
-{
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return STIFF_WHEEL_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return STIFF_WHEEL_ODE_OK;
-    }
-    stiff_wheel_rhs(t0, x, c, f0);
-    stats->rhs_calls = 1;
-    if (!all_finite(x, STIFF_WHEEL_NX) || !all_finite(f0, STIFF_WHEEL_NX)) {
-        return STIFF_WHEEL_ODE_ERR_NONFINITE;
-    }
-    *h = h0 > 0.0 ? fmin(h0, t1 - t0) : initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
-    return -1;
-}
-
-/* One trial step of an explicit embedded pair from (t, x), k[0] = f(t, x):
-   fills the other stages, xnew = x + dx (comp: see accept_step), and returns
-   the error norm (NaN or Inf when a stage is). */
-typedef double (*pair_trial)(double t, double h, const double *x, const double *c,
-                             double rtol, double atol, const double *comp,
-                             double (*k)[STIFF_WHEEL_NX], double *dx, double *xnew);
-
-/* A pair and its step-size control: h_new / h = safety err^-alpha
-   err_old^beta within [facmin, facmax] (Hairer's PI controller; beta = 0 is
-   the classic one). */
-struct pair {
-    pair_trial trial;
-    int order;      /* for the first step's estimate (HINIT's iord) */
-    int calls;      /* rhs calls of one trial */
-    int fnew;       /* the row of k that holds f(t + h, xnew) */
-    int fsal;       /* the trial computes that row itself (first same as last) */
-    double alpha, beta, safety, facmin, facmax;
-    int roots;      /* alpha = 2^-roots: err^alpha by square roots; 0: by pow */
-};
-
-/* err^alpha, by square roots when alpha is 1/2, 1/4, 1/8 ... (a libm pow
-   costs as much as a fifth of a dop853 step on the lanes). */
-static double err_power(const struct pair *m, double err)
-{
-    int j;
-    if (m->roots == 0) {
-        return pow(err, m->alpha);
-    }
-    for (j = 0; j < m->roots; ++j) {
-        err = sqrt(err);
-    }
-    return err;
-}
-
-
-/* Any embedded pair to t1, with Hairer's step-size strategy: the last step
-   clipped to end on t1, no growth right after a rejection, and a non-finite
-   trial rejected with h shrunk by facmin. */
-static int pair_integrate(const struct pair *m, double t0, double t1, double *x,
-                          const double *c, double rtol, double atol, double h0, long max_steps,
-                          stiff_wheel_stats *stats)
-{
-    double k[13][STIFF_WHEEL_NX], xnew[STIFF_WHEEL_NX], dx[STIFF_WHEEL_NX], comp[STIFF_WHEEL_NX] = {0.0};
-    double t = t0, h = 0.0, err, fac, err_old = 1e-4;
-    int i, last, rejected_last = 0, nonfinite = 0;
-    const int start = ode_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
-                                 stats);
-
-    if (start >= 0) {
-        return start;
+        comp[i] = 0.0;
     }
     for (;;) {
-        if (step_underflow(h, t)) {
-            return nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE : STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return STIFF_WHEEL_ODE_ERR_MAX_STEPS;
-        }
+
+        /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+        code = code < 0 ? (step_underflow(h,
+                t) ? (nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE :
+                STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1) : code;
         last = t + 1.01 * h >= t1;
-        if (last) {
-            h = t1 - t;
+        h = code < 0 && last ? t1 - t : h;
+        stats->h = code < 0 ? h : stats->h;
+        if (code >= 0) {
+            return code;
         }
-        stats->h = h;
-        err = m->trial(t, h, x, c, rtol, atol, comp, k, dx, xnew);
-        stats->rhs_calls += m->calls;
-        nonfinite = !isfinite(err) || !all_finite(xnew, STIFF_WHEEL_NX);
-        if (!nonfinite && err <= 1.0 && !m->fsal && !last) {
-            stiff_wheel_rhs(t + h, xnew, c, k[m->fnew]);  /* where the next step starts */
-            stats->rhs_calls += 1;
-            nonfinite = !all_finite(k[m->fnew], STIFF_WHEEL_NX);
+
+        /* trial */
+
+        /* stage 2: t + 0.2 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.2 * k[0][i]);
         }
-        if (nonfinite) {
-            stats->rejected += 1;
-            rejected_last = 1;
-            h *= m->facmin;
-            continue;
+        stiff_wheel_rhs(t + 0.2 * h, y, c, k[1]);
+
+        /* stage 3: t + 0.3 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.075 * k[0][i] + 0.225 * k[1][i]);
         }
-        /* fac = h / h_new, in Hairer's form (no division by a zero error) */
-        fac = err_power(m, err) / m->safety;
-        if (err <= 1.0) {
-            if (gimbal_lock(x, xnew)) {
-                return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            accept_step(x, xnew, dx, comp);
-            t = last ? t1 : t + h;
-            stats->t = t;
-            stats->accepted += 1;
-            if (last) {
-                return STIFF_WHEEL_ODE_OK;
+        stiff_wheel_rhs(t + 0.3 * h, y, c, k[2]);
+
+        /* stage 4: t + 0.8 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.9777777777777777 * k[0][i] - 3.7333333333333334 * k[1][i] +
+                    3.5555555555555554 * k[2][i]);
+        }
+        stiff_wheel_rhs(t + 0.8 * h, y, c, k[3]);
+
+        /* stage 5: t + 0.8888888888888888 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (2.9525986892242035 * k[0][i] - 11.595793324188385 * k[1][i] +
+                    9.822892851699436 * k[2][i] - 0.2908093278463649 * k[3][i]);
+        }
+        stiff_wheel_rhs(t + 0.8888888888888888 * h, y, c, k[4]);
+
+        /* stage 6: t + h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (2.8462752525252526 * k[0][i] - 10.757575757575758 * k[1][i] +
+                    8.906422717743473 * k[2][i] + 0.2784090909090909 * k[3][i] -
+                    0.2735313036020583 * k[4][i]);
+        }
+        stiff_wheel_rhs(t + h, y, c, k[5]);
+
+        /* stage 7: t + h, the new solution */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            dx[i] = h * (0.09114583333333333 * k[0][i] + 0.44923629829290207 * k[2][i] +
+                    0.6510416666666666 * k[3][i] - 0.322376179245283 * k[4][i] +
+                    0.13095238095238096 * k[5][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        stiff_wheel_rhs(t + h, xnew, c, k[6]);
+
+        /* the error norm (see error_norm) */
+        total = 0.0;
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            double e;
+            e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
+                    0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
+                    dmax(fabs(x[i]), fabs(xnew[i])));
+            total = total + e * e;
+        }
+        err = sqrt(total / STIFF_WHEEL_NX);
+
+        /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+        stats->rhs_calls = stats->rhs_calls + (code < 0 ? 6 : 0);
+        nonfinite = !(fabs(err) <= DBL_MAX);
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+
+        /* control: accept or reject by selection, and the next h */
+        run = code < 0;
+        take = run && !nonfinite && err <= 1.0;
+        lock = fabs(stiff_wheel_cos(xnew[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS ||
+                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !lock;
+        fac = pow(err, 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow = dmax(0.1, dmin(5.0, fac / pow(err_old, 0.04)));
+        grow = rejected_last ? dmax(grow, 1.0) : grow;  /* no growth after a rejection */
+        code = take && lock ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                STIFF_WHEEL_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (run && !take ? 1 : 0);
+        err_old = ok ? dmax(err, 1e-4) : err_old;
+        rejected_last = ok ? 0 : run && !take ? 1 : rejected_last;
+        h = !run || (take && lock) ? h : nonfinite ? h * 0.2 : ok ? h / grow : h / dmin(5.0, fac);
+
+        /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+        if (ok) {
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
             }
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                k[0][i] = k[m->fnew][i];
+                k[0][i] = k[6][i];
             }
-            fac = m->beta == 0.0 ? fac : fac / pow(err_old, m->beta);
-            fac = fmax(1.0 / m->facmax, fmin(1.0 / m->facmin, fac));
-            if (rejected_last) {
-                fac = fmax(fac, 1.0);
-            }
-            err_old = fmax(err, 1e-4);
-            rejected_last = 0;
-        } else {
-            fac = fmin(1.0 / m->facmin, fac);
-            stats->rejected += 1;
-            rejected_last = 1;
         }
-        h /= fac;
+        if (code >= 0) {
+            return code;
+        }
     }
 }
-
-/* Dormand-Prince 5(4) (Dormand & Prince 1980; Hairer, Norsett & Wanner,
-   Solving ODEs I, Table II.5.2): seven stages, the seventh at the new
-   solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat. */
-static double dopri5_trial(double t, double h, const double *x, const double *c,
-                           double rtol, double atol, const double *comp,
-                           double (*k)[STIFF_WHEEL_NX], double *dx, double *xnew)
-{
-    double y[STIFF_WHEEL_NX], err[STIFF_WHEEL_NX];
-    int i;
-
-    /* stage 2: t + 0.2 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.2 * k[0][i]);
-    }
-    stiff_wheel_rhs(t + 0.2 * h, y, c, k[1]);
-
-    /* stage 3: t + 0.3 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.075 * k[0][i]
-                         + 0.225 * k[1][i]);
-    }
-    stiff_wheel_rhs(t + 0.3 * h, y, c, k[2]);
-
-    /* stage 4: t + 0.8 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.9777777777777777 * k[0][i]
-                         - 3.7333333333333334 * k[1][i]
-                         + 3.5555555555555554 * k[2][i]);
-    }
-    stiff_wheel_rhs(t + 0.8 * h, y, c, k[3]);
-
-    /* stage 5: t + 0.8888888888888888 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (2.9525986892242035 * k[0][i]
-                         - 11.595793324188385 * k[1][i]
-                         + 9.822892851699436 * k[2][i]
-                         - 0.2908093278463649 * k[3][i]);
-    }
-    stiff_wheel_rhs(t + 0.8888888888888888 * h, y, c, k[4]);
-
-    /* stage 6: t + h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (2.8462752525252526 * k[0][i]
-                         - 10.757575757575758 * k[1][i]
-                         + 8.906422717743473 * k[2][i]
-                         + 0.2784090909090909 * k[3][i]
-                         - 0.2735313036020583 * k[4][i]);
-    }
-    stiff_wheel_rhs(t + h, y, c, k[5]);
-
-    /* stage 7: t + h, the new solution */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        dx[i] = h * (0.09114583333333333 * k[0][i]
-                     + 0.44923629829290207 * k[2][i]
-                     + 0.6510416666666666 * k[3][i]
-                     - 0.322376179245283 * k[4][i]
-                     + 0.13095238095238096 * k[5][i]) - comp[i];
-        xnew[i] = x[i] + dx[i];
-    }
-    stiff_wheel_rhs(t + h, xnew, c, k[6]);
-
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        err[i] = h * (0.0012326388888888888 * k[0][i]
-                    - 0.0042527702905061394 * k[2][i]
-                    + 0.03697916666666667 * k[3][i]
-                    - 0.05086379716981132 * k[4][i]
-                    + 0.0419047619047619 * k[5][i]
-                    - 0.025 * k[6][i]);
-    }
-    return error_norm(err, x, xnew, rtol, atol);
-}
-
-/* Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta. */
-static const struct pair dopri5_pair = {dopri5_trial, 5, 6, 6, 1, 0.17, 0.04, 0.9, 0.2, 10.0, 0};
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
 int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return pair_integrate(&dopri5_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
-                          stats ? stats : &own);
+    return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
-/* DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
-   error combines a 5th-order estimate err5 = h sum_j e5_j k_j and a
-   3rd-order one err3 = h sum_j e3_j k_j as
-   |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm. */
-static double dop853_trial(double t, double h, const double *x, const double *c,
-                           double rtol, double atol, const double *comp,
-                           double (*k)[STIFF_WHEEL_NX], double *dx, double *xnew)
+/* dop853 to t1, with Hairer's step-size strategy: the last step clipped
+   to end on t1, no growth right after a rejection, and a non-finite trial
+   rejected with h shrunk by facmin.
+   Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6]. */
+static int dop853_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
-    double y[STIFF_WHEEL_NX], err5 = 0.0, err3 = 0.0, deno;
+    double k[13][STIFF_WHEEL_NX];
+    double y[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX];
+    int code;
+    double t;
+    double h;
+    double err_old;
+    int nonfinite;
+    int rejected_last;
+    int last;
+    double err;
+    int run;
+    int take;
+    int lock;
+    int ok;
+    double fac;
+    double grow;
+    double err5;
+    double err3;
+    double deno;
     int i;
 
-    /* stage 2: t + 0.05260015195876773 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.05260015195876773 * k[0][i]);
+    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    if (code >= 0) {
+        return code;
     }
-    stiff_wheel_rhs(t + 0.05260015195876773 * h, y, c, k[1]);
+    t = t0;
+    err_old = 1e-4;
+    nonfinite = 0;
+    rejected_last = 0;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    for (;;) {
 
-    /* stage 3: t + 0.0789002279381516 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.0197250569845379 * k[0][i]
-                         + 0.0591751709536137 * k[1][i]);
-    }
-    stiff_wheel_rhs(t + 0.0789002279381516 * h, y, c, k[2]);
+        /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+        code = code < 0 ? (step_underflow(h,
+                t) ? (nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE :
+                STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1) : code;
+        last = t + 1.01 * h >= t1;
+        h = code < 0 && last ? t1 - t : h;
+        stats->h = code < 0 ? h : stats->h;
+        if (code >= 0) {
+            return code;
+        }
 
-    /* stage 4: t + 0.1183503419072274 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.02958758547680685 * k[0][i]
-                         + 0.08876275643042054 * k[2][i]);
-    }
-    stiff_wheel_rhs(t + 0.1183503419072274 * h, y, c, k[3]);
+        /* trial */
 
-    /* stage 5: t + 0.2816496580927726 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.2413651341592667 * k[0][i]
-                         - 0.8845494793282861 * k[2][i]
-                         + 0.924834003261792 * k[3][i]);
-    }
-    stiff_wheel_rhs(t + 0.2816496580927726 * h, y, c, k[4]);
+        /* stage 2: t + 0.05260015195876773 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.05260015195876773 * k[0][i]);
+        }
+        stiff_wheel_rhs(t + 0.05260015195876773 * h, y, c, k[1]);
 
-    /* stage 6: t + 0.3333333333333333 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.037037037037037035 * k[0][i]
-                         + 0.17082860872947386 * k[3][i]
-                         + 0.12546768756682242 * k[4][i]);
-    }
-    stiff_wheel_rhs(t + 0.3333333333333333 * h, y, c, k[5]);
+        /* stage 3: t + 0.0789002279381516 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.0197250569845379 * k[0][i] + 0.0591751709536137 * k[1][i]);
+        }
+        stiff_wheel_rhs(t + 0.0789002279381516 * h, y, c, k[2]);
 
-    /* stage 7: t + 0.25 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.037109375 * k[0][i]
-                         + 0.17025221101954405 * k[3][i]
-                         + 0.06021653898045596 * k[4][i]
-                         - 0.017578125 * k[5][i]);
-    }
-    stiff_wheel_rhs(t + 0.25 * h, y, c, k[6]);
+        /* stage 4: t + 0.1183503419072274 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.02958758547680685 * k[0][i] + 0.08876275643042054 * k[2][i]);
+        }
+        stiff_wheel_rhs(t + 0.1183503419072274 * h, y, c, k[3]);
 
-    /* stage 8: t + 0.3076923076923077 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.03709200011850479 * k[0][i]
-                         + 0.17038392571223998 * k[3][i]
-                         + 0.10726203044637328 * k[4][i]
-                         - 0.015319437748624402 * k[5][i]
-                         + 0.008273789163814023 * k[6][i]);
-    }
-    stiff_wheel_rhs(t + 0.3076923076923077 * h, y, c, k[7]);
+        /* stage 5: t + 0.2816496580927726 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.2413651341592667 * k[0][i] - 0.8845494793282861 * k[2][i] +
+                    0.924834003261792 * k[3][i]);
+        }
+        stiff_wheel_rhs(t + 0.2816496580927726 * h, y, c, k[4]);
 
-    /* stage 9: t + 0.6512820512820513 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.6241109587160757 * k[0][i]
-                         - 3.3608926294469414 * k[3][i]
-                         - 0.868219346841726 * k[4][i]
-                         + 27.59209969944671 * k[5][i]
-                         + 20.154067550477894 * k[6][i]
-                         - 43.48988418106996 * k[7][i]);
-    }
-    stiff_wheel_rhs(t + 0.6512820512820513 * h, y, c, k[8]);
+        /* stage 6: t + 0.3333333333333333 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.037037037037037035 * k[0][i] + 0.17082860872947386 * k[3][i] +
+                    0.12546768756682242 * k[4][i]);
+        }
+        stiff_wheel_rhs(t + 0.3333333333333333 * h, y, c, k[5]);
 
-    /* stage 10: t + 0.6 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (0.47766253643826434 * k[0][i]
-                         - 2.4881146199716677 * k[3][i]
-                         - 0.590290826836843 * k[4][i]
-                         + 21.230051448181193 * k[5][i]
-                         + 15.279233632882423 * k[6][i]
-                         - 33.28821096898486 * k[7][i]
-                         - 0.020331201708508627 * k[8][i]);
-    }
-    stiff_wheel_rhs(t + 0.6 * h, y, c, k[9]);
+        /* stage 7: t + 0.25 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.037109375 * k[0][i] + 0.17025221101954405 * k[3][i] +
+                    0.06021653898045596 * k[4][i] - 0.017578125 * k[5][i]);
+        }
+        stiff_wheel_rhs(t + 0.25 * h, y, c, k[6]);
 
-    /* stage 11: t + 0.8571428571428571 h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (-0.9371424300859873 * k[0][i]
-                         + 5.186372428844064 * k[3][i]
-                         + 1.0914373489967295 * k[4][i]
-                         - 8.149787010746927 * k[5][i]
-                         - 18.52006565999696 * k[6][i]
-                         + 22.739487099350505 * k[7][i]
-                         + 2.4936055526796523 * k[8][i]
-                         - 3.0467644718982196 * k[9][i]);
-    }
-    stiff_wheel_rhs(t + 0.8571428571428571 * h, y, c, k[10]);
+        /* stage 8: t + 0.3076923076923077 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.03709200011850479 * k[0][i] + 0.17038392571223998 * k[3][i] +
+                    0.10726203044637328 * k[4][i] - 0.015319437748624402 * k[5][i] +
+                    0.008273789163814023 * k[6][i]);
+        }
+        stiff_wheel_rhs(t + 0.3076923076923077 * h, y, c, k[7]);
 
-    /* stage 12: t + h */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        y[i] = x[i] + h * (2.273310147516538 * k[0][i]
-                         - 10.53449546673725 * k[3][i]
-                         - 2.0008720582248625 * k[4][i]
-                         - 17.9589318631188 * k[5][i]
-                         + 27.94888452941996 * k[6][i]
-                         - 2.8589982771350235 * k[7][i]
-                         - 8.87285693353063 * k[8][i]
-                         + 12.360567175794303 * k[9][i]
-                         + 0.6433927460157636 * k[10][i]);
-    }
-    stiff_wheel_rhs(t + h, y, c, k[11]);
+        /* stage 9: t + 0.6512820512820513 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.6241109587160757 * k[0][i] - 3.3608926294469414 * k[3][i] -
+                    0.868219346841726 * k[4][i] + 27.59209969944671 * k[5][i] +
+                    20.154067550477894 * k[6][i] - 43.48988418106996 * k[7][i]);
+        }
+        stiff_wheel_rhs(t + 0.6512820512820513 * h, y, c, k[8]);
 
-    /* the new solution */
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        dx[i] = h * (0.054293734116568765 * k[0][i]
-                     + 4.450312892752409 * k[5][i]
-                     + 1.8915178993145003 * k[6][i]
-                     - 5.801203960010585 * k[7][i]
-                     + 0.3111643669578199 * k[8][i]
-                     - 0.1521609496625161 * k[9][i]
-                     + 0.20136540080403034 * k[10][i]
-                     + 0.04471061572777259 * k[11][i]) - comp[i];
-        xnew[i] = x[i] + dx[i];
-    }
+        /* stage 10: t + 0.6 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.47766253643826434 * k[0][i] - 2.4881146199716677 * k[3][i] -
+                    0.590290826836843 * k[4][i] + 21.230051448181193 * k[5][i] +
+                    15.279233632882423 * k[6][i] - 33.28821096898486 * k[7][i] -
+                    0.020331201708508627 * k[8][i]);
+        }
+        stiff_wheel_rhs(t + 0.6 * h, y, c, k[9]);
 
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        const double sk = atol + rtol * fmax(fabs(x[i]), fabs(xnew[i]));
-        const double e5 = (0.01312004499419488 * k[0][i]
-                         - 1.2251564463762044 * k[5][i]
-                         - 0.4957589496572502 * k[6][i]
-                         + 1.6643771824549864 * k[7][i]
-                         - 0.35032884874997366 * k[8][i]
-                         + 0.3341791187130175 * k[9][i]
-                         + 0.08192320648511571 * k[10][i]
-                         - 0.022355307863886294 * k[11][i]) / sk;
-        const double e3 = (-0.18980075407240762 * k[0][i]
-                         + 4.450312892752409 * k[5][i]
-                         + 1.8915178993145003 * k[6][i]
-                         - 5.801203960010585 * k[7][i]
-                         - 0.4226823213237919 * k[8][i]
-                         - 0.1521609496625161 * k[9][i]
-                         + 0.20136540080403034 * k[10][i]
-                         + 0.02265179219836082 * k[11][i]) / sk;
-        err5 += e5 * e5;
-        err3 += e3 * e3;
+        /* stage 11: t + 0.8571428571428571 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (-0.9371424300859873 * k[0][i] + 5.186372428844064 * k[3][i] +
+                    1.0914373489967295 * k[4][i] - 8.149787010746927 * k[5][i] -
+                    18.52006565999696 * k[6][i] + 22.739487099350505 * k[7][i] +
+                    2.4936055526796523 * k[8][i] - 3.0467644718982196 * k[9][i]);
+        }
+        stiff_wheel_rhs(t + 0.8571428571428571 * h, y, c, k[10]);
+
+        /* stage 12: t + h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (2.273310147516538 * k[0][i] - 10.53449546673725 * k[3][i] -
+                    2.0008720582248625 * k[4][i] - 17.9589318631188 * k[5][i] + 27.94888452941996
+                    * k[6][i] - 2.8589982771350235 * k[7][i] - 8.87285693353063 * k[8][i] +
+                    12.360567175794303 * k[9][i] + 0.6433927460157636 * k[10][i]);
+        }
+        stiff_wheel_rhs(t + h, y, c, k[11]);
+
+        /* the new solution */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            dx[i] = h * (0.054293734116568765 * k[0][i] + 4.450312892752409 * k[5][i] +
+                    1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] +
+                    0.3111643669578199 * k[8][i] - 0.1521609496625161 * k[9][i] +
+                    0.20136540080403034 * k[10][i] + 0.04471061572777259 * k[11][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+
+        /* the error: DOP853's two estimates, combined */
+        err5 = 0.0;
+        err3 = 0.0;
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            double e5, e3;
+            e5 = (0.01312004499419488 * k[0][i] - 1.2251564463762044 * k[5][i] -
+                    0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
+                    0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
+                    0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
+                    rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+            e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
+                    1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
+                    0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
+                    0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
+                    rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+            err5 = err5 + e5 * e5;
+            err3 = err3 + e3 * e3;
+        }
+        deno = err5 + 1e-2 * err3;
+        err = deno > 0.0 ? fabs(h) * err5 / sqrt(STIFF_WHEEL_NX * deno) : 0.0;
+
+        /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+        stats->rhs_calls = stats->rhs_calls + (code < 0 ? 11 : 0);
+        nonfinite = !(fabs(err) <= DBL_MAX);
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+        ok = code < 0 && !nonfinite && err <= 1.0 && !last;
+        if (ok) {
+            stiff_wheel_rhs(t + h, xnew, c, k[12]);  /* where the next step starts */
+        }
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            nonfinite = nonfinite || (ok && !(fabs(k[12][i]) <= DBL_MAX));
+        }
+        stats->rhs_calls = stats->rhs_calls + (ok ? 1 : 0);
+
+        /* control: accept or reject by selection, and the next h */
+        run = code < 0;
+        take = run && !nonfinite && err <= 1.0;
+        lock = fabs(stiff_wheel_cos(xnew[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS ||
+                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !lock;
+        fac = sqrt(sqrt(sqrt(err))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow = dmax(0.16666666666666666, dmin(3.003003003003003, fac));
+        grow = rejected_last ? dmax(grow, 1.0) : grow;  /* no growth after a rejection */
+        code = take && lock ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                STIFF_WHEEL_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (run && !take ? 1 : 0);
+        err_old = ok ? dmax(err, 1e-4) : err_old;
+        rejected_last = ok ? 0 : run && !take ? 1 : rejected_last;
+        h = !run || (take && lock) ? h : nonfinite ? h * 0.333 : ok ? h / grow : h /
+                dmin(3.003003003003003, fac);
+
+        /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+        if (ok) {
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                k[0][i] = k[12][i];
+            }
+        }
+        if (code >= 0) {
+            return code;
+        }
     }
-    deno = err5 + 0.01 * err3;
-    return deno > 0.0 ? fabs(h) * err5 / sqrt(STIFF_WHEEL_NX * deno) : 0.0;
 }
-
-/* Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6]. */
-static const struct pair dop853_pair = {dop853_trial, 8, 11, 12, 0, 0.125, 0.0, 0.9, 0.333, 6.0, 3};
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
 int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return pair_integrate(&dop853_pair, t0, t1, x, c, rtol, atol, h0, max_steps,
-                          stats ? stats : &own);
+    return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
-/* What the lanes of an explicit pair hold: per lane, the state and stages
-   of pair_integrate (stored by state: [i][l] is x_i of lane l) and its
-   scalars. A lane is busy with trajectory traj until code >= 0. */
+/* What the lanes of an explicit pair hold: per lane, the values of
+   <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
 struct lanes {
-    double x[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], xnew[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], dx[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
-    double comp[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], y[STIFF_WHEEL_NX][STIFF_WHEEL_LANES], k[13][STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
-    double t[STIFF_WHEEL_LANES], h[STIFF_WHEEL_LANES], ts[STIFF_WHEEL_LANES], err[STIFF_WHEEL_LANES], err_old[STIFF_WHEEL_LANES];
-    double stats_t[STIFF_WHEEL_LANES], stats_h[STIFF_WHEEL_LANES];
-    long accepted[STIFF_WHEEL_LANES], rejected[STIFF_WHEEL_LANES], rhs_calls[STIFF_WHEEL_LANES];
-    int busy[STIFF_WHEEL_LANES], code[STIFF_WHEEL_LANES], last[STIFF_WHEEL_LANES], nonfinite[STIFF_WHEEL_LANES], rejected_last[STIFF_WHEEL_LANES];
-    int ok[STIFF_WHEEL_LANES];
+    double x[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
+    double k[13][STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
+    double y[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
+    double xnew[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
+    double dx[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
+    double comp[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
+    int code[STIFF_WHEEL_LANES];
+    double t[STIFF_WHEEL_LANES];
+    double h[STIFF_WHEEL_LANES];
+    double err_old[STIFF_WHEEL_LANES];
+    int nonfinite[STIFF_WHEEL_LANES];
+    int rejected_last[STIFF_WHEEL_LANES];
+    double stats_t[STIFF_WHEEL_LANES];
+    double stats_h[STIFF_WHEEL_LANES];
+    long stats_accepted[STIFF_WHEEL_LANES];
+    long stats_rejected[STIFF_WHEEL_LANES];
+    long stats_rhs_calls[STIFF_WHEEL_LANES];
+    double ts[STIFF_WHEEL_LANES];  /* the time of an rhs call */
+    int busy[STIFF_WHEEL_LANES];
     size_t traj[STIFF_WHEEL_LANES];
 };
 
@@ -937,16 +1006,40 @@ static void rhs_lanes(const double *STIFF_WHEEL_RESTRICT t,
     }
 }
 
-/* One trial step on every lane (pair_trial's work): L->xnew, L->dx, L->err. */
-typedef void (*lanes_trial)(struct lanes *L, const double *c, double rtol, double atol);
+/* One step of a pair on every lane. */
+typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
+                           long max_steps);
 
-/* dopri5_trial on every lane. */
-static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, double atol)
+/* One step of dopri5_integrate on every lane. */
+static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
 {
-    double sum[STIFF_WHEEL_LANES];
+    int last[STIFF_WHEEL_LANES];
+    double err[STIFF_WHEEL_LANES];
+    int run[STIFF_WHEEL_LANES];
+    int take[STIFF_WHEEL_LANES];
+    int lock[STIFF_WHEEL_LANES];
+    int ok[STIFF_WHEEL_LANES];
+    double fac[STIFF_WHEEL_LANES];
+    double grow[STIFF_WHEEL_LANES];
+    double total[STIFF_WHEEL_LANES];
     int i, l;
 
-    /* stage 2 */
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? STIFF_WHEEL_ODE_ERR_NONFINITE :
+                STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.2 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
@@ -959,12 +1052,11 @@ static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[1]);
 
-    /* stage 3 */
+    /* stage 3: t + 0.3 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l]
-                                                 + 0.225 * L->k[1][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l] + 0.225 * L->k[1][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -973,13 +1065,12 @@ static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[2]);
 
-    /* stage 4 */
+    /* stage 4: t + 0.8 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l]
-                                                 - 3.7333333333333334 * L->k[1][i][l]
-                                                 + 3.5555555555555554 * L->k[2][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l] -
+                    3.7333333333333334 * L->k[1][i][l] + 3.5555555555555554 * L->k[2][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -988,14 +1079,13 @@ static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[3]);
 
-    /* stage 5 */
+    /* stage 5: t + 0.8888888888888888 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l]
-                                                 - 11.595793324188385 * L->k[1][i][l]
-                                                 + 9.822892851699436 * L->k[2][i][l]
-                                                 - 0.2908093278463649 * L->k[3][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l] -
+                    11.595793324188385 * L->k[1][i][l] + 9.822892851699436 * L->k[2][i][l] -
+                    0.2908093278463649 * L->k[3][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1004,15 +1094,13 @@ static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[4]);
 
-    /* stage 6 */
+    /* stage 6: t + h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l]
-                                                 - 10.757575757575758 * L->k[1][i][l]
-                                                 + 8.906422717743473 * L->k[2][i][l]
-                                                 + 0.2784090909090909 * L->k[3][i][l]
-                                                 - 0.2735313036020583 * L->k[4][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l] -
+                    10.757575757575758 * L->k[1][i][l] + 8.906422717743473 * L->k[2][i][l] +
+                    0.2784090909090909 * L->k[3][i][l] - 0.2735313036020583 * L->k[4][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1021,15 +1109,13 @@ static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[5]);
 
-    /* stage 7, the new solution */
+    /* stage 7: t + h, the new solution */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l]
-                                    + 0.44923629829290207 * L->k[2][i][l]
-                                    + 0.6510416666666666 * L->k[3][i][l]
-                                    - 0.322376179245283 * L->k[4][i][l]
-                                    + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
+            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l] + 0.44923629829290207 *
+                    L->k[2][i][l] + 0.6510416666666666 * L->k[3][i][l] - 0.322376179245283 *
+                    L->k[4][i][l] + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
             L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
         }
     }
@@ -1039,36 +1125,112 @@ static void dopri5_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->xnew, c, L->k[6]);
 
+    /* the error norm (see error_norm) */
     STIFF_WHEEL_SIMD
     for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        sum[l] = 0.0;
+        total[l] = 0.0;
     }
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            const double err = L->h[l] * (0.0012326388888888888 * L->k[0][i][l]
-                                          - 0.0042527702905061394 * L->k[2][i][l]
-                                          + 0.03697916666666667 * L->k[3][i][l]
-                                          - 0.05086379716981132 * L->k[4][i][l]
-                                          + 0.0419047619047619 * L->k[5][i][l]
-                                          - 0.025 * L->k[6][i][l]);
-            const double e = err / (atol + rtol * fmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
-            sum[l] += e * e;
+            double e;
+            e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
+                    L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
+                    L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
+                    (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+            total[l] = total[l] + e * e;
         }
     }
     STIFF_WHEEL_SIMD
     for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        L->err[l] = sqrt(sum[l] / STIFF_WHEEL_NX);
+        err[l] = sqrt(total[l] / STIFF_WHEEL_NX);
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 6 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    /* pow: scalar calls */
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = fabs(stiff_wheel_cos_lanes(L->xnew[1][l])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? STIFF_WHEEL_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.2 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(5.0, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[6][i][l] : L->k[0][i][l];
+        }
     }
 }
 
-/* dop853_trial on every lane. */
-static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, double atol)
+/* One step of dop853_integrate on every lane. */
+static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
 {
-    double err5[STIFF_WHEEL_LANES], err3[STIFF_WHEEL_LANES];
+    int last[STIFF_WHEEL_LANES];
+    double err[STIFF_WHEEL_LANES];
+    int run[STIFF_WHEEL_LANES];
+    int take[STIFF_WHEEL_LANES];
+    int lock[STIFF_WHEEL_LANES];
+    int ok[STIFF_WHEEL_LANES];
+    double fac[STIFF_WHEEL_LANES];
+    double grow[STIFF_WHEEL_LANES];
+    double err5[STIFF_WHEEL_LANES];
+    double err3[STIFF_WHEEL_LANES];
+    double deno[STIFF_WHEEL_LANES];
     int i, l;
+    int need;
 
-    /* stage 2 */
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? STIFF_WHEEL_ODE_ERR_NONFINITE :
+                STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.05260015195876773 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
@@ -1081,12 +1243,12 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[1]);
 
-    /* stage 3 */
+    /* stage 3: t + 0.0789002279381516 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l]
-                                                 + 0.0591751709536137 * L->k[1][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l] +
+                    0.0591751709536137 * L->k[1][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1095,12 +1257,12 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[2]);
 
-    /* stage 4 */
+    /* stage 4: t + 0.1183503419072274 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l]
-                                                 + 0.08876275643042054 * L->k[2][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l] +
+                    0.08876275643042054 * L->k[2][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1109,13 +1271,12 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[3]);
 
-    /* stage 5 */
+    /* stage 5: t + 0.2816496580927726 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l]
-                                                 - 0.8845494793282861 * L->k[2][i][l]
-                                                 + 0.924834003261792 * L->k[3][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l] -
+                    0.8845494793282861 * L->k[2][i][l] + 0.924834003261792 * L->k[3][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1124,13 +1285,12 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[4]);
 
-    /* stage 6 */
+    /* stage 6: t + 0.3333333333333333 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l]
-                                                 + 0.17082860872947386 * L->k[3][i][l]
-                                                 + 0.12546768756682242 * L->k[4][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l] +
+                    0.17082860872947386 * L->k[3][i][l] + 0.12546768756682242 * L->k[4][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1139,14 +1299,13 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[5]);
 
-    /* stage 7 */
+    /* stage 7: t + 0.25 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l]
-                                                 + 0.17025221101954405 * L->k[3][i][l]
-                                                 + 0.06021653898045596 * L->k[4][i][l]
-                                                 - 0.017578125 * L->k[5][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l] +
+                    0.17025221101954405 * L->k[3][i][l] + 0.06021653898045596 * L->k[4][i][l] -
+                    0.017578125 * L->k[5][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1155,15 +1314,13 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[6]);
 
-    /* stage 8 */
+    /* stage 8: t + 0.3076923076923077 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l]
-                                                 + 0.17038392571223998 * L->k[3][i][l]
-                                                 + 0.10726203044637328 * L->k[4][i][l]
-                                                 - 0.015319437748624402 * L->k[5][i][l]
-                                                 + 0.008273789163814023 * L->k[6][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l] +
+                    0.17038392571223998 * L->k[3][i][l] + 0.10726203044637328 * L->k[4][i][l] -
+                    0.015319437748624402 * L->k[5][i][l] + 0.008273789163814023 * L->k[6][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1172,16 +1329,14 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[7]);
 
-    /* stage 9 */
+    /* stage 9: t + 0.6512820512820513 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l]
-                                                 - 3.3608926294469414 * L->k[3][i][l]
-                                                 - 0.868219346841726 * L->k[4][i][l]
-                                                 + 27.59209969944671 * L->k[5][i][l]
-                                                 + 20.154067550477894 * L->k[6][i][l]
-                                                 - 43.48988418106996 * L->k[7][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l] -
+                    3.3608926294469414 * L->k[3][i][l] - 0.868219346841726 * L->k[4][i][l] +
+                    27.59209969944671 * L->k[5][i][l] + 20.154067550477894 * L->k[6][i][l] -
+                    43.48988418106996 * L->k[7][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1190,17 +1345,14 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[8]);
 
-    /* stage 10 */
+    /* stage 10: t + 0.6 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l]
-                                                 - 2.4881146199716677 * L->k[3][i][l]
-                                                 - 0.590290826836843 * L->k[4][i][l]
-                                                 + 21.230051448181193 * L->k[5][i][l]
-                                                 + 15.279233632882423 * L->k[6][i][l]
-                                                 - 33.28821096898486 * L->k[7][i][l]
-                                                 - 0.020331201708508627 * L->k[8][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l] -
+                    2.4881146199716677 * L->k[3][i][l] - 0.590290826836843 * L->k[4][i][l] +
+                    21.230051448181193 * L->k[5][i][l] + 15.279233632882423 * L->k[6][i][l] -
+                    33.28821096898486 * L->k[7][i][l] - 0.020331201708508627 * L->k[8][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1209,18 +1361,15 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[9]);
 
-    /* stage 11 */
+    /* stage 11: t + 0.8571428571428571 h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l]
-                                                 + 5.186372428844064 * L->k[3][i][l]
-                                                 + 1.0914373489967295 * L->k[4][i][l]
-                                                 - 8.149787010746927 * L->k[5][i][l]
-                                                 - 18.52006565999696 * L->k[6][i][l]
-                                                 + 22.739487099350505 * L->k[7][i][l]
-                                                 + 2.4936055526796523 * L->k[8][i][l]
-                                                 - 3.0467644718982196 * L->k[9][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l] +
+                    5.186372428844064 * L->k[3][i][l] + 1.0914373489967295 * L->k[4][i][l] -
+                    8.149787010746927 * L->k[5][i][l] - 18.52006565999696 * L->k[6][i][l] +
+                    22.739487099350505 * L->k[7][i][l] + 2.4936055526796523 * L->k[8][i][l] -
+                    3.0467644718982196 * L->k[9][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1229,19 +1378,15 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     }
     rhs_lanes(L->ts, L->y, c, L->k[10]);
 
-    /* stage 12 */
+    /* stage 12: t + h */
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l]
-                                                 - 10.53449546673725 * L->k[3][i][l]
-                                                 - 2.0008720582248625 * L->k[4][i][l]
-                                                 - 17.9589318631188 * L->k[5][i][l]
-                                                 + 27.94888452941996 * L->k[6][i][l]
-                                                 - 2.8589982771350235 * L->k[7][i][l]
-                                                 - 8.87285693353063 * L->k[8][i][l]
-                                                 + 12.360567175794303 * L->k[9][i][l]
-                                                 + 0.6433927460157636 * L->k[10][i][l]);
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l] -
+                    10.53449546673725 * L->k[3][i][l] - 2.0008720582248625 * L->k[4][i][l] -
+                    17.9589318631188 * L->k[5][i][l] + 27.94888452941996 * L->k[6][i][l] -
+                    2.8589982771350235 * L->k[7][i][l] - 8.87285693353063 * L->k[8][i][l] +
+                    12.360567175794303 * L->k[9][i][l] + 0.6433927460157636 * L->k[10][i][l]);
         }
     }
     STIFF_WHEEL_SIMD
@@ -1254,18 +1399,16 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l]
-                                    + 4.450312892752409 * L->k[5][i][l]
-                                    + 1.8915178993145003 * L->k[6][i][l]
-                                    - 5.801203960010585 * L->k[7][i][l]
-                                    + 0.3111643669578199 * L->k[8][i][l]
-                                    - 0.1521609496625161 * L->k[9][i][l]
-                                    + 0.20136540080403034 * L->k[10][i][l]
-                                    + 0.04471061572777259 * L->k[11][i][l]) - L->comp[i][l];
+            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l] + 4.450312892752409 *
+                    L->k[5][i][l] + 1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 *
+                    L->k[7][i][l] + 0.3111643669578199 * L->k[8][i][l] - 0.1521609496625161 *
+                    L->k[9][i][l] + 0.20136540080403034 * L->k[10][i][l] + 0.04471061572777259 *
+                    L->k[11][i][l]) - L->comp[i][l];
             L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
         }
     }
 
+    /* the error: DOP853's two estimates, combined */
     STIFF_WHEEL_SIMD
     for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
         err5[l] = 0.0;
@@ -1274,45 +1417,115 @@ static void dop853_trial_lanes(struct lanes *L, const double *c, double rtol, do
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            const double sk = atol + rtol * fmax(fabs(L->x[i][l]), fabs(L->xnew[i][l]));
-            const double e5 = (0.01312004499419488 * L->k[0][i][l]
-                                - 1.2251564463762044 * L->k[5][i][l]
-                                - 0.4957589496572502 * L->k[6][i][l]
-                                + 1.6643771824549864 * L->k[7][i][l]
-                                - 0.35032884874997366 * L->k[8][i][l]
-                                + 0.3341791187130175 * L->k[9][i][l]
-                                + 0.08192320648511571 * L->k[10][i][l]
-                                - 0.022355307863886294 * L->k[11][i][l]) / sk;
-            const double e3 = (-0.18980075407240762 * L->k[0][i][l]
-                                + 4.450312892752409 * L->k[5][i][l]
-                                + 1.8915178993145003 * L->k[6][i][l]
-                                - 5.801203960010585 * L->k[7][i][l]
-                                - 0.4226823213237919 * L->k[8][i][l]
-                                - 0.1521609496625161 * L->k[9][i][l]
-                                + 0.20136540080403034 * L->k[10][i][l]
-                                + 0.02265179219836082 * L->k[11][i][l]) / sk;
-            err5[l] += e5 * e5;
-            err3[l] += e3 * e3;
+            double e5, e3;
+            e5 = (0.01312004499419488 * L->k[0][i][l] - 1.2251564463762044 * L->k[5][i][l] -
+                    0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
+                    0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
+                    0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
+                    / (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+            e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
+                    1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
+                    0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
+                    0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
+                    / (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+            err5[l] = err5[l] + e5 * e5;
+            err3[l] = err3[l] + e3 * e3;
         }
     }
     STIFF_WHEEL_SIMD
     for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        const double deno = err5[l] + 0.01 * err3[l];
-        L->err[l] = deno > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(STIFF_WHEEL_NX * deno) : 0.0;
+        deno[l] = err5[l] + 1e-2 * err3[l];
+        err[l] = deno[l] > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(STIFF_WHEEL_NX * deno[l]) : 0.0;
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 11 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        ok[l] = L->code[l] < 0 && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+    }
+    need = 0;
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->k[12]);
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX));
+        }
+    }
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (ok[l] ? 1 : 0);
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    STIFF_WHEEL_SIMD
+    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = fabs(stiff_wheel_cos_lanes(L->xnew[1][l])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? STIFF_WHEEL_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.333 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(3.003003003003003, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[12][i][l] : L->k[0][i][l];
+        }
     }
 }
 
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
-static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj, double t0,
-                      double t1, double *xs, const double *c, double rtol, double atol,
-                      double h0, long max_steps, stiff_wheel_stats *stats)
+static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
+                      double *xs, const double *c, double rtol, double atol, double h0,
+                      long max_steps, stiff_wheel_stats *stats)
 {
     const double *x = xs + traj * STIFF_WHEEL_NX;
     double f0[STIFF_WHEEL_NX], h = 0.0;
     int i;
-    const int code = ode_start(m->order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
-                                stats);
+    const int code = ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1326,129 +1539,15 @@ static int lane_start(const struct pair *m, struct lanes *L, int l, size_t traj,
     L->err_old[l] = 1e-4;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
-    L->accepted[l] = 0;
-    L->rejected[l] = 0;
-    L->rhs_calls[l] = stats->rhs_calls;
+    L->stats_accepted[l] = 0;
+    L->stats_rejected[l] = 0;
+    L->stats_rhs_calls[l] = stats->rhs_calls;
     L->busy[l] = 1;
     L->code[l] = -1;
     L->nonfinite[l] = 0;
     L->rejected_last[l] = 0;
     L->traj[l] = traj;
     return -1;
-}
-
-/* The start of each lane's step, as pair_integrate's loop begins: a lane
-   whose step size underflowed or whose steps ran out gets its code; the
-   others clip a last step to end on t1. */
-static void lanes_begin(struct lanes *L, double t1, long max_steps)
-{
-    int l;
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        const int underflow = L->h[l] < 16.0 * DBL_EPSILON * fabs(L->t[l]) || L->h[l] < DBL_MIN;
-        const int spent = L->accepted[l] + L->rejected[l] >= max_steps;
-        const int nonfinite = L->nonfinite[l];
-        const int code = underflow ? (nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE : STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW)
-                                   : spent ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1;
-        const int last = L->t[l] + 1.01 * L->h[l] >= t1;
-        L->code[l] = L->busy[l] ? code : L->code[l];
-        L->last[l] = last;
-        L->h[l] = code < 0 && last ? t1 - L->t[l] : L->h[l];
-        L->stats_h[l] = code < 0 ? L->h[l] : L->stats_h[l];
-    }
-}
-
-/* After the trial: f(t + h, xnew) where a lane's step will be accepted and
-   is not the last (for a pair that is not first same as last), the
-   non-finite mask, and the counters. */
-static void lanes_check(const struct pair *m, struct lanes *L, const double *c)
-{
-    int i, l, need = 0;
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        const int run = L->busy[l] && L->code[l] < 0;
-        L->nonfinite[l] = !(fabs(L->err[l]) <= DBL_MAX);
-        L->rhs_calls[l] += run ? m->calls : 0;
-        L->ts[l] = L->t[l] + L->h[l];
-    }
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        STIFF_WHEEL_SIMD
-        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->nonfinite[l] |= !(fabs(L->xnew[i][l]) <= DBL_MAX);
-        }
-    }
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        L->ok[l] = L->busy[l] && L->code[l] < 0 && !L->nonfinite[l] && L->err[l] <= 1.0
-                   && !m->fsal && !L->last[l];
-    }
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        need |= L->ok[l];
-    }
-    if (!need) {
-        return;
-    }
-    rhs_lanes(L->ts, L->xnew, c, L->k[m->fnew]);
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        STIFF_WHEEL_SIMD
-        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            L->nonfinite[l] |= L->ok[l] && !(fabs(L->k[m->fnew][i][l]) <= DBL_MAX);
-        }
-    }
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        L->rhs_calls[l] += L->ok[l];
-    }
-}
-
-/* pair_integrate's accept or reject on every lane, by masks: the new h, the
-   counters, and L->ok where the step is taken (a lane that stops on the
-   attitude or on t1 gets its code). */
-static void lanes_control(const struct pair *m, struct lanes *L, double t1)
-{
-    int l;
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {  /* err_power, pow: scalar calls */
-        const int run = L->busy[l] && L->code[l] < 0;
-        const int nonfinite = L->nonfinite[l];
-        const double err = L->err[l], h = L->h[l];
-        const int take = run && !nonfinite && err <= 1.0;
-        const double cq = stiff_wheel_cos_lanes(L->xnew[1][l]);
-        const int lock = fabs(cq) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS  /* gimbal_lock, in lanes */
-                         || gimbal_interval(L->x[1][l]) != gimbal_interval(L->xnew[1][l]);
-        const int ok = take && !lock;
-        const double fac = err_power(m, err) / m->safety;
-        double grow = m->beta == 0.0 ? fac : fac / pow(L->err_old[l], m->beta);
-        grow = fmax(1.0 / m->facmax, fmin(1.0 / m->facmin, grow));
-        grow = L->rejected_last[l] ? fmax(grow, 1.0) : grow;
-        L->code[l] = take && lock ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR
-                   : ok && L->last[l] ? STIFF_WHEEL_ODE_OK : L->code[l];
-        L->t[l] = ok ? (L->last[l] ? t1 : L->t[l] + h) : L->t[l];
-        L->stats_t[l] = L->t[l];
-        L->accepted[l] += ok;
-        L->rejected[l] += run && !take;
-        L->err_old[l] = ok ? fmax(err, 1e-4) : L->err_old[l];
-        L->rejected_last[l] = ok ? 0 : run && !take ? 1 : L->rejected_last[l];
-        L->h[l] = !run || (take && lock) ? h
-                : nonfinite ? h * m->facmin
-                : ok ? h / grow : h / fmin(1.0 / m->facmin, fac);
-        L->ok[l] = ok;
-    }
-}
-
-/* accept_step on the lanes that took their step, and f(t + h, xnew) as the
-   next step's first stage. */
-static void lanes_accept(const struct pair *m, struct lanes *L)
-{
-    int i, l;
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        STIFF_WHEEL_SIMD
-        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            const int ok = L->ok[l];
-            L->comp[i][l] = ok ? (L->xnew[i][l] - L->x[i][l]) - L->dx[i][l] : L->comp[i][l];
-            L->x[i][l] = ok ? L->xnew[i][l] : L->x[i][l];
-            L->k[0][i][l] = ok ? L->k[m->fnew][i][l] : L->k[0][i][l];
-        }
-    }
 }
 
 /* Trajectory traj's results: its statistics and code (x is in place). */
@@ -1475,9 +1574,9 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, stiff_wheel_s
             stats_start(&st, t0);
             st.t = L->stats_t[l];
             st.h = L->stats_h[l];
-            st.accepted = L->accepted[l];
-            st.rejected = L->rejected[l];
-            st.rhs_calls = L->rhs_calls[l];
+            st.accepted = L->stats_accepted[l];
+            st.rejected = L->stats_rejected[l];
+            st.rhs_calls = L->stats_rhs_calls[l];
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 xs[L->traj[l] * STIFF_WHEEL_NX + (size_t)i] = L->x[i][l];
             }
@@ -1491,7 +1590,7 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, stiff_wheel_s
 
 /* Trajectories begin..end-1 of a batch, STIFF_WHEEL_LANES at a time: a lane that
    finishes takes the next trajectory. Returns how many failed. */
-static size_t pair_lanes(const struct pair *m, lanes_trial trial, size_t begin, size_t end,
+static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
 {
@@ -1504,7 +1603,7 @@ static size_t pair_lanes(const struct pair *m, lanes_trial trial, size_t begin, 
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
             while (!L.busy[l] && next < end) {
                 stiff_wheel_stats st;
-                const int code = lane_start(m, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
+                const int code = lane_start(order, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
                                             max_steps, &st);
                 if (code >= 0) {
                     put_result(next, code, &st, stats, codes);
@@ -1517,11 +1616,7 @@ static size_t pair_lanes(const struct pair *m, lanes_trial trial, size_t begin, 
         if (!busy) {
             return failed;
         }
-        lanes_begin(&L, t1, max_steps);
-        trial(&L, c, rtol, atol);
-        lanes_check(m, &L, c);
-        lanes_control(m, &L, t1);
-        lanes_accept(m, &L);
+        step(&L, c, rtol, atol, t1, max_steps);
         failed += lanes_finish(&L, t0, xs, stats, codes);
     }
 }
@@ -1529,7 +1624,7 @@ static size_t pair_lanes(const struct pair *m, lanes_trial trial, size_t begin, 
 /* A batch over every core when compiled with OpenMP: chunks of about an
    eighth of a thread's share, taken in turn (a chunk's trajectories are the
    same whichever thread runs it); else one chunk. */
-static size_t pair_batch(const struct pair *m, lanes_trial trial, size_t n, double t0,
+static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
 {
@@ -1543,11 +1638,11 @@ static size_t pair_batch(const struct pair *m, lanes_trial trial, size_t n, doub
     for (b = 0; b < chunks; ++b) {
         const size_t begin = (size_t)b * chunk;
         const size_t end = n - begin < chunk ? n : begin + chunk;
-        failed += pair_lanes(m, trial, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
+        failed += pair_lanes(step, order, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
                              stats, codes);
     }
 #else
-    failed = pair_lanes(m, trial, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
+    failed = pair_lanes(step, order, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
 #endif
     return failed;
 }
@@ -2351,7 +2446,7 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
 {
-    return pair_batch(&dopri5_pair, dopri5_trial_lanes, n, t0, t1, x, c, rtol, atol, h0,
+    return pair_batch(dopri5_step_lanes, 5, n, t0, t1, x, c, rtol, atol, h0,
                       max_steps, stats, codes);
 }
 
@@ -2360,7 +2455,7 @@ size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const
 size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
 {
-    return pair_batch(&dop853_pair, dop853_trial_lanes, n, t0, t1, x, c, rtol, atol, h0,
+    return pair_batch(dop853_step_lanes, 8, n, t0, t1, x, c, rtol, atol, h0,
                       max_steps, stats, codes);
 }
 

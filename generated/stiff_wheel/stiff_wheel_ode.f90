@@ -69,35 +69,6 @@ module stiff_wheel_ode_mod
   ! kinematic rates q1' and q3' in the 7th digit.
   real(c_double), parameter, public :: STIFF_WHEEL_ODE_GIMBAL_LOCK_COS = 1e-09_c_double
 
-  ! An explicit embedded pair's step-size control: h_new / h = safety
-  ! err^-alpha err_old^beta within [facmin, facmax] (Hairer's PI controller).
-  type :: control
-    integer :: order      ! for the first step's estimate (HINIT's iord)
-    integer :: calls      ! rhs calls of one trial
-    integer :: fnew       ! the column of k that holds f(t + h, xnew)
-    logical :: fsal       ! the trial computes that column itself
-    real(c_double) :: alpha, beta, safety, facmin, facmax
-  end type control
-  ! Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
-  type(control), parameter :: dopri5_control = control(5, 6, 7, .true., 0.17_c_double, &
-      0.04_c_double, 0.9_c_double, 0.2_c_double, 10.0_c_double)
-  ! Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
-  type(control), parameter :: dop853_control = control(8, 11, 13, .false., 0.125_c_double, &
-      0.0_c_double, 0.9_c_double, 0.333_c_double, 6.0_c_double)
-
-  abstract interface
-    ! One trial step of a pair from (t, x), k(:, 1) = f(t, x): fills the other
-    ! stages, xnew = x + dx (comp: see accept_step), and returns the error
-    ! norm (NaN or Inf when a stage is).
-    function pair_trial(t, h, x, c, rtol, atol, comp, k, dx, xnew) result(err)
-      import :: c_double, nx, nc
-      real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol, comp(nx)
-      real(c_double), intent(inout) :: k(nx, 13)
-      real(c_double), intent(out) :: dx(nx), xnew(nx)
-      real(c_double) :: err
-    end function pair_trial
-  end interface
-
 contains
 
   ! The message for a return code, blank-padded to 67 characters: trim() it.
@@ -251,57 +222,21 @@ contains
     J(64) = c(2)
   end subroutine stiff_wheel_jac
 
-  ! The attitude is 3-1-2 angles, q2 = x(2): their kinematics divide by
-  ! cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
-  ! two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered j
-  ! = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
-  ! unless the step passed a point of gimbal lock, however long the step
-  ! (whole turns included). Where the rounding of q2/pi could misplace q2 by
-  ! an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6.
-  pure real(c_double) function gimbal_interval(q2)
-    real(c_double), intent(in) :: q2
-    real(c_double) :: y
+  ! floor(y) as a real (no integer overflow, for any y)
+  pure real(c_double) function floor_real(y)
+    real(c_double), intent(in) :: y
 
-    y = q2 * 0.3183098861837907_c_double + 0.5_c_double
-    gimbal_interval = aint(y)  ! floor(y), as a real: no integer overflow
-    if (y < gimbal_interval) gimbal_interval = gimbal_interval - 1
-  end function gimbal_interval
-
-  ! .true. when x is at gimbal lock, |cos q2| < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS.
-  pure logical function gimbal_lock_at(x)
-    real(c_double), intent(in) :: x(nx)
-
-    gimbal_lock_at = abs(cos(x(2))) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS
-  end function gimbal_lock_at
-
-  ! .true. when the step from x to xnew ends at gimbal lock or passes a
-  ! point of it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump).
-  pure logical function gimbal_lock(x, xnew)
-    real(c_double), intent(in) :: x(nx), xnew(nx)
-
-    gimbal_lock = gimbal_lock_at(xnew) &
-                  .or. abs(gimbal_interval(x(2)) - gimbal_interval(xnew(2))) >= 1  ! not equal
-  end function gimbal_lock
-
-  ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
-  ! compensation: comp keeps what this add lost and the next step takes it
-  ! back from its dx, so the rounding of 1e7 adds does not pile up in the
-  ! invariants (a build with -ffast-math may optimize it away).
-  subroutine accept_step(x, xnew, dx, comp)
-    real(c_double), intent(inout) :: x(nx), comp(nx)
-    real(c_double), intent(in) :: xnew(nx), dx(nx)
-
-    comp = (xnew - x) - dx
-    x = xnew
-  end subroutine accept_step
+    floor_real = aint(y)
+    if (y < floor_real) floor_real = floor_real - 1
+  end function floor_real
 
   ! Counters at zero, at the start time (also the time reached if nothing is).
   subroutine stats_start(stats, t0)
-    type(stiff_wheel_stats), intent(out) :: stats
+    type(stiff_wheel_stats), intent(inout) :: stats
     real(c_double), intent(in) :: t0
 
     stats%t = t0
-    stats%h = 0
+    stats%h = 0.0_c_double
     stats%accepted = 0
     stats%rejected = 0
     stats%rhs_calls = 0
@@ -309,7 +244,308 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
+  ! 1 when no element of v is NaN or Inf.
+  function all_finite(v, n) result(res)
+    integer(c_int), intent(in) :: n
+    real(c_double), intent(in) :: v(0:n - 1)
+    logical :: res
+    integer(c_int) :: i
+
+    do i = 0, n - 1
+      if (.not. ieee_is_finite(v(i))) then
+        res = .false.
+        return
+      end if
+    end do
+    res = .true.
+    return
+  end function all_finite
+
+  ! x := xnew, the step's x + dx. Every method sums its steps with Kahan's
+  ! compensation: comp keeps what this add lost and the next step takes it
+  ! back from its dx, so the rounding of 1e7 adds does not pile up in the
+  ! invariants (a build with -ffast-math may optimize it away).
+  subroutine accept_step(x, xnew, dx, comp)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: xnew(0:nx - 1)
+    real(c_double), intent(in) :: dx(0:nx - 1)
+    real(c_double), intent(inout) :: comp(0:nx - 1)
+    integer(c_int) :: i
+
+    do i = 0, nx - 1
+      comp(i) = xnew(i) - x(i) - dx(i)
+      x(i) = xnew(i)
+    end do
+  end subroutine accept_step
+
+  ! The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by
+  ! cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between
+  ! two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered
+  ! j = floor(q2/pi + 1/2): the two ends of a step lie in the same interval
+  ! unless the step passed a point of gimbal lock, however long the step
+  ! (whole turns included). Where the rounding of q2/pi could misplace q2 by
+  ! an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6.
+  function gimbal_interval(q2) result(res)
+    real(c_double), intent(in) :: q2
+    real(c_double) :: res
+
+    res = floor_real(q2 * 0.3183098861837907_c_double + 0.5_c_double)
+    return
+  end function gimbal_interval
+
+  ! 1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS.
+  function gimbal_lock_at(x) result(res)
+    real(c_double), intent(in) :: x(0:nx - 1)
+    logical :: res
+
+    res = abs(cos(x(1))) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS
+    return
+  end function gimbal_lock_at
+
+  ! 1 when the step from x to xnew ends at gimbal lock or passes a point of
+  ! it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump).
+  function gimbal_lock(x, xnew) result(res)
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: xnew(0:nx - 1)
+    logical :: res
+
+    res = abs(cos(xnew(1))) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
+        gimbal_interval(xnew(1))) >= 1.0_c_double
+    return
+  end function gimbal_lock
+
+  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
+  ! double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
+  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
+  function bad_arguments(t0, t1, rtol, atol, h0, max_steps) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    logical :: res
+
+    res = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. .not. &
+        (rtol > STIFF_WHEEL_ODE_MIN_RTOL) .or. .not. ieee_is_finite(rtol) .or. .not. (atol > &
+        0.0_c_double) .or. .not. ieee_is_finite(atol) .or. .not. ieee_is_finite(h0) .or. &
+        max_steps < 1
+    return
+  end function bad_arguments
+
+  ! h is lost in the rounding of t: the solution cannot be resolved further.
+  function step_underflow(h, t) result(res)
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: t
+    logical :: res
+
+    res = h < 16.0_c_double * epsilon(1.0_c_double) * abs(t) .or. h < tiny(1.0_c_double)
+    return
+  end function step_underflow
+
+  ! The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
+  ! sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1.
+  function error_norm(err, x, xnew, rtol, atol) result(res)
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: err(0:nx - 1)
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: xnew(0:nx - 1)
+    real(c_double) :: res
+    real(c_double) :: total
+    real(c_double) :: e
+    integer(c_int) :: i
+
+    total = 0.0_c_double
+    do i = 0, nx - 1
+      e = err(i) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+      total = total + e * e
+    end do
+    res = sqrt(total / nx)
+    return
+  end function error_norm
+
+  ! Hairer's HINIT (dopri5.f): the first step h such that
+  ! h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step.
+  function initial_step(order, t0, t1, x, f0, c, rtol, atol, stats) result(res)
+    integer(c_int), intent(in) :: order
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    type(stiff_wheel_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double) :: res
+    real(c_double) :: x1(0:nx - 1)
+    real(c_double) :: f1(0:nx - 1)
+    real(c_double) :: dnf
+    real(c_double) :: dny
+    real(c_double) :: der2
+    real(c_double) :: der12
+    real(c_double) :: h
+    real(c_double) :: h1
+    real(c_double) :: d
+    real(c_double) :: sk
+    integer(c_int) :: i
+
+    dnf = 0.0_c_double
+    dny = 0.0_c_double
+    do i = 0, nx - 1
+      sk = atol + rtol * abs(x(i))
+      dnf = dnf + f0(i) / sk * (f0(i) / sk)
+      dny = dny + x(i) / sk * (x(i) / sk)
+    end do
+    h = merge(1e-6_c_double, 1e-2_c_double * sqrt(dny / dnf), &
+        dnf <= 1e-10_c_double .or. dny <= 1e-10_c_double)
+    h = min(h, t1 - t0)
+    do i = 0, nx - 1
+      x1(i) = x(i) + h * f0(i)
+    end do
+    call stiff_wheel_rhs(t0 + h, x1, c, f1)
+    stats%rhs_calls = stats%rhs_calls + 1
+    der2 = 0.0_c_double
+    do i = 0, nx - 1
+      d = (f1(i) - f0(i)) / (atol + rtol * abs(x(i)))
+      der2 = der2 + d * d
+    end do
+    der2 = sqrt(der2) / h
+    if (.not. ieee_is_finite(der2)) then
+      der2 = 0.0_c_double  ! the Euler step left the domain of f: trust |f| alone
+    end if
+    der12 = max(der2, sqrt(dnf))
+    h1 = merge(max(1e-6_c_double, h * 1e-3_c_double), &
+        (1e-2_c_double / der12)**(1.0_c_double / order), der12 <= 1e-15_c_double)
+    res = min(min(100.0_c_double * h, h1), t1 - t0)
+    return
+  end function initial_step
+
+  ! An adaptive method's start (every pair, rodas4, radau5): the arguments,
+  ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
+  ! on from there, else the code to return (x as given).
+  function ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats) result(res)
+    integer(c_int), intent(in) :: order
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    real(c_double), intent(out) :: h
+    type(stiff_wheel_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(out) :: f0(0:nx - 1)
+    integer(c_int) :: res
+
+    h = 0.0_c_double
+    call stats_start(stats, t0)
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
+      res = STIFF_WHEEL_ODE_ERR_ARGUMENT
+      return
+    end if
+    if (gimbal_lock_at(x)) then
+      res = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
+      return
+    end if
+    if (.not. (t1 > t0)) then
+      res = STIFF_WHEEL_ODE_OK
+      return
+    end if
+    call stiff_wheel_rhs(t0, x, c, f0)
+    stats%rhs_calls = 1
+    if (.not. all_finite(x, nx) .or. .not. all_finite(f0, nx)) then
+      res = STIFF_WHEEL_ODE_ERR_NONFINITE
+      return
+    end if
+    if (h0 > 0.0_c_double) then
+      h = min(h0, t1 - t0)
+    else
+      h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats)
+    end if
+    res = -1
+    return
+  end function ode_start
+
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
+  function rk4_steps(t0, t1, steps, x, c, stats) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    integer(c_long), intent(in) :: steps
+    type(stiff_wheel_stats), intent(inout) :: stats
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    integer(c_int) :: i
+    integer(c_long) :: n
+
+    comp = 0.0_c_double
+    call stats_start(stats, t0)
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+      res = STIFF_WHEEL_ODE_ERR_ARGUMENT
+      return
+    end if
+    if (gimbal_lock_at(x)) then
+      res = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
+      return
+    end if
+    h = (t1 - t0) / real(steps, c_double)
+    stats%h = h
+    do n = 0, steps - 1
+      t = t0 + real(n, c_double) * h
+      call stiff_wheel_rhs(t, x, c, k(:, 0))
+
+      ! stage 2: t + 0.5 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.5_c_double * k(i, 0))
+      end do
+      call stiff_wheel_rhs(t + 0.5_c_double * h, y, c, k(:, 1))
+
+      ! stage 3: t + 0.5 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.5_c_double * k(i, 1))
+      end do
+      call stiff_wheel_rhs(t + 0.5_c_double * h, y, c, k(:, 2))
+
+      ! stage 4: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * k(i, 2)
+      end do
+      call stiff_wheel_rhs(t + h, y, c, k(:, 3))
+
+      ! the new solution
+      do i = 0, nx - 1
+        dx(i) = h * (0.16666666666666666_c_double * k(i, 0) + 0.3333333333333333_c_double * k(i, &
+            1) + 0.3333333333333333_c_double * k(i, 2) + 0.16666666666666666_c_double * k(i, &
+            3)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+      stats%rhs_calls = stats%rhs_calls + 4
+      if (.not. all_finite(xnew, nx)) then
+        res = STIFF_WHEEL_ODE_ERR_NONFINITE
+        return
+      end if
+      if (gimbal_lock(x, xnew)) then
+        res = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+        return
+      end if
+      call accept_step(x, xnew, dx, comp)
+      stats%accepted = stats%accepted + 1
+      stats%t = merge(t1, t + h, n + 1 == steps)
+    end do
+    res = STIFF_WHEEL_ODE_OK
+    return
+  end function rk4_steps
+
+  ! Classic Runge-Kutta, order 4, fixed step.
   function stiff_wheel_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="stiff_wheel_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
@@ -318,63 +554,12 @@ contains
     real(c_double), intent(in) :: c(nc)
     type(c_ptr), value, intent(in) :: stats_ptr  ! a stiff_wheel_stats, or NULL
     integer(c_int) :: code
-    real(c_double) :: k(nx, 4), y(nx), xnew(nx), dx(nx), comp(nx), t, h
     type(stiff_wheel_stats), pointer :: stats
     type(stiff_wheel_stats), target :: own
-    integer(c_long) :: n
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) &
-        .or. steps < 1) then
-      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
-    h = (t1 - t0) / real(steps, c_double)
-    stats%h = h
-    comp = 0
-    do n = 0, steps - 1
-      t = t0 + real(n, c_double) * h
-      call stiff_wheel_rhs(t, x, c, k(:, 1))
-
-      ! stage 2: t + 0.5 h
-      y = x + h * (0.5_c_double * k(:, 1))
-      call stiff_wheel_rhs(t + 0.5_c_double * h, y, c, k(:, 2))
-
-      ! stage 3: t + 0.5 h
-      y = x + h * (0.5_c_double * k(:, 2))
-      call stiff_wheel_rhs(t + 0.5_c_double * h, y, c, k(:, 3))
-
-      ! stage 4: t + h
-      y = x + h * (k(:, 3))
-      call stiff_wheel_rhs(t + h, y, c, k(:, 4))
-
-      ! the new solution
-      dx = h * (0.16666666666666666_c_double * k(:, 1) &
-                + 0.3333333333333333_c_double * k(:, 2) &
-                + 0.3333333333333333_c_double * k(:, 3) &
-                + 0.16666666666666666_c_double * k(:, 4)) - comp
-      xnew = x + dx
-
-      stats%rhs_calls = stats%rhs_calls + 4
-      if (.not. all(ieee_is_finite(xnew))) then
-        code = STIFF_WHEEL_ODE_ERR_NONFINITE
-        return
-      end if
-      if (gimbal_lock(x, xnew)) then
-        code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
-        return
-      end if
-      call accept_step(x, xnew, dx, comp)
-      stats%accepted = stats%accepted + 1
-      stats%t = merge(t1, t + h, n + 1 == steps)
-    end do
-    code = STIFF_WHEEL_ODE_OK
+    code = rk4_steps(t0, t1, steps, x, c, stats)
   end function stiff_wheel_rk4
 
   ! stats, codes: NULL when not wanted.
@@ -410,237 +595,170 @@ contains
     !$omp end parallel do
   end function stiff_wheel_rk4_batch
 
-  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
-  ! double arithmetic can meet (rtol <= STIFF_WHEEL_ODE_MIN_RTOL, atol <= 0), max_steps
-  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
-  pure logical function bad_arguments(t0, t1, rtol, atol, h0, max_steps)
-    real(c_double), intent(in) :: t0, t1, rtol, atol, h0
+  ! dopri5 to t1, with Hairer's step-size strategy: the last step clipped
+  ! to end on t1, no growth right after a rejection, and a non-finite trial
+  ! rejected with h shrunk by facmin.
+  ! Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
+  function dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
     integer(c_long), intent(in) :: max_steps
-
-    bad_arguments = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) &
-        .or. .not. ieee_is_finite(t1) .or. .not. (rtol > STIFF_WHEEL_ODE_MIN_RTOL) &
-        .or. .not. ieee_is_finite(rtol) .or. .not. (atol > 0) .or. .not. ieee_is_finite(atol) &
-        .or. .not. ieee_is_finite(h0) .or. max_steps < 1
-  end function bad_arguments
-
-  ! h is lost in the rounding of t: the solution cannot be resolved further.
-  pure logical function step_underflow(h, t)
-    real(c_double), intent(in) :: h, t
-
-    step_underflow = h < 16 * epsilon(h) * abs(t) .or. h < tiny(h)
-  end function step_underflow
-
-  ! The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
-  ! sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1.
-  pure real(c_double) function error_norm(err, x, xnew, rtol, atol)
-    real(c_double), intent(in) :: err(nx), x(nx), xnew(nx), rtol, atol
-
-    error_norm = sqrt(sum((err / (atol + rtol * max(abs(x), abs(xnew))))**2) &
-                      / real(nx, c_double))
-  end function error_norm
-
-  ! Hairer's HINIT (dopri5.f): the first step h such that
-  ! h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step.
-  real(c_double) function initial_step(order, t0, t1, x, f0, c, rtol, atol, stats) result(h)
-    integer, intent(in) :: order
-    real(c_double), intent(in) :: t0, t1, x(nx), f0(nx), c(nc), rtol, atol
     type(stiff_wheel_stats), intent(inout) :: stats
-    real(c_double) :: sk(nx), x1(nx), f1(nx), dnf, dny, der2, der12, h1
-
-    sk = atol + rtol * abs(x)
-    dnf = sum((f0 / sk)**2)
-    dny = sum((x / sk)**2)
-    if (dnf <= 1e-10_c_double .or. dny <= 1e-10_c_double) then
-      h = 1e-6_c_double
-    else
-      h = 0.01_c_double * sqrt(dny / dnf)
-    end if
-    h = min(h, t1 - t0)
-    x1 = x + h * f0
-    call stiff_wheel_rhs(t0 + h, x1, c, f1)
-    stats%rhs_calls = stats%rhs_calls + 1
-    der2 = sqrt(sum(((f1 - f0) / sk)**2)) / h
-    if (.not. ieee_is_finite(der2)) der2 = 0  ! the Euler step left the domain of f
-    der12 = max(der2, sqrt(dnf))
-    if (der12 <= 1e-15_c_double) then
-      h1 = max(1e-6_c_double, h * 1e-3_c_double)
-    else
-      h1 = (0.01_c_double / der12)**(1 / real(order, c_double))
-    end if
-    h = min(100 * h, h1, t1 - t0)
-  end function initial_step
-
-  ! An adaptive method's start (every pair, rodas4, radau5): the arguments,
-  ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
-  ! on from there, else the code to return (x as given).
-  integer(c_int) function ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
-                                    stats) result(code)
-    integer, intent(in) :: order
-    real(c_double), intent(in) :: t0, t1, x(nx), c(nc), rtol, atol, h0
-    integer(c_long), intent(in) :: max_steps
-    real(c_double), intent(out) :: f0(nx), h
-    type(stiff_wheel_stats), intent(inout) :: stats
-
-    h = 0
-    f0 = 0
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      code = STIFF_WHEEL_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
-    code = STIFF_WHEEL_ODE_OK
-    if (.not. (t1 > t0)) return
-    call stiff_wheel_rhs(t0, x, c, f0)
-    stats%rhs_calls = 1
-    if (.not. (all(ieee_is_finite(x)) .and. all(ieee_is_finite(f0)))) then
-      code = STIFF_WHEEL_ODE_ERR_NONFINITE
-      return
-    end if
-    if (h0 > 0) then
-      h = min(h0, t1 - t0)
-    else
-      h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats)
-    end if
-    code = -1
-  end function ode_start
-
-  ! Any embedded pair to t1, with Hairer's step-size strategy: the last step
-  ! clipped to end on t1, no growth right after a rejection, and a non-finite
-  ! trial rejected with h shrunk by facmin.
-  function pair_integrate(trial, m, t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(code)
-    procedure(pair_trial) :: trial
-    type(control), intent(in) :: m
-    real(c_double), intent(in) :: t0, t1, rtol, atol, h0
-    real(c_double), intent(inout) :: x(nx)
-    real(c_double), intent(in) :: c(nc)
-    integer(c_long), intent(in) :: max_steps
-    type(stiff_wheel_stats), intent(out) :: stats
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
     integer(c_int) :: code
-    real(c_double) :: k(nx, 13), xnew(nx), dx(nx), comp(nx), t, h, err, fac, err_old
-    logical :: last, rejected_last, nonfinite
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err_old
+    logical :: nonfinite
+    logical :: rejected_last
+    logical :: last
+    real(c_double) :: err
+    logical :: run
+    logical :: take
+    logical :: lock
+    logical :: ok
+    real(c_double) :: fac
+    real(c_double) :: grow
+    real(c_double) :: total
+    real(c_double) :: e
+    integer(c_int) :: i
 
-    code = ode_start(m%order, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 1), h, stats)
-    if (code >= 0) return
-    code = STIFF_WHEEL_ODE_OK
+    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 0), h, stats)
+    if (code >= 0) then
+      res = code
+      return
+    end if
     t = t0
     err_old = 1e-4_c_double
-    comp = 0
-    rejected_last = .false.
     nonfinite = .false.
-    do
-      if (step_underflow(h, t)) then
-        code = merge(STIFF_WHEEL_ODE_ERR_NONFINITE, &
-                     STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW, nonfinite)
-        return
-      end if
-      if (stats%accepted + stats%rejected >= max_steps) then
-        code = STIFF_WHEEL_ODE_ERR_MAX_STEPS
-        return
-      end if
-      last = t + 1.01_c_double * h >= t1
-      if (last) h = t1 - t
-      stats%h = h
-      err = trial(t, h, x, c, rtol, atol, comp, k, dx, xnew)
-      stats%rhs_calls = stats%rhs_calls + m%calls
-      nonfinite = .not. (ieee_is_finite(err) .and. all(ieee_is_finite(xnew)))
-      if (.not. nonfinite .and. err <= 1 .and. .not. m%fsal .and. .not. last) then
-        call stiff_wheel_rhs(t + h, xnew, c, k(:, m%fnew))  ! where the next step starts
-        stats%rhs_calls = stats%rhs_calls + 1
-        nonfinite = .not. all(ieee_is_finite(k(:, m%fnew)))
-      end if
-      if (nonfinite) then
-        stats%rejected = stats%rejected + 1
-        rejected_last = .true.
-        h = h * m%facmin
-        cycle
-      end if
-      ! fac = h / h_new, in Hairer's form (no division by a zero error)
-      fac = err**m%alpha / m%safety
-      if (err <= 1) then
-        if (gimbal_lock(x, xnew)) then
-          code = STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
-          return
-        end if
-        call accept_step(x, xnew, dx, comp)
-        t = merge(t1, t + h, last)
-        stats%t = t
-        stats%accepted = stats%accepted + 1
-        if (last) return
-        k(:, 1) = k(:, m%fnew)
-        fac = max(1 / m%facmax, min(1 / m%facmin, fac / err_old**m%beta))
-        if (rejected_last) fac = max(fac, 1.0_c_double)
-        err_old = max(err, 1e-4_c_double)
-        rejected_last = .false.
-      else
-        fac = min(1 / m%facmin, fac)
-        stats%rejected = stats%rejected + 1
-        rejected_last = .true.
-      end if
-      h = h / fac
+    rejected_last = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
     end do
-  end function pair_integrate
+    do
 
-  ! Dormand-Prince 5(4) (Dormand & Prince 1980; Hairer, Norsett & Wanner,
-  ! Solving ODEs I, Table II.5.2): seven stages, the seventh at the new
-  ! solution (FSAL); the error is h sum_j e_j k_j with e = b - bhat.
-  function dopri5_trial(t, h, x, c, rtol, atol, comp, k, dx, xnew) result(err)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol, comp(nx)
-    real(c_double), intent(inout) :: k(nx, 13)
-    real(c_double), intent(out) :: dx(nx), xnew(nx)
-    real(c_double) :: err
-    real(c_double) :: y(nx), e(nx)
+      ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
+      code = merge(merge(merge(STIFF_WHEEL_ODE_ERR_NONFINITE, STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW, &
+          nonfinite), merge(STIFF_WHEEL_ODE_ERR_MAX_STEPS, -1, &
+          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, code < 0)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, code < 0 .and. last)
+      stats%h = merge(h, stats%h, code < 0)
+      if (code >= 0) then
+        res = code
+        return
+      end if
 
-    ! stage 2: t + 0.2 h
-    y = x + h * (0.2_c_double * k(:, 1))
-    call stiff_wheel_rhs(t + 0.2_c_double * h, y, c, k(:, 2))
+      ! trial
 
-    ! stage 3: t + 0.3 h
-    y = x + h * (0.075_c_double * k(:, 1) &
-              + 0.225_c_double * k(:, 2))
-    call stiff_wheel_rhs(t + 0.3_c_double * h, y, c, k(:, 3))
+      ! stage 2: t + 0.2 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.2_c_double * k(i, 0))
+      end do
+      call stiff_wheel_rhs(t + 0.2_c_double * h, y, c, k(:, 1))
 
-    ! stage 4: t + 0.8 h
-    y = x + h * (0.9777777777777777_c_double * k(:, 1) &
-              - 3.7333333333333334_c_double * k(:, 2) &
-              + 3.5555555555555554_c_double * k(:, 3))
-    call stiff_wheel_rhs(t + 0.8_c_double * h, y, c, k(:, 4))
+      ! stage 3: t + 0.3 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.075_c_double * k(i, 0) + 0.225_c_double * k(i, 1))
+      end do
+      call stiff_wheel_rhs(t + 0.3_c_double * h, y, c, k(:, 2))
 
-    ! stage 5: t + 0.8888888888888888 h
-    y = x + h * (2.9525986892242035_c_double * k(:, 1) &
-              - 11.595793324188385_c_double * k(:, 2) &
-              + 9.822892851699436_c_double * k(:, 3) &
-              - 0.2908093278463649_c_double * k(:, 4))
-    call stiff_wheel_rhs(t + 0.8888888888888888_c_double * h, y, c, k(:, 5))
+      ! stage 4: t + 0.8 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.9777777777777777_c_double * k(i, &
+            0) - 3.7333333333333334_c_double * k(i, 1) + 3.5555555555555554_c_double * k(i, 2))
+      end do
+      call stiff_wheel_rhs(t + 0.8_c_double * h, y, c, k(:, 3))
 
-    ! stage 6: t + h
-    y = x + h * (2.8462752525252526_c_double * k(:, 1) &
-              - 10.757575757575758_c_double * k(:, 2) &
-              + 8.906422717743473_c_double * k(:, 3) &
-              + 0.2784090909090909_c_double * k(:, 4) &
-              - 0.2735313036020583_c_double * k(:, 5))
-    call stiff_wheel_rhs(t + h, y, c, k(:, 6))
+      ! stage 5: t + 0.8888888888888888 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (2.9525986892242035_c_double * k(i, &
+            0) - 11.595793324188385_c_double * k(i, 1) + 9.822892851699436_c_double * k(i, &
+            2) - 0.2908093278463649_c_double * k(i, 3))
+      end do
+      call stiff_wheel_rhs(t + 0.8888888888888888_c_double * h, y, c, k(:, 4))
 
-    ! stage 7: t + h, the new solution
-    dx = h * (0.09114583333333333_c_double * k(:, 1) &
-              + 0.44923629829290207_c_double * k(:, 3) &
-              + 0.6510416666666666_c_double * k(:, 4) &
-              - 0.322376179245283_c_double * k(:, 5) &
-              + 0.13095238095238096_c_double * k(:, 6)) - comp
-    xnew = x + dx
-    call stiff_wheel_rhs(t + h, xnew, c, k(:, 7))
+      ! stage 6: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (2.8462752525252526_c_double * k(i, &
+            0) - 10.757575757575758_c_double * k(i, 1) + 8.906422717743473_c_double * k(i, &
+            2) + 0.2784090909090909_c_double * k(i, 3) - 0.2735313036020583_c_double * k(i, 4))
+      end do
+      call stiff_wheel_rhs(t + h, y, c, k(:, 5))
 
-    e = h * (0.0012326388888888888_c_double * k(:, 1) &
-             - 0.0042527702905061394_c_double * k(:, 3) &
-             + 0.03697916666666667_c_double * k(:, 4) &
-             - 0.05086379716981132_c_double * k(:, 5) &
-             + 0.0419047619047619_c_double * k(:, 6) &
-             - 0.025_c_double * k(:, 7))
-    err = error_norm(e, x, xnew, rtol, atol)
-  end function dopri5_trial
+      ! stage 7: t + h, the new solution
+      do i = 0, nx - 1
+        dx(i) = h * (0.09114583333333333_c_double * k(i, 0) + 0.44923629829290207_c_double * k(i, &
+            2) + 0.6510416666666666_c_double * k(i, 3) - 0.322376179245283_c_double * k(i, &
+            4) + 0.13095238095238096_c_double * k(i, 5)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+      call stiff_wheel_rhs(t + h, xnew, c, k(:, 6))
+
+      ! the error norm (see error_norm)
+      total = 0.0_c_double
+      do i = 0, nx - 1
+        e = h * (0.0012326388888888888_c_double * k(i, 0) - 0.0042527702905061394_c_double * k(i, &
+            2) + 0.03697916666666667_c_double * k(i, 3) - 0.05086379716981132_c_double * k(i, &
+            4) + 0.0419047619047619_c_double * k(i, 5) - 0.025_c_double * k(i, &
+            6)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+        total = total + e * e
+      end do
+      err = sqrt(total / nx)
+
+      ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
+      stats%rhs_calls = stats%rhs_calls + (merge(6, 0, code < 0))
+      nonfinite = .not. ieee_is_finite(err)
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! control: accept or reject by selection, and the next h
+      run = code < 0
+      take = run .and. .not. nonfinite .and. err <= 1.0_c_double
+      lock = abs(cos(xnew(1))) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
+          gimbal_interval(xnew(1))) >= 1.0_c_double
+      ok = take .and. .not. lock
+      fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
+      grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
+      grow = merge(max(grow, 1.0_c_double), grow, rejected_last)  ! no growth after a rejection
+      code = merge(STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR, merge(STIFF_WHEEL_ODE_OK, code, &
+          ok .and. last), take .and. lock)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, run .and. .not. take))
+      err_old = merge(max(err, 1e-4_c_double), err_old, ok)
+      rejected_last = merge(.false., merge(.true., rejected_last, run .and. .not. take), ok)
+      h = merge(h, merge(h * 0.2_c_double, merge(h / grow, h / min(5.0_c_double, fac), ok), &
+          nonfinite), .not. run .or. (take .and. lock))
+
+      ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
+      if (ok) then
+        do i = 0, nx - 1
+          comp(i) = xnew(i) - x(i) - dx(i)
+          x(i) = xnew(i)
+        end do
+        do i = 0, nx - 1
+          k(i, 0) = k(i, 6)
+        end do
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function dopri5_integrate
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   function stiff_wheel_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
@@ -656,136 +774,246 @@ contains
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    code = pair_integrate(dopri5_trial, dopri5_control, t0, t1, x, c, rtol, atol, h0, &
-                          max_steps, stats)
+    code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function stiff_wheel_dopri5
 
-  ! DOP853 (Hairer's dop853.f): twelve stages of an 8th-order method; the
-  ! error combines a 5th-order estimate err5 = h sum_j e5_j k_j and a
-  ! 3rd-order one err3 = h sum_j e3_j k_j as
-  ! |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) in the scaled norm.
-  function dop853_trial(t, h, x, c, rtol, atol, comp, k, dx, xnew) result(err)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), rtol, atol, comp(nx)
-    real(c_double), intent(inout) :: k(nx, 13)
-    real(c_double), intent(out) :: dx(nx), xnew(nx)
+  ! dop853 to t1, with Hairer's step-size strategy: the last step clipped
+  ! to end on t1, no growth right after a rejection, and a non-finite trial
+  ! rejected with h shrunk by facmin.
+  ! Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
+  function dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(stiff_wheel_stats), intent(inout) :: stats
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err_old
+    logical :: nonfinite
+    logical :: rejected_last
+    logical :: last
     real(c_double) :: err
-    real(c_double) :: y(nx), sk(nx), err5, err3, deno
+    logical :: run
+    logical :: take
+    logical :: lock
+    logical :: ok
+    real(c_double) :: fac
+    real(c_double) :: grow
+    real(c_double) :: err5
+    real(c_double) :: err3
+    real(c_double) :: deno
+    real(c_double) :: e3
+    real(c_double) :: e5
+    integer(c_int) :: i
 
-    ! stage 2: t + 0.05260015195876773 h
-    y = x + h * (0.05260015195876773_c_double * k(:, 1))
-    call stiff_wheel_rhs(t + 0.05260015195876773_c_double * h, y, c, k(:, 2))
+    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 0), h, stats)
+    if (code >= 0) then
+      res = code
+      return
+    end if
+    t = t0
+    err_old = 1e-4_c_double
+    nonfinite = .false.
+    rejected_last = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    do
 
-    ! stage 3: t + 0.0789002279381516 h
-    y = x + h * (0.0197250569845379_c_double * k(:, 1) &
-              + 0.0591751709536137_c_double * k(:, 2))
-    call stiff_wheel_rhs(t + 0.0789002279381516_c_double * h, y, c, k(:, 3))
+      ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
+      code = merge(merge(merge(STIFF_WHEEL_ODE_ERR_NONFINITE, STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW, &
+          nonfinite), merge(STIFF_WHEEL_ODE_ERR_MAX_STEPS, -1, &
+          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, code < 0)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, code < 0 .and. last)
+      stats%h = merge(h, stats%h, code < 0)
+      if (code >= 0) then
+        res = code
+        return
+      end if
 
-    ! stage 4: t + 0.1183503419072274 h
-    y = x + h * (0.02958758547680685_c_double * k(:, 1) &
-              + 0.08876275643042054_c_double * k(:, 3))
-    call stiff_wheel_rhs(t + 0.1183503419072274_c_double * h, y, c, k(:, 4))
+      ! trial
 
-    ! stage 5: t + 0.2816496580927726 h
-    y = x + h * (0.2413651341592667_c_double * k(:, 1) &
-              - 0.8845494793282861_c_double * k(:, 3) &
-              + 0.924834003261792_c_double * k(:, 4))
-    call stiff_wheel_rhs(t + 0.2816496580927726_c_double * h, y, c, k(:, 5))
+      ! stage 2: t + 0.05260015195876773 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.05260015195876773_c_double * k(i, 0))
+      end do
+      call stiff_wheel_rhs(t + 0.05260015195876773_c_double * h, y, c, k(:, 1))
 
-    ! stage 6: t + 0.3333333333333333 h
-    y = x + h * (0.037037037037037035_c_double * k(:, 1) &
-              + 0.17082860872947386_c_double * k(:, 4) &
-              + 0.12546768756682242_c_double * k(:, 5))
-    call stiff_wheel_rhs(t + 0.3333333333333333_c_double * h, y, c, k(:, 6))
+      ! stage 3: t + 0.0789002279381516 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.0197250569845379_c_double * k(i, &
+            0) + 0.0591751709536137_c_double * k(i, 1))
+      end do
+      call stiff_wheel_rhs(t + 0.0789002279381516_c_double * h, y, c, k(:, 2))
 
-    ! stage 7: t + 0.25 h
-    y = x + h * (0.037109375_c_double * k(:, 1) &
-              + 0.17025221101954405_c_double * k(:, 4) &
-              + 0.06021653898045596_c_double * k(:, 5) &
-              - 0.017578125_c_double * k(:, 6))
-    call stiff_wheel_rhs(t + 0.25_c_double * h, y, c, k(:, 7))
+      ! stage 4: t + 0.1183503419072274 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.02958758547680685_c_double * k(i, &
+            0) + 0.08876275643042054_c_double * k(i, 2))
+      end do
+      call stiff_wheel_rhs(t + 0.1183503419072274_c_double * h, y, c, k(:, 3))
 
-    ! stage 8: t + 0.3076923076923077 h
-    y = x + h * (0.03709200011850479_c_double * k(:, 1) &
-              + 0.17038392571223998_c_double * k(:, 4) &
-              + 0.10726203044637328_c_double * k(:, 5) &
-              - 0.015319437748624402_c_double * k(:, 6) &
-              + 0.008273789163814023_c_double * k(:, 7))
-    call stiff_wheel_rhs(t + 0.3076923076923077_c_double * h, y, c, k(:, 8))
+      ! stage 5: t + 0.2816496580927726 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.2413651341592667_c_double * k(i, &
+            0) - 0.8845494793282861_c_double * k(i, 2) + 0.924834003261792_c_double * k(i, 3))
+      end do
+      call stiff_wheel_rhs(t + 0.2816496580927726_c_double * h, y, c, k(:, 4))
 
-    ! stage 9: t + 0.6512820512820513 h
-    y = x + h * (0.6241109587160757_c_double * k(:, 1) &
-              - 3.3608926294469414_c_double * k(:, 4) &
-              - 0.868219346841726_c_double * k(:, 5) &
-              + 27.59209969944671_c_double * k(:, 6) &
-              + 20.154067550477894_c_double * k(:, 7) &
-              - 43.48988418106996_c_double * k(:, 8))
-    call stiff_wheel_rhs(t + 0.6512820512820513_c_double * h, y, c, k(:, 9))
+      ! stage 6: t + 0.3333333333333333 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.037037037037037035_c_double * k(i, &
+            0) + 0.17082860872947386_c_double * k(i, 3) + 0.12546768756682242_c_double * k(i, 4))
+      end do
+      call stiff_wheel_rhs(t + 0.3333333333333333_c_double * h, y, c, k(:, 5))
 
-    ! stage 10: t + 0.6 h
-    y = x + h * (0.47766253643826434_c_double * k(:, 1) &
-              - 2.4881146199716677_c_double * k(:, 4) &
-              - 0.590290826836843_c_double * k(:, 5) &
-              + 21.230051448181193_c_double * k(:, 6) &
-              + 15.279233632882423_c_double * k(:, 7) &
-              - 33.28821096898486_c_double * k(:, 8) &
-              - 0.020331201708508627_c_double * k(:, 9))
-    call stiff_wheel_rhs(t + 0.6_c_double * h, y, c, k(:, 10))
+      ! stage 7: t + 0.25 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.037109375_c_double * k(i, 0) + 0.17025221101954405_c_double * k(i, &
+            3) + 0.06021653898045596_c_double * k(i, 4) - 0.017578125_c_double * k(i, 5))
+      end do
+      call stiff_wheel_rhs(t + 0.25_c_double * h, y, c, k(:, 6))
 
-    ! stage 11: t + 0.8571428571428571 h
-    y = x + h * (-0.9371424300859873_c_double * k(:, 1) &
-              + 5.186372428844064_c_double * k(:, 4) &
-              + 1.0914373489967295_c_double * k(:, 5) &
-              - 8.149787010746927_c_double * k(:, 6) &
-              - 18.52006565999696_c_double * k(:, 7) &
-              + 22.739487099350505_c_double * k(:, 8) &
-              + 2.4936055526796523_c_double * k(:, 9) &
-              - 3.0467644718982196_c_double * k(:, 10))
-    call stiff_wheel_rhs(t + 0.8571428571428571_c_double * h, y, c, k(:, 11))
+      ! stage 8: t + 0.3076923076923077 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.03709200011850479_c_double * k(i, &
+            0) + 0.17038392571223998_c_double * k(i, 3) + 0.10726203044637328_c_double * k(i, &
+            4) - 0.015319437748624402_c_double * k(i, 5) + 0.008273789163814023_c_double * k(i, 6))
+      end do
+      call stiff_wheel_rhs(t + 0.3076923076923077_c_double * h, y, c, k(:, 7))
 
-    ! stage 12: t + h
-    y = x + h * (2.273310147516538_c_double * k(:, 1) &
-              - 10.53449546673725_c_double * k(:, 4) &
-              - 2.0008720582248625_c_double * k(:, 5) &
-              - 17.9589318631188_c_double * k(:, 6) &
-              + 27.94888452941996_c_double * k(:, 7) &
-              - 2.8589982771350235_c_double * k(:, 8) &
-              - 8.87285693353063_c_double * k(:, 9) &
-              + 12.360567175794303_c_double * k(:, 10) &
-              + 0.6433927460157636_c_double * k(:, 11))
-    call stiff_wheel_rhs(t + h, y, c, k(:, 12))
+      ! stage 9: t + 0.6512820512820513 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.6241109587160757_c_double * k(i, &
+            0) - 3.3608926294469414_c_double * k(i, 3) - 0.868219346841726_c_double * k(i, &
+            4) + 27.59209969944671_c_double * k(i, 5) + 20.154067550477894_c_double * k(i, &
+            6) - 43.48988418106996_c_double * k(i, 7))
+      end do
+      call stiff_wheel_rhs(t + 0.6512820512820513_c_double * h, y, c, k(:, 8))
 
-    ! the new solution
-    dx = h * (0.054293734116568765_c_double * k(:, 1) &
-              + 4.450312892752409_c_double * k(:, 6) &
-              + 1.8915178993145003_c_double * k(:, 7) &
-              - 5.801203960010585_c_double * k(:, 8) &
-              + 0.3111643669578199_c_double * k(:, 9) &
-              - 0.1521609496625161_c_double * k(:, 10) &
-              + 0.20136540080403034_c_double * k(:, 11) &
-              + 0.04471061572777259_c_double * k(:, 12)) - comp
-    xnew = x + dx
+      ! stage 10: t + 0.6 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.47766253643826434_c_double * k(i, &
+            0) - 2.4881146199716677_c_double * k(i, 3) - 0.590290826836843_c_double * k(i, &
+            4) + 21.230051448181193_c_double * k(i, 5) + 15.279233632882423_c_double * k(i, &
+            6) - 33.28821096898486_c_double * k(i, 7) - 0.020331201708508627_c_double * k(i, 8))
+      end do
+      call stiff_wheel_rhs(t + 0.6_c_double * h, y, c, k(:, 9))
 
-    sk = atol + rtol * max(abs(x), abs(xnew))
-    err5 = sum(((0.01312004499419488_c_double * k(:, 1) &
-                 - 1.2251564463762044_c_double * k(:, 6) &
-                 - 0.4957589496572502_c_double * k(:, 7) &
-                 + 1.6643771824549864_c_double * k(:, 8) &
-                 - 0.35032884874997366_c_double * k(:, 9) &
-                 + 0.3341791187130175_c_double * k(:, 10) &
-                 + 0.08192320648511571_c_double * k(:, 11) &
-                 - 0.022355307863886294_c_double * k(:, 12)) / sk)**2)
-    err3 = sum(((-0.18980075407240762_c_double * k(:, 1) &
-                 + 4.450312892752409_c_double * k(:, 6) &
-                 + 1.8915178993145003_c_double * k(:, 7) &
-                 - 5.801203960010585_c_double * k(:, 8) &
-                 - 0.4226823213237919_c_double * k(:, 9) &
-                 - 0.1521609496625161_c_double * k(:, 10) &
-                 + 0.20136540080403034_c_double * k(:, 11) &
-                 + 0.02265179219836082_c_double * k(:, 12)) / sk)**2)
-    deno = err5 + 0.01_c_double * err3
-    err = 0
-    if (deno > 0) err = abs(h) * err5 / sqrt(nx * deno)
-  end function dop853_trial
+      ! stage 11: t + 0.8571428571428571 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((-0.9371424300859873_c_double) * k(i, &
+            0) + 5.186372428844064_c_double * k(i, 3) + 1.0914373489967295_c_double * k(i, &
+            4) - 8.149787010746927_c_double * k(i, 5) - 18.52006565999696_c_double * k(i, &
+            6) + 22.739487099350505_c_double * k(i, 7) + 2.4936055526796523_c_double * k(i, &
+            8) - 3.0467644718982196_c_double * k(i, 9))
+      end do
+      call stiff_wheel_rhs(t + 0.8571428571428571_c_double * h, y, c, k(:, 10))
+
+      ! stage 12: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (2.273310147516538_c_double * k(i, &
+            0) - 10.53449546673725_c_double * k(i, 3) - 2.0008720582248625_c_double * k(i, &
+            4) - 17.9589318631188_c_double * k(i, 5) + 27.94888452941996_c_double * k(i, &
+            6) - 2.8589982771350235_c_double * k(i, 7) - 8.87285693353063_c_double * k(i, &
+            8) + 12.360567175794303_c_double * k(i, 9) + 0.6433927460157636_c_double * k(i, 10))
+      end do
+      call stiff_wheel_rhs(t + h, y, c, k(:, 11))
+
+      ! the new solution
+      do i = 0, nx - 1
+        dx(i) = h * (0.054293734116568765_c_double * k(i, 0) + 4.450312892752409_c_double * k(i, &
+            5) + 1.8915178993145003_c_double * k(i, 6) - 5.801203960010585_c_double * k(i, &
+            7) + 0.3111643669578199_c_double * k(i, 8) - 0.1521609496625161_c_double * k(i, &
+            9) + 0.20136540080403034_c_double * k(i, 10) + 0.04471061572777259_c_double * k(i, &
+            11)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+
+      ! the error: DOP853's two estimates, combined
+      err5 = 0.0_c_double
+      err3 = 0.0_c_double
+      do i = 0, nx - 1
+        e5 = (0.01312004499419488_c_double * k(i, 0) - 1.2251564463762044_c_double * k(i, &
+            5) - 0.4957589496572502_c_double * k(i, 6) + 1.6643771824549864_c_double * k(i, &
+            7) - 0.35032884874997366_c_double * k(i, 8) + 0.3341791187130175_c_double * k(i, &
+            9) + 0.08192320648511571_c_double * k(i, 10) - 0.022355307863886294_c_double * k(i, &
+            11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+        e3 = ((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
+            5) + 1.8915178993145003_c_double * k(i, 6) - 5.801203960010585_c_double * k(i, &
+            7) - 0.4226823213237919_c_double * k(i, 8) - 0.1521609496625161_c_double * k(i, &
+            9) + 0.20136540080403034_c_double * k(i, 10) + 0.02265179219836082_c_double * k(i, &
+            11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+        err5 = err5 + e5 * e5
+        err3 = err3 + e3 * e3
+      end do
+      deno = err5 + 1e-2_c_double * err3
+      err = merge(abs(h) * err5 / sqrt(nx * deno), 0.0_c_double, deno > 0.0_c_double)
+
+      ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
+      stats%rhs_calls = stats%rhs_calls + (merge(11, 0, code < 0))
+      nonfinite = .not. ieee_is_finite(err)
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+      ok = code < 0 .and. .not. nonfinite .and. err <= 1.0_c_double .and. .not. last
+      if (ok) then
+        call stiff_wheel_rhs(t + h, xnew, c, k(:, 12))  ! where the next step starts
+      end if
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. (ok .and. .not. ieee_is_finite(k(i, 12)))
+      end do
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, ok))
+
+      ! control: accept or reject by selection, and the next h
+      run = code < 0
+      take = run .and. .not. nonfinite .and. err <= 1.0_c_double
+      lock = abs(cos(xnew(1))) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
+          gimbal_interval(xnew(1))) >= 1.0_c_double
+      ok = take .and. .not. lock
+      fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
+      grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))
+      grow = merge(max(grow, 1.0_c_double), grow, rejected_last)  ! no growth after a rejection
+      code = merge(STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR, merge(STIFF_WHEEL_ODE_OK, code, &
+          ok .and. last), take .and. lock)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, run .and. .not. take))
+      err_old = merge(max(err, 1e-4_c_double), err_old, ok)
+      rejected_last = merge(.false., merge(.true., rejected_last, run .and. .not. take), ok)
+      h = merge(h, merge(h * 0.333_c_double, merge(h / grow, h / min(3.003003003003003_c_double, &
+          fac), ok), nonfinite), .not. run .or. (take .and. lock))
+
+      ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
+      if (ok) then
+        do i = 0, nx - 1
+          comp(i) = xnew(i) - x(i) - dx(i)
+          x(i) = xnew(i)
+        end do
+        do i = 0, nx - 1
+          k(i, 0) = k(i, 12)
+        end do
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function dop853_integrate
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   function stiff_wheel_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
@@ -801,8 +1029,7 @@ contains
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    code = pair_integrate(dop853_trial, dop853_control, t0, t1, x, c, rtol, atol, h0, &
-                          max_steps, stats)
+    code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function stiff_wheel_dop853
 
   ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
@@ -1584,7 +1811,7 @@ contains
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
     ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
-    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1618,7 +1845,7 @@ contains
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
     ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
-    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1652,7 +1879,7 @@ contains
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
     ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
-    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
@@ -1686,7 +1913,7 @@ contains
     if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
     failed = 0
     ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
-    !$omp parallel do schedule(dynamic, 4) private(code) reduction(+:failed)
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
         code = stiff_wheel_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &

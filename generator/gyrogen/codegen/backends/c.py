@@ -10,6 +10,7 @@ from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
+from gyrogen.codegen.integrators.program import c_text, program
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import (
     Function,
@@ -117,6 +118,7 @@ def files(unit: Unit) -> dict[str, str]:
         "source_trig": trig_used(unit.prefix, [rhs, lanes, *outputs]),
         "ode_trig": ode_trig,
         "methods": unit.methods,
+        "ir": c_text(program(unit.methods, unit.quaternion), unit.prefix, unit.macro),
         "abi": abi,
         "registry": methods_registry,
         "checks": printed("c", unit.macro, unit.cluster),

@@ -10,6 +10,7 @@ from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
+from gyrogen.codegen.integrators.program import fortran_text, program
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
 from gyrogen.errors import GyrogenError
@@ -74,6 +75,7 @@ def files(unit: Unit) -> dict[str, str]:
         "outputs": outputs,
         "jac": jac,
         "methods": unit.methods,
+        "ir": fortran_text(program(unit.methods, unit.quaternion), unit.prefix, unit.macro),
         "abi": abi,
         "registry": methods_registry,
         "checks": printed("fortran", unit.macro, unit.cluster),

@@ -1,0 +1,344 @@
+"""The pieces every integrator shares, described once: statistics, the
+finiteness and attitude checks, the compensated accept, the arguments,
+Hairer's first step and the adaptive start-up."""
+
+from __future__ import annotations
+
+from gyrogen import abi
+from gyrogen.codegen.ir.nodes import (
+    Bool,
+    Call,
+    Comment,
+    Const,
+    Decl,
+    E,
+    For,
+    Func,
+    If,
+    Int,
+    Num,
+    Ref,
+    Return,
+    S,
+    Var,
+    assign,
+    cmp,
+    fn,
+    inc,
+    not_,
+    or_,
+    sel,
+)
+
+NX = Const("NX")
+i = Var("i")
+x, xnew, dx, comp = Var("x"), Var("xnew"), Var("dx"), Var("comp")
+t0, t1, h, h0, c = Var("t0"), Var("t1"), Var("h"), Var("h0"), Var("c")
+rtol, atol, stats = Var("rtol"), Var("atol"), Var("stats")
+
+
+def arr(name: str, intent: str = "in", *shape: str | int) -> Decl:
+    return Decl(name, "double", shape or ("NX",), intent)  # type: ignore[arg-type]
+
+
+def real(name: str, intent: str = "in") -> Decl:
+    return Decl(name, "double", (), intent)  # type: ignore[arg-type]
+
+
+STATS = Decl("stats", "stats", (), "inout")
+TOLERANCES = (real("rtol"), real("atol"))
+
+
+def code(name: str) -> Const:
+    return Const(f"ODE_{name}")
+
+
+def stats_start() -> Func:
+    body: list[S] = [assign(Var("stats.t"), t0)]
+    for f in abi.STATS_FIELDS[1:]:
+        body.append(assign(Var(f"stats.{f.name}"), Num(0.0) if f.ctype == "double" else Int(0)))
+    doc = ("Counters at zero, at the start time (also the time reached if nothing is).",)
+    return Func("stats_start", (STATS, real("t0")), tuple(body), doc=doc)
+
+
+def all_finite() -> Func:
+    v, n = Var("v"), Var("n")
+    body = (
+        For("i", n, (If(not_(fn("finite", v[i])), (Return(Bool(False)),)),)),
+        Return(Bool(True)),
+    )
+    params = (Decl("v", "double", ("n",)), Decl("n", "int"))
+    doc = ("1 when no element of v is NaN or Inf.",)
+    return Func("all_finite", params, body, "bool", doc=doc)
+
+
+def accepted(quaternion: bool) -> list[S]:
+    """x := xnew with the compensated sum (and the attitude projected)."""
+    body: list[S] = [
+        For("i", NX, (assign(comp[i], (xnew[i] - x[i]) - dx[i]), assign(x[i], xnew[i]))),
+    ]
+    if quaternion:
+        norm = Var("norm")
+        e = [x[j] * x[j] for j in range(4)]
+        body += [
+            Comment("the attitude, Euler parameters x[0..3], projected back onto |e| = 1"),
+            assign(norm, fn("sqrt", ((e[0] + e[1]) + e[2]) + e[3])),
+            For(
+                "i",
+                Int(4),
+                (
+                    assign(x[i], x[i] / norm),
+                    assign(comp[i], 0.0, "the projection moved e: its rounding is not the add's"),
+                ),
+            ),
+        ]
+    return body
+
+
+def accept_step(quaternion: bool) -> Func:
+    body = accepted(quaternion)
+    doc = (
+        "x := xnew, the step's x + dx. Every method sums its steps with Kahan's",
+        "compensation: comp keeps what this add lost and the next step takes it",
+        "back from its dx, so the rounding of 1e7 adds does not pile up in the",
+        "invariants (a build with -ffast-math may optimize it away).",
+    )
+    params = (arr("x", "inout"), arr("xnew"), arr("dx"), arr("comp", "inout"))
+    locals_ = (real("norm", "inout"),) if quaternion else ()
+    return Func("accept_step", params, tuple(body), None, locals_, doc)
+
+
+def locked(before: Var, after: Var) -> E:
+    """The step from before to after ends at gimbal lock or passes a point of it."""
+    at = cmp(fn("abs", fn("cos", after[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))
+    jump = fn("abs", fn("gimbal_interval", before[1]) - fn("gimbal_interval", after[1]))
+    return or_(at, cmp(jump, ">=", 1.0))
+
+
+def gimbal() -> list[Func]:
+    q2 = Var("q2")
+    interval = Func(
+        "gimbal_interval",
+        (real("q2"),),
+        (Return(fn("floor", q2 * Num(abi.GIMBAL_INTERVALS) + 0.5)),),
+        "double",
+        doc=(
+            "The attitude is 3-1-2 angles, q2 = x[1]: their kinematics divide by",
+            "cos(q2), which is zero at q2 = pi/2 + k pi for every integer k. Between",
+            "two such points lies one interval ((j - 1/2) pi, (j + 1/2) pi), numbered",
+            "j = floor(q2/pi + 1/2): the two ends of a step lie in the same interval",
+            "unless the step passed a point of gimbal lock, however long the step",
+            "(whole turns included). Where the rounding of q2/pi could misplace q2 by",
+            "an interval, |cos q2| is below the lock's bar, for |q2| up to 1e6.",
+        ),
+    )
+    at = Func(
+        "gimbal_lock_at",
+        (arr("x"),),
+        (Return(cmp(fn("abs", fn("cos", x[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))),),
+        "bool",
+        doc=("1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS.",),
+    )
+    lock = Func(
+        "gimbal_lock",
+        (arr("x"), arr("xnew")),
+        (Return(locked(x, xnew)),),
+        "bool",
+        doc=(
+            "1 when the step from x to xnew ends at gimbal lock or passes a point of",
+            "it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump).",
+        ),
+    )
+    return [interval, at, lock]
+
+
+def bad_arguments() -> Func:
+    ms = Var("max_steps")
+    bad = or_(
+        not_(cmp(t1, ">=", t0)),
+        not_(fn("finite", t0)),
+        not_(fn("finite", t1)),
+        not_(cmp(rtol, ">", Const("ODE_MIN_RTOL"))),
+        not_(fn("finite", rtol)),
+        not_(cmp(atol, ">", 0.0)),
+        not_(fn("finite", atol)),
+        not_(fn("finite", h0)),
+        cmp(ms, "<", 1),
+    )
+    params = (real("t0"), real("t1"), *TOLERANCES, real("h0"), Decl("max_steps", "long"))
+    doc = (
+        "The arguments every adaptive method refuses: t1 < t0, a tolerance no",
+        "double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps",
+        "< 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).",
+    )
+    return Func("bad_arguments", params, (Return(bad),), "bool", doc=doc)
+
+
+def step_underflow() -> Func:
+    t = Var("t")
+    small = or_(
+        cmp(h, "<", Num(16.0) * Const("EPSILON") * fn("abs", t)), cmp(h, "<", Const("TINY"))
+    )
+    doc = ("h is lost in the rounding of t: the solution cannot be resolved further.",)
+    return Func("step_underflow", (real("h"), real("t")), (Return(small),), "bool", doc=doc)
+
+
+def scaled(e: E, at: E) -> E:
+    """e / (atol + rtol max(|x_i|, |xnew_i|))."""
+    return e / (atol + rtol * fn("max", fn("abs", x[at]), fn("abs", xnew[at])))
+
+
+def error_norm() -> Func:
+    err, total, e = Var("err"), Var("total"), Var("e")
+    body = (
+        assign(total, 0.0),
+        For("i", NX, (assign(e, scaled(err[i], i)), assign(total, total + e * e)), ("e",)),
+        Return(fn("sqrt", total / NX)),
+    )
+    doc = (
+        "The standard error norm: sqrt(mean((err_i / sk_i)^2)) with",
+        "sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1.",
+    )
+    params = (arr("err"), arr("x"), arr("xnew"), *TOLERANCES)
+    return Func("error_norm", params, body, "double", (real("total"),), doc)
+
+
+def initial_step() -> Func:
+    f0, f1, x1 = Var("f0"), Var("f1"), Var("x1")
+    dnf, dny, der2, der12, h1, sk, d = (
+        Var(n) for n in ("dnf", "dny", "der2", "der12", "h1", "sk", "d")
+    )
+    order = Var("order")
+    body = (
+        assign(dnf, 0.0),
+        assign(dny, 0.0),
+        For(
+            "i",
+            NX,
+            (
+                assign(sk, atol + rtol * fn("abs", x[i])),
+                assign(dnf, dnf + (f0[i] / sk) * (f0[i] / sk)),
+                assign(dny, dny + (x[i] / sk) * (x[i] / sk)),
+            ),
+            ("sk",),
+        ),
+        assign(
+            h,
+            sel(
+                or_(cmp(dnf, "<=", 1e-10), cmp(dny, "<=", 1e-10)),
+                1e-6,
+                Num(0.01) * fn("sqrt", dny / dnf),
+            ),
+        ),
+        assign(h, fn("min", h, t1 - t0)),
+        For("i", NX, (assign(x1[i], x[i] + h * f0[i]),)),
+        Call("rhs", (t0 + h, x1, c, f1)),
+        inc(Var("stats.rhs_calls"), 1),
+        assign(der2, 0.0),
+        For(
+            "i",
+            NX,
+            (
+                assign(d, (f1[i] - f0[i]) / (atol + rtol * fn("abs", x[i]))),
+                assign(der2, der2 + d * d),
+            ),
+            ("d",),
+        ),
+        assign(der2, fn("sqrt", der2) / h),
+        If(
+            not_(fn("finite", der2)),
+            (assign(der2, 0.0, "the Euler step left the domain of f: trust |f| alone"),),
+        ),
+        assign(der12, fn("max", der2, fn("sqrt", dnf))),
+        assign(
+            h1,
+            sel(
+                cmp(der12, "<=", 1e-15),
+                fn("max", 1e-6, h * 1e-3),
+                fn("pow", Num(0.01) / der12, Num(1.0) / order),
+            ),
+        ),
+        Return(fn("min", fn("min", Num(100.0) * h, h1), t1 - t0)),
+    )
+    params = (
+        Decl("order", "int"),
+        real("t0"),
+        real("t1"),
+        arr("x"),
+        arr("f0"),
+        Decl("c", "double", ("NC",)),
+        *TOLERANCES,
+        STATS,
+    )
+    locals_ = (
+        arr("x1", "inout"),
+        arr("f1", "inout"),
+        *(real(n, "inout") for n in ("dnf", "dny", "der2", "der12", "h", "h1")),
+    )
+    doc = (
+        "Hairer's HINIT (dopri5.f): the first step h such that",
+        "h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step.",
+    )
+    return Func("initial_step", params, body, "double", locals_, doc)
+
+
+def ode_start(quaternion: bool) -> Func:
+    f0 = Var("f0")
+    args = (t0, t1, rtol, atol, h0, Var("max_steps"))
+    body: list[S] = [
+        assign(h, 0.0),
+        Call("stats_start", (stats, t0)),
+        If(fn("bad_arguments", *args), (Return(code("ERR_ARGUMENT")),)),
+    ]
+    if not quaternion:
+        body.append(
+            If(
+                fn("gimbal_lock_at", x),
+                (Return(code("ERR_ATTITUDE_SINGULAR"), "at the start: x as given"),),
+            )
+        )
+    first = fn("initial_step", Var("order"), t0, t1, x, f0, c, rtol, atol, stats)
+    body += [
+        If(not_(cmp(t1, ">", t0)), (Return(code("OK")),)),
+        Call("rhs", (t0, x, c, f0)),
+        assign(Var("stats.rhs_calls"), Int(1)),
+        If(
+            or_(not_(fn("all_finite", x, NX)), not_(fn("all_finite", f0, NX))),
+            (Return(code("ERR_NONFINITE")),),
+        ),
+        If(cmp(h0, ">", 0.0), (assign(h, fn("min", h0, t1 - t0)),), (assign(h, first),)),
+        Return(Int(-1)),
+    ]
+    params = (
+        Decl("order", "int"),
+        real("t0"),
+        real("t1"),
+        arr("x"),
+        Decl("c", "double", ("NC",)),
+        *TOLERANCES,
+        real("h0"),
+        Decl("max_steps", "long"),
+        arr("f0", "out"),
+        real("h", "out"),
+        STATS,
+    )
+    doc = (
+        "An adaptive method's start (every pair, rodas4, radau5): the arguments,",
+        "the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go",
+        "on from there, else the code to return (x as given).",
+    )
+    return Func("ode_start", params, tuple(body), "int", doc=doc)
+
+
+def shared(quaternion: bool, adaptive: bool, norm: bool) -> list[Func]:
+    """The shared functions a file defines, in order: those of the adaptive
+    methods when it has one, error_norm when a method uses it."""
+    out = [stats_start(), all_finite(), accept_step(quaternion)]
+    out += [] if quaternion else gimbal()
+    if adaptive:
+        out += [bad_arguments(), step_underflow()] + [error_norm()] * norm
+        out += [initial_step(), ode_start(quaternion)]
+    return out
+
+
+__all__ = ["Ref", "shared"]

@@ -1,0 +1,172 @@
+"""The IR as C99: one trajectory (CPrinter) or SIMD lanes (LanesPrinter).
+
+The lanes printer prints the same statements for every lane of a struct
+lanes L: a per-trajectory value v is L->v[l] (an array's element x[i] is
+L->x[i][l]), a branch over values becomes a selection per lane, and a call
+of the rhs takes each lane's time. So a lane performs, operation for
+operation, what the scalar code performs for its trajectory.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from gyrogen.codegen.ir.nodes import (
+    Assign,
+    Call,
+    Comment,
+    Decl,
+    E,
+    Fn,
+    For,
+    Func,
+    If,
+    Loop,
+    Return,
+    S,
+    Sel,
+    Var,
+)
+from gyrogen.codegen.ir.printer import ATOM, Printer
+
+CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX"}
+CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int"}
+FUNCTIONS = {"max": "dmax", "min": "dmin", "abs": "fabs"}
+
+
+class CPrinter(Printer):
+    ops: ClassVar[dict[str, str]] = {"and": "&&", "or": "||"}
+
+    def const(self, name: str) -> str:
+        if name == "NX":
+            return f"{self.macro}_NX"
+        return CONSTS.get(name) or f"{self.macro}_{name}"
+
+    def var(self, name: str) -> tuple[str, int]:
+        if "." in name:
+            struct, field = name.split(".")
+            return f"{struct}->{field}", ATOM
+        d = self.decls.get(name)
+        if d is not None and d in self._pointers():
+            return f"*{name}", 7
+        return name, ATOM
+
+    def _pointers(self) -> set[Decl]:
+        return {
+            d for d in self.decls.values() if not d.shape and d.intent != "in" and d.type != "stats"
+        }
+
+    def element(self, name: str, index: tuple[str, ...]) -> str:
+        return name + "".join(f"[{i}]" for i in index)
+
+    def row(self, name: str, j: str) -> str:
+        return f"{name}[{j}]"
+
+    def ref(self, name: str) -> str:
+        d = self.decls.get(name)
+        return name if d is not None and d in self._pointers() else f"&{name}"
+
+    def boolean(self, value: bool) -> str:
+        return "1" if value else "0"
+
+    def negate(self, text: str) -> str:
+        return "!" + text
+
+    def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
+        if name == "finite":
+            return f"(fabs({args[0]}) <= DBL_MAX)"
+        if name == "cos":
+            return f"{self.prefix}_cos({args[0]})"
+        if name == "real":
+            return f"(double){self.expr(nodes[0], ATOM)}"
+        return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
+
+    def select(self, e: Sel) -> str:
+        return f"{self.expr(e.cond, 1)} ? {self.expr(e.a, 1)} : {self.expr(e.b, 0)}"
+
+    def note(self, text: str) -> str:
+        return f"  /* {text} */"
+
+    def statement(self, s: S, depth: int) -> list[str]:
+        pad = self.indent * depth
+        if isinstance(s, Assign):
+            return self.line(depth, f"{self.expr(s.target)} = {self.expr(s.value)};", s.note)
+        if isinstance(s, Comment):
+            return [""] * s.blank + [f"{pad}/* {s.text} */"]
+        if isinstance(s, Call):
+            name = f"{self.prefix}_rhs" if s.name == "rhs" else s.name
+            return self.line(depth, f"{name}({self.call_args(s)});", s.note)
+        if isinstance(s, Return):
+            text = "return;" if s.value is None else f"return {self.expr(s.value)};"
+            return self.line(depth, text, s.note)
+        if isinstance(s, If):
+            out = [f"{pad}if ({self.expr(s.cond)}) {{", *self.block(s.then, depth + 1)]
+            if s.orelse:
+                out += [f"{pad}}} else {{", *self.block(s.orelse, depth + 1)]
+            return [*out, f"{pad}}}"]
+        if isinstance(s, Loop):
+            return [f"{pad}for (;;) {{", *self.block(s.body, depth + 1), f"{pad}}}"]
+        assert isinstance(s, For), s
+        head = f"{pad}for ({s.var} = 0; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{"
+        local = [f"{pad}{self.indent}double {', '.join(s.locals)};"] if s.locals else []
+        return [head, *local, *self.block(s.body, depth + 1), f"{pad}}}"]
+
+    def declaration(self, d: Decl, param: bool) -> str:
+        if d.type == "stats":
+            return f"{self.prefix}_stats *{d.name}"
+        ctype = CTYPE[d.type]
+        if param:
+            if len(d.shape) == 2:
+                return f"{ctype} (*{d.name})[{self.extent(d.shape[1])}]"
+            if d.shape or d.intent != "in":
+                return f"{'const ' if d.intent == 'in' else ''}{ctype} *{d.name}"
+            return f"{ctype} {d.name}"
+        dims = "".join(f"[{self.extent(n)}]" for n in d.shape)
+        init = (
+            ""
+            if d.init is None
+            else f" = {{{self.expr(d.init)}}}"
+            if d.shape
+            else (f" = {self.expr(d.init)}")
+        )
+        return f"{ctype} {d.name}{dims}{init}"
+
+    def extent(self, n: str | int) -> str:
+        return self.const(n) if isinstance(n, str) else str(n)
+
+    def function(self, func: Func) -> str:
+        p = self.with_decls(func)
+        ret = "void" if func.returns is None else CTYPE[func.returns]
+        params = ", ".join(p.declaration(d, True) for d in func.params)
+        head = p.wrap(
+            f"static {ret} {func.name}({params})", " " * (len(ret) + 9 + len(func.name)), ""
+        )
+        doc = [f"/* {func.doc[0]}", *(f"   {d}" for d in func.doc[1:])] if func.doc else []
+        if doc:
+            doc[-1] += " */"
+        locals_ = [f"{self.indent}{p.declaration(d, False)};" for d in func.locals]
+        loops = sorted({(s.var, s.type) for s in walk(func.body) if isinstance(s, For)})
+        locals_ += [f"{self.indent}{CTYPE[t]} {v};" for v, t in loops]
+        body = p.block(func.body, 1)
+        blank = [""] if locals_ else []
+        return "\n".join([*doc, *head, "{", *locals_, *blank, *body, "}"]) + "\n"
+
+
+def walk(body: tuple[S, ...]) -> list[S]:
+    """Every statement, nested ones included."""
+    out: list[S] = []
+    for s in body:
+        out.append(s)
+        if isinstance(s, If):
+            out += walk(s.then) + walk(s.orelse)
+        elif isinstance(s, (For, Loop)):
+            out += walk(s.body)
+    return out
+
+
+def uses(body: tuple[S, ...], name: str) -> bool:
+    """The statements call function name."""
+    return f"Fn(name='{name}'" in repr(body)
+
+
+__all__ = ["CPrinter", "Fn", "Var", "uses", "walk"]

@@ -1,0 +1,148 @@
+"""The IR as Fortran 2008 (module procedures of <prefix>_ode_mod).
+
+Arrays are declared from 0, as the IR indexes them; k[j][i] is k(i, j). A
+function's value is `res`; a return sets it and leaves. Locals get their
+first values by assignment (an initializer would make them SAVE).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from gyrogen.codegen.ir.c import walk
+from gyrogen.codegen.ir.nodes import (
+    Assign,
+    Call,
+    Comment,
+    Decl,
+    E,
+    For,
+    Func,
+    If,
+    Loop,
+    Return,
+    S,
+    Sel,
+    Var,
+)
+from gyrogen.codegen.ir.printer import ATOM, Printer
+
+CONSTS = {
+    "NX": "nx",
+    "NC": "nc",
+    "EPSILON": "epsilon(1.0_c_double)",
+    "TINY": "tiny(1.0_c_double)",
+    "HUGE": "huge(1.0_c_double)",
+}
+FTYPE = {
+    "double": "real(c_double)",
+    "int": "integer(c_int)",
+    "long": "integer(c_long)",
+    "bool": "logical",
+}
+FUNCTIONS = {"finite": "ieee_is_finite", "floor": "floor_real"}
+
+
+class FortranPrinter(Printer):
+    indent = "  "
+    ops: ClassVar[dict[str, str]] = {"and": ".and.", "or": ".or.", "==": "==", "!=": "/="}
+    unary_minus = 5
+    continuation = " &"
+
+    def number(self, value: float) -> str:
+        return super().number(value) + "_c_double"
+
+    def const(self, name: str) -> str:
+        return CONSTS.get(name) or f"{self.macro}_{name}"
+
+    def var(self, name: str) -> tuple[str, int]:
+        return name.replace(".", "%"), ATOM
+
+    def element(self, name: str, index: tuple[str, ...]) -> str:
+        return f"{name}({', '.join(reversed(index))})"
+
+    def row(self, name: str, j: str) -> str:
+        return f"{name}(:, {j})"
+
+    def ref(self, name: str) -> str:
+        return name
+
+    def boolean(self, value: bool) -> str:
+        return ".true." if value else ".false."
+
+    def negate(self, text: str) -> str:
+        return ".not. " + text
+
+    def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
+        if name == "real":
+            return f"real({args[0]}, c_double)"
+        if name == "pow":
+            return f"{self.expr(nodes[0], ATOM)}**{self.expr(nodes[1], ATOM)}"
+        return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
+
+    def select(self, e: Sel) -> str:
+        return f"merge({self.expr(e.a)}, {self.expr(e.b)}, {self.expr(e.cond)})"
+
+    def note(self, text: str) -> str:
+        return f"  ! {text}"
+
+    def statement(self, s: S, depth: int) -> list[str]:
+        pad = self.indent * depth
+        if isinstance(s, Assign):
+            return self.line(depth, f"{self.expr(s.target)} = {self.expr(s.value)}", s.note)
+        if isinstance(s, Comment):
+            return [""] * s.blank + [f"{pad}! {s.text}"]
+        if isinstance(s, Call):
+            name = f"{self.prefix}_rhs" if s.name == "rhs" else s.name
+            return self.line(depth, f"call {name}({self.call_args(s)})", s.note)
+        if isinstance(s, Return):
+            if s.value is None:
+                return self.line(depth, "return", s.note)
+            return [*self.line(depth, f"res = {self.expr(s.value)}", s.note), f"{pad}return"]
+        if isinstance(s, If):
+            out = [f"{pad}if ({self.expr(s.cond)}) then", *self.block(s.then, depth + 1)]
+            if s.orelse:
+                out += [f"{pad}else", *self.block(s.orelse, depth + 1)]
+            return [*out, f"{pad}end if"]
+        if isinstance(s, Loop):
+            return [f"{pad}do", *self.block(s.body, depth + 1), f"{pad}end do"]
+        assert isinstance(s, For), s
+        head = f"{pad}do {s.var} = 0, {self.expr(s.n, 5)} - 1"
+        return [head, *self.block(s.body, depth + 1), f"{pad}end do"]
+
+    def declaration(self, d: Decl, param: bool) -> str:
+        ftype = f"type({self.prefix}_stats)" if d.type == "stats" else FTYPE[d.type]
+        intent = f", intent({d.intent})" if param else ""
+        dims = ", ".join(f"0:{self.extent(n)} - 1" for n in reversed(d.shape))
+        return f"{ftype}{intent} :: {d.name}" + (f"({dims})" if dims else "")
+
+    def extent(self, n: str | int) -> str:
+        if isinstance(n, int) or n in self.decls:
+            return str(n)
+        return self.const(n)
+
+    def function(self, func: Func) -> str:
+        p = self.with_decls(func)
+        names = ", ".join(d.name for d in func.params)
+        kind = "subroutine" if func.returns is None else "function"
+        result = "" if func.returns is None else " result(res)"
+        pad = self.indent
+        head = p.wrap(f"{pad}{kind} {func.name}({names}){result}", pad * 5, "")
+        doc = [f"{pad}! {d}" for d in func.doc]
+        params = sorted(func.params, key=lambda d: bool(d.shape))  # extents first
+        decls = [f"{pad * 2}{p.declaration(d, True)}" for d in params]
+        if func.returns is not None:
+            decls.append(f"{pad * 2}{FTYPE.get(func.returns, 'integer')} :: res")
+        decls += [f"{pad * 2}{p.declaration(d, False)}" for d in func.locals]
+        scoped = sorted({x for s in walk(func.body) if isinstance(s, For) for x in s.locals})
+        decls += [f"{pad * 2}real(c_double) :: {x}" for x in scoped]
+        loops = sorted({(s.var, s.type) for s in walk(func.body) if isinstance(s, For)})
+        decls += [f"{pad * 2}{FTYPE[t]} :: {v}" for v, t in loops]
+        inits = [Assign(p_var(d), d.init) for d in func.locals if d.init is not None]
+        body = p.block((*inits, *func.body), 2)
+        end = f"{pad}end {kind} {func.name}"
+        return "\n".join([*doc, *head, *decls, "", *body, end]) + "\n"
+
+
+def p_var(d: Decl) -> Var:
+    return Var(d.name)

@@ -1,0 +1,200 @@
+"""The IR over SIMD lanes: the scalar statements of one trajectory, printed
+for every lane of a struct lanes L (see gyrogen.codegen.ir.c).
+
+A run of statements on values becomes one loop over the lanes; a loop over
+the states holds a loop over the lanes; a branch becomes a selection per
+lane (if-conversion: both sides computed, each lane keeps its own); a call
+of the rhs runs on every lane with each lane's time, and a branch around a
+call runs it when any lane needs it.
+"""
+
+from __future__ import annotations
+
+from gyrogen.codegen.ir.c import CTYPE, CPrinter, uses
+from gyrogen.codegen.ir.nodes import (
+    Assign,
+    At,
+    Call,
+    Comment,
+    Decl,
+    E,
+    For,
+    Func,
+    If,
+    Row,
+    S,
+    Sel,
+    Var,
+    and_,
+    not_,
+)
+from gyrogen.codegen.ir.printer import ATOM
+
+
+class LanesPrinter(CPrinter):
+    """state: the per-trajectory values the struct lanes holds; every other
+    name is the function's (a value local: one per lane) or the same on
+    every lane (rtol, atol, t1, c...)."""
+
+    def __init__(
+        self, prefix: str, macro: str, decls: dict[str, Decl], state: dict[str, Decl] | None = None
+    ) -> None:
+        super().__init__(prefix, macro, decls)
+        self.state = state or {}
+        self.scoped: set[str] = set()
+
+    def with_decls(self, func: Func) -> LanesPrinter:
+        return LanesPrinter(self.prefix, self.macro, {d.name: d for d in func.locals}, self.state)
+
+    @property
+    def width(self) -> str:
+        return f"{self.macro}_LANES"
+
+    def field(self, name: str) -> str:
+        return "L->" + name.replace(".", "_")
+
+    def var(self, name: str) -> tuple[str, int]:
+        if name in self.state:
+            d = self.state[name]
+            return (self.field(name) if d.shape else f"{self.field(name)}[l]"), ATOM
+        if name in self.decls and name not in self.scoped:
+            return f"{name}[l]", ATOM
+        return name, ATOM
+
+    def element(self, name: str, index: tuple[str, ...]) -> str:
+        base = self.field(name) if name in self.state else name
+        return base + "".join(f"[{i}]" for i in index) + ("[l]" if name in self.state else "")
+
+    def row(self, name: str, j: str) -> str:
+        return f"{self.field(name)}[{j}]"
+
+    def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
+        if name == "cos":
+            return f"{self.prefix}_cos_lanes({args[0]})"
+        return super().call(name, args, nodes)
+
+    def lane_loop(self, depth: int, body: list[str], simd: bool) -> list[str]:
+        pad = self.indent * depth
+        pragma = [f"{pad}{self.macro}_SIMD"] if simd else [f"{pad}/* pow: scalar calls */"]
+        return [*pragma, f"{pad}for (l = 0; l < {self.width}; ++l) {{", *body, f"{pad}}}"]
+
+    def block(self, body: tuple[S, ...], depth: int) -> list[str]:
+        """Top-level statements: runs of value statements share one lane loop."""
+        lines: list[str] = []
+        run: list[S] = []
+
+        def flush() -> None:
+            if run:
+                inner = super(LanesPrinter, self).block(tuple(converted(run)), depth + 1)
+                lines.extend(self.lane_loop(depth, inner, not uses(tuple(run), "pow")))
+                run.clear()
+
+        for s in converted(body, top=True, own=frozenset(self.decls)):
+            if isinstance(s, Assign):
+                run.append(s)
+                continue
+            flush()
+            lines += self.outer(s, depth)
+        flush()
+        return lines
+
+    def outer(self, s: S, depth: int) -> list[str]:
+        pad = self.indent * depth
+        if isinstance(s, Comment):
+            return super().statement(s, depth)
+        if isinstance(s, For):
+            self.scoped |= set(s.locals)
+            local = [f"{pad}{self.indent * 2}double {', '.join(s.locals)};"] if s.locals else []
+            inner = super().block(tuple(converted(s.body)), depth + 2)
+            loop = self.lane_loop(depth + 1, [*local, *inner], not uses(s.body, "pow"))
+            self.scoped -= set(s.locals)
+            return [
+                f"{pad}for ({s.var} = 0; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{",
+                *loop,
+                f"{pad}}}",
+            ]
+        if isinstance(s, Call):
+            assert s.name == "rhs", s
+            t, x, c, out = s.args
+            times = self.lane_loop(depth, [f"{pad}{self.indent}L->ts[l] = {self.expr(t)};"], True)
+            args = ", ".join(self.expr(a) for a in (x, c, out))
+            return [*times, f"{pad}rhs_lanes(L->ts, {args});"]
+        assert isinstance(s, If) and not s.orelse, s
+        assert all(isinstance(x, Call) for x in s.then), "a branch around a call holds calls only"
+        any_lane = self.lane_loop(depth, [f"{pad}{self.indent}need |= {self.expr(s.cond)};"], True)
+        return [
+            f"{pad}need = 0;",
+            *any_lane,
+            f"{pad}if (need) {{",
+            *self.block(s.then, depth + 1),
+            f"{pad}}}",
+        ]
+
+    def function(self, func: Func) -> str:
+        """static void name(struct lanes *L, params): func's body on every lane."""
+        p = self.with_decls(func)
+        params = ", ".join(
+            ["struct lanes *L", *(CPrinter.declaration(p, d, True) for d in func.params)]
+        )
+        locals_ = [f"{CTYPE[d.type]} {d.name}[{self.width}];" for d in func.locals]
+        loops = sorted({s.var for s in walk_for(func.body)} | {"l"})
+        locals_.append(f"int {', '.join(loops)};")
+        if any(isinstance(s, If) and any(isinstance(x, Call) for x in s.then) for s in func.body):
+            locals_.append("int need;")
+        doc = [f"/* {d} */" for d in func.doc[:1]]
+        body = p.block(func.body, 1)
+        head = p.wrap(f"static void {func.name}({params})", " " * (13 + len(func.name)), "")
+        lines = [*doc, *head, "{", *(self.indent + x for x in locals_), *body, "}"]
+        return "\n".join(lines) + "\n"
+
+
+def nested(s: S) -> list[S]:
+    if isinstance(s, If):
+        return [x for y in (*s.then, *s.orelse) for x in [y, *nested(y)]]
+    if isinstance(s, For):
+        return [x for y in s.body for x in [y, *nested(y)]]
+    return []
+
+
+def walk_for(body: tuple[S, ...]) -> list[For]:
+    return [s for s in body if isinstance(s, For)] + [
+        f for s in body if isinstance(s, If) for f in walk_for((*s.then, *s.orelse))
+    ]
+
+
+def converted(
+    body: list[S] | tuple[S, ...],
+    cond: E | None = None,
+    top: bool = False,
+    own: frozenset = frozenset(),
+) -> list[S]:
+    """if-conversion: each assignment under cond keeps its old value where
+    cond is false. A branch may not assign what its condition reads. At the
+    top, a branch around calls stays a branch. Names in own are the branch's
+    own values (a local first set in it): assigned as they are."""
+    out: list[S] = []
+    for s in body:
+        if top and isinstance(s, If) and any(isinstance(x, Call) for x in nested(s)):
+            out.append(s)
+        elif isinstance(s, If):
+            written = {repr(x.target) for x in nested(s) if isinstance(x, Assign)}
+            assert not any(w in repr(s.cond) for w in written), f"branch assigns its condition: {s}"
+            both = s.cond if cond is None else _and(cond, s.cond)
+            other = not_(s.cond) if cond is None else _and(cond, not_(s.cond))
+            out += converted(s.then, both, own=own) + converted(s.orelse, other, own=own)
+        elif isinstance(s, Assign) and isinstance(s.target, Var) and s.target.name in own:
+            out.append(s)
+        elif isinstance(s, Assign) and cond is not None:
+            out.append(Assign(s.target, Sel(cond, s.value, s.target), s.note))
+        elif isinstance(s, For) and cond is not None:
+            out.append(For(s.var, s.n, tuple(converted(s.body, cond, own=own)), s.locals, s.type))
+        else:
+            out.append(s)
+    return out
+
+
+def _and(a: E, b: E) -> E:
+    return and_(a, b)
+
+
+__all__ = ["At", "LanesPrinter", "Row", "Var"]

@@ -1,0 +1,281 @@
+"""The integrators' statement IR: expressions, statements and functions.
+
+An integrator is described once in these nodes (gyrogen.codegen.integrators)
+and printed by one printer per target: scalar C and SIMD-lane C
+(gyrogen.codegen.ir.c) and Fortran 2008 (gyrogen.codegen.ir.fortran). The
+nodes keep the order of every operation as written: a printer adds
+parentheses where its language needs them and never reassociates, so every
+target rounds alike.
+
+Arrays are indexed from 0 in every target (Fortran declares them 0:n-1); a
+two-index array is k[j][i] in C order (Fortran prints k(i, j)). A name with
+a dot, "stats.h", is a field of the statistics (stats->h, stats%h).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class E:
+    """An expression; + - * / and unary - build operations as written."""
+
+    def __add__(self, other: E | float) -> E:
+        return Bin("+", self, lit(other))
+
+    def __radd__(self, other: float) -> E:
+        return Bin("+", lit(other), self)
+
+    def __sub__(self, other: E | float) -> E:
+        return Bin("-", self, lit(other))
+
+    def __rsub__(self, other: float) -> E:
+        return Bin("-", lit(other), self)
+
+    def __mul__(self, other: E | float) -> E:
+        return Bin("*", self, lit(other))
+
+    def __rmul__(self, other: float) -> E:
+        return Bin("*", lit(other), self)
+
+    def __truediv__(self, other: E | float) -> E:
+        return Bin("/", self, lit(other))
+
+    def __rtruediv__(self, other: float) -> E:
+        return Bin("/", lit(other), self)
+
+    def __neg__(self) -> E:
+        return Un("-", self)
+
+    def __getitem__(self, index: E | int | tuple[E | int, ...]) -> At:
+        assert isinstance(self, Var)
+        idx = index if isinstance(index, tuple) else (index,)
+        return At(self.name, tuple(Int(i) if isinstance(i, int) else i for i in idx))
+
+
+@dataclass(frozen=True)
+class Num(E):
+    """A double literal."""
+
+    value: float
+
+
+@dataclass(frozen=True)
+class Int(E):
+    value: int
+
+
+@dataclass(frozen=True)
+class Bool(E):
+    value: bool
+
+
+@dataclass(frozen=True)
+class Var(E):
+    """A scalar (or a whole array, as a call's argument)."""
+
+    name: str
+
+
+@dataclass(frozen=True)
+class At(E):
+    """An element of an array, C order."""
+
+    name: str
+    index: tuple[E, ...]
+
+
+@dataclass(frozen=True)
+class Row(E):
+    """Row j of a two-index array, as a call's argument (C k[j], Fortran k(:, j))."""
+
+    name: str
+    row: E
+
+
+@dataclass(frozen=True)
+class Ref(E):
+    """A scalar passed for the callee to set (C &h, Fortran h)."""
+
+    name: str
+
+
+@dataclass(frozen=True)
+class Const(E):
+    """A named constant of the file: NX, a return code ("ODE_OK"), MIN_RTOL,
+    GIMBAL_LOCK_COS, or the double's EPSILON, TINY, HUGE."""
+
+    name: str
+
+
+Type = Literal["double", "int", "long", "bool", "stats"]
+BinOp = Literal["+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!=", "and", "or"]
+
+
+@dataclass(frozen=True)
+class Bin(E):
+    op: BinOp
+    a: E
+    b: E
+
+
+@dataclass(frozen=True)
+class Un(E):
+    op: Literal["-", "not"]
+    a: E
+
+
+@dataclass(frozen=True)
+class Fn(E):
+    """A function: max, min, abs, sqrt, pow, floor, finite (not NaN or Inf),
+    cos (the scene's), or a function of the file by its name."""
+
+    name: str
+    args: tuple[E, ...]
+
+
+@dataclass(frozen=True)
+class Sel(E):
+    """cond ? a : b (both sides are evaluated: no side effects in them)."""
+
+    cond: E
+    a: E
+    b: E
+
+
+def lit(v: E | float) -> E:
+    if isinstance(v, E):
+        return v
+    if isinstance(v, bool):
+        return Bool(v)
+    return Int(v) if isinstance(v, int) and not isinstance(v, bool) else Num(float(v))
+
+
+def fn(name: str, *args: E | float) -> E:
+    return Fn(name, tuple(lit(a) for a in args))
+
+
+def cmp(a: E | float, op: BinOp, b: E | float) -> E:
+    return Bin(op, lit(a), lit(b))
+
+
+def and_(*terms: E) -> E:
+    out = terms[0]
+    for t in terms[1:]:
+        out = Bin("and", out, t)
+    return out
+
+
+def or_(*terms: E) -> E:
+    out = terms[0]
+    for t in terms[1:]:
+        out = Bin("or", out, t)
+    return out
+
+
+def not_(a: E) -> E:
+    return Un("not", a)
+
+
+def sel(cond: E, a: E | float, b: E | float) -> E:
+    return Sel(cond, lit(a), lit(b))
+
+
+# Statements
+
+
+@dataclass(frozen=True)
+class S:
+    """A statement."""
+
+
+@dataclass(frozen=True)
+class Assign(S):
+    target: Var | At
+    value: E
+    note: str = ""
+    """A comment at the end of the line."""
+
+
+@dataclass(frozen=True)
+class For(S):
+    """var = 0 .. n - 1; locals are scoped to the body (doubles)."""
+
+    var: str
+    n: E
+    body: tuple[S, ...]
+    locals: tuple[str, ...] = ()
+    type: Type = "int"
+
+
+@dataclass(frozen=True)
+class If(S):
+    cond: E
+    then: tuple[S, ...]
+    orelse: tuple[S, ...] = ()
+
+
+@dataclass(frozen=True)
+class Loop(S):
+    """Forever, until a return."""
+
+    body: tuple[S, ...]
+
+
+@dataclass(frozen=True)
+class Return(S):
+    value: E | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Call(S):
+    """A subroutine call (the rhs: its lanes twin takes the time per lane)."""
+
+    name: str
+    args: tuple[E, ...]
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Comment(S):
+    text: str
+    blank: bool = True
+    """A blank line before it."""
+
+
+def assign(target: Var | At, value: E | float, note: str = "") -> Assign:
+    return Assign(target, lit(value), note)
+
+
+def inc(target: Var | At, by: E | float) -> Assign:
+    """target += by, written out (target + by)."""
+    return Assign(target, Bin("+", target, lit(by)))
+
+
+# Declarations and functions
+
+
+@dataclass(frozen=True)
+class Decl:
+    """A parameter or a local: a scalar, or an array of shape (C order) whose
+    extents are names (NX) or numbers."""
+
+    name: str
+    type: Type
+    shape: tuple[str | int, ...] = ()
+    intent: Literal["in", "out", "inout"] = "in"
+    init: E | None = None
+    """A local's value at the start (an array: every element)."""
+
+
+@dataclass(frozen=True)
+class Func:
+    name: str
+    params: tuple[Decl, ...]
+    body: tuple[S, ...]
+    returns: Type | None = None
+    locals: tuple[Decl, ...] = field(default=())
+    doc: tuple[str, ...] = ()

@@ -1,0 +1,181 @@
+"""What every target's printer shares: expressions by precedence, statements
+laid out by indentation, functions from their declarations.
+
+A printer never reorders: a right operand of equal precedence is always
+parenthesized, so a - (b + c) and a + (b + c) stay as the description has
+them and every target performs the same roundings.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from gyrogen.codegen.ir.nodes import (
+    At,
+    Bin,
+    Bool,
+    Call,
+    Const,
+    Decl,
+    E,
+    Fn,
+    Func,
+    Int,
+    Num,
+    Ref,
+    Row,
+    S,
+    Sel,
+    Un,
+    Var,
+)
+from gyrogen.methods import literal
+
+PRECEDENCE = {"or": 1, "and": 2, "==": 3, "!=": 3, "<": 4, "<=": 4, ">": 4, ">=": 4}
+PRECEDENCE |= {"+": 5, "-": 5, "*": 6, "/": 6}
+ATOM = 9
+WRAP = 100
+"""A statement continues on a new line before it would pass this column."""
+
+
+def _op(e: E, op: str) -> bool:
+    return isinstance(e, Bin) and e.op == op
+
+
+class Printer:
+    """A target: subclasses spell the atoms, operators and statements."""
+
+    indent = "    "
+    ops: ClassVar[dict[str, str]] = {}
+    unary_minus = 7
+    """The precedence of -x (Fortran: that of a sum; C: above a product)."""
+
+    def __init__(self, prefix: str, macro: str, decls: dict[str, Decl]) -> None:
+        self.prefix = prefix
+        self.macro = macro
+        self.decls = decls
+
+    def with_decls(self, func: Func) -> Printer:
+        """A printer for func's body: its parameters (and locals) by name."""
+        return type(self)(self.prefix, self.macro, {d.name: d for d in func.params})
+
+    # expressions
+
+    def expr(self, e: E, parent: int = 0, right: bool = False) -> str:
+        text, prec = self._expr(e)
+        need = prec < parent or (right and prec == parent and prec < ATOM)
+        return f"({text})" if need else text
+
+    def _expr(self, e: E) -> tuple[str, int]:
+        if isinstance(e, Num):
+            return self.number(e.value), ATOM if e.value >= 0 else self.unary_minus
+        if isinstance(e, Int):
+            return str(e.value), ATOM if e.value >= 0 else self.unary_minus
+        if isinstance(e, Bool):
+            return self.boolean(e.value), ATOM
+        if isinstance(e, Var):
+            return self.var(e.name)
+        if isinstance(e, At):
+            return self.element(e.name, tuple(self.expr(i) for i in e.index)), ATOM
+        if isinstance(e, Row):
+            return self.row(e.name, self.expr(e.row)), ATOM
+        if isinstance(e, Ref):
+            return self.ref(e.name), ATOM
+        if isinstance(e, Const):
+            return self.const(e.name), ATOM
+        if isinstance(e, Bin):
+            return self.binary(e), PRECEDENCE[e.op]
+        if isinstance(e, Un):
+            if e.op == "-":
+                return "-" + self.expr(e.a, self.unary_minus + 1), self.unary_minus
+            return self.negate(self.expr(e.a, ATOM)), ATOM
+        if isinstance(e, Fn):
+            return self.call(e.name, [self.expr(a) for a in e.args], e.args), ATOM
+        assert isinstance(e, Sel), e
+        return self.select(e), 0
+
+    def binary(self, e: Bin) -> str:
+        prec = PRECEDENCE[e.op]
+        if e.op in ("or", "and"):  # a chain; an and inside an or in parentheses (-Wparentheses)
+            left, right = (
+                self.expr(a, ATOM if _op(a, "and" if e.op == "or" else "or") else prec)
+                for a in (e.a, e.b)
+            )
+            if _op(e.b, e.op):
+                right = f"({right})"
+        else:
+            left = self.expr(e.a, prec)
+            right = self.expr(e.b, prec, right=True)
+        return f"{left} {self.ops.get(e.op, e.op)} {right}"
+
+    def number(self, value: float) -> str:
+        return literal(value)
+
+    def const(self, name: str) -> str:
+        raise NotImplementedError
+
+    def var(self, name: str) -> tuple[str, int]:
+        raise NotImplementedError
+
+    def element(self, name: str, index: tuple[str, ...]) -> str:
+        raise NotImplementedError
+
+    def row(self, name: str, j: str) -> str:
+        raise NotImplementedError
+
+    def ref(self, name: str) -> str:
+        raise NotImplementedError
+
+    def boolean(self, value: bool) -> str:
+        raise NotImplementedError
+
+    def negate(self, text: str) -> str:
+        raise NotImplementedError
+
+    def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
+        raise NotImplementedError
+
+    def select(self, e: Sel) -> str:
+        raise NotImplementedError
+
+    # statements
+
+    def block(self, body: tuple[S, ...], depth: int) -> list[str]:
+        lines: list[str] = []
+        for s in body:
+            lines += self.statement(s, depth)
+        return lines
+
+    def statement(self, s: S, depth: int) -> list[str]:
+        raise NotImplementedError
+
+    def line(self, depth: int, text: str, note: str = "") -> list[str]:
+        """One statement, continued on new lines past WRAP."""
+        pad = self.indent * depth
+        return self.wrap(pad + text, pad + self.indent * 2, self.note(note) if note else "")
+
+    def wrap(self, text: str, cont: str, tail: str) -> list[str]:
+        lines = []
+        while len(text) > WRAP:
+            cut = text.rfind(", ", len(cont) + 8, WRAP - 2) + 1 or text.rfind(
+                " ", len(cont) + 8, WRAP - 2
+            )
+            if cut < 0:
+                break
+            lines.append(text[:cut] + self.continuation)
+            text = cont + text[cut + 1 :]
+        return [*lines, text + tail]
+
+    continuation = ""
+
+    def note(self, text: str) -> str:
+        raise NotImplementedError
+
+    def call_args(self, call: Call) -> str:
+        return ", ".join(self.expr(a) for a in call.args)
+
+    def declaration(self, d: Decl, param: bool) -> str:
+        raise NotImplementedError
+
+    def function(self, func: Func) -> str:
+        raise NotImplementedError
