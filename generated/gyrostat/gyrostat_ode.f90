@@ -593,6 +593,90 @@ contains
     return
   end function ode_start
 
+  ! In-place LU decomposition with partial pivoting within the diagonal
+  ! blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14) (row i's block ends
+  ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+  ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
+  function lu_decompose(a, piv) result(res)
+    real(c_double), intent(inout) :: a(0:nx * nx - 1)
+    integer(c_int), intent(out) :: piv(0:nx - 1)
+    logical :: res
+    integer(c_int), parameter :: lu_end(0:13) = [1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14]
+    integer(c_int) :: p
+    real(c_double) :: m
+    real(c_double) :: swap
+    integer(c_int) :: i
+    integer(c_int) :: j
+    integer(c_int) :: k
+
+    do k = 0, nx - 1
+      p = k
+      do i = k + 1, lu_end(k) - 1
+        if (abs(a(i * nx + k)) > abs(a(p * nx + k))) then
+          p = i
+        end if
+      end do
+      piv(k) = p
+      if (.not. (abs(a(p * nx + k)) > 0.0_c_double)) then
+        res = .true.  ! singular
+        return
+      end if
+      if (p /= k) then
+        do j = 0, nx - 1
+          swap = a(k * nx + j)
+          a(k * nx + j) = a(p * nx + j)
+          a(p * nx + j) = swap
+        end do
+      end if
+      a(k * nx + k) = 1.0_c_double / a(k * nx + k)
+      do i = k + 1, lu_end(k) - 1
+        m = a(i * nx + k) * a(k * nx + k)
+        a(i * nx + k) = m
+        do j = k + 1, nx - 1
+          a(i * nx + j) = a(i * nx + j) - m * a(k * nx + j)
+        end do
+      end do
+      do j = k + 1, nx - 1
+        a(k * nx + j) = a(k * nx + j) * a(k * nx + k)  ! u_kj / u_kk
+      end do
+    end do
+    res = .false.
+    return
+  end function lu_decompose
+
+  ! b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
+  ! and V that can be nonzero; each row subtracts the latest b_j last.
+  subroutine lu_solve(lu, piv, b)
+    real(c_double), intent(in) :: lu(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(inout) :: b(0:nx - 1)
+    real(c_double) :: swap
+    integer(c_int) :: i
+
+    do i = 0, nx - 1
+      swap = b(i)
+      b(i) = b(piv(i))
+      b(piv(i)) = swap
+    end do
+    b(2) = b(2) - lu(29) * b(1)
+    b(8) = b(8) - lu(119) * b(7)
+    b(9) = b(9) - lu(133) * b(7) - lu(134) * b(8)
+    b(13) = b(13) * lu(195)
+    b(12) = b(12) * lu(180)
+    b(11) = b(11) * lu(165)
+    b(10) = b(10) * lu(150)
+    b(9) = b(9) * lu(135) - lu(136) * b(10)
+    b(8) = b(8) * lu(120) - lu(122) * b(10) - lu(121) * b(9)
+    b(7) = b(7) * lu(105) - lu(108) * b(10) - lu(107) * b(9) - lu(106) * b(8)
+    b(6) = b(6) * lu(90) - lu(97) * b(13)
+    b(5) = b(5) * lu(75) - lu(82) * b(12)
+    b(4) = b(4) * lu(60) - lu(67) * b(11)
+    b(3) = b(3) * lu(45) - lu(52) * b(10) - lu(50) * b(8)
+    b(2) = b(2) * lu(30) - lu(37) * b(9) - lu(36) * b(8) - lu(35) * b(7)
+    b(1) = b(1) * lu(15) - lu(23) * b(9) - lu(22) * b(8) - lu(21) * b(7) - lu(16) * b(2)
+    b(0) = b(0) * lu(0) - lu(9) * b(9) - lu(7) * b(7) - lu(2) * b(2) - lu(1) * b(1)
+  end subroutine lu_solve
+
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
   function rk4_steps(t0, t1, steps, x, c, stats) result(res)
     real(c_double), intent(in) :: t0
@@ -1157,78 +1241,6 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_dop853
 
-  ! In-place LU decomposition with partial pivoting of E = I/(h gamma) - J,
-  ! block upper triangular in state order (see gyrogen/symbolic/blocks.py), with
-  ! the diagonal blocks (0-based, end excluded)
-  ! (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12),
-  ! (12, 13), (13, 14).
-  ! L is unit lower and nonzero within the diagonal blocks only; U = D V, stored
-  ! as 1/u_kk on the diagonal and V's u_kj/u_kk above it (each row of the back
-  ! substitution then waits on one multiply-add); row k swapped with piv(k), a
-  ! row of the same block. .true. when a pivot is zero: singular.
-  logical function lu_decompose(a, piv) result(singular)
-    real(c_double), intent(inout) :: a(nx, nx)
-    integer, intent(out) :: piv(nx)
-    integer, parameter :: block_end(nx) = [1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14]
-    real(c_double) :: row(nx)
-    integer :: e, j, k, p
-
-    singular = .true.
-    do k = 1, nx
-      e = block_end(k)
-      p = k - 1 + maxloc(abs(a(k:e, k)), dim=1)
-      piv(k) = p
-      if (.not. (abs(a(p, k)) > 0)) return
-      if (p /= k) then
-        row = a(k, :)
-        a(k, :) = a(p, :)
-        a(p, :) = row
-      end if
-      a(k, k) = 1 / a(k, k)
-      a(k + 1:e, k) = a(k + 1:e, k) * a(k, k)
-      do j = k + 1, nx
-        a(k + 1:e, j) = a(k + 1:e, j) - a(k + 1:e, k) * a(k, j)
-      end do
-      a(k, k + 1:nx) = a(k, k + 1:nx) * a(k, k)  ! u_kj / u_kk
-    end do
-    singular = .false.
-  end function lu_decompose
-
-  ! b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
-  ! and V that can be nonzero; each row subtracts the latest b(j) last.
-  subroutine lu_solve(lu, piv, b)
-    real(c_double), intent(in) :: lu(nx, nx)
-    integer, intent(in) :: piv(nx)
-    real(c_double), intent(inout) :: b(nx)
-    real(c_double) :: swap
-    integer :: j
-
-    do j = 1, nx
-      swap = b(j)
-      b(j) = b(piv(j))
-      b(piv(j)) = swap
-    end do
-    b(3) = b(3) - lu(3, 2) * b(2)
-    b(9) = b(9) - lu(9, 8) * b(8)
-    b(10) = b(10) - lu(10, 8) * b(8) - lu(10, 9) * b(9)
-    b(14) = b(14) * lu(14, 14)
-    b(13) = b(13) * lu(13, 13)
-    b(12) = b(12) * lu(12, 12)
-    b(11) = b(11) * lu(11, 11)
-    b(10) = b(10) * lu(10, 10) - lu(10, 11) * b(11)
-    b(9) = b(9) * lu(9, 9) - lu(9, 11) * b(11) - lu(9, 10) * b(10)
-    b(8) = b(8) * lu(8, 8) - lu(8, 11) * b(11) - lu(8, 10) * b(10) - lu(8, 9) * b(9)
-    b(7) = b(7) * lu(7, 7) - lu(7, 14) * b(14)
-    b(6) = b(6) * lu(6, 6) - lu(6, 13) * b(13)
-    b(5) = b(5) * lu(5, 5) - lu(5, 12) * b(12)
-    b(4) = b(4) * lu(4, 4) - lu(4, 11) * b(11) - lu(4, 9) * b(9)
-    b(3) = b(3) * lu(3, 3) - lu(3, 10) * b(10) - lu(3, 9) * b(9) - lu(3, 8) * b(8)
-    b(2) = b(2) * lu(2, 2) - lu(2, 10) * b(10) - lu(2, 9) * b(9) - lu(2, 8) * b(8) &
-         - lu(2, 3) * b(3)
-    b(1) = b(1) * lu(1, 1) - lu(1, 10) * b(10) - lu(1, 8) * b(8) - lu(1, 3) * b(3) &
-         - lu(1, 2) * b(2)
-  end subroutine lu_solve
-
   ! 1/(re + i im) as inv_re + i inv_im, by Smith's division (no overflow in
   ! re^2 + im^2).
   pure subroutine complex_inverse(re, im, inv_re, inv_im)
@@ -1388,88 +1400,260 @@ contains
         - ar(1, 2) * bi(2) - ai(1, 2) * br(2)
     br(1) = re
   end subroutine lu_solve_complex
-  ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
-  ! Hairer's rodas.f): with E = I/(h gamma) - J, gamma = 0.25, stage s solves
-  ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
-  ! Stiffly accurate: stage 6 sits on the embedded solution and the step is
-  ! that plus k_6, so k_6 is the error estimate. Returns its norm (NaN or Inf
-  ! when a stage is).
-  function rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, &
-                        xnew) result(err)
-    real(c_double), intent(in) :: t, h, x(nx), f0(nx), lu(nx, nx), c(nc), rtol, atol, comp(nx)
-    integer, intent(in) :: piv(nx)
-    real(c_double), intent(out) :: k(nx, 6), dx(nx), xnew(nx)
-    real(c_double) :: err, y(nx), fy(nx), inv_h
 
-    inv_h = 1 / h
+  ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+  ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+  ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+  ! Stiffly accurate: stage 6 sits on the embedded solution and the step
+  ! is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+  ! when a stage is).
+  function rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: lu(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: comp(0:nx - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: dx(0:nx - 1)
+    real(c_double), intent(inout) :: xnew(0:nx - 1)
+    real(c_double) :: res
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: fy(0:nx - 1)
+    real(c_double) :: inv_h
+    integer(c_int) :: i
+
+    inv_h = 1.0_c_double / h
 
     ! stage 1: t
-    k(:, 1) = f0
-    call lu_solve(lu, piv, k(:, 1))
+    do i = 0, nx - 1
+      k(i, 0) = f0(i)
+    end do
+    call lu_solve(lu, piv, k(:, 0))
 
     ! stage 2: t + 0.386 h
-    y = x + 1.544_c_double * k(:, 1)
+    do i = 0, nx - 1
+      y(i) = x(i) + 1.544_c_double * k(i, 0)
+    end do
     call gyrostat_rhs(t + 0.386_c_double * h, y, c, fy)
-    k(:, 2) = fy + inv_h * (-5.6688_c_double * k(:, 1))
-    call lu_solve(lu, piv, k(:, 2))
+    do i = 0, nx - 1
+      k(i, 1) = fy(i) + inv_h * ((-5.6688_c_double) * k(i, 0))
+    end do
+    call lu_solve(lu, piv, k(:, 1))
 
     ! stage 3: t + 0.21 h
-    y = x + 0.9466785280815826_c_double * k(:, 1) &
-          + 0.2557011698983284_c_double * k(:, 2)
+    do i = 0, nx - 1
+      y(i) = x(i) + 0.9466785280815826_c_double * k(i, 0) + 0.2557011698983284_c_double * k(i, 1)
+    end do
     call gyrostat_rhs(t + 0.21_c_double * h, y, c, fy)
-    k(:, 3) = fy + inv_h * (-2.430093356833875_c_double * k(:, 1) &
-                              - 0.2063599157091915_c_double * k(:, 2))
-    call lu_solve(lu, piv, k(:, 3))
+    do i = 0, nx - 1
+      k(i, 2) = fy(i) + inv_h * ((-2.430093356833875_c_double) * k(i, &
+          0) - 0.2063599157091915_c_double * k(i, 1))
+    end do
+    call lu_solve(lu, piv, k(:, 2))
 
     ! stage 4: t + 0.63 h
-    y = x + 3.314825187068521_c_double * k(:, 1) &
-          + 2.896124015972201_c_double * k(:, 2) &
-          + 0.9986419139977817_c_double * k(:, 3)
+    do i = 0, nx - 1
+      y(i) = x(i) + 3.314825187068521_c_double * k(i, 0) + 2.896124015972201_c_double * k(i, &
+          1) + 0.9986419139977817_c_double * k(i, 2)
+    end do
     call gyrostat_rhs(t + 0.63_c_double * h, y, c, fy)
-    k(:, 4) = fy + inv_h * (-0.1073529058151375_c_double * k(:, 1) &
-                              - 9.594562251023355_c_double * k(:, 2) &
-                              - 20.47028614809616_c_double * k(:, 3))
-    call lu_solve(lu, piv, k(:, 4))
+    do i = 0, nx - 1
+      k(i, 3) = fy(i) + inv_h * ((-0.1073529058151375_c_double) * k(i, &
+          0) - 9.594562251023355_c_double * k(i, 1) - 20.47028614809616_c_double * k(i, 2))
+    end do
+    call lu_solve(lu, piv, k(:, 3))
 
     ! stage 5: t + h
-    y = x + 1.221224509226641_c_double * k(:, 1) &
-          + 6.019134481288629_c_double * k(:, 2) &
-          + 12.53708332932087_c_double * k(:, 3) &
-          - 0.687886036105895_c_double * k(:, 4)
+    do i = 0, nx - 1
+      y(i) = x(i) + 1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1) + 12.53708332932087_c_double * k(i, 2) - 0.687886036105895_c_double * k(i, 3)
+    end do
     call gyrostat_rhs(t + h, y, c, fy)
-    k(:, 5) = fy + inv_h * (7.496443313967647_c_double * k(:, 1) &
-                              - 10.24680431464352_c_double * k(:, 2) &
-                              - 33.99990352819905_c_double * k(:, 3) &
-                              + 11.7089089320616_c_double * k(:, 4))
-    call lu_solve(lu, piv, k(:, 5))
+    do i = 0, nx - 1
+      k(i, 4) = fy(i) + inv_h * (7.496443313967647_c_double * k(i, &
+          0) - 10.24680431464352_c_double * k(i, 1) - 33.99990352819905_c_double * k(i, &
+          2) + 11.7089089320616_c_double * k(i, 3))
+    end do
+    call lu_solve(lu, piv, k(:, 4))
 
     ! stage 6: t + h, on the embedded solution
-    dx = 1.221224509226641_c_double * k(:, 1) &
-         + 6.019134481288629_c_double * k(:, 2) &
-         + 12.53708332932087_c_double * k(:, 3) &
-         - 0.687886036105895_c_double * k(:, 4) &
-         + k(:, 5)
-    y = x + dx
+    do i = 0, nx - 1
+      dx(i) = 1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1) + 12.53708332932087_c_double * k(i, 2) - 0.687886036105895_c_double * k(i, 3) + k(i, 4)
+      y(i) = x(i) + dx(i)
+    end do
     call gyrostat_rhs(t + h, y, c, fy)
-    k(:, 6) = fy + inv_h * (8.083246795921522_c_double * k(:, 1) &
-                              - 7.981132988064893_c_double * k(:, 2) &
-                              - 31.52159432874371_c_double * k(:, 3) &
-                              + 16.31930543123136_c_double * k(:, 4) &
-                              - 6.058818238834054_c_double * k(:, 5))
-    call lu_solve(lu, piv, k(:, 6))
+    do i = 0, nx - 1
+      k(i, 5) = fy(i) + inv_h * (8.083246795921522_c_double * k(i, &
+          0) - 7.981132988064893_c_double * k(i, 1) - 31.52159432874371_c_double * k(i, &
+          2) + 16.31930543123136_c_double * k(i, 3) - 6.058818238834054_c_double * k(i, 4))
+    end do
+    call lu_solve(lu, piv, k(:, 5))
 
     ! the new solution x + dx: the embedded one plus k_6
-    dx = (dx + k(:, 6)) - comp
-    xnew = x + dx
-    err = error_norm(k(:, 6), x, xnew, rtol, atol)
+    do i = 0, nx - 1
+      dx(i) = dx(i) + k(i, 5) - comp(i)
+      xnew(i) = x(i) + dx(i)
+    end do
+    res = error_norm(k(:, 5), x, xnew, rtol, atol)
+    return
   end function rodas4_trial
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! J and f are evaluated once per accepted step; a rejected step only
-  ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h =
-  ! 0.9 err^-1/4 within [0.2, 6], and Gustafsson's predictive controller
-  ! after an accepted step. A singular E is retried with h halved, five
-  ! times in a row at most.
+  ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+  ! err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an accepted step.
+  ! A singular E is retried with h times 0.5, 5 times in a row at most.
+  function rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(gyrostat_stats), intent(inout) :: stats
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    integer(c_int) :: res
+    real(c_double) :: J(0:nx * nx - 1)
+    real(c_double) :: lu(0:nx * nx - 1)
+    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: fnew(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: piv(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err
+    real(c_double) :: fac
+    real(c_double) :: gus
+    real(c_double) :: h_acc
+    real(c_double) :: err_acc
+    logical :: last
+    logical :: rejected_last
+    logical :: nonfinite
+    logical :: new_point
+    integer(c_int) :: singular
+    integer(c_int) :: start
+    integer(c_int) :: i
+
+    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (start >= 0) then
+      res = start
+      return
+    end if
+    t = t0
+    h_acc = 0.0_c_double
+    err_acc = 1e-2_c_double
+    rejected_last = .false.
+    nonfinite = .false.
+    singular = 0
+    new_point = .true.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    do
+      if (new_point) then
+        call gyrostat_jac(t, x, c, J)
+        stats%jac_calls = stats%jac_calls + 1
+        if (.not. all_finite(J, nx * nx)) then
+          res = GYROSTAT_ODE_ERR_NONFINITE
+          return
+        end if
+        new_point = .false.
+      end if
+      if (step_underflow(h, t)) then
+        res = merge(GYROSTAT_ODE_ERR_NONFINITE, GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        res = GYROSTAT_ODE_ERR_MAX_STEPS
+        return
+      end if
+      last = t + 1.01_c_double * h >= t1
+      if (last) then
+        h = t1 - t
+      end if
+      stats%h = h
+
+      ! E = I/(h gamma) - J
+      do i = 0, nx * nx - 1
+        lu(i) = -J(i)
+      end do
+      do i = 0, nx - 1
+        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
+      end do
+      stats%decompositions = stats%decompositions + 1
+      if (lu_decompose(lu, piv)) then
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+        singular = singular + 1
+        if (singular == 5) then
+          res = GYROSTAT_ODE_ERR_SINGULAR
+          return
+        end if
+        h = h * 0.5_c_double
+        cycle
+      end if
+      singular = 0
+      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew)
+      stats%rhs_calls = stats%rhs_calls + 5
+      nonfinite = .not. ieee_is_finite(err) .or. .not. all_finite(xnew, nx)
+      if (.not. nonfinite .and. err <= 1.0_c_double .and. .not. last) then
+        call gyrostat_rhs(t + h, xnew, c, fnew)  ! where the next step starts
+        stats%rhs_calls = stats%rhs_calls + 1
+        nonfinite = .not. all_finite(fnew, nx)
+      end if
+      if (nonfinite) then
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+        h = h * 0.2_c_double
+        cycle
+      end if
+      fac = max(0.16666666666666666_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))  ! h / h_new
+      if (err <= 1.0_c_double) then
+        if (gimbal_lock(x, xnew)) then
+          res = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        if (stats%accepted > 0) then
+          gus = h_acc / h * (err * err / err_acc)**0.25_c_double / 0.9_c_double
+          fac = max(fac, max(0.16666666666666666_c_double, min(5.0_c_double, gus)))
+        end if
+        h_acc = h
+        err_acc = max(1e-2_c_double, err)
+        call accept_step(x, xnew, dx, comp)
+        t = merge(t1, t + h, last)
+        stats%t = t
+        stats%accepted = stats%accepted + 1
+        if (last) then
+          res = GYROSTAT_ODE_OK
+          return
+        end if
+        do i = 0, nx - 1
+          f0(i) = fnew(i)
+        end do
+        new_point = .true.
+        if (rejected_last) then
+          fac = max(fac, 1.0_c_double)
+        end if
+        rejected_last = .false.
+      else
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+      end if
+      h = h / fac
+    end do
+  end function rodas4_integrate
+
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   function gyrostat_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
@@ -1478,114 +1662,12 @@ contains
     integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
-    real(c_double) :: jac(nx * nx), lu(nx, nx), k(nx, 6), f0(nx), fnew(nx), xnew(nx)
-    real(c_double) :: dx(nx), comp(nx)
-    real(c_double) :: t, h, err, fac, gus, h_acc, err_acc
     type(gyrostat_stats), pointer :: stats
     type(gyrostat_stats), target :: own
-    integer :: piv(nx), i, j, singular
-    logical :: last, rejected_last, nonfinite, new_point
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    code = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
-    if (code >= 0) return
-    code = GYROSTAT_ODE_OK
-    t = t0
-    h_acc = 0
-    err_acc = 1e-2_c_double
-    comp = 0
-    rejected_last = .false.
-    nonfinite = .false.
-    new_point = .true.
-    singular = 0
-    do
-      if (new_point) then
-        call gyrostat_jac(t, x, c, jac)
-        stats%jac_calls = stats%jac_calls + 1
-        if (.not. all(ieee_is_finite(jac))) then
-          code = GYROSTAT_ODE_ERR_NONFINITE
-          return
-        end if
-        new_point = .false.
-      end if
-      if (step_underflow(h, t)) then
-        code = merge(GYROSTAT_ODE_ERR_NONFINITE, &
-                     GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
-        return
-      end if
-      if (stats%accepted + stats%rejected >= max_steps) then
-        code = GYROSTAT_ODE_ERR_MAX_STEPS
-        return
-      end if
-      last = t + 1.01_c_double * h >= t1
-      if (last) h = t1 - t
-      stats%h = h
-
-      ! E = I/(h gamma) - J; jac is row-major
-      do j = 1, nx
-        do i = 1, nx
-          lu(i, j) = -jac((i - 1) * nx + j)
-        end do
-        lu(j, j) = lu(j, j) + 1 / (h * 0.25_c_double)
-      end do
-      stats%decompositions = stats%decompositions + 1
-      if (lu_decompose(lu, piv)) then
-        stats%rejected = stats%rejected + 1
-        rejected_last = .true.
-        singular = singular + 1
-        if (singular == 5) then
-          code = GYROSTAT_ODE_ERR_SINGULAR
-          return
-        end if
-        h = h * 0.5_c_double
-        cycle
-      end if
-      singular = 0
-
-      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, &
-                         xnew)
-      stats%rhs_calls = stats%rhs_calls + 5
-      nonfinite = .not. (ieee_is_finite(err) .and. all(ieee_is_finite(xnew)))
-      if (.not. nonfinite .and. err <= 1 .and. .not. last) then
-        call gyrostat_rhs(t + h, xnew, c, fnew)  ! where the next step starts
-        stats%rhs_calls = stats%rhs_calls + 1
-        nonfinite = .not. all(ieee_is_finite(fnew))
-      end if
-      if (nonfinite) then
-        stats%rejected = stats%rejected + 1
-        rejected_last = .true.
-        h = h * 0.2_c_double
-        cycle
-      end if
-      ! fac = h / h_new
-      fac = max(1 / 6.0_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))
-      if (err <= 1) then
-        if (gimbal_lock(x, xnew)) then
-          code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
-          return
-        end if
-        if (stats%accepted > 0) then
-          gus = (h_acc / h) * (err * err / err_acc)**0.25_c_double / 0.9_c_double
-          fac = max(fac, 1 / 6.0_c_double, min(5.0_c_double, gus))
-        end if
-        h_acc = h
-        err_acc = max(1e-2_c_double, err)
-        call accept_step(x, xnew, dx, comp)
-        t = merge(t1, t + h, last)
-        stats%t = t
-        stats%accepted = stats%accepted + 1
-        if (last) return
-        f0 = fnew
-        new_point = .true.
-        if (rejected_last) fac = max(fac, 1.0_c_double)
-        rejected_last = .false.
-      else
-        stats%rejected = stats%rejected + 1
-        rejected_last = .true.
-      end if
-      h = h / fac
-    end do
+    code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_rodas4
 
   ! Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,
@@ -1610,9 +1692,9 @@ contains
     alpha_h = 2.6810828736277523_c_double / h
     do j = 1, nx
       do i = 1, nx
-        e1(i, j) = -jac((i - 1) * nx + j)
+        e1(j, i) = -jac((i - 1) * nx + j)  ! row-major, as lu_decompose reads it
+        e2r(i, j) = -jac((i - 1) * nx + j)
       end do
-      e2r(:, j) = e1(:, j)
       e2i(:, j) = 0
     end do
     do j = 1, nx

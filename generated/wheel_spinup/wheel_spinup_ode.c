@@ -461,6 +461,79 @@ static int ode_start(int order, double t0, double t1, const double *x, const dou
     return -1;
 }
 
+/* In-place LU decomposition with partial pivoting within the diagonal
+   blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8) (row i's block ends
+   before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+   row k swapped with piv[k]. 1 when a pivot is zero: singular. */
+static int lu_decompose(double *a, int *piv)
+{
+    static const int lu_end[8] = {1, 3, 3, 4, 7, 7, 7, 8};
+    int p;
+    double m;
+    double swap;
+    int i;
+    int j;
+    int k;
+
+    for (k = 0; k < WHEEL_SPINUP_NX; ++k) {
+        p = k;
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            if (fabs(a[i * WHEEL_SPINUP_NX + k]) > fabs(a[p * WHEEL_SPINUP_NX + k])) {
+                p = i;
+            }
+        }
+        piv[k] = p;
+        if (!(fabs(a[p * WHEEL_SPINUP_NX + k]) > 0.0)) {
+            return 1;  /* singular */
+        }
+        if (p != k) {
+            for (j = 0; j < WHEEL_SPINUP_NX; ++j) {
+                swap = a[k * WHEEL_SPINUP_NX + j];
+                a[k * WHEEL_SPINUP_NX + j] = a[p * WHEEL_SPINUP_NX + j];
+                a[p * WHEEL_SPINUP_NX + j] = swap;
+            }
+        }
+        a[k * WHEEL_SPINUP_NX + k] = 1.0 / a[k * WHEEL_SPINUP_NX + k];
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            m = a[i * WHEEL_SPINUP_NX + k] * a[k * WHEEL_SPINUP_NX + k];
+            a[i * WHEEL_SPINUP_NX + k] = m;
+            for (j = k + 1; j < WHEEL_SPINUP_NX; ++j) {
+                a[i * WHEEL_SPINUP_NX + j] = a[i * WHEEL_SPINUP_NX + j] - m * a[k *
+                        WHEEL_SPINUP_NX + j];
+            }
+        }
+        for (j = k + 1; j < WHEEL_SPINUP_NX; ++j) {
+            a[k * WHEEL_SPINUP_NX + j] = a[k * WHEEL_SPINUP_NX + j] * a[k * WHEEL_SPINUP_NX + k];  /* u_kj / u_kk */
+        }
+    }
+    return 0;
+}
+
+/* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
+   and V that can be nonzero; each row subtracts the latest b_j last. */
+static void lu_solve(const double *lu, const int *piv, double *b)
+{
+    double swap;
+    int i;
+
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        swap = b[i];
+        b[i] = b[piv[i]];
+        b[piv[i]] = swap;
+    }
+    b[2] = b[2] - lu[17] * b[1];
+    b[5] = b[5] - lu[44] * b[4];
+    b[6] = b[6] - lu[52] * b[4] - lu[53] * b[5];
+    b[7] = b[7] * lu[63];
+    b[6] = b[6] * lu[54] - lu[55] * b[7];
+    b[5] = b[5] * lu[45] - lu[47] * b[7] - lu[46] * b[6];
+    b[4] = b[4] * lu[36] - lu[39] * b[7] - lu[38] * b[6] - lu[37] * b[5];
+    b[3] = b[3] * lu[27] - lu[31] * b[7] - lu[29] * b[5];
+    b[2] = b[2] * lu[18] - lu[22] * b[6] - lu[21] * b[5] - lu[20] * b[4];
+    b[1] = b[1] * lu[9] - lu[14] * b[6] - lu[13] * b[5] - lu[12] * b[4] - lu[10] * b[2];
+    b[0] = b[0] * lu[0] - lu[6] * b[6] - lu[4] * b[4] - lu[2] * b[2] - lu[1] * b[1];
+}
+
 /* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
 static int rk4_steps(double t0, double t1, long steps, double *x, const double *c,
                      wheel_spinup_stats *stats)
@@ -1651,74 +1724,6 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
    Row i's block ends before row lu_end[i]. */
 static const int lu_end[WHEEL_SPINUP_NX] = {1, 3, 3, 4, 7, 7, 7, 8};
 
-/* In-place LU decomposition with partial pivoting of a row-major
-   WHEEL_SPINUP_NX x WHEEL_SPINUP_NX block upper triangular matrix: L unit lower, nonzero
-   within the diagonal blocks only; U = D V, stored as 1/u_kk on the
-   diagonal and V's u_kj/u_kk above it (so that each row of the back
-   substitution waits on one multiply-add, not also on a divide by u_kk);
-   row k swapped with piv[k], a row of the same block. 1 when a pivot is
-   zero: the matrix is singular. */
-static int lu_decompose(double *a, int *piv)
-{
-    int i, j, k, p;
-    for (k = 0; k < WHEEL_SPINUP_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(a[i * WHEEL_SPINUP_NX + k]) > fabs(a[p * WHEEL_SPINUP_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(a[p * WHEEL_SPINUP_NX + k]) > 0.0)) {
-            return 1;
-        }
-        if (p != k) {
-            for (j = 0; j < WHEEL_SPINUP_NX; ++j) {
-                const double swap = a[k * WHEEL_SPINUP_NX + j];
-                a[k * WHEEL_SPINUP_NX + j] = a[p * WHEEL_SPINUP_NX + j];
-                a[p * WHEEL_SPINUP_NX + j] = swap;
-            }
-        }
-        a[k * WHEEL_SPINUP_NX + k] = 1.0 / a[k * WHEEL_SPINUP_NX + k];
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            const double l = a[i * WHEEL_SPINUP_NX + k] * a[k * WHEEL_SPINUP_NX + k];
-            a[i * WHEEL_SPINUP_NX + k] = l;
-            for (j = k + 1; j < WHEEL_SPINUP_NX; ++j) {
-                a[i * WHEEL_SPINUP_NX + j] -= l * a[k * WHEEL_SPINUP_NX + j];
-            }
-        }
-        for (j = k + 1; j < WHEEL_SPINUP_NX; ++j) {
-            a[k * WHEEL_SPINUP_NX + j] *= a[k * WHEEL_SPINUP_NX + k];  /* u_kj / u_kk */
-        }
-    }
-    return 0;
-}
-
-/* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
-   and V that can be nonzero; each row subtracts the latest b_j last. */
-static inline void lu_solve(const double *lu, const int *piv, double *b)
-{
-    int i;
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        const double swap = b[i];
-        b[i] = b[piv[i]];
-        b[piv[i]] = swap;
-    }
-    b[2] = b[2] - lu[17] * b[1];
-    b[5] = b[5] - lu[44] * b[4];
-    b[6] = b[6] - lu[52] * b[4] - lu[53] * b[5];
-    b[7] *= lu[63];
-    b[6] = b[6] * lu[54] - lu[55] * b[7];
-    b[5] = b[5] * lu[45] - lu[47] * b[7] - lu[46] * b[6];
-    b[4] = b[4] * lu[36] - lu[39] * b[7] - lu[38] * b[6] - lu[37] * b[5];
-    b[3] = b[3] * lu[27] - lu[31] * b[7] - lu[29] * b[5];
-    b[2] = b[2] * lu[18] - lu[22] * b[6] - lu[21] * b[5] - lu[20] * b[4];
-    b[1] = b[1] * lu[9] - lu[14] * b[6] - lu[13] * b[5] - lu[12] * b[4]
-            - lu[10] * b[2];
-    b[0] = b[0] * lu[0] - lu[6] * b[6] - lu[4] * b[4] - lu[2] * b[2]
-            - lu[1] * b[1];
-}
-
 /* 1/(re + i im) as *inv_re + i *inv_im, by Smith's division (no overflow
    in re^2 + im^2). */
 static void complex_inverse(double re, double im, double *inv_re, double *inv_im)
@@ -1869,20 +1874,24 @@ static inline void lu_solve_complex(const double *ar, const double *ai, const in
         br[0] = re;
     }
 }
+
 /* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
-   Hairer's rodas.f): with E = I/(h gamma) - J, gamma = 0.25, stage s solves
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
    E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
-   Stiffly accurate: stage 6 sits on the embedded solution and the step is
-   that plus k_6, so k_6 is the error estimate. Returns its norm (NaN or Inf
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
    when a stage is). */
 static double rodas4_trial(double t, double h, const double *x, const double *f0,
                            const double *lu, const int *piv, const double *c, double rtol,
                            double atol, const double *comp, double (*k)[WHEEL_SPINUP_NX],
                            double *dx, double *xnew)
 {
-    double y[WHEEL_SPINUP_NX], fy[WHEEL_SPINUP_NX];
-    const double inv_h = 1.0 / h;
+    double y[WHEEL_SPINUP_NX];
+    double fy[WHEEL_SPINUP_NX];
+    double inv_h;
     int i;
+
+    inv_h = 1.0 / h;
 
     /* stage 1: t */
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
@@ -1902,68 +1911,55 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
 
     /* stage 3: t + 0.21 h */
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 0.9466785280815826 * k[0][i]
-                    + 0.2557011698983284 * k[1][i];
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
     }
     wheel_spinup_rhs(t + 0.21 * h, y, c, fy);
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i]
-                                  - 0.2063599157091915 * k[1][i]);
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
     }
     lu_solve(lu, piv, k[2]);
 
     /* stage 4: t + 0.63 h */
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 3.314825187068521 * k[0][i]
-                    + 2.896124015972201 * k[1][i]
-                    + 0.9986419139977817 * k[2][i];
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
     }
     wheel_spinup_rhs(t + 0.63 * h, y, c, fy);
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i]
-                                  - 9.594562251023355 * k[1][i]
-                                  - 20.47028614809616 * k[2][i]);
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
     }
     lu_solve(lu, piv, k[3]);
 
     /* stage 5: t + h */
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 1.221224509226641 * k[0][i]
-                    + 6.019134481288629 * k[1][i]
-                    + 12.53708332932087 * k[2][i]
-                    - 0.687886036105895 * k[3][i];
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
     }
     wheel_spinup_rhs(t + h, y, c, fy);
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i]
-                                  - 10.24680431464352 * k[1][i]
-                                  - 33.99990352819905 * k[2][i]
-                                  + 11.7089089320616 * k[3][i]);
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
     }
     lu_solve(lu, piv, k[4]);
 
     /* stage 6: t + h, on the embedded solution */
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        dx[i] = 1.221224509226641 * k[0][i]
-                + 6.019134481288629 * k[1][i]
-                + 12.53708332932087 * k[2][i]
-                - 0.687886036105895 * k[3][i]
-                + k[4][i];
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
         y[i] = x[i] + dx[i];
     }
     wheel_spinup_rhs(t + h, y, c, fy);
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i]
-                                  - 7.981132988064893 * k[1][i]
-                                  - 31.52159432874371 * k[2][i]
-                                  + 16.31930543123136 * k[3][i]
-                                  - 6.058818238834054 * k[4][i]);
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
     }
     lu_solve(lu, piv, k[5]);
 
     /* the new solution x + dx: the embedded one plus k_6 */
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        dx[i] = (dx[i] + k[5][i]) - comp[i];
+        dx[i] = dx[i] + k[5][i] - comp[i];
         xnew[i] = x[i] + dx[i];
     }
     return error_norm(k[5], x, xnew, rtol, atol);
@@ -1971,31 +1967,54 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
    J and f are evaluated once per accepted step; a rejected step only
-   refactors E with the new h. Step size as Hairer's rodas.f: h_new/h =
-   0.9 err^-1/4 within [0.2, 6], and Gustafsson's predictive controller
-   after an accepted step. A singular E is retried with h halved, five
-   times in a row at most. */
-int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
+   refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an accepted step.
+   A singular E is retried with h times 0.5, 5 times in a row at most. */
+static int rodas4_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
-    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX], lu[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX], k[6][WHEEL_SPINUP_NX];
-    double f0[WHEEL_SPINUP_NX], fnew[WHEEL_SPINUP_NX], xnew[WHEEL_SPINUP_NX], dx[WHEEL_SPINUP_NX], comp[WHEEL_SPINUP_NX] = {0.0};
+    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double lu[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double k[6][WHEEL_SPINUP_NX];
+    double f0[WHEEL_SPINUP_NX];
+    double fnew[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
     int piv[WHEEL_SPINUP_NX];
-    double t = t0, h, err, fac, h_acc = 0.0, err_acc = 1e-2;
-    wheel_spinup_stats own;
-    int i, last, rejected_last = 0, nonfinite = 0, singular = 0, new_point = 1, start;
+    double t;
+    double h;
+    double err;
+    double fac;
+    double gus;
+    double h_acc;
+    double err_acc;
+    int last;
+    int rejected_last;
+    int nonfinite;
+    int new_point;
+    int singular;
+    int start;
+    int i;
 
-    if (stats == NULL) {
-        stats = &own;  /* not wanted */
-    }
     start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
     if (start >= 0) {
         return start;
     }
+    t = t0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    rejected_last = 0;
+    nonfinite = 0;
+    singular = 0;
+    new_point = 1;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+    }
     for (;;) {
         if (new_point) {
             wheel_spinup_jac(t, x, c, J);
-            stats->jac_calls += 1;
+            stats->jac_calls = stats->jac_calls + 1;
             if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
                 return WHEEL_SPINUP_ODE_ERR_NONFINITE;
             }
@@ -2013,56 +2032,54 @@ int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double
         }
         stats->h = h;
 
+        /* E = I/(h gamma) - J */
         for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
             lu[i] = -J[i];
         }
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            lu[i * WHEEL_SPINUP_NX + i] += 1.0 / (h * 0.25);
+            lu[i * WHEEL_SPINUP_NX + i] = lu[i * WHEEL_SPINUP_NX + i] + 1.0 / (h * 0.25);
         }
-        stats->decompositions += 1;
+        stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
-            stats->rejected += 1;
+            stats->rejected = stats->rejected + 1;
             rejected_last = 1;
-            singular += 1;
+            singular = singular + 1;
             if (singular == 5) {
                 return WHEEL_SPINUP_ODE_ERR_SINGULAR;
             }
-            h *= 0.5;
+            h = h * 0.5;
             continue;
         }
         singular = 0;
-
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx,
-                           xnew);
-        stats->rhs_calls += 5;
-        nonfinite = !isfinite(err) || !all_finite(xnew, WHEEL_SPINUP_NX);
+        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
+        stats->rhs_calls = stats->rhs_calls + 5;
+        nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, WHEEL_SPINUP_NX);
         if (!nonfinite && err <= 1.0 && !last) {
             wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
-            stats->rhs_calls += 1;
+            stats->rhs_calls = stats->rhs_calls + 1;
             nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
         }
         if (nonfinite) {
-            stats->rejected += 1;
+            stats->rejected = stats->rejected + 1;
             rejected_last = 1;
-            h *= 0.2;
+            h = h * 0.2;
             continue;
         }
-        /* fac = h / h_new */
-        fac = dmax(1.0 / 6.0, dmin(5.0, pow(err, 0.25) / 0.9));
+        fac = dmax(0.16666666666666666, dmin(5.0, pow(err, 0.25) / 0.9));  /* h / h_new */
         if (err <= 1.0) {
             if (gimbal_lock(x, xnew)) {
                 return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
             }
             if (stats->accepted > 0) {
-                const double gus = (h_acc / h) * pow(err * err / err_acc, 0.25) / 0.9;
-                fac = dmax(fac, dmax(1.0 / 6.0, dmin(5.0, gus)));
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                fac = dmax(fac, dmax(0.16666666666666666, dmin(5.0, gus)));
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
-            stats->accepted += 1;
+            stats->accepted = stats->accepted + 1;
             if (last) {
                 return WHEEL_SPINUP_ODE_OK;
             }
@@ -2075,11 +2092,19 @@ int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double
             }
             rejected_last = 0;
         } else {
-            stats->rejected += 1;
+            stats->rejected = stats->rejected + 1;
             rejected_last = 1;
         }
-        h /= fac;
+        h = h / fac;
     }
+}
+
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
+int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,

@@ -118,7 +118,11 @@ def files(unit: Unit) -> dict[str, str]:
         "source_trig": trig_used(unit.prefix, [rhs, lanes, *outputs]),
         "ode_trig": ode_trig,
         "methods": unit.methods,
-        "ir": c_text(program(unit.methods, unit.quaternion), unit.prefix, unit.macro),
+        "ir": c_text(
+            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks),
+            unit.prefix,
+            unit.macro,
+        ),
         "abi": abi,
         "registry": methods_registry,
         "checks": printed("c", unit.macro, unit.cluster),

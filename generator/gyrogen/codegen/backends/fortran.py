@@ -75,7 +75,11 @@ def files(unit: Unit) -> dict[str, str]:
         "outputs": outputs,
         "jac": jac,
         "methods": unit.methods,
-        "ir": fortran_text(program(unit.methods, unit.quaternion), unit.prefix, unit.macro),
+        "ir": fortran_text(
+            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks),
+            unit.prefix,
+            unit.macro,
+        ),
         "abi": abi,
         "registry": methods_registry,
         "checks": printed("fortran", unit.macro, unit.cluster),

@@ -56,9 +56,10 @@ from gyrogen.tableaus import Explicit, Terms
 t, k, y, c = Var("t"), Var("k"), Var("y"), Var("c")
 
 
-def combo(terms: Terms) -> E:
-    """a_1 k[j_1][i] + a_2 k[j_2][i] ..., left to right; zeros left out."""
-    out: E | None = None
+def combo(terms: Terms, onto: E | None = None) -> E:
+    """a_1 k[j_1][i] + a_2 k[j_2][i] ..., left to right; zeros left out.
+    With onto: onto + a_1 k[j_1][i] + ..., each term added in turn."""
+    out: E | None = onto
     for j, a in terms:
         kj = k[j, i]
         if out is None:

@@ -15,6 +15,7 @@ from gyrogen.codegen.ir.nodes import (
     Assign,
     Call,
     Comment,
+    Continue,
     Decl,
     E,
     Fn,
@@ -40,6 +41,8 @@ class CPrinter(Printer):
     def const(self, name: str) -> str:
         if name == "NX":
             return f"{self.macro}_NX"
+        if name == "NX2":
+            return f"{self.macro}_NX * {self.macro}_NX"
         return CONSTS.get(name) or f"{self.macro}_{name}"
 
     def var(self, name: str) -> tuple[str, int]:
@@ -94,7 +97,7 @@ class CPrinter(Printer):
         if isinstance(s, Comment):
             return [""] * s.blank + [f"{pad}/* {s.text} */"]
         if isinstance(s, Call):
-            name = f"{self.prefix}_rhs" if s.name == "rhs" else s.name
+            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac") else s.name
             return self.line(depth, f"{name}({self.call_args(s)});", s.note)
         if isinstance(s, Return):
             text = "return;" if s.value is None else f"return {self.expr(s.value)};"
@@ -106,8 +109,11 @@ class CPrinter(Printer):
             return [*out, f"{pad}}}"]
         if isinstance(s, Loop):
             return [f"{pad}for (;;) {{", *self.block(s.body, depth + 1), f"{pad}}}"]
+        if isinstance(s, Continue):
+            return [f"{pad}continue;"]
         assert isinstance(s, For), s
-        head = f"{pad}for ({s.var} = 0; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{"
+        start = self.expr(s.start)
+        head = f"{pad}for ({s.var} = {start}; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{"
         local = [f"{pad}{self.indent}double {', '.join(s.locals)};"] if s.locals else []
         return [head, *local, *self.block(s.body, depth + 1), f"{pad}}}"]
 
@@ -115,6 +121,9 @@ class CPrinter(Printer):
         if d.type == "stats":
             return f"{self.prefix}_stats *{d.name}"
         ctype = CTYPE[d.type]
+        if d.values:
+            table = ", ".join(str(v) for v in d.values)
+            return f"static const {ctype} {d.name}[{len(d.values)}] = {{{table}}}"
         if param:
             if len(d.shape) == 2:
                 return f"{ctype} (*{d.name})[{self.extent(d.shape[1])}]"

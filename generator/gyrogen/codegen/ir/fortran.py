@@ -14,6 +14,7 @@ from gyrogen.codegen.ir.nodes import (
     Assign,
     Call,
     Comment,
+    Continue,
     Decl,
     E,
     For,
@@ -30,6 +31,7 @@ from gyrogen.codegen.ir.printer import ATOM, Printer
 CONSTS = {
     "NX": "nx",
     "NC": "nc",
+    "NX2": "nx * nx",
     "EPSILON": "epsilon(1.0_c_double)",
     "TINY": "tiny(1.0_c_double)",
     "HUGE": "huge(1.0_c_double)",
@@ -93,7 +95,7 @@ class FortranPrinter(Printer):
         if isinstance(s, Comment):
             return [""] * s.blank + [f"{pad}! {s.text}"]
         if isinstance(s, Call):
-            name = f"{self.prefix}_rhs" if s.name == "rhs" else s.name
+            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac") else s.name
             return self.line(depth, f"call {name}({self.call_args(s)})", s.note)
         if isinstance(s, Return):
             if s.value is None:
@@ -106,12 +108,17 @@ class FortranPrinter(Printer):
             return [*out, f"{pad}end if"]
         if isinstance(s, Loop):
             return [f"{pad}do", *self.block(s.body, depth + 1), f"{pad}end do"]
+        if isinstance(s, Continue):
+            return [f"{pad}cycle"]
         assert isinstance(s, For), s
-        head = f"{pad}do {s.var} = 0, {self.expr(s.n, 5)} - 1"
+        head = f"{pad}do {s.var} = {self.expr(s.start)}, {self.expr(s.n, 5)} - 1"
         return [head, *self.block(s.body, depth + 1), f"{pad}end do"]
 
     def declaration(self, d: Decl, param: bool) -> str:
         ftype = f"type({self.prefix}_stats)" if d.type == "stats" else FTYPE[d.type]
+        if d.values:
+            table = ", ".join(str(v) for v in d.values)
+            return f"{ftype}, parameter :: {d.name}(0:{len(d.values) - 1}) = [{table}]"
         intent = f", intent({d.intent})" if param else ""
         dims = ", ".join(f"0:{self.extent(n)} - 1" for n in reversed(d.shape))
         return f"{ftype}{intent} :: {d.name}" + (f"({dims})" if dims else "")
@@ -138,7 +145,9 @@ class FortranPrinter(Printer):
         decls += [f"{pad * 2}real(c_double) :: {x}" for x in scoped]
         loops = sorted({(s.var, s.type) for s in walk(func.body) if isinstance(s, For)})
         decls += [f"{pad * 2}{FTYPE[t]} :: {v}" for v, t in loops]
-        inits = [Assign(p_var(d), d.init) for d in func.locals if d.init is not None]
+        inits = [
+            Assign(p_var(d), d.init) for d in func.locals if d.init is not None and not d.values
+        ]
         body = p.block((*inits, *func.body), 2)
         end = f"{pad}end {kind} {func.name}"
         return "\n".join([*doc, *head, *decls, "", *body, end]) + "\n"

@@ -108,8 +108,9 @@ class LanesPrinter(CPrinter):
             inner = super().block(tuple(converted(s.body)), depth + 2)
             loop = self.lane_loop(depth + 1, [*local, *inner], not uses(s.body, "pow"))
             self.scoped -= set(s.locals)
+            v, start, stop = s.var, self.expr(s.start), self.expr(s.n, 4)
             return [
-                f"{pad}for ({s.var} = 0; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{",
+                f"{pad}for ({v} = {start}; {v} < {stop}; ++{v}) {{",
                 *loop,
                 f"{pad}}}",
             ]
@@ -187,7 +188,8 @@ def converted(
         elif isinstance(s, Assign) and cond is not None:
             out.append(Assign(s.target, Sel(cond, s.value, s.target), s.note))
         elif isinstance(s, For) and cond is not None:
-            out.append(For(s.var, s.n, tuple(converted(s.body, cond, own=own)), s.locals, s.type))
+            body = tuple(converted(s.body, cond, own=own))
+            out.append(For(s.var, s.n, body, s.locals, s.type, s.start))
         else:
             out.append(s)
     return out

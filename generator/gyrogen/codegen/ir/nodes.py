@@ -201,13 +201,14 @@ class Assign(S):
 
 @dataclass(frozen=True)
 class For(S):
-    """var = 0 .. n - 1; locals are scoped to the body (doubles)."""
+    """var = start .. n - 1; locals are scoped to the body (doubles)."""
 
     var: str
     n: E
     body: tuple[S, ...]
     locals: tuple[str, ...] = ()
     type: Type = "int"
+    start: E = field(default_factory=lambda: Int(0))
 
 
 @dataclass(frozen=True)
@@ -228,6 +229,11 @@ class Loop(S):
 class Return(S):
     value: E | None = None
     note: str = ""
+
+
+@dataclass(frozen=True)
+class Continue(S):
+    """On to the loop's next turn."""
 
 
 @dataclass(frozen=True)
@@ -269,6 +275,8 @@ class Decl:
     intent: Literal["in", "out", "inout"] = "in"
     init: E | None = None
     """A local's value at the start (an array: every element)."""
+    values: tuple[int, ...] = ()
+    """A constant table of integers (an array local that never changes)."""
 
 
 @dataclass(frozen=True)
