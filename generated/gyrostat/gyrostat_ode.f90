@@ -594,7 +594,8 @@ contains
   end function ode_start
 
   ! In-place LU decomposition with partial pivoting within the diagonal
-  ! blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11), (11, 12), (12, 13), (13, 14) (row i's block ends
+  ! blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11),
+  ! (11, 12), (12, 13), (13, 14) (row i's block ends
   ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
   ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
   function lu_decompose(a, piv) result(res)
@@ -676,6 +677,168 @@ contains
     b(1) = b(1) * lu(15) - lu(23) * b(9) - lu(22) * b(8) - lu(21) * b(7) - lu(16) * b(2)
     b(0) = b(0) * lu(0) - lu(9) * b(9) - lu(7) * b(7) - lu(2) * b(2) - lu(1) * b(1)
   end subroutine lu_solve
+
+  ! lu_decompose for the complex matrix ar + i ai, stored the same way: the
+  ! pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC).
+  function lu_decompose_complex(ar, ai, piv) result(res)
+    real(c_double), intent(inout) :: ar(0:nx * nx - 1)
+    real(c_double), intent(inout) :: ai(0:nx * nx - 1)
+    integer(c_int), intent(out) :: piv(0:nx - 1)
+    logical :: res
+    integer(c_int), parameter :: lu_end(0:13) = [1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14]
+    integer(c_int) :: p
+    real(c_double) :: swap
+    real(c_double) :: re
+    real(c_double) :: im
+    real(c_double) :: r
+    real(c_double) :: d
+    real(c_double) :: lr
+    real(c_double) :: li
+    real(c_double) :: ur
+    real(c_double) :: ui
+    integer(c_int) :: i
+    integer(c_int) :: j
+    integer(c_int) :: k
+
+    do k = 0, nx - 1
+      p = k
+      do i = k + 1, lu_end(k) - 1
+        if (abs(ar(i * nx + k)) + abs(ai(i * nx + k)) > abs(ar(p * nx + k)) + abs(ai(p * nx + k))) then
+          p = i
+        end if
+      end do
+      piv(k) = p
+      if (.not. (abs(ar(p * nx + k)) + abs(ai(p * nx + k)) > 0.0_c_double)) then
+        res = .true.  ! singular
+        return
+      end if
+      if (p /= k) then
+        do j = 0, nx - 1
+          swap = ar(k * nx + j)
+          ar(k * nx + j) = ar(p * nx + j)
+          ar(p * nx + j) = swap
+          swap = ai(k * nx + j)
+          ai(k * nx + j) = ai(p * nx + j)
+          ai(p * nx + j) = swap
+        end do
+      end if
+      ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+      re = ar(k * nx + k)
+      im = ai(k * nx + k)
+      if (abs(re) >= abs(im)) then
+        r = im / re
+        d = re + im * r
+        ar(k * nx + k) = 1.0_c_double / d
+        ai(k * nx + k) = (-r) / d
+      else
+        r = re / im
+        d = im + re * r
+        ar(k * nx + k) = r / d
+        ai(k * nx + k) = (-1.0_c_double) / d
+      end if
+      do i = k + 1, lu_end(k) - 1
+        lr = ar(i * nx + k) * ar(k * nx + k) - ai(i * nx + k) * ai(k * nx + k)
+        li = ar(i * nx + k) * ai(k * nx + k) + ai(i * nx + k) * ar(k * nx + k)
+        ar(i * nx + k) = lr
+        ai(i * nx + k) = li
+        do j = k + 1, nx - 1
+          ur = ar(k * nx + j)
+          ui = ai(k * nx + j)
+          ar(i * nx + j) = ar(i * nx + j) - (lr * ur - li * ui)
+          ai(i * nx + j) = ai(i * nx + j) - (lr * ui + li * ur)
+        end do
+      end do
+      do j = k + 1, nx - 1
+        ur = ar(k * nx + j)
+        ui = ai(k * nx + j)
+        ar(k * nx + j) = ur * ar(k * nx + k) - ui * ai(k * nx + k)  ! u_kj / u_kk
+        ai(k * nx + j) = ur * ai(k * nx + k) + ui * ar(k * nx + k)
+      end do
+    end do
+    res = .false.
+    return
+  end function lu_decompose_complex
+
+  ! lu_solve for lu_decompose_complex's factors: b = br + i bi.
+  subroutine lu_solve_complex(ar, ai, piv, br, bi)
+    real(c_double), intent(in) :: ar(0:nx * nx - 1)
+    real(c_double), intent(in) :: ai(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(inout) :: br(0:nx - 1)
+    real(c_double), intent(inout) :: bi(0:nx - 1)
+    real(c_double) :: swap
+    real(c_double) :: re
+    integer(c_int) :: i
+
+    do i = 0, nx - 1
+      swap = br(i)
+      br(i) = br(piv(i))
+      br(piv(i)) = swap
+      swap = bi(i)
+      bi(i) = bi(piv(i))
+      bi(piv(i)) = swap
+    end do
+    br(2) = br(2) - ar(29) * br(1) + ai(29) * bi(1)
+    bi(2) = bi(2) - ar(29) * bi(1) - ai(29) * br(1)
+    br(8) = br(8) - ar(119) * br(7) + ai(119) * bi(7)
+    bi(8) = bi(8) - ar(119) * bi(7) - ai(119) * br(7)
+    br(9) = br(9) - ar(133) * br(7) + ai(133) * bi(7) - ar(134) * br(8) + ai(134) * bi(8)
+    bi(9) = bi(9) - ar(133) * bi(7) - ai(133) * br(7) - ar(134) * bi(8) - ai(134) * br(8)
+    re = br(13) * ar(195) - bi(13) * ai(195)
+    bi(13) = bi(13) * ar(195) + br(13) * ai(195)
+    br(13) = re
+    re = br(12) * ar(180) - bi(12) * ai(180)
+    bi(12) = bi(12) * ar(180) + br(12) * ai(180)
+    br(12) = re
+    re = br(11) * ar(165) - bi(11) * ai(165)
+    bi(11) = bi(11) * ar(165) + br(11) * ai(165)
+    br(11) = re
+    re = br(10) * ar(150) - bi(10) * ai(150)
+    bi(10) = bi(10) * ar(150) + br(10) * ai(150)
+    br(10) = re
+    re = br(9) * ar(135) - bi(9) * ai(135) - ar(136) * br(10) + ai(136) * bi(10)
+    bi(9) = bi(9) * ar(135) + br(9) * ai(135) - ar(136) * bi(10) - ai(136) * br(10)
+    br(9) = re
+    re = br(8) * ar(120) - bi(8) * ai(120) - ar(122) * br(10) + ai(122) * bi(10) - ar(121) * &
+        br(9) + ai(121) * bi(9)
+    bi(8) = bi(8) * ar(120) + br(8) * ai(120) - ar(122) * bi(10) - ai(122) * br(10) - ar(121) * &
+        bi(9) - ai(121) * br(9)
+    br(8) = re
+    re = br(7) * ar(105) - bi(7) * ai(105) - ar(108) * br(10) + ai(108) * bi(10) - ar(107) * &
+        br(9) + ai(107) * bi(9) - ar(106) * br(8) + ai(106) * bi(8)
+    bi(7) = bi(7) * ar(105) + br(7) * ai(105) - ar(108) * bi(10) - ai(108) * br(10) - ar(107) * &
+        bi(9) - ai(107) * br(9) - ar(106) * bi(8) - ai(106) * br(8)
+    br(7) = re
+    re = br(6) * ar(90) - bi(6) * ai(90) - ar(97) * br(13) + ai(97) * bi(13)
+    bi(6) = bi(6) * ar(90) + br(6) * ai(90) - ar(97) * bi(13) - ai(97) * br(13)
+    br(6) = re
+    re = br(5) * ar(75) - bi(5) * ai(75) - ar(82) * br(12) + ai(82) * bi(12)
+    bi(5) = bi(5) * ar(75) + br(5) * ai(75) - ar(82) * bi(12) - ai(82) * br(12)
+    br(5) = re
+    re = br(4) * ar(60) - bi(4) * ai(60) - ar(67) * br(11) + ai(67) * bi(11)
+    bi(4) = bi(4) * ar(60) + br(4) * ai(60) - ar(67) * bi(11) - ai(67) * br(11)
+    br(4) = re
+    re = br(3) * ar(45) - bi(3) * ai(45) - ar(52) * br(10) + ai(52) * bi(10) - ar(50) * br(8) + &
+        ai(50) * bi(8)
+    bi(3) = bi(3) * ar(45) + br(3) * ai(45) - ar(52) * bi(10) - ai(52) * br(10) - ar(50) * bi(8) &
+        - ai(50) * br(8)
+    br(3) = re
+    re = br(2) * ar(30) - bi(2) * ai(30) - ar(37) * br(9) + ai(37) * bi(9) - ar(36) * br(8) + &
+        ai(36) * bi(8) - ar(35) * br(7) + ai(35) * bi(7)
+    bi(2) = bi(2) * ar(30) + br(2) * ai(30) - ar(37) * bi(9) - ai(37) * br(9) - ar(36) * bi(8) - &
+        ai(36) * br(8) - ar(35) * bi(7) - ai(35) * br(7)
+    br(2) = re
+    re = br(1) * ar(15) - bi(1) * ai(15) - ar(23) * br(9) + ai(23) * bi(9) - ar(22) * br(8) + &
+        ai(22) * bi(8) - ar(21) * br(7) + ai(21) * bi(7) - ar(16) * br(2) + ai(16) * bi(2)
+    bi(1) = bi(1) * ar(15) + br(1) * ai(15) - ar(23) * bi(9) - ai(23) * br(9) - ar(22) * bi(8) - &
+        ai(22) * br(8) - ar(21) * bi(7) - ai(21) * br(7) - ar(16) * bi(2) - ai(16) * br(2)
+    br(1) = re
+    re = br(0) * ar(0) - bi(0) * ai(0) - ar(9) * br(9) + ai(9) * bi(9) - ar(7) * br(7) + ai(7) * &
+        bi(7) - ar(2) * br(2) + ai(2) * bi(2) - ar(1) * br(1) + ai(1) * bi(1)
+    bi(0) = bi(0) * ar(0) + br(0) * ai(0) - ar(9) * bi(9) - ai(9) * br(9) - ar(7) * bi(7) - ai(7) &
+        * br(7) - ar(2) * bi(2) - ai(2) * br(2) - ar(1) * bi(1) - ai(1) * br(1)
+    br(0) = re
+  end subroutine lu_solve_complex
 
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
   function rk4_steps(t0, t1, steps, x, c, stats) result(res)
@@ -1241,166 +1404,6 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_dop853
 
-  ! 1/(re + i im) as inv_re + i inv_im, by Smith's division (no overflow in
-  ! re^2 + im^2).
-  pure subroutine complex_inverse(re, im, inv_re, inv_im)
-    real(c_double), intent(in) :: re, im
-    real(c_double), intent(out) :: inv_re, inv_im
-    real(c_double) :: r, d
-
-    if (abs(re) >= abs(im)) then
-      r = im / re
-      d = re + im * r
-      inv_re = 1 / d
-      inv_im = (-r) / d
-    else
-      r = re / im
-      d = im + re * r
-      inv_re = r / d
-      inv_im = (-1) / d
-    end if
-  end subroutine complex_inverse
-
-  ! lu_decompose for the complex matrix ar + i ai, stored the same way: the
-  ! pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC).
-  logical function lu_decompose_complex(ar, ai, piv) result(singular)
-    real(c_double), intent(inout) :: ar(nx, nx), ai(nx, nx)
-    integer, intent(out) :: piv(nx)
-    integer, parameter :: block_end(nx) = [1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14]
-    real(c_double) :: row(nx), inv_re, inv_im, lr, li, ur, ui
-    integer :: e, i, j, k, p
-
-    singular = .true.
-    do k = 1, nx
-      e = block_end(k)
-      p = k - 1 + maxloc(abs(ar(k:e, k)) + abs(ai(k:e, k)), dim=1)
-      piv(k) = p
-      if (.not. (abs(ar(p, k)) + abs(ai(p, k)) > 0)) return
-      if (p /= k) then
-        row = ar(k, :)
-        ar(k, :) = ar(p, :)
-        ar(p, :) = row
-        row = ai(k, :)
-        ai(k, :) = ai(p, :)
-        ai(p, :) = row
-      end if
-      call complex_inverse(ar(k, k), ai(k, k), inv_re, inv_im)
-      ar(k, k) = inv_re
-      ai(k, k) = inv_im
-      do i = k + 1, e
-        lr = ar(i, k) * ar(k, k) - ai(i, k) * ai(k, k)
-        li = ar(i, k) * ai(k, k) + ai(i, k) * ar(k, k)
-        ar(i, k) = lr
-        ai(i, k) = li
-        do j = k + 1, nx
-          ur = ar(k, j)
-          ui = ai(k, j)
-          ar(i, j) = ar(i, j) - (lr * ur - li * ui)
-          ai(i, j) = ai(i, j) - (lr * ui + li * ur)
-        end do
-      end do
-      do j = k + 1, nx  ! u_kj / u_kk
-        ur = ar(k, j)
-        ui = ai(k, j)
-        ar(k, j) = ur * ar(k, k) - ui * ai(k, k)
-        ai(k, j) = ur * ai(k, k) + ui * ar(k, k)
-      end do
-    end do
-    singular = .false.
-  end function lu_decompose_complex
-
-  ! lu_solve for lu_decompose_complex's factors: b = br + i bi.
-  subroutine lu_solve_complex(ar, ai, piv, br, bi)
-    real(c_double), intent(in) :: ar(nx, nx), ai(nx, nx)
-    integer, intent(in) :: piv(nx)
-    real(c_double), intent(inout) :: br(nx), bi(nx)
-    real(c_double) :: swap, re
-    integer :: j
-
-    do j = 1, nx
-      swap = br(j)
-      br(j) = br(piv(j))
-      br(piv(j)) = swap
-      swap = bi(j)
-      bi(j) = bi(piv(j))
-      bi(piv(j)) = swap
-    end do
-    br(3) = br(3) - ar(3, 2) * br(2) + ai(3, 2) * bi(2)
-    bi(3) = bi(3) - ar(3, 2) * bi(2) - ai(3, 2) * br(2)
-    br(9) = br(9) - ar(9, 8) * br(8) + ai(9, 8) * bi(8)
-    bi(9) = bi(9) - ar(9, 8) * bi(8) - ai(9, 8) * br(8)
-    br(10) = br(10) - ar(10, 8) * br(8) + ai(10, 8) * bi(8) &
-        - ar(10, 9) * br(9) + ai(10, 9) * bi(9)
-    bi(10) = bi(10) - ar(10, 8) * bi(8) - ai(10, 8) * br(8) &
-        - ar(10, 9) * bi(9) - ai(10, 9) * br(9)
-    re = br(14) * ar(14, 14) - bi(14) * ai(14, 14)
-    bi(14) = bi(14) * ar(14, 14) + br(14) * ai(14, 14)
-    br(14) = re
-    re = br(13) * ar(13, 13) - bi(13) * ai(13, 13)
-    bi(13) = bi(13) * ar(13, 13) + br(13) * ai(13, 13)
-    br(13) = re
-    re = br(12) * ar(12, 12) - bi(12) * ai(12, 12)
-    bi(12) = bi(12) * ar(12, 12) + br(12) * ai(12, 12)
-    br(12) = re
-    re = br(11) * ar(11, 11) - bi(11) * ai(11, 11)
-    bi(11) = bi(11) * ar(11, 11) + br(11) * ai(11, 11)
-    br(11) = re
-    re = br(10) * ar(10, 10) - bi(10) * ai(10, 10) - ar(10, 11) * br(11) + ai(10, 11) * bi(11)
-    bi(10) = bi(10) * ar(10, 10) + br(10) * ai(10, 10) - ar(10, 11) * bi(11) - ai(10, 11) * br(11)
-    br(10) = re
-    re = br(9) * ar(9, 9) - bi(9) * ai(9, 9) - ar(9, 11) * br(11) + ai(9, 11) * bi(11) &
-        - ar(9, 10) * br(10) + ai(9, 10) * bi(10)
-    bi(9) = bi(9) * ar(9, 9) + br(9) * ai(9, 9) - ar(9, 11) * bi(11) - ai(9, 11) * br(11) &
-        - ar(9, 10) * bi(10) - ai(9, 10) * br(10)
-    br(9) = re
-    re = br(8) * ar(8, 8) - bi(8) * ai(8, 8) - ar(8, 11) * br(11) + ai(8, 11) * bi(11) &
-        - ar(8, 10) * br(10) + ai(8, 10) * bi(10) &
-        - ar(8, 9) * br(9) + ai(8, 9) * bi(9)
-    bi(8) = bi(8) * ar(8, 8) + br(8) * ai(8, 8) - ar(8, 11) * bi(11) - ai(8, 11) * br(11) &
-        - ar(8, 10) * bi(10) - ai(8, 10) * br(10) &
-        - ar(8, 9) * bi(9) - ai(8, 9) * br(9)
-    br(8) = re
-    re = br(7) * ar(7, 7) - bi(7) * ai(7, 7) - ar(7, 14) * br(14) + ai(7, 14) * bi(14)
-    bi(7) = bi(7) * ar(7, 7) + br(7) * ai(7, 7) - ar(7, 14) * bi(14) - ai(7, 14) * br(14)
-    br(7) = re
-    re = br(6) * ar(6, 6) - bi(6) * ai(6, 6) - ar(6, 13) * br(13) + ai(6, 13) * bi(13)
-    bi(6) = bi(6) * ar(6, 6) + br(6) * ai(6, 6) - ar(6, 13) * bi(13) - ai(6, 13) * br(13)
-    br(6) = re
-    re = br(5) * ar(5, 5) - bi(5) * ai(5, 5) - ar(5, 12) * br(12) + ai(5, 12) * bi(12)
-    bi(5) = bi(5) * ar(5, 5) + br(5) * ai(5, 5) - ar(5, 12) * bi(12) - ai(5, 12) * br(12)
-    br(5) = re
-    re = br(4) * ar(4, 4) - bi(4) * ai(4, 4) - ar(4, 11) * br(11) + ai(4, 11) * bi(11) &
-        - ar(4, 9) * br(9) + ai(4, 9) * bi(9)
-    bi(4) = bi(4) * ar(4, 4) + br(4) * ai(4, 4) - ar(4, 11) * bi(11) - ai(4, 11) * br(11) &
-        - ar(4, 9) * bi(9) - ai(4, 9) * br(9)
-    br(4) = re
-    re = br(3) * ar(3, 3) - bi(3) * ai(3, 3) - ar(3, 10) * br(10) + ai(3, 10) * bi(10) &
-        - ar(3, 9) * br(9) + ai(3, 9) * bi(9) &
-        - ar(3, 8) * br(8) + ai(3, 8) * bi(8)
-    bi(3) = bi(3) * ar(3, 3) + br(3) * ai(3, 3) - ar(3, 10) * bi(10) - ai(3, 10) * br(10) &
-        - ar(3, 9) * bi(9) - ai(3, 9) * br(9) &
-        - ar(3, 8) * bi(8) - ai(3, 8) * br(8)
-    br(3) = re
-    re = br(2) * ar(2, 2) - bi(2) * ai(2, 2) - ar(2, 10) * br(10) + ai(2, 10) * bi(10) &
-        - ar(2, 9) * br(9) + ai(2, 9) * bi(9) &
-        - ar(2, 8) * br(8) + ai(2, 8) * bi(8) &
-        - ar(2, 3) * br(3) + ai(2, 3) * bi(3)
-    bi(2) = bi(2) * ar(2, 2) + br(2) * ai(2, 2) - ar(2, 10) * bi(10) - ai(2, 10) * br(10) &
-        - ar(2, 9) * bi(9) - ai(2, 9) * br(9) &
-        - ar(2, 8) * bi(8) - ai(2, 8) * br(8) &
-        - ar(2, 3) * bi(3) - ai(2, 3) * br(3)
-    br(2) = re
-    re = br(1) * ar(1, 1) - bi(1) * ai(1, 1) - ar(1, 10) * br(10) + ai(1, 10) * bi(10) &
-        - ar(1, 8) * br(8) + ai(1, 8) * bi(8) &
-        - ar(1, 3) * br(3) + ai(1, 3) * bi(3) &
-        - ar(1, 2) * br(2) + ai(1, 2) * bi(2)
-    bi(1) = bi(1) * ar(1, 1) + br(1) * ai(1, 1) - ar(1, 10) * bi(10) - ai(1, 10) * br(10) &
-        - ar(1, 8) * bi(8) - ai(1, 8) * br(8) &
-        - ar(1, 3) * bi(3) - ai(1, 3) * br(3) &
-        - ar(1, 2) * bi(2) - ai(1, 2) * br(2)
-    br(1) = re
-  end subroutine lu_solve_complex
-
   ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
   ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
   ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
@@ -1507,7 +1510,8 @@ contains
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! J and f are evaluated once per accepted step; a rejected step only
   ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
-  ! err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an accepted step.
+  ! err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+  ! accepted step.
   ! A singular E is retried with h times 0.5, 5 times in a row at most.
   function rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
     real(c_double), intent(in) :: t0
@@ -1670,145 +1674,267 @@ contains
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_rodas4
 
-  ! Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,
-  ! Sec. IV.8): Hairer's radau5.f for an ODE without mass matrix.
-  ! The stage increments z_k = x(t + c_k h) - x at c = (0.1550510257216822, 0.6449489742783178, 1)
-  ! solve z = h (A (x) I) F(z). With w = (T^-1 (x) I) z the simplified Newton
-  ! iterations split into a real system, E1 = (gamma/h) I - J, and a complex
-  ! one, E2 = ((alpha + i beta)/h) I - J, the eigenvalues of A^-1 being gamma
-  ! = 3.637834252744496 and alpha +- i beta = 2.6810828736277523 +- 3.0504301992474105 i.
-  ! The step is x + z3.
-
-  ! E1 and E2 for this h, factored; .true. when either is singular. jac is
-  ! row-major.
-  logical function radau5_factor(jac, h, e1, piv1, e2r, e2i, piv2) result(singular)
-    real(c_double), intent(in) :: jac(nx * nx), h
-    real(c_double), intent(out) :: e1(nx, nx), e2r(nx, nx), e2i(nx, nx)
-    integer, intent(out) :: piv1(nx), piv2(nx)
-    real(c_double) :: gamma_h, alpha_h
-    integer :: i, j
+  ! E1 and E2 for this h, factored; 1 when either is singular.
+  function radau5_factor(J, h, e1, piv1, e2r, e2i, piv2) result(res)
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: e1(0:nx * nx - 1)
+    integer(c_int), intent(out) :: piv1(0:nx - 1)
+    real(c_double), intent(out) :: e2r(0:nx * nx - 1)
+    real(c_double), intent(out) :: e2i(0:nx * nx - 1)
+    integer(c_int), intent(out) :: piv2(0:nx - 1)
+    logical :: res
+    real(c_double) :: gamma_h
+    real(c_double) :: alpha_h
+    integer(c_int) :: i
 
     gamma_h = 3.637834252744496_c_double / h
     alpha_h = 2.6810828736277523_c_double / h
-    do j = 1, nx
-      do i = 1, nx
-        e1(j, i) = -jac((i - 1) * nx + j)  ! row-major, as lu_decompose reads it
-        e2r(i, j) = -jac((i - 1) * nx + j)
-      end do
-      e2i(:, j) = 0
+    do i = 0, nx * nx - 1
+      e1(i) = -J(i)
+      e2r(i) = -J(i)
+      e2i(i) = 0.0_c_double
     end do
-    do j = 1, nx
-      e1(j, j) = e1(j, j) + gamma_h
-      e2r(j, j) = e2r(j, j) + alpha_h
-      e2i(j, j) = 3.0504301992474105_c_double / h
+    do i = 0, nx - 1
+      e1(i * nx + i) = e1(i * nx + i) + gamma_h
+      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
+      e2i(i * nx + i) = 3.0504301992474105_c_double / h
     end do
-    singular = lu_decompose(e1, piv1)
-    if (.not. singular) singular = lu_decompose_complex(e2r, e2i, piv2)
+    if (lu_decompose(e1, piv1)) then
+      res = .true.
+      return
+    end if
+    res = lu_decompose_complex(e2r, e2i, piv2)
+    return
   end function radau5_factor
 
   ! One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
   ! F at the three stages, then the corrections to w solved into z1..z3.
   ! Returns their RMS over scal (NaN or Inf when a stage is).
-  real(c_double) function radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, &
-                                         z3, w1, w2, w3) result(dyno)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), e1(nx, nx), e2r(nx, nx), e2i(nx, nx)
-    real(c_double), intent(in) :: scal(nx), w1(nx), w2(nx), w3(nx)
-    integer, intent(in) :: piv1(nx), piv2(nx)
-    real(c_double), intent(inout) :: z1(nx), z2(nx), z3(nx)
-    real(c_double) :: a1(nx), a2(nx), a3(nx)
+  function radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2, &
+          w3) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: e1(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv1(0:nx - 1)
+    real(c_double), intent(in) :: e2r(0:nx * nx - 1)
+    real(c_double), intent(in) :: e2i(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv2(0:nx - 1)
+    real(c_double), intent(in) :: scal(0:nx - 1)
+    real(c_double), intent(inout) :: z1(0:nx - 1)
+    real(c_double), intent(inout) :: z2(0:nx - 1)
+    real(c_double), intent(inout) :: z3(0:nx - 1)
+    real(c_double), intent(in) :: w1(0:nx - 1)
+    real(c_double), intent(in) :: w2(0:nx - 1)
+    real(c_double), intent(in) :: w3(0:nx - 1)
+    real(c_double) :: res
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: gamma_h
+    real(c_double) :: alpha_h
+    real(c_double) :: beta_h
+    real(c_double) :: total
+    real(c_double) :: a1
+    real(c_double) :: a2
+    real(c_double) :: a3
+    real(c_double) :: s1
+    real(c_double) :: s2
+    real(c_double) :: s3
+    integer(c_int) :: i
 
-    call gyrostat_rhs(t + 0.1550510257216822_c_double * h, x + z1, c, a1)
-    call gyrostat_rhs(t + 0.6449489742783178_c_double * h, x + z2, c, a2)
-    call gyrostat_rhs(t + h, x + z3, c, a3)
-    z1 = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + 0.5417705399358749_c_double * a3 &
-         - (3.637834252744496_c_double / h) * w1
-    z2 = -4.178718591551905_c_double * a1 - 0.32768282076106237_c_double * a2 + 0.47662355450055044_c_double * a3 &
-         - (2.6810828736277523_c_double / h) * w2 + (3.0504301992474105_c_double / h) * w3
-    z3 = -0.5028726349457868_c_double * a1 + 2.571926949855605_c_double * a2 - 0.5960392048282249_c_double * a3 &
-         - (2.6810828736277523_c_double / h) * w3 - (3.0504301992474105_c_double / h) * w2
+    gamma_h = 3.637834252744496_c_double / h
+    alpha_h = 2.6810828736277523_c_double / h
+    beta_h = 3.0504301992474105_c_double / h
+    do i = 0, nx - 1
+      y(i) = x(i) + z1(i)
+    end do
+    call gyrostat_rhs(t + 0.1550510257216822_c_double * h, y, c, z1)
+    do i = 0, nx - 1
+      y(i) = x(i) + z2(i)
+    end do
+    call gyrostat_rhs(t + 0.6449489742783178_c_double * h, y, c, z2)
+    do i = 0, nx - 1
+      y(i) = x(i) + z3(i)
+    end do
+    call gyrostat_rhs(t + h, y, c, z3)
+    do i = 0, nx - 1
+      a1 = z1(i)
+      a2 = z2(i)
+      a3 = z3(i)
+      z1(i) = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + &
+          0.5417705399358749_c_double * a3 - gamma_h * w1(i)
+      z2(i) = (-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2 + &
+          0.47662355450055044_c_double * a3 - alpha_h * w2(i) + beta_h * w3(i)
+      z3(i) = (-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2 - &
+          0.5960392048282249_c_double * a3 - alpha_h * w3(i) - beta_h * w2(i)
+    end do
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
-    dyno = sqrt(sum((z1 / scal)**2 + (z2 / scal)**2 + (z3 / scal)**2) / (3 * nx))
+    total = 0.0_c_double
+    do i = 0, nx - 1
+      s1 = z1(i) / scal(i)
+      s2 = z2(i) / scal(i)
+      s3 = z3(i) / scal(i)
+      total = total + (s1 * s1 + s2 * s2 + s3 * s3)
+    end do
+    res = sqrt(total / (3 * nx))
+    return
   end function radau5_newton
 
   ! The local error estimate E1^-1 (f0 + (e1 z1 + e2 z2 + e3 z3)/h), its RMS
-  ! over scal, at least 1e-10_c_double (NaN or Inf when it is). On the first step
+  ! over scal, at least 1e-10 (NaN or Inf when it is). On the first step
   ! or after a rejection an estimate >= 1 is taken again through f at x + err
   ! (radau5.f's ESTRAD): one more rhs call.
-  real(c_double) function radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, again, &
-                                        stats) result(norm)
-    real(c_double), intent(in) :: t, h, x(nx), c(nc), f0(nx), e1(nx, nx), scal(nx)
-    real(c_double), intent(in) :: z1(nx), z2(nx), z3(nx)
-    integer, intent(in) :: piv1(nx)
+  function radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, again, stats) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
     logical, intent(in) :: again
     type(gyrostat_stats), intent(inout) :: stats
-    real(c_double) :: g(nx), err(nx)
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: e1(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv1(0:nx - 1)
+    real(c_double), intent(in) :: scal(0:nx - 1)
+    real(c_double), intent(in) :: z1(0:nx - 1)
+    real(c_double), intent(in) :: z2(0:nx - 1)
+    real(c_double), intent(in) :: z3(0:nx - 1)
+    real(c_double) :: res
+    real(c_double) :: g(0:nx - 1)
+    real(c_double) :: err(0:nx - 1)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: total
+    real(c_double) :: norm
+    integer(c_int) :: i
 
-    g = (-10.048809399827416_c_double * z1 + 1.382142733160749_c_double * z2 - 0.3333333333333333_c_double * z3) / h
-    err = f0 + g
+    do i = 0, nx - 1
+      g(i) = ((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i) - &
+          0.3333333333333333_c_double * z3(i)) / h
+      err(i) = f0(i) + g(i)
+    end do
     call lu_solve(e1, piv1, err)
-    norm = sqrt(sum((err / scal)**2) / nx)
-    if (norm >= 1 .and. again) then
-      call gyrostat_rhs(t, x + err, c, err)
+    total = 0.0_c_double
+    do i = 0, nx - 1
+      total = total + err(i) / scal(i) * (err(i) / scal(i))
+    end do
+    norm = sqrt(total / nx)
+    if (norm >= 1.0_c_double .and. again) then
+      do i = 0, nx - 1
+        y(i) = x(i) + err(i)
+      end do
+      call gyrostat_rhs(t, y, c, err)
       stats%rhs_calls = stats%rhs_calls + 1
-      err = err + g
+      do i = 0, nx - 1
+        err(i) = err(i) + g(i)
+      end do
       call lu_solve(e1, piv1, err)
-      norm = sqrt(sum((err / scal)**2) / nx)
+      total = 0.0_c_double
+      do i = 0, nx - 1
+        total = total + err(i) / scal(i) * (err(i) / scal(i))
+      end do
+      norm = sqrt(total / nx)
     end if
-    if (norm < 1e-10_c_double) norm = 1e-10_c_double
+    res = merge(1e-10_c_double, norm, norm < 1e-10_c_double)
+    return
   end function radau5_error
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
-  ! Hairer's radau5.f strategy: the error test's tolerances are rtol' =
-  ! 0.1 rtol^(2/3) and atol' = rtol' atol/rtol; h_new/h = fac err^-1/4 within
-  ! [0.2, 8] (fac = 0.9, less after many Newton iterations), and
-  ! Gustafsson's predictive controller after an accepted step. J is kept
-  ! while the Newton iterations contract by <= 1e-3 a step, and h, E1
-  ! and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
-  ! diverge, take more than 7, or meet a NaN or Inf retry with h halved
-  ! (slow ones with a smaller h); a singular E1 or E2 too, 5 times in a row at
-  ! most.
-  function gyrostat_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
-      bind(C, name="gyrostat_f_radau5")
-    real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
-    real(c_double), intent(inout) :: x(nx)
-    real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
-    type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
-    integer(c_int) :: code
-    real(c_double) :: jac(nx * nx), e1(nx, nx), e2r(nx, nx), e2i(nx, nx)
-    real(c_double) :: z1(nx), z2(nx), z3(nx), w1(nx), w2(nx), w3(nx), a1(nx), a2(nx), a3(nx)
-    real(c_double) :: ak1(nx), ak2(nx), ak3(nx)  ! the collocation polynomial of the last step
-    real(c_double) :: f0(nx), fnew(nx), scal(nx), xnew(nx), dx(nx), comp(nx)
-    real(c_double) :: t, h, h_old, h_new, h_acc, err_acc, rtol_e, atol_e, newton_tol, err, quot
-    real(c_double) :: rate, theta, theta_old, dyno, dyno_old, thq, predicted, c1q, c2q, c3q
-    type(gyrostat_stats), pointer :: stats
-    type(gyrostat_stats), target :: own
-    integer :: piv1(nx), piv2(nx), newt, outcome, singular
-    logical :: last, first, reject, fresh_jac, need_jac, need_lu, nonfinite
+  ! Hairer's radau5.f strategy: the error test's tolerances are
+  ! rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+  ! h_new/h = fac err^-1/4
+  ! within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+  ! Gustafsson's predictive controller after an accepted step.
+  ! J is kept while the Newton iterations contract by <= 0.001 a step, and
+  ! h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+  ! diverge, take more than 7, or meet a NaN or Inf
+  ! retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+  ! times in a row at most.
+  function radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(gyrostat_stats), intent(inout) :: stats
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    integer(c_int) :: res
+    real(c_double) :: J(0:nx * nx - 1)
+    real(c_double) :: e1(0:nx * nx - 1)
+    real(c_double) :: e2r(0:nx * nx - 1)
+    real(c_double) :: e2i(0:nx * nx - 1)
+    real(c_double) :: z1(0:nx - 1)
+    real(c_double) :: z2(0:nx - 1)
+    real(c_double) :: z3(0:nx - 1)
+    real(c_double) :: w1(0:nx - 1)
+    real(c_double) :: w2(0:nx - 1)
+    real(c_double) :: w3(0:nx - 1)
+    real(c_double) :: ak1(0:nx - 1)
+    real(c_double) :: ak2(0:nx - 1)
+    real(c_double) :: ak3(0:nx - 1)
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: fnew(0:nx - 1)
+    real(c_double) :: scal(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: piv1(0:nx - 1)
+    integer(c_int) :: piv2(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: h_old
+    real(c_double) :: h_new
+    real(c_double) :: h_acc
+    real(c_double) :: err_acc
+    real(c_double) :: rtol_e
+    real(c_double) :: atol_e
+    real(c_double) :: newton_tol
+    real(c_double) :: err
+    real(c_double) :: quot
+    real(c_double) :: rate
+    real(c_double) :: theta
+    real(c_double) :: theta_old
+    real(c_double) :: dyno
+    real(c_double) :: dyno_old
+    real(c_double) :: thq
+    real(c_double) :: predicted
+    real(c_double) :: q
+    real(c_double) :: gus
+    real(c_double) :: c1q
+    real(c_double) :: c2q
+    real(c_double) :: c3q
+    logical :: last
+    logical :: first
+    logical :: reject
+    logical :: fresh_jac
+    logical :: need_jac
+    logical :: need_lu
+    logical :: nonfinite
+    integer(c_int) :: newt
+    integer(c_int) :: outcome
+    integer(c_int) :: singular
+    integer(c_int) :: start
+    real(c_double) :: a1
+    real(c_double) :: a2
+    real(c_double) :: a3
+    real(c_double) :: ak
+    integer(c_int) :: i
 
-    stats => own  ! when stats_ptr is NULL: not wanted
-    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
-    if (code >= 0) return
-    code = GYROSTAT_ODE_OK
+    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (start >= 0) then
+      res = start
+      return
+    end if
     t = t0
-    ak1 = 0.0_c_double  ! read only after a first accepted step; set for -Wmaybe-uninitialized
-    ak2 = 0.0_c_double
-    ak3 = 0.0_c_double
-    rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
-    atol_e = rtol_e * (atol / rtol)
-    newton_tol = max(10.0_c_double * (0.5_c_double * epsilon(1.0_c_double)) / rtol_e, min(0.03_c_double, sqrt(rtol_e)))
-    last = t + 1.01_c_double * h >= t1
-    if (last) h = t1 - t
-    scal = atol_e + rtol_e * abs(x)
-    h_old = 1
-    h_acc = 0
+    h_old = 1.0_c_double
+    rate = 1.0_c_double
+    theta_old = 1.0_c_double
+    dyno_old = 1.0_c_double
+    h_acc = 0.0_c_double
     err_acc = 1e-2_c_double
-    rate = 1
-    theta_old = 1
-    dyno_old = 1
-    comp = 0
+    last = .false.
     first = .true.
     reject = .false.
     fresh_jac = .false.
@@ -1816,12 +1942,29 @@ contains
     need_lu = .true.
     nonfinite = .false.
     singular = 0
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+      ak1(i) = 0.0_c_double
+      ak2(i) = 0.0_c_double
+      ak3(i) = 0.0_c_double
+    end do
+    rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
+    atol_e = rtol_e * (atol / rtol)
+    newton_tol = max(10.0_c_double * (0.5_c_double * epsilon(1.0_c_double)) / rtol_e, &
+        min(0.03_c_double, sqrt(rtol_e)))
+    if (t + 1.01_c_double * h >= t1) then
+      h = t1 - t
+      last = .true.
+    end if
+    do i = 0, nx - 1
+      scal(i) = atol_e + rtol_e * abs(x(i))
+    end do
     do
       if (need_jac) then
-        call gyrostat_jac(t, x, c, jac)
+        call gyrostat_jac(t, x, c, J)
         stats%jac_calls = stats%jac_calls + 1
-        if (.not. all(ieee_is_finite(jac))) then
-          code = GYROSTAT_ODE_ERR_NONFINITE
+        if (.not. all_finite(J, nx * nx)) then
+          res = GYROSTAT_ODE_ERR_NONFINITE
           return
         end if
         fresh_jac = .true.
@@ -1829,20 +1972,19 @@ contains
         need_lu = .true.
       end if
       if (step_underflow(h, t)) then
-        code = merge(GYROSTAT_ODE_ERR_NONFINITE, &
-                     GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        res = merge(GYROSTAT_ODE_ERR_NONFINITE, GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite)
         return
       end if
       if (stats%accepted + stats%rejected >= max_steps) then
-        code = GYROSTAT_ODE_ERR_MAX_STEPS
+        res = GYROSTAT_ODE_ERR_MAX_STEPS
         return
       end if
       if (need_lu) then
         stats%decompositions = stats%decompositions + 1
-        if (radau5_factor(jac, h, e1, piv1, e2r, e2i, piv2)) then
+        if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) then
           singular = singular + 1
           if (singular == 5) then
-            code = GYROSTAT_ODE_ERR_SINGULAR
+            res = GYROSTAT_ODE_ERR_SINGULAR
             return
           end if
           stats%rejected = stats%rejected + 1
@@ -1857,33 +1999,42 @@ contains
       end if
       stats%h = h
 
-      ! the Newton iterations start from the last step's collocation
-      ! polynomial, continued
+      ! the Newton iterations start from the last step's collocation polynomial
       if (first) then
-        z1 = 0
-        z2 = 0
-        z3 = 0
-        w1 = 0
-        w2 = 0
-        w3 = 0
+        do i = 0, nx - 1
+          z1(i) = 0.0_c_double
+          z2(i) = 0.0_c_double
+          z3(i) = 0.0_c_double
+          w1(i) = 0.0_c_double
+          w2(i) = 0.0_c_double
+          w3(i) = 0.0_c_double
+        end do
       else
         c3q = h / h_old
         c1q = 0.1550510257216822_c_double * c3q
         c2q = 0.6449489742783178_c_double * c3q
-        a1 = c1q * (ak1 + (c1q + 0.35505102572168223_c_double) * (ak2 + (c1q + 0.8449489742783178_c_double) * ak3))
-        a2 = c2q * (ak1 + (c2q + 0.35505102572168223_c_double) * (ak2 + (c2q + 0.8449489742783178_c_double) * ak3))
-        a3 = c3q * (ak1 + (c3q + 0.35505102572168223_c_double) * (ak2 + (c3q + 0.8449489742783178_c_double) * ak3))
-        z1 = a1
-        z2 = a2
-        z3 = a3
-        w1 = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + 0.5417705399358749_c_double * a3
-        w2 = -4.178718591551905_c_double * a1 - 0.32768282076106237_c_double * a2 + 0.47662355450055044_c_double * a3
-        w3 = -0.5028726349457868_c_double * a1 + 2.571926949855605_c_double * a2 - 0.5960392048282249_c_double * a3
+        do i = 0, nx - 1
+          a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          a2 = c2q * (ak1(i) + (c2q + 0.35505102572168223_c_double) * (ak2(i) + (c2q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          a3 = c3q * (ak1(i) + (c3q + 0.35505102572168223_c_double) * (ak2(i) + (c3q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          z1(i) = a1
+          z2(i) = a2
+          z3(i) = a3
+          w1(i) = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + &
+              0.5417705399358749_c_double * a3
+          w2(i) = (-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2 + &
+              0.47662355450055044_c_double * a3
+          w3(i) = (-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2 - &
+              0.5960392048282249_c_double * a3
+        end do
       end if
 
       ! outcome: 0 converged, 1 too slowly (h reduced), 2 failed
       outcome = 0
-      rate = max(rate, (0.5_c_double * epsilon(1.0_c_double)))**0.8_c_double
+      rate = max(rate, 0.5_c_double * epsilon(1.0_c_double))**0.8_c_double
       theta = 1e-3_c_double
       newt = 0
       do
@@ -1891,8 +2042,7 @@ contains
           outcome = 2
           exit
         end if
-        dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2, &
-                                  w3)
+        dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2, w3)
         stats%rhs_calls = stats%rhs_calls + 3
         newt = newt + 1
         if (.not. ieee_is_finite(dyno)) then
@@ -1902,102 +2052,118 @@ contains
         end if
         if (newt > 1 .and. newt < 7) then
           thq = dyno / dyno_old
-          if (newt == 2) then
-            theta = thq
-          else
-            theta = sqrt(thq * theta_old)
-          end if
+          theta = merge(thq, sqrt(thq * theta_old), newt == 2)
           theta_old = thq
           if (.not. (theta < 0.99_c_double)) then
             outcome = 2
             exit
           end if
-          rate = theta / (1 - theta)
+          rate = theta / (1.0_c_double - theta)
           predicted = rate * dyno * theta**real(6 - newt, c_double) / newton_tol
-          if (predicted >= 1) then
-            h = h * (0.8_c_double * max(1e-4_c_double, min(20.0_c_double, predicted)) &
-                **(-1 / real(10 - newt, c_double)))
+          if (predicted >= 1.0_c_double) then
+            q = max(1e-4_c_double, min(20.0_c_double, predicted))
+            h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
             outcome = 1
             exit
           end if
         end if
-        dyno_old = max(dyno, (0.5_c_double * epsilon(1.0_c_double)))
-        a1 = w1 + z1
-        a2 = w2 + z2
-        a3 = w3 + z3
-        w1 = a1
-        w2 = a2
-        w3 = a3
-        z1 = 0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2 - 0.030029194105147424_c_double * a3
-        z2 = 0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2 + 0.3829421127572619_c_double * a3
-        z3 = 0.966048182615093_c_double * a1 + a2
-        if (.not. (rate * dyno > newton_tol)) exit
+        dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        do i = 0, nx - 1
+          a1 = w1(i) + z1(i)
+          a2 = w2(i) + z2(i)
+          a3 = w3(i) + z3(i)
+          w1(i) = a1
+          w2(i) = a2
+          w3(i) = a3
+          z1(i) = 0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2 - &
+              0.030029194105147424_c_double * a3
+          z2(i) = 0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2 + &
+              0.3829421127572619_c_double * a3
+          z3(i) = 0.966048182615093_c_double * a1 + a2
+        end do
+        if (.not. (rate * dyno > newton_tol)) then
+          exit
+        end if
       end do
       if (outcome == 0) then
         err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
-        dx = z3 - comp
-        xnew = x + dx
-        if (err < 1 .and. .not. last) then
+        do i = 0, nx - 1
+          dx(i) = z3(i) - comp(i)
+          xnew(i) = x(i) + dx(i)
+        end do
+        if (err < 1.0_c_double .and. .not. last) then
           call gyrostat_rhs(t + h, xnew, c, fnew)  ! where the next step starts
           stats%rhs_calls = stats%rhs_calls + 1
-          nonfinite = .not. all(ieee_is_finite(fnew))
+          nonfinite = .not. all_finite(fnew, nx)
         else
           nonfinite = .not. ieee_is_finite(err)
         end if
-        nonfinite = nonfinite .or. .not. all(ieee_is_finite(xnew))
-        if (nonfinite) outcome = 2
+        nonfinite = nonfinite .or. .not. all_finite(xnew, nx)
+        if (nonfinite) then
+          outcome = 2
+        end if
       end if
       if (outcome /= 0) then
         stats%rejected = stats%rejected + 1
         reject = .true.
         last = .false.
-        if (outcome == 2) h = h * 0.5_c_double
+        if (outcome == 2) then
+          h = h * 0.5_c_double
+        end if
         need_lu = .true.
         need_jac = .not. fresh_jac
         cycle
       end if
-
-      ! h_new = h / quot
-      quot = max(1 / 8.0_c_double, min(5.0_c_double, err**0.25_c_double &
-                 / min(0.9_c_double, 13.5_c_double / (newt + 14))))
+      quot = max(0.125_c_double, min(5.0_c_double, err**0.25_c_double / min(0.9_c_double, &
+          13.5_c_double / (newt + 14))))  ! h_new = h / quot
       h_new = h / quot
-      if (err < 1) then
+      if (err < 1.0_c_double) then
         if (gimbal_lock(x, xnew)) then
-          code = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          res = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
           return
         end if
         first = .false.
         if (stats%accepted > 0) then
-          quot = max(quot, 1 / 8.0_c_double, min(5.0_c_double, &
-                     (h_acc / h) * (err * err / err_acc)**0.25_c_double / 0.9_c_double))
+          gus = h_acc / h * (err * err / err_acc)**0.25_c_double / 0.9_c_double
+          quot = max(quot, max(0.125_c_double, min(5.0_c_double, gus)))
           h_new = h / quot
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         h_old = h
-        a1 = (z2 - z1) / 0.4898979485566356_c_double
-        ak1 = (z3 - z2) / 0.35505102572168223_c_double
-        ak2 = (ak1 - a1) / 0.8449489742783178_c_double
-        ak3 = ak2 - (a1 - z1 / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
+        do i = 0, nx - 1
+          ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
+          ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
+          ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
+          ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
+        end do
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
         stats%accepted = stats%accepted + 1
-        if (last) return
-        f0 = fnew
-        scal = atol_e + rtol_e * abs(x)
+        if (last) then
+          res = GYROSTAT_ODE_OK
+          return
+        end if
+        do i = 0, nx - 1
+          f0(i) = fnew(i)
+          scal(i) = atol_e + rtol_e * abs(x(i))
+        end do
         fresh_jac = .false.
         h_new = min(h_new, t1 - t0)
-        if (reject) h_new = min(h_new, h)
+        if (reject) then
+          h_new = min(h_new, h)
+        end if
         reject = .false.
         if (t + 1.01_c_double * h_new >= t1) then
           h = t1 - t
           last = .true.
-        else if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h &
-                 .and. h_new <= 1.2_c_double * h) then
-          cycle  ! the same h: J, E1 and E2 as they are
         else
-          h = h_new
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+            cycle
+          else
+            h = h_new
+          end if
         end if
         need_lu = .true.
         need_jac = theta > 1e-3_c_double
@@ -2005,15 +2171,28 @@ contains
         stats%rejected = stats%rejected + 1
         reject = .true.
         last = .false.
-        if (first) then
-          h = h * 0.1_c_double
-        else
-          h = h_new
-        end if
+        h = merge(h * 0.1_c_double, h_new, first)
         need_lu = .true.
         need_jac = .not. fresh_jac
       end if
     end do
+  end function radau5_integrate
+
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  function gyrostat_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+      bind(C, name="gyrostat_f_radau5")
+    real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
+    integer(c_int) :: code
+    type(gyrostat_stats), pointer :: stats
+    type(gyrostat_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_radau5
 
   ! stats, codes: NULL when not wanted.

@@ -564,6 +564,167 @@ static void lu_solve(const double *lu, const int *piv, double *b)
     b[0] = b[0] * lu[0] - lu[5] * b[5] - lu[3] * b[3] - lu[2] * b[2] - lu[1] * b[1];
 }
 
+/* lu_decompose for the complex matrix ar + i ai, stored the same way: the
+   pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
+static int lu_decompose_complex(double *ar, double *ai, int *piv)
+{
+    static const int lu_end[9] = {1, 3, 3, 9, 9, 9, 9, 9, 9};
+    int p;
+    double swap;
+    double re;
+    double im;
+    double r;
+    double d;
+    double lr;
+    double li;
+    double ur;
+    double ui;
+    int i;
+    int j;
+    int k;
+
+    for (k = 0; k < RW3_ORTHOGONAL_NX; ++k) {
+        p = k;
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            if (fabs(ar[i * RW3_ORTHOGONAL_NX + k]) + fabs(ai[i * RW3_ORTHOGONAL_NX + k]) > fabs(ar[p * RW3_ORTHOGONAL_NX + k]) + fabs(ai[p * RW3_ORTHOGONAL_NX + k])) {
+                p = i;
+            }
+        }
+        piv[k] = p;
+        if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + k]) + fabs(ai[p * RW3_ORTHOGONAL_NX + k]) > 0.0)) {
+            return 1;  /* singular */
+        }
+        if (p != k) {
+            for (j = 0; j < RW3_ORTHOGONAL_NX; ++j) {
+                swap = ar[k * RW3_ORTHOGONAL_NX + j];
+                ar[k * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+                ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+                swap = ai[k * RW3_ORTHOGONAL_NX + j];
+                ai[k * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+                ai[p * RW3_ORTHOGONAL_NX + j] = swap;
+            }
+        }
+        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+        re = ar[k * RW3_ORTHOGONAL_NX + k];
+        im = ai[k * RW3_ORTHOGONAL_NX + k];
+        if (fabs(re) >= fabs(im)) {
+            r = im / re;
+            d = re + im * r;
+            ar[k * RW3_ORTHOGONAL_NX + k] = 1.0 / d;
+            ai[k * RW3_ORTHOGONAL_NX + k] = -r / d;
+        } else {
+            r = re / im;
+            d = im + re * r;
+            ar[k * RW3_ORTHOGONAL_NX + k] = r / d;
+            ai[k * RW3_ORTHOGONAL_NX + k] = -1.0 / d;
+        }
+        for (i = k + 1; i < lu_end[k]; ++i) {
+            lr = ar[i * RW3_ORTHOGONAL_NX + k] * ar[k * RW3_ORTHOGONAL_NX + k] - ai[i *
+                    RW3_ORTHOGONAL_NX + k] * ai[k * RW3_ORTHOGONAL_NX + k];
+            li = ar[i * RW3_ORTHOGONAL_NX + k] * ai[k * RW3_ORTHOGONAL_NX + k] + ai[i *
+                    RW3_ORTHOGONAL_NX + k] * ar[k * RW3_ORTHOGONAL_NX + k];
+            ar[i * RW3_ORTHOGONAL_NX + k] = lr;
+            ai[i * RW3_ORTHOGONAL_NX + k] = li;
+            for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
+                ur = ar[k * RW3_ORTHOGONAL_NX + j];
+                ui = ai[k * RW3_ORTHOGONAL_NX + j];
+                ar[i * RW3_ORTHOGONAL_NX + j] = ar[i * RW3_ORTHOGONAL_NX + j] - (lr * ur - li * ui);
+                ai[i * RW3_ORTHOGONAL_NX + j] = ai[i * RW3_ORTHOGONAL_NX + j] - (lr * ui + li * ur);
+            }
+        }
+        for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
+            ur = ar[k * RW3_ORTHOGONAL_NX + j];
+            ui = ai[k * RW3_ORTHOGONAL_NX + j];
+            ar[k * RW3_ORTHOGONAL_NX + j] = ur * ar[k * RW3_ORTHOGONAL_NX + k] - ui * ai[k *
+                    RW3_ORTHOGONAL_NX + k];  /* u_kj / u_kk */
+            ai[k * RW3_ORTHOGONAL_NX + j] = ur * ai[k * RW3_ORTHOGONAL_NX + k] + ui * ar[k *
+                    RW3_ORTHOGONAL_NX + k];
+        }
+    }
+    return 0;
+}
+
+/* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
+static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
+                             double *bi)
+{
+    double swap;
+    double re;
+    int i;
+
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        swap = br[i];
+        br[i] = br[piv[i]];
+        br[piv[i]] = swap;
+        swap = bi[i];
+        bi[i] = bi[piv[i]];
+        bi[piv[i]] = swap;
+    }
+    br[2] = br[2] - ar[19] * br[1] + ai[19] * bi[1];
+    bi[2] = bi[2] - ar[19] * bi[1] - ai[19] * br[1];
+    br[4] = br[4] - ar[39] * br[3] + ai[39] * bi[3];
+    bi[4] = bi[4] - ar[39] * bi[3] - ai[39] * br[3];
+    br[5] = br[5] - ar[48] * br[3] + ai[48] * bi[3] - ar[49] * br[4] + ai[49] * bi[4];
+    bi[5] = bi[5] - ar[48] * bi[3] - ai[48] * br[3] - ar[49] * bi[4] - ai[49] * br[4];
+    br[6] = br[6] - ar[57] * br[3] + ai[57] * bi[3] - ar[58] * br[4] + ai[58] * bi[4] - ar[59] *
+            br[5] + ai[59] * bi[5];
+    bi[6] = bi[6] - ar[57] * bi[3] - ai[57] * br[3] - ar[58] * bi[4] - ai[58] * br[4] - ar[59] *
+            bi[5] - ai[59] * br[5];
+    br[7] = br[7] - ar[66] * br[3] + ai[66] * bi[3] - ar[67] * br[4] + ai[67] * bi[4] - ar[68] *
+            br[5] + ai[68] * bi[5] - ar[69] * br[6] + ai[69] * bi[6];
+    bi[7] = bi[7] - ar[66] * bi[3] - ai[66] * br[3] - ar[67] * bi[4] - ai[67] * br[4] - ar[68] *
+            bi[5] - ai[68] * br[5] - ar[69] * bi[6] - ai[69] * br[6];
+    br[8] = br[8] - ar[75] * br[3] + ai[75] * bi[3] - ar[76] * br[4] + ai[76] * bi[4] - ar[77] *
+            br[5] + ai[77] * bi[5] - ar[78] * br[6] + ai[78] * bi[6] - ar[79] * br[7] + ai[79] *
+            bi[7];
+    bi[8] = bi[8] - ar[75] * bi[3] - ai[75] * br[3] - ar[76] * bi[4] - ai[76] * br[4] - ar[77] *
+            bi[5] - ai[77] * br[5] - ar[78] * bi[6] - ai[78] * br[6] - ar[79] * bi[7] - ai[79] *
+            br[7];
+    re = br[8] * ar[80] - bi[8] * ai[80];
+    bi[8] = bi[8] * ar[80] + br[8] * ai[80];
+    br[8] = re;
+    re = br[7] * ar[70] - bi[7] * ai[70] - ar[71] * br[8] + ai[71] * bi[8];
+    bi[7] = bi[7] * ar[70] + br[7] * ai[70] - ar[71] * bi[8] - ai[71] * br[8];
+    br[7] = re;
+    re = br[6] * ar[60] - bi[6] * ai[60] - ar[62] * br[8] + ai[62] * bi[8] - ar[61] * br[7] +
+            ai[61] * bi[7];
+    bi[6] = bi[6] * ar[60] + br[6] * ai[60] - ar[62] * bi[8] - ai[62] * br[8] - ar[61] * bi[7] -
+            ai[61] * br[7];
+    br[6] = re;
+    re = br[5] * ar[50] - bi[5] * ai[50] - ar[53] * br[8] + ai[53] * bi[8] - ar[52] * br[7] +
+            ai[52] * bi[7] - ar[51] * br[6] + ai[51] * bi[6];
+    bi[5] = bi[5] * ar[50] + br[5] * ai[50] - ar[53] * bi[8] - ai[53] * br[8] - ar[52] * bi[7] -
+            ai[52] * br[7] - ar[51] * bi[6] - ai[51] * br[6];
+    br[5] = re;
+    re = br[4] * ar[40] - bi[4] * ai[40] - ar[44] * br[8] + ai[44] * bi[8] - ar[43] * br[7] +
+            ai[43] * bi[7] - ar[42] * br[6] + ai[42] * bi[6] - ar[41] * br[5] + ai[41] * bi[5];
+    bi[4] = bi[4] * ar[40] + br[4] * ai[40] - ar[44] * bi[8] - ai[44] * br[8] - ar[43] * bi[7] -
+            ai[43] * br[7] - ar[42] * bi[6] - ai[42] * br[6] - ar[41] * bi[5] - ai[41] * br[5];
+    br[4] = re;
+    re = br[3] * ar[30] - bi[3] * ai[30] - ar[35] * br[8] + ai[35] * bi[8] - ar[34] * br[7] +
+            ai[34] * bi[7] - ar[33] * br[6] + ai[33] * bi[6] - ar[32] * br[5] + ai[32] * bi[5] -
+            ar[31] * br[4] + ai[31] * bi[4];
+    bi[3] = bi[3] * ar[30] + br[3] * ai[30] - ar[35] * bi[8] - ai[35] * br[8] - ar[34] * bi[7] -
+            ai[34] * br[7] - ar[33] * bi[6] - ai[33] * br[6] - ar[32] * bi[5] - ai[32] * br[5] -
+            ar[31] * bi[4] - ai[31] * br[4];
+    br[3] = re;
+    re = br[2] * ar[20] - bi[2] * ai[20] - ar[23] * br[5] + ai[23] * bi[5] - ar[22] * br[4] +
+            ai[22] * bi[4] - ar[21] * br[3] + ai[21] * bi[3];
+    bi[2] = bi[2] * ar[20] + br[2] * ai[20] - ar[23] * bi[5] - ai[23] * br[5] - ar[22] * bi[4] -
+            ai[22] * br[4] - ar[21] * bi[3] - ai[21] * br[3];
+    br[2] = re;
+    re = br[1] * ar[10] - bi[1] * ai[10] - ar[14] * br[5] + ai[14] * bi[5] - ar[13] * br[4] +
+            ai[13] * bi[4] - ar[12] * br[3] + ai[12] * bi[3] - ar[11] * br[2] + ai[11] * bi[2];
+    bi[1] = bi[1] * ar[10] + br[1] * ai[10] - ar[14] * bi[5] - ai[14] * br[5] - ar[13] * bi[4] -
+            ai[13] * br[4] - ar[12] * bi[3] - ai[12] * br[3] - ar[11] * bi[2] - ai[11] * br[2];
+    br[1] = re;
+    re = br[0] * ar[0] - bi[0] * ai[0] - ar[5] * br[5] + ai[5] * bi[5] - ar[3] * br[3] + ai[3] *
+            bi[3] - ar[2] * br[2] + ai[2] * bi[2] - ar[1] * br[1] + ai[1] * bi[1];
+    bi[0] = bi[0] * ar[0] + br[0] * ai[0] - ar[5] * bi[5] - ai[5] * br[5] - ar[3] * bi[3] - ai[3]
+            * br[3] - ar[2] * bi[2] - ai[2] * br[2] - ar[1] * bi[1] - ai[1] * br[1];
+    br[0] = re;
+}
+
 /* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
 static int rk4_steps(double t0, double t1, long steps, double *x, const double *c,
                      rw3_orthogonal_stats *stats)
@@ -1761,202 +1922,6 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
 #endif
     return failed;
 }
-/* E = I/(h gamma) - J is block upper triangular in state order (see
-   gyrogen/symbolic/blocks.py): blocks (0, 1), (1, 3), (3, 9).
-   Row i's block ends before row lu_end[i]. */
-static const int lu_end[RW3_ORTHOGONAL_NX] = {1, 3, 3, 9, 9, 9, 9, 9, 9};
-
-/* 1/(re + i im) as *inv_re + i *inv_im, by Smith's division (no overflow
-   in re^2 + im^2). */
-static void complex_inverse(double re, double im, double *inv_re, double *inv_im)
-{
-    if (fabs(re) >= fabs(im)) {
-        const double r = im / re, d = re + im * r;
-        *inv_re = 1.0 / d;
-        *inv_im = -r / d;
-    } else {
-        const double r = re / im, d = im + re * r;
-        *inv_re = r / d;
-        *inv_im = -1.0 / d;
-    }
-}
-
-/* lu_decompose for the complex matrix ar + i ai, stored the same way: the
-   pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
-{
-    int i, j, k, p;
-    for (k = 0; k < RW3_ORTHOGONAL_NX; ++k) {
-        const int kk = k * RW3_ORTHOGONAL_NX + k;
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(ar[i * RW3_ORTHOGONAL_NX + k]) + fabs(ai[i * RW3_ORTHOGONAL_NX + k])
-                > fabs(ar[p * RW3_ORTHOGONAL_NX + k]) + fabs(ai[p * RW3_ORTHOGONAL_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + k]) + fabs(ai[p * RW3_ORTHOGONAL_NX + k]) > 0.0)) {
-            return 1;
-        }
-        if (p != k) {
-            for (j = 0; j < RW3_ORTHOGONAL_NX; ++j) {
-                double swap = ar[k * RW3_ORTHOGONAL_NX + j];
-                ar[k * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
-                ar[p * RW3_ORTHOGONAL_NX + j] = swap;
-                swap = ai[k * RW3_ORTHOGONAL_NX + j];
-                ai[k * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
-                ai[p * RW3_ORTHOGONAL_NX + j] = swap;
-            }
-        }
-        complex_inverse(ar[kk], ai[kk], &ar[kk], &ai[kk]);
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            const int ik = i * RW3_ORTHOGONAL_NX + k;
-            const double lr = ar[ik] * ar[kk] - ai[ik] * ai[kk];
-            const double li = ar[ik] * ai[kk] + ai[ik] * ar[kk];
-            ar[ik] = lr;
-            ai[ik] = li;
-            for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
-                const double ur = ar[k * RW3_ORTHOGONAL_NX + j], ui = ai[k * RW3_ORTHOGONAL_NX + j];
-                ar[i * RW3_ORTHOGONAL_NX + j] -= lr * ur - li * ui;
-                ai[i * RW3_ORTHOGONAL_NX + j] -= lr * ui + li * ur;
-            }
-        }
-        for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {  /* u_kj / u_kk */
-            const double ur = ar[k * RW3_ORTHOGONAL_NX + j], ui = ai[k * RW3_ORTHOGONAL_NX + j];
-            ar[k * RW3_ORTHOGONAL_NX + j] = ur * ar[kk] - ui * ai[kk];
-            ai[k * RW3_ORTHOGONAL_NX + j] = ur * ai[kk] + ui * ar[kk];
-        }
-    }
-    return 0;
-}
-/* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static inline void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                                    double *bi)
-{
-    int i;
-    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        double swap = br[i];
-        br[i] = br[piv[i]];
-        br[piv[i]] = swap;
-        swap = bi[i];
-        bi[i] = bi[piv[i]];
-        bi[piv[i]] = swap;
-    }
-    br[2] = br[2] - ar[19] * br[1] + ai[19] * bi[1];
-    bi[2] = bi[2] - ar[19] * bi[1] - ai[19] * br[1];
-    br[4] = br[4] - ar[39] * br[3] + ai[39] * bi[3];
-    bi[4] = bi[4] - ar[39] * bi[3] - ai[39] * br[3];
-    br[5] = br[5] - ar[48] * br[3] + ai[48] * bi[3]
-            - ar[49] * br[4] + ai[49] * bi[4];
-    bi[5] = bi[5] - ar[48] * bi[3] - ai[48] * br[3]
-            - ar[49] * bi[4] - ai[49] * br[4];
-    br[6] = br[6] - ar[57] * br[3] + ai[57] * bi[3]
-            - ar[58] * br[4] + ai[58] * bi[4]
-            - ar[59] * br[5] + ai[59] * bi[5];
-    bi[6] = bi[6] - ar[57] * bi[3] - ai[57] * br[3]
-            - ar[58] * bi[4] - ai[58] * br[4]
-            - ar[59] * bi[5] - ai[59] * br[5];
-    br[7] = br[7] - ar[66] * br[3] + ai[66] * bi[3]
-            - ar[67] * br[4] + ai[67] * bi[4]
-            - ar[68] * br[5] + ai[68] * bi[5]
-            - ar[69] * br[6] + ai[69] * bi[6];
-    bi[7] = bi[7] - ar[66] * bi[3] - ai[66] * br[3]
-            - ar[67] * bi[4] - ai[67] * br[4]
-            - ar[68] * bi[5] - ai[68] * br[5]
-            - ar[69] * bi[6] - ai[69] * br[6];
-    br[8] = br[8] - ar[75] * br[3] + ai[75] * bi[3]
-            - ar[76] * br[4] + ai[76] * bi[4]
-            - ar[77] * br[5] + ai[77] * bi[5]
-            - ar[78] * br[6] + ai[78] * bi[6]
-            - ar[79] * br[7] + ai[79] * bi[7];
-    bi[8] = bi[8] - ar[75] * bi[3] - ai[75] * br[3]
-            - ar[76] * bi[4] - ai[76] * br[4]
-            - ar[77] * bi[5] - ai[77] * br[5]
-            - ar[78] * bi[6] - ai[78] * br[6]
-            - ar[79] * bi[7] - ai[79] * br[7];
-    {
-        const double re = br[8] * ar[80] - bi[8] * ai[80];
-        bi[8] = bi[8] * ar[80] + br[8] * ai[80];
-        br[8] = re;
-    }
-    {
-        const double re = br[7] * ar[70] - bi[7] * ai[70] - ar[71] * br[8] + ai[71] * bi[8];
-        bi[7] = bi[7] * ar[70] + br[7] * ai[70] - ar[71] * bi[8] - ai[71] * br[8];
-        br[7] = re;
-    }
-    {
-        const double re = br[6] * ar[60] - bi[6] * ai[60] - ar[62] * br[8] + ai[62] * bi[8]
-                          - ar[61] * br[7] + ai[61] * bi[7];
-        bi[6] = bi[6] * ar[60] + br[6] * ai[60] - ar[62] * bi[8] - ai[62] * br[8]
-                - ar[61] * bi[7] - ai[61] * br[7];
-        br[6] = re;
-    }
-    {
-        const double re = br[5] * ar[50] - bi[5] * ai[50] - ar[53] * br[8] + ai[53] * bi[8]
-                          - ar[52] * br[7] + ai[52] * bi[7]
-                          - ar[51] * br[6] + ai[51] * bi[6];
-        bi[5] = bi[5] * ar[50] + br[5] * ai[50] - ar[53] * bi[8] - ai[53] * br[8]
-                - ar[52] * bi[7] - ai[52] * br[7]
-                - ar[51] * bi[6] - ai[51] * br[6];
-        br[5] = re;
-    }
-    {
-        const double re = br[4] * ar[40] - bi[4] * ai[40] - ar[44] * br[8] + ai[44] * bi[8]
-                          - ar[43] * br[7] + ai[43] * bi[7]
-                          - ar[42] * br[6] + ai[42] * bi[6]
-                          - ar[41] * br[5] + ai[41] * bi[5];
-        bi[4] = bi[4] * ar[40] + br[4] * ai[40] - ar[44] * bi[8] - ai[44] * br[8]
-                - ar[43] * bi[7] - ai[43] * br[7]
-                - ar[42] * bi[6] - ai[42] * br[6]
-                - ar[41] * bi[5] - ai[41] * br[5];
-        br[4] = re;
-    }
-    {
-        const double re = br[3] * ar[30] - bi[3] * ai[30] - ar[35] * br[8] + ai[35] * bi[8]
-                          - ar[34] * br[7] + ai[34] * bi[7]
-                          - ar[33] * br[6] + ai[33] * bi[6]
-                          - ar[32] * br[5] + ai[32] * bi[5]
-                          - ar[31] * br[4] + ai[31] * bi[4];
-        bi[3] = bi[3] * ar[30] + br[3] * ai[30] - ar[35] * bi[8] - ai[35] * br[8]
-                - ar[34] * bi[7] - ai[34] * br[7]
-                - ar[33] * bi[6] - ai[33] * br[6]
-                - ar[32] * bi[5] - ai[32] * br[5]
-                - ar[31] * bi[4] - ai[31] * br[4];
-        br[3] = re;
-    }
-    {
-        const double re = br[2] * ar[20] - bi[2] * ai[20] - ar[23] * br[5] + ai[23] * bi[5]
-                          - ar[22] * br[4] + ai[22] * bi[4]
-                          - ar[21] * br[3] + ai[21] * bi[3];
-        bi[2] = bi[2] * ar[20] + br[2] * ai[20] - ar[23] * bi[5] - ai[23] * br[5]
-                - ar[22] * bi[4] - ai[22] * br[4]
-                - ar[21] * bi[3] - ai[21] * br[3];
-        br[2] = re;
-    }
-    {
-        const double re = br[1] * ar[10] - bi[1] * ai[10] - ar[14] * br[5] + ai[14] * bi[5]
-                          - ar[13] * br[4] + ai[13] * bi[4]
-                          - ar[12] * br[3] + ai[12] * bi[3]
-                          - ar[11] * br[2] + ai[11] * bi[2];
-        bi[1] = bi[1] * ar[10] + br[1] * ai[10] - ar[14] * bi[5] - ai[14] * br[5]
-                - ar[13] * bi[4] - ai[13] * br[4]
-                - ar[12] * bi[3] - ai[12] * br[3]
-                - ar[11] * bi[2] - ai[11] * br[2];
-        br[1] = re;
-    }
-    {
-        const double re = br[0] * ar[0] - bi[0] * ai[0] - ar[5] * br[5] + ai[5] * bi[5]
-                          - ar[3] * br[3] + ai[3] * bi[3]
-                          - ar[2] * br[2] + ai[2] * bi[2]
-                          - ar[1] * br[1] + ai[1] * bi[1];
-        bi[0] = bi[0] * ar[0] + br[0] * ai[0] - ar[5] * bi[5] - ai[5] * br[5]
-                - ar[3] * bi[3] - ai[3] * br[3]
-                - ar[2] * bi[2] - ai[2] * br[2]
-                - ar[1] * bi[1] - ai[1] * br[1];
-        br[0] = re;
-    }
-}
 
 /* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
    Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
@@ -2051,7 +2016,8 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
    J and f are evaluated once per accepted step; a rejected step only
    refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
-   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an accepted step.
+   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+   accepted step.
    A singular E is retried with h times 0.5, 5 times in a row at most. */
 static int rodas4_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
@@ -2191,48 +2157,51 @@ int rw3_orthogonal_rodas4(double t0, double t1, double *x, const double *c, doub
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
-/* Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,
-   Sec. IV.8): Hairer's radau5.f for an ODE without mass matrix.
-   The stage increments z_k = x(t + c_k h) - x at c = (0.1550510257216822, 0.6449489742783178, 1)
-   solve z = h (A (x) I) F(z). With w = (T^-1 (x) I) z the simplified Newton
-   iterations split into a real system, E1 = (gamma/h) I - J, and a complex
-   one, E2 = ((alpha + i beta)/h) I - J, the eigenvalues of A^-1 being gamma
-   = 3.637834252744496 and alpha +- i beta = 2.6810828736277523 +- 3.0504301992474105 i.
-   The step is x + z3. */
-
 /* E1 and E2 for this h, factored; 1 when either is singular. */
 static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                          double *e2i, int *piv2)
+                         double *e2i, int *piv2)
 {
-    const double gamma_h = 3.637834252744496 / h, alpha_h = 2.6810828736277523 / h;
+    double gamma_h;
+    double alpha_h;
     int i;
+
+    gamma_h = 3.637834252744496 / h;
+    alpha_h = 2.6810828736277523 / h;
     for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
         e1[i] = -J[i];
         e2r[i] = -J[i];
         e2i[i] = 0.0;
     }
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        e1[i * RW3_ORTHOGONAL_NX + i] += gamma_h;
-        e2r[i * RW3_ORTHOGONAL_NX + i] += alpha_h;
+        e1[i * RW3_ORTHOGONAL_NX + i] = e1[i * RW3_ORTHOGONAL_NX + i] + gamma_h;
+        e2r[i * RW3_ORTHOGONAL_NX + i] = e2r[i * RW3_ORTHOGONAL_NX + i] + alpha_h;
         e2i[i * RW3_ORTHOGONAL_NX + i] = 3.0504301992474105 / h;
     }
-    return lu_decompose(e1, piv1) || lu_decompose_complex(e2r, e2i, piv2);
+    if (lu_decompose(e1, piv1)) {
+        return 1;
+    }
+    return lu_decompose_complex(e2r, e2i, piv2);
 }
 
 /* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
    F at the three stages, then the corrections to w solved into z1..z3.
    Returns their RMS over scal (NaN or Inf when a stage is). */
 static double radau5_newton(double t, double h, const double *x, const double *c,
-                           const double *e1, const int *piv1, const double *e2r,
-                           const double *e2i, const int *piv2, const double *scal, double *z1,
-                           double *z2, double *z3, const double *w1, const double *w2,
-                           const double *w3)
+                            const double *e1, const int *piv1, const double *e2r,
+                            const double *e2i, const int *piv2, const double *scal, double *z1,
+                            double *z2, double *z3, const double *w1, const double *w2,
+                            const double *w3)
 {
-    const double gamma_h = 3.637834252744496 / h, alpha_h = 2.6810828736277523 / h;
-    const double beta_h = 3.0504301992474105 / h;
-    double y[RW3_ORTHOGONAL_NX], sum = 0.0;
+    double y[RW3_ORTHOGONAL_NX];
+    double gamma_h;
+    double alpha_h;
+    double beta_h;
+    double total;
     int i;
 
+    gamma_h = 3.637834252744496 / h;
+    alpha_h = 2.6810828736277523 / h;
+    beta_h = 3.0504301992474105 / h;
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         y[i] = x[i] + z1[i];
     }
@@ -2246,21 +2215,28 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     }
     rw3_orthogonal_rhs(t + h, y, c, z3);
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        const double a1 = z1[i], a2 = z2[i], a3 = z3[i];
-        z1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3
-                - gamma_h * w1[i];
-        z2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044 * a3
-                - alpha_h * w2[i] + beta_h * w3[i];
-        z3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3
-                - alpha_h * w3[i] - beta_h * w2[i];
+        double a1, a2, a3;
+        a1 = z1[i];
+        a2 = z2[i];
+        a3 = z3[i];
+        z1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3 -
+                gamma_h * w1[i];
+        z2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044 * a3 -
+                alpha_h * w2[i] + beta_h * w3[i];
+        z3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3 -
+                alpha_h * w3[i] - beta_h * w2[i];
     }
     lu_solve(e1, piv1, z1);
     lu_solve_complex(e2r, e2i, piv2, z2, z3);
+    total = 0.0;
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        const double s1 = z1[i] / scal[i], s2 = z2[i] / scal[i], s3 = z3[i] / scal[i];
-        sum += s1 * s1 + s2 * s2 + s3 * s3;
+        double s1, s2, s3;
+        s1 = z1[i] / scal[i];
+        s2 = z2[i] / scal[i];
+        s3 = z3[i] / scal[i];
+        total = total + (s1 * s1 + s2 * s2 + s3 * s3);
     }
-    return sqrt(sum / (3 * RW3_ORTHOGONAL_NX));
+    return sqrt(total / (3 * RW3_ORTHOGONAL_NX));
 }
 
 /* The local error estimate E1^-1 (f0 + (e1 z1 + e2 z2 + e3 z3)/h), its RMS
@@ -2268,72 +2244,142 @@ static double radau5_newton(double t, double h, const double *x, const double *c
    or after a rejection an estimate >= 1 is taken again through f at x + err
    (radau5.f's ESTRAD): one more rhs call. */
 static double radau5_error(double t, double h, const double *x, const double *c,
-                          const double *f0, const double *e1, const int *piv1,
-                          const double *scal, const double *z1, const double *z2,
-                          const double *z3, int again, rw3_orthogonal_stats *stats)
+                           const double *f0, const double *e1, const int *piv1,
+                           const double *scal, const double *z1, const double *z2,
+                           const double *z3, int again, rw3_orthogonal_stats *stats)
 {
-    double g[RW3_ORTHOGONAL_NX], err[RW3_ORTHOGONAL_NX], y[RW3_ORTHOGONAL_NX], sum = 0.0, norm;
+    double g[RW3_ORTHOGONAL_NX];
+    double err[RW3_ORTHOGONAL_NX];
+    double y[RW3_ORTHOGONAL_NX];
+    double total;
+    double norm;
     int i;
 
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 * z3[i]) / h;
+        g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
+                z3[i]) / h;
         err[i] = f0[i] + g[i];
     }
     lu_solve(e1, piv1, err);
+    total = 0.0;
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        sum += (err[i] / scal[i]) * (err[i] / scal[i]);
+        total = total + err[i] / scal[i] * (err[i] / scal[i]);
     }
-    norm = sqrt(sum / RW3_ORTHOGONAL_NX);
+    norm = sqrt(total / RW3_ORTHOGONAL_NX);
     if (norm >= 1.0 && again) {
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
             y[i] = x[i] + err[i];
         }
         rw3_orthogonal_rhs(t, y, c, err);
-        stats->rhs_calls += 1;
+        stats->rhs_calls = stats->rhs_calls + 1;
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-            err[i] += g[i];
+            err[i] = err[i] + g[i];
         }
         lu_solve(e1, piv1, err);
-        sum = 0.0;
+        total = 0.0;
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-            sum += (err[i] / scal[i]) * (err[i] / scal[i]);
+            total = total + err[i] / scal[i] * (err[i] / scal[i]);
         }
-        norm = sqrt(sum / RW3_ORTHOGONAL_NX);
+        norm = sqrt(total / RW3_ORTHOGONAL_NX);
     }
     return norm < 1e-10 ? 1e-10 : norm;
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
-   Hairer's radau5.f strategy: the error test's tolerances are rtol' =
-   0.1 rtol^(2/3) and atol' = rtol' atol/rtol; h_new/h = fac err^-1/4 within
-   [0.2, 8] (fac = 0.9, less after many Newton iterations), and
-   Gustafsson's predictive controller after an accepted step. J is kept
-   while the Newton iterations contract by <= 1e-3 a step, and h, E1
-   and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
-   diverge, take more than 7, or meet a NaN or Inf retry with h halved
-   (slow ones with a smaller h); a singular E1 or E2 too, 5 times in a row at
-   most. */
-int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+   Hairer's radau5.f strategy: the error test's tolerances are
+   rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+   h_new/h = fac err^-1/4
+   within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+   Gustafsson's predictive controller after an accepted step.
+   J is kept while the Newton iterations contract by <= 0.001 a step, and
+   h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+   diverge, take more than 7, or meet a NaN or Inf
+   retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+   times in a row at most. */
+static int radau5_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
-    double J[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX], e1[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX], e2r[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX], e2i[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX];
-    double z1[RW3_ORTHOGONAL_NX], z2[RW3_ORTHOGONAL_NX], z3[RW3_ORTHOGONAL_NX], w1[RW3_ORTHOGONAL_NX], w2[RW3_ORTHOGONAL_NX], w3[RW3_ORTHOGONAL_NX];
-    double ak1[RW3_ORTHOGONAL_NX], ak2[RW3_ORTHOGONAL_NX], ak3[RW3_ORTHOGONAL_NX];  /* the collocation polynomial of the last step */
-    double f0[RW3_ORTHOGONAL_NX], fnew[RW3_ORTHOGONAL_NX], scal[RW3_ORTHOGONAL_NX], xnew[RW3_ORTHOGONAL_NX], dx[RW3_ORTHOGONAL_NX], comp[RW3_ORTHOGONAL_NX] = {0.0};
-    int piv1[RW3_ORTHOGONAL_NX], piv2[RW3_ORTHOGONAL_NX];
-    double t = t0, h, h_old = 1.0, h_new, h_acc = 0.0, err_acc = 1e-2;
-    double rtol_e, atol_e, newton_tol, err, quot, rate = 1.0, theta, theta_old = 1.0;
-    double dyno, dyno_old = 1.0;
-    rw3_orthogonal_stats own;
-    int i, newt, outcome, last = 0, first = 1, reject = 0, fresh_jac = 0, need_jac = 1;
-    int need_lu = 1, singular = 0, nonfinite = 0, start;
+    double J[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX];
+    double e1[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX];
+    double e2r[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX];
+    double e2i[RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX];
+    double z1[RW3_ORTHOGONAL_NX];
+    double z2[RW3_ORTHOGONAL_NX];
+    double z3[RW3_ORTHOGONAL_NX];
+    double w1[RW3_ORTHOGONAL_NX];
+    double w2[RW3_ORTHOGONAL_NX];
+    double w3[RW3_ORTHOGONAL_NX];
+    double ak1[RW3_ORTHOGONAL_NX];
+    double ak2[RW3_ORTHOGONAL_NX];
+    double ak3[RW3_ORTHOGONAL_NX];
+    double f0[RW3_ORTHOGONAL_NX];
+    double fnew[RW3_ORTHOGONAL_NX];
+    double scal[RW3_ORTHOGONAL_NX];
+    double xnew[RW3_ORTHOGONAL_NX];
+    double dx[RW3_ORTHOGONAL_NX];
+    double comp[RW3_ORTHOGONAL_NX];
+    int piv1[RW3_ORTHOGONAL_NX];
+    int piv2[RW3_ORTHOGONAL_NX];
+    double t;
+    double h;
+    double h_old;
+    double h_new;
+    double h_acc;
+    double err_acc;
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    double err;
+    double quot;
+    double rate;
+    double theta;
+    double theta_old;
+    double dyno;
+    double dyno_old;
+    double thq;
+    double predicted;
+    double q;
+    double gus;
+    double c1q;
+    double c2q;
+    double c3q;
+    int last;
+    int first;
+    int reject;
+    int fresh_jac;
+    int need_jac;
+    int need_lu;
+    int nonfinite;
+    int newt;
+    int outcome;
+    int singular;
+    int start;
+    int i;
 
-    if (stats == NULL) {
-        stats = &own;  /* not wanted */
-    }
     start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
     if (start >= 0) {
         return start;
+    }
+    t = t0;
+    h_old = 1.0;
+    rate = 1.0;
+    theta_old = 1.0;
+    dyno_old = 1.0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    last = 0;
+    first = 1;
+    reject = 0;
+    fresh_jac = 0;
+    need_jac = 1;
+    need_lu = 1;
+    nonfinite = 0;
+    singular = 0;
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        comp[i] = 0.0;
+        ak1[i] = 0.0;
+        ak2[i] = 0.0;
+        ak3[i] = 0.0;
     }
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -2348,7 +2394,7 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
     for (;;) {
         if (need_jac) {
             rw3_orthogonal_jac(t, x, c, J);
-            stats->jac_calls += 1;
+            stats->jac_calls = stats->jac_calls + 1;
             if (!all_finite(J, RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX)) {
                 return RW3_ORTHOGONAL_ODE_ERR_NONFINITE;
             }
@@ -2357,22 +2403,23 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             need_lu = 1;
         }
         if (step_underflow(h, t)) {
-            return nonfinite ? RW3_ORTHOGONAL_ODE_ERR_NONFINITE : RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW;
+            return nonfinite ? RW3_ORTHOGONAL_ODE_ERR_NONFINITE :
+                    RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW;
         }
         if (stats->accepted + stats->rejected >= max_steps) {
             return RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS;
         }
         if (need_lu) {
-            stats->decompositions += 1;
+            stats->decompositions = stats->decompositions + 1;
             if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) {
-                singular += 1;
+                singular = singular + 1;
                 if (singular == 5) {
                     return RW3_ORTHOGONAL_ODE_ERR_SINGULAR;
                 }
-                stats->rejected += 1;
+                stats->rejected = stats->rejected + 1;
                 reject = 1;
                 last = 0;
-                h *= 0.5;
+                h = h * 0.5;
                 need_jac = !fresh_jac;
                 continue;
             }
@@ -2381,47 +2428,59 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
         }
         stats->h = h;
 
-        /* the Newton iterations start from the last step's collocation
-           polynomial, continued */
+        /* the Newton iterations start from the last step's collocation polynomial */
         if (first) {
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-                z1[i] = z2[i] = z3[i] = w1[i] = w2[i] = w3[i] = 0.0;
+                z1[i] = 0.0;
+                z2[i] = 0.0;
+                z3[i] = 0.0;
+                w1[i] = 0.0;
+                w2[i] = 0.0;
+                w3[i] = 0.0;
             }
         } else {
-            const double c3q = h / h_old, c1q = 0.1550510257216822 * c3q, c2q = 0.6449489742783178 * c3q;
+            c3q = h / h_old;
+            c1q = 0.1550510257216822 * c3q;
+            c2q = 0.6449489742783178 * c3q;
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-                const double a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q + 0.8449489742783178) * ak3[i]));
-                const double a2 = c2q * (ak1[i] + (c2q + 0.35505102572168223) * (ak2[i] + (c2q + 0.8449489742783178) * ak3[i]));
-                const double a3 = c3q * (ak1[i] + (c3q + 0.35505102572168223) * (ak2[i] + (c3q + 0.8449489742783178) * ak3[i]));
+                double a1, a2, a3;
+                a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
+                        0.8449489742783178) * ak3[i]));
+                a2 = c2q * (ak1[i] + (c2q + 0.35505102572168223) * (ak2[i] + (c2q +
+                        0.8449489742783178) * ak3[i]));
+                a3 = c3q * (ak1[i] + (c3q + 0.35505102572168223) * (ak2[i] + (c3q +
+                        0.8449489742783178) * ak3[i]));
                 z1[i] = a1;
                 z2[i] = a2;
                 z3[i] = a3;
                 w1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3;
-                w2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044 * a3;
+                w2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044
+                        * a3;
                 w3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3;
             }
         }
 
         /* outcome: 0 converged, 1 too slowly (h reduced), 2 failed */
         outcome = 0;
-        rate = pow(dmax(rate, (0.5 * DBL_EPSILON)), 0.8);
+        rate = pow(dmax(rate, 0.5 * DBL_EPSILON), 0.8);
         theta = 1e-3;
-        for (newt = 0;;) {
+        newt = 0;
+        for (;;) {
             if (newt >= 7) {
                 outcome = 2;
                 break;
             }
-            dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1,
-                                w2, w3);
-            stats->rhs_calls += 3;
-            newt += 1;
-            if (!isfinite(dyno)) {
+            dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2,
+                    w3);
+            stats->rhs_calls = stats->rhs_calls + 3;
+            newt = newt + 1;
+            if (!(fabs(dyno) <= DBL_MAX)) {
                 nonfinite = 1;
                 outcome = 2;
                 break;
             }
             if (newt > 1 && newt < 7) {
-                const double thq = dyno / dyno_old;
+                thq = dyno / dyno_old;
                 theta = newt == 2 ? thq : sqrt(thq * theta_old);
                 theta_old = thq;
                 if (!(theta < 0.99)) {
@@ -2429,23 +2488,25 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
                     break;
                 }
                 rate = theta / (1.0 - theta);
-                {
-                    const double predicted = rate * dyno * pow(theta, 6 - newt) / newton_tol;
-                    if (predicted >= 1.0) {
-                        const double q = dmax(1e-4, dmin(20.0, predicted));
-                        h *= 0.8 * pow(q, -1.0 / (10 - newt));
-                        outcome = 1;
-                        break;
-                    }
+                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                if (predicted >= 1.0) {
+                    q = dmax(1e-4, dmin(20.0, predicted));
+                    h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
+                    outcome = 1;
+                    break;
                 }
             }
-            dyno_old = dmax(dyno, (0.5 * DBL_EPSILON));
+            dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-                const double a1 = w1[i] + z1[i], a2 = w2[i] + z2[i], a3 = w3[i] + z3[i];
+                double a1, a2, a3;
+                a1 = w1[i] + z1[i];
+                a2 = w2[i] + z2[i];
+                a3 = w3[i] + z3[i];
                 w1[i] = a1;
                 w2[i] = a2;
                 w3[i] = a3;
-                z1[i] = 0.09123239487089295 * a1 - 0.1412552950209542 * a2 - 0.030029194105147424 * a3;
+                z1[i] = 0.09123239487089295 * a1 - 0.1412552950209542 * a2 - 0.030029194105147424
+                        * a3;
                 z2[i] = 0.241717932707107 * a1 + 0.20412935229379994 * a2 + 0.3829421127572619 * a3;
                 z3[i] = 0.966048182615093 * a1 + a2;
             }
@@ -2461,10 +2522,10 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             }
             if (err < 1.0 && !last) {
                 rw3_orthogonal_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
-                stats->rhs_calls += 1;
+                stats->rhs_calls = stats->rhs_calls + 1;
                 nonfinite = !all_finite(fnew, RW3_ORTHOGONAL_NX);
             } else {
-                nonfinite = !isfinite(err);
+                nonfinite = !(fabs(err) <= DBL_MAX);
             }
             nonfinite = nonfinite || !all_finite(xnew, RW3_ORTHOGONAL_NX);
             if (nonfinite) {
@@ -2472,19 +2533,17 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             }
         }
         if (outcome != 0) {
-            stats->rejected += 1;
+            stats->rejected = stats->rejected + 1;
             reject = 1;
             last = 0;
             if (outcome == 2) {
-                h *= 0.5;
+                h = h * 0.5;
             }
             need_lu = 1;
             need_jac = !fresh_jac;
             continue;
         }
-
-        /* h_new = h / quot */
-        quot = dmax(1.0 / 8.0, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));
+        quot = dmax(0.125, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));  /* h_new = h / quot */
         h_new = h / quot;
         if (err < 1.0) {
             if (gimbal_lock(x, xnew)) {
@@ -2492,15 +2551,16 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             }
             first = 0;
             if (stats->accepted > 0) {
-                const double gus = (h_acc / h) * pow(err * err / err_acc, 0.25) / 0.9;
-                quot = dmax(quot, dmax(1.0 / 8.0, dmin(5.0, gus)));
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                quot = dmax(quot, dmax(0.125, dmin(5.0, gus)));
                 h_new = h / quot;
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
             h_old = h;
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-                const double ak = (z2[i] - z1[i]) / 0.4898979485566356;
+                double ak;
+                ak = (z2[i] - z1[i]) / 0.4898979485566356;
                 ak1[i] = (z3[i] - z2[i]) / 0.35505102572168223;
                 ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
                 ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
@@ -2508,7 +2568,7 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
             stats->t = t;
-            stats->accepted += 1;
+            stats->accepted = stats->accepted + 1;
             if (last) {
                 return RW3_ORTHOGONAL_ODE_OK;
             }
@@ -2525,15 +2585,17 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             if (t + 1.01 * h_new >= t1) {
                 h = t1 - t;
                 last = 1;
-            } else if (theta <= 1e-3 && h_new >= 1.0 * h && h_new <= 1.2 * h) {
-                continue;  /* the same h: J, E1 and E2 as they are */
             } else {
-                h = h_new;
+                if (theta <= 1e-3 && h_new >= 1.0 * h && h_new <= 1.2 * h) {
+                    continue;
+                } else {
+                    h = h_new;
+                }
             }
             need_lu = 1;
             need_jac = theta > 1e-3;
         } else {
-            stats->rejected += 1;
+            stats->rejected = stats->rejected + 1;
             reject = 1;
             last = 0;
             h = first ? h * 0.1 : h_new;
@@ -2541,6 +2603,14 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
             need_jac = !fresh_jac;
         }
     }
+}
+
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
+int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, rw3_orthogonal_stats *stats)
+{
+    rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
+    return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;

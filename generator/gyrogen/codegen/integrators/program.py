@@ -9,27 +9,24 @@ they call here.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
-from gyrogen.codegen.integrators import common, explicit, linear, pair, rosenbrock
+from gyrogen.codegen.integrators import (
+    common,
+    explicit,
+    linear,
+    pair,
+    radau,
+    radau_step,
+    rosenbrock,
+)
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
 from gyrogen.codegen.ir.nodes import Decl, Func
 from gyrogen.methods import Method
 from gyrogen.symbolic.blocks import Blocks
-
-TEMPLATE_CALLS = {
-    "radau": {
-        "ode_start",
-        "step_underflow",
-        "accept_step",
-        "gimbal_lock",
-        "all_finite",
-        "lu_decompose",
-        "lu_solve",
-    },
-}
 
 
 def calls(funcs: list[Func]) -> set[str]:
@@ -62,18 +59,34 @@ def program(
                 rosenbrock.trial(m, uses_time),
                 rosenbrock.integrate(m, quaternion, uses_time),
             ]
+        if m.radau:
+            implicit += [radau.factor(m), radau.newton(m), radau.error(m)]
+            implicit.append(radau_step.integrate(m, quaternion))
     adaptive = any(not m.fixed_step for m in methods)
     candidates = common.shared(quaternion, adaptive, True)
     if blocks is not None:
-        candidates += [linear.decompose(blocks), linear.solve(blocks, len(blocks.end))]
+        nx = len(blocks.end)
+        candidates += [
+            linear.decompose(blocks),
+            linear.solve(blocks, nx),
+            linear.decompose_complex(blocks),
+            linear.solve_complex(blocks, nx),
+        ]
     wanted = calls(fixed + integrate + implicit + lanes)
-    for m in methods:
-        wanted |= TEMPLATE_CALLS["radau"] if m.radau else set()
     for f in reversed(candidates):  # callers come after what they call
         if f.name in wanted:
             wanted |= calls([f])
     shared = [f for f in candidates if f.name in wanted]
     return Program(shared, fixed, integrate, implicit, lanes, pair.lane_state(krows), krows)
+
+
+def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:
+    """The functions of each method (named <method>_...), as one text."""
+    out: dict[str, str] = {}
+    for f in funcs:
+        name = f.name.split("_")[0]
+        out[name] = out.get(name, "") + ("\n" if name in out else "") + text(f)
+    return out
 
 
 def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
@@ -90,7 +103,7 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
         "shared": "\n".join(c.function(f) for f in p.shared),
         "fixed": {f.name.removesuffix("_steps"): c.function(f) for f in p.fixed},
         "pairs": {f.name.removesuffix("_integrate"): c.function(f) for f in p.pairs},
-        "implicit": {f.name: c.function(f) for f in p.implicit},
+        "implicit": by_method(p.implicit, c.function),
         "lanes": {f.name.removesuffix("_step_lanes"): lanes.function(f) for f in p.lanes},
         "fields": fields,
         "krows": p.krows,
@@ -103,6 +116,6 @@ def fortran_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
         "shared": "\n".join(f.function(x) for x in p.shared),
         "fixed": {x.name.removesuffix("_steps"): f.function(x) for x in p.fixed},
         "pairs": {x.name.removesuffix("_integrate"): f.function(x) for x in p.pairs},
-        "implicit": {x.name: f.function(x) for x in p.implicit},
+        "implicit": by_method(p.implicit, f.function),
         "krows": p.krows,
     }

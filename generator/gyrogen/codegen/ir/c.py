@@ -13,6 +13,7 @@ from typing import ClassVar
 
 from gyrogen.codegen.ir.nodes import (
     Assign,
+    Break,
     Call,
     Comment,
     Continue,
@@ -28,7 +29,7 @@ from gyrogen.codegen.ir.nodes import (
     Sel,
     Var,
 )
-from gyrogen.codegen.ir.printer import ATOM, Printer
+from gyrogen.codegen.ir.printer import ATOM, Printer, doc_lines
 
 CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX"}
 CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int"}
@@ -111,6 +112,8 @@ class CPrinter(Printer):
             return [f"{pad}for (;;) {{", *self.block(s.body, depth + 1), f"{pad}}}"]
         if isinstance(s, Continue):
             return [f"{pad}continue;"]
+        if isinstance(s, Break):
+            return [f"{pad}break;"]
         assert isinstance(s, For), s
         start = self.expr(s.start)
         head = f"{pad}for ({s.var} = {start}; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{"
@@ -150,7 +153,8 @@ class CPrinter(Printer):
         head = p.wrap(
             f"static {ret} {func.name}({params})", " " * (len(ret) + 9 + len(func.name)), ""
         )
-        doc = [f"/* {func.doc[0]}", *(f"   {d}" for d in func.doc[1:])] if func.doc else []
+        text = doc_lines(func.doc)
+        doc = [f"/* {text[0]}", *(f"   {d}" for d in text[1:])] if text else []
         if doc:
             doc[-1] += " */"
         locals_ = [f"{self.indent}{p.declaration(d, False)};" for d in func.locals]

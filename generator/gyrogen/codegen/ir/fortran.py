@@ -12,6 +12,7 @@ from typing import ClassVar
 from gyrogen.codegen.ir.c import walk
 from gyrogen.codegen.ir.nodes import (
     Assign,
+    Break,
     Call,
     Comment,
     Continue,
@@ -26,7 +27,7 @@ from gyrogen.codegen.ir.nodes import (
     Sel,
     Var,
 )
-from gyrogen.codegen.ir.printer import ATOM, Printer
+from gyrogen.codegen.ir.printer import ATOM, Printer, doc_lines
 
 CONSTS = {
     "NX": "nx",
@@ -110,6 +111,8 @@ class FortranPrinter(Printer):
             return [f"{pad}do", *self.block(s.body, depth + 1), f"{pad}end do"]
         if isinstance(s, Continue):
             return [f"{pad}cycle"]
+        if isinstance(s, Break):
+            return [f"{pad}exit"]
         assert isinstance(s, For), s
         head = f"{pad}do {s.var} = {self.expr(s.start)}, {self.expr(s.n, 5)} - 1"
         return [head, *self.block(s.body, depth + 1), f"{pad}end do"]
@@ -135,7 +138,7 @@ class FortranPrinter(Printer):
         result = "" if func.returns is None else " result(res)"
         pad = self.indent
         head = p.wrap(f"{pad}{kind} {func.name}({names}){result}", pad * 5, "")
-        doc = [f"{pad}! {d}" for d in func.doc]
+        doc = [f"{pad}! {d}" for d in doc_lines(func.doc)]
         params = sorted(func.params, key=lambda d: bool(d.shape))  # extents first
         decls = [f"{pad * 2}{p.declaration(d, True)}" for d in params]
         if func.returns is not None:

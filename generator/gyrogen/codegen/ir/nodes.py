@@ -237,6 +237,11 @@ class Continue(S):
 
 
 @dataclass(frozen=True)
+class Break(S):
+    """Out of the innermost Loop (never from inside a For)."""
+
+
+@dataclass(frozen=True)
 class Call(S):
     """A subroutine call (the rhs: its lanes twin takes the time per lane)."""
 

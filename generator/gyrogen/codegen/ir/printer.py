@@ -8,6 +8,7 @@ them and every target performs the same roundings.
 
 from __future__ import annotations
 
+import textwrap
 from typing import ClassVar
 
 from gyrogen.codegen.ir.nodes import (
@@ -36,6 +37,14 @@ PRECEDENCE |= {"+": 5, "-": 5, "*": 6, "/": 6}
 ATOM = 9
 WRAP = 100
 """A statement continues on a new line before it would pass this column."""
+
+
+DOC_WIDTH = 76
+
+
+def doc_lines(doc: tuple[str, ...]) -> list[str]:
+    """A function's comment lines, each wrapped to DOC_WIDTH columns."""
+    return [part for line in doc for part in textwrap.wrap(line, DOC_WIDTH) or [""]]
 
 
 def _op(e: E, op: str) -> bool:
