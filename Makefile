@@ -95,16 +95,20 @@ report: setup
 	$(BIN)/gyrogen bench-ensemble --out report
 
 ## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files,
-## then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
+## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
+## without -march=native), then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
 ## clusters) with a fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
 FUZZ_EXAMPLES ?= 2000
 FUZZ_CLUSTERS ?= 200
 FUZZ_GIMBAL ?= 10000
 FUZZ_SWEEPS ?= 5000
+FUZZ_AGREE ?= 250
 fuzz: setup
 	GYROGEN_GIMBAL_DRAWS=$(FUZZ_GIMBAL) GYROGEN_GIMBAL_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q tests/test_ode_edges.py -k gimbal_lock_is_never_stepped_over
 	GYROGEN_SWEEP_EXAMPLES=$(FUZZ_SWEEPS) $(BIN)/python -m pytest -q tests/test_sweep_space.py
+	GYROGEN_AGREE_SCENES=$(FUZZ_AGREE) GYROGEN_AGREE_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
+	  $(BIN)/python -m pytest -q -n auto tests/test_scene_space.py -k every_method
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
 	$(BIN)/python tests/fuzz_scenes.py --clusters --examples $(FUZZ_CLUSTERS) --out fuzz-failures
 

@@ -6,6 +6,7 @@ seed."""
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -94,14 +95,16 @@ def test_fortran_radau5_steps_as_c_radau5_on_the_scene_of_issue_19(
     assert steps["fortran"] == steps["c"], steps
 
 
-def drawn_scenes(attitude: str, n: int, seed_: int) -> list[str]:
+def drawn_scenes(
+    attitude: str, n: int, seed_: int, integrators: str = '["radau5"]'
+) -> list[str]:
     """The first n valid scenes of that attitude scene_space draws from
-    seed_, each made a C and Fortran radau5 scene."""
+    seed_, each made a C and Fortran scene of those integrators."""
     texts: list[str] = []
 
     @seed(seed_)
     @settings(
-        max_examples=300,
+        max_examples=max(300, 40 * n),
         deadline=None,
         database=None,
         phases=[Phase.generate],
@@ -111,7 +114,7 @@ def drawn_scenes(attitude: str, n: int, seed_: int) -> list[str]:
     def one(drawn: Draw) -> None:
         if len(texts) < n and drawn.valid and f'attitude = "{attitude}"' in drawn.text:
             text = re.sub(r"(?m)^targets = .*$", 'targets = ["c", "fortran"]', drawn.text)
-            texts.append(re.sub(r"(?m)^integrators = .*$", 'integrators = ["radau5"]', text))
+            texts.append(re.sub(r"(?m)^integrators = .*$", f"integrators = {integrators}", text))
 
     one()
     assert len(texts) == n, f"{len(texts)} {attitude} scenes drawn from seed {seed_}"
@@ -139,3 +142,59 @@ def test_c_and_fortran_radau5_take_the_same_steps_on_builtin_scenes(
     steps = radau5_steps(name, tmp_path, (1e-6, 1e-9))
     assert [code for code, _, _ in steps["c"]] == [0, 0], steps
     assert steps["fortran"] == steps["c"], steps
+
+
+AGREE = int(os.environ.get("GYROGEN_AGREE_SCENES", "2"))
+"""Drawn scenes per attitude on which C and Fortran run every method alike
+(`make fuzz`: 250 of each, 500 in all)."""
+AGREE_SEED = int(os.environ.get("GYROGEN_AGREE_SEED", "20"))
+EVERY = ("rk4", "dopri5", "dop853", "rodas4", "radau5")
+
+
+def every_method(path: Path, work: Path) -> dict[str, list[tuple]]:
+    """Per language and method: code, accepted and rejected steps and the
+    final state, from the scene's start to its t_end at rtol = atol = 1e-8
+    (rk4: 200 steps)."""
+    from gyrogen.analysis.simulate import runtime_values
+    from gyrogen.codegen.generate import generate
+    from gyrogen.runtime.build import build
+    from gyrogen.scene import load
+
+    scene = load(str(path))
+    generate(scene, work / "src")
+    x0, p = np.array(scene.initial_state()), runtime_values(scene)
+    runs: dict[str, list[tuple]] = {}
+    for language in ("c", "fortran"):
+        b = build(work / "src", language)
+        c, t1 = b.setup(p), scene.simulate.t_end
+        runs[language] = []
+        for method in EVERY:
+            controls = {"steps": 200} if method == "rk4" else {"rtol": 1e-8, "atol": 1e-8}
+            x, stats, code = b.integrate(method, x0, c, 0.0, t1, **controls)  # type: ignore[arg-type]
+            runs[language].append((method, code, stats["accepted"], stats["rejected"], x))
+    return runs
+
+
+@pytest.mark.parametrize("portable", [False, True], ids=["native", "portable"])
+@pytest.mark.parametrize("attitude", ["quaternion", "euler312"])
+def test_c_and_fortran_run_every_method_alike_on_drawn_scenes(
+    attitude: str, portable: bool, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 20: both languages print every integrator from one description,
+    so on drawn scenes they take the same accepted and rejected steps with
+    every method and end within 1e-14 (scaled by max(1, |x|)) of each other:
+    built with -march=native and without (GYROGEN_PORTABLE)."""
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    if portable:
+        monkeypatch.setenv("GYROGEN_PORTABLE", "1")
+    methods = "[" + ", ".join(f'"{m}"' for m in EVERY) + "]"
+    for k, text in enumerate(drawn_scenes(attitude, AGREE, AGREE_SEED, methods)):
+        path = tmp_path / f"drawn{k}.toml"
+        path.write_text(text, encoding="utf-8")
+        runs = every_method(path, tmp_path / f"drawn{k}")
+        for c_run, f_run in zip(runs["c"], runs["fortran"], strict=True):
+            assert c_run[:4] == f_run[:4], (text, c_run[:4], f_run[:4])
+            xc, xf = c_run[4], f_run[4]
+            if c_run[1] == 0:
+                gap = np.abs(xc - xf) / np.maximum(1.0, np.abs(xc))
+                assert gap.max() <= 1e-14, (text, c_run[0], gap.max())

@@ -193,7 +193,7 @@ contains
           4.5440763299219775e-05_c_double*u4)
     dxdt(5) = u1*(0.01775954828743408_c_double*u1 - &
           0.10773983913066638_c_double*u3) - 0.01775954828743408_c_double* &
-          u3**2
+          u3*u3
     dxdt(6) = tmp3*u3 + u1*(-0.3153534800671272_c_double*u2 - &
           5.266025597120826e-05_c_double*u4)
     dxdt(7) = 0
@@ -218,8 +218,8 @@ contains
     u3 = x(6)
     u4 = x(7)
     out(1) = u1*(550.4926119402985_c_double*u1 + 24.880597014925375_c_double &
-          *u3) + 700.4850746268656_c_double*u2**2 + &
-          475.02246268656717_c_double*u3**2 + 0.025_c_double*u4**2
+          *u3) + 700.4850746268656_c_double*u2*u2 + &
+          475.02246268656717_c_double*u3*u3 + 0.025_c_double*u4*u4
   end subroutine dual_spin_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.

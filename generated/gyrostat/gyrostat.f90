@@ -167,14 +167,14 @@ contains
       return
     end if
 
-    tmp0 = l3**2
-    tmp1 = l1**2
+    tmp0 = l3*l3
+    tmp1 = l1*l1
     mu = m_a*m_b/(m_a + m_b)
     IA11 = I + I11 + mu*tmp0
     IA22 = I22 + mu*(tmp0 + tmp1)
     IA33 = I + I33 + mu*tmp1
     IA13 = I13 - l1*l3*mu
-    tmp2 = I13**2
+    tmp2 = I13*I13
     tmp3 = I*I11
     tmp4 = I*I33
     tmp5 = mu*tmp0
@@ -183,30 +183,32 @@ contains
     tmp8 = I11*tmp7
     tmp9 = I33*tmp5
     tmp10 = 2*I13*l1*l3*mu
-    tmp11 = I**2
+    tmp11 = I*I
     tmp12 = I*tmp7
     tmp13 = tmp11 + tmp12
-    tmp14 = 1d0/(I11*I33 + tmp10 + tmp13 - tmp2 + tmp3 + tmp4 + tmp6 + tmp8 &
-          + tmp9)
+    tmp14 = 1.0_c_double/(I11*I33 + tmp10 + tmp13 - tmp2 + tmp3 + tmp4 + &
+          tmp6 + tmp8 + tmp9)
     tmp15 = IA13*tmp14
     tmp16 = -I*I22 - tmp10 + tmp2
     tmp17 = J*tmp14
-    tmp18 = 1d0/IA22
+    tmp18 = 1.0_c_double/IA22
     c(1) = -tmp15*(2*I + I11 - I22 + I33)
     c(2) = J*tmp15
-    c(3) = -tmp14*(-I22*I33 - I22*tmp7 + I33**2 + I33*tmp7 + tmp13 + tmp16 + &
-          2*tmp4 - tmp6 - tmp9)
+    c(3) = -tmp14*(-I22*I33 - I22*tmp7 + I33*I33 + I33*tmp7 + tmp13 + tmp16 &
+          + 2*tmp4 - tmp6 - tmp9)
     c(4) = IA33*tmp17
     c(5) = IA13*tmp18
     c(6) = -tmp18*(I11 - I33 + tmp5 - tmp7)
     c(7) = -T*tmp18
-    c(8) = tmp14*(I11**2 - I11*I22 + I11*tmp5 - I22*tmp5 + tmp11 - tmp12 + &
+    c(8) = tmp14*(I11*I11 - I11*I22 + I11*tmp5 - I22*tmp5 + tmp11 - tmp12 + &
           tmp16 + 2*tmp3 + tmp6 - tmp8)
     c(9) = -IA11*tmp17
     c(10) = T/J
     c(11) = g
-    c(12) = tmp14*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(IA13**2 + &
-          (1.0d0/4.0d0)*(IA11 - IA33)**2))**2
+    c(12) = tmp14*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(IA13*IA13 &
+          + (1.0d0/4.0d0)*(IA11 - IA33)*(IA11 - IA33)))*((1.0d0/2.0d0)*IA11 &
+          + (1.0d0/2.0d0)*IA33 + sqrt(IA13*IA13 + (1.0d0/4.0d0)*(IA11 - &
+          IA33)*(IA11 - IA33)))
     if (.not. (c(GYROSTAT_COND) <= 10000000000000.0_c_double)) then
       status = GYROSTAT_ERR_MASS_SINGULAR
       return
@@ -285,7 +287,7 @@ contains
     dxdt(6) = u6
     dxdt(7) = u7
     dxdt(8) = u1*(c(1)*u2 + c(2)*u4) + u3*(c(3)*u2 + c(4)*u4)
-    dxdt(9) = -c(5)*u3**2 + c(7) + u1*(c(5)*u1 + c(6)*u3)
+    dxdt(9) = -c(5)*u3*u3 + c(7) + u1*(c(5)*u1 + c(6)*u3)
     dxdt(10) = u2*(-c(1)*u3 + c(8)*u1) + u4*(-c(2)*u3 + c(9)*u1)
     dxdt(11) = c(10)
     dxdt(12) = 0

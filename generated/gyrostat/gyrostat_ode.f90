@@ -142,8 +142,8 @@ contains
     tmp4 = cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/tmp1**2
-    tmp8 = 1d0/tmp1
+    tmp7 = tmp6/(tmp1*tmp1)
+    tmp8 = 1.0_c_double/tmp1
     tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
     tmp10 = tmp2*tmp8
     tmp11 = tmp4*tmp8
@@ -178,7 +178,7 @@ contains
     J(27) = 0
     J(28) = 0
     J(29) = 0
-    J(30) = -tmp0**2*tmp7 + tmp3 - tmp5
+    J(30) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
     J(31) = -tmp0*tmp9
     J(32) = 0
     J(33) = 0

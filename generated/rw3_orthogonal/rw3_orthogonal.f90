@@ -193,8 +193,8 @@ contains
     w3 = x(9)
     out(1) = u1*(150.86984375_c_double*u1 + 2.005_c_double*u2 - &
           3.15125_c_double*u3) + u2*(175.86984375_c_double*u2 + &
-          1.34875_c_double*u3) + 125.655_c_double*u3**2 + 0.0175_c_double*( &
-          w1**2 + w2**2 + w3**2)
+          1.34875_c_double*u3) + 125.655_c_double*u3*u3 + 0.0175_c_double*( &
+          w1*w1 + w2*w2 + w3*w3)
   end subroutine rw3_orthogonal_kinetic_energy
 
   ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 58 ops.

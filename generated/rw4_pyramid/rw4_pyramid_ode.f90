@@ -172,8 +172,8 @@ contains
     tmp4 = cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/tmp1**2
-    tmp8 = 1d0/tmp1
+    tmp7 = tmp6/(tmp1*tmp1)
+    tmp8 = 1.0_c_double/tmp1
     tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
     tmp10 = tmp2*tmp8
     tmp11 = tmp4*tmp8
@@ -232,7 +232,7 @@ contains
     J(19) = 0
     J(20) = 0
     J(21) = 0
-    J(22) = -tmp0**2*tmp7 + tmp3 - tmp5
+    J(22) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
     J(23) = -tmp0*tmp9
     J(24) = tmp0*tmp10
     J(25) = 1

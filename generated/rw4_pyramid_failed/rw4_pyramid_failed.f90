@@ -231,8 +231,8 @@ contains
     w4 = x(10)
     out(1) = u1*(210.88191056910568_c_double*u1 - 4.0_c_double*u2 + &
           6.0_c_double*u3) + u2*(190.88191056910568_c_double*u2 + &
-          2.5_c_double*u3) + 150.91666666666666_c_double*u3**2 + &
-          0.0225_c_double*(w1**2 + w2**2 + w3**2 + w4**2)
+          2.5_c_double*u3) + 150.91666666666666_c_double*u3*u3 + &
+          0.0225_c_double*(w1*w1 + w2*w2 + w3*w3 + w4*w4)
   end subroutine rw4_pyramid_failed_kinetic_energy
 
   ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 63 ops.

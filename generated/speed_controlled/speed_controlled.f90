@@ -209,9 +209,9 @@ contains
     dxdt(4) = -u2 + u4
     dxdt(5) = -tmp3*u1 + u3*(0.33522655090705017_c_double*u2 + &
           0.0004980820048148975_c_double*u4)
-    dxdt(6) = c(1)*slip + 0.018613186525101588_c_double*u1**2 - &
+    dxdt(6) = c(1)*slip + 0.018613186525101588_c_double*u1*u1 - &
           0.06916590204045965_c_double*u1*u3 - &
-          0.018613186525101588_c_double*u3**2
+          0.018613186525101588_c_double*u3*u3
     dxdt(7) = tmp3*u3 + u1*(-0.2723557574878444_c_double*u2 - &
           0.0005451879938902264_c_double*u4)
     dxdt(8) = c(2)*slip
@@ -236,8 +236,8 @@ contains
     u3 = x(7)
     u4 = x(8)
     out(1) = u1*(30.133355263157895_c_double*u1 + &
-          1.4013157894736843_c_double*u3) + 37.64309210526316_c_double*u2** &
-          2 + 27.52973684210526_c_double*u3**2 + 0.015_c_double*u4**2
+          1.4013157894736843_c_double*u3) + 37.64309210526316_c_double*u2* &
+          u2 + 27.52973684210526_c_double*u3*u3 + 0.015_c_double*u4*u4
   end subroutine speed_controlled_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.

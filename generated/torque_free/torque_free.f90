@@ -212,8 +212,8 @@ contains
     u2 = x(5)
     u3 = x(6)
     u4 = x(7)
-    out(1) = 1.525_c_double*u1**2 + 2*u2**2 + 1.525_c_double*u3**2 + &
-          0.04_c_double*u4**2
+    out(1) = 1.525_c_double*u1*u1 + 2*u2*u2 + 1.525_c_double*u3*u3 + &
+          0.04_c_double*u4*u4
   end subroutine torque_free_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 42 ops.

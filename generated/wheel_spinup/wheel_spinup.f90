@@ -200,9 +200,9 @@ contains
     dxdt(4) = -u2 + u4
     dxdt(5) = -tmp3*u1 + u3*(0.3499793829482495_c_double*u2 + &
           0.0007488716786310489_c_double*u4)
-    dxdt(6) = c(1) + 0.01627906976744186_c_double*u1**2 - &
+    dxdt(6) = c(1) + 0.01627906976744186_c_double*u1*u1 - &
           0.06976744186046512_c_double*u1*u3 - 0.01627906976744186_c_double &
-          *u3**2
+          *u3*u3
     dxdt(7) = tmp3*u3 + u1*(-0.2872098251809964_c_double*u2 - &
           0.0008211868373490824_c_double*u4)
     dxdt(8) = c(2)
@@ -227,8 +227,8 @@ contains
     u3 = x(7)
     u4 = x(8)
     out(1) = u1*(10.019705882352941_c_double*u1 + &
-          0.4117647058823529_c_double*u3) + 12.647058823529411_c_double*u2 &
-          **2 + 9.13735294117647_c_double*u3**2 + 0.0075_c_double*u4**2
+          0.4117647058823529_c_double*u3) + 12.647058823529411_c_double*u2* &
+          u2 + 9.13735294117647_c_double*u3*u3 + 0.0075_c_double*u4*u4
   end subroutine wheel_spinup_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.

@@ -141,8 +141,8 @@ contains
     tmp4 = cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/tmp1**2
-    tmp8 = 1d0/tmp1
+    tmp7 = tmp6/(tmp1*tmp1)
+    tmp8 = 1.0_c_double/tmp1
     tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
     tmp10 = tmp2*tmp8
     tmp11 = tmp4*tmp8
@@ -165,7 +165,7 @@ contains
     J(15) = tmp2
     J(16) = 0
     J(17) = 0
-    J(18) = -tmp0**2*tmp7 + tmp3 - tmp5
+    J(18) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
     J(19) = -tmp0*tmp9
     J(20) = 0
     J(21) = tmp0*tmp10

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from functools import partial
 
 import sympy as sm
+from sympy.printing.precedence import PRECEDENCE
 
 from gyrogen.codegen.context import Unit
 from gyrogen.symbolic.literals import LiteralError, writable
@@ -33,6 +34,39 @@ class WritableNumbers:
     def _check(expr: sm.Rational) -> None:
         if not writable(expr):
             raise LiteralError(f"internal: the number {expr} reached a printer unconverted")
+
+
+class SmallPowers:
+    """A printer mixin: small integer powers as products (x*x beats pow(x, 2)
+    in C; in Fortran x**2 would round a*x**2 as a*(x*x), where C rounds
+    a*x*x as (a*x)*x), so that both languages print, and round, alike."""
+
+    def _print_Pow(self, expr: sm.Pow) -> str:
+        base, exp = expr.base, expr.exp
+        if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
+            b = self.parenthesize(  # type: ignore[attr-defined]
+                base, PRECEDENCE["Mul"] + 1
+            )
+            n = abs(int(exp))
+            one = self._print(sm.Float(1.0))  # type: ignore[attr-defined]
+            if n == 1:
+                return f"{one}/{b}"
+            prod = "*".join([b] * n)
+            return prod if exp > 0 else f"{one}/({prod})"
+        return str(super()._print_Pow(expr))  # type: ignore[misc]
+
+    def _print_Mul(self, expr: sm.Mul) -> str:
+        """sympy writes a lone denominator bare (a/b**2 as "a/" + Pow), trusting
+        a power to bind tighter than "/"; the products above do not, so
+        a/b**2 must read a/(b*b), not a/b*b."""
+        den = [f for f in expr.args if f.is_Pow and f.exp.is_Rational and f.exp.is_negative]
+        if len(den) != 1 or not (den[0].exp.is_Integer and -3 <= den[0].exp <= -2):
+            return str(super()._print_Mul(expr))  # type: ignore[misc]
+        if expr.as_coeff_Mul()[0] < 0:
+            return "-" + self._print(-expr)  # type: ignore[attr-defined]
+        num = sm.Mul(*(f for f in expr.args if f is not den[0]))
+        text = self.parenthesize(num, PRECEDENCE["Mul"], strict=True)  # type: ignore[attr-defined]
+        return f"{text}/({self._print(1 / den[0])})"  # type: ignore[attr-defined]
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ generate --lib`) keep plain -O2."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import tempfile
@@ -69,8 +70,19 @@ def accepts(tool: str, language: str, flag: str) -> bool:
     return proc.returncode == 0
 
 
+PORTABLE = "GYROGEN_PORTABLE"
+"""Set (to anything but empty or 0), a local build leaves out -march=native:
+code for any CPU of the architecture (and a check that the numbers do not
+depend on the instructions the CPU offers)."""
+
+
+def portable() -> bool:
+    return os.environ.get(PORTABLE, "") not in ("", "0")
+
+
 def _optional(tool: str, language: str) -> tuple[str, ...]:
-    fast = tuple(f for f in FAST if accepts(tool, language, f))
+    fast = tuple(f for f in FAST if accepts(tool, language, f)
+                 and not (portable() and f.startswith("-march")))  # fmt: skip
     return (fast or ("-O2",)) + ((OPENMP,) if openmp(tool, language) else ())
 
 

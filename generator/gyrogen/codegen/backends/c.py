@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sympy as sm
 from sympy.printing.c import C99CodePrinter
-from sympy.printing.precedence import PRECEDENCE
 
 from gyrogen import abi
 from gyrogen import methods as methods_registry
@@ -14,6 +13,7 @@ from gyrogen.codegen.integrators.program import c_text, program
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import (
     Function,
+    SmallPowers,
     WritableNumbers,
     functions,
     jacobian,
@@ -22,7 +22,7 @@ from gyrogen.codegen.statements import (
 from gyrogen.symbolic.hoist import constants
 
 
-class CPrinter(WritableNumbers, C99CodePrinter):
+class CPrinter(SmallPowers, WritableNumbers, C99CodePrinter):
     """C99 with the hoisted constants as c[k], doubles in their shortest
     exact form, small integer powers as products (x*x beats pow(x, 2)), and
     sin and cos as the file's own <prefix>_sin, <prefix>_cos (c/_trig.jinja:
@@ -49,30 +49,6 @@ class CPrinter(WritableNumbers, C99CodePrinter):
     def _print_Heaviside(self, expr: sm.Heaviside) -> str:
         """A torque limit's slope in the Jacobian: 1 inside the clamp, 0 outside."""
         return f"(({self._print(expr.args[0])}) > 0.0 ? 1.0 : 0.0)"
-
-    def _print_Pow(self, expr: sm.Pow) -> str:
-        base, exp = expr.base, expr.exp
-        if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
-            b = self.parenthesize(base, PRECEDENCE["Mul"] + 1)
-            n = abs(int(exp))
-            if n == 1:
-                return f"1.0/{b}"
-            prod = "*".join([b] * n)
-            return prod if exp > 0 else f"1.0/({prod})"
-        return str(super()._print_Pow(expr))
-
-    def _print_Mul(self, expr: sm.Mul) -> str:
-        """sympy writes a lone denominator bare (a/b**2 as "a/" + Pow), trusting
-        a power to bind tighter than "/"; the products above do not, so
-        a/b**2 must read a/(b*b), not a/b*b."""
-        den = [f for f in expr.args if f.is_Pow and f.exp.is_Rational and f.exp.is_negative]
-        if len(den) != 1 or not (den[0].exp.is_Integer and -3 <= den[0].exp <= -2):
-            return str(super()._print_Mul(expr))
-        if expr.as_coeff_Mul()[0] < 0:
-            return "-" + self._print(-expr)
-        num = sm.Mul(*(f for f in expr.args if f is not den[0]))
-        text = self.parenthesize(num, PRECEDENCE["Mul"], strict=True)
-        return f"{text}/({self._print(1 / den[0])})"
 
 
 TRIG = ("sin", "cos", "sin_lanes", "cos_lanes")

@@ -12,14 +12,20 @@ from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
 from gyrogen.codegen.integrators.program import fortran_text, program
 from gyrogen.codegen.render import f_double, render
-from gyrogen.codegen.statements import WritableNumbers, functions, jacobian, statements
+from gyrogen.codegen.statements import (
+    SmallPowers,
+    WritableNumbers,
+    functions,
+    jacobian,
+    statements,
+)
 from gyrogen.errors import GyrogenError
 from gyrogen.methods import signature_of
 from gyrogen.setup_checks import local_names
 from gyrogen.symbolic.hoist import constants
 
 
-class FortranPrinter(WritableNumbers, FCodePrinter):
+class FortranPrinter(SmallPowers, WritableNumbers, FCodePrinter):
     """Fortran 2008 free form (wrapped under 132 columns) with the hoisted
     constants as c(k+1). Names are printed as they are: `_check_names`
     refuses a function whose names differ only in case, where sympy would
