@@ -61,7 +61,7 @@ def test_numbers_outside_double_range_are_refused(value: sm.Expr) -> None:
         as_double(value)
 
 
-@pytest.mark.parametrize("printer", [CPrinter(0, "p"), FortranPrinter(0)])
+@pytest.mark.parametrize("printer", [CPrinter(0, "p"), FortranPrinter(0, "p")])
 def test_printers_refuse_an_unconverted_number(printer: object) -> None:
     with pytest.raises(LiteralError, match="reached a printer"):
         printer.doprint(sm.Mul(sm.Integer(2**70), x, evaluate=False))  # type: ignore[attr-defined]

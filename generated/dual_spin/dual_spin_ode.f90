@@ -27,6 +27,8 @@ module dual_spin_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use dual_spin_mod, only: dual_spin_rhs, nx => DUAL_SPIN_NX, &
                          nc => DUAL_SPIN_NC
+  use dual_spin_mod, only: dual_spin_sin
+  use dual_spin_mod, only: dual_spin_cos
   implicit none
   private
   public :: dual_spin_jac
@@ -134,11 +136,11 @@ contains
     u2 = x(5)
     u3 = x(6)
     u4 = x(7)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = dual_spin_sin(q2)
+    tmp1 = dual_spin_cos(q2)
+    tmp2 = dual_spin_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = dual_spin_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -283,7 +285,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS
+    res = abs(dual_spin_cos(x(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -294,8 +296,8 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-        gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = abs(dual_spin_cos(xnew(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS .or. &
+        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
 
@@ -927,8 +929,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(dual_spin_cos(xnew(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
@@ -1182,8 +1184,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(dual_spin_cos(xnew(1))) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))

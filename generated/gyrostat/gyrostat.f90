@@ -43,9 +43,11 @@
 !   p(12)  T     N m     motor torque on B about a2 (minus on A)
 module gyrostat_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int
-  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
   implicit none
   private
+  public :: gyrostat_sin
+  public :: gyrostat_cos
   public :: gyrostat_setup
   public :: gyrostat_rhs
   public :: gyrostat_strerror
@@ -76,6 +78,131 @@ module gyrostat_mod
   integer(c_int), parameter, public :: GYROSTAT_ERR_MASS_SINGULAR = 7
 
 contains
+
+  ! x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
+  ! reduction.
+  function gyrostat_reduce(x, tail, quad) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(out) :: tail
+    real(c_double), intent(out) :: quad
+    real(c_double) :: res
+    real(c_double) :: n
+    real(c_double) :: r
+    real(c_double) :: t
+    real(c_double) :: w
+    real(c_double) :: y
+
+    n = x * 0.6366197723675814_c_double + 6755399441055744.0_c_double - 6755399441055744.0_c_double
+    r = x - n * 1.5707963267341256_c_double
+    t = r
+    w = n * 6.077100506303966e-11_c_double
+    r = t - w
+    w = n * 2.0222662487959506e-21_c_double - (t - r - w)
+    t = r
+    w = n * 2.0222662487111665e-21_c_double
+    r = t - w
+    w = n * 8.4784276603689e-32_c_double - (t - r - w)
+    y = r - w
+    tail = r - y - w
+    quad = n - 4.0_c_double * ((n - 1.5_c_double) * 0.25_c_double + 6755399441055744.0_c_double - &
+        6755399441055744.0_c_double)  ! n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer
+    res = y
+    return
+  end function gyrostat_reduce
+
+  ! sin(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_sin.
+  function gyrostat_ksin(x, y) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: z
+    real(c_double) :: w
+    real(c_double) :: v
+    real(c_double) :: r
+
+    z = x * x
+    w = z * z
+    v = z * x
+    r = 0.00833333333332249_c_double + z * (-0.0001984126982985795_c_double + z * &
+        2.7557313707070068e-06_c_double) + z * w * (-2.5050760253406863e-08_c_double + z * &
+        1.58969099521155e-10_c_double)
+    res = x - (z * (0.5_c_double * y - v * r) - y - v * (-0.16666666666666632_c_double))
+    return
+  end function gyrostat_ksin
+
+  ! cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_cos.
+  function gyrostat_kcos(x, y) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: z
+    real(c_double) :: w
+    real(c_double) :: hz
+    real(c_double) :: u
+    real(c_double) :: r
+
+    z = x * x
+    w = z * z
+    hz = 0.5_c_double * z
+    u = 1.0_c_double - hz
+    r = z * (0.0416666666666666_c_double + z * (-0.001388888888887411_c_double + z * &
+        2.480158728947673e-05_c_double)) + w * w * (-2.7557314351390663e-07_c_double + z * &
+        (2.087572321298175e-09_c_double + z * (-1.1359647557788195e-11_c_double)))
+    res = u + (1.0_c_double - u - hz + (z * r - x * y))
+    return
+  end function gyrostat_kcos
+
+  ! sin(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond): both
+  ! kernels, then the quadrant picks one and its sign.
+  function gyrostat_sin(x) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double) :: res
+    real(c_double) :: y
+    real(c_double) :: q
+    real(c_double) :: r
+    real(c_double) :: s
+    real(c_double) :: c
+    real(c_double) :: v
+    real(c_double) :: f
+
+    if (abs(x) <= 0.7853981633974483_c_double) then
+      res = gyrostat_ksin(x, x - x)  ! the reduction's r and tail: x, +0
+      return
+    end if
+    r = gyrostat_reduce(x, y, q)
+    s = gyrostat_ksin(r, y)
+    c = gyrostat_kcos(r, y)
+    v = merge(c, s, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    f = merge(-v, v, q >= 2.0_c_double)
+    res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
+    return
+  end function gyrostat_sin
+
+  ! cos(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond): both
+  ! kernels, then the quadrant picks one and its sign.
+  function gyrostat_cos(x) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double) :: res
+    real(c_double) :: y
+    real(c_double) :: q
+    real(c_double) :: r
+    real(c_double) :: s
+    real(c_double) :: c
+    real(c_double) :: v
+    real(c_double) :: f
+
+    if (abs(x) <= 0.7853981633974483_c_double) then
+      res = gyrostat_kcos(x, x - x)  ! the reduction's r and tail: x, +0
+      return
+    end if
+    r = gyrostat_reduce(x, y, q)
+    s = gyrostat_ksin(r, y)
+    c = gyrostat_kcos(r, y)
+    v = merge(s, c, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    f = merge(-v, v, q > 0.5_c_double .and. q < 2.5_c_double)
+    res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
+    return
+  end function gyrostat_cos
 
   ! Checks p and computes the constants c that gyrostat_rhs needs
   ! (110 ops, plus the checks). Returns GYROSTAT_OK or
@@ -276,12 +403,12 @@ contains
     u5 = x(12)
     u6 = x(13)
     u7 = x(14)
-    tmp0 = sin(q3)
-    tmp1 = cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
+    tmp0 = gyrostat_sin(q3)
+    tmp1 = gyrostat_cos(q3)
+    tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos(q2)
     dxdt(1) = tmp2
     dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*sin(q2) + u2
+    dxdt(3) = -tmp2*gyrostat_sin(q2) + u2
     dxdt(4) = -u2 + u4
     dxdt(5) = u5
     dxdt(6) = u6

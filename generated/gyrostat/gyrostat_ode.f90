@@ -27,6 +27,8 @@ module gyrostat_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use gyrostat_mod, only: gyrostat_rhs, nx => GYROSTAT_NX, &
                          nc => GYROSTAT_NC
+  use gyrostat_mod, only: gyrostat_sin
+  use gyrostat_mod, only: gyrostat_cos
   implicit none
   private
   public :: gyrostat_jac
@@ -135,11 +137,11 @@ contains
     u2 = x(9)
     u3 = x(10)
     u4 = x(11)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = gyrostat_sin(q2)
+    tmp1 = gyrostat_cos(q2)
+    tmp2 = gyrostat_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = gyrostat_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -423,7 +425,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS
+    res = abs(gyrostat_cos(x(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -434,8 +436,8 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-        gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = abs(gyrostat_cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. &
+        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
 
@@ -1098,8 +1100,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(gyrostat_cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
@@ -1353,8 +1355,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(gyrostat_cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))

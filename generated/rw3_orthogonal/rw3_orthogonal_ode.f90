@@ -27,6 +27,8 @@ module rw3_orthogonal_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use rw3_orthogonal_mod, only: rw3_orthogonal_rhs, nx => RW3_ORTHOGONAL_NX, &
                          nc => RW3_ORTHOGONAL_NC
+  use rw3_orthogonal_mod, only: rw3_orthogonal_sin
+  use rw3_orthogonal_mod, only: rw3_orthogonal_cos
   implicit none
   private
   public :: rw3_orthogonal_jac
@@ -143,11 +145,11 @@ contains
     w1 = x(7)
     w2 = x(8)
     w3 = x(9)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = rw3_orthogonal_sin(q2)
+    tmp1 = rw3_orthogonal_cos(q2)
+    tmp2 = rw3_orthogonal_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = rw3_orthogonal_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -353,7 +355,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS
+    res = abs(rw3_orthogonal_cos(x(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -364,8 +366,8 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-        gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = abs(rw3_orthogonal_cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS .or. &
+        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
 
@@ -1028,7 +1030,7 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS .or. &
+      lock = abs(rw3_orthogonal_cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS .or. &
           abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
@@ -1284,7 +1286,7 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS .or. &
+      lock = abs(rw3_orthogonal_cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS .or. &
           abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form

@@ -32,9 +32,11 @@
 !   p( 4)  w_ref_4 rad/s   speed controller of rotor B4: commanded rate relative to A
 module rw4_pyramid_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int
-  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
   implicit none
   private
+  public :: rw4_pyramid_sin
+  public :: rw4_pyramid_cos
   public :: rw4_pyramid_setup
   public :: rw4_pyramid_rhs
   public :: rw4_pyramid_strerror
@@ -58,6 +60,133 @@ module rw4_pyramid_mod
   integer(c_int), parameter, public :: RW4_PYRAMID_ERR_MASS_SINGULAR = 7
 
 contains
+
+  ! x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
+  ! reduction.
+  function rw4_pyramid_reduce(x, tail, quad) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(out) :: tail
+    real(c_double), intent(out) :: quad
+    real(c_double) :: res
+    real(c_double) :: n
+    real(c_double) :: r
+    real(c_double) :: t
+    real(c_double) :: w
+    real(c_double) :: y
+
+    n = x * 0.6366197723675814_c_double + 6755399441055744.0_c_double - 6755399441055744.0_c_double
+    r = x - n * 1.5707963267341256_c_double
+    t = r
+    w = n * 6.077100506303966e-11_c_double
+    r = t - w
+    w = n * 2.0222662487959506e-21_c_double - (t - r - w)
+    t = r
+    w = n * 2.0222662487111665e-21_c_double
+    r = t - w
+    w = n * 8.4784276603689e-32_c_double - (t - r - w)
+    y = r - w
+    tail = r - y - w
+    quad = n - 4.0_c_double * ((n - 1.5_c_double) * 0.25_c_double + 6755399441055744.0_c_double - &
+        6755399441055744.0_c_double)  ! n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer
+    res = y
+    return
+  end function rw4_pyramid_reduce
+
+  ! sin(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_sin.
+  function rw4_pyramid_ksin(x, y) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: z
+    real(c_double) :: w
+    real(c_double) :: v
+    real(c_double) :: r
+
+    z = x * x
+    w = z * z
+    v = z * x
+    r = 0.00833333333332249_c_double + z * (-0.0001984126982985795_c_double + z * &
+        2.7557313707070068e-06_c_double) + z * w * (-2.5050760253406863e-08_c_double + z * &
+        1.58969099521155e-10_c_double)
+    res = x - (z * (0.5_c_double * y - v * r) - y - v * (-0.16666666666666632_c_double))
+    return
+  end function rw4_pyramid_ksin
+
+  ! cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_cos.
+  function rw4_pyramid_kcos(x, y) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: z
+    real(c_double) :: w
+    real(c_double) :: hz
+    real(c_double) :: u
+    real(c_double) :: r
+
+    z = x * x
+    w = z * z
+    hz = 0.5_c_double * z
+    u = 1.0_c_double - hz
+    r = z * (0.0416666666666666_c_double + z * (-0.001388888888887411_c_double + z * &
+        2.480158728947673e-05_c_double)) + w * w * (-2.7557314351390663e-07_c_double + z * &
+        (2.087572321298175e-09_c_double + z * (-1.1359647557788195e-11_c_double)))
+    res = u + (1.0_c_double - u - hz + (z * r - x * y))
+    return
+  end function rw4_pyramid_kcos
+
+  ! sin(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_reduce for beyond):
+  ! both
+  ! kernels, then the quadrant picks one and its sign.
+  function rw4_pyramid_sin(x) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double) :: res
+    real(c_double) :: y
+    real(c_double) :: q
+    real(c_double) :: r
+    real(c_double) :: s
+    real(c_double) :: c
+    real(c_double) :: v
+    real(c_double) :: f
+
+    if (abs(x) <= 0.7853981633974483_c_double) then
+      res = rw4_pyramid_ksin(x, x - x)  ! the reduction's r and tail: x, +0
+      return
+    end if
+    r = rw4_pyramid_reduce(x, y, q)
+    s = rw4_pyramid_ksin(r, y)
+    c = rw4_pyramid_kcos(r, y)
+    v = merge(c, s, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    f = merge(-v, v, q >= 2.0_c_double)
+    res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
+    return
+  end function rw4_pyramid_sin
+
+  ! cos(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_reduce for beyond):
+  ! both
+  ! kernels, then the quadrant picks one and its sign.
+  function rw4_pyramid_cos(x) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double) :: res
+    real(c_double) :: y
+    real(c_double) :: q
+    real(c_double) :: r
+    real(c_double) :: s
+    real(c_double) :: c
+    real(c_double) :: v
+    real(c_double) :: f
+
+    if (abs(x) <= 0.7853981633974483_c_double) then
+      res = rw4_pyramid_kcos(x, x - x)  ! the reduction's r and tail: x, +0
+      return
+    end if
+    r = rw4_pyramid_reduce(x, y, q)
+    s = rw4_pyramid_ksin(r, y)
+    c = rw4_pyramid_kcos(r, y)
+    v = merge(s, c, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    f = merge(-v, v, q > 0.5_c_double .and. q < 2.5_c_double)
+    res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
+    return
+  end function rw4_pyramid_cos
 
   ! Checks p and computes the constants c that rw4_pyramid_rhs needs
   ! (4 ops, plus the checks). Returns RW4_PYRAMID_OK or
@@ -167,9 +296,9 @@ contains
     tmp1 = 0.8164965809277259_c_double*u3
     tmp2 = 0.5773502691896258_c_double*u2
     tmp3 = -tmp1
-    tmp4 = sin(q3)
-    tmp5 = cos(q3)
-    tmp6 = (-tmp4*u1 + tmp5*u3)/cos(q2)
+    tmp4 = rw4_pyramid_sin(q3)
+    tmp5 = rw4_pyramid_cos(q3)
+    tmp6 = (-tmp4*u1 + tmp5*u3)/rw4_pyramid_cos(q2)
     h1 = 421.76382113821137_c_double*u1 - 4*u2 + 6*u3 + &
           0.025980762113533163_c_double*(w1 - w3)
     h2 = -4*u1 + 381.76382113821137_c_double*u2 + 2.5_c_double*u3 + &
@@ -194,7 +323,7 @@ contains
           net4)
     dxdt(1) = tmp6
     dxdt(2) = tmp4*u3 + tmp5*u1
-    dxdt(3) = -tmp6*sin(q2) + u2
+    dxdt(3) = -tmp6*rw4_pyramid_sin(q2) + u2
     dxdt(4) = 0.002371907568400169_c_double*f1 + &
           2.5162222823731624e-05_c_double*f2 - &
           4.735842396728992e-05_c_double*f3
@@ -283,16 +412,16 @@ contains
     w2 = x(8)
     w3 = x(9)
     w4 = x(10)
-    tmp0 = sin(q1)
+    tmp0 = rw4_pyramid_sin(q1)
     tmp1 = -4*u1 + 381.76382113821137_c_double*u2 + 2.5_c_double*u3 + &
           0.025980762113533163_c_double*(w2 - w4)
-    tmp2 = cos(q2)
+    tmp2 = rw4_pyramid_cos(q2)
     tmp3 = tmp1*tmp2
-    tmp4 = sin(q3)
-    tmp5 = cos(q1)
+    tmp4 = rw4_pyramid_sin(q3)
+    tmp5 = rw4_pyramid_cos(q1)
     tmp6 = tmp4*tmp5
-    tmp7 = sin(q2)
-    tmp8 = cos(q3)
+    tmp7 = rw4_pyramid_sin(q2)
+    tmp8 = rw4_pyramid_cos(q3)
     tmp9 = tmp0*tmp8
     tmp10 = 6*u1 + 2.5_c_double*u2 + 301.8333333333333_c_double*u3 + &
           0.036742346141747664_c_double*(w1 + w2 + w3 + w4)

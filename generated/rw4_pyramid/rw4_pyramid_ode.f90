@@ -27,6 +27,8 @@ module rw4_pyramid_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use rw4_pyramid_mod, only: rw4_pyramid_rhs, nx => RW4_PYRAMID_NX, &
                          nc => RW4_PYRAMID_NC
+  use rw4_pyramid_mod, only: rw4_pyramid_sin
+  use rw4_pyramid_mod, only: rw4_pyramid_cos
   implicit none
   private
   public :: rw4_pyramid_jac
@@ -165,11 +167,11 @@ contains
     w2 = x(8)
     w3 = x(9)
     w4 = x(10)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = rw4_pyramid_sin(q2)
+    tmp1 = rw4_pyramid_cos(q2)
+    tmp2 = rw4_pyramid_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = rw4_pyramid_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -503,7 +505,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS
+    res = abs(rw4_pyramid_cos(x(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -514,8 +516,8 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-        gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = abs(rw4_pyramid_cos(xnew(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. &
+        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
 
@@ -1194,8 +1196,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(rw4_pyramid_cos(xnew(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
@@ -1449,8 +1451,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(rw4_pyramid_cos(xnew(1))) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))

@@ -27,6 +27,8 @@ module rw4_pyramid_failed_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_rhs, nx => RW4_PYRAMID_FAILED_NX, &
                          nc => RW4_PYRAMID_FAILED_NC
+  use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_sin
+  use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_cos
   implicit none
   private
   public :: rw4_pyramid_failed_jac
@@ -162,11 +164,11 @@ contains
     w2 = x(8)
     w3 = x(9)
     w4 = x(10)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = rw4_pyramid_failed_sin(q2)
+    tmp1 = rw4_pyramid_failed_cos(q2)
+    tmp2 = rw4_pyramid_failed_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = rw4_pyramid_failed_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -484,7 +486,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS
+    res = abs(rw4_pyramid_failed_cos(x(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -495,7 +497,7 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS .or. &
+    res = abs(rw4_pyramid_failed_cos(xnew(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS .or. &
         abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
@@ -1176,7 +1178,7 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS .or. &
+      lock = abs(rw4_pyramid_failed_cos(xnew(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS .or. &
           abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
@@ -1432,7 +1434,7 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS .or. &
+      lock = abs(rw4_pyramid_failed_cos(xnew(1))) < RW4_PYRAMID_FAILED_ODE_GIMBAL_LOCK_COS .or. &
           abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form

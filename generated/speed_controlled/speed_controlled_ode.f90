@@ -27,6 +27,8 @@ module speed_controlled_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use speed_controlled_mod, only: speed_controlled_rhs, nx => SPEED_CONTROLLED_NX, &
                          nc => SPEED_CONTROLLED_NC
+  use speed_controlled_mod, only: speed_controlled_sin
+  use speed_controlled_mod, only: speed_controlled_cos
   implicit none
   private
   public :: speed_controlled_jac
@@ -134,11 +136,11 @@ contains
     u2 = x(6)
     u3 = x(7)
     u4 = x(8)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = speed_controlled_sin(q2)
+    tmp1 = speed_controlled_cos(q2)
+    tmp2 = speed_controlled_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = speed_controlled_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -298,7 +300,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS
+    res = abs(speed_controlled_cos(x(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -309,8 +311,8 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) &
-        - gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = abs(speed_controlled_cos(xnew(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS .or. &
+        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
 
@@ -954,7 +956,7 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS .or. &
+      lock = abs(speed_controlled_cos(xnew(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS .or. &
           abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
@@ -1210,7 +1212,7 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS .or. &
+      lock = abs(speed_controlled_cos(xnew(1))) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS .or. &
           abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form

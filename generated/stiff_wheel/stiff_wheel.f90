@@ -28,9 +28,11 @@
 !   p( 2)  w_ref rad/s   speed controller: commanded rate of B relative to A
 module stiff_wheel_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int
-  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
   implicit none
   private
+  public :: stiff_wheel_sin
+  public :: stiff_wheel_cos
   public :: stiff_wheel_setup
   public :: stiff_wheel_rhs
   public :: stiff_wheel_strerror
@@ -64,6 +66,133 @@ module stiff_wheel_mod
   integer(c_int), parameter, public :: STIFF_WHEEL_ERR_MASS_SINGULAR = 7
 
 contains
+
+  ! x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
+  ! reduction.
+  function stiff_wheel_reduce(x, tail, quad) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(out) :: tail
+    real(c_double), intent(out) :: quad
+    real(c_double) :: res
+    real(c_double) :: n
+    real(c_double) :: r
+    real(c_double) :: t
+    real(c_double) :: w
+    real(c_double) :: y
+
+    n = x * 0.6366197723675814_c_double + 6755399441055744.0_c_double - 6755399441055744.0_c_double
+    r = x - n * 1.5707963267341256_c_double
+    t = r
+    w = n * 6.077100506303966e-11_c_double
+    r = t - w
+    w = n * 2.0222662487959506e-21_c_double - (t - r - w)
+    t = r
+    w = n * 2.0222662487111665e-21_c_double
+    r = t - w
+    w = n * 8.4784276603689e-32_c_double - (t - r - w)
+    y = r - w
+    tail = r - y - w
+    quad = n - 4.0_c_double * ((n - 1.5_c_double) * 0.25_c_double + 6755399441055744.0_c_double - &
+        6755399441055744.0_c_double)  ! n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer
+    res = y
+    return
+  end function stiff_wheel_reduce
+
+  ! sin(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_sin.
+  function stiff_wheel_ksin(x, y) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: z
+    real(c_double) :: w
+    real(c_double) :: v
+    real(c_double) :: r
+
+    z = x * x
+    w = z * z
+    v = z * x
+    r = 0.00833333333332249_c_double + z * (-0.0001984126982985795_c_double + z * &
+        2.7557313707070068e-06_c_double) + z * w * (-2.5050760253406863e-08_c_double + z * &
+        1.58969099521155e-10_c_double)
+    res = x - (z * (0.5_c_double * y - v * r) - y - v * (-0.16666666666666632_c_double))
+    return
+  end function stiff_wheel_ksin
+
+  ! cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_cos.
+  function stiff_wheel_kcos(x, y) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: z
+    real(c_double) :: w
+    real(c_double) :: hz
+    real(c_double) :: u
+    real(c_double) :: r
+
+    z = x * x
+    w = z * z
+    hz = 0.5_c_double * z
+    u = 1.0_c_double - hz
+    r = z * (0.0416666666666666_c_double + z * (-0.001388888888887411_c_double + z * &
+        2.480158728947673e-05_c_double)) + w * w * (-2.7557314351390663e-07_c_double + z * &
+        (2.087572321298175e-09_c_double + z * (-1.1359647557788195e-11_c_double)))
+    res = u + (1.0_c_double - u - hz + (z * r - x * y))
+    return
+  end function stiff_wheel_kcos
+
+  ! sin(x) within 1 ulp for |x| <= 1.6e6 (see stiff_wheel_reduce for beyond):
+  ! both
+  ! kernels, then the quadrant picks one and its sign.
+  function stiff_wheel_sin(x) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double) :: res
+    real(c_double) :: y
+    real(c_double) :: q
+    real(c_double) :: r
+    real(c_double) :: s
+    real(c_double) :: c
+    real(c_double) :: v
+    real(c_double) :: f
+
+    if (abs(x) <= 0.7853981633974483_c_double) then
+      res = stiff_wheel_ksin(x, x - x)  ! the reduction's r and tail: x, +0
+      return
+    end if
+    r = stiff_wheel_reduce(x, y, q)
+    s = stiff_wheel_ksin(r, y)
+    c = stiff_wheel_kcos(r, y)
+    v = merge(c, s, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    f = merge(-v, v, q >= 2.0_c_double)
+    res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
+    return
+  end function stiff_wheel_sin
+
+  ! cos(x) within 1 ulp for |x| <= 1.6e6 (see stiff_wheel_reduce for beyond):
+  ! both
+  ! kernels, then the quadrant picks one and its sign.
+  function stiff_wheel_cos(x) result(res)
+    real(c_double), intent(in) :: x
+    real(c_double) :: res
+    real(c_double) :: y
+    real(c_double) :: q
+    real(c_double) :: r
+    real(c_double) :: s
+    real(c_double) :: c
+    real(c_double) :: v
+    real(c_double) :: f
+
+    if (abs(x) <= 0.7853981633974483_c_double) then
+      res = stiff_wheel_kcos(x, x - x)  ! the reduction's r and tail: x, +0
+      return
+    end if
+    r = stiff_wheel_reduce(x, y, q)
+    s = stiff_wheel_ksin(r, y)
+    c = stiff_wheel_kcos(r, y)
+    v = merge(s, c, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    f = merge(-v, v, q > 0.5_c_double .and. q < 2.5_c_double)
+    res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
+    return
+  end function stiff_wheel_cos
 
   ! Checks p and computes the constants c that stiff_wheel_rhs needs
   ! (10 ops, plus the checks). Returns STIFF_WHEEL_OK or
@@ -198,14 +327,14 @@ contains
     u3 = x(7)
     u4 = x(8)
     slip = c(3) - u2 + u4
-    tmp0 = sin(q3)
-    tmp1 = cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/cos(q2)
+    tmp0 = stiff_wheel_sin(q3)
+    tmp1 = stiff_wheel_cos(q3)
+    tmp2 = (-tmp0*u1 + tmp1*u3)/stiff_wheel_cos(q2)
     tmp3 = 0.016919114337701612_c_double*u2 - &
           1.2676659094182028e-05_c_double*u4
     dxdt(1) = tmp2
     dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*sin(q2) + u2
+    dxdt(3) = -tmp2*stiff_wheel_sin(q2) + u2
     dxdt(4) = -u2 + u4
     dxdt(5) = -tmp3*u1 + u3*(0.33522655090705017_c_double*u2 + &
           0.0004980820048148975_c_double*u4)
@@ -277,16 +406,16 @@ contains
     u2 = x(6)
     u3 = x(7)
     u4 = x(8)
-    tmp0 = sin(q1)
+    tmp0 = stiff_wheel_sin(q1)
     tmp1 = 75.28618421052632_c_double*u2 + 0.03_c_double*u4
-    tmp2 = cos(q2)
+    tmp2 = stiff_wheel_cos(q2)
     tmp3 = tmp1*tmp2
     tmp4 = 1.4013157894736843_c_double*u1 + 55.05947368421052_c_double*u3
-    tmp5 = sin(q3)
-    tmp6 = cos(q1)
+    tmp5 = stiff_wheel_sin(q3)
+    tmp6 = stiff_wheel_cos(q1)
     tmp7 = tmp5*tmp6
-    tmp8 = sin(q2)
-    tmp9 = cos(q3)
+    tmp8 = stiff_wheel_sin(q2)
+    tmp9 = stiff_wheel_cos(q3)
     tmp10 = tmp0*tmp9
     tmp11 = 60.26671052631579_c_double*u1 + 1.4013157894736843_c_double*u3
     tmp12 = tmp0*tmp5

@@ -32,130 +32,156 @@
 #define TORQUE_FREE_RESTRICT restrict
 #endif
 
-/* x = n pi/2 + r, |r| <= pi/4 (a little more when x 2/pi is near a half
-   integer), r as r + *tail to about 2^-118 |x|, and *quad = n mod 4 (0..3,
-   as a double). The reduction of fdlibm's __rem_pio2 for "medium" |x|
-   (pi/2 in three pieces of 33 bits and their tails), all three rounds taken
-   every time: n pio2_1 is exact for |n| < 2^20, so r is accurate for |x| <=
-   2^20 pi/2 = 1.6e6. Beyond, n pio2_1 rounds and the result is sin or cos
-   of a point within half an ulp of x (an absolute error <= ulp(x)/2, the
-   uncertainty of x itself); beyond 2^50 (1.1e15) n is no longer exact and
-   the functions return NaN, as they do for an infinite or NaN x. */
+
+/* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
+   reduction. */
 static inline double torque_free_reduce(double x, double *tail, double *quad)
 {
-    const double toint = 6755399441055744.0;  /* 1.5 2^52: adding it rounds to an integer */
-    const double invpio2 = 6.36619772367581382433e-01;
-    const double pio2_1 = 1.57079632673412561417e+00;
-    const double pio2_2 = 6.07710050630396597660e-11;
-    const double pio2_2t = 2.02226624879595063154e-21;
-    const double pio2_3 = 2.02226624871116645580e-21;
-    const double pio2_3t = 8.47842766036889956997e-32;
-    const double n = (x * invpio2 + toint) - toint;
-    double r = x - n * pio2_1, t = r, w = n * pio2_2, y;
-    r = t - w;
-    w = n * pio2_2t - ((t - r) - w);
+    double n;
+    double r;
+    double t;
+    double w;
+    double y;
+
+    n = x * 0.6366197723675814 + 6755399441055744.0 - 6755399441055744.0;
+    r = x - n * 1.5707963267341256;
     t = r;
-    w = n * pio2_3;
+    w = n * 6.077100506303966e-11;
     r = t - w;
-    w = n * pio2_3t - ((t - r) - w);
+    w = n * 2.0222662487959506e-21 - (t - r - w);
+    t = r;
+    w = n * 2.0222662487111665e-21;
+    r = t - w;
+    w = n * 8.4784276603689e-32 - (t - r - w);
     y = r - w;
-    *tail = (r - y) - w;
-    /* n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer */
-    *quad = n - 4.0 * (((n - 1.5) * 0.25 + toint) - toint);
+    *tail = r - y - w;
+    *quad = n - 4.0 * ((n - 1.5) * 0.25 + 6755399441055744.0 - 6755399441055744.0);  /* n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer */
     return y;
 }
 
-/* sin(x + y) and cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's
-   __kernel_sin and __kernel_cos (musl's form), errors below 1 ulp. */
+/* sin(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_sin. */
 static inline double torque_free_ksin(double x, double y)
 {
-    const double S1 = -1.66666666666666324348e-01, S2 = 8.33333333332248946124e-03,
-                 S3 = -1.98412698298579493134e-04, S4 = 2.75573137070700676789e-06,
-                 S5 = -2.50507602534068634195e-08, S6 = 1.58969099521155010221e-10;
-    const double z = x * x, w = z * z, v = z * x;
-    const double r = S2 + z * (S3 + z * S4) + z * w * (S5 + z * S6);
-    return x - ((z * (0.5 * y - v * r) - y) - v * S1);
+    double z;
+    double w;
+    double v;
+    double r;
+
+    z = x * x;
+    w = z * z;
+    v = z * x;
+    r = 0.00833333333332249 + z * (-0.0001984126982985795 + z * 2.7557313707070068e-06) + z * w *
+            (-2.5050760253406863e-08 + z * 1.58969099521155e-10);
+    return x - (z * (0.5 * y - v * r) - y - v * -0.16666666666666632);
 }
 
+/* cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_cos. */
 static inline double torque_free_kcos(double x, double y)
 {
-    const double C1 = 4.16666666666666019037e-02, C2 = -1.38888888888741095749e-03,
-                 C3 = 2.48015872894767294178e-05, C4 = -2.75573143513906633035e-07,
-                 C5 = 2.08757232129817482790e-09, C6 = -1.13596475577881948265e-11;
-    const double z = x * x, w = z * z, hz = 0.5 * z, u = 1.0 - hz;
-    const double r = z * (C1 + z * (C2 + z * C3)) + w * w * (C4 + z * (C5 + z * C6));
-    return u + (((1.0 - u) - hz) + (z * r - x * y));
+    double z;
+    double w;
+    double hz;
+    double u;
+    double r;
+
+    z = x * x;
+    w = z * z;
+    hz = 0.5 * z;
+    u = 1.0 - hz;
+    r = z * (0.0416666666666666 + z * (-0.001388888888887411 + z * 2.480158728947673e-05)) + w *
+            w * (-2.7557314351390663e-07 + z * (2.087572321298175e-09 + z *
+            -1.1359647557788195e-11));
+    return u + (1.0 - u - hz + (z * r - x * y));
 }
 
-/* The largest |x| the reduction takes (2^50); past it, NaN. */
-#define TORQUE_FREE_TRIG_MAX 1125899906842624.0
-
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both kernels, then the quadrant picks one and its sign. sin and cos of
-   one angle share the reduction and the kernels once inlined. */
+   both
+   kernels, then the quadrant picks one and its sign. */
 static inline double torque_free_sin(double x)
 {
-    double y, q;
-    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
-       passed is x - x (+0 here), not a literal 0.0, so that the compiler
-       fuses the kernel's multiply-adds as it does in the _lanes twin and
-       both give the same bits under -ffp-contract=fast too. */
-    if (fabs(x) <= 0.78539816339744828)
-        return torque_free_ksin(x, x - x);
-    const double r = torque_free_reduce(x, &y, &q);
-    const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
-    const int odd = q == 1.0 || q == 3.0;
-    const double v = odd ? c : s;
-    const double f = q >= 2.0 ? -v : v;
-    return fabs(x) <= TORQUE_FREE_TRIG_MAX ? f : (double)NAN;
+    double y;
+    double q;
+    double r;
+    double s;
+    double c;
+    double v;
+    double f;
+
+    if (fabs(x) <= 0.7853981633974483) {
+        return torque_free_ksin(x, x - x);  /* the reduction's r and tail: x, +0 */
+    }
+    r = torque_free_reduce(x, &y, &q);
+    s = torque_free_ksin(r, y);
+    c = torque_free_kcos(r, y);
+    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    f = q >= 2.0 ? -v : v;
+    return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both kernels, then the quadrant picks one and its sign. sin and cos of
-   one angle share the reduction and the kernels once inlined. */
+   both
+   kernels, then the quadrant picks one and its sign. */
 static inline double torque_free_cos(double x)
 {
-    double y, q;
-    /* |x| <= pi/4: the reduction would give x and a tail of +0. The tail
-       passed is x - x (+0 here), not a literal 0.0, so that the compiler
-       fuses the kernel's multiply-adds as it does in the _lanes twin and
-       both give the same bits under -ffp-contract=fast too. */
-    if (fabs(x) <= 0.78539816339744828)
-        return torque_free_kcos(x, x - x);
-    const double r = torque_free_reduce(x, &y, &q);
-    const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
-    const int odd = q == 1.0 || q == 3.0;
-    const double v = odd ? s : c;
-    const double f = q == 1.0 || q == 2.0 ? -v : v;
-    return fabs(x) <= TORQUE_FREE_TRIG_MAX ? f : (double)NAN;
+    double y;
+    double q;
+    double r;
+    double s;
+    double c;
+    double v;
+    double f;
+
+    if (fabs(x) <= 0.7853981633974483) {
+        return torque_free_kcos(x, x - x);  /* the reduction's r and tail: x, +0 */
+    }
+    r = torque_free_reduce(x, &y, &q);
+    s = torque_free_ksin(r, y);
+    c = torque_free_kcos(r, y);
+    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    f = q > 0.5 && q < 2.5 ? -v : v;
+    return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both kernels, then the quadrant picks one and its sign. sin and cos of
-   one angle share the reduction and the kernels once inlined. Branch-free. */
+   both
+   kernels, then the quadrant picks one and its sign. Branch-free. */
 static inline double torque_free_sin_lanes(double x)
 {
-    double y, q;
-    const double r = torque_free_reduce(x, &y, &q);
-    const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
-    const int odd = q == 1.0 || q == 3.0;
-    const double v = odd ? c : s;
-    const double f = q >= 2.0 ? -v : v;
-    return fabs(x) <= TORQUE_FREE_TRIG_MAX ? f : (double)NAN;
+    double y;
+    double q;
+    double r;
+    double s;
+    double c;
+    double v;
+    double f;
+
+    r = torque_free_reduce(x, &y, &q);
+    s = torque_free_ksin(r, y);
+    c = torque_free_kcos(r, y);
+    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    f = q >= 2.0 ? -v : v;
+    return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both kernels, then the quadrant picks one and its sign. sin and cos of
-   one angle share the reduction and the kernels once inlined. Branch-free. */
+   both
+   kernels, then the quadrant picks one and its sign. Branch-free. */
 static inline double torque_free_cos_lanes(double x)
 {
-    double y, q;
-    const double r = torque_free_reduce(x, &y, &q);
-    const double s = torque_free_ksin(r, y), c = torque_free_kcos(r, y);
-    const int odd = q == 1.0 || q == 3.0;
-    const double v = odd ? s : c;
-    const double f = q == 1.0 || q == 2.0 ? -v : v;
-    return fabs(x) <= TORQUE_FREE_TRIG_MAX ? f : (double)NAN;
+    double y;
+    double q;
+    double r;
+    double s;
+    double c;
+    double v;
+    double f;
+
+    r = torque_free_reduce(x, &y, &q);
+    s = torque_free_ksin(r, y);
+    c = torque_free_kcos(r, y);
+    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    f = q > 0.5 && q < 2.5 ? -v : v;
+    return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 

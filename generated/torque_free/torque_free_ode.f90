@@ -27,6 +27,8 @@ module torque_free_ode_mod
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use torque_free_mod, only: torque_free_rhs, nx => TORQUE_FREE_NX, &
                          nc => TORQUE_FREE_NC
+  use torque_free_mod, only: torque_free_sin
+  use torque_free_mod, only: torque_free_cos
   implicit none
   private
   public :: torque_free_jac
@@ -134,11 +136,11 @@ contains
     u2 = x(5)
     u3 = x(6)
     u4 = x(7)
-    tmp0 = sin(q2)
-    tmp1 = cos(q2)
-    tmp2 = sin(q3)
+    tmp0 = torque_free_sin(q2)
+    tmp1 = torque_free_cos(q2)
+    tmp2 = torque_free_sin(q3)
     tmp3 = tmp2*u1
-    tmp4 = cos(q3)
+    tmp4 = torque_free_cos(q3)
     tmp5 = tmp4*u3
     tmp6 = -tmp3 + tmp5
     tmp7 = tmp6/(tmp1*tmp1)
@@ -274,7 +276,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(cos(x(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS
+    res = abs(torque_free_cos(x(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS
     return
   end function gimbal_lock_at
 
@@ -285,8 +287,8 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-        gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = abs(torque_free_cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS .or. &
+        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
     return
   end function gimbal_lock
 
@@ -918,8 +920,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(torque_free_cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
@@ -1173,8 +1175,8 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS .or. abs(gimbal_interval(x(1)) - &
-          gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = abs(torque_free_cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS .or. &
+          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))

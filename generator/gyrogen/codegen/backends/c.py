@@ -9,7 +9,8 @@ from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
-from gyrogen.codegen.integrators.program import c_text, program
+from gyrogen.codegen.integrators.program import c_text, program, trig_text
+from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import (
     Function,
@@ -25,9 +26,10 @@ from gyrogen.symbolic.hoist import constants
 class CPrinter(SmallPowers, WritableNumbers, C99CodePrinter):
     """C99 with the hoisted constants as c[k], doubles in their shortest
     exact form, small integer powers as products (x*x beats pow(x, 2)), and
-    sin and cos as the file's own <prefix>_sin, <prefix>_cos (c/_trig.jinja:
-    inline), or with ``lanes`` their branch-free twins <prefix>_sin_lanes,
-    <prefix>_cos_lanes, so that a loop over lanes vectorizes."""
+    sin and cos as the file's own <prefix>_sin, <prefix>_cos
+    (gyrogen.codegen.integrators.trig: inline), or with ``lanes`` their
+    branch-free twins <prefix>_sin_lanes, <prefix>_cos_lanes, so that a loop
+    over lanes vectorizes."""
 
     def __init__(self, nc: int, prefix: str, lanes: bool = False) -> None:
         super().__init__()
@@ -51,16 +53,12 @@ class CPrinter(SmallPowers, WritableNumbers, C99CodePrinter):
         return f"(({self._print(expr.args[0])}) > 0.0 ? 1.0 : 0.0)"
 
 
-TRIG = ("sin", "cos", "sin_lanes", "cos_lanes")
-"""The trig functions c/_trig.jinja defines, in the order a file defines them."""
-
-
 def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
     """Which of <prefix>_sin, <prefix>_cos and their _lanes twins the
     functions call: a file defines only those (clang warns of an unused
     static inline function)."""
     text = " ".join(s.code for f in fns if f is not None for s in f.statements)
-    return [name for name in TRIG if f"{prefix}_{name}(" in text]
+    return [name for name in VARIANTS if f"{prefix}_{name}(" in text]
 
 
 def files(unit: Unit) -> dict[str, str]:
@@ -82,7 +80,7 @@ def files(unit: Unit) -> dict[str, str]:
     ode_trig = trig_used(unit.prefix, [jac, *inlined])  # rhs_lanes is inlined in ode.c
     gimbal_checks = ["cos", "cos_lanes"] if has_lanes else ["cos"]
     if not unit.quaternion:  # the gimbal-lock checks
-        ode_trig = [n for n in TRIG if n in ode_trig + gimbal_checks]
+        ode_trig = [n for n in VARIANTS if n in ode_trig + gimbal_checks]
     ctx = {
         "unit": unit,
         "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
@@ -91,8 +89,10 @@ def files(unit: Unit) -> dict[str, str]:
         "rhs_lanes_ode": lanes_ode,
         "outputs": outputs,
         "jac": jac,
-        "source_trig": trig_used(unit.prefix, [rhs, lanes, *outputs]),
-        "ode_trig": ode_trig,
+        "source_trig": trig_text(
+            "c", unit.prefix, unit.macro, trig_used(unit.prefix, [rhs, lanes, *outputs])
+        ),
+        "ode_trig": trig_text("c", unit.prefix, unit.macro, ode_trig),
         "methods": unit.methods,
         "ir": c_text(
             program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks),

@@ -10,9 +10,10 @@ from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import Unit
-from gyrogen.codegen.integrators.program import fortran_text, program
+from gyrogen.codegen.integrators.program import fortran_text, program, trig_text
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import (
+    Function,
     SmallPowers,
     WritableNumbers,
     functions,
@@ -31,9 +32,18 @@ class FortranPrinter(SmallPowers, WritableNumbers, FCodePrinter):
     refuses a function whose names differ only in case, where sympy would
     mangle them silently."""
 
-    def __init__(self, nc: int) -> None:
+    def __init__(self, nc: int, prefix: str) -> None:
         super().__init__({"standard": 2008, "source_format": "free", "name_mangling": False})
         self._names = {c.name: f"c({k + 1})" for k, c in enumerate(constants(nc))}
+        self._prefix = prefix
+
+    def _print_sin(self, expr: sm.sin) -> str:
+        """The module's own sin and cos (gyrogen.codegen.integrators.trig):
+        the same bits as the C files'."""
+        return f"{self._prefix}_sin({self._print(expr.args[0])})"
+
+    def _print_cos(self, expr: sm.cos) -> str:
+        return f"{self._prefix}_cos({self._print(expr.args[0])})"
 
     def _print_Symbol(self, expr: sm.Symbol) -> str:
         return self._names.get(expr.name) or str(super()._print_Symbol(expr))
@@ -56,7 +66,7 @@ def _check_names(names: list[str], where: str) -> None:
 
 
 def files(unit: Unit) -> dict[str, str]:
-    printer = FortranPrinter(unit.nc)
+    printer = FortranPrinter(unit.nc, unit.prefix)
 
     def assign(lhs: str, expr: sm.Expr) -> str:
         return str(printer.doprint(expr, assign_to=sm.Symbol(lhs)))
@@ -74,8 +84,21 @@ def files(unit: Unit) -> dict[str, str]:
         names = [unit.states[i].name for i in fn.states] + ["torque"] * fn.torque
         args = SIGNATURES[signature.get(fn.name, "output")].names
         _check_names([*args, *names, *(s.name for s in fn.statements if s.declare)], fn.name)
+
+    def used(fns: list[Function | None], gimbal: bool = False) -> list[str]:
+        text = " ".join(s.code for f in fns if f is not None for s in f.statements)
+        return [
+            v for v in ("sin", "cos") if f"{unit.prefix}_{v}(" in text or (gimbal and v == "cos")
+        ]
+
+    gimbal = bool(unit.methods) and not unit.quaternion
+    setup_fn = Function("setup", "", "", setup, [], False)
+    trig = used([setup_fn, rhs, *outputs, jac], gimbal)
     ctx = {
         "unit": unit,
+        "trig": trig_text("fortran", unit.prefix, unit.macro, trig),
+        "trig_names": trig,
+        "ode_trig_names": used([jac], gimbal),
         "setup": setup,
         "rhs": rhs,
         "outputs": outputs,

@@ -20,6 +20,7 @@ from gyrogen.codegen.integrators import (
     radau,
     radau_step,
     rosenbrock,
+    trig,
 )
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
@@ -119,3 +120,10 @@ def fortran_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
         "implicit": by_method(p.implicit, f.function),
         "krows": p.krows,
     }
+
+
+def trig_text(language: str, prefix: str, macro: str, used: list[str]) -> str:
+    """The sin and cos variants in used, with their reduction and kernels,
+    as C or Fortran (gyrogen.codegen.integrators.trig)."""
+    printer = CPrinter(prefix, macro, {}) if language == "c" else FortranPrinter(prefix, macro, {})
+    return "\n".join(printer.function(f) for f in trig.functions(prefix, used))

@@ -31,7 +31,7 @@ from gyrogen.codegen.ir.nodes import (
 )
 from gyrogen.codegen.ir.printer import ATOM, Printer, doc_lines
 
-CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX"}
+CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX", "NAN": "(double)NAN"}
 CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int"}
 FUNCTIONS = {"max": "dmax", "min": "dmin", "abs": "fabs"}
 
@@ -150,8 +150,11 @@ class CPrinter(Printer):
         p = self.with_decls(func)
         ret = "void" if func.returns is None else CTYPE[func.returns]
         params = ", ".join(p.declaration(d, True) for d in func.params)
+        static = "static inline" if func.inline else "static"
         head = p.wrap(
-            f"static {ret} {func.name}({params})", " " * (len(ret) + 9 + len(func.name)), ""
+            f"{static} {ret} {func.name}({params})",
+            " " * (len(static) + len(ret) + 3 + len(func.name)),
+            "",
         )
         text = doc_lines(func.doc)
         doc = [f"/* {text[0]}", *(f"   {d}" for d in text[1:])] if text else []

@@ -36,6 +36,7 @@ CONSTS = {
     "EPSILON": "epsilon(1.0_c_double)",
     "TINY": "tiny(1.0_c_double)",
     "HUGE": "huge(1.0_c_double)",
+    "NAN": "ieee_value(1.0_c_double, ieee_quiet_nan)",
 }
 FTYPE = {
     "double": "real(c_double)",
@@ -79,6 +80,8 @@ class FortranPrinter(Printer):
     def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
         if name == "real":
             return f"real({args[0]}, c_double)"
+        if name == "cos":
+            return f"{self.prefix}_cos({args[0]})"
         if name == "pow":
             return f"{self.expr(nodes[0], ATOM)}**{self.expr(nodes[1], ATOM)}"
         return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"

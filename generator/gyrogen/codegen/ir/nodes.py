@@ -292,3 +292,5 @@ class Func:
     returns: Type | None = None
     locals: tuple[Decl, ...] = field(default=())
     doc: tuple[str, ...] = ()
+    inline: bool = False
+    """C: static inline (small functions in a header-like role)."""
