@@ -4,6 +4,7 @@ imports a later stage), and no module outgrows 400 lines."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -85,3 +86,36 @@ def test_running_compiled_code_never_imports_sympy() -> None:
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert proc.stdout.strip() == "False", proc.stderr
+
+
+def test_each_integrator_is_written_once() -> None:
+    """Issue 20: every integrator, and what they share (start-up, step
+    control, linear algebra, sin and cos), is described once in
+    codegen/integrators and printed to scalar C, SIMD lanes and Fortran. A
+    template may call a printed function; none defines one or holds the
+    step control's values."""
+    import sympy as sm
+
+    from gyrogen import methods
+    from gyrogen.codegen.integrators import trig
+    from gyrogen.codegen.integrators.program import program
+    from gyrogen.symbolic.blocks import diagonal_blocks
+
+    every = list(methods.METHODS.values())
+    blocks = diagonal_blocks([sm.Integer(1)] * 49, 7)
+    names = {"project_quaternion", "pair_integrate", "err_power", "complex_inverse"}
+    for quaternion in (False, True):
+        p = program(every, quaternion, True, blocks)
+        for f in (*p.shared, *p.fixed, *p.pairs, *p.implicit, *p.lanes):
+            names.add(f.name)
+    names |= {f.name.removeprefix("p_") for f in trig.functions("p", list(trig.VARIANTS))}
+    control = ("err_old", "rejected_last", "h_new", "facmin", "facmax", "newton", "lu_end", "ksin")
+    templates = sorted((PACKAGE / "templates").rglob("*.jinja"))
+    assert templates
+    for path in templates:
+        text = path.read_text(encoding="utf-8")
+        for name in names:
+            defined = rf"(?m)^\s*(static|.*function|.*subroutine)\b[^\n(]*\b\w*{name}\s*\("
+            assert not re.search(defined, text), f"{path.name} defines {name}"
+        for word in control:
+            assert word not in text, f"{path.name} holds the step control ({word})"

@@ -841,6 +841,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.
@@ -1026,6 +1027,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.

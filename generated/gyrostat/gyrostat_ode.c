@@ -977,6 +977,7 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     if (code >= 0) {
         return code;
     }
+    code = -1;
     t = t0;
     err_old = 1e-4;
     nonfinite = 0;
@@ -1140,6 +1141,7 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     if (code >= 0) {
         return code;
     }
+    code = -1;
     t = t0;
     err_old = 1e-4;
     nonfinite = 0;
@@ -1928,20 +1930,22 @@ static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0,
     for (i = 0; i < GYROSTAT_NX; ++i) {
         L->x[i][l] = x[i];
         L->k[0][i][l] = f0[i];
+    }
+    L->code[l] = -1;
+    L->t[l] = t0;
+    L->err_old[l] = 1e-4;
+    L->nonfinite[l] = 0;
+    L->rejected_last[l] = 0;
+    for (i = 0; i < GYROSTAT_NX; ++i) {
         L->comp[i][l] = 0.0;
     }
-    L->t[l] = t0;
     L->h[l] = h;
-    L->err_old[l] = 1e-4;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
     L->busy[l] = 1;
-    L->code[l] = -1;
-    L->nonfinite[l] = 0;
-    L->rejected_last[l] = 0;
     L->traj[l] = traj;
     return -1;
 }

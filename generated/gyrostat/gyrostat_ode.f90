@@ -1012,6 +1012,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.
@@ -1197,6 +1198,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.

@@ -941,6 +941,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.
@@ -1127,6 +1128,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.

@@ -1089,6 +1089,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.
@@ -1275,6 +1276,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.

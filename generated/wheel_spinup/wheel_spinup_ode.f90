@@ -862,6 +862,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.
@@ -1047,6 +1048,7 @@ contains
       res = code
       return
     end if
+    code = -1
     t = t0
     err_old = 1e-4_c_double
     nonfinite = .false.

@@ -202,6 +202,18 @@ def used_locals(body: list[S]) -> tuple[Decl, ...]:
     return tuple(declare(n) for n in LOCALS if f"Var(name='{n}')" in text)
 
 
+def start_state() -> list[S]:
+    """A trajectory's values at t0, after ode_start (code -1: going on)."""
+    return [
+        assign(Var("code"), Int(-1)),
+        assign(t, Var("t0")),
+        assign(Var("err_old"), registry.PAIR_ERR_FLOOR),
+        assign(Var("nonfinite"), Bool(False)),
+        assign(Var("rejected_last"), Bool(False)),
+        For("i", NX, (assign(comp[i], 0.0),)),
+    ]
+
+
 def integrate(m: Method, quaternion: bool, krows: int) -> Func:
     """m.name_integrate: pair m from t0 to t1 on one trajectory."""
     begin, rest = parts(m, quaternion)
@@ -224,11 +236,7 @@ def integrate(m: Method, quaternion: bool, krows: int) -> Func:
     body: list[S] = [
         assign(cd, fn("ode_start", *args)),
         stop,
-        assign(t, t0),
-        assign(Var("err_old"), registry.PAIR_ERR_FLOOR),
-        assign(Var("nonfinite"), Bool(False)),
-        assign(Var("rejected_last"), Bool(False)),
-        For("i", NX, (assign(comp[i], 0.0),)),
+        *start_state(),
         Loop((*begin, stop, *rest, stop)),
     ]
     params = (

@@ -107,6 +107,7 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
         "implicit": by_method(p.implicit, c.function),
         "lanes": {f.name.removesuffix("_step_lanes"): lanes.function(f) for f in p.lanes},
         "fields": fields,
+        "lane_init": "\n".join(lanes.one_lane(tuple(pair.start_state()), 1)),
         "krows": p.krows,
     }
 

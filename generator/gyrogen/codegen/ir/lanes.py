@@ -78,8 +78,13 @@ class LanesPrinter(CPrinter):
         pragma = [f"{pad}{self.macro}_SIMD"] if simd else [f"{pad}/* pow: scalar calls */"]
         return [*pragma, f"{pad}for (l = 0; l < {self.width}; ++l) {{", *body, f"{pad}}}"]
 
+    single = False
+    """Printing for one lane (one_lane): statements as they are."""
+
     def block(self, body: tuple[S, ...], depth: int) -> list[str]:
         """Top-level statements: runs of value statements share one lane loop."""
+        if self.single:
+            return CPrinter.block(self, body, depth)
         lines: list[str] = []
         run: list[S] = []
 
@@ -130,6 +135,14 @@ class LanesPrinter(CPrinter):
             *self.block(s.then, depth + 1),
             f"{pad}}}",
         ]
+
+    def one_lane(self, body: tuple[S, ...], depth: int) -> list[str]:
+        """body for lane l alone (l given): no loop over the lanes."""
+        self.single = True
+        try:
+            return CPrinter.block(self, body, depth)
+        finally:
+            self.single = False
 
     def function(self, func: Func) -> str:
         """static void name(struct lanes *L, params): func's body on every lane."""
