@@ -1185,6 +1185,694 @@ int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
+/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+   when a stage is). */
+static double rodas4_trial(double t, double h, const double *x, const double *f0,
+                           const double *lu, const int *piv, const double *c, double rtol,
+                           double atol, const double *comp, double (*k)[WHEEL_SPINUP_NX],
+                           double *dx, double *xnew)
+{
+    double y[WHEEL_SPINUP_NX];
+    double fy[WHEEL_SPINUP_NX];
+    double inv_h;
+    int i;
+
+    inv_h = 1.0 / h;
+
+    /* stage 1: t */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        k[0][i] = f0[i];
+    }
+    lu_solve(lu, piv, k[0]);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + 1.544 * k[0][i];
+    }
+    wheel_spinup_rhs(t + 0.386 * h, y, c, fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
+    }
+    lu_solve(lu, piv, k[1]);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
+    }
+    wheel_spinup_rhs(t + 0.21 * h, y, c, fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
+    }
+    lu_solve(lu, piv, k[2]);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
+    }
+    wheel_spinup_rhs(t + 0.63 * h, y, c, fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
+    }
+    lu_solve(lu, piv, k[3]);
+
+    /* stage 5: t + h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
+    }
+    wheel_spinup_rhs(t + h, y, c, fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
+    }
+    lu_solve(lu, piv, k[4]);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
+        y[i] = x[i] + dx[i];
+    }
+    wheel_spinup_rhs(t + h, y, c, fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
+    }
+    lu_solve(lu, piv, k[5]);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        dx[i] = dx[i] + k[5][i] - comp[i];
+        xnew[i] = x[i] + dx[i];
+    }
+    return error_norm(k[5], x, xnew, rtol, atol);
+}
+
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+   J and f are evaluated once per accepted step; a rejected step only
+   refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+   accepted step.
+   A singular E is retried with h times 0.5, 5 times in a row at most. */
+static int rodas4_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double lu[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double k[6][WHEEL_SPINUP_NX];
+    double f0[WHEEL_SPINUP_NX];
+    double fnew[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int piv[WHEEL_SPINUP_NX];
+    double t;
+    double h;
+    double err;
+    double fac;
+    double gus;
+    double h_acc;
+    double err_acc;
+    int last;
+    int rejected_last;
+    int nonfinite;
+    int new_point;
+    int singular;
+    int start;
+    int i;
+
+    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (start >= 0) {
+        return start;
+    }
+    t = t0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    rejected_last = 0;
+    nonfinite = 0;
+    singular = 0;
+    new_point = 1;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    for (;;) {
+        if (new_point) {
+            wheel_spinup_jac(t, x, c, J);
+            stats->jac_calls = stats->jac_calls + 1;
+            if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
+                return WHEEL_SPINUP_ODE_ERR_NONFINITE;
+            }
+            new_point = 0;
+        }
+        if (step_underflow(h, t)) {
+            return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
+        }
+        last = t + 1.01 * h >= t1;
+        if (last) {
+            h = t1 - t;
+        }
+        stats->h = h;
+
+        /* E = I/(h gamma) - J */
+        for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
+            lu[i] = -J[i];
+        }
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            lu[i * WHEEL_SPINUP_NX + i] = lu[i * WHEEL_SPINUP_NX + i] + 1.0 / (h * 0.25);
+        }
+        stats->decompositions = stats->decompositions + 1;
+        if (lu_decompose(lu, piv)) {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+            singular = singular + 1;
+            if (singular == 5) {
+                return WHEEL_SPINUP_ODE_ERR_SINGULAR;
+            }
+            h = h * 0.5;
+            continue;
+        }
+        singular = 0;
+        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
+        stats->rhs_calls = stats->rhs_calls + 5;
+        nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, WHEEL_SPINUP_NX);
+        if (!nonfinite && err <= 1.0 && !last) {
+            wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
+            stats->rhs_calls = stats->rhs_calls + 1;
+            nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
+        }
+        if (nonfinite) {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+            h = h * 0.2;
+            continue;
+        }
+        fac = dmax(0.16666666666666666, dmin(5.0, pow(err, 0.25) / 0.9));  /* h / h_new */
+        if (err <= 1.0) {
+            if (gimbal_lock(x, xnew)) {
+                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            if (stats->accepted > 0) {
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                fac = dmax(fac, dmax(0.16666666666666666, dmin(5.0, gus)));
+            }
+            h_acc = h;
+            err_acc = dmax(1e-2, err);
+            accept_step(x, xnew, dx, comp);
+            t = last ? t1 : t + h;
+            stats->t = t;
+            stats->accepted = stats->accepted + 1;
+            if (last) {
+                return WHEEL_SPINUP_ODE_OK;
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                f0[i] = fnew[i];
+            }
+            new_point = 1;
+            if (rejected_last) {
+                fac = dmax(fac, 1.0);
+            }
+            rejected_last = 0;
+        } else {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+        }
+        h = h / fac;
+    }
+}
+
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
+int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
+/* E1 and E2 for this h, factored; 1 when either is singular. */
+static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
+                         double *e2i, int *piv2)
+{
+    double gamma_h;
+    double alpha_h;
+    int i;
+
+    gamma_h = 3.637834252744496 / h;
+    alpha_h = 2.6810828736277523 / h;
+    for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
+        e1[i] = -J[i];
+        e2r[i] = -J[i];
+        e2i[i] = 0.0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        e1[i * WHEEL_SPINUP_NX + i] = e1[i * WHEEL_SPINUP_NX + i] + gamma_h;
+        e2r[i * WHEEL_SPINUP_NX + i] = e2r[i * WHEEL_SPINUP_NX + i] + alpha_h;
+        e2i[i * WHEEL_SPINUP_NX + i] = 3.0504301992474105 / h;
+    }
+    if (lu_decompose(e1, piv1)) {
+        return 1;
+    }
+    return lu_decompose_complex(e2r, e2i, piv2);
+}
+
+/* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
+   F at the three stages, then the corrections to w solved into z1..z3.
+   Returns their RMS over scal (NaN or Inf when a stage is). */
+static double radau5_newton(double t, double h, const double *x, const double *c,
+                            const double *e1, const int *piv1, const double *e2r,
+                            const double *e2i, const int *piv2, const double *scal, double *z1,
+                            double *z2, double *z3, const double *w1, const double *w2,
+                            const double *w3)
+{
+    double y[WHEEL_SPINUP_NX];
+    double gamma_h;
+    double alpha_h;
+    double beta_h;
+    double total;
+    int i;
+
+    gamma_h = 3.637834252744496 / h;
+    alpha_h = 2.6810828736277523 / h;
+    beta_h = 3.0504301992474105 / h;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + z1[i];
+    }
+    wheel_spinup_rhs(t + 0.1550510257216822 * h, y, c, z1);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + z2[i];
+    }
+    wheel_spinup_rhs(t + 0.6449489742783178 * h, y, c, z2);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        y[i] = x[i] + z3[i];
+    }
+    wheel_spinup_rhs(t + h, y, c, z3);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        double a1, a2, a3;
+        a1 = z1[i];
+        a2 = z2[i];
+        a3 = z3[i];
+        z1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3 -
+                gamma_h * w1[i];
+        z2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044 * a3 -
+                alpha_h * w2[i] + beta_h * w3[i];
+        z3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3 -
+                alpha_h * w3[i] - beta_h * w2[i];
+    }
+    lu_solve(e1, piv1, z1);
+    lu_solve_complex(e2r, e2i, piv2, z2, z3);
+    total = 0.0;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        double s1, s2, s3;
+        s1 = z1[i] / scal[i];
+        s2 = z2[i] / scal[i];
+        s3 = z3[i] / scal[i];
+        total = total + (s1 * s1 + s2 * s2 + s3 * s3);
+    }
+    return sqrt(total / (3 * WHEEL_SPINUP_NX));
+}
+
+/* The local error estimate E1^-1 (f0 + (e1 z1 + e2 z2 + e3 z3)/h), its RMS
+   over scal, at least 1e-10 (NaN or Inf when it is). On the first step
+   or after a rejection an estimate >= 1 is taken again through f at x + err
+   (radau5.f's ESTRAD): one more rhs call. */
+static double radau5_error(double t, double h, const double *x, const double *c,
+                           const double *f0, const double *e1, const int *piv1,
+                           const double *scal, const double *z1, const double *z2,
+                           const double *z3, int again, wheel_spinup_stats *stats)
+{
+    double g[WHEEL_SPINUP_NX];
+    double err[WHEEL_SPINUP_NX];
+    double y[WHEEL_SPINUP_NX];
+    double total;
+    double norm;
+    int i;
+
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
+                z3[i]) / h;
+        err[i] = f0[i] + g[i];
+    }
+    lu_solve(e1, piv1, err);
+    total = 0.0;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        total = total + err[i] / scal[i] * (err[i] / scal[i]);
+    }
+    norm = sqrt(total / WHEEL_SPINUP_NX);
+    if (norm >= 1.0 && again) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + err[i];
+        }
+        wheel_spinup_rhs(t, y, c, err);
+        stats->rhs_calls = stats->rhs_calls + 1;
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            err[i] = err[i] + g[i];
+        }
+        lu_solve(e1, piv1, err);
+        total = 0.0;
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            total = total + err[i] / scal[i] * (err[i] / scal[i]);
+        }
+        norm = sqrt(total / WHEEL_SPINUP_NX);
+    }
+    return norm < 1e-10 ? 1e-10 : norm;
+}
+
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+   Hairer's radau5.f strategy: the error test's tolerances are
+   rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+   h_new/h = fac err^-1/4
+   within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+   Gustafsson's predictive controller after an accepted step.
+   J is kept while the Newton iterations contract by <= 0.001 a step, and
+   h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+   diverge, take more than 7, or meet a NaN or Inf
+   retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+   times in a row at most. */
+static int radau5_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double e1[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double e2r[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double e2i[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double z1[WHEEL_SPINUP_NX];
+    double z2[WHEEL_SPINUP_NX];
+    double z3[WHEEL_SPINUP_NX];
+    double w1[WHEEL_SPINUP_NX];
+    double w2[WHEEL_SPINUP_NX];
+    double w3[WHEEL_SPINUP_NX];
+    double ak1[WHEEL_SPINUP_NX];
+    double ak2[WHEEL_SPINUP_NX];
+    double ak3[WHEEL_SPINUP_NX];
+    double f0[WHEEL_SPINUP_NX];
+    double fnew[WHEEL_SPINUP_NX];
+    double scal[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int piv1[WHEEL_SPINUP_NX];
+    int piv2[WHEEL_SPINUP_NX];
+    double t;
+    double h;
+    double h_old;
+    double h_new;
+    double h_acc;
+    double err_acc;
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    double err;
+    double quot;
+    double rate;
+    double theta;
+    double theta_old;
+    double dyno;
+    double dyno_old;
+    double thq;
+    double predicted;
+    double q;
+    double gus;
+    double c1q;
+    double c2q;
+    double c3q;
+    int last;
+    int first;
+    int reject;
+    int fresh_jac;
+    int need_jac;
+    int need_lu;
+    int nonfinite;
+    int newt;
+    int outcome;
+    int singular;
+    int start;
+    int i;
+
+    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (start >= 0) {
+        return start;
+    }
+    t = t0;
+    h_old = 1.0;
+    rate = 1.0;
+    theta_old = 1.0;
+    dyno_old = 1.0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    last = 0;
+    first = 1;
+    reject = 0;
+    fresh_jac = 0;
+    need_jac = 1;
+    need_lu = 1;
+    nonfinite = 0;
+    singular = 0;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+        ak1[i] = 0.0;
+        ak2[i] = 0.0;
+        ak3[i] = 0.0;
+    }
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+    if (t + 1.01 * h >= t1) {
+        h = t1 - t;
+        last = 1;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        scal[i] = atol_e + rtol_e * fabs(x[i]);
+    }
+    for (;;) {
+        if (need_jac) {
+            wheel_spinup_jac(t, x, c, J);
+            stats->jac_calls = stats->jac_calls + 1;
+            if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
+                return WHEEL_SPINUP_ODE_ERR_NONFINITE;
+            }
+            fresh_jac = 1;
+            need_jac = 0;
+            need_lu = 1;
+        }
+        if (step_underflow(h, t)) {
+            return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
+        }
+        if (need_lu) {
+            stats->decompositions = stats->decompositions + 1;
+            if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) {
+                singular = singular + 1;
+                if (singular == 5) {
+                    return WHEEL_SPINUP_ODE_ERR_SINGULAR;
+                }
+                stats->rejected = stats->rejected + 1;
+                reject = 1;
+                last = 0;
+                h = h * 0.5;
+                need_jac = !fresh_jac;
+                continue;
+            }
+            singular = 0;
+            need_lu = 0;
+        }
+        stats->h = h;
+
+        /* the Newton iterations start from the last step's collocation polynomial */
+        if (first) {
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                z1[i] = 0.0;
+                z2[i] = 0.0;
+                z3[i] = 0.0;
+                w1[i] = 0.0;
+                w2[i] = 0.0;
+                w3[i] = 0.0;
+            }
+        } else {
+            c3q = h / h_old;
+            c1q = 0.1550510257216822 * c3q;
+            c2q = 0.6449489742783178 * c3q;
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                double a1, a2, a3;
+                a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
+                        0.8449489742783178) * ak3[i]));
+                a2 = c2q * (ak1[i] + (c2q + 0.35505102572168223) * (ak2[i] + (c2q +
+                        0.8449489742783178) * ak3[i]));
+                a3 = c3q * (ak1[i] + (c3q + 0.35505102572168223) * (ak2[i] + (c3q +
+                        0.8449489742783178) * ak3[i]));
+                z1[i] = a1;
+                z2[i] = a2;
+                z3[i] = a3;
+                w1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3;
+                w2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044
+                        * a3;
+                w3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3;
+            }
+        }
+
+        /* outcome: 0 converged, 1 too slowly (h reduced), 2 failed */
+        outcome = 0;
+        rate = pow(dmax(rate, 0.5 * DBL_EPSILON), 0.8);
+        theta = 1e-3;
+        newt = 0;
+        for (;;) {
+            if (newt >= 7) {
+                outcome = 2;
+                break;
+            }
+            dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2,
+                    w3);
+            stats->rhs_calls = stats->rhs_calls + 3;
+            newt = newt + 1;
+            if (!(fabs(dyno) <= DBL_MAX)) {
+                nonfinite = 1;
+                outcome = 2;
+                break;
+            }
+            if (newt > 1 && newt < 7) {
+                thq = dyno / dyno_old;
+                theta = newt == 2 ? thq : sqrt(thq * theta_old);
+                theta_old = thq;
+                if (!(theta < 0.99)) {
+                    outcome = 2;
+                    break;
+                }
+                rate = theta / (1.0 - theta);
+                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                if (predicted >= 1.0) {
+                    q = dmax(1e-4, dmin(20.0, predicted));
+                    h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
+                    outcome = 1;
+                    break;
+                }
+            }
+            dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                double a1, a2, a3;
+                a1 = w1[i] + z1[i];
+                a2 = w2[i] + z2[i];
+                a3 = w3[i] + z3[i];
+                w1[i] = a1;
+                w2[i] = a2;
+                w3[i] = a3;
+                z1[i] = 0.09123239487089295 * a1 - 0.1412552950209542 * a2 - 0.030029194105147424
+                        * a3;
+                z2[i] = 0.241717932707107 * a1 + 0.20412935229379994 * a2 + 0.3829421127572619 * a3;
+                z3[i] = 0.966048182615093 * a1 + a2;
+            }
+            if (!(rate * dyno > newton_tol)) {
+                break;
+            }
+        }
+        if (outcome == 0) {
+            err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                dx[i] = z3[i] - comp[i];
+                xnew[i] = x[i] + dx[i];
+            }
+            if (err < 1.0 && !last) {
+                wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
+                stats->rhs_calls = stats->rhs_calls + 1;
+                nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
+            } else {
+                nonfinite = !(fabs(err) <= DBL_MAX);
+            }
+            nonfinite = nonfinite || !all_finite(xnew, WHEEL_SPINUP_NX);
+            if (nonfinite) {
+                outcome = 2;
+            }
+        }
+        if (outcome != 0) {
+            stats->rejected = stats->rejected + 1;
+            reject = 1;
+            last = 0;
+            if (outcome == 2) {
+                h = h * 0.5;
+            }
+            need_lu = 1;
+            need_jac = !fresh_jac;
+            continue;
+        }
+        quot = dmax(0.125, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));  /* h_new = h / quot */
+        h_new = h / quot;
+        if (err < 1.0) {
+            if (gimbal_lock(x, xnew)) {
+                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            first = 0;
+            if (stats->accepted > 0) {
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                quot = dmax(quot, dmax(0.125, dmin(5.0, gus)));
+                h_new = h / quot;
+            }
+            h_acc = h;
+            err_acc = dmax(1e-2, err);
+            h_old = h;
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                double ak;
+                ak = (z2[i] - z1[i]) / 0.4898979485566356;
+                ak1[i] = (z3[i] - z2[i]) / 0.35505102572168223;
+                ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
+                ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
+            }
+            accept_step(x, xnew, dx, comp);
+            t = last ? t1 : t + h;
+            stats->t = t;
+            stats->accepted = stats->accepted + 1;
+            if (last) {
+                return WHEEL_SPINUP_ODE_OK;
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                f0[i] = fnew[i];
+                scal[i] = atol_e + rtol_e * fabs(x[i]);
+            }
+            fresh_jac = 0;
+            h_new = dmin(h_new, t1 - t0);
+            if (reject) {
+                h_new = dmin(h_new, h);
+            }
+            reject = 0;
+            if (t + 1.01 * h_new >= t1) {
+                h = t1 - t;
+                last = 1;
+            } else {
+                if (theta <= 1e-3 && h_new >= 1.0 * h && h_new <= 1.2 * h) {
+                    continue;
+                } else {
+                    h = h_new;
+                }
+            }
+            need_lu = 1;
+            need_jac = theta > 1e-3;
+        } else {
+            stats->rejected = stats->rejected + 1;
+            reject = 1;
+            last = 0;
+            h = first ? h * 0.1 : h_new;
+            need_lu = 1;
+            need_jac = !fresh_jac;
+        }
+    }
+}
+
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
+int wheel_spinup_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
@@ -1888,694 +2576,6 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     failed = pair_lanes(step, order, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
 #endif
     return failed;
-}
-
-/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
-   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
-   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
-   Stiffly accurate: stage 6 sits on the embedded solution and the step
-   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
-   when a stage is). */
-static double rodas4_trial(double t, double h, const double *x, const double *f0,
-                           const double *lu, const int *piv, const double *c, double rtol,
-                           double atol, const double *comp, double (*k)[WHEEL_SPINUP_NX],
-                           double *dx, double *xnew)
-{
-    double y[WHEEL_SPINUP_NX];
-    double fy[WHEEL_SPINUP_NX];
-    double inv_h;
-    int i;
-
-    inv_h = 1.0 / h;
-
-    /* stage 1: t */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[0][i] = f0[i];
-    }
-    lu_solve(lu, piv, k[0]);
-
-    /* stage 2: t + 0.386 h */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 1.544 * k[0][i];
-    }
-    wheel_spinup_rhs(t + 0.386 * h, y, c, fy);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
-    }
-    lu_solve(lu, piv, k[1]);
-
-    /* stage 3: t + 0.21 h */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
-    }
-    wheel_spinup_rhs(t + 0.21 * h, y, c, fy);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
-    }
-    lu_solve(lu, piv, k[2]);
-
-    /* stage 4: t + 0.63 h */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
-                0.9986419139977817 * k[2][i];
-    }
-    wheel_spinup_rhs(t + 0.63 * h, y, c, fy);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
-                20.47028614809616 * k[2][i]);
-    }
-    lu_solve(lu, piv, k[3]);
-
-    /* stage 5: t + h */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
-                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
-    }
-    wheel_spinup_rhs(t + h, y, c, fy);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
-                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
-    }
-    lu_solve(lu, piv, k[4]);
-
-    /* stage 6: t + h, on the embedded solution */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
-                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
-        y[i] = x[i] + dx[i];
-    }
-    wheel_spinup_rhs(t + h, y, c, fy);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
-                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
-                k[4][i]);
-    }
-    lu_solve(lu, piv, k[5]);
-
-    /* the new solution x + dx: the embedded one plus k_6 */
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        dx[i] = dx[i] + k[5][i] - comp[i];
-        xnew[i] = x[i] + dx[i];
-    }
-    return error_norm(k[5], x, xnew, rtol, atol);
-}
-
-/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
-   J and f are evaluated once per accepted step; a rejected step only
-   refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
-   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
-   accepted step.
-   A singular E is retried with h times 0.5, 5 times in a row at most. */
-static int rodas4_integrate(double t0, double t1, double *x, const double *c, double rtol,
-                            double atol, double h0, long max_steps, wheel_spinup_stats *stats)
-{
-    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
-    double lu[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
-    double k[6][WHEEL_SPINUP_NX];
-    double f0[WHEEL_SPINUP_NX];
-    double fnew[WHEEL_SPINUP_NX];
-    double xnew[WHEEL_SPINUP_NX];
-    double dx[WHEEL_SPINUP_NX];
-    double comp[WHEEL_SPINUP_NX];
-    int piv[WHEEL_SPINUP_NX];
-    double t;
-    double h;
-    double err;
-    double fac;
-    double gus;
-    double h_acc;
-    double err_acc;
-    int last;
-    int rejected_last;
-    int nonfinite;
-    int new_point;
-    int singular;
-    int start;
-    int i;
-
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
-    if (start >= 0) {
-        return start;
-    }
-    t = t0;
-    h_acc = 0.0;
-    err_acc = 1e-2;
-    rejected_last = 0;
-    nonfinite = 0;
-    singular = 0;
-    new_point = 1;
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        comp[i] = 0.0;
-    }
-    for (;;) {
-        if (new_point) {
-            wheel_spinup_jac(t, x, c, J);
-            stats->jac_calls = stats->jac_calls + 1;
-            if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
-                return WHEEL_SPINUP_ODE_ERR_NONFINITE;
-            }
-            new_point = 0;
-        }
-        if (step_underflow(h, t)) {
-            return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
-        }
-        last = t + 1.01 * h >= t1;
-        if (last) {
-            h = t1 - t;
-        }
-        stats->h = h;
-
-        /* E = I/(h gamma) - J */
-        for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            lu[i * WHEEL_SPINUP_NX + i] = lu[i * WHEEL_SPINUP_NX + i] + 1.0 / (h * 0.25);
-        }
-        stats->decompositions = stats->decompositions + 1;
-        if (lu_decompose(lu, piv)) {
-            stats->rejected = stats->rejected + 1;
-            rejected_last = 1;
-            singular = singular + 1;
-            if (singular == 5) {
-                return WHEEL_SPINUP_ODE_ERR_SINGULAR;
-            }
-            h = h * 0.5;
-            continue;
-        }
-        singular = 0;
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
-        stats->rhs_calls = stats->rhs_calls + 5;
-        nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, WHEEL_SPINUP_NX);
-        if (!nonfinite && err <= 1.0 && !last) {
-            wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
-            stats->rhs_calls = stats->rhs_calls + 1;
-            nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
-        }
-        if (nonfinite) {
-            stats->rejected = stats->rejected + 1;
-            rejected_last = 1;
-            h = h * 0.2;
-            continue;
-        }
-        fac = dmax(0.16666666666666666, dmin(5.0, pow(err, 0.25) / 0.9));  /* h / h_new */
-        if (err <= 1.0) {
-            if (gimbal_lock(x, xnew)) {
-                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            if (stats->accepted > 0) {
-                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
-                fac = dmax(fac, dmax(0.16666666666666666, dmin(5.0, gus)));
-            }
-            h_acc = h;
-            err_acc = dmax(1e-2, err);
-            accept_step(x, xnew, dx, comp);
-            t = last ? t1 : t + h;
-            stats->t = t;
-            stats->accepted = stats->accepted + 1;
-            if (last) {
-                return WHEEL_SPINUP_ODE_OK;
-            }
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                f0[i] = fnew[i];
-            }
-            new_point = 1;
-            if (rejected_last) {
-                fac = dmax(fac, 1.0);
-            }
-            rejected_last = 0;
-        } else {
-            stats->rejected = stats->rejected + 1;
-            rejected_last = 1;
-        }
-        h = h / fac;
-    }
-}
-
-/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
-{
-    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
-}
-
-/* E1 and E2 for this h, factored; 1 when either is singular. */
-static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                         double *e2i, int *piv2)
-{
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        e1[i * WHEEL_SPINUP_NX + i] = e1[i * WHEEL_SPINUP_NX + i] + gamma_h;
-        e2r[i * WHEEL_SPINUP_NX + i] = e2r[i * WHEEL_SPINUP_NX + i] + alpha_h;
-        e2i[i * WHEEL_SPINUP_NX + i] = 3.0504301992474105 / h;
-    }
-    if (lu_decompose(e1, piv1)) {
-        return 1;
-    }
-    return lu_decompose_complex(e2r, e2i, piv2);
-}
-
-/* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
-   F at the three stages, then the corrections to w solved into z1..z3.
-   Returns their RMS over scal (NaN or Inf when a stage is). */
-static double radau5_newton(double t, double h, const double *x, const double *c,
-                            const double *e1, const int *piv1, const double *e2r,
-                            const double *e2i, const int *piv2, const double *scal, double *z1,
-                            double *z2, double *z3, const double *w1, const double *w2,
-                            const double *w3)
-{
-    double y[WHEEL_SPINUP_NX];
-    double gamma_h;
-    double alpha_h;
-    double beta_h;
-    double total;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    beta_h = 3.0504301992474105 / h;
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + z1[i];
-    }
-    wheel_spinup_rhs(t + 0.1550510257216822 * h, y, c, z1);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + z2[i];
-    }
-    wheel_spinup_rhs(t + 0.6449489742783178 * h, y, c, z2);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        y[i] = x[i] + z3[i];
-    }
-    wheel_spinup_rhs(t + h, y, c, z3);
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        double a1, a2, a3;
-        a1 = z1[i];
-        a2 = z2[i];
-        a3 = z3[i];
-        z1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3 -
-                gamma_h * w1[i];
-        z2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044 * a3 -
-                alpha_h * w2[i] + beta_h * w3[i];
-        z3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3 -
-                alpha_h * w3[i] - beta_h * w2[i];
-    }
-    lu_solve(e1, piv1, z1);
-    lu_solve_complex(e2r, e2i, piv2, z2, z3);
-    total = 0.0;
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        double s1, s2, s3;
-        s1 = z1[i] / scal[i];
-        s2 = z2[i] / scal[i];
-        s3 = z3[i] / scal[i];
-        total = total + (s1 * s1 + s2 * s2 + s3 * s3);
-    }
-    return sqrt(total / (3 * WHEEL_SPINUP_NX));
-}
-
-/* The local error estimate E1^-1 (f0 + (e1 z1 + e2 z2 + e3 z3)/h), its RMS
-   over scal, at least 1e-10 (NaN or Inf when it is). On the first step
-   or after a rejection an estimate >= 1 is taken again through f at x + err
-   (radau5.f's ESTRAD): one more rhs call. */
-static double radau5_error(double t, double h, const double *x, const double *c,
-                           const double *f0, const double *e1, const int *piv1,
-                           const double *scal, const double *z1, const double *z2,
-                           const double *z3, int again, wheel_spinup_stats *stats)
-{
-    double g[WHEEL_SPINUP_NX];
-    double err[WHEEL_SPINUP_NX];
-    double y[WHEEL_SPINUP_NX];
-    double total;
-    double norm;
-    int i;
-
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
-                z3[i]) / h;
-        err[i] = f0[i] + g[i];
-    }
-    lu_solve(e1, piv1, err);
-    total = 0.0;
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        total = total + err[i] / scal[i] * (err[i] / scal[i]);
-    }
-    norm = sqrt(total / WHEEL_SPINUP_NX);
-    if (norm >= 1.0 && again) {
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            y[i] = x[i] + err[i];
-        }
-        wheel_spinup_rhs(t, y, c, err);
-        stats->rhs_calls = stats->rhs_calls + 1;
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            err[i] = err[i] + g[i];
-        }
-        lu_solve(e1, piv1, err);
-        total = 0.0;
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            total = total + err[i] / scal[i] * (err[i] / scal[i]);
-        }
-        norm = sqrt(total / WHEEL_SPINUP_NX);
-    }
-    return norm < 1e-10 ? 1e-10 : norm;
-}
-
-/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
-   Hairer's radau5.f strategy: the error test's tolerances are
-   rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
-   h_new/h = fac err^-1/4
-   within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
-   Gustafsson's predictive controller after an accepted step.
-   J is kept while the Newton iterations contract by <= 0.001 a step, and
-   h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
-   diverge, take more than 7, or meet a NaN or Inf
-   retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
-   times in a row at most. */
-static int radau5_integrate(double t0, double t1, double *x, const double *c, double rtol,
-                            double atol, double h0, long max_steps, wheel_spinup_stats *stats)
-{
-    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
-    double e1[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
-    double e2r[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
-    double e2i[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
-    double z1[WHEEL_SPINUP_NX];
-    double z2[WHEEL_SPINUP_NX];
-    double z3[WHEEL_SPINUP_NX];
-    double w1[WHEEL_SPINUP_NX];
-    double w2[WHEEL_SPINUP_NX];
-    double w3[WHEEL_SPINUP_NX];
-    double ak1[WHEEL_SPINUP_NX];
-    double ak2[WHEEL_SPINUP_NX];
-    double ak3[WHEEL_SPINUP_NX];
-    double f0[WHEEL_SPINUP_NX];
-    double fnew[WHEEL_SPINUP_NX];
-    double scal[WHEEL_SPINUP_NX];
-    double xnew[WHEEL_SPINUP_NX];
-    double dx[WHEEL_SPINUP_NX];
-    double comp[WHEEL_SPINUP_NX];
-    int piv1[WHEEL_SPINUP_NX];
-    int piv2[WHEEL_SPINUP_NX];
-    double t;
-    double h;
-    double h_old;
-    double h_new;
-    double h_acc;
-    double err_acc;
-    double rtol_e;
-    double atol_e;
-    double newton_tol;
-    double err;
-    double quot;
-    double rate;
-    double theta;
-    double theta_old;
-    double dyno;
-    double dyno_old;
-    double thq;
-    double predicted;
-    double q;
-    double gus;
-    double c1q;
-    double c2q;
-    double c3q;
-    int last;
-    int first;
-    int reject;
-    int fresh_jac;
-    int need_jac;
-    int need_lu;
-    int nonfinite;
-    int newt;
-    int outcome;
-    int singular;
-    int start;
-    int i;
-
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
-    if (start >= 0) {
-        return start;
-    }
-    t = t0;
-    h_old = 1.0;
-    rate = 1.0;
-    theta_old = 1.0;
-    dyno_old = 1.0;
-    h_acc = 0.0;
-    err_acc = 1e-2;
-    last = 0;
-    first = 1;
-    reject = 0;
-    fresh_jac = 0;
-    need_jac = 1;
-    need_lu = 1;
-    nonfinite = 0;
-    singular = 0;
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        comp[i] = 0.0;
-        ak1[i] = 0.0;
-        ak2[i] = 0.0;
-        ak3[i] = 0.0;
-    }
-    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
-    atol_e = rtol_e * (atol / rtol);
-    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
-    if (t + 1.01 * h >= t1) {
-        h = t1 - t;
-        last = 1;
-    }
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
-    }
-    for (;;) {
-        if (need_jac) {
-            wheel_spinup_jac(t, x, c, J);
-            stats->jac_calls = stats->jac_calls + 1;
-            if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
-                return WHEEL_SPINUP_ODE_ERR_NONFINITE;
-            }
-            fresh_jac = 1;
-            need_jac = 0;
-            need_lu = 1;
-        }
-        if (step_underflow(h, t)) {
-            return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
-        }
-        if (need_lu) {
-            stats->decompositions = stats->decompositions + 1;
-            if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) {
-                singular = singular + 1;
-                if (singular == 5) {
-                    return WHEEL_SPINUP_ODE_ERR_SINGULAR;
-                }
-                stats->rejected = stats->rejected + 1;
-                reject = 1;
-                last = 0;
-                h = h * 0.5;
-                need_jac = !fresh_jac;
-                continue;
-            }
-            singular = 0;
-            need_lu = 0;
-        }
-        stats->h = h;
-
-        /* the Newton iterations start from the last step's collocation polynomial */
-        if (first) {
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                z1[i] = 0.0;
-                z2[i] = 0.0;
-                z3[i] = 0.0;
-                w1[i] = 0.0;
-                w2[i] = 0.0;
-                w3[i] = 0.0;
-            }
-        } else {
-            c3q = h / h_old;
-            c1q = 0.1550510257216822 * c3q;
-            c2q = 0.6449489742783178 * c3q;
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                double a1, a2, a3;
-                a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
-                        0.8449489742783178) * ak3[i]));
-                a2 = c2q * (ak1[i] + (c2q + 0.35505102572168223) * (ak2[i] + (c2q +
-                        0.8449489742783178) * ak3[i]));
-                a3 = c3q * (ak1[i] + (c3q + 0.35505102572168223) * (ak2[i] + (c3q +
-                        0.8449489742783178) * ak3[i]));
-                z1[i] = a1;
-                z2[i] = a2;
-                z3[i] = a3;
-                w1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3;
-                w2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044
-                        * a3;
-                w3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3;
-            }
-        }
-
-        /* outcome: 0 converged, 1 too slowly (h reduced), 2 failed */
-        outcome = 0;
-        rate = pow(dmax(rate, 0.5 * DBL_EPSILON), 0.8);
-        theta = 1e-3;
-        newt = 0;
-        for (;;) {
-            if (newt >= 7) {
-                outcome = 2;
-                break;
-            }
-            dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2,
-                    w3);
-            stats->rhs_calls = stats->rhs_calls + 3;
-            newt = newt + 1;
-            if (!(fabs(dyno) <= DBL_MAX)) {
-                nonfinite = 1;
-                outcome = 2;
-                break;
-            }
-            if (newt > 1 && newt < 7) {
-                thq = dyno / dyno_old;
-                theta = newt == 2 ? thq : sqrt(thq * theta_old);
-                theta_old = thq;
-                if (!(theta < 0.99)) {
-                    outcome = 2;
-                    break;
-                }
-                rate = theta / (1.0 - theta);
-                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
-                if (predicted >= 1.0) {
-                    q = dmax(1e-4, dmin(20.0, predicted));
-                    h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
-                    outcome = 1;
-                    break;
-                }
-            }
-            dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                double a1, a2, a3;
-                a1 = w1[i] + z1[i];
-                a2 = w2[i] + z2[i];
-                a3 = w3[i] + z3[i];
-                w1[i] = a1;
-                w2[i] = a2;
-                w3[i] = a3;
-                z1[i] = 0.09123239487089295 * a1 - 0.1412552950209542 * a2 - 0.030029194105147424
-                        * a3;
-                z2[i] = 0.241717932707107 * a1 + 0.20412935229379994 * a2 + 0.3829421127572619 * a3;
-                z3[i] = 0.966048182615093 * a1 + a2;
-            }
-            if (!(rate * dyno > newton_tol)) {
-                break;
-            }
-        }
-        if (outcome == 0) {
-            err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                dx[i] = z3[i] - comp[i];
-                xnew[i] = x[i] + dx[i];
-            }
-            if (err < 1.0 && !last) {
-                wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
-                stats->rhs_calls = stats->rhs_calls + 1;
-                nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
-            } else {
-                nonfinite = !(fabs(err) <= DBL_MAX);
-            }
-            nonfinite = nonfinite || !all_finite(xnew, WHEEL_SPINUP_NX);
-            if (nonfinite) {
-                outcome = 2;
-            }
-        }
-        if (outcome != 0) {
-            stats->rejected = stats->rejected + 1;
-            reject = 1;
-            last = 0;
-            if (outcome == 2) {
-                h = h * 0.5;
-            }
-            need_lu = 1;
-            need_jac = !fresh_jac;
-            continue;
-        }
-        quot = dmax(0.125, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));  /* h_new = h / quot */
-        h_new = h / quot;
-        if (err < 1.0) {
-            if (gimbal_lock(x, xnew)) {
-                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            first = 0;
-            if (stats->accepted > 0) {
-                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
-                quot = dmax(quot, dmax(0.125, dmin(5.0, gus)));
-                h_new = h / quot;
-            }
-            h_acc = h;
-            err_acc = dmax(1e-2, err);
-            h_old = h;
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                double ak;
-                ak = (z2[i] - z1[i]) / 0.4898979485566356;
-                ak1[i] = (z3[i] - z2[i]) / 0.35505102572168223;
-                ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
-                ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
-            }
-            accept_step(x, xnew, dx, comp);
-            t = last ? t1 : t + h;
-            stats->t = t;
-            stats->accepted = stats->accepted + 1;
-            if (last) {
-                return WHEEL_SPINUP_ODE_OK;
-            }
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
-            }
-            fresh_jac = 0;
-            h_new = dmin(h_new, t1 - t0);
-            if (reject) {
-                h_new = dmin(h_new, h);
-            }
-            reject = 0;
-            if (t + 1.01 * h_new >= t1) {
-                h = t1 - t;
-                last = 1;
-            } else {
-                if (theta <= 1e-3 && h_new >= 1.0 * h && h_new <= 1.2 * h) {
-                    continue;
-                } else {
-                    h = h_new;
-                }
-            }
-            need_lu = 1;
-            need_jac = theta > 1e-3;
-        } else {
-            stats->rejected = stats->rejected + 1;
-            reject = 1;
-            last = 0;
-            h = first ? h * 0.1 : h_new;
-            need_lu = 1;
-            need_jac = !fresh_jac;
-        }
-    }
-}
-
-/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int wheel_spinup_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
-{
-    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;

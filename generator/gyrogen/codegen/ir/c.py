@@ -12,11 +12,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 from gyrogen.codegen.ir.nodes import (
-    Assign,
-    Break,
-    Call,
-    Comment,
-    Continue,
     Decl,
     E,
     Fn,
@@ -24,7 +19,6 @@ from gyrogen.codegen.ir.nodes import (
     Func,
     If,
     Loop,
-    Return,
     S,
     Sel,
     Var,
@@ -91,34 +85,25 @@ class CPrinter(Printer):
     def note(self, text: str) -> str:
         return f"  /* {text} */"
 
-    def statement(self, s: S, depth: int) -> list[str]:
-        pad = self.indent * depth
-        if isinstance(s, Assign):
-            return self.line(depth, f"{self.expr(s.target)} = {self.expr(s.value)};", s.note)
-        if isinstance(s, Comment):
-            return [""] * s.blank + [f"{pad}/* {s.text} */"]
-        if isinstance(s, Call):
-            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac") else s.name
-            return self.line(depth, f"{name}({self.call_args(s)});", s.note)
-        if isinstance(s, Return):
-            text = "return;" if s.value is None else f"return {self.expr(s.value)};"
-            return self.line(depth, text, s.note)
-        if isinstance(s, If):
-            out = [f"{pad}if ({self.expr(s.cond)}) {{", *self.block(s.then, depth + 1)]
-            if s.orelse:
-                out += [f"{pad}}} else {{", *self.block(s.orelse, depth + 1)]
-            return [*out, f"{pad}}}"]
-        if isinstance(s, Loop):
-            return [f"{pad}for (;;) {{", *self.block(s.body, depth + 1), f"{pad}}}"]
-        if isinstance(s, Continue):
-            return [f"{pad}continue;"]
-        if isinstance(s, Break):
-            return [f"{pad}break;"]
-        assert isinstance(s, For), s
-        start = self.expr(s.start)
-        head = f"{pad}for ({s.var} = {start}; {s.var} < {self.expr(s.n, 4)}; ++{s.var}) {{"
-        local = [f"{pad}{self.indent}double {', '.join(s.locals)};"] if s.locals else []
-        return [head, *local, *self.block(s.body, depth + 1), f"{pad}}}"]
+    syntax: ClassVar[dict[str, str]] = {
+        "assign": "{target} = {value};",
+        "comment": "/* {text} */",
+        "call": "{name}({args});",
+        "return": "return;",
+        "return_value": "return {value};",
+        "if": "if ({cond}) {{",
+        "else": "}} else {{",
+        "end_if": "}}",
+        "loop": "for (;;) {{",
+        "end_loop": "}}",
+        "continue": "continue;",
+        "break": "break;",
+        "for": "for ({v} = {start}; {v} < {stop}; ++{v}) {{",
+        "end_for": "}}",
+    }
+
+    def scoped_locals(self, s: For, depth: int) -> list[str]:
+        return [f"{self.indent * depth}double {', '.join(s.locals)};"] if s.locals else []
 
     def declaration(self, d: Decl, param: bool) -> str:
         if d.type == "stats":

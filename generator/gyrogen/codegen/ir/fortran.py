@@ -12,18 +12,10 @@ from typing import ClassVar
 from gyrogen.codegen.ir.c import walk
 from gyrogen.codegen.ir.nodes import (
     Assign,
-    Break,
-    Call,
-    Comment,
-    Continue,
     Decl,
     E,
     For,
     Func,
-    If,
-    Loop,
-    Return,
-    S,
     Sel,
     Var,
 )
@@ -92,33 +84,22 @@ class FortranPrinter(Printer):
     def note(self, text: str) -> str:
         return f"  ! {text}"
 
-    def statement(self, s: S, depth: int) -> list[str]:
-        pad = self.indent * depth
-        if isinstance(s, Assign):
-            return self.line(depth, f"{self.expr(s.target)} = {self.expr(s.value)}", s.note)
-        if isinstance(s, Comment):
-            return [""] * s.blank + [f"{pad}! {s.text}"]
-        if isinstance(s, Call):
-            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac") else s.name
-            return self.line(depth, f"call {name}({self.call_args(s)})", s.note)
-        if isinstance(s, Return):
-            if s.value is None:
-                return self.line(depth, "return", s.note)
-            return [*self.line(depth, f"res = {self.expr(s.value)}", s.note), f"{pad}return"]
-        if isinstance(s, If):
-            out = [f"{pad}if ({self.expr(s.cond)}) then", *self.block(s.then, depth + 1)]
-            if s.orelse:
-                out += [f"{pad}else", *self.block(s.orelse, depth + 1)]
-            return [*out, f"{pad}end if"]
-        if isinstance(s, Loop):
-            return [f"{pad}do", *self.block(s.body, depth + 1), f"{pad}end do"]
-        if isinstance(s, Continue):
-            return [f"{pad}cycle"]
-        if isinstance(s, Break):
-            return [f"{pad}exit"]
-        assert isinstance(s, For), s
-        head = f"{pad}do {s.var} = {self.expr(s.start)}, {self.expr(s.n, 5)} - 1"
-        return [head, *self.block(s.body, depth + 1), f"{pad}end do"]
+    syntax: ClassVar[dict[str, str]] = {
+        "assign": "{target} = {value}",
+        "comment": "! {text}",
+        "call": "call {name}({args})",
+        "return": "return",
+        "return_value": "res = {value}\nreturn",
+        "if": "if ({cond}) then",
+        "else": "else",
+        "end_if": "end if",
+        "loop": "do",
+        "end_loop": "end do",
+        "continue": "cycle",
+        "break": "exit",
+        "for": "do {v} = {start}, {stop} - 1",
+        "end_for": "end do",
+    }
 
     def declaration(self, d: Decl, param: bool) -> str:
         ftype = f"type({self.prefix}_stats)" if d.type == "stats" else FTYPE[d.type]

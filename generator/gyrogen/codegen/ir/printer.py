@@ -12,18 +12,26 @@ import textwrap
 from typing import ClassVar
 
 from gyrogen.codegen.ir.nodes import (
+    Assign,
     At,
     Bin,
     Bool,
+    Break,
     Call,
+    Comment,
     Const,
+    Continue,
     Decl,
     E,
     Fn,
+    For,
     Func,
+    If,
     Int,
+    Loop,
     Num,
     Ref,
+    Return,
     Row,
     S,
     Sel,
@@ -155,8 +163,47 @@ class Printer:
             lines += self.statement(s, depth)
         return lines
 
+    syntax: ClassVar[dict[str, str]] = {}
+    """The language's statements: assign, comment, call, return, return_value
+    (lines split by newlines), if, else, end_if, loop, end_loop, continue,
+    break, for, end_for, each with {fields} to fill."""
+
     def statement(self, s: S, depth: int) -> list[str]:
-        raise NotImplementedError
+        pad, say = self.indent * depth, self.syntax
+        if isinstance(s, Assign):
+            text = say["assign"].format(target=self.expr(s.target), value=self.expr(s.value))
+            return self.line(depth, text, s.note)
+        if isinstance(s, Comment):
+            return [""] * s.blank + [pad + say["comment"].format(text=s.text)]
+        if isinstance(s, Call):
+            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac") else s.name
+            return self.line(depth, say["call"].format(name=name, args=self.call_args(s)), s.note)
+        if isinstance(s, Return):
+            if s.value is None:
+                return self.line(depth, say["return"].format(), s.note)
+            first, *rest = say["return_value"].format(value=self.expr(s.value)).split("\n")
+            return [*self.line(depth, first, s.note), *(pad + r for r in rest)]
+        if isinstance(s, If):
+            out = [pad + say["if"].format(cond=self.expr(s.cond)), *self.block(s.then, depth + 1)]
+            if s.orelse:
+                out += [pad + say["else"].format(), *self.block(s.orelse, depth + 1)]
+            return [*out, pad + say["end_if"].format()]
+        if isinstance(s, Loop):
+            return [
+                pad + say["loop"].format(),
+                *self.block(s.body, depth + 1),
+                pad + say["end_loop"].format(),
+            ]
+        if isinstance(s, (Continue, Break)):
+            return [pad + say["continue" if isinstance(s, Continue) else "break"].format()]
+        assert isinstance(s, For), s
+        head = say["for"].format(v=s.var, start=self.expr(s.start), stop=self.expr(s.n, 5))
+        body = [*self.scoped_locals(s, depth + 1), *self.block(s.body, depth + 1)]
+        return [pad + head, *body, pad + say["end_for"].format()]
+
+    def scoped_locals(self, s: For, depth: int) -> list[str]:
+        """The declarations of a loop's own locals at its top (C), or none."""
+        return []
 
     def line(self, depth: int, text: str, note: str = "") -> list[str]:
         """One statement, continued on new lines past WRAP."""
