@@ -8,7 +8,7 @@ import sympy as sm
 
 from gyrogen import methods
 from gyrogen.analysis.check_cases import quaternion_scene
-from gyrogen.codegen.context import make_unit
+from gyrogen.codegen.context import make_context
 from gyrogen.oracle import scene_view
 from gyrogen.scene import Scene, builtin_names, load
 from gyrogen.symbolic.blocks import diagonal_blocks
@@ -72,7 +72,7 @@ def test_blocks_cover_the_witness_jacobian(name: str) -> None:
     no entry below the diagonal outside a block, and no entry of a block's
     rows beyond it outside U's pattern."""
     scene = quaternion_scene() if name == "quaternion" else load(name)
-    blocks = make_unit(scene).lu_blocks
+    blocks = make_context(scene).lu_blocks
     assert blocks is not None
     jac = numeric_jacobian(scene)
     for i in range(len(jac)):

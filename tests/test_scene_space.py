@@ -95,9 +95,7 @@ def test_fortran_radau5_steps_as_c_radau5_on_the_scene_of_issue_19(
     assert steps["fortran"] == steps["c"], steps
 
 
-def drawn_scenes(
-    attitude: str, n: int, seed_: int, integrators: str = '["radau5"]'
-) -> list[str]:
+def drawn_scenes(attitude: str, n: int, seed_: int, integrators: str = '["radau5"]') -> list[str]:
     """The first n valid scenes of that attitude scene_space draws from
     seed_, each made a C and Fortran scene of those integrators."""
     texts: list[str] = []

@@ -237,9 +237,9 @@ def test_specialization_drops_states_and_parameters(tmp_path: Path) -> None:
 def test_torque_free_principal_scene_meets_the_op_goal() -> None:
     """Torque-free, no translation, principal axes, every value folded: at
     most 20 ops in rhs (trig calls included here, so stricter than asked)."""
-    from gyrogen.codegen.context import make_unit
+    from gyrogen.codegen.context import make_context
 
-    assert make_unit(load("torque_free")).ops["rhs"] <= 20
+    assert make_context(load("torque_free")).ops["rhs"] <= 20
 
 
 @pytest.mark.slow

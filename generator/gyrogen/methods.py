@@ -245,7 +245,7 @@ def get(name: str) -> Method:
 
 def signature_of(function: str) -> Signature:
     """The C signature of a function, by its key in a manifest's functions
-    (codegen.context.Unit.functions): an integrator's by its kind."""
+    (codegen.context.SceneContext.functions): an integrator's by its kind."""
     batch = function.endswith("_batch")
     method = METHODS.get(function.removesuffix("_batch"))
     if method is not None:

@@ -57,7 +57,7 @@ class Output:
 
 
 @dataclass(frozen=True)
-class Unit:
+class SceneContext:
     scene: Scene
     equations: Equations
     optimized: Optimized
@@ -224,9 +224,9 @@ def build_id(scene: Scene) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def make_unit(scene: Scene) -> Unit:
+def make_context(scene: Scene) -> SceneContext:
     eqs = specialize(scene)
-    return Unit(scene, eqs, optimize(eqs, jacobian=needs_jacobian(scene.integrators)))
+    return SceneContext(scene, eqs, optimize(eqs, jacobian=needs_jacobian(scene.integrators)))
 
 
 def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from gyrogen import abi
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.units import DIMENSIONLESS, base_units, per_second
 
 
@@ -62,7 +62,7 @@ class Stepping:
 
 @dataclass(frozen=True)
 class FmuModel:
-    unit: Unit
+    unit: SceneContext
     parameters: tuple[float, ...]
     """Start values of the runtime parameters, in p[] order."""
     stepping: Stepping

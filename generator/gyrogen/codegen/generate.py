@@ -8,7 +8,7 @@ from pathlib import Path
 
 from gyrogen.codegen import buildfiles
 from gyrogen.codegen.backends import c, fortran
-from gyrogen.codegen.context import Unit, make_unit
+from gyrogen.codegen.context import SceneContext, make_context
 from gyrogen.codegen.manifest import manifest
 from gyrogen.errors import SceneError
 from gyrogen.files import write_atomic
@@ -18,12 +18,12 @@ from gyrogen.symbolic.literals import LiteralError
 
 
 @cache
-def full_model_unit() -> Unit:
+def full_model_unit() -> SceneContext:
     """The paper's full model, for comparison in every manifest and table."""
-    return make_unit(default_scene())
+    return make_context(default_scene())
 
 
-def render_all(unit: Unit, lib: bool = False) -> dict[str, str]:
+def render_all(unit: SceneContext, lib: bool = False) -> dict[str, str]:
     """Every file of the scene; with lib, also CMakeLists.txt and <prefix>.mk."""
     files: dict[str, str] = {}
     if "c" in unit.scene.targets:
@@ -37,13 +37,13 @@ def render_all(unit: Unit, lib: bool = False) -> dict[str, str]:
     return files
 
 
-def unit_of(scene: Scene) -> Unit:
+def unit_of(scene: Scene) -> SceneContext:
     """The scene's unit; the default scene's is the full model every
     manifest compares with: built once."""
     if scene == default_scene():
         return full_model_unit()
     try:
-        return make_unit(scene)
+        return make_context(scene)
     except LiteralError as exc:
         raise LiteralError(f"{scene.name}: {exc}") from exc
 
@@ -62,7 +62,7 @@ def claim(out: Path, prefix: str) -> None:
         )
 
 
-def generate(scene: Scene, out: Path, lib: bool = False) -> Unit:
+def generate(scene: Scene, out: Path, lib: bool = False) -> SceneContext:
     """Render the scene into out, all or nothing (gyrogen.files)."""
     claim(out, scene.name)
     unit = unit_of(scene)

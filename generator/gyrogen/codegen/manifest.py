@@ -9,11 +9,11 @@ from collections.abc import Sequence
 from typing import Any
 
 from gyrogen.abi import ODE_CODES, STATS_FIELDS, Code
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.methods import signature_of
 
 
-def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
+def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
     """What tools and tests read instead of parsing C; full, the paper's full
     model, is what the scene is compared with (its caller derives it)."""
     p = unit.prefix
@@ -49,7 +49,7 @@ def manifest(unit: Unit, full: Unit) -> dict[str, Any]:
     }
 
 
-def _files(unit: Unit) -> dict[str, str]:
+def _files(unit: SceneContext) -> dict[str, str]:
     p, ode = unit.prefix, bool(unit.scene.integrators)
     files: dict[str, str] = {}
     if "c" in unit.scene.targets:
@@ -63,7 +63,7 @@ def _files(unit: Unit) -> dict[str, str]:
     return files
 
 
-def _exported(unit: Unit) -> dict[str, dict[str, str]]:
+def _exported(unit: SceneContext) -> dict[str, dict[str, str]]:
     """The functions of each target the scene builds, by key: exported name."""
     names = unit.functions
     return {
@@ -73,7 +73,7 @@ def _exported(unit: Unit) -> dict[str, dict[str, str]]:
     }
 
 
-def _signature(unit: Unit, key: str, name: str) -> dict[str, Any]:
+def _signature(unit: SceneContext, key: str, name: str) -> dict[str, Any]:
     """One function's C declaration, and its arguments for an FFI: each
     pointer's element count ("count", times the batch's n when per_state)."""
     sig = signature_of(key)

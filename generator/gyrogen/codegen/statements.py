@@ -12,7 +12,7 @@ from functools import partial
 import sympy as sm
 from sympy.printing.precedence import PRECEDENCE
 
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.symbolic.literals import LiteralError, writable
 from gyrogen.symbolic.optimize import Block
 
@@ -105,14 +105,18 @@ def statements(block: Block, output: Callable[[int], str], assign: Assign) -> li
     return temps + stores
 
 
-def functions(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> list[Function]:
+def functions(
+    unit: SceneContext, array: Callable[[str, int], str], assign: Assign
+) -> list[Function]:
     """rhs first, then the scene's outputs; array(name, i) spells name[i]."""
     blocks = [("rhs", unit.optimized.rhs, "dxdt", "dx/dt", "")]
     blocks += [(o.name, o.block, "out", o.doc, o.unit) for o in unit.outputs]
     return [_function(unit, array, assign, *b) for b in blocks]
 
 
-def jacobian(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> Function | None:
+def jacobian(
+    unit: SceneContext, array: Callable[[str, int], str], assign: Assign
+) -> Function | None:
     """d(dx/dt)/dx into J, row-major (J[i*NX + j] = d f_i / d x_j)."""
     block = unit.optimized.jacobian
     if block is None:
@@ -121,7 +125,7 @@ def jacobian(unit: Unit, array: Callable[[str, int], str], assign: Assign) -> Fu
 
 
 def _function(
-    unit: Unit,
+    unit: SceneContext,
     array: Callable[[str, int], str],
     assign: Assign,
     name: str,

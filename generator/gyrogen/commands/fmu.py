@@ -1,4 +1,4 @@
-"""`gyrogen fmu`: a scene as a Functional Mock-up Unit."""
+"""`gyrogen fmu`: a scene as a Functional Mock-up SceneContext."""
 
 from __future__ import annotations
 

@@ -11,10 +11,10 @@ from gyrogen.commands.options import SCENE, default_out, out_dir, progress
 from gyrogen.scene import Scene, builtin_names, default, load
 
 if TYPE_CHECKING:
-    from gyrogen.codegen.context import Unit
+    from gyrogen.codegen.context import SceneContext
 
 
-def _row(unit: Unit, full: Unit) -> str:
+def _row(unit: SceneContext, full: SceneContext) -> str:
     outs = ", ".join(o.name for o in unit.outputs) or "-"
     return (
         f"{unit.prefix:<18} {unit.nx:>2}/{full.nx:<3} {unit.np:>3} {unit.nc:>3} "
@@ -22,7 +22,7 @@ def _row(unit: Unit, full: Unit) -> str:
     )
 
 
-def print_table(units: list[Unit]) -> None:
+def print_table(units: list[SceneContext]) -> None:
     from gyrogen.codegen.generate import full_model_unit
 
     full = full_model_unit()

@@ -14,7 +14,7 @@ from gyrogen.errors import GyrogenError
 from gyrogen.scene import Scene, default
 
 if TYPE_CHECKING:
-    from gyrogen.codegen.context import Unit
+    from gyrogen.codegen.context import SceneContext
     from gyrogen.runtime.compiled import Compiled
 
 
@@ -22,14 +22,14 @@ def verify_scene(
     scene: Scene,
     directory: Path,
     counts: tuple[int, int, int],
-    written: Callable[[Unit], None] = lambda unit: None,
-) -> tuple[Unit, bool]:
+    written: Callable[[SceneContext], None] = lambda unit: None,
+) -> tuple[SceneContext, bool]:
     """Generate the scene into directory (written is told), build every
     target, compare with the reference at counts (states, parameter sets,
     seed) and print the table: the unit, and whether everything passed."""
     from gyrogen.runtime.scene_build import build_scene
 
-    def announce(unit: Unit) -> None:
+    def announce(unit: SceneContext) -> None:
         written(unit)
         click.echo(f"building {', '.join(scene.targets)} through cffi ...")
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from gyrogen.abi import PARAMETERS
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import sampling, scene_view
 from gyrogen.runtime.build import build
@@ -354,7 +354,7 @@ CHECK_ILL = 2
 sets (well-conditioned, ill-conditioned), as `gyrogen verify` does in full."""
 
 
-def check_rendered(unit: Unit, files: Mapping[str, str]) -> float:
+def check_rendered(unit: SceneContext, files: Mapping[str, str]) -> float:
     """Compile every target in files (C with the strict flags, Fortran with
     -std=f2008 -Werror) and compare the rhs, outputs and Jacobian with the
     numpy reference; raise GyrogenError naming the scene and what differs.

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.generate import generate
 from gyrogen.runtime.build import build
 from gyrogen.runtime.compiled import Compiled, Language
@@ -17,8 +17,8 @@ def build_scene(
     scene: Scene,
     directory: Path,
     languages: Iterable[Language],
-    written: Callable[[Unit], None] = lambda unit: None,
-) -> tuple[Unit, dict[Language, Compiled]]:
+    written: Callable[[SceneContext], None] = lambda unit: None,
+) -> tuple[SceneContext, dict[Language, Compiled]]:
     """Generate scene into directory (all or nothing), call written with
     its unit, then build each language in turn (or fetch it from the
     cache): the unit and the backends by language."""

@@ -8,7 +8,7 @@ from sympy.printing.c import C99CodePrinter
 from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.codegen.checks import printed
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.integrators.program import c_text, program, trig_text
 from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.codegen.render import c_double, render
@@ -61,7 +61,7 @@ def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
     return [name for name in VARIANTS if f"{prefix}_{name}(" in text]
 
 
-def files(unit: Unit) -> dict[str, str]:
+def files(unit: SceneContext) -> dict[str, str]:
     printer = CPrinter(unit.nc, unit.prefix)
     lanes_printer = CPrinter(unit.nc, unit.prefix, lanes=True)
 

@@ -9,7 +9,7 @@ from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import printed
-from gyrogen.codegen.context import Unit
+from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.integrators.program import fortran_text, program, trig_text
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import (
@@ -65,7 +65,7 @@ def _check_names(names: list[str], where: str) -> None:
             raise GyrogenError(f"Fortran ignores case: {other!r} and {n!r} clash in {where}")
 
 
-def files(unit: Unit) -> dict[str, str]:
+def files(unit: SceneContext) -> dict[str, str]:
     printer = FortranPrinter(unit.nc, unit.prefix)
 
     def assign(lhs: str, expr: sm.Expr) -> str:
