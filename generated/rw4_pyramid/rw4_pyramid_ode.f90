@@ -1032,39 +1032,6 @@ contains
     code = rk4_steps(t0, t1, steps, x, c, stats)
   end function rw4_pyramid_rk4
 
-  ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
-      bind(C, name="rw4_pyramid_f_rk4_batch")
-    integer(c_size_t), value, intent(in) :: n
-    real(c_double), value, intent(in) :: t0, t1
-    integer(c_long), value, intent(in) :: steps
-    real(c_double), intent(inout) :: x(nx, n)
-    real(c_double), intent(in) :: c(nc)
-    type(c_ptr), value, intent(in) :: stats, codes
-    integer(c_size_t) :: failed
-    type(rw4_pyramid_stats), pointer :: stats_out(:)
-    integer(c_int), pointer :: codes_out(:)
-    integer(c_size_t) :: i
-    integer(c_int) :: code
-
-    nullify (stats_out, codes_out)
-    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
-    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
-    failed = 0
-    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
-    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
-    do i = 1, n
-      if (associated(stats_out)) then
-        code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
-      else
-        code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
-      end if
-      if (associated(codes_out)) codes_out(i) = code
-      if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
-    end do
-    !$omp end parallel do
-  end function rw4_pyramid_rk4_batch
-
   ! dopri5 to t1, with Hairer's step-size strategy: the last step clipped
   ! to end on t1, no growth right after a rejection, and a non-finite trial
   ! rejected with h shrunk by facmin.
@@ -2294,6 +2261,40 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_pyramid_radau5
+
+  ! stats, codes: NULL when not wanted.
+  function rw4_pyramid_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
+      result(failed) bind(C, name="rw4_pyramid_f_rk4_batch")
+    integer(c_size_t), value, intent(in) :: n
+    real(c_double), value, intent(in) :: t0, t1
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: steps
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(rw4_pyramid_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, &
+                                  c_loc(stats_out(i)))
+      else
+        code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function rw4_pyramid_rk4_batch
 
   ! stats, codes: NULL when not wanted.
   function rw4_pyramid_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
