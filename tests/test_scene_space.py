@@ -63,6 +63,16 @@ def radau5_steps(path: Path | str, work: Path, tols: tuple[float, ...]) -> dict[
     """Per language, radau5's (code, accepted, rejected) on the scene at
     path (or the built-in scene of that name) from its start to its t_end,
     at rtol = atol = each of tols."""
+    runs = method_runs(path, work, [("radau5", {"rtol": tol, "atol": tol}) for tol in tols])
+    return {language: [run[1:4] for run in out] for language, out in runs.items()}
+
+
+def method_runs(
+    path: Path | str, work: Path, plan: list[tuple[str, dict]]
+) -> dict[str, list[tuple]]:
+    """Per language and (method, controls) of plan: the method, code,
+    accepted and rejected steps and the final state, from the scene's start
+    to its t_end."""
     from gyrogen.analysis.simulate import runtime_values
     from gyrogen.codegen.generate import generate
     from gyrogen.runtime.build import build
@@ -71,15 +81,15 @@ def radau5_steps(path: Path | str, work: Path, tols: tuple[float, ...]) -> dict[
     scene = load(str(path))
     generate(scene, work / "src")
     x0, p = np.array(scene.initial_state()), runtime_values(scene)
-    steps: dict[str, list[tuple]] = {}
+    runs: dict[str, list[tuple]] = {}
     for language in ("c", "fortran"):
         b = build(work / "src", language)
         c, t1 = b.setup(p), scene.simulate.t_end
-        steps[language] = []
-        for tol in tols:
-            _, stats, code = b.integrate("radau5", x0, c, 0.0, t1, rtol=tol, atol=tol)
-            steps[language].append((code, stats["accepted"], stats["rejected"]))
-    return steps
+        runs[language] = []
+        for method, controls in plan:
+            x, stats, code = b.integrate(method, x0, c, 0.0, t1, **controls)
+            runs[language].append((method, code, stats["accepted"], stats["rejected"], x))
+    return runs
 
 
 def test_fortran_radau5_steps_as_c_radau5_on_the_scene_of_issue_19(
@@ -150,27 +160,9 @@ EVERY = ("rk4", "dopri5", "dop853", "rodas4", "radau5")
 
 
 def every_method(path: Path, work: Path) -> dict[str, list[tuple]]:
-    """Per language and method: code, accepted and rejected steps and the
-    final state, from the scene's start to its t_end at rtol = atol = 1e-8
-    (rk4: 200 steps)."""
-    from gyrogen.analysis.simulate import runtime_values
-    from gyrogen.codegen.generate import generate
-    from gyrogen.runtime.build import build
-    from gyrogen.scene import load
-
-    scene = load(str(path))
-    generate(scene, work / "src")
-    x0, p = np.array(scene.initial_state()), runtime_values(scene)
-    runs: dict[str, list[tuple]] = {}
-    for language in ("c", "fortran"):
-        b = build(work / "src", language)
-        c, t1 = b.setup(p), scene.simulate.t_end
-        runs[language] = []
-        for method in EVERY:
-            controls = {"steps": 200} if method == "rk4" else {"rtol": 1e-8, "atol": 1e-8}
-            x, stats, code = b.integrate(method, x0, c, 0.0, t1, **controls)  # type: ignore[arg-type]
-            runs[language].append((method, code, stats["accepted"], stats["rejected"], x))
-    return runs
+    """method_runs with every method at rtol = atol = 1e-8 (rk4: 200 steps)."""
+    plan = [(m, {"steps": 200} if m == "rk4" else {"rtol": 1e-8, "atol": 1e-8}) for m in EVERY]
+    return method_runs(path, work, plan)
 
 
 @pytest.mark.parametrize("portable", [False, True], ids=["native", "portable"])

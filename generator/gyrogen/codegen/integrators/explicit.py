@@ -56,19 +56,25 @@ from gyrogen.tableaus import Explicit, Terms
 t, k, y, c = Var("t"), Var("k"), Var("y"), Var("c")
 
 
-def combo(terms: Terms, onto: E | None = None) -> E:
-    """a_1 k[j_1][i] + a_2 k[j_2][i] ..., left to right; zeros left out.
-    With onto: onto + a_1 k[j_1][i] + ..., each term added in turn."""
+def linear(terms: list[tuple[float, E]], onto: E | None = None) -> E:
+    """a_1 v_1 + a_2 v_2 ..., left to right: zeros left out, ones written as
+    v. With onto: onto + a_1 v_1 + ..., each term added in turn."""
     out: E | None = onto
-    for j, a in terms:
-        kj = k[j, i]
+    for a, v in terms:
+        if a == 0.0:
+            continue
         if out is None:
-            out = kj if a == 1.0 else -kj if a == -1.0 else Num(a) * kj
+            out = v if a == 1.0 else -v if a == -1.0 else Num(a) * v
         else:
-            term = kj if abs(a) == 1.0 else Num(abs(a)) * kj
+            term = v if abs(a) == 1.0 else Num(abs(a)) * v
             out = out - term if a < 0 else out + term
     assert out is not None
     return out
+
+
+def combo(terms: Terms, onto: E | None = None) -> E:
+    """a_1 k[j_1][i] + a_2 k[j_2][i] ... (see linear)."""
+    return linear([(a, k[j, i]) for j, a in terms], onto)
 
 
 def at(node: float) -> E:
@@ -221,4 +227,4 @@ def trial(m: Method) -> list[S]:
     ]
 
 
-__all__ = ["At", "combo", "fixed", "rows", "stages", "trial"]
+__all__ = ["At", "combo", "fixed", "linear", "rows", "stages", "trial"]

@@ -24,7 +24,7 @@ from gyrogen.codegen.integrators.common import (
     xnew,
 )
 from gyrogen.codegen.integrators.common import real as scalar
-from gyrogen.codegen.integrators.explicit import at
+from gyrogen.codegen.integrators.explicit import at, linear
 from gyrogen.codegen.ir.nodes import (
     Assign,
     Bool,
@@ -62,18 +62,8 @@ EPS = Num(0.5) * Const("EPSILON")
 
 
 def dot(row: tuple[float, ...], vs: list[E]) -> E:
-    """sum_j row_j v_j, left to right: zeros left out, ones written as v_j."""
-    out: E | None = None
-    for a, v in zip(row, vs, strict=True):
-        if a == 0.0:
-            continue
-        if out is None:
-            out = v if a == 1.0 else -v if a == -1.0 else Num(a) * v
-        else:
-            term = v if abs(a) == 1.0 else Num(abs(a)) * v
-            out = out - term if a < 0 else out + term
-    assert out is not None
-    return out
+    """sum_j row_j v_j (see explicit.linear)."""
+    return linear(list(zip(row, vs, strict=True)))
 
 
 def each(*body: S, local: tuple[str, ...] = ()) -> For:
