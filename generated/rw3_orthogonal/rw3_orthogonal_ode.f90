@@ -330,7 +330,7 @@ contains
     integer(c_int) :: i
 
     do i = 0, nx - 1
-      comp(i) = xnew(i) - x(i) - dx(i)
+      comp(i) = (xnew(i) - x(i)) - dx(i)
       x(i) = xnew(i)
     end do
   end subroutine accept_step
@@ -396,7 +396,7 @@ contains
     real(c_double), intent(in) :: t
     logical :: res
 
-    res = h < 16.0_c_double * epsilon(1.0_c_double) * abs(t) .or. h < tiny(1.0_c_double)
+    res = h < (16.0_c_double * epsilon(1.0_c_double)) * abs(t) .or. h < tiny(1.0_c_double)
     return
   end function step_underflow
 
@@ -451,8 +451,8 @@ contains
     dny = 0.0_c_double
     do i = 0, nx - 1
       sk = atol + rtol * abs(x(i))
-      dnf = dnf + f0(i) / sk * (f0(i) / sk)
-      dny = dny + x(i) / sk * (x(i) / sk)
+      dnf = dnf + (f0(i) / sk) * (f0(i) / sk)
+      dny = dny + (x(i) / sk) * (x(i) / sk)
     end do
     h = merge(1e-6_c_double, 1e-2_c_double * sqrt(dny / dnf), &
         dnf <= 1e-10_c_double .or. dny <= 1e-10_c_double)
@@ -592,20 +592,21 @@ contains
     end do
     b(2) = b(2) - lu(19) * b(1)
     b(4) = b(4) - lu(39) * b(3)
-    b(5) = b(5) - lu(48) * b(3) - lu(49) * b(4)
-    b(6) = b(6) - lu(57) * b(3) - lu(58) * b(4) - lu(59) * b(5)
-    b(7) = b(7) - lu(66) * b(3) - lu(67) * b(4) - lu(68) * b(5) - lu(69) * b(6)
-    b(8) = b(8) - lu(75) * b(3) - lu(76) * b(4) - lu(77) * b(5) - lu(78) * b(6) - lu(79) * b(7)
+    b(5) = (b(5) - lu(48) * b(3)) - lu(49) * b(4)
+    b(6) = ((b(6) - lu(57) * b(3)) - lu(58) * b(4)) - lu(59) * b(5)
+    b(7) = (((b(7) - lu(66) * b(3)) - lu(67) * b(4)) - lu(68) * b(5)) - lu(69) * b(6)
+    b(8) = ((((b(8) - lu(75) * b(3)) - lu(76) * b(4)) - lu(77) * b(5)) - lu(78) * b(6)) - lu(79) &
+        * b(7)
     b(8) = b(8) * lu(80)
     b(7) = b(7) * lu(70) - lu(71) * b(8)
-    b(6) = b(6) * lu(60) - lu(62) * b(8) - lu(61) * b(7)
-    b(5) = b(5) * lu(50) - lu(53) * b(8) - lu(52) * b(7) - lu(51) * b(6)
-    b(4) = b(4) * lu(40) - lu(44) * b(8) - lu(43) * b(7) - lu(42) * b(6) - lu(41) * b(5)
-    b(3) = b(3) * lu(30) - lu(35) * b(8) - lu(34) * b(7) - lu(33) * b(6) - lu(32) * b(5) - lu(31) &
-        * b(4)
-    b(2) = b(2) * lu(20) - lu(23) * b(5) - lu(22) * b(4) - lu(21) * b(3)
-    b(1) = b(1) * lu(10) - lu(14) * b(5) - lu(13) * b(4) - lu(12) * b(3) - lu(11) * b(2)
-    b(0) = b(0) * lu(0) - lu(5) * b(5) - lu(3) * b(3) - lu(2) * b(2) - lu(1) * b(1)
+    b(6) = (b(6) * lu(60) - lu(62) * b(8)) - lu(61) * b(7)
+    b(5) = ((b(5) * lu(50) - lu(53) * b(8)) - lu(52) * b(7)) - lu(51) * b(6)
+    b(4) = (((b(4) * lu(40) - lu(44) * b(8)) - lu(43) * b(7)) - lu(42) * b(6)) - lu(41) * b(5)
+    b(3) = ((((b(3) * lu(30) - lu(35) * b(8)) - lu(34) * b(7)) - lu(33) * b(6)) - lu(32) * b(5)) &
+        - lu(31) * b(4)
+    b(2) = ((b(2) * lu(20) - lu(23) * b(5)) - lu(22) * b(4)) - lu(21) * b(3)
+    b(1) = (((b(1) * lu(10) - lu(14) * b(5)) - lu(13) * b(4)) - lu(12) * b(3)) - lu(11) * b(2)
+    b(0) = (((b(0) * lu(0) - lu(5) * b(5)) - lu(3) * b(3)) - lu(2) * b(2)) - lu(1) * b(1)
   end subroutine lu_solve
 
   ! lu_decompose for the complex matrix ar + i ai, stored the same way: the
@@ -708,66 +709,72 @@ contains
       bi(i) = bi(piv(i))
       bi(piv(i)) = swap
     end do
-    br(2) = br(2) - ar(19) * br(1) + ai(19) * bi(1)
-    bi(2) = bi(2) - ar(19) * bi(1) - ai(19) * br(1)
-    br(4) = br(4) - ar(39) * br(3) + ai(39) * bi(3)
-    bi(4) = bi(4) - ar(39) * bi(3) - ai(39) * br(3)
-    br(5) = br(5) - ar(48) * br(3) + ai(48) * bi(3) - ar(49) * br(4) + ai(49) * bi(4)
-    bi(5) = bi(5) - ar(48) * bi(3) - ai(48) * br(3) - ar(49) * bi(4) - ai(49) * br(4)
-    br(6) = br(6) - ar(57) * br(3) + ai(57) * bi(3) - ar(58) * br(4) + ai(58) * bi(4) - ar(59) * &
-        br(5) + ai(59) * bi(5)
-    bi(6) = bi(6) - ar(57) * bi(3) - ai(57) * br(3) - ar(58) * bi(4) - ai(58) * br(4) - ar(59) * &
-        bi(5) - ai(59) * br(5)
-    br(7) = br(7) - ar(66) * br(3) + ai(66) * bi(3) - ar(67) * br(4) + ai(67) * bi(4) - ar(68) * &
-        br(5) + ai(68) * bi(5) - ar(69) * br(6) + ai(69) * bi(6)
-    bi(7) = bi(7) - ar(66) * bi(3) - ai(66) * br(3) - ar(67) * bi(4) - ai(67) * br(4) - ar(68) * &
-        bi(5) - ai(68) * br(5) - ar(69) * bi(6) - ai(69) * br(6)
-    br(8) = br(8) - ar(75) * br(3) + ai(75) * bi(3) - ar(76) * br(4) + ai(76) * bi(4) - ar(77) * &
-        br(5) + ai(77) * bi(5) - ar(78) * br(6) + ai(78) * bi(6) - ar(79) * br(7) + ai(79) * bi(7)
-    bi(8) = bi(8) - ar(75) * bi(3) - ai(75) * br(3) - ar(76) * bi(4) - ai(76) * br(4) - ar(77) * &
-        bi(5) - ai(77) * br(5) - ar(78) * bi(6) - ai(78) * br(6) - ar(79) * bi(7) - ai(79) * br(7)
+    br(2) = (br(2) - ar(19) * br(1)) + ai(19) * bi(1)
+    bi(2) = (bi(2) - ar(19) * bi(1)) - ai(19) * br(1)
+    br(4) = (br(4) - ar(39) * br(3)) + ai(39) * bi(3)
+    bi(4) = (bi(4) - ar(39) * bi(3)) - ai(39) * br(3)
+    br(5) = (((br(5) - ar(48) * br(3)) + ai(48) * bi(3)) - ar(49) * br(4)) + ai(49) * bi(4)
+    bi(5) = (((bi(5) - ar(48) * bi(3)) - ai(48) * br(3)) - ar(49) * bi(4)) - ai(49) * br(4)
+    br(6) = (((((br(6) - ar(57) * br(3)) + ai(57) * bi(3)) - ar(58) * br(4)) + ai(58) * bi(4)) - &
+        ar(59) * br(5)) + ai(59) * bi(5)
+    bi(6) = (((((bi(6) - ar(57) * bi(3)) - ai(57) * br(3)) - ar(58) * bi(4)) - ai(58) * br(4)) - &
+        ar(59) * bi(5)) - ai(59) * br(5)
+    br(7) = (((((((br(7) - ar(66) * br(3)) + ai(66) * bi(3)) - ar(67) * br(4)) + ai(67) * bi(4)) &
+        - ar(68) * br(5)) + ai(68) * bi(5)) - ar(69) * br(6)) + ai(69) * bi(6)
+    bi(7) = (((((((bi(7) - ar(66) * bi(3)) - ai(66) * br(3)) - ar(67) * bi(4)) - ai(67) * br(4)) &
+        - ar(68) * bi(5)) - ai(68) * br(5)) - ar(69) * bi(6)) - ai(69) * br(6)
+    br(8) = (((((((((br(8) - ar(75) * br(3)) + ai(75) * bi(3)) - ar(76) * br(4)) + ai(76) * &
+        bi(4)) - ar(77) * br(5)) + ai(77) * bi(5)) - ar(78) * br(6)) + ai(78) * bi(6)) - ar(79) * &
+        br(7)) + ai(79) * bi(7)
+    bi(8) = (((((((((bi(8) - ar(75) * bi(3)) - ai(75) * br(3)) - ar(76) * bi(4)) - ai(76) * &
+        br(4)) - ar(77) * bi(5)) - ai(77) * br(5)) - ar(78) * bi(6)) - ai(78) * br(6)) - ar(79) * &
+        bi(7)) - ai(79) * br(7)
     re = br(8) * ar(80) - bi(8) * ai(80)
     bi(8) = bi(8) * ar(80) + br(8) * ai(80)
     br(8) = re
-    re = br(7) * ar(70) - bi(7) * ai(70) - ar(71) * br(8) + ai(71) * bi(8)
-    bi(7) = bi(7) * ar(70) + br(7) * ai(70) - ar(71) * bi(8) - ai(71) * br(8)
+    re = ((br(7) * ar(70) - bi(7) * ai(70)) - ar(71) * br(8)) + ai(71) * bi(8)
+    bi(7) = ((bi(7) * ar(70) + br(7) * ai(70)) - ar(71) * bi(8)) - ai(71) * br(8)
     br(7) = re
-    re = br(6) * ar(60) - bi(6) * ai(60) - ar(62) * br(8) + ai(62) * bi(8) - ar(61) * br(7) + &
-        ai(61) * bi(7)
-    bi(6) = bi(6) * ar(60) + br(6) * ai(60) - ar(62) * bi(8) - ai(62) * br(8) - ar(61) * bi(7) - &
-        ai(61) * br(7)
+    re = ((((br(6) * ar(60) - bi(6) * ai(60)) - ar(62) * br(8)) + ai(62) * bi(8)) - ar(61) * &
+        br(7)) + ai(61) * bi(7)
+    bi(6) = ((((bi(6) * ar(60) + br(6) * ai(60)) - ar(62) * bi(8)) - ai(62) * br(8)) - ar(61) * &
+        bi(7)) - ai(61) * br(7)
     br(6) = re
-    re = br(5) * ar(50) - bi(5) * ai(50) - ar(53) * br(8) + ai(53) * bi(8) - ar(52) * br(7) + &
-        ai(52) * bi(7) - ar(51) * br(6) + ai(51) * bi(6)
-    bi(5) = bi(5) * ar(50) + br(5) * ai(50) - ar(53) * bi(8) - ai(53) * br(8) - ar(52) * bi(7) - &
-        ai(52) * br(7) - ar(51) * bi(6) - ai(51) * br(6)
+    re = ((((((br(5) * ar(50) - bi(5) * ai(50)) - ar(53) * br(8)) + ai(53) * bi(8)) - ar(52) * &
+        br(7)) + ai(52) * bi(7)) - ar(51) * br(6)) + ai(51) * bi(6)
+    bi(5) = ((((((bi(5) * ar(50) + br(5) * ai(50)) - ar(53) * bi(8)) - ai(53) * br(8)) - ar(52) * &
+        bi(7)) - ai(52) * br(7)) - ar(51) * bi(6)) - ai(51) * br(6)
     br(5) = re
-    re = br(4) * ar(40) - bi(4) * ai(40) - ar(44) * br(8) + ai(44) * bi(8) - ar(43) * br(7) + &
-        ai(43) * bi(7) - ar(42) * br(6) + ai(42) * bi(6) - ar(41) * br(5) + ai(41) * bi(5)
-    bi(4) = bi(4) * ar(40) + br(4) * ai(40) - ar(44) * bi(8) - ai(44) * br(8) - ar(43) * bi(7) - &
-        ai(43) * br(7) - ar(42) * bi(6) - ai(42) * br(6) - ar(41) * bi(5) - ai(41) * br(5)
+    re = ((((((((br(4) * ar(40) - bi(4) * ai(40)) - ar(44) * br(8)) + ai(44) * bi(8)) - ar(43) * &
+        br(7)) + ai(43) * bi(7)) - ar(42) * br(6)) + ai(42) * bi(6)) - ar(41) * br(5)) + ai(41) * &
+        bi(5)
+    bi(4) = ((((((((bi(4) * ar(40) + br(4) * ai(40)) - ar(44) * bi(8)) - ai(44) * br(8)) - ar(43) &
+        * bi(7)) - ai(43) * br(7)) - ar(42) * bi(6)) - ai(42) * br(6)) - ar(41) * bi(5)) - ai(41) &
+        * br(5)
     br(4) = re
-    re = br(3) * ar(30) - bi(3) * ai(30) - ar(35) * br(8) + ai(35) * bi(8) - ar(34) * br(7) + &
-        ai(34) * bi(7) - ar(33) * br(6) + ai(33) * bi(6) - ar(32) * br(5) + ai(32) * bi(5) - &
-        ar(31) * br(4) + ai(31) * bi(4)
-    bi(3) = bi(3) * ar(30) + br(3) * ai(30) - ar(35) * bi(8) - ai(35) * br(8) - ar(34) * bi(7) - &
-        ai(34) * br(7) - ar(33) * bi(6) - ai(33) * br(6) - ar(32) * bi(5) - ai(32) * br(5) - &
-        ar(31) * bi(4) - ai(31) * br(4)
+    re = ((((((((((br(3) * ar(30) - bi(3) * ai(30)) - ar(35) * br(8)) + ai(35) * bi(8)) - ar(34) &
+        * br(7)) + ai(34) * bi(7)) - ar(33) * br(6)) + ai(33) * bi(6)) - ar(32) * br(5)) + ai(32) &
+        * bi(5)) - ar(31) * br(4)) + ai(31) * bi(4)
+    bi(3) = ((((((((((bi(3) * ar(30) + br(3) * ai(30)) - ar(35) * bi(8)) - ai(35) * br(8)) - &
+        ar(34) * bi(7)) - ai(34) * br(7)) - ar(33) * bi(6)) - ai(33) * br(6)) - ar(32) * bi(5)) - &
+        ai(32) * br(5)) - ar(31) * bi(4)) - ai(31) * br(4)
     br(3) = re
-    re = br(2) * ar(20) - bi(2) * ai(20) - ar(23) * br(5) + ai(23) * bi(5) - ar(22) * br(4) + &
-        ai(22) * bi(4) - ar(21) * br(3) + ai(21) * bi(3)
-    bi(2) = bi(2) * ar(20) + br(2) * ai(20) - ar(23) * bi(5) - ai(23) * br(5) - ar(22) * bi(4) - &
-        ai(22) * br(4) - ar(21) * bi(3) - ai(21) * br(3)
+    re = ((((((br(2) * ar(20) - bi(2) * ai(20)) - ar(23) * br(5)) + ai(23) * bi(5)) - ar(22) * &
+        br(4)) + ai(22) * bi(4)) - ar(21) * br(3)) + ai(21) * bi(3)
+    bi(2) = ((((((bi(2) * ar(20) + br(2) * ai(20)) - ar(23) * bi(5)) - ai(23) * br(5)) - ar(22) * &
+        bi(4)) - ai(22) * br(4)) - ar(21) * bi(3)) - ai(21) * br(3)
     br(2) = re
-    re = br(1) * ar(10) - bi(1) * ai(10) - ar(14) * br(5) + ai(14) * bi(5) - ar(13) * br(4) + &
-        ai(13) * bi(4) - ar(12) * br(3) + ai(12) * bi(3) - ar(11) * br(2) + ai(11) * bi(2)
-    bi(1) = bi(1) * ar(10) + br(1) * ai(10) - ar(14) * bi(5) - ai(14) * br(5) - ar(13) * bi(4) - &
-        ai(13) * br(4) - ar(12) * bi(3) - ai(12) * br(3) - ar(11) * bi(2) - ai(11) * br(2)
+    re = ((((((((br(1) * ar(10) - bi(1) * ai(10)) - ar(14) * br(5)) + ai(14) * bi(5)) - ar(13) * &
+        br(4)) + ai(13) * bi(4)) - ar(12) * br(3)) + ai(12) * bi(3)) - ar(11) * br(2)) + ai(11) * &
+        bi(2)
+    bi(1) = ((((((((bi(1) * ar(10) + br(1) * ai(10)) - ar(14) * bi(5)) - ai(14) * br(5)) - ar(13) &
+        * bi(4)) - ai(13) * br(4)) - ar(12) * bi(3)) - ai(12) * br(3)) - ar(11) * bi(2)) - ai(11) &
+        * br(2)
     br(1) = re
-    re = br(0) * ar(0) - bi(0) * ai(0) - ar(5) * br(5) + ai(5) * bi(5) - ar(3) * br(3) + ai(3) * &
-        bi(3) - ar(2) * br(2) + ai(2) * bi(2) - ar(1) * br(1) + ai(1) * bi(1)
-    bi(0) = bi(0) * ar(0) + br(0) * ai(0) - ar(5) * bi(5) - ai(5) * br(5) - ar(3) * bi(3) - ai(3) &
-        * br(3) - ar(2) * bi(2) - ai(2) * br(2) - ar(1) * bi(1) - ai(1) * br(1)
+    re = ((((((((br(0) * ar(0) - bi(0) * ai(0)) - ar(5) * br(5)) + ai(5) * bi(5)) - ar(3) * &
+        br(3)) + ai(3) * bi(3)) - ar(2) * br(2)) + ai(2) * bi(2)) - ar(1) * br(1)) + ai(1) * bi(1)
+    bi(0) = ((((((((bi(0) * ar(0) + br(0) * ai(0)) - ar(5) * bi(5)) - ai(5) * br(5)) - ar(3) * &
+        bi(3)) - ai(3) * br(3)) - ar(2) * bi(2)) - ai(2) * br(2)) - ar(1) * bi(1)) - ai(1) * br(1)
     br(0) = re
   end subroutine lu_solve_complex
 
@@ -826,9 +833,9 @@ contains
 
       ! the new solution
       do i = 0, nx - 1
-        dx(i) = h * (0.16666666666666666_c_double * k(i, 0) + 0.3333333333333333_c_double * k(i, &
-            1) + 0.3333333333333333_c_double * k(i, 2) + 0.16666666666666666_c_double * k(i, &
-            3)) - comp(i)
+        dx(i) = h * (((0.16666666666666666_c_double * k(i, &
+            0) + 0.3333333333333333_c_double * k(i, 1)) + 0.3333333333333333_c_double * k(i, &
+            2)) + 0.16666666666666666_c_double * k(i, 3)) - comp(i)
         xnew(i) = x(i) + dx(i)
       end do
       stats%rhs_calls = stats%rhs_calls + 4
@@ -947,32 +954,33 @@ contains
 
       ! stage 4: t + 0.8 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.9777777777777777_c_double * k(i, &
-            0) - 3.7333333333333334_c_double * k(i, 1) + 3.5555555555555554_c_double * k(i, 2))
+        y(i) = x(i) + h * ((0.9777777777777777_c_double * k(i, &
+            0) - 3.7333333333333334_c_double * k(i, 1)) + 3.5555555555555554_c_double * k(i, 2))
       end do
       call rw3_orthogonal_rhs(t + 0.8_c_double * h, y, c, k(:, 3))
 
       ! stage 5: t + 0.8888888888888888 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (2.9525986892242035_c_double * k(i, &
-            0) - 11.595793324188385_c_double * k(i, 1) + 9.822892851699436_c_double * k(i, &
-            2) - 0.2908093278463649_c_double * k(i, 3))
+        y(i) = x(i) + h * (((2.9525986892242035_c_double * k(i, &
+            0) - 11.595793324188385_c_double * k(i, 1)) + 9.822892851699436_c_double * k(i, &
+            2)) - 0.2908093278463649_c_double * k(i, 3))
       end do
       call rw3_orthogonal_rhs(t + 0.8888888888888888_c_double * h, y, c, k(:, 4))
 
       ! stage 6: t + h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (2.8462752525252526_c_double * k(i, &
-            0) - 10.757575757575758_c_double * k(i, 1) + 8.906422717743473_c_double * k(i, &
-            2) + 0.2784090909090909_c_double * k(i, 3) - 0.2735313036020583_c_double * k(i, 4))
+        y(i) = x(i) + h * ((((2.8462752525252526_c_double * k(i, &
+            0) - 10.757575757575758_c_double * k(i, 1)) + 8.906422717743473_c_double * k(i, &
+            2)) + 0.2784090909090909_c_double * k(i, 3)) - 0.2735313036020583_c_double * k(i, 4))
       end do
       call rw3_orthogonal_rhs(t + h, y, c, k(:, 5))
 
       ! stage 7: t + h, the new solution
       do i = 0, nx - 1
-        dx(i) = h * (0.09114583333333333_c_double * k(i, 0) + 0.44923629829290207_c_double * k(i, &
-            2) + 0.6510416666666666_c_double * k(i, 3) - 0.322376179245283_c_double * k(i, &
-            4) + 0.13095238095238096_c_double * k(i, 5)) - comp(i)
+        dx(i) = h * ((((0.09114583333333333_c_double * k(i, &
+            0) + 0.44923629829290207_c_double * k(i, 2)) + 0.6510416666666666_c_double * k(i, &
+            3)) - 0.322376179245283_c_double * k(i, 4)) + 0.13095238095238096_c_double * k(i, &
+            5)) - comp(i)
         xnew(i) = x(i) + dx(i)
       end do
       call rw3_orthogonal_rhs(t + h, xnew, c, k(:, 6))
@@ -980,10 +988,10 @@ contains
       ! the error norm (see error_norm)
       total = 0.0_c_double
       do i = 0, nx - 1
-        e = h * (0.0012326388888888888_c_double * k(i, 0) - 0.0042527702905061394_c_double * k(i, &
-            2) + 0.03697916666666667_c_double * k(i, 3) - 0.05086379716981132_c_double * k(i, &
-            4) + 0.0419047619047619_c_double * k(i, 5) - 0.025_c_double * k(i, &
-            6)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+        e = (h * (((((0.0012326388888888888_c_double * k(i, &
+            0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
+            3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
         total = total + e * e
       end do
       err = sqrt(total / nx)
@@ -1018,7 +1026,7 @@ contains
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
         do i = 0, nx - 1
-          comp(i) = xnew(i) - x(i) - dx(i)
+          comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
         end do
         do i = 0, nx - 1
@@ -1142,78 +1150,79 @@ contains
 
       ! stage 5: t + 0.2816496580927726 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.2413651341592667_c_double * k(i, &
-            0) - 0.8845494793282861_c_double * k(i, 2) + 0.924834003261792_c_double * k(i, 3))
+        y(i) = x(i) + h * ((0.2413651341592667_c_double * k(i, &
+            0) - 0.8845494793282861_c_double * k(i, 2)) + 0.924834003261792_c_double * k(i, 3))
       end do
       call rw3_orthogonal_rhs(t + 0.2816496580927726_c_double * h, y, c, k(:, 4))
 
       ! stage 6: t + 0.3333333333333333 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.037037037037037035_c_double * k(i, &
-            0) + 0.17082860872947386_c_double * k(i, 3) + 0.12546768756682242_c_double * k(i, 4))
+        y(i) = x(i) + h * ((0.037037037037037035_c_double * k(i, &
+            0) + 0.17082860872947386_c_double * k(i, 3)) + 0.12546768756682242_c_double * k(i, 4))
       end do
       call rw3_orthogonal_rhs(t + 0.3333333333333333_c_double * h, y, c, k(:, 5))
 
       ! stage 7: t + 0.25 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.037109375_c_double * k(i, 0) + 0.17025221101954405_c_double * k(i, &
-            3) + 0.06021653898045596_c_double * k(i, 4) - 0.017578125_c_double * k(i, 5))
+        y(i) = x(i) + h * (((0.037109375_c_double * k(i, 0) + 0.17025221101954405_c_double * k(i, &
+            3)) + 0.06021653898045596_c_double * k(i, 4)) - 0.017578125_c_double * k(i, 5))
       end do
       call rw3_orthogonal_rhs(t + 0.25_c_double * h, y, c, k(:, 6))
 
       ! stage 8: t + 0.3076923076923077 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.03709200011850479_c_double * k(i, &
-            0) + 0.17038392571223998_c_double * k(i, 3) + 0.10726203044637328_c_double * k(i, &
-            4) - 0.015319437748624402_c_double * k(i, 5) + 0.008273789163814023_c_double * k(i, 6))
+        y(i) = x(i) + h * ((((0.03709200011850479_c_double * k(i, &
+            0) + 0.17038392571223998_c_double * k(i, 3)) + 0.10726203044637328_c_double * k(i, &
+            4)) - 0.015319437748624402_c_double * k(i, 5)) + 0.008273789163814023_c_double * k(i, &
+            6))
       end do
       call rw3_orthogonal_rhs(t + 0.3076923076923077_c_double * h, y, c, k(:, 7))
 
       ! stage 9: t + 0.6512820512820513 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.6241109587160757_c_double * k(i, &
-            0) - 3.3608926294469414_c_double * k(i, 3) - 0.868219346841726_c_double * k(i, &
-            4) + 27.59209969944671_c_double * k(i, 5) + 20.154067550477894_c_double * k(i, &
-            6) - 43.48988418106996_c_double * k(i, 7))
+        y(i) = x(i) + h * (((((0.6241109587160757_c_double * k(i, &
+            0) - 3.3608926294469414_c_double * k(i, 3)) - 0.868219346841726_c_double * k(i, &
+            4)) + 27.59209969944671_c_double * k(i, 5)) + 20.154067550477894_c_double * k(i, &
+            6)) - 43.48988418106996_c_double * k(i, 7))
       end do
       call rw3_orthogonal_rhs(t + 0.6512820512820513_c_double * h, y, c, k(:, 8))
 
       ! stage 10: t + 0.6 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (0.47766253643826434_c_double * k(i, &
-            0) - 2.4881146199716677_c_double * k(i, 3) - 0.590290826836843_c_double * k(i, &
-            4) + 21.230051448181193_c_double * k(i, 5) + 15.279233632882423_c_double * k(i, &
-            6) - 33.28821096898486_c_double * k(i, 7) - 0.020331201708508627_c_double * k(i, 8))
+        y(i) = x(i) + h * ((((((0.47766253643826434_c_double * k(i, &
+            0) - 2.4881146199716677_c_double * k(i, 3)) - 0.590290826836843_c_double * k(i, &
+            4)) + 21.230051448181193_c_double * k(i, 5)) + 15.279233632882423_c_double * k(i, &
+            6)) - 33.28821096898486_c_double * k(i, 7)) - 0.020331201708508627_c_double * k(i, 8))
       end do
       call rw3_orthogonal_rhs(t + 0.6_c_double * h, y, c, k(:, 9))
 
       ! stage 11: t + 0.8571428571428571 h
       do i = 0, nx - 1
-        y(i) = x(i) + h * ((-0.9371424300859873_c_double) * k(i, &
-            0) + 5.186372428844064_c_double * k(i, 3) + 1.0914373489967295_c_double * k(i, &
-            4) - 8.149787010746927_c_double * k(i, 5) - 18.52006565999696_c_double * k(i, &
-            6) + 22.739487099350505_c_double * k(i, 7) + 2.4936055526796523_c_double * k(i, &
-            8) - 3.0467644718982196_c_double * k(i, 9))
+        y(i) = x(i) + h * ((((((((-0.9371424300859873_c_double) * k(i, &
+            0) + 5.186372428844064_c_double * k(i, 3)) + 1.0914373489967295_c_double * k(i, &
+            4)) - 8.149787010746927_c_double * k(i, 5)) - 18.52006565999696_c_double * k(i, &
+            6)) + 22.739487099350505_c_double * k(i, 7)) + 2.4936055526796523_c_double * k(i, &
+            8)) - 3.0467644718982196_c_double * k(i, 9))
       end do
       call rw3_orthogonal_rhs(t + 0.8571428571428571_c_double * h, y, c, k(:, 10))
 
       ! stage 12: t + h
       do i = 0, nx - 1
-        y(i) = x(i) + h * (2.273310147516538_c_double * k(i, &
-            0) - 10.53449546673725_c_double * k(i, 3) - 2.0008720582248625_c_double * k(i, &
-            4) - 17.9589318631188_c_double * k(i, 5) + 27.94888452941996_c_double * k(i, &
-            6) - 2.8589982771350235_c_double * k(i, 7) - 8.87285693353063_c_double * k(i, &
-            8) + 12.360567175794303_c_double * k(i, 9) + 0.6433927460157636_c_double * k(i, 10))
+        y(i) = x(i) + h * ((((((((2.273310147516538_c_double * k(i, &
+            0) - 10.53449546673725_c_double * k(i, 3)) - 2.0008720582248625_c_double * k(i, &
+            4)) - 17.9589318631188_c_double * k(i, 5)) + 27.94888452941996_c_double * k(i, &
+            6)) - 2.8589982771350235_c_double * k(i, 7)) - 8.87285693353063_c_double * k(i, &
+            8)) + 12.360567175794303_c_double * k(i, 9)) + 0.6433927460157636_c_double * k(i, 10))
       end do
       call rw3_orthogonal_rhs(t + h, y, c, k(:, 11))
 
       ! the new solution
       do i = 0, nx - 1
-        dx(i) = h * (0.054293734116568765_c_double * k(i, 0) + 4.450312892752409_c_double * k(i, &
-            5) + 1.8915178993145003_c_double * k(i, 6) - 5.801203960010585_c_double * k(i, &
-            7) + 0.3111643669578199_c_double * k(i, 8) - 0.1521609496625161_c_double * k(i, &
-            9) + 0.20136540080403034_c_double * k(i, 10) + 0.04471061572777259_c_double * k(i, &
-            11)) - comp(i)
+        dx(i) = h * (((((((0.054293734116568765_c_double * k(i, &
+            0) + 4.450312892752409_c_double * k(i, 5)) + 1.8915178993145003_c_double * k(i, &
+            6)) - 5.801203960010585_c_double * k(i, 7)) + 0.3111643669578199_c_double * k(i, &
+            8)) - 0.1521609496625161_c_double * k(i, 9)) + 0.20136540080403034_c_double * k(i, &
+            10)) + 0.04471061572777259_c_double * k(i, 11)) - comp(i)
         xnew(i) = x(i) + dx(i)
       end do
 
@@ -1221,21 +1230,21 @@ contains
       err5 = 0.0_c_double
       err3 = 0.0_c_double
       do i = 0, nx - 1
-        e5 = (0.01312004499419488_c_double * k(i, 0) - 1.2251564463762044_c_double * k(i, &
-            5) - 0.4957589496572502_c_double * k(i, 6) + 1.6643771824549864_c_double * k(i, &
-            7) - 0.35032884874997366_c_double * k(i, 8) + 0.3341791187130175_c_double * k(i, &
-            9) + 0.08192320648511571_c_double * k(i, 10) - 0.022355307863886294_c_double * k(i, &
+        e5 = (((((((0.01312004499419488_c_double * k(i, 0) - 1.2251564463762044_c_double * k(i, &
+            5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
+            7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
+            9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
             11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
-        e3 = ((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
-            5) + 1.8915178993145003_c_double * k(i, 6) - 5.801203960010585_c_double * k(i, &
-            7) - 0.4226823213237919_c_double * k(i, 8) - 0.1521609496625161_c_double * k(i, &
-            9) + 0.20136540080403034_c_double * k(i, 10) + 0.02265179219836082_c_double * k(i, &
+        e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
+            5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
+            7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
+            9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
             11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
         err5 = err5 + e5 * e5
         err3 = err3 + e3 * e3
       end do
       deno = err5 + 1e-2_c_double * err3
-      err = merge(abs(h) * err5 / sqrt(nx * deno), 0.0_c_double, deno > 0.0_c_double)
+      err = merge((abs(h) * err5) / sqrt(nx * deno), 0.0_c_double, deno > 0.0_c_double)
 
       ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
       stats%rhs_calls = stats%rhs_calls + (merge(11, 0, code < 0))
@@ -1275,7 +1284,7 @@ contains
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
         do i = 0, nx - 1
-          comp(i) = xnew(i) - x(i) - dx(i)
+          comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
         end do
         do i = 0, nx - 1
@@ -1352,7 +1361,7 @@ contains
 
     ! stage 3: t + 0.21 h
     do i = 0, nx - 1
-      y(i) = x(i) + 0.9466785280815826_c_double * k(i, 0) + 0.2557011698983284_c_double * k(i, 1)
+      y(i) = (x(i) + 0.9466785280815826_c_double * k(i, 0)) + 0.2557011698983284_c_double * k(i, 1)
     end do
     call rw3_orthogonal_rhs(t + 0.21_c_double * h, y, c, fy)
     do i = 0, nx - 1
@@ -1363,46 +1372,47 @@ contains
 
     ! stage 4: t + 0.63 h
     do i = 0, nx - 1
-      y(i) = x(i) + 3.314825187068521_c_double * k(i, 0) + 2.896124015972201_c_double * k(i, &
-          1) + 0.9986419139977817_c_double * k(i, 2)
+      y(i) = ((x(i) + 3.314825187068521_c_double * k(i, 0)) + 2.896124015972201_c_double * k(i, &
+          1)) + 0.9986419139977817_c_double * k(i, 2)
     end do
     call rw3_orthogonal_rhs(t + 0.63_c_double * h, y, c, fy)
     do i = 0, nx - 1
-      k(i, 3) = fy(i) + inv_h * ((-0.1073529058151375_c_double) * k(i, &
-          0) - 9.594562251023355_c_double * k(i, 1) - 20.47028614809616_c_double * k(i, 2))
+      k(i, 3) = fy(i) + inv_h * (((-0.1073529058151375_c_double) * k(i, &
+          0) - 9.594562251023355_c_double * k(i, 1)) - 20.47028614809616_c_double * k(i, 2))
     end do
     call lu_solve(lu, piv, k(:, 3))
 
     ! stage 5: t + h
     do i = 0, nx - 1
-      y(i) = x(i) + 1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
-          1) + 12.53708332932087_c_double * k(i, 2) - 0.687886036105895_c_double * k(i, 3)
+      y(i) = (((x(i) + 1.221224509226641_c_double * k(i, 0)) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, 3)
     end do
     call rw3_orthogonal_rhs(t + h, y, c, fy)
     do i = 0, nx - 1
-      k(i, 4) = fy(i) + inv_h * (7.496443313967647_c_double * k(i, &
-          0) - 10.24680431464352_c_double * k(i, 1) - 33.99990352819905_c_double * k(i, &
-          2) + 11.7089089320616_c_double * k(i, 3))
+      k(i, 4) = fy(i) + inv_h * (((7.496443313967647_c_double * k(i, &
+          0) - 10.24680431464352_c_double * k(i, 1)) - 33.99990352819905_c_double * k(i, &
+          2)) + 11.7089089320616_c_double * k(i, 3))
     end do
     call lu_solve(lu, piv, k(:, 4))
 
     ! stage 6: t + h, on the embedded solution
     do i = 0, nx - 1
-      dx(i) = 1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
-          1) + 12.53708332932087_c_double * k(i, 2) - 0.687886036105895_c_double * k(i, 3) + k(i, 4)
+      dx(i) = (((1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, &
+          3)) + k(i, 4)
       y(i) = x(i) + dx(i)
     end do
     call rw3_orthogonal_rhs(t + h, y, c, fy)
     do i = 0, nx - 1
-      k(i, 5) = fy(i) + inv_h * (8.083246795921522_c_double * k(i, &
-          0) - 7.981132988064893_c_double * k(i, 1) - 31.52159432874371_c_double * k(i, &
-          2) + 16.31930543123136_c_double * k(i, 3) - 6.058818238834054_c_double * k(i, 4))
+      k(i, 5) = fy(i) + inv_h * ((((8.083246795921522_c_double * k(i, &
+          0) - 7.981132988064893_c_double * k(i, 1)) - 31.52159432874371_c_double * k(i, &
+          2)) + 16.31930543123136_c_double * k(i, 3)) - 6.058818238834054_c_double * k(i, 4))
     end do
     call lu_solve(lu, piv, k(:, 5))
 
     ! the new solution x + dx: the embedded one plus k_6
     do i = 0, nx - 1
-      dx(i) = dx(i) + k(i, 5) - comp(i)
+      dx(i) = (dx(i) + k(i, 5)) - comp(i)
       xnew(i) = x(i) + dx(i)
     end do
     res = error_norm(k(:, 5), x, xnew, rtol, atol)
@@ -1531,7 +1541,7 @@ contains
           return
         end if
         if (stats%accepted > 0) then
-          gus = h_acc / h * (err * err / err_acc)**0.25_c_double / 0.9_c_double
+          gus = ((h_acc / h) * ((err * err) / err_acc)**0.25_c_double) / 0.9_c_double
           fac = max(fac, max(0.16666666666666666_c_double, min(5.0_c_double, gus)))
         end if
         h_acc = h
@@ -1665,12 +1675,12 @@ contains
       a1 = z1(i)
       a2 = z2(i)
       a3 = z3(i)
-      z1(i) = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + &
-          0.5417705399358749_c_double * a3 - gamma_h * w1(i)
-      z2(i) = (-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2 + &
-          0.47662355450055044_c_double * a3 - alpha_h * w2(i) + beta_h * w3(i)
-      z3(i) = (-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2 - &
-          0.5960392048282249_c_double * a3 - alpha_h * w3(i) - beta_h * w2(i)
+      z1(i) = ((4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2) + &
+          0.5417705399358749_c_double * a3) - gamma_h * w1(i)
+      z2(i) = ((((-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2) + &
+          0.47662355450055044_c_double * a3) - alpha_h * w2(i)) + beta_h * w3(i)
+      z3(i) = ((((-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2) - &
+          0.5960392048282249_c_double * a3) - alpha_h * w3(i)) - beta_h * w2(i)
     end do
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
@@ -1679,7 +1689,7 @@ contains
       s1 = z1(i) / scal(i)
       s2 = z2(i) / scal(i)
       s3 = z3(i) / scal(i)
-      total = total + (s1 * s1 + s2 * s2 + s3 * s3)
+      total = total + ((s1 * s1 + s2 * s2) + s3 * s3)
     end do
     res = sqrt(total / (3 * nx))
     return
@@ -1712,14 +1722,14 @@ contains
     integer(c_int) :: i
 
     do i = 0, nx - 1
-      g(i) = ((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i) - &
+      g(i) = (((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i)) - &
           0.3333333333333333_c_double * z3(i)) / h
       err(i) = f0(i) + g(i)
     end do
     call lu_solve(e1, piv1, err)
     total = 0.0_c_double
     do i = 0, nx - 1
-      total = total + err(i) / scal(i) * (err(i) / scal(i))
+      total = total + (err(i) / scal(i)) * (err(i) / scal(i))
     end do
     norm = sqrt(total / nx)
     if (norm >= 1.0_c_double .and. again) then
@@ -1734,7 +1744,7 @@ contains
       call lu_solve(e1, piv1, err)
       total = 0.0_c_double
       do i = 0, nx - 1
-        total = total + err(i) / scal(i) * (err(i) / scal(i))
+        total = total + (err(i) / scal(i)) * (err(i) / scal(i))
       end do
       norm = sqrt(total / nx)
     end if
@@ -1853,7 +1863,7 @@ contains
     end do
     rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
     atol_e = rtol_e * (atol / rtol)
-    newton_tol = max(10.0_c_double * (0.5_c_double * epsilon(1.0_c_double)) / rtol_e, &
+    newton_tol = max((10.0_c_double * (0.5_c_double * epsilon(1.0_c_double))) / rtol_e, &
         min(0.03_c_double, sqrt(rtol_e)))
     if (t + 1.01_c_double * h >= t1) then
       h = t1 - t
@@ -1927,11 +1937,11 @@ contains
           z1(i) = a1
           z2(i) = a2
           z3(i) = a3
-          w1(i) = 4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2 + &
+          w1(i) = (4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2) + &
               0.5417705399358749_c_double * a3
-          w2(i) = (-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2 + &
+          w2(i) = ((-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2) + &
               0.47662355450055044_c_double * a3
-          w3(i) = (-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2 - &
+          w3(i) = ((-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2) - &
               0.5960392048282249_c_double * a3
         end do
       end if
@@ -1963,7 +1973,7 @@ contains
             exit
           end if
           rate = theta / (1.0_c_double - theta)
-          predicted = rate * dyno * theta**real(6 - newt, c_double) / newton_tol
+          predicted = ((rate * dyno) * theta**real(6 - newt, c_double)) / newton_tol
           if (predicted >= 1.0_c_double) then
             q = max(1e-4_c_double, min(20.0_c_double, predicted))
             h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
@@ -1979,9 +1989,9 @@ contains
           w1(i) = a1
           w2(i) = a2
           w3(i) = a3
-          z1(i) = 0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2 - &
+          z1(i) = (0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2) - &
               0.030029194105147424_c_double * a3
-          z2(i) = 0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2 + &
+          z2(i) = (0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2) + &
               0.3829421127572619_c_double * a3
           z3(i) = 0.966048182615093_c_double * a1 + a2
         end do
@@ -2028,7 +2038,7 @@ contains
         end if
         first = .false.
         if (stats%accepted > 0) then
-          gus = h_acc / h * (err * err / err_acc)**0.25_c_double / 0.9_c_double
+          gus = ((h_acc / h) * ((err * err) / err_acc)**0.25_c_double) / 0.9_c_double
           quot = max(quot, max(0.125_c_double, min(5.0_c_double, gus)))
           h_new = h / quot
         end if

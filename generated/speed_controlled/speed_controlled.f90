@@ -80,20 +80,21 @@ contains
     real(c_double) :: w
     real(c_double) :: y
 
-    n = x * 0.6366197723675814_c_double + 6755399441055744.0_c_double - 6755399441055744.0_c_double
+    n = (x * 0.6366197723675814_c_double + 6755399441055744.0_c_double) - &
+        6755399441055744.0_c_double
     r = x - n * 1.5707963267341256_c_double
     t = r
     w = n * 6.077100506303966e-11_c_double
     r = t - w
-    w = n * 2.0222662487959506e-21_c_double - (t - r - w)
+    w = n * 2.0222662487959506e-21_c_double - ((t - r) - w)
     t = r
     w = n * 2.0222662487111665e-21_c_double
     r = t - w
-    w = n * 8.4784276603689e-32_c_double - (t - r - w)
+    w = n * 8.4784276603689e-32_c_double - ((t - r) - w)
     y = r - w
-    tail = r - y - w
-    quad = n - 4.0_c_double * ((n - 1.5_c_double) * 0.25_c_double + 6755399441055744.0_c_double - &
-        6755399441055744.0_c_double)  ! n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer
+    tail = (r - y) - w
+    quad = n - 4.0_c_double * (((n - 1.5_c_double) * 0.25_c_double + 6755399441055744.0_c_double) &
+        - 6755399441055744.0_c_double)  ! n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer
     res = y
     return
   end function speed_controlled_reduce
@@ -111,10 +112,10 @@ contains
     z = x * x
     w = z * z
     v = z * x
-    r = 0.00833333333332249_c_double + z * (-0.0001984126982985795_c_double + z * &
-        2.7557313707070068e-06_c_double) + z * w * (-2.5050760253406863e-08_c_double + z * &
+    r = (0.00833333333332249_c_double + z * ((-0.0001984126982985795_c_double) + z * &
+        2.7557313707070068e-06_c_double)) + (z * w) * ((-2.5050760253406863e-08_c_double) + z * &
         1.58969099521155e-10_c_double)
-    res = x - (z * (0.5_c_double * y - v * r) - y - v * (-0.16666666666666632_c_double))
+    res = x - ((z * (0.5_c_double * y - v * r) - y) - v * (-0.16666666666666632_c_double))
     return
   end function speed_controlled_ksin
 
@@ -133,10 +134,10 @@ contains
     w = z * z
     hz = 0.5_c_double * z
     u = 1.0_c_double - hz
-    r = z * (0.0416666666666666_c_double + z * (-0.001388888888887411_c_double + z * &
-        2.480158728947673e-05_c_double)) + w * w * (-2.7557314351390663e-07_c_double + z * &
+    r = z * (0.0416666666666666_c_double + z * ((-0.001388888888887411_c_double) + z * &
+        2.480158728947673e-05_c_double)) + (w * w) * ((-2.7557314351390663e-07_c_double) + z * &
         (2.087572321298175e-09_c_double + z * (-1.1359647557788195e-11_c_double)))
-    res = u + (1.0_c_double - u - hz + (z * r - x * y))
+    res = u + (((1.0_c_double - u) - hz) + (z * r - x * y))
     return
   end function speed_controlled_kcos
 

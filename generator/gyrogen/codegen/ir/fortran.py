@@ -43,6 +43,7 @@ class FortranPrinter(Printer):
     indent = "  "
     ops: ClassVar[dict[str, str]] = {"and": ".and.", "or": ".or.", "==": "==", "!=": "/="}
     unary_minus = 5
+    grouped = 1
     continuation = " &"
 
     def number(self, value: float) -> str:

@@ -121,9 +121,15 @@ class Printer:
             if _op(e.b, e.op):
                 right = f"({right})"
         else:
-            left = self.expr(e.a, prec)
+            left = self.expr(e.a, prec + self.grouped)
             right = self.expr(e.b, prec, right=True)
         return f"{left} {self.ops.get(e.op, e.op)} {right}"
+
+    grouped = 0
+    """1: a left operand of equal precedence in parentheses too, (a + b) - c.
+    Fortran lets a compiler evaluate any mathematically equivalent form but
+    never across parentheses: without them, x + K - K (the reduction's
+    rounding to an integer) could become x."""
 
     def number(self, value: float) -> str:
         return literal(value)
