@@ -5,6 +5,7 @@ command line starts and does the main job."""
 
 from __future__ import annotations
 
+import fcntl
 import os
 import site
 import subprocess
@@ -23,21 +24,32 @@ PACKAGE = REPO / "generator" / "gyrogen"
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
+    # one build at a time: setuptools builds in the checkout's build/, which
+    # two pytest-xdist workers would share
+    lock = (tmp_path_factory.getbasetemp().parent / "gyrogen-wheel.lock").open("w")
+    fcntl.flock(lock, fcntl.LOCK_EX)
     subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
          "-w", str(out), str(REPO)],
         check=True, capture_output=True,
     )  # fmt: skip
+    fcntl.flock(lock, fcntl.LOCK_UN)
+    lock.close()
     (path,) = out.glob("gyrogen-*.whl")
     return path
 
 
 def test_wheel_holds_every_file_of_the_package(wheel: Path) -> None:
+    """The package's files, and the templates: at the top level of the
+    checkout, in the package as gyrogen/templates (a link to them)."""
     tracked = subprocess.run(
-        ["git", "ls-files", "generator/gyrogen"], cwd=REPO, capture_output=True, text=True,
-        check=True,
+        ["git", "ls-files", "generator/gyrogen", "templates"], cwd=REPO, capture_output=True,
+        text=True, check=True,
     ).stdout.split()  # fmt: skip
-    expected = {f.removeprefix("generator/") for f in tracked}
+    assert (PACKAGE / "templates").is_symlink()
+    expected = {f.removeprefix("generator/") for f in tracked if f.startswith("generator/")}
+    expected -= {"gyrogen/templates"}  # the link itself
+    expected |= {"gyrogen/" + f for f in tracked if f.startswith("templates/")}
     assert any(f.startswith("gyrogen/commands/") for f in expected)
     assert any(f.endswith(".jinja") for f in expected)
     assert any(f.endswith(".toml") for f in expected)
