@@ -28,7 +28,7 @@ import numpy as np
 import sympy as sm
 from sympy.printing.c import C99CodePrinter
 
-from gyrogen.analysis.timing import best_of
+from gyrogen.analysis.bench.timing import best_of
 from gyrogen.codegen.generate import generate, unit_of
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build, flags

@@ -27,8 +27,8 @@ from pathlib import Path
 import fmpy
 import numpy as np
 
-from gyrogen.analysis import simulate
-from gyrogen.analysis.check_cases import quaternion_scene
+from gyrogen.analysis.check.check_cases import quaternion_scene
+from gyrogen.analysis.simulate import simulate
 from gyrogen.codegen.fmu_model import FmuModel, Stepping
 from gyrogen.codegen.generate import unit_of
 from gyrogen.files import write_atomic

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from gyrogen import api
-from gyrogen.analysis.sweep_draws import inputs
+from gyrogen.analysis.sweep.sweep_draws import inputs
 from gyrogen.oracle.compare import scaled_error
 
 GYROGEN = str(Path(sys.executable).with_name("gyrogen"))

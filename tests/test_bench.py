@@ -1,4 +1,5 @@
-"""Smoke test of gyrogen.analysis.bench_rhs on a tiny workload: it runs and reports sane numbers.
+"""Smoke test of gyrogen.analysis.bench.bench_rhs on a tiny workload: it runs and reports
+sane numbers.
 
 Never asserts a speed: timings depend on the machine and its load.
 """
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from gyrogen.analysis import bench_rhs
+from gyrogen.analysis.bench import bench_rhs
 
 pytestmark = pytest.mark.slow  # the benchmark command on a tiny run
 

@@ -1,5 +1,5 @@
 """`gyrogen check --plots`: one figure per case, of the quantities that case
-is about (analysis/check_plots.py), and each case's extreme quantity
+is about (analysis/check/check_plots.py), and each case's extreme quantity
 (Case.extreme, declared in check_cases.py)."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from gyrogen.analysis import check_cases, check_engine
-from gyrogen.analysis.plots import PIXELS
+from gyrogen.analysis.check import check_cases, check_engine
+from gyrogen.analysis.simulate.plots import PIXELS
 from gyrogen.runtime.compiled import Compiled
 
 pytestmark = pytest.mark.slow  # every check case integrated and drawn

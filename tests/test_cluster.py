@@ -14,7 +14,7 @@ from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.oracle.compare import compare
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import builtin_text, load, parse
-from gyrogen.scene_rotors import exact_unit
+from gyrogen.scene.rotors import exact_unit
 
 GOOD = builtin_text("rw3_orthogonal")
 

@@ -96,3 +96,13 @@ def test_installed_wheel_runs_the_command_line(fresh: Path, tmp_path: Path) -> N
     assert "all checks passed" in out and (tmp_path / "out" / "gyrostat.c").is_file()
     out = run(fresh, "verify", "dual_spin", cwd=tmp_path)
     assert "FAIL" not in out and "refused with the documented code" in out
+
+
+def test_the_code_digest_reads_every_template() -> None:
+    """A sweep's identity hashes gyrogen's modules and templates, the
+    templates through the package's link to them."""
+    from gyrogen.analysis.sweep.sweep_sources import digested
+
+    templates = {p.name for p in (REPO / "templates").rglob("*.jinja")}
+    read = {p.name for p in digested(PACKAGE) if p.suffix == ".jinja"}
+    assert templates and templates <= read

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from gyrogen.analysis import plots
-from gyrogen.analysis.simulate import check_solution
-from gyrogen.analysis.simulate_files import COLUMNS
+from gyrogen.analysis.simulate import plots
+from gyrogen.analysis.simulate.simulate import check_solution
+from gyrogen.analysis.simulate.simulate_files import COLUMNS
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import reference, scene_view
 from gyrogen.scene import builtin_names, builtin_text, load
@@ -263,7 +263,7 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     """--method dop853 runs the generated integrator between output points:
     no interpolation, so the invariants hold to the tolerance."""
     from gyrogen import scene as scenes
-    from gyrogen.analysis import simulate
+    from gyrogen.analysis.simulate import simulate
 
     res = simulate.run(
         scenes.load("torque_free"),
@@ -294,7 +294,7 @@ def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: N
 @pytest.mark.slow
 def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
     from gyrogen import scene as scenes
-    from gyrogen.analysis import simulate
+    from gyrogen.analysis.simulate import simulate
     from gyrogen.errors import SceneError
 
     text = scenes.builtin_text("torque_free").replace(
@@ -315,7 +315,7 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     with the method it picks (the default, auto): the stiff one with the
     compiled Radau IIA its stiffness calls for, and says why; the others with
     the compiled dop853 (scipy's only where a scene compiled no pair)."""
-    from gyrogen.analysis import simulate
+    from gyrogen.analysis.simulate import simulate
 
     scene = load(name)
     t_end = min(1.0, scene.simulate.t_end)
@@ -336,7 +336,7 @@ def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
     relative to the carrier (a cluster has no u4)."""
     from matplotlib.image import imread
 
-    from gyrogen.analysis import plots, simulate
+    from gyrogen.analysis.simulate import plots, simulate
 
     scene = load("rw4_pyramid")
     simulate.run(scene, tmp_path / "o", simulate.Settings(2.0, 0.1, "dop853", True))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gyrogen import abi, methods
-from gyrogen.analysis import check_cases, check_engine
+from gyrogen.analysis.check import check_cases, check_engine
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.runtime import scene_build
 from gyrogen.runtime.compiled import Compiled, Language

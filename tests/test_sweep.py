@@ -14,12 +14,12 @@ import pytest
 from sweep_cases import free_port, rows, small
 
 from gyrogen import api
-from gyrogen.analysis.sweep_draws import inputs
-from gyrogen.analysis.sweep_metrics import NOT_RUN
+from gyrogen.analysis.sweep.sweep_draws import inputs
+from gyrogen.analysis.sweep.sweep_metrics import NOT_RUN
+from gyrogen.analysis.sweep.sweep_spec import load
 from gyrogen.oracle import reference
 from gyrogen.physics import body_momentum, lumped_inertias
 from gyrogen.runtime.segment import integrate_segments
-from gyrogen.sweep_spec import load
 
 
 @pytest.fixture(scope="module")
@@ -181,7 +181,7 @@ def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
     import threading
     import time
 
-    from gyrogen.analysis.sweep_dask import CONNECT_TIMEOUT
+    from gyrogen.analysis.sweep.sweep_dask import CONNECT_TIMEOUT
 
     class Quiet(http.server.BaseHTTPRequestHandler):
         def log_message(self, *args: object) -> None:
@@ -346,7 +346,7 @@ def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
 def test_the_local_engine_listens_on_this_machine_only() -> None:
     import psutil
 
-    from gyrogen.analysis.sweep_dask import engine
+    from gyrogen.analysis.sweep.sweep_dask import engine
 
     with engine(None, 1):
         listening = [c for c in psutil.Process().net_connections("inet")

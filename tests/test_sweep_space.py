@@ -16,10 +16,10 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gyrogen.analysis.sweep_draws import inputs
+from gyrogen.analysis.sweep.sweep_draws import inputs
+from gyrogen.analysis.sweep.sweep_spec import METRICS, parse
 from gyrogen.errors import SceneError
 from gyrogen.scene import builtin_text
-from gyrogen.sweep_spec import METRICS, parse
 
 EXAMPLES = int(os.environ.get("GYROGEN_SWEEP_EXAMPLES", "150"))
 QUAT = builtin_text("gyrostat").replace('name = "gyrostat"', 'name = "gq"').replace(

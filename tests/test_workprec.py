@@ -11,8 +11,8 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from gyrogen.analysis import workprec
-from gyrogen.analysis.workprec import Run
+from gyrogen.analysis.bench import workprec
+from gyrogen.analysis.bench.workprec import Run
 from gyrogen.scene import builtin_text
 
 
@@ -48,7 +48,7 @@ def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
 @pytest.mark.slow
 def test_dop853_converges_to_the_reference(tmp_path: Path) -> None:
     """Tighter tolerances give smaller errors against the reference."""
-    from gyrogen.analysis import workprec, workprec_report
+    from gyrogen.analysis.bench import workprec, workprec_report
     from gyrogen.scene import default
 
     prob = workprec_report.problem(default(), tmp_path / "src", workprec.QUICK)

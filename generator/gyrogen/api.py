@@ -20,12 +20,12 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gyrogen.analysis.sweep_sources import compiled, scene_sources
+from gyrogen.analysis.sweep.sweep_sources import compiled, scene_sources
+from gyrogen.analysis.sweep.sweep_spec import Spec, parse
+from gyrogen.analysis.sweep.sweep_spec import load as load_spec
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene
 from gyrogen.scene import load as load_scene
-from gyrogen.sweep_spec import Spec, parse
-from gyrogen.sweep_spec import load as load_spec
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -53,7 +53,7 @@ def simulate(
     and the scene's states (files in out, else in a temporary directory)."""
     import pandas as pd
 
-    from gyrogen.analysis import simulate as sim
+    from gyrogen.analysis.simulate import simulate as sim
 
     chosen = _scene(scene)
     settings = sim.Settings(
@@ -83,7 +83,7 @@ def sweep(
     """`gyrogen sweep`: every trajectory of spec (a built-in sweep, a sweep
     file or a Spec) into out [default: sweep/<name>], resuming what is there;
     its rows, one per trajectory, in sample order."""
-    from gyrogen.analysis import sweep_engine, sweep_report
+    from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = Path(out) if out is not None else Path("sweep") / chosen.name
@@ -98,7 +98,7 @@ def read(out: str | Path) -> pd.DataFrame:
     """The rows of the sweep in out, in sample order."""
     import pandas as pd
 
-    from gyrogen.analysis.sweep_columns import PARTS
+    from gyrogen.analysis.sweep.sweep_columns import PARTS
 
     frame = pd.read_parquet(Path(out) / PARTS)
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)

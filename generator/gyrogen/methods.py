@@ -229,7 +229,7 @@ def pick(available: Iterable[str], stiff: bool) -> str | None:
 
 SCIPY: tuple[str, ...] = ("RK45", "DOP853", "Radau", "LSODA")
 AUTO = "auto"
-"""The method simulate picks itself: for a stiff scene (analysis/stiffness.py)
+"""The method simulate picks itself: for a stiff scene (analysis/check/stiffness.py)
 the build's best implicit integrator (scipy's Radau if it has none), else
 scipy's DOP853."""
 """scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""

@@ -17,7 +17,7 @@ from gyrogen.scene import Scene, default
 def bench(scene: Scene | None, quick: bool, out: Path | None) -> None:
     """Work-precision report: error against run time for every integrator of
     SCENE (default gyrostat) and for scipy and PyDy, in one run."""
-    from gyrogen.analysis import workprec, workprec_report
+    from gyrogen.analysis.bench import workprec, workprec_report
 
     scene = scene or default()
     workprec_report.check_scene(scene)  # before the first line of progress

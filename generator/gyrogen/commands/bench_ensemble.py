@@ -20,7 +20,7 @@ from gyrogen.limits import MAX_REPEATS
 @directory("--out", "Also write the report into this directory, as ensemble.md.")
 def bench_ensemble(n: int, repeats: int, no_peers: bool, out: Path | None) -> None:
     """Ensembles (error <= 1e-8) and the single trajectory, side by side."""
-    from gyrogen.analysis import ensemble_report
+    from gyrogen.analysis.bench import ensemble_report
     from gyrogen.files import write_atomic
 
     lines: list[str] = []

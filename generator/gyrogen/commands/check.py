@@ -12,7 +12,7 @@ from gyrogen.commands.options import directory, progress
 from gyrogen.errors import GyrogenError
 
 if TYPE_CHECKING:
-    from gyrogen.analysis.check_engine import Result
+    from gyrogen.analysis.check.check_engine import Result
 
 
 @click.command()
@@ -28,7 +28,7 @@ def check(
     conditioning, step statistics, method, and a diagnosis. NAMES select
     the built-in cases whose name contains them, or name a scene (built-in or
     .toml) to check its own simulate settings."""
-    from gyrogen.analysis import check_cases, check_engine
+    from gyrogen.analysis.check import check_cases, check_engine
     from gyrogen.codegen.context import build_id
     from gyrogen.files import write_atomic
     from gyrogen.runtime.compiled import Compiled
@@ -60,7 +60,7 @@ def check(
             res = check_engine.run_case(case, compiled.get(key))
             results.append(res)
             if plots is not None:
-                from gyrogen.analysis import check_plots  # matplotlib: only for plots
+                from gyrogen.analysis.check import check_plots  # matplotlib: only for plots
 
                 write_atomic(plots, {f"{_slug(case.name)}.png": check_plots.png(res)})
     _table(results)

@@ -65,7 +65,7 @@ def simulate(
     """Generate SCENE, build its RHS, integrate it with scipy's solve_ivp from
     simulate.initial, and write trajectory.csv, trajectory.npz, summary.json
     and trajectory.png with the invariants |H| in N and the energy balance."""
-    from gyrogen.analysis import simulate as sim
+    from gyrogen.analysis.simulate import simulate as sim
 
     settings = sim.Settings(
         t_end=t_end or scene.simulate.t_end,

@@ -21,7 +21,7 @@ class SweepType(click.ParamType):
     name = "SWEEP"
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
-        from gyrogen.sweep_spec import load
+        from gyrogen.analysis.sweep.sweep_spec import load
 
         return load(str(value))
 
@@ -77,7 +77,7 @@ def sweep(
     figures. Rerun into the same --out to resume: the chunks written are
     skipped, if this gyrogen, its generated code and its build flags are
     those that began the sweep (else refused: --restart)."""
-    from gyrogen.analysis import sweep_engine, sweep_report
+    from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the local engine: not with --scheduler")

@@ -26,7 +26,7 @@ import sympy.physics.mechanics as me
 from gyrogen import physics
 from gyrogen.abi_rotors import cluster_states, rotor_name
 from gyrogen.scene import Scene
-from gyrogen.scene_rotors import Rotor
+from gyrogen.scene.rotors import Rotor
 from gyrogen.symbolic import equations, model
 from gyrogen.symbolic.equations import Equations
 
@@ -37,7 +37,7 @@ def _number(v: float) -> sm.Expr:
 
 
 def _axis(r: Rotor) -> sm.Matrix:
-    """g_k normalized exactly (scene_rotors.exact_unit): |g| = 1 in the algebra."""
+    """g_k normalized exactly (rotors.exact_unit): |g| = 1 in the algebra."""
     return sm.Matrix([sm.Rational(x.numerator, x.denominator) for x in r.unit_axis])
 
 

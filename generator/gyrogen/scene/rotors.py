@@ -37,7 +37,7 @@ from gyrogen.abi_rotors import (
     cluster_states,
     rotor_name,
 )
-from gyrogen.scene_rules import parameter_value
+from gyrogen.scene.rules import parameter_value
 
 
 def _folded(v: object) -> object:

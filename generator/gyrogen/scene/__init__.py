@@ -32,13 +32,14 @@ from pydantic import (
     model_validator,
 )
 
-from gyrogen import methods, scene_rotors
+from gyrogen import methods
 from gyrogen.abi import CONTROLLER_PARAMETERS, MIN_RTOL, PARAMETERS, STATES
 from gyrogen.abi_rotors import MAX_ROTORS
 from gyrogen.errors import SceneError
 from gyrogen.limits import MAX_SCENE_BYTES
-from gyrogen.scene_rotors import Rotor
-from gyrogen.scene_rules import (
+from gyrogen.scene import rotors
+from gyrogen.scene.rotors import Rotor
+from gyrogen.scene.rules import (
     QUATERNION,
     check_description,
     check_name,
@@ -135,7 +136,7 @@ class Scene(_Strict):
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
     simulate: Simulate = Simulate()
     rotors: Annotated[list[Rotor], Field(max_length=MAX_ROTORS)] = Field(default_factory=list)
-    """A reaction-wheel cluster (gyrogen.scene_rotors); none: the paper's one rotor on a2."""
+    """A reaction-wheel cluster (gyrogen.scene.rotors); none: the paper's one rotor on a2."""
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: Any) -> Any:
@@ -184,7 +185,7 @@ class Scene(_Strict):
                 "(leave rotors out for the paper's single rotor on a2)"
             )
         if self.rotors:
-            scene_rotors.check_cluster(self.parameters, self.rotors, self.effects.model_fields_set)
+            rotors.check_cluster(self.parameters, self.rotors, self.effects.model_fields_set)
         else:
             _check_parameter_names(self)
             check_physics(self.parameters)
@@ -207,7 +208,7 @@ class Scene(_Strict):
         """The kept states, in x[] order."""
         if self.rotors:
             quaternion = self.attitude == "quaternion"
-            return scene_rotors.states(self.rotors, quaternion, self.effects.rotor_angle)
+            return rotors.states(self.rotors, quaternion, self.effects.rotor_angle)
         drop = set()
         if not self.effects.translation:
             drop |= {"q5", "q6", "q7", "u5", "u6", "u7"}
@@ -232,7 +233,7 @@ class Scene(_Strict):
     def runtime(self) -> tuple[str, ...]:
         """Runtime parameters, in p[] order (the model's order, then k, w_ref)."""
         if self.rotors:
-            return scene_rotors.runtime_names(self.rotors)
+            return rotors.runtime_names(self.rotors)
         order = (*PARAMETERS, *CONTROLLER_PARAMETERS)
         return tuple(n for n in order if self.parameters.get(n) == "runtime")
 

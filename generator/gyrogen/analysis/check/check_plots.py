@@ -18,8 +18,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from gyrogen.abi import ODE_CODES, SETUP_CODES, Code, message
-from gyrogen.analysis.check_engine import Result
-from gyrogen.analysis.plots import DPI, FLOOR, SIZE_INCHES, invariant_drifts, png_bytes
+from gyrogen.analysis.check.check_engine import Result
+from gyrogen.analysis.simulate.plots import DPI, FLOOR, SIZE_INCHES, invariant_drifts, png_bytes
 
 
 def _words(ax: Axes, y: float, text: str, size: float = 10, width: int = 68) -> None:

@@ -14,10 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis import stiffness, workprec, workprec_peers
-from gyrogen.analysis.bench_rhs import machine, pydy_rhs
-from gyrogen.analysis.simulate import runtime_values
-from gyrogen.analysis.workprec import Config, Problem, Run
+from gyrogen.analysis.bench import workprec, workprec_peers
+from gyrogen.analysis.bench.bench_rhs import machine, pydy_rhs
+from gyrogen.analysis.bench.workprec import Config, Problem, Run
+from gyrogen.analysis.check import stiffness
+from gyrogen.analysis.simulate.simulate import runtime_values
 from gyrogen.errors import SceneError
 from gyrogen.files import write_atomic
 from gyrogen.runtime.compiled import Language
@@ -193,7 +194,7 @@ def figure(prob: Problem, runs: list[Run]) -> bytes:
     from matplotlib import colormaps
     from matplotlib.figure import Figure  # matplotlib: loaded only for the figure
 
-    from gyrogen.analysis.plots import png_bytes
+    from gyrogen.analysis.simulate.plots import png_bytes
 
     fig = Figure(figsize=(14, 7), dpi=100)
     ax = fig.subplots()

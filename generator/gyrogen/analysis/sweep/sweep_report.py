@@ -2,7 +2,7 @@
 summary.md (the run's figures, return codes, each metric's spread, the
 criterion's agreement share), histograms.png and, for a 2-D grid, map.png.
 
-The parts are read back one column at a time (analysis/sweep_columns.py).
+The parts are read back one column at a time (analysis/sweep/sweep_columns.py).
 
 The spin-stability criterion (NOTES.md, analysis/check_engine.spin_axes):
 a trajectory is observed unstable when its max nutation angle exceeds
@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyrogen.abi import UNITS
-from gyrogen.analysis.check_engine import spin_axes, spin_stable
-from gyrogen.analysis.sweep_columns import (
+from gyrogen.analysis.check.check_engine import spin_axes, spin_stable
+from gyrogen.analysis.sweep.sweep_columns import (
     Histogram,
     column,
     counts,
@@ -30,14 +30,14 @@ from gyrogen.analysis.sweep_columns import (
     part_files,
     spread,
 )
-from gyrogen.analysis.sweep_draws import axis_values
-from gyrogen.analysis.sweep_engine import Run
+from gyrogen.analysis.sweep.sweep_draws import axis_values
+from gyrogen.analysis.sweep.sweep_engine import Run
+from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.files import write_atomic
 from gyrogen.physics import lumped_inertias
-from gyrogen.sweep_spec import Spec
 
 if TYPE_CHECKING:
-    from gyrogen.analysis.sweep_plots import MapData
+    from gyrogen.analysis.sweep.sweep_plots import MapData
 
 HISTOGRAMS = ("max_nutation", "max_rate", "H_drift", "rhs_calls")
 """Metric columns shown as histograms (with every time_to_ column)."""
@@ -185,7 +185,7 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     data, histograms = summary(spec, record, metric_columns(spec, columns))
     files: dict[str, str | bytes] = {"summary.md": markdown(data)}
     if plots:
-        from gyrogen.analysis.sweep_plots import histograms_png, map_png  # matplotlib
+        from gyrogen.analysis.sweep.sweep_plots import histograms_png, map_png  # matplotlib
 
         files["histograms.png"] = histograms_png(f"sweep {spec.name}", histograms)
         if (grid := map_data(spec, record.out, columns)) is not None:
@@ -201,7 +201,7 @@ def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
     draws of each cell), with NOTES.md's boundary when the sweep has the
     spin criterion; None for other sweeps, and when no cell has a value
     (setup refused every parameter set, say)."""
-    from gyrogen.analysis.sweep_plots import MapData
+    from gyrogen.analysis.sweep.sweep_plots import MapData
 
     sweep = spec.sweep
     metric = next((c for c in HISTOGRAMS if c in columns), None)

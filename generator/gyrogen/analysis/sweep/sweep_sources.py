@@ -38,15 +38,24 @@ class Sources:
     files: dict[str, str]
 
 
+def digested(root: Path) -> list[Path]:
+    """gyrogen's modules and templates below root. os.walk follows the link
+    to the templates (in a checkout, gyrogen/templates -> ../../templates),
+    which Path.rglob does not."""
+    found = [Path(d) / f for d, _, files in os.walk(root, followlinks=True) for f in files]
+    return sorted(
+        p for p in found if p.suffix in (".py", ".jinja") and "__pycache__" not in p.parts
+    )
+
+
 @cache
 def code_digest() -> str:
     """A digest of gyrogen's own modules and templates: rendered sources
     cached by an older generator are never reused."""
     root = Path(gyrogen.__file__).parent
     h = hashlib.sha256()
-    for path in sorted(root.rglob("*")):
-        if path.suffix in (".py", ".jinja") and "__pycache__" not in path.parts:
-            h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    for path in digested(root):
+        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
     return h.hexdigest()[:16]
 
 

@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from gyrogen.analysis.timing import best_of, per_call_ns
+from gyrogen.analysis.bench.timing import best_of, per_call_ns
 from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
 from gyrogen.runtime import flags

@@ -1,11 +1,11 @@
 """Simulate a scene: generate, build, integrate with scipy's solve_ivp through
 the compiled RHS (or with a compiled integrator: by default the best
-implicit one for a stiff scene, analysis/stiffness.py), check the invariants with
-the numpy reference (analysis/invariants.py), and write the trajectory (CSV,
-npz), a summary and a figure (analysis/simulate_files.py), all or nothing.
+implicit one for a stiff scene, analysis/check/stiffness.py), check the invariants with
+the numpy reference (analysis/simulate/invariants.py), and write the trajectory (CSV,
+npz), a summary and a figure (analysis/simulate/simulate_files.py), all or nothing.
 
 The trajectory is sampled on the output grid and at the quadrature nodes
-inside each interval (analysis/trajectory.py). Between solver steps the
+inside each interval (analysis/simulate/trajectory.py). Between solver steps the
 output comes from solve_ivp's dense output, which is less accurate than the
 steps themselves: in a long DOP853 step it can be off by far more than rtol
 (speed_controlled: 1e-7 mid-step), and the residuals show it. They measure
@@ -27,9 +27,10 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import methods
 from gyrogen.abi import MAX_STEPS, ODE_CODES, message
-from gyrogen.analysis import simulate_files, stiffness
-from gyrogen.analysis.invariants import Invariants, along_trajectory
-from gyrogen.analysis.trajectory import Trajectory, from_samples, output_grid, sample_times
+from gyrogen.analysis.check import stiffness
+from gyrogen.analysis.simulate import simulate_files
+from gyrogen.analysis.simulate.invariants import Invariants, along_trajectory
+from gyrogen.analysis.simulate.trajectory import Trajectory, from_samples, output_grid, sample_times
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import make_dir, write_atomic
 from gyrogen.runtime.compiled import Compiled, Language, controls

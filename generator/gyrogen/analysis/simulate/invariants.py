@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen.abi import STATES
-from gyrogen.analysis.trajectory import Trajectory, running_integrals
+from gyrogen.analysis.simulate.trajectory import Trajectory, running_integrals
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.scene import Scene
 

@@ -9,12 +9,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gyrogen.analysis.invariants import Invariants
-from gyrogen.analysis.trajectory import QUADRATURE, Trajectory
+from gyrogen.analysis.simulate.invariants import Invariants
+from gyrogen.analysis.simulate.trajectory import QUADRATURE, Trajectory
 from gyrogen.scene import Scene
 
 if TYPE_CHECKING:
-    from gyrogen.analysis.simulate import Result
+    from gyrogen.analysis.simulate.simulate import Result
 
 COLUMNS = ("H_norm", "K", "H_drift", "H_vector_drift", "energy_residual", "u4_residual")
 """Invariant columns of trajectory.csv, after t and the states."""
@@ -98,7 +98,7 @@ def contents(res: Result, p: np.ndarray) -> dict[str, bytes]:
         "summary.json": (json.dumps(summary(res, p), indent=2) + "\n").encode(),
     }
     if res.settings.plot:
-        from gyrogen.analysis import plots  # matplotlib: loaded only when a plot is wanted
+        from gyrogen.analysis.simulate import plots  # matplotlib: loaded only when a plot is wanted
 
         blobs["trajectory.png"] = plots.trajectory_png(scene, traj.t, traj.x, _drifts(inv))
     return blobs

@@ -17,7 +17,7 @@ metrics to keep; validated like scenes (one line, exit 2, nothing written).
     [criterion]                   # spin_stability = { grows_by = 10.0, band = 0.05 }
 
 Trajectory i is grid point i // count with draw i % count; its draws are a
-function of (seed, i) alone (analysis/sweep_draws.py).
+function of (seed, i) alone (analysis/sweep/sweep_draws.py).
 """
 
 from __future__ import annotations
@@ -45,12 +45,12 @@ from gyrogen.limits import (
 )
 from gyrogen.scene import Number, Scene, builtin_names, one_line, read_file
 from gyrogen.scene import load as load_scene
-from gyrogen.scene_rules import QUATERNION, check_quaternion
+from gyrogen.scene.rules import QUATERNION, check_quaternion
 from gyrogen.setup_checks import first_failure
 from gyrogen.sweep_values import Axis, Distribution
 
 METRICS = ("final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to")
-"""What a sweep may keep of each trajectory (analysis/sweep_metrics.py)."""
+"""What a sweep may keep of each trajectory (analysis/sweep/sweep_metrics.py)."""
 SAMPLED = ("max_nutation", "max_rate", "invariant_drift", "time_to")
 """The metrics that look along the run, at metrics.samples points."""
 QUANTITIES = ("nutation", "rate")

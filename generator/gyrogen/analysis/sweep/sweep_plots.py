@@ -13,8 +13,8 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from gyrogen.analysis.plots import png_bytes
-from gyrogen.analysis.sweep_columns import Histogram, log_scale
+from gyrogen.analysis.simulate.plots import png_bytes
+from gyrogen.analysis.sweep.sweep_columns import Histogram, log_scale
 
 Scale = Callable[[Any], Any]
 

@@ -22,7 +22,7 @@ from scipy.integrate import solve_ivp
 
 from gyrogen import methods
 from gyrogen.abi import ODE_CODES, STATES, message
-from gyrogen.analysis.timing import best_time
+from gyrogen.analysis.bench.timing import best_time
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import scaled_error

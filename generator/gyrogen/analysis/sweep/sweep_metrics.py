@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 
 from gyrogen.abi import unit_and_doc
-from gyrogen.analysis.sweep_draws import inputs
+from gyrogen.analysis.sweep.sweep_draws import inputs
+from gyrogen.analysis.sweep.sweep_spec import SAMPLED, Spec
 from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.segment import COUNTERS
-from gyrogen.sweep_spec import SAMPLED, Spec
 
 NOT_RUN = -1
 """code of a trajectory whose parameters setup refused."""

@@ -5,7 +5,7 @@ Engines: by default a local cluster in this process, one thread per core
 (the compiled integrators release the GIL), with no set-up; or an existing
 dask.distributed cluster (scheduler="tcp://HOST:PORT"). Either way the
 client scatters the sweep and its generated sources to every worker once
-(analysis/sweep_sources.py), submits chunk tasks a few at a time (so
+(analysis/sweep/sweep_sources.py), submits chunk tasks a few at a time (so
 neither the client nor the scheduler holds more than a window of results:
 memory stays flat whatever the sweep's size), and writes each result as
 <out>/parts/part-NNNNNN.parquet, atomically. A worker that dies loses
@@ -31,20 +31,20 @@ from typing import Any
 import numpy as np
 
 from gyrogen import __version__
-from gyrogen.analysis.sweep_columns import PARTS
-from gyrogen.analysis.sweep_dask import engine
-from gyrogen.analysis.sweep_metrics import column_docs, run_chunk
-from gyrogen.analysis.sweep_sources import (
+from gyrogen.analysis.sweep.sweep_columns import PARTS
+from gyrogen.analysis.sweep.sweep_dask import engine
+from gyrogen.analysis.sweep.sweep_metrics import column_docs, run_chunk
+from gyrogen.analysis.sweep.sweep_sources import (
     Sources,
     code_digest,
     compiled,
     scene_sources,
     sources_digest,
 )
+from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
 from gyrogen.runtime import flags
-from gyrogen.sweep_spec import Spec
 
 STATE_FILE = "sweep.json"
 _PART = re.compile(r"part-(\d+)\.parquet")

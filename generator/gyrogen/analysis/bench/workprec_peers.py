@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis import peers, workprec
-from gyrogen.analysis.timing import best_of, best_time
-from gyrogen.analysis.workprec import Config, Problem, Run
+from gyrogen.analysis.bench import peers, workprec
+from gyrogen.analysis.bench.timing import best_of, best_time
+from gyrogen.analysis.bench.workprec import Config, Problem, Run
 from gyrogen.oracle.compare import scaled_error
 
 Echo = Callable[[str], None]

@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis import ensemble as ens
-from gyrogen.analysis import peers
-from gyrogen.analysis.bench_rhs import machine
-from gyrogen.analysis.timing import best_time
-from gyrogen.analysis.workprec import REF_TOL
+from gyrogen.analysis.bench import ensemble as ens
+from gyrogen.analysis.bench import peers
+from gyrogen.analysis.bench.bench_rhs import machine
+from gyrogen.analysis.bench.timing import best_time
+from gyrogen.analysis.bench.workprec import REF_TOL
 from gyrogen.runtime.compiled import cores
 
 Echo = Callable[[str], None]

@@ -26,8 +26,9 @@ from gyrogen.abi import (
     WARN_CONDITION,
     message,
 )
-from gyrogen.analysis import invariants, stiffness
-from gyrogen.analysis.trajectory import QUAD_NODES, from_samples, sample_times
+from gyrogen.analysis.check import stiffness
+from gyrogen.analysis.simulate import invariants
+from gyrogen.analysis.simulate.trajectory import QUAD_NODES, from_samples, sample_times
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.cluster_reference import clamp_margins
 from gyrogen.physics import LUMPED_FROM, lumped_inertias

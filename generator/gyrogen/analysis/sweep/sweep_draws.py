@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-from gyrogen.sweep_spec import Spec
+from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.sweep_values import Axis, Distribution
 
 WORDS_PER_BLOCK = 4

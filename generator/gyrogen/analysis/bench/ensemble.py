@@ -4,7 +4,7 @@ The problem is issue 12's: the default scene over 10 s from its
 [simulate] state, errors against DOP853 in C at rtol = atol = 1e-13, with
 the scaled error of workprec (max |x - ref| / (1 + |ref|)). An ensemble
 perturbs u1..u3 by up to +-10 % (uniform, seeded). Every time is the best
-of several repeats; the peers (analysis/peers.py) are timed in the same run.
+of several repeats; the peers (analysis/bench/peers.py) are timed in the same run.
 These functions return figures for a report to use; commands/ prints them.
 """
 
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from gyrogen.abi import MAX_STEPS
-from gyrogen.analysis.simulate import runtime_values
-from gyrogen.analysis.timing import best_time
-from gyrogen.analysis.workprec import REF_TOL
+from gyrogen.analysis.bench.timing import best_time
+from gyrogen.analysis.bench.workprec import REF_TOL
+from gyrogen.analysis.simulate.simulate import runtime_values
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled, cores
 from gyrogen.runtime.scene_build import build_scene

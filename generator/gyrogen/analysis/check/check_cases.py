@@ -17,8 +17,8 @@ import numpy as np
 
 from gyrogen import methods
 from gyrogen.abi import GIMBAL_LOCK_COS
-from gyrogen.analysis import check_clusters
-from gyrogen.analysis.check_engine import Case, Extreme, spin_prediction
+from gyrogen.analysis.check import check_clusters
+from gyrogen.analysis.check.check_engine import Case, Extreme, spin_prediction
 from gyrogen.errors import SceneError
 from gyrogen.oracle.scene_view import quaternion_dcm
 from gyrogen.physics import LUMPED_FROM, lumped_inertias
