@@ -2,8 +2,7 @@
 
 The shared functions a file defines are those its methods call (C and
 Fortran refuse an unused static or private procedure under -Werror).
-rodas4 and radau5 are still Jinja templates: TEMPLATE_CALLS names what
-they call here.
+The templates only place these texts and the public wrappers.
 """
 
 from __future__ import annotations
