@@ -675,8 +675,8 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 }
 
 /* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
-static int rk4_steps(double t0, double t1, long steps, double *x, const double *c,
-                     dual_spin_stats *stats)
+static int rk4_integrate(double t0, double t1, long steps, double *x, const double *c,
+                         dual_spin_stats *stats)
 {
     double k[4][DUAL_SPIN_NX];
     double y[DUAL_SPIN_NX];
@@ -740,31 +740,10 @@ static int rk4_steps(double t0, double t1, long steps, double *x, const double *
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c,
-        dual_spin_stats *stats)
+int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c, dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
-    return rk4_steps(t0, t1, steps, x, c, stats ? stats : &own);
-}
-
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
-size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
-        const double *c, dual_spin_stats *stats, int *codes)
-{
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = dual_spin_rk4(t0, t1, steps, x + (size_t)i * DUAL_SPIN_NX, c,
-                                    stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
-    }
-    return failed;
+    return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
 }
 
 /* dopri5 to t1, with Hairer's step-size strategy: the last step clipped
@@ -2549,6 +2528,27 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     return failed;
 }
 
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
+size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
+        dual_spin_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = dual_spin_rk4(t0, t1, steps, x + (size_t)i * DUAL_SPIN_NX, c,
+                                           stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
+    }
+    return failed;
+}
+
 /* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
@@ -2578,8 +2578,8 @@ size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const d
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = dual_spin_rodas4(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                           max_steps, stats ? stats + i : NULL);
+        const int code = dual_spin_rodas4(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2599,8 +2599,8 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = dual_spin_radau5(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                           max_steps, stats ? stats + i : NULL);
+        const int code = dual_spin_radau5(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

@@ -674,7 +674,7 @@ contains
   end subroutine lu_solve_complex
 
   ! Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps.
-  function rk4_steps(t0, t1, steps, x, c, stats) result(res)
+  function rk4_integrate(t0, t1, steps, x, c, stats) result(res)
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1
     integer(c_long), intent(in) :: steps
@@ -748,15 +748,15 @@ contains
     end do
     res = DUAL_SPIN_ODE_OK
     return
-  end function rk4_steps
+  end function rk4_integrate
 
   ! Classic Runge-Kutta, order 4, fixed step.
   function dual_spin_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
-    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -764,7 +764,7 @@ contains
 
     stats => own  ! when stats_ptr is NULL: not wanted
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
-    code = rk4_steps(t0, t1, steps, x, c, stats)
+    code = rk4_integrate(t0, t1, steps, x, c, stats)
   end function dual_spin_rk4
 
   ! dopri5 to t1, with Hairer's step-size strategy: the last step clipped

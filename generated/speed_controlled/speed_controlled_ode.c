@@ -710,8 +710,8 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 }
 
 /* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
-static int rk4_steps(double t0, double t1, long steps, double *x, const double *c,
-                     speed_controlled_stats *stats)
+static int rk4_integrate(double t0, double t1, long steps, double *x, const double *c,
+                         speed_controlled_stats *stats)
 {
     double k[4][SPEED_CONTROLLED_NX];
     double y[SPEED_CONTROLLED_NX];
@@ -775,31 +775,10 @@ static int rk4_steps(double t0, double t1, long steps, double *x, const double *
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int speed_controlled_rk4(double t0, double t1, long steps, double *x, const double *c,
-        speed_controlled_stats *stats)
+int speed_controlled_rk4(double t0, double t1, long steps, double *x, const double *c, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
-    return rk4_steps(t0, t1, steps, x, c, stats ? stats : &own);
-}
-
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
-size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
-        const double *c, speed_controlled_stats *stats, int *codes)
-{
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = speed_controlled_rk4(t0, t1, steps, x + (size_t)i * SPEED_CONTROLLED_NX, c,
-                                    stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
-    }
-    return failed;
+    return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
 }
 
 /* dopri5 to t1, with Hairer's step-size strategy: the last step clipped
@@ -2593,6 +2572,27 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     return failed;
 }
 
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
+size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
+        speed_controlled_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = speed_controlled_rk4(t0, t1, steps, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                                           stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
+    }
+    return failed;
+}
+
 /* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
@@ -2622,8 +2622,8 @@ size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x, 
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = speed_controlled_rodas4(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                           max_steps, stats ? stats + i : NULL);
+        const int code = speed_controlled_rodas4(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2643,8 +2643,8 @@ size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, 
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = speed_controlled_radau5(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                           max_steps, stats ? stats + i : NULL);
+        const int code = speed_controlled_radau5(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

@@ -707,8 +707,8 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 }
 
 /* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
-static int rk4_steps(double t0, double t1, long steps, double *x, const double *c,
-                     stiff_wheel_stats *stats)
+static int rk4_integrate(double t0, double t1, long steps, double *x, const double *c,
+                         stiff_wheel_stats *stats)
 {
     double k[4][STIFF_WHEEL_NX];
     double y[STIFF_WHEEL_NX];
@@ -772,31 +772,10 @@ static int rk4_steps(double t0, double t1, long steps, double *x, const double *
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c,
-        stiff_wheel_stats *stats)
+int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return rk4_steps(t0, t1, steps, x, c, stats ? stats : &own);
-}
-
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
-size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
-        const double *c, stiff_wheel_stats *stats, int *codes)
-{
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_rk4(t0, t1, steps, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                    stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
-    }
-    return failed;
+    return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
 }
 
 /* dopri5 to t1, with Hairer's step-size strategy: the last step clipped
@@ -2583,6 +2562,27 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     return failed;
 }
 
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
+size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
+        stiff_wheel_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = stiff_wheel_rk4(t0, t1, steps, x + (size_t)i * STIFF_WHEEL_NX, c,
+                                           stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
+}
+
 /* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
@@ -2612,8 +2612,8 @@ size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_rodas4(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                           max_steps, stats ? stats + i : NULL);
+        const int code = stiff_wheel_rodas4(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2633,8 +2633,8 @@ size_t stiff_wheel_radau5_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_radau5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                           max_steps, stats ? stats + i : NULL);
+        const int code = stiff_wheel_radau5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

@@ -120,7 +120,7 @@ def stages(tab: Explicit) -> list[S]:
 
 
 def fixed(m: Method, quaternion: bool) -> Func:
-    """m.name_steps: `steps` equal steps from t0 to t1."""
+    """m.name_integrate: `steps` equal steps from t0 to t1."""
     tab = m.tableau
     assert isinstance(tab, Explicit)
     t0, t1, steps, n = Var("t0"), Var("t1"), Var("steps"), Var("n")
@@ -178,7 +178,7 @@ def fixed(m: Method, quaternion: bool) -> Func:
         real("t", "inout"),
         real("h", "inout"),
     )
-    return Func(f"{m.name}_steps", params, tuple(body), "int", locals_, m.notes)
+    return Func(f"{m.name}_integrate", params, tuple(body), "int", locals_, m.notes)
 
 
 def rows(pairs: list[Method]) -> int:

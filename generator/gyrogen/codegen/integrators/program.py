@@ -89,6 +89,14 @@ def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:
     return out
 
 
+def methods_text(p: Program, printer: CPrinter | FortranPrinter) -> dict[str, object]:
+    """The shared functions as one text, and each method's (<method>_...)."""
+    return {
+        "shared": "\n".join(printer.function(f) for f in p.shared),
+        "methods": by_method([*p.fixed, *p.pairs, *p.implicit], printer.function),
+    }
+
+
 def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
     c = CPrinter(prefix, macro, {})
     lanes = LanesPrinter(prefix, macro, {}, p.state)
@@ -100,26 +108,15 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
             f"{lanes.field(d.name).removeprefix('L->')}{dims}[{macro}_LANES];"
         )
     return {
-        "shared": "\n".join(c.function(f) for f in p.shared),
-        "fixed": {f.name.removesuffix("_steps"): c.function(f) for f in p.fixed},
-        "pairs": {f.name.removesuffix("_integrate"): c.function(f) for f in p.pairs},
-        "implicit": by_method(p.implicit, c.function),
+        **methods_text(p, c),
         "lanes": {f.name.removesuffix("_step_lanes"): lanes.function(f) for f in p.lanes},
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(pair.start_state()), 1)),
-        "krows": p.krows,
     }
 
 
 def fortran_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
-    f = FortranPrinter(prefix, macro, {})
-    return {
-        "shared": "\n".join(f.function(x) for x in p.shared),
-        "fixed": {x.name.removesuffix("_steps"): f.function(x) for x in p.fixed},
-        "pairs": {x.name.removesuffix("_integrate"): f.function(x) for x in p.pairs},
-        "implicit": by_method(p.implicit, f.function),
-        "krows": p.krows,
-    }
+    return methods_text(p, FortranPrinter(prefix, macro, {}))
 
 
 def trig_text(language: str, prefix: str, macro: str, used: list[str]) -> str:
