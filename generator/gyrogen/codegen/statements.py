@@ -13,6 +13,7 @@ import sympy as sm
 from sympy.printing.precedence import PRECEDENCE
 
 from gyrogen.codegen.context import SceneContext
+from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.symbolic.literals import LiteralError, writable
 from gyrogen.symbolic.optimize import Block
 
@@ -143,3 +144,11 @@ def _function(
         states=[i for i, s in enumerate(unit.states) if s in free],
         torque=any(s in free for s in unit.equations.inputs),
     )
+
+
+def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
+    """Which of <prefix>_sin, <prefix>_cos and their _lanes twins the
+    functions call (gyrogen.codegen.integrators.trig): a file defines only
+    those (clang warns of an unused static inline function)."""
+    text = " ".join(s.code for f in fns if f is not None for s in f.statements)
+    return [name for name in VARIANTS if f"{prefix}_{name}(" in text]

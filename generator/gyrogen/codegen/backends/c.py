@@ -13,12 +13,12 @@ from gyrogen.codegen.integrators.program import c_text, program, trig_text
 from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import (
-    Function,
     SmallPowers,
     WritableNumbers,
     functions,
     jacobian,
     statements,
+    trig_used,
 )
 from gyrogen.symbolic.hoist import constants
 
@@ -51,14 +51,6 @@ class CPrinter(SmallPowers, WritableNumbers, C99CodePrinter):
     def _print_Heaviside(self, expr: sm.Heaviside) -> str:
         """A torque limit's slope in the Jacobian: 1 inside the clamp, 0 outside."""
         return f"(({self._print(expr.args[0])}) > 0.0 ? 1.0 : 0.0)"
-
-
-def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
-    """Which of <prefix>_sin, <prefix>_cos and their _lanes twins the
-    functions call: a file defines only those (clang warns of an unused
-    static inline function)."""
-    text = " ".join(s.code for f in fns if f is not None for s in f.statements)
-    return [name for name in VARIANTS if f"{prefix}_{name}(" in text]
 
 
 def files(unit: SceneContext) -> dict[str, str]:

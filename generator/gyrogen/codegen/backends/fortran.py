@@ -19,6 +19,7 @@ from gyrogen.codegen.statements import (
     functions,
     jacobian,
     statements,
+    trig_used,
 )
 from gyrogen.errors import GyrogenError
 from gyrogen.methods import signature_of
@@ -86,10 +87,8 @@ def files(unit: SceneContext) -> dict[str, str]:
         _check_names([*args, *names, *(s.name for s in fn.statements if s.declare)], fn.name)
 
     def used(fns: list[Function | None], gimbal: bool = False) -> list[str]:
-        text = " ".join(s.code for f in fns if f is not None for s in f.statements)
-        return [
-            v for v in ("sin", "cos") if f"{unit.prefix}_{v}(" in text or (gimbal and v == "cos")
-        ]
+        found = trig_used(unit.prefix, fns) + ["cos"] * gimbal
+        return [v for v in ("sin", "cos") if v in found]  # Fortran has no _lanes twins
 
     gimbal = bool(unit.methods) and not unit.quaternion
     setup_fn = Function("setup", "", "", setup, [], False)

@@ -193,8 +193,8 @@ def converted(
         elif isinstance(s, If):
             written = {repr(x.target) for x in nested(s) if isinstance(x, Assign)}
             assert not any(w in repr(s.cond) for w in written), f"branch assigns its condition: {s}"
-            both = s.cond if cond is None else _and(cond, s.cond)
-            other = not_(s.cond) if cond is None else _and(cond, not_(s.cond))
+            both = s.cond if cond is None else and_(cond, s.cond)
+            other = not_(s.cond) if cond is None else and_(cond, not_(s.cond))
             out += converted(s.then, both, own=own) + converted(s.orelse, other, own=own)
         elif isinstance(s, Assign) and isinstance(s.target, Var) and s.target.name in own:
             out.append(s)
@@ -206,10 +206,6 @@ def converted(
         else:
             out.append(s)
     return out
-
-
-def _and(a: E, b: E) -> E:
-    return and_(a, b)
 
 
 __all__ = ["At", "LanesPrinter", "Row", "Var"]
