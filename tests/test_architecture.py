@@ -101,12 +101,16 @@ def test_each_integrator_is_written_once() -> None:
     from gyrogen.codegen.integrators import trig
     from gyrogen.codegen.integrators.program import program
     from gyrogen.symbolic.blocks import diagonal_blocks
+    from gyrogen.symbolic.jet import decompose
+    from gyrogen.symbolic.optimize import Block
 
     every = list(methods.METHODS.values())
     blocks = diagonal_blocks([sm.Integer(1)] * 49, 7)
+    xs = sm.symbols("x0:2")
+    jet = decompose(Block((), (sm.sin(xs[1]) / xs[0], xs[0] * xs[1])), xs)
     names = {"project_quaternion", "pair_integrate", "err_power", "complex_inverse"}
     for quaternion in (False, True):
-        p = program(every, quaternion, True, blocks)
+        p = program(every, quaternion, True, blocks, jet)
         for f in (*p.shared, *p.fixed, *p.pairs, *p.implicit, *p.lanes):
             names.add(f.name)
     names |= {f.name.removeprefix("p_") for f in trig.functions("p", list(trig.VARIANTS))}

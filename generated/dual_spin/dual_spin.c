@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id d34fb83f3161e6a2: a hash of the scene, gyrogen and sympy
+ * Build id 3d387293da232775: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as DUAL_SPIN_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

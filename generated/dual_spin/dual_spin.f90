@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id d34fb83f3161e6a2: a hash of the scene, gyrogen and sympy versions
+! Build id 3d387293da232775: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as DUAL_SPIN_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -35,7 +35,7 @@ module dual_spin_mod
   public :: dual_spin_kinetic_energy
   public :: dual_spin_angular_momentum
 
-  character(len=*), parameter, public :: DUAL_SPIN_BUILD_ID = "d34fb83f3161e6a2"
+  character(len=*), parameter, public :: DUAL_SPIN_BUILD_ID = "3d387293da232775"
   integer, parameter, public :: DUAL_SPIN_NX = 7  ! states
   integer, parameter, public :: DUAL_SPIN_NP = 0  ! parameters
   integer, parameter, public :: DUAL_SPIN_NC = 1  ! hoisted constants

@@ -5,7 +5,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id d34fb83f3161e6a2: a hash of the scene, gyrogen and sympy
+ * Build id 3d387293da232775: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as DUAL_SPIN_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -98,6 +98,11 @@ size_t dual_spin_f_rodas4_batch(size_t n, double t0, double t1, double *x,
 int dual_spin_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, dual_spin_stats *stats);
 size_t dual_spin_f_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        dual_spin_stats *stats, int *codes);
+int dual_spin_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, dual_spin_stats *stats);
+size_t dual_spin_f_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         dual_spin_stats *stats, int *codes);
 

@@ -5,7 +5,7 @@
  * template c/ode.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id d34fb83f3161e6a2: a hash of the scene, gyrogen and sympy
+ * Build id 3d387293da232775: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as DUAL_SPIN_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -1826,6 +1826,310 @@ int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rt
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 46
+   nodes to the given order (16 of them convolutions). */
+static inline void taylor_jet(int order, const double *x, double (*tay)[53])
+{
+    double acc7;
+    double acc8;
+    double acc9;
+    double acc10;
+    double acc12;
+    double acc13;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc18;
+    double acc25;
+    double acc31;
+    double acc34;
+    double acc41;
+    double acc43;
+    double acc50;
+    double rk;
+    double rk1;
+    int j;
+    int k;
+
+    /* order 0: the state and every node's value */
+    tay[0][0] = x[0];
+    tay[0][1] = x[1];
+    tay[0][2] = x[2];
+    tay[0][3] = x[3];
+    tay[0][4] = x[4];
+    tay[0][5] = x[5];
+    tay[0][6] = x[6];
+    tay[0][7] = dual_spin_sin(tay[0][2]);
+    tay[0][8] = dual_spin_cos(tay[0][2]);
+    tay[0][9] = tay[0][8] * tay[0][5];
+    tay[0][10] = tay[0][7] * tay[0][3];
+    tay[0][11] = tay[0][9] - tay[0][10];
+    tay[0][12] = dual_spin_sin(tay[0][1]);
+    tay[0][13] = dual_spin_cos(tay[0][1]);
+    tay[0][14] = tay[0][11] / tay[0][13];
+    tay[0][15] = tay[0][7] * tay[0][5];
+    tay[0][16] = tay[0][8] * tay[0][3];
+    tay[0][17] = tay[0][15] + tay[0][16];
+    tay[0][18] = tay[0][14] * tay[0][12];
+    tay[0][19] = tay[0][4] - tay[0][18];
+    tay[0][21] = 4.5440763299219775e-05 * tay[0][6];
+    tay[0][23] = 0.4092155481941839 * tay[0][4];
+    tay[0][24] = tay[0][21] + tay[0][23];
+    tay[0][25] = tay[0][5] * tay[0][24];
+    tay[0][27] = 0.015471973456719416 * tay[0][4];
+    tay[0][29] = 1.1900419543364779e-06 * tay[0][6];
+    tay[0][30] = tay[0][27] - tay[0][29];
+    tay[0][31] = tay[0][30] * tay[0][3];
+    tay[0][32] = tay[0][25] - tay[0][31];
+    tay[0][34] = tay[0][5] * tay[0][5];
+    tay[0][35] = 0.01775954828743408 * tay[0][34];
+    tay[0][36] = -tay[0][35];
+    tay[0][37] = 0.01775954828743408 * tay[0][3];
+    tay[0][39] = 0.10773983913066638 * tay[0][5];
+    tay[0][40] = tay[0][37] - tay[0][39];
+    tay[0][41] = tay[0][3] * tay[0][40];
+    tay[0][42] = tay[0][36] + tay[0][41];
+    tay[0][43] = tay[0][30] * tay[0][5];
+    tay[0][45] = 5.266025597120826e-05 * tay[0][6];
+    tay[0][46] = -tay[0][45];
+    tay[0][48] = 0.3153534800671272 * tay[0][4];
+    tay[0][49] = tay[0][46] - tay[0][48];
+    tay[0][50] = tay[0][3] * tay[0][49];
+    tay[0][51] = tay[0][43] + tay[0][50];
+    tay[1][0] = tay[0][14];
+    tay[1][1] = tay[0][17];
+    tay[1][2] = tay[0][19];
+    tay[1][3] = tay[0][32];
+    tay[1][4] = tay[0][42];
+    tay[1][5] = tay[0][51];
+    tay[1][6] = 0.0;
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (k = 1; k < order; ++k) {
+        rk = 1.0 / (double)k;
+        acc7 = 0.0;
+        acc8 = 0.0;
+        acc9 = 0.0;
+        acc10 = 0.0;
+        acc12 = 0.0;
+        acc13 = 0.0;
+        acc14 = 0.0;
+        acc15 = 0.0;
+        acc16 = 0.0;
+        acc18 = 0.0;
+        acc25 = 0.0;
+        acc31 = 0.0;
+        acc34 = 0.0;
+        acc41 = 0.0;
+        acc43 = 0.0;
+        acc50 = 0.0;
+        for (j = 1; j < k; ++j) {
+            double w1, w2;
+            w1 = (double)j * tay[j][1];
+            w2 = (double)j * tay[j][2];
+            acc7 = acc7 + w2 * tay[k - j][8];
+            acc8 = acc8 + w2 * tay[k - j][7];
+            acc9 = acc9 + tay[j][8] * tay[k - j][5];
+            acc10 = acc10 + tay[j][7] * tay[k - j][3];
+            acc12 = acc12 + w1 * tay[k - j][13];
+            acc13 = acc13 + w1 * tay[k - j][12];
+            acc14 = acc14 + tay[j][13] * tay[k - j][14];
+            acc15 = acc15 + tay[j][7] * tay[k - j][5];
+            acc16 = acc16 + tay[j][8] * tay[k - j][3];
+            acc18 = acc18 + tay[j][14] * tay[k - j][12];
+            acc25 = acc25 + tay[j][5] * tay[k - j][24];
+            acc31 = acc31 + tay[j][30] * tay[k - j][3];
+            acc34 = acc34 + tay[j][5] * tay[k - j][5];
+            acc41 = acc41 + tay[j][3] * tay[k - j][40];
+            acc43 = acc43 + tay[j][30] * tay[k - j][5];
+            acc50 = acc50 + tay[j][3] * tay[k - j][49];
+        }
+        tay[k][7] = (acc7 + (double)k * tay[k][2] * tay[0][8]) * rk;
+        tay[k][8] = -((acc8 + (double)k * tay[k][2] * tay[0][7]) * rk);
+        tay[k][9] = tay[0][8] * tay[k][5] + acc9 + tay[k][8] * tay[0][5];
+        tay[k][10] = tay[0][7] * tay[k][3] + acc10 + tay[k][7] * tay[0][3];
+        tay[k][11] = tay[k][9] - tay[k][10];
+        tay[k][12] = (acc12 + (double)k * tay[k][1] * tay[0][13]) * rk;
+        tay[k][13] = -((acc13 + (double)k * tay[k][1] * tay[0][12]) * rk);
+        tay[k][14] = (tay[k][11] - (acc14 + tay[k][13] * tay[0][14])) / tay[0][13];
+        tay[k][15] = tay[0][7] * tay[k][5] + acc15 + tay[k][7] * tay[0][5];
+        tay[k][16] = tay[0][8] * tay[k][3] + acc16 + tay[k][8] * tay[0][3];
+        tay[k][17] = tay[k][15] + tay[k][16];
+        tay[k][18] = tay[0][14] * tay[k][12] + acc18 + tay[k][14] * tay[0][12];
+        tay[k][19] = tay[k][4] - tay[k][18];
+        tay[k][21] = 4.5440763299219775e-05 * tay[k][6];
+        tay[k][23] = 0.4092155481941839 * tay[k][4];
+        tay[k][24] = tay[k][21] + tay[k][23];
+        tay[k][25] = tay[0][5] * tay[k][24] + acc25 + tay[k][5] * tay[0][24];
+        tay[k][27] = 0.015471973456719416 * tay[k][4];
+        tay[k][29] = 1.1900419543364779e-06 * tay[k][6];
+        tay[k][30] = tay[k][27] - tay[k][29];
+        tay[k][31] = tay[0][30] * tay[k][3] + acc31 + tay[k][30] * tay[0][3];
+        tay[k][32] = tay[k][25] - tay[k][31];
+        tay[k][34] = tay[0][5] * tay[k][5] + acc34 + tay[k][5] * tay[0][5];
+        tay[k][35] = 0.01775954828743408 * tay[k][34];
+        tay[k][36] = -tay[k][35];
+        tay[k][37] = 0.01775954828743408 * tay[k][3];
+        tay[k][39] = 0.10773983913066638 * tay[k][5];
+        tay[k][40] = tay[k][37] - tay[k][39];
+        tay[k][41] = tay[0][3] * tay[k][40] + acc41 + tay[k][3] * tay[0][40];
+        tay[k][42] = tay[k][36] + tay[k][41];
+        tay[k][43] = tay[0][30] * tay[k][5] + acc43 + tay[k][30] * tay[0][5];
+        tay[k][45] = 5.266025597120826e-05 * tay[k][6];
+        tay[k][46] = -tay[k][45];
+        tay[k][48] = 0.3153534800671272 * tay[k][4];
+        tay[k][49] = tay[k][46] - tay[k][48];
+        tay[k][50] = tay[0][3] * tay[k][49] + acc50 + tay[k][3] * tay[0][49];
+        tay[k][51] = tay[k][43] + tay[k][50];
+        rk1 = 1.0 / (double)(k + 1);
+        tay[k + 1][0] = tay[k][14] * rk1;
+        tay[k + 1][1] = tay[k][17] * rk1;
+        tay[k + 1][2] = tay[k][19] * rk1;
+        tay[k + 1][3] = tay[k][32] * rk1;
+        tay[k + 1][4] = tay[k][42] * rk1;
+        tay[k + 1][5] = tay[k][51] * rk1;
+        tay[k + 1][6] = 0.0;
+    }
+}
+
+/* Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step
+   size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
+   every state by the automatic-differentiation recurrences over the scene's
+   own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
+   last two coefficients, the new state by Horner's scheme. */
+static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, dual_spin_stats *stats)
+{
+    double tay[19][53];
+    double xnew[DUAL_SPIN_NX];
+    double dx[DUAL_SPIN_NX];
+    double comp[DUAL_SPIN_NX] = {0.0};
+    int order;
+    int nonfinite;
+    int fresh;
+    int last;
+    double t;
+    double h;
+    double rhofac;
+    double scale;
+    double xmax;
+    double dp;
+    double dq;
+    double rho;
+    int i;
+    int q;
+
+    (void)c;  /* unused when every value is folded */
+    stats_start(stats, t0);
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+        return DUAL_SPIN_ODE_ERR_ARGUMENT;
+    }
+    if (gimbal_lock_at(x)) {
+        return DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
+    }
+    if (!(t1 > t0)) {
+        return DUAL_SPIN_ODE_OK;
+    }
+    if (!all_finite(x, DUAL_SPIN_NX)) {
+        return DUAL_SPIN_ODE_ERR_NONFINITE;
+    }
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    scale = atol / rtol;
+    t = t0;
+    nonfinite = 0;
+    fresh = 1;
+    for (;;) {
+        if (fresh != 0) {
+            taylor_jet(order, x, tay);
+            stats->rhs_calls = stats->rhs_calls + 1;
+            xmax = 0.0;
+            dp = 0.0;
+            dq = 0.0;
+            for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                xmax = dmax(xmax, fabs(x[i]));
+                dp = dmax(dp, fabs(tay[order][i]));
+                dq = dmax(dq, fabs(tay[order - 1][i]));
+            }
+            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
+                    1.0 / (double)(order - 1)));
+            h = dmin(rho * rhofac, t1 - t);
+            if (stats->accepted == 0 && h0 > 0.0) {
+                h = dmin(h, h0);  /* a first step no longer than h0 */
+            }
+            fresh = 0;
+        }
+        last = t + 1.01 * h >= t1;
+        if (last) {
+            h = t1 - t;
+        }
+        stats->h = h;
+        if (step_underflow(h, t)) {
+            return nonfinite != 0 ? DUAL_SPIN_ODE_ERR_NONFINITE : DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return DUAL_SPIN_ODE_ERR_MAX_STEPS;
+        }
+
+        /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            double acc;
+            acc = tay[order][i];
+            for (q = 0; q < order - 1; ++q) {
+                acc = tay[order - q - 1][i] + h * acc;
+            }
+            dx[i] = h * acc - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        nonfinite = all_finite(xnew, DUAL_SPIN_NX) ? 0 : 1;
+        if (nonfinite != 0) {
+            stats->rejected = stats->rejected + 1;
+            h = h * 0.5;
+            last = 0;
+        } else {
+            if (gimbal_lock(x, xnew)) {
+                return DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            accept_step(x, xnew, dx, comp);
+            stats->accepted = stats->accepted + 1;
+            t = last ? t1 : t + h;
+            stats->t = t;
+            fresh = 1;
+        }
+        if (last && nonfinite == 0) {
+            break;
+        }
+    }
+    return DUAL_SPIN_ODE_OK;
+}
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
+int dual_spin_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, dual_spin_stats *stats)
+{
+    dual_spin_stats own;  /* when stats is NULL: not wanted */
+    return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
@@ -2600,6 +2904,27 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = dual_spin_radau5(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
+    }
+    return failed;
+}
+
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
+size_t dual_spin_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = dual_spin_taylor(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
                                            rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;

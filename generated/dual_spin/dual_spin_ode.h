@@ -5,7 +5,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id d34fb83f3161e6a2: a hash of the scene, gyrogen and sympy
+ * Build id 3d387293da232775: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as DUAL_SPIN_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -157,6 +157,19 @@ size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const d
 int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, dual_spin_stats *stats);
 size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats,
+        int *codes);
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+ * The order p = ceil(-ln(rtol)/2 + 1) (2 to 18); each step's size from the
+ * last two Taylor coefficients, so that |x^[p]| h^p is near rtol max(atol/rtol,
+ * |x|) e^-2 (Jorba & Zou); no step is rejected for its error. h0 > 0 bounds
+ * the first step; at most max_steps steps; stats.rhs_calls counts the Taylor
+ * expansions. A new state with a NaN or Inf is retried with h halved: code 3
+ * if that persists to underflow, or at once when x is not finite. */
+int dual_spin_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, dual_spin_stats *stats);
+size_t dual_spin_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats,
         int *codes);
 

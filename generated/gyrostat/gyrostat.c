@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 434b88cb74663f0a: a hash of the scene, gyrogen and sympy
+ * Build id 20f054308af8e12e: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

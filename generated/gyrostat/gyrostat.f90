@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 434b88cb74663f0a: a hash of the scene, gyrogen and sympy versions
+! Build id 20f054308af8e12e: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as GYROSTAT_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -52,7 +52,7 @@ module gyrostat_mod
   public :: gyrostat_rhs
   public :: gyrostat_strerror
 
-  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "434b88cb74663f0a"
+  character(len=*), parameter, public :: GYROSTAT_BUILD_ID = "20f054308af8e12e"
   integer, parameter, public :: GYROSTAT_NX = 14  ! states
   integer, parameter, public :: GYROSTAT_NP = 12  ! parameters
   integer, parameter, public :: GYROSTAT_NC = 12  ! hoisted constants

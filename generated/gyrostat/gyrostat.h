@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 434b88cb74663f0a: a hash of the scene, gyrogen and sympy
+ * Build id 20f054308af8e12e: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,7 +19,7 @@
 extern "C" {
 #endif
 
-#define GYROSTAT_BUILD_ID "434b88cb74663f0a"
+#define GYROSTAT_BUILD_ID "20f054308af8e12e"
 
 #define GYROSTAT_NX 14   /* states */
 #define GYROSTAT_NP 12   /* parameters */

@@ -5,7 +5,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 434b88cb74663f0a: a hash of the scene, gyrogen and sympy
+ * Build id 20f054308af8e12e: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as GYROSTAT_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -95,6 +95,11 @@ size_t gyrostat_f_rodas4_batch(size_t n, double t0, double t1, double *x, const 
 int gyrostat_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, gyrostat_stats *stats);
 size_t gyrostat_f_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
+        int *codes);
+int gyrostat_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, gyrostat_stats *stats);
+size_t gyrostat_f_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
         int *codes);
 

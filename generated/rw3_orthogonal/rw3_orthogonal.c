@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id da419102bf70fc39: a hash of the scene, gyrogen and sympy
+ * Build id 0f8ca0a553e2b3a8: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

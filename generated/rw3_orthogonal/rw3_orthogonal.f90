@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id da419102bf70fc39: a hash of the scene, gyrogen and sympy versions
+! Build id 0f8ca0a553e2b3a8: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -39,7 +39,7 @@ module rw3_orthogonal_mod
   public :: rw3_orthogonal_angular_momentum
   public :: rw3_orthogonal_power
 
-  character(len=*), parameter, public :: RW3_ORTHOGONAL_BUILD_ID = "da419102bf70fc39"
+  character(len=*), parameter, public :: RW3_ORTHOGONAL_BUILD_ID = "0f8ca0a553e2b3a8"
   integer, parameter, public :: RW3_ORTHOGONAL_NX = 9  ! states
   integer, parameter, public :: RW3_ORTHOGONAL_NP = 1  ! parameters
   integer, parameter, public :: RW3_ORTHOGONAL_NC = 3  ! hoisted constants

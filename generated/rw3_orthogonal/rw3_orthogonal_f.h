@@ -5,7 +5,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id da419102bf70fc39: a hash of the scene, gyrogen and sympy
+ * Build id 0f8ca0a553e2b3a8: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -95,6 +95,11 @@ size_t rw3_orthogonal_f_rodas4_batch(size_t n, double t0, double t1, double *x,
 int rw3_orthogonal_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, rw3_orthogonal_stats *stats);
 size_t rw3_orthogonal_f_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        rw3_orthogonal_stats *stats, int *codes);
+int rw3_orthogonal_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, rw3_orthogonal_stats *stats);
+size_t rw3_orthogonal_f_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw3_orthogonal_stats *stats, int *codes);
 

@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id da419102bf70fc39. The same interface as rw3_orthogonal_ode.h, under
+! Build id 0f8ca0a553e2b3a8. The same interface as rw3_orthogonal_ode.h, under
 ! the bind(C) names rw3_orthogonal_f_<method> and rw3_orthogonal_f_<method>_batch.
 ! Coefficients and their published sources as above each method in rw3_orthogonal_ode.c.
 ! rw3_orthogonal_f.h declares these bind(C) procedures for C callers.
@@ -37,6 +37,7 @@ module rw3_orthogonal_ode_mod
   public :: rw3_orthogonal_dop853, rw3_orthogonal_dop853_batch
   public :: rw3_orthogonal_rodas4, rw3_orthogonal_rodas4_batch
   public :: rw3_orthogonal_radau5, rw3_orthogonal_radau5_batch
+  public :: rw3_orthogonal_taylor, rw3_orthogonal_taylor_batch
   public :: rw3_orthogonal_ode_strerror
 
   ! What an integration did, and where it stopped: rw3_orthogonal_stats of rw3_orthogonal_ode.h.
@@ -2109,6 +2110,403 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw3_orthogonal_radau5
 
+  ! The normalized Taylor coefficients of x and of the rhs's 85
+  ! nodes to the given order (16 of them convolutions).
+  subroutine taylor_jet(order, x, c, tay)
+    integer(c_int), intent(in) :: order
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: tay(0:94 - 1, 0:19 - 1)
+    real(c_double) :: acc9
+    real(c_double) :: acc10
+    real(c_double) :: acc11
+    real(c_double) :: acc12
+    real(c_double) :: acc14
+    real(c_double) :: acc15
+    real(c_double) :: acc16
+    real(c_double) :: acc17
+    real(c_double) :: acc18
+    real(c_double) :: acc20
+    real(c_double) :: acc38
+    real(c_double) :: acc49
+    real(c_double) :: acc55
+    real(c_double) :: acc65
+    real(c_double) :: acc71
+    real(c_double) :: acc73
+    real(c_double) :: rk
+    real(c_double) :: rk1
+    real(c_double) :: w1
+    real(c_double) :: w2
+    integer(c_int) :: j
+    integer(c_int) :: k
+
+    ! order 0: the state and every node's value
+    tay(0, 0) = x(0)
+    tay(1, 0) = x(1)
+    tay(2, 0) = x(2)
+    tay(3, 0) = x(3)
+    tay(4, 0) = x(4)
+    tay(5, 0) = x(5)
+    tay(6, 0) = x(6)
+    tay(7, 0) = x(7)
+    tay(8, 0) = x(8)
+    tay(9, 0) = rw3_orthogonal_sin(tay(2, 0))
+    tay(10, 0) = rw3_orthogonal_cos(tay(2, 0))
+    tay(11, 0) = tay(10, 0) * tay(5, 0)
+    tay(12, 0) = tay(9, 0) * tay(3, 0)
+    tay(13, 0) = tay(11, 0) - tay(12, 0)
+    tay(14, 0) = rw3_orthogonal_sin(tay(1, 0))
+    tay(15, 0) = rw3_orthogonal_cos(tay(1, 0))
+    tay(16, 0) = tay(13, 0) / tay(15, 0)
+    tay(17, 0) = tay(9, 0) * tay(5, 0)
+    tay(18, 0) = tay(10, 0) * tay(3, 0)
+    tay(19, 0) = tay(17, 0) + tay(18, 0)
+    tay(20, 0) = tay(16, 0) * tay(14, 0)
+    tay(21, 0) = tay(4, 0) - tay(20, 0)
+    tay(24, 0) = tay(8, 0) - tay(5, 0)
+    tay(25, 0) = (-0.0001_c_double) * tay(24, 0)
+    tay(26, 0) = -tay(25, 0)
+    tay(28, 0) = 0.035_c_double * tay(6, 0)
+    tay(30, 0) = 2.005_c_double * tay(4, 0)
+    tay(31, 0) = tay(28, 0) + tay(30, 0)
+    tay(33, 0) = 301.7396875_c_double * tay(3, 0)
+    tay(34, 0) = tay(31, 0) + tay(33, 0)
+    tay(36, 0) = 3.15125_c_double * tay(5, 0)
+    tay(37, 0) = tay(34, 0) - tay(36, 0)
+    tay(38, 0) = tay(37, 0) * tay(4, 0)
+    tay(39, 0) = tay(26, 0) + tay(38, 0)
+    tay(40, 0) = 0.035_c_double * tay(7, 0)
+    tay(42, 0) = 1.34875_c_double * tay(5, 0)
+    tay(43, 0) = tay(40, 0) + tay(42, 0)
+    tay(44, 0) = 2.005_c_double * tay(3, 0)
+    tay(45, 0) = tay(43, 0) + tay(44, 0)
+    tay(47, 0) = 351.7396875_c_double * tay(4, 0)
+    tay(48, 0) = tay(45, 0) + tay(47, 0)
+    tay(49, 0) = tay(48, 0) * tay(3, 0)
+    tay(50, 0) = tay(39, 0) - tay(49, 0)
+    tay(51, 0) = 4.166596729006503e-05_c_double * tay(50, 0)
+    tay(54, 0) = -0.02_c_double
+    tay(55, 0) = tay(48, 0) * tay(5, 0)
+    tay(56, 0) = tay(54, 0) + tay(55, 0)
+    tay(57, 0) = 0.035_c_double * tay(8, 0)
+    tay(58, 0) = 1.34875_c_double * tay(4, 0)
+    tay(59, 0) = tay(57, 0) + tay(58, 0)
+    tay(61, 0) = 251.31_c_double * tay(5, 0)
+    tay(62, 0) = tay(59, 0) + tay(61, 0)
+    tay(63, 0) = 3.15125_c_double * tay(3, 0)
+    tay(64, 0) = tay(62, 0) - tay(63, 0)
+    tay(65, 0) = tay(64, 0) * tay(4, 0)
+    tay(66, 0) = tay(56, 0) - tay(65, 0)
+    tay(67, 0) = 0.0033146766733524852_c_double * tay(66, 0)
+    tay(68, 0) = tay(51, 0) + tay(67, 0)
+    tay(71, 0) = tay(64, 0) * tay(3, 0)
+    tay(72, 0) = c(1) + tay(71, 0)
+    tay(73, 0) = tay(37, 0) * tay(5, 0)
+    tay(74, 0) = tay(72, 0) - tay(73, 0)
+    tay(75, 0) = 1.9054215209804005e-05_c_double * tay(74, 0)
+    tay(76, 0) = tay(68, 0) - tay(75, 0)
+    tay(78, 0) = 0.0028431796071504527_c_double * tay(74, 0)
+    tay(80, 0) = 1.5497923245489903e-05_c_double * tay(50, 0)
+    tay(81, 0) = tay(78, 0) - tay(80, 0)
+    tay(82, 0) = 1.9054215209804005e-05_c_double * tay(66, 0)
+    tay(83, 0) = tay(81, 0) - tay(82, 0)
+    tay(85, 0) = 0.003979754895162947_c_double * tay(50, 0)
+    tay(86, 0) = 4.166596729006503e-05_c_double * tay(66, 0)
+    tay(87, 0) = tay(85, 0) + tay(86, 0)
+    tay(88, 0) = 1.5497923245489903e-05_c_double * tay(74, 0)
+    tay(89, 0) = tay(87, 0) - tay(88, 0)
+    tay(93, 0) = 28.571428571428573_c_double * tay(25, 0)
+    tay(0, 1) = tay(16, 0)
+    tay(1, 1) = tay(19, 0)
+    tay(2, 1) = tay(21, 0)
+    tay(3, 1) = tay(76, 0)
+    tay(4, 1) = tay(83, 0)
+    tay(5, 1) = tay(89, 0)
+    tay(6, 1) = 0.5714285714285714_c_double
+    tay(7, 1) = c(0)
+    tay(8, 1) = tay(93, 0)
+
+    ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
+    do k = 1, order - 1
+      rk = 1.0_c_double / real(k, c_double)
+      acc9 = 0.0_c_double
+      acc10 = 0.0_c_double
+      acc11 = 0.0_c_double
+      acc12 = 0.0_c_double
+      acc14 = 0.0_c_double
+      acc15 = 0.0_c_double
+      acc16 = 0.0_c_double
+      acc17 = 0.0_c_double
+      acc18 = 0.0_c_double
+      acc20 = 0.0_c_double
+      acc38 = 0.0_c_double
+      acc49 = 0.0_c_double
+      acc55 = 0.0_c_double
+      acc65 = 0.0_c_double
+      acc71 = 0.0_c_double
+      acc73 = 0.0_c_double
+      do j = 1, k - 1
+        w1 = real(j, c_double) * tay(1, j)
+        w2 = real(j, c_double) * tay(2, j)
+        acc9 = acc9 + w2 * tay(10, k - j)
+        acc10 = acc10 + w2 * tay(9, k - j)
+        acc11 = acc11 + tay(10, j) * tay(5, k - j)
+        acc12 = acc12 + tay(9, j) * tay(3, k - j)
+        acc14 = acc14 + w1 * tay(15, k - j)
+        acc15 = acc15 + w1 * tay(14, k - j)
+        acc16 = acc16 + tay(15, j) * tay(16, k - j)
+        acc17 = acc17 + tay(9, j) * tay(5, k - j)
+        acc18 = acc18 + tay(10, j) * tay(3, k - j)
+        acc20 = acc20 + tay(16, j) * tay(14, k - j)
+        acc38 = acc38 + tay(37, j) * tay(4, k - j)
+        acc49 = acc49 + tay(48, j) * tay(3, k - j)
+        acc55 = acc55 + tay(48, j) * tay(5, k - j)
+        acc65 = acc65 + tay(64, j) * tay(4, k - j)
+        acc71 = acc71 + tay(64, j) * tay(3, k - j)
+        acc73 = acc73 + tay(37, j) * tay(5, k - j)
+      end do
+      tay(9, k) = (acc9 + (real(k, c_double) * tay(2, k)) * tay(10, 0)) * rk
+      tay(10, k) = -(acc10 + (real(k, c_double) * tay(2, k)) * tay(9, 0)) * rk
+      tay(11, k) = (tay(10, 0) * tay(5, k) + acc11) + tay(10, k) * tay(5, 0)
+      tay(12, k) = (tay(9, 0) * tay(3, k) + acc12) + tay(9, k) * tay(3, 0)
+      tay(13, k) = tay(11, k) - tay(12, k)
+      tay(14, k) = (acc14 + (real(k, c_double) * tay(1, k)) * tay(15, 0)) * rk
+      tay(15, k) = -(acc15 + (real(k, c_double) * tay(1, k)) * tay(14, 0)) * rk
+      tay(16, k) = (tay(13, k) - (acc16 + tay(15, k) * tay(16, 0))) / tay(15, 0)
+      tay(17, k) = (tay(9, 0) * tay(5, k) + acc17) + tay(9, k) * tay(5, 0)
+      tay(18, k) = (tay(10, 0) * tay(3, k) + acc18) + tay(10, k) * tay(3, 0)
+      tay(19, k) = tay(17, k) + tay(18, k)
+      tay(20, k) = (tay(16, 0) * tay(14, k) + acc20) + tay(16, k) * tay(14, 0)
+      tay(21, k) = tay(4, k) - tay(20, k)
+      tay(24, k) = tay(8, k) - tay(5, k)
+      tay(25, k) = (-0.0001_c_double) * tay(24, k)
+      tay(26, k) = -tay(25, k)
+      tay(28, k) = 0.035_c_double * tay(6, k)
+      tay(30, k) = 2.005_c_double * tay(4, k)
+      tay(31, k) = tay(28, k) + tay(30, k)
+      tay(33, k) = 301.7396875_c_double * tay(3, k)
+      tay(34, k) = tay(31, k) + tay(33, k)
+      tay(36, k) = 3.15125_c_double * tay(5, k)
+      tay(37, k) = tay(34, k) - tay(36, k)
+      tay(38, k) = (tay(37, 0) * tay(4, k) + acc38) + tay(37, k) * tay(4, 0)
+      tay(39, k) = tay(26, k) + tay(38, k)
+      tay(40, k) = 0.035_c_double * tay(7, k)
+      tay(42, k) = 1.34875_c_double * tay(5, k)
+      tay(43, k) = tay(40, k) + tay(42, k)
+      tay(44, k) = 2.005_c_double * tay(3, k)
+      tay(45, k) = tay(43, k) + tay(44, k)
+      tay(47, k) = 351.7396875_c_double * tay(4, k)
+      tay(48, k) = tay(45, k) + tay(47, k)
+      tay(49, k) = (tay(48, 0) * tay(3, k) + acc49) + tay(48, k) * tay(3, 0)
+      tay(50, k) = tay(39, k) - tay(49, k)
+      tay(51, k) = 4.166596729006503e-05_c_double * tay(50, k)
+      tay(55, k) = (tay(48, 0) * tay(5, k) + acc55) + tay(48, k) * tay(5, 0)
+      tay(56, k) = tay(55, k)
+      tay(57, k) = 0.035_c_double * tay(8, k)
+      tay(58, k) = 1.34875_c_double * tay(4, k)
+      tay(59, k) = tay(57, k) + tay(58, k)
+      tay(61, k) = 251.31_c_double * tay(5, k)
+      tay(62, k) = tay(59, k) + tay(61, k)
+      tay(63, k) = 3.15125_c_double * tay(3, k)
+      tay(64, k) = tay(62, k) - tay(63, k)
+      tay(65, k) = (tay(64, 0) * tay(4, k) + acc65) + tay(64, k) * tay(4, 0)
+      tay(66, k) = tay(56, k) - tay(65, k)
+      tay(67, k) = 0.0033146766733524852_c_double * tay(66, k)
+      tay(68, k) = tay(51, k) + tay(67, k)
+      tay(71, k) = (tay(64, 0) * tay(3, k) + acc71) + tay(64, k) * tay(3, 0)
+      tay(72, k) = tay(71, k)
+      tay(73, k) = (tay(37, 0) * tay(5, k) + acc73) + tay(37, k) * tay(5, 0)
+      tay(74, k) = tay(72, k) - tay(73, k)
+      tay(75, k) = 1.9054215209804005e-05_c_double * tay(74, k)
+      tay(76, k) = tay(68, k) - tay(75, k)
+      tay(78, k) = 0.0028431796071504527_c_double * tay(74, k)
+      tay(80, k) = 1.5497923245489903e-05_c_double * tay(50, k)
+      tay(81, k) = tay(78, k) - tay(80, k)
+      tay(82, k) = 1.9054215209804005e-05_c_double * tay(66, k)
+      tay(83, k) = tay(81, k) - tay(82, k)
+      tay(85, k) = 0.003979754895162947_c_double * tay(50, k)
+      tay(86, k) = 4.166596729006503e-05_c_double * tay(66, k)
+      tay(87, k) = tay(85, k) + tay(86, k)
+      tay(88, k) = 1.5497923245489903e-05_c_double * tay(74, k)
+      tay(89, k) = tay(87, k) - tay(88, k)
+      tay(93, k) = 28.571428571428573_c_double * tay(25, k)
+      rk1 = 1.0_c_double / real(k + 1, c_double)
+      tay(0, k + 1) = tay(16, k) * rk1
+      tay(1, k + 1) = tay(19, k) * rk1
+      tay(2, k + 1) = tay(21, k) * rk1
+      tay(3, k + 1) = tay(76, k) * rk1
+      tay(4, k + 1) = tay(83, k) * rk1
+      tay(5, k + 1) = tay(89, k) * rk1
+      tay(6, k + 1) = 0.0_c_double
+      tay(7, k + 1) = 0.0_c_double
+      tay(8, k + 1) = tay(93, k) * rk1
+    end do
+  end subroutine taylor_jet
+
+  ! Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step
+  ! size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
+  ! every state by the automatic-differentiation recurrences over the scene's
+  ! own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
+  ! last two coefficients, the new state by Horner's scheme.
+  function taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
+    real(c_double), intent(in) :: t0
+    real(c_double), intent(in) :: t1
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(rw3_orthogonal_stats), intent(inout) :: stats
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    integer(c_int) :: res
+    real(c_double) :: tay(0:94 - 1, 0:19 - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: order
+    integer(c_int) :: nonfinite
+    integer(c_int) :: fresh
+    logical :: last
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: rhofac
+    real(c_double) :: scale
+    real(c_double) :: xmax
+    real(c_double) :: dp
+    real(c_double) :: dq
+    real(c_double) :: rho
+    real(c_double) :: acc
+    integer(c_int) :: i
+    integer(c_int) :: q
+
+    comp = 0.0_c_double
+    call stats_start(stats, t0)
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
+      res = RW3_ORTHOGONAL_ODE_ERR_ARGUMENT
+      return
+    end if
+    if (gimbal_lock_at(x)) then
+      res = RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
+      return
+    end if
+    if (.not. (t1 > t0)) then
+      res = RW3_ORTHOGONAL_ODE_OK
+      return
+    end if
+    if (.not. all_finite(x, nx)) then
+      res = RW3_ORTHOGONAL_ODE_ERR_NONFINITE
+      return
+    end if
+
+    ! the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol
+    order = 2
+    order = order + (merge(1, 0, 0.1353352832366127_c_double > rtol))
+    order = order + (merge(1, 0, 0.01831563888873418_c_double > rtol))
+    order = order + (merge(1, 0, 0.0024787521766663585_c_double > rtol))
+    order = order + (merge(1, 0, 0.00033546262790251185_c_double > rtol))
+    order = order + (merge(1, 0, 4.5399929762484854e-05_c_double > rtol))
+    order = order + (merge(1, 0, 6.14421235332821e-06_c_double > rtol))
+    order = order + (merge(1, 0, 8.315287191035679e-07_c_double > rtol))
+    order = order + (merge(1, 0, 1.1253517471925912e-07_c_double > rtol))
+    order = order + (merge(1, 0, 1.522997974471263e-08_c_double > rtol))
+    order = order + (merge(1, 0, 2.061153622438558e-09_c_double > rtol))
+    order = order + (merge(1, 0, 2.7894680928689246e-10_c_double > rtol))
+    order = order + (merge(1, 0, 3.775134544279098e-11_c_double > rtol))
+    order = order + (merge(1, 0, 5.109089028063325e-12_c_double > rtol))
+    order = order + (merge(1, 0, 6.914400106940203e-13_c_double > rtol))
+    order = order + (merge(1, 0, 9.357622968840175e-14_c_double > rtol))
+    order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
+    rhofac = exp((-0.7_c_double) / real(order - 1, c_double)) / 7.3890560989306495_c_double
+    scale = atol / rtol
+    t = t0
+    nonfinite = 0
+    fresh = 1
+    do
+      if (fresh /= 0) then
+        call taylor_jet(order, x, c, tay)
+        stats%rhs_calls = stats%rhs_calls + 1
+        xmax = 0.0_c_double
+        dp = 0.0_c_double
+        dq = 0.0_c_double
+        do i = 0, nx - 1
+          xmax = max(xmax, abs(x(i)))
+          dp = max(dp, abs(tay(i, order)))
+          dq = max(dq, abs(tay(i, order - 1)))
+        end do
+        xmax = max(scale, xmax)  ! the absolute and relative modes in one
+        rho = min((xmax / dp)**(1.0_c_double / real(order, c_double)), &
+            (xmax / dq)**(1.0_c_double / real(order - 1, c_double)))
+        h = min(rho * rhofac, t1 - t)
+        if (stats%accepted == 0 .and. h0 > 0.0_c_double) then
+          h = min(h, h0)  ! a first step no longer than h0
+        end if
+        fresh = 0
+      end if
+      last = t + 1.01_c_double * h >= t1
+      if (last) then
+        h = t1 - t
+      end if
+      stats%h = h
+      if (step_underflow(h, t)) then
+        res = merge(RW3_ORTHOGONAL_ODE_ERR_NONFINITE, RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW, &
+            nonfinite /= 0)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        res = RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS
+        return
+      end if
+
+      ! x(t + h) by Horner's scheme, less what the last add lost (comp)
+      do i = 0, nx - 1
+        acc = tay(i, order)
+        do q = 0, order - 1 - 1
+          acc = tay(i, (order - q) - 1) + h * acc
+        end do
+        dx(i) = h * acc - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+      nonfinite = merge(0, 1, all_finite(xnew, nx))
+      if (nonfinite /= 0) then
+        stats%rejected = stats%rejected + 1
+        h = h * 0.5_c_double
+        last = .false.
+      else
+        if (gimbal_lock(x, xnew)) then
+          res = RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        call accept_step(x, xnew, dx, comp)
+        stats%accepted = stats%accepted + 1
+        t = merge(t1, t + h, last)
+        stats%t = t
+        fresh = 1
+      end if
+      if (last .and. nonfinite == 0) then
+        exit
+      end if
+    end do
+    res = RW3_ORTHOGONAL_ODE_OK
+    return
+  end function taylor_integrate
+
+  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+  function rw3_orthogonal_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+      bind(C, name="rw3_orthogonal_f_taylor")
+    real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
+    integer(c_int) :: code
+    type(rw3_orthogonal_stats), pointer :: stats
+    type(rw3_orthogonal_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
+  end function rw3_orthogonal_taylor
+
   ! stats, codes: NULL when not wanted.
   function rw3_orthogonal_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
       result(failed) bind(C, name="rw3_orthogonal_f_rk4_batch")
@@ -2278,5 +2676,39 @@ contains
     end do
     !$omp end parallel do
   end function rw3_orthogonal_radau5_batch
+
+  ! stats, codes: NULL when not wanted.
+  function rw3_orthogonal_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
+      result(failed) bind(C, name="rw3_orthogonal_f_taylor_batch")
+    integer(c_size_t), value, intent(in) :: n
+    real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(rw3_orthogonal_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = rw3_orthogonal_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
+                                  c_loc(stats_out(i)))
+      else
+        code = rw3_orthogonal_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= RW3_ORTHOGONAL_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function rw3_orthogonal_taylor_batch
 
 end module rw3_orthogonal_ode_mod

@@ -5,7 +5,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id da419102bf70fc39: a hash of the scene, gyrogen and sympy
+ * Build id 0f8ca0a553e2b3a8: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as RW3_ORTHOGONAL_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -157,6 +157,19 @@ size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x,
 int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, rw3_orthogonal_stats *stats);
 size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        rw3_orthogonal_stats *stats, int *codes);
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+ * The order p = ceil(-ln(rtol)/2 + 1) (2 to 18); each step's size from the
+ * last two Taylor coefficients, so that |x^[p]| h^p is near rtol max(atol/rtol,
+ * |x|) e^-2 (Jorba & Zou); no step is rejected for its error. h0 > 0 bounds
+ * the first step; at most max_steps steps; stats.rhs_calls counts the Taylor
+ * expansions. A new state with a NaN or Inf is retried with h halved: code 3
+ * if that persists to underflow, or at once when x is not finite. */
+int rw3_orthogonal_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, rw3_orthogonal_stats *stats);
+size_t rw3_orthogonal_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw3_orthogonal_stats *stats, int *codes);
 

@@ -5,7 +5,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 76b66da77716378d: a hash of the scene, gyrogen and sympy versions
+! Build id a7ce4531ec679521: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -40,7 +40,7 @@ module speed_controlled_mod
   public :: speed_controlled_angular_momentum
   public :: speed_controlled_power
 
-  character(len=*), parameter, public :: SPEED_CONTROLLED_BUILD_ID = "76b66da77716378d"
+  character(len=*), parameter, public :: SPEED_CONTROLLED_BUILD_ID = "a7ce4531ec679521"
   integer, parameter, public :: SPEED_CONTROLLED_NX = 8  ! states
   integer, parameter, public :: SPEED_CONTROLLED_NP = 2  ! parameters
   integer, parameter, public :: SPEED_CONTROLLED_NC = 7  ! hoisted constants

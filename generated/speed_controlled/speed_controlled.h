@@ -6,7 +6,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 76b66da77716378d: a hash of the scene, gyrogen and sympy
+ * Build id a7ce4531ec679521: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -20,7 +20,7 @@
 extern "C" {
 #endif
 
-#define SPEED_CONTROLLED_BUILD_ID "76b66da77716378d"
+#define SPEED_CONTROLLED_BUILD_ID "a7ce4531ec679521"
 
 #define SPEED_CONTROLLED_NX 8   /* states */
 #define SPEED_CONTROLLED_NP 2   /* parameters */

@@ -6,7 +6,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 76b66da77716378d: a hash of the scene, gyrogen and sympy
+ * Build id a7ce4531ec679521: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -105,6 +105,12 @@ int speed_controlled_f_radau5(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats);
 size_t speed_controlled_f_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        speed_controlled_stats *stats, int *codes);
+int speed_controlled_f_taylor(double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps,
+        speed_controlled_stats *stats);
+size_t speed_controlled_f_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
 

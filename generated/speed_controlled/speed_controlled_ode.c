@@ -6,7 +6,7 @@
  * template c/ode.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 76b66da77716378d: a hash of the scene, gyrogen and sympy
+ * Build id a7ce4531ec679521: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -1863,6 +1863,328 @@ int speed_controlled_radau5(double t0, double t1, double *x, const double *c, do
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 54
+   nodes to the given order (17 of them convolutions). */
+static inline void taylor_jet(int order, const double *x, const double *c, double (*tay)[62])
+{
+    double acc8;
+    double acc9;
+    double acc10;
+    double acc11;
+    double acc13;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc17;
+    double acc19;
+    double acc27;
+    double acc33;
+    double acc36;
+    double acc38;
+    double acc49;
+    double acc51;
+    double acc58;
+    double rk;
+    double rk1;
+    int j;
+    int k;
+
+    /* order 0: the state and every node's value */
+    tay[0][0] = x[0];
+    tay[0][1] = x[1];
+    tay[0][2] = x[2];
+    tay[0][3] = x[3];
+    tay[0][4] = x[4];
+    tay[0][5] = x[5];
+    tay[0][6] = x[6];
+    tay[0][7] = x[7];
+    tay[0][8] = speed_controlled_sin(tay[0][2]);
+    tay[0][9] = speed_controlled_cos(tay[0][2]);
+    tay[0][10] = tay[0][9] * tay[0][6];
+    tay[0][11] = tay[0][8] * tay[0][4];
+    tay[0][12] = tay[0][10] - tay[0][11];
+    tay[0][13] = speed_controlled_sin(tay[0][1]);
+    tay[0][14] = speed_controlled_cos(tay[0][1]);
+    tay[0][15] = tay[0][12] / tay[0][14];
+    tay[0][16] = tay[0][8] * tay[0][6];
+    tay[0][17] = tay[0][9] * tay[0][4];
+    tay[0][18] = tay[0][16] + tay[0][17];
+    tay[0][19] = tay[0][15] * tay[0][13];
+    tay[0][20] = tay[0][5] - tay[0][19];
+    tay[0][21] = tay[0][7] - tay[0][5];
+    tay[0][23] = 0.0004980820048148975 * tay[0][7];
+    tay[0][25] = 0.33522655090705017 * tay[0][5];
+    tay[0][26] = tay[0][23] + tay[0][25];
+    tay[0][27] = tay[0][6] * tay[0][26];
+    tay[0][29] = 0.016919114337701612 * tay[0][5];
+    tay[0][31] = 1.2676659094182028e-05 * tay[0][7];
+    tay[0][32] = tay[0][29] - tay[0][31];
+    tay[0][33] = tay[0][32] * tay[0][4];
+    tay[0][34] = tay[0][27] - tay[0][33];
+    tay[0][36] = tay[0][4] * tay[0][4];
+    tay[0][37] = 0.018613186525101588 * tay[0][36];
+    tay[0][38] = tay[0][6] * tay[0][6];
+    tay[0][39] = 0.018613186525101588 * tay[0][38];
+    tay[0][40] = tay[0][37] - tay[0][39];
+    tay[0][43] = c[2] + tay[0][7];
+    tay[0][44] = tay[0][43] - tay[0][5];
+    tay[0][45] = c[0] * tay[0][44];
+    tay[0][46] = tay[0][40] + tay[0][45];
+    tay[0][48] = 0.06916590204045965 * tay[0][4];
+    tay[0][49] = tay[0][48] * tay[0][6];
+    tay[0][50] = tay[0][46] - tay[0][49];
+    tay[0][51] = tay[0][32] * tay[0][6];
+    tay[0][53] = 0.2723557574878444 * tay[0][5];
+    tay[0][54] = -tay[0][53];
+    tay[0][56] = 0.0005451879938902264 * tay[0][7];
+    tay[0][57] = tay[0][54] - tay[0][56];
+    tay[0][58] = tay[0][4] * tay[0][57];
+    tay[0][59] = tay[0][51] + tay[0][58];
+    tay[0][61] = c[1] * tay[0][44];
+    tay[1][0] = tay[0][15];
+    tay[1][1] = tay[0][18];
+    tay[1][2] = tay[0][20];
+    tay[1][3] = tay[0][21];
+    tay[1][4] = tay[0][34];
+    tay[1][5] = tay[0][50];
+    tay[1][6] = tay[0][59];
+    tay[1][7] = tay[0][61];
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (k = 1; k < order; ++k) {
+        rk = 1.0 / (double)k;
+        acc8 = 0.0;
+        acc9 = 0.0;
+        acc10 = 0.0;
+        acc11 = 0.0;
+        acc13 = 0.0;
+        acc14 = 0.0;
+        acc15 = 0.0;
+        acc16 = 0.0;
+        acc17 = 0.0;
+        acc19 = 0.0;
+        acc27 = 0.0;
+        acc33 = 0.0;
+        acc36 = 0.0;
+        acc38 = 0.0;
+        acc49 = 0.0;
+        acc51 = 0.0;
+        acc58 = 0.0;
+        for (j = 1; j < k; ++j) {
+            double w1, w2;
+            w1 = (double)j * tay[j][1];
+            w2 = (double)j * tay[j][2];
+            acc8 = acc8 + w2 * tay[k - j][9];
+            acc9 = acc9 + w2 * tay[k - j][8];
+            acc10 = acc10 + tay[j][9] * tay[k - j][6];
+            acc11 = acc11 + tay[j][8] * tay[k - j][4];
+            acc13 = acc13 + w1 * tay[k - j][14];
+            acc14 = acc14 + w1 * tay[k - j][13];
+            acc15 = acc15 + tay[j][14] * tay[k - j][15];
+            acc16 = acc16 + tay[j][8] * tay[k - j][6];
+            acc17 = acc17 + tay[j][9] * tay[k - j][4];
+            acc19 = acc19 + tay[j][15] * tay[k - j][13];
+            acc27 = acc27 + tay[j][6] * tay[k - j][26];
+            acc33 = acc33 + tay[j][32] * tay[k - j][4];
+            acc36 = acc36 + tay[j][4] * tay[k - j][4];
+            acc38 = acc38 + tay[j][6] * tay[k - j][6];
+            acc49 = acc49 + tay[j][48] * tay[k - j][6];
+            acc51 = acc51 + tay[j][32] * tay[k - j][6];
+            acc58 = acc58 + tay[j][4] * tay[k - j][57];
+        }
+        tay[k][8] = (acc8 + (double)k * tay[k][2] * tay[0][9]) * rk;
+        tay[k][9] = -((acc9 + (double)k * tay[k][2] * tay[0][8]) * rk);
+        tay[k][10] = tay[0][9] * tay[k][6] + acc10 + tay[k][9] * tay[0][6];
+        tay[k][11] = tay[0][8] * tay[k][4] + acc11 + tay[k][8] * tay[0][4];
+        tay[k][12] = tay[k][10] - tay[k][11];
+        tay[k][13] = (acc13 + (double)k * tay[k][1] * tay[0][14]) * rk;
+        tay[k][14] = -((acc14 + (double)k * tay[k][1] * tay[0][13]) * rk);
+        tay[k][15] = (tay[k][12] - (acc15 + tay[k][14] * tay[0][15])) / tay[0][14];
+        tay[k][16] = tay[0][8] * tay[k][6] + acc16 + tay[k][8] * tay[0][6];
+        tay[k][17] = tay[0][9] * tay[k][4] + acc17 + tay[k][9] * tay[0][4];
+        tay[k][18] = tay[k][16] + tay[k][17];
+        tay[k][19] = tay[0][15] * tay[k][13] + acc19 + tay[k][15] * tay[0][13];
+        tay[k][20] = tay[k][5] - tay[k][19];
+        tay[k][21] = tay[k][7] - tay[k][5];
+        tay[k][23] = 0.0004980820048148975 * tay[k][7];
+        tay[k][25] = 0.33522655090705017 * tay[k][5];
+        tay[k][26] = tay[k][23] + tay[k][25];
+        tay[k][27] = tay[0][6] * tay[k][26] + acc27 + tay[k][6] * tay[0][26];
+        tay[k][29] = 0.016919114337701612 * tay[k][5];
+        tay[k][31] = 1.2676659094182028e-05 * tay[k][7];
+        tay[k][32] = tay[k][29] - tay[k][31];
+        tay[k][33] = tay[0][32] * tay[k][4] + acc33 + tay[k][32] * tay[0][4];
+        tay[k][34] = tay[k][27] - tay[k][33];
+        tay[k][36] = tay[0][4] * tay[k][4] + acc36 + tay[k][4] * tay[0][4];
+        tay[k][37] = 0.018613186525101588 * tay[k][36];
+        tay[k][38] = tay[0][6] * tay[k][6] + acc38 + tay[k][6] * tay[0][6];
+        tay[k][39] = 0.018613186525101588 * tay[k][38];
+        tay[k][40] = tay[k][37] - tay[k][39];
+        tay[k][43] = tay[k][7];
+        tay[k][44] = tay[k][43] - tay[k][5];
+        tay[k][45] = c[0] * tay[k][44];
+        tay[k][46] = tay[k][40] + tay[k][45];
+        tay[k][48] = 0.06916590204045965 * tay[k][4];
+        tay[k][49] = tay[0][48] * tay[k][6] + acc49 + tay[k][48] * tay[0][6];
+        tay[k][50] = tay[k][46] - tay[k][49];
+        tay[k][51] = tay[0][32] * tay[k][6] + acc51 + tay[k][32] * tay[0][6];
+        tay[k][53] = 0.2723557574878444 * tay[k][5];
+        tay[k][54] = -tay[k][53];
+        tay[k][56] = 0.0005451879938902264 * tay[k][7];
+        tay[k][57] = tay[k][54] - tay[k][56];
+        tay[k][58] = tay[0][4] * tay[k][57] + acc58 + tay[k][4] * tay[0][57];
+        tay[k][59] = tay[k][51] + tay[k][58];
+        tay[k][61] = c[1] * tay[k][44];
+        rk1 = 1.0 / (double)(k + 1);
+        tay[k + 1][0] = tay[k][15] * rk1;
+        tay[k + 1][1] = tay[k][18] * rk1;
+        tay[k + 1][2] = tay[k][20] * rk1;
+        tay[k + 1][3] = tay[k][21] * rk1;
+        tay[k + 1][4] = tay[k][34] * rk1;
+        tay[k + 1][5] = tay[k][50] * rk1;
+        tay[k + 1][6] = tay[k][59] * rk1;
+        tay[k + 1][7] = tay[k][61] * rk1;
+    }
+}
+
+/* Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step
+   size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
+   every state by the automatic-differentiation recurrences over the scene's
+   own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
+   last two coefficients, the new state by Horner's scheme. */
+static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, speed_controlled_stats *stats)
+{
+    double tay[19][62];
+    double xnew[SPEED_CONTROLLED_NX];
+    double dx[SPEED_CONTROLLED_NX];
+    double comp[SPEED_CONTROLLED_NX] = {0.0};
+    int order;
+    int nonfinite;
+    int fresh;
+    int last;
+    double t;
+    double h;
+    double rhofac;
+    double scale;
+    double xmax;
+    double dp;
+    double dq;
+    double rho;
+    int i;
+    int q;
+
+    stats_start(stats, t0);
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+        return SPEED_CONTROLLED_ODE_ERR_ARGUMENT;
+    }
+    if (gimbal_lock_at(x)) {
+        return SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
+    }
+    if (!(t1 > t0)) {
+        return SPEED_CONTROLLED_ODE_OK;
+    }
+    if (!all_finite(x, SPEED_CONTROLLED_NX)) {
+        return SPEED_CONTROLLED_ODE_ERR_NONFINITE;
+    }
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    scale = atol / rtol;
+    t = t0;
+    nonfinite = 0;
+    fresh = 1;
+    for (;;) {
+        if (fresh != 0) {
+            taylor_jet(order, x, c, tay);
+            stats->rhs_calls = stats->rhs_calls + 1;
+            xmax = 0.0;
+            dp = 0.0;
+            dq = 0.0;
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                xmax = dmax(xmax, fabs(x[i]));
+                dp = dmax(dp, fabs(tay[order][i]));
+                dq = dmax(dq, fabs(tay[order - 1][i]));
+            }
+            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
+                    1.0 / (double)(order - 1)));
+            h = dmin(rho * rhofac, t1 - t);
+            if (stats->accepted == 0 && h0 > 0.0) {
+                h = dmin(h, h0);  /* a first step no longer than h0 */
+            }
+            fresh = 0;
+        }
+        last = t + 1.01 * h >= t1;
+        if (last) {
+            h = t1 - t;
+        }
+        stats->h = h;
+        if (step_underflow(h, t)) {
+            return nonfinite != 0 ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
+                    SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return SPEED_CONTROLLED_ODE_ERR_MAX_STEPS;
+        }
+
+        /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            double acc;
+            acc = tay[order][i];
+            for (q = 0; q < order - 1; ++q) {
+                acc = tay[order - q - 1][i] + h * acc;
+            }
+            dx[i] = h * acc - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        nonfinite = all_finite(xnew, SPEED_CONTROLLED_NX) ? 0 : 1;
+        if (nonfinite != 0) {
+            stats->rejected = stats->rejected + 1;
+            h = h * 0.5;
+            last = 0;
+        } else {
+            if (gimbal_lock(x, xnew)) {
+                return SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            accept_step(x, xnew, dx, comp);
+            stats->accepted = stats->accepted + 1;
+            t = last ? t1 : t + h;
+            stats->t = t;
+            fresh = 1;
+        }
+        if (last && nonfinite == 0) {
+            break;
+        }
+    }
+    return SPEED_CONTROLLED_ODE_OK;
+}
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
+int speed_controlled_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, speed_controlled_stats *stats)
+{
+    speed_controlled_stats own;  /* when stats is NULL: not wanted */
+    return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
@@ -2644,6 +2966,27 @@ size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = speed_controlled_radau5(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
+    }
+    return failed;
+}
+
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
+size_t speed_controlled_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = speed_controlled_taylor(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
                                            rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;

@@ -6,7 +6,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 76b66da77716378d: a hash of the scene, gyrogen and sympy
+ * Build id a7ce4531ec679521: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as SPEED_CONTROLLED_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -158,6 +158,19 @@ size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x,
 int speed_controlled_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, speed_controlled_stats *stats);
 size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        speed_controlled_stats *stats, int *codes);
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+ * The order p = ceil(-ln(rtol)/2 + 1) (2 to 18); each step's size from the
+ * last two Taylor coefficients, so that |x^[p]| h^p is near rtol max(atol/rtol,
+ * |x|) e^-2 (Jorba & Zou); no step is rejected for its error. h0 > 0 bounds
+ * the first step; at most max_steps steps; stats.rhs_calls counts the Taylor
+ * expansions. A new state with a NaN or Inf is retried with h halved: code 3
+ * if that persists to underflow, or at once when x is not finite. */
+int speed_controlled_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, speed_controlled_stats *stats);
+size_t speed_controlled_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
 

@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 3d272e3cedf3ee38: a hash of the scene, gyrogen and sympy
+ * Build id 8247293ff48e3e11: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as TORQUE_FREE_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 3d272e3cedf3ee38: a hash of the scene, gyrogen and sympy versions
+! Build id 8247293ff48e3e11: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as TORQUE_FREE_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -35,7 +35,7 @@ module torque_free_mod
   public :: torque_free_kinetic_energy
   public :: torque_free_angular_momentum
 
-  character(len=*), parameter, public :: TORQUE_FREE_BUILD_ID = "3d272e3cedf3ee38"
+  character(len=*), parameter, public :: TORQUE_FREE_BUILD_ID = "8247293ff48e3e11"
   integer, parameter, public :: TORQUE_FREE_NX = 7  ! states
   integer, parameter, public :: TORQUE_FREE_NP = 0  ! parameters
   integer, parameter, public :: TORQUE_FREE_NC = 1  ! hoisted constants

@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 3d272e3cedf3ee38: a hash of the scene, gyrogen and sympy
+ * Build id 8247293ff48e3e11: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as TORQUE_FREE_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,7 +19,7 @@
 extern "C" {
 #endif
 
-#define TORQUE_FREE_BUILD_ID "3d272e3cedf3ee38"
+#define TORQUE_FREE_BUILD_ID "8247293ff48e3e11"
 
 #define TORQUE_FREE_NX 7   /* states */
 #define TORQUE_FREE_NP 0   /* parameters */

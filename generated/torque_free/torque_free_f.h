@@ -5,7 +5,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 3d272e3cedf3ee38: a hash of the scene, gyrogen and sympy
+ * Build id 8247293ff48e3e11: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as TORQUE_FREE_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -99,6 +99,11 @@ size_t torque_free_f_rodas4_batch(size_t n, double t0, double t1, double *x,
 int torque_free_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, torque_free_stats *stats);
 size_t torque_free_f_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        torque_free_stats *stats, int *codes);
+int torque_free_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, torque_free_stats *stats);
+size_t torque_free_f_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         torque_free_stats *stats, int *codes);
 

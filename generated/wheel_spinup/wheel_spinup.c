@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 9a1eb2e9a11df66c: a hash of the scene, gyrogen and sympy
+ * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):

@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 9a1eb2e9a11df66c: a hash of the scene, gyrogen and sympy versions
+! Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -38,7 +38,7 @@ module wheel_spinup_mod
   public :: wheel_spinup_angular_momentum
   public :: wheel_spinup_power
 
-  character(len=*), parameter, public :: WHEEL_SPINUP_BUILD_ID = "9a1eb2e9a11df66c"
+  character(len=*), parameter, public :: WHEEL_SPINUP_BUILD_ID = "12205a99de73d91a"
   integer, parameter, public :: WHEEL_SPINUP_NX = 8  ! states
   integer, parameter, public :: WHEEL_SPINUP_NP = 1  ! parameters
   integer, parameter, public :: WHEEL_SPINUP_NC = 4  ! hoisted constants

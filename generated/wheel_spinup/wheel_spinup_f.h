@@ -5,7 +5,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 9a1eb2e9a11df66c: a hash of the scene, gyrogen and sympy
+ * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -100,6 +100,11 @@ size_t wheel_spinup_f_rodas4_batch(size_t n, double t0, double t1, double *x,
 int wheel_spinup_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_f_radau5_batch(size_t n, double t0, double t1, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps,
+        wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, wheel_spinup_stats *stats);
+size_t wheel_spinup_f_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         wheel_spinup_stats *stats, int *codes);
 

@@ -5,7 +5,7 @@
  * template c/ode.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 9a1eb2e9a11df66c: a hash of the scene, gyrogen and sympy
+ * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -1852,6 +1852,320 @@ int wheel_spinup_radau5(double t0, double t1, double *x, const double *c, double
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 49
+   nodes to the given order (17 of them convolutions). */
+static inline void taylor_jet(int order, const double *x, const double *c, double (*tay)[57])
+{
+    double acc8;
+    double acc9;
+    double acc10;
+    double acc11;
+    double acc13;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc17;
+    double acc19;
+    double acc27;
+    double acc33;
+    double acc37;
+    double acc40;
+    double acc45;
+    double acc47;
+    double acc54;
+    double rk;
+    double rk1;
+    int j;
+    int k;
+
+    /* order 0: the state and every node's value */
+    tay[0][0] = x[0];
+    tay[0][1] = x[1];
+    tay[0][2] = x[2];
+    tay[0][3] = x[3];
+    tay[0][4] = x[4];
+    tay[0][5] = x[5];
+    tay[0][6] = x[6];
+    tay[0][7] = x[7];
+    tay[0][8] = wheel_spinup_sin(tay[0][2]);
+    tay[0][9] = wheel_spinup_cos(tay[0][2]);
+    tay[0][10] = tay[0][9] * tay[0][6];
+    tay[0][11] = tay[0][8] * tay[0][4];
+    tay[0][12] = tay[0][10] - tay[0][11];
+    tay[0][13] = wheel_spinup_sin(tay[0][1]);
+    tay[0][14] = wheel_spinup_cos(tay[0][1]);
+    tay[0][15] = tay[0][12] / tay[0][14];
+    tay[0][16] = tay[0][8] * tay[0][6];
+    tay[0][17] = tay[0][9] * tay[0][4];
+    tay[0][18] = tay[0][16] + tay[0][17];
+    tay[0][19] = tay[0][15] * tay[0][13];
+    tay[0][20] = tay[0][5] - tay[0][19];
+    tay[0][21] = tay[0][7] - tay[0][5];
+    tay[0][23] = 0.3499793829482495 * tay[0][5];
+    tay[0][25] = 0.0007488716786310489 * tay[0][7];
+    tay[0][26] = tay[0][23] + tay[0][25];
+    tay[0][27] = tay[0][6] * tay[0][26];
+    tay[0][29] = 0.014646230145692387 * tay[0][5];
+    tay[0][31] = 1.6873537034207817e-05 * tay[0][7];
+    tay[0][32] = tay[0][29] - tay[0][31];
+    tay[0][33] = tay[0][32] * tay[0][4];
+    tay[0][34] = tay[0][27] - tay[0][33];
+    tay[0][37] = tay[0][4] * tay[0][4];
+    tay[0][38] = 0.01627906976744186 * tay[0][37];
+    tay[0][39] = c[0] + tay[0][38];
+    tay[0][40] = tay[0][6] * tay[0][6];
+    tay[0][41] = 0.01627906976744186 * tay[0][40];
+    tay[0][42] = tay[0][39] - tay[0][41];
+    tay[0][44] = 0.06976744186046512 * tay[0][4];
+    tay[0][45] = tay[0][44] * tay[0][6];
+    tay[0][46] = tay[0][42] - tay[0][45];
+    tay[0][47] = tay[0][32] * tay[0][6];
+    tay[0][49] = 0.0008211868373490824 * tay[0][7];
+    tay[0][50] = -tay[0][49];
+    tay[0][52] = 0.2872098251809964 * tay[0][5];
+    tay[0][53] = tay[0][50] - tay[0][52];
+    tay[0][54] = tay[0][4] * tay[0][53];
+    tay[0][55] = tay[0][47] + tay[0][54];
+    tay[1][0] = tay[0][15];
+    tay[1][1] = tay[0][18];
+    tay[1][2] = tay[0][20];
+    tay[1][3] = tay[0][21];
+    tay[1][4] = tay[0][34];
+    tay[1][5] = tay[0][46];
+    tay[1][6] = tay[0][55];
+    tay[1][7] = c[1];
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (k = 1; k < order; ++k) {
+        rk = 1.0 / (double)k;
+        acc8 = 0.0;
+        acc9 = 0.0;
+        acc10 = 0.0;
+        acc11 = 0.0;
+        acc13 = 0.0;
+        acc14 = 0.0;
+        acc15 = 0.0;
+        acc16 = 0.0;
+        acc17 = 0.0;
+        acc19 = 0.0;
+        acc27 = 0.0;
+        acc33 = 0.0;
+        acc37 = 0.0;
+        acc40 = 0.0;
+        acc45 = 0.0;
+        acc47 = 0.0;
+        acc54 = 0.0;
+        for (j = 1; j < k; ++j) {
+            double w1, w2;
+            w1 = (double)j * tay[j][1];
+            w2 = (double)j * tay[j][2];
+            acc8 = acc8 + w2 * tay[k - j][9];
+            acc9 = acc9 + w2 * tay[k - j][8];
+            acc10 = acc10 + tay[j][9] * tay[k - j][6];
+            acc11 = acc11 + tay[j][8] * tay[k - j][4];
+            acc13 = acc13 + w1 * tay[k - j][14];
+            acc14 = acc14 + w1 * tay[k - j][13];
+            acc15 = acc15 + tay[j][14] * tay[k - j][15];
+            acc16 = acc16 + tay[j][8] * tay[k - j][6];
+            acc17 = acc17 + tay[j][9] * tay[k - j][4];
+            acc19 = acc19 + tay[j][15] * tay[k - j][13];
+            acc27 = acc27 + tay[j][6] * tay[k - j][26];
+            acc33 = acc33 + tay[j][32] * tay[k - j][4];
+            acc37 = acc37 + tay[j][4] * tay[k - j][4];
+            acc40 = acc40 + tay[j][6] * tay[k - j][6];
+            acc45 = acc45 + tay[j][44] * tay[k - j][6];
+            acc47 = acc47 + tay[j][32] * tay[k - j][6];
+            acc54 = acc54 + tay[j][4] * tay[k - j][53];
+        }
+        tay[k][8] = (acc8 + (double)k * tay[k][2] * tay[0][9]) * rk;
+        tay[k][9] = -((acc9 + (double)k * tay[k][2] * tay[0][8]) * rk);
+        tay[k][10] = tay[0][9] * tay[k][6] + acc10 + tay[k][9] * tay[0][6];
+        tay[k][11] = tay[0][8] * tay[k][4] + acc11 + tay[k][8] * tay[0][4];
+        tay[k][12] = tay[k][10] - tay[k][11];
+        tay[k][13] = (acc13 + (double)k * tay[k][1] * tay[0][14]) * rk;
+        tay[k][14] = -((acc14 + (double)k * tay[k][1] * tay[0][13]) * rk);
+        tay[k][15] = (tay[k][12] - (acc15 + tay[k][14] * tay[0][15])) / tay[0][14];
+        tay[k][16] = tay[0][8] * tay[k][6] + acc16 + tay[k][8] * tay[0][6];
+        tay[k][17] = tay[0][9] * tay[k][4] + acc17 + tay[k][9] * tay[0][4];
+        tay[k][18] = tay[k][16] + tay[k][17];
+        tay[k][19] = tay[0][15] * tay[k][13] + acc19 + tay[k][15] * tay[0][13];
+        tay[k][20] = tay[k][5] - tay[k][19];
+        tay[k][21] = tay[k][7] - tay[k][5];
+        tay[k][23] = 0.3499793829482495 * tay[k][5];
+        tay[k][25] = 0.0007488716786310489 * tay[k][7];
+        tay[k][26] = tay[k][23] + tay[k][25];
+        tay[k][27] = tay[0][6] * tay[k][26] + acc27 + tay[k][6] * tay[0][26];
+        tay[k][29] = 0.014646230145692387 * tay[k][5];
+        tay[k][31] = 1.6873537034207817e-05 * tay[k][7];
+        tay[k][32] = tay[k][29] - tay[k][31];
+        tay[k][33] = tay[0][32] * tay[k][4] + acc33 + tay[k][32] * tay[0][4];
+        tay[k][34] = tay[k][27] - tay[k][33];
+        tay[k][37] = tay[0][4] * tay[k][4] + acc37 + tay[k][4] * tay[0][4];
+        tay[k][38] = 0.01627906976744186 * tay[k][37];
+        tay[k][39] = tay[k][38];
+        tay[k][40] = tay[0][6] * tay[k][6] + acc40 + tay[k][6] * tay[0][6];
+        tay[k][41] = 0.01627906976744186 * tay[k][40];
+        tay[k][42] = tay[k][39] - tay[k][41];
+        tay[k][44] = 0.06976744186046512 * tay[k][4];
+        tay[k][45] = tay[0][44] * tay[k][6] + acc45 + tay[k][44] * tay[0][6];
+        tay[k][46] = tay[k][42] - tay[k][45];
+        tay[k][47] = tay[0][32] * tay[k][6] + acc47 + tay[k][32] * tay[0][6];
+        tay[k][49] = 0.0008211868373490824 * tay[k][7];
+        tay[k][50] = -tay[k][49];
+        tay[k][52] = 0.2872098251809964 * tay[k][5];
+        tay[k][53] = tay[k][50] - tay[k][52];
+        tay[k][54] = tay[0][4] * tay[k][53] + acc54 + tay[k][4] * tay[0][53];
+        tay[k][55] = tay[k][47] + tay[k][54];
+        rk1 = 1.0 / (double)(k + 1);
+        tay[k + 1][0] = tay[k][15] * rk1;
+        tay[k + 1][1] = tay[k][18] * rk1;
+        tay[k + 1][2] = tay[k][20] * rk1;
+        tay[k + 1][3] = tay[k][21] * rk1;
+        tay[k + 1][4] = tay[k][34] * rk1;
+        tay[k + 1][5] = tay[k][46] * rk1;
+        tay[k + 1][6] = tay[k][55] * rk1;
+        tay[k + 1][7] = 0.0;
+    }
+}
+
+/* Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step
+   size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
+   every state by the automatic-differentiation recurrences over the scene's
+   own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
+   last two coefficients, the new state by Horner's scheme. */
+static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    double tay[19][57];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX] = {0.0};
+    int order;
+    int nonfinite;
+    int fresh;
+    int last;
+    double t;
+    double h;
+    double rhofac;
+    double scale;
+    double xmax;
+    double dp;
+    double dq;
+    double rho;
+    int i;
+    int q;
+
+    stats_start(stats, t0);
+    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+        return WHEEL_SPINUP_ODE_ERR_ARGUMENT;
+    }
+    if (gimbal_lock_at(x)) {
+        return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
+    }
+    if (!(t1 > t0)) {
+        return WHEEL_SPINUP_ODE_OK;
+    }
+    if (!all_finite(x, WHEEL_SPINUP_NX)) {
+        return WHEEL_SPINUP_ODE_ERR_NONFINITE;
+    }
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    scale = atol / rtol;
+    t = t0;
+    nonfinite = 0;
+    fresh = 1;
+    for (;;) {
+        if (fresh != 0) {
+            taylor_jet(order, x, c, tay);
+            stats->rhs_calls = stats->rhs_calls + 1;
+            xmax = 0.0;
+            dp = 0.0;
+            dq = 0.0;
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                xmax = dmax(xmax, fabs(x[i]));
+                dp = dmax(dp, fabs(tay[order][i]));
+                dq = dmax(dq, fabs(tay[order - 1][i]));
+            }
+            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
+                    1.0 / (double)(order - 1)));
+            h = dmin(rho * rhofac, t1 - t);
+            if (stats->accepted == 0 && h0 > 0.0) {
+                h = dmin(h, h0);  /* a first step no longer than h0 */
+            }
+            fresh = 0;
+        }
+        last = t + 1.01 * h >= t1;
+        if (last) {
+            h = t1 - t;
+        }
+        stats->h = h;
+        if (step_underflow(h, t)) {
+            return nonfinite != 0 ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                    WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
+        }
+
+        /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            double acc;
+            acc = tay[order][i];
+            for (q = 0; q < order - 1; ++q) {
+                acc = tay[order - q - 1][i] + h * acc;
+            }
+            dx[i] = h * acc - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        nonfinite = all_finite(xnew, WHEEL_SPINUP_NX) ? 0 : 1;
+        if (nonfinite != 0) {
+            stats->rejected = stats->rejected + 1;
+            h = h * 0.5;
+            last = 0;
+        } else {
+            if (gimbal_lock(x, xnew)) {
+                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            accept_step(x, xnew, dx, comp);
+            stats->accepted = stats->accepted + 1;
+            t = last ? t1 : t + h;
+            stats->t = t;
+            fresh = 1;
+        }
+        if (last && nonfinite == 0) {
+            break;
+        }
+    }
+    return WHEEL_SPINUP_ODE_OK;
+}
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
+int wheel_spinup_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
+        double h0, long max_steps, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
@@ -2629,6 +2943,27 @@ size_t wheel_spinup_radau5_batch(size_t n, double t0, double t1, double *x, cons
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = wheel_spinup_radau5(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c,
+                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
+}
+
+/* NULL stats or codes: not wanted.
+   every core under OpenMP. */
+size_t wheel_spinup_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = wheel_spinup_taylor(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c,
                                            rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;

@@ -10,7 +10,18 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from gyrogen.abi import SIGNATURES, Signature
-from gyrogen.tableaus import DOP853, DOPRI5, RADAU5, RK4, RODAS4, Explicit, Radau, Rosenbrock
+from gyrogen.tableaus import (
+    DOP853,
+    DOPRI5,
+    RADAU5,
+    RK4,
+    RODAS4,
+    TAYLOR,
+    Explicit,
+    Radau,
+    Rosenbrock,
+    Series,
+)
 
 
 @dataclass(frozen=True)
@@ -94,6 +105,20 @@ class RadauControl:
     """Singular E1 or E2 with h halved this many times in a row: an error."""
 
 
+@dataclass(frozen=True)
+class TaylorControl:
+    """A Taylor method's step size, after Jorba & Zou (2005), Sec. 3.3.1, with
+    heyoka's safety factor: h = rho exp(-safety / (p - 1)) / e^2, rho the
+    smaller of (s / |x^[p-1]|)^(1/(p-1)) and (s / |x^[p]|)^(1/p) over the
+    state's last two normalized Taylor coefficients (infinity norms), s =
+    max(atol / rtol, |x|) (heyoka's rule when atol = rtol: absolute below
+    |x| = 1, relative above). No step is rejected for its error: a step whose
+    new state is not finite is retried with h times nonfinite_shrink."""
+
+    safety: float = 0.7
+    nonfinite_shrink: float = 0.5
+
+
 PAIR_ERR_FLOOR = 1e-4
 """Hairer's facold: an explicit pair's previous error starts at, and is never
 taken below, this (the PI controller's err_old)."""
@@ -116,8 +141,8 @@ class Method:
 
     name: str
     doc: str
-    tableau: Explicit | Rosenbrock | Radau
-    control: PairControl | RosenbrockControl | RadauControl | None = None
+    tableau: Explicit | Rosenbrock | Radau | Series
+    control: PairControl | RosenbrockControl | RadauControl | TaylorControl | None = None
     """The step-size control of an adaptive method; None for a fixed step."""
     notes: tuple[str, ...] = ()
     """What the method is and where it comes from: the comment lines above
@@ -143,6 +168,11 @@ class Method:
         return isinstance(self.tableau, Radau)
 
     @property
+    def taylor(self) -> bool:
+        """A Taylor series method: its code is the scene's own expansion."""
+        return isinstance(self.tableau, Series)
+
+    @property
     def pair(self) -> bool:
         """An explicit embedded pair (the adaptive explicit methods)."""
         return isinstance(self.control, PairControl)
@@ -150,6 +180,7 @@ class Method:
     @property
     def trial_calls(self) -> int:
         """rhs calls of one trial step of a pair (the first stage is given)."""
+        assert not isinstance(self.tableau, Series)
         return self.tableau.stages - 1
 
     @property
@@ -182,6 +213,13 @@ _NOTES = {
         "Radau IIA of order 5, three implicit stages (Hairer & Wanner, Solving ODEs II,",
         "Sec. IV.8): Hairer's radau5.f for an ODE without mass matrix",
     ),
+    "taylor": (
+        "Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step",
+        "size of heyoka's taylor_adaptive): the normalized Taylor coefficients of",
+        "every state by the automatic-differentiation recurrences over the scene's",
+        "own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the",
+        "last two coefficients, the new state by Horner's scheme.",
+    ),
 }
 _DOPRI5_DEFAULTS = "Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta."
 _DOP853_DEFAULTS = "Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6]."
@@ -197,6 +235,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            RODAS4, RosenbrockControl(), _NOTES["rodas4"]),
     Method("radau5", "Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.",
            RADAU5, RadauControl(), _NOTES["radau5"]),
+    Method("taylor", "Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; "
+           "for smooth scenes.", TAYLOR, TaylorControl(), _NOTES["taylor"]),
 )}
 # fmt: on
 """Every compiled integrator, in the order scenes list them by default."""

@@ -21,14 +21,20 @@ Sources:
   Solving ODEs II, Sec. IV.8, as Hairer's radau5.f (subroutine RADCOR): the
   nodes, eigenvalues and error weights from their closed forms (evaluated
   at 40 digits, then rounded), T and T^-1 the decimals of its DATA lines.
+- TAYLOR: no tableau; the order of the series from the tolerance, after
+  Jorba & Zou, Experiment. Math. 14 (2005), Sec. 3.3.1, as heyoka's
+  taylor_order_from_tol: p = max(2, ceil(-ln(rtol)/2 + 1)).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from fractions import Fraction as F
 
 import mpmath
+
+from gyrogen.abi import MIN_RTOL
 
 Terms = list[tuple[int, float]]
 
@@ -290,3 +296,27 @@ RODAS4 = Rosenbrock(
 # fmt: on
 
 RADAU5 = _radau5()
+
+
+@dataclass(frozen=True)
+class Series:
+    """A Taylor series method: no stages; the order of the series comes from
+    the tolerance (Jorba & Zou's p = ceil(-ln(tol)/2 + 1), at least min_order)
+    and is at most `order`, the one an rtol just above abi.MIN_RTOL asks for."""
+
+    order: int
+    min_order: int = 2
+
+    def order_for(self, tol: float) -> int:
+        """The order the generated code takes for rtol = tol (the same rule,
+        in Python, for tests and reports)."""
+        return min(self.order, max(self.min_order, math.ceil(-math.log(tol) / 2 + 1)))
+
+    def thresholds(self) -> tuple[float, ...]:
+        """e^(-2 (q - 1)) for q = min_order .. order - 1: the order is
+        min_order plus the number of these above rtol."""
+        return tuple(math.exp(-2.0 * (q - 1)) for q in range(self.min_order, self.order))
+
+
+TAYLOR = Series(order=math.ceil(-math.log(MIN_RTOL) / 2 + 1))
+"""rtol > abi.MIN_RTOL = 10 DBL_EPSILON: order 18 at most."""

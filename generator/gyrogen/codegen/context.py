@@ -23,6 +23,7 @@ from gyrogen.scene import Scene
 from gyrogen.setup_checks import CHECKS
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
+from gyrogen.symbolic.jet import Jet, decompose
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
 from gyrogen.symbolic.specialize import specialize
 
@@ -103,6 +104,13 @@ class SceneContext:
         """The diagonal blocks the implicit method's LU works in."""
         jac = self.optimized.jacobian
         return None if jac is None else diagonal_blocks(jac.outputs, self.nx)
+
+    @cached_property
+    def jet(self) -> Jet | None:
+        """The rhs as elementary operations, when a Taylor method expands it."""
+        if not any(m.taylor for m in self.methods):
+            return None
+        return decompose(self.optimized.rhs, self.states)
 
     @property
     def methods(self) -> list[Method]:

@@ -201,7 +201,34 @@ class Scene(_Strict):
             check_physics({**self.parameters, **self.simulate.parameters})
         if self.attitude == "quaternion":
             check_quaternion(self.simulate.initial)
+        self._series_where_smooth()
         return self
+
+    def _series_where_smooth(self) -> None:
+        """A Taylor series is offered only where the rhs is smooth: left out
+        of the default integrators elsewhere, refused when asked for."""
+        why = self.not_smooth
+        series = [m for m in self.integrators if methods.get(m).taylor]
+        if why is None or not series:
+            return
+        if "integrators" in self.model_fields_set:
+            raise ValueError(
+                f"integrators: {series[0]} is not offered for this scene: its rhs is not "
+                f"smooth ({why}), and a Taylor series would step over the kink (use dop853)"
+            )
+        kept = [m for m in self.integrators if m not in series]
+        object.__setattr__(self, "integrators", kept)  # the default, for this scene
+
+    @property
+    def not_smooth(self) -> str | None:
+        """Why the rhs is not smooth everywhere (a piecewise-linear torque
+        table, a clamped motor torque), or None."""
+        if self.effects.torque == "table":
+            return "a piecewise-linear torque table"
+        clamped = [k for k, r in enumerate(self.rotors, 1) if r.tau_max is not None]
+        if clamped:
+            return f"rotor {clamped[0]}'s motor torque is clamped to tau_max"
+        return None
 
     @property
     def states(self) -> tuple[str, ...]:

@@ -69,7 +69,8 @@ def files(unit: SceneContext) -> dict[str, str]:
     jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
     has_lanes = any(m.pair for m in unit.methods)
     inlined = [lanes_ode] if has_lanes and not lanes_ode.torque else []
-    ode_trig = trig_used(unit.prefix, [jac, *inlined])  # rhs_lanes is inlined in ode.c
+    expanded = [rhs] if unit.jet is not None else []  # the Taylor jet's sin and cos: the rhs's
+    ode_trig = trig_used(unit.prefix, [jac, *inlined, *expanded])  # rhs_lanes is inlined in ode.c
     gimbal_checks = ["cos", "cos_lanes"] if has_lanes else ["cos"]
     if not unit.quaternion:  # the gimbal-lock checks
         ode_trig = [n for n in VARIANTS if n in ode_trig + gimbal_checks]
@@ -87,7 +88,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "ode_trig": trig_text("c", unit.prefix, unit.macro, ode_trig),
         "methods": unit.methods,
         "ir": c_text(
-            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks),
+            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks, unit.jet),
             unit.prefix,
             unit.macro,
         ),

@@ -19,6 +19,7 @@ from gyrogen.codegen.integrators import (
     radau,
     radau_step,
     rosenbrock,
+    taylor,
     trig,
 )
 from gyrogen.codegen.ir.c import CPrinter
@@ -27,6 +28,7 @@ from gyrogen.codegen.ir.lanes import LanesPrinter
 from gyrogen.codegen.ir.nodes import Decl, Func
 from gyrogen.methods import Method
 from gyrogen.symbolic.blocks import Blocks
+from gyrogen.symbolic.jet import Jet
 
 
 def calls(funcs: list[Func]) -> set[str]:
@@ -45,7 +47,11 @@ class Program:
 
 
 def program(
-    methods: list[Method], quaternion: bool, uses_time: bool = False, blocks: Blocks | None = None
+    methods: list[Method],
+    quaternion: bool,
+    uses_time: bool = False,
+    blocks: Blocks | None = None,
+    jet: Jet | None = None,
 ) -> Program:
     pairs = [m for m in methods if m.pair]
     krows = explicit.rows(pairs) if pairs else 0
@@ -62,6 +68,9 @@ def program(
         if m.radau:
             implicit += [radau.factor(m), radau.newton(m), radau.error(m)]
             implicit.append(radau_step.integrate(m, quaternion))
+        if m.taylor:
+            assert jet is not None, "a Taylor method needs the scene's jet"
+            implicit += taylor.functions(m, jet, quaternion)
     adaptive = any(not m.fixed_step for m in methods)
     candidates = common.shared(quaternion, adaptive, True)
     if blocks is not None:

@@ -73,8 +73,8 @@ class CPrinter(Printer):
     def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
         if name == "finite":
             return f"(fabs({args[0]}) <= DBL_MAX)"
-        if name == "cos":
-            return f"{self.prefix}_cos({args[0]})"
+        if name in ("sin", "cos"):
+            return f"{self.prefix}_{name}({args[0]})"
         if name == "real":
             return f"(double){self.expr(nodes[0], ATOM)}"
         return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
@@ -98,6 +98,7 @@ class CPrinter(Printer):
         "end_loop": "}}",
         "continue": "continue;",
         "break": "break;",
+        "unused": "(void){name};  /* unused when every value is folded */",
         "for": "for ({v} = {start}; {v} < {stop}; ++{v}) {{",
         "end_for": "}}",
     }

@@ -73,8 +73,8 @@ class FortranPrinter(Printer):
     def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
         if name == "real":
             return f"real({args[0]}, c_double)"
-        if name == "cos":
-            return f"{self.prefix}_cos({args[0]})"
+        if name in ("sin", "cos"):
+            return f"{self.prefix}_{name}({args[0]})"
         if name == "pow":
             return f"{self.expr(nodes[0], ATOM)}**{self.expr(nodes[1], ATOM)}"
         return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
@@ -98,6 +98,10 @@ class FortranPrinter(Printer):
         "end_loop": "end do",
         "continue": "cycle",
         "break": "exit",
+        "unused": (
+            "associate (unused_{name} => {name})  ! unused when every value is folded\n"
+            "end associate"
+        ),
         "for": "do {v} = {start}, {stop} - 1",
         "end_for": "end do",
     }

@@ -69,8 +69,8 @@ class LanesPrinter(CPrinter):
         return f"{self.field(name)}[{j}]"
 
     def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
-        if name == "cos":
-            return f"{self.prefix}_cos_lanes({args[0]})"
+        if name in ("sin", "cos"):
+            return f"{self.prefix}_{name}_lanes({args[0]})"
         return super().call(name, args, nodes)
 
     def lane_loop(self, depth: int, body: list[str], simd: bool) -> list[str]:

@@ -251,6 +251,14 @@ class Call(S):
 
 
 @dataclass(frozen=True)
+class Unused(S):
+    """A parameter some scenes never read (C (void)name, a Fortran associate):
+    the strict builds refuse an unused one otherwise."""
+
+    name: str
+
+
+@dataclass(frozen=True)
 class Comment(S):
     text: str
     blank: bool = True

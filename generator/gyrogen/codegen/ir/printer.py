@@ -36,6 +36,7 @@ from gyrogen.codegen.ir.nodes import (
     S,
     Sel,
     Un,
+    Unused,
     Var,
 )
 from gyrogen.methods import literal
@@ -202,6 +203,8 @@ class Printer:
             ]
         if isinstance(s, (Continue, Break)):
             return [pad + say["continue" if isinstance(s, Continue) else "break"].format()]
+        if isinstance(s, Unused):
+            return [pad + line for line in say["unused"].format(name=s.name).split("\n")]
         assert isinstance(s, For), s
         head = say["for"].format(v=s.var, start=self.expr(s.start), stop=self.expr(s.n, 5))
         body = [*self.scoped_locals(s, depth + 1), *self.block(s.body, depth + 1)]

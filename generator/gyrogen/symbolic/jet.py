@@ -1,0 +1,195 @@
+"""The rhs as a DAG of elementary operations: what a Taylor method expands.
+
+Each node is a state, a hoisted constant c[i], a number, or one operation
+(+, -, unary -, *, /, sin, cos) on earlier nodes, so the nodes are in an
+order where every operand comes first. A node whose operands are all
+constant is constant: its Taylor coefficients past order 0 are zero, and a
+product or quotient by it is a scaling. sin and cos of one argument come as
+a pair (their recurrences read each other). The normalized Taylor
+coefficients of every node follow from its operands' by the recurrences of
+automatic differentiation (Jorba & Zou 2005, Sec. 2; heyoka's Taylor
+decomposition does the same), printed by gyrogen.codegen.integrators.taylor.
+
+Only smooth operations are expanded: a min or max (a torque clamp), a table
+or any other function is refused here, and the scene validator keeps the
+method away from such scenes first (gyrogen.scene.rules).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Literal
+
+import sympy as sm
+
+from gyrogen.errors import GyrogenError
+from gyrogen.symbolic.optimize import Block
+
+Op = Literal["x", "c", "num", "add", "sub", "neg", "mul", "div", "sin", "cos"]
+CONSTANT = re.compile(r"c(\d+)")
+
+
+class NotExpandable(GyrogenError):
+    """The rhs holds an operation a Taylor method cannot expand."""
+
+
+@dataclass(frozen=True)
+class Node:
+    op: Op
+    args: tuple[int, ...] = ()
+    index: int = 0
+    """x: the state's index; c: the constant's; sin and cos: the partner node."""
+    value: float = 0.0
+    """num: the number."""
+    const: bool = False
+
+
+@dataclass(frozen=True)
+class Jet:
+    """The nodes (the states first, 0 .. nx-1) and each state's derivative."""
+
+    nodes: tuple[Node, ...]
+    outputs: tuple[int, ...]
+
+    @property
+    def nx(self) -> int:
+        return len(self.outputs)
+
+    def convolutions(self) -> list[int]:
+        """The nodes whose order-k coefficient sums over lower orders (a
+        product or quotient of two varying nodes, sin, cos)."""
+        return [n for n, node in enumerate(self.nodes) if self.convolves(node)]
+
+    def convolves(self, node: Node) -> bool:
+        if node.const or node.op in ("x", "add", "sub", "neg"):
+            return False
+        if node.op in ("sin", "cos"):
+            return True
+        a, b = (self.nodes[i] for i in node.args)
+        return not a.const and not b.const if node.op == "mul" else not b.const
+
+
+class _Builder:
+    def __init__(self, states: tuple[sm.Symbol, ...], temporaries: dict[sm.Symbol, sm.Expr]):
+        self.nodes: list[Node] = [Node("x", index=i) for i in range(len(states))]
+        self.found: dict[Node, int] = {n: i for i, n in enumerate(self.nodes)}
+        self.states = {s: i for i, s in enumerate(states)}
+        self.temporaries = temporaries
+        self.memo: dict[sm.Expr, int] = {}
+        self.trig: dict[int, tuple[int, int]] = {}
+
+    def node(self, op: Op, *args: int, index: int = 0, value: float = 0.0) -> int:
+        const = op in ("c", "num") or (op != "x" and all(self.nodes[a].const for a in args))
+        key = Node(op, args, index, value, const)
+        if key not in self.found:
+            self.found[key] = len(self.nodes)
+            self.nodes.append(key)
+        return self.found[key]
+
+    def number(self, v: float) -> int:
+        return self.node("num", value=float(v))
+
+    def visit(self, e: sm.Expr) -> int:
+        if e not in self.memo:
+            self.memo[e] = self._visit(e)
+        return self.memo[e]
+
+    def _visit(self, e: sm.Expr) -> int:
+        if e.is_Symbol:
+            return self._symbol(e)
+        if e.is_Number:
+            return self.number(float(e))
+        if e.is_Add:
+            return self._add(e)
+        if e.is_Mul:
+            return self._mul(e)
+        if e.is_Pow:
+            return self._pow(e)
+        if isinstance(e, (sm.sin, sm.cos)):
+            s, c = self._sincos(self.visit(e.args[0]))
+            return s if isinstance(e, sm.sin) else c
+        what = type(e).__name__
+        if isinstance(e, (sm.Min, sm.Max, sm.Abs, sm.Piecewise, sm.sign, sm.Heaviside)):
+            raise NotExpandable(f"the rhs is not smooth ({what}): a Taylor series cannot cross it")
+        raise NotExpandable(f"the rhs calls {what}, which the Taylor method does not expand")
+
+    def _sincos(self, a: int) -> tuple[int, int]:
+        if a not in self.trig:
+            s, const = len(self.nodes), self.nodes[a].const
+            self.nodes += [Node("sin", (a,), s + 1, const=const), Node("cos", (a,), s, const=const)]
+            self.trig[a] = (s, s + 1)
+        return self.trig[a]
+
+    def _symbol(self, s: sm.Symbol) -> int:
+        if s in self.states:
+            return self.states[s]
+        if s in self.temporaries:
+            return self.visit(self.temporaries[s])
+        m = CONSTANT.fullmatch(s.name)
+        if m:
+            return self.node("c", index=int(m.group(1)))
+        raise NotExpandable(f"the rhs reads {s.name} (not a state or constant): time-dependent")
+
+    def _add(self, e: sm.Expr) -> int:
+        out: int | None = None
+        for term in e.args:
+            coeff, _ = term.as_coeff_Mul()
+            negative = coeff.is_negative
+            v = self.visit(-term if negative else term)
+            if out is None:
+                out = self.node("neg", v) if negative else v
+            else:
+                out = self.node("sub" if negative else "add", out, v)
+        assert out is not None
+        return out
+
+    def _product(self, factors: list[sm.Expr]) -> int | None:
+        out: int | None = None
+        for f in factors:
+            v = self.visit(f)
+            out = v if out is None else self.node("mul", out, v)
+        return out
+
+    def _mul(self, e: sm.Expr) -> int:
+        coeff, rest = e.as_coeff_Mul()
+        num: list[sm.Expr] = []
+        den: list[sm.Expr] = []
+        for f in sm.Mul.make_args(rest):
+            if f.is_Pow and f.exp.is_Integer and f.exp < 0:
+                den.append(f.base ** (-f.exp))
+            else:
+                num.append(f)
+        sign = -1 if coeff == -1 else 1
+        if coeff not in (1, -1):
+            num.insert(0, coeff)
+        top = self._product(num)
+        if den:
+            bottom = self._product(den)
+            assert bottom is not None
+            top = self.node("div", self.number(1.0) if top is None else top, bottom)
+        assert top is not None
+        return self.node("neg", top) if sign < 0 else top
+
+    def _pow(self, e: sm.Pow) -> int:
+        base, exp = e.base, e.exp
+        if not exp.is_Integer:
+            raise NotExpandable(
+                f"the rhs raises to the power {exp}, which the Taylor method does not expand"
+            )
+        n = int(exp)
+        if n < 0:
+            return self.node("div", self.number(1.0), self._pow(sm.Pow(base, -n, evaluate=False)))
+        b = self.visit(base)
+        out = b
+        for _ in range(n - 1):
+            out = self.node("mul", out, b)
+        return out
+
+
+def decompose(block: Block, states: tuple[sm.Symbol, ...]) -> Jet:
+    """The rhs block (dx/dt in state order) as a Jet; NotExpandable when it
+    holds anything but the smooth operations above."""
+    builder = _Builder(states, {a.lhs: a.rhs for a in block.temporaries})
+    outputs = tuple(builder.visit(e) for e in block.outputs)
+    return Jet(tuple(builder.nodes), outputs)
