@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 from hypothesis import strategies as st
-from scene_space import INTEGRATOR_LISTS, TARGET_LISTS, Draw, to_toml, toml_value
+from scene_space import INTEGRATOR_LISTS, TARGET_LISTS, Draw, offered, to_toml, toml_value
 
 from gyrogen.abi_rotors import MAX_ROTORS
 
@@ -120,7 +120,9 @@ def clusters(draw: st.DrawFn) -> Draw:
         "description": f"a drawn cluster of {n} rotors",
         "attitude": attitude,
         "targets": draw(TARGET_LISTS),
-        "integrators": draw(INTEGRATOR_LISTS),
+        "integrators": offered(
+            draw(INTEGRATOR_LISTS), all(r.get("tau_max") is None for r in rotors)
+        ),
     }
     tables = {
         "parameters": carrier,

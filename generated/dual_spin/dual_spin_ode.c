@@ -781,12 +781,12 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -945,12 +945,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1828,7 +1828,7 @@ int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rt
 
 /* The normalized Taylor coefficients of x and of the rhs's 46
    nodes to the given order (16 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, double (*tay)[53])
+static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[53])
 {
     double acc7;
     double acc8;
@@ -1846,10 +1846,10 @@ static inline void taylor_jet(int order, const double *x, double (*tay)[53])
     double acc41;
     double acc43;
     double acc50;
-    double rk;
-    double rk1;
+    double ib14;
+    double ub14;
     int j;
-    int k;
+    int n;
 
     /* order 0: the state and every node's value */
     tay[0][0] = x[0];
@@ -1896,6 +1896,8 @@ static inline void taylor_jet(int order, const double *x, double (*tay)[53])
     tay[0][49] = tay[0][46] - tay[0][48];
     tay[0][50] = tay[0][3] * tay[0][49];
     tay[0][51] = tay[0][43] + tay[0][50];
+    ib14 = 1.0 / tay[0][13];
+    ub14 = tay[0][14] / tay[0][13];
     tay[1][0] = tay[0][14];
     tay[1][1] = tay[0][17];
     tay[1][2] = tay[0][19];
@@ -1905,8 +1907,7 @@ static inline void taylor_jet(int order, const double *x, double (*tay)[53])
     tay[1][6] = 0.0;
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (k = 1; k < order; ++k) {
-        rk = 1.0 / (double)k;
+    for (n = 1; n < order; ++n) {
         acc7 = 0.0;
         acc8 = 0.0;
         acc9 = 0.0;
@@ -1923,72 +1924,71 @@ static inline void taylor_jet(int order, const double *x, double (*tay)[53])
         acc41 = 0.0;
         acc43 = 0.0;
         acc50 = 0.0;
-        for (j = 1; j < k; ++j) {
+        for (j = 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
-            acc7 = acc7 + w2 * tay[k - j][8];
-            acc8 = acc8 + w2 * tay[k - j][7];
-            acc9 = acc9 + tay[j][8] * tay[k - j][5];
-            acc10 = acc10 + tay[j][7] * tay[k - j][3];
-            acc12 = acc12 + w1 * tay[k - j][13];
-            acc13 = acc13 + w1 * tay[k - j][12];
-            acc14 = acc14 + tay[j][13] * tay[k - j][14];
-            acc15 = acc15 + tay[j][7] * tay[k - j][5];
-            acc16 = acc16 + tay[j][8] * tay[k - j][3];
-            acc18 = acc18 + tay[j][14] * tay[k - j][12];
-            acc25 = acc25 + tay[j][5] * tay[k - j][24];
-            acc31 = acc31 + tay[j][30] * tay[k - j][3];
-            acc34 = acc34 + tay[j][5] * tay[k - j][5];
-            acc41 = acc41 + tay[j][3] * tay[k - j][40];
-            acc43 = acc43 + tay[j][30] * tay[k - j][5];
-            acc50 = acc50 + tay[j][3] * tay[k - j][49];
+            acc7 = acc7 + w2 * tay[n - j][8];
+            acc8 = acc8 + w2 * tay[n - j][7];
+            acc9 = acc9 + tay[j][8] * tay[n - j][5];
+            acc10 = acc10 + tay[j][7] * tay[n - j][3];
+            acc12 = acc12 + w1 * tay[n - j][13];
+            acc13 = acc13 + w1 * tay[n - j][12];
+            acc14 = acc14 + tay[j][13] * tay[n - j][14];
+            acc15 = acc15 + tay[j][7] * tay[n - j][5];
+            acc16 = acc16 + tay[j][8] * tay[n - j][3];
+            acc18 = acc18 + tay[j][14] * tay[n - j][12];
+            acc25 = acc25 + tay[j][5] * tay[n - j][24];
+            acc31 = acc31 + tay[j][30] * tay[n - j][3];
+            acc34 = acc34 + tay[j][5] * tay[n - j][5];
+            acc41 = acc41 + tay[j][3] * tay[n - j][40];
+            acc43 = acc43 + tay[j][30] * tay[n - j][5];
+            acc50 = acc50 + tay[j][3] * tay[n - j][49];
         }
-        tay[k][7] = (acc7 + (double)k * tay[k][2] * tay[0][8]) * rk;
-        tay[k][8] = -((acc8 + (double)k * tay[k][2] * tay[0][7]) * rk);
-        tay[k][9] = tay[0][8] * tay[k][5] + acc9 + tay[k][8] * tay[0][5];
-        tay[k][10] = tay[0][7] * tay[k][3] + acc10 + tay[k][7] * tay[0][3];
-        tay[k][11] = tay[k][9] - tay[k][10];
-        tay[k][12] = (acc12 + (double)k * tay[k][1] * tay[0][13]) * rk;
-        tay[k][13] = -((acc13 + (double)k * tay[k][1] * tay[0][12]) * rk);
-        tay[k][14] = (tay[k][11] - (acc14 + tay[k][13] * tay[0][14])) / tay[0][13];
-        tay[k][15] = tay[0][7] * tay[k][5] + acc15 + tay[k][7] * tay[0][5];
-        tay[k][16] = tay[0][8] * tay[k][3] + acc16 + tay[k][8] * tay[0][3];
-        tay[k][17] = tay[k][15] + tay[k][16];
-        tay[k][18] = tay[0][14] * tay[k][12] + acc18 + tay[k][14] * tay[0][12];
-        tay[k][19] = tay[k][4] - tay[k][18];
-        tay[k][21] = 4.5440763299219775e-05 * tay[k][6];
-        tay[k][23] = 0.4092155481941839 * tay[k][4];
-        tay[k][24] = tay[k][21] + tay[k][23];
-        tay[k][25] = tay[0][5] * tay[k][24] + acc25 + tay[k][5] * tay[0][24];
-        tay[k][27] = 0.015471973456719416 * tay[k][4];
-        tay[k][29] = 1.1900419543364779e-06 * tay[k][6];
-        tay[k][30] = tay[k][27] - tay[k][29];
-        tay[k][31] = tay[0][30] * tay[k][3] + acc31 + tay[k][30] * tay[0][3];
-        tay[k][32] = tay[k][25] - tay[k][31];
-        tay[k][34] = tay[0][5] * tay[k][5] + acc34 + tay[k][5] * tay[0][5];
-        tay[k][35] = 0.01775954828743408 * tay[k][34];
-        tay[k][36] = -tay[k][35];
-        tay[k][37] = 0.01775954828743408 * tay[k][3];
-        tay[k][39] = 0.10773983913066638 * tay[k][5];
-        tay[k][40] = tay[k][37] - tay[k][39];
-        tay[k][41] = tay[0][3] * tay[k][40] + acc41 + tay[k][3] * tay[0][40];
-        tay[k][42] = tay[k][36] + tay[k][41];
-        tay[k][43] = tay[0][30] * tay[k][5] + acc43 + tay[k][30] * tay[0][5];
-        tay[k][45] = 5.266025597120826e-05 * tay[k][6];
-        tay[k][46] = -tay[k][45];
-        tay[k][48] = 0.3153534800671272 * tay[k][4];
-        tay[k][49] = tay[k][46] - tay[k][48];
-        tay[k][50] = tay[0][3] * tay[k][49] + acc50 + tay[k][3] * tay[0][49];
-        tay[k][51] = tay[k][43] + tay[k][50];
-        rk1 = 1.0 / (double)(k + 1);
-        tay[k + 1][0] = tay[k][14] * rk1;
-        tay[k + 1][1] = tay[k][17] * rk1;
-        tay[k + 1][2] = tay[k][19] * rk1;
-        tay[k + 1][3] = tay[k][32] * rk1;
-        tay[k + 1][4] = tay[k][42] * rk1;
-        tay[k + 1][5] = tay[k][51] * rk1;
-        tay[k + 1][6] = 0.0;
+        tay[n][7] = acc7 * inv[n] + tay[n][2] * tay[0][8];
+        tay[n][8] = -(acc8 * inv[n]) - tay[n][2] * tay[0][7];
+        tay[n][9] = acc9 + tay[0][8] * tay[n][5] + tay[n][8] * tay[0][5];
+        tay[n][10] = acc10 + tay[0][7] * tay[n][3] + tay[n][7] * tay[0][3];
+        tay[n][11] = tay[n][9] - tay[n][10];
+        tay[n][12] = acc12 * inv[n] + tay[n][1] * tay[0][13];
+        tay[n][13] = -(acc13 * inv[n]) - tay[n][1] * tay[0][12];
+        tay[n][14] = tay[n][11] * ib14 - (acc14 * ib14 + tay[n][13] * ub14);
+        tay[n][15] = acc15 + tay[0][7] * tay[n][5] + tay[n][7] * tay[0][5];
+        tay[n][16] = acc16 + tay[0][8] * tay[n][3] + tay[n][8] * tay[0][3];
+        tay[n][17] = tay[n][15] + tay[n][16];
+        tay[n][18] = acc18 + tay[0][14] * tay[n][12] + tay[n][14] * tay[0][12];
+        tay[n][19] = tay[n][4] - tay[n][18];
+        tay[n][21] = 4.5440763299219775e-05 * tay[n][6];
+        tay[n][23] = 0.4092155481941839 * tay[n][4];
+        tay[n][24] = tay[n][21] + tay[n][23];
+        tay[n][25] = acc25 + tay[0][5] * tay[n][24] + tay[n][5] * tay[0][24];
+        tay[n][27] = 0.015471973456719416 * tay[n][4];
+        tay[n][29] = 1.1900419543364779e-06 * tay[n][6];
+        tay[n][30] = tay[n][27] - tay[n][29];
+        tay[n][31] = acc31 + tay[0][30] * tay[n][3] + tay[n][30] * tay[0][3];
+        tay[n][32] = tay[n][25] - tay[n][31];
+        tay[n][34] = acc34 + tay[0][5] * tay[n][5] + tay[n][5] * tay[0][5];
+        tay[n][35] = 0.01775954828743408 * tay[n][34];
+        tay[n][36] = -tay[n][35];
+        tay[n][37] = 0.01775954828743408 * tay[n][3];
+        tay[n][39] = 0.10773983913066638 * tay[n][5];
+        tay[n][40] = tay[n][37] - tay[n][39];
+        tay[n][41] = acc41 + tay[0][3] * tay[n][40] + tay[n][3] * tay[0][40];
+        tay[n][42] = tay[n][36] + tay[n][41];
+        tay[n][43] = acc43 + tay[0][30] * tay[n][5] + tay[n][30] * tay[0][5];
+        tay[n][45] = 5.266025597120826e-05 * tay[n][6];
+        tay[n][46] = -tay[n][45];
+        tay[n][48] = 0.3153534800671272 * tay[n][4];
+        tay[n][49] = tay[n][46] - tay[n][48];
+        tay[n][50] = acc50 + tay[0][3] * tay[n][49] + tay[n][3] * tay[0][49];
+        tay[n][51] = tay[n][43] + tay[n][50];
+        tay[n + 1][0] = tay[n][14] * inv[n + 1];
+        tay[n + 1][1] = tay[n][17] * inv[n + 1];
+        tay[n + 1][2] = tay[n][19] * inv[n + 1];
+        tay[n + 1][3] = tay[n][32] * inv[n + 1];
+        tay[n + 1][4] = tay[n][42] * inv[n + 1];
+        tay[n + 1][5] = tay[n][51] * inv[n + 1];
+        tay[n + 1][6] = 0.0;
     }
 }
 
@@ -2001,17 +2001,26 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                             double atol, double h0, long max_steps, dual_spin_stats *stats)
 {
     double tay[19][53];
+    double inv[19] = {0.0};
+    double f0[DUAL_SPIN_NX];
     double xnew[DUAL_SPIN_NX];
     double dx[DUAL_SPIN_NX];
-    double comp[DUAL_SPIN_NX] = {0.0};
+    double comp[DUAL_SPIN_NX];
     int order;
-    int nonfinite;
-    int fresh;
-    int last;
-    double t;
-    double h;
     double rhofac;
     double scale;
+    int code;
+    double t;
+    double h;
+    double cap;
+    int nonfinite;
+    int last;
+    int run;
+    int take;
+    int ok;
+    int at;
+    int jump;
+    int retry;
     double xmax;
     double dp;
     double dq;
@@ -2019,19 +2028,9 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    (void)c;  /* unused when every value is folded */
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return DUAL_SPIN_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return DUAL_SPIN_ODE_OK;
-    }
-    if (!all_finite(x, DUAL_SPIN_NX)) {
-        return DUAL_SPIN_ODE_ERR_NONFINITE;
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (code >= 0) {
+        return code;
     }
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
@@ -2053,73 +2052,84 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
     scale = atol / rtol;
+    code = -1;
     t = t0;
     nonfinite = 0;
-    fresh = 1;
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    cap = h0 > 0.0 ? h : DBL_MAX;
     for (;;) {
-        if (fresh != 0) {
-            taylor_jet(order, x, tay);
-            stats->rhs_calls = stats->rhs_calls + 1;
-            xmax = 0.0;
-            dp = 0.0;
-            dq = 0.0;
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                xmax = dmax(xmax, fabs(x[i]));
-                dp = dmax(dp, fabs(tay[order][i]));
-                dq = dmax(dq, fabs(tay[order - 1][i]));
-            }
-            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
-                    1.0 / (double)(order - 1)));
-            h = dmin(rho * rhofac, t1 - t);
-            if (stats->accepted == 0 && h0 > 0.0) {
-                h = dmin(h, h0);  /* a first step no longer than h0 */
-            }
-            fresh = 0;
+
+        /* the coefficients at x, and the step they allow (Jorba and Zou) */
+        run = code < 0;
+        taylor_jet(order, x, inv, tay);
+        stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
+        xmax = 0.0;
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            xmax = dmax(xmax, fabs(x[i]));
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
         }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
-        if (last) {
-            h = t1 - t;
-        }
-        stats->h = h;
-        if (step_underflow(h, t)) {
-            return nonfinite != 0 ? DUAL_SPIN_ODE_ERR_NONFINITE : DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return DUAL_SPIN_ODE_ERR_MAX_STEPS;
-        }
+        h = last ? t1 - t : h;
+        stats->h = run ? h : stats->h;
+        code = run ? (step_underflow(h,
+                t) ? (nonfinite ? DUAL_SPIN_ODE_ERR_NONFINITE : DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW)
+                : stats->accepted + stats->rejected >= max_steps ? DUAL_SPIN_ODE_ERR_MAX_STEPS :
+                -1) : code;  /* a step lost in t, or no steps left, stops */
+        run = code < 0;
 
         /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
-            double acc;
-            acc = tay[order][i];
-            for (q = 0; q < order - 1; ++q) {
-                acc = tay[order - q - 1][i] + h * acc;
+            xnew[i] = tay[order][i];
+        }
+        for (q = 0; q < order - 1; ++q) {
+            for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                xnew[i] = tay[order - q - 1][i] + h * xnew[i];
             }
-            dx[i] = h * acc - comp[i];
+        }
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
         }
-        nonfinite = all_finite(xnew, DUAL_SPIN_NX) ? 0 : 1;
-        if (nonfinite != 0) {
-            stats->rejected = stats->rejected + 1;
-            h = h * 0.5;
-            last = 0;
-        } else {
-            if (gimbal_lock(x, xnew)) {
-                return DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            accept_step(x, xnew, dx, comp);
-            stats->accepted = stats->accepted + 1;
-            t = last ? t1 : t + h;
-            stats->t = t;
-            fresh = 1;
+        nonfinite = 0;
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
         }
-        if (last && nonfinite == 0) {
-            break;
+
+        /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+        take = run && !nonfinite;
+        at = fabs(dual_spin_cos(xnew[1])) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS;
+        jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !at && !jump;
+        retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
+        code = take && at && !jump ? DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                DUAL_SPIN_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (retry ? 1 : 0);
+        cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
+        if (ok) {
+            for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+        }
+        if (code >= 0) {
+            return code;
         }
     }
-    return DUAL_SPIN_ODE_OK;
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
@@ -2151,6 +2161,8 @@ struct lanes {
     long stats_accepted[DUAL_SPIN_LANES];
     long stats_rejected[DUAL_SPIN_LANES];
     long stats_rhs_calls[DUAL_SPIN_LANES];
+    double cap[DUAL_SPIN_LANES];
+    double tay[19][53][DUAL_SPIN_LANES];
     double ts[DUAL_SPIN_LANES];  /* the time of an rhs call */
     int busy[DUAL_SPIN_LANES];
     size_t traj[DUAL_SPIN_LANES];
@@ -2343,7 +2355,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 
     /* control: accept or reject by selection, and the next h */
-    /* pow: scalar calls */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
     for (l = 0; l < DUAL_SPIN_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
@@ -2699,6 +2711,334 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 46 */
+static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
+{
+    double acc7[DUAL_SPIN_LANES];
+    double acc8[DUAL_SPIN_LANES];
+    double acc9[DUAL_SPIN_LANES];
+    double acc10[DUAL_SPIN_LANES];
+    double acc12[DUAL_SPIN_LANES];
+    double acc13[DUAL_SPIN_LANES];
+    double acc14[DUAL_SPIN_LANES];
+    double acc15[DUAL_SPIN_LANES];
+    double acc16[DUAL_SPIN_LANES];
+    double acc18[DUAL_SPIN_LANES];
+    double acc25[DUAL_SPIN_LANES];
+    double acc31[DUAL_SPIN_LANES];
+    double acc34[DUAL_SPIN_LANES];
+    double acc41[DUAL_SPIN_LANES];
+    double acc43[DUAL_SPIN_LANES];
+    double acc50[DUAL_SPIN_LANES];
+    double ib14[DUAL_SPIN_LANES];
+    double ub14[DUAL_SPIN_LANES];
+    int j, l, n;
+    /* order 0: the state and every node's value */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->tay[0][0][l] = L->x[0][l];
+        L->tay[0][1][l] = L->x[1][l];
+        L->tay[0][2][l] = L->x[2][l];
+        L->tay[0][3][l] = L->x[3][l];
+        L->tay[0][4][l] = L->x[4][l];
+        L->tay[0][5][l] = L->x[5][l];
+        L->tay[0][6][l] = L->x[6][l];
+        L->tay[0][7][l] = dual_spin_sin_lanes(L->tay[0][2][l]);
+        L->tay[0][8][l] = dual_spin_cos_lanes(L->tay[0][2][l]);
+        L->tay[0][9][l] = L->tay[0][8][l] * L->tay[0][5][l];
+        L->tay[0][10][l] = L->tay[0][7][l] * L->tay[0][3][l];
+        L->tay[0][11][l] = L->tay[0][9][l] - L->tay[0][10][l];
+        L->tay[0][12][l] = dual_spin_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][13][l] = dual_spin_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][14][l] = L->tay[0][11][l] / L->tay[0][13][l];
+        L->tay[0][15][l] = L->tay[0][7][l] * L->tay[0][5][l];
+        L->tay[0][16][l] = L->tay[0][8][l] * L->tay[0][3][l];
+        L->tay[0][17][l] = L->tay[0][15][l] + L->tay[0][16][l];
+        L->tay[0][18][l] = L->tay[0][14][l] * L->tay[0][12][l];
+        L->tay[0][19][l] = L->tay[0][4][l] - L->tay[0][18][l];
+        L->tay[0][21][l] = 4.5440763299219775e-05 * L->tay[0][6][l];
+        L->tay[0][23][l] = 0.4092155481941839 * L->tay[0][4][l];
+        L->tay[0][24][l] = L->tay[0][21][l] + L->tay[0][23][l];
+        L->tay[0][25][l] = L->tay[0][5][l] * L->tay[0][24][l];
+        L->tay[0][27][l] = 0.015471973456719416 * L->tay[0][4][l];
+        L->tay[0][29][l] = 1.1900419543364779e-06 * L->tay[0][6][l];
+        L->tay[0][30][l] = L->tay[0][27][l] - L->tay[0][29][l];
+        L->tay[0][31][l] = L->tay[0][30][l] * L->tay[0][3][l];
+        L->tay[0][32][l] = L->tay[0][25][l] - L->tay[0][31][l];
+        L->tay[0][34][l] = L->tay[0][5][l] * L->tay[0][5][l];
+        L->tay[0][35][l] = 0.01775954828743408 * L->tay[0][34][l];
+        L->tay[0][36][l] = -L->tay[0][35][l];
+        L->tay[0][37][l] = 0.01775954828743408 * L->tay[0][3][l];
+        L->tay[0][39][l] = 0.10773983913066638 * L->tay[0][5][l];
+        L->tay[0][40][l] = L->tay[0][37][l] - L->tay[0][39][l];
+        L->tay[0][41][l] = L->tay[0][3][l] * L->tay[0][40][l];
+        L->tay[0][42][l] = L->tay[0][36][l] + L->tay[0][41][l];
+        L->tay[0][43][l] = L->tay[0][30][l] * L->tay[0][5][l];
+        L->tay[0][45][l] = 5.266025597120826e-05 * L->tay[0][6][l];
+        L->tay[0][46][l] = -L->tay[0][45][l];
+        L->tay[0][48][l] = 0.3153534800671272 * L->tay[0][4][l];
+        L->tay[0][49][l] = L->tay[0][46][l] - L->tay[0][48][l];
+        L->tay[0][50][l] = L->tay[0][3][l] * L->tay[0][49][l];
+        L->tay[0][51][l] = L->tay[0][43][l] + L->tay[0][50][l];
+        ib14[l] = 1.0 / L->tay[0][13][l];
+        ub14[l] = L->tay[0][14][l] / L->tay[0][13][l];
+        L->tay[1][0][l] = L->tay[0][14][l];
+        L->tay[1][1][l] = L->tay[0][17][l];
+        L->tay[1][2][l] = L->tay[0][19][l];
+        L->tay[1][3][l] = L->tay[0][32][l];
+        L->tay[1][4][l] = L->tay[0][42][l];
+        L->tay[1][5][l] = L->tay[0][51][l];
+        L->tay[1][6][l] = 0.0;
+    }
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (n = 1; n < order; ++n) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            acc7[l] = 0.0;
+            acc8[l] = 0.0;
+            acc9[l] = 0.0;
+            acc10[l] = 0.0;
+            acc12[l] = 0.0;
+            acc13[l] = 0.0;
+            acc14[l] = 0.0;
+            acc15[l] = 0.0;
+            acc16[l] = 0.0;
+            acc18[l] = 0.0;
+            acc25[l] = 0.0;
+            acc31[l] = 0.0;
+            acc34[l] = 0.0;
+            acc41[l] = 0.0;
+            acc43[l] = 0.0;
+            acc50[l] = 0.0;
+        }
+        for (j = 1; j < n; ++j) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                double w1, w2;
+                w1 = (double)j * L->tay[j][1][l];
+                w2 = (double)j * L->tay[j][2][l];
+                acc7[l] = acc7[l] + w2 * L->tay[n - j][8][l];
+                acc8[l] = acc8[l] + w2 * L->tay[n - j][7][l];
+                acc9[l] = acc9[l] + L->tay[j][8][l] * L->tay[n - j][5][l];
+                acc10[l] = acc10[l] + L->tay[j][7][l] * L->tay[n - j][3][l];
+                acc12[l] = acc12[l] + w1 * L->tay[n - j][13][l];
+                acc13[l] = acc13[l] + w1 * L->tay[n - j][12][l];
+                acc14[l] = acc14[l] + L->tay[j][13][l] * L->tay[n - j][14][l];
+                acc15[l] = acc15[l] + L->tay[j][7][l] * L->tay[n - j][5][l];
+                acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][3][l];
+                acc18[l] = acc18[l] + L->tay[j][14][l] * L->tay[n - j][12][l];
+                acc25[l] = acc25[l] + L->tay[j][5][l] * L->tay[n - j][24][l];
+                acc31[l] = acc31[l] + L->tay[j][30][l] * L->tay[n - j][3][l];
+                acc34[l] = acc34[l] + L->tay[j][5][l] * L->tay[n - j][5][l];
+                acc41[l] = acc41[l] + L->tay[j][3][l] * L->tay[n - j][40][l];
+                acc43[l] = acc43[l] + L->tay[j][30][l] * L->tay[n - j][5][l];
+                acc50[l] = acc50[l] + L->tay[j][3][l] * L->tay[n - j][49][l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->tay[n][7][l] = acc7[l] * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
+            L->tay[n][8][l] = -(acc8[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
+            L->tay[n][9][l] = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] *
+                    L->tay[0][5][l];
+            L->tay[n][10][l] = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] *
+                    L->tay[0][3][l];
+            L->tay[n][11][l] = L->tay[n][9][l] - L->tay[n][10][l];
+            L->tay[n][12][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][13][l];
+            L->tay[n][13][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][12][l];
+            L->tay[n][14][l] = L->tay[n][11][l] * ib14[l] - (acc14[l] * ib14[l] +
+                    L->tay[n][13][l] * ub14[l]);
+            L->tay[n][15][l] = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] *
+                    L->tay[0][5][l];
+            L->tay[n][16][l] = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] *
+                    L->tay[0][3][l];
+            L->tay[n][17][l] = L->tay[n][15][l] + L->tay[n][16][l];
+            L->tay[n][18][l] = acc18[l] + L->tay[0][14][l] * L->tay[n][12][l] + L->tay[n][14][l]
+                    * L->tay[0][12][l];
+            L->tay[n][19][l] = L->tay[n][4][l] - L->tay[n][18][l];
+            L->tay[n][21][l] = 4.5440763299219775e-05 * L->tay[n][6][l];
+            L->tay[n][23][l] = 0.4092155481941839 * L->tay[n][4][l];
+            L->tay[n][24][l] = L->tay[n][21][l] + L->tay[n][23][l];
+            L->tay[n][25][l] = acc25[l] + L->tay[0][5][l] * L->tay[n][24][l] + L->tay[n][5][l] *
+                    L->tay[0][24][l];
+            L->tay[n][27][l] = 0.015471973456719416 * L->tay[n][4][l];
+            L->tay[n][29][l] = 1.1900419543364779e-06 * L->tay[n][6][l];
+            L->tay[n][30][l] = L->tay[n][27][l] - L->tay[n][29][l];
+            L->tay[n][31][l] = acc31[l] + L->tay[0][30][l] * L->tay[n][3][l] + L->tay[n][30][l] *
+                    L->tay[0][3][l];
+            L->tay[n][32][l] = L->tay[n][25][l] - L->tay[n][31][l];
+            L->tay[n][34][l] = acc34[l] + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] *
+                    L->tay[0][5][l];
+            L->tay[n][35][l] = 0.01775954828743408 * L->tay[n][34][l];
+            L->tay[n][36][l] = -L->tay[n][35][l];
+            L->tay[n][37][l] = 0.01775954828743408 * L->tay[n][3][l];
+            L->tay[n][39][l] = 0.10773983913066638 * L->tay[n][5][l];
+            L->tay[n][40][l] = L->tay[n][37][l] - L->tay[n][39][l];
+            L->tay[n][41][l] = acc41[l] + L->tay[0][3][l] * L->tay[n][40][l] + L->tay[n][3][l] *
+                    L->tay[0][40][l];
+            L->tay[n][42][l] = L->tay[n][36][l] + L->tay[n][41][l];
+            L->tay[n][43][l] = acc43[l] + L->tay[0][30][l] * L->tay[n][5][l] + L->tay[n][30][l] *
+                    L->tay[0][5][l];
+            L->tay[n][45][l] = 5.266025597120826e-05 * L->tay[n][6][l];
+            L->tay[n][46][l] = -L->tay[n][45][l];
+            L->tay[n][48][l] = 0.3153534800671272 * L->tay[n][4][l];
+            L->tay[n][49][l] = L->tay[n][46][l] - L->tay[n][48][l];
+            L->tay[n][50][l] = acc50[l] + L->tay[0][3][l] * L->tay[n][49][l] + L->tay[n][3][l] *
+                    L->tay[0][49][l];
+            L->tay[n][51][l] = L->tay[n][43][l] + L->tay[n][50][l];
+            L->tay[n + 1][0][l] = L->tay[n][14][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = L->tay[n][17][l] * inv[n + 1];
+            L->tay[n + 1][2][l] = L->tay[n][19][l] * inv[n + 1];
+            L->tay[n + 1][3][l] = L->tay[n][32][l] * inv[n + 1];
+            L->tay[n + 1][4][l] = L->tay[n][42][l] * inv[n + 1];
+            L->tay[n + 1][5][l] = L->tay[n][51][l] * inv[n + 1];
+            L->tay[n + 1][6][l] = 0.0;
+        }
+    }
+}
+
+/* One step of taylor_integrate on every lane. */
+static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv[19];
+    int order;
+    double rhofac;
+    double scale;
+    int last[DUAL_SPIN_LANES];
+    int run[DUAL_SPIN_LANES];
+    int take[DUAL_SPIN_LANES];
+    int ok[DUAL_SPIN_LANES];
+    int at[DUAL_SPIN_LANES];
+    int jump[DUAL_SPIN_LANES];
+    int retry[DUAL_SPIN_LANES];
+    double xmax[DUAL_SPIN_LANES];
+    double dp[DUAL_SPIN_LANES];
+    double dq[DUAL_SPIN_LANES];
+    double rho[DUAL_SPIN_LANES];
+    int i, l, q;
+    (void)c;  /* unused when every value is folded */
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
+    scale = atol / rtol;
+
+    /* the coefficients at x, and the step they allow (Jorba and Zou) */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+    }
+    taylor_jet_lanes(L, order, inv);
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (run[l] ? 1 : 0);
+        xmax[l] = 0.0;
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rho[l] = exp(dmin(log(xmax[l] / dp[l]) * inv[order],
+                log(xmax[l] / dq[l]) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = run[l] ? L->h[l] : L->stats_h[l];
+        L->code[l] = run[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? DUAL_SPIN_ODE_ERR_NONFINITE :
+                DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? DUAL_SPIN_ODE_ERR_MAX_STEPS : -1) : L->code[l];  /* a step lost in t, or no steps left, stops */
+        run[l] = L->code[l] < 0;
+    }
+
+    /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (q = 0; q < order - 1; ++q) {
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - q - 1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * L->xnew[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->nonfinite[l] = 0;
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+
+    /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        take[l] = run[l] && !L->nonfinite[l];
+        at[l] = fabs(dual_spin_cos_lanes(L->xnew[1][l])) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS;
+        jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !at[l] && !jump[l];
+        retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */
+        L->code[l] = take[l] && at[l] && !jump[l] ? DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR : ok[l]
+                && last[l] ? DUAL_SPIN_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->cap[l] = ok[l] ? DBL_MAX : retry[l] ? L->h[l] * 0.5 : L->cap[l];
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
 static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
@@ -2716,15 +3056,16 @@ static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0,
         L->x[i][l] = x[i];
         L->k[0][i][l] = f0[i];
     }
+    L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
-    L->err_old[l] = 1e-4;
     L->nonfinite[l] = 0;
-    L->rejected_last[l] = 0;
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         L->comp[i][l] = 0.0;
     }
-    L->h[l] = h;
+    L->err_old[l] = 1e-4;
+    L->rejected_last[l] = 0;
+    L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
@@ -2913,23 +3254,11 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t dual_spin_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = dual_spin_taylor(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
-    }
-    return failed;
+    return pair_batch(taylor_step_lanes, 18, n, t0, t1, x, c, rtol, atol, h0,
+                      max_steps, stats, codes);
 }

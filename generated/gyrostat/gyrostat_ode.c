@@ -958,12 +958,12 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < GYROSTAT_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1122,12 +1122,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < GYROSTAT_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -2005,7 +2005,8 @@ int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rto
 
 /* The normalized Taylor coefficients of x and of the rhs's 52
    nodes to the given order (16 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *c, double (*tay)[66])
+static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
+                              double (*tay)[66])
 {
     double acc14;
     double acc15;
@@ -2023,10 +2024,10 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     double acc49;
     double acc56;
     double acc61;
-    double rk;
-    double rk1;
+    double ib21;
+    double ub21;
     int j;
-    int k;
+    int n;
 
     /* order 0: the state and every node's value */
     tay[0][0] = x[0];
@@ -2083,6 +2084,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     tay[0][60] = tay[0][58] - tay[0][59];
     tay[0][61] = tay[0][10] * tay[0][60];
     tay[0][62] = tay[0][56] + tay[0][61];
+    ib21 = 1.0 / tay[0][20];
+    ub21 = tay[0][21] / tay[0][20];
     tay[1][0] = tay[0][21];
     tay[1][1] = tay[0][24];
     tay[1][2] = tay[0][26];
@@ -2099,8 +2102,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     tay[1][13] = c[10];
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (k = 1; k < order; ++k) {
-        rk = 1.0 / (double)k;
+    for (n = 1; n < order; ++n) {
         acc14 = 0.0;
         acc15 = 0.0;
         acc16 = 0.0;
@@ -2117,82 +2119,81 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
         acc49 = 0.0;
         acc56 = 0.0;
         acc61 = 0.0;
-        for (j = 1; j < k; ++j) {
+        for (j = 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
-            acc14 = acc14 + w2 * tay[k - j][15];
-            acc15 = acc15 + w2 * tay[k - j][14];
-            acc16 = acc16 + tay[j][15] * tay[k - j][9];
-            acc17 = acc17 + tay[j][14] * tay[k - j][7];
-            acc19 = acc19 + w1 * tay[k - j][20];
-            acc20 = acc20 + w1 * tay[k - j][19];
-            acc21 = acc21 + tay[j][20] * tay[k - j][21];
-            acc22 = acc22 + tay[j][14] * tay[k - j][9];
-            acc23 = acc23 + tay[j][15] * tay[k - j][7];
-            acc25 = acc25 + tay[j][21] * tay[k - j][19];
-            acc33 = acc33 + tay[j][7] * tay[k - j][32];
-            acc39 = acc39 + tay[j][9] * tay[k - j][38];
-            acc47 = acc47 + tay[j][7] * tay[k - j][46];
-            acc49 = acc49 + tay[j][9] * tay[k - j][9];
-            acc56 = acc56 + tay[j][8] * tay[k - j][55];
-            acc61 = acc61 + tay[j][10] * tay[k - j][60];
+            acc14 = acc14 + w2 * tay[n - j][15];
+            acc15 = acc15 + w2 * tay[n - j][14];
+            acc16 = acc16 + tay[j][15] * tay[n - j][9];
+            acc17 = acc17 + tay[j][14] * tay[n - j][7];
+            acc19 = acc19 + w1 * tay[n - j][20];
+            acc20 = acc20 + w1 * tay[n - j][19];
+            acc21 = acc21 + tay[j][20] * tay[n - j][21];
+            acc22 = acc22 + tay[j][14] * tay[n - j][9];
+            acc23 = acc23 + tay[j][15] * tay[n - j][7];
+            acc25 = acc25 + tay[j][21] * tay[n - j][19];
+            acc33 = acc33 + tay[j][7] * tay[n - j][32];
+            acc39 = acc39 + tay[j][9] * tay[n - j][38];
+            acc47 = acc47 + tay[j][7] * tay[n - j][46];
+            acc49 = acc49 + tay[j][9] * tay[n - j][9];
+            acc56 = acc56 + tay[j][8] * tay[n - j][55];
+            acc61 = acc61 + tay[j][10] * tay[n - j][60];
         }
-        tay[k][14] = (acc14 + (double)k * tay[k][2] * tay[0][15]) * rk;
-        tay[k][15] = -((acc15 + (double)k * tay[k][2] * tay[0][14]) * rk);
-        tay[k][16] = tay[0][15] * tay[k][9] + acc16 + tay[k][15] * tay[0][9];
-        tay[k][17] = tay[0][14] * tay[k][7] + acc17 + tay[k][14] * tay[0][7];
-        tay[k][18] = tay[k][16] - tay[k][17];
-        tay[k][19] = (acc19 + (double)k * tay[k][1] * tay[0][20]) * rk;
-        tay[k][20] = -((acc20 + (double)k * tay[k][1] * tay[0][19]) * rk);
-        tay[k][21] = (tay[k][18] - (acc21 + tay[k][20] * tay[0][21])) / tay[0][20];
-        tay[k][22] = tay[0][14] * tay[k][9] + acc22 + tay[k][14] * tay[0][9];
-        tay[k][23] = tay[0][15] * tay[k][7] + acc23 + tay[k][15] * tay[0][7];
-        tay[k][24] = tay[k][22] + tay[k][23];
-        tay[k][25] = tay[0][21] * tay[k][19] + acc25 + tay[k][21] * tay[0][19];
-        tay[k][26] = tay[k][8] - tay[k][25];
-        tay[k][27] = tay[k][10] - tay[k][8];
-        tay[k][29] = c[0] * tay[k][8];
-        tay[k][31] = c[1] * tay[k][10];
-        tay[k][32] = tay[k][29] + tay[k][31];
-        tay[k][33] = tay[0][7] * tay[k][32] + acc33 + tay[k][7] * tay[0][32];
-        tay[k][35] = c[2] * tay[k][8];
-        tay[k][37] = c[3] * tay[k][10];
-        tay[k][38] = tay[k][35] + tay[k][37];
-        tay[k][39] = tay[0][9] * tay[k][38] + acc39 + tay[k][9] * tay[0][38];
-        tay[k][40] = tay[k][33] + tay[k][39];
-        tay[k][43] = c[4] * tay[k][7];
-        tay[k][45] = c[5] * tay[k][9];
-        tay[k][46] = tay[k][43] + tay[k][45];
-        tay[k][47] = tay[0][7] * tay[k][46] + acc47 + tay[k][7] * tay[0][46];
-        tay[k][48] = tay[k][47];
-        tay[k][49] = tay[0][9] * tay[k][9] + acc49 + tay[k][9] * tay[0][9];
-        tay[k][50] = c[4] * tay[k][49];
-        tay[k][51] = tay[k][48] - tay[k][50];
-        tay[k][53] = c[7] * tay[k][7];
-        tay[k][54] = c[0] * tay[k][9];
-        tay[k][55] = tay[k][53] - tay[k][54];
-        tay[k][56] = tay[0][8] * tay[k][55] + acc56 + tay[k][8] * tay[0][55];
-        tay[k][58] = c[8] * tay[k][7];
-        tay[k][59] = c[1] * tay[k][9];
-        tay[k][60] = tay[k][58] - tay[k][59];
-        tay[k][61] = tay[0][10] * tay[k][60] + acc61 + tay[k][10] * tay[0][60];
-        tay[k][62] = tay[k][56] + tay[k][61];
-        rk1 = 1.0 / (double)(k + 1);
-        tay[k + 1][0] = tay[k][21] * rk1;
-        tay[k + 1][1] = tay[k][24] * rk1;
-        tay[k + 1][2] = tay[k][26] * rk1;
-        tay[k + 1][3] = tay[k][27] * rk1;
-        tay[k + 1][4] = tay[k][11] * rk1;
-        tay[k + 1][5] = tay[k][12] * rk1;
-        tay[k + 1][6] = tay[k][13] * rk1;
-        tay[k + 1][7] = tay[k][40] * rk1;
-        tay[k + 1][8] = tay[k][51] * rk1;
-        tay[k + 1][9] = tay[k][62] * rk1;
-        tay[k + 1][10] = 0.0;
-        tay[k + 1][11] = 0.0;
-        tay[k + 1][12] = 0.0;
-        tay[k + 1][13] = 0.0;
+        tay[n][14] = acc14 * inv[n] + tay[n][2] * tay[0][15];
+        tay[n][15] = -(acc15 * inv[n]) - tay[n][2] * tay[0][14];
+        tay[n][16] = acc16 + tay[0][15] * tay[n][9] + tay[n][15] * tay[0][9];
+        tay[n][17] = acc17 + tay[0][14] * tay[n][7] + tay[n][14] * tay[0][7];
+        tay[n][18] = tay[n][16] - tay[n][17];
+        tay[n][19] = acc19 * inv[n] + tay[n][1] * tay[0][20];
+        tay[n][20] = -(acc20 * inv[n]) - tay[n][1] * tay[0][19];
+        tay[n][21] = tay[n][18] * ib21 - (acc21 * ib21 + tay[n][20] * ub21);
+        tay[n][22] = acc22 + tay[0][14] * tay[n][9] + tay[n][14] * tay[0][9];
+        tay[n][23] = acc23 + tay[0][15] * tay[n][7] + tay[n][15] * tay[0][7];
+        tay[n][24] = tay[n][22] + tay[n][23];
+        tay[n][25] = acc25 + tay[0][21] * tay[n][19] + tay[n][21] * tay[0][19];
+        tay[n][26] = tay[n][8] - tay[n][25];
+        tay[n][27] = tay[n][10] - tay[n][8];
+        tay[n][29] = c[0] * tay[n][8];
+        tay[n][31] = c[1] * tay[n][10];
+        tay[n][32] = tay[n][29] + tay[n][31];
+        tay[n][33] = acc33 + tay[0][7] * tay[n][32] + tay[n][7] * tay[0][32];
+        tay[n][35] = c[2] * tay[n][8];
+        tay[n][37] = c[3] * tay[n][10];
+        tay[n][38] = tay[n][35] + tay[n][37];
+        tay[n][39] = acc39 + tay[0][9] * tay[n][38] + tay[n][9] * tay[0][38];
+        tay[n][40] = tay[n][33] + tay[n][39];
+        tay[n][43] = c[4] * tay[n][7];
+        tay[n][45] = c[5] * tay[n][9];
+        tay[n][46] = tay[n][43] + tay[n][45];
+        tay[n][47] = acc47 + tay[0][7] * tay[n][46] + tay[n][7] * tay[0][46];
+        tay[n][48] = tay[n][47];
+        tay[n][49] = acc49 + tay[0][9] * tay[n][9] + tay[n][9] * tay[0][9];
+        tay[n][50] = c[4] * tay[n][49];
+        tay[n][51] = tay[n][48] - tay[n][50];
+        tay[n][53] = c[7] * tay[n][7];
+        tay[n][54] = c[0] * tay[n][9];
+        tay[n][55] = tay[n][53] - tay[n][54];
+        tay[n][56] = acc56 + tay[0][8] * tay[n][55] + tay[n][8] * tay[0][55];
+        tay[n][58] = c[8] * tay[n][7];
+        tay[n][59] = c[1] * tay[n][9];
+        tay[n][60] = tay[n][58] - tay[n][59];
+        tay[n][61] = acc61 + tay[0][10] * tay[n][60] + tay[n][10] * tay[0][60];
+        tay[n][62] = tay[n][56] + tay[n][61];
+        tay[n + 1][0] = tay[n][21] * inv[n + 1];
+        tay[n + 1][1] = tay[n][24] * inv[n + 1];
+        tay[n + 1][2] = tay[n][26] * inv[n + 1];
+        tay[n + 1][3] = tay[n][27] * inv[n + 1];
+        tay[n + 1][4] = tay[n][11] * inv[n + 1];
+        tay[n + 1][5] = tay[n][12] * inv[n + 1];
+        tay[n + 1][6] = tay[n][13] * inv[n + 1];
+        tay[n + 1][7] = tay[n][40] * inv[n + 1];
+        tay[n + 1][8] = tay[n][51] * inv[n + 1];
+        tay[n + 1][9] = tay[n][62] * inv[n + 1];
+        tay[n + 1][10] = 0.0;
+        tay[n + 1][11] = 0.0;
+        tay[n + 1][12] = 0.0;
+        tay[n + 1][13] = 0.0;
     }
 }
 
@@ -2205,17 +2206,26 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                             double atol, double h0, long max_steps, gyrostat_stats *stats)
 {
     double tay[19][66];
+    double inv[19] = {0.0};
+    double f0[GYROSTAT_NX];
     double xnew[GYROSTAT_NX];
     double dx[GYROSTAT_NX];
-    double comp[GYROSTAT_NX] = {0.0};
+    double comp[GYROSTAT_NX];
     int order;
-    int nonfinite;
-    int fresh;
-    int last;
-    double t;
-    double h;
     double rhofac;
     double scale;
+    int code;
+    double t;
+    double h;
+    double cap;
+    int nonfinite;
+    int last;
+    int run;
+    int take;
+    int ok;
+    int at;
+    int jump;
+    int retry;
     double xmax;
     double dp;
     double dq;
@@ -2223,18 +2233,9 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return GYROSTAT_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return GYROSTAT_ODE_OK;
-    }
-    if (!all_finite(x, GYROSTAT_NX)) {
-        return GYROSTAT_ODE_ERR_NONFINITE;
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (code >= 0) {
+        return code;
     }
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
@@ -2256,73 +2257,84 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
     scale = atol / rtol;
+    code = -1;
     t = t0;
     nonfinite = 0;
-    fresh = 1;
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    cap = h0 > 0.0 ? h : DBL_MAX;
     for (;;) {
-        if (fresh != 0) {
-            taylor_jet(order, x, c, tay);
-            stats->rhs_calls = stats->rhs_calls + 1;
-            xmax = 0.0;
-            dp = 0.0;
-            dq = 0.0;
-            for (i = 0; i < GYROSTAT_NX; ++i) {
-                xmax = dmax(xmax, fabs(x[i]));
-                dp = dmax(dp, fabs(tay[order][i]));
-                dq = dmax(dq, fabs(tay[order - 1][i]));
-            }
-            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
-                    1.0 / (double)(order - 1)));
-            h = dmin(rho * rhofac, t1 - t);
-            if (stats->accepted == 0 && h0 > 0.0) {
-                h = dmin(h, h0);  /* a first step no longer than h0 */
-            }
-            fresh = 0;
+
+        /* the coefficients at x, and the step they allow (Jorba and Zou) */
+        run = code < 0;
+        taylor_jet(order, x, c, inv, tay);
+        stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
+        xmax = 0.0;
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            xmax = dmax(xmax, fabs(x[i]));
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
         }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
-        if (last) {
-            h = t1 - t;
-        }
-        stats->h = h;
-        if (step_underflow(h, t)) {
-            return nonfinite != 0 ? GYROSTAT_ODE_ERR_NONFINITE : GYROSTAT_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return GYROSTAT_ODE_ERR_MAX_STEPS;
-        }
+        h = last ? t1 - t : h;
+        stats->h = run ? h : stats->h;
+        code = run ? (step_underflow(h,
+                t) ? (nonfinite ? GYROSTAT_ODE_ERR_NONFINITE : GYROSTAT_ODE_ERR_STEP_UNDERFLOW) :
+                stats->accepted + stats->rejected >= max_steps ? GYROSTAT_ODE_ERR_MAX_STEPS : -1)
+                : code;  /* a step lost in t, or no steps left, stops */
+        run = code < 0;
 
         /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
         for (i = 0; i < GYROSTAT_NX; ++i) {
-            double acc;
-            acc = tay[order][i];
-            for (q = 0; q < order - 1; ++q) {
-                acc = tay[order - q - 1][i] + h * acc;
+            xnew[i] = tay[order][i];
+        }
+        for (q = 0; q < order - 1; ++q) {
+            for (i = 0; i < GYROSTAT_NX; ++i) {
+                xnew[i] = tay[order - q - 1][i] + h * xnew[i];
             }
-            dx[i] = h * acc - comp[i];
+        }
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
         }
-        nonfinite = all_finite(xnew, GYROSTAT_NX) ? 0 : 1;
-        if (nonfinite != 0) {
-            stats->rejected = stats->rejected + 1;
-            h = h * 0.5;
-            last = 0;
-        } else {
-            if (gimbal_lock(x, xnew)) {
-                return GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            accept_step(x, xnew, dx, comp);
-            stats->accepted = stats->accepted + 1;
-            t = last ? t1 : t + h;
-            stats->t = t;
-            fresh = 1;
+        nonfinite = 0;
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
         }
-        if (last && nonfinite == 0) {
-            break;
+
+        /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+        take = run && !nonfinite;
+        at = fabs(gyrostat_cos(xnew[1])) < GYROSTAT_ODE_GIMBAL_LOCK_COS;
+        jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !at && !jump;
+        retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
+        code = take && at && !jump ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                GYROSTAT_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (retry ? 1 : 0);
+        cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
+        if (ok) {
+            for (i = 0; i < GYROSTAT_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+        }
+        if (code >= 0) {
+            return code;
         }
     }
-    return GYROSTAT_ODE_OK;
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
@@ -2354,6 +2366,8 @@ struct lanes {
     long stats_accepted[GYROSTAT_LANES];
     long stats_rejected[GYROSTAT_LANES];
     long stats_rhs_calls[GYROSTAT_LANES];
+    double cap[GYROSTAT_LANES];
+    double tay[19][66][GYROSTAT_LANES];
     double ts[GYROSTAT_LANES];  /* the time of an rhs call */
     int busy[GYROSTAT_LANES];
     size_t traj[GYROSTAT_LANES];
@@ -2555,7 +2569,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 
     /* control: accept or reject by selection, and the next h */
-    /* pow: scalar calls */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
     for (l = 0; l < GYROSTAT_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
@@ -2911,6 +2925,360 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 52 */
+static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
+{
+    double acc14[GYROSTAT_LANES];
+    double acc15[GYROSTAT_LANES];
+    double acc16[GYROSTAT_LANES];
+    double acc17[GYROSTAT_LANES];
+    double acc19[GYROSTAT_LANES];
+    double acc20[GYROSTAT_LANES];
+    double acc21[GYROSTAT_LANES];
+    double acc22[GYROSTAT_LANES];
+    double acc23[GYROSTAT_LANES];
+    double acc25[GYROSTAT_LANES];
+    double acc33[GYROSTAT_LANES];
+    double acc39[GYROSTAT_LANES];
+    double acc47[GYROSTAT_LANES];
+    double acc49[GYROSTAT_LANES];
+    double acc56[GYROSTAT_LANES];
+    double acc61[GYROSTAT_LANES];
+    double ib21[GYROSTAT_LANES];
+    double ub21[GYROSTAT_LANES];
+    int j, l, n;
+    /* order 0: the state and every node's value */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->tay[0][0][l] = L->x[0][l];
+        L->tay[0][1][l] = L->x[1][l];
+        L->tay[0][2][l] = L->x[2][l];
+        L->tay[0][3][l] = L->x[3][l];
+        L->tay[0][4][l] = L->x[4][l];
+        L->tay[0][5][l] = L->x[5][l];
+        L->tay[0][6][l] = L->x[6][l];
+        L->tay[0][7][l] = L->x[7][l];
+        L->tay[0][8][l] = L->x[8][l];
+        L->tay[0][9][l] = L->x[9][l];
+        L->tay[0][10][l] = L->x[10][l];
+        L->tay[0][11][l] = L->x[11][l];
+        L->tay[0][12][l] = L->x[12][l];
+        L->tay[0][13][l] = L->x[13][l];
+        L->tay[0][14][l] = gyrostat_sin_lanes(L->tay[0][2][l]);
+        L->tay[0][15][l] = gyrostat_cos_lanes(L->tay[0][2][l]);
+        L->tay[0][16][l] = L->tay[0][15][l] * L->tay[0][9][l];
+        L->tay[0][17][l] = L->tay[0][14][l] * L->tay[0][7][l];
+        L->tay[0][18][l] = L->tay[0][16][l] - L->tay[0][17][l];
+        L->tay[0][19][l] = gyrostat_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][20][l] = gyrostat_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][21][l] = L->tay[0][18][l] / L->tay[0][20][l];
+        L->tay[0][22][l] = L->tay[0][14][l] * L->tay[0][9][l];
+        L->tay[0][23][l] = L->tay[0][15][l] * L->tay[0][7][l];
+        L->tay[0][24][l] = L->tay[0][22][l] + L->tay[0][23][l];
+        L->tay[0][25][l] = L->tay[0][21][l] * L->tay[0][19][l];
+        L->tay[0][26][l] = L->tay[0][8][l] - L->tay[0][25][l];
+        L->tay[0][27][l] = L->tay[0][10][l] - L->tay[0][8][l];
+        L->tay[0][29][l] = c[0] * L->tay[0][8][l];
+        L->tay[0][31][l] = c[1] * L->tay[0][10][l];
+        L->tay[0][32][l] = L->tay[0][29][l] + L->tay[0][31][l];
+        L->tay[0][33][l] = L->tay[0][7][l] * L->tay[0][32][l];
+        L->tay[0][35][l] = c[2] * L->tay[0][8][l];
+        L->tay[0][37][l] = c[3] * L->tay[0][10][l];
+        L->tay[0][38][l] = L->tay[0][35][l] + L->tay[0][37][l];
+        L->tay[0][39][l] = L->tay[0][9][l] * L->tay[0][38][l];
+        L->tay[0][40][l] = L->tay[0][33][l] + L->tay[0][39][l];
+        L->tay[0][43][l] = c[4] * L->tay[0][7][l];
+        L->tay[0][45][l] = c[5] * L->tay[0][9][l];
+        L->tay[0][46][l] = L->tay[0][43][l] + L->tay[0][45][l];
+        L->tay[0][47][l] = L->tay[0][7][l] * L->tay[0][46][l];
+        L->tay[0][48][l] = c[6] + L->tay[0][47][l];
+        L->tay[0][49][l] = L->tay[0][9][l] * L->tay[0][9][l];
+        L->tay[0][50][l] = c[4] * L->tay[0][49][l];
+        L->tay[0][51][l] = L->tay[0][48][l] - L->tay[0][50][l];
+        L->tay[0][53][l] = c[7] * L->tay[0][7][l];
+        L->tay[0][54][l] = c[0] * L->tay[0][9][l];
+        L->tay[0][55][l] = L->tay[0][53][l] - L->tay[0][54][l];
+        L->tay[0][56][l] = L->tay[0][8][l] * L->tay[0][55][l];
+        L->tay[0][58][l] = c[8] * L->tay[0][7][l];
+        L->tay[0][59][l] = c[1] * L->tay[0][9][l];
+        L->tay[0][60][l] = L->tay[0][58][l] - L->tay[0][59][l];
+        L->tay[0][61][l] = L->tay[0][10][l] * L->tay[0][60][l];
+        L->tay[0][62][l] = L->tay[0][56][l] + L->tay[0][61][l];
+        ib21[l] = 1.0 / L->tay[0][20][l];
+        ub21[l] = L->tay[0][21][l] / L->tay[0][20][l];
+        L->tay[1][0][l] = L->tay[0][21][l];
+        L->tay[1][1][l] = L->tay[0][24][l];
+        L->tay[1][2][l] = L->tay[0][26][l];
+        L->tay[1][3][l] = L->tay[0][27][l];
+        L->tay[1][4][l] = L->tay[0][11][l];
+        L->tay[1][5][l] = L->tay[0][12][l];
+        L->tay[1][6][l] = L->tay[0][13][l];
+        L->tay[1][7][l] = L->tay[0][40][l];
+        L->tay[1][8][l] = L->tay[0][51][l];
+        L->tay[1][9][l] = L->tay[0][62][l];
+        L->tay[1][10][l] = c[9];
+        L->tay[1][11][l] = 0.0;
+        L->tay[1][12][l] = 0.0;
+        L->tay[1][13][l] = c[10];
+    }
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (n = 1; n < order; ++n) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            acc14[l] = 0.0;
+            acc15[l] = 0.0;
+            acc16[l] = 0.0;
+            acc17[l] = 0.0;
+            acc19[l] = 0.0;
+            acc20[l] = 0.0;
+            acc21[l] = 0.0;
+            acc22[l] = 0.0;
+            acc23[l] = 0.0;
+            acc25[l] = 0.0;
+            acc33[l] = 0.0;
+            acc39[l] = 0.0;
+            acc47[l] = 0.0;
+            acc49[l] = 0.0;
+            acc56[l] = 0.0;
+            acc61[l] = 0.0;
+        }
+        for (j = 1; j < n; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double w1, w2;
+                w1 = (double)j * L->tay[j][1][l];
+                w2 = (double)j * L->tay[j][2][l];
+                acc14[l] = acc14[l] + w2 * L->tay[n - j][15][l];
+                acc15[l] = acc15[l] + w2 * L->tay[n - j][14][l];
+                acc16[l] = acc16[l] + L->tay[j][15][l] * L->tay[n - j][9][l];
+                acc17[l] = acc17[l] + L->tay[j][14][l] * L->tay[n - j][7][l];
+                acc19[l] = acc19[l] + w1 * L->tay[n - j][20][l];
+                acc20[l] = acc20[l] + w1 * L->tay[n - j][19][l];
+                acc21[l] = acc21[l] + L->tay[j][20][l] * L->tay[n - j][21][l];
+                acc22[l] = acc22[l] + L->tay[j][14][l] * L->tay[n - j][9][l];
+                acc23[l] = acc23[l] + L->tay[j][15][l] * L->tay[n - j][7][l];
+                acc25[l] = acc25[l] + L->tay[j][21][l] * L->tay[n - j][19][l];
+                acc33[l] = acc33[l] + L->tay[j][7][l] * L->tay[n - j][32][l];
+                acc39[l] = acc39[l] + L->tay[j][9][l] * L->tay[n - j][38][l];
+                acc47[l] = acc47[l] + L->tay[j][7][l] * L->tay[n - j][46][l];
+                acc49[l] = acc49[l] + L->tay[j][9][l] * L->tay[n - j][9][l];
+                acc56[l] = acc56[l] + L->tay[j][8][l] * L->tay[n - j][55][l];
+                acc61[l] = acc61[l] + L->tay[j][10][l] * L->tay[n - j][60][l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->tay[n][14][l] = acc14[l] * inv[n] + L->tay[n][2][l] * L->tay[0][15][l];
+            L->tay[n][15][l] = -(acc15[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][14][l];
+            L->tay[n][16][l] = acc16[l] + L->tay[0][15][l] * L->tay[n][9][l] + L->tay[n][15][l] *
+                    L->tay[0][9][l];
+            L->tay[n][17][l] = acc17[l] + L->tay[0][14][l] * L->tay[n][7][l] + L->tay[n][14][l] *
+                    L->tay[0][7][l];
+            L->tay[n][18][l] = L->tay[n][16][l] - L->tay[n][17][l];
+            L->tay[n][19][l] = acc19[l] * inv[n] + L->tay[n][1][l] * L->tay[0][20][l];
+            L->tay[n][20][l] = -(acc20[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][19][l];
+            L->tay[n][21][l] = L->tay[n][18][l] * ib21[l] - (acc21[l] * ib21[l] +
+                    L->tay[n][20][l] * ub21[l]);
+            L->tay[n][22][l] = acc22[l] + L->tay[0][14][l] * L->tay[n][9][l] + L->tay[n][14][l] *
+                    L->tay[0][9][l];
+            L->tay[n][23][l] = acc23[l] + L->tay[0][15][l] * L->tay[n][7][l] + L->tay[n][15][l] *
+                    L->tay[0][7][l];
+            L->tay[n][24][l] = L->tay[n][22][l] + L->tay[n][23][l];
+            L->tay[n][25][l] = acc25[l] + L->tay[0][21][l] * L->tay[n][19][l] + L->tay[n][21][l]
+                    * L->tay[0][19][l];
+            L->tay[n][26][l] = L->tay[n][8][l] - L->tay[n][25][l];
+            L->tay[n][27][l] = L->tay[n][10][l] - L->tay[n][8][l];
+            L->tay[n][29][l] = c[0] * L->tay[n][8][l];
+            L->tay[n][31][l] = c[1] * L->tay[n][10][l];
+            L->tay[n][32][l] = L->tay[n][29][l] + L->tay[n][31][l];
+            L->tay[n][33][l] = acc33[l] + L->tay[0][7][l] * L->tay[n][32][l] + L->tay[n][7][l] *
+                    L->tay[0][32][l];
+            L->tay[n][35][l] = c[2] * L->tay[n][8][l];
+            L->tay[n][37][l] = c[3] * L->tay[n][10][l];
+            L->tay[n][38][l] = L->tay[n][35][l] + L->tay[n][37][l];
+            L->tay[n][39][l] = acc39[l] + L->tay[0][9][l] * L->tay[n][38][l] + L->tay[n][9][l] *
+                    L->tay[0][38][l];
+            L->tay[n][40][l] = L->tay[n][33][l] + L->tay[n][39][l];
+            L->tay[n][43][l] = c[4] * L->tay[n][7][l];
+            L->tay[n][45][l] = c[5] * L->tay[n][9][l];
+            L->tay[n][46][l] = L->tay[n][43][l] + L->tay[n][45][l];
+            L->tay[n][47][l] = acc47[l] + L->tay[0][7][l] * L->tay[n][46][l] + L->tay[n][7][l] *
+                    L->tay[0][46][l];
+            L->tay[n][48][l] = L->tay[n][47][l];
+            L->tay[n][49][l] = acc49[l] + L->tay[0][9][l] * L->tay[n][9][l] + L->tay[n][9][l] *
+                    L->tay[0][9][l];
+            L->tay[n][50][l] = c[4] * L->tay[n][49][l];
+            L->tay[n][51][l] = L->tay[n][48][l] - L->tay[n][50][l];
+            L->tay[n][53][l] = c[7] * L->tay[n][7][l];
+            L->tay[n][54][l] = c[0] * L->tay[n][9][l];
+            L->tay[n][55][l] = L->tay[n][53][l] - L->tay[n][54][l];
+            L->tay[n][56][l] = acc56[l] + L->tay[0][8][l] * L->tay[n][55][l] + L->tay[n][8][l] *
+                    L->tay[0][55][l];
+            L->tay[n][58][l] = c[8] * L->tay[n][7][l];
+            L->tay[n][59][l] = c[1] * L->tay[n][9][l];
+            L->tay[n][60][l] = L->tay[n][58][l] - L->tay[n][59][l];
+            L->tay[n][61][l] = acc61[l] + L->tay[0][10][l] * L->tay[n][60][l] + L->tay[n][10][l]
+                    * L->tay[0][60][l];
+            L->tay[n][62][l] = L->tay[n][56][l] + L->tay[n][61][l];
+            L->tay[n + 1][0][l] = L->tay[n][21][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = L->tay[n][24][l] * inv[n + 1];
+            L->tay[n + 1][2][l] = L->tay[n][26][l] * inv[n + 1];
+            L->tay[n + 1][3][l] = L->tay[n][27][l] * inv[n + 1];
+            L->tay[n + 1][4][l] = L->tay[n][11][l] * inv[n + 1];
+            L->tay[n + 1][5][l] = L->tay[n][12][l] * inv[n + 1];
+            L->tay[n + 1][6][l] = L->tay[n][13][l] * inv[n + 1];
+            L->tay[n + 1][7][l] = L->tay[n][40][l] * inv[n + 1];
+            L->tay[n + 1][8][l] = L->tay[n][51][l] * inv[n + 1];
+            L->tay[n + 1][9][l] = L->tay[n][62][l] * inv[n + 1];
+            L->tay[n + 1][10][l] = 0.0;
+            L->tay[n + 1][11][l] = 0.0;
+            L->tay[n + 1][12][l] = 0.0;
+            L->tay[n + 1][13][l] = 0.0;
+        }
+    }
+}
+
+/* One step of taylor_integrate on every lane. */
+static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv[19];
+    int order;
+    double rhofac;
+    double scale;
+    int last[GYROSTAT_LANES];
+    int run[GYROSTAT_LANES];
+    int take[GYROSTAT_LANES];
+    int ok[GYROSTAT_LANES];
+    int at[GYROSTAT_LANES];
+    int jump[GYROSTAT_LANES];
+    int retry[GYROSTAT_LANES];
+    double xmax[GYROSTAT_LANES];
+    double dp[GYROSTAT_LANES];
+    double dq[GYROSTAT_LANES];
+    double rho[GYROSTAT_LANES];
+    int i, l, q;
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
+    scale = atol / rtol;
+
+    /* the coefficients at x, and the step they allow (Jorba and Zou) */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+    }
+    taylor_jet_lanes(L, order, c, inv);
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (run[l] ? 1 : 0);
+        xmax[l] = 0.0;
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rho[l] = exp(dmin(log(xmax[l] / dp[l]) * inv[order],
+                log(xmax[l] / dq[l]) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = run[l] ? L->h[l] : L->stats_h[l];
+        L->code[l] = run[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? GYROSTAT_ODE_ERR_NONFINITE :
+                GYROSTAT_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? GYROSTAT_ODE_ERR_MAX_STEPS : -1) : L->code[l];  /* a step lost in t, or no steps left, stops */
+        run[l] = L->code[l] < 0;
+    }
+
+    /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (q = 0; q < order - 1; ++q) {
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - q - 1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * L->xnew[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->nonfinite[l] = 0;
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+
+    /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        take[l] = run[l] && !L->nonfinite[l];
+        at[l] = fabs(gyrostat_cos_lanes(L->xnew[1][l])) < GYROSTAT_ODE_GIMBAL_LOCK_COS;
+        jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !at[l] && !jump[l];
+        retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */
+        L->code[l] = take[l] && at[l] && !jump[l] ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? GYROSTAT_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->cap[l] = ok[l] ? DBL_MAX : retry[l] ? L->h[l] * 0.5 : L->cap[l];
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
 static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
@@ -2928,15 +3296,16 @@ static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0,
         L->x[i][l] = x[i];
         L->k[0][i][l] = f0[i];
     }
+    L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
-    L->err_old[l] = 1e-4;
     L->nonfinite[l] = 0;
-    L->rejected_last[l] = 0;
     for (i = 0; i < GYROSTAT_NX; ++i) {
         L->comp[i][l] = 0.0;
     }
-    L->h[l] = h;
+    L->err_old[l] = 1e-4;
+    L->rejected_last[l] = 0;
+    L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
@@ -3125,23 +3494,11 @@ size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const do
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
+/* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t gyrostat_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = gyrostat_taylor(t0, t1, x + (size_t)i * GYROSTAT_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != GYROSTAT_ODE_OK);
-    }
-    return failed;
+    return pair_batch(taylor_step_lanes, 18, n, t0, t1, x, c, rtol, atol, h0,
+                      max_steps, stats, codes);
 }

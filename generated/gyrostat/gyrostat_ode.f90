@@ -984,12 +984,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -1171,12 +1171,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -2174,10 +2174,11 @@ contains
 
   ! The normalized Taylor coefficients of x and of the rhs's 52
   ! nodes to the given order (16 of them convolutions).
-  subroutine taylor_jet(order, x, c, tay)
+  subroutine taylor_jet(order, x, c, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: inv(0:19 - 1)
     real(c_double), intent(inout) :: tay(0:66 - 1, 0:19 - 1)
     real(c_double) :: acc14
     real(c_double) :: acc15
@@ -2195,12 +2196,12 @@ contains
     real(c_double) :: acc49
     real(c_double) :: acc56
     real(c_double) :: acc61
-    real(c_double) :: rk
-    real(c_double) :: rk1
+    real(c_double) :: ib21
+    real(c_double) :: ub21
     real(c_double) :: w1
     real(c_double) :: w2
     integer(c_int) :: j
-    integer(c_int) :: k
+    integer(c_int) :: n
 
     ! order 0: the state and every node's value
     tay(0, 0) = x(0)
@@ -2257,6 +2258,8 @@ contains
     tay(60, 0) = tay(58, 0) - tay(59, 0)
     tay(61, 0) = tay(10, 0) * tay(60, 0)
     tay(62, 0) = tay(56, 0) + tay(61, 0)
+    ib21 = 1.0_c_double / tay(20, 0)
+    ub21 = tay(21, 0) / tay(20, 0)
     tay(0, 1) = tay(21, 0)
     tay(1, 1) = tay(24, 0)
     tay(2, 1) = tay(26, 0)
@@ -2273,8 +2276,7 @@ contains
     tay(13, 1) = c(10)
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do k = 1, order - 1
-      rk = 1.0_c_double / real(k, c_double)
+    do n = 1, order - 1
       acc14 = 0.0_c_double
       acc15 = 0.0_c_double
       acc16 = 0.0_c_double
@@ -2291,81 +2293,80 @@ contains
       acc49 = 0.0_c_double
       acc56 = 0.0_c_double
       acc61 = 0.0_c_double
-      do j = 1, k - 1
+      do j = 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
-        acc14 = acc14 + w2 * tay(15, k - j)
-        acc15 = acc15 + w2 * tay(14, k - j)
-        acc16 = acc16 + tay(15, j) * tay(9, k - j)
-        acc17 = acc17 + tay(14, j) * tay(7, k - j)
-        acc19 = acc19 + w1 * tay(20, k - j)
-        acc20 = acc20 + w1 * tay(19, k - j)
-        acc21 = acc21 + tay(20, j) * tay(21, k - j)
-        acc22 = acc22 + tay(14, j) * tay(9, k - j)
-        acc23 = acc23 + tay(15, j) * tay(7, k - j)
-        acc25 = acc25 + tay(21, j) * tay(19, k - j)
-        acc33 = acc33 + tay(7, j) * tay(32, k - j)
-        acc39 = acc39 + tay(9, j) * tay(38, k - j)
-        acc47 = acc47 + tay(7, j) * tay(46, k - j)
-        acc49 = acc49 + tay(9, j) * tay(9, k - j)
-        acc56 = acc56 + tay(8, j) * tay(55, k - j)
-        acc61 = acc61 + tay(10, j) * tay(60, k - j)
+        acc14 = acc14 + w2 * tay(15, n - j)
+        acc15 = acc15 + w2 * tay(14, n - j)
+        acc16 = acc16 + tay(15, j) * tay(9, n - j)
+        acc17 = acc17 + tay(14, j) * tay(7, n - j)
+        acc19 = acc19 + w1 * tay(20, n - j)
+        acc20 = acc20 + w1 * tay(19, n - j)
+        acc21 = acc21 + tay(20, j) * tay(21, n - j)
+        acc22 = acc22 + tay(14, j) * tay(9, n - j)
+        acc23 = acc23 + tay(15, j) * tay(7, n - j)
+        acc25 = acc25 + tay(21, j) * tay(19, n - j)
+        acc33 = acc33 + tay(7, j) * tay(32, n - j)
+        acc39 = acc39 + tay(9, j) * tay(38, n - j)
+        acc47 = acc47 + tay(7, j) * tay(46, n - j)
+        acc49 = acc49 + tay(9, j) * tay(9, n - j)
+        acc56 = acc56 + tay(8, j) * tay(55, n - j)
+        acc61 = acc61 + tay(10, j) * tay(60, n - j)
       end do
-      tay(14, k) = (acc14 + (real(k, c_double) * tay(2, k)) * tay(15, 0)) * rk
-      tay(15, k) = -(acc15 + (real(k, c_double) * tay(2, k)) * tay(14, 0)) * rk
-      tay(16, k) = (tay(15, 0) * tay(9, k) + acc16) + tay(15, k) * tay(9, 0)
-      tay(17, k) = (tay(14, 0) * tay(7, k) + acc17) + tay(14, k) * tay(7, 0)
-      tay(18, k) = tay(16, k) - tay(17, k)
-      tay(19, k) = (acc19 + (real(k, c_double) * tay(1, k)) * tay(20, 0)) * rk
-      tay(20, k) = -(acc20 + (real(k, c_double) * tay(1, k)) * tay(19, 0)) * rk
-      tay(21, k) = (tay(18, k) - (acc21 + tay(20, k) * tay(21, 0))) / tay(20, 0)
-      tay(22, k) = (tay(14, 0) * tay(9, k) + acc22) + tay(14, k) * tay(9, 0)
-      tay(23, k) = (tay(15, 0) * tay(7, k) + acc23) + tay(15, k) * tay(7, 0)
-      tay(24, k) = tay(22, k) + tay(23, k)
-      tay(25, k) = (tay(21, 0) * tay(19, k) + acc25) + tay(21, k) * tay(19, 0)
-      tay(26, k) = tay(8, k) - tay(25, k)
-      tay(27, k) = tay(10, k) - tay(8, k)
-      tay(29, k) = c(0) * tay(8, k)
-      tay(31, k) = c(1) * tay(10, k)
-      tay(32, k) = tay(29, k) + tay(31, k)
-      tay(33, k) = (tay(7, 0) * tay(32, k) + acc33) + tay(7, k) * tay(32, 0)
-      tay(35, k) = c(2) * tay(8, k)
-      tay(37, k) = c(3) * tay(10, k)
-      tay(38, k) = tay(35, k) + tay(37, k)
-      tay(39, k) = (tay(9, 0) * tay(38, k) + acc39) + tay(9, k) * tay(38, 0)
-      tay(40, k) = tay(33, k) + tay(39, k)
-      tay(43, k) = c(4) * tay(7, k)
-      tay(45, k) = c(5) * tay(9, k)
-      tay(46, k) = tay(43, k) + tay(45, k)
-      tay(47, k) = (tay(7, 0) * tay(46, k) + acc47) + tay(7, k) * tay(46, 0)
-      tay(48, k) = tay(47, k)
-      tay(49, k) = (tay(9, 0) * tay(9, k) + acc49) + tay(9, k) * tay(9, 0)
-      tay(50, k) = c(4) * tay(49, k)
-      tay(51, k) = tay(48, k) - tay(50, k)
-      tay(53, k) = c(7) * tay(7, k)
-      tay(54, k) = c(0) * tay(9, k)
-      tay(55, k) = tay(53, k) - tay(54, k)
-      tay(56, k) = (tay(8, 0) * tay(55, k) + acc56) + tay(8, k) * tay(55, 0)
-      tay(58, k) = c(8) * tay(7, k)
-      tay(59, k) = c(1) * tay(9, k)
-      tay(60, k) = tay(58, k) - tay(59, k)
-      tay(61, k) = (tay(10, 0) * tay(60, k) + acc61) + tay(10, k) * tay(60, 0)
-      tay(62, k) = tay(56, k) + tay(61, k)
-      rk1 = 1.0_c_double / real(k + 1, c_double)
-      tay(0, k + 1) = tay(21, k) * rk1
-      tay(1, k + 1) = tay(24, k) * rk1
-      tay(2, k + 1) = tay(26, k) * rk1
-      tay(3, k + 1) = tay(27, k) * rk1
-      tay(4, k + 1) = tay(11, k) * rk1
-      tay(5, k + 1) = tay(12, k) * rk1
-      tay(6, k + 1) = tay(13, k) * rk1
-      tay(7, k + 1) = tay(40, k) * rk1
-      tay(8, k + 1) = tay(51, k) * rk1
-      tay(9, k + 1) = tay(62, k) * rk1
-      tay(10, k + 1) = 0.0_c_double
-      tay(11, k + 1) = 0.0_c_double
-      tay(12, k + 1) = 0.0_c_double
-      tay(13, k + 1) = 0.0_c_double
+      tay(14, n) = acc14 * inv(n) + tay(2, n) * tay(15, 0)
+      tay(15, n) = (-acc15 * inv(n)) - tay(2, n) * tay(14, 0)
+      tay(16, n) = (acc16 + tay(15, 0) * tay(9, n)) + tay(15, n) * tay(9, 0)
+      tay(17, n) = (acc17 + tay(14, 0) * tay(7, n)) + tay(14, n) * tay(7, 0)
+      tay(18, n) = tay(16, n) - tay(17, n)
+      tay(19, n) = acc19 * inv(n) + tay(1, n) * tay(20, 0)
+      tay(20, n) = (-acc20 * inv(n)) - tay(1, n) * tay(19, 0)
+      tay(21, n) = tay(18, n) * ib21 - (acc21 * ib21 + tay(20, n) * ub21)
+      tay(22, n) = (acc22 + tay(14, 0) * tay(9, n)) + tay(14, n) * tay(9, 0)
+      tay(23, n) = (acc23 + tay(15, 0) * tay(7, n)) + tay(15, n) * tay(7, 0)
+      tay(24, n) = tay(22, n) + tay(23, n)
+      tay(25, n) = (acc25 + tay(21, 0) * tay(19, n)) + tay(21, n) * tay(19, 0)
+      tay(26, n) = tay(8, n) - tay(25, n)
+      tay(27, n) = tay(10, n) - tay(8, n)
+      tay(29, n) = c(0) * tay(8, n)
+      tay(31, n) = c(1) * tay(10, n)
+      tay(32, n) = tay(29, n) + tay(31, n)
+      tay(33, n) = (acc33 + tay(7, 0) * tay(32, n)) + tay(7, n) * tay(32, 0)
+      tay(35, n) = c(2) * tay(8, n)
+      tay(37, n) = c(3) * tay(10, n)
+      tay(38, n) = tay(35, n) + tay(37, n)
+      tay(39, n) = (acc39 + tay(9, 0) * tay(38, n)) + tay(9, n) * tay(38, 0)
+      tay(40, n) = tay(33, n) + tay(39, n)
+      tay(43, n) = c(4) * tay(7, n)
+      tay(45, n) = c(5) * tay(9, n)
+      tay(46, n) = tay(43, n) + tay(45, n)
+      tay(47, n) = (acc47 + tay(7, 0) * tay(46, n)) + tay(7, n) * tay(46, 0)
+      tay(48, n) = tay(47, n)
+      tay(49, n) = (acc49 + tay(9, 0) * tay(9, n)) + tay(9, n) * tay(9, 0)
+      tay(50, n) = c(4) * tay(49, n)
+      tay(51, n) = tay(48, n) - tay(50, n)
+      tay(53, n) = c(7) * tay(7, n)
+      tay(54, n) = c(0) * tay(9, n)
+      tay(55, n) = tay(53, n) - tay(54, n)
+      tay(56, n) = (acc56 + tay(8, 0) * tay(55, n)) + tay(8, n) * tay(55, 0)
+      tay(58, n) = c(8) * tay(7, n)
+      tay(59, n) = c(1) * tay(9, n)
+      tay(60, n) = tay(58, n) - tay(59, n)
+      tay(61, n) = (acc61 + tay(10, 0) * tay(60, n)) + tay(10, n) * tay(60, 0)
+      tay(62, n) = tay(56, n) + tay(61, n)
+      tay(0, n + 1) = tay(21, n) * inv(n + 1)
+      tay(1, n + 1) = tay(24, n) * inv(n + 1)
+      tay(2, n + 1) = tay(26, n) * inv(n + 1)
+      tay(3, n + 1) = tay(27, n) * inv(n + 1)
+      tay(4, n + 1) = tay(11, n) * inv(n + 1)
+      tay(5, n + 1) = tay(12, n) * inv(n + 1)
+      tay(6, n + 1) = tay(13, n) * inv(n + 1)
+      tay(7, n + 1) = tay(40, n) * inv(n + 1)
+      tay(8, n + 1) = tay(51, n) * inv(n + 1)
+      tay(9, n + 1) = tay(62, n) * inv(n + 1)
+      tay(10, n + 1) = 0.0_c_double
+      tay(11, n + 1) = 0.0_c_double
+      tay(12, n + 1) = 0.0_c_double
+      tay(13, n + 1) = 0.0_c_double
     end do
   end subroutine taylor_jet
 
@@ -2386,41 +2387,37 @@ contains
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
     real(c_double) :: tay(0:66 - 1, 0:19 - 1)
+    real(c_double) :: inv(0:19 - 1)
+    real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
     real(c_double) :: comp(0:nx - 1)
     integer(c_int) :: order
-    integer(c_int) :: nonfinite
-    integer(c_int) :: fresh
-    logical :: last
-    real(c_double) :: t
-    real(c_double) :: h
     real(c_double) :: rhofac
     real(c_double) :: scale
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: cap
+    logical :: nonfinite
+    logical :: last
+    logical :: run
+    logical :: take
+    logical :: ok
+    logical :: at
+    logical :: jump
+    logical :: retry
     real(c_double) :: xmax
     real(c_double) :: dp
     real(c_double) :: dq
     real(c_double) :: rho
-    real(c_double) :: acc
     integer(c_int) :: i
     integer(c_int) :: q
 
-    comp = 0.0_c_double
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      res = GYROSTAT_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      res = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
-    if (.not. (t1 > t0)) then
-      res = GYROSTAT_ODE_OK
-      return
-    end if
-    if (.not. all_finite(x, nx)) then
-      res = GYROSTAT_ODE_ERR_NONFINITE
+    inv = 0.0_c_double
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (code >= 0) then
+      res = code
       return
     end if
 
@@ -2443,76 +2440,84 @@ contains
     order = order + (merge(1, 0, 9.357622968840175e-14_c_double > rtol))
     order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
     rhofac = exp((-0.7_c_double) / real(order - 1, c_double)) / 7.3890560989306495_c_double
+    do q = 1, order + 1 - 1
+      inv(q) = 1.0_c_double / real(q, c_double)
+    end do
     scale = atol / rtol
+    code = -1
     t = t0
-    nonfinite = 0
-    fresh = 1
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    cap = merge(h, huge(1.0_c_double), h0 > 0.0_c_double)
     do
-      if (fresh /= 0) then
-        call taylor_jet(order, x, c, tay)
-        stats%rhs_calls = stats%rhs_calls + 1
-        xmax = 0.0_c_double
-        dp = 0.0_c_double
-        dq = 0.0_c_double
-        do i = 0, nx - 1
-          xmax = max(xmax, abs(x(i)))
-          dp = max(dp, abs(tay(i, order)))
-          dq = max(dq, abs(tay(i, order - 1)))
-        end do
-        xmax = max(scale, xmax)  ! the absolute and relative modes in one
-        rho = min((xmax / dp)**(1.0_c_double / real(order, c_double)), &
-            (xmax / dq)**(1.0_c_double / real(order - 1, c_double)))
-        h = min(rho * rhofac, t1 - t)
-        if (stats%accepted == 0 .and. h0 > 0.0_c_double) then
-          h = min(h, h0)  ! a first step no longer than h0
-        end if
-        fresh = 0
-      end if
+
+      ! the coefficients at x, and the step they allow (Jorba and Zou)
+      run = code < 0
+      call taylor_jet(order, x, c, inv, tay)
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
+      xmax = 0.0_c_double
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 0, nx - 1
+        xmax = max(xmax, abs(x(i)))
+        dp = max(dp, abs(tay(i, order)))
+        dq = max(dq, abs(tay(i, order - 1)))
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rho = exp(min(log(xmax / dp) * inv(order), log(xmax / dq) * inv(order - 1)))  ! min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1)))
+      h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
-      if (last) then
-        h = t1 - t
-      end if
-      stats%h = h
-      if (step_underflow(h, t)) then
-        res = merge(GYROSTAT_ODE_ERR_NONFINITE, GYROSTAT_ODE_ERR_STEP_UNDERFLOW, nonfinite /= 0)
-        return
-      end if
-      if (stats%accepted + stats%rejected >= max_steps) then
-        res = GYROSTAT_ODE_ERR_MAX_STEPS
-        return
-      end if
+      h = merge(t1 - t, h, last)
+      stats%h = merge(h, stats%h, run)
+      code = merge(merge(merge(GYROSTAT_ODE_ERR_NONFINITE, GYROSTAT_ODE_ERR_STEP_UNDERFLOW, &
+          nonfinite), merge(GYROSTAT_ODE_ERR_MAX_STEPS, -1, &
+          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! a step lost in t, or no steps left, stops
+      run = code < 0
 
       ! x(t + h) by Horner's scheme, less what the last add lost (comp)
       do i = 0, nx - 1
-        acc = tay(i, order)
-        do q = 0, order - 1 - 1
-          acc = tay(i, (order - q) - 1) + h * acc
+        xnew(i) = tay(i, order)
+      end do
+      do q = 0, order - 1 - 1
+        do i = 0, nx - 1
+          xnew(i) = tay(i, (order - q) - 1) + h * xnew(i)
         end do
-        dx(i) = h * acc - comp(i)
+      end do
+      do i = 0, nx - 1
+        dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)
       end do
-      nonfinite = merge(0, 1, all_finite(xnew, nx))
-      if (nonfinite /= 0) then
-        stats%rejected = stats%rejected + 1
-        h = h * 0.5_c_double
-        last = .false.
-      else
-        if (gimbal_lock(x, xnew)) then
-          res = GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
-          return
-        end if
-        call accept_step(x, xnew, dx, comp)
-        stats%accepted = stats%accepted + 1
-        t = merge(t1, t + h, last)
-        stats%t = t
-        fresh = 1
+      nonfinite = .false.
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock
+      take = run .and. .not. nonfinite
+      at = abs(gyrostat_cos(xnew(1))) < GYROSTAT_ODE_GIMBAL_LOCK_COS
+      jump = abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+      ok = take .and. .not. at .and. .not. jump
+      retry = run .and. (nonfinite .or. jump)  ! past gimbal lock, or not finite
+      code = merge(GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR, merge(GYROSTAT_ODE_OK, code, &
+          ok .and. last), take .and. at .and. .not. jump)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, retry))
+      cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
+      if (ok) then
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
       end if
-      if (last .and. nonfinite == 0) then
-        exit
+      if (code >= 0) then
+        res = code
+        return
       end if
     end do
-    res = GYROSTAT_ODE_OK
-    return
   end function taylor_integrate
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.

@@ -858,12 +858,12 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1022,12 +1022,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1907,7 +1907,8 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
 
 /* The normalized Taylor coefficients of x and of the rhs's 85
    nodes to the given order (16 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *c, double (*tay)[94])
+static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
+                              double (*tay)[94])
 {
     double acc9;
     double acc10;
@@ -1925,10 +1926,10 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     double acc65;
     double acc71;
     double acc73;
-    double rk;
-    double rk1;
+    double ib16;
+    double ub16;
     int j;
-    int k;
+    int n;
 
     /* order 0: the state and every node's value */
     tay[0][0] = x[0];
@@ -2006,6 +2007,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     tay[0][88] = 1.5497923245489903e-05 * tay[0][74];
     tay[0][89] = tay[0][87] - tay[0][88];
     tay[0][93] = 28.571428571428573 * tay[0][25];
+    ib16 = 1.0 / tay[0][15];
+    ub16 = tay[0][16] / tay[0][15];
     tay[1][0] = tay[0][16];
     tay[1][1] = tay[0][19];
     tay[1][2] = tay[0][21];
@@ -2017,8 +2020,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     tay[1][8] = tay[0][93];
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (k = 1; k < order; ++k) {
-        rk = 1.0 / (double)k;
+    for (n = 1; n < order; ++n) {
         acc9 = 0.0;
         acc10 = 0.0;
         acc11 = 0.0;
@@ -2035,102 +2037,101 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
         acc65 = 0.0;
         acc71 = 0.0;
         acc73 = 0.0;
-        for (j = 1; j < k; ++j) {
+        for (j = 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
-            acc9 = acc9 + w2 * tay[k - j][10];
-            acc10 = acc10 + w2 * tay[k - j][9];
-            acc11 = acc11 + tay[j][10] * tay[k - j][5];
-            acc12 = acc12 + tay[j][9] * tay[k - j][3];
-            acc14 = acc14 + w1 * tay[k - j][15];
-            acc15 = acc15 + w1 * tay[k - j][14];
-            acc16 = acc16 + tay[j][15] * tay[k - j][16];
-            acc17 = acc17 + tay[j][9] * tay[k - j][5];
-            acc18 = acc18 + tay[j][10] * tay[k - j][3];
-            acc20 = acc20 + tay[j][16] * tay[k - j][14];
-            acc38 = acc38 + tay[j][37] * tay[k - j][4];
-            acc49 = acc49 + tay[j][48] * tay[k - j][3];
-            acc55 = acc55 + tay[j][48] * tay[k - j][5];
-            acc65 = acc65 + tay[j][64] * tay[k - j][4];
-            acc71 = acc71 + tay[j][64] * tay[k - j][3];
-            acc73 = acc73 + tay[j][37] * tay[k - j][5];
+            acc9 = acc9 + w2 * tay[n - j][10];
+            acc10 = acc10 + w2 * tay[n - j][9];
+            acc11 = acc11 + tay[j][10] * tay[n - j][5];
+            acc12 = acc12 + tay[j][9] * tay[n - j][3];
+            acc14 = acc14 + w1 * tay[n - j][15];
+            acc15 = acc15 + w1 * tay[n - j][14];
+            acc16 = acc16 + tay[j][15] * tay[n - j][16];
+            acc17 = acc17 + tay[j][9] * tay[n - j][5];
+            acc18 = acc18 + tay[j][10] * tay[n - j][3];
+            acc20 = acc20 + tay[j][16] * tay[n - j][14];
+            acc38 = acc38 + tay[j][37] * tay[n - j][4];
+            acc49 = acc49 + tay[j][48] * tay[n - j][3];
+            acc55 = acc55 + tay[j][48] * tay[n - j][5];
+            acc65 = acc65 + tay[j][64] * tay[n - j][4];
+            acc71 = acc71 + tay[j][64] * tay[n - j][3];
+            acc73 = acc73 + tay[j][37] * tay[n - j][5];
         }
-        tay[k][9] = (acc9 + (double)k * tay[k][2] * tay[0][10]) * rk;
-        tay[k][10] = -((acc10 + (double)k * tay[k][2] * tay[0][9]) * rk);
-        tay[k][11] = tay[0][10] * tay[k][5] + acc11 + tay[k][10] * tay[0][5];
-        tay[k][12] = tay[0][9] * tay[k][3] + acc12 + tay[k][9] * tay[0][3];
-        tay[k][13] = tay[k][11] - tay[k][12];
-        tay[k][14] = (acc14 + (double)k * tay[k][1] * tay[0][15]) * rk;
-        tay[k][15] = -((acc15 + (double)k * tay[k][1] * tay[0][14]) * rk);
-        tay[k][16] = (tay[k][13] - (acc16 + tay[k][15] * tay[0][16])) / tay[0][15];
-        tay[k][17] = tay[0][9] * tay[k][5] + acc17 + tay[k][9] * tay[0][5];
-        tay[k][18] = tay[0][10] * tay[k][3] + acc18 + tay[k][10] * tay[0][3];
-        tay[k][19] = tay[k][17] + tay[k][18];
-        tay[k][20] = tay[0][16] * tay[k][14] + acc20 + tay[k][16] * tay[0][14];
-        tay[k][21] = tay[k][4] - tay[k][20];
-        tay[k][24] = tay[k][8] - tay[k][5];
-        tay[k][25] = -0.0001 * tay[k][24];
-        tay[k][26] = -tay[k][25];
-        tay[k][28] = 0.035 * tay[k][6];
-        tay[k][30] = 2.005 * tay[k][4];
-        tay[k][31] = tay[k][28] + tay[k][30];
-        tay[k][33] = 301.7396875 * tay[k][3];
-        tay[k][34] = tay[k][31] + tay[k][33];
-        tay[k][36] = 3.15125 * tay[k][5];
-        tay[k][37] = tay[k][34] - tay[k][36];
-        tay[k][38] = tay[0][37] * tay[k][4] + acc38 + tay[k][37] * tay[0][4];
-        tay[k][39] = tay[k][26] + tay[k][38];
-        tay[k][40] = 0.035 * tay[k][7];
-        tay[k][42] = 1.34875 * tay[k][5];
-        tay[k][43] = tay[k][40] + tay[k][42];
-        tay[k][44] = 2.005 * tay[k][3];
-        tay[k][45] = tay[k][43] + tay[k][44];
-        tay[k][47] = 351.7396875 * tay[k][4];
-        tay[k][48] = tay[k][45] + tay[k][47];
-        tay[k][49] = tay[0][48] * tay[k][3] + acc49 + tay[k][48] * tay[0][3];
-        tay[k][50] = tay[k][39] - tay[k][49];
-        tay[k][51] = 4.166596729006503e-05 * tay[k][50];
-        tay[k][55] = tay[0][48] * tay[k][5] + acc55 + tay[k][48] * tay[0][5];
-        tay[k][56] = tay[k][55];
-        tay[k][57] = 0.035 * tay[k][8];
-        tay[k][58] = 1.34875 * tay[k][4];
-        tay[k][59] = tay[k][57] + tay[k][58];
-        tay[k][61] = 251.31 * tay[k][5];
-        tay[k][62] = tay[k][59] + tay[k][61];
-        tay[k][63] = 3.15125 * tay[k][3];
-        tay[k][64] = tay[k][62] - tay[k][63];
-        tay[k][65] = tay[0][64] * tay[k][4] + acc65 + tay[k][64] * tay[0][4];
-        tay[k][66] = tay[k][56] - tay[k][65];
-        tay[k][67] = 0.0033146766733524852 * tay[k][66];
-        tay[k][68] = tay[k][51] + tay[k][67];
-        tay[k][71] = tay[0][64] * tay[k][3] + acc71 + tay[k][64] * tay[0][3];
-        tay[k][72] = tay[k][71];
-        tay[k][73] = tay[0][37] * tay[k][5] + acc73 + tay[k][37] * tay[0][5];
-        tay[k][74] = tay[k][72] - tay[k][73];
-        tay[k][75] = 1.9054215209804005e-05 * tay[k][74];
-        tay[k][76] = tay[k][68] - tay[k][75];
-        tay[k][78] = 0.0028431796071504527 * tay[k][74];
-        tay[k][80] = 1.5497923245489903e-05 * tay[k][50];
-        tay[k][81] = tay[k][78] - tay[k][80];
-        tay[k][82] = 1.9054215209804005e-05 * tay[k][66];
-        tay[k][83] = tay[k][81] - tay[k][82];
-        tay[k][85] = 0.003979754895162947 * tay[k][50];
-        tay[k][86] = 4.166596729006503e-05 * tay[k][66];
-        tay[k][87] = tay[k][85] + tay[k][86];
-        tay[k][88] = 1.5497923245489903e-05 * tay[k][74];
-        tay[k][89] = tay[k][87] - tay[k][88];
-        tay[k][93] = 28.571428571428573 * tay[k][25];
-        rk1 = 1.0 / (double)(k + 1);
-        tay[k + 1][0] = tay[k][16] * rk1;
-        tay[k + 1][1] = tay[k][19] * rk1;
-        tay[k + 1][2] = tay[k][21] * rk1;
-        tay[k + 1][3] = tay[k][76] * rk1;
-        tay[k + 1][4] = tay[k][83] * rk1;
-        tay[k + 1][5] = tay[k][89] * rk1;
-        tay[k + 1][6] = 0.0;
-        tay[k + 1][7] = 0.0;
-        tay[k + 1][8] = tay[k][93] * rk1;
+        tay[n][9] = acc9 * inv[n] + tay[n][2] * tay[0][10];
+        tay[n][10] = -(acc10 * inv[n]) - tay[n][2] * tay[0][9];
+        tay[n][11] = acc11 + tay[0][10] * tay[n][5] + tay[n][10] * tay[0][5];
+        tay[n][12] = acc12 + tay[0][9] * tay[n][3] + tay[n][9] * tay[0][3];
+        tay[n][13] = tay[n][11] - tay[n][12];
+        tay[n][14] = acc14 * inv[n] + tay[n][1] * tay[0][15];
+        tay[n][15] = -(acc15 * inv[n]) - tay[n][1] * tay[0][14];
+        tay[n][16] = tay[n][13] * ib16 - (acc16 * ib16 + tay[n][15] * ub16);
+        tay[n][17] = acc17 + tay[0][9] * tay[n][5] + tay[n][9] * tay[0][5];
+        tay[n][18] = acc18 + tay[0][10] * tay[n][3] + tay[n][10] * tay[0][3];
+        tay[n][19] = tay[n][17] + tay[n][18];
+        tay[n][20] = acc20 + tay[0][16] * tay[n][14] + tay[n][16] * tay[0][14];
+        tay[n][21] = tay[n][4] - tay[n][20];
+        tay[n][24] = tay[n][8] - tay[n][5];
+        tay[n][25] = -0.0001 * tay[n][24];
+        tay[n][26] = -tay[n][25];
+        tay[n][28] = 0.035 * tay[n][6];
+        tay[n][30] = 2.005 * tay[n][4];
+        tay[n][31] = tay[n][28] + tay[n][30];
+        tay[n][33] = 301.7396875 * tay[n][3];
+        tay[n][34] = tay[n][31] + tay[n][33];
+        tay[n][36] = 3.15125 * tay[n][5];
+        tay[n][37] = tay[n][34] - tay[n][36];
+        tay[n][38] = acc38 + tay[0][37] * tay[n][4] + tay[n][37] * tay[0][4];
+        tay[n][39] = tay[n][26] + tay[n][38];
+        tay[n][40] = 0.035 * tay[n][7];
+        tay[n][42] = 1.34875 * tay[n][5];
+        tay[n][43] = tay[n][40] + tay[n][42];
+        tay[n][44] = 2.005 * tay[n][3];
+        tay[n][45] = tay[n][43] + tay[n][44];
+        tay[n][47] = 351.7396875 * tay[n][4];
+        tay[n][48] = tay[n][45] + tay[n][47];
+        tay[n][49] = acc49 + tay[0][48] * tay[n][3] + tay[n][48] * tay[0][3];
+        tay[n][50] = tay[n][39] - tay[n][49];
+        tay[n][51] = 4.166596729006503e-05 * tay[n][50];
+        tay[n][55] = acc55 + tay[0][48] * tay[n][5] + tay[n][48] * tay[0][5];
+        tay[n][56] = tay[n][55];
+        tay[n][57] = 0.035 * tay[n][8];
+        tay[n][58] = 1.34875 * tay[n][4];
+        tay[n][59] = tay[n][57] + tay[n][58];
+        tay[n][61] = 251.31 * tay[n][5];
+        tay[n][62] = tay[n][59] + tay[n][61];
+        tay[n][63] = 3.15125 * tay[n][3];
+        tay[n][64] = tay[n][62] - tay[n][63];
+        tay[n][65] = acc65 + tay[0][64] * tay[n][4] + tay[n][64] * tay[0][4];
+        tay[n][66] = tay[n][56] - tay[n][65];
+        tay[n][67] = 0.0033146766733524852 * tay[n][66];
+        tay[n][68] = tay[n][51] + tay[n][67];
+        tay[n][71] = acc71 + tay[0][64] * tay[n][3] + tay[n][64] * tay[0][3];
+        tay[n][72] = tay[n][71];
+        tay[n][73] = acc73 + tay[0][37] * tay[n][5] + tay[n][37] * tay[0][5];
+        tay[n][74] = tay[n][72] - tay[n][73];
+        tay[n][75] = 1.9054215209804005e-05 * tay[n][74];
+        tay[n][76] = tay[n][68] - tay[n][75];
+        tay[n][78] = 0.0028431796071504527 * tay[n][74];
+        tay[n][80] = 1.5497923245489903e-05 * tay[n][50];
+        tay[n][81] = tay[n][78] - tay[n][80];
+        tay[n][82] = 1.9054215209804005e-05 * tay[n][66];
+        tay[n][83] = tay[n][81] - tay[n][82];
+        tay[n][85] = 0.003979754895162947 * tay[n][50];
+        tay[n][86] = 4.166596729006503e-05 * tay[n][66];
+        tay[n][87] = tay[n][85] + tay[n][86];
+        tay[n][88] = 1.5497923245489903e-05 * tay[n][74];
+        tay[n][89] = tay[n][87] - tay[n][88];
+        tay[n][93] = 28.571428571428573 * tay[n][25];
+        tay[n + 1][0] = tay[n][16] * inv[n + 1];
+        tay[n + 1][1] = tay[n][19] * inv[n + 1];
+        tay[n + 1][2] = tay[n][21] * inv[n + 1];
+        tay[n + 1][3] = tay[n][76] * inv[n + 1];
+        tay[n + 1][4] = tay[n][83] * inv[n + 1];
+        tay[n + 1][5] = tay[n][89] * inv[n + 1];
+        tay[n + 1][6] = 0.0;
+        tay[n + 1][7] = 0.0;
+        tay[n + 1][8] = tay[n][93] * inv[n + 1];
     }
 }
 
@@ -2143,17 +2144,26 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                             double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     double tay[19][94];
+    double inv[19] = {0.0};
+    double f0[RW3_ORTHOGONAL_NX];
     double xnew[RW3_ORTHOGONAL_NX];
     double dx[RW3_ORTHOGONAL_NX];
-    double comp[RW3_ORTHOGONAL_NX] = {0.0};
+    double comp[RW3_ORTHOGONAL_NX];
     int order;
-    int nonfinite;
-    int fresh;
-    int last;
-    double t;
-    double h;
     double rhofac;
     double scale;
+    int code;
+    double t;
+    double h;
+    double cap;
+    int nonfinite;
+    int last;
+    int run;
+    int take;
+    int ok;
+    int at;
+    int jump;
+    int retry;
     double xmax;
     double dp;
     double dq;
@@ -2161,18 +2171,9 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return RW3_ORTHOGONAL_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return RW3_ORTHOGONAL_ODE_OK;
-    }
-    if (!all_finite(x, RW3_ORTHOGONAL_NX)) {
-        return RW3_ORTHOGONAL_ODE_ERR_NONFINITE;
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (code >= 0) {
+        return code;
     }
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
@@ -2194,74 +2195,84 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
     scale = atol / rtol;
+    code = -1;
     t = t0;
     nonfinite = 0;
-    fresh = 1;
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    cap = h0 > 0.0 ? h : DBL_MAX;
     for (;;) {
-        if (fresh != 0) {
-            taylor_jet(order, x, c, tay);
-            stats->rhs_calls = stats->rhs_calls + 1;
-            xmax = 0.0;
-            dp = 0.0;
-            dq = 0.0;
-            for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-                xmax = dmax(xmax, fabs(x[i]));
-                dp = dmax(dp, fabs(tay[order][i]));
-                dq = dmax(dq, fabs(tay[order - 1][i]));
-            }
-            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
-                    1.0 / (double)(order - 1)));
-            h = dmin(rho * rhofac, t1 - t);
-            if (stats->accepted == 0 && h0 > 0.0) {
-                h = dmin(h, h0);  /* a first step no longer than h0 */
-            }
-            fresh = 0;
+
+        /* the coefficients at x, and the step they allow (Jorba and Zou) */
+        run = code < 0;
+        taylor_jet(order, x, c, inv, tay);
+        stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
+        xmax = 0.0;
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+            xmax = dmax(xmax, fabs(x[i]));
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
         }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
-        if (last) {
-            h = t1 - t;
-        }
-        stats->h = h;
-        if (step_underflow(h, t)) {
-            return nonfinite != 0 ? RW3_ORTHOGONAL_ODE_ERR_NONFINITE :
-                    RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS;
-        }
+        h = last ? t1 - t : h;
+        stats->h = run ? h : stats->h;
+        code = run ? (step_underflow(h,
+                t) ? (nonfinite ? RW3_ORTHOGONAL_ODE_ERR_NONFINITE :
+                RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS : -1) : code;  /* a step lost in t, or no steps left, stops */
+        run = code < 0;
 
         /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-            double acc;
-            acc = tay[order][i];
-            for (q = 0; q < order - 1; ++q) {
-                acc = tay[order - q - 1][i] + h * acc;
+            xnew[i] = tay[order][i];
+        }
+        for (q = 0; q < order - 1; ++q) {
+            for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+                xnew[i] = tay[order - q - 1][i] + h * xnew[i];
             }
-            dx[i] = h * acc - comp[i];
+        }
+        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+            dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
         }
-        nonfinite = all_finite(xnew, RW3_ORTHOGONAL_NX) ? 0 : 1;
-        if (nonfinite != 0) {
-            stats->rejected = stats->rejected + 1;
-            h = h * 0.5;
-            last = 0;
-        } else {
-            if (gimbal_lock(x, xnew)) {
-                return RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            accept_step(x, xnew, dx, comp);
-            stats->accepted = stats->accepted + 1;
-            t = last ? t1 : t + h;
-            stats->t = t;
-            fresh = 1;
+        nonfinite = 0;
+        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
         }
-        if (last && nonfinite == 0) {
-            break;
+
+        /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+        take = run && !nonfinite;
+        at = fabs(rw3_orthogonal_cos(xnew[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS;
+        jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !at && !jump;
+        retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
+        code = take && at && !jump ? RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                RW3_ORTHOGONAL_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (retry ? 1 : 0);
+        cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
+        if (ok) {
+            for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+        }
+        if (code >= 0) {
+            return code;
         }
     }
-    return RW3_ORTHOGONAL_ODE_OK;
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
@@ -2293,6 +2304,8 @@ struct lanes {
     long stats_accepted[RW3_ORTHOGONAL_LANES];
     long stats_rejected[RW3_ORTHOGONAL_LANES];
     long stats_rhs_calls[RW3_ORTHOGONAL_LANES];
+    double cap[RW3_ORTHOGONAL_LANES];
+    double tay[19][94][RW3_ORTHOGONAL_LANES];
     double ts[RW3_ORTHOGONAL_LANES];  /* the time of an rhs call */
     int busy[RW3_ORTHOGONAL_LANES];
     size_t traj[RW3_ORTHOGONAL_LANES];
@@ -2497,7 +2510,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 
     /* control: accept or reject by selection, and the next h */
-    /* pow: scalar calls */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
@@ -2856,6 +2869,397 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 85 */
+static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
+{
+    double acc9[RW3_ORTHOGONAL_LANES];
+    double acc10[RW3_ORTHOGONAL_LANES];
+    double acc11[RW3_ORTHOGONAL_LANES];
+    double acc12[RW3_ORTHOGONAL_LANES];
+    double acc14[RW3_ORTHOGONAL_LANES];
+    double acc15[RW3_ORTHOGONAL_LANES];
+    double acc16[RW3_ORTHOGONAL_LANES];
+    double acc17[RW3_ORTHOGONAL_LANES];
+    double acc18[RW3_ORTHOGONAL_LANES];
+    double acc20[RW3_ORTHOGONAL_LANES];
+    double acc38[RW3_ORTHOGONAL_LANES];
+    double acc49[RW3_ORTHOGONAL_LANES];
+    double acc55[RW3_ORTHOGONAL_LANES];
+    double acc65[RW3_ORTHOGONAL_LANES];
+    double acc71[RW3_ORTHOGONAL_LANES];
+    double acc73[RW3_ORTHOGONAL_LANES];
+    double ib16[RW3_ORTHOGONAL_LANES];
+    double ub16[RW3_ORTHOGONAL_LANES];
+    int j, l, n;
+    /* order 0: the state and every node's value */
+    RW3_ORTHOGONAL_SIMD
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        L->tay[0][0][l] = L->x[0][l];
+        L->tay[0][1][l] = L->x[1][l];
+        L->tay[0][2][l] = L->x[2][l];
+        L->tay[0][3][l] = L->x[3][l];
+        L->tay[0][4][l] = L->x[4][l];
+        L->tay[0][5][l] = L->x[5][l];
+        L->tay[0][6][l] = L->x[6][l];
+        L->tay[0][7][l] = L->x[7][l];
+        L->tay[0][8][l] = L->x[8][l];
+        L->tay[0][9][l] = rw3_orthogonal_sin_lanes(L->tay[0][2][l]);
+        L->tay[0][10][l] = rw3_orthogonal_cos_lanes(L->tay[0][2][l]);
+        L->tay[0][11][l] = L->tay[0][10][l] * L->tay[0][5][l];
+        L->tay[0][12][l] = L->tay[0][9][l] * L->tay[0][3][l];
+        L->tay[0][13][l] = L->tay[0][11][l] - L->tay[0][12][l];
+        L->tay[0][14][l] = rw3_orthogonal_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][15][l] = rw3_orthogonal_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][16][l] = L->tay[0][13][l] / L->tay[0][15][l];
+        L->tay[0][17][l] = L->tay[0][9][l] * L->tay[0][5][l];
+        L->tay[0][18][l] = L->tay[0][10][l] * L->tay[0][3][l];
+        L->tay[0][19][l] = L->tay[0][17][l] + L->tay[0][18][l];
+        L->tay[0][20][l] = L->tay[0][16][l] * L->tay[0][14][l];
+        L->tay[0][21][l] = L->tay[0][4][l] - L->tay[0][20][l];
+        L->tay[0][24][l] = L->tay[0][8][l] - L->tay[0][5][l];
+        L->tay[0][25][l] = -0.0001 * L->tay[0][24][l];
+        L->tay[0][26][l] = -L->tay[0][25][l];
+        L->tay[0][28][l] = 0.035 * L->tay[0][6][l];
+        L->tay[0][30][l] = 2.005 * L->tay[0][4][l];
+        L->tay[0][31][l] = L->tay[0][28][l] + L->tay[0][30][l];
+        L->tay[0][33][l] = 301.7396875 * L->tay[0][3][l];
+        L->tay[0][34][l] = L->tay[0][31][l] + L->tay[0][33][l];
+        L->tay[0][36][l] = 3.15125 * L->tay[0][5][l];
+        L->tay[0][37][l] = L->tay[0][34][l] - L->tay[0][36][l];
+        L->tay[0][38][l] = L->tay[0][37][l] * L->tay[0][4][l];
+        L->tay[0][39][l] = L->tay[0][26][l] + L->tay[0][38][l];
+        L->tay[0][40][l] = 0.035 * L->tay[0][7][l];
+        L->tay[0][42][l] = 1.34875 * L->tay[0][5][l];
+        L->tay[0][43][l] = L->tay[0][40][l] + L->tay[0][42][l];
+        L->tay[0][44][l] = 2.005 * L->tay[0][3][l];
+        L->tay[0][45][l] = L->tay[0][43][l] + L->tay[0][44][l];
+        L->tay[0][47][l] = 351.7396875 * L->tay[0][4][l];
+        L->tay[0][48][l] = L->tay[0][45][l] + L->tay[0][47][l];
+        L->tay[0][49][l] = L->tay[0][48][l] * L->tay[0][3][l];
+        L->tay[0][50][l] = L->tay[0][39][l] - L->tay[0][49][l];
+        L->tay[0][51][l] = 4.166596729006503e-05 * L->tay[0][50][l];
+        L->tay[0][54][l] = -0.02;
+        L->tay[0][55][l] = L->tay[0][48][l] * L->tay[0][5][l];
+        L->tay[0][56][l] = L->tay[0][54][l] + L->tay[0][55][l];
+        L->tay[0][57][l] = 0.035 * L->tay[0][8][l];
+        L->tay[0][58][l] = 1.34875 * L->tay[0][4][l];
+        L->tay[0][59][l] = L->tay[0][57][l] + L->tay[0][58][l];
+        L->tay[0][61][l] = 251.31 * L->tay[0][5][l];
+        L->tay[0][62][l] = L->tay[0][59][l] + L->tay[0][61][l];
+        L->tay[0][63][l] = 3.15125 * L->tay[0][3][l];
+        L->tay[0][64][l] = L->tay[0][62][l] - L->tay[0][63][l];
+        L->tay[0][65][l] = L->tay[0][64][l] * L->tay[0][4][l];
+        L->tay[0][66][l] = L->tay[0][56][l] - L->tay[0][65][l];
+        L->tay[0][67][l] = 0.0033146766733524852 * L->tay[0][66][l];
+        L->tay[0][68][l] = L->tay[0][51][l] + L->tay[0][67][l];
+        L->tay[0][71][l] = L->tay[0][64][l] * L->tay[0][3][l];
+        L->tay[0][72][l] = c[1] + L->tay[0][71][l];
+        L->tay[0][73][l] = L->tay[0][37][l] * L->tay[0][5][l];
+        L->tay[0][74][l] = L->tay[0][72][l] - L->tay[0][73][l];
+        L->tay[0][75][l] = 1.9054215209804005e-05 * L->tay[0][74][l];
+        L->tay[0][76][l] = L->tay[0][68][l] - L->tay[0][75][l];
+        L->tay[0][78][l] = 0.0028431796071504527 * L->tay[0][74][l];
+        L->tay[0][80][l] = 1.5497923245489903e-05 * L->tay[0][50][l];
+        L->tay[0][81][l] = L->tay[0][78][l] - L->tay[0][80][l];
+        L->tay[0][82][l] = 1.9054215209804005e-05 * L->tay[0][66][l];
+        L->tay[0][83][l] = L->tay[0][81][l] - L->tay[0][82][l];
+        L->tay[0][85][l] = 0.003979754895162947 * L->tay[0][50][l];
+        L->tay[0][86][l] = 4.166596729006503e-05 * L->tay[0][66][l];
+        L->tay[0][87][l] = L->tay[0][85][l] + L->tay[0][86][l];
+        L->tay[0][88][l] = 1.5497923245489903e-05 * L->tay[0][74][l];
+        L->tay[0][89][l] = L->tay[0][87][l] - L->tay[0][88][l];
+        L->tay[0][93][l] = 28.571428571428573 * L->tay[0][25][l];
+        ib16[l] = 1.0 / L->tay[0][15][l];
+        ub16[l] = L->tay[0][16][l] / L->tay[0][15][l];
+        L->tay[1][0][l] = L->tay[0][16][l];
+        L->tay[1][1][l] = L->tay[0][19][l];
+        L->tay[1][2][l] = L->tay[0][21][l];
+        L->tay[1][3][l] = L->tay[0][76][l];
+        L->tay[1][4][l] = L->tay[0][83][l];
+        L->tay[1][5][l] = L->tay[0][89][l];
+        L->tay[1][6][l] = 0.5714285714285714;
+        L->tay[1][7][l] = c[0];
+        L->tay[1][8][l] = L->tay[0][93][l];
+    }
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (n = 1; n < order; ++n) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            acc9[l] = 0.0;
+            acc10[l] = 0.0;
+            acc11[l] = 0.0;
+            acc12[l] = 0.0;
+            acc14[l] = 0.0;
+            acc15[l] = 0.0;
+            acc16[l] = 0.0;
+            acc17[l] = 0.0;
+            acc18[l] = 0.0;
+            acc20[l] = 0.0;
+            acc38[l] = 0.0;
+            acc49[l] = 0.0;
+            acc55[l] = 0.0;
+            acc65[l] = 0.0;
+            acc71[l] = 0.0;
+            acc73[l] = 0.0;
+        }
+        for (j = 1; j < n; ++j) {
+            RW3_ORTHOGONAL_SIMD
+            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+                double w1, w2;
+                w1 = (double)j * L->tay[j][1][l];
+                w2 = (double)j * L->tay[j][2][l];
+                acc9[l] = acc9[l] + w2 * L->tay[n - j][10][l];
+                acc10[l] = acc10[l] + w2 * L->tay[n - j][9][l];
+                acc11[l] = acc11[l] + L->tay[j][10][l] * L->tay[n - j][5][l];
+                acc12[l] = acc12[l] + L->tay[j][9][l] * L->tay[n - j][3][l];
+                acc14[l] = acc14[l] + w1 * L->tay[n - j][15][l];
+                acc15[l] = acc15[l] + w1 * L->tay[n - j][14][l];
+                acc16[l] = acc16[l] + L->tay[j][15][l] * L->tay[n - j][16][l];
+                acc17[l] = acc17[l] + L->tay[j][9][l] * L->tay[n - j][5][l];
+                acc18[l] = acc18[l] + L->tay[j][10][l] * L->tay[n - j][3][l];
+                acc20[l] = acc20[l] + L->tay[j][16][l] * L->tay[n - j][14][l];
+                acc38[l] = acc38[l] + L->tay[j][37][l] * L->tay[n - j][4][l];
+                acc49[l] = acc49[l] + L->tay[j][48][l] * L->tay[n - j][3][l];
+                acc55[l] = acc55[l] + L->tay[j][48][l] * L->tay[n - j][5][l];
+                acc65[l] = acc65[l] + L->tay[j][64][l] * L->tay[n - j][4][l];
+                acc71[l] = acc71[l] + L->tay[j][64][l] * L->tay[n - j][3][l];
+                acc73[l] = acc73[l] + L->tay[j][37][l] * L->tay[n - j][5][l];
+            }
+        }
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            L->tay[n][9][l] = acc9[l] * inv[n] + L->tay[n][2][l] * L->tay[0][10][l];
+            L->tay[n][10][l] = -(acc10[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][9][l];
+            L->tay[n][11][l] = acc11[l] + L->tay[0][10][l] * L->tay[n][5][l] + L->tay[n][10][l] *
+                    L->tay[0][5][l];
+            L->tay[n][12][l] = acc12[l] + L->tay[0][9][l] * L->tay[n][3][l] + L->tay[n][9][l] *
+                    L->tay[0][3][l];
+            L->tay[n][13][l] = L->tay[n][11][l] - L->tay[n][12][l];
+            L->tay[n][14][l] = acc14[l] * inv[n] + L->tay[n][1][l] * L->tay[0][15][l];
+            L->tay[n][15][l] = -(acc15[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][14][l];
+            L->tay[n][16][l] = L->tay[n][13][l] * ib16[l] - (acc16[l] * ib16[l] +
+                    L->tay[n][15][l] * ub16[l]);
+            L->tay[n][17][l] = acc17[l] + L->tay[0][9][l] * L->tay[n][5][l] + L->tay[n][9][l] *
+                    L->tay[0][5][l];
+            L->tay[n][18][l] = acc18[l] + L->tay[0][10][l] * L->tay[n][3][l] + L->tay[n][10][l] *
+                    L->tay[0][3][l];
+            L->tay[n][19][l] = L->tay[n][17][l] + L->tay[n][18][l];
+            L->tay[n][20][l] = acc20[l] + L->tay[0][16][l] * L->tay[n][14][l] + L->tay[n][16][l]
+                    * L->tay[0][14][l];
+            L->tay[n][21][l] = L->tay[n][4][l] - L->tay[n][20][l];
+            L->tay[n][24][l] = L->tay[n][8][l] - L->tay[n][5][l];
+            L->tay[n][25][l] = -0.0001 * L->tay[n][24][l];
+            L->tay[n][26][l] = -L->tay[n][25][l];
+            L->tay[n][28][l] = 0.035 * L->tay[n][6][l];
+            L->tay[n][30][l] = 2.005 * L->tay[n][4][l];
+            L->tay[n][31][l] = L->tay[n][28][l] + L->tay[n][30][l];
+            L->tay[n][33][l] = 301.7396875 * L->tay[n][3][l];
+            L->tay[n][34][l] = L->tay[n][31][l] + L->tay[n][33][l];
+            L->tay[n][36][l] = 3.15125 * L->tay[n][5][l];
+            L->tay[n][37][l] = L->tay[n][34][l] - L->tay[n][36][l];
+            L->tay[n][38][l] = acc38[l] + L->tay[0][37][l] * L->tay[n][4][l] + L->tay[n][37][l] *
+                    L->tay[0][4][l];
+            L->tay[n][39][l] = L->tay[n][26][l] + L->tay[n][38][l];
+            L->tay[n][40][l] = 0.035 * L->tay[n][7][l];
+            L->tay[n][42][l] = 1.34875 * L->tay[n][5][l];
+            L->tay[n][43][l] = L->tay[n][40][l] + L->tay[n][42][l];
+            L->tay[n][44][l] = 2.005 * L->tay[n][3][l];
+            L->tay[n][45][l] = L->tay[n][43][l] + L->tay[n][44][l];
+            L->tay[n][47][l] = 351.7396875 * L->tay[n][4][l];
+            L->tay[n][48][l] = L->tay[n][45][l] + L->tay[n][47][l];
+            L->tay[n][49][l] = acc49[l] + L->tay[0][48][l] * L->tay[n][3][l] + L->tay[n][48][l] *
+                    L->tay[0][3][l];
+            L->tay[n][50][l] = L->tay[n][39][l] - L->tay[n][49][l];
+            L->tay[n][51][l] = 4.166596729006503e-05 * L->tay[n][50][l];
+            L->tay[n][55][l] = acc55[l] + L->tay[0][48][l] * L->tay[n][5][l] + L->tay[n][48][l] *
+                    L->tay[0][5][l];
+            L->tay[n][56][l] = L->tay[n][55][l];
+            L->tay[n][57][l] = 0.035 * L->tay[n][8][l];
+            L->tay[n][58][l] = 1.34875 * L->tay[n][4][l];
+            L->tay[n][59][l] = L->tay[n][57][l] + L->tay[n][58][l];
+            L->tay[n][61][l] = 251.31 * L->tay[n][5][l];
+            L->tay[n][62][l] = L->tay[n][59][l] + L->tay[n][61][l];
+            L->tay[n][63][l] = 3.15125 * L->tay[n][3][l];
+            L->tay[n][64][l] = L->tay[n][62][l] - L->tay[n][63][l];
+            L->tay[n][65][l] = acc65[l] + L->tay[0][64][l] * L->tay[n][4][l] + L->tay[n][64][l] *
+                    L->tay[0][4][l];
+            L->tay[n][66][l] = L->tay[n][56][l] - L->tay[n][65][l];
+            L->tay[n][67][l] = 0.0033146766733524852 * L->tay[n][66][l];
+            L->tay[n][68][l] = L->tay[n][51][l] + L->tay[n][67][l];
+            L->tay[n][71][l] = acc71[l] + L->tay[0][64][l] * L->tay[n][3][l] + L->tay[n][64][l] *
+                    L->tay[0][3][l];
+            L->tay[n][72][l] = L->tay[n][71][l];
+            L->tay[n][73][l] = acc73[l] + L->tay[0][37][l] * L->tay[n][5][l] + L->tay[n][37][l] *
+                    L->tay[0][5][l];
+            L->tay[n][74][l] = L->tay[n][72][l] - L->tay[n][73][l];
+            L->tay[n][75][l] = 1.9054215209804005e-05 * L->tay[n][74][l];
+            L->tay[n][76][l] = L->tay[n][68][l] - L->tay[n][75][l];
+            L->tay[n][78][l] = 0.0028431796071504527 * L->tay[n][74][l];
+            L->tay[n][80][l] = 1.5497923245489903e-05 * L->tay[n][50][l];
+            L->tay[n][81][l] = L->tay[n][78][l] - L->tay[n][80][l];
+            L->tay[n][82][l] = 1.9054215209804005e-05 * L->tay[n][66][l];
+            L->tay[n][83][l] = L->tay[n][81][l] - L->tay[n][82][l];
+            L->tay[n][85][l] = 0.003979754895162947 * L->tay[n][50][l];
+            L->tay[n][86][l] = 4.166596729006503e-05 * L->tay[n][66][l];
+            L->tay[n][87][l] = L->tay[n][85][l] + L->tay[n][86][l];
+            L->tay[n][88][l] = 1.5497923245489903e-05 * L->tay[n][74][l];
+            L->tay[n][89][l] = L->tay[n][87][l] - L->tay[n][88][l];
+            L->tay[n][93][l] = 28.571428571428573 * L->tay[n][25][l];
+            L->tay[n + 1][0][l] = L->tay[n][16][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = L->tay[n][19][l] * inv[n + 1];
+            L->tay[n + 1][2][l] = L->tay[n][21][l] * inv[n + 1];
+            L->tay[n + 1][3][l] = L->tay[n][76][l] * inv[n + 1];
+            L->tay[n + 1][4][l] = L->tay[n][83][l] * inv[n + 1];
+            L->tay[n + 1][5][l] = L->tay[n][89][l] * inv[n + 1];
+            L->tay[n + 1][6][l] = 0.0;
+            L->tay[n + 1][7][l] = 0.0;
+            L->tay[n + 1][8][l] = L->tay[n][93][l] * inv[n + 1];
+        }
+    }
+}
+
+/* One step of taylor_integrate on every lane. */
+static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv[19];
+    int order;
+    double rhofac;
+    double scale;
+    int last[RW3_ORTHOGONAL_LANES];
+    int run[RW3_ORTHOGONAL_LANES];
+    int take[RW3_ORTHOGONAL_LANES];
+    int ok[RW3_ORTHOGONAL_LANES];
+    int at[RW3_ORTHOGONAL_LANES];
+    int jump[RW3_ORTHOGONAL_LANES];
+    int retry[RW3_ORTHOGONAL_LANES];
+    double xmax[RW3_ORTHOGONAL_LANES];
+    double dp[RW3_ORTHOGONAL_LANES];
+    double dq[RW3_ORTHOGONAL_LANES];
+    double rho[RW3_ORTHOGONAL_LANES];
+    int i, l, q;
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
+    scale = atol / rtol;
+
+    /* the coefficients at x, and the step they allow (Jorba and Zou) */
+    RW3_ORTHOGONAL_SIMD
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+    }
+    taylor_jet_lanes(L, order, c, inv);
+    RW3_ORTHOGONAL_SIMD
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (run[l] ? 1 : 0);
+        xmax[l] = 0.0;
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rho[l] = exp(dmin(log(xmax[l] / dp[l]) * inv[order],
+                log(xmax[l] / dq[l]) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = run[l] ? L->h[l] : L->stats_h[l];
+        L->code[l] = run[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW3_ORTHOGONAL_ODE_ERR_NONFINITE :
+                RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];  /* a step lost in t, or no steps left, stops */
+        run[l] = L->code[l] < 0;
+    }
+
+    /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (q = 0; q < order - 1; ++q) {
+        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+            RW3_ORTHOGONAL_SIMD
+            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - q - 1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * L->xnew[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    RW3_ORTHOGONAL_SIMD
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        L->nonfinite[l] = 0;
+    }
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+
+    /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+    RW3_ORTHOGONAL_SIMD
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        take[l] = run[l] && !L->nonfinite[l];
+        at[l] = fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS;
+        jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !at[l] && !jump[l];
+        retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */
+        L->code[l] = take[l] && at[l] && !jump[l] ? RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR :
+                ok[l] && last[l] ? RW3_ORTHOGONAL_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->cap[l] = ok[l] ? DBL_MAX : retry[l] ? L->h[l] * 0.5 : L->cap[l];
+    }
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
 static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
@@ -2873,15 +3277,16 @@ static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0,
         L->x[i][l] = x[i];
         L->k[0][i][l] = f0[i];
     }
+    L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
-    L->err_old[l] = 1e-4;
     L->nonfinite[l] = 0;
-    L->rejected_last[l] = 0;
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         L->comp[i][l] = 0.0;
     }
-    L->h[l] = h;
+    L->err_old[l] = 1e-4;
+    L->rejected_last[l] = 0;
+    L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
@@ -3070,23 +3475,11 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
 {
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = rw3_orthogonal_taylor(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != RW3_ORTHOGONAL_ODE_OK);
-    }
-    return failed;
+    return pair_batch(taylor_step_lanes, 18, n, t0, t1, x, c, rtol, atol, h0,
+                      max_steps, stats, codes);
 }

@@ -918,12 +918,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -1106,12 +1106,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -2112,10 +2112,11 @@ contains
 
   ! The normalized Taylor coefficients of x and of the rhs's 85
   ! nodes to the given order (16 of them convolutions).
-  subroutine taylor_jet(order, x, c, tay)
+  subroutine taylor_jet(order, x, c, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: inv(0:19 - 1)
     real(c_double), intent(inout) :: tay(0:94 - 1, 0:19 - 1)
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2133,12 +2134,12 @@ contains
     real(c_double) :: acc65
     real(c_double) :: acc71
     real(c_double) :: acc73
-    real(c_double) :: rk
-    real(c_double) :: rk1
+    real(c_double) :: ib16
+    real(c_double) :: ub16
     real(c_double) :: w1
     real(c_double) :: w2
     integer(c_int) :: j
-    integer(c_int) :: k
+    integer(c_int) :: n
 
     ! order 0: the state and every node's value
     tay(0, 0) = x(0)
@@ -2216,6 +2217,8 @@ contains
     tay(88, 0) = 1.5497923245489903e-05_c_double * tay(74, 0)
     tay(89, 0) = tay(87, 0) - tay(88, 0)
     tay(93, 0) = 28.571428571428573_c_double * tay(25, 0)
+    ib16 = 1.0_c_double / tay(15, 0)
+    ub16 = tay(16, 0) / tay(15, 0)
     tay(0, 1) = tay(16, 0)
     tay(1, 1) = tay(19, 0)
     tay(2, 1) = tay(21, 0)
@@ -2227,8 +2230,7 @@ contains
     tay(8, 1) = tay(93, 0)
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do k = 1, order - 1
-      rk = 1.0_c_double / real(k, c_double)
+    do n = 1, order - 1
       acc9 = 0.0_c_double
       acc10 = 0.0_c_double
       acc11 = 0.0_c_double
@@ -2245,101 +2247,100 @@ contains
       acc65 = 0.0_c_double
       acc71 = 0.0_c_double
       acc73 = 0.0_c_double
-      do j = 1, k - 1
+      do j = 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
-        acc9 = acc9 + w2 * tay(10, k - j)
-        acc10 = acc10 + w2 * tay(9, k - j)
-        acc11 = acc11 + tay(10, j) * tay(5, k - j)
-        acc12 = acc12 + tay(9, j) * tay(3, k - j)
-        acc14 = acc14 + w1 * tay(15, k - j)
-        acc15 = acc15 + w1 * tay(14, k - j)
-        acc16 = acc16 + tay(15, j) * tay(16, k - j)
-        acc17 = acc17 + tay(9, j) * tay(5, k - j)
-        acc18 = acc18 + tay(10, j) * tay(3, k - j)
-        acc20 = acc20 + tay(16, j) * tay(14, k - j)
-        acc38 = acc38 + tay(37, j) * tay(4, k - j)
-        acc49 = acc49 + tay(48, j) * tay(3, k - j)
-        acc55 = acc55 + tay(48, j) * tay(5, k - j)
-        acc65 = acc65 + tay(64, j) * tay(4, k - j)
-        acc71 = acc71 + tay(64, j) * tay(3, k - j)
-        acc73 = acc73 + tay(37, j) * tay(5, k - j)
+        acc9 = acc9 + w2 * tay(10, n - j)
+        acc10 = acc10 + w2 * tay(9, n - j)
+        acc11 = acc11 + tay(10, j) * tay(5, n - j)
+        acc12 = acc12 + tay(9, j) * tay(3, n - j)
+        acc14 = acc14 + w1 * tay(15, n - j)
+        acc15 = acc15 + w1 * tay(14, n - j)
+        acc16 = acc16 + tay(15, j) * tay(16, n - j)
+        acc17 = acc17 + tay(9, j) * tay(5, n - j)
+        acc18 = acc18 + tay(10, j) * tay(3, n - j)
+        acc20 = acc20 + tay(16, j) * tay(14, n - j)
+        acc38 = acc38 + tay(37, j) * tay(4, n - j)
+        acc49 = acc49 + tay(48, j) * tay(3, n - j)
+        acc55 = acc55 + tay(48, j) * tay(5, n - j)
+        acc65 = acc65 + tay(64, j) * tay(4, n - j)
+        acc71 = acc71 + tay(64, j) * tay(3, n - j)
+        acc73 = acc73 + tay(37, j) * tay(5, n - j)
       end do
-      tay(9, k) = (acc9 + (real(k, c_double) * tay(2, k)) * tay(10, 0)) * rk
-      tay(10, k) = -(acc10 + (real(k, c_double) * tay(2, k)) * tay(9, 0)) * rk
-      tay(11, k) = (tay(10, 0) * tay(5, k) + acc11) + tay(10, k) * tay(5, 0)
-      tay(12, k) = (tay(9, 0) * tay(3, k) + acc12) + tay(9, k) * tay(3, 0)
-      tay(13, k) = tay(11, k) - tay(12, k)
-      tay(14, k) = (acc14 + (real(k, c_double) * tay(1, k)) * tay(15, 0)) * rk
-      tay(15, k) = -(acc15 + (real(k, c_double) * tay(1, k)) * tay(14, 0)) * rk
-      tay(16, k) = (tay(13, k) - (acc16 + tay(15, k) * tay(16, 0))) / tay(15, 0)
-      tay(17, k) = (tay(9, 0) * tay(5, k) + acc17) + tay(9, k) * tay(5, 0)
-      tay(18, k) = (tay(10, 0) * tay(3, k) + acc18) + tay(10, k) * tay(3, 0)
-      tay(19, k) = tay(17, k) + tay(18, k)
-      tay(20, k) = (tay(16, 0) * tay(14, k) + acc20) + tay(16, k) * tay(14, 0)
-      tay(21, k) = tay(4, k) - tay(20, k)
-      tay(24, k) = tay(8, k) - tay(5, k)
-      tay(25, k) = (-0.0001_c_double) * tay(24, k)
-      tay(26, k) = -tay(25, k)
-      tay(28, k) = 0.035_c_double * tay(6, k)
-      tay(30, k) = 2.005_c_double * tay(4, k)
-      tay(31, k) = tay(28, k) + tay(30, k)
-      tay(33, k) = 301.7396875_c_double * tay(3, k)
-      tay(34, k) = tay(31, k) + tay(33, k)
-      tay(36, k) = 3.15125_c_double * tay(5, k)
-      tay(37, k) = tay(34, k) - tay(36, k)
-      tay(38, k) = (tay(37, 0) * tay(4, k) + acc38) + tay(37, k) * tay(4, 0)
-      tay(39, k) = tay(26, k) + tay(38, k)
-      tay(40, k) = 0.035_c_double * tay(7, k)
-      tay(42, k) = 1.34875_c_double * tay(5, k)
-      tay(43, k) = tay(40, k) + tay(42, k)
-      tay(44, k) = 2.005_c_double * tay(3, k)
-      tay(45, k) = tay(43, k) + tay(44, k)
-      tay(47, k) = 351.7396875_c_double * tay(4, k)
-      tay(48, k) = tay(45, k) + tay(47, k)
-      tay(49, k) = (tay(48, 0) * tay(3, k) + acc49) + tay(48, k) * tay(3, 0)
-      tay(50, k) = tay(39, k) - tay(49, k)
-      tay(51, k) = 4.166596729006503e-05_c_double * tay(50, k)
-      tay(55, k) = (tay(48, 0) * tay(5, k) + acc55) + tay(48, k) * tay(5, 0)
-      tay(56, k) = tay(55, k)
-      tay(57, k) = 0.035_c_double * tay(8, k)
-      tay(58, k) = 1.34875_c_double * tay(4, k)
-      tay(59, k) = tay(57, k) + tay(58, k)
-      tay(61, k) = 251.31_c_double * tay(5, k)
-      tay(62, k) = tay(59, k) + tay(61, k)
-      tay(63, k) = 3.15125_c_double * tay(3, k)
-      tay(64, k) = tay(62, k) - tay(63, k)
-      tay(65, k) = (tay(64, 0) * tay(4, k) + acc65) + tay(64, k) * tay(4, 0)
-      tay(66, k) = tay(56, k) - tay(65, k)
-      tay(67, k) = 0.0033146766733524852_c_double * tay(66, k)
-      tay(68, k) = tay(51, k) + tay(67, k)
-      tay(71, k) = (tay(64, 0) * tay(3, k) + acc71) + tay(64, k) * tay(3, 0)
-      tay(72, k) = tay(71, k)
-      tay(73, k) = (tay(37, 0) * tay(5, k) + acc73) + tay(37, k) * tay(5, 0)
-      tay(74, k) = tay(72, k) - tay(73, k)
-      tay(75, k) = 1.9054215209804005e-05_c_double * tay(74, k)
-      tay(76, k) = tay(68, k) - tay(75, k)
-      tay(78, k) = 0.0028431796071504527_c_double * tay(74, k)
-      tay(80, k) = 1.5497923245489903e-05_c_double * tay(50, k)
-      tay(81, k) = tay(78, k) - tay(80, k)
-      tay(82, k) = 1.9054215209804005e-05_c_double * tay(66, k)
-      tay(83, k) = tay(81, k) - tay(82, k)
-      tay(85, k) = 0.003979754895162947_c_double * tay(50, k)
-      tay(86, k) = 4.166596729006503e-05_c_double * tay(66, k)
-      tay(87, k) = tay(85, k) + tay(86, k)
-      tay(88, k) = 1.5497923245489903e-05_c_double * tay(74, k)
-      tay(89, k) = tay(87, k) - tay(88, k)
-      tay(93, k) = 28.571428571428573_c_double * tay(25, k)
-      rk1 = 1.0_c_double / real(k + 1, c_double)
-      tay(0, k + 1) = tay(16, k) * rk1
-      tay(1, k + 1) = tay(19, k) * rk1
-      tay(2, k + 1) = tay(21, k) * rk1
-      tay(3, k + 1) = tay(76, k) * rk1
-      tay(4, k + 1) = tay(83, k) * rk1
-      tay(5, k + 1) = tay(89, k) * rk1
-      tay(6, k + 1) = 0.0_c_double
-      tay(7, k + 1) = 0.0_c_double
-      tay(8, k + 1) = tay(93, k) * rk1
+      tay(9, n) = acc9 * inv(n) + tay(2, n) * tay(10, 0)
+      tay(10, n) = (-acc10 * inv(n)) - tay(2, n) * tay(9, 0)
+      tay(11, n) = (acc11 + tay(10, 0) * tay(5, n)) + tay(10, n) * tay(5, 0)
+      tay(12, n) = (acc12 + tay(9, 0) * tay(3, n)) + tay(9, n) * tay(3, 0)
+      tay(13, n) = tay(11, n) - tay(12, n)
+      tay(14, n) = acc14 * inv(n) + tay(1, n) * tay(15, 0)
+      tay(15, n) = (-acc15 * inv(n)) - tay(1, n) * tay(14, 0)
+      tay(16, n) = tay(13, n) * ib16 - (acc16 * ib16 + tay(15, n) * ub16)
+      tay(17, n) = (acc17 + tay(9, 0) * tay(5, n)) + tay(9, n) * tay(5, 0)
+      tay(18, n) = (acc18 + tay(10, 0) * tay(3, n)) + tay(10, n) * tay(3, 0)
+      tay(19, n) = tay(17, n) + tay(18, n)
+      tay(20, n) = (acc20 + tay(16, 0) * tay(14, n)) + tay(16, n) * tay(14, 0)
+      tay(21, n) = tay(4, n) - tay(20, n)
+      tay(24, n) = tay(8, n) - tay(5, n)
+      tay(25, n) = (-0.0001_c_double) * tay(24, n)
+      tay(26, n) = -tay(25, n)
+      tay(28, n) = 0.035_c_double * tay(6, n)
+      tay(30, n) = 2.005_c_double * tay(4, n)
+      tay(31, n) = tay(28, n) + tay(30, n)
+      tay(33, n) = 301.7396875_c_double * tay(3, n)
+      tay(34, n) = tay(31, n) + tay(33, n)
+      tay(36, n) = 3.15125_c_double * tay(5, n)
+      tay(37, n) = tay(34, n) - tay(36, n)
+      tay(38, n) = (acc38 + tay(37, 0) * tay(4, n)) + tay(37, n) * tay(4, 0)
+      tay(39, n) = tay(26, n) + tay(38, n)
+      tay(40, n) = 0.035_c_double * tay(7, n)
+      tay(42, n) = 1.34875_c_double * tay(5, n)
+      tay(43, n) = tay(40, n) + tay(42, n)
+      tay(44, n) = 2.005_c_double * tay(3, n)
+      tay(45, n) = tay(43, n) + tay(44, n)
+      tay(47, n) = 351.7396875_c_double * tay(4, n)
+      tay(48, n) = tay(45, n) + tay(47, n)
+      tay(49, n) = (acc49 + tay(48, 0) * tay(3, n)) + tay(48, n) * tay(3, 0)
+      tay(50, n) = tay(39, n) - tay(49, n)
+      tay(51, n) = 4.166596729006503e-05_c_double * tay(50, n)
+      tay(55, n) = (acc55 + tay(48, 0) * tay(5, n)) + tay(48, n) * tay(5, 0)
+      tay(56, n) = tay(55, n)
+      tay(57, n) = 0.035_c_double * tay(8, n)
+      tay(58, n) = 1.34875_c_double * tay(4, n)
+      tay(59, n) = tay(57, n) + tay(58, n)
+      tay(61, n) = 251.31_c_double * tay(5, n)
+      tay(62, n) = tay(59, n) + tay(61, n)
+      tay(63, n) = 3.15125_c_double * tay(3, n)
+      tay(64, n) = tay(62, n) - tay(63, n)
+      tay(65, n) = (acc65 + tay(64, 0) * tay(4, n)) + tay(64, n) * tay(4, 0)
+      tay(66, n) = tay(56, n) - tay(65, n)
+      tay(67, n) = 0.0033146766733524852_c_double * tay(66, n)
+      tay(68, n) = tay(51, n) + tay(67, n)
+      tay(71, n) = (acc71 + tay(64, 0) * tay(3, n)) + tay(64, n) * tay(3, 0)
+      tay(72, n) = tay(71, n)
+      tay(73, n) = (acc73 + tay(37, 0) * tay(5, n)) + tay(37, n) * tay(5, 0)
+      tay(74, n) = tay(72, n) - tay(73, n)
+      tay(75, n) = 1.9054215209804005e-05_c_double * tay(74, n)
+      tay(76, n) = tay(68, n) - tay(75, n)
+      tay(78, n) = 0.0028431796071504527_c_double * tay(74, n)
+      tay(80, n) = 1.5497923245489903e-05_c_double * tay(50, n)
+      tay(81, n) = tay(78, n) - tay(80, n)
+      tay(82, n) = 1.9054215209804005e-05_c_double * tay(66, n)
+      tay(83, n) = tay(81, n) - tay(82, n)
+      tay(85, n) = 0.003979754895162947_c_double * tay(50, n)
+      tay(86, n) = 4.166596729006503e-05_c_double * tay(66, n)
+      tay(87, n) = tay(85, n) + tay(86, n)
+      tay(88, n) = 1.5497923245489903e-05_c_double * tay(74, n)
+      tay(89, n) = tay(87, n) - tay(88, n)
+      tay(93, n) = 28.571428571428573_c_double * tay(25, n)
+      tay(0, n + 1) = tay(16, n) * inv(n + 1)
+      tay(1, n + 1) = tay(19, n) * inv(n + 1)
+      tay(2, n + 1) = tay(21, n) * inv(n + 1)
+      tay(3, n + 1) = tay(76, n) * inv(n + 1)
+      tay(4, n + 1) = tay(83, n) * inv(n + 1)
+      tay(5, n + 1) = tay(89, n) * inv(n + 1)
+      tay(6, n + 1) = 0.0_c_double
+      tay(7, n + 1) = 0.0_c_double
+      tay(8, n + 1) = tay(93, n) * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -2360,41 +2361,37 @@ contains
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
     real(c_double) :: tay(0:94 - 1, 0:19 - 1)
+    real(c_double) :: inv(0:19 - 1)
+    real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
     real(c_double) :: comp(0:nx - 1)
     integer(c_int) :: order
-    integer(c_int) :: nonfinite
-    integer(c_int) :: fresh
-    logical :: last
-    real(c_double) :: t
-    real(c_double) :: h
     real(c_double) :: rhofac
     real(c_double) :: scale
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: cap
+    logical :: nonfinite
+    logical :: last
+    logical :: run
+    logical :: take
+    logical :: ok
+    logical :: at
+    logical :: jump
+    logical :: retry
     real(c_double) :: xmax
     real(c_double) :: dp
     real(c_double) :: dq
     real(c_double) :: rho
-    real(c_double) :: acc
     integer(c_int) :: i
     integer(c_int) :: q
 
-    comp = 0.0_c_double
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      res = RW3_ORTHOGONAL_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      res = RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
-    if (.not. (t1 > t0)) then
-      res = RW3_ORTHOGONAL_ODE_OK
-      return
-    end if
-    if (.not. all_finite(x, nx)) then
-      res = RW3_ORTHOGONAL_ODE_ERR_NONFINITE
+    inv = 0.0_c_double
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (code >= 0) then
+      res = code
       return
     end if
 
@@ -2417,77 +2414,85 @@ contains
     order = order + (merge(1, 0, 9.357622968840175e-14_c_double > rtol))
     order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
     rhofac = exp((-0.7_c_double) / real(order - 1, c_double)) / 7.3890560989306495_c_double
+    do q = 1, order + 1 - 1
+      inv(q) = 1.0_c_double / real(q, c_double)
+    end do
     scale = atol / rtol
+    code = -1
     t = t0
-    nonfinite = 0
-    fresh = 1
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    cap = merge(h, huge(1.0_c_double), h0 > 0.0_c_double)
     do
-      if (fresh /= 0) then
-        call taylor_jet(order, x, c, tay)
-        stats%rhs_calls = stats%rhs_calls + 1
-        xmax = 0.0_c_double
-        dp = 0.0_c_double
-        dq = 0.0_c_double
-        do i = 0, nx - 1
-          xmax = max(xmax, abs(x(i)))
-          dp = max(dp, abs(tay(i, order)))
-          dq = max(dq, abs(tay(i, order - 1)))
-        end do
-        xmax = max(scale, xmax)  ! the absolute and relative modes in one
-        rho = min((xmax / dp)**(1.0_c_double / real(order, c_double)), &
-            (xmax / dq)**(1.0_c_double / real(order - 1, c_double)))
-        h = min(rho * rhofac, t1 - t)
-        if (stats%accepted == 0 .and. h0 > 0.0_c_double) then
-          h = min(h, h0)  ! a first step no longer than h0
-        end if
-        fresh = 0
-      end if
+
+      ! the coefficients at x, and the step they allow (Jorba and Zou)
+      run = code < 0
+      call taylor_jet(order, x, c, inv, tay)
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
+      xmax = 0.0_c_double
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 0, nx - 1
+        xmax = max(xmax, abs(x(i)))
+        dp = max(dp, abs(tay(i, order)))
+        dq = max(dq, abs(tay(i, order - 1)))
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rho = exp(min(log(xmax / dp) * inv(order), log(xmax / dq) * inv(order - 1)))  ! min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1)))
+      h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
-      if (last) then
-        h = t1 - t
-      end if
-      stats%h = h
-      if (step_underflow(h, t)) then
-        res = merge(RW3_ORTHOGONAL_ODE_ERR_NONFINITE, RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW, &
-            nonfinite /= 0)
-        return
-      end if
-      if (stats%accepted + stats%rejected >= max_steps) then
-        res = RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS
-        return
-      end if
+      h = merge(t1 - t, h, last)
+      stats%h = merge(h, stats%h, run)
+      code = merge(merge(merge(RW3_ORTHOGONAL_ODE_ERR_NONFINITE, &
+          RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW, nonfinite), &
+          merge(RW3_ORTHOGONAL_ODE_ERR_MAX_STEPS, -1, &
+          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! a step lost in t, or no steps left, stops
+      run = code < 0
 
       ! x(t + h) by Horner's scheme, less what the last add lost (comp)
       do i = 0, nx - 1
-        acc = tay(i, order)
-        do q = 0, order - 1 - 1
-          acc = tay(i, (order - q) - 1) + h * acc
+        xnew(i) = tay(i, order)
+      end do
+      do q = 0, order - 1 - 1
+        do i = 0, nx - 1
+          xnew(i) = tay(i, (order - q) - 1) + h * xnew(i)
         end do
-        dx(i) = h * acc - comp(i)
+      end do
+      do i = 0, nx - 1
+        dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)
       end do
-      nonfinite = merge(0, 1, all_finite(xnew, nx))
-      if (nonfinite /= 0) then
-        stats%rejected = stats%rejected + 1
-        h = h * 0.5_c_double
-        last = .false.
-      else
-        if (gimbal_lock(x, xnew)) then
-          res = RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
-          return
-        end if
-        call accept_step(x, xnew, dx, comp)
-        stats%accepted = stats%accepted + 1
-        t = merge(t1, t + h, last)
-        stats%t = t
-        fresh = 1
+      nonfinite = .false.
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock
+      take = run .and. .not. nonfinite
+      at = abs(rw3_orthogonal_cos(xnew(1))) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS
+      jump = abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+      ok = take .and. .not. at .and. .not. jump
+      retry = run .and. (nonfinite .or. jump)  ! past gimbal lock, or not finite
+      code = merge(RW3_ORTHOGONAL_ODE_ERR_ATTITUDE_SINGULAR, merge(RW3_ORTHOGONAL_ODE_OK, code, &
+          ok .and. last), take .and. at .and. .not. jump)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, retry))
+      cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
+      if (ok) then
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
       end if
-      if (last .and. nonfinite == 0) then
-        exit
+      if (code >= 0) then
+        res = code
+        return
       end if
     end do
-    res = RW3_ORTHOGONAL_ODE_OK
-    return
   end function taylor_integrate
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.

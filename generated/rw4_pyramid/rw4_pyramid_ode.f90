@@ -1084,12 +1084,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -1271,12 +1271,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1

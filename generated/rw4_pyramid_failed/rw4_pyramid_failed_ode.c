@@ -916,12 +916,12 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1080,12 +1080,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -2201,7 +2201,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 
     /* control: accept or reject by selection, and the next h */
-    /* pow: scalar calls */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
     for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
@@ -2578,15 +2578,15 @@ static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0,
         L->x[i][l] = x[i];
         L->k[0][i][l] = f0[i];
     }
+    L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
-    L->err_old[l] = 1e-4;
     L->nonfinite[l] = 0;
-    L->rejected_last[l] = 0;
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         L->comp[i][l] = 0.0;
     }
-    L->h[l] = h;
+    L->err_old[l] = 1e-4;
+    L->rejected_last[l] = 0;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;

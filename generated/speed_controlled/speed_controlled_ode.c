@@ -816,12 +816,12 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -980,12 +980,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     }
     code = -1;
     t = t0;
-    err_old = 1e-4;
     nonfinite = 0;
-    rejected_last = 0;
     for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
         comp[i] = 0.0;
     }
+    err_old = 1e-4;
+    rejected_last = 0;
     for (;;) {
 
         /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1865,7 +1865,8 @@ int speed_controlled_radau5(double t0, double t1, double *x, const double *c, do
 
 /* The normalized Taylor coefficients of x and of the rhs's 54
    nodes to the given order (17 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *c, double (*tay)[62])
+static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
+                              double (*tay)[62])
 {
     double acc8;
     double acc9;
@@ -1884,10 +1885,10 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     double acc49;
     double acc51;
     double acc58;
-    double rk;
-    double rk1;
+    double ib15;
+    double ub15;
     int j;
-    int k;
+    int n;
 
     /* order 0: the state and every node's value */
     tay[0][0] = x[0];
@@ -1941,6 +1942,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     tay[0][58] = tay[0][4] * tay[0][57];
     tay[0][59] = tay[0][51] + tay[0][58];
     tay[0][61] = c[1] * tay[0][44];
+    ib15 = 1.0 / tay[0][14];
+    ub15 = tay[0][15] / tay[0][14];
     tay[1][0] = tay[0][15];
     tay[1][1] = tay[0][18];
     tay[1][2] = tay[0][20];
@@ -1951,8 +1954,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
     tay[1][7] = tay[0][61];
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (k = 1; k < order; ++k) {
-        rk = 1.0 / (double)k;
+    for (n = 1; n < order; ++n) {
         acc8 = 0.0;
         acc9 = 0.0;
         acc10 = 0.0;
@@ -1970,80 +1972,79 @@ static inline void taylor_jet(int order, const double *x, const double *c, doubl
         acc49 = 0.0;
         acc51 = 0.0;
         acc58 = 0.0;
-        for (j = 1; j < k; ++j) {
+        for (j = 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
-            acc8 = acc8 + w2 * tay[k - j][9];
-            acc9 = acc9 + w2 * tay[k - j][8];
-            acc10 = acc10 + tay[j][9] * tay[k - j][6];
-            acc11 = acc11 + tay[j][8] * tay[k - j][4];
-            acc13 = acc13 + w1 * tay[k - j][14];
-            acc14 = acc14 + w1 * tay[k - j][13];
-            acc15 = acc15 + tay[j][14] * tay[k - j][15];
-            acc16 = acc16 + tay[j][8] * tay[k - j][6];
-            acc17 = acc17 + tay[j][9] * tay[k - j][4];
-            acc19 = acc19 + tay[j][15] * tay[k - j][13];
-            acc27 = acc27 + tay[j][6] * tay[k - j][26];
-            acc33 = acc33 + tay[j][32] * tay[k - j][4];
-            acc36 = acc36 + tay[j][4] * tay[k - j][4];
-            acc38 = acc38 + tay[j][6] * tay[k - j][6];
-            acc49 = acc49 + tay[j][48] * tay[k - j][6];
-            acc51 = acc51 + tay[j][32] * tay[k - j][6];
-            acc58 = acc58 + tay[j][4] * tay[k - j][57];
+            acc8 = acc8 + w2 * tay[n - j][9];
+            acc9 = acc9 + w2 * tay[n - j][8];
+            acc10 = acc10 + tay[j][9] * tay[n - j][6];
+            acc11 = acc11 + tay[j][8] * tay[n - j][4];
+            acc13 = acc13 + w1 * tay[n - j][14];
+            acc14 = acc14 + w1 * tay[n - j][13];
+            acc15 = acc15 + tay[j][14] * tay[n - j][15];
+            acc16 = acc16 + tay[j][8] * tay[n - j][6];
+            acc17 = acc17 + tay[j][9] * tay[n - j][4];
+            acc19 = acc19 + tay[j][15] * tay[n - j][13];
+            acc27 = acc27 + tay[j][6] * tay[n - j][26];
+            acc33 = acc33 + tay[j][32] * tay[n - j][4];
+            acc36 = acc36 + tay[j][4] * tay[n - j][4];
+            acc38 = acc38 + tay[j][6] * tay[n - j][6];
+            acc49 = acc49 + tay[j][48] * tay[n - j][6];
+            acc51 = acc51 + tay[j][32] * tay[n - j][6];
+            acc58 = acc58 + tay[j][4] * tay[n - j][57];
         }
-        tay[k][8] = (acc8 + (double)k * tay[k][2] * tay[0][9]) * rk;
-        tay[k][9] = -((acc9 + (double)k * tay[k][2] * tay[0][8]) * rk);
-        tay[k][10] = tay[0][9] * tay[k][6] + acc10 + tay[k][9] * tay[0][6];
-        tay[k][11] = tay[0][8] * tay[k][4] + acc11 + tay[k][8] * tay[0][4];
-        tay[k][12] = tay[k][10] - tay[k][11];
-        tay[k][13] = (acc13 + (double)k * tay[k][1] * tay[0][14]) * rk;
-        tay[k][14] = -((acc14 + (double)k * tay[k][1] * tay[0][13]) * rk);
-        tay[k][15] = (tay[k][12] - (acc15 + tay[k][14] * tay[0][15])) / tay[0][14];
-        tay[k][16] = tay[0][8] * tay[k][6] + acc16 + tay[k][8] * tay[0][6];
-        tay[k][17] = tay[0][9] * tay[k][4] + acc17 + tay[k][9] * tay[0][4];
-        tay[k][18] = tay[k][16] + tay[k][17];
-        tay[k][19] = tay[0][15] * tay[k][13] + acc19 + tay[k][15] * tay[0][13];
-        tay[k][20] = tay[k][5] - tay[k][19];
-        tay[k][21] = tay[k][7] - tay[k][5];
-        tay[k][23] = 0.0004980820048148975 * tay[k][7];
-        tay[k][25] = 0.33522655090705017 * tay[k][5];
-        tay[k][26] = tay[k][23] + tay[k][25];
-        tay[k][27] = tay[0][6] * tay[k][26] + acc27 + tay[k][6] * tay[0][26];
-        tay[k][29] = 0.016919114337701612 * tay[k][5];
-        tay[k][31] = 1.2676659094182028e-05 * tay[k][7];
-        tay[k][32] = tay[k][29] - tay[k][31];
-        tay[k][33] = tay[0][32] * tay[k][4] + acc33 + tay[k][32] * tay[0][4];
-        tay[k][34] = tay[k][27] - tay[k][33];
-        tay[k][36] = tay[0][4] * tay[k][4] + acc36 + tay[k][4] * tay[0][4];
-        tay[k][37] = 0.018613186525101588 * tay[k][36];
-        tay[k][38] = tay[0][6] * tay[k][6] + acc38 + tay[k][6] * tay[0][6];
-        tay[k][39] = 0.018613186525101588 * tay[k][38];
-        tay[k][40] = tay[k][37] - tay[k][39];
-        tay[k][43] = tay[k][7];
-        tay[k][44] = tay[k][43] - tay[k][5];
-        tay[k][45] = c[0] * tay[k][44];
-        tay[k][46] = tay[k][40] + tay[k][45];
-        tay[k][48] = 0.06916590204045965 * tay[k][4];
-        tay[k][49] = tay[0][48] * tay[k][6] + acc49 + tay[k][48] * tay[0][6];
-        tay[k][50] = tay[k][46] - tay[k][49];
-        tay[k][51] = tay[0][32] * tay[k][6] + acc51 + tay[k][32] * tay[0][6];
-        tay[k][53] = 0.2723557574878444 * tay[k][5];
-        tay[k][54] = -tay[k][53];
-        tay[k][56] = 0.0005451879938902264 * tay[k][7];
-        tay[k][57] = tay[k][54] - tay[k][56];
-        tay[k][58] = tay[0][4] * tay[k][57] + acc58 + tay[k][4] * tay[0][57];
-        tay[k][59] = tay[k][51] + tay[k][58];
-        tay[k][61] = c[1] * tay[k][44];
-        rk1 = 1.0 / (double)(k + 1);
-        tay[k + 1][0] = tay[k][15] * rk1;
-        tay[k + 1][1] = tay[k][18] * rk1;
-        tay[k + 1][2] = tay[k][20] * rk1;
-        tay[k + 1][3] = tay[k][21] * rk1;
-        tay[k + 1][4] = tay[k][34] * rk1;
-        tay[k + 1][5] = tay[k][50] * rk1;
-        tay[k + 1][6] = tay[k][59] * rk1;
-        tay[k + 1][7] = tay[k][61] * rk1;
+        tay[n][8] = acc8 * inv[n] + tay[n][2] * tay[0][9];
+        tay[n][9] = -(acc9 * inv[n]) - tay[n][2] * tay[0][8];
+        tay[n][10] = acc10 + tay[0][9] * tay[n][6] + tay[n][9] * tay[0][6];
+        tay[n][11] = acc11 + tay[0][8] * tay[n][4] + tay[n][8] * tay[0][4];
+        tay[n][12] = tay[n][10] - tay[n][11];
+        tay[n][13] = acc13 * inv[n] + tay[n][1] * tay[0][14];
+        tay[n][14] = -(acc14 * inv[n]) - tay[n][1] * tay[0][13];
+        tay[n][15] = tay[n][12] * ib15 - (acc15 * ib15 + tay[n][14] * ub15);
+        tay[n][16] = acc16 + tay[0][8] * tay[n][6] + tay[n][8] * tay[0][6];
+        tay[n][17] = acc17 + tay[0][9] * tay[n][4] + tay[n][9] * tay[0][4];
+        tay[n][18] = tay[n][16] + tay[n][17];
+        tay[n][19] = acc19 + tay[0][15] * tay[n][13] + tay[n][15] * tay[0][13];
+        tay[n][20] = tay[n][5] - tay[n][19];
+        tay[n][21] = tay[n][7] - tay[n][5];
+        tay[n][23] = 0.0004980820048148975 * tay[n][7];
+        tay[n][25] = 0.33522655090705017 * tay[n][5];
+        tay[n][26] = tay[n][23] + tay[n][25];
+        tay[n][27] = acc27 + tay[0][6] * tay[n][26] + tay[n][6] * tay[0][26];
+        tay[n][29] = 0.016919114337701612 * tay[n][5];
+        tay[n][31] = 1.2676659094182028e-05 * tay[n][7];
+        tay[n][32] = tay[n][29] - tay[n][31];
+        tay[n][33] = acc33 + tay[0][32] * tay[n][4] + tay[n][32] * tay[0][4];
+        tay[n][34] = tay[n][27] - tay[n][33];
+        tay[n][36] = acc36 + tay[0][4] * tay[n][4] + tay[n][4] * tay[0][4];
+        tay[n][37] = 0.018613186525101588 * tay[n][36];
+        tay[n][38] = acc38 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
+        tay[n][39] = 0.018613186525101588 * tay[n][38];
+        tay[n][40] = tay[n][37] - tay[n][39];
+        tay[n][43] = tay[n][7];
+        tay[n][44] = tay[n][43] - tay[n][5];
+        tay[n][45] = c[0] * tay[n][44];
+        tay[n][46] = tay[n][40] + tay[n][45];
+        tay[n][48] = 0.06916590204045965 * tay[n][4];
+        tay[n][49] = acc49 + tay[0][48] * tay[n][6] + tay[n][48] * tay[0][6];
+        tay[n][50] = tay[n][46] - tay[n][49];
+        tay[n][51] = acc51 + tay[0][32] * tay[n][6] + tay[n][32] * tay[0][6];
+        tay[n][53] = 0.2723557574878444 * tay[n][5];
+        tay[n][54] = -tay[n][53];
+        tay[n][56] = 0.0005451879938902264 * tay[n][7];
+        tay[n][57] = tay[n][54] - tay[n][56];
+        tay[n][58] = acc58 + tay[0][4] * tay[n][57] + tay[n][4] * tay[0][57];
+        tay[n][59] = tay[n][51] + tay[n][58];
+        tay[n][61] = c[1] * tay[n][44];
+        tay[n + 1][0] = tay[n][15] * inv[n + 1];
+        tay[n + 1][1] = tay[n][18] * inv[n + 1];
+        tay[n + 1][2] = tay[n][20] * inv[n + 1];
+        tay[n + 1][3] = tay[n][21] * inv[n + 1];
+        tay[n + 1][4] = tay[n][34] * inv[n + 1];
+        tay[n + 1][5] = tay[n][50] * inv[n + 1];
+        tay[n + 1][6] = tay[n][59] * inv[n + 1];
+        tay[n + 1][7] = tay[n][61] * inv[n + 1];
     }
 }
 
@@ -2056,17 +2057,26 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                             double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
     double tay[19][62];
+    double inv[19] = {0.0};
+    double f0[SPEED_CONTROLLED_NX];
     double xnew[SPEED_CONTROLLED_NX];
     double dx[SPEED_CONTROLLED_NX];
-    double comp[SPEED_CONTROLLED_NX] = {0.0};
+    double comp[SPEED_CONTROLLED_NX];
     int order;
-    int nonfinite;
-    int fresh;
-    int last;
-    double t;
-    double h;
     double rhofac;
     double scale;
+    int code;
+    double t;
+    double h;
+    double cap;
+    int nonfinite;
+    int last;
+    int run;
+    int take;
+    int ok;
+    int at;
+    int jump;
+    int retry;
     double xmax;
     double dp;
     double dq;
@@ -2074,18 +2084,9 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
-        return SPEED_CONTROLLED_ODE_ERR_ARGUMENT;
-    }
-    if (gimbal_lock_at(x)) {
-        return SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
-    }
-    if (!(t1 > t0)) {
-        return SPEED_CONTROLLED_ODE_OK;
-    }
-    if (!all_finite(x, SPEED_CONTROLLED_NX)) {
-        return SPEED_CONTROLLED_ODE_ERR_NONFINITE;
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    if (code >= 0) {
+        return code;
     }
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
@@ -2107,74 +2108,84 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
     scale = atol / rtol;
+    code = -1;
     t = t0;
     nonfinite = 0;
-    fresh = 1;
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    cap = h0 > 0.0 ? h : DBL_MAX;
     for (;;) {
-        if (fresh != 0) {
-            taylor_jet(order, x, c, tay);
-            stats->rhs_calls = stats->rhs_calls + 1;
-            xmax = 0.0;
-            dp = 0.0;
-            dq = 0.0;
-            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
-                xmax = dmax(xmax, fabs(x[i]));
-                dp = dmax(dp, fabs(tay[order][i]));
-                dq = dmax(dq, fabs(tay[order - 1][i]));
-            }
-            xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-            rho = dmin(pow(xmax / dp, 1.0 / (double)order), pow(xmax / dq,
-                    1.0 / (double)(order - 1)));
-            h = dmin(rho * rhofac, t1 - t);
-            if (stats->accepted == 0 && h0 > 0.0) {
-                h = dmin(h, h0);  /* a first step no longer than h0 */
-            }
-            fresh = 0;
+
+        /* the coefficients at x, and the step they allow (Jorba and Zou) */
+        run = code < 0;
+        taylor_jet(order, x, c, inv, tay);
+        stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
+        xmax = 0.0;
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            xmax = dmax(xmax, fabs(x[i]));
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
         }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
-        if (last) {
-            h = t1 - t;
-        }
-        stats->h = h;
-        if (step_underflow(h, t)) {
-            return nonfinite != 0 ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
-                    SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW;
-        }
-        if (stats->accepted + stats->rejected >= max_steps) {
-            return SPEED_CONTROLLED_ODE_ERR_MAX_STEPS;
-        }
+        h = last ? t1 - t : h;
+        stats->h = run ? h : stats->h;
+        code = run ? (step_underflow(h,
+                t) ? (nonfinite ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
+                SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) : code;  /* a step lost in t, or no steps left, stops */
+        run = code < 0;
 
         /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
-            double acc;
-            acc = tay[order][i];
-            for (q = 0; q < order - 1; ++q) {
-                acc = tay[order - q - 1][i] + h * acc;
+            xnew[i] = tay[order][i];
+        }
+        for (q = 0; q < order - 1; ++q) {
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                xnew[i] = tay[order - q - 1][i] + h * xnew[i];
             }
-            dx[i] = h * acc - comp[i];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
         }
-        nonfinite = all_finite(xnew, SPEED_CONTROLLED_NX) ? 0 : 1;
-        if (nonfinite != 0) {
-            stats->rejected = stats->rejected + 1;
-            h = h * 0.5;
-            last = 0;
-        } else {
-            if (gimbal_lock(x, xnew)) {
-                return SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
-            }
-            accept_step(x, xnew, dx, comp);
-            stats->accepted = stats->accepted + 1;
-            t = last ? t1 : t + h;
-            stats->t = t;
-            fresh = 1;
+        nonfinite = 0;
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
         }
-        if (last && nonfinite == 0) {
-            break;
+
+        /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+        take = run && !nonfinite;
+        at = fabs(speed_controlled_cos(xnew[1])) < SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS;
+        jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !at && !jump;
+        retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
+        code = take && at && !jump ? SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                SPEED_CONTROLLED_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (retry ? 1 : 0);
+        cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
+        if (ok) {
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+        }
+        if (code >= 0) {
+            return code;
         }
     }
-    return SPEED_CONTROLLED_ODE_OK;
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
@@ -2206,6 +2217,8 @@ struct lanes {
     long stats_accepted[SPEED_CONTROLLED_LANES];
     long stats_rejected[SPEED_CONTROLLED_LANES];
     long stats_rhs_calls[SPEED_CONTROLLED_LANES];
+    double cap[SPEED_CONTROLLED_LANES];
+    double tay[19][62][SPEED_CONTROLLED_LANES];
     double ts[SPEED_CONTROLLED_LANES];  /* the time of an rhs call */
     int busy[SPEED_CONTROLLED_LANES];
     size_t traj[SPEED_CONTROLLED_LANES];
@@ -2401,7 +2414,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 
     /* control: accept or reject by selection, and the next h */
-    /* pow: scalar calls */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
     for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
@@ -2761,6 +2774,354 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
+/* The normalized Taylor coefficients of x and of the rhs's 54 */
+static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
+{
+    double acc8[SPEED_CONTROLLED_LANES];
+    double acc9[SPEED_CONTROLLED_LANES];
+    double acc10[SPEED_CONTROLLED_LANES];
+    double acc11[SPEED_CONTROLLED_LANES];
+    double acc13[SPEED_CONTROLLED_LANES];
+    double acc14[SPEED_CONTROLLED_LANES];
+    double acc15[SPEED_CONTROLLED_LANES];
+    double acc16[SPEED_CONTROLLED_LANES];
+    double acc17[SPEED_CONTROLLED_LANES];
+    double acc19[SPEED_CONTROLLED_LANES];
+    double acc27[SPEED_CONTROLLED_LANES];
+    double acc33[SPEED_CONTROLLED_LANES];
+    double acc36[SPEED_CONTROLLED_LANES];
+    double acc38[SPEED_CONTROLLED_LANES];
+    double acc49[SPEED_CONTROLLED_LANES];
+    double acc51[SPEED_CONTROLLED_LANES];
+    double acc58[SPEED_CONTROLLED_LANES];
+    double ib15[SPEED_CONTROLLED_LANES];
+    double ub15[SPEED_CONTROLLED_LANES];
+    int j, l, n;
+    /* order 0: the state and every node's value */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->tay[0][0][l] = L->x[0][l];
+        L->tay[0][1][l] = L->x[1][l];
+        L->tay[0][2][l] = L->x[2][l];
+        L->tay[0][3][l] = L->x[3][l];
+        L->tay[0][4][l] = L->x[4][l];
+        L->tay[0][5][l] = L->x[5][l];
+        L->tay[0][6][l] = L->x[6][l];
+        L->tay[0][7][l] = L->x[7][l];
+        L->tay[0][8][l] = speed_controlled_sin_lanes(L->tay[0][2][l]);
+        L->tay[0][9][l] = speed_controlled_cos_lanes(L->tay[0][2][l]);
+        L->tay[0][10][l] = L->tay[0][9][l] * L->tay[0][6][l];
+        L->tay[0][11][l] = L->tay[0][8][l] * L->tay[0][4][l];
+        L->tay[0][12][l] = L->tay[0][10][l] - L->tay[0][11][l];
+        L->tay[0][13][l] = speed_controlled_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][14][l] = speed_controlled_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][15][l] = L->tay[0][12][l] / L->tay[0][14][l];
+        L->tay[0][16][l] = L->tay[0][8][l] * L->tay[0][6][l];
+        L->tay[0][17][l] = L->tay[0][9][l] * L->tay[0][4][l];
+        L->tay[0][18][l] = L->tay[0][16][l] + L->tay[0][17][l];
+        L->tay[0][19][l] = L->tay[0][15][l] * L->tay[0][13][l];
+        L->tay[0][20][l] = L->tay[0][5][l] - L->tay[0][19][l];
+        L->tay[0][21][l] = L->tay[0][7][l] - L->tay[0][5][l];
+        L->tay[0][23][l] = 0.0004980820048148975 * L->tay[0][7][l];
+        L->tay[0][25][l] = 0.33522655090705017 * L->tay[0][5][l];
+        L->tay[0][26][l] = L->tay[0][23][l] + L->tay[0][25][l];
+        L->tay[0][27][l] = L->tay[0][6][l] * L->tay[0][26][l];
+        L->tay[0][29][l] = 0.016919114337701612 * L->tay[0][5][l];
+        L->tay[0][31][l] = 1.2676659094182028e-05 * L->tay[0][7][l];
+        L->tay[0][32][l] = L->tay[0][29][l] - L->tay[0][31][l];
+        L->tay[0][33][l] = L->tay[0][32][l] * L->tay[0][4][l];
+        L->tay[0][34][l] = L->tay[0][27][l] - L->tay[0][33][l];
+        L->tay[0][36][l] = L->tay[0][4][l] * L->tay[0][4][l];
+        L->tay[0][37][l] = 0.018613186525101588 * L->tay[0][36][l];
+        L->tay[0][38][l] = L->tay[0][6][l] * L->tay[0][6][l];
+        L->tay[0][39][l] = 0.018613186525101588 * L->tay[0][38][l];
+        L->tay[0][40][l] = L->tay[0][37][l] - L->tay[0][39][l];
+        L->tay[0][43][l] = c[2] + L->tay[0][7][l];
+        L->tay[0][44][l] = L->tay[0][43][l] - L->tay[0][5][l];
+        L->tay[0][45][l] = c[0] * L->tay[0][44][l];
+        L->tay[0][46][l] = L->tay[0][40][l] + L->tay[0][45][l];
+        L->tay[0][48][l] = 0.06916590204045965 * L->tay[0][4][l];
+        L->tay[0][49][l] = L->tay[0][48][l] * L->tay[0][6][l];
+        L->tay[0][50][l] = L->tay[0][46][l] - L->tay[0][49][l];
+        L->tay[0][51][l] = L->tay[0][32][l] * L->tay[0][6][l];
+        L->tay[0][53][l] = 0.2723557574878444 * L->tay[0][5][l];
+        L->tay[0][54][l] = -L->tay[0][53][l];
+        L->tay[0][56][l] = 0.0005451879938902264 * L->tay[0][7][l];
+        L->tay[0][57][l] = L->tay[0][54][l] - L->tay[0][56][l];
+        L->tay[0][58][l] = L->tay[0][4][l] * L->tay[0][57][l];
+        L->tay[0][59][l] = L->tay[0][51][l] + L->tay[0][58][l];
+        L->tay[0][61][l] = c[1] * L->tay[0][44][l];
+        ib15[l] = 1.0 / L->tay[0][14][l];
+        ub15[l] = L->tay[0][15][l] / L->tay[0][14][l];
+        L->tay[1][0][l] = L->tay[0][15][l];
+        L->tay[1][1][l] = L->tay[0][18][l];
+        L->tay[1][2][l] = L->tay[0][20][l];
+        L->tay[1][3][l] = L->tay[0][21][l];
+        L->tay[1][4][l] = L->tay[0][34][l];
+        L->tay[1][5][l] = L->tay[0][50][l];
+        L->tay[1][6][l] = L->tay[0][59][l];
+        L->tay[1][7][l] = L->tay[0][61][l];
+    }
+
+    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
+    for (n = 1; n < order; ++n) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            acc8[l] = 0.0;
+            acc9[l] = 0.0;
+            acc10[l] = 0.0;
+            acc11[l] = 0.0;
+            acc13[l] = 0.0;
+            acc14[l] = 0.0;
+            acc15[l] = 0.0;
+            acc16[l] = 0.0;
+            acc17[l] = 0.0;
+            acc19[l] = 0.0;
+            acc27[l] = 0.0;
+            acc33[l] = 0.0;
+            acc36[l] = 0.0;
+            acc38[l] = 0.0;
+            acc49[l] = 0.0;
+            acc51[l] = 0.0;
+            acc58[l] = 0.0;
+        }
+        for (j = 1; j < n; ++j) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                double w1, w2;
+                w1 = (double)j * L->tay[j][1][l];
+                w2 = (double)j * L->tay[j][2][l];
+                acc8[l] = acc8[l] + w2 * L->tay[n - j][9][l];
+                acc9[l] = acc9[l] + w2 * L->tay[n - j][8][l];
+                acc10[l] = acc10[l] + L->tay[j][9][l] * L->tay[n - j][6][l];
+                acc11[l] = acc11[l] + L->tay[j][8][l] * L->tay[n - j][4][l];
+                acc13[l] = acc13[l] + w1 * L->tay[n - j][14][l];
+                acc14[l] = acc14[l] + w1 * L->tay[n - j][13][l];
+                acc15[l] = acc15[l] + L->tay[j][14][l] * L->tay[n - j][15][l];
+                acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][6][l];
+                acc17[l] = acc17[l] + L->tay[j][9][l] * L->tay[n - j][4][l];
+                acc19[l] = acc19[l] + L->tay[j][15][l] * L->tay[n - j][13][l];
+                acc27[l] = acc27[l] + L->tay[j][6][l] * L->tay[n - j][26][l];
+                acc33[l] = acc33[l] + L->tay[j][32][l] * L->tay[n - j][4][l];
+                acc36[l] = acc36[l] + L->tay[j][4][l] * L->tay[n - j][4][l];
+                acc38[l] = acc38[l] + L->tay[j][6][l] * L->tay[n - j][6][l];
+                acc49[l] = acc49[l] + L->tay[j][48][l] * L->tay[n - j][6][l];
+                acc51[l] = acc51[l] + L->tay[j][32][l] * L->tay[n - j][6][l];
+                acc58[l] = acc58[l] + L->tay[j][4][l] * L->tay[n - j][57][l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->tay[n][8][l] = acc8[l] * inv[n] + L->tay[n][2][l] * L->tay[0][9][l];
+            L->tay[n][9][l] = -(acc9[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][8][l];
+            L->tay[n][10][l] = acc10[l] + L->tay[0][9][l] * L->tay[n][6][l] + L->tay[n][9][l] *
+                    L->tay[0][6][l];
+            L->tay[n][11][l] = acc11[l] + L->tay[0][8][l] * L->tay[n][4][l] + L->tay[n][8][l] *
+                    L->tay[0][4][l];
+            L->tay[n][12][l] = L->tay[n][10][l] - L->tay[n][11][l];
+            L->tay[n][13][l] = acc13[l] * inv[n] + L->tay[n][1][l] * L->tay[0][14][l];
+            L->tay[n][14][l] = -(acc14[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][13][l];
+            L->tay[n][15][l] = L->tay[n][12][l] * ib15[l] - (acc15[l] * ib15[l] +
+                    L->tay[n][14][l] * ub15[l]);
+            L->tay[n][16][l] = acc16[l] + L->tay[0][8][l] * L->tay[n][6][l] + L->tay[n][8][l] *
+                    L->tay[0][6][l];
+            L->tay[n][17][l] = acc17[l] + L->tay[0][9][l] * L->tay[n][4][l] + L->tay[n][9][l] *
+                    L->tay[0][4][l];
+            L->tay[n][18][l] = L->tay[n][16][l] + L->tay[n][17][l];
+            L->tay[n][19][l] = acc19[l] + L->tay[0][15][l] * L->tay[n][13][l] + L->tay[n][15][l]
+                    * L->tay[0][13][l];
+            L->tay[n][20][l] = L->tay[n][5][l] - L->tay[n][19][l];
+            L->tay[n][21][l] = L->tay[n][7][l] - L->tay[n][5][l];
+            L->tay[n][23][l] = 0.0004980820048148975 * L->tay[n][7][l];
+            L->tay[n][25][l] = 0.33522655090705017 * L->tay[n][5][l];
+            L->tay[n][26][l] = L->tay[n][23][l] + L->tay[n][25][l];
+            L->tay[n][27][l] = acc27[l] + L->tay[0][6][l] * L->tay[n][26][l] + L->tay[n][6][l] *
+                    L->tay[0][26][l];
+            L->tay[n][29][l] = 0.016919114337701612 * L->tay[n][5][l];
+            L->tay[n][31][l] = 1.2676659094182028e-05 * L->tay[n][7][l];
+            L->tay[n][32][l] = L->tay[n][29][l] - L->tay[n][31][l];
+            L->tay[n][33][l] = acc33[l] + L->tay[0][32][l] * L->tay[n][4][l] + L->tay[n][32][l] *
+                    L->tay[0][4][l];
+            L->tay[n][34][l] = L->tay[n][27][l] - L->tay[n][33][l];
+            L->tay[n][36][l] = acc36[l] + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] *
+                    L->tay[0][4][l];
+            L->tay[n][37][l] = 0.018613186525101588 * L->tay[n][36][l];
+            L->tay[n][38][l] = acc38[l] + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] *
+                    L->tay[0][6][l];
+            L->tay[n][39][l] = 0.018613186525101588 * L->tay[n][38][l];
+            L->tay[n][40][l] = L->tay[n][37][l] - L->tay[n][39][l];
+            L->tay[n][43][l] = L->tay[n][7][l];
+            L->tay[n][44][l] = L->tay[n][43][l] - L->tay[n][5][l];
+            L->tay[n][45][l] = c[0] * L->tay[n][44][l];
+            L->tay[n][46][l] = L->tay[n][40][l] + L->tay[n][45][l];
+            L->tay[n][48][l] = 0.06916590204045965 * L->tay[n][4][l];
+            L->tay[n][49][l] = acc49[l] + L->tay[0][48][l] * L->tay[n][6][l] + L->tay[n][48][l] *
+                    L->tay[0][6][l];
+            L->tay[n][50][l] = L->tay[n][46][l] - L->tay[n][49][l];
+            L->tay[n][51][l] = acc51[l] + L->tay[0][32][l] * L->tay[n][6][l] + L->tay[n][32][l] *
+                    L->tay[0][6][l];
+            L->tay[n][53][l] = 0.2723557574878444 * L->tay[n][5][l];
+            L->tay[n][54][l] = -L->tay[n][53][l];
+            L->tay[n][56][l] = 0.0005451879938902264 * L->tay[n][7][l];
+            L->tay[n][57][l] = L->tay[n][54][l] - L->tay[n][56][l];
+            L->tay[n][58][l] = acc58[l] + L->tay[0][4][l] * L->tay[n][57][l] + L->tay[n][4][l] *
+                    L->tay[0][57][l];
+            L->tay[n][59][l] = L->tay[n][51][l] + L->tay[n][58][l];
+            L->tay[n][61][l] = c[1] * L->tay[n][44][l];
+            L->tay[n + 1][0][l] = L->tay[n][15][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = L->tay[n][18][l] * inv[n + 1];
+            L->tay[n + 1][2][l] = L->tay[n][20][l] * inv[n + 1];
+            L->tay[n + 1][3][l] = L->tay[n][21][l] * inv[n + 1];
+            L->tay[n + 1][4][l] = L->tay[n][34][l] * inv[n + 1];
+            L->tay[n + 1][5][l] = L->tay[n][50][l] * inv[n + 1];
+            L->tay[n + 1][6][l] = L->tay[n][59][l] * inv[n + 1];
+            L->tay[n + 1][7][l] = L->tay[n][61][l] * inv[n + 1];
+        }
+    }
+}
+
+/* One step of taylor_integrate on every lane. */
+static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv[19];
+    int order;
+    double rhofac;
+    double scale;
+    int last[SPEED_CONTROLLED_LANES];
+    int run[SPEED_CONTROLLED_LANES];
+    int take[SPEED_CONTROLLED_LANES];
+    int ok[SPEED_CONTROLLED_LANES];
+    int at[SPEED_CONTROLLED_LANES];
+    int jump[SPEED_CONTROLLED_LANES];
+    int retry[SPEED_CONTROLLED_LANES];
+    double xmax[SPEED_CONTROLLED_LANES];
+    double dp[SPEED_CONTROLLED_LANES];
+    double dq[SPEED_CONTROLLED_LANES];
+    double rho[SPEED_CONTROLLED_LANES];
+    int i, l, q;
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
+    for (q = 1; q < order + 1; ++q) {
+        inv[q] = 1.0 / (double)q;
+    }
+    scale = atol / rtol;
+
+    /* the coefficients at x, and the step they allow (Jorba and Zou) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+    }
+    taylor_jet_lanes(L, order, c, inv);
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (run[l] ? 1 : 0);
+        xmax[l] = 0.0;
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rho[l] = exp(dmin(log(xmax[l] / dp[l]) * inv[order],
+                log(xmax[l] / dq[l]) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = run[l] ? L->h[l] : L->stats_h[l];
+        L->code[l] = run[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
+                SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];  /* a step lost in t, or no steps left, stops */
+        run[l] = L->code[l] < 0;
+    }
+
+    /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (q = 0; q < order - 1; ++q) {
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - q - 1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * L->xnew[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->nonfinite[l] = 0;
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+        }
+    }
+
+    /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        take[l] = run[l] && !L->nonfinite[l];
+        at[l] = fabs(speed_controlled_cos_lanes(L->xnew[1][l])) <
+                SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS;
+        jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !at[l] && !jump[l];
+        retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */
+        L->code[l] = take[l] && at[l] && !jump[l] ? SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR :
+                ok[l] && last[l] ? SPEED_CONTROLLED_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->cap[l] = ok[l] ? DBL_MAX : retry[l] ? L->h[l] * 0.5 : L->cap[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
 static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
@@ -2778,15 +3139,16 @@ static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0,
         L->x[i][l] = x[i];
         L->k[0][i][l] = f0[i];
     }
+    L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
-    L->err_old[l] = 1e-4;
     L->nonfinite[l] = 0;
-    L->rejected_last[l] = 0;
     for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
         L->comp[i][l] = 0.0;
     }
-    L->h[l] = h;
+    L->err_old[l] = 1e-4;
+    L->rejected_last[l] = 0;
+    L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
@@ -2975,23 +3337,11 @@ size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t speed_controlled_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
 {
-    size_t failed = 0;
-    long i;
-#ifdef _OPENMP
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
-#endif
-    for (i = 0; i < (long)n; ++i) {
-        const int code = speed_controlled_taylor(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
-        if (codes) {
-            codes[i] = code;
-        }
-        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
-    }
-    return failed;
+    return pair_batch(taylor_step_lanes, 18, n, t0, t1, x, c, rtol, atol, h0,
+                      max_steps, stats, codes);
 }

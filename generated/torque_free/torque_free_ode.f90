@@ -804,12 +804,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -991,12 +991,12 @@ contains
     end if
     code = -1
     t = t0
-    err_old = 1e-4_c_double
     nonfinite = .false.
-    rejected_last = .false.
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
     end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
     do
 
       ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
@@ -1994,9 +1994,10 @@ contains
 
   ! The normalized Taylor coefficients of x and of the rhs's 22
   ! nodes to the given order (12 of them convolutions).
-  subroutine taylor_jet(order, x, tay)
+  subroutine taylor_jet(order, x, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: inv(0:19 - 1)
     real(c_double), intent(inout) :: tay(0:29 - 1, 0:19 - 1)
     real(c_double) :: acc7
     real(c_double) :: acc8
@@ -2010,12 +2011,12 @@ contains
     real(c_double) :: acc18
     real(c_double) :: acc25
     real(c_double) :: acc27
-    real(c_double) :: rk
-    real(c_double) :: rk1
+    real(c_double) :: ib14
+    real(c_double) :: ub14
     real(c_double) :: w1
     real(c_double) :: w2
     integer(c_int) :: j
-    integer(c_int) :: k
+    integer(c_int) :: n
 
     ! order 0: the state and every node's value
     tay(0, 0) = x(0)
@@ -2044,6 +2045,8 @@ contains
     tay(25, 0) = tay(24, 0) * tay(5, 0)
     tay(27, 0) = tay(24, 0) * tay(3, 0)
     tay(28, 0) = -tay(27, 0)
+    ib14 = 1.0_c_double / tay(13, 0)
+    ub14 = tay(14, 0) / tay(13, 0)
     tay(0, 1) = tay(14, 0)
     tay(1, 1) = tay(17, 0)
     tay(2, 1) = tay(19, 0)
@@ -2053,8 +2056,7 @@ contains
     tay(6, 1) = 0.0_c_double
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do k = 1, order - 1
-      rk = 1.0_c_double / real(k, c_double)
+    do n = 1, order - 1
       acc7 = 0.0_c_double
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
@@ -2067,49 +2069,48 @@ contains
       acc18 = 0.0_c_double
       acc25 = 0.0_c_double
       acc27 = 0.0_c_double
-      do j = 1, k - 1
+      do j = 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
-        acc7 = acc7 + w2 * tay(8, k - j)
-        acc8 = acc8 + w2 * tay(7, k - j)
-        acc9 = acc9 + tay(8, j) * tay(5, k - j)
-        acc10 = acc10 + tay(7, j) * tay(3, k - j)
-        acc12 = acc12 + w1 * tay(13, k - j)
-        acc13 = acc13 + w1 * tay(12, k - j)
-        acc14 = acc14 + tay(13, j) * tay(14, k - j)
-        acc15 = acc15 + tay(7, j) * tay(5, k - j)
-        acc16 = acc16 + tay(8, j) * tay(3, k - j)
-        acc18 = acc18 + tay(14, j) * tay(12, k - j)
-        acc25 = acc25 + tay(24, j) * tay(5, k - j)
-        acc27 = acc27 + tay(24, j) * tay(3, k - j)
+        acc7 = acc7 + w2 * tay(8, n - j)
+        acc8 = acc8 + w2 * tay(7, n - j)
+        acc9 = acc9 + tay(8, j) * tay(5, n - j)
+        acc10 = acc10 + tay(7, j) * tay(3, n - j)
+        acc12 = acc12 + w1 * tay(13, n - j)
+        acc13 = acc13 + w1 * tay(12, n - j)
+        acc14 = acc14 + tay(13, j) * tay(14, n - j)
+        acc15 = acc15 + tay(7, j) * tay(5, n - j)
+        acc16 = acc16 + tay(8, j) * tay(3, n - j)
+        acc18 = acc18 + tay(14, j) * tay(12, n - j)
+        acc25 = acc25 + tay(24, j) * tay(5, n - j)
+        acc27 = acc27 + tay(24, j) * tay(3, n - j)
       end do
-      tay(7, k) = (acc7 + (real(k, c_double) * tay(2, k)) * tay(8, 0)) * rk
-      tay(8, k) = -(acc8 + (real(k, c_double) * tay(2, k)) * tay(7, 0)) * rk
-      tay(9, k) = (tay(8, 0) * tay(5, k) + acc9) + tay(8, k) * tay(5, 0)
-      tay(10, k) = (tay(7, 0) * tay(3, k) + acc10) + tay(7, k) * tay(3, 0)
-      tay(11, k) = tay(9, k) - tay(10, k)
-      tay(12, k) = (acc12 + (real(k, c_double) * tay(1, k)) * tay(13, 0)) * rk
-      tay(13, k) = -(acc13 + (real(k, c_double) * tay(1, k)) * tay(12, 0)) * rk
-      tay(14, k) = (tay(11, k) - (acc14 + tay(13, k) * tay(14, 0))) / tay(13, 0)
-      tay(15, k) = (tay(7, 0) * tay(5, k) + acc15) + tay(7, k) * tay(5, 0)
-      tay(16, k) = (tay(8, 0) * tay(3, k) + acc16) + tay(8, k) * tay(3, 0)
-      tay(17, k) = tay(15, k) + tay(16, k)
-      tay(18, k) = (tay(14, 0) * tay(12, k) + acc18) + tay(14, k) * tay(12, 0)
-      tay(19, k) = tay(4, k) - tay(18, k)
-      tay(21, k) = 0.3114754098360656_c_double * tay(4, k)
-      tay(23, k) = 0.02622950819672131_c_double * tay(6, k)
-      tay(24, k) = tay(21, k) + tay(23, k)
-      tay(25, k) = (tay(24, 0) * tay(5, k) + acc25) + tay(24, k) * tay(5, 0)
-      tay(27, k) = (tay(24, 0) * tay(3, k) + acc27) + tay(24, k) * tay(3, 0)
-      tay(28, k) = -tay(27, k)
-      rk1 = 1.0_c_double / real(k + 1, c_double)
-      tay(0, k + 1) = tay(14, k) * rk1
-      tay(1, k + 1) = tay(17, k) * rk1
-      tay(2, k + 1) = tay(19, k) * rk1
-      tay(3, k + 1) = tay(25, k) * rk1
-      tay(4, k + 1) = 0.0_c_double
-      tay(5, k + 1) = tay(28, k) * rk1
-      tay(6, k + 1) = 0.0_c_double
+      tay(7, n) = acc7 * inv(n) + tay(2, n) * tay(8, 0)
+      tay(8, n) = (-acc8 * inv(n)) - tay(2, n) * tay(7, 0)
+      tay(9, n) = (acc9 + tay(8, 0) * tay(5, n)) + tay(8, n) * tay(5, 0)
+      tay(10, n) = (acc10 + tay(7, 0) * tay(3, n)) + tay(7, n) * tay(3, 0)
+      tay(11, n) = tay(9, n) - tay(10, n)
+      tay(12, n) = acc12 * inv(n) + tay(1, n) * tay(13, 0)
+      tay(13, n) = (-acc13 * inv(n)) - tay(1, n) * tay(12, 0)
+      tay(14, n) = tay(11, n) * ib14 - (acc14 * ib14 + tay(13, n) * ub14)
+      tay(15, n) = (acc15 + tay(7, 0) * tay(5, n)) + tay(7, n) * tay(5, 0)
+      tay(16, n) = (acc16 + tay(8, 0) * tay(3, n)) + tay(8, n) * tay(3, 0)
+      tay(17, n) = tay(15, n) + tay(16, n)
+      tay(18, n) = (acc18 + tay(14, 0) * tay(12, n)) + tay(14, n) * tay(12, 0)
+      tay(19, n) = tay(4, n) - tay(18, n)
+      tay(21, n) = 0.3114754098360656_c_double * tay(4, n)
+      tay(23, n) = 0.02622950819672131_c_double * tay(6, n)
+      tay(24, n) = tay(21, n) + tay(23, n)
+      tay(25, n) = (acc25 + tay(24, 0) * tay(5, n)) + tay(24, n) * tay(5, 0)
+      tay(27, n) = (acc27 + tay(24, 0) * tay(3, n)) + tay(24, n) * tay(3, 0)
+      tay(28, n) = -tay(27, n)
+      tay(0, n + 1) = tay(14, n) * inv(n + 1)
+      tay(1, n + 1) = tay(17, n) * inv(n + 1)
+      tay(2, n + 1) = tay(19, n) * inv(n + 1)
+      tay(3, n + 1) = tay(25, n) * inv(n + 1)
+      tay(4, n + 1) = 0.0_c_double
+      tay(5, n + 1) = tay(28, n) * inv(n + 1)
+      tay(6, n + 1) = 0.0_c_double
     end do
   end subroutine taylor_jet
 
@@ -2130,43 +2131,37 @@ contains
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
     real(c_double) :: tay(0:29 - 1, 0:19 - 1)
+    real(c_double) :: inv(0:19 - 1)
+    real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
     real(c_double) :: comp(0:nx - 1)
     integer(c_int) :: order
-    integer(c_int) :: nonfinite
-    integer(c_int) :: fresh
-    logical :: last
-    real(c_double) :: t
-    real(c_double) :: h
     real(c_double) :: rhofac
     real(c_double) :: scale
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: cap
+    logical :: nonfinite
+    logical :: last
+    logical :: run
+    logical :: take
+    logical :: ok
+    logical :: at
+    logical :: jump
+    logical :: retry
     real(c_double) :: xmax
     real(c_double) :: dp
     real(c_double) :: dq
     real(c_double) :: rho
-    real(c_double) :: acc
     integer(c_int) :: i
     integer(c_int) :: q
 
-    comp = 0.0_c_double
-    associate (unused_c => c)  ! unused when every value is folded
-    end associate
-    call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
-      res = TORQUE_FREE_ODE_ERR_ARGUMENT
-      return
-    end if
-    if (gimbal_lock_at(x)) then
-      res = TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
-      return
-    end if
-    if (.not. (t1 > t0)) then
-      res = TORQUE_FREE_ODE_OK
-      return
-    end if
-    if (.not. all_finite(x, nx)) then
-      res = TORQUE_FREE_ODE_ERR_NONFINITE
+    inv = 0.0_c_double
+    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    if (code >= 0) then
+      res = code
       return
     end if
 
@@ -2189,77 +2184,84 @@ contains
     order = order + (merge(1, 0, 9.357622968840175e-14_c_double > rtol))
     order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
     rhofac = exp((-0.7_c_double) / real(order - 1, c_double)) / 7.3890560989306495_c_double
+    do q = 1, order + 1 - 1
+      inv(q) = 1.0_c_double / real(q, c_double)
+    end do
     scale = atol / rtol
+    code = -1
     t = t0
-    nonfinite = 0
-    fresh = 1
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    cap = merge(h, huge(1.0_c_double), h0 > 0.0_c_double)
     do
-      if (fresh /= 0) then
-        call taylor_jet(order, x, tay)
-        stats%rhs_calls = stats%rhs_calls + 1
-        xmax = 0.0_c_double
-        dp = 0.0_c_double
-        dq = 0.0_c_double
-        do i = 0, nx - 1
-          xmax = max(xmax, abs(x(i)))
-          dp = max(dp, abs(tay(i, order)))
-          dq = max(dq, abs(tay(i, order - 1)))
-        end do
-        xmax = max(scale, xmax)  ! the absolute and relative modes in one
-        rho = min((xmax / dp)**(1.0_c_double / real(order, c_double)), &
-            (xmax / dq)**(1.0_c_double / real(order - 1, c_double)))
-        h = min(rho * rhofac, t1 - t)
-        if (stats%accepted == 0 .and. h0 > 0.0_c_double) then
-          h = min(h, h0)  ! a first step no longer than h0
-        end if
-        fresh = 0
-      end if
+
+      ! the coefficients at x, and the step they allow (Jorba and Zou)
+      run = code < 0
+      call taylor_jet(order, x, inv, tay)
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
+      xmax = 0.0_c_double
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 0, nx - 1
+        xmax = max(xmax, abs(x(i)))
+        dp = max(dp, abs(tay(i, order)))
+        dq = max(dq, abs(tay(i, order - 1)))
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rho = exp(min(log(xmax / dp) * inv(order), log(xmax / dq) * inv(order - 1)))  ! min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1)))
+      h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
-      if (last) then
-        h = t1 - t
-      end if
-      stats%h = h
-      if (step_underflow(h, t)) then
-        res = merge(TORQUE_FREE_ODE_ERR_NONFINITE, TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW, &
-            nonfinite /= 0)
-        return
-      end if
-      if (stats%accepted + stats%rejected >= max_steps) then
-        res = TORQUE_FREE_ODE_ERR_MAX_STEPS
-        return
-      end if
+      h = merge(t1 - t, h, last)
+      stats%h = merge(h, stats%h, run)
+      code = merge(merge(merge(TORQUE_FREE_ODE_ERR_NONFINITE, TORQUE_FREE_ODE_ERR_STEP_UNDERFLOW, &
+          nonfinite), merge(TORQUE_FREE_ODE_ERR_MAX_STEPS, -1, &
+          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! a step lost in t, or no steps left, stops
+      run = code < 0
 
       ! x(t + h) by Horner's scheme, less what the last add lost (comp)
       do i = 0, nx - 1
-        acc = tay(i, order)
-        do q = 0, order - 1 - 1
-          acc = tay(i, (order - q) - 1) + h * acc
+        xnew(i) = tay(i, order)
+      end do
+      do q = 0, order - 1 - 1
+        do i = 0, nx - 1
+          xnew(i) = tay(i, (order - q) - 1) + h * xnew(i)
         end do
-        dx(i) = h * acc - comp(i)
+      end do
+      do i = 0, nx - 1
+        dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)
       end do
-      nonfinite = merge(0, 1, all_finite(xnew, nx))
-      if (nonfinite /= 0) then
-        stats%rejected = stats%rejected + 1
-        h = h * 0.5_c_double
-        last = .false.
-      else
-        if (gimbal_lock(x, xnew)) then
-          res = TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
-          return
-        end if
-        call accept_step(x, xnew, dx, comp)
-        stats%accepted = stats%accepted + 1
-        t = merge(t1, t + h, last)
-        stats%t = t
-        fresh = 1
+      nonfinite = .false.
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock
+      take = run .and. .not. nonfinite
+      at = abs(torque_free_cos(xnew(1))) < TORQUE_FREE_ODE_GIMBAL_LOCK_COS
+      jump = abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+      ok = take .and. .not. at .and. .not. jump
+      retry = run .and. (nonfinite .or. jump)  ! past gimbal lock, or not finite
+      code = merge(TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR, merge(TORQUE_FREE_ODE_OK, code, &
+          ok .and. last), take .and. at .and. .not. jump)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, retry))
+      cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
+      if (ok) then
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
       end if
-      if (last .and. nonfinite == 0) then
-        exit
+      if (code >= 0) then
+        res = code
+        return
       end if
     end do
-    res = TORQUE_FREE_ODE_OK
-    return
   end function taylor_integrate
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.

@@ -178,6 +178,11 @@ class Method:
         return isinstance(self.control, PairControl)
 
     @property
+    def lanes(self) -> bool:
+        """Its batch runs trajectories in SIMD lanes (an explicit pair, Taylor)."""
+        return self.pair or self.taylor
+
+    @property
     def trial_calls(self) -> int:
         """rhs calls of one trial step of a pair (the first stage is given)."""
         assert not isinstance(self.tableau, Series)
@@ -256,8 +261,12 @@ STIFF_CHOICE: tuple[str, ...] = ("radau5", "rodas4")
 """The implicit methods gyrogen runs a stiff problem with, best first: radau5
 is faster than rodas4 at every error from 1e-4 to 1e-13 on stiff_wheel
 (`make report`, the stiff work-precision table)."""
-EXPLICIT_CHOICE: tuple[str, ...] = ("dop853", "dopri5")
-"""The explicit pairs for a problem that is not stiff, best first."""
+EXPLICIT_CHOICE: tuple[str, ...] = ("taylor", "dop853", "dopri5")
+"""The explicit methods for a problem that is not stiff, best first: the
+Taylor method where the rhs is smooth (the scene offers it only there),
+faster than dop853 on one trajectory at every rtol from 1e-6 to 1e-14 on
+the default scene (1.3x to 2.5x, C driver: README, issue 22's note); else
+dop853, then dopri5."""
 
 
 def pick(available: Iterable[str], stiff: bool) -> str | None:

@@ -95,6 +95,17 @@ def accepted(quaternion: bool) -> list[S]:
     return body
 
 
+def start_state() -> list[S]:
+    """What every adaptive method's trajectory starts with after ode_start
+    (code -1: going on; nothing lost to rounding yet)."""
+    return [
+        assign(Var("code"), Int(-1)),
+        assign(Var("t"), t0),
+        assign(Var("nonfinite"), Bool(False)),
+        For("i", NX, (assign(comp[i], 0.0),)),
+    ]
+
+
 def accept_step(quaternion: bool) -> Func:
     body = accepted(quaternion)
     doc = (

@@ -13,6 +13,7 @@ single calls bit for bit.
 from __future__ import annotations
 
 from gyrogen import methods as registry
+from gyrogen.codegen.integrators import common
 from gyrogen.codegen.integrators.common import (
     NX,
     STATS,
@@ -20,7 +21,6 @@ from gyrogen.codegen.integrators.common import (
     accepted,
     arr,
     code,
-    comp,
     h,
     i,
     locked,
@@ -187,9 +187,10 @@ def declare(name: str, init: E | None = None) -> Decl:
 
 def state_arrays(krows: int) -> tuple[Decl, ...]:
     """The arrays of a trajectory: x, its stages, the new point, Kahan's comp."""
+    rows = (Decl("k", "double", (krows, "NX"), "inout"),) if krows else ()
     return (
         arr("x", "inout"),
-        Decl("k", "double", (krows, "NX"), "inout"),
+        *rows,
         arr("y", "inout"),
         arr("xnew", "inout"),
         arr("dx", "inout"),
@@ -205,12 +206,9 @@ def used_locals(body: list[S]) -> tuple[Decl, ...]:
 def start_state() -> list[S]:
     """A trajectory's values at t0, after ode_start (code -1: going on)."""
     return [
-        assign(Var("code"), Int(-1)),
-        assign(t, Var("t0")),
+        *common.start_state(),
         assign(Var("err_old"), registry.PAIR_ERR_FLOOR),
-        assign(Var("nonfinite"), Bool(False)),
         assign(Var("rejected_last"), Bool(False)),
-        For("i", NX, (assign(comp[i], 0.0),)),
     ]
 
 

@@ -20,12 +20,13 @@ from gyrogen.codegen.integrators import (
     radau_step,
     rosenbrock,
     taylor,
+    taylor_jet,
     trig,
 )
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Decl, Func
+from gyrogen.codegen.ir.nodes import Decl, Func, S
 from gyrogen.methods import Method
 from gyrogen.symbolic.blocks import Blocks
 from gyrogen.symbolic.jet import Jet
@@ -43,7 +44,9 @@ class Program:
     implicit: list[Func]
     lanes: list[Func]
     state: dict[str, Decl]
-    krows: int
+    """What struct lanes holds per lane (its arrays [..][LANES])."""
+    init: list[S]
+    """A trajectory's values at t0 in its lane (lane_start)."""
 
 
 def program(
@@ -58,6 +61,8 @@ def program(
     fixed = [explicit.fixed(m, quaternion) for m in methods if m.fixed_step]
     integrate = [pair.integrate(m, quaternion, krows) for m in pairs]
     lanes = [pair.lanes_step(m, quaternion) for m in pairs]
+    state = pair.lane_state(krows)
+    init = pair.start_state() if pairs else []
     implicit: list[Func] = []
     for m in methods:
         if m.rosenbrock:
@@ -71,6 +76,9 @@ def program(
         if m.taylor:
             assert jet is not None, "a Taylor method needs the scene's jet"
             implicit += taylor.functions(m, jet, quaternion)
+            lanes += [taylor_jet.jet_lanes(m, jet), taylor.lanes_step(m, jet, quaternion)]
+            state = {**state, **{d.name: d for d in taylor.lane_state(m, jet)}}
+            init = taylor.start_state() if not pairs else [*init, taylor.start_state()[-1]]
     adaptive = any(not m.fixed_step for m in methods)
     candidates = common.shared(quaternion, adaptive, True)
     if blocks is not None:
@@ -86,7 +94,7 @@ def program(
         if f.name in wanted:
             wanted |= calls([f])
     shared = [f for f in candidates if f.name in wanted]
-    return Program(shared, fixed, integrate, implicit, lanes, pair.lane_state(krows), krows)
+    return Program(shared, fixed, integrate, implicit, lanes, state, init)
 
 
 def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:
@@ -118,9 +126,9 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
         )
     return {
         **methods_text(p, c),
-        "lanes": {f.name.removesuffix("_step_lanes"): lanes.function(f) for f in p.lanes},
+        "lanes": by_method(p.lanes, lanes.function),
         "fields": fields,
-        "lane_init": "\n".join(lanes.one_lane(tuple(pair.start_state()), 1)),
+        "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
     }
 
 

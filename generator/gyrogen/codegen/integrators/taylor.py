@@ -1,20 +1,11 @@
-"""The Taylor series method, described once: the scene's jet (the
-normalized Taylor coefficients of every node of its rhs DAG,
-gyrogen.symbolic.jet) and the integrator around it.
-
-The jet at order k: first, for j = 1 .. k-1, every convolution's terms
-that read only lower orders, in one loop whose body holds every node (the
-terms of different nodes are independent, so the processor overlaps them);
-then, node by node in DAG order, the terms that read order k and the
-linear nodes; then each state's coefficient k+1 = f[k] / (k+1). The
-recurrences (Jorba & Zou 2005, Sec. 2), for T[k] the coefficient of order k:
-  u = a b:    u[k] = sum_{j=0..k} a[j] b[k-j]
-  u = a / b:  u[k] = (a[k] - sum_{j=1..k} b[j] u[k-j]) / b[0]
-  s = sin a, c = cos a:
-              s[k] =  (1/k) sum_{j=1..k} j a[j] c[k-j]
-              c[k] = -(1/k) sum_{j=1..k} j a[j] s[k-j]
-A constant operand (hoisted parameters, numbers) has no coefficient past
-order 0: a product or quotient by it is a scaling.
+"""The Taylor series method, described once: Jorba and Zou's order and
+step size (with heyoka's safety factor) around the scene's jet
+(gyrogen.codegen.integrators.taylor_jet), as one step of straight-line code
+with selections: the scalar integrator loops over it, the lanes print it
+over every lane (gyrogen.codegen.ir.lanes), so a batch equals its single
+calls bit for bit. No step is rejected for its error; a step whose new
+state is not finite, or that passes a point of gimbal lock, is retried with
+h halved.
 """
 
 from __future__ import annotations
@@ -22,10 +13,12 @@ from __future__ import annotations
 import math
 
 from gyrogen import methods as registry
+from gyrogen.codegen.integrators import common
 from gyrogen.codegen.integrators.common import (
     NX,
     STATS,
     TOLERANCES,
+    accepted,
     arr,
     code,
     comp,
@@ -36,12 +29,20 @@ from gyrogen.codegen.integrators.common import (
     x,
     xnew,
 )
+from gyrogen.codegen.integrators.taylor_jet import (
+    T,
+    c,
+    coefficients,
+    jet_function,
+    order,
+    reads_constants,
+)
 from gyrogen.codegen.ir.nodes import (
     At,
     Bool,
-    Break,
     Call,
     Comment,
+    Const,
     Decl,
     E,
     For,
@@ -50,6 +51,7 @@ from gyrogen.codegen.ir.nodes import (
     Int,
     Loop,
     Num,
+    Ref,
     Return,
     S,
     Unused,
@@ -64,171 +66,17 @@ from gyrogen.codegen.ir.nodes import (
     sel,
 )
 from gyrogen.methods import Method
-from gyrogen.symbolic.jet import Jet, Node
+from gyrogen.symbolic.jet import Jet
 from gyrogen.tableaus import Series
 
-T, c, k, j = Var("tay"), Var("c"), Var("k"), Var("j")
-order = Var("order")
 
-
-def coefficients(series: Series, jet: Jet) -> Decl:
-    """tay[k][n]: the coefficient of order k of node n."""
-    return Decl("tay", "double", (series.order + 1, len(jet.nodes)), "inout")
-
-
-class _Printer:
-    """A jet's nodes as IR expressions."""
-
-    def __init__(self, jet: Jet):
-        self.jet = jet
-
-    def zero(self, n: int) -> E:
-        """Node n at order 0: a number or c[i] as itself, else T[0][n]."""
-        node = self.jet.nodes[n]
-        if node.op == "num":
-            return Num(node.value)
-        if node.op == "c":
-            return c[node.index]
-        return T[Int(0), Int(n)]
-
-    def at(self, n: int, order_: E) -> E:
-        return T[order_, Int(n)]
-
-    def value(self, node: Node) -> E:
-        """The node's value from its operands' (order 0)."""
-        z = [self.zero(a) for a in node.args]
-        if node.op in ("sin", "cos"):
-            return fn(node.op, z[0])
-        if node.op == "neg":
-            return -z[0]
-        ops = {"add": "+", "sub": "-", "mul": "*", "div": "/"}
-        a, b = z
-        return {"+": a + b, "-": a - b, "*": a * b, "/": a / b}[ops[node.op]]
-
-    def varying(self, n: int) -> bool:
-        return not self.jet.nodes[n].const
-
-    def linear(self, node: Node) -> E:
-        """add, sub, neg at order k >= 1: the varying operands' order k."""
-        a = node.args[0]
-        if node.op == "neg":
-            return -self.at(a, k)
-        b = node.args[1]
-        if not self.varying(a):
-            return self.at(b, k) if node.op == "add" else -self.at(b, k)
-        if not self.varying(b):
-            return self.at(a, k)
-        return self.at(a, k) + self.at(b, k) if node.op == "add" else self.at(a, k) - self.at(b, k)
-
-    def term(self, n: int, node: Node) -> E:
-        """A convolution's term j (1 <= j < k), which reads orders below k."""
-        acc = Var(f"acc{n}")
-        kj = k - j
-        if node.op == "mul":
-            a, b = node.args
-            return acc + self.at(a, j) * self.at(b, kj)
-        if node.op == "div":
-            return acc + self.at(node.args[1], j) * self.at(n, kj)
-        return acc + Var(f"w{node.args[0]}") * self.at(node.index, kj)
-
-    def finish(self, n: int, node: Node) -> E:
-        """Node n at order k >= 1, from its convolution's sum and its operands' order k."""
-        acc = Var(f"acc{n}")
-        if node.op in ("add", "sub", "neg"):
-            return self.linear(node)
-        if node.op in ("sin", "cos"):
-            a = node.args[0]
-            s = (acc + (fn("real", k) * self.at(a, k)) * self.at(node.index, Int(0))) * Var("rk")
-            return s if node.op == "sin" else -s
-        a, b = node.args
-        if node.op == "mul":
-            if not self.varying(a):
-                return self.zero(a) * self.at(b, k)
-            if not self.varying(b):
-                return self.at(a, k) * self.zero(b)
-            return (self.at(a, Int(0)) * self.at(b, k) + acc) + self.at(a, k) * self.at(b, Int(0))
-        if not self.varying(b):
-            return self.at(a, k) / self.zero(b)
-        known = acc + self.at(b, k) * self.at(n, Int(0))
-        top = self.at(a, k) - known if self.varying(a) else -known
-        return top / self.at(b, Int(0))
-
-
-def reads_constants(jet: Jet) -> bool:
-    """The rhs reads c[] (a scene with every value folded does not)."""
-    return any(n.op == "c" for n in jet.nodes)
-
-
-def jet_function(series: Series, jet: Jet) -> Func:
-    """taylor_jet: T[0 .. order][*] at x."""
-    p = _Printer(jet)
-    nx = jet.nx
-    body: list[S] = [Comment("order 0: the state and every node's value", False)]
-    body += [assign(T[Int(0), Int(n)], x[n]) for n in range(nx)]
-    body += [
-        assign(T[Int(0), Int(n)], p.value(jet.nodes[n]))
-        for n in range(nx, len(jet.nodes))
-        if jet.nodes[n].op not in ("num", "c")
-    ]
-    body += [assign(T[Int(1), Int(n)], p.zero(f)) for n, f in enumerate(jet.outputs)]
-    conv = jet.convolutions()
-    trig_args = sorted({jet.nodes[n].args[0] for n in conv if jet.nodes[n].op in ("sin", "cos")})
-    loop: list[S] = [assign(Var(f"w{a}"), fn("real", j) * p.at(a, j)) for a in trig_args]
-    loop += [assign(Var(f"acc{n}"), p.term(n, jet.nodes[n])) for n in conv]
-    order_k: list[S] = [assign(Var("rk"), Num(1.0) / fn("real", k))] * bool(trig_args)
-    order_k += [assign(Var(f"acc{n}"), 0.0) for n in conv]
-    if conv:
-        order_k.append(For("j", k, tuple(loop), tuple(f"w{a}" for a in trig_args), start=Int(1)))
-    order_k += [
-        assign(T[k, Int(n)], p.finish(n, jet.nodes[n]))
-        for n in range(nx, len(jet.nodes))
-        if not jet.nodes[n].const
-    ]
-    order_k.append(assign(Var("rk1"), Num(1.0) / fn("real", k + 1)))
-    for n, f in enumerate(jet.outputs):
-        value = p.at(f, k) * Var("rk1") if p.varying(f) else Num(0.0)
-        order_k.append(assign(T[k + 1, Int(n)], value))
-    body += [
-        Comment("orders 1 .. order-1 of the nodes, so orders 2 .. order of the state"),
-        For("k", order, tuple(order_k), start=Int(1)),
-    ]
-    params = (
-        Decl("order", "int"),
-        arr("x"),
-        *([Decl("c", "double", ("NC",))] if reads_constants(jet) else []),
-        coefficients(series, jet),
-    )
-    locals_ = (
-        *(real(f"acc{n}", "inout") for n in conv),
-        *([real("rk", "inout")] if trig_args else []),
-        real("rk1", "inout"),
-    )
-    doc = (
-        f"The normalized Taylor coefficients of x and of the rhs's {len(jet.nodes) - nx}",
-        f"nodes to the given order ({len(conv)} of them convolutions).",
-    )
-    return Func("taylor_jet", params, tuple(body), None, locals_, doc, inline=True)
-
-
-def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
-    """taylor_integrate: from t0 to t1 on one trajectory."""
+def uniform(m: Method, jet: Jet) -> list[S]:
+    """What every trajectory of a call shares (it depends on rtol and atol
+    only): the order, the step's safety factor, 1/k, atol/rtol."""
     series, ctl = m.tableau, m.control
     assert isinstance(series, Series) and isinstance(ctl, registry.TaylorControl)
-    t, t0, t1 = Var("t"), Var("t0"), Var("t1")
-    last, nonfinite, fresh, acc = Var("last"), Var("nonfinite"), Var("fresh"), Var("acc")
-    xmax, dp, dq, rho, scale = (Var(n) for n in ("xmax", "dp", "dq", "rho", "scale"))
-    args = (t0, t1, Var("rtol"), Var("atol"), Var("h0"), Var("max_steps"))
-    body: list[S] = [
-        *([] if reads_constants(jet) else [Unused("c")]),
-        Call("stats_start", (Var("stats"), t0)),
-        If(fn("bad_arguments", *args), (Return(code("ERR_ARGUMENT")),)),
-    ]
-    if not quaternion:
-        at_start = Return(code("ERR_ATTITUDE_SINGULAR"), "at the start: x as given")
-        body.append(If(fn("gimbal_lock_at", x), (at_start,)))
-    body += [
-        If(not_(cmp(t1, ">", t0)), (Return(code("OK")),)),
-        If(not_(fn("all_finite", x, NX)), (Return(code("ERR_NONFINITE")),)),
+    q = Var("q")
+    return [
         Comment("the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol"),
         assign(order, Int(series.min_order)),
         *(
@@ -236,20 +84,56 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
             for v in series.thresholds()
         ),
         assign(Var("rhofac"), fn("exp", Num(-ctl.safety) / fn("real", order - 1)) / Num(math.e**2)),
-        assign(scale, Var("atol") / Var("rtol")),
-        assign(t, t0),
-        assign(nonfinite, Int(0)),
-        assign(fresh, Int(1)),
+        For("q", order + 1, (assign(Var("inv")[q], Num(1.0) / fn("real", q)),), start=Int(1)),
+        assign(Var("scale"), Var("atol") / Var("rtol")),
     ]
-    horner: list[S] = [
-        assign(acc, T[order, i]),
-        For("q", order - 1, (assign(acc, T[order - Var("q") - 1, i] + h * acc),)),
-        assign(dx[i], h * acc - comp[i]),
-        assign(xnew[i], x[i] + dx[i]),
+
+
+UNIFORM = ("order", "rhofac", "scale")
+STATE = ("code", "t", "h", "cap", "nonfinite")
+"""A trajectory's values that live from step to step (besides x, comp, stats)."""
+LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rho")
+BOOLS = {"nonfinite", "last", "run", "take", "ok", "at", "jump", "retry"}
+
+
+def declare(name: str) -> Decl:
+    if name == "code":
+        return Decl(name, "int", (), "inout")
+    return Decl(name, "bool" if name in BOOLS else "double", (), "inout")
+
+
+def start_state() -> list[S]:
+    """A trajectory's values at t0 after ode_start: h0 > 0 bounds the first step."""
+    return [
+        *common.start_state(),
+        assign(Var("cap"), sel(cmp(Var("h0"), ">", 0.0), h, Const("HUGE"))),
     ]
-    expand: list[S] = [
-        Call("taylor_jet", (order, x, *([c] if reads_constants(jet) else []), T)),
-        inc(Var("stats.rhs_calls"), 1),
+
+
+def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
+    """One step of one trajectory, straight-line with selections (the scalar
+    integrator loops over it; the lanes print it over every lane)."""
+    ctl = m.control
+    assert isinstance(ctl, registry.TaylorControl)
+    t, t1, cd = Var("t"), Var("t1"), Var("code")
+    last, run, take, ok, at, jump, retry = (
+        Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
+    )
+    nonfinite, cap = Var("nonfinite"), Var("cap")
+    xmax, dp, dq, rho = (Var(n) for n in ("xmax", "dp", "dq", "rho"))
+    q = Var("q")
+    spent = cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps"))
+    stop = sel(
+        fn("step_underflow", h, t),
+        sel(nonfinite, code("ERR_NONFINITE"), code("ERR_STEP_UNDERFLOW")),
+        sel(spent, code("ERR_MAX_STEPS"), Int(-1)),
+    )
+    args = (order, x, *([c] if reads_constants(jet) else []), Var("inv"), T)
+    body: list[S] = [
+        Comment("the coefficients at x, and the step they allow (Jorba and Zou)"),
+        assign(run, cmp(cd, "<", 0)),
+        Call("taylor_jet", args),
+        inc(Var("stats.rhs_calls"), sel(run, Int(1), Int(0))),
         assign(xmax, 0.0),
         assign(dp, 0.0),
         assign(dq, 0.0),
@@ -262,76 +146,82 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
                 assign(dq, fn("max", dq, fn("abs", T[order - 1, i]))),
             ),
         ),
-        assign(xmax, fn("max", scale, xmax), "the absolute and relative modes in one"),
+        assign(xmax, fn("max", Var("scale"), xmax), "the absolute and relative modes in one"),
         assign(
             rho,
             fn(
-                "min",
-                fn("pow", xmax / dp, Num(1.0) / fn("real", order)),
-                fn("pow", xmax / dq, Num(1.0) / fn("real", order - 1)),
+                "exp",
+                fn(
+                    "min",
+                    fn("log", xmax / dp) * Var("inv")[order],
+                    fn("log", xmax / dq) * Var("inv")[order - 1],
+                ),
             ),
+            "min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1)))",
         ),
-        assign(h, fn("min", rho * Var("rhofac"), t1 - t)),
-        If(
-            and_(cmp(Var("stats.accepted"), "==", 0), cmp(Var("h0"), ">", 0.0)),
-            (assign(h, fn("min", h, Var("h0")), "a first step no longer than h0"),),
-        ),
-        assign(fresh, Int(0)),
-    ]
-    spent = cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps"))
-    step: list[S] = [
-        If(cmp(fresh, "!=", 0), tuple(expand)),
+        assign(h, fn("min", fn("min", rho * Var("rhofac"), t1 - t), cap)),
         assign(last, cmp(t + Num(registry.LAST_STEP_SLACK) * h, ">=", t1)),
-        If(last, (assign(h, t1 - t),)),
-        assign(Var("stats.h"), h),
-        If(
-            fn("step_underflow", h, t),
-            (
-                Return(
-                    sel(
-                        cmp(nonfinite, "!=", 0),
-                        code("ERR_NONFINITE"),
-                        code("ERR_STEP_UNDERFLOW"),
-                    )
-                ),
-            ),
-        ),
-        If(spent, (Return(code("ERR_MAX_STEPS")),)),
+        assign(h, sel(last, t1 - t, h)),
+        assign(Var("stats.h"), sel(run, h, Var("stats.h"))),
+        assign(cd, sel(run, stop, cd), "a step lost in t, or no steps left, stops"),
+        assign(run, cmp(cd, "<", 0)),
         Comment("x(t + h) by Horner's scheme, less what the last add lost (comp)"),
-        For("i", NX, tuple(horner), ("acc",)),
-        assign(nonfinite, sel(fn("all_finite", xnew, NX), Int(0), Int(1))),
-        If(
-            cmp(nonfinite, "!=", 0),
-            (
-                inc(Var("stats.rejected"), 1),
-                assign(h, h * Num(ctl.nonfinite_shrink)),
-                assign(last, Bool(False)),
-            ),
-            (
-                *(
-                    []
-                    if quaternion
-                    else [
-                        If(
-                            fn("gimbal_lock", x, xnew),
-                            (
-                                Return(
-                                    code("ERR_ATTITUDE_SINGULAR"), "x: the state before this step"
-                                ),
-                            ),
-                        )
-                    ]
-                ),
-                Call("accept_step", (x, xnew, dx, comp)),
-                inc(Var("stats.accepted"), 1),
-                assign(t, sel(last, t1, t + h)),
-                assign(Var("stats.t"), t),
-                assign(fresh, Int(1)),
+        For("i", NX, (assign(xnew[i], T[order, i]),)),
+        For("q", order - 1, (For("i", NX, (assign(xnew[i], T[order - q - 1, i] + h * xnew[i]),)),)),
+        For("i", NX, (assign(dx[i], h * xnew[i] - comp[i]), assign(xnew[i], x[i] + dx[i]))),
+        assign(nonfinite, Bool(False)),
+        For("i", NX, (assign(nonfinite, or_(nonfinite, not_(fn("finite", xnew[i])))),)),
+        Comment("accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock"),
+        assign(take, and_(run, not_(nonfinite))),
+        assign(at, Bool(False) if quaternion else gimbal_at(xnew)),
+        assign(jump, Bool(False) if quaternion else gimbal_jump(x, xnew)),
+        assign(ok, and_(take, not_(at), not_(jump))),
+        assign(retry, and_(run, or_(nonfinite, jump)), "past gimbal lock, or not finite"),
+        assign(
+            cd,
+            sel(
+                and_(take, at, not_(jump)),
+                code("ERR_ATTITUDE_SINGULAR"),
+                sel(and_(ok, last), code("OK"), cd),
             ),
         ),
-        If(and_(last, cmp(nonfinite, "==", 0)), (Break(),)),
+        assign(t, sel(ok, sel(last, t1, t + h), t)),
+        assign(Var("stats.t"), t),
+        inc(Var("stats.accepted"), sel(ok, Int(1), Int(0))),
+        inc(Var("stats.rejected"), sel(retry, Int(1), Int(0))),
+        assign(cap, sel(ok, Const("HUGE"), sel(retry, h * Num(ctl.nonfinite_shrink), cap))),
+        If(ok, tuple(accepted(quaternion))),
     ]
-    body += [Loop(tuple(step)), Return(code("OK"))]
+    return body
+
+
+def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
+    """taylor_integrate: from t0 to t1 on one trajectory."""
+    series = m.tableau
+    assert isinstance(series, Series)
+    cd = Var("code")
+    args = (
+        Int(series.order),
+        Var("t0"),
+        Var("t1"),
+        x,
+        c,
+        Var("rtol"),
+        Var("atol"),
+        Var("h0"),
+        Var("max_steps"),
+        Var("f0"),
+        Ref("h"),
+        Var("stats"),
+    )
+    stop = If(cmp(cd, ">=", 0), (Return(cd),))
+    body: list[S] = [
+        assign(cd, fn("ode_start", *args)),
+        stop,
+        *uniform(m, jet),
+        *start_state(),
+        Loop((*step(m, jet, quaternion), stop)),
+    ]
     params = (
         real("t0"),
         real("t1"),
@@ -344,22 +234,63 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
     )
     locals_ = (
         coefficients(series, jet),
+        Decl("inv", "double", (series.order + 1,), "inout", Num(0.0)),
+        arr("f0", "inout"),
         arr("xnew", "inout"),
         arr("dx", "inout"),
-        Decl("comp", "double", ("NX",), "inout", Num(0.0)),
+        arr("comp", "inout"),
         Decl("order", "int", (), "inout"),
-        Decl("nonfinite", "int", (), "inout"),
-        Decl("fresh", "int", (), "inout"),
-        Decl("last", "bool", (), "inout"),
-        *(real(n, "inout") for n in ("t", "h", "rhofac", "scale", "xmax", "dp", "dq", "rho")),
+        real("rhofac", "inout"),
+        real("scale", "inout"),
+        *(declare(n) for n in STATE),
+        *(declare(n) for n in LOCALS),
+        *([declare("norm")] if quaternion else []),
     )
     return Func("taylor_integrate", params, tuple(body), "int", locals_, m.notes)
+
+
+def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
+    """taylor_step_lanes: one step of every lane of a struct lanes (the
+    shared values computed first, the same on every lane)."""
+    series = m.tableau
+    assert isinstance(series, Series)
+    unused = [] if reads_constants(jet) else [Unused("c")]
+    body = (*unused, *uniform(m, jet), *step(m, jet, quaternion))
+    params = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
+    locals_ = (
+        Decl("inv", "double", (series.order + 1,), "in"),
+        Decl("order", "int", (), "in"),
+        real("rhofac", "in"),
+        real("scale", "in"),
+        *(declare(n) for n in LOCALS),
+        *([declare("norm")] if quaternion else []),
+    )
+    doc = ("One step of taylor_integrate on every lane.",)
+    return Func("taylor_step_lanes", params, body, None, locals_, doc)
+
+
+def lane_state(m: Method, jet: Jet) -> list[Decl]:
+    """What struct lanes holds per lane for a Taylor method, beyond a pair's."""
+    series = m.tableau
+    assert isinstance(series, Series)
+    return [Decl("cap", "double", (), "inout"), coefficients(series, jet)]
 
 
 def functions(m: Method, jet: Jet, quaternion: bool) -> list[Func]:
     series = m.tableau
     assert isinstance(series, Series)
     return [jet_function(series, jet), integrate(m, jet, quaternion)]
+
+
+def gimbal_at(xnew: Var) -> E:
+    """The step ends at gimbal lock: |cos q2| below the bar (a stop)."""
+    return cmp(fn("abs", fn("cos", xnew[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))
+
+
+def gimbal_jump(x_: Var, xnew: Var) -> E:
+    """The step passed a point of gimbal lock (a retry with a shorter step)."""
+    jump = fn("abs", fn("gimbal_interval", x_[1]) - fn("gimbal_interval", xnew[1]))
+    return cmp(jump, ">=", 1.0)
 
 
 __all__ = ["At", "functions", "not_", "or_"]

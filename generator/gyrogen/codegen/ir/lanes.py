@@ -24,6 +24,7 @@ from gyrogen.codegen.ir.nodes import (
     Row,
     S,
     Sel,
+    Unused,
     Var,
     and_,
     not_,
@@ -46,6 +47,17 @@ class LanesPrinter(CPrinter):
     def with_decls(self, func: Func) -> LanesPrinter:
         return LanesPrinter(self.prefix, self.macro, {d.name: d for d in func.locals}, self.state)
 
+    def uniform(self, name: str) -> bool:
+        """A local the same on every lane (declared with intent "in"): set
+        outside the loops over lanes, read as it is."""
+        d = self.decls.get(name)
+        return d is not None and d.intent == "in"
+
+    def sets_uniform(self, s: S) -> bool:
+        return isinstance(s, Assign) and self.uniform(
+            s.target.name if isinstance(s.target, (Var, At)) else ""
+        )
+
     @property
     def width(self) -> str:
         return f"{self.macro}_LANES"
@@ -57,7 +69,7 @@ class LanesPrinter(CPrinter):
         if name in self.state:
             d = self.state[name]
             return (self.field(name) if d.shape else f"{self.field(name)}[l]"), ATOM
-        if name in self.decls and name not in self.scoped:
+        if name in self.decls and name not in self.scoped and not self.uniform(name):
             return f"{name}[l]", ATOM
         return name, ATOM
 
@@ -75,7 +87,11 @@ class LanesPrinter(CPrinter):
 
     def lane_loop(self, depth: int, body: list[str], simd: bool) -> list[str]:
         pad = self.indent * depth
-        pragma = [f"{pad}{self.macro}_SIMD"] if simd else [f"{pad}/* pow: scalar calls */"]
+        pragma = (
+            [f"{pad}{self.macro}_SIMD"]
+            if simd
+            else [f"{pad}/* pow, log, exp: scalar calls, as the single trajectory's */"]
+        )
         return [*pragma, f"{pad}for (l = 0; l < {self.width}; ++l) {{", *body, f"{pad}}}"]
 
     single = False
@@ -91,10 +107,14 @@ class LanesPrinter(CPrinter):
         def flush() -> None:
             if run:
                 inner = super(LanesPrinter, self).block(tuple(converted(run)), depth + 1)
-                lines.extend(self.lane_loop(depth, inner, not uses(tuple(run), "pow")))
+                lines.extend(self.lane_loop(depth, inner, vector(tuple(run))))
                 run.clear()
 
         for s in converted(body, top=True, own=frozenset(self.decls)):
+            if self.sets_uniform(s):
+                flush()
+                lines += CPrinter.statement(self, s, depth)
+                continue
             if isinstance(s, Assign):
                 run.append(s)
                 continue
@@ -105,13 +125,20 @@ class LanesPrinter(CPrinter):
 
     def outer(self, s: S, depth: int) -> list[str]:
         pad = self.indent * depth
-        if isinstance(s, Comment):
+        if isinstance(s, (Comment, Unused)):
             return super().statement(s, depth)
+        if isinstance(s, For) and all(self.sets_uniform(x) for x in s.body):
+            return CPrinter.statement(self, s, depth)
+        if isinstance(s, For) and any(isinstance(x, (For, If, Call)) for x in s.body):
+            v, start, stop = s.var, self.expr(s.start), self.expr(s.n, 4)
+            assert not s.locals, "a loop of loops keeps no scoped values"
+            head = f"{pad}for ({v} = {start}; {v} < {stop}; ++{v}) {{"
+            return [head, *self.block(s.body, depth + 1), f"{pad}}}"]
         if isinstance(s, For):
             self.scoped |= set(s.locals)
             local = [f"{pad}{self.indent * 2}double {', '.join(s.locals)};"] if s.locals else []
             inner = super().block(tuple(converted(s.body)), depth + 2)
-            loop = self.lane_loop(depth + 1, [*local, *inner], not uses(s.body, "pow"))
+            loop = self.lane_loop(depth + 1, [*local, *inner], vector(s.body))
             self.scoped -= set(s.locals)
             v, start, stop = s.var, self.expr(s.start), self.expr(s.n, 4)
             return [
@@ -119,8 +146,11 @@ class LanesPrinter(CPrinter):
                 *loop,
                 f"{pad}}}",
             ]
+        if isinstance(s, Call) and s.name != "rhs":
+            kept = [a for a in s.args if not (isinstance(a, Var) and a.name in self.state)]
+            args = ", ".join(["L", *(self.expr(a) for a in kept)])
+            return [f"{pad}{s.name}_lanes({args});"]
         if isinstance(s, Call):
-            assert s.name == "rhs", s
             t, x, c, out = s.args
             times = self.lane_loop(depth, [f"{pad}{self.indent}L->ts[l] = {self.expr(t)};"], True)
             args = ", ".join(self.expr(a) for a in (x, c, out))
@@ -150,7 +180,12 @@ class LanesPrinter(CPrinter):
         params = ", ".join(
             ["struct lanes *L", *(CPrinter.declaration(p, d, True) for d in func.params)]
         )
-        locals_ = [f"{CTYPE[d.type]} {d.name}[{self.width}];" for d in func.locals]
+        locals_ = [
+            f"{CTYPE[d.type]} {d.name}{''.join(f'[{self.extent(n)}]' for n in d.shape)};"
+            if d.intent == "in"
+            else f"{CTYPE[d.type]} {d.name}[{self.width}];"
+            for d in func.locals
+        ]
         loops = sorted({s.var for s in walk_for(func.body)} | {"l"})
         locals_.append(f"int {', '.join(loops)};")
         if any(isinstance(s, If) and any(isinstance(x, Call) for x in s.then) for s in func.body):
@@ -162,6 +197,13 @@ class LanesPrinter(CPrinter):
         return "\n".join(lines) + "\n"
 
 
+def vector(body: tuple[S, ...] | list[S]) -> bool:
+    """A loop over lanes the compiler may vectorize: one with no call of
+    pow, log or exp (their vector versions round otherwise than the scalar
+    ones the single trajectory calls)."""
+    return not any(uses(tuple(body), f) for f in ("pow", "log", "exp"))
+
+
 def nested(s: S) -> list[S]:
     if isinstance(s, If):
         return [x for y in (*s.then, *s.orelse) for x in [y, *nested(y)]]
@@ -171,9 +213,14 @@ def nested(s: S) -> list[S]:
 
 
 def walk_for(body: tuple[S, ...]) -> list[For]:
-    return [s for s in body if isinstance(s, For)] + [
-        f for s in body if isinstance(s, If) for f in walk_for((*s.then, *s.orelse))
-    ]
+    """Every loop in body, nested ones included."""
+    out: list[For] = []
+    for s in body:
+        if isinstance(s, For):
+            out += [s, *walk_for(s.body)]
+        elif isinstance(s, If):
+            out += walk_for((*s.then, *s.orelse))
+    return out
 
 
 def converted(

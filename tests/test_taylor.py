@@ -1,0 +1,230 @@
+"""The Taylor series integrator (issue 22): the scene's rhs as elementary
+operations (gyrogen.symbolic.jet), its coefficients by the recurrences of
+automatic differentiation, printed once to C and Fortran
+(gyrogen.codegen.integrators.taylor). Against sympy's own series, a
+tight reference, C against Fortran, and where it is not offered."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sm
+
+from gyrogen import abi, methods
+from gyrogen.errors import GyrogenError, SceneError
+from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.scene import load, parse
+from gyrogen.symbolic.jet import NotExpandable, decompose
+from gyrogen.symbolic.optimize import Assignment, Block
+
+REPO = Path(__file__).resolve().parents[1]
+SMOOTH = ["gyrostat", "torque_free", "dual_spin", "speed_controlled", "rw3_orthogonal"]
+CODES = {c.name.removeprefix("ODE_"): c.value for c in abi.ODE_CODES}
+
+
+def coefficients(
+    jet_nodes: list, outputs: tuple[int, ...], x0: list[float], order: int
+) -> np.ndarray:
+    """The normalized Taylor coefficients of the states, by the recurrences
+    the generated code prints (a plain Python transcription of them)."""
+    n = len(jet_nodes)
+    t = np.zeros((order + 1, n))
+    nx = len(outputs)
+    for k in range(order + 1):
+        for i, node in enumerate(jet_nodes):
+            if node.op == "x":
+                t[k, i] = x0[i] if k == 0 else t[k - 1, outputs[i]] / k if k else 0.0
+                continue
+            if node.op == "num":
+                t[k, i] = node.value if k == 0 else 0.0
+                continue
+            a = node.args[0]
+            if node.op == "neg":
+                t[k, i] = -t[k, a]
+            elif node.op in ("add", "sub"):
+                b = node.args[1]
+                t[k, i] = t[k, a] + t[k, b] if node.op == "add" else t[k, a] - t[k, b]
+            elif node.op == "mul":
+                b = node.args[1]
+                t[k, i] = sum(t[j, a] * t[k - j, b] for j in range(k + 1))
+            elif node.op == "div":
+                b = node.args[1]
+                t[k, i] = (t[k, a] - sum(t[j, b] * t[k - j, i] for j in range(1, k + 1))) / t[0, b]
+            elif node.op in ("sin", "cos") and k == 0:
+                t[0, i] = np.sin(t[0, a]) if node.op == "sin" else np.cos(t[0, a])
+            elif node.op == "sin":
+                t[k, i] = sum(j * t[j, a] * t[k - j, node.index] for j in range(1, k + 1)) / k
+            elif node.op == "cos":
+                t[k, i] = -sum(j * t[j, a] * t[k - j, node.index] for j in range(1, k + 1)) / k
+    assert nx == len(outputs)
+    return t[:, :nx]
+
+
+def test_the_recurrences_are_the_series_of_the_solution() -> None:
+    """A small system with every operation: the recurrences' coefficients
+    equal sympy's Taylor series of the exact solution's derivatives."""
+    xs = sm.symbols("x0:3")
+    tmp = sm.Symbol("tmp0")
+    f = (
+        xs[1] * sm.cos(xs[2]) - sm.Rational(3, 10),
+        -sm.sin(xs[2]) / (2 + xs[0] ** 2) + tmp,
+        xs[0] * xs[1] - tmp**3,
+    )
+    block = Block((Assignment(tmp, sm.Float(0.25) * xs[2]),), f)
+    jet = decompose(block, xs)
+    x0 = [0.3, -0.2, 0.7]
+    order = 7
+    got = coefficients(list(jet.nodes), jet.outputs, x0, order)
+    # the exact series: x^(k) = D^(k-1) f along the flow, by sympy
+    fx = [e.subs(tmp, sm.Float(0.25) * xs[2]) for e in f]
+    derivs = [list(xs)]
+    for _ in range(order):
+        prev = derivs[-1]
+        derivs.append(
+            [sum(sm.diff(p, xs[j]) * fx[j] for j in range(3)) for p in prev]
+            if len(derivs) > 1
+            else list(fx)
+        )
+    at = dict(zip(xs, x0, strict=True))
+    for k in range(order + 1):
+        want = [float(d.subs(at)) / float(sm.factorial(k)) for d in derivs[k]]
+        np.testing.assert_allclose(got[k], want, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize(
+    "expr, why",
+    [
+        (sm.Max(sm.Symbol("x0"), 1), "not smooth"),
+        (sm.Abs(sm.Symbol("x0")), "not smooth"),
+        (sm.exp(sm.Symbol("x0")), "does not expand"),
+        (sm.sqrt(sm.Symbol("x0")), "power 1/2"),
+        (sm.Symbol("t") * sm.Symbol("x0"), "time-dependent"),
+    ],
+)
+def test_what_is_not_expanded_is_refused(expr: sm.Expr, why: str) -> None:
+    with pytest.raises(NotExpandable, match=why):
+        decompose(Block((), (expr,)), (sm.Symbol("x0"),))
+    assert issubclass(NotExpandable, GyrogenError)
+
+
+TABLED = """
+name = "tabled"
+description = "a wheel under a tabled torque"
+{integrators}
+[parameters]
+m_a = 300.0
+m_b = 4.0
+I11 = 60.0
+I22 = 75.0
+I33 = 55.0
+I13 = 1.5
+I   = 0.02
+J   = 0.03
+l1  = 0.1
+l3  = 0.25
+
+[effects]
+translation = false
+torque = "table"
+torque_table = [[0.0, 0.0], [0.5, 0.4], [1.5, -0.3]]
+"""
+
+
+def test_taylor_is_offered_only_where_the_rhs_is_smooth() -> None:
+    """Left out of a non-smooth scene's default integrators, refused in one
+    line when asked for; smooth built-ins have it by default."""
+    assert "taylor" not in parse(TABLED.format(integrators=""), "t").integrators
+    with pytest.raises(SceneError, match=r"taylor is not offered for this scene.*torque table"):
+        parse(TABLED.format(integrators='integrators = ["taylor"]'), "t")
+    assert "taylor" not in load("rw4_pyramid").integrators  # clamped motors
+    for name in SMOOTH:
+        assert "taylor" in load(name).integrators, name
+
+
+@pytest.fixture(scope="module")
+def built(cache_dir: Path) -> dict[tuple[str, str], Compiled]:
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    try:
+        return {
+            (name, lang): build.build(REPO / "generated" / name, lang)
+            for name in SMOOTH
+            for lang in ("c", "fortran")
+        }
+    finally:
+        mp.undo()
+
+
+def problem(name: str) -> tuple[np.ndarray, np.ndarray]:
+    scene = load(name)
+    x0 = np.array(scene.initial_state())
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    return x0, p
+
+
+def scaled(x: np.ndarray, ref: np.ndarray) -> float:
+    return float(np.max(np.abs(x - ref) / (1.0 + np.abs(ref))))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", SMOOTH)
+def test_taylor_meets_its_tolerance_in_c_and_fortran_alike(
+    built: dict[tuple[str, str], Compiled], name: str
+) -> None:
+    """Against DOP853 at 1e-13: the error falls with rtol and stays within
+    100 rtol; C and Fortran take the same steps and agree to 1e-14 scaled."""
+    x0, p = problem(name)
+    c_b, f_b = built[name, "c"], built[name, "fortran"]
+    c = c_b.setup(p)
+    t1 = 10.0
+    ref, _, code = c_b.integrate("dop853", x0, c, 0.0, t1, rtol=1e-13, atol=1e-13)
+    assert code == 0
+    last = np.inf
+    for tol in (1e-6, 1e-8, 1e-10, 1e-12):
+        xc, sc, cc = c_b.integrate("taylor", x0, c, 0.0, t1, rtol=tol, atol=tol)
+        xf, sf, cf = f_b.integrate("taylor", x0, c, 0.0, t1, rtol=tol, atol=tol)
+        assert cc == cf == 0 and sc["t"] == sf["t"] == t1
+        assert sc["accepted"] == sf["accepted"] and sc["rejected"] == sf["rejected"] == 0
+        assert scaled(xc, xf) < 1e-14, (tol, scaled(xc, xf))
+        err = scaled(xc, ref)
+        assert err < max(100 * tol, 1e-11), (tol, err)
+        assert err < last * 1.5 or err < 1e-11
+        last = err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("language", ["c", "fortran"])
+def test_taylor_codes(built: dict[tuple[str, str], Compiled], language: str) -> None:
+    """The codes every adaptive method returns, the same for Taylor."""
+    b = built["gyrostat", language]
+    x0, p = problem("gyrostat")
+    c = b.setup(p)
+    _, st, code = b.integrate("taylor", x0, c, 0.0, 0.0, rtol=1e-8, atol=1e-8)
+    assert code == CODES["OK"] and st["accepted"] == 0
+    _, _, code = b.integrate("taylor", x0, c, 1.0, 0.0, rtol=1e-8, atol=1e-8)
+    assert code == CODES["ERR_ARGUMENT"]
+    _, _, code = b.integrate("taylor", x0, c, 0.0, 1.0, rtol=1e-20, atol=1e-8)
+    assert code == CODES["ERR_ARGUMENT"]
+    bad = x0.copy()
+    bad[7] = np.nan
+    _, _, code = b.integrate("taylor", bad, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    assert code == CODES["ERR_NONFINITE"]
+    _, st, code = b.integrate("taylor", x0, c, 0.0, 10.0, rtol=1e-8, atol=1e-8, max_steps=3)
+    assert code == CODES["ERR_MAX_STEPS"] and st["accepted"] == 3
+    x, st, code = b.integrate("taylor", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    x2, st2, code2 = b.integrate("taylor", x0, c, 0.0, 1.0, rtol=1e-8, atol=1e-8, h0=1e-3)
+    assert code == code2 == 0 and st2["accepted"] > st["accepted"]  # h0 bounds the first step
+    assert scaled(x, x2) < 1e-7
+    near = x0.copy()
+    near[1] = np.pi / 2 - 1e-12  # q2 at gimbal lock
+    _, _, code = b.integrate("taylor", near, c, 0.0, 1.0, rtol=1e-8, atol=1e-8)
+    assert code == CODES["ERR_ATTITUDE_SINGULAR"]
+
+
+def test_taylor_is_a_registered_adaptive_method() -> None:
+    m = methods.get("taylor")
+    assert m.taylor and not m.pair and not m.implicit and not m.fixed_step
+    assert "taylor" in methods.ADAPTIVE
