@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from sweep_cases import free_port, long, rows
 
-from gyrogen.analysis.sweep.sweep_sources import builds
+from gyrogen.runtime.scene_build import builds
 
 pytestmark = pytest.mark.slow  # sweeps of a cluster scene on Dask workers
 

@@ -20,10 +20,10 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gyrogen.analysis.sweep.sweep_sources import compiled, scene_sources
 from gyrogen.analysis.sweep.sweep_spec import Spec, parse
 from gyrogen.analysis.sweep.sweep_spec import load as load_spec
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene
 from gyrogen.scene import load as load_scene
 

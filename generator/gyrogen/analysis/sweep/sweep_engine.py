@@ -5,7 +5,7 @@ Engines: by default a local cluster in this process, one thread per core
 (the compiled integrators release the GIL), with no set-up; or an existing
 dask.distributed cluster (scheduler="tcp://HOST:PORT"). Either way the
 client scatters the sweep and its generated sources to every worker once
-(analysis/sweep/sweep_sources.py), submits chunk tasks a few at a time (so
+(runtime/scene_build.py), submits chunk tasks a few at a time (so
 neither the client nor the scheduler holds more than a window of results:
 memory stays flat whatever the sweep's size), and writes each result as
 <out>/parts/part-NNNNNN.parquet, atomically. A worker that dies loses
@@ -34,17 +34,11 @@ from gyrogen import __version__
 from gyrogen.analysis.sweep.sweep_columns import PARTS
 from gyrogen.analysis.sweep.sweep_dask import engine
 from gyrogen.analysis.sweep.sweep_metrics import column_docs, run_chunk
-from gyrogen.analysis.sweep.sweep_sources import (
-    Sources,
-    code_digest,
-    compiled,
-    scene_sources,
-    sources_digest,
-)
 from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
-from gyrogen.runtime import flags
+from gyrogen.runtime.flags import flags_for
+from gyrogen.runtime.scene_build import Sources, code_digest, compiled, scene_sources
 
 STATE_FILE = "sweep.json"
 _PART = re.compile(r"part-(\d+)\.parquet")
@@ -72,13 +66,12 @@ def identity(spec: Spec, sources: Sources) -> dict[str, str]:
     """What a sweep's rows depend on besides its spec: gyrogen's version and
     code (the metrics, the draws), the generated sources (the integrators)
     and the flags they are built with. A resume continues only the same."""
-    language = sources.language
-    used = flags.c_flags() if language == "c" else flags.fortran_flags()
+    used = flags_for(sources.language, sources.portable)
     return {
         "gyrogen": __version__,
         "code": code_digest(),
         "build_id": sources.build_id,
-        "sources": sources_digest(sources),
+        "sources": sources.digest,
         "flags": " ".join(used),
     }
 
