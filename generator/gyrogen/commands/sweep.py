@@ -60,6 +60,18 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
     help="Compute anew where --out holds this sweep begun by another build (another gyrogen, "
     "generated code or flags): a resume continues only the same.",
 )
+@click.option(
+    "--shared",
+    is_flag=True,
+    help="With --scheduler: --out is on a file system every worker reaches at the same path; "
+    "each worker writes its parts there, and only each chunk's figures reach this process.",
+)
+@click.option(
+    "--native",
+    is_flag=True,
+    help="Build for this CPU (-march=native): faster, but the bits may differ on another "
+    "CPU, so a worker on one refuses its tasks [default: portable code, the same bits on any].",
+)
 def sweep(
     spec: Any,
     out: Path | None,
@@ -69,18 +81,23 @@ def sweep(
     no_plots: bool,
     quiet: bool,
     restart: bool,
+    shared: bool,
+    native: bool,
 ) -> None:
     """Integrate every trajectory of SWEEP (a built-in sweep: stability_map,
     monte_carlo; or a sweep file naming a scene) with the scene's compiled
     batch integrator, one Parquet row per trajectory with its inputs and
     metrics, written chunk by chunk; then summary.json, summary.md and
-    figures. Rerun into the same --out to resume: the chunks written are
-    skipped, if this gyrogen, its generated code and its build flags are
-    those that began the sweep (else refused: --restart)."""
+    figures. Rerun into the same --out to resume, with any --chunk: only
+    what is left is computed, if this gyrogen, its generated code and its
+    build flags are those that began the sweep (else refused: --restart).
+    The local engine's dashboard (127.0.0.1) is printed on stderr."""
     from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the local engine: not with --scheduler")
+    if shared and scheduler is None:
+        raise click.UsageError("--shared is for --scheduler: the local engine writes its parts")
     out = out or Path("sweep") / spec.name
     record = sweep_engine.run(
         spec,
@@ -90,6 +107,8 @@ def sweep(
         chunk=chunk,
         progress=not quiet,
         restart=restart,
+        shared=shared,
+        native=native,
     )
     data = sweep_report.write(spec, record, plots=not no_plots)
     for line in sweep_report.markdown(data).splitlines()[2:]:

@@ -9,6 +9,7 @@ generate --lib`) keep plain -O2."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import subprocess
@@ -103,3 +104,19 @@ def fortran_flags(tool: str = "gfortran", portable: bool = False) -> tuple[str, 
 def flags_for(language: str, portable: bool = False) -> tuple[str, ...]:
     """A local build's flags for language ("c" or "fortran")."""
     return c_flags(portable=portable) if language == "c" else fortran_flags(portable=portable)
+
+
+@cache
+def native_target(tool: str = "gcc") -> str:
+    """What -march=native means on this CPU to tool: its -march value and a
+    digest of every target option it resolves to (the instruction sets the
+    code may use). Two CPUs with another value may round differently."""
+    path = shutil.which(tool)
+    if path is None:
+        return "unknown"
+    proc = subprocess.run([path, "-march=native", "-Q", "--help=target"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    options = sorted(" ".join(line.split()) for line in proc.stdout.splitlines()
+                     if line.strip().startswith("-m"))  # fmt: skip
+    march = next((o.split()[1] for o in options if o.startswith("-march=") and " " in o), "?")
+    return f"{march}-{hashlib.sha256(chr(10).join(options).encode()).hexdigest()[:12]}"

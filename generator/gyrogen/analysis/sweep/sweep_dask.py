@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import socket
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,9 +19,13 @@ CONNECT_TIMEOUT = 10.0
 
 
 @contextmanager
-def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, str, int]]:
+def engine(
+    scheduler: str | None, threads: int | None, announce: bool = False
+) -> Iterator[tuple[Any, str, int]]:
     """A dask.distributed client: on scheduler, or on a local cluster of
-    threads in this process. Yields (client, engine name, worker threads)."""
+    threads in this process (its dashboard on 127.0.0.1, bokeh's); announce:
+    say where the dashboard is, on stderr. Yields (client, engine name,
+    worker threads)."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -37,14 +42,26 @@ def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, st
             ) as cluster,
             Client(cluster) as client,
         ):
+            if announce:
+                _dashboard(client, "127.0.0.1")
             yield client, f"local ({n} threads)", n
         return
     with _connect(Client, scheduler) as client:
+        if announce:
+            _dashboard(client, scheduler.removeprefix("tcp://").rsplit(":", 1)[0])
         workers = client.scheduler_info(n_workers=-1)["workers"].values()
         n = sum(int(w.get("nthreads", 1)) for w in workers)
         if n == 0:
             raise GyrogenError(f"--scheduler {scheduler}: the cluster has no workers")
         yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+
+
+def _dashboard(client: Any, host: str) -> None:
+    """Where the dashboard is on host (none without bokeh, or when the
+    scheduler runs without one)."""
+    port = client.scheduler_info().get("services", {}).get("dashboard")
+    where = f"http://{host}:{port}/status" if port else "none (the scheduler serves none)"
+    print(f"dashboard: {where}", file=sys.stderr)
 
 
 @contextmanager
