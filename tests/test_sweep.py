@@ -335,7 +335,7 @@ def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
     meta = json.loads(schema.metadata[b"gyrogen"])
     assert meta["sweep"] == "small" and meta["scene"] == "gyrostat" and meta["seed"] == 11
     assert meta["spec"]["draws"]["count"] == 4 and meta["chunk"] == 25
-    assert set(meta["identity"]) == {"gyrogen", "code", "build_id", "sources", "flags"}
+    assert set(meta["identity"]) == {"gyrogen", "code", "build_id", "sources", "flags", "cpu"}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["seed"] == 11 and summary["identity"] == meta["identity"]
     assert summary["spec"] == meta["spec"]

@@ -1,8 +1,8 @@
 """Issue 23, a sweep at scale: the summary streams over the parts (10^4 parts
 under `ulimit -n 256`), its median and p99 are numpy's exactly, another
---chunk resumes the same sweep, the code is portable by default (or built
-for one CPU, which a worker on another refuses), and the local engine's
-dashboard is printed."""
+--chunk resumes the same sweep, the code is built for the workers' CPU,
+recorded, which a worker on another refuses (or portable for any), and the
+local engine's dashboard is printed."""
 
 from __future__ import annotations
 
@@ -154,22 +154,26 @@ def test_another_chunk_resumes_the_sweep(tmp_path: Path, cache: Path, cli) -> No
 
 
 @pytest.mark.slow
-def test_sweeps_build_portable_code_unless_native(tmp_path: Path, cache: Path, cli) -> None:
-    """By default no -march=native (the same bits on any CPU of the
-    architecture, a mixed cluster included); --native records the CPU, and
-    the sweep resumed portable is another build."""
+def test_sweeps_record_the_cpu_unless_portable(tmp_path: Path, cache: Path, cli) -> None:
+    """By default the code is built for the workers' CPU (-march=native),
+    which the identity records; --portable builds for any CPU (no
+    -march=native, no contraction into FMAs) and records none, and resuming
+    it with native code is another build."""
+    from gyrogen.runtime.flags import native_target
+
     sweep = small(tmp_path / "s.toml")
     out = tmp_path / "out"
     assert cli(["sweep", str(sweep), "--out", str(out), "--quiet", "--no-plots"]).code == 0
     ident = json.loads((out / "summary.json").read_text())["identity"]
-    assert "-march=native" not in ident["flags"].split() and "cpu" not in ident
-    assert "-ffp-contract=off" in ident["flags"].split()
-    native = tmp_path / "native"
-    code, _, err = cli(["sweep", str(sweep), "--out", str(native), "--native", "--quiet"])
+    assert "-march=native" in ident["flags"].split() and ident["cpu"] == native_target()
+    portable = tmp_path / "portable"
+    code, _, err = cli(["sweep", str(sweep), "--out", str(portable), "--portable", "--quiet"])
     assert code == 0, err
-    held = json.loads((native / "summary.json").read_text())["identity"]
-    assert "-march=native" in held["flags"].split() and held["cpu"]
-    code, _, err = cli(["sweep", str(sweep), "--out", str(native), "--quiet"])
+    held = json.loads((portable / "summary.json").read_text())["identity"]
+    assert "-march=native" not in held["flags"].split() and "cpu" not in held
+    assert "-ffp-contract=off" in held["flags"].split()
+    assert rows(portable).equals(rows(out))  # here, the same bits (not promised across CPUs)
+    code, _, err = cli(["sweep", str(sweep), "--out", str(portable), "--quiet"])
     assert code == 1 and "(changed: flags, cpu)" in err
 
 

@@ -67,10 +67,10 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
     "each worker writes its parts there, and only each chunk's figures reach this process.",
 )
 @click.option(
-    "--native",
+    "--portable",
     is_flag=True,
-    help="Build for this CPU (-march=native): faster, but the bits may differ on another "
-    "CPU, so a worker on one refuses its tasks [default: portable code, the same bits on any].",
+    help="Build for any CPU of the architecture (no -march=native), for a cluster of mixed "
+    "CPUs: slower [default: for the workers' CPU, recorded; workers of another are refused].",
 )
 def sweep(
     spec: Any,
@@ -82,7 +82,7 @@ def sweep(
     quiet: bool,
     restart: bool,
     shared: bool,
-    native: bool,
+    portable: bool,
 ) -> None:
     """Integrate every trajectory of SWEEP (a built-in sweep: stability_map,
     monte_carlo; or a sweep file naming a scene) with the scene's compiled
@@ -108,7 +108,7 @@ def sweep(
         progress=not quiet,
         restart=restart,
         shared=shared,
-        native=native,
+        portable=portable,
     )
     data = sweep_report.write(spec, record, plots=not no_plots)
     for line in sweep_report.markdown(data).splitlines()[2:]:
