@@ -88,7 +88,13 @@ def sweep(
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = Path(out) if out is not None else Path("sweep") / chosen.name
     record = sweep_engine.run(
-        chosen, where, scheduler=scheduler, threads=workers, chunk=chunk, progress=progress
+        chosen,
+        where,
+        scheduler=scheduler,
+        threads=workers,
+        chunk=chunk,
+        progress=progress,
+        meanwhile=sweep_report.load_plots if plots else None,
     )
     sweep_report.write(chosen, record, plots=plots)
     return read(where)

@@ -99,6 +99,7 @@ def sweep(
     if shared and scheduler is None:
         raise click.UsageError("--shared is for --scheduler: the local engine writes its parts")
     out = out or Path("sweep") / spec.name
+    plots = None if no_plots else sweep_report.load_plots  # matplotlib while the chunks run
     record = sweep_engine.run(
         spec,
         out,
@@ -109,6 +110,7 @@ def sweep(
         restart=restart,
         shared=shared,
         portable=portable,
+        meanwhile=plots,
     )
     data = sweep_report.write(spec, record, plots=not no_plots)
     for line in sweep_report.markdown(data).splitlines()[2:]:

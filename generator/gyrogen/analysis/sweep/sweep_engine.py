@@ -31,7 +31,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -169,11 +169,14 @@ def run(
     restart: bool = False,
     shared: bool = False,
     portable: bool = False,
+    meanwhile: Callable[[], object] | None = None,
 ) -> Run:
     """Every sample of spec not yet in out, computed and written; restart:
     begin anew where out holds this sweep begun by another build; shared:
     the cluster's workers reach out at the same path and write the parts;
-    portable: build for any CPU rather than the workers' (-march=native)."""
+    portable: build for any CPU rather than the workers' (-march=native);
+    meanwhile: run in a thread of its own once the first tasks are out (what
+    the end will need: matplotlib's import)."""
     began = time.perf_counter()
     chunk = chunk or spec.sweep.chunk
     read_state(out)  # obstacles first, before the seconds of deriving the sources
@@ -196,7 +199,8 @@ def run(
         scattered = client.scatter(job, broadcast=True, hash=False)
         record.startup = time.perf_counter() - began
         started = time.perf_counter()
-        made = _compute(client, scattered, record, done, left(done, spec.size, chunk), progress)
+        todo = left(done, spec.size, chunk)
+        made = _compute(client, scattered, record, done, todo, progress, meanwhile)
         record.wall = time.perf_counter() - started
     _strays(out, {*done, *made})
     return record
@@ -209,6 +213,7 @@ def _compute(
     done: list[tuple[int, int]],
     todo: Iterator[tuple[int, int]],
     progress: bool,
+    meanwhile: Callable[[], object] | None = None,
 ) -> set[tuple[int, int]]:
     """The chunks of todo, a window at a time; the (start, stop) of the parts made."""
     from distributed import as_completed
@@ -225,6 +230,8 @@ def _compute(
 
     for _ in range(2 * record.threads + 2):
         submit()
+    if meanwhile is not None:
+        threading.Thread(target=meanwhile, daemon=True).start()
     with tqdm(
         total=job.spec.size, initial=sum(b - a for a, b in done), unit="traj", unit_scale=True,
         file=sys.stderr, disable=not progress, mininterval=0.5, smoothing=0.1,

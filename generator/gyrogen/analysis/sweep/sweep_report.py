@@ -194,6 +194,11 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     return data
 
 
+def load_plots() -> None:
+    """Import the figures' module (matplotlib: 0.4 s), ahead of need."""
+    import gyrogen.analysis.sweep.sweep_plots  # noqa: F401
+
+
 def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
     """A 2-D product grid's map of its first metric (the median over the
     draws of each cell), with NOTES.md's boundary when the sweep has the
