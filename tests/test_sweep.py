@@ -341,12 +341,17 @@ def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
     assert summary["spec"] == meta["spec"]
 
 
-def test_the_local_engine_listens_on_this_machine_only() -> None:
+@pytest.mark.parametrize("dashboard", [False, True])
+def test_the_local_engine_listens_on_this_machine_only(dashboard: bool) -> None:
+    """With its dashboard (bokeh's) or without (a quiet run: no bokeh
+    imported), the local engine's HTTP routes listen on 127.0.0.1 only
+    (distributed's default, and its fallback without an address, is every
+    interface)."""
     import psutil
 
     from gyrogen.analysis.sweep.sweep_dask import engine
 
-    with engine(None, 1):
+    with engine(None, 1, dashboard=dashboard):
         listening = [c for c in psutil.Process().net_connections("inet")
                      if c.status == psutil.CONN_LISTEN]  # fmt: skip
     assert listening and {c.laddr.ip for c in listening} == {"127.0.0.1"}

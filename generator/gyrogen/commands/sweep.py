@@ -53,7 +53,7 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
     help="Trajectories per task [default: the sweep's chunk].",
 )
 @click.option("--no-plots", is_flag=True, help="Skip histograms.png and map.png.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--quiet", is_flag=True, help="No progress bar, and no dashboard.")
 @click.option(
     "--restart",
     is_flag=True,
@@ -91,7 +91,8 @@ def sweep(
     figures. Rerun into the same --out to resume, with any --chunk: only
     what is left is computed, if this gyrogen, its generated code and its
     build flags are those that began the sweep (else refused: --restart).
-    The local engine's dashboard (127.0.0.1) is printed on stderr."""
+    Unless --quiet, the local engine serves a dashboard on 127.0.0.1 and
+    prints its address on stderr."""
     from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     if scheduler is not None and workers is not None:

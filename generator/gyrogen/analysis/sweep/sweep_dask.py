@@ -20,14 +20,19 @@ CONNECT_TIMEOUT = 10.0
 
 @contextmanager
 def engine(
-    scheduler: str | None, threads: int | None, announce: bool = False
+    scheduler: str | None, threads: int | None, dashboard: bool = False
 ) -> Iterator[tuple[Any, str, int]]:
     """A dask.distributed client: on scheduler, or on a local cluster of
-    threads in this process (its dashboard on 127.0.0.1, bokeh's); announce:
-    say where the dashboard is, on stderr. Yields (client, engine name,
-    worker threads)."""
+    threads in this process; dashboard: the local cluster serves its
+    dashboard (bokeh's, on 127.0.0.1: its import costs about a second, so a
+    quiet run goes without), and where a dashboard is is said on stderr.
+    Yields (client, engine name, worker threads)."""
     import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster, Worker
+
+    class Plain(Worker):  # its HTTP routes on 127.0.0.1, without bokeh's dashboard
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **{**kwargs, "dashboard": False})
 
     if scheduler is None:
         n = threads or os.cpu_count() or 1
@@ -39,15 +44,17 @@ def engine(
                 processes=False,
                 dashboard_address="127.0.0.1:0",
                 worker_dashboard_address="127.0.0.1:0",
+                scheduler_kwargs={"dashboard": dashboard},
+                worker_class=Worker if dashboard else Plain,
             ) as cluster,
             Client(cluster) as client,
         ):
-            if announce:
+            if dashboard:
                 _dashboard(client, "127.0.0.1")
             yield client, f"local ({n} threads)", n
         return
     with _connect(Client, scheduler) as client:
-        if announce:
+        if dashboard:
             _dashboard(client, scheduler.removeprefix("tcp://").rsplit(":", 1)[0])
         workers = client.scheduler_info(n_workers=-1)["workers"].values()
         n = sum(int(w.get("nthreads", 1)) for w in workers)
