@@ -28,7 +28,7 @@ import numpy as np
 
 from gyrogen.abi import PARAMETERS
 from gyrogen.codegen.context import SceneContext
-from gyrogen.errors import GyrogenError
+from gyrogen.errors import BuildError, GyrogenError
 from gyrogen.oracle import sampling, scene_view
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_files
@@ -361,7 +361,7 @@ def check_rendered(unit: SceneContext, files: Mapping[str, str]) -> float:
     name = unit.scene.name
     try:
         built = build_files(files, unit.scene.targets)
-    except GyrogenError as exc:
+    except BuildError as exc:
         raise GyrogenError(f"{name}: generated code that does not compile: {exc}") from exc
     given = given_parameters(unit.scene)
     report = compare(

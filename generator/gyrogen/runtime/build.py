@@ -69,7 +69,7 @@ def build(source_dir: Path, language: Language, portable: bool = False) -> Compi
     return Compiled(language, plan.manifest, module.ffi, module.lib)
 
 
-def _plan(source_dir: Path, language: Language, portable: bool) -> _Plan:
+def _plan(source_dir: Path, language: Language, portable: bool = False) -> _Plan:
     manifest_path = source_dir / "manifest.json"
     if not manifest_path.is_file():
         raise BuildError(f"no manifest.json in {source_dir}: run `gyrogen generate` first")

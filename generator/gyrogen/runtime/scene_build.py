@@ -113,9 +113,14 @@ def build_files(
     files: Mapping[str, str], languages: Iterable[Language], portable: bool = False
 ) -> dict[Language, Compiled]:
     """files built by language, from a directory of their own that is gone
-    afterwards (the builds live in the cache)."""
+    afterwards (the builds live in the cache): private, so written plainly."""
     with tempfile.TemporaryDirectory(prefix="gyrogen-sources-") as tmp:
-        write_atomic(Path(tmp), files)
+        for name, text in files.items():
+            path = Path(tmp) / name
+            try:
+                path.write_text(text, encoding="utf-8")
+            except OSError as exc:
+                raise GyrogenError(f"cannot write {path}: {exc.strerror or exc}") from exc
         return build_dir(Path(tmp), languages, portable)
 
 

@@ -27,6 +27,7 @@ portable=True builds for any CPU of the architecture (a mixed cluster).
 from __future__ import annotations
 
 import json
+import socket
 import sys
 import threading
 import time
@@ -117,6 +118,11 @@ def chunk_task(job: Job, start: int, stop: int) -> Done:
     t0 = time.perf_counter()
     data = parquet_bytes(run_chunk(comp, job.spec, start, stop), part_metadata(job))
     if job.parts is not None:
+        if not Path(job.parts).is_dir():  # the client made it: this worker does not see it
+            raise GyrogenError(
+                f"{job.parts} is not on the worker at {socket.gethostname()}: --shared needs "
+                "--out on a file system every worker reaches at the same path"
+            )
         write_part(Path(job.parts), start, stop, data)
         return Done(start, stop, time.perf_counter() - t0, None)
     return Done(start, stop, time.perf_counter() - t0, data)
@@ -277,11 +283,19 @@ def _cpu(client: Any, scheduler: str) -> str:
 
 
 def _strays(out: Path, kept: set[tuple[int, int]]) -> None:
-    """After the run: only this sweep's parts in out (a task of an earlier,
-    interrupted run on a cluster may have finished since), and no
-    temporaries of a worker killed mid-write."""
+    """After the run: every part it made is in out (a worker that wrote
+    elsewhere is refused), only this sweep's parts are (a task of an
+    earlier, interrupted run on a cluster may have finished since), and no
+    temporary of a worker killed mid-write."""
     parts = out / PARTS
-    for a, b in written(out):
+    found = written(out)
+    if missing := kept - set(found):
+        a, b = min(missing)
+        raise GyrogenError(
+            f"{parts / part_name(a, b)} and {len(missing) - 1} other parts are not there: a "
+            "worker wrote them where this machine does not see (is --out shared?)"
+        )
+    for a, b in found:
         if (a, b) not in kept:
             print(f"{parts / part_name(a, b)}: not this run's: removed", file=sys.stderr)
             (parts / part_name(a, b)).unlink(missing_ok=True)
