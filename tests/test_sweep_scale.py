@@ -20,7 +20,7 @@ import pytest
 from sweep_cases import rows, small
 
 from gyrogen.analysis.sweep import sweep_columns
-from gyrogen.analysis.sweep.sweep_parts import part_name, written
+from gyrogen.analysis.sweep.sweep_columns import part_name, written
 
 FILES = 256
 

@@ -79,10 +79,12 @@ def sweep(
     chunk: int | None = None,
     progress: bool = False,
     plots: bool = True,
+    portable: bool = False,
 ) -> pd.DataFrame:
     """`gyrogen sweep`: every trajectory of spec (a built-in sweep, a sweep
-    file or a Spec) into out [default: sweep/<name>], resuming what is there;
-    its rows, one per trajectory, in sample order."""
+    file or a Spec) into out [default: sweep/<name>], resuming what is there
+    (portable: code for any CPU, `--portable`); its rows, one per
+    trajectory, in sample order."""
     from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
@@ -94,6 +96,7 @@ def sweep(
         threads=workers,
         chunk=chunk,
         progress=progress,
+        portable=portable,
         meanwhile=sweep_report.load_plots if plots else None,
     )
     sweep_report.write(chosen, record, plots=plots)

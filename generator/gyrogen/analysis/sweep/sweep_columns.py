@@ -16,12 +16,16 @@ whole: the map has a cell per trajectory."""
 
 from __future__ import annotations
 
+import os
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from gyrogen.errors import GyrogenError
 
 BINS = 50
 LOG_SPAN = 100.0
@@ -42,8 +46,30 @@ selected in memory (8 MB), else narrowed by RADIX more bits."""
 _SIGN = np.uint64(1 << 63)
 
 
+DIGITS = 11
+"""Sample indices in a part's name (MAX_SWEEP_TRAJECTORIES = 10^10 fits)."""
+_PART = re.compile(rf"part-(\d{{{DIGITS}}})-(\d{{{DIGITS}}})\.parquet")
+
+
+def part_name(start: int, stop: int) -> str:
+    """The part of the rows of samples start..stop (analysis/sweep/sweep_parts.py)."""
+    return f"part-{start:0{DIGITS}d}-{stop:0{DIGITS}d}.parquet"
+
+
+def written(out: Path) -> list[tuple[int, int]]:
+    """The (start, stop) of the parts in out, in order."""
+    try:
+        names = os.listdir(out / PARTS)
+    except FileNotFoundError:
+        return []
+    except OSError as exc:
+        raise GyrogenError(f"{out / PARTS}: cannot list it: {exc.strerror or exc}") from exc
+    return sorted((int(m[1]), int(m[2])) for n in names if (m := _PART.fullmatch(n)))
+
+
 def part_files(out: Path) -> list[Path]:
-    return sorted((out / PARTS).glob("part-*.parquet"))
+    """The parts in out, in sample order (nothing else that is there)."""
+    return [out / PARTS / part_name(a, b) for a, b in written(out)]
 
 
 def scan(out: Path, names: list[str]) -> Iterator[dict[str, np.ndarray]]:

@@ -23,36 +23,18 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis.sweep.sweep_columns import PARTS
+from gyrogen.analysis.sweep.sweep_columns import PARTS, part_name, written
 from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, write_atomic
 
 STATE_FILE = "sweep.json"
-DIGITS = 11
-"""Sample indices in a part's name (MAX_SWEEP_TRAJECTORIES = 10^10 fits)."""
-_PART = re.compile(rf"part-(\d{{{DIGITS}}})-(\d{{{DIGITS}}})\.parquet")
 _STAGED = re.compile(r"\.part-.*\.(new|old)")
 """write_atomic's temporary names: what a writer killed mid-write leaves."""
 
 
-def part_name(start: int, stop: int) -> str:
-    return f"part-{start:0{DIGITS}d}-{stop:0{DIGITS}d}.parquet"
-
-
 def write_part(parts: Path, start: int, stop: int, data: bytes) -> None:
     write_atomic(parts, {part_name(start, stop): data})
-
-
-def written(out: Path) -> list[tuple[int, int]]:
-    """The (start, stop) of the parts in out, in order."""
-    try:
-        names = os.listdir(out / PARTS)
-    except FileNotFoundError:
-        return []
-    except OSError as exc:
-        raise GyrogenError(f"{out / PARTS}: cannot list it: {exc.strerror or exc}") from exc
-    return sorted((int(m[1]), int(m[2])) for n in names if (m := _PART.fullmatch(n)))
 
 
 def whole(path: Path, rows: int, ident: dict[str, str]) -> bool:
