@@ -3,7 +3,9 @@
 - the error of the chosen tolerance: the worst scaled error (workprec's)
   of 300 trajectories' final states against DOP853 at 1e-13;
 - the bare batch compute: Compiled.integrate_batch on the same start states
-  in chunks, on 1 and on 2 threads (the peer: no Dask, no metrics, no files);
+  in chunks, on 1 and on 2 threads (the peer: no Dask, no metrics, no files),
+  built as a sweep builds it (-march=native), and portable (`--portable`)
+  on 1 thread: what portable code costs;
 - end to end: `gyrogen sweep` as a user runs it (a new process, Parquet,
   summary and figures) with --workers 1 and 2, interleaved, best of
   --repeats; the overhead beyond the bare compute on as many threads;
@@ -33,6 +35,7 @@ from typing import NamedTuple
 from gyrogen import api
 from gyrogen.analysis.sweep.sweep_draws import inputs
 from gyrogen.oracle.compare import scaled_error
+from gyrogen.runtime.scene_build import compiled, scene_sources
 
 GYROGEN = str(Path(sys.executable).with_name("gyrogen"))
 SWEEP = """# make sweep-bench: Monte Carlo over the default scene's initial rates
@@ -75,11 +78,12 @@ def wall_of(timed: Timed) -> float:
     return timed.wall
 
 
-def bare(spec: api.Spec, tol: float, threads: int, chunk: int) -> Timed:
+def bare(spec: api.Spec, tol: float, threads: int, chunk: int, portable: bool = False) -> Timed:
     """integrate_batch over every start state, chunk by chunk, on `threads`
     threads: each call on one core (threads=1: without it, OpenMP would put
-    every call on every core and the 1-thread peer would run on two)."""
-    model = api.compile(spec.scene)
+    every call on every core and the 1-thread peer would run on two); the
+    code built as a sweep builds it (-march=native), or portable."""
+    model = compiled(scene_sources(spec.scene, portable))
     starts = [inputs(spec, a, min(spec.size, a + chunk)) for a in range(0, spec.size, chunk)]
     c = model.setup(starts[0].p[0])
 
@@ -140,9 +144,18 @@ def peak_rss(sweep_file: Path, out: Path) -> tuple[float, float]:
     return int(proc.stdout.split()[-1]) / 1024, wall
 
 
-def report(size: int, bares: dict[int, list[Timed]], runs: dict[int, list[Timed]]) -> None:
+def report(
+    size: int, bares: dict[int, list[Timed]], runs: dict[int, list[Timed]], portable: list[Timed]
+) -> None:
     """Each figure best of the repeats, with every repeat shown."""
     best = {n: min(got, key=wall_of) for n, got in bares.items()}
+    for what, of in (("wall", wall_of), ("CPU", lambda t: t.cpu)):
+        slow, fast = min(map(of, portable)), min(map(of, bares[1]))
+        print(
+            f"portable code, bare, 1 thread: {what} {slow:.2f} s against {fast:.2f} s native "
+            f"(all: {', '.join(f'{of(t):.2f}' for t in portable)}): "
+            f"{(slow - fast) / size * 1e9:+.0f} ns/traj ({100 * (slow / fast - 1):+.1f}%)"
+        )
     for n, got in bares.items():
         wall, cpu = best[n].wall, min(t.cpu for t in got)
         every = ", ".join(f"{t.wall:.2f}" for t in got)
@@ -181,11 +194,13 @@ def main() -> None:
     print(f"error at rtol = atol = {args.tol:g}: {error_of(spec, args.tol):.3g} (300 trajectories)")
     bares: dict[int, list[Timed]] = {1: [], 2: []}
     runs: dict[int, list[Timed]] = {1: [], 2: []}
+    portable: list[Timed] = []
     for _ in range(args.repeats):  # interleaved: each repeat sees the same load
         for n in (2, 1):
             bares[n].append(bare(spec, args.tol, n, args.chunk))
             runs[n].append(end_to_end(sweep_file, work / f"e2e-{n}", n))
-    report(spec.size, bares, runs)
+        portable.append(bare(spec, args.tol, 1, args.chunk, portable=True))
+    report(spec.size, bares, runs, portable)
     parts = sum(p.stat().st_size for p in (work / "e2e-2" / "parts").iterdir())
     print(f"Parquet: {parts / spec.size:.1f} bytes per trajectory ({parts / 1e6:.1f} MB)")
     print(f"scheduler: {scheduler_rate(5000):,.0f} empty tasks per second (local, 2 processes)")

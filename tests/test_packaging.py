@@ -101,7 +101,7 @@ def test_installed_wheel_runs_the_command_line(fresh: Path, tmp_path: Path) -> N
 def test_the_code_digest_reads_every_template() -> None:
     """A sweep's identity hashes gyrogen's modules and templates, the
     templates through the package's link to them."""
-    from gyrogen.analysis.sweep.sweep_sources import digested
+    from gyrogen.runtime.scene_build import digested
 
     templates = {p.name for p in (REPO / "templates").rglob("*.jinja")}
     read = {p.name for p in digested(PACKAGE) if p.suffix == ".jinja"}

@@ -147,8 +147,8 @@ def test_two_scenes_of_one_name_get_a_build_each(
     real_build = scene_build.build
     built: list[int] = []
 
-    def counting(source: Path, language: Language) -> Compiled:
-        comp = real_build(source, language)
+    def counting(source: Path, language: Language, portable: bool = False) -> Compiled:
+        comp = real_build(source, language, portable)
         built.append(comp.nx)
         return comp
 

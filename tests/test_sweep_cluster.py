@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from sweep_cases import free_port, long, rows
 
-from gyrogen.analysis.sweep.sweep_sources import builds
+from gyrogen.runtime.scene_build import builds
 
 pytestmark = pytest.mark.slow  # sweeps of a cluster scene on Dask workers
 
@@ -199,3 +199,47 @@ def test_memory_does_not_grow_with_the_number_of_chunks(tmp_path: Path, cache: P
     peak_kb = int(next(line for line in status.splitlines() if line.startswith("VmHWM")).split()[1])
     assert len(list(out.glob("parts/part-*"))) >= 20
     assert peak_kb < 600_000, peak_kb  # 185 MB measured; a list of 10^9 indices is 3 GB and more
+
+
+def test_workers_write_their_parts_to_the_shared_path(
+    tmp_path: Path,
+    cluster: tuple[str, list[subprocess.Popen]],
+    cli,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """--shared: each worker process writes the parts it computes into --out
+    (here a directory both reach), and the client writes none, receiving
+    only each chunk's figures; a worker SIGKILLed once 3 parts are there
+    loses nothing, and no temporary of a write it cut short stays behind."""
+    from gyrogen.analysis.sweep import sweep_engine
+
+    address, procs = cluster
+    sweep = long(tmp_path / "long.toml")
+    local, shared = tmp_path / "local", tmp_path / "shared"
+    assert cli(["sweep", str(sweep), "--out", str(local), "--no-plots", "--quiet"]).code == 0
+    by_client: list[tuple[int, int]] = []
+    real = sweep_engine.write_part
+
+    def counted(parts: Path, start: int, stop: int, data: bytes) -> None:
+        by_client.append((start, stop))
+        real(parts, start, stop, data)
+
+    monkeypatch.setattr(sweep_engine, "write_part", counted)
+    seen: list[int] = []
+    watcher = threading.Thread(target=_kill_when, args=(shared / "parts", 3, procs[1], seen))
+    watcher.start()
+    code, stdout, err = cli(["sweep", str(sweep), "--out", str(shared), "--scheduler", address,
+                             "--shared", "--quiet"])  # fmt: skip
+    watcher.join()
+    assert code == 0, err
+    assert procs[1].wait(timeout=10) == -signal.SIGKILL and seen and seen[0] < CHUNKS
+    assert f"{CHUNKS} chunks computed" in stdout and by_client == []
+    assert rows(shared).equals(rows(local))
+    assert (
+        sorted(p.name for p in (shared / "parts").iterdir() if not p.name.startswith("part-")) == []
+    )
+
+
+def test_shared_is_for_a_scheduler(tmp_path: Path, cli) -> None:
+    code, _, err = cli(["sweep", "monte_carlo", "--out", str(tmp_path / "o"), "--shared"])
+    assert code == 2 and "--shared is for --scheduler" in err and not (tmp_path / "o").exists()

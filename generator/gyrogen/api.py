@@ -20,10 +20,10 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gyrogen.analysis.sweep.sweep_sources import compiled, scene_sources
 from gyrogen.analysis.sweep.sweep_spec import Spec, parse
 from gyrogen.analysis.sweep.sweep_spec import load as load_spec
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene
 from gyrogen.scene import load as load_scene
 
@@ -79,16 +79,25 @@ def sweep(
     chunk: int | None = None,
     progress: bool = False,
     plots: bool = True,
+    portable: bool = False,
 ) -> pd.DataFrame:
     """`gyrogen sweep`: every trajectory of spec (a built-in sweep, a sweep
-    file or a Spec) into out [default: sweep/<name>], resuming what is there;
-    its rows, one per trajectory, in sample order."""
+    file or a Spec) into out [default: sweep/<name>], resuming what is there
+    (portable: code for any CPU, `--portable`); its rows, one per
+    trajectory, in sample order."""
     from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = Path(out) if out is not None else Path("sweep") / chosen.name
     record = sweep_engine.run(
-        chosen, where, scheduler=scheduler, threads=workers, chunk=chunk, progress=progress
+        chosen,
+        where,
+        scheduler=scheduler,
+        threads=workers,
+        chunk=chunk,
+        progress=progress,
+        portable=portable,
+        meanwhile=sweep_report.load_plots if plots else None,
     )
     sweep_report.write(chosen, record, plots=plots)
     return read(where)

@@ -53,12 +53,24 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
     help="Trajectories per task [default: the sweep's chunk].",
 )
 @click.option("--no-plots", is_flag=True, help="Skip histograms.png and map.png.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--quiet", is_flag=True, help="No progress bar, and no dashboard.")
 @click.option(
     "--restart",
     is_flag=True,
     help="Compute anew where --out holds this sweep begun by another build (another gyrogen, "
     "generated code or flags): a resume continues only the same.",
+)
+@click.option(
+    "--shared",
+    is_flag=True,
+    help="With --scheduler: --out is on a file system every worker reaches at the same path; "
+    "each worker writes its parts there, and only each chunk's figures reach this process.",
+)
+@click.option(
+    "--portable",
+    is_flag=True,
+    help="Build for any CPU of the architecture (no -march=native), for a cluster of mixed "
+    "CPUs: slower [default: for the workers' CPU, recorded; workers of another are refused].",
 )
 def sweep(
     spec: Any,
@@ -69,19 +81,26 @@ def sweep(
     no_plots: bool,
     quiet: bool,
     restart: bool,
+    shared: bool,
+    portable: bool,
 ) -> None:
     """Integrate every trajectory of SWEEP (a built-in sweep: stability_map,
     monte_carlo; or a sweep file naming a scene) with the scene's compiled
     batch integrator, one Parquet row per trajectory with its inputs and
     metrics, written chunk by chunk; then summary.json, summary.md and
-    figures. Rerun into the same --out to resume: the chunks written are
-    skipped, if this gyrogen, its generated code and its build flags are
-    those that began the sweep (else refused: --restart)."""
+    figures. Rerun into the same --out to resume, with any --chunk: only
+    what is left is computed, if this gyrogen, its generated code and its
+    build flags are those that began the sweep (else refused: --restart).
+    Unless --quiet, the local engine serves a dashboard on 127.0.0.1 and
+    prints its address on stderr."""
     from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the local engine: not with --scheduler")
+    if shared and scheduler is None:
+        raise click.UsageError("--shared is for --scheduler: the local engine writes its parts")
     out = out or Path("sweep") / spec.name
+    plots = None if no_plots else sweep_report.load_plots  # matplotlib while the chunks run
     record = sweep_engine.run(
         spec,
         out,
@@ -90,6 +109,9 @@ def sweep(
         chunk=chunk,
         progress=not quiet,
         restart=restart,
+        shared=shared,
+        portable=portable,
+        meanwhile=plots,
     )
     data = sweep_report.write(spec, record, plots=not no_plots)
     for line in sweep_report.markdown(data).splitlines()[2:]:

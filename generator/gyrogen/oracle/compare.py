@@ -20,20 +20,18 @@ to JAC_TOLERANCE of its row's sizes (a wrong entry is wrong by O(1)).
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from gyrogen.abi import PARAMETERS
 from gyrogen.codegen.context import SceneContext
-from gyrogen.errors import GyrogenError
+from gyrogen.errors import BuildError, GyrogenError
 from gyrogen.oracle import sampling, scene_view
-from gyrogen.runtime.build import build
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.scene_build import build_files
 from gyrogen.scene import Scene
 
 TOLERANCE = 1e-12
@@ -361,17 +359,14 @@ def check_rendered(unit: SceneContext, files: Mapping[str, str]) -> float:
     Returns the seconds it took."""
     t0 = time.perf_counter()
     name = unit.scene.name
-    with tempfile.TemporaryDirectory(prefix="gyrogen-check-") as tmp:
-        for file, text in files.items():
-            (Path(tmp) / file).write_text(text, encoding="utf-8")
-        try:
-            backends = [build(Path(tmp), lang) for lang in unit.scene.targets]
-        except GyrogenError as exc:
-            raise GyrogenError(f"{name}: generated code that does not compile: {exc}") from exc
-        given = given_parameters(unit.scene)
-        report = compare(
-            backends, unit.scene, CHECK_STATES, CHECK_PARAMS, CHECK_ILL, seed=0, given=given
-        )
+    try:
+        built = build_files(files, unit.scene.targets)
+    except BuildError as exc:
+        raise GyrogenError(f"{name}: generated code that does not compile: {exc}") from exc
+    given = given_parameters(unit.scene)
+    report = compare(
+        list(built.values()), unit.scene, CHECK_STATES, CHECK_PARAMS, CHECK_ILL, seed=0, given=given
+    )
     if report.refusal_failures:
         raise GyrogenError(f"{name}: the generated setup differs: {report.refusal_failures[0]}")
     failed = [r for r in report.rows if not r.passed]

@@ -51,22 +51,25 @@ class _Plan:
     cdef: str
     key: str
     cc: str
+    flags: tuple[str, ...]
 
     @property
     def module_name(self) -> str:
         return f"_gyrogen_{self.manifest['prefix']}_{self.language}_{self.key}"
 
 
-def build(source_dir: Path, language: Language) -> Compiled:
+def build(source_dir: Path, language: Language, portable: bool = False) -> Compiled:
     """Compile (or fetch from the cache) and load one backend of the
-    generated sources in source_dir (which holds manifest.json)."""
-    plan = _plan(Path(source_dir), language)
+    generated sources in source_dir (which holds manifest.json); portable:
+    for any CPU of the architecture (runtime/flags.py), whatever the
+    environment says."""
+    plan = _plan(Path(source_dir), language, portable)
     entry = cache.cache_dir() / plan.key
     module = cache.fetch(plan.module_name, entry, lambda work, final: _compile(plan, work, final))
     return Compiled(language, plan.manifest, module.ffi, module.lib)
 
 
-def _plan(source_dir: Path, language: Language) -> _Plan:
+def _plan(source_dir: Path, language: Language, portable: bool = False) -> _Plan:
     manifest_path = source_dir / "manifest.json"
     if not manifest_path.is_file():
         raise BuildError(f"no manifest.json in {source_dir}: run `gyrogen generate` first")
@@ -86,8 +89,9 @@ def _plan(source_dir: Path, language: Language) -> _Plan:
     ctx = _glue_context(manifest, language)
     glue = render("cffi/glue.c.jinja", **ctx)
     cdef = render("cffi/cdef.h.jinja", **ctx)
-    key = _key(language, sources, glue, cdef)
-    return _Plan(language, manifest, sources, glue, cdef, key, tool)
+    used = flags.flags_for(language, portable)
+    key = _key(language, sources, glue, cdef, used)
+    return _Plan(language, manifest, sources, glue, cdef, key, tool, used)
 
 
 def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any]:
@@ -112,9 +116,10 @@ def _tool_version(tool: str) -> str:
     return out.stdout.splitlines()[0] if out.stdout else tool
 
 
-def _key(language: Language, sources: list[Path], glue: str, cdef: str) -> str:
+def _key(
+    language: Language, sources: list[Path], glue: str, cdef: str, used: tuple[str, ...]
+) -> str:
     tool = "gcc" if language == "c" else "gfortran"
-    used = flags.c_flags() if language == "c" else flags.fortran_flags()
     return cache.entry_key((language, _tool_version(tool), " ".join(used), glue, cdef), sources)
 
 
@@ -128,7 +133,7 @@ def _compile(plan: _Plan, work: Path, final: Path) -> None:
         objects = []
         for src in (s for s in plan.sources if s.suffix == ".c"):
             obj = work / f"{src.stem}.o"
-            cmd = [plan.cc, *flags.c_flags(), "-c", "-o", obj.name, src.name]
+            cmd = [plan.cc, *plan.flags, "-c", "-o", obj.name, src.name]
             _run(cmd, work, cache.log_path(final, src.name))
             objects.append(str(obj))
         ffi.set_source(plan.module_name, plan.glue, extra_objects=objects, **_openmp_args())
@@ -136,7 +141,7 @@ def _compile(plan: _Plan, work: Path, final: Path) -> None:
         lib = plan.module_name + "_f"
         gf = require("gfortran")
         names = [src.name for src in plan.sources]
-        cmd = [gf, *flags.fortran_flags(), "-shared", "-J", ".", "-o", f"lib{lib}.so", *names]
+        cmd = [gf, *plan.flags, "-shared", "-J", ".", "-o", f"lib{lib}.so", *names]
         _run(cmd, work, cache.log_path(final, names[-1]))
         ffi.set_source(
             plan.module_name,

@@ -9,6 +9,7 @@ generate --lib`) keep plain -O2."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import subprocess
@@ -76,13 +77,13 @@ code for any CPU of the architecture (and a check that the numbers do not
 depend on the instructions the CPU offers)."""
 
 
-def portable() -> bool:
+def env_portable() -> bool:
     return os.environ.get(PORTABLE, "") not in ("", "0")
 
 
-def _optional(tool: str, language: str) -> tuple[str, ...]:
+def _optional(tool: str, language: str, native: bool) -> tuple[str, ...]:
     fast = tuple(f for f in FAST if accepts(tool, language, f)
-                 and not (portable() and f.startswith("-march")))  # fmt: skip
+                 and (native or not f.startswith("-march")))  # fmt: skip
     return (fast or ("-O2",)) + ((OPENMP,) if openmp(tool, language) else ())
 
 
@@ -91,9 +92,31 @@ def openmp(tool: str, language: str) -> bool:
     return accepts(tool, language, OPENMP)
 
 
-def c_flags(tool: str = "gcc") -> tuple[str, ...]:
-    return C_BASE + _optional(tool, "c")
+def c_flags(tool: str = "gcc", portable: bool = False) -> tuple[str, ...]:
+    """portable: without -march=native even when GYROGEN_PORTABLE is not set."""
+    return C_BASE + _optional(tool, "c", not (portable or env_portable()))
 
 
-def fortran_flags(tool: str = "gfortran") -> tuple[str, ...]:
-    return FORTRAN_BASE + _optional(tool, "fortran")
+def fortran_flags(tool: str = "gfortran", portable: bool = False) -> tuple[str, ...]:
+    return FORTRAN_BASE + _optional(tool, "fortran", not (portable or env_portable()))
+
+
+def flags_for(language: str, portable: bool = False) -> tuple[str, ...]:
+    """A local build's flags for language ("c" or "fortran")."""
+    return c_flags(portable=portable) if language == "c" else fortran_flags(portable=portable)
+
+
+@cache
+def native_target(tool: str = "gcc") -> str:
+    """What -march=native means on this CPU to tool: its -march value and a
+    digest of every target option it resolves to (the instruction sets the
+    code may use). Two CPUs with another value may round differently."""
+    path = shutil.which(tool)
+    if path is None:
+        return "unknown"
+    proc = subprocess.run([path, "-march=native", "-Q", "--help=target"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    options = sorted(" ".join(line.split()) for line in proc.stdout.splitlines()
+                     if line.strip().startswith("-m"))  # fmt: skip
+    march = next((o.split()[1] for o in options if o.startswith("-march=") and " " in o), "?")
+    return f"{march}-{hashlib.sha256(chr(10).join(options).encode()).hexdigest()[:12]}"

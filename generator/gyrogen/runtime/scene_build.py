@@ -1,16 +1,127 @@
-"""A scene's sources rendered into a directory, then built: what every
-command that runs the generated code does first."""
+"""The one generate-and-build path: a scene's sources rendered (and kept in
+the build cache), written into a directory all or nothing, and built per
+language. Every command that runs generated code, a sweep's workers and
+generate's check before it writes come through here.
+
+Rendering derives the equations (sympy), so it is imported only when a
+scene is rendered: a process that builds sources it was handed (a sweep's
+worker) or found in the cache never imports sympy.
+
+The rendered sources are cached under the build cache's sources/, keyed by
+the scene, the sympy version and a digest of gyrogen's own code and
+templates, so a rerun skips the derivation. Built sources are written into
+a directory of their own first (runtime/build.py copies them into its cache
+entry, keyed by their bytes and the flags), so two processes building the
+same sources never share a half-written directory.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+import hashlib
+import json
+import os
+import tempfile
+import threading
+from collections.abc import Callable, Iterable, Mapping
+from contextlib import suppress
+from dataclasses import dataclass
+from functools import cache
+from importlib.metadata import version
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from gyrogen.codegen.context import SceneContext
-from gyrogen.codegen.generate import generate
+import gyrogen
+from gyrogen.errors import GyrogenError
+from gyrogen.files import write_atomic
 from gyrogen.runtime.build import build
+from gyrogen.runtime.cache import cache_dir
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import Scene
+
+if TYPE_CHECKING:
+    from gyrogen.codegen.context import SceneContext
+
+
+@dataclass(frozen=True)
+class Sources:
+    """A scene's rendered files by name, their build id, the language a
+    sweep builds, and whether it builds them portable (runtime/flags.py)."""
+
+    build_id: str
+    language: Language
+    files: dict[str, str]
+    portable: bool = False
+
+    @property
+    def digest(self) -> str:
+        text = json.dumps(self.files, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def digested(root: Path) -> list[Path]:
+    """gyrogen's modules and templates below root. os.walk follows the link
+    to the templates (in a checkout, gyrogen/templates -> ../../templates),
+    which Path.rglob does not."""
+    found = [Path(d) / f for d, _, files in os.walk(root, followlinks=True) for f in files]
+    return sorted(
+        p for p in found if p.suffix in (".py", ".jinja") and "__pycache__" not in p.parts
+    )
+
+
+@cache
+def code_digest() -> str:
+    """A digest of gyrogen's own modules and templates: rendered sources
+    cached by an older generator are never reused."""
+    root = Path(gyrogen.__file__).parent
+    h = hashlib.sha256()
+    for path in digested(root):
+        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def scene_sources(scene: Scene, portable: bool = False) -> Sources:
+    """The scene's rendered sources (built as C when it has a C target, else
+    Fortran): from the cache when this gyrogen and sympy rendered them
+    before (then sympy is not even imported), else rendered and kept."""
+    language: Language = "c" if "c" in scene.targets else "fortran"
+    text = json.dumps([scene.model_dump(mode="json"), code_digest(), version("sympy")])
+    key = hashlib.sha256(text.encode()).hexdigest()[:24]
+    stored = cache_dir() / "sources"
+    try:
+        held = json.loads((stored / f"{key}.json").read_text(encoding="utf-8"))
+        return Sources(str(held["build_id"]), language, dict(held["files"]), portable)
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    from gyrogen.codegen.context import build_id  # sympy: only when rendering
+    from gyrogen.codegen.generate import render_all, unit_of
+
+    files = render_all(unit_of(scene))
+    held = json.dumps({"build_id": build_id(scene), "files": files})
+    with suppress(GyrogenError):  # a cache not written costs only the next derivation
+        write_atomic(stored, {f"{key}.json": held})
+    return Sources(build_id(scene), language, files, portable)
+
+
+def build_dir(
+    directory: Path, languages: Iterable[Language], portable: bool = False
+) -> dict[Language, Compiled]:
+    """The sources in directory built (or fetched from the cache), by language."""
+    return {language: build(directory, language, portable) for language in languages}
+
+
+def build_files(
+    files: Mapping[str, str], languages: Iterable[Language], portable: bool = False
+) -> dict[Language, Compiled]:
+    """files built by language, from a directory of their own that is gone
+    afterwards (the builds live in the cache): private, so written plainly."""
+    with tempfile.TemporaryDirectory(prefix="gyrogen-sources-") as tmp:
+        for name, text in files.items():
+            path = Path(tmp) / name
+            try:
+                path.write_text(text, encoding="utf-8")
+            except OSError as exc:
+                raise GyrogenError(f"cannot write {path}: {exc.strerror or exc}") from exc
+        return build_dir(Path(tmp), languages, portable)
 
 
 def build_scene(
@@ -19,9 +130,34 @@ def build_scene(
     languages: Iterable[Language],
     written: Callable[[SceneContext], None] = lambda unit: None,
 ) -> tuple[SceneContext, dict[Language, Compiled]]:
-    """Generate scene into directory (all or nothing), call written with
-    its unit, then build each language in turn (or fetch it from the
-    cache): the unit and the backends by language."""
+    """Render scene into directory (all or nothing), call written with its
+    unit, then build each language in turn (or fetch it from the cache):
+    the unit and the backends by language."""
+    from gyrogen.codegen.generate import generate  # sympy
+
     unit = generate(scene, directory)
     written(unit)
-    return unit, {language: build(directory, language) for language in languages}
+    return unit, build_dir(directory, languages)
+
+
+_BUILT: dict[str, Compiled] = {}
+_BUILDS: list[str] = []
+"""The build ids this process has built, one entry per build (a test reads it)."""
+_LOCK = threading.Lock()
+
+
+def compiled(sources: Sources) -> Compiled:
+    """The sources built in this process: once per build id, sources and
+    flags (threads wait for the first)."""
+    key = f"{sources.build_id}-{sources.digest}-{sources.portable}"
+    with _LOCK:
+        if key not in _BUILT:
+            built = build_files(sources.files, [sources.language], sources.portable)
+            _BUILT[key] = built[sources.language]
+            _BUILDS.append(sources.build_id)
+        return _BUILT[key]
+
+
+def builds() -> list[str]:
+    """The build ids built in this process so far."""
+    return list(_BUILDS)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import socket
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,11 +19,20 @@ CONNECT_TIMEOUT = 10.0
 
 
 @contextmanager
-def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, str, int]]:
+def engine(
+    scheduler: str | None, threads: int | None, dashboard: bool = False
+) -> Iterator[tuple[Any, str, int]]:
     """A dask.distributed client: on scheduler, or on a local cluster of
-    threads in this process. Yields (client, engine name, worker threads)."""
+    threads in this process; dashboard: the local cluster serves its
+    dashboard (bokeh's, on 127.0.0.1: its import costs about a second, so a
+    quiet run goes without), and where a dashboard is is said on stderr.
+    Yields (client, engine name, worker threads)."""
     import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster, Worker
+
+    class Plain(Worker):  # its HTTP routes on 127.0.0.1, without bokeh's dashboard
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **{**kwargs, "dashboard": False})
 
     if scheduler is None:
         n = threads or os.cpu_count() or 1
@@ -34,17 +44,31 @@ def engine(scheduler: str | None, threads: int | None) -> Iterator[tuple[Any, st
                 processes=False,
                 dashboard_address="127.0.0.1:0",
                 worker_dashboard_address="127.0.0.1:0",
+                scheduler_kwargs={"dashboard": dashboard},
+                worker_class=Worker if dashboard else Plain,
             ) as cluster,
             Client(cluster) as client,
         ):
+            if dashboard:
+                _dashboard(client, "127.0.0.1")
             yield client, f"local ({n} threads)", n
         return
     with _connect(Client, scheduler) as client:
+        if dashboard:
+            _dashboard(client, scheduler.removeprefix("tcp://").rsplit(":", 1)[0])
         workers = client.scheduler_info(n_workers=-1)["workers"].values()
         n = sum(int(w.get("nthreads", 1)) for w in workers)
         if n == 0:
             raise GyrogenError(f"--scheduler {scheduler}: the cluster has no workers")
         yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+
+
+def _dashboard(client: Any, host: str) -> None:
+    """Where the dashboard is on host (none without bokeh, or when the
+    scheduler runs without one)."""
+    port = client.scheduler_info().get("services", {}).get("dashboard")
+    where = f"http://{host}:{port}/status" if port else "none (the scheduler serves none)"
+    print(f"dashboard: {where}", file=sys.stderr)
 
 
 @contextmanager

@@ -117,7 +117,7 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
         cols[name][:] = values
     groups, which = parameter_sets(inp.p)
     setups = [comp.setup_code(p) for p in groups]
-    cols["setup_code"][:] = [setups[g][0] for g in which]
+    cols["setup_code"][:] = np.array([code for code, _ in setups])[which]
     ran = np.flatnonzero(cols["setup_code"] == 0)
     if ran.size:
         members = [np.flatnonzero(which[ran] == g) for g in range(len(groups))]

@@ -24,11 +24,10 @@ from gyrogen.abi import UNITS
 from gyrogen.analysis.check.check_engine import spin_axes, spin_stable
 from gyrogen.analysis.sweep.sweep_columns import (
     Histogram,
-    column,
-    counts,
     in_order,
     part_files,
-    spread,
+    scan,
+    spreads,
 )
 from gyrogen.analysis.sweep.sweep_draws import axis_values
 from gyrogen.analysis.sweep.sweep_engine import Run
@@ -54,32 +53,31 @@ def spin_values(spec: Spec, data: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def spin_agreement(spec: Spec, out: Path) -> dict[str, Any]:
+    """The criterion against the observed growth, counted part by part."""
     crit = spec.sweep.criterion.spin_stability
     assert crit is not None
     swept = [n for n in SPIN_NAMES if n in spec.variables]
-    data = in_order(out, [*swept, "code", "nutation_0", "max_nutation"])
-    v = spin_values(spec, data)
-    omega = np.broadcast_to(v["u2"], data["code"].shape)
-    spinning = omega != 0
-    safe = np.where(spinning, omega, 1.0)
-    sigma, it1, it3 = spin_axes(v, safe, v["u4"])
-    near = (np.abs(sigma / it1 - 1) < crit.band) | (np.abs(sigma / it3 - 1) < crit.band)
-    predicted = np.broadcast_to(spin_stable(v, safe, v["u4"]), omega.shape)
-    observed = data["max_nutation"] <= crit.grows_by * data["nutation_0"]
-    judged = spinning & ~near & (data["code"] == 0)
-    agree = int(np.sum(judged & (predicted == observed)))
-    return {
-        "cells": int(omega.size),
-        "judged": int(judged.sum()),
-        "in_band": int(np.sum(near & spinning)),
-        "not_finished": int(np.sum(data["code"] != 0)),
-        "agree": agree,
-        "share": agree / int(judged.sum()) if judged.any() else float("nan"),
-        "predicted_unstable": int(np.sum(~predicted)),
-        "observed_unstable": int(np.sum(~observed)),
-        "grows_by": crit.grows_by,
-        "band": crit.band,
-    }
+    found = dict.fromkeys(("cells", "judged", "in_band", "not_finished", "agree"), 0)
+    found |= dict.fromkeys(("predicted_unstable", "observed_unstable"), 0)
+    for data in scan(out, [*swept, "code", "nutation_0", "max_nutation"]):
+        v = spin_values(spec, data)
+        omega = np.broadcast_to(v["u2"], data["code"].shape)
+        spinning = omega != 0
+        safe = np.where(spinning, omega, 1.0)
+        sigma, it1, it3 = spin_axes(v, safe, v["u4"])
+        near = (np.abs(sigma / it1 - 1) < crit.band) | (np.abs(sigma / it3 - 1) < crit.band)
+        predicted = np.broadcast_to(spin_stable(v, safe, v["u4"]), omega.shape)
+        observed = data["max_nutation"] <= crit.grows_by * data["nutation_0"]
+        judged = spinning & ~near & (data["code"] == 0)
+        found["cells"] += int(omega.size)
+        found["judged"] += int(judged.sum())
+        found["in_band"] += int(np.sum(near & spinning))
+        found["not_finished"] += int(np.sum(data["code"] != 0))
+        found["agree"] += int(np.sum(judged & (predicted == observed)))
+        found["predicted_unstable"] += int(np.sum(~predicted))
+        found["observed_unstable"] += int(np.sum(~observed))
+    share = found["agree"] / found["judged"] if found["judged"] else float("nan")
+    return {**found, "share": share, "grows_by": crit.grows_by, "band": crit.band}
 
 
 def timing(record: Run) -> dict[str, Any]:
@@ -128,15 +126,15 @@ def summary(
         "samples": sweep.metrics.points,
         "trajectories": spec.size,
         "chunk": record.job.chunk,
-        "chunks": record.job.chunks,
+        "parts": len(part_files(out)),
         "run": timing(record),
-        "setup_codes": counts(out, "setup_code"),
-        "integrator_codes": counts(out, "code"),
         "metrics": {},
     }
+    codes, found = spreads(out, shown, ("setup_code", "code"))  # streamed over the parts
+    data["setup_codes"], data["integrator_codes"] = codes["setup_code"], codes["code"]
     histograms = {}
-    for name in shown:  # one column in memory at a time
-        data["metrics"][name], histograms[name] = spread(column(out, name))
+    for name, (stats, histogram) in found.items():
+        data["metrics"][name], histograms[name] = stats, histogram
     if sweep.criterion.spin_stability is not None:
         data["spin_stability"] = spin_agreement(spec, out)
     return data, histograms
@@ -148,8 +146,8 @@ def markdown(data: dict[str, Any]) -> str:
         f"# sweep {data['sweep']}: {data['trajectories']:,} trajectories of {data['scene']}",
         "",
         f"{data['method']} to t = {data['t_end']:g} s (rtol {data['rtol']:g}, atol "
-        f"{data['atol']:g}), {data['samples']} samples each; {data['chunks']} chunks of "
-        f"{data['chunk']:,}; build {data['build_id']}.",
+        f"{data['atol']:g}), {data['samples']} samples each; {data['parts']} parts, this "
+        f"run's chunks of {data['chunk']:,}; build {data['build_id']}.",
         "",
         f"This run: {run['engine']}; {run['chunks_computed']} chunks computed, "
         f"{run['chunks_skipped']} already written; start-up {run['startup_s']:.2f} s, then "
@@ -194,6 +192,11 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     files["summary.json"] = json.dumps(data, indent=1) + "\n"
     write_atomic(record.out, files)
     return data
+
+
+def load_plots() -> None:
+    """Import the figures' module (matplotlib: 0.4 s), ahead of need."""
+    import gyrogen.analysis.sweep.sweep_plots  # noqa: F401
 
 
 def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:

@@ -188,8 +188,9 @@ class Spec:
         return dict(self.scene.simulate.initial if given is None else given)
 
     def fingerprint(self) -> str:
-        """Which sweep a results directory holds: its description and scene."""
-        text = self.sweep.model_dump_json() + self.scene.model_dump_json()
+        """Which sweep a results directory holds: its description (less the
+        chunk size: another resumes it) and scene."""
+        text = self.sweep.model_dump_json(exclude={"chunk"}) + self.scene.model_dump_json()
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
