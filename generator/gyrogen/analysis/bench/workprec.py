@@ -167,8 +167,8 @@ def _compiled_run(
 
 def _raw_call(comp: Compiled, method: str, prob: Problem, kw: Controls) -> Callable[[], Any]:
     """One integration through cffi on preallocated buffers, as a program
-    embedding the C would call it: Compiled.integrate's conveniences (a
-    copy, a stats dict) cost ~6 us a call, half of a fast integration."""
+    embedding the C would call it (Compiled.integrate adds about 1 us: a
+    new state and stats struct per call, `make bench-call`)."""
     ffi = comp.ffi
     fn = comp.function(method)
     x = prob.x0.copy()
