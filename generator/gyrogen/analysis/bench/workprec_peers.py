@@ -154,24 +154,32 @@ def _casadi_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: 
     return out
 
 
-def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:
-    """gyrogen's optimized rhs block, statement by statement, in SX."""
+def rhs_values(unit: Any, x: Any, c: Any, funcs: dict[str, Any]) -> list[Any]:
+    """gyrogen's optimized rhs block, statement by statement, on another
+    library's symbols (CasADi's SX, heyoka's expressions): x and c indexable
+    by state and constant, funcs its sin, cos and sqrt (the same arithmetic
+    as the generated code)."""
     import sympy as sm
 
     from gyrogen.symbolic.hoist import constants
 
     env: dict[Any, Any] = {s: x[i] for i, s in enumerate(unit.states)}
     env.update({k: c[i] for i, k in enumerate(constants(unit.nc))})
-    funcs = [{"sin": ca.sin, "cos": ca.cos, "sqrt": ca.sqrt}, "math"]
+    modules = [funcs, "math"]
 
     def value(expr: sm.Expr) -> Any:
         args = sorted(expr.free_symbols, key=str)
-        return sm.lambdify(args, expr, modules=funcs)(*(env[a] for a in args))
+        return sm.lambdify(args, expr, modules=modules)(*(env[a] for a in args))
 
     block = unit.optimized.rhs
     for a in block.temporaries:
         env[a.lhs] = value(a.rhs)
-    return ca.vertcat(*(value(e) for e in block.outputs))
+    return [value(e) for e in block.outputs]
+
+
+def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:
+    """gyrogen's optimized rhs block in SX."""
+    return ca.vertcat(*rhs_values(unit, x, c, {"sin": ca.sin, "cos": ca.cos, "sqrt": ca.sqrt}))
 
 
 def _check_sx(f: Any, prob: Problem, echo: Echo) -> None:
