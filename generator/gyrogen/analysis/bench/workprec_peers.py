@@ -38,9 +38,56 @@ MIN_TIMED = 0.02
 
 def runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
     """Every installed peer at the ladder of tolerances."""
-    return _numbalsoda_runs(prob, cfg, stiff, echo, progress) + _casadi_runs(
-        prob, cfg, stiff, echo, progress
+    return (
+        _numbalsoda_runs(prob, cfg, stiff, echo, progress)
+        + _casadi_runs(prob, cfg, stiff, echo, progress)
+        + _heyoka_runs(prob, cfg, stiff, echo, progress)
     )
+
+
+HEYOKA = "heyoka taylor_adaptive"
+HEYOKA_TAIL = (10.0**-14.5, 1e-15)
+"""heyoka's tolerances past the ladder's tightest (its error lags its tol)."""
+
+
+def _heyoka_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
+    """heyoka's scalar Taylor integrator (heyoka_peer), one per tolerance,
+    timed as propagate_until from Python; its JIT times and its call floor
+    (a propagation over no time) go into the report's notes."""
+    from gyrogen.analysis.bench import heyoka_peer
+    from gyrogen.codegen.generate import unit_of
+
+    hy = heyoka_peer.module()
+    if hy is None:
+        echo("heyoka skipped (No module named 'heyoka'): pip install -e '.[bench]'")
+        return []
+    if stiff:
+        echo("heyoka skipped: a stiff scene (its Taylor method is explicit)")
+        return []
+    try:
+        sys = heyoka_peer.system(hy, unit_of(prob.scene))
+    except ValueError as exc:
+        echo(f"heyoka skipped: {exc}")
+        return []
+    heyoka_peer.check(sys, prob.compiled["C"].rhs, prob.c, prob.x0, echo)
+    progress(f"{HEYOKA} (LLVM JIT, from Python)")
+    out, jits = [], []
+    for tol in (*cfg.tolerances, *HEYOKA_TAIL):
+        one = heyoka_peer.Scalar(sys, prob.x0, prob.c, prob.t1, tol)
+        jits.append((tol, one.jit, int(one.ta.order)))
+        x = one.final()
+        secs = best_time(one.run, cfg.repeats, min_total=MIN_TIMED)
+        out.append(Run(HEYOKA, "JIT, from Python", tol, scaled_error(x, prob.ref), secs, 0))
+    floor = heyoka_peer.Scalar(sys, prob.x0, prob.c, 0.0, cfg.tolerances[0])
+    first = {o: (t, j) for t, j, o in reversed(jits)}  # each order's first construction
+    prob.notes["heyoka JIT (taylor_adaptive construction, each order's first)"] = ", ".join(
+        f"order {o} {j:.2f} s (tol {t:.0e})" for o, (t, j) in sorted(first.items())
+    )
+    us = best_time(floor.run, cfg.repeats, min_total=MIN_TIMED) * 1e6
+    prob.notes["heyoka's Python call floor"] = (
+        f"{us:.2f} us per propagate_until over no time (in every heyoka time)"
+    )
+    return out
 
 
 def _c_rhs_address(prob: Problem) -> int:
