@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis.bench import ensemble as ens
-from gyrogen.analysis.bench import peers
+from gyrogen.analysis.bench import ensemble_levels, peers
 from gyrogen.analysis.bench.bench_rhs import machine
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.bench.workprec import REF_TOL
@@ -109,6 +109,9 @@ def run(n: int, repeats: int, peers_on: bool = True, echo: Echo = print, **kw: A
     single(prob, nbs, repeats, echo)
     echo("")
     ensemble(prob, n, nbs, dfx, repeats, echo)
+    if peers_on:
+        echo("")
+        ensemble_levels.table(prob, n, repeats, echo)
     echo("")
     echo("lanes, us per trajectory against N and threads:")
     for size, threads, us in ens.scaling(prob, (16, 100, 1000, n), ens.default_threads(), 1e-9,

@@ -1,0 +1,172 @@
+"""bench-ensemble's table at errors 1e-6 to 1e-14: gyrogen's lanes
+(dop853_batch) against heyoka's taylor_adaptive_batch at its recommended
+SIMD width, on one core and on two, each read along its work-precision
+front (workprec.seconds_at: log-log between the tolerances around a level).
+
+The error of a tolerance is the worst of the first CHECKED members against
+heyoka's real128 reference of each (quadruple precision); the time is for
+all N members. gyrogen runs integrate_batch with threads = 1 or 2 (OpenMP);
+heyoka's propagate holds the GIL and its ensemble mode copies the
+integrator per iteration, so its 2 cores are 2 worker processes (spawned,
+each with the integrator, unpickled, and its half of the members sent once),
+timed from the parent's request to the last final state back. Wall time is
+what is compared; CPU time (this process and the workers, every thread) is
+printed beside it, so that "2 cores" is seen to be two.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import pickle
+import time
+from collections.abc import Callable
+from functools import partial
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+
+from gyrogen.analysis.bench import ensemble as ens
+from gyrogen.analysis.bench import heyoka_peer, workprec
+from gyrogen.analysis.bench.workprec import Run
+from gyrogen.analysis.bench.workprec_peers import HEYOKA_TAIL
+
+LEVELS = (1e-6, 1e-8, 1e-10, 1e-12, 1e-14)
+CHECKED = 200
+"""Members whose worst error against the real128 reference rates a tolerance."""
+Echo = Callable[[str], None]
+
+
+def timed(fn: Callable[[], Any], repeats: int) -> tuple[float, float]:
+    """(wall, CPU) seconds of fn's fastest of repeats runs (CPU: this
+    process's, every thread)."""
+    best = (np.inf, np.inf)
+    for _ in range(max(1, repeats)):
+        w0, c0 = time.perf_counter(), time.process_time()
+        extra = fn()
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        if wall < best[0]:
+            best = (wall, cpu + (extra if isinstance(extra, float) else 0.0))
+    return best
+
+
+def _worker(conn: Connection, x0s: np.ndarray) -> None:
+    """A heyoka worker process: ("load", pickled Batch) -> True;
+    ("run", None) -> (final states, CPU seconds); None ends it."""
+    batch: Any = None
+    while (msg := conn.recv()) is not None:
+        kind, payload = msg
+        if kind == "load":
+            batch = pickle.loads(payload)
+            conn.send(True)
+        else:
+            c0 = time.process_time()
+            out = batch.run(x0s)
+            conn.send((out, time.process_time() - c0))
+
+
+class Workers:
+    """count heyoka worker processes, each holding one slice of x0s."""
+
+    def __init__(self, x0s: np.ndarray, count: int):
+        ctx = mp.get_context("spawn")
+        self.conns, self.procs = [], []
+        for part in np.array_split(x0s, count):
+            mine, theirs = ctx.Pipe()
+            proc = ctx.Process(target=_worker, args=(theirs, part), daemon=True)
+            proc.start()
+            self.conns.append(mine)
+            self.procs.append(proc)
+
+    def load(self, batch: heyoka_peer.Batch) -> None:
+        blob = pickle.dumps(batch)
+        for conn in self.conns:
+            conn.send(("load", blob))
+        for conn in self.conns:
+            conn.recv()
+
+    def run(self) -> tuple[np.ndarray, float]:
+        """Every worker's final states, stacked, and their CPU seconds."""
+        for conn in self.conns:
+            conn.send(("run", None))
+        parts = [conn.recv() for conn in self.conns]
+        return np.concatenate([p[0] for p in parts]), sum(p[1] for p in parts)
+
+    def close(self) -> None:
+        for conn, proc in zip(self.conns, self.procs, strict=True):
+            with contextlib.suppress(OSError):  # a worker that died has said why on stderr
+                conn.send(None)
+            proc.join(timeout=10)
+            if proc.is_alive():
+                proc.terminate()
+
+
+def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> None:
+    """Measure and print the table (echo each line)."""
+    from gyrogen.codegen.generate import unit_of
+    from gyrogen.scene import default
+
+    hy = heyoka_peer.module()
+    if hy is None:
+        echo("heyoka skipped (No module named 'heyoka'): pip install -e '.[bench]'")
+        return
+    sys = heyoka_peer.system(hy, unit_of(default()))
+    heyoka_peer.check(sys, prob.comp.rhs, prob.c, prob.x0, echo)
+    x0s = ens.members(prob, n)
+    few = x0s[:CHECKED]
+    quad = heyoka_peer.Quad(sys, prob.c, prob.t1)
+    ref = np.array([quad.final(x) for x in few])
+    two = 2
+    runs: dict[str, list[Run]] = {k: [] for k in ("g1", "g2", "h1", "h2")}
+    cpu: dict[str, list[float]] = {k: [] for k in runs}
+    for tol in ens.LADDER:
+        err = ens.ensemble_error(ref, ens.finals(prob, few, tol))
+        for key, threads in (("g1", 1), ("g2", two)):
+            wall, c = timed(partial(ens.finals, prob, x0s, tol, threads), repeats)
+            runs[key].append(Run("gyrogen", key, tol, err, wall / n, 0))
+            cpu[key].append(c / wall)
+    workers = Workers(x0s, two)
+    widths = set()
+    try:
+        for tol in (*ens.LADDER, *HEYOKA_TAIL):
+            batch = heyoka_peer.Batch(sys, prob.x0, prob.c, prob.t1, tol)
+            widths.add(batch.width)
+            err = ens.ensemble_error(ref, batch.run(few, checked=True))
+            wall, c = timed(partial(batch.run, x0s), repeats)
+            runs["h1"].append(Run("heyoka", "h1", tol, err, wall / n, 0))
+            cpu["h1"].append(c / wall)
+            workers.load(batch)
+            wall, c = timed(lambda: workers.run()[1], repeats)
+            runs["h2"].append(Run("heyoka", "h2", tol, err, wall / n, 0))
+            cpu["h2"].append(c / wall)
+    finally:
+        workers.close()
+    _print(runs, cpu, n, widths, echo)
+
+
+def _print(runs: dict[str, list[Run]], cpu: dict[str, list[float]], n: int, widths: set[int],
+           echo: Echo) -> None:  # fmt: skip
+    w = "/".join(str(x) for x in sorted(widths))
+    echo(f"ensembles against heyoka: {n} members, us per trajectory (wall) at the worst error "
+         f"of the first {CHECKED} members against heyoka's real128 reference, read along "
+         "each front")  # fmt: skip
+    head = ("error", "gyrogen lanes 1 core", f"heyoka batch w={w}, 1 core", "ratio",
+            "gyrogen lanes 2 cores", "heyoka batch, 2 processes", "ratio")  # fmt: skip
+    echo("| " + " | ".join(head) + " |")
+    echo("|" + "---|" * len(head))
+    for level in LEVELS:
+        t = {k: workprec.seconds_at(v, level) for k, v in runs.items()}
+        cells = [f"{level:.0e}"]
+        for g, h in (("g1", "h1"), ("g2", "h2")):
+            tg, th = t[g], t[h]
+            ratio = "-" if tg is None or th is None else f"{th / tg:.2f}"
+            cells += [_cell(tg), _cell(th), ratio]
+        echo("| " + " | ".join(cells) + " |")
+    echo("ratio: heyoka / gyrogen (above 1: gyrogen faster). CPU / wall over the tolerances: "
+         + ", ".join(f"{k} {min(v):.2f}-{max(v):.2f}" for k, v in cpu.items())
+         + " (g: gyrogen, h: heyoka; 1 or 2 cores)")  # fmt: skip
+
+
+def _cell(seconds: float | None) -> str:
+    return "-" if seconds is None else f"{seconds * 1e6:.2f}"
