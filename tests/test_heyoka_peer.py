@@ -78,3 +78,28 @@ def test_quadruple_reference_and_the_integrators(
     for x, want in zip(x0s, got, strict=True):
         single = heyoka_peer.Scalar(sys, x, c, t1, 1e-12)
         assert scaled_error(single.final(), want) < 1e-12
+
+
+@pytest.mark.slow  # 2 worker processes and a JIT per tolerance
+def test_ensemble_table_and_fronts(monkeypatch: pytest.MonkeyPatch, cache_dir: Path) -> None:
+    """bench-ensemble's table against heyoka on 16 members and a short
+    ladder: a row per level, four fronts, CPU / wall said, a real figure."""
+    import io
+
+    import matplotlib.image
+
+    from gyrogen.analysis.bench import ensemble as ens
+    from gyrogen.analysis.bench import ensemble_levels
+
+    monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
+    monkeypatch.setattr(ens, "LADDER", (1e-5, 1e-8, 1e-11, 1e-13))
+    monkeypatch.setattr(ensemble_levels, "HEYOKA_TAIL", (1e-15,))
+    lines: list[str] = []
+    runs = ensemble_levels.table(ens.problem(), 16, 1, lines.append)
+    assert set(runs) == set(ensemble_levels.LABELS)
+    assert [len(v) for v in runs.values()] == [4, 4, 5, 5]
+    rows = [line for line in lines if line.startswith("| 1e-")]
+    assert [r.split(" | ")[0] for r in rows] == [f"| {x:.0e}" for x in ensemble_levels.LEVELS]
+    assert "CPU / wall over the tolerances: g1" in lines[-1]
+    img = matplotlib.image.imread(io.BytesIO(ensemble_levels.figure(runs, 16)))
+    assert img.shape[:2] == (600, 1000) and float(img.std()) > 0.01

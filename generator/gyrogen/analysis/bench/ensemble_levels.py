@@ -102,15 +102,24 @@ class Workers:
                 proc.terminate()
 
 
-def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> None:
-    """Measure and print the table (echo each line)."""
+LABELS = {
+    "g1": "gyrogen dop853_batch (lanes), 1 core",
+    "g2": "gyrogen dop853_batch (lanes), 2 cores (OpenMP)",
+    "h1": "heyoka taylor_adaptive_batch, 1 core",
+    "h2": "heyoka taylor_adaptive_batch, 2 processes",
+}
+
+
+def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> dict[str, list[Run]]:
+    """Measure and print the table (echo each line): each contender's runs
+    by its LABELS key (none without heyoka)."""
     from gyrogen.codegen.generate import unit_of
     from gyrogen.scene import default
 
     hy = heyoka_peer.module()
     if hy is None:
         echo("heyoka skipped (No module named 'heyoka'): pip install -e '.[bench]'")
-        return
+        return {}
     sys = heyoka_peer.system(hy, unit_of(default()))
     heyoka_peer.check(sys, prob.comp.rhs, prob.c, prob.x0, echo)
     x0s = ens.members(prob, n)
@@ -143,6 +152,7 @@ def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> None:
     finally:
         workers.close()
     _print(runs, cpu, n, widths, echo)
+    return runs
 
 
 def _print(runs: dict[str, list[Run]], cpu: dict[str, list[float]], n: int, widths: set[int],
@@ -170,3 +180,27 @@ def _print(runs: dict[str, list[Run]], cpu: dict[str, list[float]], n: int, widt
 
 def _cell(seconds: float | None) -> str:
     return "-" if seconds is None else f"{seconds * 1e6:.2f}"
+
+
+def figure(runs: dict[str, list[Run]], n: int) -> bytes:
+    """The four fronts: us per trajectory against the worst member's error."""
+    from matplotlib.figure import Figure  # matplotlib: loaded only for the figure
+
+    from gyrogen.analysis.simulate.plots import png_bytes
+
+    fig = Figure(figsize=(10, 6), dpi=100)
+    ax = fig.subplots()
+    styles = {"g1": "-o", "g2": "-s", "h1": ":D", "h2": ":^"}
+    for key, key_runs in runs.items():
+        pts = [(r.seconds * 1e6, r.error) for r in workprec.front(key_runs)]
+        if pts:
+            ax.loglog(*zip(*pts, strict=True), styles[key], label=LABELS[key], ms=4)
+    for level in LEVELS:
+        ax.axhline(level, color="0.85", lw=0.8, zorder=0)
+    ax.set_xlabel("us per trajectory (wall)")
+    ax.set_ylabel(f"worst scaled error of {CHECKED} members vs real128")
+    ax.set_title(f"Ensembles of {n}, default scene, 10 s: fronts (gyrogen solid, heyoka dotted)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return png_bytes(fig)
