@@ -91,10 +91,11 @@ bench-ensemble: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-ensemble
 
-## report: work-precision reports (figure, tables, summary) for the default and the stiff scene against the compiled peers, and the ensembles
+## report: work-precision reports (figure, tables, summary) for the default, dual_spin and the stiff scene against the compiled peers, and the ensembles
 report: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench gyrostat --out report/gyrostat
+	$(BIN)/gyrogen bench dual_spin --out report/dual_spin
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 	$(BIN)/gyrogen bench-ensemble --out report
 

@@ -99,7 +99,9 @@ def test_ensemble_table_and_fronts(monkeypatch: pytest.MonkeyPatch, cache_dir: P
     assert set(runs) == set(ensemble_levels.LABELS)
     assert [len(v) for v in runs.values()] == [4, 4, 5, 5]
     rows = [line for line in lines if line.startswith("| 1e-")]
-    assert [r.split(" | ")[0] for r in rows] == [f"| {x:.0e}" for x in ensemble_levels.LEVELS]
-    assert "CPU / wall over the tolerances: g1" in lines[-1]
+    levels = [f"| {x:.0e}" for x in ensemble_levels.LEVELS]
+    assert [r.split(" | ")[0] for r in rows] == levels + levels  # wall, then CPU
+    assert "CPU time (user + system" in "\n".join(lines)
+    assert "CPU / wall at the runs: g1" in lines[-1]
     img = matplotlib.image.imread(io.BytesIO(ensemble_levels.figure(runs, 16)))
     assert img.shape[:2] == (600, 1000) and float(img.std()) > 0.01

@@ -127,42 +127,52 @@ def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> dict[str, list
     quad = heyoka_peer.Quad(sys, prob.c, prob.t1)
     ref = np.array([quad.final(x) for x in few])
     two = 2
-    runs: dict[str, list[Run]] = {k: [] for k in ("g1", "g2", "h1", "h2")}
-    cpu: dict[str, list[float]] = {k: [] for k in runs}
-    for tol in ens.LADDER:
-        err = ens.ensemble_error(ref, ens.finals(prob, few, tol))
-        for key, threads in (("g1", 1), ("g2", two)):
-            wall, c = timed(partial(ens.finals, prob, x0s, tol, threads), repeats)
-            runs[key].append(Run("gyrogen", key, tol, err, wall / n, 0))
-            cpu[key].append(c / wall)
+    runs: dict[str, list[Run]] = {k: [] for k in LABELS}
+    cpu: dict[str, list[Run]] = {k: [] for k in LABELS}
+
+    def add(key: str, tol: float, err: float, wall: float, c: float) -> None:
+        runs[key].append(Run(LABELS[key], "wall", tol, err, wall / n, 0))
+        cpu[key].append(Run(LABELS[key], "CPU", tol, err, c / n, 0))
+
     workers = Workers(x0s, two)
     widths = set()
-    try:
+    try:  # each tolerance: gyrogen's then heyoka's, side by side under one load
         for tol in (*ens.LADDER, *HEYOKA_TAIL):
+            if tol in ens.LADDER:
+                err = ens.ensemble_error(ref, ens.finals(prob, few, tol))
+                for key, threads in (("g1", 1), ("g2", two)):
+                    add(
+                        key, tol, err, *timed(partial(ens.finals, prob, x0s, tol, threads), repeats)
+                    )
             batch = heyoka_peer.Batch(sys, prob.x0, prob.c, prob.t1, tol)
             widths.add(batch.width)
             err = ens.ensemble_error(ref, batch.run(few, checked=True))
-            wall, c = timed(partial(batch.run, x0s), repeats)
-            runs["h1"].append(Run("heyoka", "h1", tol, err, wall / n, 0))
-            cpu["h1"].append(c / wall)
+            add("h1", tol, err, *timed(partial(batch.run, x0s), repeats))
             workers.load(batch)
-            wall, c = timed(lambda: workers.run()[1], repeats)
-            runs["h2"].append(Run("heyoka", "h2", tol, err, wall / n, 0))
-            cpu["h2"].append(c / wall)
+            add("h2", tol, err, *timed(lambda: workers.run()[1], repeats))
     finally:
         workers.close()
-    _print(runs, cpu, n, widths, echo)
+    w = "/".join(str(x) for x in sorted(widths))
+    echo(f"ensembles against heyoka (batch width {w}): {n} members, us per trajectory at the "
+         f"worst error of the first {CHECKED} members against heyoka's real128 reference, "
+         "read along each front; wall time:")  # fmt: skip
+    _table(runs, echo)
+    echo("CPU time (user + system of every thread and worker process):")
+    _table(cpu, echo)
+    echo("ratio: heyoka / gyrogen (above 1: gyrogen faster). CPU / wall at the runs: "
+         + ", ".join(f"{k} {_spread(cpu[k], runs[k])}" for k in LABELS)
+         + " (g: gyrogen, h: heyoka; 1 or 2 cores)")  # fmt: skip
     return runs
 
 
-def _print(runs: dict[str, list[Run]], cpu: dict[str, list[float]], n: int, widths: set[int],
-           echo: Echo) -> None:  # fmt: skip
-    w = "/".join(str(x) for x in sorted(widths))
-    echo(f"ensembles against heyoka: {n} members, us per trajectory (wall) at the worst error "
-         f"of the first {CHECKED} members against heyoka's real128 reference, read along "
-         "each front")  # fmt: skip
-    head = ("error", "gyrogen lanes 1 core", f"heyoka batch w={w}, 1 core", "ratio",
-            "gyrogen lanes 2 cores", "heyoka batch, 2 processes", "ratio")  # fmt: skip
+def _spread(cpu: list[Run], wall: list[Run]) -> str:
+    ratios = [c.seconds / w.seconds for c, w in zip(cpu, wall, strict=True)]
+    return f"{min(ratios):.2f}-{max(ratios):.2f}"
+
+
+def _table(runs: dict[str, list[Run]], echo: Echo) -> None:
+    head = ("error", "gyrogen lanes 1 core", "heyoka batch 1 core", "ratio",
+            "gyrogen lanes 2 cores", "heyoka batch 2 processes", "ratio")  # fmt: skip
     echo("| " + " | ".join(head) + " |")
     echo("|" + "---|" * len(head))
     for level in LEVELS:
@@ -173,9 +183,6 @@ def _print(runs: dict[str, list[Run]], cpu: dict[str, list[float]], n: int, widt
             ratio = "-" if tg is None or th is None else f"{th / tg:.2f}"
             cells += [_cell(tg), _cell(th), ratio]
         echo("| " + " | ".join(cells) + " |")
-    echo("ratio: heyoka / gyrogen (above 1: gyrogen faster). CPU / wall over the tolerances: "
-         + ", ".join(f"{k} {min(v):.2f}-{max(v):.2f}" for k, v in cpu.items())
-         + " (g: gyrogen, h: heyoka; 1 or 2 cores)")  # fmt: skip
 
 
 def _cell(seconds: float | None) -> str:
