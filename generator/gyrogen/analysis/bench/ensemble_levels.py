@@ -59,7 +59,8 @@ def _worker(conn: Connection, x0s: np.ndarray) -> None:
         kind, payload = msg
         if kind == "load":
             batch = pickle.loads(payload)
-            conn.send(True)
+            heyoka_peer.one_thread()
+            conn.send(heyoka_peer.module().get_nthreads())
         else:
             c0 = time.process_time()
             out = batch.run(x0s)
@@ -83,8 +84,9 @@ class Workers:
         blob = pickle.dumps(batch)
         for conn in self.conns:
             conn.send(("load", blob))
-        for conn in self.conns:
-            conn.recv()
+        threads = [conn.recv() for conn in self.conns]
+        if threads != [1] * len(self.conns):
+            raise RuntimeError(f"heyoka's workers run {threads} threads, not 1 each")
 
     def run(self) -> tuple[np.ndarray, float]:
         """Every worker's final states, stacked, and their CPU seconds."""
@@ -122,6 +124,8 @@ def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> dict[str, list
         return {}
     sys = heyoka_peer.system(hy, unit_of(default()))
     heyoka_peer.check(sys, prob.comp.rhs, prob.c, prob.x0, echo)
+    heyoka_peer.one_thread()
+    echo(f"heyoka's threads (set_nthreads): {hy.get_nthreads()} here and in each worker")
     x0s = ens.members(prob, n)
     few = x0s[:CHECKED]
     quad = heyoka_peer.Quad(sys, prob.c, prob.t1)

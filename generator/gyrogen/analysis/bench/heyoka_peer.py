@@ -50,6 +50,13 @@ def module() -> Any:
     return heyoka
 
 
+def one_thread() -> None:
+    """heyoka's own parallelism (its TBB thread pool: ensembles, parallel
+    mode) held to one thread in this process, so that a row's cores are
+    the ones it says."""
+    module().set_nthreads(1)
+
+
 @dataclass(frozen=True)
 class System:
     hy: Any

@@ -70,6 +70,7 @@ def _heyoka_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: 
         echo(f"heyoka skipped: {exc}")
         return []
     heyoka_peer.check(sys, prob.compiled["C"].rhs, prob.c, prob.x0, echo)
+    heyoka_peer.one_thread()
     progress(f"{HEYOKA} (LLVM JIT, from Python)")
     out, jits = [], []
     for tol in (*cfg.tolerances, *HEYOKA_TAIL):
