@@ -6,9 +6,9 @@ the same arithmetic as the generated code, the hoisted constants c as
 heyoka's runtime parameters par[i]), checked against the compiled rhs at
 random states before anything is timed (`check`, a bar of 1e-14).
 
-- `scalar`: a `taylor_adaptive` per tolerance (rtol = atol = tol, heyoka's
+- `Scalar`: a `taylor_adaptive` per tolerance (rtol = atol = tol, heyoka's
   one tolerance), timed as `propagate_until` from Python; its construction
-  (the JIT) timed apart.
+  (the JIT) timed apart, with no cached code (`cold`).
 - `Batch`: `taylor_adaptive_batch` at heyoka's recommended SIMD width, an
   ensemble run as a Python loop over its batches. heyoka's propagate holds
   the GIL, and its ensemble mode copies the integrator per iteration
@@ -55,6 +55,15 @@ def one_thread() -> None:
     mode) held to one thread in this process, so that a row's cores are
     the ones it says."""
     module().set_nthreads(1)
+
+
+def cold(hy: Any) -> None:
+    """No compiled code at hand: heyoka's disk cache (~/.cache/heyoka,
+    across processes) off in this process and its memory cache emptied, so
+    that a construction's time is its JIT's, as gyrogen's build is timed
+    from an empty cache."""
+    hy.llvm_state.set_diskcache_enabled(False)
+    hy.llvm_state.clear_memcache()
 
 
 @dataclass(frozen=True)
@@ -112,6 +121,7 @@ class Scalar:
     construction took."""
 
     def __init__(self, sys: System, x0: np.ndarray, c: np.ndarray, t1: float, tol: float):
+        cold(sys.hy)
         t0 = time.perf_counter()
         self.ta = sys.hy.taylor_adaptive(sys.pairs, x0, tol=tol, pars=c[: sys.npars])
         self.jit = time.perf_counter() - t0
@@ -172,6 +182,7 @@ class Batch:
     def __init__(self, sys: System, x0: np.ndarray, c: np.ndarray, t1: float, tol: float):
         hy = sys.hy
         self.width = w = int(hy.recommended_simd_size())
+        cold(hy)
         t0 = time.perf_counter()
         self.ta = hy.taylor_adaptive_batch(
             sys.pairs, np.ascontiguousarray(np.tile(x0[:, None], (1, w))), tol=tol,
