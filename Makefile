@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -82,15 +82,20 @@ bench: setup
 bench-clusters: setup
 	$(BIN)/python tests/bench_clusters.py
 
+## bench-call: us per call of Compiled.integrate and integrate_batch against the raw cffi call
+bench-call: setup
+	$(BIN)/python tests/bench_call.py
+
 ## bench-ensemble: lane-batched ensembles and the single trajectory against numbalsoda and diffrax
 bench-ensemble: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-ensemble
 
-## report: work-precision reports (figure, tables, summary) for the default and the stiff scene against the compiled peers, and the ensembles
+## report: work-precision reports (figure, tables, summary) for the default, dual_spin and the stiff scene against the compiled peers, and the ensembles
 report: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench gyrostat --out report/gyrostat
+	$(BIN)/gyrogen bench dual_spin --out report/dual_spin
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 	$(BIN)/gyrogen bench-ensemble --out report
 

@@ -260,6 +260,46 @@ def test_bad_arguments(compiled: Get, language: str) -> None:
     assert b.integrate("rk4", x0, c, 1.0, 0.0, steps=10)[2] == ARGUMENT
 
 
+def test_bad_input_in_python(compiled: Get) -> None:
+    """What C cannot see is refused in Python with one line: a state or
+    constants of the wrong length, non-finite constants, an unknown method,
+    steps with the wrong kind of method; a non-finite state is C's code."""
+    b = compiled("gyrostat", "c")
+    _, x0, p = problem("gyrostat")
+    c = b.setup(p)
+    bad_c = c.copy()
+    bad_c[1] = np.inf
+    cases = [
+        (lambda: b.integrate("dop853", x0[:-1], c, 0.0, 1.0), r"initial state must have shape"),
+        (lambda: b.integrate("dop853", x0, c[:-1], 0.0, 1.0), r"constants c must have shape"),
+        (lambda: b.integrate("dop853", x0, bad_c, 0.0, 1.0), r"not all finite \(index 1\)"),
+        (lambda: b.integrate("nope", x0, c, 0.0, 1.0), r"no integrator 'nope' in this build"),
+        (lambda: b.integrate("rk4", x0, c, 0.0, 1.0), r"rk4: steps= goes with the fixed"),
+        (lambda: b.integrate("dop853", x0, c, 0.0, 1.0, steps=3), r"steps= goes with"),
+        (lambda: b.integrate_batch("dop853", x0[None, :-1], c, 0.0, 1.0), r"shape \(n, 14\)"),
+        (lambda: b.integrate_batch("dop853", x0[None], c[:-1], 0.0, 1.0), r"constants c must"),
+    ]
+    for call, message in cases:
+        with pytest.raises(ValueError, match=message) as info:
+            call()
+        assert "\n" not in str(info.value)
+
+
+def test_constants_are_read_at_each_call(compiled: Get) -> None:
+    """c's buffer is kept for the next call with the same array: a change
+    in place is seen, and another array (a list too) replaces it."""
+    b = compiled("gyrostat", "c")
+    _, x0, p = problem("gyrostat")
+    c = b.setup(p)
+    first, _, _ = b.integrate("dop853", x0, c, 0.0, 1.0)
+    other = b.setup(p * 1.5)
+    changed, _, _ = b.integrate("dop853", x0, other, 0.0, 1.0)
+    c[:] = other
+    assert np.array_equal(b.integrate("dop853", x0, c, 0.0, 1.0)[0], changed)
+    assert np.array_equal(b.integrate("dop853", list(x0), list(b.setup(p)), 0.0, 1.0)[0], first)
+    assert not np.array_equal(first, changed)
+
+
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_max_steps(compiled: Get, language: str) -> None:
     b = compiled("gyrostat", language)

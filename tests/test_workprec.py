@@ -34,6 +34,7 @@ def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
         for rhs in ("gyrogen's C RHS", "numba RHS"):
             assert (f"numbalsoda {m}", rhs) in labels
     assert any(m == "CasADi cvodes Adams" for m, _ in labels)
+    assert ("heyoka taylor_adaptive", "JIT, from Python") in labels  # the test extra has it
     assert "## gyrogen against its peers" in text and "numbalsoda DOP853 (numba RHS)" in text
     ok = [r for r in rows if r["status"] == "ok"]
     assert all(float(r["seconds"]) > 0 and float(r["error"]) >= 0 for r in ok)
@@ -41,6 +42,9 @@ def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
     assert data["scene"] == "gyrostat" and len(data["runs"]) == len(rows)
     checks = data["reference_checks"]
     assert checks["scipy DOP853 (compiled RHS) at 1e-13"] < 1e-10
+    assert checks["DOP853 in C at 1e-13 against heyoka real128"] < 1e-10
+    assert "reference: heyoka real128 (quadruple precision)" in text and "| 1e-14 |" in text
+    assert "gyrogen generate and build:" in text and "heyoka JIT" in text
     summary = (out / "summary.md").read_text()
     assert summary.startswith("# Work-precision: gyrostat")
 

@@ -16,8 +16,11 @@ from gyrogen.limits import MAX_REPEATS
               help="Ensemble members.")  # fmt: skip
 @click.option("--repeats", type=click.IntRange(1, MAX_REPEATS), default=5, show_default=True,
               help="Repeats per timing (best is kept).")  # fmt: skip
-@click.option("--no-peers", is_flag=True, help="Skip numbalsoda and diffrax.")
-@directory("--out", "Also write the report into this directory, as ensemble.md.")
+@click.option("--no-peers", is_flag=True, help="Skip numbalsoda, diffrax and heyoka.")
+@directory(
+    "--out",
+    "Also write the report into this directory: ensemble.md, and ensemble_fronts.png with heyoka.",
+)
 def bench_ensemble(n: int, repeats: int, no_peers: bool, out: Path | None) -> None:
     """Ensembles (error <= 1e-8) and the single trajectory, side by side."""
     from gyrogen.analysis.bench import ensemble_report
@@ -29,11 +32,11 @@ def bench_ensemble(n: int, repeats: int, no_peers: bool, out: Path | None) -> No
         lines.append(line)
         click.echo(line)
 
-    ensemble_report.run(n, repeats, peers_on=not no_peers, echo=echo)
+    figures = ensemble_report.run(n, repeats, peers_on=not no_peers, echo=echo)
     if out is not None:
-        text = "# Ensembles: gyrogen's lanes against numbalsoda and diffrax\n\n```\n"
-        write_atomic(out, {"ensemble.md": text + "\n".join(lines) + "\n```\n"})
-        click.echo(f"wrote {out / 'ensemble.md'}")
+        text = "# Ensembles: gyrogen's lanes against numbalsoda, diffrax and heyoka\n\n```\n"
+        write_atomic(out, {"ensemble.md": text + "\n".join(lines) + "\n```\n", **figures})
+        click.echo("wrote " + ", ".join(str(out / name) for name in ["ensemble.md", *figures]))
 
 
 command = bench_ensemble

@@ -4,10 +4,11 @@ the Jacobian and the integrators, called through cffi on numpy arrays."""
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Literal, TypedDict, Unpack
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 
@@ -31,6 +32,39 @@ class Controls(TypedDict, total=False):
 
 DEFAULT_CONTROLS = Controls(rtol=1e-8, atol=1e-8, h0=0.0, max_steps=abi.MAX_STEPS, steps=None)
 _STATS_NAMES = tuple(f.name for f in abi.STATS_FIELDS)
+_F64 = np.dtype(np.float64)
+_DOUBLES, _STATS, _INTS = "double[]", "gyrogen_stats[]", "int[]"
+_STATS_PTR = "gyrogen_stats *"
+_NOTHING: tuple[Any, Any] = (object(), None)
+
+
+class Stats(Mapping[str, float | int]):
+    """One integration's statistics (abi.STATS_FIELDS), read from its C
+    struct when asked for: a mapping, equal to the dict of its values."""
+
+    __slots__ = ("_struct",)
+
+    def __init__(self, struct: Any) -> None:
+        self._struct = struct
+
+    def __getitem__(self, name: str) -> float | int:
+        if name not in _STATS_NAMES:
+            raise KeyError(name)
+        return getattr(self._struct, name)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(_STATS_NAMES)
+
+    def __len__(self) -> int:
+        return len(_STATS_NAMES)
+
+    def __repr__(self) -> str:
+        return repr(dict(self))
+
+
+def _bad(a: np.ndarray) -> int:
+    """The first index of a whose value is not finite."""
+    return int(np.flatnonzero(~np.isfinite(a))[0])
 
 
 def controls(method: str, *, steps: int, rtol: float, atol: float, max_steps: int) -> Controls:
@@ -56,6 +90,9 @@ class Compiled:
     manifest: dict[str, Any]
     ffi: Any
     lib: Any
+
+    _c_held: tuple[Any, Any] = field(default=_NOTHING, init=False, repr=False, compare=False)
+    """The last c array given (by identity) and its cffi buffer."""
 
     @cached_property
     def nx(self) -> int:
@@ -132,38 +169,32 @@ class Compiled:
         c: np.ndarray,
         t0: float,
         t1: float,
-        **given: Unpack[Controls],
-    ) -> tuple[np.ndarray, dict[str, float | int], int]:
+        *,
+        rtol: float = DEFAULT_CONTROLS["rtol"],
+        atol: float = DEFAULT_CONTROLS["atol"],
+        h0: float = DEFAULT_CONTROLS["h0"],
+        max_steps: int = DEFAULT_CONTROLS["max_steps"],
+        steps: int | None = None,
+    ) -> tuple[np.ndarray, Stats, int]:
         """One compiled integration of x0 (nx,) from t0 to t1 by the single
-        trajectory's function: the final state (the last good one on
-        failure), the statistics (abi.STATS_FIELDS) and the return code
-        (abi.ODE_CODES). The controls (Controls) as keywords.
+        trajectory's function: the final state (a new array; the last good
+        state on failure), the statistics (abi.STATS_FIELDS, a read-only
+        mapping) and the return code (abi.ODE_CODES, a non-finite state
+        among them). The controls (Controls) as keywords.
 
-        The method's function and kind are looked up once per build
-        (_integrators), so a call costs little more than the C call itself."""
+        A call costs about a microsecond more than the C call itself (0.8 to
+        1.1 us measured, `make bench-call`): the method's function and kind
+        are looked up once per build, c's buffer once per array (its length
+        and finiteness checked then), and x0's shape on every call (a float64
+        array of shape (nx,) is copied as it is; anything else goes through
+        np.array first). A non-finite state is the C function's to refuse
+        (its return code)."""
         try:
-            fn, fixed = self._integrators[method]
+            call = self._single[method]
         except KeyError:
-            self._check_method(method, given.get("steps"))  # raises, saying why
+            self._check_method(method, steps)  # raises, saying why
             raise
-        steps = given.get("steps")
-        if (steps is None) == fixed:
-            self._check_method(method, steps)
-        x = np.array(x0, dtype=np.float64).reshape(-1)  # a copy: integrated in place
-        if x.shape != (self.nx,):
-            raise ValueError(f"the initial state must have shape ({self.nx},), not {x.shape}")
-        if not (type(c) is np.ndarray and c.dtype == np.float64 and c.flags.c_contiguous):
-            c = np.ascontiguousarray(c, dtype=np.float64)
-        stats = self.ffi.new("gyrogen_stats *")
-        if fixed:
-            code = fn(t0, t1, steps, self.doubles(x), self.doubles(c), stats)
-        else:
-            get = given.get
-            d = DEFAULT_CONTROLS
-            code = fn(t0, t1, self.doubles(x), self.doubles(c), get("rtol", d["rtol"]),
-                      get("atol", d["atol"]), get("h0", d["h0"]),
-                      get("max_steps", d["max_steps"]), stats)  # fmt: skip
-        return x, {name: getattr(stats, name) for name in _STATS_NAMES}, int(code)
+        return call(x0, c, t0, t1, rtol, atol, h0, max_steps, steps)
 
     @cached_property
     def _integrators(self) -> dict[str, tuple[Any, bool]]:
@@ -173,6 +204,58 @@ class Compiled:
             m: (self.function(m), methods.get(m).fixed_step) for m in self.manifest["integrators"]
         }
 
+    @cached_property
+    def _single(self) -> dict[str, Callable[..., tuple[np.ndarray, Stats, int]]]:
+        """integrate()'s work for each integrator, bound once per build."""
+        return {m: self._bind(m, fn, fixed) for m, (fn, fixed) in self._integrators.items()}
+
+    def _bind(self, method: str, fn: Any, fixed: bool) -> Callable[..., Any]:
+        """The single-trajectory call of one integrator: everything it can
+        look up is looked up here, once; a new state and stats struct per
+        call (calls may run at once on several threads: cffi releases the
+        GIL)."""
+        shape, new, buffer = (self.nx,), self.ffi.new, self.ffi.from_buffer
+
+        def call(
+            x0: Any, c: Any, t0: float, t1: float, rtol: float, atol: float, h0: float,
+            max_steps: int, steps: int | None,
+        ) -> tuple[np.ndarray, Stats, int]:  # fmt: skip
+            if (steps is None) == fixed:
+                self._check_method(method, steps)  # raises, saying why
+            if x0.__class__ is np.ndarray and x0.dtype is _F64 and x0.shape == shape:
+                x = x0.copy()  # integrated in place
+            else:
+                x = self._state(x0)
+            held = self._c_held
+            cb = held[1] if held[0] is c else self._c_buffer(c)
+            stats = new(_STATS_PTR)
+            if fixed:
+                code = fn(t0, t1, steps, buffer(_DOUBLES, x), cb, stats)
+            else:
+                code = fn(t0, t1, buffer(_DOUBLES, x), cb, rtol, atol, h0, max_steps, stats)
+            return x, Stats(stats), code
+
+        return call
+
+    def _c_buffer(self, c: Any) -> Any:
+        """c's cffi buffer, kept for the next call with the same array (a
+        one-line ValueError for a wrong length or a non-finite value)."""
+        arr = np.ascontiguousarray(c, dtype=np.float64)
+        if arr.shape != (self.nc,):
+            raise ValueError(f"the constants c must have shape ({self.nc},), not {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"the constants c are not all finite (index {_bad(arr)})")
+        buf = self.doubles(arr)
+        if arr is c:  # a later call with this array reuses the buffer
+            object.__setattr__(self, "_c_held", (c, buf))
+        return buf
+
+    def _state(self, x0: Any) -> np.ndarray:
+        x = np.array(x0, dtype=np.float64).reshape(-1)  # a copy: integrated in place
+        if x.shape != (self.nx,):
+            raise ValueError(f"the initial state must have shape ({self.nx},), not {x.shape}")
+        return x
+
     def integrate_batch(
         self,
         method: str,
@@ -181,7 +264,12 @@ class Compiled:
         t0: float,
         t1: float,
         threads: int | None = None,
-        **given: Unpack[Controls],
+        *,
+        rtol: float = DEFAULT_CONTROLS["rtol"],
+        atol: float = DEFAULT_CONTROLS["atol"],
+        h0: float = DEFAULT_CONTROLS["h0"],
+        max_steps: int = DEFAULT_CONTROLS["max_steps"],
+        steps: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """integrate() for many initial states (n, nx): final states (n, nx),
         statistics as a structured array (n,) with the fields of
@@ -189,38 +277,54 @@ class Compiled:
         (None: every one, 1: this one); a build with OpenMP splits the batch
         in C, one without it in slices called from Python threads (cffi
         releases the GIL). The results do not depend on it, bit for bit."""
-        fixed = self._check_method(method, given.get("steps"))
-        ctl = Controls(**{**DEFAULT_CONTROLS, **given})
-        x = np.array(x0s, dtype=np.float64, order="C", ndmin=2)  # a copy: integrated in place
+        try:
+            fn, fixed = self._batches[method]
+        except KeyError:
+            self._check_method(method, steps)  # raises, saying why
+            raise
+        if (steps is None) == fixed:
+            self._check_method(method, steps)
+        if x0s.__class__ is np.ndarray and x0s.dtype is _F64 and x0s.ndim == 2:
+            x = x0s.copy()  # C order; integrated in place
+        else:
+            x = np.array(x0s, dtype=np.float64, order="C", ndmin=2)
         if x.ndim != 2 or x.shape[1] != self.nx:
             raise ValueError(f"initial states must have shape (n, {self.nx}), not {x.shape}")
         n = x.shape[0]
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)
-        cb = self.doubles(np.ascontiguousarray(c, dtype=np.float64))
-        fn = self.function(f"{method}_batch")
-        tolerances = (ctl["rtol"], ctl["atol"], ctl["h0"], ctl["max_steps"])
-
-        def run(lo: int, hi: int) -> None:
-            tail = (self.doubles(x[lo:hi]), cb)
-            args = (hi - lo, t0, t1, ctl["steps"], *tail) if fixed else (hi - lo, t0, t1, *tail)
-            fn(
-                *args,
-                *(() if fixed else tolerances),
-                self.ffi.from_buffer("gyrogen_stats[]", stats[lo:hi]),
-                self.ffi.from_buffer("int[]", codes[lo:hi]),
-            )
-
-        count = cores() if threads is None else threads
+        held = self._c_held
+        cb = held[1] if held[0] is c else self._c_buffer(c)
+        buf = self.ffi.from_buffer
+        count = self._cores if threads is None else threads
         if count < 1:
             raise ValueError(f"threads must be at least 1, not {count}")
+
+        def run(x: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
+            xb, sb, kb = buf(_DOUBLES, x), buf(_STATS, stats), buf(_INTS, codes)
+            if fixed:
+                fn(len(x), t0, t1, steps, xb, cb, sb, kb)
+            else:
+                fn(len(x), t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
+
         if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-            run(0, n)  # OpenMP, or one thread
+            run(x, stats, codes)  # OpenMP, or one thread
         else:
-            edges = np.linspace(0, n, min(count, n) + 1).astype(int)
-            with ThreadPoolExecutor(len(edges) - 1) as pool:
-                list(pool.map(run, edges[:-1], edges[1:]))
+            cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
+            with ThreadPoolExecutor(len(cuts) + 1) as pool:
+                list(pool.map(run, *(np.split(a, cuts) for a in (x, stats, codes))))
         return x, stats, codes
+
+    @cached_property
+    def _batches(self) -> dict[str, tuple[Any, bool]]:
+        """Each integrator's _batch function, and whether it is fixed-step."""
+        return {
+            m: (self.function(f"{m}_batch"), fixed) for m, (_, fixed) in self._integrators.items()
+        }
+
+    @cached_property
+    def _cores(self) -> int:
+        return cores()
 
     def _check_method(self, method: str, steps: int | None) -> bool:
         """Whether method is a fixed-step one; ValueError unless this build

@@ -5,7 +5,7 @@ and the run stops at the first failure code."""
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +26,7 @@ class Segments:
     """The COUNTERS summed over the segments run, and t, the time reached."""
     code: int
     """0, or the return code (abi.ODE_CODES) of the segment that failed."""
-    intervals: tuple[dict[str, float | int], ...] = ()
+    intervals: tuple[Mapping[str, float | int], ...] = ()
     """Each segment's own statistics (abi.STATS_FIELDS), the failed one last."""
     stopped: np.ndarray | None = None
     """On failure: the last good state, at totals["t"]."""

@@ -27,8 +27,8 @@ from gyrogen.runtime.compiled import Compiled, cores
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import default
 
-LADDER = tuple(10.0 ** (-k / 2) for k in range(8, 25))
-"""Tolerances tried (1e-4 .. 1e-12, half decades), loosest first."""
+LADDER = tuple(10.0 ** (-k / 2) for k in range(8, 29))
+"""Tolerances tried (1e-4 .. 1e-14, half decades), loosest first."""
 PEER_LOOPS = 200
 """numbalsoda integrations per timed @njit call."""
 

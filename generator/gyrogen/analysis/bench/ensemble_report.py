@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis.bench import ensemble as ens
-from gyrogen.analysis.bench import peers
+from gyrogen.analysis.bench import ensemble_levels, peers
 from gyrogen.analysis.bench.bench_rhs import machine
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.bench.workprec import REF_TOL
@@ -98,7 +98,10 @@ def ensemble(prob: ens.Problem, n: int, nbs: Any, dfx: Any, repeats: int, echo: 
         echo(f"  vs {label}: {us / all_:.1f}x")
 
 
-def run(n: int, repeats: int, peers_on: bool = True, echo: Echo = print, **kw: Any) -> None:
+def run(
+    n: int, repeats: int, peers_on: bool = True, echo: Echo = print, **kw: Any
+) -> dict[str, bytes]:
+    """Measure and print; the figures by file name (the fronts against heyoka)."""
     info = machine()
     echo(f"machine: {info['cpu']}; {_load()}")
     echo(f"C flags: {info['c_flags']}")
@@ -109,9 +112,16 @@ def run(n: int, repeats: int, peers_on: bool = True, echo: Echo = print, **kw: A
     single(prob, nbs, repeats, echo)
     echo("")
     ensemble(prob, n, nbs, dfx, repeats, echo)
+    figures = {}
+    if peers_on:
+        echo("")
+        fronts = ensemble_levels.table(prob, n, repeats, echo)
+        if fronts:
+            figures["ensemble_fronts.png"] = ensemble_levels.figure(fronts, n)
     echo("")
     echo("lanes, us per trajectory against N and threads:")
     for size, threads, us in ens.scaling(prob, (16, 100, 1000, n), ens.default_threads(), 1e-9,
                                          repeats):  # fmt: skip
         echo(f"  N = {size:>6}, {threads} thread(s): {us:.2f}")
     echo(f"after: {_load()}")
+    return figures

@@ -50,7 +50,7 @@ class Config:
 
 
 FULL = Config(
-    tolerances=tuple(10.0 ** (-k / 2) for k in range(4, 25)),  # 1e-2 .. 1e-12, half decades
+    tolerances=tuple(10.0 ** (-k / 2) for k in range(4, 29)),  # 1e-2 .. 1e-14, half decades
     rk4_steps=(100, 200, 400, 800, 1600, 3200, 6400, 12800, 25600, 51200),
     scipy_tolerances=tuple(10.0**-k for k in range(3, 13)),
     repeats=5,
@@ -99,6 +99,14 @@ class Problem:
     ref: np.ndarray = field(default_factory=lambda: np.zeros(0))
     checks: dict[str, float] = field(default_factory=dict)
     """Reference cross-checks: name -> mixed difference."""
+    reference_name: str = f"DOP853 in C at rtol = atol = {REF_TOL:g}"
+    notes: dict[str, str] = field(default_factory=dict)
+    """What the report says beside its tables: set-up times (builds, JITs)."""
+
+    @property
+    def quadruple(self) -> bool:
+        """Whether ref is the quadruple-precision one (errors below 1e-10 readable)."""
+        return self.reference_name.startswith("heyoka")
 
 
 def full_model(scene: Scene) -> bool:
@@ -107,9 +115,12 @@ def full_model(scene: Scene) -> bool:
     return scene.name == "gyrostat" and list(scene.states) == list(STATES)
 
 
-def reference(prob: Problem) -> None:
+def reference(prob: Problem, quadruple: bool = True) -> None:
     """DOP853 in C at 1e-13, checked against scipy at the same tolerance
-    (Radau with the compiled Jacobian for a stiff scene) and the closed form."""
+    and the closed form; then, when quadruple, heyoka is installed and the scene's rhs
+    expressible in it, heyoka's real128 integrator at 1e-32 (quadruple
+    precision) is the reference, checked against a run of its own at 1e-28
+    and against that DOP853."""
     comp = prob.compiled["C"]
     given = Controls(rtol=REF_TOL, atol=REF_TOL)
     seg = integrate_segments(comp, "dop853", prob.x0, prob.c, (0.0, prob.t1), given)
@@ -124,6 +135,31 @@ def reference(prob: Problem) -> None:
     prob.checks["scipy DOP853 (compiled RHS) at 1e-13"] = scaled_error(sol.y[:, -1], x)
     if prob.scene.name == "torque_free":
         prob.checks["closed form (NOTES.md)"] = scaled_error(closed_form(prob), x)
+    if quadruple:
+        _quadruple(prob, x)
+    else:
+        prob.notes["reference"] = "DOP853 at 1e-13 (a stiff scene: no real128 Taylor reference)"
+
+
+def _quadruple(prob: Problem, dop853: np.ndarray) -> None:
+    from gyrogen.analysis.bench import heyoka_peer
+    from gyrogen.codegen.generate import unit_of
+
+    hy = heyoka_peer.module()
+    if hy is None:
+        prob.notes["reference"] = "DOP853 at 1e-13 (pip install heyoka for the real128 one)"
+        return
+    try:
+        sys = heyoka_peer.system(hy, unit_of(prob.scene))
+    except ValueError as exc:
+        prob.notes["reference"] = f"DOP853 at 1e-13 (heyoka cannot take this scene: {exc})"
+        return
+    heyoka_peer.check(sys, prob.compiled["C"].rhs, prob.c, prob.x0, lambda line: None)
+    ref, self_check = heyoka_peer.reference(sys, prob.x0, prob.c, prob.t1)
+    prob.checks[f"DOP853 in C at {REF_TOL:g} against heyoka real128"] = scaled_error(dop853, ref)
+    prob.checks[f"heyoka real128 at {heyoka_peer.QUAD_CHECK_TOL:g} against it"] = self_check
+    prob.ref = ref
+    prob.reference_name = f"heyoka real128 (quadruple precision) at tol {heyoka_peer.QUAD_TOL:g}"
 
 
 def closed_form(prob: Problem) -> np.ndarray:
@@ -167,8 +203,8 @@ def _compiled_run(
 
 def _raw_call(comp: Compiled, method: str, prob: Problem, kw: Controls) -> Callable[[], Any]:
     """One integration through cffi on preallocated buffers, as a program
-    embedding the C would call it: Compiled.integrate's conveniences (a
-    copy, a stats dict) cost ~6 us a call, half of a fast integration."""
+    embedding the C would call it (Compiled.integrate adds about 1 us: a
+    new state and stats struct per call, `make bench-call`)."""
     ffi = comp.ffi
     fn = comp.function(method)
     x = prob.x0.copy()

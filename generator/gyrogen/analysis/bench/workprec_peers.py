@@ -38,9 +38,57 @@ MIN_TIMED = 0.02
 
 def runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
     """Every installed peer at the ladder of tolerances."""
-    return _numbalsoda_runs(prob, cfg, stiff, echo, progress) + _casadi_runs(
-        prob, cfg, stiff, echo, progress
+    return (
+        _numbalsoda_runs(prob, cfg, stiff, echo, progress)
+        + _casadi_runs(prob, cfg, stiff, echo, progress)
+        + _heyoka_runs(prob, cfg, stiff, echo, progress)
     )
+
+
+HEYOKA = "heyoka taylor_adaptive"
+HEYOKA_TAIL = (10.0**-14.5, 1e-15)
+"""heyoka's tolerances past the ladder's tightest (its error lags its tol)."""
+
+
+def _heyoka_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: Echo) -> list[Run]:
+    """heyoka's scalar Taylor integrator (heyoka_peer), one per tolerance,
+    timed as propagate_until from Python; its JIT times and its call floor
+    (a propagation over no time) go into the report's notes."""
+    from gyrogen.analysis.bench import heyoka_peer
+    from gyrogen.codegen.generate import unit_of
+
+    hy = heyoka_peer.module()
+    if hy is None:
+        echo("heyoka skipped (No module named 'heyoka'): pip install -e '.[bench]'")
+        return []
+    if stiff:
+        echo("heyoka skipped: a stiff scene (its Taylor method is explicit)")
+        return []
+    try:
+        sys = heyoka_peer.system(hy, unit_of(prob.scene))
+    except ValueError as exc:
+        echo(f"heyoka skipped: {exc}")
+        return []
+    heyoka_peer.check(sys, prob.compiled["C"].rhs, prob.c, prob.x0, echo)
+    heyoka_peer.one_thread()
+    progress(f"{HEYOKA} (LLVM JIT, from Python)")
+    out, jits = [], []
+    for tol in (*cfg.tolerances, *HEYOKA_TAIL):
+        one = heyoka_peer.Scalar(sys, prob.x0, prob.c, prob.t1, tol)
+        jits.append((tol, one.jit, int(one.ta.order)))
+        x = one.final()
+        secs = best_time(one.run, cfg.repeats, min_total=MIN_TIMED)
+        out.append(Run(HEYOKA, "JIT, from Python", tol, scaled_error(x, prob.ref), secs, 0))
+    floor = heyoka_peer.Scalar(sys, prob.x0, prob.c, 0.0, cfg.tolerances[0])
+    first = {o: (t, j) for t, j, o in reversed(jits)}  # each order once
+    prob.notes["heyoka JIT (taylor_adaptive construction, no cached code)"] = ", ".join(
+        f"order {o} {j:.2f} s (tol {t:.0e})" for o, (t, j) in sorted(first.items())
+    )
+    us = best_time(floor.run, cfg.repeats, min_total=MIN_TIMED) * 1e6
+    prob.notes["heyoka's Python call floor"] = (
+        f"{us:.2f} us per propagate_until over no time (in every heyoka time)"
+    )
+    return out
 
 
 def _c_rhs_address(prob: Problem) -> int:
@@ -154,24 +202,32 @@ def _casadi_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: 
     return out
 
 
-def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:
-    """gyrogen's optimized rhs block, statement by statement, in SX."""
+def rhs_values(unit: Any, x: Any, c: Any, funcs: dict[str, Any]) -> list[Any]:
+    """gyrogen's optimized rhs block, statement by statement, on another
+    library's symbols (CasADi's SX, heyoka's expressions): x and c indexable
+    by state and constant, funcs its sin, cos and sqrt (the same arithmetic
+    as the generated code)."""
     import sympy as sm
 
     from gyrogen.symbolic.hoist import constants
 
     env: dict[Any, Any] = {s: x[i] for i, s in enumerate(unit.states)}
     env.update({k: c[i] for i, k in enumerate(constants(unit.nc))})
-    funcs = [{"sin": ca.sin, "cos": ca.cos, "sqrt": ca.sqrt}, "math"]
+    modules = [funcs, "math"]
 
     def value(expr: sm.Expr) -> Any:
         args = sorted(expr.free_symbols, key=str)
-        return sm.lambdify(args, expr, modules=funcs)(*(env[a] for a in args))
+        return sm.lambdify(args, expr, modules=modules)(*(env[a] for a in args))
 
     block = unit.optimized.rhs
     for a in block.temporaries:
         env[a.lhs] = value(a.rhs)
-    return ca.vertcat(*(value(e) for e in block.outputs))
+    return [value(e) for e in block.outputs]
+
+
+def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:
+    """gyrogen's optimized rhs block in SX."""
+    return ca.vertcat(*rhs_values(unit, x, c, {"sin": ca.sin, "cos": ca.cos, "sqrt": ca.sqrt}))
 
 
 def _check_sx(f: Any, prob: Problem, echo: Echo) -> None:

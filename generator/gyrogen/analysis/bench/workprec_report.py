@@ -3,12 +3,15 @@ and write them as a table (CSV, JSON), a markdown summary and a PNG figure."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
 import math
+import os
 import tempfile
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +29,11 @@ from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import Scene
 
 LEVELS = (1e-4, 1e-6, 1e-8, 1e-10)
+QUAD_LEVELS = (*LEVELS, 1e-12, 1e-14)
+"""The error levels read against the real128 reference (the DOP853 one is
+itself ~1e-12 off)."""
+PEERS = ("numbalsoda", "CasADi", "heyoka")
+"""How the compiled peers' labels start."""
 _LABELS = {"c": "C", "fortran": "Fortran"}
 Echo = Callable[[str], None]
 
@@ -51,19 +59,38 @@ def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
 
 
 def measure(scene: Scene, cfg: Config, echo: Echo, progress: Echo) -> tuple[Problem, list[Run]]:
-    with tempfile.TemporaryDirectory(prefix="gyrogen-wp-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="gyrogen-wp-") as tmp, _empty_cache(Path(tmp)):
+        t0 = time.perf_counter()
         prob = problem(scene, Path(tmp) / scene.name, cfg)
-        workprec.reference(prob)
+        languages = " and ".join(prob.compiled)
+        prob.notes["gyrogen generate and build"] = (
+            f"{time.perf_counter() - t0:.1f} s ({languages}, every integrator, an empty cache)"
+        )
+        comp = prob.compiled["C"]
+        stiff = stiffness.index(comp, prob.c, prob.x0, prob.t1) > stiffness.STIFF
+        workprec.reference(prob, quadruple=not stiff)
         runs = workprec.compiled_runs(prob, cfg, progress)
         runs += workprec.scipy_runs(prob, "numpy RHS", workprec.numpy_rhs(prob), cfg, progress)
         runs += workprec.scipy_runs(
             prob, "C RHS via cffi", workprec.compiled_rhs(prob), cfg, progress
         )
         runs += _pydy_runs(prob, cfg, echo, progress)
-        comp = prob.compiled["C"]
-        stiff = stiffness.index(comp, prob.c, prob.x0, prob.t1) > stiffness.STIFF
         runs += workprec_peers.runs(prob, cfg, stiff, echo, progress)
     return prob, runs
+
+
+@contextlib.contextmanager
+def _empty_cache(tmp: Path) -> Iterator[None]:
+    """GYROGEN_CACHE in tmp for the block: the build is timed from nothing."""
+    before = os.environ.get("GYROGEN_CACHE")
+    os.environ["GYROGEN_CACHE"] = str(tmp / "cache")
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["GYROGEN_CACHE"]
+        else:
+            os.environ["GYROGEN_CACHE"] = before
 
 
 def _pydy_runs(prob: Problem, cfg: Config, echo: Echo, progress: Echo) -> list[Run]:
@@ -86,9 +113,10 @@ def summary(prob: Problem, runs: list[Run]) -> list[str]:
     each peer, both read along the contenders' work-precision curves."""
     info = machine()
     lines = [f"# Work-precision: {prob.scene.name}", "", prob.scene.description, ""]
-    lines += [f"- t in [0, {prob.t1:g}] s; reference: DOP853 in C at rtol = atol = 1e-13"]
+    lines += [f"- t in [0, {prob.t1:g}] s; reference: {prob.reference_name}"]
     lines += [f"- reference check, {k}: {v:.2e}" for k, v in prob.checks.items()]
-    lines += [f"- machine: {info['cpu']}; C flags {info['c_flags']}"]
+    lines += [f"- {k}: {v}" for k, v in prob.notes.items()]
+    lines += [f"- machine: {info['cpu']}; C flags {info['c_flags']}; {load()}"]
     lines += [
         "- each contender's time at an error level is read along its curve (the runs no "
         "faster run beats in accuracy), interpolated in log-log between the runs around it",
@@ -97,13 +125,22 @@ def summary(prob: Problem, runs: list[Run]) -> list[str]:
         "|---|---|---|",
     ]
     labels = sorted({r.label for r in runs})
-    for level in LEVELS:
+    for level in levels(prob):
         times = {lb: workprec.seconds_at(_by(runs, lb), level) for lb in labels}
         known = {lb: t for lb, t in times.items() if t is not None}
         if known:
             best = min(known, key=lambda lb: known[lb])
             lines.append(f"| {level:.0e} | {best} | {_time(known[best])} |")
-    return [*lines, "", *against_peers(runs)]
+    return [*lines, "", *against_peers(runs, levels(prob))]
+
+
+def levels(prob: Problem) -> tuple[float, ...]:
+    return QUAD_LEVELS if prob.quadruple else LEVELS
+
+
+def load() -> str:
+    one, five, _ = os.getloadavg()
+    return f"load average {one:.2f} (1 min), {five:.2f} (5 min)"
 
 
 def _time(seconds: float) -> str:
@@ -120,18 +157,18 @@ def _by(runs: list[Run], label: str) -> list[Run]:
 
 def _peers(runs: list[Run]) -> list[str]:
     """The peers' labels: the compiled ones, PyDy, then scipy's fastest."""
-    labels = sorted({r.label for r in runs if r.method.startswith(("numbalsoda", "CasADi"))})
+    labels = sorted({r.label for r in runs if r.method.startswith(PEERS)})
     return labels + sorted({r.label for r in runs if "PyDy" in r.backend})
 
 
-def against_peers(runs: list[Run]) -> list[str]:
+def against_peers(runs: list[Run], levels: tuple[float, ...] = LEVELS) -> list[str]:
     """Markdown: per error level, gyrogen's fastest compiled C run and each
     peer's time with the ratio peer / gyrogen."""
     peers = _peers(runs)
     scipy = [r for r in runs if r.method.startswith("scipy") and "PyDy" not in r.backend]
     head = ["error", "gyrogen (fastest C integrator)", *peers, "fastest scipy solve_ivp"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for level in LEVELS:
+    for level in levels:
         mine = _fastest([r for r in runs if r.backend == "C"], level)
         if mine is None:
             continue
@@ -152,7 +189,9 @@ def against_peers(runs: list[Run]) -> list[str]:
         *out,
         "",
         "numbalsoda runs inside one @njit loop (no Python per integration); gyrogen "
-        "through cffi (its call and a state copy included); CasADi one Function call each.",
+        "through cffi (its call and a state copy included); CasADi one Function call each; "
+        "heyoka one propagate_until each (its Python call floor in the notes above: heyoka's "
+        "integrator cannot be called from a compiled loop through its Python package).",
     ]
 
 
@@ -204,7 +243,7 @@ def figure(prob: Problem, runs: list[Run]) -> bytes:
         pts = sorted((r.seconds, r.error) for r in _by(runs, label) if r.status.startswith("ok"))
         if not pts:
             continue
-        peer = label.startswith(("numbalsoda", "CasADi"))
+        peer = label.startswith(PEERS)
         style = "--s" if "scipy" in label else ":D" if peer else "-o"  # gyrogen: solid
         ax.loglog(*zip(*pts, strict=True), style, label=label, color=palette(i % 20), ms=4)
     ax.set_xlabel("wall time per integration (s)")

@@ -12,7 +12,7 @@ compiled integrators at rtol = 1e-12, watching the invariants of NOTES.md:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -149,7 +149,7 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     return res
 
 
-def _merged(intervals: tuple[dict[str, Any], ...], every: int) -> tuple[dict[str, Any], ...]:
+def _merged(intervals: tuple[Mapping[str, Any], ...], every: int) -> tuple[dict[str, Any], ...]:
     """Each run of `every` consecutive intervals' statistics as one: the
     counters summed, the time reached and the last step of its last."""
     out = []
