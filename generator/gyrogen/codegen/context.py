@@ -96,7 +96,26 @@ class SceneContext:
         ops.update({o.name: o.block.ops for o in self.outputs})
         if self.optimized.jacobian is not None:
             ops["jac"] = self.optimized.jacobian.ops
+        if self.optimized.linear is not None:
+            ops["linear"] = self.optimized.linear.ops
         return ops
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The linear model's inputs (outputs.linear_model), else none."""
+        pert = self.equations.perturbed
+        return pert.names if pert is not None else ()
+
+    @property
+    def ny(self) -> int:
+        """The outputs' values, one after another: the linear model's y."""
+        return sum(o.size for o in self.outputs)
+
+    @property
+    def linear_sizes(self) -> dict[str, tuple[int, int]]:
+        """The linear model's matrices, (rows, columns) each."""
+        nx, nu, ny = self.nx, len(self.inputs), self.ny
+        return {"A": (nx, nx), "B": (nx, nu), "C": (ny, nx), "D": (ny, nu)}
 
     @cached_property
     def lu_blocks(self) -> Blocks | None:
@@ -205,6 +224,8 @@ class SceneContext:
             f[o.name] = f"{p}_f_{o.name}"
         if self.optimized.jacobian is not None:
             c["jac"], f["jac"] = f"{p}_jac", f"{p}_f_jac"
+        if self.optimized.linear is not None and "c" in self.scene.targets:
+            c["linear"] = f"{p}_linear"  # C only
         for m in self.scene.integrators:
             c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
             c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"

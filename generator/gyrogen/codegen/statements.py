@@ -125,6 +125,26 @@ def jacobian(
     return _function(unit, array, assign, "jac", block, "J", "d(dx/dt)/dx, row-major", "1/s")
 
 
+def linear(unit: SceneContext, array: Callable[[str, int], str], assign: Assign) -> Function | None:
+    """A, B, C, D of the linear model, each row-major (A[i*NX + j] = d f_i /
+    d x_j, B[i*NU + j] = d f_i / d u_j, C and D alike for the outputs y)."""
+    block = unit.optimized.linear
+    if block is None:
+        return None
+    sizes = unit.linear_sizes
+    edges = [0]
+    for rows, cols in sizes.values():
+        edges.append(edges[-1] + rows * cols)
+    names = list(sizes)
+
+    def at(arr: str, i: int) -> str:
+        k = max(j for j in range(len(names)) if edges[j] <= i)
+        return array(names[k], i - edges[k])
+
+    doc = "the linear model: A = df/dx, B = df/du, C = dy/dx, D = dy/du, row-major"
+    return _function(unit, at, assign, "linear", block, "", doc, "")
+
+
 def _function(
     unit: SceneContext,
     array: Callable[[str, int], str],

@@ -88,6 +88,10 @@ class Outputs(_Strict):
     """Angular momentum about AB* in N components (uses the direction cosines)."""
     power: StrictBool = False
     """Power of the motor torque, T (u4 - u2)."""
+    linear_model: StrictBool = False
+    """The function <prefix>_linear: A, B, C, D of the linear model at any
+    state (inputs: each rotor's motor torque, or its speed controller's
+    w_ref; outputs: the ones above). `gyrogen linearize` sets it."""
 
 
 class Simulate(_Strict):
@@ -136,6 +140,9 @@ class Scene(_Strict):
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
     simulate: Simulate = Simulate()
     rotors: Annotated[list[Rotor], Field(max_length=MAX_ROTORS)] = Field(default_factory=list)
+    equilibrium: dict[str, Number] | None = None
+    """The state `gyrogen linearize` linearizes about, by name (states not
+    named: 0, e0: 1); the runtime parameters are simulate.parameters."""
     """A reaction-wheel cluster (gyrogen.scene.rotors); none: the paper's one rotor on a2."""
 
     @model_serializer(mode="wrap")
@@ -143,6 +150,10 @@ class Scene(_Strict):
         """Without rotors, the dump of a scene before clusters existed (its build
         id); with them, only the effects a cluster has (the others are refused)."""
         data = handler(self)
+        if self.equilibrium is None:
+            data.pop("equilibrium", None)  # the dump before linear models
+        if isinstance(data.get("outputs"), dict) and not self.outputs.linear_model:
+            data["outputs"].pop("linear_model", None)  # the dump before linear models
         if not self.rotors:
             data.pop("rotors", None)
         elif isinstance(data.get("effects"), dict):  # a cluster has only these effects
@@ -192,6 +203,9 @@ class Scene(_Strict):
         bad = sorted(set(self.simulate.initial) - set(self.states))
         if bad:
             raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
+        bad = sorted(set(self.equilibrium or {}) - set(self.states))
+        if bad:
+            raise ValueError(f"equilibrium: {', '.join(bad)} is not a state of this scene")
         bad = sorted(set(self.simulate.parameters) - set(self.runtime))
         if bad:
             raise ValueError(

@@ -20,6 +20,8 @@ Every inertial value is folded, so I~^-1 is numbers in the code.
 
 from __future__ import annotations
 
+import dataclasses
+
 import sympy as sm
 import sympy.physics.mechanics as me
 
@@ -119,20 +121,35 @@ def _by_axis_component(nets: list[sm.Expr], axes: list[sm.Matrix]) -> sm.Matrix:
     return sm.Matrix(out)
 
 
-def _torques(scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix]) -> dict:
+def inputs(scene: Scene) -> tuple[str, ...]:
+    """The linear model's inputs: each rotor's w_ref_k (a speed controller)
+    or its motor torque T_k."""
+    return tuple(
+        rotor_name("w_ref" if r.torque == "speed_controller" else "T", k)
+        for k, r in enumerate(scene.rotors, 1)
+    )
+
+
+def _torques(
+    scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix], perturbed: bool = False
+) -> dict:
     """Each rotor's net torque, and the named values it reads: rel_k (the
-    rate relative to A) when friction or a speed controller needs it."""
+    rate relative to A) when friction or a speed controller needs it. With
+    perturbed, each rotor's input plus its delta (Equations.perturbed)."""
     w_a = sm.Matrix([states["u1"], states["u2"], states["u3"]])
     shared: dict[sm.Symbol, sm.Expr] = {}
     nets: list[sm.Expr] = []
     motors: list[sm.Expr] = []
     for k, (r, g) in enumerate(zip(scene.rotors, axes, strict=True), 1):
         law = {key: _param(rotor_name(key, k), v) for key, v in r.law().items()}
+        if perturbed:
+            key = "w_ref" if r.torque == "speed_controller" else "T"
+            law[key] = law.get(key, sm.S.Zero) + equations.delta(rotor_name(key, k))
         rel = sm.Symbol(f"{SLIP}{k}", real=True)
         if r.b or r.torque == "speed_controller":
             shared[rel] = states[f"w{k}"] - g.dot(w_a)
         motor = sm.S.Zero
-        if r.torque == "constant":
+        if r.torque in ("constant", "none") and "T" in law:
             motor = law["T"]
         elif r.torque == "speed_controller":
             motor = -law["k"] * (rel - law["w_ref"])
@@ -184,7 +201,25 @@ def _derive(scene: Scene) -> Equations:
         **torques["shared"],
         **dict(zip(f, f_value, strict=True)),
     }
-    return _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
+    eqs = _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
+    if not scene.outputs.linear_model:
+        return eqs
+    torques = _torques(scene, st, axes, perturbed=True)
+    f_value = h.cross(w_a) - _by_axis_component(torques["nets"], axes)
+    shared = {
+        **dict(zip(h, h_value, strict=True)),
+        **torques["shared"],
+        **dict(zip(f, f_value, strict=True)),
+    }
+    names = inputs(scene)
+    perturbed = equations.Perturbed(
+        controls=tuple(equations.delta(n) for n in names),
+        names=names,
+        forcing=sm.Matrix([*f, *torques["nets"]]),
+        shared=shared,
+        outputs=_outputs(scene, st, expected, shared, torques["motors"], axes),
+    )
+    return dataclasses.replace(eqs, perturbed=perturbed)
 
 
 def _equations(

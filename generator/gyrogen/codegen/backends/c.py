@@ -17,6 +17,7 @@ from gyrogen.codegen.statements import (
     WritableNumbers,
     functions,
     jacobian,
+    linear,
     statements,
     trig_used,
 )
@@ -67,6 +68,7 @@ def files(unit: SceneContext) -> dict[str, str]:
     lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign_lanes)[0]
     lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign_lanes)[0]
     jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
+    lin = linear(unit, lambda a, i: f"{a}[{i}]", assign)
     has_lanes = any(m.pair for m in unit.methods)
     inlined = [lanes_ode] if has_lanes and not lanes_ode.torque else []
     ode_trig = trig_used(unit.prefix, [jac, *inlined])  # rhs_lanes is inlined in ode.c
@@ -81,8 +83,9 @@ def files(unit: SceneContext) -> dict[str, str]:
         "rhs_lanes_ode": lanes_ode,
         "outputs": outputs,
         "jac": jac,
+        "linear": lin,
         "source_trig": trig_text(
-            "c", unit.prefix, unit.macro, trig_used(unit.prefix, [rhs, lanes, *outputs])
+            "c", unit.prefix, unit.macro, trig_used(unit.prefix, [rhs, lanes, *outputs, lin])
         ),
         "ode_trig": trig_text("c", unit.prefix, unit.macro, ode_trig),
         "methods": unit.methods,
