@@ -6,7 +6,7 @@ moments meeting the triangle inequality, turned by a random rotation), N = 1
 to 6 rotors on random axes (unit vectors written to 17 digits; at times all
 along the carrier's axes, or all in one plane) at random positions, each
 with its own mass, inertias, friction, torque law (none, constant, speed
-controller; values folded or "runtime") and optional limit;
+controller, a T(t) table; values folded or "runtime") and optional limit;
 either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
@@ -21,7 +21,7 @@ from scene_space import INTEGRATOR_LISTS, TARGET_LISTS, Draw, to_toml, toml_valu
 
 from gyrogen.abi_rotors import MAX_ROTORS
 
-LAWS = ("none", "constant", "speed_controller")
+LAWS = ("none", "constant", "speed_controller", "table")
 BREAKS = ("axis of length 0", "axis of length 1.01", "J > 2 I", "negative tau_max", "negative b")
 
 
@@ -56,6 +56,10 @@ def _rotor(rng: np.random.Generator, scale: float, runtime: set[str], k: int) ->
     rotor["torque"] = law
     values = {"T": float(rng.uniform(-1, 1) * size), "k": float(10.0 ** rng.uniform(-3, 0)),
               "w_ref": float(rng.uniform(-200, 200))}  # fmt: skip
+    if law == "table":  # 2 to 6 points over the drawn scene's 1 s, and beyond it
+        times = np.sort(rng.uniform(-0.2, 1.2, rng.integers(2, 7)))
+        torques = rng.uniform(-1, 1, times.size) * size
+        rotor["torque_table"] = [[float(t), float(v)] for t, v in zip(times, torques, strict=True)]
     for key in {"constant": ("T",), "speed_controller": ("k", "w_ref")}.get(law, ()):
         if rng.random() < 0.5:
             rotor[key] = "runtime"

@@ -45,6 +45,15 @@ class Local:
 
 
 @dataclass(frozen=True)
+class Table:
+    """A tabulated torque: the function <prefix>_<name>(t) and its local."""
+
+    name: str
+    points: list[tuple[float, float]]
+    doc: str
+
+
+@dataclass(frozen=True)
 class Output:
     name: str
     block: Block
@@ -168,6 +177,23 @@ class SceneContext:
         return self.scene.effects.torque_table
 
     @property
+    def torque_tables(self) -> list[Table]:
+        """Every T(t) table: the scene's torque, or each cluster rotor's torque_k."""
+        if self.torque_table:
+            doc = "T(t), piecewise linear through the scene's table, constant outside it."
+            return [Table("torque", self.torque_table, doc)]
+        return [
+            Table(
+                f"torque_{k}",
+                r.torque_table,
+                f"T_{k}(t), rotor B{k}'s motor torque, piecewise linear through its table, "
+                "constant outside it.",
+            )
+            for k, r in enumerate(self.scene.rotors, 1)
+            if r.torque_table
+        ]
+
+    @property
     def folded_summary(self) -> str:
         return ", ".join(f"{n} = {v!r}" for n, v in self.scene.folded().items())
 
@@ -258,4 +284,6 @@ def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:
     if torque == "speed_controller":
         return (f"speed controller T = -k (w{k} - g{k}.w_A - w_ref), k = {v['k']}, "
                 f"w_ref = {v['w_ref']}")  # fmt: skip
+    if torque == "table":
+        return f"motor torque T(t), piecewise linear through its table (torque_{k})"
     return "no motor torque"

@@ -89,8 +89,13 @@ class Function:
     statements: list[Statement]
     states: list[int]
     """Indices of the states it reads: only those become locals."""
-    torque: bool
-    """Reads the tabulated torque T(t)."""
+    tables: list[str]
+    """The tabulated torques T(t) it reads (torque; a cluster's torque_k)."""
+
+    @property
+    def torque(self) -> bool:
+        """Reads a tabulated torque."""
+        return bool(self.tables)
 
 
 Assign = Callable[[str, sm.Expr], str]
@@ -162,7 +167,7 @@ def _function(
         unit=units,
         statements=statements(block, partial(array, arr), assign),
         states=[i for i, s in enumerate(unit.states) if s in free],
-        torque=any(s in free for s in unit.equations.inputs),
+        tables=[s.name for s in unit.equations.inputs if s in free],
     )
 
 

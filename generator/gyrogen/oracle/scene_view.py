@@ -109,7 +109,7 @@ def full_parameters(
 def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     xs = np.atleast_2d(xs)
     if scene.rotors:
-        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime))
+        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime), t)
         if scene.attitude == "quaternion":
             out[:, :4] = quaternion_rates(
                 xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)]
@@ -126,14 +126,14 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     return out
 
 
-def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray) -> np.ndarray:
+def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     """(n, K) values whose signs change exactly where the rhs is not smooth
     in the state: a cluster's torque clamps (cluster_reference.clamp_margins);
     none (K = 0) for the paper's scenes, smooth in the state."""
     xs = np.atleast_2d(xs)
     if not scene.rotors:
         return np.zeros((len(xs), 0))
-    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime))
+    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime), t)
 
 
 def output(
@@ -148,7 +148,7 @@ def output(
             angles = np.zeros((len(xs), len(STATES)))
             angles[:, :3] = xs[:, :3]
             dcm = reference.direction_cosines(angles)
-        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm)
+        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm, t)
     x_full = full_states(scene, xs)
     p = full_parameters(scene, p_runtime, x_full, t)
     if name == "kinetic_energy":

@@ -9,7 +9,6 @@ values are the same as the generated setup's (abi.SETUP_CODES).
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
 import stat
@@ -46,6 +45,7 @@ from gyrogen.scene.rules import (
     check_output_grid,
     check_physics,
     check_quaternion,
+    check_table,
     parameter_value,
 )
 
@@ -69,16 +69,7 @@ class Effects(_Strict):
 
     @model_validator(mode="after")
     def _table(self) -> Effects:
-        table = self.torque_table
-        if self.torque != "table":
-            if table is not None:
-                raise ValueError("torque_table is only used with torque = 'table'")
-            return self
-        if table is None or len(table) < 2:
-            raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
-        times = [t for t, _ in table]
-        if any(b <= a for a, b in itertools.pairwise(times)):
-            raise ValueError("torque_table times must increase strictly")
+        check_table(self.torque, self.torque_table)
         return self
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from fractions import Fraction
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
@@ -25,6 +25,7 @@ from pydantic import (
     Field,
     StrictFloat,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
@@ -37,7 +38,7 @@ from gyrogen.abi_rotors import (
     cluster_states,
     rotor_name,
 )
-from gyrogen.scene.rules import parameter_value
+from gyrogen.scene.rules import check_table, parameter_value
 
 
 def _folded(v: object) -> object:
@@ -53,8 +54,8 @@ Folded = Annotated[float, BeforeValidator(_folded)]
 Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
 Vector = tuple[StrictFloat, StrictFloat, StrictFloat]
 
-LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref")}
-"""The keys each torque law needs (and allows)."""
+LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref"), "table": ()}
+"""The keys each torque law needs (and allows); a table's points are its torque_table."""
 
 
 class Rotor(BaseModel):
@@ -75,15 +76,21 @@ class Rotor(BaseModel):
     w_ref: Value | None = None
     tau_max: Annotated[Folded, Field(ge=0)] | None = None
     """|T| is clamped to tau_max (a saturating motor); refused when negative."""
+    torque_table: list[tuple[StrictFloat, StrictFloat]] | None = None
+    """torque = "table": (t, T) points of a piecewise-linear T(t), held
+    constant outside (as the single rotor's effects.torque_table)."""
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: Any) -> Any:
+        """Without a table, the dump of a rotor before tables (its scene's build id)."""
+        data = handler(self)
+        if self.torque_table is None and isinstance(data, dict):
+            data.pop("torque_table", None)
+        return data
 
     @field_validator("torque")
     @classmethod
     def _law(cls, v: str) -> str:
-        if v == "table":
-            raise ValueError(
-                "'table': torque tables are not supported for a cluster's rotors "
-                f"(one of {', '.join(map(repr, LAW_KEYS))}; the single-rotor scene has tables)"
-            )
         if v not in LAW_KEYS:
             raise ValueError(f"{v!r}: not one of {', '.join(map(repr, LAW_KEYS))}")
         return v
@@ -102,6 +109,7 @@ class Rotor(BaseModel):
             raise ValueError(
                 f"axis: length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
             )
+        check_table(self.torque, self.torque_table)
         need = LAW_KEYS[self.torque]
         for key in ("T", "k", "w_ref"):
             given = getattr(self, key) is not None

@@ -102,10 +102,11 @@ def kane(inertia: sm.Matrix, axes: list[sm.Matrix], axial: list[sm.Expr]) -> tup
     return mm, forcing, qdot, net
 
 
-SLIP, NET, MOMENTUM, FORCING = "rel", "net", "h", "f"
+SLIP, NET, MOMENTUM, FORCING, TABLE = "rel", "net", "h", "f", "torque"
 """Named values of the rhs: each wheel's relative rate and net torque, the
 momentum h, and f = h x w_A - sum_k net_k g_k (= I~ u'): I~^-1 then
-multiplies three numbers, where multiplying out h x w_A costs ~20 ops more."""
+multiplies three numbers, where multiplying out h x w_A costs ~20 ops more.
+torque_k is rotor k's T(t) from its table: a per-call input (Equations.inputs)."""
 
 
 def _by_axis_component(nets: list[sm.Expr], axes: list[sm.Matrix]) -> sm.Matrix:
@@ -140,6 +141,7 @@ def _torques(
     shared: dict[sm.Symbol, sm.Expr] = {}
     nets: list[sm.Expr] = []
     motors: list[sm.Expr] = []
+    inputs: list[sm.Symbol] = []
     for k, (r, g) in enumerate(zip(scene.rotors, axes, strict=True), 1):
         law = {key: _param(rotor_name(key, k), v) for key, v in r.law().items()}
         if perturbed:
@@ -148,9 +150,11 @@ def _torques(
         rel = sm.Symbol(f"{SLIP}{k}", real=True)
         if r.b or r.torque == "speed_controller":
             shared[rel] = states[f"w{k}"] - g.dot(w_a)
-        motor = sm.S.Zero
-        if r.torque in ("constant", "none") and "T" in law:
-            motor = law["T"]
+        motor = law.get("T", sm.S.Zero)  # constant; a perturbed none or table
+        if r.torque == "table":
+            table = sm.Symbol(f"{TABLE}_{k}", real=True)
+            inputs.append(table)
+            motor += table
         elif r.torque == "speed_controller":
             motor = -law["k"] * (rel - law["w_ref"])
         if r.tau_max is not None:
@@ -163,7 +167,7 @@ def _torques(
             shared[name] = net
             net = name
         nets.append(net)
-    return {"shared": shared, "nets": nets, "motors": motors}
+    return {"shared": shared, "nets": nets, "motors": motors, "inputs": tuple(inputs)}
 
 
 def _param(name: str, value: float | str) -> sm.Expr:
@@ -202,6 +206,7 @@ def _derive(scene: Scene) -> Equations:
         **dict(zip(f, f_value, strict=True)),
     }
     eqs = _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
+    eqs = dataclasses.replace(eqs, inputs=torques["inputs"])
     if not scene.outputs.linear_model:
         return eqs
     torques = _torques(scene, st, axes, perturbed=True)

@@ -62,7 +62,7 @@ def rates(scene: Scene, p: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarr
     x (m, nx), from the scene's torque law as the reference applies it."""
     v = scene_view.values(scene, p)
     if scene.rotors:  # dK/dt: every net torque times its wheel's relative rate; wheel 1's
-        return cluster_reference.power_and_torque(scene, x, v)
+        return cluster_reference.power_and_torque(scene, x, v, t)
     full = scene_view.full_states(scene, x)
     if scene.effects.torque == "table":  # scene_view.torque takes one t; the table needs each
         table = np.array(scene.effects.torque_table)

@@ -82,7 +82,7 @@ def files(unit: SceneContext) -> dict[str, str]:
     jac = jacobian(unit, lambda a, i: f"{a}({i + 1})", assign)
     signature = {"rhs": "rhs", "jac": "jac"}
     for fn in (rhs, *outputs, *([jac] if jac else [])):
-        names = [unit.states[i].name for i in fn.states] + ["torque"] * fn.torque
+        names = [unit.states[i].name for i in fn.states] + fn.tables
         args = SIGNATURES[signature.get(fn.name, "output")].names
         _check_names([*args, *names, *(s.name for s in fn.statements if s.declare)], fn.name)
 
@@ -91,7 +91,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         return [v for v in ("sin", "cos") if v in found]  # Fortran has no _lanes twins
 
     gimbal = bool(unit.methods) and not unit.quaternion
-    setup_fn = Function("setup", "", "", setup, [], False)
+    setup_fn = Function("setup", "", "", setup, [], [])
     trig = used([setup_fn, rhs, *outputs, jac], gimbal)
     ctx = {
         "unit": unit,
