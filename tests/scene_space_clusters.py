@@ -6,7 +6,7 @@ moments meeting the triangle inequality, turned by a random rotation), N = 1
 to 6 rotors on random axes (unit vectors written to 17 digits; at times all
 along the carrier's axes, or all in one plane) at random positions, each
 with its own mass, inertias, friction, torque law (none, constant, speed
-controller, a T(t) table; values folded or "runtime") and optional limit;
+controller, a T(t) table; values folded or "runtime", J too) and optional limit;
 either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
@@ -39,7 +39,9 @@ def _carrier(rng: np.random.Generator) -> dict[str, float]:
     return out
 
 
-def _rotor(rng: np.random.Generator, scale: float, runtime: set[str], k: int) -> dict[str, object]:
+def _rotor(
+    rng: np.random.Generator, scale: float, runtime: set[str], k: int, axial: dict[str, float]
+) -> dict[str, object]:
     g = rng.normal(size=3)
     size = 10.0 ** rng.uniform(-3, -1) * scale
     inertia = float(size * rng.uniform(0.5, 1.0))
@@ -50,6 +52,10 @@ def _rotor(rng: np.random.Generator, scale: float, runtime: set[str], k: int) ->
         "axis": [float(x) for x in g / np.linalg.norm(g)],
         "position": [float(x) for x in rng.uniform(-1, 1, 3)],
     }
+    if rng.random() < 0.25:  # setup checks 0 < J <= 2 I; the draw's value goes to simulate
+        runtime.add(f"J_{k}")
+        axial[f"J_{k}"] = float(rotor["J"])  # type: ignore[arg-type]
+        rotor["J"] = "runtime"
     if rng.random() < 0.5:
         rotor["b"] = float(10.0 ** rng.uniform(-6, -2))
     law = str(rng.choice(LAWS))
@@ -110,7 +116,8 @@ def clusters(draw: st.DrawFn) -> Draw:
     n = draw(st.integers(1, MAX_ROTORS))
     carrier = _carrier(rng)
     runtime: set[str] = set()
-    rotors = [_rotor(rng, carrier["I11"], runtime, k) for k in range(1, n + 1)]
+    axial: dict[str, float] = {}
+    rotors = [_rotor(rng, carrier["I11"], runtime, k, axial) for k in range(1, n + 1)]
     _lay_axes(rotors, draw(st.sampled_from(LAYOUTS)), rng)
     broken = draw(st.sampled_from([None] * 15 + list(BREAKS)))
     if broken is not None:
@@ -118,7 +125,7 @@ def clusters(draw: st.DrawFn) -> Draw:
     attitude = draw(st.sampled_from(["euler312", "quaternion"]))
     initial = {f"u{i}": draw(st.floats(-1, 1)) for i in (1, 2, 3)}
     initial.update({f"w{k}": draw(st.floats(-100, 100)) for k in range(1, n + 1)})
-    params = {name: _runtime_value(name, rng) for name in sorted(runtime)}
+    params = {name: axial.get(name, _runtime_value(name, rng)) for name in sorted(runtime)}
     top = {
         "name": f"cluster{n}",
         "description": f"a drawn cluster of {n} rotors",

@@ -19,9 +19,10 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
     "tau_max": ("N m", "torque limit of rotor B{k}: the motor torque is clamped to +-tau_max"),
 }
 """A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
-ROTOR_RUNTIME = ("T", "k", "w_ref")
-"""The rotor keys that may be "runtime" (the others are folded: setup then
-holds the inverse of the constant inertia as numbers)."""
+ROTOR_RUNTIME = ("J", "T", "k", "w_ref")
+"""The rotor keys that may be "runtime", in a rotor's p[] order (the others
+are folded: setup then holds the inverse of the lumped inertia I~ as numbers;
+a runtime J_k stays out of I~, setup checks 0 < J_k <= 2 I_k and inverts it)."""
 MAX_ROTORS = 6
 """Rotors a cluster scene may have."""
 AXIS_NORM_SLACK = 1e-3

@@ -165,6 +165,21 @@ CHECKS: tuple[Check, ...] = (
 """In the order setup makes them: the first failure wins."""
 
 
+def cluster_checks(axial: list[tuple[str, float]]) -> tuple[Check, ...]:
+    """A cluster's setup checks: every parameter finite, each runtime axial
+    inertia (its name, its rotor's folded I) positive and at most 2 I as
+    check 6 has it, the lumped inertia's condition number (the scene
+    validator checks every folded value)."""
+    finite, bound = (next(c for c in CHECKS if c.kind == kind) for kind in ("finite", "bound"))
+    if not axial:
+        return (finite, bound)
+    positive = Check(3, "positive", tuple(Sym(n) for n, _ in axial), each=True)
+    slack = tuple(
+        Check(6, "slack", (Sym(n) - Num(2.0 * i), Num(2.0 * i) + Sym(n))) for n, i in axial
+    )
+    return (finite, positive, *slack, bound)
+
+
 def symbols(e: Expr) -> set[str]:
     if isinstance(e, Sym):
         return {e.name}

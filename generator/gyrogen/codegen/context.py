@@ -18,9 +18,10 @@ from gyrogen.abi import (
     Code,
     unit_and_doc,
 )
+from gyrogen.abi_rotors import rotor_name
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
-from gyrogen.setup_checks import CHECKS
+from gyrogen.setup_checks import CHECKS, Check, cluster_checks
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
@@ -148,11 +149,20 @@ class SceneContext:
         return bool(self.scene.rotors)
 
     @property
+    def checks(self) -> tuple[Check, ...]:
+        """setup's checks: a cluster's folded inertial values are checked by
+        the scene validator, so its setup makes 'finite', 'bound' and the
+        checks of its runtime axial inertias (setup_checks.cluster_checks)."""
+        if not self.cluster:
+            return CHECKS
+        rotors = enumerate(self.scene.rotors, 1)
+        axial = [(rotor_name("J", k), r.I) for k, r in rotors if r.J == "runtime"]
+        return cluster_checks(axial)
+
+    @property
     def setup_codes(self) -> list[Code]:
-        """The codes setup can return: a cluster's inertial values are folded
-        and checked by the scene validator, so its setup makes only the
-        'finite' and 'bound' checks (codegen.checks.printed)."""
-        made = {c.code for c in CHECKS if not self.cluster or c.kind in ("finite", "bound")}
+        """The codes setup can return (those of its checks)."""
+        made = {c.code for c in self.checks}
         return [code for code in SETUP_CODES if code.value == 0 or code.value in made]
 
     @property

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gyrogen.abi_rotors import rotor_name
 from gyrogen.scene import Scene
 
 
@@ -43,8 +44,11 @@ class Values:
     b: np.ndarray
 
 
-def values(scene: Scene) -> Values:
+def values(scene: Scene, runtime: dict[str, float] | None = None) -> Values:
+    """The numbers, a runtime axial inertia J_k from runtime (0 without it:
+    only the condition number, which J does not change, reads none)."""
     p = {n: float(v) for n, v in scene.folded().items()}
+    given = runtime or {}
     i12, i13, i23 = p.get("I12", 0.0), p.get("I13", 0.0), p.get("I23", 0.0)
     carrier = np.array([[p["I11"], i12, i13], [i12, p["I22"], i23], [i13, i23, p["I33"]]])
     rotors = scene.rotors
@@ -54,7 +58,12 @@ def values(scene: Scene) -> Values:
         carrier=carrier,
         m=np.array([r.m for r in rotors]),
         I=np.array([r.I for r in rotors]),
-        J=np.array([r.J for r in rotors]),
+        J=np.array(
+            [
+                given.get(rotor_name("J", k), 0.0) if r.J == "runtime" else r.J
+                for k, r in enumerate(rotors, 1)
+            ]
+        ),
         g=axes / np.linalg.norm(axes, axis=1, keepdims=True),
         r=np.array([r.position for r in rotors], dtype=float),
         b=np.array([r.b for r in rotors]),
@@ -81,7 +90,7 @@ def _point(mass: float, rho: np.ndarray) -> np.ndarray:
 
 def condition(scene: Scene) -> float:
     """||A||_F ||A^-1||_F of the inertia the speeds' equations solve with."""
-    v = values(scene)
+    v = values(scene)  # the J_k cancel in it
     a = system_inertia(v) - (v.J[:, None, None] * np.einsum("ki,kj->kij", v.g, v.g)).sum(0)
     return float(np.linalg.norm(a) * np.linalg.norm(np.linalg.inv(a)))
 
@@ -146,7 +155,7 @@ class Motion:
 
 
 def motion(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.0) -> Motion:
-    v = values(scene)
+    v = values(scene, runtime)
     n = len(v.m)
     w, wheels = xs[:, -3 - n : -n], xs[:, -n:]
     rel = wheels - w @ v.g.T
@@ -157,7 +166,7 @@ def motion(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.
 def rhs(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.0) -> np.ndarray:
     """dx/dt of a cluster's states (scene.states order); 3-1-2 angles or the
     quaternion rates are filled in by the caller when the attitude is e."""
-    v = values(scene)
+    v = values(scene, runtime)
     n = len(v.m)
     mo = motion(scene, xs, runtime, t)
     net = mo.motor - v.b * mo.rel
@@ -181,7 +190,7 @@ def rhs(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.0) 
 def outputs(scene: Scene, name: str, xs: np.ndarray, runtime: dict[str, float],
             dcm: np.ndarray, t: Time = 0.0) -> np.ndarray:  # fmt: skip
     """Energy, H in N (dcm: a_i = sum_j C[i, j] n_j per state), motor power."""
-    v = values(scene)
+    v = values(scene, runtime)
     mo = motion(scene, xs, runtime, t)
     if name == "kinetic_energy":
         i_c = system_inertia(v)
@@ -199,7 +208,7 @@ def power_and_torque(
 ) -> np.ndarray:
     """(n, 2): dK/dt (sum of net torque times relative rate: motors and
     friction) and wheel 1's net torque (its J w1' = net_1)."""
-    v = values(scene)
+    v = values(scene, runtime)
     mo = motion(scene, np.atleast_2d(xs), runtime, t)
     net = mo.motor - v.b * mo.rel
     return np.column_stack([(net * mo.rel).sum(1), net[:, 0]])

@@ -264,8 +264,15 @@ _CLUSTER_DRAWS = {
 
 
 def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
-    """A cluster's runtime values are torque laws' (T, k, w_ref): any draw is valid."""
-    cols = [_CLUSTER_DRAWS[name.rsplit("_", 1)[0]](rng, n) for name in scene.runtime]
+    """A cluster's runtime values: torque laws' (T, k, w_ref), any draw
+    valid; an axial inertia J_k within (0.1, 2] of its rotor's I_k."""
+    cols = []
+    for name in scene.runtime:
+        key, k = name.rsplit("_", 1)
+        if key == "J":
+            cols.append(scene.rotors[int(k) - 1].I * rng.uniform(0.1, 2.0, n))
+        else:
+            cols.append(_CLUSTER_DRAWS[key](rng, n))
     return np.stack(cols, axis=1)
 
 

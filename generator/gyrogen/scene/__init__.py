@@ -204,6 +204,8 @@ class Scene(_Strict):
             )
         if not self.rotors:
             check_physics({**self.parameters, **self.simulate.parameters})
+        else:
+            rotors.check_runtime_values(self.rotors, self.simulate.parameters)
         if self.attitude == "quaternion":
             check_quaternion(self.simulate.initial)
         return self

@@ -63,7 +63,8 @@ class Rotor(BaseModel):
 
     m: Folded
     I: Folded
-    J: Folded
+    J: Value
+    """Axial inertia: a number, or "runtime" (setup checks 0 < J <= 2 I)."""
     axis: Vector
     """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
     position: Vector = (0.0, 0.0, 0.0)
@@ -97,11 +98,11 @@ class Rotor(BaseModel):
 
     @model_validator(mode="after")
     def _rules(self) -> Rotor:
-        for name in ("m", "I", "J"):
+        for name in ("m", "I"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name}: must be positive (got {getattr(self, name)})")
-        if self.J > 2.0 * self.I * (1.0 + TRIANGLE_SLACK):
-            raise ValueError(f"J: rotor needs J <= 2 I (I = {self.I}, J = {self.J})")
+        if self.J != "runtime":
+            check_axial(self.I, self.J, "J")
         norm = math.sqrt(sum(x * x for x in self.axis))
         if norm == 0.0:
             raise ValueError("axis: has length 0: not a direction")
@@ -131,14 +132,31 @@ class Rotor(BaseModel):
         return {key: v for key in LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None}
 
 
+def check_axial(inertia: float, axial: float, where: str) -> None:
+    """0 < J <= 2 I (within TRIANGLE_SLACK): an axisymmetric rotor's inertias."""
+    if not axial > 0.0:
+        raise ValueError(f"{where}: must be positive (got {axial})")
+    if axial > 2.0 * inertia * (1.0 + TRIANGLE_SLACK):
+        raise ValueError(f"{where}: rotor needs J <= 2 I (I = {inertia}, J = {axial})")
+
+
 def runtime_names(rotors: list[Rotor]) -> tuple[str, ...]:
-    """p[] of a cluster: each rotor's runtime keys, rotor by rotor."""
+    """p[] of a cluster: each rotor's runtime keys, rotor by rotor (J first,
+    then its torque law's)."""
     return tuple(
         rotor_name(key, k)
         for k, r in enumerate(rotors, 1)
-        for key, v in r.law().items()
+        for key, v in (("J", r.J), *r.law().items())
         if v == "runtime"
     )
+
+
+def check_runtime_values(rotors: list[Rotor], values: Mapping[str, float]) -> None:
+    """The runtime axial inertias given (simulate.parameters) meet J <= 2 I."""
+    for k, r in enumerate(rotors, 1):
+        name = rotor_name("J", k)
+        if r.J == "runtime" and name in values:
+            check_axial(r.I, values[name], f"simulate.parameters.{name}")
 
 
 def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:

@@ -177,7 +177,7 @@ def _param(name: str, value: float | str) -> sm.Expr:
 def _derive(scene: Scene) -> Equations:
     inertia = lumped_inertia(scene)
     axes = [_axis(r) for r in scene.rotors]
-    axial = [_number(r.J) for r in scene.rotors]
+    axial = [_param(rotor_name("J", k), r.J) for k, r in enumerate(scene.rotors, 1)]
     n = len(axes)
     mm, forcing, qdot, net = kane(inertia, axes, axial)
     names = cluster_states(n, False, True)
@@ -260,7 +260,7 @@ def _equations(
         lumped={},
         outputs=_outputs(scene, st, mass, shared, motors, axes),
         shared=shared,
-        checks={},
+        checks={a.name: a for a in mass.diagonal()[3:] if isinstance(a, sm.Symbol)},
         coupled=mass.extract([0, 1, 2], [0, 1, 2]),
         gather=True,
     )

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen import methods, physics
+from gyrogen.abi_rotors import rotor_name
 from gyrogen.analysis.sweep.sweep_sources import compiled, scene_sources
 from gyrogen.errors import SceneError
 from gyrogen.runtime.compiled import Compiled
@@ -140,7 +141,12 @@ def locked_inertia(scene: Scene, p: np.ndarray) -> tuple[np.ndarray, list[np.nda
     if scene.rotors:
         lumped = np.array(lumped_inertia(scene.parameters, scene.rotors))
         axes = [np.array([float(x) for x in r.unit_axis]) for r in scene.rotors]
-        js = [r.J * g for r, g in zip(scene.rotors, axes, strict=True)]
+        runtime = dict(zip(scene.runtime, p, strict=True))
+        axial = [
+            runtime[rotor_name("J", k)] if r.J == "runtime" else float(r.J)
+            for k, r in enumerate(scene.rotors, 1)
+        ]
+        js = [j * g for j, g in zip(axial, axes, strict=True)]
         return lumped + sum(np.outer(j, g) for j, g in zip(js, axes, strict=True)), js
     v = {**scene.folded(), **dict(zip(scene.runtime, p, strict=True))}
     a11, a22, a33, a13 = physics.lumped_inertias(*(v[n] for n in physics.LUMPED_FROM))

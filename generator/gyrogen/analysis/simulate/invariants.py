@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen.abi import STATES
+from gyrogen.abi_rotors import rotor_name
 from gyrogen.analysis.simulate.trajectory import Trajectory, running_integrals
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.scene import Scene
@@ -164,4 +165,7 @@ def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:
 
 def _axial(scene: Scene, p: np.ndarray) -> float:
     """J of the rotor whose rate the u4 residual follows (a cluster's wheel 1)."""
-    return scene.rotors[0].J if scene.rotors else scene_view.values(scene, p)["J"]
+    v = scene_view.values(scene, p)
+    if scene.rotors:
+        return v[rotor_name("J", 1)] if scene.rotors[0].J == "runtime" else float(scene.rotors[0].J)
+    return v["J"]

@@ -96,7 +96,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         ),
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("c", unit.macro, unit.cluster),
+        "checks": printed("c", unit.macro, unit.checks),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }
     out = {

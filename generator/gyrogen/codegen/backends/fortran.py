@@ -110,7 +110,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         ),
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("fortran", unit.macro, unit.cluster),
+        "checks": printed("fortran", unit.macro, unit.checks),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
         "check_locals": () if unit.cluster else local_names(),
         "signature_of": signature_of,
