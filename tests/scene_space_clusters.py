@@ -6,7 +6,8 @@ moments meeting the triangle inequality, turned by a random rotation), N = 1
 to 6 rotors on random axes (unit vectors written to 17 digits; at times all
 along the carrier's axes, or all in one plane) at random positions, each
 with its own mass, inertias, friction, torque law (none, constant, speed
-controller, a T(t) table; values folded or "runtime", J too) and optional limit;
+controller, a T(t) table; values folded or "runtime") and optional limit,
+the carrier's mass and tensor and each rotor's m, I, J at times "runtime";
 either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
@@ -39,9 +40,7 @@ def _carrier(rng: np.random.Generator) -> dict[str, float]:
     return out
 
 
-def _rotor(
-    rng: np.random.Generator, scale: float, runtime: set[str], k: int, axial: dict[str, float]
-) -> dict[str, object]:
+def _rotor(rng: np.random.Generator, scale: float, runtime: set[str], k: int) -> dict[str, object]:
     g = rng.normal(size=3)
     size = 10.0 ** rng.uniform(-3, -1) * scale
     inertia = float(size * rng.uniform(0.5, 1.0))
@@ -52,10 +51,6 @@ def _rotor(
         "axis": [float(x) for x in g / np.linalg.norm(g)],
         "position": [float(x) for x in rng.uniform(-1, 1, 3)],
     }
-    if rng.random() < 0.25:  # setup checks 0 < J <= 2 I; the draw's value goes to simulate
-        runtime.add(f"J_{k}")
-        axial[f"J_{k}"] = float(rotor["J"])  # type: ignore[arg-type]
-        rotor["J"] = "runtime"
     if rng.random() < 0.5:
         rotor["b"] = float(10.0 ** rng.uniform(-6, -2))
     law = str(rng.choice(LAWS))
@@ -116,16 +111,18 @@ def clusters(draw: st.DrawFn) -> Draw:
     n = draw(st.integers(1, MAX_ROTORS))
     carrier = _carrier(rng)
     runtime: set[str] = set()
-    axial: dict[str, float] = {}
-    rotors = [_rotor(rng, carrier["I11"], runtime, k, axial) for k in range(1, n + 1)]
+    rotors = [_rotor(rng, carrier["I11"], runtime, k) for k in range(1, n + 1)]
     _lay_axes(rotors, draw(st.sampled_from(LAYOUTS)), rng)
     broken = draw(st.sampled_from([None] * 15 + list(BREAKS)))
+    at = draw(st.integers(0, n - 1))
     if broken is not None:
-        _break(rotors[draw(st.integers(0, n - 1))], broken)
+        _break(rotors[at], broken)
+    inertial = _runtime_inertia(carrier, rotors, at if broken else None, rng)
+    runtime |= set(inertial)
     attitude = draw(st.sampled_from(["euler312", "quaternion"]))
     initial = {f"u{i}": draw(st.floats(-1, 1)) for i in (1, 2, 3)}
     initial.update({f"w{k}": draw(st.floats(-100, 100)) for k in range(1, n + 1)})
-    params = {name: axial.get(name, _runtime_value(name, rng)) for name in sorted(runtime)}
+    params = {name: inertial.get(name, _runtime_value(name, rng)) for name in sorted(runtime)}
     top = {
         "name": f"cluster{n}",
         "description": f"a drawn cluster of {n} rotors",
@@ -145,6 +142,28 @@ def clusters(draw: st.DrawFn) -> Draw:
     for rotor in rotors:
         text += "\n[[rotors]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in rotor.items())
     return Draw(text, broken is None, broken or "")
+
+
+def _runtime_inertia(
+    carrier: dict[str, object],
+    rotors: list[dict[str, object]],
+    broken: int | None,
+    rng: np.random.Generator,
+) -> dict[str, float]:
+    """Make some inertial values "runtime" (setup checks them; the drawn
+    values go to simulate.parameters): the carrier's tensor and mass in one
+    draw in four, each rotor's m, I, J in one in four (not the broken one's)."""
+    out: dict[str, float] = {}
+    if rng.random() < 0.25:
+        for name in ("m_a", "I11", "I22", "I33", "I12", "I13", "I23"):
+            out[name] = float(carrier[name])  # type: ignore[arg-type]
+            carrier[name] = "runtime"
+    for k, rotor in enumerate(rotors, 1):
+        for key in ("m", "I", "J"):
+            if k - 1 != broken and rng.random() < 0.25:
+                out[f"{key}_{k}"] = float(rotor[key])  # type: ignore[arg-type]
+                rotor[key] = "runtime"
+    return out
 
 
 def _runtime_value(name: str, rng: np.random.Generator) -> float:

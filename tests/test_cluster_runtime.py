@@ -1,7 +1,10 @@
-"""Runtime cluster properties, the subset built: a wheel's axial inertia
-J_k = "runtime". It stays out of the lumped inertia I~ (folded, inverted in
-numbers as before); setup checks 0 < J_k <= 2 I_k (codes 3 and 6) and
-computes 1/J_k; the Newton-Euler reference reads J_k from p[]."""
+"""Runtime cluster properties, the part built: the carrier's mass and
+tensor and each wheel's mass, transverse and axial inertia may be
+"runtime" (positions and axes stay folded). The lumped inertia I~ is then
+named scalars of setup, inverted there; setup checks the values (masses
+and inertias positive, the carrier positive definite and meeting the
+triangle inequality, J_k <= 2 I_k, I~'s condition number); the
+Newton-Euler reference reads them from p[]."""
 
 from __future__ import annotations
 
@@ -11,57 +14,75 @@ import numpy as np
 import pytest
 
 from gyrogen.analysis.linearize import linearize as engine
+from gyrogen.codegen.context import make_context
+from gyrogen.errors import SceneError
 from gyrogen.oracle.compare import compare
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import Scene, builtin_text, load, parse
 
-PYRAMID = builtin_text("rw4_pyramid")
-RUNTIME = (
-    PYRAMID.replace('name = "rw4_pyramid"', 'name = "rw4_runtime_j"')
-    .replace("J = 0.045", 'J = "runtime"')
-    .replace("w_ref_4 = 30.0 }", "w_ref_4 = 30.0, J_1 = 0.045, J_2 = 0.045, J_3 = 0.045, "
-             "J_4 = 0.045 }")
-)  # fmt: skip
+CARRIER = {"m_a": 800.0, "I11": 420.0, "I22": 380.0, "I33": 300.0, "I12": -4.0, "I13": 6.0,
+           "I23": 2.5}  # fmt: skip
+WHEEL = {"m": 5.0, "I": 0.025, "J": 0.045}
+W_REF = {"w_ref_1": 100.0, "w_ref_2": -50.0, "w_ref_3": 80.0, "w_ref_4": 30.0}
+
+
+def _runtime_text() -> str:
+    text = builtin_text("rw4_pyramid").replace('name = "rw4_pyramid"', 'name = "rw4_runtime"')
+    for name, value in CARRIER.items():
+        text = text.replace(f"{name} = {value}", f'{name} = "runtime"', 1)
+    for key, value in WHEEL.items():
+        text = text.replace(f"\n{key} = {value}\n", f'\n{key} = "runtime"\n')
+    given = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEEL.items()}}
+    extra = ", ".join(f"{n} = {v!r}" for n, v in given.items())
+    return text.replace("w_ref_4 = 30.0 }", f"w_ref_4 = 30.0, {extra} }}")
+
+
+TEXT = _runtime_text()
+NOMINAL = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEEL.items()}, **W_REF}
 
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[Language, Compiled]]:
-    scene = parse(RUNTIME, "rw4_runtime_j.toml")
-    _, backends = build_scene(scene, tmp_path_factory.mktemp("runtime_j"), ["c", "fortran"])
+    scene = parse(TEXT, "rw4_runtime.toml")
+    _, backends = build_scene(scene, tmp_path_factory.mktemp("runtime"), ["c", "fortran"])
     return scene, backends
 
 
-def test_p_holds_each_rotors_j_then_its_law(built) -> None:
+def _p(scene: Scene, **change: float) -> np.ndarray:
+    return np.array([{**NOMINAL, **change}[n] for n in scene.runtime])
+
+
+def test_p_holds_the_carrier_then_each_rotor(built) -> None:
     scene, backends = built
-    assert scene.runtime == ("J_1", "w_ref_1", "J_2", "w_ref_2", "J_3", "w_ref_3", "J_4", "w_ref_4")
+    assert scene.runtime[:7] == tuple(CARRIER)
+    assert scene.runtime[7:11] == ("m_1", "I_1", "J_1", "w_ref_1") and len(scene.runtime) == 23
     assert backends["c"].manifest["parameters"] == list(scene.runtime)
 
 
-def test_c_and_fortran_match_the_reference_and_refuse_bad_j(built) -> None:
-    """Random states and parameter sets (J_k within (0.1, 2] I_k), and the
-    refusals: J_k = 0 or negative (code 3), above 2 I_k (code 6), NaN."""
+def test_c_and_fortran_match_the_reference_and_refuse_what_setup_must(built) -> None:
+    """Random states and parameter sets (oracle.scene_view: tensors kept
+    within the triangle inequality), and the refusals of every inertial
+    value made unphysical (oracle.sampling.invalid_cluster) and NaN."""
     scene, backends = built
     report = compare(list(backends.values()), scene, n_states=2000, n_params=20, n_ill=0)
     assert report.passed, [r for r in report.rows if not r.passed]
-    assert not report.refusal_failures and report.refusals_checked >= 2 * 4 * 3
+    assert not report.refusal_failures and report.refusals_checked >= 100
 
 
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_at_the_folded_values_it_is_the_folded_scene(
     language: Language, built, tmp_path: Path
 ) -> None:
-    """With p's J_k at the folded 0.045, rhs and outputs equal rw4_pyramid's
-    to rounding (its own build: folded scenes keep their bytes)."""
+    """With p at rw4_pyramid's values, rhs and outputs equal its own build's
+    to rounding (that build, folded, keeps its bytes: make check-generated)."""
     scene, backends = built
-    folded = load("rw4_pyramid")
-    _, theirs = build_scene(folded, tmp_path / "folded", [language])
+    _, theirs = build_scene(load("rw4_pyramid"), tmp_path / "folded", [language])
     rng = np.random.default_rng(3)
     xs = rng.normal(size=(200, len(scene.states)))
     xs[:, -4:] = rng.uniform(-300, 300, (200, 4))
-    w_ref = np.array([100.0, -50.0, 80.0, 30.0])
-    mine = backends[language].setup(np.ravel(np.column_stack([np.full(4, 0.045), w_ref])))
-    own = theirs[language].setup(w_ref)
+    mine = backends[language].setup(_p(scene))
+    own = theirs[language].setup(np.array(list(W_REF.values())))
     a, b = backends[language].rhs(xs, mine), theirs[language].rhs(xs, own)
     assert np.max(np.abs(a - b) / (1 + np.abs(b))) < 1e-13
     for name in ("kinetic_energy", "angular_momentum", "power"):
@@ -70,23 +91,60 @@ def test_at_the_folded_values_it_is_the_folded_scene(
         assert np.max(np.abs(a - b) / (1 + np.abs(b))) < 1e-13, name
 
 
-def test_setup_codes_name_the_axial_inertia(built) -> None:
-    _, backends = built
-    comp = backends["c"]
-    good = np.ravel(np.column_stack([np.full(4, 0.045), [100.0, -50.0, 80.0, 30.0]]))
-    for j, value, code in ((2, 0.0, 3), (4, -1e-3, 3), (6, 0.0501, 6), (0, 0.05, 0)):
-        p = good.copy()
-        p[j] = value
-        assert comp.setup_code(p)[0] == code, (j, value)
-    assert comp.manifest["setup_codes"]["3"].startswith("a rotor inertia")
+@pytest.mark.parametrize(
+    ("change", "code"),
+    [
+        ({}, 0),
+        ({"m_a": 0.0}, 2),
+        ({"m_3": -1.0}, 2),
+        ({"I_2": 0.0}, 3),
+        ({"J_4": -1e-3}, 3),
+        ({"I11": -420.0}, 4),
+        ({"I12": 500.0}, 4),
+        ({"I33": 900.0}, 5),
+        ({"I33": 800.0, "I12": 0.0, "I13": 0.0, "I23": 0.0}, 0),  # a lamina: on the boundary
+        ({"J_1": 0.0501}, 6),
+        ({"I_1": 0.0224}, 6),
+    ],
+)
+def test_setup_codes(change: dict[str, float], code: int, built) -> None:
+    scene, backends = built
+    for comp in backends.values():
+        assert comp.setup_code(_p(scene, **change))[0] == code, (comp.language, change)
 
 
-def test_the_linear_model_reads_j_from_p(built) -> None:
-    """B over each wheel rate is k_k / J_k at a hold (its speed controller's
-    reference enters as -k (rel - w_ref)), J_k from p."""
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (
+            "I33 = 300.0,",
+            "simulate.parameters.I11..I23: principal moments (379.586, 420.328, 900.087)",
+        ),
+        ("J_2 = 0.045", "simulate.parameters.J_2: rotor needs J <= 2 I (I = 0.025, J = 0.06)"),
+        ("m_4 = 5.0", "simulate.parameters.m_4: must be positive (got -5.0)"),
+    ],
+)
+def test_the_scene_checks_the_runtime_values_it_gives(edit: str, message: str) -> None:
+    bad = {"I33 = 300.0,": "I33 = 900.0,", "J_2 = 0.045": "J_2 = 0.06",
+           "m_4 = 5.0": "m_4 = -5.0"}[edit]  # fmt: skip
+    assert edit in TEXT
+    with pytest.raises(SceneError) as err:
+        parse(TEXT.replace(edit, bad), "bad.toml")
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_op_counts_before_and_after() -> None:
+    """The issue's bar: at most 160 ops in the rhs with every inertial value
+    runtime (rw4_pyramid folded: 114)."""
+    runtime = make_context(parse(TEXT, "rw4_runtime.toml")).ops["rhs"]
+    folded = make_context(load("rw4_pyramid")).ops["rhs"]
+    assert folded == 114 and runtime <= 160, (folded, runtime)
+
+
+def test_the_linear_model_reads_them_from_p(built) -> None:
+    """B over each wheel rate at a hold is k_k / J_k, J_k from p."""
     scene, _ = built
     j = [0.03, 0.04, 0.045, 0.05]
-    given = {f"J_{k}": v for k, v in enumerate(j, 1)}
-    lin = engine.model(scene, parameters=given, spin=0.0)
+    lin = engine.model(scene, parameters={f"J_{k}": v for k, v in enumerate(j, 1)}, spin=0.0)
     rows = [lin.states.index(f"w{k}") for k in (1, 2, 3, 4)]
     assert np.allclose(np.diag(lin.B[rows]), [0.05 / v for v in j], rtol=1e-12)

@@ -19,10 +19,12 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
     "tau_max": ("N m", "torque limit of rotor B{k}: the motor torque is clamped to +-tau_max"),
 }
 """A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
-ROTOR_RUNTIME = ("J", "T", "k", "w_ref")
-"""The rotor keys that may be "runtime", in a rotor's p[] order (the others
-are folded: setup then holds the inverse of the lumped inertia I~ as numbers;
-a runtime J_k stays out of I~, setup checks 0 < J_k <= 2 I_k and inverts it)."""
+ROTOR_RUNTIME = ("m", "I", "J", "T", "k", "w_ref")
+"""The rotor keys that may be "runtime", in a rotor's p[] order (b, tau_max,
+position and axis are folded). With every inertial value folded the
+inverse of the lumped inertia I~ is numbers in the code; with a runtime
+m, I or carrier value setup computes I~ and inverts it; a runtime J_k stays
+out of I~. setup checks the runtime values (setup_checks.cluster_checks)."""
 MAX_ROTORS = 6
 """Rotors a cluster scene may have."""
 AXIS_NORM_SLACK = 1e-3

@@ -155,9 +155,10 @@ class SceneContext:
         checks of its runtime axial inertias (setup_checks.cluster_checks)."""
         if not self.cluster:
             return CHECKS
-        rotors = enumerate(self.scene.rotors, 1)
-        axial = [(rotor_name("J", k), r.I) for k, r in rotors if r.J == "runtime"]
-        return cluster_checks(axial)
+        values: dict[str, float | str] = dict(self.scene.parameters)
+        for k, r in enumerate(self.scene.rotors, 1):
+            values.update({rotor_name(key, k): getattr(r, key) for key in ("m", "I", "J")})
+        return cluster_checks(values, len(self.scene.rotors))
 
     @property
     def setup_codes(self) -> list[Code]:

@@ -45,25 +45,31 @@ class Values:
 
 
 def values(scene: Scene, runtime: dict[str, float] | None = None) -> Values:
-    """The numbers, a runtime axial inertia J_k from runtime (0 without it:
-    only the condition number, which J does not change, reads none)."""
-    p = {n: float(v) for n, v in scene.folded().items()}
+    """The numbers: folded, or runtime ones from runtime by their p[] names
+    (an axial inertia missing there is 0: only the condition number, which
+    J does not change, is computed without it)."""
     given = runtime or {}
+    p = {n: float(given[n] if v == "runtime" else v) for n, v in scene.parameters.items()}
     i12, i13, i23 = p.get("I12", 0.0), p.get("I13", 0.0), p.get("I23", 0.0)
     carrier = np.array([[p["I11"], i12, i13], [i12, p["I22"], i23], [i13, i23, p["I33"]]])
     rotors = scene.rotors
+
+    def each(key: str, missing: float | None = None) -> np.ndarray:
+        out = []
+        for k, r in enumerate(rotors, 1):
+            v = getattr(r, key)
+            name = rotor_name(key, k)
+            out.append(float(v) if v != "runtime" else given.get(name, missing) if
+                       missing is not None else given[name])  # fmt: skip
+        return np.array(out)
+
     axes = np.array([r.axis for r in rotors], dtype=float)
     return Values(
         m_a=p["m_a"],
         carrier=carrier,
-        m=np.array([r.m for r in rotors]),
-        I=np.array([r.I for r in rotors]),
-        J=np.array(
-            [
-                given.get(rotor_name("J", k), 0.0) if r.J == "runtime" else r.J
-                for k, r in enumerate(rotors, 1)
-            ]
-        ),
+        m=each("m"),
+        I=each("I"),
+        J=each("J", 0.0),
         g=axes / np.linalg.norm(axes, axis=1, keepdims=True),
         r=np.array([r.position for r in rotors], dtype=float),
         b=np.array([r.b for r in rotors]),
@@ -88,9 +94,9 @@ def _point(mass: float, rho: np.ndarray) -> np.ndarray:
     return mass * (rho @ rho * np.eye(3) - np.outer(rho, rho))
 
 
-def condition(scene: Scene) -> float:
+def condition(scene: Scene, runtime: dict[str, float] | None = None) -> float:
     """||A||_F ||A^-1||_F of the inertia the speeds' equations solve with."""
-    v = values(scene)  # the J_k cancel in it
+    v = values(scene, runtime)  # the J_k cancel in it
     a = system_inertia(v) - (v.J[:, None, None] * np.einsum("ki,kj->kij", v.g, v.g)).sum(0)
     return float(np.linalg.norm(a) * np.linalg.norm(np.linalg.inv(a)))
 

@@ -311,8 +311,8 @@ def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
     full model's invalid cases that change runtime entries only, and NaN in
     each runtime parameter."""
     cases = []
-    if scene.rotors:  # besides the torque laws, only axial inertias: 0 < J <= 2 I
-        return _axial_cases(scene, base) + _nan_cases(scene, base)
+    if scene.rotors:  # the torque laws take any finite value; the inertial ones not
+        return sampling.invalid_cluster(scene, base) + _nan_cases(scene, base)
     full = scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
     index = {n: i for i, n in enumerate(PARAMETERS)}
     for what, p_full, code in sampling.invalid_parameters(full):
@@ -323,21 +323,6 @@ def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
             )
             cases.append((what, p, code))
     return cases + _nan_cases(scene, base)
-
-
-def _axial_cases(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
-    """A cluster's runtime J_k at 0, negative (code 3) and above 2 I_k (code 6)."""
-    cases = []
-    for k, rotor in enumerate(scene.rotors, 1):
-        name = f"J_{k}"
-        if name not in scene.runtime:
-            continue
-        j = scene.runtime.index(name)
-        for value, code in ((0.0, 3), (-rotor.I, 3), (2.01 * rotor.I, 6)):
-            p = base.copy()
-            p[j] = value
-            cases.append((f"{name} = {value:g}", p, code))
-    return cases
 
 
 def _nan_cases(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:

@@ -251,7 +251,7 @@ def condition(scene: Scene, p_runtime: np.ndarray) -> float:
     """The condition number compare groups parameter sets by: the coupled
     block's (a cluster's: its folded inertia's, ||A||_F ||A^-1||_F)."""
     if scene.rotors:
-        return cluster_reference.condition(scene)
+        return cluster_reference.condition(scene, values(scene, p_runtime))
     full = full_parameters(scene, p_runtime, np.zeros((1, len(STATES))), 0.0)[0]
     return float(sampling.lumped_condition(full))
 
@@ -266,14 +266,29 @@ _CLUSTER_DRAWS = {
 def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
     """A cluster's runtime values: torque laws' (T, k, w_ref), any draw
     valid; an axial inertia J_k within (0.1, 2] of its rotor's I_k."""
-    cols = []
-    for name in scene.runtime:
-        key, k = name.rsplit("_", 1)
-        if key == "J":
-            cols.append(scene.rotors[int(k) - 1].I * rng.uniform(0.1, 2.0, n))
+    cols: dict[str, np.ndarray] = {}
+    folded = scene.folded()
+    diagonal = [float(folded[d]) for d in ("I11", "I22", "I33") if d in folded]
+    scale = float(np.mean(diagonal)) if diagonal else 100.0
+    for name in scene.runtime:  # in p[] order: a rotor's I before its J
+        key, _, k = name.rpartition("_")  # I11: key ""
+        if name == "m_a":
+            cols[name] = rng.uniform(50.0, 500.0, n)
+        elif name in ("I11", "I22", "I33"):  # within 0.8..1.2 of each other: triangle kept
+            cols[name] = scale * rng.uniform(0.8, 1.2, n)
+        elif name in ("I12", "I13", "I23"):
+            cols[name] = scale * rng.uniform(-0.05, 0.05, n)
+        elif key == "m":
+            cols[name] = rng.uniform(1.0, 10.0, n)
+        elif key == "I":
+            cols[name] = rng.uniform(0.01, 0.05, n)
+        elif key == "J":
+            inertia = scene.rotors[int(k) - 1].I
+            base = cols[f"I_{k}"] if inertia == "runtime" else float(inertia)
+            cols[name] = base * rng.uniform(0.1, 2.0, n)
         else:
-            cols.append(_CLUSTER_DRAWS[key](rng, n))
-    return np.stack(cols, axis=1)
+            cols[name] = _CLUSTER_DRAWS[key](rng, n)
+    return np.stack([cols[name] for name in scene.runtime], axis=1)
 
 
 def _cluster_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:

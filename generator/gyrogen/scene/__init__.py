@@ -204,8 +204,10 @@ class Scene(_Strict):
             )
         if not self.rotors:
             check_physics({**self.parameters, **self.simulate.parameters})
-        else:
-            rotors.check_runtime_values(self.rotors, self.simulate.parameters)
+        elif self.runtime and (
+            known := rotors.resolved(self.parameters, self.rotors, self.simulate.parameters)
+        ):
+            rotors.check_values(*known, "simulate.parameters")
         if self.attitude == "quaternion":
             check_quaternion(self.simulate.initial)
         return self
@@ -240,7 +242,7 @@ class Scene(_Strict):
     def runtime(self) -> tuple[str, ...]:
         """Runtime parameters, in p[] order (the model's order, then k, w_ref)."""
         if self.rotors:
-            return rotors.runtime_names(self.rotors)
+            return rotors.runtime_names(self.parameters, self.rotors)
         order = (*PARAMETERS, *CONTROLLER_PARAMETERS)
         return tuple(n for n in order if self.parameters.get(n) == "runtime")
 

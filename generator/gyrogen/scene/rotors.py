@@ -3,9 +3,11 @@
 A cluster scene has a carrier A (mass m_a, a full symmetric inertia tensor
 about A*) and N rotors, each with its own mass, inertias, spin axis g_k
 (fixed in A, normalized exactly), position of B_k* from A*, viscous friction,
-torque law and optional torque limit. Mass, inertias and geometry are folded
-into the code (setup then holds the inverse of the constant inertia as
-numbers); the torque laws' T, k and w_ref may be "runtime". No translation:
+torque law and optional torque limit. The torque laws' T, k and w_ref, the
+carrier's mass and tensor and each rotor's m, I and J may be "runtime"
+(checked by setup; the values simulate.parameters gives, here); positions,
+axes, friction and limits are folded. With every inertial value folded,
+setup holds the inverse of the constant inertia as numbers. No translation:
 the system's mass center is fixed in A and free in N (a free-floating
 spacecraft). Each rule raises ValueError with the line pydantic shows.
 """
@@ -44,7 +46,7 @@ from gyrogen.scene.rules import check_table, parameter_value
 def _folded(v: object) -> object:
     if v == "runtime":
         raise ValueError(
-            "a rotor's mass, inertias, friction and limit are folded: only "
+            "a rotor's friction and limit are folded: only "
             f'{", ".join(ROTOR_RUNTIME)} may be "runtime"'
         )
     return parameter_value(v)
@@ -61,10 +63,11 @@ LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref"), 
 class Rotor(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    m: Folded
-    I: Folded
+    m: Value
+    I: Value
     J: Value
-    """Axial inertia: a number, or "runtime" (setup checks 0 < J <= 2 I)."""
+    """Mass, transverse and axial inertia: numbers, or "runtime" (setup
+    checks them: positive, J <= 2 I, the lumped inertia's condition)."""
     axis: Vector
     """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
     position: Vector = (0.0, 0.0, 0.0)
@@ -99,10 +102,13 @@ class Rotor(BaseModel):
     @model_validator(mode="after")
     def _rules(self) -> Rotor:
         for name in ("m", "I"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name}: must be positive (got {getattr(self, name)})")
-        if self.J != "runtime":
+            value = getattr(self, name)
+            if value != "runtime" and not value > 0.0:
+                raise ValueError(f"{name}: must be positive (got {value})")
+        if self.J != "runtime" and self.I != "runtime":
             check_axial(self.I, self.J, "J")
+        elif self.J != "runtime" and not self.J > 0.0:
+            raise ValueError(f"J: must be positive (got {self.J})")
         norm = math.sqrt(sum(x * x for x in self.axis))
         if norm == 0.0:
             raise ValueError("axis: has length 0: not a direction")
@@ -140,23 +146,38 @@ def check_axial(inertia: float, axial: float, where: str) -> None:
         raise ValueError(f"{where}: rotor needs J <= 2 I (I = {inertia}, J = {axial})")
 
 
-def runtime_names(rotors: list[Rotor]) -> tuple[str, ...]:
-    """p[] of a cluster: each rotor's runtime keys, rotor by rotor (J first,
-    then its torque law's)."""
-    return tuple(
+def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) -> tuple[str, ...]:
+    """p[] of a cluster: the carrier's runtime keys (CLUSTER_CARRIER order),
+    then each rotor's, rotor by rotor (m, I, J, then its torque law's)."""
+    carrier = tuple(n for n in CLUSTER_CARRIER if parameters.get(n) == "runtime")
+    return carrier + tuple(
         rotor_name(key, k)
         for k, r in enumerate(rotors, 1)
-        for key, v in (("J", r.J), *r.law().items())
+        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *r.law().items())
         if v == "runtime"
     )
 
 
-def check_runtime_values(rotors: list[Rotor], values: Mapping[str, float]) -> None:
-    """The runtime axial inertias given (simulate.parameters) meet J <= 2 I."""
+def resolved(
+    parameters: Mapping[str, float | str], rotors: list[Rotor], given: Mapping[str, float]
+) -> tuple[dict[str, float], list[Rotor]] | None:
+    """The carrier's and the rotors' inertial values with the runtime ones
+    from given (simulate.parameters), or None when one is not given."""
+    values: dict[str, float] = {}
+    for n, v in parameters.items():
+        if v == "runtime" and n not in given:
+            return None
+        values[n] = float(given[n] if v == "runtime" else v)
+    out = []
     for k, r in enumerate(rotors, 1):
-        name = rotor_name("J", k)
-        if r.J == "runtime" and name in values:
-            check_axial(r.I, values[name], f"simulate.parameters.{name}")
+        update: dict[str, float] = {}
+        for key in ("m", "I", "J"):
+            if getattr(r, key) == "runtime":
+                if rotor_name(key, k) not in given:
+                    return None
+                update[key] = float(given[rotor_name(key, k)])
+        out.append(r.model_copy(update=update))
+    return values, out
 
 
 def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:
@@ -176,24 +197,37 @@ def check_cluster(
     for n in ("m_a", "I11", "I22", "I33"):
         if n not in parameters:
             raise ValueError(f"parameters: missing {n}")
-    for n, v in parameters.items():
+    for n in parameters:
         if n not in CLUSTER_CARRIER:
             raise ValueError(
                 f"parameters.{n}: not a carrier key of a cluster scene "
                 f"({', '.join(CLUSTER_CARRIER)}; each rotor's keys go in its [[rotors]] table)"
             )
-        if v == "runtime":
-            raise ValueError(f'parameters.{n}: a cluster\'s carrier is folded, not "runtime"')
+    known = resolved(parameters, rotors, {})
+    if known is not None:
+        check_values(*known, "parameters")
+
+
+def check_values(parameters: Mapping[str, float], rotors: list[Rotor], where: str) -> None:
+    """A cluster's inertial values, every one known (folded or given in
+    where): positive masses and inertias, J <= 2 I, a positive-definite
+    carrier meeting the triangle inequality, a well-conditioned lumped inertia."""
+    for k, r in enumerate(rotors, 1):
+        for key in ("m", "I"):
+            if not getattr(r, key) > 0.0:
+                raise ValueError(f"{where}.{rotor_name(key, k)}: must be positive "
+                                 f"(got {getattr(r, key)})")  # fmt: skip
+        check_axial(r.I, r.J, f"{where}.{rotor_name('J', k)}")  # type: ignore[arg-type]
     carrier = carrier_tensor(parameters)
-    if not parameters["m_a"] > 0:  # type: ignore[operator]
-        raise ValueError(f"parameters.m_a: must be positive (got {parameters['m_a']})")
+    if not parameters["m_a"] > 0:
+        raise ValueError(f"{where}.m_a: must be positive (got {parameters['m_a']})")
     moments = [float(x) for x in np.linalg.eigvalsh(np.array(carrier))]
     if not min(moments) > 0:
-        raise ValueError("parameters.I11..I23: carrier inertia is not positive definite")
+        raise ValueError(f"{where}.I11..I23: carrier inertia is not positive definite")
     if 2.0 * max(moments) - sum(moments) > TRIANGLE_SLACK * sum(moments):
         text = ", ".join(f"{m:.6g}" for m in sorted(moments))
         raise ValueError(
-            f"parameters.I11..I23: principal moments ({text}) violate the triangle inequality"
+            f"{where}.I11..I23: principal moments ({text}) violate the triangle inequality"
         )
     try:
         lumped = lumped_inertia(parameters, rotors)
@@ -225,7 +259,7 @@ def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -
     return physics.cluster_inertia(
         float(parameters["m_a"]),
         carrier_tensor(parameters),
-        [(r.m, r.I, [float(x) for x in r.unit_axis], r.position) for r in rotors],
+        [(float(r.m), float(r.I), [float(x) for x in r.unit_axis], r.position) for r in rotors],
     )
 
 

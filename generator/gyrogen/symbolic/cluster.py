@@ -15,7 +15,9 @@ entry,
 
 with h and each rotor's torque named values of the rhs (Equations.shared),
 so the momentum the carrier and a wheel exchange is one rounded number.
-Every inertial value is folded, so I~^-1 is numbers in the code.
+With every inertial value folded I~^-1 is numbers in the code; an entry of
+I~ that reads a runtime value is a named scalar of setup (IC11..IC23,
+Equations.lumped), and setup inverts I~ (optimize.block_inverse).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import sympy as sm
 import sympy.physics.mechanics as me
 
 from gyrogen import physics
-from gyrogen.abi_rotors import cluster_states, rotor_name
+from gyrogen.abi_rotors import CLUSTER_CARRIER, cluster_states, rotor_name
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import Rotor
 from gyrogen.symbolic import equations, model
@@ -44,20 +46,44 @@ def _axis(r: Rotor) -> sm.Matrix:
 
 
 def _carrier(scene: Scene) -> list[list[sm.Expr]]:
-    v = {n: _number(x) for n, x in scene.folded().items()}
+    v = {n: _param(n, x) for n, x in scene.parameters.items()}
     z = sm.S.Zero
     i12, i13, i23 = v.get("I12", z), v.get("I13", z), v.get("I23", z)
     return [[v["I11"], i12, i13], [i12, v["I22"], i23], [i13, i23, v["I33"]]]
 
 
 def lumped_inertia(scene: Scene) -> sm.Matrix:
-    """I~ about the mass center C, exact."""
+    """I~ about the mass center C, exact: numbers, or expressions in the
+    runtime parameters (carrier tensor, masses, transverse inertias)."""
     rotors = [
-        (_number(r.m), _number(r.I), list(_axis(r)), [_number(x) for x in r.position])
-        for r in scene.rotors
+        (
+            _param(rotor_name("m", k), r.m),
+            _param(rotor_name("I", k), r.I),
+            list(_axis(r)),
+            [_number(x) for x in r.position],
+        )
+        for k, r in enumerate(scene.rotors, 1)
     ]
-    m_a = _number(float(scene.parameters["m_a"]))
+    m_a = _param("m_a", scene.parameters["m_a"])
     return sm.Matrix(physics.cluster_inertia(m_a, _carrier(scene), rotors))
+
+
+LUMPED = ((0, 0, "IC11"), (1, 1, "IC22"), (2, 2, "IC33"), (0, 1, "IC12"), (0, 2, "IC13"),
+          (1, 2, "IC23"))  # fmt: skip
+"""I~'s entries as setup names them when they depend on runtime parameters."""
+
+
+def _named(exact: sm.Matrix) -> tuple[sm.Matrix, dict[sm.Symbol, sm.Expr]]:
+    """I~ with each entry that reads a runtime parameter as a named scalar
+    of setup (Equations.lumped), and those scalars' values."""
+    out = sm.Matrix(exact)
+    lumped: dict[sm.Symbol, sm.Expr] = {}
+    for i, j, name in LUMPED:
+        if exact[i, j].free_symbols:
+            s = sm.Symbol(name, real=True)
+            lumped[s] = sm.factor(sm.cancel(exact[i, j]))
+            out[i, j] = out[j, i] = s
+    return out, lumped
 
 
 def _plain(names: tuple[str, ...]) -> tuple[sm.Symbol, ...]:
@@ -175,7 +201,7 @@ def _param(name: str, value: float | str) -> sm.Expr:
 
 
 def _derive(scene: Scene) -> Equations:
-    inertia = lumped_inertia(scene)
+    inertia, lumped = _named(lumped_inertia(scene))
     axes = [_axis(r) for r in scene.rotors]
     axial = [_param(rotor_name("J", k), r.J) for k, r in enumerate(scene.rotors, 1)]
     n = len(axes)
@@ -206,7 +232,7 @@ def _derive(scene: Scene) -> Equations:
         **dict(zip(f, f_value, strict=True)),
     }
     eqs = _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
-    eqs = dataclasses.replace(eqs, inputs=torques["inputs"])
+    eqs = dataclasses.replace(eqs, inputs=torques["inputs"], lumped=lumped)
     if not scene.outputs.linear_model:
         return eqs
     torques = _torques(scene, st, axes, perturbed=True)
@@ -260,7 +286,7 @@ def _equations(
         lumped={},
         outputs=_outputs(scene, st, mass, shared, motors, axes),
         shared=shared,
-        checks={a.name: a for a in mass.diagonal()[3:] if isinstance(a, sm.Symbol)},
+        checks={n: sm.Symbol(n, real=True) for n in scene.runtime if _inertial(n)},
         coupled=mass.extract([0, 1, 2], [0, 1, 2]),
         gather=True,
     )
@@ -298,6 +324,11 @@ def _outputs(
             motor.xreplace(full) * (wheels[k] - axes[k].dot(w_a)) for k, motor in enumerate(motors)
         )
     return out
+
+
+def _inertial(name: str) -> bool:
+    """A runtime parameter setup's checks read: the carrier's, a mass, an inertia."""
+    return name in CLUSTER_CARRIER or name.rpartition("_")[0] in ("m", "I", "J")
 
 
 def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:

@@ -175,8 +175,9 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     inline = _inlined(shared)
     jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     linear = _linear_model(eqs, inverse, kin, hoister) if eqs.perturbed else None
-    values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
-    det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
+    cluster = eqs.coupled.shape[0] == 3  # no reduced mass to multiply out
+    values = [v if cluster else _multiplied_out(v, eqs.lumped) for v in hoister.values]
+    det = sm.S.Zero if cluster else _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(
         setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac, linear=linear
@@ -242,7 +243,7 @@ def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     cluster's 3x3 block, folded: ||M||_F ||M^-1||_F (physics.frobenius_condition)."""
     if block.shape[0] == 3:
         cond = physics.frobenius_condition(block.tolist(), sm.sqrt)
-        return as_double(cond, integers=False)
+        return as_double(cond, integers=False) if cond.is_number else cond
     cond = physics.condition(block[0, 0], block[0, 1], block[1, 1], det, sm.sqrt)
     return as_double(cond, integers=False) if cond.is_number else cond
 

@@ -23,12 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen import methods, physics
-from gyrogen.abi_rotors import rotor_name
 from gyrogen.analysis.sweep.sweep_sources import compiled, scene_sources
 from gyrogen.errors import SceneError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, validate
-from gyrogen.scene.rotors import lumped_inertia
+from gyrogen.scene.rotors import lumped_inertia, resolved
 
 RESIDUAL_BAR = 1e-9
 """A point is an equilibrium when its kept states' rates are at most this
@@ -139,14 +138,12 @@ def locked_inertia(scene: Scene, p: np.ndarray) -> tuple[np.ndarray, list[np.nda
     """The inertia with the wheels locked (A-components), and each wheel's
     axial momentum direction J g (the rate it multiplies: its w or u4)."""
     if scene.rotors:
-        lumped = np.array(lumped_inertia(scene.parameters, scene.rotors))
-        axes = [np.array([float(x) for x in r.unit_axis]) for r in scene.rotors]
-        runtime = dict(zip(scene.runtime, p, strict=True))
-        axial = [
-            runtime[rotor_name("J", k)] if r.J == "runtime" else float(r.J)
-            for k, r in enumerate(scene.rotors, 1)
-        ]
-        js = [j * g for j, g in zip(axial, axes, strict=True)]
+        known = resolved(scene.parameters, scene.rotors, dict(zip(scene.runtime, p, strict=True)))
+        assert known is not None  # p holds every runtime value
+        values, rotors = known
+        lumped = np.array(lumped_inertia(values, rotors))
+        axes = [np.array([float(x) for x in r.unit_axis]) for r in rotors]
+        js = [float(r.J) * g for r, g in zip(rotors, axes, strict=True)]
         return lumped + sum(np.outer(j, g) for j, g in zip(js, axes, strict=True)), js
     v = {**scene.folded(), **dict(zip(scene.runtime, p, strict=True))}
     a11, a22, a33, a13 = physics.lumped_inertias(*(v[n] for n in physics.LUMPED_FROM))

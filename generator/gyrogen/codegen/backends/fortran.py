@@ -74,7 +74,8 @@ def files(unit: SceneContext) -> dict[str, str]:
 
     rhs, *outputs = functions(unit, lambda a, i: f"{a}({i + 1})", assign)
     setup = statements(unit.optimized.setup, lambda k: f"c({k + 1})", assign)
-    setup_names = [*SIGNATURES["setup"].names, SETUP_RESULT, *local_names()]
+    check_locals = local_names(unit.checks)
+    setup_names = [*SIGNATURES["setup"].names, SETUP_RESULT, *check_locals]
     _check_names(
         [*setup_names, *(v.name for v in unit.setup_locals), *(s.name for s in setup if s.declare)],
         "setup",
@@ -112,7 +113,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "registry": methods_registry,
         "checks": printed("fortran", unit.macro, unit.checks),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
-        "check_locals": () if unit.cluster else local_names(),
+        "check_locals": check_locals,
         "signature_of": signature_of,
     }
     out = {
