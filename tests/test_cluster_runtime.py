@@ -1,6 +1,6 @@
 """Runtime cluster properties, the part built: the carrier's mass and
-tensor and each wheel's mass, transverse and axial inertia may be
-"runtime" (positions and axes stay folded). The lumped inertia I~ is then
+tensor and each wheel's mass, transverse and axial inertia and position may
+be "runtime" (the axes stay folded). The lumped inertia I~ is then
 named scalars of setup, inverted there; setup checks the values (masses
 and inertias positive, the carrier positive definite and meeting the
 triangle inequality, J_k <= 2 I_k, I~'s condition number); the
@@ -24,6 +24,8 @@ from gyrogen.scene import Scene, builtin_text, load, parse
 CARRIER = {"m_a": 800.0, "I11": 420.0, "I22": 380.0, "I33": 300.0, "I12": -4.0, "I13": 6.0,
            "I23": 2.5}  # fmt: skip
 WHEEL = {"m": 5.0, "I": 0.025, "J": 0.045}
+POSITIONS = [(0.3, 0.0, -0.2), (0.0, 0.3, -0.2), (-0.3, 0.0, -0.2), (0.0, -0.3, -0.2)]
+PLACES = {f"r{i}_{k}": x for k, at in enumerate(POSITIONS, 1) for i, x in enumerate(at, 1)}
 W_REF = {"w_ref_1": 100.0, "w_ref_2": -50.0, "w_ref_3": 80.0, "w_ref_4": 30.0}
 
 
@@ -33,13 +35,17 @@ def _runtime_text() -> str:
         text = text.replace(f"{name} = {value}", f'{name} = "runtime"', 1)
     for key, value in WHEEL.items():
         text = text.replace(f"\n{key} = {value}\n", f'\n{key} = "runtime"\n')
-    given = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEEL.items()}}
+    for at in POSITIONS:
+        text = text.replace(f"position = {list(at)}", 'position = "runtime"')
+    given = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEEL.items()},
+             **PLACES}  # fmt: skip
     extra = ", ".join(f"{n} = {v!r}" for n, v in given.items())
     return text.replace("w_ref_4 = 30.0 }", f"w_ref_4 = 30.0, {extra} }}")
 
 
 TEXT = _runtime_text()
-NOMINAL = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEEL.items()}, **W_REF}
+NOMINAL = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEEL.items()},
+           **PLACES, **W_REF}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +62,8 @@ def _p(scene: Scene, **change: float) -> np.ndarray:
 def test_p_holds_the_carrier_then_each_rotor(built) -> None:
     scene, backends = built
     assert scene.runtime[:7] == tuple(CARRIER)
-    assert scene.runtime[7:11] == ("m_1", "I_1", "J_1", "w_ref_1") and len(scene.runtime) == 23
+    assert scene.runtime[7:14] == ("m_1", "I_1", "J_1", "r1_1", "r2_1", "r3_1", "w_ref_1")
+    assert len(scene.runtime) == 7 + 4 * 7
     assert backends["c"].manifest["parameters"] == list(scene.runtime)
 
 
@@ -135,7 +142,7 @@ def test_the_scene_checks_the_runtime_values_it_gives(edit: str, message: str) -
 
 def test_op_counts_before_and_after() -> None:
     """The issue's bar: at most 160 ops in the rhs with every inertial value
-    runtime (rw4_pyramid folded: 114)."""
+    and position runtime (rw4_pyramid folded: 114)."""
     runtime = make_context(parse(TEXT, "rw4_runtime.toml")).ops["rhs"]
     folded = make_context(load("rw4_pyramid")).ops["rhs"]
     assert folded == 114 and runtime <= 160, (folded, runtime)

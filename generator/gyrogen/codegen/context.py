@@ -172,7 +172,11 @@ class SceneContext:
         out = []
         for k, r in enumerate(self.scene.rotors, 1):
             g = ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
-            at = ", ".join(f"{x:.6g}" for x in r.position)
+            at = (
+                f"p[r1_{k}], p[r2_{k}], p[r3_{k}]"
+                if r.position == "runtime"
+                else ", ".join(f"{x:.6g}" for x in r.position)
+            )
             out.append(f"Rotor B{k}: axis g{k} = ({g}) in A, B{k}* at ({at}) m from A*;")
             out.append(f"  {_law_doc(r.law(), r.torque, k)};")
             limit = "" if r.tau_max is None else f", |T| clamped to {r.tau_max:g} N m"

@@ -71,7 +71,15 @@ def values(scene: Scene, runtime: dict[str, float] | None = None) -> Values:
         I=each("I"),
         J=each("J", 0.0),
         g=axes / np.linalg.norm(axes, axis=1, keepdims=True),
-        r=np.array([r.position for r in rotors], dtype=float),
+        r=np.array(
+            [
+                [given[rotor_name(f"r{i}", k)] for i in (1, 2, 3)]
+                if r.position == "runtime"
+                else r.position
+                for k, r in enumerate(rotors, 1)
+            ],
+            dtype=float,
+        ),
         b=np.array([r.b for r in rotors]),
     )
 

@@ -282,6 +282,8 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
             cols[name] = rng.uniform(1.0, 10.0, n)
         elif key == "I":
             cols[name] = rng.uniform(0.01, 0.05, n)
+        elif key in ("r1", "r2", "r3"):
+            cols[name] = rng.uniform(-0.5, 0.5, n)
         elif key == "J":
             inertia = scene.rotors[int(k) - 1].I
             base = cols[f"I_{k}"] if inertia == "runtime" else float(inertia)

@@ -5,9 +5,10 @@ about A*) and N rotors, each with its own mass, inertias, spin axis g_k
 (fixed in A, normalized exactly), position of B_k* from A*, viscous friction,
 torque law and optional torque limit. The torque laws' T, k and w_ref, the
 carrier's mass and tensor and each rotor's m, I and J may be "runtime"
-(checked by setup; the values simulate.parameters gives, here); positions,
-axes, friction and limits are folded. With every inertial value folded,
-setup holds the inverse of the constant inertia as numbers. No translation:
+(checked by setup; the values simulate.parameters gives, here), and so may
+a position (p's r1_k, r2_k, r3_k); axes, friction and limits are folded.
+With every inertial value folded, setup holds the inverse of the constant
+inertia as numbers. No translation:
 the system's mass center is fixed in A and free in N (a free-floating
 spacecraft). Each rule raises ValueError with the line pydantic shows.
 """
@@ -36,6 +37,7 @@ from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
 from gyrogen.abi_rotors import (
     AXIS_NORM_SLACK,
     CLUSTER_CARRIER,
+    POSITION,
     ROTOR_RUNTIME,
     cluster_states,
     rotor_name,
@@ -70,8 +72,8 @@ class Rotor(BaseModel):
     checks them: positive, J <= 2 I, the lumped inertia's condition)."""
     axis: Vector
     """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
-    position: Vector = (0.0, 0.0, 0.0)
-    """B_k* from A*, in A-components (m)."""
+    position: Vector | Literal["runtime"] = (0.0, 0.0, 0.0)
+    """B_k* from A*, in A-components (m); "runtime": p's r1_k, r2_k, r3_k."""
     b: Annotated[Folded, Field(ge=0)] = 0.0
     torque: str = "none"
     """One of CLUSTER_LAWS (a string here, so that the refusal can say why)."""
@@ -153,9 +155,13 @@ def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) ->
     return carrier + tuple(
         rotor_name(key, k)
         for k, r in enumerate(rotors, 1)
-        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *r.law().items())
+        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *_position(r), *r.law().items())
         if v == "runtime"
     )
+
+
+def _position(r: Rotor) -> tuple[tuple[str, str], ...]:
+    return tuple((key, "runtime") for key in POSITION) if r.position == "runtime" else ()
 
 
 def resolved(
@@ -170,12 +176,16 @@ def resolved(
         values[n] = float(given[n] if v == "runtime" else v)
     out = []
     for k, r in enumerate(rotors, 1):
-        update: dict[str, float] = {}
+        update: dict[str, object] = {}
         for key in ("m", "I", "J"):
             if getattr(r, key) == "runtime":
                 if rotor_name(key, k) not in given:
                     return None
                 update[key] = float(given[rotor_name(key, k)])
+        if r.position == "runtime":
+            if any(rotor_name(key, k) not in given for key in POSITION):
+                return None
+            update["position"] = tuple(float(given[rotor_name(key, k)]) for key in POSITION)
         out.append(r.model_copy(update=update))
     return values, out
 

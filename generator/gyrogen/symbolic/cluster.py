@@ -28,7 +28,7 @@ import sympy as sm
 import sympy.physics.mechanics as me
 
 from gyrogen import physics
-from gyrogen.abi_rotors import CLUSTER_CARRIER, cluster_states, rotor_name
+from gyrogen.abi_rotors import CLUSTER_CARRIER, POSITION, cluster_states, rotor_name
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import Rotor
 from gyrogen.symbolic import equations, model
@@ -60,7 +60,9 @@ def lumped_inertia(scene: Scene) -> sm.Matrix:
             _param(rotor_name("m", k), r.m),
             _param(rotor_name("I", k), r.I),
             list(_axis(r)),
-            [_number(x) for x in r.position],
+            [sm.Symbol(rotor_name(key, k), real=True) for key in POSITION]
+            if r.position == "runtime"
+            else [_number(x) for x in r.position],
         )
         for k, r in enumerate(scene.rotors, 1)
     ]
@@ -328,7 +330,7 @@ def _outputs(
 
 def _inertial(name: str) -> bool:
     """A runtime parameter setup's checks read: the carrier's, a mass, an inertia."""
-    return name in CLUSTER_CARRIER or name.rpartition("_")[0] in ("m", "I", "J")
+    return name in CLUSTER_CARRIER or name.rpartition("_")[0] in ("m", "I", "J", *POSITION)
 
 
 def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:
