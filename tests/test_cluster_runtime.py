@@ -155,3 +155,32 @@ def test_the_linear_model_reads_them_from_p(built) -> None:
     lin = engine.model(scene, parameters={f"J_{k}": v for k, v in enumerate(j, 1)}, spin=0.0)
     rows = [lin.states.index(f"w{k}") for k in (1, 2, 3, 4)]
     assert np.allclose(np.diag(lin.B[rows]), [0.05 / v for v in j], rtol=1e-12)
+
+
+def test_random_axes_with_everything_runtime(tmp_path: Path) -> None:
+    """Six wheels on axes off the carrier's (exact rationals of denominators
+    ~1e9): I~'s entries stay sums as the formulas give them (put over a
+    common denominator, these raised LiteralError: coefficients past double
+    range), and C matches the reference."""
+    rng = np.random.default_rng(5)
+    rows, given = [], {**CARRIER}
+    for k in range(1, 7):
+        g = [float(x) for x in rng.normal(size=3)]
+        g = [x / float(np.linalg.norm(g)) for x in g]
+        rows.append(
+            f'[[rotors]]\nm = "runtime"\nI = "runtime"\nJ = "runtime"\n'
+            f'axis = [{g[0]!r}, {g[1]!r}, {g[2]!r}]\nposition = "runtime"\n'
+        )
+        given.update({f"m_{k}": 4.0, f"I_{k}": 0.02, f"J_{k}": 0.03, f"r1_{k}": 0.1 * k,
+                      f"r2_{k}": -0.1, f"r3_{k}": 0.05})  # fmt: skip
+    head = "\n".join(f'{n} = "runtime"' for n in CARRIER)
+    sim = ", ".join(f"{n} = {v!r}" for n, v in given.items())
+    text = (
+        f'name = "rw6_random"\ndescription = "random axes"\nintegrators = ["dop853"]\n'
+        f"[parameters]\n{head}\n[outputs]\nangular_momentum = true\n" + "".join(rows)
+        + f"[simulate]\nparameters = {{ {sim} }}\n"
+    )  # fmt: skip
+    scene = parse(text, "rw6_random.toml")
+    _, backends = build_scene(scene, tmp_path / "gen", ["c"])
+    report = compare([backends["c"]], scene, n_states=500, n_params=5, n_ill=0)
+    assert report.passed and not report.refusal_failures, report.rows

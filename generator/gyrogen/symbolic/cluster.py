@@ -83,7 +83,7 @@ def _named(exact: sm.Matrix) -> tuple[sm.Matrix, dict[sm.Symbol, sm.Expr]]:
     for i, j, name in LUMPED:
         if exact[i, j].free_symbols:
             s = sm.Symbol(name, real=True)
-            lumped[s] = sm.factor(sm.cancel(exact[i, j]))
+            lumped[s] = exact[i, j]  # as summed: one fraction would need huge integers
             out[i, j] = out[j, i] = s
     return out, lumped
 
