@@ -281,7 +281,11 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
         elif key == "m":
             cols[name] = rng.uniform(1.0, 10.0, n)
         elif key == "I":
-            cols[name] = rng.uniform(0.01, 0.05, n)
+            axial = scene.rotors[int(k) - 1].J
+            if axial == "runtime":
+                cols[name] = rng.uniform(0.01, 0.05, n)
+            else:  # J <= 2 I: I at least half the folded J
+                cols[name] = float(axial) * rng.uniform(0.5, 2.5, n)
         elif key in ("r1", "r2", "r3"):
             cols[name] = rng.uniform(-0.5, 0.5, n)
         elif key == "J":
