@@ -356,8 +356,8 @@ def _integrators(scene: Scene, comp: Compiled, p: np.ndarray) -> None:
 def _spiky(scene: Scene) -> bool:
     """A torque table with points closer than 1e-6 s: a jump that RK4's
     fixed steps straddle, so its error is no longer its convergence's."""
-    table = scene.effects.torque_table or []
-    return any(b[0] - a[0] < 1e-6 for a, b in itertools.pairwise(table))
+    tables = [scene.effects.torque_table or [], *(r.torque_table or [] for r in scene.rotors)]
+    return any(b[0] - a[0] < 1e-6 for t in tables for a, b in itertools.pairwise(t))
 
 
 def _rk4_converges(

@@ -6,7 +6,9 @@ moments meeting the triangle inequality, turned by a random rotation), N = 1
 to 6 rotors on random axes (unit vectors written to 17 digits; at times all
 along the carrier's axes, or all in one plane) at random positions, each
 with its own mass, inertias, friction, torque law (none, constant, speed
-controller; values folded or "runtime") and optional limit;
+controller, a T(t) table; values folded or "runtime") and optional limit,
+the carrier's mass and tensor and each rotor's m, I, J and position at
+times "runtime";
 either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
@@ -21,7 +23,7 @@ from scene_space import INTEGRATOR_LISTS, TARGET_LISTS, Draw, offered, to_toml, 
 
 from gyrogen.abi_rotors import MAX_ROTORS
 
-LAWS = ("none", "constant", "speed_controller")
+LAWS = ("none", "constant", "speed_controller", "table")
 BREAKS = ("axis of length 0", "axis of length 1.01", "J > 2 I", "negative tau_max", "negative b")
 
 
@@ -56,6 +58,10 @@ def _rotor(rng: np.random.Generator, scale: float, runtime: set[str], k: int) ->
     rotor["torque"] = law
     values = {"T": float(rng.uniform(-1, 1) * size), "k": float(10.0 ** rng.uniform(-3, 0)),
               "w_ref": float(rng.uniform(-200, 200))}  # fmt: skip
+    if law == "table":  # 2 to 6 points over the drawn scene's 1 s, and beyond it
+        times = np.sort(rng.uniform(-0.2, 1.2, rng.integers(2, 7)))
+        torques = rng.uniform(-1, 1, times.size) * size
+        rotor["torque_table"] = [[float(t), float(v)] for t, v in zip(times, torques, strict=True)]
     for key in {"constant": ("T",), "speed_controller": ("k", "w_ref")}.get(law, ()):
         if rng.random() < 0.5:
             rotor[key] = "runtime"
@@ -109,12 +115,15 @@ def clusters(draw: st.DrawFn) -> Draw:
     rotors = [_rotor(rng, carrier["I11"], runtime, k) for k in range(1, n + 1)]
     _lay_axes(rotors, draw(st.sampled_from(LAYOUTS)), rng)
     broken = draw(st.sampled_from([None] * 15 + list(BREAKS)))
+    at = draw(st.integers(0, n - 1))
     if broken is not None:
-        _break(rotors[draw(st.integers(0, n - 1))], broken)
+        _break(rotors[at], broken)
+    inertial = _runtime_inertia(carrier, rotors, at if broken else None, rng)
+    runtime |= set(inertial)
     attitude = draw(st.sampled_from(["euler312", "quaternion"]))
     initial = {f"u{i}": draw(st.floats(-1, 1)) for i in (1, 2, 3)}
     initial.update({f"w{k}": draw(st.floats(-100, 100)) for k in range(1, n + 1)})
-    params = {name: _runtime_value(name, rng) for name in sorted(runtime)}
+    params = {name: inertial.get(name, _runtime_value(name, rng)) for name in sorted(runtime)}
     top = {
         "name": f"cluster{n}",
         "description": f"a drawn cluster of {n} rotors",
@@ -136,6 +145,33 @@ def clusters(draw: st.DrawFn) -> Draw:
     for rotor in rotors:
         text += "\n[[rotors]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in rotor.items())
     return Draw(text, broken is None, broken or "")
+
+
+def _runtime_inertia(
+    carrier: dict[str, object],
+    rotors: list[dict[str, object]],
+    broken: int | None,
+    rng: np.random.Generator,
+) -> dict[str, float]:
+    """Make some inertial values "runtime" (setup checks them; the drawn
+    values go to simulate.parameters): the carrier's tensor and mass in one
+    draw in four, each rotor's m, I, J in one in four (not the broken one's),
+    its position in one in four."""
+    out: dict[str, float] = {}
+    if rng.random() < 0.25:
+        for name in ("m_a", "I11", "I22", "I33", "I12", "I13", "I23"):
+            out[name] = float(carrier[name])  # type: ignore[arg-type]
+            carrier[name] = "runtime"
+    for k, rotor in enumerate(rotors, 1):
+        for key in ("m", "I", "J"):
+            if k - 1 != broken and rng.random() < 0.25:
+                out[f"{key}_{k}"] = float(rotor[key])  # type: ignore[arg-type]
+                rotor[key] = "runtime"
+        if rng.random() < 0.25:
+            at = rotor["position"]
+            out.update({f"r{i}_{k}": float(x) for i, x in enumerate(at, 1)})  # type: ignore[arg-type]
+            rotor["position"] = "runtime"
+    return out
 
 
 def _runtime_value(name: str, rng: np.random.Generator) -> float:

@@ -246,6 +246,11 @@ SIGNATURES: dict[str, Signature] = {
     "rhs": Signature("void", _args(*_PER_CALL, "double *dxdt:nx")),
     "output": Signature("void", _args(*_PER_CALL, "double *out:out")),
     "jac": Signature("void", _args(*_PER_CALL, "double *J:nx*nx")),
+    "linear": Signature(
+        "void",
+        _args(*_PER_CALL, "double *A:nx*nx", "double *B:nx*nu", "double *C:ny*nx",
+              "double *D:ny*nu"),
+    ),
     "strerror": Signature("const char *", _args("int code")),
     "fixed_step": Signature(
         "int",
@@ -269,6 +274,7 @@ SIGNATURES: dict[str, Signature] = {
     ),
 }  # fmt: skip
 """setup, rhs, each output function (energy, momentum, power), the Jacobian,
+the linear model (outputs.linear_model: nu inputs, ny outputs, C only),
 the two strerror functions (setup's codes, the integrators'), and the
 integrators: fixed-step (rk4) or adaptive, each with its _batch variant.
 The integrators' stats and codes may be NULL."""

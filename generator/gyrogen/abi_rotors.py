@@ -17,11 +17,21 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
     "k": ("N m s", "speed controller gain of rotor B{k}: T = -k (w{k} - g{k}.w_A - w_ref)"),
     "w_ref": ("rad/s", "speed controller of rotor B{k}: commanded rate relative to A"),
     "tau_max": ("N m", "torque limit of rotor B{k}: the motor torque is clamped to +-tau_max"),
+    **{
+        f"r{i}": ("m", f'position of B{{k}}* from A*, a{i} component (position = "runtime")')
+        for i in (1, 2, 3)
+    },
 }
 """A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
-ROTOR_RUNTIME = ("T", "k", "w_ref")
-"""The rotor keys that may be "runtime" (the others are folded: setup then
-holds the inverse of the constant inertia as numbers)."""
+ROTOR_RUNTIME = ("m", "I", "J", "T", "k", "w_ref")
+"""The rotor keys that may be "runtime", in a rotor's p[] order (b, tau_max
+and the axis are folded; position = "runtime" gives POSITION, after J). With
+every inertial value folded the inverse of the lumped inertia I~ is numbers
+in the code; with a runtime m, I, position or carrier value setup computes
+I~ and inverts it; a runtime J_k stays out of I~. setup checks the runtime
+values (setup_checks.cluster_checks)."""
+POSITION = ("r1", "r2", "r3")
+"""position = "runtime": B_k*'s A-components in p[] (r1_k, r2_k, r3_k)."""
 MAX_ROTORS = 6
 """Rotors a cluster scene may have."""
 AXIS_NORM_SLACK = 1e-3

@@ -7,6 +7,8 @@
     trajectory = api.simulate("dual_spin", method="dop853")   # pandas: t and the states
     df = api.sweep("stability_map")                    # pandas: one row per trajectory
     df = api.sweep(api.load_sweep(toml_text, name="mine"), workers=2)
+    lin = api.linearize("dual_spin")                   # A, B, C, D about a steady spin
+    sys = api.state_space("rw4_pyramid", spin=0.0)     # python-control StateSpace (a hold)
 
 The same code as the command line: `compile` is what a sweep's workers do
 (sources rendered once and cached, built through the build cache),
@@ -18,17 +20,21 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gyrogen.analysis.sweep.sweep_spec import Spec, parse
 from gyrogen.analysis.sweep.sweep_spec import load as load_spec
+from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene
 from gyrogen.scene import load as load_scene
 
 if TYPE_CHECKING:
+    import control
     import pandas as pd
+
+    from gyrogen.analysis.linearize.linearize import Linear
 
 
 def _scene(scene: str | Scene) -> Scene:
@@ -111,3 +117,40 @@ def read(out: str | Path) -> pd.DataFrame:
 
     frame = pd.read_parquet(Path(out) / PARTS)
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)
+
+
+def linearize(
+    scene: str | Scene = "dual_spin",
+    *,
+    state: list[float] | None = None,
+    at: dict[str, float] | None = None,
+    parameters: dict[str, float] | None = None,
+    spin: float | None = None,
+    axis: int | None = None,
+) -> Linear:
+    """`gyrogen linearize`: the linear model (A, B, C, D over its kept
+    states, names, the point, eigenvalues) about the point given (state:
+    every value; at: by name), else the scene's equilibrium, else the steady
+    spin found (spin rad/s about the principal axis nearest a_axis)."""
+    from gyrogen.analysis.linearize.linearize import model
+
+    return model(_scene(scene), state=state, at=at, parameters=parameters, spin=spin, axis=axis)
+
+
+def state_space(scene: str | Scene | Linear = "dual_spin", **point: Any) -> control.StateSpace:
+    """linearize()'s model (or a Linear) as a python-control StateSpace, with
+    the states, inputs and outputs named (the extra gyrogen[linear])."""
+    from gyrogen.analysis.linearize.linearize import Linear
+
+    try:
+        import control
+    except ImportError:
+        raise GyrogenError(
+            "python-control is not installed: pip install 'gyrogen[linear]'"
+        ) from None
+    lin = scene if isinstance(scene, Linear) else linearize(scene, **point)
+    return control.ss(
+        lin.A, lin.B, lin.C, lin.D,
+        states=list(lin.states), inputs=list(lin.inputs), outputs=list(lin.outputs),
+        name=lin.scene.name,
+    )  # fmt: skip

@@ -15,7 +15,7 @@ sums, differences, products, squares, a square root and a maximum.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -165,6 +165,81 @@ CHECKS: tuple[Check, ...] = (
 """In the order setup makes them: the first failure wins."""
 
 
+def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ...]:
+    """A cluster's setup checks, on its inertial values by name (m_a, I11..I23,
+    m_k, I_k, J_k; a number or "runtime"; a carrier product missing is 0):
+    every parameter finite; then, where a value is runtime, masses and
+    inertias positive, the carrier positive definite and meeting the
+    triangle inequality (s 1 - T positive definite, s = (1/2 + slack) tr T:
+    Sylvester's leading minors), J_k <= 2 I_k; the lumped inertia's
+    condition number. The scene validator checks the folded values."""
+
+    def term(name: str) -> Expr:
+        v = values.get(name, 0.0)
+        return Sym(name) if v == "runtime" else Num(float(v))
+
+    def runtime(*names: str) -> tuple[Expr, ...]:
+        return tuple(Sym(m) for m in names if values.get(m) == "runtime")
+
+    finite, bound = (next(c for c in CHECKS if c.kind == kind) for kind in ("finite", "bound"))
+    out = [finite]
+    rotors = [tuple(f"{key}_{k}" for key in ("m", "I", "J")) for k in range(1, n + 1)]
+    masses = runtime("m_a", *(m for m, _, _ in rotors))
+    if masses:
+        out.append(Check(2, "positive", masses, each=True))
+    inertias = runtime(*(x for _, i, j in rotors for x in (i, j)))
+    if inertias:
+        out.append(Check(3, "positive", inertias, each=True))
+    if runtime(*CARRIER_KEYS):  # the scene validator's messages are its own (rotors.py)
+        t = {key: term(key) for key in CARRIER_KEYS}
+        carrier = (t["I11"], t["I22"], t["I33"], t["I12"], t["I13"], t["I23"])
+        out.append(
+            Check(4, "positive", (t["I11"], Sym("pd2"), Sym("pd3")),
+                  locals=_minors("pd", *carrier, 1.0),
+                  comment=("Sylvester: the carrier's leading minors.",))
+        )  # fmt: skip
+        half = ("half_trace", Num(0.5 + TRIANGLE_SLACK) * add(*carrier[:3]))
+        shifted = tuple((f"s{i}", Sym("half_trace") - t[f"I{i}"]) for i in ("11", "22", "33"))
+        diagonal = (Sym("s11"), Sym("s22"), Sym("s33"))
+        out.append(
+            Check(5, "positive", (Sym("s11"), Sym("tri2"), Sym("tri3")),
+                  locals=(half, *shifted, *_minors("tri", *diagonal, *carrier[3:], -1.0)),
+                  comment=("The largest principal moment is at most half the trace (with",
+                           "slack): s 1 - T positive definite, s = (1/2 + slack) tr T."))
+        )  # fmt: skip
+    for _, i, j in rotors:
+        if values.get(i) == "runtime" or values.get(j) == "runtime":
+            out.append(
+                Check(6, "slack", (term(j) - Num(2.0) * term(i), Num(2.0) * term(i) + term(j)))
+            )
+    return (*out, bound)
+
+
+CARRIER_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")
+
+
+def _minors(
+    name: str, a11: Expr, a22: Expr, a33: Expr, b12: Expr, b13: Expr, b23: Expr, sign: float
+) -> tuple[tuple[str, Expr], ...]:
+    """Locals name2, name3: the leading 2x2 and 3x3 minors of the symmetric
+    matrix of diagonal a and off-diagonal sign * b (short lines: one
+    cofactor each, name_m1..3)."""
+    m1, m2, m3 = (Sym(f"{name}_m{i}") for i in (1, 2, 3))
+    if sign > 0:
+        cofactors = (b12 * a33 - b13 * b23, b12 * b23 - a22 * b13)
+        det = a11 * m1 - b12 * m2 + b13 * m3
+    else:  # m3 holds the cofactor's negative: no unary minus (Fortran refuses "- -x")
+        cofactors = (b12 * a33 + b13 * b23, b12 * b23 + a22 * b13)
+        det = a11 * m1 - b12 * m2 - b13 * m3
+    return (
+        (f"{name}2", a11 * a22 - b12 * b12),
+        (f"{name}_m1", a22 * a33 - b23 * b23),
+        (f"{name}_m2", cofactors[0]),
+        (f"{name}_m3", cofactors[1]),
+        (f"{name}3", det),
+    )
+
+
 def symbols(e: Expr) -> set[str]:
     if isinstance(e, Sym):
         return {e.name}
@@ -179,9 +254,9 @@ def checked_parameters() -> tuple[str, ...]:
     return tuple(n for n in (*PARAMETERS, *CONTROLLER_PARAMETERS) if n in read)
 
 
-def local_names() -> tuple[str, ...]:
+def local_names(checks: Sequence[Check] = CHECKS) -> tuple[str, ...]:
     """Every local the checks compute (the generated setup declares them)."""
-    return tuple(name for c in CHECKS for name, _ in c.locals)
+    return tuple(name for c in checks for name, _ in c.locals)
 
 
 def evaluate(e: Expr, v: Values) -> float:

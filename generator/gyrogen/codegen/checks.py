@@ -7,13 +7,13 @@ squares and the maximum. The templates lay the checks out.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
 from gyrogen.abi import TRIANGLE_SLACK
 from gyrogen.codegen.render import c_double, f_double
-from gyrogen.setup_checks import CHECKS, Call, Expr, Num, Op, Sym
+from gyrogen.setup_checks import CHECKS, Call, Check, Expr, Num, Op, Sym
 
 Language = Literal["c", "fortran"]
 _PRECEDENCE = {"+": 1, "-": 1, "*": 2}
@@ -90,10 +90,9 @@ class Printer:
         return "\n".join(lines).removeprefix("    if (.not. (")
 
 
-def printed(language: Language, macro: str, cluster: bool = False) -> list[Printed]:
-    """Every check but 'finite' (the templates loop over p for that one); a
-    rotor cluster's inertial values are folded and checked by the scene
-    validator, so its setup makes only the bound on the condition number."""
+def printed(language: Language, macro: str, checks: Sequence[Check] = CHECKS) -> list[Printed]:
+    """Every check of checks but 'finite' (the templates loop over p for
+    that one); a rotor cluster's are setup_checks.cluster_checks."""
     p = Printer(language, macro)
     return [
         Printed(
@@ -103,6 +102,6 @@ def printed(language: Language, macro: str, cluster: bool = False) -> list[Print
             tuple((name, p(e)) for name, e in c.locals),
             c.comment,
         )
-        for c in CHECKS
-        if c.kind != "finite" and (c.kind == "bound" or not cluster)
+        for c in checks
+        if c.kind != "finite"
     ]

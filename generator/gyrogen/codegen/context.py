@@ -18,9 +18,10 @@ from gyrogen.abi import (
     Code,
     unit_and_doc,
 )
+from gyrogen.abi_rotors import rotor_name
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
-from gyrogen.setup_checks import CHECKS
+from gyrogen.setup_checks import CHECKS, Check, cluster_checks
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.jet import Jet, decompose
@@ -43,6 +44,15 @@ class Local:
     name: str
     index: int | None
     value: float | None
+
+
+@dataclass(frozen=True)
+class Table:
+    """A tabulated torque: the function <prefix>_<name>(t) and its local."""
+
+    name: str
+    points: list[tuple[float, float]]
+    doc: str
 
 
 @dataclass(frozen=True)
@@ -97,7 +107,26 @@ class SceneContext:
         ops.update({o.name: o.block.ops for o in self.outputs})
         if self.optimized.jacobian is not None:
             ops["jac"] = self.optimized.jacobian.ops
+        if self.optimized.linear is not None:
+            ops["linear"] = self.optimized.linear.ops
         return ops
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The linear model's inputs (outputs.linear_model), else none."""
+        pert = self.equations.perturbed
+        return pert.names if pert is not None else ()
+
+    @property
+    def ny(self) -> int:
+        """The outputs' values, one after another: the linear model's y."""
+        return sum(o.size for o in self.outputs)
+
+    @property
+    def linear_sizes(self) -> dict[str, tuple[int, int]]:
+        """The linear model's matrices, (rows, columns) each."""
+        nx, nu, ny = self.nx, len(self.inputs), self.ny
+        return {"A": (nx, nx), "B": (nx, nu), "C": (ny, nx), "D": (ny, nu)}
 
     @cached_property
     def lu_blocks(self) -> Blocks | None:
@@ -128,11 +157,21 @@ class SceneContext:
         return bool(self.scene.rotors)
 
     @property
+    def checks(self) -> tuple[Check, ...]:
+        """setup's checks: a cluster's folded inertial values are checked by
+        the scene validator, so its setup makes 'finite', 'bound' and the
+        checks of its runtime axial inertias (setup_checks.cluster_checks)."""
+        if not self.cluster:
+            return CHECKS
+        values: dict[str, float | str] = dict(self.scene.parameters)
+        for k, r in enumerate(self.scene.rotors, 1):
+            values.update({rotor_name(key, k): getattr(r, key) for key in ("m", "I", "J")})
+        return cluster_checks(values, len(self.scene.rotors))
+
+    @property
     def setup_codes(self) -> list[Code]:
-        """The codes setup can return: a cluster's inertial values are folded
-        and checked by the scene validator, so its setup makes only the
-        'finite' and 'bound' checks (codegen.checks.printed)."""
-        made = {c.code for c in CHECKS if not self.cluster or c.kind in ("finite", "bound")}
+        """The codes setup can return (those of its checks)."""
+        made = {c.code for c in self.checks}
         return [code for code in SETUP_CODES if code.value == 0 or code.value in made]
 
     @property
@@ -141,7 +180,11 @@ class SceneContext:
         out = []
         for k, r in enumerate(self.scene.rotors, 1):
             g = ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
-            at = ", ".join(f"{x:.6g}" for x in r.position)
+            at = (
+                f"p[r1_{k}], p[r2_{k}], p[r3_{k}]"
+                if r.position == "runtime"
+                else ", ".join(f"{x:.6g}" for x in r.position)
+            )
             out.append(f"Rotor B{k}: axis g{k} = ({g}) in A, B{k}* at ({at}) m from A*;")
             out.append(f"  {_law_doc(r.law(), r.torque, k)};")
             limit = "" if r.tau_max is None else f", |T| clamped to {r.tau_max:g} N m"
@@ -155,6 +198,23 @@ class SceneContext:
     @property
     def torque_table(self) -> list[tuple[float, float]] | None:
         return self.scene.effects.torque_table
+
+    @property
+    def torque_tables(self) -> list[Table]:
+        """Every T(t) table: the scene's torque, or each cluster rotor's torque_k."""
+        if self.torque_table:
+            doc = "T(t), piecewise linear through the scene's table, constant outside it."
+            return [Table("torque", self.torque_table, doc)]
+        return [
+            Table(
+                f"torque_{k}",
+                r.torque_table,
+                f"T_{k}(t), rotor B{k}'s motor torque, piecewise linear through its table, "
+                "constant outside it.",
+            )
+            for k, r in enumerate(self.scene.rotors, 1)
+            if r.torque_table
+        ]
 
     @property
     def folded_summary(self) -> str:
@@ -213,6 +273,8 @@ class SceneContext:
             f[o.name] = f"{p}_f_{o.name}"
         if self.optimized.jacobian is not None:
             c["jac"], f["jac"] = f"{p}_jac", f"{p}_f_jac"
+        if self.optimized.linear is not None and "c" in self.scene.targets:
+            c["linear"] = f"{p}_linear"  # C only
         for m in self.scene.integrators:
             c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
             c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"
@@ -245,4 +307,6 @@ def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:
     if torque == "speed_controller":
         return (f"speed controller T = -k (w{k} - g{k}.w_A - w_ref), k = {v['k']}, "
                 f"w_ref = {v['w_ref']}")  # fmt: skip
+    if torque == "table":
+        return f"motor torque T(t), piecewise linear through its table (torque_{k})"
     return "no motor torque"

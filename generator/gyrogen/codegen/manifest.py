@@ -30,6 +30,7 @@ def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
         "np": unit.np,
         "nc": unit.nc,
         "outputs": {o.name: o.size for o in unit.outputs},
+        **({"linear": linear(unit)} if unit.optimized.linear is not None else {}),
         "integrators": list(unit.scene.integrators),
         "targets": list(unit.scene.targets),
         "functions": unit.functions,
@@ -47,6 +48,18 @@ def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
         "files": _files(unit),
         "versions": unit.versions,
     }
+
+
+def linear(unit: SceneContext) -> dict[str, list[str]]:
+    """The linear model's inputs u and outputs y, in <prefix>_linear's order
+    (an output of several values: name_1, name_2, ...), and the output
+    functions y is made of, in that order."""
+    y = [
+        f"{o.name}_{k}" if o.size > 1 else o.name
+        for o in unit.outputs
+        for k in range(1, o.size + 1)
+    ]
+    return {"inputs": list(unit.inputs), "outputs": y, "from": [o.name for o in unit.outputs]}
 
 
 def _files(unit: SceneContext) -> dict[str, str]:
@@ -78,6 +91,7 @@ def _signature(unit: SceneContext, key: str, name: str) -> dict[str, Any]:
     pointer's element count ("count", times the batch's n when per_state)."""
     sig = signature_of(key)
     sizes = {"nx": unit.nx, "np": unit.np, "nc": unit.nc, "out": unit.outputs_size(key)}
+    sizes.update(nu=len(unit.inputs), ny=unit.ny)
     args: list[dict[str, Any]] = []
     for arg in sig.args:
         entry: dict[str, Any] = {"name": arg.name, "ctype": arg.ctype.format(prefix=unit.prefix)}

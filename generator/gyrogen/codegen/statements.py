@@ -89,8 +89,13 @@ class Function:
     statements: list[Statement]
     states: list[int]
     """Indices of the states it reads: only those become locals."""
-    torque: bool
-    """Reads the tabulated torque T(t)."""
+    tables: list[str]
+    """The tabulated torques T(t) it reads (torque; a cluster's torque_k)."""
+
+    @property
+    def torque(self) -> bool:
+        """Reads a tabulated torque."""
+        return bool(self.tables)
 
 
 Assign = Callable[[str, sm.Expr], str]
@@ -125,6 +130,26 @@ def jacobian(
     return _function(unit, array, assign, "jac", block, "J", "d(dx/dt)/dx, row-major", "1/s")
 
 
+def linear(unit: SceneContext, array: Callable[[str, int], str], assign: Assign) -> Function | None:
+    """A, B, C, D of the linear model, each row-major (A[i*NX + j] = d f_i /
+    d x_j, B[i*NU + j] = d f_i / d u_j, C and D alike for the outputs y)."""
+    block = unit.optimized.linear
+    if block is None:
+        return None
+    sizes = unit.linear_sizes
+    edges = [0]
+    for rows, cols in sizes.values():
+        edges.append(edges[-1] + rows * cols)
+    names = list(sizes)
+
+    def at(arr: str, i: int) -> str:
+        k = max(j for j in range(len(names)) if edges[j] <= i)
+        return array(names[k], i - edges[k])
+
+    doc = "the linear model: A = df/dx, B = df/du, C = dy/dx, D = dy/du, row-major"
+    return _function(unit, at, assign, "linear", block, "", doc, "")
+
+
 def _function(
     unit: SceneContext,
     array: Callable[[str, int], str],
@@ -142,7 +167,7 @@ def _function(
         unit=units,
         statements=statements(block, partial(array, arr), assign),
         states=[i for i, s in enumerate(unit.states) if s in free],
-        torque=any(s in free for s in unit.equations.inputs),
+        tables=[s.name for s in unit.equations.inputs if s in free],
     )
 
 

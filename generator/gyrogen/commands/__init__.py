@@ -17,4 +17,5 @@ NAMES = (
     "bench_ensemble",
     "fmu",
     "sweep",
+    "linearize",
 )

@@ -187,7 +187,7 @@ def _pairs(
         if "jac" in b.manifest["functions"][b.language]:
             few = states[:JAC_STATES]
             jac = np.array([b.jacobian(x, constants[_label(b)], t) for x in few])
-            kinks = lambda xs, q: scene_view.kinks(scene, xs, q)  # noqa: E731
+            kinks = lambda xs, q: scene_view.kinks(scene, xs, q, t)  # noqa: E731
             yield (
                 f"{_label(b)} vs reference jac",
                 jacobian_error(jac, _reference(scene, "rhs", t), few, p, kinks),
@@ -237,10 +237,11 @@ def _bar(pair: str, cond: float, bar: Callable[[float], float]) -> float:
 
 def _time_span(scene: Scene) -> tuple[float, float]:
     """Times to evaluate at: across a T(t) table and beyond both its ends."""
-    table = scene.effects.torque_table
-    if not table:
+    tables = [scene.effects.torque_table, *(r.torque_table for r in scene.rotors)]
+    times = [t for table in tables if table for t, _ in table]
+    if not times:
         return (0.0, 1.0)
-    t0, t1 = table[0][0], table[-1][0]
+    t0, t1 = min(times), max(times)
     return (t0 - 0.1 * (t1 - t0) - 1.0, t1 + 0.1 * (t1 - t0) + 1.0)
 
 
@@ -308,8 +309,8 @@ def invalid_runtime(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
     full model's invalid cases that change runtime entries only, and NaN in
     each runtime parameter."""
     cases = []
-    if scene.rotors:  # only the torque laws are runtime: any finite value is valid
-        return _nan_cases(scene, base)
+    if scene.rotors:  # the torque laws take any finite value; the inertial ones not
+        return sampling.invalid_cluster(scene, base) + _nan_cases(scene, base)
     full = scene_view.full_parameters(scene, base, np.zeros((1, 14)), 0.0)[0]
     index = {n: i for i, n in enumerate(PARAMETERS)}
     for what, p_full, code in sampling.invalid_parameters(full):

@@ -1,7 +1,8 @@
 """Random and invalid inputs for the tests, and the Python mirror of the setup checks.
 
-Pure numpy (only :mod:`gyrogen.abi` besides): the tests use it to drive both the
-numpy reference and the generated code, so it must not depend on the symbolic model.
+Pure numpy (only :mod:`gyrogen.abi` and a scene's values besides): the tests use it
+to drive both the numpy reference and the generated code, so it must not depend on
+the symbolic model.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from gyrogen import abi
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
 from gyrogen.oracle.reference import lumped
+from gyrogen.scene import Scene
 
 __all__ = ["invalid_parameters", "random_parameters", "random_states", "setup_code"]
 
@@ -244,4 +246,35 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
             7,
         ),
     ]
+    return cases
+
+
+def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
+    """A cluster's runtime inertial values made unphysical, with setup's code:
+    a mass at 0 (2); I_k or J_k at 0 or negative (3); the carrier not
+    positive definite (4) or past the triangle inequality (5); J_k above 2 I_k (6)."""
+    index = {n: j for j, n in enumerate(scene.runtime)}
+    known = {**scene.folded(), **dict(zip(scene.runtime, base, strict=True))}
+    edits: list[tuple[dict[str, float], int]] = []
+    for name in scene.runtime:
+        key = name.rpartition("_")[0]
+        if name == "m_a" or key == "m":
+            edits.append(({name: 0.0}, 2))
+        elif key in ("I", "J"):
+            edits += [({name: 0.0}, 3), ({name: -1e-3}, 3)]
+    if "I11" in index:
+        edits.append(({"I11": -float(known["I11"])}, 4))
+    if "I33" in index:
+        edits.append(({"I33": 3.0 * (float(known["I11"]) + float(known["I22"]))}, 5))
+    for k, r in enumerate(scene.rotors, 1):
+        if f"J_{k}" in index or f"I_{k}" in index:
+            edits.append(({f"J_{k}": 2.01 * float(known[f"I_{k}"] if r.I == "runtime" else r.I)}
+                          if f"J_{k}" in index else {f"I_{k}": 0.49 * float(r.J)}, 6))  # fmt: skip
+    cases = []
+    for edit, code in edits:
+        p = base.copy()
+        for name, value in edit.items():
+            p[index[name]] = value
+        what = ", ".join(f"{n} = {v:g}" for n, v in edit.items())
+        cases.append((what, p, code))
     return cases

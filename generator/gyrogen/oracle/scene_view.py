@@ -109,7 +109,7 @@ def full_parameters(
 def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     xs = np.atleast_2d(xs)
     if scene.rotors:
-        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime))
+        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime), t)
         if scene.attitude == "quaternion":
             out[:, :4] = quaternion_rates(
                 xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)]
@@ -126,14 +126,14 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     return out
 
 
-def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray) -> np.ndarray:
+def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     """(n, K) values whose signs change exactly where the rhs is not smooth
     in the state: a cluster's torque clamps (cluster_reference.clamp_margins);
     none (K = 0) for the paper's scenes, smooth in the state."""
     xs = np.atleast_2d(xs)
     if not scene.rotors:
         return np.zeros((len(xs), 0))
-    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime))
+    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime), t)
 
 
 def output(
@@ -148,7 +148,7 @@ def output(
             angles = np.zeros((len(xs), len(STATES)))
             angles[:, :3] = xs[:, :3]
             dcm = reference.direction_cosines(angles)
-        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm)
+        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm, t)
     x_full = full_states(scene, xs)
     p = full_parameters(scene, p_runtime, x_full, t)
     if name == "kinetic_energy":
@@ -251,7 +251,7 @@ def condition(scene: Scene, p_runtime: np.ndarray) -> float:
     """The condition number compare groups parameter sets by: the coupled
     block's (a cluster's: its folded inertia's, ||A||_F ||A^-1||_F)."""
     if scene.rotors:
-        return cluster_reference.condition(scene)
+        return cluster_reference.condition(scene, values(scene, p_runtime))
     full = full_parameters(scene, p_runtime, np.zeros((1, len(STATES))), 0.0)[0]
     return float(sampling.lumped_condition(full))
 
@@ -264,9 +264,37 @@ _CLUSTER_DRAWS = {
 
 
 def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
-    """A cluster's runtime values are torque laws' (T, k, w_ref): any draw is valid."""
-    cols = [_CLUSTER_DRAWS[name.rsplit("_", 1)[0]](rng, n) for name in scene.runtime]
-    return np.stack(cols, axis=1)
+    """A cluster's runtime values: torque laws' (T, k, w_ref), any draw
+    valid; an axial inertia J_k within (0.1, 2] of its rotor's I_k."""
+    cols: dict[str, np.ndarray] = {}
+    folded = scene.folded()
+    diagonal = [float(folded[d]) for d in ("I11", "I22", "I33") if d in folded]
+    scale = float(np.mean(diagonal)) if diagonal else 100.0
+    for name in scene.runtime:  # in p[] order: a rotor's I before its J
+        key, _, k = name.rpartition("_")  # I11: key ""
+        if name == "m_a":
+            cols[name] = rng.uniform(50.0, 500.0, n)
+        elif name in ("I11", "I22", "I33"):  # within 0.8..1.2 of each other: triangle kept
+            cols[name] = scale * rng.uniform(0.8, 1.2, n)
+        elif name in ("I12", "I13", "I23"):
+            cols[name] = scale * rng.uniform(-0.05, 0.05, n)
+        elif key == "m":
+            cols[name] = rng.uniform(1.0, 10.0, n)
+        elif key == "I":
+            axial = scene.rotors[int(k) - 1].J
+            if axial == "runtime":
+                cols[name] = rng.uniform(0.01, 0.05, n)
+            else:  # J <= 2 I: I at least half the folded J
+                cols[name] = float(axial) * rng.uniform(0.5, 2.5, n)
+        elif key in ("r1", "r2", "r3"):
+            cols[name] = rng.uniform(-0.5, 0.5, n)
+        elif key == "J":
+            inertia = scene.rotors[int(k) - 1].I
+            base = cols[f"I_{k}"] if inertia == "runtime" else float(inertia)
+            cols[name] = base * rng.uniform(0.1, 2.0, n)
+        else:
+            cols[name] = _CLUSTER_DRAWS[key](rng, n)
+    return np.stack([cols[name] for name in scene.runtime], axis=1)
 
 
 def _cluster_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -102,9 +102,11 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
     if "jac" in names:
         per_call.append("jac")
     integrators = [n for m in manifest["integrators"] for n in (m, f"{m}_batch")]
+    linear = ["linear"] if "linear" in names else []
+    declared = ["setup", *per_call, *linear, *integrators]
     return {
         "functions": [names[f] for f in per_call],
-        "declared": [(signature_of(k), names[k]) for k in ["setup", *per_call, *integrators]],
+        "declared": [(signature_of(k), names[k]) for k in declared],
         "methods": manifest["integrators"],
         "abi": abi,
         "nx": manifest["nx"],

@@ -9,7 +9,6 @@ values are the same as the generated setup's (abi.SETUP_CODES).
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
 import stat
@@ -46,6 +45,7 @@ from gyrogen.scene.rules import (
     check_output_grid,
     check_physics,
     check_quaternion,
+    check_table,
     parameter_value,
 )
 
@@ -69,16 +69,7 @@ class Effects(_Strict):
 
     @model_validator(mode="after")
     def _table(self) -> Effects:
-        table = self.torque_table
-        if self.torque != "table":
-            if table is not None:
-                raise ValueError("torque_table is only used with torque = 'table'")
-            return self
-        if table is None or len(table) < 2:
-            raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
-        times = [t for t, _ in table]
-        if any(b <= a for a, b in itertools.pairwise(times)):
-            raise ValueError("torque_table times must increase strictly")
+        check_table(self.torque, self.torque_table)
         return self
 
 
@@ -88,6 +79,10 @@ class Outputs(_Strict):
     """Angular momentum about AB* in N components (uses the direction cosines)."""
     power: StrictBool = False
     """Power of the motor torque, T (u4 - u2)."""
+    linear_model: StrictBool = False
+    """The function <prefix>_linear: A, B, C, D of the linear model at any
+    state (inputs: each rotor's motor torque, or its speed controller's
+    w_ref; outputs: the ones above). `gyrogen linearize` sets it."""
 
 
 class Simulate(_Strict):
@@ -136,6 +131,9 @@ class Scene(_Strict):
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
     simulate: Simulate = Simulate()
     rotors: Annotated[list[Rotor], Field(max_length=MAX_ROTORS)] = Field(default_factory=list)
+    equilibrium: dict[str, Number] | None = None
+    """The state `gyrogen linearize` linearizes about, by name (states not
+    named: 0, e0: 1); the runtime parameters are simulate.parameters."""
     """A reaction-wheel cluster (gyrogen.scene.rotors); none: the paper's one rotor on a2."""
 
     @model_serializer(mode="wrap")
@@ -143,6 +141,10 @@ class Scene(_Strict):
         """Without rotors, the dump of a scene before clusters existed (its build
         id); with them, only the effects a cluster has (the others are refused)."""
         data = handler(self)
+        if self.equilibrium is None:
+            data.pop("equilibrium", None)  # the dump before linear models
+        if isinstance(data.get("outputs"), dict) and not self.outputs.linear_model:
+            data["outputs"].pop("linear_model", None)  # the dump before linear models
         if not self.rotors:
             data.pop("rotors", None)
         elif isinstance(data.get("effects"), dict):  # a cluster has only these effects
@@ -192,6 +194,9 @@ class Scene(_Strict):
         bad = sorted(set(self.simulate.initial) - set(self.states))
         if bad:
             raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
+        bad = sorted(set(self.equilibrium or {}) - set(self.states))
+        if bad:
+            raise ValueError(f"equilibrium: {', '.join(bad)} is not a state of this scene")
         bad = sorted(set(self.simulate.parameters) - set(self.runtime))
         if bad:
             raise ValueError(
@@ -199,6 +204,10 @@ class Scene(_Strict):
             )
         if not self.rotors:
             check_physics({**self.parameters, **self.simulate.parameters})
+        elif self.runtime and (
+            known := rotors.resolved(self.parameters, self.rotors, self.simulate.parameters)
+        ):
+            rotors.check_values(*known, "simulate.parameters")
         if self.attitude == "quaternion":
             check_quaternion(self.simulate.initial)
         self._series_where_smooth()
@@ -260,7 +269,7 @@ class Scene(_Strict):
     def runtime(self) -> tuple[str, ...]:
         """Runtime parameters, in p[] order (the model's order, then k, w_ref)."""
         if self.rotors:
-            return rotors.runtime_names(self.rotors)
+            return rotors.runtime_names(self.parameters, self.rotors)
         order = (*PARAMETERS, *CONTROLLER_PARAMETERS)
         return tuple(n for n in order if self.parameters.get(n) == "runtime")
 

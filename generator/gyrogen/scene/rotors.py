@@ -3,9 +3,12 @@
 A cluster scene has a carrier A (mass m_a, a full symmetric inertia tensor
 about A*) and N rotors, each with its own mass, inertias, spin axis g_k
 (fixed in A, normalized exactly), position of B_k* from A*, viscous friction,
-torque law and optional torque limit. Mass, inertias and geometry are folded
-into the code (setup then holds the inverse of the constant inertia as
-numbers); the torque laws' T, k and w_ref may be "runtime". No translation:
+torque law and optional torque limit. The torque laws' T, k and w_ref, the
+carrier's mass and tensor and each rotor's m, I and J may be "runtime"
+(checked by setup; the values simulate.parameters gives, here), and so may
+a position (p's r1_k, r2_k, r3_k); axes, friction and limits are folded.
+With every inertial value folded, setup holds the inverse of the constant
+inertia as numbers. No translation:
 the system's mass center is fixed in A and free in N (a free-floating
 spacecraft). Each rule raises ValueError with the line pydantic shows.
 """
@@ -15,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from fractions import Fraction
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import (
@@ -25,6 +28,7 @@ from pydantic import (
     Field,
     StrictFloat,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
@@ -33,17 +37,18 @@ from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
 from gyrogen.abi_rotors import (
     AXIS_NORM_SLACK,
     CLUSTER_CARRIER,
+    POSITION,
     ROTOR_RUNTIME,
     cluster_states,
     rotor_name,
 )
-from gyrogen.scene.rules import parameter_value
+from gyrogen.scene.rules import check_table, parameter_value
 
 
 def _folded(v: object) -> object:
     if v == "runtime":
         raise ValueError(
-            "a rotor's mass, inertias, friction and limit are folded: only "
+            "a rotor's friction and limit are folded: only "
             f'{", ".join(ROTOR_RUNTIME)} may be "runtime"'
         )
     return parameter_value(v)
@@ -53,20 +58,22 @@ Folded = Annotated[float, BeforeValidator(_folded)]
 Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
 Vector = tuple[StrictFloat, StrictFloat, StrictFloat]
 
-LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref")}
-"""The keys each torque law needs (and allows)."""
+LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref"), "table": ()}
+"""The keys each torque law needs (and allows); a table's points are its torque_table."""
 
 
 class Rotor(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    m: Folded
-    I: Folded
-    J: Folded
+    m: Value
+    I: Value
+    J: Value
+    """Mass, transverse and axial inertia: numbers, or "runtime" (setup
+    checks them: positive, J <= 2 I, the lumped inertia's condition)."""
     axis: Vector
     """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
-    position: Vector = (0.0, 0.0, 0.0)
-    """B_k* from A*, in A-components (m)."""
+    position: Vector | Literal["runtime"] = (0.0, 0.0, 0.0)
+    """B_k* from A*, in A-components (m); "runtime": p's r1_k, r2_k, r3_k."""
     b: Annotated[Folded, Field(ge=0)] = 0.0
     torque: str = "none"
     """One of CLUSTER_LAWS (a string here, so that the refusal can say why)."""
@@ -75,26 +82,35 @@ class Rotor(BaseModel):
     w_ref: Value | None = None
     tau_max: Annotated[Folded, Field(ge=0)] | None = None
     """|T| is clamped to tau_max (a saturating motor); refused when negative."""
+    torque_table: list[tuple[StrictFloat, StrictFloat]] | None = None
+    """torque = "table": (t, T) points of a piecewise-linear T(t), held
+    constant outside (as the single rotor's effects.torque_table)."""
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: Any) -> Any:
+        """Without a table, the dump of a rotor before tables (its scene's build id)."""
+        data = handler(self)
+        if self.torque_table is None and isinstance(data, dict):
+            data.pop("torque_table", None)
+        return data
 
     @field_validator("torque")
     @classmethod
     def _law(cls, v: str) -> str:
-        if v == "table":
-            raise ValueError(
-                "'table': torque tables are not supported for a cluster's rotors "
-                f"(one of {', '.join(map(repr, LAW_KEYS))}; the single-rotor scene has tables)"
-            )
         if v not in LAW_KEYS:
             raise ValueError(f"{v!r}: not one of {', '.join(map(repr, LAW_KEYS))}")
         return v
 
     @model_validator(mode="after")
     def _rules(self) -> Rotor:
-        for name in ("m", "I", "J"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name}: must be positive (got {getattr(self, name)})")
-        if self.J > 2.0 * self.I * (1.0 + TRIANGLE_SLACK):
-            raise ValueError(f"J: rotor needs J <= 2 I (I = {self.I}, J = {self.J})")
+        for name in ("m", "I"):
+            value = getattr(self, name)
+            if value != "runtime" and not value > 0.0:
+                raise ValueError(f"{name}: must be positive (got {value})")
+        if self.J != "runtime" and self.I != "runtime":
+            check_axial(self.I, self.J, "J")
+        elif self.J != "runtime" and not self.J > 0.0:
+            raise ValueError(f"J: must be positive (got {self.J})")
         norm = math.sqrt(sum(x * x for x in self.axis))
         if norm == 0.0:
             raise ValueError("axis: has length 0: not a direction")
@@ -102,6 +118,7 @@ class Rotor(BaseModel):
             raise ValueError(
                 f"axis: length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
             )
+        check_table(self.torque, self.torque_table)
         need = LAW_KEYS[self.torque]
         for key in ("T", "k", "w_ref"):
             given = getattr(self, key) is not None
@@ -123,14 +140,54 @@ class Rotor(BaseModel):
         return {key: v for key in LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None}
 
 
-def runtime_names(rotors: list[Rotor]) -> tuple[str, ...]:
-    """p[] of a cluster: each rotor's runtime keys, rotor by rotor."""
-    return tuple(
+def check_axial(inertia: float, axial: float, where: str) -> None:
+    """0 < J <= 2 I (within TRIANGLE_SLACK): an axisymmetric rotor's inertias."""
+    if not axial > 0.0:
+        raise ValueError(f"{where}: must be positive (got {axial})")
+    if axial > 2.0 * inertia * (1.0 + TRIANGLE_SLACK):
+        raise ValueError(f"{where}: rotor needs J <= 2 I (I = {inertia}, J = {axial})")
+
+
+def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) -> tuple[str, ...]:
+    """p[] of a cluster: the carrier's runtime keys (CLUSTER_CARRIER order),
+    then each rotor's, rotor by rotor (m, I, J, then its torque law's)."""
+    carrier = tuple(n for n in CLUSTER_CARRIER if parameters.get(n) == "runtime")
+    return carrier + tuple(
         rotor_name(key, k)
         for k, r in enumerate(rotors, 1)
-        for key, v in r.law().items()
+        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *_position(r), *r.law().items())
         if v == "runtime"
     )
+
+
+def _position(r: Rotor) -> tuple[tuple[str, str], ...]:
+    return tuple((key, "runtime") for key in POSITION) if r.position == "runtime" else ()
+
+
+def resolved(
+    parameters: Mapping[str, float | str], rotors: list[Rotor], given: Mapping[str, float]
+) -> tuple[dict[str, float], list[Rotor]] | None:
+    """The carrier's and the rotors' inertial values with the runtime ones
+    from given (simulate.parameters), or None when one is not given."""
+    values: dict[str, float] = {}
+    for n, v in parameters.items():
+        if v == "runtime" and n not in given:
+            return None
+        values[n] = float(given[n] if v == "runtime" else v)
+    out = []
+    for k, r in enumerate(rotors, 1):
+        update: dict[str, object] = {}
+        for key in ("m", "I", "J"):
+            if getattr(r, key) == "runtime":
+                if rotor_name(key, k) not in given:
+                    return None
+                update[key] = float(given[rotor_name(key, k)])
+        if r.position == "runtime":
+            if any(rotor_name(key, k) not in given for key in POSITION):
+                return None
+            update["position"] = tuple(float(given[rotor_name(key, k)]) for key in POSITION)
+        out.append(r.model_copy(update=update))
+    return values, out
 
 
 def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:
@@ -150,24 +207,37 @@ def check_cluster(
     for n in ("m_a", "I11", "I22", "I33"):
         if n not in parameters:
             raise ValueError(f"parameters: missing {n}")
-    for n, v in parameters.items():
+    for n in parameters:
         if n not in CLUSTER_CARRIER:
             raise ValueError(
                 f"parameters.{n}: not a carrier key of a cluster scene "
                 f"({', '.join(CLUSTER_CARRIER)}; each rotor's keys go in its [[rotors]] table)"
             )
-        if v == "runtime":
-            raise ValueError(f'parameters.{n}: a cluster\'s carrier is folded, not "runtime"')
+    known = resolved(parameters, rotors, {})
+    if known is not None:
+        check_values(*known, "parameters")
+
+
+def check_values(parameters: Mapping[str, float], rotors: list[Rotor], where: str) -> None:
+    """A cluster's inertial values, every one known (folded or given in
+    where): positive masses and inertias, J <= 2 I, a positive-definite
+    carrier meeting the triangle inequality, a well-conditioned lumped inertia."""
+    for k, r in enumerate(rotors, 1):
+        for key in ("m", "I"):
+            if not getattr(r, key) > 0.0:
+                raise ValueError(f"{where}.{rotor_name(key, k)}: must be positive "
+                                 f"(got {getattr(r, key)})")  # fmt: skip
+        check_axial(r.I, r.J, f"{where}.{rotor_name('J', k)}")  # type: ignore[arg-type]
     carrier = carrier_tensor(parameters)
-    if not parameters["m_a"] > 0:  # type: ignore[operator]
-        raise ValueError(f"parameters.m_a: must be positive (got {parameters['m_a']})")
+    if not parameters["m_a"] > 0:
+        raise ValueError(f"{where}.m_a: must be positive (got {parameters['m_a']})")
     moments = [float(x) for x in np.linalg.eigvalsh(np.array(carrier))]
     if not min(moments) > 0:
-        raise ValueError("parameters.I11..I23: carrier inertia is not positive definite")
+        raise ValueError(f"{where}.I11..I23: carrier inertia is not positive definite")
     if 2.0 * max(moments) - sum(moments) > TRIANGLE_SLACK * sum(moments):
         text = ", ".join(f"{m:.6g}" for m in sorted(moments))
         raise ValueError(
-            f"parameters.I11..I23: principal moments ({text}) violate the triangle inequality"
+            f"{where}.I11..I23: principal moments ({text}) violate the triangle inequality"
         )
     try:
         lumped = lumped_inertia(parameters, rotors)
@@ -199,7 +269,7 @@ def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -
     return physics.cluster_inertia(
         float(parameters["m_a"]),
         carrier_tensor(parameters),
-        [(r.m, r.I, [float(x) for x in r.unit_axis], r.position) for r in rotors],
+        [(float(r.m), float(r.I), [float(x) for x in r.unit_axis], r.position) for r in rotors],
     )
 
 

@@ -6,6 +6,7 @@ ValueError with the one line pydantic shows under the key."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
@@ -127,3 +128,16 @@ def check_physics(p: Mapping[str, float | str]) -> None:
     failed = first_failure({k: x for k, x in p.items() if not isinstance(x, str)})
     if failed is not None:
         raise ValueError(failed[1])
+
+
+def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
+    """A torque table goes with torque = 'table', and only with it: at least
+    2 (t, T) points, the times increasing strictly."""
+    if torque != "table":
+        if table is not None:
+            raise ValueError("torque_table is only used with torque = 'table'")
+        return
+    if table is None or len(table) < 2:
+        raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
+    if any(b[0] <= a[0] for a, b in itertools.pairwise(table)):
+        raise ValueError("torque_table times must increase strictly")

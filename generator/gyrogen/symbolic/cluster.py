@@ -15,16 +15,20 @@ entry,
 
 with h and each rotor's torque named values of the rhs (Equations.shared),
 so the momentum the carrier and a wheel exchange is one rounded number.
-Every inertial value is folded, so I~^-1 is numbers in the code.
+With every inertial value folded I~^-1 is numbers in the code; an entry of
+I~ that reads a runtime value is a named scalar of setup (IC11..IC23,
+Equations.lumped), and setup inverts I~ (optimize.block_inverse).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import sympy as sm
 import sympy.physics.mechanics as me
 
 from gyrogen import physics
-from gyrogen.abi_rotors import cluster_states, rotor_name
+from gyrogen.abi_rotors import CLUSTER_CARRIER, POSITION, cluster_states, rotor_name
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import Rotor
 from gyrogen.symbolic import equations, model
@@ -42,20 +46,46 @@ def _axis(r: Rotor) -> sm.Matrix:
 
 
 def _carrier(scene: Scene) -> list[list[sm.Expr]]:
-    v = {n: _number(x) for n, x in scene.folded().items()}
+    v = {n: _param(n, x) for n, x in scene.parameters.items()}
     z = sm.S.Zero
     i12, i13, i23 = v.get("I12", z), v.get("I13", z), v.get("I23", z)
     return [[v["I11"], i12, i13], [i12, v["I22"], i23], [i13, i23, v["I33"]]]
 
 
 def lumped_inertia(scene: Scene) -> sm.Matrix:
-    """I~ about the mass center C, exact."""
+    """I~ about the mass center C, exact: numbers, or expressions in the
+    runtime parameters (carrier tensor, masses, transverse inertias)."""
     rotors = [
-        (_number(r.m), _number(r.I), list(_axis(r)), [_number(x) for x in r.position])
-        for r in scene.rotors
+        (
+            _param(rotor_name("m", k), r.m),
+            _param(rotor_name("I", k), r.I),
+            list(_axis(r)),
+            [sm.Symbol(rotor_name(key, k), real=True) for key in POSITION]
+            if r.position == "runtime"
+            else [_number(x) for x in r.position],
+        )
+        for k, r in enumerate(scene.rotors, 1)
     ]
-    m_a = _number(float(scene.parameters["m_a"]))
+    m_a = _param("m_a", scene.parameters["m_a"])
     return sm.Matrix(physics.cluster_inertia(m_a, _carrier(scene), rotors))
+
+
+LUMPED = ((0, 0, "IC11"), (1, 1, "IC22"), (2, 2, "IC33"), (0, 1, "IC12"), (0, 2, "IC13"),
+          (1, 2, "IC23"))  # fmt: skip
+"""I~'s entries as setup names them when they depend on runtime parameters."""
+
+
+def _named(exact: sm.Matrix) -> tuple[sm.Matrix, dict[sm.Symbol, sm.Expr]]:
+    """I~ with each entry that reads a runtime parameter as a named scalar
+    of setup (Equations.lumped), and those scalars' values."""
+    out = sm.Matrix(exact)
+    lumped: dict[sm.Symbol, sm.Expr] = {}
+    for i, j, name in LUMPED:
+        if exact[i, j].free_symbols:
+            s = sm.Symbol(name, real=True)
+            lumped[s] = exact[i, j]  # as summed: one fraction would need huge integers
+            out[i, j] = out[j, i] = s
+    return out, lumped
 
 
 def _plain(names: tuple[str, ...]) -> tuple[sm.Symbol, ...]:
@@ -100,10 +130,11 @@ def kane(inertia: sm.Matrix, axes: list[sm.Matrix], axial: list[sm.Expr]) -> tup
     return mm, forcing, qdot, net
 
 
-SLIP, NET, MOMENTUM, FORCING = "rel", "net", "h", "f"
+SLIP, NET, MOMENTUM, FORCING, TABLE = "rel", "net", "h", "f", "torque"
 """Named values of the rhs: each wheel's relative rate and net torque, the
 momentum h, and f = h x w_A - sum_k net_k g_k (= I~ u'): I~^-1 then
-multiplies three numbers, where multiplying out h x w_A costs ~20 ops more."""
+multiplies three numbers, where multiplying out h x w_A costs ~20 ops more.
+torque_k is rotor k's T(t) from its table: a per-call input (Equations.inputs)."""
 
 
 def _by_axis_component(nets: list[sm.Expr], axes: list[sm.Matrix]) -> sm.Matrix:
@@ -119,21 +150,39 @@ def _by_axis_component(nets: list[sm.Expr], axes: list[sm.Matrix]) -> sm.Matrix:
     return sm.Matrix(out)
 
 
-def _torques(scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix]) -> dict:
+def inputs(scene: Scene) -> tuple[str, ...]:
+    """The linear model's inputs: each rotor's w_ref_k (a speed controller)
+    or its motor torque T_k."""
+    return tuple(
+        rotor_name("w_ref" if r.torque == "speed_controller" else "T", k)
+        for k, r in enumerate(scene.rotors, 1)
+    )
+
+
+def _torques(
+    scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix], perturbed: bool = False
+) -> dict:
     """Each rotor's net torque, and the named values it reads: rel_k (the
-    rate relative to A) when friction or a speed controller needs it."""
+    rate relative to A) when friction or a speed controller needs it. With
+    perturbed, each rotor's input plus its delta (Equations.perturbed)."""
     w_a = sm.Matrix([states["u1"], states["u2"], states["u3"]])
     shared: dict[sm.Symbol, sm.Expr] = {}
     nets: list[sm.Expr] = []
     motors: list[sm.Expr] = []
+    inputs: list[sm.Symbol] = []
     for k, (r, g) in enumerate(zip(scene.rotors, axes, strict=True), 1):
         law = {key: _param(rotor_name(key, k), v) for key, v in r.law().items()}
+        if perturbed:
+            key = "w_ref" if r.torque == "speed_controller" else "T"
+            law[key] = law.get(key, sm.S.Zero) + equations.delta(rotor_name(key, k))
         rel = sm.Symbol(f"{SLIP}{k}", real=True)
         if r.b or r.torque == "speed_controller":
             shared[rel] = states[f"w{k}"] - g.dot(w_a)
-        motor = sm.S.Zero
-        if r.torque == "constant":
-            motor = law["T"]
+        motor = law.get("T", sm.S.Zero)  # constant; a perturbed none or table
+        if r.torque == "table":
+            table = sm.Symbol(f"{TABLE}_{k}", real=True)
+            inputs.append(table)
+            motor += table
         elif r.torque == "speed_controller":
             motor = -law["k"] * (rel - law["w_ref"])
         if r.tau_max is not None:
@@ -146,7 +195,7 @@ def _torques(scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix]) 
             shared[name] = net
             net = name
         nets.append(net)
-    return {"shared": shared, "nets": nets, "motors": motors}
+    return {"shared": shared, "nets": nets, "motors": motors, "inputs": tuple(inputs)}
 
 
 def _param(name: str, value: float | str) -> sm.Expr:
@@ -154,9 +203,9 @@ def _param(name: str, value: float | str) -> sm.Expr:
 
 
 def _derive(scene: Scene) -> Equations:
-    inertia = lumped_inertia(scene)
+    inertia, lumped = _named(lumped_inertia(scene))
     axes = [_axis(r) for r in scene.rotors]
-    axial = [_number(r.J) for r in scene.rotors]
+    axial = [_param(rotor_name("J", k), r.J) for k, r in enumerate(scene.rotors, 1)]
     n = len(axes)
     mm, forcing, qdot, net = kane(inertia, axes, axial)
     names = cluster_states(n, False, True)
@@ -184,7 +233,26 @@ def _derive(scene: Scene) -> Equations:
         **torques["shared"],
         **dict(zip(f, f_value, strict=True)),
     }
-    return _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
+    eqs = _equations(scene, st, expected, coded, qdot, shared, torques["motors"], axes)
+    eqs = dataclasses.replace(eqs, inputs=torques["inputs"], lumped=lumped)
+    if not scene.outputs.linear_model:
+        return eqs
+    torques = _torques(scene, st, axes, perturbed=True)
+    f_value = h.cross(w_a) - _by_axis_component(torques["nets"], axes)
+    shared = {
+        **dict(zip(h, h_value, strict=True)),
+        **torques["shared"],
+        **dict(zip(f, f_value, strict=True)),
+    }
+    names = inputs(scene)
+    perturbed = equations.Perturbed(
+        controls=tuple(equations.delta(n) for n in names),
+        names=names,
+        forcing=sm.Matrix([*f, *torques["nets"]]),
+        shared=shared,
+        outputs=_outputs(scene, st, expected, shared, torques["motors"], axes),
+    )
+    return dataclasses.replace(eqs, perturbed=perturbed)
 
 
 def _equations(
@@ -220,7 +288,7 @@ def _equations(
         lumped={},
         outputs=_outputs(scene, st, mass, shared, motors, axes),
         shared=shared,
-        checks={},
+        checks={n: sm.Symbol(n, real=True) for n in scene.runtime if _inertial(n)},
         coupled=mass.extract([0, 1, 2], [0, 1, 2]),
         gather=True,
     )
@@ -258,6 +326,11 @@ def _outputs(
             motor.xreplace(full) * (wheels[k] - axes[k].dot(w_a)) for k, motor in enumerate(motors)
         )
     return out
+
+
+def _inertial(name: str) -> bool:
+    """A runtime parameter setup's checks read: the carrier's, a mass, an inertia."""
+    return name in CLUSTER_CARRIER or name.rpartition("_")[0] in ("m", "I", "J", *POSITION)
 
 
 def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:

@@ -15,6 +15,27 @@ from gyrogen.symbolic import model
 
 
 @dataclass(frozen=True)
+class Perturbed:
+    """The equations again with an input added to each rotor's law (the
+    scene's outputs.linear_model): delta_j on its motor torque, or on its
+    speed controller's w_ref. At delta = 0 they are the scene's own; their
+    derivatives there are the linear model's B and D."""
+
+    controls: tuple[sm.Symbol, ...]
+    """delta_1.., in the order of names."""
+    names: tuple[str, ...]
+    """The inputs: T (T_k), or w_ref (w_ref_k) for a speed controller."""
+    forcing: sm.Matrix
+    shared: dict[sm.Symbol, sm.Expr]
+    outputs: dict[str, tuple[sm.Expr, ...]]
+
+
+def delta(name: str) -> sm.Symbol:
+    """The input added to name (T_2, w_ref): never printed (set to 0)."""
+    return sm.Symbol(f"delta_{name}", real=True)
+
+
+@dataclass(frozen=True)
 class Equations:
     states: tuple[sm.Symbol, ...]
     """Kept states, in x[] order."""
@@ -43,6 +64,8 @@ class Equations:
     each round their own copy of a large torque; with one rounded torque the
     angular momentum they exchange cancels (drift 1e-10 -> 1e-15 at
     k/J = 1e6)."""
+    perturbed: Perturbed | None = None
+    """With outputs.linear_model: the equations with each rotor's input."""
     gather: bool = False
     """Sum the terms of one |coefficient| before one multiply (hoist.gathered):
     a cluster's symmetric axes give k (w1 - w3); the paper's scenes keep

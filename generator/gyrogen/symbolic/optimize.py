@@ -60,6 +60,9 @@ class Optimized:
     """Optional extra functions (energy, momentum, power), per call."""
     jacobian: Block | None = None
     """d(dx/dt)/dx, row-major, when an implicit integrator needs it."""
+    linear: Block | None = None
+    """A, B, C, D of the linear model (Equations.perturbed), each row-major,
+    one after another."""
 
     @property
     def nc(self) -> int:
@@ -156,7 +159,8 @@ def _temporaries() -> Iterator[sm.Symbol]:
 def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
     also d(dx/dt)/dx for the implicit integrators."""
-    udot = block_inverse(eqs.mass_matrix) * eqs.forcing
+    inverse = block_inverse(eqs.mass_matrix)
+    udot = inverse * eqs.forcing
     hoister = Hoister(eqs.gather)
     per_call = [*eqs.states, *eqs.inputs, *eqs.shared]
     dyn = [hoist(e, per_call, hoister) for e in udot]
@@ -170,10 +174,42 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     }
     inline = _inlined(shared)
     jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
-    values = [_multiplied_out(v, eqs.lumped) for v in hoister.values]
-    det = _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
+    linear = _linear_model(eqs, inverse, kin, hoister) if eqs.perturbed else None
+    cluster = eqs.coupled.shape[0] == 3  # no reduced mass to multiply out
+    values = [v if cluster else _multiplied_out(v, eqs.lumped) for v in hoister.values]
+    det = sm.S.Zero if cluster else _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
-    return Optimized(setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac)
+    return Optimized(
+        setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac, linear=linear
+    )
+
+
+def _linear_model(
+    eqs: Equations, inverse: sm.Matrix, kin: list[sm.Expr], hoister: Hoister
+) -> Block:
+    """A = df/dx, B = df/du, C = dy/dx, D = dy/du at u = 0, row-major, from
+    the perturbed equations hoisted after the scene's own (their constants
+    come after the rhs's: the rhs and its constants stay as they were)."""
+    pert = eqs.perturbed
+    assert pert is not None
+    per_call = [*eqs.states, *eqs.inputs, *pert.shared, *pert.controls]
+    dyn = [hoist(e, per_call, hoister) for e in inverse * pert.forcing]
+    shared = _inlined({s: hoist(e, per_call, hoister) for s, e in pert.shared.items()})
+    f = [e.xreplace(shared) for e in (*kin, *dyn)]
+    y = [hoist(_sincos(e), per_call, hoister) for exprs in pert.outputs.values() for e in exprs]
+    at_zero = dict.fromkeys(pert.controls, sm.S.Zero)
+    entries = [
+        sm.diff(e, v).xreplace(at_zero)
+        for rows, columns in (
+            (f, eqs.states),
+            (f, pert.controls),
+            (y, eqs.states),
+            (y, pert.controls),
+        )
+        for e in rows
+        for v in columns
+    ]
+    return _cse(entries, _temporaries())
 
 
 def _rhs_block(shared: dict[sm.Symbol, sm.Expr], f: list[sm.Expr], gather: bool) -> Block:
@@ -207,7 +243,7 @@ def condition(block: sm.Matrix, det: sm.Expr) -> sm.Expr:
     cluster's 3x3 block, folded: ||M||_F ||M^-1||_F (physics.frobenius_condition)."""
     if block.shape[0] == 3:
         cond = physics.frobenius_condition(block.tolist(), sm.sqrt)
-        return as_double(cond, integers=False)
+        return as_double(cond, integers=False) if cond.is_number else cond
     cond = physics.condition(block[0, 0], block[0, 1], block[1, 1], det, sm.sqrt)
     return as_double(cond, integers=False) if cond.is_number else cond
 

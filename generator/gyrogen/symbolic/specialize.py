@@ -4,6 +4,8 @@ and add the outputs it asks for."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import sympy as sm
 
 from gyrogen.abi import CONTROLLER_PARAMETERS
@@ -87,6 +89,13 @@ def specialize(scene: Scene) -> Equations:
         kept = [*quat.e, *kept[3:]]
         kin = sm.Matrix([*quat.kinematics, *kin[3:]])
     runtime = tuple(sym[n] for n in scene.runtime)
+    perturbed = None
+    if scene.outputs.linear_model:
+        forcing = equations.plain(full.forcing)
+        perturbed = _perturbed(
+            scene, v, by_name, subs, sym["T"], torque,
+            lambda s: forcing.subs(s).extract(keep_u, [0]),
+        )  # fmt: skip
     return Equations(
         states=tuple(kept),
         params=runtime,
@@ -99,7 +108,33 @@ def specialize(scene: Scene) -> Equations:
         shared=shared,
         checks={n: v[n] for n in checked_parameters()},
         coupled=mm.extract([0, 2], [0, 2]),  # u1..u4 are always kept
+        perturbed=perturbed,
     )
+
+
+def _perturbed(
+    scene: Scene,
+    v: dict[str, sm.Expr],
+    u: dict[str, sm.Symbol],
+    subs: dict[sm.Basic, sm.Expr],
+    T: sm.Symbol,
+    torque: sm.Expr,
+    forcing: Callable[[dict[sm.Basic, sm.Expr]], sm.Matrix],
+) -> equations.Perturbed:
+    """The rotor's input: delta on w_ref (a speed controller) or on the motor
+    torque; forcing(subs) is the kept forcing under subs."""
+    if scene.effects.torque == "speed_controller":
+        d = equations.delta("w_ref")
+        shared = {SLIP: u["u4"] - u["u2"] - (v["w_ref"] + d)}
+        with_d = subs
+    else:
+        d = equations.delta("T")
+        shared = {}
+        torque = torque + d
+        with_d = {**subs, T: torque}
+    outputs = _outputs(scene, with_d, u, torque.xreplace(shared))
+    name = "w_ref" if shared else "T"
+    return equations.Perturbed((d,), (name,), forcing(with_d), shared, outputs)
 
 
 def _outputs(

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen.abi import STATES
+from gyrogen.abi_rotors import rotor_name
 from gyrogen.analysis.simulate.trajectory import Trajectory, running_integrals
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.scene import Scene
@@ -62,7 +63,7 @@ def rates(scene: Scene, p: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarr
     x (m, nx), from the scene's torque law as the reference applies it."""
     v = scene_view.values(scene, p)
     if scene.rotors:  # dK/dt: every net torque times its wheel's relative rate; wheel 1's
-        return cluster_reference.power_and_torque(scene, x, v)
+        return cluster_reference.power_and_torque(scene, x, v, t)
     full = scene_view.full_states(scene, x)
     if scene.effects.torque == "table":  # scene_view.torque takes one t; the table needs each
         table = np.array(scene.effects.torque_table)
@@ -164,4 +165,7 @@ def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:
 
 def _axial(scene: Scene, p: np.ndarray) -> float:
     """J of the rotor whose rate the u4 residual follows (a cluster's wheel 1)."""
-    return scene.rotors[0].J if scene.rotors else scene_view.values(scene, p)["J"]
+    v = scene_view.values(scene, p)
+    if scene.rotors:
+        return v[rotor_name("J", 1)] if scene.rotors[0].J == "runtime" else float(scene.rotors[0].J)
+    return v["J"]

@@ -17,6 +17,7 @@ from gyrogen.codegen.statements import (
     WritableNumbers,
     functions,
     jacobian,
+    linear,
     statements,
     trig_used,
 )
@@ -67,6 +68,7 @@ def files(unit: SceneContext) -> dict[str, str]:
     lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign_lanes)[0]
     lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign_lanes)[0]
     jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
+    lin = linear(unit, lambda a, i: f"{a}[{i}]", assign)
     has_lanes = any(m.pair for m in unit.methods)
     inlined = [lanes_ode] if has_lanes and not lanes_ode.torque else []
     expanded = [rhs] if unit.jet is not None else []  # the Taylor jet's sin and cos: the rhs's
@@ -82,8 +84,9 @@ def files(unit: SceneContext) -> dict[str, str]:
         "rhs_lanes_ode": lanes_ode,
         "outputs": outputs,
         "jac": jac,
+        "linear": lin,
         "source_trig": trig_text(
-            "c", unit.prefix, unit.macro, trig_used(unit.prefix, [rhs, lanes, *outputs])
+            "c", unit.prefix, unit.macro, trig_used(unit.prefix, [rhs, lanes, *outputs, lin])
         ),
         "ode_trig": trig_text("c", unit.prefix, unit.macro, ode_trig),
         "methods": unit.methods,
@@ -94,7 +97,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         ),
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("c", unit.macro, unit.cluster),
+        "checks": printed("c", unit.macro, unit.checks),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }
     out = {

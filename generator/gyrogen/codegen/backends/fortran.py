@@ -74,7 +74,8 @@ def files(unit: SceneContext) -> dict[str, str]:
 
     rhs, *outputs = functions(unit, lambda a, i: f"{a}({i + 1})", assign)
     setup = statements(unit.optimized.setup, lambda k: f"c({k + 1})", assign)
-    setup_names = [*SIGNATURES["setup"].names, SETUP_RESULT, *local_names()]
+    check_locals = local_names(unit.checks)
+    setup_names = [*SIGNATURES["setup"].names, SETUP_RESULT, *check_locals]
     _check_names(
         [*setup_names, *(v.name for v in unit.setup_locals), *(s.name for s in setup if s.declare)],
         "setup",
@@ -82,7 +83,7 @@ def files(unit: SceneContext) -> dict[str, str]:
     jac = jacobian(unit, lambda a, i: f"{a}({i + 1})", assign)
     signature = {"rhs": "rhs", "jac": "jac"}
     for fn in (rhs, *outputs, *([jac] if jac else [])):
-        names = [unit.states[i].name for i in fn.states] + ["torque"] * fn.torque
+        names = [unit.states[i].name for i in fn.states] + fn.tables
         args = SIGNATURES[signature.get(fn.name, "output")].names
         _check_names([*args, *names, *(s.name for s in fn.statements if s.declare)], fn.name)
 
@@ -91,7 +92,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         return [v for v in ("sin", "cos") if v in found]  # Fortran has no _lanes twins
 
     gimbal = bool(unit.methods) and not unit.quaternion
-    setup_fn = Function("setup", "", "", setup, [], False)
+    setup_fn = Function("setup", "", "", setup, [], [])
     trig = used([setup_fn, rhs, *outputs, jac], gimbal)
     ctx = {
         "unit": unit,
@@ -110,9 +111,9 @@ def files(unit: SceneContext) -> dict[str, str]:
         ),
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("fortran", unit.macro, unit.cluster),
+        "checks": printed("fortran", unit.macro, unit.checks),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
-        "check_locals": () if unit.cluster else local_names(),
+        "check_locals": check_locals,
         "signature_of": signature_of,
     }
     out = {

@@ -1,0 +1,96 @@
+"""linearize: the linear model A, B, C, D of a scene about an equilibrium."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from gyrogen.commands.options import SCENE, FiniteFloat, directory
+from gyrogen.scene import Scene
+
+
+def _pairs(value: str | None, flag: str) -> dict[str, float]:
+    """'a=1,b=2' -> {a: 1.0, b: 2.0} (nan passes: the engine names it)."""
+    if not value:
+        return {}
+    out: dict[str, float] = {}
+    for item in value.split(","):
+        name, eq, number = item.partition("=")
+        try:
+            if not eq:
+                raise ValueError
+            out[name.strip()] = float(number)
+        except ValueError:
+            raise click.BadParameter(f"{item!r} is not NAME=NUMBER", param_hint=flag) from None
+    return out
+
+
+def _vector(value: str | None) -> list[float] | None:
+    if value is None:
+        return None
+    try:
+        return [float(v) for v in value.split(",")]
+    except ValueError:
+        raise click.BadParameter(
+            f"{value!r} is not a comma-separated list of numbers", param_hint="--state"
+        ) from None
+
+
+@click.command()
+@click.argument("scene", type=SCENE)
+@click.option("--at", "at", default=None, metavar="NAME=V,...",
+              help="The equilibrium by state name (others 0, e0 1).")  # fmt: skip
+@click.option("--state", default=None, metavar="V1,V2,...",
+              help="The equilibrium as the whole state vector, in the scene's order.")  # fmt: skip
+@click.option("--param", "params", default=None, metavar="NAME=V,...",
+              help="Runtime parameters [default: the scene's simulate.parameters].")  # fmt: skip
+@click.option("--spin", type=FiniteFloat(), default=None,
+              help="Find a steady spin at this rate, rad/s [default: the start's].")  # fmt: skip
+@click.option("--axis", type=click.IntRange(1, 3), default=None,
+              help="Find the spin about the principal axis nearest a1, a2 or a3 "
+              "[default: nearest the start's w_A].")  # fmt: skip
+@directory("--out", "Directory for linear.npz and poles.png [default: linear/<scene>].")
+@click.option("--plot", is_flag=True, help="Also write poles.png, the pole map.")
+def linearize(
+    scene: Scene,
+    at: str | None,
+    state: str | None,
+    params: str | None,
+    spin: float | None,
+    axis: int | None,
+    out: Path | None,
+    plot: bool,
+) -> None:
+    """Linearize SCENE about an equilibrium: x' = A x + B u, y = C x + D u.
+
+    The equilibrium is --at or --state if given, else the scene's
+    `equilibrium`, else found: a steady spin about a principal axis (--spin,
+    --axis) with each wheel at the rate its torque law holds. The inputs u
+    are each rotor's motor torque, or its speed controller's w_ref; the
+    outputs y the scene's outputs. About a spin the attitude and rotor
+    angles turn and are left out. Writes linear.npz (A, B, C, D, their
+    names, the point, the eigenvalues) and prints the modes in words:
+    stable, unstable or marginal."""
+    from gyrogen.analysis.linearize import linear_files
+    from gyrogen.analysis.linearize import linearize as engine
+
+    if at is not None and state is not None:
+        raise click.UsageError("--at and --state are exclusive: give the point one way")
+    lin = engine.model(
+        scene,
+        state=_vector(state),
+        at=_pairs(at, "--at") if at is not None else None,
+        parameters=_pairs(params, "--param"),
+        spin=spin,
+        axis=axis,
+    )
+    if (line := linear_files.warning(lin)) is not None:
+        click.echo(f"gyrogen: {line}", err=True)
+    written = linear_files.write(lin, out or Path("linear") / scene.name, plot)
+    for line in linear_files.report(lin):
+        click.echo(line)
+    click.echo(f"wrote {', '.join(str(p) for p in written)}")
+
+
+command = linearize

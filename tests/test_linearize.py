@@ -1,0 +1,220 @@
+"""`gyrogen linearize`: A from the generated Jacobian and B, C, D from the
+generated <prefix>_linear agree with central differences of the compiled
+rhs, outputs and setup; the eigenvalues agree with NOTES.md's spin-stability
+criterion on the stability map's grid; bad points are one line, exit 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrogen import api
+from gyrogen.analysis.check.check_engine import spin_stable
+from gyrogen.analysis.linearize import linear_files, modes
+from gyrogen.analysis.linearize import linearize as engine
+from gyrogen.analysis.sweep import sweep_spec
+from gyrogen.analysis.sweep.sweep_draws import grid_values
+from gyrogen.analysis.sweep.sweep_report import spin_values
+from gyrogen.codegen.context import make_context
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.scene import load
+from gyrogen.scene.rotors import lumped_inertia
+
+SCENES = ("dual_spin", "rw4_pyramid", "speed_controlled", "wheel_spinup", "rw3_orthogonal")
+FD_BAR = 1e-7
+
+
+@pytest.fixture(scope="module")
+def builds() -> dict[str, Compiled]:
+    return {name: engine.build(load(name)) for name in SCENES}
+
+
+def _central(f, v: np.ndarray, j: int) -> np.ndarray:
+    """d f / d v_j by central differences (step ~ cbrt(eps) |v_j|)."""
+    h = 6e-6 * max(1.0, abs(v[j]))
+    up, down = v.copy(), v.copy()
+    up[j] += h
+    down[j] -= h
+    return (f(up) - f(down)) / (up[j] - down[j])
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def _points(name: str, comp: Compiled) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The scene's parameters and states around its found equilibrium
+    (wheels within 1 rad/s of it: inside every torque clamp)."""
+    scene = load(name)
+    p = engine.parameters_of(scene, {})
+    x0, _ = engine.find_spin(scene, comp, p, None, None)
+    rng = np.random.default_rng(7)
+    return p, [x0 + rng.normal(0.0, 0.3, x0.size) for _ in range(5)]
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_a_and_c_agree_with_central_differences(name: str, builds: dict[str, Compiled]) -> None:
+    comp = builds[name]
+    p, xs = _points(name, comp)
+    c = comp.setup(p)
+    outputs = comp.manifest["linear"]["from"]
+    for x in xs:
+        nx = x.size
+        a = comp.jacobian(x, c)
+        fd = np.column_stack([_central(lambda v: comp.rhs(v, c), x, j) for j in range(nx)])
+        assert _relative(a, fd) < FD_BAR, name
+        a_lin, _, c_lin, _ = engine.generated(comp, x, c)
+        assert _relative(a_lin, a) < 1e-14
+        if outputs:
+            y = lambda v: np.concatenate([comp.output(o, v, c)[0] for o in outputs])  # noqa: E731
+            fd_c = np.column_stack([_central(y, x, j) for j in range(nx)])
+            assert _relative(c_lin, fd_c) < FD_BAR, name
+
+
+@pytest.mark.parametrize("name", [n for n in SCENES if load(n).runtime])
+def test_b_and_d_agree_with_central_differences_through_setup(
+    name: str, builds: dict[str, Compiled]
+) -> None:
+    """Each runtime input (T, T_k, w_ref, w_ref_k): B and D are the rhs's
+    and the outputs' derivatives along that parameter of setup."""
+    comp = builds[name]
+    scene = load(name)
+    p, xs = _points(name, comp)
+    inputs = comp.manifest["linear"]["inputs"]
+    outputs = comp.manifest["linear"]["from"]
+    x = xs[0]
+    _, b, _, d = engine.generated(comp, x, comp.setup(p))
+    checked = 0
+    for j, u in enumerate(inputs):
+        if u not in scene.runtime:
+            continue  # folded: checked through its twin scenes below
+        k = scene.runtime.index(u)
+        fd = _central(lambda q: comp.rhs(x, comp.setup(q)), p, k)
+        assert _relative(b[:, j], fd) < FD_BAR, (name, u)
+        if outputs:
+            y = lambda q: np.concatenate(  # noqa: E731
+                [comp.output(o, x, comp.setup(q))[0] for o in outputs]
+            )
+            assert np.max(np.abs(d[:, j] - _central(y, p, k))) <= FD_BAR * max(
+                1.0, float(np.max(np.abs(d)))
+            ), (name, u)
+        checked += 1
+    assert checked >= 1
+
+
+def test_b_of_folded_runtime_and_absent_torques_is_the_inverse_inertia() -> None:
+    """rw3_orthogonal: wheel 1's T folded, wheel 2's runtime, wheel 3 without
+    a motor. Each T_k enters as I~ u' = ... - T_k g_k and J_k w_k' = T_k, so
+    B's columns are -I~^-1 g_k over u and 1/J_k over w_k, whatever the law."""
+    scene = load("rw3_orthogonal")
+    lin = api.linearize(scene, spin=0.0)
+    assert lin.inputs == ("T_1", "T_2", "T_3")
+    inverse = np.linalg.inv(np.array(lumped_inertia(scene.parameters, scene.rotors)))
+    axes = np.array([[float(g) for g in r.unit_axis] for r in scene.rotors]).T
+    u = [lin.states.index(s) for s in ("u1", "u2", "u3")]
+    w = [lin.states.index(f"w{k}") for k in (1, 2, 3)]
+    assert np.allclose(lin.B[u], -inverse @ axes, rtol=1e-12, atol=0)
+    assert np.allclose(lin.B[w], np.diag([1 / r.J for r in scene.rotors]), rtol=1e-14, atol=0)
+
+
+def test_the_linear_model_leaves_the_scene_code_as_it_was() -> None:
+    """outputs.linear_model adds <prefix>_linear and constants after the
+    rhs's own: rhs, Jacobian and outputs stay the same expressions."""
+    scene = load("dual_spin")
+    mine = make_context(engine.with_model(scene))
+    own = make_context(scene)
+    assert mine.optimized.rhs == own.optimized.rhs
+    assert mine.optimized.outputs == own.optimized.outputs
+    assert mine.optimized.setup.outputs[: own.nc - 1] == own.optimized.setup.outputs[:-1]
+    assert engine.with_model(scene).model_dump()["outputs"]["linear_model"] is True
+    assert "linear_model" not in scene.model_dump()["outputs"]
+
+
+def test_eigenvalues_agree_with_the_spin_criterion_on_the_stability_map() -> None:
+    """Every cell of the stability map (gyrostat, 41 x 41 over I22 and u4,
+    a spin of u2 = 1 rad/s): unstable from the eigenvalues of the rotational
+    block (u1..u4; translation is a double integrator of its own) against
+    NOTES.md's (H_a - I_t1 Omega)(H_a - I_t3 Omega) > 0. The cells on the
+    boundary have a double zero eigenvalue: a Jordan block (unstable, like
+    t) where the criterion's product is zero to rounding."""
+    spec = sweep_spec.load("stability_map")
+    scene = spec.scene
+    comp = engine.build(scene)
+    n = spec.sweep.grid_size
+    grid = grid_values(spec, np.arange(n))
+    base, start = spec.base_parameters(), spec.base_state()
+    omega = start["u2"]
+    agree = 0
+    for i in range(n):
+        cell = {k: float(v[i]) for k, v in grid.items()}
+        p = engine.parameters_of(scene, {**base, "I22": cell["I22"]})
+        x = engine.state_of(scene, None, {"u2": omega, "u4": cell["u4"]})
+        lin = engine.linearize(scene, comp, p, x, "grid")
+        assert lin.residual == 0.0
+        rot = [lin.states.index(s) for s in ("u1", "u2", "u3", "u4")]
+        unstable = modes.unstable(lin.A[np.ix_(rot, rot)], ("u1", "u2", "u3", "u4"))
+        v = spin_values(spec, {k: np.array([cell[k]]) for k in grid})
+        stable = bool(spin_stable(v, np.float64(omega), v["u4"])[0])
+        agree += stable != unstable
+    assert n == 1681 and agree / n >= 0.995, agree
+
+
+def test_found_spin_of_the_dual_spin_is_an_exact_equilibrium_and_marginal() -> None:
+    lin = api.linearize("dual_spin")
+    assert lin.residual == 0.0 and lin.dropped == ("q1", "q2", "q3")
+    found = modes.modes(lin.A, lin.states)
+    assert modes.overall(found) == "marginal"
+    nutation = [m for m in found if m.oscillating]
+    assert len(nutation) == 1 and set(nutation[0].states) == {"u1", "u3"}
+    assert "oscillating at 0.0475" in nutation[0].words()
+
+
+def test_state_space_carries_the_names_and_the_poles() -> None:
+    control = pytest.importorskip("control")
+    lin = api.linearize("rw4_pyramid", spin=0.0)
+    sys = api.state_space(lin)
+    assert list(sys.state_labels) == list(lin.states)
+    assert list(sys.input_labels) == ["w_ref_1", "w_ref_2", "w_ref_3", "w_ref_4"]
+    assert len(sys.output_labels) == 8
+    poles = np.sort_complex(control.poles(sys))
+    assert np.allclose(poles, np.sort_complex(lin.eigenvalues), atol=1e-12)
+
+
+def test_command_writes_npz_and_pole_map(tmp_path: Path, cli) -> None:
+    code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), "--plot"])
+    assert code == 0 and err == "", err
+    assert "marginal: 2 modes" in out and "(x2)" in out and "in u1, u3" in out
+    data = np.load(tmp_path / linear_files.NPZ)
+    assert data["A"].shape == (4, 4) and list(data["states"]) == ["u1", "u2", "u3", "u4"]
+    assert list(data["inputs"]) == ["T"] and data["C"].shape == (4, 4)
+    png = (tmp_path / linear_files.PLOT).read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--state", "0,0,0,0.05"], "the equilibrium has 4 values; dual_spin has 7 states"),
+        (["--at", "u2=nan"], "state u2 is nan: not a finite number"),
+        (["--at", "u9=1"], "u9 is not a state of dual_spin"),
+        (["--at", "u2"], "'u2' is not NAME=NUMBER"),
+        (["--at", "u2=1", "--spin", "1"], "give the equilibrium or ask for a spin"),
+        (["--param", "k=1"], "k is not a runtime parameter of the scene"),
+    ],
+)
+def test_bad_points_are_one_line_exit_2(argv: list[str], message: str, tmp_path: Path, cli) -> None:
+    code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), *argv])
+    assert (code, out) == (2, "") and err.count("\n") == 1 and message in err, err
+    assert not any(tmp_path.iterdir())
+
+
+def test_not_an_equilibrium_is_warned_with_its_residual(tmp_path: Path, cli) -> None:
+    code, _, err = cli(
+        ["linearize", "dual_spin", "--out", str(tmp_path), "--at", "u1=0.01,u2=0.05,u4=600"]
+    )
+    assert code == 0 and err.count("\n") == 1, err
+    assert err.startswith("gyrogen: warning: not an equilibrium: max |dx/dt|")
+    assert "the model is about a moving point" in err
+    assert (tmp_path / linear_files.NPZ).is_file()
