@@ -130,7 +130,8 @@ def clusters(draw: st.DrawFn) -> Draw:
         "attitude": attitude,
         "targets": draw(TARGET_LISTS),
         "integrators": offered(
-            draw(INTEGRATOR_LISTS), all(r.get("tau_max") is None for r in rotors)
+            draw(INTEGRATOR_LISTS),
+            all(r.get("tau_max") is None and r.get("torque") != "table" for r in rotors),
         ),
     }
     tables = {

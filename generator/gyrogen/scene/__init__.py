@@ -234,6 +234,9 @@ class Scene(_Strict):
         table, a clamped motor torque), or None."""
         if self.effects.torque == "table":
             return "a piecewise-linear torque table"
+        tabled = [k for k, r in enumerate(self.rotors, 1) if r.torque == "table"]
+        if tabled:
+            return f"rotor {tabled[0]}'s piecewise-linear torque table"
         clamped = [k for k, r in enumerate(self.rotors, 1) if r.tau_max is not None]
         if clamped:
             return f"rotor {clamped[0]}'s motor torque is clamped to tau_max"
