@@ -88,7 +88,7 @@ def test_files_exist_and_agree(torque_free: Run) -> None:
     np.testing.assert_array_equal(csv[:, -len(COLUMNS) :], invariants)
     manifest = json.loads((torque_free.dir / "src" / "manifest.json").read_text())
     assert summary["scene"] == "torque_free" and summary["build_id"] == manifest["build_id"]
-    assert (summary["method"], summary["backend"]) == ("taylor", "c")  # auto: compiled, fastest
+    assert (summary["method"], summary["backend"]) == ("dop853", "c")  # auto: compiled
     assert (summary["rtol"], summary["atol"]) == (scene.simulate.rtol, scene.simulate.atol)
     assert summary["nfev"] > 0 and summary["wall_time_s"] > 0 and summary["t_end"] == 2.0
     worst = summary["invariants"]

@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sm
+from test_integrators import tabled  # the wheel under a tabled torque
 
 from gyrogen import abi, methods
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import load, parse
+from gyrogen.scene import Scene, load
 from gyrogen.symbolic.jet import NotExpandable, decompose
 from gyrogen.symbolic.optimize import Assignment, Block
 
@@ -110,35 +111,14 @@ def test_what_is_not_expanded_is_refused(expr: sm.Expr, why: str) -> None:
     assert issubclass(NotExpandable, GyrogenError)
 
 
-TABLED = """
-name = "tabled"
-description = "a wheel under a tabled torque"
-{integrators}
-[parameters]
-m_a = 300.0
-m_b = 4.0
-I11 = 60.0
-I22 = 75.0
-I33 = 55.0
-I13 = 1.5
-I   = 0.02
-J   = 0.03
-l1  = 0.1
-l3  = 0.25
-
-[effects]
-translation = false
-torque = "table"
-torque_table = [[0.0, 0.0], [0.5, 0.4], [1.5, -0.3]]
-"""
-
-
 def test_taylor_is_offered_only_where_the_rhs_is_smooth() -> None:
     """Left out of a non-smooth scene's default integrators, refused in one
     line when asked for; smooth built-ins have it by default."""
-    assert "taylor" not in parse(TABLED.format(integrators=""), "t").integrators
+    data = tabled(["dop853"]).model_dump()
+    del data["integrators"]
+    assert "taylor" not in Scene.model_validate(data).integrators
     with pytest.raises(SceneError, match=r"taylor is not offered for this scene.*torque table"):
-        parse(TABLED.format(integrators='integrators = ["taylor"]'), "t")
+        tabled(["taylor"])
     assert "taylor" not in load("rw4_pyramid").integrators  # clamped motors
     for name in SMOOTH:
         assert "taylor" in load(name).integrators, name

@@ -2134,7 +2134,7 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
         xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));
         h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
         h = last ? t1 - t : h;
@@ -2142,7 +2142,7 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         code = run ? (step_underflow(h,
                 t) ? (nonfinite ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
                 SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
-                max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) : code;  /* a step lost in t, or no steps left, stops */
+                max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) : code;  /* lost in t, or no steps left */
         run = code < 0;
 
         /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
@@ -3050,7 +3050,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
         xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
         rho[l] = exp(dmin(log(xmax[l] / dp[l]) * inv[order],
-                log(xmax[l] / dq[l]) * inv[order - 1]));  /* min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1))) */
+                log(xmax[l] / dq[l]) * inv[order - 1]));
         L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
         last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
         L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];
@@ -3059,7 +3059,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->t[l]) ? (L->nonfinite[l] ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
                 SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
                 L->stats_rejected[l] >= max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) :
-                L->code[l];  /* a step lost in t, or no steps left, stops */
+                L->code[l];  /* lost in t, or no steps left */
         run[l] = L->code[l] < 0;
     }
 

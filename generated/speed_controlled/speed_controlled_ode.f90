@@ -2316,7 +2316,7 @@ contains
         dq = max(dq, abs(tay(i, order - 1)))
       end do
       xmax = max(scale, xmax)  ! the absolute and relative modes in one
-      rho = exp(min(log(xmax / dp) * inv(order), log(xmax / dq) * inv(order - 1)))  ! min((s/|x^[p]|)^(1/p), (s/|x^[p-1]|)^(1/(p-1)))
+      rho = exp(min(log(xmax / dp) * inv(order), log(xmax / dq) * inv(order - 1)))
       h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
       h = merge(t1 - t, h, last)
@@ -2324,7 +2324,7 @@ contains
       code = merge(merge(merge(SPEED_CONTROLLED_ODE_ERR_NONFINITE, &
           SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW, nonfinite), &
           merge(SPEED_CONTROLLED_ODE_ERR_MAX_STEPS, -1, &
-          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! a step lost in t, or no steps left, stops
+          stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! lost in t, or no steps left
       run = code < 0
 
       ! x(t + h) by Horner's scheme, less what the last add lost (comp)

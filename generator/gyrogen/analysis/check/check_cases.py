@@ -286,7 +286,7 @@ def scene_case(name: str) -> Case:
     add += [f"{', '.join(lacking)} to integrators"] if lacking else []
     if add:
         raise SceneError(
-            f"{name}: gyrogen check needs the scene's C build with an explicit method "
+            f"{name}: gyrogen check needs the scene's C build with an explicit pair "
             f"({' or '.join(methods.EXPLICIT_CHOICE)}) and an implicit method "
             f"({' or '.join(methods.STIFF_CHOICE)}, with the Jacobian): add {' and '.join(add)}"
         )

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen import methods, physics
-from gyrogen.analysis.sweep.sweep_sources import compiled, scene_sources
 from gyrogen.errors import SceneError
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene, validate
 from gyrogen.scene.rotors import lumped_inertia, resolved
 
