@@ -307,11 +307,6 @@ class Series:
     order: int
     min_order: int = 2
 
-    def order_for(self, tol: float) -> int:
-        """The order the generated code takes for rtol = tol (the same rule,
-        in Python, for tests and reports)."""
-        return min(self.order, max(self.min_order, math.ceil(-math.log(tol) / 2 + 1)))
-
     def thresholds(self) -> tuple[float, ...]:
         """e^(-2 (q - 1)) for q = min_order .. order - 1: the order is
         min_order plus the number of these above rtol."""

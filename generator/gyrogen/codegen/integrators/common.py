@@ -119,11 +119,27 @@ def accept_step(quaternion: bool) -> Func:
     return Func("accept_step", params, tuple(body), None, locals_, doc)
 
 
+def gimbal_at(after: Var) -> E:
+    """The step ends at gimbal lock: |cos q2| below the bar."""
+    return cmp(fn("abs", fn("cos", after[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))
+
+
+def gimbal_jump(before: Var, after: Var) -> E:
+    """The step passed a point of gimbal lock (its ends in two intervals)."""
+    jump = fn("abs", fn("gimbal_interval", before[1]) - fn("gimbal_interval", after[1]))
+    return cmp(jump, ">=", 1.0)
+
+
 def locked(before: Var, after: Var) -> E:
     """The step from before to after ends at gimbal lock or passes a point of it."""
-    at = cmp(fn("abs", fn("cos", after[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))
-    jump = fn("abs", fn("gimbal_interval", before[1]) - fn("gimbal_interval", after[1]))
-    return or_(at, cmp(jump, ">=", 1.0))
+    return or_(gimbal_at(after), gimbal_jump(before, after))
+
+
+def declare(name: str, bools: set[str], init: E | None = None) -> Decl:
+    """A method's value from step to step: code an int, the names in bools
+    flags, the rest doubles."""
+    kind = "int" if name == "code" else "bool" if name in bools else "double"
+    return Decl(name, kind, (), "inout", init)  # type: ignore[arg-type]
 
 
 def gimbal() -> list[Func]:

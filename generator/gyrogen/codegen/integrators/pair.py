@@ -180,9 +180,8 @@ LOCALS = (
 BOOLS = {"nonfinite", "rejected_last", "last", "run", "take", "lock", "ok"}
 
 
-def declare(name: str, init: E | None = None) -> Decl:
-    kind = "int" if name == "code" else "bool" if name in BOOLS else "double"
-    return Decl(name, kind, (), "inout", init)  # type: ignore[arg-type]
+def declare(name: str) -> Decl:
+    return common.declare(name, BOOLS)
 
 
 def state_arrays(krows: int) -> tuple[Decl, ...]:

@@ -23,6 +23,8 @@ from gyrogen.codegen.integrators.common import (
     code,
     comp,
     dx,
+    gimbal_at,
+    gimbal_jump,
     h,
     i,
     real,
@@ -38,13 +40,11 @@ from gyrogen.codegen.integrators.taylor_jet import (
     reads_constants,
 )
 from gyrogen.codegen.ir.nodes import (
-    At,
     Bool,
     Call,
     Comment,
     Const,
     Decl,
-    E,
     For,
     Func,
     If,
@@ -89,7 +89,6 @@ def uniform(m: Method, jet: Jet) -> list[S]:
     ]
 
 
-UNIFORM = ("order", "rhofac", "scale")
 STATE = ("code", "t", "h", "cap", "nonfinite")
 """A trajectory's values that live from step to step (besides x, comp, stats)."""
 LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rho")
@@ -97,9 +96,7 @@ BOOLS = {"nonfinite", "last", "run", "take", "ok", "at", "jump", "retry"}
 
 
 def declare(name: str) -> Decl:
-    if name == "code":
-        return Decl(name, "int", (), "inout")
-    return Decl(name, "bool" if name in BOOLS else "double", (), "inout")
+    return common.declare(name, BOOLS)
 
 
 def start_state() -> list[S]:
@@ -279,17 +276,3 @@ def functions(m: Method, jet: Jet, quaternion: bool) -> list[Func]:
     series = m.tableau
     assert isinstance(series, Series)
     return [jet_function(series, jet), integrate(m, jet, quaternion)]
-
-
-def gimbal_at(xnew: Var) -> E:
-    """The step ends at gimbal lock: |cos q2| below the bar (a stop)."""
-    return cmp(fn("abs", fn("cos", xnew[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))
-
-
-def gimbal_jump(x_: Var, xnew: Var) -> E:
-    """The step passed a point of gimbal lock (a retry with a shorter step)."""
-    jump = fn("abs", fn("gimbal_interval", x_[1]) - fn("gimbal_interval", xnew[1]))
-    return cmp(jump, ">=", 1.0)
-
-
-__all__ = ["At", "functions", "not_", "or_"]

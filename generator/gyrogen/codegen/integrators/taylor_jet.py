@@ -70,9 +70,8 @@ class _Printer:
             return fn(node.op, z[0])
         if node.op == "neg":
             return -z[0]
-        ops = {"add": "+", "sub": "-", "mul": "*", "div": "/"}
         a, b = z
-        return {"+": a + b, "-": a - b, "*": a * b, "/": a / b}[ops[node.op]]
+        return {"add": a + b, "sub": a - b, "mul": a * b, "div": a / b}[node.op]
 
     def varying(self, n: int) -> bool:
         return not self.jet.nodes[n].const
