@@ -208,3 +208,30 @@ def test_taylor_is_a_registered_adaptive_method() -> None:
     m = methods.get("taylor")
     assert m.taylor and not m.pair and not m.implicit and not m.fixed_step
     assert "taylor" in methods.ADAPTIVE
+
+
+@pytest.mark.slow
+def test_a_scene_with_only_the_taylor_method(tmp_path: Path, cache_dir: Path) -> None:
+    """Its lanes define their own sin and cos (no pair's rhs_lanes brings
+    them), it compiles under generate's strict check, its batch equals its
+    single calls, and auto picks it rather than scipy."""
+    from gyrogen.codegen.generate import generate
+
+    data = load("torque_free").model_dump()
+    data.update(name="only_taylor", integrators=["taylor"])
+    scene = Scene.model_validate(data)
+    generate(scene, tmp_path / "src")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    try:
+        b = build.build(tmp_path / "src", "c")
+    finally:
+        mp.undo()
+    x0 = np.array(scene.initial_state())
+    c = b.setup(np.zeros(0))
+    xs = x0 + 0.01 * np.arange(3)[:, None]
+    xb, _, codes = b.integrate_batch("taylor", xs, c, 0.0, 2.0, rtol=1e-10, atol=1e-10)
+    for k in range(3):
+        x, _, code = b.integrate("taylor", xs[k], c, 0.0, 2.0, rtol=1e-10, atol=1e-10)
+        assert code == codes[k] == 0 and np.array_equal(x, xb[k])
+    assert methods.pick(scene.integrators, stiff=False) == "taylor"

@@ -42,7 +42,7 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
     show_default=True,
     help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators; "
     "auto: the scene's best compiled integrator of the kind its stiffness calls for "
-    "(radau5 or rodas4 if stiff, else dop853 or dopri5), scipy's Radau or DOP853 only "
+    "(radau5 or rodas4 if stiff, else dop853, dopri5 or taylor), scipy's Radau or DOP853 only "
     "when the scene compiled none of that kind.",
 )
 @click.option(

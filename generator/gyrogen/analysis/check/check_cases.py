@@ -287,7 +287,8 @@ def scene_case(name: str) -> Case:
     if add:
         raise SceneError(
             f"{name}: gyrogen check needs the scene's C build with an explicit pair "
-            f"({' or '.join(methods.EXPLICIT_CHOICE)}) and an implicit method "
+            f"({' or '.join(m for m in methods.EXPLICIT_CHOICE if methods.get(m).pair)}) "
+            f"and an implicit method "
             f"({' or '.join(methods.STIFF_CHOICE)}, with the Jacobian): add {' and '.join(add)}"
         )
     sim = scene.simulate

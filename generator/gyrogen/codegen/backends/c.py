@@ -69,9 +69,10 @@ def files(unit: SceneContext) -> dict[str, str]:
     lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign_lanes)[0]
     jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
     lin = linear(unit, lambda a, i: f"{a}[{i}]", assign)
-    has_lanes = any(m.pair for m in unit.methods)
-    inlined = [lanes_ode] if has_lanes and not lanes_ode.torque else []
-    expanded = [rhs] if unit.jet is not None else []  # the Taylor jet's sin and cos: the rhs's
+    has_lanes = any(m.lanes for m in unit.methods)
+    inlined = [lanes_ode] if any(m.pair for m in unit.methods) and not lanes_ode.torque else []
+    # the Taylor jet calls the rhs's sin and cos, scalar and over lanes
+    expanded = [rhs, lanes_ode] if unit.jet is not None else []
     ode_trig = trig_used(unit.prefix, [jac, *inlined, *expanded])  # rhs_lanes is inlined in ode.c
     gimbal_checks = ["cos", "cos_lanes"] if has_lanes else ["cos"]
     if not unit.quaternion:  # the gimbal-lock checks
