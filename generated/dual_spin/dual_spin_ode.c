@@ -1828,7 +1828,7 @@ int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rt
 
 /* The normalized Taylor coefficients of x and of the rhs's 46
    nodes to the given order (16 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[53])
+static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[16])
 {
     double acc7;
     double acc8;
@@ -1848,6 +1848,35 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     double acc50;
     double ib14;
     double ub14;
+    double v9;
+    double v10;
+    double v11;
+    double v15;
+    double v16;
+    double v17;
+    double v18;
+    double v19;
+    double v21;
+    double v23;
+    double v25;
+    double v27;
+    double v29;
+    double v31;
+    double v32;
+    double v34;
+    double v35;
+    double v36;
+    double v37;
+    double v39;
+    double v41;
+    double v42;
+    double v43;
+    double v45;
+    double v46;
+    double v48;
+    double v50;
+    double v51;
+    int b;
     int j;
     int n;
 
@@ -1861,49 +1890,49 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     tay[0][6] = x[6];
     tay[0][7] = dual_spin_sin(tay[0][2]);
     tay[0][8] = dual_spin_cos(tay[0][2]);
-    tay[0][9] = tay[0][8] * tay[0][5];
-    tay[0][10] = tay[0][7] * tay[0][3];
-    tay[0][11] = tay[0][9] - tay[0][10];
-    tay[0][12] = dual_spin_sin(tay[0][1]);
-    tay[0][13] = dual_spin_cos(tay[0][1]);
-    tay[0][14] = tay[0][11] / tay[0][13];
-    tay[0][15] = tay[0][7] * tay[0][5];
-    tay[0][16] = tay[0][8] * tay[0][3];
-    tay[0][17] = tay[0][15] + tay[0][16];
-    tay[0][18] = tay[0][14] * tay[0][12];
-    tay[0][19] = tay[0][4] - tay[0][18];
-    tay[0][21] = 4.5440763299219775e-05 * tay[0][6];
-    tay[0][23] = 0.4092155481941839 * tay[0][4];
-    tay[0][24] = tay[0][21] + tay[0][23];
-    tay[0][25] = tay[0][5] * tay[0][24];
-    tay[0][27] = 0.015471973456719416 * tay[0][4];
-    tay[0][29] = 1.1900419543364779e-06 * tay[0][6];
-    tay[0][30] = tay[0][27] - tay[0][29];
-    tay[0][31] = tay[0][30] * tay[0][3];
-    tay[0][32] = tay[0][25] - tay[0][31];
-    tay[0][34] = tay[0][5] * tay[0][5];
-    tay[0][35] = 0.01775954828743408 * tay[0][34];
-    tay[0][36] = -tay[0][35];
-    tay[0][37] = 0.01775954828743408 * tay[0][3];
-    tay[0][39] = 0.10773983913066638 * tay[0][5];
-    tay[0][40] = tay[0][37] - tay[0][39];
-    tay[0][41] = tay[0][3] * tay[0][40];
-    tay[0][42] = tay[0][36] + tay[0][41];
-    tay[0][43] = tay[0][30] * tay[0][5];
-    tay[0][45] = 5.266025597120826e-05 * tay[0][6];
-    tay[0][46] = -tay[0][45];
-    tay[0][48] = 0.3153534800671272 * tay[0][4];
-    tay[0][49] = tay[0][46] - tay[0][48];
-    tay[0][50] = tay[0][3] * tay[0][49];
-    tay[0][51] = tay[0][43] + tay[0][50];
-    ib14 = 1.0 / tay[0][13];
-    ub14 = tay[0][14] / tay[0][13];
-    tay[1][0] = tay[0][14];
-    tay[1][1] = tay[0][17];
-    tay[1][2] = tay[0][19];
-    tay[1][3] = tay[0][32];
-    tay[1][4] = tay[0][42];
-    tay[1][5] = tay[0][51];
+    v9 = tay[0][8] * tay[0][5];
+    v10 = tay[0][7] * tay[0][3];
+    v11 = v9 - v10;
+    tay[0][9] = dual_spin_sin(tay[0][1]);
+    tay[0][10] = dual_spin_cos(tay[0][1]);
+    tay[0][11] = v11 / tay[0][10];
+    v15 = tay[0][7] * tay[0][5];
+    v16 = tay[0][8] * tay[0][3];
+    v17 = v15 + v16;
+    v18 = tay[0][11] * tay[0][9];
+    v19 = tay[0][4] - v18;
+    v21 = 4.5440763299219775e-05 * tay[0][6];
+    v23 = 0.4092155481941839 * tay[0][4];
+    tay[0][12] = v21 + v23;
+    v25 = tay[0][5] * tay[0][12];
+    v27 = 0.015471973456719416 * tay[0][4];
+    v29 = 1.1900419543364779e-06 * tay[0][6];
+    tay[0][13] = v27 - v29;
+    v31 = tay[0][13] * tay[0][3];
+    v32 = v25 - v31;
+    v34 = tay[0][5] * tay[0][5];
+    v35 = 0.01775954828743408 * v34;
+    v36 = -v35;
+    v37 = 0.01775954828743408 * tay[0][3];
+    v39 = 0.10773983913066638 * tay[0][5];
+    tay[0][14] = v37 - v39;
+    v41 = tay[0][3] * tay[0][14];
+    v42 = v36 + v41;
+    v43 = tay[0][13] * tay[0][5];
+    v45 = 5.266025597120826e-05 * tay[0][6];
+    v46 = -v45;
+    v48 = 0.3153534800671272 * tay[0][4];
+    tay[0][15] = v46 - v48;
+    v50 = tay[0][3] * tay[0][15];
+    v51 = v43 + v50;
+    ib14 = 1.0 / tay[0][10];
+    ub14 = tay[0][11] / tay[0][10];
+    tay[1][0] = tay[0][11];
+    tay[1][1] = v17;
+    tay[1][2] = v19;
+    tay[1][3] = v32;
+    tay[1][4] = v42;
+    tay[1][5] = v51;
     tay[1][6] = 0.0;
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
@@ -1924,7 +1953,42 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         acc41 = 0.0;
         acc43 = 0.0;
         acc50 = 0.0;
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            double w1_0, w1_1, w2_0, w2_1;
+            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
+            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
+            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
+            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
+            acc7 = acc7 + (w2_0 * tay[n - (2 * b + 1)][8] + w2_1 * tay[n - (2 * b + 2)][8]);
+            acc8 = acc8 + (w2_0 * tay[n - (2 * b + 1)][7] + w2_1 * tay[n - (2 * b + 2)][7]);
+            acc9 = acc9 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][5]);
+            acc10 = acc10 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][7] *
+                    tay[n - (2 * b + 2)][3]);
+            acc12 = acc12 + (w1_0 * tay[n - (2 * b + 1)][10] + w1_1 * tay[n - (2 * b + 2)][10]);
+            acc13 = acc13 + (w1_0 * tay[n - (2 * b + 1)][9] + w1_1 * tay[n - (2 * b + 2)][9]);
+            acc14 = acc14 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][11] + tay[2 * b + 2][10] *
+                    tay[n - (2 * b + 2)][11]);
+            acc15 = acc15 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][7] *
+                    tay[n - (2 * b + 2)][5]);
+            acc16 = acc16 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][3]);
+            acc18 = acc18 + (tay[2 * b + 1][11] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][11] *
+                    tay[n - (2 * b + 2)][9]);
+            acc25 = acc25 + (tay[2 * b + 1][5] * tay[n - (2 * b + 1)][12] + tay[2 * b + 2][5] *
+                    tay[n - (2 * b + 2)][12]);
+            acc31 = acc31 + (tay[2 * b + 1][13] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][13] *
+                    tay[n - (2 * b + 2)][3]);
+            acc34 = acc34 + (tay[2 * b + 1][5] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][5] *
+                    tay[n - (2 * b + 2)][5]);
+            acc41 = acc41 + (tay[2 * b + 1][3] * tay[n - (2 * b + 1)][14] + tay[2 * b + 2][3] *
+                    tay[n - (2 * b + 2)][14]);
+            acc43 = acc43 + (tay[2 * b + 1][13] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][13] *
+                    tay[n - (2 * b + 2)][5]);
+            acc50 = acc50 + (tay[2 * b + 1][3] * tay[n - (2 * b + 1)][15] + tay[2 * b + 2][3] *
+                    tay[n - (2 * b + 2)][15]);
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
@@ -1932,62 +1996,62 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
             acc8 = acc8 + w2 * tay[n - j][7];
             acc9 = acc9 + tay[j][8] * tay[n - j][5];
             acc10 = acc10 + tay[j][7] * tay[n - j][3];
-            acc12 = acc12 + w1 * tay[n - j][13];
-            acc13 = acc13 + w1 * tay[n - j][12];
-            acc14 = acc14 + tay[j][13] * tay[n - j][14];
+            acc12 = acc12 + w1 * tay[n - j][10];
+            acc13 = acc13 + w1 * tay[n - j][9];
+            acc14 = acc14 + tay[j][10] * tay[n - j][11];
             acc15 = acc15 + tay[j][7] * tay[n - j][5];
             acc16 = acc16 + tay[j][8] * tay[n - j][3];
-            acc18 = acc18 + tay[j][14] * tay[n - j][12];
-            acc25 = acc25 + tay[j][5] * tay[n - j][24];
-            acc31 = acc31 + tay[j][30] * tay[n - j][3];
+            acc18 = acc18 + tay[j][11] * tay[n - j][9];
+            acc25 = acc25 + tay[j][5] * tay[n - j][12];
+            acc31 = acc31 + tay[j][13] * tay[n - j][3];
             acc34 = acc34 + tay[j][5] * tay[n - j][5];
-            acc41 = acc41 + tay[j][3] * tay[n - j][40];
-            acc43 = acc43 + tay[j][30] * tay[n - j][5];
-            acc50 = acc50 + tay[j][3] * tay[n - j][49];
+            acc41 = acc41 + tay[j][3] * tay[n - j][14];
+            acc43 = acc43 + tay[j][13] * tay[n - j][5];
+            acc50 = acc50 + tay[j][3] * tay[n - j][15];
         }
         tay[n][7] = acc7 * inv[n] + tay[n][2] * tay[0][8];
         tay[n][8] = -(acc8 * inv[n]) - tay[n][2] * tay[0][7];
-        tay[n][9] = acc9 + tay[0][8] * tay[n][5] + tay[n][8] * tay[0][5];
-        tay[n][10] = acc10 + tay[0][7] * tay[n][3] + tay[n][7] * tay[0][3];
-        tay[n][11] = tay[n][9] - tay[n][10];
-        tay[n][12] = acc12 * inv[n] + tay[n][1] * tay[0][13];
-        tay[n][13] = -(acc13 * inv[n]) - tay[n][1] * tay[0][12];
-        tay[n][14] = tay[n][11] * ib14 - (acc14 * ib14 + tay[n][13] * ub14);
-        tay[n][15] = acc15 + tay[0][7] * tay[n][5] + tay[n][7] * tay[0][5];
-        tay[n][16] = acc16 + tay[0][8] * tay[n][3] + tay[n][8] * tay[0][3];
-        tay[n][17] = tay[n][15] + tay[n][16];
-        tay[n][18] = acc18 + tay[0][14] * tay[n][12] + tay[n][14] * tay[0][12];
-        tay[n][19] = tay[n][4] - tay[n][18];
-        tay[n][21] = 4.5440763299219775e-05 * tay[n][6];
-        tay[n][23] = 0.4092155481941839 * tay[n][4];
-        tay[n][24] = tay[n][21] + tay[n][23];
-        tay[n][25] = acc25 + tay[0][5] * tay[n][24] + tay[n][5] * tay[0][24];
-        tay[n][27] = 0.015471973456719416 * tay[n][4];
-        tay[n][29] = 1.1900419543364779e-06 * tay[n][6];
-        tay[n][30] = tay[n][27] - tay[n][29];
-        tay[n][31] = acc31 + tay[0][30] * tay[n][3] + tay[n][30] * tay[0][3];
-        tay[n][32] = tay[n][25] - tay[n][31];
-        tay[n][34] = acc34 + tay[0][5] * tay[n][5] + tay[n][5] * tay[0][5];
-        tay[n][35] = 0.01775954828743408 * tay[n][34];
-        tay[n][36] = -tay[n][35];
-        tay[n][37] = 0.01775954828743408 * tay[n][3];
-        tay[n][39] = 0.10773983913066638 * tay[n][5];
-        tay[n][40] = tay[n][37] - tay[n][39];
-        tay[n][41] = acc41 + tay[0][3] * tay[n][40] + tay[n][3] * tay[0][40];
-        tay[n][42] = tay[n][36] + tay[n][41];
-        tay[n][43] = acc43 + tay[0][30] * tay[n][5] + tay[n][30] * tay[0][5];
-        tay[n][45] = 5.266025597120826e-05 * tay[n][6];
-        tay[n][46] = -tay[n][45];
-        tay[n][48] = 0.3153534800671272 * tay[n][4];
-        tay[n][49] = tay[n][46] - tay[n][48];
-        tay[n][50] = acc50 + tay[0][3] * tay[n][49] + tay[n][3] * tay[0][49];
-        tay[n][51] = tay[n][43] + tay[n][50];
-        tay[n + 1][0] = tay[n][14] * inv[n + 1];
-        tay[n + 1][1] = tay[n][17] * inv[n + 1];
-        tay[n + 1][2] = tay[n][19] * inv[n + 1];
-        tay[n + 1][3] = tay[n][32] * inv[n + 1];
-        tay[n + 1][4] = tay[n][42] * inv[n + 1];
-        tay[n + 1][5] = tay[n][51] * inv[n + 1];
+        v9 = acc9 + tay[0][8] * tay[n][5] + tay[n][8] * tay[0][5];
+        v10 = acc10 + tay[0][7] * tay[n][3] + tay[n][7] * tay[0][3];
+        v11 = v9 - v10;
+        tay[n][9] = acc12 * inv[n] + tay[n][1] * tay[0][10];
+        tay[n][10] = -(acc13 * inv[n]) - tay[n][1] * tay[0][9];
+        tay[n][11] = v11 * ib14 - (acc14 * ib14 + tay[n][10] * ub14);
+        v15 = acc15 + tay[0][7] * tay[n][5] + tay[n][7] * tay[0][5];
+        v16 = acc16 + tay[0][8] * tay[n][3] + tay[n][8] * tay[0][3];
+        v17 = v15 + v16;
+        v18 = acc18 + tay[0][11] * tay[n][9] + tay[n][11] * tay[0][9];
+        v19 = tay[n][4] - v18;
+        v21 = 4.5440763299219775e-05 * tay[n][6];
+        v23 = 0.4092155481941839 * tay[n][4];
+        tay[n][12] = v21 + v23;
+        v25 = acc25 + tay[0][5] * tay[n][12] + tay[n][5] * tay[0][12];
+        v27 = 0.015471973456719416 * tay[n][4];
+        v29 = 1.1900419543364779e-06 * tay[n][6];
+        tay[n][13] = v27 - v29;
+        v31 = acc31 + tay[0][13] * tay[n][3] + tay[n][13] * tay[0][3];
+        v32 = v25 - v31;
+        v34 = acc34 + tay[0][5] * tay[n][5] + tay[n][5] * tay[0][5];
+        v35 = 0.01775954828743408 * v34;
+        v36 = -v35;
+        v37 = 0.01775954828743408 * tay[n][3];
+        v39 = 0.10773983913066638 * tay[n][5];
+        tay[n][14] = v37 - v39;
+        v41 = acc41 + tay[0][3] * tay[n][14] + tay[n][3] * tay[0][14];
+        v42 = v36 + v41;
+        v43 = acc43 + tay[0][13] * tay[n][5] + tay[n][13] * tay[0][5];
+        v45 = 5.266025597120826e-05 * tay[n][6];
+        v46 = -v45;
+        v48 = 0.3153534800671272 * tay[n][4];
+        tay[n][15] = v46 - v48;
+        v50 = acc50 + tay[0][3] * tay[n][15] + tay[n][3] * tay[0][15];
+        v51 = v43 + v50;
+        tay[n + 1][0] = tay[n][11] * inv[n + 1];
+        tay[n + 1][1] = v17 * inv[n + 1];
+        tay[n + 1][2] = v19 * inv[n + 1];
+        tay[n + 1][3] = v32 * inv[n + 1];
+        tay[n + 1][4] = v42 * inv[n + 1];
+        tay[n + 1][5] = v51 * inv[n + 1];
         tay[n + 1][6] = 0.0;
     }
 }
@@ -2000,7 +2064,7 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, dual_spin_stats *stats)
 {
-    double tay[19][53];
+    double tay[19][16];
     double inv[19] = {0.0};
     double f0[DUAL_SPIN_NX];
     double xnew[DUAL_SPIN_NX];
@@ -2162,7 +2226,7 @@ struct lanes {
     long stats_rejected[DUAL_SPIN_LANES];
     long stats_rhs_calls[DUAL_SPIN_LANES];
     double cap[DUAL_SPIN_LANES];
-    double tay[19][53][DUAL_SPIN_LANES];
+    double tay[19][16][DUAL_SPIN_LANES];
     double ts[DUAL_SPIN_LANES];  /* the time of an rhs call */
     int busy[DUAL_SPIN_LANES];
     size_t traj[DUAL_SPIN_LANES];
@@ -2732,10 +2796,11 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
     double acc50[DUAL_SPIN_LANES];
     double ib14[DUAL_SPIN_LANES];
     double ub14[DUAL_SPIN_LANES];
-    int j, l, n;
+    int b, j, l, n;
     /* order 0: the state and every node's value */
     DUAL_SPIN_SIMD
     for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -2745,49 +2810,49 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         L->tay[0][6][l] = L->x[6][l];
         L->tay[0][7][l] = dual_spin_sin_lanes(L->tay[0][2][l]);
         L->tay[0][8][l] = dual_spin_cos_lanes(L->tay[0][2][l]);
-        L->tay[0][9][l] = L->tay[0][8][l] * L->tay[0][5][l];
-        L->tay[0][10][l] = L->tay[0][7][l] * L->tay[0][3][l];
-        L->tay[0][11][l] = L->tay[0][9][l] - L->tay[0][10][l];
-        L->tay[0][12][l] = dual_spin_sin_lanes(L->tay[0][1][l]);
-        L->tay[0][13][l] = dual_spin_cos_lanes(L->tay[0][1][l]);
-        L->tay[0][14][l] = L->tay[0][11][l] / L->tay[0][13][l];
-        L->tay[0][15][l] = L->tay[0][7][l] * L->tay[0][5][l];
-        L->tay[0][16][l] = L->tay[0][8][l] * L->tay[0][3][l];
-        L->tay[0][17][l] = L->tay[0][15][l] + L->tay[0][16][l];
-        L->tay[0][18][l] = L->tay[0][14][l] * L->tay[0][12][l];
-        L->tay[0][19][l] = L->tay[0][4][l] - L->tay[0][18][l];
-        L->tay[0][21][l] = 4.5440763299219775e-05 * L->tay[0][6][l];
-        L->tay[0][23][l] = 0.4092155481941839 * L->tay[0][4][l];
-        L->tay[0][24][l] = L->tay[0][21][l] + L->tay[0][23][l];
-        L->tay[0][25][l] = L->tay[0][5][l] * L->tay[0][24][l];
-        L->tay[0][27][l] = 0.015471973456719416 * L->tay[0][4][l];
-        L->tay[0][29][l] = 1.1900419543364779e-06 * L->tay[0][6][l];
-        L->tay[0][30][l] = L->tay[0][27][l] - L->tay[0][29][l];
-        L->tay[0][31][l] = L->tay[0][30][l] * L->tay[0][3][l];
-        L->tay[0][32][l] = L->tay[0][25][l] - L->tay[0][31][l];
-        L->tay[0][34][l] = L->tay[0][5][l] * L->tay[0][5][l];
-        L->tay[0][35][l] = 0.01775954828743408 * L->tay[0][34][l];
-        L->tay[0][36][l] = -L->tay[0][35][l];
-        L->tay[0][37][l] = 0.01775954828743408 * L->tay[0][3][l];
-        L->tay[0][39][l] = 0.10773983913066638 * L->tay[0][5][l];
-        L->tay[0][40][l] = L->tay[0][37][l] - L->tay[0][39][l];
-        L->tay[0][41][l] = L->tay[0][3][l] * L->tay[0][40][l];
-        L->tay[0][42][l] = L->tay[0][36][l] + L->tay[0][41][l];
-        L->tay[0][43][l] = L->tay[0][30][l] * L->tay[0][5][l];
-        L->tay[0][45][l] = 5.266025597120826e-05 * L->tay[0][6][l];
-        L->tay[0][46][l] = -L->tay[0][45][l];
-        L->tay[0][48][l] = 0.3153534800671272 * L->tay[0][4][l];
-        L->tay[0][49][l] = L->tay[0][46][l] - L->tay[0][48][l];
-        L->tay[0][50][l] = L->tay[0][3][l] * L->tay[0][49][l];
-        L->tay[0][51][l] = L->tay[0][43][l] + L->tay[0][50][l];
-        ib14[l] = 1.0 / L->tay[0][13][l];
-        ub14[l] = L->tay[0][14][l] / L->tay[0][13][l];
-        L->tay[1][0][l] = L->tay[0][14][l];
-        L->tay[1][1][l] = L->tay[0][17][l];
-        L->tay[1][2][l] = L->tay[0][19][l];
-        L->tay[1][3][l] = L->tay[0][32][l];
-        L->tay[1][4][l] = L->tay[0][42][l];
-        L->tay[1][5][l] = L->tay[0][51][l];
+        v9 = L->tay[0][8][l] * L->tay[0][5][l];
+        v10 = L->tay[0][7][l] * L->tay[0][3][l];
+        v11 = v9 - v10;
+        L->tay[0][9][l] = dual_spin_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][10][l] = dual_spin_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][11][l] = v11 / L->tay[0][10][l];
+        v15 = L->tay[0][7][l] * L->tay[0][5][l];
+        v16 = L->tay[0][8][l] * L->tay[0][3][l];
+        v17 = v15 + v16;
+        v18 = L->tay[0][11][l] * L->tay[0][9][l];
+        v19 = L->tay[0][4][l] - v18;
+        v21 = 4.5440763299219775e-05 * L->tay[0][6][l];
+        v23 = 0.4092155481941839 * L->tay[0][4][l];
+        L->tay[0][12][l] = v21 + v23;
+        v25 = L->tay[0][5][l] * L->tay[0][12][l];
+        v27 = 0.015471973456719416 * L->tay[0][4][l];
+        v29 = 1.1900419543364779e-06 * L->tay[0][6][l];
+        L->tay[0][13][l] = v27 - v29;
+        v31 = L->tay[0][13][l] * L->tay[0][3][l];
+        v32 = v25 - v31;
+        v34 = L->tay[0][5][l] * L->tay[0][5][l];
+        v35 = 0.01775954828743408 * v34;
+        v36 = -v35;
+        v37 = 0.01775954828743408 * L->tay[0][3][l];
+        v39 = 0.10773983913066638 * L->tay[0][5][l];
+        L->tay[0][14][l] = v37 - v39;
+        v41 = L->tay[0][3][l] * L->tay[0][14][l];
+        v42 = v36 + v41;
+        v43 = L->tay[0][13][l] * L->tay[0][5][l];
+        v45 = 5.266025597120826e-05 * L->tay[0][6][l];
+        v46 = -v45;
+        v48 = 0.3153534800671272 * L->tay[0][4][l];
+        L->tay[0][15][l] = v46 - v48;
+        v50 = L->tay[0][3][l] * L->tay[0][15][l];
+        v51 = v43 + v50;
+        ib14[l] = 1.0 / L->tay[0][10][l];
+        ub14[l] = L->tay[0][11][l] / L->tay[0][10][l];
+        L->tay[1][0][l] = L->tay[0][11][l];
+        L->tay[1][1][l] = v17;
+        L->tay[1][2][l] = v19;
+        L->tay[1][3][l] = v32;
+        L->tay[1][4][l] = v42;
+        L->tay[1][5][l] = v51;
         L->tay[1][6][l] = 0.0;
     }
 
@@ -2812,7 +2877,49 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             acc43[l] = 0.0;
             acc50[l] = 0.0;
         }
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                double w1_0, w1_1, w2_0, w2_1;
+                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
+                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
+                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
+                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
+                acc7[l] = acc7[l] + (w2_0 * L->tay[n - (2 * b + 1)][8][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][8][l]);
+                acc8[l] = acc8[l] + (w2_0 * L->tay[n - (2 * b + 1)][7][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][7][l]);
+                acc9[l] = acc9[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc10[l] = acc10[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc12[l] = acc12[l] + (w1_0 * L->tay[n - (2 * b + 1)][10][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][10][l]);
+                acc13[l] = acc13[l] + (w1_0 * L->tay[n - (2 * b + 1)][9][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][9][l]);
+                acc14[l] = acc14[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][11][l]
+                        + L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][11][l]);
+                acc15[l] = acc15[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc16[l] = acc16[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc18[l] = acc18[l] + (L->tay[2 * b + 1][11][l] * L->tay[n - (2 * b + 1)][9][l] +
+                        L->tay[2 * b + 2][11][l] * L->tay[n - (2 * b + 2)][9][l]);
+                acc25[l] = acc25[l] + (L->tay[2 * b + 1][5][l] * L->tay[n - (2 * b + 1)][12][l] +
+                        L->tay[2 * b + 2][5][l] * L->tay[n - (2 * b + 2)][12][l]);
+                acc31[l] = acc31[l] + (L->tay[2 * b + 1][13][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][13][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc34[l] = acc34[l] + (L->tay[2 * b + 1][5][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][5][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc41[l] = acc41[l] + (L->tay[2 * b + 1][3][l] * L->tay[n - (2 * b + 1)][14][l] +
+                        L->tay[2 * b + 2][3][l] * L->tay[n - (2 * b + 2)][14][l]);
+                acc43[l] = acc43[l] + (L->tay[2 * b + 1][13][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][13][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc50[l] = acc50[l] + (L->tay[2 * b + 1][3][l] * L->tay[n - (2 * b + 1)][15][l] +
+                        L->tay[2 * b + 2][3][l] * L->tay[n - (2 * b + 2)][15][l]);
+            }
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
                 double w1, w2;
@@ -2822,77 +2929,72 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
                 acc8[l] = acc8[l] + w2 * L->tay[n - j][7][l];
                 acc9[l] = acc9[l] + L->tay[j][8][l] * L->tay[n - j][5][l];
                 acc10[l] = acc10[l] + L->tay[j][7][l] * L->tay[n - j][3][l];
-                acc12[l] = acc12[l] + w1 * L->tay[n - j][13][l];
-                acc13[l] = acc13[l] + w1 * L->tay[n - j][12][l];
-                acc14[l] = acc14[l] + L->tay[j][13][l] * L->tay[n - j][14][l];
+                acc12[l] = acc12[l] + w1 * L->tay[n - j][10][l];
+                acc13[l] = acc13[l] + w1 * L->tay[n - j][9][l];
+                acc14[l] = acc14[l] + L->tay[j][10][l] * L->tay[n - j][11][l];
                 acc15[l] = acc15[l] + L->tay[j][7][l] * L->tay[n - j][5][l];
                 acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][3][l];
-                acc18[l] = acc18[l] + L->tay[j][14][l] * L->tay[n - j][12][l];
-                acc25[l] = acc25[l] + L->tay[j][5][l] * L->tay[n - j][24][l];
-                acc31[l] = acc31[l] + L->tay[j][30][l] * L->tay[n - j][3][l];
+                acc18[l] = acc18[l] + L->tay[j][11][l] * L->tay[n - j][9][l];
+                acc25[l] = acc25[l] + L->tay[j][5][l] * L->tay[n - j][12][l];
+                acc31[l] = acc31[l] + L->tay[j][13][l] * L->tay[n - j][3][l];
                 acc34[l] = acc34[l] + L->tay[j][5][l] * L->tay[n - j][5][l];
-                acc41[l] = acc41[l] + L->tay[j][3][l] * L->tay[n - j][40][l];
-                acc43[l] = acc43[l] + L->tay[j][30][l] * L->tay[n - j][5][l];
-                acc50[l] = acc50[l] + L->tay[j][3][l] * L->tay[n - j][49][l];
+                acc41[l] = acc41[l] + L->tay[j][3][l] * L->tay[n - j][14][l];
+                acc43[l] = acc43[l] + L->tay[j][13][l] * L->tay[n - j][5][l];
+                acc50[l] = acc50[l] + L->tay[j][3][l] * L->tay[n - j][15][l];
             }
         }
         DUAL_SPIN_SIMD
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
             L->tay[n][7][l] = acc7[l] * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
             L->tay[n][8][l] = -(acc8[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
-            L->tay[n][9][l] = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] *
-                    L->tay[0][5][l];
-            L->tay[n][10][l] = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] *
+            v9 = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] * L->tay[0][5][l];
+            v10 = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] * L->tay[0][3][l];
+            v11 = v9 - v10;
+            L->tay[n][9][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][10][l];
+            L->tay[n][10][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][9][l];
+            L->tay[n][11][l] = v11 * ib14[l] - (acc14[l] * ib14[l] + L->tay[n][10][l] * ub14[l]);
+            v15 = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] * L->tay[0][5][l];
+            v16 = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
+            v17 = v15 + v16;
+            v18 = acc18[l] + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] *
+                    L->tay[0][9][l];
+            v19 = L->tay[n][4][l] - v18;
+            v21 = 4.5440763299219775e-05 * L->tay[n][6][l];
+            v23 = 0.4092155481941839 * L->tay[n][4][l];
+            L->tay[n][12][l] = v21 + v23;
+            v25 = acc25[l] + L->tay[0][5][l] * L->tay[n][12][l] + L->tay[n][5][l] *
+                    L->tay[0][12][l];
+            v27 = 0.015471973456719416 * L->tay[n][4][l];
+            v29 = 1.1900419543364779e-06 * L->tay[n][6][l];
+            L->tay[n][13][l] = v27 - v29;
+            v31 = acc31[l] + L->tay[0][13][l] * L->tay[n][3][l] + L->tay[n][13][l] *
                     L->tay[0][3][l];
-            L->tay[n][11][l] = L->tay[n][9][l] - L->tay[n][10][l];
-            L->tay[n][12][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][13][l];
-            L->tay[n][13][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][12][l];
-            L->tay[n][14][l] = L->tay[n][11][l] * ib14[l] - (acc14[l] * ib14[l] +
-                    L->tay[n][13][l] * ub14[l]);
-            L->tay[n][15][l] = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] *
+            v32 = v25 - v31;
+            v34 = acc34[l] + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] * L->tay[0][5][l];
+            v35 = 0.01775954828743408 * v34;
+            v36 = -v35;
+            v37 = 0.01775954828743408 * L->tay[n][3][l];
+            v39 = 0.10773983913066638 * L->tay[n][5][l];
+            L->tay[n][14][l] = v37 - v39;
+            v41 = acc41[l] + L->tay[0][3][l] * L->tay[n][14][l] + L->tay[n][3][l] *
+                    L->tay[0][14][l];
+            v42 = v36 + v41;
+            v43 = acc43[l] + L->tay[0][13][l] * L->tay[n][5][l] + L->tay[n][13][l] *
                     L->tay[0][5][l];
-            L->tay[n][16][l] = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] *
-                    L->tay[0][3][l];
-            L->tay[n][17][l] = L->tay[n][15][l] + L->tay[n][16][l];
-            L->tay[n][18][l] = acc18[l] + L->tay[0][14][l] * L->tay[n][12][l] + L->tay[n][14][l]
-                    * L->tay[0][12][l];
-            L->tay[n][19][l] = L->tay[n][4][l] - L->tay[n][18][l];
-            L->tay[n][21][l] = 4.5440763299219775e-05 * L->tay[n][6][l];
-            L->tay[n][23][l] = 0.4092155481941839 * L->tay[n][4][l];
-            L->tay[n][24][l] = L->tay[n][21][l] + L->tay[n][23][l];
-            L->tay[n][25][l] = acc25[l] + L->tay[0][5][l] * L->tay[n][24][l] + L->tay[n][5][l] *
-                    L->tay[0][24][l];
-            L->tay[n][27][l] = 0.015471973456719416 * L->tay[n][4][l];
-            L->tay[n][29][l] = 1.1900419543364779e-06 * L->tay[n][6][l];
-            L->tay[n][30][l] = L->tay[n][27][l] - L->tay[n][29][l];
-            L->tay[n][31][l] = acc31[l] + L->tay[0][30][l] * L->tay[n][3][l] + L->tay[n][30][l] *
-                    L->tay[0][3][l];
-            L->tay[n][32][l] = L->tay[n][25][l] - L->tay[n][31][l];
-            L->tay[n][34][l] = acc34[l] + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] *
-                    L->tay[0][5][l];
-            L->tay[n][35][l] = 0.01775954828743408 * L->tay[n][34][l];
-            L->tay[n][36][l] = -L->tay[n][35][l];
-            L->tay[n][37][l] = 0.01775954828743408 * L->tay[n][3][l];
-            L->tay[n][39][l] = 0.10773983913066638 * L->tay[n][5][l];
-            L->tay[n][40][l] = L->tay[n][37][l] - L->tay[n][39][l];
-            L->tay[n][41][l] = acc41[l] + L->tay[0][3][l] * L->tay[n][40][l] + L->tay[n][3][l] *
-                    L->tay[0][40][l];
-            L->tay[n][42][l] = L->tay[n][36][l] + L->tay[n][41][l];
-            L->tay[n][43][l] = acc43[l] + L->tay[0][30][l] * L->tay[n][5][l] + L->tay[n][30][l] *
-                    L->tay[0][5][l];
-            L->tay[n][45][l] = 5.266025597120826e-05 * L->tay[n][6][l];
-            L->tay[n][46][l] = -L->tay[n][45][l];
-            L->tay[n][48][l] = 0.3153534800671272 * L->tay[n][4][l];
-            L->tay[n][49][l] = L->tay[n][46][l] - L->tay[n][48][l];
-            L->tay[n][50][l] = acc50[l] + L->tay[0][3][l] * L->tay[n][49][l] + L->tay[n][3][l] *
-                    L->tay[0][49][l];
-            L->tay[n][51][l] = L->tay[n][43][l] + L->tay[n][50][l];
-            L->tay[n + 1][0][l] = L->tay[n][14][l] * inv[n + 1];
-            L->tay[n + 1][1][l] = L->tay[n][17][l] * inv[n + 1];
-            L->tay[n + 1][2][l] = L->tay[n][19][l] * inv[n + 1];
-            L->tay[n + 1][3][l] = L->tay[n][32][l] * inv[n + 1];
-            L->tay[n + 1][4][l] = L->tay[n][42][l] * inv[n + 1];
-            L->tay[n + 1][5][l] = L->tay[n][51][l] * inv[n + 1];
+            v45 = 5.266025597120826e-05 * L->tay[n][6][l];
+            v46 = -v45;
+            v48 = 0.3153534800671272 * L->tay[n][4][l];
+            L->tay[n][15][l] = v46 - v48;
+            v50 = acc50[l] + L->tay[0][3][l] * L->tay[n][15][l] + L->tay[n][3][l] *
+                    L->tay[0][15][l];
+            v51 = v43 + v50;
+            L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = v17 * inv[n + 1];
+            L->tay[n + 1][2][l] = v19 * inv[n + 1];
+            L->tay[n + 1][3][l] = v32 * inv[n + 1];
+            L->tay[n + 1][4][l] = v42 * inv[n + 1];
+            L->tay[n + 1][5][l] = v51 * inv[n + 1];
             L->tay[n + 1][6][l] = 0.0;
         }
     }

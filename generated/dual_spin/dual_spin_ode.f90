@@ -2007,7 +2007,7 @@ contains
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:53 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:16 - 1, 0:19 - 1)
     real(c_double) :: acc7
     real(c_double) :: acc8
     real(c_double) :: acc9
@@ -2026,8 +2026,41 @@ contains
     real(c_double) :: acc50
     real(c_double) :: ib14
     real(c_double) :: ub14
+    real(c_double) :: v9
+    real(c_double) :: v10
+    real(c_double) :: v11
+    real(c_double) :: v15
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v21
+    real(c_double) :: v23
+    real(c_double) :: v25
+    real(c_double) :: v27
+    real(c_double) :: v29
+    real(c_double) :: v31
+    real(c_double) :: v32
+    real(c_double) :: v34
+    real(c_double) :: v35
+    real(c_double) :: v36
+    real(c_double) :: v37
+    real(c_double) :: v39
+    real(c_double) :: v41
+    real(c_double) :: v42
+    real(c_double) :: v43
+    real(c_double) :: v45
+    real(c_double) :: v46
+    real(c_double) :: v48
+    real(c_double) :: v50
+    real(c_double) :: v51
     real(c_double) :: w1
+    real(c_double) :: w1_0
+    real(c_double) :: w1_1
     real(c_double) :: w2
+    real(c_double) :: w2_0
+    real(c_double) :: w2_1
+    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2041,49 +2074,49 @@ contains
     tay(6, 0) = x(6)
     tay(7, 0) = dual_spin_sin(tay(2, 0))
     tay(8, 0) = dual_spin_cos(tay(2, 0))
-    tay(9, 0) = tay(8, 0) * tay(5, 0)
-    tay(10, 0) = tay(7, 0) * tay(3, 0)
-    tay(11, 0) = tay(9, 0) - tay(10, 0)
-    tay(12, 0) = dual_spin_sin(tay(1, 0))
-    tay(13, 0) = dual_spin_cos(tay(1, 0))
-    tay(14, 0) = tay(11, 0) / tay(13, 0)
-    tay(15, 0) = tay(7, 0) * tay(5, 0)
-    tay(16, 0) = tay(8, 0) * tay(3, 0)
-    tay(17, 0) = tay(15, 0) + tay(16, 0)
-    tay(18, 0) = tay(14, 0) * tay(12, 0)
-    tay(19, 0) = tay(4, 0) - tay(18, 0)
-    tay(21, 0) = 4.5440763299219775e-05_c_double * tay(6, 0)
-    tay(23, 0) = 0.4092155481941839_c_double * tay(4, 0)
-    tay(24, 0) = tay(21, 0) + tay(23, 0)
-    tay(25, 0) = tay(5, 0) * tay(24, 0)
-    tay(27, 0) = 0.015471973456719416_c_double * tay(4, 0)
-    tay(29, 0) = 1.1900419543364779e-06_c_double * tay(6, 0)
-    tay(30, 0) = tay(27, 0) - tay(29, 0)
-    tay(31, 0) = tay(30, 0) * tay(3, 0)
-    tay(32, 0) = tay(25, 0) - tay(31, 0)
-    tay(34, 0) = tay(5, 0) * tay(5, 0)
-    tay(35, 0) = 0.01775954828743408_c_double * tay(34, 0)
-    tay(36, 0) = -tay(35, 0)
-    tay(37, 0) = 0.01775954828743408_c_double * tay(3, 0)
-    tay(39, 0) = 0.10773983913066638_c_double * tay(5, 0)
-    tay(40, 0) = tay(37, 0) - tay(39, 0)
-    tay(41, 0) = tay(3, 0) * tay(40, 0)
-    tay(42, 0) = tay(36, 0) + tay(41, 0)
-    tay(43, 0) = tay(30, 0) * tay(5, 0)
-    tay(45, 0) = 5.266025597120826e-05_c_double * tay(6, 0)
-    tay(46, 0) = -tay(45, 0)
-    tay(48, 0) = 0.3153534800671272_c_double * tay(4, 0)
-    tay(49, 0) = tay(46, 0) - tay(48, 0)
-    tay(50, 0) = tay(3, 0) * tay(49, 0)
-    tay(51, 0) = tay(43, 0) + tay(50, 0)
-    ib14 = 1.0_c_double / tay(13, 0)
-    ub14 = tay(14, 0) / tay(13, 0)
-    tay(0, 1) = tay(14, 0)
-    tay(1, 1) = tay(17, 0)
-    tay(2, 1) = tay(19, 0)
-    tay(3, 1) = tay(32, 0)
-    tay(4, 1) = tay(42, 0)
-    tay(5, 1) = tay(51, 0)
+    v9 = tay(8, 0) * tay(5, 0)
+    v10 = tay(7, 0) * tay(3, 0)
+    v11 = v9 - v10
+    tay(9, 0) = dual_spin_sin(tay(1, 0))
+    tay(10, 0) = dual_spin_cos(tay(1, 0))
+    tay(11, 0) = v11 / tay(10, 0)
+    v15 = tay(7, 0) * tay(5, 0)
+    v16 = tay(8, 0) * tay(3, 0)
+    v17 = v15 + v16
+    v18 = tay(11, 0) * tay(9, 0)
+    v19 = tay(4, 0) - v18
+    v21 = 4.5440763299219775e-05_c_double * tay(6, 0)
+    v23 = 0.4092155481941839_c_double * tay(4, 0)
+    tay(12, 0) = v21 + v23
+    v25 = tay(5, 0) * tay(12, 0)
+    v27 = 0.015471973456719416_c_double * tay(4, 0)
+    v29 = 1.1900419543364779e-06_c_double * tay(6, 0)
+    tay(13, 0) = v27 - v29
+    v31 = tay(13, 0) * tay(3, 0)
+    v32 = v25 - v31
+    v34 = tay(5, 0) * tay(5, 0)
+    v35 = 0.01775954828743408_c_double * v34
+    v36 = -v35
+    v37 = 0.01775954828743408_c_double * tay(3, 0)
+    v39 = 0.10773983913066638_c_double * tay(5, 0)
+    tay(14, 0) = v37 - v39
+    v41 = tay(3, 0) * tay(14, 0)
+    v42 = v36 + v41
+    v43 = tay(13, 0) * tay(5, 0)
+    v45 = 5.266025597120826e-05_c_double * tay(6, 0)
+    v46 = -v45
+    v48 = 0.3153534800671272_c_double * tay(4, 0)
+    tay(15, 0) = v46 - v48
+    v50 = tay(3, 0) * tay(15, 0)
+    v51 = v43 + v50
+    ib14 = 1.0_c_double / tay(10, 0)
+    ub14 = tay(11, 0) / tay(10, 0)
+    tay(0, 1) = tay(11, 0)
+    tay(1, 1) = v17
+    tay(2, 1) = v19
+    tay(3, 1) = v32
+    tay(4, 1) = v42
+    tay(5, 1) = v51
     tay(6, 1) = 0.0_c_double
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
@@ -2104,69 +2137,103 @@ contains
       acc41 = 0.0_c_double
       acc43 = 0.0_c_double
       acc50 = 0.0_c_double
-      do j = 1, n - 1
+      do b = 0, (n - 1) / 2 - 1
+        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
+        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
+        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
+        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
+        acc7 = acc7 + (w2_0 * tay(8, n - (2 * b + 1)) + w2_1 * tay(8, n - (2 * b + 2)))
+        acc8 = acc8 + (w2_0 * tay(7, n - (2 * b + 1)) + w2_1 * tay(7, n - (2 * b + 2)))
+        acc9 = acc9 + (tay(8, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(5, &
+            n - (2 * b + 2)))
+        acc10 = acc10 + (tay(7, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(7, 2 * b + 2) * tay(3, &
+            n - (2 * b + 2)))
+        acc12 = acc12 + (w1_0 * tay(10, n - (2 * b + 1)) + w1_1 * tay(10, n - (2 * b + 2)))
+        acc13 = acc13 + (w1_0 * tay(9, n - (2 * b + 1)) + w1_1 * tay(9, n - (2 * b + 2)))
+        acc14 = acc14 + (tay(10, 2 * b + 1) * tay(11, n - (2 * b + 1)) + tay(10, &
+            2 * b + 2) * tay(11, n - (2 * b + 2)))
+        acc15 = acc15 + (tay(7, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(7, 2 * b + 2) * tay(5, &
+            n - (2 * b + 2)))
+        acc16 = acc16 + (tay(8, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(3, &
+            n - (2 * b + 2)))
+        acc18 = acc18 + (tay(11, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(11, &
+            2 * b + 2) * tay(9, n - (2 * b + 2)))
+        acc25 = acc25 + (tay(5, 2 * b + 1) * tay(12, n - (2 * b + 1)) + tay(5, &
+            2 * b + 2) * tay(12, n - (2 * b + 2)))
+        acc31 = acc31 + (tay(13, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(13, &
+            2 * b + 2) * tay(3, n - (2 * b + 2)))
+        acc34 = acc34 + (tay(5, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(5, 2 * b + 2) * tay(5, &
+            n - (2 * b + 2)))
+        acc41 = acc41 + (tay(3, 2 * b + 1) * tay(14, n - (2 * b + 1)) + tay(3, &
+            2 * b + 2) * tay(14, n - (2 * b + 2)))
+        acc43 = acc43 + (tay(13, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(13, &
+            2 * b + 2) * tay(5, n - (2 * b + 2)))
+        acc50 = acc50 + (tay(3, 2 * b + 1) * tay(15, n - (2 * b + 1)) + tay(3, &
+            2 * b + 2) * tay(15, n - (2 * b + 2)))
+      end do
+      do j = 2 * ((n - 1) / 2) + 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
         acc7 = acc7 + w2 * tay(8, n - j)
         acc8 = acc8 + w2 * tay(7, n - j)
         acc9 = acc9 + tay(8, j) * tay(5, n - j)
         acc10 = acc10 + tay(7, j) * tay(3, n - j)
-        acc12 = acc12 + w1 * tay(13, n - j)
-        acc13 = acc13 + w1 * tay(12, n - j)
-        acc14 = acc14 + tay(13, j) * tay(14, n - j)
+        acc12 = acc12 + w1 * tay(10, n - j)
+        acc13 = acc13 + w1 * tay(9, n - j)
+        acc14 = acc14 + tay(10, j) * tay(11, n - j)
         acc15 = acc15 + tay(7, j) * tay(5, n - j)
         acc16 = acc16 + tay(8, j) * tay(3, n - j)
-        acc18 = acc18 + tay(14, j) * tay(12, n - j)
-        acc25 = acc25 + tay(5, j) * tay(24, n - j)
-        acc31 = acc31 + tay(30, j) * tay(3, n - j)
+        acc18 = acc18 + tay(11, j) * tay(9, n - j)
+        acc25 = acc25 + tay(5, j) * tay(12, n - j)
+        acc31 = acc31 + tay(13, j) * tay(3, n - j)
         acc34 = acc34 + tay(5, j) * tay(5, n - j)
-        acc41 = acc41 + tay(3, j) * tay(40, n - j)
-        acc43 = acc43 + tay(30, j) * tay(5, n - j)
-        acc50 = acc50 + tay(3, j) * tay(49, n - j)
+        acc41 = acc41 + tay(3, j) * tay(14, n - j)
+        acc43 = acc43 + tay(13, j) * tay(5, n - j)
+        acc50 = acc50 + tay(3, j) * tay(15, n - j)
       end do
       tay(7, n) = acc7 * inv(n) + tay(2, n) * tay(8, 0)
       tay(8, n) = (-acc8 * inv(n)) - tay(2, n) * tay(7, 0)
-      tay(9, n) = (acc9 + tay(8, 0) * tay(5, n)) + tay(8, n) * tay(5, 0)
-      tay(10, n) = (acc10 + tay(7, 0) * tay(3, n)) + tay(7, n) * tay(3, 0)
-      tay(11, n) = tay(9, n) - tay(10, n)
-      tay(12, n) = acc12 * inv(n) + tay(1, n) * tay(13, 0)
-      tay(13, n) = (-acc13 * inv(n)) - tay(1, n) * tay(12, 0)
-      tay(14, n) = tay(11, n) * ib14 - (acc14 * ib14 + tay(13, n) * ub14)
-      tay(15, n) = (acc15 + tay(7, 0) * tay(5, n)) + tay(7, n) * tay(5, 0)
-      tay(16, n) = (acc16 + tay(8, 0) * tay(3, n)) + tay(8, n) * tay(3, 0)
-      tay(17, n) = tay(15, n) + tay(16, n)
-      tay(18, n) = (acc18 + tay(14, 0) * tay(12, n)) + tay(14, n) * tay(12, 0)
-      tay(19, n) = tay(4, n) - tay(18, n)
-      tay(21, n) = 4.5440763299219775e-05_c_double * tay(6, n)
-      tay(23, n) = 0.4092155481941839_c_double * tay(4, n)
-      tay(24, n) = tay(21, n) + tay(23, n)
-      tay(25, n) = (acc25 + tay(5, 0) * tay(24, n)) + tay(5, n) * tay(24, 0)
-      tay(27, n) = 0.015471973456719416_c_double * tay(4, n)
-      tay(29, n) = 1.1900419543364779e-06_c_double * tay(6, n)
-      tay(30, n) = tay(27, n) - tay(29, n)
-      tay(31, n) = (acc31 + tay(30, 0) * tay(3, n)) + tay(30, n) * tay(3, 0)
-      tay(32, n) = tay(25, n) - tay(31, n)
-      tay(34, n) = (acc34 + tay(5, 0) * tay(5, n)) + tay(5, n) * tay(5, 0)
-      tay(35, n) = 0.01775954828743408_c_double * tay(34, n)
-      tay(36, n) = -tay(35, n)
-      tay(37, n) = 0.01775954828743408_c_double * tay(3, n)
-      tay(39, n) = 0.10773983913066638_c_double * tay(5, n)
-      tay(40, n) = tay(37, n) - tay(39, n)
-      tay(41, n) = (acc41 + tay(3, 0) * tay(40, n)) + tay(3, n) * tay(40, 0)
-      tay(42, n) = tay(36, n) + tay(41, n)
-      tay(43, n) = (acc43 + tay(30, 0) * tay(5, n)) + tay(30, n) * tay(5, 0)
-      tay(45, n) = 5.266025597120826e-05_c_double * tay(6, n)
-      tay(46, n) = -tay(45, n)
-      tay(48, n) = 0.3153534800671272_c_double * tay(4, n)
-      tay(49, n) = tay(46, n) - tay(48, n)
-      tay(50, n) = (acc50 + tay(3, 0) * tay(49, n)) + tay(3, n) * tay(49, 0)
-      tay(51, n) = tay(43, n) + tay(50, n)
-      tay(0, n + 1) = tay(14, n) * inv(n + 1)
-      tay(1, n + 1) = tay(17, n) * inv(n + 1)
-      tay(2, n + 1) = tay(19, n) * inv(n + 1)
-      tay(3, n + 1) = tay(32, n) * inv(n + 1)
-      tay(4, n + 1) = tay(42, n) * inv(n + 1)
-      tay(5, n + 1) = tay(51, n) * inv(n + 1)
+      v9 = (acc9 + tay(8, 0) * tay(5, n)) + tay(8, n) * tay(5, 0)
+      v10 = (acc10 + tay(7, 0) * tay(3, n)) + tay(7, n) * tay(3, 0)
+      v11 = v9 - v10
+      tay(9, n) = acc12 * inv(n) + tay(1, n) * tay(10, 0)
+      tay(10, n) = (-acc13 * inv(n)) - tay(1, n) * tay(9, 0)
+      tay(11, n) = v11 * ib14 - (acc14 * ib14 + tay(10, n) * ub14)
+      v15 = (acc15 + tay(7, 0) * tay(5, n)) + tay(7, n) * tay(5, 0)
+      v16 = (acc16 + tay(8, 0) * tay(3, n)) + tay(8, n) * tay(3, 0)
+      v17 = v15 + v16
+      v18 = (acc18 + tay(11, 0) * tay(9, n)) + tay(11, n) * tay(9, 0)
+      v19 = tay(4, n) - v18
+      v21 = 4.5440763299219775e-05_c_double * tay(6, n)
+      v23 = 0.4092155481941839_c_double * tay(4, n)
+      tay(12, n) = v21 + v23
+      v25 = (acc25 + tay(5, 0) * tay(12, n)) + tay(5, n) * tay(12, 0)
+      v27 = 0.015471973456719416_c_double * tay(4, n)
+      v29 = 1.1900419543364779e-06_c_double * tay(6, n)
+      tay(13, n) = v27 - v29
+      v31 = (acc31 + tay(13, 0) * tay(3, n)) + tay(13, n) * tay(3, 0)
+      v32 = v25 - v31
+      v34 = (acc34 + tay(5, 0) * tay(5, n)) + tay(5, n) * tay(5, 0)
+      v35 = 0.01775954828743408_c_double * v34
+      v36 = -v35
+      v37 = 0.01775954828743408_c_double * tay(3, n)
+      v39 = 0.10773983913066638_c_double * tay(5, n)
+      tay(14, n) = v37 - v39
+      v41 = (acc41 + tay(3, 0) * tay(14, n)) + tay(3, n) * tay(14, 0)
+      v42 = v36 + v41
+      v43 = (acc43 + tay(13, 0) * tay(5, n)) + tay(13, n) * tay(5, 0)
+      v45 = 5.266025597120826e-05_c_double * tay(6, n)
+      v46 = -v45
+      v48 = 0.3153534800671272_c_double * tay(4, n)
+      tay(15, n) = v46 - v48
+      v50 = (acc50 + tay(3, 0) * tay(15, n)) + tay(3, n) * tay(15, 0)
+      v51 = v43 + v50
+      tay(0, n + 1) = tay(11, n) * inv(n + 1)
+      tay(1, n + 1) = v17 * inv(n + 1)
+      tay(2, n + 1) = v19 * inv(n + 1)
+      tay(3, n + 1) = v32 * inv(n + 1)
+      tay(4, n + 1) = v42 * inv(n + 1)
+      tay(5, n + 1) = v51 * inv(n + 1)
       tay(6, n + 1) = 0.0_c_double
     end do
   end subroutine taylor_jet
@@ -2187,7 +2254,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:53 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:16 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

@@ -2006,7 +2006,7 @@ int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rto
 /* The normalized Taylor coefficients of x and of the rhs's 52
    nodes to the given order (16 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[66])
+                              double (*tay)[24])
 {
     double acc14;
     double acc15;
@@ -2026,6 +2026,37 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double acc61;
     double ib21;
     double ub21;
+    double v16;
+    double v17;
+    double v18;
+    double v22;
+    double v23;
+    double v24;
+    double v25;
+    double v26;
+    double v27;
+    double v29;
+    double v31;
+    double v33;
+    double v35;
+    double v37;
+    double v39;
+    double v40;
+    double v43;
+    double v45;
+    double v47;
+    double v48;
+    double v49;
+    double v50;
+    double v51;
+    double v53;
+    double v54;
+    double v56;
+    double v58;
+    double v59;
+    double v61;
+    double v62;
+    int b;
     int j;
     int n;
 
@@ -2046,56 +2077,56 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     tay[0][13] = x[13];
     tay[0][14] = gyrostat_sin(tay[0][2]);
     tay[0][15] = gyrostat_cos(tay[0][2]);
-    tay[0][16] = tay[0][15] * tay[0][9];
-    tay[0][17] = tay[0][14] * tay[0][7];
-    tay[0][18] = tay[0][16] - tay[0][17];
-    tay[0][19] = gyrostat_sin(tay[0][1]);
-    tay[0][20] = gyrostat_cos(tay[0][1]);
-    tay[0][21] = tay[0][18] / tay[0][20];
-    tay[0][22] = tay[0][14] * tay[0][9];
-    tay[0][23] = tay[0][15] * tay[0][7];
-    tay[0][24] = tay[0][22] + tay[0][23];
-    tay[0][25] = tay[0][21] * tay[0][19];
-    tay[0][26] = tay[0][8] - tay[0][25];
-    tay[0][27] = tay[0][10] - tay[0][8];
-    tay[0][29] = c[0] * tay[0][8];
-    tay[0][31] = c[1] * tay[0][10];
-    tay[0][32] = tay[0][29] + tay[0][31];
-    tay[0][33] = tay[0][7] * tay[0][32];
-    tay[0][35] = c[2] * tay[0][8];
-    tay[0][37] = c[3] * tay[0][10];
-    tay[0][38] = tay[0][35] + tay[0][37];
-    tay[0][39] = tay[0][9] * tay[0][38];
-    tay[0][40] = tay[0][33] + tay[0][39];
-    tay[0][43] = c[4] * tay[0][7];
-    tay[0][45] = c[5] * tay[0][9];
-    tay[0][46] = tay[0][43] + tay[0][45];
-    tay[0][47] = tay[0][7] * tay[0][46];
-    tay[0][48] = c[6] + tay[0][47];
-    tay[0][49] = tay[0][9] * tay[0][9];
-    tay[0][50] = c[4] * tay[0][49];
-    tay[0][51] = tay[0][48] - tay[0][50];
-    tay[0][53] = c[7] * tay[0][7];
-    tay[0][54] = c[0] * tay[0][9];
-    tay[0][55] = tay[0][53] - tay[0][54];
-    tay[0][56] = tay[0][8] * tay[0][55];
-    tay[0][58] = c[8] * tay[0][7];
-    tay[0][59] = c[1] * tay[0][9];
-    tay[0][60] = tay[0][58] - tay[0][59];
-    tay[0][61] = tay[0][10] * tay[0][60];
-    tay[0][62] = tay[0][56] + tay[0][61];
-    ib21 = 1.0 / tay[0][20];
-    ub21 = tay[0][21] / tay[0][20];
-    tay[1][0] = tay[0][21];
-    tay[1][1] = tay[0][24];
-    tay[1][2] = tay[0][26];
-    tay[1][3] = tay[0][27];
+    v16 = tay[0][15] * tay[0][9];
+    v17 = tay[0][14] * tay[0][7];
+    v18 = v16 - v17;
+    tay[0][16] = gyrostat_sin(tay[0][1]);
+    tay[0][17] = gyrostat_cos(tay[0][1]);
+    tay[0][18] = v18 / tay[0][17];
+    v22 = tay[0][14] * tay[0][9];
+    v23 = tay[0][15] * tay[0][7];
+    v24 = v22 + v23;
+    v25 = tay[0][18] * tay[0][16];
+    v26 = tay[0][8] - v25;
+    v27 = tay[0][10] - tay[0][8];
+    v29 = c[0] * tay[0][8];
+    v31 = c[1] * tay[0][10];
+    tay[0][19] = v29 + v31;
+    v33 = tay[0][7] * tay[0][19];
+    v35 = c[2] * tay[0][8];
+    v37 = c[3] * tay[0][10];
+    tay[0][20] = v35 + v37;
+    v39 = tay[0][9] * tay[0][20];
+    v40 = v33 + v39;
+    v43 = c[4] * tay[0][7];
+    v45 = c[5] * tay[0][9];
+    tay[0][21] = v43 + v45;
+    v47 = tay[0][7] * tay[0][21];
+    v48 = c[6] + v47;
+    v49 = tay[0][9] * tay[0][9];
+    v50 = c[4] * v49;
+    v51 = v48 - v50;
+    v53 = c[7] * tay[0][7];
+    v54 = c[0] * tay[0][9];
+    tay[0][22] = v53 - v54;
+    v56 = tay[0][8] * tay[0][22];
+    v58 = c[8] * tay[0][7];
+    v59 = c[1] * tay[0][9];
+    tay[0][23] = v58 - v59;
+    v61 = tay[0][10] * tay[0][23];
+    v62 = v56 + v61;
+    ib21 = 1.0 / tay[0][17];
+    ub21 = tay[0][18] / tay[0][17];
+    tay[1][0] = tay[0][18];
+    tay[1][1] = v24;
+    tay[1][2] = v26;
+    tay[1][3] = v27;
     tay[1][4] = tay[0][11];
     tay[1][5] = tay[0][12];
     tay[1][6] = tay[0][13];
-    tay[1][7] = tay[0][40];
-    tay[1][8] = tay[0][51];
-    tay[1][9] = tay[0][62];
+    tay[1][7] = v40;
+    tay[1][8] = v51;
+    tay[1][9] = v62;
     tay[1][10] = c[9];
     tay[1][11] = 0.0;
     tay[1][12] = 0.0;
@@ -2119,7 +2150,42 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc49 = 0.0;
         acc56 = 0.0;
         acc61 = 0.0;
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            double w1_0, w1_1, w2_0, w2_1;
+            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
+            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
+            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
+            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
+            acc14 = acc14 + (w2_0 * tay[n - (2 * b + 1)][15] + w2_1 * tay[n - (2 * b + 2)][15]);
+            acc15 = acc15 + (w2_0 * tay[n - (2 * b + 1)][14] + w2_1 * tay[n - (2 * b + 2)][14]);
+            acc16 = acc16 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][15] *
+                    tay[n - (2 * b + 2)][9]);
+            acc17 = acc17 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][7] + tay[2 * b + 2][14] *
+                    tay[n - (2 * b + 2)][7]);
+            acc19 = acc19 + (w1_0 * tay[n - (2 * b + 1)][17] + w1_1 * tay[n - (2 * b + 2)][17]);
+            acc20 = acc20 + (w1_0 * tay[n - (2 * b + 1)][16] + w1_1 * tay[n - (2 * b + 2)][16]);
+            acc21 = acc21 + (tay[2 * b + 1][17] * tay[n - (2 * b + 1)][18] + tay[2 * b + 2][17] *
+                    tay[n - (2 * b + 2)][18]);
+            acc22 = acc22 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][14] *
+                    tay[n - (2 * b + 2)][9]);
+            acc23 = acc23 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][7] + tay[2 * b + 2][15] *
+                    tay[n - (2 * b + 2)][7]);
+            acc25 = acc25 + (tay[2 * b + 1][18] * tay[n - (2 * b + 1)][16] + tay[2 * b + 2][18] *
+                    tay[n - (2 * b + 2)][16]);
+            acc33 = acc33 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][19] + tay[2 * b + 2][7] *
+                    tay[n - (2 * b + 2)][19]);
+            acc39 = acc39 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][20] + tay[2 * b + 2][9] *
+                    tay[n - (2 * b + 2)][20]);
+            acc47 = acc47 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][21] + tay[2 * b + 2][7] *
+                    tay[n - (2 * b + 2)][21]);
+            acc49 = acc49 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][9] *
+                    tay[n - (2 * b + 2)][9]);
+            acc56 = acc56 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][22] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][22]);
+            acc61 = acc61 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][23] + tay[2 * b + 2][10] *
+                    tay[n - (2 * b + 2)][23]);
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
@@ -2127,69 +2193,69 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
             acc15 = acc15 + w2 * tay[n - j][14];
             acc16 = acc16 + tay[j][15] * tay[n - j][9];
             acc17 = acc17 + tay[j][14] * tay[n - j][7];
-            acc19 = acc19 + w1 * tay[n - j][20];
-            acc20 = acc20 + w1 * tay[n - j][19];
-            acc21 = acc21 + tay[j][20] * tay[n - j][21];
+            acc19 = acc19 + w1 * tay[n - j][17];
+            acc20 = acc20 + w1 * tay[n - j][16];
+            acc21 = acc21 + tay[j][17] * tay[n - j][18];
             acc22 = acc22 + tay[j][14] * tay[n - j][9];
             acc23 = acc23 + tay[j][15] * tay[n - j][7];
-            acc25 = acc25 + tay[j][21] * tay[n - j][19];
-            acc33 = acc33 + tay[j][7] * tay[n - j][32];
-            acc39 = acc39 + tay[j][9] * tay[n - j][38];
-            acc47 = acc47 + tay[j][7] * tay[n - j][46];
+            acc25 = acc25 + tay[j][18] * tay[n - j][16];
+            acc33 = acc33 + tay[j][7] * tay[n - j][19];
+            acc39 = acc39 + tay[j][9] * tay[n - j][20];
+            acc47 = acc47 + tay[j][7] * tay[n - j][21];
             acc49 = acc49 + tay[j][9] * tay[n - j][9];
-            acc56 = acc56 + tay[j][8] * tay[n - j][55];
-            acc61 = acc61 + tay[j][10] * tay[n - j][60];
+            acc56 = acc56 + tay[j][8] * tay[n - j][22];
+            acc61 = acc61 + tay[j][10] * tay[n - j][23];
         }
         tay[n][14] = acc14 * inv[n] + tay[n][2] * tay[0][15];
         tay[n][15] = -(acc15 * inv[n]) - tay[n][2] * tay[0][14];
-        tay[n][16] = acc16 + tay[0][15] * tay[n][9] + tay[n][15] * tay[0][9];
-        tay[n][17] = acc17 + tay[0][14] * tay[n][7] + tay[n][14] * tay[0][7];
-        tay[n][18] = tay[n][16] - tay[n][17];
-        tay[n][19] = acc19 * inv[n] + tay[n][1] * tay[0][20];
-        tay[n][20] = -(acc20 * inv[n]) - tay[n][1] * tay[0][19];
-        tay[n][21] = tay[n][18] * ib21 - (acc21 * ib21 + tay[n][20] * ub21);
-        tay[n][22] = acc22 + tay[0][14] * tay[n][9] + tay[n][14] * tay[0][9];
-        tay[n][23] = acc23 + tay[0][15] * tay[n][7] + tay[n][15] * tay[0][7];
-        tay[n][24] = tay[n][22] + tay[n][23];
-        tay[n][25] = acc25 + tay[0][21] * tay[n][19] + tay[n][21] * tay[0][19];
-        tay[n][26] = tay[n][8] - tay[n][25];
-        tay[n][27] = tay[n][10] - tay[n][8];
-        tay[n][29] = c[0] * tay[n][8];
-        tay[n][31] = c[1] * tay[n][10];
-        tay[n][32] = tay[n][29] + tay[n][31];
-        tay[n][33] = acc33 + tay[0][7] * tay[n][32] + tay[n][7] * tay[0][32];
-        tay[n][35] = c[2] * tay[n][8];
-        tay[n][37] = c[3] * tay[n][10];
-        tay[n][38] = tay[n][35] + tay[n][37];
-        tay[n][39] = acc39 + tay[0][9] * tay[n][38] + tay[n][9] * tay[0][38];
-        tay[n][40] = tay[n][33] + tay[n][39];
-        tay[n][43] = c[4] * tay[n][7];
-        tay[n][45] = c[5] * tay[n][9];
-        tay[n][46] = tay[n][43] + tay[n][45];
-        tay[n][47] = acc47 + tay[0][7] * tay[n][46] + tay[n][7] * tay[0][46];
-        tay[n][48] = tay[n][47];
-        tay[n][49] = acc49 + tay[0][9] * tay[n][9] + tay[n][9] * tay[0][9];
-        tay[n][50] = c[4] * tay[n][49];
-        tay[n][51] = tay[n][48] - tay[n][50];
-        tay[n][53] = c[7] * tay[n][7];
-        tay[n][54] = c[0] * tay[n][9];
-        tay[n][55] = tay[n][53] - tay[n][54];
-        tay[n][56] = acc56 + tay[0][8] * tay[n][55] + tay[n][8] * tay[0][55];
-        tay[n][58] = c[8] * tay[n][7];
-        tay[n][59] = c[1] * tay[n][9];
-        tay[n][60] = tay[n][58] - tay[n][59];
-        tay[n][61] = acc61 + tay[0][10] * tay[n][60] + tay[n][10] * tay[0][60];
-        tay[n][62] = tay[n][56] + tay[n][61];
-        tay[n + 1][0] = tay[n][21] * inv[n + 1];
-        tay[n + 1][1] = tay[n][24] * inv[n + 1];
-        tay[n + 1][2] = tay[n][26] * inv[n + 1];
-        tay[n + 1][3] = tay[n][27] * inv[n + 1];
+        v16 = acc16 + tay[0][15] * tay[n][9] + tay[n][15] * tay[0][9];
+        v17 = acc17 + tay[0][14] * tay[n][7] + tay[n][14] * tay[0][7];
+        v18 = v16 - v17;
+        tay[n][16] = acc19 * inv[n] + tay[n][1] * tay[0][17];
+        tay[n][17] = -(acc20 * inv[n]) - tay[n][1] * tay[0][16];
+        tay[n][18] = v18 * ib21 - (acc21 * ib21 + tay[n][17] * ub21);
+        v22 = acc22 + tay[0][14] * tay[n][9] + tay[n][14] * tay[0][9];
+        v23 = acc23 + tay[0][15] * tay[n][7] + tay[n][15] * tay[0][7];
+        v24 = v22 + v23;
+        v25 = acc25 + tay[0][18] * tay[n][16] + tay[n][18] * tay[0][16];
+        v26 = tay[n][8] - v25;
+        v27 = tay[n][10] - tay[n][8];
+        v29 = c[0] * tay[n][8];
+        v31 = c[1] * tay[n][10];
+        tay[n][19] = v29 + v31;
+        v33 = acc33 + tay[0][7] * tay[n][19] + tay[n][7] * tay[0][19];
+        v35 = c[2] * tay[n][8];
+        v37 = c[3] * tay[n][10];
+        tay[n][20] = v35 + v37;
+        v39 = acc39 + tay[0][9] * tay[n][20] + tay[n][9] * tay[0][20];
+        v40 = v33 + v39;
+        v43 = c[4] * tay[n][7];
+        v45 = c[5] * tay[n][9];
+        tay[n][21] = v43 + v45;
+        v47 = acc47 + tay[0][7] * tay[n][21] + tay[n][7] * tay[0][21];
+        v48 = v47;
+        v49 = acc49 + tay[0][9] * tay[n][9] + tay[n][9] * tay[0][9];
+        v50 = c[4] * v49;
+        v51 = v48 - v50;
+        v53 = c[7] * tay[n][7];
+        v54 = c[0] * tay[n][9];
+        tay[n][22] = v53 - v54;
+        v56 = acc56 + tay[0][8] * tay[n][22] + tay[n][8] * tay[0][22];
+        v58 = c[8] * tay[n][7];
+        v59 = c[1] * tay[n][9];
+        tay[n][23] = v58 - v59;
+        v61 = acc61 + tay[0][10] * tay[n][23] + tay[n][10] * tay[0][23];
+        v62 = v56 + v61;
+        tay[n + 1][0] = tay[n][18] * inv[n + 1];
+        tay[n + 1][1] = v24 * inv[n + 1];
+        tay[n + 1][2] = v26 * inv[n + 1];
+        tay[n + 1][3] = v27 * inv[n + 1];
         tay[n + 1][4] = tay[n][11] * inv[n + 1];
         tay[n + 1][5] = tay[n][12] * inv[n + 1];
         tay[n + 1][6] = tay[n][13] * inv[n + 1];
-        tay[n + 1][7] = tay[n][40] * inv[n + 1];
-        tay[n + 1][8] = tay[n][51] * inv[n + 1];
-        tay[n + 1][9] = tay[n][62] * inv[n + 1];
+        tay[n + 1][7] = v40 * inv[n + 1];
+        tay[n + 1][8] = v51 * inv[n + 1];
+        tay[n + 1][9] = v62 * inv[n + 1];
         tay[n + 1][10] = 0.0;
         tay[n + 1][11] = 0.0;
         tay[n + 1][12] = 0.0;
@@ -2205,7 +2271,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, gyrostat_stats *stats)
 {
-    double tay[19][66];
+    double tay[19][24];
     double inv[19] = {0.0};
     double f0[GYROSTAT_NX];
     double xnew[GYROSTAT_NX];
@@ -2367,7 +2433,7 @@ struct lanes {
     long stats_rejected[GYROSTAT_LANES];
     long stats_rhs_calls[GYROSTAT_LANES];
     double cap[GYROSTAT_LANES];
-    double tay[19][66][GYROSTAT_LANES];
+    double tay[19][24][GYROSTAT_LANES];
     double ts[GYROSTAT_LANES];  /* the time of an rhs call */
     int busy[GYROSTAT_LANES];
     size_t traj[GYROSTAT_LANES];
@@ -2946,10 +3012,11 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     double acc61[GYROSTAT_LANES];
     double ib21[GYROSTAT_LANES];
     double ub21[GYROSTAT_LANES];
-    int j, l, n;
+    int b, j, l, n;
     /* order 0: the state and every node's value */
     GYROSTAT_SIMD
     for (l = 0; l < GYROSTAT_LANES; ++l) {
+        double v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v31, v33, v35, v37, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -2966,56 +3033,56 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         L->tay[0][13][l] = L->x[13][l];
         L->tay[0][14][l] = gyrostat_sin_lanes(L->tay[0][2][l]);
         L->tay[0][15][l] = gyrostat_cos_lanes(L->tay[0][2][l]);
-        L->tay[0][16][l] = L->tay[0][15][l] * L->tay[0][9][l];
-        L->tay[0][17][l] = L->tay[0][14][l] * L->tay[0][7][l];
-        L->tay[0][18][l] = L->tay[0][16][l] - L->tay[0][17][l];
-        L->tay[0][19][l] = gyrostat_sin_lanes(L->tay[0][1][l]);
-        L->tay[0][20][l] = gyrostat_cos_lanes(L->tay[0][1][l]);
-        L->tay[0][21][l] = L->tay[0][18][l] / L->tay[0][20][l];
-        L->tay[0][22][l] = L->tay[0][14][l] * L->tay[0][9][l];
-        L->tay[0][23][l] = L->tay[0][15][l] * L->tay[0][7][l];
-        L->tay[0][24][l] = L->tay[0][22][l] + L->tay[0][23][l];
-        L->tay[0][25][l] = L->tay[0][21][l] * L->tay[0][19][l];
-        L->tay[0][26][l] = L->tay[0][8][l] - L->tay[0][25][l];
-        L->tay[0][27][l] = L->tay[0][10][l] - L->tay[0][8][l];
-        L->tay[0][29][l] = c[0] * L->tay[0][8][l];
-        L->tay[0][31][l] = c[1] * L->tay[0][10][l];
-        L->tay[0][32][l] = L->tay[0][29][l] + L->tay[0][31][l];
-        L->tay[0][33][l] = L->tay[0][7][l] * L->tay[0][32][l];
-        L->tay[0][35][l] = c[2] * L->tay[0][8][l];
-        L->tay[0][37][l] = c[3] * L->tay[0][10][l];
-        L->tay[0][38][l] = L->tay[0][35][l] + L->tay[0][37][l];
-        L->tay[0][39][l] = L->tay[0][9][l] * L->tay[0][38][l];
-        L->tay[0][40][l] = L->tay[0][33][l] + L->tay[0][39][l];
-        L->tay[0][43][l] = c[4] * L->tay[0][7][l];
-        L->tay[0][45][l] = c[5] * L->tay[0][9][l];
-        L->tay[0][46][l] = L->tay[0][43][l] + L->tay[0][45][l];
-        L->tay[0][47][l] = L->tay[0][7][l] * L->tay[0][46][l];
-        L->tay[0][48][l] = c[6] + L->tay[0][47][l];
-        L->tay[0][49][l] = L->tay[0][9][l] * L->tay[0][9][l];
-        L->tay[0][50][l] = c[4] * L->tay[0][49][l];
-        L->tay[0][51][l] = L->tay[0][48][l] - L->tay[0][50][l];
-        L->tay[0][53][l] = c[7] * L->tay[0][7][l];
-        L->tay[0][54][l] = c[0] * L->tay[0][9][l];
-        L->tay[0][55][l] = L->tay[0][53][l] - L->tay[0][54][l];
-        L->tay[0][56][l] = L->tay[0][8][l] * L->tay[0][55][l];
-        L->tay[0][58][l] = c[8] * L->tay[0][7][l];
-        L->tay[0][59][l] = c[1] * L->tay[0][9][l];
-        L->tay[0][60][l] = L->tay[0][58][l] - L->tay[0][59][l];
-        L->tay[0][61][l] = L->tay[0][10][l] * L->tay[0][60][l];
-        L->tay[0][62][l] = L->tay[0][56][l] + L->tay[0][61][l];
-        ib21[l] = 1.0 / L->tay[0][20][l];
-        ub21[l] = L->tay[0][21][l] / L->tay[0][20][l];
-        L->tay[1][0][l] = L->tay[0][21][l];
-        L->tay[1][1][l] = L->tay[0][24][l];
-        L->tay[1][2][l] = L->tay[0][26][l];
-        L->tay[1][3][l] = L->tay[0][27][l];
+        v16 = L->tay[0][15][l] * L->tay[0][9][l];
+        v17 = L->tay[0][14][l] * L->tay[0][7][l];
+        v18 = v16 - v17;
+        L->tay[0][16][l] = gyrostat_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][17][l] = gyrostat_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][18][l] = v18 / L->tay[0][17][l];
+        v22 = L->tay[0][14][l] * L->tay[0][9][l];
+        v23 = L->tay[0][15][l] * L->tay[0][7][l];
+        v24 = v22 + v23;
+        v25 = L->tay[0][18][l] * L->tay[0][16][l];
+        v26 = L->tay[0][8][l] - v25;
+        v27 = L->tay[0][10][l] - L->tay[0][8][l];
+        v29 = c[0] * L->tay[0][8][l];
+        v31 = c[1] * L->tay[0][10][l];
+        L->tay[0][19][l] = v29 + v31;
+        v33 = L->tay[0][7][l] * L->tay[0][19][l];
+        v35 = c[2] * L->tay[0][8][l];
+        v37 = c[3] * L->tay[0][10][l];
+        L->tay[0][20][l] = v35 + v37;
+        v39 = L->tay[0][9][l] * L->tay[0][20][l];
+        v40 = v33 + v39;
+        v43 = c[4] * L->tay[0][7][l];
+        v45 = c[5] * L->tay[0][9][l];
+        L->tay[0][21][l] = v43 + v45;
+        v47 = L->tay[0][7][l] * L->tay[0][21][l];
+        v48 = c[6] + v47;
+        v49 = L->tay[0][9][l] * L->tay[0][9][l];
+        v50 = c[4] * v49;
+        v51 = v48 - v50;
+        v53 = c[7] * L->tay[0][7][l];
+        v54 = c[0] * L->tay[0][9][l];
+        L->tay[0][22][l] = v53 - v54;
+        v56 = L->tay[0][8][l] * L->tay[0][22][l];
+        v58 = c[8] * L->tay[0][7][l];
+        v59 = c[1] * L->tay[0][9][l];
+        L->tay[0][23][l] = v58 - v59;
+        v61 = L->tay[0][10][l] * L->tay[0][23][l];
+        v62 = v56 + v61;
+        ib21[l] = 1.0 / L->tay[0][17][l];
+        ub21[l] = L->tay[0][18][l] / L->tay[0][17][l];
+        L->tay[1][0][l] = L->tay[0][18][l];
+        L->tay[1][1][l] = v24;
+        L->tay[1][2][l] = v26;
+        L->tay[1][3][l] = v27;
         L->tay[1][4][l] = L->tay[0][11][l];
         L->tay[1][5][l] = L->tay[0][12][l];
         L->tay[1][6][l] = L->tay[0][13][l];
-        L->tay[1][7][l] = L->tay[0][40][l];
-        L->tay[1][8][l] = L->tay[0][51][l];
-        L->tay[1][9][l] = L->tay[0][62][l];
+        L->tay[1][7][l] = v40;
+        L->tay[1][8][l] = v51;
+        L->tay[1][9][l] = v62;
         L->tay[1][10][l] = c[9];
         L->tay[1][11][l] = 0.0;
         L->tay[1][12][l] = 0.0;
@@ -3043,7 +3110,49 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             acc56[l] = 0.0;
             acc61[l] = 0.0;
         }
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double w1_0, w1_1, w2_0, w2_1;
+                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
+                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
+                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
+                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
+                acc14[l] = acc14[l] + (w2_0 * L->tay[n - (2 * b + 1)][15][l] + w2_1 * L->tay[n -
+                        (2 * b + 2)][15][l]);
+                acc15[l] = acc15[l] + (w2_0 * L->tay[n - (2 * b + 1)][14][l] + w2_1 * L->tay[n -
+                        (2 * b + 2)][14][l]);
+                acc16[l] = acc16[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][9][l] +
+                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][9][l]);
+                acc17[l] = acc17[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][7][l] +
+                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][7][l]);
+                acc19[l] = acc19[l] + (w1_0 * L->tay[n - (2 * b + 1)][17][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][17][l]);
+                acc20[l] = acc20[l] + (w1_0 * L->tay[n - (2 * b + 1)][16][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][16][l]);
+                acc21[l] = acc21[l] + (L->tay[2 * b + 1][17][l] * L->tay[n - (2 * b + 1)][18][l]
+                        + L->tay[2 * b + 2][17][l] * L->tay[n - (2 * b + 2)][18][l]);
+                acc22[l] = acc22[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][9][l] +
+                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][9][l]);
+                acc23[l] = acc23[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][7][l] +
+                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][7][l]);
+                acc25[l] = acc25[l] + (L->tay[2 * b + 1][18][l] * L->tay[n - (2 * b + 1)][16][l]
+                        + L->tay[2 * b + 2][18][l] * L->tay[n - (2 * b + 2)][16][l]);
+                acc33[l] = acc33[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][19][l] +
+                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][19][l]);
+                acc39[l] = acc39[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][20][l] +
+                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][20][l]);
+                acc47[l] = acc47[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][21][l] +
+                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][21][l]);
+                acc49[l] = acc49[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][9][l] +
+                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][9][l]);
+                acc56[l] = acc56[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][22][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][22][l]);
+                acc61[l] = acc61[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][23][l]
+                        + L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][23][l]);
+            }
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
                 double w1, w2;
@@ -3053,84 +3162,83 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
                 acc15[l] = acc15[l] + w2 * L->tay[n - j][14][l];
                 acc16[l] = acc16[l] + L->tay[j][15][l] * L->tay[n - j][9][l];
                 acc17[l] = acc17[l] + L->tay[j][14][l] * L->tay[n - j][7][l];
-                acc19[l] = acc19[l] + w1 * L->tay[n - j][20][l];
-                acc20[l] = acc20[l] + w1 * L->tay[n - j][19][l];
-                acc21[l] = acc21[l] + L->tay[j][20][l] * L->tay[n - j][21][l];
+                acc19[l] = acc19[l] + w1 * L->tay[n - j][17][l];
+                acc20[l] = acc20[l] + w1 * L->tay[n - j][16][l];
+                acc21[l] = acc21[l] + L->tay[j][17][l] * L->tay[n - j][18][l];
                 acc22[l] = acc22[l] + L->tay[j][14][l] * L->tay[n - j][9][l];
                 acc23[l] = acc23[l] + L->tay[j][15][l] * L->tay[n - j][7][l];
-                acc25[l] = acc25[l] + L->tay[j][21][l] * L->tay[n - j][19][l];
-                acc33[l] = acc33[l] + L->tay[j][7][l] * L->tay[n - j][32][l];
-                acc39[l] = acc39[l] + L->tay[j][9][l] * L->tay[n - j][38][l];
-                acc47[l] = acc47[l] + L->tay[j][7][l] * L->tay[n - j][46][l];
+                acc25[l] = acc25[l] + L->tay[j][18][l] * L->tay[n - j][16][l];
+                acc33[l] = acc33[l] + L->tay[j][7][l] * L->tay[n - j][19][l];
+                acc39[l] = acc39[l] + L->tay[j][9][l] * L->tay[n - j][20][l];
+                acc47[l] = acc47[l] + L->tay[j][7][l] * L->tay[n - j][21][l];
                 acc49[l] = acc49[l] + L->tay[j][9][l] * L->tay[n - j][9][l];
-                acc56[l] = acc56[l] + L->tay[j][8][l] * L->tay[n - j][55][l];
-                acc61[l] = acc61[l] + L->tay[j][10][l] * L->tay[n - j][60][l];
+                acc56[l] = acc56[l] + L->tay[j][8][l] * L->tay[n - j][22][l];
+                acc61[l] = acc61[l] + L->tay[j][10][l] * L->tay[n - j][23][l];
             }
         }
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
+            double v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v31, v33, v35, v37, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
             L->tay[n][14][l] = acc14[l] * inv[n] + L->tay[n][2][l] * L->tay[0][15][l];
             L->tay[n][15][l] = -(acc15[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][14][l];
-            L->tay[n][16][l] = acc16[l] + L->tay[0][15][l] * L->tay[n][9][l] + L->tay[n][15][l] *
+            v16 = acc16[l] + L->tay[0][15][l] * L->tay[n][9][l] + L->tay[n][15][l] *
                     L->tay[0][9][l];
-            L->tay[n][17][l] = acc17[l] + L->tay[0][14][l] * L->tay[n][7][l] + L->tay[n][14][l] *
+            v17 = acc17[l] + L->tay[0][14][l] * L->tay[n][7][l] + L->tay[n][14][l] *
                     L->tay[0][7][l];
-            L->tay[n][18][l] = L->tay[n][16][l] - L->tay[n][17][l];
-            L->tay[n][19][l] = acc19[l] * inv[n] + L->tay[n][1][l] * L->tay[0][20][l];
-            L->tay[n][20][l] = -(acc20[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][19][l];
-            L->tay[n][21][l] = L->tay[n][18][l] * ib21[l] - (acc21[l] * ib21[l] +
-                    L->tay[n][20][l] * ub21[l]);
-            L->tay[n][22][l] = acc22[l] + L->tay[0][14][l] * L->tay[n][9][l] + L->tay[n][14][l] *
+            v18 = v16 - v17;
+            L->tay[n][16][l] = acc19[l] * inv[n] + L->tay[n][1][l] * L->tay[0][17][l];
+            L->tay[n][17][l] = -(acc20[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][16][l];
+            L->tay[n][18][l] = v18 * ib21[l] - (acc21[l] * ib21[l] + L->tay[n][17][l] * ub21[l]);
+            v22 = acc22[l] + L->tay[0][14][l] * L->tay[n][9][l] + L->tay[n][14][l] *
                     L->tay[0][9][l];
-            L->tay[n][23][l] = acc23[l] + L->tay[0][15][l] * L->tay[n][7][l] + L->tay[n][15][l] *
+            v23 = acc23[l] + L->tay[0][15][l] * L->tay[n][7][l] + L->tay[n][15][l] *
                     L->tay[0][7][l];
-            L->tay[n][24][l] = L->tay[n][22][l] + L->tay[n][23][l];
-            L->tay[n][25][l] = acc25[l] + L->tay[0][21][l] * L->tay[n][19][l] + L->tay[n][21][l]
-                    * L->tay[0][19][l];
-            L->tay[n][26][l] = L->tay[n][8][l] - L->tay[n][25][l];
-            L->tay[n][27][l] = L->tay[n][10][l] - L->tay[n][8][l];
-            L->tay[n][29][l] = c[0] * L->tay[n][8][l];
-            L->tay[n][31][l] = c[1] * L->tay[n][10][l];
-            L->tay[n][32][l] = L->tay[n][29][l] + L->tay[n][31][l];
-            L->tay[n][33][l] = acc33[l] + L->tay[0][7][l] * L->tay[n][32][l] + L->tay[n][7][l] *
-                    L->tay[0][32][l];
-            L->tay[n][35][l] = c[2] * L->tay[n][8][l];
-            L->tay[n][37][l] = c[3] * L->tay[n][10][l];
-            L->tay[n][38][l] = L->tay[n][35][l] + L->tay[n][37][l];
-            L->tay[n][39][l] = acc39[l] + L->tay[0][9][l] * L->tay[n][38][l] + L->tay[n][9][l] *
-                    L->tay[0][38][l];
-            L->tay[n][40][l] = L->tay[n][33][l] + L->tay[n][39][l];
-            L->tay[n][43][l] = c[4] * L->tay[n][7][l];
-            L->tay[n][45][l] = c[5] * L->tay[n][9][l];
-            L->tay[n][46][l] = L->tay[n][43][l] + L->tay[n][45][l];
-            L->tay[n][47][l] = acc47[l] + L->tay[0][7][l] * L->tay[n][46][l] + L->tay[n][7][l] *
-                    L->tay[0][46][l];
-            L->tay[n][48][l] = L->tay[n][47][l];
-            L->tay[n][49][l] = acc49[l] + L->tay[0][9][l] * L->tay[n][9][l] + L->tay[n][9][l] *
-                    L->tay[0][9][l];
-            L->tay[n][50][l] = c[4] * L->tay[n][49][l];
-            L->tay[n][51][l] = L->tay[n][48][l] - L->tay[n][50][l];
-            L->tay[n][53][l] = c[7] * L->tay[n][7][l];
-            L->tay[n][54][l] = c[0] * L->tay[n][9][l];
-            L->tay[n][55][l] = L->tay[n][53][l] - L->tay[n][54][l];
-            L->tay[n][56][l] = acc56[l] + L->tay[0][8][l] * L->tay[n][55][l] + L->tay[n][8][l] *
-                    L->tay[0][55][l];
-            L->tay[n][58][l] = c[8] * L->tay[n][7][l];
-            L->tay[n][59][l] = c[1] * L->tay[n][9][l];
-            L->tay[n][60][l] = L->tay[n][58][l] - L->tay[n][59][l];
-            L->tay[n][61][l] = acc61[l] + L->tay[0][10][l] * L->tay[n][60][l] + L->tay[n][10][l]
-                    * L->tay[0][60][l];
-            L->tay[n][62][l] = L->tay[n][56][l] + L->tay[n][61][l];
-            L->tay[n + 1][0][l] = L->tay[n][21][l] * inv[n + 1];
-            L->tay[n + 1][1][l] = L->tay[n][24][l] * inv[n + 1];
-            L->tay[n + 1][2][l] = L->tay[n][26][l] * inv[n + 1];
-            L->tay[n + 1][3][l] = L->tay[n][27][l] * inv[n + 1];
+            v24 = v22 + v23;
+            v25 = acc25[l] + L->tay[0][18][l] * L->tay[n][16][l] + L->tay[n][18][l] *
+                    L->tay[0][16][l];
+            v26 = L->tay[n][8][l] - v25;
+            v27 = L->tay[n][10][l] - L->tay[n][8][l];
+            v29 = c[0] * L->tay[n][8][l];
+            v31 = c[1] * L->tay[n][10][l];
+            L->tay[n][19][l] = v29 + v31;
+            v33 = acc33[l] + L->tay[0][7][l] * L->tay[n][19][l] + L->tay[n][7][l] *
+                    L->tay[0][19][l];
+            v35 = c[2] * L->tay[n][8][l];
+            v37 = c[3] * L->tay[n][10][l];
+            L->tay[n][20][l] = v35 + v37;
+            v39 = acc39[l] + L->tay[0][9][l] * L->tay[n][20][l] + L->tay[n][9][l] *
+                    L->tay[0][20][l];
+            v40 = v33 + v39;
+            v43 = c[4] * L->tay[n][7][l];
+            v45 = c[5] * L->tay[n][9][l];
+            L->tay[n][21][l] = v43 + v45;
+            v47 = acc47[l] + L->tay[0][7][l] * L->tay[n][21][l] + L->tay[n][7][l] *
+                    L->tay[0][21][l];
+            v48 = v47;
+            v49 = acc49[l] + L->tay[0][9][l] * L->tay[n][9][l] + L->tay[n][9][l] * L->tay[0][9][l];
+            v50 = c[4] * v49;
+            v51 = v48 - v50;
+            v53 = c[7] * L->tay[n][7][l];
+            v54 = c[0] * L->tay[n][9][l];
+            L->tay[n][22][l] = v53 - v54;
+            v56 = acc56[l] + L->tay[0][8][l] * L->tay[n][22][l] + L->tay[n][8][l] *
+                    L->tay[0][22][l];
+            v58 = c[8] * L->tay[n][7][l];
+            v59 = c[1] * L->tay[n][9][l];
+            L->tay[n][23][l] = v58 - v59;
+            v61 = acc61[l] + L->tay[0][10][l] * L->tay[n][23][l] + L->tay[n][10][l] *
+                    L->tay[0][23][l];
+            v62 = v56 + v61;
+            L->tay[n + 1][0][l] = L->tay[n][18][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = v24 * inv[n + 1];
+            L->tay[n + 1][2][l] = v26 * inv[n + 1];
+            L->tay[n + 1][3][l] = v27 * inv[n + 1];
             L->tay[n + 1][4][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][5][l] = L->tay[n][12][l] * inv[n + 1];
             L->tay[n + 1][6][l] = L->tay[n][13][l] * inv[n + 1];
-            L->tay[n + 1][7][l] = L->tay[n][40][l] * inv[n + 1];
-            L->tay[n + 1][8][l] = L->tay[n][51][l] * inv[n + 1];
-            L->tay[n + 1][9][l] = L->tay[n][62][l] * inv[n + 1];
+            L->tay[n + 1][7][l] = v40 * inv[n + 1];
+            L->tay[n + 1][8][l] = v51 * inv[n + 1];
+            L->tay[n + 1][9][l] = v62 * inv[n + 1];
             L->tay[n + 1][10][l] = 0.0;
             L->tay[n + 1][11][l] = 0.0;
             L->tay[n + 1][12][l] = 0.0;

@@ -2179,7 +2179,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:66 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:24 - 1, 0:19 - 1)
     real(c_double) :: acc14
     real(c_double) :: acc15
     real(c_double) :: acc16
@@ -2198,8 +2198,43 @@ contains
     real(c_double) :: acc61
     real(c_double) :: ib21
     real(c_double) :: ub21
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v22
+    real(c_double) :: v23
+    real(c_double) :: v24
+    real(c_double) :: v25
+    real(c_double) :: v26
+    real(c_double) :: v27
+    real(c_double) :: v29
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v35
+    real(c_double) :: v37
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v43
+    real(c_double) :: v45
+    real(c_double) :: v47
+    real(c_double) :: v48
+    real(c_double) :: v49
+    real(c_double) :: v50
+    real(c_double) :: v51
+    real(c_double) :: v53
+    real(c_double) :: v54
+    real(c_double) :: v56
+    real(c_double) :: v58
+    real(c_double) :: v59
+    real(c_double) :: v61
+    real(c_double) :: v62
     real(c_double) :: w1
+    real(c_double) :: w1_0
+    real(c_double) :: w1_1
     real(c_double) :: w2
+    real(c_double) :: w2_0
+    real(c_double) :: w2_1
+    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2220,56 +2255,56 @@ contains
     tay(13, 0) = x(13)
     tay(14, 0) = gyrostat_sin(tay(2, 0))
     tay(15, 0) = gyrostat_cos(tay(2, 0))
-    tay(16, 0) = tay(15, 0) * tay(9, 0)
-    tay(17, 0) = tay(14, 0) * tay(7, 0)
-    tay(18, 0) = tay(16, 0) - tay(17, 0)
-    tay(19, 0) = gyrostat_sin(tay(1, 0))
-    tay(20, 0) = gyrostat_cos(tay(1, 0))
-    tay(21, 0) = tay(18, 0) / tay(20, 0)
-    tay(22, 0) = tay(14, 0) * tay(9, 0)
-    tay(23, 0) = tay(15, 0) * tay(7, 0)
-    tay(24, 0) = tay(22, 0) + tay(23, 0)
-    tay(25, 0) = tay(21, 0) * tay(19, 0)
-    tay(26, 0) = tay(8, 0) - tay(25, 0)
-    tay(27, 0) = tay(10, 0) - tay(8, 0)
-    tay(29, 0) = c(0) * tay(8, 0)
-    tay(31, 0) = c(1) * tay(10, 0)
-    tay(32, 0) = tay(29, 0) + tay(31, 0)
-    tay(33, 0) = tay(7, 0) * tay(32, 0)
-    tay(35, 0) = c(2) * tay(8, 0)
-    tay(37, 0) = c(3) * tay(10, 0)
-    tay(38, 0) = tay(35, 0) + tay(37, 0)
-    tay(39, 0) = tay(9, 0) * tay(38, 0)
-    tay(40, 0) = tay(33, 0) + tay(39, 0)
-    tay(43, 0) = c(4) * tay(7, 0)
-    tay(45, 0) = c(5) * tay(9, 0)
-    tay(46, 0) = tay(43, 0) + tay(45, 0)
-    tay(47, 0) = tay(7, 0) * tay(46, 0)
-    tay(48, 0) = c(6) + tay(47, 0)
-    tay(49, 0) = tay(9, 0) * tay(9, 0)
-    tay(50, 0) = c(4) * tay(49, 0)
-    tay(51, 0) = tay(48, 0) - tay(50, 0)
-    tay(53, 0) = c(7) * tay(7, 0)
-    tay(54, 0) = c(0) * tay(9, 0)
-    tay(55, 0) = tay(53, 0) - tay(54, 0)
-    tay(56, 0) = tay(8, 0) * tay(55, 0)
-    tay(58, 0) = c(8) * tay(7, 0)
-    tay(59, 0) = c(1) * tay(9, 0)
-    tay(60, 0) = tay(58, 0) - tay(59, 0)
-    tay(61, 0) = tay(10, 0) * tay(60, 0)
-    tay(62, 0) = tay(56, 0) + tay(61, 0)
-    ib21 = 1.0_c_double / tay(20, 0)
-    ub21 = tay(21, 0) / tay(20, 0)
-    tay(0, 1) = tay(21, 0)
-    tay(1, 1) = tay(24, 0)
-    tay(2, 1) = tay(26, 0)
-    tay(3, 1) = tay(27, 0)
+    v16 = tay(15, 0) * tay(9, 0)
+    v17 = tay(14, 0) * tay(7, 0)
+    v18 = v16 - v17
+    tay(16, 0) = gyrostat_sin(tay(1, 0))
+    tay(17, 0) = gyrostat_cos(tay(1, 0))
+    tay(18, 0) = v18 / tay(17, 0)
+    v22 = tay(14, 0) * tay(9, 0)
+    v23 = tay(15, 0) * tay(7, 0)
+    v24 = v22 + v23
+    v25 = tay(18, 0) * tay(16, 0)
+    v26 = tay(8, 0) - v25
+    v27 = tay(10, 0) - tay(8, 0)
+    v29 = c(0) * tay(8, 0)
+    v31 = c(1) * tay(10, 0)
+    tay(19, 0) = v29 + v31
+    v33 = tay(7, 0) * tay(19, 0)
+    v35 = c(2) * tay(8, 0)
+    v37 = c(3) * tay(10, 0)
+    tay(20, 0) = v35 + v37
+    v39 = tay(9, 0) * tay(20, 0)
+    v40 = v33 + v39
+    v43 = c(4) * tay(7, 0)
+    v45 = c(5) * tay(9, 0)
+    tay(21, 0) = v43 + v45
+    v47 = tay(7, 0) * tay(21, 0)
+    v48 = c(6) + v47
+    v49 = tay(9, 0) * tay(9, 0)
+    v50 = c(4) * v49
+    v51 = v48 - v50
+    v53 = c(7) * tay(7, 0)
+    v54 = c(0) * tay(9, 0)
+    tay(22, 0) = v53 - v54
+    v56 = tay(8, 0) * tay(22, 0)
+    v58 = c(8) * tay(7, 0)
+    v59 = c(1) * tay(9, 0)
+    tay(23, 0) = v58 - v59
+    v61 = tay(10, 0) * tay(23, 0)
+    v62 = v56 + v61
+    ib21 = 1.0_c_double / tay(17, 0)
+    ub21 = tay(18, 0) / tay(17, 0)
+    tay(0, 1) = tay(18, 0)
+    tay(1, 1) = v24
+    tay(2, 1) = v26
+    tay(3, 1) = v27
     tay(4, 1) = tay(11, 0)
     tay(5, 1) = tay(12, 0)
     tay(6, 1) = tay(13, 0)
-    tay(7, 1) = tay(40, 0)
-    tay(8, 1) = tay(51, 0)
-    tay(9, 1) = tay(62, 0)
+    tay(7, 1) = v40
+    tay(8, 1) = v51
+    tay(9, 1) = v62
     tay(10, 1) = c(9)
     tay(11, 1) = 0.0_c_double
     tay(12, 1) = 0.0_c_double
@@ -2293,76 +2328,110 @@ contains
       acc49 = 0.0_c_double
       acc56 = 0.0_c_double
       acc61 = 0.0_c_double
-      do j = 1, n - 1
+      do b = 0, (n - 1) / 2 - 1
+        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
+        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
+        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
+        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
+        acc14 = acc14 + (w2_0 * tay(15, n - (2 * b + 1)) + w2_1 * tay(15, n - (2 * b + 2)))
+        acc15 = acc15 + (w2_0 * tay(14, n - (2 * b + 1)) + w2_1 * tay(14, n - (2 * b + 2)))
+        acc16 = acc16 + (tay(15, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(15, &
+            2 * b + 2) * tay(9, n - (2 * b + 2)))
+        acc17 = acc17 + (tay(14, 2 * b + 1) * tay(7, n - (2 * b + 1)) + tay(14, &
+            2 * b + 2) * tay(7, n - (2 * b + 2)))
+        acc19 = acc19 + (w1_0 * tay(17, n - (2 * b + 1)) + w1_1 * tay(17, n - (2 * b + 2)))
+        acc20 = acc20 + (w1_0 * tay(16, n - (2 * b + 1)) + w1_1 * tay(16, n - (2 * b + 2)))
+        acc21 = acc21 + (tay(17, 2 * b + 1) * tay(18, n - (2 * b + 1)) + tay(17, &
+            2 * b + 2) * tay(18, n - (2 * b + 2)))
+        acc22 = acc22 + (tay(14, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(14, &
+            2 * b + 2) * tay(9, n - (2 * b + 2)))
+        acc23 = acc23 + (tay(15, 2 * b + 1) * tay(7, n - (2 * b + 1)) + tay(15, &
+            2 * b + 2) * tay(7, n - (2 * b + 2)))
+        acc25 = acc25 + (tay(18, 2 * b + 1) * tay(16, n - (2 * b + 1)) + tay(18, &
+            2 * b + 2) * tay(16, n - (2 * b + 2)))
+        acc33 = acc33 + (tay(7, 2 * b + 1) * tay(19, n - (2 * b + 1)) + tay(7, &
+            2 * b + 2) * tay(19, n - (2 * b + 2)))
+        acc39 = acc39 + (tay(9, 2 * b + 1) * tay(20, n - (2 * b + 1)) + tay(9, &
+            2 * b + 2) * tay(20, n - (2 * b + 2)))
+        acc47 = acc47 + (tay(7, 2 * b + 1) * tay(21, n - (2 * b + 1)) + tay(7, &
+            2 * b + 2) * tay(21, n - (2 * b + 2)))
+        acc49 = acc49 + (tay(9, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(9, &
+            n - (2 * b + 2)))
+        acc56 = acc56 + (tay(8, 2 * b + 1) * tay(22, n - (2 * b + 1)) + tay(8, &
+            2 * b + 2) * tay(22, n - (2 * b + 2)))
+        acc61 = acc61 + (tay(10, 2 * b + 1) * tay(23, n - (2 * b + 1)) + tay(10, &
+            2 * b + 2) * tay(23, n - (2 * b + 2)))
+      end do
+      do j = 2 * ((n - 1) / 2) + 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
         acc14 = acc14 + w2 * tay(15, n - j)
         acc15 = acc15 + w2 * tay(14, n - j)
         acc16 = acc16 + tay(15, j) * tay(9, n - j)
         acc17 = acc17 + tay(14, j) * tay(7, n - j)
-        acc19 = acc19 + w1 * tay(20, n - j)
-        acc20 = acc20 + w1 * tay(19, n - j)
-        acc21 = acc21 + tay(20, j) * tay(21, n - j)
+        acc19 = acc19 + w1 * tay(17, n - j)
+        acc20 = acc20 + w1 * tay(16, n - j)
+        acc21 = acc21 + tay(17, j) * tay(18, n - j)
         acc22 = acc22 + tay(14, j) * tay(9, n - j)
         acc23 = acc23 + tay(15, j) * tay(7, n - j)
-        acc25 = acc25 + tay(21, j) * tay(19, n - j)
-        acc33 = acc33 + tay(7, j) * tay(32, n - j)
-        acc39 = acc39 + tay(9, j) * tay(38, n - j)
-        acc47 = acc47 + tay(7, j) * tay(46, n - j)
+        acc25 = acc25 + tay(18, j) * tay(16, n - j)
+        acc33 = acc33 + tay(7, j) * tay(19, n - j)
+        acc39 = acc39 + tay(9, j) * tay(20, n - j)
+        acc47 = acc47 + tay(7, j) * tay(21, n - j)
         acc49 = acc49 + tay(9, j) * tay(9, n - j)
-        acc56 = acc56 + tay(8, j) * tay(55, n - j)
-        acc61 = acc61 + tay(10, j) * tay(60, n - j)
+        acc56 = acc56 + tay(8, j) * tay(22, n - j)
+        acc61 = acc61 + tay(10, j) * tay(23, n - j)
       end do
       tay(14, n) = acc14 * inv(n) + tay(2, n) * tay(15, 0)
       tay(15, n) = (-acc15 * inv(n)) - tay(2, n) * tay(14, 0)
-      tay(16, n) = (acc16 + tay(15, 0) * tay(9, n)) + tay(15, n) * tay(9, 0)
-      tay(17, n) = (acc17 + tay(14, 0) * tay(7, n)) + tay(14, n) * tay(7, 0)
-      tay(18, n) = tay(16, n) - tay(17, n)
-      tay(19, n) = acc19 * inv(n) + tay(1, n) * tay(20, 0)
-      tay(20, n) = (-acc20 * inv(n)) - tay(1, n) * tay(19, 0)
-      tay(21, n) = tay(18, n) * ib21 - (acc21 * ib21 + tay(20, n) * ub21)
-      tay(22, n) = (acc22 + tay(14, 0) * tay(9, n)) + tay(14, n) * tay(9, 0)
-      tay(23, n) = (acc23 + tay(15, 0) * tay(7, n)) + tay(15, n) * tay(7, 0)
-      tay(24, n) = tay(22, n) + tay(23, n)
-      tay(25, n) = (acc25 + tay(21, 0) * tay(19, n)) + tay(21, n) * tay(19, 0)
-      tay(26, n) = tay(8, n) - tay(25, n)
-      tay(27, n) = tay(10, n) - tay(8, n)
-      tay(29, n) = c(0) * tay(8, n)
-      tay(31, n) = c(1) * tay(10, n)
-      tay(32, n) = tay(29, n) + tay(31, n)
-      tay(33, n) = (acc33 + tay(7, 0) * tay(32, n)) + tay(7, n) * tay(32, 0)
-      tay(35, n) = c(2) * tay(8, n)
-      tay(37, n) = c(3) * tay(10, n)
-      tay(38, n) = tay(35, n) + tay(37, n)
-      tay(39, n) = (acc39 + tay(9, 0) * tay(38, n)) + tay(9, n) * tay(38, 0)
-      tay(40, n) = tay(33, n) + tay(39, n)
-      tay(43, n) = c(4) * tay(7, n)
-      tay(45, n) = c(5) * tay(9, n)
-      tay(46, n) = tay(43, n) + tay(45, n)
-      tay(47, n) = (acc47 + tay(7, 0) * tay(46, n)) + tay(7, n) * tay(46, 0)
-      tay(48, n) = tay(47, n)
-      tay(49, n) = (acc49 + tay(9, 0) * tay(9, n)) + tay(9, n) * tay(9, 0)
-      tay(50, n) = c(4) * tay(49, n)
-      tay(51, n) = tay(48, n) - tay(50, n)
-      tay(53, n) = c(7) * tay(7, n)
-      tay(54, n) = c(0) * tay(9, n)
-      tay(55, n) = tay(53, n) - tay(54, n)
-      tay(56, n) = (acc56 + tay(8, 0) * tay(55, n)) + tay(8, n) * tay(55, 0)
-      tay(58, n) = c(8) * tay(7, n)
-      tay(59, n) = c(1) * tay(9, n)
-      tay(60, n) = tay(58, n) - tay(59, n)
-      tay(61, n) = (acc61 + tay(10, 0) * tay(60, n)) + tay(10, n) * tay(60, 0)
-      tay(62, n) = tay(56, n) + tay(61, n)
-      tay(0, n + 1) = tay(21, n) * inv(n + 1)
-      tay(1, n + 1) = tay(24, n) * inv(n + 1)
-      tay(2, n + 1) = tay(26, n) * inv(n + 1)
-      tay(3, n + 1) = tay(27, n) * inv(n + 1)
+      v16 = (acc16 + tay(15, 0) * tay(9, n)) + tay(15, n) * tay(9, 0)
+      v17 = (acc17 + tay(14, 0) * tay(7, n)) + tay(14, n) * tay(7, 0)
+      v18 = v16 - v17
+      tay(16, n) = acc19 * inv(n) + tay(1, n) * tay(17, 0)
+      tay(17, n) = (-acc20 * inv(n)) - tay(1, n) * tay(16, 0)
+      tay(18, n) = v18 * ib21 - (acc21 * ib21 + tay(17, n) * ub21)
+      v22 = (acc22 + tay(14, 0) * tay(9, n)) + tay(14, n) * tay(9, 0)
+      v23 = (acc23 + tay(15, 0) * tay(7, n)) + tay(15, n) * tay(7, 0)
+      v24 = v22 + v23
+      v25 = (acc25 + tay(18, 0) * tay(16, n)) + tay(18, n) * tay(16, 0)
+      v26 = tay(8, n) - v25
+      v27 = tay(10, n) - tay(8, n)
+      v29 = c(0) * tay(8, n)
+      v31 = c(1) * tay(10, n)
+      tay(19, n) = v29 + v31
+      v33 = (acc33 + tay(7, 0) * tay(19, n)) + tay(7, n) * tay(19, 0)
+      v35 = c(2) * tay(8, n)
+      v37 = c(3) * tay(10, n)
+      tay(20, n) = v35 + v37
+      v39 = (acc39 + tay(9, 0) * tay(20, n)) + tay(9, n) * tay(20, 0)
+      v40 = v33 + v39
+      v43 = c(4) * tay(7, n)
+      v45 = c(5) * tay(9, n)
+      tay(21, n) = v43 + v45
+      v47 = (acc47 + tay(7, 0) * tay(21, n)) + tay(7, n) * tay(21, 0)
+      v48 = v47
+      v49 = (acc49 + tay(9, 0) * tay(9, n)) + tay(9, n) * tay(9, 0)
+      v50 = c(4) * v49
+      v51 = v48 - v50
+      v53 = c(7) * tay(7, n)
+      v54 = c(0) * tay(9, n)
+      tay(22, n) = v53 - v54
+      v56 = (acc56 + tay(8, 0) * tay(22, n)) + tay(8, n) * tay(22, 0)
+      v58 = c(8) * tay(7, n)
+      v59 = c(1) * tay(9, n)
+      tay(23, n) = v58 - v59
+      v61 = (acc61 + tay(10, 0) * tay(23, n)) + tay(10, n) * tay(23, 0)
+      v62 = v56 + v61
+      tay(0, n + 1) = tay(18, n) * inv(n + 1)
+      tay(1, n + 1) = v24 * inv(n + 1)
+      tay(2, n + 1) = v26 * inv(n + 1)
+      tay(3, n + 1) = v27 * inv(n + 1)
       tay(4, n + 1) = tay(11, n) * inv(n + 1)
       tay(5, n + 1) = tay(12, n) * inv(n + 1)
       tay(6, n + 1) = tay(13, n) * inv(n + 1)
-      tay(7, n + 1) = tay(40, n) * inv(n + 1)
-      tay(8, n + 1) = tay(51, n) * inv(n + 1)
-      tay(9, n + 1) = tay(62, n) * inv(n + 1)
+      tay(7, n + 1) = v40 * inv(n + 1)
+      tay(8, n + 1) = v51 * inv(n + 1)
+      tay(9, n + 1) = v62 * inv(n + 1)
       tay(10, n + 1) = 0.0_c_double
       tay(11, n + 1) = 0.0_c_double
       tay(12, n + 1) = 0.0_c_double
@@ -2386,7 +2455,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:66 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:24 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

@@ -1908,7 +1908,7 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
 /* The normalized Taylor coefficients of x and of the rhs's 85
    nodes to the given order (16 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[94])
+                              double (*tay)[18])
 {
     double acc9;
     double acc10;
@@ -1928,6 +1928,64 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double acc73;
     double ib16;
     double ub16;
+    double v11;
+    double v12;
+    double v13;
+    double v17;
+    double v18;
+    double v19;
+    double v20;
+    double v21;
+    double v24;
+    double v25;
+    double v26;
+    double v28;
+    double v30;
+    double v31;
+    double v33;
+    double v34;
+    double v36;
+    double v38;
+    double v39;
+    double v40;
+    double v42;
+    double v43;
+    double v44;
+    double v45;
+    double v47;
+    double v49;
+    double v50;
+    double v51;
+    double v55;
+    double v56;
+    double v57;
+    double v58;
+    double v59;
+    double v61;
+    double v62;
+    double v63;
+    double v65;
+    double v66;
+    double v67;
+    double v68;
+    double v71;
+    double v72;
+    double v73;
+    double v74;
+    double v75;
+    double v76;
+    double v78;
+    double v80;
+    double v81;
+    double v82;
+    double v83;
+    double v85;
+    double v86;
+    double v87;
+    double v88;
+    double v89;
+    double v93;
+    int b;
     int j;
     int n;
 
@@ -1943,81 +2001,81 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     tay[0][8] = x[8];
     tay[0][9] = rw3_orthogonal_sin(tay[0][2]);
     tay[0][10] = rw3_orthogonal_cos(tay[0][2]);
-    tay[0][11] = tay[0][10] * tay[0][5];
-    tay[0][12] = tay[0][9] * tay[0][3];
-    tay[0][13] = tay[0][11] - tay[0][12];
-    tay[0][14] = rw3_orthogonal_sin(tay[0][1]);
-    tay[0][15] = rw3_orthogonal_cos(tay[0][1]);
-    tay[0][16] = tay[0][13] / tay[0][15];
-    tay[0][17] = tay[0][9] * tay[0][5];
-    tay[0][18] = tay[0][10] * tay[0][3];
-    tay[0][19] = tay[0][17] + tay[0][18];
-    tay[0][20] = tay[0][16] * tay[0][14];
-    tay[0][21] = tay[0][4] - tay[0][20];
-    tay[0][24] = tay[0][8] - tay[0][5];
-    tay[0][25] = -0.0001 * tay[0][24];
-    tay[0][26] = -tay[0][25];
-    tay[0][28] = 0.035 * tay[0][6];
-    tay[0][30] = 2.005 * tay[0][4];
-    tay[0][31] = tay[0][28] + tay[0][30];
-    tay[0][33] = 301.7396875 * tay[0][3];
-    tay[0][34] = tay[0][31] + tay[0][33];
-    tay[0][36] = 3.15125 * tay[0][5];
-    tay[0][37] = tay[0][34] - tay[0][36];
-    tay[0][38] = tay[0][37] * tay[0][4];
-    tay[0][39] = tay[0][26] + tay[0][38];
-    tay[0][40] = 0.035 * tay[0][7];
-    tay[0][42] = 1.34875 * tay[0][5];
-    tay[0][43] = tay[0][40] + tay[0][42];
-    tay[0][44] = 2.005 * tay[0][3];
-    tay[0][45] = tay[0][43] + tay[0][44];
-    tay[0][47] = 351.7396875 * tay[0][4];
-    tay[0][48] = tay[0][45] + tay[0][47];
-    tay[0][49] = tay[0][48] * tay[0][3];
-    tay[0][50] = tay[0][39] - tay[0][49];
-    tay[0][51] = 4.166596729006503e-05 * tay[0][50];
-    tay[0][54] = -0.02;
-    tay[0][55] = tay[0][48] * tay[0][5];
-    tay[0][56] = tay[0][54] + tay[0][55];
-    tay[0][57] = 0.035 * tay[0][8];
-    tay[0][58] = 1.34875 * tay[0][4];
-    tay[0][59] = tay[0][57] + tay[0][58];
-    tay[0][61] = 251.31 * tay[0][5];
-    tay[0][62] = tay[0][59] + tay[0][61];
-    tay[0][63] = 3.15125 * tay[0][3];
-    tay[0][64] = tay[0][62] - tay[0][63];
-    tay[0][65] = tay[0][64] * tay[0][4];
-    tay[0][66] = tay[0][56] - tay[0][65];
-    tay[0][67] = 0.0033146766733524852 * tay[0][66];
-    tay[0][68] = tay[0][51] + tay[0][67];
-    tay[0][71] = tay[0][64] * tay[0][3];
-    tay[0][72] = c[1] + tay[0][71];
-    tay[0][73] = tay[0][37] * tay[0][5];
-    tay[0][74] = tay[0][72] - tay[0][73];
-    tay[0][75] = 1.9054215209804005e-05 * tay[0][74];
-    tay[0][76] = tay[0][68] - tay[0][75];
-    tay[0][78] = 0.0028431796071504527 * tay[0][74];
-    tay[0][80] = 1.5497923245489903e-05 * tay[0][50];
-    tay[0][81] = tay[0][78] - tay[0][80];
-    tay[0][82] = 1.9054215209804005e-05 * tay[0][66];
-    tay[0][83] = tay[0][81] - tay[0][82];
-    tay[0][85] = 0.003979754895162947 * tay[0][50];
-    tay[0][86] = 4.166596729006503e-05 * tay[0][66];
-    tay[0][87] = tay[0][85] + tay[0][86];
-    tay[0][88] = 1.5497923245489903e-05 * tay[0][74];
-    tay[0][89] = tay[0][87] - tay[0][88];
-    tay[0][93] = 28.571428571428573 * tay[0][25];
-    ib16 = 1.0 / tay[0][15];
-    ub16 = tay[0][16] / tay[0][15];
-    tay[1][0] = tay[0][16];
-    tay[1][1] = tay[0][19];
-    tay[1][2] = tay[0][21];
-    tay[1][3] = tay[0][76];
-    tay[1][4] = tay[0][83];
-    tay[1][5] = tay[0][89];
+    v11 = tay[0][10] * tay[0][5];
+    v12 = tay[0][9] * tay[0][3];
+    v13 = v11 - v12;
+    tay[0][11] = rw3_orthogonal_sin(tay[0][1]);
+    tay[0][12] = rw3_orthogonal_cos(tay[0][1]);
+    tay[0][13] = v13 / tay[0][12];
+    v17 = tay[0][9] * tay[0][5];
+    v18 = tay[0][10] * tay[0][3];
+    v19 = v17 + v18;
+    v20 = tay[0][13] * tay[0][11];
+    v21 = tay[0][4] - v20;
+    v24 = tay[0][8] - tay[0][5];
+    v25 = -0.0001 * v24;
+    v26 = -v25;
+    v28 = 0.035 * tay[0][6];
+    v30 = 2.005 * tay[0][4];
+    v31 = v28 + v30;
+    v33 = 301.7396875 * tay[0][3];
+    v34 = v31 + v33;
+    v36 = 3.15125 * tay[0][5];
+    tay[0][14] = v34 - v36;
+    v38 = tay[0][14] * tay[0][4];
+    v39 = v26 + v38;
+    v40 = 0.035 * tay[0][7];
+    v42 = 1.34875 * tay[0][5];
+    v43 = v40 + v42;
+    v44 = 2.005 * tay[0][3];
+    v45 = v43 + v44;
+    v47 = 351.7396875 * tay[0][4];
+    tay[0][15] = v45 + v47;
+    v49 = tay[0][15] * tay[0][3];
+    v50 = v39 - v49;
+    v51 = 4.166596729006503e-05 * v50;
+    tay[0][16] = -0.02;
+    v55 = tay[0][15] * tay[0][5];
+    v56 = tay[0][16] + v55;
+    v57 = 0.035 * tay[0][8];
+    v58 = 1.34875 * tay[0][4];
+    v59 = v57 + v58;
+    v61 = 251.31 * tay[0][5];
+    v62 = v59 + v61;
+    v63 = 3.15125 * tay[0][3];
+    tay[0][17] = v62 - v63;
+    v65 = tay[0][17] * tay[0][4];
+    v66 = v56 - v65;
+    v67 = 0.0033146766733524852 * v66;
+    v68 = v51 + v67;
+    v71 = tay[0][17] * tay[0][3];
+    v72 = c[1] + v71;
+    v73 = tay[0][14] * tay[0][5];
+    v74 = v72 - v73;
+    v75 = 1.9054215209804005e-05 * v74;
+    v76 = v68 - v75;
+    v78 = 0.0028431796071504527 * v74;
+    v80 = 1.5497923245489903e-05 * v50;
+    v81 = v78 - v80;
+    v82 = 1.9054215209804005e-05 * v66;
+    v83 = v81 - v82;
+    v85 = 0.003979754895162947 * v50;
+    v86 = 4.166596729006503e-05 * v66;
+    v87 = v85 + v86;
+    v88 = 1.5497923245489903e-05 * v74;
+    v89 = v87 - v88;
+    v93 = 28.571428571428573 * v25;
+    ib16 = 1.0 / tay[0][12];
+    ub16 = tay[0][13] / tay[0][12];
+    tay[1][0] = tay[0][13];
+    tay[1][1] = v19;
+    tay[1][2] = v21;
+    tay[1][3] = v76;
+    tay[1][4] = v83;
+    tay[1][5] = v89;
     tay[1][6] = 0.5714285714285714;
     tay[1][7] = c[0];
-    tay[1][8] = tay[0][93];
+    tay[1][8] = v93;
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
     for (n = 1; n < order; ++n) {
@@ -2037,7 +2095,42 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc65 = 0.0;
         acc71 = 0.0;
         acc73 = 0.0;
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            double w1_0, w1_1, w2_0, w2_1;
+            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
+            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
+            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
+            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
+            acc9 = acc9 + (w2_0 * tay[n - (2 * b + 1)][10] + w2_1 * tay[n - (2 * b + 2)][10]);
+            acc10 = acc10 + (w2_0 * tay[n - (2 * b + 1)][9] + w2_1 * tay[n - (2 * b + 2)][9]);
+            acc11 = acc11 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][10] *
+                    tay[n - (2 * b + 2)][5]);
+            acc12 = acc12 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][9] *
+                    tay[n - (2 * b + 2)][3]);
+            acc14 = acc14 + (w1_0 * tay[n - (2 * b + 1)][12] + w1_1 * tay[n - (2 * b + 2)][12]);
+            acc15 = acc15 + (w1_0 * tay[n - (2 * b + 1)][11] + w1_1 * tay[n - (2 * b + 2)][11]);
+            acc16 = acc16 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][13] + tay[2 * b + 2][12] *
+                    tay[n - (2 * b + 2)][13]);
+            acc17 = acc17 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][9] *
+                    tay[n - (2 * b + 2)][5]);
+            acc18 = acc18 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][10] *
+                    tay[n - (2 * b + 2)][3]);
+            acc20 = acc20 + (tay[2 * b + 1][13] * tay[n - (2 * b + 1)][11] + tay[2 * b + 2][13] *
+                    tay[n - (2 * b + 2)][11]);
+            acc38 = acc38 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][14] *
+                    tay[n - (2 * b + 2)][4]);
+            acc49 = acc49 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][15] *
+                    tay[n - (2 * b + 2)][3]);
+            acc55 = acc55 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][15] *
+                    tay[n - (2 * b + 2)][5]);
+            acc65 = acc65 + (tay[2 * b + 1][17] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][17] *
+                    tay[n - (2 * b + 2)][4]);
+            acc71 = acc71 + (tay[2 * b + 1][17] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][17] *
+                    tay[n - (2 * b + 2)][3]);
+            acc73 = acc73 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][14] *
+                    tay[n - (2 * b + 2)][5]);
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
@@ -2045,93 +2138,93 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
             acc10 = acc10 + w2 * tay[n - j][9];
             acc11 = acc11 + tay[j][10] * tay[n - j][5];
             acc12 = acc12 + tay[j][9] * tay[n - j][3];
-            acc14 = acc14 + w1 * tay[n - j][15];
-            acc15 = acc15 + w1 * tay[n - j][14];
-            acc16 = acc16 + tay[j][15] * tay[n - j][16];
+            acc14 = acc14 + w1 * tay[n - j][12];
+            acc15 = acc15 + w1 * tay[n - j][11];
+            acc16 = acc16 + tay[j][12] * tay[n - j][13];
             acc17 = acc17 + tay[j][9] * tay[n - j][5];
             acc18 = acc18 + tay[j][10] * tay[n - j][3];
-            acc20 = acc20 + tay[j][16] * tay[n - j][14];
-            acc38 = acc38 + tay[j][37] * tay[n - j][4];
-            acc49 = acc49 + tay[j][48] * tay[n - j][3];
-            acc55 = acc55 + tay[j][48] * tay[n - j][5];
-            acc65 = acc65 + tay[j][64] * tay[n - j][4];
-            acc71 = acc71 + tay[j][64] * tay[n - j][3];
-            acc73 = acc73 + tay[j][37] * tay[n - j][5];
+            acc20 = acc20 + tay[j][13] * tay[n - j][11];
+            acc38 = acc38 + tay[j][14] * tay[n - j][4];
+            acc49 = acc49 + tay[j][15] * tay[n - j][3];
+            acc55 = acc55 + tay[j][15] * tay[n - j][5];
+            acc65 = acc65 + tay[j][17] * tay[n - j][4];
+            acc71 = acc71 + tay[j][17] * tay[n - j][3];
+            acc73 = acc73 + tay[j][14] * tay[n - j][5];
         }
         tay[n][9] = acc9 * inv[n] + tay[n][2] * tay[0][10];
         tay[n][10] = -(acc10 * inv[n]) - tay[n][2] * tay[0][9];
-        tay[n][11] = acc11 + tay[0][10] * tay[n][5] + tay[n][10] * tay[0][5];
-        tay[n][12] = acc12 + tay[0][9] * tay[n][3] + tay[n][9] * tay[0][3];
-        tay[n][13] = tay[n][11] - tay[n][12];
-        tay[n][14] = acc14 * inv[n] + tay[n][1] * tay[0][15];
-        tay[n][15] = -(acc15 * inv[n]) - tay[n][1] * tay[0][14];
-        tay[n][16] = tay[n][13] * ib16 - (acc16 * ib16 + tay[n][15] * ub16);
-        tay[n][17] = acc17 + tay[0][9] * tay[n][5] + tay[n][9] * tay[0][5];
-        tay[n][18] = acc18 + tay[0][10] * tay[n][3] + tay[n][10] * tay[0][3];
-        tay[n][19] = tay[n][17] + tay[n][18];
-        tay[n][20] = acc20 + tay[0][16] * tay[n][14] + tay[n][16] * tay[0][14];
-        tay[n][21] = tay[n][4] - tay[n][20];
-        tay[n][24] = tay[n][8] - tay[n][5];
-        tay[n][25] = -0.0001 * tay[n][24];
-        tay[n][26] = -tay[n][25];
-        tay[n][28] = 0.035 * tay[n][6];
-        tay[n][30] = 2.005 * tay[n][4];
-        tay[n][31] = tay[n][28] + tay[n][30];
-        tay[n][33] = 301.7396875 * tay[n][3];
-        tay[n][34] = tay[n][31] + tay[n][33];
-        tay[n][36] = 3.15125 * tay[n][5];
-        tay[n][37] = tay[n][34] - tay[n][36];
-        tay[n][38] = acc38 + tay[0][37] * tay[n][4] + tay[n][37] * tay[0][4];
-        tay[n][39] = tay[n][26] + tay[n][38];
-        tay[n][40] = 0.035 * tay[n][7];
-        tay[n][42] = 1.34875 * tay[n][5];
-        tay[n][43] = tay[n][40] + tay[n][42];
-        tay[n][44] = 2.005 * tay[n][3];
-        tay[n][45] = tay[n][43] + tay[n][44];
-        tay[n][47] = 351.7396875 * tay[n][4];
-        tay[n][48] = tay[n][45] + tay[n][47];
-        tay[n][49] = acc49 + tay[0][48] * tay[n][3] + tay[n][48] * tay[0][3];
-        tay[n][50] = tay[n][39] - tay[n][49];
-        tay[n][51] = 4.166596729006503e-05 * tay[n][50];
-        tay[n][55] = acc55 + tay[0][48] * tay[n][5] + tay[n][48] * tay[0][5];
-        tay[n][56] = tay[n][55];
-        tay[n][57] = 0.035 * tay[n][8];
-        tay[n][58] = 1.34875 * tay[n][4];
-        tay[n][59] = tay[n][57] + tay[n][58];
-        tay[n][61] = 251.31 * tay[n][5];
-        tay[n][62] = tay[n][59] + tay[n][61];
-        tay[n][63] = 3.15125 * tay[n][3];
-        tay[n][64] = tay[n][62] - tay[n][63];
-        tay[n][65] = acc65 + tay[0][64] * tay[n][4] + tay[n][64] * tay[0][4];
-        tay[n][66] = tay[n][56] - tay[n][65];
-        tay[n][67] = 0.0033146766733524852 * tay[n][66];
-        tay[n][68] = tay[n][51] + tay[n][67];
-        tay[n][71] = acc71 + tay[0][64] * tay[n][3] + tay[n][64] * tay[0][3];
-        tay[n][72] = tay[n][71];
-        tay[n][73] = acc73 + tay[0][37] * tay[n][5] + tay[n][37] * tay[0][5];
-        tay[n][74] = tay[n][72] - tay[n][73];
-        tay[n][75] = 1.9054215209804005e-05 * tay[n][74];
-        tay[n][76] = tay[n][68] - tay[n][75];
-        tay[n][78] = 0.0028431796071504527 * tay[n][74];
-        tay[n][80] = 1.5497923245489903e-05 * tay[n][50];
-        tay[n][81] = tay[n][78] - tay[n][80];
-        tay[n][82] = 1.9054215209804005e-05 * tay[n][66];
-        tay[n][83] = tay[n][81] - tay[n][82];
-        tay[n][85] = 0.003979754895162947 * tay[n][50];
-        tay[n][86] = 4.166596729006503e-05 * tay[n][66];
-        tay[n][87] = tay[n][85] + tay[n][86];
-        tay[n][88] = 1.5497923245489903e-05 * tay[n][74];
-        tay[n][89] = tay[n][87] - tay[n][88];
-        tay[n][93] = 28.571428571428573 * tay[n][25];
-        tay[n + 1][0] = tay[n][16] * inv[n + 1];
-        tay[n + 1][1] = tay[n][19] * inv[n + 1];
-        tay[n + 1][2] = tay[n][21] * inv[n + 1];
-        tay[n + 1][3] = tay[n][76] * inv[n + 1];
-        tay[n + 1][4] = tay[n][83] * inv[n + 1];
-        tay[n + 1][5] = tay[n][89] * inv[n + 1];
+        v11 = acc11 + tay[0][10] * tay[n][5] + tay[n][10] * tay[0][5];
+        v12 = acc12 + tay[0][9] * tay[n][3] + tay[n][9] * tay[0][3];
+        v13 = v11 - v12;
+        tay[n][11] = acc14 * inv[n] + tay[n][1] * tay[0][12];
+        tay[n][12] = -(acc15 * inv[n]) - tay[n][1] * tay[0][11];
+        tay[n][13] = v13 * ib16 - (acc16 * ib16 + tay[n][12] * ub16);
+        v17 = acc17 + tay[0][9] * tay[n][5] + tay[n][9] * tay[0][5];
+        v18 = acc18 + tay[0][10] * tay[n][3] + tay[n][10] * tay[0][3];
+        v19 = v17 + v18;
+        v20 = acc20 + tay[0][13] * tay[n][11] + tay[n][13] * tay[0][11];
+        v21 = tay[n][4] - v20;
+        v24 = tay[n][8] - tay[n][5];
+        v25 = -0.0001 * v24;
+        v26 = -v25;
+        v28 = 0.035 * tay[n][6];
+        v30 = 2.005 * tay[n][4];
+        v31 = v28 + v30;
+        v33 = 301.7396875 * tay[n][3];
+        v34 = v31 + v33;
+        v36 = 3.15125 * tay[n][5];
+        tay[n][14] = v34 - v36;
+        v38 = acc38 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
+        v39 = v26 + v38;
+        v40 = 0.035 * tay[n][7];
+        v42 = 1.34875 * tay[n][5];
+        v43 = v40 + v42;
+        v44 = 2.005 * tay[n][3];
+        v45 = v43 + v44;
+        v47 = 351.7396875 * tay[n][4];
+        tay[n][15] = v45 + v47;
+        v49 = acc49 + tay[0][15] * tay[n][3] + tay[n][15] * tay[0][3];
+        v50 = v39 - v49;
+        v51 = 4.166596729006503e-05 * v50;
+        v55 = acc55 + tay[0][15] * tay[n][5] + tay[n][15] * tay[0][5];
+        v56 = v55;
+        v57 = 0.035 * tay[n][8];
+        v58 = 1.34875 * tay[n][4];
+        v59 = v57 + v58;
+        v61 = 251.31 * tay[n][5];
+        v62 = v59 + v61;
+        v63 = 3.15125 * tay[n][3];
+        tay[n][17] = v62 - v63;
+        v65 = acc65 + tay[0][17] * tay[n][4] + tay[n][17] * tay[0][4];
+        v66 = v56 - v65;
+        v67 = 0.0033146766733524852 * v66;
+        v68 = v51 + v67;
+        v71 = acc71 + tay[0][17] * tay[n][3] + tay[n][17] * tay[0][3];
+        v72 = v71;
+        v73 = acc73 + tay[0][14] * tay[n][5] + tay[n][14] * tay[0][5];
+        v74 = v72 - v73;
+        v75 = 1.9054215209804005e-05 * v74;
+        v76 = v68 - v75;
+        v78 = 0.0028431796071504527 * v74;
+        v80 = 1.5497923245489903e-05 * v50;
+        v81 = v78 - v80;
+        v82 = 1.9054215209804005e-05 * v66;
+        v83 = v81 - v82;
+        v85 = 0.003979754895162947 * v50;
+        v86 = 4.166596729006503e-05 * v66;
+        v87 = v85 + v86;
+        v88 = 1.5497923245489903e-05 * v74;
+        v89 = v87 - v88;
+        v93 = 28.571428571428573 * v25;
+        tay[n + 1][0] = tay[n][13] * inv[n + 1];
+        tay[n + 1][1] = v19 * inv[n + 1];
+        tay[n + 1][2] = v21 * inv[n + 1];
+        tay[n + 1][3] = v76 * inv[n + 1];
+        tay[n + 1][4] = v83 * inv[n + 1];
+        tay[n + 1][5] = v89 * inv[n + 1];
         tay[n + 1][6] = 0.0;
         tay[n + 1][7] = 0.0;
-        tay[n + 1][8] = tay[n][93] * inv[n + 1];
+        tay[n + 1][8] = v93 * inv[n + 1];
     }
 }
 
@@ -2143,7 +2236,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
-    double tay[19][94];
+    double tay[19][18];
     double inv[19] = {0.0};
     double f0[RW3_ORTHOGONAL_NX];
     double xnew[RW3_ORTHOGONAL_NX];
@@ -2305,7 +2398,7 @@ struct lanes {
     long stats_rejected[RW3_ORTHOGONAL_LANES];
     long stats_rhs_calls[RW3_ORTHOGONAL_LANES];
     double cap[RW3_ORTHOGONAL_LANES];
-    double tay[19][94][RW3_ORTHOGONAL_LANES];
+    double tay[19][18][RW3_ORTHOGONAL_LANES];
     double ts[RW3_ORTHOGONAL_LANES];  /* the time of an rhs call */
     int busy[RW3_ORTHOGONAL_LANES];
     size_t traj[RW3_ORTHOGONAL_LANES];
@@ -2890,10 +2983,11 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     double acc73[RW3_ORTHOGONAL_LANES];
     double ib16[RW3_ORTHOGONAL_LANES];
     double ub16[RW3_ORTHOGONAL_LANES];
-    int j, l, n;
+    int b, j, l, n;
     /* order 0: the state and every node's value */
     RW3_ORTHOGONAL_SIMD
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        double v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v28, v30, v31, v33, v34, v36, v38, v39, v40, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -2905,81 +2999,81 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         L->tay[0][8][l] = L->x[8][l];
         L->tay[0][9][l] = rw3_orthogonal_sin_lanes(L->tay[0][2][l]);
         L->tay[0][10][l] = rw3_orthogonal_cos_lanes(L->tay[0][2][l]);
-        L->tay[0][11][l] = L->tay[0][10][l] * L->tay[0][5][l];
-        L->tay[0][12][l] = L->tay[0][9][l] * L->tay[0][3][l];
-        L->tay[0][13][l] = L->tay[0][11][l] - L->tay[0][12][l];
-        L->tay[0][14][l] = rw3_orthogonal_sin_lanes(L->tay[0][1][l]);
-        L->tay[0][15][l] = rw3_orthogonal_cos_lanes(L->tay[0][1][l]);
-        L->tay[0][16][l] = L->tay[0][13][l] / L->tay[0][15][l];
-        L->tay[0][17][l] = L->tay[0][9][l] * L->tay[0][5][l];
-        L->tay[0][18][l] = L->tay[0][10][l] * L->tay[0][3][l];
-        L->tay[0][19][l] = L->tay[0][17][l] + L->tay[0][18][l];
-        L->tay[0][20][l] = L->tay[0][16][l] * L->tay[0][14][l];
-        L->tay[0][21][l] = L->tay[0][4][l] - L->tay[0][20][l];
-        L->tay[0][24][l] = L->tay[0][8][l] - L->tay[0][5][l];
-        L->tay[0][25][l] = -0.0001 * L->tay[0][24][l];
-        L->tay[0][26][l] = -L->tay[0][25][l];
-        L->tay[0][28][l] = 0.035 * L->tay[0][6][l];
-        L->tay[0][30][l] = 2.005 * L->tay[0][4][l];
-        L->tay[0][31][l] = L->tay[0][28][l] + L->tay[0][30][l];
-        L->tay[0][33][l] = 301.7396875 * L->tay[0][3][l];
-        L->tay[0][34][l] = L->tay[0][31][l] + L->tay[0][33][l];
-        L->tay[0][36][l] = 3.15125 * L->tay[0][5][l];
-        L->tay[0][37][l] = L->tay[0][34][l] - L->tay[0][36][l];
-        L->tay[0][38][l] = L->tay[0][37][l] * L->tay[0][4][l];
-        L->tay[0][39][l] = L->tay[0][26][l] + L->tay[0][38][l];
-        L->tay[0][40][l] = 0.035 * L->tay[0][7][l];
-        L->tay[0][42][l] = 1.34875 * L->tay[0][5][l];
-        L->tay[0][43][l] = L->tay[0][40][l] + L->tay[0][42][l];
-        L->tay[0][44][l] = 2.005 * L->tay[0][3][l];
-        L->tay[0][45][l] = L->tay[0][43][l] + L->tay[0][44][l];
-        L->tay[0][47][l] = 351.7396875 * L->tay[0][4][l];
-        L->tay[0][48][l] = L->tay[0][45][l] + L->tay[0][47][l];
-        L->tay[0][49][l] = L->tay[0][48][l] * L->tay[0][3][l];
-        L->tay[0][50][l] = L->tay[0][39][l] - L->tay[0][49][l];
-        L->tay[0][51][l] = 4.166596729006503e-05 * L->tay[0][50][l];
-        L->tay[0][54][l] = -0.02;
-        L->tay[0][55][l] = L->tay[0][48][l] * L->tay[0][5][l];
-        L->tay[0][56][l] = L->tay[0][54][l] + L->tay[0][55][l];
-        L->tay[0][57][l] = 0.035 * L->tay[0][8][l];
-        L->tay[0][58][l] = 1.34875 * L->tay[0][4][l];
-        L->tay[0][59][l] = L->tay[0][57][l] + L->tay[0][58][l];
-        L->tay[0][61][l] = 251.31 * L->tay[0][5][l];
-        L->tay[0][62][l] = L->tay[0][59][l] + L->tay[0][61][l];
-        L->tay[0][63][l] = 3.15125 * L->tay[0][3][l];
-        L->tay[0][64][l] = L->tay[0][62][l] - L->tay[0][63][l];
-        L->tay[0][65][l] = L->tay[0][64][l] * L->tay[0][4][l];
-        L->tay[0][66][l] = L->tay[0][56][l] - L->tay[0][65][l];
-        L->tay[0][67][l] = 0.0033146766733524852 * L->tay[0][66][l];
-        L->tay[0][68][l] = L->tay[0][51][l] + L->tay[0][67][l];
-        L->tay[0][71][l] = L->tay[0][64][l] * L->tay[0][3][l];
-        L->tay[0][72][l] = c[1] + L->tay[0][71][l];
-        L->tay[0][73][l] = L->tay[0][37][l] * L->tay[0][5][l];
-        L->tay[0][74][l] = L->tay[0][72][l] - L->tay[0][73][l];
-        L->tay[0][75][l] = 1.9054215209804005e-05 * L->tay[0][74][l];
-        L->tay[0][76][l] = L->tay[0][68][l] - L->tay[0][75][l];
-        L->tay[0][78][l] = 0.0028431796071504527 * L->tay[0][74][l];
-        L->tay[0][80][l] = 1.5497923245489903e-05 * L->tay[0][50][l];
-        L->tay[0][81][l] = L->tay[0][78][l] - L->tay[0][80][l];
-        L->tay[0][82][l] = 1.9054215209804005e-05 * L->tay[0][66][l];
-        L->tay[0][83][l] = L->tay[0][81][l] - L->tay[0][82][l];
-        L->tay[0][85][l] = 0.003979754895162947 * L->tay[0][50][l];
-        L->tay[0][86][l] = 4.166596729006503e-05 * L->tay[0][66][l];
-        L->tay[0][87][l] = L->tay[0][85][l] + L->tay[0][86][l];
-        L->tay[0][88][l] = 1.5497923245489903e-05 * L->tay[0][74][l];
-        L->tay[0][89][l] = L->tay[0][87][l] - L->tay[0][88][l];
-        L->tay[0][93][l] = 28.571428571428573 * L->tay[0][25][l];
-        ib16[l] = 1.0 / L->tay[0][15][l];
-        ub16[l] = L->tay[0][16][l] / L->tay[0][15][l];
-        L->tay[1][0][l] = L->tay[0][16][l];
-        L->tay[1][1][l] = L->tay[0][19][l];
-        L->tay[1][2][l] = L->tay[0][21][l];
-        L->tay[1][3][l] = L->tay[0][76][l];
-        L->tay[1][4][l] = L->tay[0][83][l];
-        L->tay[1][5][l] = L->tay[0][89][l];
+        v11 = L->tay[0][10][l] * L->tay[0][5][l];
+        v12 = L->tay[0][9][l] * L->tay[0][3][l];
+        v13 = v11 - v12;
+        L->tay[0][11][l] = rw3_orthogonal_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][12][l] = rw3_orthogonal_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][13][l] = v13 / L->tay[0][12][l];
+        v17 = L->tay[0][9][l] * L->tay[0][5][l];
+        v18 = L->tay[0][10][l] * L->tay[0][3][l];
+        v19 = v17 + v18;
+        v20 = L->tay[0][13][l] * L->tay[0][11][l];
+        v21 = L->tay[0][4][l] - v20;
+        v24 = L->tay[0][8][l] - L->tay[0][5][l];
+        v25 = -0.0001 * v24;
+        v26 = -v25;
+        v28 = 0.035 * L->tay[0][6][l];
+        v30 = 2.005 * L->tay[0][4][l];
+        v31 = v28 + v30;
+        v33 = 301.7396875 * L->tay[0][3][l];
+        v34 = v31 + v33;
+        v36 = 3.15125 * L->tay[0][5][l];
+        L->tay[0][14][l] = v34 - v36;
+        v38 = L->tay[0][14][l] * L->tay[0][4][l];
+        v39 = v26 + v38;
+        v40 = 0.035 * L->tay[0][7][l];
+        v42 = 1.34875 * L->tay[0][5][l];
+        v43 = v40 + v42;
+        v44 = 2.005 * L->tay[0][3][l];
+        v45 = v43 + v44;
+        v47 = 351.7396875 * L->tay[0][4][l];
+        L->tay[0][15][l] = v45 + v47;
+        v49 = L->tay[0][15][l] * L->tay[0][3][l];
+        v50 = v39 - v49;
+        v51 = 4.166596729006503e-05 * v50;
+        L->tay[0][16][l] = -0.02;
+        v55 = L->tay[0][15][l] * L->tay[0][5][l];
+        v56 = L->tay[0][16][l] + v55;
+        v57 = 0.035 * L->tay[0][8][l];
+        v58 = 1.34875 * L->tay[0][4][l];
+        v59 = v57 + v58;
+        v61 = 251.31 * L->tay[0][5][l];
+        v62 = v59 + v61;
+        v63 = 3.15125 * L->tay[0][3][l];
+        L->tay[0][17][l] = v62 - v63;
+        v65 = L->tay[0][17][l] * L->tay[0][4][l];
+        v66 = v56 - v65;
+        v67 = 0.0033146766733524852 * v66;
+        v68 = v51 + v67;
+        v71 = L->tay[0][17][l] * L->tay[0][3][l];
+        v72 = c[1] + v71;
+        v73 = L->tay[0][14][l] * L->tay[0][5][l];
+        v74 = v72 - v73;
+        v75 = 1.9054215209804005e-05 * v74;
+        v76 = v68 - v75;
+        v78 = 0.0028431796071504527 * v74;
+        v80 = 1.5497923245489903e-05 * v50;
+        v81 = v78 - v80;
+        v82 = 1.9054215209804005e-05 * v66;
+        v83 = v81 - v82;
+        v85 = 0.003979754895162947 * v50;
+        v86 = 4.166596729006503e-05 * v66;
+        v87 = v85 + v86;
+        v88 = 1.5497923245489903e-05 * v74;
+        v89 = v87 - v88;
+        v93 = 28.571428571428573 * v25;
+        ib16[l] = 1.0 / L->tay[0][12][l];
+        ub16[l] = L->tay[0][13][l] / L->tay[0][12][l];
+        L->tay[1][0][l] = L->tay[0][13][l];
+        L->tay[1][1][l] = v19;
+        L->tay[1][2][l] = v21;
+        L->tay[1][3][l] = v76;
+        L->tay[1][4][l] = v83;
+        L->tay[1][5][l] = v89;
         L->tay[1][6][l] = 0.5714285714285714;
         L->tay[1][7][l] = c[0];
-        L->tay[1][8][l] = L->tay[0][93][l];
+        L->tay[1][8][l] = v93;
     }
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
@@ -3003,7 +3097,49 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             acc71[l] = 0.0;
             acc73[l] = 0.0;
         }
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            RW3_ORTHOGONAL_SIMD
+            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+                double w1_0, w1_1, w2_0, w2_1;
+                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
+                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
+                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
+                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
+                acc9[l] = acc9[l] + (w2_0 * L->tay[n - (2 * b + 1)][10][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][10][l]);
+                acc10[l] = acc10[l] + (w2_0 * L->tay[n - (2 * b + 1)][9][l] + w2_1 * L->tay[n -
+                        (2 * b + 2)][9][l]);
+                acc11[l] = acc11[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc12[l] = acc12[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc14[l] = acc14[l] + (w1_0 * L->tay[n - (2 * b + 1)][12][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][12][l]);
+                acc15[l] = acc15[l] + (w1_0 * L->tay[n - (2 * b + 1)][11][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][11][l]);
+                acc16[l] = acc16[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][13][l]
+                        + L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][13][l]);
+                acc17[l] = acc17[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc18[l] = acc18[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc20[l] = acc20[l] + (L->tay[2 * b + 1][13][l] * L->tay[n - (2 * b + 1)][11][l]
+                        + L->tay[2 * b + 2][13][l] * L->tay[n - (2 * b + 2)][11][l]);
+                acc38[l] = acc38[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][4][l] +
+                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][4][l]);
+                acc49[l] = acc49[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc55[l] = acc55[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc65[l] = acc65[l] + (L->tay[2 * b + 1][17][l] * L->tay[n - (2 * b + 1)][4][l] +
+                        L->tay[2 * b + 2][17][l] * L->tay[n - (2 * b + 2)][4][l]);
+                acc71[l] = acc71[l] + (L->tay[2 * b + 1][17][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][17][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc73[l] = acc73[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][5][l]);
+            }
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
                 double w1, w2;
@@ -3013,108 +3149,106 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
                 acc10[l] = acc10[l] + w2 * L->tay[n - j][9][l];
                 acc11[l] = acc11[l] + L->tay[j][10][l] * L->tay[n - j][5][l];
                 acc12[l] = acc12[l] + L->tay[j][9][l] * L->tay[n - j][3][l];
-                acc14[l] = acc14[l] + w1 * L->tay[n - j][15][l];
-                acc15[l] = acc15[l] + w1 * L->tay[n - j][14][l];
-                acc16[l] = acc16[l] + L->tay[j][15][l] * L->tay[n - j][16][l];
+                acc14[l] = acc14[l] + w1 * L->tay[n - j][12][l];
+                acc15[l] = acc15[l] + w1 * L->tay[n - j][11][l];
+                acc16[l] = acc16[l] + L->tay[j][12][l] * L->tay[n - j][13][l];
                 acc17[l] = acc17[l] + L->tay[j][9][l] * L->tay[n - j][5][l];
                 acc18[l] = acc18[l] + L->tay[j][10][l] * L->tay[n - j][3][l];
-                acc20[l] = acc20[l] + L->tay[j][16][l] * L->tay[n - j][14][l];
-                acc38[l] = acc38[l] + L->tay[j][37][l] * L->tay[n - j][4][l];
-                acc49[l] = acc49[l] + L->tay[j][48][l] * L->tay[n - j][3][l];
-                acc55[l] = acc55[l] + L->tay[j][48][l] * L->tay[n - j][5][l];
-                acc65[l] = acc65[l] + L->tay[j][64][l] * L->tay[n - j][4][l];
-                acc71[l] = acc71[l] + L->tay[j][64][l] * L->tay[n - j][3][l];
-                acc73[l] = acc73[l] + L->tay[j][37][l] * L->tay[n - j][5][l];
+                acc20[l] = acc20[l] + L->tay[j][13][l] * L->tay[n - j][11][l];
+                acc38[l] = acc38[l] + L->tay[j][14][l] * L->tay[n - j][4][l];
+                acc49[l] = acc49[l] + L->tay[j][15][l] * L->tay[n - j][3][l];
+                acc55[l] = acc55[l] + L->tay[j][15][l] * L->tay[n - j][5][l];
+                acc65[l] = acc65[l] + L->tay[j][17][l] * L->tay[n - j][4][l];
+                acc71[l] = acc71[l] + L->tay[j][17][l] * L->tay[n - j][3][l];
+                acc73[l] = acc73[l] + L->tay[j][14][l] * L->tay[n - j][5][l];
             }
         }
         RW3_ORTHOGONAL_SIMD
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            double v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v28, v30, v31, v33, v34, v36, v38, v39, v40, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
             L->tay[n][9][l] = acc9[l] * inv[n] + L->tay[n][2][l] * L->tay[0][10][l];
             L->tay[n][10][l] = -(acc10[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][9][l];
-            L->tay[n][11][l] = acc11[l] + L->tay[0][10][l] * L->tay[n][5][l] + L->tay[n][10][l] *
+            v11 = acc11[l] + L->tay[0][10][l] * L->tay[n][5][l] + L->tay[n][10][l] *
                     L->tay[0][5][l];
-            L->tay[n][12][l] = acc12[l] + L->tay[0][9][l] * L->tay[n][3][l] + L->tay[n][9][l] *
+            v12 = acc12[l] + L->tay[0][9][l] * L->tay[n][3][l] + L->tay[n][9][l] * L->tay[0][3][l];
+            v13 = v11 - v12;
+            L->tay[n][11][l] = acc14[l] * inv[n] + L->tay[n][1][l] * L->tay[0][12][l];
+            L->tay[n][12][l] = -(acc15[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][11][l];
+            L->tay[n][13][l] = v13 * ib16[l] - (acc16[l] * ib16[l] + L->tay[n][12][l] * ub16[l]);
+            v17 = acc17[l] + L->tay[0][9][l] * L->tay[n][5][l] + L->tay[n][9][l] * L->tay[0][5][l];
+            v18 = acc18[l] + L->tay[0][10][l] * L->tay[n][3][l] + L->tay[n][10][l] *
                     L->tay[0][3][l];
-            L->tay[n][13][l] = L->tay[n][11][l] - L->tay[n][12][l];
-            L->tay[n][14][l] = acc14[l] * inv[n] + L->tay[n][1][l] * L->tay[0][15][l];
-            L->tay[n][15][l] = -(acc15[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][14][l];
-            L->tay[n][16][l] = L->tay[n][13][l] * ib16[l] - (acc16[l] * ib16[l] +
-                    L->tay[n][15][l] * ub16[l]);
-            L->tay[n][17][l] = acc17[l] + L->tay[0][9][l] * L->tay[n][5][l] + L->tay[n][9][l] *
-                    L->tay[0][5][l];
-            L->tay[n][18][l] = acc18[l] + L->tay[0][10][l] * L->tay[n][3][l] + L->tay[n][10][l] *
-                    L->tay[0][3][l];
-            L->tay[n][19][l] = L->tay[n][17][l] + L->tay[n][18][l];
-            L->tay[n][20][l] = acc20[l] + L->tay[0][16][l] * L->tay[n][14][l] + L->tay[n][16][l]
-                    * L->tay[0][14][l];
-            L->tay[n][21][l] = L->tay[n][4][l] - L->tay[n][20][l];
-            L->tay[n][24][l] = L->tay[n][8][l] - L->tay[n][5][l];
-            L->tay[n][25][l] = -0.0001 * L->tay[n][24][l];
-            L->tay[n][26][l] = -L->tay[n][25][l];
-            L->tay[n][28][l] = 0.035 * L->tay[n][6][l];
-            L->tay[n][30][l] = 2.005 * L->tay[n][4][l];
-            L->tay[n][31][l] = L->tay[n][28][l] + L->tay[n][30][l];
-            L->tay[n][33][l] = 301.7396875 * L->tay[n][3][l];
-            L->tay[n][34][l] = L->tay[n][31][l] + L->tay[n][33][l];
-            L->tay[n][36][l] = 3.15125 * L->tay[n][5][l];
-            L->tay[n][37][l] = L->tay[n][34][l] - L->tay[n][36][l];
-            L->tay[n][38][l] = acc38[l] + L->tay[0][37][l] * L->tay[n][4][l] + L->tay[n][37][l] *
+            v19 = v17 + v18;
+            v20 = acc20[l] + L->tay[0][13][l] * L->tay[n][11][l] + L->tay[n][13][l] *
+                    L->tay[0][11][l];
+            v21 = L->tay[n][4][l] - v20;
+            v24 = L->tay[n][8][l] - L->tay[n][5][l];
+            v25 = -0.0001 * v24;
+            v26 = -v25;
+            v28 = 0.035 * L->tay[n][6][l];
+            v30 = 2.005 * L->tay[n][4][l];
+            v31 = v28 + v30;
+            v33 = 301.7396875 * L->tay[n][3][l];
+            v34 = v31 + v33;
+            v36 = 3.15125 * L->tay[n][5][l];
+            L->tay[n][14][l] = v34 - v36;
+            v38 = acc38[l] + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] *
                     L->tay[0][4][l];
-            L->tay[n][39][l] = L->tay[n][26][l] + L->tay[n][38][l];
-            L->tay[n][40][l] = 0.035 * L->tay[n][7][l];
-            L->tay[n][42][l] = 1.34875 * L->tay[n][5][l];
-            L->tay[n][43][l] = L->tay[n][40][l] + L->tay[n][42][l];
-            L->tay[n][44][l] = 2.005 * L->tay[n][3][l];
-            L->tay[n][45][l] = L->tay[n][43][l] + L->tay[n][44][l];
-            L->tay[n][47][l] = 351.7396875 * L->tay[n][4][l];
-            L->tay[n][48][l] = L->tay[n][45][l] + L->tay[n][47][l];
-            L->tay[n][49][l] = acc49[l] + L->tay[0][48][l] * L->tay[n][3][l] + L->tay[n][48][l] *
+            v39 = v26 + v38;
+            v40 = 0.035 * L->tay[n][7][l];
+            v42 = 1.34875 * L->tay[n][5][l];
+            v43 = v40 + v42;
+            v44 = 2.005 * L->tay[n][3][l];
+            v45 = v43 + v44;
+            v47 = 351.7396875 * L->tay[n][4][l];
+            L->tay[n][15][l] = v45 + v47;
+            v49 = acc49[l] + L->tay[0][15][l] * L->tay[n][3][l] + L->tay[n][15][l] *
                     L->tay[0][3][l];
-            L->tay[n][50][l] = L->tay[n][39][l] - L->tay[n][49][l];
-            L->tay[n][51][l] = 4.166596729006503e-05 * L->tay[n][50][l];
-            L->tay[n][55][l] = acc55[l] + L->tay[0][48][l] * L->tay[n][5][l] + L->tay[n][48][l] *
+            v50 = v39 - v49;
+            v51 = 4.166596729006503e-05 * v50;
+            v55 = acc55[l] + L->tay[0][15][l] * L->tay[n][5][l] + L->tay[n][15][l] *
                     L->tay[0][5][l];
-            L->tay[n][56][l] = L->tay[n][55][l];
-            L->tay[n][57][l] = 0.035 * L->tay[n][8][l];
-            L->tay[n][58][l] = 1.34875 * L->tay[n][4][l];
-            L->tay[n][59][l] = L->tay[n][57][l] + L->tay[n][58][l];
-            L->tay[n][61][l] = 251.31 * L->tay[n][5][l];
-            L->tay[n][62][l] = L->tay[n][59][l] + L->tay[n][61][l];
-            L->tay[n][63][l] = 3.15125 * L->tay[n][3][l];
-            L->tay[n][64][l] = L->tay[n][62][l] - L->tay[n][63][l];
-            L->tay[n][65][l] = acc65[l] + L->tay[0][64][l] * L->tay[n][4][l] + L->tay[n][64][l] *
+            v56 = v55;
+            v57 = 0.035 * L->tay[n][8][l];
+            v58 = 1.34875 * L->tay[n][4][l];
+            v59 = v57 + v58;
+            v61 = 251.31 * L->tay[n][5][l];
+            v62 = v59 + v61;
+            v63 = 3.15125 * L->tay[n][3][l];
+            L->tay[n][17][l] = v62 - v63;
+            v65 = acc65[l] + L->tay[0][17][l] * L->tay[n][4][l] + L->tay[n][17][l] *
                     L->tay[0][4][l];
-            L->tay[n][66][l] = L->tay[n][56][l] - L->tay[n][65][l];
-            L->tay[n][67][l] = 0.0033146766733524852 * L->tay[n][66][l];
-            L->tay[n][68][l] = L->tay[n][51][l] + L->tay[n][67][l];
-            L->tay[n][71][l] = acc71[l] + L->tay[0][64][l] * L->tay[n][3][l] + L->tay[n][64][l] *
+            v66 = v56 - v65;
+            v67 = 0.0033146766733524852 * v66;
+            v68 = v51 + v67;
+            v71 = acc71[l] + L->tay[0][17][l] * L->tay[n][3][l] + L->tay[n][17][l] *
                     L->tay[0][3][l];
-            L->tay[n][72][l] = L->tay[n][71][l];
-            L->tay[n][73][l] = acc73[l] + L->tay[0][37][l] * L->tay[n][5][l] + L->tay[n][37][l] *
+            v72 = v71;
+            v73 = acc73[l] + L->tay[0][14][l] * L->tay[n][5][l] + L->tay[n][14][l] *
                     L->tay[0][5][l];
-            L->tay[n][74][l] = L->tay[n][72][l] - L->tay[n][73][l];
-            L->tay[n][75][l] = 1.9054215209804005e-05 * L->tay[n][74][l];
-            L->tay[n][76][l] = L->tay[n][68][l] - L->tay[n][75][l];
-            L->tay[n][78][l] = 0.0028431796071504527 * L->tay[n][74][l];
-            L->tay[n][80][l] = 1.5497923245489903e-05 * L->tay[n][50][l];
-            L->tay[n][81][l] = L->tay[n][78][l] - L->tay[n][80][l];
-            L->tay[n][82][l] = 1.9054215209804005e-05 * L->tay[n][66][l];
-            L->tay[n][83][l] = L->tay[n][81][l] - L->tay[n][82][l];
-            L->tay[n][85][l] = 0.003979754895162947 * L->tay[n][50][l];
-            L->tay[n][86][l] = 4.166596729006503e-05 * L->tay[n][66][l];
-            L->tay[n][87][l] = L->tay[n][85][l] + L->tay[n][86][l];
-            L->tay[n][88][l] = 1.5497923245489903e-05 * L->tay[n][74][l];
-            L->tay[n][89][l] = L->tay[n][87][l] - L->tay[n][88][l];
-            L->tay[n][93][l] = 28.571428571428573 * L->tay[n][25][l];
-            L->tay[n + 1][0][l] = L->tay[n][16][l] * inv[n + 1];
-            L->tay[n + 1][1][l] = L->tay[n][19][l] * inv[n + 1];
-            L->tay[n + 1][2][l] = L->tay[n][21][l] * inv[n + 1];
-            L->tay[n + 1][3][l] = L->tay[n][76][l] * inv[n + 1];
-            L->tay[n + 1][4][l] = L->tay[n][83][l] * inv[n + 1];
-            L->tay[n + 1][5][l] = L->tay[n][89][l] * inv[n + 1];
+            v74 = v72 - v73;
+            v75 = 1.9054215209804005e-05 * v74;
+            v76 = v68 - v75;
+            v78 = 0.0028431796071504527 * v74;
+            v80 = 1.5497923245489903e-05 * v50;
+            v81 = v78 - v80;
+            v82 = 1.9054215209804005e-05 * v66;
+            v83 = v81 - v82;
+            v85 = 0.003979754895162947 * v50;
+            v86 = 4.166596729006503e-05 * v66;
+            v87 = v85 + v86;
+            v88 = 1.5497923245489903e-05 * v74;
+            v89 = v87 - v88;
+            v93 = 28.571428571428573 * v25;
+            L->tay[n + 1][0][l] = L->tay[n][13][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = v19 * inv[n + 1];
+            L->tay[n + 1][2][l] = v21 * inv[n + 1];
+            L->tay[n + 1][3][l] = v76 * inv[n + 1];
+            L->tay[n + 1][4][l] = v83 * inv[n + 1];
+            L->tay[n + 1][5][l] = v89 * inv[n + 1];
             L->tay[n + 1][6][l] = 0.0;
             L->tay[n + 1][7][l] = 0.0;
-            L->tay[n + 1][8][l] = L->tay[n][93][l] * inv[n + 1];
+            L->tay[n + 1][8][l] = v93 * inv[n + 1];
         }
     }
 }

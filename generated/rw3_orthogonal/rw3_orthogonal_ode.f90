@@ -2117,7 +2117,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:94 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:18 - 1, 0:19 - 1)
     real(c_double) :: acc9
     real(c_double) :: acc10
     real(c_double) :: acc11
@@ -2136,8 +2136,70 @@ contains
     real(c_double) :: acc73
     real(c_double) :: ib16
     real(c_double) :: ub16
+    real(c_double) :: v11
+    real(c_double) :: v12
+    real(c_double) :: v13
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v20
+    real(c_double) :: v21
+    real(c_double) :: v24
+    real(c_double) :: v25
+    real(c_double) :: v26
+    real(c_double) :: v28
+    real(c_double) :: v30
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v34
+    real(c_double) :: v36
+    real(c_double) :: v38
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v42
+    real(c_double) :: v43
+    real(c_double) :: v44
+    real(c_double) :: v45
+    real(c_double) :: v47
+    real(c_double) :: v49
+    real(c_double) :: v50
+    real(c_double) :: v51
+    real(c_double) :: v55
+    real(c_double) :: v56
+    real(c_double) :: v57
+    real(c_double) :: v58
+    real(c_double) :: v59
+    real(c_double) :: v61
+    real(c_double) :: v62
+    real(c_double) :: v63
+    real(c_double) :: v65
+    real(c_double) :: v66
+    real(c_double) :: v67
+    real(c_double) :: v68
+    real(c_double) :: v71
+    real(c_double) :: v72
+    real(c_double) :: v73
+    real(c_double) :: v74
+    real(c_double) :: v75
+    real(c_double) :: v76
+    real(c_double) :: v78
+    real(c_double) :: v80
+    real(c_double) :: v81
+    real(c_double) :: v82
+    real(c_double) :: v83
+    real(c_double) :: v85
+    real(c_double) :: v86
+    real(c_double) :: v87
+    real(c_double) :: v88
+    real(c_double) :: v89
+    real(c_double) :: v93
     real(c_double) :: w1
+    real(c_double) :: w1_0
+    real(c_double) :: w1_1
     real(c_double) :: w2
+    real(c_double) :: w2_0
+    real(c_double) :: w2_1
+    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2153,81 +2215,81 @@ contains
     tay(8, 0) = x(8)
     tay(9, 0) = rw3_orthogonal_sin(tay(2, 0))
     tay(10, 0) = rw3_orthogonal_cos(tay(2, 0))
-    tay(11, 0) = tay(10, 0) * tay(5, 0)
-    tay(12, 0) = tay(9, 0) * tay(3, 0)
-    tay(13, 0) = tay(11, 0) - tay(12, 0)
-    tay(14, 0) = rw3_orthogonal_sin(tay(1, 0))
-    tay(15, 0) = rw3_orthogonal_cos(tay(1, 0))
-    tay(16, 0) = tay(13, 0) / tay(15, 0)
-    tay(17, 0) = tay(9, 0) * tay(5, 0)
-    tay(18, 0) = tay(10, 0) * tay(3, 0)
-    tay(19, 0) = tay(17, 0) + tay(18, 0)
-    tay(20, 0) = tay(16, 0) * tay(14, 0)
-    tay(21, 0) = tay(4, 0) - tay(20, 0)
-    tay(24, 0) = tay(8, 0) - tay(5, 0)
-    tay(25, 0) = (-0.0001_c_double) * tay(24, 0)
-    tay(26, 0) = -tay(25, 0)
-    tay(28, 0) = 0.035_c_double * tay(6, 0)
-    tay(30, 0) = 2.005_c_double * tay(4, 0)
-    tay(31, 0) = tay(28, 0) + tay(30, 0)
-    tay(33, 0) = 301.7396875_c_double * tay(3, 0)
-    tay(34, 0) = tay(31, 0) + tay(33, 0)
-    tay(36, 0) = 3.15125_c_double * tay(5, 0)
-    tay(37, 0) = tay(34, 0) - tay(36, 0)
-    tay(38, 0) = tay(37, 0) * tay(4, 0)
-    tay(39, 0) = tay(26, 0) + tay(38, 0)
-    tay(40, 0) = 0.035_c_double * tay(7, 0)
-    tay(42, 0) = 1.34875_c_double * tay(5, 0)
-    tay(43, 0) = tay(40, 0) + tay(42, 0)
-    tay(44, 0) = 2.005_c_double * tay(3, 0)
-    tay(45, 0) = tay(43, 0) + tay(44, 0)
-    tay(47, 0) = 351.7396875_c_double * tay(4, 0)
-    tay(48, 0) = tay(45, 0) + tay(47, 0)
-    tay(49, 0) = tay(48, 0) * tay(3, 0)
-    tay(50, 0) = tay(39, 0) - tay(49, 0)
-    tay(51, 0) = 4.166596729006503e-05_c_double * tay(50, 0)
-    tay(54, 0) = -0.02_c_double
-    tay(55, 0) = tay(48, 0) * tay(5, 0)
-    tay(56, 0) = tay(54, 0) + tay(55, 0)
-    tay(57, 0) = 0.035_c_double * tay(8, 0)
-    tay(58, 0) = 1.34875_c_double * tay(4, 0)
-    tay(59, 0) = tay(57, 0) + tay(58, 0)
-    tay(61, 0) = 251.31_c_double * tay(5, 0)
-    tay(62, 0) = tay(59, 0) + tay(61, 0)
-    tay(63, 0) = 3.15125_c_double * tay(3, 0)
-    tay(64, 0) = tay(62, 0) - tay(63, 0)
-    tay(65, 0) = tay(64, 0) * tay(4, 0)
-    tay(66, 0) = tay(56, 0) - tay(65, 0)
-    tay(67, 0) = 0.0033146766733524852_c_double * tay(66, 0)
-    tay(68, 0) = tay(51, 0) + tay(67, 0)
-    tay(71, 0) = tay(64, 0) * tay(3, 0)
-    tay(72, 0) = c(1) + tay(71, 0)
-    tay(73, 0) = tay(37, 0) * tay(5, 0)
-    tay(74, 0) = tay(72, 0) - tay(73, 0)
-    tay(75, 0) = 1.9054215209804005e-05_c_double * tay(74, 0)
-    tay(76, 0) = tay(68, 0) - tay(75, 0)
-    tay(78, 0) = 0.0028431796071504527_c_double * tay(74, 0)
-    tay(80, 0) = 1.5497923245489903e-05_c_double * tay(50, 0)
-    tay(81, 0) = tay(78, 0) - tay(80, 0)
-    tay(82, 0) = 1.9054215209804005e-05_c_double * tay(66, 0)
-    tay(83, 0) = tay(81, 0) - tay(82, 0)
-    tay(85, 0) = 0.003979754895162947_c_double * tay(50, 0)
-    tay(86, 0) = 4.166596729006503e-05_c_double * tay(66, 0)
-    tay(87, 0) = tay(85, 0) + tay(86, 0)
-    tay(88, 0) = 1.5497923245489903e-05_c_double * tay(74, 0)
-    tay(89, 0) = tay(87, 0) - tay(88, 0)
-    tay(93, 0) = 28.571428571428573_c_double * tay(25, 0)
-    ib16 = 1.0_c_double / tay(15, 0)
-    ub16 = tay(16, 0) / tay(15, 0)
-    tay(0, 1) = tay(16, 0)
-    tay(1, 1) = tay(19, 0)
-    tay(2, 1) = tay(21, 0)
-    tay(3, 1) = tay(76, 0)
-    tay(4, 1) = tay(83, 0)
-    tay(5, 1) = tay(89, 0)
+    v11 = tay(10, 0) * tay(5, 0)
+    v12 = tay(9, 0) * tay(3, 0)
+    v13 = v11 - v12
+    tay(11, 0) = rw3_orthogonal_sin(tay(1, 0))
+    tay(12, 0) = rw3_orthogonal_cos(tay(1, 0))
+    tay(13, 0) = v13 / tay(12, 0)
+    v17 = tay(9, 0) * tay(5, 0)
+    v18 = tay(10, 0) * tay(3, 0)
+    v19 = v17 + v18
+    v20 = tay(13, 0) * tay(11, 0)
+    v21 = tay(4, 0) - v20
+    v24 = tay(8, 0) - tay(5, 0)
+    v25 = (-0.0001_c_double) * v24
+    v26 = -v25
+    v28 = 0.035_c_double * tay(6, 0)
+    v30 = 2.005_c_double * tay(4, 0)
+    v31 = v28 + v30
+    v33 = 301.7396875_c_double * tay(3, 0)
+    v34 = v31 + v33
+    v36 = 3.15125_c_double * tay(5, 0)
+    tay(14, 0) = v34 - v36
+    v38 = tay(14, 0) * tay(4, 0)
+    v39 = v26 + v38
+    v40 = 0.035_c_double * tay(7, 0)
+    v42 = 1.34875_c_double * tay(5, 0)
+    v43 = v40 + v42
+    v44 = 2.005_c_double * tay(3, 0)
+    v45 = v43 + v44
+    v47 = 351.7396875_c_double * tay(4, 0)
+    tay(15, 0) = v45 + v47
+    v49 = tay(15, 0) * tay(3, 0)
+    v50 = v39 - v49
+    v51 = 4.166596729006503e-05_c_double * v50
+    tay(16, 0) = -0.02_c_double
+    v55 = tay(15, 0) * tay(5, 0)
+    v56 = tay(16, 0) + v55
+    v57 = 0.035_c_double * tay(8, 0)
+    v58 = 1.34875_c_double * tay(4, 0)
+    v59 = v57 + v58
+    v61 = 251.31_c_double * tay(5, 0)
+    v62 = v59 + v61
+    v63 = 3.15125_c_double * tay(3, 0)
+    tay(17, 0) = v62 - v63
+    v65 = tay(17, 0) * tay(4, 0)
+    v66 = v56 - v65
+    v67 = 0.0033146766733524852_c_double * v66
+    v68 = v51 + v67
+    v71 = tay(17, 0) * tay(3, 0)
+    v72 = c(1) + v71
+    v73 = tay(14, 0) * tay(5, 0)
+    v74 = v72 - v73
+    v75 = 1.9054215209804005e-05_c_double * v74
+    v76 = v68 - v75
+    v78 = 0.0028431796071504527_c_double * v74
+    v80 = 1.5497923245489903e-05_c_double * v50
+    v81 = v78 - v80
+    v82 = 1.9054215209804005e-05_c_double * v66
+    v83 = v81 - v82
+    v85 = 0.003979754895162947_c_double * v50
+    v86 = 4.166596729006503e-05_c_double * v66
+    v87 = v85 + v86
+    v88 = 1.5497923245489903e-05_c_double * v74
+    v89 = v87 - v88
+    v93 = 28.571428571428573_c_double * v25
+    ib16 = 1.0_c_double / tay(12, 0)
+    ub16 = tay(13, 0) / tay(12, 0)
+    tay(0, 1) = tay(13, 0)
+    tay(1, 1) = v19
+    tay(2, 1) = v21
+    tay(3, 1) = v76
+    tay(4, 1) = v83
+    tay(5, 1) = v89
     tay(6, 1) = 0.5714285714285714_c_double
     tay(7, 1) = c(0)
-    tay(8, 1) = tay(93, 0)
+    tay(8, 1) = v93
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
     do n = 1, order - 1
@@ -2247,100 +2309,134 @@ contains
       acc65 = 0.0_c_double
       acc71 = 0.0_c_double
       acc73 = 0.0_c_double
-      do j = 1, n - 1
+      do b = 0, (n - 1) / 2 - 1
+        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
+        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
+        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
+        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
+        acc9 = acc9 + (w2_0 * tay(10, n - (2 * b + 1)) + w2_1 * tay(10, n - (2 * b + 2)))
+        acc10 = acc10 + (w2_0 * tay(9, n - (2 * b + 1)) + w2_1 * tay(9, n - (2 * b + 2)))
+        acc11 = acc11 + (tay(10, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(10, &
+            2 * b + 2) * tay(5, n - (2 * b + 2)))
+        acc12 = acc12 + (tay(9, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(3, &
+            n - (2 * b + 2)))
+        acc14 = acc14 + (w1_0 * tay(12, n - (2 * b + 1)) + w1_1 * tay(12, n - (2 * b + 2)))
+        acc15 = acc15 + (w1_0 * tay(11, n - (2 * b + 1)) + w1_1 * tay(11, n - (2 * b + 2)))
+        acc16 = acc16 + (tay(12, 2 * b + 1) * tay(13, n - (2 * b + 1)) + tay(12, &
+            2 * b + 2) * tay(13, n - (2 * b + 2)))
+        acc17 = acc17 + (tay(9, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(5, &
+            n - (2 * b + 2)))
+        acc18 = acc18 + (tay(10, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(10, &
+            2 * b + 2) * tay(3, n - (2 * b + 2)))
+        acc20 = acc20 + (tay(13, 2 * b + 1) * tay(11, n - (2 * b + 1)) + tay(13, &
+            2 * b + 2) * tay(11, n - (2 * b + 2)))
+        acc38 = acc38 + (tay(14, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(14, &
+            2 * b + 2) * tay(4, n - (2 * b + 2)))
+        acc49 = acc49 + (tay(15, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(15, &
+            2 * b + 2) * tay(3, n - (2 * b + 2)))
+        acc55 = acc55 + (tay(15, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(15, &
+            2 * b + 2) * tay(5, n - (2 * b + 2)))
+        acc65 = acc65 + (tay(17, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(17, &
+            2 * b + 2) * tay(4, n - (2 * b + 2)))
+        acc71 = acc71 + (tay(17, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(17, &
+            2 * b + 2) * tay(3, n - (2 * b + 2)))
+        acc73 = acc73 + (tay(14, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(14, &
+            2 * b + 2) * tay(5, n - (2 * b + 2)))
+      end do
+      do j = 2 * ((n - 1) / 2) + 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
         acc9 = acc9 + w2 * tay(10, n - j)
         acc10 = acc10 + w2 * tay(9, n - j)
         acc11 = acc11 + tay(10, j) * tay(5, n - j)
         acc12 = acc12 + tay(9, j) * tay(3, n - j)
-        acc14 = acc14 + w1 * tay(15, n - j)
-        acc15 = acc15 + w1 * tay(14, n - j)
-        acc16 = acc16 + tay(15, j) * tay(16, n - j)
+        acc14 = acc14 + w1 * tay(12, n - j)
+        acc15 = acc15 + w1 * tay(11, n - j)
+        acc16 = acc16 + tay(12, j) * tay(13, n - j)
         acc17 = acc17 + tay(9, j) * tay(5, n - j)
         acc18 = acc18 + tay(10, j) * tay(3, n - j)
-        acc20 = acc20 + tay(16, j) * tay(14, n - j)
-        acc38 = acc38 + tay(37, j) * tay(4, n - j)
-        acc49 = acc49 + tay(48, j) * tay(3, n - j)
-        acc55 = acc55 + tay(48, j) * tay(5, n - j)
-        acc65 = acc65 + tay(64, j) * tay(4, n - j)
-        acc71 = acc71 + tay(64, j) * tay(3, n - j)
-        acc73 = acc73 + tay(37, j) * tay(5, n - j)
+        acc20 = acc20 + tay(13, j) * tay(11, n - j)
+        acc38 = acc38 + tay(14, j) * tay(4, n - j)
+        acc49 = acc49 + tay(15, j) * tay(3, n - j)
+        acc55 = acc55 + tay(15, j) * tay(5, n - j)
+        acc65 = acc65 + tay(17, j) * tay(4, n - j)
+        acc71 = acc71 + tay(17, j) * tay(3, n - j)
+        acc73 = acc73 + tay(14, j) * tay(5, n - j)
       end do
       tay(9, n) = acc9 * inv(n) + tay(2, n) * tay(10, 0)
       tay(10, n) = (-acc10 * inv(n)) - tay(2, n) * tay(9, 0)
-      tay(11, n) = (acc11 + tay(10, 0) * tay(5, n)) + tay(10, n) * tay(5, 0)
-      tay(12, n) = (acc12 + tay(9, 0) * tay(3, n)) + tay(9, n) * tay(3, 0)
-      tay(13, n) = tay(11, n) - tay(12, n)
-      tay(14, n) = acc14 * inv(n) + tay(1, n) * tay(15, 0)
-      tay(15, n) = (-acc15 * inv(n)) - tay(1, n) * tay(14, 0)
-      tay(16, n) = tay(13, n) * ib16 - (acc16 * ib16 + tay(15, n) * ub16)
-      tay(17, n) = (acc17 + tay(9, 0) * tay(5, n)) + tay(9, n) * tay(5, 0)
-      tay(18, n) = (acc18 + tay(10, 0) * tay(3, n)) + tay(10, n) * tay(3, 0)
-      tay(19, n) = tay(17, n) + tay(18, n)
-      tay(20, n) = (acc20 + tay(16, 0) * tay(14, n)) + tay(16, n) * tay(14, 0)
-      tay(21, n) = tay(4, n) - tay(20, n)
-      tay(24, n) = tay(8, n) - tay(5, n)
-      tay(25, n) = (-0.0001_c_double) * tay(24, n)
-      tay(26, n) = -tay(25, n)
-      tay(28, n) = 0.035_c_double * tay(6, n)
-      tay(30, n) = 2.005_c_double * tay(4, n)
-      tay(31, n) = tay(28, n) + tay(30, n)
-      tay(33, n) = 301.7396875_c_double * tay(3, n)
-      tay(34, n) = tay(31, n) + tay(33, n)
-      tay(36, n) = 3.15125_c_double * tay(5, n)
-      tay(37, n) = tay(34, n) - tay(36, n)
-      tay(38, n) = (acc38 + tay(37, 0) * tay(4, n)) + tay(37, n) * tay(4, 0)
-      tay(39, n) = tay(26, n) + tay(38, n)
-      tay(40, n) = 0.035_c_double * tay(7, n)
-      tay(42, n) = 1.34875_c_double * tay(5, n)
-      tay(43, n) = tay(40, n) + tay(42, n)
-      tay(44, n) = 2.005_c_double * tay(3, n)
-      tay(45, n) = tay(43, n) + tay(44, n)
-      tay(47, n) = 351.7396875_c_double * tay(4, n)
-      tay(48, n) = tay(45, n) + tay(47, n)
-      tay(49, n) = (acc49 + tay(48, 0) * tay(3, n)) + tay(48, n) * tay(3, 0)
-      tay(50, n) = tay(39, n) - tay(49, n)
-      tay(51, n) = 4.166596729006503e-05_c_double * tay(50, n)
-      tay(55, n) = (acc55 + tay(48, 0) * tay(5, n)) + tay(48, n) * tay(5, 0)
-      tay(56, n) = tay(55, n)
-      tay(57, n) = 0.035_c_double * tay(8, n)
-      tay(58, n) = 1.34875_c_double * tay(4, n)
-      tay(59, n) = tay(57, n) + tay(58, n)
-      tay(61, n) = 251.31_c_double * tay(5, n)
-      tay(62, n) = tay(59, n) + tay(61, n)
-      tay(63, n) = 3.15125_c_double * tay(3, n)
-      tay(64, n) = tay(62, n) - tay(63, n)
-      tay(65, n) = (acc65 + tay(64, 0) * tay(4, n)) + tay(64, n) * tay(4, 0)
-      tay(66, n) = tay(56, n) - tay(65, n)
-      tay(67, n) = 0.0033146766733524852_c_double * tay(66, n)
-      tay(68, n) = tay(51, n) + tay(67, n)
-      tay(71, n) = (acc71 + tay(64, 0) * tay(3, n)) + tay(64, n) * tay(3, 0)
-      tay(72, n) = tay(71, n)
-      tay(73, n) = (acc73 + tay(37, 0) * tay(5, n)) + tay(37, n) * tay(5, 0)
-      tay(74, n) = tay(72, n) - tay(73, n)
-      tay(75, n) = 1.9054215209804005e-05_c_double * tay(74, n)
-      tay(76, n) = tay(68, n) - tay(75, n)
-      tay(78, n) = 0.0028431796071504527_c_double * tay(74, n)
-      tay(80, n) = 1.5497923245489903e-05_c_double * tay(50, n)
-      tay(81, n) = tay(78, n) - tay(80, n)
-      tay(82, n) = 1.9054215209804005e-05_c_double * tay(66, n)
-      tay(83, n) = tay(81, n) - tay(82, n)
-      tay(85, n) = 0.003979754895162947_c_double * tay(50, n)
-      tay(86, n) = 4.166596729006503e-05_c_double * tay(66, n)
-      tay(87, n) = tay(85, n) + tay(86, n)
-      tay(88, n) = 1.5497923245489903e-05_c_double * tay(74, n)
-      tay(89, n) = tay(87, n) - tay(88, n)
-      tay(93, n) = 28.571428571428573_c_double * tay(25, n)
-      tay(0, n + 1) = tay(16, n) * inv(n + 1)
-      tay(1, n + 1) = tay(19, n) * inv(n + 1)
-      tay(2, n + 1) = tay(21, n) * inv(n + 1)
-      tay(3, n + 1) = tay(76, n) * inv(n + 1)
-      tay(4, n + 1) = tay(83, n) * inv(n + 1)
-      tay(5, n + 1) = tay(89, n) * inv(n + 1)
+      v11 = (acc11 + tay(10, 0) * tay(5, n)) + tay(10, n) * tay(5, 0)
+      v12 = (acc12 + tay(9, 0) * tay(3, n)) + tay(9, n) * tay(3, 0)
+      v13 = v11 - v12
+      tay(11, n) = acc14 * inv(n) + tay(1, n) * tay(12, 0)
+      tay(12, n) = (-acc15 * inv(n)) - tay(1, n) * tay(11, 0)
+      tay(13, n) = v13 * ib16 - (acc16 * ib16 + tay(12, n) * ub16)
+      v17 = (acc17 + tay(9, 0) * tay(5, n)) + tay(9, n) * tay(5, 0)
+      v18 = (acc18 + tay(10, 0) * tay(3, n)) + tay(10, n) * tay(3, 0)
+      v19 = v17 + v18
+      v20 = (acc20 + tay(13, 0) * tay(11, n)) + tay(13, n) * tay(11, 0)
+      v21 = tay(4, n) - v20
+      v24 = tay(8, n) - tay(5, n)
+      v25 = (-0.0001_c_double) * v24
+      v26 = -v25
+      v28 = 0.035_c_double * tay(6, n)
+      v30 = 2.005_c_double * tay(4, n)
+      v31 = v28 + v30
+      v33 = 301.7396875_c_double * tay(3, n)
+      v34 = v31 + v33
+      v36 = 3.15125_c_double * tay(5, n)
+      tay(14, n) = v34 - v36
+      v38 = (acc38 + tay(14, 0) * tay(4, n)) + tay(14, n) * tay(4, 0)
+      v39 = v26 + v38
+      v40 = 0.035_c_double * tay(7, n)
+      v42 = 1.34875_c_double * tay(5, n)
+      v43 = v40 + v42
+      v44 = 2.005_c_double * tay(3, n)
+      v45 = v43 + v44
+      v47 = 351.7396875_c_double * tay(4, n)
+      tay(15, n) = v45 + v47
+      v49 = (acc49 + tay(15, 0) * tay(3, n)) + tay(15, n) * tay(3, 0)
+      v50 = v39 - v49
+      v51 = 4.166596729006503e-05_c_double * v50
+      v55 = (acc55 + tay(15, 0) * tay(5, n)) + tay(15, n) * tay(5, 0)
+      v56 = v55
+      v57 = 0.035_c_double * tay(8, n)
+      v58 = 1.34875_c_double * tay(4, n)
+      v59 = v57 + v58
+      v61 = 251.31_c_double * tay(5, n)
+      v62 = v59 + v61
+      v63 = 3.15125_c_double * tay(3, n)
+      tay(17, n) = v62 - v63
+      v65 = (acc65 + tay(17, 0) * tay(4, n)) + tay(17, n) * tay(4, 0)
+      v66 = v56 - v65
+      v67 = 0.0033146766733524852_c_double * v66
+      v68 = v51 + v67
+      v71 = (acc71 + tay(17, 0) * tay(3, n)) + tay(17, n) * tay(3, 0)
+      v72 = v71
+      v73 = (acc73 + tay(14, 0) * tay(5, n)) + tay(14, n) * tay(5, 0)
+      v74 = v72 - v73
+      v75 = 1.9054215209804005e-05_c_double * v74
+      v76 = v68 - v75
+      v78 = 0.0028431796071504527_c_double * v74
+      v80 = 1.5497923245489903e-05_c_double * v50
+      v81 = v78 - v80
+      v82 = 1.9054215209804005e-05_c_double * v66
+      v83 = v81 - v82
+      v85 = 0.003979754895162947_c_double * v50
+      v86 = 4.166596729006503e-05_c_double * v66
+      v87 = v85 + v86
+      v88 = 1.5497923245489903e-05_c_double * v74
+      v89 = v87 - v88
+      v93 = 28.571428571428573_c_double * v25
+      tay(0, n + 1) = tay(13, n) * inv(n + 1)
+      tay(1, n + 1) = v19 * inv(n + 1)
+      tay(2, n + 1) = v21 * inv(n + 1)
+      tay(3, n + 1) = v76 * inv(n + 1)
+      tay(4, n + 1) = v83 * inv(n + 1)
+      tay(5, n + 1) = v89 * inv(n + 1)
       tay(6, n + 1) = 0.0_c_double
       tay(7, n + 1) = 0.0_c_double
-      tay(8, n + 1) = tay(93, n) * inv(n + 1)
+      tay(8, n + 1) = v93 * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -2360,7 +2456,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:94 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:18 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

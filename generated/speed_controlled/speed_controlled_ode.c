@@ -1866,7 +1866,7 @@ int speed_controlled_radau5(double t0, double t1, double *x, const double *c, do
 /* The normalized Taylor coefficients of x and of the rhs's 54
    nodes to the given order (17 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[62])
+                              double (*tay)[17])
 {
     double acc8;
     double acc9;
@@ -1887,6 +1887,41 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double acc58;
     double ib15;
     double ub15;
+    double v10;
+    double v11;
+    double v12;
+    double v16;
+    double v17;
+    double v18;
+    double v19;
+    double v20;
+    double v21;
+    double v23;
+    double v25;
+    double v27;
+    double v29;
+    double v31;
+    double v33;
+    double v34;
+    double v36;
+    double v37;
+    double v38;
+    double v39;
+    double v40;
+    double v43;
+    double v44;
+    double v45;
+    double v46;
+    double v49;
+    double v50;
+    double v51;
+    double v53;
+    double v54;
+    double v56;
+    double v58;
+    double v59;
+    double v61;
+    int b;
     int j;
     int n;
 
@@ -1901,57 +1936,57 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     tay[0][7] = x[7];
     tay[0][8] = speed_controlled_sin(tay[0][2]);
     tay[0][9] = speed_controlled_cos(tay[0][2]);
-    tay[0][10] = tay[0][9] * tay[0][6];
-    tay[0][11] = tay[0][8] * tay[0][4];
-    tay[0][12] = tay[0][10] - tay[0][11];
-    tay[0][13] = speed_controlled_sin(tay[0][1]);
-    tay[0][14] = speed_controlled_cos(tay[0][1]);
-    tay[0][15] = tay[0][12] / tay[0][14];
-    tay[0][16] = tay[0][8] * tay[0][6];
-    tay[0][17] = tay[0][9] * tay[0][4];
-    tay[0][18] = tay[0][16] + tay[0][17];
-    tay[0][19] = tay[0][15] * tay[0][13];
-    tay[0][20] = tay[0][5] - tay[0][19];
-    tay[0][21] = tay[0][7] - tay[0][5];
-    tay[0][23] = 0.0004980820048148975 * tay[0][7];
-    tay[0][25] = 0.33522655090705017 * tay[0][5];
-    tay[0][26] = tay[0][23] + tay[0][25];
-    tay[0][27] = tay[0][6] * tay[0][26];
-    tay[0][29] = 0.016919114337701612 * tay[0][5];
-    tay[0][31] = 1.2676659094182028e-05 * tay[0][7];
-    tay[0][32] = tay[0][29] - tay[0][31];
-    tay[0][33] = tay[0][32] * tay[0][4];
-    tay[0][34] = tay[0][27] - tay[0][33];
-    tay[0][36] = tay[0][4] * tay[0][4];
-    tay[0][37] = 0.018613186525101588 * tay[0][36];
-    tay[0][38] = tay[0][6] * tay[0][6];
-    tay[0][39] = 0.018613186525101588 * tay[0][38];
-    tay[0][40] = tay[0][37] - tay[0][39];
-    tay[0][43] = c[2] + tay[0][7];
-    tay[0][44] = tay[0][43] - tay[0][5];
-    tay[0][45] = c[0] * tay[0][44];
-    tay[0][46] = tay[0][40] + tay[0][45];
-    tay[0][48] = 0.06916590204045965 * tay[0][4];
-    tay[0][49] = tay[0][48] * tay[0][6];
-    tay[0][50] = tay[0][46] - tay[0][49];
-    tay[0][51] = tay[0][32] * tay[0][6];
-    tay[0][53] = 0.2723557574878444 * tay[0][5];
-    tay[0][54] = -tay[0][53];
-    tay[0][56] = 0.0005451879938902264 * tay[0][7];
-    tay[0][57] = tay[0][54] - tay[0][56];
-    tay[0][58] = tay[0][4] * tay[0][57];
-    tay[0][59] = tay[0][51] + tay[0][58];
-    tay[0][61] = c[1] * tay[0][44];
-    ib15 = 1.0 / tay[0][14];
-    ub15 = tay[0][15] / tay[0][14];
-    tay[1][0] = tay[0][15];
-    tay[1][1] = tay[0][18];
-    tay[1][2] = tay[0][20];
-    tay[1][3] = tay[0][21];
-    tay[1][4] = tay[0][34];
-    tay[1][5] = tay[0][50];
-    tay[1][6] = tay[0][59];
-    tay[1][7] = tay[0][61];
+    v10 = tay[0][9] * tay[0][6];
+    v11 = tay[0][8] * tay[0][4];
+    v12 = v10 - v11;
+    tay[0][10] = speed_controlled_sin(tay[0][1]);
+    tay[0][11] = speed_controlled_cos(tay[0][1]);
+    tay[0][12] = v12 / tay[0][11];
+    v16 = tay[0][8] * tay[0][6];
+    v17 = tay[0][9] * tay[0][4];
+    v18 = v16 + v17;
+    v19 = tay[0][12] * tay[0][10];
+    v20 = tay[0][5] - v19;
+    v21 = tay[0][7] - tay[0][5];
+    v23 = 0.0004980820048148975 * tay[0][7];
+    v25 = 0.33522655090705017 * tay[0][5];
+    tay[0][13] = v23 + v25;
+    v27 = tay[0][6] * tay[0][13];
+    v29 = 0.016919114337701612 * tay[0][5];
+    v31 = 1.2676659094182028e-05 * tay[0][7];
+    tay[0][14] = v29 - v31;
+    v33 = tay[0][14] * tay[0][4];
+    v34 = v27 - v33;
+    v36 = tay[0][4] * tay[0][4];
+    v37 = 0.018613186525101588 * v36;
+    v38 = tay[0][6] * tay[0][6];
+    v39 = 0.018613186525101588 * v38;
+    v40 = v37 - v39;
+    v43 = c[2] + tay[0][7];
+    v44 = v43 - tay[0][5];
+    v45 = c[0] * v44;
+    v46 = v40 + v45;
+    tay[0][15] = 0.06916590204045965 * tay[0][4];
+    v49 = tay[0][15] * tay[0][6];
+    v50 = v46 - v49;
+    v51 = tay[0][14] * tay[0][6];
+    v53 = 0.2723557574878444 * tay[0][5];
+    v54 = -v53;
+    v56 = 0.0005451879938902264 * tay[0][7];
+    tay[0][16] = v54 - v56;
+    v58 = tay[0][4] * tay[0][16];
+    v59 = v51 + v58;
+    v61 = c[1] * v44;
+    ib15 = 1.0 / tay[0][11];
+    ub15 = tay[0][12] / tay[0][11];
+    tay[1][0] = tay[0][12];
+    tay[1][1] = v18;
+    tay[1][2] = v20;
+    tay[1][3] = v21;
+    tay[1][4] = v34;
+    tay[1][5] = v50;
+    tay[1][6] = v59;
+    tay[1][7] = v61;
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
     for (n = 1; n < order; ++n) {
@@ -1972,7 +2007,44 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc49 = 0.0;
         acc51 = 0.0;
         acc58 = 0.0;
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            double w1_0, w1_1, w2_0, w2_1;
+            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
+            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
+            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
+            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
+            acc8 = acc8 + (w2_0 * tay[n - (2 * b + 1)][9] + w2_1 * tay[n - (2 * b + 2)][9]);
+            acc9 = acc9 + (w2_0 * tay[n - (2 * b + 1)][8] + w2_1 * tay[n - (2 * b + 2)][8]);
+            acc10 = acc10 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][9] *
+                    tay[n - (2 * b + 2)][6]);
+            acc11 = acc11 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][4]);
+            acc13 = acc13 + (w1_0 * tay[n - (2 * b + 1)][11] + w1_1 * tay[n - (2 * b + 2)][11]);
+            acc14 = acc14 + (w1_0 * tay[n - (2 * b + 1)][10] + w1_1 * tay[n - (2 * b + 2)][10]);
+            acc15 = acc15 + (tay[2 * b + 1][11] * tay[n - (2 * b + 1)][12] + tay[2 * b + 2][11] *
+                    tay[n - (2 * b + 2)][12]);
+            acc16 = acc16 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][6]);
+            acc17 = acc17 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][9] *
+                    tay[n - (2 * b + 2)][4]);
+            acc19 = acc19 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][10] + tay[2 * b + 2][12] *
+                    tay[n - (2 * b + 2)][10]);
+            acc27 = acc27 + (tay[2 * b + 1][6] * tay[n - (2 * b + 1)][13] + tay[2 * b + 2][6] *
+                    tay[n - (2 * b + 2)][13]);
+            acc33 = acc33 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][14] *
+                    tay[n - (2 * b + 2)][4]);
+            acc36 = acc36 + (tay[2 * b + 1][4] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][4] *
+                    tay[n - (2 * b + 2)][4]);
+            acc38 = acc38 + (tay[2 * b + 1][6] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][6] *
+                    tay[n - (2 * b + 2)][6]);
+            acc49 = acc49 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][15] *
+                    tay[n - (2 * b + 2)][6]);
+            acc51 = acc51 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][14] *
+                    tay[n - (2 * b + 2)][6]);
+            acc58 = acc58 + (tay[2 * b + 1][4] * tay[n - (2 * b + 1)][16] + tay[2 * b + 2][4] *
+                    tay[n - (2 * b + 2)][16]);
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
@@ -1980,71 +2052,71 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
             acc9 = acc9 + w2 * tay[n - j][8];
             acc10 = acc10 + tay[j][9] * tay[n - j][6];
             acc11 = acc11 + tay[j][8] * tay[n - j][4];
-            acc13 = acc13 + w1 * tay[n - j][14];
-            acc14 = acc14 + w1 * tay[n - j][13];
-            acc15 = acc15 + tay[j][14] * tay[n - j][15];
+            acc13 = acc13 + w1 * tay[n - j][11];
+            acc14 = acc14 + w1 * tay[n - j][10];
+            acc15 = acc15 + tay[j][11] * tay[n - j][12];
             acc16 = acc16 + tay[j][8] * tay[n - j][6];
             acc17 = acc17 + tay[j][9] * tay[n - j][4];
-            acc19 = acc19 + tay[j][15] * tay[n - j][13];
-            acc27 = acc27 + tay[j][6] * tay[n - j][26];
-            acc33 = acc33 + tay[j][32] * tay[n - j][4];
+            acc19 = acc19 + tay[j][12] * tay[n - j][10];
+            acc27 = acc27 + tay[j][6] * tay[n - j][13];
+            acc33 = acc33 + tay[j][14] * tay[n - j][4];
             acc36 = acc36 + tay[j][4] * tay[n - j][4];
             acc38 = acc38 + tay[j][6] * tay[n - j][6];
-            acc49 = acc49 + tay[j][48] * tay[n - j][6];
-            acc51 = acc51 + tay[j][32] * tay[n - j][6];
-            acc58 = acc58 + tay[j][4] * tay[n - j][57];
+            acc49 = acc49 + tay[j][15] * tay[n - j][6];
+            acc51 = acc51 + tay[j][14] * tay[n - j][6];
+            acc58 = acc58 + tay[j][4] * tay[n - j][16];
         }
         tay[n][8] = acc8 * inv[n] + tay[n][2] * tay[0][9];
         tay[n][9] = -(acc9 * inv[n]) - tay[n][2] * tay[0][8];
-        tay[n][10] = acc10 + tay[0][9] * tay[n][6] + tay[n][9] * tay[0][6];
-        tay[n][11] = acc11 + tay[0][8] * tay[n][4] + tay[n][8] * tay[0][4];
-        tay[n][12] = tay[n][10] - tay[n][11];
-        tay[n][13] = acc13 * inv[n] + tay[n][1] * tay[0][14];
-        tay[n][14] = -(acc14 * inv[n]) - tay[n][1] * tay[0][13];
-        tay[n][15] = tay[n][12] * ib15 - (acc15 * ib15 + tay[n][14] * ub15);
-        tay[n][16] = acc16 + tay[0][8] * tay[n][6] + tay[n][8] * tay[0][6];
-        tay[n][17] = acc17 + tay[0][9] * tay[n][4] + tay[n][9] * tay[0][4];
-        tay[n][18] = tay[n][16] + tay[n][17];
-        tay[n][19] = acc19 + tay[0][15] * tay[n][13] + tay[n][15] * tay[0][13];
-        tay[n][20] = tay[n][5] - tay[n][19];
-        tay[n][21] = tay[n][7] - tay[n][5];
-        tay[n][23] = 0.0004980820048148975 * tay[n][7];
-        tay[n][25] = 0.33522655090705017 * tay[n][5];
-        tay[n][26] = tay[n][23] + tay[n][25];
-        tay[n][27] = acc27 + tay[0][6] * tay[n][26] + tay[n][6] * tay[0][26];
-        tay[n][29] = 0.016919114337701612 * tay[n][5];
-        tay[n][31] = 1.2676659094182028e-05 * tay[n][7];
-        tay[n][32] = tay[n][29] - tay[n][31];
-        tay[n][33] = acc33 + tay[0][32] * tay[n][4] + tay[n][32] * tay[0][4];
-        tay[n][34] = tay[n][27] - tay[n][33];
-        tay[n][36] = acc36 + tay[0][4] * tay[n][4] + tay[n][4] * tay[0][4];
-        tay[n][37] = 0.018613186525101588 * tay[n][36];
-        tay[n][38] = acc38 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
-        tay[n][39] = 0.018613186525101588 * tay[n][38];
-        tay[n][40] = tay[n][37] - tay[n][39];
-        tay[n][43] = tay[n][7];
-        tay[n][44] = tay[n][43] - tay[n][5];
-        tay[n][45] = c[0] * tay[n][44];
-        tay[n][46] = tay[n][40] + tay[n][45];
-        tay[n][48] = 0.06916590204045965 * tay[n][4];
-        tay[n][49] = acc49 + tay[0][48] * tay[n][6] + tay[n][48] * tay[0][6];
-        tay[n][50] = tay[n][46] - tay[n][49];
-        tay[n][51] = acc51 + tay[0][32] * tay[n][6] + tay[n][32] * tay[0][6];
-        tay[n][53] = 0.2723557574878444 * tay[n][5];
-        tay[n][54] = -tay[n][53];
-        tay[n][56] = 0.0005451879938902264 * tay[n][7];
-        tay[n][57] = tay[n][54] - tay[n][56];
-        tay[n][58] = acc58 + tay[0][4] * tay[n][57] + tay[n][4] * tay[0][57];
-        tay[n][59] = tay[n][51] + tay[n][58];
-        tay[n][61] = c[1] * tay[n][44];
-        tay[n + 1][0] = tay[n][15] * inv[n + 1];
-        tay[n + 1][1] = tay[n][18] * inv[n + 1];
-        tay[n + 1][2] = tay[n][20] * inv[n + 1];
-        tay[n + 1][3] = tay[n][21] * inv[n + 1];
-        tay[n + 1][4] = tay[n][34] * inv[n + 1];
-        tay[n + 1][5] = tay[n][50] * inv[n + 1];
-        tay[n + 1][6] = tay[n][59] * inv[n + 1];
-        tay[n + 1][7] = tay[n][61] * inv[n + 1];
+        v10 = acc10 + tay[0][9] * tay[n][6] + tay[n][9] * tay[0][6];
+        v11 = acc11 + tay[0][8] * tay[n][4] + tay[n][8] * tay[0][4];
+        v12 = v10 - v11;
+        tay[n][10] = acc13 * inv[n] + tay[n][1] * tay[0][11];
+        tay[n][11] = -(acc14 * inv[n]) - tay[n][1] * tay[0][10];
+        tay[n][12] = v12 * ib15 - (acc15 * ib15 + tay[n][11] * ub15);
+        v16 = acc16 + tay[0][8] * tay[n][6] + tay[n][8] * tay[0][6];
+        v17 = acc17 + tay[0][9] * tay[n][4] + tay[n][9] * tay[0][4];
+        v18 = v16 + v17;
+        v19 = acc19 + tay[0][12] * tay[n][10] + tay[n][12] * tay[0][10];
+        v20 = tay[n][5] - v19;
+        v21 = tay[n][7] - tay[n][5];
+        v23 = 0.0004980820048148975 * tay[n][7];
+        v25 = 0.33522655090705017 * tay[n][5];
+        tay[n][13] = v23 + v25;
+        v27 = acc27 + tay[0][6] * tay[n][13] + tay[n][6] * tay[0][13];
+        v29 = 0.016919114337701612 * tay[n][5];
+        v31 = 1.2676659094182028e-05 * tay[n][7];
+        tay[n][14] = v29 - v31;
+        v33 = acc33 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
+        v34 = v27 - v33;
+        v36 = acc36 + tay[0][4] * tay[n][4] + tay[n][4] * tay[0][4];
+        v37 = 0.018613186525101588 * v36;
+        v38 = acc38 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
+        v39 = 0.018613186525101588 * v38;
+        v40 = v37 - v39;
+        v43 = tay[n][7];
+        v44 = v43 - tay[n][5];
+        v45 = c[0] * v44;
+        v46 = v40 + v45;
+        tay[n][15] = 0.06916590204045965 * tay[n][4];
+        v49 = acc49 + tay[0][15] * tay[n][6] + tay[n][15] * tay[0][6];
+        v50 = v46 - v49;
+        v51 = acc51 + tay[0][14] * tay[n][6] + tay[n][14] * tay[0][6];
+        v53 = 0.2723557574878444 * tay[n][5];
+        v54 = -v53;
+        v56 = 0.0005451879938902264 * tay[n][7];
+        tay[n][16] = v54 - v56;
+        v58 = acc58 + tay[0][4] * tay[n][16] + tay[n][4] * tay[0][16];
+        v59 = v51 + v58;
+        v61 = c[1] * v44;
+        tay[n + 1][0] = tay[n][12] * inv[n + 1];
+        tay[n + 1][1] = v18 * inv[n + 1];
+        tay[n + 1][2] = v20 * inv[n + 1];
+        tay[n + 1][3] = v21 * inv[n + 1];
+        tay[n + 1][4] = v34 * inv[n + 1];
+        tay[n + 1][5] = v50 * inv[n + 1];
+        tay[n + 1][6] = v59 * inv[n + 1];
+        tay[n + 1][7] = v61 * inv[n + 1];
     }
 }
 
@@ -2056,7 +2128,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
-    double tay[19][62];
+    double tay[19][17];
     double inv[19] = {0.0};
     double f0[SPEED_CONTROLLED_NX];
     double xnew[SPEED_CONTROLLED_NX];
@@ -2218,7 +2290,7 @@ struct lanes {
     long stats_rejected[SPEED_CONTROLLED_LANES];
     long stats_rhs_calls[SPEED_CONTROLLED_LANES];
     double cap[SPEED_CONTROLLED_LANES];
-    double tay[19][62][SPEED_CONTROLLED_LANES];
+    double tay[19][17][SPEED_CONTROLLED_LANES];
     double ts[SPEED_CONTROLLED_LANES];  /* the time of an rhs call */
     int busy[SPEED_CONTROLLED_LANES];
     size_t traj[SPEED_CONTROLLED_LANES];
@@ -2796,10 +2868,11 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     double acc58[SPEED_CONTROLLED_LANES];
     double ib15[SPEED_CONTROLLED_LANES];
     double ub15[SPEED_CONTROLLED_LANES];
-    int j, l, n;
+    int b, j, l, n;
     /* order 0: the state and every node's value */
     SPEED_CONTROLLED_SIMD
     for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        double v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -2810,57 +2883,57 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         L->tay[0][7][l] = L->x[7][l];
         L->tay[0][8][l] = speed_controlled_sin_lanes(L->tay[0][2][l]);
         L->tay[0][9][l] = speed_controlled_cos_lanes(L->tay[0][2][l]);
-        L->tay[0][10][l] = L->tay[0][9][l] * L->tay[0][6][l];
-        L->tay[0][11][l] = L->tay[0][8][l] * L->tay[0][4][l];
-        L->tay[0][12][l] = L->tay[0][10][l] - L->tay[0][11][l];
-        L->tay[0][13][l] = speed_controlled_sin_lanes(L->tay[0][1][l]);
-        L->tay[0][14][l] = speed_controlled_cos_lanes(L->tay[0][1][l]);
-        L->tay[0][15][l] = L->tay[0][12][l] / L->tay[0][14][l];
-        L->tay[0][16][l] = L->tay[0][8][l] * L->tay[0][6][l];
-        L->tay[0][17][l] = L->tay[0][9][l] * L->tay[0][4][l];
-        L->tay[0][18][l] = L->tay[0][16][l] + L->tay[0][17][l];
-        L->tay[0][19][l] = L->tay[0][15][l] * L->tay[0][13][l];
-        L->tay[0][20][l] = L->tay[0][5][l] - L->tay[0][19][l];
-        L->tay[0][21][l] = L->tay[0][7][l] - L->tay[0][5][l];
-        L->tay[0][23][l] = 0.0004980820048148975 * L->tay[0][7][l];
-        L->tay[0][25][l] = 0.33522655090705017 * L->tay[0][5][l];
-        L->tay[0][26][l] = L->tay[0][23][l] + L->tay[0][25][l];
-        L->tay[0][27][l] = L->tay[0][6][l] * L->tay[0][26][l];
-        L->tay[0][29][l] = 0.016919114337701612 * L->tay[0][5][l];
-        L->tay[0][31][l] = 1.2676659094182028e-05 * L->tay[0][7][l];
-        L->tay[0][32][l] = L->tay[0][29][l] - L->tay[0][31][l];
-        L->tay[0][33][l] = L->tay[0][32][l] * L->tay[0][4][l];
-        L->tay[0][34][l] = L->tay[0][27][l] - L->tay[0][33][l];
-        L->tay[0][36][l] = L->tay[0][4][l] * L->tay[0][4][l];
-        L->tay[0][37][l] = 0.018613186525101588 * L->tay[0][36][l];
-        L->tay[0][38][l] = L->tay[0][6][l] * L->tay[0][6][l];
-        L->tay[0][39][l] = 0.018613186525101588 * L->tay[0][38][l];
-        L->tay[0][40][l] = L->tay[0][37][l] - L->tay[0][39][l];
-        L->tay[0][43][l] = c[2] + L->tay[0][7][l];
-        L->tay[0][44][l] = L->tay[0][43][l] - L->tay[0][5][l];
-        L->tay[0][45][l] = c[0] * L->tay[0][44][l];
-        L->tay[0][46][l] = L->tay[0][40][l] + L->tay[0][45][l];
-        L->tay[0][48][l] = 0.06916590204045965 * L->tay[0][4][l];
-        L->tay[0][49][l] = L->tay[0][48][l] * L->tay[0][6][l];
-        L->tay[0][50][l] = L->tay[0][46][l] - L->tay[0][49][l];
-        L->tay[0][51][l] = L->tay[0][32][l] * L->tay[0][6][l];
-        L->tay[0][53][l] = 0.2723557574878444 * L->tay[0][5][l];
-        L->tay[0][54][l] = -L->tay[0][53][l];
-        L->tay[0][56][l] = 0.0005451879938902264 * L->tay[0][7][l];
-        L->tay[0][57][l] = L->tay[0][54][l] - L->tay[0][56][l];
-        L->tay[0][58][l] = L->tay[0][4][l] * L->tay[0][57][l];
-        L->tay[0][59][l] = L->tay[0][51][l] + L->tay[0][58][l];
-        L->tay[0][61][l] = c[1] * L->tay[0][44][l];
-        ib15[l] = 1.0 / L->tay[0][14][l];
-        ub15[l] = L->tay[0][15][l] / L->tay[0][14][l];
-        L->tay[1][0][l] = L->tay[0][15][l];
-        L->tay[1][1][l] = L->tay[0][18][l];
-        L->tay[1][2][l] = L->tay[0][20][l];
-        L->tay[1][3][l] = L->tay[0][21][l];
-        L->tay[1][4][l] = L->tay[0][34][l];
-        L->tay[1][5][l] = L->tay[0][50][l];
-        L->tay[1][6][l] = L->tay[0][59][l];
-        L->tay[1][7][l] = L->tay[0][61][l];
+        v10 = L->tay[0][9][l] * L->tay[0][6][l];
+        v11 = L->tay[0][8][l] * L->tay[0][4][l];
+        v12 = v10 - v11;
+        L->tay[0][10][l] = speed_controlled_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][11][l] = speed_controlled_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][12][l] = v12 / L->tay[0][11][l];
+        v16 = L->tay[0][8][l] * L->tay[0][6][l];
+        v17 = L->tay[0][9][l] * L->tay[0][4][l];
+        v18 = v16 + v17;
+        v19 = L->tay[0][12][l] * L->tay[0][10][l];
+        v20 = L->tay[0][5][l] - v19;
+        v21 = L->tay[0][7][l] - L->tay[0][5][l];
+        v23 = 0.0004980820048148975 * L->tay[0][7][l];
+        v25 = 0.33522655090705017 * L->tay[0][5][l];
+        L->tay[0][13][l] = v23 + v25;
+        v27 = L->tay[0][6][l] * L->tay[0][13][l];
+        v29 = 0.016919114337701612 * L->tay[0][5][l];
+        v31 = 1.2676659094182028e-05 * L->tay[0][7][l];
+        L->tay[0][14][l] = v29 - v31;
+        v33 = L->tay[0][14][l] * L->tay[0][4][l];
+        v34 = v27 - v33;
+        v36 = L->tay[0][4][l] * L->tay[0][4][l];
+        v37 = 0.018613186525101588 * v36;
+        v38 = L->tay[0][6][l] * L->tay[0][6][l];
+        v39 = 0.018613186525101588 * v38;
+        v40 = v37 - v39;
+        v43 = c[2] + L->tay[0][7][l];
+        v44 = v43 - L->tay[0][5][l];
+        v45 = c[0] * v44;
+        v46 = v40 + v45;
+        L->tay[0][15][l] = 0.06916590204045965 * L->tay[0][4][l];
+        v49 = L->tay[0][15][l] * L->tay[0][6][l];
+        v50 = v46 - v49;
+        v51 = L->tay[0][14][l] * L->tay[0][6][l];
+        v53 = 0.2723557574878444 * L->tay[0][5][l];
+        v54 = -v53;
+        v56 = 0.0005451879938902264 * L->tay[0][7][l];
+        L->tay[0][16][l] = v54 - v56;
+        v58 = L->tay[0][4][l] * L->tay[0][16][l];
+        v59 = v51 + v58;
+        v61 = c[1] * v44;
+        ib15[l] = 1.0 / L->tay[0][11][l];
+        ub15[l] = L->tay[0][12][l] / L->tay[0][11][l];
+        L->tay[1][0][l] = L->tay[0][12][l];
+        L->tay[1][1][l] = v18;
+        L->tay[1][2][l] = v20;
+        L->tay[1][3][l] = v21;
+        L->tay[1][4][l] = v34;
+        L->tay[1][5][l] = v50;
+        L->tay[1][6][l] = v59;
+        L->tay[1][7][l] = v61;
     }
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
@@ -2885,7 +2958,51 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             acc51[l] = 0.0;
             acc58[l] = 0.0;
         }
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                double w1_0, w1_1, w2_0, w2_1;
+                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
+                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
+                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
+                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
+                acc8[l] = acc8[l] + (w2_0 * L->tay[n - (2 * b + 1)][9][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][9][l]);
+                acc9[l] = acc9[l] + (w2_0 * L->tay[n - (2 * b + 1)][8][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][8][l]);
+                acc10[l] = acc10[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][6][l] +
+                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][6][l]);
+                acc11[l] = acc11[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][4][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][4][l]);
+                acc13[l] = acc13[l] + (w1_0 * L->tay[n - (2 * b + 1)][11][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][11][l]);
+                acc14[l] = acc14[l] + (w1_0 * L->tay[n - (2 * b + 1)][10][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][10][l]);
+                acc15[l] = acc15[l] + (L->tay[2 * b + 1][11][l] * L->tay[n - (2 * b + 1)][12][l]
+                        + L->tay[2 * b + 2][11][l] * L->tay[n - (2 * b + 2)][12][l]);
+                acc16[l] = acc16[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][6][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][6][l]);
+                acc17[l] = acc17[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][4][l] +
+                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][4][l]);
+                acc19[l] = acc19[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][10][l]
+                        + L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][10][l]);
+                acc27[l] = acc27[l] + (L->tay[2 * b + 1][6][l] * L->tay[n - (2 * b + 1)][13][l] +
+                        L->tay[2 * b + 2][6][l] * L->tay[n - (2 * b + 2)][13][l]);
+                acc33[l] = acc33[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][4][l] +
+                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][4][l]);
+                acc36[l] = acc36[l] + (L->tay[2 * b + 1][4][l] * L->tay[n - (2 * b + 1)][4][l] +
+                        L->tay[2 * b + 2][4][l] * L->tay[n - (2 * b + 2)][4][l]);
+                acc38[l] = acc38[l] + (L->tay[2 * b + 1][6][l] * L->tay[n - (2 * b + 1)][6][l] +
+                        L->tay[2 * b + 2][6][l] * L->tay[n - (2 * b + 2)][6][l]);
+                acc49[l] = acc49[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][6][l] +
+                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][6][l]);
+                acc51[l] = acc51[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][6][l] +
+                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][6][l]);
+                acc58[l] = acc58[l] + (L->tay[2 * b + 1][4][l] * L->tay[n - (2 * b + 1)][16][l] +
+                        L->tay[2 * b + 2][4][l] * L->tay[n - (2 * b + 2)][16][l]);
+            }
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
                 double w1, w2;
@@ -2895,87 +3012,81 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
                 acc9[l] = acc9[l] + w2 * L->tay[n - j][8][l];
                 acc10[l] = acc10[l] + L->tay[j][9][l] * L->tay[n - j][6][l];
                 acc11[l] = acc11[l] + L->tay[j][8][l] * L->tay[n - j][4][l];
-                acc13[l] = acc13[l] + w1 * L->tay[n - j][14][l];
-                acc14[l] = acc14[l] + w1 * L->tay[n - j][13][l];
-                acc15[l] = acc15[l] + L->tay[j][14][l] * L->tay[n - j][15][l];
+                acc13[l] = acc13[l] + w1 * L->tay[n - j][11][l];
+                acc14[l] = acc14[l] + w1 * L->tay[n - j][10][l];
+                acc15[l] = acc15[l] + L->tay[j][11][l] * L->tay[n - j][12][l];
                 acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][6][l];
                 acc17[l] = acc17[l] + L->tay[j][9][l] * L->tay[n - j][4][l];
-                acc19[l] = acc19[l] + L->tay[j][15][l] * L->tay[n - j][13][l];
-                acc27[l] = acc27[l] + L->tay[j][6][l] * L->tay[n - j][26][l];
-                acc33[l] = acc33[l] + L->tay[j][32][l] * L->tay[n - j][4][l];
+                acc19[l] = acc19[l] + L->tay[j][12][l] * L->tay[n - j][10][l];
+                acc27[l] = acc27[l] + L->tay[j][6][l] * L->tay[n - j][13][l];
+                acc33[l] = acc33[l] + L->tay[j][14][l] * L->tay[n - j][4][l];
                 acc36[l] = acc36[l] + L->tay[j][4][l] * L->tay[n - j][4][l];
                 acc38[l] = acc38[l] + L->tay[j][6][l] * L->tay[n - j][6][l];
-                acc49[l] = acc49[l] + L->tay[j][48][l] * L->tay[n - j][6][l];
-                acc51[l] = acc51[l] + L->tay[j][32][l] * L->tay[n - j][6][l];
-                acc58[l] = acc58[l] + L->tay[j][4][l] * L->tay[n - j][57][l];
+                acc49[l] = acc49[l] + L->tay[j][15][l] * L->tay[n - j][6][l];
+                acc51[l] = acc51[l] + L->tay[j][14][l] * L->tay[n - j][6][l];
+                acc58[l] = acc58[l] + L->tay[j][4][l] * L->tay[n - j][16][l];
             }
         }
         SPEED_CONTROLLED_SIMD
         for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            double v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
             L->tay[n][8][l] = acc8[l] * inv[n] + L->tay[n][2][l] * L->tay[0][9][l];
             L->tay[n][9][l] = -(acc9[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][8][l];
-            L->tay[n][10][l] = acc10[l] + L->tay[0][9][l] * L->tay[n][6][l] + L->tay[n][9][l] *
-                    L->tay[0][6][l];
-            L->tay[n][11][l] = acc11[l] + L->tay[0][8][l] * L->tay[n][4][l] + L->tay[n][8][l] *
+            v10 = acc10[l] + L->tay[0][9][l] * L->tay[n][6][l] + L->tay[n][9][l] * L->tay[0][6][l];
+            v11 = acc11[l] + L->tay[0][8][l] * L->tay[n][4][l] + L->tay[n][8][l] * L->tay[0][4][l];
+            v12 = v10 - v11;
+            L->tay[n][10][l] = acc13[l] * inv[n] + L->tay[n][1][l] * L->tay[0][11][l];
+            L->tay[n][11][l] = -(acc14[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][10][l];
+            L->tay[n][12][l] = v12 * ib15[l] - (acc15[l] * ib15[l] + L->tay[n][11][l] * ub15[l]);
+            v16 = acc16[l] + L->tay[0][8][l] * L->tay[n][6][l] + L->tay[n][8][l] * L->tay[0][6][l];
+            v17 = acc17[l] + L->tay[0][9][l] * L->tay[n][4][l] + L->tay[n][9][l] * L->tay[0][4][l];
+            v18 = v16 + v17;
+            v19 = acc19[l] + L->tay[0][12][l] * L->tay[n][10][l] + L->tay[n][12][l] *
+                    L->tay[0][10][l];
+            v20 = L->tay[n][5][l] - v19;
+            v21 = L->tay[n][7][l] - L->tay[n][5][l];
+            v23 = 0.0004980820048148975 * L->tay[n][7][l];
+            v25 = 0.33522655090705017 * L->tay[n][5][l];
+            L->tay[n][13][l] = v23 + v25;
+            v27 = acc27[l] + L->tay[0][6][l] * L->tay[n][13][l] + L->tay[n][6][l] *
+                    L->tay[0][13][l];
+            v29 = 0.016919114337701612 * L->tay[n][5][l];
+            v31 = 1.2676659094182028e-05 * L->tay[n][7][l];
+            L->tay[n][14][l] = v29 - v31;
+            v33 = acc33[l] + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] *
                     L->tay[0][4][l];
-            L->tay[n][12][l] = L->tay[n][10][l] - L->tay[n][11][l];
-            L->tay[n][13][l] = acc13[l] * inv[n] + L->tay[n][1][l] * L->tay[0][14][l];
-            L->tay[n][14][l] = -(acc14[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][13][l];
-            L->tay[n][15][l] = L->tay[n][12][l] * ib15[l] - (acc15[l] * ib15[l] +
-                    L->tay[n][14][l] * ub15[l]);
-            L->tay[n][16][l] = acc16[l] + L->tay[0][8][l] * L->tay[n][6][l] + L->tay[n][8][l] *
+            v34 = v27 - v33;
+            v36 = acc36[l] + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] * L->tay[0][4][l];
+            v37 = 0.018613186525101588 * v36;
+            v38 = acc38[l] + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] * L->tay[0][6][l];
+            v39 = 0.018613186525101588 * v38;
+            v40 = v37 - v39;
+            v43 = L->tay[n][7][l];
+            v44 = v43 - L->tay[n][5][l];
+            v45 = c[0] * v44;
+            v46 = v40 + v45;
+            L->tay[n][15][l] = 0.06916590204045965 * L->tay[n][4][l];
+            v49 = acc49[l] + L->tay[0][15][l] * L->tay[n][6][l] + L->tay[n][15][l] *
                     L->tay[0][6][l];
-            L->tay[n][17][l] = acc17[l] + L->tay[0][9][l] * L->tay[n][4][l] + L->tay[n][9][l] *
-                    L->tay[0][4][l];
-            L->tay[n][18][l] = L->tay[n][16][l] + L->tay[n][17][l];
-            L->tay[n][19][l] = acc19[l] + L->tay[0][15][l] * L->tay[n][13][l] + L->tay[n][15][l]
-                    * L->tay[0][13][l];
-            L->tay[n][20][l] = L->tay[n][5][l] - L->tay[n][19][l];
-            L->tay[n][21][l] = L->tay[n][7][l] - L->tay[n][5][l];
-            L->tay[n][23][l] = 0.0004980820048148975 * L->tay[n][7][l];
-            L->tay[n][25][l] = 0.33522655090705017 * L->tay[n][5][l];
-            L->tay[n][26][l] = L->tay[n][23][l] + L->tay[n][25][l];
-            L->tay[n][27][l] = acc27[l] + L->tay[0][6][l] * L->tay[n][26][l] + L->tay[n][6][l] *
-                    L->tay[0][26][l];
-            L->tay[n][29][l] = 0.016919114337701612 * L->tay[n][5][l];
-            L->tay[n][31][l] = 1.2676659094182028e-05 * L->tay[n][7][l];
-            L->tay[n][32][l] = L->tay[n][29][l] - L->tay[n][31][l];
-            L->tay[n][33][l] = acc33[l] + L->tay[0][32][l] * L->tay[n][4][l] + L->tay[n][32][l] *
-                    L->tay[0][4][l];
-            L->tay[n][34][l] = L->tay[n][27][l] - L->tay[n][33][l];
-            L->tay[n][36][l] = acc36[l] + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] *
-                    L->tay[0][4][l];
-            L->tay[n][37][l] = 0.018613186525101588 * L->tay[n][36][l];
-            L->tay[n][38][l] = acc38[l] + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] *
+            v50 = v46 - v49;
+            v51 = acc51[l] + L->tay[0][14][l] * L->tay[n][6][l] + L->tay[n][14][l] *
                     L->tay[0][6][l];
-            L->tay[n][39][l] = 0.018613186525101588 * L->tay[n][38][l];
-            L->tay[n][40][l] = L->tay[n][37][l] - L->tay[n][39][l];
-            L->tay[n][43][l] = L->tay[n][7][l];
-            L->tay[n][44][l] = L->tay[n][43][l] - L->tay[n][5][l];
-            L->tay[n][45][l] = c[0] * L->tay[n][44][l];
-            L->tay[n][46][l] = L->tay[n][40][l] + L->tay[n][45][l];
-            L->tay[n][48][l] = 0.06916590204045965 * L->tay[n][4][l];
-            L->tay[n][49][l] = acc49[l] + L->tay[0][48][l] * L->tay[n][6][l] + L->tay[n][48][l] *
-                    L->tay[0][6][l];
-            L->tay[n][50][l] = L->tay[n][46][l] - L->tay[n][49][l];
-            L->tay[n][51][l] = acc51[l] + L->tay[0][32][l] * L->tay[n][6][l] + L->tay[n][32][l] *
-                    L->tay[0][6][l];
-            L->tay[n][53][l] = 0.2723557574878444 * L->tay[n][5][l];
-            L->tay[n][54][l] = -L->tay[n][53][l];
-            L->tay[n][56][l] = 0.0005451879938902264 * L->tay[n][7][l];
-            L->tay[n][57][l] = L->tay[n][54][l] - L->tay[n][56][l];
-            L->tay[n][58][l] = acc58[l] + L->tay[0][4][l] * L->tay[n][57][l] + L->tay[n][4][l] *
-                    L->tay[0][57][l];
-            L->tay[n][59][l] = L->tay[n][51][l] + L->tay[n][58][l];
-            L->tay[n][61][l] = c[1] * L->tay[n][44][l];
-            L->tay[n + 1][0][l] = L->tay[n][15][l] * inv[n + 1];
-            L->tay[n + 1][1][l] = L->tay[n][18][l] * inv[n + 1];
-            L->tay[n + 1][2][l] = L->tay[n][20][l] * inv[n + 1];
-            L->tay[n + 1][3][l] = L->tay[n][21][l] * inv[n + 1];
-            L->tay[n + 1][4][l] = L->tay[n][34][l] * inv[n + 1];
-            L->tay[n + 1][5][l] = L->tay[n][50][l] * inv[n + 1];
-            L->tay[n + 1][6][l] = L->tay[n][59][l] * inv[n + 1];
-            L->tay[n + 1][7][l] = L->tay[n][61][l] * inv[n + 1];
+            v53 = 0.2723557574878444 * L->tay[n][5][l];
+            v54 = -v53;
+            v56 = 0.0005451879938902264 * L->tay[n][7][l];
+            L->tay[n][16][l] = v54 - v56;
+            v58 = acc58[l] + L->tay[0][4][l] * L->tay[n][16][l] + L->tay[n][4][l] *
+                    L->tay[0][16][l];
+            v59 = v51 + v58;
+            v61 = c[1] * v44;
+            L->tay[n + 1][0][l] = L->tay[n][12][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = v18 * inv[n + 1];
+            L->tay[n + 1][2][l] = v20 * inv[n + 1];
+            L->tay[n + 1][3][l] = v21 * inv[n + 1];
+            L->tay[n + 1][4][l] = v34 * inv[n + 1];
+            L->tay[n + 1][5][l] = v50 * inv[n + 1];
+            L->tay[n + 1][6][l] = v59 * inv[n + 1];
+            L->tay[n + 1][7][l] = v61 * inv[n + 1];
         }
     }
 }

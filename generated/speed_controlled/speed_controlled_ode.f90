@@ -2038,7 +2038,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:62 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:17 - 1, 0:19 - 1)
     real(c_double) :: acc8
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2058,8 +2058,47 @@ contains
     real(c_double) :: acc58
     real(c_double) :: ib15
     real(c_double) :: ub15
+    real(c_double) :: v10
+    real(c_double) :: v11
+    real(c_double) :: v12
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v20
+    real(c_double) :: v21
+    real(c_double) :: v23
+    real(c_double) :: v25
+    real(c_double) :: v27
+    real(c_double) :: v29
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v34
+    real(c_double) :: v36
+    real(c_double) :: v37
+    real(c_double) :: v38
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v43
+    real(c_double) :: v44
+    real(c_double) :: v45
+    real(c_double) :: v46
+    real(c_double) :: v49
+    real(c_double) :: v50
+    real(c_double) :: v51
+    real(c_double) :: v53
+    real(c_double) :: v54
+    real(c_double) :: v56
+    real(c_double) :: v58
+    real(c_double) :: v59
+    real(c_double) :: v61
     real(c_double) :: w1
+    real(c_double) :: w1_0
+    real(c_double) :: w1_1
     real(c_double) :: w2
+    real(c_double) :: w2_0
+    real(c_double) :: w2_1
+    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2074,57 +2113,57 @@ contains
     tay(7, 0) = x(7)
     tay(8, 0) = speed_controlled_sin(tay(2, 0))
     tay(9, 0) = speed_controlled_cos(tay(2, 0))
-    tay(10, 0) = tay(9, 0) * tay(6, 0)
-    tay(11, 0) = tay(8, 0) * tay(4, 0)
-    tay(12, 0) = tay(10, 0) - tay(11, 0)
-    tay(13, 0) = speed_controlled_sin(tay(1, 0))
-    tay(14, 0) = speed_controlled_cos(tay(1, 0))
-    tay(15, 0) = tay(12, 0) / tay(14, 0)
-    tay(16, 0) = tay(8, 0) * tay(6, 0)
-    tay(17, 0) = tay(9, 0) * tay(4, 0)
-    tay(18, 0) = tay(16, 0) + tay(17, 0)
-    tay(19, 0) = tay(15, 0) * tay(13, 0)
-    tay(20, 0) = tay(5, 0) - tay(19, 0)
-    tay(21, 0) = tay(7, 0) - tay(5, 0)
-    tay(23, 0) = 0.0004980820048148975_c_double * tay(7, 0)
-    tay(25, 0) = 0.33522655090705017_c_double * tay(5, 0)
-    tay(26, 0) = tay(23, 0) + tay(25, 0)
-    tay(27, 0) = tay(6, 0) * tay(26, 0)
-    tay(29, 0) = 0.016919114337701612_c_double * tay(5, 0)
-    tay(31, 0) = 1.2676659094182028e-05_c_double * tay(7, 0)
-    tay(32, 0) = tay(29, 0) - tay(31, 0)
-    tay(33, 0) = tay(32, 0) * tay(4, 0)
-    tay(34, 0) = tay(27, 0) - tay(33, 0)
-    tay(36, 0) = tay(4, 0) * tay(4, 0)
-    tay(37, 0) = 0.018613186525101588_c_double * tay(36, 0)
-    tay(38, 0) = tay(6, 0) * tay(6, 0)
-    tay(39, 0) = 0.018613186525101588_c_double * tay(38, 0)
-    tay(40, 0) = tay(37, 0) - tay(39, 0)
-    tay(43, 0) = c(2) + tay(7, 0)
-    tay(44, 0) = tay(43, 0) - tay(5, 0)
-    tay(45, 0) = c(0) * tay(44, 0)
-    tay(46, 0) = tay(40, 0) + tay(45, 0)
-    tay(48, 0) = 0.06916590204045965_c_double * tay(4, 0)
-    tay(49, 0) = tay(48, 0) * tay(6, 0)
-    tay(50, 0) = tay(46, 0) - tay(49, 0)
-    tay(51, 0) = tay(32, 0) * tay(6, 0)
-    tay(53, 0) = 0.2723557574878444_c_double * tay(5, 0)
-    tay(54, 0) = -tay(53, 0)
-    tay(56, 0) = 0.0005451879938902264_c_double * tay(7, 0)
-    tay(57, 0) = tay(54, 0) - tay(56, 0)
-    tay(58, 0) = tay(4, 0) * tay(57, 0)
-    tay(59, 0) = tay(51, 0) + tay(58, 0)
-    tay(61, 0) = c(1) * tay(44, 0)
-    ib15 = 1.0_c_double / tay(14, 0)
-    ub15 = tay(15, 0) / tay(14, 0)
-    tay(0, 1) = tay(15, 0)
-    tay(1, 1) = tay(18, 0)
-    tay(2, 1) = tay(20, 0)
-    tay(3, 1) = tay(21, 0)
-    tay(4, 1) = tay(34, 0)
-    tay(5, 1) = tay(50, 0)
-    tay(6, 1) = tay(59, 0)
-    tay(7, 1) = tay(61, 0)
+    v10 = tay(9, 0) * tay(6, 0)
+    v11 = tay(8, 0) * tay(4, 0)
+    v12 = v10 - v11
+    tay(10, 0) = speed_controlled_sin(tay(1, 0))
+    tay(11, 0) = speed_controlled_cos(tay(1, 0))
+    tay(12, 0) = v12 / tay(11, 0)
+    v16 = tay(8, 0) * tay(6, 0)
+    v17 = tay(9, 0) * tay(4, 0)
+    v18 = v16 + v17
+    v19 = tay(12, 0) * tay(10, 0)
+    v20 = tay(5, 0) - v19
+    v21 = tay(7, 0) - tay(5, 0)
+    v23 = 0.0004980820048148975_c_double * tay(7, 0)
+    v25 = 0.33522655090705017_c_double * tay(5, 0)
+    tay(13, 0) = v23 + v25
+    v27 = tay(6, 0) * tay(13, 0)
+    v29 = 0.016919114337701612_c_double * tay(5, 0)
+    v31 = 1.2676659094182028e-05_c_double * tay(7, 0)
+    tay(14, 0) = v29 - v31
+    v33 = tay(14, 0) * tay(4, 0)
+    v34 = v27 - v33
+    v36 = tay(4, 0) * tay(4, 0)
+    v37 = 0.018613186525101588_c_double * v36
+    v38 = tay(6, 0) * tay(6, 0)
+    v39 = 0.018613186525101588_c_double * v38
+    v40 = v37 - v39
+    v43 = c(2) + tay(7, 0)
+    v44 = v43 - tay(5, 0)
+    v45 = c(0) * v44
+    v46 = v40 + v45
+    tay(15, 0) = 0.06916590204045965_c_double * tay(4, 0)
+    v49 = tay(15, 0) * tay(6, 0)
+    v50 = v46 - v49
+    v51 = tay(14, 0) * tay(6, 0)
+    v53 = 0.2723557574878444_c_double * tay(5, 0)
+    v54 = -v53
+    v56 = 0.0005451879938902264_c_double * tay(7, 0)
+    tay(16, 0) = v54 - v56
+    v58 = tay(4, 0) * tay(16, 0)
+    v59 = v51 + v58
+    v61 = c(1) * v44
+    ib15 = 1.0_c_double / tay(11, 0)
+    ub15 = tay(12, 0) / tay(11, 0)
+    tay(0, 1) = tay(12, 0)
+    tay(1, 1) = v18
+    tay(2, 1) = v20
+    tay(3, 1) = v21
+    tay(4, 1) = v34
+    tay(5, 1) = v50
+    tay(6, 1) = v59
+    tay(7, 1) = v61
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
     do n = 1, order - 1
@@ -2145,78 +2184,114 @@ contains
       acc49 = 0.0_c_double
       acc51 = 0.0_c_double
       acc58 = 0.0_c_double
-      do j = 1, n - 1
+      do b = 0, (n - 1) / 2 - 1
+        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
+        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
+        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
+        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
+        acc8 = acc8 + (w2_0 * tay(9, n - (2 * b + 1)) + w2_1 * tay(9, n - (2 * b + 2)))
+        acc9 = acc9 + (w2_0 * tay(8, n - (2 * b + 1)) + w2_1 * tay(8, n - (2 * b + 2)))
+        acc10 = acc10 + (tay(9, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(6, &
+            n - (2 * b + 2)))
+        acc11 = acc11 + (tay(8, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(4, &
+            n - (2 * b + 2)))
+        acc13 = acc13 + (w1_0 * tay(11, n - (2 * b + 1)) + w1_1 * tay(11, n - (2 * b + 2)))
+        acc14 = acc14 + (w1_0 * tay(10, n - (2 * b + 1)) + w1_1 * tay(10, n - (2 * b + 2)))
+        acc15 = acc15 + (tay(11, 2 * b + 1) * tay(12, n - (2 * b + 1)) + tay(11, &
+            2 * b + 2) * tay(12, n - (2 * b + 2)))
+        acc16 = acc16 + (tay(8, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(6, &
+            n - (2 * b + 2)))
+        acc17 = acc17 + (tay(9, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(4, &
+            n - (2 * b + 2)))
+        acc19 = acc19 + (tay(12, 2 * b + 1) * tay(10, n - (2 * b + 1)) + tay(12, &
+            2 * b + 2) * tay(10, n - (2 * b + 2)))
+        acc27 = acc27 + (tay(6, 2 * b + 1) * tay(13, n - (2 * b + 1)) + tay(6, &
+            2 * b + 2) * tay(13, n - (2 * b + 2)))
+        acc33 = acc33 + (tay(14, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(14, &
+            2 * b + 2) * tay(4, n - (2 * b + 2)))
+        acc36 = acc36 + (tay(4, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(4, 2 * b + 2) * tay(4, &
+            n - (2 * b + 2)))
+        acc38 = acc38 + (tay(6, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(6, 2 * b + 2) * tay(6, &
+            n - (2 * b + 2)))
+        acc49 = acc49 + (tay(15, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(15, &
+            2 * b + 2) * tay(6, n - (2 * b + 2)))
+        acc51 = acc51 + (tay(14, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(14, &
+            2 * b + 2) * tay(6, n - (2 * b + 2)))
+        acc58 = acc58 + (tay(4, 2 * b + 1) * tay(16, n - (2 * b + 1)) + tay(4, &
+            2 * b + 2) * tay(16, n - (2 * b + 2)))
+      end do
+      do j = 2 * ((n - 1) / 2) + 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
         acc8 = acc8 + w2 * tay(9, n - j)
         acc9 = acc9 + w2 * tay(8, n - j)
         acc10 = acc10 + tay(9, j) * tay(6, n - j)
         acc11 = acc11 + tay(8, j) * tay(4, n - j)
-        acc13 = acc13 + w1 * tay(14, n - j)
-        acc14 = acc14 + w1 * tay(13, n - j)
-        acc15 = acc15 + tay(14, j) * tay(15, n - j)
+        acc13 = acc13 + w1 * tay(11, n - j)
+        acc14 = acc14 + w1 * tay(10, n - j)
+        acc15 = acc15 + tay(11, j) * tay(12, n - j)
         acc16 = acc16 + tay(8, j) * tay(6, n - j)
         acc17 = acc17 + tay(9, j) * tay(4, n - j)
-        acc19 = acc19 + tay(15, j) * tay(13, n - j)
-        acc27 = acc27 + tay(6, j) * tay(26, n - j)
-        acc33 = acc33 + tay(32, j) * tay(4, n - j)
+        acc19 = acc19 + tay(12, j) * tay(10, n - j)
+        acc27 = acc27 + tay(6, j) * tay(13, n - j)
+        acc33 = acc33 + tay(14, j) * tay(4, n - j)
         acc36 = acc36 + tay(4, j) * tay(4, n - j)
         acc38 = acc38 + tay(6, j) * tay(6, n - j)
-        acc49 = acc49 + tay(48, j) * tay(6, n - j)
-        acc51 = acc51 + tay(32, j) * tay(6, n - j)
-        acc58 = acc58 + tay(4, j) * tay(57, n - j)
+        acc49 = acc49 + tay(15, j) * tay(6, n - j)
+        acc51 = acc51 + tay(14, j) * tay(6, n - j)
+        acc58 = acc58 + tay(4, j) * tay(16, n - j)
       end do
       tay(8, n) = acc8 * inv(n) + tay(2, n) * tay(9, 0)
       tay(9, n) = (-acc9 * inv(n)) - tay(2, n) * tay(8, 0)
-      tay(10, n) = (acc10 + tay(9, 0) * tay(6, n)) + tay(9, n) * tay(6, 0)
-      tay(11, n) = (acc11 + tay(8, 0) * tay(4, n)) + tay(8, n) * tay(4, 0)
-      tay(12, n) = tay(10, n) - tay(11, n)
-      tay(13, n) = acc13 * inv(n) + tay(1, n) * tay(14, 0)
-      tay(14, n) = (-acc14 * inv(n)) - tay(1, n) * tay(13, 0)
-      tay(15, n) = tay(12, n) * ib15 - (acc15 * ib15 + tay(14, n) * ub15)
-      tay(16, n) = (acc16 + tay(8, 0) * tay(6, n)) + tay(8, n) * tay(6, 0)
-      tay(17, n) = (acc17 + tay(9, 0) * tay(4, n)) + tay(9, n) * tay(4, 0)
-      tay(18, n) = tay(16, n) + tay(17, n)
-      tay(19, n) = (acc19 + tay(15, 0) * tay(13, n)) + tay(15, n) * tay(13, 0)
-      tay(20, n) = tay(5, n) - tay(19, n)
-      tay(21, n) = tay(7, n) - tay(5, n)
-      tay(23, n) = 0.0004980820048148975_c_double * tay(7, n)
-      tay(25, n) = 0.33522655090705017_c_double * tay(5, n)
-      tay(26, n) = tay(23, n) + tay(25, n)
-      tay(27, n) = (acc27 + tay(6, 0) * tay(26, n)) + tay(6, n) * tay(26, 0)
-      tay(29, n) = 0.016919114337701612_c_double * tay(5, n)
-      tay(31, n) = 1.2676659094182028e-05_c_double * tay(7, n)
-      tay(32, n) = tay(29, n) - tay(31, n)
-      tay(33, n) = (acc33 + tay(32, 0) * tay(4, n)) + tay(32, n) * tay(4, 0)
-      tay(34, n) = tay(27, n) - tay(33, n)
-      tay(36, n) = (acc36 + tay(4, 0) * tay(4, n)) + tay(4, n) * tay(4, 0)
-      tay(37, n) = 0.018613186525101588_c_double * tay(36, n)
-      tay(38, n) = (acc38 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
-      tay(39, n) = 0.018613186525101588_c_double * tay(38, n)
-      tay(40, n) = tay(37, n) - tay(39, n)
-      tay(43, n) = tay(7, n)
-      tay(44, n) = tay(43, n) - tay(5, n)
-      tay(45, n) = c(0) * tay(44, n)
-      tay(46, n) = tay(40, n) + tay(45, n)
-      tay(48, n) = 0.06916590204045965_c_double * tay(4, n)
-      tay(49, n) = (acc49 + tay(48, 0) * tay(6, n)) + tay(48, n) * tay(6, 0)
-      tay(50, n) = tay(46, n) - tay(49, n)
-      tay(51, n) = (acc51 + tay(32, 0) * tay(6, n)) + tay(32, n) * tay(6, 0)
-      tay(53, n) = 0.2723557574878444_c_double * tay(5, n)
-      tay(54, n) = -tay(53, n)
-      tay(56, n) = 0.0005451879938902264_c_double * tay(7, n)
-      tay(57, n) = tay(54, n) - tay(56, n)
-      tay(58, n) = (acc58 + tay(4, 0) * tay(57, n)) + tay(4, n) * tay(57, 0)
-      tay(59, n) = tay(51, n) + tay(58, n)
-      tay(61, n) = c(1) * tay(44, n)
-      tay(0, n + 1) = tay(15, n) * inv(n + 1)
-      tay(1, n + 1) = tay(18, n) * inv(n + 1)
-      tay(2, n + 1) = tay(20, n) * inv(n + 1)
-      tay(3, n + 1) = tay(21, n) * inv(n + 1)
-      tay(4, n + 1) = tay(34, n) * inv(n + 1)
-      tay(5, n + 1) = tay(50, n) * inv(n + 1)
-      tay(6, n + 1) = tay(59, n) * inv(n + 1)
-      tay(7, n + 1) = tay(61, n) * inv(n + 1)
+      v10 = (acc10 + tay(9, 0) * tay(6, n)) + tay(9, n) * tay(6, 0)
+      v11 = (acc11 + tay(8, 0) * tay(4, n)) + tay(8, n) * tay(4, 0)
+      v12 = v10 - v11
+      tay(10, n) = acc13 * inv(n) + tay(1, n) * tay(11, 0)
+      tay(11, n) = (-acc14 * inv(n)) - tay(1, n) * tay(10, 0)
+      tay(12, n) = v12 * ib15 - (acc15 * ib15 + tay(11, n) * ub15)
+      v16 = (acc16 + tay(8, 0) * tay(6, n)) + tay(8, n) * tay(6, 0)
+      v17 = (acc17 + tay(9, 0) * tay(4, n)) + tay(9, n) * tay(4, 0)
+      v18 = v16 + v17
+      v19 = (acc19 + tay(12, 0) * tay(10, n)) + tay(12, n) * tay(10, 0)
+      v20 = tay(5, n) - v19
+      v21 = tay(7, n) - tay(5, n)
+      v23 = 0.0004980820048148975_c_double * tay(7, n)
+      v25 = 0.33522655090705017_c_double * tay(5, n)
+      tay(13, n) = v23 + v25
+      v27 = (acc27 + tay(6, 0) * tay(13, n)) + tay(6, n) * tay(13, 0)
+      v29 = 0.016919114337701612_c_double * tay(5, n)
+      v31 = 1.2676659094182028e-05_c_double * tay(7, n)
+      tay(14, n) = v29 - v31
+      v33 = (acc33 + tay(14, 0) * tay(4, n)) + tay(14, n) * tay(4, 0)
+      v34 = v27 - v33
+      v36 = (acc36 + tay(4, 0) * tay(4, n)) + tay(4, n) * tay(4, 0)
+      v37 = 0.018613186525101588_c_double * v36
+      v38 = (acc38 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
+      v39 = 0.018613186525101588_c_double * v38
+      v40 = v37 - v39
+      v43 = tay(7, n)
+      v44 = v43 - tay(5, n)
+      v45 = c(0) * v44
+      v46 = v40 + v45
+      tay(15, n) = 0.06916590204045965_c_double * tay(4, n)
+      v49 = (acc49 + tay(15, 0) * tay(6, n)) + tay(15, n) * tay(6, 0)
+      v50 = v46 - v49
+      v51 = (acc51 + tay(14, 0) * tay(6, n)) + tay(14, n) * tay(6, 0)
+      v53 = 0.2723557574878444_c_double * tay(5, n)
+      v54 = -v53
+      v56 = 0.0005451879938902264_c_double * tay(7, n)
+      tay(16, n) = v54 - v56
+      v58 = (acc58 + tay(4, 0) * tay(16, n)) + tay(4, n) * tay(16, 0)
+      v59 = v51 + v58
+      v61 = c(1) * v44
+      tay(0, n + 1) = tay(12, n) * inv(n + 1)
+      tay(1, n + 1) = v18 * inv(n + 1)
+      tay(2, n + 1) = v20 * inv(n + 1)
+      tay(3, n + 1) = v21 * inv(n + 1)
+      tay(4, n + 1) = v34 * inv(n + 1)
+      tay(5, n + 1) = v50 * inv(n + 1)
+      tay(6, n + 1) = v59 * inv(n + 1)
+      tay(7, n + 1) = v61 * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -2236,7 +2311,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:62 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:17 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

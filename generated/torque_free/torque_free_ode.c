@@ -1833,7 +1833,7 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
 
 /* The normalized Taylor coefficients of x and of the rhs's 22
    nodes to the given order (12 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[29])
+static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[13])
 {
     double acc7;
     double acc8;
@@ -1849,6 +1849,20 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     double acc27;
     double ib14;
     double ub14;
+    double v9;
+    double v10;
+    double v11;
+    double v15;
+    double v16;
+    double v17;
+    double v18;
+    double v19;
+    double v21;
+    double v23;
+    double v25;
+    double v27;
+    double v28;
+    int b;
     int j;
     int n;
 
@@ -1862,31 +1876,31 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     tay[0][6] = x[6];
     tay[0][7] = torque_free_sin(tay[0][2]);
     tay[0][8] = torque_free_cos(tay[0][2]);
-    tay[0][9] = tay[0][8] * tay[0][5];
-    tay[0][10] = tay[0][7] * tay[0][3];
-    tay[0][11] = tay[0][9] - tay[0][10];
-    tay[0][12] = torque_free_sin(tay[0][1]);
-    tay[0][13] = torque_free_cos(tay[0][1]);
-    tay[0][14] = tay[0][11] / tay[0][13];
-    tay[0][15] = tay[0][7] * tay[0][5];
-    tay[0][16] = tay[0][8] * tay[0][3];
-    tay[0][17] = tay[0][15] + tay[0][16];
-    tay[0][18] = tay[0][14] * tay[0][12];
-    tay[0][19] = tay[0][4] - tay[0][18];
-    tay[0][21] = 0.3114754098360656 * tay[0][4];
-    tay[0][23] = 0.02622950819672131 * tay[0][6];
-    tay[0][24] = tay[0][21] + tay[0][23];
-    tay[0][25] = tay[0][24] * tay[0][5];
-    tay[0][27] = tay[0][24] * tay[0][3];
-    tay[0][28] = -tay[0][27];
-    ib14 = 1.0 / tay[0][13];
-    ub14 = tay[0][14] / tay[0][13];
-    tay[1][0] = tay[0][14];
-    tay[1][1] = tay[0][17];
-    tay[1][2] = tay[0][19];
-    tay[1][3] = tay[0][25];
+    v9 = tay[0][8] * tay[0][5];
+    v10 = tay[0][7] * tay[0][3];
+    v11 = v9 - v10;
+    tay[0][9] = torque_free_sin(tay[0][1]);
+    tay[0][10] = torque_free_cos(tay[0][1]);
+    tay[0][11] = v11 / tay[0][10];
+    v15 = tay[0][7] * tay[0][5];
+    v16 = tay[0][8] * tay[0][3];
+    v17 = v15 + v16;
+    v18 = tay[0][11] * tay[0][9];
+    v19 = tay[0][4] - v18;
+    v21 = 0.3114754098360656 * tay[0][4];
+    v23 = 0.02622950819672131 * tay[0][6];
+    tay[0][12] = v21 + v23;
+    v25 = tay[0][12] * tay[0][5];
+    v27 = tay[0][12] * tay[0][3];
+    v28 = -v27;
+    ib14 = 1.0 / tay[0][10];
+    ub14 = tay[0][11] / tay[0][10];
+    tay[1][0] = tay[0][11];
+    tay[1][1] = v17;
+    tay[1][2] = v19;
+    tay[1][3] = v25;
     tay[1][4] = 0.0;
-    tay[1][5] = tay[0][28];
+    tay[1][5] = v28;
     tay[1][6] = 0.0;
 
     /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
@@ -1903,7 +1917,34 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         acc18 = 0.0;
         acc25 = 0.0;
         acc27 = 0.0;
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            double w1_0, w1_1, w2_0, w2_1;
+            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
+            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
+            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
+            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
+            acc7 = acc7 + (w2_0 * tay[n - (2 * b + 1)][8] + w2_1 * tay[n - (2 * b + 2)][8]);
+            acc8 = acc8 + (w2_0 * tay[n - (2 * b + 1)][7] + w2_1 * tay[n - (2 * b + 2)][7]);
+            acc9 = acc9 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][5]);
+            acc10 = acc10 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][7] *
+                    tay[n - (2 * b + 2)][3]);
+            acc12 = acc12 + (w1_0 * tay[n - (2 * b + 1)][10] + w1_1 * tay[n - (2 * b + 2)][10]);
+            acc13 = acc13 + (w1_0 * tay[n - (2 * b + 1)][9] + w1_1 * tay[n - (2 * b + 2)][9]);
+            acc14 = acc14 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][11] + tay[2 * b + 2][10] *
+                    tay[n - (2 * b + 2)][11]);
+            acc15 = acc15 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][7] *
+                    tay[n - (2 * b + 2)][5]);
+            acc16 = acc16 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][8] *
+                    tay[n - (2 * b + 2)][3]);
+            acc18 = acc18 + (tay[2 * b + 1][11] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][11] *
+                    tay[n - (2 * b + 2)][9]);
+            acc25 = acc25 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][12] *
+                    tay[n - (2 * b + 2)][5]);
+            acc27 = acc27 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][12] *
+                    tay[n - (2 * b + 2)][3]);
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             double w1, w2;
             w1 = (double)j * tay[j][1];
             w2 = (double)j * tay[j][2];
@@ -1911,40 +1952,40 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
             acc8 = acc8 + w2 * tay[n - j][7];
             acc9 = acc9 + tay[j][8] * tay[n - j][5];
             acc10 = acc10 + tay[j][7] * tay[n - j][3];
-            acc12 = acc12 + w1 * tay[n - j][13];
-            acc13 = acc13 + w1 * tay[n - j][12];
-            acc14 = acc14 + tay[j][13] * tay[n - j][14];
+            acc12 = acc12 + w1 * tay[n - j][10];
+            acc13 = acc13 + w1 * tay[n - j][9];
+            acc14 = acc14 + tay[j][10] * tay[n - j][11];
             acc15 = acc15 + tay[j][7] * tay[n - j][5];
             acc16 = acc16 + tay[j][8] * tay[n - j][3];
-            acc18 = acc18 + tay[j][14] * tay[n - j][12];
-            acc25 = acc25 + tay[j][24] * tay[n - j][5];
-            acc27 = acc27 + tay[j][24] * tay[n - j][3];
+            acc18 = acc18 + tay[j][11] * tay[n - j][9];
+            acc25 = acc25 + tay[j][12] * tay[n - j][5];
+            acc27 = acc27 + tay[j][12] * tay[n - j][3];
         }
         tay[n][7] = acc7 * inv[n] + tay[n][2] * tay[0][8];
         tay[n][8] = -(acc8 * inv[n]) - tay[n][2] * tay[0][7];
-        tay[n][9] = acc9 + tay[0][8] * tay[n][5] + tay[n][8] * tay[0][5];
-        tay[n][10] = acc10 + tay[0][7] * tay[n][3] + tay[n][7] * tay[0][3];
-        tay[n][11] = tay[n][9] - tay[n][10];
-        tay[n][12] = acc12 * inv[n] + tay[n][1] * tay[0][13];
-        tay[n][13] = -(acc13 * inv[n]) - tay[n][1] * tay[0][12];
-        tay[n][14] = tay[n][11] * ib14 - (acc14 * ib14 + tay[n][13] * ub14);
-        tay[n][15] = acc15 + tay[0][7] * tay[n][5] + tay[n][7] * tay[0][5];
-        tay[n][16] = acc16 + tay[0][8] * tay[n][3] + tay[n][8] * tay[0][3];
-        tay[n][17] = tay[n][15] + tay[n][16];
-        tay[n][18] = acc18 + tay[0][14] * tay[n][12] + tay[n][14] * tay[0][12];
-        tay[n][19] = tay[n][4] - tay[n][18];
-        tay[n][21] = 0.3114754098360656 * tay[n][4];
-        tay[n][23] = 0.02622950819672131 * tay[n][6];
-        tay[n][24] = tay[n][21] + tay[n][23];
-        tay[n][25] = acc25 + tay[0][24] * tay[n][5] + tay[n][24] * tay[0][5];
-        tay[n][27] = acc27 + tay[0][24] * tay[n][3] + tay[n][24] * tay[0][3];
-        tay[n][28] = -tay[n][27];
-        tay[n + 1][0] = tay[n][14] * inv[n + 1];
-        tay[n + 1][1] = tay[n][17] * inv[n + 1];
-        tay[n + 1][2] = tay[n][19] * inv[n + 1];
-        tay[n + 1][3] = tay[n][25] * inv[n + 1];
+        v9 = acc9 + tay[0][8] * tay[n][5] + tay[n][8] * tay[0][5];
+        v10 = acc10 + tay[0][7] * tay[n][3] + tay[n][7] * tay[0][3];
+        v11 = v9 - v10;
+        tay[n][9] = acc12 * inv[n] + tay[n][1] * tay[0][10];
+        tay[n][10] = -(acc13 * inv[n]) - tay[n][1] * tay[0][9];
+        tay[n][11] = v11 * ib14 - (acc14 * ib14 + tay[n][10] * ub14);
+        v15 = acc15 + tay[0][7] * tay[n][5] + tay[n][7] * tay[0][5];
+        v16 = acc16 + tay[0][8] * tay[n][3] + tay[n][8] * tay[0][3];
+        v17 = v15 + v16;
+        v18 = acc18 + tay[0][11] * tay[n][9] + tay[n][11] * tay[0][9];
+        v19 = tay[n][4] - v18;
+        v21 = 0.3114754098360656 * tay[n][4];
+        v23 = 0.02622950819672131 * tay[n][6];
+        tay[n][12] = v21 + v23;
+        v25 = acc25 + tay[0][12] * tay[n][5] + tay[n][12] * tay[0][5];
+        v27 = acc27 + tay[0][12] * tay[n][3] + tay[n][12] * tay[0][3];
+        v28 = -v27;
+        tay[n + 1][0] = tay[n][11] * inv[n + 1];
+        tay[n + 1][1] = v17 * inv[n + 1];
+        tay[n + 1][2] = v19 * inv[n + 1];
+        tay[n + 1][3] = v25 * inv[n + 1];
         tay[n + 1][4] = 0.0;
-        tay[n + 1][5] = tay[n][28] * inv[n + 1];
+        tay[n + 1][5] = v28 * inv[n + 1];
         tay[n + 1][6] = 0.0;
     }
 }
@@ -1957,7 +1998,7 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, torque_free_stats *stats)
 {
-    double tay[19][29];
+    double tay[19][13];
     double inv[19] = {0.0};
     double f0[TORQUE_FREE_NX];
     double xnew[TORQUE_FREE_NX];
@@ -2119,7 +2160,7 @@ struct lanes {
     long stats_rejected[TORQUE_FREE_LANES];
     long stats_rhs_calls[TORQUE_FREE_LANES];
     double cap[TORQUE_FREE_LANES];
-    double tay[19][29][TORQUE_FREE_LANES];
+    double tay[19][13][TORQUE_FREE_LANES];
     double ts[TORQUE_FREE_LANES];  /* the time of an rhs call */
     int busy[TORQUE_FREE_LANES];
     size_t traj[TORQUE_FREE_LANES];
@@ -2685,10 +2726,11 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
     double acc27[TORQUE_FREE_LANES];
     double ib14[TORQUE_FREE_LANES];
     double ub14[TORQUE_FREE_LANES];
-    int j, l, n;
+    int b, j, l, n;
     /* order 0: the state and every node's value */
     TORQUE_FREE_SIMD
     for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+        double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v28;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -2698,31 +2740,31 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         L->tay[0][6][l] = L->x[6][l];
         L->tay[0][7][l] = torque_free_sin_lanes(L->tay[0][2][l]);
         L->tay[0][8][l] = torque_free_cos_lanes(L->tay[0][2][l]);
-        L->tay[0][9][l] = L->tay[0][8][l] * L->tay[0][5][l];
-        L->tay[0][10][l] = L->tay[0][7][l] * L->tay[0][3][l];
-        L->tay[0][11][l] = L->tay[0][9][l] - L->tay[0][10][l];
-        L->tay[0][12][l] = torque_free_sin_lanes(L->tay[0][1][l]);
-        L->tay[0][13][l] = torque_free_cos_lanes(L->tay[0][1][l]);
-        L->tay[0][14][l] = L->tay[0][11][l] / L->tay[0][13][l];
-        L->tay[0][15][l] = L->tay[0][7][l] * L->tay[0][5][l];
-        L->tay[0][16][l] = L->tay[0][8][l] * L->tay[0][3][l];
-        L->tay[0][17][l] = L->tay[0][15][l] + L->tay[0][16][l];
-        L->tay[0][18][l] = L->tay[0][14][l] * L->tay[0][12][l];
-        L->tay[0][19][l] = L->tay[0][4][l] - L->tay[0][18][l];
-        L->tay[0][21][l] = 0.3114754098360656 * L->tay[0][4][l];
-        L->tay[0][23][l] = 0.02622950819672131 * L->tay[0][6][l];
-        L->tay[0][24][l] = L->tay[0][21][l] + L->tay[0][23][l];
-        L->tay[0][25][l] = L->tay[0][24][l] * L->tay[0][5][l];
-        L->tay[0][27][l] = L->tay[0][24][l] * L->tay[0][3][l];
-        L->tay[0][28][l] = -L->tay[0][27][l];
-        ib14[l] = 1.0 / L->tay[0][13][l];
-        ub14[l] = L->tay[0][14][l] / L->tay[0][13][l];
-        L->tay[1][0][l] = L->tay[0][14][l];
-        L->tay[1][1][l] = L->tay[0][17][l];
-        L->tay[1][2][l] = L->tay[0][19][l];
-        L->tay[1][3][l] = L->tay[0][25][l];
+        v9 = L->tay[0][8][l] * L->tay[0][5][l];
+        v10 = L->tay[0][7][l] * L->tay[0][3][l];
+        v11 = v9 - v10;
+        L->tay[0][9][l] = torque_free_sin_lanes(L->tay[0][1][l]);
+        L->tay[0][10][l] = torque_free_cos_lanes(L->tay[0][1][l]);
+        L->tay[0][11][l] = v11 / L->tay[0][10][l];
+        v15 = L->tay[0][7][l] * L->tay[0][5][l];
+        v16 = L->tay[0][8][l] * L->tay[0][3][l];
+        v17 = v15 + v16;
+        v18 = L->tay[0][11][l] * L->tay[0][9][l];
+        v19 = L->tay[0][4][l] - v18;
+        v21 = 0.3114754098360656 * L->tay[0][4][l];
+        v23 = 0.02622950819672131 * L->tay[0][6][l];
+        L->tay[0][12][l] = v21 + v23;
+        v25 = L->tay[0][12][l] * L->tay[0][5][l];
+        v27 = L->tay[0][12][l] * L->tay[0][3][l];
+        v28 = -v27;
+        ib14[l] = 1.0 / L->tay[0][10][l];
+        ub14[l] = L->tay[0][11][l] / L->tay[0][10][l];
+        L->tay[1][0][l] = L->tay[0][11][l];
+        L->tay[1][1][l] = v17;
+        L->tay[1][2][l] = v19;
+        L->tay[1][3][l] = v25;
         L->tay[1][4][l] = 0.0;
-        L->tay[1][5][l] = L->tay[0][28][l];
+        L->tay[1][5][l] = v28;
         L->tay[1][6][l] = 0.0;
     }
 
@@ -2743,7 +2785,41 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             acc25[l] = 0.0;
             acc27[l] = 0.0;
         }
-        for (j = 1; j < n; ++j) {
+        for (b = 0; b < (n - 1) / 2; ++b) {
+            TORQUE_FREE_SIMD
+            for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+                double w1_0, w1_1, w2_0, w2_1;
+                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
+                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
+                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
+                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
+                acc7[l] = acc7[l] + (w2_0 * L->tay[n - (2 * b + 1)][8][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][8][l]);
+                acc8[l] = acc8[l] + (w2_0 * L->tay[n - (2 * b + 1)][7][l] + w2_1 * L->tay[n - (2
+                        * b + 2)][7][l]);
+                acc9[l] = acc9[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc10[l] = acc10[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc12[l] = acc12[l] + (w1_0 * L->tay[n - (2 * b + 1)][10][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][10][l]);
+                acc13[l] = acc13[l] + (w1_0 * L->tay[n - (2 * b + 1)][9][l] + w1_1 * L->tay[n -
+                        (2 * b + 2)][9][l]);
+                acc14[l] = acc14[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][11][l]
+                        + L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][11][l]);
+                acc15[l] = acc15[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc16[l] = acc16[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][3][l]);
+                acc18[l] = acc18[l] + (L->tay[2 * b + 1][11][l] * L->tay[n - (2 * b + 1)][9][l] +
+                        L->tay[2 * b + 2][11][l] * L->tay[n - (2 * b + 2)][9][l]);
+                acc25[l] = acc25[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][5][l] +
+                        L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][5][l]);
+                acc27[l] = acc27[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][3][l] +
+                        L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][3][l]);
+            }
+        }
+        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
             TORQUE_FREE_SIMD
             for (l = 0; l < TORQUE_FREE_LANES; ++l) {
                 double w1, w2;
@@ -2753,51 +2829,47 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
                 acc8[l] = acc8[l] + w2 * L->tay[n - j][7][l];
                 acc9[l] = acc9[l] + L->tay[j][8][l] * L->tay[n - j][5][l];
                 acc10[l] = acc10[l] + L->tay[j][7][l] * L->tay[n - j][3][l];
-                acc12[l] = acc12[l] + w1 * L->tay[n - j][13][l];
-                acc13[l] = acc13[l] + w1 * L->tay[n - j][12][l];
-                acc14[l] = acc14[l] + L->tay[j][13][l] * L->tay[n - j][14][l];
+                acc12[l] = acc12[l] + w1 * L->tay[n - j][10][l];
+                acc13[l] = acc13[l] + w1 * L->tay[n - j][9][l];
+                acc14[l] = acc14[l] + L->tay[j][10][l] * L->tay[n - j][11][l];
                 acc15[l] = acc15[l] + L->tay[j][7][l] * L->tay[n - j][5][l];
                 acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][3][l];
-                acc18[l] = acc18[l] + L->tay[j][14][l] * L->tay[n - j][12][l];
-                acc25[l] = acc25[l] + L->tay[j][24][l] * L->tay[n - j][5][l];
-                acc27[l] = acc27[l] + L->tay[j][24][l] * L->tay[n - j][3][l];
+                acc18[l] = acc18[l] + L->tay[j][11][l] * L->tay[n - j][9][l];
+                acc25[l] = acc25[l] + L->tay[j][12][l] * L->tay[n - j][5][l];
+                acc27[l] = acc27[l] + L->tay[j][12][l] * L->tay[n - j][3][l];
             }
         }
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+            double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v28;
             L->tay[n][7][l] = acc7[l] * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
             L->tay[n][8][l] = -(acc8[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
-            L->tay[n][9][l] = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] *
+            v9 = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] * L->tay[0][5][l];
+            v10 = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] * L->tay[0][3][l];
+            v11 = v9 - v10;
+            L->tay[n][9][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][10][l];
+            L->tay[n][10][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][9][l];
+            L->tay[n][11][l] = v11 * ib14[l] - (acc14[l] * ib14[l] + L->tay[n][10][l] * ub14[l]);
+            v15 = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] * L->tay[0][5][l];
+            v16 = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
+            v17 = v15 + v16;
+            v18 = acc18[l] + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] *
+                    L->tay[0][9][l];
+            v19 = L->tay[n][4][l] - v18;
+            v21 = 0.3114754098360656 * L->tay[n][4][l];
+            v23 = 0.02622950819672131 * L->tay[n][6][l];
+            L->tay[n][12][l] = v21 + v23;
+            v25 = acc25[l] + L->tay[0][12][l] * L->tay[n][5][l] + L->tay[n][12][l] *
                     L->tay[0][5][l];
-            L->tay[n][10][l] = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] *
+            v27 = acc27[l] + L->tay[0][12][l] * L->tay[n][3][l] + L->tay[n][12][l] *
                     L->tay[0][3][l];
-            L->tay[n][11][l] = L->tay[n][9][l] - L->tay[n][10][l];
-            L->tay[n][12][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][13][l];
-            L->tay[n][13][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][12][l];
-            L->tay[n][14][l] = L->tay[n][11][l] * ib14[l] - (acc14[l] * ib14[l] +
-                    L->tay[n][13][l] * ub14[l]);
-            L->tay[n][15][l] = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] *
-                    L->tay[0][5][l];
-            L->tay[n][16][l] = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] *
-                    L->tay[0][3][l];
-            L->tay[n][17][l] = L->tay[n][15][l] + L->tay[n][16][l];
-            L->tay[n][18][l] = acc18[l] + L->tay[0][14][l] * L->tay[n][12][l] + L->tay[n][14][l]
-                    * L->tay[0][12][l];
-            L->tay[n][19][l] = L->tay[n][4][l] - L->tay[n][18][l];
-            L->tay[n][21][l] = 0.3114754098360656 * L->tay[n][4][l];
-            L->tay[n][23][l] = 0.02622950819672131 * L->tay[n][6][l];
-            L->tay[n][24][l] = L->tay[n][21][l] + L->tay[n][23][l];
-            L->tay[n][25][l] = acc25[l] + L->tay[0][24][l] * L->tay[n][5][l] + L->tay[n][24][l] *
-                    L->tay[0][5][l];
-            L->tay[n][27][l] = acc27[l] + L->tay[0][24][l] * L->tay[n][3][l] + L->tay[n][24][l] *
-                    L->tay[0][3][l];
-            L->tay[n][28][l] = -L->tay[n][27][l];
-            L->tay[n + 1][0][l] = L->tay[n][14][l] * inv[n + 1];
-            L->tay[n + 1][1][l] = L->tay[n][17][l] * inv[n + 1];
-            L->tay[n + 1][2][l] = L->tay[n][19][l] * inv[n + 1];
-            L->tay[n + 1][3][l] = L->tay[n][25][l] * inv[n + 1];
+            v28 = -v27;
+            L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
+            L->tay[n + 1][1][l] = v17 * inv[n + 1];
+            L->tay[n + 1][2][l] = v19 * inv[n + 1];
+            L->tay[n + 1][3][l] = v25 * inv[n + 1];
             L->tay[n + 1][4][l] = 0.0;
-            L->tay[n + 1][5][l] = L->tay[n][28][l] * inv[n + 1];
+            L->tay[n + 1][5][l] = v28 * inv[n + 1];
             L->tay[n + 1][6][l] = 0.0;
         }
     }

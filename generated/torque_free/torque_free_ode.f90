@@ -1998,7 +1998,7 @@ contains
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:29 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:13 - 1, 0:19 - 1)
     real(c_double) :: acc7
     real(c_double) :: acc8
     real(c_double) :: acc9
@@ -2013,8 +2013,26 @@ contains
     real(c_double) :: acc27
     real(c_double) :: ib14
     real(c_double) :: ub14
+    real(c_double) :: v9
+    real(c_double) :: v10
+    real(c_double) :: v11
+    real(c_double) :: v15
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v21
+    real(c_double) :: v23
+    real(c_double) :: v25
+    real(c_double) :: v27
+    real(c_double) :: v28
     real(c_double) :: w1
+    real(c_double) :: w1_0
+    real(c_double) :: w1_1
     real(c_double) :: w2
+    real(c_double) :: w2_0
+    real(c_double) :: w2_1
+    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2028,31 +2046,31 @@ contains
     tay(6, 0) = x(6)
     tay(7, 0) = torque_free_sin(tay(2, 0))
     tay(8, 0) = torque_free_cos(tay(2, 0))
-    tay(9, 0) = tay(8, 0) * tay(5, 0)
-    tay(10, 0) = tay(7, 0) * tay(3, 0)
-    tay(11, 0) = tay(9, 0) - tay(10, 0)
-    tay(12, 0) = torque_free_sin(tay(1, 0))
-    tay(13, 0) = torque_free_cos(tay(1, 0))
-    tay(14, 0) = tay(11, 0) / tay(13, 0)
-    tay(15, 0) = tay(7, 0) * tay(5, 0)
-    tay(16, 0) = tay(8, 0) * tay(3, 0)
-    tay(17, 0) = tay(15, 0) + tay(16, 0)
-    tay(18, 0) = tay(14, 0) * tay(12, 0)
-    tay(19, 0) = tay(4, 0) - tay(18, 0)
-    tay(21, 0) = 0.3114754098360656_c_double * tay(4, 0)
-    tay(23, 0) = 0.02622950819672131_c_double * tay(6, 0)
-    tay(24, 0) = tay(21, 0) + tay(23, 0)
-    tay(25, 0) = tay(24, 0) * tay(5, 0)
-    tay(27, 0) = tay(24, 0) * tay(3, 0)
-    tay(28, 0) = -tay(27, 0)
-    ib14 = 1.0_c_double / tay(13, 0)
-    ub14 = tay(14, 0) / tay(13, 0)
-    tay(0, 1) = tay(14, 0)
-    tay(1, 1) = tay(17, 0)
-    tay(2, 1) = tay(19, 0)
-    tay(3, 1) = tay(25, 0)
+    v9 = tay(8, 0) * tay(5, 0)
+    v10 = tay(7, 0) * tay(3, 0)
+    v11 = v9 - v10
+    tay(9, 0) = torque_free_sin(tay(1, 0))
+    tay(10, 0) = torque_free_cos(tay(1, 0))
+    tay(11, 0) = v11 / tay(10, 0)
+    v15 = tay(7, 0) * tay(5, 0)
+    v16 = tay(8, 0) * tay(3, 0)
+    v17 = v15 + v16
+    v18 = tay(11, 0) * tay(9, 0)
+    v19 = tay(4, 0) - v18
+    v21 = 0.3114754098360656_c_double * tay(4, 0)
+    v23 = 0.02622950819672131_c_double * tay(6, 0)
+    tay(12, 0) = v21 + v23
+    v25 = tay(12, 0) * tay(5, 0)
+    v27 = tay(12, 0) * tay(3, 0)
+    v28 = -v27
+    ib14 = 1.0_c_double / tay(10, 0)
+    ub14 = tay(11, 0) / tay(10, 0)
+    tay(0, 1) = tay(11, 0)
+    tay(1, 1) = v17
+    tay(2, 1) = v19
+    tay(3, 1) = v25
     tay(4, 1) = 0.0_c_double
-    tay(5, 1) = tay(28, 0)
+    tay(5, 1) = v28
     tay(6, 1) = 0.0_c_double
 
     ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
@@ -2069,47 +2087,73 @@ contains
       acc18 = 0.0_c_double
       acc25 = 0.0_c_double
       acc27 = 0.0_c_double
-      do j = 1, n - 1
+      do b = 0, (n - 1) / 2 - 1
+        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
+        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
+        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
+        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
+        acc7 = acc7 + (w2_0 * tay(8, n - (2 * b + 1)) + w2_1 * tay(8, n - (2 * b + 2)))
+        acc8 = acc8 + (w2_0 * tay(7, n - (2 * b + 1)) + w2_1 * tay(7, n - (2 * b + 2)))
+        acc9 = acc9 + (tay(8, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(5, &
+            n - (2 * b + 2)))
+        acc10 = acc10 + (tay(7, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(7, 2 * b + 2) * tay(3, &
+            n - (2 * b + 2)))
+        acc12 = acc12 + (w1_0 * tay(10, n - (2 * b + 1)) + w1_1 * tay(10, n - (2 * b + 2)))
+        acc13 = acc13 + (w1_0 * tay(9, n - (2 * b + 1)) + w1_1 * tay(9, n - (2 * b + 2)))
+        acc14 = acc14 + (tay(10, 2 * b + 1) * tay(11, n - (2 * b + 1)) + tay(10, &
+            2 * b + 2) * tay(11, n - (2 * b + 2)))
+        acc15 = acc15 + (tay(7, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(7, 2 * b + 2) * tay(5, &
+            n - (2 * b + 2)))
+        acc16 = acc16 + (tay(8, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(3, &
+            n - (2 * b + 2)))
+        acc18 = acc18 + (tay(11, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(11, &
+            2 * b + 2) * tay(9, n - (2 * b + 2)))
+        acc25 = acc25 + (tay(12, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(12, &
+            2 * b + 2) * tay(5, n - (2 * b + 2)))
+        acc27 = acc27 + (tay(12, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(12, &
+            2 * b + 2) * tay(3, n - (2 * b + 2)))
+      end do
+      do j = 2 * ((n - 1) / 2) + 1, n - 1
         w1 = real(j, c_double) * tay(1, j)
         w2 = real(j, c_double) * tay(2, j)
         acc7 = acc7 + w2 * tay(8, n - j)
         acc8 = acc8 + w2 * tay(7, n - j)
         acc9 = acc9 + tay(8, j) * tay(5, n - j)
         acc10 = acc10 + tay(7, j) * tay(3, n - j)
-        acc12 = acc12 + w1 * tay(13, n - j)
-        acc13 = acc13 + w1 * tay(12, n - j)
-        acc14 = acc14 + tay(13, j) * tay(14, n - j)
+        acc12 = acc12 + w1 * tay(10, n - j)
+        acc13 = acc13 + w1 * tay(9, n - j)
+        acc14 = acc14 + tay(10, j) * tay(11, n - j)
         acc15 = acc15 + tay(7, j) * tay(5, n - j)
         acc16 = acc16 + tay(8, j) * tay(3, n - j)
-        acc18 = acc18 + tay(14, j) * tay(12, n - j)
-        acc25 = acc25 + tay(24, j) * tay(5, n - j)
-        acc27 = acc27 + tay(24, j) * tay(3, n - j)
+        acc18 = acc18 + tay(11, j) * tay(9, n - j)
+        acc25 = acc25 + tay(12, j) * tay(5, n - j)
+        acc27 = acc27 + tay(12, j) * tay(3, n - j)
       end do
       tay(7, n) = acc7 * inv(n) + tay(2, n) * tay(8, 0)
       tay(8, n) = (-acc8 * inv(n)) - tay(2, n) * tay(7, 0)
-      tay(9, n) = (acc9 + tay(8, 0) * tay(5, n)) + tay(8, n) * tay(5, 0)
-      tay(10, n) = (acc10 + tay(7, 0) * tay(3, n)) + tay(7, n) * tay(3, 0)
-      tay(11, n) = tay(9, n) - tay(10, n)
-      tay(12, n) = acc12 * inv(n) + tay(1, n) * tay(13, 0)
-      tay(13, n) = (-acc13 * inv(n)) - tay(1, n) * tay(12, 0)
-      tay(14, n) = tay(11, n) * ib14 - (acc14 * ib14 + tay(13, n) * ub14)
-      tay(15, n) = (acc15 + tay(7, 0) * tay(5, n)) + tay(7, n) * tay(5, 0)
-      tay(16, n) = (acc16 + tay(8, 0) * tay(3, n)) + tay(8, n) * tay(3, 0)
-      tay(17, n) = tay(15, n) + tay(16, n)
-      tay(18, n) = (acc18 + tay(14, 0) * tay(12, n)) + tay(14, n) * tay(12, 0)
-      tay(19, n) = tay(4, n) - tay(18, n)
-      tay(21, n) = 0.3114754098360656_c_double * tay(4, n)
-      tay(23, n) = 0.02622950819672131_c_double * tay(6, n)
-      tay(24, n) = tay(21, n) + tay(23, n)
-      tay(25, n) = (acc25 + tay(24, 0) * tay(5, n)) + tay(24, n) * tay(5, 0)
-      tay(27, n) = (acc27 + tay(24, 0) * tay(3, n)) + tay(24, n) * tay(3, 0)
-      tay(28, n) = -tay(27, n)
-      tay(0, n + 1) = tay(14, n) * inv(n + 1)
-      tay(1, n + 1) = tay(17, n) * inv(n + 1)
-      tay(2, n + 1) = tay(19, n) * inv(n + 1)
-      tay(3, n + 1) = tay(25, n) * inv(n + 1)
+      v9 = (acc9 + tay(8, 0) * tay(5, n)) + tay(8, n) * tay(5, 0)
+      v10 = (acc10 + tay(7, 0) * tay(3, n)) + tay(7, n) * tay(3, 0)
+      v11 = v9 - v10
+      tay(9, n) = acc12 * inv(n) + tay(1, n) * tay(10, 0)
+      tay(10, n) = (-acc13 * inv(n)) - tay(1, n) * tay(9, 0)
+      tay(11, n) = v11 * ib14 - (acc14 * ib14 + tay(10, n) * ub14)
+      v15 = (acc15 + tay(7, 0) * tay(5, n)) + tay(7, n) * tay(5, 0)
+      v16 = (acc16 + tay(8, 0) * tay(3, n)) + tay(8, n) * tay(3, 0)
+      v17 = v15 + v16
+      v18 = (acc18 + tay(11, 0) * tay(9, n)) + tay(11, n) * tay(9, 0)
+      v19 = tay(4, n) - v18
+      v21 = 0.3114754098360656_c_double * tay(4, n)
+      v23 = 0.02622950819672131_c_double * tay(6, n)
+      tay(12, n) = v21 + v23
+      v25 = (acc25 + tay(12, 0) * tay(5, n)) + tay(12, n) * tay(5, 0)
+      v27 = (acc27 + tay(12, 0) * tay(3, n)) + tay(12, n) * tay(3, 0)
+      v28 = -v27
+      tay(0, n + 1) = tay(11, n) * inv(n + 1)
+      tay(1, n + 1) = v17 * inv(n + 1)
+      tay(2, n + 1) = v19 * inv(n + 1)
+      tay(3, n + 1) = v25 * inv(n + 1)
       tay(4, n + 1) = 0.0_c_double
-      tay(5, n + 1) = tay(28, n) * inv(n + 1)
+      tay(5, n + 1) = v28 * inv(n + 1)
       tay(6, n + 1) = 0.0_c_double
     end do
   end subroutine taylor_jet
@@ -2130,7 +2174,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:29 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:13 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

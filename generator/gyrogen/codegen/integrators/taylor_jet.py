@@ -14,6 +14,14 @@ nodes; then each state's coefficient k+1 = f[k] / (k+1). The recurrences
               c[k] = -(1/k) sum_{j=1..k} j a[j] s[k-j]
 A constant operand (hoisted parameters, numbers) has no coefficient past
 order 0: a product or quotient by it is a scaling.
+
+Only what a later order reads is stored (`kept`): the states (the step's
+polynomial), every operand a convolution reads at a lower order, and the
+constant nodes; the other nodes (sums, differences, scalings) are values of
+their order alone (locals of intent "tmp": over lanes, scoped to one loop
+over the lanes), so the coefficients a step touches are fewer and stay in
+the first-level cache. A convolution's lower-order terms are summed UNROLL
+at a time, pairwise, then added to its accumulator.
 """
 
 from __future__ import annotations
@@ -36,13 +44,35 @@ from gyrogen.methods import Method
 from gyrogen.symbolic.jet import Jet, Node
 from gyrogen.tableaus import Series
 
-T, c, k, j = Var("tay"), Var("c"), Var("n"), Var("j")
+T, c, k, j, b = Var("tay"), Var("c"), Var("n"), Var("j"), Var("b")
 order = Var("order")
+UNROLL = 2
+"""Terms of a convolution per turn of its loop: their sum is added to the
+accumulator once (over lanes, one load and store of it per UNROLL terms).
+On the default scene 2 beat 1, 4 and 8, in the batch and the single call."""
+
+
+def kept(jet: Jet) -> list[int]:
+    """The nodes whose coefficients are stored, states first (row i is
+    state i): the states, a convolution's varying operands and the
+    convolution itself where its recurrence reads its own lower orders
+    (quotient, sin, cos, with the partner), and the constant nodes."""
+    keep = set(range(jet.nx))
+    for n in jet.convolutions():
+        node = jet.nodes[n]
+        if node.op == "mul":
+            keep |= set(node.args)
+        elif node.op == "div":
+            keep |= {node.args[1], n}
+        else:
+            keep |= {node.args[0], n, node.index}
+    keep |= {n for n, node in enumerate(jet.nodes) if node.const and node.op not in ("num", "c")}
+    return sorted(keep)
 
 
 def coefficients(series: Series, jet: Jet) -> Decl:
-    """tay[k][n]: the coefficient of order k of node n."""
-    return Decl("tay", "double", (series.order + 1, len(jet.nodes)), "inout")
+    """tay[k][r]: the coefficient of order k of the node stored in row r."""
+    return Decl("tay", "double", (series.order + 1, len(kept(jet))), "inout")
 
 
 class _Printer:
@@ -50,6 +80,7 @@ class _Printer:
 
     def __init__(self, jet: Jet):
         self.jet = jet
+        self.row = {n: r for r, n in enumerate(kept(jet))}
 
     def zero(self, n: int) -> E:
         """Node n at order 0: a number or c[i] as itself, else T[0][n]."""
@@ -58,10 +89,24 @@ class _Printer:
             return Num(node.value)
         if node.op == "c":
             return c[node.index]
-        return T[Int(0), Int(n)]
+        return self.at(n, Int(0))
 
     def at(self, n: int, order_: E) -> E:
-        return T[order_, Int(n)]
+        """Node n's coefficient of order_: a stored one, or the value of
+        the order being computed (of order 0 or k only)."""
+        if n in self.row:
+            return T[order_, Int(self.row[n])]
+        assert order_ in (k, Int(0)), f"node {n} is not kept, yet read at order {order_}"
+        return Var(f"v{n}")
+
+    def temporaries(self) -> list[int]:
+        """The nodes computed and not stored."""
+        nodes = self.jet.nodes
+        return [
+            n
+            for n in range(self.jet.nx, len(nodes))
+            if n not in self.row and nodes[n].op not in ("num", "c")
+        ]
 
     def value(self, node: Node) -> E:
         """The node's value from its operands' (order 0)."""
@@ -88,16 +133,16 @@ class _Printer:
             return self.at(a, k)
         return self.at(a, k) + self.at(b, k) if node.op == "add" else self.at(a, k) - self.at(b, k)
 
-    def term(self, n: int, node: Node) -> E:
-        """A convolution's term j (1 <= j < k), which reads orders below k."""
-        acc = Var(f"acc{n}")
-        kj = k - j
+    def term(self, n: int, node: Node, jj: E, w: str) -> E:
+        """A convolution's term jj (1 <= jj < k), which reads orders below
+        k; w names the trigonometric argument's jj a[jj]."""
+        kj = k - jj
         if node.op == "mul":
-            a, b = node.args
-            return acc + self.at(a, j) * self.at(b, kj)
+            a, b_ = node.args
+            return self.at(a, jj) * self.at(b_, kj)
         if node.op == "div":
-            return acc + self.at(node.args[1], j) * self.at(n, kj)
-        return acc + Var(f"w{node.args[0]}") * self.at(node.index, kj)
+            return self.at(node.args[1], jj) * self.at(n, kj)
+        return Var(f"w{node.args[0]}{w}") * self.at(node.index, kj)
 
     def finish(self, n: int, node: Node) -> E:
         """Node n at order k >= 1, from its convolution's sum and its operands'
@@ -111,17 +156,17 @@ class _Printer:
             if node.op == "sin":  # (acc + k a[k] c[0]) / k
                 return acc * inv_k + self.at(a, k) * partner
             return -(acc * inv_k) - self.at(a, k) * partner
-        a, b = node.args
+        a, b_ = node.args
         if node.op == "mul":
             if not self.varying(a):
-                return self.zero(a) * self.at(b, k)
-            if not self.varying(b):
-                return self.at(a, k) * self.zero(b)
-            return (acc + self.at(a, Int(0)) * self.at(b, k)) + self.at(a, k) * self.at(b, Int(0))
-        if not self.varying(b):
-            return self.at(a, k) / self.zero(b)
+                return self.zero(a) * self.at(b_, k)
+            if not self.varying(b_):
+                return self.at(a, k) * self.zero(b_)
+            return (acc + self.at(a, Int(0)) * self.at(b_, k)) + self.at(a, k) * self.at(b_, Int(0))
+        if not self.varying(b_):
+            return self.at(a, k) / self.zero(b_)
         # (a[k] - acc - b[k] u[0]) / b[0], with 1/b[0] and u[0]/b[0] from order 0
-        known = acc * Var(f"ib{n}") + self.at(b, k) * Var(f"ub{n}")
+        known = acc * Var(f"ib{n}") + self.at(b_, k) * Var(f"ub{n}")
         return self.at(a, k) * Var(f"ib{n}") - known if self.varying(a) else -known
 
     def divisions(self) -> list[int]:
@@ -138,6 +183,52 @@ def reads_constants(jet: Jet) -> bool:
     return any(n.op == "c" for n in jet.nodes)
 
 
+def _sum(terms: list[E]) -> E:
+    """Pairwise: ((t0 + t1) + (t2 + t3))."""
+    while len(terms) > 1:
+        terms = [terms[i] + terms[i + 1] if i + 1 < len(terms) else terms[i]
+                 for i in range(0, len(terms), 2)]  # fmt: skip
+    return terms[0]
+
+
+def _lower_orders(p: _Printer) -> list[S]:
+    """The convolutions' terms j = 1 .. k-1: UNROLL per turn of a loop over
+    blocks, then the rest one at a time."""
+    jet = p.jet
+    conv = jet.convolutions()
+    if not conv:
+        return []
+    trig = sorted({jet.nodes[n].args[0] for n in conv if jet.nodes[n].op in ("sin", "cos")})
+
+    def turn(js: list[E], tag: str) -> tuple[list[S], tuple[str, ...]]:
+        count = len(js)
+        names = [f"_{u}" if tag else "" for u in range(count)]
+        ws: list[S] = [
+            assign(Var(f"w{a}{w}"), fn("real", jj) * p.at(a, jj))
+            for a in trig
+            for jj, w in zip(js, names, strict=True)
+        ]
+        sums: list[S] = [
+            assign(
+                Var(f"acc{n}"),
+                Var(f"acc{n}")
+                + _sum([p.term(n, jet.nodes[n], jj, w) for jj, w in zip(js, names, strict=True)]),
+            )
+            for n in conv
+        ]
+        return ws + sums, tuple(f"w{a}{w}" for a in trig for w in names)
+
+    blocks = (k - Int(1)) / Int(UNROLL)
+    out: list[S] = [assign(Var(f"acc{n}"), 0.0) for n in conv]
+    if UNROLL > 1:
+        body, scoped = turn([Int(UNROLL) * b + Int(1 + u) for u in range(UNROLL)], "u")
+        out.append(For("b", blocks, tuple(body), scoped))
+    body, scoped = turn([j], "")
+    start = Int(UNROLL) * blocks + Int(1) if UNROLL > 1 else Int(1)
+    out.append(For("j", k, tuple(body), scoped, start=start))
+    return out
+
+
 def jet_function(series: Series, jet: Jet) -> Func:
     """taylor_jet: tay[0 .. order][*] at x; inv[k] = 1/k."""
     p = _Printer(jet)
@@ -145,26 +236,20 @@ def jet_function(series: Series, jet: Jet) -> Func:
     body: list[S] = [Comment("order 0: the state and every node's value", False)]
     body += [assign(T[Int(0), Int(n)], x[n]) for n in range(nx)]
     body += [
-        assign(T[Int(0), Int(n)], p.value(jet.nodes[n]))
+        assign(p.at(n, Int(0)), p.value(jet.nodes[n]))  # type: ignore[arg-type]
         for n in range(nx, len(jet.nodes))
         if jet.nodes[n].op not in ("num", "c")
     ]
     for n in p.divisions():
-        b0 = T[Int(0), Int(jet.nodes[n].args[1])]
+        b0 = p.at(jet.nodes[n].args[1], Int(0))
         body += [
             assign(Var(f"ib{n}"), Num(1.0) / b0),
-            assign(Var(f"ub{n}"), T[Int(0), Int(n)] / b0),
+            assign(Var(f"ub{n}"), p.at(n, Int(0)) / b0),
         ]
     body += [assign(T[Int(1), Int(n)], p.zero(f)) for n, f in enumerate(jet.outputs)]
-    conv = jet.convolutions()
-    trig_args = sorted({jet.nodes[n].args[0] for n in conv if jet.nodes[n].op in ("sin", "cos")})
-    loop: list[S] = [assign(Var(f"w{a}"), fn("real", j) * p.at(a, j)) for a in trig_args]
-    loop += [assign(Var(f"acc{n}"), p.term(n, jet.nodes[n])) for n in conv]
-    order_k: list[S] = [assign(Var(f"acc{n}"), 0.0) for n in conv]
-    if conv:
-        order_k.append(For("j", k, tuple(loop), tuple(f"w{a}" for a in trig_args), start=Int(1)))
+    order_k = _lower_orders(p)
     order_k += [
-        assign(T[k, Int(n)], p.finish(n, jet.nodes[n]))
+        assign(p.at(n, k), p.finish(n, jet.nodes[n]))  # type: ignore[arg-type]
         for n in range(nx, len(jet.nodes))
         if not jet.nodes[n].const
     ]
@@ -182,9 +267,11 @@ def jet_function(series: Series, jet: Jet) -> Func:
         Decl("inv", "double", (series.order + 1,)),
         coefficients(series, jet),
     )
+    conv = jet.convolutions()
     locals_ = (
         *(real(f"acc{n}", "inout") for n in conv),
         *(real(f"{v}{n}", "inout") for n in p.divisions() for v in ("ib", "ub")),
+        *(real(f"v{n}", "tmp") for n in p.temporaries()),
     )
     doc = (
         f"The normalized Taylor coefficients of x and of the rhs's {len(jet.nodes) - nx}",

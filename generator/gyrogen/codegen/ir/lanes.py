@@ -53,6 +53,10 @@ class LanesPrinter(CPrinter):
         d = self.decls.get(name)
         return d is not None and d.intent == "in"
 
+    def temporary(self, name: str) -> bool:
+        d = self.decls.get(name)
+        return d is not None and d.intent == "tmp"
+
     def sets_uniform(self, s: S) -> bool:
         return isinstance(s, Assign) and self.uniform(
             s.target.name if isinstance(s.target, (Var, At)) else ""
@@ -69,7 +73,12 @@ class LanesPrinter(CPrinter):
         if name in self.state:
             d = self.state[name]
             return (self.field(name) if d.shape else f"{self.field(name)}[l]"), ATOM
-        if name in self.decls and name not in self.scoped and not self.uniform(name):
+        if (
+            name in self.decls
+            and name not in self.scoped
+            and not self.uniform(name)
+            and not self.temporary(name)
+        ):
             return f"{name}[l]", ATOM
         return name, ATOM
 
@@ -106,8 +115,10 @@ class LanesPrinter(CPrinter):
 
         def flush() -> None:
             if run:
+                temps = self.temporaries(run)
+                local = [f"{self.indent * (depth + 1)}double {', '.join(temps)};"] if temps else []
                 inner = super(LanesPrinter, self).block(tuple(converted(run)), depth + 1)
-                lines.extend(self.lane_loop(depth, inner, vector(tuple(run))))
+                lines.extend(self.lane_loop(depth, [*local, *inner], vector(tuple(run))))
                 run.clear()
 
         for s in converted(body, top=True, own=frozenset(self.decls)):
@@ -122,6 +133,17 @@ class LanesPrinter(CPrinter):
             lines += self.outer(s, depth)
         flush()
         return lines
+
+    def temporaries(self, run: list[S]) -> list[str]:
+        """The temporaries a run of assignments sets, each before any read."""
+        set_: list[str] = []
+        for s in run:
+            assert isinstance(s, Assign)
+            read = {n for n in names(s.value) if self.temporary(n)}
+            assert read <= set(set_), f"{sorted(read - set(set_))} read before set in a run"
+            if isinstance(s.target, Var) and self.temporary(s.target.name):
+                set_.append(s.target.name)
+        return set_
 
     def outer(self, s: S, depth: int) -> list[str]:
         pad = self.indent * depth
@@ -185,6 +207,7 @@ class LanesPrinter(CPrinter):
             if d.intent == "in"
             else f"{CTYPE[d.type]} {d.name}[{self.width}];"
             for d in func.locals
+            if d.intent != "tmp"
         ]
         loops = sorted({s.var for s in walk_for(func.body)} | {"l"})
         locals_.append(f"int {', '.join(loops)};")
@@ -202,6 +225,18 @@ def vector(body: tuple[S, ...] | list[S]) -> bool:
     pow, log or exp (their vector versions round otherwise than the scalar
     ones the single trajectory calls)."""
     return not any(uses(tuple(body), f) for f in ("pow", "log", "exp"))
+
+
+def names(e: E) -> set[str]:
+    """The variables an expression reads."""
+    if isinstance(e, Var):
+        return {e.name}
+    out = {e.name} if isinstance(e, At) else set()
+    for v in vars(e).values():
+        for x in v if isinstance(v, tuple) else (v,):
+            if isinstance(x, E):
+                out |= names(x)
+    return out
 
 
 def nested(s: S) -> list[S]:

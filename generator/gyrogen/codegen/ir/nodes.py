@@ -285,7 +285,10 @@ class Decl:
     name: str
     type: Type
     shape: tuple[str | int, ...] = ()
-    intent: Literal["in", "out", "inout"] = "in"
+    intent: Literal["in", "out", "inout", "tmp"] = "in"
+    """A local's "in": the same on every lane (set outside the loops over
+    lanes); "tmp": a value used only in the run of statements that sets it
+    (over lanes, a scalar of the one loop over the lanes)."""
     init: E | None = None
     """A local's value at the start (an array: every element)."""
     values: tuple[int, ...] = ()
