@@ -587,7 +587,8 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 
 /* An adaptive method's start (every pair, rodas4, radau5): the arguments,
    the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
-   on from there, else the code to return (x as given). */
+   on from there, else the code to return (x as given). order: the method's,
+   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0. */
 static int ode_start(int order, double t0, double t1, const double *x, const double *c,
                      double rtol, double atol, double h0, long max_steps, double *f0, double *h,
                      gyrostat_stats *stats)
@@ -611,7 +612,9 @@ static int ode_start(int order, double t0, double t1, const double *x, const dou
     if (h0 > 0.0) {
         *h = dmin(h0, t1 - t0);
     } else {
-        *h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+        if (order > 0) {
+            *h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+        }
     }
     return -1;
 }
@@ -2299,7 +2302,7 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    code = ode_start(18, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    code = ode_start(0, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -3607,6 +3610,6 @@ size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const do
 size_t gyrostat_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 18, n, t0, t1, x, c, rtol, atol, h0,
+    return pair_batch(taylor_step_lanes, 0, n, t0, t1, x, c, rtol, atol, h0,
                       max_steps, stats, codes);
 }

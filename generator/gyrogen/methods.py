@@ -183,6 +183,13 @@ class Method:
         return self.pair or self.taylor
 
     @property
+    def start_order(self) -> int:
+        """The order ode_start estimates the first step for (Hairer's HINIT);
+        0 for a Taylor method, whose every step, the first too, comes from
+        its coefficients."""
+        return 0 if self.taylor else self.tableau.order
+
+    @property
     def trial_calls(self) -> int:
         """rhs calls of one trial step of a pair (the first stage is given)."""
         assert not isinstance(self.tableau, Series)

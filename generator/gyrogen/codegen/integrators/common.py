@@ -333,7 +333,11 @@ def ode_start(quaternion: bool) -> Func:
             or_(not_(fn("all_finite", x, NX)), not_(fn("all_finite", f0, NX))),
             (Return(code("ERR_NONFINITE")),),
         ),
-        If(cmp(h0, ">", 0.0), (assign(h, fn("min", h0, t1 - t0)),), (assign(h, first),)),
+        If(
+            cmp(h0, ">", 0.0),
+            (assign(h, fn("min", h0, t1 - t0)),),
+            (If(cmp(Var("order"), ">", 0), (assign(h, first),)),),
+        ),
         Return(Int(-1)),
     ]
     params = (
@@ -352,7 +356,8 @@ def ode_start(quaternion: bool) -> Func:
     doc = (
         "An adaptive method's start (every pair, rodas4, radau5): the arguments,",
         "the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go",
-        "on from there, else the code to return (x as given).",
+        "on from there, else the code to return (x as given). order: the method's,",
+        "for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.",
     )
     return Func("ode_start", params, tuple(body), "int", doc=doc)
 

@@ -216,7 +216,7 @@ def integrate(m: Method, quaternion: bool, krows: int) -> Func:
     begin, rest = parts(m, quaternion)
     t0, cd = Var("t0"), Var("code")
     args = (
-        Int(m.tableau.order),
+        Int(m.start_order),
         t0,
         Var("t1"),
         x,

@@ -197,7 +197,7 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
     assert isinstance(series, Series)
     cd = Var("code")
     args = (
-        Int(series.order),
+        Int(m.start_order),
         Var("t0"),
         Var("t1"),
         x,
