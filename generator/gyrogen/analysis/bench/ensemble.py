@@ -61,12 +61,14 @@ def members(prob: Problem, n: int, seed: int = 0) -> np.ndarray:
     return x0s
 
 
-def finals(prob: Problem, x0s: np.ndarray, tol: float, threads: int | None = None) -> np.ndarray:
+def finals(
+    prob: Problem, x0s: np.ndarray, tol: float, threads: int | None = None, method: str = "dop853"
+) -> np.ndarray:
     x, _, codes = prob.comp.integrate_batch(
-        "dop853", x0s, prob.c, 0.0, prob.t1, threads, rtol=tol, atol=tol, max_steps=MAX_STEPS
+        method, x0s, prob.c, 0.0, prob.t1, threads, rtol=tol, atol=tol, max_steps=MAX_STEPS
     )
     if np.any(codes != 0):
-        raise RuntimeError(f"dop853 failed on {np.count_nonzero(codes)} members at tol {tol:g}")
+        raise RuntimeError(f"{method} failed on {np.count_nonzero(codes)} members at tol {tol:g}")
     return x
 
 

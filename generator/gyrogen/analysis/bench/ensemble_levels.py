@@ -1,5 +1,6 @@
 """bench-ensemble's table at errors 1e-6 to 1e-14: gyrogen's lanes
-(dop853_batch) against heyoka's taylor_adaptive_batch at its recommended
+(dop853_batch and taylor_batch, the faster at each error) against heyoka's
+taylor_adaptive_batch at its recommended
 SIMD width, on one core and on two, each read along its work-precision
 front (workprec.seconds_at: log-log between the tolerances around a level).
 
@@ -33,6 +34,8 @@ from gyrogen.analysis.bench.workprec import Run
 from gyrogen.analysis.bench.workprec_peers import HEYOKA_TAIL
 
 LEVELS = (1e-6, 1e-8, 1e-10, 1e-12, 1e-14)
+GYROGEN = {"dop853": ("g1", "g2"), "taylor": ("t1", "t2")}
+"""gyrogen's batch methods in the table: each one's keys (1 core, 2 cores)."""
 CHECKED = 200
 """Members whose worst error against the real128 reference rates a tolerance."""
 Echo = Callable[[str], None]
@@ -107,6 +110,8 @@ class Workers:
 LABELS = {
     "g1": "gyrogen dop853_batch (lanes), 1 core",
     "g2": "gyrogen dop853_batch (lanes), 2 cores (OpenMP)",
+    "t1": "gyrogen taylor_batch (lanes), 1 core",
+    "t2": "gyrogen taylor_batch (lanes), 2 cores (OpenMP)",
     "h1": "heyoka taylor_adaptive_batch, 1 core",
     "h2": "heyoka taylor_adaptive_batch, 2 processes",
 }
@@ -142,12 +147,13 @@ def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> dict[str, list
     widths = set()
     try:  # each tolerance: gyrogen's then heyoka's, side by side under one load
         for tol in (*ens.LADDER, *HEYOKA_TAIL):
-            if tol in ens.LADDER:
-                err = ens.ensemble_error(ref, ens.finals(prob, few, tol))
-                for key, threads in (("g1", 1), ("g2", two)):
-                    add(
-                        key, tol, err, *timed(partial(ens.finals, prob, x0s, tol, threads), repeats)
-                    )
+            for method, keys in GYROGEN.items():
+                if tol not in ens.LADDER:
+                    break
+                err = ens.ensemble_error(ref, ens.finals(prob, few, tol, method=method))
+                for key, threads in zip(keys, (1, two), strict=True):
+                    run = partial(ens.finals, prob, x0s, tol, threads, method)
+                    add(key, tol, err, *timed(run, repeats))
             batch = heyoka_peer.Batch(sys, prob.x0, prob.c, prob.t1, tol)
             widths.add(batch.width)
             err = ens.ensemble_error(ref, batch.run(few, checked=True))
@@ -182,10 +188,12 @@ def _table(runs: dict[str, list[Run]], echo: Echo) -> None:
     for level in LEVELS:
         t = {k: workprec.seconds_at(v, level) for k, v in runs.items()}
         cells = [f"{level:.0e}"]
-        for g, h in (("g1", "h1"), ("g2", "h2")):
-            tg, th = t[g], t[h]
+        for cores, h in ((0, "h1"), (1, "h2")):
+            times = {m: s for m, keys in GYROGEN.items() if (s := t[keys[cores]]) is not None}
+            best = min(times, key=times.__getitem__) if times else None
+            tg, th = (times[best] if best else None), t[h]
             ratio = "-" if tg is None or th is None else f"{th / tg:.2f}"
-            cells += [_cell(tg), _cell(th), ratio]
+            cells += [_cell(tg) + (f" ({best})" if best else ""), _cell(th), ratio]
         echo("| " + " | ".join(cells) + " |")
 
 
@@ -201,7 +209,7 @@ def figure(runs: dict[str, list[Run]], n: int) -> bytes:
 
     fig = Figure(figsize=(10, 6), dpi=100)
     ax = fig.subplots()
-    styles = {"g1": "-o", "g2": "-s", "h1": ":D", "h2": ":^"}
+    styles = {"g1": "-o", "g2": "-s", "t1": "-v", "t2": "-P", "h1": ":D", "h2": ":^"}
     for key, key_runs in runs.items():
         pts = [(r.seconds * 1e6, r.error) for r in workprec.front(key_runs)]
         if pts:
