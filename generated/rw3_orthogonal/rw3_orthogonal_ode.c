@@ -514,6 +514,105 @@ static int ode_start(int order, double t0, double t1, const double *x, const dou
     return -1;
 }
 
+/* log z for the step size, branch-free (see
+   gyrogen.codegen.integrators.elementary). */
+static inline double step_log(double z)
+{
+    double m;
+    double e;
+    double f;
+    double s;
+    double w;
+    double r;
+    double hf;
+    double inv;
+    double z2;
+
+    m = z > 0.0 && z <= DBL_MAX ? dmax(z, DBL_MIN) : 1.0;
+    inv = m < 1.0 ? -1.0 : 1.0;
+    m = m < 1.0 ? 1.0 / m : m;
+    e = 0.0;
+    e = m >= 1.3407807929942597e+154 ? e + 512.0 : e;
+    m = m >= 1.3407807929942597e+154 ? m * 7.458340731200207e-155 : m;
+    e = m >= 1.157920892373162e+77 ? e + 256.0 : e;
+    m = m >= 1.157920892373162e+77 ? m * 8.636168555094445e-78 : m;
+    e = m >= 3.402823669209385e+38 ? e + 128.0 : e;
+    m = m >= 3.402823669209385e+38 ? m * 2.938735877055719e-39 : m;
+    e = m >= 1.8446744073709552e+19 ? e + 64.0 : e;
+    m = m >= 1.8446744073709552e+19 ? m * 5.421010862427522e-20 : m;
+    e = m >= 4294967296.0 ? e + 32.0 : e;
+    m = m >= 4294967296.0 ? m * 2.3283064365386963e-10 : m;
+    e = m >= 65536.0 ? e + 16.0 : e;
+    m = m >= 65536.0 ? m * 1.52587890625e-05 : m;
+    e = m >= 256.0 ? e + 8.0 : e;
+    m = m >= 256.0 ? m * 0.00390625 : m;
+    e = m >= 16.0 ? e + 4.0 : e;
+    m = m >= 16.0 ? m * 0.0625 : m;
+    e = m >= 4.0 ? e + 2.0 : e;
+    m = m >= 4.0 ? m * 0.25 : m;
+    e = m >= 2.0 ? e + 1.0 : e;
+    m = m >= 2.0 ? m * 0.5 : m;
+    e = m > 1.4142135623730951 ? e + 1.0 : e;
+    m = m > 1.4142135623730951 ? m * 0.5 : m;
+    f = m - 1.0;
+    hf = 0.5 * f * f;
+    s = f / (2.0 + f);
+    z2 = s * s;
+    w = z2 * z2;
+    r = z2 * (0.6666666666666735 + w * (0.2857142874366239 + w * (0.1818357216161805 + w *
+            0.14798198605116586)));
+    r = r + w * (0.3999999999940942 + w * (0.22222198432149784 + w * 0.15313837699209373));
+    r = e * 0.6931471803691238 - (hf - (s * (hf + r) + e * 1.9082149292705877e-10) - f);
+    return z > 0.0 && z <= DBL_MAX ? inv * r : z <= 0.0 ? -DBL_MAX : z;
+}
+
+/* e^y for the step size, branch-free (see
+   gyrogen.codegen.integrators.elementary). */
+static inline double step_exp(double y)
+{
+    double yy;
+    double k;
+    double hi;
+    double lo;
+    double r;
+    double t;
+    double c;
+    double v;
+
+    yy = dmin(dmax(y, -745.0), 709.0);
+    k = yy * 1.4426950408889634 + 6755399441055744.0 - 6755399441055744.0;
+    hi = yy - k * 0.6931471803691238;
+    lo = k * 1.9082149292705877e-10;
+    r = hi - lo;
+    t = r * r;
+    c = r - t * (0.16666666666666602 + t * (-0.0027777777777015593 + t * (6.613756321437934e-05 +
+            t * (-1.6533902205465252e-06 + t * 4.1381367970572385e-08))));
+    v = 1.0 - (lo - r * c / (2.0 - c) - hi);
+    v = k <= -512.0 ? v * 7.458340731200207e-155 : v;
+    k = k <= -512.0 ? k + 512.0 : k;
+    v = k >= 512.0 ? v * 1.3407807929942597e+154 : k <= -512.0 ? v * 7.458340731200207e-155 : v;
+    k = k >= 512.0 ? k - 512.0 : k <= -512.0 ? k + 512.0 : k;
+    v = k >= 256.0 ? v * 1.157920892373162e+77 : k <= -256.0 ? v * 8.636168555094445e-78 : v;
+    k = k >= 256.0 ? k - 256.0 : k <= -256.0 ? k + 256.0 : k;
+    v = k >= 128.0 ? v * 3.402823669209385e+38 : k <= -128.0 ? v * 2.938735877055719e-39 : v;
+    k = k >= 128.0 ? k - 128.0 : k <= -128.0 ? k + 128.0 : k;
+    v = k >= 64.0 ? v * 1.8446744073709552e+19 : k <= -64.0 ? v * 5.421010862427522e-20 : v;
+    k = k >= 64.0 ? k - 64.0 : k <= -64.0 ? k + 64.0 : k;
+    v = k >= 32.0 ? v * 4294967296.0 : k <= -32.0 ? v * 2.3283064365386963e-10 : v;
+    k = k >= 32.0 ? k - 32.0 : k <= -32.0 ? k + 32.0 : k;
+    v = k >= 16.0 ? v * 65536.0 : k <= -16.0 ? v * 1.52587890625e-05 : v;
+    k = k >= 16.0 ? k - 16.0 : k <= -16.0 ? k + 16.0 : k;
+    v = k >= 8.0 ? v * 256.0 : k <= -8.0 ? v * 0.00390625 : v;
+    k = k >= 8.0 ? k - 8.0 : k <= -8.0 ? k + 8.0 : k;
+    v = k >= 4.0 ? v * 16.0 : k <= -4.0 ? v * 0.0625 : v;
+    k = k >= 4.0 ? k - 4.0 : k <= -4.0 ? k + 4.0 : k;
+    v = k >= 2.0 ? v * 4.0 : k <= -2.0 ? v * 0.25 : v;
+    k = k >= 2.0 ? k - 2.0 : k <= -2.0 ? k + 2.0 : k;
+    v = k >= 1.0 ? v * 2.0 : k <= -1.0 ? v * 0.5 : v;
+    k = k >= 1.0 ? k - 1.0 : k <= -1.0 ? k + 1.0 : k;
+    return y > 709.0 ? DBL_MAX : y >= -745.0 ? v : y < -745.0 ? 0.0 : y;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 9) (row i's block ends
    before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -2317,7 +2416,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
         xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-        rho = exp(dmin(log(xmax / dp) * inv[order], log(xmax / dq) * inv[order - 1]));
+        rho = step_exp(dmin(step_log(xmax / dp) * inv[order],
+                step_log(xmax / dq) * inv[order - 1]));
         h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
         h = last ? t1 - t : h;
@@ -3322,11 +3422,11 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
     }
-    /* pow, log, exp: scalar calls, as the single trajectory's */
+    RW3_ORTHOGONAL_SIMD
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
-        rho[l] = exp(dmin(log(xmax[l] / dp[l]) * inv[order],
-                log(xmax[l] / dq[l]) * inv[order - 1]));
+        rho[l] = step_exp(dmin(step_log(xmax[l] / dp[l]) * inv[order],
+                step_log(xmax[l] / dq[l]) * inv[order - 1]));
         L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
         last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
         L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];

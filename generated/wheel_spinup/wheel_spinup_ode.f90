@@ -474,6 +474,130 @@ contains
     return
   end function ode_start
 
+  ! log z for the step size, branch-free (see
+  ! gyrogen.codegen.integrators.elementary).
+  function step_log(z) result(res)
+    real(c_double), intent(in) :: z
+    real(c_double) :: res
+    real(c_double) :: m
+    real(c_double) :: e
+    real(c_double) :: f
+    real(c_double) :: s
+    real(c_double) :: w
+    real(c_double) :: r
+    real(c_double) :: hf
+    real(c_double) :: inv
+    real(c_double) :: z2
+
+    m = merge(max(z, tiny(1.0_c_double)), 1.0_c_double, &
+        z > 0.0_c_double .and. z <= huge(1.0_c_double))
+    inv = merge(-1.0_c_double, 1.0_c_double, m < 1.0_c_double)
+    m = merge(1.0_c_double / m, m, m < 1.0_c_double)
+    e = 0.0_c_double
+    e = merge(e + 512.0_c_double, e, m >= 1.3407807929942597e+154_c_double)
+    m = merge(m * 7.458340731200207e-155_c_double, m, m >= 1.3407807929942597e+154_c_double)
+    e = merge(e + 256.0_c_double, e, m >= 1.157920892373162e+77_c_double)
+    m = merge(m * 8.636168555094445e-78_c_double, m, m >= 1.157920892373162e+77_c_double)
+    e = merge(e + 128.0_c_double, e, m >= 3.402823669209385e+38_c_double)
+    m = merge(m * 2.938735877055719e-39_c_double, m, m >= 3.402823669209385e+38_c_double)
+    e = merge(e + 64.0_c_double, e, m >= 1.8446744073709552e+19_c_double)
+    m = merge(m * 5.421010862427522e-20_c_double, m, m >= 1.8446744073709552e+19_c_double)
+    e = merge(e + 32.0_c_double, e, m >= 4294967296.0_c_double)
+    m = merge(m * 2.3283064365386963e-10_c_double, m, m >= 4294967296.0_c_double)
+    e = merge(e + 16.0_c_double, e, m >= 65536.0_c_double)
+    m = merge(m * 1.52587890625e-05_c_double, m, m >= 65536.0_c_double)
+    e = merge(e + 8.0_c_double, e, m >= 256.0_c_double)
+    m = merge(m * 0.00390625_c_double, m, m >= 256.0_c_double)
+    e = merge(e + 4.0_c_double, e, m >= 16.0_c_double)
+    m = merge(m * 0.0625_c_double, m, m >= 16.0_c_double)
+    e = merge(e + 2.0_c_double, e, m >= 4.0_c_double)
+    m = merge(m * 0.25_c_double, m, m >= 4.0_c_double)
+    e = merge(e + 1.0_c_double, e, m >= 2.0_c_double)
+    m = merge(m * 0.5_c_double, m, m >= 2.0_c_double)
+    e = merge(e + 1.0_c_double, e, m > 1.4142135623730951_c_double)
+    m = merge(m * 0.5_c_double, m, m > 1.4142135623730951_c_double)
+    f = m - 1.0_c_double
+    hf = (0.5_c_double * f) * f
+    s = f / (2.0_c_double + f)
+    z2 = s * s
+    w = z2 * z2
+    r = z2 * (0.6666666666666735_c_double + w * (0.2857142874366239_c_double + w * &
+        (0.1818357216161805_c_double + w * 0.14798198605116586_c_double)))
+    r = r + w * (0.3999999999940942_c_double + w * (0.22222198432149784_c_double + w * &
+        0.15313837699209373_c_double))
+    r = e * 0.6931471803691238_c_double - ((hf - (s * (hf + r) + e * &
+        1.9082149292705877e-10_c_double)) - f)
+    res = merge(inv * r, merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
+        z > 0.0_c_double .and. z <= huge(1.0_c_double))
+    return
+  end function step_log
+
+  ! e^y for the step size, branch-free (see
+  ! gyrogen.codegen.integrators.elementary).
+  function step_exp(y) result(res)
+    real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: yy
+    real(c_double) :: k
+    real(c_double) :: hi
+    real(c_double) :: lo
+    real(c_double) :: r
+    real(c_double) :: t
+    real(c_double) :: c
+    real(c_double) :: v
+
+    yy = min(max(y, -745.0_c_double), 709.0_c_double)
+    k = (yy * 1.4426950408889634_c_double + 6755399441055744.0_c_double) - &
+        6755399441055744.0_c_double
+    hi = yy - k * 0.6931471803691238_c_double
+    lo = k * 1.9082149292705877e-10_c_double
+    r = hi - lo
+    t = r * r
+    c = r - t * (0.16666666666666602_c_double + t * ((-0.0027777777777015593_c_double) + t * &
+        (6.613756321437934e-05_c_double + t * ((-1.6533902205465252e-06_c_double) + t * &
+        4.1381367970572385e-08_c_double))))
+    v = 1.0_c_double - ((lo - (r * c) / (2.0_c_double - c)) - hi)
+    v = merge(v * 7.458340731200207e-155_c_double, v, k <= -512.0_c_double)
+    k = merge(k + 512.0_c_double, k, k <= -512.0_c_double)
+    v = merge(v * 1.3407807929942597e+154_c_double, merge(v * 7.458340731200207e-155_c_double, v, &
+        k <= -512.0_c_double), k >= 512.0_c_double)
+    k = merge(k - 512.0_c_double, merge(k + 512.0_c_double, k, k <= -512.0_c_double), &
+        k >= 512.0_c_double)
+    v = merge(v * 1.157920892373162e+77_c_double, merge(v * 8.636168555094445e-78_c_double, v, &
+        k <= -256.0_c_double), k >= 256.0_c_double)
+    k = merge(k - 256.0_c_double, merge(k + 256.0_c_double, k, k <= -256.0_c_double), &
+        k >= 256.0_c_double)
+    v = merge(v * 3.402823669209385e+38_c_double, merge(v * 2.938735877055719e-39_c_double, v, &
+        k <= -128.0_c_double), k >= 128.0_c_double)
+    k = merge(k - 128.0_c_double, merge(k + 128.0_c_double, k, k <= -128.0_c_double), &
+        k >= 128.0_c_double)
+    v = merge(v * 1.8446744073709552e+19_c_double, merge(v * 5.421010862427522e-20_c_double, v, &
+        k <= -64.0_c_double), k >= 64.0_c_double)
+    k = merge(k - 64.0_c_double, merge(k + 64.0_c_double, k, k <= -64.0_c_double), &
+        k >= 64.0_c_double)
+    v = merge(v * 4294967296.0_c_double, merge(v * 2.3283064365386963e-10_c_double, v, &
+        k <= -32.0_c_double), k >= 32.0_c_double)
+    k = merge(k - 32.0_c_double, merge(k + 32.0_c_double, k, k <= -32.0_c_double), &
+        k >= 32.0_c_double)
+    v = merge(v * 65536.0_c_double, merge(v * 1.52587890625e-05_c_double, v, &
+        k <= -16.0_c_double), k >= 16.0_c_double)
+    k = merge(k - 16.0_c_double, merge(k + 16.0_c_double, k, k <= -16.0_c_double), &
+        k >= 16.0_c_double)
+    v = merge(v * 256.0_c_double, merge(v * 0.00390625_c_double, v, k <= -8.0_c_double), &
+        k >= 8.0_c_double)
+    k = merge(k - 8.0_c_double, merge(k + 8.0_c_double, k, k <= -8.0_c_double), k >= 8.0_c_double)
+    v = merge(v * 16.0_c_double, merge(v * 0.0625_c_double, v, k <= -4.0_c_double), &
+        k >= 4.0_c_double)
+    k = merge(k - 4.0_c_double, merge(k + 4.0_c_double, k, k <= -4.0_c_double), k >= 4.0_c_double)
+    v = merge(v * 4.0_c_double, merge(v * 0.25_c_double, v, k <= -2.0_c_double), k >= 2.0_c_double)
+    k = merge(k - 2.0_c_double, merge(k + 2.0_c_double, k, k <= -2.0_c_double), k >= 2.0_c_double)
+    v = merge(v * 2.0_c_double, merge(v * 0.5_c_double, v, k <= -1.0_c_double), k >= 1.0_c_double)
+    k = merge(k - 1.0_c_double, merge(k + 1.0_c_double, k, k <= -1.0_c_double), k >= 1.0_c_double)
+    res = merge(huge(1.0_c_double), merge(v, merge(0.0_c_double, y, y < -745.0_c_double), &
+        y >= -745.0_c_double), y > 709.0_c_double)
+    return
+  end function step_exp
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8) (row i's block ends
   ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -2373,7 +2497,7 @@ contains
         dq = max(dq, abs(tay(i, order - 1)))
       end do
       xmax = max(scale, xmax)  ! the absolute and relative modes in one
-      rho = exp(min(log(xmax / dp) * inv(order), log(xmax / dq) * inv(order - 1)))
+      rho = step_exp(min(step_log(xmax / dp) * inv(order), step_log(xmax / dq) * inv(order - 1)))
       h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
       h = merge(t1 - t, h, last)

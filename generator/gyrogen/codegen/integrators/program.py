@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from gyrogen.codegen.integrators import (
     common,
+    elementary,
     explicit,
     linear,
     pair,
@@ -80,7 +81,7 @@ def program(
             state = {**state, **{d.name: d for d in taylor.lane_state(m, jet)}}
             init = taylor.start_state() if not pairs else [*init, taylor.start_state()[-1]]
     adaptive = any(not m.fixed_step for m in methods)
-    candidates = common.shared(quaternion, adaptive, True)
+    candidates = [*common.shared(quaternion, adaptive, True), *elementary.functions()]
     if blocks is not None:
         nx = len(blocks.end)
         candidates += [

@@ -146,12 +146,12 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(xmax, fn("max", Var("scale"), xmax), "the absolute and relative modes in one"),
         assign(
             rho,
-            fn(
-                "exp",
+            fn(  # branch-free log and exp: over lanes, vectorized
+                "step_exp",
                 fn(
                     "min",
-                    fn("log", xmax / dp) * Var("inv")[order],
-                    fn("log", xmax / dq) * Var("inv")[order - 1],
+                    fn("step_log", xmax / dp) * Var("inv")[order],
+                    fn("step_log", xmax / dq) * Var("inv")[order - 1],
                 ),
             ),
         ),
