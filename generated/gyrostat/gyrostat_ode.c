@@ -2398,6 +2398,7 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     double dp;
     double dq;
     double rho;
+    double h2;
     int i;
     int q;
 
@@ -2463,13 +2464,19 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                 : code;  /* lost in t, or no steps left */
         run = code < 0;
 
-        /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+        /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
+        h2 = h * h;
         for (i = 0; i < GYROSTAT_NX; ++i) {
             xnew[i] = tay[order][i];
         }
-        for (q = 0; q < order - 1; ++q) {
+        for (q = 0; q < (order - 1) / 2; ++q) {
             for (i = 0; i < GYROSTAT_NX; ++i) {
-                xnew[i] = tay[order - q - 1][i] + h * xnew[i];
+                xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+            }
+        }
+        for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
+            for (i = 0; i < GYROSTAT_NX; ++i) {
+                xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {
@@ -3369,6 +3376,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double dp[GYROSTAT_LANES];
     double dq[GYROSTAT_LANES];
     double rho[GYROSTAT_LANES];
+    double h2[GYROSTAT_LANES];
     int i, l, q;
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
@@ -3432,18 +3440,31 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         run[l] = L->code[l] < 0;
     }
 
-    /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+    /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        h2[l] = L->h[l] * L->h[l];
+    }
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
-    for (q = 0; q < order - 1; ++q) {
+    for (q = 0; q < (order - 1) / 2; ++q) {
         for (i = 0; i < GYROSTAT_NX; ++i) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->xnew[i][l] = L->tay[order - q - 1][i][l] + L->h[l] * L->xnew[i][l];
+                L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
+                        - 1][i][l] + h2[l] * L->xnew[i][l];
+            }
+        }
+    }
+    for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
     }

@@ -2463,6 +2463,7 @@ contains
     real(c_double) :: dp
     real(c_double) :: dq
     real(c_double) :: rho
+    real(c_double) :: h2
     integer(c_int) :: i
     integer(c_int) :: q
 
@@ -2529,13 +2530,19 @@ contains
           stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! lost in t, or no steps left
       run = code < 0
 
-      ! x(t + h) by Horner's scheme, less what the last add lost (comp)
+      ! x(t + h) by Horner's scheme two orders a turn, less what the last add lost
+      h2 = h * h
       do i = 0, nx - 1
         xnew(i) = tay(i, order)
       end do
-      do q = 0, order - 1 - 1
+      do q = 0, (order - 1) / 2 - 1
         do i = 0, nx - 1
-          xnew(i) = tay(i, (order - q) - 1) + h * xnew(i)
+          xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+        end do
+      end do
+      do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
+        do i = 0, nx - 1
+          xnew(i) = tay(i, 1) + h * xnew(i)
         end do
       end do
       do i = 0, nx - 1

@@ -2232,6 +2232,7 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     double dp;
     double dq;
     double rho;
+    double h2;
     int i;
     int q;
 
@@ -2297,13 +2298,19 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                 max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) : code;  /* lost in t, or no steps left */
         run = code < 0;
 
-        /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+        /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
+        h2 = h * h;
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             xnew[i] = tay[order][i];
         }
-        for (q = 0; q < order - 1; ++q) {
+        for (q = 0; q < (order - 1) / 2; ++q) {
             for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                xnew[i] = tay[order - q - 1][i] + h * xnew[i];
+                xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+            }
+        }
+        for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
@@ -3178,6 +3185,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double dp[WHEEL_SPINUP_LANES];
     double dq[WHEEL_SPINUP_LANES];
     double rho[WHEEL_SPINUP_LANES];
+    double h2[WHEEL_SPINUP_LANES];
     int i, l, q;
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
@@ -3242,18 +3250,31 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         run[l] = L->code[l] < 0;
     }
 
-    /* x(t + h) by Horner's scheme, less what the last add lost (comp) */
+    /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        h2[l] = L->h[l] * L->h[l];
+    }
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
-    for (q = 0; q < order - 1; ++q) {
+    for (q = 0; q < (order - 1) / 2; ++q) {
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             WHEEL_SPINUP_SIMD
             for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-                L->xnew[i][l] = L->tay[order - q - 1][i][l] + L->h[l] * L->xnew[i][l];
+                L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
+                        - 1][i][l] + h2[l] * L->xnew[i][l];
+            }
+        }
+    }
+    for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
     }

@@ -284,11 +284,11 @@ def pick(available: Iterable[str], stiff: bool) -> str | None:
 
 
 SCIPY: tuple[str, ...] = ("RK45", "DOP853", "Radau", "LSODA")
+"""scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""
 AUTO = "auto"
 """The method simulate picks itself: for a stiff scene (analysis/check/stiffness.py)
 the build's best implicit integrator (scipy's Radau if it has none), else
-scipy's DOP853."""
-"""scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""
+the build's best explicit one (EXPLICIT_CHOICE; scipy's DOP853 if it has none)."""
 
 
 def get(name: str) -> Method:

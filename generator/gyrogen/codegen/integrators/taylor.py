@@ -45,6 +45,7 @@ from gyrogen.codegen.ir.nodes import (
     Comment,
     Const,
     Decl,
+    E,
     For,
     Func,
     If,
@@ -91,7 +92,7 @@ def uniform(m: Method, jet: Jet) -> list[S]:
 
 STATE = ("code", "t", "h", "cap", "nonfinite")
 """A trajectory's values that live from step to step (besides x, comp, stats)."""
-LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rho")
+LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rho", "h2")
 BOOLS = {"nonfinite", "last", "run", "take", "ok", "at", "jump", "retry"}
 
 
@@ -117,8 +118,19 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
     )
     nonfinite, cap = Var("nonfinite"), Var("cap")
-    xmax, dp, dq, rho = (Var(n) for n in ("xmax", "dp", "dq", "rho"))
+    xmax, dp, dq, rho, h2 = (Var(n) for n in ("xmax", "dp", "dq", "rho", "h2"))
     q = Var("q")
+    pairs = (order - Int(1)) / Int(2)  # Horner's turns of two orders; then one more if odd
+
+    def two(i: Var) -> E:
+        """Orders k - 1 and k of state i, k = order - 2 q - 1, onto xnew[i]."""
+        return (
+            T[order - Int(2) * q - Int(2), i] + h * T[order - Int(2) * q - Int(1), i]
+        ) + h2 * xnew[i]
+
+    def one(i: Var) -> E:
+        return T[Int(1), i] + h * xnew[i]
+
     spent = cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps"))
     stop = sel(
         fn("step_underflow", h, t),
@@ -161,9 +173,11 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(Var("stats.h"), sel(run, h, Var("stats.h"))),
         assign(cd, sel(run, stop, cd), "lost in t, or no steps left"),
         assign(run, cmp(cd, "<", 0)),
-        Comment("x(t + h) by Horner's scheme, less what the last add lost (comp)"),
+        Comment("x(t + h) by Horner's scheme two orders a turn, less what the last add lost"),
+        assign(h2, h * h),
         For("i", NX, (assign(xnew[i], T[order, i]),)),
-        For("q", order - 1, (For("i", NX, (assign(xnew[i], T[order - q - 1, i] + h * xnew[i]),)),)),
+        For("q", pairs, (For("i", NX, (assign(xnew[i], two(i)),)),)),
+        For("q", order - 1 - Int(2) * pairs, (For("i", NX, (assign(xnew[i], one(i)),)),)),
         For("i", NX, (assign(dx[i], h * xnew[i] - comp[i]), assign(xnew[i], x[i] + dx[i]))),
         assign(nonfinite, Bool(False)),
         For("i", NX, (assign(nonfinite, or_(nonfinite, not_(fn("finite", xnew[i])))),)),
