@@ -45,6 +45,11 @@ def real(name: str, intent: str = "in") -> Decl:
     return Decl(name, "double", (), intent)  # type: ignore[arg-type]
 
 
+def reals(*names: str) -> tuple[Decl, ...]:
+    """Local doubles a function sets."""
+    return tuple(real(n, "inout") for n in names)
+
+
 STATS = Decl("stats", "stats", (), "inout")
 TOLERANCES = (real("rtol"), real("atol"))
 

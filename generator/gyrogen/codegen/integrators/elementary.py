@@ -18,9 +18,10 @@ as long as it may be) and of y < -745 is 0 (a step too short: underflow).
 
 from __future__ import annotations
 
+from gyrogen.codegen.integrators.common import real, reals
+from gyrogen.codegen.integrators.trig import TOINT
 from gyrogen.codegen.ir.nodes import (
     Const,
-    Decl,
     E,
     Func,
     Num,
@@ -37,12 +38,7 @@ from gyrogen.codegen.ir.nodes import (
 NAMES = ("step_log", "step_exp")
 """The functions, in the order a file defines them."""
 LN2_HI, LN2_LO = 6.93147180369123816490e-01, 1.90821492927058770002e-10
-TOINT = 6755399441055744.0  # 1.5 2^52: adding it rounds to an integer
 POWERS = (512, 256, 128, 64, 32, 16, 8, 4, 2, 1)
-
-
-def _d(name: str, intent: str = "inout") -> Decl:
-    return Decl(name, "double", (), intent)  # type: ignore[arg-type]
 
 
 def _scale_down(m: Var, e: Var) -> list[S]:
@@ -84,8 +80,8 @@ def log_function() -> Func:
         Return(sel(finite, inv * r, sel(cmp(z, "<=", 0.0), -Const("HUGE"), z))),  # inf, NaN: z
     ]  # fmt: skip
     doc = ("log z for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
-    locals_ = tuple(_d(n) for n in ("m", "e", "f", "s", "w", "r", "hf", "inv", "z2"))
-    return Func("step_log", (_d("z", "in"),), tuple(body), "double", locals_, doc, inline=True)
+    locals_ = reals("m", "e", "f", "s", "w", "r", "hf", "inv", "z2")
+    return Func("step_log", (real("z"),), tuple(body), "double", locals_, doc, inline=True)
 
 
 def exp_function() -> Func:
@@ -115,8 +111,8 @@ def exp_function() -> Func:
     tail: E = sel(cmp(y, "<", -745.0), Num(0.0), y)  # y NaN: every comparison false
     body.append(Return(sel(cmp(y, ">", 709.0), Const("HUGE"), sel(cmp(y, ">=", -745.0), v, tail))))
     doc = ("e^y for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
-    locals_ = tuple(_d(n) for n in ("yy", "k", "hi", "lo", "r", "t", "c", "v"))
-    return Func("step_exp", (_d("y", "in"),), tuple(body), "double", locals_, doc, inline=True)
+    locals_ = reals("yy", "k", "hi", "lo", "r", "t", "c", "v")
+    return Func("step_exp", (real("y"),), tuple(body), "double", locals_, doc, inline=True)
 
 
 def functions() -> list[Func]:

@@ -20,9 +20,9 @@ vectorizes.
 
 from __future__ import annotations
 
+from gyrogen.codegen.integrators.common import real, reals
 from gyrogen.codegen.ir.nodes import (
     Const,
-    Decl,
     E,
     Func,
     If,
@@ -38,19 +38,18 @@ from gyrogen.codegen.ir.nodes import (
     sel,
 )
 
+TOINT = 6755399441055744.0
+"""1.5 2^52: adding it to a double of magnitude below 2^51, then subtracting it,
+rounds that double to an integer (to nearest)."""
 TRIG_MAX = 1125899906842624.0
 """The largest |x| the reduction takes (2^50); past it, NaN."""
 VARIANTS = ("sin", "cos", "sin_lanes", "cos_lanes")
 """The functions a file may call, in the order a file defines them."""
 
 
-def _d(name: str, intent: str = "inout") -> Decl:
-    return Decl(name, "double", (), intent)  # type: ignore[arg-type]
-
-
 def reduce(prefix: str) -> Func:
     x, n, r, t, w, y = (Var(v) for v in ("x", "n", "r", "t", "w", "y"))
-    toint = Num(6755399441055744.0)  # 1.5 2^52: adding it rounds to an integer
+    toint = Num(TOINT)
     pio2 = [Num(v) for v in (1.57079632673412561417e00, 6.07710050630396597660e-11,
                              2.02226624879595063154e-21, 2.02226624871116645580e-21,
                              8.47842766036889956997e-32)]  # fmt: skip
@@ -71,10 +70,10 @@ def reduce(prefix: str) -> Func:
                "n - 4 floor(n/4): (n - 1.5)/4 is never within 1/8 of a half integer"),
         Return(y),
     )  # fmt: skip
-    params = (_d("x", "in"), _d("tail", "out"), _d("quad", "out"))
+    params = (real("x"), real("tail", "out"), real("quad", "out"))
     doc = ("x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium reduction.",)
     return Func(f"{prefix}_reduce", params, body, "double",
-                tuple(_d(v) for v in ("n", "r", "t", "w", "y")), doc, inline=True)  # fmt: skip
+                reals("n", "r", "t", "w", "y"), doc, inline=True)  # fmt: skip
 
 
 def ksin(prefix: str) -> Func:
@@ -90,8 +89,8 @@ def ksin(prefix: str) -> Func:
         Return(x - ((z * (Num(0.5) * y - v * r) - y) - v * S[0])),
     )
     doc = ("sin(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_sin.",)
-    return Func(f"{prefix}_ksin", (_d("x", "in"), _d("y", "in")), body, "double",
-                tuple(_d(n) for n in ("z", "w", "v", "r")), doc, inline=True)  # fmt: skip
+    return Func(f"{prefix}_ksin", (real("x"), real("y")), body, "double",
+                reals("z", "w", "v", "r"), doc, inline=True)  # fmt: skip
 
 
 def kcos(prefix: str) -> Func:
@@ -108,8 +107,8 @@ def kcos(prefix: str) -> Func:
         Return(u + (((Num(1.0) - u) - hz) + (z * r - x * y))),
     )
     doc = ("cos(x + y) for |x| <= pi/4, |y| < ulp(x): fdlibm's __kernel_cos.",)
-    return Func(f"{prefix}_kcos", (_d("x", "in"), _d("y", "in")), body, "double",
-                tuple(_d(n) for n in ("z", "w", "hz", "u", "r")), doc, inline=True)  # fmt: skip
+    return Func(f"{prefix}_kcos", (real("x"), real("y")), body, "double",
+                reals("z", "w", "hz", "u", "r"), doc, inline=True)  # fmt: skip
 
 
 def between(q: E, low: float, high: float) -> E:
@@ -140,8 +139,8 @@ def function(prefix: str, variant: str) -> Func:
         "kernels, then the quadrant picks one and its sign." + (
             " Branch-free." if variant != name else ""),
     )  # fmt: skip
-    locals_ = tuple(_d(n) for n in ("y", "q", "r", "s", "c", "v", "f"))
-    return Func(f"{prefix}_{variant}", (_d("x", "in"),), body, "double", locals_, doc, inline=True)
+    locals_ = reals("y", "q", "r", "s", "c", "v", "f")
+    return Func(f"{prefix}_{variant}", (real("x"),), body, "double", locals_, doc, inline=True)
 
 
 def functions(prefix: str, used: list[str]) -> list[Func]:
