@@ -108,3 +108,22 @@ def test_ensemble_table_and_fronts(monkeypatch: pytest.MonkeyPatch, cache_dir: P
     assert "CPU / wall at the runs: g1" in lines[-1]
     img = matplotlib.image.imread(io.BytesIO(ensemble_levels.figure(runs, 16)))
     assert img.shape[:2] == (600, 1000) and float(img.std()) > 0.01
+
+
+@pytest.mark.parametrize("name", ["gyrostat", "dual_spin"])
+def test_taylor_meets_the_quadruple_reference(
+    name: str, tmp_path: Path, cache_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """gyrogen's Taylor method against heyoka's real128 reference: its
+    error falls with the tolerance (within 20 tol at 1e-8 .. 1e-14), and at
+    each tolerance it is heyoka's own error to 1e-15 (the same order and
+    step rule: the same steps)."""
+    comp, unit, c, x0, scene = _scene(name, tmp_path, cache_dir, monkeypatch)
+    t1 = scene.simulate.t_end
+    sys = heyoka_peer.system(heyoka_peer.module(), unit)
+    ref, _ = heyoka_peer.reference(sys, x0, c, t1)
+    for tol in (1e-8, 1e-11, 1e-14):
+        got, _, code = comp.integrate("taylor", x0, c, 0.0, t1, rtol=tol, atol=tol)
+        theirs = heyoka_peer.Scalar(sys, x0, c, t1, tol).final()
+        assert code == 0 and scaled_error(got, ref) <= 20 * tol, (tol, scaled_error(got, ref))
+        assert abs(scaled_error(got, ref) - scaled_error(theirs, ref)) <= 1e-15 + 1e-3 * tol
