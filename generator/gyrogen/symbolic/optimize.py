@@ -301,8 +301,12 @@ def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignme
     """
     used = set().union(*(v.free_symbols for v in values)) if values else set()
     defs = _in_reduced_mass(eqs.lumped)
-    names_used = [s for s in eqs.lumped if s in used]
-    used |= set().union(*(defs[s].free_symbols for s in names_used)) if names_used else set()
+    while True:  # a scalar may read another (I~ a runtime axis's normalized g)
+        names_used = [s for s in eqs.lumped if s in used]
+        more = set().union(*(defs[s].free_symbols for s in names_used)) if names_used else set()
+        if more <= used:
+            break
+        used |= more
     named = {MU: _reduced_mass(eqs.lumped)} if MU in used else {}
     named.update({s: defs[s] for s in names_used})
     names = _temporaries()
