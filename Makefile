@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -98,6 +98,11 @@ report: setup
 	$(BIN)/gyrogen bench dual_spin --out report/dual_spin
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 	$(BIN)/gyrogen bench-ensemble --out report
+
+## verify-axes: rw4_pyramid with every cluster property runtime (axes too) against the Newton-Euler
+## reference at the issue's size, 10^4 states x 100 parameter sets, C and Fortran, to 1e-13
+verify-axes: setup
+	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_cluster_axes.py -k issues_size
 
 ## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files,
 ## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
