@@ -139,10 +139,12 @@ SWEEP_MEMORY ?= 10000000
 sweep-bench: setup
 	$(BIN)/python tests/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY)
 
-## sweep-map: the stability map of NOTES.md and the Monte Carlo example, into report/
+## sweep-map: the stability map of NOTES.md, the Monte Carlo example and the misalignment Monte Carlo
+## over rw4_hardware (10^5 trajectories, one build; its histograms.png is docs/rw4_misalignment.png), into report/
 sweep-map: setup
 	$(BIN)/gyrogen sweep stability_map --out report/stability_map
 	$(BIN)/gyrogen sweep monte_carlo --out report/monte_carlo
+	$(BIN)/gyrogen sweep rw4_misalignment --out report/rw4_misalignment
 
 ## check: numerical stability on every stiff and extreme case
 check: setup

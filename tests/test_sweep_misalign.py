@@ -20,6 +20,7 @@ from scipy import stats
 
 from gyrogen.analysis.sweep.sweep_draws import inputs
 from gyrogen.analysis.sweep.sweep_metrics import columns, pointing
+from gyrogen.analysis.sweep.sweep_spec import load as load_sweep
 from gyrogen.analysis.sweep.sweep_spec import parse
 from gyrogen.errors import SceneError
 from gyrogen.scene import builtin_text, load
@@ -226,3 +227,17 @@ def test_pointing_is_the_angle_a3_turned_through(attitude: str, tmp_path: Path) 
         x[2, :2] = math.cos(0.15), math.sin(0.15)
         assert "pointing" in columns(s)
     assert np.allclose(pointing(s, x0, x), [0.3, 0.0, 0.2], rtol=0, atol=1e-15)
+
+
+def test_the_builtin_misalignment_sweep_keeps_its_hardware_within_bounds() -> None:
+    """sweeps/rw4_misalignment: 10^5 trajectories of one build, every axis
+    within 0.5 degrees of the pyramid's, the inertias within 2%."""
+    s = load_sweep("rw4_misalignment")
+    assert s.size == 100_000 and s.scene.name == "rw4_hardware"
+    inp = inputs(s, 99_000, 100_000)
+    for k in (1, 2, 3, 4):
+        g, angle = tilts(inp.values, k)
+        assert np.all(angle <= 0.5 + 1e-9) and np.allclose(np.linalg.norm(g, axis=1), 1.0)
+    for name in ("I11", "I22", "I33", "I_1", "J_4"):
+        ratio = inp.values[name] / NOMINAL[name]
+        assert np.all(np.abs(ratio - 1.0) <= 0.02 + 1e-12), name
