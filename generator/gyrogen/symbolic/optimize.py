@@ -167,6 +167,8 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     shared = {s: hoist(e, per_call, hoister) for s, e in eqs.shared.items()}
     n_q = len(eqs.kinematics)
     kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
+    # a rotor angle's rate on a runtime axis reads setup's values: hoisted too
+    kin = [hoist(e, per_call, hoister) if e.free_symbols - set(eqs.states) else e for e in kin]
     rhs = _rhs_block(shared, [*kin, *dyn], eqs.gather)
     outputs = {
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
