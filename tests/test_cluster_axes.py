@@ -15,6 +15,7 @@ import pytest
 from test_cluster_runtime import W_REF
 
 from gyrogen.abi_rotors import AXIS_NORM_SLACK
+from gyrogen.analysis.check.check_engine import axes_span
 from gyrogen.codegen.context import make_context
 from gyrogen.errors import SceneError
 from gyrogen.oracle.compare import compare
@@ -156,3 +157,12 @@ def test_op_counts_before_and_after() -> None:
     property runtime, axes included (rw4_pyramid folded: 114)."""
     runtime = make_context(load("rw4_hardware")).ops["rhs"]
     assert runtime <= 160, runtime
+
+
+def test_the_checks_warning_reads_runtime_axes() -> None:
+    """gyrogen check's span of the axes: rw4_hardware's at its nominal
+    values is rw4_pyramid's; its axes turned into one plane nearly fail."""
+    folded = axes_span(load("rw4_pyramid"), {})
+    assert axes_span(load("rw4_hardware"), NOMINAL) == pytest.approx(folded, rel=1e-14)
+    flat = {**NOMINAL, **{f"g3_{k}": 1e-3 for k in (1, 2, 3, 4)}}
+    assert axes_span(load("rw4_hardware"), flat) < 1e-2 < folded
