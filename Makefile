@@ -104,7 +104,7 @@ report: setup
 verify-axes: setup
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_cluster_axes.py -k issues_size
 
-## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files,
+## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
 ## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
 ## without -march=native), then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
 ## clusters) with a fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
@@ -116,7 +116,8 @@ FUZZ_AGREE ?= 250
 fuzz: setup
 	GYROGEN_GIMBAL_DRAWS=$(FUZZ_GIMBAL) GYROGEN_GIMBAL_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q tests/test_ode_edges.py -k gimbal_lock_is_never_stepped_over
-	GYROGEN_SWEEP_EXAMPLES=$(FUZZ_SWEEPS) $(BIN)/python -m pytest -q tests/test_sweep_space.py
+	GYROGEN_SWEEP_EXAMPLES=$(FUZZ_SWEEPS) $(BIN)/python -m pytest -q tests/test_sweep_space.py \
+	  tests/test_sweep_misalign.py -k "space or drawn_misalignments"
 	GYROGEN_AGREE_SCENES=$(FUZZ_AGREE) GYROGEN_AGREE_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q -n auto tests/test_scene_space.py -k every_method
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
