@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -99,7 +99,12 @@ report: setup
 	$(BIN)/gyrogen bench stiff_wheel --out report/stiff_wheel
 	$(BIN)/gyrogen bench-ensemble --out report
 
-## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files,
+## verify-axes: rw4_pyramid with every cluster property runtime (axes too) against the Newton-Euler
+## reference at the issue's size, 10^4 states x 100 parameter sets, C and Fortran, to 1e-13
+verify-axes: setup
+	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_cluster_axes.py -k issues_size
+
+## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
 ## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
 ## without -march=native), then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
 ## clusters) with a fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
@@ -111,7 +116,8 @@ FUZZ_AGREE ?= 250
 fuzz: setup
 	GYROGEN_GIMBAL_DRAWS=$(FUZZ_GIMBAL) GYROGEN_GIMBAL_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q tests/test_ode_edges.py -k gimbal_lock_is_never_stepped_over
-	GYROGEN_SWEEP_EXAMPLES=$(FUZZ_SWEEPS) $(BIN)/python -m pytest -q tests/test_sweep_space.py
+	GYROGEN_SWEEP_EXAMPLES=$(FUZZ_SWEEPS) $(BIN)/python -m pytest -q tests/test_sweep_space.py \
+	  tests/test_sweep_misalign.py -k "space or drawn_misalignments"
 	GYROGEN_AGREE_SCENES=$(FUZZ_AGREE) GYROGEN_AGREE_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q -n auto tests/test_scene_space.py -k every_method
 	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
@@ -134,10 +140,12 @@ SWEEP_MEMORY ?= 10000000
 sweep-bench: setup
 	$(BIN)/python tests/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY)
 
-## sweep-map: the stability map of NOTES.md and the Monte Carlo example, into report/
+## sweep-map: the stability map of NOTES.md, the Monte Carlo example and the misalignment Monte Carlo
+## over rw4_hardware (10^5 trajectories, one build; its histograms.png is docs/rw4_misalignment.png), into report/
 sweep-map: setup
 	$(BIN)/gyrogen sweep stability_map --out report/stability_map
 	$(BIN)/gyrogen sweep monte_carlo --out report/monte_carlo
+	$(BIN)/gyrogen sweep rw4_misalignment --out report/rw4_misalignment
 
 ## check: numerical stability on every stiff and extreme case
 check: setup

@@ -2,7 +2,9 @@
 gyrogen generates: I~^-1 as numbers, no solve per call) against a plain
 generated M-solve per call (the same named values, then the LU solve of the
 constant (3+N)-square mass matrix, its nonzero entries as literals), and
-the rhs op count against N.
+the rhs op count against N; then each scene with every cluster property
+runtime against its folded twin (RUNTIME_PAIRS: rw4_hardware against
+rw4_pyramid), the generated rhs in one C loop each, timed interleaved.
 
     python tests/bench_clusters.py [--states N] [--repeats R]
 
@@ -37,6 +39,8 @@ from gyrogen.symbolic import cluster
 from gyrogen.symbolic.optimize import count_ops, cse_only
 
 SCENES = ("rw3_orthogonal", "rw4_pyramid", "rw4_pyramid_failed")
+RUNTIME_PAIRS = (("rw4_hardware", "rw4_pyramid"),)
+"""(everything runtime, folded): the issue's bar is 1.3x the folded ns per state."""
 MATCH = 1e-12
 """Largest difference to the reference, relative to each state's largest rate."""
 
@@ -134,6 +138,57 @@ def compile_both(scene: Scene, src: Path) -> ctypes.CDLL:
     return ctypes.CDLL(str(lib))
 
 
+HOISTED = """
+void bench_{prefix}(long n, const double *x, const double *c, double *out)
+{{
+    for (long i = 0; i < n; ++i) {prefix}_rhs(0.0, x + i * {nx}, c, out + i * {nx});
+}}
+"""
+
+
+def runtime_against_folded(pair: tuple[str, str], states: int, repeats: int) -> list[float]:
+    """ns per state of the runtime scene's rhs and the folded one's (the
+    same states; each checked against the reference first), best of
+    repeats rounds, the two timed alternately in each round."""
+    scenes = [load(name) for name in pair]
+    xs = _states(scenes[0], states, np.random.default_rng(2))
+    with tempfile.TemporaryDirectory(prefix="gyrogen-bench-runtime-") as tmp:
+        src = Path(tmp)
+        text = "#include <math.h>\n"
+        calls = []
+        for scene in scenes:
+            unit = unit_of(scene)
+            generate(scene, src / scene.name)
+            text += f'#include "{scene.name}/{unit.prefix}.c"\n'
+            text += HOISTED.format(prefix=unit.prefix, nx=unit.nx)
+        (src / "bench.c").write_text(text)
+        chosen = [f for f in flags.c_flags("gcc") if f not in ("-Wpedantic", "-Werror")]
+        for scene in scenes:
+            chosen += ["-I", str(src / scene.name)]
+        lib = src / "libbench.so"
+        subprocess.run(["gcc", *chosen, "-shared", "-o", str(lib), str(src / "bench.c"), "-lm"],
+                       check=True)  # fmt: skip
+        dll = ctypes.CDLL(str(lib))
+        for scene in scenes:
+            p = np.array([scene.simulate.parameters[n] for n in scene.runtime], dtype=float)
+            comp = build.build(src / scene.name, "c")
+            c = comp.setup(p)
+            got = np.empty_like(xs)
+            args = [
+                ctypes.c_long(states),
+                *(a.ctypes.data_as(ctypes.c_void_p) for a in (xs, c, got)),
+            ]
+            fn = getattr(dll, f"bench_{unit_of(scene).prefix}")
+            fn(*args)
+            _check(f"{scene.name} hoisted", got, scene_view.rhs(scene, xs, p))
+            calls.append((fn, args, c, got))
+        best = [float("inf")] * len(scenes)
+        for _ in range(repeats):
+            for i, (fn, args, _, _) in enumerate(calls):
+                best[i] = min(best[i], best_of(lambda fn=fn, args=args: fn(*args), 1))
+    return [b / states * 1e9 for b in best]
+
+
 def _states(scene: Scene, n: int, rng: np.random.Generator) -> np.ndarray:
     x = rng.uniform(-1.0, 1.0, (n, len(scene.states)))
     wheels = len(scene.rotors)
@@ -209,6 +264,16 @@ def main() -> None:
     for n in range(1, 7):
         scene = random_cluster(n, 7)
         print(f"{n:>3} {unit_of(scene).ops['rhs']:>8} {msolve_ops(scene):>12}")
+    print("\nevery cluster property runtime against folded (interleaved, ns per state):")
+    columns = f"{'rhs ops':>8} {'ns':>7}"
+    print(f"{'scene':<14} {columns}   {'folded':<12} {columns} {'ratio':>6}")
+    for pair in RUNTIME_PAIRS:
+        ns = runtime_against_folded(pair, args.states, 4 * args.repeats)
+        ops = [unit_of(load(name)).ops["rhs"] for name in pair]
+        print(
+            f"{pair[0]:<14} {ops[0]:>8} {ns[0]:>7.1f}   {pair[1]:<12} {ops[1]:>8} {ns[1]:>7.1f} "
+            f"{ns[0] / ns[1]:>6.2f}"
+        )
     sys.stdout.flush()
 
 

@@ -7,8 +7,8 @@ to 6 rotors on random axes (unit vectors written to 17 digits; at times all
 along the carrier's axes, or all in one plane) at random positions, each
 with its own mass, inertias, friction, torque law (none, constant, speed
 controller, a T(t) table; values folded or "runtime") and optional limit,
-the carrier's mass and tensor and each rotor's m, I, J and position at
-times "runtime";
+the carrier's mass and tensor and each rotor's m, I, J, position and axis
+at times "runtime";
 either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
@@ -157,7 +157,7 @@ def _runtime_inertia(
     """Make some inertial values "runtime" (setup checks them; the drawn
     values go to simulate.parameters): the carrier's tensor and mass in one
     draw in four, each rotor's m, I, J in one in four (not the broken one's),
-    its position in one in four."""
+    its position in one in four, its axis in one in four (not the broken one's)."""
     out: dict[str, float] = {}
     if rng.random() < 0.25:
         for name in ("m_a", "I11", "I22", "I33", "I12", "I13", "I23"):
@@ -172,6 +172,10 @@ def _runtime_inertia(
             at = rotor["position"]
             out.update({f"r{i}_{k}": float(x) for i, x in enumerate(at, 1)})  # type: ignore[arg-type]
             rotor["position"] = "runtime"
+        if k - 1 != broken and rng.random() < 0.25:
+            g = rotor["axis"]
+            out.update({f"g{i}_{k}": float(x) for i, x in enumerate(g, 1)})  # type: ignore[arg-type]
+            rotor["axis"] = "runtime"
     return out
 
 

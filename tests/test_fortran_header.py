@@ -79,9 +79,14 @@ def strerror_program(source_dir: Path, tmp_path: Path) -> Path:
     return tmp_path / "codes"
 
 
-def test_fortran_strerror(strerror_program: Path) -> None:
+def test_fortran_strerror(strerror_program: Path, source_dir: Path) -> None:
+    """Each code the scene's setup can return (the manifest's: a cluster's
+    axis code 8 not among the default scene's) and every integrator code."""
     lines = run([str(strerror_program)], strerror_program.parent).splitlines()
-    for codes, printed in ((abi.SETUP_CODES, lines[:10]), (abi.ODE_CODES, lines[10:])):
+    made = json.loads((source_dir / "manifest.json").read_text())["setup_codes"]
+    setup = tuple(c for c in abi.SETUP_CODES if str(c.value) in made)
+    assert [c.value for c in setup] == list(range(8))
+    for codes, printed in ((setup, lines[:10]), (abi.ODE_CODES, lines[10:])):
         expected = [abi.message(codes, k) if k in {c.value for c in codes} else abi.UNKNOWN_CODE
                     for k in range(-1, 9)]  # fmt: skip
         assert printed == expected

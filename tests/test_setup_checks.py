@@ -14,7 +14,7 @@ from gyrogen.abi import PARAMETERS, SETUP_CODES
 from gyrogen.codegen.checks import Printer
 from gyrogen.oracle import sampling
 from gyrogen.runtime.build import Compiled
-from gyrogen.setup_checks import CHECKS, checked_parameters, first_failure
+from gyrogen.setup_checks import CHECKS, checked_parameters, cluster_checks, first_failure
 
 
 def python_code(p: np.ndarray) -> int:
@@ -40,7 +40,11 @@ def test_one_declaration_three_interpretations(
 
 
 def test_every_setup_code_but_ok_has_its_check() -> None:
-    assert [c.code for c in CHECKS] == [c.value for c in SETUP_CODES if c.value]
+    """The single rotor's checks in code order; a cluster's runtime axis adds 8."""
+    assert [c.code for c in CHECKS] == [c.value for c in SETUP_CODES if 0 < c.value < 8]
+    axis = cluster_checks({"g1_1": "runtime"}, 1)
+    made = {c.code for c in (*CHECKS, *axis)}
+    assert sorted(made) == [c.value for c in SETUP_CODES if c.value]
 
 
 def test_the_checks_read_the_carrier_and_rotor() -> None:

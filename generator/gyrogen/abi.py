@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gyrogen.abi_rotors import ROTOR_KEYS
+from gyrogen.abi_rotors import AXIS_NORM_SLACK, ROTOR_KEYS
 
 STATES: tuple[str, ...] = tuple(f"q{i}" for i in range(1, 8)) + tuple(f"u{i}" for i in range(1, 8))
 """q1..q3: 3-1-2 Euler angles of the carrier A in N; q4: rotor angle about a2
@@ -140,8 +140,10 @@ SETUP_CODES: tuple[Code, ...] = (
         "ERR_MASS_SINGULAR",
         "the mass matrix is not numerically positive definite (condition number above 1e13)",
     ),
+    Code(8, "ERR_AXIS", f"a rotor axis is not of unit length (within {AXIS_NORM_SLACK:g})"),
 )
-"""Return codes of <prefix>_setup, checked in this order; the first failure wins."""
+"""Return codes of <prefix>_setup, checked in this order (a runtime axis, 8,
+before the condition number, 7, which reads the axes); the first failure wins."""
 
 ODE_CODES: tuple[Code, ...] = (
     Code(0, "ODE_OK", "ok"),

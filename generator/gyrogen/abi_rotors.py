@@ -21,22 +21,32 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
         f"r{i}": ("m", f'position of B{{k}}* from A*, a{i} component (position = "runtime")')
         for i in (1, 2, 3)
     },
+    **{
+        f"g{i}": ("-", f'spin axis g{{k}} of rotor B{{k}}, a{i} component (axis = "runtime")')
+        for i in (1, 2, 3)
+    },
 }
 """A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
 ROTOR_RUNTIME = ("m", "I", "J", "T", "k", "w_ref")
-"""The rotor keys that may be "runtime", in a rotor's p[] order (b, tau_max
-and the axis are folded; position = "runtime" gives POSITION, after J). With
-every inertial value folded the inverse of the lumped inertia I~ is numbers
-in the code; with a runtime m, I, position or carrier value setup computes
-I~ and inverts it; a runtime J_k stays out of I~. setup checks the runtime
-values (setup_checks.cluster_checks)."""
+"""The rotor keys that may be "runtime", in a rotor's p[] order (b and
+tau_max are folded; position = "runtime" gives POSITION, then axis =
+"runtime" AXIS, after J). With every inertial value folded the inverse of
+the lumped inertia I~ is numbers in the code; with a runtime m, I, position,
+axis or carrier value setup computes I~ and inverts it; a runtime J_k stays
+out of I~. setup checks the runtime values (setup_checks.cluster_checks)."""
 POSITION = ("r1", "r2", "r3")
 """position = "runtime": B_k*'s A-components in p[] (r1_k, r2_k, r3_k)."""
+AXIS = ("g1", "g2", "g3")
+"""axis = "runtime": g_k's A-components in p[] (g1_k, g2_k, g3_k), of length
+within AXIS_NORM_SLACK of 1; setup normalizes them into UNIT_AXIS."""
+UNIT_AXIS = ("gn1", "gn2", "gn3")
+"""A runtime axis normalized: named scalars of setup (gn1_k, gn2_k, gn3_k)."""
 MAX_ROTORS = 6
 """Rotors a cluster scene may have."""
 AXIS_NORM_SLACK = 1e-3
 """A rotor axis must have length within this of 1; it is then normalized
-exactly (a longer miss is a typo, refused)."""
+(exactly when folded, by setup when runtime; a longer miss is a typo,
+refused: a folded axis by the scene, a runtime one by setup's code 8)."""
 
 
 def rotor_name(key: str, k: int) -> str:

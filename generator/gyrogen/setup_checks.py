@@ -21,6 +21,7 @@ from typing import Literal
 
 from gyrogen import physics
 from gyrogen.abi import CONTROLLER_PARAMETERS, MAX_CONDITION, PARAMETERS, TRIANGLE_SLACK
+from gyrogen.abi_rotors import AXIS, AXIS_NORM_SLACK
 from gyrogen.physics import LUMPED_FROM
 
 
@@ -167,12 +168,13 @@ CHECKS: tuple[Check, ...] = (
 
 def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ...]:
     """A cluster's setup checks, on its inertial values by name (m_a, I11..I23,
-    m_k, I_k, J_k; a number or "runtime"; a carrier product missing is 0):
-    every parameter finite; then, where a value is runtime, masses and
+    m_k, I_k, J_k, g1_k: a number or "runtime"; a carrier product missing
+    is 0): every parameter finite; then, where a value is runtime, masses and
     inertias positive, the carrier positive definite and meeting the
     triangle inequality (s 1 - T positive definite, s = (1/2 + slack) tr T:
-    Sylvester's leading minors), J_k <= 2 I_k; the lumped inertia's
-    condition number. The scene validator checks the folded values."""
+    Sylvester's leading minors), J_k <= 2 I_k, each runtime axis of length
+    within AXIS_NORM_SLACK of 1 (code 8); the lumped inertia's condition
+    number. The scene validator checks the folded values."""
 
     def term(name: str) -> Expr:
         v = values.get(name, 0.0)
@@ -212,7 +214,24 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
             out.append(
                 Check(6, "slack", (term(j) - Num(2.0) * term(i), Num(2.0) * term(i) + term(j)))
             )
+    for k in range(1, n + 1):
+        if values.get(f"{AXIS[0]}_{k}") == "runtime":
+            out.append(_unit_length(k))
     return (*out, bound)
+
+
+def _unit_length(k: int) -> Check:
+    """Rotor k's runtime axis (g1_k, g2_k, g3_k) of length within
+    AXIS_NORM_SLACK of 1: |norm_k - 1| <= slack (setup then normalizes it)."""
+    norm = Sym(f"norm_{k}")
+    length = sqrt(add(*(square(Sym(f"{key}_{k}")) for key in AXIS)))
+    return Check(
+        8,
+        "bound",
+        (maximum(norm - Num(1.0), Num(1.0) - norm), Num(AXIS_NORM_SLACK)),
+        locals=((f"norm_{k}", length),),
+        comment=(f"Rotor {k}'s axis: of unit length within the slack.",),
+    )
 
 
 CARRIER_KEYS = ("I11", "I22", "I33", "I12", "I13", "I23")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, model_validator
 
 from gyrogen.limits import MAX_SWEEP_AXIS
 from gyrogen.scene import Number
@@ -115,3 +115,46 @@ class Axis(_Strict):
     @property
     def size(self) -> int:
         return len(self.values) if self.values is not None else self.spaced[2]
+
+
+MAX_TILT_DEG = 90.0
+"""The largest cone a misalignment's tilt may be bounded by (degrees): past
+it the axis would turn back on itself."""
+
+
+class Misalignment(_Strict):
+    """A runtime axis tilted by a small rotation: about a direction
+    perpendicular to it drawn uniformly, by an angle (degrees) drawn from
+    angle and restricted to [-max_deg, max_deg] (the tilt is its size); the
+    axis stays a unit vector."""
+
+    angle: Distribution
+    max_deg: Number
+    """The cone's half angle (degrees): in (0, MAX_TILT_DEG]."""
+
+    @field_validator("max_deg")
+    @classmethod
+    def _bounded(cls, v: float) -> float:
+        if not 0.0 < v <= MAX_TILT_DEG:
+            raise ValueError(f"must be in (0, {MAX_TILT_DEG:g}] degrees (got {v:g})")
+        return v
+
+    @model_validator(mode="after")
+    def _reaches(self) -> Misalignment:
+        lo, hi = self.bounds
+        if not lo < hi or not self.angle.cdf(hi) - self.angle.cdf(lo) > 1e-12:
+            raise ValueError(
+                f"angle: leaves no probability within +-max_deg = {self.max_deg:g} degrees"
+            )
+        return self
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """[-max_deg, max_deg], within angle's own truncate if it has one."""
+        lo, hi = self.angle.truncate or (-math.inf, math.inf)
+        return max(lo, -self.max_deg), min(hi, self.max_deg)
+
+    @property
+    def cone(self) -> Distribution:
+        """angle restricted to bounds (degrees)."""
+        return self.angle.model_copy(update={"truncate": self.bounds})

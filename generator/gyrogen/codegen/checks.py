@@ -13,7 +13,7 @@ from typing import Literal
 
 from gyrogen.abi import TRIANGLE_SLACK
 from gyrogen.codegen.render import c_double, f_double
-from gyrogen.setup_checks import CHECKS, Call, Check, Expr, Num, Op, Sym
+from gyrogen.setup_checks import CHECKS, Call, Check, Expr, Num, Op, Sym, symbols
 
 Language = Literal["c", "fortran"]
 _PRECEDENCE = {"+": 1, "-": 1, "*": 2}
@@ -31,6 +31,8 @@ class Printed:
     """True when the check fails (C: the whole if condition; Fortran: the same)."""
     locals: tuple[tuple[str, str], ...]
     comment: tuple[str, ...]
+    late: bool
+    """Made after the constants: it reads their condition number."""
 
 
 class Printer:
@@ -101,6 +103,7 @@ def printed(language: Language, macro: str, checks: Sequence[Check] = CHECKS) ->
             p.condition(c.kind, c.exprs),
             tuple((name, p(e)) for name, e in c.locals),
             c.comment,
+            any("cond" in symbols(e) for e in c.exprs),
         )
         for c in checks
         if c.kind != "finite"

@@ -18,7 +18,7 @@ from gyrogen.abi import (
     Code,
     unit_and_doc,
 )
-from gyrogen.abi_rotors import rotor_name
+from gyrogen.abi_rotors import AXIS, rotor_name
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
@@ -166,6 +166,7 @@ class SceneContext:
         values: dict[str, float | str] = dict(self.scene.parameters)
         for k, r in enumerate(self.scene.rotors, 1):
             values.update({rotor_name(key, k): getattr(r, key) for key in ("m", "I", "J")})
+            values.update({rotor_name(key, k): r.axis for key in AXIS if r.axis == "runtime"})
         return cluster_checks(values, len(self.scene.rotors))
 
     @property
@@ -179,7 +180,11 @@ class SceneContext:
         """A cluster's rotors for the header: axis, position, law, friction, limit."""
         out = []
         for k, r in enumerate(self.scene.rotors, 1):
-            g = ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
+            g = (
+                f"p[g1_{k}], p[g2_{k}], p[g3_{k}] normalized"
+                if r.axis == "runtime"
+                else ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
+            )
             at = (
                 f"p[r1_{k}], p[r2_{k}], p[r3_{k}]"
                 if r.position == "runtime"

@@ -63,7 +63,13 @@ def values(scene: Scene, runtime: dict[str, float] | None = None) -> Values:
                        missing is not None else given[name])  # fmt: skip
         return np.array(out)
 
-    axes = np.array([r.axis for r in rotors], dtype=float)
+    axes = np.array(
+        [
+            [given[rotor_name(f"g{i}", k)] for i in (1, 2, 3)] if r.axis == "runtime" else r.axis
+            for k, r in enumerate(rotors, 1)
+        ],
+        dtype=float,
+    )
     return Values(
         m_a=p["m_a"],
         carrier=carrier,

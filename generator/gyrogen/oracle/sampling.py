@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from gyrogen import abi
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
+from gyrogen.abi_rotors import AXIS_NORM_SLACK
 from gyrogen.oracle.reference import lumped
 from gyrogen.scene import Scene
 
@@ -252,7 +253,8 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
 def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
     """A cluster's runtime inertial values made unphysical, with setup's code:
     a mass at 0 (2); I_k or J_k at 0 or negative (3); the carrier not
-    positive definite (4) or past the triangle inequality (5); J_k above 2 I_k (6)."""
+    positive definite (4) or past the triangle inequality (5); J_k above 2 I_k (6); a
+    runtime axis longer or shorter than the slack allows, or 0 (8)."""
     index = {n: j for j, n in enumerate(scene.runtime)}
     known = {**scene.folded(), **dict(zip(scene.runtime, base, strict=True))}
     edits: list[tuple[dict[str, float], int]] = []
@@ -270,6 +272,11 @@ def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
         if f"J_{k}" in index or f"I_{k}" in index:
             edits.append(({f"J_{k}": 2.01 * float(known[f"I_{k}"] if r.I == "runtime" else r.I)}
                           if f"J_{k}" in index else {f"I_{k}": 0.49 * float(r.J)}, 6))  # fmt: skip
+        if f"g1_{k}" in index:
+            axis = {f"g{i}_{k}": float(known[f"g{i}_{k}"]) for i in (1, 2, 3)}
+            norm = math.sqrt(sum(v * v for v in axis.values()))
+            for length in (1.0 + 3.0 * AXIS_NORM_SLACK, 1.0 - 3.0 * AXIS_NORM_SLACK, 0.0):
+                edits.append(({n: v * length / norm for n, v in axis.items()}, 8))
     cases = []
     for edit, code in edits:
         p = base.copy()

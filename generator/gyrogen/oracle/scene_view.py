@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
+from gyrogen.abi_rotors import AXIS_NORM_SLACK
 from gyrogen.oracle import cluster_reference, reference, sampling
 from gyrogen.scene import Scene
 
@@ -288,6 +289,15 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
                 cols[name] = float(axial) * rng.uniform(0.5, 2.5, n)
         elif key in ("r1", "r2", "r3"):
             cols[name] = rng.uniform(-0.5, 0.5, n)
+        elif key == "g1":  # a direction anywhere, its length within the slack of 1
+            g = rng.normal(size=(n, 3))
+            g *= rng.uniform(1.0 - AXIS_NORM_SLACK, 1.0 + AXIS_NORM_SLACK, (n, 1)) / np.linalg.norm(
+                g, axis=1, keepdims=True
+            )
+            for i in (1, 2, 3):
+                cols[f"g{i}_{k}"] = g[:, i - 1]
+        elif key in ("g2", "g3"):
+            pass  # drawn with g1
         elif key == "J":
             inertia = scene.rotors[int(k) - 1].I
             base = cols[f"I_{k}"] if inertia == "runtime" else float(inertia)

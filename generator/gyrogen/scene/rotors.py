@@ -6,7 +6,8 @@ about A*) and N rotors, each with its own mass, inertias, spin axis g_k
 torque law and optional torque limit. The torque laws' T, k and w_ref, the
 carrier's mass and tensor and each rotor's m, I and J may be "runtime"
 (checked by setup; the values simulate.parameters gives, here), and so may
-a position (p's r1_k, r2_k, r3_k); axes, friction and limits are folded.
+a position (p's r1_k, r2_k, r3_k) and an axis (g1_k, g2_k, g3_k: setup
+checks its length and normalizes it); friction and limits are folded.
 With every inertial value folded, setup holds the inverse of the constant
 inertia as numbers. No translation:
 the system's mass center is fixed in A and free in N (a free-floating
@@ -35,6 +36,7 @@ from pydantic import (
 from gyrogen import physics
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
 from gyrogen.abi_rotors import (
+    AXIS,
     AXIS_NORM_SLACK,
     CLUSTER_CARRIER,
     POSITION,
@@ -70,8 +72,9 @@ class Rotor(BaseModel):
     J: Value
     """Mass, transverse and axial inertia: numbers, or "runtime" (setup
     checks them: positive, J <= 2 I, the lumped inertia's condition)."""
-    axis: Vector
-    """g_k in A-components: length within AXIS_NORM_SLACK of 1, then normalized."""
+    axis: Vector | Literal["runtime"]
+    """g_k in A-components: length within AXIS_NORM_SLACK of 1, then
+    normalized; "runtime": p's g1_k, g2_k, g3_k (setup checks and normalizes)."""
     position: Vector | Literal["runtime"] = (0.0, 0.0, 0.0)
     """B_k* from A*, in A-components (m); "runtime": p's r1_k, r2_k, r3_k."""
     b: Annotated[Folded, Field(ge=0)] = 0.0
@@ -111,13 +114,8 @@ class Rotor(BaseModel):
             check_axial(self.I, self.J, "J")
         elif self.J != "runtime" and not self.J > 0.0:
             raise ValueError(f"J: must be positive (got {self.J})")
-        norm = math.sqrt(sum(x * x for x in self.axis))
-        if norm == 0.0:
-            raise ValueError("axis: has length 0: not a direction")
-        if abs(norm - 1.0) > AXIS_NORM_SLACK:
-            raise ValueError(
-                f"axis: length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
-            )
+        if self.axis != "runtime":
+            check_axis(self.axis, "axis")
         check_table(self.torque, self.torque_table)
         need = LAW_KEYS[self.torque]
         for key in ("T", "k", "w_ref"):
@@ -132,12 +130,26 @@ class Rotor(BaseModel):
     def unit_axis(self) -> tuple[Fraction, Fraction, Fraction]:
         """g_k normalized exactly: the rational point of the unit sphere
         nearest the axis given (within 1e-15), so that |g| = 1 holds in the
-        algebra of the generator and the mass matrix stays block-diagonal."""
+        algebra of the generator and the mass matrix stays block-diagonal.
+        A runtime axis has none here (resolved gives it its values)."""
+        if self.axis == "runtime":
+            raise ValueError('axis: "runtime" (its values come with the parameters)')
         return exact_unit(self.axis)
 
     def law(self) -> dict[str, float | str]:
         """The torque law's parameters by key."""
         return {key: v for key in LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None}
+
+
+def check_axis(axis: tuple[float, float, float], where: str) -> None:
+    """A direction: length within AXIS_NORM_SLACK of 1 (then normalized)."""
+    norm = math.sqrt(sum(x * x for x in axis))
+    if norm == 0.0:
+        raise ValueError(f"{where}: has length 0: not a direction")
+    if not abs(norm - 1.0) <= AXIS_NORM_SLACK:
+        raise ValueError(
+            f"{where}: length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
+        )
 
 
 def check_axial(inertia: float, axial: float, where: str) -> None:
@@ -155,13 +167,15 @@ def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) ->
     return carrier + tuple(
         rotor_name(key, k)
         for k, r in enumerate(rotors, 1)
-        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *_position(r), *r.law().items())
+        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *_vectors(r), *r.law().items())
         if v == "runtime"
     )
 
 
-def _position(r: Rotor) -> tuple[tuple[str, str], ...]:
-    return tuple((key, "runtime") for key in POSITION) if r.position == "runtime" else ()
+def _vectors(r: Rotor) -> tuple[tuple[str, str], ...]:
+    """A runtime position's keys, then a runtime axis's."""
+    position = tuple((key, "runtime") for key in POSITION) if r.position == "runtime" else ()
+    return position + (tuple((key, "runtime") for key in AXIS) if r.axis == "runtime" else ())
 
 
 def resolved(
@@ -182,12 +196,26 @@ def resolved(
                 if rotor_name(key, k) not in given:
                     return None
                 update[key] = float(given[rotor_name(key, k)])
-        if r.position == "runtime":
-            if any(rotor_name(key, k) not in given for key in POSITION):
-                return None
-            update["position"] = tuple(float(given[rotor_name(key, k)]) for key in POSITION)
+        for field, keys in (("position", POSITION), ("axis", AXIS)):
+            if getattr(r, field) == "runtime":
+                if any(rotor_name(key, k) not in given for key in keys):
+                    return None
+                update[field] = tuple(float(given[rotor_name(key, k)]) for key in keys)
         out.append(r.model_copy(update=update))
     return values, out
+
+
+def unit_axes(rotors: list[Rotor], given: Mapping[str, float]) -> np.ndarray:
+    """(N, 3) each rotor's unit axis in floats: a folded one's exact unit
+    vector, a runtime one's g1_k..g3_k from given, normalized as setup does."""
+    out = []
+    for k, r in enumerate(rotors, 1):
+        if r.axis == "runtime":
+            g = np.array([float(given[rotor_name(key, k)]) for key in AXIS])
+            out.append(g / np.sqrt(g @ g))
+        else:
+            out.append(np.array([float(x) for x in r.unit_axis]))
+    return np.array(out).reshape(len(rotors), 3)
 
 
 def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:
@@ -228,6 +256,7 @@ def check_values(parameters: Mapping[str, float], rotors: list[Rotor], where: st
                 raise ValueError(f"{where}.{rotor_name(key, k)}: must be positive "
                                  f"(got {getattr(r, key)})")  # fmt: skip
         check_axial(r.I, r.J, f"{where}.{rotor_name('J', k)}")  # type: ignore[arg-type]
+        check_axis(r.axis, f"{where}.{rotor_name('g1', k)}..g3")  # type: ignore[arg-type]
     carrier = carrier_tensor(parameters)
     if not parameters["m_a"] > 0:
         raise ValueError(f"{where}.m_a: must be positive (got {parameters['m_a']})")

@@ -17,7 +17,9 @@ with h and each rotor's torque named values of the rhs (Equations.shared),
 so the momentum the carrier and a wheel exchange is one rounded number.
 With every inertial value folded I~^-1 is numbers in the code; an entry of
 I~ that reads a runtime value is a named scalar of setup (IC11..IC23,
-Equations.lumped), and setup inverts I~ (optimize.block_inverse).
+Equations.lumped), and setup inverts I~ (optimize.block_inverse). A runtime
+axis is three named scalars of setup too, g_k normalized (gn1_k..gn3_k):
+the proof then holds on the unit sphere (|g_k| = 1 reduces its squares).
 """
 
 from __future__ import annotations
@@ -28,7 +30,14 @@ import sympy as sm
 import sympy.physics.mechanics as me
 
 from gyrogen import physics
-from gyrogen.abi_rotors import CLUSTER_CARRIER, POSITION, cluster_states, rotor_name
+from gyrogen.abi_rotors import (
+    AXIS,
+    CLUSTER_CARRIER,
+    POSITION,
+    UNIT_AXIS,
+    cluster_states,
+    rotor_name,
+)
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import Rotor
 from gyrogen.symbolic import equations, model
@@ -40,9 +49,38 @@ def _number(v: float) -> sm.Expr:
     return sm.Rational(repr(float(v)))
 
 
-def _axis(r: Rotor) -> sm.Matrix:
-    """g_k normalized exactly (rotors.exact_unit): |g| = 1 in the algebra."""
+def _axis(r: Rotor, k: int) -> sm.Matrix:
+    """g_k normalized exactly (rotors.exact_unit): |g| = 1 in the algebra;
+    a runtime axis: setup's normalized scalars gn1_k..gn3_k (_unit_axes)."""
+    if r.axis == "runtime":
+        return sm.Matrix(_plain(tuple(rotor_name(key, k) for key in UNIT_AXIS)))
     return sm.Matrix([sm.Rational(x.numerator, x.denominator) for x in r.unit_axis])
+
+
+def _unit_axes(scene: Scene) -> dict[sm.Symbol, sm.Expr]:
+    """Each runtime axis normalized by setup: gn_i_k = g_i_k / |g_k|."""
+    out: dict[sm.Symbol, sm.Expr] = {}
+    for k, r in enumerate(scene.rotors, 1):
+        if r.axis == "runtime":
+            g = _plain(tuple(rotor_name(key, k) for key in AXIS))
+            norm = sm.sqrt(sm.Add(*(x**2 for x in g)))
+            out.update(zip(_axis(r, k), (x / norm for x in g), strict=True))
+    return out
+
+
+def _on_sphere(e: sm.Expr, axes: list[sm.Matrix]) -> sm.Expr:
+    """e expanded with every runtime axis's g3^2 written 1 - g1^2 - g2^2:
+    its normal form on the unit spheres (0 when e vanishes there)."""
+    e = sm.expand(e)
+    for g1, g2, g3 in (list(g) for g in axes if not g[0].is_number):
+        square = 1 - g1**2 - g2**2
+        e = sm.expand(
+            e.replace(
+                lambda x, g3=g3: x.is_Pow and x.base == g3 and x.exp >= 2,
+                lambda x, g3=g3, square=square: square ** (x.exp // 2) * g3 ** (x.exp % 2),
+            )
+        )
+    return e
 
 
 def _carrier(scene: Scene) -> list[list[sm.Expr]]:
@@ -59,7 +97,7 @@ def lumped_inertia(scene: Scene) -> sm.Matrix:
         (
             _param(rotor_name("m", k), r.m),
             _param(rotor_name("I", k), r.I),
-            list(_axis(r)),
+            list(_axis(r, k)),
             [sm.Symbol(rotor_name(key, k), real=True) for key in POSITION]
             if r.position == "runtime"
             else [_number(x) for x in r.position],
@@ -144,7 +182,9 @@ def _by_axis_component(nets: list[sm.Expr], axes: list[sm.Matrix]) -> sm.Matrix:
     for i in range(3):
         groups: dict[sm.Expr, list[sm.Expr]] = {}
         for net, g in zip(nets, axes, strict=True):
-            if g[i] != 0:
+            if not g[i].is_number:  # a runtime axis: its own group
+                groups.setdefault(g[i], []).append(net)
+            elif g[i] != 0:
                 groups.setdefault(abs(g[i]), []).append(sm.sign(g[i]) * net)
         out.append(sm.Add(*(size * sm.Add(*terms) for size, terms in groups.items())))
     return sm.Matrix(out)
@@ -204,7 +244,8 @@ def _param(name: str, value: float | str) -> sm.Expr:
 
 def _derive(scene: Scene) -> Equations:
     inertia, lumped = _named(lumped_inertia(scene))
-    axes = [_axis(r) for r in scene.rotors]
+    lumped = {**_unit_axes(scene), **lumped}
+    axes = [_axis(r, k) for k, r in enumerate(scene.rotors, 1)]
     axial = [_param(rotor_name("J", k), r.J) for k, r in enumerate(scene.rotors, 1)]
     n = len(axes)
     mm, forcing, qdot, net = kane(inertia, axes, axial)
@@ -219,8 +260,8 @@ def _derive(scene: Scene) -> Equations:
     tau_a = sum((net[k] * axes[k] for k in range(n)), sm.zeros(3, 1))
     momentum = [*(h_value.cross(w_a) - tau_a), *net]
     expected = sm.diag(inertia, *axial)
-    if sm.expand(mm - expected) != sm.zeros(3 + n) or any(
-        sm.expand(a - b) != 0 for a, b in zip(forcing, momentum, strict=True)
+    if any(_on_sphere(e, axes) != 0 for e in mm - expected) or any(
+        _on_sphere(a - b, axes) != 0 for a, b in zip(forcing, momentum, strict=True)
     ):
         raise AssertionError("internal: Kane's cluster equations differ from the momentum form")
     torques = _torques(scene, st, axes)
@@ -330,7 +371,8 @@ def _outputs(
 
 def _inertial(name: str) -> bool:
     """A runtime parameter setup's checks read: the carrier's, a mass, an inertia."""
-    return name in CLUSTER_CARRIER or name.rpartition("_")[0] in ("m", "I", "J", *POSITION)
+    key = name.rpartition("_")[0]
+    return name in CLUSTER_CARRIER or key in ("m", "I", "J", *POSITION, *AXIS)
 
 
 def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:

@@ -167,6 +167,8 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     shared = {s: hoist(e, per_call, hoister) for s, e in eqs.shared.items()}
     n_q = len(eqs.kinematics)
     kin = _reuse_earlier([_sincos(e) for e in eqs.kinematics], eqs.states[n_q:])
+    # a rotor angle's rate on a runtime axis reads setup's values: hoisted too
+    kin = [hoist(e, per_call, hoister) if e.free_symbols - set(eqs.states) else e for e in kin]
     rhs = _rhs_block(shared, [*kin, *dyn], eqs.gather)
     outputs = {
         name: _cse([hoist(_sincos(e), per_call, hoister) for e in exprs], _temporaries())
@@ -301,8 +303,12 @@ def _setup(eqs: Equations, values: list[sm.Expr]) -> tuple[Block, tuple[Assignme
     """
     used = set().union(*(v.free_symbols for v in values)) if values else set()
     defs = _in_reduced_mass(eqs.lumped)
-    names_used = [s for s in eqs.lumped if s in used]
-    used |= set().union(*(defs[s].free_symbols for s in names_used)) if names_used else set()
+    while True:  # a scalar may read another (I~ a runtime axis's normalized g)
+        names_used = [s for s in eqs.lumped if s in used]
+        more = set().union(*(defs[s].free_symbols for s in names_used)) if names_used else set()
+        if more <= used:
+            break
+        used |= more
     named = {MU: _reduced_mass(eqs.lumped)} if MU in used else {}
     named.update({s: defs[s] for s in names_used})
     names = _temporaries()

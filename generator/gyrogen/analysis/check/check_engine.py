@@ -35,6 +35,7 @@ from gyrogen.physics import LUMPED_FROM, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, Controls, controls
 from gyrogen.runtime.segment import COUNTERS, integrate_segments
 from gyrogen.scene import Scene
+from gyrogen.scene.rotors import unit_axes
 
 DRIFT_BAR = 1e-10
 """The invariants' relative drift allowed at rtol 1e-12."""
@@ -216,7 +217,7 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
             f"warning: mass matrix condition number {res.condition:.2g} > {WARN_CONDITION:g}"
         )
-    span = axes_span(scene)
+    span = axes_span(scene, dict(zip(scene.runtime, p, strict=True)))
     if span < AXES_SPAN_WARN:
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
             f"warning: the wheel axes nearly fail to span space (singular values of "
@@ -227,12 +228,13 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
         res.diagnosis = "passes near gimbal lock: quaternions would be cheaper"
 
 
-def axes_span(scene: Scene) -> float:
+def axes_span(scene: Scene, given: Mapping[str, float]) -> float:
     """Smallest over largest singular value of a cluster's axes [g_1 .. g_N]
-    (1 below three wheels, which cannot span space anyway, and without rotors)."""
+    (1 below three wheels, which cannot span space anyway, and without
+    rotors); a runtime axis's from the runtime values given."""
     if len(scene.rotors) < 3:
         return 1.0
-    sv = np.linalg.svd(np.array([r.unit_axis for r in scene.rotors], dtype=float), compute_uv=False)
+    sv = np.linalg.svd(unit_axes(scene.rotors, given), compute_uv=False)
     return float(sv[-1] / sv[0])
 
 

@@ -27,7 +27,7 @@ from gyrogen.errors import SceneError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene, validate
-from gyrogen.scene.rotors import lumped_inertia, resolved
+from gyrogen.scene.rotors import lumped_inertia, resolved, unit_axes
 
 RESIDUAL_BAR = 1e-9
 """A point is an equilibrium when its kept states' rates are at most this
@@ -142,7 +142,7 @@ def locked_inertia(scene: Scene, p: np.ndarray) -> tuple[np.ndarray, list[np.nda
         assert known is not None  # p holds every runtime value
         values, rotors = known
         lumped = np.array(lumped_inertia(values, rotors))
-        axes = [np.array([float(x) for x in r.unit_axis]) for r in rotors]
+        axes = list(unit_axes(rotors, {}))
         js = [float(r.J) * g for r, g in zip(rotors, axes, strict=True)]
         return lumped + sum(np.outer(j, g) for j, g in zip(js, axes, strict=True)), js
     v = {**scene.folded(), **dict(zip(scene.runtime, p, strict=True))}
@@ -171,7 +171,7 @@ def wheel_rates(scene: Scene, p: np.ndarray, start: np.ndarray) -> list[float]:
         elif r.torque == "constant" and r.b > 0:
             out.append(float(law["T"]) / r.b)
         else:
-            g = np.array([float(x) for x in r.unit_axis])
+            g = unit_axes(scene.rotors, v)[k - 1]
             out.append(float(start[idx[f"w{k}"]] - g @ start[[idx[f"u{i}"] for i in (1, 2, 3)]]))
     return out
 
@@ -201,8 +201,9 @@ def find_spin(
     x[body] = omega * e
     rel = wheel_rates(scene, p, start)
     if scene.rotors:
-        for k, (r, w) in enumerate(zip(scene.rotors, rel, strict=True), 1):
-            x[idx[f"w{k}"]] = w + np.array([float(g) for g in r.unit_axis]) @ x[body]
+        axes = unit_axes(scene.rotors, dict(zip(scene.runtime, p, strict=True)))
+        for k, (g, w) in enumerate(zip(axes, rel, strict=True), 1):
+            x[idx[f"w{k}"]] = w + g @ x[body]
     else:
         x[idx["u4"]] = rel[0] + x[idx["u2"]]
     x = _newton(comp, comp.setup(p), x, e, omega, body)

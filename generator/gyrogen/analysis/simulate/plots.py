@@ -7,12 +7,14 @@ is needed, and no global state is touched.
 from __future__ import annotations
 
 import io
+from collections.abc import Mapping
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from gyrogen.scene import Scene
+from gyrogen.scene.rotors import unit_axes
 
 SIZE_INCHES = (12.0, 8.0)
 DPI = 100
@@ -32,9 +34,11 @@ def _body_rates(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
     ax.set(title="carrier angular velocity (A components)", ylabel="rad/s")
 
 
-def _rotor(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
+def _rotor(
+    ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray, given: Mapping[str, float]
+) -> None:
     if scene.rotors:
-        _wheels(ax, scene, t, x)
+        _wheels(ax, scene, t, x, given)
         return
     u2, u4 = _column(scene, x, "u2"), _column(scene, x, "u4")
     ax.plot(t, u4, label="u4 (absolute)")
@@ -42,11 +46,13 @@ def _rotor(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
     ax.set(title="rotor rate about a2", ylabel="rad/s")
 
 
-def _wheels(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:
-    """A cluster: each wheel's rate relative to the carrier, w_k - g_k . w_A."""
+def _wheels(
+    ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray, given: Mapping[str, float]
+) -> None:
+    """A cluster: each wheel's rate relative to the carrier, w_k - g_k . w_A
+    (a runtime axis's g_k from the runtime values given)."""
     w_a = np.column_stack([_column(scene, x, f"u{i}") for i in (1, 2, 3)])
-    for k, rotor in enumerate(scene.rotors, 1):
-        g = np.array(rotor.unit_axis, dtype=float)
+    for k, g in enumerate(unit_axes(scene.rotors, given), 1):
         ax.plot(t, _column(scene, x, f"w{k}") - w_a @ g, label=f"w{k} - g{k}.w_A")
     ax.set(title="wheel rates relative to the carrier", ylabel="rad/s")
 
@@ -75,14 +81,19 @@ def invariant_drifts(ax: Axes, t: np.ndarray, drifts: dict[str, np.ndarray]) -> 
 
 
 def trajectory_png(
-    scene: Scene, t: np.ndarray, x: np.ndarray, drifts: dict[str, np.ndarray]
+    scene: Scene,
+    t: np.ndarray,
+    x: np.ndarray,
+    drifts: dict[str, np.ndarray],
+    given: Mapping[str, float] | None = None,
 ) -> bytes:
     """Body rates, rotor rate, attitude and the invariants' drifts (label ->
-    relative error on t), as PNG bytes of exactly PIXELS."""
+    relative error on t), as PNG bytes of exactly PIXELS; given: the runtime
+    values by name (a runtime axis)."""
     fig = Figure(figsize=SIZE_INCHES, dpi=DPI, layout="constrained")
     (a, b), (c, d) = fig.subplots(2, 2, sharex=True)
     _body_rates(a, scene, t, x)
-    _rotor(b, scene, t, x)
+    _rotor(b, scene, t, x, given or {})
     _attitude(c, scene, t, x)
     invariant_drifts(d, t, drifts)
     for ax in (a, b, c):

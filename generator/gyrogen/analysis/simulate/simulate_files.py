@@ -100,7 +100,9 @@ def contents(res: Result, p: np.ndarray) -> dict[str, bytes]:
     if res.settings.plot:
         from gyrogen.analysis.simulate import plots  # matplotlib: loaded only when a plot is wanted
 
-        blobs["trajectory.png"] = plots.trajectory_png(scene, traj.t, traj.x, _drifts(inv))
+        blobs["trajectory.png"] = plots.trajectory_png(
+            scene, traj.t, traj.x, _drifts(inv), dict(zip(scene.runtime, p, strict=True))
+        )
     return blobs
 
 

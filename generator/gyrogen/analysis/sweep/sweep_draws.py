@@ -9,7 +9,10 @@ seed, gives trajectory i the 64-bit words of its counter blocks i * B to
 each word becomes a value through the inverse of its distribution's CDF
 (truncated: restricted to [F(lo), F(hi)]). One word per value, never a
 rejection loop, so no value depends on another trajectory, on the chunking,
-the worker count or the engine.
+the worker count or the engine. A misaligned axis takes two words after the
+drawn variables': its tilt (the size of a draw from its cone's angle, in
+degrees) and the tilt's direction about the nominal axis (uniform), so it
+stays a unit vector.
 """
 
 from __future__ import annotations
@@ -19,8 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-from gyrogen.analysis.sweep.sweep_spec import Spec
-from gyrogen.sweep_values import Axis, Distribution
+from gyrogen.abi_rotors import AXIS, rotor_name
+from gyrogen.analysis.sweep.sweep_spec import Spec, rotor_of
+from gyrogen.sweep_values import Axis, Distribution, Misalignment
 
 WORDS_PER_BLOCK = 4
 """A Philox counter block gives four 64-bit words."""
@@ -85,10 +89,34 @@ def inverse_cdf(dist: Distribution, u: np.ndarray) -> np.ndarray:
 
 def drawn_values(spec: Spec, start: int, stop: int) -> dict[str, np.ndarray]:
     draws = spec.sweep.draws
-    if draws is None or not draws.variables:
+    if draws is None or not (draws.variables or draws.misalign):
         return {}
-    u = uniforms(draws.seed, start, stop, len(draws.variables))
-    return {name: inverse_cdf(d, u[:, j]) for j, (name, d) in enumerate(draws.variables.items())}
+    n = len(draws.variables)
+    u = uniforms(draws.seed, start, stop, n + 2 * len(draws.misalign))
+    out = {name: inverse_cdf(d, u[:, j]) for j, (name, d) in enumerate(draws.variables.items())}
+    base = spec.base_parameters()
+    for j, (key, tilt) in enumerate(draws.misalign.items()):
+        names = [rotor_name(c, rotor_of(key)) for c in AXIS]
+        nominal = np.array([base[name] for name in names], dtype=np.float64)
+        g = tilted(nominal, tilt, u[:, n + 2 * j], u[:, n + 2 * j + 1])
+        out.update({name: g[:, i] for i, name in enumerate(names)})
+    return out
+
+
+def tilted(nominal: np.ndarray, tilt: Misalignment, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, 3) unit vectors: nominal normalized, turned by the angle |draw|
+    (quantile u of the cone's angle, degrees) toward the direction at angle
+    2 pi v about it (from e1, perpendicular to it in the plane of the
+    nominal and the axis of A it is least along, and e2 = g0 x e1)."""
+    g0 = nominal / np.sqrt(nominal @ nominal)
+    away = np.eye(3)[int(np.argmin(np.abs(g0)))]
+    e1 = away - (away @ g0) * g0
+    e1 /= np.sqrt(e1 @ e1)
+    e2 = np.cross(g0, e1)
+    theta = np.radians(np.abs(inverse_cdf(tilt.cone, u)))
+    phi = 2.0 * np.pi * v
+    side = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+    return np.cos(theta)[:, None] * g0 + np.sin(theta)[:, None] * side
 
 
 def inputs(spec: Spec, start: int, stop: int) -> Inputs:

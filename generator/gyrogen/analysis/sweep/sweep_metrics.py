@@ -25,7 +25,9 @@ The columns (one row per trajectory):
   gravity acts at AB*);
 - time_to: time_to_<quantity>, the first sample time at which the quantity
   (nutation, rate, or a state) is on the other side of its threshold from
-  where it started (0 if it starts on it; NaN if never).
+  where it started (0 if it starts on it; NaN if never);
+- pointing: the angle (rad) between the carrier's a3 (a boresight) at the
+  end and at the start, in N (any scene, either attitude).
 
 A failed run's metrics cover the samples it reached.
 """
@@ -41,6 +43,8 @@ import numpy as np
 from gyrogen.abi import unit_and_doc
 from gyrogen.analysis.sweep.sweep_draws import inputs
 from gyrogen.analysis.sweep.sweep_spec import SAMPLED, Spec
+from gyrogen.oracle.reference import N_STATES, direction_cosines
+from gyrogen.oracle.scene_view import quaternion_dcm
 from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.segment import COUNTERS
@@ -67,6 +71,8 @@ def columns(spec: Spec) -> dict[str, np.dtype]:
     }
     cols |= {col: np.dtype(np.float64) for key in keep for col in names.get(key, ())}
     cols |= {f"time_to_{q}": np.dtype(np.float64) for q in spec.sweep.metrics.time_to}
+    if "pointing" in keep:
+        cols["pointing"] = np.dtype(np.float64)
     return cols
 
 
@@ -79,6 +85,7 @@ _METRIC_DOCS = {
     "max_nutation": ("rad", "largest angle between a2 and H over the samples"),
     "max_rate": ("rad/s", "largest |omega| of the carrier over the samples"),
     "H_drift": ("1", "largest relative change of |H| over the samples"),
+    "pointing": ("rad", "angle between the carrier's a3 at the end and at the start (in N)"),
 }
 
 
@@ -124,7 +131,7 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
         batches = [(c, m) for (code, c), m in zip(setups, members, strict=True) if code == 0]
         runtime = dict(zip(spec.scene.runtime, inp.p[ran].T, strict=True))
         known = {**spec.scene.folded(), **runtime}
-        _store(spec, cols, ran, _integrate(comp, spec, batches, known, inp.x0[ran]))
+        _store(spec, cols, ran, _integrate(comp, spec, batches, known, inp.x0[ran]), inp.x0[ran])
     return cols
 
 
@@ -241,10 +248,29 @@ def _integrate(
     return runs
 
 
-def _store(spec: Spec, cols: dict[str, np.ndarray], rows: np.ndarray, runs: _Runs) -> None:
+def boresight(spec: Spec, x: np.ndarray) -> np.ndarray:
+    """(n, 3) the carrier's a3 in N-components at the states x (n, nx)."""
+    states = spec.scene.states
+    if spec.scene.attitude == "quaternion":
+        return quaternion_dcm(x[:, [states.index(f"e{i}") for i in range(4)]])[:, 2, :]
+    angles = np.zeros((len(x), N_STATES))
+    angles[:, :3] = x[:, [states.index(f"q{i}") for i in (1, 2, 3)]]
+    return direction_cosines(angles)[:, 2, :]
+
+
+def pointing(spec: Spec, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The angle between a3 at x and at x0 (atan2: exact for small angles)."""
+    a, b = boresight(spec, x0), boresight(spec, x)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
+
+
+def _store(
+    spec: Spec, cols: dict[str, np.ndarray], rows: np.ndarray, runs: _Runs, x0: np.ndarray
+) -> None:
     watch = runs.watch
     found = {
         "code": runs.code,
+        "pointing": pointing(spec, x0, runs.x),
         "t": runs.reached,
         **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},
         **runs.totals,

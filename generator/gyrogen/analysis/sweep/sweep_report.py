@@ -38,7 +38,7 @@ from gyrogen.physics import lumped_inertias
 if TYPE_CHECKING:
     from gyrogen.analysis.sweep.sweep_plots import MapData
 
-HISTOGRAMS = ("max_nutation", "max_rate", "H_drift", "rhs_calls")
+HISTOGRAMS = ("max_nutation", "max_rate", "H_drift", "pointing", "rhs_calls")
 """Metric columns shown as histograms (with every time_to_ column)."""
 SPIN_NAMES = ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J", "l1", "l3", "u2", "u4")
 MESH = 200

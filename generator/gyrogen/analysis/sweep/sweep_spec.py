@@ -13,6 +13,8 @@ metrics to keep; validated like scenes (one line, exit 2, nothing written).
                                   #   | logspace = [a, b, n] }
     [draws]                       # seed, count, NAME = { uniform | normal | lognormal = [a, b],
                                   #   truncate = [lo, hi] }
+    [draws.misalign]              # axis_K = { angle = { distribution, degrees }, max_deg = 0.5 }:
+                                  #   rotor K's runtime axis tilted within a cone
     [metrics]                     # keep = [...], samples, time_to = { QUANTITY = threshold }
     [criterion]                   # spin_stability = { grows_by = 10.0, band = 0.05 }
 
@@ -37,6 +39,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, m
 
 from gyrogen import methods
 from gyrogen.abi import MIN_RTOL
+from gyrogen.abi_rotors import AXIS, rotor_name
 from gyrogen.errors import SceneError
 from gyrogen.limits import (
     MAX_SWEEP_CHUNK,
@@ -45,11 +48,14 @@ from gyrogen.limits import (
 )
 from gyrogen.scene import Number, Scene, builtin_names, one_line, read_file
 from gyrogen.scene import load as load_scene
+from gyrogen.scene.rotors import check_axis
 from gyrogen.scene.rules import QUATERNION, check_quaternion
 from gyrogen.setup_checks import first_failure
-from gyrogen.sweep_values import Axis, Distribution
+from gyrogen.sweep_values import Axis, Distribution, Misalignment
 
-METRICS = ("final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to")
+METRICS = (
+    "final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to", "pointing",
+)  # fmt: skip
 """What a sweep may keep of each trajectory (analysis/sweep/sweep_metrics.py)."""
 SAMPLED = ("max_nutation", "max_rate", "invariant_drift", "time_to")
 """The metrics that look along the run, at metrics.samples points."""
@@ -70,12 +76,15 @@ class Draws(_Strict):
     count: Annotated[StrictInt, Field(ge=1, le=MAX_SWEEP_TRAJECTORIES)]
     variables: dict[str, Distribution] = Field(default_factory=dict)
     """Every other key of [draws]: NAME = distribution."""
+    misalign: dict[str, Misalignment] = Field(default_factory=dict)
+    """axis_K = misalignment: rotor K's runtime axis tilted (g1_K..g3_K
+    drawn; their base values the nominal axis)."""
 
     @model_validator(mode="before")
     @classmethod
     def _gather(cls, data: object) -> object:
         if isinstance(data, dict) and "variables" not in data:
-            own = {k: v for k, v in data.items() if k in ("seed", "count")}
+            own = {k: v for k, v in data.items() if k in ("seed", "count", "misalign")}
             return {**own, "variables": {k: v for k, v in data.items() if k not in own}}
         return data
 
@@ -174,9 +183,16 @@ class Spec:
 
     @property
     def variables(self) -> tuple[str, ...]:
-        """The swept names: the grid's, then the drawn ones."""
+        """The swept names: the grid's, then the drawn ones, then the
+        misaligned axes' components."""
         drawn = self.sweep.draws.variables if self.sweep.draws else {}
-        return (*self.sweep.grid, *drawn)
+        return (*self.sweep.grid, *drawn, *self.tilted)
+
+    @property
+    def tilted(self) -> tuple[str, ...]:
+        """g1_K, g2_K, g3_K of each misaligned axis, in the order written."""
+        misalign = self.sweep.draws.misalign if self.sweep.draws else {}
+        return tuple(rotor_name(key, rotor_of(name)) for name in misalign for key in AXIS)
 
     def base_parameters(self) -> dict[str, float]:
         """The runtime parameters' values before the grid and the draws."""
@@ -245,6 +261,7 @@ def check_against(sweep: Sweep, scene: Scene) -> None:
         for name in names:
             _check_variable(scene, f"{key}.{name}", name)
     _check_names(scene, sweep)
+    _check_misalign(scene, sweep)
     _check_values(scene, sweep)
     cluster_only = sorted(set(sweep.metrics.keep) & set(SINGLE_ROTOR_METRICS))
     if scene.rotors and cluster_only:
@@ -276,6 +293,37 @@ def _check_variable(scene: Scene, key: str, name: str) -> None:
         f"{key}: not a state or runtime parameter of scene {scene.name} "
         f"(states {', '.join(scene.states)}; runtime {', '.join(scene.runtime) or 'none'})"
     )
+
+
+def rotor_of(key: str) -> int:
+    """K of a misalignment's key axis_K (0 when it is not of that form)."""
+    head, _, k = key.rpartition("_")
+    return int(k) if head == "axis" and k.isdigit() and k == str(int(k)) else 0
+
+
+def _check_misalign(scene: Scene, sweep: Sweep) -> None:
+    """Each misaligned axis is a runtime axis of the scene, not also on the
+    grid or drawn, and its nominal value (the base parameters) a direction."""
+    if sweep.draws is None:
+        return
+    swept = set(sweep.grid) | set(sweep.draws.variables)
+    base = {**scene.simulate.parameters, **sweep.parameters}
+    for key in sweep.draws.misalign:
+        where, k = f"draws.misalign.{key}", rotor_of(key)
+        if not 1 <= k <= len(scene.rotors):
+            axes = f"axis_1..axis_{len(scene.rotors)}" if scene.rotors else "none: not a cluster"
+            raise ValueError(f"{where}: not a rotor axis of scene {scene.name} ({axes})")
+        if scene.rotors[k - 1].axis != "runtime":
+            raise ValueError(
+                f"{where}: rotor {k}'s axis is folded into the code: make it "
+                '"runtime" in the scene to misalign it'
+            )
+        names = [rotor_name(c, k) for c in AXIS]
+        both = [n for n in names if n in swept]
+        if both:
+            raise ValueError(f"{where}: {', '.join(both)} also on the grid or drawn")
+        if all(n in base for n in names):
+            check_axis(tuple(base[n] for n in names), f"{where}: nominal {names[0]}..g3")  # type: ignore[arg-type]
 
 
 def _check_names(scene: Scene, sweep: Sweep) -> None:

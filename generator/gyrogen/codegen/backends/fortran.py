@@ -8,7 +8,7 @@ from sympy.printing.fortran import FCodePrinter
 from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
-from gyrogen.codegen.checks import printed
+from gyrogen.codegen.checks import FORTRAN_WRAP, printed
 from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.integrators.program import fortran_text, program, trig_text
 from gyrogen.codegen.render import f_double, render
@@ -66,6 +66,19 @@ def _check_names(names: list[str], where: str) -> None:
             raise GyrogenError(f"Fortran ignores case: {other!r} and {n!r} clash in {where}")
 
 
+def _declared(names: tuple[str, ...]) -> list[str]:
+    """names as the lists of one declaration each, each line within
+    FORTRAN_WRAP columns (many checks' locals: a cluster's runtime axes)."""
+    head = len("    real(c_double) :: ")
+    lines: list[list[str]] = []
+    for name in names:
+        if lines and head + len(", ".join([*lines[-1], name])) <= FORTRAN_WRAP:
+            lines[-1].append(name)
+        else:
+            lines.append([name])
+    return [", ".join(line) for line in lines]
+
+
 def files(unit: SceneContext) -> dict[str, str]:
     printer = FortranPrinter(unit.nc, unit.prefix)
 
@@ -113,7 +126,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "registry": methods_registry,
         "checks": printed("fortran", unit.macro, unit.checks),
         "code_names": {c.value: c.name for c in abi.SETUP_CODES},
-        "check_locals": check_locals,
+        "check_locals": _declared(check_locals),
         "signature_of": signature_of,
     }
     out = {
