@@ -557,7 +557,8 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 
 /* An adaptive method's start (every pair, rodas4, radau5): the arguments,
    the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
-   on from there, else the code to return (x as given). */
+   on from there, else the code to return (x as given). order: the method's,
+   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0. */
 static int ode_start(int order, double t0, double t1, const double *x, const double *c,
                      double rtol, double atol, double h0, long max_steps, double *f0, double *h,
                      rw4_hardware_stats *stats)
@@ -581,7 +582,9 @@ static int ode_start(int order, double t0, double t1, const double *x, const dou
     if (h0 > 0.0) {
         *h = dmin(h0, t1 - t0);
     } else {
-        *h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+        if (order > 0) {
+            *h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats);
+        }
     }
     return -1;
 }

@@ -597,7 +597,8 @@ contains
 
   ! An adaptive method's start (every pair, rodas4, radau5): the arguments,
   ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
-  ! on from there, else the code to return (x as given).
+  ! on from there, else the code to return (x as given). order: the method's,
+  ! for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
   function ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats) result(res)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: t0
@@ -636,7 +637,9 @@ contains
     if (h0 > 0.0_c_double) then
       h = min(h0, t1 - t0)
     else
-      h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats)
+      if (order > 0) then
+        h = initial_step(order, t0, t1, x, f0, c, rtol, atol, stats)
+      end if
     end if
     res = -1
     return
