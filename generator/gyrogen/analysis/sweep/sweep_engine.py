@@ -9,9 +9,10 @@ client scatters the sweep and its generated sources to every worker once
 chunk tasks a few at a time (so neither the client nor the scheduler holds
 more than a window of results: memory stays flat whatever the sweep's
 size). Who writes a part: the worker that computed it, when the output
-directory is one every worker reaches (the local engine; shared=True on a
-cluster with a shared file system), and then only each chunk's figures come
-back; else the client, from the bytes the task returns. A worker that dies
+(a directory or an fsspec URL: analysis/sweep/sweep_store.py) is one every
+worker reaches (the local engine; shared=True on a cluster with a shared
+file system or a URL), and then only each chunk's figures come back; else
+the client, from the bytes the task returns. A worker that dies
 loses nothing: Dask reschedules its chunks. A rerun of the same sweep into
 the same directory, with any chunk size, computes only what is left
 (resume after a crash or Ctrl-C); a directory holding another sweep, or
