@@ -134,11 +134,16 @@ bench-lib: setup
 	$(BIN)/python tests/bench_cmake_default.py
 
 ## sweep-bench: the sweep's figures: 10^6 trajectories end to end against the bare batch
-## compute, 1 -> 2 workers, the scheduler's task rate, and the peak memory of 10^7
+## compute, 1 -> 2 workers, the fixed and per-chunk costs, the scheduler's task rate, and the
+## peak memory of 10^7; SWEEP_BASELINE=REV runs gyrogen as of REV beside this tree (before and
+## after), SWEEP_LARGE=N also compares end to end at N trajectories
 SWEEP_TRAJECTORIES ?= 1000000
 SWEEP_MEMORY ?= 10000000
+SWEEP_LARGE ?= 0
+SWEEP_BASELINE ?=
 sweep-bench: setup
-	$(BIN)/python tests/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY)
+	$(BIN)/python tests/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY) \
+	  --large $(SWEEP_LARGE) $(if $(SWEEP_BASELINE),--baseline $(SWEEP_BASELINE))
 
 ## sweep-map: the stability map of NOTES.md, the Monte Carlo example and the misalignment Monte Carlo
 ## over rw4_hardware (10^5 trajectories, one build; its histograms.png is docs/rw4_misalignment.png), into report/

@@ -243,3 +243,45 @@ def test_workers_write_their_parts_to_the_shared_path(
 def test_shared_is_for_a_scheduler(tmp_path: Path, cli) -> None:
     code, _, err = cli(["sweep", "monte_carlo", "--out", str(tmp_path / "o"), "--shared"])
     assert code == 2 and "--shared is for --scheduler" in err and not (tmp_path / "o").exists()
+
+
+def test_workers_write_their_parts_to_a_file_url(
+    tmp_path: Path,
+    cluster: tuple[str, list[subprocess.Popen]],
+    cli,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """--out file:///... --shared: the workers write every part through
+    fsspec (the client none), the rows are the local run's, the summary is
+    read back from the URL and written there, and a rerun after two parts
+    are lost computes only those two (the resume lists and reads the URL)."""
+    from gyrogen.analysis.sweep import sweep_engine
+
+    address, _ = cluster
+    sweep = long(tmp_path / "long.toml")
+    local, there = tmp_path / "local", tmp_path / "there"
+    url = f"file://{there}"
+    assert cli(["sweep", str(sweep), "--out", str(local), "--no-plots", "--quiet"]).code == 0
+    by_client: list[tuple[int, int]] = []
+    real = sweep_engine.write_part
+
+    def counted(where: object, start: int, stop: int, data: bytes) -> None:
+        by_client.append((start, stop))
+        real(where, start, stop, data)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(sweep_engine, "write_part", counted)
+    run = ["sweep", str(sweep), "--out", url, "--scheduler", address, "--shared", "--quiet"]
+    code, stdout, err = cli(run)
+    assert code == 0, err
+    assert f"{CHUNKS} chunks computed" in stdout and by_client == []
+    assert rows(url).equals(rows(local))
+    summary, mine = (json.loads((d / "summary.json").read_text()) for d in (there, local))
+    assert summary["parts"] == CHUNKS and summary["metrics"] == mine["metrics"]
+    assert summary["integrator_codes"] == mine["integrator_codes"]
+    lost = sorted((there / "parts").iterdir())[3:5]
+    for part in lost:
+        part.unlink()
+    code, stdout, err = cli(run)
+    assert code == 0 and "2 chunks computed, 39 already written" in stdout, (stdout, err)
+    assert rows(url).equals(rows(local)) and by_client == []
+    assert all(p.name.startswith("part-") for p in (there / "parts").iterdir())

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 from gyrogen.analysis.sweep.sweep_spec import Spec, parse
 from gyrogen.analysis.sweep.sweep_spec import load as load_spec
+from gyrogen.analysis.sweep.sweep_store import Store, store
 from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
@@ -88,13 +89,13 @@ def sweep(
     portable: bool = False,
 ) -> pd.DataFrame:
     """`gyrogen sweep`: every trajectory of spec (a built-in sweep, a sweep
-    file or a Spec) into out [default: sweep/<name>], resuming what is there
-    (portable: code for any CPU, `--portable`); its rows, one per
-    trajectory, in sample order."""
+    file or a Spec) into out (a directory or an fsspec URL) [default:
+    sweep/<name>], resuming what is there (portable: code for any CPU,
+    `--portable`); its rows, one per trajectory, in sample order."""
     from gyrogen.analysis.sweep import sweep_engine, sweep_report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
-    where = Path(out) if out is not None else Path("sweep") / chosen.name
+    where = store(out if out is not None else Path("sweep") / chosen.name)
     record = sweep_engine.run(
         chosen,
         where,
@@ -109,13 +110,14 @@ def sweep(
     return read(where)
 
 
-def read(out: str | Path) -> pd.DataFrame:
-    """The rows of the sweep in out, in sample order."""
+def read(out: str | Path | Store) -> pd.DataFrame:
+    """The rows of the sweep in out (a directory or an fsspec URL), in sample order."""
     import pandas as pd
 
     from gyrogen.analysis.sweep.sweep_columns import PARTS
 
-    frame = pd.read_parquet(Path(out) / PARTS)
+    where = store(out)
+    frame = pd.read_parquet(Path(where.where) / PARTS if where.local else where.show(PARTS))
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)
 
 

@@ -9,7 +9,6 @@ from typing import Any
 
 import click
 
-from gyrogen.commands.options import directory
 from gyrogen.limits import MAX_SWEEP_CHUNK
 
 ADDRESS = re.compile(r"tcp://[^\s:/]+:\d{1,5}")
@@ -26,6 +25,23 @@ class SweepType(click.ParamType):
         return load(str(value))
 
 
+class OutType(click.ParamType):
+    """A directory, or an fsspec URL (PROTOCOL://PATH) checked before any work."""
+
+    name = "DIR|URL"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        if not isinstance(value, str) or "://" not in value:
+            return click.Path(file_okay=False, path_type=Path).convert(value, param, ctx)
+        from gyrogen.analysis.sweep.sweep_store import url_store
+        from gyrogen.errors import GyrogenError
+
+        try:
+            return url_store(value)
+        except GyrogenError as exc:
+            self.fail(str(exc), param, ctx)
+
+
 def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     if value is not None and not ADDRESS.fullmatch(value):
         raise click.BadParameter(f"{value!r} is not tcp://HOST:PORT", ctx, param)
@@ -36,7 +52,12 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
 
 @click.command()
 @click.argument("spec", metavar="SWEEP", type=SweepType())
-@directory("--out", "Directory for the Parquet parts, summary and figures [default: sweep/<name>].")
+@click.option(
+    "--out",
+    type=OutType(),
+    help="Directory or fsspec URL (file:///PATH, s3://BUCKET/PATH) for the Parquet parts, "
+    "summary and figures [default: sweep/<name>].",
+)
 @click.option(
     "--scheduler",
     callback=_address,
@@ -63,8 +84,9 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
 @click.option(
     "--shared",
     is_flag=True,
-    help="With --scheduler: --out is on a file system every worker reaches at the same path; "
-    "each worker writes its parts there, and only each chunk's figures reach this process.",
+    help="With --scheduler: every worker reaches --out (a shared file system at the same path, "
+    "or a URL); each worker writes its parts there, and only each chunk's figures reach this "
+    "process.",
 )
 @click.option(
     "--portable",
@@ -74,7 +96,7 @@ def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> s
 )
 def sweep(
     spec: Any,
-    out: Path | None,
+    out: Any,
     scheduler: str | None,
     workers: int | None,
     chunk: int | None,
@@ -117,7 +139,8 @@ def sweep(
     for line in sweep_report.markdown(data).splitlines()[2:]:
         if line and not line.startswith("|"):
             click.echo(line)
-    click.echo(f"wrote {out}/ ({', '.join(data['files'])}; rows in {sweep_engine.PARTS}/)")
+    shown = record.out.show()
+    click.echo(f"wrote {shown}/ ({', '.join(data['files'])}; rows in {sweep_engine.PARTS}/)")
 
 
 command = sweep

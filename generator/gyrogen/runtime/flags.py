@@ -4,7 +4,7 @@ compiler takes it: -O3 -march=native, and -fopenmp (the _batch integrators
 then run on every core), with nothing fused into an FMA
 (-ffp-contract=off -fno-tree-slp-vectorize, see FAST), so that the numbers
 do not depend on the CPU model. Each optional flag is probed once per
-process with the compiler itself. The portable build files (`gyrogen
+process with the compiler itself, the probes at once. The portable build files (`gyrogen
 generate --lib`) keep plain -O2."""
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 from pathlib import Path
 
@@ -82,9 +83,11 @@ def env_portable() -> bool:
 
 
 def _optional(tool: str, language: str, native: bool) -> tuple[str, ...]:
-    fast = tuple(f for f in FAST if accepts(tool, language, f)
-                 and (native or not f.startswith("-march")))  # fmt: skip
-    return (fast or ("-O2",)) + ((OPENMP,) if openmp(tool, language) else ())
+    wanted = [f for f in FAST if native or not f.startswith("-march")]
+    with ThreadPoolExecutor(len(wanted) + 1) as pool:  # the probes at once: ~50 ms each
+        taken = list(pool.map(lambda f: accepts(tool, language, f), [*wanted, OPENMP]))
+    fast = tuple(f for f, ok in zip(wanted, taken, strict=False) if ok)
+    return (fast or ("-O2",)) + ((OPENMP,) if taken[-1] else ())
 
 
 def openmp(tool: str, language: str) -> bool:

@@ -16,7 +16,6 @@ whole: the map has a cell per trajectory."""
 
 from __future__ import annotations
 
-import os
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -25,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.errors import GyrogenError
+from gyrogen.analysis.sweep.sweep_store import Store, store
 
 BINS = 50
 LOG_SPAN = 100.0
@@ -56,33 +55,29 @@ def part_name(start: int, stop: int) -> str:
     return f"part-{start:0{DIGITS}d}-{stop:0{DIGITS}d}.parquet"
 
 
-def written(out: Path) -> list[tuple[int, int]]:
+def written(out: Store | Path) -> list[tuple[int, int]]:
     """The (start, stop) of the parts in out, in order."""
-    try:
-        names = os.listdir(out / PARTS)
-    except FileNotFoundError:
-        return []
-    except OSError as exc:
-        raise GyrogenError(f"{out / PARTS}: cannot list it: {exc.strerror or exc}") from exc
+    names = store(out).listdir(PARTS)
     return sorted((int(m[1]), int(m[2])) for n in names if (m := _PART.fullmatch(n)))
 
 
-def part_files(out: Path) -> list[Path]:
-    """The parts in out, in sample order (nothing else that is there)."""
-    return [out / PARTS / part_name(a, b) for a, b in written(out)]
+def part_files(out: Store | Path) -> list[str]:
+    """The names of the parts in out, in sample order (nothing else that is there)."""
+    return [part_name(a, b) for a, b in written(out)]
 
 
-def scan(out: Path, names: list[str]) -> Iterator[dict[str, np.ndarray]]:
+def scan(out: Store | Path, names: list[str]) -> Iterator[dict[str, np.ndarray]]:
     """The named columns of each part in turn (one file open at a time)."""
     import pyarrow.parquet as pq
 
-    for path in part_files(out):
-        with pq.ParquetFile(path) as f:  # ParquetFile, not read_table: no pandas
-            table = f.read(columns=names)
+    where = store(out)
+    for name in part_files(where):
+        with where.open(PARTS, name) as source, pq.ParquetFile(source) as f:
+            table = f.read(columns=names)  # ParquetFile, not read_table: no pandas
         yield {n: numpy_of(table.column(n)) for n in names}
 
 
-def column(out: Path, name: str) -> np.ndarray:
+def column(out: Store | Path, name: str) -> np.ndarray:
     """The column name of every part in out, in the parts' order."""
     return np.concatenate([part[name] for part in scan(out, [name])])
 
@@ -100,7 +95,7 @@ def numpy_of(chunked: Any) -> np.ndarray:
     return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
 
 
-def in_order(out: Path, names: list[str]) -> dict[str, np.ndarray]:
+def in_order(out: Store | Path, names: list[str]) -> dict[str, np.ndarray]:
     """Columns in sample order."""
     order = np.argsort(column(out, "sample"), kind="stable")
     return {n: column(out, n)[order] for n in names}
@@ -248,7 +243,7 @@ Spread = tuple[dict[str, float | int], Histogram]
 
 
 def spreads(
-    out: Path, names: list[str], counted: tuple[str, ...] = ()
+    out: Store | Path, names: list[str], counted: tuple[str, ...] = ()
 ) -> tuple[dict[str, dict[str, int]], dict[str, Spread]]:
     """How many rows hold each value of the counted (integer) columns, and
     each named column's min, median, p99, max and mean over its finite

@@ -17,6 +17,7 @@ stays a unit vector.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,6 +120,13 @@ def tilted(nominal: np.ndarray, tilt: Misalignment, u: np.ndarray, v: np.ndarray
     return np.cos(theta)[:, None] * g0 + np.sin(theta)[:, None] * side
 
 
+def _rows(values: Sequence[float], n: int) -> np.ndarray:
+    """(n, len(values)) doubles, each row values (np.tile's, without its repeat)."""
+    out = np.empty((n, len(values)), dtype=np.float64)
+    out[:] = np.array(values, dtype=np.float64)
+    return out
+
+
 def inputs(spec: Spec, start: int, stop: int) -> Inputs:
     """Everything trajectories start..stop-1 start from."""
     sample = np.arange(start, stop, dtype=np.int64)
@@ -127,9 +135,9 @@ def inputs(spec: Spec, start: int, stop: int) -> Inputs:
     base = scene.model_copy(
         update={"simulate": scene.simulate.model_copy(update={"initial": spec.base_state()})}
     )
-    x0 = np.tile(np.array(base.initial_state(), dtype=np.float64), (len(sample), 1))
     params = spec.base_parameters()
-    p = np.tile(np.array([params.get(n, np.nan) for n in scene.runtime]), (len(sample), 1))
+    x0 = _rows(base.initial_state(), len(sample))
+    p = _rows([params.get(n, np.nan) for n in scene.runtime], len(sample))
     for name, v in values.items():
         if name in scene.states:
             x0[:, scene.states.index(name)] = v

@@ -9,9 +9,10 @@ client scatters the sweep and its generated sources to every worker once
 chunk tasks a few at a time (so neither the client nor the scheduler holds
 more than a window of results: memory stays flat whatever the sweep's
 size). Who writes a part: the worker that computed it, when the output
-directory is one every worker reaches (the local engine; shared=True on a
-cluster with a shared file system), and then only each chunk's figures come
-back; else the client, from the bytes the task returns. A worker that dies
+(a directory or an fsspec URL: analysis/sweep/sweep_store.py) is one every
+worker reaches (the local engine; shared=True on a cluster with a shared
+file system or a URL), and then only each chunk's figures come back; else
+the client, from the bytes the task returns. A worker that dies
 loses nothing: Dask reschedules its chunks. A rerun of the same sweep into
 the same directory, with any chunk size, computes only what is left
 (resume after a crash or Ctrl-C); a directory holding another sweep, or
@@ -55,8 +56,8 @@ from gyrogen.analysis.sweep.sweep_parts import (
     written,
 )
 from gyrogen.analysis.sweep.sweep_spec import Spec
+from gyrogen.analysis.sweep.sweep_store import Store, store
 from gyrogen.errors import GyrogenError
-from gyrogen.files import make_dir
 from gyrogen.runtime.flags import flags_for, native_target
 from gyrogen.runtime.scene_build import Sources, code_digest, compiled, scene_sources
 
@@ -70,8 +71,8 @@ class Job:
     sources: Sources
     chunk: int
     identity: dict[str, str] = field(default_factory=dict)
-    parts: str | None = None
-    """The directory the workers write the parts into (None: the client does)."""
+    parts: Store | None = None
+    """The sweep's store when the workers write the parts into it (None: the client does)."""
 
     @property
     def chunks(self) -> int:
@@ -117,13 +118,13 @@ def chunk_task(job: Job, start: int, stop: int) -> Done:
     comp = compiled(job.sources)
     t0 = time.perf_counter()
     data = parquet_bytes(run_chunk(comp, job.spec, start, stop), part_metadata(job))
-    if job.parts is not None:
-        if not Path(job.parts).is_dir():  # the client made it: this worker does not see it
+    if (where := job.parts) is not None:
+        if where.has_dirs and where.kind(PARTS) != "dir":  # the client made it: not seen here
             raise GyrogenError(
-                f"{job.parts} is not on the worker at {socket.gethostname()}: --shared needs "
-                "--out on a file system every worker reaches at the same path"
+                f"{where.show(PARTS)} is not on the worker at {socket.gethostname()}: --shared "
+                "needs --out on a file system every worker reaches at the same path or URL"
             )
-        write_part(Path(job.parts), start, stop, data)
+        write_part(where, start, stop, data)
         return Done(start, stop, time.perf_counter() - t0, None)
     return Done(start, stop, time.perf_counter() - t0, data)
 
@@ -150,7 +151,7 @@ def part_metadata(job: Job) -> dict[str, Any]:
 class Run:
     """How a sweep ran: what was skipped and computed, and the times."""
 
-    out: Path
+    out: Store
     job: Job
     engine: str
     threads: int
@@ -166,7 +167,7 @@ class Run:
 
 def run(
     spec: Spec,
-    out: Path,
+    out: Path | Store,
     *,
     scheduler: str | None = None,
     threads: int | None = None,
@@ -185,11 +186,12 @@ def run(
     the end will need: matplotlib's import)."""
     began = time.perf_counter()
     chunk = chunk or spec.sweep.chunk
+    out = store(out)
     read_state(out)  # obstacles first, before the seconds of deriving the sources
     sources = scene_sources(spec.scene, portable)
     if scheduler is None:  # pyarrow's first write loads its codecs: not on the tasks' path
         threading.Thread(target=parquet_bytes, args=({"warm": np.zeros(1)},), daemon=True).start()
-    writers = str((out / PARTS).absolute()) if scheduler is None or shared else None
+    writers = out.absolute() if scheduler is None or shared else None
     cpu = None if portable or scheduler else native_target()
     if scheduler is None:  # refusals first, before any work (a cluster's CPU is asked below)
         check_out(out, spec, identity(spec, sources, cpu), restart)
@@ -199,7 +201,7 @@ def run(
         ident = identity(spec, sources, cpu)
         state = check_out(out, spec, ident, restart)
         job = Job(spec, sources, chunk, ident, writers)
-        make_dir(out / PARTS)
+        out.make_dir(PARTS)
         done = claim(out, state)
         record = Run(out, job, name, n, skipped=len(done))
         scattered = client.scatter(job, broadcast=True, hash=False)
@@ -225,7 +227,7 @@ def _compute(
     from distributed import as_completed
     from tqdm import tqdm
 
-    job, parts, made = record.job, record.out / PARTS, set()
+    job, out, made = record.job, record.out, set()
     futures = as_completed()
     # unique to this run: two clients on one scheduler never share a task
     key = f"gyrogen-sweep-{job.spec.fingerprint()}-{uuid.uuid4().hex[:12]}"
@@ -245,7 +247,7 @@ def _compute(
         for future in futures:
             got = _result(future)
             if got.data is not None:
-                write_part(parts, got.start, got.stop, got.data)
+                write_part(out, got.start, got.stop, got.data)
             made.add((got.start, got.stop))
             record.task_seconds.append(got.seconds)
             record.rows += got.stop - got.start
@@ -282,21 +284,20 @@ def _cpu(client: Any, scheduler: str) -> str:
     return cpus.pop()
 
 
-def _strays(out: Path, kept: set[tuple[int, int]]) -> None:
+def _strays(out: Store, kept: set[tuple[int, int]]) -> None:
     """After the run: every part it made is in out (a worker that wrote
     elsewhere is refused), only this sweep's parts are (a task of an
     earlier, interrupted run on a cluster may have finished since), and no
     temporary of a worker killed mid-write."""
-    parts = out / PARTS
     found = written(out)
     if missing := kept - set(found):
         a, b = min(missing)
         raise GyrogenError(
-            f"{parts / part_name(a, b)} and {len(missing) - 1} other parts are not there: a "
-            "worker wrote them where this machine does not see (is --out shared?)"
+            f"{out.show(PARTS, part_name(a, b))} and {len(missing) - 1} other parts are not "
+            "there: a worker wrote them where this machine does not see (is --out shared?)"
         )
     for a, b in found:
         if (a, b) not in kept:
-            print(f"{parts / part_name(a, b)}: not this run's: removed", file=sys.stderr)
-            (parts / part_name(a, b)).unlink(missing_ok=True)
-    clean(parts)
+            print(f"{out.show(PARTS, part_name(a, b))}: not this run's: removed", file=sys.stderr)
+            out.remove(PARTS, part_name(a, b))
+    clean(out)

@@ -107,32 +107,43 @@ def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
     return docs
 
 
-def _blank(spec: Spec, n: int) -> dict[str, np.ndarray]:
+def _filled(spec: Spec, n: int, every: dict[str, np.ndarray], ran: np.ndarray | None,
+            found: dict[str, np.ndarray]) -> dict[str, np.ndarray]:  # fmt: skip
+    """The chunk's columns: every (values of all n rows: the inputs) and
+    found (values of the rows ran, None: all of them) as they are when they
+    cover every row (no copy), else in columns filled for the rows not run
+    (code NOT_RUN, NaN, 0)."""
     out = {}
     for name, dtype in columns(spec).items():
-        fill = np.nan if dtype.kind == "f" else 0
-        out[name] = np.full(n, NOT_RUN if name == "code" else fill, dtype=dtype)
+        if name in every or (ran is None and name in found):
+            out[name] = np.asarray(every[name] if name in every else found[name], dtype=dtype)
+            continue
+        fill = NOT_RUN if name == "code" else np.nan if dtype.kind == "f" else 0
+        out[name] = np.full(n, fill, dtype=dtype)
+        if name in found:
+            out[name][ran] = found[name]
     return out
 
 
 def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np.ndarray]:
     """The rows of trajectories start..stop-1, as columns."""
     inp = inputs(spec, start, stop)
-    cols = _blank(spec, len(inp.sample))
-    cols["sample"][:] = inp.sample
-    for name, values in inp.values.items():
-        cols[name][:] = values
+    n = len(inp.sample)
     groups, which = parameter_sets(inp.p)
     setups = [comp.setup_code(p) for p in groups]
-    cols["setup_code"][:] = np.array([code for code, _ in setups])[which]
-    ran = np.flatnonzero(cols["setup_code"] == 0)
-    if ran.size:
-        members = [np.flatnonzero(which[ran] == g) for g in range(len(groups))]
-        batches = [(c, m) for (code, c), m in zip(setups, members, strict=True) if code == 0]
-        runtime = dict(zip(spec.scene.runtime, inp.p[ran].T, strict=True))
-        known = {**spec.scene.folded(), **runtime}
-        _store(spec, cols, ran, _integrate(comp, spec, batches, known, inp.x0[ran]), inp.x0[ran])
-    return cols
+    codes = np.array([code for code, _ in setups], dtype=np.int32)[which]
+    every = {"sample": inp.sample, **inp.values, "setup_code": codes}
+    ran = np.flatnonzero(codes == 0)
+    if not ran.size:
+        return _filled(spec, n, every, ran, {})
+    members = [np.flatnonzero(which[ran] == g) for g in range(len(groups))]
+    batches = [(c, m) for (code, c), m in zip(setups, members, strict=True) if code == 0]
+    all_ran = ran.size == n  # the usual case: no gather, no scatter
+    runtime = dict(zip(spec.scene.runtime, (inp.p if all_ran else inp.p[ran]).T, strict=True))
+    known = {**spec.scene.folded(), **runtime}
+    x0 = inp.x0 if all_ran else inp.x0[ran]
+    runs = _integrate(comp, spec, batches, known, x0)
+    return _filled(spec, n, every, None if all_ran else ran, _found(spec, runs, x0))
 
 
 def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -212,7 +223,8 @@ def _integrate(
 ) -> _Runs:
     """Every trajectory from 0 to t_end, interval by interval: each
     parameter set's (constants c, rows) live rows in one batch call, then
-    the metrics of all rows at the interval's end in one look."""
+    the metrics of all rows at the interval's end in one look. x0 becomes
+    the runs' states (integrated in place)."""
     sweep = spec.sweep
     n_samples = sweep.metrics.points
     times = np.linspace(0.0, sweep.t_end, n_samples + 1)
@@ -223,16 +235,18 @@ def _integrate(
     )  # fmt: skip
     n = len(x0)
     runs = _Runs(
-        x0.copy(), np.zeros(n, dtype=np.int32), np.zeros(n),
+        x0, np.zeros(n, dtype=np.int32), np.zeros(n),
         {name: np.zeros(n, dtype=np.int64) for name in COUNTERS},
         _Watch(spec, values, x0) if set(sweep.metrics.keep) & set(SAMPLED) else None,
     )  # fmt: skip
     alive = np.ones(n, dtype=bool)
     for t0, t1 in itertools.pairwise(times):
         for c, rows in batches:
-            live = rows[alive[rows]]
+            live: Any = rows[alive[rows]]
             if not live.size:
                 continue
+            if live.size == n:  # every row: a slice reads and writes in place
+                live = slice(None)
             # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
             xl, stats, codes = comp.integrate_batch(
                 sweep.method, runs.x[live], c, t0, t1, threads=1, **given
@@ -264,17 +278,17 @@ def pointing(spec: Spec, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
 
 
-def _store(
-    spec: Spec, cols: dict[str, np.ndarray], rows: np.ndarray, runs: _Runs, x0: np.ndarray
-) -> None:
+def _found(spec: Spec, runs: _Runs, x0: np.ndarray) -> dict[str, np.ndarray]:
+    """The columns the runs (from x0) give, for the rows that ran."""
     watch = runs.watch
     found = {
         "code": runs.code,
-        "pointing": pointing(spec, x0, runs.x),
         "t": runs.reached,
         **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},
         **runs.totals,
     }
+    if "pointing" in columns(spec):
+        found["pointing"] = pointing(spec, x0, runs.x)
     if watch is not None:
         found |= {
             "nutation_0": watch.nutation_0,
@@ -283,6 +297,4 @@ def _store(
             "H_drift": watch.drift,
             **{f"time_to_{q}": t for q, t in watch.time_to.items()},
         }
-    for name, values in found.items():
-        if name in cols:
-            cols[name][rows] = values
+    return found

@@ -5,45 +5,46 @@ another began: what is left is the gaps between the parts that are whole,
 cut at multiples of this run's chunk (a clean run's parts are the same
 whatever was done before).
 
-A part is written all or nothing (files.write_atomic: a temporary name,
-fsynced, renamed), by the client or by the worker that computed it; a part
-cut short (a crash, a full disk), computed with another identity, or
-overlapping another is computed again.
+A part is written all or nothing (Store.write: locally a temporary name,
+fsynced, renamed; sweep_store.py says what holds for each URL protocol), by
+the client or by the worker that computed it; a part cut short (a crash, a
+full disk), computed with another identity, or overlapping another is
+computed again.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import re
 import sys
 from collections.abc import Iterator
-from pathlib import Path
+from contextlib import suppress
 from typing import Any
 
 import numpy as np
 
 from gyrogen.analysis.sweep.sweep_columns import PARTS, part_name, written
 from gyrogen.analysis.sweep.sweep_spec import Spec
+from gyrogen.analysis.sweep.sweep_store import Store
 from gyrogen.errors import GyrogenError
-from gyrogen.files import can_write, write_atomic
 
 STATE_FILE = "sweep.json"
 _STAGED = re.compile(r"\.part-.*\.(new|old)")
-"""write_atomic's temporary names: what a writer killed mid-write leaves."""
+"""The temporary names of a part being written (files.write_atomic's, and
+a URL store's): what a writer killed mid-write leaves."""
 
 
-def write_part(parts: Path, start: int, stop: int, data: bytes) -> None:
-    write_atomic(parts, {part_name(start, stop): data})
+def write_part(out: Store, start: int, stop: int, data: bytes) -> None:
+    out.write({part_name(start, stop): data}, PARTS)
 
 
-def whole(path: Path, rows: int, ident: dict[str, str]) -> bool:
-    """Whether the part at path is a complete Parquet file of rows rows (its
+def whole(out: Store, name: str, rows: int, ident: dict[str, str]) -> bool:
+    """Whether the part name is a complete Parquet file of rows rows (its
     footer read back) computed with this identity."""
     import pyarrow.parquet as pq
 
     try:
-        with pq.ParquetFile(path) as f:
+        with out.open(PARTS, name) as source, pq.ParquetFile(source) as f:
             meta = f.metadata
         held = json.loads(meta.metadata[b"gyrogen"])["identity"]
         return bool(meta.num_rows == rows and held == ident)
@@ -51,15 +52,15 @@ def whole(path: Path, rows: int, ident: dict[str, str]) -> bool:
         return False
 
 
-def read_state(out: Path) -> dict[str, Any] | None:
+def read_state(out: Store) -> dict[str, Any] | None:
     """The sweep state out holds (None: none yet); obstacles refused."""
-    parts, path = out / PARTS, out / STATE_FILE
-    if os.path.lexists(parts) and not parts.is_dir():
-        raise GyrogenError(f"{parts}: not a directory: remove it or use another --out")
-    if not os.path.lexists(path):
+    if out.kind(PARTS) not in ("absent", "dir"):
+        raise GyrogenError(f"{out.show(PARTS)}: not a directory: remove it or use another --out")
+    if out.kind(STATE_FILE) == "absent":
         return None
+    path = out.show(STATE_FILE)
     try:
-        held = json.loads(path.read_text(encoding="utf-8"))
+        held = json.loads(out.read_text(STATE_FILE))
     except (OSError, ValueError) as exc:
         why = getattr(exc, "strerror", None) or exc
         raise GyrogenError(f"{path}: unreadable ({why}): remove it or use another --out") from exc
@@ -68,7 +69,7 @@ def read_state(out: Path) -> dict[str, Any] | None:
     return held
 
 
-def check_out(out: Path, spec: Spec, ident: dict[str, str], restart: bool) -> dict[str, Any]:
+def check_out(out: Store, spec: Spec, ident: dict[str, str], restart: bool) -> dict[str, Any]:
     """Before any work: out can hold this sweep (nothing in the way, no other
     sweep in it, and a sweep begun there was computed with the same
     identity, unless restart); the state file to write. The chunk size is
@@ -78,57 +79,62 @@ def check_out(out: Path, spec: Spec, ident: dict[str, str], restart: bool) -> di
     held = read_state(out)
     if held is None:
         if written(out):
-            raise GyrogenError(f"{out / PARTS} holds parts but no {STATE_FILE}: remove it first")
-        can_write(out, [STATE_FILE])
+            raise GyrogenError(
+                f"{out.show(PARTS)} holds parts but no {STATE_FILE}: remove it first"
+            )
+        out.can_write(STATE_FILE)
     elif {k: held.get(k) for k in state} != state:
         raise GyrogenError(
-            f"{out} holds another sweep ({held.get('sweep')}, {held.get('trajectories')} "
+            f"{out.show()} holds another sweep ({held.get('sweep')}, {held.get('trajectories')} "
             "trajectories): use another --out or remove it"
         )
     elif held.get("identity") != ident and not restart:
         was = held.get("identity") or {}
         changed = [k for k in {**ident, **was} if was.get(k) != ident.get(k)]
         raise GyrogenError(
-            f"{out} holds this sweep begun with another build (changed: {', '.join(changed)}): "
-            "its rows would mix two codes; --restart computes it anew, or use another --out"
+            f"{out.show()} holds this sweep begun with another build (changed: "
+            f"{', '.join(changed)}): its rows would mix two codes; --restart computes it anew, "
+            "or use another --out"
         )
     return state | {"identity": ident}
 
 
-def claim(out: Path, state: dict[str, Any]) -> list[tuple[int, int]]:
+def claim(out: Store, state: dict[str, Any]) -> list[tuple[int, int]]:
     """out for this sweep: its state file written, what a killed writer left
     removed; the (start, stop) of the parts that are whole, in order (a
     damaged one, or one overlapping another, is removed to be computed again)."""
-    parts = out / PARTS
     if read_state(out) != state:  # new, or begun by another build and restarted
         for a, b in written(out):
-            (parts / part_name(a, b)).unlink(missing_ok=True)
-        write_atomic(out, {STATE_FILE: json.dumps(state, indent=1) + "\n"})
+            out.remove(PARTS, part_name(a, b))
+        out.write({STATE_FILE: json.dumps(state, indent=1) + "\n"})
         return []
-    clean(parts)
+    clean(out)
     done: list[tuple[int, int]] = []
     for a, b in written(out):
-        path = parts / part_name(a, b)
+        name = part_name(a, b)
         if (done and a < done[-1][1]) or b > state["trajectories"] or b <= a:
-            print(f"{path}: overlaps another part: computing it again", file=sys.stderr)
-        elif whole(path, b - a, state["identity"]):
+            print(f"{out.show(PARTS, name)}: overlaps another part: computing it again",
+                  file=sys.stderr)  # fmt: skip
+        elif whole(out, name, b - a, state["identity"]):
             done.append((a, b))
             continue
         else:
-            print(f"{path}: damaged or cut short: computing it again", file=sys.stderr)
-        path.unlink(missing_ok=True)
+            print(f"{out.show(PARTS, name)}: damaged or cut short: computing it again",
+                  file=sys.stderr)  # fmt: skip
+        out.remove(PARTS, name)
     return done
 
 
-def clean(parts: Path) -> None:
-    """Remove what a writer killed mid-write left (write_atomic's temporaries)."""
+def clean(out: Store) -> None:
+    """Remove what a writer killed mid-write left (the parts' temporaries)."""
     try:
-        names = os.listdir(parts)
-    except OSError:
+        names = out.listdir(PARTS)
+    except GyrogenError:
         return
     for name in names:
         if _STAGED.fullmatch(name):
-            (parts / name).unlink(missing_ok=True)
+            with suppress(GyrogenError):
+                out.remove(PARTS, name)
 
 
 def left(done: list[tuple[int, int]], size: int, chunk: int) -> Iterator[tuple[int, int]]:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -23,6 +22,7 @@ import numpy as np
 from gyrogen.abi import UNITS
 from gyrogen.analysis.check.check_engine import spin_axes, spin_stable
 from gyrogen.analysis.sweep.sweep_columns import (
+    PARTS,
     Histogram,
     in_order,
     part_files,
@@ -32,7 +32,7 @@ from gyrogen.analysis.sweep.sweep_columns import (
 from gyrogen.analysis.sweep.sweep_draws import axis_values
 from gyrogen.analysis.sweep.sweep_engine import Run
 from gyrogen.analysis.sweep.sweep_spec import Spec
-from gyrogen.files import write_atomic
+from gyrogen.analysis.sweep.sweep_store import Store
 from gyrogen.physics import lumped_inertias
 
 if TYPE_CHECKING:
@@ -52,7 +52,7 @@ def spin_values(spec: Spec, data: dict[str, np.ndarray]) -> dict[str, Any]:
     return {n: data[n] if n in data else np.float64(base.get(n, 0.0)) for n in SPIN_NAMES}
 
 
-def spin_agreement(spec: Spec, out: Path) -> dict[str, Any]:
+def spin_agreement(spec: Spec, out: Store) -> dict[str, Any]:
     """The criterion against the observed growth, counted part by part."""
     crit = spec.sweep.criterion.spin_stability
     assert crit is not None
@@ -179,7 +179,8 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     """summary.json, summary.md and the figures into the sweep's directory."""
     import pyarrow.parquet as pq
 
-    columns = list(pq.read_schema(part_files(record.out)[0]).names)
+    with record.out.open(PARTS, part_files(record.out)[0]) as source:
+        columns = list(pq.read_schema(source).names)
     data, histograms = summary(spec, record, metric_columns(spec, columns))
     files: dict[str, str | bytes] = {"summary.md": markdown(data)}
     if plots:
@@ -190,7 +191,7 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
             files["map.png"] = map_png(grid)
     data["files"] = ["summary.json", *files]
     files["summary.json"] = json.dumps(data, indent=1) + "\n"
-    write_atomic(record.out, files)
+    record.out.write(files)
     return data
 
 
@@ -199,7 +200,7 @@ def load_plots() -> None:
     import gyrogen.analysis.sweep.sweep_plots  # noqa: F401
 
 
-def map_data(spec: Spec, out: Path, columns: list[str]) -> MapData | None:
+def map_data(spec: Spec, out: Store, columns: list[str]) -> MapData | None:
     """A 2-D product grid's map of its first metric (the median over the
     draws of each cell), with NOTES.md's boundary when the sweep has the
     spin criterion; None for other sweeps, and when no cell has a value

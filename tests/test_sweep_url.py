@@ -1,0 +1,173 @@
+"""--out as an fsspec URL: file:// runs a sweep, resumes it and summarizes it
+through fsspec (the same rows as a local directory); every hostile URL is
+refused in one line naming it and why, before any work, with nothing
+written; an unwritable place is one line, exit 1, nothing half-written; a
+write cut short leaves no temporary behind. (The real scheduler and
+workers writing to a file:// URL: tests/test_sweep_cluster.py.)"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sweep_cases import rows, small
+
+from gyrogen.analysis.sweep.sweep_store import Store, url_store
+from gyrogen.errors import GyrogenError
+
+
+@pytest.fixture
+def cache(cache_dir: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
+    return cache_dir
+
+
+def _listing(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
+
+
+HOSTILE = [
+    ("file://relative/o", "a file URL names an absolute path on this machine: file:///PATH"),
+    ("file://", "a file URL names an absolute path on this machine"),
+    ("file:///", "names no path (PROTOCOL://PATH)"),
+    ("nope://bucket/o", "unknown protocol 'nope': fsspec has no file system of that name"),
+    ("memory://o", "memory:// is each process's own memory: workers would not share it"),
+    ("file:///{dir}/o?x=1", "a query or fragment (? or #) is not supported"),
+    ("file:///{dir}/o#top", "a query or fragment (? or #) is not supported"),
+    ("simplecache::file:///{dir}/o", "not a URL (PROTOCOL://PATH; chained URLs"),
+    ("://{dir}/o", "not a URL (PROTOCOL://PATH"),
+    ("file:///{dir}/o\nx", "a URL with a character that is not printable"),
+    ("file:///{dir}/o\x00", "a URL with a character that is not printable"),
+]
+
+
+@pytest.mark.parametrize(("url", "message"), HOSTILE, ids=[h[0] for h in HOSTILE])
+def test_a_hostile_url_is_one_line_exit_2_nothing_written(
+    url: str, message: str, tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)  # a URL read as a relative path would write here
+    sweep = small(tmp_path / "s.toml")
+    before = _listing(tmp_path)
+    code, stdout, err = cli(["sweep", str(sweep), "--out", url.format(dir=tmp_path)])
+    assert (code, stdout) == (2, "") and err.count("\n") == 1, err
+    assert err.startswith("gyrogen sweep: error: Invalid value for '--out': "), err
+    assert message in err, err
+    assert _listing(tmp_path) == before
+
+
+@pytest.mark.skipif(importlib.util.find_spec("s3fs") is not None, reason="s3fs is installed")
+def test_a_protocol_without_its_package_says_which(tmp_path: Path, cli) -> None:
+    code, _, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", "s3://bucket/o"])
+    assert code == 2 and err.count("\n") == 1, err
+    assert "s3://bucket/o: the s3 protocol needs a package that is not installed" in err, err
+    assert "s3fs" in err, err
+
+
+PROTOCOLS = st.sampled_from(["file", "local", "memory", "s3", "gs", "nope", "FILE", "ftp", "x+y"])
+TAILS = st.text(st.characters(codec="utf-8"), max_size=30)
+
+
+@settings(max_examples=300, deadline=None)
+@given(protocol=PROTOCOLS, tail=TAILS, slash=st.sampled_from(["", "/", "//"]))
+def test_every_url_is_a_store_or_one_line_naming_it(protocol: str, tail: str, slash: str) -> None:
+    """Whatever follows PROTOCOL://: a store of a protocol fsspec has, on the
+    path fsspec reads from the URL, or one GyrogenError line that starts
+    with the URL (repr when it holds a character that is not printable). Nothing is
+    touched: url_store only reads the URL."""
+    url = f"{protocol}://{slash}{tail}"
+    try:
+        found = url_store(url)
+    except GyrogenError as exc:
+        message = str(exc)
+        assert "\n" not in message and message.startswith(f"{url}: " if url.isprintable()
+                                                          else repr(url)), message  # fmt: skip
+        return
+    assert isinstance(found, Store) and found.where == url and found.protocol == protocol.lower()
+    assert found.root and "?" not in found.root and "#" not in found.root
+    if found.protocol in ("file", "local"):
+        assert os.path.isabs(found.root)
+
+
+@pytest.mark.slow
+def test_a_file_url_sweeps_resumes_and_summarizes_as_a_directory(
+    tmp_path: Path, cache: Path, cli
+) -> None:
+    sweep = small(tmp_path / "s.toml")
+    local, there = tmp_path / "local", tmp_path / "there"
+    url = f"file://{there}"
+    assert cli(["sweep", str(sweep), "--out", str(local), "--quiet"]).code == 0
+    code, stdout, err = cli(["sweep", str(sweep), "--out", url, "--quiet"])
+    assert code == 0, err
+    assert f"wrote {url}/ (summary.json" in stdout
+    assert rows(url).equals(rows(local))
+    summary, mine = (json.loads((d / "summary.json").read_text()) for d in (there, local))
+    assert summary["metrics"] == mine["metrics"] and summary["parts"] == mine["parts"] == 3
+    # a resume through the URL: one part gone, one cut short, one writer's temporary left
+    parts = sorted((there / "parts").glob("part-*.parquet"))
+    parts[0].unlink()
+    parts[1].write_bytes(parts[1].read_bytes()[:100])
+    (there / "parts" / f".{parts[2].name}.0123456789ab.new").write_bytes(b"half")
+    code, stdout, err = cli(["sweep", str(sweep), "--out", url, "--quiet"])
+    assert code == 0 and "2 chunks computed, 1 already written" in stdout, (stdout, err)
+    assert "damaged or cut short" in err and rows(url).equals(rows(local))
+    assert sorted(p.name for p in (there / "parts").iterdir()) == sorted(p.name for p in parts)
+
+
+def test_an_unwritable_url_is_one_line_exit_1_nothing_written(tmp_path: Path, cli) -> None:
+    blocker = tmp_path / "afile"
+    blocker.write_text("mine")
+    sweep = small(tmp_path / "s.toml")
+    before = _listing(tmp_path)
+    for url, why in [
+        (f"file://{blocker}/o", "Not a directory"),  # a file in the way
+        ("file:///proc/gyrogen-none/o", "No such file or directory"),  # not even root makes it
+    ]:
+        code, stdout, err = cli(["sweep", str(sweep), "--out", url])
+        assert (code, stdout) == (1, "") and err.count("\n") == 1, err
+        assert err.startswith("gyrogen: error: cannot ") and url in err and why in err, err
+        assert _listing(tmp_path) == before and blocker.read_text() == "mine"
+
+
+@pytest.mark.parametrize(
+    ("obstacle", "message"),
+    [("parts", "{url}/parts: not a directory"), ("state", "{url}/sweep.json: not a sweep's state")],
+)
+def test_obstacles_at_a_url_are_refused_before_any_work(
+    tmp_path: Path, cli, obstacle: str, message: str
+) -> None:
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "parts").write_text("mine") if obstacle == "parts" else (out / "sweep.json").write_text(
+        "[1, 2]"
+    )
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    url = f"file://{out}"
+    code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", url])
+    assert (code, stdout) == (1, "") and err.count("\n") == 1
+    assert err.startswith("gyrogen: error: " + message.format(url=url)), err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_a_url_write_cut_short_leaves_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The rename that would make a part whole fails: one line naming the
+    part, no temporary, no part."""
+    where = url_store(f"file://{tmp_path}")
+    where.make_dir("parts")
+
+    def refused(*args: object, **kwargs: object) -> None:
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(type(where.fs), "mv", refused)
+    with pytest.raises(GyrogenError) as exc:
+        where.write({"part-1.parquet": b"rows"}, "parts")
+    assert (
+        str(exc.value) == f"cannot write file://{tmp_path}/parts/part-1.parquet: Permission denied"
+    )
+    assert list((tmp_path / "parts").iterdir()) == []
