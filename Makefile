@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -81,6 +81,11 @@ bench: setup
 ## bench-clusters: the cluster scenes' rhs, hoisted against an M-solve per call (ops, ns per state), ops vs N
 bench-clusters: setup
 	$(BIN)/python tests/bench_clusters.py
+
+## bench-taylor: the Taylor method on one trajectory against heyoka's, gyrostat and dual_spin, side by side
+bench-taylor: setup
+	$(BIN)/python tests/bench_taylor.py gyrostat 9
+	$(BIN)/python tests/bench_taylor.py dual_spin 9
 
 ## bench-call: us per call of Compiled.integrate and integrate_batch against the raw cffi call
 bench-call: setup

@@ -1,0 +1,84 @@
+"""The Taylor method on one trajectory against heyoka's scalar integrator,
+tolerance by tolerance, interleaved (`make bench-taylor`, scenes gyrostat and
+dual_spin): steps, each one's error against heyoka's real128 reference,
+gyrogen's raw cffi call and heyoka's propagate_until each less its own call
+floor (a call over no time), and both as a Python user calls them
+(Compiled.integrate against propagate_until). Best of the repeats; the load
+average is printed before and after.
+
+usage: python tests/bench_taylor.py SCENE [REPEATS]
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from gyrogen.abi import MAX_STEPS
+from gyrogen.analysis.bench import heyoka_peer as hp
+from gyrogen.analysis.bench.timing import best_time
+from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.codegen.generate import unit_of
+from gyrogen.oracle.compare import scaled_error
+from gyrogen.runtime.scene_build import build_scene
+from gyrogen.scene import load
+
+LEVELS = (1e-6, 1e-8, 1e-10, 1e-12, 1e-14)
+
+
+def main(name: str, repeats: int) -> None:
+    scene = load(name)
+    with tempfile.TemporaryDirectory() as tmp:
+        _, built = build_scene(scene, Path(tmp), ("c",))
+    comp = built["c"]
+    c = comp.setup(runtime_values(scene))
+    x0, t1 = np.array(scene.initial_state()), scene.simulate.t_end
+    hy = hp.module()
+    if hy is None:
+        sys.exit("heyoka is not installed: pip install -e '.[bench]'")
+    hp.one_thread()
+    hsys = hp.system(hy, unit_of(scene))
+    ref, _ = hp.reference(hsys, x0, c, t1)
+    fn, x = comp.function("taylor"), x0.copy()
+    xb, cb = comp.doubles(x), comp.doubles(np.ascontiguousarray(c))
+    stats = comp.ffi.new("gyrogen_stats *")
+
+    def raw(tol: float, end: float) -> None:
+        x[:] = x0
+        fn(0.0, end, xb, cb, tol, tol, 0.0, MAX_STEPS, stats)
+
+    g_floor = best_time(lambda: raw(1e-8, 0.0), repeats, min_total=0.02)
+    h_floor = best_time(hp.Scalar(hsys, x0, c, 0.0, 1e-8).run, repeats, min_total=0.02)
+    print(f"{scene.name}, 0..{t1:g} s; call floors: gyrogen raw cffi {g_floor * 1e6:.2f} us, "
+          f"heyoka {h_floor * 1e6:.2f} us; load {os.getloadavg()[0]:.2f}")  # fmt: skip
+    print("| rtol = atol | steps | error gyrogen | error heyoka | gyrogen us | heyoka us | "
+          "heyoka / gyrogen | from Python: gyrogen us | heyoka us | ratio |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for tol in LEVELS:
+        theirs = hp.Scalar(hsys, x0, c, t1, tol)
+        hx = theirs.final()
+        raw(tol, t1)
+        gx, steps = x.copy(), stats.accepted
+        tg = best_time(lambda tol=tol: raw(tol, t1), repeats, min_total=0.05) - g_floor
+        th = best_time(theirs.run, repeats, min_total=0.05) - h_floor
+
+        def python(tol: float = tol) -> None:
+            comp.integrate("taylor", x0, c, 0.0, t1, rtol=tol, atol=tol)
+
+        pg = best_time(python, repeats, min_total=0.05)
+        ph = best_time(theirs.run, repeats, min_total=0.05)
+        print(f"| {tol:.0e} | {steps} | {scaled_error(gx, ref):.1e} | {scaled_error(hx, ref):.1e}"
+              f" | {tg * 1e6:.2f} | {th * 1e6:.2f} | {th / tg:.2f} | {pg * 1e6:.2f}"
+              f" | {ph * 1e6:.2f} | {ph / pg:.2f} |")  # fmt: skip
+    print(f"after: load {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main(
+        sys.argv[1] if len(sys.argv) > 1 else "gyrostat",
+        int(sys.argv[2]) if len(sys.argv) > 2 else 7,
+    )
