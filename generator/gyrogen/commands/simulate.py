@@ -62,9 +62,10 @@ def simulate(
     max_nfev: int,
     no_plot: bool,
 ) -> None:
-    """Generate SCENE, build its RHS, integrate it with scipy's solve_ivp from
-    simulate.initial, and write trajectory.csv, trajectory.npz, summary.json
-    and trajectory.png with the invariants |H| in N and the energy balance."""
+    """Generate SCENE, build it, integrate it from simulate.initial with one
+    of its compiled integrators or scipy's solve_ivp (--method), and write
+    trajectory.csv, trajectory.npz, summary.json and trajectory.png with the
+    invariants |H| in N and the energy balance."""
     from gyrogen.analysis.simulate import simulate as sim
 
     settings = sim.Settings(
