@@ -117,6 +117,12 @@ BAD = [
     ("name 300 characters", named("b" * 300), "... (300 characters) is longer than 32"),
     ("description too long", described("x" * 2001), "description: 2"),
     ("description NUL", described("a\\u0000b "), NUL_AT_1),
+    (
+        "description bidi",
+        described("\\u202e hostile */"),
+        "description: bidirectional control U+202E",
+    ),
+    ("description isolate", described("ok \\u2066x"), "description: bidirectional control U+2066"),
 ]
 
 

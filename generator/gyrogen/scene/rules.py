@@ -88,17 +88,29 @@ def check_name(v: str) -> None:
         raise ValueError(f"{shown} is a C keyword")
 
 
+BIDI_CONTROLS = frozenset((0x061C, 0x200E, 0x200F, *range(0x202A, 0x202F), *range(0x2066, 0x206A)))
+"""Unicode's bidirectional controls: in a comment they can make the code read
+otherwise than it compiles ("Trojan Source"), and gcc refuses an unpaired
+one (-Werror=bidi-chars), so a description with one would not compile."""
+
+
 def check_description(v: str) -> str:
-    """Any text but control characters (newlines and tabs are fine) and what
-    XML 1.0 cannot hold (U+FFFE, U+FFFF, lone surrogates: an FMU's
-    modelDescription.xml carries the description), at most
-    DESCRIPTION_MAX_LENGTH characters; CR LF is read as a newline."""
+    """Any text but control characters (newlines and tabs are fine),
+    bidirectional controls (BIDI_CONTROLS) and what XML 1.0 cannot hold
+    (U+FFFE, U+FFFF, lone surrogates: an FMU's modelDescription.xml carries
+    the description), at most DESCRIPTION_MAX_LENGTH characters; CR LF is
+    read as a newline."""
     v = v.replace("\r\n", "\n")
     if len(v) > DESCRIPTION_MAX_LENGTH:
         raise ValueError(f"{len(v)} characters; at most {DESCRIPTION_MAX_LENGTH}")
     for i, ch in enumerate(v):
         if ch not in "\n\t" and (ord(ch) < 32 or 127 <= ord(ch) < 160):
             raise ValueError(f"control character U+{ord(ch):04X} at position {i}")
+        if ord(ch) in BIDI_CONTROLS:
+            raise ValueError(
+                f"bidirectional control U+{ord(ch):04X} at position {i}: it would make the "
+                "generated code's comments read otherwise than they compile"
+            )
         if ord(ch) in (0xFFFE, 0xFFFF) or 0xD800 <= ord(ch) <= 0xDFFF:
             raise ValueError(
                 f"U+{ord(ch):04X} at position {i} is not a character: XML (an FMU's "
