@@ -243,6 +243,10 @@ def test_failed_or_non_finite_solution_is_one_line() -> None:
     nan = SimpleNamespace(status=0, t=np.array([0.0, 0.5, 1.0, 1.5]), y=y)
     with pytest.raises(GyrogenError, match=r"^LSODA: non-finite state at t = 1 s$"):
         check_solution(nan, "LSODA", 1.5, 3.0, 10)
+    with pytest.raises(GyrogenError, match=r"spent; the state may be blowing up$"):
+        check_solution(None, "Radau", 1.5, 3.0, 10)  # a stiff method: no advice to take it
+    with pytest.raises(GyrogenError, match=r"or the scene is stiff \(try --method Radau\)$"):
+        check_solution(None, "DOP853", 1.5, 3.0, 10)
 
 
 @pytest.mark.slow

@@ -201,8 +201,12 @@ def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: 
     at = f"{method} failed at t = {t_max:.6g} s of {t_end:g}"
     if sol is None:
         raise GyrogenError(
-            f"{at}: {max_nfev} RHS calls (--max-nfev) spent; "
-            "the state may be blowing up, or the scene is stiff (try --method Radau)"
+            f"{at}: {max_nfev} RHS calls (--max-nfev) spent; the state may be blowing up"
+            + (
+                ""
+                if method in ("Radau", "LSODA")
+                else ", or the scene is stiff (try --method Radau)"
+            )
         )
     if sol.status < 0:
         raise GyrogenError(f"{at}: {sol.message}")
