@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from gyrogen.codegen.integrators.common import arr, real, x
 from gyrogen.codegen.ir.nodes import (
+    At,
     Comment,
     Decl,
     E,
@@ -44,7 +45,7 @@ from gyrogen.methods import Method
 from gyrogen.symbolic.jet import Jet, Node
 from gyrogen.tableaus import Series
 
-T, c, k, j, b = Var("tay"), Var("c"), Var("n"), Var("j"), Var("b")
+T, c, k, j, blk = Var("tay"), Var("c"), Var("n"), Var("j"), Var("b")
 order = Var("order")
 UNROLL = 2
 """Terms of a convolution per turn of its loop: their sum is added to the
@@ -91,7 +92,7 @@ class _Printer:
             return c[node.index]
         return self.at(n, Int(0))
 
-    def at(self, n: int, order_: E) -> E:
+    def at(self, n: int, order_: E) -> At | Var:
         """Node n's coefficient of order_: a stored one, or the value of
         the order being computed (of order 0 or k only)."""
         if n in self.row:
@@ -138,8 +139,8 @@ class _Printer:
         k; w names the trigonometric argument's jj a[jj]."""
         kj = k - jj
         if node.op == "mul":
-            a, b_ = node.args
-            return self.at(a, jj) * self.at(b_, kj)
+            a, b = node.args
+            return self.at(a, jj) * self.at(b, kj)
         if node.op == "div":
             return self.at(node.args[1], jj) * self.at(n, kj)
         return Var(f"w{node.args[0]}{w}") * self.at(node.index, kj)
@@ -156,17 +157,17 @@ class _Printer:
             if node.op == "sin":  # (acc + k a[k] c[0]) / k
                 return acc * inv_k + self.at(a, k) * partner
             return -(acc * inv_k) - self.at(a, k) * partner
-        a, b_ = node.args
+        a, b = node.args
         if node.op == "mul":
             if not self.varying(a):
-                return self.zero(a) * self.at(b_, k)
-            if not self.varying(b_):
-                return self.at(a, k) * self.zero(b_)
-            return (acc + self.at(a, Int(0)) * self.at(b_, k)) + self.at(a, k) * self.at(b_, Int(0))
-        if not self.varying(b_):
-            return self.at(a, k) / self.zero(b_)
+                return self.zero(a) * self.at(b, k)
+            if not self.varying(b):
+                return self.at(a, k) * self.zero(b)
+            return (acc + self.at(a, Int(0)) * self.at(b, k)) + self.at(a, k) * self.at(b, Int(0))
+        if not self.varying(b):
+            return self.at(a, k) / self.zero(b)
         # (a[k] - acc - b[k] u[0]) / b[0], with 1/b[0] and u[0]/b[0] from order 0
-        known = acc * Var(f"ib{n}") + self.at(b_, k) * Var(f"ub{n}")
+        known = acc * Var(f"ib{n}") + self.at(b, k) * Var(f"ub{n}")
         return self.at(a, k) * Var(f"ib{n}") - known if self.varying(a) else -known
 
     def divisions(self) -> list[int]:
@@ -200,9 +201,9 @@ def _lower_orders(p: _Printer) -> list[S]:
         return []
     trig = sorted({jet.nodes[n].args[0] for n in conv if jet.nodes[n].op in ("sin", "cos")})
 
-    def turn(js: list[E], tag: str) -> tuple[list[S], tuple[str, ...]]:
-        count = len(js)
-        names = [f"_{u}" if tag else "" for u in range(count)]
+    def turn(js: list[E]) -> tuple[list[S], tuple[str, ...]]:
+        """The terms js of every convolution; w names per term when several."""
+        names = [f"_{u}" for u in range(len(js))] if len(js) > 1 else [""]
         ws: list[S] = [
             assign(Var(f"w{a}{w}"), fn("real", jj) * p.at(a, jj))
             for a in trig
@@ -218,14 +219,12 @@ def _lower_orders(p: _Printer) -> list[S]:
         ]
         return ws + sums, tuple(f"w{a}{w}" for a in trig for w in names)
 
-    blocks = (k - Int(1)) / Int(UNROLL)
+    blocks = (k - Int(1)) / Int(UNROLL)  # then the rest (none when UNROLL is 1)
+    body, scoped = turn([Int(UNROLL) * blk + Int(1 + u) for u in range(UNROLL)])
     out: list[S] = [assign(Var(f"acc{n}"), 0.0) for n in conv]
-    if UNROLL > 1:
-        body, scoped = turn([Int(UNROLL) * b + Int(1 + u) for u in range(UNROLL)], "u")
-        out.append(For("b", blocks, tuple(body), scoped))
-    body, scoped = turn([j], "")
-    start = Int(UNROLL) * blocks + Int(1) if UNROLL > 1 else Int(1)
-    out.append(For("j", k, tuple(body), scoped, start=start))
+    out.append(For("b", blocks, tuple(body), scoped))
+    body, scoped = turn([j])
+    out.append(For("j", k, tuple(body), scoped, start=Int(UNROLL) * blocks + Int(1)))
     return out
 
 
@@ -236,7 +235,7 @@ def jet_function(series: Series, jet: Jet) -> Func:
     body: list[S] = [Comment("order 0: the state and every node's value", False)]
     body += [assign(T[Int(0), Int(n)], x[n]) for n in range(nx)]
     body += [
-        assign(p.at(n, Int(0)), p.value(jet.nodes[n]))  # type: ignore[arg-type]
+        assign(p.at(n, Int(0)), p.value(jet.nodes[n]))
         for n in range(nx, len(jet.nodes))
         if jet.nodes[n].op not in ("num", "c")
     ]
@@ -249,7 +248,7 @@ def jet_function(series: Series, jet: Jet) -> Func:
     body += [assign(T[Int(1), Int(n)], p.zero(f)) for n, f in enumerate(jet.outputs)]
     order_k = _lower_orders(p)
     order_k += [
-        assign(p.at(n, k), p.finish(n, jet.nodes[n]))  # type: ignore[arg-type]
+        assign(p.at(n, k), p.finish(n, jet.nodes[n]))
         for n in range(nx, len(jet.nodes))
         if not jet.nodes[n].const
     ]

@@ -141,8 +141,9 @@ class LanesPrinter(CPrinter):
             assert isinstance(s, Assign)
             read = {n for n in names(s.value) if self.temporary(n)}
             assert read <= set(set_), f"{sorted(read - set(set_))} read before set in a run"
-            if isinstance(s.target, Var) and self.temporary(s.target.name):
-                set_.append(s.target.name)
+            target = s.target.name if isinstance(s.target, Var) else ""
+            if self.temporary(target) and target not in set_:
+                set_.append(target)
         return set_
 
     def outer(self, s: S, depth: int) -> list[str]:
