@@ -31,6 +31,13 @@
 #else
 #define DUAL_SPIN_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define DUAL_SPIN_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define DUAL_SPIN_ALIGNED __declspec(align(64))
+#else
+#define DUAL_SPIN_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -2316,20 +2323,22 @@ int dual_spin_taylor(double t0, double t1, double *x, const double *c, double rt
 
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
-   busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
-struct lanes {
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
+   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
+   doubles then starts on a cache line (on a row that straddles two, the
+   jet of taylor_batch ran 1.4 times slower). */
+struct DUAL_SPIN_ALIGNED lanes {
+    double ts[DUAL_SPIN_LANES];  /* the time of an rhs call */
+    size_t traj[DUAL_SPIN_LANES];
     double x[DUAL_SPIN_NX][DUAL_SPIN_LANES];
     double k[13][DUAL_SPIN_NX][DUAL_SPIN_LANES];
     double y[DUAL_SPIN_NX][DUAL_SPIN_LANES];
     double xnew[DUAL_SPIN_NX][DUAL_SPIN_LANES];
     double dx[DUAL_SPIN_NX][DUAL_SPIN_LANES];
     double comp[DUAL_SPIN_NX][DUAL_SPIN_LANES];
-    int code[DUAL_SPIN_LANES];
     double t[DUAL_SPIN_LANES];
     double h[DUAL_SPIN_LANES];
     double err_old[DUAL_SPIN_LANES];
-    int nonfinite[DUAL_SPIN_LANES];
-    int rejected_last[DUAL_SPIN_LANES];
     double stats_t[DUAL_SPIN_LANES];
     double stats_h[DUAL_SPIN_LANES];
     long stats_accepted[DUAL_SPIN_LANES];
@@ -2337,9 +2346,10 @@ struct lanes {
     long stats_rhs_calls[DUAL_SPIN_LANES];
     double cap[DUAL_SPIN_LANES];
     double tay[19][16][DUAL_SPIN_LANES];
-    double ts[DUAL_SPIN_LANES];  /* the time of an rhs call */
+    int code[DUAL_SPIN_LANES];
+    int nonfinite[DUAL_SPIN_LANES];
+    int rejected_last[DUAL_SPIN_LANES];
     int busy[DUAL_SPIN_LANES];
-    size_t traj[DUAL_SPIN_LANES];
 };
 
 /* dual_spin_rhs_lanes on DUAL_SPIN_LANES lanes, for the compiler to see that the rows

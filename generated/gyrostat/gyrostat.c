@@ -26,6 +26,13 @@
 #else
 #define GYROSTAT_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define GYROSTAT_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define GYROSTAT_ALIGNED __declspec(align(64))
+#else
+#define GYROSTAT_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium

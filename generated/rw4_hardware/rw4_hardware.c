@@ -27,6 +27,13 @@
 #else
 #define RW4_HARDWARE_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define RW4_HARDWARE_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define RW4_HARDWARE_ALIGNED __declspec(align(64))
+#else
+#define RW4_HARDWARE_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium

@@ -27,6 +27,13 @@
 #else
 #define SPEED_CONTROLLED_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define SPEED_CONTROLLED_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define SPEED_CONTROLLED_ALIGNED __declspec(align(64))
+#else
+#define SPEED_CONTROLLED_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium

@@ -32,6 +32,13 @@
 #else
 #define SPEED_CONTROLLED_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define SPEED_CONTROLLED_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define SPEED_CONTROLLED_ALIGNED __declspec(align(64))
+#else
+#define SPEED_CONTROLLED_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -2380,20 +2387,22 @@ int speed_controlled_taylor(double t0, double t1, double *x, const double *c, do
 
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
-   busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
-struct lanes {
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
+   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
+   doubles then starts on a cache line (on a row that straddles two, the
+   jet of taylor_batch ran 1.4 times slower). */
+struct SPEED_CONTROLLED_ALIGNED lanes {
+    double ts[SPEED_CONTROLLED_LANES];  /* the time of an rhs call */
+    size_t traj[SPEED_CONTROLLED_LANES];
     double x[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
     double k[13][SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
     double y[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
     double xnew[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
     double dx[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
     double comp[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
-    int code[SPEED_CONTROLLED_LANES];
     double t[SPEED_CONTROLLED_LANES];
     double h[SPEED_CONTROLLED_LANES];
     double err_old[SPEED_CONTROLLED_LANES];
-    int nonfinite[SPEED_CONTROLLED_LANES];
-    int rejected_last[SPEED_CONTROLLED_LANES];
     double stats_t[SPEED_CONTROLLED_LANES];
     double stats_h[SPEED_CONTROLLED_LANES];
     long stats_accepted[SPEED_CONTROLLED_LANES];
@@ -2401,9 +2410,10 @@ struct lanes {
     long stats_rhs_calls[SPEED_CONTROLLED_LANES];
     double cap[SPEED_CONTROLLED_LANES];
     double tay[19][17][SPEED_CONTROLLED_LANES];
-    double ts[SPEED_CONTROLLED_LANES];  /* the time of an rhs call */
+    int code[SPEED_CONTROLLED_LANES];
+    int nonfinite[SPEED_CONTROLLED_LANES];
+    int rejected_last[SPEED_CONTROLLED_LANES];
     int busy[SPEED_CONTROLLED_LANES];
-    size_t traj[SPEED_CONTROLLED_LANES];
 };
 
 /* speed_controlled_rhs_lanes on SPEED_CONTROLLED_LANES lanes, for the compiler to see that the rows

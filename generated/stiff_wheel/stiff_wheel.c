@@ -27,6 +27,13 @@
 #else
 #define STIFF_WHEEL_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define STIFF_WHEEL_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define STIFF_WHEEL_ALIGNED __declspec(align(64))
+#else
+#define STIFF_WHEEL_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium

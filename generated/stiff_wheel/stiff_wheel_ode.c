@@ -32,6 +32,13 @@
 #else
 #define STIFF_WHEEL_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define STIFF_WHEEL_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define STIFF_WHEEL_ALIGNED __declspec(align(64))
+#else
+#define STIFF_WHEEL_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -1863,28 +1870,31 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
 
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
-   busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
-struct lanes {
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
+   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
+   doubles then starts on a cache line (on a row that straddles two, the
+   jet of taylor_batch ran 1.4 times slower). */
+struct STIFF_WHEEL_ALIGNED lanes {
+    double ts[STIFF_WHEEL_LANES];  /* the time of an rhs call */
+    size_t traj[STIFF_WHEEL_LANES];
     double x[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
     double k[13][STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
     double y[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
     double xnew[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
     double dx[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
     double comp[STIFF_WHEEL_NX][STIFF_WHEEL_LANES];
-    int code[STIFF_WHEEL_LANES];
     double t[STIFF_WHEEL_LANES];
     double h[STIFF_WHEEL_LANES];
     double err_old[STIFF_WHEEL_LANES];
-    int nonfinite[STIFF_WHEEL_LANES];
-    int rejected_last[STIFF_WHEEL_LANES];
     double stats_t[STIFF_WHEEL_LANES];
     double stats_h[STIFF_WHEEL_LANES];
     long stats_accepted[STIFF_WHEEL_LANES];
     long stats_rejected[STIFF_WHEEL_LANES];
     long stats_rhs_calls[STIFF_WHEEL_LANES];
-    double ts[STIFF_WHEEL_LANES];  /* the time of an rhs call */
+    int code[STIFF_WHEEL_LANES];
+    int nonfinite[STIFF_WHEEL_LANES];
+    int rejected_last[STIFF_WHEEL_LANES];
     int busy[STIFF_WHEEL_LANES];
-    size_t traj[STIFF_WHEEL_LANES];
 };
 
 /* stiff_wheel_rhs_lanes on STIFF_WHEEL_LANES lanes, for the compiler to see that the rows

@@ -26,6 +26,13 @@
 #else
 #define TORQUE_FREE_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define TORQUE_FREE_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define TORQUE_FREE_ALIGNED __declspec(align(64))
+#else
+#define TORQUE_FREE_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium

@@ -31,6 +31,13 @@
 #else
 #define TORQUE_FREE_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define TORQUE_FREE_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define TORQUE_FREE_ALIGNED __declspec(align(64))
+#else
+#define TORQUE_FREE_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -2250,20 +2257,22 @@ int torque_free_taylor(double t0, double t1, double *x, const double *c, double 
 
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
-   busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
-struct lanes {
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
+   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
+   doubles then starts on a cache line (on a row that straddles two, the
+   jet of taylor_batch ran 1.4 times slower). */
+struct TORQUE_FREE_ALIGNED lanes {
+    double ts[TORQUE_FREE_LANES];  /* the time of an rhs call */
+    size_t traj[TORQUE_FREE_LANES];
     double x[TORQUE_FREE_NX][TORQUE_FREE_LANES];
     double k[13][TORQUE_FREE_NX][TORQUE_FREE_LANES];
     double y[TORQUE_FREE_NX][TORQUE_FREE_LANES];
     double xnew[TORQUE_FREE_NX][TORQUE_FREE_LANES];
     double dx[TORQUE_FREE_NX][TORQUE_FREE_LANES];
     double comp[TORQUE_FREE_NX][TORQUE_FREE_LANES];
-    int code[TORQUE_FREE_LANES];
     double t[TORQUE_FREE_LANES];
     double h[TORQUE_FREE_LANES];
     double err_old[TORQUE_FREE_LANES];
-    int nonfinite[TORQUE_FREE_LANES];
-    int rejected_last[TORQUE_FREE_LANES];
     double stats_t[TORQUE_FREE_LANES];
     double stats_h[TORQUE_FREE_LANES];
     long stats_accepted[TORQUE_FREE_LANES];
@@ -2271,9 +2280,10 @@ struct lanes {
     long stats_rhs_calls[TORQUE_FREE_LANES];
     double cap[TORQUE_FREE_LANES];
     double tay[19][13][TORQUE_FREE_LANES];
-    double ts[TORQUE_FREE_LANES];  /* the time of an rhs call */
+    int code[TORQUE_FREE_LANES];
+    int nonfinite[TORQUE_FREE_LANES];
+    int rejected_last[TORQUE_FREE_LANES];
     int busy[TORQUE_FREE_LANES];
-    size_t traj[TORQUE_FREE_LANES];
 };
 
 /* torque_free_rhs_lanes on TORQUE_FREE_LANES lanes, for the compiler to see that the rows

@@ -26,6 +26,13 @@
 #else
 #define WHEEL_SPINUP_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define WHEEL_SPINUP_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define WHEEL_SPINUP_ALIGNED __declspec(align(64))
+#else
+#define WHEEL_SPINUP_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium

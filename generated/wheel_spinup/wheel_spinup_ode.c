@@ -31,6 +31,13 @@
 #else
 #define WHEEL_SPINUP_RESTRICT restrict
 #endif
+#if defined(__GNUC__)
+#define WHEEL_SPINUP_ALIGNED __attribute__((aligned(64)))
+#elif defined(_MSC_VER)
+#define WHEEL_SPINUP_ALIGNED __declspec(align(64))
+#else
+#define WHEEL_SPINUP_ALIGNED
+#endif
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -2357,20 +2364,22 @@ int wheel_spinup_taylor(double t0, double t1, double *x, const double *c, double
 
 /* What the lanes of an explicit pair hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
-   busy with trajectory traj until code >= 0; an idle lane's code is >= 0. */
-struct lanes {
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
+   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
+   doubles then starts on a cache line (on a row that straddles two, the
+   jet of taylor_batch ran 1.4 times slower). */
+struct WHEEL_SPINUP_ALIGNED lanes {
+    double ts[WHEEL_SPINUP_LANES];  /* the time of an rhs call */
+    size_t traj[WHEEL_SPINUP_LANES];
     double x[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     double k[13][WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     double y[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     double xnew[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     double dx[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     double comp[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
-    int code[WHEEL_SPINUP_LANES];
     double t[WHEEL_SPINUP_LANES];
     double h[WHEEL_SPINUP_LANES];
     double err_old[WHEEL_SPINUP_LANES];
-    int nonfinite[WHEEL_SPINUP_LANES];
-    int rejected_last[WHEEL_SPINUP_LANES];
     double stats_t[WHEEL_SPINUP_LANES];
     double stats_h[WHEEL_SPINUP_LANES];
     long stats_accepted[WHEEL_SPINUP_LANES];
@@ -2378,9 +2387,10 @@ struct lanes {
     long stats_rhs_calls[WHEEL_SPINUP_LANES];
     double cap[WHEEL_SPINUP_LANES];
     double tay[19][17][WHEEL_SPINUP_LANES];
-    double ts[WHEEL_SPINUP_LANES];  /* the time of an rhs call */
+    int code[WHEEL_SPINUP_LANES];
+    int nonfinite[WHEEL_SPINUP_LANES];
+    int rejected_last[WHEEL_SPINUP_LANES];
     int busy[WHEEL_SPINUP_LANES];
-    size_t traj[WHEEL_SPINUP_LANES];
 };
 
 /* wheel_spinup_rhs_lanes on WHEEL_SPINUP_LANES lanes, for the compiler to see that the rows
