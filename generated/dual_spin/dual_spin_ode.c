@@ -1937,7 +1937,7 @@ int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rt
 
 /* The normalized Taylor coefficients of x and of the rhs's 46
    nodes to the given order (16 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[16])
+static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[18])
 {
     double acc7;
     double acc8;
@@ -1985,11 +1985,10 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     double v48;
     double v50;
     double v51;
-    int b;
     int j;
     int n;
 
-    /* order 0: the state and every node's value */
+    /* orders 0 and 1 of the state and of every node */
     tay[0][0] = x[0];
     tay[0][1] = x[1];
     tay[0][2] = x[2];
@@ -2038,14 +2037,62 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     ub14 = tay[0][11] / tay[0][10];
     tay[1][0] = tay[0][11];
     tay[1][1] = v17;
+    tay[1][16] = tay[1][1];
     tay[1][2] = v19;
+    tay[1][17] = tay[1][2];
     tay[1][3] = v32;
     tay[1][4] = v42;
     tay[1][5] = v51;
     tay[1][6] = 0.0;
+    tay[1][7] = tay[1][2] * tay[0][8];
+    tay[1][8] = -(tay[1][2] * tay[0][7]);
+    v9 = tay[0][8] * tay[1][5] + tay[1][8] * tay[0][5];
+    v10 = tay[0][7] * tay[1][3] + tay[1][7] * tay[0][3];
+    v11 = v9 - v10;
+    tay[1][9] = tay[1][1] * tay[0][10];
+    tay[1][10] = -(tay[1][1] * tay[0][9]);
+    tay[1][11] = v11 * ib14 - tay[1][10] * ub14;
+    v15 = tay[0][7] * tay[1][5] + tay[1][7] * tay[0][5];
+    v16 = tay[0][8] * tay[1][3] + tay[1][8] * tay[0][3];
+    v17 = v15 + v16;
+    v18 = tay[0][11] * tay[1][9] + tay[1][11] * tay[0][9];
+    v19 = tay[1][4] - v18;
+    v21 = 4.5440763299219775e-05 * tay[1][6];
+    v23 = 0.4092155481941839 * tay[1][4];
+    tay[1][12] = v21 + v23;
+    v25 = tay[0][5] * tay[1][12] + tay[1][5] * tay[0][12];
+    v27 = 0.015471973456719416 * tay[1][4];
+    v29 = 1.1900419543364779e-06 * tay[1][6];
+    tay[1][13] = v27 - v29;
+    v31 = tay[0][13] * tay[1][3] + tay[1][13] * tay[0][3];
+    v32 = v25 - v31;
+    v34 = tay[0][5] * tay[1][5] + tay[1][5] * tay[0][5];
+    v35 = 0.01775954828743408 * v34;
+    v36 = -v35;
+    v37 = 0.01775954828743408 * tay[1][3];
+    v39 = 0.10773983913066638 * tay[1][5];
+    tay[1][14] = v37 - v39;
+    v41 = tay[0][3] * tay[1][14] + tay[1][3] * tay[0][14];
+    v42 = v36 + v41;
+    v43 = tay[0][13] * tay[1][5] + tay[1][13] * tay[0][5];
+    v45 = 5.266025597120826e-05 * tay[1][6];
+    v46 = -v45;
+    v48 = 0.3153534800671272 * tay[1][4];
+    tay[1][15] = v46 - v48;
+    v50 = tay[0][3] * tay[1][15] + tay[1][3] * tay[0][15];
+    v51 = v43 + v50;
+    tay[2][0] = tay[1][11] * inv[2];
+    tay[2][1] = v17 * inv[2];
+    tay[2][16] = 2.0 * tay[2][1];
+    tay[2][2] = v19 * inv[2];
+    tay[2][17] = 2.0 * tay[2][2];
+    tay[2][3] = v32 * inv[2];
+    tay[2][4] = v42 * inv[2];
+    tay[2][5] = v51 * inv[2];
+    tay[2][6] = 0.0;
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         acc7 = 0.0;
         acc8 = 0.0;
         acc9 = 0.0;
@@ -2062,51 +2109,13 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         acc41 = 0.0;
         acc43 = 0.0;
         acc50 = 0.0;
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            double w1_0, w1_1, w2_0, w2_1;
-            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
-            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
-            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
-            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
-            acc7 = acc7 + (w2_0 * tay[n - (2 * b + 1)][8] + w2_1 * tay[n - (2 * b + 2)][8]);
-            acc8 = acc8 + (w2_0 * tay[n - (2 * b + 1)][7] + w2_1 * tay[n - (2 * b + 2)][7]);
-            acc9 = acc9 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][5]);
-            acc10 = acc10 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][7] *
-                    tay[n - (2 * b + 2)][3]);
-            acc12 = acc12 + (w1_0 * tay[n - (2 * b + 1)][10] + w1_1 * tay[n - (2 * b + 2)][10]);
-            acc13 = acc13 + (w1_0 * tay[n - (2 * b + 1)][9] + w1_1 * tay[n - (2 * b + 2)][9]);
-            acc14 = acc14 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][11] + tay[2 * b + 2][10] *
-                    tay[n - (2 * b + 2)][11]);
-            acc15 = acc15 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][7] *
-                    tay[n - (2 * b + 2)][5]);
-            acc16 = acc16 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][3]);
-            acc18 = acc18 + (tay[2 * b + 1][11] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][11] *
-                    tay[n - (2 * b + 2)][9]);
-            acc25 = acc25 + (tay[2 * b + 1][5] * tay[n - (2 * b + 1)][12] + tay[2 * b + 2][5] *
-                    tay[n - (2 * b + 2)][12]);
-            acc31 = acc31 + (tay[2 * b + 1][13] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][13] *
-                    tay[n - (2 * b + 2)][3]);
-            acc34 = acc34 + (tay[2 * b + 1][5] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][5] *
-                    tay[n - (2 * b + 2)][5]);
-            acc41 = acc41 + (tay[2 * b + 1][3] * tay[n - (2 * b + 1)][14] + tay[2 * b + 2][3] *
-                    tay[n - (2 * b + 2)][14]);
-            acc43 = acc43 + (tay[2 * b + 1][13] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][13] *
-                    tay[n - (2 * b + 2)][5]);
-            acc50 = acc50 + (tay[2 * b + 1][3] * tay[n - (2 * b + 1)][15] + tay[2 * b + 2][3] *
-                    tay[n - (2 * b + 2)][15]);
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            double w1, w2;
-            w1 = (double)j * tay[j][1];
-            w2 = (double)j * tay[j][2];
-            acc7 = acc7 + w2 * tay[n - j][8];
-            acc8 = acc8 + w2 * tay[n - j][7];
+        for (j = 1; j < n; ++j) {
+            acc7 = acc7 + tay[j][17] * tay[n - j][8];
+            acc8 = acc8 + tay[j][17] * tay[n - j][7];
             acc9 = acc9 + tay[j][8] * tay[n - j][5];
             acc10 = acc10 + tay[j][7] * tay[n - j][3];
-            acc12 = acc12 + w1 * tay[n - j][10];
-            acc13 = acc13 + w1 * tay[n - j][9];
+            acc12 = acc12 + tay[j][16] * tay[n - j][10];
+            acc13 = acc13 + tay[j][16] * tay[n - j][9];
             acc14 = acc14 + tay[j][10] * tay[n - j][11];
             acc15 = acc15 + tay[j][7] * tay[n - j][5];
             acc16 = acc16 + tay[j][8] * tay[n - j][3];
@@ -2157,7 +2166,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v51 = v43 + v50;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
         tay[n + 1][1] = v17 * inv[n + 1];
+        tay[n + 1][16] = (double)(n + 1) * tay[n + 1][1];
         tay[n + 1][2] = v19 * inv[n + 1];
+        tay[n + 1][17] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v32 * inv[n + 1];
         tay[n + 1][4] = v42 * inv[n + 1];
         tay[n + 1][5] = v51 * inv[n + 1];
@@ -2173,7 +2184,7 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, dual_spin_stats *stats)
 {
-    double tay[19][16];
+    double tay[19][18];
     double inv[19] = {0.0};
     double f0[DUAL_SPIN_NX];
     double xnew[DUAL_SPIN_NX];
@@ -2345,7 +2356,7 @@ struct DUAL_SPIN_ALIGNED lanes {
     long stats_rejected[DUAL_SPIN_LANES];
     long stats_rhs_calls[DUAL_SPIN_LANES];
     double cap[DUAL_SPIN_LANES];
-    double tay[19][16][DUAL_SPIN_LANES];
+    double tay[19][18][DUAL_SPIN_LANES];
     int code[DUAL_SPIN_LANES];
     int nonfinite[DUAL_SPIN_LANES];
     int rejected_last[DUAL_SPIN_LANES];
@@ -2898,26 +2909,10 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
 /* The normalized Taylor coefficients of x and of the rhs's 46 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
 {
-    double acc7[DUAL_SPIN_LANES];
-    double acc8[DUAL_SPIN_LANES];
-    double acc9[DUAL_SPIN_LANES];
-    double acc10[DUAL_SPIN_LANES];
-    double acc12[DUAL_SPIN_LANES];
-    double acc13[DUAL_SPIN_LANES];
-    double acc14[DUAL_SPIN_LANES];
-    double acc15[DUAL_SPIN_LANES];
-    double acc16[DUAL_SPIN_LANES];
-    double acc18[DUAL_SPIN_LANES];
-    double acc25[DUAL_SPIN_LANES];
-    double acc31[DUAL_SPIN_LANES];
-    double acc34[DUAL_SPIN_LANES];
-    double acc41[DUAL_SPIN_LANES];
-    double acc43[DUAL_SPIN_LANES];
-    double acc50[DUAL_SPIN_LANES];
     double ib14[DUAL_SPIN_LANES];
     double ub14[DUAL_SPIN_LANES];
-    int b, j, l, n;
-    /* order 0: the state and every node's value */
+    int j, l, n;
+    /* orders 0 and 1 of the state and of every node */
     DUAL_SPIN_SIMD
     for (l = 0; l < DUAL_SPIN_LANES; ++l) {
         double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
@@ -2969,149 +2964,144 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         ub14[l] = L->tay[0][11][l] / L->tay[0][10][l];
         L->tay[1][0][l] = L->tay[0][11][l];
         L->tay[1][1][l] = v17;
+        L->tay[1][16][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v19;
+        L->tay[1][17][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v32;
         L->tay[1][4][l] = v42;
         L->tay[1][5][l] = v51;
         L->tay[1][6][l] = 0.0;
+        L->tay[1][7][l] = L->tay[1][2][l] * L->tay[0][8][l];
+        L->tay[1][8][l] = -(L->tay[1][2][l] * L->tay[0][7][l]);
+        v9 = L->tay[0][8][l] * L->tay[1][5][l] + L->tay[1][8][l] * L->tay[0][5][l];
+        v10 = L->tay[0][7][l] * L->tay[1][3][l] + L->tay[1][7][l] * L->tay[0][3][l];
+        v11 = v9 - v10;
+        L->tay[1][9][l] = L->tay[1][1][l] * L->tay[0][10][l];
+        L->tay[1][10][l] = -(L->tay[1][1][l] * L->tay[0][9][l]);
+        L->tay[1][11][l] = v11 * ib14[l] - L->tay[1][10][l] * ub14[l];
+        v15 = L->tay[0][7][l] * L->tay[1][5][l] + L->tay[1][7][l] * L->tay[0][5][l];
+        v16 = L->tay[0][8][l] * L->tay[1][3][l] + L->tay[1][8][l] * L->tay[0][3][l];
+        v17 = v15 + v16;
+        v18 = L->tay[0][11][l] * L->tay[1][9][l] + L->tay[1][11][l] * L->tay[0][9][l];
+        v19 = L->tay[1][4][l] - v18;
+        v21 = 4.5440763299219775e-05 * L->tay[1][6][l];
+        v23 = 0.4092155481941839 * L->tay[1][4][l];
+        L->tay[1][12][l] = v21 + v23;
+        v25 = L->tay[0][5][l] * L->tay[1][12][l] + L->tay[1][5][l] * L->tay[0][12][l];
+        v27 = 0.015471973456719416 * L->tay[1][4][l];
+        v29 = 1.1900419543364779e-06 * L->tay[1][6][l];
+        L->tay[1][13][l] = v27 - v29;
+        v31 = L->tay[0][13][l] * L->tay[1][3][l] + L->tay[1][13][l] * L->tay[0][3][l];
+        v32 = v25 - v31;
+        v34 = L->tay[0][5][l] * L->tay[1][5][l] + L->tay[1][5][l] * L->tay[0][5][l];
+        v35 = 0.01775954828743408 * v34;
+        v36 = -v35;
+        v37 = 0.01775954828743408 * L->tay[1][3][l];
+        v39 = 0.10773983913066638 * L->tay[1][5][l];
+        L->tay[1][14][l] = v37 - v39;
+        v41 = L->tay[0][3][l] * L->tay[1][14][l] + L->tay[1][3][l] * L->tay[0][14][l];
+        v42 = v36 + v41;
+        v43 = L->tay[0][13][l] * L->tay[1][5][l] + L->tay[1][13][l] * L->tay[0][5][l];
+        v45 = 5.266025597120826e-05 * L->tay[1][6][l];
+        v46 = -v45;
+        v48 = 0.3153534800671272 * L->tay[1][4][l];
+        L->tay[1][15][l] = v46 - v48;
+        v50 = L->tay[0][3][l] * L->tay[1][15][l] + L->tay[1][3][l] * L->tay[0][15][l];
+        v51 = v43 + v50;
+        L->tay[2][0][l] = L->tay[1][11][l] * inv[2];
+        L->tay[2][1][l] = v17 * inv[2];
+        L->tay[2][16][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][2][l] = v19 * inv[2];
+        L->tay[2][17][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][3][l] = v32 * inv[2];
+        L->tay[2][4][l] = v42 * inv[2];
+        L->tay[2][5][l] = v51 * inv[2];
+        L->tay[2][6][l] = 0.0;
     }
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         DUAL_SPIN_SIMD
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-            acc7[l] = 0.0;
-            acc8[l] = 0.0;
-            acc9[l] = 0.0;
-            acc10[l] = 0.0;
-            acc12[l] = 0.0;
-            acc13[l] = 0.0;
-            acc14[l] = 0.0;
-            acc15[l] = 0.0;
-            acc16[l] = 0.0;
-            acc18[l] = 0.0;
-            acc25[l] = 0.0;
-            acc31[l] = 0.0;
-            acc34[l] = 0.0;
-            acc41[l] = 0.0;
-            acc43[l] = 0.0;
-            acc50[l] = 0.0;
-        }
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            DUAL_SPIN_SIMD
-            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                double w1_0, w1_1, w2_0, w2_1;
-                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
-                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
-                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
-                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
-                acc7[l] = acc7[l] + (w2_0 * L->tay[n - (2 * b + 1)][8][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][8][l]);
-                acc8[l] = acc8[l] + (w2_0 * L->tay[n - (2 * b + 1)][7][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][7][l]);
-                acc9[l] = acc9[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc10[l] = acc10[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc12[l] = acc12[l] + (w1_0 * L->tay[n - (2 * b + 1)][10][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][10][l]);
-                acc13[l] = acc13[l] + (w1_0 * L->tay[n - (2 * b + 1)][9][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][9][l]);
-                acc14[l] = acc14[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][11][l]
-                        + L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][11][l]);
-                acc15[l] = acc15[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc16[l] = acc16[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc18[l] = acc18[l] + (L->tay[2 * b + 1][11][l] * L->tay[n - (2 * b + 1)][9][l] +
-                        L->tay[2 * b + 2][11][l] * L->tay[n - (2 * b + 2)][9][l]);
-                acc25[l] = acc25[l] + (L->tay[2 * b + 1][5][l] * L->tay[n - (2 * b + 1)][12][l] +
-                        L->tay[2 * b + 2][5][l] * L->tay[n - (2 * b + 2)][12][l]);
-                acc31[l] = acc31[l] + (L->tay[2 * b + 1][13][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][13][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc34[l] = acc34[l] + (L->tay[2 * b + 1][5][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][5][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc41[l] = acc41[l] + (L->tay[2 * b + 1][3][l] * L->tay[n - (2 * b + 1)][14][l] +
-                        L->tay[2 * b + 2][3][l] * L->tay[n - (2 * b + 2)][14][l]);
-                acc43[l] = acc43[l] + (L->tay[2 * b + 1][13][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][13][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc50[l] = acc50[l] + (L->tay[2 * b + 1][3][l] * L->tay[n - (2 * b + 1)][15][l] +
-                        L->tay[2 * b + 2][3][l] * L->tay[n - (2 * b + 2)][15][l]);
-            }
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            DUAL_SPIN_SIMD
-            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                double w1, w2;
-                w1 = (double)j * L->tay[j][1][l];
-                w2 = (double)j * L->tay[j][2][l];
-                acc7[l] = acc7[l] + w2 * L->tay[n - j][8][l];
-                acc8[l] = acc8[l] + w2 * L->tay[n - j][7][l];
-                acc9[l] = acc9[l] + L->tay[j][8][l] * L->tay[n - j][5][l];
-                acc10[l] = acc10[l] + L->tay[j][7][l] * L->tay[n - j][3][l];
-                acc12[l] = acc12[l] + w1 * L->tay[n - j][10][l];
-                acc13[l] = acc13[l] + w1 * L->tay[n - j][9][l];
-                acc14[l] = acc14[l] + L->tay[j][10][l] * L->tay[n - j][11][l];
-                acc15[l] = acc15[l] + L->tay[j][7][l] * L->tay[n - j][5][l];
-                acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][3][l];
-                acc18[l] = acc18[l] + L->tay[j][11][l] * L->tay[n - j][9][l];
-                acc25[l] = acc25[l] + L->tay[j][5][l] * L->tay[n - j][12][l];
-                acc31[l] = acc31[l] + L->tay[j][13][l] * L->tay[n - j][3][l];
-                acc34[l] = acc34[l] + L->tay[j][5][l] * L->tay[n - j][5][l];
-                acc41[l] = acc41[l] + L->tay[j][3][l] * L->tay[n - j][14][l];
-                acc43[l] = acc43[l] + L->tay[j][13][l] * L->tay[n - j][5][l];
-                acc50[l] = acc50[l] + L->tay[j][3][l] * L->tay[n - j][15][l];
-            }
-        }
-        DUAL_SPIN_SIMD
-        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-            double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
-            L->tay[n][7][l] = acc7[l] * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
-            L->tay[n][8][l] = -(acc8[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
-            v9 = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] * L->tay[0][5][l];
-            v10 = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] * L->tay[0][3][l];
+            double acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc31, acc34, acc41, acc43, acc50, v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
+            acc7 = 0.0;
+            acc8 = 0.0;
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc12 = 0.0;
+            acc13 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc18 = 0.0;
+            acc25 = 0.0;
+            acc31 = 0.0;
+            acc34 = 0.0;
+            acc41 = 0.0;
+            acc43 = 0.0;
+            acc50 = 0.0;
+            j = 1;
+            do {
+                acc7 = acc7 + L->tay[j][17][l] * L->tay[n - j][8][l];
+                acc8 = acc8 + L->tay[j][17][l] * L->tay[n - j][7][l];
+                acc9 = acc9 + L->tay[j][8][l] * L->tay[n - j][5][l];
+                acc10 = acc10 + L->tay[j][7][l] * L->tay[n - j][3][l];
+                acc12 = acc12 + L->tay[j][16][l] * L->tay[n - j][10][l];
+                acc13 = acc13 + L->tay[j][16][l] * L->tay[n - j][9][l];
+                acc14 = acc14 + L->tay[j][10][l] * L->tay[n - j][11][l];
+                acc15 = acc15 + L->tay[j][7][l] * L->tay[n - j][5][l];
+                acc16 = acc16 + L->tay[j][8][l] * L->tay[n - j][3][l];
+                acc18 = acc18 + L->tay[j][11][l] * L->tay[n - j][9][l];
+                acc25 = acc25 + L->tay[j][5][l] * L->tay[n - j][12][l];
+                acc31 = acc31 + L->tay[j][13][l] * L->tay[n - j][3][l];
+                acc34 = acc34 + L->tay[j][5][l] * L->tay[n - j][5][l];
+                acc41 = acc41 + L->tay[j][3][l] * L->tay[n - j][14][l];
+                acc43 = acc43 + L->tay[j][13][l] * L->tay[n - j][5][l];
+                acc50 = acc50 + L->tay[j][3][l] * L->tay[n - j][15][l];
+                ++j;
+            } while (j < n);
+            L->tay[n][7][l] = acc7 * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
+            L->tay[n][8][l] = -(acc8 * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
+            v9 = acc9 + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] * L->tay[0][5][l];
+            v10 = acc10 + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] * L->tay[0][3][l];
             v11 = v9 - v10;
-            L->tay[n][9][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][10][l];
-            L->tay[n][10][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][9][l];
-            L->tay[n][11][l] = v11 * ib14[l] - (acc14[l] * ib14[l] + L->tay[n][10][l] * ub14[l]);
-            v15 = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] * L->tay[0][5][l];
-            v16 = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
+            L->tay[n][9][l] = acc12 * inv[n] + L->tay[n][1][l] * L->tay[0][10][l];
+            L->tay[n][10][l] = -(acc13 * inv[n]) - L->tay[n][1][l] * L->tay[0][9][l];
+            L->tay[n][11][l] = v11 * ib14[l] - (acc14 * ib14[l] + L->tay[n][10][l] * ub14[l]);
+            v15 = acc15 + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] * L->tay[0][5][l];
+            v16 = acc16 + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
             v17 = v15 + v16;
-            v18 = acc18[l] + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] *
-                    L->tay[0][9][l];
+            v18 = acc18 + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] * L->tay[0][9][l];
             v19 = L->tay[n][4][l] - v18;
             v21 = 4.5440763299219775e-05 * L->tay[n][6][l];
             v23 = 0.4092155481941839 * L->tay[n][4][l];
             L->tay[n][12][l] = v21 + v23;
-            v25 = acc25[l] + L->tay[0][5][l] * L->tay[n][12][l] + L->tay[n][5][l] *
-                    L->tay[0][12][l];
+            v25 = acc25 + L->tay[0][5][l] * L->tay[n][12][l] + L->tay[n][5][l] * L->tay[0][12][l];
             v27 = 0.015471973456719416 * L->tay[n][4][l];
             v29 = 1.1900419543364779e-06 * L->tay[n][6][l];
             L->tay[n][13][l] = v27 - v29;
-            v31 = acc31[l] + L->tay[0][13][l] * L->tay[n][3][l] + L->tay[n][13][l] *
-                    L->tay[0][3][l];
+            v31 = acc31 + L->tay[0][13][l] * L->tay[n][3][l] + L->tay[n][13][l] * L->tay[0][3][l];
             v32 = v25 - v31;
-            v34 = acc34[l] + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] * L->tay[0][5][l];
+            v34 = acc34 + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] * L->tay[0][5][l];
             v35 = 0.01775954828743408 * v34;
             v36 = -v35;
             v37 = 0.01775954828743408 * L->tay[n][3][l];
             v39 = 0.10773983913066638 * L->tay[n][5][l];
             L->tay[n][14][l] = v37 - v39;
-            v41 = acc41[l] + L->tay[0][3][l] * L->tay[n][14][l] + L->tay[n][3][l] *
-                    L->tay[0][14][l];
+            v41 = acc41 + L->tay[0][3][l] * L->tay[n][14][l] + L->tay[n][3][l] * L->tay[0][14][l];
             v42 = v36 + v41;
-            v43 = acc43[l] + L->tay[0][13][l] * L->tay[n][5][l] + L->tay[n][13][l] *
-                    L->tay[0][5][l];
+            v43 = acc43 + L->tay[0][13][l] * L->tay[n][5][l] + L->tay[n][13][l] * L->tay[0][5][l];
             v45 = 5.266025597120826e-05 * L->tay[n][6][l];
             v46 = -v45;
             v48 = 0.3153534800671272 * L->tay[n][4][l];
             L->tay[n][15][l] = v46 - v48;
-            v50 = acc50[l] + L->tay[0][3][l] * L->tay[n][15][l] + L->tay[n][3][l] *
-                    L->tay[0][15][l];
+            v50 = acc50 + L->tay[0][3][l] * L->tay[n][15][l] + L->tay[n][3][l] * L->tay[0][15][l];
             v51 = v43 + v50;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v17 * inv[n + 1];
+            L->tay[n + 1][16][l] = (double)(n + 1) * L->tay[n + 1][1][l];
             L->tay[n + 1][2][l] = v19 * inv[n + 1];
+            L->tay[n + 1][17][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v32 * inv[n + 1];
             L->tay[n + 1][4][l] = v42 * inv[n + 1];
             L->tay[n + 1][5][l] = v51 * inv[n + 1];

@@ -2115,7 +2115,7 @@ int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rto
 /* The normalized Taylor coefficients of x and of the rhs's 52
    nodes to the given order (16 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[24])
+                              double (*tay)[26])
 {
     double acc14;
     double acc15;
@@ -2165,11 +2165,10 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double v59;
     double v61;
     double v62;
-    int b;
     int j;
     int n;
 
-    /* order 0: the state and every node's value */
+    /* orders 0 and 1 of the state and of every node */
     tay[0][0] = x[0];
     tay[0][1] = x[1];
     tay[0][2] = x[2];
@@ -2228,7 +2227,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     ub21 = tay[0][18] / tay[0][17];
     tay[1][0] = tay[0][18];
     tay[1][1] = v24;
+    tay[1][24] = tay[1][1];
     tay[1][2] = v26;
+    tay[1][25] = tay[1][2];
     tay[1][3] = v27;
     tay[1][4] = tay[0][11];
     tay[1][5] = tay[0][12];
@@ -2240,9 +2241,65 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     tay[1][11] = 0.0;
     tay[1][12] = 0.0;
     tay[1][13] = c[10];
+    tay[1][14] = tay[1][2] * tay[0][15];
+    tay[1][15] = -(tay[1][2] * tay[0][14]);
+    v16 = tay[0][15] * tay[1][9] + tay[1][15] * tay[0][9];
+    v17 = tay[0][14] * tay[1][7] + tay[1][14] * tay[0][7];
+    v18 = v16 - v17;
+    tay[1][16] = tay[1][1] * tay[0][17];
+    tay[1][17] = -(tay[1][1] * tay[0][16]);
+    tay[1][18] = v18 * ib21 - tay[1][17] * ub21;
+    v22 = tay[0][14] * tay[1][9] + tay[1][14] * tay[0][9];
+    v23 = tay[0][15] * tay[1][7] + tay[1][15] * tay[0][7];
+    v24 = v22 + v23;
+    v25 = tay[0][18] * tay[1][16] + tay[1][18] * tay[0][16];
+    v26 = tay[1][8] - v25;
+    v27 = tay[1][10] - tay[1][8];
+    v29 = c[0] * tay[1][8];
+    v31 = c[1] * tay[1][10];
+    tay[1][19] = v29 + v31;
+    v33 = tay[0][7] * tay[1][19] + tay[1][7] * tay[0][19];
+    v35 = c[2] * tay[1][8];
+    v37 = c[3] * tay[1][10];
+    tay[1][20] = v35 + v37;
+    v39 = tay[0][9] * tay[1][20] + tay[1][9] * tay[0][20];
+    v40 = v33 + v39;
+    v43 = c[4] * tay[1][7];
+    v45 = c[5] * tay[1][9];
+    tay[1][21] = v43 + v45;
+    v47 = tay[0][7] * tay[1][21] + tay[1][7] * tay[0][21];
+    v48 = v47;
+    v49 = tay[0][9] * tay[1][9] + tay[1][9] * tay[0][9];
+    v50 = c[4] * v49;
+    v51 = v48 - v50;
+    v53 = c[7] * tay[1][7];
+    v54 = c[0] * tay[1][9];
+    tay[1][22] = v53 - v54;
+    v56 = tay[0][8] * tay[1][22] + tay[1][8] * tay[0][22];
+    v58 = c[8] * tay[1][7];
+    v59 = c[1] * tay[1][9];
+    tay[1][23] = v58 - v59;
+    v61 = tay[0][10] * tay[1][23] + tay[1][10] * tay[0][23];
+    v62 = v56 + v61;
+    tay[2][0] = tay[1][18] * inv[2];
+    tay[2][1] = v24 * inv[2];
+    tay[2][24] = 2.0 * tay[2][1];
+    tay[2][2] = v26 * inv[2];
+    tay[2][25] = 2.0 * tay[2][2];
+    tay[2][3] = v27 * inv[2];
+    tay[2][4] = tay[1][11] * inv[2];
+    tay[2][5] = tay[1][12] * inv[2];
+    tay[2][6] = tay[1][13] * inv[2];
+    tay[2][7] = v40 * inv[2];
+    tay[2][8] = v51 * inv[2];
+    tay[2][9] = v62 * inv[2];
+    tay[2][10] = 0.0;
+    tay[2][11] = 0.0;
+    tay[2][12] = 0.0;
+    tay[2][13] = 0.0;
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         acc14 = 0.0;
         acc15 = 0.0;
         acc16 = 0.0;
@@ -2259,51 +2316,13 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc49 = 0.0;
         acc56 = 0.0;
         acc61 = 0.0;
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            double w1_0, w1_1, w2_0, w2_1;
-            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
-            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
-            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
-            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
-            acc14 = acc14 + (w2_0 * tay[n - (2 * b + 1)][15] + w2_1 * tay[n - (2 * b + 2)][15]);
-            acc15 = acc15 + (w2_0 * tay[n - (2 * b + 1)][14] + w2_1 * tay[n - (2 * b + 2)][14]);
-            acc16 = acc16 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][15] *
-                    tay[n - (2 * b + 2)][9]);
-            acc17 = acc17 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][7] + tay[2 * b + 2][14] *
-                    tay[n - (2 * b + 2)][7]);
-            acc19 = acc19 + (w1_0 * tay[n - (2 * b + 1)][17] + w1_1 * tay[n - (2 * b + 2)][17]);
-            acc20 = acc20 + (w1_0 * tay[n - (2 * b + 1)][16] + w1_1 * tay[n - (2 * b + 2)][16]);
-            acc21 = acc21 + (tay[2 * b + 1][17] * tay[n - (2 * b + 1)][18] + tay[2 * b + 2][17] *
-                    tay[n - (2 * b + 2)][18]);
-            acc22 = acc22 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][14] *
-                    tay[n - (2 * b + 2)][9]);
-            acc23 = acc23 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][7] + tay[2 * b + 2][15] *
-                    tay[n - (2 * b + 2)][7]);
-            acc25 = acc25 + (tay[2 * b + 1][18] * tay[n - (2 * b + 1)][16] + tay[2 * b + 2][18] *
-                    tay[n - (2 * b + 2)][16]);
-            acc33 = acc33 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][19] + tay[2 * b + 2][7] *
-                    tay[n - (2 * b + 2)][19]);
-            acc39 = acc39 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][20] + tay[2 * b + 2][9] *
-                    tay[n - (2 * b + 2)][20]);
-            acc47 = acc47 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][21] + tay[2 * b + 2][7] *
-                    tay[n - (2 * b + 2)][21]);
-            acc49 = acc49 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][9] *
-                    tay[n - (2 * b + 2)][9]);
-            acc56 = acc56 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][22] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][22]);
-            acc61 = acc61 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][23] + tay[2 * b + 2][10] *
-                    tay[n - (2 * b + 2)][23]);
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            double w1, w2;
-            w1 = (double)j * tay[j][1];
-            w2 = (double)j * tay[j][2];
-            acc14 = acc14 + w2 * tay[n - j][15];
-            acc15 = acc15 + w2 * tay[n - j][14];
+        for (j = 1; j < n; ++j) {
+            acc14 = acc14 + tay[j][25] * tay[n - j][15];
+            acc15 = acc15 + tay[j][25] * tay[n - j][14];
             acc16 = acc16 + tay[j][15] * tay[n - j][9];
             acc17 = acc17 + tay[j][14] * tay[n - j][7];
-            acc19 = acc19 + w1 * tay[n - j][17];
-            acc20 = acc20 + w1 * tay[n - j][16];
+            acc19 = acc19 + tay[j][24] * tay[n - j][17];
+            acc20 = acc20 + tay[j][24] * tay[n - j][16];
             acc21 = acc21 + tay[j][17] * tay[n - j][18];
             acc22 = acc22 + tay[j][14] * tay[n - j][9];
             acc23 = acc23 + tay[j][15] * tay[n - j][7];
@@ -2357,7 +2376,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v62 = v56 + v61;
         tay[n + 1][0] = tay[n][18] * inv[n + 1];
         tay[n + 1][1] = v24 * inv[n + 1];
+        tay[n + 1][24] = (double)(n + 1) * tay[n + 1][1];
         tay[n + 1][2] = v26 * inv[n + 1];
+        tay[n + 1][25] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v27 * inv[n + 1];
         tay[n + 1][4] = tay[n][11] * inv[n + 1];
         tay[n + 1][5] = tay[n][12] * inv[n + 1];
@@ -2380,7 +2401,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, gyrostat_stats *stats)
 {
-    double tay[19][24];
+    double tay[19][26];
     double inv[19] = {0.0};
     double f0[GYROSTAT_NX];
     double xnew[GYROSTAT_NX];
@@ -2552,7 +2573,7 @@ struct GYROSTAT_ALIGNED lanes {
     long stats_rejected[GYROSTAT_LANES];
     long stats_rhs_calls[GYROSTAT_LANES];
     double cap[GYROSTAT_LANES];
-    double tay[19][24][GYROSTAT_LANES];
+    double tay[19][26][GYROSTAT_LANES];
     int code[GYROSTAT_LANES];
     int nonfinite[GYROSTAT_LANES];
     int rejected_last[GYROSTAT_LANES];
@@ -3114,26 +3135,10 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
 /* The normalized Taylor coefficients of x and of the rhs's 52 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
-    double acc14[GYROSTAT_LANES];
-    double acc15[GYROSTAT_LANES];
-    double acc16[GYROSTAT_LANES];
-    double acc17[GYROSTAT_LANES];
-    double acc19[GYROSTAT_LANES];
-    double acc20[GYROSTAT_LANES];
-    double acc21[GYROSTAT_LANES];
-    double acc22[GYROSTAT_LANES];
-    double acc23[GYROSTAT_LANES];
-    double acc25[GYROSTAT_LANES];
-    double acc33[GYROSTAT_LANES];
-    double acc39[GYROSTAT_LANES];
-    double acc47[GYROSTAT_LANES];
-    double acc49[GYROSTAT_LANES];
-    double acc56[GYROSTAT_LANES];
-    double acc61[GYROSTAT_LANES];
     double ib21[GYROSTAT_LANES];
     double ub21[GYROSTAT_LANES];
-    int b, j, l, n;
-    /* order 0: the state and every node's value */
+    int j, l, n;
+    /* orders 0 and 1 of the state and of every node */
     GYROSTAT_SIMD
     for (l = 0; l < GYROSTAT_LANES; ++l) {
         double v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v31, v33, v35, v37, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
@@ -3195,7 +3200,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         ub21[l] = L->tay[0][18][l] / L->tay[0][17][l];
         L->tay[1][0][l] = L->tay[0][18][l];
         L->tay[1][1][l] = v24;
+        L->tay[1][24][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v26;
+        L->tay[1][25][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v27;
         L->tay[1][4][l] = L->tay[0][11][l];
         L->tay[1][5][l] = L->tay[0][12][l];
@@ -3207,151 +3214,150 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         L->tay[1][11][l] = 0.0;
         L->tay[1][12][l] = 0.0;
         L->tay[1][13][l] = c[10];
+        L->tay[1][14][l] = L->tay[1][2][l] * L->tay[0][15][l];
+        L->tay[1][15][l] = -(L->tay[1][2][l] * L->tay[0][14][l]);
+        v16 = L->tay[0][15][l] * L->tay[1][9][l] + L->tay[1][15][l] * L->tay[0][9][l];
+        v17 = L->tay[0][14][l] * L->tay[1][7][l] + L->tay[1][14][l] * L->tay[0][7][l];
+        v18 = v16 - v17;
+        L->tay[1][16][l] = L->tay[1][1][l] * L->tay[0][17][l];
+        L->tay[1][17][l] = -(L->tay[1][1][l] * L->tay[0][16][l]);
+        L->tay[1][18][l] = v18 * ib21[l] - L->tay[1][17][l] * ub21[l];
+        v22 = L->tay[0][14][l] * L->tay[1][9][l] + L->tay[1][14][l] * L->tay[0][9][l];
+        v23 = L->tay[0][15][l] * L->tay[1][7][l] + L->tay[1][15][l] * L->tay[0][7][l];
+        v24 = v22 + v23;
+        v25 = L->tay[0][18][l] * L->tay[1][16][l] + L->tay[1][18][l] * L->tay[0][16][l];
+        v26 = L->tay[1][8][l] - v25;
+        v27 = L->tay[1][10][l] - L->tay[1][8][l];
+        v29 = c[0] * L->tay[1][8][l];
+        v31 = c[1] * L->tay[1][10][l];
+        L->tay[1][19][l] = v29 + v31;
+        v33 = L->tay[0][7][l] * L->tay[1][19][l] + L->tay[1][7][l] * L->tay[0][19][l];
+        v35 = c[2] * L->tay[1][8][l];
+        v37 = c[3] * L->tay[1][10][l];
+        L->tay[1][20][l] = v35 + v37;
+        v39 = L->tay[0][9][l] * L->tay[1][20][l] + L->tay[1][9][l] * L->tay[0][20][l];
+        v40 = v33 + v39;
+        v43 = c[4] * L->tay[1][7][l];
+        v45 = c[5] * L->tay[1][9][l];
+        L->tay[1][21][l] = v43 + v45;
+        v47 = L->tay[0][7][l] * L->tay[1][21][l] + L->tay[1][7][l] * L->tay[0][21][l];
+        v48 = v47;
+        v49 = L->tay[0][9][l] * L->tay[1][9][l] + L->tay[1][9][l] * L->tay[0][9][l];
+        v50 = c[4] * v49;
+        v51 = v48 - v50;
+        v53 = c[7] * L->tay[1][7][l];
+        v54 = c[0] * L->tay[1][9][l];
+        L->tay[1][22][l] = v53 - v54;
+        v56 = L->tay[0][8][l] * L->tay[1][22][l] + L->tay[1][8][l] * L->tay[0][22][l];
+        v58 = c[8] * L->tay[1][7][l];
+        v59 = c[1] * L->tay[1][9][l];
+        L->tay[1][23][l] = v58 - v59;
+        v61 = L->tay[0][10][l] * L->tay[1][23][l] + L->tay[1][10][l] * L->tay[0][23][l];
+        v62 = v56 + v61;
+        L->tay[2][0][l] = L->tay[1][18][l] * inv[2];
+        L->tay[2][1][l] = v24 * inv[2];
+        L->tay[2][24][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][2][l] = v26 * inv[2];
+        L->tay[2][25][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][3][l] = v27 * inv[2];
+        L->tay[2][4][l] = L->tay[1][11][l] * inv[2];
+        L->tay[2][5][l] = L->tay[1][12][l] * inv[2];
+        L->tay[2][6][l] = L->tay[1][13][l] * inv[2];
+        L->tay[2][7][l] = v40 * inv[2];
+        L->tay[2][8][l] = v51 * inv[2];
+        L->tay[2][9][l] = v62 * inv[2];
+        L->tay[2][10][l] = 0.0;
+        L->tay[2][11][l] = 0.0;
+        L->tay[2][12][l] = 0.0;
+        L->tay[2][13][l] = 0.0;
     }
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            acc14[l] = 0.0;
-            acc15[l] = 0.0;
-            acc16[l] = 0.0;
-            acc17[l] = 0.0;
-            acc19[l] = 0.0;
-            acc20[l] = 0.0;
-            acc21[l] = 0.0;
-            acc22[l] = 0.0;
-            acc23[l] = 0.0;
-            acc25[l] = 0.0;
-            acc33[l] = 0.0;
-            acc39[l] = 0.0;
-            acc47[l] = 0.0;
-            acc49[l] = 0.0;
-            acc56[l] = 0.0;
-            acc61[l] = 0.0;
-        }
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            GYROSTAT_SIMD
-            for (l = 0; l < GYROSTAT_LANES; ++l) {
-                double w1_0, w1_1, w2_0, w2_1;
-                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
-                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
-                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
-                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
-                acc14[l] = acc14[l] + (w2_0 * L->tay[n - (2 * b + 1)][15][l] + w2_1 * L->tay[n -
-                        (2 * b + 2)][15][l]);
-                acc15[l] = acc15[l] + (w2_0 * L->tay[n - (2 * b + 1)][14][l] + w2_1 * L->tay[n -
-                        (2 * b + 2)][14][l]);
-                acc16[l] = acc16[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][9][l] +
-                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][9][l]);
-                acc17[l] = acc17[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][7][l] +
-                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][7][l]);
-                acc19[l] = acc19[l] + (w1_0 * L->tay[n - (2 * b + 1)][17][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][17][l]);
-                acc20[l] = acc20[l] + (w1_0 * L->tay[n - (2 * b + 1)][16][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][16][l]);
-                acc21[l] = acc21[l] + (L->tay[2 * b + 1][17][l] * L->tay[n - (2 * b + 1)][18][l]
-                        + L->tay[2 * b + 2][17][l] * L->tay[n - (2 * b + 2)][18][l]);
-                acc22[l] = acc22[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][9][l] +
-                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][9][l]);
-                acc23[l] = acc23[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][7][l] +
-                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][7][l]);
-                acc25[l] = acc25[l] + (L->tay[2 * b + 1][18][l] * L->tay[n - (2 * b + 1)][16][l]
-                        + L->tay[2 * b + 2][18][l] * L->tay[n - (2 * b + 2)][16][l]);
-                acc33[l] = acc33[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][19][l] +
-                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][19][l]);
-                acc39[l] = acc39[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][20][l] +
-                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][20][l]);
-                acc47[l] = acc47[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][21][l] +
-                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][21][l]);
-                acc49[l] = acc49[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][9][l] +
-                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][9][l]);
-                acc56[l] = acc56[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][22][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][22][l]);
-                acc61[l] = acc61[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][23][l]
-                        + L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][23][l]);
-            }
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            GYROSTAT_SIMD
-            for (l = 0; l < GYROSTAT_LANES; ++l) {
-                double w1, w2;
-                w1 = (double)j * L->tay[j][1][l];
-                w2 = (double)j * L->tay[j][2][l];
-                acc14[l] = acc14[l] + w2 * L->tay[n - j][15][l];
-                acc15[l] = acc15[l] + w2 * L->tay[n - j][14][l];
-                acc16[l] = acc16[l] + L->tay[j][15][l] * L->tay[n - j][9][l];
-                acc17[l] = acc17[l] + L->tay[j][14][l] * L->tay[n - j][7][l];
-                acc19[l] = acc19[l] + w1 * L->tay[n - j][17][l];
-                acc20[l] = acc20[l] + w1 * L->tay[n - j][16][l];
-                acc21[l] = acc21[l] + L->tay[j][17][l] * L->tay[n - j][18][l];
-                acc22[l] = acc22[l] + L->tay[j][14][l] * L->tay[n - j][9][l];
-                acc23[l] = acc23[l] + L->tay[j][15][l] * L->tay[n - j][7][l];
-                acc25[l] = acc25[l] + L->tay[j][18][l] * L->tay[n - j][16][l];
-                acc33[l] = acc33[l] + L->tay[j][7][l] * L->tay[n - j][19][l];
-                acc39[l] = acc39[l] + L->tay[j][9][l] * L->tay[n - j][20][l];
-                acc47[l] = acc47[l] + L->tay[j][7][l] * L->tay[n - j][21][l];
-                acc49[l] = acc49[l] + L->tay[j][9][l] * L->tay[n - j][9][l];
-                acc56[l] = acc56[l] + L->tay[j][8][l] * L->tay[n - j][22][l];
-                acc61[l] = acc61[l] + L->tay[j][10][l] * L->tay[n - j][23][l];
-            }
-        }
-        GYROSTAT_SIMD
-        for (l = 0; l < GYROSTAT_LANES; ++l) {
-            double v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v31, v33, v35, v37, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
-            L->tay[n][14][l] = acc14[l] * inv[n] + L->tay[n][2][l] * L->tay[0][15][l];
-            L->tay[n][15][l] = -(acc15[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][14][l];
-            v16 = acc16[l] + L->tay[0][15][l] * L->tay[n][9][l] + L->tay[n][15][l] *
-                    L->tay[0][9][l];
-            v17 = acc17[l] + L->tay[0][14][l] * L->tay[n][7][l] + L->tay[n][14][l] *
-                    L->tay[0][7][l];
+            double acc14, acc15, acc16, acc17, acc19, acc20, acc21, acc22, acc23, acc25, acc33, acc39, acc47, acc49, acc56, acc61, v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v31, v33, v35, v37, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc19 = 0.0;
+            acc20 = 0.0;
+            acc21 = 0.0;
+            acc22 = 0.0;
+            acc23 = 0.0;
+            acc25 = 0.0;
+            acc33 = 0.0;
+            acc39 = 0.0;
+            acc47 = 0.0;
+            acc49 = 0.0;
+            acc56 = 0.0;
+            acc61 = 0.0;
+            j = 1;
+            do {
+                acc14 = acc14 + L->tay[j][25][l] * L->tay[n - j][15][l];
+                acc15 = acc15 + L->tay[j][25][l] * L->tay[n - j][14][l];
+                acc16 = acc16 + L->tay[j][15][l] * L->tay[n - j][9][l];
+                acc17 = acc17 + L->tay[j][14][l] * L->tay[n - j][7][l];
+                acc19 = acc19 + L->tay[j][24][l] * L->tay[n - j][17][l];
+                acc20 = acc20 + L->tay[j][24][l] * L->tay[n - j][16][l];
+                acc21 = acc21 + L->tay[j][17][l] * L->tay[n - j][18][l];
+                acc22 = acc22 + L->tay[j][14][l] * L->tay[n - j][9][l];
+                acc23 = acc23 + L->tay[j][15][l] * L->tay[n - j][7][l];
+                acc25 = acc25 + L->tay[j][18][l] * L->tay[n - j][16][l];
+                acc33 = acc33 + L->tay[j][7][l] * L->tay[n - j][19][l];
+                acc39 = acc39 + L->tay[j][9][l] * L->tay[n - j][20][l];
+                acc47 = acc47 + L->tay[j][7][l] * L->tay[n - j][21][l];
+                acc49 = acc49 + L->tay[j][9][l] * L->tay[n - j][9][l];
+                acc56 = acc56 + L->tay[j][8][l] * L->tay[n - j][22][l];
+                acc61 = acc61 + L->tay[j][10][l] * L->tay[n - j][23][l];
+                ++j;
+            } while (j < n);
+            L->tay[n][14][l] = acc14 * inv[n] + L->tay[n][2][l] * L->tay[0][15][l];
+            L->tay[n][15][l] = -(acc15 * inv[n]) - L->tay[n][2][l] * L->tay[0][14][l];
+            v16 = acc16 + L->tay[0][15][l] * L->tay[n][9][l] + L->tay[n][15][l] * L->tay[0][9][l];
+            v17 = acc17 + L->tay[0][14][l] * L->tay[n][7][l] + L->tay[n][14][l] * L->tay[0][7][l];
             v18 = v16 - v17;
-            L->tay[n][16][l] = acc19[l] * inv[n] + L->tay[n][1][l] * L->tay[0][17][l];
-            L->tay[n][17][l] = -(acc20[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][16][l];
-            L->tay[n][18][l] = v18 * ib21[l] - (acc21[l] * ib21[l] + L->tay[n][17][l] * ub21[l]);
-            v22 = acc22[l] + L->tay[0][14][l] * L->tay[n][9][l] + L->tay[n][14][l] *
-                    L->tay[0][9][l];
-            v23 = acc23[l] + L->tay[0][15][l] * L->tay[n][7][l] + L->tay[n][15][l] *
-                    L->tay[0][7][l];
+            L->tay[n][16][l] = acc19 * inv[n] + L->tay[n][1][l] * L->tay[0][17][l];
+            L->tay[n][17][l] = -(acc20 * inv[n]) - L->tay[n][1][l] * L->tay[0][16][l];
+            L->tay[n][18][l] = v18 * ib21[l] - (acc21 * ib21[l] + L->tay[n][17][l] * ub21[l]);
+            v22 = acc22 + L->tay[0][14][l] * L->tay[n][9][l] + L->tay[n][14][l] * L->tay[0][9][l];
+            v23 = acc23 + L->tay[0][15][l] * L->tay[n][7][l] + L->tay[n][15][l] * L->tay[0][7][l];
             v24 = v22 + v23;
-            v25 = acc25[l] + L->tay[0][18][l] * L->tay[n][16][l] + L->tay[n][18][l] *
-                    L->tay[0][16][l];
+            v25 = acc25 + L->tay[0][18][l] * L->tay[n][16][l] + L->tay[n][18][l] * L->tay[0][16][l];
             v26 = L->tay[n][8][l] - v25;
             v27 = L->tay[n][10][l] - L->tay[n][8][l];
             v29 = c[0] * L->tay[n][8][l];
             v31 = c[1] * L->tay[n][10][l];
             L->tay[n][19][l] = v29 + v31;
-            v33 = acc33[l] + L->tay[0][7][l] * L->tay[n][19][l] + L->tay[n][7][l] *
-                    L->tay[0][19][l];
+            v33 = acc33 + L->tay[0][7][l] * L->tay[n][19][l] + L->tay[n][7][l] * L->tay[0][19][l];
             v35 = c[2] * L->tay[n][8][l];
             v37 = c[3] * L->tay[n][10][l];
             L->tay[n][20][l] = v35 + v37;
-            v39 = acc39[l] + L->tay[0][9][l] * L->tay[n][20][l] + L->tay[n][9][l] *
-                    L->tay[0][20][l];
+            v39 = acc39 + L->tay[0][9][l] * L->tay[n][20][l] + L->tay[n][9][l] * L->tay[0][20][l];
             v40 = v33 + v39;
             v43 = c[4] * L->tay[n][7][l];
             v45 = c[5] * L->tay[n][9][l];
             L->tay[n][21][l] = v43 + v45;
-            v47 = acc47[l] + L->tay[0][7][l] * L->tay[n][21][l] + L->tay[n][7][l] *
-                    L->tay[0][21][l];
+            v47 = acc47 + L->tay[0][7][l] * L->tay[n][21][l] + L->tay[n][7][l] * L->tay[0][21][l];
             v48 = v47;
-            v49 = acc49[l] + L->tay[0][9][l] * L->tay[n][9][l] + L->tay[n][9][l] * L->tay[0][9][l];
+            v49 = acc49 + L->tay[0][9][l] * L->tay[n][9][l] + L->tay[n][9][l] * L->tay[0][9][l];
             v50 = c[4] * v49;
             v51 = v48 - v50;
             v53 = c[7] * L->tay[n][7][l];
             v54 = c[0] * L->tay[n][9][l];
             L->tay[n][22][l] = v53 - v54;
-            v56 = acc56[l] + L->tay[0][8][l] * L->tay[n][22][l] + L->tay[n][8][l] *
-                    L->tay[0][22][l];
+            v56 = acc56 + L->tay[0][8][l] * L->tay[n][22][l] + L->tay[n][8][l] * L->tay[0][22][l];
             v58 = c[8] * L->tay[n][7][l];
             v59 = c[1] * L->tay[n][9][l];
             L->tay[n][23][l] = v58 - v59;
-            v61 = acc61[l] + L->tay[0][10][l] * L->tay[n][23][l] + L->tay[n][10][l] *
-                    L->tay[0][23][l];
+            v61 = acc61 + L->tay[0][10][l] * L->tay[n][23][l] + L->tay[n][10][l] * L->tay[0][23][l];
             v62 = v56 + v61;
             L->tay[n + 1][0][l] = L->tay[n][18][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v24 * inv[n + 1];
+            L->tay[n + 1][24][l] = (double)(n + 1) * L->tay[n + 1][1][l];
             L->tay[n + 1][2][l] = v26 * inv[n + 1];
+            L->tay[n + 1][25][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v27 * inv[n + 1];
             L->tay[n + 1][4][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][5][l] = L->tay[n][12][l] * inv[n + 1];

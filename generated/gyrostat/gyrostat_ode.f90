@@ -2306,7 +2306,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:24 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:26 - 1, 0:19 - 1)
     real(c_double) :: acc14
     real(c_double) :: acc15
     real(c_double) :: acc16
@@ -2355,17 +2355,10 @@ contains
     real(c_double) :: v59
     real(c_double) :: v61
     real(c_double) :: v62
-    real(c_double) :: w1
-    real(c_double) :: w1_0
-    real(c_double) :: w1_1
-    real(c_double) :: w2
-    real(c_double) :: w2_0
-    real(c_double) :: w2_1
-    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
-    ! order 0: the state and every node's value
+    ! orders 0 and 1 of the state and of every node
     tay(0, 0) = x(0)
     tay(1, 0) = x(1)
     tay(2, 0) = x(2)
@@ -2424,7 +2417,9 @@ contains
     ub21 = tay(18, 0) / tay(17, 0)
     tay(0, 1) = tay(18, 0)
     tay(1, 1) = v24
+    tay(24, 1) = tay(1, 1)
     tay(2, 1) = v26
+    tay(25, 1) = tay(2, 1)
     tay(3, 1) = v27
     tay(4, 1) = tay(11, 0)
     tay(5, 1) = tay(12, 0)
@@ -2436,9 +2431,65 @@ contains
     tay(11, 1) = 0.0_c_double
     tay(12, 1) = 0.0_c_double
     tay(13, 1) = c(10)
+    tay(14, 1) = tay(2, 1) * tay(15, 0)
+    tay(15, 1) = -tay(2, 1) * tay(14, 0)
+    v16 = tay(15, 0) * tay(9, 1) + tay(15, 1) * tay(9, 0)
+    v17 = tay(14, 0) * tay(7, 1) + tay(14, 1) * tay(7, 0)
+    v18 = v16 - v17
+    tay(16, 1) = tay(1, 1) * tay(17, 0)
+    tay(17, 1) = -tay(1, 1) * tay(16, 0)
+    tay(18, 1) = v18 * ib21 - tay(17, 1) * ub21
+    v22 = tay(14, 0) * tay(9, 1) + tay(14, 1) * tay(9, 0)
+    v23 = tay(15, 0) * tay(7, 1) + tay(15, 1) * tay(7, 0)
+    v24 = v22 + v23
+    v25 = tay(18, 0) * tay(16, 1) + tay(18, 1) * tay(16, 0)
+    v26 = tay(8, 1) - v25
+    v27 = tay(10, 1) - tay(8, 1)
+    v29 = c(0) * tay(8, 1)
+    v31 = c(1) * tay(10, 1)
+    tay(19, 1) = v29 + v31
+    v33 = tay(7, 0) * tay(19, 1) + tay(7, 1) * tay(19, 0)
+    v35 = c(2) * tay(8, 1)
+    v37 = c(3) * tay(10, 1)
+    tay(20, 1) = v35 + v37
+    v39 = tay(9, 0) * tay(20, 1) + tay(9, 1) * tay(20, 0)
+    v40 = v33 + v39
+    v43 = c(4) * tay(7, 1)
+    v45 = c(5) * tay(9, 1)
+    tay(21, 1) = v43 + v45
+    v47 = tay(7, 0) * tay(21, 1) + tay(7, 1) * tay(21, 0)
+    v48 = v47
+    v49 = tay(9, 0) * tay(9, 1) + tay(9, 1) * tay(9, 0)
+    v50 = c(4) * v49
+    v51 = v48 - v50
+    v53 = c(7) * tay(7, 1)
+    v54 = c(0) * tay(9, 1)
+    tay(22, 1) = v53 - v54
+    v56 = tay(8, 0) * tay(22, 1) + tay(8, 1) * tay(22, 0)
+    v58 = c(8) * tay(7, 1)
+    v59 = c(1) * tay(9, 1)
+    tay(23, 1) = v58 - v59
+    v61 = tay(10, 0) * tay(23, 1) + tay(10, 1) * tay(23, 0)
+    v62 = v56 + v61
+    tay(0, 2) = tay(18, 1) * inv(2)
+    tay(1, 2) = v24 * inv(2)
+    tay(24, 2) = 2.0_c_double * tay(1, 2)
+    tay(2, 2) = v26 * inv(2)
+    tay(25, 2) = 2.0_c_double * tay(2, 2)
+    tay(3, 2) = v27 * inv(2)
+    tay(4, 2) = tay(11, 1) * inv(2)
+    tay(5, 2) = tay(12, 1) * inv(2)
+    tay(6, 2) = tay(13, 1) * inv(2)
+    tay(7, 2) = v40 * inv(2)
+    tay(8, 2) = v51 * inv(2)
+    tay(9, 2) = v62 * inv(2)
+    tay(10, 2) = 0.0_c_double
+    tay(11, 2) = 0.0_c_double
+    tay(12, 2) = 0.0_c_double
+    tay(13, 2) = 0.0_c_double
 
-    ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do n = 1, order - 1
+    ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+    do n = 2, order - 1
       acc14 = 0.0_c_double
       acc15 = 0.0_c_double
       acc16 = 0.0_c_double
@@ -2455,49 +2506,13 @@ contains
       acc49 = 0.0_c_double
       acc56 = 0.0_c_double
       acc61 = 0.0_c_double
-      do b = 0, (n - 1) / 2 - 1
-        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
-        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
-        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
-        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
-        acc14 = acc14 + (w2_0 * tay(15, n - (2 * b + 1)) + w2_1 * tay(15, n - (2 * b + 2)))
-        acc15 = acc15 + (w2_0 * tay(14, n - (2 * b + 1)) + w2_1 * tay(14, n - (2 * b + 2)))
-        acc16 = acc16 + (tay(15, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(15, &
-            2 * b + 2) * tay(9, n - (2 * b + 2)))
-        acc17 = acc17 + (tay(14, 2 * b + 1) * tay(7, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(7, n - (2 * b + 2)))
-        acc19 = acc19 + (w1_0 * tay(17, n - (2 * b + 1)) + w1_1 * tay(17, n - (2 * b + 2)))
-        acc20 = acc20 + (w1_0 * tay(16, n - (2 * b + 1)) + w1_1 * tay(16, n - (2 * b + 2)))
-        acc21 = acc21 + (tay(17, 2 * b + 1) * tay(18, n - (2 * b + 1)) + tay(17, &
-            2 * b + 2) * tay(18, n - (2 * b + 2)))
-        acc22 = acc22 + (tay(14, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(9, n - (2 * b + 2)))
-        acc23 = acc23 + (tay(15, 2 * b + 1) * tay(7, n - (2 * b + 1)) + tay(15, &
-            2 * b + 2) * tay(7, n - (2 * b + 2)))
-        acc25 = acc25 + (tay(18, 2 * b + 1) * tay(16, n - (2 * b + 1)) + tay(18, &
-            2 * b + 2) * tay(16, n - (2 * b + 2)))
-        acc33 = acc33 + (tay(7, 2 * b + 1) * tay(19, n - (2 * b + 1)) + tay(7, &
-            2 * b + 2) * tay(19, n - (2 * b + 2)))
-        acc39 = acc39 + (tay(9, 2 * b + 1) * tay(20, n - (2 * b + 1)) + tay(9, &
-            2 * b + 2) * tay(20, n - (2 * b + 2)))
-        acc47 = acc47 + (tay(7, 2 * b + 1) * tay(21, n - (2 * b + 1)) + tay(7, &
-            2 * b + 2) * tay(21, n - (2 * b + 2)))
-        acc49 = acc49 + (tay(9, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(9, &
-            n - (2 * b + 2)))
-        acc56 = acc56 + (tay(8, 2 * b + 1) * tay(22, n - (2 * b + 1)) + tay(8, &
-            2 * b + 2) * tay(22, n - (2 * b + 2)))
-        acc61 = acc61 + (tay(10, 2 * b + 1) * tay(23, n - (2 * b + 1)) + tay(10, &
-            2 * b + 2) * tay(23, n - (2 * b + 2)))
-      end do
-      do j = 2 * ((n - 1) / 2) + 1, n - 1
-        w1 = real(j, c_double) * tay(1, j)
-        w2 = real(j, c_double) * tay(2, j)
-        acc14 = acc14 + w2 * tay(15, n - j)
-        acc15 = acc15 + w2 * tay(14, n - j)
+      do j = 1, n - 1
+        acc14 = acc14 + tay(25, j) * tay(15, n - j)
+        acc15 = acc15 + tay(25, j) * tay(14, n - j)
         acc16 = acc16 + tay(15, j) * tay(9, n - j)
         acc17 = acc17 + tay(14, j) * tay(7, n - j)
-        acc19 = acc19 + w1 * tay(17, n - j)
-        acc20 = acc20 + w1 * tay(16, n - j)
+        acc19 = acc19 + tay(24, j) * tay(17, n - j)
+        acc20 = acc20 + tay(24, j) * tay(16, n - j)
         acc21 = acc21 + tay(17, j) * tay(18, n - j)
         acc22 = acc22 + tay(14, j) * tay(9, n - j)
         acc23 = acc23 + tay(15, j) * tay(7, n - j)
@@ -2551,7 +2566,9 @@ contains
       v62 = v56 + v61
       tay(0, n + 1) = tay(18, n) * inv(n + 1)
       tay(1, n + 1) = v24 * inv(n + 1)
+      tay(24, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
       tay(2, n + 1) = v26 * inv(n + 1)
+      tay(25, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v27 * inv(n + 1)
       tay(4, n + 1) = tay(11, n) * inv(n + 1)
       tay(5, n + 1) = tay(12, n) * inv(n + 1)
@@ -2582,7 +2599,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:24 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:26 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

@@ -2017,7 +2017,7 @@ int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, doub
 /* The normalized Taylor coefficients of x and of the rhs's 85
    nodes to the given order (16 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[18])
+                              double (*tay)[20])
 {
     double acc9;
     double acc10;
@@ -2094,11 +2094,10 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double v88;
     double v89;
     double v93;
-    int b;
     int j;
     int n;
 
-    /* order 0: the state and every node's value */
+    /* orders 0 and 1 of the state and of every node */
     tay[0][0] = x[0];
     tay[0][1] = x[1];
     tay[0][2] = x[2];
@@ -2178,16 +2177,94 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     ub16 = tay[0][13] / tay[0][12];
     tay[1][0] = tay[0][13];
     tay[1][1] = v19;
+    tay[1][18] = tay[1][1];
     tay[1][2] = v21;
+    tay[1][19] = tay[1][2];
     tay[1][3] = v76;
     tay[1][4] = v83;
     tay[1][5] = v89;
     tay[1][6] = 0.5714285714285714;
     tay[1][7] = c[0];
     tay[1][8] = v93;
+    tay[1][9] = tay[1][2] * tay[0][10];
+    tay[1][10] = -(tay[1][2] * tay[0][9]);
+    v11 = tay[0][10] * tay[1][5] + tay[1][10] * tay[0][5];
+    v12 = tay[0][9] * tay[1][3] + tay[1][9] * tay[0][3];
+    v13 = v11 - v12;
+    tay[1][11] = tay[1][1] * tay[0][12];
+    tay[1][12] = -(tay[1][1] * tay[0][11]);
+    tay[1][13] = v13 * ib16 - tay[1][12] * ub16;
+    v17 = tay[0][9] * tay[1][5] + tay[1][9] * tay[0][5];
+    v18 = tay[0][10] * tay[1][3] + tay[1][10] * tay[0][3];
+    v19 = v17 + v18;
+    v20 = tay[0][13] * tay[1][11] + tay[1][13] * tay[0][11];
+    v21 = tay[1][4] - v20;
+    v24 = tay[1][8] - tay[1][5];
+    v25 = -0.0001 * v24;
+    v26 = -v25;
+    v28 = 0.035 * tay[1][6];
+    v30 = 2.005 * tay[1][4];
+    v31 = v28 + v30;
+    v33 = 301.7396875 * tay[1][3];
+    v34 = v31 + v33;
+    v36 = 3.15125 * tay[1][5];
+    tay[1][14] = v34 - v36;
+    v38 = tay[0][14] * tay[1][4] + tay[1][14] * tay[0][4];
+    v39 = v26 + v38;
+    v40 = 0.035 * tay[1][7];
+    v42 = 1.34875 * tay[1][5];
+    v43 = v40 + v42;
+    v44 = 2.005 * tay[1][3];
+    v45 = v43 + v44;
+    v47 = 351.7396875 * tay[1][4];
+    tay[1][15] = v45 + v47;
+    v49 = tay[0][15] * tay[1][3] + tay[1][15] * tay[0][3];
+    v50 = v39 - v49;
+    v51 = 4.166596729006503e-05 * v50;
+    v55 = tay[0][15] * tay[1][5] + tay[1][15] * tay[0][5];
+    v56 = v55;
+    v57 = 0.035 * tay[1][8];
+    v58 = 1.34875 * tay[1][4];
+    v59 = v57 + v58;
+    v61 = 251.31 * tay[1][5];
+    v62 = v59 + v61;
+    v63 = 3.15125 * tay[1][3];
+    tay[1][17] = v62 - v63;
+    v65 = tay[0][17] * tay[1][4] + tay[1][17] * tay[0][4];
+    v66 = v56 - v65;
+    v67 = 0.0033146766733524852 * v66;
+    v68 = v51 + v67;
+    v71 = tay[0][17] * tay[1][3] + tay[1][17] * tay[0][3];
+    v72 = v71;
+    v73 = tay[0][14] * tay[1][5] + tay[1][14] * tay[0][5];
+    v74 = v72 - v73;
+    v75 = 1.9054215209804005e-05 * v74;
+    v76 = v68 - v75;
+    v78 = 0.0028431796071504527 * v74;
+    v80 = 1.5497923245489903e-05 * v50;
+    v81 = v78 - v80;
+    v82 = 1.9054215209804005e-05 * v66;
+    v83 = v81 - v82;
+    v85 = 0.003979754895162947 * v50;
+    v86 = 4.166596729006503e-05 * v66;
+    v87 = v85 + v86;
+    v88 = 1.5497923245489903e-05 * v74;
+    v89 = v87 - v88;
+    v93 = 28.571428571428573 * v25;
+    tay[2][0] = tay[1][13] * inv[2];
+    tay[2][1] = v19 * inv[2];
+    tay[2][18] = 2.0 * tay[2][1];
+    tay[2][2] = v21 * inv[2];
+    tay[2][19] = 2.0 * tay[2][2];
+    tay[2][3] = v76 * inv[2];
+    tay[2][4] = v83 * inv[2];
+    tay[2][5] = v89 * inv[2];
+    tay[2][6] = 0.0;
+    tay[2][7] = 0.0;
+    tay[2][8] = v93 * inv[2];
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         acc9 = 0.0;
         acc10 = 0.0;
         acc11 = 0.0;
@@ -2204,51 +2281,13 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc65 = 0.0;
         acc71 = 0.0;
         acc73 = 0.0;
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            double w1_0, w1_1, w2_0, w2_1;
-            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
-            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
-            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
-            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
-            acc9 = acc9 + (w2_0 * tay[n - (2 * b + 1)][10] + w2_1 * tay[n - (2 * b + 2)][10]);
-            acc10 = acc10 + (w2_0 * tay[n - (2 * b + 1)][9] + w2_1 * tay[n - (2 * b + 2)][9]);
-            acc11 = acc11 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][10] *
-                    tay[n - (2 * b + 2)][5]);
-            acc12 = acc12 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][9] *
-                    tay[n - (2 * b + 2)][3]);
-            acc14 = acc14 + (w1_0 * tay[n - (2 * b + 1)][12] + w1_1 * tay[n - (2 * b + 2)][12]);
-            acc15 = acc15 + (w1_0 * tay[n - (2 * b + 1)][11] + w1_1 * tay[n - (2 * b + 2)][11]);
-            acc16 = acc16 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][13] + tay[2 * b + 2][12] *
-                    tay[n - (2 * b + 2)][13]);
-            acc17 = acc17 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][9] *
-                    tay[n - (2 * b + 2)][5]);
-            acc18 = acc18 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][10] *
-                    tay[n - (2 * b + 2)][3]);
-            acc20 = acc20 + (tay[2 * b + 1][13] * tay[n - (2 * b + 1)][11] + tay[2 * b + 2][13] *
-                    tay[n - (2 * b + 2)][11]);
-            acc38 = acc38 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][14] *
-                    tay[n - (2 * b + 2)][4]);
-            acc49 = acc49 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][15] *
-                    tay[n - (2 * b + 2)][3]);
-            acc55 = acc55 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][15] *
-                    tay[n - (2 * b + 2)][5]);
-            acc65 = acc65 + (tay[2 * b + 1][17] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][17] *
-                    tay[n - (2 * b + 2)][4]);
-            acc71 = acc71 + (tay[2 * b + 1][17] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][17] *
-                    tay[n - (2 * b + 2)][3]);
-            acc73 = acc73 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][14] *
-                    tay[n - (2 * b + 2)][5]);
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            double w1, w2;
-            w1 = (double)j * tay[j][1];
-            w2 = (double)j * tay[j][2];
-            acc9 = acc9 + w2 * tay[n - j][10];
-            acc10 = acc10 + w2 * tay[n - j][9];
+        for (j = 1; j < n; ++j) {
+            acc9 = acc9 + tay[j][19] * tay[n - j][10];
+            acc10 = acc10 + tay[j][19] * tay[n - j][9];
             acc11 = acc11 + tay[j][10] * tay[n - j][5];
             acc12 = acc12 + tay[j][9] * tay[n - j][3];
-            acc14 = acc14 + w1 * tay[n - j][12];
-            acc15 = acc15 + w1 * tay[n - j][11];
+            acc14 = acc14 + tay[j][18] * tay[n - j][12];
+            acc15 = acc15 + tay[j][18] * tay[n - j][11];
             acc16 = acc16 + tay[j][12] * tay[n - j][13];
             acc17 = acc17 + tay[j][9] * tay[n - j][5];
             acc18 = acc18 + tay[j][10] * tay[n - j][3];
@@ -2327,7 +2366,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v93 = 28.571428571428573 * v25;
         tay[n + 1][0] = tay[n][13] * inv[n + 1];
         tay[n + 1][1] = v19 * inv[n + 1];
+        tay[n + 1][18] = (double)(n + 1) * tay[n + 1][1];
         tay[n + 1][2] = v21 * inv[n + 1];
+        tay[n + 1][19] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v76 * inv[n + 1];
         tay[n + 1][4] = v83 * inv[n + 1];
         tay[n + 1][5] = v89 * inv[n + 1];
@@ -2345,7 +2386,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
-    double tay[19][18];
+    double tay[19][20];
     double inv[19] = {0.0};
     double f0[RW3_ORTHOGONAL_NX];
     double xnew[RW3_ORTHOGONAL_NX];
@@ -2517,7 +2558,7 @@ struct RW3_ORTHOGONAL_ALIGNED lanes {
     long stats_rejected[RW3_ORTHOGONAL_LANES];
     long stats_rhs_calls[RW3_ORTHOGONAL_LANES];
     double cap[RW3_ORTHOGONAL_LANES];
-    double tay[19][18][RW3_ORTHOGONAL_LANES];
+    double tay[19][20][RW3_ORTHOGONAL_LANES];
     int code[RW3_ORTHOGONAL_LANES];
     int nonfinite[RW3_ORTHOGONAL_LANES];
     int rejected_last[RW3_ORTHOGONAL_LANES];
@@ -3085,26 +3126,10 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
 /* The normalized Taylor coefficients of x and of the rhs's 85 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
-    double acc9[RW3_ORTHOGONAL_LANES];
-    double acc10[RW3_ORTHOGONAL_LANES];
-    double acc11[RW3_ORTHOGONAL_LANES];
-    double acc12[RW3_ORTHOGONAL_LANES];
-    double acc14[RW3_ORTHOGONAL_LANES];
-    double acc15[RW3_ORTHOGONAL_LANES];
-    double acc16[RW3_ORTHOGONAL_LANES];
-    double acc17[RW3_ORTHOGONAL_LANES];
-    double acc18[RW3_ORTHOGONAL_LANES];
-    double acc20[RW3_ORTHOGONAL_LANES];
-    double acc38[RW3_ORTHOGONAL_LANES];
-    double acc49[RW3_ORTHOGONAL_LANES];
-    double acc55[RW3_ORTHOGONAL_LANES];
-    double acc65[RW3_ORTHOGONAL_LANES];
-    double acc71[RW3_ORTHOGONAL_LANES];
-    double acc73[RW3_ORTHOGONAL_LANES];
     double ib16[RW3_ORTHOGONAL_LANES];
     double ub16[RW3_ORTHOGONAL_LANES];
-    int b, j, l, n;
-    /* order 0: the state and every node's value */
+    int j, l, n;
+    /* orders 0 and 1 of the state and of every node */
     RW3_ORTHOGONAL_SIMD
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         double v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v28, v30, v31, v33, v34, v36, v38, v39, v40, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
@@ -3187,120 +3212,146 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         ub16[l] = L->tay[0][13][l] / L->tay[0][12][l];
         L->tay[1][0][l] = L->tay[0][13][l];
         L->tay[1][1][l] = v19;
+        L->tay[1][18][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v21;
+        L->tay[1][19][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v76;
         L->tay[1][4][l] = v83;
         L->tay[1][5][l] = v89;
         L->tay[1][6][l] = 0.5714285714285714;
         L->tay[1][7][l] = c[0];
         L->tay[1][8][l] = v93;
+        L->tay[1][9][l] = L->tay[1][2][l] * L->tay[0][10][l];
+        L->tay[1][10][l] = -(L->tay[1][2][l] * L->tay[0][9][l]);
+        v11 = L->tay[0][10][l] * L->tay[1][5][l] + L->tay[1][10][l] * L->tay[0][5][l];
+        v12 = L->tay[0][9][l] * L->tay[1][3][l] + L->tay[1][9][l] * L->tay[0][3][l];
+        v13 = v11 - v12;
+        L->tay[1][11][l] = L->tay[1][1][l] * L->tay[0][12][l];
+        L->tay[1][12][l] = -(L->tay[1][1][l] * L->tay[0][11][l]);
+        L->tay[1][13][l] = v13 * ib16[l] - L->tay[1][12][l] * ub16[l];
+        v17 = L->tay[0][9][l] * L->tay[1][5][l] + L->tay[1][9][l] * L->tay[0][5][l];
+        v18 = L->tay[0][10][l] * L->tay[1][3][l] + L->tay[1][10][l] * L->tay[0][3][l];
+        v19 = v17 + v18;
+        v20 = L->tay[0][13][l] * L->tay[1][11][l] + L->tay[1][13][l] * L->tay[0][11][l];
+        v21 = L->tay[1][4][l] - v20;
+        v24 = L->tay[1][8][l] - L->tay[1][5][l];
+        v25 = -0.0001 * v24;
+        v26 = -v25;
+        v28 = 0.035 * L->tay[1][6][l];
+        v30 = 2.005 * L->tay[1][4][l];
+        v31 = v28 + v30;
+        v33 = 301.7396875 * L->tay[1][3][l];
+        v34 = v31 + v33;
+        v36 = 3.15125 * L->tay[1][5][l];
+        L->tay[1][14][l] = v34 - v36;
+        v38 = L->tay[0][14][l] * L->tay[1][4][l] + L->tay[1][14][l] * L->tay[0][4][l];
+        v39 = v26 + v38;
+        v40 = 0.035 * L->tay[1][7][l];
+        v42 = 1.34875 * L->tay[1][5][l];
+        v43 = v40 + v42;
+        v44 = 2.005 * L->tay[1][3][l];
+        v45 = v43 + v44;
+        v47 = 351.7396875 * L->tay[1][4][l];
+        L->tay[1][15][l] = v45 + v47;
+        v49 = L->tay[0][15][l] * L->tay[1][3][l] + L->tay[1][15][l] * L->tay[0][3][l];
+        v50 = v39 - v49;
+        v51 = 4.166596729006503e-05 * v50;
+        v55 = L->tay[0][15][l] * L->tay[1][5][l] + L->tay[1][15][l] * L->tay[0][5][l];
+        v56 = v55;
+        v57 = 0.035 * L->tay[1][8][l];
+        v58 = 1.34875 * L->tay[1][4][l];
+        v59 = v57 + v58;
+        v61 = 251.31 * L->tay[1][5][l];
+        v62 = v59 + v61;
+        v63 = 3.15125 * L->tay[1][3][l];
+        L->tay[1][17][l] = v62 - v63;
+        v65 = L->tay[0][17][l] * L->tay[1][4][l] + L->tay[1][17][l] * L->tay[0][4][l];
+        v66 = v56 - v65;
+        v67 = 0.0033146766733524852 * v66;
+        v68 = v51 + v67;
+        v71 = L->tay[0][17][l] * L->tay[1][3][l] + L->tay[1][17][l] * L->tay[0][3][l];
+        v72 = v71;
+        v73 = L->tay[0][14][l] * L->tay[1][5][l] + L->tay[1][14][l] * L->tay[0][5][l];
+        v74 = v72 - v73;
+        v75 = 1.9054215209804005e-05 * v74;
+        v76 = v68 - v75;
+        v78 = 0.0028431796071504527 * v74;
+        v80 = 1.5497923245489903e-05 * v50;
+        v81 = v78 - v80;
+        v82 = 1.9054215209804005e-05 * v66;
+        v83 = v81 - v82;
+        v85 = 0.003979754895162947 * v50;
+        v86 = 4.166596729006503e-05 * v66;
+        v87 = v85 + v86;
+        v88 = 1.5497923245489903e-05 * v74;
+        v89 = v87 - v88;
+        v93 = 28.571428571428573 * v25;
+        L->tay[2][0][l] = L->tay[1][13][l] * inv[2];
+        L->tay[2][1][l] = v19 * inv[2];
+        L->tay[2][18][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][2][l] = v21 * inv[2];
+        L->tay[2][19][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][3][l] = v76 * inv[2];
+        L->tay[2][4][l] = v83 * inv[2];
+        L->tay[2][5][l] = v89 * inv[2];
+        L->tay[2][6][l] = 0.0;
+        L->tay[2][7][l] = 0.0;
+        L->tay[2][8][l] = v93 * inv[2];
     }
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         RW3_ORTHOGONAL_SIMD
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-            acc9[l] = 0.0;
-            acc10[l] = 0.0;
-            acc11[l] = 0.0;
-            acc12[l] = 0.0;
-            acc14[l] = 0.0;
-            acc15[l] = 0.0;
-            acc16[l] = 0.0;
-            acc17[l] = 0.0;
-            acc18[l] = 0.0;
-            acc20[l] = 0.0;
-            acc38[l] = 0.0;
-            acc49[l] = 0.0;
-            acc55[l] = 0.0;
-            acc65[l] = 0.0;
-            acc71[l] = 0.0;
-            acc73[l] = 0.0;
-        }
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            RW3_ORTHOGONAL_SIMD
-            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                double w1_0, w1_1, w2_0, w2_1;
-                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
-                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
-                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
-                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
-                acc9[l] = acc9[l] + (w2_0 * L->tay[n - (2 * b + 1)][10][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][10][l]);
-                acc10[l] = acc10[l] + (w2_0 * L->tay[n - (2 * b + 1)][9][l] + w2_1 * L->tay[n -
-                        (2 * b + 2)][9][l]);
-                acc11[l] = acc11[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc12[l] = acc12[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc14[l] = acc14[l] + (w1_0 * L->tay[n - (2 * b + 1)][12][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][12][l]);
-                acc15[l] = acc15[l] + (w1_0 * L->tay[n - (2 * b + 1)][11][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][11][l]);
-                acc16[l] = acc16[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][13][l]
-                        + L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][13][l]);
-                acc17[l] = acc17[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc18[l] = acc18[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc20[l] = acc20[l] + (L->tay[2 * b + 1][13][l] * L->tay[n - (2 * b + 1)][11][l]
-                        + L->tay[2 * b + 2][13][l] * L->tay[n - (2 * b + 2)][11][l]);
-                acc38[l] = acc38[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][4][l] +
-                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][4][l]);
-                acc49[l] = acc49[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc55[l] = acc55[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc65[l] = acc65[l] + (L->tay[2 * b + 1][17][l] * L->tay[n - (2 * b + 1)][4][l] +
-                        L->tay[2 * b + 2][17][l] * L->tay[n - (2 * b + 2)][4][l]);
-                acc71[l] = acc71[l] + (L->tay[2 * b + 1][17][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][17][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc73[l] = acc73[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][5][l]);
-            }
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            RW3_ORTHOGONAL_SIMD
-            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                double w1, w2;
-                w1 = (double)j * L->tay[j][1][l];
-                w2 = (double)j * L->tay[j][2][l];
-                acc9[l] = acc9[l] + w2 * L->tay[n - j][10][l];
-                acc10[l] = acc10[l] + w2 * L->tay[n - j][9][l];
-                acc11[l] = acc11[l] + L->tay[j][10][l] * L->tay[n - j][5][l];
-                acc12[l] = acc12[l] + L->tay[j][9][l] * L->tay[n - j][3][l];
-                acc14[l] = acc14[l] + w1 * L->tay[n - j][12][l];
-                acc15[l] = acc15[l] + w1 * L->tay[n - j][11][l];
-                acc16[l] = acc16[l] + L->tay[j][12][l] * L->tay[n - j][13][l];
-                acc17[l] = acc17[l] + L->tay[j][9][l] * L->tay[n - j][5][l];
-                acc18[l] = acc18[l] + L->tay[j][10][l] * L->tay[n - j][3][l];
-                acc20[l] = acc20[l] + L->tay[j][13][l] * L->tay[n - j][11][l];
-                acc38[l] = acc38[l] + L->tay[j][14][l] * L->tay[n - j][4][l];
-                acc49[l] = acc49[l] + L->tay[j][15][l] * L->tay[n - j][3][l];
-                acc55[l] = acc55[l] + L->tay[j][15][l] * L->tay[n - j][5][l];
-                acc65[l] = acc65[l] + L->tay[j][17][l] * L->tay[n - j][4][l];
-                acc71[l] = acc71[l] + L->tay[j][17][l] * L->tay[n - j][3][l];
-                acc73[l] = acc73[l] + L->tay[j][14][l] * L->tay[n - j][5][l];
-            }
-        }
-        RW3_ORTHOGONAL_SIMD
-        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-            double v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v28, v30, v31, v33, v34, v36, v38, v39, v40, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
-            L->tay[n][9][l] = acc9[l] * inv[n] + L->tay[n][2][l] * L->tay[0][10][l];
-            L->tay[n][10][l] = -(acc10[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][9][l];
-            v11 = acc11[l] + L->tay[0][10][l] * L->tay[n][5][l] + L->tay[n][10][l] *
-                    L->tay[0][5][l];
-            v12 = acc12[l] + L->tay[0][9][l] * L->tay[n][3][l] + L->tay[n][9][l] * L->tay[0][3][l];
+            double acc9, acc10, acc11, acc12, acc14, acc15, acc16, acc17, acc18, acc20, acc38, acc49, acc55, acc65, acc71, acc73, v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v28, v30, v31, v33, v34, v36, v38, v39, v40, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc11 = 0.0;
+            acc12 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc18 = 0.0;
+            acc20 = 0.0;
+            acc38 = 0.0;
+            acc49 = 0.0;
+            acc55 = 0.0;
+            acc65 = 0.0;
+            acc71 = 0.0;
+            acc73 = 0.0;
+            j = 1;
+            do {
+                acc9 = acc9 + L->tay[j][19][l] * L->tay[n - j][10][l];
+                acc10 = acc10 + L->tay[j][19][l] * L->tay[n - j][9][l];
+                acc11 = acc11 + L->tay[j][10][l] * L->tay[n - j][5][l];
+                acc12 = acc12 + L->tay[j][9][l] * L->tay[n - j][3][l];
+                acc14 = acc14 + L->tay[j][18][l] * L->tay[n - j][12][l];
+                acc15 = acc15 + L->tay[j][18][l] * L->tay[n - j][11][l];
+                acc16 = acc16 + L->tay[j][12][l] * L->tay[n - j][13][l];
+                acc17 = acc17 + L->tay[j][9][l] * L->tay[n - j][5][l];
+                acc18 = acc18 + L->tay[j][10][l] * L->tay[n - j][3][l];
+                acc20 = acc20 + L->tay[j][13][l] * L->tay[n - j][11][l];
+                acc38 = acc38 + L->tay[j][14][l] * L->tay[n - j][4][l];
+                acc49 = acc49 + L->tay[j][15][l] * L->tay[n - j][3][l];
+                acc55 = acc55 + L->tay[j][15][l] * L->tay[n - j][5][l];
+                acc65 = acc65 + L->tay[j][17][l] * L->tay[n - j][4][l];
+                acc71 = acc71 + L->tay[j][17][l] * L->tay[n - j][3][l];
+                acc73 = acc73 + L->tay[j][14][l] * L->tay[n - j][5][l];
+                ++j;
+            } while (j < n);
+            L->tay[n][9][l] = acc9 * inv[n] + L->tay[n][2][l] * L->tay[0][10][l];
+            L->tay[n][10][l] = -(acc10 * inv[n]) - L->tay[n][2][l] * L->tay[0][9][l];
+            v11 = acc11 + L->tay[0][10][l] * L->tay[n][5][l] + L->tay[n][10][l] * L->tay[0][5][l];
+            v12 = acc12 + L->tay[0][9][l] * L->tay[n][3][l] + L->tay[n][9][l] * L->tay[0][3][l];
             v13 = v11 - v12;
-            L->tay[n][11][l] = acc14[l] * inv[n] + L->tay[n][1][l] * L->tay[0][12][l];
-            L->tay[n][12][l] = -(acc15[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][11][l];
-            L->tay[n][13][l] = v13 * ib16[l] - (acc16[l] * ib16[l] + L->tay[n][12][l] * ub16[l]);
-            v17 = acc17[l] + L->tay[0][9][l] * L->tay[n][5][l] + L->tay[n][9][l] * L->tay[0][5][l];
-            v18 = acc18[l] + L->tay[0][10][l] * L->tay[n][3][l] + L->tay[n][10][l] *
-                    L->tay[0][3][l];
+            L->tay[n][11][l] = acc14 * inv[n] + L->tay[n][1][l] * L->tay[0][12][l];
+            L->tay[n][12][l] = -(acc15 * inv[n]) - L->tay[n][1][l] * L->tay[0][11][l];
+            L->tay[n][13][l] = v13 * ib16[l] - (acc16 * ib16[l] + L->tay[n][12][l] * ub16[l]);
+            v17 = acc17 + L->tay[0][9][l] * L->tay[n][5][l] + L->tay[n][9][l] * L->tay[0][5][l];
+            v18 = acc18 + L->tay[0][10][l] * L->tay[n][3][l] + L->tay[n][10][l] * L->tay[0][3][l];
             v19 = v17 + v18;
-            v20 = acc20[l] + L->tay[0][13][l] * L->tay[n][11][l] + L->tay[n][13][l] *
-                    L->tay[0][11][l];
+            v20 = acc20 + L->tay[0][13][l] * L->tay[n][11][l] + L->tay[n][13][l] * L->tay[0][11][l];
             v21 = L->tay[n][4][l] - v20;
             v24 = L->tay[n][8][l] - L->tay[n][5][l];
             v25 = -0.0001 * v24;
@@ -3312,8 +3363,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v34 = v31 + v33;
             v36 = 3.15125 * L->tay[n][5][l];
             L->tay[n][14][l] = v34 - v36;
-            v38 = acc38[l] + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] *
-                    L->tay[0][4][l];
+            v38 = acc38 + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] * L->tay[0][4][l];
             v39 = v26 + v38;
             v40 = 0.035 * L->tay[n][7][l];
             v42 = 1.34875 * L->tay[n][5][l];
@@ -3322,12 +3372,10 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v45 = v43 + v44;
             v47 = 351.7396875 * L->tay[n][4][l];
             L->tay[n][15][l] = v45 + v47;
-            v49 = acc49[l] + L->tay[0][15][l] * L->tay[n][3][l] + L->tay[n][15][l] *
-                    L->tay[0][3][l];
+            v49 = acc49 + L->tay[0][15][l] * L->tay[n][3][l] + L->tay[n][15][l] * L->tay[0][3][l];
             v50 = v39 - v49;
             v51 = 4.166596729006503e-05 * v50;
-            v55 = acc55[l] + L->tay[0][15][l] * L->tay[n][5][l] + L->tay[n][15][l] *
-                    L->tay[0][5][l];
+            v55 = acc55 + L->tay[0][15][l] * L->tay[n][5][l] + L->tay[n][15][l] * L->tay[0][5][l];
             v56 = v55;
             v57 = 0.035 * L->tay[n][8][l];
             v58 = 1.34875 * L->tay[n][4][l];
@@ -3336,16 +3384,13 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v62 = v59 + v61;
             v63 = 3.15125 * L->tay[n][3][l];
             L->tay[n][17][l] = v62 - v63;
-            v65 = acc65[l] + L->tay[0][17][l] * L->tay[n][4][l] + L->tay[n][17][l] *
-                    L->tay[0][4][l];
+            v65 = acc65 + L->tay[0][17][l] * L->tay[n][4][l] + L->tay[n][17][l] * L->tay[0][4][l];
             v66 = v56 - v65;
             v67 = 0.0033146766733524852 * v66;
             v68 = v51 + v67;
-            v71 = acc71[l] + L->tay[0][17][l] * L->tay[n][3][l] + L->tay[n][17][l] *
-                    L->tay[0][3][l];
+            v71 = acc71 + L->tay[0][17][l] * L->tay[n][3][l] + L->tay[n][17][l] * L->tay[0][3][l];
             v72 = v71;
-            v73 = acc73[l] + L->tay[0][14][l] * L->tay[n][5][l] + L->tay[n][14][l] *
-                    L->tay[0][5][l];
+            v73 = acc73 + L->tay[0][14][l] * L->tay[n][5][l] + L->tay[n][14][l] * L->tay[0][5][l];
             v74 = v72 - v73;
             v75 = 1.9054215209804005e-05 * v74;
             v76 = v68 - v75;
@@ -3362,7 +3407,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v93 = 28.571428571428573 * v25;
             L->tay[n + 1][0][l] = L->tay[n][13][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v19 * inv[n + 1];
+            L->tay[n + 1][18][l] = (double)(n + 1) * L->tay[n + 1][1][l];
             L->tay[n + 1][2][l] = v21 * inv[n + 1];
+            L->tay[n + 1][19][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v76 * inv[n + 1];
             L->tay[n + 1][4][l] = v83 * inv[n + 1];
             L->tay[n + 1][5][l] = v89 * inv[n + 1];

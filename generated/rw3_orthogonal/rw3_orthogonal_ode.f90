@@ -2244,7 +2244,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:18 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:20 - 1, 0:19 - 1)
     real(c_double) :: acc9
     real(c_double) :: acc10
     real(c_double) :: acc11
@@ -2320,17 +2320,10 @@ contains
     real(c_double) :: v88
     real(c_double) :: v89
     real(c_double) :: v93
-    real(c_double) :: w1
-    real(c_double) :: w1_0
-    real(c_double) :: w1_1
-    real(c_double) :: w2
-    real(c_double) :: w2_0
-    real(c_double) :: w2_1
-    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
-    ! order 0: the state and every node's value
+    ! orders 0 and 1 of the state and of every node
     tay(0, 0) = x(0)
     tay(1, 0) = x(1)
     tay(2, 0) = x(2)
@@ -2410,16 +2403,94 @@ contains
     ub16 = tay(13, 0) / tay(12, 0)
     tay(0, 1) = tay(13, 0)
     tay(1, 1) = v19
+    tay(18, 1) = tay(1, 1)
     tay(2, 1) = v21
+    tay(19, 1) = tay(2, 1)
     tay(3, 1) = v76
     tay(4, 1) = v83
     tay(5, 1) = v89
     tay(6, 1) = 0.5714285714285714_c_double
     tay(7, 1) = c(0)
     tay(8, 1) = v93
+    tay(9, 1) = tay(2, 1) * tay(10, 0)
+    tay(10, 1) = -tay(2, 1) * tay(9, 0)
+    v11 = tay(10, 0) * tay(5, 1) + tay(10, 1) * tay(5, 0)
+    v12 = tay(9, 0) * tay(3, 1) + tay(9, 1) * tay(3, 0)
+    v13 = v11 - v12
+    tay(11, 1) = tay(1, 1) * tay(12, 0)
+    tay(12, 1) = -tay(1, 1) * tay(11, 0)
+    tay(13, 1) = v13 * ib16 - tay(12, 1) * ub16
+    v17 = tay(9, 0) * tay(5, 1) + tay(9, 1) * tay(5, 0)
+    v18 = tay(10, 0) * tay(3, 1) + tay(10, 1) * tay(3, 0)
+    v19 = v17 + v18
+    v20 = tay(13, 0) * tay(11, 1) + tay(13, 1) * tay(11, 0)
+    v21 = tay(4, 1) - v20
+    v24 = tay(8, 1) - tay(5, 1)
+    v25 = (-0.0001_c_double) * v24
+    v26 = -v25
+    v28 = 0.035_c_double * tay(6, 1)
+    v30 = 2.005_c_double * tay(4, 1)
+    v31 = v28 + v30
+    v33 = 301.7396875_c_double * tay(3, 1)
+    v34 = v31 + v33
+    v36 = 3.15125_c_double * tay(5, 1)
+    tay(14, 1) = v34 - v36
+    v38 = tay(14, 0) * tay(4, 1) + tay(14, 1) * tay(4, 0)
+    v39 = v26 + v38
+    v40 = 0.035_c_double * tay(7, 1)
+    v42 = 1.34875_c_double * tay(5, 1)
+    v43 = v40 + v42
+    v44 = 2.005_c_double * tay(3, 1)
+    v45 = v43 + v44
+    v47 = 351.7396875_c_double * tay(4, 1)
+    tay(15, 1) = v45 + v47
+    v49 = tay(15, 0) * tay(3, 1) + tay(15, 1) * tay(3, 0)
+    v50 = v39 - v49
+    v51 = 4.166596729006503e-05_c_double * v50
+    v55 = tay(15, 0) * tay(5, 1) + tay(15, 1) * tay(5, 0)
+    v56 = v55
+    v57 = 0.035_c_double * tay(8, 1)
+    v58 = 1.34875_c_double * tay(4, 1)
+    v59 = v57 + v58
+    v61 = 251.31_c_double * tay(5, 1)
+    v62 = v59 + v61
+    v63 = 3.15125_c_double * tay(3, 1)
+    tay(17, 1) = v62 - v63
+    v65 = tay(17, 0) * tay(4, 1) + tay(17, 1) * tay(4, 0)
+    v66 = v56 - v65
+    v67 = 0.0033146766733524852_c_double * v66
+    v68 = v51 + v67
+    v71 = tay(17, 0) * tay(3, 1) + tay(17, 1) * tay(3, 0)
+    v72 = v71
+    v73 = tay(14, 0) * tay(5, 1) + tay(14, 1) * tay(5, 0)
+    v74 = v72 - v73
+    v75 = 1.9054215209804005e-05_c_double * v74
+    v76 = v68 - v75
+    v78 = 0.0028431796071504527_c_double * v74
+    v80 = 1.5497923245489903e-05_c_double * v50
+    v81 = v78 - v80
+    v82 = 1.9054215209804005e-05_c_double * v66
+    v83 = v81 - v82
+    v85 = 0.003979754895162947_c_double * v50
+    v86 = 4.166596729006503e-05_c_double * v66
+    v87 = v85 + v86
+    v88 = 1.5497923245489903e-05_c_double * v74
+    v89 = v87 - v88
+    v93 = 28.571428571428573_c_double * v25
+    tay(0, 2) = tay(13, 1) * inv(2)
+    tay(1, 2) = v19 * inv(2)
+    tay(18, 2) = 2.0_c_double * tay(1, 2)
+    tay(2, 2) = v21 * inv(2)
+    tay(19, 2) = 2.0_c_double * tay(2, 2)
+    tay(3, 2) = v76 * inv(2)
+    tay(4, 2) = v83 * inv(2)
+    tay(5, 2) = v89 * inv(2)
+    tay(6, 2) = 0.0_c_double
+    tay(7, 2) = 0.0_c_double
+    tay(8, 2) = v93 * inv(2)
 
-    ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do n = 1, order - 1
+    ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+    do n = 2, order - 1
       acc9 = 0.0_c_double
       acc10 = 0.0_c_double
       acc11 = 0.0_c_double
@@ -2436,49 +2507,13 @@ contains
       acc65 = 0.0_c_double
       acc71 = 0.0_c_double
       acc73 = 0.0_c_double
-      do b = 0, (n - 1) / 2 - 1
-        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
-        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
-        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
-        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
-        acc9 = acc9 + (w2_0 * tay(10, n - (2 * b + 1)) + w2_1 * tay(10, n - (2 * b + 2)))
-        acc10 = acc10 + (w2_0 * tay(9, n - (2 * b + 1)) + w2_1 * tay(9, n - (2 * b + 2)))
-        acc11 = acc11 + (tay(10, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(10, &
-            2 * b + 2) * tay(5, n - (2 * b + 2)))
-        acc12 = acc12 + (tay(9, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(3, &
-            n - (2 * b + 2)))
-        acc14 = acc14 + (w1_0 * tay(12, n - (2 * b + 1)) + w1_1 * tay(12, n - (2 * b + 2)))
-        acc15 = acc15 + (w1_0 * tay(11, n - (2 * b + 1)) + w1_1 * tay(11, n - (2 * b + 2)))
-        acc16 = acc16 + (tay(12, 2 * b + 1) * tay(13, n - (2 * b + 1)) + tay(12, &
-            2 * b + 2) * tay(13, n - (2 * b + 2)))
-        acc17 = acc17 + (tay(9, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(5, &
-            n - (2 * b + 2)))
-        acc18 = acc18 + (tay(10, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(10, &
-            2 * b + 2) * tay(3, n - (2 * b + 2)))
-        acc20 = acc20 + (tay(13, 2 * b + 1) * tay(11, n - (2 * b + 1)) + tay(13, &
-            2 * b + 2) * tay(11, n - (2 * b + 2)))
-        acc38 = acc38 + (tay(14, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(4, n - (2 * b + 2)))
-        acc49 = acc49 + (tay(15, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(15, &
-            2 * b + 2) * tay(3, n - (2 * b + 2)))
-        acc55 = acc55 + (tay(15, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(15, &
-            2 * b + 2) * tay(5, n - (2 * b + 2)))
-        acc65 = acc65 + (tay(17, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(17, &
-            2 * b + 2) * tay(4, n - (2 * b + 2)))
-        acc71 = acc71 + (tay(17, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(17, &
-            2 * b + 2) * tay(3, n - (2 * b + 2)))
-        acc73 = acc73 + (tay(14, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(5, n - (2 * b + 2)))
-      end do
-      do j = 2 * ((n - 1) / 2) + 1, n - 1
-        w1 = real(j, c_double) * tay(1, j)
-        w2 = real(j, c_double) * tay(2, j)
-        acc9 = acc9 + w2 * tay(10, n - j)
-        acc10 = acc10 + w2 * tay(9, n - j)
+      do j = 1, n - 1
+        acc9 = acc9 + tay(19, j) * tay(10, n - j)
+        acc10 = acc10 + tay(19, j) * tay(9, n - j)
         acc11 = acc11 + tay(10, j) * tay(5, n - j)
         acc12 = acc12 + tay(9, j) * tay(3, n - j)
-        acc14 = acc14 + w1 * tay(12, n - j)
-        acc15 = acc15 + w1 * tay(11, n - j)
+        acc14 = acc14 + tay(18, j) * tay(12, n - j)
+        acc15 = acc15 + tay(18, j) * tay(11, n - j)
         acc16 = acc16 + tay(12, j) * tay(13, n - j)
         acc17 = acc17 + tay(9, j) * tay(5, n - j)
         acc18 = acc18 + tay(10, j) * tay(3, n - j)
@@ -2557,7 +2592,9 @@ contains
       v93 = 28.571428571428573_c_double * v25
       tay(0, n + 1) = tay(13, n) * inv(n + 1)
       tay(1, n + 1) = v19 * inv(n + 1)
+      tay(18, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
       tay(2, n + 1) = v21 * inv(n + 1)
+      tay(19, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v76 * inv(n + 1)
       tay(4, n + 1) = v83 * inv(n + 1)
       tay(5, n + 1) = v89 * inv(n + 1)
@@ -2583,7 +2620,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:18 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:20 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

@@ -1975,7 +1975,7 @@ int speed_controlled_radau5(double t0, double t1, double *x, const double *c, do
 /* The normalized Taylor coefficients of x and of the rhs's 54
    nodes to the given order (17 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[17])
+                              double (*tay)[19])
 {
     double acc8;
     double acc9;
@@ -2030,11 +2030,10 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double v58;
     double v59;
     double v61;
-    int b;
     int j;
     int n;
 
-    /* order 0: the state and every node's value */
+    /* orders 0 and 1 of the state and of every node */
     tay[0][0] = x[0];
     tay[0][1] = x[1];
     tay[0][2] = x[2];
@@ -2090,15 +2089,70 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     ub15 = tay[0][12] / tay[0][11];
     tay[1][0] = tay[0][12];
     tay[1][1] = v18;
+    tay[1][17] = tay[1][1];
     tay[1][2] = v20;
+    tay[1][18] = tay[1][2];
     tay[1][3] = v21;
     tay[1][4] = v34;
     tay[1][5] = v50;
     tay[1][6] = v59;
     tay[1][7] = v61;
+    tay[1][8] = tay[1][2] * tay[0][9];
+    tay[1][9] = -(tay[1][2] * tay[0][8]);
+    v10 = tay[0][9] * tay[1][6] + tay[1][9] * tay[0][6];
+    v11 = tay[0][8] * tay[1][4] + tay[1][8] * tay[0][4];
+    v12 = v10 - v11;
+    tay[1][10] = tay[1][1] * tay[0][11];
+    tay[1][11] = -(tay[1][1] * tay[0][10]);
+    tay[1][12] = v12 * ib15 - tay[1][11] * ub15;
+    v16 = tay[0][8] * tay[1][6] + tay[1][8] * tay[0][6];
+    v17 = tay[0][9] * tay[1][4] + tay[1][9] * tay[0][4];
+    v18 = v16 + v17;
+    v19 = tay[0][12] * tay[1][10] + tay[1][12] * tay[0][10];
+    v20 = tay[1][5] - v19;
+    v21 = tay[1][7] - tay[1][5];
+    v23 = 0.0004980820048148975 * tay[1][7];
+    v25 = 0.33522655090705017 * tay[1][5];
+    tay[1][13] = v23 + v25;
+    v27 = tay[0][6] * tay[1][13] + tay[1][6] * tay[0][13];
+    v29 = 0.016919114337701612 * tay[1][5];
+    v31 = 1.2676659094182028e-05 * tay[1][7];
+    tay[1][14] = v29 - v31;
+    v33 = tay[0][14] * tay[1][4] + tay[1][14] * tay[0][4];
+    v34 = v27 - v33;
+    v36 = tay[0][4] * tay[1][4] + tay[1][4] * tay[0][4];
+    v37 = 0.018613186525101588 * v36;
+    v38 = tay[0][6] * tay[1][6] + tay[1][6] * tay[0][6];
+    v39 = 0.018613186525101588 * v38;
+    v40 = v37 - v39;
+    v43 = tay[1][7];
+    v44 = v43 - tay[1][5];
+    v45 = c[0] * v44;
+    v46 = v40 + v45;
+    tay[1][15] = 0.06916590204045965 * tay[1][4];
+    v49 = tay[0][15] * tay[1][6] + tay[1][15] * tay[0][6];
+    v50 = v46 - v49;
+    v51 = tay[0][14] * tay[1][6] + tay[1][14] * tay[0][6];
+    v53 = 0.2723557574878444 * tay[1][5];
+    v54 = -v53;
+    v56 = 0.0005451879938902264 * tay[1][7];
+    tay[1][16] = v54 - v56;
+    v58 = tay[0][4] * tay[1][16] + tay[1][4] * tay[0][16];
+    v59 = v51 + v58;
+    v61 = c[1] * v44;
+    tay[2][0] = tay[1][12] * inv[2];
+    tay[2][1] = v18 * inv[2];
+    tay[2][17] = 2.0 * tay[2][1];
+    tay[2][2] = v20 * inv[2];
+    tay[2][18] = 2.0 * tay[2][2];
+    tay[2][3] = v21 * inv[2];
+    tay[2][4] = v34 * inv[2];
+    tay[2][5] = v50 * inv[2];
+    tay[2][6] = v59 * inv[2];
+    tay[2][7] = v61 * inv[2];
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         acc8 = 0.0;
         acc9 = 0.0;
         acc10 = 0.0;
@@ -2116,53 +2170,13 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc49 = 0.0;
         acc51 = 0.0;
         acc58 = 0.0;
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            double w1_0, w1_1, w2_0, w2_1;
-            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
-            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
-            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
-            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
-            acc8 = acc8 + (w2_0 * tay[n - (2 * b + 1)][9] + w2_1 * tay[n - (2 * b + 2)][9]);
-            acc9 = acc9 + (w2_0 * tay[n - (2 * b + 1)][8] + w2_1 * tay[n - (2 * b + 2)][8]);
-            acc10 = acc10 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][9] *
-                    tay[n - (2 * b + 2)][6]);
-            acc11 = acc11 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][4]);
-            acc13 = acc13 + (w1_0 * tay[n - (2 * b + 1)][11] + w1_1 * tay[n - (2 * b + 2)][11]);
-            acc14 = acc14 + (w1_0 * tay[n - (2 * b + 1)][10] + w1_1 * tay[n - (2 * b + 2)][10]);
-            acc15 = acc15 + (tay[2 * b + 1][11] * tay[n - (2 * b + 1)][12] + tay[2 * b + 2][11] *
-                    tay[n - (2 * b + 2)][12]);
-            acc16 = acc16 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][6]);
-            acc17 = acc17 + (tay[2 * b + 1][9] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][9] *
-                    tay[n - (2 * b + 2)][4]);
-            acc19 = acc19 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][10] + tay[2 * b + 2][12] *
-                    tay[n - (2 * b + 2)][10]);
-            acc27 = acc27 + (tay[2 * b + 1][6] * tay[n - (2 * b + 1)][13] + tay[2 * b + 2][6] *
-                    tay[n - (2 * b + 2)][13]);
-            acc33 = acc33 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][14] *
-                    tay[n - (2 * b + 2)][4]);
-            acc36 = acc36 + (tay[2 * b + 1][4] * tay[n - (2 * b + 1)][4] + tay[2 * b + 2][4] *
-                    tay[n - (2 * b + 2)][4]);
-            acc38 = acc38 + (tay[2 * b + 1][6] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][6] *
-                    tay[n - (2 * b + 2)][6]);
-            acc49 = acc49 + (tay[2 * b + 1][15] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][15] *
-                    tay[n - (2 * b + 2)][6]);
-            acc51 = acc51 + (tay[2 * b + 1][14] * tay[n - (2 * b + 1)][6] + tay[2 * b + 2][14] *
-                    tay[n - (2 * b + 2)][6]);
-            acc58 = acc58 + (tay[2 * b + 1][4] * tay[n - (2 * b + 1)][16] + tay[2 * b + 2][4] *
-                    tay[n - (2 * b + 2)][16]);
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            double w1, w2;
-            w1 = (double)j * tay[j][1];
-            w2 = (double)j * tay[j][2];
-            acc8 = acc8 + w2 * tay[n - j][9];
-            acc9 = acc9 + w2 * tay[n - j][8];
+        for (j = 1; j < n; ++j) {
+            acc8 = acc8 + tay[j][18] * tay[n - j][9];
+            acc9 = acc9 + tay[j][18] * tay[n - j][8];
             acc10 = acc10 + tay[j][9] * tay[n - j][6];
             acc11 = acc11 + tay[j][8] * tay[n - j][4];
-            acc13 = acc13 + w1 * tay[n - j][11];
-            acc14 = acc14 + w1 * tay[n - j][10];
+            acc13 = acc13 + tay[j][17] * tay[n - j][11];
+            acc14 = acc14 + tay[j][17] * tay[n - j][10];
             acc15 = acc15 + tay[j][11] * tay[n - j][12];
             acc16 = acc16 + tay[j][8] * tay[n - j][6];
             acc17 = acc17 + tay[j][9] * tay[n - j][4];
@@ -2220,7 +2234,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v61 = c[1] * v44;
         tay[n + 1][0] = tay[n][12] * inv[n + 1];
         tay[n + 1][1] = v18 * inv[n + 1];
+        tay[n + 1][17] = (double)(n + 1) * tay[n + 1][1];
         tay[n + 1][2] = v20 * inv[n + 1];
+        tay[n + 1][18] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v21 * inv[n + 1];
         tay[n + 1][4] = v34 * inv[n + 1];
         tay[n + 1][5] = v50 * inv[n + 1];
@@ -2237,7 +2253,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
-    double tay[19][17];
+    double tay[19][19];
     double inv[19] = {0.0};
     double f0[SPEED_CONTROLLED_NX];
     double xnew[SPEED_CONTROLLED_NX];
@@ -2409,7 +2425,7 @@ struct SPEED_CONTROLLED_ALIGNED lanes {
     long stats_rejected[SPEED_CONTROLLED_LANES];
     long stats_rhs_calls[SPEED_CONTROLLED_LANES];
     double cap[SPEED_CONTROLLED_LANES];
-    double tay[19][17][SPEED_CONTROLLED_LANES];
+    double tay[19][19][SPEED_CONTROLLED_LANES];
     int code[SPEED_CONTROLLED_LANES];
     int nonfinite[SPEED_CONTROLLED_LANES];
     int rejected_last[SPEED_CONTROLLED_LANES];
@@ -2969,27 +2985,10 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
 /* The normalized Taylor coefficients of x and of the rhs's 54 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
-    double acc8[SPEED_CONTROLLED_LANES];
-    double acc9[SPEED_CONTROLLED_LANES];
-    double acc10[SPEED_CONTROLLED_LANES];
-    double acc11[SPEED_CONTROLLED_LANES];
-    double acc13[SPEED_CONTROLLED_LANES];
-    double acc14[SPEED_CONTROLLED_LANES];
-    double acc15[SPEED_CONTROLLED_LANES];
-    double acc16[SPEED_CONTROLLED_LANES];
-    double acc17[SPEED_CONTROLLED_LANES];
-    double acc19[SPEED_CONTROLLED_LANES];
-    double acc27[SPEED_CONTROLLED_LANES];
-    double acc33[SPEED_CONTROLLED_LANES];
-    double acc36[SPEED_CONTROLLED_LANES];
-    double acc38[SPEED_CONTROLLED_LANES];
-    double acc49[SPEED_CONTROLLED_LANES];
-    double acc51[SPEED_CONTROLLED_LANES];
-    double acc58[SPEED_CONTROLLED_LANES];
     double ib15[SPEED_CONTROLLED_LANES];
     double ub15[SPEED_CONTROLLED_LANES];
-    int b, j, l, n;
-    /* order 0: the state and every node's value */
+    int j, l, n;
+    /* orders 0 and 1 of the state and of every node */
     SPEED_CONTROLLED_SIMD
     for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
         double v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
@@ -3048,137 +3047,138 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         ub15[l] = L->tay[0][12][l] / L->tay[0][11][l];
         L->tay[1][0][l] = L->tay[0][12][l];
         L->tay[1][1][l] = v18;
+        L->tay[1][17][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v20;
+        L->tay[1][18][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v21;
         L->tay[1][4][l] = v34;
         L->tay[1][5][l] = v50;
         L->tay[1][6][l] = v59;
         L->tay[1][7][l] = v61;
+        L->tay[1][8][l] = L->tay[1][2][l] * L->tay[0][9][l];
+        L->tay[1][9][l] = -(L->tay[1][2][l] * L->tay[0][8][l]);
+        v10 = L->tay[0][9][l] * L->tay[1][6][l] + L->tay[1][9][l] * L->tay[0][6][l];
+        v11 = L->tay[0][8][l] * L->tay[1][4][l] + L->tay[1][8][l] * L->tay[0][4][l];
+        v12 = v10 - v11;
+        L->tay[1][10][l] = L->tay[1][1][l] * L->tay[0][11][l];
+        L->tay[1][11][l] = -(L->tay[1][1][l] * L->tay[0][10][l]);
+        L->tay[1][12][l] = v12 * ib15[l] - L->tay[1][11][l] * ub15[l];
+        v16 = L->tay[0][8][l] * L->tay[1][6][l] + L->tay[1][8][l] * L->tay[0][6][l];
+        v17 = L->tay[0][9][l] * L->tay[1][4][l] + L->tay[1][9][l] * L->tay[0][4][l];
+        v18 = v16 + v17;
+        v19 = L->tay[0][12][l] * L->tay[1][10][l] + L->tay[1][12][l] * L->tay[0][10][l];
+        v20 = L->tay[1][5][l] - v19;
+        v21 = L->tay[1][7][l] - L->tay[1][5][l];
+        v23 = 0.0004980820048148975 * L->tay[1][7][l];
+        v25 = 0.33522655090705017 * L->tay[1][5][l];
+        L->tay[1][13][l] = v23 + v25;
+        v27 = L->tay[0][6][l] * L->tay[1][13][l] + L->tay[1][6][l] * L->tay[0][13][l];
+        v29 = 0.016919114337701612 * L->tay[1][5][l];
+        v31 = 1.2676659094182028e-05 * L->tay[1][7][l];
+        L->tay[1][14][l] = v29 - v31;
+        v33 = L->tay[0][14][l] * L->tay[1][4][l] + L->tay[1][14][l] * L->tay[0][4][l];
+        v34 = v27 - v33;
+        v36 = L->tay[0][4][l] * L->tay[1][4][l] + L->tay[1][4][l] * L->tay[0][4][l];
+        v37 = 0.018613186525101588 * v36;
+        v38 = L->tay[0][6][l] * L->tay[1][6][l] + L->tay[1][6][l] * L->tay[0][6][l];
+        v39 = 0.018613186525101588 * v38;
+        v40 = v37 - v39;
+        v43 = L->tay[1][7][l];
+        v44 = v43 - L->tay[1][5][l];
+        v45 = c[0] * v44;
+        v46 = v40 + v45;
+        L->tay[1][15][l] = 0.06916590204045965 * L->tay[1][4][l];
+        v49 = L->tay[0][15][l] * L->tay[1][6][l] + L->tay[1][15][l] * L->tay[0][6][l];
+        v50 = v46 - v49;
+        v51 = L->tay[0][14][l] * L->tay[1][6][l] + L->tay[1][14][l] * L->tay[0][6][l];
+        v53 = 0.2723557574878444 * L->tay[1][5][l];
+        v54 = -v53;
+        v56 = 0.0005451879938902264 * L->tay[1][7][l];
+        L->tay[1][16][l] = v54 - v56;
+        v58 = L->tay[0][4][l] * L->tay[1][16][l] + L->tay[1][4][l] * L->tay[0][16][l];
+        v59 = v51 + v58;
+        v61 = c[1] * v44;
+        L->tay[2][0][l] = L->tay[1][12][l] * inv[2];
+        L->tay[2][1][l] = v18 * inv[2];
+        L->tay[2][17][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][2][l] = v20 * inv[2];
+        L->tay[2][18][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][3][l] = v21 * inv[2];
+        L->tay[2][4][l] = v34 * inv[2];
+        L->tay[2][5][l] = v50 * inv[2];
+        L->tay[2][6][l] = v59 * inv[2];
+        L->tay[2][7][l] = v61 * inv[2];
     }
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         SPEED_CONTROLLED_SIMD
         for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-            acc8[l] = 0.0;
-            acc9[l] = 0.0;
-            acc10[l] = 0.0;
-            acc11[l] = 0.0;
-            acc13[l] = 0.0;
-            acc14[l] = 0.0;
-            acc15[l] = 0.0;
-            acc16[l] = 0.0;
-            acc17[l] = 0.0;
-            acc19[l] = 0.0;
-            acc27[l] = 0.0;
-            acc33[l] = 0.0;
-            acc36[l] = 0.0;
-            acc38[l] = 0.0;
-            acc49[l] = 0.0;
-            acc51[l] = 0.0;
-            acc58[l] = 0.0;
-        }
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            SPEED_CONTROLLED_SIMD
-            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                double w1_0, w1_1, w2_0, w2_1;
-                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
-                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
-                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
-                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
-                acc8[l] = acc8[l] + (w2_0 * L->tay[n - (2 * b + 1)][9][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][9][l]);
-                acc9[l] = acc9[l] + (w2_0 * L->tay[n - (2 * b + 1)][8][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][8][l]);
-                acc10[l] = acc10[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][6][l] +
-                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][6][l]);
-                acc11[l] = acc11[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][4][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][4][l]);
-                acc13[l] = acc13[l] + (w1_0 * L->tay[n - (2 * b + 1)][11][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][11][l]);
-                acc14[l] = acc14[l] + (w1_0 * L->tay[n - (2 * b + 1)][10][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][10][l]);
-                acc15[l] = acc15[l] + (L->tay[2 * b + 1][11][l] * L->tay[n - (2 * b + 1)][12][l]
-                        + L->tay[2 * b + 2][11][l] * L->tay[n - (2 * b + 2)][12][l]);
-                acc16[l] = acc16[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][6][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][6][l]);
-                acc17[l] = acc17[l] + (L->tay[2 * b + 1][9][l] * L->tay[n - (2 * b + 1)][4][l] +
-                        L->tay[2 * b + 2][9][l] * L->tay[n - (2 * b + 2)][4][l]);
-                acc19[l] = acc19[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][10][l]
-                        + L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][10][l]);
-                acc27[l] = acc27[l] + (L->tay[2 * b + 1][6][l] * L->tay[n - (2 * b + 1)][13][l] +
-                        L->tay[2 * b + 2][6][l] * L->tay[n - (2 * b + 2)][13][l]);
-                acc33[l] = acc33[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][4][l] +
-                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][4][l]);
-                acc36[l] = acc36[l] + (L->tay[2 * b + 1][4][l] * L->tay[n - (2 * b + 1)][4][l] +
-                        L->tay[2 * b + 2][4][l] * L->tay[n - (2 * b + 2)][4][l]);
-                acc38[l] = acc38[l] + (L->tay[2 * b + 1][6][l] * L->tay[n - (2 * b + 1)][6][l] +
-                        L->tay[2 * b + 2][6][l] * L->tay[n - (2 * b + 2)][6][l]);
-                acc49[l] = acc49[l] + (L->tay[2 * b + 1][15][l] * L->tay[n - (2 * b + 1)][6][l] +
-                        L->tay[2 * b + 2][15][l] * L->tay[n - (2 * b + 2)][6][l]);
-                acc51[l] = acc51[l] + (L->tay[2 * b + 1][14][l] * L->tay[n - (2 * b + 1)][6][l] +
-                        L->tay[2 * b + 2][14][l] * L->tay[n - (2 * b + 2)][6][l]);
-                acc58[l] = acc58[l] + (L->tay[2 * b + 1][4][l] * L->tay[n - (2 * b + 1)][16][l] +
-                        L->tay[2 * b + 2][4][l] * L->tay[n - (2 * b + 2)][16][l]);
-            }
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            SPEED_CONTROLLED_SIMD
-            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                double w1, w2;
-                w1 = (double)j * L->tay[j][1][l];
-                w2 = (double)j * L->tay[j][2][l];
-                acc8[l] = acc8[l] + w2 * L->tay[n - j][9][l];
-                acc9[l] = acc9[l] + w2 * L->tay[n - j][8][l];
-                acc10[l] = acc10[l] + L->tay[j][9][l] * L->tay[n - j][6][l];
-                acc11[l] = acc11[l] + L->tay[j][8][l] * L->tay[n - j][4][l];
-                acc13[l] = acc13[l] + w1 * L->tay[n - j][11][l];
-                acc14[l] = acc14[l] + w1 * L->tay[n - j][10][l];
-                acc15[l] = acc15[l] + L->tay[j][11][l] * L->tay[n - j][12][l];
-                acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][6][l];
-                acc17[l] = acc17[l] + L->tay[j][9][l] * L->tay[n - j][4][l];
-                acc19[l] = acc19[l] + L->tay[j][12][l] * L->tay[n - j][10][l];
-                acc27[l] = acc27[l] + L->tay[j][6][l] * L->tay[n - j][13][l];
-                acc33[l] = acc33[l] + L->tay[j][14][l] * L->tay[n - j][4][l];
-                acc36[l] = acc36[l] + L->tay[j][4][l] * L->tay[n - j][4][l];
-                acc38[l] = acc38[l] + L->tay[j][6][l] * L->tay[n - j][6][l];
-                acc49[l] = acc49[l] + L->tay[j][15][l] * L->tay[n - j][6][l];
-                acc51[l] = acc51[l] + L->tay[j][14][l] * L->tay[n - j][6][l];
-                acc58[l] = acc58[l] + L->tay[j][4][l] * L->tay[n - j][16][l];
-            }
-        }
-        SPEED_CONTROLLED_SIMD
-        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-            double v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
-            L->tay[n][8][l] = acc8[l] * inv[n] + L->tay[n][2][l] * L->tay[0][9][l];
-            L->tay[n][9][l] = -(acc9[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][8][l];
-            v10 = acc10[l] + L->tay[0][9][l] * L->tay[n][6][l] + L->tay[n][9][l] * L->tay[0][6][l];
-            v11 = acc11[l] + L->tay[0][8][l] * L->tay[n][4][l] + L->tay[n][8][l] * L->tay[0][4][l];
+            double acc8, acc9, acc10, acc11, acc13, acc14, acc15, acc16, acc17, acc19, acc27, acc33, acc36, acc38, acc49, acc51, acc58, v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
+            acc8 = 0.0;
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc11 = 0.0;
+            acc13 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc19 = 0.0;
+            acc27 = 0.0;
+            acc33 = 0.0;
+            acc36 = 0.0;
+            acc38 = 0.0;
+            acc49 = 0.0;
+            acc51 = 0.0;
+            acc58 = 0.0;
+            j = 1;
+            do {
+                acc8 = acc8 + L->tay[j][18][l] * L->tay[n - j][9][l];
+                acc9 = acc9 + L->tay[j][18][l] * L->tay[n - j][8][l];
+                acc10 = acc10 + L->tay[j][9][l] * L->tay[n - j][6][l];
+                acc11 = acc11 + L->tay[j][8][l] * L->tay[n - j][4][l];
+                acc13 = acc13 + L->tay[j][17][l] * L->tay[n - j][11][l];
+                acc14 = acc14 + L->tay[j][17][l] * L->tay[n - j][10][l];
+                acc15 = acc15 + L->tay[j][11][l] * L->tay[n - j][12][l];
+                acc16 = acc16 + L->tay[j][8][l] * L->tay[n - j][6][l];
+                acc17 = acc17 + L->tay[j][9][l] * L->tay[n - j][4][l];
+                acc19 = acc19 + L->tay[j][12][l] * L->tay[n - j][10][l];
+                acc27 = acc27 + L->tay[j][6][l] * L->tay[n - j][13][l];
+                acc33 = acc33 + L->tay[j][14][l] * L->tay[n - j][4][l];
+                acc36 = acc36 + L->tay[j][4][l] * L->tay[n - j][4][l];
+                acc38 = acc38 + L->tay[j][6][l] * L->tay[n - j][6][l];
+                acc49 = acc49 + L->tay[j][15][l] * L->tay[n - j][6][l];
+                acc51 = acc51 + L->tay[j][14][l] * L->tay[n - j][6][l];
+                acc58 = acc58 + L->tay[j][4][l] * L->tay[n - j][16][l];
+                ++j;
+            } while (j < n);
+            L->tay[n][8][l] = acc8 * inv[n] + L->tay[n][2][l] * L->tay[0][9][l];
+            L->tay[n][9][l] = -(acc9 * inv[n]) - L->tay[n][2][l] * L->tay[0][8][l];
+            v10 = acc10 + L->tay[0][9][l] * L->tay[n][6][l] + L->tay[n][9][l] * L->tay[0][6][l];
+            v11 = acc11 + L->tay[0][8][l] * L->tay[n][4][l] + L->tay[n][8][l] * L->tay[0][4][l];
             v12 = v10 - v11;
-            L->tay[n][10][l] = acc13[l] * inv[n] + L->tay[n][1][l] * L->tay[0][11][l];
-            L->tay[n][11][l] = -(acc14[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][10][l];
-            L->tay[n][12][l] = v12 * ib15[l] - (acc15[l] * ib15[l] + L->tay[n][11][l] * ub15[l]);
-            v16 = acc16[l] + L->tay[0][8][l] * L->tay[n][6][l] + L->tay[n][8][l] * L->tay[0][6][l];
-            v17 = acc17[l] + L->tay[0][9][l] * L->tay[n][4][l] + L->tay[n][9][l] * L->tay[0][4][l];
+            L->tay[n][10][l] = acc13 * inv[n] + L->tay[n][1][l] * L->tay[0][11][l];
+            L->tay[n][11][l] = -(acc14 * inv[n]) - L->tay[n][1][l] * L->tay[0][10][l];
+            L->tay[n][12][l] = v12 * ib15[l] - (acc15 * ib15[l] + L->tay[n][11][l] * ub15[l]);
+            v16 = acc16 + L->tay[0][8][l] * L->tay[n][6][l] + L->tay[n][8][l] * L->tay[0][6][l];
+            v17 = acc17 + L->tay[0][9][l] * L->tay[n][4][l] + L->tay[n][9][l] * L->tay[0][4][l];
             v18 = v16 + v17;
-            v19 = acc19[l] + L->tay[0][12][l] * L->tay[n][10][l] + L->tay[n][12][l] *
-                    L->tay[0][10][l];
+            v19 = acc19 + L->tay[0][12][l] * L->tay[n][10][l] + L->tay[n][12][l] * L->tay[0][10][l];
             v20 = L->tay[n][5][l] - v19;
             v21 = L->tay[n][7][l] - L->tay[n][5][l];
             v23 = 0.0004980820048148975 * L->tay[n][7][l];
             v25 = 0.33522655090705017 * L->tay[n][5][l];
             L->tay[n][13][l] = v23 + v25;
-            v27 = acc27[l] + L->tay[0][6][l] * L->tay[n][13][l] + L->tay[n][6][l] *
-                    L->tay[0][13][l];
+            v27 = acc27 + L->tay[0][6][l] * L->tay[n][13][l] + L->tay[n][6][l] * L->tay[0][13][l];
             v29 = 0.016919114337701612 * L->tay[n][5][l];
             v31 = 1.2676659094182028e-05 * L->tay[n][7][l];
             L->tay[n][14][l] = v29 - v31;
-            v33 = acc33[l] + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] *
-                    L->tay[0][4][l];
+            v33 = acc33 + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] * L->tay[0][4][l];
             v34 = v27 - v33;
-            v36 = acc36[l] + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] * L->tay[0][4][l];
+            v36 = acc36 + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] * L->tay[0][4][l];
             v37 = 0.018613186525101588 * v36;
-            v38 = acc38[l] + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] * L->tay[0][6][l];
+            v38 = acc38 + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] * L->tay[0][6][l];
             v39 = 0.018613186525101588 * v38;
             v40 = v37 - v39;
             v43 = L->tay[n][7][l];
@@ -3186,22 +3186,21 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v45 = c[0] * v44;
             v46 = v40 + v45;
             L->tay[n][15][l] = 0.06916590204045965 * L->tay[n][4][l];
-            v49 = acc49[l] + L->tay[0][15][l] * L->tay[n][6][l] + L->tay[n][15][l] *
-                    L->tay[0][6][l];
+            v49 = acc49 + L->tay[0][15][l] * L->tay[n][6][l] + L->tay[n][15][l] * L->tay[0][6][l];
             v50 = v46 - v49;
-            v51 = acc51[l] + L->tay[0][14][l] * L->tay[n][6][l] + L->tay[n][14][l] *
-                    L->tay[0][6][l];
+            v51 = acc51 + L->tay[0][14][l] * L->tay[n][6][l] + L->tay[n][14][l] * L->tay[0][6][l];
             v53 = 0.2723557574878444 * L->tay[n][5][l];
             v54 = -v53;
             v56 = 0.0005451879938902264 * L->tay[n][7][l];
             L->tay[n][16][l] = v54 - v56;
-            v58 = acc58[l] + L->tay[0][4][l] * L->tay[n][16][l] + L->tay[n][4][l] *
-                    L->tay[0][16][l];
+            v58 = acc58 + L->tay[0][4][l] * L->tay[n][16][l] + L->tay[n][4][l] * L->tay[0][16][l];
             v59 = v51 + v58;
             v61 = c[1] * v44;
             L->tay[n + 1][0][l] = L->tay[n][12][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v18 * inv[n + 1];
+            L->tay[n + 1][17][l] = (double)(n + 1) * L->tay[n + 1][1][l];
             L->tay[n + 1][2][l] = v20 * inv[n + 1];
+            L->tay[n + 1][18][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v21 * inv[n + 1];
             L->tay[n + 1][4][l] = v34 * inv[n + 1];
             L->tay[n + 1][5][l] = v50 * inv[n + 1];

@@ -2165,7 +2165,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:17 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:19 - 1, 0:19 - 1)
     real(c_double) :: acc8
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2219,17 +2219,10 @@ contains
     real(c_double) :: v58
     real(c_double) :: v59
     real(c_double) :: v61
-    real(c_double) :: w1
-    real(c_double) :: w1_0
-    real(c_double) :: w1_1
-    real(c_double) :: w2
-    real(c_double) :: w2_0
-    real(c_double) :: w2_1
-    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
-    ! order 0: the state and every node's value
+    ! orders 0 and 1 of the state and of every node
     tay(0, 0) = x(0)
     tay(1, 0) = x(1)
     tay(2, 0) = x(2)
@@ -2285,15 +2278,70 @@ contains
     ub15 = tay(12, 0) / tay(11, 0)
     tay(0, 1) = tay(12, 0)
     tay(1, 1) = v18
+    tay(17, 1) = tay(1, 1)
     tay(2, 1) = v20
+    tay(18, 1) = tay(2, 1)
     tay(3, 1) = v21
     tay(4, 1) = v34
     tay(5, 1) = v50
     tay(6, 1) = v59
     tay(7, 1) = v61
+    tay(8, 1) = tay(2, 1) * tay(9, 0)
+    tay(9, 1) = -tay(2, 1) * tay(8, 0)
+    v10 = tay(9, 0) * tay(6, 1) + tay(9, 1) * tay(6, 0)
+    v11 = tay(8, 0) * tay(4, 1) + tay(8, 1) * tay(4, 0)
+    v12 = v10 - v11
+    tay(10, 1) = tay(1, 1) * tay(11, 0)
+    tay(11, 1) = -tay(1, 1) * tay(10, 0)
+    tay(12, 1) = v12 * ib15 - tay(11, 1) * ub15
+    v16 = tay(8, 0) * tay(6, 1) + tay(8, 1) * tay(6, 0)
+    v17 = tay(9, 0) * tay(4, 1) + tay(9, 1) * tay(4, 0)
+    v18 = v16 + v17
+    v19 = tay(12, 0) * tay(10, 1) + tay(12, 1) * tay(10, 0)
+    v20 = tay(5, 1) - v19
+    v21 = tay(7, 1) - tay(5, 1)
+    v23 = 0.0004980820048148975_c_double * tay(7, 1)
+    v25 = 0.33522655090705017_c_double * tay(5, 1)
+    tay(13, 1) = v23 + v25
+    v27 = tay(6, 0) * tay(13, 1) + tay(6, 1) * tay(13, 0)
+    v29 = 0.016919114337701612_c_double * tay(5, 1)
+    v31 = 1.2676659094182028e-05_c_double * tay(7, 1)
+    tay(14, 1) = v29 - v31
+    v33 = tay(14, 0) * tay(4, 1) + tay(14, 1) * tay(4, 0)
+    v34 = v27 - v33
+    v36 = tay(4, 0) * tay(4, 1) + tay(4, 1) * tay(4, 0)
+    v37 = 0.018613186525101588_c_double * v36
+    v38 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
+    v39 = 0.018613186525101588_c_double * v38
+    v40 = v37 - v39
+    v43 = tay(7, 1)
+    v44 = v43 - tay(5, 1)
+    v45 = c(0) * v44
+    v46 = v40 + v45
+    tay(15, 1) = 0.06916590204045965_c_double * tay(4, 1)
+    v49 = tay(15, 0) * tay(6, 1) + tay(15, 1) * tay(6, 0)
+    v50 = v46 - v49
+    v51 = tay(14, 0) * tay(6, 1) + tay(14, 1) * tay(6, 0)
+    v53 = 0.2723557574878444_c_double * tay(5, 1)
+    v54 = -v53
+    v56 = 0.0005451879938902264_c_double * tay(7, 1)
+    tay(16, 1) = v54 - v56
+    v58 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
+    v59 = v51 + v58
+    v61 = c(1) * v44
+    tay(0, 2) = tay(12, 1) * inv(2)
+    tay(1, 2) = v18 * inv(2)
+    tay(17, 2) = 2.0_c_double * tay(1, 2)
+    tay(2, 2) = v20 * inv(2)
+    tay(18, 2) = 2.0_c_double * tay(2, 2)
+    tay(3, 2) = v21 * inv(2)
+    tay(4, 2) = v34 * inv(2)
+    tay(5, 2) = v50 * inv(2)
+    tay(6, 2) = v59 * inv(2)
+    tay(7, 2) = v61 * inv(2)
 
-    ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do n = 1, order - 1
+    ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+    do n = 2, order - 1
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
       acc10 = 0.0_c_double
@@ -2311,51 +2359,13 @@ contains
       acc49 = 0.0_c_double
       acc51 = 0.0_c_double
       acc58 = 0.0_c_double
-      do b = 0, (n - 1) / 2 - 1
-        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
-        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
-        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
-        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
-        acc8 = acc8 + (w2_0 * tay(9, n - (2 * b + 1)) + w2_1 * tay(9, n - (2 * b + 2)))
-        acc9 = acc9 + (w2_0 * tay(8, n - (2 * b + 1)) + w2_1 * tay(8, n - (2 * b + 2)))
-        acc10 = acc10 + (tay(9, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(6, &
-            n - (2 * b + 2)))
-        acc11 = acc11 + (tay(8, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(4, &
-            n - (2 * b + 2)))
-        acc13 = acc13 + (w1_0 * tay(11, n - (2 * b + 1)) + w1_1 * tay(11, n - (2 * b + 2)))
-        acc14 = acc14 + (w1_0 * tay(10, n - (2 * b + 1)) + w1_1 * tay(10, n - (2 * b + 2)))
-        acc15 = acc15 + (tay(11, 2 * b + 1) * tay(12, n - (2 * b + 1)) + tay(11, &
-            2 * b + 2) * tay(12, n - (2 * b + 2)))
-        acc16 = acc16 + (tay(8, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(6, &
-            n - (2 * b + 2)))
-        acc17 = acc17 + (tay(9, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(4, &
-            n - (2 * b + 2)))
-        acc19 = acc19 + (tay(12, 2 * b + 1) * tay(10, n - (2 * b + 1)) + tay(12, &
-            2 * b + 2) * tay(10, n - (2 * b + 2)))
-        acc27 = acc27 + (tay(6, 2 * b + 1) * tay(13, n - (2 * b + 1)) + tay(6, &
-            2 * b + 2) * tay(13, n - (2 * b + 2)))
-        acc33 = acc33 + (tay(14, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(4, n - (2 * b + 2)))
-        acc36 = acc36 + (tay(4, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(4, 2 * b + 2) * tay(4, &
-            n - (2 * b + 2)))
-        acc38 = acc38 + (tay(6, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(6, 2 * b + 2) * tay(6, &
-            n - (2 * b + 2)))
-        acc49 = acc49 + (tay(15, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(15, &
-            2 * b + 2) * tay(6, n - (2 * b + 2)))
-        acc51 = acc51 + (tay(14, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(6, n - (2 * b + 2)))
-        acc58 = acc58 + (tay(4, 2 * b + 1) * tay(16, n - (2 * b + 1)) + tay(4, &
-            2 * b + 2) * tay(16, n - (2 * b + 2)))
-      end do
-      do j = 2 * ((n - 1) / 2) + 1, n - 1
-        w1 = real(j, c_double) * tay(1, j)
-        w2 = real(j, c_double) * tay(2, j)
-        acc8 = acc8 + w2 * tay(9, n - j)
-        acc9 = acc9 + w2 * tay(8, n - j)
+      do j = 1, n - 1
+        acc8 = acc8 + tay(18, j) * tay(9, n - j)
+        acc9 = acc9 + tay(18, j) * tay(8, n - j)
         acc10 = acc10 + tay(9, j) * tay(6, n - j)
         acc11 = acc11 + tay(8, j) * tay(4, n - j)
-        acc13 = acc13 + w1 * tay(11, n - j)
-        acc14 = acc14 + w1 * tay(10, n - j)
+        acc13 = acc13 + tay(17, j) * tay(11, n - j)
+        acc14 = acc14 + tay(17, j) * tay(10, n - j)
         acc15 = acc15 + tay(11, j) * tay(12, n - j)
         acc16 = acc16 + tay(8, j) * tay(6, n - j)
         acc17 = acc17 + tay(9, j) * tay(4, n - j)
@@ -2413,7 +2423,9 @@ contains
       v61 = c(1) * v44
       tay(0, n + 1) = tay(12, n) * inv(n + 1)
       tay(1, n + 1) = v18 * inv(n + 1)
+      tay(17, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
       tay(2, n + 1) = v20 * inv(n + 1)
+      tay(18, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v21 * inv(n + 1)
       tay(4, n + 1) = v34 * inv(n + 1)
       tay(5, n + 1) = v50 * inv(n + 1)
@@ -2438,7 +2450,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:17 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:19 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

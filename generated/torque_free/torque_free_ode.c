@@ -1942,7 +1942,7 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
 
 /* The normalized Taylor coefficients of x and of the rhs's 22
    nodes to the given order (12 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[13])
+static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[15])
 {
     double acc7;
     double acc8;
@@ -1971,11 +1971,10 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     double v25;
     double v27;
     double v28;
-    int b;
     int j;
     int n;
 
-    /* order 0: the state and every node's value */
+    /* orders 0 and 1 of the state and of every node */
     tay[0][0] = x[0];
     tay[0][1] = x[1];
     tay[0][2] = x[2];
@@ -2006,14 +2005,44 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     ub14 = tay[0][11] / tay[0][10];
     tay[1][0] = tay[0][11];
     tay[1][1] = v17;
+    tay[1][13] = tay[1][1];
     tay[1][2] = v19;
+    tay[1][14] = tay[1][2];
     tay[1][3] = v25;
     tay[1][4] = 0.0;
     tay[1][5] = v28;
     tay[1][6] = 0.0;
+    tay[1][7] = tay[1][2] * tay[0][8];
+    tay[1][8] = -(tay[1][2] * tay[0][7]);
+    v9 = tay[0][8] * tay[1][5] + tay[1][8] * tay[0][5];
+    v10 = tay[0][7] * tay[1][3] + tay[1][7] * tay[0][3];
+    v11 = v9 - v10;
+    tay[1][9] = tay[1][1] * tay[0][10];
+    tay[1][10] = -(tay[1][1] * tay[0][9]);
+    tay[1][11] = v11 * ib14 - tay[1][10] * ub14;
+    v15 = tay[0][7] * tay[1][5] + tay[1][7] * tay[0][5];
+    v16 = tay[0][8] * tay[1][3] + tay[1][8] * tay[0][3];
+    v17 = v15 + v16;
+    v18 = tay[0][11] * tay[1][9] + tay[1][11] * tay[0][9];
+    v19 = tay[1][4] - v18;
+    v21 = 0.3114754098360656 * tay[1][4];
+    v23 = 0.02622950819672131 * tay[1][6];
+    tay[1][12] = v21 + v23;
+    v25 = tay[0][12] * tay[1][5] + tay[1][12] * tay[0][5];
+    v27 = tay[0][12] * tay[1][3] + tay[1][12] * tay[0][3];
+    v28 = -v27;
+    tay[2][0] = tay[1][11] * inv[2];
+    tay[2][1] = v17 * inv[2];
+    tay[2][13] = 2.0 * tay[2][1];
+    tay[2][2] = v19 * inv[2];
+    tay[2][14] = 2.0 * tay[2][2];
+    tay[2][3] = v25 * inv[2];
+    tay[2][4] = 0.0;
+    tay[2][5] = v28 * inv[2];
+    tay[2][6] = 0.0;
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         acc7 = 0.0;
         acc8 = 0.0;
         acc9 = 0.0;
@@ -2026,43 +2055,13 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         acc18 = 0.0;
         acc25 = 0.0;
         acc27 = 0.0;
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            double w1_0, w1_1, w2_0, w2_1;
-            w1_0 = (double)(2 * b + 1) * tay[2 * b + 1][1];
-            w1_1 = (double)(2 * b + 2) * tay[2 * b + 2][1];
-            w2_0 = (double)(2 * b + 1) * tay[2 * b + 1][2];
-            w2_1 = (double)(2 * b + 2) * tay[2 * b + 2][2];
-            acc7 = acc7 + (w2_0 * tay[n - (2 * b + 1)][8] + w2_1 * tay[n - (2 * b + 2)][8]);
-            acc8 = acc8 + (w2_0 * tay[n - (2 * b + 1)][7] + w2_1 * tay[n - (2 * b + 2)][7]);
-            acc9 = acc9 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][5]);
-            acc10 = acc10 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][7] *
-                    tay[n - (2 * b + 2)][3]);
-            acc12 = acc12 + (w1_0 * tay[n - (2 * b + 1)][10] + w1_1 * tay[n - (2 * b + 2)][10]);
-            acc13 = acc13 + (w1_0 * tay[n - (2 * b + 1)][9] + w1_1 * tay[n - (2 * b + 2)][9]);
-            acc14 = acc14 + (tay[2 * b + 1][10] * tay[n - (2 * b + 1)][11] + tay[2 * b + 2][10] *
-                    tay[n - (2 * b + 2)][11]);
-            acc15 = acc15 + (tay[2 * b + 1][7] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][7] *
-                    tay[n - (2 * b + 2)][5]);
-            acc16 = acc16 + (tay[2 * b + 1][8] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][8] *
-                    tay[n - (2 * b + 2)][3]);
-            acc18 = acc18 + (tay[2 * b + 1][11] * tay[n - (2 * b + 1)][9] + tay[2 * b + 2][11] *
-                    tay[n - (2 * b + 2)][9]);
-            acc25 = acc25 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][5] + tay[2 * b + 2][12] *
-                    tay[n - (2 * b + 2)][5]);
-            acc27 = acc27 + (tay[2 * b + 1][12] * tay[n - (2 * b + 1)][3] + tay[2 * b + 2][12] *
-                    tay[n - (2 * b + 2)][3]);
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            double w1, w2;
-            w1 = (double)j * tay[j][1];
-            w2 = (double)j * tay[j][2];
-            acc7 = acc7 + w2 * tay[n - j][8];
-            acc8 = acc8 + w2 * tay[n - j][7];
+        for (j = 1; j < n; ++j) {
+            acc7 = acc7 + tay[j][14] * tay[n - j][8];
+            acc8 = acc8 + tay[j][14] * tay[n - j][7];
             acc9 = acc9 + tay[j][8] * tay[n - j][5];
             acc10 = acc10 + tay[j][7] * tay[n - j][3];
-            acc12 = acc12 + w1 * tay[n - j][10];
-            acc13 = acc13 + w1 * tay[n - j][9];
+            acc12 = acc12 + tay[j][13] * tay[n - j][10];
+            acc13 = acc13 + tay[j][13] * tay[n - j][9];
             acc14 = acc14 + tay[j][10] * tay[n - j][11];
             acc15 = acc15 + tay[j][7] * tay[n - j][5];
             acc16 = acc16 + tay[j][8] * tay[n - j][3];
@@ -2091,7 +2090,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v28 = -v27;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
         tay[n + 1][1] = v17 * inv[n + 1];
+        tay[n + 1][13] = (double)(n + 1) * tay[n + 1][1];
         tay[n + 1][2] = v19 * inv[n + 1];
+        tay[n + 1][14] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v25 * inv[n + 1];
         tay[n + 1][4] = 0.0;
         tay[n + 1][5] = v28 * inv[n + 1];
@@ -2107,7 +2108,7 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, torque_free_stats *stats)
 {
-    double tay[19][13];
+    double tay[19][15];
     double inv[19] = {0.0};
     double f0[TORQUE_FREE_NX];
     double xnew[TORQUE_FREE_NX];
@@ -2279,7 +2280,7 @@ struct TORQUE_FREE_ALIGNED lanes {
     long stats_rejected[TORQUE_FREE_LANES];
     long stats_rhs_calls[TORQUE_FREE_LANES];
     double cap[TORQUE_FREE_LANES];
-    double tay[19][13][TORQUE_FREE_LANES];
+    double tay[19][15][TORQUE_FREE_LANES];
     int code[TORQUE_FREE_LANES];
     int nonfinite[TORQUE_FREE_LANES];
     int rejected_last[TORQUE_FREE_LANES];
@@ -2832,22 +2833,10 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
 /* The normalized Taylor coefficients of x and of the rhs's 22 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
 {
-    double acc7[TORQUE_FREE_LANES];
-    double acc8[TORQUE_FREE_LANES];
-    double acc9[TORQUE_FREE_LANES];
-    double acc10[TORQUE_FREE_LANES];
-    double acc12[TORQUE_FREE_LANES];
-    double acc13[TORQUE_FREE_LANES];
-    double acc14[TORQUE_FREE_LANES];
-    double acc15[TORQUE_FREE_LANES];
-    double acc16[TORQUE_FREE_LANES];
-    double acc18[TORQUE_FREE_LANES];
-    double acc25[TORQUE_FREE_LANES];
-    double acc27[TORQUE_FREE_LANES];
     double ib14[TORQUE_FREE_LANES];
     double ub14[TORQUE_FREE_LANES];
-    int b, j, l, n;
-    /* order 0: the state and every node's value */
+    int j, l, n;
+    /* orders 0 and 1 of the state and of every node */
     TORQUE_FREE_SIMD
     for (l = 0; l < TORQUE_FREE_LANES; ++l) {
         double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v28;
@@ -2881,112 +2870,100 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         ub14[l] = L->tay[0][11][l] / L->tay[0][10][l];
         L->tay[1][0][l] = L->tay[0][11][l];
         L->tay[1][1][l] = v17;
+        L->tay[1][13][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v19;
+        L->tay[1][14][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v25;
         L->tay[1][4][l] = 0.0;
         L->tay[1][5][l] = v28;
         L->tay[1][6][l] = 0.0;
+        L->tay[1][7][l] = L->tay[1][2][l] * L->tay[0][8][l];
+        L->tay[1][8][l] = -(L->tay[1][2][l] * L->tay[0][7][l]);
+        v9 = L->tay[0][8][l] * L->tay[1][5][l] + L->tay[1][8][l] * L->tay[0][5][l];
+        v10 = L->tay[0][7][l] * L->tay[1][3][l] + L->tay[1][7][l] * L->tay[0][3][l];
+        v11 = v9 - v10;
+        L->tay[1][9][l] = L->tay[1][1][l] * L->tay[0][10][l];
+        L->tay[1][10][l] = -(L->tay[1][1][l] * L->tay[0][9][l]);
+        L->tay[1][11][l] = v11 * ib14[l] - L->tay[1][10][l] * ub14[l];
+        v15 = L->tay[0][7][l] * L->tay[1][5][l] + L->tay[1][7][l] * L->tay[0][5][l];
+        v16 = L->tay[0][8][l] * L->tay[1][3][l] + L->tay[1][8][l] * L->tay[0][3][l];
+        v17 = v15 + v16;
+        v18 = L->tay[0][11][l] * L->tay[1][9][l] + L->tay[1][11][l] * L->tay[0][9][l];
+        v19 = L->tay[1][4][l] - v18;
+        v21 = 0.3114754098360656 * L->tay[1][4][l];
+        v23 = 0.02622950819672131 * L->tay[1][6][l];
+        L->tay[1][12][l] = v21 + v23;
+        v25 = L->tay[0][12][l] * L->tay[1][5][l] + L->tay[1][12][l] * L->tay[0][5][l];
+        v27 = L->tay[0][12][l] * L->tay[1][3][l] + L->tay[1][12][l] * L->tay[0][3][l];
+        v28 = -v27;
+        L->tay[2][0][l] = L->tay[1][11][l] * inv[2];
+        L->tay[2][1][l] = v17 * inv[2];
+        L->tay[2][13][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][2][l] = v19 * inv[2];
+        L->tay[2][14][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][3][l] = v25 * inv[2];
+        L->tay[2][4][l] = 0.0;
+        L->tay[2][5][l] = v28 * inv[2];
+        L->tay[2][6][l] = 0.0;
     }
 
-    /* orders 1 .. order-1 of the nodes, so orders 2 .. order of the state */
-    for (n = 1; n < order; ++n) {
+    /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+    for (n = 2; n < order; ++n) {
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-            acc7[l] = 0.0;
-            acc8[l] = 0.0;
-            acc9[l] = 0.0;
-            acc10[l] = 0.0;
-            acc12[l] = 0.0;
-            acc13[l] = 0.0;
-            acc14[l] = 0.0;
-            acc15[l] = 0.0;
-            acc16[l] = 0.0;
-            acc18[l] = 0.0;
-            acc25[l] = 0.0;
-            acc27[l] = 0.0;
-        }
-        for (b = 0; b < (n - 1) / 2; ++b) {
-            TORQUE_FREE_SIMD
-            for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-                double w1_0, w1_1, w2_0, w2_1;
-                w1_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][1][l];
-                w1_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][1][l];
-                w2_0 = (double)(2 * b + 1) * L->tay[2 * b + 1][2][l];
-                w2_1 = (double)(2 * b + 2) * L->tay[2 * b + 2][2][l];
-                acc7[l] = acc7[l] + (w2_0 * L->tay[n - (2 * b + 1)][8][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][8][l]);
-                acc8[l] = acc8[l] + (w2_0 * L->tay[n - (2 * b + 1)][7][l] + w2_1 * L->tay[n - (2
-                        * b + 2)][7][l]);
-                acc9[l] = acc9[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc10[l] = acc10[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc12[l] = acc12[l] + (w1_0 * L->tay[n - (2 * b + 1)][10][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][10][l]);
-                acc13[l] = acc13[l] + (w1_0 * L->tay[n - (2 * b + 1)][9][l] + w1_1 * L->tay[n -
-                        (2 * b + 2)][9][l]);
-                acc14[l] = acc14[l] + (L->tay[2 * b + 1][10][l] * L->tay[n - (2 * b + 1)][11][l]
-                        + L->tay[2 * b + 2][10][l] * L->tay[n - (2 * b + 2)][11][l]);
-                acc15[l] = acc15[l] + (L->tay[2 * b + 1][7][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][7][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc16[l] = acc16[l] + (L->tay[2 * b + 1][8][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][8][l] * L->tay[n - (2 * b + 2)][3][l]);
-                acc18[l] = acc18[l] + (L->tay[2 * b + 1][11][l] * L->tay[n - (2 * b + 1)][9][l] +
-                        L->tay[2 * b + 2][11][l] * L->tay[n - (2 * b + 2)][9][l]);
-                acc25[l] = acc25[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][5][l] +
-                        L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][5][l]);
-                acc27[l] = acc27[l] + (L->tay[2 * b + 1][12][l] * L->tay[n - (2 * b + 1)][3][l] +
-                        L->tay[2 * b + 2][12][l] * L->tay[n - (2 * b + 2)][3][l]);
-            }
-        }
-        for (j = 2 * ((n - 1) / 2) + 1; j < n; ++j) {
-            TORQUE_FREE_SIMD
-            for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-                double w1, w2;
-                w1 = (double)j * L->tay[j][1][l];
-                w2 = (double)j * L->tay[j][2][l];
-                acc7[l] = acc7[l] + w2 * L->tay[n - j][8][l];
-                acc8[l] = acc8[l] + w2 * L->tay[n - j][7][l];
-                acc9[l] = acc9[l] + L->tay[j][8][l] * L->tay[n - j][5][l];
-                acc10[l] = acc10[l] + L->tay[j][7][l] * L->tay[n - j][3][l];
-                acc12[l] = acc12[l] + w1 * L->tay[n - j][10][l];
-                acc13[l] = acc13[l] + w1 * L->tay[n - j][9][l];
-                acc14[l] = acc14[l] + L->tay[j][10][l] * L->tay[n - j][11][l];
-                acc15[l] = acc15[l] + L->tay[j][7][l] * L->tay[n - j][5][l];
-                acc16[l] = acc16[l] + L->tay[j][8][l] * L->tay[n - j][3][l];
-                acc18[l] = acc18[l] + L->tay[j][11][l] * L->tay[n - j][9][l];
-                acc25[l] = acc25[l] + L->tay[j][12][l] * L->tay[n - j][5][l];
-                acc27[l] = acc27[l] + L->tay[j][12][l] * L->tay[n - j][3][l];
-            }
-        }
-        TORQUE_FREE_SIMD
-        for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-            double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v28;
-            L->tay[n][7][l] = acc7[l] * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
-            L->tay[n][8][l] = -(acc8[l] * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
-            v9 = acc9[l] + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] * L->tay[0][5][l];
-            v10 = acc10[l] + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] * L->tay[0][3][l];
+            double acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc27, v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v28;
+            acc7 = 0.0;
+            acc8 = 0.0;
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc12 = 0.0;
+            acc13 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc18 = 0.0;
+            acc25 = 0.0;
+            acc27 = 0.0;
+            j = 1;
+            do {
+                acc7 = acc7 + L->tay[j][14][l] * L->tay[n - j][8][l];
+                acc8 = acc8 + L->tay[j][14][l] * L->tay[n - j][7][l];
+                acc9 = acc9 + L->tay[j][8][l] * L->tay[n - j][5][l];
+                acc10 = acc10 + L->tay[j][7][l] * L->tay[n - j][3][l];
+                acc12 = acc12 + L->tay[j][13][l] * L->tay[n - j][10][l];
+                acc13 = acc13 + L->tay[j][13][l] * L->tay[n - j][9][l];
+                acc14 = acc14 + L->tay[j][10][l] * L->tay[n - j][11][l];
+                acc15 = acc15 + L->tay[j][7][l] * L->tay[n - j][5][l];
+                acc16 = acc16 + L->tay[j][8][l] * L->tay[n - j][3][l];
+                acc18 = acc18 + L->tay[j][11][l] * L->tay[n - j][9][l];
+                acc25 = acc25 + L->tay[j][12][l] * L->tay[n - j][5][l];
+                acc27 = acc27 + L->tay[j][12][l] * L->tay[n - j][3][l];
+                ++j;
+            } while (j < n);
+            L->tay[n][7][l] = acc7 * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
+            L->tay[n][8][l] = -(acc8 * inv[n]) - L->tay[n][2][l] * L->tay[0][7][l];
+            v9 = acc9 + L->tay[0][8][l] * L->tay[n][5][l] + L->tay[n][8][l] * L->tay[0][5][l];
+            v10 = acc10 + L->tay[0][7][l] * L->tay[n][3][l] + L->tay[n][7][l] * L->tay[0][3][l];
             v11 = v9 - v10;
-            L->tay[n][9][l] = acc12[l] * inv[n] + L->tay[n][1][l] * L->tay[0][10][l];
-            L->tay[n][10][l] = -(acc13[l] * inv[n]) - L->tay[n][1][l] * L->tay[0][9][l];
-            L->tay[n][11][l] = v11 * ib14[l] - (acc14[l] * ib14[l] + L->tay[n][10][l] * ub14[l]);
-            v15 = acc15[l] + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] * L->tay[0][5][l];
-            v16 = acc16[l] + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
+            L->tay[n][9][l] = acc12 * inv[n] + L->tay[n][1][l] * L->tay[0][10][l];
+            L->tay[n][10][l] = -(acc13 * inv[n]) - L->tay[n][1][l] * L->tay[0][9][l];
+            L->tay[n][11][l] = v11 * ib14[l] - (acc14 * ib14[l] + L->tay[n][10][l] * ub14[l]);
+            v15 = acc15 + L->tay[0][7][l] * L->tay[n][5][l] + L->tay[n][7][l] * L->tay[0][5][l];
+            v16 = acc16 + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
             v17 = v15 + v16;
-            v18 = acc18[l] + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] *
-                    L->tay[0][9][l];
+            v18 = acc18 + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] * L->tay[0][9][l];
             v19 = L->tay[n][4][l] - v18;
             v21 = 0.3114754098360656 * L->tay[n][4][l];
             v23 = 0.02622950819672131 * L->tay[n][6][l];
             L->tay[n][12][l] = v21 + v23;
-            v25 = acc25[l] + L->tay[0][12][l] * L->tay[n][5][l] + L->tay[n][12][l] *
-                    L->tay[0][5][l];
-            v27 = acc27[l] + L->tay[0][12][l] * L->tay[n][3][l] + L->tay[n][12][l] *
-                    L->tay[0][3][l];
+            v25 = acc25 + L->tay[0][12][l] * L->tay[n][5][l] + L->tay[n][12][l] * L->tay[0][5][l];
+            v27 = acc27 + L->tay[0][12][l] * L->tay[n][3][l] + L->tay[n][12][l] * L->tay[0][3][l];
             v28 = -v27;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v17 * inv[n + 1];
+            L->tay[n + 1][13][l] = (double)(n + 1) * L->tay[n + 1][1][l];
             L->tay[n + 1][2][l] = v19 * inv[n + 1];
+            L->tay[n + 1][14][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v25 * inv[n + 1];
             L->tay[n + 1][4][l] = 0.0;
             L->tay[n + 1][5][l] = v28 * inv[n + 1];

@@ -2125,7 +2125,7 @@ contains
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:13 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:15 - 1, 0:19 - 1)
     real(c_double) :: acc7
     real(c_double) :: acc8
     real(c_double) :: acc9
@@ -2153,17 +2153,10 @@ contains
     real(c_double) :: v25
     real(c_double) :: v27
     real(c_double) :: v28
-    real(c_double) :: w1
-    real(c_double) :: w1_0
-    real(c_double) :: w1_1
-    real(c_double) :: w2
-    real(c_double) :: w2_0
-    real(c_double) :: w2_1
-    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
-    ! order 0: the state and every node's value
+    ! orders 0 and 1 of the state and of every node
     tay(0, 0) = x(0)
     tay(1, 0) = x(1)
     tay(2, 0) = x(2)
@@ -2194,14 +2187,44 @@ contains
     ub14 = tay(11, 0) / tay(10, 0)
     tay(0, 1) = tay(11, 0)
     tay(1, 1) = v17
+    tay(13, 1) = tay(1, 1)
     tay(2, 1) = v19
+    tay(14, 1) = tay(2, 1)
     tay(3, 1) = v25
     tay(4, 1) = 0.0_c_double
     tay(5, 1) = v28
     tay(6, 1) = 0.0_c_double
+    tay(7, 1) = tay(2, 1) * tay(8, 0)
+    tay(8, 1) = -tay(2, 1) * tay(7, 0)
+    v9 = tay(8, 0) * tay(5, 1) + tay(8, 1) * tay(5, 0)
+    v10 = tay(7, 0) * tay(3, 1) + tay(7, 1) * tay(3, 0)
+    v11 = v9 - v10
+    tay(9, 1) = tay(1, 1) * tay(10, 0)
+    tay(10, 1) = -tay(1, 1) * tay(9, 0)
+    tay(11, 1) = v11 * ib14 - tay(10, 1) * ub14
+    v15 = tay(7, 0) * tay(5, 1) + tay(7, 1) * tay(5, 0)
+    v16 = tay(8, 0) * tay(3, 1) + tay(8, 1) * tay(3, 0)
+    v17 = v15 + v16
+    v18 = tay(11, 0) * tay(9, 1) + tay(11, 1) * tay(9, 0)
+    v19 = tay(4, 1) - v18
+    v21 = 0.3114754098360656_c_double * tay(4, 1)
+    v23 = 0.02622950819672131_c_double * tay(6, 1)
+    tay(12, 1) = v21 + v23
+    v25 = tay(12, 0) * tay(5, 1) + tay(12, 1) * tay(5, 0)
+    v27 = tay(12, 0) * tay(3, 1) + tay(12, 1) * tay(3, 0)
+    v28 = -v27
+    tay(0, 2) = tay(11, 1) * inv(2)
+    tay(1, 2) = v17 * inv(2)
+    tay(13, 2) = 2.0_c_double * tay(1, 2)
+    tay(2, 2) = v19 * inv(2)
+    tay(14, 2) = 2.0_c_double * tay(2, 2)
+    tay(3, 2) = v25 * inv(2)
+    tay(4, 2) = 0.0_c_double
+    tay(5, 2) = v28 * inv(2)
+    tay(6, 2) = 0.0_c_double
 
-    ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do n = 1, order - 1
+    ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+    do n = 2, order - 1
       acc7 = 0.0_c_double
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
@@ -2214,41 +2237,13 @@ contains
       acc18 = 0.0_c_double
       acc25 = 0.0_c_double
       acc27 = 0.0_c_double
-      do b = 0, (n - 1) / 2 - 1
-        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
-        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
-        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
-        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
-        acc7 = acc7 + (w2_0 * tay(8, n - (2 * b + 1)) + w2_1 * tay(8, n - (2 * b + 2)))
-        acc8 = acc8 + (w2_0 * tay(7, n - (2 * b + 1)) + w2_1 * tay(7, n - (2 * b + 2)))
-        acc9 = acc9 + (tay(8, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(5, &
-            n - (2 * b + 2)))
-        acc10 = acc10 + (tay(7, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(7, 2 * b + 2) * tay(3, &
-            n - (2 * b + 2)))
-        acc12 = acc12 + (w1_0 * tay(10, n - (2 * b + 1)) + w1_1 * tay(10, n - (2 * b + 2)))
-        acc13 = acc13 + (w1_0 * tay(9, n - (2 * b + 1)) + w1_1 * tay(9, n - (2 * b + 2)))
-        acc14 = acc14 + (tay(10, 2 * b + 1) * tay(11, n - (2 * b + 1)) + tay(10, &
-            2 * b + 2) * tay(11, n - (2 * b + 2)))
-        acc15 = acc15 + (tay(7, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(7, 2 * b + 2) * tay(5, &
-            n - (2 * b + 2)))
-        acc16 = acc16 + (tay(8, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(3, &
-            n - (2 * b + 2)))
-        acc18 = acc18 + (tay(11, 2 * b + 1) * tay(9, n - (2 * b + 1)) + tay(11, &
-            2 * b + 2) * tay(9, n - (2 * b + 2)))
-        acc25 = acc25 + (tay(12, 2 * b + 1) * tay(5, n - (2 * b + 1)) + tay(12, &
-            2 * b + 2) * tay(5, n - (2 * b + 2)))
-        acc27 = acc27 + (tay(12, 2 * b + 1) * tay(3, n - (2 * b + 1)) + tay(12, &
-            2 * b + 2) * tay(3, n - (2 * b + 2)))
-      end do
-      do j = 2 * ((n - 1) / 2) + 1, n - 1
-        w1 = real(j, c_double) * tay(1, j)
-        w2 = real(j, c_double) * tay(2, j)
-        acc7 = acc7 + w2 * tay(8, n - j)
-        acc8 = acc8 + w2 * tay(7, n - j)
+      do j = 1, n - 1
+        acc7 = acc7 + tay(14, j) * tay(8, n - j)
+        acc8 = acc8 + tay(14, j) * tay(7, n - j)
         acc9 = acc9 + tay(8, j) * tay(5, n - j)
         acc10 = acc10 + tay(7, j) * tay(3, n - j)
-        acc12 = acc12 + w1 * tay(10, n - j)
-        acc13 = acc13 + w1 * tay(9, n - j)
+        acc12 = acc12 + tay(13, j) * tay(10, n - j)
+        acc13 = acc13 + tay(13, j) * tay(9, n - j)
         acc14 = acc14 + tay(10, j) * tay(11, n - j)
         acc15 = acc15 + tay(7, j) * tay(5, n - j)
         acc16 = acc16 + tay(8, j) * tay(3, n - j)
@@ -2277,7 +2272,9 @@ contains
       v28 = -v27
       tay(0, n + 1) = tay(11, n) * inv(n + 1)
       tay(1, n + 1) = v17 * inv(n + 1)
+      tay(13, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
       tay(2, n + 1) = v19 * inv(n + 1)
+      tay(14, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v25 * inv(n + 1)
       tay(4, n + 1) = 0.0_c_double
       tay(5, n + 1) = v28 * inv(n + 1)
@@ -2301,7 +2298,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:13 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:15 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

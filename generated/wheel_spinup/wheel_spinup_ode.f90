@@ -2156,7 +2156,7 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:17 - 1, 0:19 - 1)
+    real(c_double), intent(inout) :: tay(0:19 - 1, 0:19 - 1)
     real(c_double) :: acc8
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2206,17 +2206,10 @@ contains
     real(c_double) :: v52
     real(c_double) :: v54
     real(c_double) :: v55
-    real(c_double) :: w1
-    real(c_double) :: w1_0
-    real(c_double) :: w1_1
-    real(c_double) :: w2
-    real(c_double) :: w2_0
-    real(c_double) :: w2_1
-    integer(c_int) :: b
     integer(c_int) :: j
     integer(c_int) :: n
 
-    ! order 0: the state and every node's value
+    ! orders 0 and 1 of the state and of every node
     tay(0, 0) = x(0)
     tay(1, 0) = x(1)
     tay(2, 0) = x(2)
@@ -2268,15 +2261,66 @@ contains
     ub15 = tay(12, 0) / tay(11, 0)
     tay(0, 1) = tay(12, 0)
     tay(1, 1) = v18
+    tay(17, 1) = tay(1, 1)
     tay(2, 1) = v20
+    tay(18, 1) = tay(2, 1)
     tay(3, 1) = v21
     tay(4, 1) = v34
     tay(5, 1) = v46
     tay(6, 1) = v55
     tay(7, 1) = c(1)
+    tay(8, 1) = tay(2, 1) * tay(9, 0)
+    tay(9, 1) = -tay(2, 1) * tay(8, 0)
+    v10 = tay(9, 0) * tay(6, 1) + tay(9, 1) * tay(6, 0)
+    v11 = tay(8, 0) * tay(4, 1) + tay(8, 1) * tay(4, 0)
+    v12 = v10 - v11
+    tay(10, 1) = tay(1, 1) * tay(11, 0)
+    tay(11, 1) = -tay(1, 1) * tay(10, 0)
+    tay(12, 1) = v12 * ib15 - tay(11, 1) * ub15
+    v16 = tay(8, 0) * tay(6, 1) + tay(8, 1) * tay(6, 0)
+    v17 = tay(9, 0) * tay(4, 1) + tay(9, 1) * tay(4, 0)
+    v18 = v16 + v17
+    v19 = tay(12, 0) * tay(10, 1) + tay(12, 1) * tay(10, 0)
+    v20 = tay(5, 1) - v19
+    v21 = tay(7, 1) - tay(5, 1)
+    v23 = 0.3499793829482495_c_double * tay(5, 1)
+    v25 = 0.0007488716786310489_c_double * tay(7, 1)
+    tay(13, 1) = v23 + v25
+    v27 = tay(6, 0) * tay(13, 1) + tay(6, 1) * tay(13, 0)
+    v29 = 0.014646230145692387_c_double * tay(5, 1)
+    v31 = 1.6873537034207817e-05_c_double * tay(7, 1)
+    tay(14, 1) = v29 - v31
+    v33 = tay(14, 0) * tay(4, 1) + tay(14, 1) * tay(4, 0)
+    v34 = v27 - v33
+    v37 = tay(4, 0) * tay(4, 1) + tay(4, 1) * tay(4, 0)
+    v38 = 0.01627906976744186_c_double * v37
+    v39 = v38
+    v40 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
+    v41 = 0.01627906976744186_c_double * v40
+    v42 = v39 - v41
+    tay(15, 1) = 0.06976744186046512_c_double * tay(4, 1)
+    v45 = tay(15, 0) * tay(6, 1) + tay(15, 1) * tay(6, 0)
+    v46 = v42 - v45
+    v47 = tay(14, 0) * tay(6, 1) + tay(14, 1) * tay(6, 0)
+    v49 = 0.0008211868373490824_c_double * tay(7, 1)
+    v50 = -v49
+    v52 = 0.2872098251809964_c_double * tay(5, 1)
+    tay(16, 1) = v50 - v52
+    v54 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
+    v55 = v47 + v54
+    tay(0, 2) = tay(12, 1) * inv(2)
+    tay(1, 2) = v18 * inv(2)
+    tay(17, 2) = 2.0_c_double * tay(1, 2)
+    tay(2, 2) = v20 * inv(2)
+    tay(18, 2) = 2.0_c_double * tay(2, 2)
+    tay(3, 2) = v21 * inv(2)
+    tay(4, 2) = v34 * inv(2)
+    tay(5, 2) = v46 * inv(2)
+    tay(6, 2) = v55 * inv(2)
+    tay(7, 2) = 0.0_c_double
 
-    ! orders 1 .. order-1 of the nodes, so orders 2 .. order of the state
-    do n = 1, order - 1
+    ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+    do n = 2, order - 1
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
       acc10 = 0.0_c_double
@@ -2294,51 +2338,13 @@ contains
       acc45 = 0.0_c_double
       acc47 = 0.0_c_double
       acc54 = 0.0_c_double
-      do b = 0, (n - 1) / 2 - 1
-        w1_0 = real(2 * b + 1, c_double) * tay(1, 2 * b + 1)
-        w1_1 = real(2 * b + 2, c_double) * tay(1, 2 * b + 2)
-        w2_0 = real(2 * b + 1, c_double) * tay(2, 2 * b + 1)
-        w2_1 = real(2 * b + 2, c_double) * tay(2, 2 * b + 2)
-        acc8 = acc8 + (w2_0 * tay(9, n - (2 * b + 1)) + w2_1 * tay(9, n - (2 * b + 2)))
-        acc9 = acc9 + (w2_0 * tay(8, n - (2 * b + 1)) + w2_1 * tay(8, n - (2 * b + 2)))
-        acc10 = acc10 + (tay(9, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(6, &
-            n - (2 * b + 2)))
-        acc11 = acc11 + (tay(8, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(4, &
-            n - (2 * b + 2)))
-        acc13 = acc13 + (w1_0 * tay(11, n - (2 * b + 1)) + w1_1 * tay(11, n - (2 * b + 2)))
-        acc14 = acc14 + (w1_0 * tay(10, n - (2 * b + 1)) + w1_1 * tay(10, n - (2 * b + 2)))
-        acc15 = acc15 + (tay(11, 2 * b + 1) * tay(12, n - (2 * b + 1)) + tay(11, &
-            2 * b + 2) * tay(12, n - (2 * b + 2)))
-        acc16 = acc16 + (tay(8, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(8, 2 * b + 2) * tay(6, &
-            n - (2 * b + 2)))
-        acc17 = acc17 + (tay(9, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(9, 2 * b + 2) * tay(4, &
-            n - (2 * b + 2)))
-        acc19 = acc19 + (tay(12, 2 * b + 1) * tay(10, n - (2 * b + 1)) + tay(12, &
-            2 * b + 2) * tay(10, n - (2 * b + 2)))
-        acc27 = acc27 + (tay(6, 2 * b + 1) * tay(13, n - (2 * b + 1)) + tay(6, &
-            2 * b + 2) * tay(13, n - (2 * b + 2)))
-        acc33 = acc33 + (tay(14, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(4, n - (2 * b + 2)))
-        acc37 = acc37 + (tay(4, 2 * b + 1) * tay(4, n - (2 * b + 1)) + tay(4, 2 * b + 2) * tay(4, &
-            n - (2 * b + 2)))
-        acc40 = acc40 + (tay(6, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(6, 2 * b + 2) * tay(6, &
-            n - (2 * b + 2)))
-        acc45 = acc45 + (tay(15, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(15, &
-            2 * b + 2) * tay(6, n - (2 * b + 2)))
-        acc47 = acc47 + (tay(14, 2 * b + 1) * tay(6, n - (2 * b + 1)) + tay(14, &
-            2 * b + 2) * tay(6, n - (2 * b + 2)))
-        acc54 = acc54 + (tay(4, 2 * b + 1) * tay(16, n - (2 * b + 1)) + tay(4, &
-            2 * b + 2) * tay(16, n - (2 * b + 2)))
-      end do
-      do j = 2 * ((n - 1) / 2) + 1, n - 1
-        w1 = real(j, c_double) * tay(1, j)
-        w2 = real(j, c_double) * tay(2, j)
-        acc8 = acc8 + w2 * tay(9, n - j)
-        acc9 = acc9 + w2 * tay(8, n - j)
+      do j = 1, n - 1
+        acc8 = acc8 + tay(18, j) * tay(9, n - j)
+        acc9 = acc9 + tay(18, j) * tay(8, n - j)
         acc10 = acc10 + tay(9, j) * tay(6, n - j)
         acc11 = acc11 + tay(8, j) * tay(4, n - j)
-        acc13 = acc13 + w1 * tay(11, n - j)
-        acc14 = acc14 + w1 * tay(10, n - j)
+        acc13 = acc13 + tay(17, j) * tay(11, n - j)
+        acc14 = acc14 + tay(17, j) * tay(10, n - j)
         acc15 = acc15 + tay(11, j) * tay(12, n - j)
         acc16 = acc16 + tay(8, j) * tay(6, n - j)
         acc17 = acc17 + tay(9, j) * tay(4, n - j)
@@ -2392,7 +2398,9 @@ contains
       v55 = v47 + v54
       tay(0, n + 1) = tay(12, n) * inv(n + 1)
       tay(1, n + 1) = v18 * inv(n + 1)
+      tay(17, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
       tay(2, n + 1) = v20 * inv(n + 1)
+      tay(18, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v21 * inv(n + 1)
       tay(4, n + 1) = v34 * inv(n + 1)
       tay(5, n + 1) = v46 * inv(n + 1)
@@ -2417,7 +2425,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:17 - 1, 0:19 - 1)
+    real(c_double) :: tay(0:19 - 1, 0:19 - 1)
     real(c_double) :: inv(0:19 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)

@@ -1,11 +1,12 @@
 """The Taylor method's jet, described once: the normalized Taylor
 coefficients of every node of the scene's rhs DAG (gyrogen.symbolic.jet).
 
-At order k: first, for j = 1 .. k-1, every convolution's terms that read
-only lower orders, in one loop whose body holds every node (the terms of
-different nodes are independent, so the processor overlaps them); then,
+At order k >= 2: first, for j = 1 .. k-1, every convolution's terms that
+read only lower orders, in one loop whose body holds every node (the terms
+of different nodes are independent, so the processor overlaps them); then,
 node by node in DAG order, the terms that read order k and the linear
-nodes; then each state's coefficient k+1 = f[k] / (k+1). The recurrences
+nodes; then each state's coefficient k+1 = f[k] / (k+1). Order 1, which
+has no such terms, follows order 0 in the same statements. The recurrences
 (Jorba & Zou 2005, Sec. 2), for T[k] the coefficient of order k:
   u = a b:    u[k] = sum_{j=0..k} a[j] b[k-j]
   u = a / b:  u[k] = (a[k] - sum_{j=1..k} b[j] u[k-j]) / b[0]
@@ -20,8 +21,9 @@ polynomial), every operand a convolution reads at a lower order, and the
 constant nodes; the other nodes (sums, differences, scalings) are values of
 their order alone (locals of intent "tmp": over lanes, scoped to one loop
 over the lanes), so the coefficients a step touches are fewer and stay in
-the first-level cache. A convolution's lower-order terms are summed UNROLL
-at a time, pairwise, then added to its accumulator.
+the first-level cache. Over lanes, an order is one loop over the lanes
+with the loop over j inside it (For.inner): the accumulators are values of
+that loop, in registers.
 """
 
 from __future__ import annotations
@@ -45,12 +47,13 @@ from gyrogen.methods import Method
 from gyrogen.symbolic.jet import Jet, Node
 from gyrogen.tableaus import Series
 
-T, c, k, j, blk = Var("tay"), Var("c"), Var("n"), Var("j"), Var("b")
+T, c, n_, j = Var("tay"), Var("c"), Var("n"), Var("j")
 order = Var("order")
-UNROLL = 2
-"""Terms of a convolution per turn of its loop: their sum is added to the
-accumulator once (over lanes, one load and store of it per UNROLL terms).
-On the default scene 2 beat 1, 4 and 8, in the batch and the single call."""
+
+
+def succ(e: E) -> E:
+    """e + 1, folded for a number."""
+    return Int(e.value + 1) if isinstance(e, Int) else e + Int(1)
 
 
 def kept(jet: Jet) -> list[int]:
@@ -71,17 +74,38 @@ def kept(jet: Jet) -> list[int]:
     return sorted(keep)
 
 
+def arguments(jet: Jet) -> list[int]:
+    """The nodes whose sine and cosine the rhs takes."""
+    return sorted(
+        {jet.nodes[n].args[0] for n in jet.convolutions() if jet.nodes[n].op in ("sin", "cos")}
+    )
+
+
 def coefficients(series: Series, jet: Jet) -> Decl:
-    """tay[k][r]: the coefficient of order k of the node stored in row r."""
-    return Decl("tay", "double", (series.order + 1, len(kept(jet))), "inout")
+    """tay[k][r]: the coefficient of order k of the node stored in row r (the
+    kept nodes), then k a[k] of each trigonometric argument a."""
+    return Decl("tay", "double", (series.order + 1, len(kept(jet)) + len(arguments(jet))), "inout")
 
 
 class _Printer:
     """A jet's nodes as IR expressions."""
 
-    def __init__(self, jet: Jet):
-        self.jet = jet
+    def __init__(self, jet: Jet, k: E = n_):
+        self.jet, self.k = jet, k
         self.row = {n: r for r, n in enumerate(kept(jet))}
+        self.scaled = {a: len(self.row) + r for r, a in enumerate(arguments(jet))}
+
+    def set(self, n: int, order_: E, value: E) -> list[S]:
+        """Node n's coefficient of order_ = value; for a trigonometric
+        argument also order_ times it, which the convolutions read."""
+        out: list[S] = [assign(self.at(n, order_), value)]
+        if n in self.scaled:
+            times: E = self.at(n, order_)
+            if order_ != Int(1):
+                num = Num(float(order_.value)) if isinstance(order_, Int) else fn("real", order_)
+                times = num * times
+            out.append(assign(T[order_, Int(self.scaled[n])], times))
+        return out
 
     def zero(self, n: int) -> E:
         """Node n at order 0: a number or c[i] as itself, else T[0][n]."""
@@ -97,7 +121,7 @@ class _Printer:
         the order being computed (of order 0 or k only)."""
         if n in self.row:
             return T[order_, Int(self.row[n])]
-        assert order_ in (k, Int(0)), f"node {n} is not kept, yet read at order {order_}"
+        assert order_ in (self.k, Int(0)), f"node {n} is not kept, yet read at order {order_}"
         return Var(f"v{n}")
 
     def temporaries(self) -> list[int]:
@@ -124,7 +148,7 @@ class _Printer:
 
     def linear(self, node: Node) -> E:
         """add, sub, neg at order k >= 1: the varying operands' order k."""
-        a = node.args[0]
+        a, k = node.args[0], self.k
         if node.op == "neg":
             return -self.at(a, k)
         b = node.args[1]
@@ -134,41 +158,58 @@ class _Printer:
             return self.at(a, k)
         return self.at(a, k) + self.at(b, k) if node.op == "add" else self.at(a, k) - self.at(b, k)
 
-    def term(self, n: int, node: Node, jj: E, w: str) -> E:
-        """A convolution's term jj (1 <= jj < k), which reads orders below
-        k; w names the trigonometric argument's jj a[jj]."""
-        kj = k - jj
+    def term(self, n: int, node: Node, jj: E) -> E:
+        """A convolution's term jj (1 <= jj < k), which reads orders below k."""
+        kj = self.k - jj
         if node.op == "mul":
             a, b = node.args
             return self.at(a, jj) * self.at(b, kj)
         if node.op == "div":
             return self.at(node.args[1], jj) * self.at(n, kj)
-        return Var(f"w{node.args[0]}{w}") * self.at(node.index, kj)
+        return T[jj, Int(self.scaled[node.args[0]])] * self.at(node.index, kj)
 
     def finish(self, n: int, node: Node) -> E:
-        """Node n at order k >= 1, from its convolution's sum and its operands'
-        order k, each of which enters once, last (the chain from one order's
-        state to the next is as short as it can be)."""
-        acc, inv_k = Var(f"acc{n}"), Var("inv")[k]
+        """Node n at order k >= 1, from its convolution's sum (none at order
+        1) and its operands' order k, each of which enters once, last (the
+        chain from one order's state to the next is as short as it can be)."""
+        k = self.k
+        acc = None if k == Int(1) else Var(f"acc{n}")
         if node.op in ("add", "sub", "neg"):
             return self.linear(node)
         if node.op in ("sin", "cos"):
             a, partner = node.args[0], self.at(node.index, Int(0))
+            head = self.at(a, k) * partner
             if node.op == "sin":  # (acc + k a[k] c[0]) / k
-                return acc * inv_k + self.at(a, k) * partner
-            return -(acc * inv_k) - self.at(a, k) * partner
+                return head if acc is None else acc * Var("inv")[k] + head
+            return -head if acc is None else -(acc * Var("inv")[k]) - head
         a, b = node.args
         if node.op == "mul":
             if not self.varying(a):
                 return self.zero(a) * self.at(b, k)
             if not self.varying(b):
                 return self.at(a, k) * self.zero(b)
-            return (acc + self.at(a, Int(0)) * self.at(b, k)) + self.at(a, k) * self.at(b, Int(0))
+            head = self.at(a, Int(0)) * self.at(b, k)
+            return (head if acc is None else acc + head) + self.at(a, k) * self.at(b, Int(0))
         if not self.varying(b):
             return self.at(a, k) / self.zero(b)
         # (a[k] - acc - b[k] u[0]) / b[0], with 1/b[0] and u[0]/b[0] from order 0
-        known = acc * Var(f"ib{n}") + self.at(b, k) * Var(f"ub{n}")
+        head = self.at(b, k) * Var(f"ub{n}")
+        known = head if acc is None else acc * Var(f"ib{n}") + head
         return self.at(a, k) * Var(f"ib{n}") - known if self.varying(a) else -known
+
+    def order_k(self) -> list[S]:
+        """Every varying node at order k, then the states' order k+1."""
+        jet, k = self.jet, self.k
+        out: list[S] = [
+            s
+            for n in range(jet.nx, len(jet.nodes))
+            if not jet.nodes[n].const
+            for s in self.set(n, k, self.finish(n, jet.nodes[n]))
+        ]
+        for n, f in enumerate(jet.outputs):
+            value = self.at(f, k) * Var("inv")[succ(k)] if self.varying(f) else Num(0.0)
+            out += self.set(n, succ(k), value)
+        return out
 
     def divisions(self) -> list[int]:
         """The quotients by a varying node: 1/b[0] and u[0]/b[0] kept from order 0."""
@@ -184,55 +225,22 @@ def reads_constants(jet: Jet) -> bool:
     return any(n.op == "c" for n in jet.nodes)
 
 
-def _sum(terms: list[E]) -> E:
-    """Pairwise: ((t0 + t1) + (t2 + t3))."""
-    while len(terms) > 1:
-        terms = [terms[i] + terms[i + 1] if i + 1 < len(terms) else terms[i]
-                 for i in range(0, len(terms), 2)]  # fmt: skip
-    return terms[0]
-
-
 def _lower_orders(p: _Printer) -> list[S]:
-    """The convolutions' terms j = 1 .. k-1: UNROLL per turn of a loop over
-    blocks, then the rest one at a time."""
+    """The convolutions' terms j = 1 .. k-1 (k >= 2: one turn at least)."""
     jet = p.jet
     conv = jet.convolutions()
     if not conv:
         return []
-    trig = sorted({jet.nodes[n].args[0] for n in conv if jet.nodes[n].op in ("sin", "cos")})
-
-    def turn(js: list[E]) -> tuple[list[S], tuple[str, ...]]:
-        """The terms js of every convolution; w names per term when several."""
-        names = [f"_{u}" for u in range(len(js))] if len(js) > 1 else [""]
-        ws: list[S] = [
-            assign(Var(f"w{a}{w}"), fn("real", jj) * p.at(a, jj))
-            for a in trig
-            for jj, w in zip(js, names, strict=True)
-        ]
-        sums: list[S] = [
-            assign(
-                Var(f"acc{n}"),
-                Var(f"acc{n}")
-                + _sum([p.term(n, jet.nodes[n], jj, w) for jj, w in zip(js, names, strict=True)]),
-            )
-            for n in conv
-        ]
-        return ws + sums, tuple(f"w{a}{w}" for a in trig for w in names)
-
-    blocks = (k - Int(1)) / Int(UNROLL)  # then the rest (none when UNROLL is 1)
-    body, scoped = turn([Int(UNROLL) * blk + Int(1 + u) for u in range(UNROLL)])
-    out: list[S] = [assign(Var(f"acc{n}"), 0.0) for n in conv]
-    out.append(For("b", blocks, tuple(body), scoped))
-    body, scoped = turn([j])
-    out.append(For("j", k, tuple(body), scoped, start=Int(UNROLL) * blocks + Int(1)))
-    return out
+    sums = tuple(assign(Var(f"acc{n}"), Var(f"acc{n}") + p.term(n, jet.nodes[n], j)) for n in conv)
+    zero: list[S] = [assign(Var(f"acc{n}"), 0.0) for n in conv]
+    return [*zero, For("j", p.k, sums, start=Int(1), inner=True)]
 
 
 def jet_function(series: Series, jet: Jet) -> Func:
     """taylor_jet: tay[0 .. order][*] at x; inv[k] = 1/k."""
     p = _Printer(jet)
     nx = jet.nx
-    body: list[S] = [Comment("order 0: the state and every node's value", False)]
+    body: list[S] = [Comment("orders 0 and 1 of the state and of every node", False)]
     body += [assign(T[Int(0), Int(n)], x[n]) for n in range(nx)]
     body += [
         assign(p.at(n, Int(0)), p.value(jet.nodes[n]))
@@ -245,19 +253,11 @@ def jet_function(series: Series, jet: Jet) -> Func:
             assign(Var(f"ib{n}"), Num(1.0) / b0),
             assign(Var(f"ub{n}"), p.at(n, Int(0)) / b0),
         ]
-    body += [assign(T[Int(1), Int(n)], p.zero(f)) for n, f in enumerate(jet.outputs)]
-    order_k = _lower_orders(p)
-    order_k += [
-        assign(p.at(n, k), p.finish(n, jet.nodes[n]))
-        for n in range(nx, len(jet.nodes))
-        if not jet.nodes[n].const
-    ]
-    for n, f in enumerate(jet.outputs):
-        value = p.at(f, k) * Var("inv")[k + 1] if p.varying(f) else Num(0.0)
-        order_k.append(assign(T[k + 1, Int(n)], value))
+    body += [s for n, f in enumerate(jet.outputs) for s in p.set(n, Int(1), p.zero(f))]
+    body += _Printer(jet, Int(1)).order_k()
     body += [
-        Comment("orders 1 .. order-1 of the nodes, so orders 2 .. order of the state"),
-        For("n", order, tuple(order_k), start=Int(1)),
+        Comment("orders 2 .. order-1 of the nodes, so orders 3 .. order of the state"),
+        For("n", order, (*_lower_orders(p), *p.order_k()), start=Int(2)),
     ]
     params = (
         Decl("order", "int"),
@@ -268,7 +268,7 @@ def jet_function(series: Series, jet: Jet) -> Func:
     )
     conv = jet.convolutions()
     locals_ = (
-        *(real(f"acc{n}", "inout") for n in conv),
+        *(real(f"acc{n}", "tmp") for n in conv),
         *(real(f"{v}{n}", "inout") for n in p.divisions() for v in ("ib", "ub")),
         *(real(f"v{n}", "tmp") for n in p.temporaries()),
     )

@@ -21,6 +21,7 @@ from gyrogen.codegen.ir.nodes import (
     For,
     Func,
     If,
+    Int,
     Row,
     S,
     Sel,
@@ -126,7 +127,7 @@ class LanesPrinter(CPrinter):
                 flush()
                 lines += CPrinter.statement(self, s, depth)
                 continue
-            if isinstance(s, Assign):
+            if isinstance(s, Assign) or (isinstance(s, For) and s.inner):
                 run.append(s)
                 continue
             flush()
@@ -134,11 +135,27 @@ class LanesPrinter(CPrinter):
         flush()
         return lines
 
+    def statement(self, s: S, depth: int) -> list[str]:
+        """In a loop over the lanes: an inner loop as do-while (For.inner)."""
+        if not (isinstance(s, For) and s.inner) or self.single:
+            return super().statement(s, depth)
+        pad, v = self.indent * depth, s.var
+        assert not isinstance(s.n, Int) or not isinstance(s.start, Int) or s.n.value > s.start.value
+        body = [*self.scoped_locals(s, depth + 1), *CPrinter.block(self, s.body, depth + 1)]
+        return [
+            f"{pad}{v} = {self.expr(s.start)};",
+            f"{pad}do {{",
+            *body,
+            f"{pad}{self.indent}++{v};",
+            f"{pad}}} while ({v} < {self.expr(s.n, 5)});",
+        ]
+
     def temporaries(self, run: list[S]) -> list[str]:
-        """The temporaries a run of assignments sets, each before any read."""
+        """The temporaries a run of assignments (and inner loops of them)
+        sets, each before any read."""
         set_: list[str] = []
-        for s in run:
-            assert isinstance(s, Assign)
+        flat = [x for s in run for x in ([s] if isinstance(s, Assign) else walk_assigns(s))]
+        for s in flat:
             read = {n for n in names(s.value) if self.temporary(n)}
             assert read <= set(set_), f"{sorted(read - set(set_))} read before set in a run"
             target = s.target.name if isinstance(s.target, Var) else ""
@@ -246,6 +263,16 @@ def nested(s: S) -> list[S]:
     if isinstance(s, For):
         return [x for y in s.body for x in [y, *nested(y)]]
     return []
+
+
+def walk_assigns(s: S) -> list[Assign]:
+    """The assignments of an inner loop, in order (it holds nothing else)."""
+    assert isinstance(s, For) and s.inner
+    out: list[Assign] = []
+    for x in s.body:
+        assert isinstance(x, (Assign, For)), f"an inner loop assigns values only: {x}"
+        out += [x] if isinstance(x, Assign) else walk_assigns(x)
+    return out
 
 
 def walk_for(body: tuple[S, ...]) -> list[For]:

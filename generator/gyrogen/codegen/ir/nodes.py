@@ -209,6 +209,12 @@ class For(S):
     locals: tuple[str, ...] = ()
     type: Type = "int"
     start: E = field(default_factory=lambda: Int(0))
+    inner: bool = False
+    """Over lanes, a loop inside the one loop over the lanes (which the
+    compiler then vectorizes as the outer loop, its values in registers),
+    printed as a loop that runs at least once: the describer promises a
+    first turn, and bounds the same on every lane. Its body assigns values
+    only. The scalar printers print it as any loop."""
 
 
 @dataclass(frozen=True)
