@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -86,6 +86,10 @@ bench-clusters: setup
 bench-taylor: setup
 	$(BIN)/python tests/bench_taylor.py gyrostat 9
 	$(BIN)/python tests/bench_taylor.py dual_spin 9
+
+## bench-auto: the Taylor method against dop853 on every built-in scene that offers it (simulate's auto choice)
+bench-auto: setup
+	$(BIN)/python tests/bench_auto.py 7
 
 ## bench-call: us per call of Compiled.integrate and integrate_batch against the raw cffi call
 bench-call: setup

@@ -53,8 +53,8 @@ class Case:
 
 def cases() -> list[Case]:
     return [
-        Case("default", default(), "dop853", "DOP853"),
-        Case("quaternion", quaternion_scene(), "dop853", "DOP853"),
+        Case("default", default(), "taylor", "DOP853"),  # auto: smooth, not stiff
+        Case("quaternion", quaternion_scene(), "taylor", "DOP853"),
         Case("stiff", load("stiff_wheel"), "rodas4", "Radau"),
     ]
 

@@ -47,7 +47,7 @@ def fmus(tmp_path_factory: pytest.TempPathFactory, cli) -> dict[str, Path]:
     def make(root: Path) -> None:
         code, out, err = cli(["fmu", "gyrostat", "--out", str(root / "default")])
         assert code == 0, err
-        assert "wrote" in out and "FMI 2.0" in out and "(dop853)" in out
+        assert "wrote" in out and "FMI 2.0" in out and "(taylor)" in out  # auto: smooth
         code, _, err = cli(
             ["fmu", "stiff_wheel", "--method", "rodas4", "--out", str(root / "stiff")]
         )
@@ -300,7 +300,7 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
         assert lines[i - 1].startswith("log 3 ") == (what in MISUSE), what
     refused = "log 3 gyrostat_setup refused the parameters (code 2): "
     assert refused + abi.message(abi.SETUP_CODES, 2) in lines
-    failed = "log 3 gyrostat_dop853 failed at t = 0.10000000000000001 (code 5): "
+    failed = "log 3 gyrostat_taylor failed at t = 0.10000000000000001 (code 5): "
     assert failed + abi.message(abi.ODE_CODES, 5) in lines
 
 

@@ -88,7 +88,7 @@ def test_files_exist_and_agree(torque_free: Run) -> None:
     np.testing.assert_array_equal(csv[:, -len(COLUMNS) :], invariants)
     manifest = json.loads((torque_free.dir / "src" / "manifest.json").read_text())
     assert summary["scene"] == "torque_free" and summary["build_id"] == manifest["build_id"]
-    assert (summary["method"], summary["backend"]) == ("dop853", "c")  # auto: compiled
+    assert (summary["method"], summary["backend"]) == ("taylor", "c")  # auto: compiled, smooth
     assert (summary["rtol"], summary["atol"]) == (scene.simulate.rtol, scene.simulate.atol)
     assert summary["nfev"] > 0 and summary["wall_time_s"] > 0 and summary["t_end"] == 2.0
     worst = summary["invariants"]
@@ -103,7 +103,7 @@ def test_files_exist_and_agree(torque_free: Run) -> None:
 @pytest.mark.slow
 def test_printed_summary(torque_free: Run) -> None:
     lines = torque_free.out.splitlines()
-    assert lines[0].startswith("torque_free: dop853 (rtol 1e-10, atol 1e-10)")
+    assert lines[0].startswith("torque_free: taylor (rtol 1e-10, atol 1e-10)")
     assert "final time      2 s (201 points" in torque_free.out
     for word in ("nfev", "wall time", "|H| in N", "energy balance", "u4 check"):
         assert word in torque_free.out
@@ -318,7 +318,8 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     """Each built-in scene generates, builds and simulates (a short span)
     with the method it picks (the default, auto): the stiff one with the
     compiled Radau IIA its stiffness calls for, and says why; the others with
-    the compiled dop853 (scipy's only where a scene compiled no pair)."""
+    the compiled Taylor method where the scene offers it (a smooth rhs), else
+    the compiled dop853 (scipy's only where a scene compiled none)."""
     from gyrogen.analysis.simulate import simulate
 
     scene = load(name)
@@ -327,7 +328,7 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     res = simulate.run(
         scene, tmp_path / "o", simulate.Settings(t_end, t_end / 20, plot=False), echo=said.append
     )
-    method = "radau5" if name == "stiff_wheel" else "dop853"
+    method = "radau5" if name == "stiff_wheel" else "dop853" if scene.not_smooth else "taylor"
     assert res.settings.method == method
     assert any(line.startswith(f"method {method}: ") for line in said)
     assert np.all(np.isfinite(res.trajectory.x)) and res.trajectory.x.shape[0] == 21

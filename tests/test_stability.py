@@ -183,7 +183,7 @@ def test_scene_check_cannot_run_is_one_line_exit_2(
     assert (code, out) == (2, "")
     assert err == (
         f"gyrogen: error: {scene}: gyrogen check needs the scene's C build with an explicit "
-        "pair (dop853 or dopri5) and an implicit method (radau5 or rodas4, with the "
+        "method (taylor or dop853 or dopri5) and an implicit method (radau5 or rodas4, with the "
         f"Jacobian): add {add}\n"
     )
 

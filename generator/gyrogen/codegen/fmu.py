@@ -18,9 +18,10 @@ FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 
 
 def default_method(scene: Scene) -> str:
-    """What Co-Simulation steps with unless told: dop853 when the scene has
-    it, else its first adaptive integrator; a scene that cannot make an FMU
-    is refused."""
+    """What Co-Simulation steps with unless told: the explicit method
+    simulate picks (gyrogen.methods.EXPLICIT_CHOICE: taylor where the scene
+    offers it, else dop853), else the scene's first adaptive integrator; a
+    scene that cannot make an FMU is refused."""
     if "c" not in scene.targets:
         raise SceneError(f'{scene.name}: an FMU is built from the C sources: add "c" to targets')
     if f"{scene.name}.h" in FMI_HEADERS:
@@ -35,7 +36,7 @@ def default_method(scene: Scene) -> str:
             f"{scene.name}: Co-Simulation steps with an adaptive integrator, and the scene "
             f"has none (integrators: {given})"
         )
-    return "dop853" if "dop853" in adaptive else adaptive[0]
+    return methods.pick(adaptive, stiff=False) or adaptive[0]
 
 
 def files(model: FmuModel) -> dict[str, str]:

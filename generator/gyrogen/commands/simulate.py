@@ -42,7 +42,8 @@ def time_bar(label: str) -> Iterator[Callable[[int], None]]:
     show_default=True,
     help="Upper case: scipy solve_ivp; lower case: the scene's compiled integrators; "
     "auto: the scene's best compiled integrator of the kind its stiffness calls for "
-    "(radau5 or rodas4 if stiff, else dop853, dopri5 or taylor), scipy's Radau or DOP853 only "
+    f"(radau5 or rodas4 if stiff, else {', '.join(methods.EXPLICIT_CHOICE)}: taylor where the "
+    "rhs is smooth), scipy's Radau or DOP853 only "
     "when the scene compiled none of that kind.",
 )
 @click.option(
