@@ -611,34 +611,12 @@ contains
     real(c_double) :: w
     real(c_double) :: r
     real(c_double) :: hf
-    real(c_double) :: inv
     real(c_double) :: z2
 
     m = merge(max(z, tiny(1.0_c_double)), 1.0_c_double, &
         z > 0.0_c_double .and. z <= huge(1.0_c_double))
-    inv = merge(-1.0_c_double, 1.0_c_double, m < 1.0_c_double)
-    m = merge(1.0_c_double / m, m, m < 1.0_c_double)
-    e = 0.0_c_double
-    e = merge(e + 512.0_c_double, e, m >= 1.3407807929942597e+154_c_double)
-    m = merge(m * 7.458340731200207e-155_c_double, m, m >= 1.3407807929942597e+154_c_double)
-    e = merge(e + 256.0_c_double, e, m >= 1.157920892373162e+77_c_double)
-    m = merge(m * 8.636168555094445e-78_c_double, m, m >= 1.157920892373162e+77_c_double)
-    e = merge(e + 128.0_c_double, e, m >= 3.402823669209385e+38_c_double)
-    m = merge(m * 2.938735877055719e-39_c_double, m, m >= 3.402823669209385e+38_c_double)
-    e = merge(e + 64.0_c_double, e, m >= 1.8446744073709552e+19_c_double)
-    m = merge(m * 5.421010862427522e-20_c_double, m, m >= 1.8446744073709552e+19_c_double)
-    e = merge(e + 32.0_c_double, e, m >= 4294967296.0_c_double)
-    m = merge(m * 2.3283064365386963e-10_c_double, m, m >= 4294967296.0_c_double)
-    e = merge(e + 16.0_c_double, e, m >= 65536.0_c_double)
-    m = merge(m * 1.52587890625e-05_c_double, m, m >= 65536.0_c_double)
-    e = merge(e + 8.0_c_double, e, m >= 256.0_c_double)
-    m = merge(m * 0.00390625_c_double, m, m >= 256.0_c_double)
-    e = merge(e + 4.0_c_double, e, m >= 16.0_c_double)
-    m = merge(m * 0.0625_c_double, m, m >= 16.0_c_double)
-    e = merge(e + 2.0_c_double, e, m >= 4.0_c_double)
-    m = merge(m * 0.25_c_double, m, m >= 4.0_c_double)
-    e = merge(e + 1.0_c_double, e, m >= 2.0_c_double)
-    m = merge(m * 0.5_c_double, m, m >= 2.0_c_double)
+    e = real(exponent(m) - 1, c_double)
+    m = (2.0_c_double * fraction(m))
     e = merge(e + 1.0_c_double, e, m > 1.4142135623730951_c_double)
     m = merge(m * 0.5_c_double, m, m > 1.4142135623730951_c_double)
     f = m - 1.0_c_double
@@ -652,7 +630,7 @@ contains
         0.15313837699209373_c_double))
     r = e * 0.6931471803691238_c_double - ((hf - (s * (hf + r) + e * &
         1.9082149292705877e-10_c_double)) - f)
-    res = merge(inv * r, merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
+    res = merge(r, merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
         z > 0.0_c_double .and. z <= huge(1.0_c_double))
     return
   end function step_log
@@ -664,6 +642,7 @@ contains
     real(c_double) :: res
     real(c_double) :: yy
     real(c_double) :: k
+    real(c_double) :: k1
     real(c_double) :: hi
     real(c_double) :: lo
     real(c_double) :: r
@@ -682,42 +661,8 @@ contains
         (6.613756321437934e-05_c_double + t * ((-1.6533902205465252e-06_c_double) + t * &
         4.1381367970572385e-08_c_double))))
     v = 1.0_c_double - ((lo - (r * c) / (2.0_c_double - c)) - hi)
-    v = merge(v * 7.458340731200207e-155_c_double, v, k <= -512.0_c_double)
-    k = merge(k + 512.0_c_double, k, k <= -512.0_c_double)
-    v = merge(v * 1.3407807929942597e+154_c_double, merge(v * 7.458340731200207e-155_c_double, v, &
-        k <= -512.0_c_double), k >= 512.0_c_double)
-    k = merge(k - 512.0_c_double, merge(k + 512.0_c_double, k, k <= -512.0_c_double), &
-        k >= 512.0_c_double)
-    v = merge(v * 1.157920892373162e+77_c_double, merge(v * 8.636168555094445e-78_c_double, v, &
-        k <= -256.0_c_double), k >= 256.0_c_double)
-    k = merge(k - 256.0_c_double, merge(k + 256.0_c_double, k, k <= -256.0_c_double), &
-        k >= 256.0_c_double)
-    v = merge(v * 3.402823669209385e+38_c_double, merge(v * 2.938735877055719e-39_c_double, v, &
-        k <= -128.0_c_double), k >= 128.0_c_double)
-    k = merge(k - 128.0_c_double, merge(k + 128.0_c_double, k, k <= -128.0_c_double), &
-        k >= 128.0_c_double)
-    v = merge(v * 1.8446744073709552e+19_c_double, merge(v * 5.421010862427522e-20_c_double, v, &
-        k <= -64.0_c_double), k >= 64.0_c_double)
-    k = merge(k - 64.0_c_double, merge(k + 64.0_c_double, k, k <= -64.0_c_double), &
-        k >= 64.0_c_double)
-    v = merge(v * 4294967296.0_c_double, merge(v * 2.3283064365386963e-10_c_double, v, &
-        k <= -32.0_c_double), k >= 32.0_c_double)
-    k = merge(k - 32.0_c_double, merge(k + 32.0_c_double, k, k <= -32.0_c_double), &
-        k >= 32.0_c_double)
-    v = merge(v * 65536.0_c_double, merge(v * 1.52587890625e-05_c_double, v, &
-        k <= -16.0_c_double), k >= 16.0_c_double)
-    k = merge(k - 16.0_c_double, merge(k + 16.0_c_double, k, k <= -16.0_c_double), &
-        k >= 16.0_c_double)
-    v = merge(v * 256.0_c_double, merge(v * 0.00390625_c_double, v, k <= -8.0_c_double), &
-        k >= 8.0_c_double)
-    k = merge(k - 8.0_c_double, merge(k + 8.0_c_double, k, k <= -8.0_c_double), k >= 8.0_c_double)
-    v = merge(v * 16.0_c_double, merge(v * 0.0625_c_double, v, k <= -4.0_c_double), &
-        k >= 4.0_c_double)
-    k = merge(k - 4.0_c_double, merge(k + 4.0_c_double, k, k <= -4.0_c_double), k >= 4.0_c_double)
-    v = merge(v * 4.0_c_double, merge(v * 0.25_c_double, v, k <= -2.0_c_double), k >= 2.0_c_double)
-    k = merge(k - 2.0_c_double, merge(k + 2.0_c_double, k, k <= -2.0_c_double), k >= 2.0_c_double)
-    v = merge(v * 2.0_c_double, merge(v * 0.5_c_double, v, k <= -1.0_c_double), k >= 1.0_c_double)
-    k = merge(k - 1.0_c_double, merge(k + 1.0_c_double, k, k <= -1.0_c_double), k >= 1.0_c_double)
+    k1 = max(k, -1021.0_c_double)
+    v = (v * scale(1.0_c_double, int(k1))) * scale(1.0_c_double, int(k - k1))
     res = merge(huge(1.0_c_double), merge(v, merge(0.0_c_double, y, y < -745.0_c_double), &
         y >= -745.0_c_double), y > 709.0_c_double)
     return

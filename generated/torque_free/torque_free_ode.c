@@ -16,6 +16,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
 #ifdef _OPENMP
 #include <omp.h>
@@ -204,6 +205,42 @@ static inline double dmax(double a, double b)
 static inline double dmin(double a, double b)
 {
     return a < b || b != b ? a : b;
+}
+
+/* A double's exponent and significand, and 2^k, from and to its bits:
+   x = m 2^e, 1 <= m < 2, for a normal x > 0; k an integer in [-1022, 1023].
+   Exact, as Fortran's exponent, fraction and scale, which the Fortran file
+   calls instead. No conversion between integers and doubles (each one "may
+   trap" to gcc, whose loops over lanes then did not vectorize): the integer
+   is the low bits of 2^52 + it, a double. */
+static inline double bits_exponent(double x)
+{
+    uint64_t u;
+    double e;
+    memcpy(&u, &x, sizeof u);
+    u = (u >> 52) | 0x4330000000000000ULL;  /* 2^52 + the biased exponent */
+    memcpy(&e, &u, sizeof e);
+    return e - 4503599627371519.0;  /* 2^52 + 1023 */
+}
+
+static inline double bits_significand(double x)
+{
+    uint64_t u;
+    memcpy(&u, &x, sizeof u);
+    u = (u & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL;
+    memcpy(&x, &u, sizeof x);
+    return x;
+}
+
+static inline double bits_pow2(double k)
+{
+    const double t = k + 4503599627371519.0;  /* 2^52 + k + 1023, exact */
+    uint64_t u;
+    double x;
+    memcpy(&u, &t, sizeof u);
+    u = u << 52;
+    memcpy(&x, &u, sizeof x);
+    return x;
 }
 
 const char *torque_free_ode_strerror(int code)
@@ -493,33 +530,11 @@ static inline double step_log(double z)
     double w;
     double r;
     double hf;
-    double inv;
     double z2;
 
     m = z > 0.0 && z <= DBL_MAX ? dmax(z, DBL_MIN) : 1.0;
-    inv = m < 1.0 ? -1.0 : 1.0;
-    m = m < 1.0 ? 1.0 / m : m;
-    e = 0.0;
-    e = m >= 1.3407807929942597e+154 ? e + 512.0 : e;
-    m = m >= 1.3407807929942597e+154 ? m * 7.458340731200207e-155 : m;
-    e = m >= 1.157920892373162e+77 ? e + 256.0 : e;
-    m = m >= 1.157920892373162e+77 ? m * 8.636168555094445e-78 : m;
-    e = m >= 3.402823669209385e+38 ? e + 128.0 : e;
-    m = m >= 3.402823669209385e+38 ? m * 2.938735877055719e-39 : m;
-    e = m >= 1.8446744073709552e+19 ? e + 64.0 : e;
-    m = m >= 1.8446744073709552e+19 ? m * 5.421010862427522e-20 : m;
-    e = m >= 4294967296.0 ? e + 32.0 : e;
-    m = m >= 4294967296.0 ? m * 2.3283064365386963e-10 : m;
-    e = m >= 65536.0 ? e + 16.0 : e;
-    m = m >= 65536.0 ? m * 1.52587890625e-05 : m;
-    e = m >= 256.0 ? e + 8.0 : e;
-    m = m >= 256.0 ? m * 0.00390625 : m;
-    e = m >= 16.0 ? e + 4.0 : e;
-    m = m >= 16.0 ? m * 0.0625 : m;
-    e = m >= 4.0 ? e + 2.0 : e;
-    m = m >= 4.0 ? m * 0.25 : m;
-    e = m >= 2.0 ? e + 1.0 : e;
-    m = m >= 2.0 ? m * 0.5 : m;
+    e = bits_exponent(m);
+    m = bits_significand(m);
     e = m > 1.4142135623730951 ? e + 1.0 : e;
     m = m > 1.4142135623730951 ? m * 0.5 : m;
     f = m - 1.0;
@@ -531,7 +546,7 @@ static inline double step_log(double z)
             0.14798198605116586)));
     r = r + w * (0.3999999999940942 + w * (0.22222198432149784 + w * 0.15313837699209373));
     r = e * 0.6931471803691238 - (hf - (s * (hf + r) + e * 1.9082149292705877e-10) - f);
-    return z > 0.0 && z <= DBL_MAX ? inv * r : z <= 0.0 ? -DBL_MAX : z;
+    return z > 0.0 && z <= DBL_MAX ? r : z <= 0.0 ? -DBL_MAX : z;
 }
 
 /* e^y for the step size, branch-free (see
@@ -540,6 +555,7 @@ static inline double step_exp(double y)
 {
     double yy;
     double k;
+    double k1;
     double hi;
     double lo;
     double r;
@@ -556,28 +572,8 @@ static inline double step_exp(double y)
     c = r - t * (0.16666666666666602 + t * (-0.0027777777777015593 + t * (6.613756321437934e-05 +
             t * (-1.6533902205465252e-06 + t * 4.1381367970572385e-08))));
     v = 1.0 - (lo - r * c / (2.0 - c) - hi);
-    v = k <= -512.0 ? v * 7.458340731200207e-155 : v;
-    k = k <= -512.0 ? k + 512.0 : k;
-    v = k >= 512.0 ? v * 1.3407807929942597e+154 : k <= -512.0 ? v * 7.458340731200207e-155 : v;
-    k = k >= 512.0 ? k - 512.0 : k <= -512.0 ? k + 512.0 : k;
-    v = k >= 256.0 ? v * 1.157920892373162e+77 : k <= -256.0 ? v * 8.636168555094445e-78 : v;
-    k = k >= 256.0 ? k - 256.0 : k <= -256.0 ? k + 256.0 : k;
-    v = k >= 128.0 ? v * 3.402823669209385e+38 : k <= -128.0 ? v * 2.938735877055719e-39 : v;
-    k = k >= 128.0 ? k - 128.0 : k <= -128.0 ? k + 128.0 : k;
-    v = k >= 64.0 ? v * 1.8446744073709552e+19 : k <= -64.0 ? v * 5.421010862427522e-20 : v;
-    k = k >= 64.0 ? k - 64.0 : k <= -64.0 ? k + 64.0 : k;
-    v = k >= 32.0 ? v * 4294967296.0 : k <= -32.0 ? v * 2.3283064365386963e-10 : v;
-    k = k >= 32.0 ? k - 32.0 : k <= -32.0 ? k + 32.0 : k;
-    v = k >= 16.0 ? v * 65536.0 : k <= -16.0 ? v * 1.52587890625e-05 : v;
-    k = k >= 16.0 ? k - 16.0 : k <= -16.0 ? k + 16.0 : k;
-    v = k >= 8.0 ? v * 256.0 : k <= -8.0 ? v * 0.00390625 : v;
-    k = k >= 8.0 ? k - 8.0 : k <= -8.0 ? k + 8.0 : k;
-    v = k >= 4.0 ? v * 16.0 : k <= -4.0 ? v * 0.0625 : v;
-    k = k >= 4.0 ? k - 4.0 : k <= -4.0 ? k + 4.0 : k;
-    v = k >= 2.0 ? v * 4.0 : k <= -2.0 ? v * 0.25 : v;
-    k = k >= 2.0 ? k - 2.0 : k <= -2.0 ? k + 2.0 : k;
-    v = k >= 1.0 ? v * 2.0 : k <= -1.0 ? v * 0.5 : v;
-    k = k >= 1.0 ? k - 1.0 : k <= -1.0 ? k + 1.0 : k;
+    k1 = dmax(k, -1021.0);
+    v = v * bits_pow2(k1) * bits_pow2(k - k1);
     return y > 709.0 ? DBL_MAX : y >= -745.0 ? v : y < -745.0 ? 0.0 : y;
 }
 

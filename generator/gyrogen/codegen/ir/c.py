@@ -27,7 +27,15 @@ from gyrogen.codegen.ir.printer import ATOM, Printer, doc_lines
 
 CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX", "NAN": "(double)NAN"}
 CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int"}
-FUNCTIONS = {"max": "dmax", "min": "dmin", "abs": "fabs"}
+FUNCTIONS = {
+    "max": "dmax",
+    "min": "dmin",
+    "abs": "fabs",
+    "exponent": "bits_exponent",
+    "significand": "bits_significand",
+    "pow2": "bits_pow2",
+}
+"""The IR's functions under C names (the bits_ ones: c/ode.c.jinja)."""
 
 
 class CPrinter(Printer):

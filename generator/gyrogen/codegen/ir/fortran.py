@@ -77,6 +77,12 @@ class FortranPrinter(Printer):
             return f"{self.prefix}_{name}({args[0]})"
         if name == "pow":
             return f"{self.expr(nodes[0], ATOM)}**{self.expr(nodes[1], ATOM)}"
+        if name == "exponent":  # x = fraction 2^exponent, fraction in [1/2, 1)
+            return f"real(exponent({args[0]}) - 1, c_double)"
+        if name == "significand":
+            return f"(2.0_c_double * fraction({args[0]}))"
+        if name == "pow2":
+            return f"scale(1.0_c_double, int({args[0]}))"
         return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
 
     def select(self, e: Sel) -> str:
