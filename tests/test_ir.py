@@ -1,7 +1,8 @@
 """The statement IR's printers on small functions: a temporary (a local of
 intent "tmp") is a scalar of the one loop over the lanes that sets it, and a
 read of one outside that loop is refused while printing, not compiled into
-a read of another lane's or another loop's value."""
+a read of another lane's or another loop's value; an inner loop (For.inner)
+sits inside the loop over the lanes, as a do-while."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from gyrogen.codegen.integrators.taylor_jet import kept
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Comment, Decl, Func, Var, assign
+from gyrogen.codegen.ir.nodes import Comment, Decl, For, Func, Int, Var, assign
 from gyrogen.scene import default
 
 STATE = {"x": Decl("x", "double", ("NX",), "inout")}
@@ -52,3 +53,41 @@ def test_the_jet_stores_what_later_orders_read() -> None:
         node = jet.nodes[n]
         operands = set(node.args) if node.op == "mul" else {node.args[-1]}
         assert {a for a in operands if not jet.nodes[a].const} <= set(rows)
+
+
+def test_an_inner_loop_runs_inside_the_loop_over_lanes() -> None:
+    """A sum over j: over lanes, one loop over the lanes holding a do-while
+    over j, its sum a scalar of that loop (a register, once gcc vectorizes
+    the outer loop); scalar C and Fortran print the same loop as any."""
+    x, v, j = Var("x"), Var("v"), Var("j")
+    total = For("j", Var("n"), (assign(v, v + x[j]),), start=Int(1), inner=True)
+    locals_ = (Decl("v", "double", (), "tmp"), Decl("n", "int", (), "in"))
+    f = Func("f", (), (assign(v, x[0]), total, assign(x[0], v)), None, locals_)
+    text = LanesPrinter("p", "P", {}, STATE).function(f)
+    lane_loop = text.index("for (l = 0; l < P_LANES; ++l) {")
+    do = text.index("do {")
+    assert lane_loop < text.index("double v;") < text.index("j = 1;") < do
+    assert "v = v + L->x[j][l];" in text and "} while (j < n);" in text
+    assert text.count("for (l = 0;") == 1 and "double v[P_LANES]" not in text
+    assert "for (j = 1; j < n; ++j) {" in CPrinter("p", "P", {}).function(f)
+    assert "do j = 1, n - 1" in FortranPrinter("p", "P", {}).function(f)
+
+
+def test_the_jet_over_lanes_is_one_loop_over_the_lanes_per_order() -> None:
+    """The default scene's generated taylor_jet_lanes: the convolutions'
+    sums are scalars of the order's loop over the lanes, the loop over j a
+    do-while inside it; struct lanes is aligned, its int rows last."""
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "generated" / "gyrostat" / "gyrostat_ode.c").read_text()
+    jet = text[text.index("static void taylor_jet_lanes") :]
+    jet = jet[: jet.index("\n}\n")]
+    assert "double acc" in jet and "acc14[GYROSTAT_LANES]" not in jet
+    order = jet[jet.index("for (n = 2; n < order; ++n) {") :]
+    assert order.index("GYROSTAT_SIMD") < order.index("do {") < order.index("} while (j < n);")
+    struct = text[text.index("struct GYROSTAT_ALIGNED lanes {") :]
+    fields = struct[: struct.index("};")].splitlines()[1:]
+    kinds = [f.split()[0] for f in fields]
+    assert "int" in kinds and kinds.index("int") > max(
+        i for i, k in enumerate(kinds) if k in ("double", "long", "size_t")
+    )

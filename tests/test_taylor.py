@@ -240,7 +240,8 @@ def test_a_scene_with_only_the_taylor_method(tmp_path: Path, cache_dir: Path) ->
 def test_step_log_and_exp_against_glibc(source_dir: Path, tmp_path: Path) -> None:
     """The step size's branch-free log and exp (codegen/integrators/
     elementary.py) within 1 ulp of glibc's (2 allowed) over their ranges,
-    and the special values the step relies on: log of +inf is +inf, of 0
+    within 2^-1074 where exp's result is subnormal, the bit helpers exact
+    for every exponent, and the special values the step relies on: log of +inf is +inf, of 0
     is -DBL_MAX, NaN stays NaN; exp is DBL_MAX past 709, 0 below -745."""
     import subprocess
 
@@ -251,5 +252,6 @@ def test_step_log_and_exp_against_glibc(source_dir: Path, tmp_path: Path) -> Non
     out = subprocess.run([str(exe), "200000"], check=True, capture_output=True, text=True)
     rows = {r[0]: r[1:] for r in map(str.split, out.stdout.splitlines())}
     assert float(rows["log_ulps"][0]) <= 2.0 and float(rows["exp_ulps"][0]) <= 2.0
+    assert float(rows["exp_subnormal"][0]) <= 1.0 and rows["bits_bad"] == ["0"]
     assert rows["special"] == ["inf", "-1.79769e+308", "nan", "1.79769e+308", "0", "nan",
                                "1.79769e+308", "0"]  # fmt: skip
