@@ -161,7 +161,6 @@ def test_null_stats_gives_the_same_state(backends: dict[str, Compiled], language
 
 BAD = [
     {"rtol": 1e-20},
-    {"rtol": abi.MIN_RTOL},
     {"rtol": math.nan},
     {"rtol": math.inf},
     {"atol": 0.0},
@@ -177,20 +176,22 @@ BAD = [
 def test_tolerances_no_double_meets_and_a_bad_first_step(
     angles: dict[str, Compiled], language: str
 ) -> None:
-    """rtol <= 10 DBL_EPSILON, atol <= 0, a NaN or infinite tolerance or h0:
-    code 5 at once (x as given, nothing called). The first rtol above the
-    bound is accepted, and h0 <= 0 still means an automatic first step."""
+    """rtol <= the method's bound (10 DBL_EPSILON; the Taylor method's
+    DBL_EPSILON), atol <= 0, a NaN or infinite tolerance or h0: code 5 at
+    once (x as given, nothing called). The first rtol above the bound is
+    accepted, and h0 <= 0 still means an automatic first step."""
     b = angles[language]
     scene = load("torque_free")
     x0 = state(scene, **scene.simulate.initial)
     c = b.setup(np.zeros(0))
     for method in ADAPTIVE:
-        for bad in BAD:
+        floor = methods.get(method).rtol_floor
+        for bad in [*BAD, {"rtol": floor}]:
             kw = {"rtol": 1e-8, "atol": 1e-8, "max_steps": 1000} | bad
             x, stats, code = b.integrate(method, x0, c, 0.5, 1.5, **kw)
             assert code == ARGUMENT, (method, bad)
             assert np.array_equal(x, x0) and stats["t"] == 0.5 and stats["rhs_calls"] == 0
-        just_above = float(np.nextafter(abi.MIN_RTOL, 1.0))
+        just_above = float(np.nextafter(floor, 1.0))
         x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, rtol=just_above, atol=1e-12)
         assert code == OK and stats["t"] == 1.0
         auto = b.integrate(method, x0, c, 0.0, 1.0, h0=0.0)
@@ -356,7 +357,8 @@ def test_header_and_module_carry_the_registry(source_dir: Path) -> None:
     the codes are abi.ODE_CODES."""
     h = (source_dir / "gyrostat_ode.h").read_text()
     f = (source_dir / "gyrostat_ode.f90").read_text()
-    for name, value in (("MIN_RTOL", abi.MIN_RTOL), ("GIMBAL_LOCK_COS", G)):
+    bounds = (("MIN_RTOL", abi.MIN_RTOL), ("TAYLOR_MIN_RTOL", abi.TAYLOR_MIN_RTOL))
+    for name, value in (*bounds, ("GIMBAL_LOCK_COS", G)):
         (c_text,) = re.findall(rf"#define GYROSTAT_ODE_{name} (\S+)", h)
         (f_text,) = re.findall(rf"GYROSTAT_ODE_{name} = (\S+)_c_double", f)
         assert float(c_text) == float(f_text) == value

@@ -403,14 +403,16 @@ static int gimbal_lock(const double *x, const double *xnew)
             fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
-/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
-   double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
-   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, double h0, long max_steps)
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance it
+   cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or
+   ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,
+   t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double rtol_min,
+                         double h0, long max_steps)
 {
-    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol >
-            DUAL_SPIN_ODE_MIN_RTOL) || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) || !(fabs(atol)
-            <= DBL_MAX) || !(fabs(h0) <= DBL_MAX) || max_steps < 1;
+    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol > rtol_min)
+            || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) || !(fabs(atol) <= DBL_MAX) ||
+            !(fabs(h0) <= DBL_MAX) || max_steps < 1;
 }
 
 /* h is lost in the rounding of t: the solution cannot be resolved further. */
@@ -484,14 +486,15 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 /* An adaptive method's start (every pair, rodas4, radau5): the arguments,
    the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
    on from there, else the code to return (x as given). order: the method's,
-   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0. */
-static int ode_start(int order, double t0, double t1, const double *x, const double *c,
-                     double rtol, double atol, double h0, long max_steps, double *f0, double *h,
-                     dual_spin_stats *stats)
+   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
+   rtol_min: the method's bound on rtol (Method.min_rtol). */
+static int ode_start(int order, double rtol_min, double t0, double t1, const double *x,
+                     const double *c, double rtol, double atol, double h0, long max_steps,
+                     double *f0, double *h, dual_spin_stats *stats)
 {
     *h = 0.0;
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) {
         return DUAL_SPIN_ODE_ERR_ARGUMENT;
     }
     if (gimbal_lock_at(x)) {
@@ -880,7 +883,8 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double total;
     int i;
 
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(5, DUAL_SPIN_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1044,7 +1048,8 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double deno;
     int i;
 
-    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(8, DUAL_SPIN_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1366,7 +1371,8 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(4, DUAL_SPIN_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+            stats);
     if (start >= 0) {
         return start;
     }
@@ -1675,7 +1681,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(5, DUAL_SPIN_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+            stats);
     if (start >= 0) {
         return start;
     }
@@ -2180,8 +2187,8 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, dual_spin_stats *stats)
 {
-    double tay[19][18];
-    double inv[19] = {0.0};
+    double tay[21][18];
+    double inv[21] = {0.0};
     double f0[DUAL_SPIN_NX];
     double xnew[DUAL_SPIN_NX];
     double dx[DUAL_SPIN_NX];
@@ -2209,7 +2216,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    code = ode_start(0, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    code = ode_start(0, DUAL_SPIN_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
+            f0, &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -2232,6 +2240,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
     for (q = 1; q < order + 1; ++q) {
         inv[q] = 1.0 / (double)q;
@@ -2352,7 +2362,7 @@ struct DUAL_SPIN_ALIGNED lanes {
     long stats_rejected[DUAL_SPIN_LANES];
     long stats_rhs_calls[DUAL_SPIN_LANES];
     double cap[DUAL_SPIN_LANES];
-    double tay[19][18][DUAL_SPIN_LANES];
+    double tay[21][18][DUAL_SPIN_LANES];
     int code[DUAL_SPIN_LANES];
     int nonfinite[DUAL_SPIN_LANES];
     int rejected_last[DUAL_SPIN_LANES];
@@ -3110,7 +3120,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
 static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
                               double t1, long max_steps)
 {
-    double inv[19];
+    double inv[21];
     int order;
     double rhofac;
     double scale;
@@ -3147,6 +3157,8 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
     for (q = 1; q < order + 1; ++q) {
         inv[q] = 1.0 / (double)q;
@@ -3263,14 +3275,15 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
 
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
-static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
-                      double *xs, const double *c, double rtol, double atol, double h0,
-                      long max_steps, dual_spin_stats *stats)
+static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
+                      double t0, double t1, double *xs, const double *c, double rtol,
+                      double atol, double h0, long max_steps, dual_spin_stats *stats)
 {
     const double *x = xs + traj * DUAL_SPIN_NX;
     double f0[DUAL_SPIN_NX], h = 0.0;
     int i;
-    const int code = ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+                               stats);
     if (code >= 0) {
         return code;
     }
@@ -3338,7 +3351,7 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, dual_spin_sta
 
 /* Trajectories begin..end-1 of a batch, DUAL_SPIN_LANES at a time: a lane that
    finishes takes the next trajectory. Returns how many failed. */
-static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
+static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
@@ -3351,8 +3364,8 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
             while (!L.busy[l] && next < end) {
                 dual_spin_stats st;
-                const int code = lane_start(order, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
-                                            max_steps, &st);
+                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
+                                            atol, h0, max_steps, &st);
                 if (code >= 0) {
                     put_result(next, code, &st, stats, codes);
                     failed += (size_t)(code != DUAL_SPIN_ODE_OK);
@@ -3372,7 +3385,7 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
 /* A batch over every core when compiled with OpenMP: chunks of about an
    eighth of a thread's share, taken in turn (a chunk's trajectories are the
    same whichever thread runs it); else one chunk. */
-static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
+static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
@@ -3386,11 +3399,12 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     for (b = 0; b < chunks; ++b) {
         const size_t begin = (size_t)b * chunk;
         const size_t end = n - begin < chunk ? n : begin + chunk;
-        failed += pair_lanes(step, order, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
-                             stats, codes);
+        failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
+                             max_steps, stats, codes);
     }
 #else
-    failed = pair_lanes(step, order, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
+    failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats,
+                        codes);
 #endif
     return failed;
 }
@@ -3421,8 +3435,8 @@ size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x
 size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dopri5_step_lanes, 5, DUAL_SPIN_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
@@ -3430,8 +3444,8 @@ size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const d
 size_t dual_spin_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dop853_step_lanes, 8, DUAL_SPIN_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted.
@@ -3481,6 +3495,6 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
 size_t dual_spin_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(taylor_step_lanes, 0, DUAL_SPIN_ODE_TAYLOR_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }

@@ -67,8 +67,9 @@ typedef struct {
 #define DUAL_SPIN_ODE_ERR_MAX_STEPS      2  /* max_steps steps were not enough */
 #define DUAL_SPIN_ODE_ERR_NONFINITE      3  /* the state or its derivative is NaN or Inf */
 #define DUAL_SPIN_ODE_ERR_SINGULAR       4  /* the iteration matrix is singular */
-/* 5: t1 < t0, steps or max_steps < 1, rtol <= DUAL_SPIN_ODE_MIN_RTOL, atol <= 0,
-   or t0, t1, rtol, atol or h0 NaN or infinite */
+/* 5: t1 < t0, steps or max_steps < 1, rtol <= DUAL_SPIN_ODE_MIN_RTOL (taylor:
+   DUAL_SPIN_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
+   or infinite */
 #define DUAL_SPIN_ODE_ERR_ARGUMENT       5
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
@@ -91,6 +92,10 @@ const char *dual_spin_ode_strerror(int code);
 /* rtol must exceed 10 DBL_EPSILON (Hairer's rule): tighter, no double
    arithmetic meets it and the steps would shrink until max_steps ran out. */
 #define DUAL_SPIN_ODE_MIN_RTOL 2.220446049250313e-15
+/* The Taylor method's own bound (<prefix>_taylor and its batch): DBL_EPSILON.
+   It has no error estimate for Hairer's rule to protect: below 10
+   DBL_EPSILON it still steps, at order 20, its error that of the rounding. */
+#define DUAL_SPIN_ODE_TAYLOR_MIN_RTOL 2.220446049250313e-16
 /* 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
    about DBL_EPSILON |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so
    the kinematic rates q1' and q3' in the 7th digit. */
@@ -161,7 +166,7 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
         int *codes);
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
- * The order p = ceil(-ln(rtol)/2 + 1) (2 to 18); each step's size from the
+ * The order p = ceil(-ln(rtol)/2 + 1) (2 to 20); each step's size from the
  * last two Taylor coefficients, so that |x^[p]| h^p is near rtol max(atol/rtol,
  * |x|) e^-2 (Jorba & Zou); no step is rejected for its error. h0 > 0 bounds
  * the first step; at most max_steps steps; stats.rhs_calls counts the Taylor

@@ -50,8 +50,9 @@ extern "C" {
 #define GYROSTAT_ODE_ERR_MAX_STEPS      2  /* max_steps steps were not enough */
 #define GYROSTAT_ODE_ERR_NONFINITE      3  /* the state or its derivative is NaN or Inf */
 #define GYROSTAT_ODE_ERR_SINGULAR       4  /* the iteration matrix is singular */
-/* 5: t1 < t0, steps or max_steps < 1, rtol <= GYROSTAT_ODE_MIN_RTOL, atol <= 0,
-   or t0, t1, rtol, atol or h0 NaN or infinite */
+/* 5: t1 < t0, steps or max_steps < 1, rtol <= GYROSTAT_ODE_MIN_RTOL (taylor:
+   GYROSTAT_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
+   or infinite */
 #define GYROSTAT_ODE_ERR_ARGUMENT       5
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */

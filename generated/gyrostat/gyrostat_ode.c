@@ -551,14 +551,16 @@ static int gimbal_lock(const double *x, const double *xnew)
             fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
-/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
-   double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
-   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, double h0, long max_steps)
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance it
+   cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or
+   ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,
+   t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double rtol_min,
+                         double h0, long max_steps)
 {
-    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol >
-            GYROSTAT_ODE_MIN_RTOL) || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) || !(fabs(atol)
-            <= DBL_MAX) || !(fabs(h0) <= DBL_MAX) || max_steps < 1;
+    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol > rtol_min)
+            || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) || !(fabs(atol) <= DBL_MAX) ||
+            !(fabs(h0) <= DBL_MAX) || max_steps < 1;
 }
 
 /* h is lost in the rounding of t: the solution cannot be resolved further. */
@@ -632,14 +634,15 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 /* An adaptive method's start (every pair, rodas4, radau5): the arguments,
    the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
    on from there, else the code to return (x as given). order: the method's,
-   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0. */
-static int ode_start(int order, double t0, double t1, const double *x, const double *c,
-                     double rtol, double atol, double h0, long max_steps, double *f0, double *h,
-                     gyrostat_stats *stats)
+   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
+   rtol_min: the method's bound on rtol (Method.min_rtol). */
+static int ode_start(int order, double rtol_min, double t0, double t1, const double *x,
+                     const double *c, double rtol, double atol, double h0, long max_steps,
+                     double *f0, double *h, gyrostat_stats *stats)
 {
     *h = 0.0;
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) {
         return GYROSTAT_ODE_ERR_ARGUMENT;
     }
     if (gimbal_lock_at(x)) {
@@ -1057,7 +1060,8 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double total;
     int i;
 
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(5, GYROSTAT_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
+            stats);
     if (code >= 0) {
         return code;
     }
@@ -1221,7 +1225,8 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double deno;
     int i;
 
-    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(8, GYROSTAT_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
+            stats);
     if (code >= 0) {
         return code;
     }
@@ -1543,7 +1548,8 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(4, GYROSTAT_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+            stats);
     if (start >= 0) {
         return start;
     }
@@ -1852,7 +1858,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(5, GYROSTAT_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+            stats);
     if (start >= 0) {
         return start;
     }
@@ -2397,8 +2404,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, gyrostat_stats *stats)
 {
-    double tay[19][26];
-    double inv[19] = {0.0};
+    double tay[21][26];
+    double inv[21] = {0.0};
     double f0[GYROSTAT_NX];
     double xnew[GYROSTAT_NX];
     double dx[GYROSTAT_NX];
@@ -2426,7 +2433,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    code = ode_start(0, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    code = ode_start(0, GYROSTAT_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
+            f0, &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -2449,6 +2457,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
     for (q = 1; q < order + 1; ++q) {
         inv[q] = 1.0 / (double)q;
@@ -2569,7 +2579,7 @@ struct GYROSTAT_ALIGNED lanes {
     long stats_rejected[GYROSTAT_LANES];
     long stats_rhs_calls[GYROSTAT_LANES];
     double cap[GYROSTAT_LANES];
-    double tay[19][26][GYROSTAT_LANES];
+    double tay[21][26][GYROSTAT_LANES];
     int code[GYROSTAT_LANES];
     int nonfinite[GYROSTAT_LANES];
     int rejected_last[GYROSTAT_LANES];
@@ -3373,7 +3383,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
 static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
                               double t1, long max_steps)
 {
-    double inv[19];
+    double inv[21];
     int order;
     double rhofac;
     double scale;
@@ -3409,6 +3419,8 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
     for (q = 1; q < order + 1; ++q) {
         inv[q] = 1.0 / (double)q;
@@ -3525,14 +3537,15 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
 
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
-static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
-                      double *xs, const double *c, double rtol, double atol, double h0,
-                      long max_steps, gyrostat_stats *stats)
+static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
+                      double t0, double t1, double *xs, const double *c, double rtol,
+                      double atol, double h0, long max_steps, gyrostat_stats *stats)
 {
     const double *x = xs + traj * GYROSTAT_NX;
     double f0[GYROSTAT_NX], h = 0.0;
     int i;
-    const int code = ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+                               stats);
     if (code >= 0) {
         return code;
     }
@@ -3600,7 +3613,7 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, gyrostat_stat
 
 /* Trajectories begin..end-1 of a batch, GYROSTAT_LANES at a time: a lane that
    finishes takes the next trajectory. Returns how many failed. */
-static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
+static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
@@ -3613,8 +3626,8 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
         for (l = 0; l < GYROSTAT_LANES; ++l) {
             while (!L.busy[l] && next < end) {
                 gyrostat_stats st;
-                const int code = lane_start(order, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
-                                            max_steps, &st);
+                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
+                                            atol, h0, max_steps, &st);
                 if (code >= 0) {
                     put_result(next, code, &st, stats, codes);
                     failed += (size_t)(code != GYROSTAT_ODE_OK);
@@ -3634,7 +3647,7 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
 /* A batch over every core when compiled with OpenMP: chunks of about an
    eighth of a thread's share, taken in turn (a chunk's trajectories are the
    same whichever thread runs it); else one chunk. */
-static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
+static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
@@ -3648,11 +3661,12 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     for (b = 0; b < chunks; ++b) {
         const size_t begin = (size_t)b * chunk;
         const size_t end = n - begin < chunk ? n : begin + chunk;
-        failed += pair_lanes(step, order, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
-                             stats, codes);
+        failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
+                             max_steps, stats, codes);
     }
 #else
-    failed = pair_lanes(step, order, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
+    failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats,
+                        codes);
 #endif
     return failed;
 }
@@ -3683,8 +3697,8 @@ size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
 size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dopri5_step_lanes, 5, GYROSTAT_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes;
@@ -3692,8 +3706,8 @@ size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const do
 size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dop853_step_lanes, 8, GYROSTAT_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted.
@@ -3743,6 +3757,6 @@ size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const do
 size_t gyrostat_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(taylor_step_lanes, 0, GYROSTAT_ODE_TAYLOR_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }

@@ -446,14 +446,16 @@ static int gimbal_lock(const double *x, const double *xnew)
             fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
-/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
-   double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
-   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, double h0, long max_steps)
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance it
+   cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or
+   ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,
+   t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double rtol_min,
+                         double h0, long max_steps)
 {
-    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol >
-            RW3_ORTHOGONAL_ODE_MIN_RTOL) || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) ||
-            !(fabs(atol) <= DBL_MAX) || !(fabs(h0) <= DBL_MAX) || max_steps < 1;
+    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol > rtol_min)
+            || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) || !(fabs(atol) <= DBL_MAX) ||
+            !(fabs(h0) <= DBL_MAX) || max_steps < 1;
 }
 
 /* h is lost in the rounding of t: the solution cannot be resolved further. */
@@ -527,14 +529,15 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 /* An adaptive method's start (every pair, rodas4, radau5): the arguments,
    the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
    on from there, else the code to return (x as given). order: the method's,
-   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0. */
-static int ode_start(int order, double t0, double t1, const double *x, const double *c,
-                     double rtol, double atol, double h0, long max_steps, double *f0, double *h,
-                     rw3_orthogonal_stats *stats)
+   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
+   rtol_min: the method's bound on rtol (Method.min_rtol). */
+static int ode_start(int order, double rtol_min, double t0, double t1, const double *x,
+                     const double *c, double rtol, double atol, double h0, long max_steps,
+                     double *f0, double *h, rw3_orthogonal_stats *stats)
 {
     *h = 0.0;
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) {
         return RW3_ORTHOGONAL_ODE_ERR_ARGUMENT;
     }
     if (gimbal_lock_at(x)) {
@@ -957,7 +960,8 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double total;
     int i;
 
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(5, RW3_ORTHOGONAL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
+            k[0], &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1121,7 +1125,8 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double deno;
     int i;
 
-    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(8, RW3_ORTHOGONAL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
+            k[0], &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1443,7 +1448,8 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(4, RW3_ORTHOGONAL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
+            f0, &h, stats);
     if (start >= 0) {
         return start;
     }
@@ -1753,7 +1759,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(5, RW3_ORTHOGONAL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
+            f0, &h, stats);
     if (start >= 0) {
         return start;
     }
@@ -2382,8 +2389,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
-    double tay[19][20];
-    double inv[19] = {0.0};
+    double tay[21][20];
+    double inv[21] = {0.0};
     double f0[RW3_ORTHOGONAL_NX];
     double xnew[RW3_ORTHOGONAL_NX];
     double dx[RW3_ORTHOGONAL_NX];
@@ -2411,7 +2418,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     int i;
     int q;
 
-    code = ode_start(0, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    code = ode_start(0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0,
+            max_steps, f0, &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -2434,6 +2442,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
     for (q = 1; q < order + 1; ++q) {
         inv[q] = 1.0 / (double)q;
@@ -2554,7 +2564,7 @@ struct RW3_ORTHOGONAL_ALIGNED lanes {
     long stats_rejected[RW3_ORTHOGONAL_LANES];
     long stats_rhs_calls[RW3_ORTHOGONAL_LANES];
     double cap[RW3_ORTHOGONAL_LANES];
-    double tay[19][20][RW3_ORTHOGONAL_LANES];
+    double tay[21][20][RW3_ORTHOGONAL_LANES];
     int code[RW3_ORTHOGONAL_LANES];
     int nonfinite[RW3_ORTHOGONAL_LANES];
     int rejected_last[RW3_ORTHOGONAL_LANES];
@@ -3420,7 +3430,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
 static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
                               double t1, long max_steps)
 {
-    double inv[19];
+    double inv[21];
     int order;
     double rhofac;
     double scale;
@@ -3456,6 +3466,8 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
     order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
     rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
     for (q = 1; q < order + 1; ++q) {
         inv[q] = 1.0 / (double)q;
@@ -3573,14 +3585,15 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
 
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
-static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
-                      double *xs, const double *c, double rtol, double atol, double h0,
-                      long max_steps, rw3_orthogonal_stats *stats)
+static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
+                      double t0, double t1, double *xs, const double *c, double rtol,
+                      double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     const double *x = xs + traj * RW3_ORTHOGONAL_NX;
     double f0[RW3_ORTHOGONAL_NX], h = 0.0;
     int i;
-    const int code = ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+                               stats);
     if (code >= 0) {
         return code;
     }
@@ -3648,7 +3661,7 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, rw3_orthogona
 
 /* Trajectories begin..end-1 of a batch, RW3_ORTHOGONAL_LANES at a time: a lane that
    finishes takes the next trajectory. Returns how many failed. */
-static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
+static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
 {
@@ -3661,8 +3674,8 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
             while (!L.busy[l] && next < end) {
                 rw3_orthogonal_stats st;
-                const int code = lane_start(order, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
-                                            max_steps, &st);
+                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
+                                            atol, h0, max_steps, &st);
                 if (code >= 0) {
                     put_result(next, code, &st, stats, codes);
                     failed += (size_t)(code != RW3_ORTHOGONAL_ODE_OK);
@@ -3682,7 +3695,7 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
 /* A batch over every core when compiled with OpenMP: chunks of about an
    eighth of a thread's share, taken in turn (a chunk's trajectories are the
    same whichever thread runs it); else one chunk. */
-static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
+static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
 {
@@ -3696,11 +3709,12 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     for (b = 0; b < chunks; ++b) {
         const size_t begin = (size_t)b * chunk;
         const size_t end = n - begin < chunk ? n : begin + chunk;
-        failed += pair_lanes(step, order, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
-                             stats, codes);
+        failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
+                             max_steps, stats, codes);
     }
 #else
-    failed = pair_lanes(step, order, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
+    failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats,
+                        codes);
 #endif
     return failed;
 }
@@ -3731,8 +3745,8 @@ size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, doub
 size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dopri5_step_lanes, 5, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
@@ -3740,8 +3754,8 @@ size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, co
 size_t rw3_orthogonal_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dop853_step_lanes, 8, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted.
@@ -3791,6 +3805,6 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
 size_t rw3_orthogonal_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(taylor_step_lanes, 0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }

@@ -485,14 +485,16 @@ static int gimbal_lock(const double *x, const double *xnew)
             fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
-/* The arguments every adaptive method refuses: t1 < t0, a tolerance no
-   double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
-   < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic). */
-static int bad_arguments(double t0, double t1, double rtol, double atol, double h0, long max_steps)
+/* The arguments every adaptive method refuses: t1 < t0, a tolerance it
+   cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or
+   ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,
+   t1, rtol, atol or h0 (h0 <= 0: automatic). */
+static int bad_arguments(double t0, double t1, double rtol, double atol, double rtol_min,
+                         double h0, long max_steps)
 {
-    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol >
-            RW4_HARDWARE_ODE_MIN_RTOL) || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) ||
-            !(fabs(atol) <= DBL_MAX) || !(fabs(h0) <= DBL_MAX) || max_steps < 1;
+    return !(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || !(rtol > rtol_min)
+            || !(fabs(rtol) <= DBL_MAX) || !(atol > 0.0) || !(fabs(atol) <= DBL_MAX) ||
+            !(fabs(h0) <= DBL_MAX) || max_steps < 1;
 }
 
 /* h is lost in the rounding of t: the solution cannot be resolved further. */
@@ -566,14 +568,15 @@ static double initial_step(int order, double t0, double t1, const double *x, con
 /* An adaptive method's start (every pair, rodas4, radau5): the arguments,
    the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
    on from there, else the code to return (x as given). order: the method's,
-   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0. */
-static int ode_start(int order, double t0, double t1, const double *x, const double *c,
-                     double rtol, double atol, double h0, long max_steps, double *f0, double *h,
-                     rw4_hardware_stats *stats)
+   for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
+   rtol_min: the method's bound on rtol (Method.min_rtol). */
+static int ode_start(int order, double rtol_min, double t0, double t1, const double *x,
+                     const double *c, double rtol, double atol, double h0, long max_steps,
+                     double *f0, double *h, rw4_hardware_stats *stats)
 {
     *h = 0.0;
     stats_start(stats, t0);
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) {
+    if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) {
         return RW4_HARDWARE_ODE_ERR_ARGUMENT;
     }
     if (gimbal_lock_at(x)) {
@@ -954,7 +957,8 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double total;
     int i;
 
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(5, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1118,7 +1122,8 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double deno;
     int i;
 
-    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h, stats);
+    code = ode_start(8, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
     if (code >= 0) {
         return code;
     }
@@ -1440,7 +1445,8 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(4, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
+            &h, stats);
     if (start >= 0) {
         return start;
     }
@@ -1749,7 +1755,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int start;
     int i;
 
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    start = ode_start(5, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
+            &h, stats);
     if (start >= 0) {
         return start;
     }
@@ -2600,14 +2607,15 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
 
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). */
-static int lane_start(int order, struct lanes *L, int l, size_t traj, double t0, double t1,
-                      double *xs, const double *c, double rtol, double atol, double h0,
-                      long max_steps, rw4_hardware_stats *stats)
+static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
+                      double t0, double t1, double *xs, const double *c, double rtol,
+                      double atol, double h0, long max_steps, rw4_hardware_stats *stats)
 {
     const double *x = xs + traj * RW4_HARDWARE_NX;
     double f0[RW4_HARDWARE_NX], h = 0.0;
     int i;
-    const int code = ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h, stats);
+    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+                               stats);
     if (code >= 0) {
         return code;
     }
@@ -2674,7 +2682,7 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, rw4_hardware_
 
 /* Trajectories begin..end-1 of a batch, RW4_HARDWARE_LANES at a time: a lane that
    finishes takes the next trajectory. Returns how many failed. */
-static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
+static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, rw4_hardware_stats *stats, int *codes)
 {
@@ -2687,8 +2695,8 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
         for (l = 0; l < RW4_HARDWARE_LANES; ++l) {
             while (!L.busy[l] && next < end) {
                 rw4_hardware_stats st;
-                const int code = lane_start(order, &L, l, next, t0, t1, xs, c, rtol, atol, h0,
-                                            max_steps, &st);
+                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
+                                            atol, h0, max_steps, &st);
                 if (code >= 0) {
                     put_result(next, code, &st, stats, codes);
                     failed += (size_t)(code != RW4_HARDWARE_ODE_OK);
@@ -2708,7 +2716,7 @@ static size_t pair_lanes(lanes_step step, int order, size_t begin, size_t end,
 /* A batch over every core when compiled with OpenMP: chunks of about an
    eighth of a thread's share, taken in turn (a chunk's trajectories are the
    same whichever thread runs it); else one chunk. */
-static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
+static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, rw4_hardware_stats *stats, int *codes)
 {
@@ -2722,11 +2730,12 @@ static size_t pair_batch(lanes_step step, int order, size_t n, double t0,
     for (b = 0; b < chunks; ++b) {
         const size_t begin = (size_t)b * chunk;
         const size_t end = n - begin < chunk ? n : begin + chunk;
-        failed += pair_lanes(step, order, begin, end, t0, t1, xs, c, rtol, atol, h0, max_steps,
-                             stats, codes);
+        failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
+                             max_steps, stats, codes);
     }
 #else
-    failed = pair_lanes(step, order, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats, codes);
+    failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats,
+                        codes);
 #endif
     return failed;
 }
@@ -2757,8 +2766,8 @@ size_t rw4_hardware_rk4_batch(size_t n, double t0, double t1, long steps, double
 size_t rw4_hardware_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, rw4_hardware_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dopri5_step_lanes, 5, RW4_HARDWARE_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted. RW4_HARDWARE_LANES trajectories at once, in SIMD lanes;
@@ -2766,8 +2775,8 @@ size_t rw4_hardware_dopri5_batch(size_t n, double t0, double t1, double *x, cons
 size_t rw4_hardware_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, rw4_hardware_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, n, t0, t1, x, c, rtol, atol, h0,
-                      max_steps, stats, codes);
+    return pair_batch(dop853_step_lanes, 8, RW4_HARDWARE_ODE_MIN_RTOL, n,
+                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
 /* NULL stats or codes: not wanted.

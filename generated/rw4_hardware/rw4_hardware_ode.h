@@ -68,8 +68,9 @@ typedef struct {
 #define RW4_HARDWARE_ODE_ERR_MAX_STEPS      2  /* max_steps steps were not enough */
 #define RW4_HARDWARE_ODE_ERR_NONFINITE      3  /* the state or its derivative is NaN or Inf */
 #define RW4_HARDWARE_ODE_ERR_SINGULAR       4  /* the iteration matrix is singular */
-/* 5: t1 < t0, steps or max_steps < 1, rtol <= RW4_HARDWARE_ODE_MIN_RTOL, atol <= 0,
-   or t0, t1, rtol, atol or h0 NaN or infinite */
+/* 5: t1 < t0, steps or max_steps < 1, rtol <= RW4_HARDWARE_ODE_MIN_RTOL (taylor:
+   RW4_HARDWARE_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
+   or infinite */
 #define RW4_HARDWARE_ODE_ERR_ARGUMENT       5
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
@@ -92,6 +93,10 @@ const char *rw4_hardware_ode_strerror(int code);
 /* rtol must exceed 10 DBL_EPSILON (Hairer's rule): tighter, no double
    arithmetic meets it and the steps would shrink until max_steps ran out. */
 #define RW4_HARDWARE_ODE_MIN_RTOL 2.220446049250313e-15
+/* The Taylor method's own bound (<prefix>_taylor and its batch): DBL_EPSILON.
+   It has no error estimate for Hairer's rule to protect: below 10
+   DBL_EPSILON it still steps, at order 20, its error that of the rounding. */
+#define RW4_HARDWARE_ODE_TAYLOR_MIN_RTOL 2.220446049250313e-16
 /* 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
    about DBL_EPSILON |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so
    the kinematic rates q1' and q3' in the 7th digit. */

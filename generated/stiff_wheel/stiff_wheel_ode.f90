@@ -56,8 +56,9 @@ module stiff_wheel_ode_mod
   integer(c_int), parameter, public :: STIFF_WHEEL_ODE_ERR_MAX_STEPS = 2
   integer(c_int), parameter, public :: STIFF_WHEEL_ODE_ERR_NONFINITE = 3
   integer(c_int), parameter, public :: STIFF_WHEEL_ODE_ERR_SINGULAR = 4
-  ! 5: t1 < t0, steps or max_steps < 1, rtol <= STIFF_WHEEL_ODE_MIN_RTOL, atol <= 0,
-  ! or t0, t1, rtol, atol or h0 NaN or infinite
+  ! 5: t1 < t0, steps or max_steps < 1, rtol <= STIFF_WHEEL_ODE_MIN_RTOL (taylor:
+  ! STIFF_WHEEL_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
+  ! or infinite
   integer(c_int), parameter, public :: STIFF_WHEEL_ODE_ERR_ARGUMENT = 5
   ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
   ! (3-1-2 scenes only; see above)
@@ -66,6 +67,8 @@ module stiff_wheel_ode_mod
   ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
   ! double arithmetic meets it and the steps would shrink until max_steps ran out.
   real(c_double), parameter, public :: STIFF_WHEEL_ODE_MIN_RTOL = 2.220446049250313e-15_c_double
+  ! The Taylor method's own bound: it has no error estimate for that rule.
+  real(c_double), parameter, public :: STIFF_WHEEL_ODE_TAYLOR_MIN_RTOL = 2.220446049250313e-16_c_double
   ! 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
   ! about epsilon |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so the
   ! kinematic rates q1' and q3' in the 7th digit.
@@ -316,22 +319,23 @@ contains
     return
   end function gimbal_lock
 
-  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
-  ! double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
-  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
-  function bad_arguments(t0, t1, rtol, atol, h0, max_steps) result(res)
+  ! The arguments every adaptive method refuses: t1 < t0, a tolerance it
+  ! cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or
+  ! ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,
+  ! t1, rtol, atol or h0 (h0 <= 0: automatic).
+  function bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps) result(res)
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1
     real(c_double), intent(in) :: rtol
     real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: rtol_min
     real(c_double), intent(in) :: h0
     integer(c_long), intent(in) :: max_steps
     logical :: res
 
     res = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. .not. &
-        (rtol > STIFF_WHEEL_ODE_MIN_RTOL) .or. .not. ieee_is_finite(rtol) .or. .not. (atol > &
-        0.0_c_double) .or. .not. ieee_is_finite(atol) .or. .not. ieee_is_finite(h0) .or. &
-        max_steps < 1
+        (rtol > rtol_min) .or. .not. ieee_is_finite(rtol) .or. .not. (atol > 0.0_c_double) .or. &
+        .not. ieee_is_finite(atol) .or. .not. ieee_is_finite(h0) .or. max_steps < 1
     return
   end function bad_arguments
 
@@ -427,8 +431,11 @@ contains
   ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
   ! on from there, else the code to return (x as given). order: the method's,
   ! for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
-  function ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats) result(res)
+  ! rtol_min: the method's bound on rtol (Method.min_rtol).
+  function ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
+          stats) result(res)
     integer(c_int), intent(in) :: order
+    real(c_double), intent(in) :: rtol_min
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1
     real(c_double), intent(in) :: rtol
@@ -444,7 +451,7 @@ contains
 
     h = 0.0_c_double
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) then
       res = STIFF_WHEEL_ODE_ERR_ARGUMENT
       return
     end if
@@ -834,7 +841,8 @@ contains
     real(c_double) :: e
     integer(c_int) :: i
 
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 0), h, stats)
+    code = ode_start(5, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
     if (code >= 0) then
       res = code
       return
@@ -1021,7 +1029,8 @@ contains
     real(c_double) :: e5
     integer(c_int) :: i
 
-    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 0), h, stats)
+    code = ode_start(8, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
     if (code >= 0) then
       res = code
       return
@@ -1382,7 +1391,8 @@ contains
     integer(c_int) :: start
     integer(c_int) :: i
 
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    start = ode_start(4, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
     if (start >= 0) then
       res = start
       return
@@ -1756,7 +1766,8 @@ contains
     real(c_double) :: ak
     integer(c_int) :: i
 
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    start = ode_start(5, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
     if (start >= 0) then
       res = start
       return

@@ -57,8 +57,9 @@ module torque_free_ode_mod
   integer(c_int), parameter, public :: TORQUE_FREE_ODE_ERR_MAX_STEPS = 2
   integer(c_int), parameter, public :: TORQUE_FREE_ODE_ERR_NONFINITE = 3
   integer(c_int), parameter, public :: TORQUE_FREE_ODE_ERR_SINGULAR = 4
-  ! 5: t1 < t0, steps or max_steps < 1, rtol <= TORQUE_FREE_ODE_MIN_RTOL, atol <= 0,
-  ! or t0, t1, rtol, atol or h0 NaN or infinite
+  ! 5: t1 < t0, steps or max_steps < 1, rtol <= TORQUE_FREE_ODE_MIN_RTOL (taylor:
+  ! TORQUE_FREE_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
+  ! or infinite
   integer(c_int), parameter, public :: TORQUE_FREE_ODE_ERR_ARGUMENT = 5
   ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
   ! (3-1-2 scenes only; see above)
@@ -67,6 +68,8 @@ module torque_free_ode_mod
   ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
   ! double arithmetic meets it and the steps would shrink until max_steps ran out.
   real(c_double), parameter, public :: TORQUE_FREE_ODE_MIN_RTOL = 2.220446049250313e-15_c_double
+  ! The Taylor method's own bound: it has no error estimate for that rule.
+  real(c_double), parameter, public :: TORQUE_FREE_ODE_TAYLOR_MIN_RTOL = 2.220446049250313e-16_c_double
   ! 3-1-2 scenes stop at |cos q2| below this: there the rounding of q2 alone,
   ! about epsilon |q2| = 3.5e-16 rad near pi/2, changes 1/cos(q2) and so the
   ! kinematic rates q1' and q3' in the 7th digit.
@@ -293,22 +296,23 @@ contains
     return
   end function gimbal_lock
 
-  ! The arguments every adaptive method refuses: t1 < t0, a tolerance no
-  ! double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps
-  ! < 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).
-  function bad_arguments(t0, t1, rtol, atol, h0, max_steps) result(res)
+  ! The arguments every adaptive method refuses: t1 < t0, a tolerance it
+  ! cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or
+  ! ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,
+  ! t1, rtol, atol or h0 (h0 <= 0: automatic).
+  function bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps) result(res)
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1
     real(c_double), intent(in) :: rtol
     real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: rtol_min
     real(c_double), intent(in) :: h0
     integer(c_long), intent(in) :: max_steps
     logical :: res
 
     res = .not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. .not. &
-        (rtol > TORQUE_FREE_ODE_MIN_RTOL) .or. .not. ieee_is_finite(rtol) .or. .not. (atol > &
-        0.0_c_double) .or. .not. ieee_is_finite(atol) .or. .not. ieee_is_finite(h0) .or. &
-        max_steps < 1
+        (rtol > rtol_min) .or. .not. ieee_is_finite(rtol) .or. .not. (atol > 0.0_c_double) .or. &
+        .not. ieee_is_finite(atol) .or. .not. ieee_is_finite(h0) .or. max_steps < 1
     return
   end function bad_arguments
 
@@ -404,8 +408,11 @@ contains
   ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
   ! on from there, else the code to return (x as given). order: the method's,
   ! for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
-  function ode_start(order, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats) result(res)
+  ! rtol_min: the method's bound on rtol (Method.min_rtol).
+  function ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
+          stats) result(res)
     integer(c_int), intent(in) :: order
+    real(c_double), intent(in) :: rtol_min
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1
     real(c_double), intent(in) :: rtol
@@ -421,7 +428,7 @@ contains
 
     h = 0.0_c_double
     call stats_start(stats, t0)
-    if (bad_arguments(t0, t1, rtol, atol, h0, max_steps)) then
+    if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) then
       res = TORQUE_FREE_ODE_ERR_ARGUMENT
       return
     end if
@@ -869,7 +876,8 @@ contains
     real(c_double) :: e
     integer(c_int) :: i
 
-    code = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 0), h, stats)
+    code = ode_start(5, TORQUE_FREE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
     if (code >= 0) then
       res = code
       return
@@ -1056,7 +1064,8 @@ contains
     real(c_double) :: e5
     integer(c_int) :: i
 
-    code = ode_start(8, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, 0), h, stats)
+    code = ode_start(8, TORQUE_FREE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
     if (code >= 0) then
       res = code
       return
@@ -1417,7 +1426,8 @@ contains
     integer(c_int) :: start
     integer(c_int) :: i
 
-    start = ode_start(4, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    start = ode_start(4, TORQUE_FREE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
     if (start >= 0) then
       res = start
       return
@@ -1791,7 +1801,8 @@ contains
     real(c_double) :: ak
     integer(c_int) :: i
 
-    start = ode_start(5, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    start = ode_start(5, TORQUE_FREE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
     if (start >= 0) then
       res = start
       return
@@ -2069,8 +2080,8 @@ contains
   subroutine taylor_jet(order, x, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
-    real(c_double), intent(in) :: inv(0:19 - 1)
-    real(c_double), intent(inout) :: tay(0:15 - 1, 0:19 - 1)
+    real(c_double), intent(in) :: inv(0:21 - 1)
+    real(c_double), intent(inout) :: tay(0:15 - 1, 0:21 - 1)
     real(c_double) :: acc7
     real(c_double) :: acc8
     real(c_double) :: acc9
@@ -2243,8 +2254,8 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:15 - 1, 0:19 - 1)
-    real(c_double) :: inv(0:19 - 1)
+    real(c_double) :: tay(0:15 - 1, 0:21 - 1)
+    real(c_double) :: inv(0:21 - 1)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2273,7 +2284,8 @@ contains
     integer(c_int) :: q
 
     inv = 0.0_c_double
-    code = ode_start(0, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, stats)
+    code = ode_start(0, TORQUE_FREE_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, &
+        f0, h, stats)
     if (code >= 0) then
       res = code
       return
@@ -2297,6 +2309,8 @@ contains
     order = order + (merge(1, 0, 6.914400106940203e-13_c_double > rtol))
     order = order + (merge(1, 0, 9.357622968840175e-14_c_double > rtol))
     order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
+    order = order + (merge(1, 0, 1.713908431542013e-15_c_double > rtol))
+    order = order + (merge(1, 0, 2.3195228302435696e-16_c_double > rtol))
     rhofac = exp((-0.7_c_double) / real(order - 1, c_double)) / 7.3890560989306495_c_double
     do q = 1, order + 1 - 1
       inv(q) = 1.0_c_double / real(q, c_double)

@@ -159,8 +159,9 @@ ODE_CODES: tuple[Code, ...] = (
         "ODE_ERR_ARGUMENT",
         "bad argument",
         note=(
-            "5: t1 < t0, steps or max_steps < 1, rtol <= {macro}_ODE_MIN_RTOL, atol <= 0,",
-            "or t0, t1, rtol, atol or h0 NaN or infinite",
+            "5: t1 < t0, steps or max_steps < 1, rtol <= {macro}_ODE_MIN_RTOL (taylor:",
+            "{macro}_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN",
+            "or infinite",
         ),
     ),
     Code(
@@ -350,6 +351,12 @@ QUATERNION_NORM_SLACK = 1e-6
 MIN_RTOL = 10 * 2.0**-52
 """10 DBL_EPSILON = 2.220446049250313e-15: rtol must exceed it, in the
 integrators and in a scene's simulate.rtol."""
+TAYLOR_MIN_RTOL = 2.0**-52
+"""DBL_EPSILON: the Taylor method's own bound (<PREFIX>_taylor and its batch,
+called directly). Hairer's rule is about an error estimate, which it has
+none of: its order and step come from the decay of its coefficients, and at
+a tolerance within ten roundings it still steps (order 20), its error then
+that of the rounding. heyoka takes tolerances down to DBL_EPSILON too."""
 
 # The 3-1-2 attitude's kinematics divide by cos(q2): its integrators stop
 # with <PREFIX>_ODE_ERR_ATTITUDE_SINGULAR when |cos q2| < GIMBAL_LOCK_COS,

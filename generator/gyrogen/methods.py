@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from gyrogen import abi
 from gyrogen.abi import SIGNATURES, Signature
 from gyrogen.tableaus import (
     DOP853,
@@ -188,6 +189,17 @@ class Method:
         0 for a Taylor method, whose every step, the first too, comes from
         its coefficients."""
         return 0 if self.taylor else self.tableau.order
+
+    @property
+    def min_rtol(self) -> str:
+        """The named bound its rtol must exceed (ode_start refuses the rest):
+        abi.TAYLOR_MIN_RTOL for a Taylor method, else abi.MIN_RTOL."""
+        return "ODE_TAYLOR_MIN_RTOL" if self.taylor else "ODE_MIN_RTOL"
+
+    @property
+    def rtol_floor(self) -> float:
+        """min_rtol's value."""
+        return abi.TAYLOR_MIN_RTOL if self.taylor else abi.MIN_RTOL
 
     @property
     def trial_calls(self) -> int:

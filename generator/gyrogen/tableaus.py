@@ -34,7 +34,7 @@ from fractions import Fraction as F
 
 import mpmath
 
-from gyrogen.abi import MIN_RTOL
+from gyrogen.abi import TAYLOR_MIN_RTOL
 
 Terms = list[tuple[int, float]]
 
@@ -302,7 +302,7 @@ RADAU5 = _radau5()
 class Series:
     """A Taylor series method: no stages; the order of the series comes from
     the tolerance (Jorba & Zou's p = ceil(-ln(tol)/2 + 1), at least min_order)
-    and is at most `order`, the one an rtol just above abi.MIN_RTOL asks for."""
+    and is at most `order`, the one an rtol just above abi.TAYLOR_MIN_RTOL asks for."""
 
     order: int
     min_order: int = 2
@@ -313,5 +313,5 @@ class Series:
         return tuple(math.exp(-2.0 * (q - 1)) for q in range(self.min_order, self.order))
 
 
-TAYLOR = Series(order=math.ceil(-math.log(MIN_RTOL) / 2 + 1))
-"""rtol > abi.MIN_RTOL = 10 DBL_EPSILON: order 18 at most."""
+TAYLOR = Series(order=math.ceil(-math.log(TAYLOR_MIN_RTOL) / 2 + 1))
+"""rtol > abi.TAYLOR_MIN_RTOL = DBL_EPSILON: order 20 at most."""

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.abi import MIN_RTOL
+from gyrogen import methods
 from gyrogen.analysis.bench import ensemble as ens
 from gyrogen.analysis.bench import heyoka_peer, workprec
 from gyrogen.analysis.bench.workprec import Run
@@ -149,7 +149,7 @@ def table(prob: ens.Problem, n: int, repeats: int, echo: Echo) -> dict[str, list
     try:  # each tolerance: gyrogen's then heyoka's, side by side under one load
         for tol in (*ens.LADDER, *HEYOKA_TAIL):
             for method, keys in GYROGEN.items():
-                if tol not in ens.LADDER and (method != "taylor" or not tol > MIN_RTOL):
+                if tol not in ens.LADDER and not tol > methods.get(method).rtol_floor:
                     continue  # past the ladder: Taylor, whose error lags its tol as heyoka's
                 err = ens.ensemble_error(ref, ens.finals(prob, few, tol, method=method))
                 for key, threads in zip(keys, (1, two), strict=True):

@@ -190,18 +190,20 @@ def bad_arguments() -> Func:
         not_(cmp(t1, ">=", t0)),
         not_(fn("finite", t0)),
         not_(fn("finite", t1)),
-        not_(cmp(rtol, ">", Const("ODE_MIN_RTOL"))),
+        not_(cmp(rtol, ">", Var("rtol_min"))),
         not_(fn("finite", rtol)),
         not_(cmp(atol, ">", 0.0)),
         not_(fn("finite", atol)),
         not_(fn("finite", h0)),
         cmp(ms, "<", 1),
     )
-    params = (real("t0"), real("t1"), *TOLERANCES, real("h0"), Decl("max_steps", "long"))
+    params = (real("t0"), real("t1"), *TOLERANCES, real("rtol_min"), real("h0"),
+              Decl("max_steps", "long"))  # fmt: skip
     doc = (
-        "The arguments every adaptive method refuses: t1 < t0, a tolerance no",
-        "double arithmetic can meet (rtol <= ODE_MIN_RTOL, atol <= 0), max_steps",
-        "< 1, and NaN or Inf in t0, t1, rtol, atol or h0 (h0 <= 0: automatic).",
+        "The arguments every adaptive method refuses: t1 < t0, a tolerance it",
+        "cannot meet (rtol <= rtol_min, the method's ODE_MIN_RTOL or",
+        "ODE_TAYLOR_MIN_RTOL; atol <= 0), max_steps < 1, and NaN or Inf in t0,",
+        "t1, rtol, atol or h0 (h0 <= 0: automatic).",
     )
     return Func("bad_arguments", params, (Return(bad),), "bool", doc=doc)
 
@@ -316,7 +318,7 @@ def initial_step() -> Func:
 
 def ode_start(quaternion: bool) -> Func:
     f0 = Var("f0")
-    args = (t0, t1, rtol, atol, h0, Var("max_steps"))
+    args = (t0, t1, rtol, atol, Var("rtol_min"), h0, Var("max_steps"))
     body: list[S] = [
         assign(h, 0.0),
         Call("stats_start", (stats, t0)),
@@ -347,6 +349,7 @@ def ode_start(quaternion: bool) -> Func:
     ]
     params = (
         Decl("order", "int"),
+        real("rtol_min"),
         real("t0"),
         real("t1"),
         arr("x"),
@@ -363,6 +366,7 @@ def ode_start(quaternion: bool) -> Func:
         "the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go",
         "on from there, else the code to return (x as given). order: the method's,",
         "for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.",
+        "rtol_min: the method's bound on rtol (Method.min_rtol).",
     )
     return Func("ode_start", params, tuple(body), "int", doc=doc)
 

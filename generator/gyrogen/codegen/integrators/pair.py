@@ -33,6 +33,7 @@ from gyrogen.codegen.ir.nodes import (
     Bool,
     Call,
     Comment,
+    Const,
     Decl,
     E,
     For,
@@ -217,6 +218,7 @@ def integrate(m: Method, quaternion: bool, krows: int) -> Func:
     t0, cd = Var("t0"), Var("code")
     args = (
         Int(m.start_order),
+        Const(m.min_rtol),
         t0,
         Var("t1"),
         x,

@@ -238,9 +238,9 @@ def integrate(m: Method, quaternion: bool) -> Func:
         )),
     ]  # fmt: skip
     body = (
-        assign(v["start"], fn("ode_start", Int(R.order), v["t0"], v["t1"], x, c, Var("rtol"),
-                              Var("atol"), Var("h0"), Var("max_steps"), v["f0"], Ref("h"),
-                              Var("stats"))),
+        assign(v["start"], fn("ode_start", Int(R.order), Const(m.min_rtol), v["t0"], v["t1"], x,
+                              c, Var("rtol"), Var("atol"), Var("h0"), Var("max_steps"), v["f0"],
+                              Ref("h"), Var("stats"))),
         If(cmp(v["start"], ">=", 0), (Return(v["start"]),)),
         assign(t, v["t0"]),
         *(assign(v[n], 1.0) for n in ("h_old", "rate", "theta_old", "dyno_old")),

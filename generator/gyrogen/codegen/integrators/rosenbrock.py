@@ -205,8 +205,8 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         assign(h, h / fac),
     ]  # fmt: skip
     body = (
-        assign(start, fn("ode_start", Int(R.order), t0, t1, x, c, Var("rtol"), Var("atol"),
-                         Var("h0"), Var("max_steps"), f0, Ref("h"), st)),
+        assign(start, fn("ode_start", Int(R.order), Const(m.min_rtol), t0, t1, x, c, Var("rtol"),
+                         Var("atol"), Var("h0"), Var("max_steps"), f0, Ref("h"), st)),
         If(cmp(start, ">=", 0), (Return(start),)),
         assign(t, t0),
         assign(h_acc, 0.0),

@@ -212,6 +212,7 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
     cd = Var("code")
     args = (
         Int(m.start_order),
+        Const(m.min_rtol),
         Var("t0"),
         Var("t1"),
         x,
