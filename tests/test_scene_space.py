@@ -19,7 +19,7 @@ from scene_space_clusters import clusters
 pytestmark = pytest.mark.slow  # hundreds of drawn scenes, each generated, compiled and compared
 
 SHARDS = 4
-EXAMPLES = 20
+EXAMPLES = 16
 """SHARDS x EXAMPLES drawn scenes in CI (pytest-xdist spreads the shards)."""
 
 
