@@ -229,6 +229,23 @@ def test_pointing_is_the_angle_a3_turned_through(attitude: str, tmp_path: Path) 
     assert np.allclose(pointing(s, x0, x), [0.3, 0.0, 0.2], rtol=0, atol=1e-15)
 
 
+def test_a_sweeps_pointing_column_is_the_turn_from_its_start(tmp_path: Path) -> None:
+    """run_chunk's pointing: a3's angle between each row's start (its inputs)
+    and its final state, not zero (the start is integrated in place; the
+    column once read the end twice)."""
+    from gyrogen.analysis.sweep.sweep_metrics import run_chunk
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    (tmp_path / "gq.toml").write_text(QUATERNION)
+    text = 'scene = "gq.toml"\nt_end = 1.0\n[grid]\nu1 = { list = [0.0, 0.3] }\n'
+    s = parse(text + '[metrics]\nkeep = ["pointing", "final_state"]', "x", "x", tmp_path)
+    cols = run_chunk(compiled(scene_sources(s.scene, False)), s, 0, 2)
+    end = np.column_stack([cols[f"final_{n}"] for n in s.scene.states])
+    want = pointing(s, inputs(s, 0, 2).x0, end)
+    assert np.all(cols["code"] == 0) and np.all(want > 0.05)
+    np.testing.assert_array_equal(cols["pointing"], want)
+
+
 def test_the_builtin_misalignment_sweep_keeps_its_hardware_within_bounds() -> None:
     """sweeps/rw4_misalignment: 10^5 trajectories of one build, every axis
     within 0.5 degrees of the pyramid's, the inertias within 2%."""

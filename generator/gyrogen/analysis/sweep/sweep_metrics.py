@@ -142,8 +142,9 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
     runtime = dict(zip(spec.scene.runtime, (inp.p if all_ran else inp.p[ran]).T, strict=True))
     known = {**spec.scene.folded(), **runtime}
     x0 = inp.x0 if all_ran else inp.x0[ran]
+    aim = boresight(spec, x0) if "pointing" in columns(spec) else None  # x0 is integrated in place
     runs = _integrate(comp, spec, batches, known, x0)
-    return _filled(spec, n, every, None if all_ran else ran, _found(spec, runs, x0))
+    return _filled(spec, n, every, None if all_ran else ran, _found(spec, runs, aim))
 
 
 def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -274,12 +275,17 @@ def boresight(spec: Spec, x: np.ndarray) -> np.ndarray:
 
 def pointing(spec: Spec, x0: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The angle between a3 at x and at x0 (atan2: exact for small angles)."""
-    a, b = boresight(spec, x0), boresight(spec, x)
+    return _angle(boresight(spec, x0), boresight(spec, x))
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row by row, the angle between unit vectors a and b."""
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
 
 
-def _found(spec: Spec, runs: _Runs, x0: np.ndarray) -> dict[str, np.ndarray]:
-    """The columns the runs (from x0) give, for the rows that ran."""
+def _found(spec: Spec, runs: _Runs, aim: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The columns the runs give, for the rows that ran; aim: a3 at their
+    start (boresight), when the spec keeps the pointing error."""
     watch = runs.watch
     found = {
         "code": runs.code,
@@ -287,8 +293,8 @@ def _found(spec: Spec, runs: _Runs, x0: np.ndarray) -> dict[str, np.ndarray]:
         **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},
         **runs.totals,
     }
-    if "pointing" in columns(spec):
-        found["pointing"] = pointing(spec, x0, runs.x)
+    if aim is not None:
+        found["pointing"] = _angle(aim, boresight(spec, runs.x))
     if watch is not None:
         found |= {
             "nutation_0": watch.nutation_0,
