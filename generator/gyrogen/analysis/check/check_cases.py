@@ -35,11 +35,11 @@ SPIN = {  # NOTES.md: lumped inertia diag(3, 2, 4), J = 0.1
 }  # fmt: skip
 START = {"u1": 0.2, "u2": 1.0, "u3": -0.1, "u4": 50.0}
 CLOSEST_APPROACH = 17.0
+"""The gimbal-lock cases started eps below q2 = pi/2 come within about
+17 eps^2 of |cos q2| = 0 (see _gimbal)."""
 EXPLICIT = methods.EXPLICIT_CHOICE[0]
 """The method of the cases that name one (gimbal lock, spin stability): the
 one simulate picks for a smooth scene that is not stiff."""
-"""The gimbal-lock cases started eps below q2 = pi/2 come within about
-17 eps^2 of |cos q2| = 0 (see _gimbal)."""
 
 
 def _speeds(case: Case, xs: np.ndarray, *names: str) -> list[np.ndarray]:
