@@ -11,7 +11,7 @@ import pytest
 
 from gyrogen.abi import NAME_MAX_LENGTH
 from gyrogen.codegen.generate import generate
-from gyrogen.codegen.render import c_comment, f_comment, hash_comment
+from gyrogen.codegen.render import c_comment, f_comment, hash_comment, sentence
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS, FORTRAN_STRICT
 from gyrogen.scene import builtin_text, load, parse
 
@@ -45,6 +45,12 @@ def test_comment_filters_escape_what_each_syntax_reads() -> None:
     h = hash_comment(HOSTILE)
     assert all(line.startswith("#") for line in h.split("\n")[1:])
     assert max(len(line) for line in c.split("\n")) <= 80
+
+
+def test_a_description_ends_in_one_full_stop() -> None:
+    """The files' opening sentence: a full stop added unless the text has one."""
+    assert sentence("a wheel") == "a wheel." and sentence("a wheel.\n") == "a wheel."
+    assert sentence("spins?") == "spins?" and sentence("") == ""
 
 
 @pytest.mark.slow

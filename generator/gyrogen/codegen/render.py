@@ -40,6 +40,13 @@ def comment_lines(text: str) -> list[str]:
     return lines or ["(no description)"]
 
 
+def sentence(text: str) -> str:
+    """text ending in a full stop (one: a description that ends in ".",
+    "!" or "?" gets none added; an empty one stays empty)."""
+    text = text.rstrip()
+    return text if not text or text.endswith((".", "!", "?")) else text + "."
+
+
 def _unbroken(text: str, pattern: str, fix: str) -> str:
     while re.search(pattern, text):
         text = re.sub(pattern, fix, text)
@@ -120,6 +127,7 @@ def environment() -> jinja2.Environment:
         f_double=f_double,
         c_comment=c_comment,
         f_comment=f_comment,
+        sentence=sentence,
         hash_comment=hash_comment,
         c_string=c_string,
         f_string=f_string,
