@@ -177,6 +177,22 @@ def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None, c
     assert not (tmp_path / "out").exists()
 
 
+def test_parameters_whose_constants_overflow_are_one_line_exit_2(
+    tmp_path: Path, cache: None, cli
+) -> None:
+    """Each value valid, the setup accepting them, and yet a constant it
+    computes overflows (T / J past DBL_MAX): one line naming it, no
+    traceback from the integrator's argument check."""
+    text = builtin_text("wheel_spinup")
+    scene = tmp_path / "overflow.toml"
+    scene.write_text(text.replace("parameters = { T = 0.02 }", "parameters = { T = 1e308 }"))
+    run = simulate(cli, [str(scene)], tmp_path / "out")
+    assert run.code == 2 and run.out == "" and "Traceback" not in run.err, run.err
+    last = run.err.splitlines()[-1]  # after the "generating and building" line
+    assert last.startswith("gyrogen: error: wheel_spinup: simulate.parameters: setup's constant")
+    assert last.endswith("is not finite: the parameters together overflow double arithmetic")
+
+
 @pytest.mark.slow
 def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cache: None, cli) -> None:
     blocker = tmp_path / "file"
