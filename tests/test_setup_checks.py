@@ -34,14 +34,21 @@ def vectors() -> list[tuple[str, np.ndarray]]:
 def test_one_declaration_three_interpretations(
     backends: dict[str, Compiled], language: str
 ) -> None:
+    """The validator does not make 9 (the constants' overflow): it checks
+    folded values, which are bounded so that their constants stay finite."""
+    codes = set()
     for what, p in vectors():
         compiled, _ = backends[language].setup_code(p)
-        assert compiled == python_code(p) == sampling.setup_code(p), what
+        expected = sampling.setup_code(p)
+        assert compiled == expected, what
+        assert python_code(p) == (0 if expected == 9 else expected), what
+        codes.add(expected)
+    assert codes == {c.value for c in SETUP_CODES if c.value != 8}  # 8: a cluster's axis
 
 
 def test_every_setup_code_but_ok_has_its_check() -> None:
     """The single rotor's checks in code order; a cluster's runtime axis adds 8."""
-    assert [c.code for c in CHECKS] == [c.value for c in SETUP_CODES if 0 < c.value < 8]
+    assert [c.code for c in CHECKS] == [c.value for c in SETUP_CODES if c.value not in (0, 8)]
     axis = cluster_checks({"g1_1": "runtime"}, 1)
     made = {c.code for c in (*CHECKS, *axis)}
     assert sorted(made) == [c.value for c in SETUP_CODES if c.value]

@@ -189,8 +189,11 @@ def test_parameters_whose_constants_overflow_are_one_line_exit_2(
     run = simulate(cli, [str(scene)], tmp_path / "out")
     assert run.code == 2 and run.out == "" and "Traceback" not in run.err, run.err
     last = run.err.splitlines()[-1]  # after the "generating and building" line
-    assert last.startswith("gyrogen: error: wheel_spinup: simulate.parameters: setup's constant")
-    assert last.endswith("is not finite: the parameters together overflow double arithmetic")
+    assert last == (
+        "gyrogen: error: wheel_spinup: simulate.parameters: setup refused the parameters "
+        "(code 9): a constant derived from the parameters is not finite (together they "
+        "overflow doubles)"
+    )
 
 
 @pytest.mark.slow

@@ -264,6 +264,11 @@ int gyrostat_setup(const double *p, double *c)
     if (!(c[GYROSTAT_COND] <= 10000000000000.0)) {
         return GYROSTAT_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < GYROSTAT_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return GYROSTAT_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return GYROSTAT_OK;
 }
 
@@ -286,6 +291,8 @@ const char *gyrostat_strerror(int code)
         return "the rotor violates the triangle inequality (2 I < J)";
     case GYROSTAT_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    case GYROSTAT_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

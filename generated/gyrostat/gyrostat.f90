@@ -76,6 +76,8 @@ module gyrostat_mod
   integer(c_int), parameter, public :: GYROSTAT_ERR_ROTOR_TRIANGLE = 6
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: GYROSTAT_ERR_MASS_SINGULAR = 7
+  ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
+  integer(c_int), parameter, public :: GYROSTAT_ERR_OVERFLOW = 9
 
 contains
 
@@ -341,13 +343,17 @@ contains
       status = GYROSTAT_ERR_MASS_SINGULAR
       return
     end if
+    if (.not. all(ieee_is_finite(c))) then
+      status = GYROSTAT_ERR_OVERFLOW
+      return
+    end if
     status = GYROSTAT_OK
   end function gyrostat_setup
 
-  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  ! The message for a return code, blank-padded to 85 characters: trim() it.
   pure function gyrostat_strerror(code) result(msg)
     integer(c_int), intent(in) :: code
-    character(len=82) :: msg
+    character(len=85) :: msg
 
     select case (code)
     case (GYROSTAT_OK)
@@ -366,6 +372,8 @@ contains
       msg = "the rotor violates the triangle inequality (2 I < J)"
     case (GYROSTAT_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case (GYROSTAT_ERR_OVERFLOW)
+      msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default
       msg = "unknown return code"
     end select

@@ -71,6 +71,7 @@ extern "C" {
 #define GYROSTAT_ERR_CARRIER_TRIANGLE    5  /* the carrier's principal moments violate the triangle inequality */
 #define GYROSTAT_ERR_ROTOR_TRIANGLE      6  /* the rotor violates the triangle inequality (2 I < J) */
 #define GYROSTAT_ERR_MASS_SINGULAR       7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
+#define GYROSTAT_ERR_OVERFLOW            9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 /* The one line a return code of gyrostat_setup means ("unknown return code"
    for another): a string literal, not to be freed or changed. */

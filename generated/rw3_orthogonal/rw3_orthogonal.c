@@ -206,6 +206,11 @@ int rw3_orthogonal_setup(const double *p, double *c)
     if (!(c[RW3_ORTHOGONAL_COND] <= 10000000000000.0)) {
         return RW3_ORTHOGONAL_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < RW3_ORTHOGONAL_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return RW3_ORTHOGONAL_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return RW3_ORTHOGONAL_OK;
 }
 
@@ -218,6 +223,8 @@ const char *rw3_orthogonal_strerror(int code)
         return "a parameter is NaN or infinite";
     case RW3_ORTHOGONAL_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    case RW3_ORTHOGONAL_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

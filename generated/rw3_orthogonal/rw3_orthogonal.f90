@@ -54,6 +54,8 @@ module rw3_orthogonal_mod
   integer(c_int), parameter, public :: RW3_ORTHOGONAL_ERR_NONFINITE = 1
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: RW3_ORTHOGONAL_ERR_MASS_SINGULAR = 7
+  ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
+  integer(c_int), parameter, public :: RW3_ORTHOGONAL_ERR_OVERFLOW = 9
 
 contains
 
@@ -210,13 +212,17 @@ contains
       status = RW3_ORTHOGONAL_ERR_MASS_SINGULAR
       return
     end if
+    if (.not. all(ieee_is_finite(c))) then
+      status = RW3_ORTHOGONAL_ERR_OVERFLOW
+      return
+    end if
     status = RW3_ORTHOGONAL_OK
   end function rw3_orthogonal_setup
 
-  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  ! The message for a return code, blank-padded to 85 characters: trim() it.
   pure function rw3_orthogonal_strerror(code) result(msg)
     integer(c_int), intent(in) :: code
-    character(len=82) :: msg
+    character(len=85) :: msg
 
     select case (code)
     case (RW3_ORTHOGONAL_OK)
@@ -225,6 +231,8 @@ contains
       msg = "a parameter is NaN or infinite"
     case (RW3_ORTHOGONAL_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case (RW3_ORTHOGONAL_ERR_OVERFLOW)
+      msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default
       msg = "unknown return code"
     end select

@@ -40,6 +40,7 @@ extern "C" {
 #define RW3_ORTHOGONAL_OK                0  /* parameters accepted */
 #define RW3_ORTHOGONAL_ERR_NONFINITE     1  /* a parameter is NaN or infinite */
 #define RW3_ORTHOGONAL_ERR_MASS_SINGULAR 7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
+#define RW3_ORTHOGONAL_ERR_OVERFLOW      9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 #define RW3_ORTHOGONAL_ODE_OK                 0
 #define RW3_ORTHOGONAL_ODE_ERR_STEP_UNDERFLOW 1  /* step size fell below 16 eps |t| */

@@ -452,6 +452,11 @@ int rw4_hardware_setup(const double *p, double *c)
     if (!(c[RW4_HARDWARE_COND] <= 10000000000000.0)) {
         return RW4_HARDWARE_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < RW4_HARDWARE_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return RW4_HARDWARE_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return RW4_HARDWARE_OK;
 }
 
@@ -476,6 +481,8 @@ const char *rw4_hardware_strerror(int code)
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
     case RW4_HARDWARE_ERR_AXIS:
         return "a rotor axis is not of unit length (within 0.001)";
+    case RW4_HARDWARE_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

@@ -113,6 +113,8 @@ module rw4_hardware_mod
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_MASS_SINGULAR = 7
   ! 8: a rotor axis is not of unit length (within 0.001)
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_AXIS = 8
+  ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
+  integer(c_int), parameter, public :: RW4_HARDWARE_ERR_OVERFLOW = 9
 
 contains
 
@@ -675,13 +677,17 @@ contains
       status = RW4_HARDWARE_ERR_MASS_SINGULAR
       return
     end if
+    if (.not. all(ieee_is_finite(c))) then
+      status = RW4_HARDWARE_ERR_OVERFLOW
+      return
+    end if
     status = RW4_HARDWARE_OK
   end function rw4_hardware_setup
 
-  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  ! The message for a return code, blank-padded to 85 characters: trim() it.
   pure function rw4_hardware_strerror(code) result(msg)
     integer(c_int), intent(in) :: code
-    character(len=82) :: msg
+    character(len=85) :: msg
 
     select case (code)
     case (RW4_HARDWARE_OK)
@@ -702,6 +708,8 @@ contains
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
     case (RW4_HARDWARE_ERR_AXIS)
       msg = "a rotor axis is not of unit length (within 0.001)"
+    case (RW4_HARDWARE_ERR_OVERFLOW)
+      msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default
       msg = "unknown return code"
     end select

@@ -116,6 +116,7 @@ extern "C" {
 #define RW4_HARDWARE_ERR_ROTOR_TRIANGLE  6  /* the rotor violates the triangle inequality (2 I < J) */
 #define RW4_HARDWARE_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 #define RW4_HARDWARE_ERR_AXIS            8  /* a rotor axis is not of unit length (within 0.001) */
+#define RW4_HARDWARE_ERR_OVERFLOW        9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 /* The one line a return code of rw4_hardware_setup means ("unknown return code"
    for another): a string literal, not to be freed or changed. */

@@ -46,6 +46,7 @@ extern "C" {
 #define RW4_HARDWARE_ERR_ROTOR_TRIANGLE  6  /* the rotor violates the triangle inequality (2 I < J) */
 #define RW4_HARDWARE_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 #define RW4_HARDWARE_ERR_AXIS            8  /* a rotor axis is not of unit length (within 0.001) */
+#define RW4_HARDWARE_ERR_OVERFLOW        9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 #define RW4_HARDWARE_ODE_OK                 0
 #define RW4_HARDWARE_ODE_ERR_STEP_UNDERFLOW 1  /* step size fell below 16 eps |t| */

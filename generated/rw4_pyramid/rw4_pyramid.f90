@@ -58,6 +58,8 @@ module rw4_pyramid_mod
   integer(c_int), parameter, public :: RW4_PYRAMID_ERR_NONFINITE = 1
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: RW4_PYRAMID_ERR_MASS_SINGULAR = 7
+  ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
+  integer(c_int), parameter, public :: RW4_PYRAMID_ERR_OVERFLOW = 9
 
 contains
 
@@ -222,13 +224,17 @@ contains
       status = RW4_PYRAMID_ERR_MASS_SINGULAR
       return
     end if
+    if (.not. all(ieee_is_finite(c))) then
+      status = RW4_PYRAMID_ERR_OVERFLOW
+      return
+    end if
     status = RW4_PYRAMID_OK
   end function rw4_pyramid_setup
 
-  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  ! The message for a return code, blank-padded to 85 characters: trim() it.
   pure function rw4_pyramid_strerror(code) result(msg)
     integer(c_int), intent(in) :: code
-    character(len=82) :: msg
+    character(len=85) :: msg
 
     select case (code)
     case (RW4_PYRAMID_OK)
@@ -237,6 +243,8 @@ contains
       msg = "a parameter is NaN or infinite"
     case (RW4_PYRAMID_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case (RW4_PYRAMID_ERR_OVERFLOW)
+      msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default
       msg = "unknown return code"
     end select

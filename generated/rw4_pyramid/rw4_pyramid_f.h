@@ -40,6 +40,7 @@ extern "C" {
 #define RW4_PYRAMID_OK                   0  /* parameters accepted */
 #define RW4_PYRAMID_ERR_NONFINITE        1  /* a parameter is NaN or infinite */
 #define RW4_PYRAMID_ERR_MASS_SINGULAR    7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
+#define RW4_PYRAMID_ERR_OVERFLOW         9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 #define RW4_PYRAMID_ODE_OK                 0
 #define RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW 1  /* step size fell below 16 eps |t| */

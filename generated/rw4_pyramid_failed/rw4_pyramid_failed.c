@@ -209,6 +209,11 @@ int rw4_pyramid_failed_setup(const double *p, double *c)
     if (!(c[RW4_PYRAMID_FAILED_COND] <= 10000000000000.0)) {
         return RW4_PYRAMID_FAILED_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < RW4_PYRAMID_FAILED_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return RW4_PYRAMID_FAILED_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return RW4_PYRAMID_FAILED_OK;
 }
 
@@ -221,6 +226,8 @@ const char *rw4_pyramid_failed_strerror(int code)
         return "a parameter is NaN or infinite";
     case RW4_PYRAMID_FAILED_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    case RW4_PYRAMID_FAILED_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

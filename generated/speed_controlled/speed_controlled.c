@@ -238,6 +238,11 @@ int speed_controlled_setup(const double *p, double *c)
     if (!(c[SPEED_CONTROLLED_COND] <= 10000000000000.0)) {
         return SPEED_CONTROLLED_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < SPEED_CONTROLLED_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return SPEED_CONTROLLED_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return SPEED_CONTROLLED_OK;
 }
 
@@ -260,6 +265,8 @@ const char *speed_controlled_strerror(int code)
         return "the rotor violates the triangle inequality (2 I < J)";
     case SPEED_CONTROLLED_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    case SPEED_CONTROLLED_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

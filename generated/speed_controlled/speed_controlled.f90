@@ -64,6 +64,8 @@ module speed_controlled_mod
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE = 6
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: SPEED_CONTROLLED_ERR_MASS_SINGULAR = 7
+  ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
+  integer(c_int), parameter, public :: SPEED_CONTROLLED_ERR_OVERFLOW = 9
 
 contains
 
@@ -268,13 +270,17 @@ contains
       status = SPEED_CONTROLLED_ERR_MASS_SINGULAR
       return
     end if
+    if (.not. all(ieee_is_finite(c))) then
+      status = SPEED_CONTROLLED_ERR_OVERFLOW
+      return
+    end if
     status = SPEED_CONTROLLED_OK
   end function speed_controlled_setup
 
-  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  ! The message for a return code, blank-padded to 85 characters: trim() it.
   pure function speed_controlled_strerror(code) result(msg)
     integer(c_int), intent(in) :: code
-    character(len=82) :: msg
+    character(len=85) :: msg
 
     select case (code)
     case (SPEED_CONTROLLED_OK)
@@ -293,6 +299,8 @@ contains
       msg = "the rotor violates the triangle inequality (2 I < J)"
     case (SPEED_CONTROLLED_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case (SPEED_CONTROLLED_ERR_OVERFLOW)
+      msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default
       msg = "unknown return code"
     end select

@@ -45,6 +45,7 @@ extern "C" {
 #define SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
 #define SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE 6  /* the rotor violates the triangle inequality (2 I < J) */
 #define SPEED_CONTROLLED_ERR_MASS_SINGULAR 7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
+#define SPEED_CONTROLLED_ERR_OVERFLOW    9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 #define SPEED_CONTROLLED_ODE_OK                 0
 #define SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW 1  /* step size fell below 16 eps |t| */

@@ -238,6 +238,11 @@ int stiff_wheel_setup(const double *p, double *c)
     if (!(c[STIFF_WHEEL_COND] <= 10000000000000.0)) {
         return STIFF_WHEEL_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < STIFF_WHEEL_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return STIFF_WHEEL_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return STIFF_WHEEL_OK;
 }
 
@@ -260,6 +265,8 @@ const char *stiff_wheel_strerror(int code)
         return "the rotor violates the triangle inequality (2 I < J)";
     case STIFF_WHEEL_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    case STIFF_WHEEL_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

@@ -233,6 +233,11 @@ int wheel_spinup_setup(const double *p, double *c)
     if (!(c[WHEEL_SPINUP_COND] <= 10000000000000.0)) {
         return WHEEL_SPINUP_ERR_MASS_SINGULAR;
     }
+    for (i = 0; i < WHEEL_SPINUP_NC; ++i) {
+        if (!isfinite(c[i])) {
+            return WHEEL_SPINUP_ERR_OVERFLOW;  /* valid parameters whose products overflow */
+        }
+    }
     return WHEEL_SPINUP_OK;
 }
 
@@ -255,6 +260,8 @@ const char *wheel_spinup_strerror(int code)
         return "the rotor violates the triangle inequality (2 I < J)";
     case WHEEL_SPINUP_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
+    case WHEEL_SPINUP_ERR_OVERFLOW:
+        return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:
         return "unknown return code";
     }

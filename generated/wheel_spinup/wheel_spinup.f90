@@ -62,6 +62,8 @@ module wheel_spinup_mod
   integer(c_int), parameter, public :: WHEEL_SPINUP_ERR_ROTOR_TRIANGLE = 6
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: WHEEL_SPINUP_ERR_MASS_SINGULAR = 7
+  ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
+  integer(c_int), parameter, public :: WHEEL_SPINUP_ERR_OVERFLOW = 9
 
 contains
 
@@ -261,13 +263,17 @@ contains
       status = WHEEL_SPINUP_ERR_MASS_SINGULAR
       return
     end if
+    if (.not. all(ieee_is_finite(c))) then
+      status = WHEEL_SPINUP_ERR_OVERFLOW
+      return
+    end if
     status = WHEEL_SPINUP_OK
   end function wheel_spinup_setup
 
-  ! The message for a return code, blank-padded to 82 characters: trim() it.
+  ! The message for a return code, blank-padded to 85 characters: trim() it.
   pure function wheel_spinup_strerror(code) result(msg)
     integer(c_int), intent(in) :: code
-    character(len=82) :: msg
+    character(len=85) :: msg
 
     select case (code)
     case (WHEEL_SPINUP_OK)
@@ -286,6 +292,8 @@ contains
       msg = "the rotor violates the triangle inequality (2 I < J)"
     case (WHEEL_SPINUP_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
+    case (WHEEL_SPINUP_ERR_OVERFLOW)
+      msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default
       msg = "unknown return code"
     end select

@@ -44,6 +44,7 @@ extern "C" {
 #define WHEEL_SPINUP_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
 #define WHEEL_SPINUP_ERR_ROTOR_TRIANGLE  6  /* the rotor violates the triangle inequality (2 I < J) */
 #define WHEEL_SPINUP_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
+#define WHEEL_SPINUP_ERR_OVERFLOW        9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 #define WHEEL_SPINUP_ODE_OK                 0
 #define WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW 1  /* step size fell below 16 eps |t| */

@@ -141,9 +141,15 @@ SETUP_CODES: tuple[Code, ...] = (
         "the mass matrix is not numerically positive definite (condition number above 1e13)",
     ),
     Code(8, "ERR_AXIS", f"a rotor axis is not of unit length (within {AXIS_NORM_SLACK:g})"),
+    Code(
+        9,
+        "ERR_OVERFLOW",
+        "a constant derived from the parameters is not finite (together they overflow doubles)",
+    ),
 )
 """Return codes of <prefix>_setup, checked in this order (a runtime axis, 8,
-before the condition number, 7, which reads the axes); the first failure wins."""
+before the condition number, 7, which reads the axes; the constants, 9,
+last, once computed); the first failure wins."""
 
 ODE_CODES: tuple[Code, ...] = (
     Code(0, "ODE_OK", "ok"),

@@ -94,10 +94,12 @@ Message = Callable[[Values], str]
 class Check:
     """One check. kind 'finite': every parameter finite. 'positive': each
     expression > 0. 'slack': excess <= TRIANGLE_SLACK * scale (equality is
-    physical, rounding must not refuse it). 'bound': value <= limit."""
+    physical, rounding must not refuse it). 'bound': value <= limit.
+    'constants': every constant setup computed is finite (made last, at run
+    time only: each parameter may be valid and their products overflow)."""
 
     code: int
-    kind: Literal["finite", "positive", "slack", "bound"]
+    kind: Literal["finite", "positive", "slack", "bound", "constants"]
     exprs: tuple[Expr, ...] = ()
     """positive: the expressions; slack: (excess, scale); bound: (value, limit)."""
     locals: tuple[tuple[str, Expr], ...] = ()
@@ -162,6 +164,7 @@ CHECKS: tuple[Check, ...] = (
             f"{v['cond']:.3g} > {MAX_CONDITION:g}: numerically singular"
         ),
     ),
+    Check(9, "constants"),
 )
 """In the order setup makes them: the first failure wins."""
 
@@ -174,7 +177,8 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
     triangle inequality (s 1 - T positive definite, s = (1/2 + slack) tr T:
     Sylvester's leading minors), J_k <= 2 I_k, each runtime axis of length
     within AXIS_NORM_SLACK of 1 (code 8); the lumped inertia's condition
-    number. The scene validator checks the folded values."""
+    number; the constants finite (code 9). The scene validator checks the
+    folded values."""
 
     def term(name: str) -> Expr:
         v = values.get(name, 0.0)
@@ -183,7 +187,9 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
     def runtime(*names: str) -> tuple[Expr, ...]:
         return tuple(Sym(m) for m in names if values.get(m) == "runtime")
 
-    finite, bound = (next(c for c in CHECKS if c.kind == kind) for kind in ("finite", "bound"))
+    finite, bound, constants = (
+        next(c for c in CHECKS if c.kind == kind) for kind in ("finite", "bound", "constants")
+    )
     out = [finite]
     rotors = [tuple(f"{key}_{k}" for key in ("m", "I", "J")) for k in range(1, n + 1)]
     masses = runtime("m_a", *(m for m, _, _ in rotors))
@@ -217,7 +223,7 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
     for k in range(1, n + 1):
         if values.get(f"{AXIS[0]}_{k}") == "runtime":
             out.append(_unit_length(k))
-    return (*out, bound)
+    return (*out, bound, constants)
 
 
 def _unit_length(k: int) -> Check:
@@ -314,6 +320,8 @@ def failure(check: Check, v: Values) -> str | None:
     if check.kind == "finite":
         bad = [n for n in PARAMETERS + CONTROLLER_PARAMETERS if not math.isfinite(v.get(n, 0.0))]
         return f"parameters.{bad[0]}: not a finite number" if bad else None
+    if check.kind == "constants":  # folded values are bounded so that theirs stay finite
+        return None
     values = dict(v)
     for name, e in check.locals:
         if not symbols(e) <= values.keys():

@@ -32,7 +32,7 @@ class Printed:
     locals: tuple[tuple[str, str], ...]
     comment: tuple[str, ...]
     late: bool
-    """Made after the constants: it reads their condition number."""
+    """Made after the constants: it reads their condition number, or all of them."""
 
 
 class Printer:
@@ -67,7 +67,10 @@ class Printer:
         return f"{name}({', '.join(self(a) for a in e.args)})"
 
     def condition(self, kind: str, exprs: tuple[Expr, ...]) -> str:
-        """The text that is true when the check fails."""
+        """The text that is true when the check fails (for 'constants' in C,
+        where it is a loop over c, the template's)."""
+        if kind == "constants":
+            return "" if self.language == "c" else ".not. all(ieee_is_finite(c))"
         if kind == "positive":
             zero = self.number(0.0)
             if self.language == "c":
@@ -103,7 +106,7 @@ def printed(language: Language, macro: str, checks: Sequence[Check] = CHECKS) ->
             p.condition(c.kind, c.exprs),
             tuple((name, p(e)) for name, e in c.locals),
             c.comment,
-            any("cond" in symbols(e) for e in c.exprs),
+            c.kind == "constants" or any("cond" in symbols(e) for e in c.exprs),
         )
         for c in checks
         if c.kind != "finite"

@@ -160,7 +160,14 @@ class SceneContext:
     def checks(self) -> tuple[Check, ...]:
         """setup's checks: a cluster's folded inertial values are checked by
         the scene validator, so its setup makes 'finite', 'bound' and the
-        checks of its runtime axial inertias (setup_checks.cluster_checks)."""
+        checks of its runtime axial inertias (setup_checks.cluster_checks).
+        With every value folded the constants are the scene validator's
+        bounded numbers' and 'constants' is not made."""
+        out = self._checks
+        return out if self.np else tuple(c for c in out if c.kind != "constants")
+
+    @property
+    def _checks(self) -> tuple[Check, ...]:
         if not self.cluster:
             return CHECKS
         values: dict[str, float | str] = dict(self.scene.parameters)

@@ -36,8 +36,10 @@ def setup_code(p: ArrayLike) -> int:
     positive definite; 5 its principal moments (I22 and the eigenvalues of
     ``[[I11, I13], [I13, I33]]``) violate the triangle inequality by more than
     ``1e-12 * (sum of the three)``; 6 ``J > 2 I`` by more than ``1e-12 * (2 I + J)``;
-    7 the mass matrix's coupled block has a condition number above ``MAX_CONDITION``.
-    Returns 0 if all checks pass.
+    7 the mass matrix's coupled block has a condition number above ``MAX_CONDITION``;
+    9 each value is valid and yet what the equations derive from them overflows
+    (T / J, T / I~22, 1 / det and the lumped inertias: setup's constants, by another
+    road). Returns 0 if all checks pass.
     """
     pa = np.asarray(p, dtype=np.float64)
     if pa.shape != (N_PARAMETERS,):
@@ -63,7 +65,11 @@ def setup_code(p: ArrayLike) -> int:
         return 6
     if not float(lumped_condition(pa)) <= MAX_CONDITION:
         return 7
-    return 0
+    with np.errstate(all="ignore"):
+        a11, a22, a33, a13, _, _ = lumped(pa)
+        det = a11 * a33 - a13 * a13
+        derived = (a11, a22, a33, a13, 1.0 / det, J / det, v["T"] / J, v["T"] / a22)
+    return 0 if all(math.isfinite(float(d)) for d in derived) else 9
 
 
 def _log_uniform(rng: np.random.Generator, lo: float, hi: float, n: int) -> Array:
@@ -246,7 +252,10 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
             variant(I11=tiny, I22=tiny, I33=tiny, I13=0.0, I=tiny, J=tiny, l1=1.0, l3=1.0),
             7,
         ),
+        ("T = 1e308 and J = 1e-300, each valid: T / J overflows", variant(T=1e308, J=1e-300), 9),
     ]
+    if float(b[_P["J"]]) < 0.5:  # T alone (a scene with only T at run time)
+        cases.append(("T = DBL_MAX: T / J overflows", variant(T=np.finfo(float).max), 9))
     return cases
 
 
