@@ -6,6 +6,7 @@ tight reference, C against Fortran, and where it is not offered."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,7 @@ from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load
-from gyrogen.symbolic.jet import NotExpandable, decompose
+from gyrogen.symbolic.jet import Node, NotExpandable, decompose
 from gyrogen.symbolic.optimize import Assignment, Block
 
 REPO = Path(__file__).resolve().parents[1]
@@ -93,6 +94,22 @@ def test_the_recurrences_are_the_series_of_the_solution() -> None:
     for k in range(order + 1):
         want = [float(d.subs(at)) / float(sm.factorial(k)) for d in derivs[k]]
         np.testing.assert_allclose(got[k], want, rtol=1e-12, atol=1e-14)
+
+
+def test_degrees_are_where_the_series_ends() -> None:
+    """Jet.degrees: a node's degree as a polynomial in t (inf: none), past
+    which its coefficients are 0 (what the generated jet leaves out)."""
+    xs, c0 = sm.symbols("x0:5"), sm.Symbol("c0")
+    f = (c0, xs[0] * xs[0], xs[1] / c0, sm.sin(xs[2]), sm.Integer(0))
+    jet = decompose(Block((), f), xs)
+    deg = jet.degrees()
+    assert deg[: jet.nx] == (1.0, 3.0, 4.0, math.inf, 1.0)
+    nodes = [Node("num", value=0.7) if n.op == "c" else n for n in jet.nodes]  # c0 = 0.7
+    got = coefficients(nodes, jet.outputs, [0.3, -0.2, 0.5, 0.1, 2.0], 8)
+    for i in (0, 1, 2, 4):
+        assert np.all(got[int(deg[i]) + 1 :, i] == 0.0), i
+        assert got[int(deg[i]), i] != 0.0 or i == 4  # x4' = 0: its degree 1 is a bound
+    assert np.all(got[1:, 3] != 0.0)
 
 
 @pytest.mark.parametrize(
@@ -173,6 +190,26 @@ def test_taylor_meets_its_tolerance_in_c_and_fortran_alike(
         assert err < max(100 * tol, 1e-11), (tol, err)
         assert err < last * 1.5 or err < 1e-11
         last = err
+
+
+@pytest.mark.parametrize("language", ["c", "fortran"])
+def test_polynomial_states_are_exact_at_any_tolerance(
+    built: dict[tuple[str, str], Compiled], language: str
+) -> None:
+    """The default scene's rotor rate u4 (u4' = T/J), the translation rates
+    and positions (u7' = g) are polynomials of degree 1 and 2: the step
+    evaluates them exactly and they set no bound on h, so at rtol 1e-4 they
+    still equal their closed forms to rounding."""
+    x0, p = problem("gyrostat")
+    b = built["gyrostat", language]
+    c = b.setup(p)
+    t1 = 10.0
+    x, stats, code = b.integrate("taylor", x0, c, 0.0, t1, rtol=1e-4, atol=1e-4)
+    assert code == 0 and stats["accepted"] > 1
+    want = {10: x0[10] + c[9] * t1, 11: x0[11], 13: x0[13] + c[10] * t1}
+    want |= {4: x0[4] + x0[11] * t1, 6: x0[6] + x0[13] * t1 + 0.5 * c[10] * t1**2}
+    for i, v in want.items():
+        assert abs(x[i] - v) <= 1e-14 * max(1.0, abs(v)), (i, x[i], v)
 
 
 @pytest.mark.slow

@@ -2143,13 +2143,11 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v17 = v15 + v16;
         v18 = acc18 + tay[0][11] * tay[n][9] + tay[n][11] * tay[0][9];
         v19 = tay[n][4] - v18;
-        v21 = 4.5440763299219775e-05 * tay[n][6];
         v23 = 0.4092155481941839 * tay[n][4];
-        tay[n][12] = v21 + v23;
+        tay[n][12] = v23;
         v25 = acc25 + tay[0][5] * tay[n][12] + tay[n][5] * tay[0][12];
         v27 = 0.015471973456719416 * tay[n][4];
-        v29 = 1.1900419543364779e-06 * tay[n][6];
-        tay[n][13] = v27 - v29;
+        tay[n][13] = v27;
         v31 = acc31 + tay[0][13] * tay[n][3] + tay[n][13] * tay[0][3];
         v32 = v25 - v31;
         v34 = acc34 + tay[0][5] * tay[n][5] + tay[n][5] * tay[0][5];
@@ -2161,10 +2159,8 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v41 = acc41 + tay[0][3] * tay[n][14] + tay[n][3] * tay[0][14];
         v42 = v36 + v41;
         v43 = acc43 + tay[0][13] * tay[n][5] + tay[n][13] * tay[0][5];
-        v45 = 5.266025597120826e-05 * tay[n][6];
-        v46 = -v45;
         v48 = 0.3153534800671272 * tay[n][4];
-        tay[n][15] = v46 - v48;
+        tay[n][15] = -v48;
         v50 = acc50 + tay[0][3] * tay[n][15] + tay[n][3] * tay[0][15];
         v51 = v43 + v50;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
@@ -2175,7 +2171,6 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         tay[n + 1][3] = v32 * inv[n + 1];
         tay[n + 1][4] = v42 * inv[n + 1];
         tay[n + 1][5] = v51 * inv[n + 1];
-        tay[n + 1][6] = 0.0;
     }
 }
 
@@ -2265,6 +2260,10 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dq = 0.0;
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
             xmax = dmax(xmax, fabs(x[i]));
+        }
+
+        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+        for (i = 0; i < 6; ++i) {
             dp = dmax(dp, fabs(tay[order][i]));
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
@@ -2283,19 +2282,20 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
         h2 = h * h;
-        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        for (i = 0; i < 6; ++i) {
             xnew[i] = tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            for (i = 0; i < 6; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            for (i = 0; i < 6; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
+        xnew[6] = tay[1][6];
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -3029,7 +3029,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
     for (n = 2; n < order; ++n) {
         DUAL_SPIN_SIMD
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-            double acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc31, acc34, acc41, acc43, acc50, v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
+            double acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc31, acc34, acc41, acc43, acc50, v9, v10, v11, v15, v16, v17, v18, v19, v23, v25, v27, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v48, v50, v51;
             acc7 = 0.0;
             acc8 = 0.0;
             acc9 = 0.0;
@@ -3079,13 +3079,11 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             v17 = v15 + v16;
             v18 = acc18 + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] * L->tay[0][9][l];
             v19 = L->tay[n][4][l] - v18;
-            v21 = 4.5440763299219775e-05 * L->tay[n][6][l];
             v23 = 0.4092155481941839 * L->tay[n][4][l];
-            L->tay[n][12][l] = v21 + v23;
+            L->tay[n][12][l] = v23;
             v25 = acc25 + L->tay[0][5][l] * L->tay[n][12][l] + L->tay[n][5][l] * L->tay[0][12][l];
             v27 = 0.015471973456719416 * L->tay[n][4][l];
-            v29 = 1.1900419543364779e-06 * L->tay[n][6][l];
-            L->tay[n][13][l] = v27 - v29;
+            L->tay[n][13][l] = v27;
             v31 = acc31 + L->tay[0][13][l] * L->tay[n][3][l] + L->tay[n][13][l] * L->tay[0][3][l];
             v32 = v25 - v31;
             v34 = acc34 + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] * L->tay[0][5][l];
@@ -3097,10 +3095,8 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             v41 = acc41 + L->tay[0][3][l] * L->tay[n][14][l] + L->tay[n][3][l] * L->tay[0][14][l];
             v42 = v36 + v41;
             v43 = acc43 + L->tay[0][13][l] * L->tay[n][5][l] + L->tay[n][13][l] * L->tay[0][5][l];
-            v45 = 5.266025597120826e-05 * L->tay[n][6][l];
-            v46 = -v45;
             v48 = 0.3153534800671272 * L->tay[n][4][l];
-            L->tay[n][15][l] = v46 - v48;
+            L->tay[n][15][l] = -v48;
             v50 = acc50 + L->tay[0][3][l] * L->tay[n][15][l] + L->tay[n][3][l] * L->tay[0][15][l];
             v51 = v43 + v50;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
@@ -3111,7 +3107,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             L->tay[n + 1][3][l] = v32 * inv[n + 1];
             L->tay[n + 1][4][l] = v42 * inv[n + 1];
             L->tay[n + 1][5][l] = v51 * inv[n + 1];
-            L->tay[n + 1][6][l] = 0.0;
         }
     }
 }
@@ -3182,6 +3177,13 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         DUAL_SPIN_SIMD
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
             xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+        }
+    }
+
+    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+    for (i = 0; i < 6; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
             dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
@@ -3207,14 +3209,14 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < DUAL_SPIN_LANES; ++l) {
         h2[l] = L->h[l] * L->h[l];
     }
-    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+    for (i = 0; i < 6; ++i) {
         DUAL_SPIN_SIMD
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
     for (q = 0; q < (order - 1) / 2; ++q) {
-        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        for (i = 0; i < 6; ++i) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
                 L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
@@ -3223,12 +3225,16 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
     }
     for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        for (i = 0; i < 6; ++i) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
                 L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->xnew[6][l] = L->tay[1][6][l];
     }
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         DUAL_SPIN_SIMD

@@ -2303,6 +2303,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 
     /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
     for (n = 2; n < order; ++n) {
+        acc61 = tay[1][10] * tay[n - 1][23];
         acc14 = 0.0;
         acc15 = 0.0;
         acc16 = 0.0;
@@ -2318,7 +2319,6 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc47 = 0.0;
         acc49 = 0.0;
         acc56 = 0.0;
-        acc61 = 0.0;
         for (j = 1; j < n; ++j) {
             acc14 = acc14 + tay[j][25] * tay[n - j][15];
             acc15 = acc15 + tay[j][25] * tay[n - j][14];
@@ -2335,7 +2335,6 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
             acc47 = acc47 + tay[j][7] * tay[n - j][21];
             acc49 = acc49 + tay[j][9] * tay[n - j][9];
             acc56 = acc56 + tay[j][8] * tay[n - j][22];
-            acc61 = acc61 + tay[j][10] * tay[n - j][23];
         }
         tay[n][14] = acc14 * inv[n] + tay[n][2] * tay[0][15];
         tay[n][15] = -(acc15 * inv[n]) - tay[n][2] * tay[0][14];
@@ -2350,14 +2349,12 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v24 = v22 + v23;
         v25 = acc25 + tay[0][18] * tay[n][16] + tay[n][18] * tay[0][16];
         v26 = tay[n][8] - v25;
-        v27 = tay[n][10] - tay[n][8];
+        v27 = -tay[n][8];
         v29 = c[0] * tay[n][8];
-        v31 = c[1] * tay[n][10];
-        tay[n][19] = v29 + v31;
+        tay[n][19] = v29;
         v33 = acc33 + tay[0][7] * tay[n][19] + tay[n][7] * tay[0][19];
         v35 = c[2] * tay[n][8];
-        v37 = c[3] * tay[n][10];
-        tay[n][20] = v35 + v37;
+        tay[n][20] = v35;
         v39 = acc39 + tay[0][9] * tay[n][20] + tay[n][9] * tay[0][20];
         v40 = v33 + v39;
         v43 = c[4] * tay[n][7];
@@ -2375,7 +2372,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v58 = c[8] * tay[n][7];
         v59 = c[1] * tay[n][9];
         tay[n][23] = v58 - v59;
-        v61 = acc61 + tay[0][10] * tay[n][23] + tay[n][10] * tay[0][23];
+        v61 = acc61 + tay[0][10] * tay[n][23];
         v62 = v56 + v61;
         tay[n + 1][0] = tay[n][18] * inv[n + 1];
         tay[n + 1][1] = v24 * inv[n + 1];
@@ -2383,16 +2380,12 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         tay[n + 1][2] = v26 * inv[n + 1];
         tay[n + 1][25] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v27 * inv[n + 1];
-        tay[n + 1][4] = tay[n][11] * inv[n + 1];
-        tay[n + 1][5] = tay[n][12] * inv[n + 1];
-        tay[n + 1][6] = tay[n][13] * inv[n + 1];
+        tay[n + 1][4] = 0.0;
+        tay[n + 1][5] = 0.0;
+        tay[n + 1][6] = 0.0;
         tay[n + 1][7] = v40 * inv[n + 1];
         tay[n + 1][8] = v51 * inv[n + 1];
         tay[n + 1][9] = v62 * inv[n + 1];
-        tay[n + 1][10] = 0.0;
-        tay[n + 1][11] = 0.0;
-        tay[n + 1][12] = 0.0;
-        tay[n + 1][13] = 0.0;
     }
 }
 
@@ -2482,6 +2475,14 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dq = 0.0;
         for (i = 0; i < GYROSTAT_NX; ++i) {
             xmax = dmax(xmax, fabs(x[i]));
+        }
+
+        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+        for (i = 0; i < 4; ++i) {
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
+        }
+        for (i = 7; i < 10; ++i) {
             dp = dmax(dp, fabs(tay[order][i]));
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
@@ -2500,19 +2501,35 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
         h2 = h * h;
-        for (i = 0; i < GYROSTAT_NX; ++i) {
+        for (i = 0; i < 4; ++i) {
+            xnew[i] = tay[order][i];
+        }
+        for (i = 7; i < 10; ++i) {
             xnew[i] = tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
-            for (i = 0; i < GYROSTAT_NX; ++i) {
+            for (i = 0; i < 4; ++i) {
+                xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+            }
+            for (i = 7; i < 10; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-            for (i = 0; i < GYROSTAT_NX; ++i) {
+            for (i = 0; i < 4; ++i) {
+                xnew[i] = tay[1][i] + h * xnew[i];
+            }
+            for (i = 7; i < 10; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
+        xnew[4] = tay[1][4] + h * tay[2][4];
+        xnew[5] = tay[1][5] + h * tay[2][5];
+        xnew[6] = tay[1][6] + h * tay[2][6];
+        xnew[10] = tay[1][10];
+        xnew[11] = tay[1][11];
+        xnew[12] = tay[1][12];
+        xnew[13] = tay[1][13];
         for (i = 0; i < GYROSTAT_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -3282,7 +3299,8 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     for (n = 2; n < order; ++n) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            double acc14, acc15, acc16, acc17, acc19, acc20, acc21, acc22, acc23, acc25, acc33, acc39, acc47, acc49, acc56, acc61, v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v31, v33, v35, v37, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
+            double acc61, acc14, acc15, acc16, acc17, acc19, acc20, acc21, acc22, acc23, acc25, acc33, acc39, acc47, acc49, acc56, v16, v17, v18, v22, v23, v24, v25, v26, v27, v29, v33, v35, v39, v40, v43, v45, v47, v48, v49, v50, v51, v53, v54, v56, v58, v59, v61, v62;
+            acc61 = L->tay[1][10][l] * L->tay[n - 1][23][l];
             acc14 = 0.0;
             acc15 = 0.0;
             acc16 = 0.0;
@@ -3298,7 +3316,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             acc47 = 0.0;
             acc49 = 0.0;
             acc56 = 0.0;
-            acc61 = 0.0;
             j = 1;
             do {
                 acc14 = acc14 + L->tay[j][25][l] * L->tay[n - j][15][l];
@@ -3316,7 +3333,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
                 acc47 = acc47 + L->tay[j][7][l] * L->tay[n - j][21][l];
                 acc49 = acc49 + L->tay[j][9][l] * L->tay[n - j][9][l];
                 acc56 = acc56 + L->tay[j][8][l] * L->tay[n - j][22][l];
-                acc61 = acc61 + L->tay[j][10][l] * L->tay[n - j][23][l];
                 ++j;
             } while (j < n);
             L->tay[n][14][l] = acc14 * inv[n] + L->tay[n][2][l] * L->tay[0][15][l];
@@ -3332,14 +3348,12 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v24 = v22 + v23;
             v25 = acc25 + L->tay[0][18][l] * L->tay[n][16][l] + L->tay[n][18][l] * L->tay[0][16][l];
             v26 = L->tay[n][8][l] - v25;
-            v27 = L->tay[n][10][l] - L->tay[n][8][l];
+            v27 = -L->tay[n][8][l];
             v29 = c[0] * L->tay[n][8][l];
-            v31 = c[1] * L->tay[n][10][l];
-            L->tay[n][19][l] = v29 + v31;
+            L->tay[n][19][l] = v29;
             v33 = acc33 + L->tay[0][7][l] * L->tay[n][19][l] + L->tay[n][7][l] * L->tay[0][19][l];
             v35 = c[2] * L->tay[n][8][l];
-            v37 = c[3] * L->tay[n][10][l];
-            L->tay[n][20][l] = v35 + v37;
+            L->tay[n][20][l] = v35;
             v39 = acc39 + L->tay[0][9][l] * L->tay[n][20][l] + L->tay[n][9][l] * L->tay[0][20][l];
             v40 = v33 + v39;
             v43 = c[4] * L->tay[n][7][l];
@@ -3357,7 +3371,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v58 = c[8] * L->tay[n][7][l];
             v59 = c[1] * L->tay[n][9][l];
             L->tay[n][23][l] = v58 - v59;
-            v61 = acc61 + L->tay[0][10][l] * L->tay[n][23][l] + L->tay[n][10][l] * L->tay[0][23][l];
+            v61 = acc61 + L->tay[0][10][l] * L->tay[n][23][l];
             v62 = v56 + v61;
             L->tay[n + 1][0][l] = L->tay[n][18][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v24 * inv[n + 1];
@@ -3365,16 +3379,12 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             L->tay[n + 1][2][l] = v26 * inv[n + 1];
             L->tay[n + 1][25][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v27 * inv[n + 1];
-            L->tay[n + 1][4][l] = L->tay[n][11][l] * inv[n + 1];
-            L->tay[n + 1][5][l] = L->tay[n][12][l] * inv[n + 1];
-            L->tay[n + 1][6][l] = L->tay[n][13][l] * inv[n + 1];
+            L->tay[n + 1][4][l] = 0.0;
+            L->tay[n + 1][5][l] = 0.0;
+            L->tay[n + 1][6][l] = 0.0;
             L->tay[n + 1][7][l] = v40 * inv[n + 1];
             L->tay[n + 1][8][l] = v51 * inv[n + 1];
             L->tay[n + 1][9][l] = v62 * inv[n + 1];
-            L->tay[n + 1][10][l] = 0.0;
-            L->tay[n + 1][11][l] = 0.0;
-            L->tay[n + 1][12][l] = 0.0;
-            L->tay[n + 1][13][l] = 0.0;
         }
     }
 }
@@ -3444,6 +3454,20 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
             xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+        }
+    }
+
+    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+    for (i = 0; i < 4; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    for (i = 7; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
             dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
@@ -3469,14 +3493,27 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < GYROSTAT_LANES; ++l) {
         h2[l] = L->h[l] * L->h[l];
     }
-    for (i = 0; i < GYROSTAT_NX; ++i) {
+    for (i = 0; i < 4; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (i = 7; i < 10; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
     for (q = 0; q < (order - 1) / 2; ++q) {
-        for (i = 0; i < GYROSTAT_NX; ++i) {
+        for (i = 0; i < 4; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
+                        - 1][i][l] + h2[l] * L->xnew[i][l];
+            }
+        }
+        for (i = 7; i < 10; ++i) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
                 L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
@@ -3485,12 +3522,28 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
     }
     for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-        for (i = 0; i < GYROSTAT_NX; ++i) {
+        for (i = 0; i < 4; ++i) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
                 L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
+        for (i = 7; i < 10; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->xnew[4][l] = L->tay[1][4][l] + L->h[l] * L->tay[2][4][l];
+        L->xnew[5][l] = L->tay[1][5][l] + L->h[l] * L->tay[2][5][l];
+        L->xnew[6][l] = L->tay[1][6][l] + L->h[l] * L->tay[2][6][l];
+        L->xnew[10][l] = L->tay[1][10][l];
+        L->xnew[11][l] = L->tay[1][11][l];
+        L->xnew[12][l] = L->tay[1][12][l];
+        L->xnew[13][l] = L->tay[1][13][l];
     }
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD

@@ -2446,6 +2446,7 @@ contains
 
     ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
     do n = 2, order - 1
+      acc61 = tay(10, 1) * tay(23, n - 1)
       acc14 = 0.0_c_double
       acc15 = 0.0_c_double
       acc16 = 0.0_c_double
@@ -2461,7 +2462,6 @@ contains
       acc47 = 0.0_c_double
       acc49 = 0.0_c_double
       acc56 = 0.0_c_double
-      acc61 = 0.0_c_double
       do j = 1, n - 1
         acc14 = acc14 + tay(25, j) * tay(15, n - j)
         acc15 = acc15 + tay(25, j) * tay(14, n - j)
@@ -2478,7 +2478,6 @@ contains
         acc47 = acc47 + tay(7, j) * tay(21, n - j)
         acc49 = acc49 + tay(9, j) * tay(9, n - j)
         acc56 = acc56 + tay(8, j) * tay(22, n - j)
-        acc61 = acc61 + tay(10, j) * tay(23, n - j)
       end do
       tay(14, n) = acc14 * inv(n) + tay(2, n) * tay(15, 0)
       tay(15, n) = (-acc15 * inv(n)) - tay(2, n) * tay(14, 0)
@@ -2493,14 +2492,12 @@ contains
       v24 = v22 + v23
       v25 = (acc25 + tay(18, 0) * tay(16, n)) + tay(18, n) * tay(16, 0)
       v26 = tay(8, n) - v25
-      v27 = tay(10, n) - tay(8, n)
+      v27 = -tay(8, n)
       v29 = c(0) * tay(8, n)
-      v31 = c(1) * tay(10, n)
-      tay(19, n) = v29 + v31
+      tay(19, n) = v29
       v33 = (acc33 + tay(7, 0) * tay(19, n)) + tay(7, n) * tay(19, 0)
       v35 = c(2) * tay(8, n)
-      v37 = c(3) * tay(10, n)
-      tay(20, n) = v35 + v37
+      tay(20, n) = v35
       v39 = (acc39 + tay(9, 0) * tay(20, n)) + tay(9, n) * tay(20, 0)
       v40 = v33 + v39
       v43 = c(4) * tay(7, n)
@@ -2518,7 +2515,7 @@ contains
       v58 = c(8) * tay(7, n)
       v59 = c(1) * tay(9, n)
       tay(23, n) = v58 - v59
-      v61 = (acc61 + tay(10, 0) * tay(23, n)) + tay(10, n) * tay(23, 0)
+      v61 = acc61 + tay(10, 0) * tay(23, n)
       v62 = v56 + v61
       tay(0, n + 1) = tay(18, n) * inv(n + 1)
       tay(1, n + 1) = v24 * inv(n + 1)
@@ -2526,16 +2523,12 @@ contains
       tay(2, n + 1) = v26 * inv(n + 1)
       tay(25, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v27 * inv(n + 1)
-      tay(4, n + 1) = tay(11, n) * inv(n + 1)
-      tay(5, n + 1) = tay(12, n) * inv(n + 1)
-      tay(6, n + 1) = tay(13, n) * inv(n + 1)
+      tay(4, n + 1) = 0.0_c_double
+      tay(5, n + 1) = 0.0_c_double
+      tay(6, n + 1) = 0.0_c_double
       tay(7, n + 1) = v40 * inv(n + 1)
       tay(8, n + 1) = v51 * inv(n + 1)
       tay(9, n + 1) = v62 * inv(n + 1)
-      tay(10, n + 1) = 0.0_c_double
-      tay(11, n + 1) = 0.0_c_double
-      tay(12, n + 1) = 0.0_c_double
-      tay(13, n + 1) = 0.0_c_double
     end do
   end subroutine taylor_jet
 
@@ -2635,6 +2628,14 @@ contains
       dq = 0.0_c_double
       do i = 0, nx - 1
         xmax = max(xmax, abs(x(i)))
+      end do
+
+      ! a polynomial state of degree <= min_order sets no bound (its step is exact)
+      do i = 0, 4 - 1
+        dp = max(dp, abs(tay(i, order)))
+        dq = max(dq, abs(tay(i, order - 1)))
+      end do
+      do i = 7, 10 - 1
         dp = max(dp, abs(tay(i, order)))
         dq = max(dq, abs(tay(i, order - 1)))
       end do
@@ -2651,19 +2652,35 @@ contains
 
       ! x(t + h) by Horner's scheme two orders a turn, less what the last add lost
       h2 = h * h
-      do i = 0, nx - 1
+      do i = 0, 4 - 1
+        xnew(i) = tay(i, order)
+      end do
+      do i = 7, 10 - 1
         xnew(i) = tay(i, order)
       end do
       do q = 0, (order - 1) / 2 - 1
-        do i = 0, nx - 1
+        do i = 0, 4 - 1
+          xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+        end do
+        do i = 7, 10 - 1
           xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
         end do
       end do
       do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
-        do i = 0, nx - 1
+        do i = 0, 4 - 1
+          xnew(i) = tay(i, 1) + h * xnew(i)
+        end do
+        do i = 7, 10 - 1
           xnew(i) = tay(i, 1) + h * xnew(i)
         end do
       end do
+      xnew(4) = tay(4, 1) + h * tay(4, 2)
+      xnew(5) = tay(5, 1) + h * tay(5, 2)
+      xnew(6) = tay(6, 1) + h * tay(6, 2)
+      xnew(10) = tay(10, 1)
+      xnew(11) = tay(11, 1)
+      xnew(12) = tay(12, 1)
+      xnew(13) = tay(13, 1)
       do i = 0, nx - 1
         dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)

@@ -2319,18 +2319,16 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v24 = tay[n][8] - tay[n][5];
         v25 = -0.0001 * v24;
         v26 = -v25;
-        v28 = 0.035 * tay[n][6];
         v30 = 2.005 * tay[n][4];
-        v31 = v28 + v30;
+        v31 = v30;
         v33 = 301.7396875 * tay[n][3];
         v34 = v31 + v33;
         v36 = 3.15125 * tay[n][5];
         tay[n][14] = v34 - v36;
         v38 = acc38 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
         v39 = v26 + v38;
-        v40 = 0.035 * tay[n][7];
         v42 = 1.34875 * tay[n][5];
-        v43 = v40 + v42;
+        v43 = v42;
         v44 = 2.005 * tay[n][3];
         v45 = v43 + v44;
         v47 = 351.7396875 * tay[n][4];
@@ -2376,8 +2374,6 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         tay[n + 1][3] = v76 * inv[n + 1];
         tay[n + 1][4] = v83 * inv[n + 1];
         tay[n + 1][5] = v89 * inv[n + 1];
-        tay[n + 1][6] = 0.0;
-        tay[n + 1][7] = 0.0;
         tay[n + 1][8] = v93 * inv[n + 1];
     }
 }
@@ -2468,6 +2464,14 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dq = 0.0;
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
             xmax = dmax(xmax, fabs(x[i]));
+        }
+
+        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+        for (i = 0; i < 6; ++i) {
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
+        }
+        for (i = 8; i < 9; ++i) {
             dp = dmax(dp, fabs(tay[order][i]));
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
@@ -2486,19 +2490,30 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
         h2 = h * h;
-        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        for (i = 0; i < 6; ++i) {
+            xnew[i] = tay[order][i];
+        }
+        for (i = 8; i < 9; ++i) {
             xnew[i] = tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
-            for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+            for (i = 0; i < 6; ++i) {
+                xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+            }
+            for (i = 8; i < 9; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-            for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+            for (i = 0; i < 6; ++i) {
+                xnew[i] = tay[1][i] + h * xnew[i];
+            }
+            for (i = 8; i < 9; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
+        xnew[6] = tay[1][6];
+        xnew[7] = tay[1][7];
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -3310,7 +3325,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     for (n = 2; n < order; ++n) {
         RW3_ORTHOGONAL_SIMD
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-            double acc9, acc10, acc11, acc12, acc14, acc15, acc16, acc17, acc18, acc20, acc38, acc49, acc55, acc65, acc71, acc73, v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v28, v30, v31, v33, v34, v36, v38, v39, v40, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
+            double acc9, acc10, acc11, acc12, acc14, acc15, acc16, acc17, acc18, acc20, acc38, acc49, acc55, acc65, acc71, acc73, v11, v12, v13, v17, v18, v19, v20, v21, v24, v25, v26, v30, v31, v33, v34, v36, v38, v39, v42, v43, v44, v45, v47, v49, v50, v51, v55, v56, v57, v58, v59, v61, v62, v63, v65, v66, v67, v68, v71, v72, v73, v74, v75, v76, v78, v80, v81, v82, v83, v85, v86, v87, v88, v89, v93;
             acc9 = 0.0;
             acc10 = 0.0;
             acc11 = 0.0;
@@ -3363,18 +3378,16 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v24 = L->tay[n][8][l] - L->tay[n][5][l];
             v25 = -0.0001 * v24;
             v26 = -v25;
-            v28 = 0.035 * L->tay[n][6][l];
             v30 = 2.005 * L->tay[n][4][l];
-            v31 = v28 + v30;
+            v31 = v30;
             v33 = 301.7396875 * L->tay[n][3][l];
             v34 = v31 + v33;
             v36 = 3.15125 * L->tay[n][5][l];
             L->tay[n][14][l] = v34 - v36;
             v38 = acc38 + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] * L->tay[0][4][l];
             v39 = v26 + v38;
-            v40 = 0.035 * L->tay[n][7][l];
             v42 = 1.34875 * L->tay[n][5][l];
-            v43 = v40 + v42;
+            v43 = v42;
             v44 = 2.005 * L->tay[n][3][l];
             v45 = v43 + v44;
             v47 = 351.7396875 * L->tay[n][4][l];
@@ -3420,8 +3433,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             L->tay[n + 1][3][l] = v76 * inv[n + 1];
             L->tay[n + 1][4][l] = v83 * inv[n + 1];
             L->tay[n + 1][5][l] = v89 * inv[n + 1];
-            L->tay[n + 1][6][l] = 0.0;
-            L->tay[n + 1][7][l] = 0.0;
             L->tay[n + 1][8][l] = v93 * inv[n + 1];
         }
     }
@@ -3492,6 +3503,20 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         RW3_ORTHOGONAL_SIMD
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
             xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+        }
+    }
+
+    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+    for (i = 0; i < 6; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    for (i = 8; i < 9; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
             dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
@@ -3518,14 +3543,27 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         h2[l] = L->h[l] * L->h[l];
     }
-    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+    for (i = 0; i < 6; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (i = 8; i < 9; ++i) {
         RW3_ORTHOGONAL_SIMD
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
     for (q = 0; q < (order - 1) / 2; ++q) {
-        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        for (i = 0; i < 6; ++i) {
+            RW3_ORTHOGONAL_SIMD
+            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
+                        - 1][i][l] + h2[l] * L->xnew[i][l];
+            }
+        }
+        for (i = 8; i < 9; ++i) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
                 L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
@@ -3534,12 +3572,23 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
     }
     for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        for (i = 0; i < 6; ++i) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
                 L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
+        for (i = 8; i < 9; ++i) {
+            RW3_ORTHOGONAL_SIMD
+            for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+                L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    RW3_ORTHOGONAL_SIMD
+    for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+        L->xnew[6][l] = L->tay[1][6][l];
+        L->xnew[7][l] = L->tay[1][7][l];
     }
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         RW3_ORTHOGONAL_SIMD

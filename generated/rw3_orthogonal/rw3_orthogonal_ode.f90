@@ -2497,18 +2497,16 @@ contains
       v24 = tay(8, n) - tay(5, n)
       v25 = (-0.0001_c_double) * v24
       v26 = -v25
-      v28 = 0.035_c_double * tay(6, n)
       v30 = 2.005_c_double * tay(4, n)
-      v31 = v28 + v30
+      v31 = v30
       v33 = 301.7396875_c_double * tay(3, n)
       v34 = v31 + v33
       v36 = 3.15125_c_double * tay(5, n)
       tay(14, n) = v34 - v36
       v38 = (acc38 + tay(14, 0) * tay(4, n)) + tay(14, n) * tay(4, 0)
       v39 = v26 + v38
-      v40 = 0.035_c_double * tay(7, n)
       v42 = 1.34875_c_double * tay(5, n)
-      v43 = v40 + v42
+      v43 = v42
       v44 = 2.005_c_double * tay(3, n)
       v45 = v43 + v44
       v47 = 351.7396875_c_double * tay(4, n)
@@ -2554,8 +2552,6 @@ contains
       tay(3, n + 1) = v76 * inv(n + 1)
       tay(4, n + 1) = v83 * inv(n + 1)
       tay(5, n + 1) = v89 * inv(n + 1)
-      tay(6, n + 1) = 0.0_c_double
-      tay(7, n + 1) = 0.0_c_double
       tay(8, n + 1) = v93 * inv(n + 1)
     end do
   end subroutine taylor_jet
@@ -2656,6 +2652,14 @@ contains
       dq = 0.0_c_double
       do i = 0, nx - 1
         xmax = max(xmax, abs(x(i)))
+      end do
+
+      ! a polynomial state of degree <= min_order sets no bound (its step is exact)
+      do i = 0, 6 - 1
+        dp = max(dp, abs(tay(i, order)))
+        dq = max(dq, abs(tay(i, order - 1)))
+      end do
+      do i = 8, 9 - 1
         dp = max(dp, abs(tay(i, order)))
         dq = max(dq, abs(tay(i, order - 1)))
       end do
@@ -2673,19 +2677,30 @@ contains
 
       ! x(t + h) by Horner's scheme two orders a turn, less what the last add lost
       h2 = h * h
-      do i = 0, nx - 1
+      do i = 0, 6 - 1
+        xnew(i) = tay(i, order)
+      end do
+      do i = 8, 9 - 1
         xnew(i) = tay(i, order)
       end do
       do q = 0, (order - 1) / 2 - 1
-        do i = 0, nx - 1
+        do i = 0, 6 - 1
+          xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+        end do
+        do i = 8, 9 - 1
           xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
         end do
       end do
       do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
-        do i = 0, nx - 1
+        do i = 0, 6 - 1
+          xnew(i) = tay(i, 1) + h * xnew(i)
+        end do
+        do i = 8, 9 - 1
           xnew(i) = tay(i, 1) + h * xnew(i)
         end do
       end do
+      xnew(6) = tay(6, 1)
+      xnew(7) = tay(7, 1)
       do i = 0, nx - 1
         dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)

@@ -2334,6 +2334,10 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dq = 0.0;
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
             xmax = dmax(xmax, fabs(x[i]));
+        }
+
+        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+        for (i = 0; i < 8; ++i) {
             dp = dmax(dp, fabs(tay[order][i]));
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
@@ -2352,16 +2356,16 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
         h2 = h * h;
-        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        for (i = 0; i < 8; ++i) {
             xnew[i] = tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
-            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            for (i = 0; i < 8; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            for (i = 0; i < 8; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
@@ -3281,6 +3285,13 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         SPEED_CONTROLLED_SIMD
         for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
             xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+        }
+    }
+
+    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+    for (i = 0; i < 8; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
             dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
@@ -3307,14 +3318,14 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
         h2[l] = L->h[l] * L->h[l];
     }
-    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+    for (i = 0; i < 8; ++i) {
         SPEED_CONTROLLED_SIMD
         for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
     for (q = 0; q < (order - 1) / 2; ++q) {
-        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        for (i = 0; i < 8; ++i) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
                 L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
@@ -3323,7 +3334,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
     }
     for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        for (i = 0; i < 8; ++i) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
                 L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];

@@ -2486,6 +2486,10 @@ contains
       dq = 0.0_c_double
       do i = 0, nx - 1
         xmax = max(xmax, abs(x(i)))
+      end do
+
+      ! a polynomial state of degree <= min_order sets no bound (its step is exact)
+      do i = 0, 8 - 1
         dp = max(dp, abs(tay(i, order)))
         dq = max(dq, abs(tay(i, order - 1)))
       end do
@@ -2503,16 +2507,16 @@ contains
 
       ! x(t + h) by Horner's scheme two orders a turn, less what the last add lost
       h2 = h * h
-      do i = 0, nx - 1
+      do i = 0, 8 - 1
         xnew(i) = tay(i, order)
       end do
       do q = 0, (order - 1) / 2 - 1
-        do i = 0, nx - 1
+        do i = 0, 8 - 1
           xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
         end do
       end do
       do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
-        do i = 0, nx - 1
+        do i = 0, 8 - 1
           xnew(i) = tay(i, 1) + h * xnew(i)
         end do
       end do

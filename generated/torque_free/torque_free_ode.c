@@ -2046,6 +2046,8 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 
     /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
     for (n = 2; n < order; ++n) {
+        acc25 = tay[1][12] * tay[n - 1][5];
+        acc27 = tay[1][12] * tay[n - 1][3];
         acc7 = 0.0;
         acc8 = 0.0;
         acc9 = 0.0;
@@ -2056,8 +2058,6 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         acc15 = 0.0;
         acc16 = 0.0;
         acc18 = 0.0;
-        acc25 = 0.0;
-        acc27 = 0.0;
         for (j = 1; j < n; ++j) {
             acc7 = acc7 + tay[j][14] * tay[n - j][8];
             acc8 = acc8 + tay[j][14] * tay[n - j][7];
@@ -2069,8 +2069,6 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
             acc15 = acc15 + tay[j][7] * tay[n - j][5];
             acc16 = acc16 + tay[j][8] * tay[n - j][3];
             acc18 = acc18 + tay[j][11] * tay[n - j][9];
-            acc25 = acc25 + tay[j][12] * tay[n - j][5];
-            acc27 = acc27 + tay[j][12] * tay[n - j][3];
         }
         tay[n][7] = acc7 * inv[n] + tay[n][2] * tay[0][8];
         tay[n][8] = -(acc8 * inv[n]) - tay[n][2] * tay[0][7];
@@ -2084,12 +2082,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v16 = acc16 + tay[0][8] * tay[n][3] + tay[n][8] * tay[0][3];
         v17 = v15 + v16;
         v18 = acc18 + tay[0][11] * tay[n][9] + tay[n][11] * tay[0][9];
-        v19 = tay[n][4] - v18;
-        v21 = 0.3114754098360656 * tay[n][4];
-        v23 = 0.02622950819672131 * tay[n][6];
-        tay[n][12] = v21 + v23;
-        v25 = acc25 + tay[0][12] * tay[n][5] + tay[n][12] * tay[0][5];
-        v27 = acc27 + tay[0][12] * tay[n][3] + tay[n][12] * tay[0][3];
+        v19 = -v18;
+        v25 = acc25 + tay[0][12] * tay[n][5];
+        v27 = acc27 + tay[0][12] * tay[n][3];
         v28 = -v27;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
         tay[n + 1][1] = v17 * inv[n + 1];
@@ -2097,9 +2092,7 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         tay[n + 1][2] = v19 * inv[n + 1];
         tay[n + 1][14] = (double)(n + 1) * tay[n + 1][2];
         tay[n + 1][3] = v25 * inv[n + 1];
-        tay[n + 1][4] = 0.0;
         tay[n + 1][5] = v28 * inv[n + 1];
-        tay[n + 1][6] = 0.0;
     }
 }
 
@@ -2189,6 +2182,14 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dq = 0.0;
         for (i = 0; i < TORQUE_FREE_NX; ++i) {
             xmax = dmax(xmax, fabs(x[i]));
+        }
+
+        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+        for (i = 0; i < 4; ++i) {
+            dp = dmax(dp, fabs(tay[order][i]));
+            dq = dmax(dq, fabs(tay[order - 1][i]));
+        }
+        for (i = 5; i < 6; ++i) {
             dp = dmax(dp, fabs(tay[order][i]));
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
@@ -2207,19 +2208,30 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
         h2 = h * h;
-        for (i = 0; i < TORQUE_FREE_NX; ++i) {
+        for (i = 0; i < 4; ++i) {
+            xnew[i] = tay[order][i];
+        }
+        for (i = 5; i < 6; ++i) {
             xnew[i] = tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
-            for (i = 0; i < TORQUE_FREE_NX; ++i) {
+            for (i = 0; i < 4; ++i) {
+                xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+            }
+            for (i = 5; i < 6; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-            for (i = 0; i < TORQUE_FREE_NX; ++i) {
+            for (i = 0; i < 4; ++i) {
+                xnew[i] = tay[1][i] + h * xnew[i];
+            }
+            for (i = 5; i < 6; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
+        xnew[4] = tay[1][4];
+        xnew[6] = tay[1][6];
         for (i = 0; i < TORQUE_FREE_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -2917,7 +2929,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
     for (n = 2; n < order; ++n) {
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-            double acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc27, v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v28;
+            double acc25, acc27, acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, v9, v10, v11, v15, v16, v17, v18, v19, v25, v27, v28;
+            acc25 = L->tay[1][12][l] * L->tay[n - 1][5][l];
+            acc27 = L->tay[1][12][l] * L->tay[n - 1][3][l];
             acc7 = 0.0;
             acc8 = 0.0;
             acc9 = 0.0;
@@ -2928,8 +2942,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             acc15 = 0.0;
             acc16 = 0.0;
             acc18 = 0.0;
-            acc25 = 0.0;
-            acc27 = 0.0;
             j = 1;
             do {
                 acc7 = acc7 + L->tay[j][14][l] * L->tay[n - j][8][l];
@@ -2942,8 +2954,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
                 acc15 = acc15 + L->tay[j][7][l] * L->tay[n - j][5][l];
                 acc16 = acc16 + L->tay[j][8][l] * L->tay[n - j][3][l];
                 acc18 = acc18 + L->tay[j][11][l] * L->tay[n - j][9][l];
-                acc25 = acc25 + L->tay[j][12][l] * L->tay[n - j][5][l];
-                acc27 = acc27 + L->tay[j][12][l] * L->tay[n - j][3][l];
                 ++j;
             } while (j < n);
             L->tay[n][7][l] = acc7 * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
@@ -2958,12 +2968,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             v16 = acc16 + L->tay[0][8][l] * L->tay[n][3][l] + L->tay[n][8][l] * L->tay[0][3][l];
             v17 = v15 + v16;
             v18 = acc18 + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] * L->tay[0][9][l];
-            v19 = L->tay[n][4][l] - v18;
-            v21 = 0.3114754098360656 * L->tay[n][4][l];
-            v23 = 0.02622950819672131 * L->tay[n][6][l];
-            L->tay[n][12][l] = v21 + v23;
-            v25 = acc25 + L->tay[0][12][l] * L->tay[n][5][l] + L->tay[n][12][l] * L->tay[0][5][l];
-            v27 = acc27 + L->tay[0][12][l] * L->tay[n][3][l] + L->tay[n][12][l] * L->tay[0][3][l];
+            v19 = -v18;
+            v25 = acc25 + L->tay[0][12][l] * L->tay[n][5][l];
+            v27 = acc27 + L->tay[0][12][l] * L->tay[n][3][l];
             v28 = -v27;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v17 * inv[n + 1];
@@ -2971,9 +2978,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             L->tay[n + 1][2][l] = v19 * inv[n + 1];
             L->tay[n + 1][14][l] = (double)(n + 1) * L->tay[n + 1][2][l];
             L->tay[n + 1][3][l] = v25 * inv[n + 1];
-            L->tay[n + 1][4][l] = 0.0;
             L->tay[n + 1][5][l] = v28 * inv[n + 1];
-            L->tay[n + 1][6][l] = 0.0;
         }
     }
 }
@@ -3044,6 +3049,20 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
             xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+        }
+    }
+
+    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+    for (i = 0; i < 4; ++i) {
+        TORQUE_FREE_SIMD
+        for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
+            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+        }
+    }
+    for (i = 5; i < 6; ++i) {
+        TORQUE_FREE_SIMD
+        for (l = 0; l < TORQUE_FREE_LANES; ++l) {
             dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
@@ -3069,14 +3088,27 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < TORQUE_FREE_LANES; ++l) {
         h2[l] = L->h[l] * L->h[l];
     }
-    for (i = 0; i < TORQUE_FREE_NX; ++i) {
+    for (i = 0; i < 4; ++i) {
+        TORQUE_FREE_SIMD
+        for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+        }
+    }
+    for (i = 5; i < 6; ++i) {
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
     for (q = 0; q < (order - 1) / 2; ++q) {
-        for (i = 0; i < TORQUE_FREE_NX; ++i) {
+        for (i = 0; i < 4; ++i) {
+            TORQUE_FREE_SIMD
+            for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
+                        - 1][i][l] + h2[l] * L->xnew[i][l];
+            }
+        }
+        for (i = 5; i < 6; ++i) {
             TORQUE_FREE_SIMD
             for (l = 0; l < TORQUE_FREE_LANES; ++l) {
                 L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
@@ -3085,12 +3117,23 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
     }
     for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-        for (i = 0; i < TORQUE_FREE_NX; ++i) {
+        for (i = 0; i < 4; ++i) {
             TORQUE_FREE_SIMD
             for (l = 0; l < TORQUE_FREE_LANES; ++l) {
                 L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
+        for (i = 5; i < 6; ++i) {
+            TORQUE_FREE_SIMD
+            for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+                L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
+            }
+        }
+    }
+    TORQUE_FREE_SIMD
+    for (l = 0; l < TORQUE_FREE_LANES; ++l) {
+        L->xnew[4][l] = L->tay[1][4][l];
+        L->xnew[6][l] = L->tay[1][6][l];
     }
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
         TORQUE_FREE_SIMD

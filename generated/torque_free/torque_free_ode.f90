@@ -2181,6 +2181,8 @@ contains
 
     ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
     do n = 2, order - 1
+      acc25 = tay(12, 1) * tay(5, n - 1)
+      acc27 = tay(12, 1) * tay(3, n - 1)
       acc7 = 0.0_c_double
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
@@ -2191,8 +2193,6 @@ contains
       acc15 = 0.0_c_double
       acc16 = 0.0_c_double
       acc18 = 0.0_c_double
-      acc25 = 0.0_c_double
-      acc27 = 0.0_c_double
       do j = 1, n - 1
         acc7 = acc7 + tay(14, j) * tay(8, n - j)
         acc8 = acc8 + tay(14, j) * tay(7, n - j)
@@ -2204,8 +2204,6 @@ contains
         acc15 = acc15 + tay(7, j) * tay(5, n - j)
         acc16 = acc16 + tay(8, j) * tay(3, n - j)
         acc18 = acc18 + tay(11, j) * tay(9, n - j)
-        acc25 = acc25 + tay(12, j) * tay(5, n - j)
-        acc27 = acc27 + tay(12, j) * tay(3, n - j)
       end do
       tay(7, n) = acc7 * inv(n) + tay(2, n) * tay(8, 0)
       tay(8, n) = (-acc8 * inv(n)) - tay(2, n) * tay(7, 0)
@@ -2219,12 +2217,9 @@ contains
       v16 = (acc16 + tay(8, 0) * tay(3, n)) + tay(8, n) * tay(3, 0)
       v17 = v15 + v16
       v18 = (acc18 + tay(11, 0) * tay(9, n)) + tay(11, n) * tay(9, 0)
-      v19 = tay(4, n) - v18
-      v21 = 0.3114754098360656_c_double * tay(4, n)
-      v23 = 0.02622950819672131_c_double * tay(6, n)
-      tay(12, n) = v21 + v23
-      v25 = (acc25 + tay(12, 0) * tay(5, n)) + tay(12, n) * tay(5, 0)
-      v27 = (acc27 + tay(12, 0) * tay(3, n)) + tay(12, n) * tay(3, 0)
+      v19 = -v18
+      v25 = acc25 + tay(12, 0) * tay(5, n)
+      v27 = acc27 + tay(12, 0) * tay(3, n)
       v28 = -v27
       tay(0, n + 1) = tay(11, n) * inv(n + 1)
       tay(1, n + 1) = v17 * inv(n + 1)
@@ -2232,9 +2227,7 @@ contains
       tay(2, n + 1) = v19 * inv(n + 1)
       tay(14, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
       tay(3, n + 1) = v25 * inv(n + 1)
-      tay(4, n + 1) = 0.0_c_double
       tay(5, n + 1) = v28 * inv(n + 1)
-      tay(6, n + 1) = 0.0_c_double
     end do
   end subroutine taylor_jet
 
@@ -2334,6 +2327,14 @@ contains
       dq = 0.0_c_double
       do i = 0, nx - 1
         xmax = max(xmax, abs(x(i)))
+      end do
+
+      ! a polynomial state of degree <= min_order sets no bound (its step is exact)
+      do i = 0, 4 - 1
+        dp = max(dp, abs(tay(i, order)))
+        dq = max(dq, abs(tay(i, order - 1)))
+      end do
+      do i = 5, 6 - 1
         dp = max(dp, abs(tay(i, order)))
         dq = max(dq, abs(tay(i, order - 1)))
       end do
@@ -2350,19 +2351,30 @@ contains
 
       ! x(t + h) by Horner's scheme two orders a turn, less what the last add lost
       h2 = h * h
-      do i = 0, nx - 1
+      do i = 0, 4 - 1
+        xnew(i) = tay(i, order)
+      end do
+      do i = 5, 6 - 1
         xnew(i) = tay(i, order)
       end do
       do q = 0, (order - 1) / 2 - 1
-        do i = 0, nx - 1
+        do i = 0, 4 - 1
+          xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+        end do
+        do i = 5, 6 - 1
           xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
         end do
       end do
       do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
-        do i = 0, nx - 1
+        do i = 0, 4 - 1
+          xnew(i) = tay(i, 1) + h * xnew(i)
+        end do
+        do i = 5, 6 - 1
           xnew(i) = tay(i, 1) + h * xnew(i)
         end do
       end do
+      xnew(4) = tay(4, 1)
+      xnew(6) = tay(6, 1)
       do i = 0, nx - 1
         dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)

@@ -2182,14 +2182,12 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v18 = v16 + v17;
         v19 = acc19 + tay[0][12] * tay[n][10] + tay[n][12] * tay[0][10];
         v20 = tay[n][5] - v19;
-        v21 = tay[n][7] - tay[n][5];
+        v21 = -tay[n][5];
         v23 = 0.3499793829482495 * tay[n][5];
-        v25 = 0.0007488716786310489 * tay[n][7];
-        tay[n][13] = v23 + v25;
+        tay[n][13] = v23;
         v27 = acc27 + tay[0][6] * tay[n][13] + tay[n][6] * tay[0][13];
         v29 = 0.014646230145692387 * tay[n][5];
-        v31 = 1.6873537034207817e-05 * tay[n][7];
-        tay[n][14] = v29 - v31;
+        tay[n][14] = v29;
         v33 = acc33 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
         v34 = v27 - v33;
         v37 = acc37 + tay[0][4] * tay[n][4] + tay[n][4] * tay[0][4];
@@ -2202,10 +2200,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v45 = acc45 + tay[0][15] * tay[n][6] + tay[n][15] * tay[0][6];
         v46 = v42 - v45;
         v47 = acc47 + tay[0][14] * tay[n][6] + tay[n][14] * tay[0][6];
-        v49 = 0.0008211868373490824 * tay[n][7];
-        v50 = -v49;
         v52 = 0.2872098251809964 * tay[n][5];
-        tay[n][16] = v50 - v52;
+        tay[n][16] = -v52;
         v54 = acc54 + tay[0][4] * tay[n][16] + tay[n][4] * tay[0][16];
         v55 = v47 + v54;
         tay[n + 1][0] = tay[n][12] * inv[n + 1];
@@ -2217,7 +2213,6 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         tay[n + 1][4] = v34 * inv[n + 1];
         tay[n + 1][5] = v46 * inv[n + 1];
         tay[n + 1][6] = v55 * inv[n + 1];
-        tay[n + 1][7] = 0.0;
     }
 }
 
@@ -2307,6 +2302,10 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dq = 0.0;
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             xmax = dmax(xmax, fabs(x[i]));
+        }
+
+        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+        for (i = 0; i < 7; ++i) {
             dp = dmax(dp, fabs(tay[order][i]));
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
@@ -2325,19 +2324,20 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
         h2 = h * h;
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        for (i = 0; i < 7; ++i) {
             xnew[i] = tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            for (i = 0; i < 7; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            for (i = 0; i < 7; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
             }
         }
+        xnew[7] = tay[1][7];
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -3081,7 +3081,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     for (n = 2; n < order; ++n) {
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            double acc8, acc9, acc10, acc11, acc13, acc14, acc15, acc16, acc17, acc19, acc27, acc33, acc37, acc40, acc45, acc47, acc54, v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v37, v38, v39, v40, v41, v42, v45, v46, v47, v49, v50, v52, v54, v55;
+            double acc8, acc9, acc10, acc11, acc13, acc14, acc15, acc16, acc17, acc19, acc27, acc33, acc37, acc40, acc45, acc47, acc54, v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v27, v29, v33, v34, v37, v38, v39, v40, v41, v42, v45, v46, v47, v52, v54, v55;
             acc8 = 0.0;
             acc9 = 0.0;
             acc10 = 0.0;
@@ -3133,14 +3133,12 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v18 = v16 + v17;
             v19 = acc19 + L->tay[0][12][l] * L->tay[n][10][l] + L->tay[n][12][l] * L->tay[0][10][l];
             v20 = L->tay[n][5][l] - v19;
-            v21 = L->tay[n][7][l] - L->tay[n][5][l];
+            v21 = -L->tay[n][5][l];
             v23 = 0.3499793829482495 * L->tay[n][5][l];
-            v25 = 0.0007488716786310489 * L->tay[n][7][l];
-            L->tay[n][13][l] = v23 + v25;
+            L->tay[n][13][l] = v23;
             v27 = acc27 + L->tay[0][6][l] * L->tay[n][13][l] + L->tay[n][6][l] * L->tay[0][13][l];
             v29 = 0.014646230145692387 * L->tay[n][5][l];
-            v31 = 1.6873537034207817e-05 * L->tay[n][7][l];
-            L->tay[n][14][l] = v29 - v31;
+            L->tay[n][14][l] = v29;
             v33 = acc33 + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] * L->tay[0][4][l];
             v34 = v27 - v33;
             v37 = acc37 + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] * L->tay[0][4][l];
@@ -3153,10 +3151,8 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v45 = acc45 + L->tay[0][15][l] * L->tay[n][6][l] + L->tay[n][15][l] * L->tay[0][6][l];
             v46 = v42 - v45;
             v47 = acc47 + L->tay[0][14][l] * L->tay[n][6][l] + L->tay[n][14][l] * L->tay[0][6][l];
-            v49 = 0.0008211868373490824 * L->tay[n][7][l];
-            v50 = -v49;
             v52 = 0.2872098251809964 * L->tay[n][5][l];
-            L->tay[n][16][l] = v50 - v52;
+            L->tay[n][16][l] = -v52;
             v54 = acc54 + L->tay[0][4][l] * L->tay[n][16][l] + L->tay[n][4][l] * L->tay[0][16][l];
             v55 = v47 + v54;
             L->tay[n + 1][0][l] = L->tay[n][12][l] * inv[n + 1];
@@ -3168,7 +3164,6 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             L->tay[n + 1][4][l] = v34 * inv[n + 1];
             L->tay[n + 1][5][l] = v46 * inv[n + 1];
             L->tay[n + 1][6][l] = v55 * inv[n + 1];
-            L->tay[n + 1][7][l] = 0.0;
         }
     }
 }
@@ -3238,6 +3233,13 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
             xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+        }
+    }
+
+    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
+    for (i = 0; i < 7; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
             dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
             dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
         }
@@ -3264,14 +3266,14 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         h2[l] = L->h[l] * L->h[l];
     }
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+    for (i = 0; i < 7; ++i) {
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
             L->xnew[i][l] = L->tay[order][i][l];
         }
     }
     for (q = 0; q < (order - 1) / 2; ++q) {
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        for (i = 0; i < 7; ++i) {
             WHEEL_SPINUP_SIMD
             for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
                 L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
@@ -3280,12 +3282,16 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
     }
     for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        for (i = 0; i < 7; ++i) {
             WHEEL_SPINUP_SIMD
             for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
                 L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
             }
         }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->xnew[7][l] = L->tay[1][7][l];
     }
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
         WHEEL_SPINUP_SIMD

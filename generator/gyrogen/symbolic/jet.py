@@ -17,6 +17,7 @@ method away from such scenes first (gyrogen.scene.rules).
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from typing import Literal
@@ -28,6 +29,9 @@ from gyrogen.symbolic.optimize import Block
 
 Op = Literal["x", "c", "num", "add", "sub", "neg", "mul", "div", "sin", "cos"]
 CONSTANT = re.compile(r"c(\d+)")
+DEGREE_CAP = 64
+"""A degree past this is taken as none (a polynomial of such degree is no
+shorter than a Taylor series of the highest order)."""
 
 
 class NotExpandable(GyrogenError):
@@ -60,6 +64,38 @@ class Jet:
         """The nodes whose order-k coefficient sums over lower orders (a
         product or quotient of two varying nodes, sin, cos)."""
         return [n for n, node in enumerate(self.nodes) if self.convolves(node)]
+
+    def degrees(self) -> tuple[float, ...]:
+        """Each node's degree as a polynomial in t along any trajectory
+        (math.inf where it is none): a constant's 0, a sum's the larger, a
+        product's the sum, a quotient's the dividend's by a constant, a sine's
+        0 of a constant; a state's one more than its derivative's, the least
+        such (a state whose derivative is constant: 1). Past DEGREE_CAP, inf."""
+        states = [0.0] * self.nx
+        while True:
+            deg = self._degrees(states)
+            grown = [d if d <= DEGREE_CAP else math.inf for d in (deg[f] + 1 for f in self.outputs)]
+            if grown == states:
+                return deg
+            states = grown
+
+    def _degrees(self, states: list[float]) -> tuple[float, ...]:
+        deg: list[float] = []
+        for node in self.nodes:
+            a = [deg[i] for i in node.args]
+            if node.op == "x":
+                deg.append(states[node.index])
+            elif node.const:
+                deg.append(0.0)
+            elif node.op in ("add", "sub", "neg"):
+                deg.append(max(a))
+            elif node.op == "mul":
+                deg.append(a[0] + a[1])
+            elif node.op == "div":
+                deg.append(a[0] if a[1] == 0 else math.inf)
+            else:  # sin, cos of a varying argument
+                deg.append(math.inf)
+        return tuple(deg)
 
     def convolves(self, node: Node) -> bool:
         if node.const or node.op in ("x", "add", "sub", "neg"):

@@ -131,6 +131,20 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
     def one(i: Var) -> E:
         return T[Int(1), i] + h * xnew[i]
 
+    series = m.tableau
+    assert isinstance(series, Series)
+    deg = jet.degrees()
+    exact = [n for n in range(jet.nx) if deg[n] <= series.min_order]
+
+    def series_states(*body: S) -> list[S]:
+        """body for each state that is not a polynomial of degree min_order
+        or less, in loops over their runs of indices."""
+        return [For("i", Int(b), body, start=Int(a)) for a, b in _runs(jet.nx, exact)]
+
+    def polynomial(n: int) -> E:
+        """xnew of a state of degree <= min_order: exact at any order and h."""
+        return T[Int(1), Int(n)] + h * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
+
     spent = cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps"))
     stop = sel(
         fn("step_underflow", h, t),
@@ -146,14 +160,11 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(xmax, 0.0),
         assign(dp, 0.0),
         assign(dq, 0.0),
-        For(
-            "i",
-            NX,
-            (
-                assign(xmax, fn("max", xmax, fn("abs", x[i]))),
-                assign(dp, fn("max", dp, fn("abs", T[order, i]))),
-                assign(dq, fn("max", dq, fn("abs", T[order - 1, i]))),
-            ),
+        For("i", NX, (assign(xmax, fn("max", xmax, fn("abs", x[i]))),)),
+        Comment("a polynomial state of degree <= min_order sets no bound (its step is exact)"),
+        *series_states(
+            assign(dp, fn("max", dp, fn("abs", T[order, i]))),
+            assign(dq, fn("max", dq, fn("abs", T[order - 1, i]))),
         ),
         assign(xmax, fn("max", Var("scale"), xmax), "the absolute and relative modes in one"),
         assign(
@@ -175,9 +186,10 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(run, cmp(cd, "<", 0)),
         Comment("x(t + h) by Horner's scheme two orders a turn, less what the last add lost"),
         assign(h2, h * h),
-        For("i", NX, (assign(xnew[i], T[order, i]),)),
-        For("q", pairs, (For("i", NX, (assign(xnew[i], two(i)),)),)),
-        For("q", order - 1 - Int(2) * pairs, (For("i", NX, (assign(xnew[i], one(i)),)),)),
+        *series_states(assign(xnew[i], T[order, i])),
+        For("q", pairs, tuple(series_states(assign(xnew[i], two(i))))),
+        For("q", order - 1 - Int(2) * pairs, tuple(series_states(assign(xnew[i], one(i))))),
+        *(assign(xnew[Int(n)], polynomial(n)) for n in exact),
         For("i", NX, (assign(dx[i], h * xnew[i] - comp[i]), assign(xnew[i], x[i] + dx[i]))),
         assign(nonfinite, Bool(False)),
         For("i", NX, (assign(nonfinite, or_(nonfinite, not_(fn("finite", xnew[i])))),)),
@@ -203,6 +215,17 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         If(ok, tuple(accepted(quaternion))),
     ]
     return body
+
+
+def _runs(n: int, left_out: list[int]) -> list[tuple[int, int]]:
+    """The runs [a, b) of 0 .. n-1 without left_out."""
+    out: list[tuple[int, int]] = []
+    for k in (k for k in range(n) if k not in left_out):
+        if out and out[-1][1] == k:
+            out[-1] = (out[-1][0], k + 1)
+        else:
+            out.append((k, k + 1))
+    return out
 
 
 def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:

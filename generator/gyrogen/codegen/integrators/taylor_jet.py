@@ -41,7 +41,9 @@ from gyrogen.codegen.ir.nodes import (
     S,
     Var,
     assign,
+    cmp,
     fn,
+    sel,
 )
 from gyrogen.methods import Method
 from gyrogen.symbolic.jet import Jet, Node
@@ -54,6 +56,29 @@ order = Var("order")
 def succ(e: E) -> E:
     """e + 1, folded for a number."""
     return Int(e.value + 1) if isinstance(e, Int) else e + Int(1)
+
+
+ZERO = Num(0.0)
+FIXED_PAST = 1
+"""A node of degree at most this (a polynomial in t: Jet.degrees) is 0 at
+every order the orders loop computes (k >= 2): it is not computed there, a
+read of it is 0, and a convolution with it has one term."""
+
+
+def _add(a: E, b: E) -> E:
+    return b if a == ZERO else a if b == ZERO else a + b
+
+
+def _sub(a: E, b: E) -> E:
+    return a if b == ZERO else -b if a == ZERO else a - b
+
+
+def _mul(a: E, b: E) -> E:
+    return ZERO if ZERO in (a, b) else a * b
+
+
+def _neg(a: E) -> E:
+    return ZERO if a == ZERO else -a
 
 
 def kept(jet: Jet) -> list[int]:
@@ -94,13 +119,23 @@ class _Printer:
         self.jet, self.k = jet, k
         self.row = {n: r for r, n in enumerate(kept(jet))}
         self.scaled = {a: len(self.row) + r for r, a in enumerate(arguments(jet))}
+        self.deg = jet.degrees()
+        self.low = k.value if isinstance(k, Int) else 2
+        """The least order k stands for: the orders loop starts at 2."""
+
+    def fixed(self, n: int) -> bool:
+        """Node n is 0 at every order of the orders loop (not computed there)."""
+        return self.low >= 2 and self.deg[n] <= FIXED_PAST
 
     def set(self, n: int, order_: E, value: E) -> list[S]:
         """Node n's coefficient of order_ = value; for a trigonometric
-        argument also order_ times it, which the convolutions read."""
-        out: list[S] = [assign(self.at(n, order_), value)]
+        argument also order_ times it, which the convolutions read. Nothing
+        for a fixed node in the orders loop (never read there)."""
+        if not isinstance(order_, Int) and self.fixed(n):
+            return []
+        out: list[S] = [assign(self.target(n, order_), value)]
         if n in self.scaled:
-            times: E = self.at(n, order_)
+            times: E = self.target(n, order_)
             if order_ != Int(1):
                 num = Num(float(order_.value)) if isinstance(order_, Int) else fn("real", order_)
                 times = num * times
@@ -116,13 +151,25 @@ class _Printer:
             return c[node.index]
         return self.at(n, Int(0))
 
-    def at(self, n: int, order_: E) -> At | Var:
+    def at(self, n: int, order_: E) -> E:
         """Node n's coefficient of order_: a stored one, or the value of
-        the order being computed (of order 0 or k only)."""
+        the order being computed (of order 0 or k only); 0 past its degree."""
+        return ZERO if self._low(order_) > self.deg[n] else self.target(n, order_)
+
+    def target(self, n: int, order_: E) -> At | Var:
+        """Where node n's coefficient of order_ is (stored, or a value of its order)."""
         if n in self.row:
             return T[order_, Int(self.row[n])]
         assert order_ in (self.k, Int(0)), f"node {n} is not kept, yet read at order {order_}"
         return Var(f"v{n}")
+
+    def _low(self, order_: E) -> float:
+        """The least value order_ takes, where it is known (else 0)."""
+        if isinstance(order_, Int):
+            return order_.value
+        if order_ == self.k:
+            return self.low
+        return self.low + 1 if order_ == succ(self.k) else 0
 
     def temporaries(self) -> list[int]:
         """The nodes computed and not stored."""
@@ -150,17 +197,37 @@ class _Printer:
         """add, sub, neg at order k >= 1: the varying operands' order k."""
         a, k = node.args[0], self.k
         if node.op == "neg":
-            return -self.at(a, k)
+            return _neg(self.at(a, k))
         b = node.args[1]
         if not self.varying(a):
-            return self.at(b, k) if node.op == "add" else -self.at(b, k)
+            return self.at(b, k) if node.op == "add" else _neg(self.at(b, k))
         if not self.varying(b):
             return self.at(a, k)
-        return self.at(a, k) + self.at(b, k) if node.op == "add" else self.at(a, k) - self.at(b, k)
+        return (_add if node.op == "add" else _sub)(self.at(a, k), self.at(b, k))
 
-    def term(self, n: int, node: Node, jj: E) -> E:
+    def operands(self, n: int) -> tuple[int, int]:
+        """A convolution's two factors, read at orders j and k - j."""
+        node = self.jet.nodes[n]
+        if node.op == "mul":
+            return node.args[0], node.args[1]
+        if node.op == "div":
+            return node.args[1], n
+        return node.args[0], node.index
+
+    def single(self, n: int) -> E | None:
+        """A convolution's sum when one factor is fixed (1 <= j < k has one
+        term: j = 1, or k - j = 1), else None."""
+        first, second = (self.deg[f] <= FIXED_PAST for f in self.operands(n))
+        k = self.k
+        if first and second:  # a product of two lines: a[1] b[1] at k = 2 only
+            return sel(cmp(k, "==", Int(2)), self.term(n, Int(1)), ZERO)
+        if first:
+            return self.term(n, Int(1))
+        return self.term(n, k - Int(1)) if second else None
+
+    def term(self, n: int, jj: E) -> E:
         """A convolution's term jj (1 <= jj < k), which reads orders below k."""
-        kj = self.k - jj
+        node, kj = self.jet.nodes[n], self.k - jj
         if node.op == "mul":
             a, b = node.args
             return self.at(a, jj) * self.at(b, kj)
@@ -178,24 +245,26 @@ class _Printer:
             return self.linear(node)
         if node.op in ("sin", "cos"):
             a, partner = node.args[0], self.at(node.index, Int(0))
-            head = self.at(a, k) * partner
+            head = _mul(self.at(a, k), partner)
             if node.op == "sin":  # (acc + k a[k] c[0]) / k
-                return head if acc is None else acc * Var("inv")[k] + head
-            return -head if acc is None else -(acc * Var("inv")[k]) - head
+                return head if acc is None else _add(acc * Var("inv")[k], head)
+            return _neg(head) if acc is None else _sub(-(acc * Var("inv")[k]), head)
         a, b = node.args
         if node.op == "mul":
             if not self.varying(a):
-                return self.zero(a) * self.at(b, k)
+                return _mul(self.zero(a), self.at(b, k))
             if not self.varying(b):
-                return self.at(a, k) * self.zero(b)
-            head = self.at(a, Int(0)) * self.at(b, k)
-            return (head if acc is None else acc + head) + self.at(a, k) * self.at(b, Int(0))
+                return _mul(self.at(a, k), self.zero(b))
+            head = _mul(self.at(a, Int(0)), self.at(b, k))
+            return _add(
+                head if acc is None else _add(acc, head), _mul(self.at(a, k), self.at(b, Int(0)))
+            )
         if not self.varying(b):
-            return self.at(a, k) / self.zero(b)
+            return self.at(a, k) / self.zero(b) if self.at(a, k) != ZERO else ZERO
         # (a[k] - acc - b[k] u[0]) / b[0], with 1/b[0] and u[0]/b[0] from order 0
-        head = self.at(b, k) * Var(f"ub{n}")
-        known = head if acc is None else acc * Var(f"ib{n}") + head
-        return self.at(a, k) * Var(f"ib{n}") - known if self.varying(a) else -known
+        head = _mul(self.at(b, k), Var(f"ub{n}"))
+        known = head if acc is None else _add(acc * Var(f"ib{n}"), head)
+        return _sub(_mul(self.at(a, k), Var(f"ib{n}")), known) if self.varying(a) else _neg(known)
 
     def order_k(self) -> list[S]:
         """Every varying node at order k, then the states' order k+1."""
@@ -203,11 +272,11 @@ class _Printer:
         out: list[S] = [
             s
             for n in range(jet.nx, len(jet.nodes))
-            if not jet.nodes[n].const
+            if not jet.nodes[n].const and not self.fixed(n)
             for s in self.set(n, k, self.finish(n, jet.nodes[n]))
         ]
         for n, f in enumerate(jet.outputs):
-            value = self.at(f, k) * Var("inv")[succ(k)] if self.varying(f) else Num(0.0)
+            value = _mul(self.at(f, k), Var("inv")[succ(k)]) if self.varying(f) else ZERO
             out += self.set(n, succ(k), value)
         return out
 
@@ -228,12 +297,15 @@ def reads_constants(jet: Jet) -> bool:
 def _lower_orders(p: _Printer) -> list[S]:
     """The convolutions' terms j = 1 .. k-1 (k >= 2: one turn at least)."""
     jet = p.jet
-    conv = jet.convolutions()
-    if not conv:
-        return []
-    sums = tuple(assign(Var(f"acc{n}"), Var(f"acc{n}") + p.term(n, jet.nodes[n], j)) for n in conv)
-    zero: list[S] = [assign(Var(f"acc{n}"), 0.0) for n in conv]
-    return [*zero, For("j", p.k, sums, start=Int(1), inner=True)]
+    conv = [n for n in jet.convolutions() if not p.fixed(n)]
+    singles = {n: e for n in conv if (e := p.single(n)) is not None}
+    looped = [n for n in conv if n not in singles]
+    out: list[S] = [assign(Var(f"acc{n}"), e) for n, e in singles.items()]
+    if looped:
+        sums = tuple(assign(Var(f"acc{n}"), Var(f"acc{n}") + p.term(n, j)) for n in looped)
+        out += [assign(Var(f"acc{n}"), 0.0) for n in looped]
+        out.append(For("j", p.k, sums, start=Int(1), inner=True))
+    return out
 
 
 def jet_function(series: Series, jet: Jet) -> Func:
@@ -243,7 +315,7 @@ def jet_function(series: Series, jet: Jet) -> Func:
     body: list[S] = [Comment("orders 0 and 1 of the state and of every node", False)]
     body += [assign(T[Int(0), Int(n)], x[n]) for n in range(nx)]
     body += [
-        assign(p.at(n, Int(0)), p.value(jet.nodes[n]))
+        assign(p.target(n, Int(0)), p.value(jet.nodes[n]))
         for n in range(nx, len(jet.nodes))
         if jet.nodes[n].op not in ("num", "c")
     ]
