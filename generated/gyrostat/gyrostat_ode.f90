@@ -606,19 +606,14 @@ contains
     return
   end function ode_start
 
-  ! log z for the step size, branch-free (see
+  ! log2 z for the step size, branch-free (see
   ! gyrogen.codegen.integrators.elementary).
-  function step_log(z) result(res)
+  function step_log2(z) result(res)
     real(c_double), intent(in) :: z
     real(c_double) :: res
     real(c_double) :: m
     real(c_double) :: e
     real(c_double) :: f
-    real(c_double) :: s
-    real(c_double) :: w
-    real(c_double) :: r
-    real(c_double) :: hf
-    real(c_double) :: z2
 
     m = merge(max(z, tiny(1.0_c_double)), 1.0_c_double, &
         z > 0.0_c_double .and. z <= huge(1.0_c_double))
@@ -627,53 +622,37 @@ contains
     e = merge(e + 1.0_c_double, e, m > 1.4142135623730951_c_double)
     m = merge(m * 0.5_c_double, m, m > 1.4142135623730951_c_double)
     f = m - 1.0_c_double
-    hf = (0.5_c_double * f) * f
-    s = f / (2.0_c_double + f)
-    z2 = s * s
-    w = z2 * z2
-    r = z2 * (0.6666666666666735_c_double + w * (0.2857142874366239_c_double + w * &
-        (0.1818357216161805_c_double + w * 0.14798198605116586_c_double)))
-    r = r + w * (0.3999999999940942_c_double + w * (0.22222198432149784_c_double + w * &
-        0.15313837699209373_c_double))
-    r = e * 0.6931471803691238_c_double - ((hf - (s * (hf + r) + e * &
-        1.9082149292705877e-10_c_double)) - f)
-    res = merge(r, merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
+    res = merge(e + f * (1.442696432286588_c_double + f * ((-0.7213640408366104_c_double) + f * &
+        (0.4806291383826822_c_double + f * ((-0.35935059807152286_c_double) + f * &
+        (0.29563370133125855_c_double + f * ((-0.2695068891921427_c_double) + f * &
+        0.17212913448722086_c_double)))))), merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
         z > 0.0_c_double .and. z <= huge(1.0_c_double))
     return
-  end function step_log
+  end function step_log2
 
-  ! e^y for the step size, branch-free (see
+  ! 2^y for the step size, branch-free (see
   ! gyrogen.codegen.integrators.elementary).
-  function step_exp(y) result(res)
+  function step_exp2(y) result(res)
     real(c_double), intent(in) :: y
     real(c_double) :: res
     real(c_double) :: yy
     real(c_double) :: k
     real(c_double) :: k1
-    real(c_double) :: hi
-    real(c_double) :: lo
     real(c_double) :: r
-    real(c_double) :: t
-    real(c_double) :: c
     real(c_double) :: v
 
-    yy = min(max(y, -745.0_c_double), 709.0_c_double)
-    k = (yy * 1.4426950408889634_c_double + 6755399441055744.0_c_double) - &
-        6755399441055744.0_c_double
-    hi = yy - k * 0.6931471803691238_c_double
-    lo = k * 1.9082149292705877e-10_c_double
-    r = hi - lo
-    t = r * r
-    c = r - t * (0.16666666666666602_c_double + t * ((-0.0027777777777015593_c_double) + t * &
-        (6.613756321437934e-05_c_double + t * ((-1.6533902205465252e-06_c_double) + t * &
-        4.1381367970572385e-08_c_double))))
-    v = 1.0_c_double - ((lo - (r * c) / (2.0_c_double - c)) - hi)
+    yy = min(max(y, -1075.0_c_double), 1023.0_c_double)
+    k = (yy + 6755399441055744.0_c_double) - 6755399441055744.0_c_double
+    r = yy - k
     k1 = max(k, -1021.0_c_double)
-    v = (v * scale(1.0_c_double, int(k1))) * scale(1.0_c_double, int(k - k1))
-    res = merge(huge(1.0_c_double), merge(v, merge(0.0_c_double, y, y < -745.0_c_double), &
-        y >= -745.0_c_double), y > 709.0_c_double)
+    v = ((1.000000075499127_c_double + r * (0.6931472067117419_c_double + r * &
+        (0.24022107337696277_c_double + r * (0.05550327211816496_c_double + r * &
+        (0.00967603806503104_c_double + r * 0.0013400433122461265_c_double))))) * &
+        scale(1.0_c_double, int(k1))) * scale(1.0_c_double, int(k - k1))
+    res = merge(huge(1.0_c_double), merge(v, merge(0.0_c_double, y, y < -1075.0_c_double), &
+        y >= -1075.0_c_double), y > 1023.0_c_double)
     return
-  end function step_exp
+  end function step_exp2
 
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11),
@@ -2640,7 +2619,7 @@ contains
         dq = max(dq, abs(tay(i, order - 1)))
       end do
       xmax = max(scale, xmax)  ! the absolute and relative modes in one
-      rho = step_exp(min(step_log(xmax / dp) * inv(order), step_log(xmax / dq) * inv(order - 1)))
+      rho = step_exp2(min(step_log2(xmax / dp) * inv(order), step_log2(xmax / dq) * inv(order - 1)))
       h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
       h = merge(t1 - t, h, last)

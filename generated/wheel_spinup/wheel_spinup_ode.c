@@ -537,18 +537,13 @@ static int ode_start(int order, double rtol_min, double t0, double t1, const dou
     return -1;
 }
 
-/* log z for the step size, branch-free (see
+/* log2 z for the step size, branch-free (see
    gyrogen.codegen.integrators.elementary). */
-static inline double step_log(double z)
+static inline double step_log2(double z)
 {
     double m;
     double e;
     double f;
-    double s;
-    double w;
-    double r;
-    double hf;
-    double z2;
 
     m = z > 0.0 && z <= DBL_MAX ? dmax(z, DBL_MIN) : 1.0;
     e = bits_exponent(m);
@@ -556,43 +551,29 @@ static inline double step_log(double z)
     e = m > 1.4142135623730951 ? e + 1.0 : e;
     m = m > 1.4142135623730951 ? m * 0.5 : m;
     f = m - 1.0;
-    hf = 0.5 * f * f;
-    s = f / (2.0 + f);
-    z2 = s * s;
-    w = z2 * z2;
-    r = z2 * (0.6666666666666735 + w * (0.2857142874366239 + w * (0.1818357216161805 + w *
-            0.14798198605116586)));
-    r = r + w * (0.3999999999940942 + w * (0.22222198432149784 + w * 0.15313837699209373));
-    r = e * 0.6931471803691238 - (hf - (s * (hf + r) + e * 1.9082149292705877e-10) - f);
-    return z > 0.0 && z <= DBL_MAX ? r : z <= 0.0 ? -DBL_MAX : z;
+    return z > 0.0 && z <= DBL_MAX ? e + f * (1.442696432286588 + f * (-0.7213640408366104 + f *
+            (0.4806291383826822 + f * (-0.35935059807152286 + f * (0.29563370133125855 + f *
+            (-0.2695068891921427 + f * 0.17212913448722086)))))) : z <= 0.0 ? -DBL_MAX : z;
 }
 
-/* e^y for the step size, branch-free (see
+/* 2^y for the step size, branch-free (see
    gyrogen.codegen.integrators.elementary). */
-static inline double step_exp(double y)
+static inline double step_exp2(double y)
 {
     double yy;
     double k;
     double k1;
-    double hi;
-    double lo;
     double r;
-    double t;
-    double c;
     double v;
 
-    yy = dmin(dmax(y, -745.0), 709.0);
-    k = yy * 1.4426950408889634 + 6755399441055744.0 - 6755399441055744.0;
-    hi = yy - k * 0.6931471803691238;
-    lo = k * 1.9082149292705877e-10;
-    r = hi - lo;
-    t = r * r;
-    c = r - t * (0.16666666666666602 + t * (-0.0027777777777015593 + t * (6.613756321437934e-05 +
-            t * (-1.6533902205465252e-06 + t * 4.1381367970572385e-08))));
-    v = 1.0 - (lo - r * c / (2.0 - c) - hi);
+    yy = dmin(dmax(y, -1075.0), 1023.0);
+    k = yy + 6755399441055744.0 - 6755399441055744.0;
+    r = yy - k;
     k1 = dmax(k, -1021.0);
-    v = v * bits_pow2(k1) * bits_pow2(k - k1);
-    return y > 709.0 ? DBL_MAX : y >= -745.0 ? v : y < -745.0 ? 0.0 : y;
+    v = (1.000000075499127 + r * (0.6931472067117419 + r * (0.24022107337696277 + r *
+            (0.05550327211816496 + r * (0.00967603806503104 + r * 0.0013400433122461265))))) *
+            bits_pow2(k1) * bits_pow2(k - k1);
+    return y > 1023.0 ? DBL_MAX : y >= -1075.0 ? v : y < -1075.0 ? 0.0 : y;
 }
 
 /* In-place LU decomposition with partial pivoting within the diagonal
@@ -2310,8 +2291,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
             dq = dmax(dq, fabs(tay[order - 1][i]));
         }
         xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-        rho = step_exp(dmin(step_log(xmax / dp) * inv[order],
-                step_log(xmax / dq) * inv[order - 1]));
+        rho = step_exp2(dmin(step_log2(xmax / dp) * inv[order],
+                step_log2(xmax / dq) * inv[order - 1]));
         h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
         h = last ? t1 - t : h;
@@ -3247,8 +3228,8 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
-        rho[l] = step_exp(dmin(step_log(xmax[l] / dp[l]) * inv[order],
-                step_log(xmax[l] / dq[l]) * inv[order - 1]));
+        rho[l] = step_exp2(dmin(step_log2(xmax[l] / dp[l]) * inv[order],
+                step_log2(xmax[l] / dq[l]) * inv[order - 1]));
         L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
         last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
         L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];

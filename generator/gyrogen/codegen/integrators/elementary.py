@@ -1,21 +1,27 @@
-"""log and exp for the Taylor method's step size, described once and
+"""log2 and exp2 for the Taylor method's step size, described once and
 printed to C, lanes and Fortran: branch-free, so that a loop over lanes
 vectorizes (libm's calls do not, and its vector versions would round
 otherwise than the single trajectory's), the same bits in every target.
 
-step_log(z): z = 2^e m, m in [1, 2), read from the double's bits (Fn
+The step is rho = 2^min(log2(xmax/dp) / p, log2(xmax/dq) / (p - 1)) times a
+safety factor (Jorba and Zou; heyoka's factor e^(-0.7/(p-1)) / e^2), a
+heuristic: what it needs is a few correct digits, not libm's last ulp.
+So each is one short polynomial, no division:
+step_log2(z): z = 2^e m, m in [1, 2), read from the double's bits (Fn
 "exponent" and "significand": C reads the bits, Fortran calls exponent and
-fraction; both exact), m > sqrt 2 halved; then fdlibm's __ieee754_log
-kernel: log(1 + f) from s = f / (2 + f), within 1 ulp.
-step_exp(y): y = k ln 2 + r, |r| <= ln 2 / 2, k rounded by 1.5 2^52;
-fdlibm's __ieee754_exp kernel for e^r; then times 2^k (Fn "pow2", exact:
-C writes the bits, Fortran calls scale), in two factors below 2^-1022.
+fraction; both exact), m > sqrt 2 halved; log2 m = f P(f), f = m - 1, P of
+degree 6 (a Chebyshev fit): within 5.7e-7 of log2 z, exact at powers of 2.
+step_exp2(y): y = k + r, |r| <= 1/2, k rounded by 1.5 2^52; 2^r by a
+polynomial of degree 5, within 1.1e-7 relative; then times 2^k (Fn "pow2",
+exact: C writes the bits, Fortran calls scale), in two factors below
+2^-1022. The step size is then within 1.2e-6 relative of the exact
+formula's (log2's error divided by p >= 2, times ln 2, and exp2's).
 
-Their special values are what the step needs, not all of libm's: a
-positive infinite z gives +inf and a NaN gives NaN (the step's NaN paths
-stay as they were); z = 0 gives -DBL_MAX, and a z below DBL_MIN is taken
-as DBL_MIN; exp of y > 709 is DBL_MAX (a step
-as long as it may be) and of y < -745 is 0 (a step too short: underflow).
+Their special values are what the step needs: a positive infinite z gives
++inf and a NaN gives NaN (the step's NaN paths stay as they were); z = 0
+gives -DBL_MAX, and a z below DBL_MIN is taken as DBL_MIN; exp2 of y > 1023
+is DBL_MAX (a step as long as it may be) and of y < -1075 is 0 (a step too
+short: underflow).
 """
 
 from __future__ import annotations
@@ -37,22 +43,30 @@ from gyrogen.codegen.ir.nodes import (
     sel,
 )
 
-NAMES = ("step_log", "step_exp")
+NAMES = ("step_log2", "step_exp2")
 """The functions, in the order a file defines them."""
-LN2_HI, LN2_LO = 6.93147180369123816490e-01, 1.90821492927058770002e-10
 SQRT2 = 1.4142135623730951
 EXP_MIN = -1021.0
-"""The least k with v 2^k normal for every v >= 1/sqrt 2 (e^r's least):
+"""The least k with v 2^k normal for every v >= 1/sqrt 2 (2^r's least):
 below it v 2^k is v 2^EXP_MIN 2^(k - EXP_MIN), rounded once, at the last."""
+LOG2 = (1.442696432286588, -0.7213640408366104, 0.4806291383826822, -0.35935059807152286,
+        0.29563370133125855, -0.2695068891921427, 0.17212913448722086)  # fmt: skip
+"""log2(1 + f) / f on [1/sqrt 2 - 1, sqrt 2 - 1], lowest power first."""
+EXP2 = (1.000000075499127, 0.6931472067117419, 0.24022107337696277, 0.05550327211816496,
+        0.00967603806503104, 0.0013400433122461265)  # fmt: skip
+"""2^r on [-1/2, 1/2], lowest power first."""
+
+
+def horner(coefficients: tuple[float, ...], v: E) -> E:
+    """sum c_i v^i by Horner's scheme."""
+    out: E = Num(coefficients[-1])
+    for c in reversed(coefficients[:-1]):
+        out = Num(c) + v * out
+    return out
 
 
 def log_function() -> Func:
-    z, m, e, f, s, w, r, hf = (Var(n) for n in ("z", "m", "e", "f", "s", "w", "r", "hf"))
-    lg = [Num(v) for v in (6.666666666666735130e-01, 3.999999999940941908e-01,
-                           2.857142874366239149e-01, 2.222219843214978396e-01,
-                           1.818357216161805012e-01, 1.531383769920937332e-01,
-                           1.479819860511658591e-01)]  # fmt: skip
-    z2 = Var("z2")
+    z, m, e, f = (Var(n) for n in ("z", "m", "e", "f"))
     finite = and_(cmp(z, ">", 0.0), cmp(z, "<=", Const("HUGE")))
     body: list[S] = [
         assign(m, sel(finite, fn("max", z, Const("TINY")), Num(1.0))),
@@ -61,46 +75,32 @@ def log_function() -> Func:
         assign(e, sel(cmp(m, ">", SQRT2), e + 1.0, e)),
         assign(m, sel(cmp(m, ">", SQRT2), m * Num(0.5), m)),
         assign(f, m - 1.0),
-        assign(hf, Num(0.5) * f * f),
-        assign(s, f / (Num(2.0) + f)),
-        assign(z2, s * s),
-        assign(w, z2 * z2),
-        assign(r, z2 * (lg[0] + w * (lg[2] + w * (lg[4] + w * lg[6])))),
-        assign(r, r + w * (lg[1] + w * (lg[3] + w * lg[5]))),
-        assign(r, e * Num(LN2_HI) - ((hf - (s * (hf + r) + e * Num(LN2_LO))) - f)),
-        Return(sel(finite, r, sel(cmp(z, "<=", 0.0), -Const("HUGE"), z))),  # inf, NaN: z
-    ]  # fmt: skip
-    doc = ("log z for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
-    locals_ = reals("m", "e", "f", "s", "w", "r", "hf", "z2")
-    return Func("step_log", (real("z"),), tuple(body), "double", locals_, doc, inline=True)
+        Return(sel(finite, e + f * horner(LOG2, f), sel(cmp(z, "<=", 0.0), -Const("HUGE"), z))),
+    ]
+    doc = ("log2 z for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
+    return Func(
+        "step_log2", (real("z"),), tuple(body), "double", reals("m", "e", "f"), doc, inline=True
+    )
 
 
 def exp_function() -> Func:
-    y, k, hi, lo, r, t, c, v = (Var(n) for n in ("y", "k", "hi", "lo", "r", "t", "c", "v"))
-    p = [Num(v) for v in (1.66666666666666019037e-01, -2.77777777770155933842e-03,
-                          6.61375632143793436117e-05, -1.65339022054652515390e-06,
-                          4.13813679705723846039e-08)]  # fmt: skip
-    yy = Var("yy")
+    y, yy, k, k1, r, v = (Var(n) for n in ("y", "yy", "k", "k1", "r", "v"))
     body: list[S] = [
-        assign(yy, fn("min", fn("max", y, Num(-745.0)), Num(709.0))),
-        assign(k, (yy * Num(1.44269504088896338700e00) + Num(TOINT)) - Num(TOINT)),
-        assign(hi, yy - k * Num(LN2_HI)),
-        assign(lo, k * Num(LN2_LO)),
-        assign(r, hi - lo),
-        assign(t, r * r),
-        assign(c, r - t * (p[0] + t * (p[1] + t * (p[2] + t * (p[3] + t * p[4]))))),
-        assign(v, Num(1.0) - ((lo - (r * c) / (Num(2.0) - c)) - hi)),
-    ]
-    k1 = Var("k1")
-    body += [
+        assign(yy, fn("min", fn("max", y, Num(-1075.0)), Num(1023.0))),
+        assign(k, (yy + Num(TOINT)) - Num(TOINT)),
+        assign(r, yy - k),
         assign(k1, fn("max", k, Num(EXP_MIN))),
-        assign(v, v * fn("pow2", k1) * fn("pow2", k - k1)),  # the second 1 unless subnormal
+        assign(
+            v, horner(EXP2, r) * fn("pow2", k1) * fn("pow2", k - k1)
+        ),  # the second 1 unless subnormal
     ]
-    tail: E = sel(cmp(y, "<", -745.0), Num(0.0), y)  # y NaN: every comparison false
-    body.append(Return(sel(cmp(y, ">", 709.0), Const("HUGE"), sel(cmp(y, ">=", -745.0), v, tail))))
-    doc = ("e^y for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
-    locals_ = reals("yy", "k", "k1", "hi", "lo", "r", "t", "c", "v")
-    return Func("step_exp", (real("y"),), tuple(body), "double", locals_, doc, inline=True)
+    tail: E = sel(cmp(y, "<", -1075.0), Num(0.0), y)  # y NaN: every comparison false
+    body.append(
+        Return(sel(cmp(y, ">", 1023.0), Const("HUGE"), sel(cmp(y, ">=", -1075.0), v, tail)))
+    )
+    doc = ("2^y for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
+    locals_ = reals("yy", "k", "k1", "r", "v")
+    return Func("step_exp2", (real("y"),), tuple(body), "double", locals_, doc, inline=True)
 
 
 def functions() -> list[Func]:

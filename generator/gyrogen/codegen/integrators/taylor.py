@@ -170,11 +170,11 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(
             rho,
             fn(  # branch-free log and exp: over lanes, vectorized
-                "step_exp",
+                "step_exp2",
                 fn(
                     "min",
-                    fn("step_log", xmax / dp) * Var("inv")[order],
-                    fn("step_log", xmax / dq) * Var("inv")[order - 1],
+                    fn("step_log2", xmax / dp) * Var("inv")[order],
+                    fn("step_log2", xmax / dq) * Var("inv")[order - 1],
                 ),
             ),
         ),
