@@ -220,7 +220,8 @@ class _Printer:
         first, second = (self.deg[f] <= FIXED_PAST for f in self.operands(n))
         k = self.k
         if first and second:  # a product of two lines: a[1] b[1] at k = 2 only
-            return sel(cmp(k, "==", Int(2)), self.term(n, Int(1)), ZERO)
+            a, b = self.operands(n)
+            return sel(cmp(k, "==", Int(2)), self.target(a, Int(1)) * self.target(b, Int(1)), ZERO)
         if first:
             return self.term(n, Int(1))
         return self.term(n, k - Int(1)) if second else None
