@@ -202,11 +202,24 @@ def test_command_writes_npz_and_pole_map(tmp_path: Path, cli) -> None:
         (["--at", "u2"], "'u2' is not NAME=NUMBER"),
         (["--at", "u2=1", "--spin", "1"], "give the equilibrium or ask for a spin"),
         (["--param", "k=1"], "k is not a runtime parameter of the scene"),
+        (["--at", "u2=1,u2=2"], "u2 is given twice"),
+        (["--at", "=1"], "'=1' is not NAME=NUMBER"),
+        (["--spin", "1e308"], "a spin of 1e+308 rad/s: beyond 1e+100 rad/s"),
     ],
 )
 def test_bad_points_are_one_line_exit_2(argv: list[str], message: str, tmp_path: Path, cli) -> None:
     code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), *argv])
     assert (code, out) == (2, "") and err.count("\n") == 1 and message in err, err
+    assert not any(tmp_path.iterdir())
+
+
+def test_parameters_whose_constants_overflow_are_one_line_exit_2(tmp_path: Path, cli) -> None:
+    """Each value valid, together refused by setup (code 9: T/J past
+    DBL_MAX): one line, no traceback, nothing written."""
+    argv = ["linearize", "wheel_spinup", "--out", str(tmp_path), "--param", "T=1e308"]
+    code, out, err = cli(argv)
+    assert (code, out) == (2, "") and err.count("\n") == 1, err
+    assert "wheel_spinup: parameters: setup refused the parameters (code 9)" in err
     assert not any(tmp_path.iterdir())
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +18,7 @@ from matplotlib.image import imread
 from gyrogen.analysis.simulate import plots
 from gyrogen.analysis.simulate.simulate import check_solution
 from gyrogen.analysis.simulate.simulate_files import COLUMNS
+from gyrogen.analysis.simulate.trajectory import QUAD_NODES, output_grid, sample_times
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import reference, scene_view
 from gyrogen.scene import builtin_names, builtin_text, load
@@ -251,6 +253,35 @@ def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: N
     assert errors[0].startswith("gyrogen: error: DOP853 failed at t = ")
     assert "of 20: 100 RHS calls (--max-nfev) spent" in errors[0]
     assert not (tmp_path / "out" / "trajectory.csv").exists()
+
+
+@pytest.mark.parametrize("method", ["taylor", "rk4"])
+def test_compiled_methods_spend_the_budget_over_the_whole_run(
+    tmp_path: Path, cache: None, cli, method: str
+) -> None:
+    """--max-nfev bounds the RHS calls of the whole run, not of each output
+    interval (where a compiled method took it as its max_steps and passed)."""
+    run = simulate(cli, ["torque_free", "--method", method, "--max-nfev", "10"], tmp_path / "out")
+    assert run.code == 1 and run.out == ""
+    assert run.err.splitlines()[-1].startswith(f"gyrogen: error: {method} failed at t = ")
+    assert run.err.endswith(": 10 RHS calls (--max-nfev) spent\n"), run.err
+    assert not (tmp_path / "out" / "trajectory.csv").exists()
+
+
+def test_sample_times_do_not_overflow_near_dbl_max() -> None:
+    """The quadrature nodes of an interval ending near DBL_MAX are finite
+    (0.5 (a + b) overflowed with a RuntimeWarning), and the same bits as
+    before everywhere else."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        far = sample_times(np.array([0.0, 1e308, 1.7e308]))
+    assert np.all(np.isfinite(far)) and np.all(np.diff(far) > 0)
+    grid = output_grid(20.0, 0.05)
+    a, b = grid[:-1, None], grid[1:, None]
+    before = 0.5 * (a + b) + 0.5 * (b - a) * np.polynomial.legendre.leggauss(QUAD_NODES)[0]
+    assert np.array_equal(
+        sample_times(grid).reshape(-1)[:-1].reshape(len(grid) - 1, -1)[:, 1:], before
+    )
 
 
 def test_failed_or_non_finite_solution_is_one_line() -> None:

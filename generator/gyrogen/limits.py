@@ -32,3 +32,7 @@ each is a restart of the integrator on the whole chunk."""
 MAX_SWEEP_CHUNK = 10**6
 """Trajectories per task: a chunk's states and metrics are in memory at once
 (10^6 rows of ~40 doubles: 0.3 GB)."""
+MAX_SPIN = 1e100
+"""`gyrogen linearize --spin` (and api.linearize's spin), rad/s: the rates
+enter the equations squared, times inertias up to 1e50 (a folded value's
+bound), which must stay doubles."""

@@ -18,11 +18,14 @@ def _pairs(value: str | None, flag: str) -> dict[str, float]:
     for item in value.split(","):
         name, eq, number = item.partition("=")
         try:
-            if not eq:
+            if not eq or not name.strip():
                 raise ValueError
-            out[name.strip()] = float(number)
+            value_ = float(number)
         except ValueError:
             raise click.BadParameter(f"{item!r} is not NAME=NUMBER", param_hint=flag) from None
+        if name.strip() in out:
+            raise click.BadParameter(f"{name.strip()} is given twice", param_hint=flag)
+        out[name.strip()] = value_
     return out
 
 

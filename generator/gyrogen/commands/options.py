@@ -33,6 +33,12 @@ class FiniteFloat(click.FloatRange):
     """A FloatRange that also refuses nan and inf (click's lets nan through
     every bound, and inf through an open one)."""
 
+    def _describe_range(self) -> str:
+        """'finite' without bounds (click's says 'x<=None')."""
+        if self.min is None and self.max is None:
+            return "finite"
+        return str(super()._describe_range())
+
     def convert(self, value: Any, param: Any, ctx: Any) -> float:
         number = super().convert(value, param, ctx)
         if not math.isfinite(number):

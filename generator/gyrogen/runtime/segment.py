@@ -13,6 +13,7 @@ import numpy as np
 from gyrogen import abi
 from gyrogen.runtime.compiled import Compiled, Controls
 
+ERR_MAX_STEPS = next(c.value for c in abi.ODE_CODES if c.name == "ODE_ERR_MAX_STEPS")
 COUNTERS = tuple(f.name for f in abi.STATS_FIELDS if f.ctype == "long")
 """The statistics that add up over segments (steps, calls, decompositions)."""
 
@@ -40,15 +41,26 @@ def integrate_segments(
     times: Sequence[float] | np.ndarray,
     given: Controls,
     reached: Callable[[float], None] = lambda t: None,
+    rhs_budget: int | None = None,
 ) -> Segments:
     """comp's integrator method from x0 at times[0] to each later time in
-    turn; reached(t) after each time reached."""
+    turn; reached(t) after each time reached. rhs_budget: the rhs calls the
+    whole run may make (a step makes one at least, so a segment may take at
+    most as many steps as are left); spent, the run stops with
+    ODE_ERR_MAX_STEPS."""
     x = np.array(x0, dtype=np.float64)
     states = [x.copy()]
     totals: dict[str, float | int] = dict.fromkeys(COUNTERS, 0)
-    intervals = []
+    intervals: list[Mapping[str, float | int]] = []
     for a, b in itertools.pairwise(times):
-        x, stats, code = comp.integrate(method, x, c, float(a), float(b), **given)
+        kw = given.copy()
+        if rhs_budget is not None:
+            left = rhs_budget - int(totals["rhs_calls"])
+            if left <= 0:
+                return Segments(np.array(states), totals, ERR_MAX_STEPS, tuple(intervals), x.copy())
+            if "max_steps" in given:  # rk4's fixed steps take none
+                kw["max_steps"] = min(given["max_steps"], left)
+        x, stats, code = comp.integrate(method, x, c, float(a), float(b), **kw)
         intervals.append(stats)
         for name in COUNTERS:
             totals[name] += stats[name]

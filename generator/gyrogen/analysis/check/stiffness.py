@@ -57,7 +57,7 @@ def choose(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> Choice
         why = (
             f"implicit ({method or 'none in this build'}): decay rates up to {worst / span:.3g} "
             f"1/s over {span:g} s would hold an explicit method to steps of "
-            f"~{3.0 * span / worst:.2g} s"
+            f"~{3.0 / (worst / span):.2g} s"
         )
     else:
         why = (

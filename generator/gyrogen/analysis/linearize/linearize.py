@@ -24,6 +24,7 @@ import numpy as np
 
 from gyrogen import methods, physics
 from gyrogen.errors import SceneError
+from gyrogen.limits import MAX_SPIN
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene, validate
@@ -196,6 +197,11 @@ def find_spin(
     e = vectors[:, int(np.argmax(np.abs(vectors.T @ toward)))]
     e = e if e @ toward >= 0 else -e
     omega = float(np.linalg.norm(w0)) if rate is None else rate
+    if not abs(omega) <= MAX_SPIN:
+        raise SceneError(
+            f"a spin of {omega:g} rad/s: beyond {MAX_SPIN:g} rad/s, the rates' squares times "
+            "the inertias overflow double arithmetic"
+        )
     x = start.copy()
     x[[i for i, s in enumerate(scene.states) if s[0] == "u"]] = 0.0
     x[body] = omega * e
@@ -226,6 +232,11 @@ def _newton(
     for _ in range(NEWTON_STEPS):
         f = comp.rhs(x, c)[speeds]
         jac = comp.jacobian(x, c)[np.ix_(speeds, speeds)]
+        if not (np.all(np.isfinite(f)) and np.all(np.isfinite(jac))):
+            raise SceneError(
+                f"a spin of {omega:g} rad/s: the rates' derivatives overflow double arithmetic "
+                "(ask for a slower spin)"
+            )
         row = np.zeros(len(speeds))
         row[[speeds.index(i) for i in body]] = e
         system = np.vstack([jac, row])
@@ -252,6 +263,11 @@ def linearize(
     full_a = comp.jacobian(x, c)
     nx = comp.nx
     _, b, cm, d = generated(comp, x, c)
+    if not all(np.all(np.isfinite(m)) for m in (f, full_a, b, cm, d)):
+        raise SceneError(
+            f"{scene.name}: the model at this point is not finite: its values overflow "
+            "double arithmetic (a state or parameter too large)"
+        )
     speeds = _speeds(scene)
     fastest = max(1.0, float(np.max(np.abs(x[speeds])))) if speeds else 1.0
     still = [i in speeds or abs(f[i]) <= DRIFT_BAR * fastest for i in range(nx)]
@@ -316,6 +332,10 @@ def model(
         raise SceneError("give the equilibrium or ask for a spin to be found, not both")
     p = parameters_of(scene, parameters or {})
     comp = build(scene)
+    try:
+        comp.setup(p)
+    except ValueError as exc:  # each value valid, yet setup refuses them together
+        raise SceneError(f"{scene.name}: parameters: {exc}") from exc
     if state is not None or at is not None:
         x, how = state_of(scene, state, at), "given"
     elif scene.equilibrium is not None and spin is None and axis is None:

@@ -36,7 +36,7 @@ from gyrogen.files import make_dir, write_atomic
 from gyrogen.runtime.compiled import Compiled, Language, controls
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_scene
-from gyrogen.runtime.segment import integrate_segments
+from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
 from gyrogen.scene import Scene
 
 MAX_NFEV = MAX_STEPS
@@ -168,10 +168,13 @@ def _by_integrator(
     rtol, atol = start.tol
     given = controls(method, steps=100, rtol=rtol, atol=atol, max_steps=settings.max_nfev)
     t0 = time.perf_counter()
-    seg = integrate_segments(comp, method, start.x0, start.c, samples, given, reached)
+    budget = settings.max_nfev
+    seg = integrate_segments(comp, method, start.x0, start.c, samples, given, reached, budget)
     wall = time.perf_counter() - t0
     if seg.code != 0:
         why = message(ODE_CODES, seg.code)
+        if seg.code == ERR_MAX_STEPS:
+            why = f"{budget} RHS calls (--max-nfev) spent"
         raise GyrogenError(f"{method} failed at t = {seg.totals['t']:.6g} s: {why}")
     return seg.states, int(seg.totals["rhs_calls"]), wall
 

@@ -46,7 +46,9 @@ def sample_times(grid: np.ndarray) -> np.ndarray:
     """The grid with the quadrature nodes of each interval between its
     points, in order: every (QUAD_NODES + 1)-th time is a grid point."""
     a, b = grid[:-1, None], grid[1:, None]
-    nodes = 0.5 * (a + b) + 0.5 * (b - a) * _NODES
+    nodes = (0.5 * a + 0.5 * b) + 0.5 * (
+        b - a
+    ) * _NODES  # the same bits as 0.5 (a + b), no overflow
     return np.concatenate([np.column_stack([grid[:-1], nodes]).ravel(), grid[-1:]])
 
 
