@@ -228,6 +228,11 @@ def test_new_writes_a_valid_commented_scene(tmp_path: Path, cli) -> None:
     assert code == 1 and "exists" in err
     code, _, err = cli(["new", "2bad", "--out", str(tmp_path / "x.toml")])
     assert code == 2 and "not a valid scene name" in err
+    for bad, why in (("x" * 300, "longer than 32 characters"), ("a__b", "double or trailing")):
+        code, out, err = cli(["new", bad, "--out", str(tmp_path / "y.toml")])
+        assert (code, out) == (2, "") and err.count("\n") == 1 and why in err, err
+    code, out, err = cli(["new", "ok", "--out", str(tmp_path / ("y" * 300 + ".toml"))])
+    assert (code, out) == (1, "") and err.endswith(": File name too long\n"), err
 
 
 def test_specialization_drops_states_and_parameters(tmp_path: Path) -> None:

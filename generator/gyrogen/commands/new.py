@@ -2,16 +2,11 @@
 
 from __future__ import annotations
 
-import keyword
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import click
 
 from gyrogen.errors import GyrogenError, SceneError
-
-if TYPE_CHECKING:
-    pass
 
 
 @click.command()
@@ -25,11 +20,18 @@ def new(name: str, out: Path | None, force: bool) -> None:
     from gyrogen.codegen.render import render
     from gyrogen.files import write_atomic
     from gyrogen.scene import parse
+    from gyrogen.scene.rules import check_name
 
-    if not name.isidentifier() or keyword.iskeyword(name) or not name.isascii():
-        raise SceneError(f"{name!r} is not a valid scene name (a C identifier)")
+    try:
+        check_name(name)  # before any path is made of it: a 300-character one was an OSError
+    except ValueError as exc:
+        raise SceneError(f"not a valid scene name: {exc}") from None
     out = out or Path(f"{name}.toml")
-    if out.exists() and not force:
+    try:
+        exists = out.exists()
+    except OSError as exc:  # a name too long for the file system
+        raise GyrogenError(f"cannot write {out}: {exc.strerror}") from None
+    if exists and not force:
         raise GyrogenError(f"{out} exists: choose another name or pass --force")
     text = render("scene/new.toml.jinja", name=name)
     parse(text, str(out))  # the starter must itself be a valid scene
