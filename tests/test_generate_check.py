@@ -16,7 +16,7 @@ from gyrogen.codegen.generate import generate
 from gyrogen.oracle import compare, scene_view
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import load
+from gyrogen.scene import builtin_text, load
 
 
 def test_generate_checks_before_it_writes(tmp_path: Path, cli) -> None:
@@ -24,6 +24,18 @@ def test_generate_checks_before_it_writes(tmp_path: Path, cli) -> None:
     assert code == 0
     assert "checked wheel_spinup: c, fortran compiled and compared with the reference in" in out
     assert (tmp_path / "o" / "manifest.json").is_file()
+
+
+def test_given_parameters_setup_refuses_are_left_out_of_the_check(tmp_path: Path, cli) -> None:
+    """[simulate] parameters whose constants overflow (setup's code 9, which
+    the validator cannot see): the code is still checked and written (at the
+    random sets), where the check ended in a ValueError traceback."""
+    scene = tmp_path / "overflow.toml"
+    text = builtin_text("wheel_spinup")
+    scene.write_text(text.replace("parameters = { T = 0.02 }", "parameters = { T = 1e308 }"))
+    code, out, err = cli(["generate", str(scene), "--out", str(tmp_path / "o")])
+    assert code == 0 and "Traceback" not in err, err
+    assert "checked wheel_spinup: c, fortran compiled and compared" in out
 
 
 def test_no_check_skips_the_check(tmp_path: Path, cli) -> None:

@@ -198,6 +198,25 @@ def test_parameters_whose_constants_overflow_are_one_line_exit_2(
     )
 
 
+@pytest.mark.parametrize("command", ["fmu", "bench"])
+def test_fmu_and_bench_refuse_overflowing_parameters_in_one_line(
+    tmp_path: Path, cache: None, cli, command: str
+) -> None:
+    """Like simulate: setup's code 9 for the scene's [simulate] parameters is
+    one line, exit 2, nothing written (each ended in a ValueError traceback)."""
+    text = builtin_text("wheel_spinup")
+    scene = tmp_path / "overflow.toml"
+    scene.write_text(text.replace("parameters = { T = 0.02 }", "parameters = { T = 1e308 }"))
+    code, out, err = cli([command, str(scene), "--out", str(tmp_path / "out")])
+    assert code == 2 and "Traceback" not in err, err
+    assert err.splitlines()[-1] == (
+        "gyrogen: error: wheel_spinup: simulate.parameters: setup refused the parameters "
+        "(code 9): a constant derived from the parameters is not finite (together they "
+        "overflow doubles)"
+    )
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.slow
 def test_unwritable_out_is_one_line_exit_1(tmp_path: Path, cache: None, cli) -> None:
     blocker = tmp_path / "file"

@@ -67,13 +67,13 @@ def _by_stiffness(scene: Scene, explicit: str) -> str:
     import numpy as np
 
     from gyrogen.analysis.check import stiffness
-    from gyrogen.analysis.simulate.simulate import runtime_values
+    from gyrogen.analysis.simulate.simulate import given_constants, runtime_values
     from gyrogen.runtime.scene_build import build_scene
 
     with tempfile.TemporaryDirectory(prefix="gyrogen-fmu-") as tmp:
         _, built = build_scene(scene, Path(tmp) / scene.name, ["c"])
     comp = built["c"]
-    c = comp.setup(np.array(runtime_values(scene)))
+    c = given_constants(scene, comp, np.array(runtime_values(scene)))
     choice = stiffness.choose(comp, c, np.array(scene.initial_state()), scene.simulate.t_end)
     if choice.stiff and choice.method is None:
         click.echo(f"{scene.name} is stiff, and the scene has no implicit integrator: {explicit}")

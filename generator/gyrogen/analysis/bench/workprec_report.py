@@ -21,7 +21,7 @@ from gyrogen.analysis.bench import workprec, workprec_peers
 from gyrogen.analysis.bench.bench_rhs import machine, pydy_rhs
 from gyrogen.analysis.bench.workprec import Config, Problem, Run
 from gyrogen.analysis.check import stiffness
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.simulate import given_constants, runtime_values
 from gyrogen.errors import SceneError
 from gyrogen.files import write_atomic
 from gyrogen.runtime.compiled import Language
@@ -54,7 +54,7 @@ def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
     _, built = build_scene(scene, src, [lang for lang in wanted if lang in scene.targets])
     compiled = {_LABELS[lang]: comp for lang, comp in built.items()}
     x0 = np.array(scene.initial_state())
-    c = compiled["C"].setup(p)
+    c = given_constants(scene, compiled["C"], p)
     return Problem(scene, compiled, p, c, x0, scene.simulate.t_end)
 
 

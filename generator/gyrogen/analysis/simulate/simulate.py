@@ -198,6 +198,16 @@ def _by_solve_ivp(
     return np.ascontiguousarray(sol.y.T), int(sol.nfev), wall
 
 
+def given_constants(scene: Scene, comp: Compiled, p: np.ndarray) -> np.ndarray:
+    """setup's constants for the scene's [simulate] parameters p; one line
+    (SceneError) when setup refuses them (code 9, their constants overflow,
+    is setup's alone: the scene validator cannot see it)."""
+    try:
+        return comp.setup(p)
+    except ValueError as exc:
+        raise SceneError(f"{scene.name}: simulate.parameters: {exc}") from exc
+
+
 def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: int) -> None:
     """One line for a run that gave up (sol None: the RHS budget ran out),
     failed, or left non-finite states behind; t_max: the latest time tried."""
@@ -237,10 +247,7 @@ def run(
     make_dir(out)
     echo(f"generating and building {scene.name} in {out / 'src'} ...")
     comp, build_id = _prepare(scene, out)
-    try:
-        c = comp.setup(p)
-    except ValueError as exc:
-        raise SceneError(f"{scene.name}: simulate.parameters: {exc}") from exc
+    c = given_constants(scene, comp, p)
     start = Start(
         comp, c, np.array(scene.initial_state()), (scene.simulate.rtol, scene.simulate.atol)
     )
