@@ -207,7 +207,7 @@ def test_fmu_and_bench_refuse_overflowing_parameters_in_one_line(
     text = builtin_text("wheel_spinup")
     scene = tmp_path / "overflow.toml"
     scene.write_text(text.replace("parameters = { T = 0.02 }", "parameters = { T = 1e308 }"))
-    code, out, err = cli([command, str(scene), "--out", str(tmp_path / "out")])
+    code, _, err = cli([command, str(scene), "--out", str(tmp_path / "out")])
     assert code == 2 and "Traceback" not in err, err
     assert err.splitlines()[-1] == (
         "gyrogen: error: wheel_spinup: simulate.parameters: setup refused the parameters "
