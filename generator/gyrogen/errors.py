@@ -17,3 +17,9 @@ class SceneError(GyrogenError):
     """A scene file that cannot be read or is not physical."""
 
     exit_code = 2
+
+
+class SetupRefused(SceneError, ValueError):
+    """<prefix>_setup refused a parameter set (its code and why). A ValueError
+    too, for the Python API's callers; callers that know where the values
+    came from add it (simulate.parameters, --param)."""

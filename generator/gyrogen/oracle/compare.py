@@ -259,9 +259,8 @@ def compare(
     the sets given, e.g. the scene's own): well-conditioned ones at the
     issue's bar, the n_ill worst-conditioned of many draws at cond(M) eps."""
     rng = np.random.default_rng(seed)
-    if given is not None and len(
-        given
-    ):  # sets setup refuses (9: their constants overflow) are not compared
+    if given is not None and len(given):
+        # sets setup refuses (9: their constants overflow) are not compared
         given = given[[backends[0].setup_code(p)[0] == 0 for p in given]]
     states = scene_view.random_states(scene, rng, n_states)
     well = scene_view.random_runtime(scene, rng, n_params, max_condition=WELL_CONDITIONED)

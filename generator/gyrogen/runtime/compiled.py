@@ -13,7 +13,7 @@ from typing import Any, Literal, TypedDict
 import numpy as np
 
 from gyrogen import abi, methods
-from gyrogen.errors import BuildError
+from gyrogen.errors import BuildError, SetupRefused
 
 Language = Literal["c", "fortran"]
 
@@ -122,12 +122,13 @@ class Compiled:
         return int(code), c
 
     def setup(self, p: np.ndarray) -> np.ndarray:
-        """The constants c of p; a one-line ValueError when setup refuses p
-        (also when each value is valid and the constants overflow: code 9)."""
+        """The constants c of p; SetupRefused (a ValueError, one line) when
+        setup refuses p (also when each value is valid and the constants
+        overflow: code 9)."""
         code, c = self.setup_code(p)
         if code != 0:
             why = self.manifest["setup_codes"][str(code)]
-            raise ValueError(f"setup refused the parameters (code {code}): {why}")
+            raise SetupRefused(f"setup refused the parameters (code {code}): {why}")
         return c
 
     def output(self, name: str, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
