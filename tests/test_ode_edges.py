@@ -231,6 +231,32 @@ def test_start_at_gimbal_lock(angles: dict[str, Compiled], language: str) -> Non
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
+def test_gimbal_lock_far_from_its_points_needs_no_cosine(
+    angles: dict[str, Compiled], language: str
+) -> None:
+    """The check computes cos q2 only within 1e-6 pi of a point of gimbal
+    lock, or beyond |q2| = 1e6 (common.gimbal_at): its verdict is still
+    |cos q2| < GIMBAL_LOCK_COS at points near and far, over every turn
+    from -3e5 to 3e5 and beyond the pretest's range."""
+    b = angles[language]
+    scene = load("torque_free")
+    c = b.setup(np.zeros(0))
+    rng = np.random.default_rng(11)
+    turns = np.concatenate([rng.integers(-300_000, 300_000, 40), [0, -1, 3e6, -3e7]])
+    offsets = (0.0, 0.2 * G, -0.3 * G, 5 * G, -5 * G, 3e-6, -4e-6, 0.5, 1.5)
+    for k in turns:
+        point = (float(k) + 0.5) * math.pi
+        for d in offsets:
+            q2 = point + d
+            cos = abs(math.cos(q2))
+            if 0.5 * G < cos < 2 * G:
+                continue  # libm and gyrogen's cosine may round apart at the bar
+            x0 = state(scene, q2=q2)
+            code = b.integrate("dop853", x0, c, 0.5, 0.5)[2]
+            assert code == (ATTITUDE if cos < G else OK), (k, d, cos)
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
 def test_a_step_across_q2_pi_over_2(angles: dict[str, Compiled], language: str) -> None:
     """q2 = 1.4 + t crosses pi/2 at T_CROSS (q1 = q3 = 0, the rates exact):
     the step that takes cos q2 below zero is refused with code 6, and x is

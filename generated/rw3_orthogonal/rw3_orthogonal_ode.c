@@ -436,15 +436,19 @@ static double gimbal_interval(double q2)
 /* 1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS. */
 static int gimbal_lock_at(const double *x)
 {
-    return fabs(rw3_orthogonal_cos(x[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS;
+    return x[1] * 0.3183098861837907 + 0.5 - gimbal_interval(x[1]) < 1e-6 || x[1] *
+            0.3183098861837907 + 0.5 - gimbal_interval(x[1]) > 0.999999 || !(fabs(x[1]) <
+            1000000.0) ? fabs(rw3_orthogonal_cos(x[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0;
 }
 
 /* 1 when the step from x to xnew ends at gimbal lock or passes a point of
    it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
 static int gimbal_lock(const double *x, const double *xnew)
 {
-    return fabs(rw3_orthogonal_cos(xnew[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS ||
-            fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+    return (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+            0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1]) <
+            1000000.0) ? fabs(rw3_orthogonal_cos(xnew[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS :
+            0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
 /* The arguments every adaptive method refuses: t1 < t0, a tolerance it
@@ -1036,8 +1040,11 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
         /* control: accept or reject by selection, and the next h */
         run = code < 0;
         take = run && !nonfinite && err <= 1.0;
-        lock = fabs(rw3_orthogonal_cos(xnew[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(rw3_orthogonal_cos(xnew[1])) <
+                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0) || fabs(gimbal_interval(x[1]) -
+                gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !lock;
         fac = pow(err, 0.17) / 0.9;  /* h / h_new, in Hairer's form */
         grow = dmax(0.1, dmin(5.0, fac / pow(err_old, 0.04)));
@@ -1266,8 +1273,11 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
         /* control: accept or reject by selection, and the next h */
         run = code < 0;
         take = run && !nonfinite && err <= 1.0;
-        lock = fabs(rw3_orthogonal_cos(xnew[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(rw3_orthogonal_cos(xnew[1])) <
+                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0) || fabs(gimbal_interval(x[1]) -
+                gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !lock;
         fac = sqrt(sqrt(sqrt(err))) / 0.9;  /* h / h_new, in Hairer's form */
         grow = dmax(0.16666666666666666, dmin(3.003003003003003, fac));
@@ -2506,7 +2516,10 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
         take = run && !nonfinite;
-        at = fabs(rw3_orthogonal_cos(xnew[1])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS;
+        at = xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(rw3_orthogonal_cos(xnew[1])) <
+                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0;
         jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !at && !jump;
         retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
@@ -2771,8 +2784,11 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) <
-                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS || fabs(gimbal_interval(L->x[1][l]) -
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) <
+                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0) || fabs(gimbal_interval(L->x[1][l]) -
                 gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !lock[l];
         fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
@@ -3091,8 +3107,11 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) <
-                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS || fabs(gimbal_interval(L->x[1][l]) -
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) <
+                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0) || fabs(gimbal_interval(L->x[1][l]) -
                 gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !lock[l];
         fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
@@ -3593,7 +3612,11 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     RW3_ORTHOGONAL_SIMD
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
         take[l] = run[l] && !L->nonfinite[l];
-        at[l] = fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) < RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS;
+        at[l] = L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) < 1e-6
+                || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) >
+                0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw3_orthogonal_cos_lanes(L->xnew[1][l])) <
+                RW3_ORTHOGONAL_ODE_GIMBAL_LOCK_COS : 0;
         jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !at[l] && !jump[l];
         retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */

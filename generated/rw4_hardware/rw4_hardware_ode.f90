@@ -475,7 +475,10 @@ contains
     real(c_double), intent(in) :: x(0:nx - 1)
     logical :: res
 
-    res = abs(rw4_hardware_cos(x(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS
+    res = merge(abs(rw4_hardware_cos(x(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS, .false., &
+        (x(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(x(1)) < &
+        1e-6_c_double .or. (x(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+        gimbal_interval(x(1)) > 0.999999_c_double .or. .not. (abs(x(1)) < 1000000.0_c_double))
     return
   end function gimbal_lock_at
 
@@ -486,8 +489,12 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     logical :: res
 
-    res = abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS .or. &
-        abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+    res = (merge(abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS, .false., &
+        (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+        1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+        gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+        1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+        1.0_c_double
     return
   end function gimbal_lock
 
@@ -1150,8 +1157,12 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS .or. &
-          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = (merge(abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+          1.0_c_double
       ok = take .and. .not. lock
       fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
@@ -1408,8 +1419,12 @@ contains
       ! control: accept or reject by selection, and the next h
       run = code < 0
       take = run .and. .not. nonfinite .and. err <= 1.0_c_double
-      lock = abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS .or. &
-          abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+      lock = (merge(abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+          1.0_c_double
       ok = take .and. .not. lock
       fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
       grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))

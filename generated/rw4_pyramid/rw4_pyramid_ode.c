@@ -440,14 +440,18 @@ static double gimbal_interval(double q2)
 /* 1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS. */
 static int gimbal_lock_at(const double *x)
 {
-    return fabs(rw4_pyramid_cos(x[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS;
+    return x[1] * 0.3183098861837907 + 0.5 - gimbal_interval(x[1]) < 1e-6 || x[1] *
+            0.3183098861837907 + 0.5 - gimbal_interval(x[1]) > 0.999999 || !(fabs(x[1]) <
+            1000000.0) ? fabs(rw4_pyramid_cos(x[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0;
 }
 
 /* 1 when the step from x to xnew ends at gimbal lock or passes a point of
    it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
 static int gimbal_lock(const double *x, const double *xnew)
 {
-    return fabs(rw4_pyramid_cos(xnew[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS ||
+    return (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+            0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1]) <
+            1000000.0) ? fabs(rw4_pyramid_cos(xnew[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0) ||
             fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
@@ -1017,8 +1021,10 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
         /* control: accept or reject by selection, and the next h */
         run = code < 0;
         take = run && !nonfinite && err <= 1.0;
-        lock = fabs(rw4_pyramid_cos(xnew[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(rw4_pyramid_cos(xnew[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !lock;
         fac = pow(err, 0.17) / 0.9;  /* h / h_new, in Hairer's form */
         grow = dmax(0.1, dmin(5.0, fac / pow(err_old, 0.04)));
@@ -1247,8 +1253,10 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
         /* control: accept or reject by selection, and the next h */
         run = code < 0;
         take = run && !nonfinite && err <= 1.0;
-        lock = fabs(rw4_pyramid_cos(xnew[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(rw4_pyramid_cos(xnew[1])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !lock;
         fac = sqrt(sqrt(sqrt(err))) / 0.9;  /* h / h_new, in Hairer's form */
         grow = dmax(0.16666666666666666, dmin(3.003003003003003, fac));
@@ -2221,8 +2229,11 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !lock[l];
         fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
         grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
@@ -2539,8 +2550,11 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !lock[l];
         fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
         grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));

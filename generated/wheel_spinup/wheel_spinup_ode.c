@@ -411,15 +411,19 @@ static double gimbal_interval(double q2)
 /* 1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS. */
 static int gimbal_lock_at(const double *x)
 {
-    return fabs(wheel_spinup_cos(x[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS;
+    return x[1] * 0.3183098861837907 + 0.5 - gimbal_interval(x[1]) < 1e-6 || x[1] *
+            0.3183098861837907 + 0.5 - gimbal_interval(x[1]) > 0.999999 || !(fabs(x[1]) <
+            1000000.0) ? fabs(wheel_spinup_cos(x[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS : 0;
 }
 
 /* 1 when the step from x to xnew ends at gimbal lock or passes a point of
    it (the path crossed q2 = pi/2 + k pi, where q1 and q3 jump). */
 static int gimbal_lock(const double *x, const double *xnew)
 {
-    return fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS ||
-            fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+    return (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+            0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1]) <
+            1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS : 0)
+            || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
 }
 
 /* The arguments every adaptive method refuses: t1 < t0, a tolerance it
@@ -984,8 +988,10 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
         /* control: accept or reject by selection, and the next h */
         run = code < 0;
         take = run && !nonfinite && err <= 1.0;
-        lock = fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
+                : 0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !lock;
         fac = pow(err, 0.17) / 0.9;  /* h / h_new, in Hairer's form */
         grow = dmax(0.1, dmin(5.0, fac / pow(err_old, 0.04)));
@@ -1214,8 +1220,10 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
         /* control: accept or reject by selection, and the next h */
         run = code < 0;
         take = run && !nonfinite && err <= 1.0;
-        lock = fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS ||
-                fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
+                : 0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !lock;
         fac = sqrt(sqrt(sqrt(err))) / 0.9;  /* h / h_new, in Hairer's form */
         grow = dmax(0.16666666666666666, dmin(3.003003003003003, fac));
@@ -2330,7 +2338,10 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
 
         /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
         take = run && !nonfinite;
-        at = fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS;
+        at = xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
+                : 0;
         jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
         ok = take && !at && !jump;
         retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
@@ -2585,8 +2596,11 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
-                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !lock[l];
         fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
         grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
@@ -2904,8 +2918,11 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         run[l] = L->code[l] < 0;
         take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
-                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !lock[l];
         fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
         grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));
@@ -3296,7 +3313,10 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         take[l] = run[l] && !L->nonfinite[l];
-        at[l] = fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS;
+        at[l] = L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) < 1e-6
+                || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) >
+                0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS : 0;
         jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !at[l] && !jump[l];
         retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */

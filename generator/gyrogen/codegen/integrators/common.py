@@ -4,6 +4,8 @@ Hairer's first step and the adaptive start-up."""
 
 from __future__ import annotations
 
+import math
+
 from gyrogen import abi
 from gyrogen.codegen.ir.nodes import (
     Bool,
@@ -124,9 +126,33 @@ def accept_step(quaternion: bool) -> Func:
     return Func("accept_step", params, tuple(body), None, locals_, doc)
 
 
+GIMBAL_NEAR = 1e-6
+"""gimbal_at computes cos q2 only where q2 lies within GIMBAL_NEAR pi of a
+point of gimbal lock, or beyond GIMBAL_FAR: elsewhere |cos q2| is at least
+sin(pi GIMBAL_NEAR), far above the bar, and the cosine is not needed."""
+GIMBAL_FAR = 1e6
+assert math.sin(math.pi * GIMBAL_NEAR) > 1e3 * abi.GIMBAL_LOCK_COS
+
+
 def gimbal_at(after: Var) -> E:
-    """The step ends at gimbal lock: |cos q2| below the bar."""
-    return cmp(fn("abs", fn("cos", after[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))
+    """The step ends at gimbal lock: |cos q2| below the bar.
+
+    With m = q2/pi + 1/2 and f = m - floor(m), |cos q2| = |sin(pi f)|: it
+    is at least sin(pi GIMBAL_NEAR) unless f lies within GIMBAL_NEAR of 0 or
+    1. For |q2| < GIMBAL_FAR, f is within 1e-9 of its exact value (q2/pi's
+    rounding), so the cosine is computed only near those points (C's ?:
+    skips it; the answer is the same either way). NaN and Inf fall to the
+    cosine, which refuses them as before."""
+    q2 = after[1]
+    m = q2 * Num(abi.GIMBAL_INTERVALS) + 0.5
+    f = m - fn("gimbal_interval", q2)
+    near = or_(
+        cmp(f, "<", Num(GIMBAL_NEAR)),
+        cmp(f, ">", Num(1.0 - GIMBAL_NEAR)),
+        not_(cmp(fn("abs", q2), "<", Num(GIMBAL_FAR))),
+    )
+    lock = cmp(fn("abs", fn("cos", q2)), "<", Const("ODE_GIMBAL_LOCK_COS"))
+    return sel(near, lock, Bool(False))  # Fortran's merge evaluates both: gfortran needs that
 
 
 def gimbal_jump(before: Var, after: Var) -> E:
@@ -167,7 +193,7 @@ def gimbal() -> list[Func]:
     at = Func(
         "gimbal_lock_at",
         (arr("x"),),
-        (Return(cmp(fn("abs", fn("cos", x[1])), "<", Const("ODE_GIMBAL_LOCK_COS"))),),
+        (Return(gimbal_at(x)),),
         "bool",
         doc=("1 when x is at gimbal lock, |cos q2| below ODE_GIMBAL_LOCK_COS.",),
     )
