@@ -278,6 +278,15 @@ def test_bad_input_in_python(compiled: Get) -> None:
         (lambda: b.integrate("dop853", x0, c, 0.0, 1.0, steps=3), r"steps= goes with"),
         (lambda: b.integrate_batch("dop853", x0[None, :-1], c, 0.0, 1.0), r"shape \(n, 14\)"),
         (lambda: b.integrate_batch("dop853", x0[None], c[:-1], 0.0, 1.0), r"constants c must"),
+        # rhs, jacobian (outputs alike) and setup read exactly nx, nc and np values
+        (lambda: b.rhs(x0, c[:2]), r"constants c must have shape \(12,\)"),
+        (lambda: b.rhs(np.ones(3), c), r"states must have shape \(14,\) or \(n, 14\)"),
+        (lambda: b.rhs(np.ones(15), c), r"not \(15,\)"),
+        (lambda: b.rhs(np.ones((2, 2, 14)), c), r"not \(2, 2, 14\)"),
+        (lambda: b.jacobian(x0, c[:1]), r"constants c must"),
+        (lambda: b.jacobian(x0[:5], c), r"states must have shape"),
+        (lambda: b.setup(p[:3]), r"parameters p must have shape \(12,\), not \(3,\)"),
+        (lambda: b.setup_code(np.append(p, 1.0)), r"parameters p must have shape"),
     ]
     for call, message in cases:
         with pytest.raises(ValueError, match=message) as info:

@@ -115,8 +115,29 @@ class Compiled:
         """A cffi double[] on the memory of a (C-contiguous float64)."""
         return self.ffi.from_buffer("double[]", a)
 
+    @cached_property
+    def n_params(self) -> int:
+        return int(self.manifest["np"])
+
+    def _vector(self, a: Any, size: int, what: str) -> np.ndarray:
+        """a as a contiguous float64 array of shape (size,); a one-line
+        ValueError otherwise (the C functions read exactly size values)."""
+        arr = np.ascontiguousarray(a, dtype=np.float64)
+        if arr.shape != (size,):
+            raise ValueError(f"{what} must have shape ({size},), not {arr.shape}")
+        return arr
+
+    def _states(self, x: Any) -> np.ndarray:
+        """x as contiguous float64 states, shape (nx,) or (n, nx)."""
+        arr = np.ascontiguousarray(x, dtype=np.float64)
+        if arr.ndim not in (1, 2) or arr.shape[-1] != self.nx:
+            raise ValueError(
+                f"states must have shape ({self.nx},) or (n, {self.nx}), not {arr.shape}"
+            )
+        return arr
+
     def setup_code(self, p: np.ndarray) -> tuple[int, np.ndarray]:
-        p = np.ascontiguousarray(p, dtype=np.float64)
+        p = self._vector(p, self.n_params, "the parameters p")
         c = np.zeros(self.nc)
         code = self.function("setup")(self.doubles(p), self.doubles(c))
         return int(code), c
@@ -147,10 +168,10 @@ class Compiled:
         return self._apply("jac", self.nx * self.nx, x, c, t).reshape(self.nx, self.nx)
 
     def _apply(self, name: str, size: int, x: np.ndarray, c: np.ndarray, t: float) -> np.ndarray:
-        x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, self.nx)
+        x = self._states(x).reshape(-1, self.nx)
         out = np.empty((x.shape[0], size))
         fn = self.ffi.addressof(self.lib, self.symbol(name))
-        c = np.ascontiguousarray(c, dtype=np.float64)
+        c = self._vector(c, self.nc, "the constants c")
         self.lib.gyrogen_batch(
             fn, x.shape[0], size, t, self.doubles(x), self.doubles(c), self.doubles(out)
         )
@@ -158,9 +179,9 @@ class Compiled:
 
     def rhs(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
         """dx/dt for a batch of states x (n, nx) or one state (nx,)."""
-        x = np.ascontiguousarray(x, dtype=np.float64)
+        x = self._states(x)
         out = np.empty_like(x)
-        c = np.ascontiguousarray(c, dtype=np.float64)
+        c = self._vector(c, self.nc, "the constants c")
         n = x.size // self.nx
         self.lib.gyrogen_rhs_batch(n, t, self.doubles(x), self.doubles(c), self.doubles(out))
         return out
@@ -243,9 +264,7 @@ class Compiled:
     def _c_buffer(self, c: Any) -> Any:
         """c's cffi buffer, kept for the next call with the same array (a
         one-line ValueError for a wrong length or a non-finite value)."""
-        arr = np.ascontiguousarray(c, dtype=np.float64)
-        if arr.shape != (self.nc,):
-            raise ValueError(f"the constants c must have shape ({self.nc},), not {arr.shape}")
+        arr = self._vector(c, self.nc, "the constants c")
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"the constants c are not all finite (index {_bad(arr)})")
         buf = self.doubles(arr)
