@@ -205,6 +205,9 @@ def test_command_writes_npz_and_pole_map(tmp_path: Path, cli) -> None:
         (["--at", "u2=1,u2=2"], "u2 is given twice"),
         (["--at", "=1"], "'=1' is not NAME=NUMBER"),
         (["--spin", "1e308"], "a spin of 1e+308 rad/s: beyond 1e+100 rad/s"),
+        (["--at", "u4=1e308"], "state u4 = 1e+308: beyond 1e+100 rad/s"),
+        (["--at", "q2=1.5707963267948966"], "at gimbal lock (|cos q2| < 1e-09)"),
+        (["--at", "q2=-4.71238898038469"], "at gimbal lock"),
     ],
 )
 def test_bad_points_are_one_line_exit_2(argv: list[str], message: str, tmp_path: Path, cli) -> None:
@@ -231,3 +234,21 @@ def test_not_an_equilibrium_is_warned_with_its_residual(tmp_path: Path, cli) -> 
     assert err.startswith("gyrogen: warning: not an equilibrium: max |dx/dt|")
     assert "the model is about a moving point" in err
     assert (tmp_path / linear_files.NPZ).is_file()
+
+
+def test_the_residual_is_relative_without_overflow() -> None:
+    """||A|| ||x|| may overflow where the ratio does not: 1e305 against
+    1e300 x 1e10 is 1e-5 (a warning), not 1e305 / inf = 0."""
+    from gyrogen.analysis.linearize.linearize import relative
+
+    assert relative(1e305, np.array([[1e300, -1e300]]), np.array([1e10, 0.0])) == pytest.approx(
+        0.5e-5
+    )
+    assert relative(0.0, np.zeros((2, 2)), np.zeros(2)) == 0.0
+    assert relative(1.0, np.zeros((2, 2)), np.ones(2)) == np.inf
+
+
+def test_a_subnormal_spin_is_linearized_quietly(tmp_path: Path, cli) -> None:
+    code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), "--spin", "1e-320"])
+    assert code == 0 and err == "", err
+    assert "found: a steady spin of 9.99989e-321 rad/s" in out

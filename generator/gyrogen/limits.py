@@ -33,6 +33,7 @@ MAX_SWEEP_CHUNK = 10**6
 """Trajectories per task: a chunk's states and metrics are in memory at once
 (10^6 rows of ~40 doubles: 0.3 GB)."""
 MAX_SPIN = 1e100
-"""`gyrogen linearize --spin` (and api.linearize's spin), rad/s: the rates
+"""`gyrogen linearize --spin` (and api.linearize's spin) and the speeds of
+an equilibrium given to linearize, rad/s: the rates
 enter the equations squared, times inertias up to 1e50 (a folded value's
 bound), which must stay doubles."""

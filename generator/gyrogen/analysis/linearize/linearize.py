@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gyrogen import methods, physics
+from gyrogen.abi import GIMBAL_LOCK_COS
 from gyrogen.errors import SceneError
 from gyrogen.limits import MAX_SPIN
 from gyrogen.runtime.compiled import Compiled
@@ -127,6 +128,12 @@ def state_of(
         start = {"e0": 1.0, **named}
         x = np.array([float(start.get(s, 0.0)) for s in scene.states])
     _finite(x, scene.states, "state")
+    fast = [i for i in _speeds(scene) if not abs(x[i]) <= MAX_SPIN]
+    if fast:
+        raise SceneError(
+            f"state {scene.states[fast[0]]} = {x[fast[0]]:g}: beyond {MAX_SPIN:g} rad/s, the "
+            "rates' squares times the inertias overflow double arithmetic"
+        )
     return x
 
 
@@ -217,7 +224,8 @@ def find_spin(
     how = f"found: a steady spin of {omega:g} rad/s about the principal axis nearest {where}"
     if omega == 0:
         return x, "found: at rest (a hold), each wheel at the rate its law holds"
-    off = math.degrees(math.acos(min(1.0, abs(e @ x[body]) / np.linalg.norm(x[body]))))
+    w = x[body] / np.max(np.abs(x[body]))  # scaled first: a subnormal spin's squares underflow
+    off = math.degrees(math.acos(min(1.0, abs(e @ w) / np.linalg.norm(w))))
     if off > 1e-6:
         how += f" (the wheels' momentum tilts it: it turns {off:.3g} deg off that axis)"
     return x, how
@@ -258,6 +266,13 @@ def linearize(
 ) -> Linear:
     """The linear model about x: the kept states (rates that vanish, and
     every speed), A from the Jacobian, B, C, D from <prefix>_linear."""
+    if scene.attitude == "euler312":
+        q2 = float(x[scene.states.index("q2")])
+        if abs(math.cos(q2)) < GIMBAL_LOCK_COS:
+            raise SceneError(
+                f"q2 = {q2:.17g}: at gimbal lock (|cos q2| < {GIMBAL_LOCK_COS:g}), where the "
+                "3-1-2 angles' rates divide by cos q2: take another point, or Euler parameters"
+            )
     c = comp.setup(p)
     f = comp.rhs(x, c)
     full_a = comp.jacobian(x, c)
@@ -286,7 +301,6 @@ def linearize(
             f"{scene.states[kept[i]]}' depends on it"
         )
     a = full_a[np.ix_(kept, kept)]
-    scale = float(np.linalg.norm(a, np.inf) * np.linalg.norm(x[kept], np.inf))
     residual = float(np.max(np.abs(f[kept]))) if kept else 0.0
     return Linear(
         scene=scene,
@@ -301,9 +315,21 @@ def linearize(
         D=d,
         dropped=tuple(scene.states[i] for i in dropped),
         residual=residual,
-        relative_residual=residual / scale if scale > 0 else (0.0 if residual == 0 else math.inf),
+        relative_residual=relative(residual, a, x[kept]),
         found=found,
     )
+
+
+def relative(residual: float, a: np.ndarray, x: np.ndarray) -> float:
+    """residual / (||A|| ||x||) (infinity norms), without overflow: each
+    factor divided out in turn, A's norm taken of A over its largest entry."""
+    big = float(np.max(np.abs(a))) if a.size else 0.0
+    size = float(np.max(np.abs(x))) if x.size else 0.0
+    if residual == 0:
+        return 0.0
+    if big == 0 or size == 0:
+        return math.inf
+    return residual / big / float(np.linalg.norm(a / big, np.inf)) / size
 
 
 def generated(comp: Compiled, x: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
