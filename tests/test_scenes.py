@@ -110,6 +110,9 @@ BAD = [
     ("name empty", named(""), "name: must not be empty"),
     ("name non-ASCII", named("r\u00f6tor"), "not an identifier"),
     ("C keyword", named("double"), "is a C keyword"),
+    ("C header", named("math"), "names a C library header (<math.h>)"),
+    ("C header, case", named("StdInt"), "names a C library header (<stdint.h>)"),
+    ("OpenMP header", named("omp"), "the scene's omp.h would hide it"),
     ("description escape", described("\\u001b[31m"), "description: control character U+001B"),
     ("rtol no double meets", simulating("rtol = 1e-20"), "simulate.rtol: must be above 2.22e-15"),
     ("rtol at the bound", simulating("rtol = 2.220446049250313e-15"), "simulate.rtol"),
@@ -290,13 +293,14 @@ def test_table_torque_scene_matches_the_reference(tmp_path: Path) -> None:
     report = compare(backends, scene, n_states=300, n_params=1, n_ill=0, seed=4)
     assert report.passed, report.rows
     c = backends[0]
+    k = c.setup(np.zeros(0))  # the constants (none at run time: the parameters are empty)
     x = np.zeros((1, len(scene.states)))
     x[0, scene.states.index("u4")] = 1.0
     for t, torque in [(-1.0, 0.0), (0.5, 0.025), (2.0, 0.05), (4.5, 0.015), (9.0, -0.02)]:
-        du4 = c.rhs(x, np.zeros(0), t)[0, scene.states.index("u4")]
+        du4 = c.rhs(x, k, t)[0, scene.states.index("u4")]
         assert du4 == pytest.approx(torque / 0.015, rel=1e-12, abs=1e-15)
     np.testing.assert_allclose(
-        c.rhs(x, np.zeros(0), 2.5), scene_view.rhs(scene, x, np.zeros(0), 2.5), rtol=1e-13
+        c.rhs(x, k, 2.5), scene_view.rhs(scene, x, np.zeros(0), 2.5), rtol=1e-13
     )
 
 

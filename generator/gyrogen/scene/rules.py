@@ -26,6 +26,18 @@ _C_KEYWORDS = frozenset(
     "union unsigned void volatile while _Bool _Complex _Imaginary".split()
 )
 
+C_HEADERS = frozenset(
+    "assert complex ctype errno fenv float inttypes iso646 limits locale math setjmp signal "
+    "stdalign stdarg stdatomic stdbool stddef stdint stdio stdlib stdnoreturn string tgmath "
+    "threads time uchar wchar wctype omp alloca malloc memory strings unistd pthread fcntl "
+    "dirent dlfcn sched termios poll".split()
+)
+"""Headers a C program includes as <NAME.h> (C11's, OpenMP's, and POSIX's
+and glibc's most common): a scene's <name>.h sits in the include directory
+of its build and package, where it would hide the system's (a scene named
+math broke the package's own math.h include). Compared without case, for
+case-insensitive file systems."""
+
 
 def parameter_value(v: object) -> object:
     """A parameter is a number (folded into the code) or "runtime"; a TOML
@@ -86,6 +98,10 @@ def check_name(v: str) -> None:
         raise ValueError(f"{shown} has a double or trailing underscore (C++ reserves '__')")
     if v in _C_KEYWORDS:
         raise ValueError(f"{shown} is a C keyword")
+    if v.lower() in C_HEADERS:
+        raise ValueError(
+            f"{shown} names a C library header (<{v.lower()}.h>): the scene's {v}.h would hide it"
+        )
 
 
 BIDI_CONTROLS = frozenset((0x061C, 0x200E, 0x200F, *range(0x202A, 0x202F), *range(0x2066, 0x206A)))
