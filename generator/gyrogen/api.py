@@ -63,8 +63,12 @@ def simulate(
     from gyrogen.analysis.simulate import simulate as sim
 
     chosen = _scene(scene)
-    settings = sim.Settings(
-        t_end=t_end or chosen.simulate.t_end, dt=dt or chosen.simulate.dt, method=method
+    settings = sim.checked(
+        sim.Settings(
+            t_end=chosen.simulate.t_end if t_end is None else t_end,
+            dt=chosen.simulate.dt if dt is None else dt,
+            method=method,
+        )
     )
     with tempfile.TemporaryDirectory() as tmp:
         result = sim.run(chosen, Path(out) if out else Path(tmp), settings)

@@ -37,7 +37,7 @@ from gyrogen.runtime.compiled import Compiled, Language, controls
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
-from gyrogen.scene import Scene
+from gyrogen.scene import Scene, check_output_grid
 
 MAX_NFEV = MAX_STEPS
 """RHS calls before giving up: a run that blows up can crawl for hours
@@ -59,6 +59,23 @@ class Settings:
     method: str = methods.AUTO
     plot: bool = True
     max_nfev: int = MAX_NFEV
+
+
+def checked(settings: Settings) -> Settings:
+    """settings, or a one-line SceneError: t_end and dt finite and positive,
+    the output grid within its limit, a method simulate knows (what the
+    command line's option types check, for the Python API)."""
+    for name, v in (("t_end", settings.t_end), ("dt", settings.dt)):
+        if not (isinstance(v, int | float) and 0 < v < float("inf")):
+            raise SceneError(f"{name} = {v!r}: must be a finite number of seconds above 0")
+    try:
+        check_output_grid(settings.t_end, settings.dt)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    known = (methods.AUTO, *methods.SCIPY, *methods.NAMES)
+    if settings.method not in known:
+        raise SceneError(f"method {settings.method!r}: not one of {', '.join(known)}")
+    return settings
 
 
 @dataclass(frozen=True)
