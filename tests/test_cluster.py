@@ -58,6 +58,8 @@ BAD = [
      "torque_table is only used with torque = 'table'"),
     ("far position", edit("position = [0.4, 0.0, 0.1]", "position = [1e200, 0.0, 0.1]"),
      "rotors: the lumped inertia overflows a double"),
+    ("position 1e40", edit("position = [0.4, 0.0, 0.1]", "position = [1e40, 0.0, 0.1]"),
+     "rotors: the lumped inertia has condition number"),
 ]  # fmt: skip
 
 

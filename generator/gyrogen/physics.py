@@ -111,7 +111,13 @@ def adjugate(a: Matrix3) -> Matrix3:
 
 def frobenius_condition(a: Matrix3, sqrt: Callable[[Value], Value] = lambda x: x**0.5) -> Value:
     """||A||_F ||A^-1||_F of a 3x3 matrix: at least its condition number and at
-    most 3 times it; infinite for a singular one (floats)."""
+    most 3 times it; infinite for a singular one (floats). Floats are taken
+    over their largest entry first (the ratio does not change, and squares of
+    entries past 1e154 would overflow)."""
+    if all(isinstance(x, int | float) for row in a for x in row):
+        big = max(abs(float(x)) for row in a for x in row)
+        if 0 < big < float("inf"):
+            a = [[float(x) / big for x in row] for row in a]
     adj = adjugate(a)
     det = sum(a[0][j] * adj[j][0] for j in range(3))
     norm = sqrt(sum(x**2 for row in a for x in row))
