@@ -43,6 +43,9 @@ HOSTILE = [
     ("://{dir}/o", "not a URL (PROTOCOL://PATH"),
     ("file:///{dir}/o\nx", "a URL with a character that is not printable"),
     ("file:///{dir}/o\x00", "a URL with a character that is not printable"),
+    ("", "'': an empty path: name a directory or a URL"),  # was the current directory
+    ("  ", "'  ': an empty path: name a directory or a URL"),  # was a directory named '  '
+    ("\t", "'\\t': an empty path"),
 ]
 
 

@@ -203,9 +203,13 @@ class Store:
 
 
 def store(out: str | Path | Store) -> Store:
-    """The store out names: a local path, or a URL (checked: url_store)."""
+    """The store out names: a local path, or a URL (checked: url_store); an
+    empty or blank path is refused (it would be the current directory, or a
+    directory named by spaces)."""
     if isinstance(out, Store):
         return out
+    if isinstance(out, str) and not out.strip():
+        raise GyrogenError(f"{out!r}: an empty path: name a directory or a URL")
     if isinstance(out, str) and "://" in out:
         return url_store(out)
     return Store(str(out))
