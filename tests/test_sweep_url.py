@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sweep_cases import rows, small
 
-from gyrogen.analysis.sweep.sweep_store import Store, url_store
+from gyrogen.analysis.sweep.sweep_store import Store, store, url_store
 from gyrogen.errors import GyrogenError
 
 
@@ -46,6 +46,8 @@ HOSTILE = [
     ("", "'': an empty path: name a directory or a URL"),  # was the current directory
     ("  ", "'  ': an empty path: name a directory or a URL"),  # was a directory named '  '
     ("\t", "'\\t': an empty path"),
+    ("file:relative/o", "a file URL names an absolute path on this machine: file:///PATH"),
+    ("LOCAL:", "a file URL names an absolute path on this machine: file:///PATH"),
 ]
 
 
@@ -61,6 +63,38 @@ def test_a_hostile_url_is_one_line_exit_2_nothing_written(
     assert err.startswith("gyrogen sweep: error: Invalid value for '--out': "), err
     assert message in err, err
     assert _listing(tmp_path) == before
+
+
+@pytest.mark.parametrize(
+    "form", ["file:{dir}/o", "FILE://{dir}/o", "local:{dir}/o", "LOCAL://{dir}/o"]
+)
+def test_a_file_url_of_any_spelling_is_its_absolute_path(form: str, tmp_path: Path) -> None:
+    """file:/PATH is file:///PATH, as fsspec and pyarrow read it (it was a
+    relative directory ./file:/PATH that the summary then missed), and the
+    protocol's case is not the path's (FILE:///PATH was ./FILE:/PATH)."""
+    url = form.format(dir=tmp_path)
+    found = store(url)
+    assert (found.where, found.protocol, found.root) == (url, form[:5].lower().rstrip(":"),
+                                                         str(tmp_path / "o"))  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("out", "place"), [("file:{tmp}/there", "{tmp}/there"), ("s3:b/o", "{tmp}/here/s3:b/o")]
+)
+def test_a_short_file_url_sweeps_there_and_summarizes(
+    out: str, place: str, tmp_path: Path, cache: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """--out file:/PATH: everything under /PATH (before: the parts under
+    ./file:/PATH, then the summary's traceback); a relative directory that
+    pyarrow would read as a URI (s3:b/o) is that directory, read back too."""
+    here, out, place = tmp_path / "here", out.format(tmp=tmp_path), place.format(tmp=tmp_path)
+    here.mkdir()
+    monkeypatch.chdir(here)
+    code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml", count=1)), "--out", out,
+                             "--quiet", "--no-plots"])  # fmt: skip
+    assert code == 0 and f"wrote {out}/ (summary.json" in stdout, err
+    assert list(tmp_path.rglob("summary.json")) == [Path(place, "summary.json")]
+    assert len(rows(out)) == 15
 
 
 @pytest.mark.skipif(importlib.util.find_spec("s3fs") is not None, reason="s3fs is installed")

@@ -38,6 +38,9 @@ from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
 
 URL = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*)://(.*)", re.S)
+FILE_URL = re.compile(r"(file|local):(.*)", re.I | re.S)
+"""file:/PATH, a file URL's short form: the local path /PATH to fsspec and
+pyarrow alike (not a relative directory named "file:")."""
 OBJECT_STORES = frozenset({"s3", "s3a", "gs", "gcs", "az", "abfs", "abfss"})
 """Protocols whose files are objects, each PUT whole or not at all (no rename)."""
 
@@ -130,9 +133,10 @@ class Store:
     @contextmanager
     def open(self, *names: str) -> Iterator[Any]:
         """The file to read (a path, or an fsspec file object): what
-        pyarrow's ParquetFile takes."""
+        pyarrow's ParquetFile takes. A local path is made absolute: pyarrow
+        reads a relative one that looks like a URI (s3:x/...) as that URI."""
         if self.local:
-            yield self.path(*names)
+            yield os.path.abspath(self.path(*names))
             return
         with self.fs.open(self.path(*names), "rb") as fh:
             yield fh
@@ -210,17 +214,18 @@ def store(out: str | Path | Store) -> Store:
         return out
     if isinstance(out, str) and not out.strip():
         raise GyrogenError(f"{out!r}: an empty path: name a directory or a URL")
-    if isinstance(out, str) and "://" in out:
+    if isinstance(out, str) and ("://" in out or FILE_URL.match(out)):
         return url_store(out)
     return Store(str(out))
 
 
 def url_store(url: str) -> Store:
-    """The store of an fsspec URL, or a one-line GyrogenError naming the URL
-    and what is wrong with it: its form, an unknown protocol, a protocol
-    whose package is missing, memory:// (not shared between processes)."""
+    """The store of an fsspec URL (or file:/PATH, the same as file:///PATH),
+    or a one-line GyrogenError naming the URL and what is wrong with it: its
+    form, an unknown protocol, a protocol whose package is missing,
+    memory:// (not shared between processes)."""
     shown = url if url.isprintable() else repr(url)
-    match = URL.fullmatch(url)
+    match = URL.fullmatch(url) or FILE_URL.fullmatch(url)
     if not url.isprintable():
         raise GyrogenError(f"{shown}: a URL with a character that is not printable")
     if match is None:
@@ -255,5 +260,6 @@ def url_store(url: str) -> Store:
         raise GyrogenError(
             f"{shown}: the {protocol} protocol needs a package that is not installed ({exc})"
         ) from exc
-    root = str(cls._strip_protocol(url)).rstrip("/") or "/"
+    # the protocol as fsspec spells it (FILE:///p was the relative path ./FILE:/p)
+    root = str(cls._strip_protocol(f"{protocol}://{rest}")).rstrip("/") or "/"
     return Store(url, protocol, root)
