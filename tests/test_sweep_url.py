@@ -39,7 +39,9 @@ HOSTILE = [
     ("memory://o", "memory:// is each process's own memory: workers would not share it"),
     ("file:///{dir}/o?x=1", "a query or fragment (? or #) is not supported"),
     ("file:///{dir}/o#top", "a query or fragment (? or #) is not supported"),
-    ("simplecache::file:///{dir}/o", "not a URL (PROTOCOL://PATH; chained URLs"),
+    ("simplecache::file:///{dir}/o", "a chained URL (::) is not supported"),
+    ("zip://a::file:///{dir}/o.zip", "a chained URL (::) is not supported"),  # was exit 1
+    ("file:///{dir}/o::x", "a chained URL (::) is not supported"),
     ("://{dir}/o", "not a URL (PROTOCOL://PATH"),
     ("file:///{dir}/o\nx", "a URL with a character that is not printable"),
     ("file:///{dir}/o\x00", "a URL with a character that is not printable"),

@@ -228,10 +228,10 @@ def url_store(url: str) -> Store:
     match = URL.fullmatch(url) or FILE_URL.fullmatch(url)
     if not url.isprintable():
         raise GyrogenError(f"{shown}: a URL with a character that is not printable")
+    if "::" in url:  # fsspec chains at any ::, after the first :// too (zip://a::file://b)
+        raise GyrogenError(f"{shown}: a chained URL (::) is not supported: one PROTOCOL://PATH")
     if match is None:
-        raise GyrogenError(
-            f"{shown}: not a URL (PROTOCOL://PATH; chained URLs such as a::b:// are not supported)"
-        )
+        raise GyrogenError(f"{shown}: not a URL (PROTOCOL://PATH)")
     protocol, rest = match[1].lower(), match[2]
     if "?" in rest or "#" in rest:
         raise GyrogenError(f"{shown}: a query or fragment (? or #) is not supported")
