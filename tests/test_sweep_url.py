@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sweep_cases import rows, small
+from sweep_cases import free_port, rows, small
 
 from gyrogen.analysis.sweep.sweep_store import Store, store, url_store
 from gyrogen.errors import GyrogenError
@@ -50,6 +50,13 @@ HOSTILE = [
     ("\t", "'\\t': an empty path"),
     ("file:relative/o", "a file URL names an absolute path on this machine: file:///PATH"),
     ("LOCAL:", "a file URL names an absolute path on this machine: file:///PATH"),
+    # the URL's host was not given to the file system: a 49-line traceback
+    ("ftp:///{dir}/o", "the ftp file system can be made for (missing a required argument: 'host')"),
+    ("ftp://127.0.0.1:99999/o", "the ftp file system can be made for (Port out of range 0-65535)"),
+    ("zip:///{dir}/o", "zip:// is no directory to write in"),  # wrappers: exit 1 or tracebacks
+    ("simplecache:///{dir}/o", "simplecache:// is no directory to write in"),
+    ("data:///{dir}/o", "data:// is no directory to write in"),
+    ("generic:///{dir}/o", "generic:// is no directory to write in"),
 ]
 
 
@@ -78,6 +85,15 @@ def test_a_file_url_of_any_spelling_is_its_absolute_path(form: str, tmp_path: Pa
     found = store(url)
     assert (found.where, found.protocol, found.root) == (url, form[:5].lower().rstrip(":"),
                                                          str(tmp_path / "o"))  # fmt: skip
+
+
+def test_a_url_gives_its_host_to_the_file_system() -> None:
+    """ftp://USER:PASS@HOST:PORT/PATH: the file system is made with its host
+    and port (they were dropped: no ftp:// or sftp:// could be made)."""
+    found = url_store("ftp://me:pw@example.org:2121/o")
+    assert found.root == "/o" and dict(found.options) == {
+        "host": "example.org", "port": 2121, "username": "me", "password": "pw"
+    }  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -165,6 +181,7 @@ def test_an_unwritable_url_is_one_line_exit_1_nothing_written(tmp_path: Path, cl
     for url, why in [
         (f"file://{blocker}/o", "Not a directory"),  # a file in the way
         ("file:///proc/gyrogen-none/o", "No such file or directory"),  # not even root makes it
+        (f"ftp://127.0.0.1:{free_port()}/o", "Connection refused"),  # no server: was a traceback
     ]:
         code, stdout, err = cli(["sweep", str(sweep), "--out", url])
         assert (code, stdout) == (1, "") and err.count("\n") == 1, err

@@ -22,6 +22,7 @@ whose package is installed, and not memory:// (each process has its own).
 
 from __future__ import annotations
 
+import inspect
 import os
 import posixpath
 import re
@@ -43,16 +44,26 @@ FILE_URL = re.compile(r"(file|local):(.*)", re.I | re.S)
 pyarrow alike (not a relative directory named "file:")."""
 OBJECT_STORES = frozenset({"s3", "s3a", "gs", "gcs", "az", "abfs", "abfss"})
 """Protocols whose files are objects, each PUT whole or not at all (no rename)."""
+NOT_PLACES = frozenset(
+    {"blockcache", "cached", "filecache", "simplecache", "dir", "dask", "generic", "reference",
+     "asyncwrapper", "async_wrapper", "zip", "tar", "libarchive", "data", "http", "https",
+     "github", "gist", "git"}
+)  # fmt: skip
+"""fsspec protocols that are no directory to write in: wrappers of another
+file system (a chain), an archive's or a repository's files, data:// (the
+bytes are the URL), HTTP (read only)."""
 
 
 @dataclass(frozen=True)
 class Store:
     """A sweep's directory: where (the path or URL as given), protocol
-    (None: a local directory) and root (the path within the file system)."""
+    (None: a local directory), root (the path within the file system) and
+    options (what the URL gives its file system: ftp's host and port, ...)."""
 
     where: str
     protocol: str | None = None
     root: str = ""
+    options: tuple[tuple[str, Any], ...] = ()
 
     @property
     def local(self) -> bool:
@@ -65,10 +76,16 @@ class Store:
 
     @cached_property
     def fs(self) -> Any:
-        """The fsspec file system (made in each process that asks)."""
+        """The fsspec file system (made in each process that asks; the first
+        look, before any work, makes it in the client): a server that does
+        not answer is one line."""
         import fsspec
 
-        return fsspec.filesystem(self.protocol)
+        try:
+            return fsspec.filesystem(self.protocol, **dict(self.options))
+        except Exception as exc:  # each file system its own: ConnectionRefusedError, gaierror
+            why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+            raise GyrogenError(f"cannot open {self.where}: {why}") from exc
 
     def __getstate__(self) -> dict[str, Any]:  # the file system is made anew where it goes
         return {k: v for k, v in self.__dict__.items() if k != "fs"}
@@ -241,6 +258,11 @@ def url_store(url: str) -> Store:
         )
     if not rest.strip("/"):
         raise GyrogenError(f"{shown}: names no path (PROTOCOL://PATH)")
+    if protocol in NOT_PLACES:
+        raise GyrogenError(
+            f"{shown}: {protocol}:// is no directory to write in (it reads through another file "
+            "system, an archive or a server, or the URL itself)"
+        )
     if protocol == "memory":
         raise GyrogenError(
             f"{shown}: memory:// is each process's own memory: workers would not share it, "
@@ -261,5 +283,13 @@ def url_store(url: str) -> Store:
             f"{shown}: the {protocol} protocol needs a package that is not installed ({exc})"
         ) from exc
     # the protocol as fsspec spells it (FILE:///p was the relative path ./FILE:/p)
-    root = str(cls._strip_protocol(f"{protocol}://{rest}")).rstrip("/") or "/"
-    return Store(url, protocol, root)
+    canonical = f"{protocol}://{rest}"
+    try:  # what the URL gives the file system (ftp: host, port), and all it needs
+        options = cls._get_kwargs_from_urls(canonical)
+        inspect.signature(cls.__init__).bind(None, **options)
+        root = str(cls._strip_protocol(canonical)).rstrip("/") or "/"
+    except Exception as exc:  # each file system its own: TypeError, ValueError (a port)
+        raise GyrogenError(
+            f"{shown}: not a place the {protocol} file system can be made for ({exc})"
+        ) from exc
+    return Store(url, protocol, root, tuple(sorted(options.items())))
