@@ -54,3 +54,20 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+OBSTACLES = [
+    ("parts", "mine", "{out}/parts: not a directory"),
+    ("sweep.json", "[1, 2]", "{out}/sweep.json: not a sweep's state"),
+    # a directory where the sweep writes a file: every part was computed first, then exit 1
+    *((name, None, f"{{out}}/{name}: not a file, and the sweep writes one there")
+      for name in ("sweep.json", "summary.json", "summary.md", "histograms.png", "map.png")),
+]  # fmt: skip
+"""(name, a file's text or None for a directory, the message's start)"""
+
+
+def put(out: Path, name: str, text: str | None) -> dict[str, bytes | None]:
+    """The obstacle name in out; what out holds (to compare after)."""
+    out.mkdir()
+    (out / name).write_text(text) if text is not None else (out / name).mkdir()
+    return {p.name: p.read_bytes() if p.is_file() else None for p in out.rglob("*")}

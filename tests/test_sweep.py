@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from sweep_cases import free_port, rows, small
+from sweep_cases import OBSTACLES, free_port, put, rows, small
 
 from gyrogen import api
 from gyrogen.analysis.sweep.sweep_draws import inputs
@@ -203,24 +203,16 @@ def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
     assert waited < 4 * CONNECT_TIMEOUT  # bounded, not a speed figure: it hung for ever
 
 
-@pytest.mark.parametrize(
-    ("obstacle", "message"),
-    [("parts", "{out}/parts: not a directory"), ("state", "{out}/sweep.json: not a sweep's state")],
-)
+@pytest.mark.parametrize(("name", "text", "message"), OBSTACLES, ids=[o[0] for o in OBSTACLES])
 def test_obstacles_in_out_are_refused_before_any_work(
-    tmp_path: Path, cli, obstacle: str, message: str
+    tmp_path: Path, cli, name: str, text: str | None, message: str
 ) -> None:
     out = tmp_path / "o"
-    out.mkdir()
-    if obstacle == "parts":
-        (out / "parts").write_text("mine")
-    else:
-        (out / "sweep.json").write_text("[1, 2]")
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = put(out, name, text)
     code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", str(out)])
     assert (code, stdout) == (1, "") and err.count("\n") == 1
     assert err.startswith("gyrogen: error: " + message.format(out=out)), err
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert {p.name: p.read_bytes() if p.is_file() else None for p in out.rglob("*")} == before
 
 
 @pytest.mark.slow

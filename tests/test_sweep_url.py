@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sweep_cases import free_port, rows, small
+from sweep_cases import OBSTACLES, free_port, put, rows, small
 
 from gyrogen.analysis.sweep.sweep_store import Store, store, url_store
 from gyrogen.errors import GyrogenError
@@ -189,24 +189,17 @@ def test_an_unwritable_url_is_one_line_exit_1_nothing_written(tmp_path: Path, cl
         assert _listing(tmp_path) == before and blocker.read_text() == "mine"
 
 
-@pytest.mark.parametrize(
-    ("obstacle", "message"),
-    [("parts", "{url}/parts: not a directory"), ("state", "{url}/sweep.json: not a sweep's state")],
-)
+@pytest.mark.parametrize(("name", "text", "message"), OBSTACLES, ids=[o[0] for o in OBSTACLES])
 def test_obstacles_at_a_url_are_refused_before_any_work(
-    tmp_path: Path, cli, obstacle: str, message: str
+    tmp_path: Path, cli, name: str, text: str | None, message: str
 ) -> None:
     out = tmp_path / "o"
-    out.mkdir()
-    (out / "parts").write_text("mine") if obstacle == "parts" else (out / "sweep.json").write_text(
-        "[1, 2]"
-    )
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = put(out, name, text)
     url = f"file://{out}"
     code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", url])
     assert (code, stdout) == (1, "") and err.count("\n") == 1
-    assert err.startswith("gyrogen: error: " + message.format(url=url)), err
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert err.startswith("gyrogen: error: " + message.format(out=url)), err
+    assert {p.name: p.read_bytes() if p.is_file() else None for p in out.rglob("*")} == before
 
 
 def test_a_url_write_cut_short_leaves_nothing(

@@ -29,6 +29,15 @@ from gyrogen.analysis.sweep.sweep_store import Store
 from gyrogen.errors import GyrogenError
 
 STATE_FILE = "sweep.json"
+SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG = (
+    "summary.json",
+    "summary.md",
+    "histograms.png",
+    "map.png",
+)
+SUMMARY_FILES = (SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG)
+"""What the sweep writes at its end (sweep_report.write): nothing may be in
+their way, checked before any work with sweep.json's and parts' places."""
 _STAGED = re.compile(r"\.part-.*\.(new|old)")
 """The temporary names of a part being written (files.write_atomic's, and
 a URL store's): what a writer killed mid-write leaves."""
@@ -53,9 +62,16 @@ def whole(out: Store, name: str, rows: int, ident: dict[str, str]) -> bool:
 
 
 def read_state(out: Store) -> dict[str, Any] | None:
-    """The sweep state out holds (None: none yet); obstacles refused."""
+    """The sweep state out holds (None: none yet); obstacles refused: a
+    parts that is no directory, a directory (or FIFO) where a file goes."""
     if out.kind(PARTS) not in ("absent", "dir"):
         raise GyrogenError(f"{out.show(PARTS)}: not a directory: remove it or use another --out")
+    for name in (STATE_FILE, *SUMMARY_FILES):
+        if out.kind(name) not in ("absent", "file"):
+            raise GyrogenError(
+                f"{out.show(name)}: not a file, and the sweep writes one there: remove it or use "
+                "another --out"
+            )
     if out.kind(STATE_FILE) == "absent":
         return None
     path = out.show(STATE_FILE)
