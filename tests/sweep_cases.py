@@ -58,7 +58,13 @@ def free_port() -> int:
 
 OBSTACLES = [
     ("parts", "mine", "{out}/parts: not a directory"),
-    ("sweep.json", "[1, 2]", "{out}/sweep.json: not a sweep's state"),
+    ("sweep.json", "[1, 2]", "{out}/sweep.json: not a gyrogen sweep state (not a JSON object)"),
+    # valid JSON, not a sweep's state: was "holds another sweep (None, None trajectories)"
+    ("sweep.json", '{"a": 1}', "{out}/sweep.json: not a gyrogen sweep state (no sweep, "
+     "fingerprint, trajectories, scene): remove it or use another --out"),
+    ("sweep.json", '{"sweep": 1, "fingerprint": 1, "trajectories": 1, "scene": 1, "identity": [1]}',
+     "{out}/sweep.json: not a gyrogen sweep state (its identity is not a JSON object)"),
+    ("sweep.json", "[" * 10**5, "{out}/sweep.json: unreadable (maximum recursion depth"),
     # a directory where the sweep writes a file: every part was computed first, then exit 1
     *((name, None, f"{{out}}/{name}: not a file, and the sweep writes one there")
       for name in ("sweep.json", "summary.json", "summary.md", "histograms.png", "map.png")),
