@@ -54,3 +54,26 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+OBSTACLES = [
+    ("parts", "mine", "{out}/parts: not a directory"),
+    ("sweep.json", "[1, 2]", "{out}/sweep.json: not a gyrogen sweep state (not a JSON object)"),
+    # valid JSON, not a sweep's state: was "holds another sweep (None, None trajectories)"
+    ("sweep.json", '{"a": 1}', "{out}/sweep.json: not a gyrogen sweep state (no sweep, "
+     "fingerprint, trajectories, scene): remove it or use another --out"),
+    ("sweep.json", '{"sweep": 1, "fingerprint": 1, "trajectories": 1, "scene": 1, "identity": [1]}',
+     "{out}/sweep.json: not a gyrogen sweep state (its identity is not a JSON object)"),
+    ("sweep.json", "[" * 10**5, "{out}/sweep.json: unreadable (maximum recursion depth"),
+    # a directory where the sweep writes a file: every part was computed first, then exit 1
+    *((name, None, f"{{out}}/{name}: not a file, and the sweep writes one there")
+      for name in ("sweep.json", "summary.json", "summary.md", "histograms.png", "map.png")),
+]  # fmt: skip
+"""(name, a file's text or None for a directory, the message's start)"""
+
+
+def put(out: Path, name: str, text: str | None) -> dict[str, bytes | None]:
+    """The obstacle name in out; what out holds (to compare after)."""
+    out.mkdir()
+    (out / name).write_text(text) if text is not None else (out / name).mkdir()
+    return {p.name: p.read_bytes() if p.is_file() else None for p in out.rglob("*")}

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from sweep_cases import free_port, rows, small
+from sweep_cases import OBSTACLES, free_port, put, rows, small
 
 from gyrogen import api
 from gyrogen.analysis.sweep.sweep_draws import inputs
@@ -203,24 +203,16 @@ def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
     assert waited < 4 * CONNECT_TIMEOUT  # bounded, not a speed figure: it hung for ever
 
 
-@pytest.mark.parametrize(
-    ("obstacle", "message"),
-    [("parts", "{out}/parts: not a directory"), ("state", "{out}/sweep.json: not a sweep's state")],
-)
+@pytest.mark.parametrize(("name", "text", "message"), OBSTACLES, ids=[o[0] for o in OBSTACLES])
 def test_obstacles_in_out_are_refused_before_any_work(
-    tmp_path: Path, cli, obstacle: str, message: str
+    tmp_path: Path, cli, name: str, text: str | None, message: str
 ) -> None:
     out = tmp_path / "o"
-    out.mkdir()
-    if obstacle == "parts":
-        (out / "parts").write_text("mine")
-    else:
-        (out / "sweep.json").write_text("[1, 2]")
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = put(out, name, text)
     code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", str(out)])
     assert (code, stdout) == (1, "") and err.count("\n") == 1
     assert err.startswith("gyrogen: error: " + message.format(out=out)), err
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert {p.name: p.read_bytes() if p.is_file() else None for p in out.rglob("*")} == before
 
 
 @pytest.mark.slow
@@ -355,3 +347,43 @@ def test_the_local_engine_listens_on_this_machine_only(dashboard: bool) -> None:
         listening = [c for c in psutil.Process().net_connections("inet")
                      if c.status == psutil.CONN_LISTEN]  # fmt: skip
     assert listening and {c.laddr.ip for c in listening} == {"127.0.0.1"}
+
+
+HUGE = """
+scene = "gyrostat"
+method = "dop853"
+t_end = 1.0
+chunk = 10
+[parameters]
+I = {I}
+[initial]
+u1 = 1e300
+u2 = 0.1
+[draws]
+seed = 1
+count = 4
+u3 = {{ uniform = [-0.2, 0.2] }}
+[metrics]
+keep = ["max_nutation", "max_rate", "invariant_drift", "time_to"]
+samples = 4
+time_to = {{ nutation = 0.3, rate = 1.0 }}
+"""
+"""A start rate of 1e300 rad/s (in range: an axis or a draw reaches it
+too); with I = 1e40 its momentum, 1e340, is beyond doubles."""
+
+
+@pytest.mark.filterwarnings("error")  # a numpy warning in a chunk fails the sweep
+@pytest.mark.parametrize("inertia", [0.02, 1e40])
+def test_a_huge_start_rate_is_measured_without_overflow(
+    tmp_path: Path, cache: None, cli, inertia: float
+) -> None:
+    """Before: 'overflow encountered in square' on stderr and max_rate inf
+    (with I = 1e40 'overflow encountered in multiply' too, in the momentum)."""
+    sweep, out = tmp_path / "huge.toml", tmp_path / "o"
+    sweep.write_text(HUGE.format(I=inertia))
+    with np.errstate(all="raise"):
+        code, _, err = cli(["sweep", str(sweep), "--out", str(out), "--quiet", "--no-plots"])
+    assert code == 0 and "Warning" not in err, err
+    found = rows(out)
+    assert (found["max_rate"] == 1e300).all() and (found["H_drift"] == 0).all()
+    assert np.allclose(found["nutation_0"], np.pi / 2, rtol=0, atol=1e-12)  # H along a1

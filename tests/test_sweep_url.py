@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sweep_cases import rows, small
+from sweep_cases import OBSTACLES, free_port, put, rows, small
 
-from gyrogen.analysis.sweep.sweep_store import Store, url_store
+from gyrogen.analysis.sweep.sweep_store import Store, store, url_store
 from gyrogen.errors import GyrogenError
 
 
@@ -39,10 +39,24 @@ HOSTILE = [
     ("memory://o", "memory:// is each process's own memory: workers would not share it"),
     ("file:///{dir}/o?x=1", "a query or fragment (? or #) is not supported"),
     ("file:///{dir}/o#top", "a query or fragment (? or #) is not supported"),
-    ("simplecache::file:///{dir}/o", "not a URL (PROTOCOL://PATH; chained URLs"),
+    ("simplecache::file:///{dir}/o", "a chained URL (::) is not supported"),
+    ("zip://a::file:///{dir}/o.zip", "a chained URL (::) is not supported"),  # was exit 1
+    ("file:///{dir}/o::x", "a chained URL (::) is not supported"),
     ("://{dir}/o", "not a URL (PROTOCOL://PATH"),
     ("file:///{dir}/o\nx", "a URL with a character that is not printable"),
     ("file:///{dir}/o\x00", "a URL with a character that is not printable"),
+    ("", "'': an empty path: name a directory or a URL"),  # was the current directory
+    ("  ", "'  ': an empty path: name a directory or a URL"),  # was a directory named '  '
+    ("\t", "'\\t': an empty path"),
+    ("file:relative/o", "a file URL names an absolute path on this machine: file:///PATH"),
+    ("LOCAL:", "a file URL names an absolute path on this machine: file:///PATH"),
+    # the URL's host was not given to the file system: a 49-line traceback
+    ("ftp:///{dir}/o", "the ftp file system can be made for (missing a required argument: 'host')"),
+    ("ftp://127.0.0.1:99999/o", "the ftp file system can be made for (Port out of range 0-65535)"),
+    ("zip:///{dir}/o", "zip:// is no directory to write in"),  # wrappers: exit 1 or tracebacks
+    ("simplecache:///{dir}/o", "simplecache:// is no directory to write in"),
+    ("data:///{dir}/o", "data:// is no directory to write in"),
+    ("generic:///{dir}/o", "generic:// is no directory to write in"),
 ]
 
 
@@ -58,6 +72,47 @@ def test_a_hostile_url_is_one_line_exit_2_nothing_written(
     assert err.startswith("gyrogen sweep: error: Invalid value for '--out': "), err
     assert message in err, err
     assert _listing(tmp_path) == before
+
+
+@pytest.mark.parametrize(
+    "form", ["file:{dir}/o", "FILE://{dir}/o", "local:{dir}/o", "LOCAL://{dir}/o"]
+)
+def test_a_file_url_of_any_spelling_is_its_absolute_path(form: str, tmp_path: Path) -> None:
+    """file:/PATH is file:///PATH, as fsspec and pyarrow read it (it was a
+    relative directory ./file:/PATH that the summary then missed), and the
+    protocol's case is not the path's (FILE:///PATH was ./FILE:/PATH)."""
+    url = form.format(dir=tmp_path)
+    found = store(url)
+    assert (found.where, found.protocol, found.root) == (url, form[:5].lower().rstrip(":"),
+                                                         str(tmp_path / "o"))  # fmt: skip
+
+
+def test_a_url_gives_its_host_to_the_file_system() -> None:
+    """ftp://USER:PASS@HOST:PORT/PATH: the file system is made with its host
+    and port (they were dropped: no ftp:// or sftp:// could be made)."""
+    found = url_store("ftp://me:pw@example.org:2121/o")
+    assert found.root == "/o" and dict(found.options) == {
+        "host": "example.org", "port": 2121, "username": "me", "password": "pw"
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("out", "place"), [("file:{tmp}/there", "{tmp}/there"), ("s3:b/o", "{tmp}/here/s3:b/o")]
+)
+def test_a_short_file_url_sweeps_there_and_summarizes(
+    out: str, place: str, tmp_path: Path, cache: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """--out file:/PATH: everything under /PATH (before: the parts under
+    ./file:/PATH, then the summary's traceback); a relative directory that
+    pyarrow would read as a URI (s3:b/o) is that directory, read back too."""
+    here, out, place = tmp_path / "here", out.format(tmp=tmp_path), place.format(tmp=tmp_path)
+    here.mkdir()
+    monkeypatch.chdir(here)
+    code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml", count=1)), "--out", out,
+                             "--quiet", "--no-plots"])  # fmt: skip
+    assert code == 0 and f"wrote {out}/ (summary.json" in stdout, err
+    assert list(tmp_path.rglob("summary.json")) == [Path(place, "summary.json")]
+    assert len(rows(out)) == 15
 
 
 @pytest.mark.skipif(importlib.util.find_spec("s3fs") is not None, reason="s3fs is installed")
@@ -126,6 +181,7 @@ def test_an_unwritable_url_is_one_line_exit_1_nothing_written(tmp_path: Path, cl
     for url, why in [
         (f"file://{blocker}/o", "Not a directory"),  # a file in the way
         ("file:///proc/gyrogen-none/o", "No such file or directory"),  # not even root makes it
+        (f"ftp://127.0.0.1:{free_port()}/o", "Connection refused"),  # no server: was a traceback
     ]:
         code, stdout, err = cli(["sweep", str(sweep), "--out", url])
         assert (code, stdout) == (1, "") and err.count("\n") == 1, err
@@ -133,24 +189,17 @@ def test_an_unwritable_url_is_one_line_exit_1_nothing_written(tmp_path: Path, cl
         assert _listing(tmp_path) == before and blocker.read_text() == "mine"
 
 
-@pytest.mark.parametrize(
-    ("obstacle", "message"),
-    [("parts", "{url}/parts: not a directory"), ("state", "{url}/sweep.json: not a sweep's state")],
-)
+@pytest.mark.parametrize(("name", "text", "message"), OBSTACLES, ids=[o[0] for o in OBSTACLES])
 def test_obstacles_at_a_url_are_refused_before_any_work(
-    tmp_path: Path, cli, obstacle: str, message: str
+    tmp_path: Path, cli, name: str, text: str | None, message: str
 ) -> None:
     out = tmp_path / "o"
-    out.mkdir()
-    (out / "parts").write_text("mine") if obstacle == "parts" else (out / "sweep.json").write_text(
-        "[1, 2]"
-    )
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = put(out, name, text)
     url = f"file://{out}"
     code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", url])
     assert (code, stdout) == (1, "") and err.count("\n") == 1
-    assert err.startswith("gyrogen: error: " + message.format(url=url)), err
-    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert err.startswith("gyrogen: error: " + message.format(out=url)), err
+    assert {p.name: p.read_bytes() if p.is_file() else None for p in out.rglob("*")} == before
 
 
 def test_a_url_write_cut_short_leaves_nothing(

@@ -18,6 +18,7 @@ summary and figures in out, resumable), then its rows read back.
 
 from __future__ import annotations
 
+import os
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -121,7 +122,11 @@ def read(out: str | Path | Store) -> pd.DataFrame:
     from gyrogen.analysis.sweep.sweep_columns import PARTS
 
     where = store(out)
-    frame = pd.read_parquet(Path(where.where) / PARTS if where.local else where.show(PARTS))
+    # the path itself, never re-read as a URL (./s3:x is a directory; FILE:/// is file:///)
+    if where.local:
+        frame = pd.read_parquet(os.path.abspath(where.path(PARTS)))
+    else:
+        frame = pd.read_parquet(where.path(PARTS), filesystem=where.fs)
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)
 
 

@@ -31,15 +31,16 @@ class OutType(click.ParamType):
     name = "DIR|URL"
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
-        if not isinstance(value, str) or "://" not in value:
-            return click.Path(file_okay=False, path_type=Path).convert(value, param, ctx)
-        from gyrogen.analysis.sweep.sweep_store import url_store
+        from gyrogen.analysis.sweep.sweep_store import store
         from gyrogen.errors import GyrogenError
 
         try:
-            return url_store(value)
+            where = store(value)  # what is a URL and what a path: decided there alone
         except GyrogenError as exc:
             self.fail(str(exc), param, ctx)
+        if where.local:
+            return click.Path(file_okay=False, path_type=Path).convert(value, param, ctx)
+        return where
 
 
 def _address(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:

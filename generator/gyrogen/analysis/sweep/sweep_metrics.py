@@ -172,16 +172,26 @@ class _Watch:
         self.start = {q: self._quantity(q, x0) - thr for q, thr in self.thresholds.items()}
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
-    def _momentum(self, x: np.ndarray) -> np.ndarray:
-        u1, u2, u3, u4 = (x[:, i] for i in self.u)
-        return np.array(body_momentum(self.lumped, self.J, u1, u2, u3, u4))
+    def _momentum(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """H at the states x over a power of two per row, and that power: 1
+        unless the rates reach 2^600 (inertias to 1e50 times rates to 1e300
+        overflowed the products, an arctan2 of infinities then 45 degrees)."""
+        u = x[:, self.u]
+        big = np.max(np.abs(u), axis=1, initial=0.0, where=np.isfinite(u))
+        scale = np.ldexp(1.0, np.where(big >= 2.0**600, np.frexp(big)[1], 0))
+        u1, u2, u3, u4 = (u / scale[:, None]).T  # exact: a power of two
+        return np.array(body_momentum(self.lumped, self.J, u1, u2, u3, u4)), scale
 
     def _look(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The nutation angle, |omega| and |H| at the states x."""
-        h = self._momentum(x)
+        """The nutation angle, |omega| and |H| at the states x (|H| inf
+        where it is beyond doubles)."""
+        h, scale = self._momentum(x)
         transverse = np.hypot(h[0], h[2])
-        rate = np.sqrt(np.sum(x[:, self.u[:3]] ** 2, axis=1))
-        return np.arctan2(transverse, h[1]), rate, np.hypot(transverse, h[1])
+        u1, u2, u3 = (x[:, i] for i in self.u[:3])
+        rate = np.hypot(np.hypot(u1, u2), u3)  # no square to overflow: |u| to 1e308
+        with np.errstate(over="ignore"):
+            norm = np.hypot(transverse, h[1]) * scale
+        return np.arctan2(transverse, h[1]), rate, norm
 
     def _quantity(self, q: str, x: np.ndarray) -> np.ndarray:
         if q in ("nutation", "rate"):
@@ -195,7 +205,8 @@ class _Watch:
         self.nutation[live] = np.fmax(self.nutation[live], nutation)
         self.rate[live] = np.fmax(self.rate[live], rate)
         h0 = self.h0[live]
-        drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
+        with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
+            drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
         self.drift[live] = np.fmax(self.drift[live], drift)
         for q, thr in self.thresholds.items():
             crossed = np.sign(self._quantity(q, xs) - thr) != np.sign(self.start[q][live])

@@ -29,6 +29,19 @@ from gyrogen.analysis.sweep.sweep_store import Store
 from gyrogen.errors import GyrogenError
 
 STATE_FILE = "sweep.json"
+STATE_KEYS = ("sweep", "fingerprint", "trajectories", "scene")
+"""What check_out writes in STATE_FILE (and the identity, which a sweep
+begun before it was recorded lacks: another build's); a file without them
+is no sweep's."""
+SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG = (
+    "summary.json",
+    "summary.md",
+    "histograms.png",
+    "map.png",
+)
+SUMMARY_FILES = (SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG)
+"""What the sweep writes at its end (sweep_report.write): nothing may be in
+their way, checked before any work with sweep.json's and parts' places."""
 _STAGED = re.compile(r"\.part-.*\.(new|old)")
 """The temporary names of a part being written (files.write_atomic's, and
 a URL store's): what a writer killed mid-write leaves."""
@@ -53,19 +66,31 @@ def whole(out: Store, name: str, rows: int, ident: dict[str, str]) -> bool:
 
 
 def read_state(out: Store) -> dict[str, Any] | None:
-    """The sweep state out holds (None: none yet); obstacles refused."""
+    """The sweep state out holds (None: none yet); obstacles refused: a
+    parts that is no directory, a directory (or FIFO) where a file goes."""
     if out.kind(PARTS) not in ("absent", "dir"):
         raise GyrogenError(f"{out.show(PARTS)}: not a directory: remove it or use another --out")
+    for name in (STATE_FILE, *SUMMARY_FILES):
+        if out.kind(name) not in ("absent", "file"):
+            raise GyrogenError(
+                f"{out.show(name)}: not a file, and the sweep writes one there: remove it or use "
+                "another --out"
+            )
     if out.kind(STATE_FILE) == "absent":
         return None
     path = out.show(STATE_FILE)
     try:
         held = json.loads(out.read_text(STATE_FILE))
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, RecursionError) as exc:  # RecursionError: [[[[... nested
         why = getattr(exc, "strerror", None) or exc
         raise GyrogenError(f"{path}: unreadable ({why}): remove it or use another --out") from exc
-    if not isinstance(held, dict):
-        raise GyrogenError(f"{path}: not a sweep's state: remove it or use another --out")
+    missing = [k for k in STATE_KEYS if k not in held] if isinstance(held, dict) else None
+    if missing is None or missing or not isinstance(held.get("identity", {}), dict):
+        why = ("not a JSON object" if missing is None else f"no {', '.join(missing)}" if missing
+               else "its identity is not a JSON object")  # fmt: skip
+        raise GyrogenError(
+            f"{path}: not a gyrogen sweep state ({why}): remove it or use another --out"
+        )
     return held
 
 
@@ -75,7 +100,7 @@ def check_out(out: Store, spec: Spec, ident: dict[str, str], restart: bool) -> d
     identity, unless restart); the state file to write. The chunk size is
     not the sweep's: another resumes it."""
     state: dict[str, Any] = {"sweep": spec.name, "fingerprint": spec.fingerprint()}
-    state |= {"trajectories": spec.size, "scene": spec.scene.name}
+    state |= {"trajectories": spec.size, "scene": spec.scene.name}  # and identity: STATE_KEYS
     held = read_state(out)
     if held is None:
         if written(out):

@@ -31,6 +31,7 @@ from gyrogen.analysis.sweep.sweep_columns import (
 )
 from gyrogen.analysis.sweep.sweep_draws import axis_values
 from gyrogen.analysis.sweep.sweep_engine import Run
+from gyrogen.analysis.sweep.sweep_parts import HISTOGRAMS_PNG, MAP_PNG, SUMMARY_JSON, SUMMARY_MD
 from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.analysis.sweep.sweep_store import Store
 from gyrogen.physics import lumped_inertias
@@ -176,21 +177,22 @@ def markdown(data: dict[str, Any]) -> str:
 
 
 def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
-    """summary.json, summary.md and the figures into the sweep's directory."""
+    """summary.json, summary.md and the figures into the sweep's directory
+    (sweep_parts.SUMMARY_FILES: kept clear before any work)."""
     import pyarrow.parquet as pq
 
     with record.out.open(PARTS, part_files(record.out)[0]) as source:
         columns = list(pq.read_schema(source).names)
     data, histograms = summary(spec, record, metric_columns(spec, columns))
-    files: dict[str, str | bytes] = {"summary.md": markdown(data)}
+    files: dict[str, str | bytes] = {SUMMARY_MD: markdown(data)}
     if plots:
         from gyrogen.analysis.sweep.sweep_plots import histograms_png, map_png  # matplotlib
 
-        files["histograms.png"] = histograms_png(f"sweep {spec.name}", histograms)
+        files[HISTOGRAMS_PNG] = histograms_png(f"sweep {spec.name}", histograms)
         if (grid := map_data(spec, record.out, columns)) is not None:
-            files["map.png"] = map_png(grid)
-    data["files"] = ["summary.json", *files]
-    files["summary.json"] = json.dumps(data, indent=1) + "\n"
+            files[MAP_PNG] = map_png(grid)
+    data["files"] = [SUMMARY_JSON, *files]
+    files[SUMMARY_JSON] = json.dumps(data, indent=1) + "\n"
     record.out.write(files)
     return data
 

@@ -22,6 +22,7 @@ whose package is installed, and not memory:// (each process has its own).
 
 from __future__ import annotations
 
+import inspect
 import os
 import posixpath
 import re
@@ -38,18 +39,31 @@ from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
 
 URL = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*)://(.*)", re.S)
+FILE_URL = re.compile(r"(file|local):(.*)", re.I | re.S)
+"""file:/PATH, a file URL's short form: the local path /PATH to fsspec and
+pyarrow alike (not a relative directory named "file:")."""
 OBJECT_STORES = frozenset({"s3", "s3a", "gs", "gcs", "az", "abfs", "abfss"})
 """Protocols whose files are objects, each PUT whole or not at all (no rename)."""
+NOT_PLACES = frozenset(
+    {"blockcache", "cached", "filecache", "simplecache", "dir", "dask", "generic", "reference",
+     "asyncwrapper", "async_wrapper", "zip", "tar", "libarchive", "data", "http", "https",
+     "github", "gist", "git"}
+)  # fmt: skip
+"""fsspec protocols that are no directory to write in: wrappers of another
+file system (a chain), an archive's or a repository's files, data:// (the
+bytes are the URL), HTTP (read only)."""
 
 
 @dataclass(frozen=True)
 class Store:
     """A sweep's directory: where (the path or URL as given), protocol
-    (None: a local directory) and root (the path within the file system)."""
+    (None: a local directory), root (the path within the file system) and
+    options (what the URL gives its file system: ftp's host and port, ...)."""
 
     where: str
     protocol: str | None = None
     root: str = ""
+    options: tuple[tuple[str, Any], ...] = ()
 
     @property
     def local(self) -> bool:
@@ -62,10 +76,16 @@ class Store:
 
     @cached_property
     def fs(self) -> Any:
-        """The fsspec file system (made in each process that asks)."""
+        """The fsspec file system (made in each process that asks; the first
+        look, before any work, makes it in the client): a server that does
+        not answer is one line."""
         import fsspec
 
-        return fsspec.filesystem(self.protocol)
+        try:
+            return fsspec.filesystem(self.protocol, **dict(self.options))
+        except Exception as exc:  # each file system its own: ConnectionRefusedError, gaierror
+            why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+            raise GyrogenError(f"cannot open {self.where}: {why}") from exc
 
     def __getstate__(self) -> dict[str, Any]:  # the file system is made anew where it goes
         return {k: v for k, v in self.__dict__.items() if k != "fs"}
@@ -130,9 +150,10 @@ class Store:
     @contextmanager
     def open(self, *names: str) -> Iterator[Any]:
         """The file to read (a path, or an fsspec file object): what
-        pyarrow's ParquetFile takes."""
+        pyarrow's ParquetFile takes. A local path is made absolute: pyarrow
+        reads a relative one that looks like a URI (s3:x/...) as that URI."""
         if self.local:
-            yield self.path(*names)
+            yield os.path.abspath(self.path(*names))
             return
         with self.fs.open(self.path(*names), "rb") as fh:
             yield fh
@@ -203,26 +224,31 @@ class Store:
 
 
 def store(out: str | Path | Store) -> Store:
-    """The store out names: a local path, or a URL (checked: url_store)."""
+    """The store out names: a local path, or a URL (checked: url_store); an
+    empty or blank path is refused (it would be the current directory, or a
+    directory named by spaces)."""
     if isinstance(out, Store):
         return out
-    if isinstance(out, str) and "://" in out:
+    if isinstance(out, str) and not out.strip():
+        raise GyrogenError(f"{out!r}: an empty path: name a directory or a URL")
+    if isinstance(out, str) and ("://" in out or FILE_URL.match(out)):
         return url_store(out)
     return Store(str(out))
 
 
 def url_store(url: str) -> Store:
-    """The store of an fsspec URL, or a one-line GyrogenError naming the URL
-    and what is wrong with it: its form, an unknown protocol, a protocol
-    whose package is missing, memory:// (not shared between processes)."""
+    """The store of an fsspec URL (or file:/PATH, the same as file:///PATH),
+    or a one-line GyrogenError naming the URL and what is wrong with it: its
+    form, an unknown protocol, a protocol whose package is missing,
+    memory:// (not shared between processes)."""
     shown = url if url.isprintable() else repr(url)
-    match = URL.fullmatch(url)
+    match = URL.fullmatch(url) or FILE_URL.fullmatch(url)
     if not url.isprintable():
         raise GyrogenError(f"{shown}: a URL with a character that is not printable")
+    if "::" in url:  # fsspec chains at any ::, after the first :// too (zip://a::file://b)
+        raise GyrogenError(f"{shown}: a chained URL (::) is not supported: one PROTOCOL://PATH")
     if match is None:
-        raise GyrogenError(
-            f"{shown}: not a URL (PROTOCOL://PATH; chained URLs such as a::b:// are not supported)"
-        )
+        raise GyrogenError(f"{shown}: not a URL (PROTOCOL://PATH)")
     protocol, rest = match[1].lower(), match[2]
     if "?" in rest or "#" in rest:
         raise GyrogenError(f"{shown}: a query or fragment (? or #) is not supported")
@@ -232,6 +258,11 @@ def url_store(url: str) -> Store:
         )
     if not rest.strip("/"):
         raise GyrogenError(f"{shown}: names no path (PROTOCOL://PATH)")
+    if protocol in NOT_PLACES:
+        raise GyrogenError(
+            f"{shown}: {protocol}:// is no directory to write in (it reads through another file "
+            "system, an archive or a server, or the URL itself)"
+        )
     if protocol == "memory":
         raise GyrogenError(
             f"{shown}: memory:// is each process's own memory: workers would not share it, "
@@ -251,5 +282,14 @@ def url_store(url: str) -> Store:
         raise GyrogenError(
             f"{shown}: the {protocol} protocol needs a package that is not installed ({exc})"
         ) from exc
-    root = str(cls._strip_protocol(url)).rstrip("/") or "/"
-    return Store(url, protocol, root)
+    # the protocol as fsspec spells it (FILE:///p was the relative path ./FILE:/p)
+    canonical = f"{protocol}://{rest}"
+    try:  # what the URL gives the file system (ftp: host, port), and all it needs
+        options = cls._get_kwargs_from_urls(canonical)
+        inspect.signature(cls.__init__).bind(None, **options)
+        root = str(cls._strip_protocol(canonical)).rstrip("/") or "/"
+    except Exception as exc:  # each file system its own: TypeError, ValueError (a port)
+        raise GyrogenError(
+            f"{shown}: not a place the {protocol} file system can be made for ({exc})"
+        ) from exc
+    return Store(url, protocol, root, tuple(sorted(options.items())))
