@@ -64,6 +64,8 @@ TINY_DT = f"{STEPS}60 s/1e-300 s is 6e+301 output steps, {LIMIT}"
 HUGE_T_END = f"{STEPS}1e+300 s/0.05 s is 2e+301 output steps"
 JUST_OVER = f"{STEPS}50000.1 s/0.05 s is 1000001 output steps, more than the limit"
 LONGER = "simulate.dt: output step 61 s is longer than the span 60 s"
+SUBNORMAL_DT = edit("t_end = 60.0", "t_end = 5e-324", edit("dt = 0.05", "dt = 5e-324"))
+SHORTER = "simulate.dt: output step 4.94066e-324 s is shorter than 1e-300 s"
 # the generated setup's arithmetic overflows to a NaN condition number: code 7
 OVERFLOW = "parameters: the mass matrix's coupled block has condition number nan > 1e+13"
 FOLDED_RANGE = "a folded value must be 0 or of magnitude 1e-50 to 1e+50"
@@ -96,6 +98,12 @@ BAD = [
     ("flag as number", edit("rotor_angle = true", "rotor_angle = 1"), NOT_A_FLAG),
     ("tiny dt", edit("dt = 0.05", "dt = 1e-300"), TINY_DT),
     ("dt longer than t_end", edit("dt = 0.05", "dt = 61.0"), LONGER),
+    ("dt subnormal", SUBNORMAL_DT, SHORTER),
+    (
+        "dt just under 1e-300",
+        edit("t_end = 60.0", "t_end = 1e-300", edit("dt = 0.05", "dt = 9e-301")),
+        "shorter than 1e-300 s",
+    ),
     ("huge t_end", edit("t_end = 60.0", "t_end = 1e300"), HUGE_T_END),
     ("just over the point limit", edit("t_end = 60.0", "t_end = 50000.05"), JUST_OVER),
     ("folded singular", FOLDED_SINGULAR, "condition number"),

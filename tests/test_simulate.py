@@ -240,6 +240,19 @@ def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path, cli) -> None:
     )
 
 
+@pytest.mark.parametrize("dt", ["5e-324", "1e-310", "9e-301"])
+def test_output_step_too_short_to_resolve_is_a_usage_error(dt: str, tmp_path: Path, cli) -> None:
+    """dt = t_end = 5e-324 passed the count of steps (one) but left a grid of one
+    point (a reshape traceback, exit 1); 1e-310 failed only after building,
+    with src/ left behind. Both are refused before anything is generated."""
+    run = simulate(cli, ["torque_free", "--t-end", dt, "--dt", dt], tmp_path / "out")
+    assert (run.code, run.out) == (2, "")
+    assert run.err.count("\n") == 1 and "Traceback" not in run.err, run.err
+    assert run.err.startswith("gyrogen simulate: error: Invalid value for '--t-end' / '--dt': ")
+    assert "s is shorter than 1e-300 s: the quadrature samples inside it" in run.err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize(
     ("options", "blamed", "pair", "steps"),
     [
@@ -290,11 +303,14 @@ def test_compiled_methods_spend_the_budget_over_the_whole_run(
 def test_sample_times_do_not_overflow_near_dbl_max() -> None:
     """The quadrature nodes of an interval ending near DBL_MAX are finite
     (0.5 (a + b) overflowed with a RuntimeWarning), and the same bits as
-    before everywhere else."""
+    before everywhere else; so is the grid (t_end + dt/2 overflowed)."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         far = sample_times(np.array([0.0, 1e308, 1.7e308]))
+        ends = [output_grid(t, dt) for t, dt in ((1.79e308, 1.79e308), (1.797e308, 1.1e308))]
     assert np.all(np.isfinite(far)) and np.all(np.diff(far) > 0)
+    for grid, t_end in zip(ends, (1.79e308, 1.797e308), strict=True):  # arange's ValueError
+        assert grid[0] == 0.0 and grid[-1] == t_end and np.all(np.diff(grid) > 0)
     grid = output_grid(20.0, 0.05)
     a, b = grid[:-1, None], grid[1:, None]
     before = 0.5 * (a + b) + 0.5 * (b - a) * np.polynomial.legendre.leggauss(QUAD_NODES)[0]

@@ -17,7 +17,7 @@ from gyrogen.abi import (
     NAME_MAX_LENGTH,
     QUATERNION_NORM_SLACK,
 )
-from gyrogen.limits import MAX_OUTPUT_POINTS
+from gyrogen.limits import MAX_OUTPUT_POINTS, MIN_OUTPUT_STEP
 from gyrogen.setup_checks import first_failure
 
 _C_KEYWORDS = frozenset(
@@ -50,7 +50,7 @@ def parameter_value(v: object) -> object:
 
 def check_output_grid(t_end: float, dt: float) -> None:
     """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
-    (and at least once)."""
+    (and at least once), and is no shorter than MIN_OUTPUT_STEP."""
     if dt > t_end:
         raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
     steps = t_end / dt
@@ -58,6 +58,11 @@ def check_output_grid(t_end: float, dt: float) -> None:
         raise ValueError(
             f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
             f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
+        )
+    if dt < MIN_OUTPUT_STEP:
+        raise ValueError(
+            f"output step {dt:g} s is shorter than {MIN_OUTPUT_STEP:g} s: the quadrature "
+            "samples inside it would be steps shorter than any integrator resolves"
         )
 
 
