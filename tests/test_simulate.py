@@ -196,6 +196,36 @@ def test_parameters_whose_constants_overflow_are_one_line_exit_2(
         "(code 9): a constant derived from the parameters is not finite (together they "
         "overflow doubles)"
     )
+    assert not (tmp_path / "out").exists()  # src/ was written before setup refused
+
+
+@pytest.mark.parametrize(
+    "obstacle", ["summary.json", "trajectory.png", "trajectory.csv", "src", "src/torque_free.c"]
+)
+def test_anything_in_the_way_is_refused_before_any_work(
+    obstacle: str, tmp_path: Path, cache: None, cli
+) -> None:
+    """A directory where an output file goes (a file where src/ goes) is one
+    line before anything is generated, built or integrated (it was found
+    only after integrating, with src/ written), and nothing is written."""
+    out = tmp_path / "out"
+    (out / obstacle).mkdir(parents=True) if obstacle != "src" else None
+    if obstacle == "src":
+        out.mkdir()
+        (out / "src").write_text("a file")
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    run = simulate(cli, ["torque_free", "--t-end", "0.1"], out)
+    assert (run.code, run.out) == (1, ""), run.err
+    why = "Not a directory" if obstacle == "src" else "Is a directory"
+    what = (
+        f"cannot create output directory {out / 'src'}"
+        if obstacle == "src"
+        else (f"cannot write {out / obstacle}")
+    )
+    lines = run.err.splitlines()
+    assert lines[-1] == f"gyrogen: error: {what}: {why}" and "integrating" not in run.err
+    assert len(lines) == (2 if "/" in obstacle else 1), run.err  # src's files: once rendered
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
 
 
 @pytest.mark.parametrize("command", ["fmu", "bench"])
@@ -297,7 +327,7 @@ def test_compiled_methods_spend_the_budget_over_the_whole_run(
     assert run.code == 1 and run.out == ""
     assert run.err.splitlines()[-1].startswith(f"gyrogen: error: {method} failed at t = ")
     assert run.err.endswith(": 10 RHS calls (--max-nfev) spent\n"), run.err
-    assert not (tmp_path / "out" / "trajectory.csv").exists()
+    assert not (tmp_path / "out").exists()  # not even src/
 
 
 def test_sample_times_do_not_overflow_near_dbl_max() -> None:
