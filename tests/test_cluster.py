@@ -56,6 +56,9 @@ BAD = [
      "T: not used with torque = 'table'"),
     ("table, no law", edit("T = 0.02 ", "T = 0.02\ntorque_table = [[0.0, 0.0], [1.0, 0.1]] "),
      "torque_table is only used with torque = 'table'"),
+    ("table T 1e300", edit('torque = "constant"\nT = 0.02',
+                           'torque = "table"\ntorque_table = [[0.0, 0.0], [1.0, 1e300]]'),
+     "torque_table[1]: T = 1e+300 at t = 1: a folded value must be 0 or of magnitude 1e-50"),
     ("far position", edit("position = [0.4, 0.0, 0.1]", "position = [1e200, 0.0, 0.1]"),
      "rotors: the lumped inertia overflows a double"),
 ]  # fmt: skip

@@ -53,6 +53,7 @@ HUGE_MOMENTS = edit(
 )
 NESTED = "a = " + "[" * 5000 + "]" * 5000
 CONTROLLED = edit('torque = "constant"', 'torque = "speed_controller"')
+TABLED = edit('T   = "runtime"   # N m\n', "", edit('torque = "constant"', 'torque = "table"'))
 # Expected messages too long for a row of BAD:
 NOT_DEFINITE = "carrier inertia is not positive definite"
 NUL_AT_1 = "description: control character U+0000 at position 1"
@@ -92,6 +93,16 @@ BAD = [
     ("no target", edit('targets = ["c", "fortran"]', "targets = []"), "targets"),
     ("attitude", edit('targets = ["c"', 'attitude = "rodrigues"\ntargets = ["c"'), "attitude"),
     ("initial", edit("initial = { u1", "initial = { u9 = 1.0, u1"), "u9 is not a state"),
+    (
+        "table T 1e300",
+        edit('"table"', '"table"\ntorque_table = [[0, 0], [1, 1e300]]', TABLED),
+        "effects: torque_table[1]: T = 1e+300 at t = 1: a folded value must be 0 or of magnitude",
+    ),
+    (
+        "table T -1e-60",
+        edit('"table"', '"table"\ntorque_table = [[0, 0], [2, -1e-60]]', TABLED),
+        f"effects: torque_table[1]: T = -1e-60 at t = 2: {FOLDED_RANGE}",
+    ),
     ("huge I11", edit("I11 = 20.0", "I11 = 1e308"), f"parameters.I11: 1e+308: {FOLDED_RANGE}"),
     ("not positive definite", edit("I13 = 0.5", "I13 = 30.0"), NOT_DEFINITE),
     ("number true", edit("m_a = 150.0", "m_a = true"), NOT_A_NUMBER),

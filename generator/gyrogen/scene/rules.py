@@ -40,12 +40,20 @@ def parameter_value(v: object) -> object:
         x = math.inf
     if not math.isfinite(x):
         raise ValueError(f"{v!r} is not a finite number")
-    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
-        raise ValueError(
-            f"{x!r}: a folded value must be 0 or of magnitude {FOLDED_MIN:g} to "
-            f'{FOLDED_MAX:g} (its products must stay doubles); make it "runtime"'
-        )
+    if why := folded_size(x):
+        raise ValueError(f'{x!r}: {why}; make it "runtime"')
     return x
+
+
+def folded_size(x: float) -> str | None:
+    """Why x cannot be a number folded into the code (a parameter, a torque
+    table's value), or None: it is 0 or of magnitude FOLDED_MIN to FOLDED_MAX."""
+    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
+        return (
+            f"a folded value must be 0 or of magnitude {FOLDED_MIN:g} to {FOLDED_MAX:g} "
+            "(its products must stay doubles)"
+        )
+    return None
 
 
 def check_output_grid(t_end: float, dt: float) -> None:
@@ -149,7 +157,8 @@ def check_physics(p: Mapping[str, float | str]) -> None:
 
 def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
     """A torque table goes with torque = 'table', and only with it: at least
-    2 (t, T) points, the times increasing strictly."""
+    2 (t, T) points, the times increasing strictly, each T a folded value's
+    size (folded_size: the code multiplies them)."""
     if torque != "table":
         if table is not None:
             raise ValueError("torque_table is only used with torque = 'table'")
@@ -158,3 +167,6 @@ def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
         raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
     if any(b[0] <= a[0] for a, b in itertools.pairwise(table)):
         raise ValueError("torque_table times must increase strictly")
+    for i, (t, torque_value) in enumerate(table):
+        if why := folded_size(torque_value):
+            raise ValueError(f"torque_table[{i}]: T = {torque_value!r} at t = {t:g}: {why}")
