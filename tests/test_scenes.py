@@ -206,6 +206,16 @@ def test_scene_of_exactly_the_size_limit_is_read(tmp_path: Path) -> None:
     assert load(str(path)).name == "wheel_spinup"
 
 
+def test_a_byte_order_mark_is_dropped(tmp_path: Path, cli) -> None:
+    """A scene (and a sweep file, read the same way) saved with a UTF-8 BOM is
+    read (tomllib said "Invalid statement (at line 1, column 1)")."""
+    path = tmp_path / "scene.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + GOOD.encode())
+    assert load(str(path)) == parse(GOOD, "x.toml")
+    code, _, err = cli(["generate", str(path), "--no-check", "--out", str(tmp_path / "o")])
+    assert code == 0, err
+
+
 def test_table_torque_needs_increasing_times() -> None:
     text = edit('torque = "constant"', 'torque = "table"\ntorque_table = [[0.0, 1.0], [0.0, 2.0]]')
     with pytest.raises(SceneError, match="torque_table times must increase"):

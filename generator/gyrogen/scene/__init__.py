@@ -359,7 +359,8 @@ def load(arg: str) -> Scene:
 
 def read_file(path: str) -> str:
     """A scene file's text: a regular file (opened without blocking, so a
-    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8."""
+    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8
+    (a byte-order mark at its start, as some editors write, is dropped)."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except FileNotFoundError as exc:
@@ -383,7 +384,7 @@ def read_file(path: str) -> str:
     if len(data) > MAX_SCENE_BYTES:
         raise SceneError(f"{path}: more than {MAX_SCENE_BYTES:,} bytes, the limit for a scene file")
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8").removeprefix("\ufeff")  # a byte-order mark: not TOML
     except UnicodeDecodeError as exc:
         raise SceneError(
             f"{path}: cannot read: not UTF-8 ({exc.reason} at byte {exc.start})"
