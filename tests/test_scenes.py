@@ -55,6 +55,9 @@ NESTED = "a = " + "[" * 5000 + "]" * 5000
 CONTROLLED = edit('torque = "constant"', 'torque = "speed_controller"')
 TABLED = edit('T   = "runtime"   # N m\n', "", edit('torque = "constant"', 'torque = "table"'))
 # Expected messages too long for a row of BAD:
+HUGE_INT = "100000... (401 digits) is out of range"  # not "not a finite number", every digit
+DOUBLE = "a double holds at most 1.8e308"
+DIGITS_4300 = "invalid TOML: an integer of more than 4300 digits"  # a ValueError traceback
 NOT_DEFINITE = "carrier inertia is not positive definite"
 NUL_AT_1 = "description: control character U+0000 at position 1"
 NOT_A_NUMBER = 'parameters.m_a: expected a number or "runtime", not True'
@@ -103,6 +106,14 @@ BAD = [
         edit('"table"', '"table"\ntorque_table = [[0, 0], [2, -1e-60]]', TABLED),
         f"effects: torque_table[1]: T = -1e-60 at t = 2: {FOLDED_RANGE}",
     ),
+    (
+        "integer 10**400",
+        edit("m_a = 150.0", f"m_a = {10**400}"),
+        f"m_a: {HUGE_INT}: {FOLDED_RANGE}",
+    ),
+    ("integer t_end", edit("t_end = 60.0", f"t_end = {10**400}"), f"t_end: {HUGE_INT}: {DOUBLE}"),
+    ("integer u1", edit("{ u1 = 0.01", f"{{ u1 = {-(10**400)}"), f"u1: -{HUGE_INT}: {DOUBLE}"),
+    ("integer of 5001 digits", edit("m_a = 150.0", "m_a = 1" + "0" * 5000), DIGITS_4300),
     ("huge I11", edit("I11 = 20.0", "I11 = 1e308"), f"parameters.I11: 1e+308: {FOLDED_RANGE}"),
     ("not positive definite", edit("I13 = 0.5", "I13 = 30.0"), NOT_DEFINITE),
     ("number true", edit("m_a = 150.0", "m_a = true"), NOT_A_NUMBER),

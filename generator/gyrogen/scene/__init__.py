@@ -24,7 +24,6 @@ from pydantic import (
     ConfigDict,
     Field,
     StrictBool,
-    StrictFloat,
     ValidationInfo,
     field_validator,
     model_serializer,
@@ -40,6 +39,7 @@ from gyrogen.scene import rotors
 from gyrogen.scene.rotors import Rotor
 from gyrogen.scene.rules import (
     QUATERNION,
+    Number,
     check_description,
     check_name,
     check_output_grid,
@@ -50,8 +50,6 @@ from gyrogen.scene.rules import (
 )
 
 Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
-Number = StrictFloat
-"""A TOML integer or float, never a boolean or a string."""
 
 
 class _Strict(BaseModel):
@@ -327,6 +325,8 @@ def parse(text: str, source: str) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    except ValueError as exc:  # an integer past Python's 4300-digit conversion limit
+        raise SceneError(f"{source}: invalid TOML: an integer of more than 4300 digits") from exc
     except RecursionError as exc:  # tomllib recurses once per level of nesting
         raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
     return validate(data, source)

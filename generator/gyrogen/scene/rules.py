@@ -8,7 +8,11 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 from collections.abc import Mapping
+from typing import Annotated
+
+from pydantic import BeforeValidator, StrictFloat
 
 from gyrogen.abi import (
     DESCRIPTION_MAX_LENGTH,
@@ -27,6 +31,24 @@ _C_KEYWORDS = frozenset(
 )
 
 
+def shown_integer(v: int) -> str:
+    """A long integer as its first digits and their count."""
+    digits = str(abs(v))
+    return f"{'-' * (v < 0)}{digits[:6]}... ({len(digits)} digits)"
+
+
+def number(v: object) -> object:
+    """A TOML integer too large for a double is out of range, in a line of
+    its own (pydantic said only "Input should be a valid number")."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > sys.float_info.max:
+        raise ValueError(f"{shown_integer(v)} is out of range: a double holds at most 1.8e308")
+    return v
+
+
+Number = Annotated[StrictFloat, BeforeValidator(number)]
+"""A TOML integer or float, never a boolean or a string."""
+
+
 def parameter_value(v: object) -> object:
     """A parameter is a number (folded into the code) or "runtime"; a TOML
     boolean or a quoted number is neither (pydantic would take true as 1.0)."""
@@ -36,8 +58,9 @@ def parameter_value(v: object) -> object:
         raise ValueError(f'expected a number or "runtime", not {v!r}')
     try:
         x = float(v)
-    except OverflowError:
-        x = math.inf
+    except OverflowError as exc:  # an integer past a double's range (TOML's have no other)
+        line = f"{shown_integer(int(v))} is out of range: {folded_size(math.inf)}"
+        raise ValueError(line) from exc
     if not math.isfinite(x):
         raise ValueError(f"{v!r} is not a finite number")
     if why := folded_size(x):
