@@ -228,6 +228,44 @@ def test_anything_in_the_way_is_refused_before_any_work(
     assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
 
 
+def test_a_huge_start_state_warns_nothing(tmp_path: Path, cache: None, cli) -> None:
+    """u1 = 1e308: the stiffness estimate overflowed with a numpy
+    RuntimeWarning and read 'decay rates up to inf'; now the rate is a
+    number, and the integrator's refusal is the one line."""
+    assert cli(["new", "base", "--out", str(tmp_path / "base.toml")]).code == 0
+    path = tmp_path / "base.toml"
+    text = path.read_text()
+    assert "initial = { u1 = 0.01," in text
+    path.write_text(text.replace("initial = { u1 = 0.01,", "initial = { u1 = 1e308,"))
+    scene = str(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning is an exception: the run would end in it
+        run = simulate(cli, [scene, "--no-plot"], tmp_path / "out")
+    assert (run.code, run.out) == (1, "") and "inf" not in run.err, run.err
+    assert "decay rates up to 2.59e+307 1/s" in run.err
+    assert (
+        run.err.splitlines()[-1] == "gyrogen: error: radau5 failed at t = 0 s: step size underflow"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_start_state_whose_derivatives_overflow_is_one_line_exit_2(
+    tmp_path: Path, cache: None, cli
+) -> None:
+    """Refused before integrating, naming the largest values (it was the
+    integrator's 'non-finite state or derivative' at t = 0, exit 1)."""
+    scene = torque_free_with(
+        tmp_path / "s.toml", "{ u1 = 0.3, u2 = 1.0,", "{ u1 = 1e308, u2 = -1e308,"
+    )
+    run = simulate(cli, [scene, "--method", "dop853"], tmp_path / "out")
+    assert (run.code, run.out) == (2, ""), run.err
+    assert run.err.splitlines()[-1] == (
+        "gyrogen: error: torque_free: simulate.initial: the derivatives at the start state are "
+        "not finite (u1 = 1e+308, u2 = -1e+308, u4 = 40: together they overflow doubles)"
+    )
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("command", ["fmu", "bench"])
 def test_fmu_and_bench_refuse_overflowing_parameters_in_one_line(
     tmp_path: Path, cache: None, cli, command: str

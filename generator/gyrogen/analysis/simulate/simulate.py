@@ -208,6 +208,19 @@ def given_constants(scene: Scene, comp: Compiled, p: np.ndarray) -> np.ndarray:
         raise SceneError(f"{scene.name}: simulate.parameters: {exc}") from exc
 
 
+def check_start(scene: Scene, start: Start) -> None:
+    """One line (SceneError) when the derivatives at simulate.initial are not
+    finite (states whose products overflow doubles): no method can take a
+    step from there, and the stiffness estimate would read nothing."""
+    if np.all(np.isfinite(start.comp.rhs(start.x0, start.c))):
+        return
+    largest = sorted(scene.simulate.initial.items(), key=lambda kv: -abs(kv[1]))[:3]
+    raise SceneError(
+        f"{scene.name}: simulate.initial: the derivatives at the start state are not finite "
+        f"({', '.join(f'{n} = {v:g}' for n, v in largest)}: together they overflow doubles)"
+    )
+
+
 def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: int) -> None:
     """One line for a run that gave up (sol None: the RHS budget ran out),
     failed, or left non-finite states behind; t_max: the latest time tried."""
@@ -254,6 +267,7 @@ def run(
     start = Start(
         comp, c, np.array(scene.initial_state()), (scene.simulate.rtol, scene.simulate.atol)
     )
+    check_start(scene, start)
     end = output_grid(settings.t_end, settings.dt)[-1]
     if settings.method == methods.AUTO:
         choice = stiffness.choose(comp, c, start.x0, end)
