@@ -262,6 +262,8 @@ def scenes(draw: st.DrawFn) -> Draw:
     code = sampling.setup_code(full)
     if code:
         why.append(f"parameters (setup code {code})")
+    if any(v != 0.0 and not 1e-50 <= abs(v) <= 1e50 for _, v in effects.get("torque_table", [])):
+        why.append("a torque_table value (0 or of magnitude 1e-50 to 1e50)")
     return Draw(to_toml(top, tables), not why, ", ".join(why))
 
 

@@ -380,6 +380,56 @@ def test_two_scenes_never_mix_in_one_out(tmp_path: Path, cli) -> None:
     assert cli(["generate", "gyrostat", "--no-check", "--out", str(out)]).code == 0  # itself
 
 
+def _refuse_dual_spin(monkeypatch: pytest.MonkeyPatch) -> None:
+    """generate's check fails for dual_spin (at once, without compiling) and
+    passes every other scene."""
+    from gyrogen.oracle import compare
+
+    def check(unit: Any, files: Any) -> float:
+        if unit.prefix == "dual_spin":
+            raise GyrogenError("dual_spin: the generated code differs from the reference")
+        return 0.0
+
+    monkeypatch.setattr(compare, "check_rendered", check)
+
+
+@pytest.mark.parametrize("failure", ["check", "in the way", "another scene's"])
+def test_several_scenes_are_all_checked_before_any_is_written(
+    failure: str, tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The second scene failing its check, or with something in the way of
+    its directory, leaves the first unwritten too (it was written, exit 1)."""
+    out = tmp_path / "D"
+    if failure == "check":
+        _refuse_dual_spin(monkeypatch)
+    elif failure == "in the way":
+        (out / "dual_spin" / "dual_spin.c").mkdir(parents=True)
+    else:
+        (out / "dual_spin").mkdir(parents=True)
+        (out / "dual_spin" / "manifest.json").write_text('{"prefix": "other"}')
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    code, stdout, err = cli(["generate", "torque_free", "dual_spin", "--out", str(out)])
+    assert code == (2 if failure == "another scene's" else 1) and "wrote" not in stdout, err
+    assert err.count("gyrogen: error: ") == 1 and err.endswith("\n") and "dual_spin" in err
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
+
+
+def test_two_scenes_of_one_name_are_refused(tmp_path: Path, cli) -> None:
+    """Both would go to D/torque_free: the second overwrote the first."""
+    text = (Path(__file__).parents[1] / "generator/gyrogen/scenes/torque_free.toml").read_text()
+    copy = tmp_path / "copy.toml"
+    copy.write_text(text.replace("description = ", 'description = "another" #', 1))
+    code, stdout, err = cli(
+        ["generate", "torque_free", str(copy), "--no-check", "--out", str(tmp_path / "D")]
+    )
+    assert (code, stdout) == (2, "")
+    assert err == (
+        "gyrogen: error: two scenes named 'torque_free': each writes its own directory named "
+        "after the scene, so the second would overwrite the first; give one another name\n"
+    )
+    assert not (tmp_path / "D").exists()
+
+
 def test_runtime_masses_that_sum_to_zero_are_one_line(tmp_path: Path, cli) -> None:
     """m_a runtime at -5 beside a folded m_b = 5: setup's positive-mass check
     refuses it before the reduced mass divides by m_a + m_b = 0."""

@@ -53,7 +53,11 @@ HUGE_MOMENTS = edit(
 )
 NESTED = "a = " + "[" * 5000 + "]" * 5000
 CONTROLLED = edit('torque = "constant"', 'torque = "speed_controller"')
+TABLED = edit('T   = "runtime"   # N m\n', "", edit('torque = "constant"', 'torque = "table"'))
 # Expected messages too long for a row of BAD:
+HUGE_INT = "100000... (401 digits) is out of range"  # not "not a finite number", every digit
+DOUBLE = "a double holds at most 1.8e308"
+DIGITS_4300 = "invalid TOML: an integer of more than 4300 digits"  # a ValueError traceback
 NOT_DEFINITE = "carrier inertia is not positive definite"
 NUL_AT_1 = "description: control character U+0000 at position 1"
 NOT_A_NUMBER = 'parameters.m_a: expected a number or "runtime", not True'
@@ -64,6 +68,8 @@ TINY_DT = f"{STEPS}60 s/1e-300 s is 6e+301 output steps, {LIMIT}"
 HUGE_T_END = f"{STEPS}1e+300 s/0.05 s is 2e+301 output steps"
 JUST_OVER = f"{STEPS}50000.1 s/0.05 s is 1000001 output steps, more than the limit"
 LONGER = "simulate.dt: output step 61 s is longer than the span 60 s"
+SUBNORMAL_DT = edit("t_end = 60.0", "t_end = 5e-324", edit("dt = 0.05", "dt = 5e-324"))
+SHORTER = "simulate.dt: output step 4.94066e-324 s is shorter than 1e-300 s"
 # the generated setup's arithmetic overflows to a NaN condition number: code 7
 OVERFLOW = "parameters: the mass matrix's coupled block has condition number nan > 1e+13"
 FOLDED_RANGE = "a folded value must be 0 or of magnitude 1e-50 to 1e+50"
@@ -90,12 +96,36 @@ BAD = [
     ("no target", edit('targets = ["c", "fortran"]', "targets = []"), "targets"),
     ("attitude", edit('targets = ["c"', 'attitude = "rodrigues"\ntargets = ["c"'), "attitude"),
     ("initial", edit("initial = { u1", "initial = { u9 = 1.0, u1"), "u9 is not a state"),
+    (
+        "table T 1e300",
+        edit('"table"', '"table"\ntorque_table = [[0, 0], [1, 1e300]]', TABLED),
+        "effects: torque_table[1]: T = 1e+300 at t = 1: a folded value must be 0 or of magnitude",
+    ),
+    (
+        "table T -1e-60",
+        edit('"table"', '"table"\ntorque_table = [[0, 0], [2, -1e-60]]', TABLED),
+        f"effects: torque_table[1]: T = -1e-60 at t = 2: {FOLDED_RANGE}",
+    ),
+    (
+        "integer 10**400",
+        edit("m_a = 150.0", f"m_a = {10**400}"),
+        f"m_a: {HUGE_INT}: {FOLDED_RANGE}",
+    ),
+    ("integer t_end", edit("t_end = 60.0", f"t_end = {10**400}"), f"t_end: {HUGE_INT}: {DOUBLE}"),
+    ("integer u1", edit("{ u1 = 0.01", f"{{ u1 = {-(10**400)}"), f"u1: -{HUGE_INT}: {DOUBLE}"),
+    ("integer of 5001 digits", edit("m_a = 150.0", "m_a = 1" + "0" * 5000), DIGITS_4300),
     ("huge I11", edit("I11 = 20.0", "I11 = 1e308"), f"parameters.I11: 1e+308: {FOLDED_RANGE}"),
     ("not positive definite", edit("I13 = 0.5", "I13 = 30.0"), NOT_DEFINITE),
     ("number true", edit("m_a = 150.0", "m_a = true"), NOT_A_NUMBER),
     ("flag as number", edit("rotor_angle = true", "rotor_angle = 1"), NOT_A_FLAG),
     ("tiny dt", edit("dt = 0.05", "dt = 1e-300"), TINY_DT),
     ("dt longer than t_end", edit("dt = 0.05", "dt = 61.0"), LONGER),
+    ("dt subnormal", SUBNORMAL_DT, SHORTER),
+    (
+        "dt just under 1e-300",
+        edit("t_end = 60.0", "t_end = 1e-300", edit("dt = 0.05", "dt = 9e-301")),
+        "shorter than 1e-300 s",
+    ),
     ("huge t_end", edit("t_end = 60.0", "t_end = 1e300"), HUGE_T_END),
     ("just over the point limit", edit("t_end = 60.0", "t_end = 50000.05"), JUST_OVER),
     ("folded singular", FOLDED_SINGULAR, "condition number"),
@@ -188,6 +218,16 @@ def test_scene_of_exactly_the_size_limit_is_read(tmp_path: Path) -> None:
     path.write_text(GOOD + "#" * (MAX_SCENE_BYTES - len(GOOD.encode()) - 1) + "\n")
     assert path.stat().st_size == MAX_SCENE_BYTES
     assert load(str(path)).name == "wheel_spinup"
+
+
+def test_a_byte_order_mark_is_dropped(tmp_path: Path, cli) -> None:
+    """A scene (and a sweep file, read the same way) saved with a UTF-8 BOM is
+    read (tomllib said "Invalid statement (at line 1, column 1)")."""
+    path = tmp_path / "scene.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + GOOD.encode())
+    assert load(str(path)) == parse(GOOD, "x.toml")
+    code, _, err = cli(["generate", str(path), "--no-check", "--out", str(tmp_path / "o")])
+    assert code == 0, err
 
 
 def test_table_torque_needs_increasing_times() -> None:

@@ -196,6 +196,74 @@ def test_parameters_whose_constants_overflow_are_one_line_exit_2(
         "(code 9): a constant derived from the parameters is not finite (together they "
         "overflow doubles)"
     )
+    assert not (tmp_path / "out").exists()  # src/ was written before setup refused
+
+
+@pytest.mark.parametrize(
+    "obstacle", ["summary.json", "trajectory.png", "trajectory.csv", "src", "src/torque_free.c"]
+)
+def test_anything_in_the_way_is_refused_before_any_work(
+    obstacle: str, tmp_path: Path, cache: None, cli
+) -> None:
+    """A directory where an output file goes (a file where src/ goes) is one
+    line before anything is generated, built or integrated (it was found
+    only after integrating, with src/ written), and nothing is written."""
+    out = tmp_path / "out"
+    (out / obstacle).mkdir(parents=True) if obstacle != "src" else None
+    if obstacle == "src":
+        out.mkdir()
+        (out / "src").write_text("a file")
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    run = simulate(cli, ["torque_free", "--t-end", "0.1"], out)
+    assert (run.code, run.out) == (1, ""), run.err
+    why = "Not a directory" if obstacle == "src" else "Is a directory"
+    what = (
+        f"cannot create output directory {out / 'src'}"
+        if obstacle == "src"
+        else (f"cannot write {out / obstacle}")
+    )
+    lines = run.err.splitlines()
+    assert lines[-1] == f"gyrogen: error: {what}: {why}" and "integrating" not in run.err
+    assert len(lines) == (2 if "/" in obstacle else 1), run.err  # src's files: once rendered
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+
+
+def test_a_huge_start_state_warns_nothing(tmp_path: Path, cache: None, cli) -> None:
+    """u1 = 1e308: the stiffness estimate overflowed with a numpy
+    RuntimeWarning and read 'decay rates up to inf'; now the rate is a
+    number, and the integrator's refusal is the one line."""
+    assert cli(["new", "base", "--out", str(tmp_path / "base.toml")]).code == 0
+    path = tmp_path / "base.toml"
+    text = path.read_text()
+    assert "initial = { u1 = 0.01," in text
+    path.write_text(text.replace("initial = { u1 = 0.01,", "initial = { u1 = 1e308,"))
+    scene = str(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning is an exception: the run would end in it
+        run = simulate(cli, [scene, "--no-plot"], tmp_path / "out")
+    assert (run.code, run.out) == (1, "") and "inf" not in run.err, run.err
+    assert "decay rates up to 2.59e+307 1/s" in run.err
+    assert (
+        run.err.splitlines()[-1] == "gyrogen: error: radau5 failed at t = 0 s: step size underflow"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_start_state_whose_derivatives_overflow_is_one_line_exit_2(
+    tmp_path: Path, cache: None, cli
+) -> None:
+    """Refused before integrating, naming the largest values (it was the
+    integrator's 'non-finite state or derivative' at t = 0, exit 1)."""
+    scene = torque_free_with(
+        tmp_path / "s.toml", "{ u1 = 0.3, u2 = 1.0,", "{ u1 = 1e308, u2 = -1e308,"
+    )
+    run = simulate(cli, [scene, "--method", "dop853"], tmp_path / "out")
+    assert (run.code, run.out) == (2, ""), run.err
+    assert run.err.splitlines()[-1] == (
+        "gyrogen: error: torque_free: simulate.initial: the derivatives at the start state are "
+        "not finite (u1 = 1e+308, u2 = -1e+308, u4 = 40: together they overflow doubles)"
+    )
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("command", ["fmu", "bench"])
@@ -238,6 +306,19 @@ def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path, cli) -> None:
         "gyrogen simulate: error: Invalid value for '--t-end': output step 0.01 s is longer "
         "than the span 0.001 s (see --help)\n"
     )
+
+
+@pytest.mark.parametrize("dt", ["5e-324", "1e-310", "9e-301"])
+def test_output_step_too_short_to_resolve_is_a_usage_error(dt: str, tmp_path: Path, cli) -> None:
+    """dt = t_end = 5e-324 passed the count of steps (one) but left a grid of one
+    point (a reshape traceback, exit 1); 1e-310 failed only after building,
+    with src/ left behind. Both are refused before anything is generated."""
+    run = simulate(cli, ["torque_free", "--t-end", dt, "--dt", dt], tmp_path / "out")
+    assert (run.code, run.out) == (2, "")
+    assert run.err.count("\n") == 1 and "Traceback" not in run.err, run.err
+    assert run.err.startswith("gyrogen simulate: error: Invalid value for '--t-end' / '--dt': ")
+    assert "s is shorter than 1e-300 s: the quadrature samples inside it" in run.err
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize(
@@ -284,17 +365,20 @@ def test_compiled_methods_spend_the_budget_over_the_whole_run(
     assert run.code == 1 and run.out == ""
     assert run.err.splitlines()[-1].startswith(f"gyrogen: error: {method} failed at t = ")
     assert run.err.endswith(": 10 RHS calls (--max-nfev) spent\n"), run.err
-    assert not (tmp_path / "out" / "trajectory.csv").exists()
+    assert not (tmp_path / "out").exists()  # not even src/
 
 
 def test_sample_times_do_not_overflow_near_dbl_max() -> None:
     """The quadrature nodes of an interval ending near DBL_MAX are finite
     (0.5 (a + b) overflowed with a RuntimeWarning), and the same bits as
-    before everywhere else."""
+    before everywhere else; so is the grid (t_end + dt/2 overflowed)."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         far = sample_times(np.array([0.0, 1e308, 1.7e308]))
+        ends = [output_grid(t, dt) for t, dt in ((1.79e308, 1.79e308), (1.797e308, 1.1e308))]
     assert np.all(np.isfinite(far)) and np.all(np.diff(far) > 0)
+    for grid, t_end in zip(ends, (1.79e308, 1.797e308), strict=True):  # arange's ValueError
+        assert grid[0] == 0.0 and grid[-1] == t_end and np.all(np.diff(grid) > 0)
     grid = output_grid(20.0, 0.05)
     a, b = grid[:-1, None], grid[1:, None]
     before = 0.5 * (a + b) + 0.5 * (b - a) * np.polynomial.legendre.leggauss(QUAD_NODES)[0]

@@ -99,10 +99,22 @@ def test_check_command(tmp_path: Path, cli) -> None:
     assert len(pngs) == 5 and all(p.stat().st_size > 10_000 for p in pngs)
 
 
-def test_check_unknown_case(cli) -> None:
-    code, _, err = cli(["check", "no-such-case"])
-    assert code == 1
-    assert "no case or scene matches no-such-case" in err
+UNKNOWN = [
+    (["no-such-case"], "no case or scene matches no-such-case (see gyrogen check --list)"),
+    (["nominal", "bogus"], "no case or scene matches bogus (see gyrogen check --list)"),
+    (["nope.toml"], "nope.toml: no such file, and no built-in scene of that name (dual_spin, "),
+    (["/proc"], "/proc: is a directory, not a scene file"),
+]
+
+
+@pytest.mark.parametrize(("names", "message"), UNKNOWN, ids=[" ".join(u[0]) for u in UNKNOWN])
+def test_check_unknown_case_is_a_usage_error(names: list[str], message: str, cli) -> None:
+    """Exit 2 and one line, as generate and simulate refuse a scene they
+    cannot find (it was exit 1; a name matching nothing beside one that did
+    was dropped in silence)."""
+    code, out, err = cli(["check", *names, "--list"])
+    assert (code, out) == (2, "") and err.count("\n") == 1
+    assert err.startswith(f"gyrogen: error: {message}"), err
 
 
 @pytest.mark.slow

@@ -16,6 +16,25 @@ from gyrogen.analysis.bench.workprec import Run
 from gyrogen.scene import builtin_text
 
 
+@pytest.mark.parametrize("name", ["summary.md", "workprecision.png"])
+def test_anything_in_the_way_is_refused_before_measuring(
+    name: str, tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A directory where a report file goes is one line before the minutes of
+    measuring (it was found only when writing, after them)."""
+    from gyrogen.analysis.bench import workprec_report
+
+    def measured(*args: object) -> None:
+        raise AssertionError("measured with a directory in the way")
+
+    monkeypatch.setattr(workprec_report, "measure", measured)
+    (tmp_path / "report" / name).mkdir(parents=True)
+    code, text, err = cli(["bench", "torque_free", "--quick", "--out", str(tmp_path / "report")])
+    assert (code, text) == (1, "")
+    assert err == f"gyrogen: error: cannot write {tmp_path / 'report' / name}: Is a directory\n"
+    assert [p.name for p in (tmp_path / "report").iterdir()] == [name]
+
+
 @pytest.mark.slow
 def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
     out = tmp_path / "report"

@@ -18,6 +18,13 @@ MAX_OUTPUT_POINTS = 10**6
 """Output steps of a simulation, t_end/dt (scene [simulate] and `gyrogen
 simulate --t-end/--dt`): the trajectory, its quadrature samples and the CSV
 text are in memory at once; 10**6 steps of torque_free took 1.3 GB and 17 s."""
+MIN_OUTPUT_STEP = 1e-300
+"""The shortest output step dt, s (scene [simulate] and `gyrogen simulate
+--dt`): the quadrature nodes split each interval into pieces down to 0.11
+dt, each a step some integrator must take, and the compiled integrators stop
+a step shorter than the smallest normal double (2.2e-308) as an underflow;
+below ~1e-307 the samples stop being distinct doubles at all (dt = 5e-324
+left a grid of one point)."""
 MAX_SCENE_BYTES = 1 << 20
 """Size of a scene file (1 MiB), checked before it is parsed: a real scene is ~2 KB."""
 MAX_SWEEP_TRAJECTORIES = 10**10

@@ -18,10 +18,12 @@ def bench(scene: Scene | None, quick: bool, out: Path | None) -> None:
     """Work-precision report: error against run time for every integrator of
     SCENE (default gyrostat) and for scipy and PyDy, in one run."""
     from gyrogen.analysis.bench import workprec, workprec_report
+    from gyrogen.files import can_write
 
     scene = scene or default()
     workprec_report.check_scene(scene)  # before the first line of progress
     out = out or Path("report") / scene.name
+    can_write(out, workprec_report.FILES)  # before the minutes of measuring
     cfg = workprec.QUICK if quick else workprec.FULL
     step = [0]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -9,7 +10,8 @@ from typing import TYPE_CHECKING
 import click
 
 from gyrogen.commands.options import directory, progress
-from gyrogen.errors import GyrogenError
+from gyrogen.errors import GyrogenError, SceneError
+from gyrogen.scene import load
 
 if TYPE_CHECKING:
     from gyrogen.analysis.check.check_engine import Result
@@ -36,13 +38,18 @@ def check(
 
     suite = check_cases.cases(quick)
     if names and not every:
-        scenes = [check_cases.scene_case(n) for n in names if check_cases.is_scene(n)]
-        picked = [c for c in suite if any(n in c.name for n in names)]
-        suite = scenes + picked
-        if not suite:
-            raise GyrogenError(
-                f"no case or scene matches {', '.join(names)} (see gyrogen check --list)"
+        unknown = [
+            n for n in names if not check_cases.is_scene(n) and not any(n in c.name for c in suite)
+        ]
+        for name in unknown:
+            if name.endswith(".toml") or os.sep in name:
+                load(name)  # a scene file that is not one: load's one line (exit 2)
+        if unknown:
+            raise SceneError(
+                f"no case or scene matches {', '.join(unknown)} (see gyrogen check --list)"
             )
+        scenes = [check_cases.scene_case(n) for n in names if check_cases.is_scene(n)]
+        suite = scenes + [c for c in suite if any(n in c.name for n in names)]
     if listing:
         for case in suite:
             click.echo(f"{case.name:<48} expect {case.expect:<9} scene {case.scene.name}")

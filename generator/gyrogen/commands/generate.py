@@ -59,32 +59,46 @@ def generate(
     Fortran with -std=f2008 -Werror) and its rhs, outputs and Jacobian are
     compared with the numpy reference at a sample of states and parameter
     sets; on any failure nothing is written and the exit code is 1.
-    --no-check skips this."""
+    --no-check skips this. With several scenes, every one is rendered and
+    checked before any is written."""
     from gyrogen.codegen.generate import claim, render_all, unit_of
+    from gyrogen.errors import SceneError
     from gyrogen.files import can_write, write_atomic
     from gyrogen.oracle.compare import check_rendered
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
-    units = []
-    for scene in progress("generating", chosen) if len(chosen) > 1 else chosen:
-        if len(chosen) == 1:
-            target = out or default_out(scene)
-        else:
-            target = (out or Path("generated")) / scene.name
+    names = [scene.name for scene in chosen]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise SceneError(
+            f"two scenes named {twice[0]!r}: each writes its own directory named after the "
+            "scene, so the second would overwrite the first; give one another name"
+        )
+    if len(chosen) == 1:
+        targets = [out or default_out(chosen[0])]
+    else:
+        targets = [(out or Path("generated")) / name for name in names]
+    pairs = list(zip(chosen, targets, strict=True))
+    for scene, target in pairs:  # every scene's, before any work
         claim(target, scene.name)
+        can_write(target, [])
+    rendered = []
+    for scene, target in progress("generating", pairs) if len(pairs) > 1 else pairs:
         unit = unit_of(scene)
         files = render_all(unit, lib)
-        if not no_check:
-            can_write(target, files)  # before the check's seconds, not after
+        can_write(target, files)  # before the check's seconds, not after
+        rendered.append((scene, target, unit, files))
+    if not no_check:
+        for scene, _, unit, files in rendered:
             seconds = check_rendered(unit, files)
             click.echo(
                 f"checked {scene.name}: {', '.join(scene.targets)} compiled and compared "
                 f"with the reference in {seconds:.1f} s"
             )
+    for _, target, _, files in rendered:  # every scene checked: now written
         write_atomic(target, files)
-        units.append(unit)
         click.echo(f"wrote {target}/")
-    print_table(units)
+    print_table([unit for _, _, unit, _ in rendered])
 
 
 command = generate

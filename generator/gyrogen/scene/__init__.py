@@ -24,7 +24,6 @@ from pydantic import (
     ConfigDict,
     Field,
     StrictBool,
-    StrictFloat,
     ValidationInfo,
     field_validator,
     model_serializer,
@@ -40,6 +39,7 @@ from gyrogen.scene import rotors
 from gyrogen.scene.rotors import Rotor
 from gyrogen.scene.rules import (
     QUATERNION,
+    Number,
     check_description,
     check_name,
     check_output_grid,
@@ -50,8 +50,6 @@ from gyrogen.scene.rules import (
 )
 
 Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
-Number = StrictFloat
-"""A TOML integer or float, never a boolean or a string."""
 
 
 class _Strict(BaseModel):
@@ -327,6 +325,8 @@ def parse(text: str, source: str) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
+    except ValueError as exc:  # an integer past Python's 4300-digit conversion limit
+        raise SceneError(f"{source}: invalid TOML: an integer of more than 4300 digits") from exc
     except RecursionError as exc:  # tomllib recurses once per level of nesting
         raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
     return validate(data, source)
@@ -359,7 +359,8 @@ def load(arg: str) -> Scene:
 
 def read_file(path: str) -> str:
     """A scene file's text: a regular file (opened without blocking, so a
-    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8."""
+    FIFO is refused, not waited on) of at most MAX_SCENE_BYTES, in UTF-8
+    (a byte-order mark at its start, as some editors write, is dropped)."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except FileNotFoundError as exc:
@@ -383,7 +384,7 @@ def read_file(path: str) -> str:
     if len(data) > MAX_SCENE_BYTES:
         raise SceneError(f"{path}: more than {MAX_SCENE_BYTES:,} bytes, the limit for a scene file")
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8").removeprefix("\ufeff")  # a byte-order mark: not TOML
     except UnicodeDecodeError as exc:
         raise SceneError(
             f"{path}: cannot read: not UTF-8 ({exc.reason} at byte {exc.start})"

@@ -27,7 +27,6 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
-    StrictFloat,
     field_validator,
     model_serializer,
     model_validator,
@@ -44,7 +43,7 @@ from gyrogen.abi_rotors import (
     cluster_states,
     rotor_name,
 )
-from gyrogen.scene.rules import check_table, parameter_value
+from gyrogen.scene.rules import Number, check_table, parameter_value
 
 
 def _folded(v: object) -> object:
@@ -58,7 +57,7 @@ def _folded(v: object) -> object:
 
 Folded = Annotated[float, BeforeValidator(_folded)]
 Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
-Vector = tuple[StrictFloat, StrictFloat, StrictFloat]
+Vector = tuple[Number, Number, Number]
 
 LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref"), "table": ()}
 """The keys each torque law needs (and allows); a table's points are its torque_table."""
@@ -85,7 +84,7 @@ class Rotor(BaseModel):
     w_ref: Value | None = None
     tau_max: Annotated[Folded, Field(ge=0)] | None = None
     """|T| is clamped to tau_max (a saturating motor); refused when negative."""
-    torque_table: list[tuple[StrictFloat, StrictFloat]] | None = None
+    torque_table: list[tuple[Number, Number]] | None = None
     """torque = "table": (t, T) points of a piecewise-linear T(t), held
     constant outside (as the single rotor's effects.torque_table)."""
 

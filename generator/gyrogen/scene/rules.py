@@ -8,7 +8,11 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 from collections.abc import Mapping
+from typing import Annotated
+
+from pydantic import BeforeValidator, StrictFloat
 
 from gyrogen.abi import (
     DESCRIPTION_MAX_LENGTH,
@@ -17,7 +21,7 @@ from gyrogen.abi import (
     NAME_MAX_LENGTH,
     QUATERNION_NORM_SLACK,
 )
-from gyrogen.limits import MAX_OUTPUT_POINTS
+from gyrogen.limits import MAX_OUTPUT_POINTS, MIN_OUTPUT_STEP
 from gyrogen.setup_checks import first_failure
 
 _C_KEYWORDS = frozenset(
@@ -39,6 +43,24 @@ math broke the package's own math.h include). Compared without case, for
 case-insensitive file systems."""
 
 
+def shown_integer(v: int) -> str:
+    """A long integer as its first digits and their count."""
+    digits = str(abs(v))
+    return f"{'-' * (v < 0)}{digits[:6]}... ({len(digits)} digits)"
+
+
+def number(v: object) -> object:
+    """A TOML integer too large for a double is out of range, in a line of
+    its own (pydantic said only "Input should be a valid number")."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > sys.float_info.max:
+        raise ValueError(f"{shown_integer(v)} is out of range: a double holds at most 1.8e308")
+    return v
+
+
+Number = Annotated[StrictFloat, BeforeValidator(number)]
+"""A TOML integer or float, never a boolean or a string."""
+
+
 def parameter_value(v: object) -> object:
     """A parameter is a number (folded into the code) or "runtime"; a TOML
     boolean or a quoted number is neither (pydantic would take true as 1.0)."""
@@ -48,21 +70,30 @@ def parameter_value(v: object) -> object:
         raise ValueError(f'expected a number or "runtime", not {v!r}')
     try:
         x = float(v)
-    except OverflowError:
-        x = math.inf
+    except OverflowError as exc:  # an integer past a double's range (TOML's have no other)
+        line = f"{shown_integer(int(v))} is out of range: {folded_size(math.inf)}"
+        raise ValueError(line) from exc
     if not math.isfinite(x):
         raise ValueError(f"{v!r} is not a finite number")
-    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
-        raise ValueError(
-            f"{x!r}: a folded value must be 0 or of magnitude {FOLDED_MIN:g} to "
-            f'{FOLDED_MAX:g} (its products must stay doubles); make it "runtime"'
-        )
+    if why := folded_size(x):
+        raise ValueError(f'{x!r}: {why}; make it "runtime"')
     return x
+
+
+def folded_size(x: float) -> str | None:
+    """Why x cannot be a number folded into the code (a parameter, a torque
+    table's value), or None: it is 0 or of magnitude FOLDED_MIN to FOLDED_MAX."""
+    if x != 0.0 and not FOLDED_MIN <= abs(x) <= FOLDED_MAX:
+        return (
+            f"a folded value must be 0 or of magnitude {FOLDED_MIN:g} to {FOLDED_MAX:g} "
+            "(its products must stay doubles)"
+        )
+    return None
 
 
 def check_output_grid(t_end: float, dt: float) -> None:
     """ValueError unless dt fits in t_end at most MAX_OUTPUT_POINTS times
-    (and at least once)."""
+    (and at least once), and is no shorter than MIN_OUTPUT_STEP."""
     if dt > t_end:
         raise ValueError(f"output step {dt:g} s is longer than the span {t_end:g} s")
     steps = t_end / dt
@@ -70,6 +101,11 @@ def check_output_grid(t_end: float, dt: float) -> None:
         raise ValueError(
             f"t_end/dt = {t_end:g} s/{dt:g} s is {steps:.7g} output steps, more than the "
             f"limit of {MAX_OUTPUT_POINTS:,}: raise dt or lower t_end"
+        )
+    if dt < MIN_OUTPUT_STEP:
+        raise ValueError(
+            f"output step {dt:g} s is shorter than {MIN_OUTPUT_STEP:g} s: the quadrature "
+            "samples inside it would be steps shorter than any integrator resolves"
         )
 
 
@@ -160,7 +196,8 @@ def check_physics(p: Mapping[str, float | str]) -> None:
 
 def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
     """A torque table goes with torque = 'table', and only with it: at least
-    2 (t, T) points, the times increasing strictly."""
+    2 (t, T) points, the times increasing strictly, each T a folded value's
+    size (folded_size: the code multiplies them)."""
     if torque != "table":
         if table is not None:
             raise ValueError("torque_table is only used with torque = 'table'")
@@ -169,3 +206,6 @@ def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
         raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
     if any(b[0] <= a[0] for a, b in itertools.pairwise(table)):
         raise ValueError("torque_table times must increase strictly")
+    for i, (t, torque_value) in enumerate(table):
+        if why := folded_size(torque_value):
+            raise ValueError(f"torque_table[{i}]: T = {torque_value!r} at t = {t:g}: {why}")

@@ -260,18 +260,17 @@ def figure(prob: Problem, runs: list[Run]) -> bytes:
     return png_bytes(fig)
 
 
+FILES = ("workprecision.png", "workprecision.csv", "workprecision.json", "summary.md")
+"""What the report writes (`gyrogen bench` checks the way is clear before measuring)."""
+
+
 def write(prob: Problem, runs: list[Run], out: Path) -> list[Path]:
     md = "\n".join(summary(prob, runs)) + "\n"
-    write_atomic(
-        out,
-        {
-            "workprecision.csv": table_csv(runs),
-            "workprecision.json": table_json(prob, runs),
-            "summary.md": md,
-            "workprecision.png": figure(prob, runs),
-        },
-    )
-    return [
-        out / n
-        for n in ("workprecision.png", "workprecision.csv", "workprecision.json", "summary.md")
-    ]
+    contents: dict[str, str | bytes] = {
+        "workprecision.png": figure(prob, runs),
+        "workprecision.csv": table_csv(runs),
+        "workprecision.json": table_json(prob, runs),
+        "summary.md": md,
+    }
+    write_atomic(out, contents)
+    return [out / n for n in FILES]

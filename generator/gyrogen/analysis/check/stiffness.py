@@ -5,6 +5,7 @@ span. `gyrogen check` and `gyrogen simulate --method auto` decide by it."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,13 +31,24 @@ def jacobian(comp: Compiled, c: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.stack(columns, axis=1)
 
 
-def index(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> float:
-    """max over the states xs of (largest decay rate) x span; 0 when nothing decays."""
+def decay_rate(comp: Compiled, c: np.ndarray, xs: np.ndarray) -> float:
+    """The largest decay rate of the Jacobian over the states xs (0 when
+    nothing decays; inf where the Jacobian is not finite): computed without
+    a numpy warning whatever the state (u1 = 1e308 overflowed the product)."""
     worst = 0.0
-    for x in np.atleast_2d(xs):
-        rate = float(-np.min(np.linalg.eigvals(jacobian(comp, c, x)).real))
-        worst = max(worst, rate * span)
+    with np.errstate(all="ignore"):  # central differences of a huge state overflow
+        for x in np.atleast_2d(xs):
+            jac = jacobian(comp, c, x)
+            if not np.all(np.isfinite(jac)):
+                return math.inf
+            worst = max(worst, float(-np.min(np.linalg.eigvals(jac).real)))
     return worst
+
+
+def index(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> float:
+    """max over the states xs of (largest decay rate) x span; 0 when nothing
+    decays (Python floats: a product past DBL_MAX is inf, without a warning)."""
+    return decay_rate(comp, c, xs) * float(span)
 
 
 @dataclass(frozen=True)
@@ -50,14 +62,16 @@ class Choice:
 
 def choose(comp: Compiled, c: np.ndarray, xs: np.ndarray, span: float) -> Choice:
     """The method the stiffness at xs over span calls for, among the build's."""
-    worst = index(comp, c, xs, span)
+    rate = decay_rate(comp, c, xs)
+    worst = rate * float(span)
     stiff = worst > STIFF
     method = methods.pick(comp.manifest["integrators"], stiff)
-    if stiff:
+    if stiff and not math.isfinite(rate):
+        why = f"implicit ({method or 'none in this build'}): the Jacobian is not finite"
+    elif stiff:
         why = (
-            f"implicit ({method or 'none in this build'}): decay rates up to {worst / span:.3g} "
-            f"1/s over {span:g} s would hold an explicit method to steps of "
-            f"~{3.0 / (worst / span):.2g} s"
+            f"implicit ({method or 'none in this build'}): decay rates up to {rate:.3g} "
+            f"1/s over {span:g} s would hold an explicit method to steps of ~{3.0 / rate:.2g} s"
         )
     else:
         why = (

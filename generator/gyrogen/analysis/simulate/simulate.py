@@ -32,10 +32,10 @@ from gyrogen.analysis.simulate import simulate_files
 from gyrogen.analysis.simulate.invariants import Invariants, along_trajectory
 from gyrogen.analysis.simulate.trajectory import Trajectory, from_samples, output_grid, sample_times
 from gyrogen.errors import GyrogenError, SceneError
-from gyrogen.files import make_dir, write_atomic
-from gyrogen.runtime.compiled import Compiled, Language, controls
+from gyrogen.files import can_write, write_atomic
+from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.rhs import RawRhs
-from gyrogen.runtime.scene_build import build_scene
+from gyrogen.runtime.scene_build import build_files, scene_sources
 from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
 from gyrogen.scene import Scene, check_output_grid
 
@@ -225,6 +225,19 @@ def given_constants(scene: Scene, comp: Compiled, p: np.ndarray) -> np.ndarray:
         raise SceneError(f"{scene.name}: simulate.parameters: {exc}") from exc
 
 
+def check_start(scene: Scene, start: Start) -> None:
+    """One line (SceneError) when the derivatives at simulate.initial are not
+    finite (states whose products overflow doubles): no method can take a
+    step from there, and the stiffness estimate would read nothing."""
+    if np.all(np.isfinite(start.comp.rhs(start.x0, start.c))):
+        return
+    largest = sorted(scene.simulate.initial.items(), key=lambda kv: -abs(kv[1]))[:3]
+    raise SceneError(
+        f"{scene.name}: simulate.initial: the derivatives at the start state are not finite "
+        f"({', '.join(f'{n} = {v:g}' for n, v in largest)}: together they overflow doubles)"
+    )
+
+
 def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: int) -> None:
     """One line for a run that gave up (sol None: the RHS budget ran out),
     failed, or left non-finite states behind; t_max: the latest time tried."""
@@ -245,14 +258,6 @@ def check_solution(sol: Any, method: str, t_max: float, t_end: float, max_nfev: 
         raise GyrogenError(f"{method}: non-finite state at t = {sol.t[np.argmax(bad)]:.6g} s")
 
 
-def _prepare(scene: Scene, out: Path) -> tuple[Compiled, str]:
-    """Sources into out/src (kept beside the trajectory they made), then the
-    C backend, or Fortran when the scene builds no C."""
-    language: Language = "c" if "c" in scene.targets else "fortran"
-    unit, built = build_scene(scene, out / "src", [language])
-    return built[language], unit.build_id
-
-
 def run(
     scene: Scene,
     out: Path,
@@ -260,14 +265,26 @@ def run(
     progress: Progress = _no_progress,
     echo: Callable[[str], None] = lambda s: None,
 ) -> Result:
+    """Integrate and write out/ (the files of simulate_files.file_names, and
+    the sources, kept beside the trajectory they made, in out/src), all at
+    the end: a refused scene or parameter set, a failed run or anything in
+    the way (checked before any work) leaves nothing behind."""
+    from gyrogen.codegen.generate import claim
+
     p = runtime_values(scene)  # first: a scene error must leave nothing behind
-    make_dir(out)
-    echo(f"generating and building {scene.name} in {out / 'src'} ...")
-    comp, build_id = _prepare(scene, out)
+    names = simulate_files.file_names(settings.plot)
+    claim(out / "src", scene.name)
+    can_write(out, names)
+    can_write(out / "src", [])  # a file named src is in the way too
+    echo(f"generating and building {scene.name} (sources to {out / 'src'}) ...")
+    sources = scene_sources(scene)  # the C backend, or Fortran when the scene builds no C
+    can_write(out / "src", sources.files)
+    comp = build_files(sources.files, [sources.language])[sources.language]
     c = given_constants(scene, comp, p)
     start = Start(
         comp, c, np.array(scene.initial_state()), (scene.simulate.rtol, scene.simulate.atol)
     )
+    check_start(scene, start)
     end = output_grid(settings.t_end, settings.dt)[-1]
     if settings.method == methods.AUTO:
         choice = stiffness.choose(comp, c, start.x0, end)
@@ -279,9 +296,11 @@ def run(
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:
         traj = integrate(start, settings, advance)
     inv = along_trajectory(scene, p, traj)
-    files = tuple(out / n for n in simulate_files.file_names(settings.plot))
-    res = Result(scene, out, comp.language, build_id, settings, traj, inv, files)
-    write_atomic(out, simulate_files.contents(res, p))
+    files = tuple(out / n for n in names)
+    res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, files)
+    contents = simulate_files.contents(res, p)
+    write_atomic(out / "src", sources.files)
+    write_atomic(out, contents)
     return res
 
 

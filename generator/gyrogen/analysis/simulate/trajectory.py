@@ -11,6 +11,7 @@ speed controller's torque: 1e-2). A transient much shorter than dt
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -37,9 +38,14 @@ class Trajectory:
 
 
 def output_grid(t_end: float, dt: float) -> np.ndarray:
-    # Clipped: rounding in arange must not put the last point past t_end,
-    # which solve_ivp refuses.
-    return np.minimum(np.arange(0.0, t_end + dt / 2, dt), t_end)
+    """k dt for every k >= 0 with k dt < t_end + dt/2, clipped at t_end
+    (rounding must not put the last point past it, which solve_ivp refuses):
+    arange(0, t_end + dt/2, dt)'s points, counted in halves, exactly as
+    arange counts them (halving is exact above MIN_OUTPUT_STEP), since
+    t_end + dt/2 itself overflowed near DBL_MAX."""
+    n = math.ceil((t_end / 2 + dt / 4) / (dt / 2))
+    with np.errstate(over="ignore"):  # a last k dt past DBL_MAX is inf, clipped to t_end
+        return np.minimum(np.arange(n) * dt, t_end)
 
 
 def sample_times(grid: np.ndarray) -> np.ndarray:
