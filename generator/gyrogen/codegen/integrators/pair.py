@@ -23,12 +23,12 @@ from gyrogen.codegen.integrators.common import (
     code,
     h,
     i,
-    locked,
     real,
     x,
     xnew,
 )
 from gyrogen.codegen.integrators.explicit import trial
+from gyrogen.codegen.integrators.gimbal import locked
 from gyrogen.codegen.ir.nodes import (
     Bool,
     Call,

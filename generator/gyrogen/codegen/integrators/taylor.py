@@ -23,14 +23,13 @@ from gyrogen.codegen.integrators.common import (
     code,
     comp,
     dx,
-    gimbal_at,
-    gimbal_jump,
     h,
     i,
     real,
     x,
     xnew,
 )
+from gyrogen.codegen.integrators.gimbal import gimbal_at, gimbal_jump
 from gyrogen.codegen.integrators.taylor_jet import (
     T,
     c,
