@@ -223,7 +223,10 @@ def scenes(draw: st.DrawFn) -> Draw:
         times = sorted({round(t, 3) for t in drawn_times})  # points 1 ms apart at least
         if len(times) < 2:
             times = [0.0, 1.0]
-        effects["torque_table"] = [[t, draw(st.floats(-1, 1))] for t in times]
+        torques = [draw(st.floats(-1, 1)) for _ in times]  # a folded value: 0 or >= 1e-50
+        effects["torque_table"] = [
+            [t, v if abs(v) >= 1e-50 else 0.0] for t, v in zip(times, torques, strict=True)
+        ]
     initial: dict[str, float] = {f"u{i}": draw(st.floats(-2, 2)) for i in (1, 2, 3)}
     initial["u4"] = draw(st.floats(-100, 100))
     if attitude == "quaternion":

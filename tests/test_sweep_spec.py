@@ -126,6 +126,8 @@ torque = "none"
 
 BAD = [
     ("toml", "scene = ", "invalid TOML"),
+    ("integer of 5001 digits", sweep_text("chunk = 1" + "0" * 5000),
+     "invalid TOML: an integer of more than 4300 digits"),
     ("unknown key", sweep_text("speed = 1"), "speed: unknown key"),
     ("method", sweep_text('method = "euler"'), "method: 'euler' is not among the scene's"),
     ("rk4 steps", sweep_text('method = "rk4"'), "steps: give it for rk4"),

@@ -320,16 +320,20 @@ def one_line(exc: pydantic.ValidationError) -> str:
     return f"{loc}: {msg}" if loc else msg
 
 
-def parse(text: str, source: str) -> Scene:
+def load_toml(text: str, source: str) -> dict[str, Any]:
+    """TOML text as data (scene and sweep files alike), or one SceneError line."""
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: invalid TOML: {exc}") from exc
     except ValueError as exc:  # an integer past Python's 4300-digit conversion limit
         raise SceneError(f"{source}: invalid TOML: an integer of more than 4300 digits") from exc
     except RecursionError as exc:  # tomllib recurses once per level of nesting
         raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
-    return validate(data, source)
+
+
+def parse(text: str, source: str) -> Scene:
+    return validate(load_toml(text, source), source)
 
 
 def validate(data: dict[str, Any], source: str) -> Scene:

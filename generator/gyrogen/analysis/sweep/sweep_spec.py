@@ -27,7 +27,6 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from functools import cache
 from importlib.resources import files
@@ -46,7 +45,7 @@ from gyrogen.limits import (
     MAX_SWEEP_SAMPLES,
     MAX_SWEEP_TRAJECTORIES,
 )
-from gyrogen.scene import Number, Scene, builtin_names, one_line, read_file
+from gyrogen.scene import Number, Scene, builtin_names, load_toml, one_line, read_file
 from gyrogen.scene import load as load_scene
 from gyrogen.scene.rotors import check_axis
 from gyrogen.scene.rules import QUATERNION, check_quaternion
@@ -213,12 +212,7 @@ class Spec:
 def parse(text: str, source: str, name: str, here: Path | None) -> Spec:
     """A sweep from its TOML text; here: the directory scene paths start
     from (None for a built-in sweep, which names built-in scenes only)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{source}: invalid TOML: {exc}") from exc
-    except RecursionError as exc:
-        raise SceneError(f"{source}: invalid TOML: arrays or tables nested too deeply") from exc
+    data = load_toml(text, source)
     try:
         sweep = Sweep.model_validate(data)
     except pydantic.ValidationError as exc:
