@@ -320,8 +320,7 @@ def one_line(exc: pydantic.ValidationError) -> str:
     return f"{loc}: {msg}" if loc else msg
 
 
-def load_toml(text: str, source: str) -> dict[str, Any]:
-    """TOML text as data (scene and sweep files alike), or one SceneError line."""
+def load_toml(text: str, source: str) -> dict[str, Any]:  # scene and sweep files: one line
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
