@@ -584,7 +584,7 @@ static double error_norm(const double *err, const double *x, const double *xnew,
     total = 0.0;
     for (i = 0; i < GYROSTAT_NX; ++i) {
         double e;
-        e = err[i] / (atol + rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+        e = err[i] / (atol + rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
         total = total + e * e;
     }
     return sqrt(total / GYROSTAT_NX);
@@ -1124,7 +1124,7 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
                     0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    dmax(fabs(x[i]), fabs(xnew[i])));
+                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / GYROSTAT_NX);
@@ -1341,12 +1341,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -2387,7 +2387,17 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
                             double atol, double h0, long max_steps, gyrostat_stats *stats)
 {
     double tay[21][26];
-    double inv[21] = {0.0};
+    static const double inv[21] = {0.0, 1.0, 0.5, 0.3333333333333333, 0.25, 0.2,
+            0.16666666666666666, 0.14285714285714285, 0.125, 0.1111111111111111, 0.1,
+            0.09090909090909091, 0.08333333333333333, 0.07692307692307693, 0.07142857142857142,
+            0.06666666666666667, 0.0625, 0.058823529411764705, 0.05555555555555555,
+            0.05263157894736842, 0.05};
+    static const double rhofacs[21] = {0.0, 0.0, 0.06720551273974977, 0.09536916221554963,
+            0.10717059875230675, 0.11360815367076375, 0.11765484302177921, 0.12043240152376272,
+            0.12245642825298193, 0.12399674050160123, 0.12520814359063986, 0.12618578170503877,
+            0.12699134256376904, 0.12766657029576653, 0.12824072030490302, 0.12873490358780423,
+            0.1291647359223283, 0.12954201633524534, 0.12987582587444038, 0.13017326751821864,
+            0.130439976885755};
     double f0[GYROSTAT_NX];
     double xnew[GYROSTAT_NX];
     double dx[GYROSTAT_NX];
@@ -2441,10 +2451,7 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
     order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
     order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
-    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
-    for (q = 1; q < order + 1; ++q) {
-        inv[q] = 1.0 / (double)q;
-    }
+    rhofac = rhofacs[order];
     scale = atol / rtol;
     code = -1;
     t = t0;
@@ -2463,17 +2470,17 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         dp = 0.0;
         dq = 0.0;
         for (i = 0; i < GYROSTAT_NX; ++i) {
-            xmax = dmax(xmax, fabs(x[i]));
+            xmax = fabs(x[i]) > xmax ? fabs(x[i]) : xmax;
         }
 
         /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
         for (i = 0; i < 4; ++i) {
-            dp = dmax(dp, fabs(tay[order][i]));
-            dq = dmax(dq, fabs(tay[order - 1][i]));
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
         }
         for (i = 7; i < 10; ++i) {
-            dp = dmax(dp, fabs(tay[order][i]));
-            dq = dmax(dq, fabs(tay[order - 1][i]));
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
         }
         xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
         rho = step_exp2(dmin(step_log2(xmax / dp) * inv[order],
@@ -2767,7 +2774,8 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
+                    : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -2785,7 +2793,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
         }
     }
 
@@ -3055,12 +3063,14 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
         }
@@ -3080,7 +3090,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
         }
     }
     GYROSTAT_SIMD
@@ -3102,7 +3112,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX));
+            L->nonfinite[l] = (L->nonfinite[l] | (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX)));
         }
     }
     GYROSTAT_SIMD
@@ -3390,7 +3400,17 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
 static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
                               double t1, long max_steps)
 {
-    double inv[21];
+    static const double inv[21] = {0.0, 1.0, 0.5, 0.3333333333333333, 0.25, 0.2,
+            0.16666666666666666, 0.14285714285714285, 0.125, 0.1111111111111111, 0.1,
+            0.09090909090909091, 0.08333333333333333, 0.07692307692307693, 0.07142857142857142,
+            0.06666666666666667, 0.0625, 0.058823529411764705, 0.05555555555555555,
+            0.05263157894736842, 0.05};
+    static const double rhofacs[21] = {0.0, 0.0, 0.06720551273974977, 0.09536916221554963,
+            0.10717059875230675, 0.11360815367076375, 0.11765484302177921, 0.12043240152376272,
+            0.12245642825298193, 0.12399674050160123, 0.12520814359063986, 0.12618578170503877,
+            0.12699134256376904, 0.12766657029576653, 0.12824072030490302, 0.12873490358780423,
+            0.1291647359223283, 0.12954201633524534, 0.12987582587444038, 0.13017326751821864,
+            0.130439976885755};
     int order;
     double rhofac;
     double scale;
@@ -3428,10 +3448,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
     order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
     order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
-    rhofac = exp(-0.7 / (double)(order - 1)) / 7.3890560989306495;
-    for (q = 1; q < order + 1; ++q) {
-        inv[q] = 1.0 / (double)q;
-    }
+    rhofac = rhofacs[order];
     scale = atol / rtol;
 
     /* the coefficients at x, and the step they allow (Jorba and Zou) */
@@ -3450,7 +3467,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            xmax[l] = dmax(xmax[l], fabs(L->x[i][l]));
+            xmax[l] = fabs(L->x[i][l]) > xmax[l] ? fabs(L->x[i][l]) : xmax[l];
         }
     }
 
@@ -3458,15 +3475,15 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < 4; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
-            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
         }
     }
     for (i = 7; i < 10; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            dp[l] = dmax(dp[l], fabs(L->tay[order][i][l]));
-            dq[l] = dmax(dq[l], fabs(L->tay[order - 1][i][l]));
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
         }
     }
     GYROSTAT_SIMD
@@ -3556,7 +3573,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < GYROSTAT_NX; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
         }
     }
 
@@ -3570,7 +3587,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 fabs(gyrostat_cos_lanes(L->xnew[1][l])) < GYROSTAT_ODE_GIMBAL_LOCK_COS : 0;
         jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
         ok[l] = take[l] && !at[l] && !jump[l];
-        retry[l] = run[l] && (L->nonfinite[l] || jump[l]);  /* past gimbal lock, or not finite */
+        retry[l] = run[l] && (L->nonfinite[l] | jump[l]);  /* past gimbal lock, or not finite */
         L->code[l] = take[l] && at[l] && !jump[l] ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
                 last[l] ? GYROSTAT_ODE_OK : L->code[l];
         L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];

@@ -484,7 +484,7 @@ static double error_norm(const double *err, const double *x, const double *xnew,
     total = 0.0;
     for (i = 0; i < RW4_PYRAMID_NX; ++i) {
         double e;
-        e = err[i] / (atol + rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+        e = err[i] / (atol + rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
         total = total + e * e;
     }
     return sqrt(total / RW4_PYRAMID_NX);
@@ -1006,7 +1006,7 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
                     0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    dmax(fabs(x[i]), fabs(xnew[i])));
+                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / RW4_PYRAMID_NX);
@@ -1223,12 +1223,12 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * dmax(fabs(x[i]), fabs(xnew[i])));
+                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -2202,7 +2202,8 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
+                    : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -2220,7 +2221,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < RW4_PYRAMID_NX; ++i) {
         RW4_PYRAMID_SIMD
         for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
         }
     }
 
@@ -2490,12 +2491,14 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * dmax(fabs(L->x[i][l]), fabs(L->xnew[i][l])));
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
         }
@@ -2515,7 +2518,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < RW4_PYRAMID_NX; ++i) {
         RW4_PYRAMID_SIMD
         for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || !(fabs(L->xnew[i][l]) <= DBL_MAX);
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
         }
     }
     RW4_PYRAMID_SIMD
@@ -2537,7 +2540,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < RW4_PYRAMID_NX; ++i) {
         RW4_PYRAMID_SIMD
         for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->nonfinite[l] = L->nonfinite[l] || (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX));
+            L->nonfinite[l] = (L->nonfinite[l] | (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX)));
         }
     }
     RW4_PYRAMID_SIMD

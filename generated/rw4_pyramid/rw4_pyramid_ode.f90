@@ -576,7 +576,7 @@ contains
 
     total = 0.0_c_double
     do i = 0, nx - 1
-      e = err(i) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+      e = err(i) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
       total = total + e * e
     end do
     res = sqrt(total / nx)
@@ -1175,7 +1175,8 @@ contains
         e = (h * (((((0.0012326388888888888_c_double * k(i, &
             0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
             3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
-            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))))
         total = total + e * e
       end do
       err = sqrt(total / nx)
@@ -1422,12 +1423,12 @@ contains
             5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
             7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
             9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
-            11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
         e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
             5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
             7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
             9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
-            11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
         err5 = err5 + e5 * e5
         err3 = err3 + e3 * e3
       end do

@@ -372,7 +372,7 @@ contains
 
     total = 0.0_c_double
     do i = 0, nx - 1
-      e = err(i) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+      e = err(i) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
       total = total + e * e
     end do
     res = sqrt(total / nx)
@@ -979,7 +979,8 @@ contains
         e = (h * (((((0.0012326388888888888_c_double * k(i, &
             0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
             3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
-            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))))
         total = total + e * e
       end do
       err = sqrt(total / nx)
@@ -1227,12 +1228,12 @@ contains
             5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
             7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
             9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
-            11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
         e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
             5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
             7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
             9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
-            11)) / (atol + rtol * max(abs(x(i)), abs(xnew(i))))
+            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
         err5 = err5 + e5 * e5
         err3 = err3 + e3 * e3
       end do
@@ -2401,7 +2402,21 @@ contains
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
     real(c_double) :: tay(0:19 - 1, 0:21 - 1)
-    real(c_double) :: inv(0:21 - 1)
+    real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
+        0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
+        0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &
+        0.09090909090909091_c_double, 0.08333333333333333_c_double, 0.07692307692307693_c_double, &
+        0.07142857142857142_c_double, 0.06666666666666667_c_double, 0.0625_c_double, &
+        0.058823529411764705_c_double, 0.05555555555555555_c_double, &
+        0.05263157894736842_c_double, 0.05_c_double]
+    real(c_double), parameter :: rhofacs(0:20) = [0.0_c_double, 0.0_c_double, &
+        0.06720551273974977_c_double, 0.09536916221554963_c_double, 0.10717059875230675_c_double, &
+        0.11360815367076375_c_double, 0.11765484302177921_c_double, 0.12043240152376272_c_double, &
+        0.12245642825298193_c_double, 0.12399674050160123_c_double, 0.12520814359063986_c_double, &
+        0.12618578170503877_c_double, 0.12699134256376904_c_double, 0.12766657029576653_c_double, &
+        0.12824072030490302_c_double, 0.12873490358780423_c_double, 0.1291647359223283_c_double, &
+        0.12954201633524534_c_double, 0.12987582587444038_c_double, 0.13017326751821864_c_double, &
+        0.130439976885755_c_double]
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2429,7 +2444,6 @@ contains
     integer(c_int) :: i
     integer(c_int) :: q
 
-    inv = 0.0_c_double
     code = ode_start(0, SPEED_CONTROLLED_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, &
         max_steps, f0, h, stats)
     if (code >= 0) then
@@ -2457,10 +2471,7 @@ contains
     order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
     order = order + (merge(1, 0, 1.713908431542013e-15_c_double > rtol))
     order = order + (merge(1, 0, 2.3195228302435696e-16_c_double > rtol))
-    rhofac = exp((-0.7_c_double) / real(order - 1, c_double)) / 7.3890560989306495_c_double
-    do q = 1, order + 1 - 1
-      inv(q) = 1.0_c_double / real(q, c_double)
-    end do
+    rhofac = rhofacs(order)
     scale = atol / rtol
     code = -1
     t = t0
@@ -2479,13 +2490,13 @@ contains
       dp = 0.0_c_double
       dq = 0.0_c_double
       do i = 0, nx - 1
-        xmax = max(xmax, abs(x(i)))
+        xmax = merge(abs(x(i)), xmax, abs(x(i)) > xmax)
       end do
 
       ! a polynomial state of degree <= min_order sets no bound (its step is exact)
       do i = 0, 8 - 1
-        dp = max(dp, abs(tay(i, order)))
-        dq = max(dq, abs(tay(i, order - 1)))
+        dp = merge(abs(tay(i, order)), dp, abs(tay(i, order)) > dp)
+        dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
       end do
       xmax = max(scale, xmax)  ! the absolute and relative modes in one
       rho = step_exp2(min(step_log2(xmax / dp) * inv(order), step_log2(xmax / dq) * inv(order - 1)))

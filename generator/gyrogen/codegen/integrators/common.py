@@ -164,9 +164,16 @@ def step_underflow() -> Func:
     return Func("step_underflow", (real("h"), real("t")), (Return(small),), "bool", doc=doc)
 
 
+def larger(a: E, b: E) -> E:
+    """max(a, b) for an a that is never NaN; a when b is NaN. One compare and
+    a select (vmaxpd over lanes), where max ignores a NaN on either side: two
+    compares in C's dmax, and gfortran's max takes NaN or not by -O level."""
+    return sel(cmp(b, ">", a), b, a)
+
+
 def scaled(e: E, at: E) -> E:
-    """e / (atol + rtol max(|x_i|, |xnew_i|))."""
-    return e / (atol + rtol * fn("max", fn("abs", x[at]), fn("abs", xnew[at])))
+    """e / (atol + rtol max(|x_i|, |xnew_i|)); x is finite, xnew may not be."""
+    return e / (atol + rtol * larger(fn("abs", x[at]), fn("abs", xnew[at])))
 
 
 def error_norm() -> Func:

@@ -119,7 +119,7 @@ class CPrinter(Printer):
             return f"{self.prefix}_stats *{d.name}"
         ctype = CTYPE[d.type]
         if d.values:
-            table = ", ".join(str(v) for v in d.values)
+            table = ", ".join(self.number(v) if isinstance(v, float) else str(v) for v in d.values)
             return f"static const {ctype} {d.name}[{len(d.values)}] = {{{table}}}"
         if param:
             if len(d.shape) == 2:
@@ -154,7 +154,11 @@ class CPrinter(Printer):
         doc = [f"/* {text[0]}", *(f"   {d}" for d in text[1:])] if text else []
         if doc:
             doc[-1] += " */"
-        locals_ = [f"{self.indent}{p.declaration(d, False)};" for d in func.locals]
+        locals_ = [
+            line
+            for d in func.locals
+            for line in p.wrap(f"{self.indent}{p.declaration(d, False)};", self.indent * 3, "")
+        ]
         loops = sorted({(s.var, s.type) for s in walk(func.body) if isinstance(s, For)})
         locals_ += [f"{self.indent}{CTYPE[t]} {v};" for v, t in loops]
         body = p.block(func.body, 1)

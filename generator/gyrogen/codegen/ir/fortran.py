@@ -115,7 +115,7 @@ class FortranPrinter(Printer):
     def declaration(self, d: Decl, param: bool) -> str:
         ftype = f"type({self.prefix}_stats)" if d.type == "stats" else FTYPE[d.type]
         if d.values:
-            table = ", ".join(str(v) for v in d.values)
+            table = ", ".join(self.number(v) if isinstance(v, float) else str(v) for v in d.values)
             return f"{ftype}, parameter :: {d.name}(0:{len(d.values) - 1}) = [{table}]"
         intent = f", intent({d.intent})" if param else ""
         dims = ", ".join(f"0:{self.extent(n)} - 1" for n in reversed(d.shape))
@@ -138,7 +138,11 @@ class FortranPrinter(Printer):
         decls = [f"{pad * 2}{p.declaration(d, True)}" for d in params]
         if func.returns is not None:
             decls.append(f"{pad * 2}{FTYPE.get(func.returns, 'integer')} :: res")
-        decls += [f"{pad * 2}{p.declaration(d, False)}" for d in func.locals]
+        decls += [
+            line
+            for d in func.locals
+            for line in p.wrap(f"{pad * 2}{p.declaration(d, False)}", pad * 4, "")
+        ]
         scoped = sorted({x for s in walk(func.body) if isinstance(s, For) for x in s.locals})
         decls += [f"{pad * 2}real(c_double) :: {x}" for x in scoped]
         loops = sorted({(s.var, s.type) for s in walk(func.body) if isinstance(s, For)})

@@ -297,8 +297,8 @@ class Decl:
     (over lanes, a scalar of the one loop over the lanes)."""
     init: E | None = None
     """A local's value at the start (an array: every element)."""
-    values: tuple[int, ...] = ()
-    """A constant table of integers (an array local that never changes)."""
+    values: tuple[int | float, ...] = ()
+    """A constant table (an array local that never changes)."""
 
 
 @dataclass(frozen=True)
