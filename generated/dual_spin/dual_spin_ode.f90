@@ -489,10 +489,10 @@ contains
     e = merge(e + 1.0_c_double, e, m > 1.4142135623730951_c_double)
     m = merge(m * 0.5_c_double, m, m > 1.4142135623730951_c_double)
     f = m - 1.0_c_double
-    res = merge(e + f * (1.442696432286588_c_double + f * ((-0.7213640408366104_c_double) + f * &
-        (0.4806291383826822_c_double + f * ((-0.35935059807152286_c_double) + f * &
-        (0.29563370133125855_c_double + f * ((-0.2695068891921427_c_double) + f * &
-        0.17212913448722086_c_double)))))), merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
+    res = merge(e + f * (((1.442696432286588_c_double + f * (-0.7213640408366104_c_double)) + (f &
+        * f) * (0.4806291383826822_c_double + f * (-0.35935059807152286_c_double))) + ((f * f) * &
+        (f * f)) * ((0.29563370133125855_c_double + f * (-0.2695068891921427_c_double)) + (f * f) &
+        * 0.17212913448722086_c_double)), merge(-huge(1.0_c_double), z, z <= 0.0_c_double), &
         z > 0.0_c_double .and. z <= huge(1.0_c_double))
     return
   end function step_log2
@@ -512,9 +512,9 @@ contains
     k = (yy + 6755399441055744.0_c_double) - 6755399441055744.0_c_double
     r = yy - k
     k1 = max(k, -1021.0_c_double)
-    v = ((1.000000075499127_c_double + r * (0.6931472067117419_c_double + r * &
-        (0.24022107337696277_c_double + r * (0.05550327211816496_c_double + r * &
-        (0.00967603806503104_c_double + r * 0.0013400433122461265_c_double))))) * &
+    v = ((((1.000000075499127_c_double + r * 0.6931472067117419_c_double) + (r * r) * &
+        (0.24022107337696277_c_double + r * 0.05550327211816496_c_double)) + ((r * r) * (r * r)) &
+        * (0.00967603806503104_c_double + r * 0.0013400433122461265_c_double)) * &
         scale(1.0_c_double, int(k1))) * scale(1.0_c_double, int(k - k1))
     res = merge(huge(1.0_c_double), merge(v, merge(0.0_c_double, y, y < -1075.0_c_double), &
         y >= -1075.0_c_double), y > 1023.0_c_double)

@@ -10,7 +10,7 @@ So each is one short polynomial, no division:
 step_log2(z): z = 2^e m, m in [1, 2), read from the double's bits (Fn
 "exponent" and "significand": C reads the bits, Fortran calls exponent and
 fraction; both exact), m > sqrt 2 halved; log2 m = f P(f), f = m - 1, P of
-degree 6 (a Chebyshev fit): within 5.7e-7 of log2 z, exact at powers of 2.
+degree 6 (a Chebyshev fit, by Estrin's scheme): within 5.7e-7 of log2 z, exact at powers of 2.
 step_exp2(y): y = k + r, |r| <= 1/2, k rounded by 1.5 2^52; 2^r by a
 polynomial of degree 5, within 1.1e-7 relative; then times 2^k (Fn "pow2",
 exact: C writes the bits, Fortran calls scale), in two factors below
@@ -57,12 +57,17 @@ EXP2 = (1.000000075499127, 0.6931472067117419, 0.24022107337696277, 0.0555032721
 """2^r on [-1/2, 1/2], lowest power first."""
 
 
-def horner(coefficients: tuple[float, ...], v: E) -> E:
-    """sum c_i v^i by Horner's scheme."""
-    out: E = Num(coefficients[-1])
-    for c in reversed(coefficients[:-1]):
-        out = Num(c) + v * out
-    return out
+def estrin(coefficients: tuple[float, ...], v: E) -> E:
+    """sum c_i v^i by Estrin's scheme: pairs c_2i + c_2i+1 v, then the same
+    in v^2. Its chain of dependent operations is about log2 of the degree
+    long, where Horner's is the degree: the step's log2 and exp2 lie on the
+    step's critical path, and over lanes nothing else runs beside them."""
+    terms: list[E] = [Num(c) for c in coefficients]
+    while len(terms) > 1:
+        pairs = [terms[i] + v * terms[i + 1] for i in range(0, len(terms) - 1, 2)]
+        terms = pairs + terms[len(pairs) * 2 :]
+        v = v * v
+    return terms[0]
 
 
 def log_function() -> Func:
@@ -75,7 +80,7 @@ def log_function() -> Func:
         assign(e, sel(cmp(m, ">", SQRT2), e + 1.0, e)),
         assign(m, sel(cmp(m, ">", SQRT2), m * Num(0.5), m)),
         assign(f, m - 1.0),
-        Return(sel(finite, e + f * horner(LOG2, f), sel(cmp(z, "<=", 0.0), -Const("HUGE"), z))),
+        Return(sel(finite, e + f * estrin(LOG2, f), sel(cmp(z, "<=", 0.0), -Const("HUGE"), z))),
     ]
     doc = ("log2 z for the step size, branch-free (see gyrogen.codegen.integrators.elementary).",)
     return Func(
@@ -91,7 +96,7 @@ def exp_function() -> Func:
         assign(r, yy - k),
         assign(k1, fn("max", k, Num(EXP_MIN))),
         assign(
-            v, horner(EXP2, r) * fn("pow2", k1) * fn("pow2", k - k1)
+            v, estrin(EXP2, r) * fn("pow2", k1) * fn("pow2", k - k1)
         ),  # the second 1 unless subnormal
     ]
     tail: E = sel(cmp(y, "<", -1075.0), Num(0.0), y)  # y NaN: every comparison false
