@@ -42,6 +42,11 @@ of its build and package, where it would hide the system's (a scene named
 math broke the package's own math.h include). Compared without case, for
 case-insensitive file systems."""
 
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+"""The FMI headers an FMU's wrapper includes (codegen/fmu.py): a scene named
+as one would shadow it with its own header, in the FMU's sources and beside
+any FMU a user builds with the scene's package (compared without case too)."""
+
 
 def shown_integer(v: int) -> str:
     """A long integer as its first digits and their count."""
@@ -116,7 +121,8 @@ def check_name(v: str) -> None:
     """The scene's name prefixes every identifier gyrogen writes, in C (and
     C++, through the header) and Fortran: a letter, then letters, digits and
     single underscores, never ending in one (prefix + "_" would make "__",
-    which C++ reserves), at most NAME_MAX_LENGTH characters."""
+    which C++ reserves), at most NAME_MAX_LENGTH characters; not a C keyword,
+    nor a header's name (C_HEADERS, FMI_HEADERS) that its <name>.h would hide."""
     shown = repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
     if not v:
         raise ValueError("must not be empty")
@@ -138,6 +144,9 @@ def check_name(v: str) -> None:
         raise ValueError(
             f"{shown} names a C library header (<{v.lower()}.h>): the scene's {v}.h would hide it"
         )
+    fmi = [h for h in FMI_HEADERS if h[:-2].lower() == v.lower()]
+    if fmi:
+        raise ValueError(f"{shown} names an FMI header ({fmi[0]}): the scene's {v}.h would hide it")
 
 
 BIDI_CONTROLS = frozenset((0x061C, 0x200E, 0x200F, *range(0x202A, 0x202F), *range(0x2066, 0x206A)))
