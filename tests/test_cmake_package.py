@@ -118,11 +118,12 @@ def test_pkg_config(prefix: Path, tmp_path: Path) -> None:
 
 HOSTILE = (
     "@CMAKE_INSTALL_PREFIX@ ${x} $ENV{HOME} @PACKAGE_INIT@ @GYROSTAT_PC_LIBS@ a@b@c @@ @\n"
-    "#cmakedefine FOO\ncmakedefine01 BAR\n  #cmakedefine BAZ 1\nset(x 1)\n"
+    "#cmakedefine FOO\ncmakedefine01 BAR\n  #cmakedefine BAZ 1\nset(x 1) \\\n"
     "Libs: -lhostile\n#[[ not a bracket comment\n]] a trailing backslash \\"
 )
 """A description CMake's configure_file would act on in a comment: @VAR@
-substituted (@PACKAGE_INIT@'s lines live), #cmakedefine lines made live."""
+substituted (@PACKAGE_INIT@'s lines live), #cmakedefine lines made live;
+and lines that would be live out of a comment (a backslash ending one)."""
 
 
 def live(path: Path) -> list[str]:
