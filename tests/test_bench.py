@@ -35,7 +35,8 @@ def _tiny(tmp: Path | None = None, **kw: bool) -> tuple[list[bench_rhs.Measureme
     return ms, lines
 
 
-def test_tiny_run_reports_every_row(tmp_path: Path) -> None:
+def test_tiny_run_reports_every_row(tmp_path: Path, cli) -> None:
+    """Every row, sane numbers, and the one file `gyrogen bench-rhs --help` names."""
     ms, lines = _tiny(tmp_path, pydy=False)
     assert [m.name for m in ms] == NAMES
     for m in ms:
@@ -45,7 +46,9 @@ def test_tiny_run_reports_every_row(tmp_path: Path) -> None:
     text = "\n".join(lines)
     assert "one call through cffi (C) vs PyDy cython:" in text
     assert "batched C:" in text
-    doc = json.loads((tmp_path / "bench.json").read_text())
+    (written,) = (p.name for p in tmp_path.iterdir())
+    assert f"Write {written} here." in cli(["bench-rhs", "--help"]).out
+    doc = json.loads((tmp_path / written).read_text())
     assert [m["name"] for m in doc["measurements"]] == NAMES
     assert doc["machine"]["c_flags"]
 

@@ -318,6 +318,28 @@ def test_new_over_a_directory_is_one_line(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["my_sat.toml"]
 
 
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["my_sat", "--out", ""], "Invalid value for '--out': '' is empty: give the file to write"),
+        (["my_sat", "--out", "./sub/"], "'./sub/' names a directory: give the file to write, as"),
+        (["my_sat", "--out", "sub/."], "'--out': 'sub/.' names a directory"),
+        (["my_sat", "--out", "sub/.."], "'--out': 'sub/..' names a directory"),
+        (["fmi2Functions"], "'fmi2Functions' names an FMI header (fmi2Functions.h)"),
+    ],
+)
+def test_new_refuses_a_place_or_name_it_cannot_write_as_asked(
+    args: list[str], message: str, tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A directory's spelling or nothing as --out (./sub/ wrote a file
+    named sub), or a name whose header would hide an FMI header: one line,
+    exit 2, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = cli(["new", *args])
+    assert (code, out) == (2, "") and message in err and err.count("\n") == 1, err
+    assert list(tmp_path.iterdir()) == []
+
+
 NUMBERS = [
     (
         ["verify", "--states", "0"],

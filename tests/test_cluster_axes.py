@@ -134,10 +134,13 @@ def test_setup_codes(scale: float, code: int, built) -> None:
 @pytest.mark.parametrize(
     ("edits", "message"),
     [
-        ({"g2_2": 0.0, "g3_2": 0.0}, "simulate.parameters.g1_2..g3: has length 0: not a direction"),
+        (
+            {"g2_2": 0.0, "g3_2": 0.0},
+            "simulate.parameters.g1_2..g3_2: has length 0: not a direction",
+        ),
         (
             {"g3_2": 0.818},
-            "simulate.parameters.g1_2..g3: length 1.00122791 is not 1 (within 0.001)",
+            "simulate.parameters.g1_2..g3_2: length 1.00122791 is not 1 (within 0.001)",
         ),
     ],
 )

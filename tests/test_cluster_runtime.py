@@ -15,7 +15,7 @@ import pytest
 
 from gyrogen.analysis.linearize import linearize as engine
 from gyrogen.codegen.context import make_context
-from gyrogen.errors import SceneError
+from gyrogen.errors import SceneError, SetupRefused
 from gyrogen.oracle.compare import compare
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.runtime.scene_build import build_scene
@@ -118,6 +118,19 @@ def test_setup_codes(change: dict[str, float], code: int, built) -> None:
     scene, backends = built
     for comp in backends.values():
         assert comp.setup_code(_p(scene, **change))[0] == code, (comp.language, change)
+
+
+def test_a_refused_mass_is_named_as_a_cluster_names_it(built) -> None:
+    """Code 2 in a cluster is m_a or a rotor's m_k (it said m_b, which a
+    cluster does not have): setup's refusal, and the manifest the C and
+    Fortran strerror print from."""
+    scene, backends = built
+    why = "a mass (m_a or a rotor's m_k) is not positive"
+    for comp in backends.values():
+        assert comp.manifest["setup_codes"]["2"] == why
+        with pytest.raises(SetupRefused) as err:
+            comp.setup(_p(scene, m_3=-1.0))
+        assert str(err.value) == f"setup refused the parameters (code 2): {why}"
 
 
 @pytest.mark.parametrize(

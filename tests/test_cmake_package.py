@@ -21,8 +21,11 @@ import numpy as np
 import pytest
 
 from gyrogen import abi
+from gyrogen.codegen.generate import generate
+from gyrogen.codegen.render import hash_comment
 from gyrogen.oracle import reference
 from gyrogen.runtime.flags import C_WARNINGS
+from gyrogen.scene import builtin_text, parse
 
 pytestmark = pytest.mark.slow  # the CMake package configured, built and installed
 
@@ -111,6 +114,60 @@ def test_pkg_config(prefix: Path, tmp_path: Path) -> None:
          str(app), *flags, "-lm", f"-Wl,-rpath,{libdir}"], tmp_path)  # fmt: skip
     lines = run([str(app)], tmp_path).splitlines()
     assert [line.split()[0] for line in lines][:2] == ["q1", "q2"] and len(lines) == 18
+
+
+HOSTILE = (
+    "@CMAKE_INSTALL_PREFIX@ ${x} $ENV{HOME} @PACKAGE_INIT@ @GYROSTAT_PC_LIBS@ a@b@c @@ @\n"
+    "#cmakedefine FOO\ncmakedefine01 BAR\n  #cmakedefine BAZ 1\nset(x 1) \\\n"
+    "Libs: -lhostile\n#[[ not a bracket comment\n]] a trailing backslash \\"
+)
+"""A description CMake's configure_file would act on in a comment: @VAR@
+substituted (@PACKAGE_INIT@'s lines live), #cmakedefine lines made live;
+and lines that would be live out of a comment (a backslash ending one)."""
+
+
+def live(path: Path) -> list[str]:
+    """The lines of a CMake or pkg-config file that are not comments."""
+    return [line for line in path.read_text().splitlines() if not line.startswith("#")]
+
+
+def test_a_hostile_description_stays_in_the_comments(prefix: Path, tmp_path: Path) -> None:
+    """The scene's description is copied into the comments of the config and
+    the .pc file that configure_file writes: installed, each holds it as
+    written, in comments only; their live lines are the plain scene's; a
+    consumer finds the package and runs, and pkg-config reads it."""
+    text = builtin_text("gyrostat")
+    line = next(line for line in text.splitlines() if line.startswith("description = "))
+    scene = parse(text.replace(line, f"description = {json.dumps(HOSTILE)}"), "hostile.toml")
+    assert scene.description == HOSTILE
+    source, build, mine = tmp_path / "gyrostat", tmp_path / "build", tmp_path / "prefix"
+    generate(scene, source, lib=True)
+    run(["cmake", "-S", str(source), "-B", str(build), "-DBUILD_SHARED_LIBS=ON"], tmp_path)
+    run(["cmake", "--build", str(build)], tmp_path)
+    run(["cmake", "--install", str(build), "--prefix", str(mine)], tmp_path)
+    for where in ("lib/cmake/gyrostat/gyrostatConfig.cmake", "lib/pkgconfig/gyrostat.pc"):
+        name = Path(where).name + ".in"
+        installed = (mine / where).read_text()
+        assert installed.startswith(f"# {name}: builds gyrostat ({hash_comment(HOSTILE)}) as a")
+        assert live(mine / where) == live(prefix / where)
+    project = tmp_path / "consumer"
+    project.mkdir()
+    shutil.copy(EXAMPLES / "embed_c" / "main.c", project / "app.c")
+    (project / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.15)\n"
+        "project(consumer LANGUAGES C)\n"
+        "find_package(gyrostat 0.1 REQUIRED)\n"
+        "add_executable(app app.c)\n"
+        "target_link_libraries(app PRIVATE gyrostat::gyrostat m)\n"
+    )
+    out = tmp_path / "consumer-build"
+    run(["cmake", "-S", str(project), "-B", str(out), f"-DCMAKE_PREFIX_PATH={mine}"], tmp_path)
+    run(["cmake", "--build", str(out)], tmp_path)
+    assert len(run([str(out / "app")], tmp_path).splitlines()) == 18
+    env = dict(os.environ, PKG_CONFIG_PATH=str(mine / "lib" / "pkgconfig"))
+    flags = run(["pkg-config", "--cflags", "--libs", "gyrostat"], tmp_path, env).split()
+    assert flags == [f"-I{mine}/lib/pkgconfig/../../include/gyrostat",
+                     f"-L{mine}/lib/pkgconfig/../../lib", "-lgyrostat"]  # fmt: skip
 
 
 VIEW = "-DCMAKE_FIND_USE_CMAKE_SYSTEM_PATH=OFF"

@@ -345,7 +345,7 @@ def targets(line: str) -> Callable[[str], str]:
         (targets('targets = ["c"]\nintegrators = ["dop853"]'), ["--method", "rodas4"],
          "rodas4 is not among the scene's integrators (dop853)"),
         (lambda text: text.replace('name = "gyrostat"', 'name = "fmi2Functions"'), [],
-         "the scene's header fmi2Functions.h would shadow the FMI header of that name"),
+         "name: 'fmi2Functions' names an FMI header (fmi2Functions.h)"),
         (lambda text: text.replace("the paper's full model", "the paper's \ufffe model"), [],
          "U+FFFE at position 12 is not a character: XML (an FMU's modelDescription.xml)"),
     ],

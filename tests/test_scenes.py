@@ -143,6 +143,8 @@ BAD = [
     ("C header", named("math"), "names a C library header (<math.h>)"),
     ("C header, case", named("StdInt"), "names a C library header (<stdint.h>)"),
     ("OpenMP header", named("omp"), "the scene's omp.h would hide it"),
+    ("FMI header", named("fmi2Functions"), "names an FMI header (fmi2Functions.h)"),
+    ("FMI header, case", named("FMI2typesplatform"), "an FMI header (fmi2TypesPlatform.h)"),
     ("description escape", described("\\u001b[31m"), "description: control character U+001B"),
     ("rtol no double meets", simulating("rtol = 1e-20"), "simulate.rtol: must be above 2.22e-15"),
     ("rtol at the bound", simulating("rtol = 2.220446049250313e-15"), "simulate.rtol"),

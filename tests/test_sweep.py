@@ -216,6 +216,23 @@ def test_obstacles_in_out_are_refused_before_any_work(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("figure", ["histograms.png", "map.png"])
+def test_without_plots_a_figures_place_is_no_obstacle(
+    tmp_path: Path, cache: None, cli, figure: str
+) -> None:
+    """--no-plots writes no figure: a directory of its name is left alone
+    (it was refused before any work, as if the figure were to be written)."""
+    out = tmp_path / "o"
+    put(out, figure, None)
+    code, _, err = cli(["sweep", str(small(tmp_path / "s.toml", count=1)), "--out", str(out),
+                        "--quiet", "--no-plots"])  # fmt: skip
+    assert (code, err) == (0, "")
+    names = {p.name for p in out.iterdir()}
+    assert names == {"sweep.json", "parts", "summary.json", "summary.md", figure}
+    assert (out / figure).is_dir() and not any((out / figure).iterdir())
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("size", [0, 100])
 def test_a_damaged_part_is_computed_again(
     swept: tuple[Path, Path], tmp_path: Path, cli, size: int

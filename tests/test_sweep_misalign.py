@@ -143,7 +143,7 @@ BAD = [
     ("also on the grid", MISALIGN + "[grid]\ng3_1 = { list = [0.8, 0.81] }\n",
      "draws.misalign.axis_1: g3_1 also on the grid or drawn"),
     ("nominal", MISALIGN + "[parameters]\ng1_1 = 0.7\n",
-     "draws.misalign.axis_1: nominal g1_1..g3: length 1.07548439 is not 1 (within 0.001)"),
+     "draws.misalign.axis_1: nominal g1_1..g3_1: length 1.07548439 is not 1 (within 0.001)"),
 ]  # fmt: skip
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import socket
 from pathlib import Path
 
 import pytest
@@ -94,6 +95,39 @@ def test_a_url_gives_its_host_to_the_file_system() -> None:
     assert found.root == "/o" and dict(found.options) == {
         "host": "example.org", "port": 2121, "username": "me", "password": "pw"
     }  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("url", "options"),
+    [
+        ("ftp://[::1]/o", {"host": "::1"}),  # fsspec's own reading: host "[:"
+        ("ftp://me@[::1]:2121/o", {"host": "::1", "port": 2121, "username": "me"}),
+        ("ftp://[fe80::1%25eth0]:21/o", {"host": "fe80::1%eth0", "port": 21}),
+    ],
+)
+def test_an_ipv6_host_is_no_chain_and_the_file_system_gets_it(
+    url: str, options: dict[str, object]
+) -> None:
+    """sftp://[::1]/x was refused as a chained URL (its ::): an IPv6 host is
+    given to the file system without its brackets (fsspec kept them, or cut
+    the host at its last colon)."""
+    found = url_store(url)
+    assert found.root == "/o" and dict(found.options) == options
+
+
+def test_an_ipv6_host_is_reached(tmp_path: Path, cli) -> None:
+    """The real FTP client reaches [::1] (with the brackets it could not
+    resolve the name): nothing listens there, one line, exit 1."""
+    with socket.socket(socket.AF_INET6) as s:
+        s.bind(("::1", 0))
+        port = s.getsockname()[1]
+    url = f"ftp://[::1]:{port}/o"
+    code, stdout, err = cli(["sweep", str(small(tmp_path / "s.toml")), "--out", url])
+    assert (code, stdout, err) == (
+        1,
+        "",
+        f"gyrogen: error: cannot open {url}: Connection refused\n",
+    )
 
 
 @pytest.mark.parametrize(

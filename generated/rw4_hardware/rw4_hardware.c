@@ -468,7 +468,7 @@ const char *rw4_hardware_strerror(int code)
     case RW4_HARDWARE_ERR_NONFINITE:
         return "a parameter is NaN or infinite";
     case RW4_HARDWARE_ERR_MASS:
-        return "a mass (m_a or m_b) is not positive";
+        return "a mass (m_a or a rotor's m_k) is not positive";
     case RW4_HARDWARE_ERR_ROTOR_INERTIA:
         return "a rotor inertia (I or J) is not positive";
     case RW4_HARDWARE_ERR_CARRIER_NOT_PD:

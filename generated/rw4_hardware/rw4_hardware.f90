@@ -99,7 +99,7 @@ module rw4_hardware_mod
   integer(c_int), parameter, public :: RW4_HARDWARE_OK = 0
   ! 1: a parameter is NaN or infinite
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_NONFINITE = 1
-  ! 2: a mass (m_a or m_b) is not positive
+  ! 2: a mass (m_a or a rotor's m_k) is not positive
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_MASS = 2
   ! 3: a rotor inertia (I or J) is not positive
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_ROTOR_INERTIA = 3
@@ -695,7 +695,7 @@ contains
     case (RW4_HARDWARE_ERR_NONFINITE)
       msg = "a parameter is NaN or infinite"
     case (RW4_HARDWARE_ERR_MASS)
-      msg = "a mass (m_a or m_b) is not positive"
+      msg = "a mass (m_a or a rotor's m_k) is not positive"
     case (RW4_HARDWARE_ERR_ROTOR_INERTIA)
       msg = "a rotor inertia (I or J) is not positive"
     case (RW4_HARDWARE_ERR_CARRIER_NOT_PD)

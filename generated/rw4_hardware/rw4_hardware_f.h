@@ -39,7 +39,7 @@ extern "C" {
 
 #define RW4_HARDWARE_OK                  0  /* parameters accepted */
 #define RW4_HARDWARE_ERR_NONFINITE       1  /* a parameter is NaN or infinite */
-#define RW4_HARDWARE_ERR_MASS            2  /* a mass (m_a or m_b) is not positive */
+#define RW4_HARDWARE_ERR_MASS            2  /* a mass (m_a or a rotor's m_k) is not positive */
 #define RW4_HARDWARE_ERR_ROTOR_INERTIA   3  /* a rotor inertia (I or J) is not positive */
 #define RW4_HARDWARE_ERR_CARRIER_NOT_PD  4  /* the carrier inertia is not positive definite */
 #define RW4_HARDWARE_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */

@@ -11,7 +11,7 @@ templates read them through the render context (codegen.context).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from gyrogen.abi_rotors import AXIS_NORM_SLACK, ROTOR_KEYS
 
@@ -123,33 +123,38 @@ class Code:
     """Lines of a comment above the macro; {macro} is the scene's prefix."""
     doc: str = ""
     """A comment after the macro (C), when there is no note."""
+    cluster: str = ""
+    """The message in a cluster scene, where the keys it names differ (a
+    rotor's are <key>_<k>); empty: the same message."""
 
 
 SETUP_CODES: tuple[Code, ...] = (
     Code(0, "OK", "parameters accepted"),
     Code(1, "ERR_NONFINITE", "a parameter is NaN or infinite"),
-    Code(2, "ERR_MASS", "a mass (m_a or m_b) is not positive"),
+    Code(2, "ERR_MASS", "a mass (m_a or m_b) is not positive",
+         cluster="a mass (m_a or a rotor's m_k) is not positive"),
     Code(3, "ERR_ROTOR_INERTIA", "a rotor inertia (I or J) is not positive"),
     Code(4, "ERR_CARRIER_NOT_PD", "the carrier inertia is not positive definite"),
-    Code(
-        5, "ERR_CARRIER_TRIANGLE", "the carrier's principal moments violate the triangle inequality"
-    ),
+    Code(5, "ERR_CARRIER_TRIANGLE",
+         "the carrier's principal moments violate the triangle inequality"),
     Code(6, "ERR_ROTOR_TRIANGLE", "the rotor violates the triangle inequality (2 I < J)"),
-    Code(
-        7,
-        "ERR_MASS_SINGULAR",
-        "the mass matrix is not numerically positive definite (condition number above 1e13)",
-    ),
+    Code(7, "ERR_MASS_SINGULAR",
+         "the mass matrix is not numerically positive definite (condition number above 1e13)"),
     Code(8, "ERR_AXIS", f"a rotor axis is not of unit length (within {AXIS_NORM_SLACK:g})"),
-    Code(
-        9,
-        "ERR_OVERFLOW",
-        "a constant derived from the parameters is not finite (together they overflow doubles)",
-    ),
-)
+    Code(9, "ERR_OVERFLOW",
+         "a constant derived from the parameters is not finite (together they overflow doubles)"),
+)  # fmt: skip
 """Return codes of <prefix>_setup, checked in this order (a runtime axis, 8,
 before the condition number, 7, which reads the axes; the constants, 9,
 last, once computed); the first failure wins."""
+
+
+def setup_codes_of(cluster: bool) -> tuple[Code, ...]:
+    """SETUP_CODES as a scene's setup says them: a cluster's messages name its keys."""
+    if not cluster:
+        return SETUP_CODES
+    return tuple(replace(c, message=c.cluster) if c.cluster else c for c in SETUP_CODES)
+
 
 ODE_CODES: tuple[Code, ...] = (
     Code(0, "ODE_OK", "ok"),

@@ -54,6 +54,11 @@ def rotor_name(key: str, k: int) -> str:
     return f"{key}_{k}"
 
 
+def axis_keys(k: int) -> str:
+    """Rotor k's runtime axis keys as a message names them: g1_k..g3_k."""
+    return f"{rotor_name(AXIS[0], k)}..{rotor_name(AXIS[-1], k)}"
+
+
 def cluster_states(n: int, quaternion: bool, angles: bool) -> tuple[str, ...]:
     """A cluster's states in x[] order: attitude, rotor angles th1..thN (if
     kept), body rates u1..u3, absolute wheel rates w1..wN."""

@@ -109,6 +109,7 @@ def sweep(
         chunk=chunk,
         progress=progress,
         portable=portable,
+        plots=plots,
         meanwhile=sweep_report.load_plots if plots else None,
     )
     sweep_report.write(chosen, record, plots=plots)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from gyrogen.codegen.render import render
+from gyrogen.codegen.render import hash_comment, render
 from gyrogen.errors import GyrogenError
 
 __all__ = ["files"]
@@ -26,6 +26,7 @@ def _context(manifest: dict[str, Any]) -> dict[str, Any]:
             "prefix": prefix,
             "macro": prefix.upper(),
             "description": manifest["description"],
+            "escapes": CONFIGURE_ESCAPES,
             "versions": manifest["versions"],
             # Older manifests have no build id; the preamble then omits it.
             "build_id": manifest.get("build_id"),
@@ -62,6 +63,23 @@ def _versions(gyrogen: str) -> dict[str, str]:
     return {"version": gyrogen, "soversion": major if major != "0" else f"0.{minor}"}
 
 
+CONFIGURE_ESCAPES = {"AT": "@", "CMAKEDEFINE": "cmakedefine"}
+"""What configure_file acts on even in a comment of the files it configures
+(the .in files: <prefix>Config.cmake.in, <prefix>.pc.in), in the order the
+description's comment there is escaped: @VAR@ is substituted (a description's
+@PACKAGE_INIT@ put live lines in the installed config) and a line holding
+#cmakedefine becomes a live "/* #undef ... */". Each is written there as
+@<MACRO>_<KEY>@, a variable CMakeLists.txt sets to the text itself;
+configure_file substitutes once, so the text comes back as written."""
+
+
+def configured(text: str, macro: str) -> str:
+    """text as a file configure_file reads must hold it (CONFIGURE_ESCAPES)."""
+    for key, literal in CONFIGURE_ESCAPES.items():
+        text = text.replace(literal, f"@{macro}_{key}@")
+    return text
+
+
 TEMPLATES = {
     "CMakeLists.txt": "lib/CMakeLists.txt.jinja",
     "{prefix}.mk": "lib/library.mk.jinja",
@@ -75,8 +93,11 @@ def files(manifest: dict[str, Any]) -> dict[str, str]:
     """File name -> text: the files of TEMPLATES, to be written beside the
     generated sources the manifest describes."""
     ctx = _context(manifest)
+    comment = hash_comment(ctx["description"])
     out = {}
     for pattern, template in TEMPLATES.items():
         name = pattern.format(prefix=ctx["prefix"])
-        out[name] = render(template, filename=name, **ctx)
+        # The description's comment, escaped where configure_file reads it.
+        text = configured(comment, ctx["macro"]) if name.endswith(".in") else comment
+        out[name] = render(template, filename=name, description_comment=text, **ctx)
     return out

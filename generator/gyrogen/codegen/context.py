@@ -14,8 +14,8 @@ import gyrogen
 from gyrogen.abi import (
     CLUSTER_OUTPUT_DOC,
     OUTPUT_DOC,
-    SETUP_CODES,
     Code,
+    setup_codes_of,
     unit_and_doc,
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
@@ -180,7 +180,7 @@ class SceneContext:
     def setup_codes(self) -> list[Code]:
         """The codes setup can return (those of its checks)."""
         made = {c.code for c in self.checks}
-        return [code for code in SETUP_CODES if code.value == 0 or code.value in made]
+        return [c for c in setup_codes_of(self.cluster) if c.value == 0 or c.value in made]
 
     @property
     def rotor_doc(self) -> list[str]:

@@ -13,8 +13,6 @@ from gyrogen.errors import SceneError
 from gyrogen.scene import Scene
 
 FMI_VERSION = "2.0"
-FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-"""The FMI headers the wrapper includes: no file of the scene may shadow one."""
 
 
 def default_method(scene: Scene) -> str:
@@ -24,11 +22,6 @@ def default_method(scene: Scene) -> str:
     scene that cannot make an FMU is refused."""
     if "c" not in scene.targets:
         raise SceneError(f'{scene.name}: an FMU is built from the C sources: add "c" to targets')
-    if f"{scene.name}.h" in FMI_HEADERS:
-        raise SceneError(
-            f"{scene.name}: the scene's header {scene.name}.h would shadow the FMI header of "
-            "that name in the FMU's sources: rename the scene"
-        )
     adaptive = [m for m in scene.integrators if not methods.get(m).fixed_step]
     if not adaptive:
         given = ", ".join(scene.integrators) or "none"

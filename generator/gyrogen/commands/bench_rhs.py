@@ -6,12 +6,13 @@ from pathlib import Path
 
 import click
 
+from gyrogen.analysis.bench import RHS_JSON
 from gyrogen.commands.options import directory
 from gyrogen.limits import MAX_REPEATS
 
 
 @click.command("bench-rhs")
-@directory("--out", "Write bench_rhs.json here.")
+@directory("--out", f"Write {RHS_JSON} here.")
 @click.option(
     "--repeats",
     type=click.IntRange(1, MAX_REPEATS),

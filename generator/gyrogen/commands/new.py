@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -9,10 +10,24 @@ import click
 from gyrogen.errors import GyrogenError, SceneError
 
 
+def _file(ctx: click.Context, param: click.Parameter, value: str | None) -> Path | None:
+    """--out names the file to write: not empty, and not a directory's
+    spelling (DIR/, DIR/., DIR/..), which pathlib would read as DIR."""
+    if value is None:
+        return None
+    if os.path.basename(value) in ("", ".", ".."):
+        shown = f"{value!r} is empty" if not value else f"{value!r} names a directory"
+        raise click.BadParameter(f"{shown}: give the file to write, as DIR/NAME.toml")
+    return Path(value)
+
+
 @click.command()
 @click.argument("name")
 @click.option(
-    "--out", type=click.Path(dir_okay=False, path_type=Path), help="File [default: NAME.toml]."
+    "--out",
+    type=click.Path(dir_okay=False),
+    callback=_file,
+    help="File, created with any missing directories above it [default: NAME.toml].",
 )
 @click.option("--force", is_flag=True, help="Overwrite an existing file.")
 def new(name: str, out: Path | None, force: bool) -> None:

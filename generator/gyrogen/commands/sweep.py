@@ -134,6 +134,7 @@ def sweep(
         restart=restart,
         shared=shared,
         portable=portable,
+        plots=not no_plots,
         meanwhile=plots,
     )
     data = sweep_report.write(spec, record, plots=not no_plots)

@@ -40,10 +40,11 @@ from gyrogen.abi_rotors import (
     CLUSTER_CARRIER,
     POSITION,
     ROTOR_RUNTIME,
+    axis_keys,
     cluster_states,
     rotor_name,
 )
-from gyrogen.scene.rules import Number, check_table, parameter_value
+from gyrogen.scene.rules import Number, check_table, number, parameter_value, shown
 
 
 def _folded(v: object) -> object:
@@ -55,9 +56,29 @@ def _folded(v: object) -> object:
     return parameter_value(v)
 
 
+def _vector(v: object) -> object:
+    """An axis or a position: "runtime", or [x, y, z], three finite numbers
+    (A-components). Refused here in one line: pydantic's own refusal of a
+    wrong length or a nan named the members of its union."""
+    if v == "runtime":
+        return v
+    if not isinstance(v, list | tuple):
+        raise ValueError(f'expected [x, y, z] or "runtime", not {shown(v)}')
+    if len(v) != 3:
+        raise ValueError(f"{len(v)} components, not 3: give [x, y, z] (A-components)")
+    for name, x in zip("xyz", v, strict=True):
+        if isinstance(x, bool) or not isinstance(x, int | float):
+            raise ValueError(f"{name} = {shown(x)} is not a number")
+        number(x)  # an integer past a double's range
+        if not math.isfinite(x):
+            raise ValueError(f"{name} = {x!r} is not a finite number")
+    return tuple(float(x) for x in v)
+
+
 Folded = Annotated[float, BeforeValidator(_folded)]
 Value = Annotated[float | Literal["runtime"], BeforeValidator(parameter_value)]
-Vector = tuple[Number, Number, Number]
+Vector = Annotated[tuple[float, float, float] | Literal["runtime"], BeforeValidator(_vector)]
+"""[x, y, z] or "runtime" (_vector)."""
 
 LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref"), "table": ()}
 """The keys each torque law needs (and allows); a table's points are its torque_table."""
@@ -71,10 +92,10 @@ class Rotor(BaseModel):
     J: Value
     """Mass, transverse and axial inertia: numbers, or "runtime" (setup
     checks them: positive, J <= 2 I, the lumped inertia's condition)."""
-    axis: Vector | Literal["runtime"]
+    axis: Vector
     """g_k in A-components: length within AXIS_NORM_SLACK of 1, then
     normalized; "runtime": p's g1_k, g2_k, g3_k (setup checks and normalizes)."""
-    position: Vector | Literal["runtime"] = (0.0, 0.0, 0.0)
+    position: Vector = (0.0, 0.0, 0.0)
     """B_k* from A*, in A-components (m); "runtime": p's r1_k, r2_k, r3_k."""
     b: Annotated[Folded, Field(ge=0)] = 0.0
     torque: str = "none"
@@ -96,6 +117,13 @@ class Rotor(BaseModel):
             data.pop("torque_table", None)
         return data
 
+    @field_validator("axis")
+    @classmethod
+    def _axis(cls, v: tuple[float, float, float] | str) -> tuple[float, float, float] | str:
+        if v != "runtime":
+            check_axis(v, "")  # type: ignore[arg-type]
+        return v
+
     @field_validator("torque")
     @classmethod
     def _law(cls, v: str) -> str:
@@ -113,8 +141,6 @@ class Rotor(BaseModel):
             check_axial(self.I, self.J, "J")
         elif self.J != "runtime" and not self.J > 0.0:
             raise ValueError(f"J: must be positive (got {self.J})")
-        if self.axis != "runtime":
-            check_axis(self.axis, "axis")
         check_table(self.torque, self.torque_table)
         need = LAW_KEYS[self.torque]
         for key in ("T", "k", "w_ref"):
@@ -141,13 +167,15 @@ class Rotor(BaseModel):
 
 
 def check_axis(axis: tuple[float, float, float], where: str) -> None:
-    """A direction: length within AXIS_NORM_SLACK of 1 (then normalized)."""
+    """A direction: length within AXIS_NORM_SLACK of 1 (then normalized);
+    where: the keys the message names (none: pydantic's location does)."""
+    at = f"{where}: " if where else ""
     norm = math.sqrt(sum(x * x for x in axis))
     if norm == 0.0:
-        raise ValueError(f"{where}: has length 0: not a direction")
+        raise ValueError(f"{at}has length 0: not a direction")
     if not abs(norm - 1.0) <= AXIS_NORM_SLACK:
         raise ValueError(
-            f"{where}: length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
+            f"{at}length {norm:.9g} is not 1 (within {AXIS_NORM_SLACK:g}): give a unit vector"
         )
 
 
@@ -255,7 +283,7 @@ def check_values(parameters: Mapping[str, float], rotors: list[Rotor], where: st
                 raise ValueError(f"{where}.{rotor_name(key, k)}: must be positive "
                                  f"(got {getattr(r, key)})")  # fmt: skip
         check_axial(r.I, r.J, f"{where}.{rotor_name('J', k)}")  # type: ignore[arg-type]
-        check_axis(r.axis, f"{where}.{rotor_name('g1', k)}..g3")  # type: ignore[arg-type]
+        check_axis(r.axis, f"{where}.{axis_keys(k)}")  # type: ignore[arg-type]
     carrier = carrier_tensor(parameters)
     if not parameters["m_a"] > 0:
         raise ValueError(f"{where}.m_a: must be positive (got {parameters['m_a']})")

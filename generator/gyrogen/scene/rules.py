@@ -42,6 +42,20 @@ of its build and package, where it would hide the system's (a scene named
 math broke the package's own math.h include). Compared without case, for
 case-insensitive file systems."""
 
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+"""The FMI headers an FMU's wrapper includes (codegen/fmu.py): a scene named
+as one would shadow it with its own header, in the FMU's sources and beside
+any FMU a user builds with the scene's package (compared without case too)."""
+
+
+def shown(v: object) -> str:
+    """A value as a message quotes it: its repr, a text's first 40
+    characters and its length, anything else's repr cut after 40."""
+    if isinstance(v, str):
+        return repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
+    text = repr(v)
+    return text if len(text) <= 40 else text[:40] + "..."
+
 
 def shown_integer(v: int) -> str:
     """A long integer as its first digits and their count."""
@@ -116,27 +130,33 @@ def check_name(v: str) -> None:
     """The scene's name prefixes every identifier gyrogen writes, in C (and
     C++, through the header) and Fortran: a letter, then letters, digits and
     single underscores, never ending in one (prefix + "_" would make "__",
-    which C++ reserves), at most NAME_MAX_LENGTH characters."""
-    shown = repr(v) if len(v) <= 40 else repr(v[:40]) + f"... ({len(v)} characters)"
+    which C++ reserves), at most NAME_MAX_LENGTH characters; not a C keyword,
+    nor a header's name (C_HEADERS, FMI_HEADERS) that its <name>.h would hide."""
+    quoted = shown(v)
     if not v:
         raise ValueError("must not be empty")
     if len(v) > NAME_MAX_LENGTH:
         raise ValueError(
-            f"{shown} is longer than {NAME_MAX_LENGTH} characters (Fortran identifiers "
+            f"{quoted} is longer than {NAME_MAX_LENGTH} characters (Fortran identifiers "
             "stop at 63, and gyrogen appends up to 26)"
         )
     if not (v.isascii() and v[0].isalpha() and v.replace("_", "a").isalnum()):
         raise ValueError(
-            f"{shown} is not an identifier in C and Fortran: a letter, then letters, "
+            f"{quoted} is not an identifier in C and Fortran: a letter, then letters, "
             "digits and underscores"
         )
     if "__" in v or v.endswith("_"):
-        raise ValueError(f"{shown} has a double or trailing underscore (C++ reserves '__')")
+        raise ValueError(f"{quoted} has a double or trailing underscore (C++ reserves '__')")
     if v in _C_KEYWORDS:
-        raise ValueError(f"{shown} is a C keyword")
+        raise ValueError(f"{quoted} is a C keyword")
     if v.lower() in C_HEADERS:
         raise ValueError(
-            f"{shown} names a C library header (<{v.lower()}.h>): the scene's {v}.h would hide it"
+            f"{quoted} names a C library header (<{v.lower()}.h>): the scene's {v}.h would hide it"
+        )
+    fmi = [h for h in FMI_HEADERS if h[:-2].lower() == v.lower()]
+    if fmi:
+        raise ValueError(
+            f"{quoted} names an FMI header ({fmi[0]}): the scene's {v}.h would hide it"
         )
 
 

@@ -23,6 +23,7 @@ from typing import Literal
 
 import numpy as np
 
+from gyrogen.analysis.bench import RHS_JSON
 from gyrogen.analysis.bench.timing import best_of, per_call_ns
 from gyrogen.files import write_atomic
 from gyrogen.oracle import reference, sampling
@@ -220,8 +221,8 @@ def report(ms: list[Measurement], info: dict[str, str], echo: Echo) -> None:
 
 def _write_json(out: Path, ms: list[Measurement], info: dict[str, str], repeats: int) -> Path:
     doc = {"machine": info, "repeats": repeats, "measurements": [asdict(m) for m in ms]}
-    write_atomic(out, {"bench.json": json.dumps(doc, indent=2) + "\n"})
-    return out / "bench.json"
+    write_atomic(out, {RHS_JSON: json.dumps(doc, indent=2) + "\n"})
+    return out / RHS_JSON
 
 
 def run(
@@ -233,7 +234,7 @@ def run(
     batch: int = BATCH,
     pydy: bool = True,
 ) -> list[Measurement]:
-    """Run every row, print the table and goals; write out/bench.json if out is given.
+    """Run every row, print the table and goals; write out/RHS_JSON if out is given.
 
     ``calls`` sets the cffi one-call loops; Compiled.rhs and PyDy run calls // 10, the
     numpy one-state row calls // 100. ``pydy=False`` skips PyDy (and its cython compile).

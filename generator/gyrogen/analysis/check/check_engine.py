@@ -22,9 +22,9 @@ from gyrogen.abi import (
     AXES_SPAN_WARN,
     ODE_ATTITUDE_SINGULAR,
     ODE_CODES,
-    SETUP_CODES,
     WARN_CONDITION,
     message,
+    setup_codes_of,
 )
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import invariants
@@ -126,7 +126,8 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     res.setup_code, c = comp.setup_code(p)
     if res.setup_code != 0:
         res.verdict = "refused"
-        res.diagnosis = f"setup refused the parameters: {message(SETUP_CODES, res.setup_code)}"
+        why = message(setup_codes_of(bool(scene.rotors)), res.setup_code)
+        res.diagnosis = f"setup refused the parameters: {why}"
         return res
     res.condition = float(c[-1])
     choice = stiffness.choose(comp, c, x0, case.t_end)

@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from gyrogen.abi import ODE_CODES, SETUP_CODES, Code, message
+from gyrogen.abi import ODE_CODES, Code, message, setup_codes_of
 from gyrogen.analysis.check.check_engine import Result
 from gyrogen.analysis.simulate.plots import DPI, FLOOR, SIZE_INCHES, invariant_drifts, png_bytes
 
@@ -64,7 +64,7 @@ def _refused(ax: Axes, res: Result) -> None:
     lines = [
         f"REFUSED by setup, {verdict}: nothing was integrated.",
         "",
-        f"setup returned {_code_line(SETUP_CODES, res.setup_code)}",
+        f"setup returned {_code_line(setup_codes_of(bool(case.scene.rotors)), res.setup_code)}",
         "",
         "parameters: " + params,
         f"scene: {case.scene.name}",

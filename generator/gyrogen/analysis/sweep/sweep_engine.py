@@ -52,6 +52,7 @@ from gyrogen.analysis.sweep.sweep_parts import (
     parquet_bytes,
     part_name,
     read_state,
+    summary_files,
     write_part,
     written,
 )
@@ -176,30 +177,32 @@ def run(
     restart: bool = False,
     shared: bool = False,
     portable: bool = False,
+    plots: bool = True,
     meanwhile: Callable[[], object] | None = None,
 ) -> Run:
     """Every sample of spec not yet in out, computed and written; restart:
     begin anew where out holds this sweep begun by another build; shared:
     the cluster's workers reach out at the same path and write the parts;
     portable: build for any CPU rather than the workers' (-march=native);
+    plots: the summary's figures will be written (their places kept clear);
     meanwhile: run in a thread of its own once the first tasks are out (what
     the end will need: matplotlib's import)."""
     began = time.perf_counter()
     chunk = chunk or spec.sweep.chunk
-    out = store(out)
-    read_state(out)  # obstacles first, before the seconds of deriving the sources
+    out, ends = store(out), summary_files(plots)
+    read_state(out, ends)  # obstacles first, before the seconds of deriving the sources
     sources = scene_sources(spec.scene, portable)
     if scheduler is None:  # pyarrow's first write loads its codecs: not on the tasks' path
         threading.Thread(target=parquet_bytes, args=({"warm": np.zeros(1)},), daemon=True).start()
     writers = out.absolute() if scheduler is None or shared else None
     cpu = None if portable or scheduler else native_target()
     if scheduler is None:  # refusals first, before any work (a cluster's CPU is asked below)
-        check_out(out, spec, identity(spec, sources, cpu), restart)
+        check_out(out, spec, identity(spec, sources, cpu), restart, ends)
     with engine(scheduler, threads, progress) as (client, name, n):
         if scheduler is not None and not portable:
             cpu = _cpu(client, scheduler)
         ident = identity(spec, sources, cpu)
-        state = check_out(out, spec, ident, restart)
+        state = check_out(out, spec, ident, restart, ends)
         job = Job(spec, sources, chunk, ident, writers)
         out.make_dir(PARTS)
         done = claim(out, state)

@@ -40,8 +40,17 @@ SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG = (
     "map.png",
 )
 SUMMARY_FILES = (SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG)
-"""What the sweep writes at its end (sweep_report.write): nothing may be in
-their way, checked before any work with sweep.json's and parts' places."""
+"""What the sweep writes at its end (sweep_report.write; FIGURES only with
+plots): nothing may be in their way, checked before any work with
+sweep.json's and parts' places (summary_files)."""
+FIGURES = (HISTOGRAMS_PNG, MAP_PNG)
+
+
+def summary_files(plots: bool) -> tuple[str, ...]:
+    """The SUMMARY_FILES a sweep writes, with its FIGURES or without (--no-plots)."""
+    return SUMMARY_FILES if plots else tuple(n for n in SUMMARY_FILES if n not in FIGURES)
+
+
 _STAGED = re.compile(r"\.part-.*\.(new|old)")
 """The temporary names of a part being written (files.write_atomic's, and
 a URL store's): what a writer killed mid-write leaves."""
@@ -65,12 +74,13 @@ def whole(out: Store, name: str, rows: int, ident: dict[str, str]) -> bool:
         return False
 
 
-def read_state(out: Store) -> dict[str, Any] | None:
+def read_state(out: Store, ends: tuple[str, ...] = SUMMARY_FILES) -> dict[str, Any] | None:
     """The sweep state out holds (None: none yet); obstacles refused: a
-    parts that is no directory, a directory (or FIFO) where a file goes."""
+    parts that is no directory, a directory (or FIFO) where a file goes
+    (the state file, and ends: the summary files the sweep will write)."""
     if out.kind(PARTS) not in ("absent", "dir"):
         raise GyrogenError(f"{out.show(PARTS)}: not a directory: remove it or use another --out")
-    for name in (STATE_FILE, *SUMMARY_FILES):
+    for name in (STATE_FILE, *ends):
         if out.kind(name) not in ("absent", "file"):
             raise GyrogenError(
                 f"{out.show(name)}: not a file, and the sweep writes one there: remove it or use "
@@ -94,14 +104,17 @@ def read_state(out: Store) -> dict[str, Any] | None:
     return held
 
 
-def check_out(out: Store, spec: Spec, ident: dict[str, str], restart: bool) -> dict[str, Any]:
-    """Before any work: out can hold this sweep (nothing in the way, no other
-    sweep in it, and a sweep begun there was computed with the same
-    identity, unless restart); the state file to write. The chunk size is
-    not the sweep's: another resumes it."""
+def check_out(
+    out: Store, spec: Spec, ident: dict[str, str], restart: bool, ends: tuple[str, ...]
+) -> dict[str, Any]:
+    """Before any work: out can hold this sweep (nothing in the way of its
+    state, parts or ends, the summary files it will write; no other sweep in
+    it, and a sweep begun there was computed with the same identity, unless
+    restart); the state file to write. The chunk size is not the sweep's:
+    another resumes it."""
     state: dict[str, Any] = {"sweep": spec.name, "fingerprint": spec.fingerprint()}
     state |= {"trajectories": spec.size, "scene": spec.scene.name}  # and identity: STATE_KEYS
-    held = read_state(out)
+    held = read_state(out, ends)
     if held is None:
         if written(out):
             raise GyrogenError(
@@ -128,7 +141,7 @@ def claim(out: Store, state: dict[str, Any]) -> list[tuple[int, int]]:
     """out for this sweep: its state file written, what a killed writer left
     removed; the (start, stop) of the parts that are whole, in order (a
     damaged one, or one overlapping another, is removed to be computed again)."""
-    if read_state(out) != state:  # new, or begun by another build and restarted
+    if read_state(out, ()) != state:  # new, or begun by another build and restarted
         for a, b in written(out):
             out.remove(PARTS, part_name(a, b))
         out.write({STATE_FILE: json.dumps(state, indent=1) + "\n"})

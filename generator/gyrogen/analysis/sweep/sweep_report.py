@@ -178,7 +178,7 @@ def markdown(data: dict[str, Any]) -> str:
 
 def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     """summary.json, summary.md and the figures into the sweep's directory
-    (sweep_parts.SUMMARY_FILES: kept clear before any work)."""
+    (sweep_parts.summary_files: kept clear before any work)."""
     import pyarrow.parquet as pq
 
     with record.out.open(PARTS, part_files(record.out)[0]) as source:

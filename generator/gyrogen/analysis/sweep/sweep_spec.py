@@ -38,7 +38,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, m
 
 from gyrogen import methods
 from gyrogen.abi import MIN_RTOL
-from gyrogen.abi_rotors import AXIS, rotor_name
+from gyrogen.abi_rotors import AXIS, axis_keys, rotor_name
 from gyrogen.errors import SceneError
 from gyrogen.limits import (
     MAX_SWEEP_CHUNK,
@@ -317,7 +317,7 @@ def _check_misalign(scene: Scene, sweep: Sweep) -> None:
         if both:
             raise ValueError(f"{where}: {', '.join(both)} also on the grid or drawn")
         if all(n in base for n in names):
-            check_axis(tuple(base[n] for n in names), f"{where}: nominal {names[0]}..g3")  # type: ignore[arg-type]
+            check_axis(tuple(base[n] for n in names), f"{where}: nominal {axis_keys(k)}")  # type: ignore[arg-type]
 
 
 def _check_names(scene: Scene, sweep: Sweep) -> None:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from typing import Any
+from urllib.parse import unquote, urlsplit
 
 from gyrogen.errors import GyrogenError
 from gyrogen.files import can_write, make_dir, write_atomic
@@ -42,6 +43,10 @@ URL = re.compile(r"([A-Za-z][A-Za-z0-9+.-]*)://(.*)", re.S)
 FILE_URL = re.compile(r"(file|local):(.*)", re.I | re.S)
 """file:/PATH, a file URL's short form: the local path /PATH to fsspec and
 pyarrow alike (not a relative directory named "file:")."""
+IPV6_HOST = re.compile(r"\[[0-9A-Fa-f:.]*(%25[0-9A-Za-z._~-]+)?\]")
+"""A URL's host as an IPv6 literal ([::1], RFC 3986; a zone as %25, RFC
+6874): its colons are no chain (::), and the file system gets it without
+the brackets (and the zone's % unescaped)."""
 OBJECT_STORES = frozenset({"s3", "s3a", "gs", "gcs", "az", "abfs", "abfss"})
 """Protocols whose files are objects, each PUT whole or not at all (no rename)."""
 NOT_PLACES = frozenset(
@@ -245,7 +250,10 @@ def url_store(url: str) -> Store:
     match = URL.fullmatch(url) or FILE_URL.fullmatch(url)
     if not url.isprintable():
         raise GyrogenError(f"{shown}: a URL with a character that is not printable")
-    if "::" in url:  # fsspec chains at any ::, after the first :// too (zip://a::file://b)
+    authority = match[2].split("/", 1)[0] if match else ""
+    if "::" in url.replace(authority, IPV6_HOST.sub("[]", authority), 1):
+        # fsspec chains at any ::, after the first :// too (zip://a::file://b); never
+        # at an IPv6 host's (sftp://[::1]/x): the store opens no URL, only protocol + options
         raise GyrogenError(f"{shown}: a chained URL (::) is not supported: one PROTOCOL://PATH")
     if match is None:
         raise GyrogenError(f"{shown}: not a URL (PROTOCOL://PATH)")
@@ -286,6 +294,8 @@ def url_store(url: str) -> Store:
     canonical = f"{protocol}://{rest}"
     try:  # what the URL gives the file system (ftp: host, port), and all it needs
         options = cls._get_kwargs_from_urls(canonical)
+        if "host" in options and IPV6_HOST.search(authority):  # fsspec kept "[::1]" or cut "[:"
+            options["host"] = unquote(urlsplit(canonical).hostname or "")
         inspect.signature(cls.__init__).bind(None, **options)
         root = str(cls._strip_protocol(canonical)).rstrip("/") or "/"
     except Exception as exc:  # each file system its own: TypeError, ValueError (a port)
