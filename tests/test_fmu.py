@@ -26,7 +26,7 @@ from fmpy.simulation import instantiate_fmu
 from fmpy.validation import validate_fmu
 from fmu_agreement import BAR, MODES, build, by_fmpy, cases, differences, reference
 
-from gyrogen import abi
+from gyrogen import abi, methods
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
 from gyrogen.runtime.fmu_build import fmi_headers
 
@@ -290,6 +290,16 @@ def test_a_start_at_gimbal_lock_is_refused(fmus: dict[str, Path], tmp_path: Path
         + abi.message(abi.ODE_CODES, 6),
     )
     instance.freeInstance()
+
+
+def test_the_help_names_the_default_method(cli) -> None:
+    """The --method default as methods.pick applies it (before: "dop853",
+    while the default scene's FMU steps with taylor)."""
+    code, out, _ = cli(["fmu", "--help"])
+    assert code == 0
+    text = " ".join(out.split())
+    assert f"else of {', '.join(methods.EXPLICIT_CHOICE)}," in text
+    assert f"of {', '.join(methods.STIFF_CHOICE)} for a stiff scene" in text
 
 
 def test_a_start_time_that_is_not_finite_is_refused(fmus: dict[str, Path], tmp_path: Path) -> None:
