@@ -26,7 +26,7 @@ from fmpy.simulation import instantiate_fmu
 from fmpy.validation import validate_fmu
 from fmu_agreement import BAR, MODES, build, by_fmpy, cases, differences, reference
 
-from gyrogen import abi
+from gyrogen import abi, methods
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
 from gyrogen.runtime.fmu_build import fmi_headers
 
@@ -186,9 +186,151 @@ def test_bad_parameters_in_event_mode(fmus: dict[str, Path], tmp_path: Path) -> 
 
 
 def test_a_failed_step_is_an_fmi_error(fmus: dict[str, Path], tmp_path: Path) -> None:
-    """A step the integrator refuses (backwards in time): the step fails."""
-    slave, log = initialized(fmus["default"], "CoSimulation", tmp_path)
-    refused(lambda: slave.doStep(0.0, -0.1), log, abi.message(abi.ODE_CODES, 5))
+    """A step the integrator fails (a torque that overflows the state): the
+    step fails with the integrator's code and reason."""
+    fmu = fmus["default"]
+    slave, log = initialized(fmu, "CoSimulation", tmp_path)
+    slave.setReal(vr(fmu, "T"), [1e300])
+    refused(
+        lambda: slave.doStep(0.0, 0.1),
+        log,
+        f"gyrostat_taylor failed at t = 0 (code 3): {abi.message(abi.ODE_CODES, 3)}",
+    )
+    slave.freeInstance()
+
+
+@pytest.mark.parametrize("h", [-0.1, math.nan, math.inf])
+def test_a_step_size_is_refused_by_name(fmus: dict[str, Path], tmp_path: Path, h: float) -> None:
+    """A communication step size below 0, NaN, or one that takes t past
+    double range: the FMU says so (before: the integrator's "bad argument",
+    naming no argument); the state stays."""
+    fmu = fmus["default"]
+    slave, log = initialized(fmu, "CoSimulation", tmp_path)
+    before = slave.getReal(vr(fmu, "q1", "u4"))
+    refused(
+        lambda: slave.doStep(0.0, h),
+        log,
+        f"fmi2DoStep: the communication step size {h:g} is not >= 0, or t + h "
+        f"({0.0 + h:.17g}) is not finite",
+    )
+    assert slave.getReal(vr(fmu, "q1", "u4")) == before
+    slave.doStep(0.0, 0.1)
+    slave.freeInstance()
+
+
+ATTITUDE = ("e0", "e1", "e2", "e3")
+
+
+def started(fmu: Path, mode: str, tmp_path: Path, **values: float) -> tuple[Any, Log]:
+    """An instance with these start values, through initialization."""
+    instance, log = instantiate(fmu, mode, tmp_path)
+    instance.setupExperiment(startTime=0.0)
+    instance.enterInitializationMode()
+    if values:
+        instance.setReal(vr(fmu, *values), list(values.values()))
+    instance.exitInitializationMode()
+    return instance, log
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_euler_parameters_are_normalized_at_initialization(
+    fmus: dict[str, Path], tmp_path: Path, mode: str
+) -> None:
+    """Start values 2 e: after initialization the state and the outputs are
+    those of e, as the C library normalizes a start (before: Model
+    Exchange's angular momentum came out 4 times e's)."""
+    fmu = fmus["quaternion"]
+    md = fmpy.read_model_description(str(fmu))
+    start = {v.name: float(v.start) for v in md.modelVariables if v.name in ATTITUDE}
+    names = [v.name for v in md.modelVariables if v.causality == "output"]
+    clean, _ = started(fmu, mode, tmp_path / "clean")
+    doubled, _ = started(fmu, mode, tmp_path / "doubled", **{k: 2 * v for k, v in start.items()})
+    assert doubled.getReal(vr(fmu, *names)) == clean.getReal(vr(fmu, *names))
+    if mode == "CoSimulation":
+        for instance in (clean, doubled):
+            instance.doStep(0.0, 0.5)
+        assert doubled.getReal(vr(fmu, *names)) == clean.getReal(vr(fmu, *names))
+    for instance in (clean, doubled):
+        instance.freeInstance()
+
+
+@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("e", [(0.0, 0.0, 0.0, 0.0), (1e-170, 0.0, 0.0, 0.0), (1e200, 1.0, 0, 0)])
+def test_euler_parameters_without_a_direction_are_refused(
+    fmus: dict[str, Path], tmp_path: Path, mode: str, e: tuple[float, ...]
+) -> None:
+    """|e| of 0 (or below sqrt(DBL_MIN)) or too large to square: an FMI error
+    at the end of initialization naming e0..e3 (before: Co-Simulation's
+    first step failed with NaN states, Model Exchange went on with H = 0)."""
+    fmu = fmus["quaternion"]
+    instance, log = instantiate(fmu, mode, tmp_path)
+    instance.setupExperiment(startTime=0.0)
+    instance.enterInitializationMode()
+    instance.setReal(vr(fmu, *ATTITUDE), list(e))
+    refused(
+        instance.exitInitializationMode,
+        log,
+        f"fmi2ExitInitializationMode: the start values of e0, e1, e2, e3 ({e[0]:g}, {e[1]:g}, "
+        f"{e[2]:g}, {e[3]:g}) are no attitude: their norm is 0 or too large to square",
+    )
+    instance.freeInstance()
+
+
+def test_a_start_at_gimbal_lock_is_refused(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """3-1-2 angles: the integrator's start check, at initialization."""
+    fmu = fmus["default"]
+    instance, log = instantiate(fmu, "ModelExchange", tmp_path)
+    instance.setupExperiment(startTime=0.0)
+    instance.enterInitializationMode()
+    instance.setReal(vr(fmu, "q2"), [math.pi / 2])
+    refused(
+        instance.exitInitializationMode,
+        log,
+        "fmi2ExitInitializationMode: gyrostat_taylor refused the start state (code 6): "
+        + abi.message(abi.ODE_CODES, 6),
+    )
+    instance.freeInstance()
+
+
+def test_the_help_names_the_default_method(cli) -> None:
+    """The --method default as methods.pick applies it (before: "dop853",
+    while the default scene's FMU steps with taylor)."""
+    code, out, _ = cli(["fmu", "--help"])
+    assert code == 0
+    text = " ".join(out.split())
+    assert f"else of {', '.join(methods.EXPLICIT_CHOICE)}," in text
+    assert f"of {', '.join(methods.STIFF_CHOICE)} for a stiff scene" in text
+
+
+def test_a_start_time_that_is_not_finite_is_refused(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """Before: fmi2OK, and every later step refused as from another time."""
+    slave, log = instantiate(fmus["default"], "CoSimulation", tmp_path)
+    refused(
+        lambda: slave.setupExperiment(startTime=math.nan),
+        log,
+        "fmi2SetupExperiment: the start time nan is not finite",
+    )
+    slave.setupExperiment(startTime=0.0)
+    slave.freeInstance()
+
+
+@pytest.mark.parametrize("names", [("T", "T"), ("u4", "q1", "u4")])
+def test_a_variable_given_twice_is_refused(
+    fmus: dict[str, Path], tmp_path: Path, names: tuple[str, ...]
+) -> None:
+    """One fmi2SetReal that gives a variable twice sets nothing (before: the
+    last value silently won)."""
+    fmu = fmus["default"]
+    slave, log = instantiate(fmu, "CoSimulation", tmp_path)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    before = slave.getReal(vr(fmu, *names))
+    refused(
+        lambda: slave.setReal(vr(fmu, *names), [1.0 + k for k in range(len(names))]),
+        log,
+        f"fmi2SetReal: {names[0]} is given more than once",
+    )
+    assert slave.getReal(vr(fmu, *names)) == before
     slave.freeInstance()
 
 
@@ -266,7 +408,8 @@ def test_sources_compile_strictly(fmus: dict[str, Path], tmp_path: Path, compile
 
 DRIVER = Path(__file__).resolve().parent / "consumers" / "fmi2_driver.c"
 MISUSE = {
-    "wrong_guid", "step_before_initialization", "set_nowhere", "exit_refused", "set_refused",
+    "wrong_guid", "step_before_initialization", "start_nan", "set_nowhere", "set_twice",
+    "exit_refused", "set_refused",
     "get_nowhere", "unknown_category", "step_nan", "step_backwards", "other_status",
     "step_after_terminate", "states_too_many", "set_states_too_few", "derivatives_too_many",
     "fmu_state", "set_nan_states",
@@ -294,14 +437,15 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
     assert (proc.returncode, proc.stderr) == (0, "")
     lines = proc.stdout.splitlines()
     calls = [(i, *line.split()) for i, line in enumerate(lines) if not line.startswith("log ")]
-    assert len(calls) == 35 and {what for _, what, _ in calls} >= MISUSE
+    assert len(calls) == 37 and {what for _, what, _ in calls} >= MISUSE
     for i, what, status in calls:
         assert status == ("3" if what in MISUSE else "0"), what
         assert lines[i - 1].startswith("log 3 ") == (what in MISUSE), what
     refused = "log 3 gyrostat_setup refused the parameters (code 2): "
     assert refused + abi.message(abi.SETUP_CODES, 2) in lines
-    failed = "log 3 gyrostat_taylor failed at t = 0.10000000000000001 (code 5): "
-    assert failed + abi.message(abi.ODE_CODES, 5) in lines
+    step = "log 3 fmi2DoStep: the communication step size "
+    assert step + "nan is not >= 0, or t + h (nan) is not finite" in lines
+    assert step + "-1 is not >= 0, or t + h (-0.90000000000000002) is not finite" in lines
 
 
 def test_fmpy_rebuilds_the_binary_from_the_sources(fmus: dict[str, Path], tmp_path: Path) -> None:

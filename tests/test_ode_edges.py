@@ -2,7 +2,9 @@
 NULL statistics, tolerances no double can meet, a NaN or infinite first
 step, and gimbal lock of the 3-1-2 angles (code 6): at the start, where a
 step crosses q2 = pi/2, and where a pass comes closer than GIMBAL_LOCK_COS;
-the Euler-parameter twin of the same motions integrates through them."""
+the Euler-parameter twin of the same motions integrates through them, and
+its starts without a direction (|e| 0 or too large to square) are refused,
+others normalized, and a step that loses |e| is not taken."""
 
 from __future__ import annotations
 
@@ -373,6 +375,83 @@ def test_euler_parameters_pass_where_the_angles_stop(
             np.testing.assert_allclose(
                 scene_view.quaternion_dcm(x[:4]), exact_dcm(1.0, u3, 1.0), rtol=0, atol=1e-9
             )
+
+
+# --- Euler parameters: the start, and a step that loses them ---------------------------
+
+NO_DIRECTION = [(0.0, 0.0, 0.0, 0.0), (1e-170, 0.0, 0.0, 0.0), (1e200, 1.0, 0.0, 0.0)]
+"""|e| of 0, below sqrt(DBL_MIN) (its square 0), too large to square."""
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_euler_parameters_without_a_direction_are_refused(
+    euler_parameters: dict[str, Compiled], language: str
+) -> None:
+    """Every method, single and batch: code 5 and x as given at t0 (before:
+    taylor returned 0 with NaN, the others 3 with x NaN at stats.t); NaN
+    in e: code 3. A batch's good trajectory between two such is its single
+    call's."""
+    b = euler_parameters[language]
+    scene = quaternion_twin()
+    c = b.setup(np.zeros(0))
+    good = state(scene, e0=1.0, u1=1.0, u3=0.5)
+    for e in [*NO_DIRECTION, (math.nan, 0.0, 0.0, 0.0)]:
+        x0 = state(scene, u1=1.0, u3=0.5, **dict(zip(("e0", "e1", "e2", "e3"), e, strict=True)))
+        want = NONFINITE if math.isnan(e[0]) else ARGUMENT
+        for method in METHODS:
+            x, stats, code = b.integrate(method, x0, c, 0.0, 1.0, **kwargs(method))
+            assert (code, stats["t"], stats["accepted"]) == (want, 0.0, 0), (e, method)
+            np.testing.assert_array_equal(x, x0)
+            one, _, _ = b.integrate(method, good, c, 0.0, 1.0, **kwargs(method))
+            xb, _, codes = b.integrate_batch(
+                method, np.array([x0, good, x0]), c, 0.0, 1.0, **kwargs(method)
+            )
+            assert list(codes) == [want, OK, want], (e, method)
+            np.testing.assert_array_equal(xb, np.array([x0, one, x0]))
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_euler_parameters_off_the_sphere_are_normalized_at_the_start(
+    euler_parameters: dict[str, Compiled], language: str
+) -> None:
+    """A start 2 e integrates as e, bit for bit (2 |e| is exact), with every
+    method; an integration over no time returns e / |e| with code 0 (the
+    FMU's initialization), and a NaN start code 3 (before: code 0)."""
+    b = euler_parameters[language]
+    scene = quaternion_twin()
+    c = b.setup(np.zeros(0))
+    half = Q2 / 2
+    x0 = state(scene, e0=math.cos(half), e1=math.sin(half), u1=1.0, u3=0.5)
+    twice = x0.copy()
+    twice[:4] *= 2.0
+    for method in METHODS:
+        want, _, code = b.integrate(method, x0, c, 0.0, 1.0, **kwargs(method))
+        x, _, code2 = b.integrate(method, twice, c, 0.0, 1.0, **kwargs(method))
+        assert code == code2 == OK, method
+        np.testing.assert_array_equal(x, want)
+        if method != "rk4":
+            x, _, code = b.integrate(method, twice, c, 0.5, 0.5, **kwargs(method))
+            assert code == OK
+            np.testing.assert_array_equal(x[:4], x0[:4] / np.linalg.norm(x0[:4]))
+            nan = x0.copy()
+            nan[5] = math.nan
+            assert b.integrate(method, nan, c, 0.5, 0.5, **kwargs(method))[2] == NONFINITE
+
+
+@pytest.mark.parametrize("language", LANGUAGES)
+def test_a_step_that_loses_the_attitude_is_not_taken(
+    euler_parameters: dict[str, Compiled], language: str
+) -> None:
+    """rk4 with two steps at u1 = 1e40: the first step's e is finite but too
+    large to square. Before: projected to 0, then 0/0, and code 0 with NaN;
+    now code 3 with x the start at stats.t = 0."""
+    b = euler_parameters[language]
+    scene = quaternion_twin()
+    c = b.setup(np.zeros(0))
+    x0 = state(scene, e0=1.0, u1=1e40)
+    x, stats, code = b.integrate("rk4", x0, c, 0.0, 1.0, steps=2)
+    assert (code, stats["t"], stats["accepted"]) == (NONFINITE, 0.0, 0)
+    np.testing.assert_array_equal(x, x0)
 
 
 # --- the interface states the numbers -------------------------------------------------

@@ -58,7 +58,8 @@ module rw4_pyramid_ode_mod
   integer(c_int), parameter, public :: RW4_PYRAMID_ODE_ERR_SINGULAR = 4
   ! 5: t1 < t0, steps or max_steps < 1, rtol <= RW4_PYRAMID_ODE_MIN_RTOL (taylor:
   ! RW4_PYRAMID_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
-  ! or infinite
+  ! or infinite; quaternion scenes: x's Euler parameters e0..e3 of norm 0
+  ! (below sqrt(DBL_MIN)) or too large to square (x as given)
   integer(c_int), parameter, public :: RW4_PYRAMID_ODE_ERR_ARGUMENT = 5
   ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
   ! (3-1-2 scenes only; see above)
@@ -639,9 +640,10 @@ contains
     return
   end function initial_step
 
-  ! An adaptive method's start (every pair, rodas4, radau5): the arguments,
-  ! the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
-  ! on from there, else the code to return (x as given). order: the method's,
+  ! An adaptive method's start (every pair, rodas4, radau5, taylor): the
+  ! arguments, x, the attitude (Euler parameters: normalized) and f0 = f(t0, x)
+  ! checked, and the first step h. -1 to go on from there, else the code to
+  ! return (x as given, or normalized). order: the method's,
   ! for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
   ! rtol_min: the method's bound on rtol (Method.min_rtol).
   function ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
@@ -667,6 +669,10 @@ contains
       res = RW4_PYRAMID_ODE_ERR_ARGUMENT
       return
     end if
+    if (.not. all_finite(x, nx)) then
+      res = RW4_PYRAMID_ODE_ERR_NONFINITE
+      return
+    end if
     if (gimbal_lock_at(x)) then
       res = RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR  ! at the start: x as given
       return
@@ -677,7 +683,7 @@ contains
     end if
     call rw4_pyramid_rhs(t0, x, c, f0)
     stats%rhs_calls = 1
-    if (.not. all_finite(x, nx) .or. .not. all_finite(f0, nx)) then
+    if (.not. all_finite(f0, nx)) then
       res = RW4_PYRAMID_ODE_ERR_NONFINITE
       return
     end if
@@ -985,6 +991,10 @@ contains
     call stats_start(stats, t0)
     if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
       res = RW4_PYRAMID_ODE_ERR_ARGUMENT
+      return
+    end if
+    if (.not. all_finite(x, nx)) then
+      res = RW4_PYRAMID_ODE_ERR_NONFINITE
       return
     end if
     if (gimbal_lock_at(x)) then

@@ -535,9 +535,10 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     return dmin(dmin(100.0 * h, h1), t1 - t0);
 }
 
-/* An adaptive method's start (every pair, rodas4, radau5): the arguments,
-   the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go
-   on from there, else the code to return (x as given). order: the method's,
+/* An adaptive method's start (every pair, rodas4, radau5, taylor): the
+   arguments, x, the attitude (Euler parameters: normalized) and f0 = f(t0, x)
+   checked, and the first step h. -1 to go on from there, else the code to
+   return (x as given, or normalized). order: the method's,
    for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.
    rtol_min: the method's bound on rtol (Method.min_rtol). */
 static int ode_start(int order, double rtol_min, double t0, double t1, const double *x,
@@ -549,6 +550,9 @@ static int ode_start(int order, double rtol_min, double t0, double t1, const dou
     if (bad_arguments(t0, t1, rtol, atol, rtol_min, h0, max_steps)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT;
     }
+    if (!all_finite(x, RW4_PYRAMID_FAILED_NX)) {
+        return RW4_PYRAMID_FAILED_ODE_ERR_NONFINITE;
+    }
     if (gimbal_lock_at(x)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
     }
@@ -557,7 +561,7 @@ static int ode_start(int order, double rtol_min, double t0, double t1, const dou
     }
     rw4_pyramid_failed_rhs(t0, x, c, f0);
     stats->rhs_calls = 1;
-    if (!all_finite(x, RW4_PYRAMID_FAILED_NX) || !all_finite(f0, RW4_PYRAMID_FAILED_NX)) {
+    if (!all_finite(f0, RW4_PYRAMID_FAILED_NX)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_NONFINITE;
     }
     if (h0 > 0.0) {
@@ -846,6 +850,9 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
     stats_start(stats, t0);
     if (!(t1 >= t0) || !(fabs(t0) <= DBL_MAX) || !(fabs(t1) <= DBL_MAX) || steps < 1) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT;
+    }
+    if (!all_finite(x, RW4_PYRAMID_FAILED_NX)) {
+        return RW4_PYRAMID_FAILED_ODE_ERR_NONFINITE;
     }
     if (gimbal_lock_at(x)) {
         return RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR;  /* at the start: x as given */
@@ -2609,7 +2616,7 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
                       double t0, double t1, double *xs, const double *c, double rtol,
                       double atol, double h0, long max_steps, rw4_pyramid_failed_stats *stats)
 {
-    const double *x = xs + traj * RW4_PYRAMID_FAILED_NX;
+    double *x = xs + traj * RW4_PYRAMID_FAILED_NX;
     double f0[RW4_PYRAMID_FAILED_NX], h = 0.0;
     int i;
     const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,

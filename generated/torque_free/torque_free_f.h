@@ -52,7 +52,8 @@ extern "C" {
 #define TORQUE_FREE_ODE_ERR_SINGULAR       4  /* the iteration matrix is singular */
 /* 5: t1 < t0, steps or max_steps < 1, rtol <= TORQUE_FREE_ODE_MIN_RTOL (taylor:
    TORQUE_FREE_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN
-   or infinite */
+   or infinite; quaternion scenes: x's Euler parameters e0..e3 of norm 0
+   (below sqrt(DBL_MIN)) or too large to square (x as given) */
 #define TORQUE_FREE_ODE_ERR_ARGUMENT       5
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */

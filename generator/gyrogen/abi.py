@@ -172,7 +172,8 @@ ODE_CODES: tuple[Code, ...] = (
         note=(
             "5: t1 < t0, steps or max_steps < 1, rtol <= {macro}_ODE_MIN_RTOL (taylor:",
             "{macro}_ODE_TAYLOR_MIN_RTOL), atol <= 0, or t0, t1, rtol, atol or h0 NaN",
-            "or infinite",
+            "or infinite; quaternion scenes: x's Euler parameters e0..e3 of norm 0",
+            "(below sqrt(DBL_MIN)) or too large to square (x as given)",
         ),
     ),
     Code(
@@ -352,6 +353,12 @@ FOLDED_MAX = 1e50
 # Euler parameters e0..e3 given as a start state must have |e| within this of
 # 1; gyrogen then normalizes them exactly. A larger miss is a typo, refused.
 QUATERNION_NORM_SLACK = 1e-6
+ATTITUDE_MIN_NORM = 2.0**-511
+"""The compiled integrators normalize a start's Euler parameters (as each
+accepted step projects them) and refuse, with <PREFIX>_ODE_ERR_ARGUMENT, a
+start whose |e| is below this (sqrt(DBL_MIN): |e|^2 not a normal double) or
+not finite: e / |e| then has no direction (e = 0 made NaN of every state).
+A step whose new |e| is so is taken as a non-finite one."""
 
 # The adaptive integrators refuse rtol <= MIN_RTOL (and atol <= 0) with
 # <PREFIX>_ODE_ERR_ARGUMENT, by Hairer's rule (his codes stop with

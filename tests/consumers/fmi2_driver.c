@@ -47,11 +47,17 @@ static void co_simulation(const fmi2CallbackFunctions *cb, const char *guid, fmi
     said("wrong_guid", c == NULL ? fmi2Error : fmi2OK); /* refused: no instance */
     c = fmi2Instantiate("cs", fmi2CoSimulation, guid, "", cb, 0, 0);
     said("step_before_initialization", fmi2DoStep(c, 0.0, 0.1, 1));
+    said("start_nan", fmi2SetupExperiment(c, 1, 1e-10, NAN, 0, 0.0));
     said("setup_experiment", fmi2SetupExperiment(c, 1, 1e-10, 0.0, 0, 0.0));
     said("enter_initialization", fmi2EnterInitializationMode(c));
     said("get_start", fmi2GetReal(c, &p0, 1, &start));
     said("set_nan", fmi2SetReal(c, &p0, 1, &nan)); /* setup checks it on exit */
     said("set_nowhere", fmi2SetReal(c, &nowhere, 1, &minus_one));
+    {
+        const fmi2ValueReference twice[2] = {p0, p0};
+        const double values[2] = {1.0, 2.0};
+        said("set_twice", fmi2SetReal(c, twice, 2, values));
+    }
     said("exit_refused", fmi2ExitInitializationMode(c));
     said("set_start", fmi2SetReal(c, &p0, 1, &start));
     said("exit_initialization", fmi2ExitInitializationMode(c));

@@ -20,7 +20,8 @@ from gyrogen.scene import Scene
     default=None,
     help="The compiled integrator Co-Simulation steps with, one of the scene's "
     "[default: the one `gyrogen simulate --method auto` would choose for the scene's "
-    "start: an implicit one for a stiff scene, else dop853 if the scene has it].",
+    f"start: the first the scene has of {', '.join(methods.STIFF_CHOICE)} for a stiff "
+    f"scene, else of {', '.join(methods.EXPLICIT_CHOICE)}, else its first adaptive one].",
 )
 def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
     """Write SCENE as <scene>.fmu: FMI 2.0, Model Exchange and Co-Simulation,

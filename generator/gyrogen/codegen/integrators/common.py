@@ -5,6 +5,7 @@ Hairer's first step and the adaptive start-up."""
 from __future__ import annotations
 
 from gyrogen import abi
+from gyrogen.codegen.integrators import quaternion as euler_parameters
 from gyrogen.codegen.ir.nodes import (
     Bool,
     Call,
@@ -21,6 +22,7 @@ from gyrogen.codegen.ir.nodes import (
     Return,
     S,
     Var,
+    and_,
     assign,
     cmp,
     fn,
@@ -77,17 +79,35 @@ def all_finite() -> Func:
     return Func("all_finite", params, body, "bool", doc=doc)
 
 
-def accepted(quaternion: bool) -> list[S]:
-    """x := xnew with the compensated sum (and the attitude projected)."""
+def finite_state(v: Var, quaternion: bool) -> E:
+    """v has no NaN or Inf, and (quaternion) its attitude a direction."""
+    ok = fn("all_finite", v, NX)
+    return and_(ok, fn("attitude_ok", v)) if quaternion else ok
+
+
+def attitude_checked(quaternion: bool) -> list[S]:
+    """A step's check of xnew's |e| (quaternion scenes): norm := |e|, and a
+    lost one counts as non-finite (accepted(known=True) reads norm)."""
+    if not quaternion:
+        return []
+    norm, nonfinite = Var("norm"), Var("nonfinite")
+    return [
+        assign(norm, euler_parameters.norm_of(xnew)),
+        assign(nonfinite, or_(nonfinite, euler_parameters.lost(norm)), "no direction"),
+    ]
+
+
+def accepted(quaternion: bool, known: bool = False) -> list[S]:
+    """x := xnew with the compensated sum (and the attitude projected; known:
+    norm is already xnew's |e|, attitude_checked)."""
     body: list[S] = [
         For("i", NX, (assign(comp[i], (xnew[i] - x[i]) - dx[i]), assign(x[i], xnew[i]))),
     ]
     if quaternion:
         norm = Var("norm")
-        e = [x[j] * x[j] for j in range(4)]
         body += [
             Comment("the attitude, Euler parameters x[0..3], projected back onto |e| = 1"),
-            assign(norm, fn("sqrt", ((e[0] + e[1]) + e[2]) + e[3])),
+            *([] if known else [assign(norm, euler_parameters.norm_of(x))]),
             For(
                 "i",
                 Int(4),
@@ -270,6 +290,22 @@ def initial_step() -> Func:
     return Func("initial_step", params, body, "double", locals_, doc)
 
 
+def start_checks(quaternion: bool) -> list[S]:
+    """Every method's checks of its start state, after its arguments': x
+    finite, then its attitude (3-1-2: not at gimbal lock; Euler parameters:
+    normalized, or refused when |e| is lost). x as given on a code."""
+    body: list[S] = [If(not_(fn("all_finite", x, NX)), (Return(code("ERR_NONFINITE")),))]
+    if quaternion:
+        return [*body, If(not_(fn("unit_start", x)), (Return(code("ERR_ARGUMENT")),))]
+    return [
+        *body,
+        If(
+            fn("gimbal_lock_at", x),
+            (Return(code("ERR_ATTITUDE_SINGULAR"), "at the start: x as given"),),
+        ),
+    ]
+
+
 def ode_start(quaternion: bool) -> Func:
     f0 = Var("f0")
     args = (t0, t1, rtol, atol, Var("rtol_min"), h0, Var("max_steps"))
@@ -278,22 +314,13 @@ def ode_start(quaternion: bool) -> Func:
         Call("stats_start", (stats, t0)),
         If(fn("bad_arguments", *args), (Return(code("ERR_ARGUMENT")),)),
     ]
-    if not quaternion:
-        body.append(
-            If(
-                fn("gimbal_lock_at", x),
-                (Return(code("ERR_ATTITUDE_SINGULAR"), "at the start: x as given"),),
-            )
-        )
+    body += start_checks(quaternion)
     first = fn("initial_step", Var("order"), t0, t1, x, f0, c, rtol, atol, stats)
     body += [
         If(not_(cmp(t1, ">", t0)), (Return(code("OK")),)),
         Call("rhs", (t0, x, c, f0)),
         assign(Var("stats.rhs_calls"), Int(1)),
-        If(
-            or_(not_(fn("all_finite", x, NX)), not_(fn("all_finite", f0, NX))),
-            (Return(code("ERR_NONFINITE")),),
-        ),
+        If(not_(fn("all_finite", f0, NX)), (Return(code("ERR_NONFINITE")),)),
         If(
             cmp(h0, ">", 0.0),
             (assign(h, fn("min", h0, t1 - t0)),),
@@ -306,7 +333,7 @@ def ode_start(quaternion: bool) -> Func:
         real("rtol_min"),
         real("t0"),
         real("t1"),
-        arr("x"),
+        arr("x", "inout" if quaternion else "in"),
         Decl("c", "double", ("NC",)),
         *TOLERANCES,
         real("h0"),
@@ -316,9 +343,10 @@ def ode_start(quaternion: bool) -> Func:
         STATS,
     )
     doc = (
-        "An adaptive method's start (every pair, rodas4, radau5): the arguments,",
-        "the attitude and f0 = f(t0, x) checked, and the first step h. -1 to go",
-        "on from there, else the code to return (x as given). order: the method's,",
+        "An adaptive method's start (every pair, rodas4, radau5, taylor): the",
+        "arguments, x, the attitude (Euler parameters: normalized) and f0 = f(t0, x)",
+        "checked, and the first step h. -1 to go on from there, else the code to",
+        "return (x as given, or normalized). order: the method's,",
         "for the initial step estimate; 0 (Taylor): no estimate, h = h0 or 0.",
         "rtol_min: the method's bound on rtol (Method.min_rtol).",
     )
@@ -331,7 +359,7 @@ def shared(quaternion: bool, adaptive: bool, norm: bool) -> list[Func]:
     from gyrogen.codegen.integrators import gimbal  # it builds on this module
 
     out = [stats_start(), all_finite(), accept_step(quaternion)]
-    out += [] if quaternion else gimbal.functions()
+    out += euler_parameters.functions() if quaternion else gimbal.functions()
     if adaptive:
         out += [bad_arguments(), step_underflow()] + [error_norm()] * norm
         out += [initial_step(), ode_start(quaternion)]

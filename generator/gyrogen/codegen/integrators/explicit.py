@@ -20,10 +20,12 @@ from gyrogen.codegen.integrators.common import (
     code,
     comp,
     dx,
+    finite_state,
     h,
     i,
     real,
     scaled,
+    start_checks,
     x,
     xnew,
 )
@@ -130,20 +132,15 @@ def fixed(m: Method, quaternion: bool) -> Func:
     body: list[S] = [
         Call("stats_start", (Var("stats"), t0)),
         If(bad, (Return(code("ERR_ARGUMENT")),)),
+        *start_checks(quaternion),
     ]
     step: list[S] = [assign(t, t0 + fn("real", n) * h), Call("rhs", (t, x, c, Row("k", Int(0))))]
     step += stages(tab)
     step += [
         inc(Var("stats.rhs_calls"), tab.stages),
-        If(not_(fn("all_finite", xnew, NX)), (Return(code("ERR_NONFINITE")),)),
+        If(not_(finite_state(xnew, quaternion)), (Return(code("ERR_NONFINITE")),)),
     ]
     if not quaternion:
-        body.append(
-            If(
-                fn("gimbal_lock_at", x),
-                (Return(code("ERR_ATTITUDE_SINGULAR"), "at the start: x as given"),),
-            )
-        )
         step.append(
             If(
                 fn("gimbal_lock", x, xnew),

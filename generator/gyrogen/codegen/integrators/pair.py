@@ -20,6 +20,7 @@ from gyrogen.codegen.integrators.common import (
     TOLERANCES,
     accepted,
     arr,
+    attitude_checked,
     code,
     h,
     i,
@@ -95,6 +96,7 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
         inc(Var("stats.rhs_calls"), sel(cmp(cd, "<", 0), Int(m.trial_calls), Int(0))),
         assign(nonfinite, not_(fn("finite", err))),
         For("i", NX, (assign(nonfinite, or_(nonfinite, not_(fn("finite", xnew[i])))),)),
+        *attitude_checked(quaternion),
     ]
     if not tab.fsal:
         fnew = k[m.fnew, i]
@@ -156,7 +158,7 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
     first: list[S] = [For("i", NX, (assign(k[0, i], k[m.fnew, i]),))]
     accept: list[S] = [
         Comment("accept: x := xnew; f(t + h, xnew) is the next step's first stage"),
-        If(ok, (*accepted(quaternion), *first)),
+        If(ok, (*accepted(quaternion, known=True), *first)),
     ]
     return begin, [Comment("trial"), *trial(m), *check, *control, *accept]
 

@@ -14,6 +14,7 @@ from gyrogen.codegen.integrators.common import (
     code,
     comp,
     dx,
+    finite_state,
     h,
     i,
     x,
@@ -159,7 +160,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
             inc(Var("stats.rhs_calls"), 1),
             assign(v["nonfinite"], not_(fn("all_finite", v["fnew"], NX))),
         ), (assign(v["nonfinite"], not_(fn("finite", err))),)),
-        assign(v["nonfinite"], or_(v["nonfinite"], not_(fn("all_finite", xnew, NX)))),
+        assign(v["nonfinite"], or_(v["nonfinite"], not_(finite_state(xnew, quaternion)))),
         If(v["nonfinite"], (assign(v["outcome"], 2),)),
     ]  # fmt: skip
     fac = fn("min", ctl.safety, Num(ctl.safety * (1 + 2 * ctl.newton_max))

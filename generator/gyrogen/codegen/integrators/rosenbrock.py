@@ -13,6 +13,7 @@ from gyrogen.codegen.integrators.common import (
     code,
     comp,
     dx,
+    finite_state,
     h,
     i,
     real,
@@ -192,7 +193,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         assign(singular, 0),
         assign(err, fn(f"{m.name}_trial", *args)),
         inc(Var("stats.rhs_calls"), R.stages - 1),
-        assign(nonfinite, or_(not_(fn("finite", err)), not_(fn("all_finite", xnew, NX)))),
+        assign(nonfinite, or_(not_(fn("finite", err)), not_(finite_state(xnew, quaternion)))),
         If(and_(not_(nonfinite), cmp(err, "<=", 1.0), not_(last)), (
             Call("rhs", (t + h, xnew, c, fnew), "where the next step starts"),
             inc(Var("stats.rhs_calls"), 1),

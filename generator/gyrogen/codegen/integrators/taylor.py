@@ -20,6 +20,7 @@ from gyrogen.codegen.integrators.common import (
     TOLERANCES,
     accepted,
     arr,
+    attitude_checked,
     code,
     comp,
     dx,
@@ -206,6 +207,7 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         For("i", NX, (assign(dx[i], h * xnew[i] - comp[i]), assign(xnew[i], x[i] + dx[i]))),
         assign(nonfinite, Bool(False)),
         For("i", NX, (assign(nonfinite, or_(nonfinite, not_(fn("finite", xnew[i])))),)),
+        *attitude_checked(quaternion),
         Comment("accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock"),
         assign(take, and_(run, not_(nonfinite))),
         assign(at, Bool(False) if quaternion else gimbal_at(xnew)),
@@ -225,7 +227,7 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         inc(Var("stats.accepted"), sel(ok, Int(1), Int(0))),
         inc(Var("stats.rejected"), sel(retry, Int(1), Int(0))),
         assign(cap, sel(ok, Const("HUGE"), sel(retry, h * Num(ctl.nonfinite_shrink), cap))),
-        If(ok, tuple(accepted(quaternion))),
+        If(ok, tuple(accepted(quaternion, known=True))),
     ]
     return body
 
