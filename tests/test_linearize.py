@@ -252,3 +252,25 @@ def test_a_subnormal_spin_is_linearized_quietly(tmp_path: Path, cli) -> None:
     code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), "--spin", "1e-320"])
     assert code == 0 and err == "", err
     assert "found: a steady spin of 9.99989e-321 rad/s" in out
+
+
+@pytest.mark.parametrize(
+    ("axis", "verdict", "growth"),
+    [("2", "marginal: 3 modes", None), ("1", "unstable: 4 modes", "unstable: +0.145233+0i, ")],
+)
+def test_a_stiff_wheel_does_not_merge_the_slow_modes(
+    axis: str, verdict: str, growth: str | None, tmp_path: Path, cli
+) -> None:
+    """stiff_wheel with k = 3e6: a wheel mode at -1e8 beside the nutation
+    (+-0.38i about a2, a saddle +-0.145 about a1) and a zero. Measured
+    against -1e8, the slow three merged into one Jordan block ("grows like
+    t", x3) about a2 and hid the saddle's exponential growth about a1."""
+    argv = ["linearize", "stiff_wheel", "--out", str(tmp_path), "--spin", "1", "--axis", axis]
+    code, out, err = cli([*argv, "--param", "k=3e6,w_ref=150"])
+    assert code == 0 and err == "", err
+    assert f"\n{verdict} (eigenvalues" in out and "grows like t" not in out, out
+    assert "stable: -1.0004e+08+0i, not oscillating" in out
+    if growth is None:
+        assert "marginal: +0+0.381246i, oscillating at 0.381246 rad/s" in out, out
+    else:
+        assert f"{growth}not oscillating, growing: doubles every 4.773 s" in out, out
