@@ -274,3 +274,56 @@ def test_a_stiff_wheel_does_not_merge_the_slow_modes(
         assert "marginal: +0+0.381246i, oscillating at 0.381246 rad/s" in out, out
     else:
         assert f"{growth}not oscillating, growing: doubles every 4.773 s" in out, out
+
+
+WHEEL_AGAINST_FRICTION = """
+name = "wheel_against_friction"
+description = "one wheel driven by a runtime torque against its bearing friction"
+targets = ["c"]
+[parameters]
+m_a = 800.0
+I11 = 420.0
+I22 = 380.0
+I33 = 300.0
+[effects]
+rotor_angle = false
+[outputs]
+kinetic_energy = true
+[[rotors]]
+m = 5.0
+I = 0.025
+J = 0.045
+axis = [1.0, 0.0, 0.0]
+position = [0.3, 0.0, -0.2]
+b = 2e-05
+torque = "constant"
+T = "runtime"
+[simulate]
+t_end = 1.0
+dt = 0.1
+initial = { u1 = 0.01 }
+parameters = { T_1 = 0.1 }
+"""
+
+
+@pytest.mark.parametrize("spin", [[], ["--spin", "0"]])
+def test_a_found_spin_whose_wheel_rate_overflows_is_one_line_exit_2(
+    spin: list[str], tmp_path: Path, cli
+) -> None:
+    """A wheel held by T_1 = 1e300 against b = 2e-5 turns at T / b = 5e304
+    rad/s: the spin found was that point (|dx/dt| 1e281), exit 0. Now the
+    same limit as a given state's (MAX_SPIN), one line, nothing written."""
+    path = tmp_path / "wheel.toml"
+    path.write_text(WHEEL_AGAINST_FRICTION)
+    out_dir = tmp_path / "out"
+    code, out, err = cli(
+        ["linearize", str(path), "--out", str(out_dir), "--param", "T_1=1e300", *spin]
+    )
+    assert (code, out) == (2, "") and err.count("\n") == 1, err
+    assert (
+        "at the steady spin asked for (each wheel at the rate its law holds), w1 = 5e+304: "
+        "beyond 1e+100 rad/s" in err
+    ), err
+    assert not out_dir.exists()
+    code, out, err = cli(["linearize", str(path), "--out", str(out_dir), "--param", "T_1=1e-3"])
+    assert code == 0 and err == "" and "w1 = 50" in out, err

@@ -128,13 +128,18 @@ def state_of(
         start = {"e0": 1.0, **named}
         x = np.array([float(start.get(s, 0.0)) for s in scene.states])
     _finite(x, scene.states, "state")
+    _within_spin(scene, x, "state")
+    return x
+
+
+def _within_spin(scene: Scene, x: np.ndarray, what: str) -> None:
+    """Every speed of x finite and at most MAX_SPIN."""
     fast = [i for i in _speeds(scene) if not abs(x[i]) <= MAX_SPIN]
     if fast:
         raise SceneError(
-            f"state {scene.states[fast[0]]} = {x[fast[0]]:g}: beyond {MAX_SPIN:g} rad/s, the "
+            f"{what} {scene.states[fast[0]]} = {x[fast[0]]:g}: beyond {MAX_SPIN:g} rad/s, the "
             "rates' squares times the inertias overflow double arithmetic"
         )
-    return x
 
 
 def _speeds(scene: Scene) -> list[int]:
@@ -219,6 +224,7 @@ def find_spin(
             x[idx[f"w{k}"]] = w + g @ x[body]
     else:
         x[idx["u4"]] = rel[0] + x[idx["u2"]]
+    _within_spin(scene, x, "at the steady spin asked for (each wheel at the rate its law holds),")
     x = _newton(comp, comp.setup(p), x, e, omega, body)
     where = f"a{axis}" if axis is not None else "the start's rate"
     how = f"found: a steady spin of {omega:g} rad/s about the principal axis nearest {where}"
