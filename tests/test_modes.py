@@ -104,3 +104,27 @@ def test_a_decaying_jordan_block_is_stable() -> None:
     found = _found(_hidden(np.array([[-1e-3, 1.0], [0.0, -1e-3]])))
     assert _summary(found) == [("stable", 2, False, 0.0)]
     assert found[0].eigenvalue.real == pytest.approx(-1e-3, rel=1e-6)
+
+
+def test_the_verdicts_do_not_depend_on_the_units() -> None:
+    """A in other units (times 1e200, 1e-200) has the same modes, scaled:
+    A's norm is taken without overflow or underflow (squared, 1e200's
+    entries made it inf, one cluster of everything, marginal)."""
+    saddle = np.array([[0.0, 0.145], [0.145, 0.0]])
+    a = _hidden(saddle, PAIR, np.array([[0.0, 1.0], [0.0, 0.0]]), -1e8 * np.ones((1, 1)))
+    found = _found(a)
+    assert [(m.verdict, m.multiplicity, m.secular) for m in found] == [
+        ("unstable", 1, False),
+        ("unstable", 2, True),
+        ("marginal", 1, False),
+        ("stable", 1, False),
+        ("stable", 1, False),
+    ]
+    for scale in (1e200, 1e-200):
+        scaled = _found(scale * a)
+        assert [(m.verdict, m.multiplicity, m.secular, m.states) for m in scaled] == [
+            (m.verdict, m.multiplicity, m.secular, m.states) for m in found
+        ]
+        for m, n in zip(scaled, found, strict=True):
+            if not n.secular:  # a Jordan block's mean is rounding
+                assert abs(m.eigenvalue - scale * n.eigenvalue) <= 1e-5 * scale * abs(n.eigenvalue)

@@ -108,7 +108,9 @@ class _Schur:
 
 def _schur(a: np.ndarray) -> _Schur:
     t, z = scipy.linalg.schur(a, output="complex")
-    error = SLACK * len(a) * np.finfo(float).eps * float(np.linalg.norm(a))
+    big = float(np.max(np.abs(a)))
+    norm = big * float(np.linalg.norm(a / big)) if big else 0.0  # its square may overflow
+    error = SLACK * len(a) * np.finfo(float).eps * norm
     return _Schur(t, z, error)
 
 
