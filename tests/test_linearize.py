@@ -19,7 +19,7 @@ from gyrogen.analysis.sweep.sweep_draws import grid_values
 from gyrogen.analysis.sweep.sweep_report import spin_values
 from gyrogen.codegen.context import make_context
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import load
+from gyrogen.scene import builtin_text, load, parse
 from gyrogen.scene.rotors import lumped_inertia
 
 SCENES = ("dual_spin", "rw4_pyramid", "speed_controlled", "wheel_spinup", "rw3_orthogonal")
@@ -327,3 +327,41 @@ def test_a_found_spin_whose_wheel_rate_overflows_is_one_line_exit_2(
     assert not out_dir.exists()
     code, out, err = cli(["linearize", str(path), "--out", str(out_dir), "--param", "T_1=1e-3"])
     assert code == 0 and err == "" and "w1 = 50" in out, err
+
+
+QUATERNION_DUAL_SPIN = builtin_text("dual_spin").replace(
+    'name = "dual_spin"', 'name = "dual_spin_e"\nattitude = "quaternion"'
+)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--at", "e0=0"], "the equilibrium: e0..e3 are all zero: not an attitude"),
+        (["--state", "0,0,0,0,0,0.05,0,600"], "the equilibrium: e0..e3 are all zero"),
+        (["--at", "e0=2"], "the equilibrium: e0..e3 = (2, 0, 0, 0) has norm 2, not 1 (within"),
+        (["--at", "e0=0.5,e1=0.5"], "has norm 0.707106781, not 1 (within 1e-06)"),
+        (["--at", "e0=1e-200"], "has norm 1e-200, not 1"),
+        (["--at", "e1=nan"], "state e1 is nan: not a finite number"),
+    ],
+)
+def test_a_point_off_the_unit_quaternions_is_one_line_exit_2(
+    argv: list[str], message: str, tmp_path: Path, cli
+) -> None:
+    """As a scene's start: e0..e3 all zero, or |e| off 1 by more than
+    QUATERNION_NORM_SLACK, is refused (they were linearized about, exit 0)."""
+    path = tmp_path / "dual_spin_e.toml"
+    path.write_text(QUATERNION_DUAL_SPIN)
+    out_dir = tmp_path / "out"
+    code, out, err = cli(["linearize", str(path), "--out", str(out_dir), *argv])
+    assert (code, out) == (2, "") and err.count("\n") == 1 and message in err, err
+    assert not out_dir.exists()
+
+
+def test_a_nearly_unit_quaternion_point_is_normalized() -> None:
+    """Within QUATERNION_NORM_SLACK, the point's e is made a unit quaternion
+    (as a scene's start is), in the model and the point it reports."""
+    scene = parse(QUATERNION_DUAL_SPIN, "dual_spin_e.toml")
+    lin = api.linearize(scene, at={"e0": 0.70710678, "e1": 0.70710678, "u2": 0.05, "u4": 600})
+    e = lin.x[[scene.states.index(n) for n in ("e0", "e1", "e2", "e3")]]
+    assert abs(float(np.sum(e * e)) - 1.0) <= 4.5e-16 and e[0] == e[1]
