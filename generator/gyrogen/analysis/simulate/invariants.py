@@ -140,6 +140,15 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
     )
 
 
+def in_closed_form(scene: Scene) -> bool:
+    """Whether series_at_samples has the energy balance and the rate check
+    in closed form (no torque or a constant one, a cluster without torque
+    or friction); otherwise they take quadrature along the run."""
+    if scene.rotors:
+        return all(r.torque == "none" and r.b == 0 for r in scene.rotors)
+    return scene.effects.torque in ("none", "constant")
+
+
 def series_at_samples(
     scene: Scene, p: np.ndarray, xs: np.ndarray, ts: np.ndarray
 ) -> dict[str, np.ndarray]:

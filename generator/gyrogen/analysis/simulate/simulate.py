@@ -45,7 +45,7 @@ from gyrogen.runtime.scene_build import build_files, scene_sources
 from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
 from gyrogen.scene import Scene, check_output_grid
 
-QUAD_RTOL = 100 * MIN_RTOL
+QUAD_RTOL = 20 * MIN_RTOL
 """The tightest tolerance the quadrature's integrations again ask for."""
 MAX_NFEV = MAX_STEPS
 """RHS calls before giving up: a run that blows up can crawl for hours
@@ -178,31 +178,41 @@ def _controls(start: Start, settings: Settings) -> Controls:
 
 
 def _again(start: Start, settings: Settings) -> Again:
-    """The run's method again from a state at a time, at a tighter tolerance
-    (QUAD_RTOL, or rtol / 1000 if larger), for the quadrature's bisection
-    (trajectory.running_integrals)."""
+    """The run's method again from a state at a time, for the quadrature's
+    bisection (trajectory.running_integrals)."""
     comp, c, method = start.comp, start.c, settings.method
-    rtol, atol = start.tol
-    tighter = max(QUAD_RTOL, rtol * 1e-3) / rtol
-    tight = replace(start, tol=(rtol * tighter, atol * tighter))
     if method in methods.NAMES:
-        given = _controls(tight, settings)
-
-        def compiled(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray | None:
-            seg = integrate_segments(comp, method, xa, c, np.concatenate([[a], times]), given)
-            return seg.states[1:] if seg.code == 0 else None
-
-        return Again(compiled, start.tol, tight.tol)
-    rhs = RawRhs(comp, c)
+        return compiled_again(comp, method, c, start.tol, settings.max_nfev)
+    rhs, tight = RawRhs(comp, c), tighter(start.tol)
 
     def scipy(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray | None:
-        sol = solve_ivp(
-            rhs, (a, times[-1]), xa, method, times, rtol=tight.tol[0], atol=tight.tol[1]
-        )
+        sol = solve_ivp(rhs, (a, times[-1]), xa, method, times, rtol=tight[0], atol=tight[1])
         good = sol.status == 0 and sol.y.shape[1] == len(times) and np.all(np.isfinite(sol.y))
         return np.ascontiguousarray(sol.y.T) if good else None
 
-    return Again(scipy, start.tol, tight.tol)
+    return Again(scipy, start.tol, tight)
+
+
+def tighter(tol: tuple[float, float]) -> tuple[float, float]:
+    """(rtol, atol) a thousand times tighter, or as far as QUAD_RTOL."""
+    rtol, atol = tol
+    factor = max(QUAD_RTOL, rtol * 1e-3) / rtol
+    return rtol * factor, atol * factor
+
+
+def compiled_again(
+    comp: Compiled, method: str, c: np.ndarray, tol: tuple[float, float], max_steps: int
+) -> Again:
+    """A compiled integrator again from a state at a time (tighter than tol)
+    for the quadrature's bisection: simulate's runs and check's cases."""
+    tight = tighter(tol)
+    given = controls(method, steps=100, rtol=tight[0], atol=tight[1], max_steps=max_steps)
+
+    def states(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray | None:
+        seg = integrate_segments(comp, method, xa, c, np.concatenate([[a], times]), given)
+        return seg.states[1:] if seg.code == 0 else None
+
+    return Again(states, tol, tight)
 
 
 def _by_integrator(
