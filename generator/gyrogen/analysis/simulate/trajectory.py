@@ -37,7 +37,9 @@ the width times how far the rates are known (_known)."""
 PROGRESS = 1.5
 """A bisection goes on while it shrinks the rules' difference at least this
 much (a transient's halves: 2; a kink's: 4; a smooth rate's: 32); where it
-does not, the rates' noise is what they see."""
+does not STALLS times in a row, the rates' noise is what they see (a kink
+near a node may stall once)."""
+STALLS = 3
 MAX_BISECTIONS = 10**5
 """Intervals bisected in one run at most (a layer takes ~50)."""
 QUADRATURE = (
@@ -182,7 +184,7 @@ class _Edge:
 
 def _bisected(
     again: Again, rates: Rates, budget: np.ndarray, noise: np.ndarray, left: list[int],
-    a: _Edge, b: float, fb: np.ndarray, nodes: np.ndarray,
+    a: _Edge, b: float, fb: np.ndarray, nodes: np.ndarray, stalled: int = 0,
 ) -> np.ndarray:  # fmt: skip
     """int_a^b of the rates (k,), Gauss-Legendre on [a, b] (its nodes'
     rates given, known to noise) where Simpson's rule agrees, else the sum
@@ -202,11 +204,12 @@ def _bisected(
     m = _Edge(float(mid), xs[QUAD_NODES], fs[QUAD_NODES])
     halves = [(a, mid, m.f, fs[:QUAD_NODES]), (m, b, fb, fs[QUAD_NODES + 1 :])]
     parts = [_rules(e.t, end, e.f, inner, f_end) for e, end, f_end, inner in halves]
-    if np.all(parts[0][1] + parts[1][1] > off / PROGRESS):
+    stalled = stalled + 1 if np.all(parts[0][1] + parts[1][1] > off / PROGRESS) else 0
+    if stalled >= STALLS:
         return parts[0][0] + parts[1][0]  # noise: halving the width no longer helps
     at = slice(QUAD_NODES, QUAD_NODES + 1)
     finer = _known(rates, times[at], xs[at], again.tighter)[0]
-    first, second = (_bisected(again, rates, budget, finer, left, *h) for h in halves)
+    first, second = (_bisected(again, rates, budget, finer, left, *h, stalled) for h in halves)
     return first + second
 
 
