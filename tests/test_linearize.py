@@ -19,7 +19,7 @@ from gyrogen.analysis.sweep.sweep_draws import grid_values
 from gyrogen.analysis.sweep.sweep_report import spin_values
 from gyrogen.codegen.context import make_context
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import load
+from gyrogen.scene import builtin_text, load, parse
 from gyrogen.scene.rotors import lumped_inertia
 
 SCENES = ("dual_spin", "rw4_pyramid", "speed_controlled", "wheel_spinup", "rw3_orthogonal")
@@ -252,3 +252,116 @@ def test_a_subnormal_spin_is_linearized_quietly(tmp_path: Path, cli) -> None:
     code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), "--spin", "1e-320"])
     assert code == 0 and err == "", err
     assert "found: a steady spin of 9.99989e-321 rad/s" in out
+
+
+@pytest.mark.parametrize(
+    ("axis", "verdict", "growth"),
+    [("2", "marginal: 3 modes", None), ("1", "unstable: 4 modes", "unstable: +0.145233+0i, ")],
+)
+def test_a_stiff_wheel_does_not_merge_the_slow_modes(
+    axis: str, verdict: str, growth: str | None, tmp_path: Path, cli
+) -> None:
+    """stiff_wheel with k = 3e6: a wheel mode at -1e8 beside the nutation
+    (+-0.38i about a2, a saddle +-0.145 about a1) and a zero. Measured
+    against -1e8, the slow three merged into one Jordan block ("grows like
+    t", x3) about a2 and hid the saddle's exponential growth about a1."""
+    argv = ["linearize", "stiff_wheel", "--out", str(tmp_path), "--spin", "1", "--axis", axis]
+    code, out, err = cli([*argv, "--param", "k=3e6,w_ref=150"])
+    assert code == 0 and err == "", err
+    assert f"\n{verdict} (eigenvalues" in out and "grows like t" not in out, out
+    assert "stable: -1.0004e+08+0i, not oscillating" in out
+    if growth is None:
+        assert "marginal: +0+0.381246i, oscillating at 0.381246 rad/s" in out, out
+    else:
+        assert f"{growth}not oscillating, growing: doubles every 4.773 s" in out, out
+
+
+WHEEL_AGAINST_FRICTION = """
+name = "wheel_against_friction"
+description = "one wheel driven by a runtime torque against its bearing friction"
+targets = ["c"]
+[parameters]
+m_a = 800.0
+I11 = 420.0
+I22 = 380.0
+I33 = 300.0
+[effects]
+rotor_angle = false
+[outputs]
+kinetic_energy = true
+[[rotors]]
+m = 5.0
+I = 0.025
+J = 0.045
+axis = [1.0, 0.0, 0.0]
+position = [0.3, 0.0, -0.2]
+b = 2e-05
+torque = "constant"
+T = "runtime"
+[simulate]
+t_end = 1.0
+dt = 0.1
+initial = { u1 = 0.01 }
+parameters = { T_1 = 0.1 }
+"""
+
+
+@pytest.mark.parametrize("spin", [[], ["--spin", "0"]])
+def test_a_found_spin_whose_wheel_rate_overflows_is_one_line_exit_2(
+    spin: list[str], tmp_path: Path, cli
+) -> None:
+    """A wheel held by T_1 = 1e300 against b = 2e-5 turns at T / b = 5e304
+    rad/s: the spin found was that point (|dx/dt| 1e281), exit 0. Now the
+    same limit as a given state's (MAX_SPIN), one line, nothing written."""
+    path = tmp_path / "wheel.toml"
+    path.write_text(WHEEL_AGAINST_FRICTION)
+    out_dir = tmp_path / "out"
+    code, out, err = cli(
+        ["linearize", str(path), "--out", str(out_dir), "--param", "T_1=1e300", *spin]
+    )
+    assert (code, out) == (2, "") and err.count("\n") == 1, err
+    assert (
+        "at the steady spin asked for (each wheel at the rate its law holds), w1 = 5e+304: "
+        "beyond 1e+100 rad/s" in err
+    ), err
+    assert not out_dir.exists()
+    code, out, err = cli(["linearize", str(path), "--out", str(out_dir), "--param", "T_1=1e-3"])
+    assert code == 0 and err == "" and "w1 = 50" in out, err
+
+
+QUATERNION_DUAL_SPIN = builtin_text("dual_spin").replace(
+    'name = "dual_spin"', 'name = "dual_spin_e"\nattitude = "quaternion"'
+)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--at", "e0=0"], "the equilibrium: e0..e3 are all zero: not an attitude"),
+        (["--state", "0,0,0,0,0,0.05,0,600"], "the equilibrium: e0..e3 are all zero"),
+        (["--at", "e0=2"], "the equilibrium: e0..e3 = (2, 0, 0, 0) has norm 2, not 1 (within"),
+        (["--at", "e0=0.5,e1=0.5"], "has norm 0.707106781, not 1 (within 1e-06)"),
+        (["--at", "e0=1e-200"], "has norm 1e-200, not 1"),
+        (["--at", "e1=nan"], "state e1 is nan: not a finite number"),
+    ],
+)
+def test_a_point_off_the_unit_quaternions_is_one_line_exit_2(
+    argv: list[str], message: str, tmp_path: Path, cli
+) -> None:
+    """As a scene's start: e0..e3 all zero, or |e| off 1 by more than
+    QUATERNION_NORM_SLACK, is refused (they were linearized about, exit 0)."""
+    path = tmp_path / "dual_spin_e.toml"
+    path.write_text(QUATERNION_DUAL_SPIN)
+    out_dir = tmp_path / "out"
+    code, out, err = cli(["linearize", str(path), "--out", str(out_dir), *argv])
+    assert (code, out) == (2, "") and err.count("\n") == 1 and message in err, err
+    assert not out_dir.exists()
+
+
+def test_a_nearly_unit_quaternion_point_is_normalized() -> None:
+    """Within QUATERNION_NORM_SLACK, the point's e is made a unit quaternion
+    (as a scene's start is), in the model and the point it reports."""
+    scene = parse(QUATERNION_DUAL_SPIN, "dual_spin_e.toml")
+    lin = api.linearize(scene, at={"e0": 0.70710678, "e1": 0.70710678, "u2": 0.05, "u4": 600})
+    e = lin.x[[scene.states.index(n) for n in ("e0", "e1", "e2", "e3")]]
+    assert abs(float(np.sum(e * e)) - 1.0) <= 4.5e-16 and e[0] == e[1]

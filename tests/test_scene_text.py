@@ -106,12 +106,27 @@ QUATERNION = builtin_text("wheel_spinup").replace(
         ("e0 = 2.0", "has norm 2, not 1"),
         ("e0 = 0.7071, e1 = 0.7071", "has norm 0.99999"),
         ("e1 = 0.5", "has norm 1.11803399"),
+        ("e0 = 1e-200", r"has norm 1e-200, not 1"),  # its square underflowed: "all zero"
+        ("e0 = 1e200", r"has norm 1e\+200, not 1"),
     ],
 )
 def test_quaternion_start_must_be_a_unit_quaternion(start: str, message: str) -> None:
     text = QUATERNION.replace("initial = { u1 = 0.01", f"initial = {{ {start}, u1 = 0.01")
     with pytest.raises(Exception, match=message):
         parse(text, "q.toml")
+
+
+@pytest.mark.parametrize(
+    ("point", "message"),
+    [("e0 = 0.0", "equilibrium: e0..e3 are all zero"), ("e0 = 2.0", "equilibrium: e0..e3 = ")],
+)
+def test_quaternion_equilibrium_must_be_a_unit_quaternion(point: str, message: str) -> None:
+    """The point `gyrogen linearize` takes from the scene is held to the
+    start's rule (it was linearized about as given)."""
+    at = 'attitude = "quaternion"'
+    with pytest.raises(Exception, match=message):
+        parse(QUATERNION.replace(at, f"{at}\nequilibrium = {{ {point} }}"), "q.toml")
+    assert parse(QUATERNION.replace(at, f"{at}\nequilibrium = {{ e0 = 1.0 }}"), "q.toml")
 
 
 def test_a_nearly_unit_quaternion_start_is_normalized() -> None:

@@ -7,7 +7,7 @@ import io
 import json
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -18,7 +18,15 @@ from matplotlib.image import imread
 from gyrogen.analysis.simulate import plots
 from gyrogen.analysis.simulate.simulate import check_solution
 from gyrogen.analysis.simulate.simulate_files import COLUMNS
-from gyrogen.analysis.simulate.trajectory import QUAD_NODES, output_grid, sample_times
+from gyrogen.analysis.simulate.trajectory import (
+    QUAD_NODES,
+    Again,
+    Trajectory,
+    from_samples,
+    output_grid,
+    running_integrals,
+    sample_times,
+)
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import reference, scene_view
 from gyrogen.scene import builtin_names, builtin_text, load
@@ -499,3 +507,74 @@ def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
     scene = load("rw4_pyramid")
     simulate.run(scene, tmp_path / "o", simulate.Settings(2.0, 0.1, "dop853", True))
     assert imread(tmp_path / "o" / "trajectory.png").shape[:2] == plots.PIXELS
+
+
+def _layer(lam: float) -> tuple[Trajectory, Callable[[np.ndarray, np.ndarray], np.ndarray]]:
+    """x' = -lam x from x(0) = 1 on the grid 0, 0.01, .., 1 (its nodes
+    exact), with its exact states again from any point; the rate: x."""
+    grid = output_grid(1.0, 0.01)
+    samples = sample_times(grid)
+    exact = np.exp(-lam * samples)[:, None]
+
+    def states(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray:
+        return xa[None, :] * np.exp(-lam * (times - a))[:, None]
+
+    again = Again(states, (1e-14, 1e-14), (1e-15, 1e-15))
+    return from_samples(grid, samples, exact, 0, 0.0, again), lambda t, x: x[:, :1]
+
+
+def test_the_quadrature_bisects_a_transient_between_its_nodes() -> None:
+    """A layer of width 1e-5 s at the start of a 0.01 s interval (stiff_wheel's
+    wheel locking on): the nodes see none of it, the sum missed all of it
+    (int_0^1 e^(-1e5 t) dt = 1e-5, found 0). Simpson's rule sees it at the
+    interval's start; the bisection finds it to 1e-12 of the scale."""
+    traj, rate = _layer(1e5)
+    exact = (1.0 - np.exp(-1e5 * traj.t)) / 1e5
+    blind = running_integrals(replace(traj, again=None), rate, np.array([1e-5]))[:, 0]
+    assert abs(blind[-1] - exact[-1]) > 0.99 * exact[-1]
+    found = running_integrals(traj, rate, np.array([1e-5]))[:, 0]
+    assert np.max(np.abs(found - exact)) <= 1e-12 * 1e-5
+    smooth, rate = _layer(1.0)  # smooth: Simpson's rule is off by 3e-14 a piece, once bisected
+    calls: list[tuple] = []
+    counted = replace(smooth.again, states=lambda *a: calls.append(a) or smooth.again.states(*a))
+    got = running_integrals(replace(smooth, again=counted), rate, np.array([1.0]))[:, 0]
+    assert np.max(np.abs(got - (1.0 - np.exp(-smooth.t)))) <= 1e-15 and len(calls) <= 100
+
+
+def test_the_quadrature_bisects_down_to_a_kink() -> None:
+    """|t - k| (a clamp's kink at k, between the nodes): a bisection whose
+    halves happened to shrink Simpson's difference less than 1.5x stopped
+    there, 8e-5 off for one k in five; a stall must now repeat to stop it."""
+    grid = output_grid(1.0, 0.1)
+    samples = sample_times(grid)
+    again = Again(
+        lambda a, xa, times: xa[None, :] + (times - a)[:, None], (1e-14,) * 2, (1e-15,) * 2
+    )
+    traj = from_samples(grid, samples, samples[:, None].copy(), 0, 0.0, again)
+    for k in np.random.default_rng(1).uniform(0.05, 0.95, 50):
+        got = running_integrals(traj, lambda t, x, k=k: np.abs(x[:, :1] - k), np.array([1.0]))
+        assert abs(got[-1, 0] - (k**2 + (1 - k) ** 2) / 2) <= 1e-14, k
+
+
+@pytest.mark.slow
+def test_stiff_wheel_balances_hold_across_its_transient(tmp_path: Path, cli) -> None:
+    """stiff_wheel's wheel spins up 150 rad/s within 1e-5 s: the energy and
+    u4 balances read 1.0 (the quadrature saw none of it) while the run was
+    right; `gyrogen check` agrees. Now both are at the integrator's rtol."""
+    run = simulate(cli, ["stiff_wheel", "--t-end", "1", "--dt", "0.05", "--no-plot"], tmp_path)
+    assert run.code == 0, run.err
+    worst = json.loads((run.dir / "summary.json").read_text())["invariants"]
+    assert worst["energy_balance_relative_residual"] < 1e-9, worst
+    assert worst["u4_relative_residual"] < 1e-9, worst
+
+
+@pytest.mark.slow
+def test_a_cluster_is_summarized_with_its_own_balances(tmp_path: Path, cli) -> None:
+    """rw3_orthogonal has no u4: its rate check is wheel 1's w1 and its P the
+    wheels' (the summary said u4 and T (u4 - u2) + M g u7)."""
+    run = simulate(cli, ["rw3_orthogonal", "--t-end", "1", "--dt", "0.1", "--no-plot"], tmp_path)
+    assert run.code == 0, run.err
+    assert "  w1 check        w1 - w1(0) - int net_1 dt/J_1: " in run.out and "u4" not in run.out
+    note = json.loads((run.dir / "summary.json").read_text())["invariants_note"]
+    assert "P = sum_k net_k (w_k - g_k . w_A)" in note and "(w1 - w1(0) - int net_1" in note
+    assert "u4 - u2" not in note and "int T dt/J" not in note

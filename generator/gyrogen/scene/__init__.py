@@ -189,12 +189,13 @@ class Scene(_Strict):
         else:
             _check_parameter_names(self)
             check_physics(self.parameters)
-        bad = sorted(set(self.simulate.initial) - set(self.states))
-        if bad:
-            raise ValueError(f"simulate.initial: {', '.join(bad)} is not a state of this scene")
-        bad = sorted(set(self.equilibrium or {}) - set(self.states))
-        if bad:
-            raise ValueError(f"equilibrium: {', '.join(bad)} is not a state of this scene")
+        for key, point in (("simulate.initial", self.simulate.initial),
+                           ("equilibrium", self.equilibrium or {})):  # fmt: skip
+            bad = sorted(set(point) - set(self.states))
+            if bad:
+                raise ValueError(f"{key}: {', '.join(bad)} is not a state of this scene")
+            if self.attitude == "quaternion":
+                check_quaternion(point, key)  # the start; linearize's point
         bad = sorted(set(self.simulate.parameters) - set(self.runtime))
         if bad:
             raise ValueError(
@@ -206,8 +207,6 @@ class Scene(_Strict):
             known := rotors.resolved(self.parameters, self.rotors, self.simulate.parameters)
         ):
             rotors.check_values(*known, "simulate.parameters")
-        if self.attitude == "quaternion":
-            check_quaternion(self.simulate.initial)
         self._series_where_smooth()
         return self
 

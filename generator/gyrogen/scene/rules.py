@@ -195,7 +195,7 @@ def check_quaternion(initial: dict[str, float], key: str = "simulate.initial") -
     """Euler parameters start on |e| = 1 (e0 = 1 when not given); key: where
     the start state was given (a scene's simulate.initial, a sweep's initial)."""
     e = [initial.get(n, 1.0 if n == "e0" else 0.0) for n in QUATERNION]
-    norm = math.sqrt(sum(x * x for x in e))
+    norm = math.hypot(*e)  # the squares of 1e-200 or 1e200 underflow or overflow
     if norm == 0.0:
         raise ValueError(f"{key}: e0..e3 are all zero: not an attitude")
     if abs(norm - 1.0) > QUATERNION_NORM_SLACK:

@@ -28,6 +28,7 @@ from gyrogen.abi import (
 )
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import invariants
+from gyrogen.analysis.simulate.simulate import compiled_again
 from gyrogen.analysis.simulate.trajectory import QUAD_NODES, from_samples, sample_times
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.cluster_reference import clamp_margins
@@ -37,8 +38,10 @@ from gyrogen.runtime.segment import COUNTERS, integrate_segments
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import unit_axes
 
+TOL = 1e-12
+"""rtol and atol of every case's integration."""
 DRIFT_BAR = 1e-10
-"""The invariants' relative drift allowed at rtol 1e-12."""
+"""The invariants' relative drift allowed at rtol TOL."""
 
 
 @dataclass(frozen=True)
@@ -135,7 +138,7 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     res.method = case.method or choice.method or ""
     ts = np.linspace(0.0, case.t_end, case.samples + 1)
     steps = max(1, case.steps // case.samples)
-    given = controls(res.method, steps=steps, rtol=1e-12, atol=1e-12, max_steps=10**8)
+    given = controls(res.method, steps=steps, rtol=TOL, atol=TOL, max_steps=10**8)
     if case.quadrature:
         ts = _with_clamp_switches(comp, res.method, (x0, c, p), ts, given, scene)
     times = sample_times(ts) if case.quadrature else ts
@@ -145,7 +148,8 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     res.intervals = _merged(seg.intervals, every)
     res.trajectory, res.times = seg.states[::every], ts[: len(seg.states[::every])]
     if case.quadrature and seg.code == 0:
-        traj = from_samples(ts, times, seg.states, 0, 0.0)
+        again = compiled_again(comp, res.method, c, (TOL, TOL), 10**8)
+        traj = from_samples(ts, times, seg.states, 0, 0.0, again)
         res.drift_series = invariants.by_quadrature(scene, p, traj)
     _judge(res, p, c, comp)
     return res

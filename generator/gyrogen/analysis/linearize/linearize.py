@@ -30,6 +30,7 @@ from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene, validate
 from gyrogen.scene.rotors import lumped_inertia, resolved, unit_axes
+from gyrogen.scene.rules import QUATERNION, check_quaternion
 
 RESIDUAL_BAR = 1e-9
 """A point is an equilibrium when its kept states' rates are at most this
@@ -128,13 +129,25 @@ def state_of(
         start = {"e0": 1.0, **named}
         x = np.array([float(start.get(s, 0.0)) for s in scene.states])
     _finite(x, scene.states, "state")
+    if scene.attitude == "quaternion":  # as a scene's start: |e| within the slack, normalized
+        e = [scene.states.index(n) for n in QUATERNION]
+        try:
+            check_quaternion(dict(zip(QUATERNION, x[e], strict=True)), "the equilibrium")
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
+        x[e] /= math.hypot(*x[e])
+    _within_spin(scene, x, "state")
+    return x
+
+
+def _within_spin(scene: Scene, x: np.ndarray, what: str) -> None:
+    """Every speed of x finite and at most MAX_SPIN."""
     fast = [i for i in _speeds(scene) if not abs(x[i]) <= MAX_SPIN]
     if fast:
         raise SceneError(
-            f"state {scene.states[fast[0]]} = {x[fast[0]]:g}: beyond {MAX_SPIN:g} rad/s, the "
+            f"{what} {scene.states[fast[0]]} = {x[fast[0]]:g}: beyond {MAX_SPIN:g} rad/s, the "
             "rates' squares times the inertias overflow double arithmetic"
         )
-    return x
 
 
 def _speeds(scene: Scene) -> list[int]:
@@ -219,6 +232,7 @@ def find_spin(
             x[idx[f"w{k}"]] = w + g @ x[body]
     else:
         x[idx["u4"]] = rel[0] + x[idx["u2"]]
+    _within_spin(scene, x, "at the steady spin asked for (each wheel at the rate its law holds),")
     x = _newton(comp, comp.setup(p), x, e, omega, body)
     where = f"a{axis}" if axis is not None else "the start's rate"
     how = f"found: a steady spin of {omega:g} rad/s about the principal axis nearest {where}"
@@ -357,15 +371,15 @@ def model(
     if (state is not None or at is not None) and (spin is not None or axis is not None):
         raise SceneError("give the equilibrium or ask for a spin to be found, not both")
     p = parameters_of(scene, parameters or {})
+    given: tuple[np.ndarray, str] | None = None
+    if state is not None or at is not None:
+        given = state_of(scene, state, at), "given"
+    elif scene.equilibrium is not None and spin is None and axis is None:
+        given = state_of(scene, None, scene.equilibrium), "the scene's equilibrium"
     comp = build(scene)
     try:
         comp.setup(p)
     except ValueError as exc:  # each value valid, yet setup refuses them together
         raise SceneError(f"{scene.name}: parameters: {exc}") from exc
-    if state is not None or at is not None:
-        x, how = state_of(scene, state, at), "given"
-    elif scene.equilibrium is not None and spin is None and axis is None:
-        x, how = state_of(scene, None, scene.equilibrium), "the scene's equilibrium"
-    else:
-        x, how = find_spin(scene, comp, p, spin, axis)
+    x, how = given if given is not None else find_spin(scene, comp, p, spin, axis)
     return linearize(scene, comp, p, x, how)

@@ -1,20 +1,36 @@
 """A linear model's modes in words: each eigenvalue (a complex pair once)
 stable, unstable or marginal, oscillating or not, with its time scale and
-the states it moves most."""
+the states it moves most.
+
+Each eigenvalue is judged against its own rounding error, not against the
+largest eigenvalue: A is known to ~n eps ||A|| (its entries' rounding: on a
+stability boundary H_a - I_t Omega = 0 comes out as 5e-17) and the solver
+adds as much, which moves a simple eigenvalue by its condition number times
+that and splits a defective one apart (a Jordan block's halves by the
+square root). So a stiff mode at -1e8 leaves a slow pair at 0.4i and a zero
+apart (it costs them ~1e-6), while the halves of a Jordan block stay
+together (their condition numbers grow as their distance shrinks).
+Eigenvalues within each other's error make one cluster; its mean
+(conditioned by its spectral projector, finite for a Jordan block) decides
+the verdict, and a marginal cluster grows like t when its block of the
+Schur form is not its mean times I to within the cluster's own error.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
+from scipy.linalg import lapack
 
 MARGINAL = 1e-7
-"""|Re lambda| at most this times the largest |lambda| (or 1e-7 /s, if
-larger): marginal. Rounding leaves ~1e-16 |A| on a zero eigenvalue, and
-~1e-8 |A| on a double one (the boundary of a stability region)."""
-RANK = 1e-10
-"""Singular values of A - lambda I below this times ||A|| count as zero (the
-eigenvectors a marginal eigenvalue has)."""
+"""|Re lambda| at most this times |lambda|: marginal whatever the rounding
+(an oscillation that takes 1e7 radians to grow or decay by e)."""
+SLACK = 10.0
+"""A's error is taken as SLACK n eps ||A||_F (the model's rounding and the
+solver's backward error are small multiples of n eps ||A||); a cluster's block is a
+Jordan block when it is SLACK times its error or spread away from its mean."""
 SHOWN = 0.3
 """A mode is said to move the states whose eigenvector entries reach this
 fraction of its largest."""
@@ -29,7 +45,7 @@ class Mode:
     states: tuple[str, ...]
     """The states it moves most."""
     multiplicity: int = 1
-    """How many eigenvalues (within the tolerance) it stands for."""
+    """How many eigenvalues (within their rounding error) it stands for."""
     secular: bool = False
     """Marginal but repeated with fewer eigenvectors than its multiplicity
     (a Jordan block): it grows like t, so unstable."""
@@ -57,54 +73,123 @@ class Mode:
         return f"{self.verdict}: {lam.real:+.6g}{lam.imag:+.6g}i{times}, {shape}{scale}{where}"
 
 
-def tolerance(eigenvalues: np.ndarray) -> float:
-    top = float(np.max(np.abs(eigenvalues))) if eigenvalues.size else 0.0
-    return MARGINAL * max(top, 1.0)
-
-
 def verdict(real: float, tol: float) -> str:
     if real > tol:
         return "unstable"
     return "stable" if real < -tol else "marginal"
 
 
+@dataclass(frozen=True)
+class _Schur:
+    """A's complex Schur form A = Z T Z^H (not balanced: A's error is
+    relative to A's norm, whatever its scaling)."""
+
+    t: np.ndarray
+    z: np.ndarray
+    error: float
+    """A's error: SLACK n eps ||A||_F."""
+
+    @property
+    def values(self) -> np.ndarray:
+        return np.diag(self.t)
+
+    def cluster(self, members: list[int]) -> tuple[np.ndarray, np.ndarray, float]:
+        """The members' block of the reordered Schur form, their invariant
+        subspace (orthonormal), and the error of their mean."""
+        n = len(self.t)
+        select = np.zeros(n, dtype=np.int32)
+        select[members] = 1
+        ts, qs, _, m, s, _, info = lapack.ztrsen(select, self.t, self.z, job="E", lwork=n * n)
+        if info != 0 or m != len(members):  # too close to the rest to part: all of it
+            return self.t, self.z, np.inf
+        error = self.error / s if s > 0 else np.inf
+        return ts[:m, :m], qs[:, :m], error
+
+
+def _schur(a: np.ndarray) -> _Schur:
+    t, z = scipy.linalg.schur(a, output="complex")
+    big = float(np.max(np.abs(a)))
+    norm = big * float(np.linalg.norm(a / big)) if big else 0.0  # its square may overflow
+    error = SLACK * len(a) * np.finfo(float).eps * norm
+    return _Schur(t, z, error)
+
+
+def _radii(s: _Schur) -> np.ndarray:
+    """How far rounding may have moved each eigenvalue: the error times its
+    condition number, and at most SLACK times the distance to its nearest
+    (exactly equal eigenvalues have an infinite condition number)."""
+    values, n = s.values, len(s.t)
+    gaps = np.abs(values[:, None] - values[None, :]) + np.diag(np.full(n, np.inf))
+    out = np.zeros(n)
+    for i in range(n):
+        _, _, error = s.cluster([i])
+        out[i] = min(error, SLACK * float(np.min(gaps[i]))) if s.error > 0 else 0.0
+    return out
+
+
+def clusters(s: _Schur) -> list[list[int]]:
+    """The eigenvalues within each other's rounding error, joined transitively."""
+    values, radii = s.values, _radii(s)
+    owner = list(range(len(values)))
+
+    def root(i: int) -> int:
+        while owner[i] != i:
+            i = owner[i]
+        return i
+
+    for i in range(len(values)):
+        for j in range(i):
+            if abs(values[i] - values[j]) <= radii[i] + radii[j]:
+                owner[root(i)] = root(j)
+    groups: dict[int, list[int]] = {}
+    for i in range(len(values)):
+        groups.setdefault(root(i), []).append(i)
+    return list(groups.values())
+
+
 def modes(a: np.ndarray, states: tuple[str, ...]) -> list[Mode]:
     """A's modes, the unstable first, then marginal, then stable (each by
-    decreasing real part); a complex pair once."""
+    decreasing real part, the marginal by decreasing frequency: their real
+    parts are rounding); a complex pair once."""
     if not a.size:
         return []
-    values, vectors = np.linalg.eig(a)
-    tol = tolerance(values)
-    groups: list[tuple[complex, list[np.ndarray]]] = []
-    for lam, vec in zip(values, vectors.T, strict=True):
-        if lam.imag < 0 and abs(lam.imag) > tol:
+    s = _schur(a)
+    found = []
+    for members in clusters(s):
+        block, basis, error = s.cluster(members)
+        mean = complex(np.trace(block)) / len(members)
+        found.append((mean, max(error, MARGINAL * abs(mean)), members, block, basis))
+    out: list[Mode] = []
+    for mean, tol, members, block, basis in sorted(found, key=lambda f: -f[0].imag):
+        if mean.imag < -tol and any(abs(mean.conjugate() - m.eigenvalue) <= tol for m in out):
             continue  # the pair's other half
-        lam = complex(lam.real, abs(lam.imag) if abs(lam.imag) > tol else 0.0)
-        near = next((g for g in groups if abs(g[0] - lam) <= tol), None)
-        if near is None:
-            groups.append((lam, [np.abs(vec)]))
-        else:
-            near[1].append(np.abs(vec))
-    out = []
-    for lam, sizes in groups:
-        size = np.max(sizes, axis=0)
+        lam = complex(mean.real, abs(mean.imag) if abs(mean.imag) > tol else 0.0)
+        vectors = _eigenvectors(block, basis, mean, tol, s.values[members])
+        size = np.sqrt(np.sum(np.abs(vectors) ** 2, axis=1))  # the same for any basis
         top = float(size.max())
-        moved = tuple(s for s, v in zip(states, size, strict=True) if top and v >= SHOWN * top)
+        moved = tuple(n for n, v in zip(states, size, strict=True) if top and v >= SHOWN * top)
         said = verdict(lam.real, tol)
-        secular = said == "marginal" and _defective(a, values, lam, tol)
-        out.append(Mode(lam, "unstable" if secular else said, moved, len(sizes), secular))
+        secular = said == "marginal" and vectors.shape[1] < len(members)
+        out.append(Mode(lam, "unstable" if secular else said, moved, len(members), secular))
     rank = {"unstable": 0, "marginal": 1, "stable": 2}
-    return sorted(out, key=lambda m: (rank[m.verdict], -m.eigenvalue.real, -m.eigenvalue.imag))
+    return sorted(out, key=lambda m: (rank[m.verdict], -_growth(m), -m.eigenvalue.imag))
 
 
-def _defective(a: np.ndarray, values: np.ndarray, lam: complex, tol: float) -> bool:
-    """Whether lam has more eigenvalues within tol than eigenvectors."""
-    algebraic = int(np.sum(np.abs(values - lam) <= tol))
-    if algebraic < 2:
-        return False
-    sv = np.linalg.svd(a - lam * np.eye(len(a)), compute_uv=False)
-    geometric = int(np.sum(sv <= RANK * max(float(sv[0]), 1e-300)))
-    return algebraic > geometric
+def _growth(m: Mode) -> float:
+    return 0.0 if m.verdict == "marginal" else m.eigenvalue.real
+
+
+def _eigenvectors(
+    block: np.ndarray, basis: np.ndarray, mean: complex, tol: float, values: np.ndarray
+) -> np.ndarray:
+    """A basis of the cluster's eigenvectors: where its Schur block minus
+    its mean times I vanishes to within SLACK times the cluster's error or
+    spread (a semisimple cluster's block is mean I to within them; a Jordan
+    block's coupling is not, and leaves fewer eigenvectors than eigenvalues)."""
+    spread = float(np.max(np.abs(values - mean)))
+    _, sv, vh = np.linalg.svd(block - mean * np.eye(len(block)))
+    rank = int(np.sum(sv > SLACK * max(tol, spread)))
+    return np.asarray(basis @ vh[rank:].conj().T)
 
 
 def overall(found: list[Mode]) -> str:

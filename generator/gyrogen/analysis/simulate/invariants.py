@@ -76,6 +76,26 @@ def rates(scene: Scene, p: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarr
 
 
 @dataclass(frozen=True)
+class Words:
+    """The balances in words for a scene: the rate checked (the rotor's u4,
+    or a cluster's wheel 1: w1), its balance, and the power P."""
+
+    rate: str
+    balance: str
+    power: str
+
+
+def words(scene: Scene) -> Words:
+    if scene.rotors:
+        return Words(
+            "w1",
+            "w1 - w1(0) - int net_1 dt/J_1",
+            "sum_k net_k (w_k - g_k . w_A), net_k = motor_k - b_k (w_k - g_k . w_A)",
+        )
+    return Words("u4", "u4 - u4(0) - int T dt/J", "T (u4 - u2) + M g u7")
+
+
+@dataclass(frozen=True)
 class Invariants:
     h: np.ndarray
     """(n, 3) angular momentum about AB* in N."""
@@ -89,7 +109,7 @@ class Invariants:
     energy: np.ndarray
     """(K - K(0) - int P dt) / max |K|."""
     u4: np.ndarray
-    """(u4 - u4(0) - int T dt / J) / max |u4|."""
+    """(u4 - u4(0) - int T dt / J) / max |u4| (a cluster: w1's, words(scene))."""
 
     def worst(self) -> dict[str, float]:
         return {
@@ -105,9 +125,10 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
     by quadrature on the nodes inside the intervals."""
     x = traj.x
     h, k = momentum(scene, p, x), kinetic(scene, p, x)
-    work = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs))
-    h_drift, h_vector_drift = momentum_drifts(h)
     u4 = x[:, scene.states.index("w1" if scene.rotors else "u4")]
+    scales = np.array([_scale(k), _scale(u4) * _axial(scene, p)])  # the balances' normalizers
+    work = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs), scales)
+    h_drift, h_vector_drift = momentum_drifts(h)
     return Invariants(
         h=h,
         kinetic=k,
@@ -117,6 +138,15 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
         energy=balance(k, work[:, 0]),
         u4=balance(u4, work[:, 1] / _axial(scene, p)),
     )
+
+
+def in_closed_form(scene: Scene) -> bool:
+    """Whether series_at_samples has the energy balance and the rate check
+    in closed form (no torque or a constant one, a cluster without torque
+    or friction); otherwise they take quadrature along the run."""
+    if scene.rotors:
+        return all(r.torque == "none" and r.b == 0 for r in scene.rotors)
+    return scene.effects.torque in ("none", "constant")
 
 
 def series_at_samples(
@@ -147,8 +177,8 @@ def by_quadrature(scene: Scene, p: np.ndarray, traj: Trajectory) -> dict[str, np
     clamp, friction): the integrals of P and of the first rotor's torque by
     quadrature along traj."""
     along = along_trajectory(scene, p, traj)
-    rate = "w1 = w1(0) + int net_1 dt / J_1" if scene.rotors else "u4 = u4(0) + int T dt / J"
-    return {"|H| in N": along.h_drift, "energy balance": along.energy, rate: along.u4}
+    said = words(scene)
+    return {"|H| in N": along.h_drift, "energy balance": along.energy, said.balance: along.u4}
 
 
 def _work(scene: Scene, v: dict[str, float], xs: np.ndarray) -> np.ndarray:

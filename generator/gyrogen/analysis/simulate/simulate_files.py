@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gyrogen.analysis.simulate.invariants import Invariants
+from gyrogen.analysis.simulate.invariants import Invariants, words
 from gyrogen.analysis.simulate.trajectory import QUADRATURE, Trajectory
 from gyrogen.scene import Scene
 
@@ -79,14 +79,21 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
         "parameters": dict(zip(s.runtime, map(float, p), strict=True)),
         "invariants": res.invariants.worst(),
         "quadrature": QUADRATURE,
-        "invariants_note": (
-            "largest |value| over the output grid. H_norm_relative_drift: (|H| - |H(0)|)/|H(0)|, "
-            "H about AB* in N; H_vector_relative_drift: |H - H(0)|/|H(0)|. "
-            "energy_balance_relative_residual: (K - K(0) - int P dt)/max|K|, "
-            "P = T (u4 - u2) + M g u7. u4_relative_residual: (u4 - u4(0) - int T dt/J)/max|u4|."
-        ),
+        "invariants_note": note(s),
         "files": [f.name for f in res.files],
     }
+
+
+def note(scene: Scene) -> str:
+    """What summary.json's invariants are, for this scene (a cluster's
+    power and rate check are its wheels', wheel 1's)."""
+    said = words(scene)
+    return (
+        "largest |value| over the output grid. H_norm_relative_drift: (|H| - |H(0)|)/|H(0)|, "
+        "H about AB* in N; H_vector_relative_drift: |H - H(0)|/|H(0)|. "
+        "energy_balance_relative_residual: (K - K(0) - int P dt)/max|K|, "
+        f"P = {said.power}. u4_relative_residual: ({said.balance})/max|{said.rate}|."
+    )
 
 
 def contents(res: Result, p: np.ndarray) -> dict[str, bytes]:
@@ -101,15 +108,16 @@ def contents(res: Result, p: np.ndarray) -> dict[str, bytes]:
         from gyrogen.analysis.simulate import plots  # matplotlib: loaded only when a plot is wanted
 
         blobs["trajectory.png"] = plots.trajectory_png(
-            scene, traj.t, traj.x, _drifts(inv), dict(zip(scene.runtime, p, strict=True))
+            scene, traj.t, traj.x, _drifts(scene, inv), dict(zip(scene.runtime, p, strict=True))
         )
     return blobs
 
 
-def _drifts(inv: Invariants) -> dict[str, np.ndarray]:
+def _drifts(scene: Scene, inv: Invariants) -> dict[str, np.ndarray]:
+    rate = words(scene).rate
     return {
         "|H| relative drift": inv.h_drift,
         "|H - H(0)| / |H(0)|": inv.h_vector_drift,
         "energy balance residual / max K": inv.energy,
-        "u4 residual / max |u4|": inv.u4,
+        f"{rate} residual / max |{rate}|": inv.u4,
     }

@@ -1,0 +1,130 @@
+"""The modes' verdicts on spectra spread over many decades: each eigenvalue
+is judged against its own rounding error, so a stiff mode (-1e8) neither
+merges a slow pair with a zero (a false Jordan block, "grows like t") nor
+hides a slow growth, while a Jordan block that rounding splits is still
+found (alone, beside a stiff mode, on the imaginary axis, of size 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gyrogen.analysis.linearize import modes
+
+PAIR = np.array([[-0.015, 0.41], [-0.355, 0.015]])
+"""A gyroscopic nutation block: eigenvalues +-0.38i (no damping)."""
+
+
+def _hidden(*blocks: np.ndarray, seed: int = 3) -> np.ndarray:
+    """The block diagonal of blocks, seen in a random orthonormal basis (so
+    rounding touches every entry)."""
+    n = sum(len(b) for b in blocks)
+    a = np.zeros((n, n))
+    at = 0
+    for b in blocks:
+        a[at : at + len(b), at : at + len(b)] = b
+        at += len(b)
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(n, n)))
+    return q @ a @ q.T
+
+
+def _found(a: np.ndarray) -> list[modes.Mode]:
+    return modes.modes(a, tuple(f"x{i}" for i in range(len(a))))
+
+
+def _summary(found: list[modes.Mode]) -> list[tuple[str, int, bool, float]]:
+    return [(m.verdict, m.multiplicity, m.secular, round(m.eigenvalue.imag, 3)) for m in found]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_stiff_mode_leaves_a_slow_pair_and_a_zero_apart(seed: int) -> None:
+    """stiff_wheel's spectrum: +-0.38i, 0, -1e8. Measured against the
+    largest eigenvalue, all three slow ones fell within 10 of each other:
+    "unstable (x3), grows like t"."""
+    found = _found(_hidden(PAIR, np.zeros((1, 1)), -1e8 * np.ones((1, 1)), seed=seed))
+    assert modes.overall(found) == "marginal"
+    assert _summary(found) == [
+        ("marginal", 1, False, 0.381),
+        ("marginal", 1, False, 0.0),
+        ("stable", 1, False, 0.0),
+    ]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_stiff_mode_does_not_hide_a_slow_growth(seed: int) -> None:
+    """+0.145, -0.145, 0, -1e8 (a saddle beside a stiff wheel): the growth
+    is its own mode, exponential, not a Jordan block with its neighbours."""
+    saddle = np.array([[0.0, 0.145], [0.145, 0.0]])
+    found = _found(_hidden(saddle, np.zeros((1, 1)), -1e8 * np.ones((1, 1)), seed=seed))
+    assert modes.overall(found) == "unstable"
+    growing = found[0]
+    assert (growing.verdict, growing.multiplicity, growing.secular) == ("unstable", 1, False)
+    assert growing.eigenvalue.real == pytest.approx(0.145, rel=1e-6)
+    assert "growing: doubles every 4.78 s" in growing.words()
+    assert [m.verdict for m in found[1:]] == ["marginal", "stable", "stable"]
+
+
+@pytest.mark.parametrize("gamma", [1.0, 1e-3])
+def test_a_jordan_block_beside_a_stiff_mode_grows_like_t(gamma: float) -> None:
+    """0 twice with one eigenvector (coupling gamma), the pair, -1e8:
+    rounding splits the zeros by ~sqrt(gamma eps 1e8), yet they stay one
+    cluster, found defective; the pair stays apart and marginal."""
+    jordan = np.array([[0.0, gamma], [0.0, 0.0]])
+    found = _found(_hidden(jordan, PAIR, -1e8 * np.ones((1, 1))))
+    assert modes.overall(found) == "unstable"
+    assert _summary(found) == [
+        ("unstable", 2, True, 0.0),
+        ("marginal", 1, False, 0.381),
+        ("stable", 1, False, 0.0),
+    ]
+    assert "repeated without a full set of eigenvectors: grows like t" in found[0].words()
+
+
+def test_jordan_blocks_alone_grow_like_t() -> None:
+    exact = np.array([[0.0, 1.0], [0.0, 0.0]])
+    triple = _hidden(np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]))
+    rotation = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    collision = _hidden(np.block([[rotation, np.eye(2)], [np.zeros((2, 2)), rotation]]))
+    for a, imag, times in ((exact, 0.0, 2), (_hidden(exact), 0.0, 2), (triple, 0.0, 3)):
+        assert _summary(_found(a)) == [("unstable", times, True, imag)]
+    # two pairs at +-i with one eigenvector each (a stability boundary)
+    assert _summary(_found(collision)) == [("unstable", 2, True, 1.0)]
+
+
+def test_repeated_eigenvalues_with_every_eigenvector_are_marginal() -> None:
+    rotation = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    twice = _hidden(np.block([[rotation, np.zeros((2, 2))], [np.zeros((2, 2)), rotation]]))
+    assert _summary(_found(twice)) == [("marginal", 2, False, 1.0)]
+    assert _summary(_found(np.zeros((3, 3)))) == [("marginal", 3, False, 0.0)]
+    beside = _found(_hidden(np.zeros((2, 2)), -1e8 * np.ones((1, 1))))
+    assert _summary(beside) == [("marginal", 2, False, 0.0), ("stable", 1, False, 0.0)]
+
+
+def test_a_decaying_jordan_block_is_stable() -> None:
+    found = _found(_hidden(np.array([[-1e-3, 1.0], [0.0, -1e-3]])))
+    assert _summary(found) == [("stable", 2, False, 0.0)]
+    assert found[0].eigenvalue.real == pytest.approx(-1e-3, rel=1e-6)
+
+
+def test_the_verdicts_do_not_depend_on_the_units() -> None:
+    """A in other units (times 1e200, 1e-200) has the same modes, scaled:
+    A's norm is taken without overflow or underflow (squared, 1e200's
+    entries made it inf, one cluster of everything, marginal)."""
+    saddle = np.array([[0.0, 0.145], [0.145, 0.0]])
+    a = _hidden(saddle, PAIR, np.array([[0.0, 1.0], [0.0, 0.0]]), -1e8 * np.ones((1, 1)))
+    found = _found(a)
+    assert [(m.verdict, m.multiplicity, m.secular) for m in found] == [
+        ("unstable", 1, False),
+        ("unstable", 2, True),
+        ("marginal", 1, False),
+        ("stable", 1, False),
+        ("stable", 1, False),
+    ]
+    for scale in (1e200, 1e-200):
+        scaled = _found(scale * a)
+        assert [(m.verdict, m.multiplicity, m.secular, m.states) for m in scaled] == [
+            (m.verdict, m.multiplicity, m.secular, m.states) for m in found
+        ]
+        for m, n in zip(scaled, found, strict=True):
+            if not n.secular:  # a Jordan block's mean is rounding
+                assert abs(m.eigenvalue - scale * n.eigenvalue) <= 1e-5 * scale * abs(n.eigenvalue)
