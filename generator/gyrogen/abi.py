@@ -354,11 +354,9 @@ FOLDED_MAX = 1e50
 # 1; gyrogen then normalizes them exactly. A larger miss is a typo, refused.
 QUATERNION_NORM_SLACK = 1e-6
 ATTITUDE_MIN_NORM = 2.0**-511
-"""The compiled integrators normalize a start's Euler parameters (as each
-accepted step projects them) and refuse, with <PREFIX>_ODE_ERR_ARGUMENT, a
-start whose |e| is below this (sqrt(DBL_MIN): |e|^2 not a normal double) or
-not finite: e / |e| then has no direction (e = 0 made NaN of every state).
-A step whose new |e| is so is taken as a non-finite one."""
+"""The integrators normalize a start's Euler parameters and refuse one whose |e|
+is below this (sqrt(DBL_MIN)) or not finite with <PREFIX>_ODE_ERR_ARGUMENT: no
+direction (e = 0 made every state NaN). A step to such an |e| is non-finite."""
 
 # The adaptive integrators refuse rtol <= MIN_RTOL (and atol <= 0) with
 # <PREFIX>_ODE_ERR_ARGUMENT, by Hairer's rule (his codes stop with
@@ -370,11 +368,10 @@ MIN_RTOL = 10 * 2.0**-52
 """10 DBL_EPSILON = 2.220446049250313e-15: rtol must exceed it, in the
 integrators and in a scene's simulate.rtol."""
 TAYLOR_MIN_RTOL = 2.0**-52
-"""DBL_EPSILON: the Taylor method's own bound (<PREFIX>_taylor and its batch,
-called directly). Hairer's rule is about an error estimate, which it has
-none of: its order and step come from the decay of its coefficients, and at
-a tolerance within ten roundings it still steps (order 20), its error then
-that of the rounding. heyoka takes tolerances down to DBL_EPSILON too."""
+"""DBL_EPSILON: the Taylor method's own bound (<PREFIX>_taylor and its batch).
+Hairer's rule is about an error estimate, which it has none of: its order and
+step come from its coefficients' decay, and within ten roundings it still steps
+(order 20), its error that of the rounding; heyoka's bound is DBL_EPSILON too."""
 
 # The 3-1-2 attitude's kinematics divide by cos(q2): its integrators stop
 # with <PREFIX>_ODE_ERR_ATTITUDE_SINGULAR when |cos q2| < GIMBAL_LOCK_COS,
@@ -393,13 +390,10 @@ the rates are noise at the tolerances the integrators accept, and the steps
 shrink toward underflow; Euler parameters (attitude = "quaternion") have no
 such point."""
 
-# Lines of a failed compiler's output shown in its error; the whole output is
-# kept under the build cache's logs/ directory.
-COMPILER_LOG_LINES = 10
+COMPILER_LOG_LINES = 10  # of a failed compiler's output in its error (all: the cache's logs/)
 
 MAX_STEPS = 10**7
-"""Steps (accepted and rejected) an adaptive integration may take by default
-before it fails with max_steps reached (the Python API, the benchmarks, one
-Co-Simulation step of an FMU), and the RHS calls `gyrogen simulate
---max-nfev` allows scipy by default: a bound on a run that blows up rather
-than a cost to plan for."""
+"""Steps (accepted and rejected) an adaptive integration takes by default before
+max_steps ends it (the Python API, the benchmarks, an FMU's Co-Simulation step),
+and scipy's RHS calls under `simulate --max-nfev`: a bound on a run that blows
+up rather than a cost to plan for."""
