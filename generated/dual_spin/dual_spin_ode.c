@@ -2083,9 +2083,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     v51 = v43 + v50;
     tay[2][0] = tay[1][11] * inv[2];
     tay[2][1] = v17 * inv[2];
-    tay[2][16] = 2.0 * tay[2][1];
+    tay[2][16] = v17;
     tay[2][2] = v19 * inv[2];
-    tay[2][17] = 2.0 * tay[2][2];
+    tay[2][17] = v19;
     tay[2][3] = v32 * inv[2];
     tay[2][4] = v42 * inv[2];
     tay[2][5] = v51 * inv[2];
@@ -2162,9 +2162,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v51 = v43 + v50;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
         tay[n + 1][1] = v17 * inv[n + 1];
-        tay[n + 1][16] = (double)(n + 1) * tay[n + 1][1];
+        tay[n + 1][16] = v17;
         tay[n + 1][2] = v19 * inv[n + 1];
-        tay[n + 1][17] = (double)(n + 1) * tay[n + 1][2];
+        tay[n + 1][17] = v19;
         tay[n + 1][3] = v32 * inv[n + 1];
         tay[n + 1][4] = v42 * inv[n + 1];
         tay[n + 1][5] = v51 * inv[n + 1];
@@ -3031,9 +3031,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         v51 = v43 + v50;
         L->tay[2][0][l] = L->tay[1][11][l] * inv[2];
         L->tay[2][1][l] = v17 * inv[2];
-        L->tay[2][16][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][16][l] = v17;
         L->tay[2][2][l] = v19 * inv[2];
-        L->tay[2][17][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][17][l] = v19;
         L->tay[2][3][l] = v32 * inv[2];
         L->tay[2][4][l] = v42 * inv[2];
         L->tay[2][5][l] = v51 * inv[2];
@@ -3116,9 +3116,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             v51 = v43 + v50;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v17 * inv[n + 1];
-            L->tay[n + 1][16][l] = (double)(n + 1) * L->tay[n + 1][1][l];
+            L->tay[n + 1][16][l] = v17;
             L->tay[n + 1][2][l] = v19 * inv[n + 1];
-            L->tay[n + 1][17][l] = (double)(n + 1) * L->tay[n + 1][2][l];
+            L->tay[n + 1][17][l] = v19;
             L->tay[n + 1][3][l] = v32 * inv[n + 1];
             L->tay[n + 1][4][l] = v42 * inv[n + 1];
             L->tay[n + 1][5][l] = v51 * inv[n + 1];

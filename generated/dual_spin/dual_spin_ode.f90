@@ -2240,9 +2240,9 @@ contains
     v51 = v43 + v50
     tay(0, 2) = tay(11, 1) * inv(2)
     tay(1, 2) = v17 * inv(2)
-    tay(16, 2) = 2.0_c_double * tay(1, 2)
+    tay(16, 2) = v17
     tay(2, 2) = v19 * inv(2)
-    tay(17, 2) = 2.0_c_double * tay(2, 2)
+    tay(17, 2) = v19
     tay(3, 2) = v32 * inv(2)
     tay(4, 2) = v42 * inv(2)
     tay(5, 2) = v51 * inv(2)
@@ -2319,9 +2319,9 @@ contains
       v51 = v43 + v50
       tay(0, n + 1) = tay(11, n) * inv(n + 1)
       tay(1, n + 1) = v17 * inv(n + 1)
-      tay(16, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
+      tay(16, n + 1) = v17
       tay(2, n + 1) = v19 * inv(n + 1)
-      tay(17, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
+      tay(17, n + 1) = v19
       tay(3, n + 1) = v32 * inv(n + 1)
       tay(4, n + 1) = v42 * inv(n + 1)
       tay(5, n + 1) = v51 * inv(n + 1)

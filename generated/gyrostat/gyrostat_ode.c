@@ -2283,9 +2283,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     v62 = v56 + v61;
     tay[2][0] = tay[1][18] * inv[2];
     tay[2][1] = v24 * inv[2];
-    tay[2][24] = 2.0 * tay[2][1];
+    tay[2][24] = v24;
     tay[2][2] = v26 * inv[2];
-    tay[2][25] = 2.0 * tay[2][2];
+    tay[2][25] = v26;
     tay[2][3] = v27 * inv[2];
     tay[2][4] = tay[1][11] * inv[2];
     tay[2][5] = tay[1][12] * inv[2];
@@ -2373,9 +2373,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v62 = v56 + v61;
         tay[n + 1][0] = tay[n][18] * inv[n + 1];
         tay[n + 1][1] = v24 * inv[n + 1];
-        tay[n + 1][24] = (double)(n + 1) * tay[n + 1][1];
+        tay[n + 1][24] = v24;
         tay[n + 1][2] = v26 * inv[n + 1];
-        tay[n + 1][25] = (double)(n + 1) * tay[n + 1][2];
+        tay[n + 1][25] = v26;
         tay[n + 1][3] = v27 * inv[n + 1];
         tay[n + 1][4] = 0.0;
         tay[n + 1][5] = 0.0;
@@ -3294,9 +3294,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         v62 = v56 + v61;
         L->tay[2][0][l] = L->tay[1][18][l] * inv[2];
         L->tay[2][1][l] = v24 * inv[2];
-        L->tay[2][24][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][24][l] = v24;
         L->tay[2][2][l] = v26 * inv[2];
-        L->tay[2][25][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][25][l] = v26;
         L->tay[2][3][l] = v27 * inv[2];
         L->tay[2][4][l] = L->tay[1][11][l] * inv[2];
         L->tay[2][5][l] = L->tay[1][12][l] * inv[2];
@@ -3390,9 +3390,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v62 = v56 + v61;
             L->tay[n + 1][0][l] = L->tay[n][18][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v24 * inv[n + 1];
-            L->tay[n + 1][24][l] = (double)(n + 1) * L->tay[n + 1][1][l];
+            L->tay[n + 1][24][l] = v24;
             L->tay[n + 1][2][l] = v26 * inv[n + 1];
-            L->tay[n + 1][25][l] = (double)(n + 1) * L->tay[n + 1][2][l];
+            L->tay[n + 1][25][l] = v26;
             L->tay[n + 1][3][l] = v27 * inv[n + 1];
             L->tay[n + 1][4][l] = 0.0;
             L->tay[n + 1][5][l] = 0.0;

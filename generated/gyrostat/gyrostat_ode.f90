@@ -2434,9 +2434,9 @@ contains
     v62 = v56 + v61
     tay(0, 2) = tay(18, 1) * inv(2)
     tay(1, 2) = v24 * inv(2)
-    tay(24, 2) = 2.0_c_double * tay(1, 2)
+    tay(24, 2) = v24
     tay(2, 2) = v26 * inv(2)
-    tay(25, 2) = 2.0_c_double * tay(2, 2)
+    tay(25, 2) = v26
     tay(3, 2) = v27 * inv(2)
     tay(4, 2) = tay(11, 1) * inv(2)
     tay(5, 2) = tay(12, 1) * inv(2)
@@ -2524,9 +2524,9 @@ contains
       v62 = v56 + v61
       tay(0, n + 1) = tay(18, n) * inv(n + 1)
       tay(1, n + 1) = v24 * inv(n + 1)
-      tay(24, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
+      tay(24, n + 1) = v24
       tay(2, n + 1) = v26 * inv(n + 1)
-      tay(25, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
+      tay(25, n + 1) = v26
       tay(3, n + 1) = v27 * inv(n + 1)
       tay(4, n + 1) = 0.0_c_double
       tay(5, n + 1) = 0.0_c_double

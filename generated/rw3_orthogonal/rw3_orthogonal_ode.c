@@ -2256,9 +2256,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     v93 = 28.571428571428573 * v25;
     tay[2][0] = tay[1][13] * inv[2];
     tay[2][1] = v19 * inv[2];
-    tay[2][18] = 2.0 * tay[2][1];
+    tay[2][18] = v19;
     tay[2][2] = v21 * inv[2];
-    tay[2][19] = 2.0 * tay[2][2];
+    tay[2][19] = v21;
     tay[2][3] = v76 * inv[2];
     tay[2][4] = v83 * inv[2];
     tay[2][5] = v89 * inv[2];
@@ -2367,9 +2367,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v93 = 28.571428571428573 * v25;
         tay[n + 1][0] = tay[n][13] * inv[n + 1];
         tay[n + 1][1] = v19 * inv[n + 1];
-        tay[n + 1][18] = (double)(n + 1) * tay[n + 1][1];
+        tay[n + 1][18] = v19;
         tay[n + 1][2] = v21 * inv[n + 1];
-        tay[n + 1][19] = (double)(n + 1) * tay[n + 1][2];
+        tay[n + 1][19] = v21;
         tay[n + 1][3] = v76 * inv[n + 1];
         tay[n + 1][4] = v83 * inv[n + 1];
         tay[n + 1][5] = v89 * inv[n + 1];
@@ -3328,9 +3328,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         v93 = 28.571428571428573 * v25;
         L->tay[2][0][l] = L->tay[1][13][l] * inv[2];
         L->tay[2][1][l] = v19 * inv[2];
-        L->tay[2][18][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][18][l] = v19;
         L->tay[2][2][l] = v21 * inv[2];
-        L->tay[2][19][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][19][l] = v21;
         L->tay[2][3][l] = v76 * inv[2];
         L->tay[2][4][l] = v83 * inv[2];
         L->tay[2][5][l] = v89 * inv[2];
@@ -3445,9 +3445,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v93 = 28.571428571428573 * v25;
             L->tay[n + 1][0][l] = L->tay[n][13][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v19 * inv[n + 1];
-            L->tay[n + 1][18][l] = (double)(n + 1) * L->tay[n + 1][1][l];
+            L->tay[n + 1][18][l] = v19;
             L->tay[n + 1][2][l] = v21 * inv[n + 1];
-            L->tay[n + 1][19][l] = (double)(n + 1) * L->tay[n + 1][2][l];
+            L->tay[n + 1][19][l] = v21;
             L->tay[n + 1][3][l] = v76 * inv[n + 1];
             L->tay[n + 1][4][l] = v83 * inv[n + 1];
             L->tay[n + 1][5][l] = v89 * inv[n + 1];

@@ -2440,9 +2440,9 @@ contains
     v93 = 28.571428571428573_c_double * v25
     tay(0, 2) = tay(13, 1) * inv(2)
     tay(1, 2) = v19 * inv(2)
-    tay(18, 2) = 2.0_c_double * tay(1, 2)
+    tay(18, 2) = v19
     tay(2, 2) = v21 * inv(2)
-    tay(19, 2) = 2.0_c_double * tay(2, 2)
+    tay(19, 2) = v21
     tay(3, 2) = v76 * inv(2)
     tay(4, 2) = v83 * inv(2)
     tay(5, 2) = v89 * inv(2)
@@ -2551,9 +2551,9 @@ contains
       v93 = 28.571428571428573_c_double * v25
       tay(0, n + 1) = tay(13, n) * inv(n + 1)
       tay(1, n + 1) = v19 * inv(n + 1)
-      tay(18, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
+      tay(18, n + 1) = v19
       tay(2, n + 1) = v21 * inv(n + 1)
-      tay(19, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
+      tay(19, n + 1) = v21
       tay(3, n + 1) = v76 * inv(n + 1)
       tay(4, n + 1) = v83 * inv(n + 1)
       tay(5, n + 1) = v89 * inv(n + 1)

@@ -2033,9 +2033,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     v28 = -v27;
     tay[2][0] = tay[1][11] * inv[2];
     tay[2][1] = v17 * inv[2];
-    tay[2][13] = 2.0 * tay[2][1];
+    tay[2][13] = v17;
     tay[2][2] = v19 * inv[2];
-    tay[2][14] = 2.0 * tay[2][2];
+    tay[2][14] = v19;
     tay[2][3] = v25 * inv[2];
     tay[2][4] = 0.0;
     tay[2][5] = v28 * inv[2];
@@ -2085,9 +2085,9 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v28 = -v27;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
         tay[n + 1][1] = v17 * inv[n + 1];
-        tay[n + 1][13] = (double)(n + 1) * tay[n + 1][1];
+        tay[n + 1][13] = v17;
         tay[n + 1][2] = v19 * inv[n + 1];
-        tay[n + 1][14] = (double)(n + 1) * tay[n + 1][2];
+        tay[n + 1][14] = v19;
         tay[n + 1][3] = v25 * inv[n + 1];
         tay[n + 1][5] = v28 * inv[n + 1];
     }
@@ -2931,9 +2931,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         v28 = -v27;
         L->tay[2][0][l] = L->tay[1][11][l] * inv[2];
         L->tay[2][1][l] = v17 * inv[2];
-        L->tay[2][13][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][13][l] = v17;
         L->tay[2][2][l] = v19 * inv[2];
-        L->tay[2][14][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][14][l] = v19;
         L->tay[2][3][l] = v25 * inv[2];
         L->tay[2][4][l] = 0.0;
         L->tay[2][5][l] = v28 * inv[2];
@@ -2989,9 +2989,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             v28 = -v27;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v17 * inv[n + 1];
-            L->tay[n + 1][13][l] = (double)(n + 1) * L->tay[n + 1][1][l];
+            L->tay[n + 1][13][l] = v17;
             L->tay[n + 1][2][l] = v19 * inv[n + 1];
-            L->tay[n + 1][14][l] = (double)(n + 1) * L->tay[n + 1][2][l];
+            L->tay[n + 1][14][l] = v19;
             L->tay[n + 1][3][l] = v25 * inv[n + 1];
             L->tay[n + 1][5][l] = v28 * inv[n + 1];
         }

@@ -2176,9 +2176,9 @@ contains
     v28 = -v27
     tay(0, 2) = tay(11, 1) * inv(2)
     tay(1, 2) = v17 * inv(2)
-    tay(13, 2) = 2.0_c_double * tay(1, 2)
+    tay(13, 2) = v17
     tay(2, 2) = v19 * inv(2)
-    tay(14, 2) = 2.0_c_double * tay(2, 2)
+    tay(14, 2) = v19
     tay(3, 2) = v25 * inv(2)
     tay(4, 2) = 0.0_c_double
     tay(5, 2) = v28 * inv(2)
@@ -2228,9 +2228,9 @@ contains
       v28 = -v27
       tay(0, n + 1) = tay(11, n) * inv(n + 1)
       tay(1, n + 1) = v17 * inv(n + 1)
-      tay(13, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
+      tay(13, n + 1) = v17
       tay(2, n + 1) = v19 * inv(n + 1)
-      tay(14, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
+      tay(14, n + 1) = v19
       tay(3, n + 1) = v25 * inv(n + 1)
       tay(5, n + 1) = v28 * inv(n + 1)
     end do

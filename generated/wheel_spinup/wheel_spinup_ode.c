@@ -2119,9 +2119,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     v55 = v47 + v54;
     tay[2][0] = tay[1][12] * inv[2];
     tay[2][1] = v18 * inv[2];
-    tay[2][17] = 2.0 * tay[2][1];
+    tay[2][17] = v18;
     tay[2][2] = v20 * inv[2];
-    tay[2][18] = 2.0 * tay[2][2];
+    tay[2][18] = v20;
     tay[2][3] = v21 * inv[2];
     tay[2][4] = v34 * inv[2];
     tay[2][5] = v46 * inv[2];
@@ -2203,9 +2203,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         v55 = v47 + v54;
         tay[n + 1][0] = tay[n][12] * inv[n + 1];
         tay[n + 1][1] = v18 * inv[n + 1];
-        tay[n + 1][17] = (double)(n + 1) * tay[n + 1][1];
+        tay[n + 1][17] = v18;
         tay[n + 1][2] = v20 * inv[n + 1];
-        tay[n + 1][18] = (double)(n + 1) * tay[n + 1][2];
+        tay[n + 1][18] = v20;
         tay[n + 1][3] = v21 * inv[n + 1];
         tay[n + 1][4] = v34 * inv[n + 1];
         tay[n + 1][5] = v46 * inv[n + 1];
@@ -3083,9 +3083,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         v55 = v47 + v54;
         L->tay[2][0][l] = L->tay[1][12][l] * inv[2];
         L->tay[2][1][l] = v18 * inv[2];
-        L->tay[2][17][l] = 2.0 * L->tay[2][1][l];
+        L->tay[2][17][l] = v18;
         L->tay[2][2][l] = v20 * inv[2];
-        L->tay[2][18][l] = 2.0 * L->tay[2][2][l];
+        L->tay[2][18][l] = v20;
         L->tay[2][3][l] = v21 * inv[2];
         L->tay[2][4][l] = v34 * inv[2];
         L->tay[2][5][l] = v46 * inv[2];
@@ -3173,9 +3173,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             v55 = v47 + v54;
             L->tay[n + 1][0][l] = L->tay[n][12][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v18 * inv[n + 1];
-            L->tay[n + 1][17][l] = (double)(n + 1) * L->tay[n + 1][1][l];
+            L->tay[n + 1][17][l] = v18;
             L->tay[n + 1][2][l] = v20 * inv[n + 1];
-            L->tay[n + 1][18][l] = (double)(n + 1) * L->tay[n + 1][2][l];
+            L->tay[n + 1][18][l] = v20;
             L->tay[n + 1][3][l] = v21 * inv[n + 1];
             L->tay[n + 1][4][l] = v34 * inv[n + 1];
             L->tay[n + 1][5][l] = v46 * inv[n + 1];

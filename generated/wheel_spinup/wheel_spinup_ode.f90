@@ -2271,9 +2271,9 @@ contains
     v55 = v47 + v54
     tay(0, 2) = tay(12, 1) * inv(2)
     tay(1, 2) = v18 * inv(2)
-    tay(17, 2) = 2.0_c_double * tay(1, 2)
+    tay(17, 2) = v18
     tay(2, 2) = v20 * inv(2)
-    tay(18, 2) = 2.0_c_double * tay(2, 2)
+    tay(18, 2) = v20
     tay(3, 2) = v21 * inv(2)
     tay(4, 2) = v34 * inv(2)
     tay(5, 2) = v46 * inv(2)
@@ -2355,9 +2355,9 @@ contains
       v55 = v47 + v54
       tay(0, n + 1) = tay(12, n) * inv(n + 1)
       tay(1, n + 1) = v18 * inv(n + 1)
-      tay(17, n + 1) = real(n + 1, c_double) * tay(1, n + 1)
+      tay(17, n + 1) = v18
       tay(2, n + 1) = v20 * inv(n + 1)
-      tay(18, n + 1) = real(n + 1, c_double) * tay(2, n + 1)
+      tay(18, n + 1) = v20
       tay(3, n + 1) = v21 * inv(n + 1)
       tay(4, n + 1) = v34 * inv(n + 1)
       tay(5, n + 1) = v46 * inv(n + 1)

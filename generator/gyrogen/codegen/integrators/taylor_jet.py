@@ -127,14 +127,18 @@ class _Printer:
         """Node n is 0 at every order of the orders loop (not computed there)."""
         return self.low >= 2 and self.deg[n] <= FIXED_PAST
 
-    def set(self, n: int, order_: E, value: E) -> list[S]:
+    def set(self, n: int, order_: E, value: E, derivative: E | None = None) -> list[S]:
         """Node n's coefficient of order_ = value; for a trigonometric
-        argument also order_ times it, which the convolutions read. Nothing
-        for a fixed node in the orders loop (never read there)."""
+        argument also order_ times it, which the convolutions read (a
+        state's: derivative, the rhs's coefficient it is 1/order_ of, with
+        no multiply). Nothing for a fixed node in the orders loop (never
+        read there)."""
         if not isinstance(order_, Int) and self.fixed(n):
             return []
         out: list[S] = [assign(self.target(n, order_), value)]
-        if n in self.scaled:
+        if n in self.scaled and derivative is not None:
+            out.append(assign(T[order_, Int(self.scaled[n])], derivative))
+        elif n in self.scaled:
             times: E = self.target(n, order_)
             if order_ != Int(1):
                 num = Num(float(order_.value)) if isinstance(order_, Int) else fn("real", order_)
@@ -278,7 +282,7 @@ class _Printer:
         ]
         for n, f in enumerate(jet.outputs):
             value = _mul(self.at(f, k), Var("inv")[succ(k)]) if self.varying(f) else ZERO
-            out += self.set(n, succ(k), value)
+            out += self.set(n, succ(k), value, self.at(f, k) if self.varying(f) else None)
         return out
 
     def divisions(self) -> list[int]:
