@@ -39,6 +39,26 @@ def run(cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> str:
     return proc.stdout
 
 
+def cmake(source: Path, build: Path, cwd: Path, *options: str, install: Path | None = None,
+          env: dict[str, str] | None = None) -> None:  # fmt: skip
+    """source configured into build with options, built, and installed into install."""
+    run(["cmake", "-S", str(source), "-B", str(build), *options], cwd, env)
+    run(["cmake", "--build", str(build)], cwd, env)
+    if install is not None:
+        run(["cmake", "--install", str(build), "--prefix", str(install)], cwd, env)
+
+
+def consumer(find: str, exe: str, libs: str) -> str:
+    """A C project's CMakeLists.txt that finds the package and links exe.c to libs."""
+    return (
+        "cmake_minimum_required(VERSION 3.15)\n"
+        "project(consumer LANGUAGES C)\n"
+        f"find_package({find})\n"
+        f"add_executable({exe} {exe}.c)\n"
+        f"target_link_libraries({exe} PRIVATE {libs} m)\n"
+    )
+
+
 def pairs(stdout: str) -> dict[str, str]:
     return dict(line.split(" ", 1) for line in stdout.splitlines())
 
@@ -48,10 +68,9 @@ def prefix(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """generated/gyrostat built shared with Fortran, installed into a prefix."""
     work = tmp_path_factory.mktemp("package")
     build, prefix = work / "build", work / "prefix"
-    run(["cmake", "-S", str(source_dir), "-B", str(build), "-DBUILD_SHARED_LIBS=ON",
-         "-DGYROSTAT_FORTRAN=ON"], work)  # fmt: skip
-    run(["cmake", "--build", str(build)], work)
-    run(["cmake", "--install", str(build), "--prefix", str(prefix)], work)
+    cmake(
+        source_dir, build, work, "-DBUILD_SHARED_LIBS=ON", "-DGYROSTAT_FORTRAN=ON", install=prefix
+    )
     return prefix
 
 
@@ -81,17 +100,13 @@ def test_find_package_from_c_calling_c_and_fortran(prefix: Path, tmp_path: Path)
     Fortran one: the same numbers, the same refusals."""
     project = tmp_path / "consumer"
     project.mkdir()
-    shutil.copy(CONSUMERS / "c_and_fortran.c", project)
+    shutil.copy(CONSUMERS / "c_and_fortran.c", project / "mixed.c")
+    libs = "gyrostat::gyrostat gyrostat::gyrostat_f"
     (project / "CMakeLists.txt").write_text(
-        "cmake_minimum_required(VERSION 3.15)\n"
-        "project(consumer LANGUAGES C)\n"
-        "find_package(gyrostat 0.1 REQUIRED COMPONENTS Fortran)\n"
-        "add_executable(mixed c_and_fortran.c)\n"
-        "target_link_libraries(mixed PRIVATE gyrostat::gyrostat gyrostat::gyrostat_f m)\n"
+        consumer("gyrostat 0.1 REQUIRED COMPONENTS Fortran", "mixed", libs)
     )
     build = tmp_path / "build"
-    run(["cmake", "-S", str(project), "-B", str(build), f"-DCMAKE_PREFIX_PATH={prefix}"], tmp_path)
-    run(["cmake", "--build", str(build)], tmp_path)
+    cmake(project, build, tmp_path, f"-DCMAKE_PREFIX_PATH={prefix}")
     out = pairs(run([str(build / "mixed")], tmp_path))
     assert out["setup_codes"] == "0" and out["dop853_codes"] == "0"
     assert float(out["rhs_difference"]) <= 1e-14
@@ -142,9 +157,7 @@ def test_a_hostile_description_stays_in_the_comments(prefix: Path, tmp_path: Pat
     assert scene.description == HOSTILE
     source, build, mine = tmp_path / "gyrostat", tmp_path / "build", tmp_path / "prefix"
     generate(scene, source, lib=True)
-    run(["cmake", "-S", str(source), "-B", str(build), "-DBUILD_SHARED_LIBS=ON"], tmp_path)
-    run(["cmake", "--build", str(build)], tmp_path)
-    run(["cmake", "--install", str(build), "--prefix", str(mine)], tmp_path)
+    cmake(source, build, tmp_path, "-DBUILD_SHARED_LIBS=ON", install=mine)
     for where in ("lib/cmake/gyrostat/gyrostatConfig.cmake", "lib/pkgconfig/gyrostat.pc"):
         name = Path(where).name + ".in"
         installed = (mine / where).read_text()
@@ -154,15 +167,10 @@ def test_a_hostile_description_stays_in_the_comments(prefix: Path, tmp_path: Pat
     project.mkdir()
     shutil.copy(EXAMPLES / "embed_c" / "main.c", project / "app.c")
     (project / "CMakeLists.txt").write_text(
-        "cmake_minimum_required(VERSION 3.15)\n"
-        "project(consumer LANGUAGES C)\n"
-        "find_package(gyrostat 0.1 REQUIRED)\n"
-        "add_executable(app app.c)\n"
-        "target_link_libraries(app PRIVATE gyrostat::gyrostat m)\n"
+        consumer("gyrostat 0.1 REQUIRED", "app", "gyrostat::gyrostat")
     )
     out = tmp_path / "consumer-build"
-    run(["cmake", "-S", str(project), "-B", str(out), f"-DCMAKE_PREFIX_PATH={mine}"], tmp_path)
-    run(["cmake", "--build", str(out)], tmp_path)
+    cmake(project, out, tmp_path, f"-DCMAKE_PREFIX_PATH={mine}")
     assert len(run([str(out / "app")], tmp_path).splitlines()) == 18
     env = dict(os.environ, PKG_CONFIG_PATH=str(mine / "lib" / "pkgconfig"))
     flags = run(["pkg-config", "--cflags", "--libs", "gyrostat"], tmp_path, env).split()
@@ -211,8 +219,7 @@ def test_add_subdirectory_from_a_c_only_parent_without_gfortran(
     )
     env = machine_view(tmp_path)
     build = tmp_path / "build"
-    run(["cmake", "-S", str(parent), "-B", str(build), VIEW], tmp_path, env)
-    run(["cmake", "--build", str(build)], tmp_path, env)
+    cmake(parent, build, tmp_path, VIEW, env=env)
     assert len(run([str(build / "app")], tmp_path).splitlines()) == 18
     cache = (build / "CMakeCache.txt").read_text()
     assert "GYROSTAT_FORTRAN:BOOL=OFF" in cache and "CMAKE_Fortran_COMPILER" not in cache
