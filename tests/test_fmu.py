@@ -218,6 +218,26 @@ def test_a_step_size_is_refused_by_name(fmus: dict[str, Path], tmp_path: Path, h
     slave.freeInstance()
 
 
+@pytest.mark.parametrize(("t0", "h"), [(2.0**52, 0.5), (1e17, 0.1), (1e300, 0.1)])
+def test_a_step_lost_in_the_rounding_of_t_is_refused(
+    fmus: dict[str, Path], tmp_path: Path, t0: float, h: float
+) -> None:
+    """h > 0 with t + h == t: an FMI error naming h (before: fmi2OK, and the
+    time and the state stood still, step after step)."""
+    fmu = fmus["default"]
+    instance, log = instantiate(fmu, "CoSimulation", tmp_path)
+    instance.setupExperiment(startTime=t0)
+    instance.enterInitializationMode()
+    instance.exitInitializationMode()
+    refused(
+        lambda: instance.doStep(t0, h),
+        log,
+        f"fmi2DoStep: the communication step size {h:g} is lost in the rounding of t = {t0:.17g} "
+        "(t + h == t)",
+    )
+    instance.freeInstance()
+
+
 ATTITUDE = ("e0", "e1", "e2", "e3")
 
 
@@ -271,7 +291,8 @@ def test_euler_parameters_without_a_direction_are_refused(
         instance.exitInitializationMode,
         log,
         f"fmi2ExitInitializationMode: the start values of e0, e1, e2, e3 ({e[0]:g}, {e[1]:g}, "
-        f"{e[2]:g}, {e[3]:g}) are no attitude: their norm is 0 or too large to square",
+        f"{e[2]:g}, {e[3]:g}) are no attitude: their norm is 0, below sqrt(DBL_MIN) or too large "
+        "to square",
     )
     instance.freeInstance()
 
