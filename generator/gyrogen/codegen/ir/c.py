@@ -119,7 +119,7 @@ class CPrinter(Printer):
             return f"{self.prefix}_stats *{d.name}"
         ctype = CTYPE[d.type]
         if d.values:
-            table = ", ".join(self.number(v) if isinstance(v, float) else str(v) for v in d.values)
+            table = self.table(d.values)
             return f"static const {ctype} {d.name}[{len(d.values)}] = {{{table}}}"
         if param:
             if len(d.shape) == 2:

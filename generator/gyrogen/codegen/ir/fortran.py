@@ -115,7 +115,7 @@ class FortranPrinter(Printer):
     def declaration(self, d: Decl, param: bool) -> str:
         ftype = f"type({self.prefix}_stats)" if d.type == "stats" else FTYPE[d.type]
         if d.values:
-            table = ", ".join(self.number(v) if isinstance(v, float) else str(v) for v in d.values)
+            table = self.table(d.values)
             return f"{ftype}, parameter :: {d.name}(0:{len(d.values) - 1}) = [{table}]"
         intent = f", intent({d.intent})" if param else ""
         dims = ", ".join(f"0:{self.extent(n)} - 1" for n in reversed(d.shape))

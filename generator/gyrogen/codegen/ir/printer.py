@@ -135,6 +135,10 @@ class Printer:
     def number(self, value: float) -> str:
         return literal(value)
 
+    def table(self, values: tuple[int | float, ...]) -> str:
+        """A constant table's entries (Decl.values), in the target's literals."""
+        return ", ".join(self.number(v) if isinstance(v, float) else str(v) for v in values)
+
     def const(self, name: str) -> str:
         raise NotImplementedError
 
