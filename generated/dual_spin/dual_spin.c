@@ -96,15 +96,13 @@ static inline double dual_spin_kcos(double x, double y)
     return u + (1.0 - u - hz + (z * r - x * y));
 }
 
-/* sin(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond): both
-   kernels, then the quadrant picks one and its sign. */
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond): the
+   quadrant's kernel and sign. */
 static inline double dual_spin_sin(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -112,22 +110,22 @@ static inline double dual_spin_sin(double x)
         return dual_spin_ksin(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = dual_spin_reduce(x, &y, &q);
-    s = dual_spin_ksin(r, y);
-    c = dual_spin_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = dual_spin_kcos(r, y);
+    } else {
+        v = dual_spin_ksin(r, y);
+    }
     f = q >= 2.0 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
-/* cos(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond): both
-   kernels, then the quadrant picks one and its sign. */
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see dual_spin_reduce for beyond): the
+   quadrant's kernel and sign. */
 static inline double dual_spin_cos(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -135,9 +133,11 @@ static inline double dual_spin_cos(double x)
         return dual_spin_kcos(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = dual_spin_reduce(x, &y, &q);
-    s = dual_spin_ksin(r, y);
-    c = dual_spin_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = dual_spin_ksin(r, y);
+    } else {
+        v = dual_spin_kcos(r, y);
+    }
     f = q > 0.5 && q < 2.5 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
@@ -149,10 +149,10 @@ static inline double dual_spin_sin_lanes(double x)
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = dual_spin_reduce(x, &y, &q);
     s = dual_spin_ksin(r, y);
@@ -169,10 +169,10 @@ static inline double dual_spin_cos_lanes(double x)
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = dual_spin_reduce(x, &y, &q);
     s = dual_spin_ksin(r, y);

@@ -102,15 +102,13 @@ static inline double gyrostat_kcos(double x, double y)
     return u + (1.0 - u - hz + (z * r - x * y));
 }
 
-/* sin(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond): both
-   kernels, then the quadrant picks one and its sign. */
+/* sin(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond): the
+   quadrant's kernel and sign. */
 static inline double gyrostat_sin(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -118,22 +116,22 @@ static inline double gyrostat_sin(double x)
         return gyrostat_ksin(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = gyrostat_reduce(x, &y, &q);
-    s = gyrostat_ksin(r, y);
-    c = gyrostat_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = gyrostat_kcos(r, y);
+    } else {
+        v = gyrostat_ksin(r, y);
+    }
     f = q >= 2.0 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
-/* cos(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond): both
-   kernels, then the quadrant picks one and its sign. */
+/* cos(x) within 1 ulp for |x| <= 1.6e6 (see gyrostat_reduce for beyond): the
+   quadrant's kernel and sign. */
 static inline double gyrostat_cos(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -141,9 +139,11 @@ static inline double gyrostat_cos(double x)
         return gyrostat_kcos(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = gyrostat_reduce(x, &y, &q);
-    s = gyrostat_ksin(r, y);
-    c = gyrostat_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = gyrostat_ksin(r, y);
+    } else {
+        v = gyrostat_kcos(r, y);
+    }
     f = q > 0.5 && q < 2.5 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
@@ -155,10 +155,10 @@ static inline double gyrostat_sin_lanes(double x)
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = gyrostat_reduce(x, &y, &q);
     s = gyrostat_ksin(r, y);
@@ -175,10 +175,10 @@ static inline double gyrostat_cos_lanes(double x)
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = gyrostat_reduce(x, &y, &q);
     s = gyrostat_ksin(r, y);

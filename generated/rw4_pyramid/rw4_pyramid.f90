@@ -138,16 +138,13 @@ contains
   end function rw4_pyramid_kcos
 
   ! sin(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_reduce for beyond):
-  ! both
-  ! kernels, then the quadrant picks one and its sign.
+  ! the quadrant's kernel and sign.
   function rw4_pyramid_sin(x) result(res)
     real(c_double), intent(in) :: x
     real(c_double) :: res
     real(c_double) :: y
     real(c_double) :: q
     real(c_double) :: r
-    real(c_double) :: s
-    real(c_double) :: c
     real(c_double) :: v
     real(c_double) :: f
 
@@ -156,25 +153,24 @@ contains
       return
     end if
     r = rw4_pyramid_reduce(x, y, q)
-    s = rw4_pyramid_ksin(r, y)
-    c = rw4_pyramid_kcos(r, y)
-    v = merge(c, s, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    if ((q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double) then
+      v = rw4_pyramid_kcos(r, y)
+    else
+      v = rw4_pyramid_ksin(r, y)
+    end if
     f = merge(-v, v, q >= 2.0_c_double)
     res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
     return
   end function rw4_pyramid_sin
 
   ! cos(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_reduce for beyond):
-  ! both
-  ! kernels, then the quadrant picks one and its sign.
+  ! the quadrant's kernel and sign.
   function rw4_pyramid_cos(x) result(res)
     real(c_double), intent(in) :: x
     real(c_double) :: res
     real(c_double) :: y
     real(c_double) :: q
     real(c_double) :: r
-    real(c_double) :: s
-    real(c_double) :: c
     real(c_double) :: v
     real(c_double) :: f
 
@@ -183,9 +179,11 @@ contains
       return
     end if
     r = rw4_pyramid_reduce(x, y, q)
-    s = rw4_pyramid_ksin(r, y)
-    c = rw4_pyramid_kcos(r, y)
-    v = merge(s, c, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    if ((q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double) then
+      v = rw4_pyramid_ksin(r, y)
+    else
+      v = rw4_pyramid_kcos(r, y)
+    end if
     f = merge(-v, v, q > 0.5_c_double .and. q < 2.5_c_double)
     res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
     return

@@ -104,15 +104,12 @@ static inline double rw4_pyramid_failed_kcos(double x, double y)
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_failed_reduce for
-   beyond): both
-   kernels, then the quadrant picks one and its sign. */
+   beyond): the quadrant's kernel and sign. */
 static inline double rw4_pyramid_failed_sin(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -120,23 +117,22 @@ static inline double rw4_pyramid_failed_sin(double x)
         return rw4_pyramid_failed_ksin(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = rw4_pyramid_failed_reduce(x, &y, &q);
-    s = rw4_pyramid_failed_ksin(r, y);
-    c = rw4_pyramid_failed_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = rw4_pyramid_failed_kcos(r, y);
+    } else {
+        v = rw4_pyramid_failed_ksin(r, y);
+    }
     f = q >= 2.0 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_failed_reduce for
-   beyond): both
-   kernels, then the quadrant picks one and its sign. */
+   beyond): the quadrant's kernel and sign. */
 static inline double rw4_pyramid_failed_cos(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -144,25 +140,27 @@ static inline double rw4_pyramid_failed_cos(double x)
         return rw4_pyramid_failed_kcos(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = rw4_pyramid_failed_reduce(x, &y, &q);
-    s = rw4_pyramid_failed_ksin(r, y);
-    c = rw4_pyramid_failed_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = rw4_pyramid_failed_ksin(r, y);
+    } else {
+        v = rw4_pyramid_failed_kcos(r, y);
+    }
     f = q > 0.5 && q < 2.5 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_failed_reduce for
-   beyond): both
-   kernels, then the quadrant picks one and its sign. Branch-free. */
+   beyond): both kernels, then the quadrant picks one and its sign. Branch-
+   free. */
 static inline double rw4_pyramid_failed_sin_lanes(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = rw4_pyramid_failed_reduce(x, &y, &q);
     s = rw4_pyramid_failed_ksin(r, y);
@@ -173,17 +171,17 @@ static inline double rw4_pyramid_failed_sin_lanes(double x)
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see rw4_pyramid_failed_reduce for
-   beyond): both
-   kernels, then the quadrant picks one and its sign. Branch-free. */
+   beyond): both kernels, then the quadrant picks one and its sign. Branch-
+   free. */
 static inline double rw4_pyramid_failed_cos_lanes(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = rw4_pyramid_failed_reduce(x, &y, &q);
     s = rw4_pyramid_failed_ksin(r, y);

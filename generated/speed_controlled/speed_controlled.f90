@@ -144,16 +144,13 @@ contains
   end function speed_controlled_kcos
 
   ! sin(x) within 1 ulp for |x| <= 1.6e6 (see speed_controlled_reduce for
-  ! beyond): both
-  ! kernels, then the quadrant picks one and its sign.
+  ! beyond): the quadrant's kernel and sign.
   function speed_controlled_sin(x) result(res)
     real(c_double), intent(in) :: x
     real(c_double) :: res
     real(c_double) :: y
     real(c_double) :: q
     real(c_double) :: r
-    real(c_double) :: s
-    real(c_double) :: c
     real(c_double) :: v
     real(c_double) :: f
 
@@ -162,25 +159,24 @@ contains
       return
     end if
     r = speed_controlled_reduce(x, y, q)
-    s = speed_controlled_ksin(r, y)
-    c = speed_controlled_kcos(r, y)
-    v = merge(c, s, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    if ((q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double) then
+      v = speed_controlled_kcos(r, y)
+    else
+      v = speed_controlled_ksin(r, y)
+    end if
     f = merge(-v, v, q >= 2.0_c_double)
     res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
     return
   end function speed_controlled_sin
 
   ! cos(x) within 1 ulp for |x| <= 1.6e6 (see speed_controlled_reduce for
-  ! beyond): both
-  ! kernels, then the quadrant picks one and its sign.
+  ! beyond): the quadrant's kernel and sign.
   function speed_controlled_cos(x) result(res)
     real(c_double), intent(in) :: x
     real(c_double) :: res
     real(c_double) :: y
     real(c_double) :: q
     real(c_double) :: r
-    real(c_double) :: s
-    real(c_double) :: c
     real(c_double) :: v
     real(c_double) :: f
 
@@ -189,9 +185,11 @@ contains
       return
     end if
     r = speed_controlled_reduce(x, y, q)
-    s = speed_controlled_ksin(r, y)
-    c = speed_controlled_kcos(r, y)
-    v = merge(s, c, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    if ((q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double) then
+      v = speed_controlled_ksin(r, y)
+    else
+      v = speed_controlled_kcos(r, y)
+    end if
     f = merge(-v, v, q > 0.5_c_double .and. q < 2.5_c_double)
     res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
     return

@@ -137,16 +137,13 @@ contains
   end function torque_free_kcos
 
   ! sin(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-  ! both
-  ! kernels, then the quadrant picks one and its sign.
+  ! the quadrant's kernel and sign.
   function torque_free_sin(x) result(res)
     real(c_double), intent(in) :: x
     real(c_double) :: res
     real(c_double) :: y
     real(c_double) :: q
     real(c_double) :: r
-    real(c_double) :: s
-    real(c_double) :: c
     real(c_double) :: v
     real(c_double) :: f
 
@@ -155,25 +152,24 @@ contains
       return
     end if
     r = torque_free_reduce(x, y, q)
-    s = torque_free_ksin(r, y)
-    c = torque_free_kcos(r, y)
-    v = merge(c, s, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    if ((q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double) then
+      v = torque_free_kcos(r, y)
+    else
+      v = torque_free_ksin(r, y)
+    end if
     f = merge(-v, v, q >= 2.0_c_double)
     res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
     return
   end function torque_free_sin
 
   ! cos(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-  ! both
-  ! kernels, then the quadrant picks one and its sign.
+  ! the quadrant's kernel and sign.
   function torque_free_cos(x) result(res)
     real(c_double), intent(in) :: x
     real(c_double) :: res
     real(c_double) :: y
     real(c_double) :: q
     real(c_double) :: r
-    real(c_double) :: s
-    real(c_double) :: c
     real(c_double) :: v
     real(c_double) :: f
 
@@ -182,9 +178,11 @@ contains
       return
     end if
     r = torque_free_reduce(x, y, q)
-    s = torque_free_ksin(r, y)
-    c = torque_free_kcos(r, y)
-    v = merge(s, c, (q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double)
+    if ((q > 0.5_c_double .and. q < 1.5_c_double) .or. q > 2.5_c_double) then
+      v = torque_free_ksin(r, y)
+    else
+      v = torque_free_kcos(r, y)
+    end if
     f = merge(-v, v, q > 0.5_c_double .and. q < 2.5_c_double)
     res = merge(f, ieee_value(1.0_c_double, ieee_quiet_nan), abs(x) <= 1125899906842624.0_c_double)
     return

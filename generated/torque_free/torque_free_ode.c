@@ -103,15 +103,12 @@ static inline double torque_free_kcos(double x, double y)
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. */
+   the quadrant's kernel and sign. */
 static inline double torque_free_sin(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -119,23 +116,22 @@ static inline double torque_free_sin(double x)
         return torque_free_ksin(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = torque_free_reduce(x, &y, &q);
-    s = torque_free_ksin(r, y);
-    c = torque_free_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = torque_free_kcos(r, y);
+    } else {
+        v = torque_free_ksin(r, y);
+    }
     f = q >= 2.0 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. */
+   the quadrant's kernel and sign. */
 static inline double torque_free_cos(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -143,25 +139,26 @@ static inline double torque_free_cos(double x)
         return torque_free_kcos(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = torque_free_reduce(x, &y, &q);
-    s = torque_free_ksin(r, y);
-    c = torque_free_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = torque_free_ksin(r, y);
+    } else {
+        v = torque_free_kcos(r, y);
+    }
     f = q > 0.5 && q < 2.5 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. Branch-free. */
+   both kernels, then the quadrant picks one and its sign. Branch-free. */
 static inline double torque_free_sin_lanes(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = torque_free_reduce(x, &y, &q);
     s = torque_free_ksin(r, y);
@@ -172,17 +169,16 @@ static inline double torque_free_sin_lanes(double x)
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see torque_free_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. Branch-free. */
+   both kernels, then the quadrant picks one and its sign. Branch-free. */
 static inline double torque_free_cos_lanes(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = torque_free_reduce(x, &y, &q);
     s = torque_free_ksin(r, y);

@@ -97,15 +97,12 @@ static inline double wheel_spinup_kcos(double x, double y)
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see wheel_spinup_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. */
+   the quadrant's kernel and sign. */
 static inline double wheel_spinup_sin(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -113,23 +110,22 @@ static inline double wheel_spinup_sin(double x)
         return wheel_spinup_ksin(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = wheel_spinup_reduce(x, &y, &q);
-    s = wheel_spinup_ksin(r, y);
-    c = wheel_spinup_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? c : s;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = wheel_spinup_kcos(r, y);
+    } else {
+        v = wheel_spinup_ksin(r, y);
+    }
     f = q >= 2.0 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see wheel_spinup_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. */
+   the quadrant's kernel and sign. */
 static inline double wheel_spinup_cos(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
 
@@ -137,25 +133,26 @@ static inline double wheel_spinup_cos(double x)
         return wheel_spinup_kcos(x, x - x);  /* the reduction's r and tail: x, +0 */
     }
     r = wheel_spinup_reduce(x, &y, &q);
-    s = wheel_spinup_ksin(r, y);
-    c = wheel_spinup_kcos(r, y);
-    v = (q > 0.5 && q < 1.5) || q > 2.5 ? s : c;
+    if ((q > 0.5 && q < 1.5) || q > 2.5) {
+        v = wheel_spinup_ksin(r, y);
+    } else {
+        v = wheel_spinup_kcos(r, y);
+    }
     f = q > 0.5 && q < 2.5 ? -v : v;
     return fabs(x) <= 1125899906842624.0 ? f : (double)NAN;
 }
 
 /* sin(x) within 1 ulp for |x| <= 1.6e6 (see wheel_spinup_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. Branch-free. */
+   both kernels, then the quadrant picks one and its sign. Branch-free. */
 static inline double wheel_spinup_sin_lanes(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = wheel_spinup_reduce(x, &y, &q);
     s = wheel_spinup_ksin(r, y);
@@ -166,17 +163,16 @@ static inline double wheel_spinup_sin_lanes(double x)
 }
 
 /* cos(x) within 1 ulp for |x| <= 1.6e6 (see wheel_spinup_reduce for beyond):
-   both
-   kernels, then the quadrant picks one and its sign. Branch-free. */
+   both kernels, then the quadrant picks one and its sign. Branch-free. */
 static inline double wheel_spinup_cos_lanes(double x)
 {
     double y;
     double q;
     double r;
-    double s;
-    double c;
     double v;
     double f;
+    double s;
+    double c;
 
     r = wheel_spinup_reduce(x, &y, &q);
     s = wheel_spinup_ksin(r, y);

@@ -13,7 +13,9 @@ they do for an infinite or NaN x. The kernels are fdlibm's __kernel_sin and
 __kernel_cos (musl's form), errors below 1 ulp.
 
 Two variants give the same bits: <P>_sin and <P>_cos return at once for
-|x| <= pi/4 (a branch, cheap in scalar code); <P>_sin_lanes and
+|x| <= pi/4 and evaluate only the quadrant's kernel (branches, cheap in
+scalar code: 3-6 % off dop853's single call on the default scene, against
+both kernels and a select); <P>_sin_lanes and
 <P>_cos_lanes (C only) are branch-free, so that a loop over lanes
 vectorizes.
 """
@@ -37,6 +39,7 @@ from gyrogen.codegen.ir.nodes import (
     or_,
     sel,
 )
+from gyrogen.codegen.ir.nodes import S as Stmt
 
 TOINT = 6755399441055744.0
 """1.5 2^52: adding it to a double of magnitude below 2^51, then subtracting it,
@@ -125,21 +128,28 @@ def function(prefix: str, variant: str) -> Func:
         If(cmp(fn("abs", x), "<=", 0.78539816339744828), (
             Return(fn(f"{prefix}_k{name}", x, x - x), "the reduction's r and tail: x, +0"),))
     ]  # fmt: skip
+    ks, kc = fn(f"{prefix}_ksin", r, y), fn(f"{prefix}_kcos", r, y)
+    if variant == name:  # the quadrant's kernel alone (scalar: a branch)
+        pick: tuple[Stmt, ...] = (
+            If(odd, (assign(v, kc if name == "sin" else ks),),
+               (assign(v, ks if name == "sin" else kc),)),
+        )  # fmt: skip
+    else:  # both kernels, then a select (lanes: no branch)
+        pick = (assign(s, ks), assign(c, kc), assign(v, sel(odd, c, s) if name == "sin"
+                                                      else sel(odd, s, c)))  # fmt: skip
     body = (
         *early,
         assign(r, fn(f"{prefix}_reduce", x, Ref("y"), Ref("q"))),
-        assign(s, fn(f"{prefix}_ksin", r, y)),
-        assign(c, fn(f"{prefix}_kcos", r, y)),
-        assign(v, sel(odd, c, s) if name == "sin" else sel(odd, s, c)),
+        *pick,
         assign(f, sel(negative, -v, v)),
         Return(sel(cmp(fn("abs", x), "<=", TRIG_MAX), f, Const("NAN"))),
     )
     doc = (
-        f"{name}(x) within 1 ulp for |x| <= 1.6e6 (see {prefix}_reduce for beyond): both",
-        "kernels, then the quadrant picks one and its sign." + (
-            " Branch-free." if variant != name else ""),
+        f"{name}(x) within 1 ulp for |x| <= 1.6e6 (see {prefix}_reduce for beyond): "
+        + ("the quadrant's kernel and sign." if variant == name else
+           "both kernels, then the quadrant picks one and its sign. Branch-free."),
     )  # fmt: skip
-    locals_ = reals("y", "q", "r", "s", "c", "v", "f")
+    locals_ = reals("y", "q", "r", "v", "f", *(("s", "c") if variant != name else ()))
     return Func(f"{prefix}_{variant}", (real("x"),), body, "double", locals_, doc, inline=True)
 
 
