@@ -19,7 +19,7 @@ from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load
-from gyrogen.symbolic.jet import Node, NotExpandable, decompose
+from gyrogen.symbolic.jet import Node, NotExpandable, decompose, regroup
 from gyrogen.symbolic.optimize import Assignment, Block
 
 REPO = Path(__file__).resolve().parents[1]
@@ -110,6 +110,61 @@ def test_degrees_are_where_the_series_ends() -> None:
         assert np.all(got[int(deg[i]) + 1 :, i] == 0.0), i
         assert got[int(deg[i]), i] != 0.0 or i == 4  # x4' = 0: its degree 1 is a bound
     assert np.all(got[1:, 3] != 0.0)
+
+
+def test_a_quadratic_rhs_is_regrouped_by_its_fixed_state() -> None:
+    """jet.regroup: x2 (constant acceleration: fixed) takes its monomials
+    first, so one product of the two in x0' has one term; decompose keeps
+    the regrouped form because it has fewer full convolutions, and its
+    coefficients are still the series (the plain form's, to rounding)."""
+    xs, (c0, c1, c2, c3) = sm.symbols("x0:4"), sm.symbols("c0:4")
+    f0 = xs[1] * (c0 * xs[3] + c1 * xs[2]) + xs[0] * (c2 * xs[3] + c3 * xs[2])
+    f = (f0, -xs[0] * xs[3], c0, xs[1] * xs[1] - xs[0])
+    grouped = regroup(f0, xs, {2})
+    assert grouped is not None and sm.expand(grouped - f0) == 0
+    factors = {a for term in sm.Add.make_args(grouped) for a in sm.Mul.make_args(term)}
+    assert xs[2] in factors and xs[3] in factors  # x2 (c1 x1 + c3 x0) + x3 (c0 x1 + c2 x0)
+    jet = decompose(Block((), f), xs)
+    # as written: x1 (..), x0 (..), x0 x3, x1 x1; regrouped, x2 (..) has one term
+    assert jet.full() == 3
+    at = {c0: 0.7, c1: -0.4, c2: 1.3, c3: 0.2}
+    nodes = [Node("num", value=at[sm.Symbol(f"c{n.index}")]) if n.op == "c" else n
+             for n in jet.nodes]  # fmt: skip
+    x0 = [0.3, -0.2, 0.5, 0.1]
+    got = coefficients(nodes, jet.outputs, x0, 6)
+    fx = [e.subs(at) for e in f]
+    derivs = [list(xs)]
+    for _ in range(6):
+        prev = derivs[-1]
+        derivs.append([sum(sm.diff(p, xs[j]) * fx[j] for j in range(4)) for p in prev])
+    point = dict(zip(xs, x0, strict=True))
+    for k in range(7):
+        want = [float(d.subs(point)) / math.factorial(k) for d in derivs[k]]
+        np.testing.assert_allclose(got[k], want, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_regroup_is_the_same_polynomial(seed: int) -> None:
+    """Any quadratic polynomial with symbolic and float coefficients comes
+    back as the same polynomial, every quadratic monomial in one product of
+    a state and a linear form; a cubic, a sine or a quotient is not tried."""
+    rng = np.random.default_rng(seed)
+    xs, cs = sm.symbols("x0:5"), sm.symbols("c0:3")
+    terms = [float(rng.normal()) * rng.choice(cs) * xs[i] * xs[j]
+             for i, j in rng.integers(0, 5, (int(rng.integers(2, 12)), 2))]  # fmt: skip
+    e = sm.Add(*terms, rng.choice(cs) * xs[int(rng.integers(0, 5))], sm.Float(rng.normal()))
+    fixed = {int(i) for i in rng.integers(0, 5, int(rng.integers(0, 3)))}
+    grouped = regroup(e, xs, fixed)
+    if sm.Poly(e, *xs).total_degree() != 2:  # the terms cancelled
+        assert grouped is None
+        return
+    assert grouped is not None and sm.expand(grouped - e) == 0
+    for term in sm.Add.make_args(grouped):
+        assert sm.Poly(term, *xs).total_degree() <= 2
+    assert regroup(xs[0] * xs[1] * xs[2], xs, set()) is None
+    assert regroup(sm.sin(xs[0]) * xs[1], xs, set()) is None
+    assert regroup(xs[0] / xs[1], xs, set()) is None
+    assert regroup(cs[0] * cs[1], xs, set()) is None
 
 
 @pytest.mark.parametrize(

@@ -1935,9 +1935,9 @@ int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rt
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
-/* The normalized Taylor coefficients of x and of the rhs's 46
+/* The normalized Taylor coefficients of x and of the rhs's 49
    nodes to the given order (16 of them convolutions). */
-static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[18])
+static inline void taylor_jet(int order, const double *x, const double *inv, double (*tay)[19])
 {
     double acc7;
     double acc8;
@@ -1953,8 +1953,8 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     double acc31;
     double acc34;
     double acc41;
-    double acc43;
-    double acc50;
+    double acc47;
+    double acc53;
     double ib14;
     double ub14;
     double v9;
@@ -1981,10 +1981,12 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     double v42;
     double v43;
     double v45;
-    double v46;
-    double v48;
+    double v47;
+    double v49;
     double v50;
     double v51;
+    double v53;
+    double v54;
     int j;
     int n;
 
@@ -2009,15 +2011,15 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     v17 = v15 + v16;
     v18 = tay[0][11] * tay[0][9];
     v19 = tay[0][4] - v18;
-    v21 = 4.5440763299219775e-05 * tay[0][6];
-    v23 = 0.4092155481941839 * tay[0][4];
-    tay[0][12] = v21 + v23;
-    v25 = tay[0][5] * tay[0][12];
-    v27 = 0.015471973456719416 * tay[0][4];
-    v29 = 1.1900419543364779e-06 * tay[0][6];
-    tay[0][13] = v27 - v29;
-    v31 = tay[0][13] * tay[0][3];
-    v32 = v25 - v31;
+    v21 = 0.4092155481941839 * tay[0][5];
+    v23 = 0.015471973456719416 * tay[0][3];
+    tay[0][12] = v21 - v23;
+    v25 = tay[0][4] * tay[0][12];
+    v27 = 1.1900419543364779e-06 * tay[0][3];
+    v29 = 4.5440763299219775e-05 * tay[0][5];
+    tay[0][13] = v27 + v29;
+    v31 = tay[0][6] * tay[0][13];
+    v32 = v25 + v31;
     v34 = tay[0][5] * tay[0][5];
     v35 = 0.01775954828743408 * v34;
     v36 = -v35;
@@ -2026,23 +2028,26 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     tay[0][14] = v37 - v39;
     v41 = tay[0][3] * tay[0][14];
     v42 = v36 + v41;
-    v43 = tay[0][13] * tay[0][5];
-    v45 = 5.266025597120826e-05 * tay[0][6];
-    v46 = -v45;
-    v48 = 0.3153534800671272 * tay[0][4];
-    tay[0][15] = v46 - v48;
-    v50 = tay[0][3] * tay[0][15];
-    v51 = v43 + v50;
+    v43 = 0.015471973456719416 * tay[0][5];
+    v45 = 0.3153534800671272 * tay[0][3];
+    tay[0][15] = v43 - v45;
+    v47 = tay[0][4] * tay[0][15];
+    v49 = 5.266025597120826e-05 * tay[0][3];
+    v50 = -v49;
+    v51 = 1.1900419543364779e-06 * tay[0][5];
+    tay[0][16] = v50 - v51;
+    v53 = tay[0][6] * tay[0][16];
+    v54 = v47 + v53;
     ib14 = 1.0 / tay[0][10];
     ub14 = tay[0][11] / tay[0][10];
     tay[1][0] = tay[0][11];
     tay[1][1] = v17;
-    tay[1][16] = tay[1][1];
+    tay[1][17] = tay[1][1];
     tay[1][2] = v19;
-    tay[1][17] = tay[1][2];
+    tay[1][18] = tay[1][2];
     tay[1][3] = v32;
     tay[1][4] = v42;
-    tay[1][5] = v51;
+    tay[1][5] = v54;
     tay[1][6] = 0.0;
     tay[1][7] = tay[1][2] * tay[0][8];
     tay[1][8] = -(tay[1][2] * tay[0][7]);
@@ -2057,15 +2062,15 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     v17 = v15 + v16;
     v18 = tay[0][11] * tay[1][9] + tay[1][11] * tay[0][9];
     v19 = tay[1][4] - v18;
-    v21 = 4.5440763299219775e-05 * tay[1][6];
-    v23 = 0.4092155481941839 * tay[1][4];
-    tay[1][12] = v21 + v23;
-    v25 = tay[0][5] * tay[1][12] + tay[1][5] * tay[0][12];
-    v27 = 0.015471973456719416 * tay[1][4];
-    v29 = 1.1900419543364779e-06 * tay[1][6];
-    tay[1][13] = v27 - v29;
-    v31 = tay[0][13] * tay[1][3] + tay[1][13] * tay[0][3];
-    v32 = v25 - v31;
+    v21 = 0.4092155481941839 * tay[1][5];
+    v23 = 0.015471973456719416 * tay[1][3];
+    tay[1][12] = v21 - v23;
+    v25 = tay[0][4] * tay[1][12] + tay[1][4] * tay[0][12];
+    v27 = 1.1900419543364779e-06 * tay[1][3];
+    v29 = 4.5440763299219775e-05 * tay[1][5];
+    tay[1][13] = v27 + v29;
+    v31 = tay[0][6] * tay[1][13] + tay[1][6] * tay[0][13];
+    v32 = v25 + v31;
     v34 = tay[0][5] * tay[1][5] + tay[1][5] * tay[0][5];
     v35 = 0.01775954828743408 * v34;
     v36 = -v35;
@@ -2074,25 +2079,30 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
     tay[1][14] = v37 - v39;
     v41 = tay[0][3] * tay[1][14] + tay[1][3] * tay[0][14];
     v42 = v36 + v41;
-    v43 = tay[0][13] * tay[1][5] + tay[1][13] * tay[0][5];
-    v45 = 5.266025597120826e-05 * tay[1][6];
-    v46 = -v45;
-    v48 = 0.3153534800671272 * tay[1][4];
-    tay[1][15] = v46 - v48;
-    v50 = tay[0][3] * tay[1][15] + tay[1][3] * tay[0][15];
-    v51 = v43 + v50;
+    v43 = 0.015471973456719416 * tay[1][5];
+    v45 = 0.3153534800671272 * tay[1][3];
+    tay[1][15] = v43 - v45;
+    v47 = tay[0][4] * tay[1][15] + tay[1][4] * tay[0][15];
+    v49 = 5.266025597120826e-05 * tay[1][3];
+    v50 = -v49;
+    v51 = 1.1900419543364779e-06 * tay[1][5];
+    tay[1][16] = v50 - v51;
+    v53 = tay[0][6] * tay[1][16] + tay[1][6] * tay[0][16];
+    v54 = v47 + v53;
     tay[2][0] = tay[1][11] * inv[2];
     tay[2][1] = v17 * inv[2];
-    tay[2][16] = v17;
+    tay[2][17] = v17;
     tay[2][2] = v19 * inv[2];
-    tay[2][17] = v19;
+    tay[2][18] = v19;
     tay[2][3] = v32 * inv[2];
     tay[2][4] = v42 * inv[2];
-    tay[2][5] = v51 * inv[2];
+    tay[2][5] = v54 * inv[2];
     tay[2][6] = 0.0;
 
     /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
     for (n = 2; n < order; ++n) {
+        acc31 = tay[1][6] * tay[n - 1][13];
+        acc53 = tay[1][6] * tay[n - 1][16];
         acc7 = 0.0;
         acc8 = 0.0;
         acc9 = 0.0;
@@ -2104,28 +2114,24 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         acc16 = 0.0;
         acc18 = 0.0;
         acc25 = 0.0;
-        acc31 = 0.0;
         acc34 = 0.0;
         acc41 = 0.0;
-        acc43 = 0.0;
-        acc50 = 0.0;
+        acc47 = 0.0;
         for (j = 1; j < n; ++j) {
-            acc7 = acc7 + tay[j][17] * tay[n - j][8];
-            acc8 = acc8 + tay[j][17] * tay[n - j][7];
+            acc7 = acc7 + tay[j][18] * tay[n - j][8];
+            acc8 = acc8 + tay[j][18] * tay[n - j][7];
             acc9 = acc9 + tay[j][8] * tay[n - j][5];
             acc10 = acc10 + tay[j][7] * tay[n - j][3];
-            acc12 = acc12 + tay[j][16] * tay[n - j][10];
-            acc13 = acc13 + tay[j][16] * tay[n - j][9];
+            acc12 = acc12 + tay[j][17] * tay[n - j][10];
+            acc13 = acc13 + tay[j][17] * tay[n - j][9];
             acc14 = acc14 + tay[j][10] * tay[n - j][11];
             acc15 = acc15 + tay[j][7] * tay[n - j][5];
             acc16 = acc16 + tay[j][8] * tay[n - j][3];
             acc18 = acc18 + tay[j][11] * tay[n - j][9];
-            acc25 = acc25 + tay[j][5] * tay[n - j][12];
-            acc31 = acc31 + tay[j][13] * tay[n - j][3];
+            acc25 = acc25 + tay[j][4] * tay[n - j][12];
             acc34 = acc34 + tay[j][5] * tay[n - j][5];
             acc41 = acc41 + tay[j][3] * tay[n - j][14];
-            acc43 = acc43 + tay[j][13] * tay[n - j][5];
-            acc50 = acc50 + tay[j][3] * tay[n - j][15];
+            acc47 = acc47 + tay[j][4] * tay[n - j][15];
         }
         tay[n][7] = acc7 * inv[n] + tay[n][2] * tay[0][8];
         tay[n][8] = -(acc8 * inv[n]) - tay[n][2] * tay[0][7];
@@ -2140,13 +2146,15 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         v17 = v15 + v16;
         v18 = acc18 + tay[0][11] * tay[n][9] + tay[n][11] * tay[0][9];
         v19 = tay[n][4] - v18;
-        v23 = 0.4092155481941839 * tay[n][4];
-        tay[n][12] = v23;
-        v25 = acc25 + tay[0][5] * tay[n][12] + tay[n][5] * tay[0][12];
-        v27 = 0.015471973456719416 * tay[n][4];
-        tay[n][13] = v27;
-        v31 = acc31 + tay[0][13] * tay[n][3] + tay[n][13] * tay[0][3];
-        v32 = v25 - v31;
+        v21 = 0.4092155481941839 * tay[n][5];
+        v23 = 0.015471973456719416 * tay[n][3];
+        tay[n][12] = v21 - v23;
+        v25 = acc25 + tay[0][4] * tay[n][12] + tay[n][4] * tay[0][12];
+        v27 = 1.1900419543364779e-06 * tay[n][3];
+        v29 = 4.5440763299219775e-05 * tay[n][5];
+        tay[n][13] = v27 + v29;
+        v31 = acc31 + tay[0][6] * tay[n][13];
+        v32 = v25 + v31;
         v34 = acc34 + tay[0][5] * tay[n][5] + tay[n][5] * tay[0][5];
         v35 = 0.01775954828743408 * v34;
         v36 = -v35;
@@ -2155,19 +2163,24 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
         tay[n][14] = v37 - v39;
         v41 = acc41 + tay[0][3] * tay[n][14] + tay[n][3] * tay[0][14];
         v42 = v36 + v41;
-        v43 = acc43 + tay[0][13] * tay[n][5] + tay[n][13] * tay[0][5];
-        v48 = 0.3153534800671272 * tay[n][4];
-        tay[n][15] = -v48;
-        v50 = acc50 + tay[0][3] * tay[n][15] + tay[n][3] * tay[0][15];
-        v51 = v43 + v50;
+        v43 = 0.015471973456719416 * tay[n][5];
+        v45 = 0.3153534800671272 * tay[n][3];
+        tay[n][15] = v43 - v45;
+        v47 = acc47 + tay[0][4] * tay[n][15] + tay[n][4] * tay[0][15];
+        v49 = 5.266025597120826e-05 * tay[n][3];
+        v50 = -v49;
+        v51 = 1.1900419543364779e-06 * tay[n][5];
+        tay[n][16] = v50 - v51;
+        v53 = acc53 + tay[0][6] * tay[n][16];
+        v54 = v47 + v53;
         tay[n + 1][0] = tay[n][11] * inv[n + 1];
         tay[n + 1][1] = v17 * inv[n + 1];
-        tay[n + 1][16] = v17;
+        tay[n + 1][17] = v17;
         tay[n + 1][2] = v19 * inv[n + 1];
-        tay[n + 1][17] = v19;
+        tay[n + 1][18] = v19;
         tay[n + 1][3] = v32 * inv[n + 1];
         tay[n + 1][4] = v42 * inv[n + 1];
-        tay[n + 1][5] = v51 * inv[n + 1];
+        tay[n + 1][5] = v54 * inv[n + 1];
     }
 }
 
@@ -2179,7 +2192,7 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, dual_spin_stats *stats)
 {
-    double tay[21][18];
+    double tay[21][19];
     static const double inv[21] = {0.0, 1.0, 0.5, 0.3333333333333333, 0.25, 0.2,
             0.16666666666666666, 0.14285714285714285, 0.125, 0.1111111111111111, 0.1,
             0.09090909090909091, 0.08333333333333333, 0.07692307692307693, 0.07142857142857142,
@@ -2368,7 +2381,7 @@ struct DUAL_SPIN_ALIGNED lanes {
     long stats_rejected[DUAL_SPIN_LANES];
     long stats_rhs_calls[DUAL_SPIN_LANES];
     double cap[DUAL_SPIN_LANES];
-    double tay[21][18][DUAL_SPIN_LANES];
+    double tay[21][19][DUAL_SPIN_LANES];
     int code[DUAL_SPIN_LANES];
     int nonfinite[DUAL_SPIN_LANES];
     int rejected_last[DUAL_SPIN_LANES];
@@ -2927,7 +2940,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
-/* The normalized Taylor coefficients of x and of the rhs's 46 */
+/* The normalized Taylor coefficients of x and of the rhs's 49 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
 {
     double ib14[DUAL_SPIN_LANES];
@@ -2936,7 +2949,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
     /* orders 0 and 1 of the state and of every node */
     DUAL_SPIN_SIMD
     for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-        double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v46, v48, v50, v51;
+        double v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v47, v49, v50, v51, v53, v54;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -2957,15 +2970,15 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         v17 = v15 + v16;
         v18 = L->tay[0][11][l] * L->tay[0][9][l];
         v19 = L->tay[0][4][l] - v18;
-        v21 = 4.5440763299219775e-05 * L->tay[0][6][l];
-        v23 = 0.4092155481941839 * L->tay[0][4][l];
-        L->tay[0][12][l] = v21 + v23;
-        v25 = L->tay[0][5][l] * L->tay[0][12][l];
-        v27 = 0.015471973456719416 * L->tay[0][4][l];
-        v29 = 1.1900419543364779e-06 * L->tay[0][6][l];
-        L->tay[0][13][l] = v27 - v29;
-        v31 = L->tay[0][13][l] * L->tay[0][3][l];
-        v32 = v25 - v31;
+        v21 = 0.4092155481941839 * L->tay[0][5][l];
+        v23 = 0.015471973456719416 * L->tay[0][3][l];
+        L->tay[0][12][l] = v21 - v23;
+        v25 = L->tay[0][4][l] * L->tay[0][12][l];
+        v27 = 1.1900419543364779e-06 * L->tay[0][3][l];
+        v29 = 4.5440763299219775e-05 * L->tay[0][5][l];
+        L->tay[0][13][l] = v27 + v29;
+        v31 = L->tay[0][6][l] * L->tay[0][13][l];
+        v32 = v25 + v31;
         v34 = L->tay[0][5][l] * L->tay[0][5][l];
         v35 = 0.01775954828743408 * v34;
         v36 = -v35;
@@ -2974,23 +2987,26 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         L->tay[0][14][l] = v37 - v39;
         v41 = L->tay[0][3][l] * L->tay[0][14][l];
         v42 = v36 + v41;
-        v43 = L->tay[0][13][l] * L->tay[0][5][l];
-        v45 = 5.266025597120826e-05 * L->tay[0][6][l];
-        v46 = -v45;
-        v48 = 0.3153534800671272 * L->tay[0][4][l];
-        L->tay[0][15][l] = v46 - v48;
-        v50 = L->tay[0][3][l] * L->tay[0][15][l];
-        v51 = v43 + v50;
+        v43 = 0.015471973456719416 * L->tay[0][5][l];
+        v45 = 0.3153534800671272 * L->tay[0][3][l];
+        L->tay[0][15][l] = v43 - v45;
+        v47 = L->tay[0][4][l] * L->tay[0][15][l];
+        v49 = 5.266025597120826e-05 * L->tay[0][3][l];
+        v50 = -v49;
+        v51 = 1.1900419543364779e-06 * L->tay[0][5][l];
+        L->tay[0][16][l] = v50 - v51;
+        v53 = L->tay[0][6][l] * L->tay[0][16][l];
+        v54 = v47 + v53;
         ib14[l] = 1.0 / L->tay[0][10][l];
         ub14[l] = L->tay[0][11][l] / L->tay[0][10][l];
         L->tay[1][0][l] = L->tay[0][11][l];
         L->tay[1][1][l] = v17;
-        L->tay[1][16][l] = L->tay[1][1][l];
+        L->tay[1][17][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v19;
-        L->tay[1][17][l] = L->tay[1][2][l];
+        L->tay[1][18][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v32;
         L->tay[1][4][l] = v42;
-        L->tay[1][5][l] = v51;
+        L->tay[1][5][l] = v54;
         L->tay[1][6][l] = 0.0;
         L->tay[1][7][l] = L->tay[1][2][l] * L->tay[0][8][l];
         L->tay[1][8][l] = -(L->tay[1][2][l] * L->tay[0][7][l]);
@@ -3005,15 +3021,15 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         v17 = v15 + v16;
         v18 = L->tay[0][11][l] * L->tay[1][9][l] + L->tay[1][11][l] * L->tay[0][9][l];
         v19 = L->tay[1][4][l] - v18;
-        v21 = 4.5440763299219775e-05 * L->tay[1][6][l];
-        v23 = 0.4092155481941839 * L->tay[1][4][l];
-        L->tay[1][12][l] = v21 + v23;
-        v25 = L->tay[0][5][l] * L->tay[1][12][l] + L->tay[1][5][l] * L->tay[0][12][l];
-        v27 = 0.015471973456719416 * L->tay[1][4][l];
-        v29 = 1.1900419543364779e-06 * L->tay[1][6][l];
-        L->tay[1][13][l] = v27 - v29;
-        v31 = L->tay[0][13][l] * L->tay[1][3][l] + L->tay[1][13][l] * L->tay[0][3][l];
-        v32 = v25 - v31;
+        v21 = 0.4092155481941839 * L->tay[1][5][l];
+        v23 = 0.015471973456719416 * L->tay[1][3][l];
+        L->tay[1][12][l] = v21 - v23;
+        v25 = L->tay[0][4][l] * L->tay[1][12][l] + L->tay[1][4][l] * L->tay[0][12][l];
+        v27 = 1.1900419543364779e-06 * L->tay[1][3][l];
+        v29 = 4.5440763299219775e-05 * L->tay[1][5][l];
+        L->tay[1][13][l] = v27 + v29;
+        v31 = L->tay[0][6][l] * L->tay[1][13][l] + L->tay[1][6][l] * L->tay[0][13][l];
+        v32 = v25 + v31;
         v34 = L->tay[0][5][l] * L->tay[1][5][l] + L->tay[1][5][l] * L->tay[0][5][l];
         v35 = 0.01775954828743408 * v34;
         v36 = -v35;
@@ -3022,21 +3038,24 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
         L->tay[1][14][l] = v37 - v39;
         v41 = L->tay[0][3][l] * L->tay[1][14][l] + L->tay[1][3][l] * L->tay[0][14][l];
         v42 = v36 + v41;
-        v43 = L->tay[0][13][l] * L->tay[1][5][l] + L->tay[1][13][l] * L->tay[0][5][l];
-        v45 = 5.266025597120826e-05 * L->tay[1][6][l];
-        v46 = -v45;
-        v48 = 0.3153534800671272 * L->tay[1][4][l];
-        L->tay[1][15][l] = v46 - v48;
-        v50 = L->tay[0][3][l] * L->tay[1][15][l] + L->tay[1][3][l] * L->tay[0][15][l];
-        v51 = v43 + v50;
+        v43 = 0.015471973456719416 * L->tay[1][5][l];
+        v45 = 0.3153534800671272 * L->tay[1][3][l];
+        L->tay[1][15][l] = v43 - v45;
+        v47 = L->tay[0][4][l] * L->tay[1][15][l] + L->tay[1][4][l] * L->tay[0][15][l];
+        v49 = 5.266025597120826e-05 * L->tay[1][3][l];
+        v50 = -v49;
+        v51 = 1.1900419543364779e-06 * L->tay[1][5][l];
+        L->tay[1][16][l] = v50 - v51;
+        v53 = L->tay[0][6][l] * L->tay[1][16][l] + L->tay[1][6][l] * L->tay[0][16][l];
+        v54 = v47 + v53;
         L->tay[2][0][l] = L->tay[1][11][l] * inv[2];
         L->tay[2][1][l] = v17 * inv[2];
-        L->tay[2][16][l] = v17;
+        L->tay[2][17][l] = v17;
         L->tay[2][2][l] = v19 * inv[2];
-        L->tay[2][17][l] = v19;
+        L->tay[2][18][l] = v19;
         L->tay[2][3][l] = v32 * inv[2];
         L->tay[2][4][l] = v42 * inv[2];
-        L->tay[2][5][l] = v51 * inv[2];
+        L->tay[2][5][l] = v54 * inv[2];
         L->tay[2][6][l] = 0.0;
     }
 
@@ -3044,7 +3063,9 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
     for (n = 2; n < order; ++n) {
         DUAL_SPIN_SIMD
         for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-            double acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc31, acc34, acc41, acc43, acc50, v9, v10, v11, v15, v16, v17, v18, v19, v23, v25, v27, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v48, v50, v51;
+            double acc31, acc53, acc7, acc8, acc9, acc10, acc12, acc13, acc14, acc15, acc16, acc18, acc25, acc34, acc41, acc47, v9, v10, v11, v15, v16, v17, v18, v19, v21, v23, v25, v27, v29, v31, v32, v34, v35, v36, v37, v39, v41, v42, v43, v45, v47, v49, v50, v51, v53, v54;
+            acc31 = L->tay[1][6][l] * L->tay[n - 1][13][l];
+            acc53 = L->tay[1][6][l] * L->tay[n - 1][16][l];
             acc7 = 0.0;
             acc8 = 0.0;
             acc9 = 0.0;
@@ -3056,29 +3077,25 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             acc16 = 0.0;
             acc18 = 0.0;
             acc25 = 0.0;
-            acc31 = 0.0;
             acc34 = 0.0;
             acc41 = 0.0;
-            acc43 = 0.0;
-            acc50 = 0.0;
+            acc47 = 0.0;
             j = 1;
             do {
-                acc7 = acc7 + L->tay[j][17][l] * L->tay[n - j][8][l];
-                acc8 = acc8 + L->tay[j][17][l] * L->tay[n - j][7][l];
+                acc7 = acc7 + L->tay[j][18][l] * L->tay[n - j][8][l];
+                acc8 = acc8 + L->tay[j][18][l] * L->tay[n - j][7][l];
                 acc9 = acc9 + L->tay[j][8][l] * L->tay[n - j][5][l];
                 acc10 = acc10 + L->tay[j][7][l] * L->tay[n - j][3][l];
-                acc12 = acc12 + L->tay[j][16][l] * L->tay[n - j][10][l];
-                acc13 = acc13 + L->tay[j][16][l] * L->tay[n - j][9][l];
+                acc12 = acc12 + L->tay[j][17][l] * L->tay[n - j][10][l];
+                acc13 = acc13 + L->tay[j][17][l] * L->tay[n - j][9][l];
                 acc14 = acc14 + L->tay[j][10][l] * L->tay[n - j][11][l];
                 acc15 = acc15 + L->tay[j][7][l] * L->tay[n - j][5][l];
                 acc16 = acc16 + L->tay[j][8][l] * L->tay[n - j][3][l];
                 acc18 = acc18 + L->tay[j][11][l] * L->tay[n - j][9][l];
-                acc25 = acc25 + L->tay[j][5][l] * L->tay[n - j][12][l];
-                acc31 = acc31 + L->tay[j][13][l] * L->tay[n - j][3][l];
+                acc25 = acc25 + L->tay[j][4][l] * L->tay[n - j][12][l];
                 acc34 = acc34 + L->tay[j][5][l] * L->tay[n - j][5][l];
                 acc41 = acc41 + L->tay[j][3][l] * L->tay[n - j][14][l];
-                acc43 = acc43 + L->tay[j][13][l] * L->tay[n - j][5][l];
-                acc50 = acc50 + L->tay[j][3][l] * L->tay[n - j][15][l];
+                acc47 = acc47 + L->tay[j][4][l] * L->tay[n - j][15][l];
                 ++j;
             } while (j < n);
             L->tay[n][7][l] = acc7 * inv[n] + L->tay[n][2][l] * L->tay[0][8][l];
@@ -3094,13 +3111,15 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             v17 = v15 + v16;
             v18 = acc18 + L->tay[0][11][l] * L->tay[n][9][l] + L->tay[n][11][l] * L->tay[0][9][l];
             v19 = L->tay[n][4][l] - v18;
-            v23 = 0.4092155481941839 * L->tay[n][4][l];
-            L->tay[n][12][l] = v23;
-            v25 = acc25 + L->tay[0][5][l] * L->tay[n][12][l] + L->tay[n][5][l] * L->tay[0][12][l];
-            v27 = 0.015471973456719416 * L->tay[n][4][l];
-            L->tay[n][13][l] = v27;
-            v31 = acc31 + L->tay[0][13][l] * L->tay[n][3][l] + L->tay[n][13][l] * L->tay[0][3][l];
-            v32 = v25 - v31;
+            v21 = 0.4092155481941839 * L->tay[n][5][l];
+            v23 = 0.015471973456719416 * L->tay[n][3][l];
+            L->tay[n][12][l] = v21 - v23;
+            v25 = acc25 + L->tay[0][4][l] * L->tay[n][12][l] + L->tay[n][4][l] * L->tay[0][12][l];
+            v27 = 1.1900419543364779e-06 * L->tay[n][3][l];
+            v29 = 4.5440763299219775e-05 * L->tay[n][5][l];
+            L->tay[n][13][l] = v27 + v29;
+            v31 = acc31 + L->tay[0][6][l] * L->tay[n][13][l];
+            v32 = v25 + v31;
             v34 = acc34 + L->tay[0][5][l] * L->tay[n][5][l] + L->tay[n][5][l] * L->tay[0][5][l];
             v35 = 0.01775954828743408 * v34;
             v36 = -v35;
@@ -3109,19 +3128,24 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
             L->tay[n][14][l] = v37 - v39;
             v41 = acc41 + L->tay[0][3][l] * L->tay[n][14][l] + L->tay[n][3][l] * L->tay[0][14][l];
             v42 = v36 + v41;
-            v43 = acc43 + L->tay[0][13][l] * L->tay[n][5][l] + L->tay[n][13][l] * L->tay[0][5][l];
-            v48 = 0.3153534800671272 * L->tay[n][4][l];
-            L->tay[n][15][l] = -v48;
-            v50 = acc50 + L->tay[0][3][l] * L->tay[n][15][l] + L->tay[n][3][l] * L->tay[0][15][l];
-            v51 = v43 + v50;
+            v43 = 0.015471973456719416 * L->tay[n][5][l];
+            v45 = 0.3153534800671272 * L->tay[n][3][l];
+            L->tay[n][15][l] = v43 - v45;
+            v47 = acc47 + L->tay[0][4][l] * L->tay[n][15][l] + L->tay[n][4][l] * L->tay[0][15][l];
+            v49 = 5.266025597120826e-05 * L->tay[n][3][l];
+            v50 = -v49;
+            v51 = 1.1900419543364779e-06 * L->tay[n][5][l];
+            L->tay[n][16][l] = v50 - v51;
+            v53 = acc53 + L->tay[0][6][l] * L->tay[n][16][l];
+            v54 = v47 + v53;
             L->tay[n + 1][0][l] = L->tay[n][11][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v17 * inv[n + 1];
-            L->tay[n + 1][16][l] = v17;
+            L->tay[n + 1][17][l] = v17;
             L->tay[n + 1][2][l] = v19 * inv[n + 1];
-            L->tay[n + 1][17][l] = v19;
+            L->tay[n + 1][18][l] = v19;
             L->tay[n + 1][3][l] = v32 * inv[n + 1];
             L->tay[n + 1][4][l] = v42 * inv[n + 1];
-            L->tay[n + 1][5][l] = v51 * inv[n + 1];
+            L->tay[n + 1][5][l] = v54 * inv[n + 1];
         }
     }
 }

@@ -2089,13 +2089,13 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function dual_spin_radau5
 
-  ! The normalized Taylor coefficients of x and of the rhs's 46
+  ! The normalized Taylor coefficients of x and of the rhs's 49
   ! nodes to the given order (16 of them convolutions).
   subroutine taylor_jet(order, x, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:18 - 1, 0:21 - 1)
+    real(c_double), intent(inout) :: tay(0:19 - 1, 0:21 - 1)
     real(c_double) :: acc7
     real(c_double) :: acc8
     real(c_double) :: acc9
@@ -2110,8 +2110,8 @@ contains
     real(c_double) :: acc31
     real(c_double) :: acc34
     real(c_double) :: acc41
-    real(c_double) :: acc43
-    real(c_double) :: acc50
+    real(c_double) :: acc47
+    real(c_double) :: acc53
     real(c_double) :: ib14
     real(c_double) :: ub14
     real(c_double) :: v9
@@ -2138,10 +2138,12 @@ contains
     real(c_double) :: v42
     real(c_double) :: v43
     real(c_double) :: v45
-    real(c_double) :: v46
-    real(c_double) :: v48
+    real(c_double) :: v47
+    real(c_double) :: v49
     real(c_double) :: v50
     real(c_double) :: v51
+    real(c_double) :: v53
+    real(c_double) :: v54
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2166,15 +2168,15 @@ contains
     v17 = v15 + v16
     v18 = tay(11, 0) * tay(9, 0)
     v19 = tay(4, 0) - v18
-    v21 = 4.5440763299219775e-05_c_double * tay(6, 0)
-    v23 = 0.4092155481941839_c_double * tay(4, 0)
-    tay(12, 0) = v21 + v23
-    v25 = tay(5, 0) * tay(12, 0)
-    v27 = 0.015471973456719416_c_double * tay(4, 0)
-    v29 = 1.1900419543364779e-06_c_double * tay(6, 0)
-    tay(13, 0) = v27 - v29
-    v31 = tay(13, 0) * tay(3, 0)
-    v32 = v25 - v31
+    v21 = 0.4092155481941839_c_double * tay(5, 0)
+    v23 = 0.015471973456719416_c_double * tay(3, 0)
+    tay(12, 0) = v21 - v23
+    v25 = tay(4, 0) * tay(12, 0)
+    v27 = 1.1900419543364779e-06_c_double * tay(3, 0)
+    v29 = 4.5440763299219775e-05_c_double * tay(5, 0)
+    tay(13, 0) = v27 + v29
+    v31 = tay(6, 0) * tay(13, 0)
+    v32 = v25 + v31
     v34 = tay(5, 0) * tay(5, 0)
     v35 = 0.01775954828743408_c_double * v34
     v36 = -v35
@@ -2183,23 +2185,26 @@ contains
     tay(14, 0) = v37 - v39
     v41 = tay(3, 0) * tay(14, 0)
     v42 = v36 + v41
-    v43 = tay(13, 0) * tay(5, 0)
-    v45 = 5.266025597120826e-05_c_double * tay(6, 0)
-    v46 = -v45
-    v48 = 0.3153534800671272_c_double * tay(4, 0)
-    tay(15, 0) = v46 - v48
-    v50 = tay(3, 0) * tay(15, 0)
-    v51 = v43 + v50
+    v43 = 0.015471973456719416_c_double * tay(5, 0)
+    v45 = 0.3153534800671272_c_double * tay(3, 0)
+    tay(15, 0) = v43 - v45
+    v47 = tay(4, 0) * tay(15, 0)
+    v49 = 5.266025597120826e-05_c_double * tay(3, 0)
+    v50 = -v49
+    v51 = 1.1900419543364779e-06_c_double * tay(5, 0)
+    tay(16, 0) = v50 - v51
+    v53 = tay(6, 0) * tay(16, 0)
+    v54 = v47 + v53
     ib14 = 1.0_c_double / tay(10, 0)
     ub14 = tay(11, 0) / tay(10, 0)
     tay(0, 1) = tay(11, 0)
     tay(1, 1) = v17
-    tay(16, 1) = tay(1, 1)
+    tay(17, 1) = tay(1, 1)
     tay(2, 1) = v19
-    tay(17, 1) = tay(2, 1)
+    tay(18, 1) = tay(2, 1)
     tay(3, 1) = v32
     tay(4, 1) = v42
-    tay(5, 1) = v51
+    tay(5, 1) = v54
     tay(6, 1) = 0.0_c_double
     tay(7, 1) = tay(2, 1) * tay(8, 0)
     tay(8, 1) = -tay(2, 1) * tay(7, 0)
@@ -2214,15 +2219,15 @@ contains
     v17 = v15 + v16
     v18 = tay(11, 0) * tay(9, 1) + tay(11, 1) * tay(9, 0)
     v19 = tay(4, 1) - v18
-    v21 = 4.5440763299219775e-05_c_double * tay(6, 1)
-    v23 = 0.4092155481941839_c_double * tay(4, 1)
-    tay(12, 1) = v21 + v23
-    v25 = tay(5, 0) * tay(12, 1) + tay(5, 1) * tay(12, 0)
-    v27 = 0.015471973456719416_c_double * tay(4, 1)
-    v29 = 1.1900419543364779e-06_c_double * tay(6, 1)
-    tay(13, 1) = v27 - v29
-    v31 = tay(13, 0) * tay(3, 1) + tay(13, 1) * tay(3, 0)
-    v32 = v25 - v31
+    v21 = 0.4092155481941839_c_double * tay(5, 1)
+    v23 = 0.015471973456719416_c_double * tay(3, 1)
+    tay(12, 1) = v21 - v23
+    v25 = tay(4, 0) * tay(12, 1) + tay(4, 1) * tay(12, 0)
+    v27 = 1.1900419543364779e-06_c_double * tay(3, 1)
+    v29 = 4.5440763299219775e-05_c_double * tay(5, 1)
+    tay(13, 1) = v27 + v29
+    v31 = tay(6, 0) * tay(13, 1) + tay(6, 1) * tay(13, 0)
+    v32 = v25 + v31
     v34 = tay(5, 0) * tay(5, 1) + tay(5, 1) * tay(5, 0)
     v35 = 0.01775954828743408_c_double * v34
     v36 = -v35
@@ -2231,25 +2236,30 @@ contains
     tay(14, 1) = v37 - v39
     v41 = tay(3, 0) * tay(14, 1) + tay(3, 1) * tay(14, 0)
     v42 = v36 + v41
-    v43 = tay(13, 0) * tay(5, 1) + tay(13, 1) * tay(5, 0)
-    v45 = 5.266025597120826e-05_c_double * tay(6, 1)
-    v46 = -v45
-    v48 = 0.3153534800671272_c_double * tay(4, 1)
-    tay(15, 1) = v46 - v48
-    v50 = tay(3, 0) * tay(15, 1) + tay(3, 1) * tay(15, 0)
-    v51 = v43 + v50
+    v43 = 0.015471973456719416_c_double * tay(5, 1)
+    v45 = 0.3153534800671272_c_double * tay(3, 1)
+    tay(15, 1) = v43 - v45
+    v47 = tay(4, 0) * tay(15, 1) + tay(4, 1) * tay(15, 0)
+    v49 = 5.266025597120826e-05_c_double * tay(3, 1)
+    v50 = -v49
+    v51 = 1.1900419543364779e-06_c_double * tay(5, 1)
+    tay(16, 1) = v50 - v51
+    v53 = tay(6, 0) * tay(16, 1) + tay(6, 1) * tay(16, 0)
+    v54 = v47 + v53
     tay(0, 2) = tay(11, 1) * inv(2)
     tay(1, 2) = v17 * inv(2)
-    tay(16, 2) = v17
+    tay(17, 2) = v17
     tay(2, 2) = v19 * inv(2)
-    tay(17, 2) = v19
+    tay(18, 2) = v19
     tay(3, 2) = v32 * inv(2)
     tay(4, 2) = v42 * inv(2)
-    tay(5, 2) = v51 * inv(2)
+    tay(5, 2) = v54 * inv(2)
     tay(6, 2) = 0.0_c_double
 
     ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
     do n = 2, order - 1
+      acc31 = tay(6, 1) * tay(13, n - 1)
+      acc53 = tay(6, 1) * tay(16, n - 1)
       acc7 = 0.0_c_double
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
@@ -2261,28 +2271,24 @@ contains
       acc16 = 0.0_c_double
       acc18 = 0.0_c_double
       acc25 = 0.0_c_double
-      acc31 = 0.0_c_double
       acc34 = 0.0_c_double
       acc41 = 0.0_c_double
-      acc43 = 0.0_c_double
-      acc50 = 0.0_c_double
+      acc47 = 0.0_c_double
       do j = 1, n - 1
-        acc7 = acc7 + tay(17, j) * tay(8, n - j)
-        acc8 = acc8 + tay(17, j) * tay(7, n - j)
+        acc7 = acc7 + tay(18, j) * tay(8, n - j)
+        acc8 = acc8 + tay(18, j) * tay(7, n - j)
         acc9 = acc9 + tay(8, j) * tay(5, n - j)
         acc10 = acc10 + tay(7, j) * tay(3, n - j)
-        acc12 = acc12 + tay(16, j) * tay(10, n - j)
-        acc13 = acc13 + tay(16, j) * tay(9, n - j)
+        acc12 = acc12 + tay(17, j) * tay(10, n - j)
+        acc13 = acc13 + tay(17, j) * tay(9, n - j)
         acc14 = acc14 + tay(10, j) * tay(11, n - j)
         acc15 = acc15 + tay(7, j) * tay(5, n - j)
         acc16 = acc16 + tay(8, j) * tay(3, n - j)
         acc18 = acc18 + tay(11, j) * tay(9, n - j)
-        acc25 = acc25 + tay(5, j) * tay(12, n - j)
-        acc31 = acc31 + tay(13, j) * tay(3, n - j)
+        acc25 = acc25 + tay(4, j) * tay(12, n - j)
         acc34 = acc34 + tay(5, j) * tay(5, n - j)
         acc41 = acc41 + tay(3, j) * tay(14, n - j)
-        acc43 = acc43 + tay(13, j) * tay(5, n - j)
-        acc50 = acc50 + tay(3, j) * tay(15, n - j)
+        acc47 = acc47 + tay(4, j) * tay(15, n - j)
       end do
       tay(7, n) = acc7 * inv(n) + tay(2, n) * tay(8, 0)
       tay(8, n) = (-acc8 * inv(n)) - tay(2, n) * tay(7, 0)
@@ -2297,13 +2303,15 @@ contains
       v17 = v15 + v16
       v18 = (acc18 + tay(11, 0) * tay(9, n)) + tay(11, n) * tay(9, 0)
       v19 = tay(4, n) - v18
-      v23 = 0.4092155481941839_c_double * tay(4, n)
-      tay(12, n) = v23
-      v25 = (acc25 + tay(5, 0) * tay(12, n)) + tay(5, n) * tay(12, 0)
-      v27 = 0.015471973456719416_c_double * tay(4, n)
-      tay(13, n) = v27
-      v31 = (acc31 + tay(13, 0) * tay(3, n)) + tay(13, n) * tay(3, 0)
-      v32 = v25 - v31
+      v21 = 0.4092155481941839_c_double * tay(5, n)
+      v23 = 0.015471973456719416_c_double * tay(3, n)
+      tay(12, n) = v21 - v23
+      v25 = (acc25 + tay(4, 0) * tay(12, n)) + tay(4, n) * tay(12, 0)
+      v27 = 1.1900419543364779e-06_c_double * tay(3, n)
+      v29 = 4.5440763299219775e-05_c_double * tay(5, n)
+      tay(13, n) = v27 + v29
+      v31 = acc31 + tay(6, 0) * tay(13, n)
+      v32 = v25 + v31
       v34 = (acc34 + tay(5, 0) * tay(5, n)) + tay(5, n) * tay(5, 0)
       v35 = 0.01775954828743408_c_double * v34
       v36 = -v35
@@ -2312,19 +2320,24 @@ contains
       tay(14, n) = v37 - v39
       v41 = (acc41 + tay(3, 0) * tay(14, n)) + tay(3, n) * tay(14, 0)
       v42 = v36 + v41
-      v43 = (acc43 + tay(13, 0) * tay(5, n)) + tay(13, n) * tay(5, 0)
-      v48 = 0.3153534800671272_c_double * tay(4, n)
-      tay(15, n) = -v48
-      v50 = (acc50 + tay(3, 0) * tay(15, n)) + tay(3, n) * tay(15, 0)
-      v51 = v43 + v50
+      v43 = 0.015471973456719416_c_double * tay(5, n)
+      v45 = 0.3153534800671272_c_double * tay(3, n)
+      tay(15, n) = v43 - v45
+      v47 = (acc47 + tay(4, 0) * tay(15, n)) + tay(4, n) * tay(15, 0)
+      v49 = 5.266025597120826e-05_c_double * tay(3, n)
+      v50 = -v49
+      v51 = 1.1900419543364779e-06_c_double * tay(5, n)
+      tay(16, n) = v50 - v51
+      v53 = acc53 + tay(6, 0) * tay(16, n)
+      v54 = v47 + v53
       tay(0, n + 1) = tay(11, n) * inv(n + 1)
       tay(1, n + 1) = v17 * inv(n + 1)
-      tay(16, n + 1) = v17
+      tay(17, n + 1) = v17
       tay(2, n + 1) = v19 * inv(n + 1)
-      tay(17, n + 1) = v19
+      tay(18, n + 1) = v19
       tay(3, n + 1) = v32 * inv(n + 1)
       tay(4, n + 1) = v42 * inv(n + 1)
-      tay(5, n + 1) = v51 * inv(n + 1)
+      tay(5, n + 1) = v54 * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -2344,7 +2357,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:18 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:19 - 1, 0:21 - 1)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

@@ -1974,10 +1974,10 @@ int speed_controlled_radau5(double t0, double t1, double *x, const double *c, do
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
-/* The normalized Taylor coefficients of x and of the rhs's 54
-   nodes to the given order (17 of them convolutions). */
+/* The normalized Taylor coefficients of x and of the rhs's 60
+   nodes to the given order (16 of them convolutions). */
 static inline void taylor_jet(int order, const double *x, const double *c, const double *inv,
-                              double (*tay)[19])
+                              double (*tay)[21])
 {
     double acc8;
     double acc9;
@@ -1992,10 +1992,9 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double acc27;
     double acc33;
     double acc36;
-    double acc38;
-    double acc49;
-    double acc51;
-    double acc58;
+    double acc43;
+    double acc55;
+    double acc62;
     double ib15;
     double ub15;
     double v10;
@@ -2018,20 +2017,23 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     double v37;
     double v38;
     double v39;
-    double v40;
+    double v41;
     double v43;
     double v44;
-    double v45;
-    double v46;
-    double v49;
     double v50;
     double v51;
+    double v52;
     double v53;
     double v54;
-    double v56;
+    double v55;
+    double v57;
     double v58;
-    double v59;
-    double v61;
+    double v60;
+    double v62;
+    double v63;
+    double v65;
+    double v66;
+    double v67;
     int j;
     int n;
 
@@ -2067,38 +2069,43 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     tay[0][14] = v29 - v31;
     v33 = tay[0][14] * tay[0][4];
     v34 = v27 - v33;
-    v36 = tay[0][4] * tay[0][4];
+    v36 = tay[0][6] * tay[0][6];
     v37 = 0.018613186525101588 * v36;
-    v38 = tay[0][6] * tay[0][6];
-    v39 = 0.018613186525101588 * v38;
-    v40 = v37 - v39;
-    v43 = c[2] + tay[0][7];
-    v44 = v43 - tay[0][5];
-    v45 = c[0] * v44;
-    v46 = v40 + v45;
-    tay[0][15] = 0.06916590204045965 * tay[0][4];
-    v49 = tay[0][15] * tay[0][6];
-    v50 = v46 - v49;
-    v51 = tay[0][14] * tay[0][6];
-    v53 = 0.2723557574878444 * tay[0][5];
-    v54 = -v53;
-    v56 = 0.0005451879938902264 * tay[0][7];
-    tay[0][16] = v54 - v56;
-    v58 = tay[0][4] * tay[0][16];
-    v59 = v51 + v58;
-    v61 = c[1] * v44;
+    v38 = -v37;
+    v39 = 0.018613186525101588 * tay[0][4];
+    v41 = 0.06916590204045965 * tay[0][6];
+    tay[0][15] = v39 - v41;
+    v43 = tay[0][4] * tay[0][15];
+    v44 = v38 + v43;
+    tay[0][16] = 1.0 * c[0];
+    tay[0][17] = tay[0][16] * c[2];
+    v50 = v44 + tay[0][17];
+    v51 = tay[0][16] * tay[0][7];
+    v52 = v50 + v51;
+    v53 = tay[0][16] * tay[0][5];
+    v54 = v52 - v53;
+    v55 = tay[0][14] * tay[0][6];
+    v57 = 0.2723557574878444 * tay[0][5];
+    v58 = -v57;
+    v60 = 0.0005451879938902264 * tay[0][7];
+    tay[0][18] = v58 - v60;
+    v62 = tay[0][4] * tay[0][18];
+    v63 = v55 + v62;
+    v65 = c[2] + tay[0][7];
+    v66 = v65 - tay[0][5];
+    v67 = c[1] * v66;
     ib15 = 1.0 / tay[0][11];
     ub15 = tay[0][12] / tay[0][11];
     tay[1][0] = tay[0][12];
     tay[1][1] = v18;
-    tay[1][17] = tay[1][1];
+    tay[1][19] = tay[1][1];
     tay[1][2] = v20;
-    tay[1][18] = tay[1][2];
+    tay[1][20] = tay[1][2];
     tay[1][3] = v21;
     tay[1][4] = v34;
-    tay[1][5] = v50;
-    tay[1][6] = v59;
-    tay[1][7] = v61;
+    tay[1][5] = v54;
+    tay[1][6] = v63;
+    tay[1][7] = v67;
     tay[1][8] = tay[1][2] * tay[0][9];
     tay[1][9] = -(tay[1][2] * tay[0][8]);
     v10 = tay[0][9] * tay[1][6] + tay[1][9] * tay[0][6];
@@ -2122,36 +2129,39 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
     tay[1][14] = v29 - v31;
     v33 = tay[0][14] * tay[1][4] + tay[1][14] * tay[0][4];
     v34 = v27 - v33;
-    v36 = tay[0][4] * tay[1][4] + tay[1][4] * tay[0][4];
+    v36 = tay[0][6] * tay[1][6] + tay[1][6] * tay[0][6];
     v37 = 0.018613186525101588 * v36;
-    v38 = tay[0][6] * tay[1][6] + tay[1][6] * tay[0][6];
-    v39 = 0.018613186525101588 * v38;
-    v40 = v37 - v39;
-    v43 = tay[1][7];
-    v44 = v43 - tay[1][5];
-    v45 = c[0] * v44;
-    v46 = v40 + v45;
-    tay[1][15] = 0.06916590204045965 * tay[1][4];
-    v49 = tay[0][15] * tay[1][6] + tay[1][15] * tay[0][6];
-    v50 = v46 - v49;
-    v51 = tay[0][14] * tay[1][6] + tay[1][14] * tay[0][6];
-    v53 = 0.2723557574878444 * tay[1][5];
-    v54 = -v53;
-    v56 = 0.0005451879938902264 * tay[1][7];
-    tay[1][16] = v54 - v56;
-    v58 = tay[0][4] * tay[1][16] + tay[1][4] * tay[0][16];
-    v59 = v51 + v58;
-    v61 = c[1] * v44;
+    v38 = -v37;
+    v39 = 0.018613186525101588 * tay[1][4];
+    v41 = 0.06916590204045965 * tay[1][6];
+    tay[1][15] = v39 - v41;
+    v43 = tay[0][4] * tay[1][15] + tay[1][4] * tay[0][15];
+    v44 = v38 + v43;
+    v50 = v44;
+    v51 = tay[0][16] * tay[1][7];
+    v52 = v50 + v51;
+    v53 = tay[0][16] * tay[1][5];
+    v54 = v52 - v53;
+    v55 = tay[0][14] * tay[1][6] + tay[1][14] * tay[0][6];
+    v57 = 0.2723557574878444 * tay[1][5];
+    v58 = -v57;
+    v60 = 0.0005451879938902264 * tay[1][7];
+    tay[1][18] = v58 - v60;
+    v62 = tay[0][4] * tay[1][18] + tay[1][4] * tay[0][18];
+    v63 = v55 + v62;
+    v65 = tay[1][7];
+    v66 = v65 - tay[1][5];
+    v67 = c[1] * v66;
     tay[2][0] = tay[1][12] * inv[2];
     tay[2][1] = v18 * inv[2];
-    tay[2][17] = v18;
+    tay[2][19] = v18;
     tay[2][2] = v20 * inv[2];
-    tay[2][18] = v20;
+    tay[2][20] = v20;
     tay[2][3] = v21 * inv[2];
     tay[2][4] = v34 * inv[2];
-    tay[2][5] = v50 * inv[2];
-    tay[2][6] = v59 * inv[2];
-    tay[2][7] = v61 * inv[2];
+    tay[2][5] = v54 * inv[2];
+    tay[2][6] = v63 * inv[2];
+    tay[2][7] = v67 * inv[2];
 
     /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
     for (n = 2; n < order; ++n) {
@@ -2168,28 +2178,26 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         acc27 = 0.0;
         acc33 = 0.0;
         acc36 = 0.0;
-        acc38 = 0.0;
-        acc49 = 0.0;
-        acc51 = 0.0;
-        acc58 = 0.0;
+        acc43 = 0.0;
+        acc55 = 0.0;
+        acc62 = 0.0;
         for (j = 1; j < n; ++j) {
-            acc8 = acc8 + tay[j][18] * tay[n - j][9];
-            acc9 = acc9 + tay[j][18] * tay[n - j][8];
+            acc8 = acc8 + tay[j][20] * tay[n - j][9];
+            acc9 = acc9 + tay[j][20] * tay[n - j][8];
             acc10 = acc10 + tay[j][9] * tay[n - j][6];
             acc11 = acc11 + tay[j][8] * tay[n - j][4];
-            acc13 = acc13 + tay[j][17] * tay[n - j][11];
-            acc14 = acc14 + tay[j][17] * tay[n - j][10];
+            acc13 = acc13 + tay[j][19] * tay[n - j][11];
+            acc14 = acc14 + tay[j][19] * tay[n - j][10];
             acc15 = acc15 + tay[j][11] * tay[n - j][12];
             acc16 = acc16 + tay[j][8] * tay[n - j][6];
             acc17 = acc17 + tay[j][9] * tay[n - j][4];
             acc19 = acc19 + tay[j][12] * tay[n - j][10];
             acc27 = acc27 + tay[j][6] * tay[n - j][13];
             acc33 = acc33 + tay[j][14] * tay[n - j][4];
-            acc36 = acc36 + tay[j][4] * tay[n - j][4];
-            acc38 = acc38 + tay[j][6] * tay[n - j][6];
-            acc49 = acc49 + tay[j][15] * tay[n - j][6];
-            acc51 = acc51 + tay[j][14] * tay[n - j][6];
-            acc58 = acc58 + tay[j][4] * tay[n - j][16];
+            acc36 = acc36 + tay[j][6] * tay[n - j][6];
+            acc43 = acc43 + tay[j][4] * tay[n - j][15];
+            acc55 = acc55 + tay[j][14] * tay[n - j][6];
+            acc62 = acc62 + tay[j][4] * tay[n - j][18];
         }
         tay[n][8] = acc8 * inv[n] + tay[n][2] * tay[0][9];
         tay[n][9] = -(acc9 * inv[n]) - tay[n][2] * tay[0][8];
@@ -2214,36 +2222,39 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
         tay[n][14] = v29 - v31;
         v33 = acc33 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
         v34 = v27 - v33;
-        v36 = acc36 + tay[0][4] * tay[n][4] + tay[n][4] * tay[0][4];
+        v36 = acc36 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
         v37 = 0.018613186525101588 * v36;
-        v38 = acc38 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
-        v39 = 0.018613186525101588 * v38;
-        v40 = v37 - v39;
-        v43 = tay[n][7];
-        v44 = v43 - tay[n][5];
-        v45 = c[0] * v44;
-        v46 = v40 + v45;
-        tay[n][15] = 0.06916590204045965 * tay[n][4];
-        v49 = acc49 + tay[0][15] * tay[n][6] + tay[n][15] * tay[0][6];
-        v50 = v46 - v49;
-        v51 = acc51 + tay[0][14] * tay[n][6] + tay[n][14] * tay[0][6];
-        v53 = 0.2723557574878444 * tay[n][5];
-        v54 = -v53;
-        v56 = 0.0005451879938902264 * tay[n][7];
-        tay[n][16] = v54 - v56;
-        v58 = acc58 + tay[0][4] * tay[n][16] + tay[n][4] * tay[0][16];
-        v59 = v51 + v58;
-        v61 = c[1] * v44;
+        v38 = -v37;
+        v39 = 0.018613186525101588 * tay[n][4];
+        v41 = 0.06916590204045965 * tay[n][6];
+        tay[n][15] = v39 - v41;
+        v43 = acc43 + tay[0][4] * tay[n][15] + tay[n][4] * tay[0][15];
+        v44 = v38 + v43;
+        v50 = v44;
+        v51 = tay[0][16] * tay[n][7];
+        v52 = v50 + v51;
+        v53 = tay[0][16] * tay[n][5];
+        v54 = v52 - v53;
+        v55 = acc55 + tay[0][14] * tay[n][6] + tay[n][14] * tay[0][6];
+        v57 = 0.2723557574878444 * tay[n][5];
+        v58 = -v57;
+        v60 = 0.0005451879938902264 * tay[n][7];
+        tay[n][18] = v58 - v60;
+        v62 = acc62 + tay[0][4] * tay[n][18] + tay[n][4] * tay[0][18];
+        v63 = v55 + v62;
+        v65 = tay[n][7];
+        v66 = v65 - tay[n][5];
+        v67 = c[1] * v66;
         tay[n + 1][0] = tay[n][12] * inv[n + 1];
         tay[n + 1][1] = v18 * inv[n + 1];
-        tay[n + 1][17] = v18;
+        tay[n + 1][19] = v18;
         tay[n + 1][2] = v20 * inv[n + 1];
-        tay[n + 1][18] = v20;
+        tay[n + 1][20] = v20;
         tay[n + 1][3] = v21 * inv[n + 1];
         tay[n + 1][4] = v34 * inv[n + 1];
-        tay[n + 1][5] = v50 * inv[n + 1];
-        tay[n + 1][6] = v59 * inv[n + 1];
-        tay[n + 1][7] = v61 * inv[n + 1];
+        tay[n + 1][5] = v54 * inv[n + 1];
+        tay[n + 1][6] = v63 * inv[n + 1];
+        tay[n + 1][7] = v67 * inv[n + 1];
     }
 }
 
@@ -2255,7 +2266,7 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
-    double tay[21][19];
+    double tay[21][21];
     static const double inv[21] = {0.0, 1.0, 0.5, 0.3333333333333333, 0.25, 0.2,
             0.16666666666666666, 0.14285714285714285, 0.125, 0.1111111111111111, 0.1,
             0.09090909090909091, 0.08333333333333333, 0.07692307692307693, 0.07142857142857142,
@@ -2444,7 +2455,7 @@ struct SPEED_CONTROLLED_ALIGNED lanes {
     long stats_rejected[SPEED_CONTROLLED_LANES];
     long stats_rhs_calls[SPEED_CONTROLLED_LANES];
     double cap[SPEED_CONTROLLED_LANES];
-    double tay[21][19][SPEED_CONTROLLED_LANES];
+    double tay[21][21][SPEED_CONTROLLED_LANES];
     int code[SPEED_CONTROLLED_LANES];
     int nonfinite[SPEED_CONTROLLED_LANES];
     int rejected_last[SPEED_CONTROLLED_LANES];
@@ -3010,7 +3021,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
-/* The normalized Taylor coefficients of x and of the rhs's 54 */
+/* The normalized Taylor coefficients of x and of the rhs's 60 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
     double ib15[SPEED_CONTROLLED_LANES];
@@ -3019,7 +3030,7 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
     /* orders 0 and 1 of the state and of every node */
     SPEED_CONTROLLED_SIMD
     for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-        double v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
+        double v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v41, v43, v44, v50, v51, v52, v53, v54, v55, v57, v58, v60, v62, v63, v65, v66, v67;
         L->tay[0][0][l] = L->x[0][l];
         L->tay[0][1][l] = L->x[1][l];
         L->tay[0][2][l] = L->x[2][l];
@@ -3051,38 +3062,43 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         L->tay[0][14][l] = v29 - v31;
         v33 = L->tay[0][14][l] * L->tay[0][4][l];
         v34 = v27 - v33;
-        v36 = L->tay[0][4][l] * L->tay[0][4][l];
+        v36 = L->tay[0][6][l] * L->tay[0][6][l];
         v37 = 0.018613186525101588 * v36;
-        v38 = L->tay[0][6][l] * L->tay[0][6][l];
-        v39 = 0.018613186525101588 * v38;
-        v40 = v37 - v39;
-        v43 = c[2] + L->tay[0][7][l];
-        v44 = v43 - L->tay[0][5][l];
-        v45 = c[0] * v44;
-        v46 = v40 + v45;
-        L->tay[0][15][l] = 0.06916590204045965 * L->tay[0][4][l];
-        v49 = L->tay[0][15][l] * L->tay[0][6][l];
-        v50 = v46 - v49;
-        v51 = L->tay[0][14][l] * L->tay[0][6][l];
-        v53 = 0.2723557574878444 * L->tay[0][5][l];
-        v54 = -v53;
-        v56 = 0.0005451879938902264 * L->tay[0][7][l];
-        L->tay[0][16][l] = v54 - v56;
-        v58 = L->tay[0][4][l] * L->tay[0][16][l];
-        v59 = v51 + v58;
-        v61 = c[1] * v44;
+        v38 = -v37;
+        v39 = 0.018613186525101588 * L->tay[0][4][l];
+        v41 = 0.06916590204045965 * L->tay[0][6][l];
+        L->tay[0][15][l] = v39 - v41;
+        v43 = L->tay[0][4][l] * L->tay[0][15][l];
+        v44 = v38 + v43;
+        L->tay[0][16][l] = 1.0 * c[0];
+        L->tay[0][17][l] = L->tay[0][16][l] * c[2];
+        v50 = v44 + L->tay[0][17][l];
+        v51 = L->tay[0][16][l] * L->tay[0][7][l];
+        v52 = v50 + v51;
+        v53 = L->tay[0][16][l] * L->tay[0][5][l];
+        v54 = v52 - v53;
+        v55 = L->tay[0][14][l] * L->tay[0][6][l];
+        v57 = 0.2723557574878444 * L->tay[0][5][l];
+        v58 = -v57;
+        v60 = 0.0005451879938902264 * L->tay[0][7][l];
+        L->tay[0][18][l] = v58 - v60;
+        v62 = L->tay[0][4][l] * L->tay[0][18][l];
+        v63 = v55 + v62;
+        v65 = c[2] + L->tay[0][7][l];
+        v66 = v65 - L->tay[0][5][l];
+        v67 = c[1] * v66;
         ib15[l] = 1.0 / L->tay[0][11][l];
         ub15[l] = L->tay[0][12][l] / L->tay[0][11][l];
         L->tay[1][0][l] = L->tay[0][12][l];
         L->tay[1][1][l] = v18;
-        L->tay[1][17][l] = L->tay[1][1][l];
+        L->tay[1][19][l] = L->tay[1][1][l];
         L->tay[1][2][l] = v20;
-        L->tay[1][18][l] = L->tay[1][2][l];
+        L->tay[1][20][l] = L->tay[1][2][l];
         L->tay[1][3][l] = v21;
         L->tay[1][4][l] = v34;
-        L->tay[1][5][l] = v50;
-        L->tay[1][6][l] = v59;
-        L->tay[1][7][l] = v61;
+        L->tay[1][5][l] = v54;
+        L->tay[1][6][l] = v63;
+        L->tay[1][7][l] = v67;
         L->tay[1][8][l] = L->tay[1][2][l] * L->tay[0][9][l];
         L->tay[1][9][l] = -(L->tay[1][2][l] * L->tay[0][8][l]);
         v10 = L->tay[0][9][l] * L->tay[1][6][l] + L->tay[1][9][l] * L->tay[0][6][l];
@@ -3106,43 +3122,46 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
         L->tay[1][14][l] = v29 - v31;
         v33 = L->tay[0][14][l] * L->tay[1][4][l] + L->tay[1][14][l] * L->tay[0][4][l];
         v34 = v27 - v33;
-        v36 = L->tay[0][4][l] * L->tay[1][4][l] + L->tay[1][4][l] * L->tay[0][4][l];
+        v36 = L->tay[0][6][l] * L->tay[1][6][l] + L->tay[1][6][l] * L->tay[0][6][l];
         v37 = 0.018613186525101588 * v36;
-        v38 = L->tay[0][6][l] * L->tay[1][6][l] + L->tay[1][6][l] * L->tay[0][6][l];
-        v39 = 0.018613186525101588 * v38;
-        v40 = v37 - v39;
-        v43 = L->tay[1][7][l];
-        v44 = v43 - L->tay[1][5][l];
-        v45 = c[0] * v44;
-        v46 = v40 + v45;
-        L->tay[1][15][l] = 0.06916590204045965 * L->tay[1][4][l];
-        v49 = L->tay[0][15][l] * L->tay[1][6][l] + L->tay[1][15][l] * L->tay[0][6][l];
-        v50 = v46 - v49;
-        v51 = L->tay[0][14][l] * L->tay[1][6][l] + L->tay[1][14][l] * L->tay[0][6][l];
-        v53 = 0.2723557574878444 * L->tay[1][5][l];
-        v54 = -v53;
-        v56 = 0.0005451879938902264 * L->tay[1][7][l];
-        L->tay[1][16][l] = v54 - v56;
-        v58 = L->tay[0][4][l] * L->tay[1][16][l] + L->tay[1][4][l] * L->tay[0][16][l];
-        v59 = v51 + v58;
-        v61 = c[1] * v44;
+        v38 = -v37;
+        v39 = 0.018613186525101588 * L->tay[1][4][l];
+        v41 = 0.06916590204045965 * L->tay[1][6][l];
+        L->tay[1][15][l] = v39 - v41;
+        v43 = L->tay[0][4][l] * L->tay[1][15][l] + L->tay[1][4][l] * L->tay[0][15][l];
+        v44 = v38 + v43;
+        v50 = v44;
+        v51 = L->tay[0][16][l] * L->tay[1][7][l];
+        v52 = v50 + v51;
+        v53 = L->tay[0][16][l] * L->tay[1][5][l];
+        v54 = v52 - v53;
+        v55 = L->tay[0][14][l] * L->tay[1][6][l] + L->tay[1][14][l] * L->tay[0][6][l];
+        v57 = 0.2723557574878444 * L->tay[1][5][l];
+        v58 = -v57;
+        v60 = 0.0005451879938902264 * L->tay[1][7][l];
+        L->tay[1][18][l] = v58 - v60;
+        v62 = L->tay[0][4][l] * L->tay[1][18][l] + L->tay[1][4][l] * L->tay[0][18][l];
+        v63 = v55 + v62;
+        v65 = L->tay[1][7][l];
+        v66 = v65 - L->tay[1][5][l];
+        v67 = c[1] * v66;
         L->tay[2][0][l] = L->tay[1][12][l] * inv[2];
         L->tay[2][1][l] = v18 * inv[2];
-        L->tay[2][17][l] = v18;
+        L->tay[2][19][l] = v18;
         L->tay[2][2][l] = v20 * inv[2];
-        L->tay[2][18][l] = v20;
+        L->tay[2][20][l] = v20;
         L->tay[2][3][l] = v21 * inv[2];
         L->tay[2][4][l] = v34 * inv[2];
-        L->tay[2][5][l] = v50 * inv[2];
-        L->tay[2][6][l] = v59 * inv[2];
-        L->tay[2][7][l] = v61 * inv[2];
+        L->tay[2][5][l] = v54 * inv[2];
+        L->tay[2][6][l] = v63 * inv[2];
+        L->tay[2][7][l] = v67 * inv[2];
     }
 
     /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
     for (n = 2; n < order; ++n) {
         SPEED_CONTROLLED_SIMD
         for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-            double acc8, acc9, acc10, acc11, acc13, acc14, acc15, acc16, acc17, acc19, acc27, acc33, acc36, acc38, acc49, acc51, acc58, v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v40, v43, v44, v45, v46, v49, v50, v51, v53, v54, v56, v58, v59, v61;
+            double acc8, acc9, acc10, acc11, acc13, acc14, acc15, acc16, acc17, acc19, acc27, acc33, acc36, acc43, acc55, acc62, v10, v11, v12, v16, v17, v18, v19, v20, v21, v23, v25, v27, v29, v31, v33, v34, v36, v37, v38, v39, v41, v43, v44, v50, v51, v52, v53, v54, v55, v57, v58, v60, v62, v63, v65, v66, v67;
             acc8 = 0.0;
             acc9 = 0.0;
             acc10 = 0.0;
@@ -3156,29 +3175,27 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             acc27 = 0.0;
             acc33 = 0.0;
             acc36 = 0.0;
-            acc38 = 0.0;
-            acc49 = 0.0;
-            acc51 = 0.0;
-            acc58 = 0.0;
+            acc43 = 0.0;
+            acc55 = 0.0;
+            acc62 = 0.0;
             j = 1;
             do {
-                acc8 = acc8 + L->tay[j][18][l] * L->tay[n - j][9][l];
-                acc9 = acc9 + L->tay[j][18][l] * L->tay[n - j][8][l];
+                acc8 = acc8 + L->tay[j][20][l] * L->tay[n - j][9][l];
+                acc9 = acc9 + L->tay[j][20][l] * L->tay[n - j][8][l];
                 acc10 = acc10 + L->tay[j][9][l] * L->tay[n - j][6][l];
                 acc11 = acc11 + L->tay[j][8][l] * L->tay[n - j][4][l];
-                acc13 = acc13 + L->tay[j][17][l] * L->tay[n - j][11][l];
-                acc14 = acc14 + L->tay[j][17][l] * L->tay[n - j][10][l];
+                acc13 = acc13 + L->tay[j][19][l] * L->tay[n - j][11][l];
+                acc14 = acc14 + L->tay[j][19][l] * L->tay[n - j][10][l];
                 acc15 = acc15 + L->tay[j][11][l] * L->tay[n - j][12][l];
                 acc16 = acc16 + L->tay[j][8][l] * L->tay[n - j][6][l];
                 acc17 = acc17 + L->tay[j][9][l] * L->tay[n - j][4][l];
                 acc19 = acc19 + L->tay[j][12][l] * L->tay[n - j][10][l];
                 acc27 = acc27 + L->tay[j][6][l] * L->tay[n - j][13][l];
                 acc33 = acc33 + L->tay[j][14][l] * L->tay[n - j][4][l];
-                acc36 = acc36 + L->tay[j][4][l] * L->tay[n - j][4][l];
-                acc38 = acc38 + L->tay[j][6][l] * L->tay[n - j][6][l];
-                acc49 = acc49 + L->tay[j][15][l] * L->tay[n - j][6][l];
-                acc51 = acc51 + L->tay[j][14][l] * L->tay[n - j][6][l];
-                acc58 = acc58 + L->tay[j][4][l] * L->tay[n - j][16][l];
+                acc36 = acc36 + L->tay[j][6][l] * L->tay[n - j][6][l];
+                acc43 = acc43 + L->tay[j][4][l] * L->tay[n - j][15][l];
+                acc55 = acc55 + L->tay[j][14][l] * L->tay[n - j][6][l];
+                acc62 = acc62 + L->tay[j][4][l] * L->tay[n - j][18][l];
                 ++j;
             } while (j < n);
             L->tay[n][8][l] = acc8 * inv[n] + L->tay[n][2][l] * L->tay[0][9][l];
@@ -3204,36 +3221,39 @@ static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const 
             L->tay[n][14][l] = v29 - v31;
             v33 = acc33 + L->tay[0][14][l] * L->tay[n][4][l] + L->tay[n][14][l] * L->tay[0][4][l];
             v34 = v27 - v33;
-            v36 = acc36 + L->tay[0][4][l] * L->tay[n][4][l] + L->tay[n][4][l] * L->tay[0][4][l];
+            v36 = acc36 + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] * L->tay[0][6][l];
             v37 = 0.018613186525101588 * v36;
-            v38 = acc38 + L->tay[0][6][l] * L->tay[n][6][l] + L->tay[n][6][l] * L->tay[0][6][l];
-            v39 = 0.018613186525101588 * v38;
-            v40 = v37 - v39;
-            v43 = L->tay[n][7][l];
-            v44 = v43 - L->tay[n][5][l];
-            v45 = c[0] * v44;
-            v46 = v40 + v45;
-            L->tay[n][15][l] = 0.06916590204045965 * L->tay[n][4][l];
-            v49 = acc49 + L->tay[0][15][l] * L->tay[n][6][l] + L->tay[n][15][l] * L->tay[0][6][l];
-            v50 = v46 - v49;
-            v51 = acc51 + L->tay[0][14][l] * L->tay[n][6][l] + L->tay[n][14][l] * L->tay[0][6][l];
-            v53 = 0.2723557574878444 * L->tay[n][5][l];
-            v54 = -v53;
-            v56 = 0.0005451879938902264 * L->tay[n][7][l];
-            L->tay[n][16][l] = v54 - v56;
-            v58 = acc58 + L->tay[0][4][l] * L->tay[n][16][l] + L->tay[n][4][l] * L->tay[0][16][l];
-            v59 = v51 + v58;
-            v61 = c[1] * v44;
+            v38 = -v37;
+            v39 = 0.018613186525101588 * L->tay[n][4][l];
+            v41 = 0.06916590204045965 * L->tay[n][6][l];
+            L->tay[n][15][l] = v39 - v41;
+            v43 = acc43 + L->tay[0][4][l] * L->tay[n][15][l] + L->tay[n][4][l] * L->tay[0][15][l];
+            v44 = v38 + v43;
+            v50 = v44;
+            v51 = L->tay[0][16][l] * L->tay[n][7][l];
+            v52 = v50 + v51;
+            v53 = L->tay[0][16][l] * L->tay[n][5][l];
+            v54 = v52 - v53;
+            v55 = acc55 + L->tay[0][14][l] * L->tay[n][6][l] + L->tay[n][14][l] * L->tay[0][6][l];
+            v57 = 0.2723557574878444 * L->tay[n][5][l];
+            v58 = -v57;
+            v60 = 0.0005451879938902264 * L->tay[n][7][l];
+            L->tay[n][18][l] = v58 - v60;
+            v62 = acc62 + L->tay[0][4][l] * L->tay[n][18][l] + L->tay[n][4][l] * L->tay[0][18][l];
+            v63 = v55 + v62;
+            v65 = L->tay[n][7][l];
+            v66 = v65 - L->tay[n][5][l];
+            v67 = c[1] * v66;
             L->tay[n + 1][0][l] = L->tay[n][12][l] * inv[n + 1];
             L->tay[n + 1][1][l] = v18 * inv[n + 1];
-            L->tay[n + 1][17][l] = v18;
+            L->tay[n + 1][19][l] = v18;
             L->tay[n + 1][2][l] = v20 * inv[n + 1];
-            L->tay[n + 1][18][l] = v20;
+            L->tay[n + 1][20][l] = v20;
             L->tay[n + 1][3][l] = v21 * inv[n + 1];
             L->tay[n + 1][4][l] = v34 * inv[n + 1];
-            L->tay[n + 1][5][l] = v50 * inv[n + 1];
-            L->tay[n + 1][6][l] = v59 * inv[n + 1];
-            L->tay[n + 1][7][l] = v61 * inv[n + 1];
+            L->tay[n + 1][5][l] = v54 * inv[n + 1];
+            L->tay[n + 1][6][l] = v63 * inv[n + 1];
+            L->tay[n + 1][7][l] = v67 * inv[n + 1];
         }
     }
 }

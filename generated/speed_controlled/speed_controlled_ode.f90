@@ -2119,14 +2119,14 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function speed_controlled_radau5
 
-  ! The normalized Taylor coefficients of x and of the rhs's 54
-  ! nodes to the given order (17 of them convolutions).
+  ! The normalized Taylor coefficients of x and of the rhs's 60
+  ! nodes to the given order (16 of them convolutions).
   subroutine taylor_jet(order, x, c, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:19 - 1, 0:21 - 1)
+    real(c_double), intent(inout) :: tay(0:21 - 1, 0:21 - 1)
     real(c_double) :: acc8
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2140,10 +2140,9 @@ contains
     real(c_double) :: acc27
     real(c_double) :: acc33
     real(c_double) :: acc36
-    real(c_double) :: acc38
-    real(c_double) :: acc49
-    real(c_double) :: acc51
-    real(c_double) :: acc58
+    real(c_double) :: acc43
+    real(c_double) :: acc55
+    real(c_double) :: acc62
     real(c_double) :: ib15
     real(c_double) :: ub15
     real(c_double) :: v10
@@ -2166,20 +2165,23 @@ contains
     real(c_double) :: v37
     real(c_double) :: v38
     real(c_double) :: v39
-    real(c_double) :: v40
+    real(c_double) :: v41
     real(c_double) :: v43
     real(c_double) :: v44
-    real(c_double) :: v45
-    real(c_double) :: v46
-    real(c_double) :: v49
     real(c_double) :: v50
     real(c_double) :: v51
+    real(c_double) :: v52
     real(c_double) :: v53
     real(c_double) :: v54
-    real(c_double) :: v56
+    real(c_double) :: v55
+    real(c_double) :: v57
     real(c_double) :: v58
-    real(c_double) :: v59
-    real(c_double) :: v61
+    real(c_double) :: v60
+    real(c_double) :: v62
+    real(c_double) :: v63
+    real(c_double) :: v65
+    real(c_double) :: v66
+    real(c_double) :: v67
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2215,38 +2217,43 @@ contains
     tay(14, 0) = v29 - v31
     v33 = tay(14, 0) * tay(4, 0)
     v34 = v27 - v33
-    v36 = tay(4, 0) * tay(4, 0)
+    v36 = tay(6, 0) * tay(6, 0)
     v37 = 0.018613186525101588_c_double * v36
-    v38 = tay(6, 0) * tay(6, 0)
-    v39 = 0.018613186525101588_c_double * v38
-    v40 = v37 - v39
-    v43 = c(2) + tay(7, 0)
-    v44 = v43 - tay(5, 0)
-    v45 = c(0) * v44
-    v46 = v40 + v45
-    tay(15, 0) = 0.06916590204045965_c_double * tay(4, 0)
-    v49 = tay(15, 0) * tay(6, 0)
-    v50 = v46 - v49
-    v51 = tay(14, 0) * tay(6, 0)
-    v53 = 0.2723557574878444_c_double * tay(5, 0)
-    v54 = -v53
-    v56 = 0.0005451879938902264_c_double * tay(7, 0)
-    tay(16, 0) = v54 - v56
-    v58 = tay(4, 0) * tay(16, 0)
-    v59 = v51 + v58
-    v61 = c(1) * v44
+    v38 = -v37
+    v39 = 0.018613186525101588_c_double * tay(4, 0)
+    v41 = 0.06916590204045965_c_double * tay(6, 0)
+    tay(15, 0) = v39 - v41
+    v43 = tay(4, 0) * tay(15, 0)
+    v44 = v38 + v43
+    tay(16, 0) = 1.0_c_double * c(0)
+    tay(17, 0) = tay(16, 0) * c(2)
+    v50 = v44 + tay(17, 0)
+    v51 = tay(16, 0) * tay(7, 0)
+    v52 = v50 + v51
+    v53 = tay(16, 0) * tay(5, 0)
+    v54 = v52 - v53
+    v55 = tay(14, 0) * tay(6, 0)
+    v57 = 0.2723557574878444_c_double * tay(5, 0)
+    v58 = -v57
+    v60 = 0.0005451879938902264_c_double * tay(7, 0)
+    tay(18, 0) = v58 - v60
+    v62 = tay(4, 0) * tay(18, 0)
+    v63 = v55 + v62
+    v65 = c(2) + tay(7, 0)
+    v66 = v65 - tay(5, 0)
+    v67 = c(1) * v66
     ib15 = 1.0_c_double / tay(11, 0)
     ub15 = tay(12, 0) / tay(11, 0)
     tay(0, 1) = tay(12, 0)
     tay(1, 1) = v18
-    tay(17, 1) = tay(1, 1)
+    tay(19, 1) = tay(1, 1)
     tay(2, 1) = v20
-    tay(18, 1) = tay(2, 1)
+    tay(20, 1) = tay(2, 1)
     tay(3, 1) = v21
     tay(4, 1) = v34
-    tay(5, 1) = v50
-    tay(6, 1) = v59
-    tay(7, 1) = v61
+    tay(5, 1) = v54
+    tay(6, 1) = v63
+    tay(7, 1) = v67
     tay(8, 1) = tay(2, 1) * tay(9, 0)
     tay(9, 1) = -tay(2, 1) * tay(8, 0)
     v10 = tay(9, 0) * tay(6, 1) + tay(9, 1) * tay(6, 0)
@@ -2270,36 +2277,39 @@ contains
     tay(14, 1) = v29 - v31
     v33 = tay(14, 0) * tay(4, 1) + tay(14, 1) * tay(4, 0)
     v34 = v27 - v33
-    v36 = tay(4, 0) * tay(4, 1) + tay(4, 1) * tay(4, 0)
+    v36 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
     v37 = 0.018613186525101588_c_double * v36
-    v38 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
-    v39 = 0.018613186525101588_c_double * v38
-    v40 = v37 - v39
-    v43 = tay(7, 1)
-    v44 = v43 - tay(5, 1)
-    v45 = c(0) * v44
-    v46 = v40 + v45
-    tay(15, 1) = 0.06916590204045965_c_double * tay(4, 1)
-    v49 = tay(15, 0) * tay(6, 1) + tay(15, 1) * tay(6, 0)
-    v50 = v46 - v49
-    v51 = tay(14, 0) * tay(6, 1) + tay(14, 1) * tay(6, 0)
-    v53 = 0.2723557574878444_c_double * tay(5, 1)
-    v54 = -v53
-    v56 = 0.0005451879938902264_c_double * tay(7, 1)
-    tay(16, 1) = v54 - v56
-    v58 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
-    v59 = v51 + v58
-    v61 = c(1) * v44
+    v38 = -v37
+    v39 = 0.018613186525101588_c_double * tay(4, 1)
+    v41 = 0.06916590204045965_c_double * tay(6, 1)
+    tay(15, 1) = v39 - v41
+    v43 = tay(4, 0) * tay(15, 1) + tay(4, 1) * tay(15, 0)
+    v44 = v38 + v43
+    v50 = v44
+    v51 = tay(16, 0) * tay(7, 1)
+    v52 = v50 + v51
+    v53 = tay(16, 0) * tay(5, 1)
+    v54 = v52 - v53
+    v55 = tay(14, 0) * tay(6, 1) + tay(14, 1) * tay(6, 0)
+    v57 = 0.2723557574878444_c_double * tay(5, 1)
+    v58 = -v57
+    v60 = 0.0005451879938902264_c_double * tay(7, 1)
+    tay(18, 1) = v58 - v60
+    v62 = tay(4, 0) * tay(18, 1) + tay(4, 1) * tay(18, 0)
+    v63 = v55 + v62
+    v65 = tay(7, 1)
+    v66 = v65 - tay(5, 1)
+    v67 = c(1) * v66
     tay(0, 2) = tay(12, 1) * inv(2)
     tay(1, 2) = v18 * inv(2)
-    tay(17, 2) = v18
+    tay(19, 2) = v18
     tay(2, 2) = v20 * inv(2)
-    tay(18, 2) = v20
+    tay(20, 2) = v20
     tay(3, 2) = v21 * inv(2)
     tay(4, 2) = v34 * inv(2)
-    tay(5, 2) = v50 * inv(2)
-    tay(6, 2) = v59 * inv(2)
-    tay(7, 2) = v61 * inv(2)
+    tay(5, 2) = v54 * inv(2)
+    tay(6, 2) = v63 * inv(2)
+    tay(7, 2) = v67 * inv(2)
 
     ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
     do n = 2, order - 1
@@ -2316,28 +2326,26 @@ contains
       acc27 = 0.0_c_double
       acc33 = 0.0_c_double
       acc36 = 0.0_c_double
-      acc38 = 0.0_c_double
-      acc49 = 0.0_c_double
-      acc51 = 0.0_c_double
-      acc58 = 0.0_c_double
+      acc43 = 0.0_c_double
+      acc55 = 0.0_c_double
+      acc62 = 0.0_c_double
       do j = 1, n - 1
-        acc8 = acc8 + tay(18, j) * tay(9, n - j)
-        acc9 = acc9 + tay(18, j) * tay(8, n - j)
+        acc8 = acc8 + tay(20, j) * tay(9, n - j)
+        acc9 = acc9 + tay(20, j) * tay(8, n - j)
         acc10 = acc10 + tay(9, j) * tay(6, n - j)
         acc11 = acc11 + tay(8, j) * tay(4, n - j)
-        acc13 = acc13 + tay(17, j) * tay(11, n - j)
-        acc14 = acc14 + tay(17, j) * tay(10, n - j)
+        acc13 = acc13 + tay(19, j) * tay(11, n - j)
+        acc14 = acc14 + tay(19, j) * tay(10, n - j)
         acc15 = acc15 + tay(11, j) * tay(12, n - j)
         acc16 = acc16 + tay(8, j) * tay(6, n - j)
         acc17 = acc17 + tay(9, j) * tay(4, n - j)
         acc19 = acc19 + tay(12, j) * tay(10, n - j)
         acc27 = acc27 + tay(6, j) * tay(13, n - j)
         acc33 = acc33 + tay(14, j) * tay(4, n - j)
-        acc36 = acc36 + tay(4, j) * tay(4, n - j)
-        acc38 = acc38 + tay(6, j) * tay(6, n - j)
-        acc49 = acc49 + tay(15, j) * tay(6, n - j)
-        acc51 = acc51 + tay(14, j) * tay(6, n - j)
-        acc58 = acc58 + tay(4, j) * tay(16, n - j)
+        acc36 = acc36 + tay(6, j) * tay(6, n - j)
+        acc43 = acc43 + tay(4, j) * tay(15, n - j)
+        acc55 = acc55 + tay(14, j) * tay(6, n - j)
+        acc62 = acc62 + tay(4, j) * tay(18, n - j)
       end do
       tay(8, n) = acc8 * inv(n) + tay(2, n) * tay(9, 0)
       tay(9, n) = (-acc9 * inv(n)) - tay(2, n) * tay(8, 0)
@@ -2362,36 +2370,39 @@ contains
       tay(14, n) = v29 - v31
       v33 = (acc33 + tay(14, 0) * tay(4, n)) + tay(14, n) * tay(4, 0)
       v34 = v27 - v33
-      v36 = (acc36 + tay(4, 0) * tay(4, n)) + tay(4, n) * tay(4, 0)
+      v36 = (acc36 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
       v37 = 0.018613186525101588_c_double * v36
-      v38 = (acc38 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
-      v39 = 0.018613186525101588_c_double * v38
-      v40 = v37 - v39
-      v43 = tay(7, n)
-      v44 = v43 - tay(5, n)
-      v45 = c(0) * v44
-      v46 = v40 + v45
-      tay(15, n) = 0.06916590204045965_c_double * tay(4, n)
-      v49 = (acc49 + tay(15, 0) * tay(6, n)) + tay(15, n) * tay(6, 0)
-      v50 = v46 - v49
-      v51 = (acc51 + tay(14, 0) * tay(6, n)) + tay(14, n) * tay(6, 0)
-      v53 = 0.2723557574878444_c_double * tay(5, n)
-      v54 = -v53
-      v56 = 0.0005451879938902264_c_double * tay(7, n)
-      tay(16, n) = v54 - v56
-      v58 = (acc58 + tay(4, 0) * tay(16, n)) + tay(4, n) * tay(16, 0)
-      v59 = v51 + v58
-      v61 = c(1) * v44
+      v38 = -v37
+      v39 = 0.018613186525101588_c_double * tay(4, n)
+      v41 = 0.06916590204045965_c_double * tay(6, n)
+      tay(15, n) = v39 - v41
+      v43 = (acc43 + tay(4, 0) * tay(15, n)) + tay(4, n) * tay(15, 0)
+      v44 = v38 + v43
+      v50 = v44
+      v51 = tay(16, 0) * tay(7, n)
+      v52 = v50 + v51
+      v53 = tay(16, 0) * tay(5, n)
+      v54 = v52 - v53
+      v55 = (acc55 + tay(14, 0) * tay(6, n)) + tay(14, n) * tay(6, 0)
+      v57 = 0.2723557574878444_c_double * tay(5, n)
+      v58 = -v57
+      v60 = 0.0005451879938902264_c_double * tay(7, n)
+      tay(18, n) = v58 - v60
+      v62 = (acc62 + tay(4, 0) * tay(18, n)) + tay(4, n) * tay(18, 0)
+      v63 = v55 + v62
+      v65 = tay(7, n)
+      v66 = v65 - tay(5, n)
+      v67 = c(1) * v66
       tay(0, n + 1) = tay(12, n) * inv(n + 1)
       tay(1, n + 1) = v18 * inv(n + 1)
-      tay(17, n + 1) = v18
+      tay(19, n + 1) = v18
       tay(2, n + 1) = v20 * inv(n + 1)
-      tay(18, n + 1) = v20
+      tay(20, n + 1) = v20
       tay(3, n + 1) = v21 * inv(n + 1)
       tay(4, n + 1) = v34 * inv(n + 1)
-      tay(5, n + 1) = v50 * inv(n + 1)
-      tay(6, n + 1) = v59 * inv(n + 1)
-      tay(7, n + 1) = v61 * inv(n + 1)
+      tay(5, n + 1) = v54 * inv(n + 1)
+      tay(6, n + 1) = v63 * inv(n + 1)
+      tay(7, n + 1) = v67 * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -2411,7 +2422,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:19 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:21 - 1, 0:21 - 1)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

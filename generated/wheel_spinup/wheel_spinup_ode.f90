@@ -2110,14 +2110,14 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function wheel_spinup_radau5
 
-  ! The normalized Taylor coefficients of x and of the rhs's 49
-  ! nodes to the given order (17 of them convolutions).
+  ! The normalized Taylor coefficients of x and of the rhs's 53
+  ! nodes to the given order (16 of them convolutions).
   subroutine taylor_jet(order, x, c, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:19 - 1, 0:21 - 1)
+    real(c_double), intent(inout) :: tay(0:21 - 1, 0:21 - 1)
     real(c_double) :: acc8
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2130,11 +2130,10 @@ contains
     real(c_double) :: acc19
     real(c_double) :: acc27
     real(c_double) :: acc33
-    real(c_double) :: acc37
-    real(c_double) :: acc40
-    real(c_double) :: acc45
-    real(c_double) :: acc47
-    real(c_double) :: acc54
+    real(c_double) :: acc39
+    real(c_double) :: acc46
+    real(c_double) :: acc52
+    real(c_double) :: acc58
     real(c_double) :: ib15
     real(c_double) :: ub15
     real(c_double) :: v10
@@ -2153,20 +2152,21 @@ contains
     real(c_double) :: v31
     real(c_double) :: v33
     real(c_double) :: v34
-    real(c_double) :: v37
-    real(c_double) :: v38
     real(c_double) :: v39
     real(c_double) :: v40
     real(c_double) :: v41
     real(c_double) :: v42
-    real(c_double) :: v45
+    real(c_double) :: v44
     real(c_double) :: v46
     real(c_double) :: v47
-    real(c_double) :: v49
+    real(c_double) :: v48
     real(c_double) :: v50
     real(c_double) :: v52
     real(c_double) :: v54
     real(c_double) :: v55
+    real(c_double) :: v56
+    real(c_double) :: v58
+    real(c_double) :: v59
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -2193,42 +2193,45 @@ contains
     v19 = tay(12, 0) * tay(10, 0)
     v20 = tay(5, 0) - v19
     v21 = tay(7, 0) - tay(5, 0)
-    v23 = 0.3499793829482495_c_double * tay(5, 0)
-    v25 = 0.0007488716786310489_c_double * tay(7, 0)
-    tay(13, 0) = v23 + v25
-    v27 = tay(6, 0) * tay(13, 0)
-    v29 = 0.014646230145692387_c_double * tay(5, 0)
-    v31 = 1.6873537034207817e-05_c_double * tay(7, 0)
-    tay(14, 0) = v29 - v31
-    v33 = tay(14, 0) * tay(4, 0)
-    v34 = v27 - v33
-    v37 = tay(4, 0) * tay(4, 0)
-    v38 = 0.01627906976744186_c_double * v37
-    v39 = c(0) + v38
-    v40 = tay(6, 0) * tay(6, 0)
-    v41 = 0.01627906976744186_c_double * v40
-    v42 = v39 - v41
-    tay(15, 0) = 0.06976744186046512_c_double * tay(4, 0)
-    v45 = tay(15, 0) * tay(6, 0)
-    v46 = v42 - v45
-    v47 = tay(14, 0) * tay(6, 0)
-    v49 = 0.0008211868373490824_c_double * tay(7, 0)
-    v50 = -v49
-    v52 = 0.2872098251809964_c_double * tay(5, 0)
-    tay(16, 0) = v50 - v52
-    v54 = tay(4, 0) * tay(16, 0)
-    v55 = v47 + v54
+    v23 = 0.3499793829482495_c_double * tay(6, 0)
+    v25 = 0.014646230145692387_c_double * tay(4, 0)
+    tay(13, 0) = v23 - v25
+    v27 = tay(5, 0) * tay(13, 0)
+    v29 = 1.6873537034207817e-05_c_double * tay(4, 0)
+    v31 = 0.0007488716786310489_c_double * tay(6, 0)
+    tay(14, 0) = v29 + v31
+    v33 = tay(7, 0) * tay(14, 0)
+    v34 = v27 + v33
+    tay(15, 0) = 1.0_c_double * c(0)
+    v39 = tay(6, 0) * tay(6, 0)
+    v40 = 0.01627906976744186_c_double * v39
+    v41 = tay(15, 0) - v40
+    v42 = 0.01627906976744186_c_double * tay(4, 0)
+    v44 = 0.06976744186046512_c_double * tay(6, 0)
+    tay(16, 0) = v42 - v44
+    v46 = tay(4, 0) * tay(16, 0)
+    v47 = v41 + v46
+    v48 = 0.014646230145692387_c_double * tay(6, 0)
+    v50 = 0.2872098251809964_c_double * tay(4, 0)
+    tay(17, 0) = v48 - v50
+    v52 = tay(5, 0) * tay(17, 0)
+    v54 = 0.0008211868373490824_c_double * tay(4, 0)
+    v55 = -v54
+    v56 = 1.6873537034207817e-05_c_double * tay(6, 0)
+    tay(18, 0) = v55 - v56
+    v58 = tay(7, 0) * tay(18, 0)
+    v59 = v52 + v58
     ib15 = 1.0_c_double / tay(11, 0)
     ub15 = tay(12, 0) / tay(11, 0)
     tay(0, 1) = tay(12, 0)
     tay(1, 1) = v18
-    tay(17, 1) = tay(1, 1)
+    tay(19, 1) = tay(1, 1)
     tay(2, 1) = v20
-    tay(18, 1) = tay(2, 1)
+    tay(20, 1) = tay(2, 1)
     tay(3, 1) = v21
     tay(4, 1) = v34
-    tay(5, 1) = v46
-    tay(6, 1) = v55
+    tay(5, 1) = v47
+    tay(6, 1) = v59
     tay(7, 1) = c(1)
     tay(8, 1) = tay(2, 1) * tay(9, 0)
     tay(9, 1) = -tay(2, 1) * tay(8, 0)
@@ -2244,44 +2247,48 @@ contains
     v19 = tay(12, 0) * tay(10, 1) + tay(12, 1) * tay(10, 0)
     v20 = tay(5, 1) - v19
     v21 = tay(7, 1) - tay(5, 1)
-    v23 = 0.3499793829482495_c_double * tay(5, 1)
-    v25 = 0.0007488716786310489_c_double * tay(7, 1)
-    tay(13, 1) = v23 + v25
-    v27 = tay(6, 0) * tay(13, 1) + tay(6, 1) * tay(13, 0)
-    v29 = 0.014646230145692387_c_double * tay(5, 1)
-    v31 = 1.6873537034207817e-05_c_double * tay(7, 1)
-    tay(14, 1) = v29 - v31
-    v33 = tay(14, 0) * tay(4, 1) + tay(14, 1) * tay(4, 0)
-    v34 = v27 - v33
-    v37 = tay(4, 0) * tay(4, 1) + tay(4, 1) * tay(4, 0)
-    v38 = 0.01627906976744186_c_double * v37
-    v39 = v38
-    v40 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
-    v41 = 0.01627906976744186_c_double * v40
-    v42 = v39 - v41
-    tay(15, 1) = 0.06976744186046512_c_double * tay(4, 1)
-    v45 = tay(15, 0) * tay(6, 1) + tay(15, 1) * tay(6, 0)
-    v46 = v42 - v45
-    v47 = tay(14, 0) * tay(6, 1) + tay(14, 1) * tay(6, 0)
-    v49 = 0.0008211868373490824_c_double * tay(7, 1)
-    v50 = -v49
-    v52 = 0.2872098251809964_c_double * tay(5, 1)
-    tay(16, 1) = v50 - v52
-    v54 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
-    v55 = v47 + v54
+    v23 = 0.3499793829482495_c_double * tay(6, 1)
+    v25 = 0.014646230145692387_c_double * tay(4, 1)
+    tay(13, 1) = v23 - v25
+    v27 = tay(5, 0) * tay(13, 1) + tay(5, 1) * tay(13, 0)
+    v29 = 1.6873537034207817e-05_c_double * tay(4, 1)
+    v31 = 0.0007488716786310489_c_double * tay(6, 1)
+    tay(14, 1) = v29 + v31
+    v33 = tay(7, 0) * tay(14, 1) + tay(7, 1) * tay(14, 0)
+    v34 = v27 + v33
+    v39 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
+    v40 = 0.01627906976744186_c_double * v39
+    v41 = -v40
+    v42 = 0.01627906976744186_c_double * tay(4, 1)
+    v44 = 0.06976744186046512_c_double * tay(6, 1)
+    tay(16, 1) = v42 - v44
+    v46 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
+    v47 = v41 + v46
+    v48 = 0.014646230145692387_c_double * tay(6, 1)
+    v50 = 0.2872098251809964_c_double * tay(4, 1)
+    tay(17, 1) = v48 - v50
+    v52 = tay(5, 0) * tay(17, 1) + tay(5, 1) * tay(17, 0)
+    v54 = 0.0008211868373490824_c_double * tay(4, 1)
+    v55 = -v54
+    v56 = 1.6873537034207817e-05_c_double * tay(6, 1)
+    tay(18, 1) = v55 - v56
+    v58 = tay(7, 0) * tay(18, 1) + tay(7, 1) * tay(18, 0)
+    v59 = v52 + v58
     tay(0, 2) = tay(12, 1) * inv(2)
     tay(1, 2) = v18 * inv(2)
-    tay(17, 2) = v18
+    tay(19, 2) = v18
     tay(2, 2) = v20 * inv(2)
-    tay(18, 2) = v20
+    tay(20, 2) = v20
     tay(3, 2) = v21 * inv(2)
     tay(4, 2) = v34 * inv(2)
-    tay(5, 2) = v46 * inv(2)
-    tay(6, 2) = v55 * inv(2)
+    tay(5, 2) = v47 * inv(2)
+    tay(6, 2) = v59 * inv(2)
     tay(7, 2) = 0.0_c_double
 
     ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
     do n = 2, order - 1
+      acc33 = tay(7, 1) * tay(14, n - 1)
+      acc58 = tay(7, 1) * tay(18, n - 1)
       acc8 = 0.0_c_double
       acc9 = 0.0_c_double
       acc10 = 0.0_c_double
@@ -2293,30 +2300,24 @@ contains
       acc17 = 0.0_c_double
       acc19 = 0.0_c_double
       acc27 = 0.0_c_double
-      acc33 = 0.0_c_double
-      acc37 = 0.0_c_double
-      acc40 = 0.0_c_double
-      acc45 = 0.0_c_double
-      acc47 = 0.0_c_double
-      acc54 = 0.0_c_double
+      acc39 = 0.0_c_double
+      acc46 = 0.0_c_double
+      acc52 = 0.0_c_double
       do j = 1, n - 1
-        acc8 = acc8 + tay(18, j) * tay(9, n - j)
-        acc9 = acc9 + tay(18, j) * tay(8, n - j)
+        acc8 = acc8 + tay(20, j) * tay(9, n - j)
+        acc9 = acc9 + tay(20, j) * tay(8, n - j)
         acc10 = acc10 + tay(9, j) * tay(6, n - j)
         acc11 = acc11 + tay(8, j) * tay(4, n - j)
-        acc13 = acc13 + tay(17, j) * tay(11, n - j)
-        acc14 = acc14 + tay(17, j) * tay(10, n - j)
+        acc13 = acc13 + tay(19, j) * tay(11, n - j)
+        acc14 = acc14 + tay(19, j) * tay(10, n - j)
         acc15 = acc15 + tay(11, j) * tay(12, n - j)
         acc16 = acc16 + tay(8, j) * tay(6, n - j)
         acc17 = acc17 + tay(9, j) * tay(4, n - j)
         acc19 = acc19 + tay(12, j) * tay(10, n - j)
-        acc27 = acc27 + tay(6, j) * tay(13, n - j)
-        acc33 = acc33 + tay(14, j) * tay(4, n - j)
-        acc37 = acc37 + tay(4, j) * tay(4, n - j)
-        acc40 = acc40 + tay(6, j) * tay(6, n - j)
-        acc45 = acc45 + tay(15, j) * tay(6, n - j)
-        acc47 = acc47 + tay(14, j) * tay(6, n - j)
-        acc54 = acc54 + tay(4, j) * tay(16, n - j)
+        acc27 = acc27 + tay(5, j) * tay(13, n - j)
+        acc39 = acc39 + tay(6, j) * tay(6, n - j)
+        acc46 = acc46 + tay(4, j) * tay(16, n - j)
+        acc52 = acc52 + tay(5, j) * tay(17, n - j)
       end do
       tay(8, n) = acc8 * inv(n) + tay(2, n) * tay(9, 0)
       tay(9, n) = (-acc9 * inv(n)) - tay(2, n) * tay(8, 0)
@@ -2332,36 +2333,42 @@ contains
       v19 = (acc19 + tay(12, 0) * tay(10, n)) + tay(12, n) * tay(10, 0)
       v20 = tay(5, n) - v19
       v21 = -tay(5, n)
-      v23 = 0.3499793829482495_c_double * tay(5, n)
-      tay(13, n) = v23
-      v27 = (acc27 + tay(6, 0) * tay(13, n)) + tay(6, n) * tay(13, 0)
-      v29 = 0.014646230145692387_c_double * tay(5, n)
-      tay(14, n) = v29
-      v33 = (acc33 + tay(14, 0) * tay(4, n)) + tay(14, n) * tay(4, 0)
-      v34 = v27 - v33
-      v37 = (acc37 + tay(4, 0) * tay(4, n)) + tay(4, n) * tay(4, 0)
-      v38 = 0.01627906976744186_c_double * v37
-      v39 = v38
-      v40 = (acc40 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
-      v41 = 0.01627906976744186_c_double * v40
-      v42 = v39 - v41
-      tay(15, n) = 0.06976744186046512_c_double * tay(4, n)
-      v45 = (acc45 + tay(15, 0) * tay(6, n)) + tay(15, n) * tay(6, 0)
-      v46 = v42 - v45
-      v47 = (acc47 + tay(14, 0) * tay(6, n)) + tay(14, n) * tay(6, 0)
-      v52 = 0.2872098251809964_c_double * tay(5, n)
-      tay(16, n) = -v52
-      v54 = (acc54 + tay(4, 0) * tay(16, n)) + tay(4, n) * tay(16, 0)
-      v55 = v47 + v54
+      v23 = 0.3499793829482495_c_double * tay(6, n)
+      v25 = 0.014646230145692387_c_double * tay(4, n)
+      tay(13, n) = v23 - v25
+      v27 = (acc27 + tay(5, 0) * tay(13, n)) + tay(5, n) * tay(13, 0)
+      v29 = 1.6873537034207817e-05_c_double * tay(4, n)
+      v31 = 0.0007488716786310489_c_double * tay(6, n)
+      tay(14, n) = v29 + v31
+      v33 = acc33 + tay(7, 0) * tay(14, n)
+      v34 = v27 + v33
+      v39 = (acc39 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
+      v40 = 0.01627906976744186_c_double * v39
+      v41 = -v40
+      v42 = 0.01627906976744186_c_double * tay(4, n)
+      v44 = 0.06976744186046512_c_double * tay(6, n)
+      tay(16, n) = v42 - v44
+      v46 = (acc46 + tay(4, 0) * tay(16, n)) + tay(4, n) * tay(16, 0)
+      v47 = v41 + v46
+      v48 = 0.014646230145692387_c_double * tay(6, n)
+      v50 = 0.2872098251809964_c_double * tay(4, n)
+      tay(17, n) = v48 - v50
+      v52 = (acc52 + tay(5, 0) * tay(17, n)) + tay(5, n) * tay(17, 0)
+      v54 = 0.0008211868373490824_c_double * tay(4, n)
+      v55 = -v54
+      v56 = 1.6873537034207817e-05_c_double * tay(6, n)
+      tay(18, n) = v55 - v56
+      v58 = acc58 + tay(7, 0) * tay(18, n)
+      v59 = v52 + v58
       tay(0, n + 1) = tay(12, n) * inv(n + 1)
       tay(1, n + 1) = v18 * inv(n + 1)
-      tay(17, n + 1) = v18
+      tay(19, n + 1) = v18
       tay(2, n + 1) = v20 * inv(n + 1)
-      tay(18, n + 1) = v20
+      tay(20, n + 1) = v20
       tay(3, n + 1) = v21 * inv(n + 1)
       tay(4, n + 1) = v34 * inv(n + 1)
-      tay(5, n + 1) = v46 * inv(n + 1)
-      tay(6, n + 1) = v55 * inv(n + 1)
+      tay(5, n + 1) = v47 * inv(n + 1)
+      tay(6, n + 1) = v59 * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -2381,7 +2388,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:19 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:21 - 1, 0:21 - 1)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

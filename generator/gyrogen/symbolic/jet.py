@@ -10,6 +10,11 @@ coefficients of every node follow from its operands' by the recurrences of
 automatic differentiation (Jorba & Zou 2005, Sec. 2; heyoka's Taylor
 decomposition does the same), printed by gyrogen.codegen.integrators.taylor.
 
+A product costs a sum over every lower order at each order, unless one
+factor is a polynomial of degree 1 or less (FIXED_PAST: one term), so
+decompose writes a quadratic output as products of a state and a linear
+form, a fixed state's first (regroup), where that leaves fewer such sums.
+
 Only smooth operations are expanded: a min or max (a torque clamp), a table
 or any other function is refused here, and the scene validator keeps the
 method away from such scenes first (gyrogen.scene.rules).
@@ -23,6 +28,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import sympy as sm
+from sympy.polys.polyerrors import PolificationFailed
 
 from gyrogen.errors import GyrogenError
 from gyrogen.symbolic.optimize import Block
@@ -32,6 +38,15 @@ CONSTANT = re.compile(r"c(\d+)")
 DEGREE_CAP = 64
 """A degree past this is taken as none (a polynomial of such degree is no
 shorter than a Taylor series of the highest order)."""
+FIXED_PAST = 1
+"""A node of degree at most this (a polynomial in t: Jet.degrees) is 0 at
+every order the Taylor method's orders loop computes (k >= 2): it is not
+computed there, a read of it is 0, and a convolution with it has one term
+(gyrogen.codegen.integrators.taylor_jet)."""
+REGROUP_SIZE = 4000
+"""An output whose expression, temporaries substituted, has more nodes than
+this is not tried for regrouping (its expansion would cost more than it
+could save)."""
 
 
 class NotExpandable(GyrogenError):
@@ -96,6 +111,21 @@ class Jet:
             else:  # sin, cos of a varying argument
                 deg.append(math.inf)
         return tuple(deg)
+
+    def operands(self, n: int) -> tuple[int, int]:
+        """A convolution's two factors, read at orders j and k - j."""
+        node = self.nodes[n]
+        if node.op == "mul":
+            return node.args[0], node.args[1]
+        if node.op == "div":
+            return node.args[1], n
+        return node.args[0], node.index
+
+    def full(self) -> int:
+        """The convolutions whose sums run over every lower order: neither
+        factor is fixed (degree <= FIXED_PAST), where a sum has one term."""
+        deg = self.degrees()
+        return sum(all(deg[f] > FIXED_PAST for f in self.operands(n)) for n in self.convolutions())
 
     def convolves(self, node: Node) -> bool:
         if node.const or node.op in ("x", "add", "sub", "neg"):
@@ -223,9 +253,81 @@ class _Builder:
         return out
 
 
+def _build(block: Block, states: tuple[sm.Symbol, ...], outputs: list[sm.Expr]) -> Jet:
+    builder = _Builder(states, {a.lhs: a.rhs for a in block.temporaries})
+    visited = tuple(builder.visit(e) for e in outputs)
+    return Jet(tuple(builder.nodes), visited)
+
+
 def decompose(block: Block, states: tuple[sm.Symbol, ...]) -> Jet:
     """The rhs block (dx/dt in state order) as a Jet; NotExpandable when it
-    holds anything but the smooth operations above."""
-    builder = _Builder(states, {a.lhs: a.rhs for a in block.temporaries})
-    outputs = tuple(builder.visit(e) for e in block.outputs)
-    return Jet(tuple(builder.nodes), outputs)
+    holds anything but the smooth operations above.
+
+    Each output that is a quadratic polynomial in the states is tried
+    regrouped (regroup), and kept so where the jet then has fewer full
+    convolutions (Jet.full): a sum of products collected by a fixed state
+    first (a wheel at constant acceleration: one term a product) costs a
+    product less per order."""
+    outputs = list(block.outputs)
+    jet = _build(block, states, outputs)
+    deg = jet.degrees()
+    fixed = {i for i in range(len(states)) if deg[i] <= FIXED_PAST}
+    full = jet.full()
+    for i, e in enumerate(_substituted(block)):
+        grouped = None if e is None else regroup(e, states, fixed)
+        if grouped is None or full == 0:
+            continue
+        trial = _build(block, states, [*outputs[:i], grouped, *outputs[i + 1 :]])
+        if trial.full() < full:
+            outputs[i], jet, full = grouped, trial, trial.full()
+    return jet
+
+
+def _substituted(block: Block) -> list[sm.Expr | None]:
+    """Each output with the temporaries written out (None: too large)."""
+    full: dict[sm.Basic, sm.Expr] = {}
+    for a in block.temporaries:
+        full[a.lhs] = a.rhs.xreplace(full)
+    out: list[sm.Expr | None] = []
+    for e in block.outputs:
+        w = e.xreplace(full)
+        out.append(w if sm.count_ops(w) <= REGROUP_SIZE else None)
+    return out
+
+
+def regroup(e: sm.Expr, states: tuple[sm.Symbol, ...], fixed: set[int]) -> sm.Expr | None:
+    """A quadratic polynomial in the states as its constant and linear part
+    plus products state * (linear form), collected greedily: a fixed state's
+    monomials first, then the state in most of those left (ties: the lower
+    index). None unless e is such a polynomial (its coefficients hold only
+    constants)."""
+    used = [s for s in states if s in e.free_symbols]
+    if len(used) == 0:
+        return None
+    try:
+        poly = sm.Poly(e, *used)
+    except (sm.PolynomialError, PolificationFailed):
+        return None
+    if poly.total_degree() != 2 or any(s in states for s in poly.free_symbols_in_domain):
+        return None
+    rest: sm.Expr = sm.Integer(0)
+    quad: dict[tuple[int, int], sm.Expr] = {}
+    for monom, coeff in poly.terms():
+        factors = [i for i, k in enumerate(monom) for _ in range(k)]
+        if len(factors) < 2:
+            rest += coeff * sm.Mul(*(used[i] for i in factors))
+        else:
+            quad[(factors[0], factors[1])] = coeff
+    index = {i: states.index(s) for i, s in enumerate(used)}
+    groups: list[sm.Expr] = []
+    while quad:
+        count: dict[int, int] = {}
+        for pair in quad:
+            for v in set(pair):
+                count[v] = count.get(v, 0) + 1
+        v = min(count, key=lambda u: (index[u] not in fixed, -count[u], index[u]))
+        taken = {p: c for p, c in quad.items() if v in p}
+        form = sm.Add(*(c * used[p[1] if p[0] == v else p[0]] for p, c in taken.items()))
+        groups.append(sm.Mul(used[v], form))
+        quad = {p: c for p, c in quad.items() if p not in taken}
+    return sm.Add(rest, *groups)

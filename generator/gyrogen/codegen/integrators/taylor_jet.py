@@ -46,7 +46,7 @@ from gyrogen.codegen.ir.nodes import (
     sel,
 )
 from gyrogen.methods import Method
-from gyrogen.symbolic.jet import Jet, Node
+from gyrogen.symbolic.jet import FIXED_PAST, Jet, Node
 from gyrogen.tableaus import Series
 
 T, c, n_, j = Var("tay"), Var("c"), Var("n"), Var("j")
@@ -59,10 +59,6 @@ def succ(e: E) -> E:
 
 
 ZERO = Num(0.0)
-FIXED_PAST = 1
-"""A node of degree at most this (a polynomial in t: Jet.degrees) is 0 at
-every order the orders loop computes (k >= 2): it is not computed there, a
-read of it is 0, and a convolution with it has one term."""
 
 
 def _add(a: E, b: E) -> E:
@@ -209,22 +205,13 @@ class _Printer:
             return self.at(a, k)
         return (_add if node.op == "add" else _sub)(self.at(a, k), self.at(b, k))
 
-    def operands(self, n: int) -> tuple[int, int]:
-        """A convolution's two factors, read at orders j and k - j."""
-        node = self.jet.nodes[n]
-        if node.op == "mul":
-            return node.args[0], node.args[1]
-        if node.op == "div":
-            return node.args[1], n
-        return node.args[0], node.index
-
     def single(self, n: int) -> E | None:
         """A convolution's sum when one factor is fixed (1 <= j < k has one
         term: j = 1, or k - j = 1), else None."""
-        first, second = (self.deg[f] <= FIXED_PAST for f in self.operands(n))
+        first, second = (self.deg[f] <= FIXED_PAST for f in self.jet.operands(n))
         k = self.k
         if first and second:  # a product of two lines: a[1] b[1] at k = 2 only
-            a, b = self.operands(n)
+            a, b = self.jet.operands(n)
             return sel(cmp(k, "==", Int(2)), self.target(a, Int(1)) * self.target(b, Int(1)), ZERO)
         if first:
             return self.term(n, Int(1))
