@@ -143,6 +143,19 @@ def test_a_quadratic_rhs_is_regrouped_by_its_fixed_state() -> None:
         np.testing.assert_allclose(got[k], want, rtol=1e-12, atol=1e-14)
 
 
+def test_regrouping_skips_an_output_its_temporaries_would_blow_up() -> None:
+    """Temporaries that each read the one before twice: written out, the
+    output's tree has 2^60 nodes. decompose counts no further than
+    REGROUP_SIZE and keeps the output as it is (a count of the whole tree
+    would not finish)."""
+    xs, c = sm.symbols("x0:2"), sm.Symbol("c0")
+    tmps = sm.symbols("tmp0:60")
+    assigns = [Assignment(tmps[0], xs[0] * xs[1])]
+    assigns += [Assignment(tmps[k], tmps[k - 1] + c * tmps[k - 1]) for k in range(1, 60)]
+    jet = decompose(Block(tuple(assigns), (tmps[-1], xs[0])), xs)
+    assert jet.full() == 1
+
+
 @pytest.mark.parametrize("seed", range(20))
 def test_regroup_is_the_same_polynomial(seed: int) -> None:
     """Any quadratic polynomial with symbolic and float coefficients comes

@@ -291,8 +291,15 @@ def _substituted(block: Block) -> list[sm.Expr | None]:
     out: list[sm.Expr | None] = []
     for e in block.outputs:
         w = e.xreplace(full)
-        out.append(w if sm.count_ops(w) <= REGROUP_SIZE else None)
+        out.append(w if _within(w, REGROUP_SIZE) else None)
     return out
+
+
+def _within(e: sm.Expr, size: int) -> bool:
+    """e's tree has at most size nodes (counted no further: temporaries
+    written out can share subtrees, so the tree may be far larger than the
+    DAG)."""
+    return all(i < size for i, _ in enumerate(sm.preorder_traversal(e)))
 
 
 def regroup(e: sm.Expr, states: tuple[sm.Symbol, ...], fixed: set[int]) -> sm.Expr | None:
