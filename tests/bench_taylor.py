@@ -1,10 +1,13 @@
-"""The Taylor method on one trajectory against heyoka's scalar integrator,
-tolerance by tolerance, interleaved (`make bench-taylor`, scenes gyrostat and
-dual_spin): steps, each one's error against heyoka's real128 reference,
-gyrogen's raw cffi call and heyoka's propagate_until each less its own call
-floor (a call over no time), and both as a Python user calls them
-(Compiled.integrate against propagate_until). Best of the repeats; the load
-average is printed before and after.
+"""The Taylor method on one trajectory against heyoka's scalar integrator
+(`make bench-taylor`, scenes gyrostat and dual_spin). Both run a ladder of
+tolerances, interleaved: steps, each one's error against heyoka's real128
+reference, gyrogen's raw cffi call and heyoka's propagate_until each less
+its own call floor (a call over no time), and both as a Python user calls
+them (Compiled.integrate against propagate_until). Then each is read along
+its work-precision front at the errors 1e-6 .. 1e-14 (workprec.seconds_at:
+the two differ in their steps where gyrogen's step scale leaves out
+translation and caps angles, so equal tolerances are not equal errors).
+Best of the repeats; the load average is printed before and after.
 
 usage: python tests/bench_taylor.py SCENE [REPEATS]
 """
@@ -21,6 +24,7 @@ import numpy as np
 from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench import heyoka_peer as hp
 from gyrogen.analysis.bench.timing import best_time
+from gyrogen.analysis.bench.workprec import Run, seconds_at
 from gyrogen.analysis.simulate.simulate import runtime_values
 from gyrogen.codegen.generate import unit_of
 from gyrogen.oracle.compare import scaled_error
@@ -28,6 +32,8 @@ from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import load
 
 LEVELS = (1e-6, 1e-8, 1e-10, 1e-12, 1e-14)
+LADDER = tuple(10.0 ** (-k / 2) for k in range(8, 31))
+"""rtol = atol from 1e-4 to 1e-15, half a decade apart."""
 
 
 def main(name: str, repeats: int) -> None:
@@ -55,12 +61,14 @@ def main(name: str, repeats: int) -> None:
     h_floor = best_time(hp.Scalar(hsys, x0, c, 0.0, 1e-8).run, repeats, min_total=0.02)
     print(f"{scene.name}, 0..{t1:g} s; call floors: gyrogen raw cffi {g_floor * 1e6:.2f} us, "
           f"heyoka {h_floor * 1e6:.2f} us; load {os.getloadavg()[0]:.2f}")  # fmt: skip
-    print("| rtol = atol | steps | error gyrogen | error heyoka | gyrogen us | heyoka us | "
-          "heyoka / gyrogen | from Python: gyrogen us | heyoka us | ratio |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for tol in LEVELS:
+    print("| rtol = atol | steps gyrogen | steps heyoka | error gyrogen | error heyoka "
+          "| gyrogen us | heyoka us | from Python: gyrogen us | heyoka us |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|")
+    runs: dict[str, list[Run]] = {k: [] for k in ("g", "h", "pg", "ph")}
+    for tol in LADDER:
         theirs = hp.Scalar(hsys, x0, c, t1, tol)
         hx = theirs.final()
+        hsteps = int(theirs.run()[3])  # propagate_until: (outcome, min h, max h, steps, ...)
         raw(tol, t1)
         gx, steps = x.copy(), stats.accepted
         tg = best_time(lambda tol=tol: raw(tol, t1), repeats, min_total=0.05) - g_floor
@@ -71,9 +79,22 @@ def main(name: str, repeats: int) -> None:
 
         pg = best_time(python, repeats, min_total=0.05)
         ph = best_time(theirs.run, repeats, min_total=0.05)
-        print(f"| {tol:.0e} | {steps} | {scaled_error(gx, ref):.1e} | {scaled_error(hx, ref):.1e}"
-              f" | {tg * 1e6:.2f} | {th * 1e6:.2f} | {th / tg:.2f} | {pg * 1e6:.2f}"
-              f" | {ph * 1e6:.2f} | {ph / pg:.2f} |")  # fmt: skip
+        eg, eh = scaled_error(gx, ref), scaled_error(hx, ref)
+        for key, err, sec in (("g", eg, tg), ("h", eh, th), ("pg", eg, pg), ("ph", eh, ph)):
+            runs[key].append(Run(key, "", tol, err, sec, 0))
+        print(f"| {tol:.1e} | {steps} | {hsteps} | {eg:.1e} | {eh:.1e} | {tg * 1e6:.2f} "
+              f"| {th * 1e6:.2f} | {pg * 1e6:.2f} | {ph * 1e6:.2f} |")  # fmt: skip
+    print(f"\nread along each front ({scene.name}): us at an error <= level")
+    print("| error | gyrogen us | heyoka us | heyoka / gyrogen | from Python: gyrogen us "
+          "| heyoka us | ratio |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for level in LEVELS:
+        g, h, pg, ph = (seconds_at(runs[k], level) for k in ("g", "h", "pg", "ph"))
+        cells = [f"{v * 1e6:.2f}" if v is not None else "-" for v in (g, h, pg, ph)]
+        ratio = f"{h / g:.2f}" if g and h else "-"
+        pratio = f"{ph / pg:.2f}" if pg and ph else "-"
+        print(f"| {level:.0e} | {cells[0]} | {cells[1]} | {ratio} | {cells[2]} | {cells[3]} "
+              f"| {pratio} |")  # fmt: skip
     print(f"after: load {os.getloadavg()[0]:.2f}")
 
 

@@ -280,6 +280,34 @@ def test_polynomial_states_are_exact_at_any_tolerance(
         assert abs(x[i] - v) <= 1e-14 * max(1.0, abs(v)), (i, x[i], v)
 
 
+@pytest.mark.parametrize("start", [{4: 7e6}, {4: 1e12}, {3: 1e7}, {0: 1e5, 2: -3e4}])
+def test_a_far_position_or_a_wound_up_angle_leaves_the_step_alone(
+    built: dict[tuple[str, str], Compiled], start: dict[int, float]
+) -> None:
+    """A satellite's position (q5 = 7e6 m), a rotor angle wound up by a long
+    run (q4 = 1e7 rad) or large Euler angles do not loosen the step
+    (taylor.state_scales): the same steps as from the origin (where the
+    state does not enter the rhs), and the carrier's angles and rates
+    within 20 rtol of DOP853 at 1e-13. Before,
+    q5 = 7e6 took 26 steps where 62 were needed and erred by 3.9e-5 at rtol
+    1e-10 (1e12: by 58), with code 0."""
+    x0, p = problem("gyrostat")
+    b = built["gyrostat", "c"]
+    c = b.setup(p)
+    carrier = [0, 1, 2, 7, 8, 9]
+    _, plain, _ = b.integrate("taylor", x0, c, 0.0, 10.0, rtol=1e-10, atol=1e-10)
+    x = x0.copy()
+    for i, v in start.items():
+        x[i] = v
+    ref, _, code = b.integrate("dop853", x, c, 0.0, 10.0, rtol=1e-13, atol=1e-13)
+    got, stats, code2 = b.integrate("taylor", x, c, 0.0, 10.0, rtol=1e-10, atol=1e-10)
+    assert code == code2 == 0
+    if set(start) <= {3, 4}:  # neither enters the rhs: the same trajectory, the same steps
+        assert stats["accepted"] == plain["accepted"]
+    err = np.max(np.abs(got[carrier] - ref[carrier]) / np.maximum(1.0, np.abs(ref[carrier])))
+    assert err <= 20 * 1e-10, err
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_taylor_codes(built: dict[tuple[str, str], Compiled], language: str) -> None:

@@ -2478,8 +2478,12 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         xmax = 0.0;
         dp = 0.0;
         dq = 0.0;
-        for (i = 0; i < GYROSTAT_NX; ++i) {
+        for (i = 7; i < 11; ++i) {
             xmax = fabs(x[i]) > xmax ? fabs(x[i]) : xmax;
+        }
+        for (i = 0; i < 4; ++i) {
+            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
+                    3.141592653589793) : xmax;
         }
 
         /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
@@ -3474,10 +3478,18 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         dp[l] = 0.0;
         dq[l] = 0.0;
     }
-    for (i = 0; i < GYROSTAT_NX; ++i) {
+    for (i = 7; i < 11; ++i) {
         GYROSTAT_SIMD
         for (l = 0; l < GYROSTAT_LANES; ++l) {
             xmax[l] = fabs(L->x[i][l]) > xmax[l] ? fabs(L->x[i][l]) : xmax[l];
+        }
+    }
+    for (i = 0; i < 4; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            xmax[l] = dmin(fabs(L->x[i][l]),
+                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
+                    3.141592653589793) : xmax[l];
         }
     }
 

@@ -2464,8 +2464,12 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         xmax = 0.0;
         dp = 0.0;
         dq = 0.0;
-        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        for (i = 3; i < 9; ++i) {
             xmax = fabs(x[i]) > xmax ? fabs(x[i]) : xmax;
+        }
+        for (i = 0; i < 3; ++i) {
+            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
+                    3.141592653589793) : xmax;
         }
 
         /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
@@ -3520,10 +3524,18 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
         dp[l] = 0.0;
         dq[l] = 0.0;
     }
-    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+    for (i = 3; i < 9; ++i) {
         RW3_ORTHOGONAL_SIMD
         for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
             xmax[l] = fabs(L->x[i][l]) > xmax[l] ? fabs(L->x[i][l]) : xmax[l];
+        }
+    }
+    for (i = 0; i < 3; ++i) {
+        RW3_ORTHOGONAL_SIMD
+        for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
+            xmax[l] = dmin(fabs(L->x[i][l]),
+                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
+                    3.141592653589793) : xmax[l];
         }
     }
 

@@ -2340,8 +2340,12 @@ contains
       xmax = 0.0_c_double
       dp = 0.0_c_double
       dq = 0.0_c_double
-      do i = 0, nx - 1
+      do i = 3, 7 - 1
         xmax = merge(abs(x(i)), xmax, abs(x(i)) > xmax)
+      end do
+      do i = 0, 3 - 1
+        xmax = merge(min(abs(x(i)), 3.141592653589793_c_double), xmax, min(abs(x(i)), &
+            3.141592653589793_c_double) > xmax)
       end do
 
       ! a polynomial state of degree <= min_order sets no bound (its step is exact)

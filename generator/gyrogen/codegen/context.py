@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from importlib.metadata import version
 
@@ -19,6 +19,7 @@ from gyrogen.abi import (
     unit_and_doc,
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
+from gyrogen.codegen.integrators.taylor import state_scales
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
@@ -139,7 +140,8 @@ class SceneContext:
         """The rhs as elementary operations, when a Taylor method expands it."""
         if not any(m.taylor for m in self.methods):
             return None
-        return decompose(self.optimized.rhs, self.states)
+        scales = state_scales([s.name for s in self.states])
+        return replace(decompose(self.optimized.rhs, self.states), scales=scales)
 
     @property
     def methods(self) -> list[Method]:

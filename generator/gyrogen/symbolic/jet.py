@@ -70,6 +70,10 @@ class Jet:
 
     nodes: tuple[Node, ...]
     outputs: tuple[int, ...]
+    scales: tuple[str, ...] = ()
+    """How each state enters the Taylor step's relative scale (see
+    gyrogen.codegen.integrators.taylor.state_scales); () when every state
+    enters by its magnitude."""
 
     @property
     def nx(self) -> int:

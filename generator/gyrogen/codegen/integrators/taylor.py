@@ -11,7 +11,9 @@ h halved.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
+from gyrogen import abi
 from gyrogen import methods as registry
 from gyrogen.codegen.integrators import common
 from gyrogen.codegen.integrators.common import (
@@ -69,6 +71,23 @@ from gyrogen.codegen.ir.nodes import (
 from gyrogen.methods import Method
 from gyrogen.symbolic.jet import Jet
 from gyrogen.tableaus import Series
+
+ANGLE_SCALE = math.pi
+"""An angle enters the step's relative scale by at most this: its magnitude
+past half a turn is bookkeeping (a rotor angle grows without bound), and
+it would loosen the tolerance of every other state."""
+
+
+def state_scales(names: Sequence[str]) -> tuple[str, ...]:
+    """How each state enters the step's relative scale xmax (Jorba and Zou
+    scale the tolerance by the largest state): "magnitude" (a rate, a
+    wheel speed, an Euler parameter), "angle" (at most ANGLE_SCALE) or
+    "none" (translation: it never couples to the rest and is stepped by its
+    exact polynomial; a satellite's 7e6 m made the attitude's error 1e5
+    times the tolerance). By the state's unit (gyrogen.abi)."""
+    units = [abi.unit_and_doc(n)[0] for n in names]
+    return tuple("angle" if u == "rad" else "none" if u in ("m", "m/s") else "magnitude"
+                 for u in units)  # fmt: skip
 
 
 def uniform(m: Method, jet: Jet) -> list[S]:
@@ -155,6 +174,14 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         or less, in loops over their runs of indices."""
         return [For("i", Int(b), body, start=Int(a)) for a, b in _runs(jet.nx, exact)]
 
+    kinds = jet.scales or ("magnitude",) * jet.nx
+
+    def scale_states(kind: str, size: E) -> list[S]:
+        """xmax over the states of one kind, in loops over their runs."""
+        out = [n for n in range(jet.nx) if kinds[n] != kind]
+        grow = assign(xmax, common.larger(xmax, size))
+        return [For("i", Int(b), (grow,), start=Int(a)) for a, b in _runs(jet.nx, out)]
+
     def polynomial(n: int) -> E:
         """xnew of a state of degree <= min_order: exact at any order and h."""
         return T[Int(1), Int(n)] + h * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
@@ -174,7 +201,8 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(xmax, 0.0),
         assign(dp, 0.0),
         assign(dq, 0.0),
-        For("i", NX, (assign(xmax, common.larger(xmax, fn("abs", x[i]))),)),
+        *scale_states("magnitude", fn("abs", x[i])),
+        *scale_states("angle", fn("min", fn("abs", x[i]), Num(ANGLE_SCALE))),
         Comment("a polynomial state of degree <= min_order sets no bound (its step is exact)"),
         *series_states(
             assign(dp, common.larger(dp, fn("abs", T[order, i]))),
