@@ -262,8 +262,11 @@ def test_bad_arguments(compiled: Get, language: str) -> None:
 
 def test_bad_input_in_python(compiled: Get) -> None:
     """What C cannot see is refused in Python with one line: a state or
-    constants of the wrong length, non-finite constants, an unknown method,
-    steps with the wrong kind of method; a non-finite state is C's code."""
+    constants of the wrong length or shape (no reshape), complex values
+    (numpy would drop their imaginary parts), non-finite constants, an
+    unknown method, function or output, steps with the wrong kind of method,
+    a control cffi cannot hand to C (naming it); a non-finite state is C's
+    code. An empty batch, [] included, gives empty results."""
     b = compiled("gyrostat", "c")
     _, x0, p = problem("gyrostat")
     c = b.setup(p)
@@ -284,7 +287,25 @@ def test_bad_input_in_python(compiled: Get) -> None:
         (lambda: b.rhs(np.ones(15), c), r"not \(15,\)"),
         (lambda: b.rhs(np.ones((2, 2, 14)), c), r"not \(2, 2, 14\)"),
         (lambda: b.jacobian(x0, c[:1]), r"constants c must"),
-        (lambda: b.jacobian(x0[:5], c), r"states must have shape"),
+        (lambda: b.jacobian(x0[:5], c), r"state x \(one state\) must have shape"),
+        # a batch where one state goes, a reshape, complex values, C's integers
+        (lambda: b.jacobian(np.tile(x0, (3, 1)), c), r"one state\) must have shape"),
+        (lambda: b.integrate("dop853", x0.reshape(2, 7), c, 0.0, 1.0), r"not \(2, 7\)"),
+        (lambda: b.integrate("dop853", x0[:, None], c, 0.0, 1.0), r"not \(14, 1\)"),
+        (lambda: b.integrate("dop853", x0 + 0j, c, 0.0, 1.0), r"state must be real"),
+        (lambda: b.integrate("dop853", x0, c + 0j, 0.0, 1.0), r"c must be real"),
+        (lambda: b.integrate_batch("dop853", x0[None] + 0j, c, 0.0, 1.0), r"must be real"),
+        (lambda: b.integrate("dop853", x0, c, 0.0, 1.0, max_steps=2**63), r"max_steps=9223"),
+        (lambda: b.integrate("dop853", x0, c, 0.0, 1.0, max_steps=1e5), r"max_steps=100000.0"),
+        (lambda: b.integrate("rk4", x0, c, 0.0, 1.0, steps=2**64), r"steps=1844"),
+        (lambda: b.integrate("dop853", x0, c, 0.0, "1", rtol=1e-6), r"t1='1'"),
+        (
+            lambda: b.integrate_batch("dop853", x0[None], c, 0.0, 1.0, max_steps=-(2**70)),
+            r"max_steps=-1180",
+        ),
+        (lambda: b.integrate_batch("dop853", x0[None], c, 0.0, 1.0, threads=2**31), r"4096"),
+        (lambda: b.output("kinetic_energy", x0, c), r"no output 'kinetic_energy' \(its"),
+        (lambda: b.function("nosuch"), r"no function 'nosuch' \(it has"),
         (lambda: b.setup(p[:3]), r"parameters p must have shape \(12,\), not \(3,\)"),
         (lambda: b.setup_code(np.append(p, 1.0)), r"parameters p must have shape"),
     ]
@@ -292,6 +313,9 @@ def test_bad_input_in_python(compiled: Get) -> None:
         with pytest.raises(ValueError, match=message) as info:
             call()
         assert "\n" not in str(info.value)
+    for empty in ([], np.zeros((0, 14))):
+        xs, stats, codes = b.integrate_batch("dop853", empty, c, 0.0, 1.0)
+        assert xs.shape == (0, 14) and stats.shape == codes.shape == (0,)
 
 
 def test_constants_are_read_at_each_call(compiled: Get) -> None:

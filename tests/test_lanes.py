@@ -100,7 +100,7 @@ def test_batch_agrees_with_single_through_python(backends: dict[str, Compiled]) 
 
 def test_threads_must_be_positive(backends: dict[str, Compiled]) -> None:
     b = backends["c"]
-    with pytest.raises(ValueError, match="threads must be at least 1, not 0"):
+    with pytest.raises(ValueError, match="threads must be an integer from 1 to 4096, not 0"):
         b.integrate_batch("rk4", np.zeros((2, NX)), np.zeros(b.nc), 0.0, 1.0, threads=0, steps=1)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from gyrogen import abi, methods
 from gyrogen.errors import BuildError, SetupRefused
+from gyrogen.runtime.call_checks import THREADS_MAX, controls_error, real_only
 
 Language = Literal["c", "fortran"]
 
@@ -104,8 +105,12 @@ class Compiled:
 
     def symbol(self, name: str) -> str:
         """The exported name of a function: setup, rhs, jac, an output or an
-        integrator (rk4, dop853_batch, ...), as the manifest lists it."""
-        return str(self.manifest["functions"][self.language][name])
+        integrator (rk4, dop853_batch, ...), as the manifest lists it; a
+        one-line ValueError naming the ones there are otherwise."""
+        names = self.manifest["functions"][self.language]
+        if name not in names:
+            raise ValueError(f"this build has no function {name!r} (it has {', '.join(names)})")
+        return str(names[name])
 
     def function(self, name: str) -> Any:
         """That function, callable through cffi."""
@@ -122,14 +127,14 @@ class Compiled:
     def _vector(self, a: Any, size: int, what: str) -> np.ndarray:
         """a as a contiguous float64 array of shape (size,); a one-line
         ValueError otherwise (the C functions read exactly size values)."""
-        arr = np.ascontiguousarray(a, dtype=np.float64)
+        arr = np.ascontiguousarray(real_only(a, what), dtype=np.float64)
         if arr.shape != (size,):
             raise ValueError(f"{what} must have shape ({size},), not {arr.shape}")
         return arr
 
     def _states(self, x: Any) -> np.ndarray:
         """x as contiguous float64 states, shape (nx,) or (n, nx)."""
-        arr = np.ascontiguousarray(x, dtype=np.float64)
+        arr = np.ascontiguousarray(real_only(x, "states"), dtype=np.float64)
         if arr.ndim not in (1, 2) or arr.shape[-1] != self.nx:
             raise ValueError(
                 f"states must have shape ({self.nx},) or (n, {self.nx}), not {arr.shape}"
@@ -155,7 +160,11 @@ class Compiled:
     def output(self, name: str, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
         """An output function (kinetic_energy, angular_momentum, power) for a
         batch of states (n, nx): shape (n, size)."""
-        return self._apply(name, int(self.manifest["outputs"][name]), x, c, t)
+        outputs = self.manifest["outputs"]
+        if name not in outputs:
+            have = ", ".join(outputs) or "none"
+            raise ValueError(f"this build has no output {name!r} (its outputs: {have})")
+        return self._apply(name, int(outputs[name]), x, c, t)
 
     def jacobian(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
         """d(dx/dt)/dx at one state: shape (nx, nx) (scenes with an implicit
@@ -165,6 +174,7 @@ class Compiled:
                 f"scene {self.manifest['prefix']} has no Jacobian (add one of "
                 f"{', '.join(methods.IMPLICIT)} to its integrators)"
             )
+        x = self._vector(x, self.nx, "the state x (one state)")
         return self._apply("jac", self.nx * self.nx, x, c, t).reshape(self.nx, self.nx)
 
     def _apply(self, name: str, size: int, x: np.ndarray, c: np.ndarray, t: float) -> np.ndarray:
@@ -253,10 +263,13 @@ class Compiled:
             held = self._c_held
             cb = held[1] if held[0] is c else self._c_buffer(c)
             stats = new(_STATS_PTR)
-            if fixed:
-                code = fn(t0, t1, steps, buffer(_DOUBLES, x), cb, stats)
-            else:
-                code = fn(t0, t1, buffer(_DOUBLES, x), cb, rtol, atol, h0, max_steps, stats)
+            try:
+                if fixed:
+                    code = fn(t0, t1, steps, buffer(_DOUBLES, x), cb, stats)
+                else:
+                    code = fn(t0, t1, buffer(_DOUBLES, x), cb, rtol, atol, h0, max_steps, stats)
+            except (OverflowError, TypeError) as exc:
+                raise controls_error(exc, t0, t1, rtol, atol, h0, max_steps, steps) from None
             return x, Stats(stats), code
 
         return call
@@ -273,7 +286,9 @@ class Compiled:
         return buf
 
     def _state(self, x0: Any) -> np.ndarray:
-        x = np.array(x0, dtype=np.float64).reshape(-1)  # a copy: integrated in place
+        x = np.array(
+            real_only(x0, "the initial state"), dtype=np.float64
+        )  # a copy: integrated in place
         if x.shape != (self.nx,):
             raise ValueError(f"the initial state must have shape ({self.nx},), not {x.shape}")
         return x
@@ -309,7 +324,9 @@ class Compiled:
         if x0s.__class__ is np.ndarray and x0s.dtype is _F64 and x0s.ndim == 2:
             x = x0s.copy()  # C order; integrated in place
         else:
-            x = np.array(x0s, dtype=np.float64, order="C", ndmin=2)
+            x = np.array(real_only(x0s, "initial states"), dtype=np.float64, order="C", ndmin=2)
+            if x.size == 0:  # an empty batch: [] or (0, nx)
+                x = x.reshape(0, self.nx)
         if x.ndim != 2 or x.shape[1] != self.nx:
             raise ValueError(f"initial states must have shape (n, {self.nx}), not {x.shape}")
         n = x.shape[0]
@@ -319,8 +336,8 @@ class Compiled:
         cb = held[1] if held[0] is c else self._c_buffer(c)
         buf = self.ffi.from_buffer
         count = self._cores if threads is None else threads
-        if count < 1:
-            raise ValueError(f"threads must be at least 1, not {count}")
+        if not isinstance(count, (int, np.integer)) or not 1 <= count <= THREADS_MAX:
+            raise ValueError(f"threads must be an integer from 1 to {THREADS_MAX}, not {count!r}")
 
         def run(x: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
             xb, sb, kb = buf(_DOUBLES, x), buf(_STATS, stats), buf(_INTS, codes)
@@ -329,12 +346,15 @@ class Compiled:
             else:
                 fn(len(x), t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
 
-        if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-            run(x, stats, codes)  # OpenMP, or one thread
-        else:
-            cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
-            with ThreadPoolExecutor(len(cuts) + 1) as pool:
-                list(pool.map(run, *(np.split(a, cuts) for a in (x, stats, codes))))
+        try:
+            if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
+                run(x, stats, codes)  # OpenMP, or one thread
+            else:
+                cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
+                with ThreadPoolExecutor(len(cuts) + 1) as pool:
+                    list(pool.map(run, *(np.split(a, cuts) for a in (x, stats, codes))))
+        except (OverflowError, TypeError) as exc:
+            raise controls_error(exc, t0, t1, rtol, atol, h0, max_steps, steps) from None
         return x, stats, codes
 
     @cached_property

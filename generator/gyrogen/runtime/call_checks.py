@@ -1,0 +1,52 @@
+"""Checks of what a Python caller hands Compiled (gyrogen.runtime.compiled)
+that numpy and cffi would otherwise take silently or report in their own
+words: complex arrays, integers too large for C, a thread count past reason.
+Each is a one-line ValueError naming the argument."""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+
+THREADS_MAX = 4096
+"""The most threads integrate_batch takes (an int the C side can hold, and
+more than any machine here has)."""
+LONG_MAX = 2**63 - 1
+INTEGERS = ("max_steps", "steps")
+CONTROLS = ("t0", "t1", "rtol", "atol", "h0", *INTEGERS)
+"""The controls of an integrator call, in the order controls_error takes them."""
+
+
+def real_only(a: Any, what: str) -> Any:
+    """a itself; a one-line ValueError when it holds complex numbers (numpy
+    would drop their imaginary parts with only a warning)."""
+    if np.iscomplexobj(a):
+        raise ValueError(f"{what} must be real, not complex")
+    return a
+
+
+def _fits(name: str, v: Any) -> bool:
+    """Whether cffi takes v for the control name (a C long or a double)."""
+    if v is None:
+        return True
+    if name in INTEGERS:
+        return isinstance(v, (int, np.integer)) and abs(int(v)) <= LONG_MAX
+    if not isinstance(v, numbers.Real):
+        return False
+    try:
+        float(v)
+    except OverflowError:  # an int past the doubles
+        return False
+    return True
+
+
+def controls_error(exc: Exception, *controls: Any) -> ValueError:
+    """The one-line error for cffi's OverflowError or TypeError on a call:
+    the controls it could not take, by name."""
+    bad = [f"{n}={v!r}" for n, v in zip(CONTROLS, controls, strict=True) if not _fits(n, v)]
+    return ValueError(
+        f"{', '.join(bad) or 'a control'}: the times and tolerances must be real numbers, "
+        f"max_steps and steps integers that fit a C long ({exc})"
+    )
