@@ -24,6 +24,7 @@ import numpy as np
 
 from gyrogen import methods, physics
 from gyrogen.abi import GIMBAL_LOCK_COS
+from gyrogen.analysis.linearize import modes
 from gyrogen.errors import SceneError
 from gyrogen.limits import MAX_SPIN
 from gyrogen.runtime.compiled import Compiled
@@ -70,7 +71,8 @@ class Linear:
 
     @property
     def eigenvalues(self) -> np.ndarray:
-        return np.linalg.eigvals(self.A) if self.A.size else np.zeros(0, complex)
+        """A's, as the modes read them (the words print these)."""
+        return modes.eigenvalues(self.A)
 
 
 def with_model(scene: Scene) -> Scene:
