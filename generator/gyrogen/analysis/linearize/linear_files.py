@@ -5,6 +5,7 @@ with --plot poles.png, the pole map."""
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 from typing import Any
 
@@ -47,11 +48,15 @@ def warning(lin: Linear) -> str | None:
     """The one line a point that is no equilibrium gets, else None."""
     if lin.relative_residual <= RESIDUAL_BAR:
         return None
-    f_max = lin.residual
+    share = lin.relative_residual
+    why = (
+        "which no state moves (its row of A is 0)"
+        if math.isinf(share)
+        else f"{share:.3g} of its row's |A| max(|x|, 1), above {RESIDUAL_BAR:g}"
+    )
     return (
-        f"warning: not an equilibrium: max |dx/dt| over the kept states is {f_max:.3g} "
-        f"({lin.relative_residual:.3g} of ||A|| ||x||, above {RESIDUAL_BAR:g}); "
-        "the model is about a moving point"
+        f"warning: not an equilibrium: max |dx/dt| over the kept states is {lin.residual:.3g} "
+        f"({lin.worst}' = {lin.worst_rate:.3g}, {why}); the model is about a moving point"
     )
 
 
