@@ -87,7 +87,12 @@ def plot(lin: Linear) -> bytes:
 
     fig = Figure(figsize=(6.4, 4.8))
     ax = fig.add_subplot()
-    colors = {"stable": "tab:blue", "marginal": "tab:gray", "unstable": "tab:red"}
+    colors = {
+        "stable": "tab:blue",
+        "marginal": "tab:gray",
+        "unstable": "tab:red",
+        modes.CANNOT: "tab:orange",
+    }
     found = modes.modes(lin.A, lin.states)
     for verdict, color in colors.items():
         pts = [
@@ -95,7 +100,8 @@ def plot(lin: Linear) -> bytes:
             for m in found
             if m.verdict == verdict
             for v in (
-                (m.eigenvalue, m.eigenvalue.conjugate()) if m.oscillating else (m.eigenvalue,)
+                m.values
+                or ((m.eigenvalue, m.eigenvalue.conjugate()) if m.oscillating else (m.eigenvalue,))
             )
         ]
         if pts:
