@@ -128,3 +128,45 @@ def test_the_verdicts_do_not_depend_on_the_units() -> None:
         for m, n in zip(scaled, found, strict=True):
             if not n.secular:  # a Jordan block's mean is rounding
                 assert abs(m.eigenvalue - scale * n.eigenvalue) <= 1e-5 * scale * abs(n.eigenvalue)
+
+
+def _nutation_beside(omega: float) -> np.ndarray:
+    """speed_controlled's A with a wheel at w_ref: a nutation pair at
+    +-omega i (omega ~ J w_ref / I), a speed loop at -10 and the momentum
+    about a2's zero as the model's rounding leaves it (-8 eps), in the
+    structure the model has."""
+    a = np.zeros((4, 4))
+    a[0, 1], a[1, 0] = omega, -omega
+    a[2, 2], a[2, 3], a[3, 3] = -10.0, 10.0, -8 * np.finfo(float).eps
+    return a
+
+
+@pytest.mark.parametrize("power", range(0, 101, 5))
+def test_a_loop_is_never_called_zero_beside_a_fast_pair(power: int) -> None:
+    """-10 is stable while A's error (SLACK n eps ||A||) is below it; past
+    that it was merged with the zero into "marginal: -5 (x2), at rest
+    (zero)". Now a cluster whose members, each on its own, would be judged
+    apart (-10 stable, 0 at rest on the cluster's scale) cannot be judged."""
+    found = _found(_nutation_beside(10.0**power))
+    verdicts = {(m.verdict, m.multiplicity) for m in found}
+    assert ("marginal", 1) in verdicts  # the pair: its |Re| is 1e-7 of it at most
+    if 10.0**power * 1e-13 < 10.0:
+        assert {("stable", 1)} <= verdicts and ("marginal", 2) not in verdicts, found
+    else:
+        assert (modes.CANNOT, 2) in verdicts, found
+        assert modes.overall(found) == modes.CANNOT
+        judged = next(m for m in found if m.verdict == modes.CANNOT)
+        assert [v.real for v in judged.values] == [-10.0, -8 * np.finfo(float).eps]
+        assert "cannot judge: -10+0i to -1.77636e-15+0i (x2), within their rounding" in (
+            judged.words()
+        )
+    assert not any(m.verdict == "marginal" and m.eigenvalue.real < -1 for m in found)
+
+
+def test_a_cannot_judge_does_not_depend_on_the_units() -> None:
+    a = _nutation_beside(1e90)
+    for scale in (1.0, 1e-200, 1e200):
+        assert [(m.verdict, m.multiplicity) for m in _found(scale * a)] == [
+            (modes.CANNOT, 2),
+            ("marginal", 1),
+        ]

@@ -5,6 +5,7 @@ with --plot poles.png, the pole map."""
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 from typing import Any
 
@@ -47,11 +48,15 @@ def warning(lin: Linear) -> str | None:
     """The one line a point that is no equilibrium gets, else None."""
     if lin.relative_residual <= RESIDUAL_BAR:
         return None
-    f_max = lin.residual
+    share = lin.relative_residual
+    why = (
+        "which no state moves (its row of A is 0)"
+        if math.isinf(share)
+        else f"{share:.3g} of its row's |A| max(|x|, 1), above {RESIDUAL_BAR:g}"
+    )
     return (
-        f"warning: not an equilibrium: max |dx/dt| over the kept states is {f_max:.3g} "
-        f"({lin.relative_residual:.3g} of ||A|| ||x||, above {RESIDUAL_BAR:g}); "
-        "the model is about a moving point"
+        f"warning: not an equilibrium: max |dx/dt| over the kept states is {lin.residual:.3g} "
+        f"({lin.worst}' = {lin.worst_rate:.3g}, {why}); the model is about a moving point"
     )
 
 
@@ -82,7 +87,12 @@ def plot(lin: Linear) -> bytes:
 
     fig = Figure(figsize=(6.4, 4.8))
     ax = fig.add_subplot()
-    colors = {"stable": "tab:blue", "marginal": "tab:gray", "unstable": "tab:red"}
+    colors = {
+        "stable": "tab:blue",
+        "marginal": "tab:gray",
+        "unstable": "tab:red",
+        modes.CANNOT: "tab:orange",
+    }
     found = modes.modes(lin.A, lin.states)
     for verdict, color in colors.items():
         pts = [
@@ -90,7 +100,8 @@ def plot(lin: Linear) -> bytes:
             for m in found
             if m.verdict == verdict
             for v in (
-                (m.eigenvalue, m.eigenvalue.conjugate()) if m.oscillating else (m.eigenvalue,)
+                m.values
+                or ((m.eigenvalue, m.eigenvalue.conjugate()) if m.oscillating else (m.eigenvalue,))
             )
         ]
         if pts:

@@ -11,8 +11,10 @@ the rate its torque law holds, polished by Gauss-Newton on the compiled rhs.
 About a spin the attitude and the rotor angles keep turning: they are no
 equilibrium coordinates, and they drive nothing (no torque depends on
 them), so the model keeps the states whose rates vanish there and leaves
-those out (Linear.dropped). A point that is no equilibrium of the kept
-states is linearized all the same, with a warning stating the residual.
+those out (Linear.dropped); each rate against its own row's scale (relative:
+an attitude angle's against the body rates, not a wheel's 1e12 rad/s). A
+point that is no equilibrium of the kept states is linearized all the same,
+with a warning stating the residual.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 
 from gyrogen import methods, physics
 from gyrogen.abi import GIMBAL_LOCK_COS
+from gyrogen.analysis.linearize import modes
 from gyrogen.errors import SceneError
 from gyrogen.limits import MAX_SPIN
 from gyrogen.runtime.compiled import Compiled
@@ -33,10 +36,10 @@ from gyrogen.scene.rotors import lumped_inertia, resolved, unit_axes
 from gyrogen.scene.rules import QUATERNION, check_quaternion
 
 RESIDUAL_BAR = 1e-9
-"""A point is an equilibrium when its kept states' rates are at most this
-times ||A|| ||x|| (the rates a unit error in x would give)."""
+"""A point is an equilibrium when each kept state's rate is at most this
+share of its row's scale (relative)."""
 DRIFT_BAR = 1e-12
-"""A coordinate whose rate is below this times the largest speed stays put."""
+"""A coordinate whose rate is at most this share of its row's scale stays put."""
 NEWTON_STEPS = 30
 ATTITUDE = ("q1", "q2", "q3", "e0", "e1", "e2", "e3")
 """The attitude's coordinates: kept together or left out together (about a
@@ -64,13 +67,18 @@ class Linear:
     residual: float
     """max |dx/dt| over the kept states at x."""
     relative_residual: float
-    """residual / (||A|| ||x||): above RESIDUAL_BAR, x is no equilibrium."""
+    """The largest kept rate's share of its row's scale (relative): above
+    RESIDUAL_BAR, x is no equilibrium."""
+    worst: str
+    """The kept state whose rate has that share ("" if none is kept)."""
+    worst_rate: float
     found: str
     """How x was chosen: given, the scene's, or found (and how)."""
 
     @property
     def eigenvalues(self) -> np.ndarray:
-        return np.linalg.eigvals(self.A) if self.A.size else np.zeros(0, complex)
+        """A's, as the modes read them (the words print these)."""
+        return modes.eigenvalues(self.A)
 
 
 def with_model(scene: Scene) -> Scene:
@@ -298,8 +306,8 @@ def linearize(
             "double arithmetic (a state or parameter too large)"
         )
     speeds = _speeds(scene)
-    fastest = max(1.0, float(np.max(np.abs(x[speeds])))) if speeds else 1.0
-    still = [i in speeds or abs(f[i]) <= DRIFT_BAR * fastest for i in range(nx)]
+    share = relative(f, full_a, x)
+    still = [i in speeds or share[i] <= DRIFT_BAR for i in range(nx)]
     attitude = [i for i, s in enumerate(scene.states) if s in ATTITUDE]
     if not all(still[i] for i in attitude):  # the attitude turns: all of it goes
         for i in attitude:
@@ -316,6 +324,7 @@ def linearize(
         )
     a = full_a[np.ix_(kept, kept)]
     residual = float(np.max(np.abs(f[kept]))) if kept else 0.0
+    worst = max(kept, key=lambda i: (share[i], abs(f[i])), default=None)
     return Linear(
         scene=scene,
         states=tuple(scene.states[i] for i in kept),
@@ -329,21 +338,27 @@ def linearize(
         D=d,
         dropped=tuple(scene.states[i] for i in dropped),
         residual=residual,
-        relative_residual=relative(residual, a, x[kept]),
+        relative_residual=float(share[worst]) if worst is not None else 0.0,
+        worst=scene.states[worst] if worst is not None else "",
+        worst_rate=float(f[worst]) if worst is not None else 0.0,
         found=found,
     )
 
 
-def relative(residual: float, a: np.ndarray, x: np.ndarray) -> float:
-    """residual / (||A|| ||x||) (infinity norms), without overflow: each
-    factor divided out in turn, A's norm taken of A over its largest entry."""
-    big = float(np.max(np.abs(a))) if a.size else 0.0
-    size = float(np.max(np.abs(x))) if x.size else 0.0
-    if residual == 0:
-        return 0.0
-    if big == 0 or size == 0:
-        return math.inf
-    return residual / big / float(np.linalg.norm(a / big, np.inf)) / size
+def relative(f: np.ndarray, jac: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Each rate's share of its own row's scale, |f_i| / (|J| max(|x|, 1))_i:
+    of the rates that changing each state by itself (at least by 1, in its
+    unit) gives row i. An attitude angle's row reads the body rates (and the
+    angles), not a wheel's speed; a rate no state moves (a constant torque)
+    has an infinite share. Without overflow: each row over its largest
+    entry, max(|x|, 1) over its largest."""
+    size = np.maximum(np.abs(x), 1.0)
+    top = float(np.max(size, initial=1.0))
+    big = np.max(np.abs(jac), axis=1, initial=0.0)
+    rows = np.abs(jac) / np.where(big > 0, big, 1.0)[:, None]
+    with np.errstate(all="ignore"):  # a rate far beyond its scale: inf, as its share is
+        out = np.abs(f) / big / top / (rows @ (size / top))
+    return np.where(f == 0, 0.0, out)
 
 
 def generated(comp: Compiled, x: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -14,6 +14,12 @@ Eigenvalues within each other's error make one cluster; its mean
 (conditioned by its spectral projector, finite for a Jordan block) decides
 the verdict, and a marginal cluster grows like t when its block of the
 Schur form is not its mean times I to within the cluster's own error.
+
+A cluster stands for one eigenvalue only if its members, each judged by its
+own value, would get one verdict. When A's error (a wheel at 1e90 rad/s
+makes ||A|| 1e87) swallows eigenvalues the solver gives apart with different
+verdicts (its -10 and 0 within 1e73 of each other), the cluster is
+"cannot judge": its mean would be a verdict of rounding.
 """
 
 from __future__ import annotations
@@ -31,6 +37,8 @@ SLACK = 10.0
 """A's error is taken as SLACK n eps ||A||_F (the model's rounding and the
 solver's backward error are small multiples of n eps ||A||); a cluster's block is a
 Jordan block when it is SLACK times its error or spread away from its mean."""
+CANNOT = "cannot judge"
+"""The verdict of a cluster whose members' own verdicts differ."""
 SHOWN = 0.3
 """A mode is said to move the states whose eigenvector entries reach this
 fraction of its largest."""
@@ -41,7 +49,7 @@ class Mode:
     eigenvalue: complex
     """Im >= 0: a pair is one mode."""
     verdict: str
-    """stable, unstable or marginal."""
+    """stable, unstable, marginal or CANNOT."""
     states: tuple[str, ...]
     """The states it moves most."""
     multiplicity: int = 1
@@ -49,6 +57,10 @@ class Mode:
     secular: bool = False
     """Marginal but repeated with fewer eigenvectors than its multiplicity
     (a Jordan block): it grows like t, so unstable."""
+    values: tuple[complex, ...] = ()
+    """CANNOT's: its members, by real part."""
+    error: float = 0.0
+    """CANNOT's: their rounding error."""
 
     @property
     def oscillating(self) -> bool:
@@ -57,6 +69,13 @@ class Mode:
     def words(self) -> str:
         lam = self.eigenvalue
         where = f" in {', '.join(self.states)}" if self.states else ""
+        if self.verdict == CANNOT:
+            lo, hi = self.values[0], self.values[-1]
+            return (
+                f"{CANNOT}: {lo.real:+.6g}{lo.imag:+.6g}i to {hi.real:+.6g}{hi.imag:+.6g}i "
+                f"(x{self.multiplicity}), within their rounding error {self.error:.3g} of "
+                f"each other: A's condition hides whether they grow or decay{where}"
+            )
         if self.oscillating:
             shape = f"oscillating at {lam.imag:.6g} rad/s (period {2 * np.pi / lam.imag:.4g} s)"
         else:
@@ -104,6 +123,13 @@ class _Schur:
             return self.t, self.z, np.inf
         error = self.error / s if s > 0 else np.inf
         return ts[:m, :m], qs[:, :m], error
+
+
+def eigenvalues(a: np.ndarray) -> np.ndarray:
+    """A's eigenvalues as the modes read them: the diagonal of its complex
+    Schur form (linear.npz stores these, the words print their means: one
+    source, so a printed eigenvalue is a stored one)."""
+    return _schur(a).values if a.size else np.zeros(0, complex)
 
 
 def _schur(a: np.ndarray) -> _Schur:
@@ -157,10 +183,10 @@ def modes(a: np.ndarray, states: tuple[str, ...]) -> list[Mode]:
     found = []
     for members in clusters(s):
         block, basis, error = s.cluster(members)
-        mean = complex(np.trace(block)) / len(members)
-        found.append((mean, max(error, MARGINAL * abs(mean)), members, block, basis))
+        mean = complex(np.mean(s.values[members]))  # its block's trace, as stored
+        found.append((mean, max(error, MARGINAL * abs(mean)), members, block, basis, error))
     out: list[Mode] = []
-    for mean, tol, members, block, basis in sorted(found, key=lambda f: -f[0].imag):
+    for mean, tol, members, block, basis, error in sorted(found, key=lambda f: -f[0].imag):
         if mean.imag < -tol and any(abs(mean.conjugate() - m.eigenvalue) <= tol for m in out):
             continue  # the pair's other half
         lam = complex(mean.real, abs(mean.imag) if abs(mean.imag) > tol else 0.0)
@@ -170,9 +196,25 @@ def modes(a: np.ndarray, states: tuple[str, ...]) -> list[Mode]:
         moved = tuple(n for n, v in zip(states, size, strict=True) if top and v >= SHOWN * top)
         said = verdict(lam.real, tol)
         secular = said == "marginal" and vectors.shape[1] < len(members)
+        values = s.values[members]
+        if not secular and len(_faces(values, SLACK * len(a) * np.finfo(float).eps)) > 1:
+            told = tuple(sorted(values, key=lambda v: (v.real, v.imag)))
+            out.append(Mode(lam, CANNOT, moved, len(members), values=told, error=error))
+            continue
         out.append(Mode(lam, "unstable" if secular else said, moved, len(members), secular))
-    rank = {"unstable": 0, "marginal": 1, "stable": 2}
+    rank = {"unstable": 0, CANNOT: 1, "marginal": 2, "stable": 3}
     return sorted(out, key=lambda m: (rank[m.verdict], -_growth(m), -m.eigenvalue.imag))
+
+
+def _faces(values: np.ndarray, precision: float) -> set[str]:
+    """The verdicts the members get on their own: each against MARGINAL of
+    its |lambda|, or A's relative precision (SLACK n eps) times the largest
+    member's (below it, a member is zero on the cluster's own scale). An
+    exact 0 (where the solver deflated A's structure) tells nothing: a zero
+    beside a rounding one, 1e-17 at ||A|| 0.3, is one eigenvalue."""
+    values = values[values != 0]
+    floor = precision * float(np.max(np.abs(values), initial=0.0))
+    return {verdict(v.real, max(MARGINAL * abs(v), floor)) for v in values}
 
 
 def _growth(m: Mode) -> float:
@@ -193,9 +235,10 @@ def _eigenvectors(
 
 
 def overall(found: list[Mode]) -> str:
-    """unstable if any mode is; marginal if one is and none grows; else stable."""
+    """unstable if any mode is; else CANNOT if one is; else marginal if one
+    is; else stable."""
     verdicts = {m.verdict for m in found}
-    for v in ("unstable", "marginal"):
+    for v in ("unstable", CANNOT, "marginal"):
         if v in verdicts:
             return v
     return "stable"
