@@ -18,6 +18,7 @@ from gyrogen.analysis.sweep import sweep_spec
 from gyrogen.analysis.sweep.sweep_draws import grid_values
 from gyrogen.analysis.sweep.sweep_report import spin_values
 from gyrogen.codegen.context import make_context
+from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import builtin_text, load, parse
 from gyrogen.scene.rotors import lumped_inertia
@@ -450,3 +451,26 @@ def test_modes_lost_in_rounding_are_not_judged(
     assert "\ncannot judge: 2 modes (eigenvalues" in out, out
     assert f"{members}, within their rounding error" in out, out
     assert "at rest (zero)" not in out
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        ({"axis": 0}, r"axis: 0 is not 1, 2 or 3"),  # read a3 through np.eye(3)[-1]
+        ({"axis": -2}, r"axis: -2 is not 1, 2 or 3"),
+        ({"axis": 5}, r"axis: 5 is not"),  # numpy's IndexError
+        ({"axis": True}, r"axis: True is not"),
+        ({"spin": float("nan")}, r"spin: nan is not a finite number"),  # "beyond 1e+100"
+        ({"parameters": {"T": "abc"}}, r"parameters: T is 'abc', not a real number"),
+        ({"parameters": {"T": None}}, r"parameters: T is None"),
+        ({"parameters": [("T", 1.0)]}, r"parameters: give a dict of names to numbers, not list"),
+        ({"at": {"u1": "x"}}, r"at: u1 is 'x'"),
+        ({"state": [0, 0, 0, 1j, 0, 0, 0]}, r"state: x\[3\] is 1j"),
+    ],
+)
+def test_api_linearize_refuses_what_the_cli_cannot_be_given(kw: dict, message: str) -> None:
+    """api.linearize's arguments, which click checks for the CLI: one-line
+    GyrogenErrors, before anything is built (axis 0 was taken as a3)."""
+    with pytest.raises(GyrogenError, match=message) as info:
+        api.linearize("dual_spin", **kw)
+    assert "\n" not in str(info.value)

@@ -18,8 +18,11 @@ summary and figures in out, resumable), then its rows read back.
 
 from __future__ import annotations
 
+import math
+import numbers
 import os
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -146,7 +149,31 @@ def linearize(
     spin found (spin rad/s about the principal axis nearest a_axis)."""
     from gyrogen.analysis.linearize.linearize import model
 
+    _numbers("parameters", parameters)
+    _numbers("at", at)
+    if state is not None:
+        _numbers("state", {f"x[{i}]": v for i, v in enumerate(state)})
+    if spin is not None and not (_real(spin) and math.isfinite(spin)):
+        raise GyrogenError(f"spin: {spin!r} is not a finite number (rad/s)")
+    if axis is not None and (isinstance(axis, bool) or axis not in (1, 2, 3)):
+        raise GyrogenError(f"axis: {axis!r} is not 1, 2 or 3 (a1, a2, a3)")
     return model(_scene(scene), state=state, at=at, parameters=parameters, spin=spin, axis=axis)
+
+
+def _real(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _numbers(what: str, values: Any) -> None:
+    """values: None, or a mapping of names to real numbers (a one-line
+    GyrogenError otherwise, where float() would say it in its own words)."""
+    if values is None:
+        return
+    if not isinstance(values, Mapping):
+        raise GyrogenError(f"{what}: give a dict of names to numbers, not {type(values).__name__}")
+    for k, v in values.items():
+        if not _real(v):
+            raise GyrogenError(f"{what}: {k} is {v!r}, not a real number")
 
 
 def state_space(scene: str | Scene | Linear = "dual_spin", **point: Any) -> control.StateSpace:
