@@ -136,3 +136,27 @@ def test_time_at_an_error_is_read_along_the_front() -> None:
     assert workprec.seconds_at(runs, 1e-8) is None
     failed = Run("m", "C", 0.0, 1e-9, 1e-9, 0, "code 2")
     assert workprec.seconds_at([*runs, failed], 1e-8) is None
+
+
+def test_casadi_takes_a_clamped_motor() -> None:
+    """rw4_pyramid's rhs clamps its motors (Min, Max): in CasADi's SX they
+    are fmin and fmax, and the SX rhs equals the block evaluated on floats,
+    at random states and constants (Python's min of SX asked an SX for its
+    truth: `gyrogen bench rw4_pyramid` ended in a traceback)."""
+    import math
+
+    ca = pytest.importorskip("casadi")
+    from gyrogen.analysis.bench.workprec_peers import _sx_rhs, rhs_values
+    from gyrogen.codegen.generate import unit_of
+    from gyrogen.scene import load
+
+    unit = unit_of(load("rw4_pyramid"))
+    x, c = ca.SX.sym("x", unit.nx), ca.SX.sym("c", unit.nc)
+    f = ca.Function("rhs", [x, c], [_sx_rhs(ca, unit, x, c)])
+    floats = {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt}
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        xv, cv = rng.normal(size=unit.nx) * 10.0, rng.uniform(0.1, 2.0, unit.nc)
+        want = np.array(rhs_values(unit, list(xv), list(cv), floats), dtype=float)
+        got = np.asarray(f(xv, cv)).ravel()
+        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13)

@@ -19,6 +19,7 @@ A missing package skips its peer with a line saying how to install it.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -177,7 +178,11 @@ def _casadi_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: 
         return []
     x = ca.SX.sym("x", unit.nx)
     c = ca.SX.sym("c", unit.nc)
-    ode = _sx_rhs(ca, unit, x, c)
+    try:
+        ode = _sx_rhs(ca, unit, x, c)
+    except (RuntimeError, TypeError, NameError) as exc:  # an operation SX does not take
+        echo(f"CasADi skipped: {prob.scene.name}'s rhs does not translate to SX ({exc})")
+        return []
     _check_sx(ca.Function("rhs", [x, c], [ode]), prob, echo)
     variant = "BDF" if stiff else "Adams"
     label = f"CasADi cvodes {variant}"
@@ -226,8 +231,16 @@ def rhs_values(unit: Any, x: Any, c: Any, funcs: dict[str, Any]) -> list[Any]:
 
 
 def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:
-    """gyrogen's optimized rhs block in SX."""
-    return ca.vertcat(*rhs_values(unit, x, c, {"sin": ca.sin, "cos": ca.cos, "sqrt": ca.sqrt}))
+    """gyrogen's optimized rhs block in SX: a clamp's Min and Max as CasADi's
+    fmin and fmax (Python's min and max would ask an SX for its truth)."""
+    funcs = {
+        "sin": ca.sin,
+        "cos": ca.cos,
+        "sqrt": ca.sqrt,
+        "Min": lambda *a: functools.reduce(ca.fmin, a),
+        "Max": lambda *a: functools.reduce(ca.fmax, a),
+    }
+    return ca.vertcat(*rhs_values(unit, x, c, funcs))
 
 
 def _check_sx(f: Any, prob: Problem, echo: Echo) -> None:
