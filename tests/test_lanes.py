@@ -136,9 +136,15 @@ def test_trig_accuracy(source_dir: Path, tmp_path: Path) -> None:
 
 def test_bench_ensemble_prints_its_figures(cli) -> None:
     """The command runs end to end on a small ensemble (no peers: their
-    compiles take a minute); the figures are for the reader, not asserted."""
+    compiles take a minute); the figures are for the reader, not asserted.
+    A skipped peer reads "skipped" (it read inf), and --n 16 is measured once
+    among the sizes (it was twice)."""
     out = cli(["bench-ensemble", "--n", "16", "--repeats", "1", "--no-peers"])
     assert out.code == 0, out.err
     assert "single trajectory, default scene" in out.out
     assert "lanes on 1 core vs the single-trajectory loop" in out.out
     assert "N =     16, 1 thread(s)" in out.out
+    assert out.out.count("N =     16, 1 thread(s)") == 1  # --n 16 is one of the sizes: once
+    rows = [r.split() for r in out.out.splitlines() if r.strip().startswith("1e-")][:3]
+    assert [r[2:] for r in rows] == [["skipped", "-"]] * 3  # no peers: not "inf"
+    assert "numbalsoda timed inside" not in out.out
