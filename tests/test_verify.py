@@ -82,3 +82,13 @@ def test_verify_command_passes_on_every_builtin_scene(name: str, cli) -> None:
     code, out, err = cli(["verify", name])
     assert code == 0, out + err
     assert "FAIL" not in out and " ok" in out
+
+
+def test_verify_counts_the_scenes_own_parameters_apart(cli, tmp_path) -> None:
+    """--params 1 on a scene with [simulate] parameters compares 2 sets: the
+    line says which is the scene's own (it said "2 well-conditioned" with
+    no word of where the second came from)."""
+    code, out, err = cli(["verify", "dual_spin", "--states", "1", "--params", "1",
+                          "--out", str(tmp_path / "v")])  # fmt: skip
+    assert code == 0, out + err
+    assert "x 2 well-conditioned (1 random, 1 the scene's own) and" in out

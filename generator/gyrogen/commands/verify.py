@@ -49,10 +49,12 @@ def _compare(scene: Scene, backends: list[Compiled], states: int, params: int, s
         progress=lambda label, items: progress(f"comparing, {label}", items),
         given=given_parameters(scene),
     )
+    mine = report.n_params.get("own", 0)
+    own = f" ({report.n_params['well'] - mine} random, {mine} the scene's own)" if mine else ""
     click.echo(
-        f"{scene.name}: {states} random states x {report.n_params['well']} well-conditioned and "
-        f"{report.n_params['ill']} ill-conditioned parameter sets; error |a-b|/(1+|b|+S), S the "
-        "sizes of the terms (see gyrogen.oracle.compare):"
+        f"{scene.name}: {states} random states x {report.n_params['well']} well-conditioned"
+        f"{own} and {report.n_params['ill']} ill-conditioned parameter sets; error "
+        "|a-b|/(1+|b|+S), S the sizes of the terms (see gyrogen.oracle.compare):"
     )
     for r in report.rows:
         mark = "ok" if r.passed else "FAIL"

@@ -276,7 +276,8 @@ def compare(
         )
     conds = [_condition(scene, p) for p in draws]
     ill = draws[[i for i in np.argsort(conds)[-n_ill:] if conds[i] > WELL_CONDITIONED]]
-    report = Report(n_states, {"well": len(well), "ill": len(ill)})
+    own = len(fine) if given is not None and len(given) else 0
+    report = Report(n_states, {"well": len(well), "ill": len(ill), "own": own})
     label = f"cond <= {WELL_CONDITIONED:g}"
     report.rows += _group(label, backends, scene, states, well, lambda c: TOLERANCE, progress, rng)
     if len(ill):
