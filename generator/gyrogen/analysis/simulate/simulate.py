@@ -245,7 +245,9 @@ def _by_integrator(
     if seg.code != 0:
         why = message(ODE_CODES, seg.code)
         if seg.code == ERR_MAX_STEPS:
-            why = f"{budget} RHS calls (--max-nfev) spent"
+            why = f"{budget} RHS calls (--max-nfev) spent" + methods.instead(
+                method, comp.manifest["integrators"]
+            )
         raise GyrogenError(f"{method} failed at t = {seg.totals['t']:.6g} s: {why}")
     steps = steps_of_segments(np.array([s["accepted"] for s in seg.intervals]))
     return seg.states, int(seg.totals["rhs_calls"]), wall, steps
