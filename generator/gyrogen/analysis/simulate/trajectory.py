@@ -12,7 +12,11 @@ interval's ends and midpoint disagrees with the nodes' sum, and the interval
 is bisected, its states integrated again from its start (Trajectory.again,
 at a tighter tolerance), until they agree to QUAD_TOL of the integral's
 scale, or to how far the rates are known (the states' tolerance times the
-rates' gain), or to rounding.
+rates' gain), or to rounding. An oscillation many periods to an interval
+(stiff_wheel's nutation at dt = 1000 s) fools both rules alike: an interval
+the integrator took several steps across (Trajectory.steps) is first cut
+into as many pieces, their states integrated again. What it could not
+resolve (bisections or pieces spent) Integrals.unresolved says.
 """
 
 from __future__ import annotations
