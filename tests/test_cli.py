@@ -340,6 +340,35 @@ def test_new_refuses_a_place_or_name_it_cannot_write_as_asked(
     assert list(tmp_path.iterdir()) == []
 
 
+def test_new_out_dash_is_standard_output(
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`new --out -` wrote a file named -; now the scene alone goes to
+    standard output (to pipe or redirect), and nothing is written."""
+    from gyrogen.scene import parse
+
+    monkeypatch.chdir(tmp_path)
+    code, out, err = cli(["new", "my_sat", "--out", "-"])
+    assert (code, err) == (0, "") and parse(out, "stdin").name == "my_sat"
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["generate"], ["simulate", "gyrostat"], ["linearize", "dual_spin"], ["sweep", "monte_carlo"]],
+)
+def test_a_directory_out_of_dash_is_one_line(
+    argv: list[str], tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A directory --out of - made a directory named -: - is standard
+    output (as for `new`), which holds no directory; one line, exit 2."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = cli([*argv, "--out", "-"])
+    assert (code, out) == (2, "") and err.count("\n") == 1, err
+    assert "'-' is standard output, which cannot hold a directory" in err
+    assert list(tmp_path.iterdir()) == []
+
+
 NUMBERS = [
     (
         ["verify", "--states", "0"],

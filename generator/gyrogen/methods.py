@@ -294,6 +294,29 @@ def pick(available: Iterable[str], stiff: bool) -> str | None:
     return next((m for m in (STIFF_CHOICE if stiff else EXPLICIT_CHOICE) if m in have), None)
 
 
+def instead(method: str, available: Iterable[str]) -> str:
+    """What a one-line error suggests when method spent its RHS budget (empty
+    for an implicit one): the build's implicit methods by name (scipy's Radau
+    without one); for a Taylor method also the build's explicit pairs, whose
+    error is each state's: its one error norm is the largest |state|, so a
+    state far below the others goes unresolved (x9: u1 ~ 1e3 beside u4 ~ 5e20
+    at rtol 1e-10; dop853 took 5e4 calls, taylor 1.5e7 and ended wrong)."""
+    if METHODS[method].implicit:
+        return ""
+    have = set(available)
+    stiff = [m for m in STIFF_CHOICE if m in have] or ["Radau"]
+    said = (
+        f"; the state may be blowing up, or the scene is stiff (try --method {' or '.join(stiff)})"
+    )
+    pairs = [m for m in EXPLICIT_CHOICE if m in have and METHODS[m].pair]
+    if METHODS[method].taylor and pairs:
+        said += (
+            f", or its states differ too much in size for {method}'s one error norm, the largest "
+            f"|state| (try --method {' or '.join(pairs)})"
+        )
+    return said
+
+
 SCIPY: tuple[str, ...] = ("RK45", "DOP853", "Radau", "LSODA")
 """scipy's solve_ivp methods gyrogen drives with a compiled rhs (simulate, bench)."""
 AUTO = "auto"

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from gyrogen.commands.options import STDOUT
 from gyrogen.errors import GyrogenError, SceneError
 
 
@@ -27,7 +28,8 @@ def _file(ctx: click.Context, param: click.Parameter, value: str | None) -> Path
     "--out",
     type=click.Path(dir_okay=False),
     callback=_file,
-    help="File, created with any missing directories above it [default: NAME.toml].",
+    help="File, created with any missing directories above it; - for standard output "
+    "[default: NAME.toml].",
 )
 @click.option("--force", is_flag=True, help="Overwrite an existing file.")
 def new(name: str, out: Path | None, force: bool) -> None:
@@ -41,6 +43,11 @@ def new(name: str, out: Path | None, force: bool) -> None:
         check_name(name)  # before any path is made of it: a 300-character one was an OSError
     except ValueError as exc:
         raise SceneError(f"not a valid scene name: {exc}") from None
+    text = render("scene/new.toml.jinja", name=name)
+    if out is not None and str(out) == STDOUT:  # the scene alone, to pipe or redirect
+        parse(text, name)
+        click.echo(text, nl=False)
+        return
     out = out or Path(f"{name}.toml")
     try:
         exists = out.exists()
@@ -48,7 +55,6 @@ def new(name: str, out: Path | None, force: bool) -> None:
         raise GyrogenError(f"cannot write {out}: {exc.strerror}") from None
     if exists and not force:
         raise GyrogenError(f"{out} exists: choose another name or pass --force")
-    text = render("scene/new.toml.jinja", name=name)
     parse(text, str(out))  # the starter must itself be a valid scene
     write_atomic(out.parent if str(out.parent) else Path("."), {out.name: text})
     click.echo(f"wrote {out}: edit it, then `gyrogen generate {out}`")

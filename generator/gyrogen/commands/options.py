@@ -50,10 +50,27 @@ POSITIVE = FiniteFloat(min=0.0, min_open=True)
 """A finite number > 0."""
 
 
+STDOUT = "-"
+"""An --out of "-" is standard output (`gyrogen new --out -`), which holds no directory."""
+NO_STDOUT_DIRECTORY = (
+    "'-' is standard output, which cannot hold a directory: name one (./- for a directory called -)"
+)
+
+
+def _not_stdout(ctx: click.Context, param: click.Parameter, value: Path | None) -> Path | None:
+    if value is not None and str(value) == STDOUT:
+        raise click.BadParameter(NO_STDOUT_DIRECTORY, ctx, param)
+    return value
+
+
 def directory(flag: str, help: str) -> Callable[[F], F]:
-    """An option naming a directory to write into (None when not given)."""
+    """An option naming a directory to write into (None when not given; not "-")."""
     return click.option(
-        flag, type=click.Path(file_okay=False, path_type=Path), default=None, help=help
+        flag,
+        type=click.Path(file_okay=False, path_type=Path),
+        default=None,
+        callback=_not_stdout,
+        help=help,
     )
 
 

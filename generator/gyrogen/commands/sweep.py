@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from gyrogen.commands.options import NO_STDOUT_DIRECTORY, STDOUT
 from gyrogen.limits import MAX_SWEEP_CHUNK
 
 ADDRESS = re.compile(r"tcp://[^\s:/]+:\d{1,5}")
@@ -34,6 +35,8 @@ class OutType(click.ParamType):
         from gyrogen.analysis.sweep.sweep_store import store
         from gyrogen.errors import GyrogenError
 
+        if value == STDOUT:
+            self.fail(NO_STDOUT_DIRECTORY, param, ctx)
         try:
             where = store(value)  # what is a URL and what a path: decided there alone
         except GyrogenError as exc:

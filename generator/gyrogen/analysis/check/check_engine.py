@@ -29,7 +29,12 @@ from gyrogen.abi import (
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import invariants
 from gyrogen.analysis.simulate.simulate import compiled_again
-from gyrogen.analysis.simulate.trajectory import QUAD_NODES, from_samples, sample_times
+from gyrogen.analysis.simulate.trajectory import (
+    QUAD_NODES,
+    from_samples,
+    sample_times,
+    steps_of_segments,
+)
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.cluster_reference import clamp_margins
 from gyrogen.physics import LUMPED_FROM, lumped_inertias
@@ -149,7 +154,8 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     res.trajectory, res.times = seg.states[::every], ts[: len(seg.states[::every])]
     if case.quadrature and seg.code == 0:
         again = compiled_again(comp, res.method, c, (TOL, TOL), 10**8)
-        traj = from_samples(ts, times, seg.states, 0, 0.0, again)
+        across = steps_of_segments(np.array([s["accepted"] for s in seg.intervals]))
+        traj = from_samples(ts, times, seg.states, 0, 0.0, again, across)
         res.drift_series = invariants.by_quadrature(scene, p, traj)
     _judge(res, p, c, comp)
     return res

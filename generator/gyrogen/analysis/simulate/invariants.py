@@ -110,6 +110,8 @@ class Invariants:
     """(K - K(0) - int P dt) / max |K|."""
     u4: np.ndarray
     """(u4 - u4(0) - int T dt / J) / max |u4| (a cluster: w1's, words(scene))."""
+    unresolved: tuple[str, ...] = ()
+    """What the balances' quadrature could not resolve (Integrals.unresolved)."""
 
     def worst(self) -> dict[str, float]:
         return {
@@ -127,7 +129,8 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
     h, k = momentum(scene, p, x), kinetic(scene, p, x)
     u4 = x[:, scene.states.index("w1" if scene.rotors else "u4")]
     scales = np.array([_scale(k), _scale(u4) * _axial(scene, p)])  # the balances' normalizers
-    work = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs), scales)
+    integrals = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs), scales)
+    work = integrals.values
     h_drift, h_vector_drift = momentum_drifts(h)
     return Invariants(
         h=h,
@@ -137,6 +140,7 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
         h_vector_drift=h_vector_drift,
         energy=balance(k, work[:, 0]),
         u4=balance(u4, work[:, 1] / _axial(scene, p)),
+        unresolved=integrals.unresolved,
     )
 
 

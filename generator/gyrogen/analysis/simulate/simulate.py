@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.integrate
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
@@ -31,11 +32,14 @@ from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import simulate_files
 from gyrogen.analysis.simulate.invariants import Invariants, along_trajectory, words
 from gyrogen.analysis.simulate.trajectory import (
+    QUAD_NODES,
     Again,
     Trajectory,
     from_samples,
     output_grid,
     sample_times,
+    steps_between,
+    steps_of_segments,
 )
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import can_write, write_atomic
@@ -165,10 +169,8 @@ def integrate(start: Start, settings: Settings, advance: Advance) -> Trajectory:
     grid = output_grid(settings.t_end, settings.dt)
     samples = sample_times(grid)
     compiled = settings.method in methods.NAMES
-    y, nfev, wall = (_by_integrator if compiled else _by_solve_ivp)(
-        start, samples, settings, advance
-    )
-    return from_samples(grid, samples, y, nfev, wall, _again(start, settings))
+    run = (_by_integrator if compiled else _by_solve_ivp)(start, samples, settings, advance)
+    return from_samples(grid, samples, *run[:3], _again(start, settings), run[3])
 
 
 def _controls(start: Start, settings: Settings) -> Controls:
@@ -217,10 +219,11 @@ def compiled_again(
 
 def _by_integrator(
     start: Start, samples: np.ndarray, settings: Settings, advance: Advance
-) -> tuple[np.ndarray, int, float]:
+) -> tuple[np.ndarray, int, float, np.ndarray]:
     """The generated integrator from each sample time to the next: every
     output is a step end, so no interpolation error (rk4: 100 steps an
-    interval). The states, the RHS calls and the seconds it took."""
+    interval). The states, the RHS calls, the seconds it took and its steps
+    across each output interval."""
     comp, method = start.comp, settings.method
     if method not in comp.manifest["integrators"]:
         raise SceneError(
@@ -242,28 +245,40 @@ def _by_integrator(
     if seg.code != 0:
         why = message(ODE_CODES, seg.code)
         if seg.code == ERR_MAX_STEPS:
-            why = f"{budget} RHS calls (--max-nfev) spent"
+            why = f"{budget} RHS calls (--max-nfev) spent" + methods.instead(
+                method, comp.manifest["integrators"]
+            )
         raise GyrogenError(f"{method} failed at t = {seg.totals['t']:.6g} s: {why}")
-    return seg.states, int(seg.totals["rhs_calls"]), wall
+    steps = steps_of_segments(np.array([s["accepted"] for s in seg.intervals]))
+    return seg.states, int(seg.totals["rhs_calls"]), wall, steps
 
 
 def _by_solve_ivp(
     start: Start, samples: np.ndarray, settings: Settings, advance: Advance
-) -> tuple[np.ndarray, int, float]:
+) -> tuple[np.ndarray, int, float, np.ndarray]:
     """solve_ivp through the raw rhs, its dense output at the sample times:
-    the states, the RHS calls and the seconds it took."""
-    t_end = samples[-1]
+    the states, the RHS calls, the seconds it took and its steps across each
+    output interval (counted by a subclass of its solver)."""
+    t_end, ends = samples[-1], []
     f = _Rhs(start.comp, start.c, t_end, advance, settings.max_nfev)
     rtol, atol = start.tol
+
+    class Counted(getattr(scipy.integrate, settings.method)):  # type: ignore[misc]
+        def step(self) -> str | None:
+            said = super().step()
+            ends.append(self.t)
+            return said
+
     t0 = time.perf_counter()
     try:
-        sol = solve_ivp(f, (0.0, t_end), start.x0, settings.method, samples, rtol=rtol, atol=atol)
+        sol = solve_ivp(f, (0.0, t_end), start.x0, Counted, samples, rtol=rtol, atol=atol)
     except _Exhausted:
         sol = None
     wall = time.perf_counter() - t0
     check_solution(sol, settings.method, f.t_max, t_end, settings.max_nfev)
     f.finish()
-    return np.ascontiguousarray(sol.y.T), int(sol.nfev), wall
+    steps = steps_between(samples[:: QUAD_NODES + 1], np.array(ends))
+    return np.ascontiguousarray(sol.y.T), int(sol.nfev), wall, steps
 
 
 def given_constants(scene: Scene, comp: Compiled, p: np.ndarray) -> np.ndarray:
@@ -375,5 +390,6 @@ def summary_lines(res: Result) -> list[str]:
         " of max K (quadrature: Gauss-Legendre, bisected where it misses a transient)",
         f"  {said.rate} check        {said.balance}: {worst['u4_relative_residual']:.2e}"
         f" of max |{said.rate}|",
+        *(f"  quadrature      NOT RESOLVED: {why}" for why in res.invariants.unresolved),
         f"wrote {res.out}/ ({files}; sources in src/)",
     ]

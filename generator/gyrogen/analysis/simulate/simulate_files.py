@@ -79,6 +79,7 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
         "parameters": dict(zip(s.runtime, map(float, p), strict=True)),
         "invariants": res.invariants.worst(),
         "quadrature": QUADRATURE,
+        "quadrature_unresolved": list(res.invariants.unresolved),
         "invariants_note": note(s),
         "files": [f.name for f in res.files],
     }
