@@ -122,3 +122,25 @@ def check_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled
             generate(case.scene, src)
             out[case.scene.name] = build.build(src, "c")
     return out
+
+
+LONG_POLES = (
+    "test_strict.py::test_c_example_under_sanitizers",
+    "test_strict.py::test_verify_path_under_sanitizers",
+    "test_scene_space.py::test_every_drawn_scene_keeps_the_promise",
+    "test_scene_space.py::test_every_drawn_cluster_keeps_the_promise",
+)
+"""The tests of a minute or more each (ASan + UBSan compiles of the default
+scene's 140 kB rhs, the drawn-scene shards): collected first, so that
+pytest-xdist starts them at once instead of leaving one on a worker at the
+end of the run while the other waits."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    def rank(item: pytest.Item) -> int:
+        for i, pole in enumerate(LONG_POLES):
+            if pole in item.nodeid:
+                return i
+        return len(LONG_POLES)
+
+    items.sort(key=rank)  # stable: the rest keep their order
