@@ -298,7 +298,8 @@ def instead(method: str, available: Iterable[str]) -> str:
     """What a one-line error suggests when method spent its RHS budget (empty
     for an implicit one): the build's implicit methods by name (scipy's Radau
     without one); for a Taylor method also the build's explicit pairs, whose
-    error is each state's: its one error norm is the largest |state|, so a
+    error is each state's: its one error norm is the largest rate or speed
+    (taylor.state_scales), so a
     state far below the others goes unresolved (x9: u1 ~ 1e3 beside u4 ~ 5e20
     at rtol 1e-10; dop853 took 5e4 calls, taylor 1.5e7 and ended wrong)."""
     if METHODS[method].implicit:
@@ -312,7 +313,7 @@ def instead(method: str, available: Iterable[str]) -> str:
     if METHODS[method].taylor and pairs:
         said += (
             f", or its states differ too much in size for {method}'s one error norm, the largest "
-            f"|state| (try --method {' or '.join(pairs)})"
+            f"rate or speed (try --method {' or '.join(pairs)})"
         )
     return said
 
