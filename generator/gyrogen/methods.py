@@ -299,9 +299,9 @@ def instead(method: str, available: Iterable[str]) -> str:
     for an implicit one): the build's implicit methods by name (scipy's Radau
     without one); for a Taylor method also the build's explicit pairs, whose
     error is each state's: its one error norm is the largest rate or speed
-    (taylor.state_scales), so a
-    state far below the others goes unresolved (x9: u1 ~ 1e3 beside u4 ~ 5e20
-    at rtol 1e-10; dop853 took 5e4 calls, taylor 1.5e7 and ended wrong)."""
+    (taylor.state_scales), so a state far below the others goes unresolved
+    (x9: u1 ~ 1e3 beside u4 ~ 5e20 at rtol 1e-10; dop853 took 5e4 calls,
+    taylor 1.5e7 and ended wrong)."""
     if METHODS[method].implicit:
         return ""
     have = set(available)
