@@ -286,9 +286,8 @@ class Compiled:
         return buf
 
     def _state(self, x0: Any) -> np.ndarray:
-        x = np.array(
-            real_only(x0, "the initial state"), dtype=np.float64
-        )  # a copy: integrated in place
+        # a copy: integrated in place
+        x = np.array(real_only(x0, "the initial state"), dtype=np.float64)
         if x.shape != (self.nx,):
             raise ValueError(f"the initial state must have shape ({self.nx},), not {x.shape}")
         return x

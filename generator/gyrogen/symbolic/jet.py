@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from dataclasses import dataclass
 from typing import Literal
 
@@ -274,16 +275,18 @@ def decompose(block: Block, states: tuple[sm.Symbol, ...]) -> Jet:
     product less per order."""
     outputs = list(block.outputs)
     jet = _build(block, states, outputs)
+    full = jet.full()
+    if full == 0:
+        return jet
     deg = jet.degrees()
     fixed = {i for i in range(len(states)) if deg[i] <= FIXED_PAST}
-    full = jet.full()
     for i, e in enumerate(_substituted(block)):
         grouped = None if e is None else regroup(e, states, fixed)
-        if grouped is None or full == 0:
+        if grouped is None:
             continue
         trial = _build(block, states, [*outputs[:i], grouped, *outputs[i + 1 :]])
-        if trial.full() < full:
-            outputs[i], jet, full = grouped, trial, trial.full()
+        if (fewer := trial.full()) < full:
+            outputs[i], jet, full = grouped, trial, fewer
     return jet
 
 
@@ -319,7 +322,7 @@ def regroup(e: sm.Expr, states: tuple[sm.Symbol, ...], fixed: set[int]) -> sm.Ex
         poly = sm.Poly(e, *used)
     except (sm.PolynomialError, PolificationFailed):
         return None
-    if poly.total_degree() != 2 or any(s in states for s in poly.free_symbols_in_domain):
+    if poly.total_degree() != 2:
         return None
     rest: sm.Expr = sm.Integer(0)
     quad: dict[tuple[int, int], sm.Expr] = {}
@@ -332,10 +335,7 @@ def regroup(e: sm.Expr, states: tuple[sm.Symbol, ...], fixed: set[int]) -> sm.Ex
     index = {i: states.index(s) for i, s in enumerate(used)}
     groups: list[sm.Expr] = []
     while quad:
-        count: dict[int, int] = {}
-        for pair in quad:
-            for v in set(pair):
-                count[v] = count.get(v, 0) + 1
+        count = Counter(v for pair in quad for v in set(pair))
         v = min(count, key=lambda u: (index[u] not in fixed, -count[u], index[u]))
         taken = {p: c for p, c in quad.items() if v in p}
         form = sm.Add(*(c * used[p[1] if p[0] == v else p[0]] for p, c in taken.items()))

@@ -169,18 +169,21 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
     deg = jet.degrees()
     exact = [n for n in range(jet.nx) if deg[n] <= series.min_order]
 
+    def runs(left_out: list[int], *body: S) -> list[S]:
+        """body for each state but those left out, in loops over their runs."""
+        return [For("i", Int(b), body, start=Int(a)) for a, b in _runs(jet.nx, left_out)]
+
     def series_states(*body: S) -> list[S]:
         """body for each state that is not a polynomial of degree min_order
-        or less, in loops over their runs of indices."""
-        return [For("i", Int(b), body, start=Int(a)) for a, b in _runs(jet.nx, exact)]
+        or less."""
+        return runs(exact, *body)
 
     kinds = jet.scales or ("magnitude",) * jet.nx
 
     def scale_states(kind: str, size: E) -> list[S]:
-        """xmax over the states of one kind, in loops over their runs."""
-        out = [n for n in range(jet.nx) if kinds[n] != kind]
-        grow = assign(xmax, common.larger(xmax, size))
-        return [For("i", Int(b), (grow,), start=Int(a)) for a, b in _runs(jet.nx, out)]
+        """xmax over the states of one kind."""
+        other = [n for n in range(jet.nx) if kinds[n] != kind]
+        return runs(other, assign(xmax, common.larger(xmax, size)))
 
     def polynomial(n: int) -> E:
         """xnew of a state of degree <= min_order: exact at any order and h."""
