@@ -29,6 +29,7 @@ import numpy as np
 
 from gyrogen.analysis.check.check_cases import quaternion_scene
 from gyrogen.analysis.simulate import simulate
+from gyrogen.analysis.simulate.result import Settings
 from gyrogen.codegen.fmu_model import FmuModel, Stepping
 from gyrogen.codegen.generate import unit_of
 from gyrogen.files import write_atomic
@@ -70,7 +71,7 @@ def build(case: Case, out: Path) -> Path:
 
 def reference(case: Case, t_end: float, out: Path) -> np.ndarray:
     """`gyrogen simulate`'s trajectory on the scene's output grid."""
-    settings = simulate.Settings(t_end, case.scene.simulate.dt, case.reference, plot=False)
+    settings = Settings(t_end, case.scene.simulate.dt, case.reference, plot=False)
     return simulate.run(case.scene, out, settings).trajectory.x
 
 

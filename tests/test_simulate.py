@@ -16,6 +16,7 @@ import pytest
 from matplotlib.image import imread
 
 from gyrogen.analysis.simulate import plots
+from gyrogen.analysis.simulate.result import Settings
 from gyrogen.analysis.simulate.simulate import check_solution
 from gyrogen.analysis.simulate.simulate_files import COLUMNS
 from gyrogen.analysis.simulate.trajectory import (
@@ -457,7 +458,7 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     res = simulate.run(
         scenes.load("torque_free"),
         tmp_path / "out",
-        simulate.Settings(t_end=2.0, dt=0.05, method="dop853", plot=False),
+        Settings(t_end=2.0, dt=0.05, method="dop853", plot=False),
     )
     assert res.trajectory.nfev > 0 and res.trajectory.x.shape == (41, 7)
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-12
@@ -493,7 +494,7 @@ def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
         simulate.run(
             scenes.parse(text, "t.toml"),
             tmp_path / "out",
-            simulate.Settings(t_end=1.0, dt=0.1, method="rodas4", plot=False),
+            Settings(t_end=1.0, dt=0.1, method="rodas4", plot=False),
         )
 
 
@@ -511,7 +512,7 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     t_end = min(1.0, scene.simulate.t_end)
     said: list[str] = []
     res = simulate.run(
-        scene, tmp_path / "o", simulate.Settings(t_end, t_end / 20, plot=False), echo=said.append
+        scene, tmp_path / "o", Settings(t_end, t_end / 20, plot=False), echo=said.append
     )
     method = "radau5" if name == "stiff_wheel" else "dop853" if scene.not_smooth else "taylor"
     assert res.settings.method == method
@@ -529,7 +530,7 @@ def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
     from gyrogen.analysis.simulate import plots, simulate
 
     scene = load("rw4_pyramid")
-    simulate.run(scene, tmp_path / "o", simulate.Settings(2.0, 0.1, "dop853", True))
+    simulate.run(scene, tmp_path / "o", Settings(2.0, 0.1, "dop853", True))
     assert imread(tmp_path / "o" / "trajectory.png").shape[:2] == plots.PIXELS
 
 

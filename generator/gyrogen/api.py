@@ -65,10 +65,11 @@ def simulate(
     import pandas as pd
 
     from gyrogen.analysis.simulate import simulate as sim
+    from gyrogen.analysis.simulate.result import Settings, checked
 
     chosen = _scene(scene)
-    settings = sim.checked(
-        sim.Settings(
+    settings = checked(
+        Settings(
             t_end=chosen.simulate.t_end if t_end is None else t_end,
             dt=chosen.simulate.dt if dt is None else dt,
             method=method,

@@ -68,8 +68,9 @@ def simulate(
     trajectory.csv, trajectory.npz, summary.json and trajectory.png with the
     invariants |H| in N and the energy balance."""
     from gyrogen.analysis.simulate import simulate as sim
+    from gyrogen.analysis.simulate.result import Settings
 
-    settings = sim.Settings(
+    settings = Settings(
         t_end=t_end or scene.simulate.t_end,
         dt=dt or scene.simulate.dt,
         method=method,
