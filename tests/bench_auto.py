@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench.timing import best_time
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.errors import SceneError
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled

@@ -29,7 +29,7 @@ import numpy as np
 
 from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench.timing import best_time
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import default

@@ -25,7 +25,7 @@ from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench import heyoka_peer as hp
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.bench.workprec import Run, seconds_at
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.codegen.generate import unit_of
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.scene_build import build_scene

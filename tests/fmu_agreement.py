@@ -27,8 +27,8 @@ from pathlib import Path
 import fmpy
 import numpy as np
 
-from gyrogen.analysis.check.check_cases import quaternion_scene
-from gyrogen.analysis.simulate import simulate
+from gyrogen.analysis.check.cases import quaternion_scene
+from gyrogen.analysis.simulate import engine
 from gyrogen.analysis.simulate.result import Settings
 from gyrogen.codegen.fmu_model import FmuModel, Stepping
 from gyrogen.codegen.generate import unit_of
@@ -64,7 +64,7 @@ def build(case: Case, out: Path) -> Path:
     """The case's FMU (what `gyrogen fmu SCENE --method M` writes) in out."""
     sim = case.scene.simulate
     stepping = Stepping(case.method, sim.rtol, sim.atol, sim.t_end, sim.dt)
-    model = FmuModel(unit_of(case.scene), tuple(simulate.runtime_values(case.scene)), stepping)
+    model = FmuModel(unit_of(case.scene), tuple(engine.runtime_values(case.scene)), stepping)
     write_atomic(out, fmu_build.build(model, out))
     return out / f"{case.scene.name}.fmu"
 
@@ -72,7 +72,7 @@ def build(case: Case, out: Path) -> Path:
 def reference(case: Case, t_end: float, out: Path) -> np.ndarray:
     """`gyrogen simulate`'s trajectory on the scene's output grid."""
     settings = Settings(t_end, case.scene.simulate.dt, case.reference, plot=False)
-    return simulate.run(case.scene, out, settings).trajectory.x
+    return engine.run(case.scene, out, settings).trajectory.x
 
 
 def by_fmpy(case: Case, fmu: Path, mode: str, t_end: float) -> np.ndarray:

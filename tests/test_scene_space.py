@@ -73,7 +73,7 @@ def method_runs(
     """Per language and (method, controls) of plan: the method, code,
     accepted and rejected steps and the final state, from the scene's start
     to its t_end."""
-    from gyrogen.analysis.simulate.simulate import runtime_values
+    from gyrogen.analysis.simulate.engine import runtime_values
     from gyrogen.codegen.generate import generate
     from gyrogen.runtime.build import build
     from gyrogen.scene import load

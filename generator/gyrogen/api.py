@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     import control
     import pandas as pd
 
-    from gyrogen.analysis.linearize.linearize import Linear
+    from gyrogen.analysis.linearize.engine import Linear
 
 
 def _scene(scene: str | Scene) -> Scene:
@@ -64,7 +64,7 @@ def simulate(
     and the scene's states (files in out, else in a temporary directory)."""
     import pandas as pd
 
-    from gyrogen.analysis.simulate import simulate as sim
+    from gyrogen.analysis.simulate import engine as sim
     from gyrogen.analysis.simulate.result import Settings, checked
 
     chosen = _scene(scene)
@@ -148,7 +148,7 @@ def linearize(
     states, names, the point, eigenvalues) about the point given (state:
     every value; at: by name), else the scene's equilibrium, else the steady
     spin found (spin rad/s about the principal axis nearest a_axis)."""
-    from gyrogen.analysis.linearize.linearize import model
+    from gyrogen.analysis.linearize.engine import model
 
     _numbers("parameters", parameters)
     _numbers("at", at)
@@ -180,7 +180,7 @@ def _numbers(what: str, values: Any) -> None:
 def state_space(scene: str | Scene | Linear = "dual_spin", **point: Any) -> control.StateSpace:
     """linearize()'s model (or a Linear) as a python-control StateSpace, with
     the states, inputs and outputs named (the extra gyrogen[linear])."""
-    from gyrogen.analysis.linearize.linearize import Linear
+    from gyrogen.analysis.linearize.engine import Linear
 
     try:
         import control

@@ -67,7 +67,7 @@ def simulate(
     of its compiled integrators or scipy's solve_ivp (--method), and write
     trajectory.csv, trajectory.npz, summary.json and trajectory.png with the
     invariants |H| in N and the energy balance."""
-    from gyrogen.analysis.simulate import simulate as sim
+    from gyrogen.analysis.simulate import engine as sim
     from gyrogen.analysis.simulate.result import Settings
 
     settings = Settings(

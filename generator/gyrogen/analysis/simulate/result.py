@@ -1,5 +1,5 @@
 """What a simulation is asked (Settings, checked) and what it made
-(Result): the values simulate.py runs on and simulate_files.py writes."""
+(Result): the values engine.py runs on and files.py writes."""
 
 from __future__ import annotations
 

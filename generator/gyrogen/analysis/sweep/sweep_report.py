@@ -4,7 +4,7 @@ criterion's agreement share), histograms.png and, for a 2-D grid, map.png.
 
 The parts are read back one column at a time (analysis/sweep/sweep_columns.py).
 
-The spin-stability criterion (NOTES.md, analysis/check_engine.spin_axes):
+The spin-stability criterion (NOTES.md, analysis/check/engine.spin_axes):
 a trajectory is observed unstable when its max nutation angle exceeds
 grows_by times its start's; it is judged when its H_a / Omega lies outside
 band of both transverse inertias (near the boundary the growth is too slow
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyrogen.abi import UNITS
-from gyrogen.analysis.check.check_engine import spin_axes, spin_stable
+from gyrogen.analysis.check.engine import spin_axes, spin_stable
 from gyrogen.analysis.sweep.sweep_columns import (
     PARTS,
     Histogram,

@@ -2,7 +2,7 @@
 the compiled RHS (or with a compiled integrator: by default the best
 implicit one for a stiff scene, analysis/check/stiffness.py), check the invariants with
 the numpy reference (analysis/simulate/invariants.py), and write the trajectory (CSV,
-npz), a summary and a figure (analysis/simulate/simulate_files.py), all or nothing.
+npz), a summary and a figure (analysis/simulate/files.py), all or nothing.
 
 The trajectory is sampled on the output grid and at the quadrature nodes
 inside each interval (analysis/simulate/trajectory.py). Between solver steps the
@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 from gyrogen import methods
 from gyrogen.abi import MIN_RTOL, ODE_CODES, message
 from gyrogen.analysis.check import stiffness
-from gyrogen.analysis.simulate import simulate_files
+from gyrogen.analysis.simulate import files
 from gyrogen.analysis.simulate.invariants import along_trajectory, words
 from gyrogen.analysis.simulate.result import Result, Settings
 from gyrogen.analysis.simulate.trajectory import (
@@ -291,14 +291,14 @@ def run(
     progress: Progress = _no_progress,
     echo: Callable[[str], None] = lambda s: None,
 ) -> Result:
-    """Integrate and write out/ (the files of simulate_files.file_names, and
+    """Integrate and write out/ (the files of files.file_names, and
     the sources, kept beside the trajectory they made, in out/src), all at
     the end: a refused scene or parameter set, a failed run or anything in
     the way (checked before any work) leaves nothing behind."""
     from gyrogen.codegen.generate import claim
 
     p = runtime_values(scene)  # first: a scene error must leave nothing behind
-    names = simulate_files.file_names(settings.plot)
+    names = files.file_names(settings.plot)
     claim(out / "src", scene.name)
     can_write(out, names)
     can_write(out / "src", [])  # a file named src is in the way too
@@ -322,9 +322,9 @@ def run(
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:
         traj = integrate(start, settings, advance)
     inv = along_trajectory(scene, p, traj)
-    files = tuple(out / n for n in names)
-    res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, files)
-    contents = simulate_files.contents(res, p)
+    paths = tuple(out / n for n in names)
+    res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, paths)
+    contents = files.contents(res, p)
     write_atomic(out / "src", sources.files)
     write_atomic(out, contents)
     return res
