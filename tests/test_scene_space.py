@@ -1,7 +1,7 @@
 """The scene space under property tests (tests/scene_space.py): in CI a
 derandomized slice of SHARDS x EXAMPLES drawn scenes, each generated,
 compiled by gcc, clang and gfortran with -Werror and compared with the
-reference; `make fuzz` (tests/fuzz_scenes.py) runs thousands with a fresh
+reference; `make fuzz` (tools/fuzz_scenes.py) runs thousands with a fresh
 seed."""
 
 from __future__ import annotations

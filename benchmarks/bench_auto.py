@@ -6,7 +6,7 @@ steps, and the scaled error against dop853 at rtol = atol = 1e-14 (the
 Taylor method at 1e-14 beside it: the two references' agreement). The load
 average is printed before and after.
 
-usage: python tests/bench_auto.py [REPEATS]
+usage: python benchmarks/bench_auto.py [REPEATS]
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ the two differ in their steps where gyrogen's step scale leaves out
 translation and caps angles, so equal tolerances are not equal errors).
 Best of the repeats; the load average is printed before and after.
 
-usage: python tests/bench_taylor.py SCENE [REPEATS]
+usage: python benchmarks/bench_taylor.py SCENE [REPEATS]
 """
 
 from __future__ import annotations
