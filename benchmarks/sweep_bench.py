@@ -44,7 +44,7 @@ from typing import NamedTuple
 from sweep_bench_chunk import per_chunk
 
 from gyrogen import api
-from gyrogen.analysis.sweep.sweep_draws import inputs
+from gyrogen.analysis.sweep.draws import inputs
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.scene_build import compiled, scene_sources
 

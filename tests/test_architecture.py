@@ -129,7 +129,7 @@ def test_running_compiled_code_never_imports_sympy() -> None:
     code = (
         "import sys, gyrogen.runtime.build, gyrogen.runtime.compiled, gyrogen.runtime.rhs, "
         "gyrogen.runtime.segment, gyrogen.runtime.scene_build, "
-        "gyrogen.analysis.sweep.sweep_engine; "
+        "gyrogen.analysis.sweep.engine; "
         "print('sympy' in sys.modules)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

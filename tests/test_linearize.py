@@ -13,9 +13,9 @@ import pytest
 from gyrogen import api
 from gyrogen.analysis.check.engine import spin_stable
 from gyrogen.analysis.linearize import engine, files, modes
-from gyrogen.analysis.sweep import sweep_spec
-from gyrogen.analysis.sweep.sweep_draws import grid_values
-from gyrogen.analysis.sweep.sweep_report import spin_values
+from gyrogen.analysis.sweep import spec as sweep_spec
+from gyrogen.analysis.sweep.draws import grid_values
+from gyrogen.analysis.sweep.report import spin_values
 from gyrogen.codegen.context import make_context
 from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled

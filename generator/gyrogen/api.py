@@ -26,9 +26,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gyrogen.analysis.sweep.sweep_spec import Spec, parse
-from gyrogen.analysis.sweep.sweep_spec import load as load_spec
-from gyrogen.analysis.sweep.sweep_store import Store, store
+from gyrogen.analysis.sweep.spec import Spec, parse
+from gyrogen.analysis.sweep.spec import load as load_spec
+from gyrogen.analysis.sweep.store import Store, store
 from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
@@ -101,11 +101,11 @@ def sweep(
     file or a Spec) into out (a directory or an fsspec URL) [default:
     sweep/<name>], resuming what is there (portable: code for any CPU,
     `--portable`); its rows, one per trajectory, in sample order."""
-    from gyrogen.analysis.sweep import sweep_engine, sweep_report
+    from gyrogen.analysis.sweep import engine, report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = store(out if out is not None else Path("sweep") / chosen.name)
-    record = sweep_engine.run(
+    record = engine.run(
         chosen,
         where,
         scheduler=scheduler,
@@ -114,9 +114,9 @@ def sweep(
         progress=progress,
         portable=portable,
         plots=plots,
-        meanwhile=sweep_report.load_plots if plots else None,
+        meanwhile=report.load_plots if plots else None,
     )
-    sweep_report.write(chosen, record, plots=plots)
+    report.write(chosen, record, plots=plots)
     return read(where)
 
 
@@ -124,7 +124,7 @@ def read(out: str | Path | Store) -> pd.DataFrame:
     """The rows of the sweep in out (a directory or an fsspec URL), in sample order."""
     import pandas as pd
 
-    from gyrogen.analysis.sweep.sweep_columns import PARTS
+    from gyrogen.analysis.sweep.columns import PARTS
 
     where = store(out)
     # the path itself, never re-read as a URL (./s3:x is a directory; FILE:/// is file:///)
