@@ -58,8 +58,8 @@ test-fast: setup lint
 	$(BIN)/python -m pytest -m "not slow"
 
 lint: setup
-	$(BIN)/ruff check generator tests
-	$(BIN)/ruff format --check generator tests
+	$(BIN)/ruff check generator tests benchmarks tools
+	$(BIN)/ruff format --check generator tests benchmarks tools
 	$(BIN)/mypy
 
 ## generate: rewrite generated/ (every built-in scene) from the templates and the generator
@@ -76,24 +76,24 @@ check-generated: setup
 bench: setup
 	$(PIP) install -q -e '.[bench]'
 	$(BIN)/gyrogen bench-rhs --out bench-out
-	$(BIN)/python tests/bench_clusters.py
+	$(BIN)/python benchmarks/bench_clusters.py
 
 ## bench-clusters: the cluster scenes' rhs, hoisted against an M-solve per call (ops, ns per state), ops vs N
 bench-clusters: setup
-	$(BIN)/python tests/bench_clusters.py
+	$(BIN)/python benchmarks/bench_clusters.py
 
 ## bench-taylor: the Taylor method on one trajectory against heyoka's, gyrostat and dual_spin, side by side
 bench-taylor: setup
-	$(BIN)/python tests/bench_taylor.py gyrostat 9
-	$(BIN)/python tests/bench_taylor.py dual_spin 9
+	$(BIN)/python benchmarks/bench_taylor.py gyrostat 9
+	$(BIN)/python benchmarks/bench_taylor.py dual_spin 9
 
 ## bench-auto: the Taylor method against dop853 on every built-in scene that offers it (simulate's auto choice)
 bench-auto: setup
-	$(BIN)/python tests/bench_auto.py 7
+	$(BIN)/python benchmarks/bench_auto.py 7
 
 ## bench-call: us per call of Compiled.integrate and integrate_batch against the raw cffi call
 bench-call: setup
-	$(BIN)/python tests/bench_call.py
+	$(BIN)/python benchmarks/bench_call.py
 
 ## bench-ensemble: lane-batched ensembles and the single trajectory against numbalsoda and diffrax
 bench-ensemble: setup
@@ -129,18 +129,18 @@ fuzz: setup
 	  tests/test_sweep_misalign.py -k "space or drawn_misalignments"
 	GYROGEN_AGREE_SCENES=$(FUZZ_AGREE) GYROGEN_AGREE_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q -n auto tests/test_scene_space.py -k every_method
-	$(BIN)/python tests/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
-	$(BIN)/python tests/fuzz_scenes.py --clusters --examples $(FUZZ_CLUSTERS) --out fuzz-failures
+	$(BIN)/python tools/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
+	$(BIN)/python tools/fuzz_scenes.py --clusters --examples $(FUZZ_CLUSTERS) --out fuzz-failures
 
 ## fmu-agreement: the FMUs of the default, quaternion and stiff scenes in FMPy (Co-Simulation
 ## and Model Exchange) against `gyrogen simulate` over each scene's t_end (the suite runs 1 s)
 fmu-agreement: setup
-	$(BIN)/python tests/fmu_agreement.py
+	$(BIN)/python benchmarks/fmu_agreement.py
 
 ## bench-lib: ns per rhs call of the CMake package under add_subdirectory: no build type
 ## (the package's -O2), Release, and None (no -O flag: the flags before issue 15)
 bench-lib: setup
-	$(BIN)/python tests/bench_cmake_default.py
+	$(BIN)/python benchmarks/bench_cmake_default.py
 
 ## sweep-bench: the sweep's figures: 10^6 trajectories end to end against the bare batch
 ## compute, 1 -> 2 workers, the fixed and per-chunk costs, the scheduler's task rate, and the
@@ -151,7 +151,7 @@ SWEEP_MEMORY ?= 10000000
 SWEEP_LARGE ?= 0
 SWEEP_BASELINE ?=
 sweep-bench: setup
-	$(BIN)/python tests/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY) \
+	$(BIN)/python benchmarks/sweep_bench.py --trajectories $(SWEEP_TRAJECTORIES) --memory $(SWEEP_MEMORY) \
 	  --large $(SWEEP_LARGE) $(if $(SWEEP_BASELINE),--baseline $(SWEEP_BASELINE))
 
 ## sweep-map: the stability map of NOTES.md, the Monte Carlo example and the misalignment Monte Carlo
@@ -167,7 +167,7 @@ check: setup
 
 clean:
 	rm -rf build examples/build bench-out report sim sweep fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
-	find generator tests -name __pycache__ -type d -prune -exec rm -rf {} +
+	find generator tests benchmarks tools -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 
 distclean: clean

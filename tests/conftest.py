@@ -113,7 +113,7 @@ def cli() -> Callable[[list[str]], Outcome]:
 @pytest.fixture(scope="session")
 def check_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
     """The C build of each scene the `gyrogen check` cases use, by scene name."""
-    from gyrogen.analysis.check.check_cases import cases
+    from gyrogen.analysis.check.cases import cases
 
     out = {}
     for case in cases():

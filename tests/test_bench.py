@@ -1,4 +1,4 @@
-"""Smoke test of gyrogen.analysis.bench.bench_rhs on a tiny workload: it runs and reports
+"""Smoke test of gyrogen.analysis.bench.rhs on a tiny workload: it runs and reports
 sane numbers.
 
 Never asserts a speed: timings depend on the machine and its load.
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from gyrogen.analysis.bench import bench_rhs
+from gyrogen.analysis.bench import rhs
 
 pytestmark = pytest.mark.slow  # the benchmark command on a tiny run
 
@@ -29,9 +29,9 @@ NAMES = [
 ]
 
 
-def _tiny(tmp: Path | None = None, **kw: bool) -> tuple[list[bench_rhs.Measurement], list[str]]:
+def _tiny(tmp: Path | None = None, **kw: bool) -> tuple[list[rhs.Measurement], list[str]]:
     lines: list[str] = []
-    ms = bench_rhs.run(out=tmp, repeats=1, echo=lines.append, calls=1000, batch=1000, **kw)
+    ms = rhs.run(out=tmp, repeats=1, echo=lines.append, calls=1000, batch=1000, **kw)
     return ms, lines
 
 

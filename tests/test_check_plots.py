@@ -1,6 +1,6 @@
 """`gyrogen check --plots`: one figure per case, of the quantities that case
-is about (analysis/check/check_plots.py), and each case's extreme quantity
-(Case.extreme, declared in check_cases.py)."""
+is about (analysis/check/plots.py), and each case's extreme quantity
+(Case.extreme, declared in cases.py)."""
 
 from __future__ import annotations
 
@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from gyrogen.analysis.check import check_cases, check_engine
+from gyrogen.analysis.check import cases, engine
 from gyrogen.analysis.simulate.plots import PIXELS
 from gyrogen.runtime.compiled import Compiled
 
 pytestmark = pytest.mark.slow  # every check case integrated and drawn
 
-EVERY = check_cases.cases()
+EVERY = cases.cases()
 ONE_OF_EACH_KIND = {
     "nominal": "nominal.png",
     "fast rotor J u4/(I|w|)=10000": "fast_rotor_J_u4__I_w___10000.png",
@@ -57,10 +57,10 @@ def test_every_built_in_case_declares_its_extreme_quantity() -> None:
     ids=lambda c: c.name,
 )
 def test_extreme_quantity_is_finite_on_a_short_run(
-    case: check_engine.Case, check_builds: dict[str, Compiled]
+    case: engine.Case, check_builds: dict[str, Compiled]
 ) -> None:
     short = replace(case, t_end=min(case.t_end, 0.01), samples=4, steps=min(case.steps, 400))
-    res = check_engine.run_case(short, check_builds[case.scene.name])
+    res = engine.run_case(short, check_builds[case.scene.name])
     assert res.trajectory is not None and case.extreme is not None and case.extreme.values
     values = case.extreme.values(case, res.trajectory)
     assert values.shape == (len(res.trajectory),) and np.all(np.isfinite(values))
@@ -73,7 +73,7 @@ def test_the_fast_rotor_ratio_is_the_one_the_case_is_named_for() -> None:
     for case in (c for c in EVERY if c.name.startswith("fast rotor")):
         named = float(case.name.split("=")[-1])
         x0 = np.array([[case.initial.get(s, 0.0) for s in case.scene.states]])
-        assert 0.5 < check_cases.rotor_ratio(case, x0)[0] / named < 2.0, case.name
+        assert 0.5 < cases.rotor_ratio(case, x0)[0] / named < 2.0, case.name
 
 
 def test_cos_q2_agrees_between_angles_and_euler_parameters() -> None:
@@ -83,7 +83,7 @@ def test_cos_q2_agrees_between_angles_and_euler_parameters() -> None:
     for angles, quaternion in zip(gimbal[::2], gimbal[1::2], strict=True):
         eps = float(angles.name.split("=")[1].split()[0])
         got = [
-            check_cases.cos_q2(
+            cases.cos_q2(
                 c, np.array([[{"e0": 1.0, **c.initial}.get(s, 0.0) for s in c.scene.states]])
             )[0]
             for c in (angles, quaternion)

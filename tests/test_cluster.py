@@ -193,11 +193,11 @@ def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
 
 @pytest.mark.slow
 def test_bench_clusters_slice() -> None:
-    """`make bench-clusters` on a slice: both variants compiled into one
-    library agree with the reference on 200 states (measure exits otherwise),
-    and the hoisted rhs has fewer ops than the M-solve per call, for rw3 and
-    a random 2-wheel cluster."""
-    from bench_clusters import measure, msolve_ops, random_cluster
+    """`make bench-clusters`'s measurement (cluster_msolve) on a slice: both
+    variants compiled into one library agree with the reference on 200
+    states (measure exits otherwise), and the hoisted rhs has fewer ops than
+    the M-solve per call, for rw3 and a random 2-wheel cluster."""
+    from cluster_msolve import measure, msolve_ops, random_cluster
 
     from gyrogen.codegen.generate import unit_of
 

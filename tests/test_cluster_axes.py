@@ -15,7 +15,7 @@ import pytest
 from test_cluster_runtime import W_REF
 
 from gyrogen.abi_rotors import AXIS_NORM_SLACK
-from gyrogen.analysis.check.check_engine import axes_span
+from gyrogen.analysis.check.engine import axes_span
 from gyrogen.codegen.context import make_context
 from gyrogen.errors import SceneError
 from gyrogen.oracle.compare import compare

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gyrogen.analysis.linearize import linearize as engine
+from gyrogen.analysis.linearize import engine
 from gyrogen.codegen.context import make_context
 from gyrogen.errors import SceneError, SetupRefused
 from gyrogen.oracle.compare import compare

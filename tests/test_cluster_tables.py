@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gyrogen.analysis.linearize import linearize as engine
+from gyrogen.analysis.linearize import engine
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.oracle.compare import compare
 from gyrogen.runtime.compiled import Compiled, Language

@@ -24,7 +24,7 @@ from fmpy.build import build_platform_binary
 from fmpy.fmi1 import FMICallException
 from fmpy.simulation import instantiate_fmu
 from fmpy.validation import validate_fmu
-from fmu_agreement import BAR, MODES, build, by_fmpy, cases, differences, reference
+from fmu_cases import BAR, MODES, build, by_fmpy, cases, differences, reference
 
 from gyrogen import abi, methods
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS

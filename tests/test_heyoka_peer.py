@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gyrogen.analysis.bench import heyoka_peer
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_scene

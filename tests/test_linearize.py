@@ -11,12 +11,11 @@ import numpy as np
 import pytest
 
 from gyrogen import api
-from gyrogen.analysis.check.check_engine import spin_stable
-from gyrogen.analysis.linearize import linear_files, modes
-from gyrogen.analysis.linearize import linearize as engine
-from gyrogen.analysis.sweep import sweep_spec
-from gyrogen.analysis.sweep.sweep_draws import grid_values
-from gyrogen.analysis.sweep.sweep_report import spin_values
+from gyrogen.analysis.check.engine import spin_stable
+from gyrogen.analysis.linearize import engine, files, modes
+from gyrogen.analysis.sweep import spec as sweep_spec
+from gyrogen.analysis.sweep.draws import grid_values
+from gyrogen.analysis.sweep.report import spin_values
 from gyrogen.codegen.context import make_context
 from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled
@@ -188,10 +187,10 @@ def test_command_writes_npz_and_pole_map(tmp_path: Path, cli) -> None:
     code, out, err = cli(["linearize", "dual_spin", "--out", str(tmp_path), "--plot"])
     assert code == 0 and err == "", err
     assert "marginal: 2 modes" in out and "(x2)" in out and "in u1, u3" in out
-    data = np.load(tmp_path / linear_files.NPZ)
+    data = np.load(tmp_path / files.NPZ)
     assert data["A"].shape == (4, 4) and list(data["states"]) == ["u1", "u2", "u3", "u4"]
     assert list(data["inputs"]) == ["T"] and data["C"].shape == (4, 4)
-    png = (tmp_path / linear_files.PLOT).read_bytes()
+    png = (tmp_path / files.PLOT).read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 10_000
 
 
@@ -235,14 +234,14 @@ def test_not_an_equilibrium_is_warned_with_its_residual(tmp_path: Path, cli) -> 
     assert code == 0 and err.count("\n") == 1, err
     assert err.startswith("gyrogen: warning: not an equilibrium: max |dx/dt|")
     assert "the model is about a moving point" in err
-    assert (tmp_path / linear_files.NPZ).is_file()
+    assert (tmp_path / files.NPZ).is_file()
 
 
 def test_the_residual_is_relative_without_overflow() -> None:
     """A row's scale may overflow where the share does not: 1e305 against
     1e300 x 1e10 is 1e-5 (a warning), not 1e305 / inf = 0; each row has its
     own (the second's 1 against 2)."""
-    from gyrogen.analysis.linearize.linearize import relative
+    from gyrogen.analysis.linearize.engine import relative
 
     jac = np.array([[1e300, -1e300], [0.0, 2.0]])
     share = relative(np.array([1e305, 1.0]), jac, np.array([1e10, 0.0]))
@@ -259,7 +258,7 @@ def test_the_attitude_turns_whatever_the_wheel_speed(w_ref: float) -> None:
     the wheel's speed: kept, linearized as a Jordan block, "unstable ...
     grows like t", with no warning (the residual against ||A|| ||x||)."""
     lin = api.linearize("speed_controlled", parameters={"w_ref": w_ref})
-    assert lin.dropped == ("q1", "q2", "q3", "q4") and linear_files.warning(lin) is None
+    assert lin.dropped == ("q1", "q2", "q3", "q4") and files.warning(lin) is None
     assert not any(m.secular for m in modes.modes(lin.A, lin.states))
 
 
@@ -295,7 +294,7 @@ def test_a_wheel_still_spun_up_is_warned_at_any_speed(u4: str, tmp_path: Path, c
     assert err.startswith("gyrogen: warning: not an equilibrium: max |dx/dt|"), err
     assert "u4' = 1.33, which no state moves" in err, err
     assert "left out (their rates do not vanish): e0, e1, e2, e3, q4\n" in out, out
-    assert (tmp_path / "out" / linear_files.NPZ).is_file()
+    assert (tmp_path / "out" / files.NPZ).is_file()
 
 
 def test_a_subnormal_spin_is_linearized_quietly(tmp_path: Path, cli) -> None:
@@ -423,7 +422,7 @@ def test_the_printed_eigenvalues_are_the_stored_ones(tmp_path: Path, cli) -> Non
     numpy's eigvals): each mode of one eigenvalue prints a stored value."""
     code, out, err = cli(["linearize", "stiff_wheel", "--out", str(tmp_path)])
     assert code == 0 and err == "", err
-    stored = np.load(tmp_path / linear_files.NPZ)["eigenvalues"]
+    stored = np.load(tmp_path / files.NPZ)["eigenvalues"]
     lin = api.linearize("stiff_wheel")
     found = modes.modes(lin.A, lin.states)
     assert np.array_equal(stored, lin.eigenvalues)

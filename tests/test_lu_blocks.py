@@ -7,7 +7,7 @@ import pytest
 import sympy as sm
 
 from gyrogen import methods
-from gyrogen.analysis.check.check_cases import quaternion_scene
+from gyrogen.analysis.check.cases import quaternion_scene
 from gyrogen.codegen.context import make_context
 from gyrogen.oracle import scene_view
 from gyrogen.scene import Scene, builtin_names, load

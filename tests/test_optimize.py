@@ -129,7 +129,7 @@ def test_setup_constants_survive_a_nearly_singular_lumped_block(
     one, cond ~ 1/tiny): the constants are still within a few ulp of their
     exact values for the given doubles, in C and Fortran, because the mu^2
     terms cancel in sympy rather than in rounding."""
-    from gyrogen.analysis.check.check_cases import _dumbbell
+    from gyrogen.analysis.check.cases import _dumbbell
 
     values = _dumbbell(tiny)
     p = np.array([values[s.name] for s in model.symbols().params])

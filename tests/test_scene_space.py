@@ -1,7 +1,7 @@
 """The scene space under property tests (tests/scene_space.py): in CI a
 derandomized slice of SHARDS x EXAMPLES drawn scenes, each generated,
 compiled by gcc, clang and gfortran with -Werror and compared with the
-reference; `make fuzz` (tests/fuzz_scenes.py) runs thousands with a fresh
+reference; `make fuzz` (tools/fuzz_scenes.py) runs thousands with a fresh
 seed."""
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def method_runs(
     """Per language and (method, controls) of plan: the method, code,
     accepted and rejected steps and the final state, from the scene's start
     to its t_end."""
-    from gyrogen.analysis.simulate.simulate import runtime_values
+    from gyrogen.analysis.simulate.engine import runtime_values
     from gyrogen.codegen.generate import generate
     from gyrogen.runtime.build import build
     from gyrogen.scene import load

@@ -16,8 +16,9 @@ import pytest
 from matplotlib.image import imread
 
 from gyrogen.analysis.simulate import plots
-from gyrogen.analysis.simulate.simulate import check_solution
-from gyrogen.analysis.simulate.simulate_files import COLUMNS
+from gyrogen.analysis.simulate.engine import check_solution
+from gyrogen.analysis.simulate.files import COLUMNS
+from gyrogen.analysis.simulate.result import Settings
 from gyrogen.analysis.simulate.trajectory import (
     QUAD_NODES,
     Again,
@@ -452,12 +453,12 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
     """--method dop853 runs the generated integrator between output points:
     no interpolation, so the invariants hold to the tolerance."""
     from gyrogen import scene as scenes
-    from gyrogen.analysis.simulate import simulate
+    from gyrogen.analysis.simulate import engine
 
-    res = simulate.run(
+    res = engine.run(
         scenes.load("torque_free"),
         tmp_path / "out",
-        simulate.Settings(t_end=2.0, dt=0.05, method="dop853", plot=False),
+        Settings(t_end=2.0, dt=0.05, method="dop853", plot=False),
     )
     assert res.trajectory.nfev > 0 and res.trajectory.x.shape == (41, 7)
     assert res.invariants.worst()["H_norm_relative_drift"] < 1e-12
@@ -483,17 +484,17 @@ def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: N
 @pytest.mark.slow
 def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
     from gyrogen import scene as scenes
-    from gyrogen.analysis.simulate import simulate
+    from gyrogen.analysis.simulate import engine
     from gyrogen.errors import SceneError
 
     text = scenes.builtin_text("torque_free").replace(
         'targets = ["c", "fortran"]', 'targets = ["c"]\nintegrators = ["rk4"]'
     )
     with pytest.raises(SceneError, match="rodas4 is not among the scene's integrators"):
-        simulate.run(
+        engine.run(
             scenes.parse(text, "t.toml"),
             tmp_path / "out",
-            simulate.Settings(t_end=1.0, dt=0.1, method="rodas4", plot=False),
+            Settings(t_end=1.0, dt=0.1, method="rodas4", plot=False),
         )
 
 
@@ -505,13 +506,13 @@ def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     compiled Radau IIA its stiffness calls for, and says why; the others with
     the compiled Taylor method where the scene offers it (a smooth rhs), else
     the compiled dop853 (scipy's only where a scene compiled none)."""
-    from gyrogen.analysis.simulate import simulate
+    from gyrogen.analysis.simulate import engine
 
     scene = load(name)
     t_end = min(1.0, scene.simulate.t_end)
     said: list[str] = []
-    res = simulate.run(
-        scene, tmp_path / "o", simulate.Settings(t_end, t_end / 20, plot=False), echo=said.append
+    res = engine.run(
+        scene, tmp_path / "o", Settings(t_end, t_end / 20, plot=False), echo=said.append
     )
     method = "radau5" if name == "stiff_wheel" else "dop853" if scene.not_smooth else "taylor"
     assert res.settings.method == method
@@ -526,10 +527,10 @@ def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
     relative to the carrier (a cluster has no u4)."""
     from matplotlib.image import imread
 
-    from gyrogen.analysis.simulate import plots, simulate
+    from gyrogen.analysis.simulate import engine, plots
 
     scene = load("rw4_pyramid")
-    simulate.run(scene, tmp_path / "o", simulate.Settings(2.0, 0.1, "dop853", True))
+    engine.run(scene, tmp_path / "o", Settings(2.0, 0.1, "dop853", True))
     assert imread(tmp_path / "o" / "trajectory.png").shape[:2] == plots.PIXELS
 
 

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from gyrogen import abi, methods
-from gyrogen.analysis.check import check_cases, check_engine
+from gyrogen.analysis.check import cases, engine
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.runtime import scene_build
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import builtin_text
 
-QUICK = check_cases.cases(quick=True)
+QUICK = cases.cases(quick=True)
 
 
 @pytest.fixture(scope="module")
@@ -25,11 +25,11 @@ def compiled(check_builds: dict[str, Compiled]) -> dict[str, Compiled]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", QUICK, ids=[c.name for c in QUICK])
-def test_case_verdict(case: check_engine.Case, compiled: dict[str, Compiled]) -> None:
-    res = check_engine.run_case(case, compiled[case.scene.name])
+def test_case_verdict(case: engine.Case, compiled: dict[str, Compiled]) -> None:
+    res = engine.run_case(case, compiled[case.scene.name])
     assert res.passed, (res.verdict, res.diagnosis, res.drift)
     if case.expect == "pass":
-        assert max(res.drift.values()) <= check_engine.DRIFT_BAR
+        assert max(res.drift.values()) <= engine.DRIFT_BAR
 
 
 @pytest.mark.slow
@@ -41,7 +41,7 @@ def test_quaternions_beat_angles_near_gimbal_lock(compiled: dict[str, Compiled])
     at a higher cost than Euler parameters."""
     by_name = {c.name: c for c in QUICK}
     runs = {
-        name: check_engine.run_case(by_name[name], compiled[by_name[name].scene.name])
+        name: engine.run_case(by_name[name], compiled[by_name[name].scene.name])
         for name in (
             f"gimbal lock eps={eps} ({kind})"
             for eps in ("1e-06", "0.01")
@@ -70,11 +70,11 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) 
     ones whose closest approach, ~17 eps^2 in |cos q2|, is below
     GIMBAL_LOCK_COS stop with code 6; the others, and the pass over the pole
     (|cos q2| >= 0.008), succeed, as do all their quaternion twins."""
-    full = [c for c in check_cases.cases() if "gimbal" in c.name or "through" in c.name]
+    full = [c for c in cases.cases() if "gimbal" in c.name or "through" in c.name]
     assert len(full) == 10
     singular = set()
     for case in full:
-        res = check_engine.run_case(case, compiled[case.scene.name])
+        res = engine.run_case(case, compiled[case.scene.name])
         assert res.passed, (case.name, res.verdict, res.diagnosis)
         if res.verdict == "singular":
             assert res.code == abi.ODE_ATTITUDE_SINGULAR
@@ -85,7 +85,7 @@ def test_every_gimbal_case_meets_its_expectation(compiled: dict[str, Compiled]) 
 @pytest.mark.slow
 def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = next(c for c in QUICK if c.name == "speed controller k/J=1e+06")
-    res = check_engine.run_case(case, compiled[case.scene.name])
+    res = engine.run_case(case, compiled[case.scene.name])
     assert res.method == "radau5" and res.recommended.startswith("implicit (radau5)")
 
 
@@ -137,14 +137,14 @@ def test_a_scene_check_balances_a_law_without_closed_form() -> None:
     so it passed where simulate's balances read 1.0. Its energy balance and
     u4 check now take simulate's quadrature (bisected across the 1e-5 s
     transient) and hold to the bar."""
-    case = check_cases.scene_case("stiff_wheel")
+    case = cases.scene_case("stiff_wheel")
     assert case.quadrature
     comp = scene_build.compiled(scene_build.scene_sources(case.scene))
-    res = check_engine.run_case(case, comp)
+    res = engine.run_case(case, comp)
     assert res.passed and set(res.drift) == {
         "|H| in N", "energy balance", "u4 - u4(0) - int T dt/J"
     }, res.drift  # fmt: skip
-    assert max(res.drift.values()) <= check_engine.DRIFT_BAR, res.drift
+    assert max(res.drift.values()) <= engine.DRIFT_BAR, res.drift
 
 
 @pytest.mark.slow
@@ -156,7 +156,7 @@ def test_compensated_summation_keeps_a_long_run(
     summed with compensation (accept_step), by rounding alone, in both
     languages (gfortran honours the parentheses that carry it)."""
     case = next(c for c in QUICK if c.name.startswith("long run"))
-    res = check_engine.run_case(case, backends[language])
+    res = engine.run_case(case, backends[language])
     assert res.passed and max(res.drift.values()) < 1e-13, res.drift
 
 
@@ -216,7 +216,7 @@ def test_scene_check_cannot_run_is_one_line_exit_2(
     )
 
 
-def _quick(name: str) -> check_engine.Case:
+def _quick(name: str) -> engine.Case:
     return next(c for c in QUICK if c.name.startswith(name))
 
 
@@ -229,7 +229,7 @@ def test_cluster_saturation_clamps_then_releases_with_the_energy_balanced(
     among the samples, so the quadrature of the clamped power keeps the
     energy balance to rounding."""
     case = _quick("cluster wheel saturation")
-    res = check_engine.run_case(case, compiled[case.scene.name])
+    res = engine.run_case(case, compiled[case.scene.name])
     assert res.passed and res.trajectory is not None and res.times is not None
     p = np.array([case.params[n] for n in case.scene.runtime])
     runtime = scene_view.values(case.scene, p)
@@ -242,7 +242,7 @@ def test_cluster_saturation_clamps_then_releases_with_the_energy_balanced(
 @pytest.mark.slow
 def test_cluster_stiff_controllers_take_the_implicit_method(compiled: dict[str, Compiled]) -> None:
     case = _quick("cluster speed controllers k/J=100000")
-    res = check_engine.run_case(case, compiled[case.scene.name])
+    res = engine.run_case(case, compiled[case.scene.name])
     assert res.method == methods.STIFF_CHOICE[0] and res.recommended.startswith("implicit")
     assert res.stiffness > 1e5 and max(res.drift.values()) < 1e-13
 
@@ -255,10 +255,10 @@ def test_cluster_parallel_axes_warned_then_refused(compiled: dict[str, Compiled]
     span, warned, refused = (
         _quick(f"cluster ~parallel: tilt {t}") for t in ("0.01", "1e-5", "1e-8")
     )
-    res = check_engine.run_case(span, compiled[span.scene.name])
+    res = engine.run_case(span, compiled[span.scene.name])
     assert res.condition < 10 and "wheel axes nearly fail to span space" in res.diagnosis
-    res = check_engine.run_case(warned, compiled[warned.scene.name])
+    res = engine.run_case(warned, compiled[warned.scene.name])
     assert res.passed and "mass matrix condition number 1.4e+10 > 1e+08" in res.diagnosis
-    res = check_engine.run_case(refused, None)
+    res = engine.run_case(refused, None)
     assert res.verdict == "refused" and res.passed
     assert "rotors: the lumped inertia has condition number 4.71e+14 > 1e+13" in res.diagnosis

@@ -14,9 +14,9 @@ import pytest
 from sweep_cases import OBSTACLES, free_port, put, rows, small
 
 from gyrogen import api
-from gyrogen.analysis.sweep.sweep_draws import inputs
-from gyrogen.analysis.sweep.sweep_metrics import NOT_RUN
-from gyrogen.analysis.sweep.sweep_spec import load
+from gyrogen.analysis.sweep.draws import inputs
+from gyrogen.analysis.sweep.metrics import NOT_RUN
+from gyrogen.analysis.sweep.spec import load
 from gyrogen.oracle import reference
 from gyrogen.physics import body_momentum, lumped_inertias
 from gyrogen.runtime.segment import integrate_segments
@@ -179,7 +179,7 @@ def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
     import threading
     import time
 
-    from gyrogen.analysis.sweep.sweep_dask import CONNECT_TIMEOUT
+    from gyrogen.analysis.sweep.dask_client import CONNECT_TIMEOUT
 
     class Quiet(http.server.BaseHTTPRequestHandler):
         def log_message(self, *args: object) -> None:
@@ -358,7 +358,7 @@ def test_the_local_engine_listens_on_this_machine_only(dashboard: bool) -> None:
     interface)."""
     import psutil
 
-    from gyrogen.analysis.sweep.sweep_dask import engine
+    from gyrogen.analysis.sweep.dask_client import engine
 
     with engine(None, 1, dashboard=dashboard):
         listening = [c for c in psutil.Process().net_connections("inet")

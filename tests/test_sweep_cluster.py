@@ -211,20 +211,20 @@ def test_workers_write_their_parts_to_the_shared_path(
     (here a directory both reach), and the client writes none, receiving
     only each chunk's figures; a worker SIGKILLed once 3 parts are there
     loses nothing, and no temporary of a write it cut short stays behind."""
-    from gyrogen.analysis.sweep import sweep_engine
+    from gyrogen.analysis.sweep import engine
 
     address, procs = cluster
     sweep = long(tmp_path / "long.toml")
     local, shared = tmp_path / "local", tmp_path / "shared"
     assert cli(["sweep", str(sweep), "--out", str(local), "--no-plots", "--quiet"]).code == 0
     by_client: list[tuple[int, int]] = []
-    real = sweep_engine.write_part
+    real = engine.write_part
 
     def counted(parts: Path, start: int, stop: int, data: bytes) -> None:
         by_client.append((start, stop))
         real(parts, start, stop, data)
 
-    monkeypatch.setattr(sweep_engine, "write_part", counted)
+    monkeypatch.setattr(engine, "write_part", counted)
     seen: list[int] = []
     watcher = threading.Thread(target=_kill_when, args=(shared / "parts", 3, procs[1], seen))
     watcher.start()
@@ -255,7 +255,7 @@ def test_workers_write_their_parts_to_a_file_url(
     fsspec (the client none), the rows are the local run's, the summary is
     read back from the URL and written there, and a rerun after two parts
     are lost computes only those two (the resume lists and reads the URL)."""
-    from gyrogen.analysis.sweep import sweep_engine
+    from gyrogen.analysis.sweep import engine
 
     address, _ = cluster
     sweep = long(tmp_path / "long.toml")
@@ -263,13 +263,13 @@ def test_workers_write_their_parts_to_a_file_url(
     url = f"file://{there}"
     assert cli(["sweep", str(sweep), "--out", str(local), "--no-plots", "--quiet"]).code == 0
     by_client: list[tuple[int, int]] = []
-    real = sweep_engine.write_part
+    real = engine.write_part
 
     def counted(where: object, start: int, stop: int, data: bytes) -> None:
         by_client.append((start, stop))
         real(where, start, stop, data)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(sweep_engine, "write_part", counted)
+    monkeypatch.setattr(engine, "write_part", counted)
     run = ["sweep", str(sweep), "--out", url, "--scheduler", address, "--shared", "--quiet"]
     code, stdout, err = cli(run)
     assert code == 0, err

@@ -18,10 +18,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from gyrogen.analysis.sweep.sweep_draws import inputs
-from gyrogen.analysis.sweep.sweep_metrics import columns, pointing
-from gyrogen.analysis.sweep.sweep_spec import load as load_sweep
-from gyrogen.analysis.sweep.sweep_spec import parse
+from gyrogen.analysis.sweep.draws import inputs
+from gyrogen.analysis.sweep.metrics import columns, pointing
+from gyrogen.analysis.sweep.spec import load as load_sweep
+from gyrogen.analysis.sweep.spec import parse
 from gyrogen.errors import SceneError
 from gyrogen.scene import builtin_text, load
 from gyrogen.sweep_values import MAX_TILT_DEG
@@ -233,7 +233,7 @@ def test_a_sweeps_pointing_column_is_the_turn_from_its_start(tmp_path: Path) -> 
     """run_chunk's pointing: a3's angle between each row's start (its inputs)
     and its final state, not zero (the start is integrated in place; the
     column once read the end twice)."""
-    from gyrogen.analysis.sweep.sweep_metrics import run_chunk
+    from gyrogen.analysis.sweep.metrics import run_chunk
     from gyrogen.runtime.scene_build import compiled, scene_sources
 
     (tmp_path / "gq.toml").write_text(QUATERNION)

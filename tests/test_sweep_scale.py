@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from sweep_cases import rows, small
 
-from gyrogen.analysis.sweep import sweep_columns
-from gyrogen.analysis.sweep.sweep_columns import part_name, written
+from gyrogen.analysis.sweep import columns as sweep_columns
+from gyrogen.analysis.sweep.columns import part_name, written
 
 FILES = 256
 
@@ -178,8 +178,8 @@ def test_sweeps_record_the_cpu_unless_portable(tmp_path: Path, cache: Path, cli)
 
 
 def test_a_worker_on_another_cpu_refuses_native_code(cache: Path, tmp_path: Path) -> None:
-    from gyrogen.analysis.sweep.sweep_engine import Job, chunk_task
-    from gyrogen.analysis.sweep.sweep_spec import load
+    from gyrogen.analysis.sweep.engine import Job, chunk_task
+    from gyrogen.analysis.sweep.spec import load
     from gyrogen.errors import GyrogenError
     from gyrogen.runtime.scene_build import Sources
 

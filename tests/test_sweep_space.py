@@ -16,8 +16,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gyrogen.analysis.sweep.sweep_draws import inputs
-from gyrogen.analysis.sweep.sweep_spec import METRICS, parse
+from gyrogen.analysis.sweep.draws import inputs
+from gyrogen.analysis.sweep.spec import METRICS, parse
 from gyrogen.errors import SceneError
 from gyrogen.scene import builtin_text
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from gyrogen.analysis.sweep.sweep_draws import grid_values, inputs, uniforms
-from gyrogen.analysis.sweep.sweep_spec import builtin_sweeps, load, parse
+from gyrogen.analysis.sweep.draws import grid_values, inputs, uniforms
+from gyrogen.analysis.sweep.spec import builtin_sweeps, load, parse
 
 BASE = """
 scene = "gyrostat"

@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sweep_cases import OBSTACLES, free_port, put, rows, small
 
-from gyrogen.analysis.sweep.sweep_store import Store, store, url_store
+from gyrogen.analysis.sweep.store import Store, store, url_store
 from gyrogen.errors import GyrogenError
 
 

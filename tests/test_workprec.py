@@ -146,7 +146,8 @@ def test_casadi_takes_a_clamped_motor() -> None:
     import math
 
     ca = pytest.importorskip("casadi")
-    from gyrogen.analysis.bench.workprec_peers import _sx_rhs, rhs_values
+    from gyrogen.analysis.bench.peer_rhs import rhs_values
+    from gyrogen.analysis.bench.workprec_peers import _sx_rhs
     from gyrogen.codegen.generate import unit_of
     from gyrogen.scene import load
 

@@ -26,9 +26,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gyrogen.analysis.sweep.sweep_spec import Spec, parse
-from gyrogen.analysis.sweep.sweep_spec import load as load_spec
-from gyrogen.analysis.sweep.sweep_store import Store, store
+from gyrogen.analysis.sweep.spec import Spec, parse
+from gyrogen.analysis.sweep.spec import load as load_spec
+from gyrogen.analysis.sweep.store import Store, store
 from gyrogen.errors import GyrogenError
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     import control
     import pandas as pd
 
-    from gyrogen.analysis.linearize.linearize import Linear
+    from gyrogen.analysis.linearize.engine import Linear
 
 
 def _scene(scene: str | Scene) -> Scene:
@@ -64,11 +64,12 @@ def simulate(
     and the scene's states (files in out, else in a temporary directory)."""
     import pandas as pd
 
-    from gyrogen.analysis.simulate import simulate as sim
+    from gyrogen.analysis.simulate import engine as sim
+    from gyrogen.analysis.simulate.result import Settings, checked
 
     chosen = _scene(scene)
-    settings = sim.checked(
-        sim.Settings(
+    settings = checked(
+        Settings(
             t_end=chosen.simulate.t_end if t_end is None else t_end,
             dt=chosen.simulate.dt if dt is None else dt,
             method=method,
@@ -100,11 +101,11 @@ def sweep(
     file or a Spec) into out (a directory or an fsspec URL) [default:
     sweep/<name>], resuming what is there (portable: code for any CPU,
     `--portable`); its rows, one per trajectory, in sample order."""
-    from gyrogen.analysis.sweep import sweep_engine, sweep_report
+    from gyrogen.analysis.sweep import engine, report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = store(out if out is not None else Path("sweep") / chosen.name)
-    record = sweep_engine.run(
+    record = engine.run(
         chosen,
         where,
         scheduler=scheduler,
@@ -113,9 +114,9 @@ def sweep(
         progress=progress,
         portable=portable,
         plots=plots,
-        meanwhile=sweep_report.load_plots if plots else None,
+        meanwhile=report.load_plots if plots else None,
     )
-    sweep_report.write(chosen, record, plots=plots)
+    report.write(chosen, record, plots=plots)
     return read(where)
 
 
@@ -123,7 +124,7 @@ def read(out: str | Path | Store) -> pd.DataFrame:
     """The rows of the sweep in out (a directory or an fsspec URL), in sample order."""
     import pandas as pd
 
-    from gyrogen.analysis.sweep.sweep_columns import PARTS
+    from gyrogen.analysis.sweep.columns import PARTS
 
     where = store(out)
     # the path itself, never re-read as a URL (./s3:x is a directory; FILE:/// is file:///)
@@ -147,7 +148,7 @@ def linearize(
     states, names, the point, eigenvalues) about the point given (state:
     every value; at: by name), else the scene's equilibrium, else the steady
     spin found (spin rad/s about the principal axis nearest a_axis)."""
-    from gyrogen.analysis.linearize.linearize import model
+    from gyrogen.analysis.linearize.engine import model
 
     _numbers("parameters", parameters)
     _numbers("at", at)
@@ -179,7 +180,7 @@ def _numbers(what: str, values: Any) -> None:
 def state_space(scene: str | Scene | Linear = "dual_spin", **point: Any) -> control.StateSpace:
     """linearize()'s model (or a Linear) as a python-control StateSpace, with
     the states, inputs and outputs named (the extra gyrogen[linear])."""
-    from gyrogen.analysis.linearize.linearize import Linear
+    from gyrogen.analysis.linearize.engine import Linear
 
     try:
         import control

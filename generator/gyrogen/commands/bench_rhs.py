@@ -22,9 +22,9 @@ from gyrogen.limits import MAX_REPEATS
 )
 def bench_rhs(out: Path | None, repeats: int) -> None:
     """Time the RHS: cffi calls, batched C, numpy, and PyDy's cython."""
-    from gyrogen.analysis.bench import bench_rhs
+    from gyrogen.analysis.bench import rhs
 
-    bench_rhs.run(out=out, repeats=repeats, echo=click.echo)
+    rhs.run(out=out, repeats=repeats, echo=click.echo)
 
 
 command = bench_rhs

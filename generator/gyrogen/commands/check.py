@@ -14,7 +14,7 @@ from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.scene import load
 
 if TYPE_CHECKING:
-    from gyrogen.analysis.check.check_engine import Result
+    from gyrogen.analysis.check.engine import Result
 
 
 @click.command()
@@ -30,16 +30,16 @@ def check(
     conditioning, step statistics, method, and a diagnosis. NAMES select
     the built-in cases whose name contains them, or name a scene (built-in or
     .toml) to check its own simulate settings."""
-    from gyrogen.analysis.check import check_cases, check_engine
+    from gyrogen.analysis.check import cases, engine
     from gyrogen.codegen.context import build_id
     from gyrogen.files import write_atomic
     from gyrogen.runtime.compiled import Compiled
     from gyrogen.runtime.scene_build import build_scene
 
-    suite = check_cases.cases(quick)
+    suite = cases.cases(quick)
     if names and not every:
         unknown = [
-            n for n in names if not check_cases.is_scene(n) and not any(n in c.name for c in suite)
+            n for n in names if not cases.is_scene(n) and not any(n in c.name for c in suite)
         ]
         for name in unknown:
             if name.endswith(".toml") or os.sep in name:
@@ -48,7 +48,7 @@ def check(
             raise SceneError(
                 f"no case or scene matches {', '.join(unknown)} (see gyrogen check --list)"
             )
-        scenes = [check_cases.scene_case(n) for n in names if check_cases.is_scene(n)]
+        scenes = [cases.scene_case(n) for n in names if cases.is_scene(n)]
         suite = scenes + [c for c in suite if any(n in c.name for n in names)]
     if listing:
         for case in suite:
@@ -64,12 +64,12 @@ def check(
             if key not in compiled and not case.refused_by:
                 _, built = build_scene(case.scene, Path(tmp) / key, ["c"])
                 compiled[key] = built["c"]
-            res = check_engine.run_case(case, compiled.get(key))
+            res = engine.run_case(case, compiled.get(key))
             results.append(res)
             if plots is not None:
-                from gyrogen.analysis.check import check_plots  # matplotlib: only for plots
+                from gyrogen.analysis.check.plots import png  # matplotlib: only for plots
 
-                write_atomic(plots, {f"{_slug(case.name)}.png": check_plots.png(res)})
+                write_atomic(plots, {f"{_slug(case.name)}.png": png(res)})
     _table(results)
     failed = [r for r in results if not r.passed]
     if failed:

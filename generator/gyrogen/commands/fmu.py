@@ -31,7 +31,7 @@ def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
     state the scene's simulate.initial. Co-Simulation steps with the
     scene's compiled integrator at its simulate.rtol and atol. The FMI
     headers come from FMPy, which must be installed."""
-    from gyrogen.analysis.simulate.simulate import runtime_values
+    from gyrogen.analysis.simulate.engine import runtime_values
     from gyrogen.codegen.fmu import default_method
     from gyrogen.codegen.fmu_model import FmuModel, Stepping
     from gyrogen.codegen.generate import unit_of
@@ -68,7 +68,7 @@ def _by_stiffness(scene: Scene, explicit: str) -> str:
     import numpy as np
 
     from gyrogen.analysis.check import stiffness
-    from gyrogen.analysis.simulate.simulate import given_constants, runtime_values
+    from gyrogen.analysis.simulate.engine import given_constants, runtime_values
     from gyrogen.runtime.scene_build import build_scene
 
     with tempfile.TemporaryDirectory(prefix="gyrogen-fmu-") as tmp:

@@ -75,8 +75,7 @@ def linearize(
     angles turn and are left out. Writes linear.npz (A, B, C, D, their
     names, the point, the eigenvalues) and prints the modes in words:
     stable, unstable or marginal."""
-    from gyrogen.analysis.linearize import linear_files
-    from gyrogen.analysis.linearize import linearize as engine
+    from gyrogen.analysis.linearize import engine, files
 
     if at is not None and state is not None:
         raise click.UsageError("--at and --state are exclusive: give the point one way")
@@ -88,10 +87,10 @@ def linearize(
         spin=spin,
         axis=axis,
     )
-    if (line := linear_files.warning(lin)) is not None:
+    if (line := files.warning(lin)) is not None:
         click.echo(f"gyrogen: {line}", err=True)
-    written = linear_files.write(lin, out or Path("linear") / scene.name, plot)
-    for line in linear_files.report(lin):
+    written = files.write(lin, out or Path("linear") / scene.name, plot)
+    for line in files.report(lin):
         click.echo(line)
     click.echo(f"wrote {', '.join(str(p) for p in written)}")
 

@@ -67,9 +67,10 @@ def simulate(
     of its compiled integrators or scipy's solve_ivp (--method), and write
     trajectory.csv, trajectory.npz, summary.json and trajectory.png with the
     invariants |H| in N and the energy balance."""
-    from gyrogen.analysis.simulate import simulate as sim
+    from gyrogen.analysis.simulate import engine as sim
+    from gyrogen.analysis.simulate.result import Settings
 
-    settings = sim.Settings(
+    settings = Settings(
         t_end=t_end or scene.simulate.t_end,
         dt=dt or scene.simulate.dt,
         method=method,

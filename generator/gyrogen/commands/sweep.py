@@ -21,7 +21,7 @@ class SweepType(click.ParamType):
     name = "SWEEP"
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
-        from gyrogen.analysis.sweep.sweep_spec import load
+        from gyrogen.analysis.sweep.spec import load
 
         return load(str(value))
 
@@ -32,7 +32,7 @@ class OutType(click.ParamType):
     name = "DIR|URL"
 
     def convert(self, value: Any, param: Any, ctx: Any) -> Any:
-        from gyrogen.analysis.sweep.sweep_store import store
+        from gyrogen.analysis.sweep.store import store
         from gyrogen.errors import GyrogenError
 
         if value == STDOUT:
@@ -119,15 +119,15 @@ def sweep(
     build flags are those that began the sweep (else refused: --restart).
     Unless --quiet, the local engine serves a dashboard on 127.0.0.1 and
     prints its address on stderr."""
-    from gyrogen.analysis.sweep import sweep_engine, sweep_report
+    from gyrogen.analysis.sweep import engine, report
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers sizes the local engine: not with --scheduler")
     if shared and scheduler is None:
         raise click.UsageError("--shared is for --scheduler: the local engine writes its parts")
     out = out or Path("sweep") / spec.name
-    plots = None if no_plots else sweep_report.load_plots  # matplotlib while the chunks run
-    record = sweep_engine.run(
+    plots = None if no_plots else report.load_plots  # matplotlib while the chunks run
+    record = engine.run(
         spec,
         out,
         scheduler=scheduler,
@@ -140,12 +140,12 @@ def sweep(
         plots=not no_plots,
         meanwhile=plots,
     )
-    data = sweep_report.write(spec, record, plots=not no_plots)
-    for line in sweep_report.markdown(data).splitlines()[2:]:
+    data = report.write(spec, record, plots=not no_plots)
+    for line in report.markdown(data).splitlines()[2:]:
         if line and not line.startswith("|"):
             click.echo(line)
     shown = record.out.show()
-    click.echo(f"wrote {shown}/ ({', '.join(data['files'])}; rows in {sweep_engine.PARTS}/)")
+    click.echo(f"wrote {shown}/ ({', '.join(data['files'])}; rows in {engine.PARTS}/)")
 
 
 command = sweep

@@ -21,7 +21,7 @@ import numpy as np
 from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.bench.workprec import REF_TOL
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled, cores
 from gyrogen.runtime.scene_build import build_scene

@@ -14,7 +14,7 @@ import numpy as np
 
 from gyrogen.analysis.bench import ensemble as ens
 from gyrogen.analysis.bench import ensemble_levels, peers
-from gyrogen.analysis.bench.bench_rhs import machine
+from gyrogen.analysis.bench.rhs import machine
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.bench.workprec import REF_TOL
 from gyrogen.runtime.compiled import cores

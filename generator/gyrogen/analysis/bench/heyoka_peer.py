@@ -1,7 +1,7 @@
 """heyoka (the `bench` extra): Taylor-series integration compiled through
 LLVM, the reports' peer and their quadruple-precision reference.
 
-Its system is gyrogen's own optimized rhs block (workprec_peers.rhs_values:
+Its system is gyrogen's own optimized rhs block (peer_rhs.rhs_values:
 the same arithmetic as the generated code, the hoisted constants c as
 heyoka's runtime parameters par[i]), checked against the compiled rhs at
 random states before anything is timed (`check`, a bar of 1e-14).
@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis.bench.workprec_peers import rhs_values
+from gyrogen.analysis.bench.peer_rhs import rhs_values
 from gyrogen.oracle.compare import scaled_error
 
 MATCH = 1e-14

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis.bench import peers, workprec
+from gyrogen.analysis.bench.peer_rhs import rhs_values
 from gyrogen.analysis.bench.timing import best_of, best_time
 from gyrogen.analysis.bench.workprec import Config, Problem, Run
 from gyrogen.oracle.compare import scaled_error
@@ -205,29 +206,6 @@ def _casadi_runs(prob: Problem, cfg: Config, stiff: bool, echo: Echo, progress: 
         if out[-1].status != "ok":
             break
     return out
-
-
-def rhs_values(unit: Any, x: Any, c: Any, funcs: dict[str, Any]) -> list[Any]:
-    """gyrogen's optimized rhs block, statement by statement, on another
-    library's symbols (CasADi's SX, heyoka's expressions): x and c indexable
-    by state and constant, funcs its sin, cos and sqrt (the same arithmetic
-    as the generated code)."""
-    import sympy as sm
-
-    from gyrogen.symbolic.hoist import constants
-
-    env: dict[Any, Any] = {s: x[i] for i, s in enumerate(unit.states)}
-    env.update({k: c[i] for i, k in enumerate(constants(unit.nc))})
-    modules = [funcs, "math"]
-
-    def value(expr: sm.Expr) -> Any:
-        args = sorted(expr.free_symbols, key=str)
-        return sm.lambdify(args, expr, modules=modules)(*(env[a] for a in args))
-
-    block = unit.optimized.rhs
-    for a in block.temporaries:
-        env[a.lhs] = value(a.rhs)
-    return [value(e) for e in block.outputs]
 
 
 def _sx_rhs(ca: Any, unit: Any, x: Any, c: Any) -> Any:

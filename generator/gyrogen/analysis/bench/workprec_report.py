@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis.bench import workprec, workprec_peers
-from gyrogen.analysis.bench.bench_rhs import machine, pydy_rhs
+from gyrogen.analysis.bench.rhs import machine, pydy_rhs
 from gyrogen.analysis.bench.workprec import Config, Problem, Run
 from gyrogen.analysis.check import stiffness
-from gyrogen.analysis.simulate.simulate import given_constants, runtime_values
+from gyrogen.analysis.simulate.engine import given_constants, runtime_values
 from gyrogen.errors import SceneError
 from gyrogen.files import write_atomic
 from gyrogen.runtime.compiled import Language

@@ -26,7 +26,6 @@ short: underflow).
 
 from __future__ import annotations
 
-from gyrogen.codegen.integrators.common import real, reals
 from gyrogen.codegen.integrators.trig import TOINT
 from gyrogen.codegen.ir.nodes import (
     Const,
@@ -40,6 +39,8 @@ from gyrogen.codegen.ir.nodes import (
     assign,
     cmp,
     fn,
+    real,
+    reals,
     sel,
 )
 

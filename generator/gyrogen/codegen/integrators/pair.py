@@ -19,17 +19,15 @@ from gyrogen.codegen.integrators.common import (
     STATS,
     TOLERANCES,
     accepted,
-    arr,
     attitude_checked,
     code,
     h,
     i,
-    real,
+    locked,
     x,
     xnew,
 )
 from gyrogen.codegen.integrators.explicit import trial
-from gyrogen.codegen.integrators.gimbal import locked
 from gyrogen.codegen.ir.nodes import (
     Bool,
     Call,
@@ -49,12 +47,14 @@ from gyrogen.codegen.ir.nodes import (
     S,
     Var,
     and_,
+    arr,
     assign,
     cmp,
     fn,
     inc,
     not_,
     or_,
+    real,
     sel,
 )
 from gyrogen.methods import Method

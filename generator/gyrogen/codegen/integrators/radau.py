@@ -14,7 +14,6 @@ from gyrogen import methods as registry
 from gyrogen.codegen.integrators.common import (
     NX,
     STATS,
-    arr,
     code,
     comp,
     dx,
@@ -23,7 +22,6 @@ from gyrogen.codegen.integrators.common import (
     x,
     xnew,
 )
-from gyrogen.codegen.integrators.common import real as scalar
 from gyrogen.codegen.integrators.explicit import at, linear
 from gyrogen.codegen.ir.nodes import (
     Assign,
@@ -45,6 +43,7 @@ from gyrogen.codegen.ir.nodes import (
     S,
     Var,
     and_,
+    arr,
     assign,
     cmp,
     fn,
@@ -52,6 +51,7 @@ from gyrogen.codegen.ir.nodes import (
     not_,
     sel,
 )
+from gyrogen.codegen.ir.nodes import real as scalar
 from gyrogen.methods import Method, RadauControl
 from gyrogen.tableaus import Radau
 

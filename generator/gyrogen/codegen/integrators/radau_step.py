@@ -10,7 +10,6 @@ from gyrogen.codegen.integrators.common import (
     NX,
     STATS,
     TOLERANCES,
-    arr,
     code,
     comp,
     dx,
@@ -20,7 +19,6 @@ from gyrogen.codegen.integrators.common import (
     x,
     xnew,
 )
-from gyrogen.codegen.integrators.common import real as scalar
 from gyrogen.codegen.integrators.radau import EPS, c, dot, each, matrix, pivots, t
 from gyrogen.codegen.ir.nodes import (
     Break,
@@ -40,6 +38,7 @@ from gyrogen.codegen.ir.nodes import (
     S,
     Var,
     and_,
+    arr,
     assign,
     cmp,
     fn,
@@ -48,6 +47,7 @@ from gyrogen.codegen.ir.nodes import (
     or_,
     sel,
 )
+from gyrogen.codegen.ir.nodes import real as scalar
 from gyrogen.methods import Method, RadauControl
 from gyrogen.tableaus import Radau
 

@@ -21,18 +21,17 @@ from gyrogen.codegen.integrators.common import (
     STATS,
     TOLERANCES,
     accepted,
-    arr,
     attitude_checked,
     code,
     comp,
     dx,
+    gimbal_at,
+    gimbal_jump,
     h,
     i,
-    real,
     x,
     xnew,
 )
-from gyrogen.codegen.integrators.gimbal import gimbal_at, gimbal_jump
 from gyrogen.codegen.integrators.taylor_jet import (
     T,
     c,
@@ -60,12 +59,14 @@ from gyrogen.codegen.ir.nodes import (
     Unused,
     Var,
     and_,
+    arr,
     assign,
     cmp,
     fn,
     inc,
     not_,
     or_,
+    real,
     sel,
 )
 from gyrogen.methods import Method

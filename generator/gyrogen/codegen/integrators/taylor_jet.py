@@ -28,7 +28,9 @@ that loop, in registers.
 
 from __future__ import annotations
 
-from gyrogen.codegen.integrators.common import arr, real, x
+from gyrogen.codegen.integrators.common import (
+    x,
+)
 from gyrogen.codegen.ir.nodes import (
     At,
     Comment,
@@ -40,9 +42,11 @@ from gyrogen.codegen.ir.nodes import (
     Num,
     S,
     Var,
+    arr,
     assign,
     cmp,
     fn,
+    real,
     sel,
 )
 from gyrogen.methods import Method

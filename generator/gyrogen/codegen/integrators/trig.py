@@ -22,7 +22,6 @@ vectorizes.
 
 from __future__ import annotations
 
-from gyrogen.codegen.integrators.common import real, reals
 from gyrogen.codegen.ir.nodes import (
     Const,
     E,
@@ -37,6 +36,8 @@ from gyrogen.codegen.ir.nodes import (
     cmp,
     fn,
     or_,
+    real,
+    reals,
     sel,
 )
 from gyrogen.codegen.ir.nodes import S as Stmt

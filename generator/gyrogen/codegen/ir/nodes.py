@@ -111,6 +111,7 @@ class Const(E):
 
 
 Type = Literal["double", "int", "long", "bool", "stats"]
+Intent = Literal["in", "out", "inout", "tmp"]
 BinOp = Literal["+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!=", "and", "or"]
 
 
@@ -291,7 +292,7 @@ class Decl:
     name: str
     type: Type
     shape: tuple[str | int, ...] = ()
-    intent: Literal["in", "out", "inout", "tmp"] = "in"
+    intent: Intent = "in"
     """A local's "in": the same on every lane (set outside the loops over
     lanes); "tmp": a value used only in the run of statements that sets it
     (over lanes, a scalar of the one loop over the lanes)."""
@@ -299,6 +300,21 @@ class Decl:
     """A local's value at the start (an array: every element)."""
     values: tuple[int | float, ...] = ()
     """A constant table (an array local that never changes)."""
+
+
+def arr(name: str, intent: Intent = "in", *shape: str | int) -> Decl:
+    """An array of doubles, NX of them unless shape says otherwise."""
+    return Decl(name, "double", shape or ("NX",), intent)
+
+
+def real(name: str, intent: Intent = "in") -> Decl:
+    """A double."""
+    return Decl(name, "double", (), intent)
+
+
+def reals(*names: str) -> tuple[Decl, ...]:
+    """Local doubles a function sets."""
+    return tuple(real(n, "inout") for n in names)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """`make bench-call`: what Compiled.integrate and integrate_batch cost on top
 of the raw cffi call, in microseconds.
 
-    python tests/bench_call.py [--repeats R] [--rounds K]
+    python benchmarks/bench_call.py [--repeats R] [--rounds K]
 
 The default scene built in C; dop853 and rk4 (one adaptive and one
 fixed-step method). For each: t1 = t0 (the call and nothing else) and a
@@ -29,7 +29,7 @@ import numpy as np
 
 from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench.timing import best_time
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import default

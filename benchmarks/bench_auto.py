@@ -6,7 +6,7 @@ steps, and the scaled error against dop853 at rtol = atol = 1e-14 (the
 Taylor method at 1e-14 beside it: the two references' agreement). The load
 average is printed before and after.
 
-usage: python tests/bench_auto.py [REPEATS]
+usage: python benchmarks/bench_auto.py [REPEATS]
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 
 from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench.timing import best_time
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.errors import SceneError
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled

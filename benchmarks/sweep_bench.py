@@ -14,7 +14,7 @@
   getrusage's, as /usr/bin/time -v gives it);
 - the fixed costs: the same sweep of 2 trajectories end to end (process,
   imports, build-cache look-up, engine, summary, figures);
-- the per-chunk costs, phase by phase (tests/sweep_bench_chunk.py);
+- the per-chunk costs, phase by phase (benchmarks/sweep_bench_chunk.py);
 - with --baseline REV: gyrogen as of that git revision (its generator/ and
   templates/ by git archive, first on PYTHONPATH), end to end beside this
   tree's in the same repeats: before and after, side by side;
@@ -22,7 +22,7 @@
   threads (the bare loop then draws each chunk's start states in its loop:
   1.6% of the call), where the fixed costs weigh less.
 
-    python tests/sweep_bench.py --trajectories 1000000 --memory 10000000
+    python benchmarks/sweep_bench.py --trajectories 1000000 --memory 10000000
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from typing import NamedTuple
 from sweep_bench_chunk import per_chunk
 
 from gyrogen import api
-from gyrogen.analysis.sweep.sweep_draws import inputs
+from gyrogen.analysis.sweep.draws import inputs
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.scene_build import compiled, scene_sources
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from gyrogen import methods
 from gyrogen.abi import GIMBAL_LOCK_COS
-from gyrogen.analysis.check import check_clusters
-from gyrogen.analysis.check.check_engine import Case, Extreme, spin_prediction
+from gyrogen.analysis.check import clusters
+from gyrogen.analysis.check.engine import Case, Extreme, spin_prediction
 from gyrogen.analysis.simulate import invariants
 from gyrogen.errors import SceneError
 from gyrogen.oracle.scene_view import quaternion_dcm
@@ -153,7 +153,7 @@ def cases(quick: bool = False) -> list[Case]:
         *_speed_controller(quick),
         _long_run(quick),
         *_spin_stability(),
-        *check_clusters.cases(quick),
+        *clusters.cases(quick),
     ]
 
 

@@ -2,9 +2,9 @@
 summary.md (the run's figures, return codes, each metric's spread, the
 criterion's agreement share), histograms.png and, for a 2-D grid, map.png.
 
-The parts are read back one column at a time (analysis/sweep/sweep_columns.py).
+The parts are read back one column at a time (analysis/sweep/columns.py).
 
-The spin-stability criterion (NOTES.md, analysis/check_engine.spin_axes):
+The spin-stability criterion (NOTES.md, analysis/check/engine.spin_axes):
 a trajectory is observed unstable when its max nutation angle exceeds
 grows_by times its start's; it is judged when its H_a / Omega lies outside
 band of both transverse inertias (near the boundary the growth is too slow
@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gyrogen.abi import UNITS
-from gyrogen.analysis.check.check_engine import spin_axes, spin_stable
-from gyrogen.analysis.sweep.sweep_columns import (
+from gyrogen.analysis.check.engine import spin_axes, spin_stable
+from gyrogen.analysis.sweep.columns import (
     PARTS,
     Histogram,
     in_order,
@@ -29,15 +29,15 @@ from gyrogen.analysis.sweep.sweep_columns import (
     scan,
     spreads,
 )
-from gyrogen.analysis.sweep.sweep_draws import axis_values
-from gyrogen.analysis.sweep.sweep_engine import Run
-from gyrogen.analysis.sweep.sweep_parts import HISTOGRAMS_PNG, MAP_PNG, SUMMARY_JSON, SUMMARY_MD
-from gyrogen.analysis.sweep.sweep_spec import Spec
-from gyrogen.analysis.sweep.sweep_store import Store
+from gyrogen.analysis.sweep.draws import axis_values
+from gyrogen.analysis.sweep.engine import Run
+from gyrogen.analysis.sweep.parts import HISTOGRAMS_PNG, MAP_PNG, SUMMARY_JSON, SUMMARY_MD
+from gyrogen.analysis.sweep.spec import Spec
+from gyrogen.analysis.sweep.store import Store
 from gyrogen.physics import lumped_inertias
 
 if TYPE_CHECKING:
-    from gyrogen.analysis.sweep.sweep_plots import MapData
+    from gyrogen.analysis.sweep.plots import MapData
 
 HISTOGRAMS = ("max_nutation", "max_rate", "H_drift", "pointing", "rhs_calls")
 """Metric columns shown as histograms (with every time_to_ column)."""
@@ -178,7 +178,7 @@ def markdown(data: dict[str, Any]) -> str:
 
 def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     """summary.json, summary.md and the figures into the sweep's directory
-    (sweep_parts.summary_files: kept clear before any work)."""
+    (parts.summary_files: kept clear before any work)."""
     import pyarrow.parquet as pq
 
     with record.out.open(PARTS, part_files(record.out)[0]) as source:
@@ -186,7 +186,7 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     data, histograms = summary(spec, record, metric_columns(spec, columns))
     files: dict[str, str | bytes] = {SUMMARY_MD: markdown(data)}
     if plots:
-        from gyrogen.analysis.sweep.sweep_plots import histograms_png, map_png  # matplotlib
+        from gyrogen.analysis.sweep.plots import histograms_png, map_png  # matplotlib
 
         files[HISTOGRAMS_PNG] = histograms_png(f"sweep {spec.name}", histograms)
         if (grid := map_data(spec, record.out, columns)) is not None:
@@ -199,7 +199,7 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
 
 def load_plots() -> None:
     """Import the figures' module (matplotlib: 0.4 s), ahead of need."""
-    import gyrogen.analysis.sweep.sweep_plots  # noqa: F401
+    import gyrogen.analysis.sweep.plots  # noqa: F401
 
 
 def map_data(spec: Spec, out: Store, columns: list[str]) -> MapData | None:
@@ -207,7 +207,7 @@ def map_data(spec: Spec, out: Store, columns: list[str]) -> MapData | None:
     draws of each cell), with NOTES.md's boundary when the sweep has the
     spin criterion; None for other sweeps, and when no cell has a value
     (setup refused every parameter set, say)."""
-    from gyrogen.analysis.sweep.sweep_plots import MapData
+    from gyrogen.analysis.sweep.plots import MapData
 
     sweep = spec.sweep
     metric = next((c for c in HISTOGRAMS if c in columns), None)

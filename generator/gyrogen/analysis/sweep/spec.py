@@ -19,7 +19,7 @@ metrics to keep; validated like scenes (one line, exit 2, nothing written).
     [criterion]                   # spin_stability = { grows_by = 10.0, band = 0.05 }
 
 Trajectory i is grid point i // count with draw i % count; its draws are a
-function of (seed, i) alone (analysis/sweep/sweep_draws.py).
+function of (seed, i) alone (analysis/sweep/draws.py).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ from gyrogen.sweep_values import Axis, Distribution, Misalignment
 METRICS = (
     "final_state", "max_nutation", "max_rate", "invariant_drift", "stats", "time_to", "pointing",
 )  # fmt: skip
-"""What a sweep may keep of each trajectory (analysis/sweep/sweep_metrics.py)."""
+"""What a sweep may keep of each trajectory (analysis/sweep/metrics.py)."""
 SAMPLED = ("max_nutation", "max_rate", "invariant_drift", "time_to")
 """The metrics that look along the run, at metrics.samples points."""
 QUANTITIES = ("nutation", "rate")

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.abi import AXES_SPAN_WARN
-from gyrogen.analysis.check.check_engine import Case, Extreme
+from gyrogen.analysis.check.engine import Case, Extreme
 from gyrogen.errors import SceneError
 from gyrogen.oracle import cluster_reference
 from gyrogen.scene import Scene, builtin_text, load, validate

@@ -14,11 +14,11 @@ from pathlib import Path
 from typing import Any
 
 from gyrogen import api
-from gyrogen.analysis.sweep.sweep_draws import inputs
-from gyrogen.analysis.sweep.sweep_engine import Job, identity, part_metadata
-from gyrogen.analysis.sweep.sweep_metrics import run_chunk
-from gyrogen.analysis.sweep.sweep_parts import parquet_bytes, write_part
-from gyrogen.analysis.sweep.sweep_store import store
+from gyrogen.analysis.sweep.draws import inputs
+from gyrogen.analysis.sweep.engine import Job, identity, part_metadata
+from gyrogen.analysis.sweep.metrics import run_chunk
+from gyrogen.analysis.sweep.parts import parquet_bytes, write_part
+from gyrogen.analysis.sweep.store import store
 from gyrogen.runtime.flags import native_target
 from gyrogen.runtime.scene_build import compiled, scene_sources
 

@@ -6,7 +6,7 @@ cut at multiples of this run's chunk (a clean run's parts are the same
 whatever was done before).
 
 A part is written all or nothing (Store.write: locally a temporary name,
-fsynced, renamed; sweep_store.py says what holds for each URL protocol), by
+fsynced, renamed; store.py says what holds for each URL protocol), by
 the client or by the worker that computed it; a part cut short (a crash, a
 full disk), computed with another identity, or overlapping another is
 computed again.
@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis.sweep.sweep_columns import PARTS, part_name, written
-from gyrogen.analysis.sweep.sweep_spec import Spec
-from gyrogen.analysis.sweep.sweep_store import Store
+from gyrogen.analysis.sweep.columns import PARTS, part_name, written
+from gyrogen.analysis.sweep.spec import Spec
+from gyrogen.analysis.sweep.store import Store
 from gyrogen.errors import GyrogenError
 
 STATE_FILE = "sweep.json"
@@ -40,7 +40,7 @@ SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG = (
     "map.png",
 )
 SUMMARY_FILES = (SUMMARY_JSON, SUMMARY_MD, HISTOGRAMS_PNG, MAP_PNG)
-"""What the sweep writes at its end (sweep_report.write; FIGURES only with
+"""What the sweep writes at its end (report.write; FIGURES only with
 plots): nothing may be in their way, checked before any work with
 sweep.json's and parts' places (summary_files)."""
 FIGURES = (HISTOGRAMS_PNG, MAP_PNG)

@@ -2,7 +2,7 @@
 the compiled RHS (or with a compiled integrator: by default the best
 implicit one for a stiff scene, analysis/check/stiffness.py), check the invariants with
 the numpy reference (analysis/simulate/invariants.py), and write the trajectory (CSV,
-npz), a summary and a figure (analysis/simulate/simulate_files.py), all or nothing.
+npz), a summary and a figure (analysis/simulate/files.py), all or nothing.
 
 The trajectory is sampled on the output grid and at the quadrature nodes
 inside each interval (analysis/simulate/trajectory.py). Between solver steps the
@@ -27,10 +27,11 @@ import scipy.integrate
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
-from gyrogen.abi import MAX_STEPS, MIN_RTOL, ODE_CODES, message
+from gyrogen.abi import MIN_RTOL, ODE_CODES, message
 from gyrogen.analysis.check import stiffness
-from gyrogen.analysis.simulate import simulate_files
-from gyrogen.analysis.simulate.invariants import Invariants, along_trajectory, words
+from gyrogen.analysis.simulate import files
+from gyrogen.analysis.simulate.invariants import along_trajectory, words
+from gyrogen.analysis.simulate.result import Result, Settings
 from gyrogen.analysis.simulate.trajectory import (
     QUAD_NODES,
     Again,
@@ -47,13 +48,10 @@ from gyrogen.runtime.compiled import Compiled, Controls, controls
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_files, scene_sources
 from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
-from gyrogen.scene import Scene, check_output_grid
+from gyrogen.scene import Scene
 
 QUAD_RTOL = 20 * MIN_RTOL
 """The tightest tolerance the quadrature's integrations again ask for."""
-MAX_NFEV = MAX_STEPS
-"""RHS calls before giving up: a run that blows up can crawl for hours
-without solve_ivp ever failing (its steps shrink as the state grows)."""
 Advance = Callable[[int], None]
 """Told how many more percent of the simulated time are done."""
 Progress = Callable[[str], AbstractContextManager[Advance]]
@@ -62,44 +60,6 @@ Progress = Callable[[str], AbstractContextManager[Advance]]
 
 def _no_progress(label: str) -> AbstractContextManager[Advance]:
     return nullcontext(lambda n: None)
-
-
-@dataclass(frozen=True)
-class Settings:
-    t_end: float
-    dt: float
-    method: str = methods.AUTO
-    plot: bool = True
-    max_nfev: int = MAX_NFEV
-
-
-def checked(settings: Settings) -> Settings:
-    """settings, or a one-line SceneError: t_end and dt finite and positive,
-    the output grid within its limit, a method simulate knows (what the
-    command line's option types check, for the Python API)."""
-    for name, v in (("t_end", settings.t_end), ("dt", settings.dt)):
-        if not (isinstance(v, int | float) and 0 < v < float("inf")):
-            raise SceneError(f"{name} = {v!r}: must be a finite number of seconds above 0")
-    try:
-        check_output_grid(settings.t_end, settings.dt)
-    except ValueError as exc:
-        raise SceneError(str(exc)) from None
-    known = (methods.AUTO, *methods.SCIPY, *methods.NAMES)
-    if settings.method not in known:
-        raise SceneError(f"method {settings.method!r}: not one of {', '.join(known)}")
-    return settings
-
-
-@dataclass(frozen=True)
-class Result:
-    scene: Scene
-    out: Path
-    language: str
-    build_id: str
-    settings: Settings
-    trajectory: Trajectory
-    invariants: Invariants
-    files: tuple[Path, ...]
 
 
 def runtime_values(scene: Scene) -> np.ndarray:
@@ -331,14 +291,14 @@ def run(
     progress: Progress = _no_progress,
     echo: Callable[[str], None] = lambda s: None,
 ) -> Result:
-    """Integrate and write out/ (the files of simulate_files.file_names, and
+    """Integrate and write out/ (the files of files.file_names, and
     the sources, kept beside the trajectory they made, in out/src), all at
     the end: a refused scene or parameter set, a failed run or anything in
     the way (checked before any work) leaves nothing behind."""
     from gyrogen.codegen.generate import claim
 
     p = runtime_values(scene)  # first: a scene error must leave nothing behind
-    names = simulate_files.file_names(settings.plot)
+    names = files.file_names(settings.plot)
     claim(out / "src", scene.name)
     can_write(out, names)
     can_write(out / "src", [])  # a file named src is in the way too
@@ -362,9 +322,9 @@ def run(
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:
         traj = integrate(start, settings, advance)
     inv = along_trajectory(scene, p, traj)
-    files = tuple(out / n for n in names)
-    res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, files)
-    contents = simulate_files.contents(res, p)
+    paths = tuple(out / n for n in names)
+    res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, paths)
+    contents = files.contents(res, p)
     write_atomic(out / "src", sources.files)
     write_atomic(out, contents)
     return res

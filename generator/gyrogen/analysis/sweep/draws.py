@@ -24,7 +24,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from gyrogen.abi_rotors import AXIS, rotor_name
-from gyrogen.analysis.sweep.sweep_spec import Spec, rotor_of
+from gyrogen.analysis.sweep.spec import Spec, rotor_of
 from gyrogen.sweep_values import Axis, Distribution, Misalignment
 
 WORDS_PER_BLOCK = 4

@@ -28,7 +28,7 @@ from gyrogen.abi import (
 )
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import invariants
-from gyrogen.analysis.simulate.simulate import compiled_again
+from gyrogen.analysis.simulate.engine import compiled_again
 from gyrogen.analysis.simulate.trajectory import (
     QUAD_NODES,
     from_samples,

@@ -1,6 +1,6 @@
 /*
  * Nanoseconds per gyrostat_rhs call, best of REPEATS runs of CALLS calls,
- * for tests/bench_cmake_default.py (make bench-lib). The state moves a
+ * for benchmarks/bench_cmake_default.py (make bench-lib). The state moves a
  * little on every call and every derivative is summed, so no call can be
  * left out. The clock is the process's CPU time, so that time the shared
  * machine gives to others is not counted. Prints "ns_per_call <best>

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from gyrogen.analysis.simulate.plots import png_bytes
-from gyrogen.analysis.sweep.sweep_columns import Histogram, log_scale
+from gyrogen.analysis.sweep.columns import Histogram, log_scale
 
 Scale = Callable[[Any], Any]
 

@@ -3,7 +3,7 @@
 Four panels on t: the integrator's mean step per output interval (from each
 interval's statistics) with the cumulative rhs calls, the invariants'
 relative drift, the quantity that makes the case extreme (Case.extreme, set
-next to the case in check_cases.py), and the numbers and the diagnosis in
+next to the case in cases.py), and the numbers and the diagnosis in
 words. A case setup refuses has no run: its figure says why, in words.
 Imported only when plots are asked for (matplotlib is slow to load).
 """
@@ -18,7 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from gyrogen.abi import ODE_CODES, Code, message, setup_codes_of
-from gyrogen.analysis.check.check_engine import Result
+from gyrogen.analysis.check.engine import Result
 from gyrogen.analysis.simulate.plots import DPI, FLOOR, SIZE_INCHES, invariant_drifts, png_bytes
 
 

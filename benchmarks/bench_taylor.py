@@ -9,7 +9,7 @@ the two differ in their steps where gyrogen's step scale leaves out
 translation and caps angles, so equal tolerances are not equal errors).
 Best of the repeats; the load average is printed before and after.
 
-usage: python tests/bench_taylor.py SCENE [REPEATS]
+usage: python benchmarks/bench_taylor.py SCENE [REPEATS]
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench import heyoka_peer as hp
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.bench.workprec import Run, seconds_at
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.codegen.generate import unit_of
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.scene_build import build_scene

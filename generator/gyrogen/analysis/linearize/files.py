@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis.linearize import modes
-from gyrogen.analysis.linearize.linearize import RESIDUAL_BAR, Linear
+from gyrogen.analysis.linearize.engine import RESIDUAL_BAR, Linear
 from gyrogen.files import write_atomic
 
 NPZ, PLOT = "linear.npz", "poles.png"

@@ -1,5 +1,5 @@
 """Run a sweep on Dask: chunks of trajectories as tasks, each chunk's rows
-one Parquet part (analysis/sweep/sweep_parts.py).
+one Parquet part (analysis/sweep/parts.py).
 
 Engines: by default a local cluster in this process, one thread per core
 (the compiled integrators release the GIL), with no set-up; or an existing
@@ -9,7 +9,7 @@ client scatters the sweep and its generated sources to every worker once
 chunk tasks a few at a time (so neither the client nor the scheduler holds
 more than a window of results: memory stays flat whatever the sweep's
 size). Who writes a part: the worker that computed it, when the output
-(a directory or an fsspec URL: analysis/sweep/sweep_store.py) is one every
+(a directory or an fsspec URL: analysis/sweep/store.py) is one every
 worker reaches (the local engine; shared=True on a cluster with a shared
 file system or a URL), and then only each chunk's figures come back; else
 the client, from the bytes the task returns. A worker that dies
@@ -41,10 +41,10 @@ from typing import Any
 import numpy as np
 
 from gyrogen import __version__
-from gyrogen.analysis.sweep.sweep_columns import PARTS
-from gyrogen.analysis.sweep.sweep_dask import engine
-from gyrogen.analysis.sweep.sweep_metrics import column_docs, run_chunk
-from gyrogen.analysis.sweep.sweep_parts import (
+from gyrogen.analysis.sweep.columns import PARTS
+from gyrogen.analysis.sweep.dask_client import engine
+from gyrogen.analysis.sweep.metrics import column_docs, run_chunk
+from gyrogen.analysis.sweep.parts import (
     check_out,
     claim,
     clean,
@@ -56,8 +56,8 @@ from gyrogen.analysis.sweep.sweep_parts import (
     write_part,
     written,
 )
-from gyrogen.analysis.sweep.sweep_spec import Spec
-from gyrogen.analysis.sweep.sweep_store import Store, store
+from gyrogen.analysis.sweep.spec import Spec
+from gyrogen.analysis.sweep.store import Store, store
 from gyrogen.errors import GyrogenError
 from gyrogen.runtime.flags import flags_for, native_target
 from gyrogen.runtime.scene_build import Sources, code_digest, compiled, scene_sources

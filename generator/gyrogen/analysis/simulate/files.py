@@ -5,16 +5,14 @@ from __future__ import annotations
 
 import io
 import json
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from gyrogen.analysis.simulate.invariants import Invariants, words
+from gyrogen.analysis.simulate.result import Result
 from gyrogen.analysis.simulate.trajectory import QUADRATURE, Trajectory
 from gyrogen.scene import Scene
-
-if TYPE_CHECKING:
-    from gyrogen.analysis.simulate.simulate import Result
 
 COLUMNS = ("H_norm", "K", "H_drift", "H_vector_drift", "energy_residual", "u4_residual")
 """Invariant columns of trajectory.csv, after t and the states."""

@@ -1,6 +1,6 @@
 """`make fuzz`: the scene-space property test at scale, with a fresh seed.
 
-    python tests/fuzz_scenes.py [--examples N] [--jobs J] [--seed S] [--out DIR] [--clusters]
+    python tools/fuzz_scenes.py [--examples N] [--jobs J] [--seed S] [--out DIR] [--clusters]
 
 Draws N scenes (default 2000) in J processes (default: every core), each a
 shard of tests/scene_space.py's strategy with its own seed, checks each
@@ -20,7 +20,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the strategies
 
 from scene_space import run_shard
 from scene_space_clusters import clusters

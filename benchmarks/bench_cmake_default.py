@@ -1,10 +1,10 @@
 """`make bench-lib`: what the CMake package's build type does to the rhs
 (issue 15: with no build type the library used to build with no -O flag).
 
-    python tests/bench_cmake_default.py [--rounds N] [--out DIR]
+    python benchmarks/bench_cmake_default.py [--rounds N] [--out DIR]
 
 A C-only parent project pulls generated/gyrostat in with add_subdirectory
-and links tests/consumers/rhs_timing.c (itself always at -O2) against it,
+and links benchmarks/rhs_timing.c (itself always at -O2) against it,
 configured three ways side by side:
 
 - no build type: what a parent that gives none gets now (the package adds -O2);
@@ -28,7 +28,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = ROOT / "generated" / "gyrostat"
-TIMING = Path(__file__).resolve().parent / "consumers" / "rhs_timing.c"
+TIMING = Path(__file__).resolve().parent / "rhs_timing.c"
 BUILD_TYPES = {"no build type": None, "Release": "Release", "None (before issue 15)": "None"}
 PARENT = """cmake_minimum_required(VERSION 3.15)
 project(timing LANGUAGES C)

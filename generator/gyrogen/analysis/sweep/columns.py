@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis.sweep.sweep_store import Store, store
+from gyrogen.analysis.sweep.store import Store, store
 
 BINS = 50
 LOG_SPAN = 100.0
@@ -35,7 +35,7 @@ NUMPY: dict[str, np.dtype[Any]] = {
     "int64": np.dtype(np.int64),
     "int32": np.dtype(np.int32),
 }
-"""The Arrow types of a part's columns (analysis/sweep_metrics.columns) as numpy's."""
+"""The Arrow types of a part's columns (analysis/sweep/metrics.columns) as numpy's."""
 QUANTILES = {"median": 0.5, "p99": 0.99}
 RADIX = 16
 """Bits of an order statistic's key settled per counting pass."""
@@ -51,7 +51,7 @@ _PART = re.compile(rf"part-(\d{{{DIGITS}}})-(\d{{{DIGITS}}})\.parquet")
 
 
 def part_name(start: int, stop: int) -> str:
-    """The part of the rows of samples start..stop (analysis/sweep/sweep_parts.py)."""
+    """The part of the rows of samples start..stop (analysis/sweep/parts.py)."""
     return f"part-{start:0{DIGITS}d}-{stop:0{DIGITS}d}.parquet"
 
 

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 
 from gyrogen.abi import unit_and_doc
-from gyrogen.analysis.sweep.sweep_draws import inputs
-from gyrogen.analysis.sweep.sweep_spec import SAMPLED, Spec
+from gyrogen.analysis.sweep.draws import inputs
+from gyrogen.analysis.sweep.spec import SAMPLED, Spec
 from gyrogen.oracle.reference import N_STATES, direction_cosines
 from gyrogen.oracle.scene_view import quaternion_dcm
 from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias

@@ -1,13 +1,9 @@
-"""`make fmu-agreement`: the FMU of the default, the quaternion and the stiff
-scene, simulated by FMPy in Co-Simulation (the generated integrator) and
-Model Exchange (FMPy's CVODE), against `gyrogen simulate` (scipy's DOP853,
-or Radau on the stiff scene), over each scene's whole t_end.
-
-    python tests/fmu_agreement.py [--t-end T] [--out DIR]
-
-Prints, per scene and mode, the largest difference over the output grid and
-the states, |fmu - simulate| / (1 + |simulate|) and absolute. Exit 1 if
-either exceeds BAR. tests/test_fmu.py runs the same on a 1 s slice.
+"""The FMU agreement cases: the FMU of the default, the quaternion and the
+stiff scene, simulated by FMPy in Co-Simulation (the generated integrator)
+and Model Exchange (FMPy's CVODE), against `gyrogen simulate` (scipy's
+DOP853, or Radau on the stiff scene). tests/test_fmu.py runs them on a 1 s
+slice, benchmarks/fmu_agreement.py (`make fmu-agreement`) over each
+scene's whole t_end.
 
 Model Exchange runs CVODE at a tenth of the scene's rtol (CVODE_SHARPER):
 the FMU gives only derivatives there, and at the scene's own rtol CVODE's
@@ -17,18 +13,15 @@ scene over 10 s, shrinking to 3.6e-9 at a tenth).
 
 from __future__ import annotations
 
-import argparse
-import sys
-import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import fmpy
 import numpy as np
 
-from gyrogen.analysis.check.check_cases import quaternion_scene
-from gyrogen.analysis.simulate import simulate
+from gyrogen.analysis.check.cases import quaternion_scene
+from gyrogen.analysis.simulate import engine
+from gyrogen.analysis.simulate.result import Settings
 from gyrogen.codegen.fmu_model import FmuModel, Stepping
 from gyrogen.codegen.generate import unit_of
 from gyrogen.files import write_atomic
@@ -63,15 +56,15 @@ def build(case: Case, out: Path) -> Path:
     """The case's FMU (what `gyrogen fmu SCENE --method M` writes) in out."""
     sim = case.scene.simulate
     stepping = Stepping(case.method, sim.rtol, sim.atol, sim.t_end, sim.dt)
-    model = FmuModel(unit_of(case.scene), tuple(simulate.runtime_values(case.scene)), stepping)
+    model = FmuModel(unit_of(case.scene), tuple(engine.runtime_values(case.scene)), stepping)
     write_atomic(out, fmu_build.build(model, out))
     return out / f"{case.scene.name}.fmu"
 
 
 def reference(case: Case, t_end: float, out: Path) -> np.ndarray:
     """`gyrogen simulate`'s trajectory on the scene's output grid."""
-    settings = simulate.Settings(t_end, case.scene.simulate.dt, case.reference, plot=False)
-    return simulate.run(case.scene, out, settings).trajectory.x
+    settings = Settings(t_end, case.scene.simulate.dt, case.reference, plot=False)
+    return engine.run(case.scene, out, settings).trajectory.x
 
 
 def by_fmpy(case: Case, fmu: Path, mode: str, t_end: float) -> np.ndarray:
@@ -96,36 +89,3 @@ def differences(x: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     assert x.shape == ref.shape, (x.shape, ref.shape)
     gap = np.abs(x - ref)
     return float(np.max(gap / (1.0 + np.abs(ref)))), float(np.max(gap))
-
-
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--t-end", type=float, default=None, help="default: each scene's")
-    ap.add_argument("--out", type=Path, default=None, help="default: a temporary directory")
-    args = ap.parse_args()
-    worst = 0.0
-    with tempfile.TemporaryDirectory(prefix="gyrogen-fmu-") as tmp:
-        root = args.out or Path(tmp)
-        for case in cases():
-            t_end = args.t_end or case.scene.simulate.t_end
-            fmu = build(case, root / case.label)
-            t0 = time.perf_counter()
-            ref = reference(case, t_end, root / case.label / "simulate")
-            seconds = time.perf_counter() - t0
-            print(f"{case.label} ({case.scene.name}, t_end {t_end:g} s, {len(ref)} points): "
-                  f"gyrogen simulate --method {case.reference} in {seconds:.2f} s")  # fmt: skip
-            for mode in MODES:
-                t0 = time.perf_counter()
-                x = by_fmpy(case, fmu, mode, t_end)
-                scaled, absolute = differences(x, ref)
-                worst = max(worst, scaled, absolute)
-                cvode = f"FMPy's CVODE, rtol / {CVODE_SHARPER:g}"
-                what = case.method if mode == "CoSimulation" else cvode
-                print(f"  {mode:14s} ({what}): {scaled:.2e} scaled, {absolute:.2e} absolute, "
-                      f"{time.perf_counter() - t0:.2f} s")  # fmt: skip
-    print(f"largest difference {worst:.2e} (bar {BAR:g})")
-    return 0 if worst <= BAR else 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())
