@@ -45,6 +45,7 @@ def params(**changes: float) -> np.ndarray:
     return np.array([changes.get(name, VALID[name]) for name in abi.PARAMETERS])
 
 
+@pytest.mark.slow
 def test_the_codes_are_the_documented_ones(backends: dict[str, Compiled]) -> None:
     codes = backends["c"].manifest["setup_codes"]
     assert "accepted" in codes[str(OK)]

@@ -41,6 +41,7 @@ def _p(scene: Scene, **change: float) -> np.ndarray:
     return np.array([{**NOMINAL, **change}[n] for n in scene.runtime])
 
 
+@pytest.mark.slow
 def test_p_holds_each_axis_after_its_position(built) -> None:
     scene, backends = built
     assert scene.runtime[7:17] == ("m_1", "I_1", "J_1", "r1_1", "r2_1", "r3_1", "g1_1", "g2_1",
@@ -155,6 +156,7 @@ def test_the_scene_checks_the_axes_it_gives(edits: dict[str, float], message: st
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.slow
 def test_op_counts_before_and_after() -> None:
     """The issue's bar: at most 160 ops in the rhs with every cluster
     property runtime, axes included (rw4_pyramid folded: 114)."""

@@ -153,6 +153,7 @@ def test_the_scene_checks_the_runtime_values_it_gives(edit: str, message: str) -
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.slow
 def test_op_counts_before_and_after() -> None:
     """The issue's bar: at most 160 ops in the rhs with every inertial value
     and position runtime (rw4_pyramid folded: 114)."""
@@ -170,6 +171,7 @@ def test_the_linear_model_reads_them_from_p(built) -> None:
     assert np.allclose(np.diag(lin.B[rows]), [0.05 / v for v in j], rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_random_axes_with_everything_runtime(tmp_path: Path) -> None:
     """Six wheels on axes off the carrier's (exact rationals of denominators
     ~1e9): I~'s entries stay sums as the formulas give them (put over a

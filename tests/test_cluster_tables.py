@@ -79,6 +79,7 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[Languag
     return scene, backends
 
 
+@pytest.mark.slow
 def test_c_and_fortran_match_the_reference_across_the_tables(built) -> None:
     """rhs, outputs and Jacobian at random states, parameters and times
     spanning every table and beyond both ends (oracle.compare)."""

@@ -168,6 +168,7 @@ def test_glue_that_does_not_compile_shows_its_start(
     assert "#error broken glue" in log.read_text()
 
 
+@pytest.mark.slow
 def test_gyrogen_cache_naming_a_file_is_one_line(tmp_path: Path) -> None:
     """From the command line, before anything is compiled: exit 1."""
     blocker = tmp_path / "file"

@@ -43,6 +43,7 @@ def test_no_check_skips_the_check(tmp_path: Path, cli) -> None:
     assert code == 0 and "checked" not in out and (tmp_path / "manifest.json").is_file()
 
 
+@pytest.mark.slow
 def test_wrong_code_is_not_written(tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every C double one part in 1e9 off: C differs from the reference and
     from the (right) Fortran; nothing is written."""
@@ -89,6 +90,7 @@ def controlled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Compiled, obje
     return build.build(src, "c"), scene
 
 
+@pytest.mark.slow
 def test_size_scaled_bar_holds_correct_code_where_terms_cancel(controlled) -> None:  # type: ignore[no-untyped-def]
     """The speed controller's slip u4 - u2 - w_ref near zero: a plain
     relative error is large for correct code; scaled by the sizes, small."""

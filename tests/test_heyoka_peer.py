@@ -26,6 +26,7 @@ def _scene(name: str, tmp: Path, cache: Path, mp: pytest.MonkeyPatch) -> tuple[C
     return comp, unit, comp.setup(runtime_values(scene)), np.array(scene.initial_state()), scene
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["gyrostat", "dual_spin"])
 def test_heyoka_rhs_is_gyrogens(
     name: str, tmp_path: Path, cache_dir: Path, monkeypatch: pytest.MonkeyPatch
@@ -55,6 +56,7 @@ def test_time_dependent_rhs_is_refused() -> None:
         heyoka_peer.system(heyoka_peer.module(), Unit())
 
 
+@pytest.mark.slow
 def test_quadruple_reference_and_the_integrators(
     tmp_path: Path, cache_dir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -111,6 +113,7 @@ def test_ensemble_table_and_fronts(monkeypatch: pytest.MonkeyPatch, cache_dir: P
     assert img.shape[:2] == (600, 1000) and float(img.std()) > 0.01
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["gyrostat", "dual_spin"])
 def test_taylor_meets_the_quadruple_reference(
     name: str, tmp_path: Path, cache_dir: Path, monkeypatch: pytest.MonkeyPatch

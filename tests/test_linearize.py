@@ -119,6 +119,7 @@ def test_b_of_folded_runtime_and_absent_torques_is_the_inverse_inertia() -> None
     assert np.allclose(lin.B[w], np.diag([1 / r.J for r in scene.rotors]), rtol=1e-14, atol=0)
 
 
+@pytest.mark.slow
 def test_the_linear_model_leaves_the_scene_code_as_it_was() -> None:
     """outputs.linear_model adds <prefix>_linear and constants after the
     rhs's own: rhs, Jacobian and outputs stay the same expressions."""

@@ -78,6 +78,7 @@ def test_hostile_text_and_longest_name_compile_cleanly(tmp_path: Path, attitude:
     assert "\nadd_subdirectory(evil)" not in cmake and "# add_subdirectory(evil)" in cmake
 
 
+@pytest.mark.slow
 def test_headers_say_which_attitude(tmp_path: Path) -> None:
     generate(load("gyrostat"), tmp_path / "angles")
     h = (tmp_path / "angles" / "gyrostat.h").read_text()

@@ -188,6 +188,7 @@ def test_missing_runtime_value_is_one_line_exit_2(tmp_path: Path, cache: None, c
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_parameters_whose_constants_overflow_are_one_line_exit_2(
     tmp_path: Path, cache: None, cli
 ) -> None:
@@ -237,6 +238,7 @@ def test_anything_in_the_way_is_refused_before_any_work(
     assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
 
 
+@pytest.mark.slow
 def test_a_huge_start_state_warns_nothing(tmp_path: Path, cache: None, cli) -> None:
     """u1 = 1e308: the stiffness estimate overflowed with a numpy
     RuntimeWarning and read 'decay rates up to inf'; now the rate is a
@@ -258,6 +260,7 @@ def test_a_huge_start_state_warns_nothing(tmp_path: Path, cache: None, cli) -> N
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_a_start_state_whose_derivatives_overflow_is_one_line_exit_2(
     tmp_path: Path, cache: None, cli
 ) -> None:
@@ -275,6 +278,7 @@ def test_a_start_state_whose_derivatives_overflow_is_one_line_exit_2(
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["fmu", "bench"])
 def test_fmu_and_bench_refuse_overflowing_parameters_in_one_line(
     tmp_path: Path, cache: None, cli, command: str
@@ -364,6 +368,7 @@ def test_spent_budget_is_one_line_with_the_time_reached(tmp_path: Path, cache: N
     assert not (tmp_path / "out" / "trajectory.csv").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["taylor", "rk4"])
 def test_compiled_methods_spend_the_budget_over_the_whole_run(
     tmp_path: Path, cache: None, cli, method: str

@@ -65,6 +65,7 @@ def coefficients(
     return t[:, :nx]
 
 
+@pytest.mark.slow
 def test_the_recurrences_are_the_series_of_the_solution() -> None:
     """A small system with every operation: the recurrences' coefficients
     equal sympy's Taylor series of the exact solution's derivatives."""
@@ -112,6 +113,7 @@ def test_degrees_are_where_the_series_ends() -> None:
     assert np.all(got[1:, 3] != 0.0)
 
 
+@pytest.mark.slow
 def test_a_quadratic_rhs_is_regrouped_by_its_fixed_state() -> None:
     """jet.regroup: x2 (constant acceleration: fixed) takes its monomials
     first, so one product of the two in x0' has one term; decompose keeps
@@ -260,6 +262,7 @@ def test_taylor_meets_its_tolerance_in_c_and_fortran_alike(
         last = err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_polynomial_states_are_exact_at_any_tolerance(
     built: dict[tuple[str, str], Compiled], language: str
@@ -280,6 +283,7 @@ def test_polynomial_states_are_exact_at_any_tolerance(
         assert abs(x[i] - v) <= 1e-14 * max(1.0, abs(v)), (i, x[i], v)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("start", [{4: 7e6}, {4: 1e12}, {3: 1e7}, {0: 1e5, 2: -3e4}])
 def test_a_far_position_or_a_wound_up_angle_leaves_the_step_alone(
     built: dict[tuple[str, str], Compiled], start: dict[int, float]
@@ -370,6 +374,7 @@ def test_a_scene_with_only_the_taylor_method(tmp_path: Path, cache_dir: Path) ->
     assert methods.pick(scene.integrators, stiff=False) == "taylor"
 
 
+@pytest.mark.slow
 def test_step_log2_and_exp2_against_glibc(source_dir: Path, tmp_path: Path) -> None:
     """The step size's branch-free log2 and exp2 (codegen/integrators/
     elementary.py) within their documented bounds of glibc's over their

@@ -84,6 +84,7 @@ def test_verify_command_passes_on_every_builtin_scene(name: str, cli) -> None:
     assert "FAIL" not in out and " ok" in out
 
 
+@pytest.mark.slow
 def test_verify_counts_the_scenes_own_parameters_apart(cli, tmp_path) -> None:
     """--params 1 on a scene with [simulate] parameters compares 2 sets: the
     line says which is the scene's own (it said "2 well-conditioned" with

@@ -138,6 +138,7 @@ def test_time_at_an_error_is_read_along_the_front() -> None:
     assert workprec.seconds_at([*runs, failed], 1e-8) is None
 
 
+@pytest.mark.slow
 def test_casadi_takes_a_clamped_motor() -> None:
     """rw4_pyramid's rhs clamps its motors (Min, Max): in CasADi's SX they
     are fmin and fmax, and the SX rhs equals the block evaluated on floats,
