@@ -1,5 +1,6 @@
 """The house rules of ARCHITECTURE.md: the flow runs one way (no module
-imports a later stage), and no module outgrows 400 lines."""
+imports a later stage), and no module outgrows 400 lines of code (its
+docstrings not counted: documenting a function never forces a split)."""
 
 from __future__ import annotations
 
@@ -70,7 +71,16 @@ def test_every_module_has_a_stage() -> None:
 
 @pytest.mark.parametrize("path", modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_no_module_over_400_lines(path: Path) -> None:
-    assert len(path.read_text().splitlines()) <= 400
+    text = path.read_text()
+    docstrings = sum(
+        node.end_lineno - node.lineno + 1
+        for node in ast.walk(ast.parse(text))
+        if isinstance(node, ast.Expr)
+        and isinstance(node.value, ast.Constant)
+        and isinstance(node.value.value, str)
+        and node.end_lineno is not None
+    )
+    assert len(text.splitlines()) - docstrings <= 400
 
 
 def test_running_compiled_code_never_imports_sympy() -> None:
