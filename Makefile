@@ -64,7 +64,7 @@ lint: setup
 
 ## docs: the documentation site into site/ (MkDocs, warnings as errors; the docs extra is in test's)
 docs: setup
-	$(BIN)/mkdocs build --strict --clean
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --clean
 
 ## docs-bench: measure the rhs on this machine (a quick run) into docs/benchmarks/, read by the
 ## benchmarks page when the site is built
