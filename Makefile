@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -58,9 +58,18 @@ test-fast: setup lint
 	$(BIN)/python -m pytest -m "not slow"
 
 lint: setup
-	$(BIN)/ruff check generator tests benchmarks tools
-	$(BIN)/ruff format --check generator tests benchmarks tools
+	$(BIN)/ruff check generator tests benchmarks tools docs/hooks
+	$(BIN)/ruff format --check generator tests benchmarks tools docs/hooks
 	$(BIN)/mypy
+
+## docs: the documentation site into site/ (MkDocs, warnings as errors; the docs extra is in test's)
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --clean
+
+## docs-bench: measure the rhs on this machine (a quick run) into docs/benchmarks/, read by the
+## benchmarks page when the site is built
+docs-bench: setup
+	$(BIN)/python tools/docs_bench.py run --out docs/benchmarks
 
 ## generate: rewrite generated/ (every built-in scene) from the templates and the generator
 generate: setup
@@ -166,8 +175,8 @@ check: setup
 	$(BIN)/gyrogen check --all --plots report/check
 
 clean:
-	rm -rf build examples/build bench-out report sim sweep fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
-	find generator tests benchmarks tools -name __pycache__ -type d -prune -exec rm -rf {} +
+	rm -rf build site examples/build bench-out report sim sweep fuzz-failures .hypothesis .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	find generator tests benchmarks tools docs/hooks -name __pycache__ -type d -prune -exec rm -rf {} +
 	rm -rf "$${GYROGEN_CACHE:-$${XDG_CACHE_HOME:-$$HOME/.cache}/gyrogen}"
 
 distclean: clean

@@ -3,8 +3,7 @@ phase, in this process, each the best of `repeats` (CPU seconds of this
 thread, and wall), beside the bare batch call on the same start states:
 the draws, run_chunk (draws, batch call, metrics), the Parquet bytes, the
 write into a local directory (fsynced, renamed) and through a file:// URL
-(fsspec: a temporary name, renamed). The cluster plan of the README reads
-these."""
+(fsspec: a temporary name, renamed)."""
 
 from __future__ import annotations
 

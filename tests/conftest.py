@@ -129,9 +129,10 @@ LONG_POLES = (
     "test_strict.py::test_verify_path_under_sanitizers",
     "test_scene_space.py::test_every_drawn_scene_keeps_the_promise",
     "test_scene_space.py::test_every_drawn_cluster_keeps_the_promise",
+    "test_docs.py::test_every_snippet_runs[README.md]",
 )
 """The tests of a minute or more each (ASan + UBSan compiles of the default
-scene's 140 kB rhs, the drawn-scene shards): collected first, so that
+scene's 140 kB rhs, the drawn-scene shards, the README's quick starts): collected first, so that
 pytest-xdist starts them at once instead of leaving one on a worker at the
 end of the run while the other waits."""
 

@@ -39,17 +39,6 @@ def test_builtin_sweeps_load() -> None:
     assert load("monte_carlo").size == 10_000
 
 
-def test_readme_sweep_file_is_valid() -> None:
-    """README.md's commented sweep file is one a user can copy as it is."""
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    section = readme.split("## Sweeps and Monte Carlo", 1)[1]
-    text = section.split("```toml\n", 1)[1].split("```", 1)[0]
-    spec = parse(text, "README.md", "readme", None)
-    assert spec.variables == ("I22", "u4", "u1", "I13")
-    assert spec.size == 21 * 3 * 1000
-    assert spec.sweep.metrics.time_to == {"nutation": 0.2, "u4": 90.0}
-
-
 def test_product_grid_runs_the_last_axis_fastest_and_draws_innermost() -> None:
     spec = parse(sweep_text(), "x", "x", None)
     assert spec.size == 3 * 2 * 2

@@ -47,8 +47,37 @@ def _scene(scene: str | Scene) -> Scene:
 
 
 def compile(scene: str | Scene = "gyrostat") -> Compiled:
-    """The scene (a built-in name, a .toml path or a Scene) generated and
-    built, C when it has a C target: setup, rhs, outputs, integrators."""
+    """Generate a scene's code, build it and load it.
+
+    The sources are rendered once and cached, and built through the build
+    cache, so a second call with the same scene compiles nothing. The
+    backend is C when the scene has a C target, else Fortran.
+
+    Parameters
+    ----------
+    scene : str or Scene, default "gyrostat"
+        A built-in scene's name, the path of a .toml scene file, or a Scene.
+
+    Returns
+    -------
+    Compiled
+        The loaded backend: setup, rhs, Jacobian, outputs and integrators.
+
+    Raises
+    ------
+    SceneError
+        The scene is unknown, unreadable or invalid (one line naming the key).
+    BuildError
+        The compiler refused the code (its first lines; the full log in the
+        build cache).
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> model = api.compile("dual_spin")
+    >>> model.nx, model.n_params
+    (7, 0)
+    """
     return compiled(scene_sources(_scene(scene)))
 
 
@@ -60,8 +89,49 @@ def simulate(
     dt: float | None = None,
     out: str | Path | None = None,
 ) -> pd.DataFrame:
-    """`gyrogen simulate`: the trajectory on the output grid as columns t
-    and the scene's states (files in out, else in a temporary directory)."""
+    """Integrate a scene from its start, as `gyrogen simulate` does.
+
+    Parameters
+    ----------
+    scene : str or Scene, default "gyrostat"
+        A built-in scene's name, a .toml path, or a Scene; the start state,
+        runtime parameters and tolerances are its `[simulate]` table's.
+    method : str, default "auto"
+        A compiled integrator of the scene (rk4, dopri5, dop853, rodas4,
+        radau5, taylor), scipy's (RK45, DOP853, Radau, LSODA), or "auto":
+        the scene's best compiled integrator of the kind its stiffness
+        calls for.
+    t_end : float, optional
+        End time, s (default: the scene's).
+    dt : float, optional
+        Output step, s (default: the scene's).
+    out : str or Path, optional
+        Where to keep the command's files (trajectory.csv, trajectory.npz,
+        summary.json, trajectory.png and the sources); by default they go to
+        a temporary directory, removed afterwards.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per output time: the column t, then one column per state.
+
+    Raises
+    ------
+    SceneError
+        The scene is invalid, or t_end, dt or method is not one simulate
+        takes.
+    GyrogenError
+        The integration failed (its return code's reason).
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> trajectory = api.simulate("dual_spin", t_end=1.0, dt=0.5)
+    >>> list(trajectory.columns)
+    ['t', 'q1', 'q2', 'q3', 'u1', 'u2', 'u3', 'u4']
+    >>> trajectory["t"].tolist()
+    [0.0, 0.5, 1.0]
+    """
     import pandas as pd
 
     from gyrogen.analysis.simulate import engine as sim
@@ -82,7 +152,38 @@ def simulate(
 
 
 def load_sweep(text: str, name: str = "sweep", here: str | Path = ".") -> Spec:
-    """A sweep from TOML text (scene paths in it start from here)."""
+    """Read a sweep from the text of a sweep file.
+
+    Parameters
+    ----------
+    text : str
+        The sweep file's TOML text.
+    name : str, default "sweep"
+        The sweep's name (its default output directory is sweep/<name>).
+    here : str or Path, default "."
+        Where a scene path in the text starts from.
+
+    Returns
+    -------
+    Spec
+        The validated sweep, for `sweep`.
+
+    Raises
+    ------
+    SceneError
+        The text is no valid sweep (one line naming the key).
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> spec = api.load_sweep('''
+    ... scene = "dual_spin"
+    ... [grid]
+    ... u4 = { list = [0.0, 600.0] }
+    ... ''', name="two")
+    >>> spec.size
+    2
+    """
     return parse(text, name, name, Path(here))
 
 
@@ -97,10 +198,64 @@ def sweep(
     plots: bool = True,
     portable: bool = False,
 ) -> pd.DataFrame:
-    """`gyrogen sweep`: every trajectory of spec (a built-in sweep, a sweep
-    file or a Spec) into out (a directory or an fsspec URL) [default:
-    sweep/<name>], resuming what is there (portable: code for any CPU,
-    `--portable`); its rows, one per trajectory, in sample order."""
+    """Integrate every trajectory of a sweep, as `gyrogen sweep` does.
+
+    The Parquet parts, summary and figures go to `out`; a sweep already
+    begun there by the same build is resumed (only what is left is
+    computed).
+
+    Parameters
+    ----------
+    spec : str, Path or Spec
+        A built-in sweep's name, a sweep file's path, or a Spec from
+        `load_sweep`.
+    out : str or Path, optional
+        A directory or an fsspec URL (default: sweep/<name>).
+    scheduler : str, optional
+        A dask.distributed scheduler's address (tcp://HOST:PORT); by default
+        a local engine in this process.
+    workers : int, optional
+        Threads of the local engine (default: one per core).
+    chunk : int, optional
+        Trajectories per task (default: the sweep's chunk).
+    progress : bool, default False
+        Show a progress bar on stderr.
+    plots : bool, default True
+        Write histograms.png (and map.png for a 2-D grid).
+    portable : bool, default False
+        Build for any CPU of the architecture (as `--portable`), not for
+        this one.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The rows, one per trajectory, in sample order (as `read` gives them).
+
+    Raises
+    ------
+    SceneError
+        The sweep, its scene or `out` is invalid, or `out` holds a sweep
+        begun by another build.
+    GyrogenError
+        The sweep could not run (a place that cannot be written, a
+        scheduler that does not answer).
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> spec = api.load_sweep('''
+    ... scene = "dual_spin"
+    ... t_end = 5.0
+    ... [grid]
+    ... u4 = { list = [0.0, 600.0] }
+    ... [metrics]
+    ... keep = ["final_state"]
+    ... ''', name="two")
+    >>> import tempfile
+    >>> rows = api.sweep(spec, out=tempfile.mkdtemp(), workers=1, plots=False)
+    >>> rows["u4"].tolist(), rows["code"].tolist()
+    ([0.0, 600.0], [0, 0])
+    """
     from gyrogen.analysis.sweep import engine, report
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
@@ -121,7 +276,30 @@ def sweep(
 
 
 def read(out: str | Path | Store) -> pd.DataFrame:
-    """The rows of the sweep in out (a directory or an fsspec URL), in sample order."""
+    """Read back the rows of a sweep already run.
+
+    Parameters
+    ----------
+    out : str, Path or Store
+        The sweep's directory or fsspec URL.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Its rows, one per trajectory computed, in sample order.
+
+    Raises
+    ------
+    SceneError
+        `out` is no valid place (a URL gyrogen cannot use).
+    FileNotFoundError
+        `out` holds no sweep's parts.
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> rows = api.read("sweep/mine")  # doctest: +SKIP
+    """
     import pandas as pd
 
     from gyrogen.analysis.sweep.columns import PARTS
@@ -144,10 +322,50 @@ def linearize(
     spin: float | None = None,
     axis: int | None = None,
 ) -> Linear:
-    """`gyrogen linearize`: the linear model (A, B, C, D over its kept
-    states, names, the point, eigenvalues) about the point given (state:
-    every value; at: by name), else the scene's equilibrium, else the steady
-    spin found (spin rad/s about the principal axis nearest a_axis)."""
+    """Linearize a scene about an equilibrium, as `gyrogen linearize` does.
+
+    The point is `state` or `at` if given, else the scene's `equilibrium`,
+    else a steady spin found about a principal axis (each wheel at the rate
+    its torque law holds there).
+
+    Parameters
+    ----------
+    scene : str or Scene, default "dual_spin"
+        A built-in scene's name, a .toml path, or a Scene.
+    state : list of float, optional
+        The point as the whole state vector, in the scene's order.
+    at : dict of str to float, optional
+        The point by state name (others 0, e0 1).
+    parameters : dict of str to float, optional
+        The runtime parameters (default: the scene's `[simulate] parameters`).
+    spin : float, optional
+        Find a steady spin at this rate, rad/s (default: the start's rate).
+    axis : {1, 2, 3}, optional
+        Find the spin about the principal axis nearest a1, a2 or a3
+        (default: nearest the start's angular velocity).
+
+    Returns
+    -------
+    Linear
+        A, B, C, D over the kept states (about a spin the turning angles are
+        left out, in `dropped`), the names of states, inputs and outputs,
+        the point `x`, the parameters `p` and the `eigenvalues`.
+
+    Raises
+    ------
+    GyrogenError
+        An argument that is not what it should be (a number that is not
+        real or finite, an axis outside 1..3, parameters not a dict), or a
+        point linearize refuses (unknown names, gimbal lock, Euler
+        parameters off |e| = 1, speeds past 1e100 rad/s).
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> lin = api.linearize("dual_spin")
+    >>> lin.states, lin.dropped, lin.A.shape
+    (('u1', 'u2', 'u3', 'u4'), ('q1', 'q2', 'q3'), (4, 4))
+    """
     from gyrogen.analysis.linearize.engine import model
 
     _numbers("parameters", parameters)
@@ -178,8 +396,36 @@ def _numbers(what: str, values: Any) -> None:
 
 
 def state_space(scene: str | Scene | Linear = "dual_spin", **point: Any) -> control.StateSpace:
-    """linearize()'s model (or a Linear) as a python-control StateSpace, with
-    the states, inputs and outputs named (the extra gyrogen[linear])."""
+    """The linear model as a python-control StateSpace.
+
+    Needs python-control (the extra `gyrogen[linear]`).
+
+    Parameters
+    ----------
+    scene : str, Scene or Linear, default "dual_spin"
+        A scene to linearize, or a Linear from `linearize`.
+    **point
+        `linearize`'s keywords (state, at, parameters, spin, axis), for a
+        scene.
+
+    Returns
+    -------
+    control.StateSpace
+        A, B, C, D with the states, inputs and outputs named, and the
+        scene's name.
+
+    Raises
+    ------
+    GyrogenError
+        python-control is not installed, or `linearize` refused the point.
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> sys = api.state_space("dual_spin")
+    >>> sys.nstates, sys.ninputs, sys.noutputs
+    (4, 1, 4)
+    """
     from gyrogen.analysis.linearize.engine import Linear
 
     try:

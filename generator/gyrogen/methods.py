@@ -284,7 +284,7 @@ EXPLICIT_CHOICE: tuple[str, ...] = ("taylor", "dop853", "dopri5")
 """The explicit methods for a problem that is not stiff, in the order they
 are picked. The Taylor method, where the scene offers it (a smooth rhs), is
 faster than dop853 at equal error on every built-in scene that offers it,
-from 1e-4 to 1e-12, one trajectory (README, "Which method auto picks")."""
+from 1e-4 to 1e-12, one trajectory (`make bench-auto` measures it)."""
 
 
 def pick(available: Iterable[str], stiff: bool) -> str | None:

@@ -85,7 +85,20 @@ def cores() -> int:
 
 @dataclass(frozen=True)
 class Compiled:
-    """One backend loaded in this process: setup and rhs on numpy arrays."""
+    """One backend (C or Fortran) of a scene, loaded in this process.
+
+    Its methods call the generated functions through cffi on numpy arrays:
+    `setup` turns parameters into constants once, then `rhs`, `jacobian`,
+    `output`, `integrate` and `integrate_batch` take those constants. Get
+    one from `gyrogen.api.compile`.
+
+    Examples
+    --------
+    >>> from gyrogen import api
+    >>> model = api.compile("dual_spin")
+    >>> model.language, model.nx, model.nc > 0
+    ('c', 7, True)
+    """
 
     language: Language
     manifest: dict[str, Any]
@@ -97,31 +110,98 @@ class Compiled:
 
     @cached_property
     def nx(self) -> int:
+        """The number of states, the length of a state x."""
         return int(self.manifest["nx"])
 
     @cached_property
     def nc(self) -> int:
+        """The number of constants setup computes, the length of c."""
         return int(self.manifest["nc"])
 
     def symbol(self, name: str) -> str:
-        """The exported name of a function: setup, rhs, jac, an output or an
-        integrator (rk4, dop853_batch, ...), as the manifest lists it; a
-        one-line ValueError naming the ones there are otherwise."""
+        """The exported name of one of the build's functions.
+
+        Parameters
+        ----------
+        name : str
+            Its key in the manifest: setup, rhs, jac, an output
+            (kinetic_energy, ...) or an integrator (rk4, dop853_batch, ...).
+
+        Returns
+        -------
+        str
+            The symbol the library exports.
+
+        Raises
+        ------
+        ValueError
+            The build has no such function (the message lists those it has).
+
+        Examples
+        --------
+        >>> from gyrogen import api
+        >>> api.compile("dual_spin").symbol("rhs")
+        'dual_spin_rhs'
+        """
         names = self.manifest["functions"][self.language]
         if name not in names:
             raise ValueError(f"this build has no function {name!r} (it has {', '.join(names)})")
         return str(names[name])
 
     def function(self, name: str) -> Any:
-        """That function, callable through cffi."""
+        """One of the build's functions, to call through cffi.
+
+        Parameters
+        ----------
+        name : str
+            Its key in the manifest, as for `symbol`.
+
+        Returns
+        -------
+        cffi function
+            Takes cffi pointers (see `doubles`) and C scalars.
+
+        Raises
+        ------
+        ValueError
+            The build has no such function.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> c = np.zeros(model.nc)
+        >>> model.function("setup")(model.doubles(np.zeros(0)), model.doubles(c))
+        0
+        """
         return getattr(self.lib, self.symbol(name))
 
     def doubles(self, a: np.ndarray) -> Any:
-        """A cffi double[] on the memory of a (C-contiguous float64)."""
+        """A cffi `double[]` on an array's memory, with no copy.
+
+        Parameters
+        ----------
+        a : numpy.ndarray
+            A C-contiguous float64 array; it must outlive the pointer.
+
+        Returns
+        -------
+        cffi buffer
+            To hand to a function from `function`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> len(api.compile("dual_spin").doubles(np.zeros(3)))
+        3
+        """
         return self.ffi.from_buffer("double[]", a)
 
     @cached_property
     def n_params(self) -> int:
+        """The number of runtime parameters, the length of p."""
         return int(self.manifest["np"])
 
     def _vector(self, a: Any, size: int, what: str) -> np.ndarray:
@@ -142,15 +222,70 @@ class Compiled:
         return arr
 
     def setup_code(self, p: np.ndarray) -> tuple[int, np.ndarray]:
+        """Run setup on a parameter vector and return its code, refused or not.
+
+        Parameters
+        ----------
+        p : array_like, shape (n_params,)
+            The runtime parameters in the scene's order (the header's, and
+            `manifest["parameters"]`).
+
+        Returns
+        -------
+        code : int
+            0 if setup accepted p, else the first check that failed (the C
+            interface's setup codes, `manifest["setup_codes"]`).
+        c : numpy.ndarray, shape (nc,)
+            The constants (meaningful only when code is 0).
+
+        Raises
+        ------
+        ValueError
+            p is not of shape (n_params,) or not real numbers.
+
+        Examples
+        --------
+        >>> from gyrogen import api
+        >>> model = api.compile("speed_controlled")
+        >>> model.setup_code([0.3, 200.0])[0], model.setup_code([0.3, float("nan")])[0]
+        (0, 1)
+        """
         p = self._vector(p, self.n_params, "the parameters p")
         c = np.zeros(self.nc)
         code = self.function("setup")(self.doubles(p), self.doubles(c))
         return int(code), c
 
     def setup(self, p: np.ndarray) -> np.ndarray:
-        """The constants c of p; SetupRefused (a ValueError, one line) when
-        setup refuses p (also when each value is valid and the constants
-        overflow: code 9)."""
+        """Check a parameter vector and compute the constants the other calls take.
+
+        Parameters
+        ----------
+        p : array_like, shape (n_params,)
+            The runtime parameters in the scene's order (empty for a scene
+            that folds every parameter).
+
+        Returns
+        -------
+        numpy.ndarray, shape (nc,)
+            The constants c.
+
+        Raises
+        ------
+        SetupRefused
+            Setup refused p: one line with its code and reason (also when
+            each value is valid and a derived constant overflows, code 9).
+            It is a ValueError too.
+        ValueError
+            p is not of shape (n_params,) or not real numbers.
+
+        Examples
+        --------
+        >>> from gyrogen import api
+        >>> model = api.compile("speed_controlled")
+        >>> c = model.setup([0.3, 200.0])
+        >>> c.shape == (model.nc,)
+        True
+        """
         code, c = self.setup_code(p)
         if code != 0:
             why = self.manifest["setup_codes"][str(code)]
@@ -158,8 +293,39 @@ class Compiled:
         return c
 
     def output(self, name: str, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """An output function (kinetic_energy, angular_momentum, power) for a
-        batch of states (n, nx): shape (n, size)."""
+        """Evaluate an output function of the scene at states.
+
+        Parameters
+        ----------
+        name : str
+            One of the scene's outputs: kinetic_energy, angular_momentum or
+            power.
+        x : array_like, shape (nx,) or (n, nx)
+            The states.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        t : float, default 0.0
+            The time (a torque table reads it).
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, size)
+            One row per state (n = 1 for a single state); size 3 for the
+            angular momentum, one per motor for a cluster's power.
+
+        Raises
+        ------
+        ValueError
+            The build has no such output, or x or c has the wrong shape.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> model.output("angular_momentum", np.zeros(model.nx), model.setup([])).shape
+        (1, 3)
+        """
         outputs = self.manifest["outputs"]
         if name not in outputs:
             have = ", ".join(outputs) or "none"
@@ -167,8 +333,38 @@ class Compiled:
         return self._apply(name, int(outputs[name]), x, c, t)
 
     def jacobian(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """d(dx/dt)/dx at one state: shape (nx, nx) (scenes with an implicit
-        integrator, gyrogen.methods.IMPLICIT)."""
+        """The Jacobian of the right-hand side at one state.
+
+        Parameters
+        ----------
+        x : array_like, shape (nx,)
+            The state.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        t : float, default 0.0
+            The time.
+
+        Returns
+        -------
+        numpy.ndarray, shape (nx, nx)
+            J[i, j] = d f_i / d x_j.
+
+        Raises
+        ------
+        BuildError
+            The scene compiled no Jacobian (it comes with an implicit
+            integrator, rodas4 or radau5).
+        ValueError
+            x or c has the wrong shape.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> model.jacobian(np.zeros(model.nx), model.setup([])).shape
+        (7, 7)
+        """
         if "jac" not in self.manifest["functions"][self.language]:
             raise BuildError(
                 f"scene {self.manifest['prefix']} has no Jacobian (add one of "
@@ -188,7 +384,35 @@ class Compiled:
         return out
 
     def rhs(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """dx/dt for a batch of states x (n, nx) or one state (nx,)."""
+        """The right-hand side dx/dt at one state or many.
+
+        Parameters
+        ----------
+        x : array_like, shape (nx,) or (n, nx)
+            The states.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        t : float, default 0.0
+            The time (a torque table reads it).
+
+        Returns
+        -------
+        numpy.ndarray
+            dx/dt, of x's shape.
+
+        Raises
+        ------
+        ValueError
+            x or c has the wrong shape, or is not real.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> model.rhs(np.zeros((5, model.nx)), model.setup([])).shape
+        (5, 7)
+        """
         x = self._states(x)
         out = np.empty_like(x)
         c = self._vector(c, self.nc, "the constants c")
@@ -210,19 +434,61 @@ class Compiled:
         max_steps: int = DEFAULT_CONTROLS["max_steps"],
         steps: int | None = None,
     ) -> tuple[np.ndarray, Stats, int]:
-        """One compiled integration of x0 (nx,) from t0 to t1 by the single
-        trajectory's function: the final state (a new array; the last good
-        state on failure), the statistics (abi.STATS_FIELDS, a read-only
-        mapping) and the return code (abi.ODE_CODES, a non-finite state
-        among them). The controls (Controls) as keywords.
+        """Integrate one state with a compiled integrator.
 
-        A call costs about a microsecond more than the C call itself (0.8 to
-        1.1 us measured, `make bench-call`): the method's function and kind
-        are looked up once per build, c's buffer once per array (its length
-        and finiteness checked then), and x0's shape on every call (a float64
-        array of shape (nx,) is copied as it is; anything else goes through
-        np.array first). A non-finite state is the C function's to refuse
-        (its return code)."""
+        The call costs about a microsecond more than the C call itself
+        (`make bench-call` measures it): the method's function is looked up
+        once per build and c's buffer once per array.
+
+        Parameters
+        ----------
+        method : str
+            One of the scene's integrators: rk4, dopri5, dop853, rodas4,
+            radau5, taylor.
+        x0 : array_like, shape (nx,)
+            The start state; it is not changed.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        t0, t1 : float
+            Start and end time, t1 >= t0.
+        rtol, atol : float, default 1e-8
+            Tolerances of the adaptive methods (rtol above 10 DBL_EPSILON,
+            DBL_EPSILON for taylor; atol above 0).
+        h0 : float, default 0.0
+            The first step size; 0 or less: chosen by the method.
+        max_steps : int, default gyrogen.abi.MAX_STEPS
+            The step budget of the adaptive methods.
+        steps : int, optional
+            The number of equal steps: given for rk4, and only for it.
+
+        Returns
+        -------
+        x : numpy.ndarray, shape (nx,)
+            The state at t1 (a new array), or the last good state on failure.
+        stats : Stats
+            The step statistics, a read-only mapping (t, h, accepted,
+            rejected, rhs_calls, jac_calls, decompositions).
+        code : int
+            0 on success, else the integrator's return code (1 step size
+            underflow, 2 max_steps reached, 3 non-finite state, 4 singular
+            iteration matrix, 5 bad argument, 6 gimbal lock).
+
+        Raises
+        ------
+        ValueError
+            The build has no such integrator, steps is given for an adaptive
+            method or missing for rk4, or an argument has the wrong shape or
+            a value C cannot hold.
+
+        Examples
+        --------
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> x0 = [0, 0, 0, 0.001, 0.05, 0.0, 600.0]
+        >>> x, stats, code = model.integrate("dop853", x0, model.setup([]), 0.0, 10.0)
+        >>> code, x.shape, stats["t"]
+        (0, (7,), 10.0)
+        """
         try:
             call = self._single[method]
         except KeyError:
@@ -307,12 +573,53 @@ class Compiled:
         max_steps: int = DEFAULT_CONTROLS["max_steps"],
         steps: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """integrate() for many initial states (n, nx): final states (n, nx),
-        statistics as a structured array (n,) with the fields of
-        abi.STATS_FIELDS, and return codes (n,). threads: how many cores
-        (None: every one, 1: this one); a build with OpenMP splits the batch
-        in C, one without it in slices called from Python threads (cffi
-        releases the GIL). The results do not depend on it, bit for bit."""
+        """Integrate many states with one set of constants.
+
+        The explicit pairs and the Taylor method run the states in SIMD
+        lanes, each equal bit for bit to `integrate`'s result. A build with
+        OpenMP splits the batch over the cores in C, one without it in
+        slices called from Python threads (cffi releases the GIL); the
+        results do not depend on the thread count.
+
+        Parameters
+        ----------
+        method : str
+            One of the scene's integrators.
+        x0s : array_like, shape (n, nx)
+            The start states; not changed.
+        c : array_like, shape (nc,)
+            The constants from `setup`, shared by every state.
+        t0, t1 : float
+            Start and end time.
+        threads : int, optional
+            How many cores: None for every one, 1 for this one.
+        rtol, atol, h0, max_steps, steps
+            As for `integrate`.
+
+        Returns
+        -------
+        x : numpy.ndarray, shape (n, nx)
+            The final states (the last good state where one failed).
+        stats : numpy.ndarray, shape (n,)
+            A structured array with the statistics' fields.
+        codes : numpy.ndarray, shape (n,)
+            Each state's return code, as `integrate`'s.
+
+        Raises
+        ------
+        ValueError
+            As for `integrate`, or threads is not an integer from 1 to 4096.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> x0s = np.tile([0, 0, 0, 0.001, 0.05, 0.0, 600.0], (16, 1))
+        >>> x, stats, codes = model.integrate_batch("dop853", x0s, model.setup([]), 0.0, 10.0)
+        >>> x.shape, bool((codes == 0).all()), stats["accepted"].shape
+        ((16, 7), True, (16,))
+        """
         try:
             fn, fixed = self._batches[method]
         except KeyError:

@@ -22,7 +22,8 @@ C_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Werror")
 """Every warning an error: what gyrogen's own builds and the C++ view of a
 header are held to."""
 C_STRICT = ("-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror")
-"""The strictness matrix's C (README): the generated C compiles clean under it."""
+"""The strictness matrix's C (tests/test_strict.py, `make strict`): the generated C
+compiles clean under it."""
 FORTRAN_WARNINGS = ("-Wall", "-Wextra", "-Werror")
 FORTRAN_STRICT = ("-std=f2008", "-Wall", "-Wextra", "-Wimplicit-interface", "-Werror")
 """The strictness matrix's Fortran."""

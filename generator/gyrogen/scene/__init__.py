@@ -62,6 +62,8 @@ class Effects(_Strict):
     rotor_angle: StrictBool = True
     """Keep q4 (ignorable: nothing depends on it)."""
     torque: Literal["none", "constant", "speed_controller", "table"] = "constant"
+    """The motor's law: none; constant T; speed_controller T = -k (u4 - u2 - w_ref);
+    table, T(t) from torque_table."""
     torque_table: list[tuple[Number, Number]] | None = None
     """(t, T) points of a piecewise-linear T(t), held constant outside."""
 
@@ -73,6 +75,7 @@ class Effects(_Strict):
 
 class Outputs(_Strict):
     kinetic_energy: StrictBool = False
+    """Kinetic energy of the system."""
     angular_momentum: StrictBool = False
     """Angular momentum about AB* in N components (uses the direction cosines)."""
     power: StrictBool = False
@@ -89,11 +92,13 @@ class Simulate(_Strict):
     parameters: dict[str, Number] = Field(default_factory=dict)
     """Values of the runtime parameters for `gyrogen simulate`."""
     t_end: Annotated[Number, Field(gt=0)] = 10.0
+    """End time of the simulation, s (it starts at 0)."""
     dt: Annotated[Number, Field(gt=0)] = 0.01
     """Output step of the trajectory: at most t_end, and at most MAX_OUTPUT_POINTS of them in it."""
     rtol: Annotated[Number, Field(lt=1)] = 1e-10
     """Above abi.MIN_RTOL, as the compiled integrators require."""
     atol: Annotated[Number, Field(gt=0)] = 1e-10
+    """Absolute tolerance of the integrators, above 0."""
 
     @field_validator("rtol")
     @classmethod
@@ -117,10 +122,17 @@ class Scene(_Strict):
     name: str
     """Also the prefix of every generated C symbol and file."""
     description: str
+    """What the scene is: any text without control characters, at most 2000
+    characters; it reaches the generated files only inside comments."""
     parameters: dict[str, Value]
+    """Each parameter: a number folded into the code, or "runtime", an entry
+    of p[] that setup checks."""
     effects: Effects = Effects()
+    """Which effects the equations keep, and the motor's torque law."""
     outputs: Outputs = Outputs()
+    """Optional output functions beside the rhs."""
     targets: list[Literal["c", "fortran"]] = ["c", "fortran"]
+    """The languages to generate."""
     integrators: list[str] = Field(default_factory=lambda: list(methods.NAMES))
     """Compiled integrators to render beside the RHS (gyrogen.methods; an
     implicit one adds the Jacobian)."""
@@ -128,11 +140,12 @@ class Scene(_Strict):
     """3-1-2 Euler angles q1..q3 (singular at q2 = +-pi/2), or Euler parameters
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
     simulate: Simulate = Simulate()
+    """Defaults of `gyrogen simulate`, `gyrogen check SCENE` and the FMU."""
     rotors: Annotated[list[Rotor], Field(max_length=MAX_ROTORS)] = Field(default_factory=list)
+    """A reaction-wheel cluster (gyrogen.scene.rotors); none: the paper's one rotor on a2."""
     equilibrium: dict[str, Number] | None = None
     """The state `gyrogen linearize` linearizes about, by name (states not
     named: 0, e0: 1); the runtime parameters are simulate.parameters."""
-    """A reaction-wheel cluster (gyrogen.scene.rotors); none: the paper's one rotor on a2."""
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: Any) -> Any:

@@ -88,7 +88,9 @@ class Rotor(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     m: Value
+    """Mass, kg."""
     I: Value
+    """Transverse inertia about B_k*, kg m^2."""
     J: Value
     """Mass, transverse and axial inertia: numbers, or "runtime" (setup
     checks them: positive, J <= 2 I, the lumped inertia's condition)."""
@@ -98,11 +100,16 @@ class Rotor(BaseModel):
     position: Vector = (0.0, 0.0, 0.0)
     """B_k* from A*, in A-components (m); "runtime": p's r1_k, r2_k, r3_k."""
     b: Annotated[Folded, Field(ge=0)] = 0.0
+    """Viscous friction, N m s: torque -b (w_k - g_k.w_A) on the rotor."""
     torque: str = "none"
-    """One of CLUSTER_LAWS (a string here, so that the refusal can say why)."""
+    """One of CLUSTER_LAWS: none, constant (T), speed_controller (k, w_ref) or
+    table (torque_table); a string here, so that the refusal can say why."""
     T: Value | None = None
+    """torque = "constant": the motor torque, N m."""
     k: Value | None = None
+    """torque = "speed_controller": the gain, N m s."""
     w_ref: Value | None = None
+    """torque = "speed_controller": the commanded rate relative to A, rad/s."""
     tau_max: Annotated[Folded, Field(ge=0)] | None = None
     """|T| is clamped to tau_max (a saturating motor); refused when negative."""
     torque_table: list[tuple[Number, Number]] | None = None

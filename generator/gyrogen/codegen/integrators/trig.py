@@ -1,6 +1,6 @@
 """sin and cos for the generated code, described once and printed to C and
 Fortran: inline in C and within 1 ulp of the correctly rounded value
-(measured: tests/test_lanes.py, README), the same bits in both languages.
+(measured: tests/test_lanes.py), the same bits in both languages.
 
 x = n pi/2 + r, |r| <= pi/4 (a little more when x 2/pi is near a half
 integer), r as r + tail to about 2^-118 |x|, and quad = n mod 4 (0..3, as a
