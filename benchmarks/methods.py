@@ -190,14 +190,26 @@ def summary(rows: list[Row], baseline: str) -> None:
         print(f"  {method:<8} {mean:.3f} (rows {min(ratios):.3f} .. {max(ratios):.3f}){mark}")
 
 
+def run(cmd: list[str], what: str, env: dict[str, str] | None = None) -> str:
+    """cmd's output; a failure ends the run with one line: what, and the
+    last line cmd wrote to stderr."""
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    if done.returncode != 0:
+        said = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        sys.exit(f"bench-methods: {what}: {said}")
+    return done.stdout
+
+
 @contextmanager
 def rev_tree(rev: str) -> Iterator[Path]:
     """A git worktree of rev in a temp dir, removed afterwards."""
     root = Path(__file__).resolve().parent.parent
     with tempfile.TemporaryDirectory(prefix="gyrogen-baseline-") as tmp:
         there = Path(tmp) / "src"
-        subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", str(there), rev],
-                       check=True, capture_output=True)  # fmt: skip
+        run(
+            ["git", "-C", str(root), "worktree", "add", "--detach", str(there), rev],
+            f"cannot check out {rev}",
+        )
         try:
             yield there
         finally:
@@ -213,13 +225,11 @@ def rev_build(there: Path, name: str, work: Path, same_flags: bool) -> Compiled:
     scene_file, out = work / f"{name}.toml", work / name
     text = (there / "generator" / "gyrogen" / "scenes" / f"{name}.toml").read_text()
     scene_file.write_text(every_method(text))
-    subprocess.run([GYROGEN, "generate", str(scene_file), "--out", str(out)], check=True,
-                   env=env, capture_output=True)  # fmt: skip
+    run([GYROGEN, "generate", str(scene_file), "--out", str(out)], f"{name}: cannot render it", env)
     if same_flags:
         return build_dir(out, ["c"])["c"]
-    done = subprocess.run([sys.executable, "-c", REV_BUILD, str(out)], check=True, env=env,
-                          capture_output=True, text=True)  # fmt: skip
-    module_name, entry = json.loads(done.stdout.splitlines()[-1])
+    done = run([sys.executable, "-c", REV_BUILD, str(out)], f"{name}: cannot build it", env)
+    module_name, entry = json.loads(done.splitlines()[-1])
     module = cache.load(module_name, Path(entry))
     manifest = json.loads((out / "manifest.json").read_text())
     return Compiled("c", manifest, module.ffi, module.lib)

@@ -65,3 +65,13 @@ def test_a_baseline_runs_beside(
         assert float(cells[10].split()[0]) > 0
     for method in methods.NAMES:
         assert re.search(rf"^  {method} +[\d.]+ \(rows ", out, re.M)
+
+
+def test_an_unknown_baseline_is_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        run(monkeypatch, capsys, "--baseline", "no-such-rev", "--scenes", "torque_free")
+    said = str(exc.value)
+    assert said.startswith("bench-methods: cannot check out no-such-rev: ")
+    assert "\n" not in said
