@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-methods bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -103,6 +103,16 @@ bench-auto: setup
 ## bench-call: us per call of Compiled.integrate and integrate_batch against the raw cffi call
 bench-call: setup
 	$(BIN)/python benchmarks/bench_call.py
+
+## bench-methods: us per call and ns per step of every compiled method (raw cffi call, best of several)
+## on the default scene and stiff_wheel; BASELINE=REV times gyrogen as of REV beside this tree,
+## interleaved, with each method's ratio new/old per step (slower by more than 3 % flagged);
+## SAME_FLAGS=1 builds REV's sources with this tree's flags (the generated code's share alone)
+BASELINE ?=
+SAME_FLAGS ?=
+bench-methods: setup
+	$(BIN)/python benchmarks/methods.py $(if $(BASELINE),--baseline $(BASELINE)) \
+	  $(if $(SAME_FLAGS),--same-flags)
 
 ## bench-ensemble: lane-batched ensembles and the single trajectory against numbalsoda and diffrax
 bench-ensemble: setup

@@ -91,3 +91,20 @@ def test_the_jet_over_lanes_is_one_loop_over_the_lanes_per_order() -> None:
     assert "int" in kinds and kinds.index("int") > max(
         i for i, k in enumerate(kinds) if k in ("double", "long", "size_t")
     )
+
+
+def test_a_vector_loop_is_kept_a_loop_for_gcc_to_vectorize() -> None:
+    """For.vector prints gcc's and clang's directive against unrolling the
+    loop whole, right above it, in C and in Fortran; any other loop none."""
+    x, i = Var("x"), Var("i")
+    kept = For("i", Int(8), (assign(x[i], x[i] * 2.0),), vector=True)
+    plain = For("i", Int(8), (assign(x[i], x[i] + 1.0),))
+    f = Func("f", (), (kept, plain), None, ())
+    c = CPrinter("p", "P", {}).function(f).splitlines()
+    at = c.index("    #pragma GCC unroll 1")
+    assert c[at + 1].strip() == "for (i = 0; i < 8; ++i) {"
+    assert sum("#pragma" in line for line in c) == 1
+    fortran = FortranPrinter("p", "P", {}).function(f).splitlines()
+    at = next(n for n, line in enumerate(fortran) if line.strip() == "!GCC$ unroll 1")
+    assert fortran[at + 1].strip() == "do i = 0, 8 - 1"
+    assert sum("!GCC$" in line for line in fortran) == 1

@@ -567,49 +567,129 @@ static inline double step_exp2(double y)
 }
 
 /* In-place LU decomposition with partial pivoting within the diagonal
-   blocks (0, 1), (1, 3), (3, 6), (6, 7) (row i's block ends
-   before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+   blocks (0, 1), (1, 3), (3, 6), (6, 7), unrolled over the entries
+   of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
    row k swapped with piv[k]. 1 when a pivot is zero: singular. */
 static int lu_decompose(double *a, int *piv)
 {
-    static const int lu_end[7] = {1, 3, 3, 6, 6, 6, 7};
     int p;
     double m;
     double swap;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < DUAL_SPIN_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(a[i * DUAL_SPIN_NX + k]) > fabs(a[p * DUAL_SPIN_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(a[p * DUAL_SPIN_NX + k]) > 0.0)) {
-            return 1;  /* singular */
-        }
-        if (p != k) {
-            for (j = 0; j < DUAL_SPIN_NX; ++j) {
-                swap = a[k * DUAL_SPIN_NX + j];
-                a[k * DUAL_SPIN_NX + j] = a[p * DUAL_SPIN_NX + j];
-                a[p * DUAL_SPIN_NX + j] = swap;
-            }
-        }
-        a[k * DUAL_SPIN_NX + k] = 1.0 / a[k * DUAL_SPIN_NX + k];
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            m = a[i * DUAL_SPIN_NX + k] * a[k * DUAL_SPIN_NX + k];
-            a[i * DUAL_SPIN_NX + k] = m;
-            for (j = k + 1; j < DUAL_SPIN_NX; ++j) {
-                a[i * DUAL_SPIN_NX + j] = a[i * DUAL_SPIN_NX + j] - m * a[k * DUAL_SPIN_NX + j];
-            }
-        }
-        for (j = k + 1; j < DUAL_SPIN_NX; ++j) {
-            a[k * DUAL_SPIN_NX + j] = a[k * DUAL_SPIN_NX + j] * a[k * DUAL_SPIN_NX + k];  /* u_kj / u_kk */
+    piv[0] = 0;
+    if (!(fabs(a[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[0] = 1.0 / a[0];
+    a[1] = a[1] * a[0];
+    a[2] = a[2] * a[0];
+    a[3] = a[3] * a[0];
+    a[5] = a[5] * a[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(a[i * DUAL_SPIN_NX + 1]) > fabs(a[p * DUAL_SPIN_NX + 1])) {
+            p = i;
         }
     }
+    piv[1] = p;
+    if (!(fabs(a[p * DUAL_SPIN_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < DUAL_SPIN_NX; ++j) {
+            swap = a[1 * DUAL_SPIN_NX + j];
+            a[1 * DUAL_SPIN_NX + j] = a[p * DUAL_SPIN_NX + j];
+            a[p * DUAL_SPIN_NX + j] = swap;
+        }
+    }
+    a[8] = 1.0 / a[8];
+    for (i = 2; i < 3; ++i) {
+        m = a[i * DUAL_SPIN_NX + 1] * a[8];
+        a[i * DUAL_SPIN_NX + 1] = m;
+        a[i * DUAL_SPIN_NX + 2] = a[i * DUAL_SPIN_NX + 2] - m * a[9];
+        a[i * DUAL_SPIN_NX + 3] = a[i * DUAL_SPIN_NX + 3] - m * a[10];
+        a[i * DUAL_SPIN_NX + 4] = a[i * DUAL_SPIN_NX + 4] - m * a[11];
+        a[i * DUAL_SPIN_NX + 5] = a[i * DUAL_SPIN_NX + 5] - m * a[12];
+    }
+    a[9] = a[9] * a[8];
+    a[10] = a[10] * a[8];
+    a[11] = a[11] * a[8];
+    a[12] = a[12] * a[8];
+    piv[2] = 2;
+    if (!(fabs(a[16]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[16] = 1.0 / a[16];
+    a[17] = a[17] * a[16];
+    a[18] = a[18] * a[16];
+    a[19] = a[19] * a[16];
+    p = 3;
+    for (i = 4; i < 6; ++i) {
+        if (fabs(a[i * DUAL_SPIN_NX + 3]) > fabs(a[p * DUAL_SPIN_NX + 3])) {
+            p = i;
+        }
+    }
+    piv[3] = p;
+    if (!(fabs(a[p * DUAL_SPIN_NX + 3]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 3) {
+        for (j = 3; j < DUAL_SPIN_NX; ++j) {
+            swap = a[3 * DUAL_SPIN_NX + j];
+            a[3 * DUAL_SPIN_NX + j] = a[p * DUAL_SPIN_NX + j];
+            a[p * DUAL_SPIN_NX + j] = swap;
+        }
+    }
+    a[24] = 1.0 / a[24];
+    for (i = 4; i < 6; ++i) {
+        m = a[i * DUAL_SPIN_NX + 3] * a[24];
+        a[i * DUAL_SPIN_NX + 3] = m;
+        a[i * DUAL_SPIN_NX + 4] = a[i * DUAL_SPIN_NX + 4] - m * a[25];
+        a[i * DUAL_SPIN_NX + 5] = a[i * DUAL_SPIN_NX + 5] - m * a[26];
+        a[i * DUAL_SPIN_NX + 6] = a[i * DUAL_SPIN_NX + 6] - m * a[27];
+    }
+    a[25] = a[25] * a[24];
+    a[26] = a[26] * a[24];
+    a[27] = a[27] * a[24];
+    p = 4;
+    for (i = 5; i < 6; ++i) {
+        if (fabs(a[i * DUAL_SPIN_NX + 4]) > fabs(a[p * DUAL_SPIN_NX + 4])) {
+            p = i;
+        }
+    }
+    piv[4] = p;
+    if (!(fabs(a[p * DUAL_SPIN_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 3; j < DUAL_SPIN_NX; ++j) {
+            swap = a[4 * DUAL_SPIN_NX + j];
+            a[4 * DUAL_SPIN_NX + j] = a[p * DUAL_SPIN_NX + j];
+            a[p * DUAL_SPIN_NX + j] = swap;
+        }
+    }
+    a[32] = 1.0 / a[32];
+    for (i = 5; i < 6; ++i) {
+        m = a[i * DUAL_SPIN_NX + 4] * a[32];
+        a[i * DUAL_SPIN_NX + 4] = m;
+        a[i * DUAL_SPIN_NX + 5] = a[i * DUAL_SPIN_NX + 5] - m * a[33];
+        a[i * DUAL_SPIN_NX + 6] = a[i * DUAL_SPIN_NX + 6] - m * a[34];
+    }
+    a[33] = a[33] * a[32];
+    a[34] = a[34] * a[32];
+    piv[5] = 5;
+    if (!(fabs(a[40]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[40] = 1.0 / a[40];
+    a[41] = a[41] * a[40];
+    piv[6] = 6;
+    if (!(fabs(a[48]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[48] = 1.0 / a[48];
     return 0;
 }
 
@@ -618,12 +698,21 @@ static int lu_decompose(double *a, int *piv)
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
     double swap;
-    int i;
 
-    for (i = 0; i < DUAL_SPIN_NX; ++i) {
-        swap = b[i];
-        b[i] = b[piv[i]];
-        b[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = b[1];
+        b[1] = b[piv[1]];
+        b[piv[1]] = swap;
+    }
+    if (piv[3] != 3) {
+        swap = b[3];
+        b[3] = b[piv[3]];
+        b[piv[3]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = b[4];
+        b[4] = b[piv[4]];
+        b[piv[4]] = swap;
     }
     b[2] = b[2] - lu[15] * b[1];
     b[4] = b[4] - lu[31] * b[3];
@@ -641,7 +730,6 @@ static void lu_solve(const double *lu, const int *piv, double *b)
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
 static int lu_decompose_complex(double *ar, double *ai, int *piv)
 {
-    static const int lu_end[7] = {1, 3, 3, 6, 6, 6, 7};
     int p;
     double swap;
     double re;
@@ -654,65 +742,302 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     double ui;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < DUAL_SPIN_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(ar[i * DUAL_SPIN_NX + k]) + fabs(ai[i * DUAL_SPIN_NX + k]) > fabs(ar[p * DUAL_SPIN_NX + k]) + fabs(ai[p * DUAL_SPIN_NX + k])) {
-                p = i;
-            }
+    piv[0] = 0;
+    if (!(fabs(ar[0]) + fabs(ai[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[0];
+    im = ai[0];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[0] = 1.0 / d;
+        ai[0] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[0] = r / d;
+        ai[0] = -1.0 / d;
+    }
+    ur = ar[1];
+    ui = ai[1];
+    ar[1] = ur * ar[0] - ui * ai[0];
+    ai[1] = ur * ai[0] + ui * ar[0];
+    ur = ar[2];
+    ui = ai[2];
+    ar[2] = ur * ar[0] - ui * ai[0];
+    ai[2] = ur * ai[0] + ui * ar[0];
+    ur = ar[3];
+    ui = ai[3];
+    ar[3] = ur * ar[0] - ui * ai[0];
+    ai[3] = ur * ai[0] + ui * ar[0];
+    ur = ar[5];
+    ui = ai[5];
+    ar[5] = ur * ar[0] - ui * ai[0];
+    ai[5] = ur * ai[0] + ui * ar[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(ar[i * DUAL_SPIN_NX + 1]) + fabs(ai[i * DUAL_SPIN_NX + 1]) > fabs(ar[p * DUAL_SPIN_NX + 1]) + fabs(ai[p * DUAL_SPIN_NX + 1])) {
+            p = i;
         }
-        piv[k] = p;
-        if (!(fabs(ar[p * DUAL_SPIN_NX + k]) + fabs(ai[p * DUAL_SPIN_NX + k]) > 0.0)) {
-            return 1;  /* singular */
+    }
+    piv[1] = p;
+    if (!(fabs(ar[p * DUAL_SPIN_NX + 1]) + fabs(ai[p * DUAL_SPIN_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < DUAL_SPIN_NX; ++j) {
+            swap = ar[1 * DUAL_SPIN_NX + j];
+            ar[1 * DUAL_SPIN_NX + j] = ar[p * DUAL_SPIN_NX + j];
+            ar[p * DUAL_SPIN_NX + j] = swap;
+            swap = ai[1 * DUAL_SPIN_NX + j];
+            ai[1 * DUAL_SPIN_NX + j] = ai[p * DUAL_SPIN_NX + j];
+            ai[p * DUAL_SPIN_NX + j] = swap;
         }
-        if (p != k) {
-            for (j = 0; j < DUAL_SPIN_NX; ++j) {
-                swap = ar[k * DUAL_SPIN_NX + j];
-                ar[k * DUAL_SPIN_NX + j] = ar[p * DUAL_SPIN_NX + j];
-                ar[p * DUAL_SPIN_NX + j] = swap;
-                swap = ai[k * DUAL_SPIN_NX + j];
-                ai[k * DUAL_SPIN_NX + j] = ai[p * DUAL_SPIN_NX + j];
-                ai[p * DUAL_SPIN_NX + j] = swap;
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[8];
+    im = ai[8];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[8] = 1.0 / d;
+        ai[8] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[8] = r / d;
+        ai[8] = -1.0 / d;
+    }
+    for (i = 2; i < 3; ++i) {
+        lr = ar[i * DUAL_SPIN_NX + 1] * ar[8] - ai[i * DUAL_SPIN_NX + 1] * ai[8];
+        li = ar[i * DUAL_SPIN_NX + 1] * ai[8] + ai[i * DUAL_SPIN_NX + 1] * ar[8];
+        ar[i * DUAL_SPIN_NX + 1] = lr;
+        ai[i * DUAL_SPIN_NX + 1] = li;
+        ur = ar[9];
+        ui = ai[9];
+        ar[i * DUAL_SPIN_NX + 2] = ar[i * DUAL_SPIN_NX + 2] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 2] = ai[i * DUAL_SPIN_NX + 2] - (lr * ui + li * ur);
+        ur = ar[10];
+        ui = ai[10];
+        ar[i * DUAL_SPIN_NX + 3] = ar[i * DUAL_SPIN_NX + 3] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 3] = ai[i * DUAL_SPIN_NX + 3] - (lr * ui + li * ur);
+        ur = ar[11];
+        ui = ai[11];
+        ar[i * DUAL_SPIN_NX + 4] = ar[i * DUAL_SPIN_NX + 4] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 4] = ai[i * DUAL_SPIN_NX + 4] - (lr * ui + li * ur);
+        ur = ar[12];
+        ui = ai[12];
+        ar[i * DUAL_SPIN_NX + 5] = ar[i * DUAL_SPIN_NX + 5] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 5] = ai[i * DUAL_SPIN_NX + 5] - (lr * ui + li * ur);
+    }
+    ur = ar[9];
+    ui = ai[9];
+    ar[9] = ur * ar[8] - ui * ai[8];
+    ai[9] = ur * ai[8] + ui * ar[8];
+    ur = ar[10];
+    ui = ai[10];
+    ar[10] = ur * ar[8] - ui * ai[8];
+    ai[10] = ur * ai[8] + ui * ar[8];
+    ur = ar[11];
+    ui = ai[11];
+    ar[11] = ur * ar[8] - ui * ai[8];
+    ai[11] = ur * ai[8] + ui * ar[8];
+    ur = ar[12];
+    ui = ai[12];
+    ar[12] = ur * ar[8] - ui * ai[8];
+    ai[12] = ur * ai[8] + ui * ar[8];
+    piv[2] = 2;
+    if (!(fabs(ar[16]) + fabs(ai[16]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[16];
+    im = ai[16];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[16] = 1.0 / d;
+        ai[16] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[16] = r / d;
+        ai[16] = -1.0 / d;
+    }
+    ur = ar[17];
+    ui = ai[17];
+    ar[17] = ur * ar[16] - ui * ai[16];
+    ai[17] = ur * ai[16] + ui * ar[16];
+    ur = ar[18];
+    ui = ai[18];
+    ar[18] = ur * ar[16] - ui * ai[16];
+    ai[18] = ur * ai[16] + ui * ar[16];
+    ur = ar[19];
+    ui = ai[19];
+    ar[19] = ur * ar[16] - ui * ai[16];
+    ai[19] = ur * ai[16] + ui * ar[16];
+    p = 3;
+    for (i = 4; i < 6; ++i) {
+        if (fabs(ar[i * DUAL_SPIN_NX + 3]) + fabs(ai[i * DUAL_SPIN_NX + 3]) > fabs(ar[p * DUAL_SPIN_NX + 3]) + fabs(ai[p * DUAL_SPIN_NX + 3])) {
+            p = i;
         }
-        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
-        re = ar[k * DUAL_SPIN_NX + k];
-        im = ai[k * DUAL_SPIN_NX + k];
-        if (fabs(re) >= fabs(im)) {
-            r = im / re;
-            d = re + im * r;
-            ar[k * DUAL_SPIN_NX + k] = 1.0 / d;
-            ai[k * DUAL_SPIN_NX + k] = -r / d;
-        } else {
-            r = re / im;
-            d = im + re * r;
-            ar[k * DUAL_SPIN_NX + k] = r / d;
-            ai[k * DUAL_SPIN_NX + k] = -1.0 / d;
+    }
+    piv[3] = p;
+    if (!(fabs(ar[p * DUAL_SPIN_NX + 3]) + fabs(ai[p * DUAL_SPIN_NX + 3]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 3) {
+        for (j = 3; j < DUAL_SPIN_NX; ++j) {
+            swap = ar[3 * DUAL_SPIN_NX + j];
+            ar[3 * DUAL_SPIN_NX + j] = ar[p * DUAL_SPIN_NX + j];
+            ar[p * DUAL_SPIN_NX + j] = swap;
+            swap = ai[3 * DUAL_SPIN_NX + j];
+            ai[3 * DUAL_SPIN_NX + j] = ai[p * DUAL_SPIN_NX + j];
+            ai[p * DUAL_SPIN_NX + j] = swap;
         }
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            lr = ar[i * DUAL_SPIN_NX + k] * ar[k * DUAL_SPIN_NX + k] - ai[i * DUAL_SPIN_NX + k] *
-                    ai[k * DUAL_SPIN_NX + k];
-            li = ar[i * DUAL_SPIN_NX + k] * ai[k * DUAL_SPIN_NX + k] + ai[i * DUAL_SPIN_NX + k] *
-                    ar[k * DUAL_SPIN_NX + k];
-            ar[i * DUAL_SPIN_NX + k] = lr;
-            ai[i * DUAL_SPIN_NX + k] = li;
-            for (j = k + 1; j < DUAL_SPIN_NX; ++j) {
-                ur = ar[k * DUAL_SPIN_NX + j];
-                ui = ai[k * DUAL_SPIN_NX + j];
-                ar[i * DUAL_SPIN_NX + j] = ar[i * DUAL_SPIN_NX + j] - (lr * ur - li * ui);
-                ai[i * DUAL_SPIN_NX + j] = ai[i * DUAL_SPIN_NX + j] - (lr * ui + li * ur);
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[24];
+    im = ai[24];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[24] = 1.0 / d;
+        ai[24] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[24] = r / d;
+        ai[24] = -1.0 / d;
+    }
+    for (i = 4; i < 6; ++i) {
+        lr = ar[i * DUAL_SPIN_NX + 3] * ar[24] - ai[i * DUAL_SPIN_NX + 3] * ai[24];
+        li = ar[i * DUAL_SPIN_NX + 3] * ai[24] + ai[i * DUAL_SPIN_NX + 3] * ar[24];
+        ar[i * DUAL_SPIN_NX + 3] = lr;
+        ai[i * DUAL_SPIN_NX + 3] = li;
+        ur = ar[25];
+        ui = ai[25];
+        ar[i * DUAL_SPIN_NX + 4] = ar[i * DUAL_SPIN_NX + 4] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 4] = ai[i * DUAL_SPIN_NX + 4] - (lr * ui + li * ur);
+        ur = ar[26];
+        ui = ai[26];
+        ar[i * DUAL_SPIN_NX + 5] = ar[i * DUAL_SPIN_NX + 5] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 5] = ai[i * DUAL_SPIN_NX + 5] - (lr * ui + li * ur);
+        ur = ar[27];
+        ui = ai[27];
+        ar[i * DUAL_SPIN_NX + 6] = ar[i * DUAL_SPIN_NX + 6] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 6] = ai[i * DUAL_SPIN_NX + 6] - (lr * ui + li * ur);
+    }
+    ur = ar[25];
+    ui = ai[25];
+    ar[25] = ur * ar[24] - ui * ai[24];
+    ai[25] = ur * ai[24] + ui * ar[24];
+    ur = ar[26];
+    ui = ai[26];
+    ar[26] = ur * ar[24] - ui * ai[24];
+    ai[26] = ur * ai[24] + ui * ar[24];
+    ur = ar[27];
+    ui = ai[27];
+    ar[27] = ur * ar[24] - ui * ai[24];
+    ai[27] = ur * ai[24] + ui * ar[24];
+    p = 4;
+    for (i = 5; i < 6; ++i) {
+        if (fabs(ar[i * DUAL_SPIN_NX + 4]) + fabs(ai[i * DUAL_SPIN_NX + 4]) > fabs(ar[p * DUAL_SPIN_NX + 4]) + fabs(ai[p * DUAL_SPIN_NX + 4])) {
+            p = i;
         }
-        for (j = k + 1; j < DUAL_SPIN_NX; ++j) {
-            ur = ar[k * DUAL_SPIN_NX + j];
-            ui = ai[k * DUAL_SPIN_NX + j];
-            ar[k * DUAL_SPIN_NX + j] = ur * ar[k * DUAL_SPIN_NX + k] - ui * ai[k * DUAL_SPIN_NX +
-                    k];  /* u_kj / u_kk */
-            ai[k * DUAL_SPIN_NX + j] = ur * ai[k * DUAL_SPIN_NX + k] + ui * ar[k * DUAL_SPIN_NX +
-                    k];
+    }
+    piv[4] = p;
+    if (!(fabs(ar[p * DUAL_SPIN_NX + 4]) + fabs(ai[p * DUAL_SPIN_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 3; j < DUAL_SPIN_NX; ++j) {
+            swap = ar[4 * DUAL_SPIN_NX + j];
+            ar[4 * DUAL_SPIN_NX + j] = ar[p * DUAL_SPIN_NX + j];
+            ar[p * DUAL_SPIN_NX + j] = swap;
+            swap = ai[4 * DUAL_SPIN_NX + j];
+            ai[4 * DUAL_SPIN_NX + j] = ai[p * DUAL_SPIN_NX + j];
+            ai[p * DUAL_SPIN_NX + j] = swap;
         }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[32];
+    im = ai[32];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[32] = 1.0 / d;
+        ai[32] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[32] = r / d;
+        ai[32] = -1.0 / d;
+    }
+    for (i = 5; i < 6; ++i) {
+        lr = ar[i * DUAL_SPIN_NX + 4] * ar[32] - ai[i * DUAL_SPIN_NX + 4] * ai[32];
+        li = ar[i * DUAL_SPIN_NX + 4] * ai[32] + ai[i * DUAL_SPIN_NX + 4] * ar[32];
+        ar[i * DUAL_SPIN_NX + 4] = lr;
+        ai[i * DUAL_SPIN_NX + 4] = li;
+        ur = ar[33];
+        ui = ai[33];
+        ar[i * DUAL_SPIN_NX + 5] = ar[i * DUAL_SPIN_NX + 5] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 5] = ai[i * DUAL_SPIN_NX + 5] - (lr * ui + li * ur);
+        ur = ar[34];
+        ui = ai[34];
+        ar[i * DUAL_SPIN_NX + 6] = ar[i * DUAL_SPIN_NX + 6] - (lr * ur - li * ui);
+        ai[i * DUAL_SPIN_NX + 6] = ai[i * DUAL_SPIN_NX + 6] - (lr * ui + li * ur);
+    }
+    ur = ar[33];
+    ui = ai[33];
+    ar[33] = ur * ar[32] - ui * ai[32];
+    ai[33] = ur * ai[32] + ui * ar[32];
+    ur = ar[34];
+    ui = ai[34];
+    ar[34] = ur * ar[32] - ui * ai[32];
+    ai[34] = ur * ai[32] + ui * ar[32];
+    piv[5] = 5;
+    if (!(fabs(ar[40]) + fabs(ai[40]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[40];
+    im = ai[40];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[40] = 1.0 / d;
+        ai[40] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[40] = r / d;
+        ai[40] = -1.0 / d;
+    }
+    ur = ar[41];
+    ui = ai[41];
+    ar[41] = ur * ar[40] - ui * ai[40];
+    ai[41] = ur * ai[40] + ui * ar[40];
+    piv[6] = 6;
+    if (!(fabs(ar[48]) + fabs(ai[48]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[48];
+    im = ai[48];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[48] = 1.0 / d;
+        ai[48] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[48] = r / d;
+        ai[48] = -1.0 / d;
     }
     return 0;
 }
@@ -723,15 +1048,30 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 {
     double swap;
     double re;
-    int i;
 
-    for (i = 0; i < DUAL_SPIN_NX; ++i) {
-        swap = br[i];
-        br[i] = br[piv[i]];
-        br[piv[i]] = swap;
-        swap = bi[i];
-        bi[i] = bi[piv[i]];
-        bi[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = br[1];
+        br[1] = br[piv[1]];
+        br[piv[1]] = swap;
+        swap = bi[1];
+        bi[1] = bi[piv[1]];
+        bi[piv[1]] = swap;
+    }
+    if (piv[3] != 3) {
+        swap = br[3];
+        br[3] = br[piv[3]];
+        br[piv[3]] = swap;
+        swap = bi[3];
+        bi[3] = bi[piv[3]];
+        bi[piv[3]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = br[4];
+        br[4] = br[piv[4]];
+        br[piv[4]] = swap;
+        swap = bi[4];
+        bi[4] = bi[piv[4]];
+        bi[piv[4]] = swap;
     }
     br[2] = br[2] - ar[15] * br[1] + ai[15] * bi[1];
     bi[2] = bi[2] - ar[15] * bi[1] - ai[15] * br[1];
@@ -1494,6 +1834,7 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
         e2r[i] = -J[i];
         e2i[i] = 0.0;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         e1[i * DUAL_SPIN_NX + i] = e1[i * DUAL_SPIN_NX + i] + gamma_h;
         e2r[i * DUAL_SPIN_NX + i] = e2r[i * DUAL_SPIN_NX + i] + alpha_h;
@@ -1524,18 +1865,22 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     gamma_h = 3.637834252744496 / h;
     alpha_h = 2.6810828736277523 / h;
     beta_h = 3.0504301992474105 / h;
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         y[i] = x[i] + z1[i];
     }
     dual_spin_rhs(t + 0.1550510257216822 * h, y, c, z1);
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         y[i] = x[i] + z2[i];
     }
     dual_spin_rhs(t + 0.6449489742783178 * h, y, c, z2);
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         y[i] = x[i] + z3[i];
     }
     dual_spin_rhs(t + h, y, c, z3);
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         double a1, a2, a3;
         a1 = z1[i];
@@ -1551,6 +1896,7 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     lu_solve(e1, piv1, z1);
     lu_solve_complex(e2r, e2i, piv2, z2, z3);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         double s1, s2, s3;
         s1 = z1[i] / scal[i];
@@ -1577,6 +1923,7 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     double norm;
     int i;
 
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
                 z3[i]) / h;
@@ -1584,21 +1931,25 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     }
     lu_solve(e1, piv1, err);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         total = total + err[i] / scal[i] * (err[i] / scal[i]);
     }
     norm = sqrt(total / DUAL_SPIN_NX);
     if (norm >= 1.0 && again) {
+        #pragma GCC unroll 1
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
             y[i] = x[i] + err[i];
         }
         dual_spin_rhs(t, y, c, err);
         stats->rhs_calls = stats->rhs_calls + 1;
+        #pragma GCC unroll 1
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
             err[i] = err[i] + g[i];
         }
         lu_solve(e1, piv1, err);
         total = 0.0;
+        #pragma GCC unroll 1
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
             total = total + err[i] / scal[i] * (err[i] / scal[i]);
         }
@@ -1665,6 +2016,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     double c1q;
     double c2q;
     double c3q;
+    double theta_k;
     int last;
     int first;
     int reject;
@@ -1677,6 +2029,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int singular;
     int start;
     int i;
+    int k;
 
     start = ode_start(5, DUAL_SPIN_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
             stats);
@@ -1698,6 +2051,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     need_lu = 1;
     nonfinite = 0;
     singular = 0;
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         comp[i] = 0.0;
         ak1[i] = 0.0;
@@ -1711,6 +2065,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         h = t1 - t;
         last = 1;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         scal[i] = atol_e + rtol_e * fabs(x[i]);
     }
@@ -1752,6 +2107,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
 
         /* the Newton iterations start from the last step's collocation polynomial */
         if (first) {
+            #pragma GCC unroll 1
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 z1[i] = 0.0;
                 z2[i] = 0.0;
@@ -1764,6 +2120,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             c3q = h / h_old;
             c1q = 0.1550510257216822 * c3q;
             c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 double a1, a2, a3;
                 a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
@@ -1810,7 +2167,11 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                     break;
                 }
                 rate = theta / (1.0 - theta);
-                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
                 if (predicted >= 1.0) {
                     q = dmax(1e-4, dmin(20.0, predicted));
                     h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
@@ -1819,6 +2180,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                 }
             }
             dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 double a1, a2, a3;
                 a1 = w1[i] + z1[i];
@@ -1838,6 +2200,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         }
         if (outcome == 0) {
             err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 dx[i] = z3[i] - comp[i];
                 xnew[i] = x[i] + dx[i];
@@ -1880,6 +2243,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             h_acc = h;
             err_acc = dmax(1e-2, err);
             h_old = h;
+            #pragma GCC unroll 1
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 double ak;
                 ak = (z2[i] - z1[i]) / 0.4898979485566356;
@@ -1894,6 +2258,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             if (last) {
                 return DUAL_SPIN_ODE_OK;
             }
+            #pragma GCC unroll 1
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 f0[i] = fnew[i];
                 scal[i] = atol_e + rtol_e * fabs(x[i]);

@@ -528,52 +528,138 @@ contains
   end function step_exp2
 
   ! In-place LU decomposition with partial pivoting within the diagonal
-  ! blocks (0, 1), (1, 3), (3, 6), (6, 7) (row i's block ends
-  ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+  ! blocks (0, 1), (1, 3), (3, 6), (6, 7), unrolled over the entries
+  ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
   ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
   function lu_decompose(a, piv) result(res)
     real(c_double), intent(inout) :: a(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:6) = [1, 3, 3, 6, 6, 6, 7]
     integer(c_int) :: p
     real(c_double) :: m
     real(c_double) :: swap
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(a(i * nx + k)) > abs(a(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(a(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(a(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(0) = 1.0_c_double / a(0)
+    a(1) = a(1) * a(0)
+    a(2) = a(2) * a(0)
+    a(3) = a(3) * a(0)
+    a(5) = a(5) * a(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(a(i * nx + 1)) > abs(a(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = a(k * nx + j)
-          a(k * nx + j) = a(p * nx + j)
-          a(p * nx + j) = swap
-        end do
-      end if
-      a(k * nx + k) = 1.0_c_double / a(k * nx + k)
-      do i = k + 1, lu_end(k) - 1
-        m = a(i * nx + k) * a(k * nx + k)
-        a(i * nx + k) = m
-        do j = k + 1, nx - 1
-          a(i * nx + j) = a(i * nx + j) - m * a(k * nx + j)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        a(k * nx + j) = a(k * nx + j) * a(k * nx + k)  ! u_kj / u_kk
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(a(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = a(1 * nx + j)
+        a(1 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(8) = 1.0_c_double / a(8)
+    do i = 2, 3 - 1
+      m = a(i * nx + 1) * a(8)
+      a(i * nx + 1) = m
+      a(i * nx + 2) = a(i * nx + 2) - m * a(9)
+      a(i * nx + 3) = a(i * nx + 3) - m * a(10)
+      a(i * nx + 4) = a(i * nx + 4) - m * a(11)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(12)
+    end do
+    a(9) = a(9) * a(8)
+    a(10) = a(10) * a(8)
+    a(11) = a(11) * a(8)
+    a(12) = a(12) * a(8)
+    piv(2) = 2
+    if (.not. (abs(a(16)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(16) = 1.0_c_double / a(16)
+    a(17) = a(17) * a(16)
+    a(18) = a(18) * a(16)
+    a(19) = a(19) * a(16)
+    p = 3
+    do i = 4, 6 - 1
+      if (abs(a(i * nx + 3)) > abs(a(p * nx + 3))) then
+        p = i
+      end if
+    end do
+    piv(3) = p
+    if (.not. (abs(a(p * nx + 3)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 3) then
+      do j = 3, nx - 1
+        swap = a(3 * nx + j)
+        a(3 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(24) = 1.0_c_double / a(24)
+    do i = 4, 6 - 1
+      m = a(i * nx + 3) * a(24)
+      a(i * nx + 3) = m
+      a(i * nx + 4) = a(i * nx + 4) - m * a(25)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(26)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(27)
+    end do
+    a(25) = a(25) * a(24)
+    a(26) = a(26) * a(24)
+    a(27) = a(27) * a(24)
+    p = 4
+    do i = 5, 6 - 1
+      if (abs(a(i * nx + 4)) > abs(a(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(a(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 3, nx - 1
+        swap = a(4 * nx + j)
+        a(4 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(32) = 1.0_c_double / a(32)
+    do i = 5, 6 - 1
+      m = a(i * nx + 4) * a(32)
+      a(i * nx + 4) = m
+      a(i * nx + 5) = a(i * nx + 5) - m * a(33)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(34)
+    end do
+    a(33) = a(33) * a(32)
+    a(34) = a(34) * a(32)
+    piv(5) = 5
+    if (.not. (abs(a(40)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(40) = 1.0_c_double / a(40)
+    a(41) = a(41) * a(40)
+    piv(6) = 6
+    if (.not. (abs(a(48)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(48) = 1.0_c_double / a(48)
     res = .false.
     return
   end function lu_decompose
@@ -585,13 +671,22 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(inout) :: b(0:nx - 1)
     real(c_double) :: swap
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = b(i)
-      b(i) = b(piv(i))
-      b(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = b(1)
+      b(1) = b(piv(1))
+      b(piv(1)) = swap
+    end if
+    if (piv(3) /= 3) then
+      swap = b(3)
+      b(3) = b(piv(3))
+      b(piv(3)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = b(4)
+      b(4) = b(piv(4))
+      b(piv(4)) = swap
+    end if
     b(2) = b(2) - lu(15) * b(1)
     b(4) = b(4) - lu(31) * b(3)
     b(5) = (b(5) - lu(38) * b(3)) - lu(39) * b(4)
@@ -611,7 +706,6 @@ contains
     real(c_double), intent(inout) :: ai(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:6) = [1, 3, 3, 6, 6, 6, 7]
     integer(c_int) :: p
     real(c_double) :: swap
     real(c_double) :: re
@@ -624,63 +718,310 @@ contains
     real(c_double) :: ui
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(ar(i * nx + k)) + abs(ai(i * nx + k)) > abs(ar(p * nx + k)) + abs(ai(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(ar(p * nx + k)) + abs(ai(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(ar(0)) + abs(ai(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(0)
+    im = ai(0)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(0) = 1.0_c_double / d
+      ai(0) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(0) = r / d
+      ai(0) = (-1.0_c_double) / d
+    end if
+    ur = ar(1)
+    ui = ai(1)
+    ar(1) = ur * ar(0) - ui * ai(0)
+    ai(1) = ur * ai(0) + ui * ar(0)
+    ur = ar(2)
+    ui = ai(2)
+    ar(2) = ur * ar(0) - ui * ai(0)
+    ai(2) = ur * ai(0) + ui * ar(0)
+    ur = ar(3)
+    ui = ai(3)
+    ar(3) = ur * ar(0) - ui * ai(0)
+    ai(3) = ur * ai(0) + ui * ar(0)
+    ur = ar(5)
+    ui = ai(5)
+    ar(5) = ur * ar(0) - ui * ai(0)
+    ai(5) = ur * ai(0) + ui * ar(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = ar(k * nx + j)
-          ar(k * nx + j) = ar(p * nx + j)
-          ar(p * nx + j) = swap
-          swap = ai(k * nx + j)
-          ai(k * nx + j) = ai(p * nx + j)
-          ai(p * nx + j) = swap
-        end do
-      end if
-      ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
-      re = ar(k * nx + k)
-      im = ai(k * nx + k)
-      if (abs(re) >= abs(im)) then
-        r = im / re
-        d = re + im * r
-        ar(k * nx + k) = 1.0_c_double / d
-        ai(k * nx + k) = (-r) / d
-      else
-        r = re / im
-        d = im + re * r
-        ar(k * nx + k) = r / d
-        ai(k * nx + k) = (-1.0_c_double) / d
-      end if
-      do i = k + 1, lu_end(k) - 1
-        lr = ar(i * nx + k) * ar(k * nx + k) - ai(i * nx + k) * ai(k * nx + k)
-        li = ar(i * nx + k) * ai(k * nx + k) + ai(i * nx + k) * ar(k * nx + k)
-        ar(i * nx + k) = lr
-        ai(i * nx + k) = li
-        do j = k + 1, nx - 1
-          ur = ar(k * nx + j)
-          ui = ai(k * nx + j)
-          ar(i * nx + j) = ar(i * nx + j) - (lr * ur - li * ui)
-          ai(i * nx + j) = ai(i * nx + j) - (lr * ui + li * ur)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        ur = ar(k * nx + j)
-        ui = ai(k * nx + j)
-        ar(k * nx + j) = ur * ar(k * nx + k) - ui * ai(k * nx + k)  ! u_kj / u_kk
-        ai(k * nx + j) = ur * ai(k * nx + k) + ui * ar(k * nx + k)
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(ar(p * nx + 1)) + abs(ai(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = ar(1 * nx + j)
+        ar(1 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(1 * nx + j)
+        ai(1 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(8)
+    im = ai(8)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(8) = 1.0_c_double / d
+      ai(8) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(8) = r / d
+      ai(8) = (-1.0_c_double) / d
+    end if
+    do i = 2, 3 - 1
+      lr = ar(i * nx + 1) * ar(8) - ai(i * nx + 1) * ai(8)
+      li = ar(i * nx + 1) * ai(8) + ai(i * nx + 1) * ar(8)
+      ar(i * nx + 1) = lr
+      ai(i * nx + 1) = li
+      ur = ar(9)
+      ui = ai(9)
+      ar(i * nx + 2) = ar(i * nx + 2) - (lr * ur - li * ui)
+      ai(i * nx + 2) = ai(i * nx + 2) - (lr * ui + li * ur)
+      ur = ar(10)
+      ui = ai(10)
+      ar(i * nx + 3) = ar(i * nx + 3) - (lr * ur - li * ui)
+      ai(i * nx + 3) = ai(i * nx + 3) - (lr * ui + li * ur)
+      ur = ar(11)
+      ui = ai(11)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(12)
+      ui = ai(12)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+    end do
+    ur = ar(9)
+    ui = ai(9)
+    ar(9) = ur * ar(8) - ui * ai(8)
+    ai(9) = ur * ai(8) + ui * ar(8)
+    ur = ar(10)
+    ui = ai(10)
+    ar(10) = ur * ar(8) - ui * ai(8)
+    ai(10) = ur * ai(8) + ui * ar(8)
+    ur = ar(11)
+    ui = ai(11)
+    ar(11) = ur * ar(8) - ui * ai(8)
+    ai(11) = ur * ai(8) + ui * ar(8)
+    ur = ar(12)
+    ui = ai(12)
+    ar(12) = ur * ar(8) - ui * ai(8)
+    ai(12) = ur * ai(8) + ui * ar(8)
+    piv(2) = 2
+    if (.not. (abs(ar(16)) + abs(ai(16)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(16)
+    im = ai(16)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(16) = 1.0_c_double / d
+      ai(16) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(16) = r / d
+      ai(16) = (-1.0_c_double) / d
+    end if
+    ur = ar(17)
+    ui = ai(17)
+    ar(17) = ur * ar(16) - ui * ai(16)
+    ai(17) = ur * ai(16) + ui * ar(16)
+    ur = ar(18)
+    ui = ai(18)
+    ar(18) = ur * ar(16) - ui * ai(16)
+    ai(18) = ur * ai(16) + ui * ar(16)
+    ur = ar(19)
+    ui = ai(19)
+    ar(19) = ur * ar(16) - ui * ai(16)
+    ai(19) = ur * ai(16) + ui * ar(16)
+    p = 3
+    do i = 4, 6 - 1
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+        p = i
+      end if
+    end do
+    piv(3) = p
+    if (.not. (abs(ar(p * nx + 3)) + abs(ai(p * nx + 3)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 3) then
+      do j = 3, nx - 1
+        swap = ar(3 * nx + j)
+        ar(3 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(3 * nx + j)
+        ai(3 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(24)
+    im = ai(24)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(24) = 1.0_c_double / d
+      ai(24) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(24) = r / d
+      ai(24) = (-1.0_c_double) / d
+    end if
+    do i = 4, 6 - 1
+      lr = ar(i * nx + 3) * ar(24) - ai(i * nx + 3) * ai(24)
+      li = ar(i * nx + 3) * ai(24) + ai(i * nx + 3) * ar(24)
+      ar(i * nx + 3) = lr
+      ai(i * nx + 3) = li
+      ur = ar(25)
+      ui = ai(25)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(26)
+      ui = ai(26)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(27)
+      ui = ai(27)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+    end do
+    ur = ar(25)
+    ui = ai(25)
+    ar(25) = ur * ar(24) - ui * ai(24)
+    ai(25) = ur * ai(24) + ui * ar(24)
+    ur = ar(26)
+    ui = ai(26)
+    ar(26) = ur * ar(24) - ui * ai(24)
+    ai(26) = ur * ai(24) + ui * ar(24)
+    ur = ar(27)
+    ui = ai(27)
+    ar(27) = ur * ar(24) - ui * ai(24)
+    ai(27) = ur * ai(24) + ui * ar(24)
+    p = 4
+    do i = 5, 6 - 1
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(ar(p * nx + 4)) + abs(ai(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 3, nx - 1
+        swap = ar(4 * nx + j)
+        ar(4 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(4 * nx + j)
+        ai(4 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(32)
+    im = ai(32)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(32) = 1.0_c_double / d
+      ai(32) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(32) = r / d
+      ai(32) = (-1.0_c_double) / d
+    end if
+    do i = 5, 6 - 1
+      lr = ar(i * nx + 4) * ar(32) - ai(i * nx + 4) * ai(32)
+      li = ar(i * nx + 4) * ai(32) + ai(i * nx + 4) * ar(32)
+      ar(i * nx + 4) = lr
+      ai(i * nx + 4) = li
+      ur = ar(33)
+      ui = ai(33)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(34)
+      ui = ai(34)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+    end do
+    ur = ar(33)
+    ui = ai(33)
+    ar(33) = ur * ar(32) - ui * ai(32)
+    ai(33) = ur * ai(32) + ui * ar(32)
+    ur = ar(34)
+    ui = ai(34)
+    ar(34) = ur * ar(32) - ui * ai(32)
+    ai(34) = ur * ai(32) + ui * ar(32)
+    piv(5) = 5
+    if (.not. (abs(ar(40)) + abs(ai(40)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(40)
+    im = ai(40)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(40) = 1.0_c_double / d
+      ai(40) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(40) = r / d
+      ai(40) = (-1.0_c_double) / d
+    end if
+    ur = ar(41)
+    ui = ai(41)
+    ar(41) = ur * ar(40) - ui * ai(40)
+    ai(41) = ur * ai(40) + ui * ar(40)
+    piv(6) = 6
+    if (.not. (abs(ar(48)) + abs(ai(48)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(48)
+    im = ai(48)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(48) = 1.0_c_double / d
+      ai(48) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(48) = r / d
+      ai(48) = (-1.0_c_double) / d
+    end if
     res = .false.
     return
   end function lu_decompose_complex
@@ -694,16 +1035,31 @@ contains
     real(c_double), intent(inout) :: bi(0:nx - 1)
     real(c_double) :: swap
     real(c_double) :: re
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = br(i)
-      br(i) = br(piv(i))
-      br(piv(i)) = swap
-      swap = bi(i)
-      bi(i) = bi(piv(i))
-      bi(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = br(1)
+      br(1) = br(piv(1))
+      br(piv(1)) = swap
+      swap = bi(1)
+      bi(1) = bi(piv(1))
+      bi(piv(1)) = swap
+    end if
+    if (piv(3) /= 3) then
+      swap = br(3)
+      br(3) = br(piv(3))
+      br(piv(3)) = swap
+      swap = bi(3)
+      bi(3) = bi(piv(3))
+      bi(piv(3)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = br(4)
+      br(4) = br(piv(4))
+      br(piv(4)) = swap
+      swap = bi(4)
+      bi(4) = bi(piv(4))
+      bi(piv(4)) = swap
+    end if
     br(2) = (br(2) - ar(15) * br(1)) + ai(15) * bi(1)
     bi(2) = (bi(2) - ar(15) * bi(1)) - ai(15) * br(1)
     br(4) = (br(4) - ar(31) * br(3)) + ai(31) * bi(3)
@@ -1588,6 +1944,7 @@ contains
       e2r(i) = -J(i)
       e2i(i) = 0.0_c_double
     end do
+    !GCC$ unroll 1
     do i = 0, nx - 1
       e1(i * nx + i) = e1(i * nx + i) + gamma_h
       e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
@@ -1639,18 +1996,22 @@ contains
     gamma_h = 3.637834252744496_c_double / h
     alpha_h = 2.6810828736277523_c_double / h
     beta_h = 3.0504301992474105_c_double / h
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z1(i)
     end do
     call dual_spin_rhs(t + 0.1550510257216822_c_double * h, y, c, z1)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z2(i)
     end do
     call dual_spin_rhs(t + 0.6449489742783178_c_double * h, y, c, z2)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z3(i)
     end do
     call dual_spin_rhs(t + h, y, c, z3)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       a1 = z1(i)
       a2 = z2(i)
@@ -1665,6 +2026,7 @@ contains
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       s1 = z1(i) / scal(i)
       s2 = z2(i) / scal(i)
@@ -1701,6 +2063,7 @@ contains
     real(c_double) :: norm
     integer(c_int) :: i
 
+    !GCC$ unroll 1
     do i = 0, nx - 1
       g(i) = (((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i)) - &
           0.3333333333333333_c_double * z3(i)) / h
@@ -1708,21 +2071,25 @@ contains
     end do
     call lu_solve(e1, piv1, err)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       total = total + (err(i) / scal(i)) * (err(i) / scal(i))
     end do
     norm = sqrt(total / nx)
     if (norm >= 1.0_c_double .and. again) then
+      !GCC$ unroll 1
       do i = 0, nx - 1
         y(i) = x(i) + err(i)
       end do
       call dual_spin_rhs(t, y, c, err)
       stats%rhs_calls = stats%rhs_calls + 1
+      !GCC$ unroll 1
       do i = 0, nx - 1
         err(i) = err(i) + g(i)
       end do
       call lu_solve(e1, piv1, err)
       total = 0.0_c_double
+      !GCC$ unroll 1
       do i = 0, nx - 1
         total = total + (err(i) / scal(i)) * (err(i) / scal(i))
       end do
@@ -1798,6 +2165,7 @@ contains
     real(c_double) :: c1q
     real(c_double) :: c2q
     real(c_double) :: c3q
+    real(c_double) :: theta_k
     logical :: last
     logical :: first
     logical :: reject
@@ -1814,6 +2182,7 @@ contains
     real(c_double) :: a3
     real(c_double) :: ak
     integer(c_int) :: i
+    integer(c_int) :: k
 
     start = ode_start(5, DUAL_SPIN_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
         stats)
@@ -1836,6 +2205,7 @@ contains
     need_lu = .true.
     nonfinite = .false.
     singular = 0
+    !GCC$ unroll 1
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
       ak1(i) = 0.0_c_double
@@ -1850,6 +2220,7 @@ contains
       h = t1 - t
       last = .true.
     end if
+    !GCC$ unroll 1
     do i = 0, nx - 1
       scal(i) = atol_e + rtol_e * abs(x(i))
     end do
@@ -1895,6 +2266,7 @@ contains
 
       ! the Newton iterations start from the last step's collocation polynomial
       if (first) then
+        !GCC$ unroll 1
         do i = 0, nx - 1
           z1(i) = 0.0_c_double
           z2(i) = 0.0_c_double
@@ -1907,6 +2279,7 @@ contains
         c3q = h / h_old
         c1q = 0.1550510257216822_c_double * c3q
         c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
               0.8449489742783178_c_double) * ak3(i)))
@@ -1953,7 +2326,11 @@ contains
             exit
           end if
           rate = theta / (1.0_c_double - theta)
-          predicted = ((rate * dyno) * theta**real(6 - newt, c_double)) / newton_tol
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
           if (predicted >= 1.0_c_double) then
             q = max(1e-4_c_double, min(20.0_c_double, predicted))
             h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
@@ -1962,6 +2339,7 @@ contains
           end if
         end if
         dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = w1(i) + z1(i)
           a2 = w2(i) + z2(i)
@@ -1981,6 +2359,7 @@ contains
       end do
       if (outcome == 0) then
         err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
         do i = 0, nx - 1
           dx(i) = z3(i) - comp(i)
           xnew(i) = x(i) + dx(i)
@@ -2025,6 +2404,7 @@ contains
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         h_old = h
+        !GCC$ unroll 1
         do i = 0, nx - 1
           ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
           ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
@@ -2039,6 +2419,7 @@ contains
           res = DUAL_SPIN_ODE_OK
           return
         end if
+        !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
           scal(i) = atol_e + rtol_e * abs(x(i))

@@ -716,49 +716,169 @@ static inline double step_exp2(double y)
 
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11),
-   (11, 12), (12, 13), (13, 14) (row i's block ends
-   before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+   (11, 12), (12, 13), (13, 14), unrolled over the entries
+   of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
    row k swapped with piv[k]. 1 when a pivot is zero: singular. */
 static int lu_decompose(double *a, int *piv)
 {
-    static const int lu_end[14] = {1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14};
     int p;
     double m;
     double swap;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < GYROSTAT_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(a[i * GYROSTAT_NX + k]) > fabs(a[p * GYROSTAT_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(a[p * GYROSTAT_NX + k]) > 0.0)) {
-            return 1;  /* singular */
-        }
-        if (p != k) {
-            for (j = 0; j < GYROSTAT_NX; ++j) {
-                swap = a[k * GYROSTAT_NX + j];
-                a[k * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
-                a[p * GYROSTAT_NX + j] = swap;
-            }
-        }
-        a[k * GYROSTAT_NX + k] = 1.0 / a[k * GYROSTAT_NX + k];
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            m = a[i * GYROSTAT_NX + k] * a[k * GYROSTAT_NX + k];
-            a[i * GYROSTAT_NX + k] = m;
-            for (j = k + 1; j < GYROSTAT_NX; ++j) {
-                a[i * GYROSTAT_NX + j] = a[i * GYROSTAT_NX + j] - m * a[k * GYROSTAT_NX + j];
-            }
-        }
-        for (j = k + 1; j < GYROSTAT_NX; ++j) {
-            a[k * GYROSTAT_NX + j] = a[k * GYROSTAT_NX + j] * a[k * GYROSTAT_NX + k];  /* u_kj / u_kk */
+    piv[0] = 0;
+    if (!(fabs(a[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[0] = 1.0 / a[0];
+    a[1] = a[1] * a[0];
+    a[2] = a[2] * a[0];
+    a[7] = a[7] * a[0];
+    a[9] = a[9] * a[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(a[i * GYROSTAT_NX + 1]) > fabs(a[p * GYROSTAT_NX + 1])) {
+            p = i;
         }
     }
+    piv[1] = p;
+    if (!(fabs(a[p * GYROSTAT_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < GYROSTAT_NX; ++j) {
+            swap = a[1 * GYROSTAT_NX + j];
+            a[1 * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
+            a[p * GYROSTAT_NX + j] = swap;
+        }
+    }
+    a[15] = 1.0 / a[15];
+    for (i = 2; i < 3; ++i) {
+        m = a[i * GYROSTAT_NX + 1] * a[15];
+        a[i * GYROSTAT_NX + 1] = m;
+        a[i * GYROSTAT_NX + 2] = a[i * GYROSTAT_NX + 2] - m * a[16];
+        a[i * GYROSTAT_NX + 7] = a[i * GYROSTAT_NX + 7] - m * a[21];
+        a[i * GYROSTAT_NX + 8] = a[i * GYROSTAT_NX + 8] - m * a[22];
+        a[i * GYROSTAT_NX + 9] = a[i * GYROSTAT_NX + 9] - m * a[23];
+    }
+    a[16] = a[16] * a[15];
+    a[21] = a[21] * a[15];
+    a[22] = a[22] * a[15];
+    a[23] = a[23] * a[15];
+    piv[2] = 2;
+    if (!(fabs(a[30]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[30] = 1.0 / a[30];
+    a[35] = a[35] * a[30];
+    a[36] = a[36] * a[30];
+    a[37] = a[37] * a[30];
+    piv[3] = 3;
+    if (!(fabs(a[45]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[45] = 1.0 / a[45];
+    a[50] = a[50] * a[45];
+    a[52] = a[52] * a[45];
+    piv[4] = 4;
+    if (!(fabs(a[60]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[60] = 1.0 / a[60];
+    a[67] = a[67] * a[60];
+    piv[5] = 5;
+    if (!(fabs(a[75]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[75] = 1.0 / a[75];
+    a[82] = a[82] * a[75];
+    piv[6] = 6;
+    if (!(fabs(a[90]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[90] = 1.0 / a[90];
+    a[97] = a[97] * a[90];
+    p = 7;
+    for (i = 8; i < 10; ++i) {
+        if (fabs(a[i * GYROSTAT_NX + 7]) > fabs(a[p * GYROSTAT_NX + 7])) {
+            p = i;
+        }
+    }
+    piv[7] = p;
+    if (!(fabs(a[p * GYROSTAT_NX + 7]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 7) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            swap = a[7 * GYROSTAT_NX + j];
+            a[7 * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
+            a[p * GYROSTAT_NX + j] = swap;
+        }
+    }
+    a[105] = 1.0 / a[105];
+    for (i = 8; i < 10; ++i) {
+        m = a[i * GYROSTAT_NX + 7] * a[105];
+        a[i * GYROSTAT_NX + 7] = m;
+        a[i * GYROSTAT_NX + 8] = a[i * GYROSTAT_NX + 8] - m * a[106];
+        a[i * GYROSTAT_NX + 9] = a[i * GYROSTAT_NX + 9] - m * a[107];
+        a[i * GYROSTAT_NX + 10] = a[i * GYROSTAT_NX + 10] - m * a[108];
+    }
+    a[106] = a[106] * a[105];
+    a[107] = a[107] * a[105];
+    a[108] = a[108] * a[105];
+    p = 8;
+    for (i = 9; i < 10; ++i) {
+        if (fabs(a[i * GYROSTAT_NX + 8]) > fabs(a[p * GYROSTAT_NX + 8])) {
+            p = i;
+        }
+    }
+    piv[8] = p;
+    if (!(fabs(a[p * GYROSTAT_NX + 8]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 8) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            swap = a[8 * GYROSTAT_NX + j];
+            a[8 * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
+            a[p * GYROSTAT_NX + j] = swap;
+        }
+    }
+    a[120] = 1.0 / a[120];
+    for (i = 9; i < 10; ++i) {
+        m = a[i * GYROSTAT_NX + 8] * a[120];
+        a[i * GYROSTAT_NX + 8] = m;
+        a[i * GYROSTAT_NX + 9] = a[i * GYROSTAT_NX + 9] - m * a[121];
+        a[i * GYROSTAT_NX + 10] = a[i * GYROSTAT_NX + 10] - m * a[122];
+    }
+    a[121] = a[121] * a[120];
+    a[122] = a[122] * a[120];
+    piv[9] = 9;
+    if (!(fabs(a[135]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[135] = 1.0 / a[135];
+    a[136] = a[136] * a[135];
+    piv[10] = 10;
+    if (!(fabs(a[150]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[150] = 1.0 / a[150];
+    piv[11] = 11;
+    if (!(fabs(a[165]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[165] = 1.0 / a[165];
+    piv[12] = 12;
+    if (!(fabs(a[180]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[180] = 1.0 / a[180];
+    piv[13] = 13;
+    if (!(fabs(a[195]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[195] = 1.0 / a[195];
     return 0;
 }
 
@@ -767,12 +887,21 @@ static int lu_decompose(double *a, int *piv)
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
     double swap;
-    int i;
 
-    for (i = 0; i < GYROSTAT_NX; ++i) {
-        swap = b[i];
-        b[i] = b[piv[i]];
-        b[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = b[1];
+        b[1] = b[piv[1]];
+        b[piv[1]] = swap;
+    }
+    if (piv[7] != 7) {
+        swap = b[7];
+        b[7] = b[piv[7]];
+        b[piv[7]] = swap;
+    }
+    if (piv[8] != 8) {
+        swap = b[8];
+        b[8] = b[piv[8]];
+        b[piv[8]] = swap;
     }
     b[2] = b[2] - lu[29] * b[1];
     b[8] = b[8] - lu[119] * b[7];
@@ -797,7 +926,6 @@ static void lu_solve(const double *lu, const int *piv, double *b)
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
 static int lu_decompose_complex(double *ar, double *ai, int *piv)
 {
-    static const int lu_end[14] = {1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14};
     int p;
     double swap;
     double re;
@@ -810,63 +938,448 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     double ui;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < GYROSTAT_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(ar[i * GYROSTAT_NX + k]) + fabs(ai[i * GYROSTAT_NX + k]) > fabs(ar[p * GYROSTAT_NX + k]) + fabs(ai[p * GYROSTAT_NX + k])) {
-                p = i;
-            }
+    piv[0] = 0;
+    if (!(fabs(ar[0]) + fabs(ai[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[0];
+    im = ai[0];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[0] = 1.0 / d;
+        ai[0] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[0] = r / d;
+        ai[0] = -1.0 / d;
+    }
+    ur = ar[1];
+    ui = ai[1];
+    ar[1] = ur * ar[0] - ui * ai[0];
+    ai[1] = ur * ai[0] + ui * ar[0];
+    ur = ar[2];
+    ui = ai[2];
+    ar[2] = ur * ar[0] - ui * ai[0];
+    ai[2] = ur * ai[0] + ui * ar[0];
+    ur = ar[7];
+    ui = ai[7];
+    ar[7] = ur * ar[0] - ui * ai[0];
+    ai[7] = ur * ai[0] + ui * ar[0];
+    ur = ar[9];
+    ui = ai[9];
+    ar[9] = ur * ar[0] - ui * ai[0];
+    ai[9] = ur * ai[0] + ui * ar[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(ar[i * GYROSTAT_NX + 1]) + fabs(ai[i * GYROSTAT_NX + 1]) > fabs(ar[p * GYROSTAT_NX + 1]) + fabs(ai[p * GYROSTAT_NX + 1])) {
+            p = i;
         }
-        piv[k] = p;
-        if (!(fabs(ar[p * GYROSTAT_NX + k]) + fabs(ai[p * GYROSTAT_NX + k]) > 0.0)) {
-            return 1;  /* singular */
+    }
+    piv[1] = p;
+    if (!(fabs(ar[p * GYROSTAT_NX + 1]) + fabs(ai[p * GYROSTAT_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < GYROSTAT_NX; ++j) {
+            swap = ar[1 * GYROSTAT_NX + j];
+            ar[1 * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
+            ar[p * GYROSTAT_NX + j] = swap;
+            swap = ai[1 * GYROSTAT_NX + j];
+            ai[1 * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
+            ai[p * GYROSTAT_NX + j] = swap;
         }
-        if (p != k) {
-            for (j = 0; j < GYROSTAT_NX; ++j) {
-                swap = ar[k * GYROSTAT_NX + j];
-                ar[k * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
-                ar[p * GYROSTAT_NX + j] = swap;
-                swap = ai[k * GYROSTAT_NX + j];
-                ai[k * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
-                ai[p * GYROSTAT_NX + j] = swap;
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[15];
+    im = ai[15];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[15] = 1.0 / d;
+        ai[15] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[15] = r / d;
+        ai[15] = -1.0 / d;
+    }
+    for (i = 2; i < 3; ++i) {
+        lr = ar[i * GYROSTAT_NX + 1] * ar[15] - ai[i * GYROSTAT_NX + 1] * ai[15];
+        li = ar[i * GYROSTAT_NX + 1] * ai[15] + ai[i * GYROSTAT_NX + 1] * ar[15];
+        ar[i * GYROSTAT_NX + 1] = lr;
+        ai[i * GYROSTAT_NX + 1] = li;
+        ur = ar[16];
+        ui = ai[16];
+        ar[i * GYROSTAT_NX + 2] = ar[i * GYROSTAT_NX + 2] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 2] = ai[i * GYROSTAT_NX + 2] - (lr * ui + li * ur);
+        ur = ar[21];
+        ui = ai[21];
+        ar[i * GYROSTAT_NX + 7] = ar[i * GYROSTAT_NX + 7] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 7] = ai[i * GYROSTAT_NX + 7] - (lr * ui + li * ur);
+        ur = ar[22];
+        ui = ai[22];
+        ar[i * GYROSTAT_NX + 8] = ar[i * GYROSTAT_NX + 8] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 8] = ai[i * GYROSTAT_NX + 8] - (lr * ui + li * ur);
+        ur = ar[23];
+        ui = ai[23];
+        ar[i * GYROSTAT_NX + 9] = ar[i * GYROSTAT_NX + 9] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 9] = ai[i * GYROSTAT_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[16];
+    ui = ai[16];
+    ar[16] = ur * ar[15] - ui * ai[15];
+    ai[16] = ur * ai[15] + ui * ar[15];
+    ur = ar[21];
+    ui = ai[21];
+    ar[21] = ur * ar[15] - ui * ai[15];
+    ai[21] = ur * ai[15] + ui * ar[15];
+    ur = ar[22];
+    ui = ai[22];
+    ar[22] = ur * ar[15] - ui * ai[15];
+    ai[22] = ur * ai[15] + ui * ar[15];
+    ur = ar[23];
+    ui = ai[23];
+    ar[23] = ur * ar[15] - ui * ai[15];
+    ai[23] = ur * ai[15] + ui * ar[15];
+    piv[2] = 2;
+    if (!(fabs(ar[30]) + fabs(ai[30]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[30];
+    im = ai[30];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[30] = 1.0 / d;
+        ai[30] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[30] = r / d;
+        ai[30] = -1.0 / d;
+    }
+    ur = ar[35];
+    ui = ai[35];
+    ar[35] = ur * ar[30] - ui * ai[30];
+    ai[35] = ur * ai[30] + ui * ar[30];
+    ur = ar[36];
+    ui = ai[36];
+    ar[36] = ur * ar[30] - ui * ai[30];
+    ai[36] = ur * ai[30] + ui * ar[30];
+    ur = ar[37];
+    ui = ai[37];
+    ar[37] = ur * ar[30] - ui * ai[30];
+    ai[37] = ur * ai[30] + ui * ar[30];
+    piv[3] = 3;
+    if (!(fabs(ar[45]) + fabs(ai[45]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[45];
+    im = ai[45];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[45] = 1.0 / d;
+        ai[45] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[45] = r / d;
+        ai[45] = -1.0 / d;
+    }
+    ur = ar[50];
+    ui = ai[50];
+    ar[50] = ur * ar[45] - ui * ai[45];
+    ai[50] = ur * ai[45] + ui * ar[45];
+    ur = ar[52];
+    ui = ai[52];
+    ar[52] = ur * ar[45] - ui * ai[45];
+    ai[52] = ur * ai[45] + ui * ar[45];
+    piv[4] = 4;
+    if (!(fabs(ar[60]) + fabs(ai[60]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[60];
+    im = ai[60];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[60] = 1.0 / d;
+        ai[60] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[60] = r / d;
+        ai[60] = -1.0 / d;
+    }
+    ur = ar[67];
+    ui = ai[67];
+    ar[67] = ur * ar[60] - ui * ai[60];
+    ai[67] = ur * ai[60] + ui * ar[60];
+    piv[5] = 5;
+    if (!(fabs(ar[75]) + fabs(ai[75]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[75];
+    im = ai[75];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[75] = 1.0 / d;
+        ai[75] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[75] = r / d;
+        ai[75] = -1.0 / d;
+    }
+    ur = ar[82];
+    ui = ai[82];
+    ar[82] = ur * ar[75] - ui * ai[75];
+    ai[82] = ur * ai[75] + ui * ar[75];
+    piv[6] = 6;
+    if (!(fabs(ar[90]) + fabs(ai[90]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[90];
+    im = ai[90];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[90] = 1.0 / d;
+        ai[90] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[90] = r / d;
+        ai[90] = -1.0 / d;
+    }
+    ur = ar[97];
+    ui = ai[97];
+    ar[97] = ur * ar[90] - ui * ai[90];
+    ai[97] = ur * ai[90] + ui * ar[90];
+    p = 7;
+    for (i = 8; i < 10; ++i) {
+        if (fabs(ar[i * GYROSTAT_NX + 7]) + fabs(ai[i * GYROSTAT_NX + 7]) > fabs(ar[p * GYROSTAT_NX + 7]) + fabs(ai[p * GYROSTAT_NX + 7])) {
+            p = i;
         }
-        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
-        re = ar[k * GYROSTAT_NX + k];
-        im = ai[k * GYROSTAT_NX + k];
-        if (fabs(re) >= fabs(im)) {
-            r = im / re;
-            d = re + im * r;
-            ar[k * GYROSTAT_NX + k] = 1.0 / d;
-            ai[k * GYROSTAT_NX + k] = -r / d;
-        } else {
-            r = re / im;
-            d = im + re * r;
-            ar[k * GYROSTAT_NX + k] = r / d;
-            ai[k * GYROSTAT_NX + k] = -1.0 / d;
+    }
+    piv[7] = p;
+    if (!(fabs(ar[p * GYROSTAT_NX + 7]) + fabs(ai[p * GYROSTAT_NX + 7]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 7) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            swap = ar[7 * GYROSTAT_NX + j];
+            ar[7 * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
+            ar[p * GYROSTAT_NX + j] = swap;
+            swap = ai[7 * GYROSTAT_NX + j];
+            ai[7 * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
+            ai[p * GYROSTAT_NX + j] = swap;
         }
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            lr = ar[i * GYROSTAT_NX + k] * ar[k * GYROSTAT_NX + k] - ai[i * GYROSTAT_NX + k] *
-                    ai[k * GYROSTAT_NX + k];
-            li = ar[i * GYROSTAT_NX + k] * ai[k * GYROSTAT_NX + k] + ai[i * GYROSTAT_NX + k] *
-                    ar[k * GYROSTAT_NX + k];
-            ar[i * GYROSTAT_NX + k] = lr;
-            ai[i * GYROSTAT_NX + k] = li;
-            for (j = k + 1; j < GYROSTAT_NX; ++j) {
-                ur = ar[k * GYROSTAT_NX + j];
-                ui = ai[k * GYROSTAT_NX + j];
-                ar[i * GYROSTAT_NX + j] = ar[i * GYROSTAT_NX + j] - (lr * ur - li * ui);
-                ai[i * GYROSTAT_NX + j] = ai[i * GYROSTAT_NX + j] - (lr * ui + li * ur);
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[105];
+    im = ai[105];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[105] = 1.0 / d;
+        ai[105] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[105] = r / d;
+        ai[105] = -1.0 / d;
+    }
+    for (i = 8; i < 10; ++i) {
+        lr = ar[i * GYROSTAT_NX + 7] * ar[105] - ai[i * GYROSTAT_NX + 7] * ai[105];
+        li = ar[i * GYROSTAT_NX + 7] * ai[105] + ai[i * GYROSTAT_NX + 7] * ar[105];
+        ar[i * GYROSTAT_NX + 7] = lr;
+        ai[i * GYROSTAT_NX + 7] = li;
+        ur = ar[106];
+        ui = ai[106];
+        ar[i * GYROSTAT_NX + 8] = ar[i * GYROSTAT_NX + 8] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 8] = ai[i * GYROSTAT_NX + 8] - (lr * ui + li * ur);
+        ur = ar[107];
+        ui = ai[107];
+        ar[i * GYROSTAT_NX + 9] = ar[i * GYROSTAT_NX + 9] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 9] = ai[i * GYROSTAT_NX + 9] - (lr * ui + li * ur);
+        ur = ar[108];
+        ui = ai[108];
+        ar[i * GYROSTAT_NX + 10] = ar[i * GYROSTAT_NX + 10] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 10] = ai[i * GYROSTAT_NX + 10] - (lr * ui + li * ur);
+    }
+    ur = ar[106];
+    ui = ai[106];
+    ar[106] = ur * ar[105] - ui * ai[105];
+    ai[106] = ur * ai[105] + ui * ar[105];
+    ur = ar[107];
+    ui = ai[107];
+    ar[107] = ur * ar[105] - ui * ai[105];
+    ai[107] = ur * ai[105] + ui * ar[105];
+    ur = ar[108];
+    ui = ai[108];
+    ar[108] = ur * ar[105] - ui * ai[105];
+    ai[108] = ur * ai[105] + ui * ar[105];
+    p = 8;
+    for (i = 9; i < 10; ++i) {
+        if (fabs(ar[i * GYROSTAT_NX + 8]) + fabs(ai[i * GYROSTAT_NX + 8]) > fabs(ar[p * GYROSTAT_NX + 8]) + fabs(ai[p * GYROSTAT_NX + 8])) {
+            p = i;
         }
-        for (j = k + 1; j < GYROSTAT_NX; ++j) {
-            ur = ar[k * GYROSTAT_NX + j];
-            ui = ai[k * GYROSTAT_NX + j];
-            ar[k * GYROSTAT_NX + j] = ur * ar[k * GYROSTAT_NX + k] - ui * ai[k * GYROSTAT_NX + k];  /* u_kj / u_kk */
-            ai[k * GYROSTAT_NX + j] = ur * ai[k * GYROSTAT_NX + k] + ui * ar[k * GYROSTAT_NX + k];
+    }
+    piv[8] = p;
+    if (!(fabs(ar[p * GYROSTAT_NX + 8]) + fabs(ai[p * GYROSTAT_NX + 8]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 8) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            swap = ar[8 * GYROSTAT_NX + j];
+            ar[8 * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
+            ar[p * GYROSTAT_NX + j] = swap;
+            swap = ai[8 * GYROSTAT_NX + j];
+            ai[8 * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
+            ai[p * GYROSTAT_NX + j] = swap;
         }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[120];
+    im = ai[120];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[120] = 1.0 / d;
+        ai[120] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[120] = r / d;
+        ai[120] = -1.0 / d;
+    }
+    for (i = 9; i < 10; ++i) {
+        lr = ar[i * GYROSTAT_NX + 8] * ar[120] - ai[i * GYROSTAT_NX + 8] * ai[120];
+        li = ar[i * GYROSTAT_NX + 8] * ai[120] + ai[i * GYROSTAT_NX + 8] * ar[120];
+        ar[i * GYROSTAT_NX + 8] = lr;
+        ai[i * GYROSTAT_NX + 8] = li;
+        ur = ar[121];
+        ui = ai[121];
+        ar[i * GYROSTAT_NX + 9] = ar[i * GYROSTAT_NX + 9] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 9] = ai[i * GYROSTAT_NX + 9] - (lr * ui + li * ur);
+        ur = ar[122];
+        ui = ai[122];
+        ar[i * GYROSTAT_NX + 10] = ar[i * GYROSTAT_NX + 10] - (lr * ur - li * ui);
+        ai[i * GYROSTAT_NX + 10] = ai[i * GYROSTAT_NX + 10] - (lr * ui + li * ur);
+    }
+    ur = ar[121];
+    ui = ai[121];
+    ar[121] = ur * ar[120] - ui * ai[120];
+    ai[121] = ur * ai[120] + ui * ar[120];
+    ur = ar[122];
+    ui = ai[122];
+    ar[122] = ur * ar[120] - ui * ai[120];
+    ai[122] = ur * ai[120] + ui * ar[120];
+    piv[9] = 9;
+    if (!(fabs(ar[135]) + fabs(ai[135]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[135];
+    im = ai[135];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[135] = 1.0 / d;
+        ai[135] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[135] = r / d;
+        ai[135] = -1.0 / d;
+    }
+    ur = ar[136];
+    ui = ai[136];
+    ar[136] = ur * ar[135] - ui * ai[135];
+    ai[136] = ur * ai[135] + ui * ar[135];
+    piv[10] = 10;
+    if (!(fabs(ar[150]) + fabs(ai[150]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[150];
+    im = ai[150];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[150] = 1.0 / d;
+        ai[150] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[150] = r / d;
+        ai[150] = -1.0 / d;
+    }
+    piv[11] = 11;
+    if (!(fabs(ar[165]) + fabs(ai[165]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[165];
+    im = ai[165];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[165] = 1.0 / d;
+        ai[165] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[165] = r / d;
+        ai[165] = -1.0 / d;
+    }
+    piv[12] = 12;
+    if (!(fabs(ar[180]) + fabs(ai[180]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[180];
+    im = ai[180];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[180] = 1.0 / d;
+        ai[180] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[180] = r / d;
+        ai[180] = -1.0 / d;
+    }
+    piv[13] = 13;
+    if (!(fabs(ar[195]) + fabs(ai[195]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[195];
+    im = ai[195];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[195] = 1.0 / d;
+        ai[195] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[195] = r / d;
+        ai[195] = -1.0 / d;
     }
     return 0;
 }
@@ -877,15 +1390,30 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 {
     double swap;
     double re;
-    int i;
 
-    for (i = 0; i < GYROSTAT_NX; ++i) {
-        swap = br[i];
-        br[i] = br[piv[i]];
-        br[piv[i]] = swap;
-        swap = bi[i];
-        bi[i] = bi[piv[i]];
-        bi[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = br[1];
+        br[1] = br[piv[1]];
+        br[piv[1]] = swap;
+        swap = bi[1];
+        bi[1] = bi[piv[1]];
+        bi[piv[1]] = swap;
+    }
+    if (piv[7] != 7) {
+        swap = br[7];
+        br[7] = br[piv[7]];
+        br[piv[7]] = swap;
+        swap = bi[7];
+        bi[7] = bi[piv[7]];
+        bi[piv[7]] = swap;
+    }
+    if (piv[8] != 8) {
+        swap = br[8];
+        br[8] = br[piv[8]];
+        br[piv[8]] = swap;
+        swap = bi[8];
+        bi[8] = bi[piv[8]];
+        bi[piv[8]] = swap;
     }
     br[2] = br[2] - ar[29] * br[1] + ai[29] * bi[1];
     bi[2] = bi[2] - ar[29] * bi[1] - ai[29] * br[1];
@@ -1671,6 +2199,7 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
         e2r[i] = -J[i];
         e2i[i] = 0.0;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         e1[i * GYROSTAT_NX + i] = e1[i * GYROSTAT_NX + i] + gamma_h;
         e2r[i * GYROSTAT_NX + i] = e2r[i * GYROSTAT_NX + i] + alpha_h;
@@ -1701,18 +2230,22 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     gamma_h = 3.637834252744496 / h;
     alpha_h = 2.6810828736277523 / h;
     beta_h = 3.0504301992474105 / h;
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         y[i] = x[i] + z1[i];
     }
     gyrostat_rhs(t + 0.1550510257216822 * h, y, c, z1);
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         y[i] = x[i] + z2[i];
     }
     gyrostat_rhs(t + 0.6449489742783178 * h, y, c, z2);
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         y[i] = x[i] + z3[i];
     }
     gyrostat_rhs(t + h, y, c, z3);
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         double a1, a2, a3;
         a1 = z1[i];
@@ -1728,6 +2261,7 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     lu_solve(e1, piv1, z1);
     lu_solve_complex(e2r, e2i, piv2, z2, z3);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         double s1, s2, s3;
         s1 = z1[i] / scal[i];
@@ -1754,6 +2288,7 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     double norm;
     int i;
 
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
                 z3[i]) / h;
@@ -1761,21 +2296,25 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     }
     lu_solve(e1, piv1, err);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         total = total + err[i] / scal[i] * (err[i] / scal[i]);
     }
     norm = sqrt(total / GYROSTAT_NX);
     if (norm >= 1.0 && again) {
+        #pragma GCC unroll 1
         for (i = 0; i < GYROSTAT_NX; ++i) {
             y[i] = x[i] + err[i];
         }
         gyrostat_rhs(t, y, c, err);
         stats->rhs_calls = stats->rhs_calls + 1;
+        #pragma GCC unroll 1
         for (i = 0; i < GYROSTAT_NX; ++i) {
             err[i] = err[i] + g[i];
         }
         lu_solve(e1, piv1, err);
         total = 0.0;
+        #pragma GCC unroll 1
         for (i = 0; i < GYROSTAT_NX; ++i) {
             total = total + err[i] / scal[i] * (err[i] / scal[i]);
         }
@@ -1842,6 +2381,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     double c1q;
     double c2q;
     double c3q;
+    double theta_k;
     int last;
     int first;
     int reject;
@@ -1854,6 +2394,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int singular;
     int start;
     int i;
+    int k;
 
     start = ode_start(5, GYROSTAT_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
             stats);
@@ -1875,6 +2416,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     need_lu = 1;
     nonfinite = 0;
     singular = 0;
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         comp[i] = 0.0;
         ak1[i] = 0.0;
@@ -1888,6 +2430,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         h = t1 - t;
         last = 1;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < GYROSTAT_NX; ++i) {
         scal[i] = atol_e + rtol_e * fabs(x[i]);
     }
@@ -1929,6 +2472,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
 
         /* the Newton iterations start from the last step's collocation polynomial */
         if (first) {
+            #pragma GCC unroll 1
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 z1[i] = 0.0;
                 z2[i] = 0.0;
@@ -1941,6 +2485,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             c3q = h / h_old;
             c1q = 0.1550510257216822 * c3q;
             c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 double a1, a2, a3;
                 a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
@@ -1987,7 +2532,11 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                     break;
                 }
                 rate = theta / (1.0 - theta);
-                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
                 if (predicted >= 1.0) {
                     q = dmax(1e-4, dmin(20.0, predicted));
                     h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
@@ -1996,6 +2545,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                 }
             }
             dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 double a1, a2, a3;
                 a1 = w1[i] + z1[i];
@@ -2015,6 +2565,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         }
         if (outcome == 0) {
             err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 dx[i] = z3[i] - comp[i];
                 xnew[i] = x[i] + dx[i];
@@ -2057,6 +2608,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             h_acc = h;
             err_acc = dmax(1e-2, err);
             h_old = h;
+            #pragma GCC unroll 1
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 double ak;
                 ak = (z2[i] - z1[i]) / 0.4898979485566356;
@@ -2071,6 +2623,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             if (last) {
                 return GYROSTAT_ODE_OK;
             }
+            #pragma GCC unroll 1
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 f0[i] = fnew[i];
                 scal[i] = atol_e + rtol_e * fabs(x[i]);

@@ -669,52 +669,185 @@ contains
 
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11),
-  ! (11, 12), (12, 13), (13, 14) (row i's block ends
-  ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+  ! (11, 12), (12, 13), (13, 14), unrolled over the entries
+  ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
   ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
   function lu_decompose(a, piv) result(res)
     real(c_double), intent(inout) :: a(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:13) = [1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14]
     integer(c_int) :: p
     real(c_double) :: m
     real(c_double) :: swap
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(a(i * nx + k)) > abs(a(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(a(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(a(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(0) = 1.0_c_double / a(0)
+    a(1) = a(1) * a(0)
+    a(2) = a(2) * a(0)
+    a(7) = a(7) * a(0)
+    a(9) = a(9) * a(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(a(i * nx + 1)) > abs(a(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = a(k * nx + j)
-          a(k * nx + j) = a(p * nx + j)
-          a(p * nx + j) = swap
-        end do
-      end if
-      a(k * nx + k) = 1.0_c_double / a(k * nx + k)
-      do i = k + 1, lu_end(k) - 1
-        m = a(i * nx + k) * a(k * nx + k)
-        a(i * nx + k) = m
-        do j = k + 1, nx - 1
-          a(i * nx + j) = a(i * nx + j) - m * a(k * nx + j)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        a(k * nx + j) = a(k * nx + j) * a(k * nx + k)  ! u_kj / u_kk
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(a(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = a(1 * nx + j)
+        a(1 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(15) = 1.0_c_double / a(15)
+    do i = 2, 3 - 1
+      m = a(i * nx + 1) * a(15)
+      a(i * nx + 1) = m
+      a(i * nx + 2) = a(i * nx + 2) - m * a(16)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(21)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(22)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(23)
+    end do
+    a(16) = a(16) * a(15)
+    a(21) = a(21) * a(15)
+    a(22) = a(22) * a(15)
+    a(23) = a(23) * a(15)
+    piv(2) = 2
+    if (.not. (abs(a(30)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(30) = 1.0_c_double / a(30)
+    a(35) = a(35) * a(30)
+    a(36) = a(36) * a(30)
+    a(37) = a(37) * a(30)
+    piv(3) = 3
+    if (.not. (abs(a(45)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(45) = 1.0_c_double / a(45)
+    a(50) = a(50) * a(45)
+    a(52) = a(52) * a(45)
+    piv(4) = 4
+    if (.not. (abs(a(60)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(60) = 1.0_c_double / a(60)
+    a(67) = a(67) * a(60)
+    piv(5) = 5
+    if (.not. (abs(a(75)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(75) = 1.0_c_double / a(75)
+    a(82) = a(82) * a(75)
+    piv(6) = 6
+    if (.not. (abs(a(90)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(90) = 1.0_c_double / a(90)
+    a(97) = a(97) * a(90)
+    p = 7
+    do i = 8, 10 - 1
+      if (abs(a(i * nx + 7)) > abs(a(p * nx + 7))) then
+        p = i
+      end if
+    end do
+    piv(7) = p
+    if (.not. (abs(a(p * nx + 7)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 7) then
+      do j = 7, nx - 1
+        swap = a(7 * nx + j)
+        a(7 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(105) = 1.0_c_double / a(105)
+    do i = 8, 10 - 1
+      m = a(i * nx + 7) * a(105)
+      a(i * nx + 7) = m
+      a(i * nx + 8) = a(i * nx + 8) - m * a(106)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(107)
+      a(i * nx + 10) = a(i * nx + 10) - m * a(108)
+    end do
+    a(106) = a(106) * a(105)
+    a(107) = a(107) * a(105)
+    a(108) = a(108) * a(105)
+    p = 8
+    do i = 9, 10 - 1
+      if (abs(a(i * nx + 8)) > abs(a(p * nx + 8))) then
+        p = i
+      end if
+    end do
+    piv(8) = p
+    if (.not. (abs(a(p * nx + 8)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 8) then
+      do j = 7, nx - 1
+        swap = a(8 * nx + j)
+        a(8 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(120) = 1.0_c_double / a(120)
+    do i = 9, 10 - 1
+      m = a(i * nx + 8) * a(120)
+      a(i * nx + 8) = m
+      a(i * nx + 9) = a(i * nx + 9) - m * a(121)
+      a(i * nx + 10) = a(i * nx + 10) - m * a(122)
+    end do
+    a(121) = a(121) * a(120)
+    a(122) = a(122) * a(120)
+    piv(9) = 9
+    if (.not. (abs(a(135)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(135) = 1.0_c_double / a(135)
+    a(136) = a(136) * a(135)
+    piv(10) = 10
+    if (.not. (abs(a(150)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(150) = 1.0_c_double / a(150)
+    piv(11) = 11
+    if (.not. (abs(a(165)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(165) = 1.0_c_double / a(165)
+    piv(12) = 12
+    if (.not. (abs(a(180)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(180) = 1.0_c_double / a(180)
+    piv(13) = 13
+    if (.not. (abs(a(195)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(195) = 1.0_c_double / a(195)
     res = .false.
     return
   end function lu_decompose
@@ -726,13 +859,22 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(inout) :: b(0:nx - 1)
     real(c_double) :: swap
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = b(i)
-      b(i) = b(piv(i))
-      b(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = b(1)
+      b(1) = b(piv(1))
+      b(piv(1)) = swap
+    end if
+    if (piv(7) /= 7) then
+      swap = b(7)
+      b(7) = b(piv(7))
+      b(piv(7)) = swap
+    end if
+    if (piv(8) /= 8) then
+      swap = b(8)
+      b(8) = b(piv(8))
+      b(piv(8)) = swap
+    end if
     b(2) = b(2) - lu(29) * b(1)
     b(8) = b(8) - lu(119) * b(7)
     b(9) = (b(9) - lu(133) * b(7)) - lu(134) * b(8)
@@ -759,7 +901,6 @@ contains
     real(c_double), intent(inout) :: ai(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:13) = [1, 3, 3, 4, 5, 6, 7, 10, 10, 10, 11, 12, 13, 14]
     integer(c_int) :: p
     real(c_double) :: swap
     real(c_double) :: re
@@ -772,63 +913,463 @@ contains
     real(c_double) :: ui
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(ar(i * nx + k)) + abs(ai(i * nx + k)) > abs(ar(p * nx + k)) + abs(ai(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(ar(p * nx + k)) + abs(ai(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(ar(0)) + abs(ai(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(0)
+    im = ai(0)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(0) = 1.0_c_double / d
+      ai(0) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(0) = r / d
+      ai(0) = (-1.0_c_double) / d
+    end if
+    ur = ar(1)
+    ui = ai(1)
+    ar(1) = ur * ar(0) - ui * ai(0)
+    ai(1) = ur * ai(0) + ui * ar(0)
+    ur = ar(2)
+    ui = ai(2)
+    ar(2) = ur * ar(0) - ui * ai(0)
+    ai(2) = ur * ai(0) + ui * ar(0)
+    ur = ar(7)
+    ui = ai(7)
+    ar(7) = ur * ar(0) - ui * ai(0)
+    ai(7) = ur * ai(0) + ui * ar(0)
+    ur = ar(9)
+    ui = ai(9)
+    ar(9) = ur * ar(0) - ui * ai(0)
+    ai(9) = ur * ai(0) + ui * ar(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = ar(k * nx + j)
-          ar(k * nx + j) = ar(p * nx + j)
-          ar(p * nx + j) = swap
-          swap = ai(k * nx + j)
-          ai(k * nx + j) = ai(p * nx + j)
-          ai(p * nx + j) = swap
-        end do
-      end if
-      ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
-      re = ar(k * nx + k)
-      im = ai(k * nx + k)
-      if (abs(re) >= abs(im)) then
-        r = im / re
-        d = re + im * r
-        ar(k * nx + k) = 1.0_c_double / d
-        ai(k * nx + k) = (-r) / d
-      else
-        r = re / im
-        d = im + re * r
-        ar(k * nx + k) = r / d
-        ai(k * nx + k) = (-1.0_c_double) / d
-      end if
-      do i = k + 1, lu_end(k) - 1
-        lr = ar(i * nx + k) * ar(k * nx + k) - ai(i * nx + k) * ai(k * nx + k)
-        li = ar(i * nx + k) * ai(k * nx + k) + ai(i * nx + k) * ar(k * nx + k)
-        ar(i * nx + k) = lr
-        ai(i * nx + k) = li
-        do j = k + 1, nx - 1
-          ur = ar(k * nx + j)
-          ui = ai(k * nx + j)
-          ar(i * nx + j) = ar(i * nx + j) - (lr * ur - li * ui)
-          ai(i * nx + j) = ai(i * nx + j) - (lr * ui + li * ur)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        ur = ar(k * nx + j)
-        ui = ai(k * nx + j)
-        ar(k * nx + j) = ur * ar(k * nx + k) - ui * ai(k * nx + k)  ! u_kj / u_kk
-        ai(k * nx + j) = ur * ai(k * nx + k) + ui * ar(k * nx + k)
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(ar(p * nx + 1)) + abs(ai(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = ar(1 * nx + j)
+        ar(1 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(1 * nx + j)
+        ai(1 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(15)
+    im = ai(15)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(15) = 1.0_c_double / d
+      ai(15) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(15) = r / d
+      ai(15) = (-1.0_c_double) / d
+    end if
+    do i = 2, 3 - 1
+      lr = ar(i * nx + 1) * ar(15) - ai(i * nx + 1) * ai(15)
+      li = ar(i * nx + 1) * ai(15) + ai(i * nx + 1) * ar(15)
+      ar(i * nx + 1) = lr
+      ai(i * nx + 1) = li
+      ur = ar(16)
+      ui = ai(16)
+      ar(i * nx + 2) = ar(i * nx + 2) - (lr * ur - li * ui)
+      ai(i * nx + 2) = ai(i * nx + 2) - (lr * ui + li * ur)
+      ur = ar(21)
+      ui = ai(21)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(22)
+      ui = ai(22)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(23)
+      ui = ai(23)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(16)
+    ui = ai(16)
+    ar(16) = ur * ar(15) - ui * ai(15)
+    ai(16) = ur * ai(15) + ui * ar(15)
+    ur = ar(21)
+    ui = ai(21)
+    ar(21) = ur * ar(15) - ui * ai(15)
+    ai(21) = ur * ai(15) + ui * ar(15)
+    ur = ar(22)
+    ui = ai(22)
+    ar(22) = ur * ar(15) - ui * ai(15)
+    ai(22) = ur * ai(15) + ui * ar(15)
+    ur = ar(23)
+    ui = ai(23)
+    ar(23) = ur * ar(15) - ui * ai(15)
+    ai(23) = ur * ai(15) + ui * ar(15)
+    piv(2) = 2
+    if (.not. (abs(ar(30)) + abs(ai(30)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(30)
+    im = ai(30)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(30) = 1.0_c_double / d
+      ai(30) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(30) = r / d
+      ai(30) = (-1.0_c_double) / d
+    end if
+    ur = ar(35)
+    ui = ai(35)
+    ar(35) = ur * ar(30) - ui * ai(30)
+    ai(35) = ur * ai(30) + ui * ar(30)
+    ur = ar(36)
+    ui = ai(36)
+    ar(36) = ur * ar(30) - ui * ai(30)
+    ai(36) = ur * ai(30) + ui * ar(30)
+    ur = ar(37)
+    ui = ai(37)
+    ar(37) = ur * ar(30) - ui * ai(30)
+    ai(37) = ur * ai(30) + ui * ar(30)
+    piv(3) = 3
+    if (.not. (abs(ar(45)) + abs(ai(45)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(45)
+    im = ai(45)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(45) = 1.0_c_double / d
+      ai(45) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(45) = r / d
+      ai(45) = (-1.0_c_double) / d
+    end if
+    ur = ar(50)
+    ui = ai(50)
+    ar(50) = ur * ar(45) - ui * ai(45)
+    ai(50) = ur * ai(45) + ui * ar(45)
+    ur = ar(52)
+    ui = ai(52)
+    ar(52) = ur * ar(45) - ui * ai(45)
+    ai(52) = ur * ai(45) + ui * ar(45)
+    piv(4) = 4
+    if (.not. (abs(ar(60)) + abs(ai(60)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(60)
+    im = ai(60)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(60) = 1.0_c_double / d
+      ai(60) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(60) = r / d
+      ai(60) = (-1.0_c_double) / d
+    end if
+    ur = ar(67)
+    ui = ai(67)
+    ar(67) = ur * ar(60) - ui * ai(60)
+    ai(67) = ur * ai(60) + ui * ar(60)
+    piv(5) = 5
+    if (.not. (abs(ar(75)) + abs(ai(75)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(75)
+    im = ai(75)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(75) = 1.0_c_double / d
+      ai(75) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(75) = r / d
+      ai(75) = (-1.0_c_double) / d
+    end if
+    ur = ar(82)
+    ui = ai(82)
+    ar(82) = ur * ar(75) - ui * ai(75)
+    ai(82) = ur * ai(75) + ui * ar(75)
+    piv(6) = 6
+    if (.not. (abs(ar(90)) + abs(ai(90)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(90)
+    im = ai(90)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(90) = 1.0_c_double / d
+      ai(90) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(90) = r / d
+      ai(90) = (-1.0_c_double) / d
+    end if
+    ur = ar(97)
+    ui = ai(97)
+    ar(97) = ur * ar(90) - ui * ai(90)
+    ai(97) = ur * ai(90) + ui * ar(90)
+    p = 7
+    do i = 8, 10 - 1
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+        p = i
+      end if
+    end do
+    piv(7) = p
+    if (.not. (abs(ar(p * nx + 7)) + abs(ai(p * nx + 7)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 7) then
+      do j = 7, nx - 1
+        swap = ar(7 * nx + j)
+        ar(7 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(7 * nx + j)
+        ai(7 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(105)
+    im = ai(105)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(105) = 1.0_c_double / d
+      ai(105) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(105) = r / d
+      ai(105) = (-1.0_c_double) / d
+    end if
+    do i = 8, 10 - 1
+      lr = ar(i * nx + 7) * ar(105) - ai(i * nx + 7) * ai(105)
+      li = ar(i * nx + 7) * ai(105) + ai(i * nx + 7) * ar(105)
+      ar(i * nx + 7) = lr
+      ai(i * nx + 7) = li
+      ur = ar(106)
+      ui = ai(106)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(107)
+      ui = ai(107)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+      ur = ar(108)
+      ui = ai(108)
+      ar(i * nx + 10) = ar(i * nx + 10) - (lr * ur - li * ui)
+      ai(i * nx + 10) = ai(i * nx + 10) - (lr * ui + li * ur)
+    end do
+    ur = ar(106)
+    ui = ai(106)
+    ar(106) = ur * ar(105) - ui * ai(105)
+    ai(106) = ur * ai(105) + ui * ar(105)
+    ur = ar(107)
+    ui = ai(107)
+    ar(107) = ur * ar(105) - ui * ai(105)
+    ai(107) = ur * ai(105) + ui * ar(105)
+    ur = ar(108)
+    ui = ai(108)
+    ar(108) = ur * ar(105) - ui * ai(105)
+    ai(108) = ur * ai(105) + ui * ar(105)
+    p = 8
+    do i = 9, 10 - 1
+      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) then
+        p = i
+      end if
+    end do
+    piv(8) = p
+    if (.not. (abs(ar(p * nx + 8)) + abs(ai(p * nx + 8)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 8) then
+      do j = 7, nx - 1
+        swap = ar(8 * nx + j)
+        ar(8 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(8 * nx + j)
+        ai(8 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(120)
+    im = ai(120)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(120) = 1.0_c_double / d
+      ai(120) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(120) = r / d
+      ai(120) = (-1.0_c_double) / d
+    end if
+    do i = 9, 10 - 1
+      lr = ar(i * nx + 8) * ar(120) - ai(i * nx + 8) * ai(120)
+      li = ar(i * nx + 8) * ai(120) + ai(i * nx + 8) * ar(120)
+      ar(i * nx + 8) = lr
+      ai(i * nx + 8) = li
+      ur = ar(121)
+      ui = ai(121)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+      ur = ar(122)
+      ui = ai(122)
+      ar(i * nx + 10) = ar(i * nx + 10) - (lr * ur - li * ui)
+      ai(i * nx + 10) = ai(i * nx + 10) - (lr * ui + li * ur)
+    end do
+    ur = ar(121)
+    ui = ai(121)
+    ar(121) = ur * ar(120) - ui * ai(120)
+    ai(121) = ur * ai(120) + ui * ar(120)
+    ur = ar(122)
+    ui = ai(122)
+    ar(122) = ur * ar(120) - ui * ai(120)
+    ai(122) = ur * ai(120) + ui * ar(120)
+    piv(9) = 9
+    if (.not. (abs(ar(135)) + abs(ai(135)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(135)
+    im = ai(135)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(135) = 1.0_c_double / d
+      ai(135) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(135) = r / d
+      ai(135) = (-1.0_c_double) / d
+    end if
+    ur = ar(136)
+    ui = ai(136)
+    ar(136) = ur * ar(135) - ui * ai(135)
+    ai(136) = ur * ai(135) + ui * ar(135)
+    piv(10) = 10
+    if (.not. (abs(ar(150)) + abs(ai(150)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(150)
+    im = ai(150)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(150) = 1.0_c_double / d
+      ai(150) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(150) = r / d
+      ai(150) = (-1.0_c_double) / d
+    end if
+    piv(11) = 11
+    if (.not. (abs(ar(165)) + abs(ai(165)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(165)
+    im = ai(165)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(165) = 1.0_c_double / d
+      ai(165) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(165) = r / d
+      ai(165) = (-1.0_c_double) / d
+    end if
+    piv(12) = 12
+    if (.not. (abs(ar(180)) + abs(ai(180)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(180)
+    im = ai(180)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(180) = 1.0_c_double / d
+      ai(180) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(180) = r / d
+      ai(180) = (-1.0_c_double) / d
+    end if
+    piv(13) = 13
+    if (.not. (abs(ar(195)) + abs(ai(195)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(195)
+    im = ai(195)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(195) = 1.0_c_double / d
+      ai(195) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(195) = r / d
+      ai(195) = (-1.0_c_double) / d
+    end if
     res = .false.
     return
   end function lu_decompose_complex
@@ -842,16 +1383,31 @@ contains
     real(c_double), intent(inout) :: bi(0:nx - 1)
     real(c_double) :: swap
     real(c_double) :: re
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = br(i)
-      br(i) = br(piv(i))
-      br(piv(i)) = swap
-      swap = bi(i)
-      bi(i) = bi(piv(i))
-      bi(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = br(1)
+      br(1) = br(piv(1))
+      br(piv(1)) = swap
+      swap = bi(1)
+      bi(1) = bi(piv(1))
+      bi(piv(1)) = swap
+    end if
+    if (piv(7) /= 7) then
+      swap = br(7)
+      br(7) = br(piv(7))
+      br(piv(7)) = swap
+      swap = bi(7)
+      bi(7) = bi(piv(7))
+      bi(piv(7)) = swap
+    end if
+    if (piv(8) /= 8) then
+      swap = br(8)
+      br(8) = br(piv(8))
+      br(piv(8)) = swap
+      swap = bi(8)
+      bi(8) = bi(piv(8))
+      bi(piv(8)) = swap
+    end if
     br(2) = (br(2) - ar(29) * br(1)) + ai(29) * bi(1)
     bi(2) = (bi(2) - ar(29) * bi(1)) - ai(29) * br(1)
     br(8) = (br(8) - ar(119) * br(7)) + ai(119) * bi(7)
@@ -1759,6 +2315,7 @@ contains
       e2r(i) = -J(i)
       e2i(i) = 0.0_c_double
     end do
+    !GCC$ unroll 1
     do i = 0, nx - 1
       e1(i * nx + i) = e1(i * nx + i) + gamma_h
       e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
@@ -1810,18 +2367,22 @@ contains
     gamma_h = 3.637834252744496_c_double / h
     alpha_h = 2.6810828736277523_c_double / h
     beta_h = 3.0504301992474105_c_double / h
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z1(i)
     end do
     call gyrostat_rhs(t + 0.1550510257216822_c_double * h, y, c, z1)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z2(i)
     end do
     call gyrostat_rhs(t + 0.6449489742783178_c_double * h, y, c, z2)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z3(i)
     end do
     call gyrostat_rhs(t + h, y, c, z3)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       a1 = z1(i)
       a2 = z2(i)
@@ -1836,6 +2397,7 @@ contains
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       s1 = z1(i) / scal(i)
       s2 = z2(i) / scal(i)
@@ -1872,6 +2434,7 @@ contains
     real(c_double) :: norm
     integer(c_int) :: i
 
+    !GCC$ unroll 1
     do i = 0, nx - 1
       g(i) = (((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i)) - &
           0.3333333333333333_c_double * z3(i)) / h
@@ -1879,21 +2442,25 @@ contains
     end do
     call lu_solve(e1, piv1, err)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       total = total + (err(i) / scal(i)) * (err(i) / scal(i))
     end do
     norm = sqrt(total / nx)
     if (norm >= 1.0_c_double .and. again) then
+      !GCC$ unroll 1
       do i = 0, nx - 1
         y(i) = x(i) + err(i)
       end do
       call gyrostat_rhs(t, y, c, err)
       stats%rhs_calls = stats%rhs_calls + 1
+      !GCC$ unroll 1
       do i = 0, nx - 1
         err(i) = err(i) + g(i)
       end do
       call lu_solve(e1, piv1, err)
       total = 0.0_c_double
+      !GCC$ unroll 1
       do i = 0, nx - 1
         total = total + (err(i) / scal(i)) * (err(i) / scal(i))
       end do
@@ -1969,6 +2536,7 @@ contains
     real(c_double) :: c1q
     real(c_double) :: c2q
     real(c_double) :: c3q
+    real(c_double) :: theta_k
     logical :: last
     logical :: first
     logical :: reject
@@ -1985,6 +2553,7 @@ contains
     real(c_double) :: a3
     real(c_double) :: ak
     integer(c_int) :: i
+    integer(c_int) :: k
 
     start = ode_start(5, GYROSTAT_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, h, &
         stats)
@@ -2007,6 +2576,7 @@ contains
     need_lu = .true.
     nonfinite = .false.
     singular = 0
+    !GCC$ unroll 1
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
       ak1(i) = 0.0_c_double
@@ -2021,6 +2591,7 @@ contains
       h = t1 - t
       last = .true.
     end if
+    !GCC$ unroll 1
     do i = 0, nx - 1
       scal(i) = atol_e + rtol_e * abs(x(i))
     end do
@@ -2066,6 +2637,7 @@ contains
 
       ! the Newton iterations start from the last step's collocation polynomial
       if (first) then
+        !GCC$ unroll 1
         do i = 0, nx - 1
           z1(i) = 0.0_c_double
           z2(i) = 0.0_c_double
@@ -2078,6 +2650,7 @@ contains
         c3q = h / h_old
         c1q = 0.1550510257216822_c_double * c3q
         c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
               0.8449489742783178_c_double) * ak3(i)))
@@ -2124,7 +2697,11 @@ contains
             exit
           end if
           rate = theta / (1.0_c_double - theta)
-          predicted = ((rate * dyno) * theta**real(6 - newt, c_double)) / newton_tol
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
           if (predicted >= 1.0_c_double) then
             q = max(1e-4_c_double, min(20.0_c_double, predicted))
             h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
@@ -2133,6 +2710,7 @@ contains
           end if
         end if
         dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = w1(i) + z1(i)
           a2 = w2(i) + z2(i)
@@ -2152,6 +2730,7 @@ contains
       end do
       if (outcome == 0) then
         err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
         do i = 0, nx - 1
           dx(i) = z3(i) - comp(i)
           xnew(i) = x(i) + dx(i)
@@ -2196,6 +2775,7 @@ contains
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         h_old = h
+        !GCC$ unroll 1
         do i = 0, nx - 1
           ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
           ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
@@ -2210,6 +2790,7 @@ contains
           res = GYROSTAT_ODE_OK
           return
         end if
+        !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
           scal(i) = atol_e + rtol_e * abs(x(i))

@@ -607,51 +607,209 @@ static inline double step_exp2(double y)
 }
 
 /* In-place LU decomposition with partial pivoting within the diagonal
-   blocks (0, 1), (1, 3), (3, 9) (row i's block ends
-   before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+   blocks (0, 1), (1, 3), (3, 9), unrolled over the entries
+   of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
    row k swapped with piv[k]. 1 when a pivot is zero: singular. */
 static int lu_decompose(double *a, int *piv)
 {
-    static const int lu_end[9] = {1, 3, 3, 9, 9, 9, 9, 9, 9};
     int p;
     double m;
     double swap;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < RW3_ORTHOGONAL_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(a[i * RW3_ORTHOGONAL_NX + k]) > fabs(a[p * RW3_ORTHOGONAL_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(a[p * RW3_ORTHOGONAL_NX + k]) > 0.0)) {
-            return 1;  /* singular */
-        }
-        if (p != k) {
-            for (j = 0; j < RW3_ORTHOGONAL_NX; ++j) {
-                swap = a[k * RW3_ORTHOGONAL_NX + j];
-                a[k * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
-                a[p * RW3_ORTHOGONAL_NX + j] = swap;
-            }
-        }
-        a[k * RW3_ORTHOGONAL_NX + k] = 1.0 / a[k * RW3_ORTHOGONAL_NX + k];
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            m = a[i * RW3_ORTHOGONAL_NX + k] * a[k * RW3_ORTHOGONAL_NX + k];
-            a[i * RW3_ORTHOGONAL_NX + k] = m;
-            for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
-                a[i * RW3_ORTHOGONAL_NX + j] = a[i * RW3_ORTHOGONAL_NX + j] - m * a[k *
-                        RW3_ORTHOGONAL_NX + j];
-            }
-        }
-        for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
-            a[k * RW3_ORTHOGONAL_NX + j] = a[k * RW3_ORTHOGONAL_NX + j] * a[k * RW3_ORTHOGONAL_NX
-                    + k];  /* u_kj / u_kk */
+    piv[0] = 0;
+    if (!(fabs(a[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[0] = 1.0 / a[0];
+    a[1] = a[1] * a[0];
+    a[2] = a[2] * a[0];
+    a[3] = a[3] * a[0];
+    a[5] = a[5] * a[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(a[i * RW3_ORTHOGONAL_NX + 1]) > fabs(a[p * RW3_ORTHOGONAL_NX + 1])) {
+            p = i;
         }
     }
+    piv[1] = p;
+    if (!(fabs(a[p * RW3_ORTHOGONAL_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = a[1 * RW3_ORTHOGONAL_NX + j];
+            a[1 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
+            a[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    a[10] = 1.0 / a[10];
+    for (i = 2; i < 3; ++i) {
+        m = a[i * RW3_ORTHOGONAL_NX + 1] * a[10];
+        a[i * RW3_ORTHOGONAL_NX + 1] = m;
+        a[i * RW3_ORTHOGONAL_NX + 2] = a[i * RW3_ORTHOGONAL_NX + 2] - m * a[11];
+        a[i * RW3_ORTHOGONAL_NX + 3] = a[i * RW3_ORTHOGONAL_NX + 3] - m * a[12];
+        a[i * RW3_ORTHOGONAL_NX + 4] = a[i * RW3_ORTHOGONAL_NX + 4] - m * a[13];
+        a[i * RW3_ORTHOGONAL_NX + 5] = a[i * RW3_ORTHOGONAL_NX + 5] - m * a[14];
+    }
+    a[11] = a[11] * a[10];
+    a[12] = a[12] * a[10];
+    a[13] = a[13] * a[10];
+    a[14] = a[14] * a[10];
+    piv[2] = 2;
+    if (!(fabs(a[20]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[20] = 1.0 / a[20];
+    a[21] = a[21] * a[20];
+    a[22] = a[22] * a[20];
+    a[23] = a[23] * a[20];
+    p = 3;
+    for (i = 4; i < 9; ++i) {
+        if (fabs(a[i * RW3_ORTHOGONAL_NX + 3]) > fabs(a[p * RW3_ORTHOGONAL_NX + 3])) {
+            p = i;
+        }
+    }
+    piv[3] = p;
+    if (!(fabs(a[p * RW3_ORTHOGONAL_NX + 3]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 3) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = a[3 * RW3_ORTHOGONAL_NX + j];
+            a[3 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
+            a[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    a[30] = 1.0 / a[30];
+    for (i = 4; i < 9; ++i) {
+        m = a[i * RW3_ORTHOGONAL_NX + 3] * a[30];
+        a[i * RW3_ORTHOGONAL_NX + 3] = m;
+        a[i * RW3_ORTHOGONAL_NX + 4] = a[i * RW3_ORTHOGONAL_NX + 4] - m * a[31];
+        a[i * RW3_ORTHOGONAL_NX + 5] = a[i * RW3_ORTHOGONAL_NX + 5] - m * a[32];
+        a[i * RW3_ORTHOGONAL_NX + 6] = a[i * RW3_ORTHOGONAL_NX + 6] - m * a[33];
+        a[i * RW3_ORTHOGONAL_NX + 7] = a[i * RW3_ORTHOGONAL_NX + 7] - m * a[34];
+        a[i * RW3_ORTHOGONAL_NX + 8] = a[i * RW3_ORTHOGONAL_NX + 8] - m * a[35];
+    }
+    a[31] = a[31] * a[30];
+    a[32] = a[32] * a[30];
+    a[33] = a[33] * a[30];
+    a[34] = a[34] * a[30];
+    a[35] = a[35] * a[30];
+    p = 4;
+    for (i = 5; i < 9; ++i) {
+        if (fabs(a[i * RW3_ORTHOGONAL_NX + 4]) > fabs(a[p * RW3_ORTHOGONAL_NX + 4])) {
+            p = i;
+        }
+    }
+    piv[4] = p;
+    if (!(fabs(a[p * RW3_ORTHOGONAL_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = a[4 * RW3_ORTHOGONAL_NX + j];
+            a[4 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
+            a[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    a[40] = 1.0 / a[40];
+    for (i = 5; i < 9; ++i) {
+        m = a[i * RW3_ORTHOGONAL_NX + 4] * a[40];
+        a[i * RW3_ORTHOGONAL_NX + 4] = m;
+        a[i * RW3_ORTHOGONAL_NX + 5] = a[i * RW3_ORTHOGONAL_NX + 5] - m * a[41];
+        a[i * RW3_ORTHOGONAL_NX + 6] = a[i * RW3_ORTHOGONAL_NX + 6] - m * a[42];
+        a[i * RW3_ORTHOGONAL_NX + 7] = a[i * RW3_ORTHOGONAL_NX + 7] - m * a[43];
+        a[i * RW3_ORTHOGONAL_NX + 8] = a[i * RW3_ORTHOGONAL_NX + 8] - m * a[44];
+    }
+    a[41] = a[41] * a[40];
+    a[42] = a[42] * a[40];
+    a[43] = a[43] * a[40];
+    a[44] = a[44] * a[40];
+    p = 5;
+    for (i = 6; i < 9; ++i) {
+        if (fabs(a[i * RW3_ORTHOGONAL_NX + 5]) > fabs(a[p * RW3_ORTHOGONAL_NX + 5])) {
+            p = i;
+        }
+    }
+    piv[5] = p;
+    if (!(fabs(a[p * RW3_ORTHOGONAL_NX + 5]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 5) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = a[5 * RW3_ORTHOGONAL_NX + j];
+            a[5 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
+            a[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    a[50] = 1.0 / a[50];
+    for (i = 6; i < 9; ++i) {
+        m = a[i * RW3_ORTHOGONAL_NX + 5] * a[50];
+        a[i * RW3_ORTHOGONAL_NX + 5] = m;
+        a[i * RW3_ORTHOGONAL_NX + 6] = a[i * RW3_ORTHOGONAL_NX + 6] - m * a[51];
+        a[i * RW3_ORTHOGONAL_NX + 7] = a[i * RW3_ORTHOGONAL_NX + 7] - m * a[52];
+        a[i * RW3_ORTHOGONAL_NX + 8] = a[i * RW3_ORTHOGONAL_NX + 8] - m * a[53];
+    }
+    a[51] = a[51] * a[50];
+    a[52] = a[52] * a[50];
+    a[53] = a[53] * a[50];
+    p = 6;
+    for (i = 7; i < 9; ++i) {
+        if (fabs(a[i * RW3_ORTHOGONAL_NX + 6]) > fabs(a[p * RW3_ORTHOGONAL_NX + 6])) {
+            p = i;
+        }
+    }
+    piv[6] = p;
+    if (!(fabs(a[p * RW3_ORTHOGONAL_NX + 6]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 6) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = a[6 * RW3_ORTHOGONAL_NX + j];
+            a[6 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
+            a[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    a[60] = 1.0 / a[60];
+    for (i = 7; i < 9; ++i) {
+        m = a[i * RW3_ORTHOGONAL_NX + 6] * a[60];
+        a[i * RW3_ORTHOGONAL_NX + 6] = m;
+        a[i * RW3_ORTHOGONAL_NX + 7] = a[i * RW3_ORTHOGONAL_NX + 7] - m * a[61];
+        a[i * RW3_ORTHOGONAL_NX + 8] = a[i * RW3_ORTHOGONAL_NX + 8] - m * a[62];
+    }
+    a[61] = a[61] * a[60];
+    a[62] = a[62] * a[60];
+    p = 7;
+    for (i = 8; i < 9; ++i) {
+        if (fabs(a[i * RW3_ORTHOGONAL_NX + 7]) > fabs(a[p * RW3_ORTHOGONAL_NX + 7])) {
+            p = i;
+        }
+    }
+    piv[7] = p;
+    if (!(fabs(a[p * RW3_ORTHOGONAL_NX + 7]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 7) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = a[7 * RW3_ORTHOGONAL_NX + j];
+            a[7 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
+            a[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    a[70] = 1.0 / a[70];
+    for (i = 8; i < 9; ++i) {
+        m = a[i * RW3_ORTHOGONAL_NX + 7] * a[70];
+        a[i * RW3_ORTHOGONAL_NX + 7] = m;
+        a[i * RW3_ORTHOGONAL_NX + 8] = a[i * RW3_ORTHOGONAL_NX + 8] - m * a[71];
+    }
+    a[71] = a[71] * a[70];
+    piv[8] = 8;
+    if (!(fabs(a[80]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[80] = 1.0 / a[80];
     return 0;
 }
 
@@ -660,12 +818,36 @@ static int lu_decompose(double *a, int *piv)
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
     double swap;
-    int i;
 
-    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        swap = b[i];
-        b[i] = b[piv[i]];
-        b[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = b[1];
+        b[1] = b[piv[1]];
+        b[piv[1]] = swap;
+    }
+    if (piv[3] != 3) {
+        swap = b[3];
+        b[3] = b[piv[3]];
+        b[piv[3]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = b[4];
+        b[4] = b[piv[4]];
+        b[piv[4]] = swap;
+    }
+    if (piv[5] != 5) {
+        swap = b[5];
+        b[5] = b[piv[5]];
+        b[piv[5]] = swap;
+    }
+    if (piv[6] != 6) {
+        swap = b[6];
+        b[6] = b[piv[6]];
+        b[piv[6]] = swap;
+    }
+    if (piv[7] != 7) {
+        swap = b[7];
+        b[7] = b[piv[7]];
+        b[piv[7]] = swap;
     }
     b[2] = b[2] - lu[19] * b[1];
     b[4] = b[4] - lu[39] * b[3];
@@ -689,7 +871,6 @@ static void lu_solve(const double *lu, const int *piv, double *b)
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
 static int lu_decompose_complex(double *ar, double *ai, int *piv)
 {
-    static const int lu_end[9] = {1, 3, 3, 9, 9, 9, 9, 9, 9};
     int p;
     double swap;
     double re;
@@ -702,65 +883,480 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     double ui;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < RW3_ORTHOGONAL_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(ar[i * RW3_ORTHOGONAL_NX + k]) + fabs(ai[i * RW3_ORTHOGONAL_NX + k]) > fabs(ar[p * RW3_ORTHOGONAL_NX + k]) + fabs(ai[p * RW3_ORTHOGONAL_NX + k])) {
-                p = i;
-            }
+    piv[0] = 0;
+    if (!(fabs(ar[0]) + fabs(ai[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[0];
+    im = ai[0];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[0] = 1.0 / d;
+        ai[0] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[0] = r / d;
+        ai[0] = -1.0 / d;
+    }
+    ur = ar[1];
+    ui = ai[1];
+    ar[1] = ur * ar[0] - ui * ai[0];
+    ai[1] = ur * ai[0] + ui * ar[0];
+    ur = ar[2];
+    ui = ai[2];
+    ar[2] = ur * ar[0] - ui * ai[0];
+    ai[2] = ur * ai[0] + ui * ar[0];
+    ur = ar[3];
+    ui = ai[3];
+    ar[3] = ur * ar[0] - ui * ai[0];
+    ai[3] = ur * ai[0] + ui * ar[0];
+    ur = ar[5];
+    ui = ai[5];
+    ar[5] = ur * ar[0] - ui * ai[0];
+    ai[5] = ur * ai[0] + ui * ar[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 1]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 1])) {
+            p = i;
         }
-        piv[k] = p;
-        if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + k]) + fabs(ai[p * RW3_ORTHOGONAL_NX + k]) > 0.0)) {
-            return 1;  /* singular */
+    }
+    piv[1] = p;
+    if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = ar[1 * RW3_ORTHOGONAL_NX + j];
+            ar[1 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+            ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+            swap = ai[1 * RW3_ORTHOGONAL_NX + j];
+            ai[1 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+            ai[p * RW3_ORTHOGONAL_NX + j] = swap;
         }
-        if (p != k) {
-            for (j = 0; j < RW3_ORTHOGONAL_NX; ++j) {
-                swap = ar[k * RW3_ORTHOGONAL_NX + j];
-                ar[k * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
-                ar[p * RW3_ORTHOGONAL_NX + j] = swap;
-                swap = ai[k * RW3_ORTHOGONAL_NX + j];
-                ai[k * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
-                ai[p * RW3_ORTHOGONAL_NX + j] = swap;
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[10];
+    im = ai[10];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[10] = 1.0 / d;
+        ai[10] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[10] = r / d;
+        ai[10] = -1.0 / d;
+    }
+    for (i = 2; i < 3; ++i) {
+        lr = ar[i * RW3_ORTHOGONAL_NX + 1] * ar[10] - ai[i * RW3_ORTHOGONAL_NX + 1] * ai[10];
+        li = ar[i * RW3_ORTHOGONAL_NX + 1] * ai[10] + ai[i * RW3_ORTHOGONAL_NX + 1] * ar[10];
+        ar[i * RW3_ORTHOGONAL_NX + 1] = lr;
+        ai[i * RW3_ORTHOGONAL_NX + 1] = li;
+        ur = ar[11];
+        ui = ai[11];
+        ar[i * RW3_ORTHOGONAL_NX + 2] = ar[i * RW3_ORTHOGONAL_NX + 2] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 2] = ai[i * RW3_ORTHOGONAL_NX + 2] - (lr * ui + li * ur);
+        ur = ar[12];
+        ui = ai[12];
+        ar[i * RW3_ORTHOGONAL_NX + 3] = ar[i * RW3_ORTHOGONAL_NX + 3] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 3] = ai[i * RW3_ORTHOGONAL_NX + 3] - (lr * ui + li * ur);
+        ur = ar[13];
+        ui = ai[13];
+        ar[i * RW3_ORTHOGONAL_NX + 4] = ar[i * RW3_ORTHOGONAL_NX + 4] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 4] = ai[i * RW3_ORTHOGONAL_NX + 4] - (lr * ui + li * ur);
+        ur = ar[14];
+        ui = ai[14];
+        ar[i * RW3_ORTHOGONAL_NX + 5] = ar[i * RW3_ORTHOGONAL_NX + 5] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 5] = ai[i * RW3_ORTHOGONAL_NX + 5] - (lr * ui + li * ur);
+    }
+    ur = ar[11];
+    ui = ai[11];
+    ar[11] = ur * ar[10] - ui * ai[10];
+    ai[11] = ur * ai[10] + ui * ar[10];
+    ur = ar[12];
+    ui = ai[12];
+    ar[12] = ur * ar[10] - ui * ai[10];
+    ai[12] = ur * ai[10] + ui * ar[10];
+    ur = ar[13];
+    ui = ai[13];
+    ar[13] = ur * ar[10] - ui * ai[10];
+    ai[13] = ur * ai[10] + ui * ar[10];
+    ur = ar[14];
+    ui = ai[14];
+    ar[14] = ur * ar[10] - ui * ai[10];
+    ai[14] = ur * ai[10] + ui * ar[10];
+    piv[2] = 2;
+    if (!(fabs(ar[20]) + fabs(ai[20]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[20];
+    im = ai[20];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[20] = 1.0 / d;
+        ai[20] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[20] = r / d;
+        ai[20] = -1.0 / d;
+    }
+    ur = ar[21];
+    ui = ai[21];
+    ar[21] = ur * ar[20] - ui * ai[20];
+    ai[21] = ur * ai[20] + ui * ar[20];
+    ur = ar[22];
+    ui = ai[22];
+    ar[22] = ur * ar[20] - ui * ai[20];
+    ai[22] = ur * ai[20] + ui * ar[20];
+    ur = ar[23];
+    ui = ai[23];
+    ar[23] = ur * ar[20] - ui * ai[20];
+    ai[23] = ur * ai[20] + ui * ar[20];
+    p = 3;
+    for (i = 4; i < 9; ++i) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 3]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 3])) {
+            p = i;
         }
-        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
-        re = ar[k * RW3_ORTHOGONAL_NX + k];
-        im = ai[k * RW3_ORTHOGONAL_NX + k];
-        if (fabs(re) >= fabs(im)) {
-            r = im / re;
-            d = re + im * r;
-            ar[k * RW3_ORTHOGONAL_NX + k] = 1.0 / d;
-            ai[k * RW3_ORTHOGONAL_NX + k] = -r / d;
-        } else {
-            r = re / im;
-            d = im + re * r;
-            ar[k * RW3_ORTHOGONAL_NX + k] = r / d;
-            ai[k * RW3_ORTHOGONAL_NX + k] = -1.0 / d;
+    }
+    piv[3] = p;
+    if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 3]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 3) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = ar[3 * RW3_ORTHOGONAL_NX + j];
+            ar[3 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+            ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+            swap = ai[3 * RW3_ORTHOGONAL_NX + j];
+            ai[3 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+            ai[p * RW3_ORTHOGONAL_NX + j] = swap;
         }
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            lr = ar[i * RW3_ORTHOGONAL_NX + k] * ar[k * RW3_ORTHOGONAL_NX + k] - ai[i *
-                    RW3_ORTHOGONAL_NX + k] * ai[k * RW3_ORTHOGONAL_NX + k];
-            li = ar[i * RW3_ORTHOGONAL_NX + k] * ai[k * RW3_ORTHOGONAL_NX + k] + ai[i *
-                    RW3_ORTHOGONAL_NX + k] * ar[k * RW3_ORTHOGONAL_NX + k];
-            ar[i * RW3_ORTHOGONAL_NX + k] = lr;
-            ai[i * RW3_ORTHOGONAL_NX + k] = li;
-            for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
-                ur = ar[k * RW3_ORTHOGONAL_NX + j];
-                ui = ai[k * RW3_ORTHOGONAL_NX + j];
-                ar[i * RW3_ORTHOGONAL_NX + j] = ar[i * RW3_ORTHOGONAL_NX + j] - (lr * ur - li * ui);
-                ai[i * RW3_ORTHOGONAL_NX + j] = ai[i * RW3_ORTHOGONAL_NX + j] - (lr * ui + li * ur);
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[30];
+    im = ai[30];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[30] = 1.0 / d;
+        ai[30] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[30] = r / d;
+        ai[30] = -1.0 / d;
+    }
+    for (i = 4; i < 9; ++i) {
+        lr = ar[i * RW3_ORTHOGONAL_NX + 3] * ar[30] - ai[i * RW3_ORTHOGONAL_NX + 3] * ai[30];
+        li = ar[i * RW3_ORTHOGONAL_NX + 3] * ai[30] + ai[i * RW3_ORTHOGONAL_NX + 3] * ar[30];
+        ar[i * RW3_ORTHOGONAL_NX + 3] = lr;
+        ai[i * RW3_ORTHOGONAL_NX + 3] = li;
+        ur = ar[31];
+        ui = ai[31];
+        ar[i * RW3_ORTHOGONAL_NX + 4] = ar[i * RW3_ORTHOGONAL_NX + 4] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 4] = ai[i * RW3_ORTHOGONAL_NX + 4] - (lr * ui + li * ur);
+        ur = ar[32];
+        ui = ai[32];
+        ar[i * RW3_ORTHOGONAL_NX + 5] = ar[i * RW3_ORTHOGONAL_NX + 5] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 5] = ai[i * RW3_ORTHOGONAL_NX + 5] - (lr * ui + li * ur);
+        ur = ar[33];
+        ui = ai[33];
+        ar[i * RW3_ORTHOGONAL_NX + 6] = ar[i * RW3_ORTHOGONAL_NX + 6] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 6] = ai[i * RW3_ORTHOGONAL_NX + 6] - (lr * ui + li * ur);
+        ur = ar[34];
+        ui = ai[34];
+        ar[i * RW3_ORTHOGONAL_NX + 7] = ar[i * RW3_ORTHOGONAL_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 7] = ai[i * RW3_ORTHOGONAL_NX + 7] - (lr * ui + li * ur);
+        ur = ar[35];
+        ui = ai[35];
+        ar[i * RW3_ORTHOGONAL_NX + 8] = ar[i * RW3_ORTHOGONAL_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 8] = ai[i * RW3_ORTHOGONAL_NX + 8] - (lr * ui + li * ur);
+    }
+    ur = ar[31];
+    ui = ai[31];
+    ar[31] = ur * ar[30] - ui * ai[30];
+    ai[31] = ur * ai[30] + ui * ar[30];
+    ur = ar[32];
+    ui = ai[32];
+    ar[32] = ur * ar[30] - ui * ai[30];
+    ai[32] = ur * ai[30] + ui * ar[30];
+    ur = ar[33];
+    ui = ai[33];
+    ar[33] = ur * ar[30] - ui * ai[30];
+    ai[33] = ur * ai[30] + ui * ar[30];
+    ur = ar[34];
+    ui = ai[34];
+    ar[34] = ur * ar[30] - ui * ai[30];
+    ai[34] = ur * ai[30] + ui * ar[30];
+    ur = ar[35];
+    ui = ai[35];
+    ar[35] = ur * ar[30] - ui * ai[30];
+    ai[35] = ur * ai[30] + ui * ar[30];
+    p = 4;
+    for (i = 5; i < 9; ++i) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 4]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 4])) {
+            p = i;
         }
-        for (j = k + 1; j < RW3_ORTHOGONAL_NX; ++j) {
-            ur = ar[k * RW3_ORTHOGONAL_NX + j];
-            ui = ai[k * RW3_ORTHOGONAL_NX + j];
-            ar[k * RW3_ORTHOGONAL_NX + j] = ur * ar[k * RW3_ORTHOGONAL_NX + k] - ui * ai[k *
-                    RW3_ORTHOGONAL_NX + k];  /* u_kj / u_kk */
-            ai[k * RW3_ORTHOGONAL_NX + j] = ur * ai[k * RW3_ORTHOGONAL_NX + k] + ui * ar[k *
-                    RW3_ORTHOGONAL_NX + k];
+    }
+    piv[4] = p;
+    if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = ar[4 * RW3_ORTHOGONAL_NX + j];
+            ar[4 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+            ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+            swap = ai[4 * RW3_ORTHOGONAL_NX + j];
+            ai[4 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+            ai[p * RW3_ORTHOGONAL_NX + j] = swap;
         }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[40];
+    im = ai[40];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[40] = 1.0 / d;
+        ai[40] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[40] = r / d;
+        ai[40] = -1.0 / d;
+    }
+    for (i = 5; i < 9; ++i) {
+        lr = ar[i * RW3_ORTHOGONAL_NX + 4] * ar[40] - ai[i * RW3_ORTHOGONAL_NX + 4] * ai[40];
+        li = ar[i * RW3_ORTHOGONAL_NX + 4] * ai[40] + ai[i * RW3_ORTHOGONAL_NX + 4] * ar[40];
+        ar[i * RW3_ORTHOGONAL_NX + 4] = lr;
+        ai[i * RW3_ORTHOGONAL_NX + 4] = li;
+        ur = ar[41];
+        ui = ai[41];
+        ar[i * RW3_ORTHOGONAL_NX + 5] = ar[i * RW3_ORTHOGONAL_NX + 5] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 5] = ai[i * RW3_ORTHOGONAL_NX + 5] - (lr * ui + li * ur);
+        ur = ar[42];
+        ui = ai[42];
+        ar[i * RW3_ORTHOGONAL_NX + 6] = ar[i * RW3_ORTHOGONAL_NX + 6] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 6] = ai[i * RW3_ORTHOGONAL_NX + 6] - (lr * ui + li * ur);
+        ur = ar[43];
+        ui = ai[43];
+        ar[i * RW3_ORTHOGONAL_NX + 7] = ar[i * RW3_ORTHOGONAL_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 7] = ai[i * RW3_ORTHOGONAL_NX + 7] - (lr * ui + li * ur);
+        ur = ar[44];
+        ui = ai[44];
+        ar[i * RW3_ORTHOGONAL_NX + 8] = ar[i * RW3_ORTHOGONAL_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 8] = ai[i * RW3_ORTHOGONAL_NX + 8] - (lr * ui + li * ur);
+    }
+    ur = ar[41];
+    ui = ai[41];
+    ar[41] = ur * ar[40] - ui * ai[40];
+    ai[41] = ur * ai[40] + ui * ar[40];
+    ur = ar[42];
+    ui = ai[42];
+    ar[42] = ur * ar[40] - ui * ai[40];
+    ai[42] = ur * ai[40] + ui * ar[40];
+    ur = ar[43];
+    ui = ai[43];
+    ar[43] = ur * ar[40] - ui * ai[40];
+    ai[43] = ur * ai[40] + ui * ar[40];
+    ur = ar[44];
+    ui = ai[44];
+    ar[44] = ur * ar[40] - ui * ai[40];
+    ai[44] = ur * ai[40] + ui * ar[40];
+    p = 5;
+    for (i = 6; i < 9; ++i) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 5]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 5])) {
+            p = i;
+        }
+    }
+    piv[5] = p;
+    if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 5]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 5) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = ar[5 * RW3_ORTHOGONAL_NX + j];
+            ar[5 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+            ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+            swap = ai[5 * RW3_ORTHOGONAL_NX + j];
+            ai[5 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+            ai[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[50];
+    im = ai[50];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[50] = 1.0 / d;
+        ai[50] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[50] = r / d;
+        ai[50] = -1.0 / d;
+    }
+    for (i = 6; i < 9; ++i) {
+        lr = ar[i * RW3_ORTHOGONAL_NX + 5] * ar[50] - ai[i * RW3_ORTHOGONAL_NX + 5] * ai[50];
+        li = ar[i * RW3_ORTHOGONAL_NX + 5] * ai[50] + ai[i * RW3_ORTHOGONAL_NX + 5] * ar[50];
+        ar[i * RW3_ORTHOGONAL_NX + 5] = lr;
+        ai[i * RW3_ORTHOGONAL_NX + 5] = li;
+        ur = ar[51];
+        ui = ai[51];
+        ar[i * RW3_ORTHOGONAL_NX + 6] = ar[i * RW3_ORTHOGONAL_NX + 6] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 6] = ai[i * RW3_ORTHOGONAL_NX + 6] - (lr * ui + li * ur);
+        ur = ar[52];
+        ui = ai[52];
+        ar[i * RW3_ORTHOGONAL_NX + 7] = ar[i * RW3_ORTHOGONAL_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 7] = ai[i * RW3_ORTHOGONAL_NX + 7] - (lr * ui + li * ur);
+        ur = ar[53];
+        ui = ai[53];
+        ar[i * RW3_ORTHOGONAL_NX + 8] = ar[i * RW3_ORTHOGONAL_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 8] = ai[i * RW3_ORTHOGONAL_NX + 8] - (lr * ui + li * ur);
+    }
+    ur = ar[51];
+    ui = ai[51];
+    ar[51] = ur * ar[50] - ui * ai[50];
+    ai[51] = ur * ai[50] + ui * ar[50];
+    ur = ar[52];
+    ui = ai[52];
+    ar[52] = ur * ar[50] - ui * ai[50];
+    ai[52] = ur * ai[50] + ui * ar[50];
+    ur = ar[53];
+    ui = ai[53];
+    ar[53] = ur * ar[50] - ui * ai[50];
+    ai[53] = ur * ai[50] + ui * ar[50];
+    p = 6;
+    for (i = 7; i < 9; ++i) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 6]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 6])) {
+            p = i;
+        }
+    }
+    piv[6] = p;
+    if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 6]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 6) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = ar[6 * RW3_ORTHOGONAL_NX + j];
+            ar[6 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+            ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+            swap = ai[6 * RW3_ORTHOGONAL_NX + j];
+            ai[6 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+            ai[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[60];
+    im = ai[60];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[60] = 1.0 / d;
+        ai[60] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[60] = r / d;
+        ai[60] = -1.0 / d;
+    }
+    for (i = 7; i < 9; ++i) {
+        lr = ar[i * RW3_ORTHOGONAL_NX + 6] * ar[60] - ai[i * RW3_ORTHOGONAL_NX + 6] * ai[60];
+        li = ar[i * RW3_ORTHOGONAL_NX + 6] * ai[60] + ai[i * RW3_ORTHOGONAL_NX + 6] * ar[60];
+        ar[i * RW3_ORTHOGONAL_NX + 6] = lr;
+        ai[i * RW3_ORTHOGONAL_NX + 6] = li;
+        ur = ar[61];
+        ui = ai[61];
+        ar[i * RW3_ORTHOGONAL_NX + 7] = ar[i * RW3_ORTHOGONAL_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 7] = ai[i * RW3_ORTHOGONAL_NX + 7] - (lr * ui + li * ur);
+        ur = ar[62];
+        ui = ai[62];
+        ar[i * RW3_ORTHOGONAL_NX + 8] = ar[i * RW3_ORTHOGONAL_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 8] = ai[i * RW3_ORTHOGONAL_NX + 8] - (lr * ui + li * ur);
+    }
+    ur = ar[61];
+    ui = ai[61];
+    ar[61] = ur * ar[60] - ui * ai[60];
+    ai[61] = ur * ai[60] + ui * ar[60];
+    ur = ar[62];
+    ui = ai[62];
+    ar[62] = ur * ar[60] - ui * ai[60];
+    ai[62] = ur * ai[60] + ui * ar[60];
+    p = 7;
+    for (i = 8; i < 9; ++i) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 7]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 7])) {
+            p = i;
+        }
+    }
+    piv[7] = p;
+    if (!(fabs(ar[p * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 7]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 7) {
+        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+            swap = ar[7 * RW3_ORTHOGONAL_NX + j];
+            ar[7 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
+            ar[p * RW3_ORTHOGONAL_NX + j] = swap;
+            swap = ai[7 * RW3_ORTHOGONAL_NX + j];
+            ai[7 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
+            ai[p * RW3_ORTHOGONAL_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[70];
+    im = ai[70];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[70] = 1.0 / d;
+        ai[70] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[70] = r / d;
+        ai[70] = -1.0 / d;
+    }
+    for (i = 8; i < 9; ++i) {
+        lr = ar[i * RW3_ORTHOGONAL_NX + 7] * ar[70] - ai[i * RW3_ORTHOGONAL_NX + 7] * ai[70];
+        li = ar[i * RW3_ORTHOGONAL_NX + 7] * ai[70] + ai[i * RW3_ORTHOGONAL_NX + 7] * ar[70];
+        ar[i * RW3_ORTHOGONAL_NX + 7] = lr;
+        ai[i * RW3_ORTHOGONAL_NX + 7] = li;
+        ur = ar[71];
+        ui = ai[71];
+        ar[i * RW3_ORTHOGONAL_NX + 8] = ar[i * RW3_ORTHOGONAL_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW3_ORTHOGONAL_NX + 8] = ai[i * RW3_ORTHOGONAL_NX + 8] - (lr * ui + li * ur);
+    }
+    ur = ar[71];
+    ui = ai[71];
+    ar[71] = ur * ar[70] - ui * ai[70];
+    ai[71] = ur * ai[70] + ui * ar[70];
+    piv[8] = 8;
+    if (!(fabs(ar[80]) + fabs(ai[80]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[80];
+    im = ai[80];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[80] = 1.0 / d;
+        ai[80] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[80] = r / d;
+        ai[80] = -1.0 / d;
     }
     return 0;
 }
@@ -771,15 +1367,54 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 {
     double swap;
     double re;
-    int i;
 
-    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        swap = br[i];
-        br[i] = br[piv[i]];
-        br[piv[i]] = swap;
-        swap = bi[i];
-        bi[i] = bi[piv[i]];
-        bi[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = br[1];
+        br[1] = br[piv[1]];
+        br[piv[1]] = swap;
+        swap = bi[1];
+        bi[1] = bi[piv[1]];
+        bi[piv[1]] = swap;
+    }
+    if (piv[3] != 3) {
+        swap = br[3];
+        br[3] = br[piv[3]];
+        br[piv[3]] = swap;
+        swap = bi[3];
+        bi[3] = bi[piv[3]];
+        bi[piv[3]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = br[4];
+        br[4] = br[piv[4]];
+        br[piv[4]] = swap;
+        swap = bi[4];
+        bi[4] = bi[piv[4]];
+        bi[piv[4]] = swap;
+    }
+    if (piv[5] != 5) {
+        swap = br[5];
+        br[5] = br[piv[5]];
+        br[piv[5]] = swap;
+        swap = bi[5];
+        bi[5] = bi[piv[5]];
+        bi[piv[5]] = swap;
+    }
+    if (piv[6] != 6) {
+        swap = br[6];
+        br[6] = br[piv[6]];
+        br[piv[6]] = swap;
+        swap = bi[6];
+        bi[6] = bi[piv[6]];
+        bi[piv[6]] = swap;
+    }
+    if (piv[7] != 7) {
+        swap = br[7];
+        br[7] = br[piv[7]];
+        br[piv[7]] = swap;
+        swap = bi[7];
+        bi[7] = bi[piv[7]];
+        bi[piv[7]] = swap;
     }
     br[2] = br[2] - ar[19] * br[1] + ai[19] * bi[1];
     bi[2] = bi[2] - ar[19] * bi[1] - ai[19] * br[1];
@@ -1571,6 +2206,7 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
         e2r[i] = -J[i];
         e2i[i] = 0.0;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         e1[i * RW3_ORTHOGONAL_NX + i] = e1[i * RW3_ORTHOGONAL_NX + i] + gamma_h;
         e2r[i * RW3_ORTHOGONAL_NX + i] = e2r[i * RW3_ORTHOGONAL_NX + i] + alpha_h;
@@ -1601,18 +2237,22 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     gamma_h = 3.637834252744496 / h;
     alpha_h = 2.6810828736277523 / h;
     beta_h = 3.0504301992474105 / h;
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         y[i] = x[i] + z1[i];
     }
     rw3_orthogonal_rhs(t + 0.1550510257216822 * h, y, c, z1);
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         y[i] = x[i] + z2[i];
     }
     rw3_orthogonal_rhs(t + 0.6449489742783178 * h, y, c, z2);
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         y[i] = x[i] + z3[i];
     }
     rw3_orthogonal_rhs(t + h, y, c, z3);
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         double a1, a2, a3;
         a1 = z1[i];
@@ -1628,6 +2268,7 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     lu_solve(e1, piv1, z1);
     lu_solve_complex(e2r, e2i, piv2, z2, z3);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         double s1, s2, s3;
         s1 = z1[i] / scal[i];
@@ -1654,6 +2295,7 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     double norm;
     int i;
 
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
                 z3[i]) / h;
@@ -1661,21 +2303,25 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     }
     lu_solve(e1, piv1, err);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         total = total + err[i] / scal[i] * (err[i] / scal[i]);
     }
     norm = sqrt(total / RW3_ORTHOGONAL_NX);
     if (norm >= 1.0 && again) {
+        #pragma GCC unroll 1
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
             y[i] = x[i] + err[i];
         }
         rw3_orthogonal_rhs(t, y, c, err);
         stats->rhs_calls = stats->rhs_calls + 1;
+        #pragma GCC unroll 1
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
             err[i] = err[i] + g[i];
         }
         lu_solve(e1, piv1, err);
         total = 0.0;
+        #pragma GCC unroll 1
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
             total = total + err[i] / scal[i] * (err[i] / scal[i]);
         }
@@ -1742,6 +2388,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     double c1q;
     double c2q;
     double c3q;
+    double theta_k;
     int last;
     int first;
     int reject;
@@ -1754,6 +2401,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int singular;
     int start;
     int i;
+    int k;
 
     start = ode_start(5, RW3_ORTHOGONAL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps,
             f0, &h, stats);
@@ -1775,6 +2423,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     need_lu = 1;
     nonfinite = 0;
     singular = 0;
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         comp[i] = 0.0;
         ak1[i] = 0.0;
@@ -1788,6 +2437,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         h = t1 - t;
         last = 1;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
         scal[i] = atol_e + rtol_e * fabs(x[i]);
     }
@@ -1830,6 +2480,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
 
         /* the Newton iterations start from the last step's collocation polynomial */
         if (first) {
+            #pragma GCC unroll 1
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
                 z1[i] = 0.0;
                 z2[i] = 0.0;
@@ -1842,6 +2493,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             c3q = h / h_old;
             c1q = 0.1550510257216822 * c3q;
             c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
                 double a1, a2, a3;
                 a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
@@ -1888,7 +2540,11 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                     break;
                 }
                 rate = theta / (1.0 - theta);
-                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
                 if (predicted >= 1.0) {
                     q = dmax(1e-4, dmin(20.0, predicted));
                     h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
@@ -1897,6 +2553,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                 }
             }
             dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
                 double a1, a2, a3;
                 a1 = w1[i] + z1[i];
@@ -1916,6 +2573,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         }
         if (outcome == 0) {
             err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
                 dx[i] = z3[i] - comp[i];
                 xnew[i] = x[i] + dx[i];
@@ -1958,6 +2616,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             h_acc = h;
             err_acc = dmax(1e-2, err);
             h_old = h;
+            #pragma GCC unroll 1
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
                 double ak;
                 ak = (z2[i] - z1[i]) / 0.4898979485566356;
@@ -1972,6 +2631,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             if (last) {
                 return RW3_ORTHOGONAL_ODE_OK;
             }
+            #pragma GCC unroll 1
             for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
                 f0[i] = fnew[i];
                 scal[i] = atol_e + rtol_e * fabs(x[i]);

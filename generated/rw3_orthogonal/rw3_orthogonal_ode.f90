@@ -598,52 +598,220 @@ contains
   end function step_exp2
 
   ! In-place LU decomposition with partial pivoting within the diagonal
-  ! blocks (0, 1), (1, 3), (3, 9) (row i's block ends
-  ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+  ! blocks (0, 1), (1, 3), (3, 9), unrolled over the entries
+  ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
   ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
   function lu_decompose(a, piv) result(res)
     real(c_double), intent(inout) :: a(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:8) = [1, 3, 3, 9, 9, 9, 9, 9, 9]
     integer(c_int) :: p
     real(c_double) :: m
     real(c_double) :: swap
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(a(i * nx + k)) > abs(a(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(a(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(a(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(0) = 1.0_c_double / a(0)
+    a(1) = a(1) * a(0)
+    a(2) = a(2) * a(0)
+    a(3) = a(3) * a(0)
+    a(5) = a(5) * a(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(a(i * nx + 1)) > abs(a(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = a(k * nx + j)
-          a(k * nx + j) = a(p * nx + j)
-          a(p * nx + j) = swap
-        end do
-      end if
-      a(k * nx + k) = 1.0_c_double / a(k * nx + k)
-      do i = k + 1, lu_end(k) - 1
-        m = a(i * nx + k) * a(k * nx + k)
-        a(i * nx + k) = m
-        do j = k + 1, nx - 1
-          a(i * nx + j) = a(i * nx + j) - m * a(k * nx + j)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        a(k * nx + j) = a(k * nx + j) * a(k * nx + k)  ! u_kj / u_kk
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(a(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = a(1 * nx + j)
+        a(1 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(10) = 1.0_c_double / a(10)
+    do i = 2, 3 - 1
+      m = a(i * nx + 1) * a(10)
+      a(i * nx + 1) = m
+      a(i * nx + 2) = a(i * nx + 2) - m * a(11)
+      a(i * nx + 3) = a(i * nx + 3) - m * a(12)
+      a(i * nx + 4) = a(i * nx + 4) - m * a(13)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(14)
+    end do
+    a(11) = a(11) * a(10)
+    a(12) = a(12) * a(10)
+    a(13) = a(13) * a(10)
+    a(14) = a(14) * a(10)
+    piv(2) = 2
+    if (.not. (abs(a(20)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(20) = 1.0_c_double / a(20)
+    a(21) = a(21) * a(20)
+    a(22) = a(22) * a(20)
+    a(23) = a(23) * a(20)
+    p = 3
+    do i = 4, 9 - 1
+      if (abs(a(i * nx + 3)) > abs(a(p * nx + 3))) then
+        p = i
+      end if
+    end do
+    piv(3) = p
+    if (.not. (abs(a(p * nx + 3)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 3) then
+      do j = 3, nx - 1
+        swap = a(3 * nx + j)
+        a(3 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(30) = 1.0_c_double / a(30)
+    do i = 4, 9 - 1
+      m = a(i * nx + 3) * a(30)
+      a(i * nx + 3) = m
+      a(i * nx + 4) = a(i * nx + 4) - m * a(31)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(32)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(33)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(34)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(35)
+    end do
+    a(31) = a(31) * a(30)
+    a(32) = a(32) * a(30)
+    a(33) = a(33) * a(30)
+    a(34) = a(34) * a(30)
+    a(35) = a(35) * a(30)
+    p = 4
+    do i = 5, 9 - 1
+      if (abs(a(i * nx + 4)) > abs(a(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(a(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 3, nx - 1
+        swap = a(4 * nx + j)
+        a(4 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(40) = 1.0_c_double / a(40)
+    do i = 5, 9 - 1
+      m = a(i * nx + 4) * a(40)
+      a(i * nx + 4) = m
+      a(i * nx + 5) = a(i * nx + 5) - m * a(41)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(42)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(43)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(44)
+    end do
+    a(41) = a(41) * a(40)
+    a(42) = a(42) * a(40)
+    a(43) = a(43) * a(40)
+    a(44) = a(44) * a(40)
+    p = 5
+    do i = 6, 9 - 1
+      if (abs(a(i * nx + 5)) > abs(a(p * nx + 5))) then
+        p = i
+      end if
+    end do
+    piv(5) = p
+    if (.not. (abs(a(p * nx + 5)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 5) then
+      do j = 3, nx - 1
+        swap = a(5 * nx + j)
+        a(5 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(50) = 1.0_c_double / a(50)
+    do i = 6, 9 - 1
+      m = a(i * nx + 5) * a(50)
+      a(i * nx + 5) = m
+      a(i * nx + 6) = a(i * nx + 6) - m * a(51)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(52)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(53)
+    end do
+    a(51) = a(51) * a(50)
+    a(52) = a(52) * a(50)
+    a(53) = a(53) * a(50)
+    p = 6
+    do i = 7, 9 - 1
+      if (abs(a(i * nx + 6)) > abs(a(p * nx + 6))) then
+        p = i
+      end if
+    end do
+    piv(6) = p
+    if (.not. (abs(a(p * nx + 6)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 6) then
+      do j = 3, nx - 1
+        swap = a(6 * nx + j)
+        a(6 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(60) = 1.0_c_double / a(60)
+    do i = 7, 9 - 1
+      m = a(i * nx + 6) * a(60)
+      a(i * nx + 6) = m
+      a(i * nx + 7) = a(i * nx + 7) - m * a(61)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(62)
+    end do
+    a(61) = a(61) * a(60)
+    a(62) = a(62) * a(60)
+    p = 7
+    do i = 8, 9 - 1
+      if (abs(a(i * nx + 7)) > abs(a(p * nx + 7))) then
+        p = i
+      end if
+    end do
+    piv(7) = p
+    if (.not. (abs(a(p * nx + 7)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 7) then
+      do j = 3, nx - 1
+        swap = a(7 * nx + j)
+        a(7 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(70) = 1.0_c_double / a(70)
+    do i = 8, 9 - 1
+      m = a(i * nx + 7) * a(70)
+      a(i * nx + 7) = m
+      a(i * nx + 8) = a(i * nx + 8) - m * a(71)
+    end do
+    a(71) = a(71) * a(70)
+    piv(8) = 8
+    if (.not. (abs(a(80)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(80) = 1.0_c_double / a(80)
     res = .false.
     return
   end function lu_decompose
@@ -655,13 +823,37 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(inout) :: b(0:nx - 1)
     real(c_double) :: swap
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = b(i)
-      b(i) = b(piv(i))
-      b(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = b(1)
+      b(1) = b(piv(1))
+      b(piv(1)) = swap
+    end if
+    if (piv(3) /= 3) then
+      swap = b(3)
+      b(3) = b(piv(3))
+      b(piv(3)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = b(4)
+      b(4) = b(piv(4))
+      b(piv(4)) = swap
+    end if
+    if (piv(5) /= 5) then
+      swap = b(5)
+      b(5) = b(piv(5))
+      b(piv(5)) = swap
+    end if
+    if (piv(6) /= 6) then
+      swap = b(6)
+      b(6) = b(piv(6))
+      b(piv(6)) = swap
+    end if
+    if (piv(7) /= 7) then
+      swap = b(7)
+      b(7) = b(piv(7))
+      b(piv(7)) = swap
+    end if
     b(2) = b(2) - lu(19) * b(1)
     b(4) = b(4) - lu(39) * b(3)
     b(5) = (b(5) - lu(48) * b(3)) - lu(49) * b(4)
@@ -688,7 +880,6 @@ contains
     real(c_double), intent(inout) :: ai(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:8) = [1, 3, 3, 9, 9, 9, 9, 9, 9]
     integer(c_int) :: p
     real(c_double) :: swap
     real(c_double) :: re
@@ -701,63 +892,490 @@ contains
     real(c_double) :: ui
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(ar(i * nx + k)) + abs(ai(i * nx + k)) > abs(ar(p * nx + k)) + abs(ai(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(ar(p * nx + k)) + abs(ai(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(ar(0)) + abs(ai(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(0)
+    im = ai(0)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(0) = 1.0_c_double / d
+      ai(0) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(0) = r / d
+      ai(0) = (-1.0_c_double) / d
+    end if
+    ur = ar(1)
+    ui = ai(1)
+    ar(1) = ur * ar(0) - ui * ai(0)
+    ai(1) = ur * ai(0) + ui * ar(0)
+    ur = ar(2)
+    ui = ai(2)
+    ar(2) = ur * ar(0) - ui * ai(0)
+    ai(2) = ur * ai(0) + ui * ar(0)
+    ur = ar(3)
+    ui = ai(3)
+    ar(3) = ur * ar(0) - ui * ai(0)
+    ai(3) = ur * ai(0) + ui * ar(0)
+    ur = ar(5)
+    ui = ai(5)
+    ar(5) = ur * ar(0) - ui * ai(0)
+    ai(5) = ur * ai(0) + ui * ar(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = ar(k * nx + j)
-          ar(k * nx + j) = ar(p * nx + j)
-          ar(p * nx + j) = swap
-          swap = ai(k * nx + j)
-          ai(k * nx + j) = ai(p * nx + j)
-          ai(p * nx + j) = swap
-        end do
-      end if
-      ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
-      re = ar(k * nx + k)
-      im = ai(k * nx + k)
-      if (abs(re) >= abs(im)) then
-        r = im / re
-        d = re + im * r
-        ar(k * nx + k) = 1.0_c_double / d
-        ai(k * nx + k) = (-r) / d
-      else
-        r = re / im
-        d = im + re * r
-        ar(k * nx + k) = r / d
-        ai(k * nx + k) = (-1.0_c_double) / d
-      end if
-      do i = k + 1, lu_end(k) - 1
-        lr = ar(i * nx + k) * ar(k * nx + k) - ai(i * nx + k) * ai(k * nx + k)
-        li = ar(i * nx + k) * ai(k * nx + k) + ai(i * nx + k) * ar(k * nx + k)
-        ar(i * nx + k) = lr
-        ai(i * nx + k) = li
-        do j = k + 1, nx - 1
-          ur = ar(k * nx + j)
-          ui = ai(k * nx + j)
-          ar(i * nx + j) = ar(i * nx + j) - (lr * ur - li * ui)
-          ai(i * nx + j) = ai(i * nx + j) - (lr * ui + li * ur)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        ur = ar(k * nx + j)
-        ui = ai(k * nx + j)
-        ar(k * nx + j) = ur * ar(k * nx + k) - ui * ai(k * nx + k)  ! u_kj / u_kk
-        ai(k * nx + j) = ur * ai(k * nx + k) + ui * ar(k * nx + k)
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(ar(p * nx + 1)) + abs(ai(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = ar(1 * nx + j)
+        ar(1 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(1 * nx + j)
+        ai(1 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(10)
+    im = ai(10)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(10) = 1.0_c_double / d
+      ai(10) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(10) = r / d
+      ai(10) = (-1.0_c_double) / d
+    end if
+    do i = 2, 3 - 1
+      lr = ar(i * nx + 1) * ar(10) - ai(i * nx + 1) * ai(10)
+      li = ar(i * nx + 1) * ai(10) + ai(i * nx + 1) * ar(10)
+      ar(i * nx + 1) = lr
+      ai(i * nx + 1) = li
+      ur = ar(11)
+      ui = ai(11)
+      ar(i * nx + 2) = ar(i * nx + 2) - (lr * ur - li * ui)
+      ai(i * nx + 2) = ai(i * nx + 2) - (lr * ui + li * ur)
+      ur = ar(12)
+      ui = ai(12)
+      ar(i * nx + 3) = ar(i * nx + 3) - (lr * ur - li * ui)
+      ai(i * nx + 3) = ai(i * nx + 3) - (lr * ui + li * ur)
+      ur = ar(13)
+      ui = ai(13)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(14)
+      ui = ai(14)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+    end do
+    ur = ar(11)
+    ui = ai(11)
+    ar(11) = ur * ar(10) - ui * ai(10)
+    ai(11) = ur * ai(10) + ui * ar(10)
+    ur = ar(12)
+    ui = ai(12)
+    ar(12) = ur * ar(10) - ui * ai(10)
+    ai(12) = ur * ai(10) + ui * ar(10)
+    ur = ar(13)
+    ui = ai(13)
+    ar(13) = ur * ar(10) - ui * ai(10)
+    ai(13) = ur * ai(10) + ui * ar(10)
+    ur = ar(14)
+    ui = ai(14)
+    ar(14) = ur * ar(10) - ui * ai(10)
+    ai(14) = ur * ai(10) + ui * ar(10)
+    piv(2) = 2
+    if (.not. (abs(ar(20)) + abs(ai(20)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(20)
+    im = ai(20)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(20) = 1.0_c_double / d
+      ai(20) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(20) = r / d
+      ai(20) = (-1.0_c_double) / d
+    end if
+    ur = ar(21)
+    ui = ai(21)
+    ar(21) = ur * ar(20) - ui * ai(20)
+    ai(21) = ur * ai(20) + ui * ar(20)
+    ur = ar(22)
+    ui = ai(22)
+    ar(22) = ur * ar(20) - ui * ai(20)
+    ai(22) = ur * ai(20) + ui * ar(20)
+    ur = ar(23)
+    ui = ai(23)
+    ar(23) = ur * ar(20) - ui * ai(20)
+    ai(23) = ur * ai(20) + ui * ar(20)
+    p = 3
+    do i = 4, 9 - 1
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+        p = i
+      end if
+    end do
+    piv(3) = p
+    if (.not. (abs(ar(p * nx + 3)) + abs(ai(p * nx + 3)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 3) then
+      do j = 3, nx - 1
+        swap = ar(3 * nx + j)
+        ar(3 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(3 * nx + j)
+        ai(3 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(30)
+    im = ai(30)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(30) = 1.0_c_double / d
+      ai(30) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(30) = r / d
+      ai(30) = (-1.0_c_double) / d
+    end if
+    do i = 4, 9 - 1
+      lr = ar(i * nx + 3) * ar(30) - ai(i * nx + 3) * ai(30)
+      li = ar(i * nx + 3) * ai(30) + ai(i * nx + 3) * ar(30)
+      ar(i * nx + 3) = lr
+      ai(i * nx + 3) = li
+      ur = ar(31)
+      ui = ai(31)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(32)
+      ui = ai(32)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(33)
+      ui = ai(33)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(34)
+      ui = ai(34)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(35)
+      ui = ai(35)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+    end do
+    ur = ar(31)
+    ui = ai(31)
+    ar(31) = ur * ar(30) - ui * ai(30)
+    ai(31) = ur * ai(30) + ui * ar(30)
+    ur = ar(32)
+    ui = ai(32)
+    ar(32) = ur * ar(30) - ui * ai(30)
+    ai(32) = ur * ai(30) + ui * ar(30)
+    ur = ar(33)
+    ui = ai(33)
+    ar(33) = ur * ar(30) - ui * ai(30)
+    ai(33) = ur * ai(30) + ui * ar(30)
+    ur = ar(34)
+    ui = ai(34)
+    ar(34) = ur * ar(30) - ui * ai(30)
+    ai(34) = ur * ai(30) + ui * ar(30)
+    ur = ar(35)
+    ui = ai(35)
+    ar(35) = ur * ar(30) - ui * ai(30)
+    ai(35) = ur * ai(30) + ui * ar(30)
+    p = 4
+    do i = 5, 9 - 1
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(ar(p * nx + 4)) + abs(ai(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 3, nx - 1
+        swap = ar(4 * nx + j)
+        ar(4 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(4 * nx + j)
+        ai(4 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(40)
+    im = ai(40)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(40) = 1.0_c_double / d
+      ai(40) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(40) = r / d
+      ai(40) = (-1.0_c_double) / d
+    end if
+    do i = 5, 9 - 1
+      lr = ar(i * nx + 4) * ar(40) - ai(i * nx + 4) * ai(40)
+      li = ar(i * nx + 4) * ai(40) + ai(i * nx + 4) * ar(40)
+      ar(i * nx + 4) = lr
+      ai(i * nx + 4) = li
+      ur = ar(41)
+      ui = ai(41)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(42)
+      ui = ai(42)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(43)
+      ui = ai(43)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(44)
+      ui = ai(44)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+    end do
+    ur = ar(41)
+    ui = ai(41)
+    ar(41) = ur * ar(40) - ui * ai(40)
+    ai(41) = ur * ai(40) + ui * ar(40)
+    ur = ar(42)
+    ui = ai(42)
+    ar(42) = ur * ar(40) - ui * ai(40)
+    ai(42) = ur * ai(40) + ui * ar(40)
+    ur = ar(43)
+    ui = ai(43)
+    ar(43) = ur * ar(40) - ui * ai(40)
+    ai(43) = ur * ai(40) + ui * ar(40)
+    ur = ar(44)
+    ui = ai(44)
+    ar(44) = ur * ar(40) - ui * ai(40)
+    ai(44) = ur * ai(40) + ui * ar(40)
+    p = 5
+    do i = 6, 9 - 1
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+        p = i
+      end if
+    end do
+    piv(5) = p
+    if (.not. (abs(ar(p * nx + 5)) + abs(ai(p * nx + 5)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 5) then
+      do j = 3, nx - 1
+        swap = ar(5 * nx + j)
+        ar(5 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(5 * nx + j)
+        ai(5 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(50)
+    im = ai(50)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(50) = 1.0_c_double / d
+      ai(50) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(50) = r / d
+      ai(50) = (-1.0_c_double) / d
+    end if
+    do i = 6, 9 - 1
+      lr = ar(i * nx + 5) * ar(50) - ai(i * nx + 5) * ai(50)
+      li = ar(i * nx + 5) * ai(50) + ai(i * nx + 5) * ar(50)
+      ar(i * nx + 5) = lr
+      ai(i * nx + 5) = li
+      ur = ar(51)
+      ui = ai(51)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(52)
+      ui = ai(52)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(53)
+      ui = ai(53)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+    end do
+    ur = ar(51)
+    ui = ai(51)
+    ar(51) = ur * ar(50) - ui * ai(50)
+    ai(51) = ur * ai(50) + ui * ar(50)
+    ur = ar(52)
+    ui = ai(52)
+    ar(52) = ur * ar(50) - ui * ai(50)
+    ai(52) = ur * ai(50) + ui * ar(50)
+    ur = ar(53)
+    ui = ai(53)
+    ar(53) = ur * ar(50) - ui * ai(50)
+    ai(53) = ur * ai(50) + ui * ar(50)
+    p = 6
+    do i = 7, 9 - 1
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+        p = i
+      end if
+    end do
+    piv(6) = p
+    if (.not. (abs(ar(p * nx + 6)) + abs(ai(p * nx + 6)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 6) then
+      do j = 3, nx - 1
+        swap = ar(6 * nx + j)
+        ar(6 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(6 * nx + j)
+        ai(6 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(60)
+    im = ai(60)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(60) = 1.0_c_double / d
+      ai(60) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(60) = r / d
+      ai(60) = (-1.0_c_double) / d
+    end if
+    do i = 7, 9 - 1
+      lr = ar(i * nx + 6) * ar(60) - ai(i * nx + 6) * ai(60)
+      li = ar(i * nx + 6) * ai(60) + ai(i * nx + 6) * ar(60)
+      ar(i * nx + 6) = lr
+      ai(i * nx + 6) = li
+      ur = ar(61)
+      ui = ai(61)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(62)
+      ui = ai(62)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+    end do
+    ur = ar(61)
+    ui = ai(61)
+    ar(61) = ur * ar(60) - ui * ai(60)
+    ai(61) = ur * ai(60) + ui * ar(60)
+    ur = ar(62)
+    ui = ai(62)
+    ar(62) = ur * ar(60) - ui * ai(60)
+    ai(62) = ur * ai(60) + ui * ar(60)
+    p = 7
+    do i = 8, 9 - 1
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+        p = i
+      end if
+    end do
+    piv(7) = p
+    if (.not. (abs(ar(p * nx + 7)) + abs(ai(p * nx + 7)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 7) then
+      do j = 3, nx - 1
+        swap = ar(7 * nx + j)
+        ar(7 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(7 * nx + j)
+        ai(7 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(70)
+    im = ai(70)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(70) = 1.0_c_double / d
+      ai(70) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(70) = r / d
+      ai(70) = (-1.0_c_double) / d
+    end if
+    do i = 8, 9 - 1
+      lr = ar(i * nx + 7) * ar(70) - ai(i * nx + 7) * ai(70)
+      li = ar(i * nx + 7) * ai(70) + ai(i * nx + 7) * ar(70)
+      ar(i * nx + 7) = lr
+      ai(i * nx + 7) = li
+      ur = ar(71)
+      ui = ai(71)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+    end do
+    ur = ar(71)
+    ui = ai(71)
+    ar(71) = ur * ar(70) - ui * ai(70)
+    ai(71) = ur * ai(70) + ui * ar(70)
+    piv(8) = 8
+    if (.not. (abs(ar(80)) + abs(ai(80)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(80)
+    im = ai(80)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(80) = 1.0_c_double / d
+      ai(80) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(80) = r / d
+      ai(80) = (-1.0_c_double) / d
+    end if
     res = .false.
     return
   end function lu_decompose_complex
@@ -771,16 +1389,55 @@ contains
     real(c_double), intent(inout) :: bi(0:nx - 1)
     real(c_double) :: swap
     real(c_double) :: re
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = br(i)
-      br(i) = br(piv(i))
-      br(piv(i)) = swap
-      swap = bi(i)
-      bi(i) = bi(piv(i))
-      bi(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = br(1)
+      br(1) = br(piv(1))
+      br(piv(1)) = swap
+      swap = bi(1)
+      bi(1) = bi(piv(1))
+      bi(piv(1)) = swap
+    end if
+    if (piv(3) /= 3) then
+      swap = br(3)
+      br(3) = br(piv(3))
+      br(piv(3)) = swap
+      swap = bi(3)
+      bi(3) = bi(piv(3))
+      bi(piv(3)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = br(4)
+      br(4) = br(piv(4))
+      br(piv(4)) = swap
+      swap = bi(4)
+      bi(4) = bi(piv(4))
+      bi(piv(4)) = swap
+    end if
+    if (piv(5) /= 5) then
+      swap = br(5)
+      br(5) = br(piv(5))
+      br(piv(5)) = swap
+      swap = bi(5)
+      bi(5) = bi(piv(5))
+      bi(piv(5)) = swap
+    end if
+    if (piv(6) /= 6) then
+      swap = br(6)
+      br(6) = br(piv(6))
+      br(piv(6)) = swap
+      swap = bi(6)
+      bi(6) = bi(piv(6))
+      bi(piv(6)) = swap
+    end if
+    if (piv(7) /= 7) then
+      swap = br(7)
+      br(7) = br(piv(7))
+      br(piv(7)) = swap
+      swap = bi(7)
+      bi(7) = bi(piv(7))
+      bi(piv(7)) = swap
+    end if
     br(2) = (br(2) - ar(19) * br(1)) + ai(19) * bi(1)
     bi(2) = (bi(2) - ar(19) * bi(1)) - ai(19) * br(1)
     br(4) = (br(4) - ar(39) * br(3)) + ai(39) * bi(3)
@@ -1696,6 +2353,7 @@ contains
       e2r(i) = -J(i)
       e2i(i) = 0.0_c_double
     end do
+    !GCC$ unroll 1
     do i = 0, nx - 1
       e1(i * nx + i) = e1(i * nx + i) + gamma_h
       e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
@@ -1747,18 +2405,22 @@ contains
     gamma_h = 3.637834252744496_c_double / h
     alpha_h = 2.6810828736277523_c_double / h
     beta_h = 3.0504301992474105_c_double / h
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z1(i)
     end do
     call rw3_orthogonal_rhs(t + 0.1550510257216822_c_double * h, y, c, z1)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z2(i)
     end do
     call rw3_orthogonal_rhs(t + 0.6449489742783178_c_double * h, y, c, z2)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z3(i)
     end do
     call rw3_orthogonal_rhs(t + h, y, c, z3)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       a1 = z1(i)
       a2 = z2(i)
@@ -1773,6 +2435,7 @@ contains
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       s1 = z1(i) / scal(i)
       s2 = z2(i) / scal(i)
@@ -1809,6 +2472,7 @@ contains
     real(c_double) :: norm
     integer(c_int) :: i
 
+    !GCC$ unroll 1
     do i = 0, nx - 1
       g(i) = (((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i)) - &
           0.3333333333333333_c_double * z3(i)) / h
@@ -1816,21 +2480,25 @@ contains
     end do
     call lu_solve(e1, piv1, err)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       total = total + (err(i) / scal(i)) * (err(i) / scal(i))
     end do
     norm = sqrt(total / nx)
     if (norm >= 1.0_c_double .and. again) then
+      !GCC$ unroll 1
       do i = 0, nx - 1
         y(i) = x(i) + err(i)
       end do
       call rw3_orthogonal_rhs(t, y, c, err)
       stats%rhs_calls = stats%rhs_calls + 1
+      !GCC$ unroll 1
       do i = 0, nx - 1
         err(i) = err(i) + g(i)
       end do
       call lu_solve(e1, piv1, err)
       total = 0.0_c_double
+      !GCC$ unroll 1
       do i = 0, nx - 1
         total = total + (err(i) / scal(i)) * (err(i) / scal(i))
       end do
@@ -1906,6 +2574,7 @@ contains
     real(c_double) :: c1q
     real(c_double) :: c2q
     real(c_double) :: c3q
+    real(c_double) :: theta_k
     logical :: last
     logical :: first
     logical :: reject
@@ -1922,6 +2591,7 @@ contains
     real(c_double) :: a3
     real(c_double) :: ak
     integer(c_int) :: i
+    integer(c_int) :: k
 
     start = ode_start(5, RW3_ORTHOGONAL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, &
         f0, h, stats)
@@ -1944,6 +2614,7 @@ contains
     need_lu = .true.
     nonfinite = .false.
     singular = 0
+    !GCC$ unroll 1
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
       ak1(i) = 0.0_c_double
@@ -1958,6 +2629,7 @@ contains
       h = t1 - t
       last = .true.
     end if
+    !GCC$ unroll 1
     do i = 0, nx - 1
       scal(i) = atol_e + rtol_e * abs(x(i))
     end do
@@ -2004,6 +2676,7 @@ contains
 
       ! the Newton iterations start from the last step's collocation polynomial
       if (first) then
+        !GCC$ unroll 1
         do i = 0, nx - 1
           z1(i) = 0.0_c_double
           z2(i) = 0.0_c_double
@@ -2016,6 +2689,7 @@ contains
         c3q = h / h_old
         c1q = 0.1550510257216822_c_double * c3q
         c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
               0.8449489742783178_c_double) * ak3(i)))
@@ -2062,7 +2736,11 @@ contains
             exit
           end if
           rate = theta / (1.0_c_double - theta)
-          predicted = ((rate * dyno) * theta**real(6 - newt, c_double)) / newton_tol
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
           if (predicted >= 1.0_c_double) then
             q = max(1e-4_c_double, min(20.0_c_double, predicted))
             h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
@@ -2071,6 +2749,7 @@ contains
           end if
         end if
         dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = w1(i) + z1(i)
           a2 = w2(i) + z2(i)
@@ -2090,6 +2769,7 @@ contains
       end do
       if (outcome == 0) then
         err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
         do i = 0, nx - 1
           dx(i) = z3(i) - comp(i)
           xnew(i) = x(i) + dx(i)
@@ -2134,6 +2814,7 @@ contains
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         h_old = h
+        !GCC$ unroll 1
         do i = 0, nx - 1
           ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
           ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
@@ -2148,6 +2829,7 @@ contains
           res = RW3_ORTHOGONAL_ODE_OK
           return
         end if
+        !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
           scal(i) = atol_e + rtol_e * abs(x(i))

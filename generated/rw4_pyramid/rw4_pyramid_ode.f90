@@ -699,52 +699,255 @@ contains
   end function ode_start
 
   ! In-place LU decomposition with partial pivoting within the diagonal
-  ! blocks (0, 1), (1, 3), (3, 10) (row i's block ends
-  ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+  ! blocks (0, 1), (1, 3), (3, 10), unrolled over the entries
+  ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
   ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
   function lu_decompose(a, piv) result(res)
     real(c_double), intent(inout) :: a(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:9) = [1, 3, 3, 10, 10, 10, 10, 10, 10, 10]
     integer(c_int) :: p
     real(c_double) :: m
     real(c_double) :: swap
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(a(i * nx + k)) > abs(a(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(a(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(a(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(0) = 1.0_c_double / a(0)
+    a(1) = a(1) * a(0)
+    a(2) = a(2) * a(0)
+    a(3) = a(3) * a(0)
+    a(5) = a(5) * a(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(a(i * nx + 1)) > abs(a(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = a(k * nx + j)
-          a(k * nx + j) = a(p * nx + j)
-          a(p * nx + j) = swap
-        end do
-      end if
-      a(k * nx + k) = 1.0_c_double / a(k * nx + k)
-      do i = k + 1, lu_end(k) - 1
-        m = a(i * nx + k) * a(k * nx + k)
-        a(i * nx + k) = m
-        do j = k + 1, nx - 1
-          a(i * nx + j) = a(i * nx + j) - m * a(k * nx + j)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        a(k * nx + j) = a(k * nx + j) * a(k * nx + k)  ! u_kj / u_kk
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(a(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = a(1 * nx + j)
+        a(1 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(11) = 1.0_c_double / a(11)
+    do i = 2, 3 - 1
+      m = a(i * nx + 1) * a(11)
+      a(i * nx + 1) = m
+      a(i * nx + 2) = a(i * nx + 2) - m * a(12)
+      a(i * nx + 3) = a(i * nx + 3) - m * a(13)
+      a(i * nx + 4) = a(i * nx + 4) - m * a(14)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(15)
+    end do
+    a(12) = a(12) * a(11)
+    a(13) = a(13) * a(11)
+    a(14) = a(14) * a(11)
+    a(15) = a(15) * a(11)
+    piv(2) = 2
+    if (.not. (abs(a(22)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(22) = 1.0_c_double / a(22)
+    a(23) = a(23) * a(22)
+    a(24) = a(24) * a(22)
+    a(25) = a(25) * a(22)
+    p = 3
+    do i = 4, 10 - 1
+      if (abs(a(i * nx + 3)) > abs(a(p * nx + 3))) then
+        p = i
+      end if
+    end do
+    piv(3) = p
+    if (.not. (abs(a(p * nx + 3)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 3) then
+      do j = 3, nx - 1
+        swap = a(3 * nx + j)
+        a(3 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(33) = 1.0_c_double / a(33)
+    do i = 4, 10 - 1
+      m = a(i * nx + 3) * a(33)
+      a(i * nx + 3) = m
+      a(i * nx + 4) = a(i * nx + 4) - m * a(34)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(35)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(36)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(37)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(38)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(39)
+    end do
+    a(34) = a(34) * a(33)
+    a(35) = a(35) * a(33)
+    a(36) = a(36) * a(33)
+    a(37) = a(37) * a(33)
+    a(38) = a(38) * a(33)
+    a(39) = a(39) * a(33)
+    p = 4
+    do i = 5, 10 - 1
+      if (abs(a(i * nx + 4)) > abs(a(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(a(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 3, nx - 1
+        swap = a(4 * nx + j)
+        a(4 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(44) = 1.0_c_double / a(44)
+    do i = 5, 10 - 1
+      m = a(i * nx + 4) * a(44)
+      a(i * nx + 4) = m
+      a(i * nx + 5) = a(i * nx + 5) - m * a(45)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(46)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(47)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(48)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(49)
+    end do
+    a(45) = a(45) * a(44)
+    a(46) = a(46) * a(44)
+    a(47) = a(47) * a(44)
+    a(48) = a(48) * a(44)
+    a(49) = a(49) * a(44)
+    p = 5
+    do i = 6, 10 - 1
+      if (abs(a(i * nx + 5)) > abs(a(p * nx + 5))) then
+        p = i
+      end if
+    end do
+    piv(5) = p
+    if (.not. (abs(a(p * nx + 5)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 5) then
+      do j = 3, nx - 1
+        swap = a(5 * nx + j)
+        a(5 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(55) = 1.0_c_double / a(55)
+    do i = 6, 10 - 1
+      m = a(i * nx + 5) * a(55)
+      a(i * nx + 5) = m
+      a(i * nx + 6) = a(i * nx + 6) - m * a(56)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(57)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(58)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(59)
+    end do
+    a(56) = a(56) * a(55)
+    a(57) = a(57) * a(55)
+    a(58) = a(58) * a(55)
+    a(59) = a(59) * a(55)
+    p = 6
+    do i = 7, 10 - 1
+      if (abs(a(i * nx + 6)) > abs(a(p * nx + 6))) then
+        p = i
+      end if
+    end do
+    piv(6) = p
+    if (.not. (abs(a(p * nx + 6)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 6) then
+      do j = 3, nx - 1
+        swap = a(6 * nx + j)
+        a(6 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(66) = 1.0_c_double / a(66)
+    do i = 7, 10 - 1
+      m = a(i * nx + 6) * a(66)
+      a(i * nx + 6) = m
+      a(i * nx + 7) = a(i * nx + 7) - m * a(67)
+      a(i * nx + 8) = a(i * nx + 8) - m * a(68)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(69)
+    end do
+    a(67) = a(67) * a(66)
+    a(68) = a(68) * a(66)
+    a(69) = a(69) * a(66)
+    p = 7
+    do i = 8, 10 - 1
+      if (abs(a(i * nx + 7)) > abs(a(p * nx + 7))) then
+        p = i
+      end if
+    end do
+    piv(7) = p
+    if (.not. (abs(a(p * nx + 7)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 7) then
+      do j = 3, nx - 1
+        swap = a(7 * nx + j)
+        a(7 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(77) = 1.0_c_double / a(77)
+    do i = 8, 10 - 1
+      m = a(i * nx + 7) * a(77)
+      a(i * nx + 7) = m
+      a(i * nx + 8) = a(i * nx + 8) - m * a(78)
+      a(i * nx + 9) = a(i * nx + 9) - m * a(79)
+    end do
+    a(78) = a(78) * a(77)
+    a(79) = a(79) * a(77)
+    p = 8
+    do i = 9, 10 - 1
+      if (abs(a(i * nx + 8)) > abs(a(p * nx + 8))) then
+        p = i
+      end if
+    end do
+    piv(8) = p
+    if (.not. (abs(a(p * nx + 8)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 8) then
+      do j = 3, nx - 1
+        swap = a(8 * nx + j)
+        a(8 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(88) = 1.0_c_double / a(88)
+    do i = 9, 10 - 1
+      m = a(i * nx + 8) * a(88)
+      a(i * nx + 8) = m
+      a(i * nx + 9) = a(i * nx + 9) - m * a(89)
+    end do
+    a(89) = a(89) * a(88)
+    piv(9) = 9
+    if (.not. (abs(a(99)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(99) = 1.0_c_double / a(99)
     res = .false.
     return
   end function lu_decompose
@@ -756,13 +959,42 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(inout) :: b(0:nx - 1)
     real(c_double) :: swap
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = b(i)
-      b(i) = b(piv(i))
-      b(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = b(1)
+      b(1) = b(piv(1))
+      b(piv(1)) = swap
+    end if
+    if (piv(3) /= 3) then
+      swap = b(3)
+      b(3) = b(piv(3))
+      b(piv(3)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = b(4)
+      b(4) = b(piv(4))
+      b(piv(4)) = swap
+    end if
+    if (piv(5) /= 5) then
+      swap = b(5)
+      b(5) = b(piv(5))
+      b(piv(5)) = swap
+    end if
+    if (piv(6) /= 6) then
+      swap = b(6)
+      b(6) = b(piv(6))
+      b(piv(6)) = swap
+    end if
+    if (piv(7) /= 7) then
+      swap = b(7)
+      b(7) = b(piv(7))
+      b(piv(7)) = swap
+    end if
+    if (piv(8) /= 8) then
+      swap = b(8)
+      b(8) = b(piv(8))
+      b(piv(8)) = swap
+    end if
     b(2) = b(2) - lu(21) * b(1)
     b(4) = b(4) - lu(43) * b(3)
     b(5) = (b(5) - lu(53) * b(3)) - lu(54) * b(4)
@@ -793,7 +1025,6 @@ contains
     real(c_double), intent(inout) :: ai(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:9) = [1, 3, 3, 10, 10, 10, 10, 10, 10, 10]
     integer(c_int) :: p
     real(c_double) :: swap
     real(c_double) :: re
@@ -806,63 +1037,579 @@ contains
     real(c_double) :: ui
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(ar(i * nx + k)) + abs(ai(i * nx + k)) > abs(ar(p * nx + k)) + abs(ai(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(ar(p * nx + k)) + abs(ai(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(ar(0)) + abs(ai(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(0)
+    im = ai(0)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(0) = 1.0_c_double / d
+      ai(0) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(0) = r / d
+      ai(0) = (-1.0_c_double) / d
+    end if
+    ur = ar(1)
+    ui = ai(1)
+    ar(1) = ur * ar(0) - ui * ai(0)
+    ai(1) = ur * ai(0) + ui * ar(0)
+    ur = ar(2)
+    ui = ai(2)
+    ar(2) = ur * ar(0) - ui * ai(0)
+    ai(2) = ur * ai(0) + ui * ar(0)
+    ur = ar(3)
+    ui = ai(3)
+    ar(3) = ur * ar(0) - ui * ai(0)
+    ai(3) = ur * ai(0) + ui * ar(0)
+    ur = ar(5)
+    ui = ai(5)
+    ar(5) = ur * ar(0) - ui * ai(0)
+    ai(5) = ur * ai(0) + ui * ar(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = ar(k * nx + j)
-          ar(k * nx + j) = ar(p * nx + j)
-          ar(p * nx + j) = swap
-          swap = ai(k * nx + j)
-          ai(k * nx + j) = ai(p * nx + j)
-          ai(p * nx + j) = swap
-        end do
-      end if
-      ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
-      re = ar(k * nx + k)
-      im = ai(k * nx + k)
-      if (abs(re) >= abs(im)) then
-        r = im / re
-        d = re + im * r
-        ar(k * nx + k) = 1.0_c_double / d
-        ai(k * nx + k) = (-r) / d
-      else
-        r = re / im
-        d = im + re * r
-        ar(k * nx + k) = r / d
-        ai(k * nx + k) = (-1.0_c_double) / d
-      end if
-      do i = k + 1, lu_end(k) - 1
-        lr = ar(i * nx + k) * ar(k * nx + k) - ai(i * nx + k) * ai(k * nx + k)
-        li = ar(i * nx + k) * ai(k * nx + k) + ai(i * nx + k) * ar(k * nx + k)
-        ar(i * nx + k) = lr
-        ai(i * nx + k) = li
-        do j = k + 1, nx - 1
-          ur = ar(k * nx + j)
-          ui = ai(k * nx + j)
-          ar(i * nx + j) = ar(i * nx + j) - (lr * ur - li * ui)
-          ai(i * nx + j) = ai(i * nx + j) - (lr * ui + li * ur)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        ur = ar(k * nx + j)
-        ui = ai(k * nx + j)
-        ar(k * nx + j) = ur * ar(k * nx + k) - ui * ai(k * nx + k)  ! u_kj / u_kk
-        ai(k * nx + j) = ur * ai(k * nx + k) + ui * ar(k * nx + k)
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(ar(p * nx + 1)) + abs(ai(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = ar(1 * nx + j)
+        ar(1 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(1 * nx + j)
+        ai(1 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(11)
+    im = ai(11)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(11) = 1.0_c_double / d
+      ai(11) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(11) = r / d
+      ai(11) = (-1.0_c_double) / d
+    end if
+    do i = 2, 3 - 1
+      lr = ar(i * nx + 1) * ar(11) - ai(i * nx + 1) * ai(11)
+      li = ar(i * nx + 1) * ai(11) + ai(i * nx + 1) * ar(11)
+      ar(i * nx + 1) = lr
+      ai(i * nx + 1) = li
+      ur = ar(12)
+      ui = ai(12)
+      ar(i * nx + 2) = ar(i * nx + 2) - (lr * ur - li * ui)
+      ai(i * nx + 2) = ai(i * nx + 2) - (lr * ui + li * ur)
+      ur = ar(13)
+      ui = ai(13)
+      ar(i * nx + 3) = ar(i * nx + 3) - (lr * ur - li * ui)
+      ai(i * nx + 3) = ai(i * nx + 3) - (lr * ui + li * ur)
+      ur = ar(14)
+      ui = ai(14)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(15)
+      ui = ai(15)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+    end do
+    ur = ar(12)
+    ui = ai(12)
+    ar(12) = ur * ar(11) - ui * ai(11)
+    ai(12) = ur * ai(11) + ui * ar(11)
+    ur = ar(13)
+    ui = ai(13)
+    ar(13) = ur * ar(11) - ui * ai(11)
+    ai(13) = ur * ai(11) + ui * ar(11)
+    ur = ar(14)
+    ui = ai(14)
+    ar(14) = ur * ar(11) - ui * ai(11)
+    ai(14) = ur * ai(11) + ui * ar(11)
+    ur = ar(15)
+    ui = ai(15)
+    ar(15) = ur * ar(11) - ui * ai(11)
+    ai(15) = ur * ai(11) + ui * ar(11)
+    piv(2) = 2
+    if (.not. (abs(ar(22)) + abs(ai(22)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(22)
+    im = ai(22)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(22) = 1.0_c_double / d
+      ai(22) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(22) = r / d
+      ai(22) = (-1.0_c_double) / d
+    end if
+    ur = ar(23)
+    ui = ai(23)
+    ar(23) = ur * ar(22) - ui * ai(22)
+    ai(23) = ur * ai(22) + ui * ar(22)
+    ur = ar(24)
+    ui = ai(24)
+    ar(24) = ur * ar(22) - ui * ai(22)
+    ai(24) = ur * ai(22) + ui * ar(22)
+    ur = ar(25)
+    ui = ai(25)
+    ar(25) = ur * ar(22) - ui * ai(22)
+    ai(25) = ur * ai(22) + ui * ar(22)
+    p = 3
+    do i = 4, 10 - 1
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+        p = i
+      end if
+    end do
+    piv(3) = p
+    if (.not. (abs(ar(p * nx + 3)) + abs(ai(p * nx + 3)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 3) then
+      do j = 3, nx - 1
+        swap = ar(3 * nx + j)
+        ar(3 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(3 * nx + j)
+        ai(3 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(33)
+    im = ai(33)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(33) = 1.0_c_double / d
+      ai(33) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(33) = r / d
+      ai(33) = (-1.0_c_double) / d
+    end if
+    do i = 4, 10 - 1
+      lr = ar(i * nx + 3) * ar(33) - ai(i * nx + 3) * ai(33)
+      li = ar(i * nx + 3) * ai(33) + ai(i * nx + 3) * ar(33)
+      ar(i * nx + 3) = lr
+      ai(i * nx + 3) = li
+      ur = ar(34)
+      ui = ai(34)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(35)
+      ui = ai(35)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(36)
+      ui = ai(36)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(37)
+      ui = ai(37)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(38)
+      ui = ai(38)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(39)
+      ui = ai(39)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(34)
+    ui = ai(34)
+    ar(34) = ur * ar(33) - ui * ai(33)
+    ai(34) = ur * ai(33) + ui * ar(33)
+    ur = ar(35)
+    ui = ai(35)
+    ar(35) = ur * ar(33) - ui * ai(33)
+    ai(35) = ur * ai(33) + ui * ar(33)
+    ur = ar(36)
+    ui = ai(36)
+    ar(36) = ur * ar(33) - ui * ai(33)
+    ai(36) = ur * ai(33) + ui * ar(33)
+    ur = ar(37)
+    ui = ai(37)
+    ar(37) = ur * ar(33) - ui * ai(33)
+    ai(37) = ur * ai(33) + ui * ar(33)
+    ur = ar(38)
+    ui = ai(38)
+    ar(38) = ur * ar(33) - ui * ai(33)
+    ai(38) = ur * ai(33) + ui * ar(33)
+    ur = ar(39)
+    ui = ai(39)
+    ar(39) = ur * ar(33) - ui * ai(33)
+    ai(39) = ur * ai(33) + ui * ar(33)
+    p = 4
+    do i = 5, 10 - 1
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(ar(p * nx + 4)) + abs(ai(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 3, nx - 1
+        swap = ar(4 * nx + j)
+        ar(4 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(4 * nx + j)
+        ai(4 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(44)
+    im = ai(44)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(44) = 1.0_c_double / d
+      ai(44) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(44) = r / d
+      ai(44) = (-1.0_c_double) / d
+    end if
+    do i = 5, 10 - 1
+      lr = ar(i * nx + 4) * ar(44) - ai(i * nx + 4) * ai(44)
+      li = ar(i * nx + 4) * ai(44) + ai(i * nx + 4) * ar(44)
+      ar(i * nx + 4) = lr
+      ai(i * nx + 4) = li
+      ur = ar(45)
+      ui = ai(45)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(46)
+      ui = ai(46)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(47)
+      ui = ai(47)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(48)
+      ui = ai(48)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(49)
+      ui = ai(49)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(45)
+    ui = ai(45)
+    ar(45) = ur * ar(44) - ui * ai(44)
+    ai(45) = ur * ai(44) + ui * ar(44)
+    ur = ar(46)
+    ui = ai(46)
+    ar(46) = ur * ar(44) - ui * ai(44)
+    ai(46) = ur * ai(44) + ui * ar(44)
+    ur = ar(47)
+    ui = ai(47)
+    ar(47) = ur * ar(44) - ui * ai(44)
+    ai(47) = ur * ai(44) + ui * ar(44)
+    ur = ar(48)
+    ui = ai(48)
+    ar(48) = ur * ar(44) - ui * ai(44)
+    ai(48) = ur * ai(44) + ui * ar(44)
+    ur = ar(49)
+    ui = ai(49)
+    ar(49) = ur * ar(44) - ui * ai(44)
+    ai(49) = ur * ai(44) + ui * ar(44)
+    p = 5
+    do i = 6, 10 - 1
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+        p = i
+      end if
+    end do
+    piv(5) = p
+    if (.not. (abs(ar(p * nx + 5)) + abs(ai(p * nx + 5)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 5) then
+      do j = 3, nx - 1
+        swap = ar(5 * nx + j)
+        ar(5 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(5 * nx + j)
+        ai(5 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(55)
+    im = ai(55)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(55) = 1.0_c_double / d
+      ai(55) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(55) = r / d
+      ai(55) = (-1.0_c_double) / d
+    end if
+    do i = 6, 10 - 1
+      lr = ar(i * nx + 5) * ar(55) - ai(i * nx + 5) * ai(55)
+      li = ar(i * nx + 5) * ai(55) + ai(i * nx + 5) * ar(55)
+      ar(i * nx + 5) = lr
+      ai(i * nx + 5) = li
+      ur = ar(56)
+      ui = ai(56)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(57)
+      ui = ai(57)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(58)
+      ui = ai(58)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(59)
+      ui = ai(59)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(56)
+    ui = ai(56)
+    ar(56) = ur * ar(55) - ui * ai(55)
+    ai(56) = ur * ai(55) + ui * ar(55)
+    ur = ar(57)
+    ui = ai(57)
+    ar(57) = ur * ar(55) - ui * ai(55)
+    ai(57) = ur * ai(55) + ui * ar(55)
+    ur = ar(58)
+    ui = ai(58)
+    ar(58) = ur * ar(55) - ui * ai(55)
+    ai(58) = ur * ai(55) + ui * ar(55)
+    ur = ar(59)
+    ui = ai(59)
+    ar(59) = ur * ar(55) - ui * ai(55)
+    ai(59) = ur * ai(55) + ui * ar(55)
+    p = 6
+    do i = 7, 10 - 1
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+        p = i
+      end if
+    end do
+    piv(6) = p
+    if (.not. (abs(ar(p * nx + 6)) + abs(ai(p * nx + 6)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 6) then
+      do j = 3, nx - 1
+        swap = ar(6 * nx + j)
+        ar(6 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(6 * nx + j)
+        ai(6 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(66)
+    im = ai(66)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(66) = 1.0_c_double / d
+      ai(66) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(66) = r / d
+      ai(66) = (-1.0_c_double) / d
+    end if
+    do i = 7, 10 - 1
+      lr = ar(i * nx + 6) * ar(66) - ai(i * nx + 6) * ai(66)
+      li = ar(i * nx + 6) * ai(66) + ai(i * nx + 6) * ar(66)
+      ar(i * nx + 6) = lr
+      ai(i * nx + 6) = li
+      ur = ar(67)
+      ui = ai(67)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+      ur = ar(68)
+      ui = ai(68)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(69)
+      ui = ai(69)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(67)
+    ui = ai(67)
+    ar(67) = ur * ar(66) - ui * ai(66)
+    ai(67) = ur * ai(66) + ui * ar(66)
+    ur = ar(68)
+    ui = ai(68)
+    ar(68) = ur * ar(66) - ui * ai(66)
+    ai(68) = ur * ai(66) + ui * ar(66)
+    ur = ar(69)
+    ui = ai(69)
+    ar(69) = ur * ar(66) - ui * ai(66)
+    ai(69) = ur * ai(66) + ui * ar(66)
+    p = 7
+    do i = 8, 10 - 1
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+        p = i
+      end if
+    end do
+    piv(7) = p
+    if (.not. (abs(ar(p * nx + 7)) + abs(ai(p * nx + 7)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 7) then
+      do j = 3, nx - 1
+        swap = ar(7 * nx + j)
+        ar(7 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(7 * nx + j)
+        ai(7 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(77)
+    im = ai(77)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(77) = 1.0_c_double / d
+      ai(77) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(77) = r / d
+      ai(77) = (-1.0_c_double) / d
+    end if
+    do i = 8, 10 - 1
+      lr = ar(i * nx + 7) * ar(77) - ai(i * nx + 7) * ai(77)
+      li = ar(i * nx + 7) * ai(77) + ai(i * nx + 7) * ar(77)
+      ar(i * nx + 7) = lr
+      ai(i * nx + 7) = li
+      ur = ar(78)
+      ui = ai(78)
+      ar(i * nx + 8) = ar(i * nx + 8) - (lr * ur - li * ui)
+      ai(i * nx + 8) = ai(i * nx + 8) - (lr * ui + li * ur)
+      ur = ar(79)
+      ui = ai(79)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(78)
+    ui = ai(78)
+    ar(78) = ur * ar(77) - ui * ai(77)
+    ai(78) = ur * ai(77) + ui * ar(77)
+    ur = ar(79)
+    ui = ai(79)
+    ar(79) = ur * ar(77) - ui * ai(77)
+    ai(79) = ur * ai(77) + ui * ar(77)
+    p = 8
+    do i = 9, 10 - 1
+      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) then
+        p = i
+      end if
+    end do
+    piv(8) = p
+    if (.not. (abs(ar(p * nx + 8)) + abs(ai(p * nx + 8)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 8) then
+      do j = 3, nx - 1
+        swap = ar(8 * nx + j)
+        ar(8 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(8 * nx + j)
+        ai(8 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(88)
+    im = ai(88)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(88) = 1.0_c_double / d
+      ai(88) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(88) = r / d
+      ai(88) = (-1.0_c_double) / d
+    end if
+    do i = 9, 10 - 1
+      lr = ar(i * nx + 8) * ar(88) - ai(i * nx + 8) * ai(88)
+      li = ar(i * nx + 8) * ai(88) + ai(i * nx + 8) * ar(88)
+      ar(i * nx + 8) = lr
+      ai(i * nx + 8) = li
+      ur = ar(89)
+      ui = ai(89)
+      ar(i * nx + 9) = ar(i * nx + 9) - (lr * ur - li * ui)
+      ai(i * nx + 9) = ai(i * nx + 9) - (lr * ui + li * ur)
+    end do
+    ur = ar(89)
+    ui = ai(89)
+    ar(89) = ur * ar(88) - ui * ai(88)
+    ai(89) = ur * ai(88) + ui * ar(88)
+    piv(9) = 9
+    if (.not. (abs(ar(99)) + abs(ai(99)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(99)
+    im = ai(99)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(99) = 1.0_c_double / d
+      ai(99) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(99) = r / d
+      ai(99) = (-1.0_c_double) / d
+    end if
     res = .false.
     return
   end function lu_decompose_complex
@@ -876,16 +1623,63 @@ contains
     real(c_double), intent(inout) :: bi(0:nx - 1)
     real(c_double) :: swap
     real(c_double) :: re
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = br(i)
-      br(i) = br(piv(i))
-      br(piv(i)) = swap
-      swap = bi(i)
-      bi(i) = bi(piv(i))
-      bi(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = br(1)
+      br(1) = br(piv(1))
+      br(piv(1)) = swap
+      swap = bi(1)
+      bi(1) = bi(piv(1))
+      bi(piv(1)) = swap
+    end if
+    if (piv(3) /= 3) then
+      swap = br(3)
+      br(3) = br(piv(3))
+      br(piv(3)) = swap
+      swap = bi(3)
+      bi(3) = bi(piv(3))
+      bi(piv(3)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = br(4)
+      br(4) = br(piv(4))
+      br(piv(4)) = swap
+      swap = bi(4)
+      bi(4) = bi(piv(4))
+      bi(piv(4)) = swap
+    end if
+    if (piv(5) /= 5) then
+      swap = br(5)
+      br(5) = br(piv(5))
+      br(piv(5)) = swap
+      swap = bi(5)
+      bi(5) = bi(piv(5))
+      bi(piv(5)) = swap
+    end if
+    if (piv(6) /= 6) then
+      swap = br(6)
+      br(6) = br(piv(6))
+      br(piv(6)) = swap
+      swap = bi(6)
+      bi(6) = bi(piv(6))
+      bi(piv(6)) = swap
+    end if
+    if (piv(7) /= 7) then
+      swap = br(7)
+      br(7) = br(piv(7))
+      br(piv(7)) = swap
+      swap = bi(7)
+      bi(7) = bi(piv(7))
+      bi(piv(7)) = swap
+    end if
+    if (piv(8) /= 8) then
+      swap = br(8)
+      br(8) = br(piv(8))
+      br(piv(8)) = swap
+      swap = bi(8)
+      bi(8) = bi(piv(8))
+      bi(piv(8)) = swap
+    end if
     br(2) = (br(2) - ar(21) * br(1)) + ai(21) * bi(1)
     bi(2) = (bi(2) - ar(21) * bi(1)) - ai(21) * br(1)
     br(4) = (br(4) - ar(43) * br(3)) + ai(43) * bi(3)
@@ -1811,6 +2605,7 @@ contains
       e2r(i) = -J(i)
       e2i(i) = 0.0_c_double
     end do
+    !GCC$ unroll 1
     do i = 0, nx - 1
       e1(i * nx + i) = e1(i * nx + i) + gamma_h
       e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
@@ -1862,18 +2657,22 @@ contains
     gamma_h = 3.637834252744496_c_double / h
     alpha_h = 2.6810828736277523_c_double / h
     beta_h = 3.0504301992474105_c_double / h
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z1(i)
     end do
     call rw4_pyramid_rhs(t + 0.1550510257216822_c_double * h, y, c, z1)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z2(i)
     end do
     call rw4_pyramid_rhs(t + 0.6449489742783178_c_double * h, y, c, z2)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z3(i)
     end do
     call rw4_pyramid_rhs(t + h, y, c, z3)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       a1 = z1(i)
       a2 = z2(i)
@@ -1888,6 +2687,7 @@ contains
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       s1 = z1(i) / scal(i)
       s2 = z2(i) / scal(i)
@@ -1924,6 +2724,7 @@ contains
     real(c_double) :: norm
     integer(c_int) :: i
 
+    !GCC$ unroll 1
     do i = 0, nx - 1
       g(i) = (((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i)) - &
           0.3333333333333333_c_double * z3(i)) / h
@@ -1931,21 +2732,25 @@ contains
     end do
     call lu_solve(e1, piv1, err)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       total = total + (err(i) / scal(i)) * (err(i) / scal(i))
     end do
     norm = sqrt(total / nx)
     if (norm >= 1.0_c_double .and. again) then
+      !GCC$ unroll 1
       do i = 0, nx - 1
         y(i) = x(i) + err(i)
       end do
       call rw4_pyramid_rhs(t, y, c, err)
       stats%rhs_calls = stats%rhs_calls + 1
+      !GCC$ unroll 1
       do i = 0, nx - 1
         err(i) = err(i) + g(i)
       end do
       call lu_solve(e1, piv1, err)
       total = 0.0_c_double
+      !GCC$ unroll 1
       do i = 0, nx - 1
         total = total + (err(i) / scal(i)) * (err(i) / scal(i))
       end do
@@ -2021,6 +2826,7 @@ contains
     real(c_double) :: c1q
     real(c_double) :: c2q
     real(c_double) :: c3q
+    real(c_double) :: theta_k
     logical :: last
     logical :: first
     logical :: reject
@@ -2037,6 +2843,7 @@ contains
     real(c_double) :: a3
     real(c_double) :: ak
     integer(c_int) :: i
+    integer(c_int) :: k
 
     start = ode_start(5, RW4_PYRAMID_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
         h, stats)
@@ -2059,6 +2866,7 @@ contains
     need_lu = .true.
     nonfinite = .false.
     singular = 0
+    !GCC$ unroll 1
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
       ak1(i) = 0.0_c_double
@@ -2073,6 +2881,7 @@ contains
       h = t1 - t
       last = .true.
     end if
+    !GCC$ unroll 1
     do i = 0, nx - 1
       scal(i) = atol_e + rtol_e * abs(x(i))
     end do
@@ -2118,6 +2927,7 @@ contains
 
       ! the Newton iterations start from the last step's collocation polynomial
       if (first) then
+        !GCC$ unroll 1
         do i = 0, nx - 1
           z1(i) = 0.0_c_double
           z2(i) = 0.0_c_double
@@ -2130,6 +2940,7 @@ contains
         c3q = h / h_old
         c1q = 0.1550510257216822_c_double * c3q
         c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
               0.8449489742783178_c_double) * ak3(i)))
@@ -2176,7 +2987,11 @@ contains
             exit
           end if
           rate = theta / (1.0_c_double - theta)
-          predicted = ((rate * dyno) * theta**real(6 - newt, c_double)) / newton_tol
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
           if (predicted >= 1.0_c_double) then
             q = max(1e-4_c_double, min(20.0_c_double, predicted))
             h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
@@ -2185,6 +3000,7 @@ contains
           end if
         end if
         dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = w1(i) + z1(i)
           a2 = w2(i) + z2(i)
@@ -2204,6 +3020,7 @@ contains
       end do
       if (outcome == 0) then
         err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
         do i = 0, nx - 1
           dx(i) = z3(i) - comp(i)
           xnew(i) = x(i) + dx(i)
@@ -2248,6 +3065,7 @@ contains
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         h_old = h
+        !GCC$ unroll 1
         do i = 0, nx - 1
           ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
           ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
@@ -2262,6 +3080,7 @@ contains
           res = RW4_PYRAMID_ODE_OK
           return
         end if
+        !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
           scal(i) = atol_e + rtol_e * abs(x(i))

@@ -573,51 +573,243 @@ static int ode_start(int order, double rtol_min, double t0, double t1, const dou
 }
 
 /* In-place LU decomposition with partial pivoting within the diagonal
-   blocks (0, 1), (1, 3), (3, 10) (row i's block ends
-   before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+   blocks (0, 1), (1, 3), (3, 10), unrolled over the entries
+   of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
    row k swapped with piv[k]. 1 when a pivot is zero: singular. */
 static int lu_decompose(double *a, int *piv)
 {
-    static const int lu_end[10] = {1, 3, 3, 10, 10, 10, 10, 10, 10, 10};
     int p;
     double m;
     double swap;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < RW4_PYRAMID_FAILED_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(a[i * RW4_PYRAMID_FAILED_NX + k]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + k]) > 0.0)) {
-            return 1;  /* singular */
-        }
-        if (p != k) {
-            for (j = 0; j < RW4_PYRAMID_FAILED_NX; ++j) {
-                swap = a[k * RW4_PYRAMID_FAILED_NX + j];
-                a[k * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
-                a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
-            }
-        }
-        a[k * RW4_PYRAMID_FAILED_NX + k] = 1.0 / a[k * RW4_PYRAMID_FAILED_NX + k];
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            m = a[i * RW4_PYRAMID_FAILED_NX + k] * a[k * RW4_PYRAMID_FAILED_NX + k];
-            a[i * RW4_PYRAMID_FAILED_NX + k] = m;
-            for (j = k + 1; j < RW4_PYRAMID_FAILED_NX; ++j) {
-                a[i * RW4_PYRAMID_FAILED_NX + j] = a[i * RW4_PYRAMID_FAILED_NX + j] - m * a[k *
-                        RW4_PYRAMID_FAILED_NX + j];
-            }
-        }
-        for (j = k + 1; j < RW4_PYRAMID_FAILED_NX; ++j) {
-            a[k * RW4_PYRAMID_FAILED_NX + j] = a[k * RW4_PYRAMID_FAILED_NX + j] * a[k *
-                    RW4_PYRAMID_FAILED_NX + k];  /* u_kj / u_kk */
+    piv[0] = 0;
+    if (!(fabs(a[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[0] = 1.0 / a[0];
+    a[1] = a[1] * a[0];
+    a[2] = a[2] * a[0];
+    a[3] = a[3] * a[0];
+    a[5] = a[5] * a[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 1]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 1])) {
+            p = i;
         }
     }
+    piv[1] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[1 * RW4_PYRAMID_FAILED_NX + j];
+            a[1 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[11] = 1.0 / a[11];
+    for (i = 2; i < 3; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 1] * a[11];
+        a[i * RW4_PYRAMID_FAILED_NX + 1] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 2] = a[i * RW4_PYRAMID_FAILED_NX + 2] - m * a[12];
+        a[i * RW4_PYRAMID_FAILED_NX + 3] = a[i * RW4_PYRAMID_FAILED_NX + 3] - m * a[13];
+        a[i * RW4_PYRAMID_FAILED_NX + 4] = a[i * RW4_PYRAMID_FAILED_NX + 4] - m * a[14];
+        a[i * RW4_PYRAMID_FAILED_NX + 5] = a[i * RW4_PYRAMID_FAILED_NX + 5] - m * a[15];
+    }
+    a[12] = a[12] * a[11];
+    a[13] = a[13] * a[11];
+    a[14] = a[14] * a[11];
+    a[15] = a[15] * a[11];
+    piv[2] = 2;
+    if (!(fabs(a[22]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[22] = 1.0 / a[22];
+    a[23] = a[23] * a[22];
+    a[24] = a[24] * a[22];
+    a[25] = a[25] * a[22];
+    p = 3;
+    for (i = 4; i < 10; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 3]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 3])) {
+            p = i;
+        }
+    }
+    piv[3] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 3]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 3) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[3 * RW4_PYRAMID_FAILED_NX + j];
+            a[3 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[33] = 1.0 / a[33];
+    for (i = 4; i < 10; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 3] * a[33];
+        a[i * RW4_PYRAMID_FAILED_NX + 3] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 4] = a[i * RW4_PYRAMID_FAILED_NX + 4] - m * a[34];
+        a[i * RW4_PYRAMID_FAILED_NX + 5] = a[i * RW4_PYRAMID_FAILED_NX + 5] - m * a[35];
+        a[i * RW4_PYRAMID_FAILED_NX + 6] = a[i * RW4_PYRAMID_FAILED_NX + 6] - m * a[36];
+        a[i * RW4_PYRAMID_FAILED_NX + 7] = a[i * RW4_PYRAMID_FAILED_NX + 7] - m * a[37];
+        a[i * RW4_PYRAMID_FAILED_NX + 8] = a[i * RW4_PYRAMID_FAILED_NX + 8] - m * a[38];
+        a[i * RW4_PYRAMID_FAILED_NX + 9] = a[i * RW4_PYRAMID_FAILED_NX + 9] - m * a[39];
+    }
+    a[34] = a[34] * a[33];
+    a[35] = a[35] * a[33];
+    a[36] = a[36] * a[33];
+    a[37] = a[37] * a[33];
+    a[38] = a[38] * a[33];
+    a[39] = a[39] * a[33];
+    p = 4;
+    for (i = 5; i < 10; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 4]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 4])) {
+            p = i;
+        }
+    }
+    piv[4] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[4 * RW4_PYRAMID_FAILED_NX + j];
+            a[4 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[44] = 1.0 / a[44];
+    for (i = 5; i < 10; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 4] * a[44];
+        a[i * RW4_PYRAMID_FAILED_NX + 4] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 5] = a[i * RW4_PYRAMID_FAILED_NX + 5] - m * a[45];
+        a[i * RW4_PYRAMID_FAILED_NX + 6] = a[i * RW4_PYRAMID_FAILED_NX + 6] - m * a[46];
+        a[i * RW4_PYRAMID_FAILED_NX + 7] = a[i * RW4_PYRAMID_FAILED_NX + 7] - m * a[47];
+        a[i * RW4_PYRAMID_FAILED_NX + 8] = a[i * RW4_PYRAMID_FAILED_NX + 8] - m * a[48];
+        a[i * RW4_PYRAMID_FAILED_NX + 9] = a[i * RW4_PYRAMID_FAILED_NX + 9] - m * a[49];
+    }
+    a[45] = a[45] * a[44];
+    a[46] = a[46] * a[44];
+    a[47] = a[47] * a[44];
+    a[48] = a[48] * a[44];
+    a[49] = a[49] * a[44];
+    p = 5;
+    for (i = 6; i < 10; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 5]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 5])) {
+            p = i;
+        }
+    }
+    piv[5] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 5]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 5) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[5 * RW4_PYRAMID_FAILED_NX + j];
+            a[5 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[55] = 1.0 / a[55];
+    for (i = 6; i < 10; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 5] * a[55];
+        a[i * RW4_PYRAMID_FAILED_NX + 5] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 6] = a[i * RW4_PYRAMID_FAILED_NX + 6] - m * a[56];
+        a[i * RW4_PYRAMID_FAILED_NX + 7] = a[i * RW4_PYRAMID_FAILED_NX + 7] - m * a[57];
+        a[i * RW4_PYRAMID_FAILED_NX + 8] = a[i * RW4_PYRAMID_FAILED_NX + 8] - m * a[58];
+        a[i * RW4_PYRAMID_FAILED_NX + 9] = a[i * RW4_PYRAMID_FAILED_NX + 9] - m * a[59];
+    }
+    a[56] = a[56] * a[55];
+    a[57] = a[57] * a[55];
+    a[58] = a[58] * a[55];
+    a[59] = a[59] * a[55];
+    p = 6;
+    for (i = 7; i < 10; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 6]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 6])) {
+            p = i;
+        }
+    }
+    piv[6] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 6]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 6) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[6 * RW4_PYRAMID_FAILED_NX + j];
+            a[6 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[66] = 1.0 / a[66];
+    for (i = 7; i < 10; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 6] * a[66];
+        a[i * RW4_PYRAMID_FAILED_NX + 6] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 7] = a[i * RW4_PYRAMID_FAILED_NX + 7] - m * a[67];
+        a[i * RW4_PYRAMID_FAILED_NX + 8] = a[i * RW4_PYRAMID_FAILED_NX + 8] - m * a[68];
+        a[i * RW4_PYRAMID_FAILED_NX + 9] = a[i * RW4_PYRAMID_FAILED_NX + 9] - m * a[69];
+    }
+    a[67] = a[67] * a[66];
+    a[68] = a[68] * a[66];
+    a[69] = a[69] * a[66];
+    p = 7;
+    for (i = 8; i < 10; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 7]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 7])) {
+            p = i;
+        }
+    }
+    piv[7] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 7]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 7) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[7 * RW4_PYRAMID_FAILED_NX + j];
+            a[7 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[77] = 1.0 / a[77];
+    for (i = 8; i < 10; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 7] * a[77];
+        a[i * RW4_PYRAMID_FAILED_NX + 7] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 8] = a[i * RW4_PYRAMID_FAILED_NX + 8] - m * a[78];
+        a[i * RW4_PYRAMID_FAILED_NX + 9] = a[i * RW4_PYRAMID_FAILED_NX + 9] - m * a[79];
+    }
+    a[78] = a[78] * a[77];
+    a[79] = a[79] * a[77];
+    p = 8;
+    for (i = 9; i < 10; ++i) {
+        if (fabs(a[i * RW4_PYRAMID_FAILED_NX + 8]) > fabs(a[p * RW4_PYRAMID_FAILED_NX + 8])) {
+            p = i;
+        }
+    }
+    piv[8] = p;
+    if (!(fabs(a[p * RW4_PYRAMID_FAILED_NX + 8]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 8) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = a[8 * RW4_PYRAMID_FAILED_NX + j];
+            a[8 * RW4_PYRAMID_FAILED_NX + j] = a[p * RW4_PYRAMID_FAILED_NX + j];
+            a[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    a[88] = 1.0 / a[88];
+    for (i = 9; i < 10; ++i) {
+        m = a[i * RW4_PYRAMID_FAILED_NX + 8] * a[88];
+        a[i * RW4_PYRAMID_FAILED_NX + 8] = m;
+        a[i * RW4_PYRAMID_FAILED_NX + 9] = a[i * RW4_PYRAMID_FAILED_NX + 9] - m * a[89];
+    }
+    a[89] = a[89] * a[88];
+    piv[9] = 9;
+    if (!(fabs(a[99]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[99] = 1.0 / a[99];
     return 0;
 }
 
@@ -626,12 +818,41 @@ static int lu_decompose(double *a, int *piv)
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
     double swap;
-    int i;
 
-    for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
-        swap = b[i];
-        b[i] = b[piv[i]];
-        b[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = b[1];
+        b[1] = b[piv[1]];
+        b[piv[1]] = swap;
+    }
+    if (piv[3] != 3) {
+        swap = b[3];
+        b[3] = b[piv[3]];
+        b[piv[3]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = b[4];
+        b[4] = b[piv[4]];
+        b[piv[4]] = swap;
+    }
+    if (piv[5] != 5) {
+        swap = b[5];
+        b[5] = b[piv[5]];
+        b[piv[5]] = swap;
+    }
+    if (piv[6] != 6) {
+        swap = b[6];
+        b[6] = b[piv[6]];
+        b[piv[6]] = swap;
+    }
+    if (piv[7] != 7) {
+        swap = b[7];
+        b[7] = b[piv[7]];
+        b[piv[7]] = swap;
+    }
+    if (piv[8] != 8) {
+        swap = b[8];
+        b[8] = b[piv[8]];
+        b[piv[8]] = swap;
     }
     b[2] = b[2] - lu[21] * b[1];
     b[4] = b[4] - lu[43] * b[3];
@@ -659,7 +880,6 @@ static void lu_solve(const double *lu, const int *piv, double *b)
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
 static int lu_decompose_complex(double *ar, double *ai, int *piv)
 {
-    static const int lu_end[10] = {1, 3, 3, 10, 10, 10, 10, 10, 10, 10};
     int p;
     double swap;
     double re;
@@ -672,67 +892,582 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     double ui;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < RW4_PYRAMID_FAILED_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + k]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + k]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + k]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + k])) {
-                p = i;
-            }
+    piv[0] = 0;
+    if (!(fabs(ar[0]) + fabs(ai[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[0];
+    im = ai[0];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[0] = 1.0 / d;
+        ai[0] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[0] = r / d;
+        ai[0] = -1.0 / d;
+    }
+    ur = ar[1];
+    ui = ai[1];
+    ar[1] = ur * ar[0] - ui * ai[0];
+    ai[1] = ur * ai[0] + ui * ar[0];
+    ur = ar[2];
+    ui = ai[2];
+    ar[2] = ur * ar[0] - ui * ai[0];
+    ai[2] = ur * ai[0] + ui * ar[0];
+    ur = ar[3];
+    ui = ai[3];
+    ar[3] = ur * ar[0] - ui * ai[0];
+    ai[3] = ur * ai[0] + ui * ar[0];
+    ur = ar[5];
+    ui = ai[5];
+    ar[5] = ur * ar[0] - ui * ai[0];
+    ai[5] = ur * ai[0] + ui * ar[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 1]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 1])) {
+            p = i;
         }
-        piv[k] = p;
-        if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + k]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + k]) > 0.0)) {
-            return 1;  /* singular */
+    }
+    piv[1] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[1 * RW4_PYRAMID_FAILED_NX + j];
+            ar[1 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[1 * RW4_PYRAMID_FAILED_NX + j];
+            ai[1 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
         }
-        if (p != k) {
-            for (j = 0; j < RW4_PYRAMID_FAILED_NX; ++j) {
-                swap = ar[k * RW4_PYRAMID_FAILED_NX + j];
-                ar[k * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
-                ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
-                swap = ai[k * RW4_PYRAMID_FAILED_NX + j];
-                ai[k * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
-                ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[11];
+    im = ai[11];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[11] = 1.0 / d;
+        ai[11] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[11] = r / d;
+        ai[11] = -1.0 / d;
+    }
+    for (i = 2; i < 3; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 1] * ar[11] - ai[i * RW4_PYRAMID_FAILED_NX + 1] *
+                ai[11];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 1] * ai[11] + ai[i * RW4_PYRAMID_FAILED_NX + 1] *
+                ar[11];
+        ar[i * RW4_PYRAMID_FAILED_NX + 1] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 1] = li;
+        ur = ar[12];
+        ui = ai[12];
+        ar[i * RW4_PYRAMID_FAILED_NX + 2] = ar[i * RW4_PYRAMID_FAILED_NX + 2] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 2] = ai[i * RW4_PYRAMID_FAILED_NX + 2] - (lr * ui + li * ur);
+        ur = ar[13];
+        ui = ai[13];
+        ar[i * RW4_PYRAMID_FAILED_NX + 3] = ar[i * RW4_PYRAMID_FAILED_NX + 3] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 3] = ai[i * RW4_PYRAMID_FAILED_NX + 3] - (lr * ui + li * ur);
+        ur = ar[14];
+        ui = ai[14];
+        ar[i * RW4_PYRAMID_FAILED_NX + 4] = ar[i * RW4_PYRAMID_FAILED_NX + 4] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 4] = ai[i * RW4_PYRAMID_FAILED_NX + 4] - (lr * ui + li * ur);
+        ur = ar[15];
+        ui = ai[15];
+        ar[i * RW4_PYRAMID_FAILED_NX + 5] = ar[i * RW4_PYRAMID_FAILED_NX + 5] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 5] = ai[i * RW4_PYRAMID_FAILED_NX + 5] - (lr * ui + li * ur);
+    }
+    ur = ar[12];
+    ui = ai[12];
+    ar[12] = ur * ar[11] - ui * ai[11];
+    ai[12] = ur * ai[11] + ui * ar[11];
+    ur = ar[13];
+    ui = ai[13];
+    ar[13] = ur * ar[11] - ui * ai[11];
+    ai[13] = ur * ai[11] + ui * ar[11];
+    ur = ar[14];
+    ui = ai[14];
+    ar[14] = ur * ar[11] - ui * ai[11];
+    ai[14] = ur * ai[11] + ui * ar[11];
+    ur = ar[15];
+    ui = ai[15];
+    ar[15] = ur * ar[11] - ui * ai[11];
+    ai[15] = ur * ai[11] + ui * ar[11];
+    piv[2] = 2;
+    if (!(fabs(ar[22]) + fabs(ai[22]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[22];
+    im = ai[22];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[22] = 1.0 / d;
+        ai[22] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[22] = r / d;
+        ai[22] = -1.0 / d;
+    }
+    ur = ar[23];
+    ui = ai[23];
+    ar[23] = ur * ar[22] - ui * ai[22];
+    ai[23] = ur * ai[22] + ui * ar[22];
+    ur = ar[24];
+    ui = ai[24];
+    ar[24] = ur * ar[22] - ui * ai[22];
+    ai[24] = ur * ai[22] + ui * ar[22];
+    ur = ar[25];
+    ui = ai[25];
+    ar[25] = ur * ar[22] - ui * ai[22];
+    ai[25] = ur * ai[22] + ui * ar[22];
+    p = 3;
+    for (i = 4; i < 10; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 3]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 3])) {
+            p = i;
         }
-        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
-        re = ar[k * RW4_PYRAMID_FAILED_NX + k];
-        im = ai[k * RW4_PYRAMID_FAILED_NX + k];
-        if (fabs(re) >= fabs(im)) {
-            r = im / re;
-            d = re + im * r;
-            ar[k * RW4_PYRAMID_FAILED_NX + k] = 1.0 / d;
-            ai[k * RW4_PYRAMID_FAILED_NX + k] = -r / d;
-        } else {
-            r = re / im;
-            d = im + re * r;
-            ar[k * RW4_PYRAMID_FAILED_NX + k] = r / d;
-            ai[k * RW4_PYRAMID_FAILED_NX + k] = -1.0 / d;
+    }
+    piv[3] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 3]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 3) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[3 * RW4_PYRAMID_FAILED_NX + j];
+            ar[3 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[3 * RW4_PYRAMID_FAILED_NX + j];
+            ai[3 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
         }
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            lr = ar[i * RW4_PYRAMID_FAILED_NX + k] * ar[k * RW4_PYRAMID_FAILED_NX + k] - ai[i *
-                    RW4_PYRAMID_FAILED_NX + k] * ai[k * RW4_PYRAMID_FAILED_NX + k];
-            li = ar[i * RW4_PYRAMID_FAILED_NX + k] * ai[k * RW4_PYRAMID_FAILED_NX + k] + ai[i *
-                    RW4_PYRAMID_FAILED_NX + k] * ar[k * RW4_PYRAMID_FAILED_NX + k];
-            ar[i * RW4_PYRAMID_FAILED_NX + k] = lr;
-            ai[i * RW4_PYRAMID_FAILED_NX + k] = li;
-            for (j = k + 1; j < RW4_PYRAMID_FAILED_NX; ++j) {
-                ur = ar[k * RW4_PYRAMID_FAILED_NX + j];
-                ui = ai[k * RW4_PYRAMID_FAILED_NX + j];
-                ar[i * RW4_PYRAMID_FAILED_NX + j] = ar[i * RW4_PYRAMID_FAILED_NX + j] - (lr * ur
-                        - li * ui);
-                ai[i * RW4_PYRAMID_FAILED_NX + j] = ai[i * RW4_PYRAMID_FAILED_NX + j] - (lr * ui
-                        + li * ur);
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[33];
+    im = ai[33];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[33] = 1.0 / d;
+        ai[33] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[33] = r / d;
+        ai[33] = -1.0 / d;
+    }
+    for (i = 4; i < 10; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 3] * ar[33] - ai[i * RW4_PYRAMID_FAILED_NX + 3] *
+                ai[33];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 3] * ai[33] + ai[i * RW4_PYRAMID_FAILED_NX + 3] *
+                ar[33];
+        ar[i * RW4_PYRAMID_FAILED_NX + 3] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 3] = li;
+        ur = ar[34];
+        ui = ai[34];
+        ar[i * RW4_PYRAMID_FAILED_NX + 4] = ar[i * RW4_PYRAMID_FAILED_NX + 4] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 4] = ai[i * RW4_PYRAMID_FAILED_NX + 4] - (lr * ui + li * ur);
+        ur = ar[35];
+        ui = ai[35];
+        ar[i * RW4_PYRAMID_FAILED_NX + 5] = ar[i * RW4_PYRAMID_FAILED_NX + 5] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 5] = ai[i * RW4_PYRAMID_FAILED_NX + 5] - (lr * ui + li * ur);
+        ur = ar[36];
+        ui = ai[36];
+        ar[i * RW4_PYRAMID_FAILED_NX + 6] = ar[i * RW4_PYRAMID_FAILED_NX + 6] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 6] = ai[i * RW4_PYRAMID_FAILED_NX + 6] - (lr * ui + li * ur);
+        ur = ar[37];
+        ui = ai[37];
+        ar[i * RW4_PYRAMID_FAILED_NX + 7] = ar[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 7] = ai[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ui + li * ur);
+        ur = ar[38];
+        ui = ai[38];
+        ar[i * RW4_PYRAMID_FAILED_NX + 8] = ar[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 8] = ai[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ui + li * ur);
+        ur = ar[39];
+        ui = ai[39];
+        ar[i * RW4_PYRAMID_FAILED_NX + 9] = ar[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 9] = ai[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[34];
+    ui = ai[34];
+    ar[34] = ur * ar[33] - ui * ai[33];
+    ai[34] = ur * ai[33] + ui * ar[33];
+    ur = ar[35];
+    ui = ai[35];
+    ar[35] = ur * ar[33] - ui * ai[33];
+    ai[35] = ur * ai[33] + ui * ar[33];
+    ur = ar[36];
+    ui = ai[36];
+    ar[36] = ur * ar[33] - ui * ai[33];
+    ai[36] = ur * ai[33] + ui * ar[33];
+    ur = ar[37];
+    ui = ai[37];
+    ar[37] = ur * ar[33] - ui * ai[33];
+    ai[37] = ur * ai[33] + ui * ar[33];
+    ur = ar[38];
+    ui = ai[38];
+    ar[38] = ur * ar[33] - ui * ai[33];
+    ai[38] = ur * ai[33] + ui * ar[33];
+    ur = ar[39];
+    ui = ai[39];
+    ar[39] = ur * ar[33] - ui * ai[33];
+    ai[39] = ur * ai[33] + ui * ar[33];
+    p = 4;
+    for (i = 5; i < 10; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 4]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 4])) {
+            p = i;
         }
-        for (j = k + 1; j < RW4_PYRAMID_FAILED_NX; ++j) {
-            ur = ar[k * RW4_PYRAMID_FAILED_NX + j];
-            ui = ai[k * RW4_PYRAMID_FAILED_NX + j];
-            ar[k * RW4_PYRAMID_FAILED_NX + j] = ur * ar[k * RW4_PYRAMID_FAILED_NX + k] - ui *
-                    ai[k * RW4_PYRAMID_FAILED_NX + k];  /* u_kj / u_kk */
-            ai[k * RW4_PYRAMID_FAILED_NX + j] = ur * ai[k * RW4_PYRAMID_FAILED_NX + k] + ui *
-                    ar[k * RW4_PYRAMID_FAILED_NX + k];
+    }
+    piv[4] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[4 * RW4_PYRAMID_FAILED_NX + j];
+            ar[4 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[4 * RW4_PYRAMID_FAILED_NX + j];
+            ai[4 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
         }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[44];
+    im = ai[44];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[44] = 1.0 / d;
+        ai[44] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[44] = r / d;
+        ai[44] = -1.0 / d;
+    }
+    for (i = 5; i < 10; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 4] * ar[44] - ai[i * RW4_PYRAMID_FAILED_NX + 4] *
+                ai[44];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 4] * ai[44] + ai[i * RW4_PYRAMID_FAILED_NX + 4] *
+                ar[44];
+        ar[i * RW4_PYRAMID_FAILED_NX + 4] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 4] = li;
+        ur = ar[45];
+        ui = ai[45];
+        ar[i * RW4_PYRAMID_FAILED_NX + 5] = ar[i * RW4_PYRAMID_FAILED_NX + 5] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 5] = ai[i * RW4_PYRAMID_FAILED_NX + 5] - (lr * ui + li * ur);
+        ur = ar[46];
+        ui = ai[46];
+        ar[i * RW4_PYRAMID_FAILED_NX + 6] = ar[i * RW4_PYRAMID_FAILED_NX + 6] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 6] = ai[i * RW4_PYRAMID_FAILED_NX + 6] - (lr * ui + li * ur);
+        ur = ar[47];
+        ui = ai[47];
+        ar[i * RW4_PYRAMID_FAILED_NX + 7] = ar[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 7] = ai[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ui + li * ur);
+        ur = ar[48];
+        ui = ai[48];
+        ar[i * RW4_PYRAMID_FAILED_NX + 8] = ar[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 8] = ai[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ui + li * ur);
+        ur = ar[49];
+        ui = ai[49];
+        ar[i * RW4_PYRAMID_FAILED_NX + 9] = ar[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 9] = ai[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[45];
+    ui = ai[45];
+    ar[45] = ur * ar[44] - ui * ai[44];
+    ai[45] = ur * ai[44] + ui * ar[44];
+    ur = ar[46];
+    ui = ai[46];
+    ar[46] = ur * ar[44] - ui * ai[44];
+    ai[46] = ur * ai[44] + ui * ar[44];
+    ur = ar[47];
+    ui = ai[47];
+    ar[47] = ur * ar[44] - ui * ai[44];
+    ai[47] = ur * ai[44] + ui * ar[44];
+    ur = ar[48];
+    ui = ai[48];
+    ar[48] = ur * ar[44] - ui * ai[44];
+    ai[48] = ur * ai[44] + ui * ar[44];
+    ur = ar[49];
+    ui = ai[49];
+    ar[49] = ur * ar[44] - ui * ai[44];
+    ai[49] = ur * ai[44] + ui * ar[44];
+    p = 5;
+    for (i = 6; i < 10; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 5]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 5])) {
+            p = i;
+        }
+    }
+    piv[5] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 5]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 5) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[5 * RW4_PYRAMID_FAILED_NX + j];
+            ar[5 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[5 * RW4_PYRAMID_FAILED_NX + j];
+            ai[5 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[55];
+    im = ai[55];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[55] = 1.0 / d;
+        ai[55] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[55] = r / d;
+        ai[55] = -1.0 / d;
+    }
+    for (i = 6; i < 10; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 5] * ar[55] - ai[i * RW4_PYRAMID_FAILED_NX + 5] *
+                ai[55];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 5] * ai[55] + ai[i * RW4_PYRAMID_FAILED_NX + 5] *
+                ar[55];
+        ar[i * RW4_PYRAMID_FAILED_NX + 5] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 5] = li;
+        ur = ar[56];
+        ui = ai[56];
+        ar[i * RW4_PYRAMID_FAILED_NX + 6] = ar[i * RW4_PYRAMID_FAILED_NX + 6] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 6] = ai[i * RW4_PYRAMID_FAILED_NX + 6] - (lr * ui + li * ur);
+        ur = ar[57];
+        ui = ai[57];
+        ar[i * RW4_PYRAMID_FAILED_NX + 7] = ar[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 7] = ai[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ui + li * ur);
+        ur = ar[58];
+        ui = ai[58];
+        ar[i * RW4_PYRAMID_FAILED_NX + 8] = ar[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 8] = ai[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ui + li * ur);
+        ur = ar[59];
+        ui = ai[59];
+        ar[i * RW4_PYRAMID_FAILED_NX + 9] = ar[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 9] = ai[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[56];
+    ui = ai[56];
+    ar[56] = ur * ar[55] - ui * ai[55];
+    ai[56] = ur * ai[55] + ui * ar[55];
+    ur = ar[57];
+    ui = ai[57];
+    ar[57] = ur * ar[55] - ui * ai[55];
+    ai[57] = ur * ai[55] + ui * ar[55];
+    ur = ar[58];
+    ui = ai[58];
+    ar[58] = ur * ar[55] - ui * ai[55];
+    ai[58] = ur * ai[55] + ui * ar[55];
+    ur = ar[59];
+    ui = ai[59];
+    ar[59] = ur * ar[55] - ui * ai[55];
+    ai[59] = ur * ai[55] + ui * ar[55];
+    p = 6;
+    for (i = 7; i < 10; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 6]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 6])) {
+            p = i;
+        }
+    }
+    piv[6] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 6]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 6) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[6 * RW4_PYRAMID_FAILED_NX + j];
+            ar[6 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[6 * RW4_PYRAMID_FAILED_NX + j];
+            ai[6 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[66];
+    im = ai[66];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[66] = 1.0 / d;
+        ai[66] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[66] = r / d;
+        ai[66] = -1.0 / d;
+    }
+    for (i = 7; i < 10; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 6] * ar[66] - ai[i * RW4_PYRAMID_FAILED_NX + 6] *
+                ai[66];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 6] * ai[66] + ai[i * RW4_PYRAMID_FAILED_NX + 6] *
+                ar[66];
+        ar[i * RW4_PYRAMID_FAILED_NX + 6] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 6] = li;
+        ur = ar[67];
+        ui = ai[67];
+        ar[i * RW4_PYRAMID_FAILED_NX + 7] = ar[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 7] = ai[i * RW4_PYRAMID_FAILED_NX + 7] - (lr * ui + li * ur);
+        ur = ar[68];
+        ui = ai[68];
+        ar[i * RW4_PYRAMID_FAILED_NX + 8] = ar[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 8] = ai[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ui + li * ur);
+        ur = ar[69];
+        ui = ai[69];
+        ar[i * RW4_PYRAMID_FAILED_NX + 9] = ar[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 9] = ai[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[67];
+    ui = ai[67];
+    ar[67] = ur * ar[66] - ui * ai[66];
+    ai[67] = ur * ai[66] + ui * ar[66];
+    ur = ar[68];
+    ui = ai[68];
+    ar[68] = ur * ar[66] - ui * ai[66];
+    ai[68] = ur * ai[66] + ui * ar[66];
+    ur = ar[69];
+    ui = ai[69];
+    ar[69] = ur * ar[66] - ui * ai[66];
+    ai[69] = ur * ai[66] + ui * ar[66];
+    p = 7;
+    for (i = 8; i < 10; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 7]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 7])) {
+            p = i;
+        }
+    }
+    piv[7] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 7]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 7) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[7 * RW4_PYRAMID_FAILED_NX + j];
+            ar[7 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[7 * RW4_PYRAMID_FAILED_NX + j];
+            ai[7 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[77];
+    im = ai[77];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[77] = 1.0 / d;
+        ai[77] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[77] = r / d;
+        ai[77] = -1.0 / d;
+    }
+    for (i = 8; i < 10; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 7] * ar[77] - ai[i * RW4_PYRAMID_FAILED_NX + 7] *
+                ai[77];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 7] * ai[77] + ai[i * RW4_PYRAMID_FAILED_NX + 7] *
+                ar[77];
+        ar[i * RW4_PYRAMID_FAILED_NX + 7] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 7] = li;
+        ur = ar[78];
+        ui = ai[78];
+        ar[i * RW4_PYRAMID_FAILED_NX + 8] = ar[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 8] = ai[i * RW4_PYRAMID_FAILED_NX + 8] - (lr * ui + li * ur);
+        ur = ar[79];
+        ui = ai[79];
+        ar[i * RW4_PYRAMID_FAILED_NX + 9] = ar[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 9] = ai[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[78];
+    ui = ai[78];
+    ar[78] = ur * ar[77] - ui * ai[77];
+    ai[78] = ur * ai[77] + ui * ar[77];
+    ur = ar[79];
+    ui = ai[79];
+    ar[79] = ur * ar[77] - ui * ai[77];
+    ai[79] = ur * ai[77] + ui * ar[77];
+    p = 8;
+    for (i = 9; i < 10; ++i) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 8]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 8])) {
+            p = i;
+        }
+    }
+    piv[8] = p;
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 8]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 8) {
+        for (j = 3; j < RW4_PYRAMID_FAILED_NX; ++j) {
+            swap = ar[8 * RW4_PYRAMID_FAILED_NX + j];
+            ar[8 * RW4_PYRAMID_FAILED_NX + j] = ar[p * RW4_PYRAMID_FAILED_NX + j];
+            ar[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+            swap = ai[8 * RW4_PYRAMID_FAILED_NX + j];
+            ai[8 * RW4_PYRAMID_FAILED_NX + j] = ai[p * RW4_PYRAMID_FAILED_NX + j];
+            ai[p * RW4_PYRAMID_FAILED_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[88];
+    im = ai[88];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[88] = 1.0 / d;
+        ai[88] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[88] = r / d;
+        ai[88] = -1.0 / d;
+    }
+    for (i = 9; i < 10; ++i) {
+        lr = ar[i * RW4_PYRAMID_FAILED_NX + 8] * ar[88] - ai[i * RW4_PYRAMID_FAILED_NX + 8] *
+                ai[88];
+        li = ar[i * RW4_PYRAMID_FAILED_NX + 8] * ai[88] + ai[i * RW4_PYRAMID_FAILED_NX + 8] *
+                ar[88];
+        ar[i * RW4_PYRAMID_FAILED_NX + 8] = lr;
+        ai[i * RW4_PYRAMID_FAILED_NX + 8] = li;
+        ur = ar[89];
+        ui = ai[89];
+        ar[i * RW4_PYRAMID_FAILED_NX + 9] = ar[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ur - li * ui);
+        ai[i * RW4_PYRAMID_FAILED_NX + 9] = ai[i * RW4_PYRAMID_FAILED_NX + 9] - (lr * ui + li * ur);
+    }
+    ur = ar[89];
+    ui = ai[89];
+    ar[89] = ur * ar[88] - ui * ai[88];
+    ai[89] = ur * ai[88] + ui * ar[88];
+    piv[9] = 9;
+    if (!(fabs(ar[99]) + fabs(ai[99]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[99];
+    im = ai[99];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[99] = 1.0 / d;
+        ai[99] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[99] = r / d;
+        ai[99] = -1.0 / d;
     }
     return 0;
 }
@@ -743,15 +1478,62 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 {
     double swap;
     double re;
-    int i;
 
-    for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
-        swap = br[i];
-        br[i] = br[piv[i]];
-        br[piv[i]] = swap;
-        swap = bi[i];
-        bi[i] = bi[piv[i]];
-        bi[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = br[1];
+        br[1] = br[piv[1]];
+        br[piv[1]] = swap;
+        swap = bi[1];
+        bi[1] = bi[piv[1]];
+        bi[piv[1]] = swap;
+    }
+    if (piv[3] != 3) {
+        swap = br[3];
+        br[3] = br[piv[3]];
+        br[piv[3]] = swap;
+        swap = bi[3];
+        bi[3] = bi[piv[3]];
+        bi[piv[3]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = br[4];
+        br[4] = br[piv[4]];
+        br[piv[4]] = swap;
+        swap = bi[4];
+        bi[4] = bi[piv[4]];
+        bi[piv[4]] = swap;
+    }
+    if (piv[5] != 5) {
+        swap = br[5];
+        br[5] = br[piv[5]];
+        br[piv[5]] = swap;
+        swap = bi[5];
+        bi[5] = bi[piv[5]];
+        bi[piv[5]] = swap;
+    }
+    if (piv[6] != 6) {
+        swap = br[6];
+        br[6] = br[piv[6]];
+        br[piv[6]] = swap;
+        swap = bi[6];
+        bi[6] = bi[piv[6]];
+        bi[piv[6]] = swap;
+    }
+    if (piv[7] != 7) {
+        swap = br[7];
+        br[7] = br[piv[7]];
+        br[piv[7]] = swap;
+        swap = bi[7];
+        bi[7] = bi[piv[7]];
+        bi[piv[7]] = swap;
+    }
+    if (piv[8] != 8) {
+        swap = br[8];
+        br[8] = br[piv[8]];
+        br[piv[8]] = swap;
+        swap = bi[8];
+        bi[8] = bi[piv[8]];
+        bi[piv[8]] = swap;
     }
     br[2] = br[2] - ar[21] * br[1] + ai[21] * bi[1];
     bi[2] = bi[2] - ar[21] * bi[1] - ai[21] * br[1];
@@ -1557,6 +2339,7 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
         e2r[i] = -J[i];
         e2i[i] = 0.0;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         e1[i * RW4_PYRAMID_FAILED_NX + i] = e1[i * RW4_PYRAMID_FAILED_NX + i] + gamma_h;
         e2r[i * RW4_PYRAMID_FAILED_NX + i] = e2r[i * RW4_PYRAMID_FAILED_NX + i] + alpha_h;
@@ -1587,18 +2370,22 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     gamma_h = 3.637834252744496 / h;
     alpha_h = 2.6810828736277523 / h;
     beta_h = 3.0504301992474105 / h;
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         y[i] = x[i] + z1[i];
     }
     rw4_pyramid_failed_rhs(t + 0.1550510257216822 * h, y, c, z1);
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         y[i] = x[i] + z2[i];
     }
     rw4_pyramid_failed_rhs(t + 0.6449489742783178 * h, y, c, z2);
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         y[i] = x[i] + z3[i];
     }
     rw4_pyramid_failed_rhs(t + h, y, c, z3);
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         double a1, a2, a3;
         a1 = z1[i];
@@ -1614,6 +2401,7 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     lu_solve(e1, piv1, z1);
     lu_solve_complex(e2r, e2i, piv2, z2, z3);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         double s1, s2, s3;
         s1 = z1[i] / scal[i];
@@ -1640,6 +2428,7 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     double norm;
     int i;
 
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
                 z3[i]) / h;
@@ -1647,21 +2436,25 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     }
     lu_solve(e1, piv1, err);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         total = total + err[i] / scal[i] * (err[i] / scal[i]);
     }
     norm = sqrt(total / RW4_PYRAMID_FAILED_NX);
     if (norm >= 1.0 && again) {
+        #pragma GCC unroll 1
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
             y[i] = x[i] + err[i];
         }
         rw4_pyramid_failed_rhs(t, y, c, err);
         stats->rhs_calls = stats->rhs_calls + 1;
+        #pragma GCC unroll 1
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
             err[i] = err[i] + g[i];
         }
         lu_solve(e1, piv1, err);
         total = 0.0;
+        #pragma GCC unroll 1
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
             total = total + err[i] / scal[i] * (err[i] / scal[i]);
         }
@@ -1728,6 +2521,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     double c1q;
     double c2q;
     double c3q;
+    double theta_k;
     int last;
     int first;
     int reject;
@@ -1740,6 +2534,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int singular;
     int start;
     int i;
+    int k;
 
     start = ode_start(5, RW4_PYRAMID_FAILED_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0,
             max_steps, f0, &h, stats);
@@ -1761,6 +2556,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     need_lu = 1;
     nonfinite = 0;
     singular = 0;
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         comp[i] = 0.0;
         ak1[i] = 0.0;
@@ -1774,6 +2570,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         h = t1 - t;
         last = 1;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
         scal[i] = atol_e + rtol_e * fabs(x[i]);
     }
@@ -1816,6 +2613,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
 
         /* the Newton iterations start from the last step's collocation polynomial */
         if (first) {
+            #pragma GCC unroll 1
             for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
                 z1[i] = 0.0;
                 z2[i] = 0.0;
@@ -1828,6 +2626,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             c3q = h / h_old;
             c1q = 0.1550510257216822 * c3q;
             c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
             for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
                 double a1, a2, a3;
                 a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
@@ -1874,7 +2673,11 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                     break;
                 }
                 rate = theta / (1.0 - theta);
-                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
                 if (predicted >= 1.0) {
                     q = dmax(1e-4, dmin(20.0, predicted));
                     h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
@@ -1883,6 +2686,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                 }
             }
             dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
             for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
                 double a1, a2, a3;
                 a1 = w1[i] + z1[i];
@@ -1902,6 +2706,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         }
         if (outcome == 0) {
             err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
             for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
                 dx[i] = z3[i] - comp[i];
                 xnew[i] = x[i] + dx[i];
@@ -1944,6 +2749,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             h_acc = h;
             err_acc = dmax(1e-2, err);
             h_old = h;
+            #pragma GCC unroll 1
             for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
                 double ak;
                 ak = (z2[i] - z1[i]) / 0.4898979485566356;
@@ -1958,6 +2764,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             if (last) {
                 return RW4_PYRAMID_FAILED_ODE_OK;
             }
+            #pragma GCC unroll 1
             for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
                 f0[i] = fnew[i];
                 scal[i] = atol_e + rtol_e * fabs(x[i]);

@@ -543,52 +543,164 @@ contains
   end function step_exp2
 
   ! In-place LU decomposition with partial pivoting within the diagonal
-  ! blocks (0, 1), (1, 3), (3, 4), (4, 8) (row i's block ends
-  ! before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+  ! blocks (0, 1), (1, 3), (3, 4), (4, 8), unrolled over the entries
+  ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
   ! row k swapped with piv[k]. 1 when a pivot is zero: singular.
   function lu_decompose(a, piv) result(res)
     real(c_double), intent(inout) :: a(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:7) = [1, 3, 3, 4, 8, 8, 8, 8]
     integer(c_int) :: p
     real(c_double) :: m
     real(c_double) :: swap
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(a(i * nx + k)) > abs(a(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(a(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(a(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(0) = 1.0_c_double / a(0)
+    a(1) = a(1) * a(0)
+    a(2) = a(2) * a(0)
+    a(4) = a(4) * a(0)
+    a(6) = a(6) * a(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(a(i * nx + 1)) > abs(a(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = a(k * nx + j)
-          a(k * nx + j) = a(p * nx + j)
-          a(p * nx + j) = swap
-        end do
-      end if
-      a(k * nx + k) = 1.0_c_double / a(k * nx + k)
-      do i = k + 1, lu_end(k) - 1
-        m = a(i * nx + k) * a(k * nx + k)
-        a(i * nx + k) = m
-        do j = k + 1, nx - 1
-          a(i * nx + j) = a(i * nx + j) - m * a(k * nx + j)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        a(k * nx + j) = a(k * nx + j) * a(k * nx + k)  ! u_kj / u_kk
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(a(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = a(1 * nx + j)
+        a(1 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(9) = 1.0_c_double / a(9)
+    do i = 2, 3 - 1
+      m = a(i * nx + 1) * a(9)
+      a(i * nx + 1) = m
+      a(i * nx + 2) = a(i * nx + 2) - m * a(10)
+      a(i * nx + 4) = a(i * nx + 4) - m * a(12)
+      a(i * nx + 5) = a(i * nx + 5) - m * a(13)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(14)
+    end do
+    a(10) = a(10) * a(9)
+    a(12) = a(12) * a(9)
+    a(13) = a(13) * a(9)
+    a(14) = a(14) * a(9)
+    piv(2) = 2
+    if (.not. (abs(a(18)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(18) = 1.0_c_double / a(18)
+    a(20) = a(20) * a(18)
+    a(21) = a(21) * a(18)
+    a(22) = a(22) * a(18)
+    piv(3) = 3
+    if (.not. (abs(a(27)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(27) = 1.0_c_double / a(27)
+    a(29) = a(29) * a(27)
+    a(31) = a(31) * a(27)
+    p = 4
+    do i = 5, 8 - 1
+      if (abs(a(i * nx + 4)) > abs(a(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(a(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 4, nx - 1
+        swap = a(4 * nx + j)
+        a(4 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(36) = 1.0_c_double / a(36)
+    do i = 5, 8 - 1
+      m = a(i * nx + 4) * a(36)
+      a(i * nx + 4) = m
+      a(i * nx + 5) = a(i * nx + 5) - m * a(37)
+      a(i * nx + 6) = a(i * nx + 6) - m * a(38)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(39)
+    end do
+    a(37) = a(37) * a(36)
+    a(38) = a(38) * a(36)
+    a(39) = a(39) * a(36)
+    p = 5
+    do i = 6, 8 - 1
+      if (abs(a(i * nx + 5)) > abs(a(p * nx + 5))) then
+        p = i
+      end if
+    end do
+    piv(5) = p
+    if (.not. (abs(a(p * nx + 5)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 5) then
+      do j = 4, nx - 1
+        swap = a(5 * nx + j)
+        a(5 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(45) = 1.0_c_double / a(45)
+    do i = 6, 8 - 1
+      m = a(i * nx + 5) * a(45)
+      a(i * nx + 5) = m
+      a(i * nx + 6) = a(i * nx + 6) - m * a(46)
+      a(i * nx + 7) = a(i * nx + 7) - m * a(47)
+    end do
+    a(46) = a(46) * a(45)
+    a(47) = a(47) * a(45)
+    p = 6
+    do i = 7, 8 - 1
+      if (abs(a(i * nx + 6)) > abs(a(p * nx + 6))) then
+        p = i
+      end if
+    end do
+    piv(6) = p
+    if (.not. (abs(a(p * nx + 6)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 6) then
+      do j = 4, nx - 1
+        swap = a(6 * nx + j)
+        a(6 * nx + j) = a(p * nx + j)
+        a(p * nx + j) = swap
+      end do
+    end if
+    a(54) = 1.0_c_double / a(54)
+    do i = 7, 8 - 1
+      m = a(i * nx + 6) * a(54)
+      a(i * nx + 6) = m
+      a(i * nx + 7) = a(i * nx + 7) - m * a(55)
+    end do
+    a(55) = a(55) * a(54)
+    piv(7) = 7
+    if (.not. (abs(a(63)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    a(63) = 1.0_c_double / a(63)
     res = .false.
     return
   end function lu_decompose
@@ -600,13 +712,27 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(inout) :: b(0:nx - 1)
     real(c_double) :: swap
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = b(i)
-      b(i) = b(piv(i))
-      b(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = b(1)
+      b(1) = b(piv(1))
+      b(piv(1)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = b(4)
+      b(4) = b(piv(4))
+      b(piv(4)) = swap
+    end if
+    if (piv(5) /= 5) then
+      swap = b(5)
+      b(5) = b(piv(5))
+      b(piv(5)) = swap
+    end if
+    if (piv(6) /= 6) then
+      swap = b(6)
+      b(6) = b(piv(6))
+      b(piv(6)) = swap
+    end if
     b(2) = b(2) - lu(17) * b(1)
     b(5) = b(5) - lu(44) * b(4)
     b(6) = (b(6) - lu(52) * b(4)) - lu(53) * b(5)
@@ -628,7 +754,6 @@ contains
     real(c_double), intent(inout) :: ai(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv(0:nx - 1)
     logical :: res
-    integer(c_int), parameter :: lu_end(0:7) = [1, 3, 3, 4, 8, 8, 8, 8]
     integer(c_int) :: p
     real(c_double) :: swap
     real(c_double) :: re
@@ -641,63 +766,363 @@ contains
     real(c_double) :: ui
     integer(c_int) :: i
     integer(c_int) :: j
-    integer(c_int) :: k
 
-    do k = 0, nx - 1
-      p = k
-      do i = k + 1, lu_end(k) - 1
-        if (abs(ar(i * nx + k)) + abs(ai(i * nx + k)) > abs(ar(p * nx + k)) + abs(ai(p * nx + k))) then
-          p = i
-        end if
-      end do
-      piv(k) = p
-      if (.not. (abs(ar(p * nx + k)) + abs(ai(p * nx + k)) > 0.0_c_double)) then
-        res = .true.  ! singular
-        return
+    piv(0) = 0
+    if (.not. (abs(ar(0)) + abs(ai(0)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(0)
+    im = ai(0)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(0) = 1.0_c_double / d
+      ai(0) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(0) = r / d
+      ai(0) = (-1.0_c_double) / d
+    end if
+    ur = ar(1)
+    ui = ai(1)
+    ar(1) = ur * ar(0) - ui * ai(0)
+    ai(1) = ur * ai(0) + ui * ar(0)
+    ur = ar(2)
+    ui = ai(2)
+    ar(2) = ur * ar(0) - ui * ai(0)
+    ai(2) = ur * ai(0) + ui * ar(0)
+    ur = ar(4)
+    ui = ai(4)
+    ar(4) = ur * ar(0) - ui * ai(0)
+    ai(4) = ur * ai(0) + ui * ar(0)
+    ur = ar(6)
+    ui = ai(6)
+    ar(6) = ur * ar(0) - ui * ai(0)
+    ai(6) = ur * ai(0) + ui * ar(0)
+    p = 1
+    do i = 2, 3 - 1
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+        p = i
       end if
-      if (p /= k) then
-        do j = 0, nx - 1
-          swap = ar(k * nx + j)
-          ar(k * nx + j) = ar(p * nx + j)
-          ar(p * nx + j) = swap
-          swap = ai(k * nx + j)
-          ai(k * nx + j) = ai(p * nx + j)
-          ai(p * nx + j) = swap
-        end do
-      end if
-      ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
-      re = ar(k * nx + k)
-      im = ai(k * nx + k)
-      if (abs(re) >= abs(im)) then
-        r = im / re
-        d = re + im * r
-        ar(k * nx + k) = 1.0_c_double / d
-        ai(k * nx + k) = (-r) / d
-      else
-        r = re / im
-        d = im + re * r
-        ar(k * nx + k) = r / d
-        ai(k * nx + k) = (-1.0_c_double) / d
-      end if
-      do i = k + 1, lu_end(k) - 1
-        lr = ar(i * nx + k) * ar(k * nx + k) - ai(i * nx + k) * ai(k * nx + k)
-        li = ar(i * nx + k) * ai(k * nx + k) + ai(i * nx + k) * ar(k * nx + k)
-        ar(i * nx + k) = lr
-        ai(i * nx + k) = li
-        do j = k + 1, nx - 1
-          ur = ar(k * nx + j)
-          ui = ai(k * nx + j)
-          ar(i * nx + j) = ar(i * nx + j) - (lr * ur - li * ui)
-          ai(i * nx + j) = ai(i * nx + j) - (lr * ui + li * ur)
-        end do
-      end do
-      do j = k + 1, nx - 1
-        ur = ar(k * nx + j)
-        ui = ai(k * nx + j)
-        ar(k * nx + j) = ur * ar(k * nx + k) - ui * ai(k * nx + k)  ! u_kj / u_kk
-        ai(k * nx + j) = ur * ai(k * nx + k) + ui * ar(k * nx + k)
-      end do
     end do
+    piv(1) = p
+    if (.not. (abs(ar(p * nx + 1)) + abs(ai(p * nx + 1)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 1) then
+      do j = 1, nx - 1
+        swap = ar(1 * nx + j)
+        ar(1 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(1 * nx + j)
+        ai(1 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(9)
+    im = ai(9)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(9) = 1.0_c_double / d
+      ai(9) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(9) = r / d
+      ai(9) = (-1.0_c_double) / d
+    end if
+    do i = 2, 3 - 1
+      lr = ar(i * nx + 1) * ar(9) - ai(i * nx + 1) * ai(9)
+      li = ar(i * nx + 1) * ai(9) + ai(i * nx + 1) * ar(9)
+      ar(i * nx + 1) = lr
+      ai(i * nx + 1) = li
+      ur = ar(10)
+      ui = ai(10)
+      ar(i * nx + 2) = ar(i * nx + 2) - (lr * ur - li * ui)
+      ai(i * nx + 2) = ai(i * nx + 2) - (lr * ui + li * ur)
+      ur = ar(12)
+      ui = ai(12)
+      ar(i * nx + 4) = ar(i * nx + 4) - (lr * ur - li * ui)
+      ai(i * nx + 4) = ai(i * nx + 4) - (lr * ui + li * ur)
+      ur = ar(13)
+      ui = ai(13)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(14)
+      ui = ai(14)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+    end do
+    ur = ar(10)
+    ui = ai(10)
+    ar(10) = ur * ar(9) - ui * ai(9)
+    ai(10) = ur * ai(9) + ui * ar(9)
+    ur = ar(12)
+    ui = ai(12)
+    ar(12) = ur * ar(9) - ui * ai(9)
+    ai(12) = ur * ai(9) + ui * ar(9)
+    ur = ar(13)
+    ui = ai(13)
+    ar(13) = ur * ar(9) - ui * ai(9)
+    ai(13) = ur * ai(9) + ui * ar(9)
+    ur = ar(14)
+    ui = ai(14)
+    ar(14) = ur * ar(9) - ui * ai(9)
+    ai(14) = ur * ai(9) + ui * ar(9)
+    piv(2) = 2
+    if (.not. (abs(ar(18)) + abs(ai(18)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(18)
+    im = ai(18)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(18) = 1.0_c_double / d
+      ai(18) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(18) = r / d
+      ai(18) = (-1.0_c_double) / d
+    end if
+    ur = ar(20)
+    ui = ai(20)
+    ar(20) = ur * ar(18) - ui * ai(18)
+    ai(20) = ur * ai(18) + ui * ar(18)
+    ur = ar(21)
+    ui = ai(21)
+    ar(21) = ur * ar(18) - ui * ai(18)
+    ai(21) = ur * ai(18) + ui * ar(18)
+    ur = ar(22)
+    ui = ai(22)
+    ar(22) = ur * ar(18) - ui * ai(18)
+    ai(22) = ur * ai(18) + ui * ar(18)
+    piv(3) = 3
+    if (.not. (abs(ar(27)) + abs(ai(27)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(27)
+    im = ai(27)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(27) = 1.0_c_double / d
+      ai(27) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(27) = r / d
+      ai(27) = (-1.0_c_double) / d
+    end if
+    ur = ar(29)
+    ui = ai(29)
+    ar(29) = ur * ar(27) - ui * ai(27)
+    ai(29) = ur * ai(27) + ui * ar(27)
+    ur = ar(31)
+    ui = ai(31)
+    ar(31) = ur * ar(27) - ui * ai(27)
+    ai(31) = ur * ai(27) + ui * ar(27)
+    p = 4
+    do i = 5, 8 - 1
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+        p = i
+      end if
+    end do
+    piv(4) = p
+    if (.not. (abs(ar(p * nx + 4)) + abs(ai(p * nx + 4)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 4) then
+      do j = 4, nx - 1
+        swap = ar(4 * nx + j)
+        ar(4 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(4 * nx + j)
+        ai(4 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(36)
+    im = ai(36)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(36) = 1.0_c_double / d
+      ai(36) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(36) = r / d
+      ai(36) = (-1.0_c_double) / d
+    end if
+    do i = 5, 8 - 1
+      lr = ar(i * nx + 4) * ar(36) - ai(i * nx + 4) * ai(36)
+      li = ar(i * nx + 4) * ai(36) + ai(i * nx + 4) * ar(36)
+      ar(i * nx + 4) = lr
+      ai(i * nx + 4) = li
+      ur = ar(37)
+      ui = ai(37)
+      ar(i * nx + 5) = ar(i * nx + 5) - (lr * ur - li * ui)
+      ai(i * nx + 5) = ai(i * nx + 5) - (lr * ui + li * ur)
+      ur = ar(38)
+      ui = ai(38)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(39)
+      ui = ai(39)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+    end do
+    ur = ar(37)
+    ui = ai(37)
+    ar(37) = ur * ar(36) - ui * ai(36)
+    ai(37) = ur * ai(36) + ui * ar(36)
+    ur = ar(38)
+    ui = ai(38)
+    ar(38) = ur * ar(36) - ui * ai(36)
+    ai(38) = ur * ai(36) + ui * ar(36)
+    ur = ar(39)
+    ui = ai(39)
+    ar(39) = ur * ar(36) - ui * ai(36)
+    ai(39) = ur * ai(36) + ui * ar(36)
+    p = 5
+    do i = 6, 8 - 1
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+        p = i
+      end if
+    end do
+    piv(5) = p
+    if (.not. (abs(ar(p * nx + 5)) + abs(ai(p * nx + 5)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 5) then
+      do j = 4, nx - 1
+        swap = ar(5 * nx + j)
+        ar(5 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(5 * nx + j)
+        ai(5 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(45)
+    im = ai(45)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(45) = 1.0_c_double / d
+      ai(45) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(45) = r / d
+      ai(45) = (-1.0_c_double) / d
+    end if
+    do i = 6, 8 - 1
+      lr = ar(i * nx + 5) * ar(45) - ai(i * nx + 5) * ai(45)
+      li = ar(i * nx + 5) * ai(45) + ai(i * nx + 5) * ar(45)
+      ar(i * nx + 5) = lr
+      ai(i * nx + 5) = li
+      ur = ar(46)
+      ui = ai(46)
+      ar(i * nx + 6) = ar(i * nx + 6) - (lr * ur - li * ui)
+      ai(i * nx + 6) = ai(i * nx + 6) - (lr * ui + li * ur)
+      ur = ar(47)
+      ui = ai(47)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+    end do
+    ur = ar(46)
+    ui = ai(46)
+    ar(46) = ur * ar(45) - ui * ai(45)
+    ai(46) = ur * ai(45) + ui * ar(45)
+    ur = ar(47)
+    ui = ai(47)
+    ar(47) = ur * ar(45) - ui * ai(45)
+    ai(47) = ur * ai(45) + ui * ar(45)
+    p = 6
+    do i = 7, 8 - 1
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+        p = i
+      end if
+    end do
+    piv(6) = p
+    if (.not. (abs(ar(p * nx + 6)) + abs(ai(p * nx + 6)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    if (p /= 6) then
+      do j = 4, nx - 1
+        swap = ar(6 * nx + j)
+        ar(6 * nx + j) = ar(p * nx + j)
+        ar(p * nx + j) = swap
+        swap = ai(6 * nx + j)
+        ai(6 * nx + j) = ai(p * nx + j)
+        ai(p * nx + j) = swap
+      end do
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(54)
+    im = ai(54)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(54) = 1.0_c_double / d
+      ai(54) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(54) = r / d
+      ai(54) = (-1.0_c_double) / d
+    end if
+    do i = 7, 8 - 1
+      lr = ar(i * nx + 6) * ar(54) - ai(i * nx + 6) * ai(54)
+      li = ar(i * nx + 6) * ai(54) + ai(i * nx + 6) * ar(54)
+      ar(i * nx + 6) = lr
+      ai(i * nx + 6) = li
+      ur = ar(55)
+      ui = ai(55)
+      ar(i * nx + 7) = ar(i * nx + 7) - (lr * ur - li * ui)
+      ai(i * nx + 7) = ai(i * nx + 7) - (lr * ui + li * ur)
+    end do
+    ur = ar(55)
+    ui = ai(55)
+    ar(55) = ur * ar(54) - ui * ai(54)
+    ai(55) = ur * ai(54) + ui * ar(54)
+    piv(7) = 7
+    if (.not. (abs(ar(63)) + abs(ai(63)) > 0.0_c_double)) then
+      res = .true.  ! singular
+      return
+    end if
+    ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
+    re = ar(63)
+    im = ai(63)
+    if (abs(re) >= abs(im)) then
+      r = im / re
+      d = re + im * r
+      ar(63) = 1.0_c_double / d
+      ai(63) = (-r) / d
+    else
+      r = re / im
+      d = im + re * r
+      ar(63) = r / d
+      ai(63) = (-1.0_c_double) / d
+    end if
     res = .false.
     return
   end function lu_decompose_complex
@@ -711,16 +1136,39 @@ contains
     real(c_double), intent(inout) :: bi(0:nx - 1)
     real(c_double) :: swap
     real(c_double) :: re
-    integer(c_int) :: i
 
-    do i = 0, nx - 1
-      swap = br(i)
-      br(i) = br(piv(i))
-      br(piv(i)) = swap
-      swap = bi(i)
-      bi(i) = bi(piv(i))
-      bi(piv(i)) = swap
-    end do
+    if (piv(1) /= 1) then
+      swap = br(1)
+      br(1) = br(piv(1))
+      br(piv(1)) = swap
+      swap = bi(1)
+      bi(1) = bi(piv(1))
+      bi(piv(1)) = swap
+    end if
+    if (piv(4) /= 4) then
+      swap = br(4)
+      br(4) = br(piv(4))
+      br(piv(4)) = swap
+      swap = bi(4)
+      bi(4) = bi(piv(4))
+      bi(piv(4)) = swap
+    end if
+    if (piv(5) /= 5) then
+      swap = br(5)
+      br(5) = br(piv(5))
+      br(piv(5)) = swap
+      swap = bi(5)
+      bi(5) = bi(piv(5))
+      bi(piv(5)) = swap
+    end if
+    if (piv(6) /= 6) then
+      swap = br(6)
+      br(6) = br(piv(6))
+      br(piv(6)) = swap
+      swap = bi(6)
+      bi(6) = bi(piv(6))
+      bi(piv(6)) = swap
+    end if
     br(2) = (br(2) - ar(17) * br(1)) + ai(17) * bi(1)
     bi(2) = (bi(2) - ar(17) * bi(1)) - ai(17) * br(1)
     br(5) = (br(5) - ar(44) * br(4)) + ai(44) * bi(4)
@@ -1617,6 +2065,7 @@ contains
       e2r(i) = -J(i)
       e2i(i) = 0.0_c_double
     end do
+    !GCC$ unroll 1
     do i = 0, nx - 1
       e1(i * nx + i) = e1(i * nx + i) + gamma_h
       e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
@@ -1668,18 +2117,22 @@ contains
     gamma_h = 3.637834252744496_c_double / h
     alpha_h = 2.6810828736277523_c_double / h
     beta_h = 3.0504301992474105_c_double / h
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z1(i)
     end do
     call speed_controlled_rhs(t + 0.1550510257216822_c_double * h, y, c, z1)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z2(i)
     end do
     call speed_controlled_rhs(t + 0.6449489742783178_c_double * h, y, c, z2)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       y(i) = x(i) + z3(i)
     end do
     call speed_controlled_rhs(t + h, y, c, z3)
+    !GCC$ unroll 1
     do i = 0, nx - 1
       a1 = z1(i)
       a2 = z2(i)
@@ -1694,6 +2147,7 @@ contains
     call lu_solve(e1, piv1, z1)
     call lu_solve_complex(e2r, e2i, piv2, z2, z3)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       s1 = z1(i) / scal(i)
       s2 = z2(i) / scal(i)
@@ -1730,6 +2184,7 @@ contains
     real(c_double) :: norm
     integer(c_int) :: i
 
+    !GCC$ unroll 1
     do i = 0, nx - 1
       g(i) = (((-10.048809399827416_c_double) * z1(i) + 1.382142733160749_c_double * z2(i)) - &
           0.3333333333333333_c_double * z3(i)) / h
@@ -1737,21 +2192,25 @@ contains
     end do
     call lu_solve(e1, piv1, err)
     total = 0.0_c_double
+    !GCC$ unroll 1
     do i = 0, nx - 1
       total = total + (err(i) / scal(i)) * (err(i) / scal(i))
     end do
     norm = sqrt(total / nx)
     if (norm >= 1.0_c_double .and. again) then
+      !GCC$ unroll 1
       do i = 0, nx - 1
         y(i) = x(i) + err(i)
       end do
       call speed_controlled_rhs(t, y, c, err)
       stats%rhs_calls = stats%rhs_calls + 1
+      !GCC$ unroll 1
       do i = 0, nx - 1
         err(i) = err(i) + g(i)
       end do
       call lu_solve(e1, piv1, err)
       total = 0.0_c_double
+      !GCC$ unroll 1
       do i = 0, nx - 1
         total = total + (err(i) / scal(i)) * (err(i) / scal(i))
       end do
@@ -1827,6 +2286,7 @@ contains
     real(c_double) :: c1q
     real(c_double) :: c2q
     real(c_double) :: c3q
+    real(c_double) :: theta_k
     logical :: last
     logical :: first
     logical :: reject
@@ -1843,6 +2303,7 @@ contains
     real(c_double) :: a3
     real(c_double) :: ak
     integer(c_int) :: i
+    integer(c_int) :: k
 
     start = ode_start(5, SPEED_CONTROLLED_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, &
         f0, h, stats)
@@ -1865,6 +2326,7 @@ contains
     need_lu = .true.
     nonfinite = .false.
     singular = 0
+    !GCC$ unroll 1
     do i = 0, nx - 1
       comp(i) = 0.0_c_double
       ak1(i) = 0.0_c_double
@@ -1879,6 +2341,7 @@ contains
       h = t1 - t
       last = .true.
     end if
+    !GCC$ unroll 1
     do i = 0, nx - 1
       scal(i) = atol_e + rtol_e * abs(x(i))
     end do
@@ -1925,6 +2388,7 @@ contains
 
       ! the Newton iterations start from the last step's collocation polynomial
       if (first) then
+        !GCC$ unroll 1
         do i = 0, nx - 1
           z1(i) = 0.0_c_double
           z2(i) = 0.0_c_double
@@ -1937,6 +2401,7 @@ contains
         c3q = h / h_old
         c1q = 0.1550510257216822_c_double * c3q
         c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
               0.8449489742783178_c_double) * ak3(i)))
@@ -1983,7 +2448,11 @@ contains
             exit
           end if
           rate = theta / (1.0_c_double - theta)
-          predicted = ((rate * dyno) * theta**real(6 - newt, c_double)) / newton_tol
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
           if (predicted >= 1.0_c_double) then
             q = max(1e-4_c_double, min(20.0_c_double, predicted))
             h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
@@ -1992,6 +2461,7 @@ contains
           end if
         end if
         dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
         do i = 0, nx - 1
           a1 = w1(i) + z1(i)
           a2 = w2(i) + z2(i)
@@ -2011,6 +2481,7 @@ contains
       end do
       if (outcome == 0) then
         err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
         do i = 0, nx - 1
           dx(i) = z3(i) - comp(i)
           xnew(i) = x(i) + dx(i)
@@ -2055,6 +2526,7 @@ contains
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         h_old = h
+        !GCC$ unroll 1
         do i = 0, nx - 1
           ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
           ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
@@ -2069,6 +2541,7 @@ contains
           res = SPEED_CONTROLLED_ODE_OK
           return
         end if
+        !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
           scal(i) = atol_e + rtol_e * abs(x(i))

@@ -507,50 +507,154 @@ static int ode_start(int order, double rtol_min, double t0, double t1, const dou
 }
 
 /* In-place LU decomposition with partial pivoting within the diagonal
-   blocks (0, 1), (1, 3), (3, 4), (4, 8) (row i's block ends
-   before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
+   blocks (0, 1), (1, 3), (3, 4), (4, 8), unrolled over the entries
+   of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
    row k swapped with piv[k]. 1 when a pivot is zero: singular. */
 static int lu_decompose(double *a, int *piv)
 {
-    static const int lu_end[8] = {1, 3, 3, 4, 8, 8, 8, 8};
     int p;
     double m;
     double swap;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < STIFF_WHEEL_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(a[i * STIFF_WHEEL_NX + k]) > fabs(a[p * STIFF_WHEEL_NX + k])) {
-                p = i;
-            }
-        }
-        piv[k] = p;
-        if (!(fabs(a[p * STIFF_WHEEL_NX + k]) > 0.0)) {
-            return 1;  /* singular */
-        }
-        if (p != k) {
-            for (j = 0; j < STIFF_WHEEL_NX; ++j) {
-                swap = a[k * STIFF_WHEEL_NX + j];
-                a[k * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
-                a[p * STIFF_WHEEL_NX + j] = swap;
-            }
-        }
-        a[k * STIFF_WHEEL_NX + k] = 1.0 / a[k * STIFF_WHEEL_NX + k];
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            m = a[i * STIFF_WHEEL_NX + k] * a[k * STIFF_WHEEL_NX + k];
-            a[i * STIFF_WHEEL_NX + k] = m;
-            for (j = k + 1; j < STIFF_WHEEL_NX; ++j) {
-                a[i * STIFF_WHEEL_NX + j] = a[i * STIFF_WHEEL_NX + j] - m * a[k * STIFF_WHEEL_NX
-                        + j];
-            }
-        }
-        for (j = k + 1; j < STIFF_WHEEL_NX; ++j) {
-            a[k * STIFF_WHEEL_NX + j] = a[k * STIFF_WHEEL_NX + j] * a[k * STIFF_WHEEL_NX + k];  /* u_kj / u_kk */
+    piv[0] = 0;
+    if (!(fabs(a[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[0] = 1.0 / a[0];
+    a[1] = a[1] * a[0];
+    a[2] = a[2] * a[0];
+    a[4] = a[4] * a[0];
+    a[6] = a[6] * a[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(a[i * STIFF_WHEEL_NX + 1]) > fabs(a[p * STIFF_WHEEL_NX + 1])) {
+            p = i;
         }
     }
+    piv[1] = p;
+    if (!(fabs(a[p * STIFF_WHEEL_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < STIFF_WHEEL_NX; ++j) {
+            swap = a[1 * STIFF_WHEEL_NX + j];
+            a[1 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
+            a[p * STIFF_WHEEL_NX + j] = swap;
+        }
+    }
+    a[9] = 1.0 / a[9];
+    for (i = 2; i < 3; ++i) {
+        m = a[i * STIFF_WHEEL_NX + 1] * a[9];
+        a[i * STIFF_WHEEL_NX + 1] = m;
+        a[i * STIFF_WHEEL_NX + 2] = a[i * STIFF_WHEEL_NX + 2] - m * a[10];
+        a[i * STIFF_WHEEL_NX + 4] = a[i * STIFF_WHEEL_NX + 4] - m * a[12];
+        a[i * STIFF_WHEEL_NX + 5] = a[i * STIFF_WHEEL_NX + 5] - m * a[13];
+        a[i * STIFF_WHEEL_NX + 6] = a[i * STIFF_WHEEL_NX + 6] - m * a[14];
+    }
+    a[10] = a[10] * a[9];
+    a[12] = a[12] * a[9];
+    a[13] = a[13] * a[9];
+    a[14] = a[14] * a[9];
+    piv[2] = 2;
+    if (!(fabs(a[18]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[18] = 1.0 / a[18];
+    a[20] = a[20] * a[18];
+    a[21] = a[21] * a[18];
+    a[22] = a[22] * a[18];
+    piv[3] = 3;
+    if (!(fabs(a[27]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[27] = 1.0 / a[27];
+    a[29] = a[29] * a[27];
+    a[31] = a[31] * a[27];
+    p = 4;
+    for (i = 5; i < 8; ++i) {
+        if (fabs(a[i * STIFF_WHEEL_NX + 4]) > fabs(a[p * STIFF_WHEEL_NX + 4])) {
+            p = i;
+        }
+    }
+    piv[4] = p;
+    if (!(fabs(a[p * STIFF_WHEEL_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+            swap = a[4 * STIFF_WHEEL_NX + j];
+            a[4 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
+            a[p * STIFF_WHEEL_NX + j] = swap;
+        }
+    }
+    a[36] = 1.0 / a[36];
+    for (i = 5; i < 8; ++i) {
+        m = a[i * STIFF_WHEEL_NX + 4] * a[36];
+        a[i * STIFF_WHEEL_NX + 4] = m;
+        a[i * STIFF_WHEEL_NX + 5] = a[i * STIFF_WHEEL_NX + 5] - m * a[37];
+        a[i * STIFF_WHEEL_NX + 6] = a[i * STIFF_WHEEL_NX + 6] - m * a[38];
+        a[i * STIFF_WHEEL_NX + 7] = a[i * STIFF_WHEEL_NX + 7] - m * a[39];
+    }
+    a[37] = a[37] * a[36];
+    a[38] = a[38] * a[36];
+    a[39] = a[39] * a[36];
+    p = 5;
+    for (i = 6; i < 8; ++i) {
+        if (fabs(a[i * STIFF_WHEEL_NX + 5]) > fabs(a[p * STIFF_WHEEL_NX + 5])) {
+            p = i;
+        }
+    }
+    piv[5] = p;
+    if (!(fabs(a[p * STIFF_WHEEL_NX + 5]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 5) {
+        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+            swap = a[5 * STIFF_WHEEL_NX + j];
+            a[5 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
+            a[p * STIFF_WHEEL_NX + j] = swap;
+        }
+    }
+    a[45] = 1.0 / a[45];
+    for (i = 6; i < 8; ++i) {
+        m = a[i * STIFF_WHEEL_NX + 5] * a[45];
+        a[i * STIFF_WHEEL_NX + 5] = m;
+        a[i * STIFF_WHEEL_NX + 6] = a[i * STIFF_WHEEL_NX + 6] - m * a[46];
+        a[i * STIFF_WHEEL_NX + 7] = a[i * STIFF_WHEEL_NX + 7] - m * a[47];
+    }
+    a[46] = a[46] * a[45];
+    a[47] = a[47] * a[45];
+    p = 6;
+    for (i = 7; i < 8; ++i) {
+        if (fabs(a[i * STIFF_WHEEL_NX + 6]) > fabs(a[p * STIFF_WHEEL_NX + 6])) {
+            p = i;
+        }
+    }
+    piv[6] = p;
+    if (!(fabs(a[p * STIFF_WHEEL_NX + 6]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 6) {
+        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+            swap = a[6 * STIFF_WHEEL_NX + j];
+            a[6 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
+            a[p * STIFF_WHEEL_NX + j] = swap;
+        }
+    }
+    a[54] = 1.0 / a[54];
+    for (i = 7; i < 8; ++i) {
+        m = a[i * STIFF_WHEEL_NX + 6] * a[54];
+        a[i * STIFF_WHEEL_NX + 6] = m;
+        a[i * STIFF_WHEEL_NX + 7] = a[i * STIFF_WHEEL_NX + 7] - m * a[55];
+    }
+    a[55] = a[55] * a[54];
+    piv[7] = 7;
+    if (!(fabs(a[63]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    a[63] = 1.0 / a[63];
     return 0;
 }
 
@@ -559,12 +663,26 @@ static int lu_decompose(double *a, int *piv)
 static void lu_solve(const double *lu, const int *piv, double *b)
 {
     double swap;
-    int i;
 
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        swap = b[i];
-        b[i] = b[piv[i]];
-        b[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = b[1];
+        b[1] = b[piv[1]];
+        b[piv[1]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = b[4];
+        b[4] = b[piv[4]];
+        b[piv[4]] = swap;
+    }
+    if (piv[5] != 5) {
+        swap = b[5];
+        b[5] = b[piv[5]];
+        b[piv[5]] = swap;
+    }
+    if (piv[6] != 6) {
+        swap = b[6];
+        b[6] = b[piv[6]];
+        b[piv[6]] = swap;
     }
     b[2] = b[2] - lu[17] * b[1];
     b[5] = b[5] - lu[44] * b[4];
@@ -584,7 +702,6 @@ static void lu_solve(const double *lu, const int *piv, double *b)
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
 static int lu_decompose_complex(double *ar, double *ai, int *piv)
 {
-    static const int lu_end[8] = {1, 3, 3, 4, 8, 8, 8, 8};
     int p;
     double swap;
     double re;
@@ -597,65 +714,354 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     double ui;
     int i;
     int j;
-    int k;
 
-    for (k = 0; k < STIFF_WHEEL_NX; ++k) {
-        p = k;
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            if (fabs(ar[i * STIFF_WHEEL_NX + k]) + fabs(ai[i * STIFF_WHEEL_NX + k]) > fabs(ar[p * STIFF_WHEEL_NX + k]) + fabs(ai[p * STIFF_WHEEL_NX + k])) {
-                p = i;
-            }
+    piv[0] = 0;
+    if (!(fabs(ar[0]) + fabs(ai[0]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[0];
+    im = ai[0];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[0] = 1.0 / d;
+        ai[0] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[0] = r / d;
+        ai[0] = -1.0 / d;
+    }
+    ur = ar[1];
+    ui = ai[1];
+    ar[1] = ur * ar[0] - ui * ai[0];
+    ai[1] = ur * ai[0] + ui * ar[0];
+    ur = ar[2];
+    ui = ai[2];
+    ar[2] = ur * ar[0] - ui * ai[0];
+    ai[2] = ur * ai[0] + ui * ar[0];
+    ur = ar[4];
+    ui = ai[4];
+    ar[4] = ur * ar[0] - ui * ai[0];
+    ai[4] = ur * ai[0] + ui * ar[0];
+    ur = ar[6];
+    ui = ai[6];
+    ar[6] = ur * ar[0] - ui * ai[0];
+    ai[6] = ur * ai[0] + ui * ar[0];
+    p = 1;
+    for (i = 2; i < 3; ++i) {
+        if (fabs(ar[i * STIFF_WHEEL_NX + 1]) + fabs(ai[i * STIFF_WHEEL_NX + 1]) > fabs(ar[p * STIFF_WHEEL_NX + 1]) + fabs(ai[p * STIFF_WHEEL_NX + 1])) {
+            p = i;
         }
-        piv[k] = p;
-        if (!(fabs(ar[p * STIFF_WHEEL_NX + k]) + fabs(ai[p * STIFF_WHEEL_NX + k]) > 0.0)) {
-            return 1;  /* singular */
+    }
+    piv[1] = p;
+    if (!(fabs(ar[p * STIFF_WHEEL_NX + 1]) + fabs(ai[p * STIFF_WHEEL_NX + 1]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 1) {
+        for (j = 1; j < STIFF_WHEEL_NX; ++j) {
+            swap = ar[1 * STIFF_WHEEL_NX + j];
+            ar[1 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
+            ar[p * STIFF_WHEEL_NX + j] = swap;
+            swap = ai[1 * STIFF_WHEEL_NX + j];
+            ai[1 * STIFF_WHEEL_NX + j] = ai[p * STIFF_WHEEL_NX + j];
+            ai[p * STIFF_WHEEL_NX + j] = swap;
         }
-        if (p != k) {
-            for (j = 0; j < STIFF_WHEEL_NX; ++j) {
-                swap = ar[k * STIFF_WHEEL_NX + j];
-                ar[k * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
-                ar[p * STIFF_WHEEL_NX + j] = swap;
-                swap = ai[k * STIFF_WHEEL_NX + j];
-                ai[k * STIFF_WHEEL_NX + j] = ai[p * STIFF_WHEEL_NX + j];
-                ai[p * STIFF_WHEEL_NX + j] = swap;
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[9];
+    im = ai[9];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[9] = 1.0 / d;
+        ai[9] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[9] = r / d;
+        ai[9] = -1.0 / d;
+    }
+    for (i = 2; i < 3; ++i) {
+        lr = ar[i * STIFF_WHEEL_NX + 1] * ar[9] - ai[i * STIFF_WHEEL_NX + 1] * ai[9];
+        li = ar[i * STIFF_WHEEL_NX + 1] * ai[9] + ai[i * STIFF_WHEEL_NX + 1] * ar[9];
+        ar[i * STIFF_WHEEL_NX + 1] = lr;
+        ai[i * STIFF_WHEEL_NX + 1] = li;
+        ur = ar[10];
+        ui = ai[10];
+        ar[i * STIFF_WHEEL_NX + 2] = ar[i * STIFF_WHEEL_NX + 2] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 2] = ai[i * STIFF_WHEEL_NX + 2] - (lr * ui + li * ur);
+        ur = ar[12];
+        ui = ai[12];
+        ar[i * STIFF_WHEEL_NX + 4] = ar[i * STIFF_WHEEL_NX + 4] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 4] = ai[i * STIFF_WHEEL_NX + 4] - (lr * ui + li * ur);
+        ur = ar[13];
+        ui = ai[13];
+        ar[i * STIFF_WHEEL_NX + 5] = ar[i * STIFF_WHEEL_NX + 5] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 5] = ai[i * STIFF_WHEEL_NX + 5] - (lr * ui + li * ur);
+        ur = ar[14];
+        ui = ai[14];
+        ar[i * STIFF_WHEEL_NX + 6] = ar[i * STIFF_WHEEL_NX + 6] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 6] = ai[i * STIFF_WHEEL_NX + 6] - (lr * ui + li * ur);
+    }
+    ur = ar[10];
+    ui = ai[10];
+    ar[10] = ur * ar[9] - ui * ai[9];
+    ai[10] = ur * ai[9] + ui * ar[9];
+    ur = ar[12];
+    ui = ai[12];
+    ar[12] = ur * ar[9] - ui * ai[9];
+    ai[12] = ur * ai[9] + ui * ar[9];
+    ur = ar[13];
+    ui = ai[13];
+    ar[13] = ur * ar[9] - ui * ai[9];
+    ai[13] = ur * ai[9] + ui * ar[9];
+    ur = ar[14];
+    ui = ai[14];
+    ar[14] = ur * ar[9] - ui * ai[9];
+    ai[14] = ur * ai[9] + ui * ar[9];
+    piv[2] = 2;
+    if (!(fabs(ar[18]) + fabs(ai[18]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[18];
+    im = ai[18];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[18] = 1.0 / d;
+        ai[18] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[18] = r / d;
+        ai[18] = -1.0 / d;
+    }
+    ur = ar[20];
+    ui = ai[20];
+    ar[20] = ur * ar[18] - ui * ai[18];
+    ai[20] = ur * ai[18] + ui * ar[18];
+    ur = ar[21];
+    ui = ai[21];
+    ar[21] = ur * ar[18] - ui * ai[18];
+    ai[21] = ur * ai[18] + ui * ar[18];
+    ur = ar[22];
+    ui = ai[22];
+    ar[22] = ur * ar[18] - ui * ai[18];
+    ai[22] = ur * ai[18] + ui * ar[18];
+    piv[3] = 3;
+    if (!(fabs(ar[27]) + fabs(ai[27]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[27];
+    im = ai[27];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[27] = 1.0 / d;
+        ai[27] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[27] = r / d;
+        ai[27] = -1.0 / d;
+    }
+    ur = ar[29];
+    ui = ai[29];
+    ar[29] = ur * ar[27] - ui * ai[27];
+    ai[29] = ur * ai[27] + ui * ar[27];
+    ur = ar[31];
+    ui = ai[31];
+    ar[31] = ur * ar[27] - ui * ai[27];
+    ai[31] = ur * ai[27] + ui * ar[27];
+    p = 4;
+    for (i = 5; i < 8; ++i) {
+        if (fabs(ar[i * STIFF_WHEEL_NX + 4]) + fabs(ai[i * STIFF_WHEEL_NX + 4]) > fabs(ar[p * STIFF_WHEEL_NX + 4]) + fabs(ai[p * STIFF_WHEEL_NX + 4])) {
+            p = i;
         }
-        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
-        re = ar[k * STIFF_WHEEL_NX + k];
-        im = ai[k * STIFF_WHEEL_NX + k];
-        if (fabs(re) >= fabs(im)) {
-            r = im / re;
-            d = re + im * r;
-            ar[k * STIFF_WHEEL_NX + k] = 1.0 / d;
-            ai[k * STIFF_WHEEL_NX + k] = -r / d;
-        } else {
-            r = re / im;
-            d = im + re * r;
-            ar[k * STIFF_WHEEL_NX + k] = r / d;
-            ai[k * STIFF_WHEEL_NX + k] = -1.0 / d;
+    }
+    piv[4] = p;
+    if (!(fabs(ar[p * STIFF_WHEEL_NX + 4]) + fabs(ai[p * STIFF_WHEEL_NX + 4]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 4) {
+        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+            swap = ar[4 * STIFF_WHEEL_NX + j];
+            ar[4 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
+            ar[p * STIFF_WHEEL_NX + j] = swap;
+            swap = ai[4 * STIFF_WHEEL_NX + j];
+            ai[4 * STIFF_WHEEL_NX + j] = ai[p * STIFF_WHEEL_NX + j];
+            ai[p * STIFF_WHEEL_NX + j] = swap;
         }
-        for (i = k + 1; i < lu_end[k]; ++i) {
-            lr = ar[i * STIFF_WHEEL_NX + k] * ar[k * STIFF_WHEEL_NX + k] - ai[i * STIFF_WHEEL_NX
-                    + k] * ai[k * STIFF_WHEEL_NX + k];
-            li = ar[i * STIFF_WHEEL_NX + k] * ai[k * STIFF_WHEEL_NX + k] + ai[i * STIFF_WHEEL_NX
-                    + k] * ar[k * STIFF_WHEEL_NX + k];
-            ar[i * STIFF_WHEEL_NX + k] = lr;
-            ai[i * STIFF_WHEEL_NX + k] = li;
-            for (j = k + 1; j < STIFF_WHEEL_NX; ++j) {
-                ur = ar[k * STIFF_WHEEL_NX + j];
-                ui = ai[k * STIFF_WHEEL_NX + j];
-                ar[i * STIFF_WHEEL_NX + j] = ar[i * STIFF_WHEEL_NX + j] - (lr * ur - li * ui);
-                ai[i * STIFF_WHEEL_NX + j] = ai[i * STIFF_WHEEL_NX + j] - (lr * ui + li * ur);
-            }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[36];
+    im = ai[36];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[36] = 1.0 / d;
+        ai[36] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[36] = r / d;
+        ai[36] = -1.0 / d;
+    }
+    for (i = 5; i < 8; ++i) {
+        lr = ar[i * STIFF_WHEEL_NX + 4] * ar[36] - ai[i * STIFF_WHEEL_NX + 4] * ai[36];
+        li = ar[i * STIFF_WHEEL_NX + 4] * ai[36] + ai[i * STIFF_WHEEL_NX + 4] * ar[36];
+        ar[i * STIFF_WHEEL_NX + 4] = lr;
+        ai[i * STIFF_WHEEL_NX + 4] = li;
+        ur = ar[37];
+        ui = ai[37];
+        ar[i * STIFF_WHEEL_NX + 5] = ar[i * STIFF_WHEEL_NX + 5] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 5] = ai[i * STIFF_WHEEL_NX + 5] - (lr * ui + li * ur);
+        ur = ar[38];
+        ui = ai[38];
+        ar[i * STIFF_WHEEL_NX + 6] = ar[i * STIFF_WHEEL_NX + 6] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 6] = ai[i * STIFF_WHEEL_NX + 6] - (lr * ui + li * ur);
+        ur = ar[39];
+        ui = ai[39];
+        ar[i * STIFF_WHEEL_NX + 7] = ar[i * STIFF_WHEEL_NX + 7] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 7] = ai[i * STIFF_WHEEL_NX + 7] - (lr * ui + li * ur);
+    }
+    ur = ar[37];
+    ui = ai[37];
+    ar[37] = ur * ar[36] - ui * ai[36];
+    ai[37] = ur * ai[36] + ui * ar[36];
+    ur = ar[38];
+    ui = ai[38];
+    ar[38] = ur * ar[36] - ui * ai[36];
+    ai[38] = ur * ai[36] + ui * ar[36];
+    ur = ar[39];
+    ui = ai[39];
+    ar[39] = ur * ar[36] - ui * ai[36];
+    ai[39] = ur * ai[36] + ui * ar[36];
+    p = 5;
+    for (i = 6; i < 8; ++i) {
+        if (fabs(ar[i * STIFF_WHEEL_NX + 5]) + fabs(ai[i * STIFF_WHEEL_NX + 5]) > fabs(ar[p * STIFF_WHEEL_NX + 5]) + fabs(ai[p * STIFF_WHEEL_NX + 5])) {
+            p = i;
         }
-        for (j = k + 1; j < STIFF_WHEEL_NX; ++j) {
-            ur = ar[k * STIFF_WHEEL_NX + j];
-            ui = ai[k * STIFF_WHEEL_NX + j];
-            ar[k * STIFF_WHEEL_NX + j] = ur * ar[k * STIFF_WHEEL_NX + k] - ui * ai[k *
-                    STIFF_WHEEL_NX + k];  /* u_kj / u_kk */
-            ai[k * STIFF_WHEEL_NX + j] = ur * ai[k * STIFF_WHEEL_NX + k] + ui * ar[k *
-                    STIFF_WHEEL_NX + k];
+    }
+    piv[5] = p;
+    if (!(fabs(ar[p * STIFF_WHEEL_NX + 5]) + fabs(ai[p * STIFF_WHEEL_NX + 5]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 5) {
+        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+            swap = ar[5 * STIFF_WHEEL_NX + j];
+            ar[5 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
+            ar[p * STIFF_WHEEL_NX + j] = swap;
+            swap = ai[5 * STIFF_WHEEL_NX + j];
+            ai[5 * STIFF_WHEEL_NX + j] = ai[p * STIFF_WHEEL_NX + j];
+            ai[p * STIFF_WHEEL_NX + j] = swap;
         }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[45];
+    im = ai[45];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[45] = 1.0 / d;
+        ai[45] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[45] = r / d;
+        ai[45] = -1.0 / d;
+    }
+    for (i = 6; i < 8; ++i) {
+        lr = ar[i * STIFF_WHEEL_NX + 5] * ar[45] - ai[i * STIFF_WHEEL_NX + 5] * ai[45];
+        li = ar[i * STIFF_WHEEL_NX + 5] * ai[45] + ai[i * STIFF_WHEEL_NX + 5] * ar[45];
+        ar[i * STIFF_WHEEL_NX + 5] = lr;
+        ai[i * STIFF_WHEEL_NX + 5] = li;
+        ur = ar[46];
+        ui = ai[46];
+        ar[i * STIFF_WHEEL_NX + 6] = ar[i * STIFF_WHEEL_NX + 6] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 6] = ai[i * STIFF_WHEEL_NX + 6] - (lr * ui + li * ur);
+        ur = ar[47];
+        ui = ai[47];
+        ar[i * STIFF_WHEEL_NX + 7] = ar[i * STIFF_WHEEL_NX + 7] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 7] = ai[i * STIFF_WHEEL_NX + 7] - (lr * ui + li * ur);
+    }
+    ur = ar[46];
+    ui = ai[46];
+    ar[46] = ur * ar[45] - ui * ai[45];
+    ai[46] = ur * ai[45] + ui * ar[45];
+    ur = ar[47];
+    ui = ai[47];
+    ar[47] = ur * ar[45] - ui * ai[45];
+    ai[47] = ur * ai[45] + ui * ar[45];
+    p = 6;
+    for (i = 7; i < 8; ++i) {
+        if (fabs(ar[i * STIFF_WHEEL_NX + 6]) + fabs(ai[i * STIFF_WHEEL_NX + 6]) > fabs(ar[p * STIFF_WHEEL_NX + 6]) + fabs(ai[p * STIFF_WHEEL_NX + 6])) {
+            p = i;
+        }
+    }
+    piv[6] = p;
+    if (!(fabs(ar[p * STIFF_WHEEL_NX + 6]) + fabs(ai[p * STIFF_WHEEL_NX + 6]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    if (p != 6) {
+        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+            swap = ar[6 * STIFF_WHEEL_NX + j];
+            ar[6 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
+            ar[p * STIFF_WHEEL_NX + j] = swap;
+            swap = ai[6 * STIFF_WHEEL_NX + j];
+            ai[6 * STIFF_WHEEL_NX + j] = ai[p * STIFF_WHEEL_NX + j];
+            ai[p * STIFF_WHEEL_NX + j] = swap;
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[54];
+    im = ai[54];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[54] = 1.0 / d;
+        ai[54] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[54] = r / d;
+        ai[54] = -1.0 / d;
+    }
+    for (i = 7; i < 8; ++i) {
+        lr = ar[i * STIFF_WHEEL_NX + 6] * ar[54] - ai[i * STIFF_WHEEL_NX + 6] * ai[54];
+        li = ar[i * STIFF_WHEEL_NX + 6] * ai[54] + ai[i * STIFF_WHEEL_NX + 6] * ar[54];
+        ar[i * STIFF_WHEEL_NX + 6] = lr;
+        ai[i * STIFF_WHEEL_NX + 6] = li;
+        ur = ar[55];
+        ui = ai[55];
+        ar[i * STIFF_WHEEL_NX + 7] = ar[i * STIFF_WHEEL_NX + 7] - (lr * ur - li * ui);
+        ai[i * STIFF_WHEEL_NX + 7] = ai[i * STIFF_WHEEL_NX + 7] - (lr * ui + li * ur);
+    }
+    ur = ar[55];
+    ui = ai[55];
+    ar[55] = ur * ar[54] - ui * ai[54];
+    ai[55] = ur * ai[54] + ui * ar[54];
+    piv[7] = 7;
+    if (!(fabs(ar[63]) + fabs(ai[63]) > 0.0)) {
+        return 1;  /* singular */
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    re = ar[63];
+    im = ai[63];
+    if (fabs(re) >= fabs(im)) {
+        r = im / re;
+        d = re + im * r;
+        ar[63] = 1.0 / d;
+        ai[63] = -r / d;
+    } else {
+        r = re / im;
+        d = im + re * r;
+        ar[63] = r / d;
+        ai[63] = -1.0 / d;
     }
     return 0;
 }
@@ -666,15 +1072,38 @@ static void lu_solve_complex(const double *ar, const double *ai, const int *piv,
 {
     double swap;
     double re;
-    int i;
 
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        swap = br[i];
-        br[i] = br[piv[i]];
-        br[piv[i]] = swap;
-        swap = bi[i];
-        bi[i] = bi[piv[i]];
-        bi[piv[i]] = swap;
+    if (piv[1] != 1) {
+        swap = br[1];
+        br[1] = br[piv[1]];
+        br[piv[1]] = swap;
+        swap = bi[1];
+        bi[1] = bi[piv[1]];
+        bi[piv[1]] = swap;
+    }
+    if (piv[4] != 4) {
+        swap = br[4];
+        br[4] = br[piv[4]];
+        br[piv[4]] = swap;
+        swap = bi[4];
+        bi[4] = bi[piv[4]];
+        bi[piv[4]] = swap;
+    }
+    if (piv[5] != 5) {
+        swap = br[5];
+        br[5] = br[piv[5]];
+        br[piv[5]] = swap;
+        swap = bi[5];
+        bi[5] = bi[piv[5]];
+        bi[piv[5]] = swap;
+    }
+    if (piv[6] != 6) {
+        swap = br[6];
+        br[6] = br[piv[6]];
+        br[piv[6]] = swap;
+        swap = bi[6];
+        bi[6] = bi[piv[6]];
+        bi[piv[6]] = swap;
     }
     br[2] = br[2] - ar[17] * br[1] + ai[17] * bi[1];
     bi[2] = bi[2] - ar[17] * bi[1] - ai[17] * br[1];
@@ -1446,6 +1875,7 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
         e2r[i] = -J[i];
         e2i[i] = 0.0;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         e1[i * STIFF_WHEEL_NX + i] = e1[i * STIFF_WHEEL_NX + i] + gamma_h;
         e2r[i * STIFF_WHEEL_NX + i] = e2r[i * STIFF_WHEEL_NX + i] + alpha_h;
@@ -1476,18 +1906,22 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     gamma_h = 3.637834252744496 / h;
     alpha_h = 2.6810828736277523 / h;
     beta_h = 3.0504301992474105 / h;
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         y[i] = x[i] + z1[i];
     }
     stiff_wheel_rhs(t + 0.1550510257216822 * h, y, c, z1);
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         y[i] = x[i] + z2[i];
     }
     stiff_wheel_rhs(t + 0.6449489742783178 * h, y, c, z2);
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         y[i] = x[i] + z3[i];
     }
     stiff_wheel_rhs(t + h, y, c, z3);
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         double a1, a2, a3;
         a1 = z1[i];
@@ -1503,6 +1937,7 @@ static double radau5_newton(double t, double h, const double *x, const double *c
     lu_solve(e1, piv1, z1);
     lu_solve_complex(e2r, e2i, piv2, z2, z3);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         double s1, s2, s3;
         s1 = z1[i] / scal[i];
@@ -1529,6 +1964,7 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     double norm;
     int i;
 
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         g[i] = (-10.048809399827416 * z1[i] + 1.382142733160749 * z2[i] - 0.3333333333333333 *
                 z3[i]) / h;
@@ -1536,21 +1972,25 @@ static double radau5_error(double t, double h, const double *x, const double *c,
     }
     lu_solve(e1, piv1, err);
     total = 0.0;
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         total = total + err[i] / scal[i] * (err[i] / scal[i]);
     }
     norm = sqrt(total / STIFF_WHEEL_NX);
     if (norm >= 1.0 && again) {
+        #pragma GCC unroll 1
         for (i = 0; i < STIFF_WHEEL_NX; ++i) {
             y[i] = x[i] + err[i];
         }
         stiff_wheel_rhs(t, y, c, err);
         stats->rhs_calls = stats->rhs_calls + 1;
+        #pragma GCC unroll 1
         for (i = 0; i < STIFF_WHEEL_NX; ++i) {
             err[i] = err[i] + g[i];
         }
         lu_solve(e1, piv1, err);
         total = 0.0;
+        #pragma GCC unroll 1
         for (i = 0; i < STIFF_WHEEL_NX; ++i) {
             total = total + err[i] / scal[i] * (err[i] / scal[i]);
         }
@@ -1617,6 +2057,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     double c1q;
     double c2q;
     double c3q;
+    double theta_k;
     int last;
     int first;
     int reject;
@@ -1629,6 +2070,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int singular;
     int start;
     int i;
+    int k;
 
     start = ode_start(5, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
             &h, stats);
@@ -1650,6 +2092,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     need_lu = 1;
     nonfinite = 0;
     singular = 0;
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         comp[i] = 0.0;
         ak1[i] = 0.0;
@@ -1663,6 +2106,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         h = t1 - t;
         last = 1;
     }
+    #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         scal[i] = atol_e + rtol_e * fabs(x[i]);
     }
@@ -1704,6 +2148,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
 
         /* the Newton iterations start from the last step's collocation polynomial */
         if (first) {
+            #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 z1[i] = 0.0;
                 z2[i] = 0.0;
@@ -1716,6 +2161,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             c3q = h / h_old;
             c1q = 0.1550510257216822 * c3q;
             c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 double a1, a2, a3;
                 a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
@@ -1762,7 +2208,11 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                     break;
                 }
                 rate = theta / (1.0 - theta);
-                predicted = rate * dyno * pow(theta, (double)(6 - newt)) / newton_tol;
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
                 if (predicted >= 1.0) {
                     q = dmax(1e-4, dmin(20.0, predicted));
                     h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
@@ -1771,6 +2221,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
                 }
             }
             dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 double a1, a2, a3;
                 a1 = w1[i] + z1[i];
@@ -1790,6 +2241,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
         }
         if (outcome == 0) {
             err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 dx[i] = z3[i] - comp[i];
                 xnew[i] = x[i] + dx[i];
@@ -1832,6 +2284,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             h_acc = h;
             err_acc = dmax(1e-2, err);
             h_old = h;
+            #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 double ak;
                 ak = (z2[i] - z1[i]) / 0.4898979485566356;
@@ -1846,6 +2299,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             if (last) {
                 return STIFF_WHEEL_ODE_OK;
             }
+            #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 f0[i] = fnew[i];
                 scal[i] = atol_e + rtol_e * fabs(x[i]);

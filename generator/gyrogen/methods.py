@@ -72,7 +72,10 @@ class RadauControl:
     facmin: float = 0.2
     """h_new/h >= this [1/FACL] ..."""
     facmax: float = 8.0
-    """... and <= this [1/FACR]: err^-1/4 (the embedded estimate has order 3)."""
+    """... and <= this [1/FACR]."""
+    exponent: float = 0.25
+    """h_new/h = safety err^-exponent: 1 / the order of the embedded error
+    estimate plus one (3: 1/4)."""
     newton_max: int = 7
     """Simplified Newton iterations per step at most [NIT]."""
     jacobian_reuse: float = 1e-3

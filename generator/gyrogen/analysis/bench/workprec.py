@@ -197,23 +197,22 @@ def _compiled_run(
     calls = int(seg.totals["rhs_calls"])
     if seg.code != 0:
         return Run(method, backend, setting, math.inf, 0.0, calls, f"code {seg.code}")
-    secs = best_time(_raw_call(comp, method, prob, kw), repeats)
+    secs = best_time(raw_call(comp, method, prob.x0, prob.c, prob.t1, kw), repeats)
     return Run(method, backend, setting, scaled_error(seg.states[-1], prob.ref), secs, calls)
 
 
-def _raw_call(comp: Compiled, method: str, prob: Problem, kw: Controls) -> Callable[[], Any]:
-    """One integration through cffi on preallocated buffers, as a program
-    embedding the C would call it (Compiled.integrate adds about 1 us: a
-    new state and stats struct per call, `make bench-call`)."""
+def raw_call(
+    comp: Compiled, method: str, x0: np.ndarray, c: np.ndarray, t1: float, kw: Controls
+) -> Callable[[], Any]:
+    """One integration of x0 from 0 to t1 through cffi on preallocated
+    buffers, as a program embedding the C would call it (Compiled.integrate
+    adds about 1 us: a new state and stats struct per call, `make
+    bench-call`); each call starts again from x0."""
     ffi = comp.ffi
     fn = comp.function(method)
-    x = prob.x0.copy()
-    xb, cb = (
-        ffi.from_buffer("double[]", x),
-        ffi.from_buffer("double[]", np.ascontiguousarray(prob.c)),
-    )
+    x = x0.copy()
+    xb, cb = ffi.from_buffer("double[]", x), ffi.from_buffer("double[]", np.ascontiguousarray(c))
     stats = ffi.new("gyrogen_stats *")
-    x0, t1 = prob.x0, prob.t1
     if methods.get(method).fixed_step:
         steps = kw["steps"]
 

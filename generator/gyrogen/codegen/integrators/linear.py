@@ -1,14 +1,18 @@
 """The LU decompositions the implicit methods solve with, described once.
 
 E = I/(h gamma) - J is block upper triangular in state order
-(gyrogen.symbolic.blocks): the decomposition pivots within a row's block,
-and the solve is unrolled over the entries of L and U that can be nonzero.
+(gyrogen.symbolic.blocks): the decomposition pivots within a row's block;
+both it and the solve are unrolled over the entries of L and U that can be
+nonzero.
 Matrices are flat and row-major, a[i*NX + j], in every target. U = D V is
 stored as 1/u_kk on the diagonal and V's u_kj/u_kk above it, so that each
 row of the back substitution waits on one multiply-add, not on a divide.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from gyrogen.codegen.integrators.common import NX
 from gyrogen.codegen.ir.nodes import (
@@ -19,6 +23,7 @@ from gyrogen.codegen.ir.nodes import (
     For,
     Func,
     If,
+    Int,
     Num,
     Return,
     S,
@@ -30,11 +35,14 @@ from gyrogen.codegen.ir.nodes import (
 )
 from gyrogen.symbolic.blocks import Blocks
 
-i, j, k, p = Var("i"), Var("j"), Var("k"), Var("p")
+i, j, p = Var("i"), Var("j"), Var("p")
+Entry = Callable[[int | E], E]
+"""An entry's flat index (k * NX + j) -> its size, for the pivot search."""
 
 
-def swap_rows(names: tuple[str, ...]) -> S:
-    """Rows k and p of each matrix exchanged."""
+def swap_rows(names: tuple[str, ...], k: int, start: int) -> S:
+    """Rows k and p of each matrix exchanged, from the block's first column
+    (left of it both rows are zero)."""
     body: list[S] = []
     for a in names:
         swap = Var("swap")
@@ -43,58 +51,97 @@ def swap_rows(names: tuple[str, ...]) -> S:
             assign(Var(a)[k * NX + j], Var(a)[p * NX + j]),
             assign(Var(a)[p * NX + j], swap),
         ]
-    return If(cmp(p, "!=", k), (For("j", NX, tuple(body)),))
+    return If(cmp(p, "!=", k), (For("j", NX, tuple(body), start=Int(start)),))
 
 
-def decompose(blocks: Blocks) -> Func:
-    a = Var("a")
-    end = Var("lu_end")
-    ik, kk, pk = a[i * NX + k], a[k * NX + k], a[p * NX + k]
-    body = (
-        For("k", NX, (
-            assign(p, k),
-            For("i", end[k], (If(cmp(fn("abs", ik), ">", fn("abs", pk)), (assign(p, i),)),),
-                start=k + 1),
-            assign(Var("piv")[k], p),
-            If(not_(cmp(fn("abs", pk), ">", 0.0)), (Return(Bool(True), "singular"),)),
-            swap_rows(("a",)),
-            assign(kk, Num(1.0) / kk),
-            For("i", end[k], (
-                assign(Var("m"), ik * kk),
-                assign(ik, Var("m")),
-                For("j", NX, (assign(a[i * NX + j], a[i * NX + j] - Var("m") * a[k * NX + j]),),
-                    start=k + 1),
-            ), start=k + 1),
-            For("j", NX, (assign(a[k * NX + j], a[k * NX + j] * kk, "u_kj / u_kk"),), start=k + 1),
-        )),
-        Return(Bool(False)),
-    )  # fmt: skip
-    params = (Decl("a", "double", ("NX2",), "inout"), Decl("piv", "int", ("NX",), "out"))
-    locals_ = (
-        Decl("lu_end", "int", ("NX",), values=tuple(blocks.end)),
-        Decl("p", "int"),
-        Decl("m", "double"),
-        Decl("swap", "double"),
+@dataclass(frozen=True)
+class Elimination:
+    """What a decomposition does to entries, by their flat indices: the
+    real one's and the complex one's, with one pivoting and one order."""
+
+    names: tuple[str, ...]
+    size: Entry
+    inverse: Callable[[int], tuple[S, ...]]
+    """u_kk := 1/u_kk."""
+    multiplier: Callable[[E, int], tuple[S, ...]]
+    """l_ik := a_ik / u_kk (a product with the inverse), held in locals too."""
+    update: Callable[[E, int], tuple[S, ...]]
+    """a_ij -= l_ik u_kj (row i's entry, row k's)."""
+    scale: Callable[[int, int], tuple[S, ...]]
+    """u_kj := u_kj / u_kk (row k's entry, the diagonal)."""
+
+
+def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
+    """Gaussian elimination with partial pivoting within the diagonal blocks,
+    unrolled over the columns k and over the entries of U that can be
+    nonzero (Blocks.upper: what the solves read); the rows of a block as a
+    loop. Entries outside that pattern stay zero, as they would under the
+    loop over every column (l_ik times a zero)."""
+    body: list[S] = []
+    piv = Var("piv")
+    for k in range(nx):
+        s, e, kk, up = blocks.start[k], blocks.end[k], k * nx + k, blocks.upper[k]
+        if e - k > 1:
+            body += [
+                assign(p, k),
+                For("i", Int(e), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
+                                     (assign(p, i),)),), start=Int(k + 1)),
+                assign(piv[k], p),
+                If(not_(cmp(how.size(p * NX + k), ">", 0.0)), (Return(Bool(True), "singular"),)),
+                swap_rows(how.names, k, s),
+                *how.inverse(kk),
+                For("i", Int(e), (
+                    *how.multiplier(i * NX + k, kk),
+                    *(st for c in up for st in how.update(i * NX + c, k * nx + c)),
+                ), start=Int(k + 1)),
+            ]  # fmt: skip
+        else:
+            body += [
+                assign(piv[k], k),
+                If(not_(cmp(how.size(kk), ">", 0.0)), (Return(Bool(True), "singular"),)),
+                *how.inverse(kk),
+            ]
+        body += [st for c in up for st in how.scale(k * nx + c, kk)]
+    return (*body, Return(Bool(False)))
+
+
+def decompose(blocks: Blocks, nx: int) -> Func:
+    a, m = Var("a"), Var("m")
+    how = Elimination(
+        names=("a",),
+        size=lambda q: fn("abs", a[q]),
+        inverse=lambda kk: (assign(a[kk], Num(1.0) / a[kk]),),
+        multiplier=lambda ik, kk: (assign(m, a[ik] * a[kk]), assign(a[ik], m)),
+        update=lambda ij, kj: (assign(a[ij], a[ij] - m * a[kj]),),
+        scale=lambda kj, kk: (assign(a[kj], a[kj] * a[kk]),),
     )
+    params = (Decl("a", "double", ("NX2",), "inout"), Decl("piv", "int", ("NX",), "out"))
+    locals_ = (Decl("p", "int"), Decl("m", "double"), Decl("swap", "double"))
     doc = (
         "In-place LU decomposition with partial pivoting within the diagonal",
-        f"blocks {', '.join(map(str, blocks.spans))} (row i's block ends",
-        "before row lu_end[i]): L unit lower; U = D V as 1/u_kk and u_kj/u_kk;",
+        f"blocks {', '.join(map(str, blocks.spans))}, unrolled over the entries",
+        "of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;",
         "row k swapped with piv[k]. 1 when a pivot is zero: singular.",
     )
-    return Func("lu_decompose", params, body, "bool", locals_, doc)
+    return Func("lu_decompose", params, eliminate(blocks, nx, how), "bool", locals_, doc)
+
+
+def permute(blocks: Blocks, nx: int, names: tuple[Var, ...]) -> list[S]:
+    """b's rows exchanged as the decomposition exchanged them: only a row
+    with a row below it in its block can have been."""
+    piv, swap = Var("piv"), Var("swap")
+    return [
+        If(cmp(piv[r], "!=", r), tuple(
+            s for b in names
+            for s in (assign(swap, b[r]), assign(b[r], b[piv[r]]), assign(b[piv[r]], swap))
+        ))
+        for r in range(nx) if blocks.end[r] - r > 1
+    ]  # fmt: skip
 
 
 def solve(blocks: Blocks, nx: int) -> Func:
-    b, piv, lu = Var("b"), Var("piv"), Var("lu")
-    swap = Var("swap")
-    body: list[S] = [
-        For("i", NX, (
-            assign(swap, b[i]),
-            assign(b[i], b[piv[i]]),
-            assign(b[piv[i]], swap),
-        )),
-    ]  # fmt: skip
+    b, lu = Var("b"), Var("lu")
+    body = permute(blocks, nx, (b,))
     for r in range(nx):
         if blocks.lower[r]:
             value: E = b[r]
@@ -118,78 +165,62 @@ def solve(blocks: Blocks, nx: int) -> Func:
     return Func("lu_solve", params, tuple(body), None, (Decl("swap", "double"),), doc)
 
 
-def decompose_complex(blocks: Blocks) -> Func:
+def decompose_complex(blocks: Blocks, nx: int) -> Func:
     """lu_decompose for ar + i ai, stored the same way: the pivot is the entry
     of largest |re| + |im| (as radau5.f's DECOMC); 1/u_kk by Smith's division."""
     ar, ai = Var("ar"), Var("ai")
-    end = Var("lu_end")
-    ik, kk, kj, ij = i * NX + k, k * NX + k, k * NX + j, i * NX + j
-
-    def size(q: E) -> E:
-        return fn("abs", ar[q]) + fn("abs", ai[q])
-
     re, im, r, d = Var("re"), Var("im"), Var("r"), Var("d")
     lr, li, ur, ui = Var("lr"), Var("li"), Var("ur"), Var("ui")
-    inverse: tuple[S, ...] = (
-        assign(re, ar[kk]),
-        assign(im, ai[kk]),
-        If(cmp(fn("abs", re), ">=", fn("abs", im)), (
-            assign(r, im / re), assign(d, re + im * r),
-            assign(ar[kk], Num(1.0) / d), assign(ai[kk], -r / d),
-        ), (
-            assign(r, re / im), assign(d, im + re * r),
-            assign(ar[kk], r / d), assign(ai[kk], Num(-1.0) / d),
-        )),
-    )  # fmt: skip
-    body = (
-        For("k", NX, (
-            assign(p, k),
-            For("i", end[k], (If(cmp(size(ik), ">", size(p * NX + k)), (assign(p, i),)),),
-                start=k + 1),
-            assign(Var("piv")[k], p),
-            If(not_(cmp(size(p * NX + k), ">", 0.0)), (Return(Bool(True), "singular"),)),
-            swap_rows(("ar", "ai")),
+
+    def inverse(kk: int) -> tuple[S, ...]:
+        return (
             Comment("1/u_kk by Smith's division (no overflow in re^2 + im^2)", False),
-            *inverse,
-            For("i", end[k], (
-                assign(lr, ar[ik] * ar[kk] - ai[ik] * ai[kk]),
-                assign(li, ar[ik] * ai[kk] + ai[ik] * ar[kk]),
-                assign(ar[ik], lr),
-                assign(ai[ik], li),
-                For("j", NX, (
-                    assign(ur, ar[kj]), assign(ui, ai[kj]),
-                    assign(ar[ij], ar[ij] - (lr * ur - li * ui)),
-                    assign(ai[ij], ai[ij] - (lr * ui + li * ur)),
-                ), start=k + 1),
-            ), start=k + 1),
-            For("j", NX, (
-                assign(ur, ar[kj]), assign(ui, ai[kj]),
-                assign(ar[kj], ur * ar[kk] - ui * ai[kk], "u_kj / u_kk"),
-                assign(ai[kj], ur * ai[kk] + ui * ar[kk]),
-            ), start=k + 1),
-        )),
-        Return(Bool(False)),
+            assign(re, ar[kk]),
+            assign(im, ai[kk]),
+            If(cmp(fn("abs", re), ">=", fn("abs", im)), (
+                assign(r, im / re), assign(d, re + im * r),
+                assign(ar[kk], Num(1.0) / d), assign(ai[kk], -r / d),
+            ), (
+                assign(r, re / im), assign(d, im + re * r),
+                assign(ar[kk], r / d), assign(ai[kk], Num(-1.0) / d),
+            )),
+        )  # fmt: skip
+
+    how = Elimination(
+        names=("ar", "ai"),
+        size=lambda q: fn("abs", ar[q]) + fn("abs", ai[q]),
+        inverse=inverse,
+        multiplier=lambda ik, kk: (
+            assign(lr, ar[ik] * ar[kk] - ai[ik] * ai[kk]),
+            assign(li, ar[ik] * ai[kk] + ai[ik] * ar[kk]),
+            assign(ar[ik], lr),
+            assign(ai[ik], li),
+        ),
+        update=lambda ij, kj: (
+            assign(ur, ar[kj]), assign(ui, ai[kj]),
+            assign(ar[ij], ar[ij] - (lr * ur - li * ui)),
+            assign(ai[ij], ai[ij] - (lr * ui + li * ur)),
+        ),
+        scale=lambda kj, kk: (
+            assign(ur, ar[kj]), assign(ui, ai[kj]),
+            assign(ar[kj], ur * ar[kk] - ui * ai[kk]),
+            assign(ai[kj], ur * ai[kk] + ui * ar[kk]),
+        ),
     )  # fmt: skip
     params = (Decl("ar", "double", ("NX2",), "inout"), Decl("ai", "double", ("NX2",), "inout"),
               Decl("piv", "int", ("NX",), "out"))  # fmt: skip
     names = ("swap", "re", "im", "r", "d", "lr", "li", "ur", "ui")
-    locals_ = (Decl("lu_end", "int", ("NX",), values=tuple(blocks.end)), Decl("p", "int"),
-               *(Decl(n, "double") for n in names))  # fmt: skip
+    locals_ = (Decl("p", "int"), *(Decl(n, "double") for n in names))
     doc = (
         "lu_decompose for the complex matrix ar + i ai, stored the same way: the",
         "pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC).",
     )
-    return Func("lu_decompose_complex", params, body, "bool", locals_, doc)
+    return Func("lu_decompose_complex", params, eliminate(blocks, nx, how), "bool", locals_, doc)
 
 
 def solve_complex(blocks: Blocks, nx: int) -> Func:
-    ar, ai, br, bi, piv, swap, re = (Var(n) for n in ("ar", "ai", "br", "bi", "piv", "swap", "re"))
-    body: list[S] = [
-        For("i", NX, tuple(
-            s for b in (br, bi)
-            for s in (assign(swap, b[i]), assign(b[i], b[piv[i]]), assign(b[piv[i]], swap))
-        )),
-    ]  # fmt: skip
+    ar, ai, br, bi, re = (Var(n) for n in ("ar", "ai", "br", "bi", "re"))
+    body = permute(blocks, nx, (br, bi))
 
     def minus(value: E, row: int, cols: list[int], part: str) -> E:
         for c in cols:

@@ -85,9 +85,9 @@ def program(
     if blocks is not None:
         nx = len(blocks.end)
         candidates += [
-            linear.decompose(blocks),
+            linear.decompose(blocks, nx),
             linear.solve(blocks, nx),
-            linear.decompose_complex(blocks),
+            linear.decompose_complex(blocks, nx),
             linear.solve_complex(blocks, nx),
         ]
     wanted = calls(fixed + integrate + implicit + lanes)

@@ -67,7 +67,8 @@ def dot(row: tuple[float, ...], vs: list[E]) -> E:
 
 
 def each(*body: S, local: tuple[str, ...] = ()) -> For:
-    return For("i", NX, body, local)
+    """A loop over the states, vectorized (For.vector)."""
+    return For("i", NX, body, local, vector=True)
 
 
 def matrix(name: str, intent: str = "in") -> Decl:

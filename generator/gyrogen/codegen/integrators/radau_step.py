@@ -28,6 +28,7 @@ from gyrogen.codegen.ir.nodes import (
     Continue,
     Decl,
     E,
+    For,
     Func,
     If,
     Int,
@@ -55,7 +56,7 @@ V = {n: Var(n) for n in (
     "J e1 e2r e2i piv1 piv2 z1 z2 z3 w1 w2 w3 ak1 ak2 ak3 f0 fnew scal t0 t1 h_old h_new h_acc "
     "err_acc rtol_e atol_e newton_tol err quot rate theta theta_old dyno dyno_old newt outcome "
     "last first reject fresh_jac need_jac need_lu singular nonfinite start thq predicted q gus "
-    "ak c1q c2q c3q a1 a2 a3"
+    "ak c1q c2q c3q a1 a2 a3 theta_k"
 ).split()}  # fmt: skip
 
 
@@ -115,7 +116,11 @@ def integrate(m: Method, quaternion: bool) -> Func:
     ]  # fmt: skip
     newt, dyno, theta, rate = v["newt"], v["dyno"], v["theta"], v["rate"]
     k_slow, q = 4 + ctl.newton_max - 1, v["q"]
-    power = fn("pow", theta, fn("real", Int(ctl.newton_max - 1) - newt))
+    theta_k = v["theta_k"]
+    theta_to_k: list[S] = [  # theta^(newton_max - 1 - newt) by products: 0 to 4 of them
+        assign(theta_k, 1.0),
+        For("k", Int(ctl.newton_max - 1), (assign(theta_k, theta_k * theta),), start=newt),
+    ]
     slow: list[S] = [
         assign(q, fn("max", ctl.newton_slow[1], fn("min", ctl.newton_slow[2], v["predicted"]))),
         assign(h, h * (Num(ctl.newton_slow[0]) * fn("pow", q, Num(-1.0) / (Int(k_slow) - newt)))),
@@ -128,7 +133,8 @@ def integrate(m: Method, quaternion: bool) -> Func:
         assign(v["theta_old"], v["thq"]),
         If(not_(cmp(theta, "<", ctl.newton_diverged)), (assign(v["outcome"], 2), Break())),
         assign(rate, theta / (Num(1.0) - theta)),
-        assign(v["predicted"], rate * dyno * power / v["newton_tol"]),
+        *theta_to_k,
+        assign(v["predicted"], rate * dyno * theta_k / v["newton_tol"]),
         If(cmp(v["predicted"], ">=", 1.0), tuple(slow)),
     ]  # fmt: skip
     nargs = (t, h, x, c, v["e1"], v["piv1"], v["e2r"], v["e2i"], v["piv2"], v["scal"], *z, *w)
@@ -165,8 +171,8 @@ def integrate(m: Method, quaternion: bool) -> Func:
     ]  # fmt: skip
     fac = fn("min", ctl.safety, Num(ctl.safety * (1 + 2 * ctl.newton_max))
              / (newt + Int(2 * ctl.newton_max)))  # fmt: skip
-    pow4 = fn("pow", err, 0.25)
-    gus = (v["h_acc"] / h) * fn("pow", err * err / v["err_acc"], 0.25) / Num(ctl.safety)
+    pow4 = fn("pow", err, ctl.exponent)
+    gus = (v["h_acc"] / h) * fn("pow", err * err / v["err_acc"], ctl.exponent) / Num(ctl.safety)
     ak = v["ak"]
     lock: list[S] = [] if quaternion else [If(fn("gimbal_lock", x, xnew), (
         Return(code("ERR_ATTITUDE_SINGULAR"), "x: the state before this step"),))]  # fmt: skip
@@ -264,7 +270,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
               *TOLERANCES, scalar("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
     doubles = (
         "t h h_old h_new h_acc err_acc rtol_e atol_e newton_tol err quot rate theta "
-        "theta_old dyno dyno_old thq predicted q gus c1q c2q c3q"
+        "theta_old dyno dyno_old thq predicted q gus c1q c2q c3q theta_k"
     ).split()
     bools = "last first reject fresh_jac need_jac need_lu nonfinite".split()
     locals_ = (

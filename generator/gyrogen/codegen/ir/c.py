@@ -109,6 +109,7 @@ class CPrinter(Printer):
         "unused": "(void){name};  /* unused when every value is folded */",
         "for": "for ({v} = {start}; {v} < {stop}; ++{v}) {{",
         "end_for": "}}",
+        "vector": "#pragma GCC unroll 1",
     }
 
     def scoped_locals(self, s: For, depth: int) -> list[str]:

@@ -110,6 +110,7 @@ class FortranPrinter(Printer):
         ),
         "for": "do {v} = {start}, {stop} - 1",
         "end_for": "end do",
+        "vector": "!GCC$ unroll 1",
     }
 
     def declaration(self, d: Decl, param: bool) -> str:

@@ -216,6 +216,14 @@ class For(S):
     printed as a loop that runs at least once: the describer promises a
     first turn, and bounds the same on every lane. Its body assigns values
     only. The scalar printers print it as any loop."""
+    vector: bool = False
+    """Kept a loop, not unrolled whole, so that the compiler vectorizes it: a
+    short loop with a constant count (one over the states) is otherwise
+    unrolled before the loop vectorizer runs and, the straight-line
+    vectorizer being off (runtime/flags.py), left scalar. Printed with a
+    directive to gcc and clang (C: #pragma GCC unroll 1, Fortran: !GCC$ unroll
+    1), a comment to others; its elements are computed as before, so the
+    results are the same bit for bit."""
 
 
 @dataclass(frozen=True)

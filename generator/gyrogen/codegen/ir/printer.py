@@ -212,7 +212,8 @@ class Printer:
         assert isinstance(s, For), s
         head = say["for"].format(v=s.var, start=self.expr(s.start), stop=self.expr(s.n, 5))
         body = [*self.scoped_locals(s, depth + 1), *self.block(s.body, depth + 1)]
-        return [pad + head, *body, pad + say["end_for"].format()]
+        vector = [pad + say["vector"]] if s.vector else []
+        return [*vector, pad + head, *body, pad + say["end_for"].format()]
 
     def scoped_locals(self, s: For, depth: int) -> list[str]:
         """The declarations of a loop's own locals at its top (C), or none."""
