@@ -2093,7 +2093,8 @@ static inline void taylor_jet(int order, const double *x, const double *inv, dou
    size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
    every state by the automatic-differentiation recurrences over the scene's
    own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
-   last two coefficients, the new state by Horner's scheme. */
+   last two coefficients of each group of states, each by its own scale,
+   the new state by Horner's scheme. */
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, torque_free_stats *stats)
 {

@@ -2376,7 +2376,8 @@ contains
   ! size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
   ! every state by the automatic-differentiation recurrences over the scene's
   ! own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
-  ! last two coefficients, the new state by Horner's scheme.
+  ! last two coefficients of each group of states, each by its own scale,
+  ! the new state by Horner's scheme.
   function taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1

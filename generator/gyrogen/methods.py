@@ -242,7 +242,8 @@ _NOTES = {
         "size of heyoka's taylor_adaptive): the normalized Taylor coefficients of",
         "every state by the automatic-differentiation recurrences over the scene's",
         "own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the",
-        "last two coefficients, the new state by Horner's scheme.",
+        "last two coefficients of each group of states, each by its own scale,",
+        "the new state by Horner's scheme.",
     ),
 }
 _DOPRI5_DEFAULTS = "Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta."
@@ -298,10 +299,9 @@ def instead(method: str, available: Iterable[str]) -> str:
     """What a one-line error suggests when method spent its RHS budget (empty
     for an implicit one): the build's implicit methods by name (scipy's Radau
     without one); for a Taylor method also the build's explicit pairs, whose
-    error is each state's: its one error norm is the largest rate or speed
-    (taylor.state_scales), so a state far below the others goes unresolved
-    (x9: u1 ~ 1e3 beside u4 ~ 5e20 at rtol 1e-10; dop853 took 5e4 calls,
-    taylor 1.5e7 and ended wrong)."""
+    error is each state's: its error norm is the largest state of each group
+    (taylor.state_scales), so a state far below the others of its group
+    goes unresolved."""
     if METHODS[method].implicit:
         return ""
     have = set(available)
@@ -312,8 +312,8 @@ def instead(method: str, available: Iterable[str]) -> str:
     pairs = [m for m in EXPLICIT_CHOICE if m in have and METHODS[m].pair]
     if METHODS[method].taylor and pairs:
         said += (
-            f", or its states differ too much in size for {method}'s one error norm, the largest "
-            f"rate or speed (try --method {' or '.join(pairs)})"
+            f", or its states differ too much in size for {method}'s error norm, the largest "
+            f"state of each group (try --method {' or '.join(pairs)})"
         )
     return said
 
