@@ -1,5 +1,6 @@
 """The Taylor series method, described once: Jorba and Zou's order and
-step size (with heyoka's safety factor) around the scene's jet
+step size (with heyoka's safety factor; the step met in each group of
+states by the group's own scale, bounds) around the scene's jet
 (gyrogen.codegen.integrators.taylor_jet), as one step of straight-line code
 with selections: the scalar integrator loops over it, the lanes print it
 over every lane (gyrogen.codegen.ir.lanes), so a batch equals its single
@@ -75,7 +76,7 @@ from gyrogen.tableaus import Series
 ANGLE_SCALE = math.pi
 """An angle enters the step's relative scale by at most this: its magnitude
 past half a turn is bookkeeping (a rotor angle grows without bound), and
-it would loosen the tolerance of every other state."""
+it would loosen the tolerance of every other state of its group."""
 
 
 def state_scales(names: Sequence[str]) -> tuple[tuple[str, str], ...]:
