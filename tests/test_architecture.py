@@ -15,6 +15,7 @@ STAGES = (
         "errors",
         "abi_rotors",
         "abi",
+        "abi_groups",
         "limits",
         "methods",
         "tableaus",

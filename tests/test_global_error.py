@@ -10,7 +10,7 @@ local errors add up, about linearly (the nutation's phase error has the
 same sign at every step: dop853's error on the fast wheel grows as the
 time, 0.12 tol per step at rtol 1e-10 and 0.2 at 1e-8), and a flow that
 amplifies a perturbation of the start by kappa amplifies those too. So the
-global error of each state group (gyrogen.abi.state_group: attitude,
+global error of each state group (gyrogen.abi_groups.state_group: attitude,
 carrier rates, rotor angles, rotor rates, translation), measured against
 the group's own scale s_g = max(atol / rtol, the group's largest |x| at the
 start and the end), is held to
@@ -56,7 +56,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from gyrogen import abi, methods
+from gyrogen import abi, abi_groups, methods
 from gyrogen.analysis.check import stiffness
 from gyrogen.codegen.generate import generate
 from gyrogen.runtime import build
@@ -119,7 +119,7 @@ def constants(comp: Compiled, scene: Scene) -> np.ndarray:
 
 def scales(names: tuple[str, ...], *xs: np.ndarray) -> np.ndarray:
     """Each state's group scale: max(atol / rtol = 1, the group's largest |x| in xs)."""
-    groups = [abi.state_group(n) for n in names]
+    groups = [abi_groups.state_group(n) for n in names]
     big = np.max(np.abs(np.array(xs)), axis=0)
     return np.array([max(1.0, *(big[j] for j, h in enumerate(groups) if h == g)) for g in groups])
 
@@ -173,7 +173,7 @@ class Motion:
         rates = self.comp.rhs(np.array([self.x0, self.ref]), self.c)
         varying = np.abs(rates[1] - rates[0]) > 1e-12 * np.abs(rates[0])  # else: exact
         signs = np.where(np.arange(len(self.x0)) % 2 == 0, 1.0, -1.0) * varying
-        groups = np.array([abi.state_group(n) for n in self.scene.states])
+        groups = np.array([abi_groups.state_group(n) for n in self.scene.states])
         alone = [signs * (groups == g) for g in dict.fromkeys(groups)]
         return [signs, *(d for d in alone if d.any())]
 
@@ -245,7 +245,7 @@ def starts(draw: st.DrawFn, names: tuple[str, ...]) -> np.ndarray:
 
     x = np.zeros(len(names))
     for i, n in enumerate(names):
-        group, unit = abi.state_group(n), abi.unit_and_doc(n)[0]
+        group, unit = abi_groups.state_group(n), abi.unit_and_doc(n)[0]
         if group == "attitude" and unit == "rad":
             lim = 1.55 if n == "q2" else math.pi  # q2 up to gimbal lock
             x[i] = draw(st.floats(-lim, lim))

@@ -111,10 +111,13 @@ class TaylorControl:
     """A Taylor method's step size, after Jorba & Zou (2005), Sec. 3.3.1, with
     heyoka's safety factor: h = rho exp(-safety / (p - 1)) / e^2, rho the
     smaller of (s / |x^[p-1]|)^(1/(p-1)) and (s / |x^[p]|)^(1/p) over the
-    state's last two normalized Taylor coefficients (infinity norms), s =
-    max(atol / rtol, |x|) (heyoka's rule when atol = rtol: absolute below
-    |x| = 1, relative above). No step is rejected for its error: a step whose
-    new state is not finite is retried with h times nonfinite_shrink."""
+    last two normalized Taylor coefficients (infinity norms) of each group
+    of states (abi_groups.state_group), s = max(atol / rtol, the group's
+    largest |x|) (heyoka's rule when atol = rtol: absolute below |x| = 1,
+    relative above), the smallest over the groups: the fastest wheel sets
+    the scale of the rotor rates alone (taylor.bounds). No step is rejected
+    for its error: a step whose new state is not finite is retried with h
+    times nonfinite_shrink."""
 
     safety: float = 0.7
     nonfinite_shrink: float = 0.5

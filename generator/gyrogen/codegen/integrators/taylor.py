@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 from gyrogen import abi
 from gyrogen import methods as registry
+from gyrogen.abi_groups import state_group
 from gyrogen.codegen.integrators import common
 from gyrogen.codegen.integrators.common import (
     NX,
@@ -80,7 +81,7 @@ it would loosen the tolerance of every other state of its group."""
 
 
 def state_scales(names: Sequence[str]) -> tuple[tuple[str, str], ...]:
-    """Each state's group (gyrogen.abi.state_group) and how it enters its
+    """Each state's group (gyrogen.abi_groups.state_group) and how it enters its
     group's scale xmax: "magnitude" (a rate, a wheel speed, an Euler
     parameter, a position) or "angle" (at most ANGLE_SCALE). Jorba and Zou
     scale the tolerance by the largest state of all; the step here meets it
@@ -89,7 +90,7 @@ def state_scales(names: Sequence[str]) -> tuple[tuple[str, str], ...]:
     tolerance) nor a satellite's 7e6 m (the attitude's, 1e5 times) loosens
     the other groups' tolerance. Translation is a polynomial in t in every
     scene, stepped exactly: it sets no bound."""
-    return tuple((abi.state_group(n), "angle" if abi.unit_and_doc(n)[0] == "rad" else "magnitude")
+    return tuple((state_group(n), "angle" if abi.unit_and_doc(n)[0] == "rad" else "magnitude")
                  for n in names)  # fmt: skip
 
 
@@ -128,22 +129,8 @@ def tables(m: Method) -> tuple[Decl, Decl]:
 
 STATE = ("code", "t", "h", "cap", "nonfinite")
 """A trajectory's values that live from step to step (besides x, comp, stats)."""
-LOCALS = (
-    "last",
-    "run",
-    "take",
-    "ok",
-    "at",
-    "jump",
-    "retry",
-    "xmax",
-    "dp",
-    "dq",
-    "rp",
-    "rq",
-    "rho",
-    "h2",
-)
+LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rp", "rq",
+          "rho", "h2")  # fmt: skip
 BOOLS = {"nonfinite", "last", "run", "take", "ok", "at", "jump", "retry"}
 
 
