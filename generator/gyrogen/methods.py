@@ -287,8 +287,9 @@ is faster than rodas4 at every error from 1e-4 to 1e-13 on stiff_wheel
 EXPLICIT_CHOICE: tuple[str, ...] = ("taylor", "dop853", "dopri5")
 """The explicit methods for a problem that is not stiff, in the order they
 are picked. The Taylor method, where the scene offers it (a smooth rhs), is
-faster than dop853 at equal error on every built-in scene that offers it,
-from 1e-4 to 1e-12, one trajectory (README, "Which method auto picks")."""
+as fast as dop853 or faster at equal error on every built-in scene that
+offers it, from 1e-4 to 1e-12, one trajectory (README, "Which method auto
+picks"), and keeps its tolerance in each group of states."""
 
 
 def pick(available: Iterable[str], stiff: bool) -> str | None:
