@@ -27,11 +27,11 @@ err3^2)) is the one that strays at loose tolerances: on rw3_orthogonal at
 rtol 1e-6 it accepted steps of 0.4 s (0.8 rad of the carrier's turn) and
 erred 9.8 times the tolerance per step, kappa 3 (scipy's DOP853 takes the
 same steps as gyrogen's where both start alike; its first steps fall
-elsewhere here, and it erred 0.4 times). Measured over 600 drawn motions of
-the three scenes at every tolerance (two runs of `make fuzz`'s test),
+elsewhere here, and it erred 0.4 times). Measured in three runs of 300 drawn
+motions of the three scenes at every tolerance (`make fuzz`'s test),
 error / (n kappa tol_loc / rtol) was at most 17 for dop853 (a 933 s
-torque-free spin, Euler parameters, rtol 1e-6), 0.13 for dopri5, 0.071 for
-rodas4, 0.074 for radau5 and 0.01 for Taylor; F is 3 times the largest.
+torque-free spin, Euler parameters, rtol 1e-6), 0.6 for dopri5, 0.24 for
+rodas4, 0.082 for radau5 and 0.01 for Taylor; F is 3 times the largest.
 Before Taylor controlled its step in each group, the fast wheel (u4 = 1e6
 rad/s, 1 s, rtol 1e-10) gave Taylor 2.9e6 in 933 steps: 30 times over
 this bound.
