@@ -17,6 +17,7 @@ STAGES = (
         "errors",
         "abi_rotors",
         "abi",
+        "abi_groups",
         "limits",
         "methods",
         "tableaus",

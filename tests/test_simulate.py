@@ -376,7 +376,7 @@ def test_compiled_methods_spend_the_budget_over_the_whole_run(
     """--max-nfev bounds the RHS calls of the whole run, not of each output
     interval (where a compiled method took it as its max_steps and passed).
     The line names the scene's stiff methods to try (and, for taylor, its
-    explicit pairs: its one error norm is the largest rate or speed)."""
+    explicit pairs: its error norm is the largest state of each group)."""
     run = simulate(cli, ["torque_free", "--method", method, "--max-nfev", "10"], tmp_path / "out")
     assert run.code == 1 and run.out == ""
     assert [line for line in run.err.splitlines() if "error" in line] == [run.err.splitlines()[-1]]
@@ -392,8 +392,8 @@ def test_compiled_methods_spend_the_budget_over_the_whole_run(
 def test_a_spent_budget_suggests_what_the_build_offers() -> None:
     """hostile4 (x9): auto took taylor (stiffness index 1, rightly: its decay
     rates over 1e-3 s stay near 100) and spent 10^7 RHS calls, the error
-    naming nothing to try: its u4 grows to 5e20 beside u1 ~ 1e3, and
-    taylor's error norm is the largest rate or speed. dop853 takes 5e4 calls."""
+    naming nothing to try: its u4 grows to 5e20 beside u1 ~ 1e3. dop853
+    takes 5e4 calls."""
     from gyrogen.methods import instead
 
     assert instead("radau5", ["radau5", "taylor"]) == ""
@@ -401,7 +401,7 @@ def test_a_spent_budget_suggests_what_the_build_offers() -> None:
     assert instead("dopri5", ["dopri5"]).endswith("(try --method Radau)")
     said = instead("taylor", ["taylor", "dop853", "radau5"])
     assert "(try --method radau5)" in said and said.endswith(
-        "the largest rate or speed (try --method dop853)"
+        "the largest state of each group (try --method dop853)"
     )
     assert "error norm" not in instead("taylor", ["taylor", "rk4"])
 

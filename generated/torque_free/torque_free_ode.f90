@@ -2621,7 +2621,8 @@ contains
   ! size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
   ! every state by the automatic-differentiation recurrences over the scene's
   ! own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
-  ! last two coefficients, the new state by Horner's scheme.
+  ! last two coefficients of each group of states, each by its own scale,
+  ! the new state by Horner's scheme.
   function taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats) result(res)
     real(c_double), intent(in) :: t0
     real(c_double), intent(in) :: t1
@@ -2671,6 +2672,8 @@ contains
     real(c_double) :: xmax
     real(c_double) :: dp
     real(c_double) :: dq
+    real(c_double) :: rp
+    real(c_double) :: rq
     real(c_double) :: rho
     real(c_double) :: h2
     integer(c_int) :: i
@@ -2718,19 +2721,33 @@ contains
       run = code < 0
       call taylor_jet(order, x, inv, tay)
       stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
+      rp = huge(1.0_c_double)
+      rq = huge(1.0_c_double)
+
+      ! the bound the attitude set
       xmax = 0.0_c_double
-      dp = 0.0_c_double
-      dq = 0.0_c_double
-      do i = 3, 7 - 1
-        xmax = merge(abs(x(i)), xmax, abs(x(i)) > xmax)
-      end do
       do i = 0, 3 - 1
         xmax = merge(min(abs(x(i)), 3.141592653589793_c_double), xmax, min(abs(x(i)), &
             3.141592653589793_c_double) > xmax)
       end do
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 0, 3 - 1
+        dp = merge(abs(tay(i, order)), dp, abs(tay(i, order)) > dp)
+        dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rp = merge(xmax / dp, rp, xmax / dp < rp)
+      rq = merge(xmax / dq, rq, xmax / dq < rq)
 
-      ! a polynomial state of degree <= min_order sets no bound (its step is exact)
-      do i = 0, 4 - 1
+      ! the bound the carrier rates set
+      xmax = 0.0_c_double
+      do i = 3, 6 - 1
+        xmax = merge(abs(x(i)), xmax, abs(x(i)) > xmax)
+      end do
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 3, 4 - 1
         dp = merge(abs(tay(i, order)), dp, abs(tay(i, order)) > dp)
         dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
       end do
@@ -2739,7 +2756,9 @@ contains
         dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
       end do
       xmax = max(scale, xmax)  ! the absolute and relative modes in one
-      rho = step_exp2(min(step_log2(xmax / dp) * inv(order), step_log2(xmax / dq) * inv(order - 1)))
+      rp = merge(xmax / dp, rp, xmax / dp < rp)
+      rq = merge(xmax / dq, rq, xmax / dq < rq)
+      rho = step_exp2(min(step_log2(rp) * inv(order), step_log2(rq) * inv(order - 1)))
       h = min(min(rho * rhofac, t1 - t), cap)
       last = t + 1.01_c_double * h >= t1
       h = merge(t1 - t, h, last)

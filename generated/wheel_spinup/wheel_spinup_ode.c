@@ -2617,7 +2617,8 @@ static inline void taylor_jet(int order, const double *x, const double *c, const
    size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
    every state by the automatic-differentiation recurrences over the scene's
    own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
-   last two coefficients, the new state by Horner's scheme. */
+   last two coefficients of each group of states, each by its own scale,
+   the new state by Horner's scheme. */
 static int taylor_integrate(double t0, double t1, double *x, const double *c, double rtol,
                             double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
@@ -2655,6 +2656,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
     double xmax;
     double dp;
     double dq;
+    double rp;
+    double rq;
     double rho;
     double h2;
     int i;
@@ -2701,25 +2704,56 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         run = code < 0;
         taylor_jet(order, x, c, inv, tay);
         stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
+        rp = DBL_MAX;
+        rq = DBL_MAX;
+
+        /* the bound the attitude set */
         xmax = 0.0;
-        dp = 0.0;
-        dq = 0.0;
-        for (i = 4; i < 8; ++i) {
-            xmax = fabs(x[i]) > xmax ? fabs(x[i]) : xmax;
-        }
-        for (i = 0; i < 4; ++i) {
+        for (i = 0; i < 3; ++i) {
             xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
                     3.141592653589793) : xmax;
         }
-
-        /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
-        for (i = 0; i < 7; ++i) {
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 0; i < 3; ++i) {
             dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
             dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
         }
         xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
-        rho = step_exp2(dmin(step_log2(xmax / dp) * inv[order],
-                step_log2(xmax / dq) * inv[order - 1]));
+        rp = xmax / dp < rp ? xmax / dp : rp;
+        rq = xmax / dq < rq ? xmax / dq : rq;
+
+        /* the bound the rotor angles set */
+        xmax = 0.0;
+        for (i = 3; i < 4; ++i) {
+            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
+                    3.141592653589793) : xmax;
+        }
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 3; i < 4; ++i) {
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
+        }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rp = xmax / dp < rp ? xmax / dp : rp;
+        rq = xmax / dq < rq ? xmax / dq : rq;
+
+        /* the bound the carrier rates set */
+        xmax = 0.0;
+        for (i = 4; i < 7; ++i) {
+            xmax = fabs(x[i]) > xmax ? fabs(x[i]) : xmax;
+        }
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 4; i < 7; ++i) {
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
+        }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rp = xmax / dp < rp ? xmax / dp : rp;
+        rq = xmax / dq < rq ? xmax / dq : rq;
+        rho = step_exp2(dmin(step_log2(rp) * inv[order], step_log2(rq) * inv[order - 1]));
         h = dmin(dmin(rho * rhofac, t1 - t), cap);
         last = t + 1.01 * h >= t1;
         h = last ? t1 - t : h;
@@ -3623,6 +3657,8 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double xmax[WHEEL_SPINUP_LANES];
     double dp[WHEEL_SPINUP_LANES];
     double dq[WHEEL_SPINUP_LANES];
+    double rp[WHEEL_SPINUP_LANES];
+    double rq[WHEEL_SPINUP_LANES];
     double rho[WHEEL_SPINUP_LANES];
     double h2[WHEEL_SPINUP_LANES];
     int i, l, q;
@@ -3659,17 +3695,16 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (run[l] ? 1 : 0);
+        rp[l] = DBL_MAX;
+        rq[l] = DBL_MAX;
+    }
+
+    /* the bound the attitude set */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         xmax[l] = 0.0;
-        dp[l] = 0.0;
-        dq[l] = 0.0;
     }
-    for (i = 4; i < 8; ++i) {
-        WHEEL_SPINUP_SIMD
-        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            xmax[l] = fabs(L->x[i][l]) > xmax[l] ? fabs(L->x[i][l]) : xmax[l];
-        }
-    }
-    for (i = 0; i < 4; ++i) {
+    for (i = 0; i < 3; ++i) {
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
             xmax[l] = dmin(fabs(L->x[i][l]),
@@ -3677,9 +3712,12 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
                     3.141592653589793) : xmax[l];
         }
     }
-
-    /* a polynomial state of degree <= min_order sets no bound (its step is exact) */
-    for (i = 0; i < 7; ++i) {
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 0; i < 3; ++i) {
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
             dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
@@ -3689,8 +3727,71 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
         xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
-        rho[l] = step_exp2(dmin(step_log2(xmax[l] / dp[l]) * inv[order],
-                step_log2(xmax[l] / dq[l]) * inv[order - 1]));
+        rp[l] = xmax[l] / dp[l] < rp[l] ? xmax[l] / dp[l] : rp[l];
+        rq[l] = xmax[l] / dq[l] < rq[l] ? xmax[l] / dq[l] : rq[l];
+    }
+
+    /* the bound the rotor angles set */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = 0.0;
+    }
+    for (i = 3; i < 4; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            xmax[l] = dmin(fabs(L->x[i][l]),
+                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
+                    3.141592653589793) : xmax[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 3; i < 4; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rp[l] = xmax[l] / dp[l] < rp[l] ? xmax[l] / dp[l] : rp[l];
+        rq[l] = xmax[l] / dq[l] < rq[l] ? xmax[l] / dq[l] : rq[l];
+    }
+
+    /* the bound the carrier rates set */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = 0.0;
+    }
+    for (i = 4; i < 7; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            xmax[l] = fabs(L->x[i][l]) > xmax[l] ? fabs(L->x[i][l]) : xmax[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 4; i < 7; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rp[l] = xmax[l] / dp[l] < rp[l] ? xmax[l] / dp[l] : rp[l];
+        rq[l] = xmax[l] / dq[l] < rq[l] ? xmax[l] / dq[l] : rq[l];
+        rho[l] = step_exp2(dmin(step_log2(rp[l]) * inv[order], step_log2(rq[l]) * inv[order - 1]));
         L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
         last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
         L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];

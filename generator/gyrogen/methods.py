@@ -114,10 +114,13 @@ class TaylorControl:
     """A Taylor method's step size, after Jorba & Zou (2005), Sec. 3.3.1, with
     heyoka's safety factor: h = rho exp(-safety / (p - 1)) / e^2, rho the
     smaller of (s / |x^[p-1]|)^(1/(p-1)) and (s / |x^[p]|)^(1/p) over the
-    state's last two normalized Taylor coefficients (infinity norms), s =
-    max(atol / rtol, |x|) (heyoka's rule when atol = rtol: absolute below
-    |x| = 1, relative above). No step is rejected for its error: a step whose
-    new state is not finite is retried with h times nonfinite_shrink."""
+    last two normalized Taylor coefficients (infinity norms) of each group
+    of states (abi_groups.state_group), s = max(atol / rtol, the group's
+    largest |x|) (heyoka's rule when atol = rtol: absolute below |x| = 1,
+    relative above), the smallest over the groups: the fastest wheel sets
+    the scale of the rotor rates alone (taylor.bounds). No step is rejected
+    for its error: a step whose new state is not finite is retried with h
+    times nonfinite_shrink."""
 
     safety: float = 0.7
     nonfinite_shrink: float = 0.5
@@ -245,7 +248,8 @@ _NOTES = {
         "size of heyoka's taylor_adaptive): the normalized Taylor coefficients of",
         "every state by the automatic-differentiation recurrences over the scene's",
         "own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the",
-        "last two coefficients, the new state by Horner's scheme.",
+        "last two coefficients of each group of states, each by its own scale,",
+        "the new state by Horner's scheme.",
     ),
 }
 _DOPRI5_DEFAULTS = "Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta."
@@ -286,8 +290,9 @@ is faster than rodas4 at every error from 1e-4 to 1e-13 on stiff_wheel
 EXPLICIT_CHOICE: tuple[str, ...] = ("taylor", "dop853", "dopri5")
 """The explicit methods for a problem that is not stiff, in the order they
 are picked. The Taylor method, where the scene offers it (a smooth rhs), is
-faster than dop853 at equal error on every built-in scene that offers it,
-from 1e-4 to 1e-12, one trajectory (`make bench-auto` measures it)."""
+as fast as dop853 or faster at equal error on every built-in scene that
+offers it, from 1e-4 to 1e-12, one trajectory (`make bench-auto` measures
+it), and keeps its tolerance in each group of states."""
 
 
 def pick(available: Iterable[str], stiff: bool) -> str | None:
@@ -301,10 +306,9 @@ def instead(method: str, available: Iterable[str]) -> str:
     """What a one-line error suggests when method spent its RHS budget (empty
     for an implicit one): the build's implicit methods by name (scipy's Radau
     without one); for a Taylor method also the build's explicit pairs, whose
-    error is each state's: its one error norm is the largest rate or speed
-    (taylor.state_scales), so a state far below the others goes unresolved
-    (x9: u1 ~ 1e3 beside u4 ~ 5e20 at rtol 1e-10; dop853 took 5e4 calls,
-    taylor 1.5e7 and ended wrong)."""
+    error is each state's: its error norm is the largest state of each group
+    (taylor.state_scales), so a state far below the others of its group
+    goes unresolved."""
     if METHODS[method].implicit:
         return ""
     have = set(available)
@@ -315,8 +319,8 @@ def instead(method: str, available: Iterable[str]) -> str:
     pairs = [m for m in EXPLICIT_CHOICE if m in have and METHODS[m].pair]
     if METHODS[method].taylor and pairs:
         said += (
-            f", or its states differ too much in size for {method}'s one error norm, the largest "
-            f"rate or speed (try --method {' or '.join(pairs)})"
+            f", or its states differ too much in size for {method}'s error norm, the largest "
+            f"state of each group (try --method {' or '.join(pairs)})"
         )
     return said
 

@@ -71,10 +71,10 @@ class Jet:
 
     nodes: tuple[Node, ...]
     outputs: tuple[int, ...]
-    scales: tuple[str, ...] = ()
-    """How each state enters the Taylor step's relative scale (see
-    gyrogen.codegen.integrators.taylor.state_scales); () when every state
-    enters by its magnitude."""
+    scales: tuple[tuple[str, str], ...] = ()
+    """Each state's group and how it enters the group's scale in the Taylor
+    step (see gyrogen.codegen.integrators.taylor.state_scales); () when
+    every state is of one group and enters by its magnitude."""
 
     @property
     def nx(self) -> int:

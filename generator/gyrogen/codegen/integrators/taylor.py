@@ -1,5 +1,6 @@
 """The Taylor series method, described once: Jorba and Zou's order and
-step size (with heyoka's safety factor) around the scene's jet
+step size (with heyoka's safety factor; the step met in each group of
+states by the group's own scale, bounds) around the scene's jet
 (gyrogen.codegen.integrators.taylor_jet), as one step of straight-line code
 with selections: the scalar integrator loops over it, the lanes print it
 over every lane (gyrogen.codegen.ir.lanes), so a batch equals its single
@@ -15,6 +16,7 @@ from collections.abc import Sequence
 
 from gyrogen import abi
 from gyrogen import methods as registry
+from gyrogen.abi_groups import state_group
 from gyrogen.codegen.integrators import common
 from gyrogen.codegen.integrators.common import (
     NX,
@@ -76,19 +78,21 @@ from gyrogen.tableaus import Series
 ANGLE_SCALE = math.pi
 """An angle enters the step's relative scale by at most this: its magnitude
 past half a turn is bookkeeping (a rotor angle grows without bound), and
-it would loosen the tolerance of every other state."""
+it would loosen the tolerance of every other state of its group."""
 
 
-def state_scales(names: Sequence[str]) -> tuple[str, ...]:
-    """How each state enters the step's relative scale xmax (Jorba and Zou
-    scale the tolerance by the largest state): "magnitude" (a rate, a
-    wheel speed, an Euler parameter), "angle" (at most ANGLE_SCALE) or
-    "none" (translation: it never couples to the rest and is stepped by its
-    exact polynomial; a satellite's 7e6 m made the attitude's error 1e5
-    times the tolerance). By the state's unit (gyrogen.abi)."""
-    units = [abi.unit_and_doc(n)[0] for n in names]
-    return tuple("angle" if u == "rad" else "none" if u in ("m", "m/s") else "magnitude"
-                 for u in units)  # fmt: skip
+def state_scales(names: Sequence[str]) -> tuple[tuple[str, str], ...]:
+    """Each state's group (gyrogen.abi_groups.state_group) and how it enters its
+    group's scale xmax: "magnitude" (a rate, a wheel speed, an Euler
+    parameter, a position) or "angle" (at most ANGLE_SCALE). Jorba and Zou
+    scale the tolerance by the largest state of all; the step here meets it
+    in each group by the group's own largest state (bounds), so neither a
+    wheel at 1e6 rad/s (it made the body rates err by 3e7 times the
+    tolerance) nor a satellite's 7e6 m (the attitude's, 1e5 times) loosens
+    the other groups' tolerance. Translation is a polynomial in t in every
+    scene, stepped exactly: it sets no bound."""
+    return tuple((state_group(n), "angle" if abi.unit_and_doc(n)[0] == "rad" else "magnitude")
+                 for n in names)  # fmt: skip
 
 
 def uniform(m: Method, jet: Jet) -> list[S]:
@@ -126,7 +130,8 @@ def tables(m: Method) -> tuple[Decl, Decl]:
 
 STATE = ("code", "t", "h", "cap", "nonfinite")
 """A trajectory's values that live from step to step (besides x, comp, stats)."""
-LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rho", "h2")
+LOCALS = ("last", "run", "take", "ok", "at", "jump", "retry", "xmax", "dp", "dq", "rp", "rq",
+          "rho", "h2")  # fmt: skip
 BOOLS = {"nonfinite", "last", "run", "take", "ok", "at", "jump", "retry"}
 
 
@@ -152,7 +157,7 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
     )
     nonfinite, cap = Var("nonfinite"), Var("cap")
-    xmax, dp, dq, rho, h2 = (Var(n) for n in ("xmax", "dp", "dq", "rho", "h2"))
+    rho, h2 = Var("rho"), Var("h2")
     q = Var("q")
     pairs = (order - Int(1)) / Int(2)  # Horner's turns of two orders; then one more if odd
 
@@ -170,21 +175,10 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
     deg = jet.degrees()
     exact = [n for n in range(jet.nx) if deg[n] <= series.min_order]
 
-    def runs(left_out: list[int], *body: S) -> list[S]:
-        """body for each state but those left out, in loops over their runs."""
-        return [For("i", Int(b), body, start=Int(a)) for a, b in _runs(jet.nx, left_out)]
-
     def series_states(*body: S) -> list[S]:
         """body for each state that is not a polynomial of degree min_order
         or less."""
-        return runs(exact, *body)
-
-    kinds = jet.scales or ("magnitude",) * jet.nx
-
-    def scale_states(kind: str, size: E) -> list[S]:
-        """xmax over the states of one kind."""
-        other = [n for n in range(jet.nx) if kinds[n] != kind]
-        return runs(other, assign(xmax, common.larger(xmax, size)))
+        return _over(jet.nx, exact, *body)
 
     def polynomial(n: int) -> E:
         """xnew of a state of degree <= min_order: exact at any order and h."""
@@ -202,25 +196,15 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(run, cmp(cd, "<", 0)),
         Call("taylor_jet", args),
         inc(Var("stats.rhs_calls"), sel(run, Int(1), Int(0))),
-        assign(xmax, 0.0),
-        assign(dp, 0.0),
-        assign(dq, 0.0),
-        *scale_states("magnitude", fn("abs", x[i])),
-        *scale_states("angle", fn("min", fn("abs", x[i]), Num(ANGLE_SCALE))),
-        Comment("a polynomial state of degree <= min_order sets no bound (its step is exact)"),
-        *series_states(
-            assign(dp, common.larger(dp, fn("abs", T[order, i]))),
-            assign(dq, common.larger(dq, fn("abs", T[order - 1, i]))),
-        ),
-        assign(xmax, fn("max", Var("scale"), xmax), "the absolute and relative modes in one"),
+        *bounds(jet, exact),
         assign(
             rho,
             fn(  # branch-free log and exp: over lanes, vectorized
                 "step_exp2",
                 fn(
                     "min",
-                    fn("step_log2", xmax / dp) * Var("inv")[order],
-                    fn("step_log2", xmax / dq) * Var("inv")[order - 1],
+                    fn("step_log2", Var("rp")) * Var("inv")[order],
+                    fn("step_log2", Var("rq")) * Var("inv")[order - 1],
                 ),
             ),
         ),
@@ -262,6 +246,58 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         If(ok, tuple(accepted(quaternion, known=True))),
     ]
     return body
+
+
+SIZES = {"magnitude": fn("abs", x[i]), "angle": fn("min", fn("abs", x[i]), Num(ANGLE_SCALE))}
+"""How a state of each kind (state_scales) enters its group's xmax."""
+
+
+def bounds(jet: Jet, exact: list[int]) -> list[S]:
+    """Jorba and Zou's bounds on the step, rho <= (xmax / |x^[p]|)^(1/p) and
+    (xmax / |x^[p-1]|)^(1/(p-1)), met in each group of states
+    (state_scales) by its own largest state xmax = max(atol / rtol, |x_i|)
+    and its own largest coefficients: rp and rq, the smallest xmax / dp and
+    xmax / dq over the groups (the powers are monotone: the smallest ratio
+    gives the smallest step). A group whose states are all polynomials of
+    degree <= min_order sets no bound (their step is exact)."""
+    xmax, dp, dq, rp, rq = (Var(n) for n in ("xmax", "dp", "dq", "rp", "rq"))
+    scales = jet.scales or (("", "magnitude"),) * jet.nx
+    out: list[S] = [assign(rp, Const("HUGE")), assign(rq, Const("HUGE"))]
+    for group in dict.fromkeys(g for g, _ in scales):
+        members = [n for n in range(jet.nx) if scales[n][0] == group]
+        if set(members) <= set(exact):
+            continue
+        left_out = [n for n in range(jet.nx) if n not in members]
+        out += [Comment(f"the bound the {group or 'states'} set"), assign(xmax, 0.0)]
+        for kind, size in SIZES.items():
+            others = [n for n in range(jet.nx) if n in left_out or scales[n][1] != kind]
+            out += _over(jet.nx, others, assign(xmax, common.larger(xmax, size)))
+        out += [
+            assign(dp, 0.0),
+            assign(dq, 0.0),
+            *_over(
+                jet.nx,
+                sorted(set(left_out) | set(exact)),
+                assign(dp, common.larger(dp, fn("abs", T[order, i]))),
+                assign(dq, common.larger(dq, fn("abs", T[order - 1, i]))),
+            ),
+            assign(xmax, fn("max", Var("scale"), xmax), "the absolute and relative modes in one"),
+            assign(rp, smaller(rp, xmax / dp)),
+            assign(rq, smaller(rq, xmax / dq)),
+        ]
+    return out
+
+
+def smaller(a: E, b: E) -> E:
+    """min(a, b) for an a that is never NaN; a when b is NaN (common.larger's
+    mirror)."""
+    return sel(cmp(b, "<", a), b, a)
+
+
+def _over(n: int, left_out: list[int], *body: S) -> list[S]:
+    """body for each of the states 0 .. n-1 but those left out, in loops
+    over their runs."""
+    return [For("i", Int(b), body, start=Int(a)) for a, b in _runs(n, left_out)]
 
 
 def _runs(n: int, left_out: list[int]) -> list[tuple[int, int]]:
