@@ -53,7 +53,7 @@ import numpy as np
 from gyrogen import methods
 from gyrogen.analysis.bench.timing import Clock, best_time
 from gyrogen.analysis.bench.workprec import raw_call
-from gyrogen.analysis.simulate.simulate import runtime_values
+from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.runtime import cache
 from gyrogen.runtime.compiled import Compiled, controls
 from gyrogen.runtime.scene_build import build_dir, compiled, scene_sources
