@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import itertools
 import math
-import subprocess
 from pathlib import Path
 
+import compiled_expressions
 import numpy as np
 import pytest
 
@@ -108,31 +108,6 @@ def _signed() -> list[Expr]:
     return out
 
 
-def _compiled_values(language: str, exprs: list[Expr], tmp_path: Path) -> list[float]:
-    """Each expression as the language's setup check prints it, compiled
-    strictly and run with x = 3."""
-    p = Printer(language, "X")  # type: ignore[arg-type]
-    if language == "c":
-        body = "".join(f'    printf("%.17g\\n", {p(e)});\n' for e in exprs)
-        src = tmp_path / "signs.c"
-        src.write_text(f"#include <stdio.h>\n#include <math.h>\nint main(void) {{\n"
-                       f"    volatile double x = 3.0;\n{body}    return 0;\n}}\n")  # fmt: skip
-        command = ["gcc", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror"]
-    else:
-        body = "".join(f"  print '(es26.17e3)', {p(e)}\n" for e in exprs)
-        src = tmp_path / "signs.f90"
-        src.write_text(f"program signs\n  use, intrinsic :: iso_c_binding, only: c_double\n"
-                       f"  implicit none\n  real(c_double) :: x\n  x = 3.0_c_double\n{body}"
-                       f"end program signs\n")  # fmt: skip
-        command = ["gfortran", "-std=f2008", "-Wall", "-Werror"]
-    exe = tmp_path / f"signs_{language}"
-    made = subprocess.run([*command, str(src), "-o", str(exe), "-lm"], capture_output=True,
-                          text=True, check=False)  # fmt: skip
-    assert made.returncode == 0, made.stderr
-    ran = subprocess.run([str(exe)], capture_output=True, text=True, check=True)
-    return [float(v) for v in ran.stdout.split()]
-
-
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_the_printers_write_folded_values_of_every_sign(language: str, tmp_path: Path) -> None:
     """A folded product of inertia or position is negative as often as not:
@@ -140,7 +115,8 @@ def test_the_printers_write_folded_values_of_every_sign(language: str, tmp_path:
     reads -4.0**2 as -(4.0**2). Every place, every sign: the program
     compiles under the strict flags and computes what evaluate() does."""
     exprs = _signed()
-    got = _compiled_values(language, exprs, tmp_path)
+    p = Printer(language, "X")  # type: ignore[arg-type]
+    got = compiled_expressions.values(language, [p(e) for e in exprs], tmp_path)
     assert got == [evaluate(e, {"x": 3.0}) for e in exprs]
 
 
