@@ -184,8 +184,8 @@ def test_ctrl_c_while_writing_waits_until_the_files_are_placed(
 
 
 def _default_sigint() -> None:
-    """In the child: SIGINT as a terminal's process gets it (a test run in
-    the background inherits it ignored)."""
+    """In the child: SIGINT as a terminal's process gets it, where this run
+    ignores it (in the background) and the child would inherit that."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
@@ -198,13 +198,14 @@ def test_ctrl_c_at_any_moment_of_the_first_second(tmp_path: Path) -> None:
     script = Path(sys.executable).with_name("gyrogen")
     gyrogen = [str(script)] if script.is_file() else [sys.executable, "-m", "gyrogen"]
     env = {**os.environ, "GYROGEN_CACHE": str(tmp_path / "cache")}
+    reset = _default_sigint if signal.getsignal(signal.SIGINT) is signal.SIG_IGN else None
     commands = [["generate", "--out"], ["--help"], ["scenes"], ["generate", "--no-check", "--out"]]
     runs = []
     for k in range(20):
         argv = [*gyrogen, *commands[k % 4]]
         argv += [str(tmp_path / f"out{k}")] if argv[-1] == "--out" else []
         proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True, preexec_fn=_default_sigint)  # fmt: skip
+                                text=True, preexec_fn=reset)  # fmt: skip
         runs.append((k, time.monotonic(), proc))
     for k, start, proc in runs:
         time.sleep(max(0.0, start + 0.05 * (k + 1) - time.monotonic()))
