@@ -3,10 +3,12 @@ user could write them, and the check every drawn scene must pass.
 
 A draw is TOML text: any split of the parameters into folded and runtime
 (folded values as 0, 1, 0.5, short or long decimals, integers, across about
-1e-6..1e6 through a random unit scale), every effect and torque law (tables
-of random points), both attitudes, any outputs, integrators and targets, and
-names and descriptions of any length and character. Some draws are invalid
-on purpose (a bad name or description, a non-physical parameter set).
+1e-6..1e6 through a random unit scale; one draw in four a runtime diagonal
+moment beside a negative folded product of inertia and position), every
+effect and torque law (tables of random points), both attitudes, any
+outputs, integrators and targets, and names and descriptions of any length
+and character. Some draws are invalid on purpose (a bad name or
+description, a non-physical parameter set).
 
 The check: the scene validator accepts exactly the valid draws (its verdict
 is predicted independently: a regular expression for names, the numpy
@@ -192,6 +194,18 @@ SPECIAL.update({n: [1.0, 0.5] for n in ("m_a", "m_b")})
 """Round values a user writes, where they keep the system physical."""
 
 
+def _split_inertia(
+    values: dict[str, float | int], runtime: set[str], diagonal: tuple[str, ...]
+) -> None:
+    """A runtime diagonal moment beside the folded product of inertia and
+    rotor position, made negative (setup's checks then print a negative
+    number after an operator). The tensor stays valid: -I13 is the carrier
+    turned the other way."""
+    runtime |= set(diagonal)
+    runtime -= {"I13", "l1", "l3"}
+    values.update({n: -values[n] for n in ("I13", "l1", "l3") if values[n] > 0})
+
+
 TARGET_LISTS = st.permutations(["c", "fortran"]).flatmap(
     lambda t: st.integers(1, 2).map(lambda k: t[:k]))  # fmt: skip
 INTEGRATOR_LISTS = st.permutations(INTEGRATORS).flatmap(
@@ -215,6 +229,8 @@ def scenes(draw: st.DrawFn) -> Draw:
     needed += {"constant": ["T"], "speed_controller": ["k", "w_ref"]}.get(torque, [])
     values = draw(parameter_values(tuple(needed)))
     runtime = {n for n in needed if draw(st.booleans())}
+    if draw(st.integers(0, 3)) == 0:
+        _split_inertia(values, runtime, draw(st.sampled_from([("I11",), ("I33",), ("I11", "I33")])))
     effects: dict[str, object] = {"translation": translation, "rotor_angle": rotor_angle,
                                   "torque": torque}  # fmt: skip
     if torque == "table":

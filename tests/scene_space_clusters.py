@@ -7,8 +7,9 @@ to 6 rotors on random axes (unit vectors written to 17 digits; at times all
 along the carrier's axes, or all in one plane) at random positions, each
 with its own mass, inertias, friction, torque law (none, constant, speed
 controller, a T(t) table; values folded or "runtime") and optional limit,
-the carrier's mass and tensor and each rotor's m, I, J, position and axis
-at times "runtime";
+the carrier's mass and tensor (or its diagonal moments alone, beside folded
+products of either sign) and each rotor's m, I, J, position (of either sign
+when folded) and axis at times "runtime";
 either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
@@ -156,13 +157,21 @@ def _runtime_inertia(
 ) -> dict[str, float]:
     """Make some inertial values "runtime" (setup checks them; the drawn
     values go to simulate.parameters): the carrier's tensor and mass in one
-    draw in four, each rotor's m, I, J in one in four (not the broken one's),
-    its position in one in four, its axis in one in four (not the broken one's)."""
+    draw in four, in another one in four some of its diagonal moments alone
+    (its products of inertia folded, of either sign), each rotor's m, I, J in
+    one in four (not the broken one's), its position in one in four, its axis
+    in one in four (not the broken one's)."""
     out: dict[str, float] = {}
-    if rng.random() < 0.25:
-        for name in ("m_a", "I11", "I22", "I33", "I12", "I13", "I23"):
-            out[name] = float(carrier[name])  # type: ignore[arg-type]
-            carrier[name] = "runtime"
+    carrier_draw = rng.random()
+    if carrier_draw < 0.25:
+        names: tuple[str, ...] = ("m_a", "I11", "I22", "I33", "I12", "I13", "I23")
+    elif carrier_draw < 0.5:  # diagonals beside folded products, each negative one time in two
+        names = tuple(n for n in ("I11", "I22", "I33") if rng.random() < 0.5) or ("I11",)
+    else:
+        names = ()
+    for name in names:
+        out[name] = float(carrier[name])  # type: ignore[arg-type]
+        carrier[name] = "runtime"
     for k, rotor in enumerate(rotors, 1):
         for key in ("m", "I", "J"):
             if k - 1 != broken and rng.random() < 0.25:

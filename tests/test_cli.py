@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -154,6 +156,68 @@ def test_interrupt_while_writing_puts_every_old_file_back(
     assert err.endswith("gyrogen: aborted\n") and "Traceback" not in err
     assert _contents(out_dir) == old
     assert sorted(p.name for p in out_dir.iterdir()) == sorted(old)
+
+
+def test_ctrl_c_while_writing_waits_until_the_files_are_placed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A SIGINT between two statements of write_atomic (here: as the second
+    file is staged) is held until every file is placed, then raised: the
+    files are all new, and no temporary file is left."""
+    out_dir = tmp_path / "o"
+    old = _old_sources(out_dir)
+    real_stage = files_module._stage
+    staged = []
+
+    def stage(target: Path, data: str | bytes) -> Path:
+        staged.append(target)
+        if len(staged) == 2:
+            signal.raise_signal(signal.SIGINT)
+        return real_stage(target, data)
+
+    monkeypatch.setattr(files_module, "_stage", stage)
+    new = {name: f"new {name}" for name in old}
+    with pytest.raises(KeyboardInterrupt):
+        files_module.write_atomic(out_dir, new)
+    assert _contents(out_dir) == new
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(new)
+
+
+def _default_sigint() -> None:
+    """In the child: SIGINT as a terminal's process gets it, where this run
+    ignores it (in the background) and the child would inherit that."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def test_ctrl_c_at_any_moment_of_the_first_second(tmp_path: Path) -> None:
+    """SIGINT at 20 moments 0.05 s apart over a command's first second (the
+    imports: they take 2 s and more): before, each was a KeyboardInterrupt
+    traceback from inside an import (exit by the signal). Now each is
+    `gyrogen: aborted`, exit 130 (or, done already, exit 0), and nothing
+    written. The 20 run at once; the console script where there is one."""
+    script = Path(sys.executable).with_name("gyrogen")
+    gyrogen = [str(script)] if script.is_file() else [sys.executable, "-m", "gyrogen"]
+    env = {**os.environ, "GYROGEN_CACHE": str(tmp_path / "cache")}
+    reset = _default_sigint if signal.getsignal(signal.SIGINT) is signal.SIG_IGN else None
+    commands = [["generate", "--out"], ["--help"], ["scenes"], ["generate", "--no-check", "--out"]]
+    runs = []
+    for k in range(20):
+        argv = [*gyrogen, *commands[k % 4]]
+        argv += [str(tmp_path / f"out{k}")] if argv[-1] == "--out" else []
+        proc = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, preexec_fn=reset)  # fmt: skip
+        runs.append((k, time.monotonic(), proc))
+    for k, start, proc in runs:
+        time.sleep(max(0.0, start + 0.05 * (k + 1) - time.monotonic()))
+        proc.send_signal(signal.SIGINT)
+    codes = []
+    for k, _, proc in runs:
+        _, err = proc.communicate(timeout=120)
+        codes.append(proc.returncode)
+        assert (proc.returncode, err) in ((130, "gyrogen: aborted\n"), (0, "")), (k, err)
+        out = tmp_path / f"out{k}"
+        assert not out.exists() or not any(out.iterdir()), (k, list(out.iterdir()))
+    assert codes.count(130) >= 10, codes
 
 
 def test_full_disk_while_staging_leaves_no_temporary(

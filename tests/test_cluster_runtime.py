@@ -199,3 +199,20 @@ def test_random_axes_with_everything_runtime(tmp_path: Path) -> None:
     _, backends = build_scene(scene, tmp_path / "gen", ["c"])
     report = compare([backends["c"]], scene, n_states=500, n_params=5, n_ill=0)
     assert report.passed and not report.refusal_failures, report.rows
+
+
+@pytest.mark.slow
+def test_a_runtime_diagonal_beside_negative_folded_products(tmp_path: Path, cli) -> None:
+    """rw4_pyramid with I11 and wheel 1's J at run time, the rest as shipped:
+    setup's checks fold I12 = -4.0 beside the runtime I11 (pd2 = I11*380.0
+    - (-4.0)*(-4.0)), which Fortran printed as - -4.0*-4.0 and gfortran
+    refused. The scene generates and verifies."""
+    text = builtin_text("rw4_pyramid").replace('name = "rw4_pyramid"', 'name = "rw4_rt"')
+    text = text.replace("I11 = 420.0", 'I11 = "runtime"', 1)
+    text = text.replace("J = 0.045", 'J = "runtime"', 1)
+    scene = tmp_path / "rw4_rt.toml"
+    scene.write_text(text)
+    made = cli(["generate", str(scene), "--out", str(tmp_path / "gen")])
+    assert made.code == 0, made.err
+    verified = cli(["verify", str(scene), "--states", "500", "--params", "10"])
+    assert verified.code == 0 and "setup refusals" in verified.out, verified.out + verified.err

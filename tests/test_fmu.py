@@ -408,6 +408,50 @@ def test_model_exchange_refuses_non_finite_states(fmus: dict[str, Path], tmp_pat
     model.freeInstance()
 
 
+def test_model_exchange_refuses_derivatives_that_are_not_finite(
+    fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """u1 = 1e308 is finite, its products are not: fmi2GetDerivatives (and
+    fmi2GetReal of a derivative) is an fmi2Error naming the first derivative
+    that is not finite (before: fmi2OK with an infinity)."""
+    fmu = fmus["default"]
+    model, log = initialized(fmu, "ModelExchange", tmp_path)
+    model.enterContinuousTimeMode()
+    md = fmpy.read_model_description(str(fmu))
+    n = len(md.derivatives)
+    x, dx = (ctypes.c_double * n)(), (ctypes.c_double * n)()
+    model.getContinuousStates(x, n)
+    names = [v.name for v in md.modelVariables]
+    x[names.index("u1")] = 1e308
+    model.setContinuousStates(x, n)
+    with pytest.raises(FMICallException):
+        model.getDerivatives(dx, n)
+    first = next(i for i in range(n) if not math.isfinite(dx[i]))
+    said = f"fmi2GetDerivatives: der({names[first]}) = {dx[first]:g} is not finite"
+    assert (3, said) in [(s, m[-len(said) :]) for s, m in log.lines], log.lines
+    refused(lambda: model.getReal(vr(fmu, f"der({names[first]})")), log,
+            f"fmi2GetReal: der({names[first]}) = {dx[first]:g} is not finite")  # fmt: skip
+    model.freeInstance()
+
+
+@pytest.mark.parametrize("time", [math.nan, -math.inf, math.inf])
+def test_a_time_that_is_not_finite_is_refused(
+    fmus: dict[str, Path], tmp_path: Path, time: float
+) -> None:
+    """fmi2SetTime checks its time as fmi2SetupExperiment does its start
+    (before: fmi2OK, and the derivatives at t = nan); the time stays."""
+    fmu = fmus["default"]
+    model, log = initialized(fmu, "ModelExchange", tmp_path)
+    model.enterContinuousTimeMode()
+    model.setTime(0.5)
+    refused(lambda: model.setTime(time), log, f"fmi2SetTime: the time {time:g} is not finite")
+    n = len(fmpy.read_model_description(str(fmu)).derivatives)
+    dx = (ctypes.c_double * n)()
+    model.getDerivatives(dx, n)
+    assert all(math.isfinite(v) for v in dx)
+    model.freeInstance()
+
+
 def test_co_simulation_steps_a_stiff_scene_implicitly(tmp_path: Path, cli) -> None:
     """As `simulate --method auto`: radau5 for stiff_wheel (was dop853)."""
     code, out, err = cli(["fmu", "stiff_wheel", "--out", str(tmp_path)])
@@ -433,7 +477,7 @@ MISUSE = {
     "exit_refused", "set_refused",
     "get_nowhere", "unknown_category", "step_nan", "step_backwards", "other_status",
     "step_after_terminate", "states_too_many", "set_states_too_few", "derivatives_too_many",
-    "fmu_state", "set_nan_states",
+    "fmu_state", "set_nan_states", "time_nan", "time_minus_inf", "derivatives_of_1e308",
 }  # fmt: skip
 """What tests/consumers/fmi2_driver.c does wrong: each an fmi2Error (3) with
 a logged line; every other call is fmi2OK (0)."""
@@ -453,12 +497,13 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
         ["gcc", "-std=c99", *sanitize, f"-I{fmi_headers()}", "-Isources", *sources, str(DRIVER),
          "-o", "driver", "-lm"], cwd=tmp_path, check=True)  # fmt: skip
     proc = subprocess.run(
-        [str(tmp_path / "driver"), md.guid, str(p0), str(md.numberOfContinuousStates)],
+        [str(tmp_path / "driver"), md.guid, str(p0), str(md.numberOfContinuousStates),
+         str(next(v.valueReference for v in md.modelVariables if v.name == "u1"))],
         capture_output=True, text=True, check=False)  # fmt: skip
     assert (proc.returncode, proc.stderr) == (0, "")
     lines = proc.stdout.splitlines()
     calls = [(i, *line.split()) for i, line in enumerate(lines) if not line.startswith("log ")]
-    assert len(calls) == 37 and {what for _, what, _ in calls} >= MISUSE
+    assert len(calls) == 43 and {what for _, what, _ in calls} >= MISUSE
     for i, what, status in calls:
         assert status == ("3" if what in MISUSE else "0"), what
         assert lines[i - 1].startswith("log 3 ") == (what in MISUSE), what
@@ -467,6 +512,8 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
     step = "log 3 fmi2DoStep: the communication step size "
     assert step + "nan is not >= 0, or t + h (nan) is not finite" in lines
     assert step + "-1 is not >= 0, or t + h (-0.90000000000000002) is not finite" in lines
+    assert "log 3 fmi2SetTime: the time -inf is not finite" in lines
+    assert any(line.startswith("log 3 fmi2GetDerivatives: der(") for line in lines)
 
 
 def test_fmpy_rebuilds_the_binary_from_the_sources(fmus: dict[str, Path], tmp_path: Path) -> None:

@@ -6,6 +6,11 @@ sits inside the loop over the lanes, as a do-while."""
 
 from __future__ import annotations
 
+import itertools
+import operator
+from pathlib import Path
+
+import compiled_expressions
 import pytest
 
 from gyrogen.codegen.context import make_context
@@ -13,7 +18,7 @@ from gyrogen.codegen.integrators.taylor_jet import kept
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Comment, Decl, For, Func, Int, Var, assign
+from gyrogen.codegen.ir.nodes import Bin, Comment, Decl, E, Fn, For, Func, Int, Num, Un, Var, assign
 from gyrogen.scene import default
 
 STATE = {"x": Decl("x", "double", ("NX",), "inout")}
@@ -108,3 +113,29 @@ def test_a_vector_loop_is_kept_a_loop_for_gcc_to_vectorize() -> None:
     at = next(n for n, line in enumerate(fortran) if line.strip() == "!GCC$ unroll 1")
     assert fortran[at + 1].strip() == "do i = 0, 8 - 1"
     assert sum("!GCC$" in line for line in fortran) == 1
+
+
+def _signed() -> list[tuple[E, float]]:
+    """Numbers of both signs (x = 3 beside them) on each side of every
+    operator, inside a difference, under a power and a negation; each with
+    its value."""
+    x, leaves = Var("x"), [(Num(4.0), 4.0), (Num(-4.0), -4.0), (Num(-0.5), -0.5)]
+    ops = {"+": operator.add, "-": operator.sub, "*": operator.mul, "/": operator.truediv}
+    out = []
+    for (a, va), (b, vb) in itertools.product([*leaves, (x, 3.0)], repeat=2):
+        for op, f in ops.items():
+            out += [(Bin(op, a, b), f(va, vb)), (Bin("-", x, Bin(op, a, b)), 3.0 - f(va, vb))]
+        out += [(Fn("pow", (a, Int(2))), va**2), (Un("-", a), -va)]
+    return out
+
+
+@pytest.mark.parametrize("language", ["c", "fortran"])
+def test_the_printers_write_numbers_of_every_sign(language: str, tmp_path: Path) -> None:
+    """The integrators' and the Taylor jet's printers give a negative number
+    the precedence of the language's unary minus (Fortran refuses x - -4.0
+    and reads -4.0**2 as -(4.0**2)): every place, every sign compiles
+    strictly and computes what the expression means."""
+    printer = (CPrinter if language == "c" else FortranPrinter)("p", "P", {})
+    signed = _signed()
+    got = compiled_expressions.values(language, [printer.expr(e) for e, _ in signed], tmp_path)
+    assert got == [v for _, v in signed]

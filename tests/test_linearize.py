@@ -433,24 +433,20 @@ def test_the_printed_eigenvalues_are_the_stored_ones(tmp_path: Path, cli) -> Non
         assert f"{m.verdict}: {lam.real:+.6g}{lam.imag:+.6g}i" in out
 
 
-@pytest.mark.parametrize(
-    ("param", "members"),
-    [("w_ref=1e90", "-10.004+0i to -1.77636e-15+0i (x2)"), ("k=1e40", "i to +3.8624e+25+0i (x3)")],
-)
-def test_modes_lost_in_rounding_are_not_judged(
-    param: str, members: str, tmp_path: Path, cli
+@pytest.mark.parametrize(("param", "times"), [("w_ref=1e90", "(x2)"), ("k=1e40", "(x3)")])
+def test_modes_lost_in_rounding_are_one_eigenvalue(
+    param: str, times: str, tmp_path: Path, cli
 ) -> None:
     """speed_controlled at w_ref = 1e90 (||A|| 7e86) or k = 1e40 (4.7e41):
     the speed loop (-10) and the zero, or the nutation (+-0.135i) and the
-    zero, lie within A's rounding error (1e73, 6e27) of each other. They
-    read "marginal: -2.0008+0i (x5), at rest (zero)" and "marginal:
-    +1.28747e+25+0i (x3), at rest (zero)"; now "cannot judge", by name."""
+    zero, lie within A's rounding error (1e73, 6e27) of each other, where a
+    backward-stable solver may return them in any order: one eigenvalue to
+    A's precision, marginal against that error on every CPU."""
     argv = ["linearize", "speed_controlled", "--out", str(tmp_path), "--param", param]
     code, out, err = cli(argv)
     assert code == 0 and err == "", err
-    assert "\ncannot judge: 2 modes (eigenvalues" in out, out
-    assert f"{members}, within their rounding error" in out, out
-    assert "at rest (zero)" not in out
+    assert "\nmarginal: 2 modes (eigenvalues" in out, out
+    assert f"+0i {times}, not oscillating, at rest (zero)" in out, out
 
 
 @pytest.mark.parametrize(

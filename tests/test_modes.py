@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gyrogen.analysis.linearize import modes
 
@@ -142,31 +144,100 @@ def _nutation_beside(omega: float) -> np.ndarray:
 
 
 @pytest.mark.parametrize("power", range(0, 101, 5))
-def test_a_loop_is_never_called_zero_beside_a_fast_pair(power: int) -> None:
-    """-10 is stable while A's error (SLACK n eps ||A||) is below it; past
-    that it was merged with the zero into "marginal: -5 (x2), at rest
-    (zero)". Now a cluster whose members, each on its own, would be judged
-    apart (-10 stable, 0 at rest on the cluster's scale) cannot be judged."""
-    found = _found(_nutation_beside(10.0**power))
+def test_a_loop_beside_a_fast_pair_is_stable_while_a_resolves_it(power: int) -> None:
+    """-10 is stable while A's error (SLACK n eps ||A||) is below it. Past
+    that, the loop and the zero are one eigenvalue to A's precision: a
+    backward-stable solver may return them anywhere within the error, in
+    either order, so they are one marginal cluster (x2), judged by their mean
+    against that error, whatever the CPU (they read "cannot judge" when the
+    solver happened to return them apart, as LAPACK does from this exact
+    structure, and not when turned or perturbed by rounding)."""
+    a = _nutation_beside(10.0**power)
+    found = _found(a)
     verdicts = {(m.verdict, m.multiplicity) for m in found}
     assert ("marginal", 1) in verdicts  # the pair: its |Re| is 1e-7 of it at most
     if 10.0**power * 1e-13 < 10.0:
         assert {("stable", 1)} <= verdicts and ("marginal", 2) not in verdicts, found
     else:
-        assert (modes.CANNOT, 2) in verdicts, found
-        assert modes.overall(found) == modes.CANNOT
-        judged = next(m for m in found if m.verdict == modes.CANNOT)
-        assert [v.real for v in judged.values] == [-10.0, -8 * np.finfo(float).eps]
-        assert "cannot judge: -10+0i to -1.77636e-15+0i (x2), within their rounding" in (
-            judged.words()
-        )
-    assert not any(m.verdict == "marginal" and m.eigenvalue.real < -1 for m in found)
+        assert verdicts == {("marginal", 1), ("marginal", 2)}, found
+        merged = next(m for m in found if m.multiplicity == 2)
+        assert abs(merged.eigenvalue) <= modes._schur(a).error
+    q, _ = np.linalg.qr(np.random.default_rng(power).normal(size=(4, 4)))
+    turned = _found(q @ a @ q.T)
+    assert [(m.verdict, m.multiplicity) for m in turned] == [
+        (m.verdict, m.multiplicity) for m in found
+    ]
 
 
-def test_a_cannot_judge_does_not_depend_on_the_units() -> None:
+def test_a_loop_swallowed_by_the_error_does_not_depend_on_the_units() -> None:
     a = _nutation_beside(1e90)
     for scale in (1.0, 1e-200, 1e200):
         assert [(m.verdict, m.multiplicity) for m in _found(scale * a)] == [
-            (modes.CANNOT, 2),
             ("marginal", 1),
+            ("marginal", 2),
         ]
+
+
+def test_members_judged_apart_beyond_their_rounding_cannot_be_judged() -> None:
+    """A cluster whose members, each allowed what rounding may move it,
+    still get different verdicts stands for no one eigenvalue."""
+    values = np.array([-1.0, 0.0, 1.0])
+    assert modes._faces(values, 0.5) == {"stable", "marginal", "unstable"}
+    assert modes._faces(values, 2.0) == {"marginal"}
+
+
+ROTATION = np.array([[0.0, 1.0], [-1.0, 0.0]])
+KINDS = ("zero", "zeros", "pair", "pair twice", "stable", "unstable", "spiral in",
+         "spiral out", "jordan", "jordan pair", "stiff")  # fmt: skip
+"""Blocks whose verdict A's precision settles: exact zeros and pure
+oscillations (marginal, repeated with every eigenvector too), real and
+complex modes far off the axis, Jordan blocks on it, a stiff mode."""
+
+
+def _block(kind: str, size: float) -> np.ndarray:
+    """One block of KINDS at the magnitude size."""
+    pair = size * ROTATION
+    blocks = {
+        "zero": np.zeros((1, 1)),
+        "zeros": np.zeros((2, 2)),
+        "pair": pair,
+        "pair twice": np.block([[pair, np.zeros((2, 2))], [np.zeros((2, 2)), pair]]),
+        "stable": -size * np.ones((1, 1)),
+        "unstable": size * np.ones((1, 1)),
+        "spiral in": pair - 0.1 * size * np.eye(2),
+        "spiral out": pair + 0.1 * size * np.eye(2),
+        "jordan": np.array([[0.0, size], [0.0, 0.0]]),
+        "jordan pair": np.block([[pair, size * np.eye(2)], [np.zeros((2, 2)), pair]]),
+        "stiff": -1e8 * size * np.ones((1, 1)),
+    }
+    return blocks[kind]
+
+
+@st.composite
+def _spectra(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
+    """A (blocks of KINDS at distinct magnitudes 1, 3, 5, ... times a unit,
+    seen in a random orthonormal basis) and A as a backward-stable solver
+    may see it: turned by another orthogonal similarity, plus a perturbation
+    of 0 to 3 n eps ||A||_F."""
+    kinds = draw(st.lists(st.sampled_from(KINDS), min_size=1, max_size=5))
+    unit = 10.0 ** draw(st.integers(-6, 6))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    blocks = [_block(k, unit * (2 * i + 1)) for i, k in enumerate(kinds)]
+    a = _hidden(*blocks, seed=int(rng.integers(2**32)))
+    n = len(a)
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    noise = rng.normal(size=(n, n))
+    size = draw(st.floats(0.0, 3.0)) * n * np.finfo(float).eps * np.linalg.norm(a)
+    return a, q @ (a + size * noise / np.linalg.norm(noise)) @ q.T
+
+
+@settings(derandomize=True, max_examples=300, deadline=None)
+@given(_spectra())
+def test_the_verdicts_hold_for_any_backward_stable_solver(drawn: tuple) -> None:
+    """What a solver may return for A (the eigenvalues of A + E, ||E|| a few
+    n eps ||A||, in any orthonormal basis) gets A's verdicts: on an AVX-512
+    BLAS a double zero beside -1e8 came out as -7e-10 and +1.7e-9, whose own
+    verdicts differ, and read "cannot judge" where other CPUs said marginal."""
+    a, seen = drawn
+    verdicts = lambda m: sorted((v.verdict, v.multiplicity, v.secular) for v in _found(m))  # noqa: E731
+    assert verdicts(seen) == verdicts(a)

@@ -5,16 +5,30 @@ valid and invalid parameter vectors."""
 
 from __future__ import annotations
 
+import itertools
 import math
+from pathlib import Path
 
+import compiled_expressions
 import numpy as np
 import pytest
 
 from gyrogen.abi import PARAMETERS, SETUP_CODES
-from gyrogen.codegen.checks import Printer
+from gyrogen.codegen.checks import Printer, printed
 from gyrogen.oracle import sampling
 from gyrogen.runtime.build import Compiled
-from gyrogen.setup_checks import CHECKS, checked_parameters, cluster_checks, first_failure
+from gyrogen.setup_checks import (
+    CHECKS,
+    Call,
+    Expr,
+    Num,
+    Op,
+    Sym,
+    checked_parameters,
+    cluster_checks,
+    evaluate,
+    first_failure,
+)
 
 
 def python_code(p: np.ndarray) -> int:
@@ -78,3 +92,47 @@ def test_python_evaluation_has_the_generated_arithmetic() -> None:
     failed = first_failure(v)
     assert failed is not None and failed[0] == 7 and "nan" in failed[1]
     assert math.isnan(float(failed[1].split("number ")[1].split(" ")[0]))
+
+
+def _signed() -> list[Expr]:
+    """Folded values of both signs (a runtime one beside them) in every
+    place a check's expression puts an operand: each side of + - *, a
+    product inside a difference, a square's base, max's arguments."""
+    x = Sym("x")
+    leaves = [Num(4.0), Num(-4.0), Num(-0.5), x]
+    out: list[Expr] = []
+    for a, b in itertools.product(leaves, leaves):
+        out += [Op("+", (a, b)), Op("-", (a, b)), Op("*", (a, b)), Op("-", (x, Op("*", (a, b))))]
+        out += [Op("*", (x, a, b)), Op("-", (a, Op("+", (x, b)))), Call("max", (a, b))]
+        out += [Call("square", (a,)), Op("*", (b, Call("square", (Op("-", (a, b)),))))]
+    return out
+
+
+@pytest.mark.parametrize("language", ["c", "fortran"])
+def test_the_printers_write_folded_values_of_every_sign(language: str, tmp_path: Path) -> None:
+    """A folded product of inertia or position is negative as often as not:
+    Fortran refuses a unary minus after a binary operator (x - -4.0) and
+    reads -4.0**2 as -(4.0**2). Every place, every sign: the program
+    compiles under the strict flags and computes what evaluate() does."""
+    exprs = _signed()
+    p = Printer(language, "X")  # type: ignore[arg-type]
+    got = compiled_expressions.values(language, [p(e) for e in exprs], tmp_path)
+    assert got == [evaluate(e, {"x": 3.0}) for e in exprs]
+
+
+def test_fortran_checks_of_long_folded_values_fit_the_line() -> None:
+    """A cluster's carrier with I11 at run time and its other moments folded
+    to 17 digits, negative products: the minors' locals (pd_m2 =
+    (-0.0280...)*0.6317... - (-0.2165...)*0.0115...) passed Fortran's 132
+    columns. Each line, as the template places it, fits."""
+    values: dict[str, float | str] = {
+        "I11": "runtime", "I22": 0.5108950164969109, "I33": 0.6317458616537961,
+        "I12": -0.028083875871670966, "I13": -0.21656337392856828, "I23": 0.011582093621946399,
+        "I_1": 0.015651075155771636, "J_1": "runtime",
+    }  # fmt: skip
+    lines = []
+    for chk in printed("fortran", "CLUSTER6", cluster_checks(values, 1)):
+        lines += [f"    if ({chk.condition}) then"] + [f"    {n} = {v}" for n, v in chk.locals]
+    lines = [line for text in lines for line in text.splitlines()]
+    assert any("(-0.028083875871670966_c_double)*" in line for line in lines)
+    assert max(map(len, lines)) <= 132, [line for line in lines if len(line) > 132]

@@ -1,40 +1,87 @@
-"""The `gyrogen` command line: each command parses options and calls one
-function; errors are one line on stderr and a non-zero exit."""
+"""The `gyrogen` command line's entry point (pyproject's [project.scripts]).
+
+It imports nothing heavy: Ctrl-C is handled first, then the click group and
+its commands (commands.group, which imports numpy, scipy and the rest) are
+imported behind that handling, so that Ctrl-C at any moment, the imports
+included, is one line and exit 130, never a traceback. Files are written
+all or nothing (files.write_atomic holds a Ctrl-C back until its files are
+placed)."""
 
 from __future__ import annotations
 
-import importlib
+import signal
 import sys
+from collections.abc import Callable
+from types import FrameType
 
-import click
+Handler = Callable[[int, FrameType | None], object] | int | None
+"""A SIGINT handler as the signal module takes it (a function, SIG_IGN, SIG_DFL)."""
 
-from gyrogen import __version__
-from gyrogen.commands import NAMES
-from gyrogen.errors import GyrogenError
-
-
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(__version__, prog_name="gyrogen")
-def cli() -> None:
-    """Equations of motion of a gyrostat (carrier + axisymmetric rotor) from
-    Kane's method, as fast, verified C and Fortran right-hand sides."""
+ABORTED = 130
+"""The exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
 
 
-for _name in NAMES:
-    cli.add_command(importlib.import_module(f"gyrogen.commands.{_name}").command)
+class Interrupted(BaseException):
+    """Ctrl-C, as main's handler raises it: a BaseException, so that no
+    `except Exception` stops it and click does not turn it into its own
+    Abort (with a blank line first); `finally` blocks and write_atomic's
+    roll-back run as for KeyboardInterrupt."""
+
+
+_caught: list[int] = []
+"""The SIGINTs main's handler took (an import may wrap what it raised: a
+class's __set_name__ turns it into a RuntimeError)."""
+
+
+def _interrupted(signum: int, frame: FrameType | None) -> None:
+    _caught.append(signum)
+    raise Interrupted
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: one line per error, exit 1 for failures, 2 for usage."""
+    """Entry point: one line per error, exit 1 for failures, 2 for usage,
+    130 for Ctrl-C. argv None: this call is the process (the console script,
+    python -m gyrogen); when it ends, Ctrl-C is ignored (nothing is left to
+    stop, and the interpreter's exit prints no traceback). Called with argv
+    (tests, in process), it puts the SIGINT handler back as it found it."""
+    _caught.clear()
+    previous = _install(_interrupted)
     try:
-        cli.main(args=argv, prog_name="gyrogen", standalone_mode=False)
-    except click.UsageError as exc:
-        where = exc.ctx.command_path if exc.ctx else "gyrogen"
-        click.echo(f"{where}: error: {exc.format_message()} (see --help)", err=True)
-        sys.exit(2)
-    except click.Abort:
-        click.echo("gyrogen: aborted", err=True)
-        sys.exit(130)
-    except GyrogenError as exc:
-        click.echo(f"gyrogen: error: {exc}", err=True)
-        sys.exit(exc.exit_code)
+        from gyrogen.commands.group import run  # behind the handler: it imports everything
+
+        run(argv)
+    except BaseException as exc:
+        if isinstance(exc, SystemExit) or not (_caught or _from_ctrl_c(exc)):
+            raise
+        _install(signal.SIG_IGN)
+        sys.stderr.write(("\n" if sys.stderr.isatty() else "") + "gyrogen: aborted\n")
+        sys.exit(ABORTED)
+    finally:
+        if argv is None:
+            _install(signal.SIG_IGN)
+        elif previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _from_ctrl_c(exc: BaseException | None) -> bool:
+    """exc is Ctrl-C (a KeyboardInterrupt: before main's handler, or from
+    click's prompts), or was raised while handling one."""
+    while exc is not None:
+        if isinstance(exc, (Interrupted, KeyboardInterrupt)):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _install(handler: Handler) -> Handler:
+    """Install handler for SIGINT; the one it replaces. Not where SIGINT is
+    ignored (a background job's) or off the main thread (where Python
+    installs none), nor where Python installed none itself (None): there
+    it is left as it is."""
+    try:
+        current = signal.getsignal(signal.SIGINT)
+        if current is not None and (current is not signal.SIG_IGN or handler is signal.SIG_IGN):
+            signal.signal(signal.SIGINT, handler)
+        return current
+    except ValueError:  # not the main thread
+        return None

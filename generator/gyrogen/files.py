@@ -7,10 +7,12 @@ goes through write_atomic; can_write checks the way is clear first.
 from __future__ import annotations
 
 import os
+import signal
 import stat
 import tempfile
-from collections.abc import Iterable, Mapping
-from contextlib import suppress
+import threading
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager, suppress
 from functools import cache
 from pathlib import Path
 
@@ -57,8 +59,35 @@ def write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
     file goes to a temporary name in out first, with the mode open() would
     give it (NEW_FILE_MODE less the umask); then each target's old version is
     moved aside to a temporary name and the new one renamed in. A failure
-    anywhere (a full disk, a refused rename, an interrupt) puts every old
-    version back and removes the new files. Text is UTF-8 as written."""
+    anywhere (a full disk, a refused rename, an exception) puts every old
+    version back and removes the new files. Text is UTF-8 as written.
+    Ctrl-C waits until the files are placed (or rolled back): a SIGINT
+    between two statements could otherwise leave a temporary file no
+    roll-back knows of."""
+    with interrupts_held():
+        _write_atomic(out, files)
+
+
+@contextmanager
+def interrupts_held() -> Iterator[None]:
+    """A SIGINT inside the block is delivered when it ends (to the handler
+    there was before); in the main thread only (Python runs its handlers
+    there), elsewhere the block runs as it is."""
+    main = threading.current_thread() is threading.main_thread()
+    if not main or signal.getsignal(signal.SIGINT) is None:  # None: not Python's to put back
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            signal.raise_signal(signal.SIGINT)
+
+
+def _write_atomic(out: Path, files: Mapping[str, str | bytes]) -> None:
     make_dir(out)
     targets = can_write(out, files)
     staged: dict[Path, Path] = {}

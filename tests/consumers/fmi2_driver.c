@@ -9,7 +9,8 @@
  *
  * argv[1]: the GUID; argv[2]: the value reference of the first runtime
  * parameter (whose start value setup accepts and -1 it refuses); argv[3]:
- * the number of states.
+ * the number of states; argv[4]: the value reference of u1 (1e308 there
+ * makes derivatives that are not finite).
  */
 #include "fmi2Functions.h"
 
@@ -77,7 +78,8 @@ static void co_simulation(const fmi2CallbackFunctions *cb, const char *guid, fmi
     fmi2FreeInstance(c);
 }
 
-static void model_exchange(const fmi2CallbackFunctions *cb, const char *guid, size_t nx)
+static void model_exchange(const fmi2CallbackFunctions *cb, const char *guid, size_t nx,
+                           size_t u1)
 {
     double *x = (double *)calloc(nx + 1, sizeof(double));
     double *dx = (double *)calloc(nx + 1, sizeof(double));
@@ -95,6 +97,13 @@ static void model_exchange(const fmi2CallbackFunctions *cb, const char *guid, si
     for (i = 0; i < nx; ++i) x[i] = NAN;
     said("set_nan_states", fmi2SetContinuousStates(c, x, nx));
     said("derivatives_of_nan", fmi2GetDerivatives(c, dx, nx));
+    said("time_nan", fmi2SetTime(c, NAN));
+    said("time_minus_inf", fmi2SetTime(c, -INFINITY));
+    said("time", fmi2SetTime(c, 0.5));
+    said("states_again", fmi2GetContinuousStates(c, x, nx));
+    x[u1] = 1e308;
+    said("set_1e308", fmi2SetContinuousStates(c, x, nx));
+    said("derivatives_of_1e308", fmi2GetDerivatives(c, dx, nx));
     said("fmu_state", fmi2GetFMUstate(c, NULL));
     said("reset", fmi2Reset(c));
     fmi2FreeInstance(c);
@@ -105,11 +114,12 @@ static void model_exchange(const fmi2CallbackFunctions *cb, const char *guid, si
 int main(int argc, char **argv)
 {
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    if (argc != 4) {
-        fprintf(stderr, "usage: fmi2_driver GUID VR_OF_FIRST_PARAMETER NX\n");
+    if (argc != 5) {
+        fprintf(stderr, "usage: fmi2_driver GUID VR_OF_FIRST_PARAMETER NX VR_OF_U1\n");
         return 2;
     }
     co_simulation(&cb, argv[1], (fmi2ValueReference)strtoul(argv[2], NULL, 10));
-    model_exchange(&cb, argv[1], (size_t)strtoul(argv[3], NULL, 10));
+    model_exchange(&cb, argv[1], (size_t)strtoul(argv[3], NULL, 10),
+                   (size_t)strtoul(argv[4], NULL, 10));
     return 0;
 }

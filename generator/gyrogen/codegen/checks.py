@@ -17,6 +17,11 @@ from gyrogen.setup_checks import CHECKS, Call, Check, Expr, Num, Op, Sym, symbol
 
 Language = Literal["c", "fortran"]
 _PRECEDENCE = {"+": 1, "-": 1, "*": 2}
+_ATOM = 4
+_UNARY_MINUS = {"c": 3, "fortran": 1}
+"""A negative number's precedence: C's unary minus binds tighter than a
+product; Fortran's is that of a sum (x - -4.0 and x*-4.0 are errors, and
+-4.0**2 is -(4.0**2)), so there it is parenthesized as an operand."""
 FORTRAN_WRAP = 100
 """A Fortran condition continues on a new line before it would pass this column."""
 
@@ -42,16 +47,21 @@ class Printer:
         self.number: Callable[[float], str] = c_double if language == "c" else f_double
 
     def __call__(self, e: Expr, parent: int = 0, right: bool = False) -> str:
-        if isinstance(e, Num):
-            return self.number(e.value)
+        """e as an operand of an operator of precedence parent (0: none);
+        right: not its first operand, so that equal precedence is grouped
+        as written (a - (b - c), x + (-4.0)), never reassociated."""
         if isinstance(e, Sym):
             return self._symbol(e.name)
         if isinstance(e, Call):
             return self._call(e)
-        assert isinstance(e, Op)
-        prec = _PRECEDENCE[e.op]
-        glue = "*" if e.op == "*" else f" {e.op} "
-        text = glue.join(self(a, prec, i > 0 and e.op == "-") for i, a in enumerate(e.args))
+        if isinstance(e, Num):
+            text = self.number(e.value)
+            prec = _ATOM if e.value >= 0 else _UNARY_MINUS[self.language]
+        else:
+            assert isinstance(e, Op)
+            prec = _PRECEDENCE[e.op]
+            glue = "*" if e.op == "*" else f" {e.op} "
+            text = glue.join(self(a, prec, i > 0) for i, a in enumerate(e.args))
         return f"({text})" if prec < parent or (right and prec == parent) else text
 
     def _symbol(self, name: str) -> str:
@@ -82,6 +92,25 @@ class Printer:
         negate = "!" if self.language == "c" else ".not. "
         return f"{negate}({self(a)} <= {self(b)})"
 
+    def continued(self, head: str, text: str, tail: str = "") -> str:
+        """Fortran: text, placed after head and before tail on a line,
+        continued with & at a space or a product's * before FORTRAN_WRAP
+        (folded values print long: a cluster's minors pass 132 columns). C:
+        text as it is."""
+        if self.language == "c":
+            return text
+        pad = " " * (len(head) - len(head.lstrip()) + 4)
+        lines, line = [], head + text
+        while len(line + tail) > FORTRAN_WRAP:
+            spaces = line.rfind(" ", len(pad) + 8, FORTRAN_WRAP - 2)
+            stars = [i for i in range(len(pad) + 8, FORTRAN_WRAP - 2) if _product(line, i)]
+            cut = max(spaces, stars[-1] + 1 if stars else -1)
+            if cut < 0:
+                break
+            lines.append(line[:cut].rstrip() + " &")
+            line = pad + line[cut:].lstrip()
+        return "\n".join([*lines, line]).removeprefix(head)
+
     def _wrapped(self, parts: list[str]) -> str:
         """parts joined by .and., continued with & before FORTRAN_WRAP."""
         lines, line = [], "    if (.not. (" + parts[0]
@@ -95,6 +124,17 @@ class Printer:
         return "\n".join(lines).removeprefix("    if (.not. (")
 
 
+def _product(line: str, i: int) -> bool:
+    """line[i] is a product's * (not half of a power's **)."""
+    return line[i] == "*" and line[i - 1] != "*" and line[i + 1] != "*"
+
+
+def condition(p: Printer, c: Check) -> str:
+    """c's condition as the template places it: in `if (...) then`."""
+    text = p.condition(c.kind, c.exprs)
+    return text if c.kind == "positive" else p.continued("    if (", text, ") then")
+
+
 def printed(language: Language, macro: str, checks: Sequence[Check] = CHECKS) -> list[Printed]:
     """Every check of checks but 'finite' (the templates loop over p for
     that one); a rotor cluster's are setup_checks.cluster_checks."""
@@ -103,8 +143,8 @@ def printed(language: Language, macro: str, checks: Sequence[Check] = CHECKS) ->
         Printed(
             c.code,
             c.kind,
-            p.condition(c.kind, c.exprs),
-            tuple((name, p(e)) for name, e in c.locals),
+            condition(p, c),
+            tuple((name, p.continued(f"    {name} = ", p(e))) for name, e in c.locals),
             c.comment,
             c.kind == "constants" or any("cond" in symbols(e) for e in c.exprs),
         )

@@ -15,11 +15,19 @@ Eigenvalues within each other's error make one cluster; its mean
 the verdict, and a marginal cluster grows like t when its block of the
 Schur form is not its mean times I to within the cluster's own error.
 
-A cluster stands for one eigenvalue only if its members, each judged by its
-own value, would get one verdict. When A's error (a wheel at 1e90 rad/s
-makes ||A|| 1e87) swallows eigenvalues the solver gives apart with different
-verdicts (its -10 and 0 within 1e73 of each other), the cluster is
-"cannot judge": its mean would be a verdict of rounding.
+Every verdict holds for any backward-stable eigensolver: its eigenvalues are
+those of A + E with ||E|| a small multiple of n eps ||A||, and the
+tolerances are SLACK times that, so no solver, BLAS kernel or CPU can turn
+one verdict into another. Within a cluster, rounding moves the members apart
+by up to the power law of its size m, (error nu^(m-1))^(1/m), nu the
+block's departure from its mean times I (a Jordan block's coupling): a
+member's own value tells nothing within that. A cluster stands for one
+eigenvalue only if its members, each judged against that bound, would get
+one verdict; otherwise it is "cannot judge". Eigenvalues that A's error
+swallows whole (a wheel at 1e90 rad/s makes ||A|| 1e87 and its speed loop
+at -10 and its zero lie within 1e73 of each other) are one eigenvalue to
+A's precision: a solver may return them at +-1e73 in any order, so their
+verdict is their mean's against that error, as for any zero.
 """
 
 from __future__ import annotations
@@ -38,7 +46,8 @@ SLACK = 10.0
 solver's backward error are small multiples of n eps ||A||); a cluster's block is a
 Jordan block when it is SLACK times its error or spread away from its mean."""
 CANNOT = "cannot judge"
-"""The verdict of a cluster whose members' own verdicts differ."""
+"""The verdict of a cluster whose members, each against the bound on what
+rounding may move it (_spread_bound), get different verdicts."""
 SHOWN = 0.3
 """A mode is said to move the states whose eigenvector entries reach this
 fraction of its largest."""
@@ -154,6 +163,32 @@ def _radii(s: _Schur) -> np.ndarray:
 
 
 def clusters(s: _Schur) -> list[list[int]]:
+    """The eigenvalues within each other's rounding error, joined
+    transitively; then joined again while two clusters' members may lie
+    together (their means within the sum of their spreads' bounds: the
+    halves of two Jordan blocks on one eigenvalue, paired across the
+    blocks by their nearest)."""
+    groups = _nearest(s)
+    while True:
+        bounds = []
+        for members in groups:
+            block, _, error = s.cluster(members)
+            mean = complex(np.mean(s.values[members]))
+            bounds.append((mean, _spread_bound(block, mean, error)))
+        pair = next(
+            ((i, j) for i in range(len(groups)) for j in range(i)
+             if abs(bounds[i][0] - bounds[j][0]) <= bounds[i][1] + bounds[j][1]),
+            None,
+        )  # fmt: skip
+        if pair is None:
+            return groups
+        i, j = pair
+        groups = [g for k, g in enumerate(groups) if k not in pair] + [
+            sorted(groups[i] + groups[j])
+        ]
+
+
+def _nearest(s: _Schur) -> list[list[int]]:
     """The eigenvalues within each other's rounding error, joined transitively."""
     values, radii = s.values, _radii(s)
     owner = list(range(len(values)))
@@ -197,7 +232,7 @@ def modes(a: np.ndarray, states: tuple[str, ...]) -> list[Mode]:
         said = verdict(lam.real, tol)
         secular = said == "marginal" and vectors.shape[1] < len(members)
         values = s.values[members]
-        if not secular and len(_faces(values, SLACK * len(a) * np.finfo(float).eps)) > 1:
+        if not secular and len(_faces(values, _spread_bound(block, mean, error))) > 1:
             told = tuple(sorted(values, key=lambda v: (v.real, v.imag)))
             out.append(Mode(lam, CANNOT, moved, len(members), values=told, error=error))
             continue
@@ -206,15 +241,21 @@ def modes(a: np.ndarray, states: tuple[str, ...]) -> list[Mode]:
     return sorted(out, key=lambda m: (rank[m.verdict], -_growth(m), -m.eigenvalue.imag))
 
 
-def _faces(values: np.ndarray, precision: float) -> set[str]:
+def _spread_bound(block: np.ndarray, mean: complex, error: float) -> float:
+    """How far rounding may move a cluster's members from its mean: the power
+    law of its size m, (error nu^(m-1))^(1/m), nu its block's departure from
+    mean I (at least the error): error for a semisimple cluster, the square
+    root of error times the coupling for a Jordan block of two."""
+    m = len(block)
+    nu = max(float(np.linalg.norm(block - mean * np.eye(m), 2)), error)
+    return float(error ** (1.0 / m) * nu ** (1.0 - 1.0 / m)) if error > 0 else 0.0
+
+
+def _faces(values: np.ndarray, bound: float) -> set[str]:
     """The verdicts the members get on their own: each against MARGINAL of
-    its |lambda|, or A's relative precision (SLACK n eps) times the largest
-    member's (below it, a member is zero on the cluster's own scale). An
-    exact 0 (where the solver deflated A's structure) tells nothing: a zero
-    beside a rounding one, 1e-17 at ||A|| 0.3, is one eigenvalue."""
-    values = values[values != 0]
-    floor = precision * float(np.max(np.abs(values), initial=0.0))
-    return {verdict(v.real, max(MARGINAL * abs(v), floor)) for v in values}
+    its |lambda|, or the bound on what rounding may have moved it (below
+    it, its sign is the solver's, not A's)."""
+    return {verdict(v.real, max(MARGINAL * abs(v), bound)) for v in values}
 
 
 def _growth(m: Mode) -> float:
