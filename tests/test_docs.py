@@ -183,7 +183,7 @@ def text_of(site: Path, page: str) -> str:
 
 def test_the_reference_holds_what_the_code_registers(site: Path) -> None:
     from gyrogen import abi, api, methods
-    from gyrogen.cli import cli
+    from gyrogen.commands.group import cli
     from gyrogen.runtime.compiled import Compiled
     from gyrogen.scene import Effects, Outputs, Scene, Simulate
     from gyrogen.scene.rotors import Rotor
