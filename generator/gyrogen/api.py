@@ -104,7 +104,7 @@ def sweep(
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = store(out if out is not None else Path("sweep") / chosen.name)
-    record = sweep_engine.run(
+    with sweep_engine.run(
         chosen,
         where,
         scheduler=scheduler,
@@ -114,23 +114,30 @@ def sweep(
         portable=portable,
         plots=plots,
         meanwhile=sweep_report.load_plots if plots else None,
-    )
-    sweep_report.write(chosen, record, plots=plots)
+    ) as record:
+        sweep_report.write(chosen, record, plots=plots)
     return read(where)
 
 
 def read(out: str | Path | Store) -> pd.DataFrame:
-    """The rows of the sweep in out (a directory or an fsspec URL), in sample order."""
-    import pandas as pd
+    """The rows of the sweep in out (a directory or an fsspec URL), in
+    sample order: its parts, each checked as a resume checks it (a part
+    whose footer disagrees with its name or the sweep is one line)."""
+    import pyarrow.parquet as pq
 
     from gyrogen.analysis.sweep.sweep_columns import PARTS
+    from gyrogen.analysis.sweep.sweep_parts import trusted
 
     where = store(out)
-    # the path itself, never re-read as a URL (./s3:x is a directory; FILE:/// is file:///)
+    names = trusted(where)
+    if not names:
+        raise GyrogenError(f"{where.show(PARTS)}: no parts yet")
+    # the paths themselves, never re-read as URLs (./s3:x is a directory; FILE:/// is file:///)
     if where.local:
-        frame = pd.read_parquet(os.path.abspath(where.path(PARTS)))
+        table = pq.read_table([os.path.abspath(where.path(PARTS, n)) for n in names])
     else:
-        frame = pd.read_parquet(where.path(PARTS), filesystem=where.fs)
+        table = pq.read_table([where.path(PARTS, n) for n in names], filesystem=where.fs)
+    frame = table.to_pandas()
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)
 
 
