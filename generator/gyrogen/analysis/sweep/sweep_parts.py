@@ -197,7 +197,8 @@ def check_out(
     """Before any work: out can hold this sweep (nothing in the way of its
     state, parts or ends, the summary files it will write; no other sweep in
     it, and a sweep begun there was computed with the same identity, unless
-    restart); the state file to write. The chunk size is not the sweep's:
+    restart; nothing in its parts folder but files, no part named for
+    samples not its own: strays); the state file to write. The chunk size is not the sweep's:
     another resumes it."""
     state: dict[str, Any] = {"sweep": spec.name, "fingerprint": spec.fingerprint()}
     state |= {"trajectories": spec.size, "scene": spec.scene.name}  # and identity: STATE_KEYS
@@ -208,7 +209,6 @@ def check_out(
                 f"{out.show(PARTS)} holds parts but no {STATE_FILE}: remove it first"
             )
         out.can_write(STATE_FILE)
-        strays(out, spec.size)
     elif {k: held.get(k) for k in state} != state:
         raise GyrogenError(
             f"{out.show()} holds another sweep ({held.get('sweep')}, {held.get('trajectories')} "
@@ -222,8 +222,7 @@ def check_out(
             f"{', '.join(changed)}): its rows would mix two codes; --restart computes it anew, "
             "or use another --out"
         )
-    else:
-        strays(out, spec.size)
+    strays(out, spec.size)
     return state | {"identity": ident}
 
 
