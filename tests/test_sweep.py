@@ -1,6 +1,7 @@
 """gyrogen sweep on the local engine: the rows against the compiled
-integrator run directly, resume, the stability map against NOTES.md, the
-API, and the refusals of a run (another sweep in --out, no scheduler)."""
+integrator run directly, resume (a part is what its footer says), the
+stability map against NOTES.md, the API, and the refusals of a run
+(another sweep in --out, strays in its parts, no scheduler)."""
 
 from __future__ import annotations
 
@@ -353,6 +354,7 @@ def test_a_part_is_what_its_footer_says_not_its_name(
     why = "holds samples 0 to 25 (its footer), not 25 to 50"
     assert err == f"{second}: {why}: computing it again\n"
     assert "1 chunks computed, 2 already written" in stdout
+    assert "Setup codes {'0': 60}; integrator codes {'0': 60}." in stdout
     assert rows(tmp_path / "out").equals(rows(done))
 
 

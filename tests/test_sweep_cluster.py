@@ -1,7 +1,9 @@
 """gyrogen sweep on real engines: a `dask scheduler` and two `dask worker`
 processes on 127.0.0.1 give the local run's rows bit for bit, each worker
 builds the sources once, and a worker killed mid-sweep loses nothing; a
-client interrupted with SIGINT resumes without recomputing what it wrote."""
+client interrupted with SIGINT resumes without recomputing what it wrote;
+a second sweep into the --out of a running one is refused, and one killed
+does not hold its --out."""
 
 from __future__ import annotations
 
