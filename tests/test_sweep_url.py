@@ -342,3 +342,32 @@ def test_a_lock_of_another_host_is_refused_with_how_to_free_it() -> None:
             f"use another --out; if it is gone, remove {where.show(LOCK)}"
         )
         assert json.loads(where.read_text(LOCK)) == holder
+
+
+def test_a_lock_that_cannot_be_made_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A local file system without flock, a URL whose lock cannot be
+    written: one line naming the lock and why."""
+    import errno
+    import fcntl
+
+    from gyrogen.analysis.sweep.sweep_lock import take
+
+    def no_locks(*args: object) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(fcntl, "flock", no_locks)
+        with pytest.raises(GyrogenError) as exc:
+            take(Store(str(tmp_path / "o")))
+    assert str(exc.value) == f"cannot lock {tmp_path}/o/sweep.lock: No locks available"
+    where = _memory("unwritable")
+
+    def refused(*args: object, **kwargs: object) -> None:
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(type(where.fs), "open", refused)
+    with pytest.raises(GyrogenError) as exc:
+        take(where)
+    assert str(exc.value) == "cannot write memory://unwritable/sweep.lock: Permission denied"

@@ -99,6 +99,9 @@ def _flock(out: Store) -> Lock:
             held = _parse(os.pread(fd, 4096, 0))
             os.close(fd)
             raise _busy(out, held) from None
+        except OSError as exc:  # a file system without flock (ENOLCK)
+            os.close(fd)
+            raise out._error("cannot lock", (LOCK,), exc) from exc
         with suppress(FileNotFoundError):
             if os.stat(path).st_ino == os.fstat(fd).st_ino:
                 break
