@@ -242,6 +242,10 @@ def test_a_killed_sweep_does_not_hold_its_out(tmp_path: Path, cache: Path, form:
     second = subprocess.run(cmd, env=_environment(cache), capture_output=True, text=True,
                             timeout=120)  # fmt: skip
     assert second.returncode == 0, second.stderr
+    note = (
+        f"{where}/sweep.lock: its sweep (process {first.pid} on this host) has ended: taking it\n"
+    )
+    assert second.stderr == (note if form == "file-url" else "")
     assert f"{CHUNKS - kept} chunks computed, {kept} already written" in second.stdout
     assert list(rows(where)["sample"]) == list(range(CHUNKS * 100 - 95))
 
