@@ -379,6 +379,40 @@ def test_the_reader_refuses_a_part_whose_footer_disagrees(
     )
 
 
+FOOTERS = [
+    ({}, None),
+    ({"gyrogen": None}, "its footer records no samples"),
+    ({"samples": [0, 5]}, "holds samples 0 to 5 (its footer), not 5 to 10"),
+    ({"rows": range(5, 9)}, "holds 4 rows (its footer), not 5"),
+    ({"rows": range(0, 5)}, "its rows' statistics do not say samples 5 to 10"),
+    ({"fingerprint": "another"}, "computed for another sweep (its footer)"),
+    ({"identity": {"code": "another"}}, "computed with another build (its footer)"),
+    ({"bytes": b"PAR1"}, "damaged or cut short"),
+]
+"""(what differs from a true part of samples 5..10, why the resume computes it again)"""
+
+
+@pytest.mark.parametrize(("change", "why"), FOOTERS, ids=[str(f[1]) for f in FOOTERS])
+def test_the_verdict_on_a_part_reads_its_footer(
+    tmp_path: Path, change: dict[str, object], why: str | None
+) -> None:
+    """A part of samples 5..10 is its sweep's only when its footer says so:
+    its samples, its rows' count and statistics, fingerprint and identity."""
+    from gyrogen.analysis.sweep.sweep_columns import part_name
+    from gyrogen.analysis.sweep.sweep_parts import parquet_bytes, verdict
+    from gyrogen.analysis.sweep.sweep_store import store
+
+    state = {"fingerprint": "mine", "identity": {"code": "mine"}}
+    meta = {"samples": [5, 10], **state}
+    meta |= {k: v for k, v in change.items() if k in ("samples", "fingerprint", "identity")}
+    sample = np.array(change.get("rows", range(5, 10)), dtype=np.int64)
+    said = {"gyrogen": meta} if "gyrogen" not in change else None
+    data = change.get("bytes") or parquet_bytes({"sample": sample}, said)
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / part_name(5, 10)).write_bytes(data)  # type: ignore[arg-type]
+    assert verdict(store(tmp_path), 5, 10, state) == why
+
+
 STRAYS = [
     ("part-00000000060-00000000085.parquet", "file",
      "names samples 60 to 85, not within this sweep's 0 to 60: not its part"),

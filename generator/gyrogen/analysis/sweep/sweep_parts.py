@@ -197,9 +197,9 @@ def check_out(
     """Before any work: out can hold this sweep (nothing in the way of its
     state, parts or ends, the summary files it will write; no other sweep in
     it, and a sweep begun there was computed with the same identity, unless
-    restart; nothing in its parts folder but files, no part named for
-    samples not its own: strays); the state file to write. The chunk size is not the sweep's:
-    another resumes it."""
+    restart; nothing in its parts folder but files, and no part named for
+    samples not its own: strays); the state file to write. The chunk size
+    is not the sweep's: another resumes it."""
     state: dict[str, Any] = {"sweep": spec.name, "fingerprint": spec.fingerprint()}
     state |= {"trajectories": spec.size, "scene": spec.scene.name}  # and identity: STATE_KEYS
     held = read_state(out, ends)
