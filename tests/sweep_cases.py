@@ -69,7 +69,8 @@ OBSTACLES = [
     ("sweep.json", "[" * 10**5, "{out}/sweep.json: unreadable (maximum recursion depth"),
     # a directory where the sweep writes a file: every part was computed first, then exit 1
     *((name, None, f"{{out}}/{name}: not a file, and the sweep writes one there")
-      for name in ("sweep.json", "summary.json", "summary.md", "histograms.png", "map.png")),
+      for name in ("sweep.json", "sweep.lock", "summary.json", "summary.md", "histograms.png",
+                   "map.png")),
 ]  # fmt: skip
 """(name, a file's text or None for a directory, the message's start)"""
 

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen.analysis.sweep.sweep_columns import PARTS, part_name, samples_of, written
+from gyrogen.analysis.sweep.sweep_lock import LOCK
 from gyrogen.analysis.sweep.sweep_spec import Spec
 from gyrogen.analysis.sweep.sweep_store import Store
 from gyrogen.errors import GyrogenError
@@ -161,10 +162,11 @@ def trusted(out: Store) -> list[str]:
 def read_state(out: Store, ends: tuple[str, ...] = SUMMARY_FILES) -> dict[str, Any] | None:
     """The sweep state out holds (None: none yet); obstacles refused: a
     parts that is no directory, a directory (or FIFO) where a file goes
-    (the state file, and ends: the summary files the sweep will write)."""
+    (the state file, the lock, and ends: the summary files the sweep will
+    write)."""
     if out.kind(PARTS) not in ("absent", "dir"):
         raise GyrogenError(f"{out.show(PARTS)}: not a directory: remove it or use another --out")
-    for name in (STATE_FILE, *ends):
+    for name in (STATE_FILE, LOCK, *ends):
         if out.kind(name) not in ("absent", "file"):
             raise GyrogenError(
                 f"{out.show(name)}: not a file, and the sweep writes one there: remove it or use "
