@@ -32,7 +32,8 @@ def _timed(f: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, flo
 def per_chunk(spec: api.Spec, tol: float, chunk: int, work: Path, repeats: int = 5) -> None:
     sources = scene_sources(spec.scene)
     comp = compiled(sources)
-    meta = part_metadata(Job(spec, sources, chunk, identity(spec, sources, native_target())))
+    job = Job(spec, sources, chunk, identity(spec, sources, native_target()))
+    meta = part_metadata(job, 0, chunk)
     local, url = store(work / "chunk-local"), store(f"file://{work / 'chunk-url'}")
     for where in (local, url):
         where.make_dir("parts")

@@ -64,10 +64,13 @@ OBSTACLES = [
      "fingerprint, trajectories, scene): remove it or use another --out"),
     ("sweep.json", '{"sweep": 1, "fingerprint": 1, "trajectories": 1, "scene": 1, "identity": [1]}',
      "{out}/sweep.json: not a gyrogen sweep state (its identity is not a JSON object)"),
+    ("sweep.json", '{"sweep": 1, "fingerprint": 1, "trajectories": "60", "scene": 1}',
+     "{out}/sweep.json: not a gyrogen sweep state (its trajectories is not a count)"),
     ("sweep.json", "[" * 10**5, "{out}/sweep.json: unreadable (maximum recursion depth"),
     # a directory where the sweep writes a file: every part was computed first, then exit 1
     *((name, None, f"{{out}}/{name}: not a file, and the sweep writes one there")
-      for name in ("sweep.json", "summary.json", "summary.md", "histograms.png", "map.png")),
+      for name in ("sweep.json", "sweep.lock", "summary.json", "summary.md", "histograms.png",
+                   "map.png")),
 ]  # fmt: skip
 """(name, a file's text or None for a directory, the message's start)"""
 

@@ -1,6 +1,7 @@
 """gyrogen sweep on the local engine: the rows against the compiled
-integrator run directly, resume, the stability map against NOTES.md, the
-API, and the refusals of a run (another sweep in --out, no scheduler)."""
+integrator run directly, resume (a part is what its footer says), the
+stability map against NOTES.md, the API, and the refusals of a run
+(another sweep in --out, strays in its parts, no scheduler)."""
 
 from __future__ import annotations
 
@@ -323,8 +324,130 @@ def test_a_part_of_another_build_is_computed_again(
     meta["identity"]["code"] = "0" * 16
     pq.write_table(table.replace_schema_metadata({"gyrogen": json.dumps(meta)}), part)
     code, _, err = cli(["sweep", str(path), "--out", str(out), "--quiet"])
-    assert code == 0 and err == f"{part}: damaged or cut short: computing it again\n"
+    why = "computed with another build (its footer)"
+    assert code == 0 and err == f"{part}: {why}: computing it again\n"
     assert rows(out).equals(rows(done))
+
+
+def _copy(done: Path, out: Path) -> Path:
+    """A copy of the sweep in done at out; out's parts directory."""
+    import shutil
+
+    shutil.copytree(done, out)
+    return out / "parts"
+
+
+@pytest.mark.slow
+def test_a_part_is_what_its_footer_says_not_its_name(
+    swept: tuple[Path, Path], tmp_path: Path, cli
+) -> None:
+    """The first part copied over the second (its name says samples 25 to
+    50, its footer 0 to 25): the resume names it and why, computes it again,
+    and the rows are a clean run's (before: '0 chunks computed, 3 already
+    written', samples 0 to 24 twice and 25 to 49 never)."""
+    path, done = swept
+    parts = _copy(done, tmp_path / "out")
+    first, second, _ = sorted(parts.iterdir())
+    second.write_bytes(first.read_bytes())
+    code, stdout, err = cli(["sweep", str(path), "--out", str(tmp_path / "out"), "--quiet"])
+    assert code == 0, err
+    why = "holds samples 0 to 25 (its footer), not 25 to 50"
+    assert err == f"{second}: {why}: computing it again\n"
+    assert "1 chunks computed, 2 already written" in stdout
+    assert "Setup codes {'0': 60}; integrator codes {'0': 60}." in stdout
+    assert rows(tmp_path / "out").equals(rows(done))
+
+
+@pytest.mark.slow
+def test_the_reader_refuses_a_part_whose_footer_disagrees(
+    swept: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """api.read lists and checks the parts as the resume does: a part whose
+    footer says other samples than its name is one line naming it (before:
+    its rows read twice, the samples of its name never)."""
+    from gyrogen.errors import GyrogenError
+
+    _, done = swept
+    parts = _copy(done, tmp_path / "out")
+    first, second, _ = sorted(parts.iterdir())
+    second.write_bytes(first.read_bytes())
+    with pytest.raises(GyrogenError) as exc:
+        api.read(tmp_path / "out")
+    assert str(exc.value) == (
+        f"{second}: holds samples 0 to 25 (its footer), not 25 to 50: rerun the sweep to compute "
+        "it again"
+    )
+
+
+FOOTERS = [
+    ({}, None),
+    ({"gyrogen": None}, "its footer records no samples"),
+    ({"samples": [0, 5]}, "holds samples 0 to 5 (its footer), not 5 to 10"),
+    ({"rows": range(5, 9)}, "holds 4 rows (its footer), not 5"),
+    ({"rows": range(0, 5)}, "its rows' statistics do not say samples 5 to 10"),
+    ({"fingerprint": "another"}, "computed for another sweep (its footer)"),
+    ({"identity": {"code": "another"}}, "computed with another build (its footer)"),
+    ({"bytes": b"PAR1"}, "damaged or cut short"),
+]
+"""(what differs from a true part of samples 5..10, why the resume computes it again)"""
+
+
+@pytest.mark.parametrize(("change", "why"), FOOTERS, ids=[str(f[1]) for f in FOOTERS])
+def test_the_verdict_on_a_part_reads_its_footer(
+    tmp_path: Path, change: dict[str, object], why: str | None
+) -> None:
+    """A part of samples 5..10 is its sweep's only when its footer says so:
+    its samples, its rows' count and statistics, fingerprint and identity."""
+    from gyrogen.analysis.sweep.columns import part_name
+    from gyrogen.analysis.sweep.parts import parquet_bytes, verdict
+    from gyrogen.analysis.sweep.store import store
+
+    state = {"fingerprint": "mine", "identity": {"code": "mine"}}
+    meta = {"samples": [5, 10], **state}
+    meta |= {k: v for k, v in change.items() if k in ("samples", "fingerprint", "identity")}
+    sample = np.array(change.get("rows", range(5, 10)), dtype=np.int64)
+    said = {"gyrogen": meta} if "gyrogen" not in change else None
+    data = change.get("bytes") or parquet_bytes({"sample": sample}, said)
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / part_name(5, 10)).write_bytes(data)  # type: ignore[arg-type]
+    assert verdict(store(tmp_path), 5, 10, state) == why
+
+
+STRAYS = [
+    ("part-00000000060-00000000085.parquet", "file",
+     "names samples 60 to 85, not within this sweep's 0 to 60: not its part"),
+    ("part-00000000030-00000000030.parquet", "file",
+     "names samples 30 to 30, not within this sweep's 0 to 60: not its part"),
+    ("part-00000000025-00000000050.parquet", "dir",
+     "a directory, and the parts folder holds files only"),
+    ("notes", "dir", "a directory, and the parts folder holds files only"),
+]  # fmt: skip
+"""(a name in parts, what is put there, the refusal's words)"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "kind", "why"), STRAYS, ids=[s[0][:20] + s[1] for s in STRAYS])
+def test_a_stray_in_the_parts_folder_is_refused_before_any_work(
+    swept: tuple[Path, Path], tmp_path: Path, cli, name: str, kind: str, why: str
+) -> None:
+    """A part-named file outside the sweep's samples (it was 'overlaps
+    another part'), or a directory (named like a part, it was 'cannot remove
+    ...: Is a directory', exit 1, once the engine had started): one line,
+    exit 1, nothing written."""
+    path, done = swept
+    out = tmp_path / "out"
+    parts = _copy(done, out)
+    first = sorted(parts.iterdir())[0]
+    if kind == "dir":
+        (parts / name).unlink(missing_ok=True)
+        (parts / name).mkdir()
+    else:
+        (parts / name).write_bytes(first.read_bytes())
+    before = {p: p.read_bytes() if p.is_file() else None for p in out.rglob("*")}
+    code, stdout, err = cli(["sweep", str(path), "--out", str(out), "--quiet"])
+    assert (code, stdout) == (1, "")
+    assert err == f"gyrogen: error: {parts / name}: {why}: remove it or use another --out\n"
+    assert {p: p.read_bytes() if p.is_file() else None for p in out.rglob("*")} == before
 
 
 @pytest.mark.slow
@@ -333,7 +456,7 @@ def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
     the sweep's identity, spec, seed and scene; summary.json too."""
     import pyarrow.parquet as pq
 
-    _, out = swept
+    path, out = swept
     schema = pq.read_schema(sorted((out / "parts").iterdir())[0])
     assert schema.field("final_u4").metadata == {
         b"unit": b"rad/s",
@@ -344,6 +467,7 @@ def test_the_data_explains_itself(swept: tuple[Path, Path]) -> None:
     meta = json.loads(schema.metadata[b"gyrogen"])
     assert meta["sweep"] == "small" and meta["scene"] == "gyrostat" and meta["seed"] == 11
     assert meta["spec"]["draws"]["count"] == 4 and meta["chunk"] == 25
+    assert meta["samples"] == [0, 25] and meta["fingerprint"] == load(str(path)).fingerprint()
     assert set(meta["identity"]) == {"gyrogen", "code", "build_id", "sources", "flags", "cpu"}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["seed"] == 11 and summary["identity"] == meta["identity"]

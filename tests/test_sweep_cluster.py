@@ -1,7 +1,9 @@
 """gyrogen sweep on real engines: a `dask scheduler` and two `dask worker`
 processes on 127.0.0.1 give the local run's rows bit for bit, each worker
 builds the sources once, and a worker killed mid-sweep loses nothing; a
-client interrupted with SIGINT resumes without recomputing what it wrote."""
+client interrupted with SIGINT resumes without recomputing what it wrote;
+a second sweep into the --out of a running one is refused, and one killed
+does not hold its --out."""
 
 from __future__ import annotations
 
@@ -172,6 +174,80 @@ def test_interrupted_client_resumes_without_recomputing(tmp_path: Path, cache: P
     fresh = tmp_path / "fresh"
     assert cli([*cmd[3:5], "--out", str(fresh), "--quiet", "--no-plots"]).code == 0
     assert rows(out).equals(rows(fresh))
+
+
+def _sweeping(cmd: list[str], cache: Path, parts: Path) -> subprocess.Popen:
+    """cmd started, returned once it has written a part (it holds its --out)."""
+    proc = subprocess.Popen(
+        cmd, env=_environment(cache), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not list(parts.glob("part-*.parquet")):
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.01)
+    return proc
+
+
+def _held(out: Path) -> dict[str, bytes | None]:
+    return {str(p): p.read_bytes() if p.is_file() else None for p in sorted(out.rglob("*"))}
+
+
+@pytest.mark.parametrize("form", ["dir", "file-url"])
+def test_a_second_sweep_into_a_busy_out_is_refused(tmp_path: Path, cache: Path, form: str) -> None:
+    """Two `gyrogen sweep` processes into one --out: the first, stopped
+    (SIGSTOP) once it has written a part, holds it; the second is refused in
+    one line, exit 1, and changes nothing there; the first, continued,
+    computes every chunk once (before: both ran to the end, computing the
+    same chunks twice)."""
+    import socket
+
+    sweep, out = long(tmp_path / "long.toml"), tmp_path / "out"
+    where = str(out) if form == "dir" else f"file://{out}"
+    cmd = [sys.executable, "-m", "gyrogen", "sweep", str(sweep), "--out", where, "--quiet",
+           "--no-plots", "--workers", "1"]  # fmt: skip
+    first = _sweeping(cmd, cache, out / "parts")
+    first.send_signal(signal.SIGSTOP)
+    try:
+        before = _held(out)
+        second = subprocess.run(
+            cmd, env=_environment(cache), capture_output=True, text=True, timeout=120
+        )
+        after = _held(out)
+    finally:
+        first.send_signal(signal.SIGCONT)
+    stdout, err = first.communicate(timeout=120)
+    assert first.returncode == 0, err
+    assert (second.returncode, second.stdout) == (1, "") and after == before
+    assert second.stderr == (
+        f"gyrogen: error: {where} is being written by another sweep (process {first.pid} on "
+        f"{socket.gethostname()}): wait for it to end, or use another --out\n"
+    )
+    assert f"{CHUNKS} chunks computed, 0 already written" in stdout
+    assert list(rows(where)["sample"]) == list(range(CHUNKS * 100 - 95))
+
+
+@pytest.mark.parametrize("form", ["dir", "file-url"])
+def test_a_killed_sweep_does_not_hold_its_out(tmp_path: Path, cache: Path, form: str) -> None:
+    """The first sweep SIGKILLed once it has written a part: its lock is no
+    one's (a directory's flock ends with its process; a URL's lock file
+    names a process of this host that is gone), and the rerun resumes."""
+    sweep, out = long(tmp_path / "long.toml"), tmp_path / "out"
+    where = str(out) if form == "dir" else f"file://{out}"
+    cmd = [sys.executable, "-m", "gyrogen", "sweep", str(sweep), "--out", where, "--quiet",
+           "--no-plots", "--workers", "1"]  # fmt: skip
+    first = _sweeping(cmd, cache, out / "parts")
+    first.send_signal(signal.SIGKILL)
+    first.communicate(timeout=60)
+    kept = len(list((out / "parts").glob("part-*.parquet")))
+    second = subprocess.run(cmd, env=_environment(cache), capture_output=True, text=True,
+                            timeout=120)  # fmt: skip
+    assert second.returncode == 0, second.stderr
+    note = (
+        f"{where}/sweep.lock: its sweep (process {first.pid} on this host) has ended: taking it\n"
+    )
+    assert second.stderr == (note if form == "file-url" else "")
+    assert f"{CHUNKS - kept} chunks computed, {kept} already written" in second.stdout
+    assert list(rows(where)["sample"]) == list(range(CHUNKS * 100 - 95))
 
 
 def test_memory_does_not_grow_with_the_number_of_chunks(tmp_path: Path, cache: Path) -> None:

@@ -62,7 +62,8 @@ def test_the_streamed_spread_is_numpys(
     }
     columns["a"][::37], columns["b"][::11] = np.nan, np.inf
     _parts(tmp_path, columns, [0, 1, 700, 701, 2000, n])
-    counted, got = sweep_columns.spreads(tmp_path, list(columns), ("c",))
+    parts = [part_name(a, b) for a, b in written(tmp_path)]
+    counted, got = sweep_columns.spreads(tmp_path, parts, list(columns), ("c",))
     assert counted == {
         "c": {
             str(k): int(c)
@@ -112,8 +113,11 @@ def test_ten_thousand_parts_are_summarized_under_256_files(
     [(a, b)] = written(one)
     table = pq.read_table(one / "parts" / part_name(a, b))
     assert b == table.num_rows == 10_005
-    for i in range(b):
-        pq.write_table(table.slice(i, 1), many / "parts" / part_name(i, i + 1))
+    meta = json.loads(table.schema.metadata[b"gyrogen"])
+    for i in range(b):  # each part's footer says its sample
+        said = {b"gyrogen": json.dumps({**meta, "samples": [i, i + 1]}).encode()}
+        one_row = table.slice(i, 1).replace_schema_metadata(said)
+        pq.write_table(one_row, many / "parts" / part_name(i, i + 1))
     proc = subprocess.run(
         [sys.executable, "-m", "gyrogen", "sweep", str(sweep), "--out", str(many), "--chunk", "1",
          "--quiet", "--no-plots"],

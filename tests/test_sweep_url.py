@@ -254,3 +254,120 @@ def test_a_url_write_cut_short_leaves_nothing(
         str(exc.value) == f"cannot write file://{tmp_path}/parts/part-1.parquet: Permission denied"
     )
     assert list((tmp_path / "parts").iterdir()) == []
+
+
+def _memory(name: str) -> Store:
+    """An empty memory:// store (this process's own: the lock's URL path,
+    testable in one process)."""
+    where = Store(f"memory://{name}", "memory", f"/{name}")
+    if where.fs.exists(where.root):
+        where.fs.rm(where.root, recursive=True)
+    return where
+
+
+@pytest.mark.parametrize("kind", ["dir", "memory"])
+def test_a_held_out_is_refused_and_free_once_released(tmp_path: Path, kind: str) -> None:
+    """The lock of a local directory (an flock) and of a URL (an exclusively
+    created file): a second taker is refused in one line naming the holder;
+    released, the lock is gone and the next taker gets it."""
+    from gyrogen.analysis.sweep.lock import LOCK, take
+
+    where = Store(str(tmp_path / "o")) if kind == "dir" else _memory("held")
+    first = take(where)
+    with pytest.raises(GyrogenError) as exc:
+        take(where)
+    assert str(exc.value) == (
+        f"{where.show()} is being written by another sweep (process {os.getpid()} on "
+        f"{socket.gethostname()}): wait for it to end, or use another --out"
+    )
+    first.release()
+    assert where.kind(LOCK) == "absent"
+    take(where).release()
+
+
+def _lock_of(holder: dict[str, object]) -> Store:
+    from gyrogen.analysis.sweep.lock import LOCK
+
+    where = _memory("stale")
+    where.make_dir()
+    where.write({LOCK: json.dumps(holder)})
+    return where
+
+
+def _this_host() -> dict[str, object]:
+    from gyrogen.analysis.sweep.lock import _namespace
+
+    return {"host": socket.gethostname(), "namespace": _namespace(), "token": "theirs"}
+
+
+def test_a_lock_left_by_a_process_of_this_host_that_is_gone_is_taken(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Stale: the pid of a process that has ended, or a live pid whose
+    process started at another time (reused); a note names it."""
+    import subprocess
+    import sys
+
+    from gyrogen.analysis.sweep.lock import LOCK, take
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    for pid, started in [(gone.pid, 1.0), (os.getpid(), 1.0)]:
+        where = _lock_of({**_this_host(), "pid": pid, "started": started})
+        lock = take(where)
+        assert json.loads(where.read_text(LOCK))["pid"] == os.getpid()
+        lock.release()
+        assert capsys.readouterr().err == (
+            f"{where.show(LOCK)}: its sweep (process {pid} on this host) has ended: taking it\n"
+        )
+
+
+def test_a_lock_of_another_host_is_refused_with_how_to_free_it() -> None:
+    """A holder on another host cannot be seen from here: refused, and the
+    line says which file to remove if it is gone (an unreadable lock too)."""
+    from gyrogen.analysis.sweep.lock import LOCK, take
+
+    for holder, who in [
+        (
+            {**_this_host(), "host": "elsewhere", "pid": 1, "started": 1.0},
+            " (process 1 on elsewhere)",
+        ),
+        ({}, ""),
+    ]:
+        where = _lock_of(holder)
+        with pytest.raises(GyrogenError) as exc:
+            take(where)
+        assert str(exc.value) == (
+            f"{where.show()} is being written by another sweep{who}: wait for it to end, or "
+            f"use another --out; if it is gone, remove {where.show(LOCK)}"
+        )
+        assert json.loads(where.read_text(LOCK)) == holder
+
+
+def test_a_lock_that_cannot_be_made_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A local file system without flock, a URL whose lock cannot be
+    written: one line naming the lock and why."""
+    import errno
+    import fcntl
+
+    from gyrogen.analysis.sweep.lock import take
+
+    def no_locks(*args: object) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(fcntl, "flock", no_locks)
+        with pytest.raises(GyrogenError) as exc:
+            take(Store(str(tmp_path / "o")))
+    assert str(exc.value) == f"cannot lock {tmp_path}/o/sweep.lock: No locks available"
+    where = _memory("unwritable")
+
+    def refused(*args: object, **kwargs: object) -> None:
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(type(where.fs), "open", refused)
+    with pytest.raises(GyrogenError) as exc:
+        take(where)
+    assert str(exc.value) == "cannot write memory://unwritable/sweep.lock: Permission denied"

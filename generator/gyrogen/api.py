@@ -260,7 +260,7 @@ def sweep(
 
     chosen = spec if isinstance(spec, Spec) else load_spec(str(spec))
     where = store(out if out is not None else Path("sweep") / chosen.name)
-    record = engine.run(
+    with engine.run(
         chosen,
         where,
         scheduler=scheduler,
@@ -270,8 +270,8 @@ def sweep(
         portable=portable,
         plots=plots,
         meanwhile=report.load_plots if plots else None,
-    )
-    report.write(chosen, record, plots=plots)
+    ) as record:
+        report.write(chosen, record, plots=plots)
     return read(where)
 
 
@@ -286,7 +286,8 @@ def read(out: str | Path | Store) -> pd.DataFrame:
     Returns
     -------
     pandas.DataFrame
-        Its rows, one per trajectory computed, in sample order.
+        Its rows, one per trajectory computed, in sample order. Each part
+        is checked as a resume checks it.
 
     Raises
     ------
@@ -294,22 +295,30 @@ def read(out: str | Path | Store) -> pd.DataFrame:
         `out` is no valid place (a URL gyrogen cannot use).
     FileNotFoundError
         `out` holds no sweep's parts.
+    GyrogenError
+        A part whose footer disagrees with its name or the sweep.
 
     Examples
     --------
     >>> from gyrogen import api
     >>> rows = api.read("sweep/mine")  # doctest: +SKIP
     """
-    import pandas as pd
+
+    import pyarrow.parquet as pq
 
     from gyrogen.analysis.sweep.columns import PARTS
+    from gyrogen.analysis.sweep.parts import trusted
 
     where = store(out)
-    # the path itself, never re-read as a URL (./s3:x is a directory; FILE:/// is file:///)
+    names = trusted(where)
+    if not names:
+        raise GyrogenError(f"{where.show(PARTS)}: no parts yet")
+    # the paths themselves, never re-read as URLs (./s3:x is a directory; FILE:/// is file:///)
     if where.local:
-        frame = pd.read_parquet(os.path.abspath(where.path(PARTS)))
+        table = pq.read_table([os.path.abspath(where.path(PARTS, n)) for n in names])
     else:
-        frame = pd.read_parquet(where.path(PARTS), filesystem=where.fs)
+        table = pq.read_table([where.path(PARTS, n) for n in names], filesystem=where.fs)
+    frame = table.to_pandas()
     return frame.sort_values("sample", kind="stable").reset_index(drop=True)
 
 

@@ -116,7 +116,10 @@ def sweep(
     metrics, written chunk by chunk; then summary.json, summary.md and
     figures. Rerun into the same --out to resume, with any --chunk: only
     what is left is computed, if this gyrogen, its generated code and its
-    build flags are those that began the sweep (else refused: --restart).
+    build flags are those that began the sweep (else refused: --restart);
+    a part is kept only when its footer says it holds the samples of its
+    name, of this sweep and build. One sweep writes an --out at a time: a
+    second is refused while the first runs.
     Unless --quiet, the local engine serves a dashboard on 127.0.0.1 and
     prints its address on stderr."""
     from gyrogen.analysis.sweep import engine, report
@@ -127,7 +130,7 @@ def sweep(
         raise click.UsageError("--shared is for --scheduler: the local engine writes its parts")
     out = out or Path("sweep") / spec.name
     plots = None if no_plots else report.load_plots  # matplotlib while the chunks run
-    record = engine.run(
+    with engine.run(
         spec,
         out,
         scheduler=scheduler,
@@ -139,8 +142,8 @@ def sweep(
         portable=portable,
         plots=not no_plots,
         meanwhile=plots,
-    )
-    data = report.write(spec, record, plots=not no_plots)
+    ) as record:  # out's lock held until the summary is written
+        data = report.write(spec, record, plots=not no_plots)
     for line in report.markdown(data).splitlines()[2:]:
         if line and not line.startswith("|"):
             click.echo(line)

@@ -55,31 +55,32 @@ def part_name(start: int, stop: int) -> str:
     return f"part-{start:0{DIGITS}d}-{stop:0{DIGITS}d}.parquet"
 
 
+def samples_of(name: str) -> tuple[int, int] | None:
+    """The (start, stop) a part's name says (None: not a part's name)."""
+    m = _PART.fullmatch(name)
+    return (int(m[1]), int(m[2])) if m else None
+
+
 def written(out: Store | Path) -> list[tuple[int, int]]:
-    """The (start, stop) of the parts in out, in order."""
-    names = store(out).listdir(PARTS)
-    return sorted((int(m[1]), int(m[2])) for n in names if (m := _PART.fullmatch(n)))
+    """The (start, stop) the names of the parts in out say, in order (what
+    each holds is its footer's word: parts.verdict)."""
+    return sorted(filter(None, map(samples_of, store(out).listdir(PARTS))))
 
 
-def part_files(out: Store | Path) -> list[str]:
-    """The names of the parts in out, in sample order (nothing else that is there)."""
-    return [part_name(a, b) for a, b in written(out)]
-
-
-def scan(out: Store | Path, names: list[str]) -> Iterator[dict[str, np.ndarray]]:
-    """The named columns of each part in turn (one file open at a time)."""
+def scan(out: Store | Path, parts: list[str], names: list[str]) -> Iterator[dict[str, np.ndarray]]:
+    """The named columns of each of the parts in turn (one file open at a time)."""
     import pyarrow.parquet as pq
 
     where = store(out)
-    for name in part_files(where):
-        with where.open(PARTS, name) as source, pq.ParquetFile(source) as f:
+    for part in parts:
+        with where.open(PARTS, part) as source, pq.ParquetFile(source) as f:
             table = f.read(columns=names)  # ParquetFile, not read_table: no pandas
         yield {n: numpy_of(table.column(n)) for n in names}
 
 
-def column(out: Store | Path, name: str) -> np.ndarray:
-    """The column name of every part in out, in the parts' order."""
-    return np.concatenate([part[name] for part in scan(out, [name])])
+def column(out: Store | Path, parts: list[str], name: str) -> np.ndarray:
+    """The column name of the parts, in their order."""
+    return np.concatenate([part[name] for part in scan(out, parts, [name])])
 
 
 def numpy_of(chunked: Any) -> np.ndarray:
@@ -95,10 +96,10 @@ def numpy_of(chunked: Any) -> np.ndarray:
     return pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
 
 
-def in_order(out: Store | Path, names: list[str]) -> dict[str, np.ndarray]:
-    """Columns in sample order."""
-    order = np.argsort(column(out, "sample"), kind="stable")
-    return {n: column(out, n)[order] for n in names}
+def in_order(out: Store | Path, parts: list[str], names: list[str]) -> dict[str, np.ndarray]:
+    """Columns of the parts in sample order."""
+    order = np.argsort(column(out, parts, "sample"), kind="stable")
+    return {n: column(out, parts, n)[order] for n in names}
 
 
 @dataclass(frozen=True)
@@ -243,14 +244,14 @@ Spread = tuple[dict[str, float | int], Histogram]
 
 
 def spreads(
-    out: Store | Path, names: list[str], counted: tuple[str, ...] = ()
+    out: Store | Path, parts: list[str], names: list[str], counted: tuple[str, ...] = ()
 ) -> tuple[dict[str, dict[str, int]], dict[str, Spread]]:
     """How many rows hold each value of the counted (integer) columns, and
     each named column's min, median, p99, max and mean over its finite
-    values, and its histogram, streamed over the parts."""
+    values, and its histogram, streamed over the parts (names in out)."""
     found = {n: _Column() for n in names}
     tallies: dict[str, dict[int, int]] = {n: {} for n in counted}
-    for part in scan(out, [*counted, *(n for n in names if n not in counted)]):
+    for part in scan(out, parts, [*counted, *(n for n in names if n not in counted)]):
         for n, tally in tallies.items():
             keys_, seen = np.unique(part[n], return_counts=True)
             for k, c in zip(keys_.tolist(), seen.tolist(), strict=True):
@@ -262,7 +263,7 @@ def spreads(
         c.plan()
     first = bool(found)
     while first or any(c.pending() for c in found.values()):
-        for part in scan(out, names):
+        for part in scan(out, parts, names):
             for n, c in found.items():
                 v = part[n].astype(np.float64, copy=False)
                 v = v[np.isfinite(v)]

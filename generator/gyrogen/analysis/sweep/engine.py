@@ -16,7 +16,9 @@ the client, from the bytes the task returns. A worker that dies
 loses nothing: Dask reschedules its chunks. A rerun of the same sweep into
 the same directory, with any chunk size, computes only what is left
 (resume after a crash or Ctrl-C); a directory holding another sweep, or
-this one begun by another build, is refused.
+this one begun by another build, is refused, and so is one that another
+sweep is writing (analysis/sweep/lock.py: a sweep holds its output's
+lock until its summary is written).
 
 The code is built for the workers' CPU (-march=native: 3.6x faster than
 portable code here), which the identity records: workers of different CPUs
@@ -43,6 +45,7 @@ import numpy as np
 from gyrogen import __version__
 from gyrogen.analysis.sweep.columns import PARTS
 from gyrogen.analysis.sweep.dask_client import engine
+from gyrogen.analysis.sweep.lock import Lock, take
 from gyrogen.analysis.sweep.metrics import column_docs, run_chunk
 from gyrogen.analysis.sweep.parts import (
     check_out,
@@ -118,7 +121,7 @@ def chunk_task(job: Job, start: int, stop: int) -> Done:
         )
     comp = compiled(job.sources)
     t0 = time.perf_counter()
-    data = parquet_bytes(run_chunk(comp, job.spec, start, stop), part_metadata(job))
+    data = parquet_bytes(run_chunk(comp, job.spec, start, stop), part_metadata(job, start, stop))
     if (where := job.parts) is not None:
         if where.has_dirs and where.kind(PARTS) != "dir":  # the client made it: not seen here
             raise GyrogenError(
@@ -130,14 +133,18 @@ def chunk_task(job: Job, start: int, stop: int) -> Done:
     return Done(start, stop, time.perf_counter() - t0, data)
 
 
-def part_metadata(job: Job) -> dict[str, Any]:
-    """What a part says of itself (Parquet schema metadata, readable without
-    gyrogen): each column's unit and meaning, and the sweep's identity,
-    spec, seed and scene."""
+def part_metadata(job: Job, start: int, stop: int) -> dict[str, Any]:
+    """What the part of samples start..stop says of itself (Parquet schema
+    metadata, readable without gyrogen): each column's unit and meaning, and
+    its samples, the sweep's fingerprint and identity (what a resume checks
+    against its name and sweep.json: parts.verdict), spec, seed and
+    scene."""
     spec = job.spec
     return {
         "columns": {n: {"unit": u, "meaning": m} for n, (u, m) in column_docs(spec).items()},
         "gyrogen": {
+            "samples": [start, stop],
+            "fingerprint": spec.fingerprint(),
             "identity": job.identity,
             "sweep": spec.name,
             "spec": json.loads(spec.sweep.model_dump_json()),
@@ -150,7 +157,8 @@ def part_metadata(job: Job) -> dict[str, Any]:
 
 @dataclass
 class Run:
-    """How a sweep ran: what was skipped and computed, and the times."""
+    """How a sweep ran: what was skipped and computed, the times, and its
+    parts; while open (with run(...) as record:), out's lock is held."""
 
     out: Store
     job: Job
@@ -164,6 +172,22 @@ class Run:
     task_seconds: list[float] = field(default_factory=list)
     rows: int = 0
     """Trajectories computed by this run."""
+    parts: list[str] = field(default_factory=list)
+    """The names of the sweep's parts in sample order: those found whole and
+    those made (what its summary reads)."""
+    lock: Lock | None = None
+
+    def __enter__(self) -> Run:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """out's lock released: another sweep may write there."""
+        if self.lock is not None:
+            self.lock.release()
+            self.lock = None
 
 
 def run(
@@ -180,7 +204,9 @@ def run(
     plots: bool = True,
     meanwhile: Callable[[], object] | None = None,
 ) -> Run:
-    """Every sample of spec not yet in out, computed and written; restart:
+    """Every sample of spec not yet in out, computed and written, out's
+    lock held until the Run returned is closed (its summary written under
+    it: with run(...) as record); restart:
     begin anew where out holds this sweep begun by another build; shared:
     the cluster's workers reach out at the same path and write the parts;
     portable: build for any CPU rather than the workers' (-march=native);
@@ -198,22 +224,31 @@ def run(
     cpu = None if portable or scheduler else native_target()
     if scheduler is None:  # refusals first, before any work (a cluster's CPU is asked below)
         check_out(out, spec, identity(spec, sources, cpu), restart, ends)
-    with engine(scheduler, threads, progress) as (client, name, n):
-        if scheduler is not None and not portable:
-            cpu = _cpu(client, scheduler)
-        ident = identity(spec, sources, cpu)
-        state = check_out(out, spec, ident, restart, ends)
-        job = Job(spec, sources, chunk, ident, writers)
-        out.make_dir(PARTS)
-        done = claim(out, state)
-        record = Run(out, job, name, n, skipped=len(done))
-        scattered = client.scatter(job, broadcast=True, hash=False)
-        record.startup = time.perf_counter() - began
-        started = time.perf_counter()
-        todo = left(done, spec.size, chunk)
-        made = _compute(client, scattered, record, done, todo, progress, meanwhile)
-        record.wall = time.perf_counter() - started
-    _strays(out, {*done, *made})
+    lock: Lock | None = None
+    try:
+        with engine(scheduler, threads, progress) as (client, name, n):
+            if scheduler is not None and not portable:
+                cpu = _cpu(client, scheduler)
+            ident = identity(spec, sources, cpu)
+            lock = take(out)
+            state = check_out(out, spec, ident, restart, ends)  # again, under the lock
+            job = Job(spec, sources, chunk, ident, writers)
+            out.make_dir(PARTS)
+            done = claim(out, state)
+            record = Run(out, job, name, n, skipped=len(done), lock=lock)
+            scattered = client.scatter(job, broadcast=True, hash=False)
+            record.startup = time.perf_counter() - began
+            started = time.perf_counter()
+            todo = left(done, spec.size, chunk)
+            made = _compute(client, scattered, record, done, todo, progress, meanwhile)
+            record.wall = time.perf_counter() - started
+        kept = sorted({*done, *made})
+        _strays(out, set(kept))
+    except BaseException:
+        if lock is not None:
+            lock.release()
+        raise
+    record.parts = [part_name(a, b) for a, b in kept]
     return record
 
 

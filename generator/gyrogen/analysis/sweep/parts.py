@@ -5,11 +5,16 @@ another began: what is left is the gaps between the parts that are whole,
 cut at multiples of this run's chunk (a clean run's parts are the same
 whatever was done before).
 
-A part is written all or nothing (Store.write: locally a temporary name,
-fsynced, renamed; store.py says what holds for each URL protocol), by
-the client or by the worker that computed it; a part cut short (a crash, a
-full disk), computed with another identity, or overlapping another is
-computed again.
+A part is what its footer says, not its name: a resume keeps a part only
+when its footer (read alone, not the rows) records the samples of its name,
+as many rows, rows whose statistics say those samples, and the sweep's
+fingerprint and identity as sweep.json has them (verdict); any other is
+computed again with a note saying which and why, and a reader (api.read)
+refuses it. A part is written all or nothing (Store.write: locally a
+temporary name, fsynced, renamed; store.py says what holds for each
+URL protocol), by the client or by the worker that computed it. A
+directory in the parts folder, or a part named for samples outside the
+sweep's, is refused before any work (strays).
 """
 
 from __future__ import annotations
@@ -23,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis.sweep.columns import PARTS, part_name, written
+from gyrogen.analysis.sweep.columns import PARTS, part_name, samples_of, written
+from gyrogen.analysis.sweep.lock import LOCK
 from gyrogen.analysis.sweep.spec import Spec
 from gyrogen.analysis.sweep.store import Store
 from gyrogen.errors import GyrogenError
@@ -60,27 +66,107 @@ def write_part(out: Store, start: int, stop: int, data: bytes) -> None:
     out.write({part_name(start, stop): data}, PARTS)
 
 
-def whole(out: Store, name: str, rows: int, ident: dict[str, str]) -> bool:
-    """Whether the part name is a complete Parquet file of rows rows (its
-    footer read back) computed with this identity."""
+def verdict(out: Store, start: int, stop: int, state: dict[str, Any]) -> str | None:
+    """Why the part of samples start..stop is not this sweep's (None: it
+    is), from its footer alone: the samples it records, its rows' count and
+    the statistics of their sample column against its name; its fingerprint
+    and identity against state (sweep.json's)."""
     import pyarrow.parquet as pq
 
     try:
-        with out.open(PARTS, name) as source, pq.ParquetFile(source) as f:
+        with out.open(PARTS, part_name(start, stop)) as source, pq.ParquetFile(source) as f:
             meta = f.metadata
-        held = json.loads(meta.metadata[b"gyrogen"])["identity"]
-        return bool(meta.num_rows == rows and held == ident)
     except Exception:  # pyarrow's errors for a damaged file vary: ArrowInvalid, OSError
-        return False
+        return "damaged or cut short"
+    held = _recorded(meta)
+    says = held.get("samples")
+    if says != [start, stop]:
+        if not (isinstance(says, list) and len(says) == 2):
+            return "its footer records no samples"
+        return f"holds samples {says[0]} to {says[1]} (its footer), not {start} to {stop}"
+    if meta.num_rows != stop - start:
+        return f"holds {meta.num_rows} rows (its footer), not {stop - start}"
+    if _sample_range(meta) != (start, stop - 1):
+        return f"its rows' statistics do not say samples {start} to {stop}"
+    if held.get("fingerprint") != state["fingerprint"]:
+        return "computed for another sweep (its footer)"
+    if held.get("identity") != state["identity"]:
+        return "computed with another build (its footer)"
+    return None
+
+
+def _recorded(meta: Any) -> dict[str, Any]:
+    """What a part's footer records of it (engine.part_metadata; {}: nothing)."""
+    try:
+        held = json.loads((meta.metadata or {})[b"gyrogen"])
+    except (KeyError, ValueError):
+        return {}
+    return held if isinstance(held, dict) else {}
+
+
+def _sample_range(meta: Any) -> tuple[int, int] | None:
+    """The least and greatest sample of a part's rows, from its row groups'
+    statistics (None: not recorded)."""
+    if "sample" not in meta.schema.names:
+        return None
+    at = meta.schema.names.index("sample")
+    low, high = [], []
+    for g in range(meta.num_row_groups):
+        stats = meta.row_group(g).column(at).statistics
+        if stats is None or not stats.has_min_max:
+            return None
+        low.append(stats.min)
+        high.append(stats.max)
+    return (min(low), max(high)) if low else None
+
+
+def strays(out: Store, size: int) -> None:
+    """Before any work: a one-line GyrogenError for what the parts folder
+    may not hold: anything but files (a directory, whatever its name), and
+    a part whose name says samples not within the sweep's 0..size."""
+    for name, kind in sorted(out.entries(PARTS).items()):
+        if kind != "file":
+            what = "a directory" if kind == "dir" else "not a file"
+            raise GyrogenError(
+                f"{out.show(PARTS, name)}: {what}, and the parts folder holds files only: "
+                "remove it or use another --out"
+            )
+        if (said := samples_of(name)) and not 0 <= said[0] < said[1] <= size:
+            raise GyrogenError(
+                f"{out.show(PARTS, name)}: names samples {said[0]} to {said[1]}, not within "
+                f"this sweep's 0 to {size}: not its part: remove it or use another --out"
+            )
+
+
+def trusted(out: Store) -> list[str]:
+    """The names of the parts of the sweep in out, in sample order, each
+    checked as a resume checks it (strays, overlaps, verdict) against
+    out's sweep.json: a one-line GyrogenError for the first that fails."""
+    state = read_state(out, ())
+    if state is None:
+        raise GyrogenError(f"{out.show()}: holds no sweep (no {STATE_FILE})")
+    strays(out, state["trajectories"])
+    names: list[str] = []
+    end = 0
+    for a, b in written(out):
+        why = "overlaps another part" if a < end else verdict(out, a, b, state)
+        if why is not None:
+            raise GyrogenError(
+                f"{out.show(PARTS, part_name(a, b))}: {why}: rerun the sweep to compute it again"
+            )
+        names.append(part_name(a, b))
+        end = b
+    return names
 
 
 def read_state(out: Store, ends: tuple[str, ...] = SUMMARY_FILES) -> dict[str, Any] | None:
     """The sweep state out holds (None: none yet); obstacles refused: a
     parts that is no directory, a directory (or FIFO) where a file goes
-    (the state file, and ends: the summary files the sweep will write)."""
+    (the state file, the lock, and ends: the summary files the sweep will
+    write)."""
     if out.kind(PARTS) not in ("absent", "dir"):
         raise GyrogenError(f"{out.show(PARTS)}: not a directory: remove it or use another --out")
-    for name in (STATE_FILE, *ends):
+    for name in (STATE_FILE, LOCK, *ends):
         if out.kind(name) not in ("absent", "file"):
             raise GyrogenError(
                 f"{out.show(name)}: not a file, and the sweep writes one there: remove it or use "
@@ -95,8 +181,11 @@ def read_state(out: Store, ends: tuple[str, ...] = SUMMARY_FILES) -> dict[str, A
         why = getattr(exc, "strerror", None) or exc
         raise GyrogenError(f"{path}: unreadable ({why}): remove it or use another --out") from exc
     missing = [k for k in STATE_KEYS if k not in held] if isinstance(held, dict) else None
-    if missing is None or missing or not isinstance(held.get("identity", {}), dict):
+    size = held.get("trajectories") if isinstance(held, dict) else None
+    count = isinstance(size, int) and not isinstance(size, bool) and size >= 0
+    if missing is None or missing or not isinstance(held.get("identity", {}), dict) or not count:
         why = ("not a JSON object" if missing is None else f"no {', '.join(missing)}" if missing
+               else "its trajectories is not a count" if not count
                else "its identity is not a JSON object")  # fmt: skip
         raise GyrogenError(
             f"{path}: not a gyrogen sweep state ({why}): remove it or use another --out"
@@ -110,8 +199,9 @@ def check_out(
     """Before any work: out can hold this sweep (nothing in the way of its
     state, parts or ends, the summary files it will write; no other sweep in
     it, and a sweep begun there was computed with the same identity, unless
-    restart); the state file to write. The chunk size is not the sweep's:
-    another resumes it."""
+    restart; nothing in its parts folder but files, and no part named for
+    samples not its own: strays); the state file to write. The chunk size
+    is not the sweep's: another resumes it."""
     state: dict[str, Any] = {"sweep": spec.name, "fingerprint": spec.fingerprint()}
     state |= {"trajectories": spec.size, "scene": spec.scene.name}  # and identity: STATE_KEYS
     held = read_state(out, ends)
@@ -134,13 +224,16 @@ def check_out(
             f"{', '.join(changed)}): its rows would mix two codes; --restart computes it anew, "
             "or use another --out"
         )
+    strays(out, spec.size)
     return state | {"identity": ident}
 
 
 def claim(out: Store, state: dict[str, Any]) -> list[tuple[int, int]]:
-    """out for this sweep: its state file written, what a killed writer left
-    removed; the (start, stop) of the parts that are whole, in order (a
-    damaged one, or one overlapping another, is removed to be computed again)."""
+    """out for this sweep (its lock held, check_out passed): its state file
+    written, what a killed writer left removed; the (start, stop) of the
+    parts that are whole, in order (one overlapping another, or that is not
+    what its name says, verdict, is removed to be computed again, with a
+    note saying which and why)."""
     if read_state(out, ()) != state:  # new, or begun by another build and restarted
         for a, b in written(out):
             out.remove(PARTS, part_name(a, b))
@@ -150,15 +243,12 @@ def claim(out: Store, state: dict[str, Any]) -> list[tuple[int, int]]:
     done: list[tuple[int, int]] = []
     for a, b in written(out):
         name = part_name(a, b)
-        if (done and a < done[-1][1]) or b > state["trajectories"] or b <= a:
-            print(f"{out.show(PARTS, name)}: overlaps another part: computing it again",
-                  file=sys.stderr)  # fmt: skip
-        elif whole(out, name, b - a, state["identity"]):
+        if done and a < done[-1][1]:
+            why: str | None = "overlaps another part"
+        elif (why := verdict(out, a, b, state)) is None:
             done.append((a, b))
             continue
-        else:
-            print(f"{out.show(PARTS, name)}: damaged or cut short: computing it again",
-                  file=sys.stderr)  # fmt: skip
+        print(f"{out.show(PARTS, name)}: {why}: computing it again", file=sys.stderr)
         out.remove(PARTS, name)
     return done
 

@@ -2,7 +2,8 @@
 summary.md (the run's figures, return codes, each metric's spread, the
 criterion's agreement share), histograms.png and, for a 2-D grid, map.png.
 
-The parts are read back one column at a time (analysis/sweep/columns.py).
+The parts are read back one column at a time (analysis/sweep/columns.py):
+those the run found whole or made (Run.parts), nothing else that is there.
 
 The spin-stability criterion (NOTES.md, analysis/check/engine.spin_axes):
 a trajectory is observed unstable when its max nutation angle exceeds
@@ -21,14 +22,7 @@ import numpy as np
 
 from gyrogen.abi import UNITS
 from gyrogen.analysis.check.engine import spin_axes, spin_stable
-from gyrogen.analysis.sweep.columns import (
-    PARTS,
-    Histogram,
-    in_order,
-    part_files,
-    scan,
-    spreads,
-)
+from gyrogen.analysis.sweep.columns import PARTS, Histogram, in_order, scan, spreads
 from gyrogen.analysis.sweep.draws import axis_values
 from gyrogen.analysis.sweep.engine import Run
 from gyrogen.analysis.sweep.parts import HISTOGRAMS_PNG, MAP_PNG, SUMMARY_JSON, SUMMARY_MD
@@ -53,14 +47,14 @@ def spin_values(spec: Spec, data: dict[str, np.ndarray]) -> dict[str, Any]:
     return {n: data[n] if n in data else np.float64(base.get(n, 0.0)) for n in SPIN_NAMES}
 
 
-def spin_agreement(spec: Spec, out: Store) -> dict[str, Any]:
+def spin_agreement(spec: Spec, out: Store, parts: list[str]) -> dict[str, Any]:
     """The criterion against the observed growth, counted part by part."""
     crit = spec.sweep.criterion.spin_stability
     assert crit is not None
     swept = [n for n in SPIN_NAMES if n in spec.variables]
     found = dict.fromkeys(("cells", "judged", "in_band", "not_finished", "agree"), 0)
     found |= dict.fromkeys(("predicted_unstable", "observed_unstable"), 0)
-    for data in scan(out, [*swept, "code", "nutation_0", "max_nutation"]):
+    for data in scan(out, parts, [*swept, "code", "nutation_0", "max_nutation"]):
         v = spin_values(spec, data)
         omega = np.broadcast_to(v["u2"], data["code"].shape)
         spinning = omega != 0
@@ -127,17 +121,17 @@ def summary(
         "samples": sweep.metrics.points,
         "trajectories": spec.size,
         "chunk": record.job.chunk,
-        "parts": len(part_files(out)),
+        "parts": len(record.parts),
         "run": timing(record),
         "metrics": {},
     }
-    codes, found = spreads(out, shown, ("setup_code", "code"))  # streamed over the parts
+    codes, found = spreads(out, record.parts, shown, ("setup_code", "code"))  # streamed
     data["setup_codes"], data["integrator_codes"] = codes["setup_code"], codes["code"]
     histograms = {}
     for name, (stats, histogram) in found.items():
         data["metrics"][name], histograms[name] = stats, histogram
     if sweep.criterion.spin_stability is not None:
-        data["spin_stability"] = spin_agreement(spec, out)
+        data["spin_stability"] = spin_agreement(spec, out, record.parts)
     return data, histograms
 
 
@@ -181,7 +175,7 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
     (parts.summary_files: kept clear before any work)."""
     import pyarrow.parquet as pq
 
-    with record.out.open(PARTS, part_files(record.out)[0]) as source:
+    with record.out.open(PARTS, record.parts[0]) as source:
         columns = list(pq.read_schema(source).names)
     data, histograms = summary(spec, record, metric_columns(spec, columns))
     files: dict[str, str | bytes] = {SUMMARY_MD: markdown(data)}
@@ -189,7 +183,7 @@ def write(spec: Spec, record: Run, plots: bool = True) -> dict[str, Any]:
         from gyrogen.analysis.sweep.plots import histograms_png, map_png  # matplotlib
 
         files[HISTOGRAMS_PNG] = histograms_png(f"sweep {spec.name}", histograms)
-        if (grid := map_data(spec, record.out, columns)) is not None:
+        if (grid := map_data(spec, record, columns)) is not None:
             files[MAP_PNG] = map_png(grid)
     data["files"] = [SUMMARY_JSON, *files]
     files[SUMMARY_JSON] = json.dumps(data, indent=1) + "\n"
@@ -202,7 +196,7 @@ def load_plots() -> None:
     import gyrogen.analysis.sweep.plots  # noqa: F401
 
 
-def map_data(spec: Spec, out: Store, columns: list[str]) -> MapData | None:
+def map_data(spec: Spec, record: Run, columns: list[str]) -> MapData | None:
     """A 2-D product grid's map of its first metric (the median over the
     draws of each cell), with NOTES.md's boundary when the sweep has the
     spin criterion; None for other sweeps, and when no cell has a value
@@ -215,7 +209,7 @@ def map_data(spec: Spec, out: Store, columns: list[str]) -> MapData | None:
         return None
     (y_name, y_axis), (x_name, x_axis) = sweep.grid.items()
     y, x = axis_values(y_axis), axis_values(x_axis)
-    z = in_order(out, [metric])[metric].reshape(len(y), len(x), sweep.count)
+    z = in_order(record.out, record.parts, [metric])[metric].reshape(len(y), len(x), sweep.count)
     ys, xs = np.argsort(y, kind="stable"), np.argsort(x, kind="stable")  # listed in any order
     y, x, z = y[ys], x[xs], z[ys][:, xs]
     if not np.isfinite(z).any():

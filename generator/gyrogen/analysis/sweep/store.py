@@ -146,6 +146,22 @@ class Store:
             raise self._error("cannot list", names, exc) from exc
         return [posixpath.basename(str(p).rstrip("/")) for p in found]
 
+    def entries(self, *names: str) -> dict[str, str]:
+        """What the directory names holds ({} when it is not there): each
+        name's kind as kind() says it, from one listing."""
+        try:
+            if self.local:
+                with os.scandir(self.path(*names)) as found:
+                    return {e.name: _kind_of(e) for e in found}
+            found = self.fs.ls(self.path(*names), detail=True)
+        except FileNotFoundError:
+            return {}
+        except OSError as exc:
+            raise self._error("cannot list", names, exc) from exc
+        kinds = {"directory": "dir", "file": "file"}
+        return {posixpath.basename(str(e["name"]).rstrip("/")): kinds.get(e.get("type"), "other")
+                for e in found}  # fmt: skip
+
     def read_text(self, *names: str) -> str:
         """The file's text; OSError (FileNotFoundError when absent) as raised."""
         if self.local:
@@ -226,6 +242,17 @@ class Store:
     def _error(self, what: str, names: tuple[str, ...], exc: OSError) -> GyrogenError:
         why = exc.strerror or str(exc) or type(exc).__name__
         return GyrogenError(f"{what} {self.show(*names)}: {why}")
+
+
+def _kind_of(entry: os.DirEntry[str]) -> str:
+    """A directory entry's kind as Store.kind says it (a link: what it
+    points to; a dangling link is a file)."""
+    try:
+        if entry.is_dir():
+            return "dir"
+        return "file" if entry.is_file() or not os.path.exists(entry.path) else "other"
+    except OSError:
+        return "other"
 
 
 def store(out: str | Path | Store) -> Store:
