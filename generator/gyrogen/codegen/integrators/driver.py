@@ -107,9 +107,9 @@ def stop_code(nonfinite: Var) -> E:
     )
 
 
-def last_step() -> E:
-    """A step of h from t ends on t1 (within registry.LAST_STEP_SLACK)."""
-    return cmp(t + Num(registry.LAST_STEP_SLACK) * h, ">=", t1)
+def last_step(step: E = h) -> E:
+    """A step of step from t ends on t1 (within registry.LAST_STEP_SLACK)."""
+    return cmp(t + Num(registry.LAST_STEP_SLACK) * step, ">=", t1)
 
 
 def ended(attitude: E, ok: E, last: E, cd: Var) -> E:
