@@ -74,7 +74,12 @@ def started(m: Method, f0: E, into: Var) -> list[S]:
     """ode_start (common.ode_start): into := its code, returned when it stops."""
     args = (Int(m.start_order), Const(m.min_rtol), t0, t1, x, c, Var("rtol"), Var("atol"),
             Var("h0"), Var("max_steps"), f0, Ref("h"), Var("stats"))  # fmt: skip
-    return [assign(into, fn("ode_start", *args)), If(cmp(into, ">=", 0), (Return(into),))]
+    return [assign(into, fn("ode_start", *args)), stopped(into)]
+
+
+def stopped(cd: Var) -> S:
+    """cd a stop code (not GOING_ON): return it."""
+    return If(cmp(cd, ">=", 0), (Return(cd),))
 
 
 # The stop tests
