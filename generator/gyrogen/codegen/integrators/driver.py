@@ -64,10 +64,15 @@ PARAMS = (real("t0"), real("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)
 """<method>_integrate's arguments, every adaptive method's."""
 
 
-def count(field: str, by: E | int) -> S:
-    """stats.field += by (a field of abi.STATS_FIELDS)."""
+def stat(field: str) -> Var:
+    """stats.field, a field of abi.STATS_FIELDS."""
     assert field in {f.name for f in abi.STATS_FIELDS}, field
-    return inc(Var(f"stats.{field}"), by)
+    return Var(f"stats.{field}")
+
+
+def count(field: str, by: E | int) -> S:
+    """stats.field += by."""
+    return inc(stat(field), by)
 
 
 def started(m: Method, f0: E, into: Var) -> list[S]:
@@ -87,7 +92,7 @@ def stopped(cd: Var) -> S:
 
 def spent() -> E:
     """No steps left: accepted and rejected ones count."""
-    return cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps"))
+    return cmp(stat("accepted") + stat("rejected"), ">=", Var("max_steps"))
 
 
 def underflow_code(nonfinite: Var) -> E:
@@ -154,21 +159,26 @@ def rejected(flag: Var) -> list[S]:
     return [count("rejected", 1), assign(flag, True)]
 
 
-def accepted(quaternion: bool, last: Var, control: list[S], interpolant: list[S]) -> list[S]:
-    """An accepted step: a step past gimbal lock stops (x the state before
-    it); then control (the next h), interpolant (the dense output's
-    coefficients, from the step before x moves: radau5's collocation
-    polynomial, the next Newton iterations' start; empty for the rest),
-    x := xnew, t, counted, and OK after the last step."""
-    lock: list[S] = [] if quaternion else [If(fn("gimbal_lock", x, xnew), (
+def attitude_stop(quaternion: bool) -> list[S]:
+    """3-1-2 angles: a step that ends at gimbal lock or passes a point of it
+    stops, x the state before it (Euler parameters: nothing to check)."""
+    return [] if quaternion else [If(fn("gimbal_lock", x, xnew), (
         Return(ERR_ATTITUDE_SINGULAR, "x: the state before this step"),))]  # fmt: skip
+
+
+def accepted(quaternion: bool, last: Var, control: list[S], interpolant: list[S]) -> list[S]:
+    """An accepted step: attitude_stop; then control (the next h),
+    interpolant (the dense output's coefficients, from the step before x
+    moves: radau5's collocation polynomial, the next Newton iterations'
+    start; empty for the rest), x := xnew, t, counted, and OK after the
+    last step."""
     return [
-        *lock,
+        *attitude_stop(quaternion),
         *control,
         *interpolant,
         Call("accept_step", (x, xnew, Var("dx"), Var("comp"))),
         assign(t, sel(last, t1, t + h)),
-        assign(Var("stats.t"), t),
+        assign(stat("t"), t),
         count("accepted", 1),
         If(last, (Return(OK),)),
     ]
@@ -178,7 +188,7 @@ def counted(ok: E, retry: E, last: E) -> list[S]:
     """accepted's t and statistics by selection: ok taken, retry rejected."""
     return [
         assign(t, sel(ok, sel(last, t1, t + h), t)),
-        assign(Var("stats.t"), t),
+        assign(stat("t"), t),
         count("accepted", sel(ok, Int(1), Int(0))),
         count("rejected", sel(retry, Int(1), Int(0))),
     ]
@@ -201,6 +211,11 @@ class PI:
 
     ctl: PairControl
 
+    @staticmethod
+    def start() -> list[S]:
+        err_old, rejected_last = Var("err_old"), Var("rejected_last")
+        return [assign(err_old, registry.PAIR_ERR_FLOOR), assign(rejected_last, False)]
+
     def factors(self, err: Var, err_old: Var, rejected_last: Var) -> list[S]:
         """fac := h/h_new by err alone (a rejection's); grow := the PI
         controller's h/h_new (an acceptance's)."""
@@ -217,8 +232,12 @@ class PI:
                    "no growth after a rejection"),
         ]  # fmt: skip
 
-    def remember(self, ok: E, err: Var, err_old: Var) -> S:
-        return assign(err_old, sel(ok, fn("max", err, registry.PAIR_ERR_FLOOR), err_old))
+    def remember(self, ok: E, reject: E, err: Var, err_old: Var, rejected_last: Var) -> list[S]:
+        """After the step: err_old the accepted one's error, rejected_last."""
+        return [
+            assign(err_old, sel(ok, fn("max", err, registry.PAIR_ERR_FLOOR), err_old)),
+            assign(rejected_last, sel(ok, False, sel(reject, True, rejected_last))),
+        ]
 
     def next_h(self, keep: E, nonfinite: E, ok: E) -> S:
         """h unchanged (keep), shrunk by facmin (a non-finite trial), by the
@@ -254,7 +273,7 @@ class Gustafsson:
         ctl, gus = self.ctl, Var("gus")
         ratio = (self.h_acc / h) * fn("pow", err * err / self.err_acc, ctl.exponent)
         return [
-            If(cmp(Var("stats.accepted"), ">", 0), (
+            If(cmp(stat("accepted"), ">", 0), (
                 assign(gus, ratio / Num(ctl.safety)),
                 assign(quot, fn("max", quot, clamp(ctl, gus))),
                 *then,

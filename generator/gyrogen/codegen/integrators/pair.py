@@ -62,20 +62,14 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
     assert isinstance(ctl, registry.PairControl)
     tab = m.tableau
     assert isinstance(tab, Explicit)
-    cd, err, err_old, last = Var("code"), Var("err"), Var("err_old"), Var("last")
-    nonfinite, rejected_last, ok, run = (
-        Var("nonfinite"),
-        Var("rejected_last"),
-        Var("ok"),
-        Var("run"),
-    )
-    take, lock, t1 = Var("take"), Var("lock"), Var("t1")
+    names = "code err err_old last nonfinite rejected_last ok run take lock t1".split()
+    cd, err, err_old, last, nonfinite, rejected_last, ok, run, take, lock, t1 = map(Var, names)
     begin: list[S] = [
         Comment("begin: a step size lost in t, or no steps left, stops; a last step ends on t1"),
         assign(cd, sel(cmp(cd, "<", 0), driver.stop_code(nonfinite), cd)),
         assign(last, driver.last_step()),
         assign(h, sel(and_(cmp(cd, "<", 0), last), t1 - t, h)),
-        assign(Var("stats.h"), sel(cmp(cd, "<", 0), h, Var("stats.h"))),
+        assign(driver.stat("h"), sel(cmp(cd, "<", 0), h, driver.stat("h"))),
     ]
     check: list[S] = [
         Comment("check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken"),
@@ -88,17 +82,11 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
         fnew = k[m.fnew, i]
         check += [
             assign(ok, and_(cmp(cd, "<", 0), not_(nonfinite), cmp(err, "<=", 1.0), not_(last))),
-            If(
-                ok,
-                (
-                    Call(
-                        "rhs", (t + h, xnew, c, Row("k", Int(m.fnew))), "where the next step starts"
-                    ),
-                ),
-            ),
+            If(ok, (Call("rhs", (t + h, xnew, c, Row("k", Int(m.fnew))),
+                         "where the next step starts"),)),
             For("i", NX, (assign(nonfinite, or_(nonfinite, and_(ok, not_(fn("finite", fnew))))),)),
             driver.count("rhs_calls", sel(ok, Int(1), Int(0))),
-        ]
+        ]  # fmt: skip
     pi = driver.PI(ctl)
     reject = and_(run, not_(take))
     control: list[S] = [
@@ -110,8 +98,7 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
         *pi.factors(err, err_old, rejected_last),
         assign(cd, driver.ended(and_(take, lock), ok, last, cd)),
         *driver.counted(ok, reject, last),
-        pi.remember(ok, err, err_old),
-        assign(rejected_last, sel(ok, Bool(False), sel(reject, Bool(True), rejected_last))),
+        *pi.remember(ok, reject, err, err_old, rejected_last),
         pi.next_h(or_(not_(run), and_(take, lock)), nonfinite, ok),
     ]
     first: list[S] = [For("i", NX, (assign(k[0, i], k[m.fnew, i]),))]
@@ -124,21 +111,7 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
 
 STATE = ("code", "t", "h", "err_old", "nonfinite", "rejected_last")
 """A pair's values that live from step to step (besides x and stats)."""
-LOCALS = (
-    "last",
-    "err",
-    "run",
-    "take",
-    "lock",
-    "ok",
-    "fac",
-    "grow",
-    "total",
-    "err5",
-    "err3",
-    "deno",
-    "norm",
-)
+LOCALS = tuple("last err run take lock ok fac grow total err5 err3 deno norm".split())
 BOOLS = {"nonfinite", "rejected_last", "last", "run", "take", "lock", "ok"}
 
 
@@ -149,14 +122,7 @@ def declare(name: str) -> Decl:
 def state_arrays(krows: int) -> tuple[Decl, ...]:
     """The arrays of a trajectory: x, its stages, the new point, Kahan's comp."""
     rows = (Decl("k", "double", (krows, "NX"), "inout"),) if krows else ()
-    return (
-        arr("x", "inout"),
-        *rows,
-        arr("y", "inout"),
-        arr("xnew", "inout"),
-        arr("dx", "inout"),
-        arr("comp", "inout"),
-    )
+    return (arr("x", "inout"), *rows, *(arr(n, "inout") for n in ("y", "xnew", "dx", "comp")))
 
 
 def used_locals(body: list[S]) -> tuple[Decl, ...]:
@@ -166,11 +132,7 @@ def used_locals(body: list[S]) -> tuple[Decl, ...]:
 
 def start_state() -> list[S]:
     """A trajectory's values at t0, after ode_start (code -1: going on)."""
-    return [
-        *common.start_state(),
-        assign(Var("err_old"), registry.PAIR_ERR_FLOOR),
-        assign(Var("rejected_last"), Bool(False)),
-    ]
+    return [*common.start_state(), *driver.PI.start()]
 
 
 def integrate(m: Method, quaternion: bool, krows: int) -> Func:

@@ -186,7 +186,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
         If(v["need_jac"], tuple(jac)),
         *driver.stop_tests(v["nonfinite"]),
         If(v["need_lu"], tuple(lu)),
-        assign(Var("stats.h"), h),
+        assign(driver.stat("h"), h),
         *start_newton,
         Comment("outcome: 0 converged, 1 too slowly (h reduced), 2 failed"),
         assign(v["outcome"], 0),

@@ -148,7 +148,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         *driver.stop_tests(nonfinite),
         assign(last, driver.last_step()),
         If(last, (assign(h, t1 - t),)),
-        assign(Var("stats.h"), h),
+        assign(driver.stat("h"), h),
         Comment("E = I/(h gamma) - J"),
         For("i", Const("NX2"), (assign(lu[i], -J[i]),)),
         For("i", NX, (assign(ii, ii + Num(1.0) / (h * Num(R.gamma))),)),
