@@ -110,11 +110,8 @@ def stop_tests(nonfinite: Var) -> list[S]:
 
 def stop_code(nonfinite: Var) -> E:
     """stop_tests as one selection: the code to stop with, or GOING_ON."""
-    return sel(
-        fn("step_underflow", h, t),
-        underflow_code(nonfinite),
-        sel(spent(), ERR_MAX_STEPS, GOING_ON),
-    )
+    lost = fn("step_underflow", h, t)
+    return sel(lost, underflow_code(nonfinite), sel(spent(), ERR_MAX_STEPS, GOING_ON))
 
 
 def last_step(step: E = h) -> E:

@@ -59,6 +59,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
     c1, c2 = R.nodes[0], R.nodes[1]
     control = driver.Gustafsson(ctl)
     rejected: list[S] = [*driver.rejected(v["reject"]), assign(v["last"], False)]
+    refactor = [assign(v["need_lu"], True), assign(v["need_jac"], not_(v["fresh_jac"]))]
     jac: list[S] = [
         *driver.jacobian(v["J"]),
         assign(v["fresh_jac"], True),
@@ -198,8 +199,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
         If(cmp(v["outcome"], "!=", 0), (
             *rejected,
             If(cmp(v["outcome"], "==", 2), (assign(h, h * Num(ctl.newton_shrink)),)),
-            assign(v["need_lu"], True),
-            assign(v["need_jac"], not_(v["fresh_jac"])),
+            *refactor,
             Continue(),
         )),
         assign(quot, control.quotient(err, fac), "h_new = h / quot"),
@@ -207,8 +207,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
         If(cmp(err, "<", 1.0), tuple(accept), (
             *rejected,
             assign(h, sel(v["first"], h * Num(ctl.first_reject), h_new)),
-            assign(v["need_lu"], True),
-            assign(v["need_jac"], not_(v["fresh_jac"])),
+            *refactor,
         )),
     ]  # fmt: skip
     body = (
