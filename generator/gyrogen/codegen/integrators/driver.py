@@ -13,7 +13,8 @@ it has one, its interpolant); the driver holds the rest:
   from gyrogen.methods.
 
 rodas4's and radau5's loops are written with If and else from these parts;
-a pair's step and the Taylor method's take the same expressions and select
+a branch-free step (a pair's, printed over lanes too) takes the same
+expressions and selects: stop_code, ended, counted and the PI controller
 (every lane of a batch then takes the scalar path bit for bit).
 """
 
