@@ -54,6 +54,8 @@ TOLERANCES = (real("rtol"), real("atol"))
 
 
 def code(name: str) -> Const:
+    """The integrators' return code ODE_name (abi.ODE_CODES)."""
+    assert any(c.name == f"ODE_{name}" for c in abi.ODE_CODES), name
     return Const(f"ODE_{name}")
 
 

@@ -13,6 +13,7 @@ for bit.
 
 from __future__ import annotations
 
+from gyrogen.codegen.integrators import driver
 from gyrogen.codegen.integrators.common import (
     NX,
     STATS,
@@ -46,7 +47,6 @@ from gyrogen.codegen.ir.nodes import (
     assign,
     cmp,
     fn,
-    inc,
     not_,
     or_,
     real,
@@ -137,24 +137,18 @@ def fixed(m: Method, quaternion: bool) -> Func:
     step: list[S] = [assign(t, t0 + fn("real", n) * h), Call("rhs", (t, x, c, Row("k", Int(0))))]
     step += stages(tab)
     step += [
-        inc(Var("stats.rhs_calls"), tab.stages),
+        driver.count("rhs_calls", tab.stages),
         If(not_(finite_state(xnew, quaternion)), (Return(code("ERR_NONFINITE")),)),
     ]
-    if not quaternion:
-        step.append(
-            If(
-                fn("gimbal_lock", x, xnew),
-                (Return(code("ERR_ATTITUDE_SINGULAR"), "x: the state before this step"),),
-            )
-        )
     step += [
+        *driver.attitude_stop(quaternion),
         Call("accept_step", (x, xnew, dx, comp)),
-        inc(Var("stats.accepted"), 1),
-        assign(Var("stats.t"), sel(cmp(n + 1, "==", steps), t1, t + h)),
+        driver.count("accepted", 1),
+        assign(driver.stat("t"), sel(cmp(n + 1, "==", steps), t1, t + h)),
     ]
     body += [
         assign(h, (t1 - t0) / fn("real", steps)),
-        assign(Var("stats.h"), h),
+        assign(driver.stat("h"), h),
         For("n", steps, tuple(step), type="long"),
         Return(code("OK")),
     ]

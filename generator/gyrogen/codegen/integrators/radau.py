@@ -11,6 +11,7 @@ the eigenvalues of A^-1 being gamma and alpha +- i beta. The step is x + z3.
 from __future__ import annotations
 
 from gyrogen import methods as registry
+from gyrogen.codegen.integrators import driver
 from gyrogen.codegen.integrators.common import (
     NX,
     STATS,
@@ -47,7 +48,6 @@ from gyrogen.codegen.ir.nodes import (
     assign,
     cmp,
     fn,
-    inc,
     not_,
     sel,
 )
@@ -168,7 +168,7 @@ def error(m: Method) -> Func:
         If(and_(cmp(norm, ">=", 1.0), Var("again")), (
             each(assign(y[i], x[i] + err[i])),
             Call("rhs", (t, y, c, err)),
-            inc(Var("stats.rhs_calls"), 1),
+            driver.count("rhs_calls", 1),
             each(assign(err[i], err[i] + g[i])),
             Call("lu_solve", (e1, piv1, err)),
             *rms(),

@@ -5,12 +5,8 @@ predictive controller, J and the factors kept while they serve."""
 
 from __future__ import annotations
 
-from gyrogen import methods as registry
+from gyrogen.codegen.integrators import driver
 from gyrogen.codegen.integrators.common import (
-    NX,
-    STATS,
-    TOLERANCES,
-    code,
     comp,
     dx,
     finite_state,
@@ -22,9 +18,7 @@ from gyrogen.codegen.integrators.common import (
 from gyrogen.codegen.integrators.radau import EPS, c, dot, each, matrix, pivots, t
 from gyrogen.codegen.ir.nodes import (
     Break,
-    Call,
     Comment,
-    Const,
     Continue,
     Decl,
     E,
@@ -34,8 +28,6 @@ from gyrogen.codegen.ir.nodes import (
     Int,
     Loop,
     Num,
-    Ref,
-    Return,
     S,
     Var,
     and_,
@@ -65,24 +57,20 @@ def integrate(m: Method, quaternion: bool) -> Func:
     assert isinstance(R, Radau) and isinstance(ctl, RadauControl)
     v = V
     c1, c2 = R.nodes[0], R.nodes[1]
-    low, high = Num(1.0 / ctl.facmax), Num(1.0 / ctl.facmin)
-    slack = Num(registry.LAST_STEP_SLACK)
-    rejected: list[S] = [inc(Var("stats.rejected"), 1), assign(v["reject"], True),
-                         assign(v["last"], False)]  # fmt: skip
+    control = driver.Gustafsson(ctl)
+    rejected: list[S] = [*driver.rejected(v["reject"]), assign(v["last"], False)]
+    refactor = [assign(v["need_lu"], True), assign(v["need_jac"], not_(v["fresh_jac"]))]
     jac: list[S] = [
-        Call("jac", (t, x, c, v["J"])),
-        inc(Var("stats.jac_calls"), 1),
-        If(not_(fn("all_finite", v["J"], Const("NX2"))), (Return(code("ERR_NONFINITE")),)),
+        *driver.jacobian(v["J"]),
         assign(v["fresh_jac"], True),
         assign(v["need_jac"], False),
         assign(v["need_lu"], True),
     ]
     factors = (v["J"], h, v["e1"], v["piv1"], v["e2r"], v["e2i"], v["piv2"])
     lu: list[S] = [
-        inc(Var("stats.decompositions"), 1),
+        driver.count("decompositions", 1),
         If(fn(f"{m.name}_factor", *factors), (
-            inc(v["singular"], 1),
-            If(cmp(v["singular"], "==", ctl.singular_tries), (Return(code("ERR_SINGULAR")),)),
+            *driver.singular_stop(v["singular"], ctl.singular_tries),
             *rejected,
             assign(h, h * Num(ctl.newton_shrink)),
             assign(v["need_jac"], not_(v["fresh_jac"])),
@@ -141,7 +129,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
     iterate = Loop((
         If(cmp(newt, ">=", ctl.newton_max), (assign(v["outcome"], 2), Break())),
         assign(dyno, fn(f"{m.name}_newton", *nargs)),
-        inc(Var("stats.rhs_calls"), 3),
+        driver.count("rhs_calls", 3),
         inc(newt, 1),
         If(not_(fn("finite", dyno)), (assign(v["nonfinite"], True), assign(v["outcome"], 2),
                                       Break())),
@@ -161,33 +149,17 @@ def integrate(m: Method, quaternion: bool) -> Func:
     test: list[S] = [
         assign(err, fn(f"{m.name}_error", *eargs)),
         each(assign(dx[i], z[2][i] - comp[i]), assign(xnew[i], x[i] + dx[i])),
-        If(and_(cmp(err, "<", 1.0), not_(last)), (
-            Call("rhs", (t + h, xnew, c, v["fnew"]), "where the next step starts"),
-            inc(Var("stats.rhs_calls"), 1),
-            assign(v["nonfinite"], not_(fn("all_finite", v["fnew"], NX))),
-        ), (assign(v["nonfinite"], not_(fn("finite", err))),)),
+        If(and_(cmp(err, "<", 1.0), not_(last)), tuple(driver.next_f(v["fnew"], v["nonfinite"])),
+           (assign(v["nonfinite"], not_(fn("finite", err))),)),
         assign(v["nonfinite"], or_(v["nonfinite"], not_(finite_state(xnew, quaternion)))),
         If(v["nonfinite"], (assign(v["outcome"], 2),)),
     ]  # fmt: skip
     fac = fn("min", ctl.safety, Num(ctl.safety * (1 + 2 * ctl.newton_max))
              / (newt + Int(2 * ctl.newton_max)))  # fmt: skip
-    pow4 = fn("pow", err, ctl.exponent)
-    gus = (v["h_acc"] / h) * fn("pow", err * err / v["err_acc"], ctl.exponent) / Num(ctl.safety)
     ak = v["ak"]
-    lock: list[S] = [] if quaternion else [If(fn("gimbal_lock", x, xnew), (
-        Return(code("ERR_ATTITUDE_SINGULAR"), "x: the state before this step"),))]  # fmt: skip
     keep = and_(cmp(theta, "<=", ctl.jacobian_reuse), cmp(h_new, ">=", Num(ctl.keep_h[0]) * h),
                 cmp(h_new, "<=", Num(ctl.keep_h[1]) * h))  # fmt: skip
-    accept: list[S] = [
-        *lock,
-        assign(v["first"], False),
-        If(cmp(Var("stats.accepted"), ">", 0), (
-            assign(v["gus"], gus),
-            assign(quot, fn("max", quot, fn("max", low, fn("min", high, v["gus"])))),
-            assign(h_new, h / quot),
-        )),
-        assign(v["h_acc"], h),
-        assign(v["err_acc"], fn("max", ctl.err_floor, err)),
+    interpolant: list[S] = [  # the collocation polynomial, the next Newton iterations' start
         assign(v["h_old"], h),
         each(
             assign(ak, (z[1][i] - z[0][i]) / Num(c2 - c1)),
@@ -196,30 +168,26 @@ def integrate(m: Method, quaternion: bool) -> Func:
             assign(v["ak3"][i], v["ak2"][i] - (ak - z[0][i] / Num(c1)) / Num(c2)),
             local=("ak",),
         ),
-        Call("accept_step", (x, xnew, dx, comp)),
-        assign(t, sel(last, v["t1"], t + h)),
-        assign(Var("stats.t"), t),
-        inc(Var("stats.accepted"), 1),
-        If(last, (Return(code("OK")),)),
+    ]
+    predictive = control.predictive(quot, err, then=(assign(h_new, h / quot),))
+    accept: list[S] = [
+        *driver.accepted(quaternion, last, [assign(v["first"], False), *predictive], interpolant),
         each(assign(v["f0"][i], v["fnew"][i]),
              assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * fn("abs", x[i]))),
         assign(v["fresh_jac"], False),
         assign(h_new, fn("min", h_new, v["t1"] - v["t0"])),
         If(v["reject"], (assign(h_new, fn("min", h_new, h)),)),
         assign(v["reject"], False),
-        If(cmp(t + slack * h_new, ">=", v["t1"]), (assign(h, v["t1"] - t), assign(last, True)), (
+        If(driver.last_step(h_new), (assign(h, v["t1"] - t), assign(last, True)), (
             If(keep, (Continue(),), (assign(h, h_new),)),)),
         assign(v["need_lu"], True),
         assign(v["need_jac"], cmp(theta, ">", ctl.jacobian_reuse)),
     ]  # fmt: skip
     loop: list[S] = [
         If(v["need_jac"], tuple(jac)),
-        If(fn("step_underflow", h, t), (
-            Return(sel(v["nonfinite"], code("ERR_NONFINITE"), code("ERR_STEP_UNDERFLOW"))),)),
-        If(cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps")), (
-            Return(code("ERR_MAX_STEPS")),)),
+        *driver.stop_tests(v["nonfinite"]),
         If(v["need_lu"], tuple(lu)),
-        assign(Var("stats.h"), h),
+        assign(driver.stat("h"), h),
         *start_newton,
         Comment("outcome: 0 converged, 1 too slowly (h reduced), 2 failed"),
         assign(v["outcome"], 0),
@@ -231,28 +199,22 @@ def integrate(m: Method, quaternion: bool) -> Func:
         If(cmp(v["outcome"], "!=", 0), (
             *rejected,
             If(cmp(v["outcome"], "==", 2), (assign(h, h * Num(ctl.newton_shrink)),)),
-            assign(v["need_lu"], True),
-            assign(v["need_jac"], not_(v["fresh_jac"])),
+            *refactor,
             Continue(),
         )),
-        assign(quot, fn("max", low, fn("min", high, pow4 / fac)), "h_new = h / quot"),
+        assign(quot, control.quotient(err, fac), "h_new = h / quot"),
         assign(h_new, h / quot),
         If(cmp(err, "<", 1.0), tuple(accept), (
             *rejected,
             assign(h, sel(v["first"], h * Num(ctl.first_reject), h_new)),
-            assign(v["need_lu"], True),
-            assign(v["need_jac"], not_(v["fresh_jac"])),
+            *refactor,
         )),
     ]  # fmt: skip
     body = (
-        assign(v["start"], fn("ode_start", Int(R.order), Const(m.min_rtol), v["t0"], v["t1"], x,
-                              c, Var("rtol"), Var("atol"), Var("h0"), Var("max_steps"), v["f0"],
-                              Ref("h"), Var("stats"))),
-        If(cmp(v["start"], ">=", 0), (Return(v["start"]),)),
+        *driver.started(m, v["f0"], v["start"]),
         assign(t, v["t0"]),
         *(assign(v[n], 1.0) for n in ("h_old", "rate", "theta_old", "dyno_old")),
-        assign(v["h_acc"], 0.0),
-        assign(v["err_acc"], ctl.err_floor),
+        *control.start(),
         *(assign(v[n], val) for n, val in (("last", False), ("first", True), ("reject", False),
           ("fresh_jac", False), ("need_jac", True), ("need_lu", True), ("nonfinite", False))),
         assign(v["singular"], 0),
@@ -262,12 +224,10 @@ def integrate(m: Method, quaternion: bool) -> Func:
         assign(v["atol_e"], v["rtol_e"] * (Var("atol") / Var("rtol"))),
         assign(v["newton_tol"], fn("max", Num(ctl.newton_tol[0]) * EPS / v["rtol_e"],
                                    fn("min", ctl.newton_tol[1], fn("sqrt", v["rtol_e"])))),
-        If(cmp(t + slack * h, ">=", v["t1"]), (assign(h, v["t1"] - t), assign(last, True))),
+        If(driver.last_step(), (assign(h, v["t1"] - t), assign(last, True))),
         each(assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * fn("abs", x[i]))),
         Loop(tuple(loop)),
     )  # fmt: skip
-    params = (scalar("t0"), scalar("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)),
-              *TOLERANCES, scalar("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
     doubles = (
         "t h h_old h_new h_acc err_acc rtol_e atol_e newton_tol err quot rate theta "
         "theta_old dyno dyno_old thq predicted q gus c1q c2q c3q theta_k"
@@ -293,7 +253,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
         f"retry with h halved (slow ones with a smaller h); a singular E1 or E2 too,"
         f" {ctl.singular_tries} times in a row at most.",
     )
-    return Func(f"{m.name}_integrate", params, body, "int", locals_, doc)
+    return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 
 
 __all__ = ["integrate"]

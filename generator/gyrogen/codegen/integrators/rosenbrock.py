@@ -5,11 +5,10 @@ Gustafsson's predictive controller."""
 from __future__ import annotations
 
 from gyrogen import methods as registry
+from gyrogen.codegen.integrators import driver
 from gyrogen.codegen.integrators.common import (
     NX,
-    STATS,
     TOLERANCES,
-    code,
     comp,
     dx,
     finite_state,
@@ -33,7 +32,6 @@ from gyrogen.codegen.ir.nodes import (
     Int,
     Loop,
     Num,
-    Ref,
     Return,
     Row,
     S,
@@ -43,11 +41,9 @@ from gyrogen.codegen.ir.nodes import (
     assign,
     cmp,
     fn,
-    inc,
     not_,
     or_,
     real,
-    sel,
 )
 from gyrogen.methods import Method
 from gyrogen.tableaus import Rosenbrock
@@ -121,106 +117,66 @@ def trial(m: Method, uses_time: bool) -> Func:
 def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
     R, ctl = m.tableau, m.control
     assert isinstance(R, Rosenbrock) and isinstance(ctl, registry.RosenbrockControl)
-    J, lu, piv, fnew, t0, t1 = (Var(n) for n in ("J", "lu", "piv", "fnew", "t0", "t1"))
-    err, fac, gus, h_acc, err_acc = (Var(n) for n in ("err", "fac", "gus", "h_acc", "err_acc"))
+    J, lu, piv, fnew, t1 = (Var(n) for n in ("J", "lu", "piv", "fnew", "t1"))
+    err, fac, delta, start = Var("err"), Var("fac"), Var("delta"), Var("start")
     last, rejected_last, nonfinite = Var("last"), Var("rejected_last"), Var("nonfinite")
-    singular, new_point, start, delta = (
-        Var("singular"),
-        Var("new_point"),
-        Var("start"),
-        Var("delta"),
-    )
-    st = Var("stats")
-    low, high = Num(1.0 / ctl.facmax), Num(1.0 / ctl.facmin)
-    reject: list[S] = [inc(Var("stats.rejected"), 1), assign(rejected_last, True)]
-    point: list[S] = [
-        Call("jac", (t, x, c, J)),
-        inc(Var("stats.jac_calls"), 1),
-        If(not_(fn("all_finite", J, Const("NX2"))), (Return(code("ERR_NONFINITE")),)),
-    ]
+    singular, new_point = Var("singular"), Var("new_point")
+    control = driver.Gustafsson(ctl)
+    reject = driver.rejected(rejected_last)
+    point = driver.jacobian(J)
     if uses_time:
         point += [
             Comment("f depends on t (the torque table): f_t by a forward difference"),
             assign(delta, fn("sqrt", Const("EPSILON") * fn("max", 1e-5, fn("abs", t)))),
             Call("rhs", (t + delta, x, c, ft)),
-            inc(Var("stats.rhs_calls"), 1),
+            driver.count("rhs_calls", 1),
             For("i", NX, (assign(ft[i], (ft[i] - f0[i]) / delta),)),
         ]
     args = (t, h, x, f0, *((ft,) if uses_time else ()), lu, piv, c, Var("rtol"), Var("atol"),
             comp, k, dx, xnew)  # fmt: skip
-    lock: list[S] = [] if quaternion else [If(fn("gimbal_lock", x, xnew), (
-        Return(code("ERR_ATTITUDE_SINGULAR"), "x: the state before this step"),))]  # fmt: skip
-    gustafsson = (h_acc / h) * fn("pow", err * err / err_acc, ctl.exponent) / Num(ctl.safety)
+    taken = driver.accepted(quaternion, last, control.predictive(fac, err), interpolant=[])
     accept: list[S] = [
-        *lock,
-        If(cmp(Var("stats.accepted"), ">", 0), (
-            assign(gus, gustafsson),
-            assign(fac, fn("max", fac, fn("max", low, fn("min", high, gus)))),
-        )),
-        assign(h_acc, h),
-        assign(err_acc, fn("max", ctl.err_floor, err)),
-        Call("accept_step", (x, xnew, dx, comp)),
-        assign(t, sel(last, t1, t + h)),
-        assign(Var("stats.t"), t),
-        inc(Var("stats.accepted"), 1),
-        If(last, (Return(code("OK")),)),
+        *taken,
         For("i", NX, (assign(f0[i], fnew[i]),)),
         assign(new_point, True),
         If(rejected_last, (assign(fac, fn("max", fac, 1.0)),)),
         assign(rejected_last, False),
-    ]  # fmt: skip
+    ]
     ii = lu[i * NX + i]
     loop: list[S] = [
         If(new_point, (*point, assign(new_point, False))),
-        If(fn("step_underflow", h, t), (
-            Return(sel(nonfinite, code("ERR_NONFINITE"), code("ERR_STEP_UNDERFLOW"))),)),
-        If(cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps")), (
-            Return(code("ERR_MAX_STEPS")),)),
-        assign(last, cmp(t + Num(registry.LAST_STEP_SLACK) * h, ">=", t1)),
+        *driver.stop_tests(nonfinite),
+        assign(last, driver.last_step()),
         If(last, (assign(h, t1 - t),)),
-        assign(Var("stats.h"), h),
+        assign(driver.stat("h"), h),
         Comment("E = I/(h gamma) - J"),
         For("i", Const("NX2"), (assign(lu[i], -J[i]),)),
         For("i", NX, (assign(ii, ii + Num(1.0) / (h * Num(R.gamma))),)),
-        inc(Var("stats.decompositions"), 1),
+        driver.count("decompositions", 1),
         If(fn("lu_decompose", lu, piv), (
-            *reject,
-            inc(singular, 1),
-            If(cmp(singular, "==", ctl.singular_tries), (Return(code("ERR_SINGULAR")),)),
-            assign(h, h * Num(ctl.singular_shrink)),
-            Continue(),
-        )),
+            *reject, *driver.singular_stop(singular, ctl.singular_tries),
+            assign(h, h * Num(ctl.singular_shrink)), Continue())),
         assign(singular, 0),
         assign(err, fn(f"{m.name}_trial", *args)),
-        inc(Var("stats.rhs_calls"), R.stages - 1),
+        driver.count("rhs_calls", R.stages - 1),
         assign(nonfinite, or_(not_(fn("finite", err)), not_(finite_state(xnew, quaternion)))),
-        If(and_(not_(nonfinite), cmp(err, "<=", 1.0), not_(last)), (
-            Call("rhs", (t + h, xnew, c, fnew), "where the next step starts"),
-            inc(Var("stats.rhs_calls"), 1),
-            assign(nonfinite, not_(fn("all_finite", fnew, NX))),
-        )),
+        If(and_(not_(nonfinite), cmp(err, "<=", 1.0), not_(last)),
+           tuple(driver.next_f(fnew, nonfinite))),
         If(nonfinite, (*reject, assign(h, h * Num(ctl.nonfinite_shrink)), Continue())),
-        assign(fac, fn("max", low, fn("min", high, fn("pow", err, ctl.exponent) / Num(ctl.safety))),
-               "h / h_new"),
+        assign(fac, control.quotient(err, Num(ctl.safety)), "h / h_new"),
         If(cmp(err, "<=", 1.0), tuple(accept), tuple(reject)),
         assign(h, h / fac),
     ]  # fmt: skip
     body = (
-        assign(start, fn("ode_start", Int(R.order), Const(m.min_rtol), t0, t1, x, c, Var("rtol"),
-                         Var("atol"), Var("h0"), Var("max_steps"), f0, Ref("h"), st)),
-        If(cmp(start, ">=", 0), (Return(start),)),
-        assign(t, t0),
-        assign(h_acc, 0.0),
-        assign(err_acc, ctl.err_floor),
-        assign(rejected_last, False),
-        assign(nonfinite, False),
+        *driver.started(m, f0, start),
+        assign(t, Var("t0")),
+        *control.start(),
+        *(assign(v, False) for v in (rejected_last, nonfinite)),
         assign(singular, 0),
         assign(new_point, True),
         For("i", NX, (assign(comp[i], 0.0),)),
         Loop(tuple(loop)),
     )  # fmt: skip
-    params = (real("t0"), real("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)),
-              *TOLERANCES, real("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
     doubles = ["t", "h", "err", "fac", "gus", "h_acc", "err_acc"] + ["delta"] * uses_time
     locals_ = (
         Decl("J", "double", ("NX2",), "inout"), Decl("lu", "double", ("NX2",), "inout"),
@@ -239,7 +195,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         f"A singular E is retried with h times {ctl.singular_shrink:g},"
         f" {ctl.singular_tries} times in a row at most.",
     )
-    return Func(f"{m.name}_integrate", params, body, "int", locals_, doc)
+    return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 
 
 __all__ = ["Bool", "integrate", "trial"]

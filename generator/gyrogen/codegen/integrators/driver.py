@@ -1,0 +1,284 @@
+"""The adaptive driver, described once: what every adaptive method's loop
+shares. A method supplies its trial step and its error estimate (and, where
+it has one, its interpolant); the driver holds the rest:
+
+- the codes a loop stops with, and its stop tests (a step size lost in t,
+  no steps left), as statements (If) and as one selection;
+- the bookkeeping of a step: the statistics, a rejection, an acceptance
+  (the attitude check, x := xnew, t, the last step's OK), the interpolant's
+  place, f at the new point;
+- the step-size controllers, a strategy per family: Hairer's PI controller
+  of the explicit pairs (PI), and Gustafsson's predictive controller of the
+  implicit methods, rodas4 and radau5 (Gustafsson), with their constants
+  from gyrogen.methods.
+
+rodas4's and radau5's loops are written with If and else from these parts;
+a branch-free step (a pair's, printed over lanes too) takes the same
+expressions and selects: stop_code, ended, counted and the PI controller
+(every lane of a batch then takes the scalar path bit for bit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gyrogen import abi
+from gyrogen import methods as registry
+from gyrogen.codegen.integrators.common import NX, STATS, TOLERANCES, code, x, xnew
+from gyrogen.codegen.ir.nodes import (
+    Call,
+    Const,
+    Decl,
+    E,
+    If,
+    Int,
+    Num,
+    Ref,
+    Return,
+    S,
+    Var,
+    and_,
+    arr,
+    assign,
+    cmp,
+    fn,
+    inc,
+    not_,
+    real,
+    sel,
+)
+from gyrogen.methods import Method, PairControl, RadauControl, RosenbrockControl
+
+OK = code("OK")
+ERR_STEP_UNDERFLOW = code("ERR_STEP_UNDERFLOW")
+ERR_MAX_STEPS = code("ERR_MAX_STEPS")
+ERR_NONFINITE = code("ERR_NONFINITE")
+ERR_SINGULAR = code("ERR_SINGULAR")
+ERR_ATTITUDE_SINGULAR = code("ERR_ATTITUDE_SINGULAR")
+GOING_ON = Int(-1)
+"""A step's code while the trajectory goes on (every stop code is >= 0)."""
+
+t, t0, t1, h, c = Var("t"), Var("t0"), Var("t1"), Var("h"), Var("c")
+
+PARAMS = (real("t0"), real("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)), *TOLERANCES,
+          real("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
+"""<method>_integrate's arguments, every adaptive method's."""
+
+
+def stat(field: str) -> Var:
+    """stats.field, a field of abi.STATS_FIELDS."""
+    assert field in {f.name for f in abi.STATS_FIELDS}, field
+    return Var(f"stats.{field}")
+
+
+def count(field: str, by: E | int) -> S:
+    """stats.field += by."""
+    return inc(stat(field), by)
+
+
+def started(m: Method, f0: E, into: Var) -> list[S]:
+    """ode_start (common.ode_start): into := its code, returned when it stops."""
+    args = (Int(m.start_order), Const(m.min_rtol), t0, t1, x, c, Var("rtol"), Var("atol"),
+            Var("h0"), Var("max_steps"), f0, Ref("h"), Var("stats"))  # fmt: skip
+    return [assign(into, fn("ode_start", *args)), stopped(into)]
+
+
+def stopped(cd: Var) -> S:
+    """cd a stop code (not GOING_ON): return it."""
+    return If(cmp(cd, ">=", 0), (Return(cd),))
+
+
+# The stop tests
+
+
+def spent() -> E:
+    """No steps left: accepted and rejected ones count."""
+    return cmp(stat("accepted") + stat("rejected"), ">=", Var("max_steps"))
+
+
+def underflow_code(nonfinite: Var) -> E:
+    """A step size lost in t: a step shrunk by non-finite trials says so."""
+    return sel(nonfinite, ERR_NONFINITE, ERR_STEP_UNDERFLOW)
+
+
+def stop_tests(nonfinite: Var) -> list[S]:
+    """Before a step: h lost in the rounding of t, or no steps left, stops."""
+    return [
+        If(fn("step_underflow", h, t), (Return(underflow_code(nonfinite)),)),
+        If(spent(), (Return(ERR_MAX_STEPS),)),
+    ]
+
+
+def stop_code(nonfinite: Var) -> E:
+    """stop_tests as one selection: the code to stop with, or GOING_ON."""
+    lost = fn("step_underflow", h, t)
+    return sel(lost, underflow_code(nonfinite), sel(spent(), ERR_MAX_STEPS, GOING_ON))
+
+
+def last_step(step: E = h) -> E:
+    """A step of step from t ends on t1 (within registry.LAST_STEP_SLACK)."""
+    return cmp(t + Num(registry.LAST_STEP_SLACK) * step, ">=", t1)
+
+
+def ended(attitude: E, ok: E, last: E, cd: Var) -> E:
+    """A step's code by selection: the attitude's stop, OK after the last
+    step taken, else cd as it was."""
+    return sel(attitude, ERR_ATTITUDE_SINGULAR, sel(and_(ok, last), OK, cd))
+
+
+# A step's bookkeeping
+
+
+def jacobian(J: Var) -> list[S]:
+    """J := f_x(t, x), counted; a NaN or Inf in it stops."""
+    return [
+        Call("jac", (t, x, c, J)),
+        count("jac_calls", 1),
+        If(not_(fn("all_finite", J, Const("NX2"))), (Return(ERR_NONFINITE),)),
+    ]
+
+
+def singular_stop(singular: Var, tries: int) -> list[S]:
+    """One more singular iteration matrix in a row; tries of them stop."""
+    return [inc(singular, 1), If(cmp(singular, "==", tries), (Return(ERR_SINGULAR),))]
+
+
+def next_f(fnew: Var, nonfinite: Var) -> list[S]:
+    """f(t + h, xnew), where the next step starts; not finite: the step is not."""
+    return [
+        Call("rhs", (t + h, xnew, c, fnew), "where the next step starts"),
+        count("rhs_calls", 1),
+        assign(nonfinite, not_(fn("all_finite", fnew, NX))),
+    ]
+
+
+def rejected(flag: Var) -> list[S]:
+    """A rejected step, counted; flag remembers it."""
+    return [count("rejected", 1), assign(flag, True)]
+
+
+def attitude_stop(quaternion: bool) -> list[S]:
+    """3-1-2 angles: a step that ends at gimbal lock or passes a point of it
+    stops, x the state before it (Euler parameters: nothing to check)."""
+    return [] if quaternion else [If(fn("gimbal_lock", x, xnew), (
+        Return(ERR_ATTITUDE_SINGULAR, "x: the state before this step"),))]  # fmt: skip
+
+
+def accepted(quaternion: bool, last: Var, control: list[S], interpolant: list[S]) -> list[S]:
+    """An accepted step: attitude_stop; then control (the next h),
+    interpolant (the dense output's coefficients, from the step before x
+    moves: radau5's collocation polynomial, the next Newton iterations'
+    start; empty for the rest), x := xnew, t, counted, and OK after the
+    last step."""
+    return [
+        *attitude_stop(quaternion),
+        *control,
+        *interpolant,
+        Call("accept_step", (x, xnew, Var("dx"), Var("comp"))),
+        assign(t, sel(last, t1, t + h)),
+        assign(stat("t"), t),
+        count("accepted", 1),
+        If(last, (Return(OK),)),
+    ]
+
+
+def counted(ok: E, retry: E, last: E) -> list[S]:
+    """accepted's t and statistics by selection: ok taken, retry rejected."""
+    return [
+        assign(t, sel(ok, sel(last, t1, t + h), t)),
+        assign(stat("t"), t),
+        count("accepted", sel(ok, Int(1), Int(0))),
+        count("rejected", sel(retry, Int(1), Int(0))),
+    ]
+
+
+# The step-size controllers
+
+
+def clamp(ctl: PairControl | RosenbrockControl | RadauControl, quot: E) -> E:
+    """h / h_new within [1/facmax, 1/facmin]: h_new/h within [facmin, facmax]."""
+    return fn("max", Num(1.0 / ctl.facmax), fn("min", Num(1.0 / ctl.facmin), quot))
+
+
+@dataclass(frozen=True)
+class PI:
+    """Hairer's PI controller of the explicit pairs (dopri5.f, dop853.f):
+    h_new/h = safety err^-alpha err_old^beta within [facmin, facmax], no
+    growth right after a rejection, err_old the last accepted error (at
+    least registry.PAIR_ERR_FLOOR); a non-finite trial: h times facmin."""
+
+    ctl: PairControl
+
+    @staticmethod
+    def start() -> list[S]:
+        err_old, rejected_last = Var("err_old"), Var("rejected_last")
+        return [assign(err_old, registry.PAIR_ERR_FLOOR), assign(rejected_last, False)]
+
+    def factors(self, err: Var, err_old: Var, rejected_last: Var) -> list[S]:
+        """fac := h/h_new by err alone (a rejection's); grow := the PI
+        controller's h/h_new (an acceptance's)."""
+        ctl, fac, grow = self.ctl, Var("fac"), Var("grow")
+        roots = next((j for j in range(1, 7) if ctl.alpha == 0.5**j), 0)
+        power: E = err if roots else fn("pow", err, ctl.alpha)
+        for _ in range(roots):  # err^(1/2^j) by square roots
+            power = fn("sqrt", power)
+        grown = fac if ctl.beta == 0.0 else fac / fn("pow", err_old, ctl.beta)
+        return [
+            assign(fac, power / Num(ctl.safety), "h / h_new, in Hairer's form"),
+            assign(grow, clamp(ctl, grown)),
+            assign(grow, sel(rejected_last, fn("max", grow, 1.0), grow),
+                   "no growth after a rejection"),
+        ]  # fmt: skip
+
+    def remember(self, ok: E, reject: E, err: Var, err_old: Var, rejected_last: Var) -> list[S]:
+        """After the step: err_old the accepted one's error, rejected_last."""
+        return [
+            assign(err_old, sel(ok, fn("max", err, registry.PAIR_ERR_FLOOR), err_old)),
+            assign(rejected_last, sel(ok, False, sel(reject, True, rejected_last))),
+        ]
+
+    def next_h(self, keep: E, nonfinite: E, ok: E) -> S:
+        """h unchanged (keep), shrunk by facmin (a non-finite trial), by the
+        PI controller (ok) or by err alone (a rejection)."""
+        fac, grow, facmin = Var("fac"), Var("grow"), self.ctl.facmin
+        reject = h / fn("min", Num(1.0 / facmin), fac)
+        return assign(h, sel(keep, h, sel(nonfinite, h * Num(facmin), sel(ok, h / grow, reject))))
+
+
+@dataclass(frozen=True)
+class Gustafsson:
+    """The implicit methods' step size, as Hairer's rodas.f and radau5.f:
+    h/h_new = err^exponent / safety within [1/facmax, 1/facmin]; after an
+    accepted step, Gustafsson's predictive controller (Hairer & Wanner II,
+    IV.8), h/h_new = (h_acc/h) (err^2/err_acc)^exponent / safety, h_acc and
+    err_acc the last accepted step's (err_acc at least err_floor), takes the
+    smaller h_new of the two."""
+
+    ctl: RosenbrockControl | RadauControl
+    h_acc = Var("h_acc")
+    err_acc = Var("err_acc")
+
+    def start(self) -> list[S]:
+        return [assign(self.h_acc, 0.0), assign(self.err_acc, self.ctl.err_floor)]
+
+    def quotient(self, err: Var, safety: E) -> E:
+        """h / h_new by err alone."""
+        return clamp(self.ctl, fn("pow", err, self.ctl.exponent) / safety)
+
+    def predictive(self, quot: Var, err: Var, then: tuple[S, ...] = ()) -> list[S]:
+        """After an accepted step: quot := the larger h/h_new (then then,
+        after the first accepted step); h_acc and err_acc remembered."""
+        ctl, gus = self.ctl, Var("gus")
+        ratio = (self.h_acc / h) * fn("pow", err * err / self.err_acc, ctl.exponent)
+        return [
+            If(cmp(stat("accepted"), ">", 0), (
+                assign(gus, ratio / Num(ctl.safety)),
+                assign(quot, fn("max", quot, clamp(ctl, gus))),
+                *then,
+            )),
+            assign(self.h_acc, h),
+            assign(self.err_acc, fn("max", ctl.err_floor, err)),
+        ]  # fmt: skip
+
+
+__all__ = ["PI", "Gustafsson", "accepted", "counted", "stop_code", "stop_tests"]
