@@ -145,7 +145,7 @@ def test_each_integrator_is_written_once() -> None:
     import sympy as sm
 
     from gyrogen import methods
-    from gyrogen.codegen.integrators import trig
+    from gyrogen.codegen.integrators import intrinsics, trig
     from gyrogen.codegen.integrators.program import program
     from gyrogen.symbolic.blocks import diagonal_blocks
     from gyrogen.symbolic.jet import decompose
@@ -161,6 +161,7 @@ def test_each_integrator_is_written_once() -> None:
         for f in (*p.shared, *p.fixed, *p.pairs, *p.implicit, *p.lanes):
             names.add(f.name)
     names |= {f.name.removeprefix("p_") for f in trig.functions("p", list(trig.VARIANTS))}
+    names |= {f.name for f in intrinsics.functions()}
     control = ("err_old", "rejected_last", "h_new", "facmin", "facmax", "newton", "lu_end", "ksin")
     templates = sorted((PACKAGE / "templates").rglob("*.jinja"))
     assert templates

@@ -15,6 +15,7 @@ from gyrogen.codegen.integrators import (
     common,
     elementary,
     explicit,
+    intrinsics,
     linear,
     pair,
     radau,
@@ -27,7 +28,7 @@ from gyrogen.codegen.integrators import (
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Decl, Func, S
+from gyrogen.codegen.ir.nodes import Decl, Func, S, called
 from gyrogen.methods import Method
 from gyrogen.symbolic.blocks import Blocks
 from gyrogen.symbolic.jet import Jet
@@ -107,9 +108,21 @@ def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:
     return out
 
 
-def methods_text(p: Program, printer: CPrinter | FortranPrinter) -> dict[str, object]:
-    """The shared functions as one text, and each method's (<method>_...)."""
+def intrinsics_of(funcs: list[Func], printer: CPrinter | FortranPrinter) -> list[Func]:
+    """The definitions of gyrogen.codegen.integrators.intrinsics that funcs call in
+    printer's target."""
+    spelled = {printer.spellings.get(n, n) for n in called(funcs)}
+    return [f for f in intrinsics.functions() if f.name in spelled]
+
+
+def methods_text(
+    p: Program, printer: CPrinter | FortranPrinter, lanes: list[Func] | None = None
+) -> dict[str, object]:
+    """The intrinsics the file's functions (with lanes: those too) call and the
+    shared functions, each as one text, and each method's functions (<method>_...)."""
+    every = [*p.shared, *p.fixed, *p.pairs, *p.implicit, *(lanes or [])]
     return {
+        "intrinsics": "\n".join(printer.function(f) for f in intrinsics_of(every, printer)),
         "shared": "\n".join(printer.function(f) for f in p.shared),
         "methods": by_method([*p.fixed, *p.pairs, *p.implicit], printer.function),
     }
@@ -128,7 +141,7 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
             f"{lanes.field(d.name).removeprefix('L->')}{dims}[{macro}_LANES];"
         )
     return {
-        **methods_text(p, c),
+        **methods_text(p, c, p.lanes),
         "lanes": by_method(p.lanes, lanes.function),
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
