@@ -158,7 +158,7 @@ def test_each_integrator_is_written_once() -> None:
     names = {"project_quaternion", "pair_integrate", "err_power", "complex_inverse"}
     for quaternion in (False, True):
         p = program(every, quaternion, True, blocks, jet)
-        for f in (*p.shared, *p.fixed, *p.pairs, *p.implicit, *p.lanes):
+        for f in (*p.shared, *p.methods, *p.lanes):
             names.add(f.name)
     names |= {f.name.removeprefix("p_") for f in trig.functions("p", list(trig.VARIANTS))}
     names |= {f.name for f in intrinsics.functions()}

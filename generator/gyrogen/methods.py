@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Literal
 
 from gyrogen import abi
 from gyrogen.abi import SIGNATURES, Signature
@@ -139,6 +140,11 @@ def literal(value: float) -> str:
     return repr(float(value))
 
 
+Kind = Literal["fixed", "pair", "rosenbrock", "radau", "taylor"]
+KINDS: dict[type, Kind] = {Rosenbrock: "rosenbrock", Radau: "radau", Series: "taylor"}
+"""The kind of a method by its tableau, beyond the explicit ones (fixed or pair)."""
+
+
 @dataclass(frozen=True)
 class Method:
     """A compiled integrator a scene may ask for (scene key `integrators`)."""
@@ -151,6 +157,16 @@ class Method:
     notes: tuple[str, ...] = ()
     """What the method is and where it comes from: the comment lines above
     its code (the same in C and Fortran)."""
+
+    @property
+    def kind(self) -> Kind:
+        """Its family: what describes its code (codegen/integrators/program.py
+        reads one description per kind)."""
+        if self.fixed_step:
+            return "fixed"
+        if self.pair:
+            return "pair"
+        return KINDS[type(self.tableau)]
 
     @property
     def fixed_step(self) -> bool:
