@@ -7,7 +7,7 @@ The templates only place these texts and the public wrappers.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from gyrogen.codegen.integrators import (
@@ -24,6 +24,7 @@ from gyrogen.codegen.integrators import (
     taylor_jet,
     trig,
 )
+from gyrogen.codegen.integrators.tables import Table, lookup
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
@@ -201,8 +202,18 @@ def fortran_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
     return methods_text(p, FortranPrinter(prefix, macro, {}))
 
 
+def text(language: str, prefix: str, macro: str, funcs: list[Func]) -> str:
+    """funcs as C or Fortran."""
+    printer = CPrinter(prefix, macro, {}) if language == "c" else FortranPrinter(prefix, macro, {})
+    return "\n".join(printer.function(f) for f in funcs)
+
+
 def trig_text(language: str, prefix: str, macro: str, used: list[str]) -> str:
     """The sin and cos variants in used, with their reduction and kernels,
     as C or Fortran (gyrogen.codegen.integrators.trig)."""
-    printer = CPrinter(prefix, macro, {}) if language == "c" else FortranPrinter(prefix, macro, {})
-    return "\n".join(printer.function(f) for f in trig.functions(prefix, used))
+    return text(language, prefix, macro, trig.functions(prefix, used))
+
+
+def tables_text(language: str, prefix: str, macro: str, tables: Sequence[Table]) -> str:
+    """The tabulated inputs' lookups, as C or Fortran (gyrogen.codegen.integrators.tables)."""
+    return text(language, prefix, macro, [lookup(prefix, tb) for tb in tables])

@@ -6,12 +6,28 @@ constant outside them. The rhs, its outputs and its Jacobian read it as
 
 from __future__ import annotations
 
+from typing import Protocol
+
 from gyrogen.codegen.ir.nodes import Decl, For, Func, If, Int, Return, Var, cmp, real
 
 
-def lookup(function: str, points: list[tuple[float, float]], doc: str) -> Func:
-    """function(t): the first point's T up to its t, then the segment's line
-    up to the next point, the last point's T from its t on."""
+class Table(Protocol):
+    """A tabulated input (gyrogen.codegen.context.Table)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def points(self) -> list[tuple[float, float]]: ...
+
+    @property
+    def doc(self) -> str: ...
+
+
+def lookup(prefix: str, tb: Table) -> Func:
+    """<prefix>_<name>(t): the first point's T up to its t, then the segment's
+    line up to the next point, the last point's T from its t on."""
+    points = tb.points
     n = len(points)
     ts, tq = Var("ts"), Var("tq")
     t, i = Var("t"), Var("i")
@@ -25,4 +41,4 @@ def lookup(function: str, points: list[tuple[float, float]], doc: str) -> Func:
         For("i", Int(n), (If(cmp(t, "<", ts[i]), (Return(line),)),), start=Int(1)),
         Return(tq[n - 1]),
     )
-    return Func(function, (real("t"),), body, "double", table, (doc,))
+    return Func(f"{prefix}_{tb.name}", (real("t"),), body, "double", table, (tb.doc,))
