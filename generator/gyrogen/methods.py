@@ -169,6 +169,13 @@ class Method:
         return KINDS[type(self.tableau)]
 
     @property
+    def batch_chunk(self) -> int:
+        """Trajectories a thread takes at a time in a batch over every core
+        (OpenMP's dynamic schedule, C and Fortran): a fixed step's cost is
+        the same for each, an adaptive method's varies, so one at a time."""
+        return 16 if self.fixed_step else 1
+
+    @property
     def fixed_step(self) -> bool:
         """Takes a number of equal steps (steps=), not tolerances."""
         return isinstance(self.tableau, Explicit) and not self.tableau.e
