@@ -119,7 +119,8 @@ class Word(E):
 
 
 Type = Literal["double", "int", "long", "bool", "stats", "word"]
-"""word: 64 unsigned bits (C uint64_t), a double's bits to shift and mask."""
+"""word: 64 unsigned bits (C uint64_t), a double's bits to shift and mask; C
+only (Fortran has intrinsics for what C computes from the bits)."""
 Intent = Literal["in", "out", "inout", "tmp"]
 BinOp = Literal[
     "+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!=", "and", "or", ">>", "<<", "&", "|"
