@@ -163,7 +163,7 @@ def test_each_integrator_is_written_once() -> None:
     import sympy as sm
 
     from gyrogen import methods
-    from gyrogen.codegen.integrators import trig
+    from gyrogen.codegen.integrators import intrinsics, trig
     from gyrogen.codegen.integrators.program import program
     from gyrogen.symbolic.blocks import diagonal_blocks
     from gyrogen.symbolic.jet import decompose
@@ -176,9 +176,10 @@ def test_each_integrator_is_written_once() -> None:
     names = {"project_quaternion", "pair_integrate", "err_power", "complex_inverse"}
     for quaternion in (False, True):
         p = program(every, quaternion, True, blocks, jet)
-        for f in (*p.shared, *p.fixed, *p.pairs, *p.implicit, *p.lanes):
+        for f in (*p.shared, *p.methods, *p.lanes):
             names.add(f.name)
     names |= {f.name.removeprefix("p_") for f in trig.functions("p", list(trig.VARIANTS))}
+    names |= {f.name for f in intrinsics.functions()}
     control = ("err_old", "rejected_last", "h_new", "facmin", "facmax", "newton", "lu_end", "ksin")
     templates = sorted((PACKAGE / "templates").rglob("*.jinja"))
     assert templates
@@ -189,3 +190,82 @@ def test_each_integrator_is_written_once() -> None:
             assert not re.search(defined, text), f"{path.name} defines {name}"
         for word in control:
             assert word not in text, f"{path.name} holds the step control ({word})"
+
+
+PLACED = "places code printed from the model (codegen/statements.py, codegen/checks.py)"
+HAND_OFF = "hands a batch's trajectories to the printed integrators and back"
+TEMPLATE_FUNCTIONS = {
+    ("c/ode.c.jinja", "P_m_name"): "a public integrator: stats NULL, then its printed _integrate",
+    ("c/ode.c.jinja", "P_name_batch"): HAND_OFF,
+    ("c/ode.c.jinja", "P_jac"): PLACED,
+    ("c/source.c.jinja", "unit_prefix_setup"): PLACED,
+    ("c/source.c.jinja", "unit_prefix_rhs"): PLACED,
+    ("c/source.c.jinja", "unit_prefix_rhs_lanes"): PLACED,
+    ("c/source.c.jinja", "unit_prefix_o_name"): PLACED,
+    ("c/source.c.jinja", "unit_prefix_linear"): PLACED,
+    ("c/lanes.jinja", "rhs_lanes"): PLACED,
+    ("c/lanes.jinja", "lane_start"): HAND_OFF,
+    ("c/lanes.jinja", "lanes_finish"): HAND_OFF,
+    ("c/lanes.jinja", "pair_lanes"): HAND_OFF,
+    ("c/lanes.jinja", "pair_batch"): HAND_OFF,
+    ("cffi/glue.c.jinja", "gyrogen_rhs_batch"): HAND_OFF,
+    ("cffi/glue.c.jinja", "gyrogen_batch"): HAND_OFF,
+    ("cffi/glue.c.jinja", "gyrogen_each"): HAND_OFF,
+    ("fmu/fmi2.c.jinja", "check_finite"): "the FMU's refusal of a value not finite",
+    ("fmu/fmi2.c.jinja", "constants"): "the FMU's parameters into setup",
+    ("fmu/fmi2.c.jinja", "outputs"): "the FMU's outputs from the printed output functions",
+    ("fmu/fmi2.c.jinja", "set_parameters"): "the FMU's parameters into setup",
+    ("fortran/module.f90.jinja", "unit_prefix_setup"): PLACED,
+    ("fortran/module.f90.jinja", "unit_prefix_rhs"): PLACED,
+    ("fortran/module.f90.jinja", "unit_prefix_o_name"): PLACED,
+    ("fortran/ode.f90.jinja", "P_m_name"): "a public integrator: stats by pointer, then _integrate",
+    ("fortran/ode.f90.jinja", "P_name_batch"): HAND_OFF,
+    ("fortran/ode.f90.jinja", "P_jac"): PLACED,
+}
+"""The functions on doubles the templates may define, and why; any other is
+numerics, whose home is an IR function (codegen/integrators) printed to every
+target. FMI 2.0's entry points (fmi2*) are the standard's interface."""
+
+
+def double_functions(templates: Path) -> set[tuple[str, str]]:
+    """(template, name) of each function a template defines that takes or
+    returns doubles: C definitions (a body follows) and Fortran procedures
+    with real(c_double) arguments or result; a name's Jinja parts as words
+    ({{ unit.prefix }}_{{ o.name }}: unit_prefix_o_name)."""
+
+    def words(m: re.Match[str]) -> str:
+        return re.sub(r"\W+", "_", m[1].strip())
+
+    def strip(text: str) -> str:
+        text = re.sub(r"\{#.*?#\}|\{%.*?%\}", "", text, flags=re.S)
+        return re.sub(r"\{\{(.*?)\}\}", words, text, flags=re.S)
+
+    params = r"[^;{}()]*(?:\([^()]*\)[^;{}()]*)*"  # one level of parentheses: double (*x)[N]
+    c_def = re.compile(rf"(?m)^(?!\s)([\w ]*?[\w*]+)\s+\**\s*(\w+)\(({params})\)\s*\{{")
+    f_def = re.compile(
+        r"(?im)^[ \t]*([\w(), ]*?)\b(function|subroutine)\s+(\w+)\s*\(([^)]*)\)(.*?)\bend\s+\2\b",
+        re.S,
+    )
+    found = set()
+    for path in sorted(templates.rglob("*.jinja")):
+        where = path.relative_to(templates).as_posix()
+        text = strip(path.read_text(encoding="utf-8"))
+        for m in c_def.finditer(text):
+            ret, name, params = m.groups()
+            if any(t in ret + params for t in ("double", "fmi2Real")):
+                found.add((where, name))
+        for m in f_def.finditer(text):
+            prefix, _, name, _, body = m.groups()
+            if "real(c_double)" in prefix or re.search(r"real\(c_double\)[^\n]*intent", body):
+                found.add((where, name))
+    return {f for f in found if not f[1].startswith("fmi2")}
+
+
+def test_no_template_computes_on_doubles() -> None:
+    """A template lays out a file: declarations, doc comments and the printed
+    functions. One that defines a function on doubles holds numerics that the
+    other target then writes again (the table lookup, fmax, floor were so)."""
+    found = double_functions(PACKAGE / "templates")
+    assert found, "the scan finds the functions it allows"
+    extra = sorted(found - set(TEMPLATE_FUNCTIONS))
+    assert not extra, f"templates define functions on doubles: {extra}"

@@ -215,11 +215,17 @@ contains
   end subroutine dual_spin_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
-  pure real(c_double) function floor_real(y)
+  function floor_real(y) result(res)
     real(c_double), intent(in) :: y
+    real(c_double) :: res
+    real(c_double) :: f
 
-    floor_real = aint(y)
-    if (y < floor_real) floor_real = floor_real - 1
+    f = aint(y)
+    if (y < f) then
+      f = f - 1.0_c_double
+    end if
+    res = f
+    return
   end function floor_real
 
   ! Counters at zero, at the start time (also the time reached if nothing is).

@@ -189,50 +189,52 @@ static inline double gyrostat_cos_lanes(double x)
 }
 
 
-/* fmax and fmin, inline (NaN: the other argument, as fmax and fmin). The
-   library's are calls to legacy-SSE code: after AVX-512 arithmetic (gcc -O3
-   -march=native) each call paid a state transition (Rodas4 ran 4.8x
-   slower), and in a loop over lanes a call stops the vectorizer. */
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
 static inline double dmax(double a, double b)
 {
     return a > b || b != b ? a : b;
 }
 
+/* fmin, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
 static inline double dmin(double a, double b)
 {
     return a < b || b != b ? a : b;
 }
 
-/* A double's exponent and significand, and 2^k, from and to its bits:
-   x = m 2^e, 1 <= m < 2, for a normal x > 0; k an integer in [-1022, 1023].
-   Exact, as Fortran's exponent, fraction and scale, which the Fortran file
-   calls instead. No conversion between integers and doubles (each one "may
-   trap" to gcc, whose loops over lanes then did not vectorize): the integer
-   is the low bits of 2^52 + it, a double. */
+/* x = m 2^e, 1 <= m < 2: e (gyrogen.codegen.integrators.intrinsics). */
 static inline double bits_exponent(double x)
 {
     uint64_t u;
     double e;
+
     memcpy(&u, &x, sizeof u);
     u = (u >> 52) | 0x4330000000000000ULL;  /* 2^52 + the biased exponent */
     memcpy(&e, &u, sizeof e);
     return e - 4503599627371519.0;  /* 2^52 + 1023 */
 }
 
+/* x = m 2^e, 1 <= m < 2: m (gyrogen.codegen.integrators.intrinsics). */
 static inline double bits_significand(double x)
 {
     uint64_t u;
+    double m;
+
     memcpy(&u, &x, sizeof u);
     u = (u & 0x000fffffffffffffULL) | 0x3ff0000000000000ULL;
-    memcpy(&x, &u, sizeof x);
-    return x;
+    memcpy(&m, &u, sizeof m);
+    return m;
 }
 
+/* 2^k, k an integer in [-1022, 1023] (gyrogen.codegen.integrators.intrinsics). */
 static inline double bits_pow2(double k)
 {
-    const double t = k + 4503599627371519.0;  /* 2^52 + k + 1023, exact */
-    uint64_t u;
+    double t;
     double x;
+    uint64_t u;
+
+    t = k + 4503599627371519.0;  /* 2^52 + k + 1023, exact */
     memcpy(&u, &t, sizeof u);
     u = u << 52;
     memcpy(&x, &u, sizeof x);

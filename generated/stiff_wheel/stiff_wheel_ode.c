@@ -190,15 +190,15 @@ static inline double stiff_wheel_cos_lanes(double x)
 }
 
 
-/* fmax and fmin, inline (NaN: the other argument, as fmax and fmin). The
-   library's are calls to legacy-SSE code: after AVX-512 arithmetic (gcc -O3
-   -march=native) each call paid a state transition (Rodas4 ran 4.8x
-   slower), and in a loop over lanes a call stops the vectorizer. */
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
 static inline double dmax(double a, double b)
 {
     return a > b || b != b ? a : b;
 }
 
+/* fmin, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
 static inline double dmin(double a, double b)
 {
     return a < b || b != b ? a : b;

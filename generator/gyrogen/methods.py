@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Literal
 
 from gyrogen import abi
 from gyrogen.abi import SIGNATURES, Signature
@@ -142,6 +143,11 @@ def literal(value: float) -> str:
     return repr(float(value))
 
 
+Kind = Literal["fixed", "pair", "rosenbrock", "radau", "taylor"]
+KINDS: dict[type, Kind] = {Rosenbrock: "rosenbrock", Radau: "radau", Series: "taylor"}
+"""The kind of a method by its tableau, beyond the explicit ones (fixed or pair)."""
+
+
 @dataclass(frozen=True)
 class Method:
     """A compiled integrator a scene may ask for (scene key `integrators`)."""
@@ -154,6 +160,23 @@ class Method:
     notes: tuple[str, ...] = ()
     """What the method is and where it comes from: the comment lines above
     its code (the same in C and Fortran)."""
+
+    @property
+    def kind(self) -> Kind:
+        """Its family: what describes its code (codegen/integrators/program.py
+        reads one description per kind)."""
+        if self.fixed_step:
+            return "fixed"
+        if self.pair:
+            return "pair"
+        return KINDS[type(self.tableau)]
+
+    @property
+    def batch_chunk(self) -> int:
+        """Trajectories a thread takes at a time in a batch over every core
+        (OpenMP's dynamic schedule, C and Fortran): a fixed step's cost is
+        the same for each, an adaptive method's varies, so one at a time."""
+        return 16 if self.fixed_step else 1
 
     @property
     def fixed_step(self) -> bool:

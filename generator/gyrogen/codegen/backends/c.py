@@ -9,7 +9,7 @@ from gyrogen import abi
 from gyrogen import methods as methods_registry
 from gyrogen.codegen.checks import printed
 from gyrogen.codegen.context import SceneContext
-from gyrogen.codegen.integrators.program import c_text, program, trig_text
+from gyrogen.codegen.integrators.program import c_text, program, tables_text, trig_text
 from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.codegen.render import c_double, render
 from gyrogen.codegen.statements import (
@@ -79,6 +79,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         ode_trig = [n for n in VARIANTS if n in ode_trig + gimbal_checks]
     ctx = {
         "unit": unit,
+        "tables": tables_text("c", unit.prefix, unit.macro, unit.torque_tables),
         "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
         "rhs": rhs,
         "rhs_lanes": lanes,

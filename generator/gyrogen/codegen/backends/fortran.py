@@ -10,7 +10,7 @@ from gyrogen import methods as methods_registry
 from gyrogen.abi import SETUP_RESULT, SIGNATURES
 from gyrogen.codegen.checks import FORTRAN_WRAP, printed
 from gyrogen.codegen.context import SceneContext
-from gyrogen.codegen.integrators.program import fortran_text, program, trig_text
+from gyrogen.codegen.integrators.program import fortran_text, program, tables_text, trig_text
 from gyrogen.codegen.render import f_double, render
 from gyrogen.codegen.statements import (
     Function,
@@ -109,6 +109,7 @@ def files(unit: SceneContext) -> dict[str, str]:
     trig = used([setup_fn, rhs, *outputs, jac], gimbal)
     ctx = {
         "unit": unit,
+        "tables": tables_text("fortran", unit.prefix, unit.macro, unit.torque_tables),
         "trig": trig_text("fortran", unit.prefix, unit.macro, trig),
         "trig_names": trig,
         "ode_trig_names": used([jac, *([rhs] if unit.jet is not None else [])], gimbal),

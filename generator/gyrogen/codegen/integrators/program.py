@@ -7,14 +7,14 @@ The templates only place these texts and the public wrappers.
 
 from __future__ import annotations
 
-import re
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 
 from gyrogen.codegen.integrators import (
     common,
     elementary,
     explicit,
+    intrinsics,
     linear,
     pair,
     radau,
@@ -24,25 +24,90 @@ from gyrogen.codegen.integrators import (
     taylor_jet,
     trig,
 )
+from gyrogen.codegen.integrators.tables import Table, lookup
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Decl, Func, S
-from gyrogen.methods import Method
+from gyrogen.codegen.ir.nodes import Decl, Func, S, called
+from gyrogen.methods import Kind, Method
 from gyrogen.symbolic.blocks import Blocks
 from gyrogen.symbolic.jet import Jet
 
 
-def calls(funcs: list[Func]) -> set[str]:
-    return set(re.findall(r"(?:Fn|Call)\(name='(\w+)'", repr([f.body for f in funcs])))
+@dataclass(frozen=True)
+class Given:
+    """What a method's description reads of the scene."""
+
+    quaternion: bool
+    uses_time: bool
+    krows: int
+    """The stage rows the pairs' k holds (the most any pair needs)."""
+    jet: Jet | None
+
+
+@dataclass(frozen=True)
+class Parts:
+    """A method's functions: one trajectory's, and over the lanes of a batch
+    with what struct lanes holds for them and their start in a lane."""
+
+    single: list[Func]
+    lanes: list[Func] = field(default_factory=list)
+    state: list[Decl] = field(default_factory=list)
+    init: list[S] = field(default_factory=list)
+    """Beyond common.start_state: a trajectory's values at t0 in its lane."""
+
+
+def _fixed(m: Method, g: Given) -> Parts:
+    return Parts([explicit.fixed(m, g.quaternion)])
+
+
+def _pair(m: Method, g: Given) -> Parts:
+    common_start = common.start_state()
+    return Parts(
+        [pair.integrate(m, g.quaternion, g.krows)],
+        [pair.lanes_step(m, g.quaternion)],
+        init=[s for s in pair.start_state() if s not in common_start],
+    )
+
+
+def _rosenbrock(m: Method, g: Given) -> Parts:
+    return Parts(
+        [rosenbrock.trial(m, g.uses_time), rosenbrock.integrate(m, g.quaternion, g.uses_time)]
+    )
+
+
+def _radau(m: Method, g: Given) -> Parts:
+    return Parts(
+        [radau.factor(m), radau.newton(m), radau.error(m), radau_step.integrate(m, g.quaternion)]
+    )
+
+
+def _taylor(m: Method, g: Given) -> Parts:
+    assert g.jet is not None, "a Taylor method needs the scene's jet"
+    common_start = common.start_state()
+    return Parts(
+        taylor.functions(m, g.jet, g.quaternion),
+        [taylor_jet.jet_lanes(m, g.jet), taylor.lanes_step(m, g.jet, g.quaternion)],
+        taylor.lane_state(m, g.jet),
+        [s for s in taylor.start_state() if s not in common_start],
+    )
+
+
+DESCRIPTIONS: dict[Kind, Callable[[Method, Given], Parts]] = {
+    "fixed": _fixed,
+    "pair": _pair,
+    "rosenbrock": _rosenbrock,
+    "radau": _radau,
+    "taylor": _taylor,
+}
+"""Each kind of method (gyrogen.methods.Method.kind) and its description."""
 
 
 @dataclass(frozen=True)
 class Program:
     shared: list[Func]
-    fixed: list[Func]
-    pairs: list[Func]
-    implicit: list[Func]
+    methods: list[Func]
+    """One trajectory's functions of every method (<method>_...)."""
     lanes: list[Func]
     state: dict[str, Decl]
     """What struct lanes holds per lane (its arrays [..][LANES])."""
@@ -58,28 +123,14 @@ def program(
     jet: Jet | None = None,
 ) -> Program:
     pairs = [m for m in methods if m.pair]
-    krows = explicit.rows(pairs) if pairs else 0
-    fixed = [explicit.fixed(m, quaternion) for m in methods if m.fixed_step]
-    integrate = [pair.integrate(m, quaternion, krows) for m in pairs]
-    lanes = [pair.lanes_step(m, quaternion) for m in pairs]
-    state = pair.lane_state(krows)
-    init = pair.start_state() if pairs else []
-    implicit: list[Func] = []
-    for m in methods:
-        if m.rosenbrock:
-            implicit += [
-                rosenbrock.trial(m, uses_time),
-                rosenbrock.integrate(m, quaternion, uses_time),
-            ]
-        if m.radau:
-            implicit += [radau.factor(m), radau.newton(m), radau.error(m)]
-            implicit.append(radau_step.integrate(m, quaternion))
-        if m.taylor:
-            assert jet is not None, "a Taylor method needs the scene's jet"
-            implicit += taylor.functions(m, jet, quaternion)
-            lanes += [taylor_jet.jet_lanes(m, jet), taylor.lanes_step(m, jet, quaternion)]
-            state = {**state, **{d.name: d for d in taylor.lane_state(m, jet)}}
-            init = taylor.start_state() if not pairs else [*init, taylor.start_state()[-1]]
+    given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet)
+    parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
+    single = [f for p in parts for f in p.single]
+    lanes = [f for p in parts for f in p.lanes]
+    state = {**pair.lane_state(given.krows), **{d.name: d for p in parts for d in p.state}}
+    init = common.start_state() if lanes else []
+    for s in (s for p in parts for s in p.init):
+        init += [] if s in init else [s]
     adaptive = any(not m.fixed_step for m in methods)
     candidates = [*common.shared(quaternion, adaptive, True), *elementary.functions()]
     if blocks is not None:
@@ -90,12 +141,12 @@ def program(
             linear.decompose_complex(blocks, nx),
             linear.solve_complex(blocks, nx),
         ]
-    wanted = calls(fixed + integrate + implicit + lanes)
+    wanted = called(single + lanes)
     for f in reversed(candidates):  # callers come after what they call
         if f.name in wanted:
-            wanted |= calls([f])
+            wanted |= called([f])
     shared = [f for f in candidates if f.name in wanted]
-    return Program(shared, fixed, integrate, implicit, lanes, state, init)
+    return Program(shared, single, lanes, state, init)
 
 
 def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:
@@ -107,11 +158,23 @@ def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:
     return out
 
 
-def methods_text(p: Program, printer: CPrinter | FortranPrinter) -> dict[str, object]:
-    """The shared functions as one text, and each method's (<method>_...)."""
+def intrinsics_of(funcs: list[Func], printer: CPrinter | FortranPrinter) -> list[Func]:
+    """The definitions of gyrogen.codegen.integrators.intrinsics that funcs call in
+    printer's target."""
+    spelled = {printer.spellings.get(n, n) for n in called(funcs)}
+    return [f for f in intrinsics.functions() if f.name in spelled]
+
+
+def methods_text(
+    p: Program, printer: CPrinter | FortranPrinter, lanes: list[Func] | None = None
+) -> dict[str, object]:
+    """The intrinsics the file's functions (with lanes: those too) call and the
+    shared functions, each as one text, and each method's functions (<method>_...)."""
+    every = [*p.shared, *p.methods, *(lanes or [])]
     return {
+        "intrinsics": "\n".join(printer.function(f) for f in intrinsics_of(every, printer)),
         "shared": "\n".join(printer.function(f) for f in p.shared),
-        "methods": by_method([*p.fixed, *p.pairs, *p.implicit], printer.function),
+        "methods": by_method(p.methods, printer.function),
     }
 
 
@@ -128,7 +191,7 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
             f"{lanes.field(d.name).removeprefix('L->')}{dims}[{macro}_LANES];"
         )
     return {
-        **methods_text(p, c),
+        **methods_text(p, c, p.lanes),
         "lanes": by_method(p.lanes, lanes.function),
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
@@ -139,8 +202,18 @@ def fortran_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
     return methods_text(p, FortranPrinter(prefix, macro, {}))
 
 
+def text(language: str, prefix: str, macro: str, funcs: list[Func]) -> str:
+    """funcs as C or Fortran."""
+    printer = CPrinter(prefix, macro, {}) if language == "c" else FortranPrinter(prefix, macro, {})
+    return "\n".join(printer.function(f) for f in funcs)
+
+
 def trig_text(language: str, prefix: str, macro: str, used: list[str]) -> str:
     """The sin and cos variants in used, with their reduction and kernels,
     as C or Fortran (gyrogen.codegen.integrators.trig)."""
-    printer = CPrinter(prefix, macro, {}) if language == "c" else FortranPrinter(prefix, macro, {})
-    return "\n".join(printer.function(f) for f in trig.functions(prefix, used))
+    return text(language, prefix, macro, trig.functions(prefix, used))
+
+
+def tables_text(language: str, prefix: str, macro: str, tables: Sequence[Table]) -> str:
+    """The tabulated inputs' lookups, as C or Fortran (gyrogen.codegen.integrators.tables)."""
+    return text(language, prefix, macro, [lookup(prefix, tb) for tb in tables])

@@ -23,10 +23,11 @@ from gyrogen.codegen.ir.nodes import (
     Sel,
     Var,
 )
+from gyrogen.codegen.ir.nodes import walk as nodes_walk
 from gyrogen.codegen.ir.printer import ATOM, Printer, doc_lines
 
 CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX", "NAN": "(double)NAN"}
-CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int"}
+CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int", "word": "uint64_t"}
 FUNCTIONS = {
     "max": "dmax",
     "min": "dmin",
@@ -35,11 +36,13 @@ FUNCTIONS = {
     "significand": "bits_significand",
     "pow2": "bits_pow2",
 }
-"""The IR's functions under C names (the bits_ ones: c/ode.c.jinja)."""
+"""The IR's functions under C names (dmax, dmin and the bits_ ones:
+gyrogen.codegen.integrators.intrinsics)."""
 
 
 class CPrinter(Printer):
     ops: ClassVar[dict[str, str]] = {"and": "&&", "or": "||"}
+    spellings = FUNCTIONS
 
     def const(self, name: str) -> str:
         if name == "NX":
@@ -47,6 +50,9 @@ class CPrinter(Printer):
         if name == "NX2":
             return f"{self.macro}_NX * {self.macro}_NX"
         return CONSTS.get(name) or f"{self.macro}_{name}"
+
+    def word(self, value: int) -> str:
+        return f"0x{value:016x}ULL"
 
     def var(self, name: str) -> tuple[str, int]:
         if "." in name:
@@ -85,7 +91,7 @@ class CPrinter(Printer):
             return f"{self.prefix}_{name}({args[0]})"
         if name == "real":
             return f"(double){self.expr(nodes[0], ATOM)}"
-        return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
+        return f"{self.spellings.get(name, name)}({', '.join(args)})"
 
     def select(self, e: Sel) -> str:
         return f"{self.expr(e.cond, 1)} ? {self.expr(e.a, 1)} : {self.expr(e.b, 0)}"
@@ -110,6 +116,7 @@ class CPrinter(Printer):
         "for": "for ({v} = {start}; {v} < {stop}; ++{v}) {{",
         "end_for": "}}",
         "vector": "#pragma GCC unroll 1",
+        "bits": "memcpy(&{target}, &{source}, sizeof {target});",
     }
 
     def scoped_locals(self, s: For, depth: int) -> list[str]:
@@ -181,7 +188,7 @@ def walk(body: tuple[S, ...]) -> list[S]:
 
 def uses(body: tuple[S, ...], name: str) -> bool:
     """The statements call function name."""
-    return f"Fn(name='{name}'" in repr(body)
+    return any(isinstance(x, Fn) and x.name == name for s in body for x in nodes_walk(s))
 
 
 __all__ = ["CPrinter", "Fn", "Var", "uses", "walk"]

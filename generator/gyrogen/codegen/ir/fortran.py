@@ -36,12 +36,15 @@ FTYPE = {
     "long": "integer(c_long)",
     "bool": "logical",
 }
-FUNCTIONS = {"finite": "ieee_is_finite", "floor": "floor_real"}
+FUNCTIONS = {"finite": "ieee_is_finite", "floor": "floor_real", "trunc": "aint"}
+"""The IR's functions under Fortran names (floor_real:
+gyrogen.codegen.integrators.intrinsics)."""
 
 
 class FortranPrinter(Printer):
     indent = "  "
     ops: ClassVar[dict[str, str]] = {"and": ".and.", "or": ".or.", "==": "==", "!=": "/="}
+    spellings = FUNCTIONS
     unary_minus = 5
     grouped = 1
     continuation = " &"
@@ -83,7 +86,7 @@ class FortranPrinter(Printer):
             return f"(2.0_c_double * fraction({args[0]}))"
         if name == "pow2":
             return f"scale(1.0_c_double, int({args[0]}))"
-        return f"{FUNCTIONS.get(name, name)}({', '.join(args)})"
+        return f"{self.spellings.get(name, name)}({', '.join(args)})"
 
     def select(self, e: Sel) -> str:
         return f"merge({self.expr(e.a)}, {self.expr(e.b)}, {self.expr(e.cond)})"

@@ -14,7 +14,8 @@ a dot, "stats.h", is a field of the statistics (stats->h, stats%h).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field, fields
 from typing import Literal
 
 
@@ -110,9 +111,21 @@ class Const(E):
     name: str
 
 
-Type = Literal["double", "int", "long", "bool", "stats"]
+@dataclass(frozen=True)
+class Word(E):
+    """A 64-bit unsigned literal (C 0x...ULL): a double's bits."""
+
+    value: int
+
+
+Type = Literal["double", "int", "long", "bool", "stats", "word"]
+"""word: 64 unsigned bits (C uint64_t), a double's bits to shift and mask; C
+only (Fortran has intrinsics for what C computes from the bits)."""
 Intent = Literal["in", "out", "inout", "tmp"]
-BinOp = Literal["+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!=", "and", "or"]
+BinOp = Literal[
+    "+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!=", "and", "or", ">>", "<<", "&", "|"
+]
+"""The last four on words: shifts, bitwise and and or."""
 
 
 @dataclass(frozen=True)
@@ -266,6 +279,14 @@ class Call(S):
 
 
 @dataclass(frozen=True)
+class Bits(S):
+    """target takes source's bits: a double's as a word, or back (C memcpy)."""
+
+    target: str
+    source: str
+
+
+@dataclass(frozen=True)
 class Unused(S):
     """A parameter some scenes never read (C (void)name, a Fortran associate):
     the strict builds refuse an unused one otherwise."""
@@ -278,6 +299,22 @@ class Comment(S):
     text: str
     blank: bool = True
     """A blank line before it."""
+
+
+def walk(node: E | S) -> Iterator[E | S]:
+    """node and every expression and statement within it, in order."""
+    yield node
+    for f in fields(node):
+        value = getattr(node, f.name)
+        for x in value if isinstance(value, tuple) else (value,):
+            if isinstance(x, (E, S)):
+                yield from walk(x)
+
+
+def called(funcs: Iterable[Func]) -> set[str]:
+    """The names of the functions funcs call (Fn in expressions, Call statements)."""
+    roots = [r for f in funcs for r in (*f.body, *(d.init for d in f.locals)) if r is not None]
+    return {x.name for r in roots for x in walk(r) if isinstance(x, (Fn, Call))}
 
 
 def assign(target: Var | At, value: E | float, note: str = "") -> Assign:

@@ -15,6 +15,7 @@ from gyrogen.codegen.ir.nodes import (
     Assign,
     At,
     Bin,
+    Bits,
     Bool,
     Break,
     Call,
@@ -38,11 +39,17 @@ from gyrogen.codegen.ir.nodes import (
     Un,
     Unused,
     Var,
+    Word,
 )
 from gyrogen.methods import literal
 
 PRECEDENCE = {"or": 1, "and": 2, "==": 3, "!=": 3, "<": 4, "<=": 4, ">": 4, ">=": 4}
 PRECEDENCE |= {"+": 5, "-": 5, "*": 6, "/": 6}
+WORD_OPS = (">>", "<<", "&", "|")
+PRECEDENCE |= dict.fromkeys(WORD_OPS, 3)
+"""An operation on words: its operands are always parenthesized (no reliance on
+C's ranks for them, which -Wparentheses questions), and it is parenthesized
+within anything but a comparison's equal."""
 ATOM = 9
 WRAP = 100
 """A statement continues on a new line before it would pass this column."""
@@ -65,6 +72,9 @@ class Printer:
 
     indent = "    "
     ops: ClassVar[dict[str, str]] = {}
+    spellings: ClassVar[dict[str, str]] = {}
+    """The IR's functions (Fn) this target calls by another name: its
+    intrinsics' names, or a definition of gyrogen.codegen.integrators.intrinsics."""
     unary_minus = 7
     """The precedence of -x (Fortran: that of a sum; C: above a product)."""
 
@@ -91,6 +101,8 @@ class Printer:
             return str(e.value), ATOM if e.value >= 0 else self.unary_minus
         if isinstance(e, Bool):
             return self.boolean(e.value), ATOM
+        if isinstance(e, Word):
+            return self.word(e.value), ATOM
         if isinstance(e, Var):
             return self.var(e.name)
         if isinstance(e, At):
@@ -121,6 +133,8 @@ class Printer:
             )
             if _op(e.b, e.op):
                 right = f"({right})"
+        elif e.op in WORD_OPS:
+            left, right = self.expr(e.a, ATOM), self.expr(e.b, ATOM)
         else:
             left = self.expr(e.a, prec + self.grouped)
             right = self.expr(e.b, prec, right=True)
@@ -140,6 +154,9 @@ class Printer:
         return ", ".join(self.number(v) if isinstance(v, float) else str(v) for v in values)
 
     def const(self, name: str) -> str:
+        raise NotImplementedError
+
+    def word(self, value: int) -> str:
         raise NotImplementedError
 
     def var(self, name: str) -> tuple[str, int]:
@@ -177,7 +194,7 @@ class Printer:
     syntax: ClassVar[dict[str, str]] = {}
     """The language's statements: assign, comment, call, return, return_value
     (lines split by newlines), if, else, end_if, loop, end_loop, continue,
-    break, for, end_for, each with {fields} to fill."""
+    break, for, end_for, bits, each with {fields} to fill."""
 
     def statement(self, s: S, depth: int) -> list[str]:
         pad, say = self.indent * depth, self.syntax
@@ -207,6 +224,8 @@ class Printer:
             ]
         if isinstance(s, (Continue, Break)):
             return [pad + say["continue" if isinstance(s, Continue) else "break"].format()]
+        if isinstance(s, Bits):
+            return [pad + say["bits"].format(target=s.target, source=s.source)]
         if isinstance(s, Unused):
             return [pad + line for line in say["unused"].format(name=s.name).split("\n")]
         assert isinstance(s, For), s
