@@ -1,7 +1,9 @@
-"""The Taylor series method, described once: Jorba and Zou's order and
-step size (with heyoka's safety factor; the step met in each group of
-states by the group's own scale, bounds) around the scene's jet
-(gyrogen.codegen.integrators.taylor_jet), as one step of straight-line code
+"""The Taylor series method, described once: Jorba and Zou's order, the
+scene's jet (gyrogen.codegen.integrators.taylor_jet) and the bounds its
+last two coefficients set on the step in each group of states by the
+group's own scale (bounds, the method's error estimate), on the adaptive
+driver (gyrogen.codegen.integrators.driver: the stop codes, the statistics
+and Jorba and Zou's step size, JorbaZou), as one step of straight-line code
 with selections: the scalar integrator loops over it, the lanes print it
 over every lane (gyrogen.codegen.ir.lanes), so a batch equals its single
 calls bit for bit. No step is rejected for its error; a step whose new
@@ -137,10 +139,7 @@ def declare(name: str) -> Decl:
 
 def start_state() -> list[S]:
     """A trajectory's values at t0 after ode_start: h0 > 0 bounds the first step."""
-    return [
-        *common.start_state(),
-        *driver.JorbaZou.start(),
-    ]
+    return [*common.start_state(), *driver.JorbaZou.start()]
 
 
 def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
