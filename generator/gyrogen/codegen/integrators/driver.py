@@ -65,6 +65,8 @@ t, t0, t1, h, c = Var("t"), Var("t0"), Var("t1"), Var("h"), Var("c")
 PARAMS = (real("t0"), real("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)), *TOLERANCES,
           real("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
 """<method>_integrate's arguments, every adaptive method's."""
+LANE_PARAMS = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
+"""<method>_step_lanes's arguments (a lane's t0, x and h0 live in its struct lanes)."""
 
 
 def stat(field: str) -> Var:

@@ -22,7 +22,6 @@ from gyrogen.abi_groups import state_group
 from gyrogen.codegen.integrators import common, driver
 from gyrogen.codegen.integrators.common import (
     NX,
-    TOLERANCES,
     accepted,
     attitude_checked,
     comp,
@@ -312,7 +311,6 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
     assert isinstance(series, Series)
     unused = [] if reads_constants(jet) else [Unused("c")]
     body = (*unused, *uniform(m, jet), *step(m, jet, quaternion))
-    params = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
     locals_ = (
         *tables(m),
         Decl("order", "int", (), "in"),
@@ -322,7 +320,7 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
         *([declare("norm")] if quaternion else []),
     )
     doc = ("One step of taylor_integrate on every lane.",)
-    return Func("taylor_step_lanes", params, body, None, locals_, doc)
+    return Func("taylor_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
 
 
 def lane_state(m: Method, jet: Jet) -> list[Decl]:
