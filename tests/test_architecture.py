@@ -141,13 +141,13 @@ def test_the_adaptive_loops_share_the_driver() -> None:
     """The stop codes of the adaptive loops, their step counts, the last
     step's slack and the controllers' floors are written in
     codegen/integrators/driver.py alone; every other integrator module takes
-    them from it (taylor.py still spells its step's selections out)."""
+    them from it."""
     words = ("ERR_MAX_STEPS", "ERR_STEP_UNDERFLOW", "ERR_SINGULAR", "stats.accepted",
              "stats.rejected", "LAST_STEP_SLACK", "PAIR_ERR_FLOOR", "err_floor")  # fmt: skip
     folder = PACKAGE / "codegen" / "integrators"
     assert "ERR_MAX_STEPS" in (folder / "driver.py").read_text(encoding="utf-8")
     for path in sorted(folder.glob("*.py")):
-        if path.name in ("driver.py", "taylor.py"):
+        if path.name == "driver.py":
             continue
         text = path.read_text(encoding="utf-8")
         for word in words:

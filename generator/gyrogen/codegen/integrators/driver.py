@@ -8,18 +8,20 @@ it has one, its interpolant); the driver holds the rest:
   (the attitude check, x := xnew, t, the last step's OK), the interpolant's
   place, f at the new point;
 - the step-size controllers, a strategy per family: Hairer's PI controller
-  of the explicit pairs (PI), and Gustafsson's predictive controller of the
-  implicit methods, rodas4 and radau5 (Gustafsson), with their constants
-  from gyrogen.methods.
+  of the explicit pairs (PI), Gustafsson's predictive controller of the
+  implicit methods, rodas4 and radau5 (Gustafsson), and Jorba and Zou's
+  step size of the Taylor method (JorbaZou), with their constants from
+  gyrogen.methods.
 
 rodas4's and radau5's loops are written with If and else from these parts;
 a branch-free step (a pair's, printed over lanes too) takes the same
-expressions and selects: stop_code, ended, counted and the PI controller
-(every lane of a batch then takes the scalar path bit for bit).
+expressions and selects: stop_code, ended, counted and the PI and Jorba-Zou
+controllers (every lane of a batch then takes the scalar path bit for bit).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from gyrogen import abi
@@ -47,7 +49,7 @@ from gyrogen.codegen.ir.nodes import (
     real,
     sel,
 )
-from gyrogen.methods import Method, PairControl, RadauControl, RosenbrockControl
+from gyrogen.methods import Method, PairControl, RadauControl, RosenbrockControl, TaylorControl
 
 OK = code("OK")
 ERR_STEP_UNDERFLOW = code("ERR_STEP_UNDERFLOW")
@@ -63,6 +65,8 @@ t, t0, t1, h, c = Var("t"), Var("t0"), Var("t1"), Var("h"), Var("c")
 PARAMS = (real("t0"), real("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)), *TOLERANCES,
           real("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
 """<method>_integrate's arguments, every adaptive method's."""
+LANE_PARAMS = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
+"""<method>_step_lanes's arguments (a lane's t0, x and h0 live in its struct lanes)."""
 
 
 def stat(field: str) -> Var:
@@ -281,4 +285,53 @@ class Gustafsson:
         ]  # fmt: skip
 
 
-__all__ = ["PI", "Gustafsson", "accepted", "counted", "stop_code", "stop_tests"]
+@dataclass(frozen=True)
+class JorbaZou:
+    """The Taylor method's step size, after Jorba & Zou (2005), Sec. 3.3.1,
+    with heyoka's safety factor: at order p, h = rho e^(-safety / (p - 1)) /
+    e^2, rho = min(rp^(1/p), rq^(1/(p-1))) from the method's bounds rp and rq
+    on its last two coefficients (its error estimate), within t1 - t and
+    cap: h0 > 0 caps the first step, a retried step (not finite, or past
+    gimbal lock) caps the next at h times nonfinite_shrink, and an accepted
+    one lifts the cap. No step is rejected for its error."""
+
+    ctl: TaylorControl
+    cap = Var("cap")
+    rhofac = Var("rhofac")
+
+    def table(self, order: int) -> Decl:
+        """The safety factor by order k <= order, as constants (the lanes set
+        the uniform values at every step, where a call of exp and the
+        divisions by k were 4 % of the Taylor batch at 1e-6): the same
+        doubles as the C library's exp at run time."""
+        fac = tuple(math.exp(-self.ctl.safety / (k - 1)) / math.e**2 if k > 1 else 0.0
+                    for k in range(order + 1))  # fmt: skip
+        return Decl("rhofacs", "double", (order + 1,), values=fac)
+
+    def factor(self, order: E) -> S:
+        """rhofac := the safety factor at this order (uniform over a call)."""
+        return assign(self.rhofac, Var("rhofacs")[order])
+
+    @classmethod
+    def start(cls) -> list[S]:
+        """h0 > 0 (ode_start's h) caps the first step."""
+        return [assign(cls.cap, sel(cmp(Var("h0"), ">", 0.0), h, Const("HUGE")))]
+
+    def next_h(self, order: E, inv: Var, rp: E, rq: E) -> list[S]:
+        """h := rho rhofac within t1 - t and cap, rho by branch-free log2 and
+        exp2 (over lanes, vectorized); inv[k] = 1/k."""
+        rho = Var("rho")
+        roots = fn("min", fn("step_log2", rp) * inv[order], fn("step_log2", rq) * inv[order - 1])
+        return [
+            assign(rho, fn("step_exp2", roots)),
+            assign(h, fn("min", fn("min", rho * self.rhofac, t1 - t), self.cap)),
+        ]
+
+    def remember(self, ok: E, retry: E) -> S:
+        """After the step: no cap after an accepted one; a retried one caps
+        the next at h times nonfinite_shrink."""
+        shrunk = h * Num(self.ctl.nonfinite_shrink)
+        return assign(self.cap, sel(ok, Const("HUGE"), sel(retry, shrunk, self.cap)))
+
+
+__all__ = ["PI", "Gustafsson", "JorbaZou", "accepted", "counted", "stop_code", "stop_tests"]

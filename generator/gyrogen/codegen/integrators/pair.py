@@ -16,7 +16,6 @@ from gyrogen import methods as registry
 from gyrogen.codegen.integrators import common, driver
 from gyrogen.codegen.integrators.common import (
     NX,
-    TOLERANCES,
     accepted,
     attitude_checked,
     h,
@@ -46,7 +45,6 @@ from gyrogen.codegen.ir.nodes import (
     fn,
     not_,
     or_,
-    real,
     sel,
 )
 from gyrogen.methods import Method
@@ -156,9 +154,10 @@ def lanes_step(m: Method, quaternion: bool) -> Func:
     """m.name_step_lanes: one step of every lane of a struct lanes."""
     begin, rest = parts(m, quaternion)
     step = begin + rest
-    params = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
     doc = (f"One step of {m.name}_integrate on every lane.",)
-    return Func(f"{m.name}_step_lanes", params, tuple(step), None, used_locals(step), doc)
+    return Func(
+        f"{m.name}_step_lanes", driver.LANE_PARAMS, tuple(step), None, used_locals(step), doc
+    )
 
 
 def lane_state(krows: int) -> dict[str, Decl]:

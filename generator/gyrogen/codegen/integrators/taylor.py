@@ -1,7 +1,9 @@
-"""The Taylor series method, described once: Jorba and Zou's order and
-step size (with heyoka's safety factor; the step met in each group of
-states by the group's own scale, bounds) around the scene's jet
-(gyrogen.codegen.integrators.taylor_jet), as one step of straight-line code
+"""The Taylor series method, described once: Jorba and Zou's order, the
+scene's jet (gyrogen.codegen.integrators.taylor_jet) and the bounds its
+last two coefficients set on the step in each group of states by the
+group's own scale (bounds, the method's error estimate), on the adaptive
+driver (gyrogen.codegen.integrators.driver: the stop codes, the statistics
+and Jorba and Zou's step size, JorbaZou), as one step of straight-line code
 with selections: the scalar integrator loops over it, the lanes print it
 over every lane (gyrogen.codegen.ir.lanes), so a batch equals its single
 calls bit for bit. No step is rejected for its error; a step whose new
@@ -17,14 +19,11 @@ from collections.abc import Sequence
 from gyrogen import abi
 from gyrogen import methods as registry
 from gyrogen.abi_groups import state_group
-from gyrogen.codegen.integrators import common
+from gyrogen.codegen.integrators import common, driver
 from gyrogen.codegen.integrators.common import (
     NX,
-    STATS,
-    TOLERANCES,
     accepted,
     attitude_checked,
-    code,
     comp,
     dx,
     gimbal_at,
@@ -55,8 +54,6 @@ from gyrogen.codegen.ir.nodes import (
     Int,
     Loop,
     Num,
-    Ref,
-    Return,
     S,
     Unused,
     Var,
@@ -107,25 +104,25 @@ def uniform(m: Method, jet: Jet) -> list[S]:
             inc(order, sel(cmp(Num(v), ">", Var("rtol")), Int(1), Int(0)))
             for v in series.thresholds()
         ),
-        assign(Var("rhofac"), Var("rhofacs")[order]),
+        control(m).factor(order),
         assign(Var("scale"), Var("atol") / Var("rtol")),
     ]
 
 
+def control(m: Method) -> driver.JorbaZou:
+    """m's step-size controller (gyrogen.codegen.integrators.driver)."""
+    assert isinstance(m.control, registry.TaylorControl)
+    return driver.JorbaZou(m.control)
+
+
 def tables(m: Method) -> tuple[Decl, Decl]:
-    """1/k and the step's safety factor e^(-safety / (k - 1)) / e^2 by order
-    k, as constants: the lanes set the uniform values at every step, where a
-    call of exp and the divisions were 4 % of the Taylor batch at 1e-6. The
-    same doubles as computing them at run time with the C library's exp."""
-    series, ctl = m.tableau, m.control
-    assert isinstance(series, Series) and isinstance(ctl, registry.TaylorControl)
-    ks = range(series.order + 1)
-    inv = tuple(1.0 / k if k else 0.0 for k in ks)
-    fac = tuple(math.exp(-ctl.safety / (k - 1)) / math.e**2 if k > 1 else 0.0 for k in ks)
-    return (
-        Decl("inv", "double", (len(ks),), values=inv),
-        Decl("rhofacs", "double", (len(ks),), values=fac),
-    )
+    """1/k by order k (the jet's and the step size's), as constants (the
+    divisions were part of 4 % of the Taylor batch at 1e-6), and the step's
+    safety factor by order (JorbaZou.table)."""
+    series = m.tableau
+    assert isinstance(series, Series)
+    inv = tuple(1.0 / k if k else 0.0 for k in range(series.order + 1))
+    return Decl("inv", "double", (len(inv),), values=inv), control(m).table(series.order)
 
 
 STATE = ("code", "t", "h", "cap", "nonfinite")
@@ -141,23 +138,18 @@ def declare(name: str) -> Decl:
 
 def start_state() -> list[S]:
     """A trajectory's values at t0 after ode_start: h0 > 0 bounds the first step."""
-    return [
-        *common.start_state(),
-        assign(Var("cap"), sel(cmp(Var("h0"), ">", 0.0), h, Const("HUGE"))),
-    ]
+    return [*common.start_state(), *driver.JorbaZou.start()]
 
 
 def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
     """One step of one trajectory, straight-line with selections (the scalar
     integrator loops over it; the lanes print it over every lane)."""
-    ctl = m.control
-    assert isinstance(ctl, registry.TaylorControl)
     t, t1, cd = Var("t"), Var("t1"), Var("code")
     last, run, take, ok, at, jump, retry = (
         Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
     )
-    nonfinite, cap = Var("nonfinite"), Var("cap")
-    rho, h2 = Var("rho"), Var("h2")
+    nonfinite, h2 = Var("nonfinite"), Var("h2")
+    jz = control(m)
     q = Var("q")
     pairs = (order - Int(1)) / Int(2)  # Horner's turns of two orders; then one more if odd
 
@@ -184,35 +176,18 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         """xnew of a state of degree <= min_order: exact at any order and h."""
         return T[Int(1), Int(n)] + h * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
 
-    spent = cmp(Var("stats.accepted") + Var("stats.rejected"), ">=", Var("max_steps"))
-    stop = sel(
-        fn("step_underflow", h, t),
-        sel(nonfinite, code("ERR_NONFINITE"), code("ERR_STEP_UNDERFLOW")),
-        sel(spent, code("ERR_MAX_STEPS"), Int(-1)),
-    )
     args = (order, x, *([c] if reads_constants(jet) else []), Var("inv"), T)
     body: list[S] = [
         Comment("the coefficients at x, and the step they allow (Jorba and Zou)"),
         assign(run, cmp(cd, "<", 0)),
         Call("taylor_jet", args),
-        inc(Var("stats.rhs_calls"), sel(run, Int(1), Int(0))),
+        driver.count("rhs_calls", sel(run, Int(1), Int(0))),
         *bounds(jet, exact),
-        assign(
-            rho,
-            fn(  # branch-free log and exp: over lanes, vectorized
-                "step_exp2",
-                fn(
-                    "min",
-                    fn("step_log2", Var("rp")) * Var("inv")[order],
-                    fn("step_log2", Var("rq")) * Var("inv")[order - 1],
-                ),
-            ),
-        ),
-        assign(h, fn("min", fn("min", rho * Var("rhofac"), t1 - t), cap)),
-        assign(last, cmp(t + Num(registry.LAST_STEP_SLACK) * h, ">=", t1)),
+        *jz.next_h(order, Var("inv"), Var("rp"), Var("rq")),
+        assign(last, driver.last_step()),
         assign(h, sel(last, t1 - t, h)),
-        assign(Var("stats.h"), sel(run, h, Var("stats.h"))),
-        assign(cd, sel(run, stop, cd), "lost in t, or no steps left"),
+        assign(driver.stat("h"), sel(run, h, driver.stat("h"))),
+        assign(cd, sel(run, driver.stop_code(nonfinite), cd), "lost in t, or no steps left"),
         assign(run, cmp(cd, "<", 0)),
         Comment("x(t + h) by Horner's scheme two orders a turn, less what the last add lost"),
         assign(h2, h * h),
@@ -230,19 +205,9 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(jump, Bool(False) if quaternion else gimbal_jump(x, xnew)),
         assign(ok, and_(take, not_(at), not_(jump))),
         assign(retry, and_(run, or_(nonfinite, jump)), "past gimbal lock, or not finite"),
-        assign(
-            cd,
-            sel(
-                and_(take, at, not_(jump)),
-                code("ERR_ATTITUDE_SINGULAR"),
-                sel(and_(ok, last), code("OK"), cd),
-            ),
-        ),
-        assign(t, sel(ok, sel(last, t1, t + h), t)),
-        assign(Var("stats.t"), t),
-        inc(Var("stats.accepted"), sel(ok, Int(1), Int(0))),
-        inc(Var("stats.rejected"), sel(retry, Int(1), Int(0))),
-        assign(cap, sel(ok, Const("HUGE"), sel(retry, h * Num(ctl.nonfinite_shrink), cap))),
+        assign(cd, driver.ended(and_(take, at, not_(jump)), ok, last, cd)),
+        *driver.counted(ok, retry, last),
+        jz.remember(ok, retry),
         If(ok, tuple(accepted(quaternion, known=True))),
     ]
     return body
@@ -316,39 +281,12 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
     series = m.tableau
     assert isinstance(series, Series)
     cd = Var("code")
-    args = (
-        Int(m.start_order),
-        Const(m.min_rtol),
-        Var("t0"),
-        Var("t1"),
-        x,
-        c,
-        Var("rtol"),
-        Var("atol"),
-        Var("h0"),
-        Var("max_steps"),
-        Var("f0"),
-        Ref("h"),
-        Var("stats"),
-    )
-    stop = If(cmp(cd, ">=", 0), (Return(cd),))
     body: list[S] = [
-        assign(cd, fn("ode_start", *args)),
-        stop,
+        *driver.started(m, Var("f0"), cd),
         *uniform(m, jet),
         *start_state(),
-        Loop((*step(m, jet, quaternion), stop)),
+        Loop((*step(m, jet, quaternion), driver.stopped(cd))),
     ]
-    params = (
-        real("t0"),
-        real("t1"),
-        arr("x", "inout"),
-        Decl("c", "double", ("NC",)),
-        *TOLERANCES,
-        real("h0"),
-        Decl("max_steps", "long"),
-        STATS,
-    )
     locals_ = (
         coefficients(series, jet),
         *tables(m),
@@ -363,7 +301,7 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
         *(declare(n) for n in LOCALS),
         *([declare("norm")] if quaternion else []),
     )
-    return Func("taylor_integrate", params, tuple(body), "int", locals_, m.notes)
+    return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
 
 
 def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
@@ -373,7 +311,6 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
     assert isinstance(series, Series)
     unused = [] if reads_constants(jet) else [Unused("c")]
     body = (*unused, *uniform(m, jet), *step(m, jet, quaternion))
-    params = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
     locals_ = (
         *tables(m),
         Decl("order", "int", (), "in"),
@@ -383,7 +320,7 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
         *([declare("norm")] if quaternion else []),
     )
     doc = ("One step of taylor_integrate on every lane.",)
-    return Func("taylor_step_lanes", params, body, None, locals_, doc)
+    return Func("taylor_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
 
 
 def lane_state(m: Method, jet: Jet) -> list[Decl]:
