@@ -177,8 +177,14 @@ def test_ctrl_c_while_writing_waits_until_the_files_are_placed(
 
     monkeypatch.setattr(files_module, "_stage", stage)
     new = {name: f"new {name}" for name in old}
-    with pytest.raises(KeyboardInterrupt):
-        files_module.write_atomic(out_dir, new)
+    # Python's own handler, as a terminal's process has it: a run in the
+    # background inherits SIGINT ignored, and nothing would be raised
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            files_module.write_atomic(out_dir, new)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert _contents(out_dir) == new
     assert sorted(p.name for p in out_dir.iterdir()) == sorted(new)
 
