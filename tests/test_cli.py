@@ -195,6 +195,7 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.slow
 def test_ctrl_c_at_any_moment_of_the_first_second(tmp_path: Path) -> None:
     """SIGINT at 20 moments 0.05 s apart over a command's first second (the
     imports: they take 2 s and more): before, each was a KeyboardInterrupt

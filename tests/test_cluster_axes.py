@@ -59,6 +59,7 @@ def _verified(backends: dict[Language, Compiled], scene: Scene, states: int, set
     assert not report.refusal_failures and report.refusals_checked >= 100
 
 
+@pytest.mark.slow
 def test_c_and_fortran_match_the_reference_and_refuse_what_setup_must(built) -> None:
     """Random states, parameter sets on random axes of length within the
     slack (oracle.scene_view), every pair within 1e-13; and the refusals,
@@ -76,6 +77,7 @@ def test_the_issues_size(built) -> None:
     _verified(backends, scene, 10_000, 100)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_at_the_folded_values_it_is_the_folded_scene(
     language: Language, built, tmp_path: Path
@@ -97,6 +99,7 @@ def test_at_the_folded_values_it_is_the_folded_scene(
         assert np.max(np.abs(a - b) / (1 + np.abs(b))) < BAR, name
 
 
+@pytest.mark.slow
 def test_setup_normalizes_an_axis_within_the_slack(built) -> None:
     """An axis given 0.9 slack long gives the rhs of the unit one."""
     scene, backends = built
@@ -109,6 +112,7 @@ def test_setup_normalizes_an_axis_within_the_slack(built) -> None:
         assert np.max(np.abs(a - b) / (1 + np.abs(b))) < 1e-14, comp.language
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scale", "code"),
     [

@@ -89,6 +89,7 @@ def test_c_and_fortran_match_the_reference_across_the_tables(built) -> None:
     assert {r.pair for r in report.rows} >= {"C vs Fortran", "C vs reference jac"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("language", ["c", "fortran"])
 def test_each_wheel_reads_its_own_table(language: Language, built) -> None:
     """With the carrier and the wheels at rest relative to it, J_k w_k' is
@@ -125,6 +126,7 @@ def test_the_reference_interpolates_per_state_times() -> None:
     )
 
 
+@pytest.mark.slow
 def test_a_table_wheel_is_an_input_of_the_linear_model(built) -> None:
     """The linear model adds T_k to a table wheel's motor: B over w_k is
     1/J_k for the wheels whose clamp does not hold at the point."""
