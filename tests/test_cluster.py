@@ -77,7 +77,11 @@ BAD = [
                            'torque = "table"\ntorque_table = [[0.0, 0.0], [1.0, 1e300]]'),
      "torque_table[1]: T = 1e+300 at t = 1: a folded value must be 0 or of magnitude 1e-50"),
     ("far position", edit("position = [0.4, 0.0, 0.1]", "position = [1e200, 0.0, 0.1]"),
-     "rotors: the lumped inertia overflows a double"),
+     "rotors.0.position: x = 1e+200: a folded value must be 0 or of magnitude 1e-50 to 1e+50"),
+    ("tiny position", edit("position = [0.4, 0.0, 0.1]", "position = [0.4, 0.0, -2e-308]"),
+     "rotors.0.position: z = -2e-308: a folded value must be 0 or of magnitude 1e-50 to 1e+50"),
+    ("tiny axis", edit("axis = [1.0, 0.0, 0.0]", "axis = [1.0, 0.0, 1e-300]"),
+     "rotors.0.axis: z = 1e-300: a folded value must be 0 or of magnitude 1e-50 to 1e+50"),
     ("position 1e40", edit("position = [0.4, 0.0, 0.1]", "position = [1e40, 0.0, 0.1]"),
      "rotors: the lumped inertia has condition number"),
 ]  # fmt: skip

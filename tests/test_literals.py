@@ -61,6 +61,13 @@ def test_numbers_outside_double_range_are_refused(value: sm.Expr) -> None:
         as_double(value)
 
 
+def test_a_refused_rational_is_named_by_its_magnitude() -> None:
+    """Its digits cut short read as another number (an integer within range)."""
+    value = sm.Rational(-874123862273805255713542017029594789152, 5 * 10**400)
+    with pytest.raises(LiteralError, match=r"constant of the generated code, -1\.75e-362, is"):
+        as_double(value)
+
+
 @pytest.mark.parametrize("printer", [CPrinter(0, "p"), FortranPrinter(0, "p")])
 def test_printers_refuse_an_unconverted_number(printer: object) -> None:
     with pytest.raises(LiteralError, match="reached a printer"):

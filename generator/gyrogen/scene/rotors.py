@@ -44,7 +44,14 @@ from gyrogen.abi_rotors import (
     cluster_states,
     rotor_name,
 )
-from gyrogen.scene.rules import Number, check_table, number, parameter_value, shown
+from gyrogen.scene.rules import (
+    Number,
+    check_table,
+    folded_size,
+    number,
+    parameter_value,
+    shown,
+)
 
 
 def _folded(v: object) -> object:
@@ -72,6 +79,8 @@ def _vector(v: object) -> object:
         number(x)  # an integer past a double's range
         if not math.isfinite(x):
             raise ValueError(f"{name} = {x!r} is not a finite number")
+        if why := folded_size(float(x)):
+            raise ValueError(f'{name} = {x!r}: {why}; make it "runtime"')
     return tuple(float(x) for x in v)
 
 

@@ -83,10 +83,16 @@ def as_double(value: sm.Expr, integers: bool = True) -> sm.Expr:
         x = math.inf
     if not math.isfinite(x) or (x == 0.0 and value != 0) or (x != 0.0 and abs(x) < 2.0**-1022):
         raise LiteralError(
-            f"a constant of the generated code, {sm.sstr(value)[:40]}, is outside double "
+            f"a constant of the generated code, {_magnitude(value)}, is outside double "
             "range: keep the extreme parameter values at run time"
         )
     return sm.Float(x)
+
+
+def _magnitude(value: sm.Expr) -> str:
+    """value to 3 digits with its exponent, however far outside double range
+    (a rational's digits cut short read as another number)."""
+    return sm.sstr(sm.N(value, 3))
 
 
 def writable_form(expr: sm.Expr) -> sm.Expr:
