@@ -313,6 +313,26 @@ def test_a_start_at_gimbal_lock_is_refused(fmus: dict[str, Path], tmp_path: Path
     instance.freeInstance()
 
 
+def test_outputs_that_are_not_finite_are_refused(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """States the FMU takes (finite) whose outputs are not: fmi2GetReal of the
+    outputs is an fmi2Error naming the first that is not finite, as for the
+    derivatives (before: fmi2OK with an infinite kinetic energy)."""
+    fmu = fmus["stiff"]
+    model, log = initialized(fmu, "ModelExchange", tmp_path)
+    model.enterContinuousTimeMode()
+    md = fmpy.read_model_description(str(fmu))
+    n = len(md.derivatives)
+    x = (ctypes.c_double * n)()
+    model.getContinuousStates(x, n)
+    names = [v.name for v in md.modelVariables]
+    x[names.index("u1")] = 1e300
+    model.setContinuousStates(x, n)
+    assert math.isfinite(model.getReal(vr(fmu, "angular_momentum[1]"))[0])
+    refused(lambda: model.getReal(vr(fmu, "angular_momentum[1]", "kinetic_energy")), log,
+            "fmi2GetReal: kinetic_energy = inf is not finite")  # fmt: skip
+    model.freeInstance()
+
+
 def test_the_help_names_the_default_method(cli) -> None:
     """The --method default as methods.pick applies it (before: "dop853",
     while the default scene's FMU steps with taylor)."""
