@@ -313,6 +313,133 @@ def test_a_start_at_gimbal_lock_is_refused(fmus: dict[str, Path], tmp_path: Path
     instance.freeInstance()
 
 
+def test_a_failed_initialization_leaves_the_error_state(
+    fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    """After fmi2ExitInitializationMode refused a start at gimbal lock, the
+    instance is in FMI 2.0's error state: no continuous-time mode, no new
+    start values, until fmi2Reset (before: continuous-time mode was entered
+    and the derivatives at the refused state, 8e15, came back fmi2OK)."""
+    fmu = fmus["default"]
+    model, log = instantiate(fmu, "ModelExchange", tmp_path)
+    model.setupExperiment(startTime=0.0)
+    model.enterInitializationMode()
+    model.setReal(vr(fmu, "q2"), [math.pi / 2])
+    with pytest.raises(FMICallException):
+        model.exitInitializationMode()
+    refused(
+        model.enterContinuousTimeMode,
+        log,
+        "fmi2EnterContinuousTimeMode: not allowed in the error state (only in event mode)",
+    )
+    refused(
+        lambda: model.setReal(vr(fmu, "q2"), [0.0]),
+        log,
+        "fmi2SetReal: not allowed in the error state (only in the instantiated state, "
+        "initialization mode, event mode, continuous-time mode or the step-complete state)",
+    )
+    refused(
+        model.terminate,
+        log,
+        "fmi2Terminate: not allowed in the error state "
+        "(only in event mode, continuous-time mode or the step-complete state)",
+    )
+    model.reset()
+    model.setupExperiment(startTime=0.0)
+    model.enterInitializationMode()
+    model.exitInitializationMode()
+    model.enterContinuousTimeMode()
+    n = len(fmpy.read_model_description(str(fmu)).derivatives)
+    dx = (ctypes.c_double * n)()
+    model.getDerivatives(dx, n)
+    assert all(math.isfinite(v) for v in dx)
+    model.freeInstance()
+
+
+def test_model_exchange_refuses_calls_out_of_order(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """FMI 2.0's table of the calls each state allows: a call out of order is
+    an fmi2Error naming the call and the state, and the state stays (before:
+    continuous-time mode and the derivatives right after instantiation,
+    fmi2OK)."""
+    fmu = fmus["default"]
+    model, log = instantiate(fmu, "ModelExchange", tmp_path)
+    n = len(fmpy.read_model_description(str(fmu)).derivatives)
+    x, dx = (ctypes.c_double * n)(), (ctypes.c_double * n)()
+    derivatives = ("fmi2GetDerivatives: not allowed in {} (only in event mode, continuous-time "
+                   "mode, the terminated state or the error state)")  # fmt: skip
+    model.setupExperiment(startTime=0.0)
+    refused(
+        model.enterContinuousTimeMode,
+        log,
+        "fmi2EnterContinuousTimeMode: not allowed in the instantiated state (only in event mode)",
+    )
+    refused(lambda: model.getDerivatives(dx, n), log, derivatives.format("the instantiated state"))
+    refused(
+        lambda: model.getReal(vr(fmu, "q1")),
+        log,
+        "fmi2GetReal: not allowed in the "
+        "instantiated state (only in initialization mode, event mode, continuous-time mode, "
+        "the step-complete state, the terminated state or the error state)",
+    )
+    model.enterInitializationMode()
+    refused(lambda: model.getDerivatives(dx, n), log, derivatives.format("initialization mode"))
+    refused(
+        lambda: model.setTime(0.5),
+        log,
+        "fmi2SetTime: not allowed in initialization mode "
+        "(only in event mode or continuous-time mode)",
+    )
+    model.exitInitializationMode()
+    model.getContinuousStates(x, n)
+    refused(
+        lambda: model.setContinuousStates(x, n),
+        log,
+        "fmi2SetContinuousStates: not allowed in event mode (only in continuous-time mode)",
+    )
+    refused(
+        lambda: model.completedIntegratorStep(),
+        log,
+        "fmi2CompletedIntegratorStep: not allowed in event mode (only in continuous-time mode)",
+    )
+    model.enterContinuousTimeMode()
+    refused(
+        lambda: model.newDiscreteStates(),
+        log,
+        "fmi2NewDiscreteStates: not allowed in continuous-time mode (only in event mode)",
+    )
+    model.setContinuousStates(x, n)
+    model.getDerivatives(dx, n)
+    model.terminate()
+    refused(
+        model.enterEventMode,
+        log,
+        "fmi2EnterEventMode: not allowed in the terminated state "
+        "(only in event mode or continuous-time mode)",
+    )
+    model.getDerivatives(dx, n)
+    model.freeInstance()
+
+
+def test_outputs_that_are_not_finite_are_refused(fmus: dict[str, Path], tmp_path: Path) -> None:
+    """States the FMU takes (finite) whose outputs are not: fmi2GetReal of the
+    outputs is an fmi2Error naming the first that is not finite, as for the
+    derivatives (before: fmi2OK with an infinite kinetic energy)."""
+    fmu = fmus["stiff"]
+    model, log = initialized(fmu, "ModelExchange", tmp_path)
+    model.enterContinuousTimeMode()
+    md = fmpy.read_model_description(str(fmu))
+    n = len(md.derivatives)
+    x = (ctypes.c_double * n)()
+    model.getContinuousStates(x, n)
+    names = [v.name for v in md.modelVariables]
+    x[names.index("u1")] = 1e300
+    model.setContinuousStates(x, n)
+    assert math.isfinite(model.getReal(vr(fmu, "angular_momentum[1]"))[0])
+    refused(lambda: model.getReal(vr(fmu, "angular_momentum[1]", "kinetic_energy")), log,
+            "fmi2GetReal: kinetic_energy = inf is not finite")  # fmt: skip
+    model.freeInstance()
+
+
 def test_the_help_names_the_default_method(cli) -> None:
     """The --method default as methods.pick applies it (before: "dop853",
     while the default scene's FMU steps with taylor)."""
@@ -474,10 +601,12 @@ def test_sources_compile_strictly(fmus: dict[str, Path], tmp_path: Path, compile
 DRIVER = Path(__file__).resolve().parent / "consumers" / "fmi2_driver.c"
 MISUSE = {
     "wrong_guid", "step_before_initialization", "start_nan", "set_nowhere", "set_twice",
-    "exit_refused", "set_refused",
+    "exit_refused", "set_in_error", "step_in_error", "set_refused",
     "get_nowhere", "unknown_category", "step_nan", "step_backwards", "other_status",
     "step_after_terminate", "states_too_many", "set_states_too_few", "derivatives_too_many",
     "fmu_state", "set_nan_states", "time_nan", "time_minus_inf", "derivatives_of_1e308",
+    "continuous_time_before_initialization", "derivatives_before_initialization",
+    "continuous_time_in_error", "states_in_error",
 }  # fmt: skip
 """What tests/consumers/fmi2_driver.c does wrong: each an fmi2Error (3) with
 a logged line; every other call is fmi2OK (0)."""
@@ -503,7 +632,7 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
     assert (proc.returncode, proc.stderr) == (0, "")
     lines = proc.stdout.splitlines()
     calls = [(i, *line.split()) for i, line in enumerate(lines) if not line.startswith("log ")]
-    assert len(calls) == 43 and {what for _, what, _ in calls} >= MISUSE
+    assert len(calls) == 55 and {what for _, what, _ in calls} >= MISUSE
     for i, what, status in calls:
         assert status == ("3" if what in MISUSE else "0"), what
         assert lines[i - 1].startswith("log 3 ") == (what in MISUSE), what
@@ -513,6 +642,10 @@ def test_the_wrapper_under_sanitizers(fmus: dict[str, Path], tmp_path: Path) -> 
     assert step + "nan is not >= 0, or t + h (nan) is not finite" in lines
     assert step + "-1 is not >= 0, or t + h (-0.90000000000000002) is not finite" in lines
     assert "log 3 fmi2SetTime: the time -inf is not finite" in lines
+    order = "log 3 {}: not allowed in {} (only in {})"
+    assert order.format("fmi2DoStep", "the error state", "the step-complete state") in lines
+    early = order.format("fmi2EnterContinuousTimeMode", "the instantiated state", "event mode")
+    assert early in lines
     assert any(line.startswith("log 3 fmi2GetDerivatives: der(") for line in lines)
 
 

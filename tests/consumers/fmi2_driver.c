@@ -2,7 +2,8 @@
  * Drives an FMU's FMI 2.0 wrapper with no importer in between, through the
  * calls an importer may get wrong: a wrong GUID, values that are not
  * finite or that setup refuses, value references and sizes out of range,
- * steps that cannot be taken, calls out of order. Built with the FMU's
+ * steps that cannot be taken, calls out of order (FMI 2.0's state table,
+ * the error state a refused initialization leaves). Built with the FMU's
  * sources under AddressSanitizer and UBSan by tests/test_fmu.py, which
  * reads the lines: "<what> <status>" per call, "log <status> <message>"
  * per logged message, and checks them.
@@ -59,8 +60,12 @@ static void co_simulation(const fmi2CallbackFunctions *cb, const char *guid, fmi
         const double values[2] = {1.0, 2.0};
         said("set_twice", fmi2SetReal(c, twice, 2, values));
     }
-    said("exit_refused", fmi2ExitInitializationMode(c));
-    said("set_start", fmi2SetReal(c, &p0, 1, &start));
+    said("exit_refused", fmi2ExitInitializationMode(c)); /* now in the error state */
+    said("set_in_error", fmi2SetReal(c, &p0, 1, &start));
+    said("step_in_error", fmi2DoStep(c, 0.0, 0.1, 1));
+    said("reset", fmi2Reset(c)); /* the start values again */
+    said("setup_again", fmi2SetupExperiment(c, 1, 1e-10, 0.0, 0, 0.0));
+    said("enter_again", fmi2EnterInitializationMode(c));
     said("exit_initialization", fmi2ExitInitializationMode(c));
     said("set_refused", fmi2SetReal(c, &p0, 1, &minus_one));
     said("get_after", fmi2GetReal(c, &p0, 1, &value));
@@ -78,14 +83,23 @@ static void co_simulation(const fmi2CallbackFunctions *cb, const char *guid, fmi
     fmi2FreeInstance(c);
 }
 
-static void model_exchange(const fmi2CallbackFunctions *cb, const char *guid, size_t nx,
-                           size_t u1)
+static void model_exchange(const fmi2CallbackFunctions *cb, const char *guid,
+                           fmi2ValueReference p0, size_t nx, size_t u1)
 {
     double *x = (double *)calloc(nx + 1, sizeof(double));
     double *dx = (double *)calloc(nx + 1, sizeof(double));
+    const double nan = NAN;
     fmi2EventInfo info;
     size_t i;
     fmi2Component c = fmi2Instantiate("me", fmi2ModelExchange, guid, "", cb, 0, 0);
+    said("continuous_time_before_initialization", fmi2EnterContinuousTimeMode(c));
+    said("derivatives_before_initialization", fmi2GetDerivatives(c, dx, nx));
+    said("enter_initialization", fmi2EnterInitializationMode(c));
+    said("set_nan", fmi2SetReal(c, &p0, 1, &nan));
+    said("exit_refused", fmi2ExitInitializationMode(c)); /* now in the error state */
+    said("continuous_time_in_error", fmi2EnterContinuousTimeMode(c));
+    said("states_in_error", fmi2SetContinuousStates(c, x, nx));
+    said("reset", fmi2Reset(c));
     said("enter_initialization", fmi2EnterInitializationMode(c));
     said("exit_initialization", fmi2ExitInitializationMode(c));
     said("new_discrete_states", fmi2NewDiscreteStates(c, &info));
@@ -119,7 +133,7 @@ int main(int argc, char **argv)
         return 2;
     }
     co_simulation(&cb, argv[1], (fmi2ValueReference)strtoul(argv[2], NULL, 10));
-    model_exchange(&cb, argv[1], (size_t)strtoul(argv[3], NULL, 10),
-                   (size_t)strtoul(argv[4], NULL, 10));
+    model_exchange(&cb, argv[1], (fmi2ValueReference)strtoul(argv[2], NULL, 10),
+                   (size_t)strtoul(argv[3], NULL, 10), (size_t)strtoul(argv[4], NULL, 10));
     return 0;
 }
