@@ -384,7 +384,13 @@ FOOTERS = [
     ({"gyrogen": None}, "its footer records no samples"),
     ({"samples": [0, 5]}, "holds samples 0 to 5 (its footer), not 5 to 10"),
     ({"rows": range(5, 9)}, "holds 4 rows (its footer), not 5"),
-    ({"rows": range(0, 5)}, "its rows' statistics do not say samples 5 to 10"),
+    ({"rows": range(0, 5)}, "its rows are not samples 5 to 10, each once, in order"),
+    # the least and greatest samples right, one doubled and one missing: the rows'
+    # statistics agreed, and api.read gave sample 5 twice, 6 never
+    ({"rows": [5, 5, 7, 8, 9]}, "its rows are not samples 5 to 10, each once, in order"),
+    ({"rows": [5, 7, 6, 8, 9]}, "its rows are not samples 5 to 10, each once, in order"),
+    ({"rows": np.arange(5.0, 10.0)}, "its sample column is not integers (it is double)"),
+    ({"column": "trajectory"}, "holds no sample column"),
     ({"fingerprint": "another"}, "computed for another sweep (its footer)"),
     ({"identity": {"code": "another"}}, "computed with another build (its footer)"),
     ({"bytes": b"PAR1"}, "damaged or cut short"),
@@ -396,8 +402,9 @@ FOOTERS = [
 def test_the_verdict_on_a_part_reads_its_footer(
     tmp_path: Path, change: dict[str, object], why: str | None
 ) -> None:
-    """A part of samples 5..10 is its sweep's only when its footer says so:
-    its samples, its rows' count and statistics, fingerprint and identity."""
+    """A part of samples 5..10 is its sweep's only when its footer says so
+    (its samples, its rows' count, fingerprint and identity) and its sample
+    column holds 5 to 9, each once, in order."""
     from gyrogen.analysis.sweep.columns import part_name
     from gyrogen.analysis.sweep.parts import parquet_bytes, verdict
     from gyrogen.analysis.sweep.store import store
@@ -405,9 +412,9 @@ def test_the_verdict_on_a_part_reads_its_footer(
     state = {"fingerprint": "mine", "identity": {"code": "mine"}}
     meta = {"samples": [5, 10], **state}
     meta |= {k: v for k, v in change.items() if k in ("samples", "fingerprint", "identity")}
-    sample = np.array(change.get("rows", range(5, 10)), dtype=np.int64)
+    sample = np.asarray(change.get("rows", range(5, 10)))
     said = {"gyrogen": meta} if "gyrogen" not in change else None
-    data = change.get("bytes") or parquet_bytes({"sample": sample}, said)
+    data = change.get("bytes") or parquet_bytes({str(change.get("column", "sample")): sample}, said)
     (tmp_path / "parts").mkdir()
     (tmp_path / "parts" / part_name(5, 10)).write_bytes(data)  # type: ignore[arg-type]
     assert verdict(store(tmp_path), 5, 10, state) == why
