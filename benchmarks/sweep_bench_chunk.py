@@ -3,7 +3,8 @@ phase, in this process, each the best of `repeats` (CPU seconds of this
 thread, and wall), beside the bare batch call on the same start states:
 the draws, run_chunk (draws, batch call, metrics), the Parquet bytes, the
 write into a local directory (fsynced, renamed) and through a file:// URL
-(fsspec: a temporary name, renamed)."""
+(fsspec: a temporary name, renamed), and the resume's check of the part
+written (parts.verdict: its footer and its sample column)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from gyrogen import api
 from gyrogen.analysis.sweep.draws import inputs
 from gyrogen.analysis.sweep.engine import Job, identity, part_metadata
 from gyrogen.analysis.sweep.metrics import run_chunk
-from gyrogen.analysis.sweep.parts import parquet_bytes, write_part
+from gyrogen.analysis.sweep.parts import parquet_bytes, verdict, write_part
 from gyrogen.analysis.sweep.store import store
 from gyrogen.runtime.flags import native_target
 from gyrogen.runtime.scene_build import compiled, scene_sources
@@ -34,6 +35,7 @@ def per_chunk(spec: api.Spec, tol: float, chunk: int, work: Path, repeats: int =
     comp = compiled(sources)
     job = Job(spec, sources, chunk, identity(spec, sources, native_target()))
     meta = part_metadata(job, 0, chunk)
+    state = {k: meta["gyrogen"][k] for k in ("fingerprint", "identity")}
     local, url = store(work / "chunk-local"), store(f"file://{work / 'chunk-url'}")
     for where in (local, url):
         where.make_dir("parts")
@@ -58,6 +60,9 @@ def per_chunk(spec: api.Spec, tol: float, chunk: int, work: Path, repeats: int =
         keep("Parquet bytes", cpu, wall)
         for name, where in (("local directory", local), ("file:// URL (fsspec)", url)):
             keep(f"write, {name}", *_timed(write_part, where, a, b, data)[:2])
+            cpu, wall, why = _timed(verdict, where, a, b, state)
+            assert why is None, why
+            keep(f"check (verdict), {name}", cpu, wall)
     size = len(data)
     bare = best["bare batch call"][0]
     print(f"per chunk of {chunk:,} (best of {repeats}; CPU of this thread, wall):")

@@ -383,8 +383,17 @@ FOOTERS = [
     ({}, None),
     ({"gyrogen": None}, "its footer records no samples"),
     ({"samples": [0, 5]}, "holds samples 0 to 5 (its footer), not 5 to 10"),
+    # was "holds samples 5 to 10 (its footer), not 5 to 10"
+    ({"samples": ["5", "10"]}, 'its footer records its samples as ["5", "10"], not [5, 10]'),
+    ({"samples": [5, True]}, "its footer records its samples as [5, true], not [5, 10]"),
     ({"rows": range(5, 9)}, "holds 4 rows (its footer), not 5"),
-    ({"rows": range(0, 5)}, "its rows' statistics do not say samples 5 to 10"),
+    ({"rows": range(0, 5)}, "its rows are not samples 5 to 10, each once, in order"),
+    # the least and greatest samples right, one doubled and one missing: the rows'
+    # statistics agreed, and api.read gave sample 5 twice, 6 never
+    ({"rows": [5, 5, 7, 8, 9]}, "its rows are not samples 5 to 10, each once, in order"),
+    ({"rows": [5, 7, 6, 8, 9]}, "its rows are not samples 5 to 10, each once, in order"),
+    ({"rows": np.arange(5.0, 10.0)}, "its sample column is not integers (it is double)"),
+    ({"column": "trajectory"}, "holds no sample column"),
     ({"fingerprint": "another"}, "computed for another sweep (its footer)"),
     ({"identity": {"code": "another"}}, "computed with another build (its footer)"),
     ({"bytes": b"PAR1"}, "damaged or cut short"),
@@ -396,8 +405,9 @@ FOOTERS = [
 def test_the_verdict_on_a_part_reads_its_footer(
     tmp_path: Path, change: dict[str, object], why: str | None
 ) -> None:
-    """A part of samples 5..10 is its sweep's only when its footer says so:
-    its samples, its rows' count and statistics, fingerprint and identity."""
+    """A part of samples 5..10 is its sweep's only when its footer says so
+    (its samples, its rows' count, fingerprint and identity) and its sample
+    column holds 5 to 9, each once, in order."""
     from gyrogen.analysis.sweep.columns import part_name
     from gyrogen.analysis.sweep.parts import parquet_bytes, verdict
     from gyrogen.analysis.sweep.store import store
@@ -405,12 +415,75 @@ def test_the_verdict_on_a_part_reads_its_footer(
     state = {"fingerprint": "mine", "identity": {"code": "mine"}}
     meta = {"samples": [5, 10], **state}
     meta |= {k: v for k, v in change.items() if k in ("samples", "fingerprint", "identity")}
-    sample = np.array(change.get("rows", range(5, 10)), dtype=np.int64)
+    sample = np.asarray(change.get("rows", range(5, 10)))
     said = {"gyrogen": meta} if "gyrogen" not in change else None
-    data = change.get("bytes") or parquet_bytes({"sample": sample}, said)
+    data = change.get("bytes") or parquet_bytes({str(change.get("column", "sample")): sample}, said)
     (tmp_path / "parts").mkdir()
     (tmp_path / "parts" / part_name(5, 10)).write_bytes(data)  # type: ignore[arg-type]
     assert verdict(store(tmp_path), 5, 10, state) == why
+
+
+def _sweep_of(out: Path, parts: list[tuple[int, int]]) -> dict[str, object]:
+    """out holding a sweep of 32 samples (its state, returned) and true parts
+    of the samples in parts."""
+    from gyrogen.analysis.sweep.columns import part_name
+    from gyrogen.analysis.sweep.parts import STATE_FILE, parquet_bytes
+
+    state = {"sweep": "s", "fingerprint": "mine", "trajectories": 32, "scene": "gyrostat"}
+    state["identity"] = {"code": "mine"}
+    (out / "parts").mkdir(parents=True)
+    (out / STATE_FILE).write_text(json.dumps(state))
+    for a, b in parts:
+        meta = {"gyrogen": {"samples": [a, b], "fingerprint": "mine", "identity": {"code": "mine"}}}
+        sample = np.arange(a, b, dtype=np.int64)
+        (out / "parts" / part_name(a, b)).write_bytes(parquet_bytes({"sample": sample}, meta))
+    return state
+
+
+OVERLAPS = [
+    # was "computing it again": 0 chunks were computed
+    ([(0, 8), (0, 16), (8, 16), (16, 32)], [(0, 8), (8, 16), (16, 32)],
+     "overlaps part-00000000000-00000000008.parquet: removed: the parts kept hold all its "
+     "samples"),
+    ([(0, 8), (0, 16), (16, 32)], [(0, 8), (16, 32)],
+     "overlaps part-00000000000-00000000008.parquet: removed: computing again the 8 of its 16 "
+     "samples no part kept holds"),
+    ([(0, 16), (8, 24), (24, 32)], [(0, 16), (24, 32)],
+     "overlaps part-00000000000-00000000016.parquet: removed: computing again the 8 of its 16 "
+     "samples no part kept holds"),
+]  # fmt: skip
+"""(the parts written, those a resume keeps, its note on the one it removes)"""
+
+
+@pytest.mark.parametrize(("parts", "kept", "note"), OVERLAPS)
+def test_a_part_overlapping_another_is_removed_with_what_is_computed(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    parts: list[tuple[int, int]],
+    kept: list[tuple[int, int]],
+    note: str,
+) -> None:
+    """A resume keeps the first of two parts that overlap and removes the
+    other, its note saying which it overlaps and how many of its samples
+    are computed again (none when the parts kept hold them all); api.read
+    refuses it, naming the part it overlaps."""
+    from gyrogen.analysis.sweep.columns import part_name, written
+    from gyrogen.analysis.sweep.parts import claim, trusted
+    from gyrogen.analysis.sweep.store import store
+    from gyrogen.errors import GyrogenError
+
+    state = _sweep_of(tmp_path, parts)
+    (removed,) = set(parts) - set(kept)
+    with pytest.raises(GyrogenError) as exc:
+        trusted(store(tmp_path))
+    other = note.split()[1].rstrip(":")
+    assert str(exc.value) == (
+        f"{tmp_path / 'parts' / part_name(*removed)}: overlaps {other}: rerun the sweep to remove "
+        "it (and compute what of it no other part holds)"
+    )
+    assert claim(store(tmp_path), state) == kept
+    assert written(store(tmp_path)) == kept
+    assert capsys.readouterr().err == f"{tmp_path / 'parts' / part_name(*removed)}: {note}\n"
 
 
 STRAYS = [

@@ -285,6 +285,25 @@ def test_a_held_out_is_refused_and_free_once_released(tmp_path: Path, kind: str)
     take(where).release()
 
 
+@pytest.mark.parametrize("first", ["path", "url"])
+def test_a_directory_is_one_out_as_a_path_and_as_a_file_url(tmp_path: Path, first: str) -> None:
+    """A local directory named by its path and by file:// (or local://) is
+    one lock, an flock on the same file, whichever spelling takes it first:
+    the other is refused, and no lock file is left once it is released."""
+    from gyrogen.analysis.sweep.lock import LOCK, take
+
+    spellings = [store(str(tmp_path / "o")), store(f"file://{tmp_path}/o")]
+    taker, other = spellings if first == "path" else spellings[::-1]
+    assert [s.on_disk for s in (*spellings, store(f"local://{tmp_path}/o"))] == [True] * 3
+    held = take(taker)
+    for late in (other, store(f"local://{tmp_path}/o")):
+        with pytest.raises(GyrogenError, match="is being written by another sweep"):
+            take(late)
+    held.release()
+    assert not (tmp_path / "o" / LOCK).exists()
+    take(other).release()
+
+
 def _lock_of(holder: dict[str, object]) -> Store:
     from gyrogen.analysis.sweep.lock import LOCK
 

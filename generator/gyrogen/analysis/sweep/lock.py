@@ -2,13 +2,15 @@
 before it claims the parts until its summary is written, and a second
 sweep into the same out is refused in one line, having changed nothing.
 
-- A local directory: an flock on LOCK, which the kernel drops when its
-  process ends, however it ends (a crash, SIGKILL): a local lock is never
-  stale. Its holder (host and pid) is written into it for the refusal's
-  words; it is removed when released.
-- A URL (analysis/sweep/store.py): LOCK created exclusively (fsspec's
-  mode "xb": O_CREAT | O_EXCL for file://, a conditional PUT on an object
-  store that has one), naming its holder: host, pid, the process's start
+- A local directory, named by its path or by a URL of the local file
+  system (file:///PATH: Store.on_disk): an flock on LOCK, the same file
+  whichever the spelling, so that each excludes the other. The kernel
+  drops it when its process ends, however it ends (a crash, SIGKILL): a
+  local lock is never stale. Its holder (host and pid) is written into it
+  for the refusal's words; it is removed when released.
+- Any other URL (analysis/sweep/store.py): LOCK created exclusively
+  (fsspec's mode "xb": O_CREAT | O_EXCL, or a conditional PUT on an
+  object store that has one), naming its holder: host, pid, the process's start
   time and a token read back once written. A lock whose holder is a process
   of this host (the same host name and process namespace) that is gone (no
   such pid, or the pid reused by a process started at another time) is
@@ -62,7 +64,7 @@ def take(out: Store) -> Lock:
     """out's lock for this process (out made first), or a one-line
     GyrogenError naming the sweep that holds it."""
     out.make_dir()
-    return _flock(out) if out.local else _create(out)
+    return _flock(out) if out.on_disk else _create(out)
 
 
 def _holder() -> dict[str, Any]:
@@ -166,7 +168,7 @@ def _gone(held: dict[str, Any]) -> bool:
 
 def _busy(out: Store, held: dict[str, Any]) -> GyrogenError:
     who = f" (process {held['pid']} on {held['host']})" if {"pid", "host"} <= set(held) else ""
-    hint = "" if out.local or _here(held) else f"; if it is gone, remove {out.show(LOCK)}"
+    hint = "" if out.on_disk or _here(held) else f"; if it is gone, remove {out.show(LOCK)}"
     return GyrogenError(
         f"{out.show()} is being written by another sweep{who}: wait for it to end, or use "
         f"another --out{hint}"

@@ -6,15 +6,16 @@ cut at multiples of this run's chunk (a clean run's parts are the same
 whatever was done before).
 
 A part is what its footer says, not its name: a resume keeps a part only
-when its footer (read alone, not the rows) records the samples of its name,
-as many rows, rows whose statistics say those samples, and the sweep's
-fingerprint and identity as sweep.json has them (verdict); any other is
-computed again with a note saying which and why, and a reader (api.read)
-refuses it. A part is written all or nothing (Store.write: locally a
-temporary name, fsynced, renamed; store.py says what holds for each
-URL protocol), by the client or by the worker that computed it. A
-directory in the parts folder, or a part named for samples outside the
-sweep's, is refused before any work (strays).
+when its footer records the samples of its name, as many rows, and the
+sweep's fingerprint and identity as sweep.json has them, and its sample
+column (read alone, not the other rows) is those samples, each once, in
+order (verdict), and it overlaps no part kept before it; any other is
+removed with a note saying which, why, and what of it is computed again
+(claim), and a reader (api.read) refuses it. A part is written all or
+nothing (Store.write: locally a temporary name, fsynced, renamed; store.py
+says what holds for each URL protocol), by the client or by the worker
+that computed it. A directory in the parts folder, or a part named for
+samples outside the sweep's, is refused before any work (strays).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from gyrogen.analysis.sweep.columns import PARTS, part_name, samples_of, written
+from gyrogen.analysis.sweep.columns import PARTS, numpy_of, part_name, samples_of, written
 from gyrogen.analysis.sweep.lock import LOCK
 from gyrogen.analysis.sweep.spec import Spec
 from gyrogen.analysis.sweep.store import Store
@@ -68,30 +69,53 @@ def write_part(out: Store, start: int, stop: int, data: bytes) -> None:
 
 def verdict(out: Store, start: int, stop: int, state: dict[str, Any]) -> str | None:
     """Why the part of samples start..stop is not this sweep's (None: it
-    is), from its footer alone: the samples it records, its rows' count and
-    the statistics of their sample column against its name; its fingerprint
-    and identity against state (sweep.json's)."""
+    is), from its footer: the samples it records and its rows' count
+    against its name, its fingerprint and identity against state
+    (sweep.json's); then from its sample column alone (int64, 8 bytes a
+    row): its rows are those samples, each once, in order."""
     import pyarrow.parquet as pq
 
     try:
         with out.open(PARTS, part_name(start, stop)) as source, pq.ParquetFile(source) as f:
-            meta = f.metadata
+            return _footer_verdict(f.metadata, start, stop, state) or _sample_verdict(
+                f, start, stop
+            )
     except Exception:  # pyarrow's errors for a damaged file vary: ArrowInvalid, OSError
         return "damaged or cut short"
+
+
+def _footer_verdict(meta: Any, start: int, stop: int, state: dict[str, Any]) -> str | None:
     held = _recorded(meta)
     says = held.get("samples")
     if says != [start, stop]:
         if not (isinstance(says, list) and len(says) == 2):
             return "its footer records no samples"
-        return f"holds samples {says[0]} to {says[1]} (its footer), not {start} to {stop}"
+        if all(type(n) is int for n in says):
+            return f"holds samples {says[0]} to {says[1]} (its footer), not {start} to {stop}"
+        shown = json.dumps(says)
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        return f"its footer records its samples as {shown}, not [{start}, {stop}]"
     if meta.num_rows != stop - start:
         return f"holds {meta.num_rows} rows (its footer), not {stop - start}"
-    if _sample_range(meta) != (start, stop - 1):
-        return f"its rows' statistics do not say samples {start} to {stop}"
     if held.get("fingerprint") != state["fingerprint"]:
         return "computed for another sweep (its footer)"
     if held.get("identity") != state["identity"]:
         return "computed with another build (its footer)"
+    return None
+
+
+def _sample_verdict(f: Any, start: int, stop: int) -> str | None:
+    """Why the rows of the Parquet file f are not the samples start..stop,
+    each once and in order (None: they are), from its sample column."""
+    import pyarrow as pa
+
+    if "sample" not in f.schema_arrow.names:
+        return "holds no sample column"
+    samples = f.read(columns=["sample"], use_threads=False).column(0)
+    if samples.type != pa.int64() or samples.null_count:
+        return f"its sample column is not integers (it is {samples.type})"
+    if not np.array_equal(numpy_of(samples), np.arange(start, stop)):
+        return f"its rows are not samples {start} to {stop}, each once, in order"
     return None
 
 
@@ -102,22 +126,6 @@ def _recorded(meta: Any) -> dict[str, Any]:
     except (KeyError, ValueError):
         return {}
     return held if isinstance(held, dict) else {}
-
-
-def _sample_range(meta: Any) -> tuple[int, int] | None:
-    """The least and greatest sample of a part's rows, from its row groups'
-    statistics (None: not recorded)."""
-    if "sample" not in meta.schema.names:
-        return None
-    at = meta.schema.names.index("sample")
-    low, high = [], []
-    for g in range(meta.num_row_groups):
-        stats = meta.row_group(g).column(at).statistics
-        if stats is None or not stats.has_min_max:
-            return None
-        low.append(stats.min)
-        high.append(stats.max)
-    return (min(low), max(high)) if low else None
 
 
 def strays(out: Store, size: int) -> None:
@@ -149,8 +157,12 @@ def trusted(out: Store) -> list[str]:
     names: list[str] = []
     end = 0
     for a, b in written(out):
-        why = "overlaps another part" if a < end else verdict(out, a, b, state)
-        if why is not None:
+        if a < end:
+            raise GyrogenError(
+                f"{out.show(PARTS, part_name(a, b))}: overlaps {names[-1]}: rerun the sweep to "
+                "remove it (and compute what of it no other part holds)"
+            )
+        if (why := verdict(out, a, b, state)) is not None:
             raise GyrogenError(
                 f"{out.show(PARTS, part_name(a, b))}: {why}: rerun the sweep to compute it again"
             )
@@ -231,9 +243,10 @@ def check_out(
 def claim(out: Store, state: dict[str, Any]) -> list[tuple[int, int]]:
     """out for this sweep (its lock held, check_out passed): its state file
     written, what a killed writer left removed; the (start, stop) of the
-    parts that are whole, in order (one overlapping another, or that is not
-    what its name says, verdict, is removed to be computed again, with a
-    note saying which and why)."""
+    parts that are whole, in order. One overlapping a part kept before it,
+    or that is not what its name says (verdict), is removed, with a note
+    saying which, why, and what of its samples is computed again: those
+    no part kept holds (all, some or none)."""
     if read_state(out, ()) != state:  # new, or begun by another build and restarted
         for a, b in written(out):
             out.remove(PARTS, part_name(a, b))
@@ -241,15 +254,22 @@ def claim(out: Store, state: dict[str, Any]) -> list[tuple[int, int]]:
         return []
     clean(out)
     done: list[tuple[int, int]] = []
+    dropped: list[tuple[int, int, str]] = []
     for a, b in written(out):
-        name = part_name(a, b)
-        if done and a < done[-1][1]:
-            why: str | None = "overlaps another part"
-        elif (why := verdict(out, a, b, state)) is None:
+        overlap = done and a < done[-1][1]
+        why = f"overlaps {part_name(*done[-1])}" if overlap else verdict(out, a, b, state)
+        if why is None:
             done.append((a, b))
             continue
-        print(f"{out.show(PARTS, name)}: {why}: computing it again", file=sys.stderr)
-        out.remove(PARTS, name)
+        out.remove(PARTS, part_name(a, b))
+        dropped.append((a, b, why))
+    for a, b, reason in dropped:
+        held = sum(max(0, min(b, d) - max(a, c)) for c, d in done)  # the parts kept are disjoint
+        then = ("computing it again" if not held
+                else "removed: the parts kept hold all its samples" if held == b - a
+                else f"removed: computing again the {b - a - held} of its {b - a} samples no part "
+                     "kept holds")  # fmt: skip
+        print(f"{out.show(PARTS, part_name(a, b))}: {reason}: {then}", file=sys.stderr)
     return done
 
 

@@ -74,6 +74,19 @@ class Store:
     def local(self) -> bool:
         return self.protocol is None
 
+    @cached_property
+    def on_disk(self) -> bool:
+        """Whether its files are this machine's own, at path(): a local
+        directory, or a URL of fsspec's local file system (file:///PATH,
+        local://PATH). Both spellings of one directory are one --out to
+        its lock (analysis/sweep/lock.py)."""
+        if self.local:
+            return True
+        import fsspec
+        from fsspec.implementations.local import LocalFileSystem
+
+        return issubclass(fsspec.get_filesystem_class(self.protocol), LocalFileSystem)
+
     @property
     def has_dirs(self) -> bool:
         """Whether a directory is there before files are (not an object store's prefix)."""
