@@ -224,6 +224,7 @@ def _old_scenes(out: Path, names: list[str]) -> dict[str, bytes]:
     return tree(out)
 
 
+@pytest.mark.slow  # three scenes rendered in a process of its own
 def test_ctrl_c_during_a_multi_scene_generate_writes_no_scene(tmp_path: Path) -> None:
     """A real SIGINT as the second of three scenes is written: before, the
     first scene stayed written, and the second (its Ctrl-C held until its
