@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from ctrl_c import interrupted, tree
 
 from gyrogen import files as files_module
 from gyrogen.codegen import generate as generate_module
@@ -158,12 +159,13 @@ def test_interrupt_while_writing_puts_every_old_file_back(
     assert sorted(p.name for p in out_dir.iterdir()) == sorted(old)
 
 
-def test_ctrl_c_while_writing_waits_until_the_files_are_placed(
+def test_ctrl_c_while_writing_puts_the_old_files_back_once_they_are_placed(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A SIGINT between two statements of write_atomic (here: as the second
-    file is staged) is held until every file is placed, then raised: the
-    files are all new, and no temporary file is left."""
+    file is staged) is held until every file is placed, then the old
+    versions are put back and it is raised: an interrupted write never
+    stays written, and no temporary file is left."""
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
     real_stage = files_module._stage
@@ -176,7 +178,7 @@ def test_ctrl_c_while_writing_waits_until_the_files_are_placed(
         return real_stage(target, data)
 
     monkeypatch.setattr(files_module, "_stage", stage)
-    new = {name: f"new {name}" for name in old}
+    new = {name: f"new {name}" for name in [*old, "gyrostat.h"]}
     # Python's own handler, as a terminal's process has it: a run in the
     # background inherits SIGINT ignored, and nothing would be raised
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -185,8 +187,67 @@ def test_ctrl_c_while_writing_waits_until_the_files_are_placed(
             files_module.write_atomic(out_dir, new)
     finally:
         signal.signal(signal.SIGINT, previous)
-    assert _contents(out_dir) == new
-    assert sorted(p.name for p in out_dir.iterdir()) == sorted(new)
+    assert len(staged) == 3  # every file was staged (and placed) before the roll-back
+    assert _contents(out_dir) == old
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted(old)
+
+
+def test_transaction_puts_back_what_each_write_in_it_did(tmp_path: Path) -> None:
+    """Two writes into two directories (one made by them, one file written
+    twice): an exception out of the transaction puts every file back as it
+    was and removes the directories made; a SystemExit keeps them all."""
+    old_dir, new_dir = tmp_path / "o", tmp_path / "new" / "deep"
+    old = _old_sources(old_dir)
+    with pytest.raises(RuntimeError), files_module.transaction():
+        files_module.write_atomic(old_dir, {"gyrostat.c": "one", "gyrostat.h": "one"})
+        files_module.write_atomic(old_dir, {"gyrostat.c": "two", "gyrostat.h": "two"})
+        files_module.write_atomic(new_dir, {"a.c": "a"})
+        raise RuntimeError
+    assert _contents(old_dir) == old and sorted(p.name for p in old_dir.iterdir()) == sorted(old)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]
+    with pytest.raises(SystemExit), files_module.transaction():
+        files_module.write_atomic(old_dir, {"gyrostat.c": "one"})
+        with files_module.transaction():
+            files_module.write_atomic(new_dir, {"a.c": "a"})
+        raise SystemExit(1)
+    assert _contents(old_dir) == {**old, "gyrostat.c": "one"}
+    assert sorted(p.name for p in old_dir.iterdir()) == sorted(old)  # the old version removed
+    assert _contents(new_dir) == {"a.c": "a"}
+
+
+def _old_scenes(out: Path, names: list[str]) -> dict[str, bytes]:
+    """An earlier generation's files in each scene's directory under out."""
+    for name in names:
+        (out / name).mkdir(parents=True)
+        (out / name / f"{name}.c").write_text(f"old {name}")
+        (out / name / "manifest.json").write_text(f'{{"prefix": "{name}", "old": true}}')
+    return tree(out)
+
+
+@pytest.mark.slow  # three scenes rendered in a process of its own
+def test_ctrl_c_during_a_multi_scene_generate_writes_no_scene(tmp_path: Path) -> None:
+    """A real SIGINT as the second of three scenes is written: before, the
+    first scene stayed written, and the second (its Ctrl-C held until its
+    files were placed) too, beside exit 130. Now every scene's files are as
+    they were (old ones back, no new one, no temporary)."""
+    names = ["torque_free", "dual_spin", "wheel_spinup"]
+    out = tmp_path / "out"
+    old = _old_scenes(out, names)
+    argv = ["generate", *names, "--no-check", "--out", str(out)]
+    code, err = interrupted(out / names[1], argv, tmp_path / "cache")
+    assert code == 130 and err.endswith("gyrogen: aborted\n") and "Traceback" not in err
+    assert tree(out) == old
+
+
+def test_ctrl_c_while_a_scene_is_placed_leaves_nothing_written(tmp_path: Path) -> None:
+    """A real SIGINT as the one scene's files are being placed: before, exit
+    130 "aborted" beside the whole output, written. Now exit 130 and the
+    output directory it made is gone."""
+    out = tmp_path / "new" / "torque_free"
+    argv = ["generate", "torque_free", "--no-check", "--out", str(out)]
+    code, err = interrupted(out, argv, tmp_path / "cache")
+    assert code == 130 and err.endswith("gyrogen: aborted\n") and "Traceback" not in err
+    assert not (tmp_path / "new").exists()
 
 
 def _default_sigint() -> None:

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from ctrl_c import interrupted
 from matplotlib.image import imread
 
 from gyrogen.analysis.simulate import plots
@@ -670,3 +671,20 @@ def test_a_cluster_is_summarized_with_its_own_balances(tmp_path: Path, cli) -> N
     note = json.loads((run.dir / "summary.json").read_text())["invariants_note"]
     assert "P = sum_k net_k (w_k - g_k . w_A)" in note and "(w1 - w1(0) - int net_1" in note
     assert "u4 - u2" not in note and "int T dt/J" not in note
+
+
+@pytest.mark.slow  # a build (on a cold cache) and a process of its own
+@pytest.mark.parametrize("where", ["src", "."])
+def test_ctrl_c_while_writing_leaves_nothing_in_out(
+    where: str, tmp_path: Path, cache_dir: Path
+) -> None:
+    """A real SIGINT as the generated sources (src) or the results are
+    written, after the integration: before, exit 130 left out/src (and,
+    held until placed, the results too). Now exit 130 and nothing new in
+    out, which existed before and is empty again."""
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = ["simulate", "torque_free", "--t-end", "1", "--no-plot", "--out", str(out)]
+    code, err = interrupted(out / where, argv, cache_dir)
+    assert code == 130 and err.endswith("gyrogen: aborted\n") and "Traceback" not in err
+    assert list(out.iterdir()) == []

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from ctrl_c import interrupted
 from sweep_cases import OBSTACLES, free_port, put, rows, small
 
 from gyrogen import api
@@ -601,3 +602,14 @@ def test_a_huge_start_rate_is_measured_without_overflow(
     found = rows(out)
     assert (found["max_rate"] == 1e300).all() and (found["H_drift"] == 0).all()
     assert np.allclose(found["nutation_0"], np.pi / 2, rtol=0, atol=1e-12)  # H along a1
+
+
+@pytest.mark.slow  # a sweep in a process of its own
+def test_interrupted_sweep_says_one_line(tmp_path: Path, cache_dir: Path) -> None:
+    """A real SIGINT while a task runs: closing the cluster cancels it, and
+    before, Dask logged a warning for it ("Async instruction ... ended with
+    CancelledError") before gyrogen's line. Now stderr is that one line."""
+    path, out = small(tmp_path / "small.toml"), tmp_path / "out"
+    argv = ["sweep", str(path), "--out", str(out), "--workers", "1", "--quiet"]
+    code, err = interrupted("task", argv, cache_dir)
+    assert (code, err) == (130, "gyrogen: aborted\n")

@@ -3,9 +3,10 @@
 It imports nothing heavy: Ctrl-C is handled first, then the click group and
 its commands (commands.group, which imports numpy, scipy and the rest) are
 imported behind that handling, so that Ctrl-C at any moment, the imports
-included, is one line and exit 130, never a traceback. Files are written
-all or nothing (files.write_atomic holds a Ctrl-C back until its files are
-placed)."""
+included, is one line and exit 130, never a traceback. The command runs in
+one files.transaction: after exit 130 every file it wrote is put back (and
+every directory it made removed), and once it has ended a Ctrl-C is
+ignored, so that "aborted" never stands beside a finished output."""
 
 from __future__ import annotations
 
@@ -24,8 +25,8 @@ ABORTED = 130
 class Interrupted(BaseException):
     """Ctrl-C, as main's handler raises it: a BaseException, so that no
     `except Exception` stops it and click does not turn it into its own
-    Abort (with a blank line first); `finally` blocks and write_atomic's
-    roll-back run as for KeyboardInterrupt."""
+    Abort (with a blank line first); `finally` blocks and files'
+    roll-backs run as for KeyboardInterrupt."""
 
 
 _caught: list[int] = []
@@ -46,10 +47,18 @@ def main(argv: list[str] | None = None) -> None:
     (tests, in process), it puts the SIGINT handler back as it found it."""
     _caught.clear()
     previous = _install(_interrupted)
+    ended: SystemExit | None = None
     try:
-        from gyrogen.commands.group import run  # behind the handler: it imports everything
+        from gyrogen.files import transaction  # the standard library's only
 
-        run(argv)
+        with transaction():  # Ctrl-C: every file the command wrote is put back
+            from gyrogen.commands.group import run  # behind the handler: it imports everything
+
+            try:
+                run(argv)
+            except SystemExit as exc:  # an error's exit code: what was written stays
+                ended = exc
+            _install(signal.SIG_IGN)  # the command is over: a Ctrl-C now comes too late
     except BaseException as exc:
         if isinstance(exc, SystemExit) or not (_caught or _from_ctrl_c(exc)):
             raise
@@ -61,6 +70,8 @@ def main(argv: list[str] | None = None) -> None:
             _install(signal.SIG_IGN)
         elif previous is not None:
             signal.signal(signal.SIGINT, previous)
+    if ended is not None:
+        raise ended
 
 
 def _from_ctrl_c(exc: BaseException | None) -> bool:

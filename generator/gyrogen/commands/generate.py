@@ -63,7 +63,7 @@ def generate(
     checked before any is written."""
     from gyrogen.codegen.generate import claim, render_all, unit_of
     from gyrogen.errors import SceneError
-    from gyrogen.files import can_write, write_atomic
+    from gyrogen.files import can_write, transaction, write_atomic
     from gyrogen.oracle.compare import check_rendered
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
@@ -95,8 +95,10 @@ def generate(
                 f"checked {scene.name}: {', '.join(scene.targets)} compiled and compared "
                 f"with the reference in {seconds:.1f} s"
             )
-    for _, target, _, files in rendered:  # every scene checked: now written
-        write_atomic(target, files)
+    with transaction():  # every scene checked: now written, all or none
+        for _, target, _, files in rendered:
+            write_atomic(target, files)
+    for _, target, _, _ in rendered:
         click.echo(f"wrote {target}/")
     print_table([unit for _, _, unit, _ in rendered])
 

@@ -99,7 +99,7 @@ def scene_sources(scene: Scene, portable: bool = False) -> Sources:
     files = render_all(unit_of(scene))
     held = json.dumps({"build_id": build_id(scene), "files": files})
     with suppress(GyrogenError):  # a cache not written costs only the next derivation
-        write_atomic(stored, {f"{key}.json": held})
+        write_atomic(stored, {f"{key}.json": held}, keep=True)
     return Sources(build_id(scene), language, files, portable)
 
 

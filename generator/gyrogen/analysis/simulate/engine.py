@@ -43,7 +43,7 @@ from gyrogen.analysis.simulate.trajectory import (
     steps_of_segments,
 )
 from gyrogen.errors import GyrogenError, SceneError
-from gyrogen.files import can_write, write_atomic
+from gyrogen.files import can_write, transaction, write_atomic
 from gyrogen.runtime.compiled import Compiled, Controls, controls
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_files, scene_sources
@@ -325,8 +325,9 @@ def run(
     paths = tuple(out / n for n in names)
     res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, paths)
     contents = files.contents(res, p)
-    write_atomic(out / "src", sources.files)
-    write_atomic(out, contents)
+    with transaction():  # the sources and the results, all or nothing
+        write_atomic(out / "src", sources.files)
+        write_atomic(out, contents)
     return res
 
 

@@ -4,6 +4,7 @@ scheduler reached within a bound whatever answers on its port."""
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 import sys
@@ -16,6 +17,8 @@ from gyrogen.errors import GyrogenError
 
 CONNECT_TIMEOUT = 10.0
 """Seconds to reach the scheduler (the TCP connection; the handshake gets as long again)."""
+DASK_LOGGER = "distributed"
+"""The logger above all of dask.distributed's (each of its modules logs to a child)."""
 
 
 @contextmanager
@@ -51,7 +54,8 @@ def engine(
         ):
             if dashboard:
                 _dashboard(client, "127.0.0.1")
-            yield client, f"local ({n} threads)", n
+            with _quiet_when_stopped():
+                yield client, f"local ({n} threads)", n
         return
     with _connect(Client, scheduler) as client:
         if dashboard:
@@ -60,7 +64,24 @@ def engine(
         n = sum(int(w.get("nthreads", 1)) for w in workers)
         if n == 0:
             raise GyrogenError(f"--scheduler {scheduler}: the cluster has no workers")
-        yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+        with _quiet_when_stopped():
+            yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+
+
+@contextmanager
+def _quiet_when_stopped() -> Iterator[None]:
+    """Dask's loggers silenced for the rest of the process when the block
+    ends by an exception (Ctrl-C, an error): closing the client and the
+    cluster then cancels the tasks under way, and Dask would log a warning
+    for each (an "Async instruction ... ended with CancelledError") beside
+    the command's one line."""
+    try:
+        yield
+    except BaseException:
+        for name in [DASK_LOGGER, *logging.Logger.manager.loggerDict]:
+            if name == DASK_LOGGER or name.startswith(DASK_LOGGER + "."):
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        raise
 
 
 def _dashboard(client: Any, host: str) -> None:

@@ -7,7 +7,8 @@ Each file is written atomically, so a reader, a resume or the summary sees
 it whole or not at all:
 
 - a local directory: files.write_atomic (a temporary name beside it,
-  fsynced, then renamed; several files all or nothing);
+  fsynced, then renamed; several files all or nothing), kept whatever
+  follows (a Ctrl-C of the command puts back no part: a rerun resumes);
 - an object store (s3, gs, az): one PUT per file, which the store makes
   visible only once whole (an interrupted upload leaves nothing);
 - any other protocol (file://, sftp, hdfs, ...): a temporary name beside it
@@ -194,7 +195,7 @@ class Store:
 
     def make_dir(self, *names: str) -> None:
         if self.local:
-            make_dir(Path(self.path(*names)))
+            make_dir(Path(self.path(*names)), keep=True)
             return
         try:
             self.fs.makedirs(self.path(*names), exist_ok=True)
@@ -220,7 +221,7 @@ class Store:
         """Each file into the directory names, atomically (the module's
         docstring says how, per protocol); locally all or none."""
         if self.local:
-            write_atomic(Path(self.path(*names)), files)
+            write_atomic(Path(self.path(*names)), files, keep=True)
             return
         for name, data in files.items():
             blob = data.encode("utf-8") if isinstance(data, str) else data
