@@ -110,8 +110,9 @@ def sweep(
     shared: bool,
     portable: bool,
 ) -> None:
-    """Integrate every trajectory of SWEEP (a built-in sweep: stability_map,
-    monte_carlo; or a sweep file naming a scene) with the scene's compiled
+    """Integrate every trajectory of SWEEP (a built-in sweep's name, such as
+    stability_map: an unknown name lists them all; or a sweep file naming a
+    scene) with the scene's compiled
     batch integrator, one Parquet row per trajectory with its inputs and
     metrics, written chunk by chunk; then summary.json, summary.md and
     figures. Rerun into the same --out to resume, with any --chunk: only
