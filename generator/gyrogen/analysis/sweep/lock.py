@@ -94,7 +94,7 @@ def _flock(out: Store) -> Lock:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         except OSError as exc:
-            raise out._error("cannot write", (LOCK,), exc) from exc
+            raise out.failure("cannot write", (LOCK,), exc) from exc
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -103,7 +103,7 @@ def _flock(out: Store) -> Lock:
             raise _busy(out, held) from None
         except OSError as exc:  # a file system without flock (ENOLCK)
             os.close(fd)
-            raise out._error("cannot lock", (LOCK,), exc) from exc
+            raise out.failure("cannot lock", (LOCK,), exc) from exc
         with suppress(FileNotFoundError):
             if os.stat(path).st_ino == os.fstat(fd).st_ino:
                 break
@@ -124,13 +124,13 @@ def _create(out: Store) -> Lock:
             except FileExistsError:
                 pass
             except OSError as exc:
-                raise out._error("cannot write", (LOCK,), exc) from exc
+                raise out.failure("cannot write", (LOCK,), exc) from exc
         try:
             held = _parse(out.read_text(LOCK).encode())
         except FileNotFoundError:  # released meanwhile
             continue
         except OSError as exc:
-            raise out._error("cannot read", (LOCK,), exc) from exc
+            raise out.failure("cannot read", (LOCK,), exc) from exc
         if held.get("token") == me["token"]:
             return Lock(out, me["token"])
         if not _gone(held):

@@ -136,7 +136,7 @@ class Store:
             except FileNotFoundError:
                 return "absent"
             except OSError as exc:
-                raise self._error("cannot look at", names, exc) from exc
+                raise self.failure("cannot look at", names, exc) from exc
             if stat.S_ISDIR(mode):
                 return "dir"
             return "file" if stat.S_ISREG(mode) else "other"
@@ -145,7 +145,7 @@ class Store:
         except FileNotFoundError:
             return "absent"
         except OSError as exc:
-            raise self._error("cannot look at", names, exc) from exc
+            raise self.failure("cannot look at", names, exc) from exc
         return {"directory": "dir", "file": "file"}.get(kind, "other")
 
     def listdir(self, *names: str) -> list[str]:
@@ -157,7 +157,7 @@ class Store:
         except FileNotFoundError:
             return []
         except OSError as exc:
-            raise self._error("cannot list", names, exc) from exc
+            raise self.failure("cannot list", names, exc) from exc
         return [posixpath.basename(str(p).rstrip("/")) for p in found]
 
     def entries(self, *names: str) -> dict[str, str]:
@@ -171,7 +171,7 @@ class Store:
         except FileNotFoundError:
             return {}
         except OSError as exc:
-            raise self._error("cannot list", names, exc) from exc
+            raise self.failure("cannot list", names, exc) from exc
         kinds = {"directory": "dir", "file": "file"}
         return {posixpath.basename(str(e["name"]).rstrip("/")): kinds.get(e.get("type"), "other")
                 for e in found}  # fmt: skip
@@ -200,7 +200,7 @@ class Store:
         try:
             self.fs.makedirs(self.path(*names), exist_ok=True)
         except OSError as exc:
-            raise self._error("cannot create directory", names, exc) from exc
+            raise self.failure("cannot create directory", names, exc) from exc
 
     def can_write(self, *names: str) -> None:
         """Nothing in the way of writing the file names (checked before any
@@ -239,7 +239,7 @@ class Store:
                         self.fs.rm_file(tmp)
                     raise
             except OSError as exc:
-                raise self._error("cannot write", (*names, name), exc) from exc
+                raise self.failure("cannot write", (*names, name), exc) from exc
 
     def remove(self, *names: str) -> None:
         """The file names gone (nothing when it is not there)."""
@@ -251,9 +251,11 @@ class Store:
         except FileNotFoundError:
             pass
         except OSError as exc:
-            raise self._error("cannot remove", names, exc) from exc
+            raise self.failure("cannot remove", names, exc) from exc
 
-    def _error(self, what: str, names: tuple[str, ...], exc: OSError) -> GyrogenError:
+    def failure(self, what: str, names: tuple[str, ...], exc: OSError) -> GyrogenError:
+        """The one line for an OSError on names in this store (what: "cannot
+        write", ...), for the store's own operations and the sweep's lock."""
         why = exc.strerror or str(exc) or type(exc).__name__
         return GyrogenError(f"{what} {self.show(*names)}: {why}")
 
