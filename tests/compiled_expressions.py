@@ -8,12 +8,15 @@ import subprocess
 from pathlib import Path
 
 
-def values(language: str, texts: list[str], tmp_path: Path, x: float = 3.0) -> list[float]:
-    """Each C or Fortran expression text's value, with the double x given."""
+def values(
+    language: str, texts: list[str], tmp_path: Path, x: float = 3.0, prelude: str = ""
+) -> list[float]:
+    """Each C or Fortran expression text's value, with the double x given
+    (C: prelude, the functions they call, before main)."""
     if language == "c":
         body = "".join(f'    printf("%.17g\\n", {t});\n' for t in texts)
         src = tmp_path / "expressions.c"
-        src.write_text(f"#include <stdio.h>\n#include <math.h>\nint main(void) {{\n"
+        src.write_text(f"#include <stdio.h>\n#include <math.h>\n{prelude}int main(void) {{\n"
                        f"    volatile double x = {x!r};\n{body}    return 0;\n}}\n")  # fmt: skip
         command = ["gcc", "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror"]
     else:

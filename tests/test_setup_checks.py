@@ -14,7 +14,11 @@ import numpy as np
 import pytest
 
 from gyrogen.abi import PARAMETERS, SETUP_CODES
-from gyrogen.codegen.checks import Printer, printed
+from gyrogen.codegen.checks import expression, failed, lowered
+from gyrogen.codegen.integrators.program import intrinsics_of
+from gyrogen.codegen.ir.c import CPrinter
+from gyrogen.codegen.ir.fortran import FortranPrinter
+from gyrogen.codegen.ir.nodes import At, Func, Int, Var, assign
 from gyrogen.oracle import sampling
 from gyrogen.runtime.build import Compiled
 from gyrogen.setup_checks import (
@@ -72,15 +76,24 @@ def test_the_checks_read_the_carrier_and_rotor() -> None:
     assert checked_parameters() == ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "J")
 
 
+COND = At("c", (Int(0),))
+
+
+def _printer(language: str) -> CPrinter | FortranPrinter:
+    return CPrinter("x", "X", {}) if language == "c" else FortranPrinter("x", "X", {})
+
+
 def test_the_printers_spell_the_languages() -> None:
     carrier = next(c for c in CHECKS if c.code == 4)
-    c_text = Printer("c", "X").condition(carrier.kind, carrier.exprs)
-    assert c_text == "!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11*I33 - I13*I13 > 0.0)"
-    f_text = Printer("fortran", "X").condition(carrier.kind, carrier.exprs)
-    assert f_text.endswith(".and. I11*I33 - I13*I13 > 0.0_c_double)") and " &\n" in f_text
+    c_text = _printer("c").expr(failed(carrier, COND))
+    assert c_text == (
+        "!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11 * I33 - I13 * I13 > 0.0)"
+    )
+    f_text = _printer("fortran").expr(failed(carrier, COND))
+    assert f_text.startswith(".not. (I11 > 0.0_c_double) .or. .not. (I22 > 0.0_c_double)")
     triangle = next(c for c in CHECKS if c.code == 5)
-    assert Printer("fortran", "X")(triangle.locals[0][1]) == (
-        "sqrt(0.25_c_double*(I11 - I33)**2 + I13*I13)"
+    assert _printer("fortran").expr(expression(triangle.locals[0][1], COND)) == (
+        "sqrt(0.25_c_double * ((I11 - I33) * (I11 - I33)) + I13 * I13)"
     )
 
 
@@ -115,8 +128,12 @@ def test_the_printers_write_folded_values_of_every_sign(language: str, tmp_path:
     reads -4.0**2 as -(4.0**2). Every place, every sign: the program
     compiles under the strict flags and computes what evaluate() does."""
     exprs = _signed()
-    p = Printer(language, "X")  # type: ignore[arg-type]
-    got = compiled_expressions.values(language, [p(e) for e in exprs], tmp_path)
+    p = _printer(language)
+    lowered_ = [expression(e, COND) for e in exprs]
+    calls = Func("x", (), tuple(assign(Var("y"), e) for e in lowered_))
+    prelude = "".join(p.function(f) for f in intrinsics_of([calls], p)) if language == "c" else ""
+    texts = [p.expr(e) for e in lowered_]
+    got = compiled_expressions.values(language, texts, tmp_path, prelude=prelude)
     assert got == [evaluate(e, {"x": 3.0}) for e in exprs]
 
 
@@ -130,9 +147,8 @@ def test_fortran_checks_of_long_folded_values_fit_the_line() -> None:
         "I12": -0.028083875871670966, "I13": -0.21656337392856828, "I23": 0.011582093621946399,
         "I_1": 0.015651075155771636, "J_1": "runtime",
     }  # fmt: skip
-    lines = []
-    for chk in printed("fortran", "CLUSTER6", cluster_checks(values, 1)):
-        lines += [f"    if ({chk.condition}) then"] + [f"    {n} = {v}" for n, v in chk.locals]
-    lines = [line for text in lines for line in text.splitlines()]
-    assert any("(-0.028083875871670966_c_double)*" in line for line in lines)
+    early, late = lowered(cluster_checks(values, 1), 10, 0, {c.value: c.name for c in SETUP_CODES})
+    setup = Func("x_setup", (), (*early, *late), locals=(), public=True)
+    lines = FortranPrinter("x", "X", {}).function(setup).splitlines()
+    assert any("(-0.028083875871670966_c_double) *" in line for line in lines)
     assert max(map(len, lines)) <= 132, [line for line in lines if len(line) > 132]

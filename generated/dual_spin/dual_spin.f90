@@ -188,14 +188,13 @@ contains
     return
   end function dual_spin_cos
 
-  ! Checks p and computes the constants c that dual_spin_rhs needs
-  ! (0 ops, plus the checks). Returns DUAL_SPIN_OK or
-  ! the first failing check's code; c is then not to be used.
-  function dual_spin_setup(p, c) result(status) &
-      bind(C, name="dual_spin_f_setup")
-    real(c_double), intent(in) :: p(0)
-    real(c_double), intent(out) :: c(1)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that dual_spin_rhs needs (0 ops, plus
+  ! the checks). Returns DUAL_SPIN_OK or the first failing check's code; c is
+  ! then not to be used.
+  function dual_spin_setup(p, c) result(res) bind(C, name="dual_spin_f_setup")
+    real(c_double), intent(in) :: p(0:-1)
+    real(c_double), intent(out) :: c(0:0)
+    integer(c_int) :: res
     real(c_double) :: m_a
     real(c_double) :: m_b
     real(c_double) :: I11
@@ -204,13 +203,15 @@ contains
     real(c_double) :: I13
     real(c_double) :: I
     real(c_double) :: J
-    real(c_double) :: half_gap, largest
+    real(c_double) :: half_gap
+    real(c_double) :: largest
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = DUAL_SPIN_ERR_NONFINITE
-      return
-    end if
+    do i_ = 0, 1 - 1
+      c(i_) = 0.0_c_double
+    end do
+    associate (unused_p => p)  ! unused in some scenes
+    end associate
     m_a = 1200.0_c_double
     m_b = 6.0_c_double
     I11 = 1100.0_c_double
@@ -219,39 +220,39 @@ contains
     I13 = 25.0_c_double
     I = 0.03_c_double
     J = 0.05_c_double
+    if (.not. (m_a > 0.0_c_double) .or. .not. (m_b > 0.0_c_double)) then
+      res = DUAL_SPIN_ERR_MASS
+      return
+    end if
+    if (.not. (I > 0.0_c_double) .or. .not. (J > 0.0_c_double)) then
+      res = DUAL_SPIN_ERR_ROTOR_INERTIA
+      return
+    end if
+    if (.not. (I11 > 0.0_c_double) .or. .not. (I22 > 0.0_c_double) .or. .not. (I33 > &
+        0.0_c_double) .or. .not. (I11 * I33 - I13 * I13 > 0.0_c_double)) then
+      res = DUAL_SPIN_ERR_CARRIER_NOT_PD
+      return
+    end if
 
-    if (.not. (m_a > 0.0_c_double .and. m_b > 0.0_c_double)) then
-      status = DUAL_SPIN_ERR_MASS
-      return
-    end if
-    if (.not. (I > 0.0_c_double .and. J > 0.0_c_double)) then
-      status = DUAL_SPIN_ERR_ROTOR_INERTIA
-      return
-    end if
-    if (.not. (I11 > 0.0_c_double .and. I22 > 0.0_c_double .and. I33 > 0.0_c_double &
-               .and. I11*I33 - I13*I13 > 0.0_c_double)) then
-      status = DUAL_SPIN_ERR_CARRIER_NOT_PD
-      return
-    end if
     ! Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
     ! The largest may not exceed the sum of the other two.
-    half_gap = sqrt(0.25_c_double*(I11 - I33)**2 + I13*I13)
-    largest = max(I22, 0.5_c_double*(I11 + I33) + half_gap)
-    if (2.0_c_double*largest - (I11 + I22 + I33) > 1e-12_c_double*(I11 + I22 + I33)) then
-      status = DUAL_SPIN_ERR_CARRIER_TRIANGLE
+    half_gap = sqrt(0.25_c_double * ((I11 - I33) * (I11 - I33)) + I13 * I13)
+    largest = max(I22, 0.5_c_double * (I11 + I33) + half_gap)
+    if (2.0_c_double * largest - ((I11 + I22) + I33) > 1e-12_c_double * ((I11 + I22) + I33)) then
+      res = DUAL_SPIN_ERR_CARRIER_TRIANGLE
       return
     end if
-    if (J - 2.0_c_double*I > 1e-12_c_double*(2.0_c_double*I + J)) then
-      status = DUAL_SPIN_ERR_ROTOR_TRIANGLE
+    if (J - 2.0_c_double * I > 1e-12_c_double * (2.0_c_double * I + J)) then
+      res = DUAL_SPIN_ERR_ROTOR_TRIANGLE
       return
     end if
-
-    c(1) = 1.1679946825887533_c_double
-    if (.not. (c(DUAL_SPIN_COND) <= 10000000000000.0_c_double)) then
-      status = DUAL_SPIN_ERR_MASS_SINGULAR
+    c(0) = 1.1679946825887533_c_double
+    if (.not. (c(0) <= 10000000000000.0_c_double)) then
+      res = DUAL_SPIN_ERR_MASS_SINGULAR
       return
     end if
-    status = DUAL_SPIN_OK
+    res = DUAL_SPIN_OK
+    return
   end function dual_spin_setup
 
   ! The message for a return code, blank-padded to 82 characters: trim() it.
@@ -282,14 +283,14 @@ contains
   end function dual_spin_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from dual_spin_setup (36 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from dual_spin_setup (36 ops).
   subroutine dual_spin_rhs(t, x, c, dxdt) bind(C, name="dual_spin_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: dxdt(7)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: dxdt(0:6)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -301,62 +302,62 @@ contains
     real(c_double) :: tmp2
     real(c_double) :: tmp3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
     tmp0 = dual_spin_sin(q3)
     tmp1 = dual_spin_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/dual_spin_cos(q2)
-    tmp3 = 0.015471973456719416_c_double*u2 - &
-          1.1900419543364779e-06_c_double*u4
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*dual_spin_sin(q2) + u2
-    dxdt(4) = -tmp3*u1 + u3*(0.4092155481941839_c_double*u2 + &
-          4.5440763299219775e-05_c_double*u4)
-    dxdt(5) = u1*(0.01775954828743408_c_double*u1 - &
-          0.10773983913066638_c_double*u3) - 0.01775954828743408_c_double* &
-          u3*u3
-    dxdt(6) = tmp3*u3 + u1*(-0.3153534800671272_c_double*u2 - &
-          5.266025597120826e-05_c_double*u4)
-    dxdt(7) = 0
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / dual_spin_cos(q2)
+    tmp3 = 0.015471973456719416_c_double * u2 - 1.1900419543364779e-06_c_double * u4
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * dual_spin_sin(q2)
+    dxdt(3) = u3 * (4.5440763299219775e-05_c_double * u4 + 0.4092155481941839_c_double * u2) - &
+        tmp3 * u1
+    dxdt(4) = u1 * (0.01775954828743408_c_double * u1 - 0.10773983913066638_c_double * u3) - &
+        0.01775954828743408_c_double * (u3 * u3)
+    dxdt(5) = tmp3 * u3 + u1 * ((-5.266025597120826e-05_c_double * u4) - &
+        0.3153534800671272_c_double * u2)
+    dxdt(6) = 0.0_c_double
   end subroutine dual_spin_rhs
 
   ! out = kinetic energy of the system (J): 13 ops.
-  subroutine dual_spin_kinetic_energy(t, x, c, out) &
-      bind(C, name="dual_spin_f_kinetic_energy")
+  subroutine dual_spin_kinetic_energy(t, x, c, out) bind(C, name="dual_spin_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
     real(c_double) :: u4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
-    out(1) = u1*(550.4926119402985_c_double*u1 + 24.880597014925375_c_double &
-          *u3) + 700.4850746268656_c_double*u2*u2 + &
-          475.02246268656717_c_double*u3*u3 + 0.025_c_double*u4*u4
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
+    out(0) = ((0.025_c_double * (u4 * u4) + 700.4850746268656_c_double * (u2 * u2)) + &
+        475.02246268656717_c_double * (u3 * u3)) + u1 * (550.4926119402985_c_double * u1 + &
+        24.880597014925375_c_double * u3)
   end subroutine dual_spin_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.
-  subroutine dual_spin_angular_momentum(t, x, c, out) &
-      bind(C, name="dual_spin_f_angular_momentum")
+  subroutine dual_spin_angular_momentum(t, x, c, out) bind(C, name="dual_spin_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -378,33 +379,33 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
     tmp0 = dual_spin_sin(q1)
-    tmp1 = 1400.9701492537313_c_double*u2 + 0.05_c_double*u4
+    tmp1 = 0.05_c_double * u4 + 1400.9701492537313_c_double * u2
     tmp2 = dual_spin_cos(q2)
-    tmp3 = tmp1*tmp2
-    tmp4 = 24.880597014925375_c_double*u1 + 950.0449253731343_c_double*u3
+    tmp3 = tmp1 * tmp2
+    tmp4 = 24.880597014925375_c_double * u1 + 950.0449253731343_c_double * u3
     tmp5 = dual_spin_sin(q3)
     tmp6 = dual_spin_cos(q1)
-    tmp7 = tmp5*tmp6
+    tmp7 = tmp5 * tmp6
     tmp8 = dual_spin_sin(q2)
     tmp9 = dual_spin_cos(q3)
-    tmp10 = tmp0*tmp9
-    tmp11 = 1100.985223880597_c_double*u1 + 24.880597014925375_c_double*u3
-    tmp12 = tmp0*tmp5
-    out(1) = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 &
-          + tmp7)
-    out(2) = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8 &
-          *tmp9)
-    out(3) = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9
+    tmp10 = tmp0 * tmp9
+    tmp11 = 1100.985223880597_c_double * u1 + 24.880597014925375_c_double * u3
+    tmp12 = tmp0 * tmp5
+    out(0) = (tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8)) - tmp0 * tmp3
+    out(1) = (tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6) + tmp4 * (tmp12 - (tmp6 * tmp8) * tmp9)
+    out(2) = (tmp1 * tmp8 + (tmp2 * tmp4) * tmp9) - (tmp11 * tmp2) * tmp5
   end subroutine dual_spin_angular_momentum
 
 end module dual_spin_mod

@@ -264,81 +264,101 @@ const char *dual_spin_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (59 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (59 ops). */
 void dual_spin_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double u4 = x[6];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = dual_spin_sin(q2);
-    const double tmp1 = dual_spin_cos(q2);
-    const double tmp2 = dual_spin_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = dual_spin_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = 0.015471973456719416*u2 - 1.1900419543364779e-06*u4;
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    u4 = x[6];
+    tmp0 = dual_spin_sin(q2);
+    tmp1 = dual_spin_cos(q2);
+    tmp2 = dual_spin_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = dual_spin_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = 0.015471973456719416 * u2 - 1.1900419543364779e-06 * u4;
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
     J[3] = -tmp10;
-    J[4] = 0;
+    J[4] = 0.0;
     J[5] = tmp11;
-    J[6] = 0;
-    J[7] = 0;
-    J[8] = 0;
+    J[6] = 0.0;
+    J[7] = 0.0;
+    J[8] = 0.0;
     J[9] = tmp6;
     J[10] = tmp4;
-    J[11] = 0;
+    J[11] = 0.0;
     J[12] = tmp2;
-    J[13] = 0;
-    J[14] = 0;
-    J[15] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[16] = -tmp0*tmp9;
-    J[17] = tmp0*tmp10;
-    J[18] = 1;
-    J[19] = -tmp0*tmp11;
-    J[20] = 0;
-    J[21] = 0;
-    J[22] = 0;
-    J[23] = 0;
+    J[13] = 0.0;
+    J[14] = 0.0;
+    J[15] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[16] = -(tmp0 * tmp9);
+    J[17] = tmp0 * tmp10;
+    J[18] = 1.0;
+    J[19] = -(tmp0 * tmp11);
+    J[20] = 0.0;
+    J[21] = 0.0;
+    J[22] = 0.0;
+    J[23] = 0.0;
     J[24] = -tmp12;
-    J[25] = -0.015471973456719416*u1 + 0.4092155481941839*u3;
-    J[26] = 0.4092155481941839*u2 + 4.5440763299219775e-05*u4;
-    J[27] = 1.1900419543364779e-06*u1 + 4.5440763299219775e-05*u3;
-    J[28] = 0;
-    J[29] = 0;
-    J[30] = 0;
-    J[31] = 0.03551909657486816*u1 - 0.10773983913066638*u3;
-    J[32] = 0;
-    J[33] = -0.10773983913066638*u1 - 0.03551909657486816*u3;
-    J[34] = 0;
-    J[35] = 0;
-    J[36] = 0;
-    J[37] = 0;
-    J[38] = -0.3153534800671272*u2 - 5.266025597120826e-05*u4;
-    J[39] = -0.3153534800671272*u1 + 0.015471973456719416*u3;
+    J[25] = 0.4092155481941839 * u3 - 0.015471973456719416 * u1;
+    J[26] = 4.5440763299219775e-05 * u4 + 0.4092155481941839 * u2;
+    J[27] = 1.1900419543364779e-06 * u1 + 4.5440763299219775e-05 * u3;
+    J[28] = 0.0;
+    J[29] = 0.0;
+    J[30] = 0.0;
+    J[31] = 0.03551909657486816 * u1 - 0.10773983913066638 * u3;
+    J[32] = 0.0;
+    J[33] = -(0.03551909657486816 * u3) - 0.10773983913066638 * u1;
+    J[34] = 0.0;
+    J[35] = 0.0;
+    J[36] = 0.0;
+    J[37] = 0.0;
+    J[38] = -(5.266025597120826e-05 * u4) - 0.3153534800671272 * u2;
+    J[39] = 0.015471973456719416 * u3 - 0.3153534800671272 * u1;
     J[40] = tmp12;
-    J[41] = -5.266025597120826e-05*u1 - 1.1900419543364779e-06*u3;
-    J[42] = 0;
-    J[43] = 0;
-    J[44] = 0;
-    J[45] = 0;
-    J[46] = 0;
-    J[47] = 0;
-    J[48] = 0;
+    J[41] = -(5.266025597120826e-05 * u1) - 1.1900419543364779e-06 * u3;
+    J[42] = 0.0;
+    J[43] = 0.0;
+    J[44] = 0.0;
+    J[45] = 0.0;
+    J[46] = 0.0;
+    J[47] = 0.0;
+    J[48] = 0.0;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(dual_spin_stats *stats, double t0)
@@ -781,7 +801,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[5] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * DUAL_SPIN_NX + 1]) + fabs(ai[i * DUAL_SPIN_NX + 1]) > fabs(ar[p * DUAL_SPIN_NX + 1]) + fabs(ai[p * DUAL_SPIN_NX + 1])) {
+        if (fabs(ar[i * DUAL_SPIN_NX + 1]) + fabs(ai[i * DUAL_SPIN_NX + 1]) > fabs(ar[p *
+                DUAL_SPIN_NX + 1]) + fabs(ai[p * DUAL_SPIN_NX + 1])) {
             p = i;
         }
     }
@@ -883,7 +904,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[19] = ur * ai[16] + ui * ar[16];
     p = 3;
     for (i = 4; i < 6; ++i) {
-        if (fabs(ar[i * DUAL_SPIN_NX + 3]) + fabs(ai[i * DUAL_SPIN_NX + 3]) > fabs(ar[p * DUAL_SPIN_NX + 3]) + fabs(ai[p * DUAL_SPIN_NX + 3])) {
+        if (fabs(ar[i * DUAL_SPIN_NX + 3]) + fabs(ai[i * DUAL_SPIN_NX + 3]) > fabs(ar[p *
+                DUAL_SPIN_NX + 3]) + fabs(ai[p * DUAL_SPIN_NX + 3])) {
             p = i;
         }
     }
@@ -947,7 +969,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[27] = ur * ai[24] + ui * ar[24];
     p = 4;
     for (i = 5; i < 6; ++i) {
-        if (fabs(ar[i * DUAL_SPIN_NX + 4]) + fabs(ai[i * DUAL_SPIN_NX + 4]) > fabs(ar[p * DUAL_SPIN_NX + 4]) + fabs(ai[p * DUAL_SPIN_NX + 4])) {
+        if (fabs(ar[i * DUAL_SPIN_NX + 4]) + fabs(ai[i * DUAL_SPIN_NX + 4]) > fabs(ar[p *
+                DUAL_SPIN_NX + 4]) + fabs(ai[p * DUAL_SPIN_NX + 4])) {
             p = i;
         }
     }
@@ -2777,36 +2800,36 @@ struct DUAL_SPIN_ALIGNED lanes {
     int busy[DUAL_SPIN_LANES];
 };
 
-/* dual_spin_rhs_lanes on DUAL_SPIN_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *DUAL_SPIN_RESTRICT t,
                       double (*DUAL_SPIN_RESTRICT x)[DUAL_SPIN_LANES],
                       const double *DUAL_SPIN_RESTRICT c,
                       double (*DUAL_SPIN_RESTRICT dxdt)[DUAL_SPIN_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
     DUAL_SPIN_SIMD
     for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[3][l];
-        const double u2 = x[4][l];
-        const double u3 = x[5][l];
-        const double u4 = x[6][l];
-
-        const double tmp0 = dual_spin_sin_lanes(q3);
-        const double tmp1 = dual_spin_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/dual_spin_cos_lanes(q2);
-        const double tmp3 = 0.015471973456719416*u2 - 1.1900419543364779e-06*u4;
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        u4 = x[6][l];
+        tmp0 = dual_spin_sin_lanes(q3);
+        tmp1 = dual_spin_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / dual_spin_cos_lanes(q2);
+        tmp3 = 0.015471973456719416 * u2 - 1.1900419543364779e-06 * u4;
         dxdt[0][l] = tmp2;
-        dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*dual_spin_sin_lanes(q2) + u2;
-        dxdt[3][l] = -tmp3*u1 + u3*(0.4092155481941839*u2 + 4.5440763299219775e-05*u4);
-        dxdt[4][l] = u1*(0.01775954828743408*u1 - 0.10773983913066638*u3) - 0.01775954828743408*u3*u3;
-        dxdt[5][l] = tmp3*u3 + u1*(-0.3153534800671272*u2 - 5.266025597120826e-05*u4);
-        dxdt[6][l] = 0;
+        dxdt[1][l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2][l] = u2 - tmp2 * dual_spin_sin_lanes(q2);
+        dxdt[3][l] = u3 * (4.5440763299219775e-05 * u4 + 0.4092155481941839 * u2) - tmp3 * u1;
+        dxdt[4][l] = u1 * (0.01775954828743408 * u1 - 0.10773983913066638 * u3) -
+                0.01775954828743408 * (u3 * u3);
+        dxdt[5][l] = tmp3 * u3 + u1 * (-(5.266025597120826e-05 * u4) - 0.3153534800671272 * u2);
+        dxdt[6][l] = 0.0;
     }
 }
 
@@ -3572,7 +3595,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double rho[DUAL_SPIN_LANES];
     double h2[DUAL_SPIN_LANES];
     int i, l, q;
-    (void)c;  /* unused when every value is folded */
+    (void)c;  /* unused in some scenes */
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
     order = 2;

@@ -104,15 +104,16 @@ contains
   end function dual_spin_ode_strerror
 
 
-  ! d(dx/dt)/dx, row-major (59 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! J(i*nx + j + 1) = d f_(i+1) / d x_(j+1) in 1-based terms.
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (59 ops).
   subroutine dual_spin_jac(t, x, c, J) bind(C, name="dual_spin_f_jac")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: J(49)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: J(0:48)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -133,85 +134,78 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
     tmp0 = dual_spin_sin(q2)
     tmp1 = dual_spin_cos(q2)
     tmp2 = dual_spin_sin(q3)
-    tmp3 = tmp2*u1
+    tmp3 = tmp2 * u1
     tmp4 = dual_spin_cos(q3)
-    tmp5 = tmp4*u3
-    tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/(tmp1*tmp1)
-    tmp8 = 1.0_c_double/tmp1
-    tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
-    tmp10 = tmp2*tmp8
-    tmp11 = tmp4*tmp8
-    tmp12 = 0.015471973456719416_c_double*u2 - &
-          1.1900419543364779e-06_c_double*u4
-    J(1) = 0
-    J(2) = tmp0*tmp7
-    J(3) = tmp9
-    J(4) = -tmp10
-    J(5) = 0
-    J(6) = tmp11
-    J(7) = 0
-    J(8) = 0
-    J(9) = 0
-    J(10) = tmp6
-    J(11) = tmp4
-    J(12) = 0
-    J(13) = tmp2
-    J(14) = 0
-    J(15) = 0
-    J(16) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
-    J(17) = -tmp0*tmp9
-    J(18) = tmp0*tmp10
-    J(19) = 1
-    J(20) = -tmp0*tmp11
-    J(21) = 0
-    J(22) = 0
-    J(23) = 0
-    J(24) = 0
-    J(25) = -tmp12
-    J(26) = -0.015471973456719416_c_double*u1 + 0.4092155481941839_c_double* &
-          u3
-    J(27) = 0.4092155481941839_c_double*u2 + 4.5440763299219775e-05_c_double &
-          *u4
-    J(28) = 1.1900419543364779e-06_c_double*u1 + &
-          4.5440763299219775e-05_c_double*u3
-    J(29) = 0
-    J(30) = 0
-    J(31) = 0
-    J(32) = 0.03551909657486816_c_double*u1 - 0.10773983913066638_c_double* &
-          u3
-    J(33) = 0
-    J(34) = -0.10773983913066638_c_double*u1 - 0.03551909657486816_c_double* &
-          u3
-    J(35) = 0
-    J(36) = 0
-    J(37) = 0
-    J(38) = 0
-    J(39) = -0.3153534800671272_c_double*u2 - 5.266025597120826e-05_c_double &
-          *u4
-    J(40) = -0.3153534800671272_c_double*u1 + 0.015471973456719416_c_double* &
-          u3
-    J(41) = tmp12
-    J(42) = -5.266025597120826e-05_c_double*u1 - &
-          1.1900419543364779e-06_c_double*u3
-    J(43) = 0
-    J(44) = 0
-    J(45) = 0
-    J(46) = 0
-    J(47) = 0
-    J(48) = 0
-    J(49) = 0
+    tmp5 = tmp4 * u3
+    tmp6 = tmp5 - tmp3
+    tmp7 = tmp6 / (tmp1 * tmp1)
+    tmp8 = 1.0_c_double / tmp1
+    tmp9 = tmp8 * ((-tmp2 * u3) - tmp4 * u1)
+    tmp10 = tmp2 * tmp8
+    tmp11 = tmp4 * tmp8
+    tmp12 = 0.015471973456719416_c_double * u2 - 1.1900419543364779e-06_c_double * u4
+    J(0) = 0.0_c_double
+    J(1) = tmp0 * tmp7
+    J(2) = tmp9
+    J(3) = -tmp10
+    J(4) = 0.0_c_double
+    J(5) = tmp11
+    J(6) = 0.0_c_double
+    J(7) = 0.0_c_double
+    J(8) = 0.0_c_double
+    J(9) = tmp6
+    J(10) = tmp4
+    J(11) = 0.0_c_double
+    J(12) = tmp2
+    J(13) = 0.0_c_double
+    J(14) = 0.0_c_double
+    J(15) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
+    J(16) = -tmp0 * tmp9
+    J(17) = tmp0 * tmp10
+    J(18) = 1.0_c_double
+    J(19) = -tmp0 * tmp11
+    J(20) = 0.0_c_double
+    J(21) = 0.0_c_double
+    J(22) = 0.0_c_double
+    J(23) = 0.0_c_double
+    J(24) = -tmp12
+    J(25) = 0.4092155481941839_c_double * u3 - 0.015471973456719416_c_double * u1
+    J(26) = 4.5440763299219775e-05_c_double * u4 + 0.4092155481941839_c_double * u2
+    J(27) = 1.1900419543364779e-06_c_double * u1 + 4.5440763299219775e-05_c_double * u3
+    J(28) = 0.0_c_double
+    J(29) = 0.0_c_double
+    J(30) = 0.0_c_double
+    J(31) = 0.03551909657486816_c_double * u1 - 0.10773983913066638_c_double * u3
+    J(32) = 0.0_c_double
+    J(33) = (-0.03551909657486816_c_double * u3) - 0.10773983913066638_c_double * u1
+    J(34) = 0.0_c_double
+    J(35) = 0.0_c_double
+    J(36) = 0.0_c_double
+    J(37) = 0.0_c_double
+    J(38) = (-5.266025597120826e-05_c_double * u4) - 0.3153534800671272_c_double * u2
+    J(39) = 0.015471973456719416_c_double * u3 - 0.3153534800671272_c_double * u1
+    J(40) = tmp12
+    J(41) = (-5.266025597120826e-05_c_double * u1) - 1.1900419543364779e-06_c_double * u3
+    J(42) = 0.0_c_double
+    J(43) = 0.0_c_double
+    J(44) = 0.0_c_double
+    J(45) = 0.0_c_double
+    J(46) = 0.0_c_double
+    J(47) = 0.0_c_double
+    J(48) = 0.0_c_double
   end subroutine dual_spin_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -762,7 +756,8 @@ contains
     ai(5) = ur * ai(0) + ui * ar(0)
     p = 1
     do i = 2, 3 - 1
-      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) &
+          then
         p = i
       end if
     end do
@@ -866,7 +861,8 @@ contains
     ai(19) = ur * ai(16) + ui * ar(16)
     p = 3
     do i = 4, 6 - 1
-      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) &
+          then
         p = i
       end if
     end do
@@ -931,7 +927,8 @@ contains
     ai(27) = ur * ai(24) + ui * ar(24)
     p = 4
     do i = 5, 6 - 1
-      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) &
+          then
         p = i
       end if
     end do
@@ -1116,7 +1113,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: k(0:nx - 1, 0:3)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1128,7 +1125,8 @@ contains
 
     comp = 0.0_c_double
     call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < &
+        1) then
       res = DUAL_SPIN_ODE_ERR_ARGUMENT
       return
     end if
@@ -1220,7 +1218,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1410,7 +1408,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1674,7 +1672,7 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: comp(0:nx - 1)
-    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
     real(c_double), intent(inout) :: dx(0:nx - 1)
     real(c_double), intent(inout) :: xnew(0:nx - 1)
     real(c_double) :: res
@@ -1780,7 +1778,7 @@ contains
     integer(c_int) :: res
     real(c_double) :: J(0:nx * nx - 1)
     real(c_double) :: lu(0:nx * nx - 1)
-    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: fnew(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
@@ -2440,7 +2438,8 @@ contains
           h = t1 - t
           last = .true.
         else
-          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
             cycle
           else
             h = h_new
@@ -2481,8 +2480,8 @@ contains
   subroutine taylor_jet(order, x, inv, tay)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
-    real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:19 - 1, 0:21 - 1)
+    real(c_double), intent(in) :: inv(0:20)
+    real(c_double), intent(inout) :: tay(0:18, 0:20)
     real(c_double) :: acc7
     real(c_double) :: acc8
     real(c_double) :: acc9
@@ -2745,7 +2744,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:19 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:18, 0:20)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

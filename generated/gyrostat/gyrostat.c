@@ -14,6 +14,7 @@
  */
 #include "gyrostat.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -33,6 +34,14 @@
 #else
 #define GYROSTAT_ALIGNED
 #endif
+
+
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -183,95 +192,6 @@ static inline double gyrostat_cos_lanes(double x)
 }
 
 
-/* 110 ops, plus the checks. */
-int gyrostat_setup(const double *p, double *c)
-{
-    int i;
-    for (i = 0; i < GYROSTAT_NP; ++i) {
-        if (!isfinite(p[i])) {
-            return GYROSTAT_ERR_NONFINITE;
-        }
-    }
-    const double m_a = p[0];
-    const double m_b = p[1];
-    const double I11 = p[2];
-    const double I22 = p[3];
-    const double I33 = p[4];
-    const double I13 = p[5];
-    const double I = p[6];
-    const double J = p[7];
-    const double l1 = p[8];
-    const double l3 = p[9];
-    const double g = p[10];
-    const double T = p[11];
-
-    if (!(m_a > 0.0) || !(m_b > 0.0)) {
-        return GYROSTAT_ERR_MASS;
-    }
-    if (!(I > 0.0) || !(J > 0.0)) {
-        return GYROSTAT_ERR_ROTOR_INERTIA;
-    }
-    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11*I33 - I13*I13 > 0.0)) {
-        return GYROSTAT_ERR_CARRIER_NOT_PD;
-    }
-    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
-       The largest may not exceed the sum of the other two. */
-    const double half_gap = sqrt(0.25*(I11 - I33)*(I11 - I33) + I13*I13);
-    const double largest = fmax(I22, 0.5*(I11 + I33) + half_gap);
-    if (2.0*largest - (I11 + I22 + I33) > 1e-12*(I11 + I22 + I33)) {
-        return GYROSTAT_ERR_CARRIER_TRIANGLE;
-    }
-    if (J - 2.0*I > 1e-12*(2.0*I + J)) {
-        return GYROSTAT_ERR_ROTOR_TRIANGLE;
-    }
-
-    const double tmp0 = l3*l3;
-    const double tmp1 = l1*l1;
-    const double mu = m_a*m_b/(m_a + m_b);
-    const double IA11 = I + I11 + mu*tmp0;
-    const double IA22 = I22 + mu*(tmp0 + tmp1);
-    const double IA33 = I + I33 + mu*tmp1;
-    const double IA13 = I13 - l1*l3*mu;
-    const double tmp2 = I13*I13;
-    const double tmp3 = I*I11;
-    const double tmp4 = I*I33;
-    const double tmp5 = mu*tmp0;
-    const double tmp6 = I*tmp5;
-    const double tmp7 = mu*tmp1;
-    const double tmp8 = I11*tmp7;
-    const double tmp9 = I33*tmp5;
-    const double tmp10 = 2*I13*l1*l3*mu;
-    const double tmp11 = I*I;
-    const double tmp12 = I*tmp7;
-    const double tmp13 = tmp11 + tmp12;
-    const double tmp14 = 1.0/(I11*I33 + tmp10 + tmp13 - tmp2 + tmp3 + tmp4 + tmp6 + tmp8 + tmp9);
-    const double tmp15 = IA13*tmp14;
-    const double tmp16 = -I*I22 - tmp10 + tmp2;
-    const double tmp17 = J*tmp14;
-    const double tmp18 = 1.0/IA22;
-    c[0] = -tmp15*(2*I + I11 - I22 + I33);
-    c[1] = J*tmp15;
-    c[2] = -tmp14*(-I22*I33 - I22*tmp7 + I33*I33 + I33*tmp7 + tmp13 + tmp16 + 2*tmp4 - tmp6 - tmp9);
-    c[3] = IA33*tmp17;
-    c[4] = IA13*tmp18;
-    c[5] = -tmp18*(I11 - I33 + tmp5 - tmp7);
-    c[6] = -T*tmp18;
-    c[7] = tmp14*(I11*I11 - I11*I22 + I11*tmp5 - I22*tmp5 + tmp11 - tmp12 + tmp16 + 2*tmp3 + tmp6 - tmp8);
-    c[8] = -IA11*tmp17;
-    c[9] = T/J;
-    c[10] = g;
-    c[11] = tmp14*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*(IA11 - IA33)*(IA11 - IA33)))*((1.0/2.0)*IA11 + (1.0/2.0)*IA33 + sqrt(IA13*IA13 + (1.0/4.0)*(IA11 - IA33)*(IA11 - IA33)));
-    if (!(c[GYROSTAT_COND] <= 10000000000000.0)) {
-        return GYROSTAT_ERR_MASS_SINGULAR;
-    }
-    for (i = 0; i < GYROSTAT_NC; ++i) {
-        if (!isfinite(c[i])) {
-            return GYROSTAT_ERR_OVERFLOW;  /* valid parameters whose products overflow */
-        }
-    }
-    return GYROSTAT_OK;
-}
-
 const char *gyrostat_strerror(int code)
 {
     switch (code) {
@@ -298,76 +218,222 @@ const char *gyrostat_strerror(int code)
     }
 }
 
-/* 40 ops per call. */
+/* Checks p and computes the constants c that gyrostat_rhs needs (110 ops, plus
+   the checks). Returns GYROSTAT_OK or the first failing check's code; c is
+   then not to be used. */
+int gyrostat_setup(const double *p, double *c)
+{
+    double m_a;
+    double m_b;
+    double I11;
+    double I22;
+    double I33;
+    double I13;
+    double I;
+    double J;
+    double l1;
+    double l3;
+    double g;
+    double T;
+    double half_gap;
+    double largest;
+    double tmp0;
+    double tmp1;
+    double mu;
+    double IA11;
+    double IA22;
+    double IA33;
+    double IA13;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
+    double tmp13;
+    double tmp14;
+    double tmp15;
+    double tmp16;
+    double tmp17;
+    double tmp18;
+    int i_;
+
+    for (i_ = 0; i_ < 12; ++i_) {
+        c[i_] = 0.0;
+    }
+    for (i_ = 0; i_ < 12; ++i_) {
+        if (!(fabs(p[i_]) <= DBL_MAX)) {
+            return GYROSTAT_ERR_NONFINITE;
+        }
+    }
+    m_a = p[0];
+    m_b = p[1];
+    I11 = p[2];
+    I22 = p[3];
+    I33 = p[4];
+    I13 = p[5];
+    I = p[6];
+    J = p[7];
+    l1 = p[8];
+    l3 = p[9];
+    g = p[10];
+    T = p[11];
+    if (!(m_a > 0.0) || !(m_b > 0.0)) {
+        return GYROSTAT_ERR_MASS;
+    }
+    if (!(I > 0.0) || !(J > 0.0)) {
+        return GYROSTAT_ERR_ROTOR_INERTIA;
+    }
+    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11 * I33 - I13 * I13 > 0.0)) {
+        return GYROSTAT_ERR_CARRIER_NOT_PD;
+    }
+
+    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]]. */
+    /* The largest may not exceed the sum of the other two. */
+    half_gap = sqrt(0.25 * ((I11 - I33) * (I11 - I33)) + I13 * I13);
+    largest = dmax(I22, 0.5 * (I11 + I33) + half_gap);
+    if (2.0 * largest - (I11 + I22 + I33) > 1e-12 * (I11 + I22 + I33)) {
+        return GYROSTAT_ERR_CARRIER_TRIANGLE;
+    }
+    if (J - 2.0 * I > 1e-12 * (2.0 * I + J)) {
+        return GYROSTAT_ERR_ROTOR_TRIANGLE;
+    }
+    tmp0 = l3 * l3;
+    tmp1 = l1 * l1;
+    mu = m_a * m_b / (m_a + m_b);
+    IA11 = I + I11 + tmp0 * mu;
+    IA22 = I22 + mu * (tmp0 + tmp1);
+    IA33 = I + I33 + tmp1 * mu;
+    IA13 = I13 - l1 * l3 * mu;
+    tmp2 = I13 * I13;
+    tmp3 = I * I11;
+    tmp4 = I * I33;
+    tmp5 = tmp0 * mu;
+    tmp6 = I * tmp5;
+    tmp7 = tmp1 * mu;
+    tmp8 = I11 * tmp7;
+    tmp9 = I33 * tmp5;
+    tmp10 = 2.0 * I13 * l1 * l3 * mu;
+    tmp11 = I * I;
+    tmp12 = I * tmp7;
+    tmp13 = tmp11 + tmp12;
+    tmp14 = 1.0 / (tmp10 + tmp13 + tmp3 + tmp4 + tmp6 + tmp8 + tmp9 + I11 * I33 - tmp2);
+    tmp15 = IA13 * tmp14;
+    tmp16 = tmp2 - tmp10 - I * I22;
+    tmp17 = J * tmp14;
+    tmp18 = 1.0 / IA22;
+    c[0] = -(tmp15 * (I11 + I33 + 2.0 * I - I22));
+    c[1] = J * tmp15;
+    c[2] = -(tmp14 * (tmp13 + tmp16 + I33 * I33 + 2.0 * tmp4 + I33 * tmp7 - tmp6 - tmp9 - I22 *
+            I33 - I22 * tmp7));
+    c[3] = IA33 * tmp17;
+    c[4] = IA13 * tmp18;
+    c[5] = -(tmp18 * (I11 + tmp5 - I33 - tmp7));
+    c[6] = -(T * tmp18);
+    c[7] = tmp14 * (tmp11 + tmp16 + tmp6 + I11 * I11 + 2.0 * tmp3 + I11 * tmp5 - tmp12 - tmp8 -
+            I11 * I22 - I22 * tmp5);
+    c[8] = -(IA11 * tmp17);
+    c[9] = T / J;
+    c[10] = g;
+    c[11] = tmp14 * ((sqrt(IA13 * IA13 + (IA11 - IA33) * (IA11 - IA33) / 4.0) + IA11 / 2.0 + IA33
+            / 2.0) * (sqrt(IA13 * IA13 + (IA11 - IA33) * (IA11 - IA33) / 4.0) + IA11 / 2.0 + IA33
+            / 2.0));
+    if (!(c[11] <= 10000000000000.0)) {
+        return GYROSTAT_ERR_MASS_SINGULAR;
+    }
+    for (i_ = 0; i_ < 12; ++i_) {
+        if (!(fabs(c[i_]) <= DBL_MAX)) {
+            return GYROSTAT_ERR_OVERFLOW;
+        }
+    }
+    return GYROSTAT_OK;
+}
+
+/* dxdt = f(t, x) for the constants c from gyrostat_setup (40 ops). */
 void gyrostat_rhs(double t, const double *x, const double *c, double *dxdt)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[7];
-    const double u2 = x[8];
-    const double u3 = x[9];
-    const double u4 = x[10];
-    const double u5 = x[11];
-    const double u6 = x[12];
-    const double u7 = x[13];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double u5;
+    double u6;
+    double u7;
+    double tmp0;
+    double tmp1;
+    double tmp2;
 
-    const double tmp0 = gyrostat_sin(q3);
-    const double tmp1 = gyrostat_cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos(q2);
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[7];
+    u2 = x[8];
+    u3 = x[9];
+    u4 = x[10];
+    u5 = x[11];
+    u6 = x[12];
+    u7 = x[13];
+    tmp0 = gyrostat_sin(q3);
+    tmp1 = gyrostat_cos(q3);
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / gyrostat_cos(q2);
     dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*gyrostat_sin(q2) + u2;
-    dxdt[3] = -u2 + u4;
+    dxdt[1] = tmp0 * u3 + tmp1 * u1;
+    dxdt[2] = u2 - tmp2 * gyrostat_sin(q2);
+    dxdt[3] = u4 - u2;
     dxdt[4] = u5;
     dxdt[5] = u6;
     dxdt[6] = u7;
-    dxdt[7] = u1*(c[0]*u2 + c[1]*u4) + u3*(c[2]*u2 + c[3]*u4);
-    dxdt[8] = -c[4]*u3*u3 + c[6] + u1*(c[4]*u1 + c[5]*u3);
-    dxdt[9] = u2*(-c[0]*u3 + c[7]*u1) + u4*(-c[1]*u3 + c[8]*u1);
+    dxdt[7] = u1 * (c[0] * u2 + c[1] * u4) + u3 * (c[2] * u2 + c[3] * u4);
+    dxdt[8] = c[6] + u1 * (c[4] * u1 + c[5] * u3) - c[4] * (u3 * u3);
+    dxdt[9] = u2 * (c[7] * u1 - c[0] * u3) + u4 * (c[8] * u1 - c[1] * u3);
     dxdt[10] = c[9];
-    dxdt[11] = 0;
-    dxdt[12] = 0;
+    dxdt[11] = 0.0;
+    dxdt[12] = 0.0;
     dxdt[13] = c[10];
 }
 
-/* gyrostat_rhs on n lanes: the same statements, lane by lane. */
 void gyrostat_rhs_lanes(int n, const double *GYROSTAT_RESTRICT t,
-        const double *GYROSTAT_RESTRICT x, const double *GYROSTAT_RESTRICT c,
-        double *GYROSTAT_RESTRICT dxdt)
+                        const double *GYROSTAT_RESTRICT x, const double *GYROSTAT_RESTRICT c,
+                        double *GYROSTAT_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     GYROSTAT_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[7 * n + l];
-        const double u2 = x[8 * n + l];
-        const double u3 = x[9 * n + l];
-        const double u4 = x[10 * n + l];
-        const double u5 = x[11 * n + l];
-        const double u6 = x[12 * n + l];
-        const double u7 = x[13 * n + l];
-
-        const double tmp0 = gyrostat_sin_lanes(q3);
-        const double tmp1 = gyrostat_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos_lanes(q2);
-        dxdt[0 * n + l] = tmp2;
-        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*gyrostat_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = -u2 + u4;
+        double q2, q3, u1, u2, u3, u4, u5, u6, u7, tmp0, tmp1, tmp2;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[7 * n + l];
+        u2 = x[8 * n + l];
+        u3 = x[9 * n + l];
+        u4 = x[10 * n + l];
+        u5 = x[11 * n + l];
+        u6 = x[12 * n + l];
+        u7 = x[13 * n + l];
+        tmp0 = gyrostat_sin_lanes(q3);
+        tmp1 = gyrostat_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / gyrostat_cos_lanes(q2);
+        dxdt[l] = tmp2;
+        dxdt[1 * n + l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2 * n + l] = u2 - tmp2 * gyrostat_sin_lanes(q2);
+        dxdt[3 * n + l] = u4 - u2;
         dxdt[4 * n + l] = u5;
         dxdt[5 * n + l] = u6;
         dxdt[6 * n + l] = u7;
-        dxdt[7 * n + l] = u1*(c[0]*u2 + c[1]*u4) + u3*(c[2]*u2 + c[3]*u4);
-        dxdt[8 * n + l] = -c[4]*u3*u3 + c[6] + u1*(c[4]*u1 + c[5]*u3);
-        dxdt[9 * n + l] = u2*(-c[0]*u3 + c[7]*u1) + u4*(-c[1]*u3 + c[8]*u1);
+        dxdt[7 * n + l] = u1 * (c[0] * u2 + c[1] * u4) + u3 * (c[2] * u2 + c[3] * u4);
+        dxdt[8 * n + l] = c[6] + u1 * (c[4] * u1 + c[5] * u3) - c[4] * (u3 * u3);
+        dxdt[9 * n + l] = u2 * (c[7] * u1 - c[0] * u3) + u4 * (c[8] * u1 - c[1] * u3);
         dxdt[10 * n + l] = c[9];
-        dxdt[11 * n + l] = 0;
-        dxdt[12 * n + l] = 0;
+        dxdt[11 * n + l] = 0.0;
+        dxdt[12 * n + l] = 0.0;
         dxdt[13 * n + l] = c[10];
     }
 }

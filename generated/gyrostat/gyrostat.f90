@@ -207,14 +207,13 @@ contains
     return
   end function gyrostat_cos
 
-  ! Checks p and computes the constants c that gyrostat_rhs needs
-  ! (110 ops, plus the checks). Returns GYROSTAT_OK or
-  ! the first failing check's code; c is then not to be used.
-  function gyrostat_setup(p, c) result(status) &
-      bind(C, name="gyrostat_f_setup")
-    real(c_double), intent(in) :: p(12)
-    real(c_double), intent(out) :: c(12)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that gyrostat_rhs needs (110 ops, plus
+  ! the checks). Returns GYROSTAT_OK or the first failing check's code; c is
+  ! then not to be used.
+  function gyrostat_setup(p, c) result(res) bind(C, name="gyrostat_f_setup")
+    real(c_double), intent(in) :: p(0:11)
+    real(c_double), intent(out) :: c(0:11)
+    integer(c_int) :: res
     real(c_double) :: m_a
     real(c_double) :: m_b
     real(c_double) :: I11
@@ -227,7 +226,8 @@ contains
     real(c_double) :: l3
     real(c_double) :: g
     real(c_double) :: T
-    real(c_double) :: half_gap, largest
+    real(c_double) :: half_gap
+    real(c_double) :: largest
     real(c_double) :: tmp0
     real(c_double) :: tmp1
     real(c_double) :: mu
@@ -252,102 +252,108 @@ contains
     real(c_double) :: tmp16
     real(c_double) :: tmp17
     real(c_double) :: tmp18
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = GYROSTAT_ERR_NONFINITE
+    do i_ = 0, 12 - 1
+      c(i_) = 0.0_c_double
+    end do
+    do i_ = 0, 12 - 1
+      if (.not. ieee_is_finite(p(i_))) then
+        res = GYROSTAT_ERR_NONFINITE
+        return
+      end if
+    end do
+    m_a = p(0)
+    m_b = p(1)
+    I11 = p(2)
+    I22 = p(3)
+    I33 = p(4)
+    I13 = p(5)
+    I = p(6)
+    J = p(7)
+    l1 = p(8)
+    l3 = p(9)
+    g = p(10)
+    T = p(11)
+    if (.not. (m_a > 0.0_c_double) .or. .not. (m_b > 0.0_c_double)) then
+      res = GYROSTAT_ERR_MASS
       return
     end if
-    m_a = p(1)
-    m_b = p(2)
-    I11 = p(3)
-    I22 = p(4)
-    I33 = p(5)
-    I13 = p(6)
-    I = p(7)
-    J = p(8)
-    l1 = p(9)
-    l3 = p(10)
-    g = p(11)
-    T = p(12)
+    if (.not. (I > 0.0_c_double) .or. .not. (J > 0.0_c_double)) then
+      res = GYROSTAT_ERR_ROTOR_INERTIA
+      return
+    end if
+    if (.not. (I11 > 0.0_c_double) .or. .not. (I22 > 0.0_c_double) .or. .not. (I33 > &
+        0.0_c_double) .or. .not. (I11 * I33 - I13 * I13 > 0.0_c_double)) then
+      res = GYROSTAT_ERR_CARRIER_NOT_PD
+      return
+    end if
 
-    if (.not. (m_a > 0.0_c_double .and. m_b > 0.0_c_double)) then
-      status = GYROSTAT_ERR_MASS
-      return
-    end if
-    if (.not. (I > 0.0_c_double .and. J > 0.0_c_double)) then
-      status = GYROSTAT_ERR_ROTOR_INERTIA
-      return
-    end if
-    if (.not. (I11 > 0.0_c_double .and. I22 > 0.0_c_double .and. I33 > 0.0_c_double &
-               .and. I11*I33 - I13*I13 > 0.0_c_double)) then
-      status = GYROSTAT_ERR_CARRIER_NOT_PD
-      return
-    end if
     ! Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
     ! The largest may not exceed the sum of the other two.
-    half_gap = sqrt(0.25_c_double*(I11 - I33)**2 + I13*I13)
-    largest = max(I22, 0.5_c_double*(I11 + I33) + half_gap)
-    if (2.0_c_double*largest - (I11 + I22 + I33) > 1e-12_c_double*(I11 + I22 + I33)) then
-      status = GYROSTAT_ERR_CARRIER_TRIANGLE
+    half_gap = sqrt(0.25_c_double * ((I11 - I33) * (I11 - I33)) + I13 * I13)
+    largest = max(I22, 0.5_c_double * (I11 + I33) + half_gap)
+    if (2.0_c_double * largest - ((I11 + I22) + I33) > 1e-12_c_double * ((I11 + I22) + I33)) then
+      res = GYROSTAT_ERR_CARRIER_TRIANGLE
       return
     end if
-    if (J - 2.0_c_double*I > 1e-12_c_double*(2.0_c_double*I + J)) then
-      status = GYROSTAT_ERR_ROTOR_TRIANGLE
+    if (J - 2.0_c_double * I > 1e-12_c_double * (2.0_c_double * I + J)) then
+      res = GYROSTAT_ERR_ROTOR_TRIANGLE
       return
     end if
-
-    tmp0 = l3*l3
-    tmp1 = l1*l1
-    mu = m_a*m_b/(m_a + m_b)
-    IA11 = I + I11 + mu*tmp0
-    IA22 = I22 + mu*(tmp0 + tmp1)
-    IA33 = I + I33 + mu*tmp1
-    IA13 = I13 - l1*l3*mu
-    tmp2 = I13*I13
-    tmp3 = I*I11
-    tmp4 = I*I33
-    tmp5 = mu*tmp0
-    tmp6 = I*tmp5
-    tmp7 = mu*tmp1
-    tmp8 = I11*tmp7
-    tmp9 = I33*tmp5
-    tmp10 = 2*I13*l1*l3*mu
-    tmp11 = I*I
-    tmp12 = I*tmp7
+    tmp0 = l3 * l3
+    tmp1 = l1 * l1
+    mu = (m_a * m_b) / (m_a + m_b)
+    IA11 = (I + I11) + tmp0 * mu
+    IA22 = I22 + mu * (tmp0 + tmp1)
+    IA33 = (I + I33) + tmp1 * mu
+    IA13 = I13 - (l1 * l3) * mu
+    tmp2 = I13 * I13
+    tmp3 = I * I11
+    tmp4 = I * I33
+    tmp5 = tmp0 * mu
+    tmp6 = I * tmp5
+    tmp7 = tmp1 * mu
+    tmp8 = I11 * tmp7
+    tmp9 = I33 * tmp5
+    tmp10 = (((2.0_c_double * I13) * l1) * l3) * mu
+    tmp11 = I * I
+    tmp12 = I * tmp7
     tmp13 = tmp11 + tmp12
-    tmp14 = 1.0_c_double/(I11*I33 + tmp10 + tmp13 - tmp2 + tmp3 + tmp4 + &
-          tmp6 + tmp8 + tmp9)
-    tmp15 = IA13*tmp14
-    tmp16 = -I*I22 - tmp10 + tmp2
-    tmp17 = J*tmp14
-    tmp18 = 1.0_c_double/IA22
-    c(1) = -tmp15*(2*I + I11 - I22 + I33)
-    c(2) = J*tmp15
-    c(3) = -tmp14*(-I22*I33 - I22*tmp7 + I33*I33 + I33*tmp7 + tmp13 + tmp16 &
-          + 2*tmp4 - tmp6 - tmp9)
-    c(4) = IA33*tmp17
-    c(5) = IA13*tmp18
-    c(6) = -tmp18*(I11 - I33 + tmp5 - tmp7)
-    c(7) = -T*tmp18
-    c(8) = tmp14*(I11*I11 - I11*I22 + I11*tmp5 - I22*tmp5 + tmp11 - tmp12 + &
-          tmp16 + 2*tmp3 + tmp6 - tmp8)
-    c(9) = -IA11*tmp17
-    c(10) = T/J
-    c(11) = g
-    c(12) = tmp14*((1.0d0/2.0d0)*IA11 + (1.0d0/2.0d0)*IA33 + sqrt(IA13*IA13 &
-          + (1.0d0/4.0d0)*(IA11 - IA33)*(IA11 - IA33)))*((1.0d0/2.0d0)*IA11 &
-          + (1.0d0/2.0d0)*IA33 + sqrt(IA13*IA13 + (1.0d0/4.0d0)*(IA11 - &
-          IA33)*(IA11 - IA33)))
-    if (.not. (c(GYROSTAT_COND) <= 10000000000000.0_c_double)) then
-      status = GYROSTAT_ERR_MASS_SINGULAR
+    tmp14 = 1.0_c_double / ((((((((tmp10 + tmp13) + tmp3) + tmp4) + tmp6) + tmp8) + tmp9) + I11 * &
+        I33) - tmp2)
+    tmp15 = IA13 * tmp14
+    tmp16 = (tmp2 - tmp10) - I * I22
+    tmp17 = J * tmp14
+    tmp18 = 1.0_c_double / IA22
+    c(0) = -tmp15 * (((I11 + I33) + 2.0_c_double * I) - I22)
+    c(1) = J * tmp15
+    c(2) = -tmp14 * ((((((((tmp13 + tmp16) + I33 * I33) + 2.0_c_double * tmp4) + I33 * tmp7) - &
+        tmp6) - tmp9) - I22 * I33) - I22 * tmp7)
+    c(3) = IA33 * tmp17
+    c(4) = IA13 * tmp18
+    c(5) = -tmp18 * (((I11 + tmp5) - I33) - tmp7)
+    c(6) = -T * tmp18
+    c(7) = tmp14 * (((((((((tmp11 + tmp16) + tmp6) + I11 * I11) + 2.0_c_double * tmp3) + I11 * &
+        tmp5) - tmp12) - tmp8) - I11 * I22) - I22 * tmp5)
+    c(8) = -IA11 * tmp17
+    c(9) = T / J
+    c(10) = g
+    c(11) = tmp14 * (((sqrt(IA13 * IA13 + ((IA11 - IA33) * (IA11 - IA33)) / 4.0_c_double) + IA11 &
+        / 2.0_c_double) + IA33 / 2.0_c_double) * ((sqrt(IA13 * IA13 + ((IA11 - IA33) * (IA11 - &
+        IA33)) / 4.0_c_double) + IA11 / 2.0_c_double) + IA33 / 2.0_c_double))
+    if (.not. (c(11) <= 10000000000000.0_c_double)) then
+      res = GYROSTAT_ERR_MASS_SINGULAR
       return
     end if
-    if (.not. all(ieee_is_finite(c))) then
-      status = GYROSTAT_ERR_OVERFLOW
-      return
-    end if
-    status = GYROSTAT_OK
+    do i_ = 0, 12 - 1
+      if (.not. ieee_is_finite(c(i_))) then
+        res = GYROSTAT_ERR_OVERFLOW
+        return
+      end if
+    end do
+    res = GYROSTAT_OK
+    return
   end function gyrostat_setup
 
   ! The message for a return code, blank-padded to 85 characters: trim() it.
@@ -380,14 +386,14 @@ contains
   end function gyrostat_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from gyrostat_setup (40 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from gyrostat_setup (40 ops).
   subroutine gyrostat_rhs(t, x, c, dxdt) bind(C, name="gyrostat_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(14)
-    real(c_double), intent(in) :: c(12)
-    real(c_double), intent(out) :: dxdt(14)
+    real(c_double), intent(in) :: x(0:13)
+    real(c_double), intent(in) :: c(0:11)
+    real(c_double), intent(out) :: dxdt(0:13)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -401,34 +407,34 @@ contains
     real(c_double) :: tmp1
     real(c_double) :: tmp2
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(8)
-    u2 = x(9)
-    u3 = x(10)
-    u4 = x(11)
-    u5 = x(12)
-    u6 = x(13)
-    u7 = x(14)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(7)
+    u2 = x(8)
+    u3 = x(9)
+    u4 = x(10)
+    u5 = x(11)
+    u6 = x(12)
+    u7 = x(13)
     tmp0 = gyrostat_sin(q3)
     tmp1 = gyrostat_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos(q2)
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*gyrostat_sin(q2) + u2
-    dxdt(4) = -u2 + u4
-    dxdt(5) = u5
-    dxdt(6) = u6
-    dxdt(7) = u7
-    dxdt(8) = u1*(c(1)*u2 + c(2)*u4) + u3*(c(3)*u2 + c(4)*u4)
-    dxdt(9) = -c(5)*u3*u3 + c(7) + u1*(c(5)*u1 + c(6)*u3)
-    dxdt(10) = u2*(-c(1)*u3 + c(8)*u1) + u4*(-c(2)*u3 + c(9)*u1)
-    dxdt(11) = c(10)
-    dxdt(12) = 0
-    dxdt(13) = 0
-    dxdt(14) = c(11)
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / gyrostat_cos(q2)
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * gyrostat_sin(q2)
+    dxdt(3) = u4 - u2
+    dxdt(4) = u5
+    dxdt(5) = u6
+    dxdt(6) = u7
+    dxdt(7) = u1 * (c(0) * u2 + c(1) * u4) + u3 * (c(2) * u2 + c(3) * u4)
+    dxdt(8) = (c(6) + u1 * (c(4) * u1 + c(5) * u3)) - c(4) * (u3 * u3)
+    dxdt(9) = u2 * (c(7) * u1 - c(0) * u3) + u4 * (c(8) * u1 - c(1) * u3)
+    dxdt(10) = c(9)
+    dxdt(11) = 0.0_c_double
+    dxdt(12) = 0.0_c_double
+    dxdt(13) = c(10)
   end subroutine gyrostat_rhs
 
 end module gyrostat_mod

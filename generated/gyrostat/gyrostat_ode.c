@@ -264,229 +264,249 @@ const char *gyrostat_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (58 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (58 ops). */
 void gyrostat_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[7];
-    const double u2 = x[8];
-    const double u3 = x[9];
-    const double u4 = x[10];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
+    double tmp13;
 
-    const double tmp0 = gyrostat_sin(q2);
-    const double tmp1 = gyrostat_cos(q2);
-    const double tmp2 = gyrostat_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = gyrostat_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = c[0]*u2 + c[1]*u4;
-    const double tmp13 = 2*c[4];
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[7];
+    u2 = x[8];
+    u3 = x[9];
+    u4 = x[10];
+    tmp0 = gyrostat_sin(q2);
+    tmp1 = gyrostat_cos(q2);
+    tmp2 = gyrostat_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = gyrostat_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = c[0] * u2 + c[1] * u4;
+    tmp13 = 2.0 * c[4];
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
-    J[3] = 0;
-    J[4] = 0;
-    J[5] = 0;
-    J[6] = 0;
+    J[3] = 0.0;
+    J[4] = 0.0;
+    J[5] = 0.0;
+    J[6] = 0.0;
     J[7] = -tmp10;
-    J[8] = 0;
+    J[8] = 0.0;
     J[9] = tmp11;
-    J[10] = 0;
-    J[11] = 0;
-    J[12] = 0;
-    J[13] = 0;
-    J[14] = 0;
-    J[15] = 0;
+    J[10] = 0.0;
+    J[11] = 0.0;
+    J[12] = 0.0;
+    J[13] = 0.0;
+    J[14] = 0.0;
+    J[15] = 0.0;
     J[16] = tmp6;
-    J[17] = 0;
-    J[18] = 0;
-    J[19] = 0;
-    J[20] = 0;
+    J[17] = 0.0;
+    J[18] = 0.0;
+    J[19] = 0.0;
+    J[20] = 0.0;
     J[21] = tmp4;
-    J[22] = 0;
+    J[22] = 0.0;
     J[23] = tmp2;
-    J[24] = 0;
-    J[25] = 0;
-    J[26] = 0;
-    J[27] = 0;
-    J[28] = 0;
-    J[29] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[30] = -tmp0*tmp9;
-    J[31] = 0;
-    J[32] = 0;
-    J[33] = 0;
-    J[34] = 0;
-    J[35] = tmp0*tmp10;
-    J[36] = 1;
-    J[37] = -tmp0*tmp11;
-    J[38] = 0;
-    J[39] = 0;
-    J[40] = 0;
-    J[41] = 0;
-    J[42] = 0;
-    J[43] = 0;
-    J[44] = 0;
-    J[45] = 0;
-    J[46] = 0;
-    J[47] = 0;
-    J[48] = 0;
-    J[49] = 0;
-    J[50] = -1;
-    J[51] = 0;
-    J[52] = 1;
-    J[53] = 0;
-    J[54] = 0;
-    J[55] = 0;
-    J[56] = 0;
-    J[57] = 0;
-    J[58] = 0;
-    J[59] = 0;
-    J[60] = 0;
-    J[61] = 0;
-    J[62] = 0;
-    J[63] = 0;
-    J[64] = 0;
-    J[65] = 0;
-    J[66] = 0;
-    J[67] = 1;
-    J[68] = 0;
-    J[69] = 0;
-    J[70] = 0;
-    J[71] = 0;
-    J[72] = 0;
-    J[73] = 0;
-    J[74] = 0;
-    J[75] = 0;
-    J[76] = 0;
-    J[77] = 0;
-    J[78] = 0;
-    J[79] = 0;
-    J[80] = 0;
-    J[81] = 0;
-    J[82] = 1;
-    J[83] = 0;
-    J[84] = 0;
-    J[85] = 0;
-    J[86] = 0;
-    J[87] = 0;
-    J[88] = 0;
-    J[89] = 0;
-    J[90] = 0;
-    J[91] = 0;
-    J[92] = 0;
-    J[93] = 0;
-    J[94] = 0;
-    J[95] = 0;
-    J[96] = 0;
-    J[97] = 1;
-    J[98] = 0;
-    J[99] = 0;
-    J[100] = 0;
-    J[101] = 0;
-    J[102] = 0;
-    J[103] = 0;
-    J[104] = 0;
+    J[24] = 0.0;
+    J[25] = 0.0;
+    J[26] = 0.0;
+    J[27] = 0.0;
+    J[28] = 0.0;
+    J[29] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[30] = -(tmp0 * tmp9);
+    J[31] = 0.0;
+    J[32] = 0.0;
+    J[33] = 0.0;
+    J[34] = 0.0;
+    J[35] = tmp0 * tmp10;
+    J[36] = 1.0;
+    J[37] = -(tmp0 * tmp11);
+    J[38] = 0.0;
+    J[39] = 0.0;
+    J[40] = 0.0;
+    J[41] = 0.0;
+    J[42] = 0.0;
+    J[43] = 0.0;
+    J[44] = 0.0;
+    J[45] = 0.0;
+    J[46] = 0.0;
+    J[47] = 0.0;
+    J[48] = 0.0;
+    J[49] = 0.0;
+    J[50] = -1.0;
+    J[51] = 0.0;
+    J[52] = 1.0;
+    J[53] = 0.0;
+    J[54] = 0.0;
+    J[55] = 0.0;
+    J[56] = 0.0;
+    J[57] = 0.0;
+    J[58] = 0.0;
+    J[59] = 0.0;
+    J[60] = 0.0;
+    J[61] = 0.0;
+    J[62] = 0.0;
+    J[63] = 0.0;
+    J[64] = 0.0;
+    J[65] = 0.0;
+    J[66] = 0.0;
+    J[67] = 1.0;
+    J[68] = 0.0;
+    J[69] = 0.0;
+    J[70] = 0.0;
+    J[71] = 0.0;
+    J[72] = 0.0;
+    J[73] = 0.0;
+    J[74] = 0.0;
+    J[75] = 0.0;
+    J[76] = 0.0;
+    J[77] = 0.0;
+    J[78] = 0.0;
+    J[79] = 0.0;
+    J[80] = 0.0;
+    J[81] = 0.0;
+    J[82] = 1.0;
+    J[83] = 0.0;
+    J[84] = 0.0;
+    J[85] = 0.0;
+    J[86] = 0.0;
+    J[87] = 0.0;
+    J[88] = 0.0;
+    J[89] = 0.0;
+    J[90] = 0.0;
+    J[91] = 0.0;
+    J[92] = 0.0;
+    J[93] = 0.0;
+    J[94] = 0.0;
+    J[95] = 0.0;
+    J[96] = 0.0;
+    J[97] = 1.0;
+    J[98] = 0.0;
+    J[99] = 0.0;
+    J[100] = 0.0;
+    J[101] = 0.0;
+    J[102] = 0.0;
+    J[103] = 0.0;
+    J[104] = 0.0;
     J[105] = tmp12;
-    J[106] = c[0]*u1 + c[2]*u3;
-    J[107] = c[2]*u2 + c[3]*u4;
-    J[108] = c[1]*u1 + c[3]*u3;
-    J[109] = 0;
-    J[110] = 0;
-    J[111] = 0;
-    J[112] = 0;
-    J[113] = 0;
-    J[114] = 0;
-    J[115] = 0;
-    J[116] = 0;
-    J[117] = 0;
-    J[118] = 0;
-    J[119] = c[5]*u3 + tmp13*u1;
-    J[120] = 0;
-    J[121] = c[5]*u1 - tmp13*u3;
-    J[122] = 0;
-    J[123] = 0;
-    J[124] = 0;
-    J[125] = 0;
-    J[126] = 0;
-    J[127] = 0;
-    J[128] = 0;
-    J[129] = 0;
-    J[130] = 0;
-    J[131] = 0;
-    J[132] = 0;
-    J[133] = c[7]*u2 + c[8]*u4;
-    J[134] = -c[0]*u3 + c[7]*u1;
+    J[106] = c[0] * u1 + c[2] * u3;
+    J[107] = c[2] * u2 + c[3] * u4;
+    J[108] = c[1] * u1 + c[3] * u3;
+    J[109] = 0.0;
+    J[110] = 0.0;
+    J[111] = 0.0;
+    J[112] = 0.0;
+    J[113] = 0.0;
+    J[114] = 0.0;
+    J[115] = 0.0;
+    J[116] = 0.0;
+    J[117] = 0.0;
+    J[118] = 0.0;
+    J[119] = c[5] * u3 + tmp13 * u1;
+    J[120] = 0.0;
+    J[121] = c[5] * u1 - tmp13 * u3;
+    J[122] = 0.0;
+    J[123] = 0.0;
+    J[124] = 0.0;
+    J[125] = 0.0;
+    J[126] = 0.0;
+    J[127] = 0.0;
+    J[128] = 0.0;
+    J[129] = 0.0;
+    J[130] = 0.0;
+    J[131] = 0.0;
+    J[132] = 0.0;
+    J[133] = c[7] * u2 + c[8] * u4;
+    J[134] = c[7] * u1 - c[0] * u3;
     J[135] = -tmp12;
-    J[136] = -c[1]*u3 + c[8]*u1;
-    J[137] = 0;
-    J[138] = 0;
-    J[139] = 0;
-    J[140] = 0;
-    J[141] = 0;
-    J[142] = 0;
-    J[143] = 0;
-    J[144] = 0;
-    J[145] = 0;
-    J[146] = 0;
-    J[147] = 0;
-    J[148] = 0;
-    J[149] = 0;
-    J[150] = 0;
-    J[151] = 0;
-    J[152] = 0;
-    J[153] = 0;
-    J[154] = 0;
-    J[155] = 0;
-    J[156] = 0;
-    J[157] = 0;
-    J[158] = 0;
-    J[159] = 0;
-    J[160] = 0;
-    J[161] = 0;
-    J[162] = 0;
-    J[163] = 0;
-    J[164] = 0;
-    J[165] = 0;
-    J[166] = 0;
-    J[167] = 0;
-    J[168] = 0;
-    J[169] = 0;
-    J[170] = 0;
-    J[171] = 0;
-    J[172] = 0;
-    J[173] = 0;
-    J[174] = 0;
-    J[175] = 0;
-    J[176] = 0;
-    J[177] = 0;
-    J[178] = 0;
-    J[179] = 0;
-    J[180] = 0;
-    J[181] = 0;
-    J[182] = 0;
-    J[183] = 0;
-    J[184] = 0;
-    J[185] = 0;
-    J[186] = 0;
-    J[187] = 0;
-    J[188] = 0;
-    J[189] = 0;
-    J[190] = 0;
-    J[191] = 0;
-    J[192] = 0;
-    J[193] = 0;
-    J[194] = 0;
-    J[195] = 0;
+    J[136] = c[8] * u1 - c[1] * u3;
+    J[137] = 0.0;
+    J[138] = 0.0;
+    J[139] = 0.0;
+    J[140] = 0.0;
+    J[141] = 0.0;
+    J[142] = 0.0;
+    J[143] = 0.0;
+    J[144] = 0.0;
+    J[145] = 0.0;
+    J[146] = 0.0;
+    J[147] = 0.0;
+    J[148] = 0.0;
+    J[149] = 0.0;
+    J[150] = 0.0;
+    J[151] = 0.0;
+    J[152] = 0.0;
+    J[153] = 0.0;
+    J[154] = 0.0;
+    J[155] = 0.0;
+    J[156] = 0.0;
+    J[157] = 0.0;
+    J[158] = 0.0;
+    J[159] = 0.0;
+    J[160] = 0.0;
+    J[161] = 0.0;
+    J[162] = 0.0;
+    J[163] = 0.0;
+    J[164] = 0.0;
+    J[165] = 0.0;
+    J[166] = 0.0;
+    J[167] = 0.0;
+    J[168] = 0.0;
+    J[169] = 0.0;
+    J[170] = 0.0;
+    J[171] = 0.0;
+    J[172] = 0.0;
+    J[173] = 0.0;
+    J[174] = 0.0;
+    J[175] = 0.0;
+    J[176] = 0.0;
+    J[177] = 0.0;
+    J[178] = 0.0;
+    J[179] = 0.0;
+    J[180] = 0.0;
+    J[181] = 0.0;
+    J[182] = 0.0;
+    J[183] = 0.0;
+    J[184] = 0.0;
+    J[185] = 0.0;
+    J[186] = 0.0;
+    J[187] = 0.0;
+    J[188] = 0.0;
+    J[189] = 0.0;
+    J[190] = 0.0;
+    J[191] = 0.0;
+    J[192] = 0.0;
+    J[193] = 0.0;
+    J[194] = 0.0;
+    J[195] = 0.0;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(gyrostat_stats *stats, double t0)
@@ -977,7 +997,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[9] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * GYROSTAT_NX + 1]) + fabs(ai[i * GYROSTAT_NX + 1]) > fabs(ar[p * GYROSTAT_NX + 1]) + fabs(ai[p * GYROSTAT_NX + 1])) {
+        if (fabs(ar[i * GYROSTAT_NX + 1]) + fabs(ai[i * GYROSTAT_NX + 1]) > fabs(ar[p *
+                GYROSTAT_NX + 1]) + fabs(ai[p * GYROSTAT_NX + 1])) {
             p = i;
         }
     }
@@ -1171,7 +1192,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[97] = ur * ai[90] + ui * ar[90];
     p = 7;
     for (i = 8; i < 10; ++i) {
-        if (fabs(ar[i * GYROSTAT_NX + 7]) + fabs(ai[i * GYROSTAT_NX + 7]) > fabs(ar[p * GYROSTAT_NX + 7]) + fabs(ai[p * GYROSTAT_NX + 7])) {
+        if (fabs(ar[i * GYROSTAT_NX + 7]) + fabs(ai[i * GYROSTAT_NX + 7]) > fabs(ar[p *
+                GYROSTAT_NX + 7]) + fabs(ai[p * GYROSTAT_NX + 7])) {
             p = i;
         }
     }
@@ -1235,7 +1257,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[108] = ur * ai[105] + ui * ar[105];
     p = 8;
     for (i = 9; i < 10; ++i) {
-        if (fabs(ar[i * GYROSTAT_NX + 8]) + fabs(ai[i * GYROSTAT_NX + 8]) > fabs(ar[p * GYROSTAT_NX + 8]) + fabs(ai[p * GYROSTAT_NX + 8])) {
+        if (fabs(ar[i * GYROSTAT_NX + 8]) + fabs(ai[i * GYROSTAT_NX + 8]) > fabs(ar[p *
+                GYROSTAT_NX + 8]) + fabs(ai[p * GYROSTAT_NX + 8])) {
             p = i;
         }
     }
@@ -3199,44 +3222,42 @@ struct GYROSTAT_ALIGNED lanes {
     int busy[GYROSTAT_LANES];
 };
 
-/* gyrostat_rhs_lanes on GYROSTAT_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *GYROSTAT_RESTRICT t,
                       double (*GYROSTAT_RESTRICT x)[GYROSTAT_LANES],
                       const double *GYROSTAT_RESTRICT c,
                       double (*GYROSTAT_RESTRICT dxdt)[GYROSTAT_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     GYROSTAT_SIMD
     for (l = 0; l < GYROSTAT_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[7][l];
-        const double u2 = x[8][l];
-        const double u3 = x[9][l];
-        const double u4 = x[10][l];
-        const double u5 = x[11][l];
-        const double u6 = x[12][l];
-        const double u7 = x[13][l];
-
-        const double tmp0 = gyrostat_sin_lanes(q3);
-        const double tmp1 = gyrostat_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/gyrostat_cos_lanes(q2);
+        double q2, q3, u1, u2, u3, u4, u5, u6, u7, tmp0, tmp1, tmp2;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[7][l];
+        u2 = x[8][l];
+        u3 = x[9][l];
+        u4 = x[10][l];
+        u5 = x[11][l];
+        u6 = x[12][l];
+        u7 = x[13][l];
+        tmp0 = gyrostat_sin_lanes(q3);
+        tmp1 = gyrostat_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / gyrostat_cos_lanes(q2);
         dxdt[0][l] = tmp2;
-        dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*gyrostat_sin_lanes(q2) + u2;
-        dxdt[3][l] = -u2 + u4;
+        dxdt[1][l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2][l] = u2 - tmp2 * gyrostat_sin_lanes(q2);
+        dxdt[3][l] = u4 - u2;
         dxdt[4][l] = u5;
         dxdt[5][l] = u6;
         dxdt[6][l] = u7;
-        dxdt[7][l] = u1*(c[0]*u2 + c[1]*u4) + u3*(c[2]*u2 + c[3]*u4);
-        dxdt[8][l] = -c[4]*u3*u3 + c[6] + u1*(c[4]*u1 + c[5]*u3);
-        dxdt[9][l] = u2*(-c[0]*u3 + c[7]*u1) + u4*(-c[1]*u3 + c[8]*u1);
+        dxdt[7][l] = u1 * (c[0] * u2 + c[1] * u4) + u3 * (c[2] * u2 + c[3] * u4);
+        dxdt[8][l] = c[6] + u1 * (c[4] * u1 + c[5] * u3) - c[4] * (u3 * u3);
+        dxdt[9][l] = u2 * (c[7] * u1 - c[0] * u3) + u4 * (c[8] * u1 - c[1] * u3);
         dxdt[10][l] = c[9];
-        dxdt[11][l] = 0;
-        dxdt[12][l] = 0;
+        dxdt[11][l] = 0.0;
+        dxdt[12][l] = 0.0;
         dxdt[13][l] = c[10];
     }
 }

@@ -104,15 +104,16 @@ contains
   end function gyrostat_ode_strerror
 
 
-  ! d(dx/dt)/dx, row-major (58 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! J(i*nx + j + 1) = d f_(i+1) / d x_(j+1) in 1-based terms.
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (58 ops).
   subroutine gyrostat_jac(t, x, c, J) bind(C, name="gyrostat_f_jac")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(14)
-    real(c_double), intent(in) :: c(12)
-    real(c_double), intent(out) :: J(196)
+    real(c_double), intent(in) :: x(0:13)
+    real(c_double), intent(in) :: c(0:11)
+    real(c_double), intent(out) :: J(0:195)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -134,224 +135,224 @@ contains
     real(c_double) :: tmp12
     real(c_double) :: tmp13
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(8)
-    u2 = x(9)
-    u3 = x(10)
-    u4 = x(11)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(7)
+    u2 = x(8)
+    u3 = x(9)
+    u4 = x(10)
     tmp0 = gyrostat_sin(q2)
     tmp1 = gyrostat_cos(q2)
     tmp2 = gyrostat_sin(q3)
-    tmp3 = tmp2*u1
+    tmp3 = tmp2 * u1
     tmp4 = gyrostat_cos(q3)
-    tmp5 = tmp4*u3
-    tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/(tmp1*tmp1)
-    tmp8 = 1.0_c_double/tmp1
-    tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
-    tmp10 = tmp2*tmp8
-    tmp11 = tmp4*tmp8
-    tmp12 = c(1)*u2 + c(2)*u4
-    tmp13 = 2*c(5)
-    J(1) = 0
-    J(2) = tmp0*tmp7
-    J(3) = tmp9
-    J(4) = 0
-    J(5) = 0
-    J(6) = 0
-    J(7) = 0
-    J(8) = -tmp10
-    J(9) = 0
-    J(10) = tmp11
-    J(11) = 0
-    J(12) = 0
-    J(13) = 0
-    J(14) = 0
-    J(15) = 0
-    J(16) = 0
-    J(17) = tmp6
-    J(18) = 0
-    J(19) = 0
-    J(20) = 0
-    J(21) = 0
-    J(22) = tmp4
-    J(23) = 0
-    J(24) = tmp2
-    J(25) = 0
-    J(26) = 0
-    J(27) = 0
-    J(28) = 0
-    J(29) = 0
-    J(30) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
-    J(31) = -tmp0*tmp9
-    J(32) = 0
-    J(33) = 0
-    J(34) = 0
-    J(35) = 0
-    J(36) = tmp0*tmp10
-    J(37) = 1
-    J(38) = -tmp0*tmp11
-    J(39) = 0
-    J(40) = 0
-    J(41) = 0
-    J(42) = 0
-    J(43) = 0
-    J(44) = 0
-    J(45) = 0
-    J(46) = 0
-    J(47) = 0
-    J(48) = 0
-    J(49) = 0
-    J(50) = 0
-    J(51) = -1
-    J(52) = 0
-    J(53) = 1
-    J(54) = 0
-    J(55) = 0
-    J(56) = 0
-    J(57) = 0
-    J(58) = 0
-    J(59) = 0
-    J(60) = 0
-    J(61) = 0
-    J(62) = 0
-    J(63) = 0
-    J(64) = 0
-    J(65) = 0
-    J(66) = 0
-    J(67) = 0
-    J(68) = 1
-    J(69) = 0
-    J(70) = 0
-    J(71) = 0
-    J(72) = 0
-    J(73) = 0
-    J(74) = 0
-    J(75) = 0
-    J(76) = 0
-    J(77) = 0
-    J(78) = 0
-    J(79) = 0
-    J(80) = 0
-    J(81) = 0
-    J(82) = 0
-    J(83) = 1
-    J(84) = 0
-    J(85) = 0
-    J(86) = 0
-    J(87) = 0
-    J(88) = 0
-    J(89) = 0
-    J(90) = 0
-    J(91) = 0
-    J(92) = 0
-    J(93) = 0
-    J(94) = 0
-    J(95) = 0
-    J(96) = 0
-    J(97) = 0
-    J(98) = 1
-    J(99) = 0
-    J(100) = 0
-    J(101) = 0
-    J(102) = 0
-    J(103) = 0
-    J(104) = 0
-    J(105) = 0
-    J(106) = tmp12
-    J(107) = c(1)*u1 + c(3)*u3
-    J(108) = c(3)*u2 + c(4)*u4
-    J(109) = c(2)*u1 + c(4)*u3
-    J(110) = 0
-    J(111) = 0
-    J(112) = 0
-    J(113) = 0
-    J(114) = 0
-    J(115) = 0
-    J(116) = 0
-    J(117) = 0
-    J(118) = 0
-    J(119) = 0
-    J(120) = c(6)*u3 + tmp13*u1
-    J(121) = 0
-    J(122) = c(6)*u1 - tmp13*u3
-    J(123) = 0
-    J(124) = 0
-    J(125) = 0
-    J(126) = 0
-    J(127) = 0
-    J(128) = 0
-    J(129) = 0
-    J(130) = 0
-    J(131) = 0
-    J(132) = 0
-    J(133) = 0
-    J(134) = c(8)*u2 + c(9)*u4
-    J(135) = -c(1)*u3 + c(8)*u1
-    J(136) = -tmp12
-    J(137) = -c(2)*u3 + c(9)*u1
-    J(138) = 0
-    J(139) = 0
-    J(140) = 0
-    J(141) = 0
-    J(142) = 0
-    J(143) = 0
-    J(144) = 0
-    J(145) = 0
-    J(146) = 0
-    J(147) = 0
-    J(148) = 0
-    J(149) = 0
-    J(150) = 0
-    J(151) = 0
-    J(152) = 0
-    J(153) = 0
-    J(154) = 0
-    J(155) = 0
-    J(156) = 0
-    J(157) = 0
-    J(158) = 0
-    J(159) = 0
-    J(160) = 0
-    J(161) = 0
-    J(162) = 0
-    J(163) = 0
-    J(164) = 0
-    J(165) = 0
-    J(166) = 0
-    J(167) = 0
-    J(168) = 0
-    J(169) = 0
-    J(170) = 0
-    J(171) = 0
-    J(172) = 0
-    J(173) = 0
-    J(174) = 0
-    J(175) = 0
-    J(176) = 0
-    J(177) = 0
-    J(178) = 0
-    J(179) = 0
-    J(180) = 0
-    J(181) = 0
-    J(182) = 0
-    J(183) = 0
-    J(184) = 0
-    J(185) = 0
-    J(186) = 0
-    J(187) = 0
-    J(188) = 0
-    J(189) = 0
-    J(190) = 0
-    J(191) = 0
-    J(192) = 0
-    J(193) = 0
-    J(194) = 0
-    J(195) = 0
-    J(196) = 0
+    tmp5 = tmp4 * u3
+    tmp6 = tmp5 - tmp3
+    tmp7 = tmp6 / (tmp1 * tmp1)
+    tmp8 = 1.0_c_double / tmp1
+    tmp9 = tmp8 * ((-tmp2 * u3) - tmp4 * u1)
+    tmp10 = tmp2 * tmp8
+    tmp11 = tmp4 * tmp8
+    tmp12 = c(0) * u2 + c(1) * u4
+    tmp13 = 2.0_c_double * c(4)
+    J(0) = 0.0_c_double
+    J(1) = tmp0 * tmp7
+    J(2) = tmp9
+    J(3) = 0.0_c_double
+    J(4) = 0.0_c_double
+    J(5) = 0.0_c_double
+    J(6) = 0.0_c_double
+    J(7) = -tmp10
+    J(8) = 0.0_c_double
+    J(9) = tmp11
+    J(10) = 0.0_c_double
+    J(11) = 0.0_c_double
+    J(12) = 0.0_c_double
+    J(13) = 0.0_c_double
+    J(14) = 0.0_c_double
+    J(15) = 0.0_c_double
+    J(16) = tmp6
+    J(17) = 0.0_c_double
+    J(18) = 0.0_c_double
+    J(19) = 0.0_c_double
+    J(20) = 0.0_c_double
+    J(21) = tmp4
+    J(22) = 0.0_c_double
+    J(23) = tmp2
+    J(24) = 0.0_c_double
+    J(25) = 0.0_c_double
+    J(26) = 0.0_c_double
+    J(27) = 0.0_c_double
+    J(28) = 0.0_c_double
+    J(29) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
+    J(30) = -tmp0 * tmp9
+    J(31) = 0.0_c_double
+    J(32) = 0.0_c_double
+    J(33) = 0.0_c_double
+    J(34) = 0.0_c_double
+    J(35) = tmp0 * tmp10
+    J(36) = 1.0_c_double
+    J(37) = -tmp0 * tmp11
+    J(38) = 0.0_c_double
+    J(39) = 0.0_c_double
+    J(40) = 0.0_c_double
+    J(41) = 0.0_c_double
+    J(42) = 0.0_c_double
+    J(43) = 0.0_c_double
+    J(44) = 0.0_c_double
+    J(45) = 0.0_c_double
+    J(46) = 0.0_c_double
+    J(47) = 0.0_c_double
+    J(48) = 0.0_c_double
+    J(49) = 0.0_c_double
+    J(50) = -1.0_c_double
+    J(51) = 0.0_c_double
+    J(52) = 1.0_c_double
+    J(53) = 0.0_c_double
+    J(54) = 0.0_c_double
+    J(55) = 0.0_c_double
+    J(56) = 0.0_c_double
+    J(57) = 0.0_c_double
+    J(58) = 0.0_c_double
+    J(59) = 0.0_c_double
+    J(60) = 0.0_c_double
+    J(61) = 0.0_c_double
+    J(62) = 0.0_c_double
+    J(63) = 0.0_c_double
+    J(64) = 0.0_c_double
+    J(65) = 0.0_c_double
+    J(66) = 0.0_c_double
+    J(67) = 1.0_c_double
+    J(68) = 0.0_c_double
+    J(69) = 0.0_c_double
+    J(70) = 0.0_c_double
+    J(71) = 0.0_c_double
+    J(72) = 0.0_c_double
+    J(73) = 0.0_c_double
+    J(74) = 0.0_c_double
+    J(75) = 0.0_c_double
+    J(76) = 0.0_c_double
+    J(77) = 0.0_c_double
+    J(78) = 0.0_c_double
+    J(79) = 0.0_c_double
+    J(80) = 0.0_c_double
+    J(81) = 0.0_c_double
+    J(82) = 1.0_c_double
+    J(83) = 0.0_c_double
+    J(84) = 0.0_c_double
+    J(85) = 0.0_c_double
+    J(86) = 0.0_c_double
+    J(87) = 0.0_c_double
+    J(88) = 0.0_c_double
+    J(89) = 0.0_c_double
+    J(90) = 0.0_c_double
+    J(91) = 0.0_c_double
+    J(92) = 0.0_c_double
+    J(93) = 0.0_c_double
+    J(94) = 0.0_c_double
+    J(95) = 0.0_c_double
+    J(96) = 0.0_c_double
+    J(97) = 1.0_c_double
+    J(98) = 0.0_c_double
+    J(99) = 0.0_c_double
+    J(100) = 0.0_c_double
+    J(101) = 0.0_c_double
+    J(102) = 0.0_c_double
+    J(103) = 0.0_c_double
+    J(104) = 0.0_c_double
+    J(105) = tmp12
+    J(106) = c(0) * u1 + c(2) * u3
+    J(107) = c(2) * u2 + c(3) * u4
+    J(108) = c(1) * u1 + c(3) * u3
+    J(109) = 0.0_c_double
+    J(110) = 0.0_c_double
+    J(111) = 0.0_c_double
+    J(112) = 0.0_c_double
+    J(113) = 0.0_c_double
+    J(114) = 0.0_c_double
+    J(115) = 0.0_c_double
+    J(116) = 0.0_c_double
+    J(117) = 0.0_c_double
+    J(118) = 0.0_c_double
+    J(119) = c(5) * u3 + tmp13 * u1
+    J(120) = 0.0_c_double
+    J(121) = c(5) * u1 - tmp13 * u3
+    J(122) = 0.0_c_double
+    J(123) = 0.0_c_double
+    J(124) = 0.0_c_double
+    J(125) = 0.0_c_double
+    J(126) = 0.0_c_double
+    J(127) = 0.0_c_double
+    J(128) = 0.0_c_double
+    J(129) = 0.0_c_double
+    J(130) = 0.0_c_double
+    J(131) = 0.0_c_double
+    J(132) = 0.0_c_double
+    J(133) = c(7) * u2 + c(8) * u4
+    J(134) = c(7) * u1 - c(0) * u3
+    J(135) = -tmp12
+    J(136) = c(8) * u1 - c(1) * u3
+    J(137) = 0.0_c_double
+    J(138) = 0.0_c_double
+    J(139) = 0.0_c_double
+    J(140) = 0.0_c_double
+    J(141) = 0.0_c_double
+    J(142) = 0.0_c_double
+    J(143) = 0.0_c_double
+    J(144) = 0.0_c_double
+    J(145) = 0.0_c_double
+    J(146) = 0.0_c_double
+    J(147) = 0.0_c_double
+    J(148) = 0.0_c_double
+    J(149) = 0.0_c_double
+    J(150) = 0.0_c_double
+    J(151) = 0.0_c_double
+    J(152) = 0.0_c_double
+    J(153) = 0.0_c_double
+    J(154) = 0.0_c_double
+    J(155) = 0.0_c_double
+    J(156) = 0.0_c_double
+    J(157) = 0.0_c_double
+    J(158) = 0.0_c_double
+    J(159) = 0.0_c_double
+    J(160) = 0.0_c_double
+    J(161) = 0.0_c_double
+    J(162) = 0.0_c_double
+    J(163) = 0.0_c_double
+    J(164) = 0.0_c_double
+    J(165) = 0.0_c_double
+    J(166) = 0.0_c_double
+    J(167) = 0.0_c_double
+    J(168) = 0.0_c_double
+    J(169) = 0.0_c_double
+    J(170) = 0.0_c_double
+    J(171) = 0.0_c_double
+    J(172) = 0.0_c_double
+    J(173) = 0.0_c_double
+    J(174) = 0.0_c_double
+    J(175) = 0.0_c_double
+    J(176) = 0.0_c_double
+    J(177) = 0.0_c_double
+    J(178) = 0.0_c_double
+    J(179) = 0.0_c_double
+    J(180) = 0.0_c_double
+    J(181) = 0.0_c_double
+    J(182) = 0.0_c_double
+    J(183) = 0.0_c_double
+    J(184) = 0.0_c_double
+    J(185) = 0.0_c_double
+    J(186) = 0.0_c_double
+    J(187) = 0.0_c_double
+    J(188) = 0.0_c_double
+    J(189) = 0.0_c_double
+    J(190) = 0.0_c_double
+    J(191) = 0.0_c_double
+    J(192) = 0.0_c_double
+    J(193) = 0.0_c_double
+    J(194) = 0.0_c_double
+    J(195) = 0.0_c_double
   end subroutine gyrostat_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -957,7 +958,8 @@ contains
     ai(9) = ur * ai(0) + ui * ar(0)
     p = 1
     do i = 2, 3 - 1
-      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) &
+          then
         p = i
       end if
     end do
@@ -1157,7 +1159,8 @@ contains
     ai(97) = ur * ai(90) + ui * ar(90)
     p = 7
     do i = 8, 10 - 1
-      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) &
+          then
         p = i
       end if
     end do
@@ -1222,7 +1225,8 @@ contains
     ai(108) = ur * ai(105) + ui * ar(105)
     p = 8
     do i = 9, 10 - 1
-      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) then
+      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) &
+          then
         p = i
       end if
     end do
@@ -1487,7 +1491,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: k(0:nx - 1, 0:3)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1499,7 +1503,8 @@ contains
 
     comp = 0.0_c_double
     call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < &
+        1) then
       res = GYROSTAT_ODE_ERR_ARGUMENT
       return
     end if
@@ -1591,7 +1596,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1781,7 +1786,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2045,7 +2050,7 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: comp(0:nx - 1)
-    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
     real(c_double), intent(inout) :: dx(0:nx - 1)
     real(c_double), intent(inout) :: xnew(0:nx - 1)
     real(c_double) :: res
@@ -2151,7 +2156,7 @@ contains
     integer(c_int) :: res
     real(c_double) :: J(0:nx * nx - 1)
     real(c_double) :: lu(0:nx * nx - 1)
-    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: fnew(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
@@ -2811,7 +2816,8 @@ contains
           h = t1 - t
           last = .true.
         else
-          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
             cycle
           else
             h = h_new
@@ -2853,8 +2859,8 @@ contains
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
-    real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:26 - 1, 0:21 - 1)
+    real(c_double), intent(in) :: inv(0:20)
+    real(c_double), intent(inout) :: tay(0:25, 0:20)
     real(c_double) :: acc14
     real(c_double) :: acc15
     real(c_double) :: acc16
@@ -3142,7 +3148,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:26 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:25, 0:20)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

@@ -15,6 +15,7 @@
  */
 #include "rw3_orthogonal.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -34,6 +35,7 @@
 #else
 #define RW3_ORTHOGONAL_ALIGNED
 #endif
+
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -184,32 +186,6 @@ static inline double rw3_orthogonal_cos_lanes(double x)
 }
 
 
-/* 3 ops, plus the checks. */
-int rw3_orthogonal_setup(const double *p, double *c)
-{
-    int i;
-    for (i = 0; i < RW3_ORTHOGONAL_NP; ++i) {
-        if (!isfinite(p[i])) {
-            return RW3_ORTHOGONAL_ERR_NONFINITE;
-        }
-    }
-    const double T_2 = p[0];
-
-
-    c[0] = (200.0/7.0)*T_2;
-    c[1] = -T_2;
-    c[2] = 3.1152076698594064;
-    if (!(c[RW3_ORTHOGONAL_COND] <= 10000000000000.0)) {
-        return RW3_ORTHOGONAL_ERR_MASS_SINGULAR;
-    }
-    for (i = 0; i < RW3_ORTHOGONAL_NC; ++i) {
-        if (!isfinite(c[i])) {
-            return RW3_ORTHOGONAL_ERR_OVERFLOW;  /* valid parameters whose products overflow */
-        }
-    }
-    return RW3_ORTHOGONAL_OK;
-}
-
 const char *rw3_orthogonal_strerror(int code)
 {
     switch (code) {
@@ -226,143 +202,229 @@ const char *rw3_orthogonal_strerror(int code)
     }
 }
 
-/* 65 ops per call. */
-void rw3_orthogonal_rhs(double t, const double *x, const double *c, double *dxdt)
+/* Checks p and computes the constants c that rw3_orthogonal_rhs needs (3 ops,
+   plus the checks). Returns RW3_ORTHOGONAL_OK or the first failing check's
+   code; c is then not to be used. */
+int rw3_orthogonal_setup(const double *p, double *c)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
+    double T_2;
+    int i_;
 
-    const double tmp0 = rw3_orthogonal_sin(q3);
-    const double tmp1 = rw3_orthogonal_cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/rw3_orthogonal_cos(q2);
-    const double h1 = 301.7396875*u1 + 2.005*u2 - 3.15125*u3 + 0.035*w1;
-    const double h2 = 2.005*u1 + 351.7396875*u2 + 1.34875*u3 + 0.035*w2;
-    const double h3 = -3.15125*u1 + 1.34875*u2 + 251.31*u3 + 0.035*w3;
-    const double rel3 = -u3 + w3;
-    const double net3 = -0.0001*rel3;
-    const double f1 = h2*u3 - h3*u2 - 0.02;
-    const double f2 = c[1] - h1*u3 + h3*u1;
-    const double f3 = h1*u2 - h2*u1 - net3;
-    dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*rw3_orthogonal_sin(q2) + u2;
-    dxdt[3] = 0.0033146766733524852*f1 - 1.9054215209804005e-05*f2 + 4.166596729006503e-05*f3;
-    dxdt[4] = -1.9054215209804005e-05*f1 + 0.0028431796071504527*f2 - 1.5497923245489903e-05*f3;
-    dxdt[5] = 4.166596729006503e-05*f1 - 1.5497923245489903e-05*f2 + 0.003979754895162947*f3;
-    dxdt[6] = 0.5714285714285714;
-    dxdt[7] = c[0];
-    dxdt[8] = 28.571428571428573*net3;
+    for (i_ = 0; i_ < 3; ++i_) {
+        c[i_] = 0.0;
+    }
+    for (i_ = 0; i_ < 1; ++i_) {
+        if (!(fabs(p[i_]) <= DBL_MAX)) {
+            return RW3_ORTHOGONAL_ERR_NONFINITE;
+        }
+    }
+    T_2 = p[0];
+    c[0] = 200.0 * T_2 / 7.0;
+    c[1] = -T_2;
+    c[2] = 3.1152076698594064;
+    if (!(c[2] <= 10000000000000.0)) {
+        return RW3_ORTHOGONAL_ERR_MASS_SINGULAR;
+    }
+    for (i_ = 0; i_ < 3; ++i_) {
+        if (!(fabs(c[i_]) <= DBL_MAX)) {
+            return RW3_ORTHOGONAL_ERR_OVERFLOW;
+        }
+    }
+    return RW3_ORTHOGONAL_OK;
 }
 
-/* rw3_orthogonal_rhs on n lanes: the same statements, lane by lane. */
+/* dxdt = f(t, x) for the constants c from rw3_orthogonal_setup (65 ops). */
+void rw3_orthogonal_rhs(double t, const double *x, const double *c, double *dxdt)
+{
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double h1;
+    double h2;
+    double h3;
+    double rel3;
+    double net3;
+    double f1;
+    double f2;
+    double f3;
+
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    tmp0 = rw3_orthogonal_sin(q3);
+    tmp1 = rw3_orthogonal_cos(q3);
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / rw3_orthogonal_cos(q2);
+    h1 = 0.035 * w1 + 2.005 * u2 + 301.7396875 * u1 - 3.15125 * u3;
+    h2 = 0.035 * w2 + 1.34875 * u3 + 2.005 * u1 + 351.7396875 * u2;
+    h3 = 0.035 * w3 + 1.34875 * u2 + 251.31 * u3 - 3.15125 * u1;
+    rel3 = w3 - u3;
+    net3 = -(1e-4 * rel3);
+    f1 = h2 * u3 - 0.02 - h3 * u2;
+    f2 = c[1] + h3 * u1 - h1 * u3;
+    f3 = h1 * u2 - net3 - h2 * u1;
+    dxdt[0] = tmp2;
+    dxdt[1] = tmp0 * u3 + tmp1 * u1;
+    dxdt[2] = u2 - tmp2 * rw3_orthogonal_sin(q2);
+    dxdt[3] = 4.166596729006503e-05 * f3 + 0.0033146766733524852 * f1 - 1.9054215209804005e-05 * f2;
+    dxdt[4] = 0.0028431796071504527 * f2 - 1.5497923245489903e-05 * f3 - 1.9054215209804005e-05 *
+            f1;
+    dxdt[5] = 0.003979754895162947 * f3 + 4.166596729006503e-05 * f1 - 1.5497923245489903e-05 * f2;
+    dxdt[6] = 0.5714285714285714;
+    dxdt[7] = c[0];
+    dxdt[8] = 28.571428571428573 * net3;
+}
+
 void rw3_orthogonal_rhs_lanes(int n, const double *RW3_ORTHOGONAL_RESTRICT t,
-        const double *RW3_ORTHOGONAL_RESTRICT x, const double *RW3_ORTHOGONAL_RESTRICT c,
-        double *RW3_ORTHOGONAL_RESTRICT dxdt)
+                              const double *RW3_ORTHOGONAL_RESTRICT x,
+                              const double *RW3_ORTHOGONAL_RESTRICT c,
+                              double *RW3_ORTHOGONAL_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     RW3_ORTHOGONAL_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[3 * n + l];
-        const double u2 = x[4 * n + l];
-        const double u3 = x[5 * n + l];
-        const double w1 = x[6 * n + l];
-        const double w2 = x[7 * n + l];
-        const double w3 = x[8 * n + l];
-
-        const double tmp0 = rw3_orthogonal_sin_lanes(q3);
-        const double tmp1 = rw3_orthogonal_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/rw3_orthogonal_cos_lanes(q2);
-        const double h1 = 301.7396875*u1 + 2.005*u2 - 3.15125*u3 + 0.035*w1;
-        const double h2 = 2.005*u1 + 351.7396875*u2 + 1.34875*u3 + 0.035*w2;
-        const double h3 = -3.15125*u1 + 1.34875*u2 + 251.31*u3 + 0.035*w3;
-        const double rel3 = -u3 + w3;
-        const double net3 = -0.0001*rel3;
-        const double f1 = h2*u3 - h3*u2 - 0.02;
-        const double f2 = c[1] - h1*u3 + h3*u1;
-        const double f3 = h1*u2 - h2*u1 - net3;
-        dxdt[0 * n + l] = tmp2;
-        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*rw3_orthogonal_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = 0.0033146766733524852*f1 - 1.9054215209804005e-05*f2 + 4.166596729006503e-05*f3;
-        dxdt[4 * n + l] = -1.9054215209804005e-05*f1 + 0.0028431796071504527*f2 - 1.5497923245489903e-05*f3;
-        dxdt[5 * n + l] = 4.166596729006503e-05*f1 - 1.5497923245489903e-05*f2 + 0.003979754895162947*f3;
+        double q2, q3, u1, u2, u3, w1, w2, w3, tmp0, tmp1, tmp2, h1, h2, h3, rel3, net3, f1, f2, f3;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[3 * n + l];
+        u2 = x[4 * n + l];
+        u3 = x[5 * n + l];
+        w1 = x[6 * n + l];
+        w2 = x[7 * n + l];
+        w3 = x[8 * n + l];
+        tmp0 = rw3_orthogonal_sin_lanes(q3);
+        tmp1 = rw3_orthogonal_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / rw3_orthogonal_cos_lanes(q2);
+        h1 = 0.035 * w1 + 2.005 * u2 + 301.7396875 * u1 - 3.15125 * u3;
+        h2 = 0.035 * w2 + 1.34875 * u3 + 2.005 * u1 + 351.7396875 * u2;
+        h3 = 0.035 * w3 + 1.34875 * u2 + 251.31 * u3 - 3.15125 * u1;
+        rel3 = w3 - u3;
+        net3 = -(1e-4 * rel3);
+        f1 = h2 * u3 - 0.02 - h3 * u2;
+        f2 = c[1] + h3 * u1 - h1 * u3;
+        f3 = h1 * u2 - net3 - h2 * u1;
+        dxdt[l] = tmp2;
+        dxdt[1 * n + l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2 * n + l] = u2 - tmp2 * rw3_orthogonal_sin_lanes(q2);
+        dxdt[3 * n + l] = 4.166596729006503e-05 * f3 + 0.0033146766733524852 * f1 -
+                1.9054215209804005e-05 * f2;
+        dxdt[4 * n + l] = 0.0028431796071504527 * f2 - 1.5497923245489903e-05 * f3 -
+                1.9054215209804005e-05 * f1;
+        dxdt[5 * n + l] = 0.003979754895162947 * f3 + 4.166596729006503e-05 * f1 -
+                1.5497923245489903e-05 * f2;
         dxdt[6 * n + l] = 0.5714285714285714;
         dxdt[7 * n + l] = c[0];
-        dxdt[8 * n + l] = 28.571428571428573*net3;
+        dxdt[8 * n + l] = 28.571428571428573 * net3;
     }
 }
 
-/* kinetic energy of the system (J): 21 ops. */
+/* out = kinetic energy of the system (J): 21 ops. */
 void rw3_orthogonal_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
 
-    out[0] = u1*(150.86984375*u1 + 2.005*u2 - 3.15125*u3) + u2*(175.86984375*u2 + 1.34875*u3) + 125.655*u3*u3 + 0.0175*(w1*w1 + w2*w2 + w3*w3);
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    out[0] = 0.0175 * (w1 * w1 + w2 * w2 + w3 * w3) + 125.655 * (u3 * u3) + u1 * (2.005 * u2 +
+            150.86984375 * u1 - 3.15125 * u3) + u2 * (1.34875 * u3 + 175.86984375 * u2);
 }
 
-/* angular momentum about the mass center, N components h[0..2] (kg m^2/s): 58 ops. */
+/* out = angular momentum about the mass center, N components h[0..2] (kg
+   m^2/s): 58 ops. */
 void rw3_orthogonal_angular_momentum(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q1 = x[0];
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
+    double q1;
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = rw3_orthogonal_sin(q1);
-    const double tmp1 = 2.005*u1 + 351.7396875*u2 + 1.34875*u3 + 0.035*w2;
-    const double tmp2 = rw3_orthogonal_cos(q2);
-    const double tmp3 = tmp1*tmp2;
-    const double tmp4 = -3.15125*u1 + 1.34875*u2 + 251.31*u3 + 0.035*w3;
-    const double tmp5 = rw3_orthogonal_sin(q3);
-    const double tmp6 = rw3_orthogonal_cos(q1);
-    const double tmp7 = tmp5*tmp6;
-    const double tmp8 = rw3_orthogonal_sin(q2);
-    const double tmp9 = rw3_orthogonal_cos(q3);
-    const double tmp10 = tmp0*tmp9;
-    const double tmp11 = 301.7396875*u1 + 2.005*u2 - 3.15125*u3 + 0.035*w1;
-    const double tmp12 = tmp0*tmp5;
-    out[0] = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 + tmp7);
-    out[1] = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8*tmp9);
-    out[2] = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q1 = x[0];
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    tmp0 = rw3_orthogonal_sin(q1);
+    tmp1 = 0.035 * w2 + 1.34875 * u3 + 2.005 * u1 + 351.7396875 * u2;
+    tmp2 = rw3_orthogonal_cos(q2);
+    tmp3 = tmp1 * tmp2;
+    tmp4 = 0.035 * w3 + 1.34875 * u2 + 251.31 * u3 - 3.15125 * u1;
+    tmp5 = rw3_orthogonal_sin(q3);
+    tmp6 = rw3_orthogonal_cos(q1);
+    tmp7 = tmp5 * tmp6;
+    tmp8 = rw3_orthogonal_sin(q2);
+    tmp9 = rw3_orthogonal_cos(q3);
+    tmp10 = tmp0 * tmp9;
+    tmp11 = 0.035 * w1 + 2.005 * u2 + 301.7396875 * u1 - 3.15125 * u3;
+    tmp12 = tmp0 * tmp5;
+    out[0] = tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8) - tmp0 * tmp3;
+    out[1] = tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6 + tmp4 * (tmp12 - tmp6 * tmp8 * tmp9);
+    out[2] = tmp1 * tmp8 + tmp2 * tmp4 * tmp9 - tmp11 * tmp2 * tmp5;
 }
 
-/* power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 5 ops. */
+/* out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 5 ops. */
 void rw3_orthogonal_power(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double w1 = x[6];
-    const double w2 = x[7];
+    double u1;
+    double u2;
+    double w1;
+    double w2;
 
-    out[0] = 0.02*(-u1 + w1);
-    out[1] = c[1]*u2 - c[1]*w2;
-    out[2] = 0;
+    (void)t;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    w1 = x[6];
+    w2 = x[7];
+    out[0] = 0.02 * (w1 - u1);
+    out[1] = c[1] * u2 - c[1] * w2;
+    out[2] = 0.0;
 }

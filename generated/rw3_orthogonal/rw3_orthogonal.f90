@@ -185,36 +185,41 @@ contains
     return
   end function rw3_orthogonal_cos
 
-  ! Checks p and computes the constants c that rw3_orthogonal_rhs needs
-  ! (3 ops, plus the checks). Returns RW3_ORTHOGONAL_OK or
-  ! the first failing check's code; c is then not to be used.
-  function rw3_orthogonal_setup(p, c) result(status) &
-      bind(C, name="rw3_orthogonal_f_setup")
-    real(c_double), intent(in) :: p(1)
-    real(c_double), intent(out) :: c(3)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that rw3_orthogonal_rhs needs (3 ops,
+  ! plus the checks). Returns RW3_ORTHOGONAL_OK or the first failing check's
+  ! code; c is then not to be used.
+  function rw3_orthogonal_setup(p, c) result(res) bind(C, name="rw3_orthogonal_f_setup")
+    real(c_double), intent(in) :: p(0:0)
+    real(c_double), intent(out) :: c(0:2)
+    integer(c_int) :: res
     real(c_double) :: T_2
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = RW3_ORTHOGONAL_ERR_NONFINITE
+    do i_ = 0, 3 - 1
+      c(i_) = 0.0_c_double
+    end do
+    do i_ = 0, 1 - 1
+      if (.not. ieee_is_finite(p(i_))) then
+        res = RW3_ORTHOGONAL_ERR_NONFINITE
+        return
+      end if
+    end do
+    T_2 = p(0)
+    c(0) = (200.0_c_double * T_2) / 7.0_c_double
+    c(1) = -T_2
+    c(2) = 3.1152076698594064_c_double
+    if (.not. (c(2) <= 10000000000000.0_c_double)) then
+      res = RW3_ORTHOGONAL_ERR_MASS_SINGULAR
       return
     end if
-    T_2 = p(1)
-
-
-    c(1) = (200.0d0/7.0d0)*T_2
-    c(2) = -T_2
-    c(3) = 3.1152076698594064_c_double
-    if (.not. (c(RW3_ORTHOGONAL_COND) <= 10000000000000.0_c_double)) then
-      status = RW3_ORTHOGONAL_ERR_MASS_SINGULAR
-      return
-    end if
-    if (.not. all(ieee_is_finite(c))) then
-      status = RW3_ORTHOGONAL_ERR_OVERFLOW
-      return
-    end if
-    status = RW3_ORTHOGONAL_OK
+    do i_ = 0, 3 - 1
+      if (.not. ieee_is_finite(c(i_))) then
+        res = RW3_ORTHOGONAL_ERR_OVERFLOW
+        return
+      end if
+    end do
+    res = RW3_ORTHOGONAL_OK
+    return
   end function rw3_orthogonal_setup
 
   ! The message for a return code, blank-padded to 85 characters: trim() it.
@@ -237,14 +242,14 @@ contains
   end function rw3_orthogonal_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from rw3_orthogonal_setup (65 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from rw3_orthogonal_setup (65 ops).
   subroutine rw3_orthogonal_rhs(t, x, c, dxdt) bind(C, name="rw3_orthogonal_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(3)
-    real(c_double), intent(out) :: dxdt(9)
+    real(c_double), intent(in) :: x(0:8)
+    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(out) :: dxdt(0:8)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -265,54 +270,51 @@ contains
     real(c_double) :: f2
     real(c_double) :: f3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
     tmp0 = rw3_orthogonal_sin(q3)
     tmp1 = rw3_orthogonal_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/rw3_orthogonal_cos(q2)
-    h1 = 301.7396875_c_double*u1 + 2.005_c_double*u2 - 3.15125_c_double*u3 + &
-          0.035_c_double*w1
-    h2 = 2.005_c_double*u1 + 351.7396875_c_double*u2 + 1.34875_c_double*u3 + &
-          0.035_c_double*w2
-    h3 = -3.15125_c_double*u1 + 1.34875_c_double*u2 + 251.31_c_double*u3 + &
-          0.035_c_double*w3
-    rel3 = -u3 + w3
-    net3 = -0.0001_c_double*rel3
-    f1 = h2*u3 - h3*u2 - 0.02_c_double
-    f2 = c(2) - h1*u3 + h3*u1
-    f3 = h1*u2 - h2*u1 - net3
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*rw3_orthogonal_sin(q2) + u2
-    dxdt(4) = 0.0033146766733524852_c_double*f1 - &
-          1.9054215209804005e-05_c_double*f2 + &
-          4.166596729006503e-05_c_double*f3
-    dxdt(5) = -1.9054215209804005e-05_c_double*f1 + &
-          0.0028431796071504527_c_double*f2 - &
-          1.5497923245489903e-05_c_double*f3
-    dxdt(6) = 4.166596729006503e-05_c_double*f1 - &
-          1.5497923245489903e-05_c_double*f2 + &
-          0.003979754895162947_c_double*f3
-    dxdt(7) = 0.5714285714285714_c_double
-    dxdt(8) = c(1)
-    dxdt(9) = 28.571428571428573_c_double*net3
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / rw3_orthogonal_cos(q2)
+    h1 = ((0.035_c_double * w1 + 2.005_c_double * u2) + 301.7396875_c_double * u1) - &
+        3.15125_c_double * u3
+    h2 = ((0.035_c_double * w2 + 1.34875_c_double * u3) + 2.005_c_double * u1) + &
+        351.7396875_c_double * u2
+    h3 = ((0.035_c_double * w3 + 1.34875_c_double * u2) + 251.31_c_double * u3) - &
+        3.15125_c_double * u1
+    rel3 = w3 - u3
+    net3 = -1e-4_c_double * rel3
+    f1 = (h2 * u3 - 0.02_c_double) - h3 * u2
+    f2 = (c(1) + h3 * u1) - h1 * u3
+    f3 = (h1 * u2 - net3) - h2 * u1
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * rw3_orthogonal_sin(q2)
+    dxdt(3) = (4.166596729006503e-05_c_double * f3 + 0.0033146766733524852_c_double * f1) - &
+        1.9054215209804005e-05_c_double * f2
+    dxdt(4) = (0.0028431796071504527_c_double * f2 - 1.5497923245489903e-05_c_double * f3) - &
+        1.9054215209804005e-05_c_double * f1
+    dxdt(5) = (0.003979754895162947_c_double * f3 + 4.166596729006503e-05_c_double * f1) - &
+        1.5497923245489903e-05_c_double * f2
+    dxdt(6) = 0.5714285714285714_c_double
+    dxdt(7) = c(0)
+    dxdt(8) = 28.571428571428573_c_double * net3
   end subroutine rw3_orthogonal_rhs
 
   ! out = kinetic energy of the system (J): 21 ops.
-  subroutine rw3_orthogonal_kinetic_energy(t, x, c, out) &
-      bind(C, name="rw3_orthogonal_f_kinetic_energy")
+  subroutine rw3_orthogonal_kinetic_energy(t, x, c, out) bind(C, &
+          name="rw3_orthogonal_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(3)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:8)
+    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
@@ -320,27 +322,29 @@ contains
     real(c_double) :: w2
     real(c_double) :: w3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    out(1) = u1*(150.86984375_c_double*u1 + 2.005_c_double*u2 - &
-          3.15125_c_double*u3) + u2*(175.86984375_c_double*u2 + &
-          1.34875_c_double*u3) + 125.655_c_double*u3*u3 + 0.0175_c_double*( &
-          w1*w1 + w2*w2 + w3*w3)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    out(0) = ((0.0175_c_double * ((w1 * w1 + w2 * w2) + w3 * w3) + 125.655_c_double * (u3 * u3)) &
+        + u1 * ((2.005_c_double * u2 + 150.86984375_c_double * u1) - 3.15125_c_double * u3)) + u2 &
+        * (1.34875_c_double * u3 + 175.86984375_c_double * u2)
   end subroutine rw3_orthogonal_kinetic_energy
 
-  ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 58 ops.
-  subroutine rw3_orthogonal_angular_momentum(t, x, c, out) &
-      bind(C, name="rw3_orthogonal_f_angular_momentum")
+  ! out = angular momentum about the mass center, N components h[0..2] (kg
+  ! m^2/s): 58 ops.
+  subroutine rw3_orthogonal_angular_momentum(t, x, c, out) bind(C, &
+          name="rw3_orthogonal_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(3)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:8)
+    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -364,61 +368,60 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
     tmp0 = rw3_orthogonal_sin(q1)
-    tmp1 = 2.005_c_double*u1 + 351.7396875_c_double*u2 + 1.34875_c_double*u3 &
-          + 0.035_c_double*w2
+    tmp1 = ((0.035_c_double * w2 + 1.34875_c_double * u3) + 2.005_c_double * u1) + &
+        351.7396875_c_double * u2
     tmp2 = rw3_orthogonal_cos(q2)
-    tmp3 = tmp1*tmp2
-    tmp4 = -3.15125_c_double*u1 + 1.34875_c_double*u2 + 251.31_c_double*u3 + &
-          0.035_c_double*w3
+    tmp3 = tmp1 * tmp2
+    tmp4 = ((0.035_c_double * w3 + 1.34875_c_double * u2) + 251.31_c_double * u3) - &
+        3.15125_c_double * u1
     tmp5 = rw3_orthogonal_sin(q3)
     tmp6 = rw3_orthogonal_cos(q1)
-    tmp7 = tmp5*tmp6
+    tmp7 = tmp5 * tmp6
     tmp8 = rw3_orthogonal_sin(q2)
     tmp9 = rw3_orthogonal_cos(q3)
-    tmp10 = tmp0*tmp9
-    tmp11 = 301.7396875_c_double*u1 + 2.005_c_double*u2 - 3.15125_c_double* &
-          u3 + 0.035_c_double*w1
-    tmp12 = tmp0*tmp5
-    out(1) = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 &
-          + tmp7)
-    out(2) = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8 &
-          *tmp9)
-    out(3) = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9
+    tmp10 = tmp0 * tmp9
+    tmp11 = ((0.035_c_double * w1 + 2.005_c_double * u2) + 301.7396875_c_double * u1) - &
+        3.15125_c_double * u3
+    tmp12 = tmp0 * tmp5
+    out(0) = (tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8)) - tmp0 * tmp3
+    out(1) = (tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6) + tmp4 * (tmp12 - (tmp6 * tmp8) * tmp9)
+    out(2) = (tmp1 * tmp8 + (tmp2 * tmp4) * tmp9) - (tmp11 * tmp2) * tmp5
   end subroutine rw3_orthogonal_angular_momentum
 
   ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 5 ops.
-  subroutine rw3_orthogonal_power(t, x, c, out) &
-      bind(C, name="rw3_orthogonal_f_power")
+  subroutine rw3_orthogonal_power(t, x, c, out) bind(C, name="rw3_orthogonal_f_power")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(3)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:8)
+    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: w1
     real(c_double) :: w2
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    w1 = x(7)
-    w2 = x(8)
-    out(1) = 0.02_c_double*(-u1 + w1)
-    out(2) = c(2)*u2 - c(2)*w2
-    out(3) = 0
+    u1 = x(3)
+    u2 = x(4)
+    w1 = x(6)
+    w2 = x(7)
+    out(0) = 0.02_c_double * (w1 - u1)
+    out(1) = c(1) * u2 - c(1) * w2
+    out(2) = 0.0_c_double
   end subroutine rw3_orthogonal_power
 
 end module rw3_orthogonal_mod

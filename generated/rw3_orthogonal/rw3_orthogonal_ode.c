@@ -265,120 +265,156 @@ const char *rw3_orthogonal_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (138 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (138 ops). */
 void rw3_orthogonal_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
+    double tmp13;
+    double tmp14;
+    double tmp15;
+    double tmp16;
+    double tmp17;
 
-    const double tmp0 = rw3_orthogonal_sin(q2);
-    const double tmp1 = rw3_orthogonal_cos(q2);
-    const double tmp2 = rw3_orthogonal_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = rw3_orthogonal_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = 1.458308855152276e-06*w2;
-    const double tmp13 = 6.668975323431402e-07*w3;
-    const double tmp14 = 1.458308855152276e-06*u2;
-    const double tmp15 = 6.668975323431402e-07*u3;
-    const double tmp16 = 5.424273135921467e-07*w1;
-    const double tmp17 = 5.424273135921467e-07*u1;
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    tmp0 = rw3_orthogonal_sin(q2);
+    tmp1 = rw3_orthogonal_cos(q2);
+    tmp2 = rw3_orthogonal_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = rw3_orthogonal_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = 1.458308855152276e-06 * w2;
+    tmp13 = 6.668975323431402e-07 * w3;
+    tmp14 = 1.458308855152276e-06 * u2;
+    tmp15 = 6.668975323431402e-07 * u3;
+    tmp16 = 5.424273135921467e-07 * w1;
+    tmp17 = 5.424273135921467e-07 * u1;
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
     J[3] = -tmp10;
-    J[4] = 0;
+    J[4] = 0.0;
     J[5] = tmp11;
-    J[6] = 0;
-    J[7] = 0;
-    J[8] = 0;
-    J[9] = 0;
-    J[10] = 0;
+    J[6] = 0.0;
+    J[7] = 0.0;
+    J[8] = 0.0;
+    J[9] = 0.0;
+    J[10] = 0.0;
     J[11] = tmp6;
     J[12] = tmp4;
-    J[13] = 0;
+    J[13] = 0.0;
     J[14] = tmp2;
-    J[15] = 0;
-    J[16] = 0;
-    J[17] = 0;
-    J[18] = 0;
-    J[19] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[20] = -tmp0*tmp9;
-    J[21] = tmp0*tmp10;
-    J[22] = 1;
-    J[23] = -tmp0*tmp11;
-    J[24] = 0;
-    J[25] = 0;
-    J[26] = 0;
-    J[27] = 0;
-    J[28] = 0;
-    J[29] = 0;
-    J[30] = -tmp12 - tmp13 - 4.699133747337101e-05*u1 + 0.008336377129634543*u2 + 0.007550627875277421*u3;
-    J[31] = 0.008336377129634545*u1 - 0.008774259797535168*u2 + 0.3327988462904027*u3 + 1.458308855152276e-06*w1 - 0.000116013683567337*w3;
-    J[32] = 0.007550627875277421*u1 + 0.3327988462904026*u2 + 0.00882125113500854*u3 + 6.668975323431402e-07*w1 + 0.000116013683567337*w2 - 4.166596729006503e-09;
+    J[15] = 0.0;
+    J[16] = 0.0;
+    J[17] = 0.0;
+    J[18] = 0.0;
+    J[19] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[20] = -(tmp0 * tmp9);
+    J[21] = tmp0 * tmp10;
+    J[22] = 1.0;
+    J[23] = -(tmp0 * tmp11);
+    J[24] = 0.0;
+    J[25] = 0.0;
+    J[26] = 0.0;
+    J[27] = 0.0;
+    J[28] = 0.0;
+    J[29] = 0.0;
+    J[30] = 0.007550627875277421 * u3 + 0.008336377129634543 * u2 - tmp12 - tmp13 -
+            4.699133747337101e-05 * u1;
+    J[31] = 0.008336377129634545 * u1 + 0.3327988462904027 * u3 + 1.458308855152276e-06 * w1 -
+            0.000116013683567337 * w3 - 0.008774259797535168 * u2;
+    J[32] = 0.3327988462904026 * u2 + 0.000116013683567337 * w2 + 0.007550627875277421 * u1 +
+            0.00882125113500854 * u3 + 6.668975323431402e-07 * w1 - 4.166596729006503e-09;
     J[33] = tmp14 + tmp15;
-    J[34] = -1.458308855152276e-06*u1 + 0.000116013683567337*u3;
-    J[35] = -6.668975323431402e-07*u1 - 0.000116013683567337*u2 + 4.166596729006503e-09;
-    J[36] = 0;
-    J[37] = 0;
-    J[38] = 0;
-    J[39] = -0.017856992801851313*u1 + 0.004549590061738773*u2 - 0.14339795997248841*u3 + 5.424273135921467e-07*w2 + 9.951128625026586e-05*w3;
-    J[40] = tmp13 - tmp16 + 0.004549590061738772*u1 - 1.0747926685968213e-05*u2 - 0.007565346160787671*u3;
-    J[41] = -0.1433979599724884*u1 - 0.007565346160787671*u2 + 0.017867740728537283*u3 - 9.951128625026586e-05*w1 - 6.668975323431402e-07*w2 + 1.5497923245489903e-09;
-    J[42] = -5.424273135921467e-07*u2 - 9.951128625026586e-05*u3;
-    J[43] = -tmp15 + tmp17;
-    J[44] = 9.951128625026586e-05*u1 + 6.668975323431402e-07*u2 - 1.5497923245489903e-09;
-    J[45] = 0;
-    J[46] = 0;
-    J[47] = 0;
-    J[48] = -0.015861141468348716*u1 - 0.19887734770270193*u2 - 0.004502598724265401*u3 - 0.00013929142133070315*w2 - 5.424273135921467e-07*w3;
-    J[49] = -0.19887734770270185*u1 + 0.015846423182838465*u2 - 0.008325629202948576*u3 + 0.00013929142133070315*w1 - 1.458308855152276e-06*w3;
-    J[50] = tmp12 + tmp16 - 0.0045025987242654*u1 - 0.008325629202948574*u2 + 1.4718285510250293e-05*u3 - 3.979754895162947e-07;
-    J[51] = 0.00013929142133070315*u2 + 5.424273135921467e-07*u3;
-    J[52] = -0.00013929142133070315*u1 + 1.458308855152276e-06*u3;
-    J[53] = -tmp14 - tmp17 + 3.979754895162947e-07;
-    J[54] = 0;
-    J[55] = 0;
-    J[56] = 0;
-    J[57] = 0;
-    J[58] = 0;
-    J[59] = 0;
-    J[60] = 0;
-    J[61] = 0;
-    J[62] = 0;
-    J[63] = 0;
-    J[64] = 0;
-    J[65] = 0;
-    J[66] = 0;
-    J[67] = 0;
-    J[68] = 0;
-    J[69] = 0;
-    J[70] = 0;
-    J[71] = 0;
-    J[72] = 0;
-    J[73] = 0;
-    J[74] = 0;
-    J[75] = 0;
-    J[76] = 0;
+    J[34] = 0.000116013683567337 * u3 - 1.458308855152276e-06 * u1;
+    J[35] = 4.166596729006503e-09 - 0.000116013683567337 * u2 - 6.668975323431402e-07 * u1;
+    J[36] = 0.0;
+    J[37] = 0.0;
+    J[38] = 0.0;
+    J[39] = 5.424273135921467e-07 * w2 + 0.004549590061738773 * u2 + 9.951128625026586e-05 * w3 -
+            0.017856992801851313 * u1 - 0.14339795997248841 * u3;
+    J[40] = tmp13 + 0.004549590061738772 * u1 - tmp16 - 1.0747926685968213e-05 * u2 -
+            0.007565346160787671 * u3;
+    J[41] = 1.5497923245489903e-09 + 0.017867740728537283 * u3 - 0.1433979599724884 * u1 -
+            9.951128625026586e-05 * w1 - 6.668975323431402e-07 * w2 - 0.007565346160787671 * u2;
+    J[42] = -(5.424273135921467e-07 * u2) - 9.951128625026586e-05 * u3;
+    J[43] = tmp17 - tmp15;
+    J[44] = 9.951128625026586e-05 * u1 + 6.668975323431402e-07 * u2 - 1.5497923245489903e-09;
+    J[45] = 0.0;
+    J[46] = 0.0;
+    J[47] = 0.0;
+    J[48] = -(0.015861141468348716 * u1) - 5.424273135921467e-07 * w3 - 0.004502598724265401 * u3
+            - 0.19887734770270193 * u2 - 0.00013929142133070315 * w2;
+    J[49] = 0.015846423182838465 * u2 + 0.00013929142133070315 * w1 - 0.008325629202948576 * u3 -
+            1.458308855152276e-06 * w3 - 0.19887734770270185 * u1;
+    J[50] = tmp12 + tmp16 + 1.4718285510250293e-05 * u3 - 3.979754895162947e-07 -
+            0.008325629202948574 * u2 - 0.0045025987242654 * u1;
+    J[51] = 5.424273135921467e-07 * u3 + 0.00013929142133070315 * u2;
+    J[52] = 1.458308855152276e-06 * u3 - 0.00013929142133070315 * u1;
+    J[53] = 3.979754895162947e-07 - tmp14 - tmp17;
+    J[54] = 0.0;
+    J[55] = 0.0;
+    J[56] = 0.0;
+    J[57] = 0.0;
+    J[58] = 0.0;
+    J[59] = 0.0;
+    J[60] = 0.0;
+    J[61] = 0.0;
+    J[62] = 0.0;
+    J[63] = 0.0;
+    J[64] = 0.0;
+    J[65] = 0.0;
+    J[66] = 0.0;
+    J[67] = 0.0;
+    J[68] = 0.0;
+    J[69] = 0.0;
+    J[70] = 0.0;
+    J[71] = 0.0;
+    J[72] = 0.0;
+    J[73] = 0.0;
+    J[74] = 0.0;
+    J[75] = 0.0;
+    J[76] = 0.0;
     J[77] = 0.0028571428571428576;
-    J[78] = 0;
-    J[79] = 0;
+    J[78] = 0.0;
+    J[79] = 0.0;
     J[80] = -0.0028571428571428576;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(rw3_orthogonal_stats *stats, double t0)
@@ -922,7 +958,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[5] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 1]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 1])) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 1]) > fabs(ar[p
+                * RW3_ORTHOGONAL_NX + 1]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 1])) {
             p = i;
         }
     }
@@ -1024,7 +1061,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[23] = ur * ai[20] + ui * ar[20];
     p = 3;
     for (i = 4; i < 9; ++i) {
-        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 3]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 3])) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 3]) > fabs(ar[p
+                * RW3_ORTHOGONAL_NX + 3]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 3])) {
             p = i;
         }
     }
@@ -1104,7 +1142,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[35] = ur * ai[30] + ui * ar[30];
     p = 4;
     for (i = 5; i < 9; ++i) {
-        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 4]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 4])) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 4]) > fabs(ar[p
+                * RW3_ORTHOGONAL_NX + 4]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 4])) {
             p = i;
         }
     }
@@ -1176,7 +1215,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[44] = ur * ai[40] + ui * ar[40];
     p = 5;
     for (i = 6; i < 9; ++i) {
-        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 5]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 5])) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 5]) > fabs(ar[p
+                * RW3_ORTHOGONAL_NX + 5]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 5])) {
             p = i;
         }
     }
@@ -1240,7 +1280,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[53] = ur * ai[50] + ui * ar[50];
     p = 6;
     for (i = 7; i < 9; ++i) {
-        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 6]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 6])) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 6]) > fabs(ar[p
+                * RW3_ORTHOGONAL_NX + 6]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 6])) {
             p = i;
         }
     }
@@ -1296,7 +1337,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[62] = ur * ai[60] + ui * ar[60];
     p = 7;
     for (i = 8; i < 9; ++i) {
-        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 7]) > fabs(ar[p * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 7])) {
+        if (fabs(ar[i * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[i * RW3_ORTHOGONAL_NX + 7]) > fabs(ar[p
+                * RW3_ORTHOGONAL_NX + 7]) + fabs(ai[p * RW3_ORTHOGONAL_NX + 7])) {
             p = i;
         }
     }
@@ -3287,47 +3329,48 @@ struct RW3_ORTHOGONAL_ALIGNED lanes {
     int busy[RW3_ORTHOGONAL_LANES];
 };
 
-/* rw3_orthogonal_rhs_lanes on RW3_ORTHOGONAL_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *RW3_ORTHOGONAL_RESTRICT t,
                       double (*RW3_ORTHOGONAL_RESTRICT x)[RW3_ORTHOGONAL_LANES],
                       const double *RW3_ORTHOGONAL_RESTRICT c,
                       double (*RW3_ORTHOGONAL_RESTRICT dxdt)[RW3_ORTHOGONAL_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     RW3_ORTHOGONAL_SIMD
     for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[3][l];
-        const double u2 = x[4][l];
-        const double u3 = x[5][l];
-        const double w1 = x[6][l];
-        const double w2 = x[7][l];
-        const double w3 = x[8][l];
-
-        const double tmp0 = rw3_orthogonal_sin_lanes(q3);
-        const double tmp1 = rw3_orthogonal_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/rw3_orthogonal_cos_lanes(q2);
-        const double h1 = 301.7396875*u1 + 2.005*u2 - 3.15125*u3 + 0.035*w1;
-        const double h2 = 2.005*u1 + 351.7396875*u2 + 1.34875*u3 + 0.035*w2;
-        const double h3 = -3.15125*u1 + 1.34875*u2 + 251.31*u3 + 0.035*w3;
-        const double rel3 = -u3 + w3;
-        const double net3 = -0.0001*rel3;
-        const double f1 = h2*u3 - h3*u2 - 0.02;
-        const double f2 = c[1] - h1*u3 + h3*u1;
-        const double f3 = h1*u2 - h2*u1 - net3;
+        double q2, q3, u1, u2, u3, w1, w2, w3, tmp0, tmp1, tmp2, h1, h2, h3, rel3, net3, f1, f2, f3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        w1 = x[6][l];
+        w2 = x[7][l];
+        w3 = x[8][l];
+        tmp0 = rw3_orthogonal_sin_lanes(q3);
+        tmp1 = rw3_orthogonal_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / rw3_orthogonal_cos_lanes(q2);
+        h1 = 0.035 * w1 + 2.005 * u2 + 301.7396875 * u1 - 3.15125 * u3;
+        h2 = 0.035 * w2 + 1.34875 * u3 + 2.005 * u1 + 351.7396875 * u2;
+        h3 = 0.035 * w3 + 1.34875 * u2 + 251.31 * u3 - 3.15125 * u1;
+        rel3 = w3 - u3;
+        net3 = -(1e-4 * rel3);
+        f1 = h2 * u3 - 0.02 - h3 * u2;
+        f2 = c[1] + h3 * u1 - h1 * u3;
+        f3 = h1 * u2 - net3 - h2 * u1;
         dxdt[0][l] = tmp2;
-        dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*rw3_orthogonal_sin_lanes(q2) + u2;
-        dxdt[3][l] = 0.0033146766733524852*f1 - 1.9054215209804005e-05*f2 + 4.166596729006503e-05*f3;
-        dxdt[4][l] = -1.9054215209804005e-05*f1 + 0.0028431796071504527*f2 - 1.5497923245489903e-05*f3;
-        dxdt[5][l] = 4.166596729006503e-05*f1 - 1.5497923245489903e-05*f2 + 0.003979754895162947*f3;
+        dxdt[1][l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2][l] = u2 - tmp2 * rw3_orthogonal_sin_lanes(q2);
+        dxdt[3][l] = 4.166596729006503e-05 * f3 + 0.0033146766733524852 * f1 -
+                1.9054215209804005e-05 * f2;
+        dxdt[4][l] = 0.0028431796071504527 * f2 - 1.5497923245489903e-05 * f3 -
+                1.9054215209804005e-05 * f1;
+        dxdt[5][l] = 0.003979754895162947 * f3 + 4.166596729006503e-05 * f1 -
+                1.5497923245489903e-05 * f2;
         dxdt[6][l] = 0.5714285714285714;
         dxdt[7][l] = c[0];
-        dxdt[8][l] = 28.571428571428573*net3;
+        dxdt[8][l] = 28.571428571428573 * net3;
     }
 }
 

@@ -104,15 +104,16 @@ contains
   end function rw3_orthogonal_ode_strerror
 
 
-  ! d(dx/dt)/dx, row-major (138 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! J(i*nx + j + 1) = d f_(i+1) / d x_(j+1) in 1-based terms.
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (138 ops).
   subroutine rw3_orthogonal_jac(t, x, c, J) bind(C, name="rw3_orthogonal_f_jac")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(9)
-    real(c_double), intent(in) :: c(3)
-    real(c_double), intent(out) :: J(81)
+    real(c_double), intent(in) :: x(0:8)
+    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(out) :: J(0:80)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -140,148 +141,135 @@ contains
     real(c_double) :: tmp16
     real(c_double) :: tmp17
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
     tmp0 = rw3_orthogonal_sin(q2)
     tmp1 = rw3_orthogonal_cos(q2)
     tmp2 = rw3_orthogonal_sin(q3)
-    tmp3 = tmp2*u1
+    tmp3 = tmp2 * u1
     tmp4 = rw3_orthogonal_cos(q3)
-    tmp5 = tmp4*u3
-    tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/(tmp1*tmp1)
-    tmp8 = 1.0_c_double/tmp1
-    tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
-    tmp10 = tmp2*tmp8
-    tmp11 = tmp4*tmp8
-    tmp12 = 1.458308855152276e-06_c_double*w2
-    tmp13 = 6.668975323431402e-07_c_double*w3
-    tmp14 = 1.458308855152276e-06_c_double*u2
-    tmp15 = 6.668975323431402e-07_c_double*u3
-    tmp16 = 5.424273135921467e-07_c_double*w1
-    tmp17 = 5.424273135921467e-07_c_double*u1
-    J(1) = 0
-    J(2) = tmp0*tmp7
-    J(3) = tmp9
-    J(4) = -tmp10
-    J(5) = 0
-    J(6) = tmp11
-    J(7) = 0
-    J(8) = 0
-    J(9) = 0
-    J(10) = 0
-    J(11) = 0
-    J(12) = tmp6
-    J(13) = tmp4
-    J(14) = 0
-    J(15) = tmp2
-    J(16) = 0
-    J(17) = 0
-    J(18) = 0
-    J(19) = 0
-    J(20) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
-    J(21) = -tmp0*tmp9
-    J(22) = tmp0*tmp10
-    J(23) = 1
-    J(24) = -tmp0*tmp11
-    J(25) = 0
-    J(26) = 0
-    J(27) = 0
-    J(28) = 0
-    J(29) = 0
-    J(30) = 0
-    J(31) = -tmp12 - tmp13 - 4.699133747337101e-05_c_double*u1 + &
-          0.008336377129634543_c_double*u2 + 0.007550627875277421_c_double* &
-          u3
-    J(32) = 0.008336377129634545_c_double*u1 - 0.008774259797535168_c_double &
-          *u2 + 0.3327988462904027_c_double*u3 + &
-          1.458308855152276e-06_c_double*w1 - 0.000116013683567337_c_double &
-          *w3
-    J(33) = 0.007550627875277421_c_double*u1 + 0.3327988462904026_c_double* &
-          u2 + 0.00882125113500854_c_double*u3 + &
-          6.668975323431402e-07_c_double*w1 + 0.000116013683567337_c_double &
-          *w2 - 4.166596729006503e-09_c_double
-    J(34) = tmp14 + tmp15
-    J(35) = -1.458308855152276e-06_c_double*u1 + &
-          0.000116013683567337_c_double*u3
-    J(36) = -6.668975323431402e-07_c_double*u1 - &
-          0.000116013683567337_c_double*u2 + 4.166596729006503e-09_c_double
-    J(37) = 0
-    J(38) = 0
-    J(39) = 0
-    J(40) = -0.017856992801851313_c_double*u1 + &
-          0.004549590061738773_c_double*u2 - 0.14339795997248841_c_double* &
-          u3 + 5.424273135921467e-07_c_double*w2 + &
-          9.951128625026586e-05_c_double*w3
-    J(41) = tmp13 - tmp16 + 0.004549590061738772_c_double*u1 - &
-          1.0747926685968213e-05_c_double*u2 - &
-          0.007565346160787671_c_double*u3
-    J(42) = -0.1433979599724884_c_double*u1 - 0.007565346160787671_c_double* &
-          u2 + 0.017867740728537283_c_double*u3 - &
-          9.951128625026586e-05_c_double*w1 - &
-          6.668975323431402e-07_c_double*w2 + &
-          1.5497923245489903e-09_c_double
-    J(43) = -5.424273135921467e-07_c_double*u2 - &
-          9.951128625026586e-05_c_double*u3
-    J(44) = -tmp15 + tmp17
-    J(45) = 9.951128625026586e-05_c_double*u1 + &
-          6.668975323431402e-07_c_double*u2 - &
-          1.5497923245489903e-09_c_double
-    J(46) = 0
-    J(47) = 0
-    J(48) = 0
-    J(49) = -0.015861141468348716_c_double*u1 - 0.19887734770270193_c_double &
-          *u2 - 0.004502598724265401_c_double*u3 - &
-          0.00013929142133070315_c_double*w2 - &
-          5.424273135921467e-07_c_double*w3
-    J(50) = -0.19887734770270185_c_double*u1 + 0.015846423182838465_c_double &
-          *u2 - 0.008325629202948576_c_double*u3 + &
-          0.00013929142133070315_c_double*w1 - &
-          1.458308855152276e-06_c_double*w3
-    J(51) = tmp12 + tmp16 - 0.0045025987242654_c_double*u1 - &
-          0.008325629202948574_c_double*u2 + &
-          1.4718285510250293e-05_c_double*u3 - &
-          3.979754895162947e-07_c_double
-    J(52) = 0.00013929142133070315_c_double*u2 + &
-          5.424273135921467e-07_c_double*u3
-    J(53) = -0.00013929142133070315_c_double*u1 + &
-          1.458308855152276e-06_c_double*u3
-    J(54) = -tmp14 - tmp17 + 3.979754895162947e-07_c_double
-    J(55) = 0
-    J(56) = 0
-    J(57) = 0
-    J(58) = 0
-    J(59) = 0
-    J(60) = 0
-    J(61) = 0
-    J(62) = 0
-    J(63) = 0
-    J(64) = 0
-    J(65) = 0
-    J(66) = 0
-    J(67) = 0
-    J(68) = 0
-    J(69) = 0
-    J(70) = 0
-    J(71) = 0
-    J(72) = 0
-    J(73) = 0
-    J(74) = 0
-    J(75) = 0
-    J(76) = 0
-    J(77) = 0
-    J(78) = 0.0028571428571428576_c_double
-    J(79) = 0
-    J(80) = 0
-    J(81) = -0.0028571428571428576_c_double
+    tmp5 = tmp4 * u3
+    tmp6 = tmp5 - tmp3
+    tmp7 = tmp6 / (tmp1 * tmp1)
+    tmp8 = 1.0_c_double / tmp1
+    tmp9 = tmp8 * ((-tmp2 * u3) - tmp4 * u1)
+    tmp10 = tmp2 * tmp8
+    tmp11 = tmp4 * tmp8
+    tmp12 = 1.458308855152276e-06_c_double * w2
+    tmp13 = 6.668975323431402e-07_c_double * w3
+    tmp14 = 1.458308855152276e-06_c_double * u2
+    tmp15 = 6.668975323431402e-07_c_double * u3
+    tmp16 = 5.424273135921467e-07_c_double * w1
+    tmp17 = 5.424273135921467e-07_c_double * u1
+    J(0) = 0.0_c_double
+    J(1) = tmp0 * tmp7
+    J(2) = tmp9
+    J(3) = -tmp10
+    J(4) = 0.0_c_double
+    J(5) = tmp11
+    J(6) = 0.0_c_double
+    J(7) = 0.0_c_double
+    J(8) = 0.0_c_double
+    J(9) = 0.0_c_double
+    J(10) = 0.0_c_double
+    J(11) = tmp6
+    J(12) = tmp4
+    J(13) = 0.0_c_double
+    J(14) = tmp2
+    J(15) = 0.0_c_double
+    J(16) = 0.0_c_double
+    J(17) = 0.0_c_double
+    J(18) = 0.0_c_double
+    J(19) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
+    J(20) = -tmp0 * tmp9
+    J(21) = tmp0 * tmp10
+    J(22) = 1.0_c_double
+    J(23) = -tmp0 * tmp11
+    J(24) = 0.0_c_double
+    J(25) = 0.0_c_double
+    J(26) = 0.0_c_double
+    J(27) = 0.0_c_double
+    J(28) = 0.0_c_double
+    J(29) = 0.0_c_double
+    J(30) = (((0.007550627875277421_c_double * u3 + 0.008336377129634543_c_double * u2) - tmp12) &
+        - tmp13) - 4.699133747337101e-05_c_double * u1
+    J(31) = (((0.008336377129634545_c_double * u1 + 0.3327988462904027_c_double * u3) + &
+        1.458308855152276e-06_c_double * w1) - 0.000116013683567337_c_double * w3) - &
+        0.008774259797535168_c_double * u2
+    J(32) = ((((0.3327988462904026_c_double * u2 + 0.000116013683567337_c_double * w2) + &
+        0.007550627875277421_c_double * u1) + 0.00882125113500854_c_double * u3) + &
+        6.668975323431402e-07_c_double * w1) - 4.166596729006503e-09_c_double
+    J(33) = tmp14 + tmp15
+    J(34) = 0.000116013683567337_c_double * u3 - 1.458308855152276e-06_c_double * u1
+    J(35) = (4.166596729006503e-09_c_double - 0.000116013683567337_c_double * u2) - &
+        6.668975323431402e-07_c_double * u1
+    J(36) = 0.0_c_double
+    J(37) = 0.0_c_double
+    J(38) = 0.0_c_double
+    J(39) = (((5.424273135921467e-07_c_double * w2 + 0.004549590061738773_c_double * u2) + &
+        9.951128625026586e-05_c_double * w3) - 0.017856992801851313_c_double * u1) - &
+        0.14339795997248841_c_double * u3
+    J(40) = (((tmp13 + 0.004549590061738772_c_double * u1) - tmp16) - &
+        1.0747926685968213e-05_c_double * u2) - 0.007565346160787671_c_double * u3
+    J(41) = ((((1.5497923245489903e-09_c_double + 0.017867740728537283_c_double * u3) - &
+        0.1433979599724884_c_double * u1) - 9.951128625026586e-05_c_double * w1) - &
+        6.668975323431402e-07_c_double * w2) - 0.007565346160787671_c_double * u2
+    J(42) = (-5.424273135921467e-07_c_double * u2) - 9.951128625026586e-05_c_double * u3
+    J(43) = tmp17 - tmp15
+    J(44) = (9.951128625026586e-05_c_double * u1 + 6.668975323431402e-07_c_double * u2) - &
+        1.5497923245489903e-09_c_double
+    J(45) = 0.0_c_double
+    J(46) = 0.0_c_double
+    J(47) = 0.0_c_double
+    J(48) = ((((-0.015861141468348716_c_double * u1) - 5.424273135921467e-07_c_double * w3) - &
+        0.004502598724265401_c_double * u3) - 0.19887734770270193_c_double * u2) - &
+        0.00013929142133070315_c_double * w2
+    J(49) = (((0.015846423182838465_c_double * u2 + 0.00013929142133070315_c_double * w1) - &
+        0.008325629202948576_c_double * u3) - 1.458308855152276e-06_c_double * w3) - &
+        0.19887734770270185_c_double * u1
+    J(50) = ((((tmp12 + tmp16) + 1.4718285510250293e-05_c_double * u3) - &
+        3.979754895162947e-07_c_double) - 0.008325629202948574_c_double * u2) - &
+        0.0045025987242654_c_double * u1
+    J(51) = 5.424273135921467e-07_c_double * u3 + 0.00013929142133070315_c_double * u2
+    J(52) = 1.458308855152276e-06_c_double * u3 - 0.00013929142133070315_c_double * u1
+    J(53) = (3.979754895162947e-07_c_double - tmp14) - tmp17
+    J(54) = 0.0_c_double
+    J(55) = 0.0_c_double
+    J(56) = 0.0_c_double
+    J(57) = 0.0_c_double
+    J(58) = 0.0_c_double
+    J(59) = 0.0_c_double
+    J(60) = 0.0_c_double
+    J(61) = 0.0_c_double
+    J(62) = 0.0_c_double
+    J(63) = 0.0_c_double
+    J(64) = 0.0_c_double
+    J(65) = 0.0_c_double
+    J(66) = 0.0_c_double
+    J(67) = 0.0_c_double
+    J(68) = 0.0_c_double
+    J(69) = 0.0_c_double
+    J(70) = 0.0_c_double
+    J(71) = 0.0_c_double
+    J(72) = 0.0_c_double
+    J(73) = 0.0_c_double
+    J(74) = 0.0_c_double
+    J(75) = 0.0_c_double
+    J(76) = 0.0_c_double
+    J(77) = 0.0028571428571428576_c_double
+    J(78) = 0.0_c_double
+    J(79) = 0.0_c_double
+    J(80) = -0.0028571428571428576_c_double
   end subroutine rw3_orthogonal_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -936,7 +924,8 @@ contains
     ai(5) = ur * ai(0) + ui * ar(0)
     p = 1
     do i = 2, 3 - 1
-      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) &
+          then
         p = i
       end if
     end do
@@ -1040,7 +1029,8 @@ contains
     ai(23) = ur * ai(20) + ui * ar(20)
     p = 3
     do i = 4, 9 - 1
-      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) &
+          then
         p = i
       end if
     end do
@@ -1121,7 +1111,8 @@ contains
     ai(35) = ur * ai(30) + ui * ar(30)
     p = 4
     do i = 5, 9 - 1
-      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) &
+          then
         p = i
       end if
     end do
@@ -1194,7 +1185,8 @@ contains
     ai(44) = ur * ai(40) + ui * ar(40)
     p = 5
     do i = 6, 9 - 1
-      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) &
+          then
         p = i
       end if
     end do
@@ -1259,7 +1251,8 @@ contains
     ai(53) = ur * ai(50) + ui * ar(50)
     p = 6
     do i = 7, 9 - 1
-      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) &
+          then
         p = i
       end if
     end do
@@ -1316,7 +1309,8 @@ contains
     ai(62) = ur * ai(60) + ui * ar(60)
     p = 7
     do i = 8, 9 - 1
-      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) &
+          then
         p = i
       end if
     end do
@@ -1522,7 +1516,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: k(0:nx - 1, 0:3)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1534,7 +1528,8 @@ contains
 
     comp = 0.0_c_double
     call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < &
+        1) then
       res = RW3_ORTHOGONAL_ODE_ERR_ARGUMENT
       return
     end if
@@ -1626,7 +1621,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1817,7 +1812,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2082,7 +2077,7 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: comp(0:nx - 1)
-    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
     real(c_double), intent(inout) :: dx(0:nx - 1)
     real(c_double), intent(inout) :: xnew(0:nx - 1)
     real(c_double) :: res
@@ -2188,7 +2183,7 @@ contains
     integer(c_int) :: res
     real(c_double) :: J(0:nx * nx - 1)
     real(c_double) :: lu(0:nx * nx - 1)
-    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: fnew(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
@@ -2850,7 +2845,8 @@ contains
           h = t1 - t
           last = .true.
         else
-          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
             cycle
           else
             h = h_new
@@ -2892,8 +2888,8 @@ contains
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
-    real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:20 - 1, 0:21 - 1)
+    real(c_double), intent(in) :: inv(0:20)
+    real(c_double), intent(inout) :: tay(0:19, 0:20)
     real(c_double) :: acc9
     real(c_double) :: acc10
     real(c_double) :: acc11
@@ -3266,7 +3262,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:20 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:19, 0:20)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

@@ -15,6 +15,7 @@
  */
 #include "rw4_hardware.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -34,6 +35,21 @@
 #else
 #define RW4_HARDWARE_ALIGNED
 #endif
+
+
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
+
+/* fmin, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmin(double a, double b)
+{
+    return a < b || b != b ? a : b;
+}
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -184,278 +200,6 @@ static inline double rw4_hardware_cos_lanes(double x)
 }
 
 
-/* 403 ops, plus the checks. */
-int rw4_hardware_setup(const double *p, double *c)
-{
-    int i;
-    for (i = 0; i < RW4_HARDWARE_NP; ++i) {
-        if (!isfinite(p[i])) {
-            return RW4_HARDWARE_ERR_NONFINITE;
-        }
-    }
-    const double m_a = p[0];
-    const double I11 = p[1];
-    const double I22 = p[2];
-    const double I33 = p[3];
-    const double I12 = p[4];
-    const double I13 = p[5];
-    const double I23 = p[6];
-    const double m_1 = p[7];
-    const double I_1 = p[8];
-    const double J_1 = p[9];
-    const double r1_1 = p[10];
-    const double r2_1 = p[11];
-    const double r3_1 = p[12];
-    const double g1_1 = p[13];
-    const double g2_1 = p[14];
-    const double g3_1 = p[15];
-    const double m_2 = p[17];
-    const double I_2 = p[18];
-    const double J_2 = p[19];
-    const double r1_2 = p[20];
-    const double r2_2 = p[21];
-    const double r3_2 = p[22];
-    const double g1_2 = p[23];
-    const double g2_2 = p[24];
-    const double g3_2 = p[25];
-    const double m_3 = p[27];
-    const double I_3 = p[28];
-    const double J_3 = p[29];
-    const double r1_3 = p[30];
-    const double r2_3 = p[31];
-    const double r3_3 = p[32];
-    const double g1_3 = p[33];
-    const double g2_3 = p[34];
-    const double g3_3 = p[35];
-    const double m_4 = p[37];
-    const double I_4 = p[38];
-    const double J_4 = p[39];
-    const double r1_4 = p[40];
-    const double r2_4 = p[41];
-    const double r3_4 = p[42];
-    const double g1_4 = p[43];
-    const double g2_4 = p[44];
-    const double g3_4 = p[45];
-    const double w_ref_1 = p[16];
-    const double w_ref_2 = p[26];
-    const double w_ref_3 = p[36];
-    const double w_ref_4 = p[46];
-
-    if (!(m_a > 0.0) || !(m_1 > 0.0) || !(m_2 > 0.0) || !(m_3 > 0.0) || !(m_4 > 0.0)) {
-        return RW4_HARDWARE_ERR_MASS;
-    }
-    if (!(I_1 > 0.0) || !(J_1 > 0.0) || !(I_2 > 0.0) || !(J_2 > 0.0) || !(I_3 > 0.0) || !(J_3 > 0.0) || !(I_4 > 0.0) || !(J_4 > 0.0)) {
-        return RW4_HARDWARE_ERR_ROTOR_INERTIA;
-    }
-    /* Sylvester: the carrier's leading minors. */
-    const double pd2 = I11*I22 - I12*I12;
-    const double pd_m1 = I22*I33 - I23*I23;
-    const double pd_m2 = I12*I33 - I13*I23;
-    const double pd_m3 = I12*I23 - I22*I13;
-    const double pd3 = I11*pd_m1 - I12*pd_m2 + I13*pd_m3;
-    if (!(I11 > 0.0) || !(pd2 > 0.0) || !(pd3 > 0.0)) {
-        return RW4_HARDWARE_ERR_CARRIER_NOT_PD;
-    }
-    /* The largest principal moment is at most half the trace (with
-       slack): s 1 - T positive definite, s = (1/2 + slack) tr T. */
-    const double half_trace = 0.500000000001*(I11 + I22 + I33);
-    const double s11 = half_trace - I11;
-    const double s22 = half_trace - I22;
-    const double s33 = half_trace - I33;
-    const double tri2 = s11*s22 - I12*I12;
-    const double tri_m1 = s22*s33 - I23*I23;
-    const double tri_m2 = I12*s33 + I13*I23;
-    const double tri_m3 = I12*I23 + s22*I13;
-    const double tri3 = s11*tri_m1 - I12*tri_m2 - I13*tri_m3;
-    if (!(s11 > 0.0) || !(tri2 > 0.0) || !(tri3 > 0.0)) {
-        return RW4_HARDWARE_ERR_CARRIER_TRIANGLE;
-    }
-    if (J_1 - 2.0*I_1 > 1e-12*(2.0*I_1 + J_1)) {
-        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
-    }
-    if (J_2 - 2.0*I_2 > 1e-12*(2.0*I_2 + J_2)) {
-        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
-    }
-    if (J_3 - 2.0*I_3 > 1e-12*(2.0*I_3 + J_3)) {
-        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
-    }
-    if (J_4 - 2.0*I_4 > 1e-12*(2.0*I_4 + J_4)) {
-        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
-    }
-    /* Rotor 1's axis: of unit length within the slack. */
-    const double norm_1 = sqrt(g1_1*g1_1 + g2_1*g2_1 + g3_1*g3_1);
-    if (!(fmax(norm_1 - 1.0, 1.0 - norm_1) <= 0.001)) {
-        return RW4_HARDWARE_ERR_AXIS;
-    }
-    /* Rotor 2's axis: of unit length within the slack. */
-    const double norm_2 = sqrt(g1_2*g1_2 + g2_2*g2_2 + g3_2*g3_2);
-    if (!(fmax(norm_2 - 1.0, 1.0 - norm_2) <= 0.001)) {
-        return RW4_HARDWARE_ERR_AXIS;
-    }
-    /* Rotor 3's axis: of unit length within the slack. */
-    const double norm_3 = sqrt(g1_3*g1_3 + g2_3*g2_3 + g3_3*g3_3);
-    if (!(fmax(norm_3 - 1.0, 1.0 - norm_3) <= 0.001)) {
-        return RW4_HARDWARE_ERR_AXIS;
-    }
-    /* Rotor 4's axis: of unit length within the slack. */
-    const double norm_4 = sqrt(g1_4*g1_4 + g2_4*g2_4 + g3_4*g3_4);
-    if (!(fmax(norm_4 - 1.0, 1.0 - norm_4) <= 0.001)) {
-        return RW4_HARDWARE_ERR_AXIS;
-    }
-
-    const double tmp0 = pow(g1_1*g1_1 + g2_1*g2_1 + g3_1*g3_1, -1.0/2.0);
-    const double tmp1 = pow(g1_2*g1_2 + g2_2*g2_2 + g3_2*g3_2, -1.0/2.0);
-    const double tmp2 = pow(g1_3*g1_3 + g2_3*g2_3 + g3_3*g3_3, -1.0/2.0);
-    const double tmp3 = pow(g1_4*g1_4 + g2_4*g2_4 + g3_4*g3_4, -1.0/2.0);
-    const double tmp4 = m_1 + m_2 + m_3 + m_4 + m_a;
-    const double tmp5 = 1.0/(tmp4*tmp4);
-    const double tmp6 = m_1*r2_1 + m_2*r2_2 + m_3*r2_3 + m_4*r2_4;
-    const double tmp7 = tmp5*tmp6*tmp6;
-    const double tmp8 = m_1*r3_1 + m_2*r3_2 + m_3*r3_3 + m_4*r3_4;
-    const double tmp9 = tmp5*tmp8*tmp8;
-    const double tmp10 = 1.0/tmp4;
-    const double tmp11 = -tmp10*tmp6;
-    const double tmp12 = r2_1 + tmp11;
-    const double tmp13 = tmp12*tmp12;
-    const double tmp14 = -tmp10*tmp8;
-    const double tmp15 = r3_1 + tmp14;
-    const double tmp16 = tmp15*tmp15;
-    const double tmp17 = r2_2 + tmp11;
-    const double tmp18 = tmp17*tmp17;
-    const double tmp19 = r3_2 + tmp14;
-    const double tmp20 = tmp19*tmp19;
-    const double tmp21 = r2_3 + tmp11;
-    const double tmp22 = tmp21*tmp21;
-    const double tmp23 = r3_3 + tmp14;
-    const double tmp24 = tmp23*tmp23;
-    const double tmp25 = r2_4 + tmp11;
-    const double tmp26 = tmp25*tmp25;
-    const double tmp27 = r3_4 + tmp14;
-    const double tmp28 = tmp27*tmp27;
-    const double tmp29 = m_1*r1_1 + m_2*r1_2 + m_3*r1_3 + m_4*r1_4;
-    const double tmp30 = tmp29*tmp29*tmp5;
-    const double tmp31 = -tmp10*tmp29;
-    const double tmp32 = r1_1 + tmp31;
-    const double tmp33 = tmp32*tmp32;
-    const double tmp34 = r1_2 + tmp31;
-    const double tmp35 = tmp34*tmp34;
-    const double tmp36 = r1_3 + tmp31;
-    const double tmp37 = tmp36*tmp36;
-    const double tmp38 = r1_4 + tmp31;
-    const double tmp39 = tmp38*tmp38;
-    const double tmp44 = m_a*tmp29*tmp5;
-    const double tmp45 = m_1*tmp32;
-    const double tmp46 = m_2*tmp34;
-    const double tmp47 = m_3*tmp36;
-    const double tmp48 = m_4*tmp38;
-    const double gn1_1 = g1_1*tmp0;
-    const double tmp40 = I_1*gn1_1;
-    const double gn2_1 = g2_1*tmp0;
-    const double gn3_1 = g3_1*tmp0;
-    const double gn1_2 = g1_2*tmp1;
-    const double tmp41 = I_2*gn1_2;
-    const double gn2_2 = g2_2*tmp1;
-    const double gn3_2 = g3_2*tmp1;
-    const double gn1_3 = g1_3*tmp2;
-    const double tmp42 = I_3*gn1_3;
-    const double gn2_3 = g2_3*tmp2;
-    const double gn3_3 = g3_3*tmp2;
-    const double gn1_4 = g1_4*tmp3;
-    const double tmp43 = I_4*gn1_4;
-    const double gn2_4 = g2_4*tmp3;
-    const double gn3_4 = g3_4*tmp3;
-    const double IC11 = I11 + I_1*(1 - gn1_1*gn1_1) + I_2*(1 - gn1_2*gn1_2) + I_3*(1 - gn1_3*gn1_3) + I_4*(1 - gn1_4*gn1_4) + m_1*(tmp13 + tmp16) + m_2*(tmp18 + tmp20) + m_3*(tmp22 + tmp24) + m_4*(tmp26 + tmp28) + m_a*(tmp7 + tmp9);
-    const double IC22 = I22 + I_1*(1 - gn2_1*gn2_1) + I_2*(1 - gn2_2*gn2_2) + I_3*(1 - gn2_3*gn2_3) + I_4*(1 - gn2_4*gn2_4) + m_1*(tmp16 + tmp33) + m_2*(tmp20 + tmp35) + m_3*(tmp24 + tmp37) + m_4*(tmp28 + tmp39) + m_a*(tmp30 + tmp9);
-    const double IC33 = I33 + I_1*(1 - gn3_1*gn3_1) + I_2*(1 - gn3_2*gn3_2) + I_3*(1 - gn3_3*gn3_3) + I_4*(1 - gn3_4*gn3_4) + m_1*(tmp13 + tmp33) + m_2*(tmp18 + tmp35) + m_3*(tmp22 + tmp37) + m_4*(tmp26 + tmp39) + m_a*(tmp30 + tmp7);
-    const double IC12 = I12 - gn2_1*tmp40 - gn2_2*tmp41 - gn2_3*tmp42 - gn2_4*tmp43 - tmp12*tmp45 - tmp17*tmp46 - tmp21*tmp47 - tmp25*tmp48 - tmp44*tmp6;
-    const double IC13 = I13 - gn3_1*tmp40 - gn3_2*tmp41 - gn3_3*tmp42 - gn3_4*tmp43 - tmp15*tmp45 - tmp19*tmp46 - tmp23*tmp47 - tmp27*tmp48 - tmp44*tmp8;
-    const double IC23 = I23 - I_1*gn2_1*gn3_1 - I_2*gn2_2*gn3_2 - I_3*gn2_3*gn3_3 - I_4*gn2_4*gn3_4 - m_1*tmp12*tmp15 - m_2*tmp17*tmp19 - m_3*tmp21*tmp23 - m_4*tmp25*tmp27 - m_a*tmp5*tmp6*tmp8;
-    const double tmp49 = IC23*IC23;
-    const double tmp50 = IC22*IC33 - tmp49;
-    const double tmp51 = IC12*IC12;
-    const double tmp52 = IC13*IC13;
-    const double tmp53 = 1.0/(IC11*IC22*IC33 - IC11*tmp49 + 2*IC12*IC13*IC23 - IC22*tmp52 - IC33*tmp51);
-    const double tmp54 = IC12*IC33 - IC13*IC23;
-    const double tmp55 = IC12*IC23 - IC13*IC22;
-    const double tmp56 = IC11*IC33 - tmp52;
-    const double tmp57 = IC11*IC23 - IC12*IC13;
-    const double tmp58 = IC11*IC22 - tmp51;
-    const double tmp59 = -tmp54;
-    c[0] = tmp50*tmp53;
-    c[1] = -tmp53*tmp54;
-    c[2] = tmp53*tmp55;
-    c[3] = tmp53*tmp56;
-    c[4] = -tmp53*tmp57;
-    c[5] = tmp53*tmp58;
-    c[6] = 1.0/J_1;
-    c[7] = 1.0/J_2;
-    c[8] = 1.0/J_3;
-    c[9] = 1.0/J_4;
-    c[10] = IC11;
-    c[11] = IC12;
-    c[12] = IC13;
-    c[13] = J_1*gn1_1;
-    c[14] = J_2*gn1_2;
-    c[15] = J_3*gn1_3;
-    c[16] = J_4*gn1_4;
-    c[17] = IC22;
-    c[18] = IC23;
-    c[19] = J_1*gn2_1;
-    c[20] = J_2*gn2_2;
-    c[21] = J_3*gn2_3;
-    c[22] = J_4*gn2_4;
-    c[23] = IC33;
-    c[24] = J_1*gn3_1;
-    c[25] = J_2*gn3_2;
-    c[26] = J_3*gn3_3;
-    c[27] = J_4*gn3_4;
-    c[28] = -gn1_1;
-    c[29] = -gn2_1;
-    c[30] = -gn3_1;
-    c[31] = (1.0/20.0)*w_ref_1;
-    c[32] = -gn1_2;
-    c[33] = -gn2_2;
-    c[34] = -gn3_2;
-    c[35] = (1.0/20.0)*w_ref_2;
-    c[36] = -gn1_3;
-    c[37] = -gn2_3;
-    c[38] = -gn3_3;
-    c[39] = (1.0/20.0)*w_ref_3;
-    c[40] = -gn1_4;
-    c[41] = -gn2_4;
-    c[42] = -gn3_4;
-    c[43] = (1.0/20.0)*w_ref_4;
-    c[44] = (1.0/2.0)*IC11;
-    c[45] = (1.0/2.0)*IC22;
-    c[46] = (1.0/2.0)*IC33;
-    c[47] = (1.0/2.0)*J_1;
-    c[48] = (1.0/2.0)*J_2;
-    c[49] = (1.0/2.0)*J_3;
-    c[50] = (1.0/2.0)*J_4;
-    c[51] = (1.0/20.0)*gn1_1;
-    c[52] = (1.0/20.0)*gn2_1;
-    c[53] = (1.0/20.0)*gn3_1;
-    c[54] = (1.0/20.0)*gn1_2;
-    c[55] = (1.0/20.0)*gn2_2;
-    c[56] = (1.0/20.0)*gn3_2;
-    c[57] = (1.0/20.0)*gn1_3;
-    c[58] = (1.0/20.0)*gn2_3;
-    c[59] = (1.0/20.0)*gn3_3;
-    c[60] = (1.0/20.0)*gn1_4;
-    c[61] = (1.0/20.0)*gn2_4;
-    c[62] = (1.0/20.0)*gn3_4;
-    c[63] = sqrt(IC11*IC11 + IC22*IC22 + IC33*IC33 + 2*tmp49 + 2*tmp51 + 2*tmp52)*sqrt(tmp50*tmp50 + 2*tmp55*tmp55 + tmp56*tmp56 + 2*tmp57*tmp57 + tmp58*tmp58 + 2*tmp59*tmp59)/fabs(IC11*tmp50 + IC12*tmp59 + IC13*tmp55);
-    if (!(c[RW4_HARDWARE_COND] <= 10000000000000.0)) {
-        return RW4_HARDWARE_ERR_MASS_SINGULAR;
-    }
-    for (i = 0; i < RW4_HARDWARE_NC; ++i) {
-        if (!isfinite(c[i])) {
-            return RW4_HARDWARE_ERR_OVERFLOW;  /* valid parameters whose products overflow */
-        }
-    }
-    return RW4_HARDWARE_OK;
-}
-
 const char *rw4_hardware_strerror(int code)
 {
     switch (code) {
@@ -484,165 +228,677 @@ const char *rw4_hardware_strerror(int code)
     }
 }
 
-/* 152 ops per call. */
-void rw4_hardware_rhs(double t, const double *x, const double *c, double *dxdt)
+/* Checks p and computes the constants c that rw4_hardware_rhs needs (403 ops,
+   plus the checks). Returns RW4_HARDWARE_OK or the first failing check's code;
+   c is then not to be used. */
+int rw4_hardware_setup(const double *p, double *c)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double m_a;
+    double I11;
+    double I22;
+    double I33;
+    double I12;
+    double I13;
+    double I23;
+    double m_1;
+    double I_1;
+    double J_1;
+    double r1_1;
+    double r2_1;
+    double r3_1;
+    double g1_1;
+    double g2_1;
+    double g3_1;
+    double m_2;
+    double I_2;
+    double J_2;
+    double r1_2;
+    double r2_2;
+    double r3_2;
+    double g1_2;
+    double g2_2;
+    double g3_2;
+    double m_3;
+    double I_3;
+    double J_3;
+    double r1_3;
+    double r2_3;
+    double r3_3;
+    double g1_3;
+    double g2_3;
+    double g3_3;
+    double m_4;
+    double I_4;
+    double J_4;
+    double r1_4;
+    double r2_4;
+    double r3_4;
+    double g1_4;
+    double g2_4;
+    double g3_4;
+    double w_ref_1;
+    double w_ref_2;
+    double w_ref_3;
+    double w_ref_4;
+    double pd2;
+    double pd_m1;
+    double pd_m2;
+    double pd_m3;
+    double pd3;
+    double half_trace;
+    double s11;
+    double s22;
+    double s33;
+    double tri2;
+    double tri_m1;
+    double tri_m2;
+    double tri_m3;
+    double tri3;
+    double norm_1;
+    double norm_2;
+    double norm_3;
+    double norm_4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
+    double tmp13;
+    double tmp14;
+    double tmp15;
+    double tmp16;
+    double tmp17;
+    double tmp18;
+    double tmp19;
+    double tmp20;
+    double tmp21;
+    double tmp22;
+    double tmp23;
+    double tmp24;
+    double tmp25;
+    double tmp26;
+    double tmp27;
+    double tmp28;
+    double tmp29;
+    double tmp30;
+    double tmp31;
+    double tmp32;
+    double tmp33;
+    double tmp34;
+    double tmp35;
+    double tmp36;
+    double tmp37;
+    double tmp38;
+    double tmp39;
+    double tmp44;
+    double tmp45;
+    double tmp46;
+    double tmp47;
+    double tmp48;
+    double gn1_1;
+    double tmp40;
+    double gn2_1;
+    double gn3_1;
+    double gn1_2;
+    double tmp41;
+    double gn2_2;
+    double gn3_2;
+    double gn1_3;
+    double tmp42;
+    double gn2_3;
+    double gn3_3;
+    double gn1_4;
+    double tmp43;
+    double gn2_4;
+    double gn3_4;
+    double IC11;
+    double IC22;
+    double IC33;
+    double IC12;
+    double IC13;
+    double IC23;
+    double tmp49;
+    double tmp50;
+    double tmp51;
+    double tmp52;
+    double tmp53;
+    double tmp54;
+    double tmp55;
+    double tmp56;
+    double tmp57;
+    double tmp58;
+    double tmp59;
+    int i_;
 
-    const double tmp0 = rw4_hardware_sin(q3);
-    const double tmp1 = rw4_hardware_cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/rw4_hardware_cos(q2);
-    const double h1 = c[10]*u1 + c[11]*u2 + c[12]*u3 + c[13]*w1 + c[14]*w2 + c[15]*w3 + c[16]*w4;
-    const double h2 = c[11]*u1 + c[17]*u2 + c[18]*u3 + c[19]*w1 + c[20]*w2 + c[21]*w3 + c[22]*w4;
-    const double h3 = c[12]*u1 + c[18]*u2 + c[23]*u3 + c[24]*w1 + c[25]*w2 + c[26]*w3 + c[27]*w4;
-    const double rel1 = c[28]*u1 + c[29]*u2 + c[30]*u3 + w1;
-    const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[31] - 0.05*rel1));
-    const double rel2 = c[32]*u1 + c[33]*u2 + c[34]*u3 + w2;
-    const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[35] - 0.05*rel2));
-    const double rel3 = c[36]*u1 + c[37]*u2 + c[38]*u3 + w3;
-    const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[39] - 0.05*rel3));
-    const double rel4 = c[40]*u1 + c[41]*u2 + c[42]*u3 + w4;
-    const double net4 = -2e-05*rel4 + fmin(0.2, fmax(-0.2, c[43] - 0.05*rel4));
-    const double f1 = c[28]*net1 + c[32]*net2 + c[36]*net3 + c[40]*net4 + h2*u3 - h3*u2;
-    const double f2 = c[29]*net1 + c[33]*net2 + c[37]*net3 + c[41]*net4 - h1*u3 + h3*u1;
-    const double f3 = c[30]*net1 + c[34]*net2 + c[38]*net3 + c[42]*net4 + h1*u2 - h2*u1;
-    dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*rw4_hardware_sin(q2) + u2;
-    dxdt[3] = c[0]*f1 + c[1]*f2 + c[2]*f3;
-    dxdt[4] = c[1]*f1 + c[3]*f2 + c[4]*f3;
-    dxdt[5] = c[2]*f1 + c[4]*f2 + c[5]*f3;
-    dxdt[6] = c[6]*net1;
-    dxdt[7] = c[7]*net2;
-    dxdt[8] = c[8]*net3;
-    dxdt[9] = c[9]*net4;
+    for (i_ = 0; i_ < 64; ++i_) {
+        c[i_] = 0.0;
+    }
+    for (i_ = 0; i_ < 47; ++i_) {
+        if (!(fabs(p[i_]) <= DBL_MAX)) {
+            return RW4_HARDWARE_ERR_NONFINITE;
+        }
+    }
+    m_a = p[0];
+    I11 = p[1];
+    I22 = p[2];
+    I33 = p[3];
+    I12 = p[4];
+    I13 = p[5];
+    I23 = p[6];
+    m_1 = p[7];
+    I_1 = p[8];
+    J_1 = p[9];
+    r1_1 = p[10];
+    r2_1 = p[11];
+    r3_1 = p[12];
+    g1_1 = p[13];
+    g2_1 = p[14];
+    g3_1 = p[15];
+    m_2 = p[17];
+    I_2 = p[18];
+    J_2 = p[19];
+    r1_2 = p[20];
+    r2_2 = p[21];
+    r3_2 = p[22];
+    g1_2 = p[23];
+    g2_2 = p[24];
+    g3_2 = p[25];
+    m_3 = p[27];
+    I_3 = p[28];
+    J_3 = p[29];
+    r1_3 = p[30];
+    r2_3 = p[31];
+    r3_3 = p[32];
+    g1_3 = p[33];
+    g2_3 = p[34];
+    g3_3 = p[35];
+    m_4 = p[37];
+    I_4 = p[38];
+    J_4 = p[39];
+    r1_4 = p[40];
+    r2_4 = p[41];
+    r3_4 = p[42];
+    g1_4 = p[43];
+    g2_4 = p[44];
+    g3_4 = p[45];
+    w_ref_1 = p[16];
+    w_ref_2 = p[26];
+    w_ref_3 = p[36];
+    w_ref_4 = p[46];
+    if (!(m_a > 0.0) || !(m_1 > 0.0) || !(m_2 > 0.0) || !(m_3 > 0.0) || !(m_4 > 0.0)) {
+        return RW4_HARDWARE_ERR_MASS;
+    }
+    if (!(I_1 > 0.0) || !(J_1 > 0.0) || !(I_2 > 0.0) || !(J_2 > 0.0) || !(I_3 > 0.0) || !(J_3 >
+            0.0) || !(I_4 > 0.0) || !(J_4 > 0.0)) {
+        return RW4_HARDWARE_ERR_ROTOR_INERTIA;
+    }
+
+    /* Sylvester: the carrier's leading minors. */
+    pd2 = I11 * I22 - I12 * I12;
+    pd_m1 = I22 * I33 - I23 * I23;
+    pd_m2 = I12 * I33 - I13 * I23;
+    pd_m3 = I12 * I23 - I22 * I13;
+    pd3 = I11 * pd_m1 - I12 * pd_m2 + I13 * pd_m3;
+    if (!(I11 > 0.0) || !(pd2 > 0.0) || !(pd3 > 0.0)) {
+        return RW4_HARDWARE_ERR_CARRIER_NOT_PD;
+    }
+
+    /* The largest principal moment is at most half the trace (with */
+    /* slack): s 1 - T positive definite, s = (1/2 + slack) tr T. */
+    half_trace = 0.500000000001 * (I11 + I22 + I33);
+    s11 = half_trace - I11;
+    s22 = half_trace - I22;
+    s33 = half_trace - I33;
+    tri2 = s11 * s22 - I12 * I12;
+    tri_m1 = s22 * s33 - I23 * I23;
+    tri_m2 = I12 * s33 + I13 * I23;
+    tri_m3 = I12 * I23 + s22 * I13;
+    tri3 = s11 * tri_m1 - I12 * tri_m2 - I13 * tri_m3;
+    if (!(s11 > 0.0) || !(tri2 > 0.0) || !(tri3 > 0.0)) {
+        return RW4_HARDWARE_ERR_CARRIER_TRIANGLE;
+    }
+    if (J_1 - 2.0 * I_1 > 1e-12 * (2.0 * I_1 + J_1)) {
+        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
+    }
+    if (J_2 - 2.0 * I_2 > 1e-12 * (2.0 * I_2 + J_2)) {
+        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
+    }
+    if (J_3 - 2.0 * I_3 > 1e-12 * (2.0 * I_3 + J_3)) {
+        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
+    }
+    if (J_4 - 2.0 * I_4 > 1e-12 * (2.0 * I_4 + J_4)) {
+        return RW4_HARDWARE_ERR_ROTOR_TRIANGLE;
+    }
+
+    /* Rotor 1's axis: of unit length within the slack. */
+    norm_1 = sqrt(g1_1 * g1_1 + g2_1 * g2_1 + g3_1 * g3_1);
+    if (!(dmax(norm_1 - 1.0, 1.0 - norm_1) <= 1e-3)) {
+        return RW4_HARDWARE_ERR_AXIS;
+    }
+
+    /* Rotor 2's axis: of unit length within the slack. */
+    norm_2 = sqrt(g1_2 * g1_2 + g2_2 * g2_2 + g3_2 * g3_2);
+    if (!(dmax(norm_2 - 1.0, 1.0 - norm_2) <= 1e-3)) {
+        return RW4_HARDWARE_ERR_AXIS;
+    }
+
+    /* Rotor 3's axis: of unit length within the slack. */
+    norm_3 = sqrt(g1_3 * g1_3 + g2_3 * g2_3 + g3_3 * g3_3);
+    if (!(dmax(norm_3 - 1.0, 1.0 - norm_3) <= 1e-3)) {
+        return RW4_HARDWARE_ERR_AXIS;
+    }
+
+    /* Rotor 4's axis: of unit length within the slack. */
+    norm_4 = sqrt(g1_4 * g1_4 + g2_4 * g2_4 + g3_4 * g3_4);
+    if (!(dmax(norm_4 - 1.0, 1.0 - norm_4) <= 1e-3)) {
+        return RW4_HARDWARE_ERR_AXIS;
+    }
+    tmp0 = 1.0 / sqrt(g1_1 * g1_1 + g2_1 * g2_1 + g3_1 * g3_1);
+    tmp1 = 1.0 / sqrt(g1_2 * g1_2 + g2_2 * g2_2 + g3_2 * g3_2);
+    tmp2 = 1.0 / sqrt(g1_3 * g1_3 + g2_3 * g2_3 + g3_3 * g3_3);
+    tmp3 = 1.0 / sqrt(g1_4 * g1_4 + g2_4 * g2_4 + g3_4 * g3_4);
+    tmp4 = m_1 + m_2 + m_3 + m_4 + m_a;
+    tmp5 = 1.0 / (tmp4 * tmp4);
+    tmp6 = m_1 * r2_1 + m_2 * r2_2 + m_3 * r2_3 + m_4 * r2_4;
+    tmp7 = tmp5 * (tmp6 * tmp6);
+    tmp8 = m_1 * r3_1 + m_2 * r3_2 + m_3 * r3_3 + m_4 * r3_4;
+    tmp9 = tmp5 * (tmp8 * tmp8);
+    tmp10 = 1.0 / tmp4;
+    tmp11 = -(tmp10 * tmp6);
+    tmp12 = r2_1 + tmp11;
+    tmp13 = tmp12 * tmp12;
+    tmp14 = -(tmp10 * tmp8);
+    tmp15 = r3_1 + tmp14;
+    tmp16 = tmp15 * tmp15;
+    tmp17 = r2_2 + tmp11;
+    tmp18 = tmp17 * tmp17;
+    tmp19 = r3_2 + tmp14;
+    tmp20 = tmp19 * tmp19;
+    tmp21 = r2_3 + tmp11;
+    tmp22 = tmp21 * tmp21;
+    tmp23 = r3_3 + tmp14;
+    tmp24 = tmp23 * tmp23;
+    tmp25 = r2_4 + tmp11;
+    tmp26 = tmp25 * tmp25;
+    tmp27 = r3_4 + tmp14;
+    tmp28 = tmp27 * tmp27;
+    tmp29 = m_1 * r1_1 + m_2 * r1_2 + m_3 * r1_3 + m_4 * r1_4;
+    tmp30 = tmp5 * (tmp29 * tmp29);
+    tmp31 = -(tmp10 * tmp29);
+    tmp32 = r1_1 + tmp31;
+    tmp33 = tmp32 * tmp32;
+    tmp34 = r1_2 + tmp31;
+    tmp35 = tmp34 * tmp34;
+    tmp36 = r1_3 + tmp31;
+    tmp37 = tmp36 * tmp36;
+    tmp38 = r1_4 + tmp31;
+    tmp39 = tmp38 * tmp38;
+    tmp44 = m_a * tmp29 * tmp5;
+    tmp45 = m_1 * tmp32;
+    tmp46 = m_2 * tmp34;
+    tmp47 = m_3 * tmp36;
+    tmp48 = m_4 * tmp38;
+    gn1_1 = g1_1 * tmp0;
+    tmp40 = I_1 * gn1_1;
+    gn2_1 = g2_1 * tmp0;
+    gn3_1 = g3_1 * tmp0;
+    gn1_2 = g1_2 * tmp1;
+    tmp41 = I_2 * gn1_2;
+    gn2_2 = g2_2 * tmp1;
+    gn3_2 = g3_2 * tmp1;
+    gn1_3 = g1_3 * tmp2;
+    tmp42 = I_3 * gn1_3;
+    gn2_3 = g2_3 * tmp2;
+    gn3_3 = g3_3 * tmp2;
+    gn1_4 = g1_4 * tmp3;
+    tmp43 = I_4 * gn1_4;
+    gn2_4 = g2_4 * tmp3;
+    gn3_4 = g3_4 * tmp3;
+    IC11 = I11 + I_1 * (1.0 - gn1_1 * gn1_1) + I_2 * (1.0 - gn1_2 * gn1_2) + I_3 * (1.0 - gn1_3 *
+            gn1_3) + I_4 * (1.0 - gn1_4 * gn1_4) + m_1 * (tmp13 + tmp16) + m_2 * (tmp18 + tmp20)
+            + m_3 * (tmp22 + tmp24) + m_4 * (tmp26 + tmp28) + m_a * (tmp7 + tmp9);
+    IC22 = I22 + I_1 * (1.0 - gn2_1 * gn2_1) + I_2 * (1.0 - gn2_2 * gn2_2) + I_3 * (1.0 - gn2_3 *
+            gn2_3) + I_4 * (1.0 - gn2_4 * gn2_4) + m_1 * (tmp16 + tmp33) + m_2 * (tmp20 + tmp35)
+            + m_3 * (tmp24 + tmp37) + m_4 * (tmp28 + tmp39) + m_a * (tmp30 + tmp9);
+    IC33 = I33 + I_1 * (1.0 - gn3_1 * gn3_1) + I_2 * (1.0 - gn3_2 * gn3_2) + I_3 * (1.0 - gn3_3 *
+            gn3_3) + I_4 * (1.0 - gn3_4 * gn3_4) + m_1 * (tmp13 + tmp33) + m_2 * (tmp18 + tmp35)
+            + m_3 * (tmp22 + tmp37) + m_4 * (tmp26 + tmp39) + m_a * (tmp30 + tmp7);
+    IC12 = I12 - gn2_1 * tmp40 - gn2_2 * tmp41 - gn2_3 * tmp42 - gn2_4 * tmp43 - tmp12 * tmp45 -
+            tmp17 * tmp46 - tmp21 * tmp47 - tmp25 * tmp48 - tmp44 * tmp6;
+    IC13 = I13 - gn3_1 * tmp40 - gn3_2 * tmp41 - gn3_3 * tmp42 - gn3_4 * tmp43 - tmp15 * tmp45 -
+            tmp19 * tmp46 - tmp23 * tmp47 - tmp27 * tmp48 - tmp44 * tmp8;
+    IC23 = I23 - I_1 * gn2_1 * gn3_1 - I_2 * gn2_2 * gn3_2 - I_3 * gn2_3 * gn3_3 - I_4 * gn2_4 *
+            gn3_4 - m_1 * tmp12 * tmp15 - m_2 * tmp17 * tmp19 - m_3 * tmp21 * tmp23 - m_4 * tmp25
+            * tmp27 - m_a * tmp5 * tmp6 * tmp8;
+    tmp49 = IC23 * IC23;
+    tmp50 = IC22 * IC33 - tmp49;
+    tmp51 = IC12 * IC12;
+    tmp52 = IC13 * IC13;
+    tmp53 = 1.0 / (IC11 * IC22 * IC33 + 2.0 * IC12 * IC13 * IC23 - IC11 * tmp49 - IC22 * tmp52 -
+            IC33 * tmp51);
+    tmp54 = IC12 * IC33 - IC13 * IC23;
+    tmp55 = IC12 * IC23 - IC13 * IC22;
+    tmp56 = IC11 * IC33 - tmp52;
+    tmp57 = IC11 * IC23 - IC12 * IC13;
+    tmp58 = IC11 * IC22 - tmp51;
+    tmp59 = -tmp54;
+    c[0] = tmp50 * tmp53;
+    c[1] = -(tmp53 * tmp54);
+    c[2] = tmp53 * tmp55;
+    c[3] = tmp53 * tmp56;
+    c[4] = -(tmp53 * tmp57);
+    c[5] = tmp53 * tmp58;
+    c[6] = 1.0 / J_1;
+    c[7] = 1.0 / J_2;
+    c[8] = 1.0 / J_3;
+    c[9] = 1.0 / J_4;
+    c[10] = IC11;
+    c[11] = IC12;
+    c[12] = IC13;
+    c[13] = J_1 * gn1_1;
+    c[14] = J_2 * gn1_2;
+    c[15] = J_3 * gn1_3;
+    c[16] = J_4 * gn1_4;
+    c[17] = IC22;
+    c[18] = IC23;
+    c[19] = J_1 * gn2_1;
+    c[20] = J_2 * gn2_2;
+    c[21] = J_3 * gn2_3;
+    c[22] = J_4 * gn2_4;
+    c[23] = IC33;
+    c[24] = J_1 * gn3_1;
+    c[25] = J_2 * gn3_2;
+    c[26] = J_3 * gn3_3;
+    c[27] = J_4 * gn3_4;
+    c[28] = -gn1_1;
+    c[29] = -gn2_1;
+    c[30] = -gn3_1;
+    c[31] = w_ref_1 / 20.0;
+    c[32] = -gn1_2;
+    c[33] = -gn2_2;
+    c[34] = -gn3_2;
+    c[35] = w_ref_2 / 20.0;
+    c[36] = -gn1_3;
+    c[37] = -gn2_3;
+    c[38] = -gn3_3;
+    c[39] = w_ref_3 / 20.0;
+    c[40] = -gn1_4;
+    c[41] = -gn2_4;
+    c[42] = -gn3_4;
+    c[43] = w_ref_4 / 20.0;
+    c[44] = IC11 / 2.0;
+    c[45] = IC22 / 2.0;
+    c[46] = IC33 / 2.0;
+    c[47] = J_1 / 2.0;
+    c[48] = J_2 / 2.0;
+    c[49] = J_3 / 2.0;
+    c[50] = J_4 / 2.0;
+    c[51] = gn1_1 / 20.0;
+    c[52] = gn2_1 / 20.0;
+    c[53] = gn3_1 / 20.0;
+    c[54] = gn1_2 / 20.0;
+    c[55] = gn2_2 / 20.0;
+    c[56] = gn3_2 / 20.0;
+    c[57] = gn1_3 / 20.0;
+    c[58] = gn2_3 / 20.0;
+    c[59] = gn3_3 / 20.0;
+    c[60] = gn1_4 / 20.0;
+    c[61] = gn2_4 / 20.0;
+    c[62] = gn3_4 / 20.0;
+    c[63] = sqrt(IC11 * IC11 + IC22 * IC22 + IC33 * IC33 + 2.0 * tmp49 + 2.0 * tmp51 + 2.0 *
+            tmp52) * sqrt(tmp50 * tmp50 + tmp56 * tmp56 + tmp58 * tmp58 + 2.0 * (tmp55 * tmp55) +
+            2.0 * (tmp57 * tmp57) + 2.0 * (tmp59 * tmp59)) / fabs(IC11 * tmp50 + IC12 * tmp59 +
+            IC13 * tmp55);
+    if (!(c[63] <= 10000000000000.0)) {
+        return RW4_HARDWARE_ERR_MASS_SINGULAR;
+    }
+    for (i_ = 0; i_ < 64; ++i_) {
+        if (!(fabs(c[i_]) <= DBL_MAX)) {
+            return RW4_HARDWARE_ERR_OVERFLOW;
+        }
+    }
+    return RW4_HARDWARE_OK;
 }
 
-/* rw4_hardware_rhs on n lanes: the same statements, lane by lane. */
+/* dxdt = f(t, x) for the constants c from rw4_hardware_setup (152 ops). */
+void rw4_hardware_rhs(double t, const double *x, const double *c, double *dxdt)
+{
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double h1;
+    double h2;
+    double h3;
+    double rel1;
+    double net1;
+    double rel2;
+    double net2;
+    double rel3;
+    double net3;
+    double rel4;
+    double net4;
+    double f1;
+    double f2;
+    double f3;
+
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = rw4_hardware_sin(q3);
+    tmp1 = rw4_hardware_cos(q3);
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / rw4_hardware_cos(q2);
+    h1 = c[10] * u1 + c[11] * u2 + c[12] * u3 + c[13] * w1 + c[14] * w2 + c[15] * w3 + c[16] * w4;
+    h2 = c[11] * u1 + c[17] * u2 + c[18] * u3 + c[19] * w1 + c[20] * w2 + c[21] * w3 + c[22] * w4;
+    h3 = c[12] * u1 + c[18] * u2 + c[23] * u3 + c[24] * w1 + c[25] * w2 + c[26] * w3 + c[27] * w4;
+    rel1 = w1 + c[28] * u1 + c[29] * u2 + c[30] * u3;
+    net1 = dmin(0.2, dmax(-0.2, c[31] - 0.05 * rel1)) - 2e-05 * rel1;
+    rel2 = w2 + c[32] * u1 + c[33] * u2 + c[34] * u3;
+    net2 = dmin(0.2, dmax(-0.2, c[35] - 0.05 * rel2)) - 2e-05 * rel2;
+    rel3 = w3 + c[36] * u1 + c[37] * u2 + c[38] * u3;
+    net3 = dmin(0.2, dmax(-0.2, c[39] - 0.05 * rel3)) - 2e-05 * rel3;
+    rel4 = w4 + c[40] * u1 + c[41] * u2 + c[42] * u3;
+    net4 = dmin(0.2, dmax(-0.2, c[43] - 0.05 * rel4)) - 2e-05 * rel4;
+    f1 = c[28] * net1 + c[32] * net2 + c[36] * net3 + c[40] * net4 + h2 * u3 - h3 * u2;
+    f2 = c[29] * net1 + c[33] * net2 + c[37] * net3 + c[41] * net4 + h3 * u1 - h1 * u3;
+    f3 = c[30] * net1 + c[34] * net2 + c[38] * net3 + c[42] * net4 + h1 * u2 - h2 * u1;
+    dxdt[0] = tmp2;
+    dxdt[1] = tmp0 * u3 + tmp1 * u1;
+    dxdt[2] = u2 - tmp2 * rw4_hardware_sin(q2);
+    dxdt[3] = c[0] * f1 + c[1] * f2 + c[2] * f3;
+    dxdt[4] = c[1] * f1 + c[3] * f2 + c[4] * f3;
+    dxdt[5] = c[2] * f1 + c[4] * f2 + c[5] * f3;
+    dxdt[6] = c[6] * net1;
+    dxdt[7] = c[7] * net2;
+    dxdt[8] = c[8] * net3;
+    dxdt[9] = c[9] * net4;
+}
+
 void rw4_hardware_rhs_lanes(int n, const double *RW4_HARDWARE_RESTRICT t,
-        const double *RW4_HARDWARE_RESTRICT x, const double *RW4_HARDWARE_RESTRICT c,
-        double *RW4_HARDWARE_RESTRICT dxdt)
+                            const double *RW4_HARDWARE_RESTRICT x,
+                            const double *RW4_HARDWARE_RESTRICT c,
+                            double *RW4_HARDWARE_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     RW4_HARDWARE_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[3 * n + l];
-        const double u2 = x[4 * n + l];
-        const double u3 = x[5 * n + l];
-        const double w1 = x[6 * n + l];
-        const double w2 = x[7 * n + l];
-        const double w3 = x[8 * n + l];
-        const double w4 = x[9 * n + l];
-
-        const double tmp0 = rw4_hardware_sin_lanes(q3);
-        const double tmp1 = rw4_hardware_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/rw4_hardware_cos_lanes(q2);
-        const double h1 = c[10]*u1 + c[11]*u2 + c[12]*u3 + c[13]*w1 + c[14]*w2 + c[15]*w3 + c[16]*w4;
-        const double h2 = c[11]*u1 + c[17]*u2 + c[18]*u3 + c[19]*w1 + c[20]*w2 + c[21]*w3 + c[22]*w4;
-        const double h3 = c[12]*u1 + c[18]*u2 + c[23]*u3 + c[24]*w1 + c[25]*w2 + c[26]*w3 + c[27]*w4;
-        const double rel1 = c[28]*u1 + c[29]*u2 + c[30]*u3 + w1;
-        const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[31] - 0.05*rel1));
-        const double rel2 = c[32]*u1 + c[33]*u2 + c[34]*u3 + w2;
-        const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[35] - 0.05*rel2));
-        const double rel3 = c[36]*u1 + c[37]*u2 + c[38]*u3 + w3;
-        const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[39] - 0.05*rel3));
-        const double rel4 = c[40]*u1 + c[41]*u2 + c[42]*u3 + w4;
-        const double net4 = -2e-05*rel4 + fmin(0.2, fmax(-0.2, c[43] - 0.05*rel4));
-        const double f1 = c[28]*net1 + c[32]*net2 + c[36]*net3 + c[40]*net4 + h2*u3 - h3*u2;
-        const double f2 = c[29]*net1 + c[33]*net2 + c[37]*net3 + c[41]*net4 - h1*u3 + h3*u1;
-        const double f3 = c[30]*net1 + c[34]*net2 + c[38]*net3 + c[42]*net4 + h1*u2 - h2*u1;
-        dxdt[0 * n + l] = tmp2;
-        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*rw4_hardware_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = c[0]*f1 + c[1]*f2 + c[2]*f3;
-        dxdt[4 * n + l] = c[1]*f1 + c[3]*f2 + c[4]*f3;
-        dxdt[5 * n + l] = c[2]*f1 + c[4]*f2 + c[5]*f3;
-        dxdt[6 * n + l] = c[6]*net1;
-        dxdt[7 * n + l] = c[7]*net2;
-        dxdt[8 * n + l] = c[8]*net3;
-        dxdt[9 * n + l] = c[9]*net4;
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, h1, h2, h3, rel1, net1,
+                rel2, net2, rel3, net3, rel4, net4, f1, f2, f3;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[3 * n + l];
+        u2 = x[4 * n + l];
+        u3 = x[5 * n + l];
+        w1 = x[6 * n + l];
+        w2 = x[7 * n + l];
+        w3 = x[8 * n + l];
+        w4 = x[9 * n + l];
+        tmp0 = rw4_hardware_sin_lanes(q3);
+        tmp1 = rw4_hardware_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / rw4_hardware_cos_lanes(q2);
+        h1 = c[10] * u1 + c[11] * u2 + c[12] * u3 + c[13] * w1 + c[14] * w2 + c[15] * w3 + c[16]
+                * w4;
+        h2 = c[11] * u1 + c[17] * u2 + c[18] * u3 + c[19] * w1 + c[20] * w2 + c[21] * w3 + c[22]
+                * w4;
+        h3 = c[12] * u1 + c[18] * u2 + c[23] * u3 + c[24] * w1 + c[25] * w2 + c[26] * w3 + c[27]
+                * w4;
+        rel1 = w1 + c[28] * u1 + c[29] * u2 + c[30] * u3;
+        net1 = dmin(0.2, dmax(-0.2, c[31] - 0.05 * rel1)) - 2e-05 * rel1;
+        rel2 = w2 + c[32] * u1 + c[33] * u2 + c[34] * u3;
+        net2 = dmin(0.2, dmax(-0.2, c[35] - 0.05 * rel2)) - 2e-05 * rel2;
+        rel3 = w3 + c[36] * u1 + c[37] * u2 + c[38] * u3;
+        net3 = dmin(0.2, dmax(-0.2, c[39] - 0.05 * rel3)) - 2e-05 * rel3;
+        rel4 = w4 + c[40] * u1 + c[41] * u2 + c[42] * u3;
+        net4 = dmin(0.2, dmax(-0.2, c[43] - 0.05 * rel4)) - 2e-05 * rel4;
+        f1 = c[28] * net1 + c[32] * net2 + c[36] * net3 + c[40] * net4 + h2 * u3 - h3 * u2;
+        f2 = c[29] * net1 + c[33] * net2 + c[37] * net3 + c[41] * net4 + h3 * u1 - h1 * u3;
+        f3 = c[30] * net1 + c[34] * net2 + c[38] * net3 + c[42] * net4 + h1 * u2 - h2 * u1;
+        dxdt[l] = tmp2;
+        dxdt[1 * n + l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2 * n + l] = u2 - tmp2 * rw4_hardware_sin_lanes(q2);
+        dxdt[3 * n + l] = c[0] * f1 + c[1] * f2 + c[2] * f3;
+        dxdt[4 * n + l] = c[1] * f1 + c[3] * f2 + c[4] * f3;
+        dxdt[5 * n + l] = c[2] * f1 + c[4] * f2 + c[5] * f3;
+        dxdt[6 * n + l] = c[6] * net1;
+        dxdt[7 * n + l] = c[7] * net2;
+        dxdt[8 * n + l] = c[8] * net3;
+        dxdt[9 * n + l] = c[9] * net4;
     }
 }
 
-/* kinetic energy of the system (J): 26 ops. */
+/* out = kinetic energy of the system (J): 26 ops. */
 void rw4_hardware_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
 
-    out[0] = c[46]*u3*u3 + c[47]*w1*w1 + c[48]*w2*w2 + c[49]*w3*w3 + c[50]*w4*w4 + u1*(c[11]*u2 + c[12]*u3 + c[44]*u1) + u2*(c[18]*u3 + c[45]*u2);
+    (void)t;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    out[0] = c[46] * (u3 * u3) + c[47] * (w1 * w1) + c[48] * (w2 * w2) + c[49] * (w3 * w3) +
+            c[50] * (w4 * w4) + u1 * (c[11] * u2 + c[12] * u3 + c[44] * u1) + u2 * (c[18] * u3 +
+            c[45] * u2);
 }
 
-/* angular momentum about the mass center, N components h[0..2] (kg m^2/s): 76 ops. */
+/* out = angular momentum about the mass center, N components h[0..2] (kg
+   m^2/s): 76 ops. */
 void rw4_hardware_angular_momentum(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q1 = x[0];
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double q1;
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = rw4_hardware_sin(q1);
-    const double tmp1 = c[11]*u1 + c[17]*u2 + c[18]*u3 + c[19]*w1 + c[20]*w2 + c[21]*w3 + c[22]*w4;
-    const double tmp2 = rw4_hardware_cos(q2);
-    const double tmp3 = tmp1*tmp2;
-    const double tmp4 = rw4_hardware_sin(q3);
-    const double tmp5 = rw4_hardware_cos(q1);
-    const double tmp6 = tmp4*tmp5;
-    const double tmp7 = rw4_hardware_sin(q2);
-    const double tmp8 = rw4_hardware_cos(q3);
-    const double tmp9 = tmp0*tmp8;
-    const double tmp10 = c[12]*u1 + c[18]*u2 + c[23]*u3 + c[24]*w1 + c[25]*w2 + c[26]*w3 + c[27]*w4;
-    const double tmp11 = tmp0*tmp4;
-    const double tmp12 = c[10]*u1 + c[11]*u2 + c[12]*u3 + c[13]*w1 + c[14]*w2 + c[15]*w3 + c[16]*w4;
-    out[0] = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + tmp5*tmp8);
-    out[1] = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + tmp3*tmp5;
-    out[2] = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4;
+    (void)t;  /* unused in some scenes */
+    q1 = x[0];
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = rw4_hardware_sin(q1);
+    tmp1 = c[11] * u1 + c[17] * u2 + c[18] * u3 + c[19] * w1 + c[20] * w2 + c[21] * w3 + c[22] * w4;
+    tmp2 = rw4_hardware_cos(q2);
+    tmp3 = tmp1 * tmp2;
+    tmp4 = rw4_hardware_sin(q3);
+    tmp5 = rw4_hardware_cos(q1);
+    tmp6 = tmp4 * tmp5;
+    tmp7 = rw4_hardware_sin(q2);
+    tmp8 = rw4_hardware_cos(q3);
+    tmp9 = tmp0 * tmp8;
+    tmp10 = c[12] * u1 + c[18] * u2 + c[23] * u3 + c[24] * w1 + c[25] * w2 + c[26] * w3 + c[27] *
+            w4;
+    tmp11 = tmp0 * tmp4;
+    tmp12 = c[10] * u1 + c[11] * u2 + c[12] * u3 + c[13] * w1 + c[14] * w2 + c[15] * w3 + c[16] *
+            w4;
+    out[0] = tmp10 * (tmp6 + tmp7 * tmp9) + tmp12 * (tmp5 * tmp8 - tmp11 * tmp7) - tmp0 * tmp3;
+    out[1] = tmp10 * (tmp11 - tmp5 * tmp7 * tmp8) + tmp12 * (tmp9 + tmp6 * tmp7) + tmp3 * tmp5;
+    out[2] = tmp1 * tmp7 + tmp10 * tmp2 * tmp8 - tmp12 * tmp2 * tmp4;
 }
 
-/* power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 68 ops. */
+/* out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 68 ops. */
 void rw4_hardware_power(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
 
-    out[0] = (c[28]*u1 + c[29]*u2 + c[30]*u3 + w1)*fmin(0.2, fmax(-0.2, c[31] + c[51]*u1 + c[52]*u2 + c[53]*u3 - 0.05*w1));
-    out[1] = (c[32]*u1 + c[33]*u2 + c[34]*u3 + w2)*fmin(0.2, fmax(-0.2, c[35] + c[54]*u1 + c[55]*u2 + c[56]*u3 - 0.05*w2));
-    out[2] = (c[36]*u1 + c[37]*u2 + c[38]*u3 + w3)*fmin(0.2, fmax(-0.2, c[39] + c[57]*u1 + c[58]*u2 + c[59]*u3 - 0.05*w3));
-    out[3] = (c[40]*u1 + c[41]*u2 + c[42]*u3 + w4)*fmin(0.2, fmax(-0.2, c[43] + c[60]*u1 + c[61]*u2 + c[62]*u3 - 0.05*w4));
+    (void)t;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    out[0] = (w1 + c[28] * u1 + c[29] * u2 + c[30] * u3) * dmin(0.2, dmax(-0.2,
+            c[31] + c[51] * u1 + c[52] * u2 + c[53] * u3 - 0.05 * w1));
+    out[1] = (w2 + c[32] * u1 + c[33] * u2 + c[34] * u3) * dmin(0.2, dmax(-0.2,
+            c[35] + c[54] * u1 + c[55] * u2 + c[56] * u3 - 0.05 * w2));
+    out[2] = (w3 + c[36] * u1 + c[37] * u2 + c[38] * u3) * dmin(0.2, dmax(-0.2,
+            c[39] + c[57] * u1 + c[58] * u2 + c[59] * u3 - 0.05 * w3));
+    out[3] = (w4 + c[40] * u1 + c[41] * u2 + c[42] * u3) * dmin(0.2, dmax(-0.2,
+            c[43] + c[60] * u1 + c[61] * u2 + c[62] * u3 - 0.05 * w4));
 }

@@ -244,14 +244,13 @@ contains
     return
   end function rw4_hardware_cos
 
-  ! Checks p and computes the constants c that rw4_hardware_rhs needs
-  ! (403 ops, plus the checks). Returns RW4_HARDWARE_OK or
-  ! the first failing check's code; c is then not to be used.
-  function rw4_hardware_setup(p, c) result(status) &
-      bind(C, name="rw4_hardware_f_setup")
-    real(c_double), intent(in) :: p(47)
-    real(c_double), intent(out) :: c(64)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that rw4_hardware_rhs needs (403 ops,
+  ! plus the checks). Returns RW4_HARDWARE_OK or the first failing check's code;
+  ! c is then not to be used.
+  function rw4_hardware_setup(p, c) result(res) bind(C, name="rw4_hardware_f_setup")
+    real(c_double), intent(in) :: p(0:46)
+    real(c_double), intent(out) :: c(0:63)
+    integer(c_int) :: res
     real(c_double) :: m_a
     real(c_double) :: I11
     real(c_double) :: I22
@@ -299,8 +298,24 @@ contains
     real(c_double) :: w_ref_2
     real(c_double) :: w_ref_3
     real(c_double) :: w_ref_4
-    real(c_double) :: pd2, pd_m1, pd_m2, pd_m3, pd3, half_trace, s11, s22, s33, tri2, tri_m1, tri_m2
-    real(c_double) :: tri_m3, tri3, norm_1, norm_2, norm_3, norm_4
+    real(c_double) :: pd2
+    real(c_double) :: pd_m1
+    real(c_double) :: pd_m2
+    real(c_double) :: pd_m3
+    real(c_double) :: pd3
+    real(c_double) :: half_trace
+    real(c_double) :: s11
+    real(c_double) :: s22
+    real(c_double) :: s33
+    real(c_double) :: tri2
+    real(c_double) :: tri_m1
+    real(c_double) :: tri_m2
+    real(c_double) :: tri_m3
+    real(c_double) :: tri3
+    real(c_double) :: norm_1
+    real(c_double) :: norm_2
+    real(c_double) :: norm_3
+    real(c_double) :: norm_4
     real(c_double) :: tmp0
     real(c_double) :: tmp1
     real(c_double) :: tmp2
@@ -379,307 +394,319 @@ contains
     real(c_double) :: tmp57
     real(c_double) :: tmp58
     real(c_double) :: tmp59
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = RW4_HARDWARE_ERR_NONFINITE
+    do i_ = 0, 64 - 1
+      c(i_) = 0.0_c_double
+    end do
+    do i_ = 0, 47 - 1
+      if (.not. ieee_is_finite(p(i_))) then
+        res = RW4_HARDWARE_ERR_NONFINITE
+        return
+      end if
+    end do
+    m_a = p(0)
+    I11 = p(1)
+    I22 = p(2)
+    I33 = p(3)
+    I12 = p(4)
+    I13 = p(5)
+    I23 = p(6)
+    m_1 = p(7)
+    I_1 = p(8)
+    J_1 = p(9)
+    r1_1 = p(10)
+    r2_1 = p(11)
+    r3_1 = p(12)
+    g1_1 = p(13)
+    g2_1 = p(14)
+    g3_1 = p(15)
+    m_2 = p(17)
+    I_2 = p(18)
+    J_2 = p(19)
+    r1_2 = p(20)
+    r2_2 = p(21)
+    r3_2 = p(22)
+    g1_2 = p(23)
+    g2_2 = p(24)
+    g3_2 = p(25)
+    m_3 = p(27)
+    I_3 = p(28)
+    J_3 = p(29)
+    r1_3 = p(30)
+    r2_3 = p(31)
+    r3_3 = p(32)
+    g1_3 = p(33)
+    g2_3 = p(34)
+    g3_3 = p(35)
+    m_4 = p(37)
+    I_4 = p(38)
+    J_4 = p(39)
+    r1_4 = p(40)
+    r2_4 = p(41)
+    r3_4 = p(42)
+    g1_4 = p(43)
+    g2_4 = p(44)
+    g3_4 = p(45)
+    w_ref_1 = p(16)
+    w_ref_2 = p(26)
+    w_ref_3 = p(36)
+    w_ref_4 = p(46)
+    if (.not. (m_a > 0.0_c_double) .or. .not. (m_1 > 0.0_c_double) .or. .not. (m_2 > &
+        0.0_c_double) .or. .not. (m_3 > 0.0_c_double) .or. .not. (m_4 > 0.0_c_double)) then
+      res = RW4_HARDWARE_ERR_MASS
       return
     end if
-    m_a = p(1)
-    I11 = p(2)
-    I22 = p(3)
-    I33 = p(4)
-    I12 = p(5)
-    I13 = p(6)
-    I23 = p(7)
-    m_1 = p(8)
-    I_1 = p(9)
-    J_1 = p(10)
-    r1_1 = p(11)
-    r2_1 = p(12)
-    r3_1 = p(13)
-    g1_1 = p(14)
-    g2_1 = p(15)
-    g3_1 = p(16)
-    m_2 = p(18)
-    I_2 = p(19)
-    J_2 = p(20)
-    r1_2 = p(21)
-    r2_2 = p(22)
-    r3_2 = p(23)
-    g1_2 = p(24)
-    g2_2 = p(25)
-    g3_2 = p(26)
-    m_3 = p(28)
-    I_3 = p(29)
-    J_3 = p(30)
-    r1_3 = p(31)
-    r2_3 = p(32)
-    r3_3 = p(33)
-    g1_3 = p(34)
-    g2_3 = p(35)
-    g3_3 = p(36)
-    m_4 = p(38)
-    I_4 = p(39)
-    J_4 = p(40)
-    r1_4 = p(41)
-    r2_4 = p(42)
-    r3_4 = p(43)
-    g1_4 = p(44)
-    g2_4 = p(45)
-    g3_4 = p(46)
-    w_ref_1 = p(17)
-    w_ref_2 = p(27)
-    w_ref_3 = p(37)
-    w_ref_4 = p(47)
+    if (.not. (I_1 > 0.0_c_double) .or. .not. (J_1 > 0.0_c_double) .or. .not. (I_2 > &
+        0.0_c_double) .or. .not. (J_2 > 0.0_c_double) .or. .not. (I_3 > 0.0_c_double) .or. .not. &
+        (J_3 > 0.0_c_double) .or. .not. (I_4 > 0.0_c_double) .or. .not. (J_4 > 0.0_c_double)) then
+      res = RW4_HARDWARE_ERR_ROTOR_INERTIA
+      return
+    end if
 
-    if (.not. (m_a > 0.0_c_double .and. m_1 > 0.0_c_double .and. m_2 > 0.0_c_double &
-               .and. m_3 > 0.0_c_double .and. m_4 > 0.0_c_double)) then
-      status = RW4_HARDWARE_ERR_MASS
-      return
-    end if
-    if (.not. (I_1 > 0.0_c_double .and. J_1 > 0.0_c_double .and. I_2 > 0.0_c_double &
-               .and. J_2 > 0.0_c_double .and. I_3 > 0.0_c_double .and. J_3 > 0.0_c_double &
-               .and. I_4 > 0.0_c_double .and. J_4 > 0.0_c_double)) then
-      status = RW4_HARDWARE_ERR_ROTOR_INERTIA
-      return
-    end if
     ! Sylvester: the carrier's leading minors.
-    pd2 = I11*I22 - I12*I12
-    pd_m1 = I22*I33 - I23*I23
-    pd_m2 = I12*I33 - I13*I23
-    pd_m3 = I12*I23 - I22*I13
-    pd3 = I11*pd_m1 - I12*pd_m2 + I13*pd_m3
-    if (.not. (I11 > 0.0_c_double .and. pd2 > 0.0_c_double .and. pd3 > 0.0_c_double)) then
-      status = RW4_HARDWARE_ERR_CARRIER_NOT_PD
+    pd2 = I11 * I22 - I12 * I12
+    pd_m1 = I22 * I33 - I23 * I23
+    pd_m2 = I12 * I33 - I13 * I23
+    pd_m3 = I12 * I23 - I22 * I13
+    pd3 = (I11 * pd_m1 - I12 * pd_m2) + I13 * pd_m3
+    if (.not. (I11 > 0.0_c_double) .or. .not. (pd2 > 0.0_c_double) .or. .not. (pd3 > &
+        0.0_c_double)) then
+      res = RW4_HARDWARE_ERR_CARRIER_NOT_PD
       return
     end if
+
     ! The largest principal moment is at most half the trace (with
     ! slack): s 1 - T positive definite, s = (1/2 + slack) tr T.
-    half_trace = 0.500000000001_c_double*(I11 + I22 + I33)
+    half_trace = 0.500000000001_c_double * ((I11 + I22) + I33)
     s11 = half_trace - I11
     s22 = half_trace - I22
     s33 = half_trace - I33
-    tri2 = s11*s22 - I12*I12
-    tri_m1 = s22*s33 - I23*I23
-    tri_m2 = I12*s33 + I13*I23
-    tri_m3 = I12*I23 + s22*I13
-    tri3 = s11*tri_m1 - I12*tri_m2 - I13*tri_m3
-    if (.not. (s11 > 0.0_c_double .and. tri2 > 0.0_c_double .and. tri3 > 0.0_c_double)) then
-      status = RW4_HARDWARE_ERR_CARRIER_TRIANGLE
+    tri2 = s11 * s22 - I12 * I12
+    tri_m1 = s22 * s33 - I23 * I23
+    tri_m2 = I12 * s33 + I13 * I23
+    tri_m3 = I12 * I23 + s22 * I13
+    tri3 = (s11 * tri_m1 - I12 * tri_m2) - I13 * tri_m3
+    if (.not. (s11 > 0.0_c_double) .or. .not. (tri2 > 0.0_c_double) .or. .not. (tri3 > &
+        0.0_c_double)) then
+      res = RW4_HARDWARE_ERR_CARRIER_TRIANGLE
       return
     end if
-    if (J_1 - 2.0_c_double*I_1 > 1e-12_c_double*(2.0_c_double*I_1 + J_1)) then
-      status = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
+    if (J_1 - 2.0_c_double * I_1 > 1e-12_c_double * (2.0_c_double * I_1 + J_1)) then
+      res = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
       return
     end if
-    if (J_2 - 2.0_c_double*I_2 > 1e-12_c_double*(2.0_c_double*I_2 + J_2)) then
-      status = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
+    if (J_2 - 2.0_c_double * I_2 > 1e-12_c_double * (2.0_c_double * I_2 + J_2)) then
+      res = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
       return
     end if
-    if (J_3 - 2.0_c_double*I_3 > 1e-12_c_double*(2.0_c_double*I_3 + J_3)) then
-      status = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
+    if (J_3 - 2.0_c_double * I_3 > 1e-12_c_double * (2.0_c_double * I_3 + J_3)) then
+      res = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
       return
     end if
-    if (J_4 - 2.0_c_double*I_4 > 1e-12_c_double*(2.0_c_double*I_4 + J_4)) then
-      status = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
-      return
-    end if
-    ! Rotor 1's axis: of unit length within the slack.
-    norm_1 = sqrt(g1_1**2 + g2_1**2 + g3_1**2)
-    if (.not. (max(norm_1 - 1.0_c_double, 1.0_c_double - norm_1) <= 0.001_c_double)) then
-      status = RW4_HARDWARE_ERR_AXIS
-      return
-    end if
-    ! Rotor 2's axis: of unit length within the slack.
-    norm_2 = sqrt(g1_2**2 + g2_2**2 + g3_2**2)
-    if (.not. (max(norm_2 - 1.0_c_double, 1.0_c_double - norm_2) <= 0.001_c_double)) then
-      status = RW4_HARDWARE_ERR_AXIS
-      return
-    end if
-    ! Rotor 3's axis: of unit length within the slack.
-    norm_3 = sqrt(g1_3**2 + g2_3**2 + g3_3**2)
-    if (.not. (max(norm_3 - 1.0_c_double, 1.0_c_double - norm_3) <= 0.001_c_double)) then
-      status = RW4_HARDWARE_ERR_AXIS
-      return
-    end if
-    ! Rotor 4's axis: of unit length within the slack.
-    norm_4 = sqrt(g1_4**2 + g2_4**2 + g3_4**2)
-    if (.not. (max(norm_4 - 1.0_c_double, 1.0_c_double - norm_4) <= 0.001_c_double)) then
-      status = RW4_HARDWARE_ERR_AXIS
+    if (J_4 - 2.0_c_double * I_4 > 1e-12_c_double * (2.0_c_double * I_4 + J_4)) then
+      res = RW4_HARDWARE_ERR_ROTOR_TRIANGLE
       return
     end if
 
-    tmp0 = 1/sqrt(g1_1*g1_1 + g2_1*g2_1 + g3_1*g3_1)
-    tmp1 = 1/sqrt(g1_2*g1_2 + g2_2*g2_2 + g3_2*g3_2)
-    tmp2 = 1/sqrt(g1_3*g1_3 + g2_3*g2_3 + g3_3*g3_3)
-    tmp3 = 1/sqrt(g1_4*g1_4 + g2_4*g2_4 + g3_4*g3_4)
-    tmp4 = m_1 + m_2 + m_3 + m_4 + m_a
-    tmp5 = 1.0_c_double/(tmp4*tmp4)
-    tmp6 = m_1*r2_1 + m_2*r2_2 + m_3*r2_3 + m_4*r2_4
-    tmp7 = tmp5*tmp6*tmp6
-    tmp8 = m_1*r3_1 + m_2*r3_2 + m_3*r3_3 + m_4*r3_4
-    tmp9 = tmp5*tmp8*tmp8
-    tmp10 = 1.0_c_double/tmp4
-    tmp11 = -tmp10*tmp6
+    ! Rotor 1's axis: of unit length within the slack.
+    norm_1 = sqrt((g1_1 * g1_1 + g2_1 * g2_1) + g3_1 * g3_1)
+    if (.not. (max(norm_1 - 1.0_c_double, 1.0_c_double - norm_1) <= 1e-3_c_double)) then
+      res = RW4_HARDWARE_ERR_AXIS
+      return
+    end if
+
+    ! Rotor 2's axis: of unit length within the slack.
+    norm_2 = sqrt((g1_2 * g1_2 + g2_2 * g2_2) + g3_2 * g3_2)
+    if (.not. (max(norm_2 - 1.0_c_double, 1.0_c_double - norm_2) <= 1e-3_c_double)) then
+      res = RW4_HARDWARE_ERR_AXIS
+      return
+    end if
+
+    ! Rotor 3's axis: of unit length within the slack.
+    norm_3 = sqrt((g1_3 * g1_3 + g2_3 * g2_3) + g3_3 * g3_3)
+    if (.not. (max(norm_3 - 1.0_c_double, 1.0_c_double - norm_3) <= 1e-3_c_double)) then
+      res = RW4_HARDWARE_ERR_AXIS
+      return
+    end if
+
+    ! Rotor 4's axis: of unit length within the slack.
+    norm_4 = sqrt((g1_4 * g1_4 + g2_4 * g2_4) + g3_4 * g3_4)
+    if (.not. (max(norm_4 - 1.0_c_double, 1.0_c_double - norm_4) <= 1e-3_c_double)) then
+      res = RW4_HARDWARE_ERR_AXIS
+      return
+    end if
+    tmp0 = 1.0_c_double / sqrt((g1_1 * g1_1 + g2_1 * g2_1) + g3_1 * g3_1)
+    tmp1 = 1.0_c_double / sqrt((g1_2 * g1_2 + g2_2 * g2_2) + g3_2 * g3_2)
+    tmp2 = 1.0_c_double / sqrt((g1_3 * g1_3 + g2_3 * g2_3) + g3_3 * g3_3)
+    tmp3 = 1.0_c_double / sqrt((g1_4 * g1_4 + g2_4 * g2_4) + g3_4 * g3_4)
+    tmp4 = (((m_1 + m_2) + m_3) + m_4) + m_a
+    tmp5 = 1.0_c_double / (tmp4 * tmp4)
+    tmp6 = ((m_1 * r2_1 + m_2 * r2_2) + m_3 * r2_3) + m_4 * r2_4
+    tmp7 = tmp5 * (tmp6 * tmp6)
+    tmp8 = ((m_1 * r3_1 + m_2 * r3_2) + m_3 * r3_3) + m_4 * r3_4
+    tmp9 = tmp5 * (tmp8 * tmp8)
+    tmp10 = 1.0_c_double / tmp4
+    tmp11 = -tmp10 * tmp6
     tmp12 = r2_1 + tmp11
-    tmp13 = tmp12*tmp12
-    tmp14 = -tmp10*tmp8
+    tmp13 = tmp12 * tmp12
+    tmp14 = -tmp10 * tmp8
     tmp15 = r3_1 + tmp14
-    tmp16 = tmp15*tmp15
+    tmp16 = tmp15 * tmp15
     tmp17 = r2_2 + tmp11
-    tmp18 = tmp17*tmp17
+    tmp18 = tmp17 * tmp17
     tmp19 = r3_2 + tmp14
-    tmp20 = tmp19*tmp19
+    tmp20 = tmp19 * tmp19
     tmp21 = r2_3 + tmp11
-    tmp22 = tmp21*tmp21
+    tmp22 = tmp21 * tmp21
     tmp23 = r3_3 + tmp14
-    tmp24 = tmp23*tmp23
+    tmp24 = tmp23 * tmp23
     tmp25 = r2_4 + tmp11
-    tmp26 = tmp25*tmp25
+    tmp26 = tmp25 * tmp25
     tmp27 = r3_4 + tmp14
-    tmp28 = tmp27*tmp27
-    tmp29 = m_1*r1_1 + m_2*r1_2 + m_3*r1_3 + m_4*r1_4
-    tmp30 = tmp29*tmp29*tmp5
-    tmp31 = -tmp10*tmp29
+    tmp28 = tmp27 * tmp27
+    tmp29 = ((m_1 * r1_1 + m_2 * r1_2) + m_3 * r1_3) + m_4 * r1_4
+    tmp30 = tmp5 * (tmp29 * tmp29)
+    tmp31 = -tmp10 * tmp29
     tmp32 = r1_1 + tmp31
-    tmp33 = tmp32*tmp32
+    tmp33 = tmp32 * tmp32
     tmp34 = r1_2 + tmp31
-    tmp35 = tmp34*tmp34
+    tmp35 = tmp34 * tmp34
     tmp36 = r1_3 + tmp31
-    tmp37 = tmp36*tmp36
+    tmp37 = tmp36 * tmp36
     tmp38 = r1_4 + tmp31
-    tmp39 = tmp38*tmp38
-    tmp44 = m_a*tmp29*tmp5
-    tmp45 = m_1*tmp32
-    tmp46 = m_2*tmp34
-    tmp47 = m_3*tmp36
-    tmp48 = m_4*tmp38
-    gn1_1 = g1_1*tmp0
-    tmp40 = I_1*gn1_1
-    gn2_1 = g2_1*tmp0
-    gn3_1 = g3_1*tmp0
-    gn1_2 = g1_2*tmp1
-    tmp41 = I_2*gn1_2
-    gn2_2 = g2_2*tmp1
-    gn3_2 = g3_2*tmp1
-    gn1_3 = g1_3*tmp2
-    tmp42 = I_3*gn1_3
-    gn2_3 = g2_3*tmp2
-    gn3_3 = g3_3*tmp2
-    gn1_4 = g1_4*tmp3
-    tmp43 = I_4*gn1_4
-    gn2_4 = g2_4*tmp3
-    gn3_4 = g3_4*tmp3
-    IC11 = I11 + I_1*(1 - gn1_1*gn1_1) + I_2*(1 - gn1_2*gn1_2) + I_3*(1 - &
-          gn1_3*gn1_3) + I_4*(1 - gn1_4*gn1_4) + m_1*(tmp13 + tmp16) + m_2* &
-          (tmp18 + tmp20) + m_3*(tmp22 + tmp24) + m_4*(tmp26 + tmp28) + m_a &
-          *(tmp7 + tmp9)
-    IC22 = I22 + I_1*(1 - gn2_1*gn2_1) + I_2*(1 - gn2_2*gn2_2) + I_3*(1 - &
-          gn2_3*gn2_3) + I_4*(1 - gn2_4*gn2_4) + m_1*(tmp16 + tmp33) + m_2* &
-          (tmp20 + tmp35) + m_3*(tmp24 + tmp37) + m_4*(tmp28 + tmp39) + m_a &
-          *(tmp30 + tmp9)
-    IC33 = I33 + I_1*(1 - gn3_1*gn3_1) + I_2*(1 - gn3_2*gn3_2) + I_3*(1 - &
-          gn3_3*gn3_3) + I_4*(1 - gn3_4*gn3_4) + m_1*(tmp13 + tmp33) + m_2* &
-          (tmp18 + tmp35) + m_3*(tmp22 + tmp37) + m_4*(tmp26 + tmp39) + m_a &
-          *(tmp30 + tmp7)
-    IC12 = I12 - gn2_1*tmp40 - gn2_2*tmp41 - gn2_3*tmp42 - gn2_4*tmp43 - &
-          tmp12*tmp45 - tmp17*tmp46 - tmp21*tmp47 - tmp25*tmp48 - tmp44* &
-          tmp6
-    IC13 = I13 - gn3_1*tmp40 - gn3_2*tmp41 - gn3_3*tmp42 - gn3_4*tmp43 - &
-          tmp15*tmp45 - tmp19*tmp46 - tmp23*tmp47 - tmp27*tmp48 - tmp44* &
-          tmp8
-    IC23 = I23 - I_1*gn2_1*gn3_1 - I_2*gn2_2*gn3_2 - I_3*gn2_3*gn3_3 - I_4* &
-          gn2_4*gn3_4 - m_1*tmp12*tmp15 - m_2*tmp17*tmp19 - m_3*tmp21*tmp23 &
-          - m_4*tmp25*tmp27 - m_a*tmp5*tmp6*tmp8
-    tmp49 = IC23*IC23
-    tmp50 = IC22*IC33 - tmp49
-    tmp51 = IC12*IC12
-    tmp52 = IC13*IC13
-    tmp53 = 1.0_c_double/(IC11*IC22*IC33 - IC11*tmp49 + 2*IC12*IC13*IC23 - &
-          IC22*tmp52 - IC33*tmp51)
-    tmp54 = IC12*IC33 - IC13*IC23
-    tmp55 = IC12*IC23 - IC13*IC22
-    tmp56 = IC11*IC33 - tmp52
-    tmp57 = IC11*IC23 - IC12*IC13
-    tmp58 = IC11*IC22 - tmp51
+    tmp39 = tmp38 * tmp38
+    tmp44 = (m_a * tmp29) * tmp5
+    tmp45 = m_1 * tmp32
+    tmp46 = m_2 * tmp34
+    tmp47 = m_3 * tmp36
+    tmp48 = m_4 * tmp38
+    gn1_1 = g1_1 * tmp0
+    tmp40 = I_1 * gn1_1
+    gn2_1 = g2_1 * tmp0
+    gn3_1 = g3_1 * tmp0
+    gn1_2 = g1_2 * tmp1
+    tmp41 = I_2 * gn1_2
+    gn2_2 = g2_2 * tmp1
+    gn3_2 = g3_2 * tmp1
+    gn1_3 = g1_3 * tmp2
+    tmp42 = I_3 * gn1_3
+    gn2_3 = g2_3 * tmp2
+    gn3_3 = g3_3 * tmp2
+    gn1_4 = g1_4 * tmp3
+    tmp43 = I_4 * gn1_4
+    gn2_4 = g2_4 * tmp3
+    gn3_4 = g3_4 * tmp3
+    IC11 = ((((((((I11 + I_1 * (1.0_c_double - gn1_1 * gn1_1)) + I_2 * (1.0_c_double - gn1_2 * &
+        gn1_2)) + I_3 * (1.0_c_double - gn1_3 * gn1_3)) + I_4 * (1.0_c_double - gn1_4 * gn1_4)) + &
+        m_1 * (tmp13 + tmp16)) + m_2 * (tmp18 + tmp20)) + m_3 * (tmp22 + tmp24)) + m_4 * (tmp26 + &
+        tmp28)) + m_a * (tmp7 + tmp9)
+    IC22 = ((((((((I22 + I_1 * (1.0_c_double - gn2_1 * gn2_1)) + I_2 * (1.0_c_double - gn2_2 * &
+        gn2_2)) + I_3 * (1.0_c_double - gn2_3 * gn2_3)) + I_4 * (1.0_c_double - gn2_4 * gn2_4)) + &
+        m_1 * (tmp16 + tmp33)) + m_2 * (tmp20 + tmp35)) + m_3 * (tmp24 + tmp37)) + m_4 * (tmp28 + &
+        tmp39)) + m_a * (tmp30 + tmp9)
+    IC33 = ((((((((I33 + I_1 * (1.0_c_double - gn3_1 * gn3_1)) + I_2 * (1.0_c_double - gn3_2 * &
+        gn3_2)) + I_3 * (1.0_c_double - gn3_3 * gn3_3)) + I_4 * (1.0_c_double - gn3_4 * gn3_4)) + &
+        m_1 * (tmp13 + tmp33)) + m_2 * (tmp18 + tmp35)) + m_3 * (tmp22 + tmp37)) + m_4 * (tmp26 + &
+        tmp39)) + m_a * (tmp30 + tmp7)
+    IC12 = ((((((((I12 - gn2_1 * tmp40) - gn2_2 * tmp41) - gn2_3 * tmp42) - gn2_4 * tmp43) - &
+        tmp12 * tmp45) - tmp17 * tmp46) - tmp21 * tmp47) - tmp25 * tmp48) - tmp44 * tmp6
+    IC13 = ((((((((I13 - gn3_1 * tmp40) - gn3_2 * tmp41) - gn3_3 * tmp42) - gn3_4 * tmp43) - &
+        tmp15 * tmp45) - tmp19 * tmp46) - tmp23 * tmp47) - tmp27 * tmp48) - tmp44 * tmp8
+    IC23 = ((((((((I23 - (I_1 * gn2_1) * gn3_1) - (I_2 * gn2_2) * gn3_2) - (I_3 * gn2_3) * gn3_3) &
+        - (I_4 * gn2_4) * gn3_4) - (m_1 * tmp12) * tmp15) - (m_2 * tmp17) * tmp19) - (m_3 * &
+        tmp21) * tmp23) - (m_4 * tmp25) * tmp27) - ((m_a * tmp5) * tmp6) * tmp8
+    tmp49 = IC23 * IC23
+    tmp50 = IC22 * IC33 - tmp49
+    tmp51 = IC12 * IC12
+    tmp52 = IC13 * IC13
+    tmp53 = 1.0_c_double / (((((IC11 * IC22) * IC33 + ((2.0_c_double * IC12) * IC13) * IC23) - &
+        IC11 * tmp49) - IC22 * tmp52) - IC33 * tmp51)
+    tmp54 = IC12 * IC33 - IC13 * IC23
+    tmp55 = IC12 * IC23 - IC13 * IC22
+    tmp56 = IC11 * IC33 - tmp52
+    tmp57 = IC11 * IC23 - IC12 * IC13
+    tmp58 = IC11 * IC22 - tmp51
     tmp59 = -tmp54
-    c(1) = tmp50*tmp53
-    c(2) = -tmp53*tmp54
-    c(3) = tmp53*tmp55
-    c(4) = tmp53*tmp56
-    c(5) = -tmp53*tmp57
-    c(6) = tmp53*tmp58
-    c(7) = 1.0_c_double/J_1
-    c(8) = 1.0_c_double/J_2
-    c(9) = 1.0_c_double/J_3
-    c(10) = 1.0_c_double/J_4
-    c(11) = IC11
-    c(12) = IC12
-    c(13) = IC13
-    c(14) = J_1*gn1_1
-    c(15) = J_2*gn1_2
-    c(16) = J_3*gn1_3
-    c(17) = J_4*gn1_4
-    c(18) = IC22
-    c(19) = IC23
-    c(20) = J_1*gn2_1
-    c(21) = J_2*gn2_2
-    c(22) = J_3*gn2_3
-    c(23) = J_4*gn2_4
-    c(24) = IC33
-    c(25) = J_1*gn3_1
-    c(26) = J_2*gn3_2
-    c(27) = J_3*gn3_3
-    c(28) = J_4*gn3_4
-    c(29) = -gn1_1
-    c(30) = -gn2_1
-    c(31) = -gn3_1
-    c(32) = (1.0d0/20.0d0)*w_ref_1
-    c(33) = -gn1_2
-    c(34) = -gn2_2
-    c(35) = -gn3_2
-    c(36) = (1.0d0/20.0d0)*w_ref_2
-    c(37) = -gn1_3
-    c(38) = -gn2_3
-    c(39) = -gn3_3
-    c(40) = (1.0d0/20.0d0)*w_ref_3
-    c(41) = -gn1_4
-    c(42) = -gn2_4
-    c(43) = -gn3_4
-    c(44) = (1.0d0/20.0d0)*w_ref_4
-    c(45) = (1.0d0/2.0d0)*IC11
-    c(46) = (1.0d0/2.0d0)*IC22
-    c(47) = (1.0d0/2.0d0)*IC33
-    c(48) = (1.0d0/2.0d0)*J_1
-    c(49) = (1.0d0/2.0d0)*J_2
-    c(50) = (1.0d0/2.0d0)*J_3
-    c(51) = (1.0d0/2.0d0)*J_4
-    c(52) = (1.0d0/20.0d0)*gn1_1
-    c(53) = (1.0d0/20.0d0)*gn2_1
-    c(54) = (1.0d0/20.0d0)*gn3_1
-    c(55) = (1.0d0/20.0d0)*gn1_2
-    c(56) = (1.0d0/20.0d0)*gn2_2
-    c(57) = (1.0d0/20.0d0)*gn3_2
-    c(58) = (1.0d0/20.0d0)*gn1_3
-    c(59) = (1.0d0/20.0d0)*gn2_3
-    c(60) = (1.0d0/20.0d0)*gn3_3
-    c(61) = (1.0d0/20.0d0)*gn1_4
-    c(62) = (1.0d0/20.0d0)*gn2_4
-    c(63) = (1.0d0/20.0d0)*gn3_4
-    c(64) = sqrt(IC11*IC11 + IC22*IC22 + IC33*IC33 + 2*tmp49 + 2*tmp51 + 2* &
-          tmp52)*sqrt(tmp50*tmp50 + 2*tmp55*tmp55 + tmp56*tmp56 + 2*tmp57* &
-          tmp57 + tmp58*tmp58 + 2*tmp59*tmp59)/abs(IC11*tmp50 + IC12*tmp59 &
-          + IC13*tmp55)
-    if (.not. (c(RW4_HARDWARE_COND) <= 10000000000000.0_c_double)) then
-      status = RW4_HARDWARE_ERR_MASS_SINGULAR
+    c(0) = tmp50 * tmp53
+    c(1) = -tmp53 * tmp54
+    c(2) = tmp53 * tmp55
+    c(3) = tmp53 * tmp56
+    c(4) = -tmp53 * tmp57
+    c(5) = tmp53 * tmp58
+    c(6) = 1.0_c_double / J_1
+    c(7) = 1.0_c_double / J_2
+    c(8) = 1.0_c_double / J_3
+    c(9) = 1.0_c_double / J_4
+    c(10) = IC11
+    c(11) = IC12
+    c(12) = IC13
+    c(13) = J_1 * gn1_1
+    c(14) = J_2 * gn1_2
+    c(15) = J_3 * gn1_3
+    c(16) = J_4 * gn1_4
+    c(17) = IC22
+    c(18) = IC23
+    c(19) = J_1 * gn2_1
+    c(20) = J_2 * gn2_2
+    c(21) = J_3 * gn2_3
+    c(22) = J_4 * gn2_4
+    c(23) = IC33
+    c(24) = J_1 * gn3_1
+    c(25) = J_2 * gn3_2
+    c(26) = J_3 * gn3_3
+    c(27) = J_4 * gn3_4
+    c(28) = -gn1_1
+    c(29) = -gn2_1
+    c(30) = -gn3_1
+    c(31) = w_ref_1 / 20.0_c_double
+    c(32) = -gn1_2
+    c(33) = -gn2_2
+    c(34) = -gn3_2
+    c(35) = w_ref_2 / 20.0_c_double
+    c(36) = -gn1_3
+    c(37) = -gn2_3
+    c(38) = -gn3_3
+    c(39) = w_ref_3 / 20.0_c_double
+    c(40) = -gn1_4
+    c(41) = -gn2_4
+    c(42) = -gn3_4
+    c(43) = w_ref_4 / 20.0_c_double
+    c(44) = IC11 / 2.0_c_double
+    c(45) = IC22 / 2.0_c_double
+    c(46) = IC33 / 2.0_c_double
+    c(47) = J_1 / 2.0_c_double
+    c(48) = J_2 / 2.0_c_double
+    c(49) = J_3 / 2.0_c_double
+    c(50) = J_4 / 2.0_c_double
+    c(51) = gn1_1 / 20.0_c_double
+    c(52) = gn2_1 / 20.0_c_double
+    c(53) = gn3_1 / 20.0_c_double
+    c(54) = gn1_2 / 20.0_c_double
+    c(55) = gn2_2 / 20.0_c_double
+    c(56) = gn3_2 / 20.0_c_double
+    c(57) = gn1_3 / 20.0_c_double
+    c(58) = gn2_3 / 20.0_c_double
+    c(59) = gn3_3 / 20.0_c_double
+    c(60) = gn1_4 / 20.0_c_double
+    c(61) = gn2_4 / 20.0_c_double
+    c(62) = gn3_4 / 20.0_c_double
+    c(63) = (sqrt(((((IC11 * IC11 + IC22 * IC22) + IC33 * IC33) + 2.0_c_double * tmp49) + &
+        2.0_c_double * tmp51) + 2.0_c_double * tmp52) * sqrt(((((tmp50 * tmp50 + tmp56 * tmp56) + &
+        tmp58 * tmp58) + 2.0_c_double * (tmp55 * tmp55)) + 2.0_c_double * (tmp57 * tmp57)) + &
+        2.0_c_double * (tmp59 * tmp59))) / abs((IC11 * tmp50 + IC12 * tmp59) + IC13 * tmp55)
+    if (.not. (c(63) <= 10000000000000.0_c_double)) then
+      res = RW4_HARDWARE_ERR_MASS_SINGULAR
       return
     end if
-    if (.not. all(ieee_is_finite(c))) then
-      status = RW4_HARDWARE_ERR_OVERFLOW
-      return
-    end if
-    status = RW4_HARDWARE_OK
+    do i_ = 0, 64 - 1
+      if (.not. ieee_is_finite(c(i_))) then
+        res = RW4_HARDWARE_ERR_OVERFLOW
+        return
+      end if
+    end do
+    res = RW4_HARDWARE_OK
+    return
   end function rw4_hardware_setup
 
   ! The message for a return code, blank-padded to 85 characters: trim() it.
@@ -714,14 +741,14 @@ contains
   end function rw4_hardware_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from rw4_hardware_setup (152 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from rw4_hardware_setup (152 ops).
   subroutine rw4_hardware_rhs(t, x, c, dxdt) bind(C, name="rw4_hardware_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(64)
-    real(c_double), intent(out) :: dxdt(10)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:63)
+    real(c_double), intent(out) :: dxdt(0:9)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -749,60 +776,59 @@ contains
     real(c_double) :: f2
     real(c_double) :: f3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
     tmp0 = rw4_hardware_sin(q3)
     tmp1 = rw4_hardware_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/rw4_hardware_cos(q2)
-    h1 = c(11)*u1 + c(12)*u2 + c(13)*u3 + c(14)*w1 + c(15)*w2 + c(16)*w3 + c &
-          (17)*w4
-    h2 = c(12)*u1 + c(18)*u2 + c(19)*u3 + c(20)*w1 + c(21)*w2 + c(22)*w3 + c &
-          (23)*w4
-    h3 = c(13)*u1 + c(19)*u2 + c(24)*u3 + c(25)*w1 + c(26)*w2 + c(27)*w3 + c &
-          (28)*w4
-    rel1 = c(29)*u1 + c(30)*u2 + c(31)*u3 + w1
-    net1 = -2e-05_c_double*rel1 + min(0.2_c_double, max(-0.2_c_double, c(32 &
-          ) - 0.05_c_double*rel1))
-    rel2 = c(33)*u1 + c(34)*u2 + c(35)*u3 + w2
-    net2 = -2e-05_c_double*rel2 + min(0.2_c_double, max(-0.2_c_double, c(36 &
-          ) - 0.05_c_double*rel2))
-    rel3 = c(37)*u1 + c(38)*u2 + c(39)*u3 + w3
-    net3 = -2e-05_c_double*rel3 + min(0.2_c_double, max(-0.2_c_double, c(40 &
-          ) - 0.05_c_double*rel3))
-    rel4 = c(41)*u1 + c(42)*u2 + c(43)*u3 + w4
-    net4 = -2e-05_c_double*rel4 + min(0.2_c_double, max(-0.2_c_double, c(44 &
-          ) - 0.05_c_double*rel4))
-    f1 = c(29)*net1 + c(33)*net2 + c(37)*net3 + c(41)*net4 + h2*u3 - h3*u2
-    f2 = c(30)*net1 + c(34)*net2 + c(38)*net3 + c(42)*net4 - h1*u3 + h3*u1
-    f3 = c(31)*net1 + c(35)*net2 + c(39)*net3 + c(43)*net4 + h1*u2 - h2*u1
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*rw4_hardware_sin(q2) + u2
-    dxdt(4) = c(1)*f1 + c(2)*f2 + c(3)*f3
-    dxdt(5) = c(2)*f1 + c(4)*f2 + c(5)*f3
-    dxdt(6) = c(3)*f1 + c(5)*f2 + c(6)*f3
-    dxdt(7) = c(7)*net1
-    dxdt(8) = c(8)*net2
-    dxdt(9) = c(9)*net3
-    dxdt(10) = c(10)*net4
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / rw4_hardware_cos(q2)
+    h1 = (((((c(10) * u1 + c(11) * u2) + c(12) * u3) + c(13) * w1) + c(14) * w2) + c(15) * w3) + &
+        c(16) * w4
+    h2 = (((((c(11) * u1 + c(17) * u2) + c(18) * u3) + c(19) * w1) + c(20) * w2) + c(21) * w3) + &
+        c(22) * w4
+    h3 = (((((c(12) * u1 + c(18) * u2) + c(23) * u3) + c(24) * w1) + c(25) * w2) + c(26) * w3) + &
+        c(27) * w4
+    rel1 = ((w1 + c(28) * u1) + c(29) * u2) + c(30) * u3
+    net1 = min(0.2_c_double, max(-0.2_c_double, &
+        c(31) - 0.05_c_double * rel1)) - 2e-05_c_double * rel1
+    rel2 = ((w2 + c(32) * u1) + c(33) * u2) + c(34) * u3
+    net2 = min(0.2_c_double, max(-0.2_c_double, &
+        c(35) - 0.05_c_double * rel2)) - 2e-05_c_double * rel2
+    rel3 = ((w3 + c(36) * u1) + c(37) * u2) + c(38) * u3
+    net3 = min(0.2_c_double, max(-0.2_c_double, &
+        c(39) - 0.05_c_double * rel3)) - 2e-05_c_double * rel3
+    rel4 = ((w4 + c(40) * u1) + c(41) * u2) + c(42) * u3
+    net4 = min(0.2_c_double, max(-0.2_c_double, &
+        c(43) - 0.05_c_double * rel4)) - 2e-05_c_double * rel4
+    f1 = ((((c(28) * net1 + c(32) * net2) + c(36) * net3) + c(40) * net4) + h2 * u3) - h3 * u2
+    f2 = ((((c(29) * net1 + c(33) * net2) + c(37) * net3) + c(41) * net4) + h3 * u1) - h1 * u3
+    f3 = ((((c(30) * net1 + c(34) * net2) + c(38) * net3) + c(42) * net4) + h1 * u2) - h2 * u1
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * rw4_hardware_sin(q2)
+    dxdt(3) = (c(0) * f1 + c(1) * f2) + c(2) * f3
+    dxdt(4) = (c(1) * f1 + c(3) * f2) + c(4) * f3
+    dxdt(5) = (c(2) * f1 + c(4) * f2) + c(5) * f3
+    dxdt(6) = c(6) * net1
+    dxdt(7) = c(7) * net2
+    dxdt(8) = c(8) * net3
+    dxdt(9) = c(9) * net4
   end subroutine rw4_hardware_rhs
 
   ! out = kinetic energy of the system (J): 26 ops.
-  subroutine rw4_hardware_kinetic_energy(t, x, c, out) &
-      bind(C, name="rw4_hardware_f_kinetic_energy")
+  subroutine rw4_hardware_kinetic_energy(t, x, c, out) bind(C, name="rw4_hardware_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(64)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:63)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
@@ -811,27 +837,28 @@ contains
     real(c_double) :: w3
     real(c_double) :: w4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
-    out(1) = c(47)*u3*u3 + c(48)*w1*w1 + c(49)*w2*w2 + c(50)*w3*w3 + c(51)* &
-          w4*w4 + u1*(c(12)*u2 + c(13)*u3 + c(45)*u1) + u2*(c(19)*u3 + c(46 &
-          )*u2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
+    out(0) = (((((c(46) * (u3 * u3) + c(47) * (w1 * w1)) + c(48) * (w2 * w2)) + c(49) * (w3 * &
+        w3)) + c(50) * (w4 * w4)) + u1 * ((c(11) * u2 + c(12) * u3) + c(44) * u1)) + u2 * (c(18) &
+        * u3 + c(45) * u2)
   end subroutine rw4_hardware_kinetic_energy
 
-  ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 76 ops.
-  subroutine rw4_hardware_angular_momentum(t, x, c, out) &
-      bind(C, name="rw4_hardware_f_angular_momentum")
+  ! out = angular momentum about the mass center, N components h[0..2] (kg
+  ! m^2/s): 76 ops.
+  subroutine rw4_hardware_angular_momentum(t, x, c, out) bind(C, &
+          name="rw4_hardware_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(64)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:63)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -856,48 +883,45 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
     tmp0 = rw4_hardware_sin(q1)
-    tmp1 = c(12)*u1 + c(18)*u2 + c(19)*u3 + c(20)*w1 + c(21)*w2 + c(22)*w3 + &
-          c(23)*w4
+    tmp1 = (((((c(11) * u1 + c(17) * u2) + c(18) * u3) + c(19) * w1) + c(20) * w2) + c(21) * w3) &
+        + c(22) * w4
     tmp2 = rw4_hardware_cos(q2)
-    tmp3 = tmp1*tmp2
+    tmp3 = tmp1 * tmp2
     tmp4 = rw4_hardware_sin(q3)
     tmp5 = rw4_hardware_cos(q1)
-    tmp6 = tmp4*tmp5
+    tmp6 = tmp4 * tmp5
     tmp7 = rw4_hardware_sin(q2)
     tmp8 = rw4_hardware_cos(q3)
-    tmp9 = tmp0*tmp8
-    tmp10 = c(13)*u1 + c(19)*u2 + c(24)*u3 + c(25)*w1 + c(26)*w2 + c(27)*w3 &
-          + c(28)*w4
-    tmp11 = tmp0*tmp4
-    tmp12 = c(11)*u1 + c(12)*u2 + c(13)*u3 + c(14)*w1 + c(15)*w2 + c(16)*w3 &
-          + c(17)*w4
-    out(1) = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + &
-          tmp5*tmp8)
-    out(2) = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + &
-          tmp3*tmp5
-    out(3) = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4
+    tmp9 = tmp0 * tmp8
+    tmp10 = (((((c(12) * u1 + c(18) * u2) + c(23) * u3) + c(24) * w1) + c(25) * w2) + c(26) * w3) &
+        + c(27) * w4
+    tmp11 = tmp0 * tmp4
+    tmp12 = (((((c(10) * u1 + c(11) * u2) + c(12) * u3) + c(13) * w1) + c(14) * w2) + c(15) * w3) &
+        + c(16) * w4
+    out(0) = (tmp10 * (tmp6 + tmp7 * tmp9) + tmp12 * (tmp5 * tmp8 - tmp11 * tmp7)) - tmp0 * tmp3
+    out(1) = (tmp10 * (tmp11 - (tmp5 * tmp7) * tmp8) + tmp12 * (tmp9 + tmp6 * tmp7)) + tmp3 * tmp5
+    out(2) = (tmp1 * tmp7 + (tmp10 * tmp2) * tmp8) - (tmp12 * tmp2) * tmp4
   end subroutine rw4_hardware_angular_momentum
 
   ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 68 ops.
-  subroutine rw4_hardware_power(t, x, c, out) &
-      bind(C, name="rw4_hardware_f_power")
+  subroutine rw4_hardware_power(t, x, c, out) bind(C, name="rw4_hardware_f_power")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(64)
-    real(c_double), intent(out) :: out(4)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:63)
+    real(c_double), intent(out) :: out(0:3)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
@@ -906,27 +930,23 @@ contains
     real(c_double) :: w3
     real(c_double) :: w4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
-    out(1) = (c(29)*u1 + c(30)*u2 + c(31)*u3 + w1)*min(0.2_c_double, max( &
-          -0.2_c_double, c(32) + c(52)*u1 + c(53)*u2 + c(54)*u3 - &
-          0.05_c_double*w1))
-    out(2) = (c(33)*u1 + c(34)*u2 + c(35)*u3 + w2)*min(0.2_c_double, max( &
-          -0.2_c_double, c(36) + c(55)*u1 + c(56)*u2 + c(57)*u3 - &
-          0.05_c_double*w2))
-    out(3) = (c(37)*u1 + c(38)*u2 + c(39)*u3 + w3)*min(0.2_c_double, max( &
-          -0.2_c_double, c(40) + c(58)*u1 + c(59)*u2 + c(60)*u3 - &
-          0.05_c_double*w3))
-    out(4) = (c(41)*u1 + c(42)*u2 + c(43)*u3 + w4)*min(0.2_c_double, max( &
-          -0.2_c_double, c(44) + c(61)*u1 + c(62)*u2 + c(63)*u3 - &
-          0.05_c_double*w4))
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
+    out(0) = (((w1 + c(28) * u1) + c(29) * u2) + c(30) * u3) * min(0.2_c_double, &
+        max(-0.2_c_double, (((c(31) + c(51) * u1) + c(52) * u2) + c(53) * u3) - 0.05_c_double * w1))
+    out(1) = (((w2 + c(32) * u1) + c(33) * u2) + c(34) * u3) * min(0.2_c_double, &
+        max(-0.2_c_double, (((c(35) + c(54) * u1) + c(55) * u2) + c(56) * u3) - 0.05_c_double * w2))
+    out(2) = (((w3 + c(36) * u1) + c(37) * u2) + c(38) * u3) * min(0.2_c_double, &
+        max(-0.2_c_double, (((c(39) + c(57) * u1) + c(58) * u2) + c(59) * u3) - 0.05_c_double * w3))
+    out(3) = (((w4 + c(40) * u1) + c(41) * u2) + c(42) * u3) * min(0.2_c_double, &
+        max(-0.2_c_double, (((c(43) + c(60) * u1) + c(61) * u2) + c(62) * u3) - 0.05_c_double * w4))
   end subroutine rw4_hardware_power
 
 end module rw4_hardware_mod

@@ -227,194 +227,281 @@ const char *rw4_hardware_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (481 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (481 ops). */
 void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
+    double tmp13;
+    double tmp14;
+    double tmp15;
+    double tmp16;
+    double tmp17;
+    double tmp18;
+    double tmp19;
+    double tmp20;
+    double tmp21;
+    double tmp22;
+    double tmp23;
+    double tmp24;
+    double tmp25;
+    double tmp26;
+    double tmp27;
+    double tmp28;
+    double tmp29;
+    double tmp30;
+    double tmp31;
+    double tmp32;
+    double tmp33;
+    double tmp34;
+    double tmp35;
+    double tmp36;
+    double tmp37;
+    double tmp38;
+    double tmp39;
+    double tmp40;
+    double tmp41;
+    double tmp42;
+    double tmp43;
+    double tmp44;
+    double tmp45;
+    double tmp46;
+    double tmp47;
+    double tmp48;
+    double tmp49;
+    double tmp50;
+    double tmp51;
+    double tmp52;
+    double tmp53;
+    double tmp54;
+    double tmp55;
+    double tmp56;
+    double tmp57;
+    double tmp58;
+    double tmp59;
+    double tmp60;
+    double tmp61;
+    double tmp62;
+    double tmp63;
+    double tmp64;
+    double tmp65;
+    double tmp66;
+    double tmp67;
+    double tmp68;
+    double tmp69;
+    double tmp70;
+    double tmp71;
 
-    const double tmp0 = rw4_hardware_sin(q2);
-    const double tmp1 = rw4_hardware_cos(q2);
-    const double tmp2 = rw4_hardware_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = rw4_hardware_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = c[11]*u3;
-    const double tmp13 = c[12]*u2;
-    const double tmp14 = 0.05*u1;
-    const double tmp15 = 0.05*u2;
-    const double tmp16 = 0.05*u3;
-    const double tmp17 = c[28]*tmp14 + c[29]*tmp15 + c[30]*tmp16 - c[31] + 0.05*w1;
-    const double tmp18 = 0.05*((0.2 - tmp17) > 0.0 ? 1.0 : 0.0)*((0.2 - fmax(-0.2, -tmp17)) > 0.0 ? 1.0 : 0.0);
-    const double tmp19 = -c[28]*tmp18 - 2e-05*c[28];
-    const double tmp20 = c[32]*tmp14 + c[33]*tmp15 + c[34]*tmp16 - c[35] + 0.05*w2;
-    const double tmp21 = 0.05*((0.2 - tmp20) > 0.0 ? 1.0 : 0.0)*((0.2 - fmax(-0.2, -tmp20)) > 0.0 ? 1.0 : 0.0);
-    const double tmp22 = -c[32]*tmp21 - 2e-05*c[32];
-    const double tmp23 = c[36]*tmp14 + c[37]*tmp15 + c[38]*tmp16 - c[39] + 0.05*w3;
-    const double tmp24 = 0.05*((0.2 - tmp23) > 0.0 ? 1.0 : 0.0)*((0.2 - fmax(-0.2, -tmp23)) > 0.0 ? 1.0 : 0.0);
-    const double tmp25 = -c[36]*tmp24 - 2e-05*c[36];
-    const double tmp26 = c[40]*tmp14 + c[41]*tmp15 + c[42]*tmp16 - c[43] + 0.05*w4;
-    const double tmp27 = 0.05*((0.2 - tmp26) > 0.0 ? 1.0 : 0.0)*((0.2 - fmax(-0.2, -tmp26)) > 0.0 ? 1.0 : 0.0);
-    const double tmp28 = -c[40]*tmp27 - 2e-05*c[40];
-    const double tmp29 = c[28]*tmp19 + c[32]*tmp22 + c[36]*tmp25 + c[40]*tmp28 + tmp12 - tmp13;
-    const double tmp30 = c[18]*u2;
-    const double tmp31 = c[12]*u1;
-    const double tmp32 = c[23]*u3 + c[24]*w1 + c[25]*w2 + c[26]*w3 + c[27]*w4;
-    const double tmp33 = -c[10]*u3 + c[29]*tmp19 + c[33]*tmp22 + c[37]*tmp25 + c[41]*tmp28 + tmp30 + 2*tmp31 + tmp32;
-    const double tmp34 = c[18]*u3;
-    const double tmp35 = c[11]*u1;
-    const double tmp36 = c[17]*u2 + c[19]*w1 + c[20]*w2 + c[21]*w3 + c[22]*w4;
-    const double tmp37 = c[10]*u2 + c[30]*tmp19 + c[34]*tmp22 + c[38]*tmp25 + c[42]*tmp28 - tmp34 - 2*tmp35 - tmp36;
-    const double tmp38 = c[18]*u1;
-    const double tmp39 = -c[29]*tmp18 - 2e-05*c[29];
-    const double tmp40 = -c[33]*tmp21 - 2e-05*c[33];
-    const double tmp41 = -c[37]*tmp24 - 2e-05*c[37];
-    const double tmp42 = -c[41]*tmp27 - 2e-05*c[41];
-    const double tmp43 = c[29]*tmp39 + c[33]*tmp40 + c[37]*tmp41 + c[41]*tmp42 - tmp12 + tmp38;
-    const double tmp44 = c[12]*u3;
-    const double tmp45 = c[11]*u2;
-    const double tmp46 = c[10]*u1 + c[13]*w1 + c[14]*w2 + c[15]*w3 + c[16]*w4;
-    const double tmp47 = -c[17]*u1 + c[30]*tmp39 + c[34]*tmp40 + c[38]*tmp41 + c[42]*tmp42 + tmp44 + 2*tmp45 + tmp46;
-    const double tmp48 = c[17]*u3 + c[28]*tmp39 + c[32]*tmp40 + c[36]*tmp41 + c[40]*tmp42 - 2*tmp30 - tmp31 - tmp32;
-    const double tmp49 = -c[30]*tmp18 - 2e-05*c[30];
-    const double tmp50 = -c[34]*tmp21 - 2e-05*c[34];
-    const double tmp51 = -c[38]*tmp24 - 2e-05*c[38];
-    const double tmp52 = -c[42]*tmp27 - 2e-05*c[42];
-    const double tmp53 = c[30]*tmp49 + c[34]*tmp50 + c[38]*tmp51 + c[42]*tmp52 + tmp13 - tmp38;
-    const double tmp54 = -c[23]*u2 + c[28]*tmp49 + c[32]*tmp50 + c[36]*tmp51 + c[40]*tmp52 + 2*tmp34 + tmp35 + tmp36;
-    const double tmp55 = c[23]*u1 + c[29]*tmp49 + c[33]*tmp50 + c[37]*tmp51 + c[41]*tmp52 - 2*tmp44 - tmp45 - tmp46;
-    const double tmp56 = -tmp18 - 2e-05;
-    const double tmp57 = c[19]*u3 - c[24]*u2 + c[28]*tmp56;
-    const double tmp58 = -c[13]*u3 + c[24]*u1 + c[29]*tmp56;
-    const double tmp59 = c[13]*u2 - c[19]*u1 + c[30]*tmp56;
-    const double tmp60 = -tmp21 - 2e-05;
-    const double tmp61 = c[20]*u3 - c[25]*u2 + c[32]*tmp60;
-    const double tmp62 = -c[14]*u3 + c[25]*u1 + c[33]*tmp60;
-    const double tmp63 = c[14]*u2 - c[20]*u1 + c[34]*tmp60;
-    const double tmp64 = -tmp24 - 2e-05;
-    const double tmp65 = c[21]*u3 - c[26]*u2 + c[36]*tmp64;
-    const double tmp66 = -c[15]*u3 + c[26]*u1 + c[37]*tmp64;
-    const double tmp67 = c[15]*u2 - c[21]*u1 + c[38]*tmp64;
-    const double tmp68 = -tmp27 - 2e-05;
-    const double tmp69 = c[22]*u3 - c[27]*u2 + c[40]*tmp68;
-    const double tmp70 = -c[16]*u3 + c[27]*u1 + c[41]*tmp68;
-    const double tmp71 = c[16]*u2 - c[22]*u1 + c[42]*tmp68;
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = rw4_hardware_sin(q2);
+    tmp1 = rw4_hardware_cos(q2);
+    tmp2 = rw4_hardware_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = rw4_hardware_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = c[11] * u3;
+    tmp13 = c[12] * u2;
+    tmp14 = 0.05 * u1;
+    tmp15 = 0.05 * u2;
+    tmp16 = 0.05 * u3;
+    tmp17 = 0.05 * w1 + c[28] * tmp14 + c[29] * tmp15 + c[30] * tmp16 - c[31];
+    tmp18 = 0.05 * (0.2 - tmp17 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, -tmp17) > 0.0 ? 1.0 : 0.0);
+    tmp19 = -(2e-05 * c[28]) - c[28] * tmp18;
+    tmp20 = 0.05 * w2 + c[32] * tmp14 + c[33] * tmp15 + c[34] * tmp16 - c[35];
+    tmp21 = 0.05 * (0.2 - tmp20 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, -tmp20) > 0.0 ? 1.0 : 0.0);
+    tmp22 = -(2e-05 * c[32]) - c[32] * tmp21;
+    tmp23 = 0.05 * w3 + c[36] * tmp14 + c[37] * tmp15 + c[38] * tmp16 - c[39];
+    tmp24 = 0.05 * (0.2 - tmp23 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, -tmp23) > 0.0 ? 1.0 : 0.0);
+    tmp25 = -(2e-05 * c[36]) - c[36] * tmp24;
+    tmp26 = 0.05 * w4 + c[40] * tmp14 + c[41] * tmp15 + c[42] * tmp16 - c[43];
+    tmp27 = 0.05 * (0.2 - tmp26 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, -tmp26) > 0.0 ? 1.0 : 0.0);
+    tmp28 = -(2e-05 * c[40]) - c[40] * tmp27;
+    tmp29 = tmp12 + c[28] * tmp19 + c[32] * tmp22 + c[36] * tmp25 + c[40] * tmp28 - tmp13;
+    tmp30 = c[18] * u2;
+    tmp31 = c[12] * u1;
+    tmp32 = c[23] * u3 + c[24] * w1 + c[25] * w2 + c[26] * w3 + c[27] * w4;
+    tmp33 = tmp30 + tmp32 + 2.0 * tmp31 + c[29] * tmp19 + c[33] * tmp22 + c[37] * tmp25 + c[41] *
+            tmp28 - c[10] * u3;
+    tmp34 = c[18] * u3;
+    tmp35 = c[11] * u1;
+    tmp36 = c[17] * u2 + c[19] * w1 + c[20] * w2 + c[21] * w3 + c[22] * w4;
+    tmp37 = c[10] * u2 + c[30] * tmp19 + c[34] * tmp22 + c[38] * tmp25 + c[42] * tmp28 - tmp34 -
+            tmp36 - 2.0 * tmp35;
+    tmp38 = c[18] * u1;
+    tmp39 = -(2e-05 * c[29]) - c[29] * tmp18;
+    tmp40 = -(2e-05 * c[33]) - c[33] * tmp21;
+    tmp41 = -(2e-05 * c[37]) - c[37] * tmp24;
+    tmp42 = -(2e-05 * c[41]) - c[41] * tmp27;
+    tmp43 = tmp38 + c[29] * tmp39 + c[33] * tmp40 + c[37] * tmp41 + c[41] * tmp42 - tmp12;
+    tmp44 = c[12] * u3;
+    tmp45 = c[11] * u2;
+    tmp46 = c[10] * u1 + c[13] * w1 + c[14] * w2 + c[15] * w3 + c[16] * w4;
+    tmp47 = tmp44 + tmp46 + 2.0 * tmp45 + c[30] * tmp39 + c[34] * tmp40 + c[38] * tmp41 + c[42] *
+            tmp42 - c[17] * u1;
+    tmp48 = c[17] * u3 + c[28] * tmp39 + c[32] * tmp40 + c[36] * tmp41 + c[40] * tmp42 - tmp31 -
+            tmp32 - 2.0 * tmp30;
+    tmp49 = -(2e-05 * c[30]) - c[30] * tmp18;
+    tmp50 = -(2e-05 * c[34]) - c[34] * tmp21;
+    tmp51 = -(2e-05 * c[38]) - c[38] * tmp24;
+    tmp52 = -(2e-05 * c[42]) - c[42] * tmp27;
+    tmp53 = tmp13 + c[30] * tmp49 + c[34] * tmp50 + c[38] * tmp51 + c[42] * tmp52 - tmp38;
+    tmp54 = tmp35 + tmp36 + 2.0 * tmp34 + c[28] * tmp49 + c[32] * tmp50 + c[36] * tmp51 + c[40] *
+            tmp52 - c[23] * u2;
+    tmp55 = c[23] * u1 + c[29] * tmp49 + c[33] * tmp50 + c[37] * tmp51 + c[41] * tmp52 - tmp45 -
+            tmp46 - 2.0 * tmp44;
+    tmp56 = -2e-05 - tmp18;
+    tmp57 = c[19] * u3 + c[28] * tmp56 - c[24] * u2;
+    tmp58 = c[24] * u1 + c[29] * tmp56 - c[13] * u3;
+    tmp59 = c[13] * u2 + c[30] * tmp56 - c[19] * u1;
+    tmp60 = -2e-05 - tmp21;
+    tmp61 = c[20] * u3 + c[32] * tmp60 - c[25] * u2;
+    tmp62 = c[25] * u1 + c[33] * tmp60 - c[14] * u3;
+    tmp63 = c[14] * u2 + c[34] * tmp60 - c[20] * u1;
+    tmp64 = -2e-05 - tmp24;
+    tmp65 = c[21] * u3 + c[36] * tmp64 - c[26] * u2;
+    tmp66 = c[26] * u1 + c[37] * tmp64 - c[15] * u3;
+    tmp67 = c[15] * u2 + c[38] * tmp64 - c[21] * u1;
+    tmp68 = -2e-05 - tmp27;
+    tmp69 = c[22] * u3 + c[40] * tmp68 - c[27] * u2;
+    tmp70 = c[27] * u1 + c[41] * tmp68 - c[16] * u3;
+    tmp71 = c[16] * u2 + c[42] * tmp68 - c[22] * u1;
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
     J[3] = -tmp10;
-    J[4] = 0;
+    J[4] = 0.0;
     J[5] = tmp11;
-    J[6] = 0;
-    J[7] = 0;
-    J[8] = 0;
-    J[9] = 0;
-    J[10] = 0;
-    J[11] = 0;
+    J[6] = 0.0;
+    J[7] = 0.0;
+    J[8] = 0.0;
+    J[9] = 0.0;
+    J[10] = 0.0;
+    J[11] = 0.0;
     J[12] = tmp6;
     J[13] = tmp4;
-    J[14] = 0;
+    J[14] = 0.0;
     J[15] = tmp2;
-    J[16] = 0;
-    J[17] = 0;
-    J[18] = 0;
-    J[19] = 0;
-    J[20] = 0;
-    J[21] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[22] = -tmp0*tmp9;
-    J[23] = tmp0*tmp10;
-    J[24] = 1;
-    J[25] = -tmp0*tmp11;
-    J[26] = 0;
-    J[27] = 0;
-    J[28] = 0;
-    J[29] = 0;
-    J[30] = 0;
-    J[31] = 0;
-    J[32] = 0;
-    J[33] = c[0]*tmp29 + c[1]*tmp33 + c[2]*tmp37;
-    J[34] = c[0]*tmp48 + c[1]*tmp43 + c[2]*tmp47;
-    J[35] = c[0]*tmp54 + c[1]*tmp55 + c[2]*tmp53;
-    J[36] = c[0]*tmp57 + c[1]*tmp58 + c[2]*tmp59;
-    J[37] = c[0]*tmp61 + c[1]*tmp62 + c[2]*tmp63;
-    J[38] = c[0]*tmp65 + c[1]*tmp66 + c[2]*tmp67;
-    J[39] = c[0]*tmp69 + c[1]*tmp70 + c[2]*tmp71;
-    J[40] = 0;
-    J[41] = 0;
-    J[42] = 0;
-    J[43] = c[1]*tmp29 + c[3]*tmp33 + c[4]*tmp37;
-    J[44] = c[1]*tmp48 + c[3]*tmp43 + c[4]*tmp47;
-    J[45] = c[1]*tmp54 + c[3]*tmp55 + c[4]*tmp53;
-    J[46] = c[1]*tmp57 + c[3]*tmp58 + c[4]*tmp59;
-    J[47] = c[1]*tmp61 + c[3]*tmp62 + c[4]*tmp63;
-    J[48] = c[1]*tmp65 + c[3]*tmp66 + c[4]*tmp67;
-    J[49] = c[1]*tmp69 + c[3]*tmp70 + c[4]*tmp71;
-    J[50] = 0;
-    J[51] = 0;
-    J[52] = 0;
-    J[53] = c[2]*tmp29 + c[4]*tmp33 + c[5]*tmp37;
-    J[54] = c[2]*tmp48 + c[4]*tmp43 + c[5]*tmp47;
-    J[55] = c[2]*tmp54 + c[4]*tmp55 + c[5]*tmp53;
-    J[56] = c[2]*tmp57 + c[4]*tmp58 + c[5]*tmp59;
-    J[57] = c[2]*tmp61 + c[4]*tmp62 + c[5]*tmp63;
-    J[58] = c[2]*tmp65 + c[4]*tmp66 + c[5]*tmp67;
-    J[59] = c[2]*tmp69 + c[4]*tmp70 + c[5]*tmp71;
-    J[60] = 0;
-    J[61] = 0;
-    J[62] = 0;
-    J[63] = c[6]*tmp19;
-    J[64] = c[6]*tmp39;
-    J[65] = c[6]*tmp49;
-    J[66] = c[6]*tmp56;
-    J[67] = 0;
-    J[68] = 0;
-    J[69] = 0;
-    J[70] = 0;
-    J[71] = 0;
-    J[72] = 0;
-    J[73] = c[7]*tmp22;
-    J[74] = c[7]*tmp40;
-    J[75] = c[7]*tmp50;
-    J[76] = 0;
-    J[77] = c[7]*tmp60;
-    J[78] = 0;
-    J[79] = 0;
-    J[80] = 0;
-    J[81] = 0;
-    J[82] = 0;
-    J[83] = c[8]*tmp25;
-    J[84] = c[8]*tmp41;
-    J[85] = c[8]*tmp51;
-    J[86] = 0;
-    J[87] = 0;
-    J[88] = c[8]*tmp64;
-    J[89] = 0;
-    J[90] = 0;
-    J[91] = 0;
-    J[92] = 0;
-    J[93] = c[9]*tmp28;
-    J[94] = c[9]*tmp42;
-    J[95] = c[9]*tmp52;
-    J[96] = 0;
-    J[97] = 0;
-    J[98] = 0;
-    J[99] = c[9]*tmp68;
+    J[16] = 0.0;
+    J[17] = 0.0;
+    J[18] = 0.0;
+    J[19] = 0.0;
+    J[20] = 0.0;
+    J[21] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[22] = -(tmp0 * tmp9);
+    J[23] = tmp0 * tmp10;
+    J[24] = 1.0;
+    J[25] = -(tmp0 * tmp11);
+    J[26] = 0.0;
+    J[27] = 0.0;
+    J[28] = 0.0;
+    J[29] = 0.0;
+    J[30] = 0.0;
+    J[31] = 0.0;
+    J[32] = 0.0;
+    J[33] = c[0] * tmp29 + c[1] * tmp33 + c[2] * tmp37;
+    J[34] = c[0] * tmp48 + c[1] * tmp43 + c[2] * tmp47;
+    J[35] = c[0] * tmp54 + c[1] * tmp55 + c[2] * tmp53;
+    J[36] = c[0] * tmp57 + c[1] * tmp58 + c[2] * tmp59;
+    J[37] = c[0] * tmp61 + c[1] * tmp62 + c[2] * tmp63;
+    J[38] = c[0] * tmp65 + c[1] * tmp66 + c[2] * tmp67;
+    J[39] = c[0] * tmp69 + c[1] * tmp70 + c[2] * tmp71;
+    J[40] = 0.0;
+    J[41] = 0.0;
+    J[42] = 0.0;
+    J[43] = c[1] * tmp29 + c[3] * tmp33 + c[4] * tmp37;
+    J[44] = c[1] * tmp48 + c[3] * tmp43 + c[4] * tmp47;
+    J[45] = c[1] * tmp54 + c[3] * tmp55 + c[4] * tmp53;
+    J[46] = c[1] * tmp57 + c[3] * tmp58 + c[4] * tmp59;
+    J[47] = c[1] * tmp61 + c[3] * tmp62 + c[4] * tmp63;
+    J[48] = c[1] * tmp65 + c[3] * tmp66 + c[4] * tmp67;
+    J[49] = c[1] * tmp69 + c[3] * tmp70 + c[4] * tmp71;
+    J[50] = 0.0;
+    J[51] = 0.0;
+    J[52] = 0.0;
+    J[53] = c[2] * tmp29 + c[4] * tmp33 + c[5] * tmp37;
+    J[54] = c[2] * tmp48 + c[4] * tmp43 + c[5] * tmp47;
+    J[55] = c[2] * tmp54 + c[4] * tmp55 + c[5] * tmp53;
+    J[56] = c[2] * tmp57 + c[4] * tmp58 + c[5] * tmp59;
+    J[57] = c[2] * tmp61 + c[4] * tmp62 + c[5] * tmp63;
+    J[58] = c[2] * tmp65 + c[4] * tmp66 + c[5] * tmp67;
+    J[59] = c[2] * tmp69 + c[4] * tmp70 + c[5] * tmp71;
+    J[60] = 0.0;
+    J[61] = 0.0;
+    J[62] = 0.0;
+    J[63] = c[6] * tmp19;
+    J[64] = c[6] * tmp39;
+    J[65] = c[6] * tmp49;
+    J[66] = c[6] * tmp56;
+    J[67] = 0.0;
+    J[68] = 0.0;
+    J[69] = 0.0;
+    J[70] = 0.0;
+    J[71] = 0.0;
+    J[72] = 0.0;
+    J[73] = c[7] * tmp22;
+    J[74] = c[7] * tmp40;
+    J[75] = c[7] * tmp50;
+    J[76] = 0.0;
+    J[77] = c[7] * tmp60;
+    J[78] = 0.0;
+    J[79] = 0.0;
+    J[80] = 0.0;
+    J[81] = 0.0;
+    J[82] = 0.0;
+    J[83] = c[8] * tmp25;
+    J[84] = c[8] * tmp41;
+    J[85] = c[8] * tmp51;
+    J[86] = 0.0;
+    J[87] = 0.0;
+    J[88] = c[8] * tmp64;
+    J[89] = 0.0;
+    J[90] = 0.0;
+    J[91] = 0.0;
+    J[92] = 0.0;
+    J[93] = c[9] * tmp28;
+    J[94] = c[9] * tmp42;
+    J[95] = c[9] * tmp52;
+    J[96] = 0.0;
+    J[97] = 0.0;
+    J[98] = 0.0;
+    J[99] = c[9] * tmp68;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(rw4_hardware_stats *stats, double t0)
@@ -961,7 +1048,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[5] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 1]) + fabs(ai[i * RW4_HARDWARE_NX + 1]) > fabs(ar[p * RW4_HARDWARE_NX + 1]) + fabs(ai[p * RW4_HARDWARE_NX + 1])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 1]) + fabs(ai[i * RW4_HARDWARE_NX + 1]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 1]) + fabs(ai[p * RW4_HARDWARE_NX + 1])) {
             p = i;
         }
     }
@@ -1063,7 +1151,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[25] = ur * ai[22] + ui * ar[22];
     p = 3;
     for (i = 4; i < 10; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 3]) + fabs(ai[i * RW4_HARDWARE_NX + 3]) > fabs(ar[p * RW4_HARDWARE_NX + 3]) + fabs(ai[p * RW4_HARDWARE_NX + 3])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 3]) + fabs(ai[i * RW4_HARDWARE_NX + 3]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 3]) + fabs(ai[p * RW4_HARDWARE_NX + 3])) {
             p = i;
         }
     }
@@ -1151,7 +1240,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[39] = ur * ai[33] + ui * ar[33];
     p = 4;
     for (i = 5; i < 10; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 4]) + fabs(ai[i * RW4_HARDWARE_NX + 4]) > fabs(ar[p * RW4_HARDWARE_NX + 4]) + fabs(ai[p * RW4_HARDWARE_NX + 4])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 4]) + fabs(ai[i * RW4_HARDWARE_NX + 4]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 4]) + fabs(ai[p * RW4_HARDWARE_NX + 4])) {
             p = i;
         }
     }
@@ -1231,7 +1321,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[49] = ur * ai[44] + ui * ar[44];
     p = 5;
     for (i = 6; i < 10; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 5]) + fabs(ai[i * RW4_HARDWARE_NX + 5]) > fabs(ar[p * RW4_HARDWARE_NX + 5]) + fabs(ai[p * RW4_HARDWARE_NX + 5])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 5]) + fabs(ai[i * RW4_HARDWARE_NX + 5]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 5]) + fabs(ai[p * RW4_HARDWARE_NX + 5])) {
             p = i;
         }
     }
@@ -1303,7 +1394,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[59] = ur * ai[55] + ui * ar[55];
     p = 6;
     for (i = 7; i < 10; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 6]) + fabs(ai[i * RW4_HARDWARE_NX + 6]) > fabs(ar[p * RW4_HARDWARE_NX + 6]) + fabs(ai[p * RW4_HARDWARE_NX + 6])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 6]) + fabs(ai[i * RW4_HARDWARE_NX + 6]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 6]) + fabs(ai[p * RW4_HARDWARE_NX + 6])) {
             p = i;
         }
     }
@@ -1367,7 +1459,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[69] = ur * ai[66] + ui * ar[66];
     p = 7;
     for (i = 8; i < 10; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 7]) + fabs(ai[i * RW4_HARDWARE_NX + 7]) > fabs(ar[p * RW4_HARDWARE_NX + 7]) + fabs(ai[p * RW4_HARDWARE_NX + 7])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 7]) + fabs(ai[i * RW4_HARDWARE_NX + 7]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 7]) + fabs(ai[p * RW4_HARDWARE_NX + 7])) {
             p = i;
         }
     }
@@ -1423,7 +1516,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[79] = ur * ai[77] + ui * ar[77];
     p = 8;
     for (i = 9; i < 10; ++i) {
-        if (fabs(ar[i * RW4_HARDWARE_NX + 8]) + fabs(ai[i * RW4_HARDWARE_NX + 8]) > fabs(ar[p * RW4_HARDWARE_NX + 8]) + fabs(ai[p * RW4_HARDWARE_NX + 8])) {
+        if (fabs(ar[i * RW4_HARDWARE_NX + 8]) + fabs(ai[i * RW4_HARDWARE_NX + 8]) > fabs(ar[p *
+                RW4_HARDWARE_NX + 8]) + fabs(ai[p * RW4_HARDWARE_NX + 8])) {
             p = i;
         }
     }
@@ -2848,55 +2942,57 @@ struct RW4_HARDWARE_ALIGNED lanes {
     int busy[RW4_HARDWARE_LANES];
 };
 
-/* rw4_hardware_rhs_lanes on RW4_HARDWARE_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *RW4_HARDWARE_RESTRICT t,
                       double (*RW4_HARDWARE_RESTRICT x)[RW4_HARDWARE_LANES],
                       const double *RW4_HARDWARE_RESTRICT c,
                       double (*RW4_HARDWARE_RESTRICT dxdt)[RW4_HARDWARE_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     RW4_HARDWARE_SIMD
     for (l = 0; l < RW4_HARDWARE_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[3][l];
-        const double u2 = x[4][l];
-        const double u3 = x[5][l];
-        const double w1 = x[6][l];
-        const double w2 = x[7][l];
-        const double w3 = x[8][l];
-        const double w4 = x[9][l];
-
-        const double tmp0 = rw4_hardware_sin_lanes(q3);
-        const double tmp1 = rw4_hardware_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/rw4_hardware_cos_lanes(q2);
-        const double h1 = c[10]*u1 + c[11]*u2 + c[12]*u3 + c[13]*w1 + c[14]*w2 + c[15]*w3 + c[16]*w4;
-        const double h2 = c[11]*u1 + c[17]*u2 + c[18]*u3 + c[19]*w1 + c[20]*w2 + c[21]*w3 + c[22]*w4;
-        const double h3 = c[12]*u1 + c[18]*u2 + c[23]*u3 + c[24]*w1 + c[25]*w2 + c[26]*w3 + c[27]*w4;
-        const double rel1 = c[28]*u1 + c[29]*u2 + c[30]*u3 + w1;
-        const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[31] - 0.05*rel1));
-        const double rel2 = c[32]*u1 + c[33]*u2 + c[34]*u3 + w2;
-        const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[35] - 0.05*rel2));
-        const double rel3 = c[36]*u1 + c[37]*u2 + c[38]*u3 + w3;
-        const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[39] - 0.05*rel3));
-        const double rel4 = c[40]*u1 + c[41]*u2 + c[42]*u3 + w4;
-        const double net4 = -2e-05*rel4 + fmin(0.2, fmax(-0.2, c[43] - 0.05*rel4));
-        const double f1 = c[28]*net1 + c[32]*net2 + c[36]*net3 + c[40]*net4 + h2*u3 - h3*u2;
-        const double f2 = c[29]*net1 + c[33]*net2 + c[37]*net3 + c[41]*net4 - h1*u3 + h3*u1;
-        const double f3 = c[30]*net1 + c[34]*net2 + c[38]*net3 + c[42]*net4 + h1*u2 - h2*u1;
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, h1, h2, h3, rel1, net1,
+                rel2, net2, rel3, net3, rel4, net4, f1, f2, f3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        w1 = x[6][l];
+        w2 = x[7][l];
+        w3 = x[8][l];
+        w4 = x[9][l];
+        tmp0 = rw4_hardware_sin_lanes(q3);
+        tmp1 = rw4_hardware_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / rw4_hardware_cos_lanes(q2);
+        h1 = c[10] * u1 + c[11] * u2 + c[12] * u3 + c[13] * w1 + c[14] * w2 + c[15] * w3 + c[16]
+                * w4;
+        h2 = c[11] * u1 + c[17] * u2 + c[18] * u3 + c[19] * w1 + c[20] * w2 + c[21] * w3 + c[22]
+                * w4;
+        h3 = c[12] * u1 + c[18] * u2 + c[23] * u3 + c[24] * w1 + c[25] * w2 + c[26] * w3 + c[27]
+                * w4;
+        rel1 = w1 + c[28] * u1 + c[29] * u2 + c[30] * u3;
+        net1 = dmin(0.2, dmax(-0.2, c[31] - 0.05 * rel1)) - 2e-05 * rel1;
+        rel2 = w2 + c[32] * u1 + c[33] * u2 + c[34] * u3;
+        net2 = dmin(0.2, dmax(-0.2, c[35] - 0.05 * rel2)) - 2e-05 * rel2;
+        rel3 = w3 + c[36] * u1 + c[37] * u2 + c[38] * u3;
+        net3 = dmin(0.2, dmax(-0.2, c[39] - 0.05 * rel3)) - 2e-05 * rel3;
+        rel4 = w4 + c[40] * u1 + c[41] * u2 + c[42] * u3;
+        net4 = dmin(0.2, dmax(-0.2, c[43] - 0.05 * rel4)) - 2e-05 * rel4;
+        f1 = c[28] * net1 + c[32] * net2 + c[36] * net3 + c[40] * net4 + h2 * u3 - h3 * u2;
+        f2 = c[29] * net1 + c[33] * net2 + c[37] * net3 + c[41] * net4 + h3 * u1 - h1 * u3;
+        f3 = c[30] * net1 + c[34] * net2 + c[38] * net3 + c[42] * net4 + h1 * u2 - h2 * u1;
         dxdt[0][l] = tmp2;
-        dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*rw4_hardware_sin_lanes(q2) + u2;
-        dxdt[3][l] = c[0]*f1 + c[1]*f2 + c[2]*f3;
-        dxdt[4][l] = c[1]*f1 + c[3]*f2 + c[4]*f3;
-        dxdt[5][l] = c[2]*f1 + c[4]*f2 + c[5]*f3;
-        dxdt[6][l] = c[6]*net1;
-        dxdt[7][l] = c[7]*net2;
-        dxdt[8][l] = c[8]*net3;
-        dxdt[9][l] = c[9]*net4;
+        dxdt[1][l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2][l] = u2 - tmp2 * rw4_hardware_sin_lanes(q2);
+        dxdt[3][l] = c[0] * f1 + c[1] * f2 + c[2] * f3;
+        dxdt[4][l] = c[1] * f1 + c[3] * f2 + c[4] * f3;
+        dxdt[5][l] = c[2] * f1 + c[4] * f2 + c[5] * f3;
+        dxdt[6][l] = c[6] * net1;
+        dxdt[7][l] = c[7] * net2;
+        dxdt[8][l] = c[8] * net3;
+        dxdt[9][l] = c[9] * net4;
     }
 }
 

@@ -103,15 +103,16 @@ contains
   end function rw4_hardware_ode_strerror
 
 
-  ! d(dx/dt)/dx, row-major (481 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! J(i*nx + j + 1) = d f_(i+1) / d x_(j+1) in 1-based terms.
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (481 ops).
   subroutine rw4_hardware_jac(t, x, c, J) bind(C, name="rw4_hardware_f_jac")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(64)
-    real(c_double), intent(out) :: J(100)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:63)
+    real(c_double), intent(out) :: J(0:99)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -194,210 +195,203 @@ contains
     real(c_double) :: tmp70
     real(c_double) :: tmp71
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
     tmp0 = rw4_hardware_sin(q2)
     tmp1 = rw4_hardware_cos(q2)
     tmp2 = rw4_hardware_sin(q3)
-    tmp3 = tmp2*u1
+    tmp3 = tmp2 * u1
     tmp4 = rw4_hardware_cos(q3)
-    tmp5 = tmp4*u3
-    tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/(tmp1*tmp1)
-    tmp8 = 1.0_c_double/tmp1
-    tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
-    tmp10 = tmp2*tmp8
-    tmp11 = tmp4*tmp8
-    tmp12 = c(12)*u3
-    tmp13 = c(13)*u2
-    tmp14 = 0.05_c_double*u1
-    tmp15 = 0.05_c_double*u2
-    tmp16 = 0.05_c_double*u3
-    tmp17 = c(29)*tmp14 + c(30)*tmp15 + c(31)*tmp16 - c(32) + 0.05_c_double* &
-          w1
-    tmp18 = 0.05_c_double*merge(1.0_c_double, 0.0_c_double, 0.2_c_double - &
-          tmp17 > 0.0_c_double)*merge(1.0_c_double, 0.0_c_double, &
-          0.2_c_double - max(-0.2_c_double, -tmp17) > 0.0_c_double)
-    tmp19 = -c(29)*tmp18 - 2e-05_c_double*c(29)
-    tmp20 = c(33)*tmp14 + c(34)*tmp15 + c(35)*tmp16 - c(36) + 0.05_c_double* &
-          w2
-    tmp21 = 0.05_c_double*merge(1.0_c_double, 0.0_c_double, 0.2_c_double - &
-          tmp20 > 0.0_c_double)*merge(1.0_c_double, 0.0_c_double, &
-          0.2_c_double - max(-0.2_c_double, -tmp20) > 0.0_c_double)
-    tmp22 = -c(33)*tmp21 - 2e-05_c_double*c(33)
-    tmp23 = c(37)*tmp14 + c(38)*tmp15 + c(39)*tmp16 - c(40) + 0.05_c_double* &
-          w3
-    tmp24 = 0.05_c_double*merge(1.0_c_double, 0.0_c_double, 0.2_c_double - &
-          tmp23 > 0.0_c_double)*merge(1.0_c_double, 0.0_c_double, &
-          0.2_c_double - max(-0.2_c_double, -tmp23) > 0.0_c_double)
-    tmp25 = -c(37)*tmp24 - 2e-05_c_double*c(37)
-    tmp26 = c(41)*tmp14 + c(42)*tmp15 + c(43)*tmp16 - c(44) + 0.05_c_double* &
-          w4
-    tmp27 = 0.05_c_double*merge(1.0_c_double, 0.0_c_double, 0.2_c_double - &
-          tmp26 > 0.0_c_double)*merge(1.0_c_double, 0.0_c_double, &
-          0.2_c_double - max(-0.2_c_double, -tmp26) > 0.0_c_double)
-    tmp28 = -c(41)*tmp27 - 2e-05_c_double*c(41)
-    tmp29 = c(29)*tmp19 + c(33)*tmp22 + c(37)*tmp25 + c(41)*tmp28 + tmp12 - &
-          tmp13
-    tmp30 = c(19)*u2
-    tmp31 = c(13)*u1
-    tmp32 = c(24)*u3 + c(25)*w1 + c(26)*w2 + c(27)*w3 + c(28)*w4
-    tmp33 = -c(11)*u3 + c(30)*tmp19 + c(34)*tmp22 + c(38)*tmp25 + c(42)* &
-          tmp28 + tmp30 + 2*tmp31 + tmp32
-    tmp34 = c(19)*u3
-    tmp35 = c(12)*u1
-    tmp36 = c(18)*u2 + c(20)*w1 + c(21)*w2 + c(22)*w3 + c(23)*w4
-    tmp37 = c(11)*u2 + c(31)*tmp19 + c(35)*tmp22 + c(39)*tmp25 + c(43)*tmp28 &
-          - tmp34 - 2*tmp35 - tmp36
-    tmp38 = c(19)*u1
-    tmp39 = -c(30)*tmp18 - 2e-05_c_double*c(30)
-    tmp40 = -c(34)*tmp21 - 2e-05_c_double*c(34)
-    tmp41 = -c(38)*tmp24 - 2e-05_c_double*c(38)
-    tmp42 = -c(42)*tmp27 - 2e-05_c_double*c(42)
-    tmp43 = c(30)*tmp39 + c(34)*tmp40 + c(38)*tmp41 + c(42)*tmp42 - tmp12 + &
-          tmp38
-    tmp44 = c(13)*u3
-    tmp45 = c(12)*u2
-    tmp46 = c(11)*u1 + c(14)*w1 + c(15)*w2 + c(16)*w3 + c(17)*w4
-    tmp47 = -c(18)*u1 + c(31)*tmp39 + c(35)*tmp40 + c(39)*tmp41 + c(43)* &
-          tmp42 + tmp44 + 2*tmp45 + tmp46
-    tmp48 = c(18)*u3 + c(29)*tmp39 + c(33)*tmp40 + c(37)*tmp41 + c(41)*tmp42 &
-          - 2*tmp30 - tmp31 - tmp32
-    tmp49 = -c(31)*tmp18 - 2e-05_c_double*c(31)
-    tmp50 = -c(35)*tmp21 - 2e-05_c_double*c(35)
-    tmp51 = -c(39)*tmp24 - 2e-05_c_double*c(39)
-    tmp52 = -c(43)*tmp27 - 2e-05_c_double*c(43)
-    tmp53 = c(31)*tmp49 + c(35)*tmp50 + c(39)*tmp51 + c(43)*tmp52 + tmp13 - &
-          tmp38
-    tmp54 = -c(24)*u2 + c(29)*tmp49 + c(33)*tmp50 + c(37)*tmp51 + c(41)* &
-          tmp52 + 2*tmp34 + tmp35 + tmp36
-    tmp55 = c(24)*u1 + c(30)*tmp49 + c(34)*tmp50 + c(38)*tmp51 + c(42)*tmp52 &
-          - 2*tmp44 - tmp45 - tmp46
-    tmp56 = -tmp18 - 2e-05_c_double
-    tmp57 = c(20)*u3 - c(25)*u2 + c(29)*tmp56
-    tmp58 = -c(14)*u3 + c(25)*u1 + c(30)*tmp56
-    tmp59 = c(14)*u2 - c(20)*u1 + c(31)*tmp56
-    tmp60 = -tmp21 - 2e-05_c_double
-    tmp61 = c(21)*u3 - c(26)*u2 + c(33)*tmp60
-    tmp62 = -c(15)*u3 + c(26)*u1 + c(34)*tmp60
-    tmp63 = c(15)*u2 - c(21)*u1 + c(35)*tmp60
-    tmp64 = -tmp24 - 2e-05_c_double
-    tmp65 = c(22)*u3 - c(27)*u2 + c(37)*tmp64
-    tmp66 = -c(16)*u3 + c(27)*u1 + c(38)*tmp64
-    tmp67 = c(16)*u2 - c(22)*u1 + c(39)*tmp64
-    tmp68 = -tmp27 - 2e-05_c_double
-    tmp69 = c(23)*u3 - c(28)*u2 + c(41)*tmp68
-    tmp70 = -c(17)*u3 + c(28)*u1 + c(42)*tmp68
-    tmp71 = c(17)*u2 - c(23)*u1 + c(43)*tmp68
-    J(1) = 0
-    J(2) = tmp0*tmp7
-    J(3) = tmp9
-    J(4) = -tmp10
-    J(5) = 0
-    J(6) = tmp11
-    J(7) = 0
-    J(8) = 0
-    J(9) = 0
-    J(10) = 0
-    J(11) = 0
-    J(12) = 0
-    J(13) = tmp6
-    J(14) = tmp4
-    J(15) = 0
-    J(16) = tmp2
-    J(17) = 0
-    J(18) = 0
-    J(19) = 0
-    J(20) = 0
-    J(21) = 0
-    J(22) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
-    J(23) = -tmp0*tmp9
-    J(24) = tmp0*tmp10
-    J(25) = 1
-    J(26) = -tmp0*tmp11
-    J(27) = 0
-    J(28) = 0
-    J(29) = 0
-    J(30) = 0
-    J(31) = 0
-    J(32) = 0
-    J(33) = 0
-    J(34) = c(1)*tmp29 + c(2)*tmp33 + c(3)*tmp37
-    J(35) = c(1)*tmp48 + c(2)*tmp43 + c(3)*tmp47
-    J(36) = c(1)*tmp54 + c(2)*tmp55 + c(3)*tmp53
-    J(37) = c(1)*tmp57 + c(2)*tmp58 + c(3)*tmp59
-    J(38) = c(1)*tmp61 + c(2)*tmp62 + c(3)*tmp63
-    J(39) = c(1)*tmp65 + c(2)*tmp66 + c(3)*tmp67
-    J(40) = c(1)*tmp69 + c(2)*tmp70 + c(3)*tmp71
-    J(41) = 0
-    J(42) = 0
-    J(43) = 0
-    J(44) = c(2)*tmp29 + c(4)*tmp33 + c(5)*tmp37
-    J(45) = c(2)*tmp48 + c(4)*tmp43 + c(5)*tmp47
-    J(46) = c(2)*tmp54 + c(4)*tmp55 + c(5)*tmp53
-    J(47) = c(2)*tmp57 + c(4)*tmp58 + c(5)*tmp59
-    J(48) = c(2)*tmp61 + c(4)*tmp62 + c(5)*tmp63
-    J(49) = c(2)*tmp65 + c(4)*tmp66 + c(5)*tmp67
-    J(50) = c(2)*tmp69 + c(4)*tmp70 + c(5)*tmp71
-    J(51) = 0
-    J(52) = 0
-    J(53) = 0
-    J(54) = c(3)*tmp29 + c(5)*tmp33 + c(6)*tmp37
-    J(55) = c(3)*tmp48 + c(5)*tmp43 + c(6)*tmp47
-    J(56) = c(3)*tmp54 + c(5)*tmp55 + c(6)*tmp53
-    J(57) = c(3)*tmp57 + c(5)*tmp58 + c(6)*tmp59
-    J(58) = c(3)*tmp61 + c(5)*tmp62 + c(6)*tmp63
-    J(59) = c(3)*tmp65 + c(5)*tmp66 + c(6)*tmp67
-    J(60) = c(3)*tmp69 + c(5)*tmp70 + c(6)*tmp71
-    J(61) = 0
-    J(62) = 0
-    J(63) = 0
-    J(64) = c(7)*tmp19
-    J(65) = c(7)*tmp39
-    J(66) = c(7)*tmp49
-    J(67) = c(7)*tmp56
-    J(68) = 0
-    J(69) = 0
-    J(70) = 0
-    J(71) = 0
-    J(72) = 0
-    J(73) = 0
-    J(74) = c(8)*tmp22
-    J(75) = c(8)*tmp40
-    J(76) = c(8)*tmp50
-    J(77) = 0
-    J(78) = c(8)*tmp60
-    J(79) = 0
-    J(80) = 0
-    J(81) = 0
-    J(82) = 0
-    J(83) = 0
-    J(84) = c(9)*tmp25
-    J(85) = c(9)*tmp41
-    J(86) = c(9)*tmp51
-    J(87) = 0
-    J(88) = 0
-    J(89) = c(9)*tmp64
-    J(90) = 0
-    J(91) = 0
-    J(92) = 0
-    J(93) = 0
-    J(94) = c(10)*tmp28
-    J(95) = c(10)*tmp42
-    J(96) = c(10)*tmp52
-    J(97) = 0
-    J(98) = 0
-    J(99) = 0
-    J(100) = c(10)*tmp68
+    tmp5 = tmp4 * u3
+    tmp6 = tmp5 - tmp3
+    tmp7 = tmp6 / (tmp1 * tmp1)
+    tmp8 = 1.0_c_double / tmp1
+    tmp9 = tmp8 * ((-tmp2 * u3) - tmp4 * u1)
+    tmp10 = tmp2 * tmp8
+    tmp11 = tmp4 * tmp8
+    tmp12 = c(11) * u3
+    tmp13 = c(12) * u2
+    tmp14 = 0.05_c_double * u1
+    tmp15 = 0.05_c_double * u2
+    tmp16 = 0.05_c_double * u3
+    tmp17 = (((0.05_c_double * w1 + c(28) * tmp14) + c(29) * tmp15) + c(30) * tmp16) - c(31)
+    tmp18 = (0.05_c_double * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - tmp17 > 0.0_c_double))) * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - max(-0.2_c_double, -tmp17) > 0.0_c_double))
+    tmp19 = (-2e-05_c_double * c(28)) - c(28) * tmp18
+    tmp20 = (((0.05_c_double * w2 + c(32) * tmp14) + c(33) * tmp15) + c(34) * tmp16) - c(35)
+    tmp21 = (0.05_c_double * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - tmp20 > 0.0_c_double))) * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - max(-0.2_c_double, -tmp20) > 0.0_c_double))
+    tmp22 = (-2e-05_c_double * c(32)) - c(32) * tmp21
+    tmp23 = (((0.05_c_double * w3 + c(36) * tmp14) + c(37) * tmp15) + c(38) * tmp16) - c(39)
+    tmp24 = (0.05_c_double * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - tmp23 > 0.0_c_double))) * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - max(-0.2_c_double, -tmp23) > 0.0_c_double))
+    tmp25 = (-2e-05_c_double * c(36)) - c(36) * tmp24
+    tmp26 = (((0.05_c_double * w4 + c(40) * tmp14) + c(41) * tmp15) + c(42) * tmp16) - c(43)
+    tmp27 = (0.05_c_double * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - tmp26 > 0.0_c_double))) * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - max(-0.2_c_double, -tmp26) > 0.0_c_double))
+    tmp28 = (-2e-05_c_double * c(40)) - c(40) * tmp27
+    tmp29 = ((((tmp12 + c(28) * tmp19) + c(32) * tmp22) + c(36) * tmp25) + c(40) * tmp28) - tmp13
+    tmp30 = c(18) * u2
+    tmp31 = c(12) * u1
+    tmp32 = (((c(23) * u3 + c(24) * w1) + c(25) * w2) + c(26) * w3) + c(27) * w4
+    tmp33 = ((((((tmp30 + tmp32) + 2.0_c_double * tmp31) + c(29) * tmp19) + c(33) * tmp22) + &
+        c(37) * tmp25) + c(41) * tmp28) - c(10) * u3
+    tmp34 = c(18) * u3
+    tmp35 = c(11) * u1
+    tmp36 = (((c(17) * u2 + c(19) * w1) + c(20) * w2) + c(21) * w3) + c(22) * w4
+    tmp37 = ((((((c(10) * u2 + c(30) * tmp19) + c(34) * tmp22) + c(38) * tmp25) + c(42) * tmp28) &
+        - tmp34) - tmp36) - 2.0_c_double * tmp35
+    tmp38 = c(18) * u1
+    tmp39 = (-2e-05_c_double * c(29)) - c(29) * tmp18
+    tmp40 = (-2e-05_c_double * c(33)) - c(33) * tmp21
+    tmp41 = (-2e-05_c_double * c(37)) - c(37) * tmp24
+    tmp42 = (-2e-05_c_double * c(41)) - c(41) * tmp27
+    tmp43 = ((((tmp38 + c(29) * tmp39) + c(33) * tmp40) + c(37) * tmp41) + c(41) * tmp42) - tmp12
+    tmp44 = c(12) * u3
+    tmp45 = c(11) * u2
+    tmp46 = (((c(10) * u1 + c(13) * w1) + c(14) * w2) + c(15) * w3) + c(16) * w4
+    tmp47 = ((((((tmp44 + tmp46) + 2.0_c_double * tmp45) + c(30) * tmp39) + c(34) * tmp40) + &
+        c(38) * tmp41) + c(42) * tmp42) - c(17) * u1
+    tmp48 = ((((((c(17) * u3 + c(28) * tmp39) + c(32) * tmp40) + c(36) * tmp41) + c(40) * tmp42) &
+        - tmp31) - tmp32) - 2.0_c_double * tmp30
+    tmp49 = (-2e-05_c_double * c(30)) - c(30) * tmp18
+    tmp50 = (-2e-05_c_double * c(34)) - c(34) * tmp21
+    tmp51 = (-2e-05_c_double * c(38)) - c(38) * tmp24
+    tmp52 = (-2e-05_c_double * c(42)) - c(42) * tmp27
+    tmp53 = ((((tmp13 + c(30) * tmp49) + c(34) * tmp50) + c(38) * tmp51) + c(42) * tmp52) - tmp38
+    tmp54 = ((((((tmp35 + tmp36) + 2.0_c_double * tmp34) + c(28) * tmp49) + c(32) * tmp50) + &
+        c(36) * tmp51) + c(40) * tmp52) - c(23) * u2
+    tmp55 = ((((((c(23) * u1 + c(29) * tmp49) + c(33) * tmp50) + c(37) * tmp51) + c(41) * tmp52) &
+        - tmp45) - tmp46) - 2.0_c_double * tmp44
+    tmp56 = (-2e-05_c_double) - tmp18
+    tmp57 = (c(19) * u3 + c(28) * tmp56) - c(24) * u2
+    tmp58 = (c(24) * u1 + c(29) * tmp56) - c(13) * u3
+    tmp59 = (c(13) * u2 + c(30) * tmp56) - c(19) * u1
+    tmp60 = (-2e-05_c_double) - tmp21
+    tmp61 = (c(20) * u3 + c(32) * tmp60) - c(25) * u2
+    tmp62 = (c(25) * u1 + c(33) * tmp60) - c(14) * u3
+    tmp63 = (c(14) * u2 + c(34) * tmp60) - c(20) * u1
+    tmp64 = (-2e-05_c_double) - tmp24
+    tmp65 = (c(21) * u3 + c(36) * tmp64) - c(26) * u2
+    tmp66 = (c(26) * u1 + c(37) * tmp64) - c(15) * u3
+    tmp67 = (c(15) * u2 + c(38) * tmp64) - c(21) * u1
+    tmp68 = (-2e-05_c_double) - tmp27
+    tmp69 = (c(22) * u3 + c(40) * tmp68) - c(27) * u2
+    tmp70 = (c(27) * u1 + c(41) * tmp68) - c(16) * u3
+    tmp71 = (c(16) * u2 + c(42) * tmp68) - c(22) * u1
+    J(0) = 0.0_c_double
+    J(1) = tmp0 * tmp7
+    J(2) = tmp9
+    J(3) = -tmp10
+    J(4) = 0.0_c_double
+    J(5) = tmp11
+    J(6) = 0.0_c_double
+    J(7) = 0.0_c_double
+    J(8) = 0.0_c_double
+    J(9) = 0.0_c_double
+    J(10) = 0.0_c_double
+    J(11) = 0.0_c_double
+    J(12) = tmp6
+    J(13) = tmp4
+    J(14) = 0.0_c_double
+    J(15) = tmp2
+    J(16) = 0.0_c_double
+    J(17) = 0.0_c_double
+    J(18) = 0.0_c_double
+    J(19) = 0.0_c_double
+    J(20) = 0.0_c_double
+    J(21) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
+    J(22) = -tmp0 * tmp9
+    J(23) = tmp0 * tmp10
+    J(24) = 1.0_c_double
+    J(25) = -tmp0 * tmp11
+    J(26) = 0.0_c_double
+    J(27) = 0.0_c_double
+    J(28) = 0.0_c_double
+    J(29) = 0.0_c_double
+    J(30) = 0.0_c_double
+    J(31) = 0.0_c_double
+    J(32) = 0.0_c_double
+    J(33) = (c(0) * tmp29 + c(1) * tmp33) + c(2) * tmp37
+    J(34) = (c(0) * tmp48 + c(1) * tmp43) + c(2) * tmp47
+    J(35) = (c(0) * tmp54 + c(1) * tmp55) + c(2) * tmp53
+    J(36) = (c(0) * tmp57 + c(1) * tmp58) + c(2) * tmp59
+    J(37) = (c(0) * tmp61 + c(1) * tmp62) + c(2) * tmp63
+    J(38) = (c(0) * tmp65 + c(1) * tmp66) + c(2) * tmp67
+    J(39) = (c(0) * tmp69 + c(1) * tmp70) + c(2) * tmp71
+    J(40) = 0.0_c_double
+    J(41) = 0.0_c_double
+    J(42) = 0.0_c_double
+    J(43) = (c(1) * tmp29 + c(3) * tmp33) + c(4) * tmp37
+    J(44) = (c(1) * tmp48 + c(3) * tmp43) + c(4) * tmp47
+    J(45) = (c(1) * tmp54 + c(3) * tmp55) + c(4) * tmp53
+    J(46) = (c(1) * tmp57 + c(3) * tmp58) + c(4) * tmp59
+    J(47) = (c(1) * tmp61 + c(3) * tmp62) + c(4) * tmp63
+    J(48) = (c(1) * tmp65 + c(3) * tmp66) + c(4) * tmp67
+    J(49) = (c(1) * tmp69 + c(3) * tmp70) + c(4) * tmp71
+    J(50) = 0.0_c_double
+    J(51) = 0.0_c_double
+    J(52) = 0.0_c_double
+    J(53) = (c(2) * tmp29 + c(4) * tmp33) + c(5) * tmp37
+    J(54) = (c(2) * tmp48 + c(4) * tmp43) + c(5) * tmp47
+    J(55) = (c(2) * tmp54 + c(4) * tmp55) + c(5) * tmp53
+    J(56) = (c(2) * tmp57 + c(4) * tmp58) + c(5) * tmp59
+    J(57) = (c(2) * tmp61 + c(4) * tmp62) + c(5) * tmp63
+    J(58) = (c(2) * tmp65 + c(4) * tmp66) + c(5) * tmp67
+    J(59) = (c(2) * tmp69 + c(4) * tmp70) + c(5) * tmp71
+    J(60) = 0.0_c_double
+    J(61) = 0.0_c_double
+    J(62) = 0.0_c_double
+    J(63) = c(6) * tmp19
+    J(64) = c(6) * tmp39
+    J(65) = c(6) * tmp49
+    J(66) = c(6) * tmp56
+    J(67) = 0.0_c_double
+    J(68) = 0.0_c_double
+    J(69) = 0.0_c_double
+    J(70) = 0.0_c_double
+    J(71) = 0.0_c_double
+    J(72) = 0.0_c_double
+    J(73) = c(7) * tmp22
+    J(74) = c(7) * tmp40
+    J(75) = c(7) * tmp50
+    J(76) = 0.0_c_double
+    J(77) = c(7) * tmp60
+    J(78) = 0.0_c_double
+    J(79) = 0.0_c_double
+    J(80) = 0.0_c_double
+    J(81) = 0.0_c_double
+    J(82) = 0.0_c_double
+    J(83) = c(8) * tmp25
+    J(84) = c(8) * tmp41
+    J(85) = c(8) * tmp51
+    J(86) = 0.0_c_double
+    J(87) = 0.0_c_double
+    J(88) = c(8) * tmp64
+    J(89) = 0.0_c_double
+    J(90) = 0.0_c_double
+    J(91) = 0.0_c_double
+    J(92) = 0.0_c_double
+    J(93) = c(9) * tmp28
+    J(94) = c(9) * tmp42
+    J(95) = c(9) * tmp52
+    J(96) = 0.0_c_double
+    J(97) = 0.0_c_double
+    J(98) = 0.0_c_double
+    J(99) = c(9) * tmp68
   end subroutine rw4_hardware_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -1048,7 +1042,8 @@ contains
     ai(5) = ur * ai(0) + ui * ar(0)
     p = 1
     do i = 2, 3 - 1
-      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) &
+          then
         p = i
       end if
     end do
@@ -1152,7 +1147,8 @@ contains
     ai(25) = ur * ai(22) + ui * ar(22)
     p = 3
     do i = 4, 10 - 1
-      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) &
+          then
         p = i
       end if
     end do
@@ -1241,7 +1237,8 @@ contains
     ai(39) = ur * ai(33) + ui * ar(33)
     p = 4
     do i = 5, 10 - 1
-      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) &
+          then
         p = i
       end if
     end do
@@ -1322,7 +1319,8 @@ contains
     ai(49) = ur * ai(44) + ui * ar(44)
     p = 5
     do i = 6, 10 - 1
-      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) &
+          then
         p = i
       end if
     end do
@@ -1395,7 +1393,8 @@ contains
     ai(59) = ur * ai(55) + ui * ar(55)
     p = 6
     do i = 7, 10 - 1
-      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) &
+          then
         p = i
       end if
     end do
@@ -1460,7 +1459,8 @@ contains
     ai(69) = ur * ai(66) + ui * ar(66)
     p = 7
     do i = 8, 10 - 1
-      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) &
+          then
         p = i
       end if
     end do
@@ -1517,7 +1517,8 @@ contains
     ai(79) = ur * ai(77) + ui * ar(77)
     p = 8
     do i = 9, 10 - 1
-      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) then
+      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) &
+          then
         p = i
       end if
     end do
@@ -1744,7 +1745,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: k(0:nx - 1, 0:3)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1756,7 +1757,8 @@ contains
 
     comp = 0.0_c_double
     call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < &
+        1) then
       res = RW4_HARDWARE_ODE_ERR_ARGUMENT
       return
     end if
@@ -1848,7 +1850,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2038,7 +2040,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2302,7 +2304,7 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: comp(0:nx - 1)
-    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
     real(c_double), intent(inout) :: dx(0:nx - 1)
     real(c_double), intent(inout) :: xnew(0:nx - 1)
     real(c_double) :: res
@@ -2408,7 +2410,7 @@ contains
     integer(c_int) :: res
     real(c_double) :: J(0:nx * nx - 1)
     real(c_double) :: lu(0:nx * nx - 1)
-    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: fnew(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
@@ -3068,7 +3070,8 @@ contains
           h = t1 - t
           last = .true.
         else
-          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
             cycle
           else
             h = h_new

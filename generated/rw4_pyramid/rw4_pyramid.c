@@ -15,6 +15,7 @@
  */
 #include "rw4_pyramid.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -34,6 +35,21 @@
 #else
 #define RW4_PYRAMID_ALIGNED
 #endif
+
+
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
+
+/* fmin, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmin(double a, double b)
+{
+    return a < b || b != b ? a : b;
+}
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -184,37 +200,6 @@ static inline double rw4_pyramid_cos_lanes(double x)
 }
 
 
-/* 4 ops, plus the checks. */
-int rw4_pyramid_setup(const double *p, double *c)
-{
-    int i;
-    for (i = 0; i < RW4_PYRAMID_NP; ++i) {
-        if (!isfinite(p[i])) {
-            return RW4_PYRAMID_ERR_NONFINITE;
-        }
-    }
-    const double w_ref_1 = p[0];
-    const double w_ref_2 = p[1];
-    const double w_ref_3 = p[2];
-    const double w_ref_4 = p[3];
-
-
-    c[0] = (1.0/20.0)*w_ref_1;
-    c[1] = (1.0/20.0)*w_ref_2;
-    c[2] = (1.0/20.0)*w_ref_3;
-    c[3] = (1.0/20.0)*w_ref_4;
-    c[4] = 3.1210118456608873;
-    if (!(c[RW4_PYRAMID_COND] <= 10000000000000.0)) {
-        return RW4_PYRAMID_ERR_MASS_SINGULAR;
-    }
-    for (i = 0; i < RW4_PYRAMID_NC; ++i) {
-        if (!isfinite(c[i])) {
-            return RW4_PYRAMID_ERR_OVERFLOW;  /* valid parameters whose products overflow */
-        }
-    }
-    return RW4_PYRAMID_OK;
-}
-
 const char *rw4_pyramid_strerror(int code)
 {
     switch (code) {
@@ -231,180 +216,300 @@ const char *rw4_pyramid_strerror(int code)
     }
 }
 
-/* 114 ops per call. */
-void rw4_pyramid_rhs(double t, const double *x, const double *c, double *dxdt)
+/* Checks p and computes the constants c that rw4_pyramid_rhs needs (4 ops,
+   plus the checks). Returns RW4_PYRAMID_OK or the first failing check's code;
+   c is then not to be used. */
+int rw4_pyramid_setup(const double *p, double *c)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double w_ref_1;
+    double w_ref_2;
+    double w_ref_3;
+    double w_ref_4;
+    int i_;
 
-    const double tmp0 = 0.5773502691896258*u1;
-    const double tmp1 = 0.8164965809277259*u3;
-    const double tmp2 = 0.5773502691896258*u2;
-    const double tmp3 = -tmp1;
-    const double tmp4 = rw4_pyramid_sin(q3);
-    const double tmp5 = rw4_pyramid_cos(q3);
-    const double tmp6 = (-tmp4*u1 + tmp5*u3)/rw4_pyramid_cos(q2);
-    const double h1 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*(w1 - w3);
-    const double h2 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*(w2 - w4);
-    const double h3 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*(w1 + w2 + w3 + w4);
-    const double rel1 = -tmp0 - tmp1 + w1;
-    const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[0] - 0.05*rel1));
-    const double rel2 = -tmp1 - tmp2 + w2;
-    const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[1] - 0.05*rel2));
-    const double rel3 = tmp0 + tmp3 + w3;
-    const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[2] - 0.05*rel3));
-    const double rel4 = tmp2 + tmp3 + w4;
-    const double net4 = -2e-05*rel4 + fmin(0.2, fmax(-0.2, c[3] - 0.05*rel4));
-    const double f1 = h2*u3 - h3*u2 + 0.5773502691896258*(-net1 + net3);
-    const double f2 = -h1*u3 + h3*u1 + 0.5773502691896258*(-net2 + net4);
-    const double f3 = h1*u2 - h2*u1 - 0.8164965809277259*(net1 + net2 + net3 + net4);
-    dxdt[0] = tmp6;
-    dxdt[1] = tmp4*u3 + tmp5*u1;
-    dxdt[2] = -tmp6*rw4_pyramid_sin(q2) + u2;
-    dxdt[3] = 0.002371907568400169*f1 + 2.5162222823731624e-05*f2 - 4.735842396728992e-05*f3;
-    dxdt[4] = 2.5162222823731624e-05*f1 + 0.0026198295706604748*f2 - 2.2199493971044426e-05*f3;
-    dxdt[5] = -4.735842396728992e-05*f1 - 2.2199493971044426e-05*f2 + 0.003314211979940579*f3;
-    dxdt[6] = 22.22222222222222*net1;
-    dxdt[7] = 22.22222222222222*net2;
-    dxdt[8] = 22.22222222222222*net3;
-    dxdt[9] = 22.22222222222222*net4;
+    for (i_ = 0; i_ < 5; ++i_) {
+        c[i_] = 0.0;
+    }
+    for (i_ = 0; i_ < 4; ++i_) {
+        if (!(fabs(p[i_]) <= DBL_MAX)) {
+            return RW4_PYRAMID_ERR_NONFINITE;
+        }
+    }
+    w_ref_1 = p[0];
+    w_ref_2 = p[1];
+    w_ref_3 = p[2];
+    w_ref_4 = p[3];
+    c[0] = w_ref_1 / 20.0;
+    c[1] = w_ref_2 / 20.0;
+    c[2] = w_ref_3 / 20.0;
+    c[3] = w_ref_4 / 20.0;
+    c[4] = 3.1210118456608873;
+    if (!(c[4] <= 10000000000000.0)) {
+        return RW4_PYRAMID_ERR_MASS_SINGULAR;
+    }
+    for (i_ = 0; i_ < 5; ++i_) {
+        if (!(fabs(c[i_]) <= DBL_MAX)) {
+            return RW4_PYRAMID_ERR_OVERFLOW;
+        }
+    }
+    return RW4_PYRAMID_OK;
 }
 
-/* rw4_pyramid_rhs on n lanes: the same statements, lane by lane. */
+/* dxdt = f(t, x) for the constants c from rw4_pyramid_setup (114 ops). */
+void rw4_pyramid_rhs(double t, const double *x, const double *c, double *dxdt)
+{
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double h1;
+    double h2;
+    double h3;
+    double rel1;
+    double net1;
+    double rel2;
+    double net2;
+    double rel3;
+    double net3;
+    double rel4;
+    double net4;
+    double f1;
+    double f2;
+    double f3;
+
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = 0.5773502691896258 * u1;
+    tmp1 = 0.8164965809277259 * u3;
+    tmp2 = 0.5773502691896258 * u2;
+    tmp3 = -tmp1;
+    tmp4 = rw4_pyramid_sin(q3);
+    tmp5 = rw4_pyramid_cos(q3);
+    tmp6 = (tmp5 * u3 - tmp4 * u1) / rw4_pyramid_cos(q2);
+    h1 = 6.0 * u3 + 421.76382113821137 * u1 + 0.025980762113533163 * (w1 - w3) - 4.0 * u2;
+    h2 = 2.5 * u3 + 381.76382113821137 * u2 + 0.025980762113533163 * (w2 - w4) - 4.0 * u1;
+    h3 = 6.0 * u1 + 2.5 * u2 + 0.036742346141747664 * (w1 + w2 + w3 + w4) + 301.8333333333333 * u3;
+    rel1 = w1 - tmp0 - tmp1;
+    net1 = dmin(0.2, dmax(-0.2, c[0] - 0.05 * rel1)) - 2e-05 * rel1;
+    rel2 = w2 - tmp1 - tmp2;
+    net2 = dmin(0.2, dmax(-0.2, c[1] - 0.05 * rel2)) - 2e-05 * rel2;
+    rel3 = tmp0 + tmp3 + w3;
+    net3 = dmin(0.2, dmax(-0.2, c[2] - 0.05 * rel3)) - 2e-05 * rel3;
+    rel4 = tmp2 + tmp3 + w4;
+    net4 = dmin(0.2, dmax(-0.2, c[3] - 0.05 * rel4)) - 2e-05 * rel4;
+    f1 = 0.5773502691896258 * (net3 - net1) + h2 * u3 - h3 * u2;
+    f2 = 0.5773502691896258 * (net4 - net2) + h3 * u1 - h1 * u3;
+    f3 = h1 * u2 - 0.8164965809277259 * (net1 + net2 + net3 + net4) - h2 * u1;
+    dxdt[0] = tmp6;
+    dxdt[1] = tmp4 * u3 + tmp5 * u1;
+    dxdt[2] = u2 - tmp6 * rw4_pyramid_sin(q2);
+    dxdt[3] = 0.002371907568400169 * f1 + 2.5162222823731624e-05 * f2 - 4.735842396728992e-05 * f3;
+    dxdt[4] = 0.0026198295706604748 * f2 + 2.5162222823731624e-05 * f1 - 2.2199493971044426e-05 *
+            f3;
+    dxdt[5] = 0.003314211979940579 * f3 - 4.735842396728992e-05 * f1 - 2.2199493971044426e-05 * f2;
+    dxdt[6] = 22.22222222222222 * net1;
+    dxdt[7] = 22.22222222222222 * net2;
+    dxdt[8] = 22.22222222222222 * net3;
+    dxdt[9] = 22.22222222222222 * net4;
+}
+
 void rw4_pyramid_rhs_lanes(int n, const double *RW4_PYRAMID_RESTRICT t,
-        const double *RW4_PYRAMID_RESTRICT x, const double *RW4_PYRAMID_RESTRICT c,
-        double *RW4_PYRAMID_RESTRICT dxdt)
+                           const double *RW4_PYRAMID_RESTRICT x,
+                           const double *RW4_PYRAMID_RESTRICT c, double *RW4_PYRAMID_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     RW4_PYRAMID_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[3 * n + l];
-        const double u2 = x[4 * n + l];
-        const double u3 = x[5 * n + l];
-        const double w1 = x[6 * n + l];
-        const double w2 = x[7 * n + l];
-        const double w3 = x[8 * n + l];
-        const double w4 = x[9 * n + l];
-
-        const double tmp0 = 0.5773502691896258*u1;
-        const double tmp1 = 0.8164965809277259*u3;
-        const double tmp2 = 0.5773502691896258*u2;
-        const double tmp3 = -tmp1;
-        const double tmp4 = rw4_pyramid_sin_lanes(q3);
-        const double tmp5 = rw4_pyramid_cos_lanes(q3);
-        const double tmp6 = (-tmp4*u1 + tmp5*u3)/rw4_pyramid_cos_lanes(q2);
-        const double h1 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*(w1 - w3);
-        const double h2 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*(w2 - w4);
-        const double h3 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*(w1 + w2 + w3 + w4);
-        const double rel1 = -tmp0 - tmp1 + w1;
-        const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[0] - 0.05*rel1));
-        const double rel2 = -tmp1 - tmp2 + w2;
-        const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[1] - 0.05*rel2));
-        const double rel3 = tmp0 + tmp3 + w3;
-        const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[2] - 0.05*rel3));
-        const double rel4 = tmp2 + tmp3 + w4;
-        const double net4 = -2e-05*rel4 + fmin(0.2, fmax(-0.2, c[3] - 0.05*rel4));
-        const double f1 = h2*u3 - h3*u2 + 0.5773502691896258*(-net1 + net3);
-        const double f2 = -h1*u3 + h3*u1 + 0.5773502691896258*(-net2 + net4);
-        const double f3 = h1*u2 - h2*u1 - 0.8164965809277259*(net1 + net2 + net3 + net4);
-        dxdt[0 * n + l] = tmp6;
-        dxdt[1 * n + l] = tmp4*u3 + tmp5*u1;
-        dxdt[2 * n + l] = -tmp6*rw4_pyramid_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = 0.002371907568400169*f1 + 2.5162222823731624e-05*f2 - 4.735842396728992e-05*f3;
-        dxdt[4 * n + l] = 2.5162222823731624e-05*f1 + 0.0026198295706604748*f2 - 2.2199493971044426e-05*f3;
-        dxdt[5 * n + l] = -4.735842396728992e-05*f1 - 2.2199493971044426e-05*f2 + 0.003314211979940579*f3;
-        dxdt[6 * n + l] = 22.22222222222222*net1;
-        dxdt[7 * n + l] = 22.22222222222222*net2;
-        dxdt[8 * n + l] = 22.22222222222222*net3;
-        dxdt[9 * n + l] = 22.22222222222222*net4;
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, h1,
+                h2, h3, rel1, net1, rel2, net2, rel3, net3, rel4, net4, f1, f2, f3;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[3 * n + l];
+        u2 = x[4 * n + l];
+        u3 = x[5 * n + l];
+        w1 = x[6 * n + l];
+        w2 = x[7 * n + l];
+        w3 = x[8 * n + l];
+        w4 = x[9 * n + l];
+        tmp0 = 0.5773502691896258 * u1;
+        tmp1 = 0.8164965809277259 * u3;
+        tmp2 = 0.5773502691896258 * u2;
+        tmp3 = -tmp1;
+        tmp4 = rw4_pyramid_sin_lanes(q3);
+        tmp5 = rw4_pyramid_cos_lanes(q3);
+        tmp6 = (tmp5 * u3 - tmp4 * u1) / rw4_pyramid_cos_lanes(q2);
+        h1 = 6.0 * u3 + 421.76382113821137 * u1 + 0.025980762113533163 * (w1 - w3) - 4.0 * u2;
+        h2 = 2.5 * u3 + 381.76382113821137 * u2 + 0.025980762113533163 * (w2 - w4) - 4.0 * u1;
+        h3 = 6.0 * u1 + 2.5 * u2 + 0.036742346141747664 * (w1 + w2 + w3 + w4) + 301.8333333333333
+                * u3;
+        rel1 = w1 - tmp0 - tmp1;
+        net1 = dmin(0.2, dmax(-0.2, c[0] - 0.05 * rel1)) - 2e-05 * rel1;
+        rel2 = w2 - tmp1 - tmp2;
+        net2 = dmin(0.2, dmax(-0.2, c[1] - 0.05 * rel2)) - 2e-05 * rel2;
+        rel3 = tmp0 + tmp3 + w3;
+        net3 = dmin(0.2, dmax(-0.2, c[2] - 0.05 * rel3)) - 2e-05 * rel3;
+        rel4 = tmp2 + tmp3 + w4;
+        net4 = dmin(0.2, dmax(-0.2, c[3] - 0.05 * rel4)) - 2e-05 * rel4;
+        f1 = 0.5773502691896258 * (net3 - net1) + h2 * u3 - h3 * u2;
+        f2 = 0.5773502691896258 * (net4 - net2) + h3 * u1 - h1 * u3;
+        f3 = h1 * u2 - 0.8164965809277259 * (net1 + net2 + net3 + net4) - h2 * u1;
+        dxdt[l] = tmp6;
+        dxdt[1 * n + l] = tmp4 * u3 + tmp5 * u1;
+        dxdt[2 * n + l] = u2 - tmp6 * rw4_pyramid_sin_lanes(q2);
+        dxdt[3 * n + l] = 0.002371907568400169 * f1 + 2.5162222823731624e-05 * f2 -
+                4.735842396728992e-05 * f3;
+        dxdt[4 * n + l] = 0.0026198295706604748 * f2 + 2.5162222823731624e-05 * f1 -
+                2.2199493971044426e-05 * f3;
+        dxdt[5 * n + l] = 0.003314211979940579 * f3 - 4.735842396728992e-05 * f1 -
+                2.2199493971044426e-05 * f2;
+        dxdt[6 * n + l] = 22.22222222222222 * net1;
+        dxdt[7 * n + l] = 22.22222222222222 * net2;
+        dxdt[8 * n + l] = 22.22222222222222 * net3;
+        dxdt[9 * n + l] = 22.22222222222222 * net4;
     }
 }
 
-/* kinetic energy of the system (J): 23 ops. */
+/* out = kinetic energy of the system (J): 23 ops. */
 void rw4_pyramid_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
 
-    out[0] = u1*(210.88191056910568*u1 - 4.0*u2 + 6.0*u3) + u2*(190.88191056910568*u2 + 2.5*u3) + 150.91666666666666*u3*u3 + 0.0225*(w1*w1 + w2*w2 + w3*w3 + w4*w4);
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    out[0] = 0.0225 * (w1 * w1 + w2 * w2 + w3 * w3 + w4 * w4) + 150.91666666666666 * (u3 * u3) +
+            u1 * (6.0 * u3 + 210.88191056910568 * u1 - 4.0 * u2) + u2 * (2.5 * u3 +
+            190.88191056910568 * u2);
 }
 
-/* angular momentum about the mass center, N components h[0..2] (kg m^2/s): 63 ops. */
+/* out = angular momentum about the mass center, N components h[0..2] (kg
+   m^2/s): 63 ops. */
 void rw4_pyramid_angular_momentum(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q1 = x[0];
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double q1;
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = rw4_pyramid_sin(q1);
-    const double tmp1 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*(w2 - w4);
-    const double tmp2 = rw4_pyramid_cos(q2);
-    const double tmp3 = tmp1*tmp2;
-    const double tmp4 = rw4_pyramid_sin(q3);
-    const double tmp5 = rw4_pyramid_cos(q1);
-    const double tmp6 = tmp4*tmp5;
-    const double tmp7 = rw4_pyramid_sin(q2);
-    const double tmp8 = rw4_pyramid_cos(q3);
-    const double tmp9 = tmp0*tmp8;
-    const double tmp10 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*(w1 + w2 + w3 + w4);
-    const double tmp11 = tmp0*tmp4;
-    const double tmp12 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*(w1 - w3);
-    out[0] = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + tmp5*tmp8);
-    out[1] = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + tmp3*tmp5;
-    out[2] = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q1 = x[0];
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = rw4_pyramid_sin(q1);
+    tmp1 = 2.5 * u3 + 381.76382113821137 * u2 + 0.025980762113533163 * (w2 - w4) - 4.0 * u1;
+    tmp2 = rw4_pyramid_cos(q2);
+    tmp3 = tmp1 * tmp2;
+    tmp4 = rw4_pyramid_sin(q3);
+    tmp5 = rw4_pyramid_cos(q1);
+    tmp6 = tmp4 * tmp5;
+    tmp7 = rw4_pyramid_sin(q2);
+    tmp8 = rw4_pyramid_cos(q3);
+    tmp9 = tmp0 * tmp8;
+    tmp10 = 6.0 * u1 + 2.5 * u2 + 0.036742346141747664 * (w1 + w2 + w3 + w4) + 301.8333333333333
+            * u3;
+    tmp11 = tmp0 * tmp4;
+    tmp12 = 6.0 * u3 + 421.76382113821137 * u1 + 0.025980762113533163 * (w1 - w3) - 4.0 * u2;
+    out[0] = tmp10 * (tmp6 + tmp7 * tmp9) + tmp12 * (tmp5 * tmp8 - tmp11 * tmp7) - tmp0 * tmp3;
+    out[1] = tmp10 * (tmp11 - tmp5 * tmp7 * tmp8) + tmp12 * (tmp9 + tmp6 * tmp7) + tmp3 * tmp5;
+    out[2] = tmp1 * tmp7 + tmp10 * tmp2 * tmp8 - tmp12 * tmp2 * tmp4;
 }
 
-/* power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 43 ops. */
+/* out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 43 ops. */
 void rw4_pyramid_power(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
 
-    const double tmp0 = 0.5773502691896258*u1;
-    const double tmp1 = 0.8164965809277259*u3;
-    const double tmp2 = 0.028867513459481294*u1;
-    const double tmp3 = 0.0408248290463863*u3;
-    const double tmp4 = 0.5773502691896258*u2;
-    const double tmp5 = 0.028867513459481294*u2;
-    const double tmp6 = -tmp1;
-    out[0] = (-tmp0 - tmp1 + w1)*fmin(0.2, fmax(-0.2, c[0] + tmp2 + tmp3 - 0.05*w1));
-    out[1] = (-tmp1 - tmp4 + w2)*fmin(0.2, fmax(-0.2, c[1] + tmp3 + tmp5 - 0.05*w2));
-    out[2] = (tmp0 + tmp6 + w3)*fmin(0.2, fmax(-0.2, c[2] - tmp2 + tmp3 - 0.05*w3));
-    out[3] = (tmp4 + tmp6 + w4)*fmin(0.2, fmax(-0.2, c[3] + tmp3 - tmp5 - 0.05*w4));
+    (void)t;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = 0.5773502691896258 * u1;
+    tmp1 = 0.8164965809277259 * u3;
+    tmp2 = 0.028867513459481294 * u1;
+    tmp3 = 0.0408248290463863 * u3;
+    tmp4 = 0.5773502691896258 * u2;
+    tmp5 = 0.028867513459481294 * u2;
+    tmp6 = -tmp1;
+    out[0] = (w1 - tmp0 - tmp1) * dmin(0.2, dmax(-0.2, c[0] + tmp2 + tmp3 - 0.05 * w1));
+    out[1] = (w2 - tmp1 - tmp4) * dmin(0.2, dmax(-0.2, c[1] + tmp3 + tmp5 - 0.05 * w2));
+    out[2] = (tmp0 + tmp6 + w3) * dmin(0.2, dmax(-0.2, c[2] + tmp3 - tmp2 - 0.05 * w3));
+    out[3] = (tmp4 + tmp6 + w4) * dmin(0.2, dmax(-0.2, c[3] + tmp3 - tmp5 - 0.05 * w4));
 }

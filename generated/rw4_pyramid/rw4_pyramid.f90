@@ -189,44 +189,49 @@ contains
     return
   end function rw4_pyramid_cos
 
-  ! Checks p and computes the constants c that rw4_pyramid_rhs needs
-  ! (4 ops, plus the checks). Returns RW4_PYRAMID_OK or
-  ! the first failing check's code; c is then not to be used.
-  function rw4_pyramid_setup(p, c) result(status) &
-      bind(C, name="rw4_pyramid_f_setup")
-    real(c_double), intent(in) :: p(4)
-    real(c_double), intent(out) :: c(5)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that rw4_pyramid_rhs needs (4 ops,
+  ! plus the checks). Returns RW4_PYRAMID_OK or the first failing check's code;
+  ! c is then not to be used.
+  function rw4_pyramid_setup(p, c) result(res) bind(C, name="rw4_pyramid_f_setup")
+    real(c_double), intent(in) :: p(0:3)
+    real(c_double), intent(out) :: c(0:4)
+    integer(c_int) :: res
     real(c_double) :: w_ref_1
     real(c_double) :: w_ref_2
     real(c_double) :: w_ref_3
     real(c_double) :: w_ref_4
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = RW4_PYRAMID_ERR_NONFINITE
+    do i_ = 0, 5 - 1
+      c(i_) = 0.0_c_double
+    end do
+    do i_ = 0, 4 - 1
+      if (.not. ieee_is_finite(p(i_))) then
+        res = RW4_PYRAMID_ERR_NONFINITE
+        return
+      end if
+    end do
+    w_ref_1 = p(0)
+    w_ref_2 = p(1)
+    w_ref_3 = p(2)
+    w_ref_4 = p(3)
+    c(0) = w_ref_1 / 20.0_c_double
+    c(1) = w_ref_2 / 20.0_c_double
+    c(2) = w_ref_3 / 20.0_c_double
+    c(3) = w_ref_4 / 20.0_c_double
+    c(4) = 3.1210118456608873_c_double
+    if (.not. (c(4) <= 10000000000000.0_c_double)) then
+      res = RW4_PYRAMID_ERR_MASS_SINGULAR
       return
     end if
-    w_ref_1 = p(1)
-    w_ref_2 = p(2)
-    w_ref_3 = p(3)
-    w_ref_4 = p(4)
-
-
-    c(1) = (1.0d0/20.0d0)*w_ref_1
-    c(2) = (1.0d0/20.0d0)*w_ref_2
-    c(3) = (1.0d0/20.0d0)*w_ref_3
-    c(4) = (1.0d0/20.0d0)*w_ref_4
-    c(5) = 3.1210118456608873_c_double
-    if (.not. (c(RW4_PYRAMID_COND) <= 10000000000000.0_c_double)) then
-      status = RW4_PYRAMID_ERR_MASS_SINGULAR
-      return
-    end if
-    if (.not. all(ieee_is_finite(c))) then
-      status = RW4_PYRAMID_ERR_OVERFLOW
-      return
-    end if
-    status = RW4_PYRAMID_OK
+    do i_ = 0, 5 - 1
+      if (.not. ieee_is_finite(c(i_))) then
+        res = RW4_PYRAMID_ERR_OVERFLOW
+        return
+      end if
+    end do
+    res = RW4_PYRAMID_OK
+    return
   end function rw4_pyramid_setup
 
   ! The message for a return code, blank-padded to 85 characters: trim() it.
@@ -249,14 +254,14 @@ contains
   end function rw4_pyramid_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from rw4_pyramid_setup (114 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from rw4_pyramid_setup (114 ops).
   subroutine rw4_pyramid_rhs(t, x, c, dxdt) bind(C, name="rw4_pyramid_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(5)
-    real(c_double), intent(out) :: dxdt(10)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:4)
+    real(c_double), intent(out) :: dxdt(0:9)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -288,71 +293,66 @@ contains
     real(c_double) :: f2
     real(c_double) :: f3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
-    tmp0 = 0.5773502691896258_c_double*u1
-    tmp1 = 0.8164965809277259_c_double*u3
-    tmp2 = 0.5773502691896258_c_double*u2
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
+    tmp0 = 0.5773502691896258_c_double * u1
+    tmp1 = 0.8164965809277259_c_double * u3
+    tmp2 = 0.5773502691896258_c_double * u2
     tmp3 = -tmp1
     tmp4 = rw4_pyramid_sin(q3)
     tmp5 = rw4_pyramid_cos(q3)
-    tmp6 = (-tmp4*u1 + tmp5*u3)/rw4_pyramid_cos(q2)
-    h1 = 421.76382113821137_c_double*u1 - 4*u2 + 6*u3 + &
-          0.025980762113533163_c_double*(w1 - w3)
-    h2 = -4*u1 + 381.76382113821137_c_double*u2 + 2.5_c_double*u3 + &
-          0.025980762113533163_c_double*(w2 - w4)
-    h3 = 6*u1 + 2.5_c_double*u2 + 301.8333333333333_c_double*u3 + &
-          0.036742346141747664_c_double*(w1 + w2 + w3 + w4)
-    rel1 = -tmp0 - tmp1 + w1
-    net1 = -2e-05_c_double*rel1 + min(0.2_c_double, max(-0.2_c_double, c(1) &
-          - 0.05_c_double*rel1))
-    rel2 = -tmp1 - tmp2 + w2
-    net2 = -2e-05_c_double*rel2 + min(0.2_c_double, max(-0.2_c_double, c(2) &
-          - 0.05_c_double*rel2))
-    rel3 = tmp0 + tmp3 + w3
-    net3 = -2e-05_c_double*rel3 + min(0.2_c_double, max(-0.2_c_double, c(3) &
-          - 0.05_c_double*rel3))
-    rel4 = tmp2 + tmp3 + w4
-    net4 = -2e-05_c_double*rel4 + min(0.2_c_double, max(-0.2_c_double, c(4) &
-          - 0.05_c_double*rel4))
-    f1 = h2*u3 - h3*u2 + 0.5773502691896258_c_double*(-net1 + net3)
-    f2 = -h1*u3 + h3*u1 + 0.5773502691896258_c_double*(-net2 + net4)
-    f3 = h1*u2 - h2*u1 - 0.8164965809277259_c_double*(net1 + net2 + net3 + &
-          net4)
-    dxdt(1) = tmp6
-    dxdt(2) = tmp4*u3 + tmp5*u1
-    dxdt(3) = -tmp6*rw4_pyramid_sin(q2) + u2
-    dxdt(4) = 0.002371907568400169_c_double*f1 + &
-          2.5162222823731624e-05_c_double*f2 - &
-          4.735842396728992e-05_c_double*f3
-    dxdt(5) = 2.5162222823731624e-05_c_double*f1 + &
-          0.0026198295706604748_c_double*f2 - &
-          2.2199493971044426e-05_c_double*f3
-    dxdt(6) = -4.735842396728992e-05_c_double*f1 - &
-          2.2199493971044426e-05_c_double*f2 + &
-          0.003314211979940579_c_double*f3
-    dxdt(7) = 22.22222222222222_c_double*net1
-    dxdt(8) = 22.22222222222222_c_double*net2
-    dxdt(9) = 22.22222222222222_c_double*net3
-    dxdt(10) = 22.22222222222222_c_double*net4
+    tmp6 = (tmp5 * u3 - tmp4 * u1) / rw4_pyramid_cos(q2)
+    h1 = ((6.0_c_double * u3 + 421.76382113821137_c_double * u1) + 0.025980762113533163_c_double &
+        * (w1 - w3)) - 4.0_c_double * u2
+    h2 = ((2.5_c_double * u3 + 381.76382113821137_c_double * u2) + 0.025980762113533163_c_double &
+        * (w2 - w4)) - 4.0_c_double * u1
+    h3 = ((6.0_c_double * u1 + 2.5_c_double * u2) + 0.036742346141747664_c_double * (((w1 + w2) + &
+        w3) + w4)) + 301.8333333333333_c_double * u3
+    rel1 = (w1 - tmp0) - tmp1
+    net1 = min(0.2_c_double, max(-0.2_c_double, &
+        c(0) - 0.05_c_double * rel1)) - 2e-05_c_double * rel1
+    rel2 = (w2 - tmp1) - tmp2
+    net2 = min(0.2_c_double, max(-0.2_c_double, &
+        c(1) - 0.05_c_double * rel2)) - 2e-05_c_double * rel2
+    rel3 = (tmp0 + tmp3) + w3
+    net3 = min(0.2_c_double, max(-0.2_c_double, &
+        c(2) - 0.05_c_double * rel3)) - 2e-05_c_double * rel3
+    rel4 = (tmp2 + tmp3) + w4
+    net4 = min(0.2_c_double, max(-0.2_c_double, &
+        c(3) - 0.05_c_double * rel4)) - 2e-05_c_double * rel4
+    f1 = (0.5773502691896258_c_double * (net3 - net1) + h2 * u3) - h3 * u2
+    f2 = (0.5773502691896258_c_double * (net4 - net2) + h3 * u1) - h1 * u3
+    f3 = (h1 * u2 - 0.8164965809277259_c_double * (((net1 + net2) + net3) + net4)) - h2 * u1
+    dxdt(0) = tmp6
+    dxdt(1) = tmp4 * u3 + tmp5 * u1
+    dxdt(2) = u2 - tmp6 * rw4_pyramid_sin(q2)
+    dxdt(3) = (0.002371907568400169_c_double * f1 + 2.5162222823731624e-05_c_double * f2) - &
+        4.735842396728992e-05_c_double * f3
+    dxdt(4) = (0.0026198295706604748_c_double * f2 + 2.5162222823731624e-05_c_double * f1) - &
+        2.2199493971044426e-05_c_double * f3
+    dxdt(5) = (0.003314211979940579_c_double * f3 - 4.735842396728992e-05_c_double * f1) - &
+        2.2199493971044426e-05_c_double * f2
+    dxdt(6) = 22.22222222222222_c_double * net1
+    dxdt(7) = 22.22222222222222_c_double * net2
+    dxdt(8) = 22.22222222222222_c_double * net3
+    dxdt(9) = 22.22222222222222_c_double * net4
   end subroutine rw4_pyramid_rhs
 
   ! out = kinetic energy of the system (J): 23 ops.
-  subroutine rw4_pyramid_kinetic_energy(t, x, c, out) &
-      bind(C, name="rw4_pyramid_f_kinetic_energy")
+  subroutine rw4_pyramid_kinetic_energy(t, x, c, out) bind(C, name="rw4_pyramid_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(5)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:4)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
@@ -361,28 +361,31 @@ contains
     real(c_double) :: w3
     real(c_double) :: w4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
-    out(1) = u1*(210.88191056910568_c_double*u1 - 4.0_c_double*u2 + &
-          6.0_c_double*u3) + u2*(190.88191056910568_c_double*u2 + &
-          2.5_c_double*u3) + 150.91666666666666_c_double*u3*u3 + &
-          0.0225_c_double*(w1*w1 + w2*w2 + w3*w3 + w4*w4)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
+    out(0) = ((0.0225_c_double * (((w1 * w1 + w2 * w2) + w3 * w3) + w4 * w4) + &
+        150.91666666666666_c_double * (u3 * u3)) + u1 * ((6.0_c_double * u3 + &
+        210.88191056910568_c_double * u1) - 4.0_c_double * u2)) + u2 * (2.5_c_double * u3 + &
+        190.88191056910568_c_double * u2)
   end subroutine rw4_pyramid_kinetic_energy
 
-  ! out = angular momentum about the mass center, N components h[0..2] (kg m^2/s): 63 ops.
-  subroutine rw4_pyramid_angular_momentum(t, x, c, out) &
-      bind(C, name="rw4_pyramid_f_angular_momentum")
+  ! out = angular momentum about the mass center, N components h[0..2] (kg
+  ! m^2/s): 63 ops.
+  subroutine rw4_pyramid_angular_momentum(t, x, c, out) bind(C, &
+          name="rw4_pyramid_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(5)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:4)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -407,48 +410,47 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
     tmp0 = rw4_pyramid_sin(q1)
-    tmp1 = -4*u1 + 381.76382113821137_c_double*u2 + 2.5_c_double*u3 + &
-          0.025980762113533163_c_double*(w2 - w4)
+    tmp1 = ((2.5_c_double * u3 + 381.76382113821137_c_double * u2) + &
+        0.025980762113533163_c_double * (w2 - w4)) - 4.0_c_double * u1
     tmp2 = rw4_pyramid_cos(q2)
-    tmp3 = tmp1*tmp2
+    tmp3 = tmp1 * tmp2
     tmp4 = rw4_pyramid_sin(q3)
     tmp5 = rw4_pyramid_cos(q1)
-    tmp6 = tmp4*tmp5
+    tmp6 = tmp4 * tmp5
     tmp7 = rw4_pyramid_sin(q2)
     tmp8 = rw4_pyramid_cos(q3)
-    tmp9 = tmp0*tmp8
-    tmp10 = 6*u1 + 2.5_c_double*u2 + 301.8333333333333_c_double*u3 + &
-          0.036742346141747664_c_double*(w1 + w2 + w3 + w4)
-    tmp11 = tmp0*tmp4
-    tmp12 = 421.76382113821137_c_double*u1 - 4*u2 + 6*u3 + &
-          0.025980762113533163_c_double*(w1 - w3)
-    out(1) = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + &
-          tmp5*tmp8)
-    out(2) = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + &
-          tmp3*tmp5
-    out(3) = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4
+    tmp9 = tmp0 * tmp8
+    tmp10 = ((6.0_c_double * u1 + 2.5_c_double * u2) + 0.036742346141747664_c_double * (((w1 + &
+        w2) + w3) + w4)) + 301.8333333333333_c_double * u3
+    tmp11 = tmp0 * tmp4
+    tmp12 = ((6.0_c_double * u3 + 421.76382113821137_c_double * u1) + &
+        0.025980762113533163_c_double * (w1 - w3)) - 4.0_c_double * u2
+    out(0) = (tmp10 * (tmp6 + tmp7 * tmp9) + tmp12 * (tmp5 * tmp8 - tmp11 * tmp7)) - tmp0 * tmp3
+    out(1) = (tmp10 * (tmp11 - (tmp5 * tmp7) * tmp8) + tmp12 * (tmp9 + tmp6 * tmp7)) + tmp3 * tmp5
+    out(2) = (tmp1 * tmp7 + (tmp10 * tmp2) * tmp8) - (tmp12 * tmp2) * tmp4
   end subroutine rw4_pyramid_angular_momentum
 
   ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 43 ops.
-  subroutine rw4_pyramid_power(t, x, c, out) &
-      bind(C, name="rw4_pyramid_f_power")
+  subroutine rw4_pyramid_power(t, x, c, out) bind(C, name="rw4_pyramid_f_power")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(5)
-    real(c_double), intent(out) :: out(4)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:4)
+    real(c_double), intent(out) :: out(0:3)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
@@ -464,30 +466,30 @@ contains
     real(c_double) :: tmp5
     real(c_double) :: tmp6
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
-    tmp0 = 0.5773502691896258_c_double*u1
-    tmp1 = 0.8164965809277259_c_double*u3
-    tmp2 = 0.028867513459481294_c_double*u1
-    tmp3 = 0.0408248290463863_c_double*u3
-    tmp4 = 0.5773502691896258_c_double*u2
-    tmp5 = 0.028867513459481294_c_double*u2
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
+    tmp0 = 0.5773502691896258_c_double * u1
+    tmp1 = 0.8164965809277259_c_double * u3
+    tmp2 = 0.028867513459481294_c_double * u1
+    tmp3 = 0.0408248290463863_c_double * u3
+    tmp4 = 0.5773502691896258_c_double * u2
+    tmp5 = 0.028867513459481294_c_double * u2
     tmp6 = -tmp1
-    out(1) = (-tmp0 - tmp1 + w1)*min(0.2_c_double, max(-0.2_c_double, c(1) + &
-          tmp2 + tmp3 - 0.05_c_double*w1))
-    out(2) = (-tmp1 - tmp4 + w2)*min(0.2_c_double, max(-0.2_c_double, c(2) + &
-          tmp3 + tmp5 - 0.05_c_double*w2))
-    out(3) = (tmp0 + tmp6 + w3)*min(0.2_c_double, max(-0.2_c_double, c(3) - &
-          tmp2 + tmp3 - 0.05_c_double*w3))
-    out(4) = (tmp4 + tmp6 + w4)*min(0.2_c_double, max(-0.2_c_double, c(4) + &
-          tmp3 - tmp5 - 0.05_c_double*w4))
+    out(0) = ((w1 - tmp0) - tmp1) * min(0.2_c_double, max(-0.2_c_double, &
+        ((c(0) + tmp2) + tmp3) - 0.05_c_double * w1))
+    out(1) = ((w2 - tmp1) - tmp4) * min(0.2_c_double, max(-0.2_c_double, &
+        ((c(1) + tmp3) + tmp5) - 0.05_c_double * w2))
+    out(2) = ((tmp0 + tmp6) + w3) * min(0.2_c_double, max(-0.2_c_double, &
+        ((c(2) + tmp3) - tmp2) - 0.05_c_double * w3))
+    out(3) = ((tmp4 + tmp6) + w4) * min(0.2_c_double, max(-0.2_c_double, &
+        ((c(3) + tmp3) - tmp5) - 0.05_c_double * w4))
   end subroutine rw4_pyramid_power
 
 end module rw4_pyramid_mod

@@ -229,157 +229,235 @@ const char *rw4_pyramid_failed_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (335 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (335 ops). */
 void rw4_pyramid_failed_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double w1 = x[6];
-    const double w2 = x[7];
-    const double w3 = x[8];
-    const double w4 = x[9];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double w1;
+    double w2;
+    double w3;
+    double w4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
+    double tmp13;
+    double tmp14;
+    double tmp15;
+    double tmp16;
+    double tmp17;
+    double tmp18;
+    double tmp19;
+    double tmp20;
+    double tmp21;
+    double tmp22;
+    double tmp23;
+    double tmp24;
+    double tmp25;
+    double tmp26;
+    double tmp27;
+    double tmp28;
+    double tmp29;
+    double tmp30;
+    double tmp31;
+    double tmp32;
+    double tmp33;
+    double tmp34;
 
-    const double tmp0 = rw4_pyramid_failed_sin(q2);
-    const double tmp1 = rw4_pyramid_failed_cos(q2);
-    const double tmp2 = rw4_pyramid_failed_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = rw4_pyramid_failed_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = 0.028867513459481294*u1;
-    const double tmp13 = 0.0408248290463863*u3;
-    const double tmp14 = c[0] + tmp12 + tmp13 - 0.05*w1;
-    const double tmp15 = ((0.2 - fmax(-0.2, tmp14)) > 0.0 ? 1.0 : 0.0)*((tmp14 + 0.2) > 0.0 ? 1.0 : 0.0);
-    const double tmp16 = c[2] - tmp12 + tmp13 - 0.05*w3;
-    const double tmp17 = ((0.2 - fmax(-0.2, tmp16)) > 0.0 ? 1.0 : 0.0);
-    const double tmp18 = ((tmp16 + 0.2) > 0.0 ? 1.0 : 0.0);
-    const double tmp19 = tmp17*tmp18;
-    const double tmp20 = c[1] + tmp13 + 0.028867513459481294*u2 - 0.05*w2;
-    const double tmp21 = ((tmp20 + 0.2) > 0.0 ? 1.0 : 0.0);
-    const double tmp22 = ((0.2 - fmax(-0.2, tmp20)) > 0.0 ? 1.0 : 0.0);
-    const double tmp23 = tmp21*tmp22;
-    const double tmp24 = 6.53733725431086e-07*u3;
-    const double tmp25 = -tmp24;
-    const double tmp26 = 8.714944889439003e-05*u2;
-    const double tmp27 = 6.162396628989367e-05*u3;
-    const double tmp28 = -9.625868491759333e-05*u1;
-    const double tmp29 = 6.806516885332952e-05*u3;
-    const double tmp30 = 9.245191006853307e-07*u2;
-    const double tmp31 = 8.156614916557547e-07*u1;
-    const double tmp32 = 5.767597719025189e-07*u3;
-    const double tmp33 = 1.740059606133805e-06*u2;
-    const double tmp34 = 1.2304079471660068e-06*u3;
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    w1 = x[6];
+    w2 = x[7];
+    w3 = x[8];
+    w4 = x[9];
+    tmp0 = rw4_pyramid_failed_sin(q2);
+    tmp1 = rw4_pyramid_failed_cos(q2);
+    tmp2 = rw4_pyramid_failed_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = rw4_pyramid_failed_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = 0.028867513459481294 * u1;
+    tmp13 = 0.0408248290463863 * u3;
+    tmp14 = c[0] + tmp12 + tmp13 - 0.05 * w1;
+    tmp15 = (0.2 + tmp14 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, tmp14) > 0.0 ? 1.0 : 0.0);
+    tmp16 = c[2] + tmp13 - tmp12 - 0.05 * w3;
+    tmp17 = 0.2 - dmax(-0.2, tmp16) > 0.0 ? 1.0 : 0.0;
+    tmp18 = 0.2 + tmp16 > 0.0 ? 1.0 : 0.0;
+    tmp19 = tmp17 * tmp18;
+    tmp20 = c[1] + tmp13 + 0.028867513459481294 * u2 - 0.05 * w2;
+    tmp21 = 0.2 + tmp20 > 0.0 ? 1.0 : 0.0;
+    tmp22 = 0.2 - dmax(-0.2, tmp20) > 0.0 ? 1.0 : 0.0;
+    tmp23 = tmp21 * tmp22;
+    tmp24 = 6.53733725431086e-07 * u3;
+    tmp25 = -tmp24;
+    tmp26 = 8.714944889439003e-05 * u2;
+    tmp27 = 6.162396628989367e-05 * u3;
+    tmp28 = -(9.625868491759333e-05 * u1);
+    tmp29 = 6.806516885332952e-05 * u3;
+    tmp30 = 9.245191006853307e-07 * u2;
+    tmp31 = 8.156614916557547e-07 * u1;
+    tmp32 = 5.767597719025189e-07 * u3;
+    tmp33 = 1.740059606133805e-06 * u2;
+    tmp34 = 1.2304079471660068e-06 * u3;
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
     J[3] = -tmp10;
-    J[4] = 0;
+    J[4] = 0.0;
     J[5] = tmp11;
-    J[6] = 0;
-    J[7] = 0;
-    J[8] = 0;
-    J[9] = 0;
-    J[10] = 0;
-    J[11] = 0;
+    J[6] = 0.0;
+    J[7] = 0.0;
+    J[8] = 0.0;
+    J[9] = 0.0;
+    J[10] = 0.0;
+    J[11] = 0.0;
     J[12] = tmp6;
     J[13] = tmp4;
-    J[14] = 0;
+    J[14] = 0.0;
     J[15] = tmp2;
-    J[16] = 0;
-    J[17] = 0;
-    J[18] = 0;
-    J[19] = 0;
-    J[20] = 0;
-    J[21] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[22] = -tmp0*tmp9;
-    J[23] = tmp0*tmp10;
-    J[24] = 1;
-    J[25] = -tmp0*tmp11;
-    J[26] = 0;
-    J[27] = 0;
-    J[28] = 0;
-    J[29] = 0;
-    J[30] = 0;
-    J[31] = 0;
-    J[32] = 0;
-    J[33] = -3.841554404888355e-05*tmp15 - 4.064804156445544e-05*tmp19 - 7.692071785353986e-05*u1 - 0.01606287681203328*u2 - 0.01238695187118762*u3 + 9.245191006853307e-07*w1 + 2.1549270478513374e-06*w2 + 9.245191006853307e-07*w3 - 3.0588884648067615e-07*w4 - 3.1625434245335595e-08;
-    J[34] = 6.968783773904135e-07*tmp21*tmp22 - 0.016062876812033285*u1 - 0.011480670450262525*u2 + 0.18940422731779893*u3 - 8.837985684155604e-05*w1 - 8.714944889439003e-05*w2 - 8.591904094722402e-05*w3 - 8.714944889439003e-05*w4 - 3.3549630431642173e-10;
-    J[35] = -5.4327783399872144e-05*tmp15 + 5.748501166435814e-05*tmp19 + 9.855348526300785e-07*tmp23 - 0.01238695187118762*u1 + 0.18940422731779896*u2 + 0.011557591168116065*u3 - 6.53733725431086e-07*w1 + 6.162396628989367e-05*w2 + 6.53733725431086e-07*w3 - 6.162396628989367e-05*w4 + 2.5257826115887954e-09;
-    J[36] = 6.653767409306653e-05*tmp15 + tmp25 + 9.245191006853307e-07*u1 - 8.837985684155604e-05*u2 + 2.661506963722661e-08;
-    J[37] = -1.2070287563363544e-06*tmp23 - tmp26 + tmp27 + 2.1549270478513374e-06*u1 - 4.828115025345418e-10;
-    J[38] = -7.040447321780832e-05*tmp19 - tmp25 + 9.245191006853307e-07*u1 - 8.591904094722402e-05*u2 - 2.8161789287123327e-08;
-    J[39] = -tmp26 - tmp27 - 3.0588884648067615e-07*u1 - 1.0639081473621739e-09;
-    J[40] = 0;
-    J[41] = 0;
-    J[42] = 0;
-    J[43] = 1.0387671046565256e-07*tmp15 - 9.42617471256707e-07*tmp19 + 0.031260358896157345*u1 + 0.005510620830867021*u2 - 0.31424258853132236*u3 + 9.625868491759333e-05*w1 + 9.683544468949584e-05*w2 + 9.625868491759333e-05*w3 + 9.568192514569082e-05*w4 - 3.3549630431642173e-10;
-    J[44] = -4.314057908681341e-05*tmp23 + 0.005510620830867022*u1 + 5.1784837649697276e-05*u2 + 0.012357350063371539*u3 - 1.5012788725878497e-06*w1 - 9.245191006853307e-07*w2 - 3.477593287828118e-07*w3 - 9.245191006853307e-07*w4 - 3.4931060942139676e-08;
-    J[45] = 1.4690385275522902e-07*tmp15 + 1.3330624119810659e-06*tmp19 - 6.100999203320062e-05*tmp23 - 0.31424258853132236*u1 + 0.012357350063371537*u2 - 0.031312143733807044*u3 - 6.806516885332952e-05*w1 + 6.53733725431086e-07*w2 + 6.806516885332952e-05*w3 - 6.53733725431086e-07*w4 + 1.183973011789036e-09;
-    J[46] = -1.7991974024963193e-07*tmp15 - tmp28 - tmp29 - 1.5012788725878497e-06*u2 - 7.196789609985278e-11;
-    J[47] = 7.472167484630418e-05*tmp23 + tmp24 - tmp30 + 9.683544468949584e-05*u1 + 2.988866993852167e-08;
-    J[48] = -1.6326613523187123e-06*tmp19 - tmp28 + tmp29 - 3.477593287828118e-07*u2 - 6.530645409274848e-10;
-    J[49] = -tmp24 - tmp30 + 9.568192514569082e-05*u1 - 3.061370237554901e-08;
-    J[50] = 0;
-    J[51] = 0;
-    J[52] = 0;
-    J[53] = -7.732741844406775e-05*tmp15 + 7.890603257631074e-05*tmp19 + 0.0262473019118721*u1 + 0.13279713100649926*u2 - 0.00543370011301348*u3 - 8.156614916557547e-07*w1 - 8.692141453631369e-05*w2 - 8.156614916557547e-07*w3 + 8.529009155300216e-05*w4 + 6.314456528971991e-10;
-    J[54] = -7.774673394400518e-05*tmp23 + 0.13279713100649926*u1 - 0.02627690371968818*u2 + 0.016011091974383586*u3 + 8.784581265079174e-05*w1 + 1.740059606133805e-06*w2 - 8.436569343852411e-05*w3 + 1.740059606133805e-06*w4 + 2.959932529472591e-10;
-    J[55] = -0.0001093574839069*tmp15 - 0.00011158998142247187*tmp19 - 0.00010995048557382475*tmp23 - 0.005433700113013481*u1 + 0.01601109197438358*u2 + 2.960180781608348e-05*u3 + 5.767597719025189e-07*w1 - 1.2304079471660068e-06*w2 - 5.767597719025189e-07*w3 + 1.2304079471660068e-06*w4 - 1.767579722634975e-07;
-    J[56] = 0.00013393501756326403*tmp15 - tmp31 + tmp32 + 8.784581265079174e-05*u2 + 5.357400702530561e-08;
-    J[57] = 0.0001346612933135568*tmp23 + tmp33 - tmp34 - 8.692141453631369e-05*u1 + 5.3864517325422714e-08;
-    J[58] = 0.00013666925744585515*tmp17*tmp18 - tmp31 - tmp32 - 8.436569343852411e-05*u2 + 5.466770297834206e-08;
-    J[59] = tmp33 + tmp34 + 8.529009155300216e-05*u1 + 5.437719267822496e-08;
-    J[60] = 0;
-    J[61] = 0;
-    J[62] = 0;
-    J[63] = 0.6415002990995843*tmp15 + 0.0002566001196398337;
-    J[64] = 0;
-    J[65] = 0.9072184232530288*tmp15 + 0.0003628873693012115;
-    J[66] = -1.1111111111111112*tmp15 - 0.00044444444444444447;
-    J[67] = 0;
-    J[68] = 0;
-    J[69] = 0;
-    J[70] = 0;
-    J[71] = 0;
-    J[72] = 0;
-    J[73] = 0;
-    J[74] = 0.6415002990995843*tmp23 + 0.0002566001196398337;
-    J[75] = 0.9072184232530288*tmp23 + 0.0003628873693012115;
-    J[76] = 0;
-    J[77] = -1.1111111111111112*tmp23 - 0.00044444444444444447;
-    J[78] = 0;
-    J[79] = 0;
-    J[80] = 0;
-    J[81] = 0;
-    J[82] = 0;
-    J[83] = -0.6415002990995843*tmp19 - 0.0002566001196398337;
-    J[84] = 0;
-    J[85] = 0.9072184232530288*tmp19 + 0.0003628873693012115;
-    J[86] = 0;
-    J[87] = 0;
-    J[88] = -1.1111111111111112*tmp19 - 0.00044444444444444447;
-    J[89] = 0;
-    J[90] = 0;
-    J[91] = 0;
-    J[92] = 0;
-    J[93] = 0;
+    J[16] = 0.0;
+    J[17] = 0.0;
+    J[18] = 0.0;
+    J[19] = 0.0;
+    J[20] = 0.0;
+    J[21] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[22] = -(tmp0 * tmp9);
+    J[23] = tmp0 * tmp10;
+    J[24] = 1.0;
+    J[25] = -(tmp0 * tmp11);
+    J[26] = 0.0;
+    J[27] = 0.0;
+    J[28] = 0.0;
+    J[29] = 0.0;
+    J[30] = 0.0;
+    J[31] = 0.0;
+    J[32] = 0.0;
+    J[33] = 2.1549270478513374e-06 * w2 + 9.245191006853307e-07 * w1 + 9.245191006853307e-07 * w3
+            - 3.1625434245335595e-08 - 7.692071785353986e-05 * u1 - 3.0588884648067615e-07 * w4 -
+            0.01606287681203328 * u2 - 3.841554404888355e-05 * tmp15 - 4.064804156445544e-05 *
+            tmp19 - 0.01238695187118762 * u3;
+    J[34] = 0.18940422731779893 * u3 + 6.968783773904135e-07 * tmp21 * tmp22 -
+            3.3549630431642173e-10 - 8.591904094722402e-05 * w3 - 0.016062876812033285 * u1 -
+            8.837985684155604e-05 * w1 - 8.714944889439003e-05 * w2 - 8.714944889439003e-05 * w4
+            - 0.011480670450262525 * u2;
+    J[35] = 2.5257826115887954e-09 + 6.53733725431086e-07 * w3 + 5.748501166435814e-05 * tmp19 +
+            9.855348526300785e-07 * tmp23 + 0.011557591168116065 * u3 + 6.162396628989367e-05 *
+            w2 + 0.18940422731779896 * u2 - 6.53733725431086e-07 * w1 - 6.162396628989367e-05 *
+            w4 - 0.01238695187118762 * u1 - 5.4327783399872144e-05 * tmp15;
+    J[36] = 2.661506963722661e-08 + tmp25 + 6.653767409306653e-05 * tmp15 + 9.245191006853307e-07
+            * u1 - 8.837985684155604e-05 * u2;
+    J[37] = tmp27 + 2.1549270478513374e-06 * u1 - 4.828115025345418e-10 - tmp26 -
+            1.2070287563363544e-06 * tmp23;
+    J[38] = 9.245191006853307e-07 * u1 - 2.8161789287123327e-08 - tmp25 - 8.591904094722402e-05 *
+            u2 - 7.040447321780832e-05 * tmp19;
+    J[39] = -1.0639081473621739e-09 - tmp26 - tmp27 - 3.0588884648067615e-07 * u1;
+    J[40] = 0.0;
+    J[41] = 0.0;
+    J[42] = 0.0;
+    J[43] = 9.568192514569082e-05 * w4 + 0.031260358896157345 * u1 + 9.683544468949584e-05 * w2 +
+            1.0387671046565256e-07 * tmp15 + 0.005510620830867021 * u2 + 9.625868491759333e-05 *
+            w1 + 9.625868491759333e-05 * w3 - 3.3549630431642173e-10 - 0.31424258853132236 * u3 -
+            9.42617471256707e-07 * tmp19;
+    J[44] = 0.005510620830867022 * u1 + 5.1784837649697276e-05 * u2 + 0.012357350063371539 * u3 -
+            3.4931060942139676e-08 - 4.314057908681341e-05 * tmp23 - 3.477593287828118e-07 * w3 -
+            1.5012788725878497e-06 * w1 - 9.245191006853307e-07 * w2 - 9.245191006853307e-07 * w4;
+    J[45] = 1.183973011789036e-09 + 1.3330624119810659e-06 * tmp19 + 6.53733725431086e-07 * w2 +
+            0.012357350063371537 * u2 + 6.806516885332952e-05 * w3 + 1.4690385275522902e-07 *
+            tmp15 - 6.53733725431086e-07 * w4 - 6.100999203320062e-05 * tmp23 -
+            0.031312143733807044 * u3 - 0.31424258853132236 * u1 - 6.806516885332952e-05 * w1;
+    J[46] = -7.196789609985278e-11 - tmp28 - tmp29 - 1.7991974024963193e-07 * tmp15 -
+            1.5012788725878497e-06 * u2;
+    J[47] = 2.988866993852167e-08 + tmp24 + 9.683544468949584e-05 * u1 + 7.472167484630418e-05 *
+            tmp23 - tmp30;
+    J[48] = tmp29 - 6.530645409274848e-10 - tmp28 - 1.6326613523187123e-06 * tmp19 -
+            3.477593287828118e-07 * u2;
+    J[49] = 9.568192514569082e-05 * u1 - 3.061370237554901e-08 - tmp24 - tmp30;
+    J[50] = 0.0;
+    J[51] = 0.0;
+    J[52] = 0.0;
+    J[53] = 6.314456528971991e-10 + 0.13279713100649926 * u2 + 7.890603257631074e-05 * tmp19 +
+            0.0262473019118721 * u1 + 8.529009155300216e-05 * w4 - 0.00543370011301348 * u3 -
+            7.732741844406775e-05 * tmp15 - 8.156614916557547e-07 * w1 - 8.156614916557547e-07 *
+            w3 - 8.692141453631369e-05 * w2;
+    J[54] = 2.959932529472591e-10 + 8.784581265079174e-05 * w1 + 0.13279713100649926 * u1 +
+            0.016011091974383586 * u3 + 1.740059606133805e-06 * w2 + 1.740059606133805e-06 * w4 -
+            8.436569343852411e-05 * w3 - 0.02627690371968818 * u2 - 7.774673394400518e-05 * tmp23;
+    J[55] = 2.960180781608348e-05 * u3 + 0.01601109197438358 * u2 + 1.2304079471660068e-06 * w4 +
+            5.767597719025189e-07 * w1 - 1.767579722634975e-07 - 0.00011158998142247187 * tmp19 -
+            1.2304079471660068e-06 * w2 - 5.767597719025189e-07 * w3 - 0.005433700113013481 * u1
+            - 0.0001093574839069 * tmp15 - 0.00010995048557382475 * tmp23;
+    J[56] = 5.357400702530561e-08 + tmp32 + 8.784581265079174e-05 * u2 + 0.00013393501756326403 *
+            tmp15 - tmp31;
+    J[57] = 5.3864517325422714e-08 + tmp33 + 0.0001346612933135568 * tmp23 - tmp34 -
+            8.692141453631369e-05 * u1;
+    J[58] = 5.466770297834206e-08 + 0.00013666925744585515 * tmp17 * tmp18 - tmp31 - tmp32 -
+            8.436569343852411e-05 * u2;
+    J[59] = 5.437719267822496e-08 + tmp33 + tmp34 + 8.529009155300216e-05 * u1;
+    J[60] = 0.0;
+    J[61] = 0.0;
+    J[62] = 0.0;
+    J[63] = 0.0002566001196398337 + 0.6415002990995843 * tmp15;
+    J[64] = 0.0;
+    J[65] = 0.0003628873693012115 + 0.9072184232530288 * tmp15;
+    J[66] = -0.00044444444444444447 - 1.1111111111111112 * tmp15;
+    J[67] = 0.0;
+    J[68] = 0.0;
+    J[69] = 0.0;
+    J[70] = 0.0;
+    J[71] = 0.0;
+    J[72] = 0.0;
+    J[73] = 0.0;
+    J[74] = 0.0002566001196398337 + 0.6415002990995843 * tmp23;
+    J[75] = 0.0003628873693012115 + 0.9072184232530288 * tmp23;
+    J[76] = 0.0;
+    J[77] = -0.00044444444444444447 - 1.1111111111111112 * tmp23;
+    J[78] = 0.0;
+    J[79] = 0.0;
+    J[80] = 0.0;
+    J[81] = 0.0;
+    J[82] = 0.0;
+    J[83] = -0.0002566001196398337 - 0.6415002990995843 * tmp19;
+    J[84] = 0.0;
+    J[85] = 0.0003628873693012115 + 0.9072184232530288 * tmp19;
+    J[86] = 0.0;
+    J[87] = 0.0;
+    J[88] = -0.00044444444444444447 - 1.1111111111111112 * tmp19;
+    J[89] = 0.0;
+    J[90] = 0.0;
+    J[91] = 0.0;
+    J[92] = 0.0;
+    J[93] = 0.0;
     J[94] = -0.0002566001196398337;
     J[95] = 0.0003628873693012115;
-    J[96] = 0;
-    J[97] = 0;
-    J[98] = 0;
+    J[96] = 0.0;
+    J[97] = 0.0;
+    J[98] = 0.0;
     J[99] = -0.00044444444444444447;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(rw4_pyramid_failed_stats *stats, double t0)
@@ -929,12 +1007,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[5] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 1]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 1])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 1]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 1])) {
             p = i;
         }
     }
     piv[1] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 1]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 1]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 1]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 1) {
@@ -1033,12 +1113,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[25] = ur * ai[22] + ui * ar[22];
     p = 3;
     for (i = 4; i < 10; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 3]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 3])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 3]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 3])) {
             p = i;
         }
     }
     piv[3] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 3]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 3]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 3]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 3) {
@@ -1123,12 +1205,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[39] = ur * ai[33] + ui * ar[33];
     p = 4;
     for (i = 5; i < 10; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 4]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 4])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 4]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 4])) {
             p = i;
         }
     }
     piv[4] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 4]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 4]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 4]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 4) {
@@ -1205,12 +1289,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[49] = ur * ai[44] + ui * ar[44];
     p = 5;
     for (i = 6; i < 10; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 5]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 5])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 5]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 5])) {
             p = i;
         }
     }
     piv[5] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 5]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 5]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 5]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 5) {
@@ -1279,12 +1365,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[59] = ur * ai[55] + ui * ar[55];
     p = 6;
     for (i = 7; i < 10; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 6]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 6])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 6]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 6])) {
             p = i;
         }
     }
     piv[6] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 6]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 6]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 6]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 6) {
@@ -1345,12 +1433,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[69] = ur * ai[66] + ui * ar[66];
     p = 7;
     for (i = 8; i < 10; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 7]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 7])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 7]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 7])) {
             p = i;
         }
     }
     piv[7] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 7]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 7]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 7]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 7) {
@@ -1403,12 +1493,14 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[79] = ur * ai[77] + ui * ar[77];
     p = 8;
     for (i = 9; i < 10; ++i) {
-        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 8]) > fabs(ar[p * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 8])) {
+        if (fabs(ar[i * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[i * RW4_PYRAMID_FAILED_NX + 8]) >
+                fabs(ar[p * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 8])) {
             p = i;
         }
     }
     piv[8] = p;
-    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 8]) > 0.0)) {
+    if (!(fabs(ar[p * RW4_PYRAMID_FAILED_NX + 8]) + fabs(ai[p * RW4_PYRAMID_FAILED_NX + 8]) >
+            0.0)) {
         return 1;  /* singular */
     }
     if (p != 8) {
@@ -2835,59 +2927,62 @@ struct RW4_PYRAMID_FAILED_ALIGNED lanes {
     int busy[RW4_PYRAMID_FAILED_LANES];
 };
 
-/* rw4_pyramid_failed_rhs_lanes on RW4_PYRAMID_FAILED_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *RW4_PYRAMID_FAILED_RESTRICT t,
                       double (*RW4_PYRAMID_FAILED_RESTRICT x)[RW4_PYRAMID_FAILED_LANES],
                       const double *RW4_PYRAMID_FAILED_RESTRICT c,
                       double (*RW4_PYRAMID_FAILED_RESTRICT dxdt)[RW4_PYRAMID_FAILED_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     RW4_PYRAMID_FAILED_SIMD
     for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[3][l];
-        const double u2 = x[4][l];
-        const double u3 = x[5][l];
-        const double w1 = x[6][l];
-        const double w2 = x[7][l];
-        const double w3 = x[8][l];
-        const double w4 = x[9][l];
-
-        const double tmp0 = 0.5773502691896258*u1;
-        const double tmp1 = 0.8164965809277259*u3;
-        const double tmp2 = 0.5773502691896258*u2;
-        const double tmp3 = -tmp1;
-        const double tmp4 = rw4_pyramid_failed_sin_lanes(q3);
-        const double tmp5 = rw4_pyramid_failed_cos_lanes(q3);
-        const double tmp6 = (-tmp4*u1 + tmp5*u3)/rw4_pyramid_failed_cos_lanes(q2);
-        const double h1 = 421.76382113821137*u1 - 4*u2 + 6*u3 + 0.025980762113533163*(w1 - w3);
-        const double h2 = -4*u1 + 381.76382113821137*u2 + 2.5*u3 + 0.025980762113533163*(w2 - w4);
-        const double h3 = 6*u1 + 2.5*u2 + 301.8333333333333*u3 + 0.036742346141747664*(w1 + w2 + w3 + w4);
-        const double rel1 = -tmp0 - tmp1 + w1;
-        const double net1 = -2e-05*rel1 + fmin(0.2, fmax(-0.2, c[0] - 0.05*rel1));
-        const double rel2 = -tmp1 - tmp2 + w2;
-        const double net2 = -2e-05*rel2 + fmin(0.2, fmax(-0.2, c[1] - 0.05*rel2));
-        const double rel3 = tmp0 + tmp3 + w3;
-        const double net3 = -2e-05*rel3 + fmin(0.2, fmax(-0.2, c[2] - 0.05*rel3));
-        const double rel4 = tmp2 + tmp3 + w4;
-        const double net4 = -2e-05*rel4;
-        const double f1 = h2*u3 - h3*u2 + 0.5773502691896258*(-net1 + net3);
-        const double f2 = -h1*u3 + h3*u1 + 0.5773502691896258*(-net2 + net4);
-        const double f3 = h1*u2 - h2*u1 - 0.8164965809277259*(net1 + net2 + net3 + net4);
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, h1,
+                h2, h3, rel1, net1, rel2, net2, rel3, net3, rel4, net4, f1, f2, f3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        w1 = x[6][l];
+        w2 = x[7][l];
+        w3 = x[8][l];
+        w4 = x[9][l];
+        tmp0 = 0.5773502691896258 * u1;
+        tmp1 = 0.8164965809277259 * u3;
+        tmp2 = 0.5773502691896258 * u2;
+        tmp3 = -tmp1;
+        tmp4 = rw4_pyramid_failed_sin_lanes(q3);
+        tmp5 = rw4_pyramid_failed_cos_lanes(q3);
+        tmp6 = (tmp5 * u3 - tmp4 * u1) / rw4_pyramid_failed_cos_lanes(q2);
+        h1 = 6.0 * u3 + 421.76382113821137 * u1 + 0.025980762113533163 * (w1 - w3) - 4.0 * u2;
+        h2 = 2.5 * u3 + 381.76382113821137 * u2 + 0.025980762113533163 * (w2 - w4) - 4.0 * u1;
+        h3 = 6.0 * u1 + 2.5 * u2 + 0.036742346141747664 * (w1 + w2 + w3 + w4) + 301.8333333333333
+                * u3;
+        rel1 = w1 - tmp0 - tmp1;
+        net1 = dmin(0.2, dmax(-0.2, c[0] - 0.05 * rel1)) - 2e-05 * rel1;
+        rel2 = w2 - tmp1 - tmp2;
+        net2 = dmin(0.2, dmax(-0.2, c[1] - 0.05 * rel2)) - 2e-05 * rel2;
+        rel3 = tmp0 + tmp3 + w3;
+        net3 = dmin(0.2, dmax(-0.2, c[2] - 0.05 * rel3)) - 2e-05 * rel3;
+        rel4 = tmp2 + tmp3 + w4;
+        net4 = -(2e-05 * rel4);
+        f1 = 0.5773502691896258 * (net3 - net1) + h2 * u3 - h3 * u2;
+        f2 = 0.5773502691896258 * (net4 - net2) + h3 * u1 - h1 * u3;
+        f3 = h1 * u2 - 0.8164965809277259 * (net1 + net2 + net3 + net4) - h2 * u1;
         dxdt[0][l] = tmp6;
-        dxdt[1][l] = tmp4*u3 + tmp5*u1;
-        dxdt[2][l] = -tmp6*rw4_pyramid_failed_sin_lanes(q2) + u2;
-        dxdt[3][l] = 0.002371907568400169*f1 + 2.5162222823731624e-05*f2 - 4.735842396728992e-05*f3;
-        dxdt[4][l] = 2.5162222823731624e-05*f1 + 0.0026198295706604748*f2 - 2.2199493971044426e-05*f3;
-        dxdt[5][l] = -4.735842396728992e-05*f1 - 2.2199493971044426e-05*f2 + 0.003314211979940579*f3;
-        dxdt[6][l] = 22.22222222222222*net1;
-        dxdt[7][l] = 22.22222222222222*net2;
-        dxdt[8][l] = 22.22222222222222*net3;
-        dxdt[9][l] = 22.22222222222222*net4;
+        dxdt[1][l] = tmp4 * u3 + tmp5 * u1;
+        dxdt[2][l] = u2 - tmp6 * rw4_pyramid_failed_sin_lanes(q2);
+        dxdt[3][l] = 0.002371907568400169 * f1 + 2.5162222823731624e-05 * f2 -
+                4.735842396728992e-05 * f3;
+        dxdt[4][l] = 0.0026198295706604748 * f2 + 2.5162222823731624e-05 * f1 -
+                2.2199493971044426e-05 * f3;
+        dxdt[5][l] = 0.003314211979940579 * f3 - 4.735842396728992e-05 * f1 -
+                2.2199493971044426e-05 * f2;
+        dxdt[6][l] = 22.22222222222222 * net1;
+        dxdt[7][l] = 22.22222222222222 * net2;
+        dxdt[8][l] = 22.22222222222222 * net3;
+        dxdt[9][l] = 22.22222222222222 * net4;
     }
 }
 

@@ -103,15 +103,16 @@ contains
   end function rw4_pyramid_failed_ode_strerror
 
 
-  ! d(dx/dt)/dx, row-major (335 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! J(i*nx + j + 1) = d f_(i+1) / d x_(j+1) in 1-based terms.
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (335 ops).
   subroutine rw4_pyramid_failed_jac(t, x, c, J) bind(C, name="rw4_pyramid_failed_f_jac")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(10)
-    real(c_double), intent(in) :: c(4)
-    real(c_double), intent(out) :: J(100)
+    real(c_double), intent(in) :: x(0:9)
+    real(c_double), intent(in) :: c(0:3)
+    real(c_double), intent(out) :: J(0:99)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -157,261 +158,205 @@ contains
     real(c_double) :: tmp33
     real(c_double) :: tmp34
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    w1 = x(7)
-    w2 = x(8)
-    w3 = x(9)
-    w4 = x(10)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    w1 = x(6)
+    w2 = x(7)
+    w3 = x(8)
+    w4 = x(9)
     tmp0 = rw4_pyramid_failed_sin(q2)
     tmp1 = rw4_pyramid_failed_cos(q2)
     tmp2 = rw4_pyramid_failed_sin(q3)
-    tmp3 = tmp2*u1
+    tmp3 = tmp2 * u1
     tmp4 = rw4_pyramid_failed_cos(q3)
-    tmp5 = tmp4*u3
-    tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/(tmp1*tmp1)
-    tmp8 = 1.0_c_double/tmp1
-    tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
-    tmp10 = tmp2*tmp8
-    tmp11 = tmp4*tmp8
-    tmp12 = 0.028867513459481294_c_double*u1
-    tmp13 = 0.0408248290463863_c_double*u3
-    tmp14 = c(1) + tmp12 + tmp13 - 0.05_c_double*w1
-    tmp15 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double - max( &
-          -0.2_c_double, tmp14) > 0.0_c_double)*merge(1.0_c_double, &
-          0.0_c_double, tmp14 + 0.2_c_double > 0.0_c_double)
-    tmp16 = c(3) - tmp12 + tmp13 - 0.05_c_double*w3
-    tmp17 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double - max( &
-          -0.2_c_double, tmp16) > 0.0_c_double)
-    tmp18 = merge(1.0_c_double, 0.0_c_double, tmp16 + 0.2_c_double > &
-          0.0_c_double)
-    tmp19 = tmp17*tmp18
-    tmp20 = c(2) + tmp13 + 0.028867513459481294_c_double*u2 - 0.05_c_double* &
-          w2
-    tmp21 = merge(1.0_c_double, 0.0_c_double, tmp20 + 0.2_c_double > &
-          0.0_c_double)
-    tmp22 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double - max( &
-          -0.2_c_double, tmp20) > 0.0_c_double)
-    tmp23 = tmp21*tmp22
-    tmp24 = 6.53733725431086e-07_c_double*u3
+    tmp5 = tmp4 * u3
+    tmp6 = tmp5 - tmp3
+    tmp7 = tmp6 / (tmp1 * tmp1)
+    tmp8 = 1.0_c_double / tmp1
+    tmp9 = tmp8 * ((-tmp2 * u3) - tmp4 * u1)
+    tmp10 = tmp2 * tmp8
+    tmp11 = tmp4 * tmp8
+    tmp12 = 0.028867513459481294_c_double * u1
+    tmp13 = 0.0408248290463863_c_double * u3
+    tmp14 = ((c(0) + tmp12) + tmp13) - 0.05_c_double * w1
+    tmp15 = (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double + tmp14 > 0.0_c_double)) * (merge(1.0_c_double, 0.0_c_double, &
+        0.2_c_double - max(-0.2_c_double, tmp14) > 0.0_c_double))
+    tmp16 = ((c(2) + tmp13) - tmp12) - 0.05_c_double * w3
+    tmp17 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double - max(-0.2_c_double, &
+        tmp16) > 0.0_c_double)
+    tmp18 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double + tmp16 > 0.0_c_double)
+    tmp19 = tmp17 * tmp18
+    tmp20 = ((c(1) + tmp13) + 0.028867513459481294_c_double * u2) - 0.05_c_double * w2
+    tmp21 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double + tmp20 > 0.0_c_double)
+    tmp22 = merge(1.0_c_double, 0.0_c_double, 0.2_c_double - max(-0.2_c_double, &
+        tmp20) > 0.0_c_double)
+    tmp23 = tmp21 * tmp22
+    tmp24 = 6.53733725431086e-07_c_double * u3
     tmp25 = -tmp24
-    tmp26 = 8.714944889439003e-05_c_double*u2
-    tmp27 = 6.162396628989367e-05_c_double*u3
-    tmp28 = -9.625868491759333e-05_c_double*u1
-    tmp29 = 6.806516885332952e-05_c_double*u3
-    tmp30 = 9.245191006853307e-07_c_double*u2
-    tmp31 = 8.156614916557547e-07_c_double*u1
-    tmp32 = 5.767597719025189e-07_c_double*u3
-    tmp33 = 1.740059606133805e-06_c_double*u2
-    tmp34 = 1.2304079471660068e-06_c_double*u3
-    J(1) = 0
-    J(2) = tmp0*tmp7
-    J(3) = tmp9
-    J(4) = -tmp10
-    J(5) = 0
-    J(6) = tmp11
-    J(7) = 0
-    J(8) = 0
-    J(9) = 0
-    J(10) = 0
-    J(11) = 0
-    J(12) = 0
-    J(13) = tmp6
-    J(14) = tmp4
-    J(15) = 0
-    J(16) = tmp2
-    J(17) = 0
-    J(18) = 0
-    J(19) = 0
-    J(20) = 0
-    J(21) = 0
-    J(22) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
-    J(23) = -tmp0*tmp9
-    J(24) = tmp0*tmp10
-    J(25) = 1
-    J(26) = -tmp0*tmp11
-    J(27) = 0
-    J(28) = 0
-    J(29) = 0
-    J(30) = 0
-    J(31) = 0
-    J(32) = 0
-    J(33) = 0
-    J(34) = -3.841554404888355e-05_c_double*tmp15 - &
-          4.064804156445544e-05_c_double*tmp19 - &
-          7.692071785353986e-05_c_double*u1 - 0.01606287681203328_c_double* &
-          u2 - 0.01238695187118762_c_double*u3 + &
-          9.245191006853307e-07_c_double*w1 + &
-          2.1549270478513374e-06_c_double*w2 + &
-          9.245191006853307e-07_c_double*w3 - &
-          3.0588884648067615e-07_c_double*w4 - &
-          3.1625434245335595e-08_c_double
-    J(35) = 6.968783773904135e-07_c_double*tmp21*tmp22 - &
-          0.016062876812033285_c_double*u1 - 0.011480670450262525_c_double* &
-          u2 + 0.18940422731779893_c_double*u3 - &
-          8.837985684155604e-05_c_double*w1 - &
-          8.714944889439003e-05_c_double*w2 - &
-          8.591904094722402e-05_c_double*w3 - &
-          8.714944889439003e-05_c_double*w4 - &
-          3.3549630431642173e-10_c_double
-    J(36) = -5.4327783399872144e-05_c_double*tmp15 + &
-          5.748501166435814e-05_c_double*tmp19 + &
-          9.855348526300785e-07_c_double*tmp23 - &
-          0.01238695187118762_c_double*u1 + 0.18940422731779896_c_double*u2 &
-          + 0.011557591168116065_c_double*u3 - &
-          6.53733725431086e-07_c_double*w1 + 6.162396628989367e-05_c_double &
-          *w2 + 6.53733725431086e-07_c_double*w3 - &
-          6.162396628989367e-05_c_double*w4 + &
-          2.5257826115887954e-09_c_double
-    J(37) = 6.653767409306653e-05_c_double*tmp15 + tmp25 + &
-          9.245191006853307e-07_c_double*u1 - &
-          8.837985684155604e-05_c_double*u2 + &
-          2.661506963722661e-08_c_double
-    J(38) = -1.2070287563363544e-06_c_double*tmp23 - tmp26 + tmp27 + &
-          2.1549270478513374e-06_c_double*u1 - &
-          4.828115025345418e-10_c_double
-    J(39) = -7.040447321780832e-05_c_double*tmp19 - tmp25 + &
-          9.245191006853307e-07_c_double*u1 - &
-          8.591904094722402e-05_c_double*u2 - &
-          2.8161789287123327e-08_c_double
-    J(40) = -tmp26 - tmp27 - 3.0588884648067615e-07_c_double*u1 - &
-          1.0639081473621739e-09_c_double
-    J(41) = 0
-    J(42) = 0
-    J(43) = 0
-    J(44) = 1.0387671046565256e-07_c_double*tmp15 - &
-          9.42617471256707e-07_c_double*tmp19 + &
-          0.031260358896157345_c_double*u1 + 0.005510620830867021_c_double* &
-          u2 - 0.31424258853132236_c_double*u3 + &
-          9.625868491759333e-05_c_double*w1 + &
-          9.683544468949584e-05_c_double*w2 + &
-          9.625868491759333e-05_c_double*w3 + &
-          9.568192514569082e-05_c_double*w4 - &
-          3.3549630431642173e-10_c_double
-    J(45) = -4.314057908681341e-05_c_double*tmp23 + &
-          0.005510620830867022_c_double*u1 + &
-          5.1784837649697276e-05_c_double*u2 + &
-          0.012357350063371539_c_double*u3 - &
-          1.5012788725878497e-06_c_double*w1 - &
-          9.245191006853307e-07_c_double*w2 - &
-          3.477593287828118e-07_c_double*w3 - &
-          9.245191006853307e-07_c_double*w4 - &
-          3.4931060942139676e-08_c_double
-    J(46) = 1.4690385275522902e-07_c_double*tmp15 + &
-          1.3330624119810659e-06_c_double*tmp19 - &
-          6.100999203320062e-05_c_double*tmp23 - &
-          0.31424258853132236_c_double*u1 + 0.012357350063371537_c_double* &
-          u2 - 0.031312143733807044_c_double*u3 - &
-          6.806516885332952e-05_c_double*w1 + 6.53733725431086e-07_c_double &
-          *w2 + 6.806516885332952e-05_c_double*w3 - &
-          6.53733725431086e-07_c_double*w4 + 1.183973011789036e-09_c_double
-    J(47) = -1.7991974024963193e-07_c_double*tmp15 - tmp28 - tmp29 - &
-          1.5012788725878497e-06_c_double*u2 - &
-          7.196789609985278e-11_c_double
-    J(48) = 7.472167484630418e-05_c_double*tmp23 + tmp24 - tmp30 + &
-          9.683544468949584e-05_c_double*u1 + &
-          2.988866993852167e-08_c_double
-    J(49) = -1.6326613523187123e-06_c_double*tmp19 - tmp28 + tmp29 - &
-          3.477593287828118e-07_c_double*u2 - &
-          6.530645409274848e-10_c_double
-    J(50) = -tmp24 - tmp30 + 9.568192514569082e-05_c_double*u1 - &
-          3.061370237554901e-08_c_double
-    J(51) = 0
-    J(52) = 0
-    J(53) = 0
-    J(54) = -7.732741844406775e-05_c_double*tmp15 + &
-          7.890603257631074e-05_c_double*tmp19 + &
-          0.0262473019118721_c_double*u1 + 0.13279713100649926_c_double*u2 &
-          - 0.00543370011301348_c_double*u3 - &
-          8.156614916557547e-07_c_double*w1 - &
-          8.692141453631369e-05_c_double*w2 - &
-          8.156614916557547e-07_c_double*w3 + &
-          8.529009155300216e-05_c_double*w4 + &
-          6.314456528971991e-10_c_double
-    J(55) = -7.774673394400518e-05_c_double*tmp23 + &
-          0.13279713100649926_c_double*u1 - 0.02627690371968818_c_double*u2 &
-          + 0.016011091974383586_c_double*u3 + &
-          8.784581265079174e-05_c_double*w1 + &
-          1.740059606133805e-06_c_double*w2 - &
-          8.436569343852411e-05_c_double*w3 + &
-          1.740059606133805e-06_c_double*w4 + &
-          2.959932529472591e-10_c_double
-    J(56) = -0.0001093574839069_c_double*tmp15 - &
-          0.00011158998142247187_c_double*tmp19 - &
-          0.00010995048557382475_c_double*tmp23 - &
-          0.005433700113013481_c_double*u1 + 0.01601109197438358_c_double* &
-          u2 + 2.960180781608348e-05_c_double*u3 + &
-          5.767597719025189e-07_c_double*w1 - &
-          1.2304079471660068e-06_c_double*w2 - &
-          5.767597719025189e-07_c_double*w3 + &
-          1.2304079471660068e-06_c_double*w4 - &
-          1.767579722634975e-07_c_double
-    J(57) = 0.00013393501756326403_c_double*tmp15 - tmp31 + tmp32 + &
-          8.784581265079174e-05_c_double*u2 + &
-          5.357400702530561e-08_c_double
-    J(58) = 0.0001346612933135568_c_double*tmp23 + tmp33 - tmp34 - &
-          8.692141453631369e-05_c_double*u1 + &
-          5.3864517325422714e-08_c_double
-    J(59) = 0.00013666925744585515_c_double*tmp17*tmp18 - tmp31 - tmp32 - &
-          8.436569343852411e-05_c_double*u2 + &
-          5.466770297834206e-08_c_double
-    J(60) = tmp33 + tmp34 + 8.529009155300216e-05_c_double*u1 + &
-          5.437719267822496e-08_c_double
-    J(61) = 0
-    J(62) = 0
-    J(63) = 0
-    J(64) = 0.6415002990995843_c_double*tmp15 + &
-          0.0002566001196398337_c_double
-    J(65) = 0
-    J(66) = 0.9072184232530288_c_double*tmp15 + &
-          0.0003628873693012115_c_double
-    J(67) = -1.1111111111111112_c_double*tmp15 - &
-          0.00044444444444444447_c_double
-    J(68) = 0
-    J(69) = 0
-    J(70) = 0
-    J(71) = 0
-    J(72) = 0
-    J(73) = 0
-    J(74) = 0
-    J(75) = 0.6415002990995843_c_double*tmp23 + &
-          0.0002566001196398337_c_double
-    J(76) = 0.9072184232530288_c_double*tmp23 + &
-          0.0003628873693012115_c_double
-    J(77) = 0
-    J(78) = -1.1111111111111112_c_double*tmp23 - &
-          0.00044444444444444447_c_double
-    J(79) = 0
-    J(80) = 0
-    J(81) = 0
-    J(82) = 0
-    J(83) = 0
-    J(84) = -0.6415002990995843_c_double*tmp19 - &
-          0.0002566001196398337_c_double
-    J(85) = 0
-    J(86) = 0.9072184232530288_c_double*tmp19 + &
-          0.0003628873693012115_c_double
-    J(87) = 0
-    J(88) = 0
-    J(89) = -1.1111111111111112_c_double*tmp19 - &
-          0.00044444444444444447_c_double
-    J(90) = 0
-    J(91) = 0
-    J(92) = 0
-    J(93) = 0
-    J(94) = 0
-    J(95) = -0.0002566001196398337_c_double
-    J(96) = 0.0003628873693012115_c_double
-    J(97) = 0
-    J(98) = 0
-    J(99) = 0
-    J(100) = -0.00044444444444444447_c_double
+    tmp26 = 8.714944889439003e-05_c_double * u2
+    tmp27 = 6.162396628989367e-05_c_double * u3
+    tmp28 = -9.625868491759333e-05_c_double * u1
+    tmp29 = 6.806516885332952e-05_c_double * u3
+    tmp30 = 9.245191006853307e-07_c_double * u2
+    tmp31 = 8.156614916557547e-07_c_double * u1
+    tmp32 = 5.767597719025189e-07_c_double * u3
+    tmp33 = 1.740059606133805e-06_c_double * u2
+    tmp34 = 1.2304079471660068e-06_c_double * u3
+    J(0) = 0.0_c_double
+    J(1) = tmp0 * tmp7
+    J(2) = tmp9
+    J(3) = -tmp10
+    J(4) = 0.0_c_double
+    J(5) = tmp11
+    J(6) = 0.0_c_double
+    J(7) = 0.0_c_double
+    J(8) = 0.0_c_double
+    J(9) = 0.0_c_double
+    J(10) = 0.0_c_double
+    J(11) = 0.0_c_double
+    J(12) = tmp6
+    J(13) = tmp4
+    J(14) = 0.0_c_double
+    J(15) = tmp2
+    J(16) = 0.0_c_double
+    J(17) = 0.0_c_double
+    J(18) = 0.0_c_double
+    J(19) = 0.0_c_double
+    J(20) = 0.0_c_double
+    J(21) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
+    J(22) = -tmp0 * tmp9
+    J(23) = tmp0 * tmp10
+    J(24) = 1.0_c_double
+    J(25) = -tmp0 * tmp11
+    J(26) = 0.0_c_double
+    J(27) = 0.0_c_double
+    J(28) = 0.0_c_double
+    J(29) = 0.0_c_double
+    J(30) = 0.0_c_double
+    J(31) = 0.0_c_double
+    J(32) = 0.0_c_double
+    J(33) = ((((((((2.1549270478513374e-06_c_double * w2 + 9.245191006853307e-07_c_double * w1) + &
+        9.245191006853307e-07_c_double * w3) - 3.1625434245335595e-08_c_double) - &
+        7.692071785353986e-05_c_double * u1) - 3.0588884648067615e-07_c_double * w4) - &
+        0.01606287681203328_c_double * u2) - 3.841554404888355e-05_c_double * tmp15) - &
+        4.064804156445544e-05_c_double * tmp19) - 0.01238695187118762_c_double * u3
+    J(34) = (((((((0.18940422731779893_c_double * u3 + (6.968783773904135e-07_c_double * tmp21) * &
+        tmp22) - 3.3549630431642173e-10_c_double) - 8.591904094722402e-05_c_double * w3) - &
+        0.016062876812033285_c_double * u1) - 8.837985684155604e-05_c_double * w1) - &
+        8.714944889439003e-05_c_double * w2) - 8.714944889439003e-05_c_double * w4) - &
+        0.011480670450262525_c_double * u2
+    J(35) = (((((((((2.5257826115887954e-09_c_double + 6.53733725431086e-07_c_double * w3) + &
+        5.748501166435814e-05_c_double * tmp19) + 9.855348526300785e-07_c_double * tmp23) + &
+        0.011557591168116065_c_double * u3) + 6.162396628989367e-05_c_double * w2) + &
+        0.18940422731779896_c_double * u2) - 6.53733725431086e-07_c_double * w1) - &
+        6.162396628989367e-05_c_double * w4) - 0.01238695187118762_c_double * u1) - &
+        5.4327783399872144e-05_c_double * tmp15
+    J(36) = (((2.661506963722661e-08_c_double + tmp25) + 6.653767409306653e-05_c_double * tmp15) &
+        + 9.245191006853307e-07_c_double * u1) - 8.837985684155604e-05_c_double * u2
+    J(37) = (((tmp27 + 2.1549270478513374e-06_c_double * u1) - 4.828115025345418e-10_c_double) - &
+        tmp26) - 1.2070287563363544e-06_c_double * tmp23
+    J(38) = (((9.245191006853307e-07_c_double * u1 - 2.8161789287123327e-08_c_double) - tmp25) - &
+        8.591904094722402e-05_c_double * u2) - 7.040447321780832e-05_c_double * tmp19
+    J(39) = (((-1.0639081473621739e-09_c_double) - tmp26) - tmp27) - &
+        3.0588884648067615e-07_c_double * u1
+    J(40) = 0.0_c_double
+    J(41) = 0.0_c_double
+    J(42) = 0.0_c_double
+    J(43) = ((((((((9.568192514569082e-05_c_double * w4 + 0.031260358896157345_c_double * u1) + &
+        9.683544468949584e-05_c_double * w2) + 1.0387671046565256e-07_c_double * tmp15) + &
+        0.005510620830867021_c_double * u2) + 9.625868491759333e-05_c_double * w1) + &
+        9.625868491759333e-05_c_double * w3) - 3.3549630431642173e-10_c_double) - &
+        0.31424258853132236_c_double * u3) - 9.42617471256707e-07_c_double * tmp19
+    J(44) = (((((((0.005510620830867022_c_double * u1 + 5.1784837649697276e-05_c_double * u2) + &
+        0.012357350063371539_c_double * u3) - 3.4931060942139676e-08_c_double) - &
+        4.314057908681341e-05_c_double * tmp23) - 3.477593287828118e-07_c_double * w3) - &
+        1.5012788725878497e-06_c_double * w1) - 9.245191006853307e-07_c_double * w2) - &
+        9.245191006853307e-07_c_double * w4
+    J(45) = (((((((((1.183973011789036e-09_c_double + 1.3330624119810659e-06_c_double * tmp19) + &
+        6.53733725431086e-07_c_double * w2) + 0.012357350063371537_c_double * u2) + &
+        6.806516885332952e-05_c_double * w3) + 1.4690385275522902e-07_c_double * tmp15) - &
+        6.53733725431086e-07_c_double * w4) - 6.100999203320062e-05_c_double * tmp23) - &
+        0.031312143733807044_c_double * u3) - 0.31424258853132236_c_double * u1) - &
+        6.806516885332952e-05_c_double * w1
+    J(46) = ((((-7.196789609985278e-11_c_double) - tmp28) - tmp29) - &
+        1.7991974024963193e-07_c_double * tmp15) - 1.5012788725878497e-06_c_double * u2
+    J(47) = (((2.988866993852167e-08_c_double + tmp24) + 9.683544468949584e-05_c_double * u1) + &
+        7.472167484630418e-05_c_double * tmp23) - tmp30
+    J(48) = (((tmp29 - 6.530645409274848e-10_c_double) - tmp28) - 1.6326613523187123e-06_c_double &
+        * tmp19) - 3.477593287828118e-07_c_double * u2
+    J(49) = ((9.568192514569082e-05_c_double * u1 - 3.061370237554901e-08_c_double) - tmp24) - tmp30
+    J(50) = 0.0_c_double
+    J(51) = 0.0_c_double
+    J(52) = 0.0_c_double
+    J(53) = ((((((((6.314456528971991e-10_c_double + 0.13279713100649926_c_double * u2) + &
+        7.890603257631074e-05_c_double * tmp19) + 0.0262473019118721_c_double * u1) + &
+        8.529009155300216e-05_c_double * w4) - 0.00543370011301348_c_double * u3) - &
+        7.732741844406775e-05_c_double * tmp15) - 8.156614916557547e-07_c_double * w1) - &
+        8.156614916557547e-07_c_double * w3) - 8.692141453631369e-05_c_double * w2
+    J(54) = (((((((2.959932529472591e-10_c_double + 8.784581265079174e-05_c_double * w1) + &
+        0.13279713100649926_c_double * u1) + 0.016011091974383586_c_double * u3) + &
+        1.740059606133805e-06_c_double * w2) + 1.740059606133805e-06_c_double * w4) - &
+        8.436569343852411e-05_c_double * w3) - 0.02627690371968818_c_double * u2) - &
+        7.774673394400518e-05_c_double * tmp23
+    J(55) = (((((((((2.960180781608348e-05_c_double * u3 + 0.01601109197438358_c_double * u2) + &
+        1.2304079471660068e-06_c_double * w4) + 5.767597719025189e-07_c_double * w1) - &
+        1.767579722634975e-07_c_double) - 0.00011158998142247187_c_double * tmp19) - &
+        1.2304079471660068e-06_c_double * w2) - 5.767597719025189e-07_c_double * w3) - &
+        0.005433700113013481_c_double * u1) - 0.0001093574839069_c_double * tmp15) - &
+        0.00010995048557382475_c_double * tmp23
+    J(56) = (((5.357400702530561e-08_c_double + tmp32) + 8.784581265079174e-05_c_double * u2) + &
+        0.00013393501756326403_c_double * tmp15) - tmp31
+    J(57) = (((5.3864517325422714e-08_c_double + tmp33) + 0.0001346612933135568_c_double * tmp23) &
+        - tmp34) - 8.692141453631369e-05_c_double * u1
+    J(58) = (((5.466770297834206e-08_c_double + (0.00013666925744585515_c_double * tmp17) * &
+        tmp18) - tmp31) - tmp32) - 8.436569343852411e-05_c_double * u2
+    J(59) = ((5.437719267822496e-08_c_double + tmp33) + tmp34) + 8.529009155300216e-05_c_double * u1
+    J(60) = 0.0_c_double
+    J(61) = 0.0_c_double
+    J(62) = 0.0_c_double
+    J(63) = 0.0002566001196398337_c_double + 0.6415002990995843_c_double * tmp15
+    J(64) = 0.0_c_double
+    J(65) = 0.0003628873693012115_c_double + 0.9072184232530288_c_double * tmp15
+    J(66) = (-0.00044444444444444447_c_double) - 1.1111111111111112_c_double * tmp15
+    J(67) = 0.0_c_double
+    J(68) = 0.0_c_double
+    J(69) = 0.0_c_double
+    J(70) = 0.0_c_double
+    J(71) = 0.0_c_double
+    J(72) = 0.0_c_double
+    J(73) = 0.0_c_double
+    J(74) = 0.0002566001196398337_c_double + 0.6415002990995843_c_double * tmp23
+    J(75) = 0.0003628873693012115_c_double + 0.9072184232530288_c_double * tmp23
+    J(76) = 0.0_c_double
+    J(77) = (-0.00044444444444444447_c_double) - 1.1111111111111112_c_double * tmp23
+    J(78) = 0.0_c_double
+    J(79) = 0.0_c_double
+    J(80) = 0.0_c_double
+    J(81) = 0.0_c_double
+    J(82) = 0.0_c_double
+    J(83) = (-0.0002566001196398337_c_double) - 0.6415002990995843_c_double * tmp19
+    J(84) = 0.0_c_double
+    J(85) = 0.0003628873693012115_c_double + 0.9072184232530288_c_double * tmp19
+    J(86) = 0.0_c_double
+    J(87) = 0.0_c_double
+    J(88) = (-0.00044444444444444447_c_double) - 1.1111111111111112_c_double * tmp19
+    J(89) = 0.0_c_double
+    J(90) = 0.0_c_double
+    J(91) = 0.0_c_double
+    J(92) = 0.0_c_double
+    J(93) = 0.0_c_double
+    J(94) = -0.0002566001196398337_c_double
+    J(95) = 0.0003628873693012115_c_double
+    J(96) = 0.0_c_double
+    J(97) = 0.0_c_double
+    J(98) = 0.0_c_double
+    J(99) = -0.00044444444444444447_c_double
   end subroutine rw4_pyramid_failed_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -1062,7 +1007,8 @@ contains
     ai(5) = ur * ai(0) + ui * ar(0)
     p = 1
     do i = 2, 3 - 1
-      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) &
+          then
         p = i
       end if
     end do
@@ -1166,7 +1112,8 @@ contains
     ai(25) = ur * ai(22) + ui * ar(22)
     p = 3
     do i = 4, 10 - 1
-      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) then
+      if (abs(ar(i * nx + 3)) + abs(ai(i * nx + 3)) > abs(ar(p * nx + 3)) + abs(ai(p * nx + 3))) &
+          then
         p = i
       end if
     end do
@@ -1255,7 +1202,8 @@ contains
     ai(39) = ur * ai(33) + ui * ar(33)
     p = 4
     do i = 5, 10 - 1
-      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) &
+          then
         p = i
       end if
     end do
@@ -1336,7 +1284,8 @@ contains
     ai(49) = ur * ai(44) + ui * ar(44)
     p = 5
     do i = 6, 10 - 1
-      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) &
+          then
         p = i
       end if
     end do
@@ -1409,7 +1358,8 @@ contains
     ai(59) = ur * ai(55) + ui * ar(55)
     p = 6
     do i = 7, 10 - 1
-      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) &
+          then
         p = i
       end if
     end do
@@ -1474,7 +1424,8 @@ contains
     ai(69) = ur * ai(66) + ui * ar(66)
     p = 7
     do i = 8, 10 - 1
-      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) then
+      if (abs(ar(i * nx + 7)) + abs(ai(i * nx + 7)) > abs(ar(p * nx + 7)) + abs(ai(p * nx + 7))) &
+          then
         p = i
       end if
     end do
@@ -1531,7 +1482,8 @@ contains
     ai(79) = ur * ai(77) + ui * ar(77)
     p = 8
     do i = 9, 10 - 1
-      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) then
+      if (abs(ar(i * nx + 8)) + abs(ai(i * nx + 8)) > abs(ar(p * nx + 8)) + abs(ai(p * nx + 8))) &
+          then
         p = i
       end if
     end do
@@ -1758,7 +1710,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: k(0:nx - 1, 0:3)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1770,7 +1722,8 @@ contains
 
     comp = 0.0_c_double
     call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < &
+        1) then
       res = RW4_PYRAMID_FAILED_ODE_ERR_ARGUMENT
       return
     end if
@@ -1862,7 +1815,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2054,7 +2007,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -2320,7 +2273,7 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: comp(0:nx - 1)
-    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
     real(c_double), intent(inout) :: dx(0:nx - 1)
     real(c_double), intent(inout) :: xnew(0:nx - 1)
     real(c_double) :: res
@@ -2426,7 +2379,7 @@ contains
     integer(c_int) :: res
     real(c_double) :: J(0:nx * nx - 1)
     real(c_double) :: lu(0:nx * nx - 1)
-    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: fnew(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
@@ -3088,7 +3041,8 @@ contains
           h = t1 - t
           last = .true.
         else
-          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
             cycle
           else
             h = h_new

@@ -15,6 +15,7 @@
  */
 #include "speed_controlled.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -34,6 +35,14 @@
 #else
 #define SPEED_CONTROLLED_ALIGNED
 #endif
+
+
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -186,64 +195,6 @@ static inline double speed_controlled_cos_lanes(double x)
 }
 
 
-/* 10 ops, plus the checks. */
-int speed_controlled_setup(const double *p, double *c)
-{
-    int i;
-    for (i = 0; i < SPEED_CONTROLLED_NP; ++i) {
-        if (!isfinite(p[i])) {
-            return SPEED_CONTROLLED_ERR_NONFINITE;
-        }
-    }
-    const double m_a = 300.0;
-    const double m_b = 4.0;
-    const double I11 = 60.0;
-    const double I22 = 75.0;
-    const double I33 = 55.0;
-    const double I13 = 1.5;
-    const double I = 0.02;
-    const double J = 0.03;
-    const double k = p[0];
-    const double w_ref = p[1];
-
-    if (!(m_a > 0.0) || !(m_b > 0.0)) {
-        return SPEED_CONTROLLED_ERR_MASS;
-    }
-    if (!(I > 0.0) || !(J > 0.0)) {
-        return SPEED_CONTROLLED_ERR_ROTOR_INERTIA;
-    }
-    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11*I33 - I13*I13 > 0.0)) {
-        return SPEED_CONTROLLED_ERR_CARRIER_NOT_PD;
-    }
-    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
-       The largest may not exceed the sum of the other two. */
-    const double half_gap = sqrt(0.25*(I11 - I33)*(I11 - I33) + I13*I13);
-    const double largest = fmax(I22, 0.5*(I11 + I33) + half_gap);
-    if (2.0*largest - (I11 + I22 + I33) > 1e-12*(I11 + I22 + I33)) {
-        return SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE;
-    }
-    if (J - 2.0*I > 1e-12*(2.0*I + J)) {
-        return SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE;
-    }
-
-    c[0] = (304.0/22887.0)*k;
-    c[1] = -100.0/3.0*k;
-    c[2] = -w_ref;
-    c[3] = -k;
-    c[4] = 2*k;
-    c[5] = -k*w_ref;
-    c[6] = 1.1080962681823885;
-    if (!(c[SPEED_CONTROLLED_COND] <= 10000000000000.0)) {
-        return SPEED_CONTROLLED_ERR_MASS_SINGULAR;
-    }
-    for (i = 0; i < SPEED_CONTROLLED_NC; ++i) {
-        if (!isfinite(c[i])) {
-            return SPEED_CONTROLLED_ERR_OVERFLOW;  /* valid parameters whose products overflow */
-        }
-    }
-    return SPEED_CONTROLLED_OK;
-}
-
 const char *speed_controlled_strerror(int code)
 {
     switch (code) {
@@ -270,117 +221,231 @@ const char *speed_controlled_strerror(int code)
     }
 }
 
-/* 43 ops per call. */
-void speed_controlled_rhs(double t, const double *x, const double *c, double *dxdt)
+/* Checks p and computes the constants c that speed_controlled_rhs needs (10
+   ops, plus the checks). Returns SPEED_CONTROLLED_OK or the first failing
+   check's code; c is then not to be used. */
+int speed_controlled_setup(const double *p, double *c)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double m_a;
+    double m_b;
+    double I11;
+    double I22;
+    double I33;
+    double I13;
+    double I;
+    double J;
+    double k;
+    double w_ref;
+    double half_gap;
+    double largest;
+    int i_;
 
-    const double slip = c[2] - u2 + u4;
-    const double tmp0 = speed_controlled_sin(q3);
-    const double tmp1 = speed_controlled_cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/speed_controlled_cos(q2);
-    const double tmp3 = 0.016919114337701612*u2 - 1.2676659094182028e-05*u4;
-    dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*speed_controlled_sin(q2) + u2;
-    dxdt[3] = -u2 + u4;
-    dxdt[4] = -tmp3*u1 + u3*(0.33522655090705017*u2 + 0.0004980820048148975*u4);
-    dxdt[5] = c[0]*slip + 0.018613186525101588*u1*u1 - 0.06916590204045965*u1*u3 - 0.018613186525101588*u3*u3;
-    dxdt[6] = tmp3*u3 + u1*(-0.2723557574878444*u2 - 0.0005451879938902264*u4);
-    dxdt[7] = c[1]*slip;
+    for (i_ = 0; i_ < 7; ++i_) {
+        c[i_] = 0.0;
+    }
+    for (i_ = 0; i_ < 2; ++i_) {
+        if (!(fabs(p[i_]) <= DBL_MAX)) {
+            return SPEED_CONTROLLED_ERR_NONFINITE;
+        }
+    }
+    m_a = 300.0;
+    m_b = 4.0;
+    I11 = 60.0;
+    I22 = 75.0;
+    I33 = 55.0;
+    I13 = 1.5;
+    I = 0.02;
+    J = 0.03;
+    k = p[0];
+    w_ref = p[1];
+    if (!(m_a > 0.0) || !(m_b > 0.0)) {
+        return SPEED_CONTROLLED_ERR_MASS;
+    }
+    if (!(I > 0.0) || !(J > 0.0)) {
+        return SPEED_CONTROLLED_ERR_ROTOR_INERTIA;
+    }
+    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11 * I33 - I13 * I13 > 0.0)) {
+        return SPEED_CONTROLLED_ERR_CARRIER_NOT_PD;
+    }
+
+    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]]. */
+    /* The largest may not exceed the sum of the other two. */
+    half_gap = sqrt(0.25 * ((I11 - I33) * (I11 - I33)) + I13 * I13);
+    largest = dmax(I22, 0.5 * (I11 + I33) + half_gap);
+    if (2.0 * largest - (I11 + I22 + I33) > 1e-12 * (I11 + I22 + I33)) {
+        return SPEED_CONTROLLED_ERR_CARRIER_TRIANGLE;
+    }
+    if (J - 2.0 * I > 1e-12 * (2.0 * I + J)) {
+        return SPEED_CONTROLLED_ERR_ROTOR_TRIANGLE;
+    }
+    c[0] = 304.0 * k / 22887.0;
+    c[1] = -(100.0 * k / 3.0);
+    c[2] = -w_ref;
+    c[3] = -k;
+    c[4] = 2.0 * k;
+    c[5] = -(k * w_ref);
+    c[6] = 1.1080962681823885;
+    if (!(c[6] <= 10000000000000.0)) {
+        return SPEED_CONTROLLED_ERR_MASS_SINGULAR;
+    }
+    for (i_ = 0; i_ < 7; ++i_) {
+        if (!(fabs(c[i_]) <= DBL_MAX)) {
+            return SPEED_CONTROLLED_ERR_OVERFLOW;
+        }
+    }
+    return SPEED_CONTROLLED_OK;
 }
 
-/* speed_controlled_rhs on n lanes: the same statements, lane by lane. */
+/* dxdt = f(t, x) for the constants c from speed_controlled_setup (43 ops). */
+void speed_controlled_rhs(double t, const double *x, const double *c, double *dxdt)
+{
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double slip;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    slip = c[2] + u4 - u2;
+    tmp0 = speed_controlled_sin(q3);
+    tmp1 = speed_controlled_cos(q3);
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / speed_controlled_cos(q2);
+    tmp3 = 0.016919114337701612 * u2 - 1.2676659094182028e-05 * u4;
+    dxdt[0] = tmp2;
+    dxdt[1] = tmp0 * u3 + tmp1 * u1;
+    dxdt[2] = u2 - tmp2 * speed_controlled_sin(q2);
+    dxdt[3] = u4 - u2;
+    dxdt[4] = u3 * (0.0004980820048148975 * u4 + 0.33522655090705017 * u2) - tmp3 * u1;
+    dxdt[5] = 0.018613186525101588 * (u1 * u1) + c[0] * slip - 0.018613186525101588 * (u3 * u3) -
+            0.06916590204045965 * u1 * u3;
+    dxdt[6] = tmp3 * u3 + u1 * (-(0.2723557574878444 * u2) - 0.0005451879938902264 * u4);
+    dxdt[7] = c[1] * slip;
+}
+
 void speed_controlled_rhs_lanes(int n, const double *SPEED_CONTROLLED_RESTRICT t,
-        const double *SPEED_CONTROLLED_RESTRICT x, const double *SPEED_CONTROLLED_RESTRICT c,
-        double *SPEED_CONTROLLED_RESTRICT dxdt)
+                                const double *SPEED_CONTROLLED_RESTRICT x,
+                                const double *SPEED_CONTROLLED_RESTRICT c,
+                                double *SPEED_CONTROLLED_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     SPEED_CONTROLLED_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[4 * n + l];
-        const double u2 = x[5 * n + l];
-        const double u3 = x[6 * n + l];
-        const double u4 = x[7 * n + l];
-
-        const double slip = c[2] - u2 + u4;
-        const double tmp0 = speed_controlled_sin_lanes(q3);
-        const double tmp1 = speed_controlled_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/speed_controlled_cos_lanes(q2);
-        const double tmp3 = 0.016919114337701612*u2 - 1.2676659094182028e-05*u4;
-        dxdt[0 * n + l] = tmp2;
-        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*speed_controlled_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = -u2 + u4;
-        dxdt[4 * n + l] = -tmp3*u1 + u3*(0.33522655090705017*u2 + 0.0004980820048148975*u4);
-        dxdt[5 * n + l] = c[0]*slip + 0.018613186525101588*u1*u1 - 0.06916590204045965*u1*u3 - 0.018613186525101588*u3*u3;
-        dxdt[6 * n + l] = tmp3*u3 + u1*(-0.2723557574878444*u2 - 0.0005451879938902264*u4);
-        dxdt[7 * n + l] = c[1]*slip;
+        double q2, q3, u1, u2, u3, u4, slip, tmp0, tmp1, tmp2, tmp3;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[4 * n + l];
+        u2 = x[5 * n + l];
+        u3 = x[6 * n + l];
+        u4 = x[7 * n + l];
+        slip = c[2] + u4 - u2;
+        tmp0 = speed_controlled_sin_lanes(q3);
+        tmp1 = speed_controlled_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / speed_controlled_cos_lanes(q2);
+        tmp3 = 0.016919114337701612 * u2 - 1.2676659094182028e-05 * u4;
+        dxdt[l] = tmp2;
+        dxdt[1 * n + l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2 * n + l] = u2 - tmp2 * speed_controlled_sin_lanes(q2);
+        dxdt[3 * n + l] = u4 - u2;
+        dxdt[4 * n + l] = u3 * (0.0004980820048148975 * u4 + 0.33522655090705017 * u2) - tmp3 * u1;
+        dxdt[5 * n + l] = 0.018613186525101588 * (u1 * u1) + c[0] * slip - 0.018613186525101588 *
+                (u3 * u3) - 0.06916590204045965 * u1 * u3;
+        dxdt[6 * n + l] = tmp3 * u3 + u1 * (-(0.2723557574878444 * u2) - 0.0005451879938902264 *
+                u4);
+        dxdt[7 * n + l] = c[1] * slip;
     }
 }
 
-/* kinetic energy of the system (J): 13 ops. */
+/* out = kinetic energy of the system (J): 13 ops. */
 void speed_controlled_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double u1;
+    double u2;
+    double u3;
+    double u4;
 
-    out[0] = u1*(30.133355263157895*u1 + 1.4013157894736843*u3) + 37.64309210526316*u2*u2 + 27.52973684210526*u3*u3 + 0.015*u4*u4;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    out[0] = 0.015 * (u4 * u4) + 37.64309210526316 * (u2 * u2) + 27.52973684210526 * (u3 * u3) +
+            u1 * (30.133355263157895 * u1 + 1.4013157894736843 * u3);
 }
 
-/* angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops. */
+/* out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops. */
 void speed_controlled_angular_momentum(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q1 = x[0];
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double q1;
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = speed_controlled_sin(q1);
-    const double tmp1 = 75.28618421052632*u2 + 0.03*u4;
-    const double tmp2 = speed_controlled_cos(q2);
-    const double tmp3 = tmp1*tmp2;
-    const double tmp4 = 1.4013157894736843*u1 + 55.05947368421052*u3;
-    const double tmp5 = speed_controlled_sin(q3);
-    const double tmp6 = speed_controlled_cos(q1);
-    const double tmp7 = tmp5*tmp6;
-    const double tmp8 = speed_controlled_sin(q2);
-    const double tmp9 = speed_controlled_cos(q3);
-    const double tmp10 = tmp0*tmp9;
-    const double tmp11 = 60.26671052631579*u1 + 1.4013157894736843*u3;
-    const double tmp12 = tmp0*tmp5;
-    out[0] = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 + tmp7);
-    out[1] = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8*tmp9);
-    out[2] = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q1 = x[0];
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    tmp0 = speed_controlled_sin(q1);
+    tmp1 = 0.03 * u4 + 75.28618421052632 * u2;
+    tmp2 = speed_controlled_cos(q2);
+    tmp3 = tmp1 * tmp2;
+    tmp4 = 1.4013157894736843 * u1 + 55.05947368421052 * u3;
+    tmp5 = speed_controlled_sin(q3);
+    tmp6 = speed_controlled_cos(q1);
+    tmp7 = tmp5 * tmp6;
+    tmp8 = speed_controlled_sin(q2);
+    tmp9 = speed_controlled_cos(q3);
+    tmp10 = tmp0 * tmp9;
+    tmp11 = 60.26671052631579 * u1 + 1.4013157894736843 * u3;
+    tmp12 = tmp0 * tmp5;
+    out[0] = tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8) - tmp0 * tmp3;
+    out[1] = tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6 + tmp4 * (tmp12 - tmp6 * tmp8 * tmp9);
+    out[2] = tmp1 * tmp8 + tmp2 * tmp4 * tmp9 - tmp11 * tmp2 * tmp5;
 }
 
-/* power of the motor torque, T (u4 - u2) (W): 9 ops. */
+/* out = power of the motor torque, T (u4 - u2) (W): 9 ops. */
 void speed_controlled_power(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u2 = x[5];
-    const double u4 = x[7];
+    double u2;
+    double u4;
 
-    out[0] = u2*(c[3]*u2 + c[4]*u4 + c[5]) + u4*(c[3]*u4 - c[5]);
+    (void)t;  /* unused in some scenes */
+    u2 = x[5];
+    u4 = x[7];
+    out[0] = u2 * (c[5] + c[3] * u2 + c[4] * u4) + u4 * (c[3] * u4 - c[5]);
 }

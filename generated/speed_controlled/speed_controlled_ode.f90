@@ -104,15 +104,16 @@ contains
   end function speed_controlled_ode_strerror
 
 
-  ! d(dx/dt)/dx, row-major (62 ops): J(i*nx + j + 1) = d f_(i+1) / d x_(j+1).
+  ! J(i*nx + j + 1) = d f_(i+1) / d x_(j+1) in 1-based terms.
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (62 ops).
   subroutine speed_controlled_jac(t, x, c, J) bind(C, name="speed_controlled_f_jac")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
-    real(c_double), intent(out) :: J(64)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:6)
+    real(c_double), intent(out) :: J(0:63)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -133,100 +134,91 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
     tmp0 = speed_controlled_sin(q2)
     tmp1 = speed_controlled_cos(q2)
     tmp2 = speed_controlled_sin(q3)
-    tmp3 = tmp2*u1
+    tmp3 = tmp2 * u1
     tmp4 = speed_controlled_cos(q3)
-    tmp5 = tmp4*u3
-    tmp6 = -tmp3 + tmp5
-    tmp7 = tmp6/(tmp1*tmp1)
-    tmp8 = 1.0_c_double/tmp1
-    tmp9 = tmp8*(-tmp2*u3 - tmp4*u1)
-    tmp10 = tmp2*tmp8
-    tmp11 = tmp4*tmp8
-    tmp12 = 0.016919114337701612_c_double*u2 - &
-          1.2676659094182028e-05_c_double*u4
-    J(1) = 0
-    J(2) = tmp0*tmp7
-    J(3) = tmp9
-    J(4) = 0
-    J(5) = -tmp10
-    J(6) = 0
-    J(7) = tmp11
-    J(8) = 0
-    J(9) = 0
-    J(10) = 0
-    J(11) = tmp6
-    J(12) = 0
-    J(13) = tmp4
-    J(14) = 0
-    J(15) = tmp2
-    J(16) = 0
-    J(17) = 0
-    J(18) = -tmp0*tmp0*tmp7 + tmp3 - tmp5
-    J(19) = -tmp0*tmp9
-    J(20) = 0
-    J(21) = tmp0*tmp10
-    J(22) = 1
-    J(23) = -tmp0*tmp11
-    J(24) = 0
-    J(25) = 0
-    J(26) = 0
-    J(27) = 0
-    J(28) = 0
-    J(29) = 0
-    J(30) = -1
-    J(31) = 0
-    J(32) = 1
-    J(33) = 0
-    J(34) = 0
-    J(35) = 0
-    J(36) = 0
-    J(37) = -tmp12
-    J(38) = -0.016919114337701612_c_double*u1 + 0.33522655090705017_c_double &
-          *u3
-    J(39) = 0.33522655090705017_c_double*u2 + 0.0004980820048148975_c_double &
-          *u4
-    J(40) = 1.2676659094182028e-05_c_double*u1 + &
-          0.0004980820048148975_c_double*u3
-    J(41) = 0
-    J(42) = 0
-    J(43) = 0
-    J(44) = 0
-    J(45) = 0.037226373050203175_c_double*u1 - 0.06916590204045965_c_double* &
-          u3
-    J(46) = -c(1)
-    J(47) = -0.06916590204045965_c_double*u1 - 0.037226373050203175_c_double &
-          *u3
-    J(48) = c(1)
-    J(49) = 0
-    J(50) = 0
-    J(51) = 0
-    J(52) = 0
-    J(53) = -0.2723557574878444_c_double*u2 - 0.0005451879938902264_c_double &
-          *u4
-    J(54) = -0.2723557574878444_c_double*u1 + 0.016919114337701612_c_double* &
-          u3
-    J(55) = tmp12
-    J(56) = -0.0005451879938902264_c_double*u1 - &
-          1.2676659094182028e-05_c_double*u3
-    J(57) = 0
-    J(58) = 0
-    J(59) = 0
-    J(60) = 0
-    J(61) = 0
-    J(62) = -c(2)
-    J(63) = 0
-    J(64) = c(2)
+    tmp5 = tmp4 * u3
+    tmp6 = tmp5 - tmp3
+    tmp7 = tmp6 / (tmp1 * tmp1)
+    tmp8 = 1.0_c_double / tmp1
+    tmp9 = tmp8 * ((-tmp2 * u3) - tmp4 * u1)
+    tmp10 = tmp2 * tmp8
+    tmp11 = tmp4 * tmp8
+    tmp12 = 0.016919114337701612_c_double * u2 - 1.2676659094182028e-05_c_double * u4
+    J(0) = 0.0_c_double
+    J(1) = tmp0 * tmp7
+    J(2) = tmp9
+    J(3) = 0.0_c_double
+    J(4) = -tmp10
+    J(5) = 0.0_c_double
+    J(6) = tmp11
+    J(7) = 0.0_c_double
+    J(8) = 0.0_c_double
+    J(9) = 0.0_c_double
+    J(10) = tmp6
+    J(11) = 0.0_c_double
+    J(12) = tmp4
+    J(13) = 0.0_c_double
+    J(14) = tmp2
+    J(15) = 0.0_c_double
+    J(16) = 0.0_c_double
+    J(17) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
+    J(18) = -tmp0 * tmp9
+    J(19) = 0.0_c_double
+    J(20) = tmp0 * tmp10
+    J(21) = 1.0_c_double
+    J(22) = -tmp0 * tmp11
+    J(23) = 0.0_c_double
+    J(24) = 0.0_c_double
+    J(25) = 0.0_c_double
+    J(26) = 0.0_c_double
+    J(27) = 0.0_c_double
+    J(28) = 0.0_c_double
+    J(29) = -1.0_c_double
+    J(30) = 0.0_c_double
+    J(31) = 1.0_c_double
+    J(32) = 0.0_c_double
+    J(33) = 0.0_c_double
+    J(34) = 0.0_c_double
+    J(35) = 0.0_c_double
+    J(36) = -tmp12
+    J(37) = 0.33522655090705017_c_double * u3 - 0.016919114337701612_c_double * u1
+    J(38) = 0.0004980820048148975_c_double * u4 + 0.33522655090705017_c_double * u2
+    J(39) = 1.2676659094182028e-05_c_double * u1 + 0.0004980820048148975_c_double * u3
+    J(40) = 0.0_c_double
+    J(41) = 0.0_c_double
+    J(42) = 0.0_c_double
+    J(43) = 0.0_c_double
+    J(44) = 0.037226373050203175_c_double * u1 - 0.06916590204045965_c_double * u3
+    J(45) = -c(0)
+    J(46) = (-0.06916590204045965_c_double * u1) - 0.037226373050203175_c_double * u3
+    J(47) = c(0)
+    J(48) = 0.0_c_double
+    J(49) = 0.0_c_double
+    J(50) = 0.0_c_double
+    J(51) = 0.0_c_double
+    J(52) = (-0.2723557574878444_c_double * u2) - 0.0005451879938902264_c_double * u4
+    J(53) = 0.016919114337701612_c_double * u3 - 0.2723557574878444_c_double * u1
+    J(54) = tmp12
+    J(55) = (-1.2676659094182028e-05_c_double * u3) - 0.0005451879938902264_c_double * u1
+    J(56) = 0.0_c_double
+    J(57) = 0.0_c_double
+    J(58) = 0.0_c_double
+    J(59) = 0.0_c_double
+    J(60) = 0.0_c_double
+    J(61) = -c(1)
+    J(62) = 0.0_c_double
+    J(63) = c(1)
   end subroutine speed_controlled_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -810,7 +802,8 @@ contains
     ai(6) = ur * ai(0) + ui * ar(0)
     p = 1
     do i = 2, 3 - 1
-      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) then
+      if (abs(ar(i * nx + 1)) + abs(ai(i * nx + 1)) > abs(ar(p * nx + 1)) + abs(ai(p * nx + 1))) &
+          then
         p = i
       end if
     end do
@@ -941,7 +934,8 @@ contains
     ai(31) = ur * ai(27) + ui * ar(27)
     p = 4
     do i = 5, 8 - 1
-      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) then
+      if (abs(ar(i * nx + 4)) + abs(ai(i * nx + 4)) > abs(ar(p * nx + 4)) + abs(ai(p * nx + 4))) &
+          then
         p = i
       end if
     end do
@@ -1006,7 +1000,8 @@ contains
     ai(39) = ur * ai(36) + ui * ar(36)
     p = 5
     do i = 6, 8 - 1
-      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) then
+      if (abs(ar(i * nx + 5)) + abs(ai(i * nx + 5)) > abs(ar(p * nx + 5)) + abs(ai(p * nx + 5))) &
+          then
         p = i
       end if
     end do
@@ -1063,7 +1058,8 @@ contains
     ai(47) = ur * ai(45) + ui * ar(45)
     p = 6
     do i = 7, 8 - 1
-      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) then
+      if (abs(ar(i * nx + 6)) + abs(ai(i * nx + 6)) > abs(ar(p * nx + 6)) + abs(ai(p * nx + 6))) &
+          then
         p = i
       end if
     end do
@@ -1234,7 +1230,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:4 - 1)
+    real(c_double) :: k(0:nx - 1, 0:3)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1246,7 +1242,8 @@ contains
 
     comp = 0.0_c_double
     call stats_start(stats, t0)
-    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < 1) then
+    if (.not. (t1 >= t0) .or. .not. ieee_is_finite(t0) .or. .not. ieee_is_finite(t1) .or. steps < &
+        1) then
       res = SPEED_CONTROLLED_ODE_ERR_ARGUMENT
       return
     end if
@@ -1338,7 +1335,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1529,7 +1526,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: k(0:nx - 1, 0:13 - 1)
+    real(c_double) :: k(0:nx - 1, 0:12)
     real(c_double) :: y(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
     real(c_double) :: dx(0:nx - 1)
@@ -1794,7 +1791,7 @@ contains
     integer(c_int), intent(in) :: piv(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     real(c_double), intent(in) :: comp(0:nx - 1)
-    real(c_double), intent(inout) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
     real(c_double), intent(inout) :: dx(0:nx - 1)
     real(c_double), intent(inout) :: xnew(0:nx - 1)
     real(c_double) :: res
@@ -1900,7 +1897,7 @@ contains
     integer(c_int) :: res
     real(c_double) :: J(0:nx * nx - 1)
     real(c_double) :: lu(0:nx * nx - 1)
-    real(c_double) :: k(0:nx - 1, 0:6 - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
     real(c_double) :: f0(0:nx - 1)
     real(c_double) :: fnew(0:nx - 1)
     real(c_double) :: xnew(0:nx - 1)
@@ -2562,7 +2559,8 @@ contains
           h = t1 - t
           last = .true.
         else
-          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double * h) then
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
             cycle
           else
             h = h_new
@@ -2604,8 +2602,8 @@ contains
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
-    real(c_double), intent(in) :: inv(0:21 - 1)
-    real(c_double), intent(inout) :: tay(0:21 - 1, 0:21 - 1)
+    real(c_double), intent(in) :: inv(0:20)
+    real(c_double), intent(inout) :: tay(0:20, 0:20)
     real(c_double) :: acc8
     real(c_double) :: acc9
     real(c_double) :: acc10
@@ -2902,7 +2900,7 @@ contains
     real(c_double), intent(inout) :: x(0:nx - 1)
     real(c_double), intent(in) :: c(0:nc - 1)
     integer(c_int) :: res
-    real(c_double) :: tay(0:21 - 1, 0:21 - 1)
+    real(c_double) :: tay(0:20, 0:20)
     real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
         0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
         0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &

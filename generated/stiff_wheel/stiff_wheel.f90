@@ -195,14 +195,13 @@ contains
     return
   end function stiff_wheel_cos
 
-  ! Checks p and computes the constants c that stiff_wheel_rhs needs
-  ! (10 ops, plus the checks). Returns STIFF_WHEEL_OK or
-  ! the first failing check's code; c is then not to be used.
-  function stiff_wheel_setup(p, c) result(status) &
-      bind(C, name="stiff_wheel_f_setup")
-    real(c_double), intent(in) :: p(2)
-    real(c_double), intent(out) :: c(7)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that stiff_wheel_rhs needs (10 ops,
+  ! plus the checks). Returns STIFF_WHEEL_OK or the first failing check's code;
+  ! c is then not to be used.
+  function stiff_wheel_setup(p, c) result(res) bind(C, name="stiff_wheel_f_setup")
+    real(c_double), intent(in) :: p(0:1)
+    real(c_double), intent(out) :: c(0:6)
+    integer(c_int) :: res
     real(c_double) :: m_a
     real(c_double) :: m_b
     real(c_double) :: I11
@@ -213,13 +212,19 @@ contains
     real(c_double) :: J
     real(c_double) :: k
     real(c_double) :: w_ref
-    real(c_double) :: half_gap, largest
+    real(c_double) :: half_gap
+    real(c_double) :: largest
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = STIFF_WHEEL_ERR_NONFINITE
-      return
-    end if
+    do i_ = 0, 7 - 1
+      c(i_) = 0.0_c_double
+    end do
+    do i_ = 0, 2 - 1
+      if (.not. ieee_is_finite(p(i_))) then
+        res = STIFF_WHEEL_ERR_NONFINITE
+        return
+      end if
+    end do
     m_a = 300.0_c_double
     m_b = 4.0_c_double
     I11 = 60.0_c_double
@@ -228,51 +233,53 @@ contains
     I13 = 1.5_c_double
     I = 0.02_c_double
     J = 0.03_c_double
-    k = p(1)
-    w_ref = p(2)
+    k = p(0)
+    w_ref = p(1)
+    if (.not. (m_a > 0.0_c_double) .or. .not. (m_b > 0.0_c_double)) then
+      res = STIFF_WHEEL_ERR_MASS
+      return
+    end if
+    if (.not. (I > 0.0_c_double) .or. .not. (J > 0.0_c_double)) then
+      res = STIFF_WHEEL_ERR_ROTOR_INERTIA
+      return
+    end if
+    if (.not. (I11 > 0.0_c_double) .or. .not. (I22 > 0.0_c_double) .or. .not. (I33 > &
+        0.0_c_double) .or. .not. (I11 * I33 - I13 * I13 > 0.0_c_double)) then
+      res = STIFF_WHEEL_ERR_CARRIER_NOT_PD
+      return
+    end if
 
-    if (.not. (m_a > 0.0_c_double .and. m_b > 0.0_c_double)) then
-      status = STIFF_WHEEL_ERR_MASS
-      return
-    end if
-    if (.not. (I > 0.0_c_double .and. J > 0.0_c_double)) then
-      status = STIFF_WHEEL_ERR_ROTOR_INERTIA
-      return
-    end if
-    if (.not. (I11 > 0.0_c_double .and. I22 > 0.0_c_double .and. I33 > 0.0_c_double &
-               .and. I11*I33 - I13*I13 > 0.0_c_double)) then
-      status = STIFF_WHEEL_ERR_CARRIER_NOT_PD
-      return
-    end if
     ! Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
     ! The largest may not exceed the sum of the other two.
-    half_gap = sqrt(0.25_c_double*(I11 - I33)**2 + I13*I13)
-    largest = max(I22, 0.5_c_double*(I11 + I33) + half_gap)
-    if (2.0_c_double*largest - (I11 + I22 + I33) > 1e-12_c_double*(I11 + I22 + I33)) then
-      status = STIFF_WHEEL_ERR_CARRIER_TRIANGLE
+    half_gap = sqrt(0.25_c_double * ((I11 - I33) * (I11 - I33)) + I13 * I13)
+    largest = max(I22, 0.5_c_double * (I11 + I33) + half_gap)
+    if (2.0_c_double * largest - ((I11 + I22) + I33) > 1e-12_c_double * ((I11 + I22) + I33)) then
+      res = STIFF_WHEEL_ERR_CARRIER_TRIANGLE
       return
     end if
-    if (J - 2.0_c_double*I > 1e-12_c_double*(2.0_c_double*I + J)) then
-      status = STIFF_WHEEL_ERR_ROTOR_TRIANGLE
+    if (J - 2.0_c_double * I > 1e-12_c_double * (2.0_c_double * I + J)) then
+      res = STIFF_WHEEL_ERR_ROTOR_TRIANGLE
       return
     end if
-
-    c(1) = (304.0d0/22887.0d0)*k
-    c(2) = -100.0d0/3.0d0*k
-    c(3) = -w_ref
-    c(4) = -k
-    c(5) = 2*k
-    c(6) = -k*w_ref
-    c(7) = 1.1080962681823885_c_double
-    if (.not. (c(STIFF_WHEEL_COND) <= 10000000000000.0_c_double)) then
-      status = STIFF_WHEEL_ERR_MASS_SINGULAR
+    c(0) = (304.0_c_double * k) / 22887.0_c_double
+    c(1) = -(100.0_c_double * k) / 3.0_c_double
+    c(2) = -w_ref
+    c(3) = -k
+    c(4) = 2.0_c_double * k
+    c(5) = -k * w_ref
+    c(6) = 1.1080962681823885_c_double
+    if (.not. (c(6) <= 10000000000000.0_c_double)) then
+      res = STIFF_WHEEL_ERR_MASS_SINGULAR
       return
     end if
-    if (.not. all(ieee_is_finite(c))) then
-      status = STIFF_WHEEL_ERR_OVERFLOW
-      return
-    end if
-    status = STIFF_WHEEL_OK
+    do i_ = 0, 7 - 1
+      if (.not. ieee_is_finite(c(i_))) then
+        res = STIFF_WHEEL_ERR_OVERFLOW
+        return
+      end if
+    end do
+    res = STIFF_WHEEL_OK
+    return
   end function stiff_wheel_setup
 
   ! The message for a return code, blank-padded to 85 characters: trim() it.
@@ -305,14 +312,14 @@ contains
   end function stiff_wheel_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from stiff_wheel_setup (43 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from stiff_wheel_setup (43 ops).
   subroutine stiff_wheel_rhs(t, x, c, dxdt) bind(C, name="stiff_wheel_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
-    real(c_double), intent(out) :: dxdt(8)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:6)
+    real(c_double), intent(out) :: dxdt(0:7)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -325,64 +332,63 @@ contains
     real(c_double) :: tmp2
     real(c_double) :: tmp3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
-    slip = c(3) - u2 + u4
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
+    slip = (c(2) + u4) - u2
     tmp0 = stiff_wheel_sin(q3)
     tmp1 = stiff_wheel_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/stiff_wheel_cos(q2)
-    tmp3 = 0.016919114337701612_c_double*u2 - &
-          1.2676659094182028e-05_c_double*u4
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*stiff_wheel_sin(q2) + u2
-    dxdt(4) = -u2 + u4
-    dxdt(5) = -tmp3*u1 + u3*(0.33522655090705017_c_double*u2 + &
-          0.0004980820048148975_c_double*u4)
-    dxdt(6) = c(1)*slip + 0.018613186525101588_c_double*u1*u1 - &
-          0.06916590204045965_c_double*u1*u3 - &
-          0.018613186525101588_c_double*u3*u3
-    dxdt(7) = tmp3*u3 + u1*(-0.2723557574878444_c_double*u2 - &
-          0.0005451879938902264_c_double*u4)
-    dxdt(8) = c(2)*slip
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / stiff_wheel_cos(q2)
+    tmp3 = 0.016919114337701612_c_double * u2 - 1.2676659094182028e-05_c_double * u4
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * stiff_wheel_sin(q2)
+    dxdt(3) = u4 - u2
+    dxdt(4) = u3 * (0.0004980820048148975_c_double * u4 + 0.33522655090705017_c_double * u2) - &
+        tmp3 * u1
+    dxdt(5) = ((0.018613186525101588_c_double * (u1 * u1) + c(0) * slip) - &
+        0.018613186525101588_c_double * (u3 * u3)) - (0.06916590204045965_c_double * u1) * u3
+    dxdt(6) = tmp3 * u3 + u1 * ((-0.2723557574878444_c_double * u2) - &
+        0.0005451879938902264_c_double * u4)
+    dxdt(7) = c(1) * slip
   end subroutine stiff_wheel_rhs
 
   ! out = kinetic energy of the system (J): 13 ops.
-  subroutine stiff_wheel_kinetic_energy(t, x, c, out) &
-      bind(C, name="stiff_wheel_f_kinetic_energy")
+  subroutine stiff_wheel_kinetic_energy(t, x, c, out) bind(C, name="stiff_wheel_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:6)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
     real(c_double) :: u4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
-    out(1) = u1*(30.133355263157895_c_double*u1 + &
-          1.4013157894736843_c_double*u3) + 37.64309210526316_c_double*u2* &
-          u2 + 27.52973684210526_c_double*u3*u3 + 0.015_c_double*u4*u4
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
+    out(0) = ((0.015_c_double * (u4 * u4) + 37.64309210526316_c_double * (u2 * u2)) + &
+        27.52973684210526_c_double * (u3 * u3)) + u1 * (30.133355263157895_c_double * u1 + &
+        1.4013157894736843_c_double * u3)
   end subroutine stiff_wheel_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.
-  subroutine stiff_wheel_angular_momentum(t, x, c, out) &
-      bind(C, name="stiff_wheel_f_angular_momentum")
+  subroutine stiff_wheel_angular_momentum(t, x, c, out) bind(C, &
+          name="stiff_wheel_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:6)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -404,50 +410,49 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
     tmp0 = stiff_wheel_sin(q1)
-    tmp1 = 75.28618421052632_c_double*u2 + 0.03_c_double*u4
+    tmp1 = 0.03_c_double * u4 + 75.28618421052632_c_double * u2
     tmp2 = stiff_wheel_cos(q2)
-    tmp3 = tmp1*tmp2
-    tmp4 = 1.4013157894736843_c_double*u1 + 55.05947368421052_c_double*u3
+    tmp3 = tmp1 * tmp2
+    tmp4 = 1.4013157894736843_c_double * u1 + 55.05947368421052_c_double * u3
     tmp5 = stiff_wheel_sin(q3)
     tmp6 = stiff_wheel_cos(q1)
-    tmp7 = tmp5*tmp6
+    tmp7 = tmp5 * tmp6
     tmp8 = stiff_wheel_sin(q2)
     tmp9 = stiff_wheel_cos(q3)
-    tmp10 = tmp0*tmp9
-    tmp11 = 60.26671052631579_c_double*u1 + 1.4013157894736843_c_double*u3
-    tmp12 = tmp0*tmp5
-    out(1) = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 &
-          + tmp7)
-    out(2) = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8 &
-          *tmp9)
-    out(3) = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9
+    tmp10 = tmp0 * tmp9
+    tmp11 = 60.26671052631579_c_double * u1 + 1.4013157894736843_c_double * u3
+    tmp12 = tmp0 * tmp5
+    out(0) = (tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8)) - tmp0 * tmp3
+    out(1) = (tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6) + tmp4 * (tmp12 - (tmp6 * tmp8) * tmp9)
+    out(2) = (tmp1 * tmp8 + (tmp2 * tmp4) * tmp9) - (tmp11 * tmp2) * tmp5
   end subroutine stiff_wheel_angular_momentum
 
   ! out = power of the motor torque, T (u4 - u2) (W): 9 ops.
-  subroutine stiff_wheel_power(t, x, c, out) &
-      bind(C, name="stiff_wheel_f_power")
+  subroutine stiff_wheel_power(t, x, c, out) bind(C, name="stiff_wheel_f_power")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(7)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:6)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u2
     real(c_double) :: u4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u2 = x(6)
-    u4 = x(8)
-    out(1) = u2*(c(4)*u2 + c(5)*u4 + c(6)) + u4*(c(4)*u4 - c(6))
+    u2 = x(5)
+    u4 = x(7)
+    out(0) = u2 * ((c(5) + c(3) * u2) + c(4) * u4) + u4 * (c(3) * u4 - c(5))
   end subroutine stiff_wheel_power
 
 end module stiff_wheel_mod

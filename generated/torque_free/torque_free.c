@@ -14,6 +14,7 @@
  */
 #include "torque_free.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -33,6 +34,14 @@
 #else
 #define TORQUE_FREE_ALIGNED
 #endif
+
+
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -183,46 +192,6 @@ static inline double torque_free_cos_lanes(double x)
 }
 
 
-/* 0 ops, plus the checks. */
-int torque_free_setup(const double *p, double *c)
-{
-    (void)p;  /* every value is folded */
-    const double m_a = 10.0;
-    const double m_b = 2.0;
-    const double I11 = 3.0;
-    const double I22 = 4.0;
-    const double I33 = 3.0;
-    const double I13 = 0.0;
-    const double I = 0.05;
-    const double J = 0.08;
-
-    if (!(m_a > 0.0) || !(m_b > 0.0)) {
-        return TORQUE_FREE_ERR_MASS;
-    }
-    if (!(I > 0.0) || !(J > 0.0)) {
-        return TORQUE_FREE_ERR_ROTOR_INERTIA;
-    }
-    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11*I33 - I13*I13 > 0.0)) {
-        return TORQUE_FREE_ERR_CARRIER_NOT_PD;
-    }
-    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
-       The largest may not exceed the sum of the other two. */
-    const double half_gap = sqrt(0.25*(I11 - I33)*(I11 - I33) + I13*I13);
-    const double largest = fmax(I22, 0.5*(I11 + I33) + half_gap);
-    if (2.0*largest - (I11 + I22 + I33) > 1e-12*(I11 + I22 + I33)) {
-        return TORQUE_FREE_ERR_CARRIER_TRIANGLE;
-    }
-    if (J - 2.0*I > 1e-12*(2.0*I + J)) {
-        return TORQUE_FREE_ERR_ROTOR_TRIANGLE;
-    }
-
-    c[0] = 1.0;
-    if (!(c[TORQUE_FREE_COND] <= 10000000000000.0)) {
-        return TORQUE_FREE_ERR_MASS_SINGULAR;
-    }
-    return TORQUE_FREE_OK;
-}
-
 const char *torque_free_strerror(int code)
 {
     switch (code) {
@@ -247,102 +216,192 @@ const char *torque_free_strerror(int code)
     }
 }
 
-/* 19 ops per call. */
-void torque_free_rhs(double t, const double *x, const double *c, double *dxdt)
+/* Checks p and computes the constants c that torque_free_rhs needs (0 ops,
+   plus the checks). Returns TORQUE_FREE_OK or the first failing check's code;
+   c is then not to be used. */
+int torque_free_setup(const double *p, double *c)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double u4 = x[6];
+    double m_a;
+    double m_b;
+    double I11;
+    double I22;
+    double I33;
+    double I13;
+    double I;
+    double J;
+    double half_gap;
+    double largest;
+    int i_;
 
-    const double tmp0 = torque_free_sin(q3);
-    const double tmp1 = torque_free_cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/torque_free_cos(q2);
-    const double tmp3 = 0.3114754098360656*u2 + 0.02622950819672131*u4;
-    dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*torque_free_sin(q2) + u2;
-    dxdt[3] = tmp3*u3;
-    dxdt[4] = 0;
-    dxdt[5] = -tmp3*u1;
-    dxdt[6] = 0;
+    for (i_ = 0; i_ < 1; ++i_) {
+        c[i_] = 0.0;
+    }
+    (void)p;  /* unused in some scenes */
+    m_a = 10.0;
+    m_b = 2.0;
+    I11 = 3.0;
+    I22 = 4.0;
+    I33 = 3.0;
+    I13 = 0.0;
+    I = 0.05;
+    J = 0.08;
+    if (!(m_a > 0.0) || !(m_b > 0.0)) {
+        return TORQUE_FREE_ERR_MASS;
+    }
+    if (!(I > 0.0) || !(J > 0.0)) {
+        return TORQUE_FREE_ERR_ROTOR_INERTIA;
+    }
+    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11 * I33 - I13 * I13 > 0.0)) {
+        return TORQUE_FREE_ERR_CARRIER_NOT_PD;
+    }
+
+    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]]. */
+    /* The largest may not exceed the sum of the other two. */
+    half_gap = sqrt(0.25 * ((I11 - I33) * (I11 - I33)) + I13 * I13);
+    largest = dmax(I22, 0.5 * (I11 + I33) + half_gap);
+    if (2.0 * largest - (I11 + I22 + I33) > 1e-12 * (I11 + I22 + I33)) {
+        return TORQUE_FREE_ERR_CARRIER_TRIANGLE;
+    }
+    if (J - 2.0 * I > 1e-12 * (2.0 * I + J)) {
+        return TORQUE_FREE_ERR_ROTOR_TRIANGLE;
+    }
+    c[0] = 1.0;
+    if (!(c[0] <= 10000000000000.0)) {
+        return TORQUE_FREE_ERR_MASS_SINGULAR;
+    }
+    return TORQUE_FREE_OK;
 }
 
-/* torque_free_rhs on n lanes: the same statements, lane by lane. */
+/* dxdt = f(t, x) for the constants c from torque_free_setup (19 ops). */
+void torque_free_rhs(double t, const double *x, const double *c, double *dxdt)
+{
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    u4 = x[6];
+    tmp0 = torque_free_sin(q3);
+    tmp1 = torque_free_cos(q3);
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / torque_free_cos(q2);
+    tmp3 = 0.3114754098360656 * u2 + 0.02622950819672131 * u4;
+    dxdt[0] = tmp2;
+    dxdt[1] = tmp0 * u3 + tmp1 * u1;
+    dxdt[2] = u2 - tmp2 * torque_free_sin(q2);
+    dxdt[3] = tmp3 * u3;
+    dxdt[4] = 0.0;
+    dxdt[5] = -(tmp3 * u1);
+    dxdt[6] = 0.0;
+}
+
 void torque_free_rhs_lanes(int n, const double *TORQUE_FREE_RESTRICT t,
-        const double *TORQUE_FREE_RESTRICT x, const double *TORQUE_FREE_RESTRICT c,
-        double *TORQUE_FREE_RESTRICT dxdt)
+                           const double *TORQUE_FREE_RESTRICT x,
+                           const double *TORQUE_FREE_RESTRICT c, double *TORQUE_FREE_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
     TORQUE_FREE_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[3 * n + l];
-        const double u2 = x[4 * n + l];
-        const double u3 = x[5 * n + l];
-        const double u4 = x[6 * n + l];
-
-        const double tmp0 = torque_free_sin_lanes(q3);
-        const double tmp1 = torque_free_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/torque_free_cos_lanes(q2);
-        const double tmp3 = 0.3114754098360656*u2 + 0.02622950819672131*u4;
-        dxdt[0 * n + l] = tmp2;
-        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*torque_free_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = tmp3*u3;
-        dxdt[4 * n + l] = 0;
-        dxdt[5 * n + l] = -tmp3*u1;
-        dxdt[6 * n + l] = 0;
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[3 * n + l];
+        u2 = x[4 * n + l];
+        u3 = x[5 * n + l];
+        u4 = x[6 * n + l];
+        tmp0 = torque_free_sin_lanes(q3);
+        tmp1 = torque_free_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / torque_free_cos_lanes(q2);
+        tmp3 = 0.3114754098360656 * u2 + 0.02622950819672131 * u4;
+        dxdt[l] = tmp2;
+        dxdt[1 * n + l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2 * n + l] = u2 - tmp2 * torque_free_sin_lanes(q2);
+        dxdt[3 * n + l] = tmp3 * u3;
+        dxdt[4 * n + l] = 0.0;
+        dxdt[5 * n + l] = -(tmp3 * u1);
+        dxdt[6 * n + l] = 0.0;
     }
 }
 
-/* kinetic energy of the system (J): 11 ops. */
+/* out = kinetic energy of the system (J): 11 ops. */
 void torque_free_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double u4 = x[6];
+    double u1;
+    double u2;
+    double u3;
+    double u4;
 
-    out[0] = 1.525*u1*u1 + 2*u2*u2 + 1.525*u3*u3 + 0.04*u4*u4;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    u4 = x[6];
+    out[0] = 2.0 * (u2 * u2) + 1.525 * (u1 * u1) + 1.525 * (u3 * u3) + 0.04 * (u4 * u4);
 }
 
-/* angular momentum about AB*, N components h[0..2] (kg m^2/s): 42 ops. */
+/* out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 42 ops. */
 void torque_free_angular_momentum(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q1 = x[0];
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double u4 = x[6];
+    double q1;
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = torque_free_sin(q1);
-    const double tmp1 = 4*u2 + 0.08*u4;
-    const double tmp2 = torque_free_cos(q2);
-    const double tmp3 = tmp1*tmp2;
-    const double tmp4 = torque_free_sin(q3);
-    const double tmp5 = torque_free_cos(q1);
-    const double tmp6 = tmp4*tmp5;
-    const double tmp7 = torque_free_sin(q2);
-    const double tmp8 = torque_free_cos(q3);
-    const double tmp9 = tmp0*tmp8;
-    const double tmp10 = 3.05*u3;
-    const double tmp11 = tmp0*tmp4;
-    const double tmp12 = 3.05*u1;
-    out[0] = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + tmp5*tmp8);
-    out[1] = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + tmp3*tmp5;
-    out[2] = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q1 = x[0];
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    u4 = x[6];
+    tmp0 = torque_free_sin(q1);
+    tmp1 = 4.0 * u2 + 0.08 * u4;
+    tmp2 = torque_free_cos(q2);
+    tmp3 = tmp1 * tmp2;
+    tmp4 = torque_free_sin(q3);
+    tmp5 = torque_free_cos(q1);
+    tmp6 = tmp4 * tmp5;
+    tmp7 = torque_free_sin(q2);
+    tmp8 = torque_free_cos(q3);
+    tmp9 = tmp0 * tmp8;
+    tmp10 = 3.05 * u3;
+    tmp11 = tmp0 * tmp4;
+    tmp12 = 3.05 * u1;
+    out[0] = tmp10 * (tmp6 + tmp7 * tmp9) + tmp12 * (tmp5 * tmp8 - tmp11 * tmp7) - tmp0 * tmp3;
+    out[1] = tmp10 * (tmp11 - tmp5 * tmp7 * tmp8) + tmp12 * (tmp9 + tmp6 * tmp7) + tmp3 * tmp5;
+    out[2] = tmp1 * tmp7 + tmp10 * tmp2 * tmp8 - tmp12 * tmp2 * tmp4;
 }

@@ -188,14 +188,13 @@ contains
     return
   end function torque_free_cos
 
-  ! Checks p and computes the constants c that torque_free_rhs needs
-  ! (0 ops, plus the checks). Returns TORQUE_FREE_OK or
-  ! the first failing check's code; c is then not to be used.
-  function torque_free_setup(p, c) result(status) &
-      bind(C, name="torque_free_f_setup")
-    real(c_double), intent(in) :: p(0)
-    real(c_double), intent(out) :: c(1)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that torque_free_rhs needs (0 ops,
+  ! plus the checks). Returns TORQUE_FREE_OK or the first failing check's code;
+  ! c is then not to be used.
+  function torque_free_setup(p, c) result(res) bind(C, name="torque_free_f_setup")
+    real(c_double), intent(in) :: p(0:-1)
+    real(c_double), intent(out) :: c(0:0)
+    integer(c_int) :: res
     real(c_double) :: m_a
     real(c_double) :: m_b
     real(c_double) :: I11
@@ -204,13 +203,15 @@ contains
     real(c_double) :: I13
     real(c_double) :: I
     real(c_double) :: J
-    real(c_double) :: half_gap, largest
+    real(c_double) :: half_gap
+    real(c_double) :: largest
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = TORQUE_FREE_ERR_NONFINITE
-      return
-    end if
+    do i_ = 0, 1 - 1
+      c(i_) = 0.0_c_double
+    end do
+    associate (unused_p => p)  ! unused in some scenes
+    end associate
     m_a = 10.0_c_double
     m_b = 2.0_c_double
     I11 = 3.0_c_double
@@ -219,39 +220,39 @@ contains
     I13 = 0.0_c_double
     I = 0.05_c_double
     J = 0.08_c_double
+    if (.not. (m_a > 0.0_c_double) .or. .not. (m_b > 0.0_c_double)) then
+      res = TORQUE_FREE_ERR_MASS
+      return
+    end if
+    if (.not. (I > 0.0_c_double) .or. .not. (J > 0.0_c_double)) then
+      res = TORQUE_FREE_ERR_ROTOR_INERTIA
+      return
+    end if
+    if (.not. (I11 > 0.0_c_double) .or. .not. (I22 > 0.0_c_double) .or. .not. (I33 > &
+        0.0_c_double) .or. .not. (I11 * I33 - I13 * I13 > 0.0_c_double)) then
+      res = TORQUE_FREE_ERR_CARRIER_NOT_PD
+      return
+    end if
 
-    if (.not. (m_a > 0.0_c_double .and. m_b > 0.0_c_double)) then
-      status = TORQUE_FREE_ERR_MASS
-      return
-    end if
-    if (.not. (I > 0.0_c_double .and. J > 0.0_c_double)) then
-      status = TORQUE_FREE_ERR_ROTOR_INERTIA
-      return
-    end if
-    if (.not. (I11 > 0.0_c_double .and. I22 > 0.0_c_double .and. I33 > 0.0_c_double &
-               .and. I11*I33 - I13*I13 > 0.0_c_double)) then
-      status = TORQUE_FREE_ERR_CARRIER_NOT_PD
-      return
-    end if
     ! Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
     ! The largest may not exceed the sum of the other two.
-    half_gap = sqrt(0.25_c_double*(I11 - I33)**2 + I13*I13)
-    largest = max(I22, 0.5_c_double*(I11 + I33) + half_gap)
-    if (2.0_c_double*largest - (I11 + I22 + I33) > 1e-12_c_double*(I11 + I22 + I33)) then
-      status = TORQUE_FREE_ERR_CARRIER_TRIANGLE
+    half_gap = sqrt(0.25_c_double * ((I11 - I33) * (I11 - I33)) + I13 * I13)
+    largest = max(I22, 0.5_c_double * (I11 + I33) + half_gap)
+    if (2.0_c_double * largest - ((I11 + I22) + I33) > 1e-12_c_double * ((I11 + I22) + I33)) then
+      res = TORQUE_FREE_ERR_CARRIER_TRIANGLE
       return
     end if
-    if (J - 2.0_c_double*I > 1e-12_c_double*(2.0_c_double*I + J)) then
-      status = TORQUE_FREE_ERR_ROTOR_TRIANGLE
+    if (J - 2.0_c_double * I > 1e-12_c_double * (2.0_c_double * I + J)) then
+      res = TORQUE_FREE_ERR_ROTOR_TRIANGLE
       return
     end if
-
-    c(1) = 1.0_c_double
-    if (.not. (c(TORQUE_FREE_COND) <= 10000000000000.0_c_double)) then
-      status = TORQUE_FREE_ERR_MASS_SINGULAR
+    c(0) = 1.0_c_double
+    if (.not. (c(0) <= 10000000000000.0_c_double)) then
+      res = TORQUE_FREE_ERR_MASS_SINGULAR
       return
     end if
-    status = TORQUE_FREE_OK
+    res = TORQUE_FREE_OK
+    return
   end function torque_free_setup
 
   ! The message for a return code, blank-padded to 82 characters: trim() it.
@@ -282,14 +283,14 @@ contains
   end function torque_free_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from torque_free_setup (19 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from torque_free_setup (19 ops).
   subroutine torque_free_rhs(t, x, c, dxdt) bind(C, name="torque_free_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: dxdt(7)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: dxdt(0:6)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -301,56 +302,59 @@ contains
     real(c_double) :: tmp2
     real(c_double) :: tmp3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
     tmp0 = torque_free_sin(q3)
     tmp1 = torque_free_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/torque_free_cos(q2)
-    tmp3 = 0.3114754098360656_c_double*u2 + 0.02622950819672131_c_double*u4
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*torque_free_sin(q2) + u2
-    dxdt(4) = tmp3*u3
-    dxdt(5) = 0
-    dxdt(6) = -tmp3*u1
-    dxdt(7) = 0
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / torque_free_cos(q2)
+    tmp3 = 0.3114754098360656_c_double * u2 + 0.02622950819672131_c_double * u4
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * torque_free_sin(q2)
+    dxdt(3) = tmp3 * u3
+    dxdt(4) = 0.0_c_double
+    dxdt(5) = -tmp3 * u1
+    dxdt(6) = 0.0_c_double
   end subroutine torque_free_rhs
 
   ! out = kinetic energy of the system (J): 11 ops.
-  subroutine torque_free_kinetic_energy(t, x, c, out) &
-      bind(C, name="torque_free_f_kinetic_energy")
+  subroutine torque_free_kinetic_energy(t, x, c, out) bind(C, name="torque_free_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
     real(c_double) :: u4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
-    out(1) = 1.525_c_double*u1*u1 + 2*u2*u2 + 1.525_c_double*u3*u3 + &
-          0.04_c_double*u4*u4
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
+    out(0) = ((2.0_c_double * (u2 * u2) + 1.525_c_double * (u1 * u1)) + 1.525_c_double * (u3 * &
+        u3)) + 0.04_c_double * (u4 * u4)
   end subroutine torque_free_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 42 ops.
-  subroutine torque_free_angular_momentum(t, x, c, out) &
-      bind(C, name="torque_free_f_angular_momentum")
+  subroutine torque_free_angular_momentum(t, x, c, out) bind(C, &
+          name="torque_free_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(7)
-    real(c_double), intent(in) :: c(1)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:6)
+    real(c_double), intent(in) :: c(0:0)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -372,33 +376,33 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(4)
-    u2 = x(5)
-    u3 = x(6)
-    u4 = x(7)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(3)
+    u2 = x(4)
+    u3 = x(5)
+    u4 = x(6)
     tmp0 = torque_free_sin(q1)
-    tmp1 = 4*u2 + 0.08_c_double*u4
+    tmp1 = 4.0_c_double * u2 + 0.08_c_double * u4
     tmp2 = torque_free_cos(q2)
-    tmp3 = tmp1*tmp2
+    tmp3 = tmp1 * tmp2
     tmp4 = torque_free_sin(q3)
     tmp5 = torque_free_cos(q1)
-    tmp6 = tmp4*tmp5
+    tmp6 = tmp4 * tmp5
     tmp7 = torque_free_sin(q2)
     tmp8 = torque_free_cos(q3)
-    tmp9 = tmp0*tmp8
-    tmp10 = 3.05_c_double*u3
-    tmp11 = tmp0*tmp4
-    tmp12 = 3.05_c_double*u1
-    out(1) = -tmp0*tmp3 + tmp10*(tmp6 + tmp7*tmp9) + tmp12*(-tmp11*tmp7 + &
-          tmp5*tmp8)
-    out(2) = tmp10*(tmp11 - tmp5*tmp7*tmp8) + tmp12*(tmp6*tmp7 + tmp9) + &
-          tmp3*tmp5
-    out(3) = tmp1*tmp7 + tmp10*tmp2*tmp8 - tmp12*tmp2*tmp4
+    tmp9 = tmp0 * tmp8
+    tmp10 = 3.05_c_double * u3
+    tmp11 = tmp0 * tmp4
+    tmp12 = 3.05_c_double * u1
+    out(0) = (tmp10 * (tmp6 + tmp7 * tmp9) + tmp12 * (tmp5 * tmp8 - tmp11 * tmp7)) - tmp0 * tmp3
+    out(1) = (tmp10 * (tmp11 - (tmp5 * tmp7) * tmp8) + tmp12 * (tmp9 + tmp6 * tmp7)) + tmp3 * tmp5
+    out(2) = (tmp1 * tmp7 + (tmp10 * tmp2) * tmp8) - (tmp12 * tmp2) * tmp4
   end subroutine torque_free_angular_momentum
 
 end module torque_free_mod

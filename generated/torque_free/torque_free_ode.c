@@ -264,81 +264,101 @@ const char *torque_free_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (38 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (38 ops). */
 void torque_free_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[3];
-    const double u2 = x[4];
-    const double u3 = x[5];
-    const double u4 = x[6];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = torque_free_sin(q2);
-    const double tmp1 = torque_free_cos(q2);
-    const double tmp2 = torque_free_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = torque_free_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = 0.3114754098360656*u2 + 0.02622950819672131*u4;
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[3];
+    u2 = x[4];
+    u3 = x[5];
+    u4 = x[6];
+    tmp0 = torque_free_sin(q2);
+    tmp1 = torque_free_cos(q2);
+    tmp2 = torque_free_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = torque_free_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = 0.3114754098360656 * u2 + 0.02622950819672131 * u4;
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
     J[3] = -tmp10;
-    J[4] = 0;
+    J[4] = 0.0;
     J[5] = tmp11;
-    J[6] = 0;
-    J[7] = 0;
-    J[8] = 0;
+    J[6] = 0.0;
+    J[7] = 0.0;
+    J[8] = 0.0;
     J[9] = tmp6;
     J[10] = tmp4;
-    J[11] = 0;
+    J[11] = 0.0;
     J[12] = tmp2;
-    J[13] = 0;
-    J[14] = 0;
-    J[15] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[16] = -tmp0*tmp9;
-    J[17] = tmp0*tmp10;
-    J[18] = 1;
-    J[19] = -tmp0*tmp11;
-    J[20] = 0;
-    J[21] = 0;
-    J[22] = 0;
-    J[23] = 0;
-    J[24] = 0;
-    J[25] = 0.3114754098360656*u3;
+    J[13] = 0.0;
+    J[14] = 0.0;
+    J[15] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[16] = -(tmp0 * tmp9);
+    J[17] = tmp0 * tmp10;
+    J[18] = 1.0;
+    J[19] = -(tmp0 * tmp11);
+    J[20] = 0.0;
+    J[21] = 0.0;
+    J[22] = 0.0;
+    J[23] = 0.0;
+    J[24] = 0.0;
+    J[25] = 0.3114754098360656 * u3;
     J[26] = tmp12;
-    J[27] = 0.02622950819672131*u3;
-    J[28] = 0;
-    J[29] = 0;
-    J[30] = 0;
-    J[31] = 0;
-    J[32] = 0;
-    J[33] = 0;
-    J[34] = 0;
-    J[35] = 0;
-    J[36] = 0;
-    J[37] = 0;
+    J[27] = 0.02622950819672131 * u3;
+    J[28] = 0.0;
+    J[29] = 0.0;
+    J[30] = 0.0;
+    J[31] = 0.0;
+    J[32] = 0.0;
+    J[33] = 0.0;
+    J[34] = 0.0;
+    J[35] = 0.0;
+    J[36] = 0.0;
+    J[37] = 0.0;
     J[38] = -tmp12;
-    J[39] = -0.3114754098360656*u1;
-    J[40] = 0;
-    J[41] = -0.02622950819672131*u1;
-    J[42] = 0;
-    J[43] = 0;
-    J[44] = 0;
-    J[45] = 0;
-    J[46] = 0;
-    J[47] = 0;
-    J[48] = 0;
+    J[39] = -(0.3114754098360656 * u1);
+    J[40] = 0.0;
+    J[41] = -(0.02622950819672131 * u1);
+    J[42] = 0.0;
+    J[43] = 0.0;
+    J[44] = 0.0;
+    J[45] = 0.0;
+    J[46] = 0.0;
+    J[47] = 0.0;
+    J[48] = 0.0;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(torque_free_stats *stats, double t0)
@@ -781,7 +801,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[5] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * TORQUE_FREE_NX + 1]) + fabs(ai[i * TORQUE_FREE_NX + 1]) > fabs(ar[p * TORQUE_FREE_NX + 1]) + fabs(ai[p * TORQUE_FREE_NX + 1])) {
+        if (fabs(ar[i * TORQUE_FREE_NX + 1]) + fabs(ai[i * TORQUE_FREE_NX + 1]) > fabs(ar[p *
+                TORQUE_FREE_NX + 1]) + fabs(ai[p * TORQUE_FREE_NX + 1])) {
             p = i;
         }
     }
@@ -883,7 +904,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[19] = ur * ai[16] + ui * ar[16];
     p = 3;
     for (i = 4; i < 6; ++i) {
-        if (fabs(ar[i * TORQUE_FREE_NX + 3]) + fabs(ai[i * TORQUE_FREE_NX + 3]) > fabs(ar[p * TORQUE_FREE_NX + 3]) + fabs(ai[p * TORQUE_FREE_NX + 3])) {
+        if (fabs(ar[i * TORQUE_FREE_NX + 3]) + fabs(ai[i * TORQUE_FREE_NX + 3]) > fabs(ar[p *
+                TORQUE_FREE_NX + 3]) + fabs(ai[p * TORQUE_FREE_NX + 3])) {
             p = i;
         }
     }
@@ -947,7 +969,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[27] = ur * ai[24] + ui * ar[24];
     p = 4;
     for (i = 5; i < 6; ++i) {
-        if (fabs(ar[i * TORQUE_FREE_NX + 4]) + fabs(ai[i * TORQUE_FREE_NX + 4]) > fabs(ar[p * TORQUE_FREE_NX + 4]) + fabs(ai[p * TORQUE_FREE_NX + 4])) {
+        if (fabs(ar[i * TORQUE_FREE_NX + 4]) + fabs(ai[i * TORQUE_FREE_NX + 4]) > fabs(ar[p *
+                TORQUE_FREE_NX + 4]) + fabs(ai[p * TORQUE_FREE_NX + 4])) {
             p = i;
         }
     }
@@ -2695,36 +2718,35 @@ struct TORQUE_FREE_ALIGNED lanes {
     int busy[TORQUE_FREE_LANES];
 };
 
-/* torque_free_rhs_lanes on TORQUE_FREE_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *TORQUE_FREE_RESTRICT t,
                       double (*TORQUE_FREE_RESTRICT x)[TORQUE_FREE_LANES],
                       const double *TORQUE_FREE_RESTRICT c,
                       double (*TORQUE_FREE_RESTRICT dxdt)[TORQUE_FREE_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
     TORQUE_FREE_SIMD
     for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[3][l];
-        const double u2 = x[4][l];
-        const double u3 = x[5][l];
-        const double u4 = x[6][l];
-
-        const double tmp0 = torque_free_sin_lanes(q3);
-        const double tmp1 = torque_free_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/torque_free_cos_lanes(q2);
-        const double tmp3 = 0.3114754098360656*u2 + 0.02622950819672131*u4;
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        u4 = x[6][l];
+        tmp0 = torque_free_sin_lanes(q3);
+        tmp1 = torque_free_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / torque_free_cos_lanes(q2);
+        tmp3 = 0.3114754098360656 * u2 + 0.02622950819672131 * u4;
         dxdt[0][l] = tmp2;
-        dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*torque_free_sin_lanes(q2) + u2;
-        dxdt[3][l] = tmp3*u3;
-        dxdt[4][l] = 0;
-        dxdt[5][l] = -tmp3*u1;
-        dxdt[6][l] = 0;
+        dxdt[1][l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2][l] = u2 - tmp2 * torque_free_sin_lanes(q2);
+        dxdt[3][l] = tmp3 * u3;
+        dxdt[4][l] = 0.0;
+        dxdt[5][l] = -(tmp3 * u1);
+        dxdt[6][l] = 0.0;
     }
 }
 
@@ -3415,7 +3437,7 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double rho[TORQUE_FREE_LANES];
     double h2[TORQUE_FREE_LANES];
     int i, l, q;
-    (void)c;  /* unused when every value is folded */
+    (void)c;  /* unused in some scenes */
 
     /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
     order = 2;

@@ -14,6 +14,7 @@
  */
 #include "wheel_spinup.h"
 
+#include <float.h>
 #include <math.h>
 
 #ifdef _OPENMP
@@ -33,6 +34,14 @@
 #else
 #define WHEEL_SPINUP_ALIGNED
 #endif
+
+
+/* fmax, inline; NaN: the other argument
+   (gyrogen.codegen.integrators.intrinsics). */
+static inline double dmax(double a, double b)
+{
+    return a > b || b != b ? a : b;
+}
 
 
 /* x = n pi/2 + r + tail, |r| <= pi/4, quad = n mod 4: fdlibm's medium
@@ -183,60 +192,6 @@ static inline double wheel_spinup_cos_lanes(double x)
 }
 
 
-/* 6 ops, plus the checks. */
-int wheel_spinup_setup(const double *p, double *c)
-{
-    int i;
-    for (i = 0; i < WHEEL_SPINUP_NP; ++i) {
-        if (!isfinite(p[i])) {
-            return WHEEL_SPINUP_ERR_NONFINITE;
-        }
-    }
-    const double m_a = 150.0;
-    const double m_b = 3.0;
-    const double I11 = 20.0;
-    const double I22 = 25.0;
-    const double I33 = 18.0;
-    const double I13 = 0.5;
-    const double I = 0.01;
-    const double J = 0.015;
-    const double T = p[0];
-
-    if (!(m_a > 0.0) || !(m_b > 0.0)) {
-        return WHEEL_SPINUP_ERR_MASS;
-    }
-    if (!(I > 0.0) || !(J > 0.0)) {
-        return WHEEL_SPINUP_ERR_ROTOR_INERTIA;
-    }
-    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11*I33 - I13*I13 > 0.0)) {
-        return WHEEL_SPINUP_ERR_CARRIER_NOT_PD;
-    }
-    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
-       The largest may not exceed the sum of the other two. */
-    const double half_gap = sqrt(0.25*(I11 - I33)*(I11 - I33) + I13*I13);
-    const double largest = fmax(I22, 0.5*(I11 + I33) + half_gap);
-    if (2.0*largest - (I11 + I22 + I33) > 1e-12*(I11 + I22 + I33)) {
-        return WHEEL_SPINUP_ERR_CARRIER_TRIANGLE;
-    }
-    if (J - 2.0*I > 1e-12*(2.0*I + J)) {
-        return WHEEL_SPINUP_ERR_ROTOR_TRIANGLE;
-    }
-
-    c[0] = -17.0/430.0*T;
-    c[1] = (200.0/3.0)*T;
-    c[2] = -T;
-    c[3] = 1.10709823420372;
-    if (!(c[WHEEL_SPINUP_COND] <= 10000000000000.0)) {
-        return WHEEL_SPINUP_ERR_MASS_SINGULAR;
-    }
-    for (i = 0; i < WHEEL_SPINUP_NC; ++i) {
-        if (!isfinite(c[i])) {
-            return WHEEL_SPINUP_ERR_OVERFLOW;  /* valid parameters whose products overflow */
-        }
-    }
-    return WHEEL_SPINUP_OK;
-}
-
 const char *wheel_spinup_strerror(int code)
 {
     switch (code) {
@@ -263,115 +218,223 @@ const char *wheel_spinup_strerror(int code)
     }
 }
 
-/* 39 ops per call. */
+/* Checks p and computes the constants c that wheel_spinup_rhs needs (6 ops,
+   plus the checks). Returns WHEEL_SPINUP_OK or the first failing check's code;
+   c is then not to be used. */
+int wheel_spinup_setup(const double *p, double *c)
+{
+    double m_a;
+    double m_b;
+    double I11;
+    double I22;
+    double I33;
+    double I13;
+    double I;
+    double J;
+    double T;
+    double half_gap;
+    double largest;
+    int i_;
+
+    for (i_ = 0; i_ < 4; ++i_) {
+        c[i_] = 0.0;
+    }
+    for (i_ = 0; i_ < 1; ++i_) {
+        if (!(fabs(p[i_]) <= DBL_MAX)) {
+            return WHEEL_SPINUP_ERR_NONFINITE;
+        }
+    }
+    m_a = 150.0;
+    m_b = 3.0;
+    I11 = 20.0;
+    I22 = 25.0;
+    I33 = 18.0;
+    I13 = 0.5;
+    I = 1e-2;
+    J = 0.015;
+    T = p[0];
+    if (!(m_a > 0.0) || !(m_b > 0.0)) {
+        return WHEEL_SPINUP_ERR_MASS;
+    }
+    if (!(I > 0.0) || !(J > 0.0)) {
+        return WHEEL_SPINUP_ERR_ROTOR_INERTIA;
+    }
+    if (!(I11 > 0.0) || !(I22 > 0.0) || !(I33 > 0.0) || !(I11 * I33 - I13 * I13 > 0.0)) {
+        return WHEEL_SPINUP_ERR_CARRIER_NOT_PD;
+    }
+
+    /* Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]]. */
+    /* The largest may not exceed the sum of the other two. */
+    half_gap = sqrt(0.25 * ((I11 - I33) * (I11 - I33)) + I13 * I13);
+    largest = dmax(I22, 0.5 * (I11 + I33) + half_gap);
+    if (2.0 * largest - (I11 + I22 + I33) > 1e-12 * (I11 + I22 + I33)) {
+        return WHEEL_SPINUP_ERR_CARRIER_TRIANGLE;
+    }
+    if (J - 2.0 * I > 1e-12 * (2.0 * I + J)) {
+        return WHEEL_SPINUP_ERR_ROTOR_TRIANGLE;
+    }
+    c[0] = -(17.0 * T / 430.0);
+    c[1] = 200.0 * T / 3.0;
+    c[2] = -T;
+    c[3] = 1.10709823420372;
+    if (!(c[3] <= 10000000000000.0)) {
+        return WHEEL_SPINUP_ERR_MASS_SINGULAR;
+    }
+    for (i_ = 0; i_ < 4; ++i_) {
+        if (!(fabs(c[i_]) <= DBL_MAX)) {
+            return WHEEL_SPINUP_ERR_OVERFLOW;
+        }
+    }
+    return WHEEL_SPINUP_OK;
+}
+
+/* dxdt = f(t, x) for the constants c from wheel_spinup_setup (39 ops). */
 void wheel_spinup_rhs(double t, const double *x, const double *c, double *dxdt)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
 
-    const double tmp0 = wheel_spinup_sin(q3);
-    const double tmp1 = wheel_spinup_cos(q3);
-    const double tmp2 = (-tmp0*u1 + tmp1*u3)/wheel_spinup_cos(q2);
-    const double tmp3 = 0.014646230145692387*u2 - 1.6873537034207817e-05*u4;
+    (void)t;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    tmp0 = wheel_spinup_sin(q3);
+    tmp1 = wheel_spinup_cos(q3);
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / wheel_spinup_cos(q2);
+    tmp3 = 0.014646230145692387 * u2 - 1.6873537034207817e-05 * u4;
     dxdt[0] = tmp2;
-    dxdt[1] = tmp0*u3 + tmp1*u1;
-    dxdt[2] = -tmp2*wheel_spinup_sin(q2) + u2;
-    dxdt[3] = -u2 + u4;
-    dxdt[4] = -tmp3*u1 + u3*(0.3499793829482495*u2 + 0.0007488716786310489*u4);
-    dxdt[5] = c[0] + 0.01627906976744186*u1*u1 - 0.06976744186046512*u1*u3 - 0.01627906976744186*u3*u3;
-    dxdt[6] = tmp3*u3 + u1*(-0.2872098251809964*u2 - 0.0008211868373490824*u4);
+    dxdt[1] = tmp0 * u3 + tmp1 * u1;
+    dxdt[2] = u2 - tmp2 * wheel_spinup_sin(q2);
+    dxdt[3] = u4 - u2;
+    dxdt[4] = u3 * (0.3499793829482495 * u2 + 0.0007488716786310489 * u4) - tmp3 * u1;
+    dxdt[5] = c[0] + 0.01627906976744186 * (u1 * u1) - 0.01627906976744186 * (u3 * u3) -
+            0.06976744186046512 * u1 * u3;
+    dxdt[6] = tmp3 * u3 + u1 * (-(0.0008211868373490824 * u4) - 0.2872098251809964 * u2);
     dxdt[7] = c[1];
 }
 
-/* wheel_spinup_rhs on n lanes: the same statements, lane by lane. */
 void wheel_spinup_rhs_lanes(int n, const double *WHEEL_SPINUP_RESTRICT t,
-        const double *WHEEL_SPINUP_RESTRICT x, const double *WHEEL_SPINUP_RESTRICT c,
-        double *WHEEL_SPINUP_RESTRICT dxdt)
+                            const double *WHEEL_SPINUP_RESTRICT x,
+                            const double *WHEEL_SPINUP_RESTRICT c,
+                            double *WHEEL_SPINUP_RESTRICT dxdt)
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     WHEEL_SPINUP_SIMD
     for (l = 0; l < n; ++l) {
-        const double q2 = x[1 * n + l];
-        const double q3 = x[2 * n + l];
-        const double u1 = x[4 * n + l];
-        const double u2 = x[5 * n + l];
-        const double u3 = x[6 * n + l];
-        const double u4 = x[7 * n + l];
-
-        const double tmp0 = wheel_spinup_sin_lanes(q3);
-        const double tmp1 = wheel_spinup_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/wheel_spinup_cos_lanes(q2);
-        const double tmp3 = 0.014646230145692387*u2 - 1.6873537034207817e-05*u4;
-        dxdt[0 * n + l] = tmp2;
-        dxdt[1 * n + l] = tmp0*u3 + tmp1*u1;
-        dxdt[2 * n + l] = -tmp2*wheel_spinup_sin_lanes(q2) + u2;
-        dxdt[3 * n + l] = -u2 + u4;
-        dxdt[4 * n + l] = -tmp3*u1 + u3*(0.3499793829482495*u2 + 0.0007488716786310489*u4);
-        dxdt[5 * n + l] = c[0] + 0.01627906976744186*u1*u1 - 0.06976744186046512*u1*u3 - 0.01627906976744186*u3*u3;
-        dxdt[6 * n + l] = tmp3*u3 + u1*(-0.2872098251809964*u2 - 0.0008211868373490824*u4);
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3;
+        q2 = x[1 * n + l];
+        q3 = x[2 * n + l];
+        u1 = x[4 * n + l];
+        u2 = x[5 * n + l];
+        u3 = x[6 * n + l];
+        u4 = x[7 * n + l];
+        tmp0 = wheel_spinup_sin_lanes(q3);
+        tmp1 = wheel_spinup_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / wheel_spinup_cos_lanes(q2);
+        tmp3 = 0.014646230145692387 * u2 - 1.6873537034207817e-05 * u4;
+        dxdt[l] = tmp2;
+        dxdt[1 * n + l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2 * n + l] = u2 - tmp2 * wheel_spinup_sin_lanes(q2);
+        dxdt[3 * n + l] = u4 - u2;
+        dxdt[4 * n + l] = u3 * (0.3499793829482495 * u2 + 0.0007488716786310489 * u4) - tmp3 * u1;
+        dxdt[5 * n + l] = c[0] + 0.01627906976744186 * (u1 * u1) - 0.01627906976744186 * (u3 *
+                u3) - 0.06976744186046512 * u1 * u3;
+        dxdt[6 * n + l] = tmp3 * u3 + u1 * (-(0.0008211868373490824 * u4) - 0.2872098251809964 *
+                u2);
         dxdt[7 * n + l] = c[1];
     }
 }
 
-/* kinetic energy of the system (J): 13 ops. */
+/* out = kinetic energy of the system (J): 13 ops. */
 void wheel_spinup_kinetic_energy(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double u1;
+    double u2;
+    double u3;
+    double u4;
 
-    out[0] = u1*(10.019705882352941*u1 + 0.4117647058823529*u3) + 12.647058823529411*u2*u2 + 9.13735294117647*u3*u3 + 0.0075*u4*u4;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    out[0] = 0.0075 * (u4 * u4) + 9.13735294117647 * (u3 * u3) + 12.647058823529411 * (u2 * u2) +
+            u1 * (10.019705882352941 * u1 + 0.4117647058823529 * u3);
 }
 
-/* angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops. */
+/* out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops. */
 void wheel_spinup_angular_momentum(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q1 = x[0];
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double q1;
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = wheel_spinup_sin(q1);
-    const double tmp1 = 25.294117647058822*u2 + 0.015*u4;
-    const double tmp2 = wheel_spinup_cos(q2);
-    const double tmp3 = tmp1*tmp2;
-    const double tmp4 = 0.4117647058823529*u1 + 18.27470588235294*u3;
-    const double tmp5 = wheel_spinup_sin(q3);
-    const double tmp6 = wheel_spinup_cos(q1);
-    const double tmp7 = tmp5*tmp6;
-    const double tmp8 = wheel_spinup_sin(q2);
-    const double tmp9 = wheel_spinup_cos(q3);
-    const double tmp10 = tmp0*tmp9;
-    const double tmp11 = 20.039411764705882*u1 + 0.4117647058823529*u3;
-    const double tmp12 = tmp0*tmp5;
-    out[0] = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 + tmp7);
-    out[1] = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8*tmp9);
-    out[2] = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q1 = x[0];
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    tmp0 = wheel_spinup_sin(q1);
+    tmp1 = 0.015 * u4 + 25.294117647058822 * u2;
+    tmp2 = wheel_spinup_cos(q2);
+    tmp3 = tmp1 * tmp2;
+    tmp4 = 18.27470588235294 * u3 + 0.4117647058823529 * u1;
+    tmp5 = wheel_spinup_sin(q3);
+    tmp6 = wheel_spinup_cos(q1);
+    tmp7 = tmp5 * tmp6;
+    tmp8 = wheel_spinup_sin(q2);
+    tmp9 = wheel_spinup_cos(q3);
+    tmp10 = tmp0 * tmp9;
+    tmp11 = 20.039411764705882 * u1 + 0.4117647058823529 * u3;
+    tmp12 = tmp0 * tmp5;
+    out[0] = tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8) - tmp0 * tmp3;
+    out[1] = tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6 + tmp4 * (tmp12 - tmp6 * tmp8 * tmp9);
+    out[2] = tmp1 * tmp8 + tmp2 * tmp4 * tmp9 - tmp11 * tmp2 * tmp5;
 }
 
-/* power of the motor torque, T (u4 - u2) (W): 3 ops. */
+/* out = power of the motor torque, T (u4 - u2) (W): 3 ops. */
 void wheel_spinup_power(double t, const double *x, const double *c, double *out)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double u2 = x[5];
-    const double u4 = x[7];
+    double u2;
+    double u4;
 
-    out[0] = c[2]*u2 - c[2]*u4;
+    (void)t;  /* unused in some scenes */
+    u2 = x[5];
+    u4 = x[7];
+    out[0] = c[2] * u2 - c[2] * u4;
 }

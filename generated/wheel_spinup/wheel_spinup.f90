@@ -193,14 +193,13 @@ contains
     return
   end function wheel_spinup_cos
 
-  ! Checks p and computes the constants c that wheel_spinup_rhs needs
-  ! (6 ops, plus the checks). Returns WHEEL_SPINUP_OK or
-  ! the first failing check's code; c is then not to be used.
-  function wheel_spinup_setup(p, c) result(status) &
-      bind(C, name="wheel_spinup_f_setup")
-    real(c_double), intent(in) :: p(1)
-    real(c_double), intent(out) :: c(4)
-    integer(c_int) :: status
+  ! Checks p and computes the constants c that wheel_spinup_rhs needs (6 ops,
+  ! plus the checks). Returns WHEEL_SPINUP_OK or the first failing check's code;
+  ! c is then not to be used.
+  function wheel_spinup_setup(p, c) result(res) bind(C, name="wheel_spinup_f_setup")
+    real(c_double), intent(in) :: p(0:0)
+    real(c_double), intent(out) :: c(0:3)
+    integer(c_int) :: res
     real(c_double) :: m_a
     real(c_double) :: m_b
     real(c_double) :: I11
@@ -210,62 +209,70 @@ contains
     real(c_double) :: I
     real(c_double) :: J
     real(c_double) :: T
-    real(c_double) :: half_gap, largest
+    real(c_double) :: half_gap
+    real(c_double) :: largest
+    integer(c_int) :: i_
 
-    c = 0.0_c_double
-    if (.not. all(ieee_is_finite(p))) then
-      status = WHEEL_SPINUP_ERR_NONFINITE
-      return
-    end if
+    do i_ = 0, 4 - 1
+      c(i_) = 0.0_c_double
+    end do
+    do i_ = 0, 1 - 1
+      if (.not. ieee_is_finite(p(i_))) then
+        res = WHEEL_SPINUP_ERR_NONFINITE
+        return
+      end if
+    end do
     m_a = 150.0_c_double
     m_b = 3.0_c_double
     I11 = 20.0_c_double
     I22 = 25.0_c_double
     I33 = 18.0_c_double
     I13 = 0.5_c_double
-    I = 0.01_c_double
+    I = 1e-2_c_double
     J = 0.015_c_double
-    T = p(1)
+    T = p(0)
+    if (.not. (m_a > 0.0_c_double) .or. .not. (m_b > 0.0_c_double)) then
+      res = WHEEL_SPINUP_ERR_MASS
+      return
+    end if
+    if (.not. (I > 0.0_c_double) .or. .not. (J > 0.0_c_double)) then
+      res = WHEEL_SPINUP_ERR_ROTOR_INERTIA
+      return
+    end if
+    if (.not. (I11 > 0.0_c_double) .or. .not. (I22 > 0.0_c_double) .or. .not. (I33 > &
+        0.0_c_double) .or. .not. (I11 * I33 - I13 * I13 > 0.0_c_double)) then
+      res = WHEEL_SPINUP_ERR_CARRIER_NOT_PD
+      return
+    end if
 
-    if (.not. (m_a > 0.0_c_double .and. m_b > 0.0_c_double)) then
-      status = WHEEL_SPINUP_ERR_MASS
-      return
-    end if
-    if (.not. (I > 0.0_c_double .and. J > 0.0_c_double)) then
-      status = WHEEL_SPINUP_ERR_ROTOR_INERTIA
-      return
-    end if
-    if (.not. (I11 > 0.0_c_double .and. I22 > 0.0_c_double .and. I33 > 0.0_c_double &
-               .and. I11*I33 - I13*I13 > 0.0_c_double)) then
-      status = WHEEL_SPINUP_ERR_CARRIER_NOT_PD
-      return
-    end if
     ! Principal moments: I22 and the eigenvalues of [[I11, I13], [I13, I33]].
     ! The largest may not exceed the sum of the other two.
-    half_gap = sqrt(0.25_c_double*(I11 - I33)**2 + I13*I13)
-    largest = max(I22, 0.5_c_double*(I11 + I33) + half_gap)
-    if (2.0_c_double*largest - (I11 + I22 + I33) > 1e-12_c_double*(I11 + I22 + I33)) then
-      status = WHEEL_SPINUP_ERR_CARRIER_TRIANGLE
+    half_gap = sqrt(0.25_c_double * ((I11 - I33) * (I11 - I33)) + I13 * I13)
+    largest = max(I22, 0.5_c_double * (I11 + I33) + half_gap)
+    if (2.0_c_double * largest - ((I11 + I22) + I33) > 1e-12_c_double * ((I11 + I22) + I33)) then
+      res = WHEEL_SPINUP_ERR_CARRIER_TRIANGLE
       return
     end if
-    if (J - 2.0_c_double*I > 1e-12_c_double*(2.0_c_double*I + J)) then
-      status = WHEEL_SPINUP_ERR_ROTOR_TRIANGLE
+    if (J - 2.0_c_double * I > 1e-12_c_double * (2.0_c_double * I + J)) then
+      res = WHEEL_SPINUP_ERR_ROTOR_TRIANGLE
       return
     end if
-
-    c(1) = -17.0d0/430.0d0*T
-    c(2) = (200.0d0/3.0d0)*T
-    c(3) = -T
-    c(4) = 1.10709823420372_c_double
-    if (.not. (c(WHEEL_SPINUP_COND) <= 10000000000000.0_c_double)) then
-      status = WHEEL_SPINUP_ERR_MASS_SINGULAR
+    c(0) = -(17.0_c_double * T) / 430.0_c_double
+    c(1) = (200.0_c_double * T) / 3.0_c_double
+    c(2) = -T
+    c(3) = 1.10709823420372_c_double
+    if (.not. (c(3) <= 10000000000000.0_c_double)) then
+      res = WHEEL_SPINUP_ERR_MASS_SINGULAR
       return
     end if
-    if (.not. all(ieee_is_finite(c))) then
-      status = WHEEL_SPINUP_ERR_OVERFLOW
-      return
-    end if
-    status = WHEEL_SPINUP_OK
+    do i_ = 0, 4 - 1
+      if (.not. ieee_is_finite(c(i_))) then
+        res = WHEEL_SPINUP_ERR_OVERFLOW
+        return
+      end if
+    end do
+    res = WHEEL_SPINUP_OK
+    return
   end function wheel_spinup_setup
 
   ! The message for a return code, blank-padded to 85 characters: trim() it.
@@ -298,14 +305,14 @@ contains
   end function wheel_spinup_strerror
 
 
-  ! dxdt = f(t, x) for the constants c from wheel_spinup_setup (39 ops).
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
+  ! dxdt = f(t, x) for the constants c from wheel_spinup_setup (39 ops).
   subroutine wheel_spinup_rhs(t, x, c, dxdt) bind(C, name="wheel_spinup_f_rhs")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(4)
-    real(c_double), intent(out) :: dxdt(8)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:3)
+    real(c_double), intent(out) :: dxdt(0:7)
     real(c_double) :: q2
     real(c_double) :: q3
     real(c_double) :: u1
@@ -317,63 +324,62 @@ contains
     real(c_double) :: tmp2
     real(c_double) :: tmp3
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
     tmp0 = wheel_spinup_sin(q3)
     tmp1 = wheel_spinup_cos(q3)
-    tmp2 = (-tmp0*u1 + tmp1*u3)/wheel_spinup_cos(q2)
-    tmp3 = 0.014646230145692387_c_double*u2 - &
-          1.6873537034207817e-05_c_double*u4
-    dxdt(1) = tmp2
-    dxdt(2) = tmp0*u3 + tmp1*u1
-    dxdt(3) = -tmp2*wheel_spinup_sin(q2) + u2
-    dxdt(4) = -u2 + u4
-    dxdt(5) = -tmp3*u1 + u3*(0.3499793829482495_c_double*u2 + &
-          0.0007488716786310489_c_double*u4)
-    dxdt(6) = c(1) + 0.01627906976744186_c_double*u1*u1 - &
-          0.06976744186046512_c_double*u1*u3 - 0.01627906976744186_c_double &
-          *u3*u3
-    dxdt(7) = tmp3*u3 + u1*(-0.2872098251809964_c_double*u2 - &
-          0.0008211868373490824_c_double*u4)
-    dxdt(8) = c(2)
+    tmp2 = (tmp1 * u3 - tmp0 * u1) / wheel_spinup_cos(q2)
+    tmp3 = 0.014646230145692387_c_double * u2 - 1.6873537034207817e-05_c_double * u4
+    dxdt(0) = tmp2
+    dxdt(1) = tmp0 * u3 + tmp1 * u1
+    dxdt(2) = u2 - tmp2 * wheel_spinup_sin(q2)
+    dxdt(3) = u4 - u2
+    dxdt(4) = u3 * (0.3499793829482495_c_double * u2 + 0.0007488716786310489_c_double * u4) - &
+        tmp3 * u1
+    dxdt(5) = ((c(0) + 0.01627906976744186_c_double * (u1 * u1)) - 0.01627906976744186_c_double * &
+        (u3 * u3)) - (0.06976744186046512_c_double * u1) * u3
+    dxdt(6) = tmp3 * u3 + u1 * ((-0.0008211868373490824_c_double * u4) - &
+        0.2872098251809964_c_double * u2)
+    dxdt(7) = c(1)
   end subroutine wheel_spinup_rhs
 
   ! out = kinetic energy of the system (J): 13 ops.
-  subroutine wheel_spinup_kinetic_energy(t, x, c, out) &
-      bind(C, name="wheel_spinup_f_kinetic_energy")
+  subroutine wheel_spinup_kinetic_energy(t, x, c, out) bind(C, name="wheel_spinup_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(4)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:3)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u1
     real(c_double) :: u2
     real(c_double) :: u3
     real(c_double) :: u4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
-    out(1) = u1*(10.019705882352941_c_double*u1 + &
-          0.4117647058823529_c_double*u3) + 12.647058823529411_c_double*u2* &
-          u2 + 9.13735294117647_c_double*u3*u3 + 0.0075_c_double*u4*u4
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
+    out(0) = ((0.0075_c_double * (u4 * u4) + 9.13735294117647_c_double * (u3 * u3)) + &
+        12.647058823529411_c_double * (u2 * u2)) + u1 * (10.019705882352941_c_double * u1 + &
+        0.4117647058823529_c_double * u3)
   end subroutine wheel_spinup_kinetic_energy
 
   ! out = angular momentum about AB*, N components h[0..2] (kg m^2/s): 46 ops.
-  subroutine wheel_spinup_angular_momentum(t, x, c, out) &
-      bind(C, name="wheel_spinup_f_angular_momentum")
+  subroutine wheel_spinup_angular_momentum(t, x, c, out) bind(C, &
+          name="wheel_spinup_f_angular_momentum")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(4)
-    real(c_double), intent(out) :: out(3)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:3)
+    real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
     real(c_double) :: q3
@@ -395,50 +401,49 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    q1 = x(1)
-    q2 = x(2)
-    q3 = x(3)
-    u1 = x(5)
-    u2 = x(6)
-    u3 = x(7)
-    u4 = x(8)
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    q1 = x(0)
+    q2 = x(1)
+    q3 = x(2)
+    u1 = x(4)
+    u2 = x(5)
+    u3 = x(6)
+    u4 = x(7)
     tmp0 = wheel_spinup_sin(q1)
-    tmp1 = 25.294117647058822_c_double*u2 + 0.015_c_double*u4
+    tmp1 = 0.015_c_double * u4 + 25.294117647058822_c_double * u2
     tmp2 = wheel_spinup_cos(q2)
-    tmp3 = tmp1*tmp2
-    tmp4 = 0.4117647058823529_c_double*u1 + 18.27470588235294_c_double*u3
+    tmp3 = tmp1 * tmp2
+    tmp4 = 18.27470588235294_c_double * u3 + 0.4117647058823529_c_double * u1
     tmp5 = wheel_spinup_sin(q3)
     tmp6 = wheel_spinup_cos(q1)
-    tmp7 = tmp5*tmp6
+    tmp7 = tmp5 * tmp6
     tmp8 = wheel_spinup_sin(q2)
     tmp9 = wheel_spinup_cos(q3)
-    tmp10 = tmp0*tmp9
-    tmp11 = 20.039411764705882_c_double*u1 + 0.4117647058823529_c_double*u3
-    tmp12 = tmp0*tmp5
-    out(1) = -tmp0*tmp3 + tmp11*(-tmp12*tmp8 + tmp6*tmp9) + tmp4*(tmp10*tmp8 &
-          + tmp7)
-    out(2) = tmp11*(tmp10 + tmp7*tmp8) + tmp3*tmp6 + tmp4*(tmp12 - tmp6*tmp8 &
-          *tmp9)
-    out(3) = tmp1*tmp8 - tmp11*tmp2*tmp5 + tmp2*tmp4*tmp9
+    tmp10 = tmp0 * tmp9
+    tmp11 = 20.039411764705882_c_double * u1 + 0.4117647058823529_c_double * u3
+    tmp12 = tmp0 * tmp5
+    out(0) = (tmp11 * (tmp6 * tmp9 - tmp12 * tmp8) + tmp4 * (tmp7 + tmp10 * tmp8)) - tmp0 * tmp3
+    out(1) = (tmp11 * (tmp10 + tmp7 * tmp8) + tmp3 * tmp6) + tmp4 * (tmp12 - (tmp6 * tmp8) * tmp9)
+    out(2) = (tmp1 * tmp8 + (tmp2 * tmp4) * tmp9) - (tmp11 * tmp2) * tmp5
   end subroutine wheel_spinup_angular_momentum
 
   ! out = power of the motor torque, T (u4 - u2) (W): 3 ops.
-  subroutine wheel_spinup_power(t, x, c, out) &
-      bind(C, name="wheel_spinup_f_power")
+  subroutine wheel_spinup_power(t, x, c, out) bind(C, name="wheel_spinup_f_power")
     real(c_double), value, intent(in) :: t
-    real(c_double), intent(in) :: x(8)
-    real(c_double), intent(in) :: c(4)
-    real(c_double), intent(out) :: out(1)
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:3)
+    real(c_double), intent(out) :: out(0:0)
     real(c_double) :: u2
     real(c_double) :: u4
 
-    associate (unused_t => t, unused_c => c)  ! unused in some scenes
+    associate (unused_t => t)  ! unused in some scenes
     end associate
-    u2 = x(6)
-    u4 = x(8)
-    out(1) = c(3)*u2 - c(3)*u4
+    u2 = x(5)
+    u4 = x(7)
+    out(0) = c(2) * u2 - c(2) * u4
   end subroutine wheel_spinup_power
 
 end module wheel_spinup_mod

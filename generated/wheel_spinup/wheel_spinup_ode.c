@@ -264,96 +264,116 @@ const char *wheel_spinup_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major (60 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (60 ops). */
 void wheel_spinup_jac(double t, const double *x, const double *c, double *J)
 {
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
-    const double q2 = x[1];
-    const double q3 = x[2];
-    const double u1 = x[4];
-    const double u2 = x[5];
-    const double u3 = x[6];
-    const double u4 = x[7];
+    double q2;
+    double q3;
+    double u1;
+    double u2;
+    double u3;
+    double u4;
+    double tmp0;
+    double tmp1;
+    double tmp2;
+    double tmp3;
+    double tmp4;
+    double tmp5;
+    double tmp6;
+    double tmp7;
+    double tmp8;
+    double tmp9;
+    double tmp10;
+    double tmp11;
+    double tmp12;
 
-    const double tmp0 = wheel_spinup_sin(q2);
-    const double tmp1 = wheel_spinup_cos(q2);
-    const double tmp2 = wheel_spinup_sin(q3);
-    const double tmp3 = tmp2*u1;
-    const double tmp4 = wheel_spinup_cos(q3);
-    const double tmp5 = tmp4*u3;
-    const double tmp6 = -tmp3 + tmp5;
-    const double tmp7 = tmp6/(tmp1*tmp1);
-    const double tmp8 = 1.0/tmp1;
-    const double tmp9 = tmp8*(-tmp2*u3 - tmp4*u1);
-    const double tmp10 = tmp2*tmp8;
-    const double tmp11 = tmp4*tmp8;
-    const double tmp12 = 0.014646230145692387*u2 - 1.6873537034207817e-05*u4;
-    J[0] = 0;
-    J[1] = tmp0*tmp7;
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    q2 = x[1];
+    q3 = x[2];
+    u1 = x[4];
+    u2 = x[5];
+    u3 = x[6];
+    u4 = x[7];
+    tmp0 = wheel_spinup_sin(q2);
+    tmp1 = wheel_spinup_cos(q2);
+    tmp2 = wheel_spinup_sin(q3);
+    tmp3 = tmp2 * u1;
+    tmp4 = wheel_spinup_cos(q3);
+    tmp5 = tmp4 * u3;
+    tmp6 = tmp5 - tmp3;
+    tmp7 = tmp6 / (tmp1 * tmp1);
+    tmp8 = 1.0 / tmp1;
+    tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+    tmp10 = tmp2 * tmp8;
+    tmp11 = tmp4 * tmp8;
+    tmp12 = 0.014646230145692387 * u2 - 1.6873537034207817e-05 * u4;
+    J[0] = 0.0;
+    J[1] = tmp0 * tmp7;
     J[2] = tmp9;
-    J[3] = 0;
+    J[3] = 0.0;
     J[4] = -tmp10;
-    J[5] = 0;
+    J[5] = 0.0;
     J[6] = tmp11;
-    J[7] = 0;
-    J[8] = 0;
-    J[9] = 0;
+    J[7] = 0.0;
+    J[8] = 0.0;
+    J[9] = 0.0;
     J[10] = tmp6;
-    J[11] = 0;
+    J[11] = 0.0;
     J[12] = tmp4;
-    J[13] = 0;
+    J[13] = 0.0;
     J[14] = tmp2;
-    J[15] = 0;
-    J[16] = 0;
-    J[17] = -tmp0*tmp0*tmp7 + tmp3 - tmp5;
-    J[18] = -tmp0*tmp9;
-    J[19] = 0;
-    J[20] = tmp0*tmp10;
-    J[21] = 1;
-    J[22] = -tmp0*tmp11;
-    J[23] = 0;
-    J[24] = 0;
-    J[25] = 0;
-    J[26] = 0;
-    J[27] = 0;
-    J[28] = 0;
-    J[29] = -1;
-    J[30] = 0;
-    J[31] = 1;
-    J[32] = 0;
-    J[33] = 0;
-    J[34] = 0;
-    J[35] = 0;
+    J[15] = 0.0;
+    J[16] = 0.0;
+    J[17] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+    J[18] = -(tmp0 * tmp9);
+    J[19] = 0.0;
+    J[20] = tmp0 * tmp10;
+    J[21] = 1.0;
+    J[22] = -(tmp0 * tmp11);
+    J[23] = 0.0;
+    J[24] = 0.0;
+    J[25] = 0.0;
+    J[26] = 0.0;
+    J[27] = 0.0;
+    J[28] = 0.0;
+    J[29] = -1.0;
+    J[30] = 0.0;
+    J[31] = 1.0;
+    J[32] = 0.0;
+    J[33] = 0.0;
+    J[34] = 0.0;
+    J[35] = 0.0;
     J[36] = -tmp12;
-    J[37] = -0.014646230145692387*u1 + 0.3499793829482495*u3;
-    J[38] = 0.3499793829482495*u2 + 0.0007488716786310489*u4;
-    J[39] = 1.6873537034207817e-05*u1 + 0.0007488716786310489*u3;
-    J[40] = 0;
-    J[41] = 0;
-    J[42] = 0;
-    J[43] = 0;
-    J[44] = 0.03255813953488372*u1 - 0.06976744186046512*u3;
-    J[45] = 0;
-    J[46] = -0.06976744186046512*u1 - 0.03255813953488372*u3;
-    J[47] = 0;
-    J[48] = 0;
-    J[49] = 0;
-    J[50] = 0;
-    J[51] = 0;
-    J[52] = -0.2872098251809964*u2 - 0.0008211868373490824*u4;
-    J[53] = -0.2872098251809964*u1 + 0.014646230145692387*u3;
+    J[37] = 0.3499793829482495 * u3 - 0.014646230145692387 * u1;
+    J[38] = 0.3499793829482495 * u2 + 0.0007488716786310489 * u4;
+    J[39] = 1.6873537034207817e-05 * u1 + 0.0007488716786310489 * u3;
+    J[40] = 0.0;
+    J[41] = 0.0;
+    J[42] = 0.0;
+    J[43] = 0.0;
+    J[44] = 0.03255813953488372 * u1 - 0.06976744186046512 * u3;
+    J[45] = 0.0;
+    J[46] = -(0.03255813953488372 * u3) - 0.06976744186046512 * u1;
+    J[47] = 0.0;
+    J[48] = 0.0;
+    J[49] = 0.0;
+    J[50] = 0.0;
+    J[51] = 0.0;
+    J[52] = -(0.0008211868373490824 * u4) - 0.2872098251809964 * u2;
+    J[53] = 0.014646230145692387 * u3 - 0.2872098251809964 * u1;
     J[54] = tmp12;
-    J[55] = -0.0008211868373490824*u1 - 1.6873537034207817e-05*u3;
-    J[56] = 0;
-    J[57] = 0;
-    J[58] = 0;
-    J[59] = 0;
-    J[60] = 0;
-    J[61] = 0;
-    J[62] = 0;
-    J[63] = 0;
+    J[55] = -(0.0008211868373490824 * u1) - 1.6873537034207817e-05 * u3;
+    J[56] = 0.0;
+    J[57] = 0.0;
+    J[58] = 0.0;
+    J[59] = 0.0;
+    J[60] = 0.0;
+    J[61] = 0.0;
+    J[62] = 0.0;
+    J[63] = 0.0;
 }
+
 
 /* Counters at zero, at the start time (also the time reached if nothing is). */
 static void stats_start(wheel_spinup_stats *stats, double t0)
@@ -804,7 +824,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[6] = ur * ai[0] + ui * ar[0];
     p = 1;
     for (i = 2; i < 3; ++i) {
-        if (fabs(ar[i * WHEEL_SPINUP_NX + 1]) + fabs(ai[i * WHEEL_SPINUP_NX + 1]) > fabs(ar[p * WHEEL_SPINUP_NX + 1]) + fabs(ai[p * WHEEL_SPINUP_NX + 1])) {
+        if (fabs(ar[i * WHEEL_SPINUP_NX + 1]) + fabs(ai[i * WHEEL_SPINUP_NX + 1]) > fabs(ar[p *
+                WHEEL_SPINUP_NX + 1]) + fabs(ai[p * WHEEL_SPINUP_NX + 1])) {
             p = i;
         }
     }
@@ -932,7 +953,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[31] = ur * ai[27] + ui * ar[27];
     p = 4;
     for (i = 5; i < 7; ++i) {
-        if (fabs(ar[i * WHEEL_SPINUP_NX + 4]) + fabs(ai[i * WHEEL_SPINUP_NX + 4]) > fabs(ar[p * WHEEL_SPINUP_NX + 4]) + fabs(ai[p * WHEEL_SPINUP_NX + 4])) {
+        if (fabs(ar[i * WHEEL_SPINUP_NX + 4]) + fabs(ai[i * WHEEL_SPINUP_NX + 4]) > fabs(ar[p *
+                WHEEL_SPINUP_NX + 4]) + fabs(ai[p * WHEEL_SPINUP_NX + 4])) {
             p = i;
         }
     }
@@ -996,7 +1018,8 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
     ai[39] = ur * ai[36] + ui * ar[36];
     p = 5;
     for (i = 6; i < 7; ++i) {
-        if (fabs(ar[i * WHEEL_SPINUP_NX + 5]) + fabs(ai[i * WHEEL_SPINUP_NX + 5]) > fabs(ar[p * WHEEL_SPINUP_NX + 5]) + fabs(ai[p * WHEEL_SPINUP_NX + 5])) {
+        if (fabs(ar[i * WHEEL_SPINUP_NX + 5]) + fabs(ai[i * WHEEL_SPINUP_NX + 5]) > fabs(ar[p *
+                WHEEL_SPINUP_NX + 5]) + fabs(ai[p * WHEEL_SPINUP_NX + 5])) {
             p = i;
         }
     }
@@ -2858,36 +2881,35 @@ struct WHEEL_SPINUP_ALIGNED lanes {
     int busy[WHEEL_SPINUP_LANES];
 };
 
-/* wheel_spinup_rhs_lanes on WHEEL_SPINUP_LANES lanes, for the compiler to see that the rows
-   x[i] and dxdt[i] do not overlap (with n unknown, it cannot). */
 static void rhs_lanes(const double *WHEEL_SPINUP_RESTRICT t,
                       double (*WHEEL_SPINUP_RESTRICT x)[WHEEL_SPINUP_LANES],
                       const double *WHEEL_SPINUP_RESTRICT c,
                       double (*WHEEL_SPINUP_RESTRICT dxdt)[WHEEL_SPINUP_LANES])
 {
     int l;
-    (void)t;  /* unused when the scene is autonomous */
-    (void)c;  /* unused when every value is folded */
+
+    (void)t;  /* unused in some scenes */
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-        const double q2 = x[1][l];
-        const double q3 = x[2][l];
-        const double u1 = x[4][l];
-        const double u2 = x[5][l];
-        const double u3 = x[6][l];
-        const double u4 = x[7][l];
-
-        const double tmp0 = wheel_spinup_sin_lanes(q3);
-        const double tmp1 = wheel_spinup_cos_lanes(q3);
-        const double tmp2 = (-tmp0*u1 + tmp1*u3)/wheel_spinup_cos_lanes(q2);
-        const double tmp3 = 0.014646230145692387*u2 - 1.6873537034207817e-05*u4;
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[4][l];
+        u2 = x[5][l];
+        u3 = x[6][l];
+        u4 = x[7][l];
+        tmp0 = wheel_spinup_sin_lanes(q3);
+        tmp1 = wheel_spinup_cos_lanes(q3);
+        tmp2 = (tmp1 * u3 - tmp0 * u1) / wheel_spinup_cos_lanes(q2);
+        tmp3 = 0.014646230145692387 * u2 - 1.6873537034207817e-05 * u4;
         dxdt[0][l] = tmp2;
-        dxdt[1][l] = tmp0*u3 + tmp1*u1;
-        dxdt[2][l] = -tmp2*wheel_spinup_sin_lanes(q2) + u2;
-        dxdt[3][l] = -u2 + u4;
-        dxdt[4][l] = -tmp3*u1 + u3*(0.3499793829482495*u2 + 0.0007488716786310489*u4);
-        dxdt[5][l] = c[0] + 0.01627906976744186*u1*u1 - 0.06976744186046512*u1*u3 - 0.01627906976744186*u3*u3;
-        dxdt[6][l] = tmp3*u3 + u1*(-0.2872098251809964*u2 - 0.0008211868373490824*u4);
+        dxdt[1][l] = tmp0 * u3 + tmp1 * u1;
+        dxdt[2][l] = u2 - tmp2 * wheel_spinup_sin_lanes(q2);
+        dxdt[3][l] = u4 - u2;
+        dxdt[4][l] = u3 * (0.3499793829482495 * u2 + 0.0007488716786310489 * u4) - tmp3 * u1;
+        dxdt[5][l] = c[0] + 0.01627906976744186 * (u1 * u1) - 0.01627906976744186 * (u3 * u3) -
+                0.06976744186046512 * u1 * u3;
+        dxdt[6][l] = tmp3 * u3 + u1 * (-(0.0008211868373490824 * u4) - 0.2872098251809964 * u2);
         dxdt[7][l] = c[1];
     }
 }

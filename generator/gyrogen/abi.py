@@ -293,8 +293,6 @@ the linear model (outputs.linear_model: nu inputs, ny outputs, C only),
 the two strerror functions (setup's codes, the integrators'), and the
 integrators: fixed-step (rk4) or adaptive, each with its _batch variant.
 The integrators' stats and codes may be NULL."""
-SETUP_RESULT = "status"
-"""The name of setup's result in Fortran (a function with result(status))."""
 
 
 @dataclass(frozen=True)

@@ -1,179 +1,405 @@
-"""What the two backends share: one statement list per generated function.
+"""The model's sympy blocks as IR functions: setup (with its checks), the
+rhs and its lanes twins, the outputs, the Jacobian and the linear model.
 
-A printer turns one expression into text; the templates lay out the file.
+Each is lowered once into the IR (gyrogen.codegen.ir.nodes) and printed by
+the same C and Fortran printers as the integrators, so every target rounds
+alike. A sympy expression keeps sympy's order of terms and factors; a sum
+puts its positive terms first and subtracts the others (c + a*b - d, never
+-d + ...), a product divides its numerator by the product of its
+denominators, and small integer powers are products (x*x beats pow(x, 2);
+in Fortran x**2 is x*x, pow(x, 2) is not).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from functools import partial
+from collections.abc import Callable, Iterable
 
 import sympy as sm
-from sympy.printing.precedence import PRECEDENCE
 
-from gyrogen.codegen.context import SceneContext
+from gyrogen.abi import SIGNATURES, Arg
+from gyrogen.codegen.checks import LOOP
+from gyrogen.codegen.checks import lowered as lowered_checks
+from gyrogen.codegen.context import Local, SceneContext
 from gyrogen.codegen.integrators.trig import VARIANTS
+from gyrogen.codegen.ir.nodes import (
+    At,
+    Bin,
+    Call,
+    Const,
+    Decl,
+    E,
+    Fn,
+    For,
+    Func,
+    If,
+    Int,
+    Num,
+    Ref,
+    Return,
+    S,
+    Sel,
+    Un,
+    Unused,
+    Var,
+    assign,
+    called,
+    fn,
+    not_,
+    real,
+    walk,
+)
+from gyrogen.errors import GyrogenError
+from gyrogen.symbolic.hoist import constants
 from gyrogen.symbolic.literals import LiteralError, writable
 from gyrogen.symbolic.optimize import Block
 
-
-class WritableNumbers:
-    """A printer mixin: a number the target cannot write as it is (see
-    gyrogen.symbolic.literals) is an error here, never a truncated literal. optimize
-    puts every expression in writable form first, so this is the last guard."""
-
-    def _print_Integer(self, expr: sm.Integer) -> str:
-        self._check(expr)
-        return str(super()._print_Integer(expr))  # type: ignore[misc]
-
-    def _print_Rational(self, expr: sm.Rational) -> str:
-        self._check(expr)
-        return str(super()._print_Rational(expr))  # type: ignore[misc]
-
-    @staticmethod
-    def _check(expr: sm.Rational) -> None:
-        if not writable(expr):
-            raise LiteralError(f"internal: the number {expr} reached a printer unconverted")
+Names = Callable[[sm.Symbol], E]
+"""A symbol's IR: a hoisted constant c_k as c[k], anything else by its name."""
 
 
-class SmallPowers:
-    """A printer mixin: small integer powers as products (x*x beats pow(x, 2)
-    in C; in Fortran x**2 would round a*x**2 as a*(x*x), where C rounds
-    a*x*x as (a*x)*x), so that both languages print, and round, alike."""
+def expression(e: sm.Expr, names: Names, lanes: bool = False) -> E:
+    """e in the IR; with lanes, sin and cos as their branch-free twins
+    (sin_lanes, cos_lanes: gyrogen.codegen.integrators.trig)."""
 
-    def _print_Pow(self, expr: sm.Pow) -> str:
-        base, exp = expr.base, expr.exp
-        if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
-            b = self.parenthesize(  # type: ignore[attr-defined]
-                base, PRECEDENCE["Mul"] + 1
-            )
-            n = abs(int(exp))
-            one = self._print(sm.Float(1.0))  # type: ignore[attr-defined]
-            if n == 1:
-                return f"{one}/{b}"
-            prod = "*".join([b] * n)
-            return prod if exp > 0 else f"{one}/({prod})"
-        return str(super()._print_Pow(expr))  # type: ignore[misc]
+    def go(e: sm.Expr) -> E:
+        if isinstance(e, sm.Symbol):
+            return names(e)
+        if isinstance(e, sm.Number):
+            if not writable(e):
+                raise LiteralError(f"internal: the number {e} reached a printer unconverted")
+            if isinstance(e, sm.Rational) and not isinstance(e, sm.Integer):
+                return Bin("/", Num(float(e.p)), Num(float(e.q)))
+            return Num(float(e))
+        if isinstance(e, sm.Add):
+            return _sum(e, go)
+        if isinstance(e, sm.Mul):
+            return _product(e, go)
+        if isinstance(e, sm.Pow):
+            return _power(e.base, e.exp, go)
+        if isinstance(e, (sm.sin, sm.cos)):
+            return Fn(type(e).__name__ + ("_lanes" if lanes else ""), (go(e.args[0]),))
+        if isinstance(e, (sm.Max, sm.Min)):
+            name = "max" if isinstance(e, sm.Max) else "min"
+            out = go(e.args[0])
+            for a in e.args[1:]:
+                out = Fn(name, (out, go(a)))
+            return out
+        if isinstance(e, sm.Abs):
+            return Fn("abs", (go(e.args[0]),))
+        if isinstance(e, sm.Heaviside):  # a torque limit's slope: 1 inside the clamp, 0 outside
+            return Sel(Bin(">", go(e.args[0]), Num(0.0)), Num(1.0), Num(0.0))
+        raise GyrogenError(f"internal: no IR for {type(e).__name__} in {e}")
 
-    def _print_Mul(self, expr: sm.Mul) -> str:
-        """sympy writes a lone denominator bare (a/b**2 as "a/" + Pow), trusting
-        a power to bind tighter than "/"; the products above do not, so
-        a/b**2 must read a/(b*b), not a/b*b."""
-        den = [f for f in expr.args if f.is_Pow and f.exp.is_Rational and f.exp.is_negative]
-        if len(den) != 1 or not (den[0].exp.is_Integer and -3 <= den[0].exp <= -2):
-            return str(super()._print_Mul(expr))  # type: ignore[misc]
-        if expr.as_coeff_Mul()[0] < 0:
-            return "-" + self._print(-expr)  # type: ignore[attr-defined]
-        num = sm.Mul(*(f for f in expr.args if f is not den[0]))
-        text = self.parenthesize(num, PRECEDENCE["Mul"], strict=True)  # type: ignore[attr-defined]
-        return f"{text}/({self._print(1 / den[0])})"  # type: ignore[attr-defined]
-
-
-@dataclass(frozen=True)
-class Statement:
-    name: str
-    code: str
-    """The whole assignment as the language writes it (possibly several lines)."""
-    declare: bool
-    """A new local (true) or a store into an output array (false)."""
+    return go(e)
 
 
-@dataclass(frozen=True)
-class Function:
-    """One per-call function (rhs or an output) ready for a template."""
-
-    name: str
-    doc: str
-    unit: str
-    statements: list[Statement]
-    states: list[int]
-    """Indices of the states it reads: only those become locals."""
-    tables: list[str]
-    """The tabulated torques T(t) it reads (torque; a cluster's torque_k)."""
-
-    @property
-    def torque(self) -> bool:
-        """Reads a tabulated torque."""
-        return bool(self.tables)
+def _negative(term: sm.Expr) -> bool:
+    return bool(term.as_coeff_Mul()[0].is_negative)
 
 
-Assign = Callable[[str, sm.Expr], str]
+def _sum(e: sm.Add, go: Callable[[sm.Expr], E]) -> E:
+    terms = [t for t in e.args if not _negative(t)] + [t for t in e.args if _negative(t)]
+    out = go(terms[0]) if not _negative(terms[0]) else Un("-", go(-terms[0]))
+    for t in terms[1:]:
+        out = Bin("-", out, go(-t)) if _negative(t) else Bin("+", out, go(t))
+    return out
 
 
-def statements(block: Block, output: Callable[[int], str], assign: Assign) -> list[Statement]:
-    """Temporaries as locals, then one store per output."""
-    temps = [Statement(str(a.lhs), assign(str(a.lhs), a.rhs), True) for a in block.temporaries]
-    stores = []
-    for i, e in enumerate(block.outputs):
-        lhs = output(i)
-        stores.append(Statement(lhs, assign(lhs, e), False))
-    return temps + stores
+def _product(e: sm.Mul, go: Callable[[sm.Expr], E]) -> E:
+    coeff, rest = e.as_coeff_Mul()
+    if coeff.is_negative:
+        return Un("-", go(-e))
+    num: list[E] = []
+    den: list[E] = []
+    if coeff.is_Rational and coeff.q != 1:  # p/q: p over q times the rest
+        num += [] if coeff.p == 1 else [go(sm.Integer(coeff.p))]
+        den.append(go(sm.Integer(coeff.q)))
+    elif coeff != 1:
+        num.append(go(coeff))
+    for f in sm.Mul.make_args(rest):
+        if isinstance(f, sm.Pow) and f.exp.is_Rational and f.exp.is_negative:
+            den.append(_power(f.base, -f.exp, go))
+        else:
+            num.append(go(f))
+    top = _fold("*", num) if num else Num(1.0)
+    return Bin("/", top, _fold("*", den)) if den else top
 
 
-def functions(
-    unit: SceneContext, array: Callable[[str, int], str], assign: Assign
-) -> list[Function]:
-    """rhs first, then the scene's outputs; array(name, i) spells name[i]."""
-    blocks = [("rhs", unit.optimized.rhs, "dxdt", "dx/dt", "")]
-    blocks += [(o.name, o.block, "out", o.doc, o.unit) for o in unit.outputs]
-    return [_function(unit, array, assign, *b) for b in blocks]
+def _power(base: sm.Expr, exp: sm.Expr, go: Callable[[sm.Expr], E]) -> E:
+    if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
+        b = go(base)
+        prod = _fold("*", [b] * abs(int(exp)))
+        return prod if exp > 0 else Bin("/", Num(1.0), prod)
+    if exp == sm.Rational(1, 2):
+        return Fn("sqrt", (go(base),))
+    if exp == sm.Rational(-1, 2):
+        return Bin("/", Num(1.0), Fn("sqrt", (go(base),)))
+    return Fn("pow", (go(base), Num(float(exp))))
 
 
-def jacobian(
-    unit: SceneContext, array: Callable[[str, int], str], assign: Assign
-) -> Function | None:
-    """d(dx/dt)/dx into J, row-major (J[i*NX + j] = d f_i / d x_j)."""
-    block = unit.optimized.jacobian
-    if block is None:
-        return None
-    return _function(unit, array, assign, "jac", block, "J", "d(dx/dt)/dx, row-major", "1/s")
+def _fold(op: str, items: list[E]) -> E:
+    out = items[0]
+    for x in items[1:]:
+        out = Bin(op, out, x)  # type: ignore[arg-type]
+    return out
 
 
-def linear(unit: SceneContext, array: Callable[[str, int], str], assign: Assign) -> Function | None:
-    """A, B, C, D of the linear model, each row-major (A[i*NX + j] = d f_i /
-    d x_j, B[i*NU + j] = d f_i / d u_j, C and D alike for the outputs y)."""
-    block = unit.optimized.linear
-    if block is None:
-        return None
-    sizes = unit.linear_sizes
-    edges = [0]
-    for rows, cols in sizes.values():
-        edges.append(edges[-1] + rows * cols)
-    names = list(sizes)
+def symbol_names(nc: int) -> Names:
+    """c_k as c[k]; every other symbol (a state, a parameter, a temporary,
+    a tabulated torque) as a local of its own name."""
+    index = {c.name: k for k, c in enumerate(constants(nc))}
 
-    def at(arr: str, i: int) -> str:
-        k = max(j for j in range(len(names)) if edges[j] <= i)
-        return array(names[k], i - edges[k])
+    def names(s: sm.Symbol) -> E:
+        k = index.get(s.name)
+        return At("c", (Int(k),)) if k is not None else Var(s.name)
 
-    doc = "the linear model: A = df/dx, B = df/du, C = dy/dx, D = dy/du, row-major"
-    return _function(unit, at, assign, "linear", block, "", doc, "")
+    return names
 
 
-def _function(
+def block(
+    b: Block, output: Callable[[int], At], names: Names, lanes: bool = False
+) -> tuple[list[str], list[S]]:
+    """b's temporaries (their names, then their assignments) and one store per output."""
+    temps = [str(a.lhs) for a in b.temporaries]
+    body: list[S] = [
+        assign(Var(str(a.lhs)), expression(a.rhs, names, lanes)) for a in b.temporaries
+    ]
+    body += [assign(output(i), expression(e, names, lanes)) for i, e in enumerate(b.outputs)]
+    return temps, body
+
+
+def sizes(unit: SceneContext, out: int = 0) -> dict[str, int]:
+    """The lengths abi.Arg names, for this scene (out: an output's size)."""
+    nu, ny = len(unit.inputs), unit.ny
+    return {"nx": unit.nx, "np": unit.np, "nc": unit.nc, "out": out, "nu": nu, "ny": ny}
+
+
+def params(signature: str, unit: SceneContext, out: int = 0) -> tuple[Decl, ...]:
+    """A public function's parameters from its abi signature (one home)."""
+    n = sizes(unit, out)
+
+    def decl(a: Arg) -> Decl:
+        base = a.ctype.replace("const ", "").rstrip(" *")
+        if not a.length:
+            return Decl(a.name, "double" if base == "double" else "int", (), "in")
+        length = 1
+        for factor in a.length:
+            length *= n[factor]
+        return Decl(a.name, "double", (length,), "in" if a.ctype.startswith("const") else "out")
+
+    return tuple(decl(a) for a in SIGNATURES[signature].args)
+
+
+def _per_call(
     unit: SceneContext,
-    array: Callable[[str, int], str],
-    assign: Assign,
     name: str,
-    block: Block,
-    arr: str,
-    doc: str,
-    units: str,
-) -> Function:
-    free = block.free_symbols
-    return Function(
-        name=name,
+    signature: str,
+    b: Block,
+    output: Callable[[int], At],
+    doc: tuple[str, ...],
+    out: int = 0,
+) -> Func:
+    """A per-call function (rhs, an output, the Jacobian, the linear model):
+    the states and tabulated torques it reads as locals, then b."""
+    names = symbol_names(unit.nc)
+    free = b.free_symbols
+    states = [(i, s.name) for i, s in enumerate(unit.states) if s in free]
+    tables = [s.name for s in unit.equations.inputs if s in free]
+    temps, body = block(b, output, names)
+    reads = [assign(Var(n), At("x", (Int(i),))) for i, n in states]
+    reads += [assign(Var(n), fn(f"{unit.prefix}_{n}", Var("t"))) for n in tables]
+    unused: list[S] = [Unused(v) for v in ("t", "c") if not _reads([*body, *reads], v)]
+    unused += [Unused("x")] if not states else []
+    locals_ = tuple(real(n, "inout") for n in [*(n for _, n in states), *tables, *temps])
+    return Func(
+        f"{unit.prefix}_{name}",
+        params(signature, unit, out),
+        (*unused, *reads, *body),
+        locals=locals_,
         doc=doc,
-        unit=units,
-        statements=statements(block, partial(array, arr), assign),
-        states=[i for i, s in enumerate(unit.states) if s in free],
-        tables=[s.name for s in unit.equations.inputs if s in free],
+        public=True,
     )
 
 
-def trig_used(prefix: str, fns: list[Function | None]) -> list[str]:
-    """Which of <prefix>_sin, <prefix>_cos and their _lanes twins the
-    functions call (gyrogen.codegen.integrators.trig): a file defines only
-    those (clang warns of an unused static inline function)."""
-    text = " ".join(s.code for f in fns if f is not None for s in f.statements)
-    return [name for name in VARIANTS if f"{prefix}_{name}(" in text]
+def _reads(body: Iterable[S], name: str) -> bool:
+    return any(isinstance(x, (Var, At)) and x.name == name for s in body for x in walk(s))
+
+
+def rhs(unit: SceneContext) -> Func:
+    doc = (f"dxdt = f(t, x) for the constants c from {unit.prefix}_setup ({unit.ops['rhs']} ops).",)
+    return _per_call(unit, "rhs", "rhs", unit.optimized.rhs, _store("dxdt"), doc)
+
+
+def outputs(unit: SceneContext) -> list[Func]:
+    return [
+        _per_call(
+            unit,
+            o.name,
+            "output",
+            o.block,
+            _store("out"),
+            (f"out = {o.doc} ({o.unit}): {unit.ops[o.name]} ops.",),
+            o.size,
+        )
+        for o in unit.outputs
+    ]
+
+
+def jacobian(unit: SceneContext) -> Func | None:
+    """d(dx/dt)/dx into J, row-major (J[i*NX + j] = d f_i / d x_j)."""
+    b = unit.optimized.jacobian
+    if b is None:
+        return None
+    doc = (f"d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j ({unit.ops['jac']} ops).",)
+    return _per_call(unit, "jac", "jac", b, _store("J"), doc)
+
+
+def linear(unit: SceneContext) -> Func | None:
+    """A, B, C, D of the linear model, each row-major (A[i*NX + j] = d f_i /
+    d x_j, B[i*NU + j] = d f_i / d u_j, C and D alike for the outputs y)."""
+    b = unit.optimized.linear
+    if b is None:
+        return None
+    edges, names = [0], list(unit.linear_sizes)
+    for rows, cols in unit.linear_sizes.values():
+        edges.append(edges[-1] + rows * cols)
+
+    def at(i: int) -> At:
+        k = max(j for j in range(len(names)) if edges[j] <= i)
+        return At(names[k], (Int(i - edges[k]),))
+
+    doc = (
+        "the linear model: A = df/dx, B = df/du, C = dy/dx, D = dy/du, row-major "
+        f"({unit.ops['linear']} ops).",
+    )
+    f = _per_call(unit, "linear", "linear", b, at, doc)
+    unused = [Unused(n) for n in ("C", "D") if not unit.ny]
+    return Func(f.name, f.params, (*unused, *f.body), locals=f.locals, doc=f.doc, public=True)
+
+
+def _store(name: str) -> Callable[[int], At]:
+    return lambda i: At(name, (Int(i),))
+
+
+def rhs_lanes(unit: SceneContext) -> Func:
+    """<prefix>_rhs for n states at once, stored by state (x[i*n + l]): the
+    same statements, lane by lane, over sin and cos's branch-free twins."""
+    n, l_ = Var("n"), Var("l")
+
+    def at(name: str) -> Callable[[int], At]:
+        return lambda i: At(name, (Bin("+", Bin("*", Int(i), n), l_) if i else l_,))
+
+    return _lanes(unit, f"{unit.prefix}_rhs_lanes", n, at, At("t", (l_,)), public=True)
+
+
+def rhs_lanes_ode(unit: SceneContext) -> Func:
+    """The pairs' rhs over the lanes of their struct lanes (ode.c): rows
+    x[i] and dxdt[i] of LANES values, which the compiler sees do not overlap
+    (with n unknown, it cannot). A scene with a torque table calls
+    <prefix>_rhs_lanes, whose table lives in <prefix>.c."""
+    lanes = Const("LANES")
+    if unit.equations.inputs:
+        args = (lanes, Var("t"), Ref("x[0][0]"), Var("c"), Ref("dxdt[0][0]"))
+        return Func(
+            "rhs_lanes",
+            _lane_params(),
+            (Call(f"{unit.prefix}_rhs_lanes", args, "the torque table lives in <prefix>.c"),),
+            restrict=True,
+        )
+    l_ = Var("l")
+
+    def at(name: str) -> Callable[[int], At]:
+        return lambda i: At(name, (Int(i), l_))
+
+    f = _lanes(unit, "rhs_lanes", lanes, at, At("t", (l_,)), public=False)
+    return Func(f.name, _lane_params(), f.body, restrict=True)
+
+
+def _lane_params() -> tuple[Decl, ...]:
+    return (
+        Decl("t", "double", ("LANES",)),
+        Decl("x", "double", ("NX", "LANES")),
+        Decl("c", "double", ("NC",)),
+        Decl("dxdt", "double", ("NX", "LANES"), "out"),
+    )
+
+
+def _lanes(
+    unit: SceneContext,
+    name: str,
+    n: E,
+    at: Callable[[str], Callable[[int], At]],
+    t: At,
+    public: bool,
+) -> Func:
+    names = symbol_names(unit.nc)
+    b = unit.optimized.rhs
+    free = b.free_symbols
+    states = [(i, s.name) for i, s in enumerate(unit.states) if s in free]
+    tables = [s.name for s in unit.equations.inputs if s in free]
+    temps, body = block(b, at("dxdt"), names, lanes=True)
+    reads = [assign(Var(v), at("x")(i)) for i, v in states]
+    reads += [assign(Var(v), fn(f"{unit.prefix}_{v}", t)) for v in tables]
+    loop = For(
+        "l", n, (*reads, *body), tuple([*(v for _, v in states), *tables, *temps]), simd=True
+    )
+    unused = [Unused(v) for v in ("t", "c") if not _reads([loop], v)]
+    unused += [Unused("x")] if not states else []
+    p = (
+        Decl("n", "int"),
+        Decl("t", "double", (1,)),
+        Decl("x", "double", (1,)),
+        Decl("c", "double", (1,)),
+        Decl("dxdt", "double", (1,), "out"),
+    )
+    return Func(name, p, (*unused, loop), public=public, restrict=True)
+
+
+def setup(unit: SceneContext) -> Func:
+    """Checks p, then computes the constants c that the rhs needs; returns
+    OK or the first failing check's code (c is then not to be used)."""
+    names = symbol_names(unit.nc)
+    code = {c.value: c.name for c in unit.setup_codes}
+    i = Var(LOOP)
+    body: list[S] = [For(LOOP, Int(unit.nc), (assign(At("c", (i,)), 0.0),))]
+    if unit.np:
+        bad = not_(fn("finite", At("p", (i,))))
+        body.append(For(LOOP, Int(unit.np), (If(bad, (Return(Const("ERR_NONFINITE")),)),)))
+    else:
+        body.append(Unused("p"))
+    body += [assign(Var(v.name), _parameter(v)) for v in unit.setup_locals]
+    early, late = lowered_checks(unit.checks, unit.nc, unit.cond_index, code)
+    temps, stores = block(unit.optimized.setup, lambda k: At("c", (Int(k),)), names)
+    body += [*early, *stores, *late, Return(Const("OK"))]
+    locals_ = [v.name for v in unit.setup_locals]
+    locals_ += [n for c in unit.checks for n, _ in c.locals] + temps
+    doc = (
+        f"Checks p and computes the constants c that {unit.prefix}_rhs needs "
+        f"({unit.ops['setup']} ops, plus the checks). Returns {unit.macro}_OK or the first "
+        "failing check's code; c is then not to be used.",
+    )
+    return Func(
+        f"{unit.prefix}_setup",
+        params("setup", unit),
+        tuple(body),
+        returns="int",
+        locals=tuple(real(n, "inout") for n in locals_),
+        doc=doc,
+        public=True,
+    )
+
+
+def _parameter(v: Local) -> E:
+    """A parameter setup reads: p[index] (runtime), or its folded value."""
+    if v.index is not None:
+        return At("p", (Int(v.index),))
+    assert v.value is not None, v
+    return Num(v.value)
+
+
+def trig_used(funcs: Iterable[Func | None]) -> list[str]:
+    """Which of <prefix>_sin, <prefix>_cos and their _lanes twins funcs call
+    (gyrogen.codegen.integrators.trig): a file defines only those (clang
+    warns of an unused static inline function)."""
+    names = called([f for f in funcs if f is not None])
+    return [v for v in VARIANTS if v in names]

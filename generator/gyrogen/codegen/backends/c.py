@@ -1,106 +1,66 @@
-"""C99 backend: a printer and the two files it renders (header, source)."""
+"""C99: the two files of a scene (header, source) and, with integrators,
+the two of its ODE solvers, laid out by the templates around the IR's
+functions (gyrogen.codegen.statements, gyrogen.codegen.integrators)."""
 
 from __future__ import annotations
 
-import sympy as sm
-from sympy.printing.c import C99CodePrinter
-
 from gyrogen import abi
 from gyrogen import methods as methods_registry
-from gyrogen.codegen.checks import printed
+from gyrogen.codegen import statements
 from gyrogen.codegen.context import SceneContext
-from gyrogen.codegen.integrators.program import c_text, program, tables_text, trig_text
-from gyrogen.codegen.integrators.trig import VARIANTS
-from gyrogen.codegen.render import c_double, render
-from gyrogen.codegen.statements import (
-    SmallPowers,
-    WritableNumbers,
-    functions,
-    jacobian,
-    linear,
-    statements,
-    trig_used,
+from gyrogen.codegen.integrators.program import (
+    c_text,
+    intrinsics_of,
+    program,
+    tables_text,
+    trig_text,
 )
-from gyrogen.symbolic.hoist import constants
-
-
-class CPrinter(SmallPowers, WritableNumbers, C99CodePrinter):
-    """C99 with the hoisted constants as c[k], doubles in their shortest
-    exact form, small integer powers as products (x*x beats pow(x, 2)), and
-    sin and cos as the file's own <prefix>_sin, <prefix>_cos
-    (gyrogen.codegen.integrators.trig: inline), or with ``lanes`` their
-    branch-free twins <prefix>_sin_lanes, <prefix>_cos_lanes, so that a loop
-    over lanes vectorizes."""
-
-    def __init__(self, nc: int, prefix: str, lanes: bool = False) -> None:
-        super().__init__()
-        self._names = {c.name: f"c[{k}]" for k, c in enumerate(constants(nc))}
-        self._trig = prefix + "_{}" + ("_lanes" if lanes else "")
-
-    def _print_sin(self, expr: sm.sin) -> str:
-        return f"{self._trig.format('sin')}({self._print(expr.args[0])})"
-
-    def _print_cos(self, expr: sm.cos) -> str:
-        return f"{self._trig.format('cos')}({self._print(expr.args[0])})"
-
-    def _print_Symbol(self, expr: sm.Symbol) -> str:
-        return self._names.get(expr.name) or str(super()._print_Symbol(expr))
-
-    def _print_Float(self, expr: sm.Float) -> str:
-        return c_double(float(expr))
-
-    def _print_Heaviside(self, expr: sm.Heaviside) -> str:
-        """A torque limit's slope in the Jacobian: 1 inside the clamp, 0 outside."""
-        return f"(({self._print(expr.args[0])}) > 0.0 ? 1.0 : 0.0)"
+from gyrogen.codegen.integrators.trig import VARIANTS
+from gyrogen.codegen.ir.c import CPrinter
+from gyrogen.codegen.ir.nodes import Func
+from gyrogen.codegen.render import render
 
 
 def files(unit: SceneContext) -> dict[str, str]:
-    printer = CPrinter(unit.nc, unit.prefix)
-    lanes_printer = CPrinter(unit.nc, unit.prefix, lanes=True)
-
-    def assign(lhs: str, expr: sm.Expr) -> str:
-        return f"{lhs} = {printer.doprint(expr)};"
-
-    def assign_lanes(lhs: str, expr: sm.Expr) -> str:
-        return f"{lhs} = {lanes_printer.doprint(expr)};"
-
-    rhs, *outputs = functions(unit, lambda a, i: f"{a}[{i}]", assign)
-    lanes = functions(unit, lambda a, i: f"{a}[{i} * n + l]", assign_lanes)[0]
-    lanes_ode = functions(unit, lambda a, i: f"{a}[{i}][l]", assign_lanes)[0]
-    jac = jacobian(unit, lambda a, i: f"{a}[{i}]", assign)
-    lin = linear(unit, lambda a, i: f"{a}[{i}]", assign)
-    has_lanes = any(m.lanes for m in unit.methods)
-    inlined = [lanes_ode] if any(m.pair for m in unit.methods) and not lanes_ode.torque else []
+    printer = CPrinter(unit.prefix, unit.macro, {})
+    rhs = statements.rhs(unit)
+    source: list[Func | None] = [
+        statements.setup(unit),
+        rhs,
+        statements.rhs_lanes(unit),
+        *statements.outputs(unit),
+        statements.linear(unit),
+    ]
+    model = [f for f in source if f is not None]
+    jac = statements.jacobian(unit)
+    pairs = any(m.pair for m in unit.methods)
+    lanes_ode = statements.rhs_lanes_ode(unit) if pairs else None
     # the Taylor jet calls the rhs's sin and cos, scalar and over lanes
-    expanded = [rhs, lanes_ode] if unit.jet is not None else []
-    ode_trig = trig_used(unit.prefix, [jac, *inlined, *expanded])  # rhs_lanes is inlined in ode.c
-    gimbal_checks = ["cos", "cos_lanes"] if has_lanes else ["cos"]
+    rhs_trig = statements.trig_used([rhs])
+    expanded = [*rhs_trig, *(v + "_lanes" for v in rhs_trig)] if unit.jet is not None else []
+    ode_trig = statements.trig_used([jac, lanes_ode]) + expanded
+    gimbal_checks = ["cos", "cos_lanes"] if any(m.lanes for m in unit.methods) else ["cos"]
     if not unit.quaternion:  # the gimbal-lock checks
-        ode_trig = [n for n in VARIANTS if n in ode_trig + gimbal_checks]
+        ode_trig += gimbal_checks
+    ode_model = [f for f in (jac, lanes_ode) if f is not None]
     ctx = {
         "unit": unit,
         "tables": tables_text("c", unit.prefix, unit.macro, unit.torque_tables),
-        "setup": statements(unit.optimized.setup, lambda k: f"c[{k}]", assign),
-        "rhs": rhs,
-        "rhs_lanes": lanes,
-        "rhs_lanes_ode": lanes_ode,
-        "outputs": outputs,
-        "jac": jac,
-        "linear": lin,
-        "source_trig": trig_text(
-            "c", unit.prefix, unit.macro, trig_used(unit.prefix, [rhs, lanes, *outputs, lin])
-        ),
-        "ode_trig": trig_text("c", unit.prefix, unit.macro, ode_trig),
+        "source_trig": trig_text("c", unit.prefix, unit.macro, statements.trig_used(model)),
+        "source_intrinsics": "\n".join(printer.function(f) for f in intrinsics_of(model, printer)),
+        "source": "\n".join(printer.function(f) for f in model),
+        "jac": None if jac is None else printer.function(jac),
+        "rhs_lanes": None if lanes_ode is None else printer.function(lanes_ode),
+        "ode_trig": trig_text("c", unit.prefix, unit.macro, [v for v in VARIANTS if v in ode_trig]),
         "methods": unit.methods,
         "ir": c_text(
             program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks, unit.jet),
             unit.prefix,
             unit.macro,
+            ode_model,
         ),
         "abi": abi,
         "registry": methods_registry,
-        "checks": printed("c", unit.macro, unit.checks),
-        "code_names": {c.value: c.name for c in abi.SETUP_CODES},
     }
     out = {
         f"{unit.prefix}.h": render("c/header.h.jinja", **ctx),

@@ -166,11 +166,12 @@ def intrinsics_of(funcs: list[Func], printer: CPrinter | FortranPrinter) -> list
 
 
 def methods_text(
-    p: Program, printer: CPrinter | FortranPrinter, lanes: list[Func] | None = None
+    p: Program, printer: CPrinter | FortranPrinter, others: list[Func] | None = None
 ) -> dict[str, object]:
-    """The intrinsics the file's functions (with lanes: those too) call and the
-    shared functions, each as one text, and each method's functions (<method>_...)."""
-    every = [*p.shared, *p.methods, *(lanes or [])]
+    """The intrinsics the file's functions (with others: the lanes, the
+    Jacobian, those too) call and the shared functions, each as one text,
+    and each method's functions (<method>_...)."""
+    every = [*p.shared, *p.methods, *(others or [])]
     return {
         "intrinsics": "\n".join(printer.function(f) for f in intrinsics_of(every, printer)),
         "shared": "\n".join(printer.function(f) for f in p.shared),
@@ -178,7 +179,11 @@ def methods_text(
     }
 
 
-def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
+def c_text(
+    p: Program, prefix: str, macro: str, model: list[Func] | None = None
+) -> dict[str, object]:
+    """The file's text (model: the functions printed from the model beside
+    the integrators, the Jacobian and the pairs' rhs over lanes)."""
     c = CPrinter(prefix, macro, {})
     lanes = LanesPrinter(prefix, macro, {}, p.state)
     fields = []
@@ -191,15 +196,17 @@ def c_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
             f"{lanes.field(d.name).removeprefix('L->')}{dims}[{macro}_LANES];"
         )
     return {
-        **methods_text(p, c, p.lanes),
+        **methods_text(p, c, [*p.lanes, *(model or [])]),
         "lanes": by_method(p.lanes, lanes.function),
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
     }
 
 
-def fortran_text(p: Program, prefix: str, macro: str) -> dict[str, object]:
-    return methods_text(p, FortranPrinter(prefix, macro, {}))
+def fortran_text(
+    p: Program, prefix: str, macro: str, model: list[Func] | None = None
+) -> dict[str, object]:
+    return methods_text(p, FortranPrinter(prefix, macro, {}), model)
 
 
 def text(language: str, prefix: str, macro: str, funcs: list[Func]) -> str:

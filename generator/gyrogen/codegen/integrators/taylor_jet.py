@@ -112,7 +112,7 @@ def coefficients(series: Series, jet: Jet) -> Decl:
     return Decl("tay", "double", (series.order + 1, len(kept(jet)) + len(arguments(jet))), "inout")
 
 
-class _Printer:
+class _Coefficients:
     """A jet's nodes as IR expressions."""
 
     def __init__(self, jet: Jet, k: E = n_):
@@ -290,7 +290,7 @@ def reads_constants(jet: Jet) -> bool:
     return any(n.op == "c" for n in jet.nodes)
 
 
-def _lower_orders(p: _Printer) -> list[S]:
+def _lower_orders(p: _Coefficients) -> list[S]:
     """The convolutions' terms j = 1 .. k-1 (k >= 2: one turn at least)."""
     jet = p.jet
     conv = [n for n in jet.convolutions() if not p.fixed(n)]
@@ -306,7 +306,7 @@ def _lower_orders(p: _Printer) -> list[S]:
 
 def jet_function(series: Series, jet: Jet) -> Func:
     """taylor_jet: tay[0 .. order][*] at x; inv[k] = 1/k."""
-    p = _Printer(jet)
+    p = _Coefficients(jet)
     nx = jet.nx
     body: list[S] = [Comment("orders 0 and 1 of the state and of every node", False)]
     body += [assign(T[Int(0), Int(n)], x[n]) for n in range(nx)]
@@ -322,7 +322,7 @@ def jet_function(series: Series, jet: Jet) -> Func:
             assign(Var(f"ub{n}"), p.at(n, Int(0)) / b0),
         ]
     body += [s for n, f in enumerate(jet.outputs) for s in p.set(n, Int(1), p.zero(f))]
-    body += _Printer(jet, Int(1)).order_k()
+    body += _Coefficients(jet, Int(1)).order_k()
     body += [
         Comment("orders 2 .. order-1 of the nodes, so orders 3 .. order of the state"),
         For("n", order, (*_lower_orders(p), *p.order_k()), start=Int(2)),

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.codegen.ir.nodes import (
     Decl,
     E,
@@ -87,7 +88,7 @@ class CPrinter(Printer):
     def call(self, name: str, args: list[str], nodes: tuple[E, ...]) -> str:
         if name == "finite":
             return f"(fabs({args[0]}) <= DBL_MAX)"
-        if name in ("sin", "cos"):
+        if name in VARIANTS:
             return f"{self.prefix}_{name}({args[0]})"
         if name == "real":
             return f"(double){self.expr(nodes[0], ATOM)}"
@@ -112,15 +113,17 @@ class CPrinter(Printer):
         "end_loop": "}}",
         "continue": "continue;",
         "break": "break;",
-        "unused": "(void){name};  /* unused when every value is folded */",
+        "unused": "(void){name};  /* unused in some scenes */",
         "for": "for ({v} = {start}; {v} < {stop}; ++{v}) {{",
         "end_for": "}}",
         "vector": "#pragma GCC unroll 1",
+        "simd": "{macro}_SIMD",
         "bits": "memcpy(&{target}, &{source}, sizeof {target});",
     }
 
     def scoped_locals(self, s: For, depth: int) -> list[str]:
-        return [f"{self.indent * depth}double {', '.join(s.locals)};"] if s.locals else []
+        pad = self.indent * depth
+        return self.wrap(f"{pad}double {', '.join(s.locals)};", pad * 2, "") if s.locals else []
 
     def declaration(self, d: Decl, param: bool) -> str:
         if d.type == "stats":
@@ -130,10 +133,11 @@ class CPrinter(Printer):
             table = self.table(d.values)
             return f"static const {ctype} {d.name}[{len(d.values)}] = {{{table}}}"
         if param:
+            restrict = f"{self.macro}_RESTRICT " if self.restrict else ""
             if len(d.shape) == 2:
-                return f"{ctype} (*{d.name})[{self.extent(d.shape[1])}]"
+                return f"{ctype} (*{restrict}{d.name})[{self.extent(d.shape[1])}]"
             if d.shape or d.intent != "in":
-                return f"{'const ' if d.intent == 'in' else ''}{ctype} *{d.name}"
+                return f"{'const ' if d.intent == 'in' else ''}{ctype} *{restrict}{d.name}"
             return f"{ctype} {d.name}"
         dims = "".join(f"[{self.extent(n)}]" for n in d.shape)
         init = (
@@ -150,12 +154,13 @@ class CPrinter(Printer):
 
     def function(self, func: Func) -> str:
         p = self.with_decls(func)
+        p.restrict = func.restrict
         ret = "void" if func.returns is None else CTYPE[func.returns]
         params = ", ".join(p.declaration(d, True) for d in func.params)
-        static = "static inline" if func.inline else "static"
+        static = "static inline " if func.inline else "" if func.public else "static "
         head = p.wrap(
-            f"{static} {ret} {func.name}({params})",
-            " " * (len(static) + len(ret) + 3 + len(func.name)),
+            f"{static}{ret} {func.name}({params})",
+            " " * (len(static) + len(ret) + 2 + len(func.name)),
             "",
         )
         text = doc_lines(func.doc)

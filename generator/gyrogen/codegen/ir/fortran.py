@@ -36,6 +36,8 @@ FTYPE = {
     "long": "integer(c_long)",
     "bool": "logical",
 }
+RESULT = "res"
+"""A function's value: its result variable (a return sets it and leaves)."""
 FUNCTIONS = {"finite": "ieee_is_finite", "floor": "floor_real", "trunc": "aint"}
 """The IR's functions under Fortran names (floor_real:
 gyrogen.codegen.integrators.intrinsics)."""
@@ -99,7 +101,7 @@ class FortranPrinter(Printer):
         "comment": "! {text}",
         "call": "call {name}({args})",
         "return": "return",
-        "return_value": "res = {value}\nreturn",
+        "return_value": RESULT + " = {value}\nreturn",
         "if": "if ({cond}) then",
         "else": "else",
         "end_if": "end if",
@@ -107,13 +109,11 @@ class FortranPrinter(Printer):
         "end_loop": "end do",
         "continue": "cycle",
         "break": "exit",
-        "unused": (
-            "associate (unused_{name} => {name})  ! unused when every value is folded\n"
-            "end associate"
-        ),
+        "unused": ("associate (unused_{name} => {name})  ! unused in some scenes\nend associate"),
         "for": "do {v} = {start}, {stop} - 1",
         "end_for": "end do",
         "vector": "!GCC$ unroll 1",
+        "simd": "",
     }
 
     def declaration(self, d: Decl, param: bool) -> str:
@@ -121,8 +121,12 @@ class FortranPrinter(Printer):
         if d.values:
             table = self.table(d.values)
             return f"{ftype}, parameter :: {d.name}(0:{len(d.values) - 1}) = [{table}]"
-        intent = f", intent({d.intent})" if param else ""
-        dims = ", ".join(f"0:{self.extent(n)} - 1" for n in reversed(d.shape))
+        value = ", value" if param and self.public and not d.shape and d.intent == "in" else ""
+        intent = f"{value}, intent({d.intent})" if param else ""
+        dims = ", ".join(
+            f"0:{n - 1}" if isinstance(n, int) else f"0:{self.extent(n)} - 1"
+            for n in reversed(d.shape)
+        )
         return f"{ftype}{intent} :: {d.name}" + (f"({dims})" if dims else "")
 
     def extent(self, n: str | int) -> str:
@@ -132,16 +136,20 @@ class FortranPrinter(Printer):
 
     def function(self, func: Func) -> str:
         p = self.with_decls(func)
+        p.public = func.public
         names = ", ".join(d.name for d in func.params)
         kind = "subroutine" if func.returns is None else "function"
-        result = "" if func.returns is None else " result(res)"
+        result = "" if func.returns is None else f" result({RESULT})"
+        if func.public:
+            rest = func.name.removeprefix(f"{self.prefix}_")
+            result += f' bind(C, name="{self.prefix}_f_{rest}")'
         pad = self.indent
         head = p.wrap(f"{pad}{kind} {func.name}({names}){result}", pad * 5, "")
         doc = [f"{pad}! {d}" for d in doc_lines(func.doc)]
         params = sorted(func.params, key=lambda d: bool(d.shape))  # extents first
         decls = [f"{pad * 2}{p.declaration(d, True)}" for d in params]
         if func.returns is not None:
-            decls.append(f"{pad * 2}{FTYPE.get(func.returns, 'integer')} :: res")
+            decls.append(f"{pad * 2}{FTYPE.get(func.returns, 'integer')} :: {RESULT}")
         decls += [
             line
             for d in func.locals

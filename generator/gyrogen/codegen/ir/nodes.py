@@ -237,6 +237,9 @@ class For(S):
     directive to gcc and clang (C: #pragma GCC unroll 1, Fortran: !GCC$ unroll
     1), a comment to others; its elements are computed as before, so the
     results are the same bit for bit."""
+    simd: bool = False
+    """A loop whose turns are independent (one per lane of a batch): C marks
+    it <MACRO>_SIMD, `omp simd` under OpenMP."""
 
 
 @dataclass(frozen=True)
@@ -372,3 +375,9 @@ class Func:
     doc: tuple[str, ...] = ()
     inline: bool = False
     """C: static inline (small functions in a header-like role)."""
+    public: bool = False
+    """Part of the file's interface: C gives it external linkage; Fortran binds
+    it to C under the name <prefix>_f_<rest> and takes its scalars by value."""
+    restrict: bool = False
+    """Its array parameters never overlap (C: <MACRO>_RESTRICT pointers, for
+    the vectorizer; Fortran's dummy arguments never alias)."""

@@ -140,6 +140,11 @@ class Printer:
             right = self.expr(e.b, prec, right=True)
         return f"{left} {self.ops.get(e.op, e.op)} {right}"
 
+    restrict = False
+    """Pointer parameters that never overlap (Func.restrict; C says so)."""
+    public = False
+    """Printing a public function (Func.public)."""
+
     grouped = 0
     """1: a left operand of equal precedence in parentheses too, (a + b) - c.
     Fortran lets a compiler evaluate any mathematically equivalent form but
@@ -194,7 +199,7 @@ class Printer:
     syntax: ClassVar[dict[str, str]] = {}
     """The language's statements: assign, comment, call, return, return_value
     (lines split by newlines), if, else, end_if, loop, end_loop, continue,
-    break, for, end_for, bits, each with {fields} to fill."""
+    break, for, end_for, vector, simd, bits, each with {fields} to fill."""
 
     def statement(self, s: S, depth: int) -> list[str]:
         pad, say = self.indent * depth, self.syntax
@@ -212,7 +217,9 @@ class Printer:
             first, *rest = say["return_value"].format(value=self.expr(s.value)).split("\n")
             return [*self.line(depth, first, s.note), *(pad + r for r in rest)]
         if isinstance(s, If):
-            out = [pad + say["if"].format(cond=self.expr(s.cond)), *self.block(s.then, depth + 1)]
+            more = pad + self.indent * 2
+            out = self.wrap(pad + say["if"].format(cond=self.expr(s.cond)), more, "")
+            out += self.block(s.then, depth + 1)
             if s.orelse:
                 out += [pad + say["else"].format(), *self.block(s.orelse, depth + 1)]
             return [*out, pad + say["end_if"].format()]
@@ -231,8 +238,9 @@ class Printer:
         assert isinstance(s, For), s
         head = say["for"].format(v=s.var, start=self.expr(s.start), stop=self.expr(s.n, 5))
         body = [*self.scoped_locals(s, depth + 1), *self.block(s.body, depth + 1)]
-        vector = [pad + say["vector"]] if s.vector else []
-        return [*vector, pad + head, *body, pad + say["end_for"].format()]
+        marks = [pad + say["vector"]] if s.vector else []
+        marks += [pad + say["simd"].format(macro=self.macro)] if s.simd and say["simd"] else []
+        return [*marks, pad + head, *body, pad + say["end_for"].format()]
 
     def scoped_locals(self, s: For, depth: int) -> list[str]:
         """The declarations of a loop's own locals at its top (C), or none."""
