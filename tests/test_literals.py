@@ -13,6 +13,7 @@ import pytest
 import sympy as sm
 
 from gyrogen.codegen.generate import generate
+from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.statements import expression, symbol_names
 from gyrogen.oracle import scene_view
 from gyrogen.oracle.compare import compare
@@ -68,9 +69,18 @@ def test_a_refused_rational_is_named_by_its_magnitude() -> None:
 
 
 def test_the_lowering_refuses_an_unconverted_number() -> None:
-    """Every target prints the one lowering: it is the last guard."""
+    """Every target prints the one lowering: it is the last guard. Numbers
+    are written as doubles: an integer that no double is, is refused."""
     with pytest.raises(LiteralError, match="reached a printer"):
-        expression(sm.Mul(sm.Integer(2**70), x, evaluate=False), symbol_names(0))
+        expression(sm.Mul(sm.Integer(2**70 + 1), x, evaluate=False), symbol_names(0))
+
+
+def test_the_lowering_writes_a_large_exact_coefficient() -> None:
+    """A rational coefficient whose numerator passes C's int but is a
+    double (a drawn scene's 2693424863253969/2^k) is its numerator over its
+    denominator, both doubles."""
+    e = expression(sm.Rational(2693424863253969, 2**60) * x, symbol_names(0))
+    assert CPrinter("p", "P", {}).expr(e) == "2693424863253969.0 * x / 1.152921504606847e+18"
 
 
 # The issue's scene: folded decimals next to runtime inertias and masses.

@@ -50,7 +50,7 @@ from gyrogen.codegen.ir.nodes import (
 )
 from gyrogen.errors import GyrogenError
 from gyrogen.symbolic.hoist import constants
-from gyrogen.symbolic.literals import LiteralError, writable
+from gyrogen.symbolic.literals import LiteralError, exact_double, writable
 from gyrogen.symbolic.optimize import Block
 
 Names = Callable[[sm.Symbol], E]
@@ -65,7 +65,7 @@ def expression(e: sm.Expr, names: Names, lanes: bool = False) -> E:
         if isinstance(e, sm.Symbol):
             return names(e)
         if isinstance(e, sm.Number):
-            if not writable(e):
+            if not (exact_double(int(e)) if isinstance(e, sm.Integer) else writable(e)):
                 raise LiteralError(f"internal: the number {e} reached a printer unconverted")
             if isinstance(e, sm.Rational) and not isinstance(e, sm.Integer):
                 return Bin("/", Num(float(e.p)), Num(float(e.q)))
@@ -243,6 +243,15 @@ def outputs(unit: SceneContext) -> list[Func]:
         )
         for o in unit.outputs
     ]
+
+
+def events(unit: SceneContext) -> Func | None:
+    """out[k] = event k's g(t, x), in the scene's order."""
+    o = unit.events
+    if o is None:
+        return None
+    doc = (f"out = {o.doc} ({unit.ops['events']} ops).",)
+    return _per_call(unit, "events", "output", o.block, _store("out"), doc, o.size)
 
 
 def jacobian(unit: SceneContext) -> Func | None:

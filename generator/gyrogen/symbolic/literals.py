@@ -39,7 +39,7 @@ class LiteralError(GyrogenError):
     """A constant of the generated code is outside double range."""
 
 
-def _exact_double(n: int) -> bool:
+def exact_double(n: int) -> bool:
     """n as a double literal (n.0) reads back as n."""
     try:
         return int(float(n)) == n
@@ -51,7 +51,7 @@ def _writable(atom: sm.Basic) -> bool:
     if isinstance(atom, sm.Integer):
         return abs(int(atom)) <= INT_LITERAL_MAX
     if isinstance(atom, sm.Rational):
-        return _exact_double(int(atom.p)) and _exact_double(int(atom.q))
+        return exact_double(int(atom.p)) and exact_double(int(atom.q))
     if isinstance(atom, sm.Float):
         return math.isfinite(float(atom))
     return True
