@@ -44,3 +44,8 @@ MAX_SPIN = 1e100
 an equilibrium given to linearize, rad/s: the rates
 enter the equations squared, times inertias up to 1e50 (a folded value's
 bound), which must stay doubles."""
+MAX_EVENTS = 64
+"""A scene's [[events]]: each is evaluated at every step and searched for zeros."""
+MAX_EVENT_TEXT = 1000
+"""Characters of an event's expression: a real one is a line (nested deeper,
+Python's own parser refuses it first)."""

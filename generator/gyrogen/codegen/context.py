@@ -106,6 +106,8 @@ class SceneContext:
     def ops(self) -> dict[str, int]:
         ops = {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
         ops.update({o.name: o.block.ops for o in self.outputs})
+        if self.events is not None:
+            ops["events"] = self.events.block.ops
         if self.optimized.jacobian is not None:
             ops["jac"] = self.optimized.jacobian.ops
         if self.optimized.linear is not None:
@@ -152,6 +154,14 @@ class SceneContext:
     def outputs(self) -> list[Output]:
         doc = CLUSTER_OUTPUT_DOC if self.cluster else OUTPUT_DOC
         return [Output(n, b, *doc[n]) for n, b in self.optimized.outputs.items()]
+
+    @property
+    def events(self) -> Output | None:
+        """The scene's events g(t, x) as one function, <prefix>_events (out[k]:
+        event k's g), beside the outputs; None without events."""
+        b = self.optimized.events
+        names = ", ".join(e.name for e in self.scene.events)
+        return None if b is None else Output("events", b, "", f"the events' g(t, x): {names}")
 
     @property
     def cluster(self) -> bool:
@@ -207,7 +217,8 @@ class SceneContext:
 
     def outputs_size(self, function: str) -> int:
         """The size of an output function's out[], 0 for any other function."""
-        return next((o.size for o in self.outputs if o.name == function), 0)
+        every = [*self.outputs, *([self.events] if self.events else [])]
+        return next((o.size for o in every if o.name == function), 0)
 
     @property
     def torque_table(self) -> list[tuple[float, float]] | None:
@@ -282,7 +293,7 @@ class SceneContext:
         p = self.prefix
         c = {"setup": f"{p}_setup", "rhs": f"{p}_rhs", "strerror": f"{p}_strerror"}
         f = {"module": f"{p}_mod", "setup": f"{p}_f_setup", "rhs": f"{p}_f_rhs"}
-        for o in self.outputs:
+        for o in [*self.outputs, *([self.events] if self.events else [])]:
             c[o.name] = f"{p}_{o.name}"
             f[o.name] = f"{p}_f_{o.name}"
         if self.optimized.jacobian is not None:

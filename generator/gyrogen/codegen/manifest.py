@@ -30,6 +30,7 @@ def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
         "np": unit.np,
         "nc": unit.nc,
         "outputs": {o.name: o.size for o in unit.outputs},
+        "events": [e.model_dump(mode="json") for e in unit.scene.events],
         **({"linear": linear(unit)} if unit.optimized.linear is not None else {}),
         "integrators": list(unit.scene.integrators),
         "targets": list(unit.scene.targets),

@@ -169,6 +169,7 @@ def _pairs(
     """Every backend against the reference, and the backends against each
     other: the rhs, each output function, and the Jacobian."""
     names = ["rhs", *(n for n, on in scene.outputs.model_dump().items() if on)]
+    names += ["events"] if scene.events else []
     constants = {_label(b): b.setup(p) for b in backends}
     for name in names:
         tag = "" if name == "rhs" else f" {name}"
@@ -176,6 +177,8 @@ def _pairs(
         ref = f(states, p)
         if name == "rhs":
             out = {_label(b): b.rhs(states, constants[_label(b)], t) for b in backends}
+        elif name == "events":
+            out = {_label(b): b.events(states, constants[_label(b)], t) for b in backends}
         else:
             out = {_label(b): b.output(name, states, constants[_label(b)], t) for b in backends}
         for label, value in out.items():
@@ -201,6 +204,8 @@ JAC_STATES = 200
 def _reference(scene: Scene, name: str, t: float) -> Function:
     if name == "rhs":
         return lambda xs, p: scene_view.rhs(scene, xs, p, t)
+    if name == "events":
+        return lambda xs, p: scene_view.events(scene, xs, p, t)
     return lambda xs, p: scene_view.output(scene, name, xs, p, t)
 
 

@@ -13,6 +13,7 @@ from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
 from gyrogen.abi_rotors import AXIS_NORM_SLACK
 from gyrogen.oracle import cluster_reference, reference, sampling
 from gyrogen.scene import Scene
+from gyrogen.scene import events as scene_events
 
 _P = {n: i for i, n in enumerate(PARAMETERS)}
 
@@ -167,6 +168,41 @@ def output(
         u2, u4 = x_full[:, STATES.index("u2")], x_full[:, STATES.index("u4")]
         return (p[:, _P["T"]] * (u4 - u2))[:, None]
     raise KeyError(name)
+
+
+EVENT_FUNCTIONS = {
+    "sin": np.sin,
+    "cos": np.cos,
+    "sqrt": np.sqrt,
+    "abs": np.abs,
+    "min": np.fmin,  # a NaN argument is ignored, as C's fmin and the generated min
+    "max": np.fmax,
+}
+
+
+def events(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
+    """The scene's event functions g(t, x), from the reference: shape (n, events)."""
+    xs = np.atleast_2d(xs)
+    v = values(scene, p_runtime)
+    column = {s: xs[:, i] for i, s in enumerate(scene.states)}
+    outputs: dict[str, np.ndarray] = {}
+
+    def value(leaf: scene_events.Node) -> object:
+        if leaf[0] == "output" or leaf[1] in scene_events.OUTPUTS:
+            name = str(leaf[1])
+            if name not in outputs:
+                outputs[name] = output(scene, name, xs, p_runtime, t)
+            return outputs[name][:, leaf[2] if leaf[0] == "output" else 0]
+        name = str(leaf[1])
+        if name in column:
+            return column[name]
+        return t if name == scene_events.TIME else v[name]
+
+    cols = []
+    for e in scene.events:
+        g = scene_events.evaluate(scene_events.parse(e.expr), value, EVENT_FUNCTIONS)
+        cols.append(np.broadcast_to(np.asarray(g, dtype=float), (len(xs),)))
+    return np.stack(cols, axis=1) if cols else np.zeros((len(xs), 0))
 
 
 def random_runtime(

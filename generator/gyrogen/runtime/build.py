@@ -98,7 +98,7 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
     """What the cffi templates print: the setup, the per-call functions and
     the integrators of the build, by their exported names and signatures."""
     names = manifest["functions"][language]
-    per_call = ["rhs", *manifest["outputs"]]
+    per_call = ["rhs", *manifest["outputs"], *(["events"] if manifest.get("events") else [])]
     if "jac" in names:
         per_call.append("jac")
     integrators = [n for m in manifest["integrators"] for n in (m, f"{m}_batch")]

@@ -332,6 +332,39 @@ class Compiled:
             raise ValueError(f"this build has no output {name!r} (its outputs: {have})")
         return self._apply(name, int(outputs[name]), x, c, t)
 
+    @property
+    def event_names(self) -> list[str]:
+        """The scene's events by name, in the order of `events`' columns."""
+        return [e["name"] for e in self.manifest.get("events", [])]
+
+    def events(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Evaluate the scene's event functions g(t, x) at states.
+
+        Parameters
+        ----------
+        x : array_like, shape (nx,) or (n, nx)
+            The states.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        t : float, default 0.0
+            The time (an event may read it).
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, number of events)
+            Column k is event k's g (`event_names`); an event happens where
+            its g crosses zero.
+
+        Raises
+        ------
+        ValueError
+            The scene declares no events, or x or c has the wrong shape.
+        """
+        names = self.event_names
+        if not names:
+            raise ValueError("this build's scene declares no [[events]]")
+        return self._apply("events", len(names), x, c, t)
+
     def jacobian(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
         """The Jacobian of the right-hand side at one state.
 

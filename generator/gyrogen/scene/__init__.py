@@ -34,8 +34,10 @@ from gyrogen import methods
 from gyrogen.abi import CONTROLLER_PARAMETERS, MIN_RTOL, PARAMETERS, STATES
 from gyrogen.abi_rotors import MAX_ROTORS
 from gyrogen.errors import SceneError
-from gyrogen.limits import MAX_SCENE_BYTES
+from gyrogen.limits import MAX_EVENTS, MAX_SCENE_BYTES
+from gyrogen.scene import events as scene_events
 from gyrogen.scene import rotors
+from gyrogen.scene.events import Event
 from gyrogen.scene.rotors import Rotor
 from gyrogen.scene.rules import (
     QUATERNION,
@@ -146,6 +148,9 @@ class Scene(_Strict):
     equilibrium: dict[str, Number] | None = None
     """The state `gyrogen linearize` linearizes about, by name (states not
     named: 0, e0: 1); the runtime parameters are simulate.parameters."""
+    events: Annotated[list[Event], Field(max_length=MAX_EVENTS)] = Field(default_factory=list)
+    """Functions g(t, x) whose zero crossings the integrators locate
+    (gyrogen.scene.events): in states, parameters, outputs and t."""
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: Any) -> Any:
@@ -154,6 +159,8 @@ class Scene(_Strict):
         data = handler(self)
         if self.equilibrium is None:
             data.pop("equilibrium", None)  # the dump before linear models
+        if not self.events:
+            data.pop("events", None)  # the dump before events
         if isinstance(data.get("outputs"), dict) and not self.outputs.linear_model:
             data["outputs"].pop("linear_model", None)  # the dump before linear models
         if not self.rotors:
@@ -220,6 +227,9 @@ class Scene(_Strict):
             known := rotors.resolved(self.parameters, self.rotors, self.simulate.parameters)
         ):
             rotors.check_values(*known, "simulate.parameters")
+        sizes = {"kinetic_energy": 1, "angular_momentum": 3, "power": max(len(self.rotors), 1)}
+        outputs = {n: k for n, k in sizes.items() if getattr(self.outputs, n)}
+        scene_events.check(self.events, self.states, set(self.parameters), outputs)
         self._series_where_smooth()
         return self
 

@@ -13,6 +13,9 @@ import sympy.physics.mechanics as me
 
 from gyrogen.symbolic import model
 
+TIME = sm.Symbol("t", real=True)
+"""The time, as the per-call functions' argument t (an event may read it)."""
+
 
 @dataclass(frozen=True)
 class Perturbed:
@@ -53,6 +56,8 @@ class Equations:
     """Per-call values that are not states: the torque of a T(t) table."""
     outputs: dict[str, tuple[sm.Expr, ...]] = field(default_factory=dict)
     """Optional extra functions, by name, in states, inputs and parameters."""
+    events: tuple[sm.Expr, ...] = ()
+    """The scene's events g(t, x) (symbolic/events.py), in its order."""
     checks: dict[str, sm.Expr] = field(default_factory=dict)
     """The parameters setup checks, by name: a runtime symbol or a number."""
     coupled: sm.Matrix = field(default_factory=lambda: sm.eye(2))

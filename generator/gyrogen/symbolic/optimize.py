@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import sympy as sm
 
 from gyrogen import physics
-from gyrogen.symbolic.equations import Equations
+from gyrogen.symbolic.equations import TIME, Equations
 from gyrogen.symbolic.hoist import Hoister, hoist
 from gyrogen.symbolic.literals import as_double, writable_form
 
@@ -63,6 +63,8 @@ class Optimized:
     linear: Block | None = None
     """A, B, C, D of the linear model (Equations.perturbed), each row-major,
     one after another."""
+    events: Block | None = None
+    """The scene's events g(t, x), per call (their constants after the others)."""
 
     @property
     def nc(self) -> int:
@@ -177,12 +179,24 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     inline = _inlined(shared)
     jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     linear = _linear_model(eqs, inverse, kin, hoister) if eqs.perturbed else None
+    # the events' constants after every other's: a scene without events is as it was
+    events = (
+        _cse([hoist(_sincos(e), [*per_call, TIME], hoister) for e in eqs.events], _temporaries())
+        if eqs.events
+        else None
+    )
     cluster = eqs.coupled.shape[0] == 3  # no reduced mass to multiply out
     values = [v if cluster else _multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = sm.S.Zero if cluster else _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(
-        setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac, linear=linear
+        setup=setup,
+        rhs=rhs,
+        lumped=lumped,
+        outputs=outputs,
+        jacobian=jac,
+        linear=linear,
+        events=events,
     )
 
 

@@ -4,6 +4,7 @@ and add the outputs it asks for."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import sympy as sm
@@ -12,6 +13,7 @@ from gyrogen.abi import CONTROLLER_PARAMETERS
 from gyrogen.scene import Scene
 from gyrogen.setup_checks import checked_parameters
 from gyrogen.symbolic import cluster, equations, model
+from gyrogen.symbolic import events as symbolic_events
 from gyrogen.symbolic.equations import Equations
 
 
@@ -57,8 +59,13 @@ def _torque(scene: Scene, v: dict[str, sm.Expr], u: dict[str, sm.Symbol]) -> sm.
 
 
 def specialize(scene: Scene) -> Equations:
-    if scene.rotors:
-        return cluster.derive(scene)
+    eqs = cluster.derive(scene) if scene.rotors else _single(scene)
+    if scene.events:
+        eqs = dataclasses.replace(eqs, events=symbolic_events.events(scene, eqs))
+    return eqs
+
+
+def _single(scene: Scene) -> Equations:
     sym = _symbols(scene)
     v = _values(scene, sym)
     full = model.lumped()

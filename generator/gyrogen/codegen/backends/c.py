@@ -29,6 +29,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         rhs,
         statements.rhs_lanes(unit),
         *statements.outputs(unit),
+        statements.events(unit),
         statements.linear(unit),
     ]
     model = [f for f in source if f is not None]

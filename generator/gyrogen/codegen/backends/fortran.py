@@ -31,7 +31,7 @@ def _check_names(f: Func) -> None:
 def files(unit: SceneContext) -> dict[str, str]:
     printer = FortranPrinter(unit.prefix, unit.macro, {})
     setup, rhs = statements.setup(unit), statements.rhs(unit)
-    outputs = statements.outputs(unit)
+    outputs = [*statements.outputs(unit), *filter(None, [statements.events(unit)])]
     jac = statements.jacobian(unit)
     for f in (setup, rhs, *outputs, *([jac] if jac else [])):
         _check_names(f)

@@ -1,0 +1,161 @@
+"""A scene's [[events]]: declared in TOML, refused in one line when wrong,
+and compiled into <prefix>_events (C and Fortran) that agrees with the
+numpy reference, which reads the same expressions on its own."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gyrogen.codegen.generate import generate
+from gyrogen.errors import SceneError
+from gyrogen.oracle import scene_view
+from gyrogen.runtime import build
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.scene import Scene, builtin_text, parse
+from gyrogen.scene.events import parse as parse_expr
+
+EVENTS = """
+[outputs]
+kinetic_energy = true
+angular_momentum = true
+power = true
+
+[[events]]
+name = "wheel_fast"
+expr = "u4 - u2 - 300"
+direction = "up"
+terminal = true
+
+[[events]]
+name = "tilted"
+expr = "cos(q2)*cos(q1) - 0.9"
+direction = "down"
+
+[[events]]
+name = "energy_and_time"
+expr = "kinetic_energy - 2*angular_momentum[2]**2/(I11 + I33) + max(t, 1) * abs(u1) - sqrt(m_a)"
+"""
+
+
+def _scene(name: str, extra: str = EVENTS) -> Scene:
+    """A built-in scene (gyrostat: every parameter at run time) with extra."""
+    return parse(builtin_text(name) + extra, f"{name}+events")
+
+
+@pytest.fixture(scope="module")
+def compiled(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Compiled], Scene]:
+    scene = _scene("gyrostat")
+    out = tmp_path_factory.mktemp("events")
+    generate(scene, out)
+    return [build.build(out, lang) for lang in ("c", "fortran")], scene
+
+
+def test_the_compiled_events_are_the_reference(compiled: tuple[list[Compiled], Scene]) -> None:
+    """Every event at 500 drawn states and two times: C = Fortran bit for
+    bit, both within a few ulps of the reference's own reading."""
+    (c_build, f_build), scene = compiled
+    rng = np.random.default_rng(5)
+    xs = scene_view.random_states(scene, rng, 500)
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    assert c_build.event_names == ["wheel_fast", "tilted", "energy_and_time"]
+    for t in (0.0, 3.5):
+        g_c = c_build.events(xs, c_build.setup(p), t)
+        g_f = f_build.events(xs, f_build.setup(p), t)
+        ref = scene_view.events(scene, xs, p, t)
+        assert g_c.shape == (500, 3)
+        assert np.array_equal(g_c, g_f)
+        scale = 1 + np.abs(ref)
+        assert np.max(np.abs(g_c - ref) / scale) < 1e-12
+
+
+def test_the_manifest_and_header_name_the_events(
+    compiled: tuple[list[Compiled], Scene], tmp_path: Path
+) -> None:
+    (c_build, _), scene = compiled
+    listed = c_build.manifest["events"]
+    assert [e["name"] for e in listed] == ["wheel_fast", "tilted", "energy_and_time"]
+    assert listed[0] == {
+        "name": "wheel_fast", "expr": "u4 - u2 - 300", "direction": "up", "terminal": True,
+    }  # fmt: skip
+    generate(scene, tmp_path)
+    header = (tmp_path / f"{scene.name}.h").read_text()
+    assert "void gyrostat_events(double t, const double *x, const double *c, double *out);" in (
+        header
+    )
+    assert "out[1]  tilted: cos(q2)*cos(q1) - 0.9 (down)" in header
+
+
+def test_a_scene_without_events_has_no_event_function(tmp_path: Path) -> None:
+    scene = _scene("dual_spin", extra="")
+    generate(scene, tmp_path)
+    assert "_events" not in (tmp_path / "dual_spin.c").read_text()
+    assert "events" not in scene.model_dump()  # its build id is as before events
+
+
+def test_a_cluster_reads_its_outputs_and_runtime_axes(tmp_path: Path) -> None:
+    """rw4_pyramid's momentum and per-wheel power, and a wheel's rate."""
+    extra = """
+[[events]]
+name = "momentum"
+expr = "angular_momentum[0]**2 + angular_momentum[1]**2 - 4"
+
+[[events]]
+name = "second_wheel"
+expr = "w2 - 100 + power[3]"
+"""
+    scene = _scene("rw4_pyramid", extra)
+    generate(scene, tmp_path)
+    c_build = build.build(tmp_path, "c")
+    rng = np.random.default_rng(2)
+    xs = scene_view.random_states(scene, rng, 200)
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    got = c_build.events(xs, c_build.setup(p))
+    ref = scene_view.events(scene, xs, p)
+    assert np.max(np.abs(got - ref) / (1 + np.abs(ref))) < 1e-12
+
+
+@pytest.mark.parametrize(
+    ("events", "message"),
+    [
+        ('[[events]]\nname = "a"\nexpr = "__import__(\'os\')"',
+         "__import__() is not one of sin, cos, sqrt, abs, min, max"),
+        ('[[events]]\nname = "a"\nexpr = "u4 +* 2"', "is not an expression (invalid syntax)"),
+        ('[[events]]\nname = "a"\nexpr = "x9 - 1"',
+         "'x9': not a state, parameter or output of this scene, nor t"),
+        ('[[events]]\nname = "a"\nexpr = "power - 1"', "'power': set outputs.power = true"),
+        ('[[events]]\nname = "a"\nexpr = "u4.real"', "'u4.real' is not allowed"),
+        ('[[events]]\nname = "a"\nexpr = "u4 if u1 else 2"', "is not allowed"),
+        ('[[events]]\nname = "a"\nexpr = "1e999 - u4"', "the number inf is not finite"),
+        ('[[events]]\nname = "a"\nexpr = "max(u4)"', "max() takes 2 argument(s)"),
+        ('[[events]]\nname = "a"\nexpr = "' + "(" * 300 + "u4" + ")" * 300 + '"',
+         "is not an expression"),
+        ('[[events]]\nname = "a"\nexpr = "' + "u4 + " * 300 + '1"', "at most 1000 characters"),
+        ('[[events]]\nname = "a b"\nexpr = "u4"', "a letter, then letters, digits and underscores"),
+        ('[[events]]\nname = "a"\nexpr = "u4"\n[[events]]\nname = "a"\nexpr = "u2"',
+         "events.1.name: 'a' names another event too"),
+        ('[[events]]\nname = "a"\nexpr = "u4"\ndirection = "sideways"', "direction"),
+        ('[[events]]\nname = "a"\nexpr = "u4"\nterminal = "yes"', "terminal"),
+        ('[[events]]\nname = "a"\nexpr = "u4"\nwhen = 3', "when"),
+        ('[outputs]\nangular_momentum = true\n[[events]]\nname = "a"\n'
+         'expr = "angular_momentum - 1"', "has 3 values: write angular_momentum[i]"),
+        ('[outputs]\nangular_momentum = true\n[[events]]\nname = "a"\n'
+         'expr = "angular_momentum[3]"', "angular_momentum[3]: it has 3 values, from 0"),
+    ],
+)  # fmt: skip
+def test_a_wrong_event_is_one_line(events: str, message: str) -> None:
+    with pytest.raises(SceneError) as err:
+        parse(builtin_text("gyrostat") + "\n" + events + "\n", "bad.toml")
+    text = str(err.value)
+    assert message in text and "\n" not in text, text
+    assert len(text) < 400, text
+
+
+def test_the_grammar_never_evaluates_python() -> None:
+    """Names are data: no attribute, call of an unknown function, lambda or
+    comprehension gets through."""
+    for text in ("().__class__", "[u for u in x]", "lambda: 1", "open('f')", "u4[0]", "'a'"):
+        with pytest.raises(ValueError):
+            parse_expr(text)
