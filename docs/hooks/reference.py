@@ -125,6 +125,7 @@ def _model_table(model: type[BaseModel], prefix: str) -> str:
 
 def scene_schema() -> str:
     from gyrogen.scene import Effects, Outputs, Scene, Simulate
+    from gyrogen.scene.events import Event
     from gyrogen.scene.rotors import Rotor
 
     parts = [
@@ -133,6 +134,7 @@ def scene_schema() -> str:
         ("`[outputs]`", Outputs, ""),
         ("`[simulate]`", Simulate, ""),
         ("`[[rotors]]` (one table per wheel of a cluster)", Rotor, ""),
+        ("`[[events]]` (one table per event)", Event, ""),
     ]
     out = []
     for title, model, prefix in parts:
