@@ -114,7 +114,25 @@ def trial(m: Method, uses_time: bool) -> Func:
     return Func(f"{m.name}_trial", params, tuple(body), "double", locals_, doc)
 
 
-def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
+def interpolant(R: Rosenbrock) -> driver.Interpolant:
+    """rodas.f's dense output (CONTRO): x (1 - theta) + theta (xnew + (1 -
+    theta) (r3 + theta r4)), r3 and r4 the D2 and D3 rows' sums of the stages
+    k_1 .. k_5; x is the step's start (the grid writes before x moves)."""
+    r = Var("dense")
+    coefficients = For("i", NX, tuple(
+        assign(r[j, i], combo(R.dense_row(j))) for j in range(len(R.dense))))  # fmt: skip
+
+    def value(theta: E, i: E) -> E:
+        rest = Num(1.0) - theta
+        inner = xnew[i] + rest * (r[0, i] + theta * r[1, i])
+        return x[i] * rest + theta * inner
+
+    return driver.Interpolant((coefficients,), driver.by_state(value))
+
+
+def integrate(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) -> Func:
+    """m.name_integrate, or with grid m.name_grid (the states at the grid's
+    times, from the interpolant)."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Rosenbrock) and isinstance(ctl, registry.RosenbrockControl)
     J, lu, piv, fnew, t1 = (Var(n) for n in ("J", "lu", "piv", "fnew", "t1"))
@@ -134,7 +152,8 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         ]
     args = (t, h, x, f0, *((ft,) if uses_time else ()), lu, piv, c, Var("rtol"), Var("atol"),
             comp, k, dx, xnew)  # fmt: skip
-    taken = driver.accepted(quaternion, last, control.predictive(fac, err), interpolant=[])
+    dense = interpolant(R) if grid else None
+    taken = driver.accepted(quaternion, last, control.predictive(fac, err), [], dense)
     accept: list[S] = [
         *taken,
         For("i", NX, (assign(f0[i], fnew[i]),)),
@@ -168,7 +187,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         assign(h, h / fac),
     ]  # fmt: skip
     body = (
-        *driver.started(m, f0, start),
+        *driver.started(m, f0, start, grid),
         assign(t, Var("t0")),
         *control.start(),
         *(assign(v, False) for v in (rejected_last, nonfinite)),
@@ -185,6 +204,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         Decl("piv", "int", ("NX",), "inout"), *(real(n, "inout") for n in doubles),
         *(Decl(n, "bool") for n in ("last", "rejected_last", "nonfinite", "new_point")),
         Decl("singular", "int"), Decl("start", "int"),
+        *((driver.rows("dense", len(R.dense)), *driver.grid_locals(body)) if grid else ()),
     )  # fmt: skip
     doc = (
         m.doc,
@@ -195,6 +215,9 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         f"A singular E is retried with h times {ctl.singular_shrink:g},"
         f" {ctl.singular_tries} times in a row at most.",
     )
+    if grid:
+        params, name = driver.GRID_PARAMS, f"{m.name}_grid"
+        return Func(name, params, body, "int", locals_, (*doc, *driver.GRID_DOC))
     return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 
 
