@@ -2702,6 +2702,104 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     return error_norm(k[5], x, xnew, rtol, atol);
 }
 
+/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+   when a stage is). */
+static double rodas4_grid_trial(double t, double h, const double *x, const double *f0,
+                                const double *lu, const int *piv, const double *c, double rtol,
+                                double atol, const double *comp, double (*k)[GYROSTAT_NX],
+                                double *dx, double *xnew, double (*dense)[GYROSTAT_NX])
+{
+    double y[GYROSTAT_NX];
+    double fy[GYROSTAT_NX];
+    double inv_h;
+    int i;
+
+    inv_h = 1.0 / h;
+
+    /* stage 1: t */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        k[0][i] = f0[i];
+    }
+    lu_solve(lu, piv, k[0]);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        y[i] = x[i] + 1.544 * k[0][i];
+    }
+    gyrostat_rhs(t + 0.386 * h, y, c, fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
+    }
+    lu_solve(lu, piv, k[1]);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
+    }
+    gyrostat_rhs(t + 0.21 * h, y, c, fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
+    }
+    lu_solve(lu, piv, k[2]);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
+    }
+    gyrostat_rhs(t + 0.63 * h, y, c, fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
+    }
+    lu_solve(lu, piv, k[3]);
+
+    /* stage 5: t + h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
+    }
+    gyrostat_rhs(t + h, y, c, fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
+    }
+    lu_solve(lu, piv, k[4]);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
+        y[i] = x[i] + dx[i];
+    }
+    gyrostat_rhs(t + h, y, c, fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
+    }
+    lu_solve(lu, piv, k[5]);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        dx[i] = dx[i] + k[5][i] - comp[i];
+        xnew[i] = x[i] + dx[i];
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
+                34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] + 1.025137723295662 *
+                k[4][i];
+        dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
+                16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] - 6.594389125716872 *
+                k[4][i];
+    }
+    return error_norm(k[5], x, xnew, rtol, atol);
+}
+
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
    J and f are evaluated once per accepted step; a rejected step only
    refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -2952,7 +3050,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             continue;
         }
         singular = 0;
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
+        err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense);
         stats->rhs_calls = stats->rhs_calls + 5;
         nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, GYROSTAT_NX);
         if (!nonfinite && err <= 1.0 && !last) {
@@ -2977,14 +3075,6 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            for (i = 0; i < GYROSTAT_NX; ++i) {
-                dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
-                        34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] +
-                        1.025137723295662 * k[4][i];
-                dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
-                        16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] -
-                        6.594389125716872 * k[4][i];
-            }
             for (;;) {
                 if (!(g < ntimes)) {
                     break;
@@ -3071,8 +3161,8 @@ size_t gyrostat_rodas4_grid_batch(size_t n, long ntimes, const double *times, do
 }
 
 /* E1 and E2 for this h, factored; 1 when either is singular. */
-static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                         double *e2i, int *piv2)
+static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
+                                double *e2i, int *piv2)
 {
     double gamma_h;
     double alpha_h;
@@ -3100,11 +3190,11 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
 /* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
    F at the three stages, then the corrections to w solved into z1..z3.
    Returns their RMS over scal (NaN or Inf when a stage is). */
-static double radau5_newton(double t, double h, const double *x, const double *c,
-                            const double *e1, const int *piv1, const double *e2r,
-                            const double *e2i, const int *piv2, const double *scal, double *z1,
-                            double *z2, double *z3, const double *w1, const double *w2,
-                            const double *w3)
+static inline double radau5_newton(double t, double h, const double *x, const double *c,
+                                   const double *e1, const int *piv1, const double *e2r,
+                                   const double *e2i, const int *piv2, const double *scal,
+                                   double *z1, double *z2, double *z3, const double *w1,
+                                   const double *w2, const double *w3)
 {
     double y[GYROSTAT_NX];
     double gamma_h;
@@ -3162,10 +3252,10 @@ static double radau5_newton(double t, double h, const double *x, const double *c
    over scal, at least 1e-10 (NaN or Inf when it is). On the first step
    or after a rejection an estimate >= 1 is taken again through f at x + err
    (radau5.f's ESTRAD): one more rhs call. */
-static double radau5_error(double t, double h, const double *x, const double *c,
-                           const double *f0, const double *e1, const int *piv1,
-                           const double *scal, const double *z1, const double *z2,
-                           const double *z3, int again, gyrostat_stats *stats)
+static inline double radau5_error(double t, double h, const double *x, const double *c,
+                                  const double *f0, const double *e1, const int *piv1,
+                                  const double *scal, const double *z1, const double *z2,
+                                  const double *z3, int again, gyrostat_stats *stats)
 {
     double g[GYROSTAT_NX];
     double err[GYROSTAT_NX];
@@ -4512,12 +4602,62 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
     double rq;
     double rho;
     double h2;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc17;
+    double acc19;
+    double acc20;
+    double acc21;
+    double acc22;
+    double acc23;
+    double acc25;
+    double acc33;
+    double acc39;
+    double acc47;
+    double acc49;
+    double acc56;
+    double acc61;
+    double ib21;
+    double ub21;
+    double v16;
+    double v17;
+    double v18;
+    double v22;
+    double v23;
+    double v24;
+    double v25;
+    double v26;
+    double v27;
+    double v29;
+    double v31;
+    double v33;
+    double v35;
+    double v37;
+    double v39;
+    double v40;
+    double v43;
+    double v45;
+    double v47;
+    double v48;
+    double v49;
+    double v50;
+    double v51;
+    double v53;
+    double v54;
+    double v56;
+    double v58;
+    double v59;
+    double v61;
+    double v62;
     double t0;
     double t1;
     long g;
     double told;
     double frac;
     int i;
+    int j;
+    int n;
     int q;
 
     if (!grid_ok(ntimes, times)) {
@@ -4572,7 +4712,223 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 
         /* the coefficients at x, and the step they allow (Jorba and Zou) */
         run = code < 0;
-        taylor_jet(order, x, c, inv, tay);
+        /* orders 0 and 1 of the state and of every node */
+        tay[0][0] = x[0];
+        tay[0][1] = x[1];
+        tay[0][2] = x[2];
+        tay[0][3] = x[3];
+        tay[0][4] = x[4];
+        tay[0][5] = x[5];
+        tay[0][6] = x[6];
+        tay[0][7] = x[7];
+        tay[0][8] = x[8];
+        tay[0][9] = x[9];
+        tay[0][10] = x[10];
+        tay[0][11] = x[11];
+        tay[0][12] = x[12];
+        tay[0][13] = x[13];
+        tay[0][14] = gyrostat_sin(tay[0][2]);
+        tay[0][15] = gyrostat_cos(tay[0][2]);
+        v16 = tay[0][15] * tay[0][9];
+        v17 = tay[0][14] * tay[0][7];
+        v18 = v16 - v17;
+        tay[0][16] = gyrostat_sin(tay[0][1]);
+        tay[0][17] = gyrostat_cos(tay[0][1]);
+        tay[0][18] = v18 / tay[0][17];
+        v22 = tay[0][14] * tay[0][9];
+        v23 = tay[0][15] * tay[0][7];
+        v24 = v22 + v23;
+        v25 = tay[0][18] * tay[0][16];
+        v26 = tay[0][8] - v25;
+        v27 = tay[0][10] - tay[0][8];
+        v29 = c[0] * tay[0][7];
+        v31 = c[2] * tay[0][9];
+        tay[0][19] = v29 + v31;
+        v33 = tay[0][8] * tay[0][19];
+        v35 = c[1] * tay[0][7];
+        v37 = c[3] * tay[0][9];
+        tay[0][20] = v35 + v37;
+        v39 = tay[0][10] * tay[0][20];
+        v40 = v33 + v39;
+        v43 = c[4] * tay[0][7];
+        v45 = c[5] * tay[0][9];
+        tay[0][21] = v43 + v45;
+        v47 = tay[0][7] * tay[0][21];
+        v48 = c[6] + v47;
+        v49 = tay[0][9] * tay[0][9];
+        v50 = c[4] * v49;
+        v51 = v48 - v50;
+        v53 = c[7] * tay[0][7];
+        v54 = c[0] * tay[0][9];
+        tay[0][22] = v53 - v54;
+        v56 = tay[0][8] * tay[0][22];
+        v58 = c[8] * tay[0][7];
+        v59 = c[1] * tay[0][9];
+        tay[0][23] = v58 - v59;
+        v61 = tay[0][10] * tay[0][23];
+        v62 = v56 + v61;
+        ib21 = 1.0 / tay[0][17];
+        ub21 = tay[0][18] / tay[0][17];
+        tay[1][0] = tay[0][18];
+        tay[1][1] = v24;
+        tay[1][24] = tay[1][1];
+        tay[1][2] = v26;
+        tay[1][25] = tay[1][2];
+        tay[1][3] = v27;
+        tay[1][4] = tay[0][11];
+        tay[1][5] = tay[0][12];
+        tay[1][6] = tay[0][13];
+        tay[1][7] = v40;
+        tay[1][8] = v51;
+        tay[1][9] = v62;
+        tay[1][10] = c[9];
+        tay[1][11] = 0.0;
+        tay[1][12] = 0.0;
+        tay[1][13] = c[10];
+        tay[1][14] = tay[1][2] * tay[0][15];
+        tay[1][15] = -(tay[1][2] * tay[0][14]);
+        v16 = tay[0][15] * tay[1][9] + tay[1][15] * tay[0][9];
+        v17 = tay[0][14] * tay[1][7] + tay[1][14] * tay[0][7];
+        v18 = v16 - v17;
+        tay[1][16] = tay[1][1] * tay[0][17];
+        tay[1][17] = -(tay[1][1] * tay[0][16]);
+        tay[1][18] = v18 * ib21 - tay[1][17] * ub21;
+        v22 = tay[0][14] * tay[1][9] + tay[1][14] * tay[0][9];
+        v23 = tay[0][15] * tay[1][7] + tay[1][15] * tay[0][7];
+        v24 = v22 + v23;
+        v25 = tay[0][18] * tay[1][16] + tay[1][18] * tay[0][16];
+        v26 = tay[1][8] - v25;
+        v27 = tay[1][10] - tay[1][8];
+        v29 = c[0] * tay[1][7];
+        v31 = c[2] * tay[1][9];
+        tay[1][19] = v29 + v31;
+        v33 = tay[0][8] * tay[1][19] + tay[1][8] * tay[0][19];
+        v35 = c[1] * tay[1][7];
+        v37 = c[3] * tay[1][9];
+        tay[1][20] = v35 + v37;
+        v39 = tay[0][10] * tay[1][20] + tay[1][10] * tay[0][20];
+        v40 = v33 + v39;
+        v43 = c[4] * tay[1][7];
+        v45 = c[5] * tay[1][9];
+        tay[1][21] = v43 + v45;
+        v47 = tay[0][7] * tay[1][21] + tay[1][7] * tay[0][21];
+        v48 = v47;
+        v49 = tay[0][9] * tay[1][9] + tay[1][9] * tay[0][9];
+        v50 = c[4] * v49;
+        v51 = v48 - v50;
+        v53 = c[7] * tay[1][7];
+        v54 = c[0] * tay[1][9];
+        tay[1][22] = v53 - v54;
+        v56 = tay[0][8] * tay[1][22] + tay[1][8] * tay[0][22];
+        v58 = c[8] * tay[1][7];
+        v59 = c[1] * tay[1][9];
+        tay[1][23] = v58 - v59;
+        v61 = tay[0][10] * tay[1][23] + tay[1][10] * tay[0][23];
+        v62 = v56 + v61;
+        tay[2][0] = tay[1][18] * inv[2];
+        tay[2][1] = v24 * inv[2];
+        tay[2][24] = v24;
+        tay[2][2] = v26 * inv[2];
+        tay[2][25] = v26;
+        tay[2][3] = v27 * inv[2];
+        tay[2][4] = tay[1][11] * inv[2];
+        tay[2][5] = tay[1][12] * inv[2];
+        tay[2][6] = tay[1][13] * inv[2];
+        tay[2][7] = v40 * inv[2];
+        tay[2][8] = v51 * inv[2];
+        tay[2][9] = v62 * inv[2];
+        tay[2][10] = 0.0;
+        tay[2][11] = 0.0;
+        tay[2][12] = 0.0;
+        tay[2][13] = 0.0;
+
+        /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+        for (n = 2; n < order; ++n) {
+            acc39 = tay[1][10] * tay[n - 1][20];
+            acc61 = tay[1][10] * tay[n - 1][23];
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc19 = 0.0;
+            acc20 = 0.0;
+            acc21 = 0.0;
+            acc22 = 0.0;
+            acc23 = 0.0;
+            acc25 = 0.0;
+            acc33 = 0.0;
+            acc47 = 0.0;
+            acc49 = 0.0;
+            acc56 = 0.0;
+            for (j = 1; j < n; ++j) {
+                acc14 = acc14 + tay[j][25] * tay[n - j][15];
+                acc15 = acc15 + tay[j][25] * tay[n - j][14];
+                acc16 = acc16 + tay[j][15] * tay[n - j][9];
+                acc17 = acc17 + tay[j][14] * tay[n - j][7];
+                acc19 = acc19 + tay[j][24] * tay[n - j][17];
+                acc20 = acc20 + tay[j][24] * tay[n - j][16];
+                acc21 = acc21 + tay[j][17] * tay[n - j][18];
+                acc22 = acc22 + tay[j][14] * tay[n - j][9];
+                acc23 = acc23 + tay[j][15] * tay[n - j][7];
+                acc25 = acc25 + tay[j][18] * tay[n - j][16];
+                acc33 = acc33 + tay[j][8] * tay[n - j][19];
+                acc47 = acc47 + tay[j][7] * tay[n - j][21];
+                acc49 = acc49 + tay[j][9] * tay[n - j][9];
+                acc56 = acc56 + tay[j][8] * tay[n - j][22];
+            }
+            tay[n][14] = acc14 * inv[n] + tay[n][2] * tay[0][15];
+            tay[n][15] = -(acc15 * inv[n]) - tay[n][2] * tay[0][14];
+            v16 = acc16 + tay[0][15] * tay[n][9] + tay[n][15] * tay[0][9];
+            v17 = acc17 + tay[0][14] * tay[n][7] + tay[n][14] * tay[0][7];
+            v18 = v16 - v17;
+            tay[n][16] = acc19 * inv[n] + tay[n][1] * tay[0][17];
+            tay[n][17] = -(acc20 * inv[n]) - tay[n][1] * tay[0][16];
+            tay[n][18] = v18 * ib21 - (acc21 * ib21 + tay[n][17] * ub21);
+            v22 = acc22 + tay[0][14] * tay[n][9] + tay[n][14] * tay[0][9];
+            v23 = acc23 + tay[0][15] * tay[n][7] + tay[n][15] * tay[0][7];
+            v24 = v22 + v23;
+            v25 = acc25 + tay[0][18] * tay[n][16] + tay[n][18] * tay[0][16];
+            v26 = tay[n][8] - v25;
+            v27 = -tay[n][8];
+            v29 = c[0] * tay[n][7];
+            v31 = c[2] * tay[n][9];
+            tay[n][19] = v29 + v31;
+            v33 = acc33 + tay[0][8] * tay[n][19] + tay[n][8] * tay[0][19];
+            v35 = c[1] * tay[n][7];
+            v37 = c[3] * tay[n][9];
+            tay[n][20] = v35 + v37;
+            v39 = acc39 + tay[0][10] * tay[n][20];
+            v40 = v33 + v39;
+            v43 = c[4] * tay[n][7];
+            v45 = c[5] * tay[n][9];
+            tay[n][21] = v43 + v45;
+            v47 = acc47 + tay[0][7] * tay[n][21] + tay[n][7] * tay[0][21];
+            v48 = v47;
+            v49 = acc49 + tay[0][9] * tay[n][9] + tay[n][9] * tay[0][9];
+            v50 = c[4] * v49;
+            v51 = v48 - v50;
+            v53 = c[7] * tay[n][7];
+            v54 = c[0] * tay[n][9];
+            tay[n][22] = v53 - v54;
+            v56 = acc56 + tay[0][8] * tay[n][22] + tay[n][8] * tay[0][22];
+            v58 = c[8] * tay[n][7];
+            v59 = c[1] * tay[n][9];
+            tay[n][23] = v58 - v59;
+            v61 = acc61 + tay[0][10] * tay[n][23];
+            v62 = v56 + v61;
+            tay[n + 1][0] = tay[n][18] * inv[n + 1];
+            tay[n + 1][1] = v24 * inv[n + 1];
+            tay[n + 1][24] = v24;
+            tay[n + 1][2] = v26 * inv[n + 1];
+            tay[n + 1][25] = v26;
+            tay[n + 1][3] = v27 * inv[n + 1];
+            tay[n + 1][4] = 0.0;
+            tay[n + 1][5] = 0.0;
+            tay[n + 1][6] = 0.0;
+            tay[n + 1][7] = v40 * inv[n + 1];
+            tay[n + 1][8] = v51 * inv[n + 1];
+            tay[n + 1][9] = v62 * inv[n + 1];
+        }
         stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
         rp = DBL_MAX;
         rq = DBL_MAX;

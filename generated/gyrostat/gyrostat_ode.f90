@@ -2889,6 +2889,120 @@ contains
     return
   end function rodas4_trial
 
+  ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+  ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+  ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+  ! Stiffly accurate: stage 6 sits on the embedded solution and the step
+  ! is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+  ! when a stage is).
+  function rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, &
+          dense) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: lu(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: comp(0:nx - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
+    real(c_double), intent(inout) :: dx(0:nx - 1)
+    real(c_double), intent(inout) :: xnew(0:nx - 1)
+    real(c_double), intent(inout) :: dense(0:nx - 1, 0:1)
+    real(c_double) :: res
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: fy(0:nx - 1)
+    real(c_double) :: inv_h
+    integer(c_int) :: i
+
+    inv_h = 1.0_c_double / h
+
+    ! stage 1: t
+    do i = 0, nx - 1
+      k(i, 0) = f0(i)
+    end do
+    call lu_solve(lu, piv, k(:, 0))
+
+    ! stage 2: t + 0.386 h
+    do i = 0, nx - 1
+      y(i) = x(i) + 1.544_c_double * k(i, 0)
+    end do
+    call gyrostat_rhs(t + 0.386_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 1) = fy(i) + inv_h * ((-5.6688_c_double) * k(i, 0))
+    end do
+    call lu_solve(lu, piv, k(:, 1))
+
+    ! stage 3: t + 0.21 h
+    do i = 0, nx - 1
+      y(i) = (x(i) + 0.9466785280815826_c_double * k(i, 0)) + 0.2557011698983284_c_double * k(i, 1)
+    end do
+    call gyrostat_rhs(t + 0.21_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 2) = fy(i) + inv_h * ((-2.430093356833875_c_double) * k(i, &
+          0) - 0.2063599157091915_c_double * k(i, 1))
+    end do
+    call lu_solve(lu, piv, k(:, 2))
+
+    ! stage 4: t + 0.63 h
+    do i = 0, nx - 1
+      y(i) = ((x(i) + 3.314825187068521_c_double * k(i, 0)) + 2.896124015972201_c_double * k(i, &
+          1)) + 0.9986419139977817_c_double * k(i, 2)
+    end do
+    call gyrostat_rhs(t + 0.63_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 3) = fy(i) + inv_h * (((-0.1073529058151375_c_double) * k(i, &
+          0) - 9.594562251023355_c_double * k(i, 1)) - 20.47028614809616_c_double * k(i, 2))
+    end do
+    call lu_solve(lu, piv, k(:, 3))
+
+    ! stage 5: t + h
+    do i = 0, nx - 1
+      y(i) = (((x(i) + 1.221224509226641_c_double * k(i, 0)) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, 3)
+    end do
+    call gyrostat_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 4) = fy(i) + inv_h * (((7.496443313967647_c_double * k(i, &
+          0) - 10.24680431464352_c_double * k(i, 1)) - 33.99990352819905_c_double * k(i, &
+          2)) + 11.7089089320616_c_double * k(i, 3))
+    end do
+    call lu_solve(lu, piv, k(:, 4))
+
+    ! stage 6: t + h, on the embedded solution
+    do i = 0, nx - 1
+      dx(i) = (((1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, &
+          3)) + k(i, 4)
+      y(i) = x(i) + dx(i)
+    end do
+    call gyrostat_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 5) = fy(i) + inv_h * ((((8.083246795921522_c_double * k(i, &
+          0) - 7.981132988064893_c_double * k(i, 1)) - 31.52159432874371_c_double * k(i, &
+          2)) + 16.31930543123136_c_double * k(i, 3)) - 6.058818238834054_c_double * k(i, 4))
+    end do
+    call lu_solve(lu, piv, k(:, 5))
+
+    ! the new solution x + dx: the embedded one plus k_6
+    do i = 0, nx - 1
+      dx(i) = (dx(i) + k(i, 5)) - comp(i)
+      xnew(i) = x(i) + dx(i)
+    end do
+    do i = 0, nx - 1
+      dense(i, 0) = (((10.12623508344586_c_double * k(i, 0) - 7.487995877610167_c_double * k(i, &
+          1)) - 34.80091861555747_c_double * k(i, 2)) - 7.992771707568823_c_double * k(i, &
+          3)) + 1.025137723295662_c_double * k(i, 4)
+      dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
+          0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
+          2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
+    end do
+    res = error_norm(k(:, 5), x, xnew, rtol, atol)
+    return
+  end function rodas4_grid_trial
+
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! J and f are evaluated once per accepted step; a rejected step only
   ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -3168,7 +3282,7 @@ contains
         cycle
       end if
       singular = 0
-      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew)
+      err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense)
       stats%rhs_calls = stats%rhs_calls + 5
       nonfinite = .not. ieee_is_finite(err) .or. .not. all_finite(xnew, nx)
       if (.not. nonfinite .and. err <= 1.0_c_double .and. .not. last) then
@@ -3194,14 +3308,6 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do i = 0, nx - 1
-          dense(i, 0) = (((10.12623508344586_c_double * k(i, &
-              0) - 7.487995877610167_c_double * k(i, 1)) - 34.80091861555747_c_double * k(i, &
-              2)) - 7.992771707568823_c_double * k(i, 3)) + 1.025137723295662_c_double * k(i, 4)
-          dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
-              0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
-              2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
-        end do
         do
           if (.not. (g < ntimes)) then
             exit
@@ -4908,6 +5014,54 @@ contains
     real(c_double) :: rq
     real(c_double) :: rho
     real(c_double) :: h2
+    real(c_double) :: acc14
+    real(c_double) :: acc15
+    real(c_double) :: acc16
+    real(c_double) :: acc17
+    real(c_double) :: acc19
+    real(c_double) :: acc20
+    real(c_double) :: acc21
+    real(c_double) :: acc22
+    real(c_double) :: acc23
+    real(c_double) :: acc25
+    real(c_double) :: acc33
+    real(c_double) :: acc39
+    real(c_double) :: acc47
+    real(c_double) :: acc49
+    real(c_double) :: acc56
+    real(c_double) :: acc61
+    real(c_double) :: ib21
+    real(c_double) :: ub21
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v22
+    real(c_double) :: v23
+    real(c_double) :: v24
+    real(c_double) :: v25
+    real(c_double) :: v26
+    real(c_double) :: v27
+    real(c_double) :: v29
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v35
+    real(c_double) :: v37
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v43
+    real(c_double) :: v45
+    real(c_double) :: v47
+    real(c_double) :: v48
+    real(c_double) :: v49
+    real(c_double) :: v50
+    real(c_double) :: v51
+    real(c_double) :: v53
+    real(c_double) :: v54
+    real(c_double) :: v56
+    real(c_double) :: v58
+    real(c_double) :: v59
+    real(c_double) :: v61
+    real(c_double) :: v62
     real(c_double) :: t0
     real(c_double) :: t1
     integer(c_long) :: g
@@ -4915,6 +5069,8 @@ contains
     real(c_double) :: frac
     real(c_double) :: acc
     integer(c_int) :: i
+    integer(c_int) :: j
+    integer(c_int) :: n
     integer(c_int) :: q
 
     if (.not. grid_ok(ntimes, times)) then
@@ -4971,7 +5127,223 @@ contains
 
       ! the coefficients at x, and the step they allow (Jorba and Zou)
       run = code < 0
-      call taylor_jet(order, x, c, inv, tay)
+      ! orders 0 and 1 of the state and of every node
+      tay(0, 0) = x(0)
+      tay(1, 0) = x(1)
+      tay(2, 0) = x(2)
+      tay(3, 0) = x(3)
+      tay(4, 0) = x(4)
+      tay(5, 0) = x(5)
+      tay(6, 0) = x(6)
+      tay(7, 0) = x(7)
+      tay(8, 0) = x(8)
+      tay(9, 0) = x(9)
+      tay(10, 0) = x(10)
+      tay(11, 0) = x(11)
+      tay(12, 0) = x(12)
+      tay(13, 0) = x(13)
+      tay(14, 0) = gyrostat_sin(tay(2, 0))
+      tay(15, 0) = gyrostat_cos(tay(2, 0))
+      v16 = tay(15, 0) * tay(9, 0)
+      v17 = tay(14, 0) * tay(7, 0)
+      v18 = v16 - v17
+      tay(16, 0) = gyrostat_sin(tay(1, 0))
+      tay(17, 0) = gyrostat_cos(tay(1, 0))
+      tay(18, 0) = v18 / tay(17, 0)
+      v22 = tay(14, 0) * tay(9, 0)
+      v23 = tay(15, 0) * tay(7, 0)
+      v24 = v22 + v23
+      v25 = tay(18, 0) * tay(16, 0)
+      v26 = tay(8, 0) - v25
+      v27 = tay(10, 0) - tay(8, 0)
+      v29 = c(0) * tay(7, 0)
+      v31 = c(2) * tay(9, 0)
+      tay(19, 0) = v29 + v31
+      v33 = tay(8, 0) * tay(19, 0)
+      v35 = c(1) * tay(7, 0)
+      v37 = c(3) * tay(9, 0)
+      tay(20, 0) = v35 + v37
+      v39 = tay(10, 0) * tay(20, 0)
+      v40 = v33 + v39
+      v43 = c(4) * tay(7, 0)
+      v45 = c(5) * tay(9, 0)
+      tay(21, 0) = v43 + v45
+      v47 = tay(7, 0) * tay(21, 0)
+      v48 = c(6) + v47
+      v49 = tay(9, 0) * tay(9, 0)
+      v50 = c(4) * v49
+      v51 = v48 - v50
+      v53 = c(7) * tay(7, 0)
+      v54 = c(0) * tay(9, 0)
+      tay(22, 0) = v53 - v54
+      v56 = tay(8, 0) * tay(22, 0)
+      v58 = c(8) * tay(7, 0)
+      v59 = c(1) * tay(9, 0)
+      tay(23, 0) = v58 - v59
+      v61 = tay(10, 0) * tay(23, 0)
+      v62 = v56 + v61
+      ib21 = 1.0_c_double / tay(17, 0)
+      ub21 = tay(18, 0) / tay(17, 0)
+      tay(0, 1) = tay(18, 0)
+      tay(1, 1) = v24
+      tay(24, 1) = tay(1, 1)
+      tay(2, 1) = v26
+      tay(25, 1) = tay(2, 1)
+      tay(3, 1) = v27
+      tay(4, 1) = tay(11, 0)
+      tay(5, 1) = tay(12, 0)
+      tay(6, 1) = tay(13, 0)
+      tay(7, 1) = v40
+      tay(8, 1) = v51
+      tay(9, 1) = v62
+      tay(10, 1) = c(9)
+      tay(11, 1) = 0.0_c_double
+      tay(12, 1) = 0.0_c_double
+      tay(13, 1) = c(10)
+      tay(14, 1) = tay(2, 1) * tay(15, 0)
+      tay(15, 1) = -tay(2, 1) * tay(14, 0)
+      v16 = tay(15, 0) * tay(9, 1) + tay(15, 1) * tay(9, 0)
+      v17 = tay(14, 0) * tay(7, 1) + tay(14, 1) * tay(7, 0)
+      v18 = v16 - v17
+      tay(16, 1) = tay(1, 1) * tay(17, 0)
+      tay(17, 1) = -tay(1, 1) * tay(16, 0)
+      tay(18, 1) = v18 * ib21 - tay(17, 1) * ub21
+      v22 = tay(14, 0) * tay(9, 1) + tay(14, 1) * tay(9, 0)
+      v23 = tay(15, 0) * tay(7, 1) + tay(15, 1) * tay(7, 0)
+      v24 = v22 + v23
+      v25 = tay(18, 0) * tay(16, 1) + tay(18, 1) * tay(16, 0)
+      v26 = tay(8, 1) - v25
+      v27 = tay(10, 1) - tay(8, 1)
+      v29 = c(0) * tay(7, 1)
+      v31 = c(2) * tay(9, 1)
+      tay(19, 1) = v29 + v31
+      v33 = tay(8, 0) * tay(19, 1) + tay(8, 1) * tay(19, 0)
+      v35 = c(1) * tay(7, 1)
+      v37 = c(3) * tay(9, 1)
+      tay(20, 1) = v35 + v37
+      v39 = tay(10, 0) * tay(20, 1) + tay(10, 1) * tay(20, 0)
+      v40 = v33 + v39
+      v43 = c(4) * tay(7, 1)
+      v45 = c(5) * tay(9, 1)
+      tay(21, 1) = v43 + v45
+      v47 = tay(7, 0) * tay(21, 1) + tay(7, 1) * tay(21, 0)
+      v48 = v47
+      v49 = tay(9, 0) * tay(9, 1) + tay(9, 1) * tay(9, 0)
+      v50 = c(4) * v49
+      v51 = v48 - v50
+      v53 = c(7) * tay(7, 1)
+      v54 = c(0) * tay(9, 1)
+      tay(22, 1) = v53 - v54
+      v56 = tay(8, 0) * tay(22, 1) + tay(8, 1) * tay(22, 0)
+      v58 = c(8) * tay(7, 1)
+      v59 = c(1) * tay(9, 1)
+      tay(23, 1) = v58 - v59
+      v61 = tay(10, 0) * tay(23, 1) + tay(10, 1) * tay(23, 0)
+      v62 = v56 + v61
+      tay(0, 2) = tay(18, 1) * inv(2)
+      tay(1, 2) = v24 * inv(2)
+      tay(24, 2) = v24
+      tay(2, 2) = v26 * inv(2)
+      tay(25, 2) = v26
+      tay(3, 2) = v27 * inv(2)
+      tay(4, 2) = tay(11, 1) * inv(2)
+      tay(5, 2) = tay(12, 1) * inv(2)
+      tay(6, 2) = tay(13, 1) * inv(2)
+      tay(7, 2) = v40 * inv(2)
+      tay(8, 2) = v51 * inv(2)
+      tay(9, 2) = v62 * inv(2)
+      tay(10, 2) = 0.0_c_double
+      tay(11, 2) = 0.0_c_double
+      tay(12, 2) = 0.0_c_double
+      tay(13, 2) = 0.0_c_double
+
+      ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+      do n = 2, order - 1
+        acc39 = tay(10, 1) * tay(20, n - 1)
+        acc61 = tay(10, 1) * tay(23, n - 1)
+        acc14 = 0.0_c_double
+        acc15 = 0.0_c_double
+        acc16 = 0.0_c_double
+        acc17 = 0.0_c_double
+        acc19 = 0.0_c_double
+        acc20 = 0.0_c_double
+        acc21 = 0.0_c_double
+        acc22 = 0.0_c_double
+        acc23 = 0.0_c_double
+        acc25 = 0.0_c_double
+        acc33 = 0.0_c_double
+        acc47 = 0.0_c_double
+        acc49 = 0.0_c_double
+        acc56 = 0.0_c_double
+        do j = 1, n - 1
+          acc14 = acc14 + tay(25, j) * tay(15, n - j)
+          acc15 = acc15 + tay(25, j) * tay(14, n - j)
+          acc16 = acc16 + tay(15, j) * tay(9, n - j)
+          acc17 = acc17 + tay(14, j) * tay(7, n - j)
+          acc19 = acc19 + tay(24, j) * tay(17, n - j)
+          acc20 = acc20 + tay(24, j) * tay(16, n - j)
+          acc21 = acc21 + tay(17, j) * tay(18, n - j)
+          acc22 = acc22 + tay(14, j) * tay(9, n - j)
+          acc23 = acc23 + tay(15, j) * tay(7, n - j)
+          acc25 = acc25 + tay(18, j) * tay(16, n - j)
+          acc33 = acc33 + tay(8, j) * tay(19, n - j)
+          acc47 = acc47 + tay(7, j) * tay(21, n - j)
+          acc49 = acc49 + tay(9, j) * tay(9, n - j)
+          acc56 = acc56 + tay(8, j) * tay(22, n - j)
+        end do
+        tay(14, n) = acc14 * inv(n) + tay(2, n) * tay(15, 0)
+        tay(15, n) = (-acc15 * inv(n)) - tay(2, n) * tay(14, 0)
+        v16 = (acc16 + tay(15, 0) * tay(9, n)) + tay(15, n) * tay(9, 0)
+        v17 = (acc17 + tay(14, 0) * tay(7, n)) + tay(14, n) * tay(7, 0)
+        v18 = v16 - v17
+        tay(16, n) = acc19 * inv(n) + tay(1, n) * tay(17, 0)
+        tay(17, n) = (-acc20 * inv(n)) - tay(1, n) * tay(16, 0)
+        tay(18, n) = v18 * ib21 - (acc21 * ib21 + tay(17, n) * ub21)
+        v22 = (acc22 + tay(14, 0) * tay(9, n)) + tay(14, n) * tay(9, 0)
+        v23 = (acc23 + tay(15, 0) * tay(7, n)) + tay(15, n) * tay(7, 0)
+        v24 = v22 + v23
+        v25 = (acc25 + tay(18, 0) * tay(16, n)) + tay(18, n) * tay(16, 0)
+        v26 = tay(8, n) - v25
+        v27 = -tay(8, n)
+        v29 = c(0) * tay(7, n)
+        v31 = c(2) * tay(9, n)
+        tay(19, n) = v29 + v31
+        v33 = (acc33 + tay(8, 0) * tay(19, n)) + tay(8, n) * tay(19, 0)
+        v35 = c(1) * tay(7, n)
+        v37 = c(3) * tay(9, n)
+        tay(20, n) = v35 + v37
+        v39 = acc39 + tay(10, 0) * tay(20, n)
+        v40 = v33 + v39
+        v43 = c(4) * tay(7, n)
+        v45 = c(5) * tay(9, n)
+        tay(21, n) = v43 + v45
+        v47 = (acc47 + tay(7, 0) * tay(21, n)) + tay(7, n) * tay(21, 0)
+        v48 = v47
+        v49 = (acc49 + tay(9, 0) * tay(9, n)) + tay(9, n) * tay(9, 0)
+        v50 = c(4) * v49
+        v51 = v48 - v50
+        v53 = c(7) * tay(7, n)
+        v54 = c(0) * tay(9, n)
+        tay(22, n) = v53 - v54
+        v56 = (acc56 + tay(8, 0) * tay(22, n)) + tay(8, n) * tay(22, 0)
+        v58 = c(8) * tay(7, n)
+        v59 = c(1) * tay(9, n)
+        tay(23, n) = v58 - v59
+        v61 = acc61 + tay(10, 0) * tay(23, n)
+        v62 = v56 + v61
+        tay(0, n + 1) = tay(18, n) * inv(n + 1)
+        tay(1, n + 1) = v24 * inv(n + 1)
+        tay(24, n + 1) = v24
+        tay(2, n + 1) = v26 * inv(n + 1)
+        tay(25, n + 1) = v26
+        tay(3, n + 1) = v27 * inv(n + 1)
+        tay(4, n + 1) = 0.0_c_double
+        tay(5, n + 1) = 0.0_c_double
+        tay(6, n + 1) = 0.0_c_double
+        tay(7, n + 1) = v40 * inv(n + 1)
+        tay(8, n + 1) = v51 * inv(n + 1)
+        tay(9, n + 1) = v62 * inv(n + 1)
+      end do
       stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
       rp = huge(1.0_c_double)
       rq = huge(1.0_c_double)

@@ -2729,6 +2729,104 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     return error_norm(k[5], x, xnew, rtol, atol);
 }
 
+/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+   when a stage is). */
+static double rodas4_grid_trial(double t, double h, const double *x, const double *f0,
+                                const double *lu, const int *piv, const double *c, double rtol,
+                                double atol, const double *comp, double (*k)[RW3_ORTHOGONAL_NX],
+                                double *dx, double *xnew, double (*dense)[RW3_ORTHOGONAL_NX])
+{
+    double y[RW3_ORTHOGONAL_NX];
+    double fy[RW3_ORTHOGONAL_NX];
+    double inv_h;
+    int i;
+
+    inv_h = 1.0 / h;
+
+    /* stage 1: t */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        k[0][i] = f0[i];
+    }
+    lu_solve(lu, piv, k[0]);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        y[i] = x[i] + 1.544 * k[0][i];
+    }
+    rw3_orthogonal_rhs(t + 0.386 * h, y, c, fy);
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
+    }
+    lu_solve(lu, piv, k[1]);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
+    }
+    rw3_orthogonal_rhs(t + 0.21 * h, y, c, fy);
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
+    }
+    lu_solve(lu, piv, k[2]);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
+    }
+    rw3_orthogonal_rhs(t + 0.63 * h, y, c, fy);
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
+    }
+    lu_solve(lu, piv, k[3]);
+
+    /* stage 5: t + h */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
+    }
+    rw3_orthogonal_rhs(t + h, y, c, fy);
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
+    }
+    lu_solve(lu, piv, k[4]);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
+        y[i] = x[i] + dx[i];
+    }
+    rw3_orthogonal_rhs(t + h, y, c, fy);
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
+    }
+    lu_solve(lu, piv, k[5]);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        dx[i] = dx[i] + k[5][i] - comp[i];
+        xnew[i] = x[i] + dx[i];
+    }
+    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
+        dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
+                34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] + 1.025137723295662 *
+                k[4][i];
+        dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
+                16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] - 6.594389125716872 *
+                k[4][i];
+    }
+    return error_norm(k[5], x, xnew, rtol, atol);
+}
+
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
    J and f are evaluated once per accepted step; a rejected step only
    refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -2981,7 +3079,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             continue;
         }
         singular = 0;
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
+        err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense);
         stats->rhs_calls = stats->rhs_calls + 5;
         nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, RW3_ORTHOGONAL_NX);
         if (!nonfinite && err <= 1.0 && !last) {
@@ -3006,14 +3104,6 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-                dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
-                        34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] +
-                        1.025137723295662 * k[4][i];
-                dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
-                        16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] -
-                        6.594389125716872 * k[4][i];
-            }
             for (;;) {
                 if (!(g < ntimes)) {
                     break;
@@ -3100,8 +3190,8 @@ size_t rw3_orthogonal_rodas4_grid_batch(size_t n, long ntimes, const double *tim
 }
 
 /* E1 and E2 for this h, factored; 1 when either is singular. */
-static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                         double *e2i, int *piv2)
+static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
+                                double *e2i, int *piv2)
 {
     double gamma_h;
     double alpha_h;
@@ -3129,11 +3219,11 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
 /* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
    F at the three stages, then the corrections to w solved into z1..z3.
    Returns their RMS over scal (NaN or Inf when a stage is). */
-static double radau5_newton(double t, double h, const double *x, const double *c,
-                            const double *e1, const int *piv1, const double *e2r,
-                            const double *e2i, const int *piv2, const double *scal, double *z1,
-                            double *z2, double *z3, const double *w1, const double *w2,
-                            const double *w3)
+static inline double radau5_newton(double t, double h, const double *x, const double *c,
+                                   const double *e1, const int *piv1, const double *e2r,
+                                   const double *e2i, const int *piv2, const double *scal,
+                                   double *z1, double *z2, double *z3, const double *w1,
+                                   const double *w2, const double *w3)
 {
     double y[RW3_ORTHOGONAL_NX];
     double gamma_h;
@@ -3191,10 +3281,10 @@ static double radau5_newton(double t, double h, const double *x, const double *c
    over scal, at least 1e-10 (NaN or Inf when it is). On the first step
    or after a rejection an estimate >= 1 is taken again through f at x + err
    (radau5.f's ESTRAD): one more rhs call. */
-static double radau5_error(double t, double h, const double *x, const double *c,
-                           const double *f0, const double *e1, const int *piv1,
-                           const double *scal, const double *z1, const double *z2,
-                           const double *z3, int again, rw3_orthogonal_stats *stats)
+static inline double radau5_error(double t, double h, const double *x, const double *c,
+                                  const double *f0, const double *e1, const int *piv1,
+                                  const double *scal, const double *z1, const double *z2,
+                                  const double *z3, int again, rw3_orthogonal_stats *stats)
 {
     double g[RW3_ORTHOGONAL_NX];
     double err[RW3_ORTHOGONAL_NX];
@@ -4623,12 +4713,89 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
     double rq;
     double rho;
     double h2;
+    double acc9;
+    double acc10;
+    double acc11;
+    double acc12;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc17;
+    double acc18;
+    double acc20;
+    double acc38;
+    double acc49;
+    double acc55;
+    double acc65;
+    double acc71;
+    double acc73;
+    double ib16;
+    double ub16;
+    double v11;
+    double v12;
+    double v13;
+    double v17;
+    double v18;
+    double v19;
+    double v20;
+    double v21;
+    double v24;
+    double v25;
+    double v26;
+    double v28;
+    double v30;
+    double v31;
+    double v33;
+    double v34;
+    double v36;
+    double v38;
+    double v39;
+    double v40;
+    double v42;
+    double v43;
+    double v44;
+    double v45;
+    double v47;
+    double v49;
+    double v50;
+    double v51;
+    double v55;
+    double v56;
+    double v57;
+    double v58;
+    double v59;
+    double v61;
+    double v62;
+    double v63;
+    double v65;
+    double v66;
+    double v67;
+    double v68;
+    double v71;
+    double v72;
+    double v73;
+    double v74;
+    double v75;
+    double v76;
+    double v78;
+    double v80;
+    double v81;
+    double v82;
+    double v83;
+    double v85;
+    double v86;
+    double v87;
+    double v88;
+    double v89;
+    double v93;
     double t0;
     double t1;
     long g;
     double told;
     double frac;
     int i;
+    int j;
+    int n;
     int q;
 
     if (!grid_ok(ntimes, times)) {
@@ -4683,7 +4850,281 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 
         /* the coefficients at x, and the step they allow (Jorba and Zou) */
         run = code < 0;
-        taylor_jet(order, x, c, inv, tay);
+        /* orders 0 and 1 of the state and of every node */
+        tay[0][0] = x[0];
+        tay[0][1] = x[1];
+        tay[0][2] = x[2];
+        tay[0][3] = x[3];
+        tay[0][4] = x[4];
+        tay[0][5] = x[5];
+        tay[0][6] = x[6];
+        tay[0][7] = x[7];
+        tay[0][8] = x[8];
+        tay[0][9] = rw3_orthogonal_sin(tay[0][2]);
+        tay[0][10] = rw3_orthogonal_cos(tay[0][2]);
+        v11 = tay[0][10] * tay[0][5];
+        v12 = tay[0][9] * tay[0][3];
+        v13 = v11 - v12;
+        tay[0][11] = rw3_orthogonal_sin(tay[0][1]);
+        tay[0][12] = rw3_orthogonal_cos(tay[0][1]);
+        tay[0][13] = v13 / tay[0][12];
+        v17 = tay[0][9] * tay[0][5];
+        v18 = tay[0][10] * tay[0][3];
+        v19 = v17 + v18;
+        v20 = tay[0][13] * tay[0][11];
+        v21 = tay[0][4] - v20;
+        v24 = tay[0][8] - tay[0][5];
+        v25 = -0.0001 * v24;
+        v26 = -v25;
+        v28 = 0.035 * tay[0][6];
+        v30 = 2.005 * tay[0][4];
+        v31 = v28 + v30;
+        v33 = 301.7396875 * tay[0][3];
+        v34 = v31 + v33;
+        v36 = 3.15125 * tay[0][5];
+        tay[0][14] = v34 - v36;
+        v38 = tay[0][14] * tay[0][4];
+        v39 = v26 + v38;
+        v40 = 0.035 * tay[0][7];
+        v42 = 1.34875 * tay[0][5];
+        v43 = v40 + v42;
+        v44 = 2.005 * tay[0][3];
+        v45 = v43 + v44;
+        v47 = 351.7396875 * tay[0][4];
+        tay[0][15] = v45 + v47;
+        v49 = tay[0][15] * tay[0][3];
+        v50 = v39 - v49;
+        v51 = 4.166596729006503e-05 * v50;
+        tay[0][16] = -0.02;
+        v55 = tay[0][15] * tay[0][5];
+        v56 = tay[0][16] + v55;
+        v57 = 0.035 * tay[0][8];
+        v58 = 1.34875 * tay[0][4];
+        v59 = v57 + v58;
+        v61 = 251.31 * tay[0][5];
+        v62 = v59 + v61;
+        v63 = 3.15125 * tay[0][3];
+        tay[0][17] = v62 - v63;
+        v65 = tay[0][17] * tay[0][4];
+        v66 = v56 - v65;
+        v67 = 0.0033146766733524852 * v66;
+        v68 = v51 + v67;
+        v71 = tay[0][17] * tay[0][3];
+        v72 = c[1] + v71;
+        v73 = tay[0][14] * tay[0][5];
+        v74 = v72 - v73;
+        v75 = 1.9054215209804005e-05 * v74;
+        v76 = v68 - v75;
+        v78 = 0.0028431796071504527 * v74;
+        v80 = 1.5497923245489903e-05 * v50;
+        v81 = v78 - v80;
+        v82 = 1.9054215209804005e-05 * v66;
+        v83 = v81 - v82;
+        v85 = 0.003979754895162947 * v50;
+        v86 = 4.166596729006503e-05 * v66;
+        v87 = v85 + v86;
+        v88 = 1.5497923245489903e-05 * v74;
+        v89 = v87 - v88;
+        v93 = 28.571428571428573 * v25;
+        ib16 = 1.0 / tay[0][12];
+        ub16 = tay[0][13] / tay[0][12];
+        tay[1][0] = tay[0][13];
+        tay[1][1] = v19;
+        tay[1][18] = tay[1][1];
+        tay[1][2] = v21;
+        tay[1][19] = tay[1][2];
+        tay[1][3] = v76;
+        tay[1][4] = v83;
+        tay[1][5] = v89;
+        tay[1][6] = 0.5714285714285714;
+        tay[1][7] = c[0];
+        tay[1][8] = v93;
+        tay[1][9] = tay[1][2] * tay[0][10];
+        tay[1][10] = -(tay[1][2] * tay[0][9]);
+        v11 = tay[0][10] * tay[1][5] + tay[1][10] * tay[0][5];
+        v12 = tay[0][9] * tay[1][3] + tay[1][9] * tay[0][3];
+        v13 = v11 - v12;
+        tay[1][11] = tay[1][1] * tay[0][12];
+        tay[1][12] = -(tay[1][1] * tay[0][11]);
+        tay[1][13] = v13 * ib16 - tay[1][12] * ub16;
+        v17 = tay[0][9] * tay[1][5] + tay[1][9] * tay[0][5];
+        v18 = tay[0][10] * tay[1][3] + tay[1][10] * tay[0][3];
+        v19 = v17 + v18;
+        v20 = tay[0][13] * tay[1][11] + tay[1][13] * tay[0][11];
+        v21 = tay[1][4] - v20;
+        v24 = tay[1][8] - tay[1][5];
+        v25 = -0.0001 * v24;
+        v26 = -v25;
+        v28 = 0.035 * tay[1][6];
+        v30 = 2.005 * tay[1][4];
+        v31 = v28 + v30;
+        v33 = 301.7396875 * tay[1][3];
+        v34 = v31 + v33;
+        v36 = 3.15125 * tay[1][5];
+        tay[1][14] = v34 - v36;
+        v38 = tay[0][14] * tay[1][4] + tay[1][14] * tay[0][4];
+        v39 = v26 + v38;
+        v40 = 0.035 * tay[1][7];
+        v42 = 1.34875 * tay[1][5];
+        v43 = v40 + v42;
+        v44 = 2.005 * tay[1][3];
+        v45 = v43 + v44;
+        v47 = 351.7396875 * tay[1][4];
+        tay[1][15] = v45 + v47;
+        v49 = tay[0][15] * tay[1][3] + tay[1][15] * tay[0][3];
+        v50 = v39 - v49;
+        v51 = 4.166596729006503e-05 * v50;
+        v55 = tay[0][15] * tay[1][5] + tay[1][15] * tay[0][5];
+        v56 = v55;
+        v57 = 0.035 * tay[1][8];
+        v58 = 1.34875 * tay[1][4];
+        v59 = v57 + v58;
+        v61 = 251.31 * tay[1][5];
+        v62 = v59 + v61;
+        v63 = 3.15125 * tay[1][3];
+        tay[1][17] = v62 - v63;
+        v65 = tay[0][17] * tay[1][4] + tay[1][17] * tay[0][4];
+        v66 = v56 - v65;
+        v67 = 0.0033146766733524852 * v66;
+        v68 = v51 + v67;
+        v71 = tay[0][17] * tay[1][3] + tay[1][17] * tay[0][3];
+        v72 = v71;
+        v73 = tay[0][14] * tay[1][5] + tay[1][14] * tay[0][5];
+        v74 = v72 - v73;
+        v75 = 1.9054215209804005e-05 * v74;
+        v76 = v68 - v75;
+        v78 = 0.0028431796071504527 * v74;
+        v80 = 1.5497923245489903e-05 * v50;
+        v81 = v78 - v80;
+        v82 = 1.9054215209804005e-05 * v66;
+        v83 = v81 - v82;
+        v85 = 0.003979754895162947 * v50;
+        v86 = 4.166596729006503e-05 * v66;
+        v87 = v85 + v86;
+        v88 = 1.5497923245489903e-05 * v74;
+        v89 = v87 - v88;
+        v93 = 28.571428571428573 * v25;
+        tay[2][0] = tay[1][13] * inv[2];
+        tay[2][1] = v19 * inv[2];
+        tay[2][18] = v19;
+        tay[2][2] = v21 * inv[2];
+        tay[2][19] = v21;
+        tay[2][3] = v76 * inv[2];
+        tay[2][4] = v83 * inv[2];
+        tay[2][5] = v89 * inv[2];
+        tay[2][6] = 0.0;
+        tay[2][7] = 0.0;
+        tay[2][8] = v93 * inv[2];
+
+        /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+        for (n = 2; n < order; ++n) {
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc11 = 0.0;
+            acc12 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc18 = 0.0;
+            acc20 = 0.0;
+            acc38 = 0.0;
+            acc49 = 0.0;
+            acc55 = 0.0;
+            acc65 = 0.0;
+            acc71 = 0.0;
+            acc73 = 0.0;
+            for (j = 1; j < n; ++j) {
+                acc9 = acc9 + tay[j][19] * tay[n - j][10];
+                acc10 = acc10 + tay[j][19] * tay[n - j][9];
+                acc11 = acc11 + tay[j][10] * tay[n - j][5];
+                acc12 = acc12 + tay[j][9] * tay[n - j][3];
+                acc14 = acc14 + tay[j][18] * tay[n - j][12];
+                acc15 = acc15 + tay[j][18] * tay[n - j][11];
+                acc16 = acc16 + tay[j][12] * tay[n - j][13];
+                acc17 = acc17 + tay[j][9] * tay[n - j][5];
+                acc18 = acc18 + tay[j][10] * tay[n - j][3];
+                acc20 = acc20 + tay[j][13] * tay[n - j][11];
+                acc38 = acc38 + tay[j][14] * tay[n - j][4];
+                acc49 = acc49 + tay[j][15] * tay[n - j][3];
+                acc55 = acc55 + tay[j][15] * tay[n - j][5];
+                acc65 = acc65 + tay[j][17] * tay[n - j][4];
+                acc71 = acc71 + tay[j][17] * tay[n - j][3];
+                acc73 = acc73 + tay[j][14] * tay[n - j][5];
+            }
+            tay[n][9] = acc9 * inv[n] + tay[n][2] * tay[0][10];
+            tay[n][10] = -(acc10 * inv[n]) - tay[n][2] * tay[0][9];
+            v11 = acc11 + tay[0][10] * tay[n][5] + tay[n][10] * tay[0][5];
+            v12 = acc12 + tay[0][9] * tay[n][3] + tay[n][9] * tay[0][3];
+            v13 = v11 - v12;
+            tay[n][11] = acc14 * inv[n] + tay[n][1] * tay[0][12];
+            tay[n][12] = -(acc15 * inv[n]) - tay[n][1] * tay[0][11];
+            tay[n][13] = v13 * ib16 - (acc16 * ib16 + tay[n][12] * ub16);
+            v17 = acc17 + tay[0][9] * tay[n][5] + tay[n][9] * tay[0][5];
+            v18 = acc18 + tay[0][10] * tay[n][3] + tay[n][10] * tay[0][3];
+            v19 = v17 + v18;
+            v20 = acc20 + tay[0][13] * tay[n][11] + tay[n][13] * tay[0][11];
+            v21 = tay[n][4] - v20;
+            v24 = tay[n][8] - tay[n][5];
+            v25 = -0.0001 * v24;
+            v26 = -v25;
+            v30 = 2.005 * tay[n][4];
+            v31 = v30;
+            v33 = 301.7396875 * tay[n][3];
+            v34 = v31 + v33;
+            v36 = 3.15125 * tay[n][5];
+            tay[n][14] = v34 - v36;
+            v38 = acc38 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
+            v39 = v26 + v38;
+            v42 = 1.34875 * tay[n][5];
+            v43 = v42;
+            v44 = 2.005 * tay[n][3];
+            v45 = v43 + v44;
+            v47 = 351.7396875 * tay[n][4];
+            tay[n][15] = v45 + v47;
+            v49 = acc49 + tay[0][15] * tay[n][3] + tay[n][15] * tay[0][3];
+            v50 = v39 - v49;
+            v51 = 4.166596729006503e-05 * v50;
+            v55 = acc55 + tay[0][15] * tay[n][5] + tay[n][15] * tay[0][5];
+            v56 = v55;
+            v57 = 0.035 * tay[n][8];
+            v58 = 1.34875 * tay[n][4];
+            v59 = v57 + v58;
+            v61 = 251.31 * tay[n][5];
+            v62 = v59 + v61;
+            v63 = 3.15125 * tay[n][3];
+            tay[n][17] = v62 - v63;
+            v65 = acc65 + tay[0][17] * tay[n][4] + tay[n][17] * tay[0][4];
+            v66 = v56 - v65;
+            v67 = 0.0033146766733524852 * v66;
+            v68 = v51 + v67;
+            v71 = acc71 + tay[0][17] * tay[n][3] + tay[n][17] * tay[0][3];
+            v72 = v71;
+            v73 = acc73 + tay[0][14] * tay[n][5] + tay[n][14] * tay[0][5];
+            v74 = v72 - v73;
+            v75 = 1.9054215209804005e-05 * v74;
+            v76 = v68 - v75;
+            v78 = 0.0028431796071504527 * v74;
+            v80 = 1.5497923245489903e-05 * v50;
+            v81 = v78 - v80;
+            v82 = 1.9054215209804005e-05 * v66;
+            v83 = v81 - v82;
+            v85 = 0.003979754895162947 * v50;
+            v86 = 4.166596729006503e-05 * v66;
+            v87 = v85 + v86;
+            v88 = 1.5497923245489903e-05 * v74;
+            v89 = v87 - v88;
+            v93 = 28.571428571428573 * v25;
+            tay[n + 1][0] = tay[n][13] * inv[n + 1];
+            tay[n + 1][1] = v19 * inv[n + 1];
+            tay[n + 1][18] = v19;
+            tay[n + 1][2] = v21 * inv[n + 1];
+            tay[n + 1][19] = v21;
+            tay[n + 1][3] = v76 * inv[n + 1];
+            tay[n + 1][4] = v83 * inv[n + 1];
+            tay[n + 1][5] = v89 * inv[n + 1];
+            tay[n + 1][8] = v93 * inv[n + 1];
+        }
         stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
         rp = DBL_MAX;
         rq = DBL_MAX;

@@ -2918,6 +2918,120 @@ contains
     return
   end function rodas4_trial
 
+  ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+  ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+  ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+  ! Stiffly accurate: stage 6 sits on the embedded solution and the step
+  ! is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+  ! when a stage is).
+  function rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, &
+          dense) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: lu(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: comp(0:nx - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
+    real(c_double), intent(inout) :: dx(0:nx - 1)
+    real(c_double), intent(inout) :: xnew(0:nx - 1)
+    real(c_double), intent(inout) :: dense(0:nx - 1, 0:1)
+    real(c_double) :: res
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: fy(0:nx - 1)
+    real(c_double) :: inv_h
+    integer(c_int) :: i
+
+    inv_h = 1.0_c_double / h
+
+    ! stage 1: t
+    do i = 0, nx - 1
+      k(i, 0) = f0(i)
+    end do
+    call lu_solve(lu, piv, k(:, 0))
+
+    ! stage 2: t + 0.386 h
+    do i = 0, nx - 1
+      y(i) = x(i) + 1.544_c_double * k(i, 0)
+    end do
+    call rw3_orthogonal_rhs(t + 0.386_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 1) = fy(i) + inv_h * ((-5.6688_c_double) * k(i, 0))
+    end do
+    call lu_solve(lu, piv, k(:, 1))
+
+    ! stage 3: t + 0.21 h
+    do i = 0, nx - 1
+      y(i) = (x(i) + 0.9466785280815826_c_double * k(i, 0)) + 0.2557011698983284_c_double * k(i, 1)
+    end do
+    call rw3_orthogonal_rhs(t + 0.21_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 2) = fy(i) + inv_h * ((-2.430093356833875_c_double) * k(i, &
+          0) - 0.2063599157091915_c_double * k(i, 1))
+    end do
+    call lu_solve(lu, piv, k(:, 2))
+
+    ! stage 4: t + 0.63 h
+    do i = 0, nx - 1
+      y(i) = ((x(i) + 3.314825187068521_c_double * k(i, 0)) + 2.896124015972201_c_double * k(i, &
+          1)) + 0.9986419139977817_c_double * k(i, 2)
+    end do
+    call rw3_orthogonal_rhs(t + 0.63_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 3) = fy(i) + inv_h * (((-0.1073529058151375_c_double) * k(i, &
+          0) - 9.594562251023355_c_double * k(i, 1)) - 20.47028614809616_c_double * k(i, 2))
+    end do
+    call lu_solve(lu, piv, k(:, 3))
+
+    ! stage 5: t + h
+    do i = 0, nx - 1
+      y(i) = (((x(i) + 1.221224509226641_c_double * k(i, 0)) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, 3)
+    end do
+    call rw3_orthogonal_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 4) = fy(i) + inv_h * (((7.496443313967647_c_double * k(i, &
+          0) - 10.24680431464352_c_double * k(i, 1)) - 33.99990352819905_c_double * k(i, &
+          2)) + 11.7089089320616_c_double * k(i, 3))
+    end do
+    call lu_solve(lu, piv, k(:, 4))
+
+    ! stage 6: t + h, on the embedded solution
+    do i = 0, nx - 1
+      dx(i) = (((1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, &
+          3)) + k(i, 4)
+      y(i) = x(i) + dx(i)
+    end do
+    call rw3_orthogonal_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 5) = fy(i) + inv_h * ((((8.083246795921522_c_double * k(i, &
+          0) - 7.981132988064893_c_double * k(i, 1)) - 31.52159432874371_c_double * k(i, &
+          2)) + 16.31930543123136_c_double * k(i, 3)) - 6.058818238834054_c_double * k(i, 4))
+    end do
+    call lu_solve(lu, piv, k(:, 5))
+
+    ! the new solution x + dx: the embedded one plus k_6
+    do i = 0, nx - 1
+      dx(i) = (dx(i) + k(i, 5)) - comp(i)
+      xnew(i) = x(i) + dx(i)
+    end do
+    do i = 0, nx - 1
+      dense(i, 0) = (((10.12623508344586_c_double * k(i, 0) - 7.487995877610167_c_double * k(i, &
+          1)) - 34.80091861555747_c_double * k(i, 2)) - 7.992771707568823_c_double * k(i, &
+          3)) + 1.025137723295662_c_double * k(i, 4)
+      dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
+          0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
+          2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
+    end do
+    res = error_norm(k(:, 5), x, xnew, rtol, atol)
+    return
+  end function rodas4_grid_trial
+
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! J and f are evaluated once per accepted step; a rejected step only
   ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -3199,7 +3313,7 @@ contains
         cycle
       end if
       singular = 0
-      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew)
+      err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense)
       stats%rhs_calls = stats%rhs_calls + 5
       nonfinite = .not. ieee_is_finite(err) .or. .not. all_finite(xnew, nx)
       if (.not. nonfinite .and. err <= 1.0_c_double .and. .not. last) then
@@ -3225,14 +3339,6 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do i = 0, nx - 1
-          dense(i, 0) = (((10.12623508344586_c_double * k(i, &
-              0) - 7.487995877610167_c_double * k(i, 1)) - 34.80091861555747_c_double * k(i, &
-              2)) - 7.992771707568823_c_double * k(i, 3)) + 1.025137723295662_c_double * k(i, 4)
-          dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
-              0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
-              2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
-        end do
         do
           if (.not. (g < ntimes)) then
             exit
@@ -5021,6 +5127,81 @@ contains
     real(c_double) :: rq
     real(c_double) :: rho
     real(c_double) :: h2
+    real(c_double) :: acc9
+    real(c_double) :: acc10
+    real(c_double) :: acc11
+    real(c_double) :: acc12
+    real(c_double) :: acc14
+    real(c_double) :: acc15
+    real(c_double) :: acc16
+    real(c_double) :: acc17
+    real(c_double) :: acc18
+    real(c_double) :: acc20
+    real(c_double) :: acc38
+    real(c_double) :: acc49
+    real(c_double) :: acc55
+    real(c_double) :: acc65
+    real(c_double) :: acc71
+    real(c_double) :: acc73
+    real(c_double) :: ib16
+    real(c_double) :: ub16
+    real(c_double) :: v11
+    real(c_double) :: v12
+    real(c_double) :: v13
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v20
+    real(c_double) :: v21
+    real(c_double) :: v24
+    real(c_double) :: v25
+    real(c_double) :: v26
+    real(c_double) :: v28
+    real(c_double) :: v30
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v34
+    real(c_double) :: v36
+    real(c_double) :: v38
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v42
+    real(c_double) :: v43
+    real(c_double) :: v44
+    real(c_double) :: v45
+    real(c_double) :: v47
+    real(c_double) :: v49
+    real(c_double) :: v50
+    real(c_double) :: v51
+    real(c_double) :: v55
+    real(c_double) :: v56
+    real(c_double) :: v57
+    real(c_double) :: v58
+    real(c_double) :: v59
+    real(c_double) :: v61
+    real(c_double) :: v62
+    real(c_double) :: v63
+    real(c_double) :: v65
+    real(c_double) :: v66
+    real(c_double) :: v67
+    real(c_double) :: v68
+    real(c_double) :: v71
+    real(c_double) :: v72
+    real(c_double) :: v73
+    real(c_double) :: v74
+    real(c_double) :: v75
+    real(c_double) :: v76
+    real(c_double) :: v78
+    real(c_double) :: v80
+    real(c_double) :: v81
+    real(c_double) :: v82
+    real(c_double) :: v83
+    real(c_double) :: v85
+    real(c_double) :: v86
+    real(c_double) :: v87
+    real(c_double) :: v88
+    real(c_double) :: v89
+    real(c_double) :: v93
     real(c_double) :: t0
     real(c_double) :: t1
     integer(c_long) :: g
@@ -5028,6 +5209,8 @@ contains
     real(c_double) :: frac
     real(c_double) :: acc
     integer(c_int) :: i
+    integer(c_int) :: j
+    integer(c_int) :: n
     integer(c_int) :: q
 
     if (.not. grid_ok(ntimes, times)) then
@@ -5084,7 +5267,281 @@ contains
 
       ! the coefficients at x, and the step they allow (Jorba and Zou)
       run = code < 0
-      call taylor_jet(order, x, c, inv, tay)
+      ! orders 0 and 1 of the state and of every node
+      tay(0, 0) = x(0)
+      tay(1, 0) = x(1)
+      tay(2, 0) = x(2)
+      tay(3, 0) = x(3)
+      tay(4, 0) = x(4)
+      tay(5, 0) = x(5)
+      tay(6, 0) = x(6)
+      tay(7, 0) = x(7)
+      tay(8, 0) = x(8)
+      tay(9, 0) = rw3_orthogonal_sin(tay(2, 0))
+      tay(10, 0) = rw3_orthogonal_cos(tay(2, 0))
+      v11 = tay(10, 0) * tay(5, 0)
+      v12 = tay(9, 0) * tay(3, 0)
+      v13 = v11 - v12
+      tay(11, 0) = rw3_orthogonal_sin(tay(1, 0))
+      tay(12, 0) = rw3_orthogonal_cos(tay(1, 0))
+      tay(13, 0) = v13 / tay(12, 0)
+      v17 = tay(9, 0) * tay(5, 0)
+      v18 = tay(10, 0) * tay(3, 0)
+      v19 = v17 + v18
+      v20 = tay(13, 0) * tay(11, 0)
+      v21 = tay(4, 0) - v20
+      v24 = tay(8, 0) - tay(5, 0)
+      v25 = (-0.0001_c_double) * v24
+      v26 = -v25
+      v28 = 0.035_c_double * tay(6, 0)
+      v30 = 2.005_c_double * tay(4, 0)
+      v31 = v28 + v30
+      v33 = 301.7396875_c_double * tay(3, 0)
+      v34 = v31 + v33
+      v36 = 3.15125_c_double * tay(5, 0)
+      tay(14, 0) = v34 - v36
+      v38 = tay(14, 0) * tay(4, 0)
+      v39 = v26 + v38
+      v40 = 0.035_c_double * tay(7, 0)
+      v42 = 1.34875_c_double * tay(5, 0)
+      v43 = v40 + v42
+      v44 = 2.005_c_double * tay(3, 0)
+      v45 = v43 + v44
+      v47 = 351.7396875_c_double * tay(4, 0)
+      tay(15, 0) = v45 + v47
+      v49 = tay(15, 0) * tay(3, 0)
+      v50 = v39 - v49
+      v51 = 4.166596729006503e-05_c_double * v50
+      tay(16, 0) = -0.02_c_double
+      v55 = tay(15, 0) * tay(5, 0)
+      v56 = tay(16, 0) + v55
+      v57 = 0.035_c_double * tay(8, 0)
+      v58 = 1.34875_c_double * tay(4, 0)
+      v59 = v57 + v58
+      v61 = 251.31_c_double * tay(5, 0)
+      v62 = v59 + v61
+      v63 = 3.15125_c_double * tay(3, 0)
+      tay(17, 0) = v62 - v63
+      v65 = tay(17, 0) * tay(4, 0)
+      v66 = v56 - v65
+      v67 = 0.0033146766733524852_c_double * v66
+      v68 = v51 + v67
+      v71 = tay(17, 0) * tay(3, 0)
+      v72 = c(1) + v71
+      v73 = tay(14, 0) * tay(5, 0)
+      v74 = v72 - v73
+      v75 = 1.9054215209804005e-05_c_double * v74
+      v76 = v68 - v75
+      v78 = 0.0028431796071504527_c_double * v74
+      v80 = 1.5497923245489903e-05_c_double * v50
+      v81 = v78 - v80
+      v82 = 1.9054215209804005e-05_c_double * v66
+      v83 = v81 - v82
+      v85 = 0.003979754895162947_c_double * v50
+      v86 = 4.166596729006503e-05_c_double * v66
+      v87 = v85 + v86
+      v88 = 1.5497923245489903e-05_c_double * v74
+      v89 = v87 - v88
+      v93 = 28.571428571428573_c_double * v25
+      ib16 = 1.0_c_double / tay(12, 0)
+      ub16 = tay(13, 0) / tay(12, 0)
+      tay(0, 1) = tay(13, 0)
+      tay(1, 1) = v19
+      tay(18, 1) = tay(1, 1)
+      tay(2, 1) = v21
+      tay(19, 1) = tay(2, 1)
+      tay(3, 1) = v76
+      tay(4, 1) = v83
+      tay(5, 1) = v89
+      tay(6, 1) = 0.5714285714285714_c_double
+      tay(7, 1) = c(0)
+      tay(8, 1) = v93
+      tay(9, 1) = tay(2, 1) * tay(10, 0)
+      tay(10, 1) = -tay(2, 1) * tay(9, 0)
+      v11 = tay(10, 0) * tay(5, 1) + tay(10, 1) * tay(5, 0)
+      v12 = tay(9, 0) * tay(3, 1) + tay(9, 1) * tay(3, 0)
+      v13 = v11 - v12
+      tay(11, 1) = tay(1, 1) * tay(12, 0)
+      tay(12, 1) = -tay(1, 1) * tay(11, 0)
+      tay(13, 1) = v13 * ib16 - tay(12, 1) * ub16
+      v17 = tay(9, 0) * tay(5, 1) + tay(9, 1) * tay(5, 0)
+      v18 = tay(10, 0) * tay(3, 1) + tay(10, 1) * tay(3, 0)
+      v19 = v17 + v18
+      v20 = tay(13, 0) * tay(11, 1) + tay(13, 1) * tay(11, 0)
+      v21 = tay(4, 1) - v20
+      v24 = tay(8, 1) - tay(5, 1)
+      v25 = (-0.0001_c_double) * v24
+      v26 = -v25
+      v28 = 0.035_c_double * tay(6, 1)
+      v30 = 2.005_c_double * tay(4, 1)
+      v31 = v28 + v30
+      v33 = 301.7396875_c_double * tay(3, 1)
+      v34 = v31 + v33
+      v36 = 3.15125_c_double * tay(5, 1)
+      tay(14, 1) = v34 - v36
+      v38 = tay(14, 0) * tay(4, 1) + tay(14, 1) * tay(4, 0)
+      v39 = v26 + v38
+      v40 = 0.035_c_double * tay(7, 1)
+      v42 = 1.34875_c_double * tay(5, 1)
+      v43 = v40 + v42
+      v44 = 2.005_c_double * tay(3, 1)
+      v45 = v43 + v44
+      v47 = 351.7396875_c_double * tay(4, 1)
+      tay(15, 1) = v45 + v47
+      v49 = tay(15, 0) * tay(3, 1) + tay(15, 1) * tay(3, 0)
+      v50 = v39 - v49
+      v51 = 4.166596729006503e-05_c_double * v50
+      v55 = tay(15, 0) * tay(5, 1) + tay(15, 1) * tay(5, 0)
+      v56 = v55
+      v57 = 0.035_c_double * tay(8, 1)
+      v58 = 1.34875_c_double * tay(4, 1)
+      v59 = v57 + v58
+      v61 = 251.31_c_double * tay(5, 1)
+      v62 = v59 + v61
+      v63 = 3.15125_c_double * tay(3, 1)
+      tay(17, 1) = v62 - v63
+      v65 = tay(17, 0) * tay(4, 1) + tay(17, 1) * tay(4, 0)
+      v66 = v56 - v65
+      v67 = 0.0033146766733524852_c_double * v66
+      v68 = v51 + v67
+      v71 = tay(17, 0) * tay(3, 1) + tay(17, 1) * tay(3, 0)
+      v72 = v71
+      v73 = tay(14, 0) * tay(5, 1) + tay(14, 1) * tay(5, 0)
+      v74 = v72 - v73
+      v75 = 1.9054215209804005e-05_c_double * v74
+      v76 = v68 - v75
+      v78 = 0.0028431796071504527_c_double * v74
+      v80 = 1.5497923245489903e-05_c_double * v50
+      v81 = v78 - v80
+      v82 = 1.9054215209804005e-05_c_double * v66
+      v83 = v81 - v82
+      v85 = 0.003979754895162947_c_double * v50
+      v86 = 4.166596729006503e-05_c_double * v66
+      v87 = v85 + v86
+      v88 = 1.5497923245489903e-05_c_double * v74
+      v89 = v87 - v88
+      v93 = 28.571428571428573_c_double * v25
+      tay(0, 2) = tay(13, 1) * inv(2)
+      tay(1, 2) = v19 * inv(2)
+      tay(18, 2) = v19
+      tay(2, 2) = v21 * inv(2)
+      tay(19, 2) = v21
+      tay(3, 2) = v76 * inv(2)
+      tay(4, 2) = v83 * inv(2)
+      tay(5, 2) = v89 * inv(2)
+      tay(6, 2) = 0.0_c_double
+      tay(7, 2) = 0.0_c_double
+      tay(8, 2) = v93 * inv(2)
+
+      ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+      do n = 2, order - 1
+        acc9 = 0.0_c_double
+        acc10 = 0.0_c_double
+        acc11 = 0.0_c_double
+        acc12 = 0.0_c_double
+        acc14 = 0.0_c_double
+        acc15 = 0.0_c_double
+        acc16 = 0.0_c_double
+        acc17 = 0.0_c_double
+        acc18 = 0.0_c_double
+        acc20 = 0.0_c_double
+        acc38 = 0.0_c_double
+        acc49 = 0.0_c_double
+        acc55 = 0.0_c_double
+        acc65 = 0.0_c_double
+        acc71 = 0.0_c_double
+        acc73 = 0.0_c_double
+        do j = 1, n - 1
+          acc9 = acc9 + tay(19, j) * tay(10, n - j)
+          acc10 = acc10 + tay(19, j) * tay(9, n - j)
+          acc11 = acc11 + tay(10, j) * tay(5, n - j)
+          acc12 = acc12 + tay(9, j) * tay(3, n - j)
+          acc14 = acc14 + tay(18, j) * tay(12, n - j)
+          acc15 = acc15 + tay(18, j) * tay(11, n - j)
+          acc16 = acc16 + tay(12, j) * tay(13, n - j)
+          acc17 = acc17 + tay(9, j) * tay(5, n - j)
+          acc18 = acc18 + tay(10, j) * tay(3, n - j)
+          acc20 = acc20 + tay(13, j) * tay(11, n - j)
+          acc38 = acc38 + tay(14, j) * tay(4, n - j)
+          acc49 = acc49 + tay(15, j) * tay(3, n - j)
+          acc55 = acc55 + tay(15, j) * tay(5, n - j)
+          acc65 = acc65 + tay(17, j) * tay(4, n - j)
+          acc71 = acc71 + tay(17, j) * tay(3, n - j)
+          acc73 = acc73 + tay(14, j) * tay(5, n - j)
+        end do
+        tay(9, n) = acc9 * inv(n) + tay(2, n) * tay(10, 0)
+        tay(10, n) = (-acc10 * inv(n)) - tay(2, n) * tay(9, 0)
+        v11 = (acc11 + tay(10, 0) * tay(5, n)) + tay(10, n) * tay(5, 0)
+        v12 = (acc12 + tay(9, 0) * tay(3, n)) + tay(9, n) * tay(3, 0)
+        v13 = v11 - v12
+        tay(11, n) = acc14 * inv(n) + tay(1, n) * tay(12, 0)
+        tay(12, n) = (-acc15 * inv(n)) - tay(1, n) * tay(11, 0)
+        tay(13, n) = v13 * ib16 - (acc16 * ib16 + tay(12, n) * ub16)
+        v17 = (acc17 + tay(9, 0) * tay(5, n)) + tay(9, n) * tay(5, 0)
+        v18 = (acc18 + tay(10, 0) * tay(3, n)) + tay(10, n) * tay(3, 0)
+        v19 = v17 + v18
+        v20 = (acc20 + tay(13, 0) * tay(11, n)) + tay(13, n) * tay(11, 0)
+        v21 = tay(4, n) - v20
+        v24 = tay(8, n) - tay(5, n)
+        v25 = (-0.0001_c_double) * v24
+        v26 = -v25
+        v30 = 2.005_c_double * tay(4, n)
+        v31 = v30
+        v33 = 301.7396875_c_double * tay(3, n)
+        v34 = v31 + v33
+        v36 = 3.15125_c_double * tay(5, n)
+        tay(14, n) = v34 - v36
+        v38 = (acc38 + tay(14, 0) * tay(4, n)) + tay(14, n) * tay(4, 0)
+        v39 = v26 + v38
+        v42 = 1.34875_c_double * tay(5, n)
+        v43 = v42
+        v44 = 2.005_c_double * tay(3, n)
+        v45 = v43 + v44
+        v47 = 351.7396875_c_double * tay(4, n)
+        tay(15, n) = v45 + v47
+        v49 = (acc49 + tay(15, 0) * tay(3, n)) + tay(15, n) * tay(3, 0)
+        v50 = v39 - v49
+        v51 = 4.166596729006503e-05_c_double * v50
+        v55 = (acc55 + tay(15, 0) * tay(5, n)) + tay(15, n) * tay(5, 0)
+        v56 = v55
+        v57 = 0.035_c_double * tay(8, n)
+        v58 = 1.34875_c_double * tay(4, n)
+        v59 = v57 + v58
+        v61 = 251.31_c_double * tay(5, n)
+        v62 = v59 + v61
+        v63 = 3.15125_c_double * tay(3, n)
+        tay(17, n) = v62 - v63
+        v65 = (acc65 + tay(17, 0) * tay(4, n)) + tay(17, n) * tay(4, 0)
+        v66 = v56 - v65
+        v67 = 0.0033146766733524852_c_double * v66
+        v68 = v51 + v67
+        v71 = (acc71 + tay(17, 0) * tay(3, n)) + tay(17, n) * tay(3, 0)
+        v72 = v71
+        v73 = (acc73 + tay(14, 0) * tay(5, n)) + tay(14, n) * tay(5, 0)
+        v74 = v72 - v73
+        v75 = 1.9054215209804005e-05_c_double * v74
+        v76 = v68 - v75
+        v78 = 0.0028431796071504527_c_double * v74
+        v80 = 1.5497923245489903e-05_c_double * v50
+        v81 = v78 - v80
+        v82 = 1.9054215209804005e-05_c_double * v66
+        v83 = v81 - v82
+        v85 = 0.003979754895162947_c_double * v50
+        v86 = 4.166596729006503e-05_c_double * v66
+        v87 = v85 + v86
+        v88 = 1.5497923245489903e-05_c_double * v74
+        v89 = v87 - v88
+        v93 = 28.571428571428573_c_double * v25
+        tay(0, n + 1) = tay(13, n) * inv(n + 1)
+        tay(1, n + 1) = v19 * inv(n + 1)
+        tay(18, n + 1) = v19
+        tay(2, n + 1) = v21 * inv(n + 1)
+        tay(19, n + 1) = v21
+        tay(3, n + 1) = v76 * inv(n + 1)
+        tay(4, n + 1) = v83 * inv(n + 1)
+        tay(5, n + 1) = v89 * inv(n + 1)
+        tay(8, n + 1) = v93 * inv(n + 1)
+      end do
       stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
       rp = huge(1.0_c_double)
       rq = huge(1.0_c_double)

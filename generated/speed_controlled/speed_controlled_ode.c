@@ -2462,6 +2462,105 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     return error_norm(k[5], x, xnew, rtol, atol);
 }
 
+/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+   when a stage is). */
+static double rodas4_grid_trial(double t, double h, const double *x, const double *f0,
+                                const double *lu, const int *piv, const double *c, double rtol,
+                                double atol, const double *comp,
+                                double (*k)[SPEED_CONTROLLED_NX], double *dx, double *xnew,
+                                double (*dense)[SPEED_CONTROLLED_NX])
+{
+    double y[SPEED_CONTROLLED_NX];
+    double fy[SPEED_CONTROLLED_NX];
+    double inv_h;
+    int i;
+
+    inv_h = 1.0 / h;
+
+    /* stage 1: t */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        k[0][i] = f0[i];
+    }
+    lu_solve(lu, piv, k[0]);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        y[i] = x[i] + 1.544 * k[0][i];
+    }
+    speed_controlled_rhs(t + 0.386 * h, y, c, fy);
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
+    }
+    lu_solve(lu, piv, k[1]);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
+    }
+    speed_controlled_rhs(t + 0.21 * h, y, c, fy);
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
+    }
+    lu_solve(lu, piv, k[2]);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
+    }
+    speed_controlled_rhs(t + 0.63 * h, y, c, fy);
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
+    }
+    lu_solve(lu, piv, k[3]);
+
+    /* stage 5: t + h */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
+    }
+    speed_controlled_rhs(t + h, y, c, fy);
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
+    }
+    lu_solve(lu, piv, k[4]);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
+        y[i] = x[i] + dx[i];
+    }
+    speed_controlled_rhs(t + h, y, c, fy);
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
+    }
+    lu_solve(lu, piv, k[5]);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        dx[i] = dx[i] + k[5][i] - comp[i];
+        xnew[i] = x[i] + dx[i];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
+                34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] + 1.025137723295662 *
+                k[4][i];
+        dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
+                16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] - 6.594389125716872 *
+                k[4][i];
+    }
+    return error_norm(k[5], x, xnew, rtol, atol);
+}
+
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
    J and f are evaluated once per accepted step; a rejected step only
    refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -2714,7 +2813,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             continue;
         }
         singular = 0;
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
+        err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense);
         stats->rhs_calls = stats->rhs_calls + 5;
         nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, SPEED_CONTROLLED_NX);
         if (!nonfinite && err <= 1.0 && !last) {
@@ -2739,14 +2838,6 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
-                dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
-                        34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] +
-                        1.025137723295662 * k[4][i];
-                dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
-                        16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] -
-                        6.594389125716872 * k[4][i];
-            }
             for (;;) {
                 if (!(g < ntimes)) {
                     break;
@@ -2833,8 +2924,8 @@ size_t speed_controlled_rodas4_grid_batch(size_t n, long ntimes, const double *t
 }
 
 /* E1 and E2 for this h, factored; 1 when either is singular. */
-static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                         double *e2i, int *piv2)
+static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
+                                double *e2i, int *piv2)
 {
     double gamma_h;
     double alpha_h;
@@ -2862,11 +2953,11 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
 /* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
    F at the three stages, then the corrections to w solved into z1..z3.
    Returns their RMS over scal (NaN or Inf when a stage is). */
-static double radau5_newton(double t, double h, const double *x, const double *c,
-                            const double *e1, const int *piv1, const double *e2r,
-                            const double *e2i, const int *piv2, const double *scal, double *z1,
-                            double *z2, double *z3, const double *w1, const double *w2,
-                            const double *w3)
+static inline double radau5_newton(double t, double h, const double *x, const double *c,
+                                   const double *e1, const int *piv1, const double *e2r,
+                                   const double *e2i, const int *piv2, const double *scal,
+                                   double *z1, double *z2, double *z3, const double *w1,
+                                   const double *w2, const double *w3)
 {
     double y[SPEED_CONTROLLED_NX];
     double gamma_h;
@@ -2924,10 +3015,10 @@ static double radau5_newton(double t, double h, const double *x, const double *c
    over scal, at least 1e-10 (NaN or Inf when it is). On the first step
    or after a rejection an estimate >= 1 is taken again through f at x + err
    (radau5.f's ESTRAD): one more rhs call. */
-static double radau5_error(double t, double h, const double *x, const double *c,
-                           const double *f0, const double *e1, const int *piv1,
-                           const double *scal, const double *z1, const double *z2,
-                           const double *z3, int again, speed_controlled_stats *stats)
+static inline double radau5_error(double t, double h, const double *x, const double *c,
+                                  const double *f0, const double *e1, const int *piv1,
+                                  const double *scal, const double *z1, const double *z2,
+                                  const double *z3, int again, speed_controlled_stats *stats)
 {
     double g[SPEED_CONTROLLED_NX];
     double err[SPEED_CONTROLLED_NX];
@@ -4285,12 +4376,69 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
     double rq;
     double rho;
     double h2;
+    double acc8;
+    double acc9;
+    double acc10;
+    double acc11;
+    double acc13;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc17;
+    double acc19;
+    double acc27;
+    double acc33;
+    double acc36;
+    double acc43;
+    double acc55;
+    double acc62;
+    double ib15;
+    double ub15;
+    double v10;
+    double v11;
+    double v12;
+    double v16;
+    double v17;
+    double v18;
+    double v19;
+    double v20;
+    double v21;
+    double v23;
+    double v25;
+    double v27;
+    double v29;
+    double v31;
+    double v33;
+    double v34;
+    double v36;
+    double v37;
+    double v38;
+    double v39;
+    double v41;
+    double v43;
+    double v44;
+    double v50;
+    double v51;
+    double v52;
+    double v53;
+    double v54;
+    double v55;
+    double v57;
+    double v58;
+    double v60;
+    double v62;
+    double v63;
+    double v65;
+    double v66;
+    double v67;
     double t0;
     double t1;
     long g;
     double told;
     double frac;
     int i;
+    int j;
+    int n;
     int q;
 
     if (!grid_ok(ntimes, times)) {
@@ -4345,7 +4493,225 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 
         /* the coefficients at x, and the step they allow (Jorba and Zou) */
         run = code < 0;
-        taylor_jet(order, x, c, inv, tay);
+        /* orders 0 and 1 of the state and of every node */
+        tay[0][0] = x[0];
+        tay[0][1] = x[1];
+        tay[0][2] = x[2];
+        tay[0][3] = x[3];
+        tay[0][4] = x[4];
+        tay[0][5] = x[5];
+        tay[0][6] = x[6];
+        tay[0][7] = x[7];
+        tay[0][8] = speed_controlled_sin(tay[0][2]);
+        tay[0][9] = speed_controlled_cos(tay[0][2]);
+        v10 = tay[0][9] * tay[0][6];
+        v11 = tay[0][8] * tay[0][4];
+        v12 = v10 - v11;
+        tay[0][10] = speed_controlled_sin(tay[0][1]);
+        tay[0][11] = speed_controlled_cos(tay[0][1]);
+        tay[0][12] = v12 / tay[0][11];
+        v16 = tay[0][8] * tay[0][6];
+        v17 = tay[0][9] * tay[0][4];
+        v18 = v16 + v17;
+        v19 = tay[0][12] * tay[0][10];
+        v20 = tay[0][5] - v19;
+        v21 = tay[0][7] - tay[0][5];
+        v23 = 0.0004980820048148975 * tay[0][7];
+        v25 = 0.33522655090705017 * tay[0][5];
+        tay[0][13] = v23 + v25;
+        v27 = tay[0][6] * tay[0][13];
+        v29 = 0.016919114337701612 * tay[0][5];
+        v31 = 1.2676659094182028e-05 * tay[0][7];
+        tay[0][14] = v29 - v31;
+        v33 = tay[0][14] * tay[0][4];
+        v34 = v27 - v33;
+        v36 = tay[0][6] * tay[0][6];
+        v37 = 0.018613186525101588 * v36;
+        v38 = -v37;
+        v39 = 0.018613186525101588 * tay[0][4];
+        v41 = 0.06916590204045965 * tay[0][6];
+        tay[0][15] = v39 - v41;
+        v43 = tay[0][4] * tay[0][15];
+        v44 = v38 + v43;
+        tay[0][16] = 1.0 * c[0];
+        tay[0][17] = tay[0][16] * c[2];
+        v50 = v44 + tay[0][17];
+        v51 = tay[0][16] * tay[0][7];
+        v52 = v50 + v51;
+        v53 = tay[0][16] * tay[0][5];
+        v54 = v52 - v53;
+        v55 = tay[0][14] * tay[0][6];
+        v57 = 0.2723557574878444 * tay[0][5];
+        v58 = -v57;
+        v60 = 0.0005451879938902264 * tay[0][7];
+        tay[0][18] = v58 - v60;
+        v62 = tay[0][4] * tay[0][18];
+        v63 = v55 + v62;
+        v65 = c[2] + tay[0][7];
+        v66 = v65 - tay[0][5];
+        v67 = c[1] * v66;
+        ib15 = 1.0 / tay[0][11];
+        ub15 = tay[0][12] / tay[0][11];
+        tay[1][0] = tay[0][12];
+        tay[1][1] = v18;
+        tay[1][19] = tay[1][1];
+        tay[1][2] = v20;
+        tay[1][20] = tay[1][2];
+        tay[1][3] = v21;
+        tay[1][4] = v34;
+        tay[1][5] = v54;
+        tay[1][6] = v63;
+        tay[1][7] = v67;
+        tay[1][8] = tay[1][2] * tay[0][9];
+        tay[1][9] = -(tay[1][2] * tay[0][8]);
+        v10 = tay[0][9] * tay[1][6] + tay[1][9] * tay[0][6];
+        v11 = tay[0][8] * tay[1][4] + tay[1][8] * tay[0][4];
+        v12 = v10 - v11;
+        tay[1][10] = tay[1][1] * tay[0][11];
+        tay[1][11] = -(tay[1][1] * tay[0][10]);
+        tay[1][12] = v12 * ib15 - tay[1][11] * ub15;
+        v16 = tay[0][8] * tay[1][6] + tay[1][8] * tay[0][6];
+        v17 = tay[0][9] * tay[1][4] + tay[1][9] * tay[0][4];
+        v18 = v16 + v17;
+        v19 = tay[0][12] * tay[1][10] + tay[1][12] * tay[0][10];
+        v20 = tay[1][5] - v19;
+        v21 = tay[1][7] - tay[1][5];
+        v23 = 0.0004980820048148975 * tay[1][7];
+        v25 = 0.33522655090705017 * tay[1][5];
+        tay[1][13] = v23 + v25;
+        v27 = tay[0][6] * tay[1][13] + tay[1][6] * tay[0][13];
+        v29 = 0.016919114337701612 * tay[1][5];
+        v31 = 1.2676659094182028e-05 * tay[1][7];
+        tay[1][14] = v29 - v31;
+        v33 = tay[0][14] * tay[1][4] + tay[1][14] * tay[0][4];
+        v34 = v27 - v33;
+        v36 = tay[0][6] * tay[1][6] + tay[1][6] * tay[0][6];
+        v37 = 0.018613186525101588 * v36;
+        v38 = -v37;
+        v39 = 0.018613186525101588 * tay[1][4];
+        v41 = 0.06916590204045965 * tay[1][6];
+        tay[1][15] = v39 - v41;
+        v43 = tay[0][4] * tay[1][15] + tay[1][4] * tay[0][15];
+        v44 = v38 + v43;
+        v50 = v44;
+        v51 = tay[0][16] * tay[1][7];
+        v52 = v50 + v51;
+        v53 = tay[0][16] * tay[1][5];
+        v54 = v52 - v53;
+        v55 = tay[0][14] * tay[1][6] + tay[1][14] * tay[0][6];
+        v57 = 0.2723557574878444 * tay[1][5];
+        v58 = -v57;
+        v60 = 0.0005451879938902264 * tay[1][7];
+        tay[1][18] = v58 - v60;
+        v62 = tay[0][4] * tay[1][18] + tay[1][4] * tay[0][18];
+        v63 = v55 + v62;
+        v65 = tay[1][7];
+        v66 = v65 - tay[1][5];
+        v67 = c[1] * v66;
+        tay[2][0] = tay[1][12] * inv[2];
+        tay[2][1] = v18 * inv[2];
+        tay[2][19] = v18;
+        tay[2][2] = v20 * inv[2];
+        tay[2][20] = v20;
+        tay[2][3] = v21 * inv[2];
+        tay[2][4] = v34 * inv[2];
+        tay[2][5] = v54 * inv[2];
+        tay[2][6] = v63 * inv[2];
+        tay[2][7] = v67 * inv[2];
+
+        /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+        for (n = 2; n < order; ++n) {
+            acc8 = 0.0;
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc11 = 0.0;
+            acc13 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc19 = 0.0;
+            acc27 = 0.0;
+            acc33 = 0.0;
+            acc36 = 0.0;
+            acc43 = 0.0;
+            acc55 = 0.0;
+            acc62 = 0.0;
+            for (j = 1; j < n; ++j) {
+                acc8 = acc8 + tay[j][20] * tay[n - j][9];
+                acc9 = acc9 + tay[j][20] * tay[n - j][8];
+                acc10 = acc10 + tay[j][9] * tay[n - j][6];
+                acc11 = acc11 + tay[j][8] * tay[n - j][4];
+                acc13 = acc13 + tay[j][19] * tay[n - j][11];
+                acc14 = acc14 + tay[j][19] * tay[n - j][10];
+                acc15 = acc15 + tay[j][11] * tay[n - j][12];
+                acc16 = acc16 + tay[j][8] * tay[n - j][6];
+                acc17 = acc17 + tay[j][9] * tay[n - j][4];
+                acc19 = acc19 + tay[j][12] * tay[n - j][10];
+                acc27 = acc27 + tay[j][6] * tay[n - j][13];
+                acc33 = acc33 + tay[j][14] * tay[n - j][4];
+                acc36 = acc36 + tay[j][6] * tay[n - j][6];
+                acc43 = acc43 + tay[j][4] * tay[n - j][15];
+                acc55 = acc55 + tay[j][14] * tay[n - j][6];
+                acc62 = acc62 + tay[j][4] * tay[n - j][18];
+            }
+            tay[n][8] = acc8 * inv[n] + tay[n][2] * tay[0][9];
+            tay[n][9] = -(acc9 * inv[n]) - tay[n][2] * tay[0][8];
+            v10 = acc10 + tay[0][9] * tay[n][6] + tay[n][9] * tay[0][6];
+            v11 = acc11 + tay[0][8] * tay[n][4] + tay[n][8] * tay[0][4];
+            v12 = v10 - v11;
+            tay[n][10] = acc13 * inv[n] + tay[n][1] * tay[0][11];
+            tay[n][11] = -(acc14 * inv[n]) - tay[n][1] * tay[0][10];
+            tay[n][12] = v12 * ib15 - (acc15 * ib15 + tay[n][11] * ub15);
+            v16 = acc16 + tay[0][8] * tay[n][6] + tay[n][8] * tay[0][6];
+            v17 = acc17 + tay[0][9] * tay[n][4] + tay[n][9] * tay[0][4];
+            v18 = v16 + v17;
+            v19 = acc19 + tay[0][12] * tay[n][10] + tay[n][12] * tay[0][10];
+            v20 = tay[n][5] - v19;
+            v21 = tay[n][7] - tay[n][5];
+            v23 = 0.0004980820048148975 * tay[n][7];
+            v25 = 0.33522655090705017 * tay[n][5];
+            tay[n][13] = v23 + v25;
+            v27 = acc27 + tay[0][6] * tay[n][13] + tay[n][6] * tay[0][13];
+            v29 = 0.016919114337701612 * tay[n][5];
+            v31 = 1.2676659094182028e-05 * tay[n][7];
+            tay[n][14] = v29 - v31;
+            v33 = acc33 + tay[0][14] * tay[n][4] + tay[n][14] * tay[0][4];
+            v34 = v27 - v33;
+            v36 = acc36 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
+            v37 = 0.018613186525101588 * v36;
+            v38 = -v37;
+            v39 = 0.018613186525101588 * tay[n][4];
+            v41 = 0.06916590204045965 * tay[n][6];
+            tay[n][15] = v39 - v41;
+            v43 = acc43 + tay[0][4] * tay[n][15] + tay[n][4] * tay[0][15];
+            v44 = v38 + v43;
+            v50 = v44;
+            v51 = tay[0][16] * tay[n][7];
+            v52 = v50 + v51;
+            v53 = tay[0][16] * tay[n][5];
+            v54 = v52 - v53;
+            v55 = acc55 + tay[0][14] * tay[n][6] + tay[n][14] * tay[0][6];
+            v57 = 0.2723557574878444 * tay[n][5];
+            v58 = -v57;
+            v60 = 0.0005451879938902264 * tay[n][7];
+            tay[n][18] = v58 - v60;
+            v62 = acc62 + tay[0][4] * tay[n][18] + tay[n][4] * tay[0][18];
+            v63 = v55 + v62;
+            v65 = tay[n][7];
+            v66 = v65 - tay[n][5];
+            v67 = c[1] * v66;
+            tay[n + 1][0] = tay[n][12] * inv[n + 1];
+            tay[n + 1][1] = v18 * inv[n + 1];
+            tay[n + 1][19] = v18;
+            tay[n + 1][2] = v20 * inv[n + 1];
+            tay[n + 1][20] = v20;
+            tay[n + 1][3] = v21 * inv[n + 1];
+            tay[n + 1][4] = v34 * inv[n + 1];
+            tay[n + 1][5] = v54 * inv[n + 1];
+            tay[n + 1][6] = v63 * inv[n + 1];
+            tay[n + 1][7] = v67 * inv[n + 1];
+        }
         stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
         rp = DBL_MAX;
         rq = DBL_MAX;

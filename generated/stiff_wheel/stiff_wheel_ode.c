@@ -2376,6 +2376,104 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     return error_norm(k[5], x, xnew, rtol, atol);
 }
 
+/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+   when a stage is). */
+static double rodas4_grid_trial(double t, double h, const double *x, const double *f0,
+                                const double *lu, const int *piv, const double *c, double rtol,
+                                double atol, const double *comp, double (*k)[STIFF_WHEEL_NX],
+                                double *dx, double *xnew, double (*dense)[STIFF_WHEEL_NX])
+{
+    double y[STIFF_WHEEL_NX];
+    double fy[STIFF_WHEEL_NX];
+    double inv_h;
+    int i;
+
+    inv_h = 1.0 / h;
+
+    /* stage 1: t */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[0][i] = f0[i];
+    }
+    lu_solve(lu, piv, k[0]);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 1.544 * k[0][i];
+    }
+    stiff_wheel_rhs(t + 0.386 * h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
+    }
+    lu_solve(lu, piv, k[1]);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
+    }
+    stiff_wheel_rhs(t + 0.21 * h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
+    }
+    lu_solve(lu, piv, k[2]);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
+    }
+    stiff_wheel_rhs(t + 0.63 * h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
+    }
+    lu_solve(lu, piv, k[3]);
+
+    /* stage 5: t + h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
+    }
+    stiff_wheel_rhs(t + h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
+    }
+    lu_solve(lu, piv, k[4]);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
+        y[i] = x[i] + dx[i];
+    }
+    stiff_wheel_rhs(t + h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
+    }
+    lu_solve(lu, piv, k[5]);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        dx[i] = dx[i] + k[5][i] - comp[i];
+        xnew[i] = x[i] + dx[i];
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
+                34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] + 1.025137723295662 *
+                k[4][i];
+        dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
+                16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] - 6.594389125716872 *
+                k[4][i];
+    }
+    return error_norm(k[5], x, xnew, rtol, atol);
+}
+
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
    J and f are evaluated once per accepted step; a rejected step only
    refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -2626,7 +2724,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             continue;
         }
         singular = 0;
-        err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew);
+        err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense);
         stats->rhs_calls = stats->rhs_calls + 5;
         nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, STIFF_WHEEL_NX);
         if (!nonfinite && err <= 1.0 && !last) {
@@ -2651,14 +2749,6 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
-                        34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] +
-                        1.025137723295662 * k[4][i];
-                dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
-                        16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] -
-                        6.594389125716872 * k[4][i];
-            }
             for (;;) {
                 if (!(g < ntimes)) {
                     break;
@@ -2745,8 +2835,8 @@ size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 }
 
 /* E1 and E2 for this h, factored; 1 when either is singular. */
-static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                         double *e2i, int *piv2)
+static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
+                                double *e2i, int *piv2)
 {
     double gamma_h;
     double alpha_h;
@@ -2774,11 +2864,11 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
 /* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
    F at the three stages, then the corrections to w solved into z1..z3.
    Returns their RMS over scal (NaN or Inf when a stage is). */
-static double radau5_newton(double t, double h, const double *x, const double *c,
-                            const double *e1, const int *piv1, const double *e2r,
-                            const double *e2i, const int *piv2, const double *scal, double *z1,
-                            double *z2, double *z3, const double *w1, const double *w2,
-                            const double *w3)
+static inline double radau5_newton(double t, double h, const double *x, const double *c,
+                                   const double *e1, const int *piv1, const double *e2r,
+                                   const double *e2i, const int *piv2, const double *scal,
+                                   double *z1, double *z2, double *z3, const double *w1,
+                                   const double *w2, const double *w3)
 {
     double y[STIFF_WHEEL_NX];
     double gamma_h;
@@ -2836,10 +2926,10 @@ static double radau5_newton(double t, double h, const double *x, const double *c
    over scal, at least 1e-10 (NaN or Inf when it is). On the first step
    or after a rejection an estimate >= 1 is taken again through f at x + err
    (radau5.f's ESTRAD): one more rhs call. */
-static double radau5_error(double t, double h, const double *x, const double *c,
-                           const double *f0, const double *e1, const int *piv1,
-                           const double *scal, const double *z1, const double *z2,
-                           const double *z3, int again, stiff_wheel_stats *stats)
+static inline double radau5_error(double t, double h, const double *x, const double *c,
+                                  const double *f0, const double *e1, const int *piv1,
+                                  const double *scal, const double *z1, const double *z2,
+                                  const double *z3, int again, stiff_wheel_stats *stats)
 {
     double g[STIFF_WHEEL_NX];
     double err[STIFF_WHEEL_NX];

@@ -2567,6 +2567,120 @@ contains
     return
   end function rodas4_trial
 
+  ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+  ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+  ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+  ! Stiffly accurate: stage 6 sits on the embedded solution and the step
+  ! is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+  ! when a stage is).
+  function rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, &
+          dense) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: lu(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: comp(0:nx - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
+    real(c_double), intent(inout) :: dx(0:nx - 1)
+    real(c_double), intent(inout) :: xnew(0:nx - 1)
+    real(c_double), intent(inout) :: dense(0:nx - 1, 0:1)
+    real(c_double) :: res
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: fy(0:nx - 1)
+    real(c_double) :: inv_h
+    integer(c_int) :: i
+
+    inv_h = 1.0_c_double / h
+
+    ! stage 1: t
+    do i = 0, nx - 1
+      k(i, 0) = f0(i)
+    end do
+    call lu_solve(lu, piv, k(:, 0))
+
+    ! stage 2: t + 0.386 h
+    do i = 0, nx - 1
+      y(i) = x(i) + 1.544_c_double * k(i, 0)
+    end do
+    call wheel_spinup_rhs(t + 0.386_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 1) = fy(i) + inv_h * ((-5.6688_c_double) * k(i, 0))
+    end do
+    call lu_solve(lu, piv, k(:, 1))
+
+    ! stage 3: t + 0.21 h
+    do i = 0, nx - 1
+      y(i) = (x(i) + 0.9466785280815826_c_double * k(i, 0)) + 0.2557011698983284_c_double * k(i, 1)
+    end do
+    call wheel_spinup_rhs(t + 0.21_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 2) = fy(i) + inv_h * ((-2.430093356833875_c_double) * k(i, &
+          0) - 0.2063599157091915_c_double * k(i, 1))
+    end do
+    call lu_solve(lu, piv, k(:, 2))
+
+    ! stage 4: t + 0.63 h
+    do i = 0, nx - 1
+      y(i) = ((x(i) + 3.314825187068521_c_double * k(i, 0)) + 2.896124015972201_c_double * k(i, &
+          1)) + 0.9986419139977817_c_double * k(i, 2)
+    end do
+    call wheel_spinup_rhs(t + 0.63_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 3) = fy(i) + inv_h * (((-0.1073529058151375_c_double) * k(i, &
+          0) - 9.594562251023355_c_double * k(i, 1)) - 20.47028614809616_c_double * k(i, 2))
+    end do
+    call lu_solve(lu, piv, k(:, 3))
+
+    ! stage 5: t + h
+    do i = 0, nx - 1
+      y(i) = (((x(i) + 1.221224509226641_c_double * k(i, 0)) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, 3)
+    end do
+    call wheel_spinup_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 4) = fy(i) + inv_h * (((7.496443313967647_c_double * k(i, &
+          0) - 10.24680431464352_c_double * k(i, 1)) - 33.99990352819905_c_double * k(i, &
+          2)) + 11.7089089320616_c_double * k(i, 3))
+    end do
+    call lu_solve(lu, piv, k(:, 4))
+
+    ! stage 6: t + h, on the embedded solution
+    do i = 0, nx - 1
+      dx(i) = (((1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, &
+          3)) + k(i, 4)
+      y(i) = x(i) + dx(i)
+    end do
+    call wheel_spinup_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 5) = fy(i) + inv_h * ((((8.083246795921522_c_double * k(i, &
+          0) - 7.981132988064893_c_double * k(i, 1)) - 31.52159432874371_c_double * k(i, &
+          2)) + 16.31930543123136_c_double * k(i, 3)) - 6.058818238834054_c_double * k(i, 4))
+    end do
+    call lu_solve(lu, piv, k(:, 5))
+
+    ! the new solution x + dx: the embedded one plus k_6
+    do i = 0, nx - 1
+      dx(i) = (dx(i) + k(i, 5)) - comp(i)
+      xnew(i) = x(i) + dx(i)
+    end do
+    do i = 0, nx - 1
+      dense(i, 0) = (((10.12623508344586_c_double * k(i, 0) - 7.487995877610167_c_double * k(i, &
+          1)) - 34.80091861555747_c_double * k(i, 2)) - 7.992771707568823_c_double * k(i, &
+          3)) + 1.025137723295662_c_double * k(i, 4)
+      dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
+          0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
+          2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
+    end do
+    res = error_norm(k(:, 5), x, xnew, rtol, atol)
+    return
+  end function rodas4_grid_trial
+
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! J and f are evaluated once per accepted step; a rejected step only
   ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
@@ -2846,7 +2960,7 @@ contains
         cycle
       end if
       singular = 0
-      err = rodas4_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew)
+      err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense)
       stats%rhs_calls = stats%rhs_calls + 5
       nonfinite = .not. ieee_is_finite(err) .or. .not. all_finite(xnew, nx)
       if (.not. nonfinite .and. err <= 1.0_c_double .and. .not. last) then
@@ -2872,14 +2986,6 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do i = 0, nx - 1
-          dense(i, 0) = (((10.12623508344586_c_double * k(i, &
-              0) - 7.487995877610167_c_double * k(i, 1)) - 34.80091861555747_c_double * k(i, &
-              2)) - 7.992771707568823_c_double * k(i, 3)) + 1.025137723295662_c_double * k(i, 4)
-          dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
-              0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
-              2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
-        end do
         do
           if (.not. (g < ntimes)) then
             exit
@@ -4555,6 +4661,55 @@ contains
     real(c_double) :: rq
     real(c_double) :: rho
     real(c_double) :: h2
+    real(c_double) :: acc8
+    real(c_double) :: acc9
+    real(c_double) :: acc10
+    real(c_double) :: acc11
+    real(c_double) :: acc13
+    real(c_double) :: acc14
+    real(c_double) :: acc15
+    real(c_double) :: acc16
+    real(c_double) :: acc17
+    real(c_double) :: acc19
+    real(c_double) :: acc27
+    real(c_double) :: acc33
+    real(c_double) :: acc39
+    real(c_double) :: acc46
+    real(c_double) :: acc52
+    real(c_double) :: acc58
+    real(c_double) :: ib15
+    real(c_double) :: ub15
+    real(c_double) :: v10
+    real(c_double) :: v11
+    real(c_double) :: v12
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v20
+    real(c_double) :: v21
+    real(c_double) :: v23
+    real(c_double) :: v25
+    real(c_double) :: v27
+    real(c_double) :: v29
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v34
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v41
+    real(c_double) :: v42
+    real(c_double) :: v44
+    real(c_double) :: v46
+    real(c_double) :: v47
+    real(c_double) :: v48
+    real(c_double) :: v50
+    real(c_double) :: v52
+    real(c_double) :: v54
+    real(c_double) :: v55
+    real(c_double) :: v56
+    real(c_double) :: v58
+    real(c_double) :: v59
     real(c_double) :: t0
     real(c_double) :: t1
     integer(c_long) :: g
@@ -4562,6 +4717,8 @@ contains
     real(c_double) :: frac
     real(c_double) :: acc
     integer(c_int) :: i
+    integer(c_int) :: j
+    integer(c_int) :: n
     integer(c_int) :: q
 
     if (.not. grid_ok(ntimes, times)) then
@@ -4618,7 +4775,206 @@ contains
 
       ! the coefficients at x, and the step they allow (Jorba and Zou)
       run = code < 0
-      call taylor_jet(order, x, c, inv, tay)
+      ! orders 0 and 1 of the state and of every node
+      tay(0, 0) = x(0)
+      tay(1, 0) = x(1)
+      tay(2, 0) = x(2)
+      tay(3, 0) = x(3)
+      tay(4, 0) = x(4)
+      tay(5, 0) = x(5)
+      tay(6, 0) = x(6)
+      tay(7, 0) = x(7)
+      tay(8, 0) = wheel_spinup_sin(tay(2, 0))
+      tay(9, 0) = wheel_spinup_cos(tay(2, 0))
+      v10 = tay(9, 0) * tay(6, 0)
+      v11 = tay(8, 0) * tay(4, 0)
+      v12 = v10 - v11
+      tay(10, 0) = wheel_spinup_sin(tay(1, 0))
+      tay(11, 0) = wheel_spinup_cos(tay(1, 0))
+      tay(12, 0) = v12 / tay(11, 0)
+      v16 = tay(8, 0) * tay(6, 0)
+      v17 = tay(9, 0) * tay(4, 0)
+      v18 = v16 + v17
+      v19 = tay(12, 0) * tay(10, 0)
+      v20 = tay(5, 0) - v19
+      v21 = tay(7, 0) - tay(5, 0)
+      v23 = 0.3499793829482495_c_double * tay(6, 0)
+      v25 = 0.014646230145692387_c_double * tay(4, 0)
+      tay(13, 0) = v23 - v25
+      v27 = tay(5, 0) * tay(13, 0)
+      v29 = 1.6873537034207817e-05_c_double * tay(4, 0)
+      v31 = 0.0007488716786310489_c_double * tay(6, 0)
+      tay(14, 0) = v29 + v31
+      v33 = tay(7, 0) * tay(14, 0)
+      v34 = v27 + v33
+      tay(15, 0) = 1.0_c_double * c(0)
+      v39 = tay(6, 0) * tay(6, 0)
+      v40 = 0.01627906976744186_c_double * v39
+      v41 = tay(15, 0) - v40
+      v42 = 0.01627906976744186_c_double * tay(4, 0)
+      v44 = 0.06976744186046512_c_double * tay(6, 0)
+      tay(16, 0) = v42 - v44
+      v46 = tay(4, 0) * tay(16, 0)
+      v47 = v41 + v46
+      v48 = 0.014646230145692387_c_double * tay(6, 0)
+      v50 = 0.2872098251809964_c_double * tay(4, 0)
+      tay(17, 0) = v48 - v50
+      v52 = tay(5, 0) * tay(17, 0)
+      v54 = 0.0008211868373490824_c_double * tay(4, 0)
+      v55 = -v54
+      v56 = 1.6873537034207817e-05_c_double * tay(6, 0)
+      tay(18, 0) = v55 - v56
+      v58 = tay(7, 0) * tay(18, 0)
+      v59 = v52 + v58
+      ib15 = 1.0_c_double / tay(11, 0)
+      ub15 = tay(12, 0) / tay(11, 0)
+      tay(0, 1) = tay(12, 0)
+      tay(1, 1) = v18
+      tay(19, 1) = tay(1, 1)
+      tay(2, 1) = v20
+      tay(20, 1) = tay(2, 1)
+      tay(3, 1) = v21
+      tay(4, 1) = v34
+      tay(5, 1) = v47
+      tay(6, 1) = v59
+      tay(7, 1) = c(1)
+      tay(8, 1) = tay(2, 1) * tay(9, 0)
+      tay(9, 1) = -tay(2, 1) * tay(8, 0)
+      v10 = tay(9, 0) * tay(6, 1) + tay(9, 1) * tay(6, 0)
+      v11 = tay(8, 0) * tay(4, 1) + tay(8, 1) * tay(4, 0)
+      v12 = v10 - v11
+      tay(10, 1) = tay(1, 1) * tay(11, 0)
+      tay(11, 1) = -tay(1, 1) * tay(10, 0)
+      tay(12, 1) = v12 * ib15 - tay(11, 1) * ub15
+      v16 = tay(8, 0) * tay(6, 1) + tay(8, 1) * tay(6, 0)
+      v17 = tay(9, 0) * tay(4, 1) + tay(9, 1) * tay(4, 0)
+      v18 = v16 + v17
+      v19 = tay(12, 0) * tay(10, 1) + tay(12, 1) * tay(10, 0)
+      v20 = tay(5, 1) - v19
+      v21 = tay(7, 1) - tay(5, 1)
+      v23 = 0.3499793829482495_c_double * tay(6, 1)
+      v25 = 0.014646230145692387_c_double * tay(4, 1)
+      tay(13, 1) = v23 - v25
+      v27 = tay(5, 0) * tay(13, 1) + tay(5, 1) * tay(13, 0)
+      v29 = 1.6873537034207817e-05_c_double * tay(4, 1)
+      v31 = 0.0007488716786310489_c_double * tay(6, 1)
+      tay(14, 1) = v29 + v31
+      v33 = tay(7, 0) * tay(14, 1) + tay(7, 1) * tay(14, 0)
+      v34 = v27 + v33
+      v39 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
+      v40 = 0.01627906976744186_c_double * v39
+      v41 = -v40
+      v42 = 0.01627906976744186_c_double * tay(4, 1)
+      v44 = 0.06976744186046512_c_double * tay(6, 1)
+      tay(16, 1) = v42 - v44
+      v46 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
+      v47 = v41 + v46
+      v48 = 0.014646230145692387_c_double * tay(6, 1)
+      v50 = 0.2872098251809964_c_double * tay(4, 1)
+      tay(17, 1) = v48 - v50
+      v52 = tay(5, 0) * tay(17, 1) + tay(5, 1) * tay(17, 0)
+      v54 = 0.0008211868373490824_c_double * tay(4, 1)
+      v55 = -v54
+      v56 = 1.6873537034207817e-05_c_double * tay(6, 1)
+      tay(18, 1) = v55 - v56
+      v58 = tay(7, 0) * tay(18, 1) + tay(7, 1) * tay(18, 0)
+      v59 = v52 + v58
+      tay(0, 2) = tay(12, 1) * inv(2)
+      tay(1, 2) = v18 * inv(2)
+      tay(19, 2) = v18
+      tay(2, 2) = v20 * inv(2)
+      tay(20, 2) = v20
+      tay(3, 2) = v21 * inv(2)
+      tay(4, 2) = v34 * inv(2)
+      tay(5, 2) = v47 * inv(2)
+      tay(6, 2) = v59 * inv(2)
+      tay(7, 2) = 0.0_c_double
+
+      ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+      do n = 2, order - 1
+        acc33 = tay(7, 1) * tay(14, n - 1)
+        acc58 = tay(7, 1) * tay(18, n - 1)
+        acc8 = 0.0_c_double
+        acc9 = 0.0_c_double
+        acc10 = 0.0_c_double
+        acc11 = 0.0_c_double
+        acc13 = 0.0_c_double
+        acc14 = 0.0_c_double
+        acc15 = 0.0_c_double
+        acc16 = 0.0_c_double
+        acc17 = 0.0_c_double
+        acc19 = 0.0_c_double
+        acc27 = 0.0_c_double
+        acc39 = 0.0_c_double
+        acc46 = 0.0_c_double
+        acc52 = 0.0_c_double
+        do j = 1, n - 1
+          acc8 = acc8 + tay(20, j) * tay(9, n - j)
+          acc9 = acc9 + tay(20, j) * tay(8, n - j)
+          acc10 = acc10 + tay(9, j) * tay(6, n - j)
+          acc11 = acc11 + tay(8, j) * tay(4, n - j)
+          acc13 = acc13 + tay(19, j) * tay(11, n - j)
+          acc14 = acc14 + tay(19, j) * tay(10, n - j)
+          acc15 = acc15 + tay(11, j) * tay(12, n - j)
+          acc16 = acc16 + tay(8, j) * tay(6, n - j)
+          acc17 = acc17 + tay(9, j) * tay(4, n - j)
+          acc19 = acc19 + tay(12, j) * tay(10, n - j)
+          acc27 = acc27 + tay(5, j) * tay(13, n - j)
+          acc39 = acc39 + tay(6, j) * tay(6, n - j)
+          acc46 = acc46 + tay(4, j) * tay(16, n - j)
+          acc52 = acc52 + tay(5, j) * tay(17, n - j)
+        end do
+        tay(8, n) = acc8 * inv(n) + tay(2, n) * tay(9, 0)
+        tay(9, n) = (-acc9 * inv(n)) - tay(2, n) * tay(8, 0)
+        v10 = (acc10 + tay(9, 0) * tay(6, n)) + tay(9, n) * tay(6, 0)
+        v11 = (acc11 + tay(8, 0) * tay(4, n)) + tay(8, n) * tay(4, 0)
+        v12 = v10 - v11
+        tay(10, n) = acc13 * inv(n) + tay(1, n) * tay(11, 0)
+        tay(11, n) = (-acc14 * inv(n)) - tay(1, n) * tay(10, 0)
+        tay(12, n) = v12 * ib15 - (acc15 * ib15 + tay(11, n) * ub15)
+        v16 = (acc16 + tay(8, 0) * tay(6, n)) + tay(8, n) * tay(6, 0)
+        v17 = (acc17 + tay(9, 0) * tay(4, n)) + tay(9, n) * tay(4, 0)
+        v18 = v16 + v17
+        v19 = (acc19 + tay(12, 0) * tay(10, n)) + tay(12, n) * tay(10, 0)
+        v20 = tay(5, n) - v19
+        v21 = -tay(5, n)
+        v23 = 0.3499793829482495_c_double * tay(6, n)
+        v25 = 0.014646230145692387_c_double * tay(4, n)
+        tay(13, n) = v23 - v25
+        v27 = (acc27 + tay(5, 0) * tay(13, n)) + tay(5, n) * tay(13, 0)
+        v29 = 1.6873537034207817e-05_c_double * tay(4, n)
+        v31 = 0.0007488716786310489_c_double * tay(6, n)
+        tay(14, n) = v29 + v31
+        v33 = acc33 + tay(7, 0) * tay(14, n)
+        v34 = v27 + v33
+        v39 = (acc39 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
+        v40 = 0.01627906976744186_c_double * v39
+        v41 = -v40
+        v42 = 0.01627906976744186_c_double * tay(4, n)
+        v44 = 0.06976744186046512_c_double * tay(6, n)
+        tay(16, n) = v42 - v44
+        v46 = (acc46 + tay(4, 0) * tay(16, n)) + tay(4, n) * tay(16, 0)
+        v47 = v41 + v46
+        v48 = 0.014646230145692387_c_double * tay(6, n)
+        v50 = 0.2872098251809964_c_double * tay(4, n)
+        tay(17, n) = v48 - v50
+        v52 = (acc52 + tay(5, 0) * tay(17, n)) + tay(5, n) * tay(17, 0)
+        v54 = 0.0008211868373490824_c_double * tay(4, n)
+        v55 = -v54
+        v56 = 1.6873537034207817e-05_c_double * tay(6, n)
+        tay(18, n) = v55 - v56
+        v58 = acc58 + tay(7, 0) * tay(18, n)
+        v59 = v52 + v58
+        tay(0, n + 1) = tay(12, n) * inv(n + 1)
+        tay(1, n + 1) = v18 * inv(n + 1)
+        tay(19, n + 1) = v18
+        tay(2, n + 1) = v20 * inv(n + 1)
+        tay(20, n + 1) = v20
+        tay(3, n + 1) = v21 * inv(n + 1)
+        tay(4, n + 1) = v34 * inv(n + 1)
+        tay(5, n + 1) = v47 * inv(n + 1)
+        tay(6, n + 1) = v59 * inv(n + 1)
+      end do
       stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
       rp = huge(1.0_c_double)
       rq = huge(1.0_c_double)

@@ -75,6 +75,7 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
     return Parts(
         [
             rosenbrock.trial(m, g.uses_time),
+            rosenbrock.trial(m, g.uses_time, grid=True),
             rosenbrock.integrate(m, g.quaternion, g.uses_time),
             rosenbrock.integrate(m, g.quaternion, g.uses_time, grid=True),
         ]

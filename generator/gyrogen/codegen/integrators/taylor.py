@@ -207,7 +207,7 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> list[S]:
     body: list[S] = [
         Comment("the coefficients at x, and the step they allow (Jorba and Zou)"),
         assign(run, cmp(cd, "<", 0)),
-        Call("taylor_jet", args),
+        *(jet_function(series, jet).body if grid else [Call("taylor_jet", args)]),
         driver.count("rhs_calls", sel(run, Int(1), Int(0))),
         *bounds(jet, exact),
         *jz.next_h(order, Var("inv"), Var("rp"), Var("rq")),
@@ -332,8 +332,8 @@ def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func
         *(declare(n) for n in LOCALS),
         *([declare("norm")] if quaternion else []),
     )
-    if grid:
-        locals_ += driver.grid_locals(body)
+    if grid:  # the jet's code in place: taylor_jet keeps one caller, which gcc inlines
+        locals_ += (*jet_function(series, jet).locals, *driver.grid_locals(body))
         doc = (*m.notes, *driver.GRID_DOC)
         return Func("taylor_grid", driver.GRID_PARAMS, tuple(body), "int", locals_, doc)
     return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
