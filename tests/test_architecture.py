@@ -196,6 +196,8 @@ HAND_OFF = "hands a batch's trajectories to the printed integrators and back"
 TEMPLATE_FUNCTIONS = {
     ("c/ode.c.jinja", "P_m_name"): "a public integrator: stats NULL, then its printed _integrate",
     ("c/ode.c.jinja", "P_name_batch"): HAND_OFF,
+    ("c/ode.c.jinja", "P_m_name_grid"): "a public output grid: stats NULL, then its printed _grid",
+    ("c/ode.c.jinja", "P_m_name_grid_batch"): HAND_OFF,
     ("c/lanes.jinja", "lane_start"): HAND_OFF,
     ("c/lanes.jinja", "lanes_finish"): HAND_OFF,
     ("c/lanes.jinja", "pair_lanes"): HAND_OFF,
@@ -209,6 +211,8 @@ TEMPLATE_FUNCTIONS = {
     ("fmu/fmi2.c.jinja", "set_parameters"): "the FMU's parameters into setup",
     ("fortran/ode.f90.jinja", "P_m_name"): "a public integrator: stats by pointer, then _integrate",
     ("fortran/ode.f90.jinja", "P_name_batch"): HAND_OFF,
+    ("fortran/ode.f90.jinja", "P_m_name_grid"): "a public output grid: stats by pointer; _grid",
+    ("fortran/ode.f90.jinja", "P_m_name_grid_batch"): HAND_OFF,
 }
 """The functions on doubles the templates may define, and why; any other is
 numerics, whose home is an IR function (codegen/integrators) printed to every

@@ -107,6 +107,8 @@ def test_manifest(source_dir: Path) -> None:
     assert (m["nx"], m["np"]) == (14, 12)
     assert m["nc"] > 0
     methods = {f"{i}{b}": f"gyrostat_{i}{b}" for i in m["integrators"] for b in ("", "_batch")}
+    grids = [f"{i}{g}" for i in m["integrators"] if i != "rk4" for g in ("_grid", "_grid_batch")]
+    methods |= {g: f"gyrostat_{g}" for g in grids}  # the adaptive methods' output grids
     assert m["functions"]["c"] == {
         "setup": "gyrostat_setup",
         "rhs": "gyrostat_rhs",

@@ -231,6 +231,8 @@ def signatures() -> str:
         "fixed_step_batch": "<prefix>_<method>_batch",
         "adaptive": "<prefix>_<method>",
         "adaptive_batch": "<prefix>_<method>_batch",
+        "grid": "<prefix>_<method>_grid",
+        "grid_batch": "<prefix>_<method>_grid_batch",
     }
     out = []
     for key, sig in SIGNATURES.items():

@@ -59,6 +59,9 @@ extern "C" {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR 6
+/* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+   strictly increasing (unsorted or repeated); nothing is integrated or written */
+#define GYROSTAT_ODE_ERR_GRID           7
 
 #ifndef GYROSTAT_STATS_DEFINED
 #define GYROSTAT_STATS_DEFINED
@@ -85,26 +88,56 @@ int gyrostat_f_dopri5(double t0, double t1, double *x, const double *c, double r
 size_t gyrostat_f_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
         int *codes);
+int gyrostat_f_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats);
+size_t gyrostat_f_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats, int *codes);
 int gyrostat_f_dop853(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, gyrostat_stats *stats);
 size_t gyrostat_f_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
         int *codes);
+int gyrostat_f_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats);
+size_t gyrostat_f_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats, int *codes);
 int gyrostat_f_rodas4(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, gyrostat_stats *stats);
 size_t gyrostat_f_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
         int *codes);
+int gyrostat_f_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats);
+size_t gyrostat_f_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats, int *codes);
 int gyrostat_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, gyrostat_stats *stats);
 size_t gyrostat_f_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
         int *codes);
+int gyrostat_f_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats);
+size_t gyrostat_f_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats, int *codes);
 int gyrostat_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, gyrostat_stats *stats);
 size_t gyrostat_f_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats,
         int *codes);
+int gyrostat_f_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats);
+size_t gyrostat_f_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        gyrostat_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

@@ -24,7 +24,7 @@
 module rw4_hardware_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
-  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
   use rw4_hardware_mod, only: rw4_hardware_rhs, nx => RW4_HARDWARE_NX, &
                          nc => RW4_HARDWARE_NC
   use rw4_hardware_mod, only: rw4_hardware_sin
@@ -37,6 +37,10 @@ module rw4_hardware_ode_mod
   public :: rw4_hardware_dop853, rw4_hardware_dop853_batch
   public :: rw4_hardware_rodas4, rw4_hardware_rodas4_batch
   public :: rw4_hardware_radau5, rw4_hardware_radau5_batch
+  public :: rw4_hardware_dopri5_grid, rw4_hardware_dopri5_grid_batch
+  public :: rw4_hardware_dop853_grid, rw4_hardware_dop853_grid_batch
+  public :: rw4_hardware_rodas4_grid, rw4_hardware_rodas4_grid_batch
+  public :: rw4_hardware_radau5_grid, rw4_hardware_radau5_grid_batch
   public :: rw4_hardware_ode_strerror
 
   ! What an integration did, and where it stopped: rw4_hardware_stats of rw4_hardware_ode.h.
@@ -64,6 +68,9 @@ module rw4_hardware_ode_mod
   ! 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
   ! (3-1-2 scenes only; see above)
   integer(c_int), parameter, public :: RW4_HARDWARE_ODE_ERR_ATTITUDE_SINGULAR = 6
+  ! 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+  ! strictly increasing (unsorted or repeated); nothing is integrated or written
+  integer(c_int), parameter, public :: RW4_HARDWARE_ODE_ERR_GRID = 7
 
   ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
   ! double arithmetic meets it and the steps would shrink until max_steps ran out.
@@ -97,6 +104,8 @@ contains
       msg = "bad argument"
     case (RW4_HARDWARE_ODE_ERR_ATTITUDE_SINGULAR)
       msg = "the 3-1-2 attitude reached gimbal lock: use attitude = ""quaternion"""
+    case (RW4_HARDWARE_ODE_ERR_GRID)
+      msg = "bad output grid (times: at least one, finite, strictly increasing)"
     case default
       msg = "unknown return code"
     end select
@@ -664,6 +673,33 @@ contains
     res = -1
     return
   end function ode_start
+
+  ! 1 when the n grid times v are at least one, finite and strictly increasing.
+  function grid_ok(n, v) result(res)
+    integer(c_long), intent(in) :: n
+    real(c_double), intent(in) :: v(0:n - 1)
+    logical :: res
+    integer(c_long) :: k
+
+    if (n < 1) then
+      res = .false.
+      return
+    end if
+    do k = 0, n - 1
+      if (.not. ieee_is_finite(v(k))) then
+        res = .false.
+        return
+      end if
+    end do
+    do k = 1, n - 1
+      if (.not. (v(k - 1) < v(k))) then
+        res = .false.
+        return
+      end if
+    end do
+    res = .true.
+    return
+  end function grid_ok
 
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 10), unrolled over the entries
@@ -2008,6 +2044,243 @@ contains
     end do
   end function dopri5_integrate
 
+  ! dopri5 to t1, with Hairer's step-size strategy: the last step clipped
+  ! to end on t1, no growth right after a rejection, and a non-finite trial
+  ! rejected with h shrunk by facmin.
+  ! Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(rw4_hardware_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:12)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err_old
+    logical :: nonfinite
+    logical :: rejected_last
+    logical :: last
+    real(c_double) :: err
+    logical :: run
+    logical :: take
+    logical :: lock
+    logical :: ok
+    real(c_double) :: fac
+    real(c_double) :: grow
+    real(c_double) :: total
+    real(c_double) :: dense(0:nx - 1, 0:3)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: told
+    real(c_double) :: hs
+    real(c_double) :: frac
+    real(c_double) :: e
+    integer(c_int) :: i
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = RW4_HARDWARE_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    code = ode_start(5, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
+    if (code <= RW4_HARDWARE_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+    end if
+    if (code >= 0) then
+      res = code
+      return
+    end if
+    code = -1
+    t = t0
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
+    do
+
+      ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
+      code = merge(merge(merge(RW4_HARDWARE_ODE_ERR_NONFINITE, &
+          RW4_HARDWARE_ODE_ERR_STEP_UNDERFLOW, nonfinite), merge(RW4_HARDWARE_ODE_ERR_MAX_STEPS, &
+          -1, stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, code < 0)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, code < 0 .and. last)
+      stats%h = merge(h, stats%h, code < 0)
+      told = t
+      hs = h
+      if (code >= 0) then
+        res = code
+        return
+      end if
+
+      ! trial
+
+      ! stage 2: t + 0.2 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.2_c_double * k(i, 0))
+      end do
+      call rw4_hardware_rhs(t + 0.2_c_double * h, y, c, k(:, 1))
+
+      ! stage 3: t + 0.3 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.075_c_double * k(i, 0) + 0.225_c_double * k(i, 1))
+      end do
+      call rw4_hardware_rhs(t + 0.3_c_double * h, y, c, k(:, 2))
+
+      ! stage 4: t + 0.8 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((0.9777777777777777_c_double * k(i, &
+            0) - 3.7333333333333334_c_double * k(i, 1)) + 3.5555555555555554_c_double * k(i, 2))
+      end do
+      call rw4_hardware_rhs(t + 0.8_c_double * h, y, c, k(:, 3))
+
+      ! stage 5: t + 0.8888888888888888 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (((2.9525986892242035_c_double * k(i, &
+            0) - 11.595793324188385_c_double * k(i, 1)) + 9.822892851699436_c_double * k(i, &
+            2)) - 0.2908093278463649_c_double * k(i, 3))
+      end do
+      call rw4_hardware_rhs(t + 0.8888888888888888_c_double * h, y, c, k(:, 4))
+
+      ! stage 6: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((2.8462752525252526_c_double * k(i, &
+            0) - 10.757575757575758_c_double * k(i, 1)) + 8.906422717743473_c_double * k(i, &
+            2)) + 0.2784090909090909_c_double * k(i, 3)) - 0.2735313036020583_c_double * k(i, 4))
+      end do
+      call rw4_hardware_rhs(t + h, y, c, k(:, 5))
+
+      ! stage 7: t + h, the new solution
+      do i = 0, nx - 1
+        dx(i) = h * ((((0.09114583333333333_c_double * k(i, &
+            0) + 0.44923629829290207_c_double * k(i, 2)) + 0.6510416666666666_c_double * k(i, &
+            3)) - 0.322376179245283_c_double * k(i, 4)) + 0.13095238095238096_c_double * k(i, &
+            5)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+      call rw4_hardware_rhs(t + h, xnew, c, k(:, 6))
+
+      ! the error norm (see error_norm)
+      total = 0.0_c_double
+      do i = 0, nx - 1
+        e = (h * (((((0.0012326388888888888_c_double * k(i, &
+            0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
+            3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))))
+        total = total + e * e
+      end do
+      err = sqrt(total / nx)
+
+      ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
+      stats%rhs_calls = stats%rhs_calls + (merge(6, 0, code < 0))
+      nonfinite = .not. ieee_is_finite(err)
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! control: accept or reject by selection, and the next h
+      run = code < 0
+      take = run .and. .not. nonfinite .and. err <= 1.0_c_double
+      lock = (merge(abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+          1.0_c_double
+      ok = take .and. .not. lock
+      fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
+      grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
+      grow = merge(max(grow, 1.0_c_double), grow, rejected_last)  ! no growth after a rejection
+      code = merge(RW4_HARDWARE_ODE_ERR_ATTITUDE_SINGULAR, merge(RW4_HARDWARE_ODE_OK, code, &
+          ok .and. last), take .and. lock)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, run .and. .not. take))
+      err_old = merge(max(err, 1e-4_c_double), err_old, ok)
+      rejected_last = merge(.false., merge(.true., rejected_last, run .and. .not. take), ok)
+      h = merge(h, merge(h * 0.2_c_double, merge(h / grow, h / min(5.0_c_double, fac), ok), &
+          nonfinite), .not. run .or. (take .and. lock))
+
+      ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
+      if (ok) then
+
+        ! the dense output of order 4
+        do i = 0, nx - 1
+          dense(i, 0) = xnew(i) - x(i)
+          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+          dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
+          dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
+              0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
+              3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
+              5)) + 2.382468931778144_c_double * k(i, 6))
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < t)) then
+            exit
+          end if
+          frac = (times(g) - told) / hs
+          do i = 0, nx - 1
+            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+                1) + frac * (dense(i, 2) + (1.0_c_double - frac) * dense(i, 3))))
+          end do
+          g = g + 1
+        end do
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
+        do i = 0, nx - 1
+          k(i, 0) = k(i, 6)
+        end do
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function dopri5_grid
+
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   function rw4_hardware_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dopri5")
@@ -2024,6 +2297,63 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_dopri5
+
+  ! Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+      bind(C, name="rw4_hardware_f_dopri5_grid")
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
+    integer(c_int) :: code
+    type(rw4_hardware_stats), pointer :: stats
+    type(rw4_hardware_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
+  end function rw4_hardware_dopri5_grid
+
+  ! stats, codes: NULL when not wanted.
+  function rw4_hardware_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+      result(failed) bind(C, name="rw4_hardware_f_dopri5_grid_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(rw4_hardware_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
+                                  c_loc(stats_out(i)))
+      else
+        code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function rw4_hardware_dopri5_grid_batch
 
   ! dop853 to t1, with Hairer's step-size strategy: the last step clipped
   ! to end on t1, no growth right after a rejection, and a non-finite trial
@@ -2270,6 +2600,370 @@ contains
     end do
   end function dop853_integrate
 
+  ! dop853 to t1, with Hairer's step-size strategy: the last step clipped
+  ! to end on t1, no growth right after a rejection, and a non-finite trial
+  ! rejected with h shrunk by facmin.
+  ! Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(rw4_hardware_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:15)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err_old
+    logical :: nonfinite
+    logical :: rejected_last
+    logical :: last
+    real(c_double) :: err
+    logical :: run
+    logical :: take
+    logical :: lock
+    logical :: ok
+    real(c_double) :: fac
+    real(c_double) :: grow
+    real(c_double) :: err5
+    real(c_double) :: err3
+    real(c_double) :: deno
+    real(c_double) :: dense(0:nx - 1, 0:6)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: told
+    real(c_double) :: hs
+    real(c_double) :: frac
+    real(c_double) :: e3
+    real(c_double) :: e5
+    integer(c_int) :: i
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = RW4_HARDWARE_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    code = ode_start(8, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
+    if (code <= RW4_HARDWARE_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+    end if
+    if (code >= 0) then
+      res = code
+      return
+    end if
+    code = -1
+    t = t0
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
+    do
+
+      ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
+      code = merge(merge(merge(RW4_HARDWARE_ODE_ERR_NONFINITE, &
+          RW4_HARDWARE_ODE_ERR_STEP_UNDERFLOW, nonfinite), merge(RW4_HARDWARE_ODE_ERR_MAX_STEPS, &
+          -1, stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, code < 0)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, code < 0 .and. last)
+      stats%h = merge(h, stats%h, code < 0)
+      told = t
+      hs = h
+      if (code >= 0) then
+        res = code
+        return
+      end if
+
+      ! trial
+
+      ! stage 2: t + 0.05260015195876773 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.05260015195876773_c_double * k(i, 0))
+      end do
+      call rw4_hardware_rhs(t + 0.05260015195876773_c_double * h, y, c, k(:, 1))
+
+      ! stage 3: t + 0.0789002279381516 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.0197250569845379_c_double * k(i, &
+            0) + 0.0591751709536137_c_double * k(i, 1))
+      end do
+      call rw4_hardware_rhs(t + 0.0789002279381516_c_double * h, y, c, k(:, 2))
+
+      ! stage 4: t + 0.1183503419072274 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.02958758547680685_c_double * k(i, &
+            0) + 0.08876275643042054_c_double * k(i, 2))
+      end do
+      call rw4_hardware_rhs(t + 0.1183503419072274_c_double * h, y, c, k(:, 3))
+
+      ! stage 5: t + 0.2816496580927726 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((0.2413651341592667_c_double * k(i, &
+            0) - 0.8845494793282861_c_double * k(i, 2)) + 0.924834003261792_c_double * k(i, 3))
+      end do
+      call rw4_hardware_rhs(t + 0.2816496580927726_c_double * h, y, c, k(:, 4))
+
+      ! stage 6: t + 0.3333333333333333 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((0.037037037037037035_c_double * k(i, &
+            0) + 0.17082860872947386_c_double * k(i, 3)) + 0.12546768756682242_c_double * k(i, 4))
+      end do
+      call rw4_hardware_rhs(t + 0.3333333333333333_c_double * h, y, c, k(:, 5))
+
+      ! stage 7: t + 0.25 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (((0.037109375_c_double * k(i, 0) + 0.17025221101954405_c_double * k(i, &
+            3)) + 0.06021653898045596_c_double * k(i, 4)) - 0.017578125_c_double * k(i, 5))
+      end do
+      call rw4_hardware_rhs(t + 0.25_c_double * h, y, c, k(:, 6))
+
+      ! stage 8: t + 0.3076923076923077 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((0.03709200011850479_c_double * k(i, &
+            0) + 0.17038392571223998_c_double * k(i, 3)) + 0.10726203044637328_c_double * k(i, &
+            4)) - 0.015319437748624402_c_double * k(i, 5)) + 0.008273789163814023_c_double * k(i, &
+            6))
+      end do
+      call rw4_hardware_rhs(t + 0.3076923076923077_c_double * h, y, c, k(:, 7))
+
+      ! stage 9: t + 0.6512820512820513 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (((((0.6241109587160757_c_double * k(i, &
+            0) - 3.3608926294469414_c_double * k(i, 3)) - 0.868219346841726_c_double * k(i, &
+            4)) + 27.59209969944671_c_double * k(i, 5)) + 20.154067550477894_c_double * k(i, &
+            6)) - 43.48988418106996_c_double * k(i, 7))
+      end do
+      call rw4_hardware_rhs(t + 0.6512820512820513_c_double * h, y, c, k(:, 8))
+
+      ! stage 10: t + 0.6 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((((0.47766253643826434_c_double * k(i, &
+            0) - 2.4881146199716677_c_double * k(i, 3)) - 0.590290826836843_c_double * k(i, &
+            4)) + 21.230051448181193_c_double * k(i, 5)) + 15.279233632882423_c_double * k(i, &
+            6)) - 33.28821096898486_c_double * k(i, 7)) - 0.020331201708508627_c_double * k(i, 8))
+      end do
+      call rw4_hardware_rhs(t + 0.6_c_double * h, y, c, k(:, 9))
+
+      ! stage 11: t + 0.8571428571428571 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((((((-0.9371424300859873_c_double) * k(i, &
+            0) + 5.186372428844064_c_double * k(i, 3)) + 1.0914373489967295_c_double * k(i, &
+            4)) - 8.149787010746927_c_double * k(i, 5)) - 18.52006565999696_c_double * k(i, &
+            6)) + 22.739487099350505_c_double * k(i, 7)) + 2.4936055526796523_c_double * k(i, &
+            8)) - 3.0467644718982196_c_double * k(i, 9))
+      end do
+      call rw4_hardware_rhs(t + 0.8571428571428571_c_double * h, y, c, k(:, 10))
+
+      ! stage 12: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((((((2.273310147516538_c_double * k(i, &
+            0) - 10.53449546673725_c_double * k(i, 3)) - 2.0008720582248625_c_double * k(i, &
+            4)) - 17.9589318631188_c_double * k(i, 5)) + 27.94888452941996_c_double * k(i, &
+            6)) - 2.8589982771350235_c_double * k(i, 7)) - 8.87285693353063_c_double * k(i, &
+            8)) + 12.360567175794303_c_double * k(i, 9)) + 0.6433927460157636_c_double * k(i, 10))
+      end do
+      call rw4_hardware_rhs(t + h, y, c, k(:, 11))
+
+      ! the new solution
+      do i = 0, nx - 1
+        dx(i) = h * (((((((0.054293734116568765_c_double * k(i, &
+            0) + 4.450312892752409_c_double * k(i, 5)) + 1.8915178993145003_c_double * k(i, &
+            6)) - 5.801203960010585_c_double * k(i, 7)) + 0.3111643669578199_c_double * k(i, &
+            8)) - 0.1521609496625161_c_double * k(i, 9)) + 0.20136540080403034_c_double * k(i, &
+            10)) + 0.04471061572777259_c_double * k(i, 11)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+
+      ! the error: DOP853's two estimates, combined
+      err5 = 0.0_c_double
+      err3 = 0.0_c_double
+      do i = 0, nx - 1
+        e5 = (((((((0.01312004499419488_c_double * k(i, 0) - 1.2251564463762044_c_double * k(i, &
+            5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
+            7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
+            9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
+            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+        e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
+            5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
+            7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
+            9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
+            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+        err5 = err5 + e5 * e5
+        err3 = err3 + e3 * e3
+      end do
+      deno = err5 + 1e-2_c_double * err3
+      err = merge((abs(h) * err5) / sqrt(nx * deno), 0.0_c_double, deno > 0.0_c_double)
+
+      ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
+      stats%rhs_calls = stats%rhs_calls + (merge(11, 0, code < 0))
+      nonfinite = .not. ieee_is_finite(err)
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+      ok = code < 0 .and. .not. nonfinite .and. err <= 1.0_c_double
+      if (ok) then
+        call rw4_hardware_rhs(t + h, xnew, c, k(:, 12))  ! where the next step starts
+      end if
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. (ok .and. .not. ieee_is_finite(k(i, 12)))
+      end do
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, ok))
+
+      ! control: accept or reject by selection, and the next h
+      run = code < 0
+      take = run .and. .not. nonfinite .and. err <= 1.0_c_double
+      lock = (merge(abs(rw4_hardware_cos(xnew(1))) < RW4_HARDWARE_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+          1.0_c_double
+      ok = take .and. .not. lock
+      fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
+      grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))
+      grow = merge(max(grow, 1.0_c_double), grow, rejected_last)  ! no growth after a rejection
+      code = merge(RW4_HARDWARE_ODE_ERR_ATTITUDE_SINGULAR, merge(RW4_HARDWARE_ODE_OK, code, &
+          ok .and. last), take .and. lock)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, run .and. .not. take))
+      err_old = merge(max(err, 1e-4_c_double), err_old, ok)
+      rejected_last = merge(.false., merge(.true., rejected_last, run .and. .not. take), ok)
+      h = merge(h, merge(h * 0.333_c_double, merge(h / grow, h / min(3.003003003003003_c_double, &
+          fac), ok), nonfinite), .not. run .or. (take .and. lock))
+
+      ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
+      if (ok) then
+
+        ! the dense output of order 7
+        do i = 0, nx - 1
+          y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
+              0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
+              7)) - 0.12419142326381637_c_double * k(i, 8)) + 0.15329179827876568_c_double * k(i, &
+              9)) + 0.00820105229563469_c_double * k(i, &
+              10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
+        end do
+        call rw4_hardware_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
+        do i = 0, nx - 1
+          y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
+              0) + 0.028300909672366776_c_double * k(i, &
+              5)) + 0.053541988307438566_c_double * k(i, &
+              6)) - 0.05492374857139099_c_double * k(i, &
+              7)) - 0.00010834732869724932_c_double * k(i, &
+              10)) + 0.0003825710908356584_c_double * k(i, &
+              11)) - 0.00034046500868740456_c_double * k(i, &
+              12)) + 0.1413124436746325_c_double * k(i, 13))
+        end do
+        call rw4_hardware_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
+        do i = 0, nx - 1
+          y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
+              0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
+              6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
+              8)) - 0.0013990241651590145_c_double * k(i, &
+              12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, 14))
+        end do
+        call rw4_hardware_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
+        stats%rhs_calls = stats%rhs_calls + 3
+        do i = 0, nx - 1
+          dense(i, 0) = xnew(i) - x(i)
+          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+          dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
+          dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
+              0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
+              6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
+              8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
+              10)) + 0.6315787787694688_c_double * k(i, &
+              11)) - 0.08899033645133331_c_double * k(i, &
+              12)) + 18.148505520854727_c_double * k(i, 13)) - 9.194632392478356_c_double * k(i, &
+              14)) - 4.436036387594894_c_double * k(i, 15))
+          dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
+              0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
+              6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
+              8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
+              10)) - 9.332130526430229_c_double * k(i, 11)) + 15.697238121770845_c_double * k(i, &
+              12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
+              14)) + 35.81684148639408_c_double * k(i, 15))
+          dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
+              0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
+              6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
+              8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
+              10)) + 0.7777137798053443_c_double * k(i, 11)) - 2.778205752353508_c_double * k(i, &
+              12)) - 60.19669523126412_c_double * k(i, 13)) + 84.32040550667716_c_double * k(i, &
+              14)) + 11.99229113618279_c_double * k(i, 15))
+          dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
+              0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
+              6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
+              8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
+              10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
+              12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
+              14)) - 149.72683625798564_c_double * k(i, 15))
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < t)) then
+            exit
+          end if
+          frac = (times(g) - told) / hs
+          do i = 0, nx - 1
+            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+                1) + frac * (dense(i, 2) + (1.0_c_double - frac) * (dense(i, &
+                3) + frac * (dense(i, 4) + (1.0_c_double - frac) * (dense(i, 5) + frac * dense(i, &
+                6)))))))
+          end do
+          g = g + 1
+        end do
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
+        do i = 0, nx - 1
+          k(i, 0) = k(i, 12)
+        end do
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function dop853_grid
+
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   function rw4_hardware_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dop853")
@@ -2286,6 +2980,63 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_dop853
+
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+      bind(C, name="rw4_hardware_f_dop853_grid")
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
+    integer(c_int) :: code
+    type(rw4_hardware_stats), pointer :: stats
+    type(rw4_hardware_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
+  end function rw4_hardware_dop853_grid
+
+  ! stats, codes: NULL when not wanted.
+  function rw4_hardware_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+      result(failed) bind(C, name="rw4_hardware_f_dop853_grid_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(rw4_hardware_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
+                                  c_loc(stats_out(i)))
+      else
+        code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function rw4_hardware_dop853_grid_batch
 
   ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
   ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
@@ -2390,6 +3141,120 @@ contains
     res = error_norm(k(:, 5), x, xnew, rtol, atol)
     return
   end function rodas4_trial
+
+  ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+  ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+  ! E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+  ! Stiffly accurate: stage 6 sits on the embedded solution and the step
+  ! is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+  ! when a stage is).
+  function rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, &
+          dense) result(res)
+    real(c_double), intent(in) :: t
+    real(c_double), intent(in) :: h
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: x(0:nx - 1)
+    real(c_double), intent(in) :: f0(0:nx - 1)
+    real(c_double), intent(in) :: lu(0:nx * nx - 1)
+    integer(c_int), intent(in) :: piv(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(in) :: comp(0:nx - 1)
+    real(c_double), intent(inout) :: k(0:nx - 1, 0:5)
+    real(c_double), intent(inout) :: dx(0:nx - 1)
+    real(c_double), intent(inout) :: xnew(0:nx - 1)
+    real(c_double), intent(inout) :: dense(0:nx - 1, 0:1)
+    real(c_double) :: res
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: fy(0:nx - 1)
+    real(c_double) :: inv_h
+    integer(c_int) :: i
+
+    inv_h = 1.0_c_double / h
+
+    ! stage 1: t
+    do i = 0, nx - 1
+      k(i, 0) = f0(i)
+    end do
+    call lu_solve(lu, piv, k(:, 0))
+
+    ! stage 2: t + 0.386 h
+    do i = 0, nx - 1
+      y(i) = x(i) + 1.544_c_double * k(i, 0)
+    end do
+    call rw4_hardware_rhs(t + 0.386_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 1) = fy(i) + inv_h * ((-5.6688_c_double) * k(i, 0))
+    end do
+    call lu_solve(lu, piv, k(:, 1))
+
+    ! stage 3: t + 0.21 h
+    do i = 0, nx - 1
+      y(i) = (x(i) + 0.9466785280815826_c_double * k(i, 0)) + 0.2557011698983284_c_double * k(i, 1)
+    end do
+    call rw4_hardware_rhs(t + 0.21_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 2) = fy(i) + inv_h * ((-2.430093356833875_c_double) * k(i, &
+          0) - 0.2063599157091915_c_double * k(i, 1))
+    end do
+    call lu_solve(lu, piv, k(:, 2))
+
+    ! stage 4: t + 0.63 h
+    do i = 0, nx - 1
+      y(i) = ((x(i) + 3.314825187068521_c_double * k(i, 0)) + 2.896124015972201_c_double * k(i, &
+          1)) + 0.9986419139977817_c_double * k(i, 2)
+    end do
+    call rw4_hardware_rhs(t + 0.63_c_double * h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 3) = fy(i) + inv_h * (((-0.1073529058151375_c_double) * k(i, &
+          0) - 9.594562251023355_c_double * k(i, 1)) - 20.47028614809616_c_double * k(i, 2))
+    end do
+    call lu_solve(lu, piv, k(:, 3))
+
+    ! stage 5: t + h
+    do i = 0, nx - 1
+      y(i) = (((x(i) + 1.221224509226641_c_double * k(i, 0)) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, 3)
+    end do
+    call rw4_hardware_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 4) = fy(i) + inv_h * (((7.496443313967647_c_double * k(i, &
+          0) - 10.24680431464352_c_double * k(i, 1)) - 33.99990352819905_c_double * k(i, &
+          2)) + 11.7089089320616_c_double * k(i, 3))
+    end do
+    call lu_solve(lu, piv, k(:, 4))
+
+    ! stage 6: t + h, on the embedded solution
+    do i = 0, nx - 1
+      dx(i) = (((1.221224509226641_c_double * k(i, 0) + 6.019134481288629_c_double * k(i, &
+          1)) + 12.53708332932087_c_double * k(i, 2)) - 0.687886036105895_c_double * k(i, &
+          3)) + k(i, 4)
+      y(i) = x(i) + dx(i)
+    end do
+    call rw4_hardware_rhs(t + h, y, c, fy)
+    do i = 0, nx - 1
+      k(i, 5) = fy(i) + inv_h * ((((8.083246795921522_c_double * k(i, &
+          0) - 7.981132988064893_c_double * k(i, 1)) - 31.52159432874371_c_double * k(i, &
+          2)) + 16.31930543123136_c_double * k(i, 3)) - 6.058818238834054_c_double * k(i, 4))
+    end do
+    call lu_solve(lu, piv, k(:, 5))
+
+    ! the new solution x + dx: the embedded one plus k_6
+    do i = 0, nx - 1
+      dx(i) = (dx(i) + k(i, 5)) - comp(i)
+      xnew(i) = x(i) + dx(i)
+    end do
+    do i = 0, nx - 1
+      dense(i, 0) = (((10.12623508344586_c_double * k(i, 0) - 7.487995877610167_c_double * k(i, &
+          1)) - 34.80091861555747_c_double * k(i, 2)) - 7.992771707568823_c_double * k(i, &
+          3)) + 1.025137723295662_c_double * k(i, 4)
+      dense(i, 1) = ((((-0.6762803392801253_c_double) * k(i, &
+          0) + 6.087714651680015_c_double * k(i, 1)) + 16.43084320892478_c_double * k(i, &
+          2)) + 24.76722511418386_c_double * k(i, 3)) - 6.594389125716872_c_double * k(i, 4)
+    end do
+    res = error_norm(k(:, 5), x, xnew, rtol, atol)
+    return
+  end function rodas4_grid_trial
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! J and f are evaluated once per accepted step; a rejected step only
@@ -2543,6 +3408,206 @@ contains
   end function rodas4_integrate
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! J and f are evaluated once per accepted step; a rejected step only
+  ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+  ! err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+  ! accepted step.
+  ! A singular E is retried with h times 0.5, 5 times in a row at most.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(rw4_hardware_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    integer(c_int) :: res
+    real(c_double) :: J(0:nx * nx - 1)
+    real(c_double) :: lu(0:nx * nx - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: fnew(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: piv(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err
+    real(c_double) :: fac
+    real(c_double) :: gus
+    real(c_double) :: h_acc
+    real(c_double) :: err_acc
+    logical :: last
+    logical :: rejected_last
+    logical :: nonfinite
+    logical :: new_point
+    integer(c_int) :: singular
+    integer(c_int) :: start
+    real(c_double) :: dense(0:nx - 1, 0:1)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: frac
+    integer(c_int) :: i
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = RW4_HARDWARE_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    start = ode_start(4, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
+    if (start <= RW4_HARDWARE_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+    end if
+    if (start >= 0) then
+      res = start
+      return
+    end if
+    t = t0
+    h_acc = 0.0_c_double
+    err_acc = 1e-2_c_double
+    rejected_last = .false.
+    nonfinite = .false.
+    singular = 0
+    new_point = .true.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    do
+      if (new_point) then
+        call rw4_hardware_jac(t, x, c, J)
+        stats%jac_calls = stats%jac_calls + 1
+        if (.not. all_finite(J, nx * nx)) then
+          res = RW4_HARDWARE_ODE_ERR_NONFINITE
+          return
+        end if
+        new_point = .false.
+      end if
+      if (step_underflow(h, t)) then
+        res = merge(RW4_HARDWARE_ODE_ERR_NONFINITE, RW4_HARDWARE_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        res = RW4_HARDWARE_ODE_ERR_MAX_STEPS
+        return
+      end if
+      last = t + 1.01_c_double * h >= t1
+      if (last) then
+        h = t1 - t
+      end if
+      stats%h = h
+
+      ! E = I/(h gamma) - J
+      do i = 0, nx * nx - 1
+        lu(i) = -J(i)
+      end do
+      do i = 0, nx - 1
+        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
+      end do
+      stats%decompositions = stats%decompositions + 1
+      if (lu_decompose(lu, piv)) then
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+        singular = singular + 1
+        if (singular == 5) then
+          res = RW4_HARDWARE_ODE_ERR_SINGULAR
+          return
+        end if
+        h = h * 0.5_c_double
+        cycle
+      end if
+      singular = 0
+      err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense)
+      stats%rhs_calls = stats%rhs_calls + 5
+      nonfinite = .not. ieee_is_finite(err) .or. .not. all_finite(xnew, nx)
+      if (.not. nonfinite .and. err <= 1.0_c_double .and. .not. last) then
+        call rw4_hardware_rhs(t + h, xnew, c, fnew)  ! where the next step starts
+        stats%rhs_calls = stats%rhs_calls + 1
+        nonfinite = .not. all_finite(fnew, nx)
+      end if
+      if (nonfinite) then
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+        h = h * 0.2_c_double
+        cycle
+      end if
+      fac = max(0.16666666666666666_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))  ! h / h_new
+      if (err <= 1.0_c_double) then
+        if (gimbal_lock(x, xnew)) then
+          res = RW4_HARDWARE_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        if (stats%accepted > 0) then
+          gus = ((h_acc / h) * ((err * err) / err_acc)**0.25_c_double) / 0.9_c_double
+          fac = max(fac, max(0.16666666666666666_c_double, min(5.0_c_double, gus)))
+        end if
+        h_acc = h
+        err_acc = max(1e-2_c_double, err)
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < (merge(t1, t + h, last)))) then
+            exit
+          end if
+          frac = (times(g) - t) / h
+          do i = 0, nx - 1
+            out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) * &
+                (dense(i, 0) + frac * dense(i, 1)))
+          end do
+          g = g + 1
+        end do
+        call accept_step(x, xnew, dx, comp)
+        t = merge(t1, t + h, last)
+        stats%t = t
+        stats%accepted = stats%accepted + 1
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+        if (last) then
+          res = RW4_HARDWARE_ODE_OK
+          return
+        end if
+        do i = 0, nx - 1
+          f0(i) = fnew(i)
+        end do
+        new_point = .true.
+        if (rejected_last) then
+          fac = max(fac, 1.0_c_double)
+        end if
+        rejected_last = .false.
+      else
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+      end if
+      h = h / fac
+    end do
+  end function rodas4_grid
+
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   function rw4_hardware_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
@@ -2558,6 +3623,63 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_rodas4
+
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+      bind(C, name="rw4_hardware_f_rodas4_grid")
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
+    integer(c_int) :: code
+    type(rw4_hardware_stats), pointer :: stats
+    type(rw4_hardware_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
+  end function rw4_hardware_rodas4_grid
+
+  ! stats, codes: NULL when not wanted.
+  function rw4_hardware_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+      result(failed) bind(C, name="rw4_hardware_f_rodas4_grid_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(rw4_hardware_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
+                                  c_loc(stats_out(i)))
+      else
+        code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function rw4_hardware_rodas4_grid_batch
 
   ! E1 and E2 for this h, factored; 1 when either is singular.
   function radau5_factor(J, h, e1, piv1, e2r, e2i, piv2) result(res)
@@ -3091,6 +4213,409 @@ contains
   end function radau5_integrate
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Hairer's radau5.f strategy: the error test's tolerances are
+  ! rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+  ! h_new/h = fac err^-1/4
+  ! within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+  ! Gustafsson's predictive controller after an accepted step.
+  ! J is kept while the Newton iterations contract by <= 0.001 a step, and
+  ! h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+  ! diverge, take more than 7, or meet a NaN or Inf
+  ! retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+  ! times in a row at most.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    type(rw4_hardware_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    integer(c_int) :: res
+    real(c_double) :: J(0:nx * nx - 1)
+    real(c_double) :: e1(0:nx * nx - 1)
+    real(c_double) :: e2r(0:nx * nx - 1)
+    real(c_double) :: e2i(0:nx * nx - 1)
+    real(c_double) :: z1(0:nx - 1)
+    real(c_double) :: z2(0:nx - 1)
+    real(c_double) :: z3(0:nx - 1)
+    real(c_double) :: w1(0:nx - 1)
+    real(c_double) :: w2(0:nx - 1)
+    real(c_double) :: w3(0:nx - 1)
+    real(c_double) :: ak1(0:nx - 1)
+    real(c_double) :: ak2(0:nx - 1)
+    real(c_double) :: ak3(0:nx - 1)
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: fnew(0:nx - 1)
+    real(c_double) :: scal(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: piv1(0:nx - 1)
+    integer(c_int) :: piv2(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: h_old
+    real(c_double) :: h_new
+    real(c_double) :: h_acc
+    real(c_double) :: err_acc
+    real(c_double) :: rtol_e
+    real(c_double) :: atol_e
+    real(c_double) :: newton_tol
+    real(c_double) :: err
+    real(c_double) :: quot
+    real(c_double) :: rate
+    real(c_double) :: theta
+    real(c_double) :: theta_old
+    real(c_double) :: dyno
+    real(c_double) :: dyno_old
+    real(c_double) :: thq
+    real(c_double) :: predicted
+    real(c_double) :: q
+    real(c_double) :: gus
+    real(c_double) :: c1q
+    real(c_double) :: c2q
+    real(c_double) :: c3q
+    real(c_double) :: theta_k
+    logical :: last
+    logical :: first
+    logical :: reject
+    logical :: fresh_jac
+    logical :: need_jac
+    logical :: need_lu
+    logical :: nonfinite
+    integer(c_int) :: newt
+    integer(c_int) :: outcome
+    integer(c_int) :: singular
+    integer(c_int) :: start
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: frac
+    real(c_double) :: a1
+    real(c_double) :: a2
+    real(c_double) :: a3
+    real(c_double) :: ak
+    integer(c_int) :: i
+    integer(c_int) :: k
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = RW4_HARDWARE_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    start = ode_start(5, RW4_HARDWARE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
+    if (start <= RW4_HARDWARE_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+    end if
+    if (start >= 0) then
+      res = start
+      return
+    end if
+    t = t0
+    h_old = 1.0_c_double
+    rate = 1.0_c_double
+    theta_old = 1.0_c_double
+    dyno_old = 1.0_c_double
+    h_acc = 0.0_c_double
+    err_acc = 1e-2_c_double
+    last = .false.
+    first = .true.
+    reject = .false.
+    fresh_jac = .false.
+    need_jac = .true.
+    need_lu = .true.
+    nonfinite = .false.
+    singular = 0
+    !GCC$ unroll 1
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+      ak1(i) = 0.0_c_double
+      ak2(i) = 0.0_c_double
+      ak3(i) = 0.0_c_double
+    end do
+    rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
+    atol_e = rtol_e * (atol / rtol)
+    newton_tol = max((10.0_c_double * (0.5_c_double * epsilon(1.0_c_double))) / rtol_e, &
+        min(0.03_c_double, sqrt(rtol_e)))
+    if (t + 1.01_c_double * h >= t1) then
+      h = t1 - t
+      last = .true.
+    end if
+    !GCC$ unroll 1
+    do i = 0, nx - 1
+      scal(i) = atol_e + rtol_e * abs(x(i))
+    end do
+    do
+      if (need_jac) then
+        call rw4_hardware_jac(t, x, c, J)
+        stats%jac_calls = stats%jac_calls + 1
+        if (.not. all_finite(J, nx * nx)) then
+          res = RW4_HARDWARE_ODE_ERR_NONFINITE
+          return
+        end if
+        fresh_jac = .true.
+        need_jac = .false.
+        need_lu = .true.
+      end if
+      if (step_underflow(h, t)) then
+        res = merge(RW4_HARDWARE_ODE_ERR_NONFINITE, RW4_HARDWARE_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        res = RW4_HARDWARE_ODE_ERR_MAX_STEPS
+        return
+      end if
+      if (need_lu) then
+        stats%decompositions = stats%decompositions + 1
+        if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) then
+          singular = singular + 1
+          if (singular == 5) then
+            res = RW4_HARDWARE_ODE_ERR_SINGULAR
+            return
+          end if
+          stats%rejected = stats%rejected + 1
+          reject = .true.
+          last = .false.
+          h = h * 0.5_c_double
+          need_jac = .not. fresh_jac
+          cycle
+        end if
+        singular = 0
+        need_lu = .false.
+      end if
+      stats%h = h
+
+      ! the Newton iterations start from the last step's collocation polynomial
+      if (first) then
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          z1(i) = 0.0_c_double
+          z2(i) = 0.0_c_double
+          z3(i) = 0.0_c_double
+          w1(i) = 0.0_c_double
+          w2(i) = 0.0_c_double
+          w3(i) = 0.0_c_double
+        end do
+      else
+        c3q = h / h_old
+        c1q = 0.1550510257216822_c_double * c3q
+        c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          a2 = c2q * (ak1(i) + (c2q + 0.35505102572168223_c_double) * (ak2(i) + (c2q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          a3 = c3q * (ak1(i) + (c3q + 0.35505102572168223_c_double) * (ak2(i) + (c3q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          z1(i) = a1
+          z2(i) = a2
+          z3(i) = a3
+          w1(i) = (4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2) + &
+              0.5417705399358749_c_double * a3
+          w2(i) = ((-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2) + &
+              0.47662355450055044_c_double * a3
+          w3(i) = ((-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2) - &
+              0.5960392048282249_c_double * a3
+        end do
+      end if
+
+      ! outcome: 0 converged, 1 too slowly (h reduced), 2 failed
+      outcome = 0
+      rate = max(rate, 0.5_c_double * epsilon(1.0_c_double))**0.8_c_double
+      theta = 1e-3_c_double
+      newt = 0
+      do
+        if (newt >= 7) then
+          outcome = 2
+          exit
+        end if
+        dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2, w3)
+        stats%rhs_calls = stats%rhs_calls + 3
+        newt = newt + 1
+        if (.not. ieee_is_finite(dyno)) then
+          nonfinite = .true.
+          outcome = 2
+          exit
+        end if
+        if (newt > 1 .and. newt < 7) then
+          thq = dyno / dyno_old
+          theta = merge(thq, sqrt(thq * theta_old), newt == 2)
+          theta_old = thq
+          if (.not. (theta < 0.99_c_double)) then
+            outcome = 2
+            exit
+          end if
+          rate = theta / (1.0_c_double - theta)
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
+          if (predicted >= 1.0_c_double) then
+            q = max(1e-4_c_double, min(20.0_c_double, predicted))
+            h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
+            outcome = 1
+            exit
+          end if
+        end if
+        dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          a1 = w1(i) + z1(i)
+          a2 = w2(i) + z2(i)
+          a3 = w3(i) + z3(i)
+          w1(i) = a1
+          w2(i) = a2
+          w3(i) = a3
+          z1(i) = (0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2) - &
+              0.030029194105147424_c_double * a3
+          z2(i) = (0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2) + &
+              0.3829421127572619_c_double * a3
+          z3(i) = 0.966048182615093_c_double * a1 + a2
+        end do
+        if (.not. (rate * dyno > newton_tol)) then
+          exit
+        end if
+      end do
+      if (outcome == 0) then
+        err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          dx(i) = z3(i) - comp(i)
+          xnew(i) = x(i) + dx(i)
+        end do
+        if (err < 1.0_c_double .and. .not. last) then
+          call rw4_hardware_rhs(t + h, xnew, c, fnew)  ! where the next step starts
+          stats%rhs_calls = stats%rhs_calls + 1
+          nonfinite = .not. all_finite(fnew, nx)
+        else
+          nonfinite = .not. ieee_is_finite(err)
+        end if
+        nonfinite = nonfinite .or. .not. all_finite(xnew, nx)
+        if (nonfinite) then
+          outcome = 2
+        end if
+      end if
+      if (outcome /= 0) then
+        stats%rejected = stats%rejected + 1
+        reject = .true.
+        last = .false.
+        if (outcome == 2) then
+          h = h * 0.5_c_double
+        end if
+        need_lu = .true.
+        need_jac = .not. fresh_jac
+        cycle
+      end if
+      quot = max(0.125_c_double, min(5.0_c_double, err**0.25_c_double / min(0.9_c_double, &
+          13.5_c_double / (newt + 14))))  ! h_new = h / quot
+      h_new = h / quot
+      if (err < 1.0_c_double) then
+        if (gimbal_lock(x, xnew)) then
+          res = RW4_HARDWARE_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        first = .false.
+        if (stats%accepted > 0) then
+          gus = ((h_acc / h) * ((err * err) / err_acc)**0.25_c_double) / 0.9_c_double
+          quot = max(quot, max(0.125_c_double, min(5.0_c_double, gus)))
+          h_new = h / quot
+        end if
+        h_acc = h
+        err_acc = max(1e-2_c_double, err)
+        h_old = h
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
+          ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
+          ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
+          ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < (merge(t1, t + h, last)))) then
+            exit
+          end if
+          frac = (times(g) - (merge(t1, t + h, last))) / h
+          do i = 0, nx - 1
+            out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
+                (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+          end do
+          g = g + 1
+        end do
+        call accept_step(x, xnew, dx, comp)
+        t = merge(t1, t + h, last)
+        stats%t = t
+        stats%accepted = stats%accepted + 1
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+        if (last) then
+          res = RW4_HARDWARE_ODE_OK
+          return
+        end if
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          f0(i) = fnew(i)
+          scal(i) = atol_e + rtol_e * abs(x(i))
+        end do
+        fresh_jac = .false.
+        h_new = min(h_new, t1 - t0)
+        if (reject) then
+          h_new = min(h_new, h)
+        end if
+        reject = .false.
+        if (t + 1.01_c_double * h_new >= t1) then
+          h = t1 - t
+          last = .true.
+        else
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
+            cycle
+          else
+            h = h_new
+          end if
+        end if
+        need_lu = .true.
+        need_jac = theta > 1e-3_c_double
+      else
+        stats%rejected = stats%rejected + 1
+        reject = .true.
+        last = .false.
+        h = merge(h * 0.1_c_double, h_new, first)
+        need_lu = .true.
+        need_jac = .not. fresh_jac
+      end if
+    end do
+  end function radau5_grid
+
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   function rw4_hardware_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
@@ -3106,6 +4631,63 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_radau5
+
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+      bind(C, name="rw4_hardware_f_radau5_grid")
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
+    integer(c_int) :: code
+    type(rw4_hardware_stats), pointer :: stats
+    type(rw4_hardware_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
+  end function rw4_hardware_radau5_grid
+
+  ! stats, codes: NULL when not wanted.
+  function rw4_hardware_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+      result(failed) bind(C, name="rw4_hardware_f_radau5_grid_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    integer(c_long), value, intent(in) :: max_steps
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(rw4_hardware_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
+                                  c_loc(stats_out(i)))
+      else
+        code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function rw4_hardware_radau5_grid_batch
 
   ! stats, codes: NULL when not wanted.
   function rw4_hardware_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &

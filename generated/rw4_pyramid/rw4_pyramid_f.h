@@ -55,6 +55,9 @@ extern "C" {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR 6
+/* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+   strictly increasing (unsorted or repeated); nothing is integrated or written */
+#define RW4_PYRAMID_ODE_ERR_GRID           7
 
 #ifndef RW4_PYRAMID_STATS_DEFINED
 #define RW4_PYRAMID_STATS_DEFINED
@@ -86,21 +89,45 @@ int rw4_pyramid_f_dopri5(double t0, double t1, double *x, const double *c, doubl
 size_t rw4_pyramid_f_dopri5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_stats *stats, int *codes);
+int rw4_pyramid_f_dopri5_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_stats *stats);
+size_t rw4_pyramid_f_dopri5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_stats *stats, int *codes);
 int rw4_pyramid_f_dop853(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, rw4_pyramid_stats *stats);
 size_t rw4_pyramid_f_dop853_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_stats *stats, int *codes);
+int rw4_pyramid_f_dop853_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_stats *stats);
+size_t rw4_pyramid_f_dop853_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_stats *stats, int *codes);
 int rw4_pyramid_f_rodas4(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, rw4_pyramid_stats *stats);
 size_t rw4_pyramid_f_rodas4_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_stats *stats, int *codes);
+int rw4_pyramid_f_rodas4_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_stats *stats);
+size_t rw4_pyramid_f_rodas4_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_stats *stats, int *codes);
 int rw4_pyramid_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, rw4_pyramid_stats *stats);
 size_t rw4_pyramid_f_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_stats *stats, int *codes);
+int rw4_pyramid_f_radau5_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_stats *stats);
+size_t rw4_pyramid_f_radau5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

@@ -31,6 +31,17 @@ extern "C" {
  * wanted. The _batch variants integrate n states stored one after another
  * (x[i*RW4_PYRAMID_FAILED_NX + j]), fill stats[i] and codes[i], and return how many
  * failed; stats or codes may be NULL there too.
+ * The adaptive methods' _grid variants write the state at each of ntimes
+ * times, finite and strictly increasing, in one integration from times[0]
+ * (x's time: out[0] is x) to times[ntimes - 1] (x's time on return, as from
+ * the plain call): out[g*RW4_PYRAMID_FAILED_NX + j] at times[g], from the accepted steps'
+ * interpolant (the method's own dense output: dopri5 order 4, dop853 order
+ * 7, rodas4 order 3, radau5 its collocation polynomial, taylor its series),
+ * the steps not cut at the grid times. The last row equals the plain call's
+ * end state bit for bit; rows past the time a failure reached are not
+ * written; a bad grid returns RW4_PYRAMID_FAILED_ODE_ERR_GRID and writes nothing. The
+ * _grid_batch variants run n states over the same times
+ * (out[(i*ntimes + g)*RW4_PYRAMID_FAILED_NX + j]).
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Each method's coefficients and their published
  * source are above its code in rw4_pyramid_failed_ode.c.
@@ -76,6 +87,9 @@ typedef struct {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define RW4_PYRAMID_FAILED_ODE_ERR_ATTITUDE_SINGULAR 6
+/* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+   strictly increasing (unsorted or repeated); nothing is integrated or written */
+#define RW4_PYRAMID_FAILED_ODE_ERR_GRID           7
 
 /* The one line an integrator's return code means ("unknown return code" for
    another): a string literal, not to be freed or changed. */
@@ -126,6 +140,12 @@ int rw4_pyramid_failed_dopri5(double t0, double t1, double *x, const double *c,
 size_t rw4_pyramid_failed_dopri5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_failed_stats *stats, int *codes);
+int rw4_pyramid_failed_dopri5_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_failed_stats *stats);
+size_t rw4_pyramid_failed_dopri5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_failed_stats *stats, int *codes);
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -140,6 +160,12 @@ int rw4_pyramid_failed_dop853(double t0, double t1, double *x, const double *c,
 size_t rw4_pyramid_failed_dop853_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_failed_stats *stats, int *codes);
+int rw4_pyramid_failed_dop853_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_failed_stats *stats);
+size_t rw4_pyramid_failed_dop853_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_failed_stats *stats, int *codes);
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -154,6 +180,12 @@ int rw4_pyramid_failed_rodas4(double t0, double t1, double *x, const double *c,
 size_t rw4_pyramid_failed_rodas4_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_failed_stats *stats, int *codes);
+int rw4_pyramid_failed_rodas4_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_failed_stats *stats);
+size_t rw4_pyramid_failed_rodas4_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_failed_stats *stats, int *codes);
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
  * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
@@ -170,6 +202,12 @@ int rw4_pyramid_failed_radau5(double t0, double t1, double *x, const double *c,
 size_t rw4_pyramid_failed_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         rw4_pyramid_failed_stats *stats, int *codes);
+int rw4_pyramid_failed_radau5_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        rw4_pyramid_failed_stats *stats);
+size_t rw4_pyramid_failed_radau5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, rw4_pyramid_failed_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

@@ -60,6 +60,9 @@ extern "C" {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR 6
+/* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+   strictly increasing (unsorted or repeated); nothing is integrated or written */
+#define SPEED_CONTROLLED_ODE_ERR_GRID           7
 
 #ifndef SPEED_CONTROLLED_STATS_DEFINED
 #define SPEED_CONTROLLED_STATS_DEFINED
@@ -92,30 +95,60 @@ int speed_controlled_f_dopri5(double t0, double t1, double *x, const double *c,
 size_t speed_controlled_f_dopri5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
+int speed_controlled_f_dopri5_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        speed_controlled_stats *stats);
+size_t speed_controlled_f_dopri5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, speed_controlled_stats *stats, int *codes);
 int speed_controlled_f_dop853(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats);
 size_t speed_controlled_f_dop853_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
+int speed_controlled_f_dop853_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        speed_controlled_stats *stats);
+size_t speed_controlled_f_dop853_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, speed_controlled_stats *stats, int *codes);
 int speed_controlled_f_rodas4(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats);
 size_t speed_controlled_f_rodas4_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
+int speed_controlled_f_rodas4_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        speed_controlled_stats *stats);
+size_t speed_controlled_f_rodas4_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, speed_controlled_stats *stats, int *codes);
 int speed_controlled_f_radau5(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats);
 size_t speed_controlled_f_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
+int speed_controlled_f_radau5_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        speed_controlled_stats *stats);
+size_t speed_controlled_f_radau5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, speed_controlled_stats *stats, int *codes);
 int speed_controlled_f_taylor(double t0, double t1, double *x, const double *c,
         double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats);
 size_t speed_controlled_f_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         speed_controlled_stats *stats, int *codes);
+int speed_controlled_f_taylor_grid(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        speed_controlled_stats *stats);
+size_t speed_controlled_f_taylor_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, speed_controlled_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

@@ -221,6 +221,8 @@ const char *stiff_wheel_ode_strerror(int code)
         return "bad argument";
     case STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR:
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
+    case STIFF_WHEEL_ODE_ERR_GRID:
+        return "bad output grid (times: at least one, finite, strictly increasing)";
     default:
         return "unknown return code";
     }
@@ -523,6 +525,27 @@ static int ode_start(int order, double rtol_min, double t0, double t1, const dou
         }
     }
     return -1;
+}
+
+/* 1 when the n grid times v are at least one, finite and strictly increasing. */
+static int grid_ok(long n, const double *v)
+{
+    long k;
+
+    if (n < 1) {
+        return 0;
+    }
+    for (k = 0; k < n; ++k) {
+        if (!(fabs(v[k]) <= DBL_MAX)) {
+            return 0;
+        }
+    }
+    for (k = 1; k < n; ++k) {
+        if (!(v[k - 1] < v[k])) {
+            return 0;
+        }
+    }
+    return 1;
 }
 
 /* In-place LU decomposition with partial pivoting within the diagonal
@@ -1408,12 +1431,263 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     }
 }
 
+/* dopri5 to t1, with Hairer's step-size strategy: the last step clipped
+   to end on t1, no growth right after a rejection, and a non-finite trial
+   rejected with h shrunk by facmin.
+   Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, double (*out)[STIFF_WHEEL_NX],
+                       stiff_wheel_stats *stats)
+{
+    double k[13][STIFF_WHEEL_NX];
+    double y[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX];
+    int code;
+    double t;
+    double h;
+    double err_old;
+    int nonfinite;
+    int rejected_last;
+    int last;
+    double err;
+    int run;
+    int take;
+    int lock;
+    int ok;
+    double fac;
+    double grow;
+    double total;
+    double dense[4][STIFF_WHEEL_NX];
+    double t0;
+    double t1;
+    long g;
+    double told;
+    double hs;
+    double frac;
+    int i;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return STIFF_WHEEL_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    code = ode_start(5, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
+    if (code <= STIFF_WHEEL_ODE_OK) {
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+    }
+    if (code >= 0) {
+        return code;
+    }
+    code = -1;
+    t = t0;
+    nonfinite = 0;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    err_old = 1e-4;
+    rejected_last = 0;
+    for (;;) {
+
+        /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+        code = code < 0 ? (step_underflow(h,
+                t) ? (nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE :
+                STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1) : code;
+        last = t + 1.01 * h >= t1;
+        h = code < 0 && last ? t1 - t : h;
+        stats->h = code < 0 ? h : stats->h;
+        told = t;
+        hs = h;
+        if (code >= 0) {
+            return code;
+        }
+
+        /* trial */
+
+        /* stage 2: t + 0.2 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.2 * k[0][i]);
+        }
+        stiff_wheel_rhs(t + 0.2 * h, y, c, k[1]);
+
+        /* stage 3: t + 0.3 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.075 * k[0][i] + 0.225 * k[1][i]);
+        }
+        stiff_wheel_rhs(t + 0.3 * h, y, c, k[2]);
+
+        /* stage 4: t + 0.8 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.9777777777777777 * k[0][i] - 3.7333333333333334 * k[1][i] +
+                    3.5555555555555554 * k[2][i]);
+        }
+        stiff_wheel_rhs(t + 0.8 * h, y, c, k[3]);
+
+        /* stage 5: t + 0.8888888888888888 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (2.9525986892242035 * k[0][i] - 11.595793324188385 * k[1][i] +
+                    9.822892851699436 * k[2][i] - 0.2908093278463649 * k[3][i]);
+        }
+        stiff_wheel_rhs(t + 0.8888888888888888 * h, y, c, k[4]);
+
+        /* stage 6: t + h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (2.8462752525252526 * k[0][i] - 10.757575757575758 * k[1][i] +
+                    8.906422717743473 * k[2][i] + 0.2784090909090909 * k[3][i] -
+                    0.2735313036020583 * k[4][i]);
+        }
+        stiff_wheel_rhs(t + h, y, c, k[5]);
+
+        /* stage 7: t + h, the new solution */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            dx[i] = h * (0.09114583333333333 * k[0][i] + 0.44923629829290207 * k[2][i] +
+                    0.6510416666666666 * k[3][i] - 0.322376179245283 * k[4][i] +
+                    0.13095238095238096 * k[5][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        stiff_wheel_rhs(t + h, xnew, c, k[6]);
+
+        /* the error norm (see error_norm) */
+        total = 0.0;
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            double e;
+            e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
+                    0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
+                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+            total = total + e * e;
+        }
+        err = sqrt(total / STIFF_WHEEL_NX);
+
+        /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+        stats->rhs_calls = stats->rhs_calls + (code < 0 ? 6 : 0);
+        nonfinite = !(fabs(err) <= DBL_MAX);
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+
+        /* control: accept or reject by selection, and the next h */
+        run = code < 0;
+        take = run && !nonfinite && err <= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(stiff_wheel_cos(xnew[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !lock;
+        fac = pow(err, 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow = dmax(0.1, dmin(5.0, fac / pow(err_old, 0.04)));
+        grow = rejected_last ? dmax(grow, 1.0) : grow;  /* no growth after a rejection */
+        code = take && lock ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                STIFF_WHEEL_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (run && !take ? 1 : 0);
+        err_old = ok ? dmax(err, 1e-4) : err_old;
+        rejected_last = ok ? 0 : run && !take ? 1 : rejected_last;
+        h = !run || (take && lock) ? h : nonfinite ? h * 0.2 : ok ? h / grow : h / dmin(5.0, fac);
+
+        /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+        if (ok) {
+
+            /* the dense output of order 4 */
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                dense[0][i] = xnew[i] - x[i];
+                dense[1][i] = hs * k[0][i] - dense[0][i];
+                dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
+                dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 * k[2][i] -
+                        5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i] -
+                        1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < t)) {
+                    break;
+                }
+                frac = (times[g] - told) / hs;
+                for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                            (dense[2][i] + (1.0 - frac) * dense[3][i])));
+                }
+                g = g + 1;
+            }
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                k[0][i] = k[6][i];
+            }
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+        }
+        if (code >= 0) {
+            return code;
+        }
+    }
+}
+
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
 int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
+/* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see stiff_wheel_ode.h). */
+int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+{
+    stiff_wheel_stats own;  /* when stats is NULL: not wanted */
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
+                            stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const int code = stiff_wheel_dopri5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
+                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                                                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
 }
 
 /* dop853 to t1, with Hairer's step-size strategy: the last step clipped
@@ -1641,12 +1915,375 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     }
 }
 
+/* dop853 to t1, with Hairer's step-size strategy: the last step clipped
+   to end on t1, no growth right after a rejection, and a non-finite trial
+   rejected with h shrunk by facmin.
+   Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, double (*out)[STIFF_WHEEL_NX],
+                       stiff_wheel_stats *stats)
+{
+    double k[16][STIFF_WHEEL_NX];
+    double y[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX];
+    int code;
+    double t;
+    double h;
+    double err_old;
+    int nonfinite;
+    int rejected_last;
+    int last;
+    double err;
+    int run;
+    int take;
+    int lock;
+    int ok;
+    double fac;
+    double grow;
+    double err5;
+    double err3;
+    double deno;
+    double dense[7][STIFF_WHEEL_NX];
+    double t0;
+    double t1;
+    long g;
+    double told;
+    double hs;
+    double frac;
+    int i;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return STIFF_WHEEL_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    code = ode_start(8, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
+    if (code <= STIFF_WHEEL_ODE_OK) {
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+    }
+    if (code >= 0) {
+        return code;
+    }
+    code = -1;
+    t = t0;
+    nonfinite = 0;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    err_old = 1e-4;
+    rejected_last = 0;
+    for (;;) {
+
+        /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+        code = code < 0 ? (step_underflow(h,
+                t) ? (nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE :
+                STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? STIFF_WHEEL_ODE_ERR_MAX_STEPS : -1) : code;
+        last = t + 1.01 * h >= t1;
+        h = code < 0 && last ? t1 - t : h;
+        stats->h = code < 0 ? h : stats->h;
+        told = t;
+        hs = h;
+        if (code >= 0) {
+            return code;
+        }
+
+        /* trial */
+
+        /* stage 2: t + 0.05260015195876773 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.05260015195876773 * k[0][i]);
+        }
+        stiff_wheel_rhs(t + 0.05260015195876773 * h, y, c, k[1]);
+
+        /* stage 3: t + 0.0789002279381516 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.0197250569845379 * k[0][i] + 0.0591751709536137 * k[1][i]);
+        }
+        stiff_wheel_rhs(t + 0.0789002279381516 * h, y, c, k[2]);
+
+        /* stage 4: t + 0.1183503419072274 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.02958758547680685 * k[0][i] + 0.08876275643042054 * k[2][i]);
+        }
+        stiff_wheel_rhs(t + 0.1183503419072274 * h, y, c, k[3]);
+
+        /* stage 5: t + 0.2816496580927726 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.2413651341592667 * k[0][i] - 0.8845494793282861 * k[2][i] +
+                    0.924834003261792 * k[3][i]);
+        }
+        stiff_wheel_rhs(t + 0.2816496580927726 * h, y, c, k[4]);
+
+        /* stage 6: t + 0.3333333333333333 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.037037037037037035 * k[0][i] + 0.17082860872947386 * k[3][i] +
+                    0.12546768756682242 * k[4][i]);
+        }
+        stiff_wheel_rhs(t + 0.3333333333333333 * h, y, c, k[5]);
+
+        /* stage 7: t + 0.25 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.037109375 * k[0][i] + 0.17025221101954405 * k[3][i] +
+                    0.06021653898045596 * k[4][i] - 0.017578125 * k[5][i]);
+        }
+        stiff_wheel_rhs(t + 0.25 * h, y, c, k[6]);
+
+        /* stage 8: t + 0.3076923076923077 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.03709200011850479 * k[0][i] + 0.17038392571223998 * k[3][i] +
+                    0.10726203044637328 * k[4][i] - 0.015319437748624402 * k[5][i] +
+                    0.008273789163814023 * k[6][i]);
+        }
+        stiff_wheel_rhs(t + 0.3076923076923077 * h, y, c, k[7]);
+
+        /* stage 9: t + 0.6512820512820513 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.6241109587160757 * k[0][i] - 3.3608926294469414 * k[3][i] -
+                    0.868219346841726 * k[4][i] + 27.59209969944671 * k[5][i] +
+                    20.154067550477894 * k[6][i] - 43.48988418106996 * k[7][i]);
+        }
+        stiff_wheel_rhs(t + 0.6512820512820513 * h, y, c, k[8]);
+
+        /* stage 10: t + 0.6 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (0.47766253643826434 * k[0][i] - 2.4881146199716677 * k[3][i] -
+                    0.590290826836843 * k[4][i] + 21.230051448181193 * k[5][i] +
+                    15.279233632882423 * k[6][i] - 33.28821096898486 * k[7][i] -
+                    0.020331201708508627 * k[8][i]);
+        }
+        stiff_wheel_rhs(t + 0.6 * h, y, c, k[9]);
+
+        /* stage 11: t + 0.8571428571428571 h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (-0.9371424300859873 * k[0][i] + 5.186372428844064 * k[3][i] +
+                    1.0914373489967295 * k[4][i] - 8.149787010746927 * k[5][i] -
+                    18.52006565999696 * k[6][i] + 22.739487099350505 * k[7][i] +
+                    2.4936055526796523 * k[8][i] - 3.0467644718982196 * k[9][i]);
+        }
+        stiff_wheel_rhs(t + 0.8571428571428571 * h, y, c, k[10]);
+
+        /* stage 12: t + h */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            y[i] = x[i] + h * (2.273310147516538 * k[0][i] - 10.53449546673725 * k[3][i] -
+                    2.0008720582248625 * k[4][i] - 17.9589318631188 * k[5][i] + 27.94888452941996
+                    * k[6][i] - 2.8589982771350235 * k[7][i] - 8.87285693353063 * k[8][i] +
+                    12.360567175794303 * k[9][i] + 0.6433927460157636 * k[10][i]);
+        }
+        stiff_wheel_rhs(t + h, y, c, k[11]);
+
+        /* the new solution */
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            dx[i] = h * (0.054293734116568765 * k[0][i] + 4.450312892752409 * k[5][i] +
+                    1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] +
+                    0.3111643669578199 * k[8][i] - 0.1521609496625161 * k[9][i] +
+                    0.20136540080403034 * k[10][i] + 0.04471061572777259 * k[11][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+
+        /* the error: DOP853's two estimates, combined */
+        err5 = 0.0;
+        err3 = 0.0;
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            double e5, e3;
+            e5 = (0.01312004499419488 * k[0][i] - 1.2251564463762044 * k[5][i] -
+                    0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
+                    0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
+                    0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
+                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+            e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
+                    1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
+                    0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
+                    0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
+                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+            err5 = err5 + e5 * e5;
+            err3 = err3 + e3 * e3;
+        }
+        deno = err5 + 1e-2 * err3;
+        err = deno > 0.0 ? fabs(h) * err5 / sqrt(STIFF_WHEEL_NX * deno) : 0.0;
+
+        /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+        stats->rhs_calls = stats->rhs_calls + (code < 0 ? 11 : 0);
+        nonfinite = !(fabs(err) <= DBL_MAX);
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+        ok = code < 0 && !nonfinite && err <= 1.0;
+        if (ok) {
+            stiff_wheel_rhs(t + h, xnew, c, k[12]);  /* where the next step starts */
+        }
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            nonfinite = nonfinite || (ok && !(fabs(k[12][i]) <= DBL_MAX));
+        }
+        stats->rhs_calls = stats->rhs_calls + (ok ? 1 : 0);
+
+        /* control: accept or reject by selection, and the next h */
+        run = code < 0;
+        take = run && !nonfinite && err <= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(stiff_wheel_cos(xnew[1])) < STIFF_WHEEL_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !lock;
+        fac = sqrt(sqrt(sqrt(err))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow = dmax(0.16666666666666666, dmin(3.003003003003003, fac));
+        grow = rejected_last ? dmax(grow, 1.0) : grow;  /* no growth after a rejection */
+        code = take && lock ? STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                STIFF_WHEEL_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (run && !take ? 1 : 0);
+        err_old = ok ? dmax(err, 1e-4) : err_old;
+        rejected_last = ok ? 0 : run && !take ? 1 : rejected_last;
+        h = !run || (take && lock) ? h : nonfinite ? h * 0.333 : ok ? h / grow : h /
+                dmin(3.003003003003003, fac);
+
+        /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+        if (ok) {
+
+            /* the dense output of order 7 */
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
+                        k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 * k[8][i] +
+                        0.15329179827876568 * k[9][i] + 0.00820105229563469 * k[10][i] +
+                        0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
+            }
+            stiff_wheel_rhs(told + 0.1 * hs, y, c, k[13]);
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
+                        k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 * k[7][i]
+                        - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 * k[11][i] -
+                        0.00034046500868740456 * k[12][i] + 0.1413124436746325 * k[13][i]);
+            }
+            stiff_wheel_rhs(told + 0.2 * hs, y, c, k[14]);
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 * k[5][i]
+                        + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
+                        0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
+                        2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
+            }
+            stiff_wheel_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
+            stats->rhs_calls = stats->rhs_calls + 3;
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                dense[0][i] = xnew[i] - x[i];
+                dense[1][i] = hs * k[0][i] - dense[0][i];
+                dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
+                dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 * k[5][i] -
+                        3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
+                        2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
+                        2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
+                        0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
+                        9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
+                dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 * k[5][i] +
+                        165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i] -
+                        22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
+                        30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
+                        15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
+                        9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
+                dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 * k[5][i] -
+                        189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i] -
+                        11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
+                        1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
+                        2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
+                        84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
+                dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 * k[5][i] -
+                        231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
+                        93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
+                        104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
+                        43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
+                        39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < t)) {
+                    break;
+                }
+                frac = (times[g] - told) / hs;
+                for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                            (dense[2][i] + (1.0 - frac) * (dense[3][i] + frac * (dense[4][i] +
+                            (1.0 - frac) * (dense[5][i] + frac * dense[6][i]))))));
+                }
+                g = g + 1;
+            }
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                k[0][i] = k[12][i];
+            }
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+        }
+        if (code >= 0) {
+            return code;
+        }
+    }
+}
+
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
 int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
+/* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see stiff_wheel_ode.h). */
+int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+{
+    stiff_wheel_stats own;  /* when stats is NULL: not wanted */
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
+                            stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const int code = stiff_wheel_dop853_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
+                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                                                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
 }
 
 /* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
@@ -1735,6 +2372,104 @@ static double rodas4_trial(double t, double h, const double *x, const double *f0
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         dx[i] = dx[i] + k[5][i] - comp[i];
         xnew[i] = x[i] + dx[i];
+    }
+    return error_norm(k[5], x, xnew, rtol, atol);
+}
+
+/* Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
+   Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
+   E k_s = f(t + c_s h, x + sum_j a_sj k_j) + sum_j (g_sj/h) k_j.
+   Stiffly accurate: stage 6 sits on the embedded solution and the step
+   is that plus k_6, the error estimate. Returns its norm (NaN or Inf
+   when a stage is). */
+static double rodas4_grid_trial(double t, double h, const double *x, const double *f0,
+                                const double *lu, const int *piv, const double *c, double rtol,
+                                double atol, const double *comp, double (*k)[STIFF_WHEEL_NX],
+                                double *dx, double *xnew, double (*dense)[STIFF_WHEEL_NX])
+{
+    double y[STIFF_WHEEL_NX];
+    double fy[STIFF_WHEEL_NX];
+    double inv_h;
+    int i;
+
+    inv_h = 1.0 / h;
+
+    /* stage 1: t */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[0][i] = f0[i];
+    }
+    lu_solve(lu, piv, k[0]);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 1.544 * k[0][i];
+    }
+    stiff_wheel_rhs(t + 0.386 * h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[1][i] = fy[i] + inv_h * (-5.6688 * k[0][i]);
+    }
+    lu_solve(lu, piv, k[1]);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 0.9466785280815826 * k[0][i] + 0.2557011698983284 * k[1][i];
+    }
+    stiff_wheel_rhs(t + 0.21 * h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[2][i] = fy[i] + inv_h * (-2.430093356833875 * k[0][i] - 0.2063599157091915 * k[1][i]);
+    }
+    lu_solve(lu, piv, k[2]);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 3.314825187068521 * k[0][i] + 2.896124015972201 * k[1][i] +
+                0.9986419139977817 * k[2][i];
+    }
+    stiff_wheel_rhs(t + 0.63 * h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[3][i] = fy[i] + inv_h * (-0.1073529058151375 * k[0][i] - 9.594562251023355 * k[1][i] -
+                20.47028614809616 * k[2][i]);
+    }
+    lu_solve(lu, piv, k[3]);
+
+    /* stage 5: t + h */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        y[i] = x[i] + 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] +
+                12.53708332932087 * k[2][i] - 0.687886036105895 * k[3][i];
+    }
+    stiff_wheel_rhs(t + h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[4][i] = fy[i] + inv_h * (7.496443313967647 * k[0][i] - 10.24680431464352 * k[1][i] -
+                33.99990352819905 * k[2][i] + 11.7089089320616 * k[3][i]);
+    }
+    lu_solve(lu, piv, k[4]);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        dx[i] = 1.221224509226641 * k[0][i] + 6.019134481288629 * k[1][i] + 12.53708332932087 *
+                k[2][i] - 0.687886036105895 * k[3][i] + k[4][i];
+        y[i] = x[i] + dx[i];
+    }
+    stiff_wheel_rhs(t + h, y, c, fy);
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        k[5][i] = fy[i] + inv_h * (8.083246795921522 * k[0][i] - 7.981132988064893 * k[1][i] -
+                31.52159432874371 * k[2][i] + 16.31930543123136 * k[3][i] - 6.058818238834054 *
+                k[4][i]);
+    }
+    lu_solve(lu, piv, k[5]);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        dx[i] = dx[i] + k[5][i] - comp[i];
+        xnew[i] = x[i] + dx[i];
+    }
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        dense[0][i] = 10.12623508344586 * k[0][i] - 7.487995877610167 * k[1][i] -
+                34.80091861555747 * k[2][i] - 7.992771707568823 * k[3][i] + 1.025137723295662 *
+                k[4][i];
+        dense[1][i] = -0.6762803392801253 * k[0][i] + 6.087714651680015 * k[1][i] +
+                16.43084320892478 * k[2][i] + 24.76722511418386 * k[3][i] - 6.594389125716872 *
+                k[4][i];
     }
     return error_norm(k[5], x, xnew, rtol, atol);
 }
@@ -1875,6 +2610,190 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
     }
 }
 
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+   J and f are evaluated once per accepted step; a rejected step only
+   refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+   accepted step.
+   A singular E is retried with h times 0.5, 5 times in a row at most.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, double (*out)[STIFF_WHEEL_NX],
+                       stiff_wheel_stats *stats)
+{
+    double J[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
+    double lu[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
+    double k[6][STIFF_WHEEL_NX];
+    double f0[STIFF_WHEEL_NX];
+    double fnew[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX];
+    int piv[STIFF_WHEEL_NX];
+    double t;
+    double h;
+    double err;
+    double fac;
+    double gus;
+    double h_acc;
+    double err_acc;
+    int last;
+    int rejected_last;
+    int nonfinite;
+    int new_point;
+    int singular;
+    int start;
+    double dense[2][STIFF_WHEEL_NX];
+    double t0;
+    double t1;
+    long g;
+    double frac;
+    int i;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return STIFF_WHEEL_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    start = ode_start(4, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
+            &h, stats);
+    if (start <= STIFF_WHEEL_ODE_OK) {
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+    }
+    if (start >= 0) {
+        return start;
+    }
+    t = t0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    rejected_last = 0;
+    nonfinite = 0;
+    singular = 0;
+    new_point = 1;
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    for (;;) {
+        if (new_point) {
+            stiff_wheel_jac(t, x, c, J);
+            stats->jac_calls = stats->jac_calls + 1;
+            if (!all_finite(J, STIFF_WHEEL_NX * STIFF_WHEEL_NX)) {
+                return STIFF_WHEEL_ODE_ERR_NONFINITE;
+            }
+            new_point = 0;
+        }
+        if (step_underflow(h, t)) {
+            return nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE : STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return STIFF_WHEEL_ODE_ERR_MAX_STEPS;
+        }
+        last = t + 1.01 * h >= t1;
+        if (last) {
+            h = t1 - t;
+        }
+        stats->h = h;
+
+        /* E = I/(h gamma) - J */
+        for (i = 0; i < STIFF_WHEEL_NX * STIFF_WHEEL_NX; ++i) {
+            lu[i] = -J[i];
+        }
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            lu[i * STIFF_WHEEL_NX + i] = lu[i * STIFF_WHEEL_NX + i] + 1.0 / (h * 0.25);
+        }
+        stats->decompositions = stats->decompositions + 1;
+        if (lu_decompose(lu, piv)) {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+            singular = singular + 1;
+            if (singular == 5) {
+                return STIFF_WHEEL_ODE_ERR_SINGULAR;
+            }
+            h = h * 0.5;
+            continue;
+        }
+        singular = 0;
+        err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense);
+        stats->rhs_calls = stats->rhs_calls + 5;
+        nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, STIFF_WHEEL_NX);
+        if (!nonfinite && err <= 1.0 && !last) {
+            stiff_wheel_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
+            stats->rhs_calls = stats->rhs_calls + 1;
+            nonfinite = !all_finite(fnew, STIFF_WHEEL_NX);
+        }
+        if (nonfinite) {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+            h = h * 0.2;
+            continue;
+        }
+        fac = dmax(0.16666666666666666, dmin(5.0, pow(err, 0.25) / 0.9));  /* h / h_new */
+        if (err <= 1.0) {
+            if (gimbal_lock(x, xnew)) {
+                return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            if (stats->accepted > 0) {
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                fac = dmax(fac, dmax(0.16666666666666666, dmin(5.0, gus)));
+            }
+            h_acc = h;
+            err_acc = dmax(1e-2, err);
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < (last ? t1 : t + h))) {
+                    break;
+                }
+                frac = (times[g] - t) / h;
+                for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                    out[g][i] = x[i] * (1.0 - frac) + frac * (xnew[i] + (1.0 - frac) *
+                            (dense[0][i] + frac * dense[1][i]));
+                }
+                g = g + 1;
+            }
+            accept_step(x, xnew, dx, comp);
+            t = last ? t1 : t + h;
+            stats->t = t;
+            stats->accepted = stats->accepted + 1;
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+            if (last) {
+                return STIFF_WHEEL_ODE_OK;
+            }
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                f0[i] = fnew[i];
+            }
+            new_point = 1;
+            if (rejected_last) {
+                fac = dmax(fac, 1.0);
+            }
+            rejected_last = 0;
+        } else {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+        }
+        h = h / fac;
+    }
+}
+
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
 int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, stiff_wheel_stats *stats)
@@ -1883,9 +2802,41 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see stiff_wheel_ode.h). */
+int stiff_wheel_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+{
+    stiff_wheel_stats own;  /* when stats is NULL: not wanted */
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
+                            stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const int code = stiff_wheel_rodas4_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
+                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                                                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
+}
+
 /* E1 and E2 for this h, factored; 1 when either is singular. */
-static int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
-                         double *e2i, int *piv2)
+static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
+                                double *e2i, int *piv2)
 {
     double gamma_h;
     double alpha_h;
@@ -1913,11 +2864,11 @@ static int radau5_factor(const double *J, double h, double *e1, int *piv1, doubl
 /* One simplified Newton iteration from the stages z (w = T^-1 z in w1..w3):
    F at the three stages, then the corrections to w solved into z1..z3.
    Returns their RMS over scal (NaN or Inf when a stage is). */
-static double radau5_newton(double t, double h, const double *x, const double *c,
-                            const double *e1, const int *piv1, const double *e2r,
-                            const double *e2i, const int *piv2, const double *scal, double *z1,
-                            double *z2, double *z3, const double *w1, const double *w2,
-                            const double *w3)
+static inline double radau5_newton(double t, double h, const double *x, const double *c,
+                                   const double *e1, const int *piv1, const double *e2r,
+                                   const double *e2i, const int *piv2, const double *scal,
+                                   double *z1, double *z2, double *z3, const double *w1,
+                                   const double *w2, const double *w3)
 {
     double y[STIFF_WHEEL_NX];
     double gamma_h;
@@ -1975,10 +2926,10 @@ static double radau5_newton(double t, double h, const double *x, const double *c
    over scal, at least 1e-10 (NaN or Inf when it is). On the first step
    or after a rejection an estimate >= 1 is taken again through f at x + err
    (radau5.f's ESTRAD): one more rhs call. */
-static double radau5_error(double t, double h, const double *x, const double *c,
-                           const double *f0, const double *e1, const int *piv1,
-                           const double *scal, const double *z1, const double *z2,
-                           const double *z3, int again, stiff_wheel_stats *stats)
+static inline double radau5_error(double t, double h, const double *x, const double *c,
+                                  const double *f0, const double *e1, const int *piv1,
+                                  const double *scal, const double *z1, const double *z2,
+                                  const double *z3, int again, stiff_wheel_stats *stats)
 {
     double g[STIFF_WHEEL_NX];
     double err[STIFF_WHEEL_NX];
@@ -2356,12 +3307,425 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     }
 }
 
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+   Hairer's radau5.f strategy: the error test's tolerances are
+   rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+   h_new/h = fac err^-1/4
+   within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+   Gustafsson's predictive controller after an accepted step.
+   J is kept while the Newton iterations contract by <= 0.001 a step, and
+   h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+   diverge, take more than 7, or meet a NaN or Inf
+   retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+   times in a row at most.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, double (*out)[STIFF_WHEEL_NX],
+                       stiff_wheel_stats *stats)
+{
+    double J[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
+    double e1[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
+    double e2r[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
+    double e2i[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
+    double z1[STIFF_WHEEL_NX];
+    double z2[STIFF_WHEEL_NX];
+    double z3[STIFF_WHEEL_NX];
+    double w1[STIFF_WHEEL_NX];
+    double w2[STIFF_WHEEL_NX];
+    double w3[STIFF_WHEEL_NX];
+    double ak1[STIFF_WHEEL_NX];
+    double ak2[STIFF_WHEEL_NX];
+    double ak3[STIFF_WHEEL_NX];
+    double f0[STIFF_WHEEL_NX];
+    double fnew[STIFF_WHEEL_NX];
+    double scal[STIFF_WHEEL_NX];
+    double xnew[STIFF_WHEEL_NX];
+    double dx[STIFF_WHEEL_NX];
+    double comp[STIFF_WHEEL_NX];
+    int piv1[STIFF_WHEEL_NX];
+    int piv2[STIFF_WHEEL_NX];
+    double t;
+    double h;
+    double h_old;
+    double h_new;
+    double h_acc;
+    double err_acc;
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    double err;
+    double quot;
+    double rate;
+    double theta;
+    double theta_old;
+    double dyno;
+    double dyno_old;
+    double thq;
+    double predicted;
+    double q;
+    double gus;
+    double c1q;
+    double c2q;
+    double c3q;
+    double theta_k;
+    int last;
+    int first;
+    int reject;
+    int fresh_jac;
+    int need_jac;
+    int need_lu;
+    int nonfinite;
+    int newt;
+    int outcome;
+    int singular;
+    int start;
+    double t0;
+    double t1;
+    long g;
+    double frac;
+    int i;
+    int k;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return STIFF_WHEEL_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    start = ode_start(5, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
+            &h, stats);
+    if (start <= STIFF_WHEEL_ODE_OK) {
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+    }
+    if (start >= 0) {
+        return start;
+    }
+    t = t0;
+    h_old = 1.0;
+    rate = 1.0;
+    theta_old = 1.0;
+    dyno_old = 1.0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    last = 0;
+    first = 1;
+    reject = 0;
+    fresh_jac = 0;
+    need_jac = 1;
+    need_lu = 1;
+    nonfinite = 0;
+    singular = 0;
+    #pragma GCC unroll 1
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        comp[i] = 0.0;
+        ak1[i] = 0.0;
+        ak2[i] = 0.0;
+        ak3[i] = 0.0;
+    }
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+    if (t + 1.01 * h >= t1) {
+        h = t1 - t;
+        last = 1;
+    }
+    #pragma GCC unroll 1
+    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+        scal[i] = atol_e + rtol_e * fabs(x[i]);
+    }
+    for (;;) {
+        if (need_jac) {
+            stiff_wheel_jac(t, x, c, J);
+            stats->jac_calls = stats->jac_calls + 1;
+            if (!all_finite(J, STIFF_WHEEL_NX * STIFF_WHEEL_NX)) {
+                return STIFF_WHEEL_ODE_ERR_NONFINITE;
+            }
+            fresh_jac = 1;
+            need_jac = 0;
+            need_lu = 1;
+        }
+        if (step_underflow(h, t)) {
+            return nonfinite ? STIFF_WHEEL_ODE_ERR_NONFINITE : STIFF_WHEEL_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return STIFF_WHEEL_ODE_ERR_MAX_STEPS;
+        }
+        if (need_lu) {
+            stats->decompositions = stats->decompositions + 1;
+            if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) {
+                singular = singular + 1;
+                if (singular == 5) {
+                    return STIFF_WHEEL_ODE_ERR_SINGULAR;
+                }
+                stats->rejected = stats->rejected + 1;
+                reject = 1;
+                last = 0;
+                h = h * 0.5;
+                need_jac = !fresh_jac;
+                continue;
+            }
+            singular = 0;
+            need_lu = 0;
+        }
+        stats->h = h;
+
+        /* the Newton iterations start from the last step's collocation polynomial */
+        if (first) {
+            #pragma GCC unroll 1
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                z1[i] = 0.0;
+                z2[i] = 0.0;
+                z3[i] = 0.0;
+                w1[i] = 0.0;
+                w2[i] = 0.0;
+                w3[i] = 0.0;
+            }
+        } else {
+            c3q = h / h_old;
+            c1q = 0.1550510257216822 * c3q;
+            c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                double a1, a2, a3;
+                a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
+                        0.8449489742783178) * ak3[i]));
+                a2 = c2q * (ak1[i] + (c2q + 0.35505102572168223) * (ak2[i] + (c2q +
+                        0.8449489742783178) * ak3[i]));
+                a3 = c3q * (ak1[i] + (c3q + 0.35505102572168223) * (ak2[i] + (c3q +
+                        0.8449489742783178) * ak3[i]));
+                z1[i] = a1;
+                z2[i] = a2;
+                z3[i] = a3;
+                w1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3;
+                w2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044
+                        * a3;
+                w3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3;
+            }
+        }
+
+        /* outcome: 0 converged, 1 too slowly (h reduced), 2 failed */
+        outcome = 0;
+        rate = pow(dmax(rate, 0.5 * DBL_EPSILON), 0.8);
+        theta = 1e-3;
+        newt = 0;
+        for (;;) {
+            if (newt >= 7) {
+                outcome = 2;
+                break;
+            }
+            dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2,
+                    w3);
+            stats->rhs_calls = stats->rhs_calls + 3;
+            newt = newt + 1;
+            if (!(fabs(dyno) <= DBL_MAX)) {
+                nonfinite = 1;
+                outcome = 2;
+                break;
+            }
+            if (newt > 1 && newt < 7) {
+                thq = dyno / dyno_old;
+                theta = newt == 2 ? thq : sqrt(thq * theta_old);
+                theta_old = thq;
+                if (!(theta < 0.99)) {
+                    outcome = 2;
+                    break;
+                }
+                rate = theta / (1.0 - theta);
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
+                if (predicted >= 1.0) {
+                    q = dmax(1e-4, dmin(20.0, predicted));
+                    h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
+                    outcome = 1;
+                    break;
+                }
+            }
+            dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                double a1, a2, a3;
+                a1 = w1[i] + z1[i];
+                a2 = w2[i] + z2[i];
+                a3 = w3[i] + z3[i];
+                w1[i] = a1;
+                w2[i] = a2;
+                w3[i] = a3;
+                z1[i] = 0.09123239487089295 * a1 - 0.1412552950209542 * a2 - 0.030029194105147424
+                        * a3;
+                z2[i] = 0.241717932707107 * a1 + 0.20412935229379994 * a2 + 0.3829421127572619 * a3;
+                z3[i] = 0.966048182615093 * a1 + a2;
+            }
+            if (!(rate * dyno > newton_tol)) {
+                break;
+            }
+        }
+        if (outcome == 0) {
+            err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                dx[i] = z3[i] - comp[i];
+                xnew[i] = x[i] + dx[i];
+            }
+            if (err < 1.0 && !last) {
+                stiff_wheel_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
+                stats->rhs_calls = stats->rhs_calls + 1;
+                nonfinite = !all_finite(fnew, STIFF_WHEEL_NX);
+            } else {
+                nonfinite = !(fabs(err) <= DBL_MAX);
+            }
+            nonfinite = nonfinite || !all_finite(xnew, STIFF_WHEEL_NX);
+            if (nonfinite) {
+                outcome = 2;
+            }
+        }
+        if (outcome != 0) {
+            stats->rejected = stats->rejected + 1;
+            reject = 1;
+            last = 0;
+            if (outcome == 2) {
+                h = h * 0.5;
+            }
+            need_lu = 1;
+            need_jac = !fresh_jac;
+            continue;
+        }
+        quot = dmax(0.125, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));  /* h_new = h / quot */
+        h_new = h / quot;
+        if (err < 1.0) {
+            if (gimbal_lock(x, xnew)) {
+                return STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            first = 0;
+            if (stats->accepted > 0) {
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                quot = dmax(quot, dmax(0.125, dmin(5.0, gus)));
+                h_new = h / quot;
+            }
+            h_acc = h;
+            err_acc = dmax(1e-2, err);
+            h_old = h;
+            #pragma GCC unroll 1
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                double ak;
+                ak = (z2[i] - z1[i]) / 0.4898979485566356;
+                ak1[i] = (z3[i] - z2[i]) / 0.35505102572168223;
+                ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
+                ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < (last ? t1 : t + h))) {
+                    break;
+                }
+                frac = (times[g] - (last ? t1 : t + h)) / h;
+                for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                    out[g][i] = xnew[i] + frac * (ak1[i] + (frac + 0.35505102572168223) * (ak2[i]
+                            + (frac + 0.8449489742783178) * ak3[i]));
+                }
+                g = g + 1;
+            }
+            accept_step(x, xnew, dx, comp);
+            t = last ? t1 : t + h;
+            stats->t = t;
+            stats->accepted = stats->accepted + 1;
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+            if (last) {
+                return STIFF_WHEEL_ODE_OK;
+            }
+            #pragma GCC unroll 1
+            for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                f0[i] = fnew[i];
+                scal[i] = atol_e + rtol_e * fabs(x[i]);
+            }
+            fresh_jac = 0;
+            h_new = dmin(h_new, t1 - t0);
+            if (reject) {
+                h_new = dmin(h_new, h);
+            }
+            reject = 0;
+            if (t + 1.01 * h_new >= t1) {
+                h = t1 - t;
+                last = 1;
+            } else {
+                if (theta <= 1e-3 && h_new >= 1.0 * h && h_new <= 1.2 * h) {
+                    continue;
+                } else {
+                    h = h_new;
+                }
+            }
+            need_lu = 1;
+            need_jac = theta > 1e-3;
+        } else {
+            stats->rejected = stats->rejected + 1;
+            reject = 1;
+            last = 0;
+            h = first ? h * 0.1 : h_new;
+            need_lu = 1;
+            need_jac = !fresh_jac;
+        }
+    }
+}
+
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
 int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
         double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
+}
+
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see stiff_wheel_ode.h). */
+int stiff_wheel_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
+        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+{
+    stiff_wheel_stats own;  /* when stats is NULL: not wanted */
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
+                            stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t stiff_wheel_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const int code = stiff_wheel_radau5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
+                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                                                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
 }
 
 /* What the lanes of an explicit pair hold: per lane, the values of

@@ -31,6 +31,17 @@ extern "C" {
  * wanted. The _batch variants integrate n states stored one after another
  * (x[i*STIFF_WHEEL_NX + j]), fill stats[i] and codes[i], and return how many
  * failed; stats or codes may be NULL there too.
+ * The adaptive methods' _grid variants write the state at each of ntimes
+ * times, finite and strictly increasing, in one integration from times[0]
+ * (x's time: out[0] is x) to times[ntimes - 1] (x's time on return, as from
+ * the plain call): out[g*STIFF_WHEEL_NX + j] at times[g], from the accepted steps'
+ * interpolant (the method's own dense output: dopri5 order 4, dop853 order
+ * 7, rodas4 order 3, radau5 its collocation polynomial, taylor its series),
+ * the steps not cut at the grid times. The last row equals the plain call's
+ * end state bit for bit; rows past the time a failure reached are not
+ * written; a bad grid returns STIFF_WHEEL_ODE_ERR_GRID and writes nothing. The
+ * _grid_batch variants run n states over the same times
+ * (out[(i*ntimes + g)*STIFF_WHEEL_NX + j]).
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Each method's coefficients and their published
  * source are above its code in stiff_wheel_ode.c.
@@ -76,6 +87,9 @@ typedef struct {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define STIFF_WHEEL_ODE_ERR_ATTITUDE_SINGULAR 6
+/* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+   strictly increasing (unsorted or repeated); nothing is integrated or written */
+#define STIFF_WHEEL_ODE_ERR_GRID           7
 
 /* The one line an integrator's return code means ("unknown return code" for
    another): a string literal, not to be freed or changed. */
@@ -125,6 +139,12 @@ int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double 
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         stiff_wheel_stats *stats, int *codes);
+int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats);
+size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, stiff_wheel_stats *stats, int *codes);
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -138,6 +158,12 @@ int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double 
 size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         stiff_wheel_stats *stats, int *codes);
+int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats);
+size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, stiff_wheel_stats *stats, int *codes);
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -151,6 +177,12 @@ int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double 
 size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         stiff_wheel_stats *stats, int *codes);
+int stiff_wheel_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats);
+size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, stiff_wheel_stats *stats, int *codes);
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
  * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
@@ -166,6 +198,12 @@ int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double 
 size_t stiff_wheel_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         stiff_wheel_stats *stats, int *codes);
+int stiff_wheel_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        stiff_wheel_stats *stats);
+size_t stiff_wheel_radau5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, stiff_wheel_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

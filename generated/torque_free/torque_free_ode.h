@@ -30,6 +30,17 @@ extern "C" {
  * wanted. The _batch variants integrate n states stored one after another
  * (x[i*TORQUE_FREE_NX + j]), fill stats[i] and codes[i], and return how many
  * failed; stats or codes may be NULL there too.
+ * The adaptive methods' _grid variants write the state at each of ntimes
+ * times, finite and strictly increasing, in one integration from times[0]
+ * (x's time: out[0] is x) to times[ntimes - 1] (x's time on return, as from
+ * the plain call): out[g*TORQUE_FREE_NX + j] at times[g], from the accepted steps'
+ * interpolant (the method's own dense output: dopri5 order 4, dop853 order
+ * 7, rodas4 order 3, radau5 its collocation polynomial, taylor its series),
+ * the steps not cut at the grid times. The last row equals the plain call's
+ * end state bit for bit; rows past the time a failure reached are not
+ * written; a bad grid returns TORQUE_FREE_ODE_ERR_GRID and writes nothing. The
+ * _grid_batch variants run n states over the same times
+ * (out[(i*ntimes + g)*TORQUE_FREE_NX + j]).
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Each method's coefficients and their published
  * source are above its code in torque_free_ode.c.
@@ -75,6 +86,9 @@ typedef struct {
 /* 6: the 3-1-2 attitude reached gimbal lock: use attitude = "quaternion"
    (3-1-2 scenes only; see above) */
 #define TORQUE_FREE_ODE_ERR_ATTITUDE_SINGULAR 6
+/* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
+   strictly increasing (unsorted or repeated); nothing is integrated or written */
+#define TORQUE_FREE_ODE_ERR_GRID           7
 
 /* The one line an integrator's return code means ("unknown return code" for
    another): a string literal, not to be freed or changed. */
@@ -124,6 +138,12 @@ int torque_free_dopri5(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         torque_free_stats *stats, int *codes);
+int torque_free_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        torque_free_stats *stats);
+size_t torque_free_dopri5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, torque_free_stats *stats, int *codes);
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -137,6 +157,12 @@ int torque_free_dop853(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         torque_free_stats *stats, int *codes);
+int torque_free_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        torque_free_stats *stats);
+size_t torque_free_dop853_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, torque_free_stats *stats, int *codes);
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -150,6 +176,12 @@ int torque_free_rodas4(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_rodas4_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         torque_free_stats *stats, int *codes);
+int torque_free_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        torque_free_stats *stats);
+size_t torque_free_rodas4_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, torque_free_stats *stats, int *codes);
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
  * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
@@ -165,6 +197,12 @@ int torque_free_radau5(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_radau5_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         torque_free_stats *stats, int *codes);
+int torque_free_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        torque_free_stats *stats);
+size_t torque_free_radau5_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, torque_free_stats *stats, int *codes);
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
  * The order p = ceil(-ln(rtol)/2 + 1) (2 to 20); each step's size from the
@@ -178,6 +216,12 @@ int torque_free_taylor(double t0, double t1, double *x, const double *c, double 
 size_t torque_free_taylor_batch(size_t n, double t0, double t1, double *x,
         const double *c, double rtol, double atol, double h0, long max_steps,
         torque_free_stats *stats, int *codes);
+int torque_free_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+        double rtol, double atol, double h0, long max_steps, double *out,
+        torque_free_stats *stats);
+size_t torque_free_taylor_grid_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, torque_free_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

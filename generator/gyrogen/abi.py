@@ -185,6 +185,15 @@ ODE_CODES: tuple[Code, ...] = (
             "(3-1-2 scenes only; see above)",
         ),
     ),
+    Code(
+        7,
+        "ODE_ERR_GRID",
+        "bad output grid (times: at least one, finite, strictly increasing)",
+        note=(
+            "7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not",
+            "strictly increasing (unsorted or repeated); nothing is integrated or written",
+        ),
+    ),
 )  # fmt: skip
 """Return codes of the compiled integrators (<PREFIX>_ODE_* in <prefix>_ode.h);
 on failure x holds the last good state."""
@@ -285,6 +294,17 @@ SIGNATURES: dict[str, Signature] = {
     "adaptive_batch": Signature(
         "size_t",
         _args("size_t n", *_SPAN, "double *x:n*nx", "const double *c:nc", *_TOLERANCES,
+              "{prefix}_stats *stats:n", "int *codes:n"),
+    ),
+    "grid": Signature(
+        "int",
+        _args("long ntimes", "const double *times:ntimes", "double *x:nx", "const double *c:nc",
+              *_TOLERANCES, "double *out:ntimes*nx", "{prefix}_stats *stats:1"),
+    ),
+    "grid_batch": Signature(
+        "size_t",
+        _args("size_t n", "long ntimes", "const double *times:ntimes", "double *x:n*nx",
+              "const double *c:nc", *_TOLERANCES, "double *out:n*ntimes*nx",
               "{prefix}_stats *stats:n", "int *codes:n"),
     ),
 }  # fmt: skip

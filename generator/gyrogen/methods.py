@@ -369,6 +369,9 @@ def signature_of(function: str) -> Signature:
     (codegen.context.SceneContext.functions): an integrator's by its kind."""
     batch = function.endswith("_batch")
     method = METHODS.get(function.removesuffix("_batch"))
+    grid = METHODS.get(function.removesuffix("_batch").removesuffix("_grid"))
+    if method is None and grid is not None and function.removesuffix("_batch").endswith("_grid"):
+        return SIGNATURES["grid" + "_batch" * batch]
     if method is not None:
         kind = "fixed_step" if method.fixed_step else "adaptive"
         return SIGNATURES[kind + "_batch" * batch]

@@ -21,6 +21,13 @@ Sources:
   Solving ODEs II, Sec. IV.8, as Hairer's radau5.f (subroutine RADCOR): the
   nodes, eigenvalues and error weights from their closed forms (evaluated
   at 40 digits, then rounded), T and T^-1 the decimals of its DATA lines.
+- Dense output (the interpolant of each accepted step, read only by the
+  output grid): DOPRI5's of order 4 (Shampine 1986, the D coefficients of
+  Hairer's dopri5.f, CONTD5); DOP853's of order 7 (three more stages and the
+  D rows of Hairer's dop853.f, CONTD8, in the decimals of its DATA
+  statements); RODAS4's of order 3 (the D2 and D3 rows of rodas.f's ROCOE
+  and its CONTRO, as Numerical Recipes' StepperRoss reproduces them);
+  RADAU5's collocation polynomial (radau5.f's CONTR5); TAYLOR's series.
 - TAYLOR: no tableau; the order of the series from the tolerance, after
   Jorba & Zou, Experiment. Math. 14 (2005), Sec. 3.3.1, as heyoka's
   taylor_order_from_tol: p = max(2, ceil(-ln(rtol)/2 + 1)).
@@ -49,6 +56,31 @@ def _floats(*values: float | F) -> tuple[float, ...]:
 
 
 @dataclass(frozen=True)
+class DenseRK:
+    """An explicit pair's interpolant in Hairer's form (dopri5.f's CONTD5,
+    dop853.f's CONTD8): on a step from x over h to xnew, with theta in [0, 1]
+    and theta' = 1 - theta,
+
+        x(t + theta h) = r1 + theta (r2 + theta' (r3 + theta (r4 + theta' (r5 + ...))))
+
+    r1 = x, r2 = xnew - x, r3 = h k_0 - r2, r4 = r2 - h f(t + h, xnew) - r3,
+    and r5, r6, ... = h sum_j d[m][j] k_j, the k_j the step's stages, then
+    f(t + h, xnew) (the pair's fnew row), then the extra stages: stage s
+    evaluates f(t + nodes[s] h, x + h sum_j a[s][j] k_j)."""
+
+    order: int
+    nodes: tuple[float, ...]
+    a: tuple[tuple[float, ...], ...]
+    d: tuple[tuple[float, ...], ...]
+
+    def stage(self, s: int) -> Terms:
+        return terms(self.a[s])
+
+    def row(self, m: int) -> Terms:
+        return terms(self.d[m])
+
+
+@dataclass(frozen=True)
 class Explicit:
     """An explicit Runge-Kutta method: stage s evaluates k_s = f(t + c_s h,
     x + h sum_j a[s][j] k_j) (row a[s] has s entries), and the step is
@@ -61,6 +93,8 @@ class Explicit:
     b: tuple[float, ...]
     e: tuple[float, ...] = ()
     e3: tuple[float, ...] = ()
+    dense: DenseRK | None = None
+    """Its interpolant, where it has one (Hairer's form, DenseRK)."""
 
     @property
     def stages(self) -> int:
@@ -102,6 +136,11 @@ class Rosenbrock:
     a: tuple[tuple[float, ...], ...]
     g: tuple[tuple[float, ...], ...]
     d: tuple[float, ...]
+    dense: tuple[tuple[float, ...], ...] = ()
+    """Its interpolant's two rows (rodas.f's D2j and D3j, over k_1 .. k_5):
+    on a step from x to xnew, with theta' = 1 - theta, x(t + theta h) =
+    x theta' + theta (xnew + theta' (r3 + theta r4)), r3 and r4 the rows'
+    sums of the stages."""
 
     @property
     def stages(self) -> int:
@@ -109,6 +148,9 @@ class Rosenbrock:
 
     def stage(self, s: int) -> Terms:
         return terms(self.a[s])
+
+    def dense_row(self, m: int) -> Terms:
+        return terms(self.dense[m])
 
     def feedback(self, s: int) -> Terms:
         return terms(self.g[s])
@@ -194,6 +236,14 @@ DOPRI5 = Explicit(
     ),
     b=_floats(*_DOPRI5_B),
     e=_floats(*(b - bh for b, bh in zip(_DOPRI5_B, _DOPRI5_BHAT, strict=True))),
+    dense=DenseRK(
+        order=4,
+        nodes=(),
+        a=(),
+        d=(_floats(F(-12715105075, 11282082432), 0, F(87487479700, 32700410799),
+                   F(-10690763975, 1880347072), F(701980252875, 199316789632),
+                   F(-1453857185, 822651844), F(69997945, 29380423)),),
+    ),
 )
 
 _DOP853_B = (
@@ -263,6 +313,58 @@ DOP853 = Explicit(
         -0.2235530786388629525884427845e-1,
     ),
     e3=tuple(b - bhh for b, bhh in zip(_DOP853_B, _DOP853_BHH, strict=True)),
+    dense=DenseRK(
+        order=7,
+        # stages 13, 14, 15 (k_0 .. k_11 the step's, k_12 = f(t + h, xnew))
+        nodes=(0.1, 0.2, 0.777777777777777777777777777778),
+        a=(
+            (5.61675022830479523392909219681e-2, 0.0, 0.0, 0.0, 0.0, 0.0,
+             2.53500210216624811088794765333e-1, -2.46239037470802489917441475441e-1,
+             -1.24191423263816360469010140626e-1, 1.5329179827876569731206322685e-1,
+             8.20105229563468988491666602057e-3, 7.56789766054569976138603589584e-3,
+             -8.298e-3),
+            (3.18346481635021405060768473261e-2, 0.0, 0.0, 0.0, 0.0,
+             2.83009096723667755288322961402e-2, 5.35419883074385676223797384372e-2,
+             -5.49237485713909884646569340306e-2, 0.0, 0.0,
+             -1.08347328697249322858509316994e-4, 3.82571090835658412954920192323e-4,
+             -3.40465008687404560802977114492e-4, 1.41312443674632500278074618366e-1),
+            (-4.28896301583791923408573538692e-1, 0.0, 0.0, 0.0, 0.0,
+             -4.69762141536116384314449447206, 7.68342119606259904184240953878,
+             4.06898981839711007970213554331, 3.56727187455281109270669543021e-1,
+             0.0, 0.0, 0.0, -1.39902416515901462129418009734e-3,
+             2.9475147891527723389556272149, -9.15095847217987001081870187138),
+        ),
+        d=(
+            (-0.84289382761090128651353491142e1, 0.0, 0.0, 0.0, 0.0,
+             0.56671495351937776962531783590, -0.30689499459498916912797304727e1,
+             0.23846676565120698287728149680e1, 0.21170345824450282767155149946e1,
+             -0.87139158377797299206789907490, 0.22404374302607882758541771650e1,
+             0.63157877876946881815570249290, -0.88990336451333310820698117400e-1,
+             0.18148505520854727256656404962e2, -0.91946323924783554000451984436e1,
+             -0.44360363875948939664310572000e1),
+            (0.10427508642579134603413151009e2, 0.0, 0.0, 0.0, 0.0,
+             0.24228349177525818288430175319e3, 0.16520045171727028198505394887e3,
+             -0.37454675472269020279518312152e3, -0.22113666853125306036270938578e2,
+             0.77334326684722638389603898808e1, -0.30674084731089398182061213626e2,
+             -0.93321305264302278729567221706e1, 0.15697238121770843886131091075e2,
+             -0.31139403219565177677282850411e2, -0.93529243588444783865713862664e1,
+             0.35816841486394083752465898540e2),
+            (0.19985053242002433820987653617e2, 0.0, 0.0, 0.0, 0.0,
+             -0.38703730874935176555105901742e3, -0.18917813819516756882830838328e3,
+             0.52780815920542364900561016686e3, -0.11573902539959630126141871134e2,
+             0.68812326946963000169666922661e1, -0.10006050966910838403183860980e1,
+             0.77771377980534432092869265740, -0.27782057523535084065932004339e1,
+             -0.60196695231264120758267380846e2, 0.84320405506677161018159903784e2,
+             0.11992291136182789328035130030e2),
+            (-0.25693933462703749003312586129e2, 0.0, 0.0, 0.0, 0.0,
+             -0.15418974869023643374053993627e3, -0.23152937917604549567536039109e3,
+             0.35763911791061412378285349910e3, 0.93405324183624310003907691704e2,
+             -0.37458323136451633156875139351e2, 0.10409964950896230045147246184e3,
+             0.29840293426660503123344363579e2, -0.43533456590011143754432175058e2,
+             0.96324553959188282948394950600e2, -0.39177261675615439165231486172e2,
+             -0.14972683625798562581422125276e3),
+        ),
+    ),
 )
 
 _RODAS4_A5 = (
@@ -291,6 +393,12 @@ RODAS4 = Rosenbrock(
          0.1631930543123136e2, -0.6058818238834054e1),
     ),
     d=(0.25, -0.1043, 0.1035, -0.3620000000000023e-1, 0.0, 0.0),
+    dense=(
+        (0.1012623508344586e2, -0.7487995877610167e1, -0.3480091861555747e2,
+         -0.7992771707568823e1, 0.1025137723295662e1),
+        (-0.6762803392801253, 0.6087714651680015e1, 0.1643084320892478e2,
+         0.2476722511418386e2, -0.6594389125716872e1),
+    ),
 )
 
 # fmt: on

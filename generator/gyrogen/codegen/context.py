@@ -303,6 +303,9 @@ class SceneContext:
         for m in self.scene.integrators:
             c[m], f[m] = f"{p}_{m}", f"{p}_f_{m}"
             c[f"{m}_batch"], f[f"{m}_batch"] = f"{p}_{m}_batch", f"{p}_f_{m}_batch"
+            if not METHODS[m].fixed_step:  # the output grids
+                for g in (f"{m}_grid", f"{m}_grid_batch"):
+                    c[g], f[g] = f"{p}_{g}", f"{p}_f_{g}"
         if self.scene.integrators:
             c["ode_strerror"] = f"{p}_ode_strerror"
         return {"c": c, "fortran": f}

@@ -89,7 +89,8 @@ def _exported(unit: SceneContext) -> dict[str, dict[str, str]]:
 
 def _signature(unit: SceneContext, key: str, name: str) -> dict[str, Any]:
     """One function's C declaration, and its arguments for an FFI: each
-    pointer's element count ("count", times the batch's n when per_state)."""
+    pointer's element count ("count", times the batch's n when per_state,
+    and times the grid's ntimes where per_time is given)."""
     sig = signature_of(key)
     sizes = {"nx": unit.nx, "np": unit.np, "nc": unit.nc, "out": unit.outputs_size(key)}
     sizes.update(nu=len(unit.inputs), ny=unit.ny)
@@ -97,8 +98,11 @@ def _signature(unit: SceneContext, key: str, name: str) -> dict[str, Any]:
     for arg in sig.args:
         entry: dict[str, Any] = {"name": arg.name, "ctype": arg.ctype.format(prefix=unit.prefix)}
         if arg.length:
-            factors = [sizes[f] if f in sizes else int(f) for f in arg.length if f != "n"]
+            per = ("n", "ntimes")
+            factors = [sizes[f] if f in sizes else int(f) for f in arg.length if f not in per]
             entry.update(count=math.prod(factors), per_state="n" in arg.length)
+            if "ntimes" in arg.length:
+                entry.update(per_time=True)
         args.append(entry)
     return {"c": sig.c(name, unit.prefix), "returns": sig.returns, "args": args}
 

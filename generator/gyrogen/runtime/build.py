@@ -101,7 +101,12 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
     per_call = ["rhs", *manifest["outputs"], *(["events"] if manifest.get("events") else [])]
     if "jac" in names:
         per_call.append("jac")
-    integrators = [n for m in manifest["integrators"] for n in (m, f"{m}_batch")]
+    grids = ("_grid", "_grid_batch")
+    integrators = [
+        n
+        for m in manifest["integrators"]
+        for n in (m, f"{m}_batch", *(m + g for g in grids if m + g in names))
+    ]
     linear = ["linear"] if "linear" in names else []
     declared = ["setup", *per_call, *linear, *integrators]
     return {

@@ -50,3 +50,26 @@ def controls_error(exc: Exception, *controls: Any) -> ValueError:
         f"{', '.join(bad) or 'a control'}: the times and tolerances must be real numbers, "
         f"max_steps and steps integers that fit a C long ({exc})"
     )
+
+
+def grid_times(times: Any) -> np.ndarray:
+    """times as the doubles a _grid call takes: a one-line ValueError unless
+    they are a non-empty 1-D array of finite, strictly increasing reals (the
+    C and Fortran calls return ODE_ERR_GRID for the same)."""
+    t = np.array(real_only(times, "the grid times"), dtype=np.float64, ndmin=1)
+    if t.ndim != 1 or t.size == 0:
+        raise ValueError(
+            f"the grid times must be a 1-D array of at least one time, not shape {t.shape}"
+        )
+    finite = np.isfinite(t)
+    if not finite.all():
+        k = int(np.argmin(finite))
+        raise ValueError(f"the grid times must be finite (times[{k}] = {float(t[k])!r})")
+    steps = np.diff(t) > 0
+    if not steps.all():
+        k = int(np.argmin(steps)) + 1
+        raise ValueError(
+            f"the grid times must be strictly increasing (times[{k}] = {float(t[k])!r} "
+            f"after times[{k - 1}] = {float(t[k - 1])!r})"
+        )
+    return t

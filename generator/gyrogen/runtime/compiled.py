@@ -14,7 +14,7 @@ import numpy as np
 
 from gyrogen import abi, methods
 from gyrogen.errors import BuildError, SetupRefused
-from gyrogen.runtime.call_checks import THREADS_MAX, controls_error, real_only
+from gyrogen.runtime.call_checks import THREADS_MAX, controls_error, grid_times, real_only
 
 Language = Literal["c", "fortran"]
 
@@ -702,6 +702,164 @@ class Compiled:
         return {
             m: (self.function(f"{m}_batch"), fixed) for m, (_, fixed) in self._integrators.items()
         }
+
+    def integrate_grid(
+        self,
+        method: str,
+        x0: np.ndarray,
+        c: np.ndarray,
+        times: np.ndarray,
+        *,
+        rtol: float = DEFAULT_CONTROLS["rtol"],
+        atol: float = DEFAULT_CONTROLS["atol"],
+        h0: float = DEFAULT_CONTROLS["h0"],
+        max_steps: int = DEFAULT_CONTROLS["max_steps"],
+    ) -> tuple[np.ndarray, Stats, int]:
+        """The states at each of an output grid's times, from one integration.
+
+        As heyoka's propagate_grid: the first grid time is the start time
+        (x0's), the last the end time; the run is one adaptive integration
+        whose steps are not cut at the grid times, each state between the
+        ends read from the method's dense output (dopri5: order 4, dop853:
+        7, rodas4: 3, radau5: its collocation polynomial, taylor: its
+        series). The last state equals `integrate`'s from times[0] to
+        times[-1] bit for bit, and so do the step statistics but for the
+        explicit pairs' and Taylor's rhs_calls (the interpolant's stages).
+
+        Parameters
+        ----------
+        method : str
+            One of the scene's adaptive integrators.
+        x0 : array_like, shape (nx,)
+            The state at times[0]; it is not changed.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        times : array_like, shape (n,)
+            At least one time, finite and strictly increasing.
+        rtol, atol, h0, max_steps
+            As for `integrate`.
+
+        Returns
+        -------
+        states : numpy.ndarray, shape (n, nx)
+            states[g] at times[g]; rows past the time a failure reached are NaN.
+        stats : Stats
+            The step statistics, as `integrate`'s.
+        code : int
+            0 on success, else the integrator's return code, as `integrate`'s.
+
+        Raises
+        ------
+        ValueError
+            As for `integrate`, or the times are not a non-empty 1-D array of
+            finite, strictly increasing reals (unsorted, repeated, NaN).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from gyrogen import api
+        >>> model = api.compile("dual_spin")
+        >>> x0 = [0, 0, 0, 0.001, 0.05, 0.0, 600.0]
+        >>> states, stats, code = model.integrate_grid("dop853", x0, model.setup([]),
+        ...                                            np.linspace(0.0, 10.0, 11))
+        >>> code, states.shape
+        (0, (11, 7))
+        """
+        fn = self._grid(method, "_grid")
+        t = grid_times(times)
+        x = self._state(x0)
+        out = np.full((t.size, self.nx), np.nan)
+        stats = self.ffi.new(_STATS_PTR)
+        buf, held = self.ffi.from_buffer, self._c_held
+        cb = held[1] if held[0] is c else self._c_buffer(c)
+        try:
+            code = fn(t.size, buf(_DOUBLES, t), buf(_DOUBLES, x), cb, rtol, atol, h0, max_steps,
+                      buf(_DOUBLES, out), stats)  # fmt: skip
+        except (OverflowError, TypeError) as exc:
+            raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        return out, Stats(stats), code
+
+    def integrate_grid_batch(
+        self,
+        method: str,
+        x0s: np.ndarray,
+        c: np.ndarray,
+        times: np.ndarray,
+        threads: int | None = None,
+        *,
+        rtol: float = DEFAULT_CONTROLS["rtol"],
+        atol: float = DEFAULT_CONTROLS["atol"],
+        h0: float = DEFAULT_CONTROLS["h0"],
+        max_steps: int = DEFAULT_CONTROLS["max_steps"],
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`integrate_grid` for many states over the same times, one set of
+        constants; each state's rows equal its `integrate_grid` call's bit
+        for bit, whatever the thread count.
+
+        Returns
+        -------
+        states : numpy.ndarray, shape (n, len(times), nx)
+        stats : numpy.ndarray, shape (n,)
+            As `integrate_batch`'s.
+        codes : numpy.ndarray, shape (n,)
+
+        Raises
+        ------
+        ValueError
+            As for `integrate_grid` and `integrate_batch`.
+        """
+        fn = self._grid(method, "_grid_batch")
+        t = grid_times(times)
+        x = self._start_states(x0s)
+        n = x.shape[0]
+        out = np.full((n, t.size, self.nx), np.nan)
+        stats = np.zeros(n, dtype=self._stats_dtype)
+        codes = np.zeros(n, dtype=np.intc)
+        held = self._c_held
+        cb = held[1] if held[0] is c else self._c_buffer(c)
+        buf = self.ffi.from_buffer
+        count = self._thread_count(threads)
+        tb = buf(_DOUBLES, t)
+
+        def run(x: np.ndarray, out: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
+            fn(len(x), t.size, tb, buf(_DOUBLES, x), cb, rtol, atol, h0, max_steps,
+               buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
+
+        try:
+            if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
+                run(x, out, stats, codes)  # OpenMP, or one thread
+            else:
+                cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
+                with ThreadPoolExecutor(len(cuts) + 1) as pool:
+                    parts = (np.split(a, cuts) for a in (x, out, stats, codes))
+                    list(pool.map(run, *parts))
+        except (OverflowError, TypeError) as exc:
+            raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        return out, stats, codes
+
+    def _grid(self, method: str, kind: str) -> Any:
+        """method's _grid or _grid_batch function; a one-line ValueError for
+        a method this build lacks or one without an output grid (rk4)."""
+        if method not in self.manifest["integrators"]:
+            self._check_method(method, None)  # raises, saying why
+        if methods.get(method).fixed_step:
+            raise ValueError(f"{method} has no output grid: it is a fixed-step method")
+        return self.function(method + kind)
+
+    def _start_states(self, x0s: Any) -> np.ndarray:
+        """x0s as a new (n, nx) C-order array (integrated in place)."""
+        x = np.array(real_only(x0s, "initial states"), dtype=np.float64, order="C", ndmin=2)
+        if x.size == 0:  # an empty batch: [] or (0, nx)
+            x = x.reshape(0, self.nx)
+        if x.ndim != 2 or x.shape[1] != self.nx:
+            raise ValueError(f"initial states must have shape (n, {self.nx}), not {x.shape}")
+        return x
+
+    def _thread_count(self, threads: int | None) -> int:
+        count = self._cores if threads is None else threads
+        if not isinstance(count, (int, np.integer)) or not 1 <= count <= THREADS_MAX:
+            raise ValueError(f"threads must be an integer from 1 to {THREADS_MAX}, not {count!r}")
+        return int(count)
 
     @cached_property
     def _cores(self) -> int:

@@ -7,6 +7,11 @@ it has one, its interpolant); the driver holds the rest:
 - the bookkeeping of a step: the statistics, a rejection, an acceptance
   (the attitude check, x := xnew, t, the last step's OK), the interpolant's
   place, f at the new point;
+- the output grid (a method's _grid twin of _integrate): its arguments and
+  their checks, and the states written at each grid time a step passes, from
+  the method's interpolant (Interpolant: its coefficients, computed only on
+  the grid's accepted steps, and its value), or the step's end state itself
+  at a grid time the step ends on;
 - the step-size controllers, a strategy per family: Hairer's PI controller
   of the explicit pairs (PI), Gustafsson's predictive controller of the
   implicit methods, rodas4 and radau5 (Gustafsson), and Jorba and Zou's
@@ -22,18 +27,24 @@ controllers (every lane of a batch then takes the scalar path bit for bit).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from gyrogen import abi
 from gyrogen import methods as registry
 from gyrogen.codegen.integrators.common import NX, STATS, TOLERANCES, code, x, xnew
 from gyrogen.codegen.ir.nodes import (
+    Bool,
+    Break,
     Call,
     Const,
     Decl,
     E,
+    For,
+    Func,
     If,
     Int,
+    Loop,
     Num,
     Ref,
     Return,
@@ -52,6 +63,7 @@ from gyrogen.codegen.ir.nodes import (
 from gyrogen.methods import Method, PairControl, RadauControl, RosenbrockControl, TaylorControl
 
 OK = code("OK")
+ERR_GRID = code("ERR_GRID")
 ERR_STEP_UNDERFLOW = code("ERR_STEP_UNDERFLOW")
 ERR_MAX_STEPS = code("ERR_MAX_STEPS")
 ERR_NONFINITE = code("ERR_NONFINITE")
@@ -65,6 +77,23 @@ t, t0, t1, h, c = Var("t"), Var("t0"), Var("t1"), Var("h"), Var("c")
 PARAMS = (real("t0"), real("t1"), arr("x", "inout"), Decl("c", "double", ("NC",)), *TOLERANCES,
           real("h0"), Decl("max_steps", "long"), STATS)  # fmt: skip
 """<method>_integrate's arguments, every adaptive method's."""
+GRID_PARAMS = (Decl("ntimes", "long"), Decl("times", "double", ("ntimes",)), arr("x", "inout"),
+               Decl("c", "double", ("NC",)), *TOLERANCES, real("h0"), Decl("max_steps", "long"),
+               Decl("out", "double", ("ntimes", "NX"), "inout"), STATS)  # fmt: skip
+"""<method>_grid's arguments, every adaptive method's: from times[0] to
+times[ntimes - 1], out[g] the state at times[g]."""
+GRID_DOC = (
+    "The output grid: one integration from times[0] to times[ntimes - 1], the steps",
+    "not cut at the grid times; out[g] is the state at times[g], from the accepted",
+    "step's interpolant, or its end state where a step ends on times[g] (the last",
+    "one: x at t1, bit for bit _integrate's). A failure leaves the rows past the",
+    "time reached unwritten; a bad grid (ERR_GRID) writes none.",
+)
+GRID_LOCALS = (real("t0", "inout"), real("t1", "inout"), Decl("g", "long"),
+               real("told", "inout"), real("hs", "inout"), real("frac", "inout"))  # fmt: skip
+"""What a _grid integration adds to its method's locals: t0 and t1 (the
+grid's ends), g (the next grid time to write), told and hs (the accepted
+step's start and size) and frac (a grid time within it, scaled)."""
 LANE_PARAMS = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
 """<method>_step_lanes's arguments (a lane's t0, x and h0 live in its struct lanes)."""
 
@@ -80,11 +109,123 @@ def count(field: str, by: E | int) -> S:
     return inc(stat(field), by)
 
 
-def started(m: Method, f0: E, into: Var) -> list[S]:
-    """ode_start (common.ode_start): into := its code, returned when it stops."""
+def started(m: Method, f0: E, into: Var, grid: bool = False) -> list[S]:
+    """ode_start (common.ode_start): into := its code, returned when it stops.
+    grid: first the grid's checks and ends (t0, t1), and then out[0] := x
+    (the start as ode_start leaves it: Euler parameters normalized) unless
+    the start is refused."""
     args = (Int(m.start_order), Const(m.min_rtol), t0, t1, x, c, Var("rtol"), Var("atol"),
             Var("h0"), Var("max_steps"), f0, Ref("h"), Var("stats"))  # fmt: skip
-    return [assign(into, fn("ode_start", *args)), stopped(into)]
+    if not grid:
+        return [assign(into, fn("ode_start", *args)), stopped(into)]
+    first: list[S] = [For("i", NX, (assign(OUT[Int(0), i], x[i]),)), assign(G, 1)]
+    return [
+        *grid_start(),
+        assign(into, fn("ode_start", *args)),
+        If(
+            cmp(into, "<=", OK),
+            tuple(first),
+            (),
+        ),
+        stopped(into),
+    ]
+
+
+# The output grid
+
+G, OUT, TIMES, NTIMES = Var("g"), Var("out"), Var("times"), Var("ntimes")
+i = Var("i")
+
+
+def grid_locals(body: object) -> tuple[Decl, ...]:
+    """The GRID_LOCALS body reads (an unused local is an error under -Werror)."""
+    text = repr(body)
+    return tuple(d for d in GRID_LOCALS if f"Var(name='{d.name}')" in text)
+
+
+def rows(name: str, count: int) -> Decl:
+    """An interpolant's coefficients: count rows of NX."""
+    return Decl(name, "double", (count, "NX"), "inout")
+
+
+def grid_checks() -> Func:
+    """grid_ok: at least one time, each finite, each above the one before."""
+    n, v, k = Var("n"), Var("v"), Var("k")
+    body = (
+        If(cmp(n, "<", 1), (Return(Bool(False)),)),
+        For("k", n, (If(not_(fn("finite", v[k])), (Return(Bool(False)),)),), type="long"),
+        For("k", n, (If(not_(cmp(v[k - 1], "<", v[k])), (Return(Bool(False)),)),),
+            type="long", start=Int(1)),
+        Return(Bool(True)),
+    )  # fmt: skip
+    params = (Decl("n", "long"), Decl("v", "double", ("n",)))
+    doc = ("1 when the n grid times v are at least one, finite and strictly increasing.",)
+    return Func("grid_ok", params, body, "bool", doc=doc)
+
+
+def grid_start() -> list[S]:
+    """A bad grid stops (ERR_GRID, nothing written, stats at NaN time); else
+    t0 and t1 are its first and last times."""
+    return [
+        If(not_(fn("grid_ok", NTIMES, TIMES)), (
+            Call("stats_start", (Var("stats"), Const("NAN"))), Return(ERR_GRID))),
+        assign(t0, TIMES[Int(0)]),
+        assign(t1, TIMES[NTIMES - 1]),
+        assign(G, 0),
+    ]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Interpolant:
+    """A method's dense output on an accepted step: coefficients, the
+    statements that set its coefficients from the step (before x moves;
+    computed by the grid alone), and points(theta): the statements that
+    write out[g] at origin + theta step (by_state: one value per state).
+    origin is the step's start unless at_end (radau5's collocation
+    polynomial, which Hairer writes from the step's end); unscaled: theta
+    is the time from origin (the Taylor series), else over the step."""
+
+    coefficients: tuple[S, ...]
+    points: Callable[[E], list[S]]
+    at_end: bool = False
+    scaled: bool = True
+
+
+def by_state(value: Callable[[E, E], E]) -> Callable[[E], list[S]]:
+    """out[g][i] := value(theta, i) for every state i."""
+    return lambda theta: [For("i", NX, (assign(OUT[G, i], value(theta, i)),))]
+
+
+def grid_step(start: E, step: E | None) -> list[S]:
+    """Before a step whose start and size are gone when it is accepted (the
+    branch-free steps): told and hs (unless step is None) remember them for
+    the grid."""
+    return [assign(Var("told"), start), *([] if step is None else [assign(Var("hs"), step)])]
+
+
+def inside(dense: Interpolant, end: E, start: E, step: E) -> list[S]:
+    """An accepted step's grid times before its end: out[g] := the
+    interpolant there, g moved on; the coefficients first."""
+    theta = Var("frac")
+    origin = end if dense.at_end else start
+    return [
+        *dense.coefficients,
+        Loop((
+            If(not_(cmp(G, "<", NTIMES)), (Break(),)),
+            If(not_(cmp(TIMES[G], "<", end)), (Break(),)),
+            assign(theta, (TIMES[G] - origin) / step if dense.scaled else TIMES[G] - origin),
+            *dense.points(theta),
+            inc(G, 1),
+        )),
+    ]  # fmt: skip
+
+
+def reached() -> list[S]:
+    """After the step, x and t its end: a grid time there gets x itself (the
+    last one, t1, so equals _integrate's end state bit for bit; the times
+    before it were written by inside, so <= is ==)."""
+    there: list[S] = [For("i", NX, (assign(OUT[G, i], x[i]),)), inc(G, 1)]
+    return [If(cmp(G, "<", NTIMES), (If(cmp(TIMES[G], "<=", t), tuple(there)),))]
 
 
 def stopped(cd: Var) -> S:
@@ -168,20 +309,30 @@ def attitude_stop(quaternion: bool) -> list[S]:
         Return(ERR_ATTITUDE_SINGULAR, "x: the state before this step"),))]  # fmt: skip
 
 
-def accepted(quaternion: bool, last: Var, control: list[S], interpolant: list[S]) -> list[S]:
+def accepted(
+    quaternion: bool,
+    last: Var,
+    control: list[S],
+    interpolant: list[S],
+    dense: Interpolant | None = None,
+) -> list[S]:
     """An accepted step: attitude_stop; then control (the next h),
-    interpolant (the dense output's coefficients, from the step before x
-    moves: radau5's collocation polynomial, the next Newton iterations'
-    start; empty for the rest), x := xnew, t, counted, and OK after the
-    last step."""
+    interpolant (what the method keeps of the step before x moves: radau5's
+    collocation polynomial, the next Newton iterations' start; empty for the
+    rest), with dense (the grid): the grid times inside the step from its
+    interpolant; x := xnew, t, counted, the grid time at the step's end, and
+    OK after the last step."""
+    grid = inside(dense, sel(last, t1, t + h), t, h) if dense is not None else []
     return [
         *attitude_stop(quaternion),
         *control,
         *interpolant,
+        *grid,
         Call("accept_step", (x, xnew, Var("dx"), Var("comp"))),
         assign(t, sel(last, t1, t + h)),
         assign(stat("t"), t),
         count("accepted", 1),
+        *(reached() if dense is not None else []),
         If(last, (Return(OK),)),
     ]
 
@@ -334,4 +485,19 @@ class JorbaZou:
         return assign(self.cap, sel(ok, Const("HUGE"), sel(retry, shrunk, self.cap)))
 
 
-__all__ = ["PI", "Gustafsson", "JorbaZou", "accepted", "counted", "stop_code", "stop_tests"]
+__all__ = [
+    "GRID_LOCALS",
+    "GRID_PARAMS",
+    "PI",
+    "Gustafsson",
+    "Interpolant",
+    "JorbaZou",
+    "accepted",
+    "counted",
+    "grid_checks",
+    "grid_step",
+    "inside",
+    "reached",
+    "stop_code",
+    "stop_tests",
+]

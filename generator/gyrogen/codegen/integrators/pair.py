@@ -24,17 +24,19 @@ from gyrogen.codegen.integrators.common import (
     x,
     xnew,
 )
-from gyrogen.codegen.integrators.explicit import trial
+from gyrogen.codegen.integrators.explicit import combo, trial
 from gyrogen.codegen.ir.nodes import (
     Bool,
     Call,
     Comment,
     Decl,
+    E,
     For,
     Func,
     If,
     Int,
     Loop,
+    Num,
     Row,
     S,
     Var,
@@ -53,9 +55,58 @@ from gyrogen.tableaus import Explicit
 t, k, y, c = Var("t"), Var("k"), Var("y"), Var("c")
 
 
-def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
+def interpolant(m: Method) -> driver.Interpolant:
+    """Hairer's dense output of pair m (tableaus.DenseRK; dopri5.f's CONTD5,
+    dop853.f's CONTD8): its extra stages and rows from the accepted step
+    (told, hs; x still its start, k[fnew] f at its end), and the nested
+    value r1 + theta (r2 + (1 - theta) (r3 + theta (r4 + ...)))."""
+    tab = m.tableau
+    assert isinstance(tab, Explicit) and tab.dense is not None
+    dense, r, hs, told = tab.dense, Var("dense"), Var("hs"), Var("told")
+    out: list[S] = [Comment(f"the dense output of order {dense.order}")]
+    for s, node in enumerate(dense.nodes):
+        row = m.fnew + 1 + s
+        out += [
+            For("i", NX, (assign(y[i], x[i] + hs * combo(dense.stage(s))),)),
+            Call("rhs", (told + Num(node) * hs, y, c, Row("k", Int(row)))),
+        ]
+    if dense.nodes:
+        out.append(driver.count("rhs_calls", len(dense.nodes)))
+    out.append(For("i", NX, (
+        assign(r[0, i], xnew[i] - x[i]),
+        assign(r[1, i], hs * k[0, i] - r[0, i]),
+        assign(r[2, i], (r[0, i] - hs * k[m.fnew, i]) - r[1, i]),
+        *(assign(r[3 + j, i], hs * combo(dense.row(j))) for j in range(len(dense.d))),
+    )))  # fmt: skip
+
+    def value(theta: E, i: E) -> E:
+        terms: list[E] = [x[i], *(r[j, i] for j in range(3 + len(dense.d)))]
+        acc = terms[-1]
+        for j in range(len(terms) - 2, -1, -1):
+            acc = terms[j] + (theta if j % 2 == 0 else Num(1.0) - theta) * acc
+        return acc
+
+    return driver.Interpolant(tuple(out), driver.by_state(value))
+
+
+def dense_rows(m: Method) -> int:
+    """The rows of an interpolant's coefficients (r2, r3, r4 and the d rows)."""
+    tab = m.tableau
+    assert isinstance(tab, Explicit) and tab.dense is not None
+    return 3 + len(tab.dense.d)
+
+
+def grid_krows(m: Method, krows: int) -> int:
+    """k's rows for m's grid: the stages, fnew and the interpolant's stages."""
+    tab = m.tableau
+    assert isinstance(tab, Explicit) and tab.dense is not None
+    return max(krows, m.fnew + 1 + len(tab.dense.nodes))
+
+
+def parts(m: Method, quaternion: bool, grid: bool = False) -> tuple[list[S], list[S]]:
     """One step of pair m on one trajectory, as the five parts: begin, and
-    the other four."""
+    the other four. grid: the output grid's too (grid_step, f at the last
+    step's end, and the grid times an accepted step passes)."""
     ctl = m.control
     assert isinstance(ctl, registry.PairControl)
     tab = m.tableau
@@ -68,6 +119,7 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
         assign(last, driver.last_step()),
         assign(h, sel(and_(cmp(cd, "<", 0), last), t1 - t, h)),
         assign(driver.stat("h"), sel(cmp(cd, "<", 0), h, driver.stat("h"))),
+        *(driver.grid_step(t, h) if grid else []),
     ]
     check: list[S] = [
         Comment("check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken"),
@@ -79,7 +131,8 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
     if not tab.fsal:
         fnew = k[m.fnew, i]
         check += [
-            assign(ok, and_(cmp(cd, "<", 0), not_(nonfinite), cmp(err, "<=", 1.0), not_(last))),
+            assign(ok, and_(cmp(cd, "<", 0), not_(nonfinite), cmp(err, "<=", 1.0),
+                            *([] if grid else [not_(last)]))),
             If(ok, (Call("rhs", (t + h, xnew, c, Row("k", Int(m.fnew))),
                          "where the next step starts"),)),
             For("i", NX, (assign(nonfinite, or_(nonfinite, and_(ok, not_(fn("finite", fnew))))),)),
@@ -100,10 +153,12 @@ def parts(m: Method, quaternion: bool) -> tuple[list[S], list[S]]:
         pi.next_h(or_(not_(run), and_(take, lock)), nonfinite, ok),
     ]
     first: list[S] = [For("i", NX, (assign(k[0, i], k[m.fnew, i]),))]
+    inside = driver.inside(interpolant(m), t, Var("told"), Var("hs")) if grid else []
     accept: list[S] = [
         Comment("accept: x := xnew; f(t + h, xnew) is the next step's first stage"),
-        If(ok, (*accepted(quaternion, known=True), *first)),
-    ]
+        If(ok, (*inside, *accepted(quaternion, known=True), *first,
+                *(driver.reached() if grid else []))),
+    ]  # fmt: skip
     return begin, [Comment("trial"), *trial(m), *check, *control, *accept]
 
 
@@ -133,20 +188,27 @@ def start_state() -> list[S]:
     return [*common.start_state(), *driver.PI.start()]
 
 
-def integrate(m: Method, quaternion: bool, krows: int) -> Func:
-    """m.name_integrate: pair m from t0 to t1 on one trajectory."""
-    begin, rest = parts(m, quaternion)
+def integrate(m: Method, quaternion: bool, krows: int, grid: bool = False) -> Func:
+    """m.name_integrate: pair m from t0 to t1 on one trajectory; with grid,
+    m.name_grid: over the output grid."""
+    begin, rest = parts(m, quaternion, grid)
     cd = Var("code")
     stop = driver.stopped(cd)
-    start = driver.started(m, Row("k", Int(0)), cd)
+    start = driver.started(m, Row("k", Int(0)), cd, grid)
     body = [*start, *start_state(), Loop((*begin, stop, *rest, stop))]
-    locals_ = (*state_arrays(krows)[1:], *(declare(n) for n in STATE), *used_locals(begin + rest))
+    rows = grid_krows(m, krows) if grid else krows
+    locals_ = (*state_arrays(rows)[1:], *(declare(n) for n in STATE), *used_locals(begin + rest))
+    if grid:
+        locals_ += (driver.rows("dense", dense_rows(m)), *driver.grid_locals(body))
     doc = (
         f"{m.name} to t1, with Hairer's step-size strategy: the last step clipped",
         "to end on t1, no growth right after a rejection, and a non-finite trial",
         "rejected with h shrunk by facmin.",
         *((m.control.note,) if isinstance(m.control, registry.PairControl) else ()),
     )
+    if grid:
+        doc = (*doc, *driver.GRID_DOC)
+        return Func(f"{m.name}_grid", driver.GRID_PARAMS, tuple(body), "int", locals_, doc)
     return Func(f"{m.name}_integrate", driver.PARAMS, tuple(body), "int", locals_, doc)
 
 

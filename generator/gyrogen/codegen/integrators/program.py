@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 from gyrogen.codegen.integrators import (
     common,
+    driver,
     elementary,
     explicit,
     intrinsics,
@@ -64,7 +65,7 @@ def _fixed(m: Method, g: Given) -> Parts:
 def _pair(m: Method, g: Given) -> Parts:
     common_start = common.start_state()
     return Parts(
-        [pair.integrate(m, g.quaternion, g.krows)],
+        [pair.integrate(m, g.quaternion, g.krows), pair.integrate(m, g.quaternion, g.krows, True)],
         [pair.lanes_step(m, g.quaternion)],
         init=[s for s in pair.start_state() if s not in common_start],
     )
@@ -72,13 +73,24 @@ def _pair(m: Method, g: Given) -> Parts:
 
 def _rosenbrock(m: Method, g: Given) -> Parts:
     return Parts(
-        [rosenbrock.trial(m, g.uses_time), rosenbrock.integrate(m, g.quaternion, g.uses_time)]
+        [
+            rosenbrock.trial(m, g.uses_time),
+            rosenbrock.trial(m, g.uses_time, grid=True),
+            rosenbrock.integrate(m, g.quaternion, g.uses_time),
+            rosenbrock.integrate(m, g.quaternion, g.uses_time, grid=True),
+        ]
     )
 
 
 def _radau(m: Method, g: Given) -> Parts:
     return Parts(
-        [radau.factor(m), radau.newton(m), radau.error(m), radau_step.integrate(m, g.quaternion)]
+        [
+            radau.factor(m),
+            radau.newton(m),
+            radau.error(m),
+            radau_step.integrate(m, g.quaternion),
+            radau_step.integrate(m, g.quaternion, grid=True),
+        ]
     )
 
 
@@ -133,6 +145,7 @@ def program(
         init += [] if s in init else [s]
     adaptive = any(not m.fixed_step for m in methods)
     candidates = [*common.shared(quaternion, adaptive, True), *elementary.functions()]
+    candidates += [driver.grid_checks()] if adaptive else []
     if blocks is not None:
         nx = len(blocks.end)
         candidates += [

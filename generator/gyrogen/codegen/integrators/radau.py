@@ -79,6 +79,13 @@ def pivots(name: str, intent: str = "in") -> Decl:
     return Decl(name, "int", ("NX",), intent)  # type: ignore[arg-type]
 
 
+# factor, newton and error are inline: radau5_integrate and radau5_grid call
+# them, and gcc inlines a static function of two callers only when told (of
+# one, always): out of line, radau5 took 8 % longer a step (make
+# bench-methods). The complex LU they call (linear.py) stays out of line
+# either way, with two callers: 0 to 6 % a step, the most on stiff_wheel.
+
+
 def factor(m: Method) -> Func:
     R = m.tableau
     assert isinstance(R, Radau)
@@ -98,7 +105,7 @@ def factor(m: Method) -> Func:
               matrix("e2r", "out"), matrix("e2i", "out"), pivots("piv2", "out"))  # fmt: skip
     locals_ = (scalar("gamma_h", "inout"), scalar("alpha_h", "inout"))
     doc = ("E1 and E2 for this h, factored; 1 when either is singular.",)
-    return Func(f"{m.name}_factor", params, body, "bool", locals_, doc)
+    return Func(f"{m.name}_factor", params, body, "bool", locals_, doc, inline=True)
 
 
 def newton(m: Method) -> Func:
@@ -146,7 +153,7 @@ def newton(m: Method) -> Func:
         "F at the three stages, then the corrections to w solved into z1..z3.",
         "Returns their RMS over scal (NaN or Inf when a stage is).",
     )
-    return Func(f"{m.name}_newton", params, body, "double", locals_, doc)
+    return Func(f"{m.name}_newton", params, body, "double", locals_, doc, inline=True)
 
 
 def error(m: Method) -> Func:
@@ -188,7 +195,7 @@ def error(m: Method) -> Func:
         "or after a rejection an estimate >= 1 is taken again through f at x + err",
         "(radau5.f's ESTRAD): one more rhs call.",
     )
-    return Func(f"{m.name}_error", params, body, "double", locals_, doc)
+    return Func(f"{m.name}_error", params, body, "double", locals_, doc, inline=True)
 
 
 __all__ = [

@@ -52,7 +52,23 @@ V = {n: Var(n) for n in (
 ).split()}  # fmt: skip
 
 
-def integrate(m: Method, quaternion: bool) -> Func:
+def collocation(R: Radau) -> driver.Interpolant:
+    """radau5.f's CONTR5: from the step's end, s = (t - t_new) / h in [-1, 0],
+    xnew + s (ak1 + (s - c2 + 1) (ak2 + (s - c1 + 1) ak3)): the collocation
+    polynomial accepted() keeps for the next Newton iterations (order 3 at
+    any point of the step; the step itself is of order 5)."""
+    c1, c2 = R.nodes[0], R.nodes[1]
+
+    def value(s: E, i: E) -> E:
+        inner = V["ak2"][i] + (s + Num(1.0 - c1)) * V["ak3"][i]
+        return xnew[i] + s * (V["ak1"][i] + (s + Num(1.0 - c2)) * inner)
+
+    return driver.Interpolant((), driver.by_state(value), at_end=True)
+
+
+def integrate(m: Method, quaternion: bool, grid: bool = False) -> Func:
+    """m.name_integrate, or with grid m.name_grid (the states at the grid's
+    times, from the collocation polynomial)."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Radau) and isinstance(ctl, RadauControl)
     v = V
@@ -171,7 +187,8 @@ def integrate(m: Method, quaternion: bool) -> Func:
     ]
     predictive = control.predictive(quot, err, then=(assign(h_new, h / quot),))
     accept: list[S] = [
-        *driver.accepted(quaternion, last, [assign(v["first"], False), *predictive], interpolant),
+        *driver.accepted(quaternion, last, [assign(v["first"], False), *predictive], interpolant,
+                         collocation(R) if grid else None),
         each(assign(v["f0"][i], v["fnew"][i]),
              assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * fn("abs", x[i]))),
         assign(v["fresh_jac"], False),
@@ -211,7 +228,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
         )),
     ]  # fmt: skip
     body = (
-        *driver.started(m, v["f0"], v["start"]),
+        *driver.started(m, v["f0"], v["start"], grid),
         assign(t, v["t0"]),
         *(assign(v[n], 1.0) for n in ("h_old", "rate", "theta_old", "dyno_old")),
         *control.start(),
@@ -240,6 +257,7 @@ def integrate(m: Method, quaternion: bool) -> Func:
         pivots("piv1", "inout"), pivots("piv2", "inout"),
         *(scalar(n, "inout") for n in doubles), *(Decl(n, "bool") for n in bools),
         *(Decl(n, "int") for n in ("newt", "outcome", "singular", "start")),
+        *(driver.grid_locals(body) if grid else ()),
     )  # fmt: skip
     doc = (
         f"{m.doc} Hairer's radau5.f strategy: the error test's tolerances are",
@@ -253,6 +271,10 @@ def integrate(m: Method, quaternion: bool) -> Func:
         f"retry with h halved (slow ones with a smaller h); a singular E1 or E2 too,"
         f" {ctl.singular_tries} times in a row at most.",
     )
+    if grid:
+        return Func(
+            f"{m.name}_grid", driver.GRID_PARAMS, body, "int", locals_, (*doc, *driver.GRID_DOC)
+        )
     return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 
 

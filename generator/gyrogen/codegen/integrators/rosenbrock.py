@@ -60,7 +60,10 @@ def with_ft(value: E, d: float, uses_time: bool) -> E:
     return value - term if d < 0 else value + term
 
 
-def trial(m: Method, uses_time: bool) -> Func:
+def trial(m: Method, uses_time: bool, grid: bool = False) -> Func:
+    """m.name_trial; with grid m.name_grid_trial, which also sets the
+    interpolant's rows from the stages (dense: its own function, so that
+    m.name_trial keeps one caller, which gcc inlines)."""
     R = m.tableau
     assert isinstance(R, Rosenbrock)
     inv_h, lu, piv = Var("inv_h"), Var("lu"), Var("piv")
@@ -94,6 +97,7 @@ def trial(m: Method, uses_time: bool) -> Func:
         For(
             "i", NX, (assign(dx[i], (dx[i] + k[last, i]) - comp[i]), assign(xnew[i], x[i] + dx[i]))
         ),
+        *([dense_rows(R)] if grid else []),
         Return(fn("error_norm", Row("k", Int(last)), x, xnew, Var("rtol"), Var("atol"))),
     ]
     params = (
@@ -101,6 +105,7 @@ def trial(m: Method, uses_time: bool) -> Func:
         Decl("lu", "double", ("NX2",)), Decl("piv", "int", ("NX",)), Decl("c", "double", ("NC",)),
         *TOLERANCES, arr("comp"), Decl("k", "double", (R.stages, "NX"), "inout"),
         arr("dx", "inout"), arr("xnew", "inout"),
+        *((driver.rows("dense", len(R.dense)),) if grid else ()),
     )  # fmt: skip
     locals_ = (arr("y", "inout"), arr("fy", "inout"), real("inv_h", "inout"))
     doc = (
@@ -111,10 +116,34 @@ def trial(m: Method, uses_time: bool) -> Func:
         f"is that plus k_{R.stages}, the error estimate. Returns its norm (NaN or Inf",
         "when a stage is).",
     )  # fmt: skip
-    return Func(f"{m.name}_trial", params, tuple(body), "double", locals_, doc)
+    name = f"{m.name}_grid_trial" if grid else f"{m.name}_trial"
+    return Func(name, params, tuple(body), "double", locals_, doc)
 
 
-def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
+def interpolant(R: Rosenbrock) -> driver.Interpolant:
+    """rodas.f's dense output (CONTRO): x (1 - theta) + theta (xnew + (1 -
+    theta) (r3 + theta r4)), r3 and r4 the D2 and D3 rows' sums of the stages
+    k_1 .. k_5 (dense_rows, in the grid's trial); x is the step's start (the
+    grid writes before x moves)."""
+    r = Var("dense")
+
+    def value(theta: E, i: E) -> E:
+        rest = Num(1.0) - theta
+        inner = xnew[i] + rest * (r[0, i] + theta * r[1, i])
+        return x[i] * rest + theta * inner
+
+    return driver.Interpolant((), driver.by_state(value))
+
+
+def dense_rows(R: Rosenbrock) -> S:
+    """The interpolant's rows r3 and r4 from the stages (in the grid's trial)."""
+    r = Var("dense")
+    return For("i", NX, tuple(assign(r[j, i], combo(R.dense_row(j))) for j in range(len(R.dense))))
+
+
+def integrate(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) -> Func:
+    """m.name_integrate, or with grid m.name_grid (the states at the grid's
+    times, from the interpolant)."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Rosenbrock) and isinstance(ctl, registry.RosenbrockControl)
     J, lu, piv, fnew, t1 = (Var(n) for n in ("J", "lu", "piv", "fnew", "t1"))
@@ -133,8 +162,9 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
             For("i", NX, (assign(ft[i], (ft[i] - f0[i]) / delta),)),
         ]
     args = (t, h, x, f0, *((ft,) if uses_time else ()), lu, piv, c, Var("rtol"), Var("atol"),
-            comp, k, dx, xnew)  # fmt: skip
-    taken = driver.accepted(quaternion, last, control.predictive(fac, err), interpolant=[])
+            comp, k, dx, xnew, *((Var("dense"),) if grid else ()))  # fmt: skip
+    dense = interpolant(R) if grid else None
+    taken = driver.accepted(quaternion, last, control.predictive(fac, err), [], dense)
     accept: list[S] = [
         *taken,
         For("i", NX, (assign(f0[i], fnew[i]),)),
@@ -157,7 +187,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
             *reject, *driver.singular_stop(singular, ctl.singular_tries),
             assign(h, h * Num(ctl.singular_shrink)), Continue())),
         assign(singular, 0),
-        assign(err, fn(f"{m.name}_trial", *args)),
+        assign(err, fn(f"{m.name}_grid_trial" if grid else f"{m.name}_trial", *args)),
         driver.count("rhs_calls", R.stages - 1),
         assign(nonfinite, or_(not_(fn("finite", err)), not_(finite_state(xnew, quaternion)))),
         If(and_(not_(nonfinite), cmp(err, "<=", 1.0), not_(last)),
@@ -168,7 +198,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         assign(h, h / fac),
     ]  # fmt: skip
     body = (
-        *driver.started(m, f0, start),
+        *driver.started(m, f0, start, grid),
         assign(t, Var("t0")),
         *control.start(),
         *(assign(v, False) for v in (rejected_last, nonfinite)),
@@ -185,6 +215,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         Decl("piv", "int", ("NX",), "inout"), *(real(n, "inout") for n in doubles),
         *(Decl(n, "bool") for n in ("last", "rejected_last", "nonfinite", "new_point")),
         Decl("singular", "int"), Decl("start", "int"),
+        *((driver.rows("dense", len(R.dense)), *driver.grid_locals(body)) if grid else ()),
     )  # fmt: skip
     doc = (
         m.doc,
@@ -195,6 +226,9 @@ def integrate(m: Method, quaternion: bool, uses_time: bool) -> Func:
         f"A singular E is retried with h times {ctl.singular_shrink:g},"
         f" {ctl.singular_tries} times in a row at most.",
     )
+    if grid:
+        params, name = driver.GRID_PARAMS, f"{m.name}_grid"
+        return Func(name, params, body, "int", locals_, (*doc, *driver.GRID_DOC))
     return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 
 

@@ -141,9 +141,36 @@ def start_state() -> list[S]:
     return [*common.start_state(), *driver.JorbaZou.start()]
 
 
-def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
+def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
+    """The dense output: the series itself at tau = t - told, x + tau (x^[1]
+    + tau (x^[2] + ... + tau x^[p])) by Horner's scheme, and a state of degree
+    min_order or less by its exact polynomial (its higher coefficients are
+    never computed)."""
+    deg = jet.degrees()
+
+    def points(tau: E) -> list[S]:
+        acc, q = Var("acc"), Var("q")
+        horner = (
+            assign(acc, T[order, i]),
+            For("q", order - 1, (assign(acc, T[order - Int(1) - q, i] + tau * acc),)),
+            assign(driver.OUT[driver.G, i], x[i] + tau * acc),
+        )
+        out: list[S] = [
+            For("i", Int(b), horner, ("acc",), start=Int(a)) for a, b in _runs(jet.nx, exact)
+        ]
+        for n in exact:
+            low = T[Int(1), Int(n)] + tau * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
+            out.append(assign(driver.OUT[driver.G, Int(n)], x[Int(n)] + tau * low))
+        return out
+
+    return driver.Interpolant((), points, scaled=False)
+
+
+def step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> list[S]:
     """One step of one trajectory, straight-line with selections (the scalar
-    integrator loops over it; the lanes print it over every lane)."""
+    integrator loops over it; the lanes print it over every lane). grid: the
+    output grid's too (driver.grid_step, and the grid times an accepted step
+    passes, from the series)."""
     t, t1, cd = Var("t"), Var("t1"), Var("code")
     last, run, take, ok, at, jump, retry = (
         Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
@@ -180,12 +207,13 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
     body: list[S] = [
         Comment("the coefficients at x, and the step they allow (Jorba and Zou)"),
         assign(run, cmp(cd, "<", 0)),
-        Call("taylor_jet", args),
+        *(jet_function(series, jet).body if grid else [Call("taylor_jet", args)]),
         driver.count("rhs_calls", sel(run, Int(1), Int(0))),
         *bounds(jet, exact),
         *jz.next_h(order, Var("inv"), Var("rp"), Var("rq")),
         assign(last, driver.last_step()),
         assign(h, sel(last, t1 - t, h)),
+        *(driver.grid_step(t, None) if grid else []),
         assign(driver.stat("h"), sel(run, h, driver.stat("h"))),
         assign(cd, sel(run, driver.stop_code(nonfinite), cd), "lost in t, or no steps left"),
         assign(run, cmp(cd, "<", 0)),
@@ -208,9 +236,11 @@ def step(m: Method, jet: Jet, quaternion: bool) -> list[S]:
         assign(cd, driver.ended(and_(take, at, not_(jump)), ok, last, cd)),
         *driver.counted(ok, retry, last),
         jz.remember(ok, retry),
-        If(ok, tuple(accepted(quaternion, known=True))),
     ]
-    return body
+    if not grid:
+        return [*body, If(ok, tuple(accepted(quaternion, known=True)))]
+    inside = driver.inside(series_output(jet, exact), t, Var("told"), Var("hs"))
+    return [*body, If(ok, (*inside, *accepted(quaternion, known=True), *driver.reached()))]
 
 
 SIZES = {"magnitude": fn("abs", x[i]), "angle": fn("min", fn("abs", x[i]), Num(ANGLE_SCALE))}
@@ -276,16 +306,17 @@ def _runs(n: int, left_out: list[int]) -> list[tuple[int, int]]:
     return out
 
 
-def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
-    """taylor_integrate: from t0 to t1 on one trajectory."""
+def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func:
+    """taylor_integrate: from t0 to t1 on one trajectory; with grid,
+    taylor_grid: over the output grid."""
     series = m.tableau
     assert isinstance(series, Series)
     cd = Var("code")
     body: list[S] = [
-        *driver.started(m, Var("f0"), cd),
+        *driver.started(m, Var("f0"), cd, grid),
         *uniform(m, jet),
         *start_state(),
-        Loop((*step(m, jet, quaternion), driver.stopped(cd))),
+        Loop((*step(m, jet, quaternion, grid), driver.stopped(cd))),
     ]
     locals_ = (
         coefficients(series, jet),
@@ -301,6 +332,10 @@ def integrate(m: Method, jet: Jet, quaternion: bool) -> Func:
         *(declare(n) for n in LOCALS),
         *([declare("norm")] if quaternion else []),
     )
+    if grid:  # the jet's code in place: taylor_jet keeps one caller, which gcc inlines
+        locals_ += (*jet_function(series, jet).locals, *driver.grid_locals(body))
+        doc = (*m.notes, *driver.GRID_DOC)
+        return Func("taylor_grid", driver.GRID_PARAMS, tuple(body), "int", locals_, doc)
     return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
 
 
@@ -333,4 +368,8 @@ def lane_state(m: Method, jet: Jet) -> list[Decl]:
 def functions(m: Method, jet: Jet, quaternion: bool) -> list[Func]:
     series = m.tableau
     assert isinstance(series, Series)
-    return [jet_function(series, jet), integrate(m, jet, quaternion)]
+    return [
+        jet_function(series, jet),
+        integrate(m, jet, quaternion),
+        integrate(m, jet, quaternion, grid=True),
+    ]

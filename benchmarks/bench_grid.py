@@ -1,0 +1,134 @@
+"""`make bench-grid`: what an output grid costs against the end point alone,
+and against restarting the integrator at every grid time, in C.
+
+    python benchmarks/bench_grid.py [--t1 T] [--points N] [--tol TOL] [--repeats R] [--rounds K]
+
+The default scene, every adaptive method, rtol = atol = TOL, from 0 to T.
+Three raw cffi calls on buffers made once, the state reset from the
+scene's start before each: `_integrate` from 0 to T (the end point),
+`_grid` over N + 1 equally spaced times (one integration, the states read
+from the method's dense output), and N `_integrate` calls, one per interval,
+each starting where the last ended (a grid without `_grid`). Each
+figure is the best of R repeats of a loop of ~20 ms, in K rounds run side by
+side, timed by the thread's CPU time (a loaded machine still times the calls
+themselves; the load average is printed before and after). The errors, each
+the largest over the states against dop853 at 1e-14 restarted per interval:
+the grid's, runs from 0 stopped at each grid time ("stop err"), and the end
+point's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gyrogen import methods
+from gyrogen.abi import MAX_STEPS
+from gyrogen.analysis.bench.timing import best_time
+from gyrogen.analysis.simulate.engine import runtime_values
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.scene_build import build_scene
+from gyrogen.scene import default
+
+
+def load() -> str:
+    one, five, _ = os.getloadavg()
+    return f"load average {one:.2f} (1 min), {five:.2f} (5 min), {os.cpu_count()} cpus"
+
+
+def contenders(
+    comp: Compiled, method: str, x0: np.ndarray, c: np.ndarray, times: np.ndarray, tol: float
+) -> dict[str, Callable[[], Any]]:
+    """The end point, the grid and the restarted calls of method."""
+    ffi = comp.ffi
+    x = x0.copy()
+    out = np.zeros((times.size, comp.nx))
+    xb, cb, ob = ffi.from_buffer("double[]", x), comp.doubles(c), ffi.from_buffer("double[]", out)
+    tb = ffi.from_buffer("double[]", times)
+    stats = ffi.new("gyrogen_stats *")
+    fn, grid = comp.function(method), comp.function(f"{method}_grid")
+    t1, ends = float(times[-1]), [float(t) for t in times]
+
+    def end() -> Any:
+        x[:] = x0
+        return fn(0.0, t1, xb, cb, tol, tol, 0.0, MAX_STEPS, stats)
+
+    def on_grid() -> Any:
+        x[:] = x0
+        return grid(times.size, tb, xb, cb, tol, tol, 0.0, MAX_STEPS, ob, stats)
+
+    def restarted() -> Any:
+        x[:] = x0
+        for a, b in itertools.pairwise(ends):
+            fn(a, b, xb, cb, tol, tol, 0.0, MAX_STEPS, stats)
+
+    return {"end point": end, "grid": on_grid, "restarted": restarted}
+
+
+def errors(
+    comp: Compiled, method: str, x0: np.ndarray, c: np.ndarray, times: np.ndarray, tol: float
+) -> tuple[float, float, float]:
+    """The grid's largest error, the largest of runs from 0 stopped at each
+    grid time, and the end point's, against dop853 at 1e-14."""
+    ref, x = [x0.copy()], x0.copy()
+    for a, b in itertools.pairwise(times):
+        x, _, code = comp.integrate("dop853", x, c, float(a), float(b), rtol=1e-14, atol=1e-14)
+        assert code == 0
+        ref.append(x)
+    states, _, code = comp.integrate_grid(method, x0, c, times, rtol=tol, atol=tol)
+    single = [comp.integrate(method, x0, c, 0.0, float(t), rtol=tol, atol=tol) for t in times[1:]]
+    assert code == 0 and all(k == 0 for _, _, k in single), code
+    stopped = np.array([x0, *(x for x, _, _ in single)])
+    grid_err = float(np.max(np.abs(states - np.array(ref))))
+    return (
+        grid_err,
+        float(np.max(np.abs(stopped - np.array(ref)))),
+        float(np.max(np.abs(stopped[-1] - ref[-1]))),
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--t1", type=float, default=10.0)
+    ap.add_argument("--points", type=int, default=1000)
+    ap.add_argument("--tol", type=float, default=1e-10)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=3)
+    args = ap.parse_args()
+    scene = default()
+    with tempfile.TemporaryDirectory(prefix="gyrogen-grid-") as tmp:
+        _, built = build_scene(scene, Path(tmp), ("c",))
+    comp = built["c"]
+    c = comp.setup(runtime_values(scene))
+    x0 = np.array(scene.initial_state())
+    times = np.linspace(0.0, args.t1, args.points + 1)
+    print(f"{scene.name}, 0 to {args.t1:g} s, {args.points + 1} grid times, tol {args.tol:g}")
+    print(f"before: {load()}")
+    print(f"\n{'method':<8} {'end us':>10} {'grid us':>10} {'restart us':>11} "
+          f"{'grid/end':>9} {'restart/end':>12} {'grid err':>10} {'stop err':>10} "
+          f"{'end err':>10}")  # fmt: skip
+    for method in methods.ADAPTIVE:
+        runs = contenders(comp, method, x0, c, times, args.tol)
+        best = dict.fromkeys(runs, np.inf)
+        for _ in range(args.rounds):
+            for name, fn in runs.items():
+                best[name] = min(
+                    best[name], best_time(fn, args.repeats, clock=time.thread_time) * 1e6
+                )
+        grid_err, stop_err, end_err = errors(comp, method, x0, c, times, args.tol)
+        e, g, r = best["end point"], best["grid"], best["restarted"]
+        print(f"{method:<8} {e:10.1f} {g:10.1f} {r:11.1f} {g / e:9.2f} {r / e:12.1f} "
+              f"{grid_err:10.2e} {stop_err:10.2e} {end_err:10.2e}")  # fmt: skip
+    print(f"\nafter: {load()}")
+
+
+if __name__ == "__main__":
+    main()
