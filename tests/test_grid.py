@@ -7,12 +7,16 @@ C and Fortran). On the default scene, built once per session (conftest)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from gyrogen import abi, methods
+from gyrogen.codegen.generate import generate
+from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import default
+from gyrogen.scene import builtin_text, default, parse
 
 ADAPTIVE = list(methods.ADAPTIVE)
 ERR_GRID = next(c.value for c in abi.ODE_CODES if c.name == "ODE_ERR_GRID")
@@ -213,3 +217,33 @@ def test_a_failure_leaves_the_rows_past_it_unwritten(
     assert code == next(c.value for c in abi.ODE_CODES if c.name == "ODE_ERR_MAX_STEPS")
     reached = times <= stats["t"]
     assert np.all(np.isfinite(states[reached])) and np.all(np.isnan(states[~reached]))
+
+
+QUATERNION_SPINUP = builtin_text("wheel_spinup").replace(
+    'name = "wheel_spinup"', 'name = "wheel_spinup_e"\nattitude = "quaternion"'
+)
+
+
+@pytest.mark.slow  # a scene of its own, generated and built in C and Fortran
+def test_euler_parameters_on_the_grid(tmp_path: Path, cache_dir: Path) -> None:
+    """Euler parameters between step ends are the interpolant's: |e| = 1 to
+    within the tolerance's scale; at the end, projected, as _integrate's."""
+    scene = parse(QUATERNION_SPINUP, "wheel_spinup_e")
+    generate(scene, tmp_path / scene.name)
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    try:
+        models = [build.build(tmp_path / scene.name, lang) for lang in ("c", "fortran")]
+    finally:
+        mp.undo()
+    x0 = np.array(scene.initial_state())
+    c = models[0].setup(np.array([scene.simulate.parameters[n] for n in scene.runtime]))
+    times = np.linspace(0.0, 5.0, 41)
+    for method in ADAPTIVE:
+        (states, _, code), (fortran, _, _) = (
+            m.integrate_grid(method, x0, c, times, rtol=1e-9, atol=1e-9) for m in models
+        )
+        end, _, _ = models[0].integrate(method, x0, c, 0.0, 5.0, rtol=1e-9, atol=1e-9)
+        assert code == 0 and np.array_equal(states, fortran), method
+        assert np.array_equal(states[-1], end), method
+        assert np.max(np.abs(np.linalg.norm(states[:, :4], axis=1) - 1.0)) < 1e-6, method

@@ -722,7 +722,8 @@ class Compiled:
         whose steps are not cut at the grid times, each state between the
         ends read from the method's dense output (dopri5: order 4, dop853:
         7, rodas4: 3, radau5: its collocation polynomial, taylor: its
-        series). The last state equals `integrate`'s from times[0] to
+        series; Euler parameters as interpolated, |e| = 1 within the
+        interpolation's error). The last state equals `integrate`'s from times[0] to
         times[-1] bit for bit, and so do the step statistics but for the
         explicit pairs' and Taylor's rhs_calls (the interpolant's stages).
 
