@@ -197,6 +197,7 @@ TEMPLATE_FUNCTIONS = {
     ("c/ode.c.jinja", "P_m_name"): "a public integrator: stats NULL, then its printed _integrate",
     ("c/ode.c.jinja", "P_name_batch"): HAND_OFF,
     ("c/ode.c.jinja", "P_m_name_grid"): "a public output grid: stats NULL, then its printed _grid",
+    ("c/ode.c.jinja", "P_m_name_events"): "a public grid with events: stats NULL, then _events",
     ("c/ode.c.jinja", "P_m_name_grid_batch"): HAND_OFF,
     ("c/lanes.jinja", "lane_start"): HAND_OFF,
     ("c/lanes.jinja", "lanes_finish"): HAND_OFF,
@@ -212,6 +213,7 @@ TEMPLATE_FUNCTIONS = {
     ("fortran/ode.f90.jinja", "P_m_name"): "a public integrator: stats by pointer, then _integrate",
     ("fortran/ode.f90.jinja", "P_name_batch"): HAND_OFF,
     ("fortran/ode.f90.jinja", "P_m_name_grid"): "a public output grid: stats by pointer; _grid",
+    ("fortran/ode.f90.jinja", "P_m_name_events"): "a public grid with events: stats by pointer",
     ("fortran/ode.f90.jinja", "P_m_name_grid_batch"): HAND_OFF,
 }
 """The functions on doubles the templates may define, and why; any other is

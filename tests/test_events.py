@@ -159,3 +159,127 @@ def test_the_grammar_never_evaluates_python() -> None:
     for text in ("().__class__", "[u for u in x]", "lambda: 1", "open('f')", "u4[0]", "'a'"):
         with pytest.raises(ValueError):
             parse_expr(text)
+
+
+LOCATED = """
+[[events]]
+name = "third"
+expr = "sin(3*t)"
+
+[[events]]
+name = "rising"
+expr = "sin(3*t)"
+direction = "up"
+
+[[events]]
+name = "spun"
+expr = "q3 - 5"
+direction = "up"
+terminal = true
+"""
+ADAPTIVE = ("dopri5", "dop853", "rodas4", "radau5", "taylor")
+
+
+@pytest.fixture(scope="module")
+def located(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Compiled], Scene]:
+    """dual_spin (spinning at 0.05 rad/s about a2, nutating) with events in
+    t alone, and a terminal one where the spin angle q3 reaches 5 rad."""
+    scene = _scene("dual_spin", LOCATED)
+    out = tmp_path_factory.mktemp("located")
+    generate(scene, out)
+    return [build.build(out, lang) for lang in ("c", "fortran")], scene
+
+
+@pytest.mark.parametrize("method", ADAPTIVE)
+def test_crossings_are_located_to_a_few_ulps(
+    located: tuple[list[Compiled], Scene], method: str
+) -> None:
+    """sin(3 t) crosses 0 at k pi/3: every crossing within 4 ulps of its
+    time, in time order; "up" only every other one; C = Fortran bit for bit."""
+    (c_build, f_build), scene = located
+    x0, c = np.array(scene.initial_state()), c_build.setup([])
+    times = np.linspace(0.0, 4.0, 9)
+    states, log, _, code = c_build.integrate_events(method, x0, c, times, rtol=1e-10, atol=1e-10)
+    assert code == 0, code
+    third = log.times[np.array(log.names) == "third"]
+    k = np.arange(1, 4)  # pi/3, 2 pi/3, pi within (0, 4]
+    assert np.all(np.abs(third - k * np.pi / 3) <= 4 * np.spacing(k * np.pi / 3)), third
+    rising = log.times[np.array(log.names) == "rising"]
+    assert np.all(np.abs(rising - 2 * np.pi / 3) <= 4 * np.spacing(2.0)), rising
+    assert list(log.times) == sorted(log.times)
+    plain, *_ = c_build.integrate_grid(method, x0, c, times, rtol=1e-10, atol=1e-10)
+    assert np.array_equal(states, plain)  # the events leave the trajectory as it was
+    f_states, f_log, _, f_code = f_build.integrate_events(method, x0, c, times, rtol=1e-10,
+                                                          atol=1e-10)  # fmt: skip
+    assert f_code == code and np.array_equal(f_log.times, log.times)
+    assert np.array_equal(f_log.states, log.states) and np.array_equal(f_states, states)
+
+
+@pytest.mark.parametrize("method", ADAPTIVE)
+def test_a_terminal_event_stops_the_run_there(
+    located: tuple[list[Compiled], Scene], method: str
+) -> None:
+    """q3 reaches 5 rad near t = 100 s: the event's time agrees with a
+    bisection of plain runs, the state there is the log's, and the grid's
+    rows past it stay NaN (code 8)."""
+    (c_build, _), scene = located
+    x0, c = np.array(scene.initial_state()), c_build.setup([])
+    times = np.linspace(0.0, 200.0, 201)
+    states, log, stats, code = c_build.integrate_events(method, x0, c, times, rtol=1e-11,
+                                                         atol=1e-11)  # fmt: skip
+    assert code == 8 and log.names[-1] == "spun"
+    t_event = log.times[-1]
+    assert stats["t"] == t_event and 90.0 < t_event < 110.0
+    assert np.all(np.isnan(states[times > t_event])) and not np.isnan(states[times < t_event]).any()
+    assert abs(log.states[-1, 2] - 5.0) < 1e-12
+    lo, hi = 90.0, 110.0  # the crossing by bisection on plain runs from 0
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        x, _, _ = c_build.integrate(method, x0, c, 0.0, mid, rtol=1e-12, atol=1e-12)
+        lo, hi = (mid, hi) if x[2] < 5.0 else (lo, mid)
+    assert abs(t_event - hi) < 1e-8 * hi
+
+
+def test_a_full_log_stops_with_its_code(located: tuple[list[Compiled], Scene]) -> None:
+    (c_build, _), scene = located
+    x0, c = np.array(scene.initial_state()), c_build.setup([])
+    times = np.linspace(0.0, 10.0, 11)
+    states, log, stats, code = c_build.integrate_events("dop853", x0, c, times, capacity=2)
+    assert code == 9 and len(log) == 2
+    assert stats["t"] == pytest.approx(2 * np.pi / 3, rel=1e-12)  # the third crossing's time
+    assert np.all(np.isnan(states[times > stats["t"]]))
+    _, none, _, code = c_build.integrate_events("dop853", x0, c, times, capacity=0)
+    assert code == 9 and len(none) == 0
+
+
+def test_zero_at_the_start_and_nan_never_fire(tmp_path: Path) -> None:
+    """g = t is 0 at t0 (not a crossing) and positive after; g NaN everywhere
+    never crosses: the runs end with code 0 and empty logs."""
+    extra = """
+[[events]]
+name = "start"
+expr = "t"
+
+[[events]]
+name = "never"
+expr = "sqrt(u1 - 1000)"
+"""
+    scene = _scene("dual_spin", extra)
+    generate(scene, tmp_path)
+    c_build = build.build(tmp_path, "c")
+    x0, c = np.array(scene.initial_state()), c_build.setup([])
+    _, log, _, code = c_build.integrate_events("taylor", x0, c, np.linspace(0.0, 5.0, 6))
+    assert code == 0 and len(log) == 0
+
+
+def test_integrate_events_refuses_what_it_cannot_do(
+    located: tuple[list[Compiled], Scene],
+) -> None:
+    (c_build, scene) = located[0][0], located[1]
+    x0, c = np.array(scene.initial_state()), c_build.setup([])
+    with pytest.raises(ValueError, match="capacity must be an integer from 0 to 10"):
+        c_build.integrate_events("dop853", x0, c, [0.0, 1.0], capacity=-1)
+    with pytest.raises(ValueError, match="fixed-step"):
+        c_build.integrate_events("rk4", x0, c, [0.0, 1.0])
+    with pytest.raises(ValueError):
+        c_build.integrate_events("dop853", x0, c, [1.0, 0.0])

@@ -233,6 +233,7 @@ def signatures() -> str:
         "adaptive_batch": "<prefix>_<method>_batch",
         "grid": "<prefix>_<method>_grid",
         "grid_batch": "<prefix>_<method>_grid_batch",
+        "grid_events": "<prefix>_<method>_events",
     }
     out = []
     for key, sig in SIGNATURES.items():

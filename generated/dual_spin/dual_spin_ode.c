@@ -260,6 +260,10 @@ const char *dual_spin_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case DUAL_SPIN_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case DUAL_SPIN_ODE_EVENT:
+        return "stopped by a terminal event";
+    case DUAL_SPIN_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

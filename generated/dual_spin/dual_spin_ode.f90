@@ -73,6 +73,8 @@ module dual_spin_ode_mod
   ! 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
   ! strictly increasing (unsorted or repeated); nothing is integrated or written
   integer(c_int), parameter, public :: DUAL_SPIN_ODE_ERR_GRID = 7
+  integer(c_int), parameter, public :: DUAL_SPIN_ODE_EVENT = 8
+  integer(c_int), parameter, public :: DUAL_SPIN_ODE_ERR_EVENT_LOG_FULL = 9
 
   ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
   ! double arithmetic meets it and the steps would shrink until max_steps ran out.
@@ -108,6 +110,10 @@ contains
       msg = "the 3-1-2 attitude reached gimbal lock: use attitude = ""quaternion"""
     case (DUAL_SPIN_ODE_ERR_GRID)
       msg = "bad output grid (times: at least one, finite, strictly increasing)"
+    case (DUAL_SPIN_ODE_EVENT)
+      msg = "stopped by a terminal event"
+    case (DUAL_SPIN_ODE_ERR_EVENT_LOG_FULL)
+      msg = "the event log is full"
     case default
       msg = "unknown return code"
     end select

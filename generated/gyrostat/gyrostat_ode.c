@@ -260,6 +260,10 @@ const char *gyrostat_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case GYROSTAT_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case GYROSTAT_ODE_EVENT:
+        return "stopped by a terminal event";
+    case GYROSTAT_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

@@ -71,6 +71,8 @@ module rw4_hardware_ode_mod
   ! 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
   ! strictly increasing (unsorted or repeated); nothing is integrated or written
   integer(c_int), parameter, public :: RW4_HARDWARE_ODE_ERR_GRID = 7
+  integer(c_int), parameter, public :: RW4_HARDWARE_ODE_EVENT = 8
+  integer(c_int), parameter, public :: RW4_HARDWARE_ODE_ERR_EVENT_LOG_FULL = 9
 
   ! rtol must exceed 10 epsilon(1.0_c_double) (Hairer's rule): tighter, no
   ! double arithmetic meets it and the steps would shrink until max_steps ran out.
@@ -106,6 +108,10 @@ contains
       msg = "the 3-1-2 attitude reached gimbal lock: use attitude = ""quaternion"""
     case (RW4_HARDWARE_ODE_ERR_GRID)
       msg = "bad output grid (times: at least one, finite, strictly increasing)"
+    case (RW4_HARDWARE_ODE_EVENT)
+      msg = "stopped by a terminal event"
+    case (RW4_HARDWARE_ODE_ERR_EVENT_LOG_FULL)
+      msg = "the event log is full"
     case default
       msg = "unknown return code"
     end select

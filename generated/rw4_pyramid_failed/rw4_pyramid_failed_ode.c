@@ -225,6 +225,10 @@ const char *rw4_pyramid_failed_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case RW4_PYRAMID_FAILED_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case RW4_PYRAMID_FAILED_ODE_EVENT:
+        return "stopped by a terminal event";
+    case RW4_PYRAMID_FAILED_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

@@ -263,6 +263,10 @@ const char *speed_controlled_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case SPEED_CONTROLLED_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case SPEED_CONTROLLED_ODE_EVENT:
+        return "stopped by a terminal event";
+    case SPEED_CONTROLLED_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

@@ -223,6 +223,10 @@ const char *stiff_wheel_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case STIFF_WHEEL_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case STIFF_WHEEL_ODE_EVENT:
+        return "stopped by a terminal event";
+    case STIFF_WHEEL_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

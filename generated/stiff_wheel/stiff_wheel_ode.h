@@ -90,6 +90,8 @@ typedef struct {
 /* 7: a _grid call's times: none (ntimes < 1), or one NaN or infinite, or not
    strictly increasing (unsorted or repeated); nothing is integrated or written */
 #define STIFF_WHEEL_ODE_ERR_GRID           7
+#define STIFF_WHEEL_ODE_EVENT              8  /* an _events call: x and stats.t are the state and time of the event, the log's last */
+#define STIFF_WHEEL_ODE_ERR_EVENT_LOG_FULL 9  /* an _events call: capacity events logged; x and stats.t are at the next one */
 
 /* The one line an integrator's return code means ("unknown return code" for
    another): a string literal, not to be freed or changed. */

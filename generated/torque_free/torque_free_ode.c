@@ -260,6 +260,10 @@ const char *torque_free_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case TORQUE_FREE_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case TORQUE_FREE_ODE_EVENT:
+        return "stopped by a terminal event";
+    case TORQUE_FREE_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

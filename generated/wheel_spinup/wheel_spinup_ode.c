@@ -260,6 +260,10 @@ const char *wheel_spinup_ode_strerror(int code)
         return "the 3-1-2 attitude reached gimbal lock: use attitude = \"quaternion\"";
     case WHEEL_SPINUP_ODE_ERR_GRID:
         return "bad output grid (times: at least one, finite, strictly increasing)";
+    case WHEEL_SPINUP_ODE_EVENT:
+        return "stopped by a terminal event";
+    case WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL:
+        return "the event log is full";
     default:
         return "unknown return code";
     }

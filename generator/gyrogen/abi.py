@@ -194,6 +194,10 @@ ODE_CODES: tuple[Code, ...] = (
             "strictly increasing (unsorted or repeated); nothing is integrated or written",
         ),
     ),
+    Code(8, "ODE_EVENT", "stopped by a terminal event",
+         doc="an _events call: x and stats.t are the state and time of the event, the log's last"),
+    Code(9, "ODE_ERR_EVENT_LOG_FULL", "the event log is full",
+         doc="an _events call: capacity events logged; x and stats.t are at the next one"),
 )  # fmt: skip
 """Return codes of the compiled integrators (<PREFIX>_ODE_* in <prefix>_ode.h);
 on failure x holds the last good state."""
@@ -306,6 +310,13 @@ SIGNATURES: dict[str, Signature] = {
         _args("size_t n", "long ntimes", "const double *times:ntimes", "double *x:n*nx",
               "const double *c:nc", *_TOLERANCES, "double *out:n*ntimes*nx",
               "{prefix}_stats *stats:n", "int *codes:n"),
+    ),
+    "grid_events": Signature(
+        "int",
+        _args("long ntimes", "const double *times:ntimes", "double *x:nx", "const double *c:nc",
+              *_TOLERANCES, "double *out:ntimes*nx", "long capacity",
+              "double *log_t:capacity", "int *log_k:capacity", "double *log_x:capacity*nx",
+              "long *nlog:1", "{prefix}_stats *stats:1"),
     ),
 }  # fmt: skip
 """setup, rhs, each output function (energy, momentum, power), the Jacobian,

@@ -19,6 +19,7 @@ from gyrogen.abi import (
     unit_and_doc,
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
+from gyrogen.codegen.integrators.driver import Event, Grid
 from gyrogen.codegen.integrators.taylor import state_scales
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
@@ -164,6 +165,14 @@ class SceneContext:
         return None if b is None else Output("events", b, "", f"the events' g(t, x): {names}")
 
     @property
+    def event_grid(self) -> Grid | None:
+        """The events as the integrators' _events twins take them, or None."""
+        if not self.scene.events or self.events is None:
+            return None
+        way = {"up": 1, "down": -1, "any": 0}
+        return Grid(tuple(Event(way[e.direction], e.terminal) for e in self.scene.events))
+
+    @property
     def cluster(self) -> bool:
         """A reaction-wheel cluster (the scene's [[rotors]]), not the paper's one rotor."""
         return bool(self.scene.rotors)
@@ -306,6 +315,8 @@ class SceneContext:
             if not METHODS[m].fixed_step:  # the output grids
                 for g in (f"{m}_grid", f"{m}_grid_batch"):
                     c[g], f[g] = f"{p}_{g}", f"{p}_f_{g}"
+                if self.scene.events:  # the grid with the events located
+                    c[f"{m}_events"], f[f"{m}_events"] = f"{p}_{m}_events", f"{p}_f_{m}_events"
         if self.scene.integrators:
             c["ode_strerror"] = f"{p}_ode_strerror"
         return {"c": c, "fortran": f}

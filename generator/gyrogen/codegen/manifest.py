@@ -98,11 +98,13 @@ def _signature(unit: SceneContext, key: str, name: str) -> dict[str, Any]:
     for arg in sig.args:
         entry: dict[str, Any] = {"name": arg.name, "ctype": arg.ctype.format(prefix=unit.prefix)}
         if arg.length:
-            per = ("n", "ntimes")
+            per = ("n", "ntimes", "capacity")
             factors = [sizes[f] if f in sizes else int(f) for f in arg.length if f not in per]
             entry.update(count=math.prod(factors), per_state="n" in arg.length)
             if "ntimes" in arg.length:
                 entry.update(per_time=True)
+            if "capacity" in arg.length:
+                entry.update(per_event=True)
         args.append(entry)
     return {"c": sig.c(name, unit.prefix), "returns": sig.returns, "args": args}
 

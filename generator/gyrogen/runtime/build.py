@@ -101,7 +101,7 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
     per_call = ["rhs", *manifest["outputs"], *(["events"] if manifest.get("events") else [])]
     if "jac" in names:
         per_call.append("jac")
-    grids = ("_grid", "_grid_batch")
+    grids = ("_grid", "_grid_batch", "_events")
     integrators = [
         n
         for m in manifest["integrators"]

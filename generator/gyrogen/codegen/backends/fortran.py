@@ -54,7 +54,14 @@ def files(unit: SceneContext) -> dict[str, str]:
         "jac": None if jac is None else printer.function(jac),
         "methods": unit.methods,
         "ir": fortran_text(
-            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks, unit.jet),
+            program(
+                unit.methods,
+                unit.quaternion,
+                unit.uses_time,
+                unit.lu_blocks,
+                unit.jet,
+                unit.event_grid,
+            ),
             unit.prefix,
             unit.macro,
             [jac] if jac else [],

@@ -34,6 +34,7 @@ from gyrogen import abi
 from gyrogen import methods as registry
 from gyrogen.codegen.integrators.common import NX, STATS, TOLERANCES, code, x, xnew
 from gyrogen.codegen.ir.nodes import (
+    At,
     Bool,
     Break,
     Call,
@@ -57,6 +58,7 @@ from gyrogen.codegen.ir.nodes import (
     fn,
     inc,
     not_,
+    or_,
     real,
     sel,
 )
@@ -109,7 +111,7 @@ def count(field: str, by: E | int) -> S:
     return inc(stat(field), by)
 
 
-def started(m: Method, f0: E, into: Var, grid: bool = False) -> list[S]:
+def started(m: Method, f0: E, into: Var, grid: bool | Grid = False) -> list[S]:
     """ode_start (common.ode_start): into := its code, returned when it stops.
     grid: first the grid's checks and ends (t0, t1), and then out[0] := x
     (the start as ode_start leaves it: Euler parameters normalized) unless
@@ -119,8 +121,11 @@ def started(m: Method, f0: E, into: Var, grid: bool = False) -> list[S]:
     if not grid:
         return [assign(into, fn("ode_start", *args)), stopped(into)]
     first: list[S] = [For("i", NX, (assign(OUT[Int(0), i], x[i]),)), assign(G, 1)]
+    if isinstance(grid, Grid) and grid.events:  # g at the start: a crossing's first side
+        first += [Call("events", (t0, x, c, EV_OLD))]
     return [
         *grid_start(),
+        *([assign(NLOG, 0)] if isinstance(grid, Grid) and grid.events else []),
         assign(into, fn("ode_start", *args)),
         If(
             cmp(into, "<=", OK),
@@ -137,10 +142,12 @@ G, OUT, TIMES, NTIMES = Var("g"), Var("out"), Var("times"), Var("ntimes")
 i = Var("i")
 
 
-def grid_locals(body: object) -> tuple[Decl, ...]:
-    """The GRID_LOCALS body reads (an unused local is an error under -Werror)."""
+def grid_locals(body: object, grid: bool | Grid = True) -> tuple[Decl, ...]:
+    """The GRID_LOCALS body reads (an unused local is an error under -Werror),
+    and with events theirs (event_locals)."""
     text = repr(body)
-    return tuple(d for d in GRID_LOCALS if f"Var(name='{d.name}')" in text)
+    used = tuple(d for d in GRID_LOCALS if f"Var(name='{d.name}')" in text)
+    return (*used, *event_locals(grid))
 
 
 def rows(name: str, count: int) -> Decl:
@@ -179,21 +186,26 @@ def grid_start() -> list[S]:
 class Interpolant:
     """A method's dense output on an accepted step: coefficients, the
     statements that set its coefficients from the step (before x moves;
-    computed by the grid alone), and points(theta): the statements that
-    write out[g] at origin + theta step (by_state: one value per state).
+    computed by the grid alone), and points(theta, at): the statements that
+    set at(i) (out[g][i], a state of the events' search) to state i at
+    origin + theta step (by_state: one value per state).
     origin is the step's start unless at_end (radau5's collocation
     polynomial, which Hairer writes from the step's end); unscaled: theta
     is the time from origin (the Taylor series), else over the step."""
 
     coefficients: tuple[S, ...]
-    points: Callable[[E], list[S]]
+    points: Points
     at_end: bool = False
     scaled: bool = True
 
 
-def by_state(value: Callable[[E, E], E]) -> Callable[[E], list[S]]:
-    """out[g][i] := value(theta, i) for every state i."""
-    return lambda theta: [For("i", NX, (assign(OUT[G, i], value(theta, i)),))]
+Points = Callable[[E, Callable[[E], At]], list[S]]
+"""points(theta, at): the statements that set at(i) to state i at theta."""
+
+
+def by_state(value: Callable[[E, E], E]) -> Points:
+    """at(i) := value(theta, i) for every state i."""
+    return lambda theta, at: [For("i", NX, (assign(at(i), value(theta, i)),))]
 
 
 def grid_step(start: E, step: E | None) -> list[S]:
@@ -203,19 +215,229 @@ def grid_step(start: E, step: E | None) -> list[S]:
     return [assign(Var("told"), start), *([] if step is None else [assign(Var("hs"), step)])]
 
 
-def inside(dense: Interpolant, end: E, start: E, step: E) -> list[S]:
+def inside(
+    dense: Interpolant, end: E, start: E, step: E, grid: bool | Grid = True, counted: bool = False
+) -> list[S]:
     """An accepted step's grid times before its end: out[g] := the
-    interpolant there, g moved on; the coefficients first."""
+    interpolant there, g moved on; the coefficients first. With events
+    (grid a Grid with events): first the step's crossings, located and
+    logged in time order (events_in_step), and the grid only up to a stop
+    there (counted: the step is in the statistics already, t its end)."""
     theta = Var("frac")
     origin = end if dense.at_end else start
-    return [
-        *dense.coefficients,
+
+    def at(time: E) -> E:
+        return (time - origin) / step if dense.scaled else time - origin
+
+    events = isinstance(grid, Grid) and bool(grid.events)
+    until = EV_STOP if events else end
+    out: list[S] = [*dense.coefficients]
+    if events:
+        assert isinstance(grid, Grid)
+        out += events_in_step(grid, dense, at, start, end)
+    out.append(
         Loop((
             If(not_(cmp(G, "<", NTIMES)), (Break(),)),
-            If(not_(cmp(TIMES[G], "<", end)), (Break(),)),
-            assign(theta, (TIMES[G] - origin) / step if dense.scaled else TIMES[G] - origin),
-            *dense.points(theta),
+            If(not_(cmp(TIMES[G], "<", until)), (Break(),)),
+            assign(theta, at(TIMES[G])),
+            *dense.points(theta, lambda i: OUT[G, i]),
             inc(G, 1),
+        ))
+    )  # fmt: skip
+    if events:
+        assert isinstance(grid, Grid)
+        out += events_stop(dense, at, counted)
+    return out
+
+
+# Events
+
+
+@dataclass(frozen=True)
+class Event:
+    """An event as the integrators see it: which crossings count (1: g
+    rising through 0, -1: falling, 0: either) and whether it stops the run."""
+
+    direction: int
+    terminal: bool
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A method's output grid (its _grid twin); with events, the _events
+    twin, which also locates the scene's events on the interpolant."""
+
+    events: tuple[Event, ...] = ()
+
+
+EV_OLD, EV_NEW, EV_G, EV_T, EV_Y = (Var(n) for n in ("ev_old", "ev_new", "ev_g", "ev_t", "ev_y"))
+EV_A, EV_B, EV_GA, EV_GB, EV_M, EV_GM = (Var(f"ev_{n}") for n in ("a", "b", "ga", "gb", "m", "gm"))
+EV_SIDE, EV_BEST, EV_STOP, EV_HALT, EV_IT = (
+    Var(f"ev_{n}") for n in ("side", "best", "stop", "halt", "it")
+)
+NLOG, CAPACITY = Var("nlog"), Var("capacity")
+EV_ITERATIONS = 200
+"""A crossing's search stops after this many evaluations, or sooner where
+no double lies between its bracket's ends."""
+EVENT, ERR_EVENT_LOG_FULL = code("EVENT"), code("ERR_EVENT_LOG_FULL")
+
+
+def variant(grid: bool | Grid) -> str:
+    """The twin's name: grid, or events."""
+    return "events" if isinstance(grid, Grid) and grid.events else "grid"
+
+
+def grid_params(grid: bool | Grid) -> tuple[Decl, ...]:
+    """GRID_PARAMS; with events, the log before the statistics: capacity
+    entries of log_t (the time), log_k (the event, from 0) and log_x (the
+    state), nlog of them written."""
+    if not (isinstance(grid, Grid) and grid.events):
+        return GRID_PARAMS
+    log = (Decl("capacity", "long"), Decl("log_t", "double", ("capacity",), "out"),
+           Decl("log_k", "int", ("capacity",), "out"),
+           Decl("log_x", "double", ("capacity", "NX"), "out"),
+           Decl("nlog", "long", (), "out"))  # fmt: skip
+    return (*GRID_PARAMS[:-1], *log, GRID_PARAMS[-1])
+
+
+def event_locals(grid: bool | Grid) -> tuple[Decl, ...]:
+    """What an _events twin adds to its locals: the events' tables (their
+    directions and terminal flags), g at the step's two ends, the crossings'
+    times, a state on the interpolant, the search's bracket."""
+    if not (isinstance(grid, Grid) and grid.events):
+        return ()
+    ne = len(grid.events)
+    return (
+        Decl("ev_dir", "int", (ne,), values=tuple(e.direction for e in grid.events)),
+        Decl("ev_term", "int", (ne,), values=tuple(int(e.terminal) for e in grid.events)),
+        *(Decl(f"ev_{n}", "double", (ne,), "inout") for n in ("old", "new", "end", "g", "t")),
+        Decl("ev_y", "double", ("NX",), "inout"),
+        *(real(f"ev_{n}", "inout") for n in ("a", "b", "ga", "gb", "m", "gm", "stop", "ta", "tb")),
+        *(Decl(f"ev_{n}", "int", (), "inout") for n in ("side", "best", "halt", "it", "j")),
+    )
+
+
+def _state_at(dense: Interpolant, at: Callable[[E], E], time: E) -> list[S]:
+    """ev_y := the interpolant at time."""
+    return dense.points(at(time), lambda i: EV_Y[i])
+
+
+def _g_at(dense: Interpolant, at: Callable[[E], E], time: E) -> list[S]:
+    """ev_g := every event's g at time, on the interpolant."""
+    return [*_state_at(dense, at, time), Call("events", (time, EV_Y, c, EV_G))]
+
+
+def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) -> list[S]:
+    """ev_t[k] := where event k's g crosses 0 within [start, end]: the
+    Illinois method (regula falsi that halves the side it keeps), a
+    bisection where its point leaves the bracket, until the bracket holds no
+    double between its ends or ev_iterations evaluations; the crossing is
+    the bracket's right end, the first time g is on its new side (or 0)."""
+    inner = and_(cmp(EV_M, ">", EV_A), cmp(EV_M, "<", EV_B))
+    pos_m, pos_a = cmp(EV_GM, ">", 0.0), cmp(EV_GA, ">", 0.0)
+    same = or_(and_(pos_m, pos_a), and_(not_(pos_m), not_(pos_a)))
+    return [
+        assign(EV_A, start), assign(EV_B, end), assign(EV_GA, EV_OLD[k]),
+        assign(EV_GB, EV_NEW[k]), assign(EV_SIDE, 0), assign(EV_IT, 0),
+        Loop((
+            If(or_(cmp(fn("abs", EV_GB), "<=", 0.0), cmp(EV_IT, ">=", EV_ITERATIONS)), (Break(),)),
+            inc(EV_IT, 1),
+            assign(EV_M, EV_B - EV_GB * ((EV_B - EV_A) / (EV_GB - EV_GA))),
+            If(not_(inner), (assign(EV_M, EV_A + 0.5 * (EV_B - EV_A)),)),
+            If(not_(inner), (Break(),)),
+            *_g_at(dense, at, EV_M),
+            assign(EV_GM, EV_G[k]),
+            If(same, (
+                assign(EV_A, EV_M), assign(EV_GA, EV_GM),
+                If(cmp(EV_SIDE, "==", -1), (assign(EV_GB, 0.5 * EV_GB),)),
+                assign(EV_SIDE, -1),
+            ), (
+                assign(EV_B, EV_M), assign(EV_GB, EV_GM),
+                If(cmp(EV_SIDE, "==", 1), (assign(EV_GA, 0.5 * EV_GA),)),
+                assign(EV_SIDE, 1),
+            )),
+        )),
+        assign(EV_T[k], EV_B),
+    ]  # fmt: skip
+
+
+EV_SUBINTERVALS = 8
+"""Each accepted step is searched in this many equal pieces: a crossing is
+seen where g changes sign between two neighbouring points of the
+interpolant (DifferentialEquations.jl's ContinuousCallback looks at 10)."""
+
+
+def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: E,
+                   end: E) -> list[S]:  # fmt: skip
+    """g at the step's end (on xnew) and at the EV_SUBINTERVALS - 1 points
+    between (on the interpolant); in each piece, each event whose g changed
+    sign as its direction asks (from a g other than 0: a g of 0 at a piece's
+    end is that piece's crossing, never the next one's too), located; the
+    piece's crossings in time order into the log, up to the first terminal
+    one or a full log, where the step stops (ev_stop, ev_halt its code)."""
+    ne, k, j = Int(len(grid.events)), Var("ev_k"), Var("ev_j")
+    ta, tb, g_end = Var("ev_ta"), Var("ev_tb"), Var("ev_end")
+    up = and_(cmp(Var("ev_dir")[k], "!=", -1), cmp(EV_OLD[k], "<", 0.0),
+              cmp(EV_NEW[k], ">=", 0.0))  # fmt: skip
+    down = and_(cmp(Var("ev_dir")[k], "!=", 1), cmp(EV_OLD[k], ">", 0.0),
+                cmp(EV_NEW[k], "<=", 0.0))  # fmt: skip
+    best = EV_T[EV_BEST]
+    earlier = or_(cmp(EV_BEST, "<", 0), cmp(EV_T[k], "<", best))
+    log = [
+        *_state_at(dense, at, best),
+        assign(Var("log_t")[NLOG], best),
+        assign(Var("log_k")[NLOG], EV_BEST),
+        For("i", NX, (assign(Var("log_x")[NLOG, i], EV_Y[i]),)),
+        inc(NLOG, 1),
+    ]
+    point = start + (end - start) * (fn("real", j) / float(EV_SUBINTERVALS))
+    return [
+        Call("events", (end, xnew, c, g_end)),
+        assign(EV_STOP, end), assign(EV_HALT, -1), assign(ta, start), assign(j, 0),
+        Loop((
+            If(cmp(j, ">=", EV_SUBINTERVALS), (Break(),)),
+            inc(j, 1),
+            If(cmp(j, "<", EV_SUBINTERVALS), (
+                assign(tb, point), *_g_at(dense, at, tb),
+                For("ev_k", ne, (assign(EV_NEW[k], EV_G[k]),)),
+            ), (
+                assign(tb, end), For("ev_k", ne, (assign(EV_NEW[k], g_end[k]),)),
+            )),
+            For("ev_k", ne, (
+                assign(EV_T[k], Const("HUGE")),
+                If(or_(up, down), tuple(_search(dense, at, k, ta, tb))),
+            )),
+            Loop((
+                assign(EV_BEST, -1),
+                For("ev_k", ne, (
+                    If(and_(cmp(EV_T[k], "<", Const("HUGE")), earlier), (assign(EV_BEST, k),)),)),
+                If(cmp(EV_BEST, "<", 0), (Break(),)),
+                If(cmp(NLOG, ">=", CAPACITY), (
+                    assign(EV_STOP, best), assign(EV_HALT, ERR_EVENT_LOG_FULL), Break())),
+                *log,
+                If(cmp(Var("ev_term")[EV_BEST], "!=", 0), (
+                    assign(EV_STOP, best), assign(EV_HALT, EVENT), Break())),
+                assign(best, Const("HUGE")),
+            )),
+            If(cmp(EV_HALT, ">=", 0), (Break(),)),
+            For("ev_k", ne, (assign(EV_OLD[k], EV_NEW[k]),)),
+            assign(ta, tb),
+        )),
+    ]  # fmt: skip
+
+
+def events_stop(dense: Interpolant, at: Callable[[E], E], counted: bool) -> list[S]:
+    """A step that stops at an event (or a full log): x := the state there
+    (on the interpolant), t and the statistics, the grid time there, the
+    code."""
+    there: list[S] = [For("i", NX, (assign(OUT[G, i], x[i]),)), inc(G, 1)]
+    return [
+        If(cmp(EV_HALT, ">=", 0), (
+            *_state_at(dense, at, EV_STOP),
+            For("i", NX, (assign(x[i], EV_Y[i]),)),
+            assign(t, EV_STOP), assign(stat("t"), t), *([] if counted else [count("accepted", 1)]),
+            If(cmp(G, "<", NTIMES), (If(cmp(TIMES[G], "<=", t), tuple(there)),)),
+            Return(EV_HALT),
         )),
     ]  # fmt: skip
 
@@ -315,6 +537,7 @@ def accepted(
     control: list[S],
     interpolant: list[S],
     dense: Interpolant | None = None,
+    grid: bool | Grid = True,
 ) -> list[S]:
     """An accepted step: attitude_stop; then control (the next h),
     interpolant (what the method keeps of the step before x moves: radau5's
@@ -322,12 +545,12 @@ def accepted(
     rest), with dense (the grid): the grid times inside the step from its
     interpolant; x := xnew, t, counted, the grid time at the step's end, and
     OK after the last step."""
-    grid = inside(dense, sel(last, t1, t + h), t, h) if dense is not None else []
+    passed = inside(dense, sel(last, t1, t + h), t, h, grid) if dense is not None else []
     return [
         *attitude_stop(quaternion),
         *control,
         *interpolant,
-        *grid,
+        *passed,
         Call("accept_step", (x, xnew, Var("dx"), Var("comp"))),
         assign(t, sel(last, t1, t + h)),
         assign(stat("t"), t),

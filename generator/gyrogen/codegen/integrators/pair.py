@@ -103,7 +103,7 @@ def grid_krows(m: Method, krows: int) -> int:
     return max(krows, m.fnew + 1 + len(tab.dense.nodes))
 
 
-def parts(m: Method, quaternion: bool, grid: bool = False) -> tuple[list[S], list[S]]:
+def parts(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> tuple[list[S], list[S]]:
     """One step of pair m on one trajectory, as the five parts: begin, and
     the other four. grid: the output grid's too (grid_step, f at the last
     step's end, and the grid times an accepted step passes)."""
@@ -153,7 +153,9 @@ def parts(m: Method, quaternion: bool, grid: bool = False) -> tuple[list[S], lis
         pi.next_h(or_(not_(run), and_(take, lock)), nonfinite, ok),
     ]
     first: list[S] = [For("i", NX, (assign(k[0, i], k[m.fnew, i]),))]
-    inside = driver.inside(interpolant(m), t, Var("told"), Var("hs")) if grid else []
+    inside = (
+        driver.inside(interpolant(m), t, Var("told"), Var("hs"), grid, counted=True) if grid else []
+    )
     accept: list[S] = [
         Comment("accept: x := xnew; f(t + h, xnew) is the next step's first stage"),
         If(ok, (*inside, *accepted(quaternion, known=True), *first,
@@ -188,7 +190,7 @@ def start_state() -> list[S]:
     return [*common.start_state(), *driver.PI.start()]
 
 
-def integrate(m: Method, quaternion: bool, krows: int, grid: bool = False) -> Func:
+def integrate(m: Method, quaternion: bool, krows: int, grid: bool | driver.Grid = False) -> Func:
     """m.name_integrate: pair m from t0 to t1 on one trajectory; with grid,
     m.name_grid: over the output grid."""
     begin, rest = parts(m, quaternion, grid)
@@ -199,7 +201,7 @@ def integrate(m: Method, quaternion: bool, krows: int, grid: bool = False) -> Fu
     rows = grid_krows(m, krows) if grid else krows
     locals_ = (*state_arrays(rows)[1:], *(declare(n) for n in STATE), *used_locals(begin + rest))
     if grid:
-        locals_ += (driver.rows("dense", dense_rows(m)), *driver.grid_locals(body))
+        locals_ += (driver.rows("dense", dense_rows(m)), *driver.grid_locals(body, grid))
     doc = (
         f"{m.name} to t1, with Hairer's step-size strategy: the last step clipped",
         "to end on t1, no growth right after a rejection, and a non-finite trial",
@@ -208,7 +210,8 @@ def integrate(m: Method, quaternion: bool, krows: int, grid: bool = False) -> Fu
     )
     if grid:
         doc = (*doc, *driver.GRID_DOC)
-        return Func(f"{m.name}_grid", driver.GRID_PARAMS, tuple(body), "int", locals_, doc)
+        name, params = f"{m.name}_{driver.variant(grid)}", driver.grid_params(grid)
+        return Func(name, params, tuple(body), "int", locals_, doc)
     return Func(f"{m.name}_integrate", driver.PARAMS, tuple(body), "int", locals_, doc)
 
 

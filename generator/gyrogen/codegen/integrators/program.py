@@ -44,6 +44,8 @@ class Given:
     krows: int
     """The stage rows the pairs' k holds (the most any pair needs)."""
     jet: Jet | None
+    events: driver.Grid | None = None
+    """The scene's events: each adaptive method's _events twin besides."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,11 @@ def _fixed(m: Method, g: Given) -> Parts:
 def _pair(m: Method, g: Given) -> Parts:
     common_start = common.start_state()
     return Parts(
-        [pair.integrate(m, g.quaternion, g.krows), pair.integrate(m, g.quaternion, g.krows, True)],
+        [
+            pair.integrate(m, g.quaternion, g.krows),
+            pair.integrate(m, g.quaternion, g.krows, True),
+            *([pair.integrate(m, g.quaternion, g.krows, g.events)] if g.events else []),
+        ],
         [pair.lanes_step(m, g.quaternion)],
         init=[s for s in pair.start_state() if s not in common_start],
     )
@@ -78,6 +84,7 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
             rosenbrock.trial(m, g.uses_time, grid=True),
             rosenbrock.integrate(m, g.quaternion, g.uses_time),
             rosenbrock.integrate(m, g.quaternion, g.uses_time, grid=True),
+            *([rosenbrock.integrate(m, g.quaternion, g.uses_time, g.events)] if g.events else []),
         ]
     )
 
@@ -90,6 +97,7 @@ def _radau(m: Method, g: Given) -> Parts:
             radau.error(m),
             radau_step.integrate(m, g.quaternion),
             radau_step.integrate(m, g.quaternion, grid=True),
+            *([radau_step.integrate(m, g.quaternion, g.events)] if g.events else []),
         ]
     )
 
@@ -98,7 +106,7 @@ def _taylor(m: Method, g: Given) -> Parts:
     assert g.jet is not None, "a Taylor method needs the scene's jet"
     common_start = common.start_state()
     return Parts(
-        taylor.functions(m, g.jet, g.quaternion),
+        taylor.functions(m, g.jet, g.quaternion, g.events),
         [taylor_jet.jet_lanes(m, g.jet), taylor.lanes_step(m, g.jet, g.quaternion)],
         taylor.lane_state(m, g.jet),
         [s for s in taylor.start_state() if s not in common_start],
@@ -133,9 +141,10 @@ def program(
     uses_time: bool = False,
     blocks: Blocks | None = None,
     jet: Jet | None = None,
+    events: driver.Grid | None = None,
 ) -> Program:
     pairs = [m for m in methods if m.pair]
-    given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet)
+    given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet, events)
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
     single = [f for p in parts for f in p.single]
     lanes = [f for p in parts for f in p.lanes]

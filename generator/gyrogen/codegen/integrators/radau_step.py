@@ -66,7 +66,7 @@ def collocation(R: Radau) -> driver.Interpolant:
     return driver.Interpolant((), driver.by_state(value), at_end=True)
 
 
-def integrate(m: Method, quaternion: bool, grid: bool = False) -> Func:
+def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> Func:
     """m.name_integrate, or with grid m.name_grid (the states at the grid's
     times, from the collocation polynomial)."""
     R, ctl = m.tableau, m.control
@@ -188,7 +188,7 @@ def integrate(m: Method, quaternion: bool, grid: bool = False) -> Func:
     predictive = control.predictive(quot, err, then=(assign(h_new, h / quot),))
     accept: list[S] = [
         *driver.accepted(quaternion, last, [assign(v["first"], False), *predictive], interpolant,
-                         collocation(R) if grid else None),
+                         collocation(R) if grid else None, grid),
         each(assign(v["f0"][i], v["fnew"][i]),
              assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * fn("abs", x[i]))),
         assign(v["fresh_jac"], False),
@@ -257,7 +257,7 @@ def integrate(m: Method, quaternion: bool, grid: bool = False) -> Func:
         pivots("piv1", "inout"), pivots("piv2", "inout"),
         *(scalar(n, "inout") for n in doubles), *(Decl(n, "bool") for n in bools),
         *(Decl(n, "int") for n in ("newt", "outcome", "singular", "start")),
-        *(driver.grid_locals(body) if grid else ()),
+        *(driver.grid_locals(body, grid) if grid else ()),
     )  # fmt: skip
     doc = (
         f"{m.doc} Hairer's radau5.f strategy: the error test's tolerances are",
@@ -273,7 +273,12 @@ def integrate(m: Method, quaternion: bool, grid: bool = False) -> Func:
     )
     if grid:
         return Func(
-            f"{m.name}_grid", driver.GRID_PARAMS, body, "int", locals_, (*doc, *driver.GRID_DOC)
+            f"{m.name}_{driver.variant(grid)}",
+            driver.grid_params(grid),
+            body,
+            "int",
+            locals_,
+            (*doc, *driver.GRID_DOC),
         )
     return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 

@@ -141,7 +141,9 @@ def dense_rows(R: Rosenbrock) -> S:
     return For("i", NX, tuple(assign(r[j, i], combo(R.dense_row(j))) for j in range(len(R.dense))))
 
 
-def integrate(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) -> Func:
+def integrate(
+    m: Method, quaternion: bool, uses_time: bool, grid: bool | driver.Grid = False
+) -> Func:
     """m.name_integrate, or with grid m.name_grid (the states at the grid's
     times, from the interpolant)."""
     R, ctl = m.tableau, m.control
@@ -164,7 +166,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) 
     args = (t, h, x, f0, *((ft,) if uses_time else ()), lu, piv, c, Var("rtol"), Var("atol"),
             comp, k, dx, xnew, *((Var("dense"),) if grid else ()))  # fmt: skip
     dense = interpolant(R) if grid else None
-    taken = driver.accepted(quaternion, last, control.predictive(fac, err), [], dense)
+    taken = driver.accepted(quaternion, last, control.predictive(fac, err), [], dense, grid)
     accept: list[S] = [
         *taken,
         For("i", NX, (assign(f0[i], fnew[i]),)),
@@ -215,7 +217,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) 
         Decl("piv", "int", ("NX",), "inout"), *(real(n, "inout") for n in doubles),
         *(Decl(n, "bool") for n in ("last", "rejected_last", "nonfinite", "new_point")),
         Decl("singular", "int"), Decl("start", "int"),
-        *((driver.rows("dense", len(R.dense)), *driver.grid_locals(body)) if grid else ()),
+        *((driver.rows("dense", len(R.dense)), *driver.grid_locals(body, grid)) if grid else ()),
     )  # fmt: skip
     doc = (
         m.doc,
@@ -227,7 +229,7 @@ def integrate(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) 
         f" {ctl.singular_tries} times in a row at most.",
     )
     if grid:
-        params, name = driver.GRID_PARAMS, f"{m.name}_grid"
+        params, name = driver.grid_params(grid), f"{m.name}_{driver.variant(grid)}"
         return Func(name, params, body, "int", locals_, (*doc, *driver.GRID_DOC))
     return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 

@@ -14,7 +14,7 @@ h halved.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from gyrogen import abi
 from gyrogen import methods as registry
@@ -42,6 +42,7 @@ from gyrogen.codegen.integrators.taylor_jet import (
     reads_constants,
 )
 from gyrogen.codegen.ir.nodes import (
+    At,
     Bool,
     Call,
     Comment,
@@ -148,25 +149,25 @@ def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
     never computed)."""
     deg = jet.degrees()
 
-    def points(tau: E) -> list[S]:
+    def points(tau: E, at: Callable[[E], At]) -> list[S]:
         acc, q = Var("acc"), Var("q")
         horner = (
             assign(acc, T[order, i]),
             For("q", order - 1, (assign(acc, T[order - Int(1) - q, i] + tau * acc),)),
-            assign(driver.OUT[driver.G, i], x[i] + tau * acc),
+            assign(at(i), x[i] + tau * acc),
         )
         out: list[S] = [
             For("i", Int(b), horner, ("acc",), start=Int(a)) for a, b in _runs(jet.nx, exact)
         ]
         for n in exact:
             low = T[Int(1), Int(n)] + tau * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
-            out.append(assign(driver.OUT[driver.G, Int(n)], x[Int(n)] + tau * low))
+            out.append(assign(at(Int(n)), x[Int(n)] + tau * low))
         return out
 
     return driver.Interpolant((), points, scaled=False)
 
 
-def step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> list[S]:
+def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> list[S]:
     """One step of one trajectory, straight-line with selections (the scalar
     integrator loops over it; the lanes print it over every lane). grid: the
     output grid's too (driver.grid_step, and the grid times an accepted step
@@ -239,7 +240,7 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> list[S]:
     ]
     if not grid:
         return [*body, If(ok, tuple(accepted(quaternion, known=True)))]
-    inside = driver.inside(series_output(jet, exact), t, Var("told"), Var("hs"))
+    inside = driver.inside(series_output(jet, exact), t, Var("told"), Var("hs"), grid, counted=True)
     return [*body, If(ok, (*inside, *accepted(quaternion, known=True), *driver.reached()))]
 
 
@@ -306,7 +307,7 @@ def _runs(n: int, left_out: list[int]) -> list[tuple[int, int]]:
     return out
 
 
-def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func:
+def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> Func:
     """taylor_integrate: from t0 to t1 on one trajectory; with grid,
     taylor_grid: over the output grid."""
     series = m.tableau
@@ -333,9 +334,10 @@ def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func
         *([declare("norm")] if quaternion else []),
     )
     if grid:  # the jet's code in place: taylor_jet keeps one caller, which gcc inlines
-        locals_ += (*jet_function(series, jet).locals, *driver.grid_locals(body))
+        locals_ += (*jet_function(series, jet).locals, *driver.grid_locals(body, grid))
         doc = (*m.notes, *driver.GRID_DOC)
-        return Func("taylor_grid", driver.GRID_PARAMS, tuple(body), "int", locals_, doc)
+        name, params = f"taylor_{driver.variant(grid)}", driver.grid_params(grid)
+        return Func(name, params, tuple(body), "int", locals_, doc)
     return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
 
 
@@ -365,11 +367,15 @@ def lane_state(m: Method, jet: Jet) -> list[Decl]:
     return [Decl("cap", "double", (), "inout"), coefficients(series, jet)]
 
 
-def functions(m: Method, jet: Jet, quaternion: bool) -> list[Func]:
+def functions(
+    m: Method, jet: Jet, quaternion: bool, events: driver.Grid | None = None
+) -> list[Func]:
+    """The jet, taylor_integrate, taylor_grid and with events taylor_events."""
     series = m.tableau
     assert isinstance(series, Series)
     return [
         jet_function(series, jet),
         integrate(m, jet, quaternion),
         integrate(m, jet, quaternion, grid=True),
+        *([integrate(m, jet, quaternion, grid=events)] if events else []),
     ]

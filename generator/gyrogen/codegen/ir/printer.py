@@ -209,7 +209,7 @@ class Printer:
         if isinstance(s, Comment):
             return [""] * s.blank + [pad + say["comment"].format(text=s.text)]
         if isinstance(s, Call):
-            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac") else s.name
+            name = f"{self.prefix}_{s.name}" if s.name in ("rhs", "jac", "events") else s.name
             return self.line(depth, say["call"].format(name=name, args=self.call_args(s)), s.note)
         if isinstance(s, Return):
             if s.value is None:
