@@ -283,3 +283,21 @@ def test_integrate_events_refuses_what_it_cannot_do(
         c_build.integrate_events("rk4", x0, c, [0.0, 1.0])
     with pytest.raises(ValueError):
         c_build.integrate_events("dop853", x0, c, [1.0, 0.0])
+
+
+def test_simulate_writes_and_prints_the_event_log(tmp_path: Path, cli) -> None:
+    """A terminal event ends simulate's run there (the output grid's last
+    time is the event's); the summary lists the log and events.csv holds it."""
+    scene = tmp_path / "spun.toml"
+    scene.write_text(builtin_text("dual_spin").replace('name = "dual_spin"', 'name = "spun"')
+                     + LOCATED)  # fmt: skip
+    code, out, err = cli(["simulate", str(scene), "--out", str(tmp_path / "sim"), "--no-plot",
+                          "--t-end", "200", "--dt", "1", "--method", "dop853"])  # fmt: skip
+    assert code == 0, err
+    assert "terminal spun at t = 99.95" in out and "ended the run" in out
+    rows = (tmp_path / "sim" / "events.csv").read_text().splitlines()
+    assert rows[0].startswith("t,event,q1,") and rows[-1].split(",")[1] == "spun"
+    t_event = float(rows[-1].split(",")[0])
+    assert sum(r.split(",")[1] == "third" for r in rows[1:]) == int(t_event * 3 / np.pi)
+    traj = np.load(tmp_path / "sim" / "trajectory.npz")
+    assert traj["t"][-1] == t_event

@@ -66,7 +66,9 @@ def simulate(
     """Generate SCENE, build it, integrate it from simulate.initial with one
     of its compiled integrators or scipy's solve_ivp (--method), and write
     trajectory.csv, trajectory.npz, summary.json and trajectory.png with the
-    invariants |H| in N and the energy balance."""
+    invariants |H| in N and the energy balance. A scene with [[events]]
+    also gets events.csv, the events located along the run (a compiled
+    adaptive method's _events call); a terminal one ends the run there."""
     from gyrogen.analysis.simulate import engine as sim
     from gyrogen.analysis.simulate.result import Settings
 

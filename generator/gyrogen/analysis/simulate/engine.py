@@ -44,7 +44,7 @@ from gyrogen.analysis.simulate.trajectory import (
 )
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import can_write, transaction, write_atomic
-from gyrogen.runtime.compiled import Compiled, Controls, controls
+from gyrogen.runtime.compiled import Compiled, Controls, EventLog, controls
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_files, scene_sources
 from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
@@ -298,7 +298,7 @@ def run(
     from gyrogen.codegen.generate import claim
 
     p = runtime_values(scene)  # first: a scene error must leave nothing behind
-    names = files.file_names(settings.plot)
+    names = files.file_names(settings.plot, bool(scene.events))
     claim(out / "src", scene.name)
     can_write(out, names)
     can_write(out / "src", [])  # a file named src is in the way too
@@ -319,16 +319,65 @@ def run(
         method = choice.method or ("Radau" if choice.stiff else "DOP853")
         echo(f"method {method}: {choice.why}")
         settings = replace(settings, method=method)
+    log, stopped = None, False
+    if (
+        scene.events
+        and settings.method in methods.NAMES
+        and not methods.get(settings.method).fixed_step
+    ):
+        log, stopped = located(start, settings)
+        if stopped:  # the output grid ends at the event (its last time clipped to it)
+            t_event = float(log.times[-1])
+            settings = replace(settings, t_end=t_event, dt=min(settings.dt, t_event))
+            end = output_grid(settings.t_end, settings.dt)[-1]
+    elif scene.events:
+        echo(f"events not located: {settings.method} has no _events call (use a compiled "
+             "adaptive method)")  # fmt: skip
+        names = [n for n in names if n != "events.csv"]
     with progress(f"integrating {scene.name} to t = {end:g} s") as advance:
         traj = integrate(start, settings, advance)
     inv = along_trajectory(scene, p, traj)
     paths = tuple(out / n for n in names)
-    res = Result(scene, out, comp.language, sources.build_id, settings, traj, inv, paths)
+    res = Result(
+        scene, out, comp.language, sources.build_id, settings, traj, inv, paths, log, stopped
+    )
     contents = files.contents(res, p)
     with transaction():  # the sources and the results, all or nothing
         write_atomic(out / "src", sources.files)
         write_atomic(out, contents)
     return res
+
+
+def located(start: Start, settings: Settings) -> tuple[EventLog, bool]:
+    """The scene's events over the output grid (one _events call with the
+    run's method and tolerances), and whether a terminal one stopped it."""
+    grid = output_grid(settings.t_end, settings.dt)
+    rtol, atol = start.tol
+    _, log, _, code = start.comp.integrate_events(
+        settings.method, start.x0, start.c, grid, rtol=rtol, atol=atol, capacity=EVENT_CAPACITY
+    )
+    if code not in (0, 8, 9):
+        why = message(ODE_CODES, code)
+        raise SceneError(f"locating the events: {settings.method} stopped (code {code}: {why})")
+    return log, code == 8
+
+
+EVENT_CAPACITY = 100_000
+"""The most events simulate logs; past them the log (and the run) stops."""
+EVENTS_SHOWN = 10
+"""Events the summary lists; events.csv holds them all."""
+
+
+def event_lines(res: Result) -> list[str]:
+    log = res.events
+    if log is None:
+        return []
+    head = f"  events          {len(log)} located (events.csv)"
+    if res.stopped:
+        head += f"; terminal {log.names[-1]} at t = {log.times[-1]:.17g} s ended the run"
+    shown = [f"    t = {t:<24.17g} {n}" for t, n in zip(log.times, log.names, strict=True)]
+    more = [f"    ... {len(log) - EVENTS_SHOWN} more"] if len(log) > EVENTS_SHOWN else []
+    return [head, *shown[:EVENTS_SHOWN], *more]
 
 
 _LANGUAGE = {"c": "C", "fortran": "Fortran"}
@@ -352,5 +401,6 @@ def summary_lines(res: Result) -> list[str]:
         f"  {said.rate} check        {said.balance}: {worst['u4_relative_residual']:.2e}"
         f" of max |{said.rate}|",
         *(f"  quadrature      NOT RESOLVED: {why}" for why in res.invariants.unresolved),
+        *event_lines(res),
         f"wrote {res.out}/ ({files}; sources in src/)",
     ]

@@ -12,16 +12,25 @@ import numpy as np
 from gyrogen.analysis.simulate.invariants import Invariants, words
 from gyrogen.analysis.simulate.result import Result
 from gyrogen.analysis.simulate.trajectory import QUADRATURE, Trajectory
+from gyrogen.runtime.compiled import EventLog
 from gyrogen.scene import Scene
 
 COLUMNS = ("H_norm", "K", "H_drift", "H_vector_drift", "energy_residual", "u4_residual")
 """Invariant columns of trajectory.csv, after t and the states."""
 
 
-def file_names(plot: bool) -> list[str]:
+def file_names(plot: bool, events: bool = False) -> list[str]:
     """The files a run writes, in the order the summary lists them."""
     names = ["trajectory.csv", "trajectory.npz", "summary.json"]
-    return names + (["trajectory.png"] if plot else [])
+    return names + (["events.csv"] if events else []) + (["trajectory.png"] if plot else [])
+
+
+def events_csv(scene: Scene, log: EventLog) -> str:
+    """The event log: time, the event's name, the state there."""
+    lines = [",".join(("t", "event", *scene.states))]
+    for t, name, x in zip(log.times, log.names, log.states, strict=True):
+        lines.append(",".join((f"{t:.17g}", name, *(f"{v:.17g}" for v in x))))
+    return "\n".join(lines) + "\n"
 
 
 def _columns(inv: Invariants) -> np.ndarray:
@@ -103,6 +112,8 @@ def contents(res: Result, p: np.ndarray) -> dict[str, bytes]:
         "trajectory.npz": npz_bytes(scene, traj, inv),
         "summary.json": (json.dumps(summary(res, p), indent=2) + "\n").encode(),
     }
+    if res.events is not None:
+        blobs["events.csv"] = events_csv(scene, res.events).encode()
     if res.settings.plot:
         from gyrogen.analysis.simulate import plots  # matplotlib: loaded only when a plot is wanted
 

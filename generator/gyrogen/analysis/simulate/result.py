@@ -11,6 +11,7 @@ from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.simulate.invariants import Invariants
 from gyrogen.analysis.simulate.trajectory import Trajectory
 from gyrogen.errors import SceneError
+from gyrogen.runtime.compiled import EventLog
 from gyrogen.scene import Scene, check_output_grid
 
 MAX_NFEV = MAX_STEPS
@@ -54,3 +55,9 @@ class Result:
     trajectory: Trajectory
     invariants: Invariants
     files: tuple[Path, ...]
+    events: EventLog | None = None
+    """The scene's events along the run (a compiled adaptive method's
+    _events call over the output grid), or None (no events, or a method
+    without that call)."""
+    stopped: bool = False
+    """A terminal event ended the run: the output grid stops at its time."""
