@@ -301,3 +301,26 @@ def test_simulate_writes_and_prints_the_event_log(tmp_path: Path, cli) -> None:
     assert sum(r.split(",")[1] == "third" for r in rows[1:]) == int(t_event * 3 / np.pi)
     traj = np.load(tmp_path / "sim" / "trajectory.npz")
     assert traj["t"][-1] == t_event
+
+
+def test_a_sweep_counts_each_event_and_keeps_its_first_time(tmp_path: Path) -> None:
+    """run_chunk's event columns: sin(3 t) crosses at k pi/3; the terminal
+    event (q3 passing 0.3 rad, near 3 s at u2 = 0.1) ends the count."""
+    from gyrogen.analysis.sweep.metrics import column_docs, columns, run_chunk
+    from gyrogen.analysis.sweep.spec import parse as parse_sweep
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    events = LOCATED.replace('expr = "q3 - 5"', 'expr = "q3 - 0.3"')
+    (tmp_path / "ev.toml").write_text(builtin_text("dual_spin") + events)
+    grid = "[grid]\nu2 = { list = [0.05, 0.1] }\n"
+    text = 'scene = "ev.toml"\nt_end = 4.0\nmethod = "dop853"\n' + grid
+    s = parse_sweep(text, "x", "x", tmp_path)
+    assert {"first_third", "count_third", "first_spun", "count_spun"} <= set(columns(s))
+    assert column_docs(s)["first_spun"][0] == "s"
+    cols = run_chunk(compiled(scene_sources(s.scene, False)), s, 0, 2)
+    assert list(cols["count_third"]) == [3, 2] and list(cols["count_spun"]) == [0, 1]
+    assert np.allclose(cols["first_third"], np.pi / 3, rtol=1e-14)
+    assert np.isnan(cols["first_spun"][0]) and 2.5 < cols["first_spun"][1] < 3.5
+    fixed = 'scene = "ev.toml"\nt_end = 4.0\nmethod = "rk4"\nsteps = 100\n' + grid
+    rk4 = parse_sweep(fixed, "x", "x", tmp_path)
+    assert not any(c.startswith(("first_", "count_")) for c in columns(rk4))

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from gyrogen import methods
 from gyrogen.abi import unit_and_doc
 from gyrogen.analysis.sweep.draws import inputs
 from gyrogen.analysis.sweep.spec import SAMPLED, Spec
@@ -73,7 +74,21 @@ def columns(spec: Spec) -> dict[str, np.dtype]:
     cols |= {f"time_to_{q}": np.dtype(np.float64) for q in spec.sweep.metrics.time_to}
     if "pointing" in keep:
         cols["pointing"] = np.dtype(np.float64)
+    for e in located(spec):
+        cols |= {f"first_{e}": np.dtype(np.float64), f"count_{e}": np.dtype(np.int64)}
     return cols
+
+
+def located(spec: Spec) -> list[str]:
+    """The scene's events the sweep locates (their first time and count
+    columns): all of them with an adaptive method, none with a fixed step."""
+    if methods.get(spec.sweep.method).fixed_step:
+        return []
+    return [e.name for e in spec.scene.events]
+
+
+EVENT_CAPACITY = 100_000
+"""Events logged per trajectory: a count at it means at least as many."""
 
 
 _METRIC_DOCS = {
@@ -100,6 +115,14 @@ def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
         elif name.startswith("final_"):
             unit, doc = unit_and_doc(name[len("final_") :])
             docs[name] = (unit, f"final value (the last good one on failure) of: {doc}")
+        elif name.startswith("first_") and name[len("first_") :] in located(spec):
+            docs[name] = (
+                "s",
+                f"the first time event {name[len('first_') :]} happened (NaN: never)",
+            )
+        elif name.startswith("count_") and name[len("count_") :] in located(spec):
+            docs[name] = ("1", f"how often event {name[len('count_') :]} happened, up to a "
+                          f"terminal event and at most {EVENT_CAPACITY} events in all")  # fmt: skip
         elif name.startswith("time_to_"):
             docs[name] = ("s", f"first sample time {name[len('time_to_') :]} crossed its threshold")
         else:
@@ -143,8 +166,35 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
     known = {**spec.scene.folded(), **runtime}
     x0 = inp.x0 if all_ran else inp.x0[ran]
     aim = boresight(spec, x0) if "pointing" in columns(spec) else None  # x0 is integrated in place
+    events = _events(comp, spec, batches, x0) if located(spec) else {}
     runs = _integrate(comp, spec, batches, known, x0)
-    return _filled(spec, n, every, None if all_ran else ran, _found(spec, runs, aim))
+    found = _found(spec, runs, aim) | events
+    return _filled(spec, n, every, None if all_ran else ran, found)
+
+
+def _events(
+    comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]], x0: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Each event's first time and count along each trajectory, from one
+    _events call per trajectory from 0 to t_end (a run of its own beside the
+    batch that samples the metrics: a sweep with events costs about twice
+    one without)."""
+    sweep, names = spec.sweep, located(spec)
+    first = {e: np.full(len(x0), np.nan) for e in names}
+    count = {e: np.zeros(len(x0), dtype=np.int64) for e in names}
+    ends = np.array([0.0, sweep.t_end])
+    for c, rows in batches:
+        for r in rows:
+            _, log, _, _ = comp.integrate_events(
+                sweep.method, x0[r], c, ends, rtol=sweep.rtol, atol=sweep.atol,
+                max_steps=sweep.max_steps, capacity=EVENT_CAPACITY,
+            )  # fmt: skip
+            for t, e in zip(log.times, log.names, strict=True):
+                if not count[e][r]:
+                    first[e][r] = t
+                count[e][r] += 1
+    return {**{f"first_{e}": v for e, v in first.items()},
+            **{f"count_{e}": v for e, v in count.items()}}  # fmt: skip
 
 
 def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
