@@ -54,11 +54,17 @@ def cases() -> list[Case]:
 
 def build(case: Case, out: Path) -> Path:
     """The case's FMU (what `gyrogen fmu SCENE --method M` writes) in out."""
-    sim = case.scene.simulate
-    stepping = Stepping(case.method, sim.rtol, sim.atol, sim.t_end, sim.dt)
-    model = FmuModel(unit_of(case.scene), tuple(engine.runtime_values(case.scene)), stepping)
+    return build_model(case.scene, case.method, out)
+
+
+def build_model(scene: Scene, method: str, out: Path) -> Path:
+    """The scene's FMU stepping with method (what `gyrogen fmu SCENE --method
+    M` writes) in out."""
+    sim = scene.simulate
+    stepping = Stepping(method, sim.rtol, sim.atol, sim.t_end, sim.dt)
+    model = FmuModel(unit_of(scene), tuple(engine.runtime_values(scene)), stepping)
     write_atomic(out, fmu_build.build(model, out))
-    return out / f"{case.scene.name}.fmu"
+    return out / f"{scene.name}.fmu"
 
 
 def reference(case: Case, t_end: float, out: Path) -> np.ndarray:

@@ -24,11 +24,12 @@ from fmpy.build import build_platform_binary
 from fmpy.fmi1 import FMICallException
 from fmpy.simulation import instantiate_fmu
 from fmpy.validation import validate_fmu
-from fmu_cases import BAR, MODES, build, by_fmpy, cases, differences, reference
+from fmu_cases import BAR, MODES, build, build_model, by_fmpy, cases, differences, reference
 
-from gyrogen import abi, methods
+from gyrogen import abi, api, methods
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
 from gyrogen.runtime.fmu_build import fmi_headers
+from gyrogen.scene import builtin_text, parse
 
 pytestmark = pytest.mark.slow  # FMUs built and simulated with FMPy
 
@@ -729,3 +730,35 @@ def test_without_fmpy_there_are_no_headers(tmp_path: Path) -> None:
 def test_the_same_scene_makes_the_same_bytes(fmus: dict[str, Path], tmp_path: Path, cli) -> None:
     assert cli(["fmu", "gyrostat", "--out", str(tmp_path)]).code == 0
     assert (tmp_path / "gyrostat.fmu").read_bytes() == fmus["default"].read_bytes()
+
+
+def test_the_scenes_events_end_both_kinds_of_simulation(tmp_path: Path) -> None:
+    """dual_spin with sin(3 t) events and a terminal one where q3 passes
+    0.3 rad (near 6 s): Model Exchange exposes them as event indicators and
+    ends at the terminal one (FMPy's CVODE finds the crossing); Co-Simulation
+    ends the step there with fmi2Discard and fmi2Terminated, at the time the
+    _events call located."""
+    events = """
+[[events]]
+name = "third"
+expr = "sin(3*t)"
+
+[[events]]
+name = "spun"
+expr = "q3 - 0.3"
+direction = "up"
+terminal = true
+"""
+    scene = parse(builtin_text("dual_spin") + events, "events")
+    fmu = build_model(scene, "dop853", tmp_path / "fmu")
+    md = fmpy.read_model_description(str(fmu))
+    assert md.numberOfEventIndicators == 2
+    comp = api.compile(scene)
+    x0 = np.array(scene.initial_state())
+    _, log, _, code = comp.integrate_events("dop853", x0, comp.setup([]), [0.0, 20.0],
+                                            rtol=1e-10, atol=1e-10)  # fmt: skip
+    assert code == 8
+    t_event = log.times[-1]
+    for mode, close in (("CoSimulation", 1e-9), ("ModelExchange", 1e-5)):
+        out = fmpy.simulate_fmu(str(fmu), fmi_type=mode, stop_time=20.0, output_interval=0.5)
+        assert abs(out["time"][-1] - t_event) <= close * t_event, (mode, out["time"][-1], t_event)

@@ -10,7 +10,7 @@ import uuid
 from dataclasses import dataclass
 from functools import cached_property
 
-from gyrogen import abi
+from gyrogen import abi, methods
 from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.units import DIMENSIONLESS, base_units, per_second
 
@@ -89,6 +89,23 @@ class FmuModel:
                 out.append(Variable(name, len(out), "output", offset, o.unit, o.doc))
                 offset += 1
         return tuple(out)
+
+    @property
+    def event_directions(self) -> list[int]:
+        """Each event's crossings as the integrators take them (1 up, -1 down, 0 any)."""
+        grid = self.unit.event_grid
+        return [] if grid is None else [e.direction for e in grid.events]
+
+    @property
+    def event_terminal(self) -> list[int]:
+        grid = self.unit.event_grid
+        return [] if grid is None else [int(e.terminal) for e in grid.events]
+
+    @property
+    def located(self) -> bool:
+        """Co-Simulation locates the events: the scene has some and the
+        stepping method is adaptive (its _events call)."""
+        return bool(self.unit.scene.events) and not methods.get(self.stepping.method).fixed_step
 
     def of_kind(self, kind: str) -> tuple[Variable, ...]:
         return tuple(v for v in self.variables if v.kind == kind)
