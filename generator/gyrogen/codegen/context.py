@@ -20,6 +20,7 @@ from gyrogen.abi import (
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
 from gyrogen.codegen.integrators.driver import Event, Grid
+from gyrogen.codegen.integrators.program import Program, program
 from gyrogen.codegen.integrators.taylor import state_scales
 from gyrogen.methods import METHODS, Method, needs_jacobian
 from gyrogen.scene import Scene
@@ -163,6 +164,14 @@ class SceneContext:
         b = self.optimized.events
         names = ", ".join(e.name for e in self.scene.events)
         return None if b is None else Output("events", b, "", f"the events' g(t, x): {names}")
+
+    @cached_property
+    def program(self) -> Program:
+        """The integrators' functions, one description printed to every
+        target (gyrogen.codegen.integrators.program)."""
+        return program(
+            self.methods, self.quaternion, self.uses_time, self.lu_blocks, self.jet, self.event_grid
+        )
 
     @property
     def event_grid(self) -> Grid | None:

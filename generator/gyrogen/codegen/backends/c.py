@@ -11,7 +11,6 @@ from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.integrators.program import (
     c_text,
     intrinsics_of,
-    program,
     tables_text,
     trig_text,
 )
@@ -55,14 +54,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "ode_trig": trig_text("c", unit.prefix, unit.macro, [v for v in VARIANTS if v in ode_trig]),
         "methods": unit.methods,
         "ir": c_text(
-            program(
-                unit.methods,
-                unit.quaternion,
-                unit.uses_time,
-                unit.lu_blocks,
-                unit.jet,
-                unit.event_grid,
-            ),
+            unit.program,
             unit.prefix,
             unit.macro,
             ode_model,

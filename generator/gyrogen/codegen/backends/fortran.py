@@ -9,7 +9,7 @@ from gyrogen import methods as methods_registry
 from gyrogen.codegen import statements
 from gyrogen.codegen.checks import LOOP
 from gyrogen.codegen.context import SceneContext
-from gyrogen.codegen.integrators.program import fortran_text, program, tables_text, trig_text
+from gyrogen.codegen.integrators.program import fortran_text, tables_text, trig_text
 from gyrogen.codegen.ir.fortran import RESULT, FortranPrinter
 from gyrogen.codegen.ir.nodes import Func
 from gyrogen.codegen.render import render
@@ -54,14 +54,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "jac": None if jac is None else printer.function(jac),
         "methods": unit.methods,
         "ir": fortran_text(
-            program(
-                unit.methods,
-                unit.quaternion,
-                unit.uses_time,
-                unit.lu_blocks,
-                unit.jet,
-                unit.event_grid,
-            ),
+            unit.program,
             unit.prefix,
             unit.macro,
             [jac] if jac else [],
