@@ -20,14 +20,20 @@ from gyrogen.abi import (
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
 from gyrogen.codegen.integrators.taylor import state_scales
-from gyrogen.methods import METHODS, Method, needs_jacobian
-from gyrogen.scene import Scene
+from gyrogen.methods import IMPLICIT, METHODS, Method, needs_jacobian
+from gyrogen.scene import Outputs, Scene
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.jet import Jet, decompose
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
 from gyrogen.symbolic.specialize import specialize
+from gyrogen.symbolic.variational import Variational
+
+VARIATIONAL_METHODS = tuple(m for m in METHODS if m not in IMPLICIT)
+"""The methods the augmented system is integrated with: the explicit ones
+(an implicit one would solve with the augmented Jacobian, block lower
+triangular with x first, which the generated LU does not exploit)."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +111,8 @@ class SceneContext:
     @cached_property
     def ops(self) -> dict[str, int]:
         ops = {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
+        if self.optimized.augmented is not None:
+            ops["var_rhs"] = self.optimized.augmented.ops
         ops.update({o.name: o.block.ops for o in self.outputs})
         if self.optimized.jacobian is not None:
             ops["jac"] = self.optimized.jacobian.ops
@@ -142,6 +150,30 @@ class SceneContext:
             return None
         scales = state_scales([s.name for s in self.states])
         return replace(decompose(self.optimized.rhs, self.states), scales=scales)
+
+    @cached_property
+    def variational(self) -> VariationalContext | None:
+        """The augmented system (x, Phi, S) as a unit of its own under the
+        prefix <prefix>_var, with the scene's setup (its constants include
+        the variational system's): every explicit integrator instantiated
+        for it, scalar, lanes and Fortran, through the same descriptions."""
+        var = self.optimized.variational
+        if var is None or self.optimized.augmented is None:
+            return None
+        scene = self.scene.model_copy(
+            update={
+                "name": f"{self.scene.name}_var",
+                "outputs": Outputs(),
+                "integrators": [m for m in self.scene.integrators if m in VARIATIONAL_METHODS],
+                "sensitivities": None,
+            }
+        )
+        eqs = replace(
+            self.equations, states=(*self.states, *var.symbols), outputs={}, perturbed=None
+        )
+        opt = Optimized(setup=self.optimized.setup, rhs=self.optimized.augmented,
+                        lumped=self.optimized.lumped)  # fmt: skip
+        return VariationalContext(scene, eqs, opt, base=self)
 
     @property
     def methods(self) -> list[Method]:
@@ -297,6 +329,51 @@ class SceneContext:
         return {"c": c, "fortran": f}
 
 
+@dataclass(frozen=True)
+class VariationalContext(SceneContext):
+    """The augmented system y = (x, Phi's and S's entries that can be
+    nonzero), its rows documented by what they differentiate."""
+
+    base: SceneContext | None = None
+
+    @property
+    def layout(self) -> Variational:
+        assert self.base is not None and self.base.optimized.variational is not None
+        return self.base.optimized.variational
+
+    @property
+    def nx_state(self) -> int:
+        """The state's own size: y[0 .. nx_state) is x."""
+        return len(self.states) - self.layout.nv
+
+    @property
+    def state_rows(self) -> list[Row]:
+        n, var = self.nx_state, self.layout
+        x = [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states[:n])]
+        return x + [
+            Row(
+                n + r,
+                s.name,
+                "",
+                f"d {self.states[i].name} / d {var.columns[k]}(t0): Phi[{i}][{k}]",
+            )
+            for r, (s, (i, k)) in enumerate(zip(var.symbols, var.entries, strict=True))
+        ]
+
+    @cached_property
+    def jet(self) -> Jet | None:
+        """The augmented rhs as elementary operations: x's groups as the
+        scene's, and each column's entries of one row group as a group of
+        their own (magnitudes)."""
+        if not any(m.taylor for m in self.methods):
+            return None
+        n, var = self.nx_state, self.layout
+        scales = state_scales([s.name for s in self.states[:n]])
+        scales += tuple((f"d {scales[i][0]} / d {var.columns[k]}", "magnitude")
+                        for i, k in var.entries)  # fmt: skip
+        return replace(decompose(self.optimized.rhs, self.states), scales=scales)
+
+
 def versions() -> dict[str, str]:
     return {"gyrogen": gyrogen.__version__, "sympy": version("sympy")}
 
@@ -310,7 +387,10 @@ def build_id(scene: Scene) -> str:
 
 def make_context(scene: Scene) -> SceneContext:
     eqs = specialize(scene)
-    return SceneContext(scene, eqs, optimize(eqs, jacobian=needs_jacobian(scene.integrators)))
+    var = scene.sensitivities
+    wrt, error = (var.wrt, var.error) if var is not None else ((), "all")
+    jacobian = needs_jacobian(scene.integrators)
+    return SceneContext(scene, eqs, optimize(eqs, jacobian, wrt, error))
 
 
 def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:

@@ -22,6 +22,7 @@ from gyrogen import physics
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.hoist import Hoister, hoist
 from gyrogen.symbolic.literals import as_double, writable_form
+from gyrogen.symbolic.variational import Variational, variational
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,11 @@ class Optimized:
     linear: Block | None = None
     """A, B, C, D of the linear model (Equations.perturbed), each row-major,
     one after another."""
+    variational: Variational | None = None
+    """The variational system's layout (the scene's [sensitivities])."""
+    augmented: Block | None = None
+    """d/dt of (x, the entries of Phi and S), one CSE over f and the
+    variational part (symbolic.variational)."""
 
     @property
     def nc(self) -> int:
@@ -156,9 +162,16 @@ def _temporaries() -> Iterator[sm.Symbol]:
     return sm.numbered_symbols("tmp", real=True)
 
 
-def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
+def optimize(
+    eqs: Equations,
+    jacobian: bool = False,
+    wrt: Sequence[str] = (),
+    error: str = "all",
+) -> Optimized:
     """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
-    also d(dx/dt)/dx for the implicit integrators."""
+    also d(dx/dt)/dx for the implicit integrators; with wrt (the scene's
+    [sensitivities]), also the variational system (its constants after all
+    the others but setup's condition number)."""
     inverse = block_inverse(eqs.mass_matrix)
     udot = inverse * eqs.forcing
     hoister = Hoister(eqs.gather)
@@ -177,12 +190,24 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
     inline = _inlined(shared)
     jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     linear = _linear_model(eqs, inverse, kin, hoister) if eqs.perturbed else None
+    var, augmented = None, None
+    if wrt:
+        f = [e.xreplace(inline) for e in (*kin, *dyn)]
+        var = variational(f, eqs.states, eqs.params, wrt, error, hoister, eqs.lumped)
+        augmented = _rhs_block(shared, [*kin, *dyn, *var.derivatives], eqs.gather)
     cluster = eqs.coupled.shape[0] == 3  # no reduced mass to multiply out
     values = [v if cluster else _multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = sm.S.Zero if cluster else _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
     setup, lumped = _setup(eqs, [*values, condition(eqs.coupled, det)])
     return Optimized(
-        setup=setup, rhs=rhs, lumped=lumped, outputs=outputs, jacobian=jac, linear=linear
+        setup=setup,
+        rhs=rhs,
+        lumped=lumped,
+        outputs=outputs,
+        jacobian=jac,
+        linear=linear,
+        variational=var,
+        augmented=augmented,
     )
 
 
