@@ -82,7 +82,7 @@ def test_layout_state_first_sparse_and_counted():
     assert data["variational"]["columns"] == [*names, "T"]
     assert data["variational"]["nx"] == 14 + len(entries)
     assert data["ops"]["var_rhs"] == unit.optimized.augmented.ops > data["ops"]["rhs"]
-    assert data["variational"]["integrators"] == ["rk4", "dopri5", "dop853", "taylor"]
+    assert data["variational"]["integrators"] == list(s.integrators)
 
 
 def test_parameter_work_in_setup():
@@ -110,8 +110,8 @@ def setup_values(unit, p):
 
 # --- the compiled flow -------------------------------------------------------------------
 
-METHODS = ("dopri5", "dop853", "taylor")
-"""The adaptive methods integrate_var offers (rk4 too, at fixed steps)."""
+METHODS = ("dopri5", "dop853", "rodas4", "radau5", "taylor")
+"""Every adaptive method (rk4 too is offered, at fixed steps)."""
 TOL = 1e-13
 """The tolerance of the flow and of its finite differences."""
 
@@ -233,7 +233,7 @@ TORQUE_FREE = """
 name = "free_var"
 description = "torque-free, asymmetric, quaternion attitude"
 attitude = "quaternion"
-integrators = ["dopri5", "dop853", "taylor"]
+integrators = ["dopri5", "dop853", "rodas4", "radau5", "taylor"]
 
 [parameters]
 m_a = 10.0

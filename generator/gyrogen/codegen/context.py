@@ -30,11 +30,6 @@ from gyrogen.symbolic.optimize import Block, Optimized, optimize
 from gyrogen.symbolic.specialize import specialize
 from gyrogen.symbolic.variational import Variational
 
-VARIATIONAL_METHODS = tuple(m for m in METHODS if m not in IMPLICIT)
-"""The methods the augmented system is integrated with: the explicit ones
-(an implicit one would solve with the augmented Jacobian, block lower
-triangular with x first, which the generated LU does not exploit)."""
-
 
 @dataclass(frozen=True)
 class Row:
@@ -160,11 +155,13 @@ class SceneContext:
         var = self.optimized.variational
         if var is None or self.optimized.augmented is None:
             return None
+        jac = self.optimized.augmented_jacobian
+        kept = [m for m in self.scene.integrators if jac is not None or m not in IMPLICIT]
         scene = self.scene.model_copy(
             update={
                 "name": f"{self.scene.name}_var",
                 "outputs": Outputs(),
-                "integrators": [m for m in self.scene.integrators if m in VARIATIONAL_METHODS],
+                "integrators": kept,
                 "sensitivities": None,
             }
         )
@@ -172,7 +169,7 @@ class SceneContext:
             self.equations, states=(*self.states, *var.symbols), outputs={}, perturbed=None
         )
         opt = Optimized(setup=self.optimized.setup, rhs=self.optimized.augmented,
-                        lumped=self.optimized.lumped)  # fmt: skip
+                        lumped=self.optimized.lumped, jacobian=jac)  # fmt: skip
         return VariationalContext(scene, eqs, opt, base=self)
 
     @property
@@ -359,6 +356,14 @@ class VariationalContext(SceneContext):
             )
             for r, (s, (i, k)) in enumerate(zip(var.symbols, var.entries, strict=True))
         ]
+
+    @cached_property
+    def lu_blocks(self) -> Blocks | None:
+        """The diagonal blocks of the augmented Jacobian: x's, then each
+        column's of Phi; the variational part's reads of x are eliminated
+        below them (symbolic.blocks.diagonal_blocks' coupled_from)."""
+        jac = self.optimized.jacobian
+        return None if jac is None else diagonal_blocks(jac.outputs, self.nx, self.nx_state)
 
     @cached_property
     def jet(self) -> Jet | None:

@@ -22,7 +22,7 @@ from gyrogen import physics
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.hoist import Hoister, hoist
 from gyrogen.symbolic.literals import as_double, writable_form
-from gyrogen.symbolic.variational import Variational, variational
+from gyrogen.symbolic.variational import IMPLICIT_MAX_NY, Variational, variational
 
 
 @dataclass(frozen=True)
@@ -69,6 +69,10 @@ class Optimized:
     augmented: Block | None = None
     """d/dt of (x, the entries of Phi and S), one CSE over f and the
     variational part (symbolic.variational)."""
+    augmented_jacobian: Block | None = None
+    """The augmented system's Jacobian, row-major, for the implicit methods
+    (when they are wanted and the system is small enough for them:
+    variational.IMPLICIT_MAX_NY)."""
 
     @property
     def nc(self) -> int:
@@ -190,11 +194,15 @@ def optimize(
     inline = _inlined(shared)
     jac = _jacobian([e.xreplace(inline) for e in (*kin, *dyn)], eqs.states) if jacobian else None
     linear = _linear_model(eqs, inverse, kin, hoister) if eqs.perturbed else None
-    var, augmented = None, None
+    var, augmented, augmented_jac = None, None, None
     if wrt:
         f = [e.xreplace(inline) for e in (*kin, *dyn)]
         var = variational(f, eqs.states, eqs.params, wrt, error, hoister, eqs.lumped)
         augmented = _rhs_block(shared, [*kin, *dyn, *var.derivatives], eqs.gather)
+        ny = len(eqs.states) + var.nv
+        if jacobian and ny <= IMPLICIT_MAX_NY:
+            y = (*eqs.states, *var.symbols)
+            augmented_jac = _sparse_jacobian([*f, *var.derivatives], y)
     cluster = eqs.coupled.shape[0] == 3  # no reduced mass to multiply out
     values = [v if cluster else _multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = sm.S.Zero if cluster else _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
@@ -208,6 +216,7 @@ def optimize(
         linear=linear,
         variational=var,
         augmented=augmented,
+        augmented_jacobian=augmented_jac,
     )
 
 
@@ -316,6 +325,16 @@ def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
     """Row-major d f_i / d x_j of the hoisted right-hand side: it reads the
     same constants, so setup covers it too."""
     entries = [sm.diff(fi, xj) for fi in f for xj in x]
+    return _cse(entries, _temporaries())
+
+
+def _sparse_jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
+    """_jacobian, each row differentiated only by the states it reads (a
+    large augmented system is mostly zeros)."""
+    entries = []
+    for fi in f:
+        read = fi.free_symbols
+        entries += [sm.diff(fi, xj) if xj in read else sm.S.Zero for xj in x]
     return _cse(entries, _temporaries())
 
 

@@ -25,6 +25,11 @@ import sympy as sm
 from gyrogen.scene.rules import WRT_STATE
 from gyrogen.symbolic.hoist import Hoister, constants
 
+IMPLICIT_MAX_NY = 128
+"""The largest augmented system the implicit methods integrate: they hold
+ny x ny matrices (the Jacobian, E's LU: 128 KB each at 128) on the stack and
+write every entry of the Jacobian per call."""
+
 
 @dataclass(frozen=True)
 class Variational:
