@@ -104,8 +104,8 @@ def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
             ]
         for r in blocks.below[k] if blocks.below else ():  # coupled rows past the block
             body += [
-                *how.multiplier(r * nx + k, kk),
-                *(st for c in up for st in how.update(r * nx + c, k * nx + c)),
+                *how.multiplier(Int(r * nx + k), kk),
+                *(st for c in up for st in how.update(Int(r * nx + c), k * nx + c)),
             ]
         body += [st for c in up for st in how.scale(k * nx + c, kk)]
     return (*body, Return(Bool(False)))
