@@ -141,5 +141,5 @@ def _parameter_column(
             continue
         slope = total_derivative(value, p, lumped)
         if slope != 0:
-            slopes[c] = hoister.symbol_for(slope)
+            slopes[c] = hoister.symbol_for(slope, simplify=False)
     return [sm.Add(*(sm.diff(e, c) * s for c, s in slopes.items())) for e in f]
