@@ -318,3 +318,21 @@ def test_against_heyoka(default_var):
         _, phi, _, code = m.integrate_var(method, x0, c, 0.0, 10.0, rtol=1e-14, atol=1e-14)
         assert code == 0
         assert column_error(phi[:, :nx], theirs).max() < 1e-11
+
+
+@pytest.mark.slow
+def test_error_measured_on_the_state_alone(tmp_path, cache_dir):
+    """sensitivities.error = "state": the step control measures x alone (Phi
+    rides on its steps, fewer of them), and Phi still agrees with the
+    differences of the flow."""
+    text = DEFAULT_VAR + 'error = "state"\n'
+    alone = built(tmp_path / "gyrostat", cache_dir, text, ("c",))["c"]
+    x0, p = start(text)
+    c = alone.setup(p)
+    for method in METHODS:
+        _, phi, stats, code = alone.integrate_var(method, x0, c, 0.0, 10.0, rtol=TOL, atol=TOL)
+        assert code == 0
+        if method == "dop853":
+            assert column_error(phi, finite_differences(alone, method, x0, p, 10.0)).max() < 1e-7
+        plain = alone.integrate(method, x0, c, 0.0, 10.0, rtol=TOL, atol=TOL)[1]
+        assert stats["accepted"] <= plain["accepted"] * 1.1 + 2

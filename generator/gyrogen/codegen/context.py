@@ -19,7 +19,7 @@ from gyrogen.abi import (
     unit_and_doc,
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
-from gyrogen.codegen.integrators.taylor import state_scales
+from gyrogen.codegen.integrators.taylor import UNMEASURED, state_scales
 from gyrogen.methods import IMPLICIT, METHODS, Method, needs_jacobian
 from gyrogen.scene import Outputs, Scene
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
@@ -171,6 +171,12 @@ class SceneContext:
         opt = Optimized(setup=self.optimized.setup, rhs=self.optimized.augmented,
                         lumped=self.optimized.lumped, jacobian=jac)  # fmt: skip
         return VariationalContext(scene, eqs, opt, base=self)
+
+    @property
+    def measured(self) -> int | None:
+        """How many leading states the integrators' error norms measure:
+        every one (None), or an augmented system's x alone."""
+        return None
 
     @property
     def methods(self) -> list[Method]:
@@ -344,6 +350,11 @@ class VariationalContext(SceneContext):
         return len(self.states) - self.layout.nv
 
     @property
+    def measured(self) -> int | None:
+        """x alone with the scene's sensitivities.error = "state"."""
+        return self.nx_state if self.layout.error == "state" else None
+
+    @property
     def state_rows(self) -> list[Row]:
         n, var = self.nx_state, self.layout
         x = [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states[:n])]
@@ -369,13 +380,16 @@ class VariationalContext(SceneContext):
     def jet(self) -> Jet | None:
         """The augmented rhs as elementary operations: x's groups as the
         scene's, and each column's entries of one row group as a group of
-        their own (magnitudes)."""
+        their own (magnitudes), or none bounding the step (x measured alone)."""
         if not any(m.taylor for m in self.methods):
             return None
         n, var = self.nx_state, self.layout
         scales = state_scales([s.name for s in self.states[:n]])
-        scales += tuple((f"d {scales[i][0]} / d {var.columns[k]}", "magnitude")
-                        for i, k in var.entries)  # fmt: skip
+        if self.measured is not None:
+            scales += ((UNMEASURED, "magnitude"),) * var.nv
+        else:
+            scales += tuple((f"d {scales[i][0]} / d {var.columns[k]}", "magnitude")
+                            for i, k in var.entries)  # fmt: skip
         return replace(decompose(self.optimized.rhs, self.states), scales=scales)
 
 

@@ -93,7 +93,14 @@ def files(unit: SceneContext) -> dict[str, str]:
         "ode_trig": trig_text("c", unit.prefix, unit.macro, ode_trig),
         "methods": unit.methods,
         "ir": c_text(
-            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks, unit.jet),
+            program(
+                unit.methods,
+                unit.quaternion,
+                unit.uses_time,
+                unit.lu_blocks,
+                unit.jet,
+                unit.measured,
+            ),
             unit.prefix,
             unit.macro,
         ),

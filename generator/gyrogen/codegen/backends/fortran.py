@@ -119,7 +119,14 @@ def files(unit: SceneContext) -> dict[str, str]:
         "jac": jac,
         "methods": unit.methods,
         "ir": fortran_text(
-            program(unit.methods, unit.quaternion, unit.uses_time, unit.lu_blocks, unit.jet),
+            program(
+                unit.methods,
+                unit.quaternion,
+                unit.uses_time,
+                unit.lu_blocks,
+                unit.jet,
+                unit.measured,
+            ),
             unit.prefix,
             unit.macro,
         ),
