@@ -13,7 +13,7 @@ from scipy import integrate
 from gyrogen.codegen.context import make_context
 from gyrogen.codegen.generate import generate, unit_of
 from gyrogen.codegen.manifest import manifest
-from gyrogen.errors import SceneError
+from gyrogen.errors import SceneError, SetupRefused
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import builtin_text, parse
@@ -336,3 +336,81 @@ def test_error_measured_on_the_state_alone(tmp_path, cache_dir):
             assert column_error(phi, finite_differences(alone, method, x0, p, 10.0)).max() < 1e-7
         plain = alone.integrate(method, x0, c, 0.0, 10.0, rtol=TOL, atol=TOL)[1]
         assert stats["accepted"] <= plain["accepted"] * 1.1 + 2
+
+
+# --- hostile -------------------------------------------------------------------------------
+
+FLAT_SPIN = """
+name = "flat_spin"
+description = "spin about the intermediate axis, exactly: an unstable equilibrium"
+attitude = "quaternion"
+integrators = ["dopri5", "dop853", "taylor"]
+
+[parameters]
+m_a = 10.0
+m_b = 2.0
+I11 = 12.0
+I22 = 9.0
+I33 = 15.0
+I13 = 0.0
+I = 0.05
+J = 0.08
+l1 = 0.0
+l3 = 0.0
+
+[effects]
+translation = false
+rotor_angle = false
+torque = "none"
+
+[simulate]
+initial = { u1 = 20.0 }
+
+[sensitivities]
+wrt = ["state"]
+"""
+
+
+@pytest.mark.slow
+def test_phi_overflowing_is_a_code(tmp_path, cache_dir):
+    """On an unstable equilibrium x stays put while Phi grows as e^(5 t):
+    past t = 135 s it overflows. The run stops with a code (non-finite for
+    the pairs; step size underflow for taylor, whose coefficients overflow
+    first) and returns its last finite state and Phi, where the plain run
+    goes on."""
+    m = built(tmp_path / "spin", cache_dir, FLAT_SPIN, ("c",))["c"]
+    x0, _ = start(FLAT_SPIN)
+    c = m.setup([])
+    codes = {"dopri5": 3, "dop853": 3, "taylor": 1}
+    for method, expected in codes.items():
+        assert m.integrate(method, x0, c, 0.0, 400.0, rtol=1e-10, atol=1e-10)[2] == 0
+        x, phi, stats, code = m.integrate_var(method, x0, c, 0.0, 400.0, rtol=1e-10, atol=1e-10)
+        assert code == expected
+        assert 100.0 < stats["t"] < 400.0
+        assert np.isfinite(x).all() and np.isfinite(phi).all()
+        assert np.abs(phi).max() > 1e300
+
+
+@pytest.mark.slow
+def test_nan_parameters_refused(default_var):
+    """A NaN parameter is refused by setup (its code 1), and NaN constants
+    by integrate_var in one line, and a NaN start ends with the code of a
+    non-finite state."""
+    m = default_var["c"]
+    x0, p = start(DEFAULT_VAR)
+    bad = p.copy()
+    bad[-1] = np.nan
+    with pytest.raises(SetupRefused, match=r"code 1\)"):
+        m.setup(bad)
+    c = m.setup(p)
+    with pytest.raises(ValueError, match="the constants c are not all finite"):
+        m.integrate_var("dop853", x0, np.where(np.arange(len(c)) == 3, np.nan, c), 0.0, 1.0)
+    x_bad = x0.copy()
+    x_bad[2] = np.nan
+    assert m.integrate_var("dop853", x_bad, c, 0.0, 1.0)[3] == 3  # a non-finite state
+
+
+def test_no_sensitivities_declared(backends):
+    """integrate_var on a scene without [sensitivities]: one line saying what to add."""
+    with pytest.raises(ValueError, match=r"declares no sensitivities: add a \[sensitivities\]"):
+        backends["c"].integrate_var("dop853", np.zeros(14), np.zeros(12), 0.0, 1.0)
