@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-methods bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-var bench-taylor bench-auto bench-clusters bench-call bench-methods bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -103,6 +103,10 @@ bench-auto: setup
 ## bench-call: us per call of Compiled.integrate and integrate_batch against the raw cffi call
 bench-call: setup
 	$(BIN)/python benchmarks/bench_call.py
+
+## bench-var: the state transition matrix's cost over the plain trajectory, per method (error of Phi with x or not)
+bench-var: setup
+	$(BIN)/python benchmarks/bench_var.py
 
 ## bench-methods: us per call and ns per step of every compiled method (raw cffi call, best of several)
 ## on the default scene and stiff_wheel; BASELINE=REV times gyrogen as of REV beside this tree,
