@@ -475,3 +475,27 @@ def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, 
     fd = finite_differences(m, "dop853", x0, p, t1, tol=tol)
     known = ~np.isnan(fd).any(axis=0)
     assert column_error(phi[:, known], fd[:, known]).max() < 1e-7, drawn.text
+
+
+@pytest.mark.slow
+def test_every_parameter_of_a_cluster(tmp_path, cache_dir):
+    """rw4_hardware with wrt naming the state and all 47 of its runtime
+    parameters (a clamped motor among them): Phi is 10 x 57 and agrees with
+    the differences of the flow, each parameter's column as the change of x
+    per relative change of the parameter against x's size (a mass's
+    sensitivity is 1e-11 of a wheel's speed: relative to itself it is noise)."""
+    runtime = parse(builtin_text("rw4_hardware"), "rw4.toml").runtime
+    assert len(runtime) == 47
+    wrt = ", ".join(f'"{n}"' for n in ("state", *runtime))
+    text = builtin_text("rw4_hardware") + f"\n[sensitivities]\nwrt = [{wrt}]\n"
+    m = built(tmp_path / "rw4", cache_dir, text, ("c",))["c"]
+    x0, p = start(text)
+    c = m.setup(p)
+    x, phi, _, code = m.integrate_var("dop853", x0, c, 0.0, 0.5, rtol=TOL, atol=TOL)
+    assert code == 0 and phi.shape == (10, 57)
+    fd = finite_differences(m, "dop853", x0, p, 0.5, rel=1e-4)
+    assert column_error(phi[:, :10], fd[:, :10]).max() < 1e-7
+    known = ~np.isnan(fd[:, 10:]).any(axis=0)
+    assert known.sum() > 40
+    size = np.maximum(1.0, np.abs(p))[known] / np.maximum(1.0, np.abs(x))[:, None]
+    assert (np.abs(phi[:, 10:][:, known] - fd[:, 10:][:, known]) * size).max() < 1e-7
