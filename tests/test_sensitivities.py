@@ -3,6 +3,9 @@ system (Phi' = J_x Phi, S' = J_x S + J_p) and Compiled.integrate_var."""
 
 from __future__ import annotations
 
+import itertools
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -511,3 +514,21 @@ def test_every_parameter_of_a_cluster(tmp_path, cache_dir):
     known = ~np.isnan(fd[:, 10:]).any(axis=0)
     assert known.sum() > 40
     assert parameter_error(phi[:, 10:][:, known], fd[:, 10:][:, known], p[known], x) < 1e-7
+
+
+@pytest.mark.slow
+def test_the_shooting_example_converges_quadratically():
+    """examples/shooting.py: Newton on Phi reaches the start that nulls the
+    nutation, each residual at most a constant times the square of the last."""
+    run = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve().parents[1] / "examples" / "shooting.py")],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert run.stdout.rstrip().endswith("converged")
+    rows = [line.split() for line in run.stdout.splitlines() if line.split()[0].isdigit()]
+    residuals = [float(r[-1]) for r in rows]
+    assert len(residuals) >= 3
+    for before, after in itertools.pairwise(residuals):
+        assert after <= 100 * before**2 + 1e-14
