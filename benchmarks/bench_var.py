@@ -11,6 +11,8 @@ each figure the best of R repeats of a loop lasting ~20 ms, the K rounds
 side by side, one after another, so that each saw the same load (printed
 before and after). Phi's error: the largest entry of |Phi - Phi_ref|
 relative to its column's largest entry, Phi_ref from taylor at 1e-15.
+Then 64 trajectories in SIMD lanes against a loop, and (when installed)
+heyoka's var_ode_sys against gyrogen's taylor.
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gyrogen.analysis.bench import heyoka_peer
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.simulate.engine import runtime_values
+from gyrogen.codegen.generate import unit_of
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_scene
 from gyrogen.scene import builtin_text, parse
@@ -97,6 +101,65 @@ def main() -> None:
             row.append(f"{t * 1e6:{width}.0f} {t / plain:6.2f} {steps:>{11 if key == 'all' else 6}}"
                        f" {column_error(phi, ref):8.1e}")  # fmt: skip
         print(" ".join(row))
+    lanes(every, x0, c, args)
+    heyoka(every, x0, c, ref, args)
+
+
+def lanes(m: Compiled, x0: np.ndarray, c: np.ndarray, args: argparse.Namespace) -> None:
+    """64 starts near x0: integrate_var_batch on one thread (SIMD lanes)
+    against a loop of integrate_var."""
+    starts = x0 + 0.01 * np.random.default_rng(1).standard_normal((64, len(x0)))
+    tol = {"rtol": args.tol, "atol": args.tol}
+    print("64 trajectories with Phi, one thread: a loop of integrate_var, integrate_var_batch")
+    for method in ("dopri5", "dop853", "taylor"):
+
+        def each(method: str = method) -> None:
+            for x in starts:
+                m.integrate_var(method, x, c, 0.0, args.t1, **tol)
+
+        def batch(method: str = method) -> None:
+            m.integrate_var_batch(method, starts, c, 0.0, args.t1, threads=1, **tol)
+
+        t_each, t_batch = best_time(each, args.repeats), best_time(batch, args.repeats)
+        print(f"{method:8} loop {t_each * 1e3:8.2f} ms  lanes {t_batch * 1e3:8.2f} ms  "
+              f"{t_each / t_batch:5.2f}x")  # fmt: skip
+
+
+def heyoka(
+    m: Compiled, x0: np.ndarray, c: np.ndarray, ref: np.ndarray, args: argparse.Namespace
+) -> None:
+    """heyoka's var_ode_sys (its Taylor method, the same rhs block) against
+    gyrogen's taylor with Phi, each at tolerances 1e-10 and 1e-13: time
+    (state and Phi reset, propagate; the JIT apart) and Phi's error."""
+    hy = heyoka_peer.module()
+    if hy is None:
+        print("heyoka is not installed: no comparison")
+        return
+    heyoka_peer.one_thread()
+    scene = parse(builtin_text("gyrostat") + '\n[sensitivities]\nwrt = ["state"]\n', "g.toml")
+    sys_ = heyoka_peer.system(hy, unit_of(scene))
+    variational = hy.var_ode_sys(sys_.pairs, hy.var_args.vars, order=1)
+    nx = len(x0)
+    start = np.concatenate([x0, np.eye(nx).ravel()])
+    print("Phi 14 x 14 over the same interval: heyoka var_ode_sys, gyrogen taylor")
+    for tol in (1e-10, 1e-13):
+        ta = hy.taylor_adaptive(variational, start, tol=tol, pars=c[: sys_.npars])
+
+        def run(ta: object = ta) -> None:
+            ta.time = 0.0  # type: ignore[attr-defined]
+            ta.state[:] = start  # type: ignore[attr-defined]
+            ta.propagate_until(args.t1)  # type: ignore[attr-defined]
+
+        run()
+        theirs = column_error(ta.state[nx:].reshape(nx, nx), ref)
+        t_theirs = best_time(run, args.repeats)
+        ours = m.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=tol, atol=tol)[1]
+        t_ours = best_time(
+            lambda tol=tol: m.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=tol, atol=tol),
+            args.repeats,
+        )
+        print(f"tol {tol:g}: heyoka {t_theirs * 1e6:8.0f} us err {theirs:.1e}   "
+              f"gyrogen {t_ours * 1e6:8.0f} us err {column_error(ours, ref):.1e}")  # fmt: skip
 
 
 if __name__ == "__main__":
