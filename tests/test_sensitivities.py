@@ -70,34 +70,40 @@ def test_build_id_unchanged_without_the_table():
 # --- the generated system, symbolically -------------------------------------------------
 
 
-def test_layout_state_first_sparse_and_counted():
+@pytest.fixture(scope="module")
+def derived():
+    """The default scene's unit with wrt = ["T", "state", "l1"]."""
+    s = scene_with("gyrostat", 'wrt = ["T", "state", "l1"]')
+    return s, make_context(s)
+
+
+def test_layout_state_first_sparse_and_counted(derived):
     """wrt's "state" gives the first nx columns wherever it stands; an entry no
     path of J's pattern reaches is not integrated; the manifest counts the
     augmented rhs's ops beside the rhs's."""
-    s = scene_with("gyrostat", 'wrt = ["T", "state"]')
-    unit = make_context(s)
+    s, unit = derived
     var = unit.optimized.variational
     names = [x.name for x in unit.states]
-    assert var.columns == (*names, "T")
+    assert var.columns == (*names, "T", "l1")
     assert var.state_columns == 14
     entries = set(var.entries)
     u1, q1 = names.index("u1"), names.index("q1")
     assert (u1, q1) not in entries  # the rates never read the attitude
     assert (q1, u1) in entries and (u1, u1) in entries
-    assert len(entries) < 14 * 15 // 2
+    assert len(entries) < 14 * 16 // 2
     data = manifest(unit, unit)
-    assert data["variational"]["columns"] == [*names, "T"]
+    assert data["variational"]["columns"] == [*names, "T", "l1"]
     assert data["variational"]["nx"] == 14 + len(entries)
     assert data["ops"]["var_rhs"] == unit.optimized.augmented.ops > data["ops"]["rhs"]
     assert data["variational"]["integrators"] == list(s.integrators)
 
 
-def test_parameter_work_in_setup():
+def test_parameter_work_in_setup(derived):
     """d c / d p is computed once, by setup: the augmented rhs reads no
     parameter, and the scene's constants keep their values (the variational
     system's come after them, before the condition number)."""
-    plain = make_context(parse(builtin_text("gyrostat"), "g.toml"))
-    unit = make_context(scene_with("gyrostat", 'wrt = ["state", "T", "l1"]'))
+    plain = unit_of(parse(builtin_text("gyrostat"), "g.toml"))  # the full model, built once
+    unit = derived[1]
     params = set(unit.params)
     assert not unit.optimized.augmented.free_symbols & params
     assert unit.nc > plain.nc
