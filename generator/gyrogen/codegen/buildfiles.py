@@ -43,9 +43,11 @@ def _context(manifest: dict[str, Any]) -> dict[str, Any]:
         raise GyrogenError(
             f"scene {prefix} has no C sources: the library build files need the c target"
         )
-    c_sources = [names[k] for k in ("c_source", "c_ode_source") if k in names]
-    c_headers = [names[k] for k in ("c_header", "c_ode_header") if k in names]
-    fortran = [names[k] for k in ("fortran", "fortran_ode") if k in names]  # module order
+    # the scene's files, then its augmented system's (<prefix>_var, [sensitivities])
+    units = [names, *([manifest["variational"]["files"]] if "variational" in manifest else [])]
+    c_sources = [u[k] for u in units for k in ("c_source", "c_ode_source") if k in u]
+    c_headers = [u[k] for u in units for k in ("c_header", "c_ode_header") if k in u]
+    fortran = [u[k] for u in units for k in ("fortran", "fortran_ode") if k in u]  # module order
     return {
         **ctx,
         "c_source": names["c_source"],

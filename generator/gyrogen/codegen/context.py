@@ -21,15 +21,16 @@ from gyrogen.abi import (
 from gyrogen.abi_rotors import AXIS, rotor_name
 from gyrogen.codegen.integrators.driver import Event, Grid
 from gyrogen.codegen.integrators.program import Program, program
-from gyrogen.codegen.integrators.taylor import state_scales
-from gyrogen.methods import METHODS, Method, needs_jacobian
-from gyrogen.scene import Scene
+from gyrogen.codegen.integrators.taylor import UNMEASURED, state_scales
+from gyrogen.methods import IMPLICIT, METHODS, Method, needs_jacobian
+from gyrogen.scene import Outputs, Scene
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import Equations
 from gyrogen.symbolic.jet import Jet, decompose
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
 from gyrogen.symbolic.specialize import specialize
+from gyrogen.symbolic.variational import Variational
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,8 @@ class SceneContext:
     @cached_property
     def ops(self) -> dict[str, int]:
         ops = {"setup": self.optimized.setup.ops, "rhs": self.optimized.rhs.ops}
+        if self.optimized.augmented is not None:
+            ops["var_rhs"] = self.optimized.augmented.ops
         ops.update({o.name: o.block.ops for o in self.outputs})
         if self.events is not None:
             ops["events"] = self.events.block.ops
@@ -147,6 +150,38 @@ class SceneContext:
         scales = state_scales([s.name for s in self.states])
         return replace(decompose(self.optimized.rhs, self.states), scales=scales)
 
+    @cached_property
+    def variational(self) -> VariationalContext | None:
+        """The augmented system (x, Phi, S) as a unit of its own under the
+        prefix <prefix>_var, with the scene's setup (its constants include
+        the variational system's): every explicit integrator instantiated
+        for it, scalar, lanes and Fortran, through the same descriptions."""
+        var = self.optimized.variational
+        if var is None or self.optimized.augmented is None:
+            return None
+        jac = self.optimized.augmented_jacobian
+        kept = [m for m in self.scene.integrators if jac is not None or m not in IMPLICIT]
+        scene = self.scene.model_copy(
+            update={
+                "name": f"{self.scene.name}_var",
+                "outputs": Outputs(),
+                "integrators": kept,
+                "sensitivities": None,
+            }
+        )
+        eqs = replace(
+            self.equations, states=(*self.states, *var.symbols), outputs={}, perturbed=None
+        )
+        opt = Optimized(setup=self.optimized.setup, rhs=self.optimized.augmented,
+                        lumped=self.optimized.lumped, jacobian=jac)  # fmt: skip
+        return VariationalContext(scene, eqs, opt, base=self)
+
+    @property
+    def measured(self) -> int | None:
+        """How many leading states the integrators' error norms measure:
+        every one (None), or an augmented system's x alone."""
+        return None
+
     @property
     def methods(self) -> list[Method]:
         """The scene's integrators, from the registry (gyrogen.methods)."""
@@ -170,7 +205,13 @@ class SceneContext:
         """The integrators' functions, one description printed to every
         target (gyrogen.codegen.integrators.program)."""
         return program(
-            self.methods, self.quaternion, self.uses_time, self.lu_blocks, self.jet, self.event_grid
+            self.methods,
+            self.quaternion,
+            self.uses_time,
+            self.lu_blocks,
+            self.jet,
+            self.event_grid,
+            self.measured,
         )
 
     @property
@@ -324,11 +365,72 @@ class SceneContext:
             if not METHODS[m].fixed_step:  # the output grids
                 for g in (f"{m}_grid", f"{m}_grid_batch"):
                     c[g], f[g] = f"{p}_{g}", f"{p}_f_{g}"
-                if self.scene.events:  # the grid with the events located
+                if self.event_grid is not None:  # the grid with the events located
                     c[f"{m}_events"], f[f"{m}_events"] = f"{p}_{m}_events", f"{p}_f_{m}_events"
         if self.scene.integrators:
             c["ode_strerror"] = f"{p}_ode_strerror"
         return {"c": c, "fortran": f}
+
+
+@dataclass(frozen=True)
+class VariationalContext(SceneContext):
+    """The augmented system y = (x, Phi's and S's entries that can be
+    nonzero), its rows documented by what they differentiate."""
+
+    base: SceneContext | None = None
+
+    @property
+    def layout(self) -> Variational:
+        assert self.base is not None and self.base.optimized.variational is not None
+        return self.base.optimized.variational
+
+    @property
+    def nx_state(self) -> int:
+        """The state's own size: y[0 .. nx_state) is x."""
+        return len(self.states) - self.layout.nv
+
+    @property
+    def measured(self) -> int | None:
+        """x alone with the scene's sensitivities.error = "state"."""
+        return self.nx_state if self.layout.error == "state" else None
+
+    @property
+    def state_rows(self) -> list[Row]:
+        n, var = self.nx_state, self.layout
+        x = [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states[:n])]
+        return x + [
+            Row(
+                n + r,
+                s.name,
+                "",
+                f"d {self.states[i].name} / d {var.columns[k]}(t0): Phi[{i}][{k}]",
+            )
+            for r, (s, (i, k)) in enumerate(zip(var.symbols, var.entries, strict=True))
+        ]
+
+    @cached_property
+    def lu_blocks(self) -> Blocks | None:
+        """The diagonal blocks of the augmented Jacobian: x's, then each
+        column's of Phi; the variational part's reads of x are eliminated
+        below them (symbolic.blocks.diagonal_blocks' coupled_from)."""
+        jac = self.optimized.jacobian
+        return None if jac is None else diagonal_blocks(jac.outputs, self.nx, self.nx_state)
+
+    @cached_property
+    def jet(self) -> Jet | None:
+        """The augmented rhs as elementary operations: x's groups as the
+        scene's, and each column's entries of one row group as a group of
+        their own (magnitudes), or none bounding the step (x measured alone)."""
+        if not any(m.taylor for m in self.methods):
+            return None
+        n, var = self.nx_state, self.layout
+        scales = state_scales([s.name for s in self.states[:n]])
+        if self.measured is not None:
+            scales += ((UNMEASURED, "magnitude"),) * var.nv
+        else:
+            scales += tuple((f"d {scales[i][0]} / d {var.columns[k]}", "magnitude")
+                            for i, k in var.entries)  # fmt: skip
+        return replace(decompose(self.optimized.rhs, self.states), scales=scales)
 
 
 def versions() -> dict[str, str]:
@@ -344,7 +446,10 @@ def build_id(scene: Scene) -> str:
 
 def make_context(scene: Scene) -> SceneContext:
     eqs = specialize(scene)
-    return SceneContext(scene, eqs, optimize(eqs, jacobian=needs_jacobian(scene.integrators)))
+    var = scene.sensitivities
+    wrt, error = (var.wrt, var.error) if var is not None else ((), "all")
+    jacobian = needs_jacobian(scene.integrators)
+    return SceneContext(scene, eqs, optimize(eqs, jacobian, wrt, error))
 
 
 def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:

@@ -26,10 +26,12 @@ def full_model_unit() -> SceneContext:
 def render_all(unit: SceneContext, lib: bool = False) -> dict[str, str]:
     """Every file of the scene; with lib, also CMakeLists.txt and <prefix>.mk."""
     files: dict[str, str] = {}
-    if "c" in unit.scene.targets:
-        files.update(c.files(unit))
-    if "fortran" in unit.scene.targets:
-        files.update(fortran.files(unit))
+    var = unit.variational
+    for u in (unit, *([var] if var is not None else [])):
+        if "c" in unit.scene.targets:
+            files.update(c.files(u))
+        if "fortran" in unit.scene.targets:
+            files.update(fortran.files(u))
     data = manifest(unit, full_model_unit())
     files["manifest.json"] = json.dumps(data, indent=2, sort_keys=True) + "\n"
     if lib:

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from gyrogen.abi import ODE_CODES, STATS_FIELDS, Code
-from gyrogen.codegen.context import SceneContext
+from gyrogen.codegen.context import SceneContext, VariationalContext
 from gyrogen.methods import signature_of
 
 
@@ -48,6 +48,26 @@ def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
         "full_model": {"nx": full.nx, "np": full.np, "ops": full.ops},
         "files": _files(unit),
         "versions": unit.versions,
+        **({"variational": variational(unit.variational, full)} if unit.variational else {}),
+    }
+
+
+def variational(var: VariationalContext, full: SceneContext) -> dict[str, Any]:
+    """The augmented system's unit (<prefix>_var: y = x, then Phi's entries
+    that can be nonzero), its layout: Phi's columns (the states' names when
+    wrt has "state", then the parameters'), entries[r] = [row, column] of
+    y[nx + r], the others 0 for all t; error: what the step control measures."""
+    layout = var.layout
+    return {
+        **manifest(var, full),
+        "wrt": list(var.base.scene.sensitivities.wrt)
+        if var.base and var.base.scene.sensitivities
+        else [],
+        "columns": list(layout.columns),
+        "entries": [list(e) for e in layout.entries],
+        "nx_state": var.nx_state,
+        "state_columns": layout.state_columns,
+        "error": layout.error,
     }
 
 

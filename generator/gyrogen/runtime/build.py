@@ -81,11 +81,11 @@ def _plan(source_dir: Path, language: Language, portable: bool = False) -> _Plan
         raise BuildError(
             f"scene {manifest['prefix']} has no {language} target (targets: {manifest['targets']})"
         )
-    files = manifest["files"]
     wanted = ["c_header", "c_source", "c_ode_header", "c_ode_source"]
     if language == "fortran":
         wanted = ["fortran", "fortran_ode"]  # in this order: the second uses the first
-    sources = [source_dir / files[k] for k in wanted if k in files]
+    units = [manifest, *([manifest["variational"]] if "variational" in manifest else [])]
+    sources = [source_dir / u["files"][k] for u in units for k in wanted if k in u["files"]]
     ctx = _glue_context(manifest, language)
     glue = render("cffi/glue.c.jinja", **ctx)
     cdef = render("cffi/cdef.h.jinja", **ctx)
@@ -109,9 +109,15 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
     ]
     linear = ["linear"] if "linear" in names else []
     declared = ["setup", *per_call, *linear, *integrators]
+    var = manifest.get("variational")
+    augmented = []  # the augmented system's rhs and integrators (<prefix>_var_*)
+    if var is not None:
+        var_names = var["functions"][language]
+        keys = ["rhs", *(n for m in var["integrators"] for n in (m, f"{m}_batch"))]
+        augmented = [(signature_of(k), var_names[k]) for k in keys]
     return {
         "functions": [names[f] for f in per_call],
-        "declared": [(signature_of(k), names[k]) for k in declared],
+        "declared": [(signature_of(k), names[k]) for k in declared] + augmented,
         "methods": manifest["integrators"],
         "abi": abi,
         "nx": manifest["nx"],

@@ -15,6 +15,7 @@ import numpy as np
 from gyrogen import abi, methods
 from gyrogen.errors import BuildError, SetupRefused
 from gyrogen.runtime.call_checks import THREADS_MAX, controls_error, grid_times, real_only
+from gyrogen.runtime.variational import Layout
 
 Language = Literal["c", "fortran"]
 
@@ -710,6 +711,102 @@ class Compiled:
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t0, t1, rtol, atol, h0, max_steps, steps) from None
         return x, stats, codes
+
+    def integrate_var(
+        self,
+        method: str,
+        x0: np.ndarray,
+        c: np.ndarray,
+        t0: float,
+        t1: float,
+        **kwargs: Any,
+    ) -> tuple[np.ndarray, np.ndarray, Stats, int]:
+        """Integrate one state with its state transition matrix and
+        sensitivities (the scene's [sensitivities]).
+
+        The augmented system y = (x, Phi's entries that can be nonzero) is
+        integrated by the method's own code instantiated for it
+        (<prefix>_var_<method>): Phi' = J_x Phi from Phi(t0) = I, S' = J_x S
+        + J_p from S(t0) = 0. Phi is the derivative of the flow of the ODE:
+        a quaternion start is normalized by the integrator, but Phi does not
+        differentiate that normalization.
+
+        Parameters
+        ----------
+        method : str
+            One of the augmented system's integrators (the scene's explicit
+            ones: rk4, dopri5, dop853, taylor).
+        x0 : array_like, shape (nx,)
+            The start state; not changed.
+        c : array_like, shape (nc,)
+            The constants from `setup` (they include the variational
+            system's).
+        t0, t1 : float
+            Start and end time.
+        rtol, atol, h0, max_steps, steps
+            As for `integrate`; the step control measures x and Phi, or x
+            alone (the scene's sensitivities.error).
+
+        Returns
+        -------
+        x : numpy.ndarray, shape (nx,)
+            The state at t1.
+        Phi : numpy.ndarray, shape (nx, ncol)
+            dx(t1)/dx0 in the first nx columns (when wrt has "state"), then
+            dx(t1)/dp for each parameter of wrt, in wrt's order.
+        stats : Stats
+            The step statistics.
+        code : int
+            As for `integrate`.
+
+        Raises
+        ------
+        ValueError
+            The scene declares no sensitivities, or as for `integrate`.
+        """
+        var, layout = self._variational
+        y, stats, code = var.integrate(method, layout.pack(self._state(x0)), c, t0, t1, **kwargs)
+        x, phi = layout.unpack(y)
+        return x, phi, stats, code
+
+    def integrate_var_batch(
+        self,
+        method: str,
+        x0s: np.ndarray,
+        c: np.ndarray,
+        t0: float,
+        t1: float,
+        threads: int | None = None,
+        **kwargs: Any,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """`integrate_var` for many states with one set of constants, as
+        `integrate_batch` (SIMD lanes for the pairs and the Taylor method).
+
+        Returns
+        -------
+        x : numpy.ndarray, shape (n, nx)
+        Phi : numpy.ndarray, shape (n, nx, ncol)
+        stats : numpy.ndarray, shape (n,)
+        codes : numpy.ndarray, shape (n,)
+        """
+        var, layout = self._variational
+        x0 = np.array(real_only(x0s, "initial states"), dtype=np.float64, ndmin=2)
+        if x0.ndim != 2 or x0.shape[1] != self.nx:
+            raise ValueError(f"initial states must have shape (n, {self.nx}), not {x0.shape}")
+        y, stats, codes = var.integrate_batch(method, layout.pack(x0), c, t0, t1, threads, **kwargs)
+        x, phi = layout.unpack(y)
+        return x, phi, stats, codes
+
+    @cached_property
+    def _variational(self) -> tuple[Compiled, Layout]:
+        """The augmented system's functions in this build, and its layout."""
+        var = self.manifest.get("variational")
+        if var is None:
+            raise ValueError(
+                f"scene {self.manifest['prefix']} declares no sensitivities: add a "
+                '[sensitivities] table (wrt = ["state", ...]) and generate it again'
+            )
+        return Compiled(self.language, var, self.ffi, self.lib), Layout.of(var)
 
     @cached_property
     def _batches(self) -> dict[str, tuple[Any, bool]]:

@@ -32,7 +32,7 @@ from pydantic import (
 
 from gyrogen import methods
 from gyrogen.abi import CONTROLLER_PARAMETERS, MIN_RTOL, PARAMETERS, STATES
-from gyrogen.abi_rotors import MAX_ROTORS
+from gyrogen.abi_rotors import MAX_ROTORS, rotor_name
 from gyrogen.errors import SceneError
 from gyrogen.limits import MAX_EVENTS, MAX_SCENE_BYTES
 from gyrogen.scene import events as scene_events
@@ -48,6 +48,7 @@ from gyrogen.scene.rules import (
     check_physics,
     check_quaternion,
     check_table,
+    check_wrt,
     parameter_value,
 )
 
@@ -120,6 +121,24 @@ class Simulate(_Strict):
         return dt
 
 
+class Sensitivities(_Strict):
+    wrt: list[str] = Field(min_length=1)
+    """What the variational system differentiates the flow with respect to,
+    in the order of Phi's columns: "state" (the initial state: nx columns)
+    and runtime parameters by name (one column each)."""
+    error: Literal["all", "state"] = "all"
+    """What the step-size control measures: the state together with Phi
+    ("all"), or the state alone ("state": Phi rides on the state's steps)."""
+
+    @field_validator("wrt")
+    @classmethod
+    def _once(cls, v: list[str]) -> list[str]:
+        seen = [n for i, n in enumerate(v) if n in v[:i]]
+        if seen:
+            raise ValueError(f"{seen[0]!r} is listed twice")
+        return v
+
+
 class Scene(_Strict):
     name: str
     """Also the prefix of every generated C symbol and file."""
@@ -151,6 +170,9 @@ class Scene(_Strict):
     events: Annotated[list[Event], Field(max_length=MAX_EVENTS)] = Field(default_factory=list)
     """Functions g(t, x) whose zero crossings the integrators locate
     (gyrogen.scene.events): in states, parameters, outputs and t."""
+    sensitivities: Sensitivities | None = None
+    """Generate the variational equations too (the state transition matrix
+    and the sensitivities to runtime parameters): <prefix>_var_*."""
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: Any) -> Any:
@@ -161,6 +183,8 @@ class Scene(_Strict):
             data.pop("equilibrium", None)  # the dump before linear models
         if not self.events:
             data.pop("events", None)  # the dump before events
+        if self.sensitivities is None:
+            data.pop("sensitivities", None)  # the dump before sensitivities
         if isinstance(data.get("outputs"), dict) and not self.outputs.linear_model:
             data["outputs"].pop("linear_model", None)  # the dump before linear models
         if not self.rotors:
@@ -231,7 +255,19 @@ class Scene(_Strict):
         outputs = {n: k for n, k in sizes.items() if getattr(self.outputs, n)}
         scene_events.check(self.events, self.states, set(self.parameters), outputs)
         self._series_where_smooth()
+        if self.sensitivities is not None:
+            check_wrt(self.sensitivities.wrt, self.runtime, self._folded_names())
         return self
+
+    def _folded_names(self) -> set[str]:
+        """Every parameter name this scene folds to a number (a cluster's
+        rotor keys too)."""
+        names = set(self.folded())
+        for k, r in enumerate(self.rotors, 1):
+            for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *r.law().items()):
+                if v != "runtime":
+                    names.add(rotor_name(key, k))
+        return names
 
     def _series_where_smooth(self) -> None:
         """A Taylor series is offered only where the rhs is smooth: left out

@@ -229,3 +229,22 @@ def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
     for i, (t, torque_value) in enumerate(table):
         if why := folded_size(torque_value):
             raise ValueError(f"torque_table[{i}]: T = {torque_value!r} at t = {t:g}: {why}")
+
+
+WRT_STATE = "state"
+"""[sensitivities] wrt's name for the initial state (nx columns of Phi)."""
+
+
+def check_wrt(wrt: list[str], runtime: tuple[str, ...], folded: set[str]) -> None:
+    """[sensitivities] wrt: "state" or runtime parameters, each once (the
+    duplicate is the field's own check)."""
+    for i, name in enumerate(wrt):
+        if name == WRT_STATE or name in runtime:
+            continue
+        where = f"sensitivities.wrt[{i}]: {shown(name)}"
+        if name in folded:
+            raise ValueError(
+                f'{where} is folded to a number in this scene: make it "runtime" to '
+                "differentiate with respect to it"
+            )
+        raise ValueError(f'{where} is neither "state" nor a runtime parameter of this scene')

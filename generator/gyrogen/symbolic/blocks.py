@@ -26,6 +26,10 @@ class Blocks:
     upper: tuple[tuple[int, ...], ...]
     """Per row i: the columns j > i where U can be nonzero: the rest of the
     block (fill-in), and beyond it any column some row of the block uses."""
+    below: tuple[tuple[int, ...], ...] = ()
+    """Per column k: the rows past k's block where L can be nonzero (an
+    augmented system's coupling, diagonal_blocks' coupled_from, and its
+    fill-in); empty for a block upper triangular matrix."""
 
     @property
     def start(self) -> list[int]:
@@ -39,17 +43,31 @@ class Blocks:
 
     @property
     def lower(self) -> list[list[int]]:
-        """Per row i: the columns j < i where L can be nonzero (its block's)."""
-        return [list(range(s, i)) for i, s in enumerate(self.start)]
+        """Per row i: the columns j < i where L can be nonzero: those below
+        which it is coupled (below), then its block's."""
+        coupled: list[list[int]] = [[] for _ in self.start]
+        for k, rows in enumerate(self.below):
+            for i in rows:
+                coupled[i].append(k)
+        return [coupled[i] + list(range(s, i)) for i, s in enumerate(self.start)]
 
 
-def diagonal_blocks(entries: Sequence[sm.Expr], n: int) -> Blocks:
+def diagonal_blocks(entries: Sequence[sm.Expr], n: int, coupled_from: int = 0) -> Blocks:
     """The finest partition of range(n) into intervals such that every
     nonzero J[i][j] below the diagonal (j < i, row-major entries) has i and j
-    in one interval. A full pattern gives one block: the dense LU."""
+    in one interval. A full pattern gives one block: the dense LU.
+
+    With coupled_from (an augmented system: x, then its variational part,
+    which reads x while x reads none of it), an entry with j < coupled_from
+    <= i joins no blocks: the decomposition eliminates it as a row below
+    its column's block (Blocks.below), pivoting within the blocks still."""
     if len(entries) != n * n:
         raise ValueError(f"expected {n * n} Jacobian entries, got {len(entries)}")
-    lowest = [max([j, *(i for i in range(j + 1, n) if entries[i * n + j] != 0)]) for j in range(n)]
+
+    def counts(i: int, j: int) -> bool:
+        return entries[i * n + j] != 0 and not j < coupled_from <= i
+
+    lowest = [max([j, *(i for i in range(j + 1, n) if counts(i, j))]) for j in range(n)]
     spans, start, end = [], 0, 0
     for k in range(n):
         end = max(end, lowest[k] + 1)
@@ -60,4 +78,25 @@ def diagonal_blocks(entries: Sequence[sm.Expr], n: int) -> Blocks:
     for s, e in spans:
         used = {j for r in range(s, e) for j in range(e, n) if entries[r * n + j] != 0}
         upper += [tuple(j for j in range(i + 1, n) if j < e or j in used) for i in range(s, e)]
-    return Blocks(tuple(spans), tuple(upper))
+    if not coupled_from:
+        return Blocks(tuple(spans), tuple(upper))
+    return Blocks(tuple(spans), tuple(upper), _below(entries, n, spans, upper))
+
+
+def _below(
+    entries: Sequence[sm.Expr],
+    n: int,
+    spans: list[tuple[int, int]],
+    upper: list[tuple[int, ...]],
+) -> tuple[tuple[int, ...], ...]:
+    """Per column k, the rows past k's block that are nonzero in column k
+    when the decomposition reaches it: the coupling entries, and what
+    eliminating earlier columns fills in (row k's U pattern, upper[k])."""
+    nonzero = {(i, j) for i in range(n) for j in range(n) if entries[i * n + j] != 0}
+    end = [e for s, e in spans for _ in range(s, e)]
+    out = []
+    for k in range(n):
+        rows = tuple(i for i in range(end[k], n) if (i, k) in nonzero)
+        nonzero |= {(i, c) for i in rows for c in upper[k]}
+        out.append(rows)
+    return tuple(out)

@@ -26,13 +26,15 @@ class Hoister:
         self.values: list[sm.Expr] = []
         self._index: dict[sm.Expr, int] = {}
 
-    def symbol_for(self, coeff: sm.Expr) -> sm.Expr:
-        coeff = sm.factor(sm.cancel(coeff))
+    def symbol_for(self, coeff: sm.Expr, simplify: bool = True) -> sm.Expr:
+        """coeff's constant; simplify: factored first (a derivative's many
+        long coefficients are not: setup's CSE shares their terms)."""
+        coeff = sm.factor(sm.cancel(coeff)) if simplify else coeff
         if coeff.is_number:
             return as_double(coeff)
         if coeff in self._index:
             return constants(self._index[coeff] + 1)[-1]
-        neg = sm.factor(-coeff)
+        neg = sm.factor(-coeff) if simplify else -coeff
         if neg in self._index:
             return -constants(self._index[neg] + 1)[-1]
         self._index[coeff] = len(self.values)

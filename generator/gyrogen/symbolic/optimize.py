@@ -22,6 +22,7 @@ from gyrogen import physics
 from gyrogen.symbolic.equations import TIME, Equations
 from gyrogen.symbolic.hoist import Hoister, hoist
 from gyrogen.symbolic.literals import as_double, writable_form
+from gyrogen.symbolic.variational import IMPLICIT_MAX_NY, Variational, variational
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,15 @@ class Optimized:
     one after another."""
     events: Block | None = None
     """The scene's events g(t, x), per call (their constants after the others)."""
+    variational: Variational | None = None
+    """The variational system's layout (the scene's [sensitivities])."""
+    augmented: Block | None = None
+    """d/dt of (x, the entries of Phi and S), one CSE over f and the
+    variational part (symbolic.variational)."""
+    augmented_jacobian: Block | None = None
+    """The augmented system's Jacobian, row-major, for the implicit methods
+    (when they are wanted and the system is small enough for them:
+    variational.IMPLICIT_MAX_NY)."""
 
     @property
     def nc(self) -> int:
@@ -158,9 +168,16 @@ def _temporaries() -> Iterator[sm.Symbol]:
     return sm.numbered_symbols("tmp", real=True)
 
 
-def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
+def optimize(
+    eqs: Equations,
+    jacobian: bool = False,
+    wrt: Sequence[str] = (),
+    error: str = "all",
+) -> Optimized:
     """Lumped + hoisted + CSE: the variant gyrogen generates; with jacobian,
-    also d(dx/dt)/dx for the implicit integrators."""
+    also d(dx/dt)/dx for the implicit integrators; with wrt (the scene's
+    [sensitivities]), also the variational system (its constants after all
+    the others but setup's condition number)."""
     inverse = block_inverse(eqs.mass_matrix)
     udot = inverse * eqs.forcing
     hoister = Hoister(eqs.gather)
@@ -185,6 +202,15 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
         if eqs.events
         else None
     )
+    var, augmented, augmented_jac = None, None, None
+    if wrt:
+        f = [e.xreplace(inline) for e in (*kin, *dyn)]
+        var = variational(f, eqs.states, eqs.params, wrt, error, hoister, eqs.lumped)
+        augmented = _rhs_block(shared, [*kin, *dyn, *var.derivatives], eqs.gather)
+        ny = len(eqs.states) + var.nv
+        if jacobian and ny <= IMPLICIT_MAX_NY:
+            y = (*eqs.states, *var.symbols)
+            augmented_jac = _sparse_jacobian([*f, *var.derivatives], y)
     cluster = eqs.coupled.shape[0] == 3  # no reduced mass to multiply out
     values = [v if cluster else _multiplied_out(v, eqs.lumped) for v in hoister.values]
     det = sm.S.Zero if cluster else _multiplied_out(sm.Matrix(eqs.coupled).det(), eqs.lumped)
@@ -197,6 +223,9 @@ def optimize(eqs: Equations, jacobian: bool = False) -> Optimized:
         jacobian=jac,
         linear=linear,
         events=events,
+        variational=var,
+        augmented=augmented,
+        augmented_jacobian=augmented_jac,
     )
 
 
@@ -305,6 +334,16 @@ def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
     """Row-major d f_i / d x_j of the hoisted right-hand side: it reads the
     same constants, so setup covers it too."""
     entries = [sm.diff(fi, xj) for fi in f for xj in x]
+    return _cse(entries, _temporaries())
+
+
+def _sparse_jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
+    """_jacobian, each row differentiated only by the states it reads (a
+    large augmented system is mostly zeros)."""
+    entries = []
+    for fi in f:
+        read = fi.free_symbols
+        entries += [sm.diff(fi, xj) if xj in read else sm.S.Zero for xj in x]
     return _cse(entries, _temporaries())
 
 

@@ -43,6 +43,9 @@ from gyrogen.codegen.ir.nodes import (
 )
 
 NX = Const("NX")
+NE = Const("NE")
+"""The states the error norms measure, 0 .. NE-1: NX, or an augmented
+system's x alone (the scene's sensitivities.error; program.program sets it)."""
 i = Var("i")
 x, xnew, dx, comp = Var("x"), Var("xnew"), Var("dx"), Var("comp")
 t0, t1, h, h0, c = Var("t0"), Var("t1"), Var("h"), Var("h0"), Var("c")
@@ -199,8 +202,8 @@ def error_norm() -> Func:
     err, total, e = Var("err"), Var("total"), Var("e")
     body = (
         assign(total, 0.0),
-        For("i", NX, (assign(e, scaled(err[i], i)), assign(total, total + e * e)), ("e",)),
-        Return(fn("sqrt", total / NX)),
+        For("i", NE, (assign(e, scaled(err[i], i)), assign(total, total + e * e)), ("e",)),
+        Return(fn("sqrt", total / NE)),
     )
     doc = (
         "The standard error norm: sqrt(mean((err_i / sk_i)^2)) with",

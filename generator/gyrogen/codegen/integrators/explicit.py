@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from gyrogen.codegen.integrators import driver
 from gyrogen.codegen.integrators.common import (
+    NE,
     NX,
     STATS,
     code,
@@ -191,7 +192,7 @@ def trial(m: Method) -> list[S]:
             assign(err3, 0.0),
             For(
                 "i",
-                NX,
+                NE,
                 (
                     assign(e5, scaled(combo(tab.error()), i)),
                     assign(e3, scaled(combo(tab.error3()), i)),
@@ -201,7 +202,7 @@ def trial(m: Method) -> list[S]:
                 ("e5", "e3"),
             ),
             assign(deno, err5 + Num(0.01) * err3),
-            assign(err, sel(cmp(deno, ">", 0.0), fn("abs", h) * err5 / fn("sqrt", NX * deno), 0.0)),
+            assign(err, sel(cmp(deno, ">", 0.0), fn("abs", h) * err5 / fn("sqrt", NE * deno), 0.0)),
         ]
     total, e = Var("total"), Var("e")
     return [
@@ -210,11 +211,11 @@ def trial(m: Method) -> list[S]:
         assign(total, 0.0),
         For(
             "i",
-            NX,
+            NE,
             (assign(e, scaled(h * combo(tab.error()), i)), assign(total, total + e * e)),
             ("e",),
         ),
-        assign(err, fn("sqrt", total / NX)),
+        assign(err, fn("sqrt", total / NE)),
     ]
 
 

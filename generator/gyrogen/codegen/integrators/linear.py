@@ -75,8 +75,9 @@ def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
     """Gaussian elimination with partial pivoting within the diagonal blocks,
     unrolled over the columns k and over the entries of U that can be
     nonzero (Blocks.upper: what the solves read); the rows of a block as a
-    loop. Entries outside that pattern stay zero, as they would under the
-    loop over every column (l_ik times a zero)."""
+    loop, and each coupled row past it (Blocks.below) unrolled. Entries
+    outside that pattern stay zero, as they would under the loop over every
+    column (l_ik times a zero)."""
     body: list[S] = []
     piv = Var("piv")
     for k in range(nx):
@@ -100,6 +101,11 @@ def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
                 assign(piv[k], k),
                 If(not_(cmp(how.size(kk), ">", 0.0)), (Return(Bool(True), "singular"),)),
                 *how.inverse(kk),
+            ]
+        for r in blocks.below[k] if blocks.below else ():  # coupled rows past the block
+            body += [
+                *how.multiplier(Int(r * nx + k), kk),
+                *(st for c in up for st in how.update(Int(r * nx + c), k * nx + c)),
             ]
         body += [st for c in up for st in how.scale(k * nx + c, kk)]
     return (*body, Return(Bool(False)))

@@ -29,7 +29,7 @@ from gyrogen.codegen.integrators.tables import Table, lookup
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Decl, Func, S, called
+from gyrogen.codegen.ir.nodes import Decl, Func, Int, S, called, substituted
 from gyrogen.methods import Kind, Method
 from gyrogen.symbolic.blocks import Blocks
 from gyrogen.symbolic.jet import Jet
@@ -142,7 +142,10 @@ def program(
     blocks: Blocks | None = None,
     jet: Jet | None = None,
     events: driver.Grid | None = None,
+    measured: int | None = None,
 ) -> Program:
+    """The methods' functions, the lanes' and the shared ones they call;
+    measured: how many leading states the error norms measure (all: None)."""
     pairs = [m for m in methods if m.pair]
     given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet, events)
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
@@ -168,6 +171,9 @@ def program(
         if f.name in wanted:
             wanted |= called([f])
     shared = [f for f in candidates if f.name in wanted]
+    size = common.NX if measured is None else Int(measured)
+    single, lanes, shared = ([substituted(f, common.NE, size) for f in fs]
+                             for fs in (single, lanes, shared))  # fmt: skip
     return Program(shared, single, lanes, state, init)
 
 

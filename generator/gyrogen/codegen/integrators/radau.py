@@ -13,6 +13,7 @@ from __future__ import annotations
 from gyrogen import methods as registry
 from gyrogen.codegen.integrators import driver
 from gyrogen.codegen.integrators.common import (
+    NE,
     NX,
     STATS,
     code,
@@ -164,8 +165,13 @@ def error(m: Method) -> Func:
     def rms() -> list[S]:
         return [
             assign(total, 0.0),
-            each(assign(total, total + (err[i] / scal[i]) * (err[i] / scal[i]))),
-            assign(norm, fn("sqrt", total / NX)),
+            For(
+                "i",
+                NE,
+                (assign(total, total + (err[i] / scal[i]) * (err[i] / scal[i])),),
+                vector=True,
+            ),
+            assign(norm, fn("sqrt", total / NE)),
         ]
 
     body = (

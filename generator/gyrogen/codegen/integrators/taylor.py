@@ -244,6 +244,11 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False
     return [*body, If(ok, (*inside, *accepted(quaternion, known=True), *driver.reached()))]
 
 
+UNMEASURED = "unmeasured"
+"""The group of states that sets no bound on the step: an augmented
+system's variational part when its error is not measured (it rides on x's
+steps)."""
+
 SIZES = {"magnitude": fn("abs", x[i]), "angle": fn("min", fn("abs", x[i]), Num(ANGLE_SCALE))}
 """How a state of each kind (state_scales) enters its group's xmax."""
 
@@ -261,7 +266,7 @@ def bounds(jet: Jet, exact: list[int]) -> list[S]:
     out: list[S] = [assign(rp, Const("HUGE")), assign(rq, Const("HUGE"))]
     for group in dict.fromkeys(g for g, _ in scales):
         members = [n for n in range(jet.nx) if scales[n][0] == group]
-        if set(members) <= set(exact):
+        if set(members) <= set(exact) or group == UNMEASURED:
             continue
         left_out = [n for n in range(jet.nx) if n not in members]
         out += [Comment(f"the bound the {group or 'states'} set"), assign(xmax, 0.0)]

@@ -15,8 +15,8 @@ a dot, "stats.h", is a field of the statistics (stats->h, stats%h).
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field, fields
-from typing import Literal
+from dataclasses import dataclass, field, fields, replace
+from typing import Literal, TypeVar
 
 
 @dataclass(frozen=True)
@@ -312,6 +312,28 @@ def walk(node: E | S) -> Iterator[E | S]:
         for x in value if isinstance(value, tuple) else (value,):
             if isinstance(x, (E, S)):
                 yield from walk(x)
+
+
+Node = TypeVar("Node")
+
+
+def substituted(node: Node, old: E, new: E) -> Node:
+    """node with every expression equal to old replaced by new (a Func, a
+    statement, an expression or a declaration: frozen dataclasses all)."""
+    if node == old:
+        return new  # type: ignore[return-value]
+    if not hasattr(node, "__dataclass_fields__"):
+        return node
+    changes = {}
+    for f in fields(node):  # type: ignore[arg-type]
+        value = getattr(node, f.name)
+        if isinstance(value, tuple):
+            done = tuple(substituted(v, old, new) for v in value)
+        else:
+            done = substituted(value, old, new)
+        if done is not value and done != value:
+            changes[f.name] = done
+    return replace(node, **changes) if changes else node  # type: ignore[type-var]
 
 
 def called(funcs: Iterable[Func]) -> set[str]:

@@ -1,0 +1,166 @@
+"""`make bench-var`: what the state transition matrix costs over the plain
+trajectory, per compiled method, and what measuring Phi's error does.
+
+    python benchmarks/bench_var.py [--t1 T] [--tol TOL] [--repeats R] [--rounds K]
+
+The default scene with [sensitivities] wrt = ["state"] (Phi 14 x 14), built
+in C twice: error = "all" (the step control measures x and Phi) and error =
+"state" (x alone). For each method: the plain `integrate` from the scene's
+start over [0, T] at rtol = atol = TOL, then `integrate_var` in both modes;
+each figure the best of R repeats of a loop lasting ~20 ms, the K rounds
+side by side, one after another, so that each saw the same load (printed
+before and after). Phi's error: the largest entry of |Phi - Phi_ref|
+relative to its column's largest entry, Phi_ref from taylor at 1e-15.
+Then 64 trajectories in SIMD lanes against a loop, and (when installed)
+heyoka's var_ode_sys against gyrogen's taylor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from gyrogen.analysis.bench import heyoka_peer
+from gyrogen.analysis.bench.timing import best_time
+from gyrogen.analysis.simulate.engine import runtime_values
+from gyrogen.codegen.generate import unit_of
+from gyrogen.runtime.compiled import Compiled
+from gyrogen.runtime.scene_build import build_scene
+from gyrogen.scene import builtin_text, parse
+
+REFERENCE_TOL = 1e-15
+
+
+def load() -> str:
+    one, five, _ = os.getloadavg()
+    return f"load average {one:.2f} (1 min), {five:.2f} (5 min), {os.cpu_count()} cpus"
+
+
+def builds(where: Path) -> dict[str, Compiled]:
+    """The default scene with Phi, its error measured with x or not."""
+    out = {}
+    for error in ("all", "state"):
+        text = builtin_text("gyrostat") + f'\n[sensitivities]\nwrt = ["state"]\nerror = "{error}"\n'
+        _, built = build_scene(parse(text, "gyrostat.toml"), where / error, ["c"])
+        out[error] = built["c"]
+    return out
+
+
+def column_error(phi: np.ndarray, ref: np.ndarray) -> float:
+    scale = np.abs(ref).max(axis=0)
+    return float((np.abs(phi - ref).max(axis=0) / np.where(scale > 0, scale, 1.0)).max())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--t1", type=float, default=10.0)
+    ap.add_argument("--tol", type=float, default=1e-10)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=3)
+    args = ap.parse_args()
+    scene = parse(builtin_text("gyrostat"), "gyrostat.toml")
+    x0, p = np.array(scene.initial_state()), runtime_values(scene)
+    with tempfile.TemporaryDirectory() as tmp:
+        built = builds(Path(tmp))
+    every, alone = built["all"], built["state"]
+    c = every.setup(p)
+    methods = [m for m in every.manifest["variational"]["integrators"] if m != "rk4"]
+    tol = {"rtol": args.tol, "atol": args.tol}
+    ref = every.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=REFERENCE_TOL,
+                              atol=REFERENCE_TOL)[1]  # fmt: skip
+    print(f"Phi 14 x 14 on the default scene over {args.t1:g} s, rtol = atol = {args.tol:g}")
+    print(f"before: {load()}")
+    best: dict[tuple[str, str], float] = {}
+    for _ in range(args.rounds):
+        for m in methods:
+            calls = {
+                "plain": lambda m=m: every.integrate(m, x0, c, 0.0, args.t1, **tol),
+                "all": lambda m=m: every.integrate_var(m, x0, c, 0.0, args.t1, **tol),
+                "state": lambda m=m: alone.integrate_var(m, x0, c, 0.0, args.t1, **tol),
+            }
+            for key, call in calls.items():
+                t = best_time(call, args.repeats)
+                best[(m, key)] = min(best.get((m, key), np.inf), t)
+    print(f"after:  {load()}")
+    head = f"{'method':8} {'plain us':>10} {'Phi/all us':>11} {'ratio':>6} {'steps':>11}"
+    print(head + f" {'err Phi':>8} {'Phi/state us':>13} {'ratio':>6} {'steps':>6} {'err Phi':>8}")
+    for m in methods:
+        plain = best[(m, "plain")]
+        steps_plain = every.integrate(m, x0, c, 0.0, args.t1, **tol)[1]["accepted"]
+        row = [f"{m:8} {plain * 1e6:10.0f}"]
+        for key, build in (("all", every), ("state", alone)):
+            _, phi, stats, code = build.integrate_var(m, x0, c, 0.0, args.t1, **tol)
+            assert code == 0, (m, key, code)
+            t = best[(m, key)]
+            steps = f"{stats['accepted']}/{steps_plain}" if key == "all" else f"{stats['accepted']}"
+            width = 11 if key == "all" else 13
+            row.append(f"{t * 1e6:{width}.0f} {t / plain:6.2f} {steps:>{11 if key == 'all' else 6}}"
+                       f" {column_error(phi, ref):8.1e}")  # fmt: skip
+        print(" ".join(row))
+    lanes(every, x0, c, args)
+    heyoka(every, x0, c, ref, args)
+
+
+def lanes(m: Compiled, x0: np.ndarray, c: np.ndarray, args: argparse.Namespace) -> None:
+    """64 starts near x0: integrate_var_batch on one thread (SIMD lanes)
+    against a loop of integrate_var."""
+    starts = x0 + 0.01 * np.random.default_rng(1).standard_normal((64, len(x0)))
+    tol = {"rtol": args.tol, "atol": args.tol}
+    print("64 trajectories with Phi, one thread: a loop of integrate_var, integrate_var_batch")
+    for method in ("dopri5", "dop853", "taylor"):
+
+        def each(method: str = method) -> None:
+            for x in starts:
+                m.integrate_var(method, x, c, 0.0, args.t1, **tol)
+
+        def batch(method: str = method) -> None:
+            m.integrate_var_batch(method, starts, c, 0.0, args.t1, threads=1, **tol)
+
+        t_each, t_batch = best_time(each, args.repeats), best_time(batch, args.repeats)
+        print(f"{method:8} loop {t_each * 1e3:8.2f} ms  lanes {t_batch * 1e3:8.2f} ms  "
+              f"{t_each / t_batch:5.2f}x")  # fmt: skip
+
+
+def heyoka(
+    m: Compiled, x0: np.ndarray, c: np.ndarray, ref: np.ndarray, args: argparse.Namespace
+) -> None:
+    """heyoka's var_ode_sys (its Taylor method, the same rhs block) against
+    gyrogen's taylor with Phi, each at tolerances 1e-10 and 1e-13: time
+    (state and Phi reset, propagate; the JIT apart) and Phi's error."""
+    hy = heyoka_peer.module()
+    if hy is None:
+        print("heyoka is not installed: no comparison")
+        return
+    heyoka_peer.one_thread()
+    scene = parse(builtin_text("gyrostat") + '\n[sensitivities]\nwrt = ["state"]\n', "g.toml")
+    sys_ = heyoka_peer.system(hy, unit_of(scene))
+    variational = hy.var_ode_sys(sys_.pairs, hy.var_args.vars, order=1)
+    nx = len(x0)
+    start = np.concatenate([x0, np.eye(nx).ravel()])
+    print("Phi 14 x 14 over the same interval: heyoka var_ode_sys, gyrogen taylor")
+    for tol in (1e-10, 1e-13):
+        ta = hy.taylor_adaptive(variational, start, tol=tol, pars=c[: sys_.npars])
+
+        def run(ta: object = ta) -> None:
+            ta.time = 0.0  # type: ignore[attr-defined]
+            ta.state[:] = start  # type: ignore[attr-defined]
+            ta.propagate_until(args.t1)  # type: ignore[attr-defined]
+
+        run()
+        theirs = column_error(ta.state[nx:].reshape(nx, nx), ref)
+        t_theirs = best_time(run, args.repeats)
+        ours = m.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=tol, atol=tol)[1]
+        t_ours = best_time(
+            lambda tol=tol: m.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=tol, atol=tol),
+            args.repeats,
+        )
+        print(f"tol {tol:g}: heyoka {t_theirs * 1e6:8.0f} us err {theirs:.1e}   "
+              f"gyrogen {t_ours * 1e6:8.0f} us err {column_error(ours, ref):.1e}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
