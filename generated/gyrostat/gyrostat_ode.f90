@@ -2051,8 +2051,10 @@ contains
     code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_dopri5
 
-  ! Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see gyrostat_ode.h).
-  function gyrostat_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Dormand-Prince 5(4), adaptive, PI step-size control.
+  ! Over an output grid (see gyrostat_ode.h).
+  function gyrostat_dopri5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dopri5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2072,7 +2074,8 @@ contains
   end function gyrostat_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function gyrostat_dopri5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="gyrostat_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -2097,10 +2100,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -2734,8 +2738,10 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_dop853
 
-  ! DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see gyrostat_ode.h).
-  function gyrostat_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive.
+  ! Over an output grid (see gyrostat_ode.h).
+  function gyrostat_dop853_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dop853_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2755,7 +2761,8 @@ contains
   end function gyrostat_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function gyrostat_dop853_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="gyrostat_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -2780,10 +2787,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -3377,8 +3385,10 @@ contains
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_rodas4
 
-  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see gyrostat_ode.h).
-  function gyrostat_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! Over an output grid (see gyrostat_ode.h).
+  function gyrostat_rodas4_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_rodas4_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -3398,7 +3408,8 @@ contains
   end function gyrostat_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function gyrostat_rodas4_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="gyrostat_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3423,10 +3434,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -4385,8 +4397,10 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_radau5
 
-  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see gyrostat_ode.h).
-  function gyrostat_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Over an output grid (see gyrostat_ode.h).
+  function gyrostat_radau5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_radau5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -4406,7 +4420,8 @@ contains
   end function gyrostat_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function gyrostat_radau5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="gyrostat_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -4431,10 +4446,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -5537,8 +5553,10 @@ contains
     code = taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function gyrostat_taylor
 
-  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see gyrostat_ode.h).
-  function gyrostat_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+  ! Over an output grid (see gyrostat_ode.h).
+  function gyrostat_taylor_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_taylor_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -5558,7 +5576,8 @@ contains
   end function gyrostat_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function gyrostat_taylor_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="gyrostat_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -5583,10 +5602,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1

@@ -2304,8 +2304,10 @@ contains
     code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_dopri5
 
-  ! Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Dormand-Prince 5(4), adaptive, PI step-size control.
+  ! Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_dopri5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dopri5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2325,7 +2327,8 @@ contains
   end function rw4_hardware_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_hardware_dopri5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_hardware_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -2350,10 +2353,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -2987,8 +2991,10 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_dop853
 
-  ! DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive.
+  ! Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_dop853_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dop853_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -3008,7 +3014,8 @@ contains
   end function rw4_hardware_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_hardware_dop853_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_hardware_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3033,10 +3040,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -3630,8 +3638,10 @@ contains
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_rodas4
 
-  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_rodas4_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_rodas4_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -3651,7 +3661,8 @@ contains
   end function rw4_hardware_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_hardware_rodas4_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_hardware_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3676,10 +3687,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -4638,8 +4650,10 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_hardware_radau5
 
-  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Over an output grid (see rw4_hardware_ode.h).
+  function rw4_hardware_radau5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_radau5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -4659,7 +4673,8 @@ contains
   end function rw4_hardware_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_hardware_radau5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_hardware_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -4684,10 +4699,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1

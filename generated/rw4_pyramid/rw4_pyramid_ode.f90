@@ -2279,8 +2279,10 @@ contains
     code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_pyramid_dopri5
 
-  ! Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Dormand-Prince 5(4), adaptive, PI step-size control.
+  ! Over an output grid (see rw4_pyramid_ode.h).
+  function rw4_pyramid_dopri5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_dopri5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2300,7 +2302,8 @@ contains
   end function rw4_pyramid_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_pyramid_dopri5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_pyramid_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -2325,10 +2328,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -2962,8 +2966,10 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_pyramid_dop853
 
-  ! DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive.
+  ! Over an output grid (see rw4_pyramid_ode.h).
+  function rw4_pyramid_dop853_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_dop853_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2983,7 +2989,8 @@ contains
   end function rw4_pyramid_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_pyramid_dop853_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_pyramid_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3008,10 +3015,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -3605,8 +3613,10 @@ contains
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_pyramid_rodas4
 
-  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! Over an output grid (see rw4_pyramid_ode.h).
+  function rw4_pyramid_rodas4_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_rodas4_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -3626,7 +3636,8 @@ contains
   end function rw4_pyramid_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_pyramid_rodas4_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_pyramid_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3651,10 +3662,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -4613,8 +4625,10 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function rw4_pyramid_radau5
 
-  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Over an output grid (see rw4_pyramid_ode.h).
+  function rw4_pyramid_radau5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_radau5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -4634,7 +4648,8 @@ contains
   end function rw4_pyramid_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function rw4_pyramid_radau5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="rw4_pyramid_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -4659,10 +4674,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = rw4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1

@@ -1792,8 +1792,10 @@ contains
     code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function speed_controlled_dopri5
 
-  ! Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see speed_controlled_ode.h).
-  function speed_controlled_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Dormand-Prince 5(4), adaptive, PI step-size control.
+  ! Over an output grid (see speed_controlled_ode.h).
+  function speed_controlled_dopri5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="speed_controlled_f_dopri5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -1813,7 +1815,8 @@ contains
   end function speed_controlled_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function speed_controlled_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function speed_controlled_dopri5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="speed_controlled_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -1838,10 +1841,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = speed_controlled_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = speed_controlled_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = speed_controlled_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = speed_controlled_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= SPEED_CONTROLLED_ODE_OK) failed = failed + 1
@@ -2477,8 +2481,10 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function speed_controlled_dop853
 
-  ! DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see speed_controlled_ode.h).
-  function speed_controlled_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive.
+  ! Over an output grid (see speed_controlled_ode.h).
+  function speed_controlled_dop853_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="speed_controlled_f_dop853_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2498,7 +2504,8 @@ contains
   end function speed_controlled_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function speed_controlled_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function speed_controlled_dop853_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="speed_controlled_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -2523,10 +2530,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = speed_controlled_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = speed_controlled_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = speed_controlled_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = speed_controlled_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= SPEED_CONTROLLED_ODE_OK) failed = failed + 1
@@ -3122,8 +3130,10 @@ contains
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function speed_controlled_rodas4
 
-  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see speed_controlled_ode.h).
-  function speed_controlled_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! Over an output grid (see speed_controlled_ode.h).
+  function speed_controlled_rodas4_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="speed_controlled_f_rodas4_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -3143,7 +3153,8 @@ contains
   end function speed_controlled_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function speed_controlled_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function speed_controlled_rodas4_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="speed_controlled_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3168,10 +3179,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = speed_controlled_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = speed_controlled_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = speed_controlled_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = speed_controlled_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= SPEED_CONTROLLED_ODE_OK) failed = failed + 1
@@ -4132,8 +4144,10 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function speed_controlled_radau5
 
-  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see speed_controlled_ode.h).
-  function speed_controlled_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Over an output grid (see speed_controlled_ode.h).
+  function speed_controlled_radau5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="speed_controlled_f_radau5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -4153,7 +4167,8 @@ contains
   end function speed_controlled_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function speed_controlled_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function speed_controlled_radau5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="speed_controlled_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -4178,10 +4193,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = speed_controlled_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = speed_controlled_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = speed_controlled_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = speed_controlled_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= SPEED_CONTROLLED_ODE_OK) failed = failed + 1
@@ -5288,8 +5304,10 @@ contains
     code = taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function speed_controlled_taylor
 
-  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see speed_controlled_ode.h).
-  function speed_controlled_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+  ! Over an output grid (see speed_controlled_ode.h).
+  function speed_controlled_taylor_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="speed_controlled_f_taylor_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -5309,7 +5327,8 @@ contains
   end function speed_controlled_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function speed_controlled_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function speed_controlled_taylor_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="speed_controlled_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -5334,10 +5353,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = speed_controlled_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = speed_controlled_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = speed_controlled_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = speed_controlled_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= SPEED_CONTROLLED_ODE_OK) failed = failed + 1

@@ -1673,8 +1673,10 @@ contains
     code = dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function torque_free_dopri5
 
-  ! Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see torque_free_ode.h).
-  function torque_free_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Dormand-Prince 5(4), adaptive, PI step-size control.
+  ! Over an output grid (see torque_free_ode.h).
+  function torque_free_dopri5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="torque_free_f_dopri5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -1694,7 +1696,8 @@ contains
   end function torque_free_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function torque_free_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function torque_free_dopri5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="torque_free_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -1719,10 +1722,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = torque_free_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = torque_free_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = torque_free_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -2356,8 +2360,10 @@ contains
     code = dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function torque_free_dop853
 
-  ! DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see torque_free_ode.h).
-  function torque_free_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive.
+  ! Over an output grid (see torque_free_ode.h).
+  function torque_free_dop853_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="torque_free_f_dop853_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -2377,7 +2383,8 @@ contains
   end function torque_free_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function torque_free_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function torque_free_dop853_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="torque_free_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -2402,10 +2409,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = torque_free_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = torque_free_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = torque_free_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -2999,8 +3007,10 @@ contains
     code = rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function torque_free_rodas4
 
-  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see torque_free_ode.h).
-  function torque_free_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! Over an output grid (see torque_free_ode.h).
+  function torque_free_rodas4_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="torque_free_f_rodas4_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -3020,7 +3030,8 @@ contains
   end function torque_free_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function torque_free_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function torque_free_rodas4_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="torque_free_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -3045,10 +3056,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = torque_free_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = torque_free_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = torque_free_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -4007,8 +4019,10 @@ contains
     code = radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function torque_free_radau5
 
-  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see torque_free_ode.h).
-  function torque_free_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Over an output grid (see torque_free_ode.h).
+  function torque_free_radau5_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="torque_free_f_radau5_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -4028,7 +4042,8 @@ contains
   end function torque_free_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function torque_free_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function torque_free_radau5_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="torque_free_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -4053,10 +4068,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = torque_free_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = torque_free_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = torque_free_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
@@ -4877,8 +4893,10 @@ contains
     code = taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats)
   end function torque_free_taylor
 
-  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see torque_free_ode.h).
-  function torque_free_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+  ! Over an output grid (see torque_free_ode.h).
+  function torque_free_taylor_grid( &
+      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
       bind(C, name="torque_free_f_taylor_grid")
     integer(c_long), value, intent(in) :: ntimes
     real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
@@ -4898,7 +4916,8 @@ contains
   end function torque_free_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function torque_free_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
+  function torque_free_taylor_grid_batch( &
+      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
       result(failed) bind(C, name="torque_free_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
     integer(c_long), value, intent(in) :: ntimes
@@ -4923,10 +4942,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = torque_free_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), &
-                                  c_loc(stats_out(i)))
+        code = torque_free_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_loc(stats_out(i)))
       else
-        code = torque_free_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, i), c_null_ptr)
+        code = torque_free_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+                 out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= TORQUE_FREE_ODE_OK) failed = failed + 1
