@@ -371,3 +371,39 @@ def test_the_events_agree_with_heyokas(located: tuple[list[Compiled], Scene], me
     assert len(third) == len(seen) - 1
     assert np.max(np.abs(third - np.array(seen[1:])) / third) < 1e-15
     assert abs(log.times[-1] - ta.time) < 1e-11 * ta.time
+
+
+@pytest.mark.parametrize(
+    ("expr", "message"),
+    [
+        ("u4/0", "is not a finite real number everywhere"),
+        ("sqrt(-1) + u4", "is not a finite real number everywhere"),
+        ("(-8)**(1/3) - u4", "is not a finite real number everywhere"),
+        ("0**(-1)", "is not a finite real number everywhere"),
+        ("t**t", "an exponent must be a number, not 't'"),
+        ("2**2**2**2**2 - u4", "is outside double range"),
+    ],
+)
+def test_an_event_no_code_can_compute_is_one_line(
+    tmp_path: Path, cli, expr: str, message: str
+) -> None:
+    """Refused at generate in one line (exit 2, or 1 for a constant past
+    double range), nothing written; an event that is NaN where the state
+    makes it so (sqrt(u1)) is no error: it agrees with the reference."""
+    scene = tmp_path / "bad.toml"
+    scene.write_text(builtin_text("dual_spin") + f'\n[[events]]\nname = "e"\nexpr = "{expr}"\n')
+    code, _, err = cli(["generate", str(scene), "--out", str(tmp_path / "out")])
+    assert code in (1, 2) and message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_event_nan_where_the_state_makes_it_so_generates(tmp_path: Path, cli) -> None:
+    """sqrt(u1) is NaN at the drawn states with u1 < 0, in the compiled code
+    and in the reference alike: generate's comparison counts that as
+    agreement (it once read it as an error of NaN)."""
+    scene = tmp_path / "nan.toml"
+    scene.write_text(
+        builtin_text("dual_spin") + '\n[[events]]\nname = "e"\nexpr = "sqrt(u1) - 0.1"\n'
+    )
+    code, _, err = cli(["generate", str(scene), "--out", str(tmp_path / "out")])
+    assert code == 0, err

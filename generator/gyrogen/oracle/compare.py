@@ -177,8 +177,11 @@ def _pairs(
         ref = f(states, p)
         if name == "rhs":
             out = {_label(b): b.rhs(states, constants[_label(b)], t) for b in backends}
-        elif name == "events":
+        elif name == "events":  # NaN where the reference's is NaN too is agreement
             out = {_label(b): b.events(states, constants[_label(b)], t) for b in backends}
+            both = {k: np.isnan(v) & np.isnan(ref) for k, v in out.items()}
+            out = {k: np.where(both[k], 0.0, v) for k, v in out.items()}
+            ref = np.where(np.any(list(both.values()), axis=0), 0.0, ref)
         else:
             out = {_label(b): b.output(name, states, constants[_label(b)], t) for b in backends}
         for label, value in out.items():

@@ -100,7 +100,11 @@ def _node(e: ast.expr, text: str) -> Node:
         return ("neg", a) if isinstance(e.op, ast.USub) else a
     if isinstance(e, ast.BinOp) and type(e.op) in _OPS:
         op = _OPS[type(e.op)]
-        return (op, _node(e.left, text), _node(e.right, text))
+        right = _node(e.right, text)
+        if op == "**" and not _constant(right):
+            shown = ast.get_source_segment(text.strip(), e.right) or "it"
+            raise ValueError(f"{_shown(text)}: an exponent must be a number, not {shown!r}")
+        return (op, _node(e.left, text), right)
     if isinstance(e, ast.Call) and isinstance(e.func, ast.Name) and not e.keywords:
         f = e.func.id
         if f not in FUNCTIONS:
@@ -122,6 +126,15 @@ def _node(e: ast.expr, text: str) -> Node:
         f"{_shown(text)}: {shown!r} is not allowed (numbers, names, + - * / **, parentheses, "
         f"{', '.join(FUNCTIONS)}, an output's component as angular_momentum[i])"
     )
+
+
+def _constant(node: Node) -> bool:
+    """node reads no name, output or time: numbers alone."""
+    if node[0] == "num":
+        return True
+    if node[0] in ("name", "output"):
+        return False
+    return all(_constant(a) for a in (node[2] if node[0] == "call" else node[1:]))
 
 
 def check(

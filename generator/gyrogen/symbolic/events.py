@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import sympy as sm
 
+from gyrogen.errors import SceneError
 from gyrogen.scene import Scene
 from gyrogen.scene.events import TIME, Node, evaluate, parse
 from gyrogen.symbolic.equations import TIME as T
@@ -44,6 +45,14 @@ def events(scene: Scene, eqs: Equations) -> tuple[sm.Expr, ...]:
     def exact(v: float) -> sm.Expr:
         return sm.Rational(repr(v))  # the decimal as written, as folded values
 
-    return tuple(
-        sm.sympify(evaluate(parse(ev.expr), value, FUNCTIONS, exact)) for ev in scene.events
-    )
+    out = []
+    for k, ev in enumerate(scene.events):
+        g = sm.sympify(evaluate(parse(ev.expr), value, FUNCTIONS, exact))
+        rooted = any(p.base.is_negative and not p.exp.is_integer for p in g.atoms(sm.Pow))
+        if rooted or g.has(sm.I, sm.zoo, sm.oo, -sm.oo, sm.nan):
+            raise SceneError(
+                f"events.{k}.expr: {ev.expr!r} is not a finite real number everywhere (it reads "
+                f"as {str(g)[:80]}: a division by zero, or a root of a negative number)"
+            )
+        out.append(g)
+    return tuple(out)
