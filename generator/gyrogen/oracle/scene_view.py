@@ -200,7 +200,8 @@ def events(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) 
 
     cols = []
     for e in scene.events:
-        g = scene_events.evaluate(scene_events.parse(e.expr), value, EVENT_FUNCTIONS)
+        with np.errstate(all="ignore"):  # a NaN or Inf g is the event's own (as in C)
+            g = scene_events.evaluate(scene_events.parse(e.expr), value, EVENT_FUNCTIONS)
         cols.append(np.broadcast_to(np.asarray(g, dtype=float), (len(xs),)))
     return np.stack(cols, axis=1) if cols else np.zeros((len(xs), 0))
 
