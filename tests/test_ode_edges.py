@@ -467,7 +467,7 @@ def test_header_and_module_carry_the_registry(source_dir: Path) -> None:
         (c_text,) = re.findall(rf"#define GYROSTAT_ODE_{name} (\S+)", h)
         (f_text,) = re.findall(rf"GYROSTAT_ODE_{name} = (\S+)_c_double", f)
         assert float(c_text) == float(f_text) == value
-    c_codes = {int(v) for v in re.findall(r"#define GYROSTAT_ODE_(?:OK|ERR_\w+) +(\d+)", h)}
-    f_codes = {int(v) for v in re.findall(r"GYROSTAT_ODE_(?:OK|ERR_\w+) = (\d+)", f)}
+    c_codes = {int(v) for v in re.findall(r"#define GYROSTAT_ODE_(?:OK|EVENT|ERR_\w+) +(\d+)", h)}
+    f_codes = {int(v) for v in re.findall(r"GYROSTAT_ODE_(?:OK|EVENT|ERR_\w+) = (\d+)", f)}
     assert c_codes == f_codes == {c.value for c in abi.ODE_CODES}
     assert "#define GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR 6" in h
