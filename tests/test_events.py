@@ -328,14 +328,16 @@ def test_a_sweep_counts_each_event_and_keeps_its_first_time(tmp_path: Path) -> N
 
 def test_the_longest_name_keeps_fortran_within_its_columns() -> None:
     """Every Fortran line of a scene named at the longest a name may be, with
-    events (their _events twins and wrappers), fits 132 columns (a drawn
-    scene's 32-letter name once put the _grid wrappers' heads past them)."""
+    events (their _events twins and wrappers) and sensitivities (the unit
+    <name>_var), fits 132 columns (a drawn scene's 32-letter name once put
+    the _grid wrappers' heads past them, the _var unit's use line too)."""
     from gyrogen.abi import NAME_MAX_LENGTH
     from gyrogen.codegen.generate import render_all, unit_of
 
     name = "a" * NAME_MAX_LENGTH
     text = builtin_text("dual_spin").replace('name = "dual_spin"', f'name = "{name}"')
-    files = render_all(unit_of(parse(text + LOCATED, "long")))
+    sensitivities = '\n[sensitivities]\nwrt = ["state"]\n'  # its unit is <name>_var
+    files = render_all(unit_of(parse(text + LOCATED + sensitivities, "long")))
     long = [(f, n) for f, body in files.items() if f.endswith(".f90")
             for n, line in enumerate(body.splitlines(), 1) if len(line) > 132]  # fmt: skip
     assert not long, long[:5]

@@ -25,7 +25,8 @@ module dual_spin_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use dual_spin_mod, only: dual_spin_rhs, nx => DUAL_SPIN_NX, &
+  use dual_spin_mod, only: dual_spin_rhs, &
+                         nx => DUAL_SPIN_NX, &
                          nc => DUAL_SPIN_NC
   use dual_spin_mod, only: dual_spin_sin
   use dual_spin_mod, only: dual_spin_cos
@@ -45,7 +46,8 @@ module dual_spin_ode_mod
   public :: dual_spin_taylor_grid, dual_spin_taylor_grid_batch
   public :: dual_spin_ode_strerror
 
-  ! What an integration did, and where it stopped: dual_spin_stats of dual_spin_ode.h.
+  ! What an integration did, and where it stopped:
+  ! dual_spin_stats of dual_spin_ode.h.
   type, bind(C), public :: dual_spin_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

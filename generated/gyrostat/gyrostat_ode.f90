@@ -25,7 +25,8 @@ module gyrostat_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use gyrostat_mod, only: gyrostat_rhs, nx => GYROSTAT_NX, &
+  use gyrostat_mod, only: gyrostat_rhs, &
+                         nx => GYROSTAT_NX, &
                          nc => GYROSTAT_NC
   use gyrostat_mod, only: gyrostat_sin
   use gyrostat_mod, only: gyrostat_cos
@@ -45,7 +46,8 @@ module gyrostat_ode_mod
   public :: gyrostat_taylor_grid, gyrostat_taylor_grid_batch
   public :: gyrostat_ode_strerror
 
-  ! What an integration did, and where it stopped: gyrostat_stats of gyrostat_ode.h.
+  ! What an integration did, and where it stopped:
+  ! gyrostat_stats of gyrostat_ode.h.
   type, bind(C), public :: gyrostat_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

@@ -25,7 +25,8 @@ module rw3_orthogonal_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use rw3_orthogonal_mod, only: rw3_orthogonal_rhs, nx => RW3_ORTHOGONAL_NX, &
+  use rw3_orthogonal_mod, only: rw3_orthogonal_rhs, &
+                         nx => RW3_ORTHOGONAL_NX, &
                          nc => RW3_ORTHOGONAL_NC
   use rw3_orthogonal_mod, only: rw3_orthogonal_sin
   use rw3_orthogonal_mod, only: rw3_orthogonal_cos
@@ -45,7 +46,8 @@ module rw3_orthogonal_ode_mod
   public :: rw3_orthogonal_taylor_grid, rw3_orthogonal_taylor_grid_batch
   public :: rw3_orthogonal_ode_strerror
 
-  ! What an integration did, and where it stopped: rw3_orthogonal_stats of rw3_orthogonal_ode.h.
+  ! What an integration did, and where it stopped:
+  ! rw3_orthogonal_stats of rw3_orthogonal_ode.h.
   type, bind(C), public :: rw3_orthogonal_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

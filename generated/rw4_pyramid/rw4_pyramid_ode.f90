@@ -25,7 +25,8 @@ module rw4_pyramid_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use rw4_pyramid_mod, only: rw4_pyramid_rhs, nx => RW4_PYRAMID_NX, &
+  use rw4_pyramid_mod, only: rw4_pyramid_rhs, &
+                         nx => RW4_PYRAMID_NX, &
                          nc => RW4_PYRAMID_NC
   use rw4_pyramid_mod, only: rw4_pyramid_sin
   use rw4_pyramid_mod, only: rw4_pyramid_cos
@@ -43,7 +44,8 @@ module rw4_pyramid_ode_mod
   public :: rw4_pyramid_radau5_grid, rw4_pyramid_radau5_grid_batch
   public :: rw4_pyramid_ode_strerror
 
-  ! What an integration did, and where it stopped: rw4_pyramid_stats of rw4_pyramid_ode.h.
+  ! What an integration did, and where it stopped:
+  ! rw4_pyramid_stats of rw4_pyramid_ode.h.
   type, bind(C), public :: rw4_pyramid_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

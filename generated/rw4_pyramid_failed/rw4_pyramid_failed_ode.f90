@@ -25,7 +25,8 @@ module rw4_pyramid_failed_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_rhs, nx => RW4_PYRAMID_FAILED_NX, &
+  use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_rhs, &
+                         nx => RW4_PYRAMID_FAILED_NX, &
                          nc => RW4_PYRAMID_FAILED_NC
   use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_sin
   use rw4_pyramid_failed_mod, only: rw4_pyramid_failed_cos
@@ -43,7 +44,8 @@ module rw4_pyramid_failed_ode_mod
   public :: rw4_pyramid_failed_radau5_grid, rw4_pyramid_failed_radau5_grid_batch
   public :: rw4_pyramid_failed_ode_strerror
 
-  ! What an integration did, and where it stopped: rw4_pyramid_failed_stats of rw4_pyramid_failed_ode.h.
+  ! What an integration did, and where it stopped:
+  ! rw4_pyramid_failed_stats of rw4_pyramid_failed_ode.h.
   type, bind(C), public :: rw4_pyramid_failed_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

@@ -25,7 +25,8 @@ module speed_controlled_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use speed_controlled_mod, only: speed_controlled_rhs, nx => SPEED_CONTROLLED_NX, &
+  use speed_controlled_mod, only: speed_controlled_rhs, &
+                         nx => SPEED_CONTROLLED_NX, &
                          nc => SPEED_CONTROLLED_NC
   use speed_controlled_mod, only: speed_controlled_sin
   use speed_controlled_mod, only: speed_controlled_cos
@@ -45,7 +46,8 @@ module speed_controlled_ode_mod
   public :: speed_controlled_taylor_grid, speed_controlled_taylor_grid_batch
   public :: speed_controlled_ode_strerror
 
-  ! What an integration did, and where it stopped: speed_controlled_stats of speed_controlled_ode.h.
+  ! What an integration did, and where it stopped:
+  ! speed_controlled_stats of speed_controlled_ode.h.
   type, bind(C), public :: speed_controlled_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

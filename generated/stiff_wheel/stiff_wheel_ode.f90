@@ -25,7 +25,8 @@ module stiff_wheel_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use stiff_wheel_mod, only: stiff_wheel_rhs, nx => STIFF_WHEEL_NX, &
+  use stiff_wheel_mod, only: stiff_wheel_rhs, &
+                         nx => STIFF_WHEEL_NX, &
                          nc => STIFF_WHEEL_NC
   use stiff_wheel_mod, only: stiff_wheel_sin
   use stiff_wheel_mod, only: stiff_wheel_cos
@@ -43,7 +44,8 @@ module stiff_wheel_ode_mod
   public :: stiff_wheel_radau5_grid, stiff_wheel_radau5_grid_batch
   public :: stiff_wheel_ode_strerror
 
-  ! What an integration did, and where it stopped: stiff_wheel_stats of stiff_wheel_ode.h.
+  ! What an integration did, and where it stopped:
+  ! stiff_wheel_stats of stiff_wheel_ode.h.
   type, bind(C), public :: stiff_wheel_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

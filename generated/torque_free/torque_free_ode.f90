@@ -25,7 +25,8 @@ module torque_free_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use torque_free_mod, only: torque_free_rhs, nx => TORQUE_FREE_NX, &
+  use torque_free_mod, only: torque_free_rhs, &
+                         nx => TORQUE_FREE_NX, &
                          nc => TORQUE_FREE_NC
   use torque_free_mod, only: torque_free_sin
   use torque_free_mod, only: torque_free_cos
@@ -45,7 +46,8 @@ module torque_free_ode_mod
   public :: torque_free_taylor_grid, torque_free_taylor_grid_batch
   public :: torque_free_ode_strerror
 
-  ! What an integration did, and where it stopped: torque_free_stats of torque_free_ode.h.
+  ! What an integration did, and where it stopped:
+  ! torque_free_stats of torque_free_ode.h.
   type, bind(C), public :: torque_free_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried

@@ -25,7 +25,8 @@ module wheel_spinup_ode_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int, c_long, c_size_t, c_ptr, &
                                          c_null_ptr, c_associated, c_f_pointer, c_loc
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
-  use wheel_spinup_mod, only: wheel_spinup_rhs, nx => WHEEL_SPINUP_NX, &
+  use wheel_spinup_mod, only: wheel_spinup_rhs, &
+                         nx => WHEEL_SPINUP_NX, &
                          nc => WHEEL_SPINUP_NC
   use wheel_spinup_mod, only: wheel_spinup_sin
   use wheel_spinup_mod, only: wheel_spinup_cos
@@ -45,7 +46,8 @@ module wheel_spinup_ode_mod
   public :: wheel_spinup_taylor_grid, wheel_spinup_taylor_grid_batch
   public :: wheel_spinup_ode_strerror
 
-  ! What an integration did, and where it stopped: wheel_spinup_stats of wheel_spinup_ode.h.
+  ! What an integration did, and where it stopped:
+  ! wheel_spinup_stats of wheel_spinup_ode.h.
   type, bind(C), public :: wheel_spinup_stats
     real(c_double) :: t                 ! time reached (t1 on success)
     real(c_double) :: h                 ! last step size tried
