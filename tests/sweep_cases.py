@@ -41,9 +41,11 @@ def small(path: Path, t_end: float = 2.0, chunk: int = 25, count: int = 4) -> Pa
 
 
 def long(path: Path) -> Path:
-    """41 chunks of 100 trajectories, ~0.03 s each: long enough to stop or
-    kill something in the middle of it."""
-    return small(path, t_end=30.0, chunk=100, count=4000 // 15 + 1)
+    """41 chunks of 100 trajectories, ~0.1 s each: long enough to stop or
+    kill something in the middle of it even when the machine is busy (at
+    ~0.03 s each a loaded machine's test process, waking late, found the
+    sweep done)."""
+    return small(path, t_end=100.0, chunk=100, count=4000 // 15 + 1)
 
 
 def rows(out: Path) -> pd.DataFrame:
