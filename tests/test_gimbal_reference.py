@@ -322,3 +322,22 @@ def test_kanes_equations_agree() -> None:
     ours = np.column_stack([w_A_d, gd_d, w_d])
     theirs = np.array([kane(v, *(a[s] for a in states)) for s in range(m)])
     assert np.max(np.abs(ours - theirs) / np.abs(theirs).max(1, keepdims=True)) < 1e-12
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (
+            {"g_g": [[1.0, 0.1, 0.0]]},
+            "g_g: a gimbal axis is not perpendicular to its spin axis g_s0",
+        ),
+        ({"mg": [1.0]}, "mg, IG: a fixed wheel (g_g = 0) has no gimbal frame"),
+        ({"IG": [np.eye(3)]}, "mg, IG: a fixed wheel (g_g = 0) has no gimbal frame"),
+    ],
+)
+def test_inconsistent_arrays_are_one_line_errors(change: dict, message: str) -> None:
+    given = {"m_a": 10.0, "carrier": np.eye(3), "m": [1.0], "I": [0.1], "J": [0.1],
+             "g_s0": [[0.0, 1.0, 0.0]], "r": [[0.0, 0.0, 0.0]], **change}  # fmt: skip
+    with pytest.raises(ValueError) as err:
+        gr.values_from_arrays(**given)
+    assert str(err.value) == message
