@@ -6,6 +6,7 @@ and Kane's equations, assembled numerically body by body, agree with it."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -247,7 +248,9 @@ def test_driven_vscmgs_gain_the_motors_work_less_friction() -> None:
     assert miss < 1e-11
 
 
-def along(fn, args: tuple[np.ndarray, ...], rates: tuple[np.ndarray, ...]) -> np.ndarray:
+def along(
+    fn: Callable[..., np.ndarray], args: tuple[np.ndarray, ...], rates: tuple[np.ndarray, ...]
+) -> np.ndarray:
     """d fn / dt along the motion, by the complex step (exact to rounding)."""
     h = 1e-30
     return np.imag(fn(*(a + 1j * h * r for a, r in zip(args, rates, strict=True)))) / h
@@ -273,16 +276,23 @@ def test_energy_rate_is_motor_power_less_friction_and_h_is_held_in_n() -> None:
     assert np.max(np.linalg.norm(h_dot, axis=1) / np.linalg.norm(h, axis=1)) < 1e-13
 
 
-def kane(v: gr.Values, w_A, gam, gd, w, u_s, u_g) -> np.ndarray:
+def kane(
+    v: gr.Values,
+    w_A: np.ndarray,
+    gam: np.ndarray,
+    gd: np.ndarray,
+    w: np.ndarray,
+    u_s: np.ndarray,
+    u_g: np.ndarray,
+) -> np.ndarray:
     """(w_A', gd', w') of one state by Kane's equations: every body's
     angular velocity written from the kinematics alone, partial angular
     velocities read off as the columns of that linear map, its gimbal-angle
     derivative by the complex step, Euler's I alpha + w x I w per body."""
     n = len(v.m)
     gimbal = v.has_gimbal
-    masses = np.concatenate([[v.m_a], v.m, v.mg])
-    center = (masses[1 : n + 1, None] * v.r).sum(0) + (v.mg[:, None] * v.r).sum(0)
-    center = center / masses.sum()
+    rotor_mass = v.m + v.mg
+    center = (rotor_mass[:, None] * v.r).sum(0) / (v.m_a + rotor_mass.sum())
 
     def axes(angles: np.ndarray) -> tuple[np.ndarray, ...]:
         g_s = np.array([
@@ -339,10 +349,12 @@ def kane(v: gr.Values, w_A, gam, gd, w, u_s, u_g) -> np.ndarray:
     return out
 
 
-def test_kanes_equations_agree() -> None:
+@pytest.mark.parametrize("config", [(3, 2), (4, 0), (1, 0), (2, 3), "vscmg3"])
+def test_kanes_equations_agree(config: tuple[int, int] | str) -> None:
+    """Random CMGs (full frame tensors) and fixed wheels, and the 3-VSCMG set."""
     rng = np.random.default_rng(11)
-    v = random_cmgs(rng, 3, 2)
-    m, n = 25, 5
+    v = vscmg3() if config == "vscmg3" else random_cmgs(rng, *config)
+    m, n = 25, len(v.m)
     states = random_states(rng, m, n)
     w_A_d, _, gd_d, w_d = gr.derivatives(v, *states)
     ours = np.column_stack([w_A_d, gd_d, w_d])
