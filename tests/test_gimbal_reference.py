@@ -371,6 +371,12 @@ def test_kanes_equations_agree(config: tuple[int, int] | str) -> None:
         ),
         ({"mg": [1.0]}, "mg, IG: a fixed wheel (g_g = 0) has no gimbal frame"),
         ({"IG": [np.eye(3)]}, "mg, IG: a fixed wheel (g_g = 0) has no gimbal frame"),
+        (
+            {"g_g": [[1.0, 0.0, 0.0]], "IG": [[[1.0, 0.1, 0], [0, 1, 0], [0, 0, 1]]]},
+            "IG: a gimbal frame's inertia tensor is not symmetric",
+        ),
+        ({"J": [0.0]}, "J: a wheel's axial inertia is not positive"),
+        ({"J": [np.nan]}, "J: a wheel's axial inertia is not positive"),
     ],
 )
 def test_inconsistent_arrays_are_one_line_errors(change: dict, message: str) -> None:

@@ -45,7 +45,8 @@ class Values:
     m, I, J: the wheel's mass, transverse and axial inertia about its center.
     g_s0: the wheel's unit spin axis at gimbal angle 0 (a fixed wheel's axis).
     g_g: the unit gimbal axis, perpendicular to g_s0 (zeros for a fixed wheel).
-    r: the wheel's and the gimbal frame's common mass center from A*, on g_g.
+    r: the wheel's and the gimbal frame's common mass center from A* (the
+    gimbal axis passes through it).
     b: the wheel's bearing friction coefficient (torque -b Omega on it).
     mg, IG: the gimbal frame's mass and inertia tensor about its mass center
     in its own axes (g_s, g_t, g_g), (N, 3, 3) symmetric; zeros for a fixed
@@ -81,8 +82,8 @@ def values_from_arrays(
 ) -> Values:
     """Values from arrays; a rotor whose g_g row is zero (or all of them,
     g_g None) is a fixed wheel. Axes are normalized; a gimbal axis not
-    perpendicular to its spin axis, or a fixed wheel with a frame, is a
-    ValueError."""
+    perpendicular to its spin axis, a frame's tensor not symmetric, a fixed
+    wheel with a frame or an axial inertia not positive is a ValueError."""
     g_s0 = np.atleast_2d(np.asarray(g_s0, dtype=float))
     n = len(g_s0)
     gg = np.zeros((n, 3)) if g_g is None else np.atleast_2d(np.asarray(g_g, dtype=float))
@@ -95,13 +96,20 @@ def values_from_arrays(
     frame_i = np.zeros((n, 3, 3)) if IG is None else np.asarray(IG, dtype=float).reshape(n, 3, 3)
     if np.any(frame_m[~has] != 0) or np.any(frame_i[~has] != 0):
         raise ValueError("mg, IG: a fixed wheel (g_g = 0) has no gimbal frame")
+    if np.any(
+        np.abs(frame_i - frame_i.transpose(0, 2, 1)) > 1e-12 * np.abs(frame_i).max(initial=0)
+    ):
+        raise ValueError("IG: a gimbal frame's inertia tensor is not symmetric")
+    axial = np.asarray(J, dtype=float).reshape(n)
+    if np.any(~(axial > 0)):
+        raise ValueError("J: a wheel's axial inertia is not positive")
     return Values(
         m_a=float(m_a),
         carrier=np.asarray(carrier, dtype=float).reshape(3, 3),
         has_gimbal=has,
         m=np.asarray(m, dtype=float).reshape(n),
         I=np.asarray(I, dtype=float).reshape(n),
-        J=np.asarray(J, dtype=float).reshape(n),
+        J=axial,
         g_s0=spin,
         g_g=gg,
         r=np.asarray(r, dtype=float).reshape(n, 3),
@@ -209,7 +217,9 @@ def derivatives(
     u_g: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(w_A', gam', gd', w') of M states: w_A (M, 3), the rest (M, N). A
-    fixed wheel's gam' and gd' are 0 and its u_g is ignored."""
+    fixed wheel's gam' and gd' are 0 and its u_g is ignored. The rows solved
+    per state: the system's momentum (3), then each gimbal about g_g (a fixed
+    wheel's row: gd' = 0); w' comes first, from each wheel's own law."""
     f = frames(v, gam)
     rate = np.where(v.has_gimbal, gd, 0.0)
     w_G = _rates(v, f, w_A, gd)
@@ -224,7 +234,7 @@ def derivatives(
     m, n = gam.shape
     mat = np.zeros((m, 3 + n, 3 + n))
     rhs = np.zeros((m, 3 + n))
-    k_g = np.einsum("mnij,mnj->mni", f.K, f.g_g)  # K g_g, a column of the carrier's rows
+    k_g = np.einsum("mnij,mnj->mni", f.K, f.g_g)  # K g_g: how gd' turns the momentum
     mat[:, :3, :3] = point_inertia(v) + f.K.sum(1)
     mat[:, :3, 3:] = k_g.transpose(0, 2, 1)
     mat[:, 3:, :3] = k_g  # K symmetric: g_g^T K
