@@ -797,6 +797,33 @@ class Compiled:
         x, phi = layout.unpack(y)
         return x, phi, stats, codes
 
+    def integrate_var_grid(
+        self,
+        method: str,
+        x0: np.ndarray,
+        c: np.ndarray,
+        times: np.ndarray,
+        **kwargs: Any,
+    ) -> tuple[np.ndarray, np.ndarray, Stats, int]:
+        """`integrate_var` on an output grid, as `integrate_grid`: one
+        integration of x with Phi, both read at each time from the method's
+        dense output (Phi(times[0]) = I: the grid's first time is the start).
+
+        Returns
+        -------
+        x : numpy.ndarray, shape (n, nx)
+        Phi : numpy.ndarray, shape (n, nx, ncol)
+            Rows past the time a failure reached are NaN in both.
+        stats : Stats
+        code : int
+        """
+        var, layout = self._variational
+        y0 = layout.pack(self._state(x0))
+        y, stats, code = var.integrate_grid(method, y0, c, times, **kwargs)
+        x, phi = layout.unpack(y)
+        phi[np.isnan(x[:, 0])] = np.nan
+        return x, phi, stats, code
+
     @cached_property
     def _variational(self) -> tuple[Compiled, Layout]:
         """The augmented system's functions in this build, and its layout."""
