@@ -319,6 +319,8 @@ def test_a_sweep_counts_each_event_and_keeps_its_first_time(tmp_path: Path) -> N
     assert column_docs(s)["first_spun"][0] == "s"
     cols = run_chunk(compiled(scene_sources(s.scene, False)), s, 0, 2)
     assert list(cols["count_third"]) == [3, 2] and list(cols["count_spun"]) == [0, 1]
+    assert list(cols["code"]) == [0, 8]  # the terminal event ends the run: ODE_EVENT
+    assert cols["t"][0] == 4.0 and cols["t"][1] == cols["first_spun"][1]
     assert np.allclose(cols["first_third"], np.pi / 3, rtol=1e-14)
     assert np.isnan(cols["first_spun"][0]) and 2.5 < cols["first_spun"][1] < 3.5
     fixed = 'scene = "ev.toml"\nt_end = 4.0\nmethod = "rk4"\nsteps = 100\n' + grid

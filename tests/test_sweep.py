@@ -21,7 +21,6 @@ from gyrogen.analysis.sweep.metrics import NOT_RUN
 from gyrogen.analysis.sweep.spec import load
 from gyrogen.oracle import reference
 from gyrogen.physics import body_momentum, lumped_inertias
-from gyrogen.runtime.segment import integrate_segments
 
 
 @pytest.fixture(scope="module")
@@ -54,12 +53,12 @@ def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path])
     for i in (0, 17, spec.size - 1):
         c = model.setup(inp.p[i])
         given = {"rtol": 1e-9, "atol": 1e-9, "max_steps": 10**6}
-        seg = integrate_segments(model, "dop853", inp.x0[i], c, times, given)  # type: ignore[arg-type]
+        states, stats, code = model.integrate_grid("dop853", inp.x0[i], c, times, **given)
         finals = frame.loc[i, [f"final_{s}" for s in spec.scene.states]].to_numpy(float)
-        assert np.array_equal(finals, seg.states[-1])
-        assert frame.loc[i, "rhs_calls"] == seg.totals["rhs_calls"]
+        assert code == 0 and np.array_equal(finals, states[-1])
+        assert frame.loc[i, "rhs_calls"] == stats["rhs_calls"]
         assert frame.loc[i, "max_rate"] == pytest.approx(
-            np.max(np.linalg.norm(seg.states[:, 7:10], axis=1)), rel=1e-15
+            np.max(np.linalg.norm(states[:, 7:10], axis=1)), rel=1e-15
         )
 
 
@@ -68,9 +67,16 @@ def test_metrics_are_what_their_names_say(swept: tuple[Path, Path]) -> None:
     frame = rows(swept[1])
     assert (frame["max_nutation"] >= frame["nutation_0"]).all()
     assert (frame["H_drift"] < 1e-8).all()  # |H| is conserved: rtol 1e-9 holds it
-    reached = frame["time_to_u1"].dropna()
-    assert len(reached) and reached.isin(np.linspace(0.0, 2.0, 11)).all()
     assert frame["code"].eq(0).all() and frame["t"].eq(2.0).all()
+    reached = frame["time_to_u1"].dropna()
+    assert len(reached) and not reached.isin(np.linspace(0.0, 2.0, 11)).any()
+    # located on the dense output, not the first sample past it: u1 is 0.25 there
+    spec = load(str(swept[0]))
+    model, inp = api.compile(spec.scene), inputs(spec, 0, spec.size)
+    for i in reached.index[:4]:
+        c, at = model.setup(inp.p[i]), float(reached[i])
+        x, _, code = model.integrate("dop853", inp.x0[i], c, 0.0, at, rtol=1e-12, atol=1e-12)
+        assert code == 0 and abs(x[7] - 0.25) < 1e-8
 
 
 def test_body_momentum_has_the_reference_magnitude() -> None:
@@ -83,6 +89,101 @@ def test_body_momentum_has_the_reference_magnitude() -> None:
     h = body_momentum(lumped_inertias(*(v[n] for n in names)), v["J"], *x[:, 7:11].T)
     expected = np.linalg.norm(reference.angular_momentum_n(x, inp.p), axis=-1)
     assert np.allclose(np.linalg.norm(h, axis=0), expected, rtol=1e-13)
+
+
+MONTE_CARLO_FAILING = """
+scene = "gyrostat"
+method = "dop853"
+t_end = 10.0
+rtol = 1e-9
+atol = 1e-9
+max_steps = 40
+[draws]
+seed = 1
+count = 20
+I11 = { normal = [12.0, 0.3] }
+u4  = { uniform = [1.0, 3000.0] }
+[metrics]
+keep = ["final_state", "stats", "max_nutation", "max_rate", "invariant_drift", "time_to"]
+samples = 2
+time_to = { nutation = 0.3 }
+"""
+
+
+def test_a_monte_carlo_whose_runs_fail_midway_keeps_every_row() -> None:
+    """A parameter set per trajectory, some of whose runs exhaust max_steps
+    (one budget per trajectory) between the samples: each row has its code,
+    the time it reached and metrics over the samples it reached, and the
+    others are the grid's (the metrics of the rows still running once read
+    every row's inertias: a chunk with a run failing after the first
+    sample stopped with a shape mismatch)."""
+    from gyrogen.analysis.sweep.metrics import run_chunk
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    spec = api.load_sweep(MONTE_CARLO_FAILING)
+    model = compiled(scene_sources(spec.scene))
+    cols = run_chunk(model, spec, 0, 20)
+    failed = cols["code"] == 2  # ODE_ERR_MAX_STEPS
+    assert failed.any() and not failed.all() and set(cols["code"]) == {0, 2}
+    assert (cols["t"][failed] < 10.0).all() and (cols["t"][~failed] == 10.0).all()
+    assert np.isfinite(cols["max_rate"]).all() and np.isfinite(cols["max_nutation"]).all()
+    inp = inputs(spec, 0, 20)
+    times = np.linspace(0.0, 10.0, 3)
+    for i in range(20):
+        states, stats, code = model.integrate_grid(
+            "dop853", inp.x0[i], model.setup(inp.p[i]), times, rtol=1e-9, atol=1e-9, max_steps=40
+        )
+        assert code == cols["code"][i] and stats["t"] == cols["t"][i]
+        seen = states[~np.isnan(states[:, 0])]
+        assert cols["max_rate"][i] == np.max(np.linalg.norm(seen[:, 7:10], axis=1))
+
+
+def test_time_to_is_located_where_the_quantity_is_its_threshold() -> None:
+    """time_to's nutation, rate and state thresholds are events the sweep
+    adds to its scene, located on the dense output: the compiled integrator
+    run to the time found has the quantity at its threshold (to the
+    location's precision), where the first sample past it was up to a
+    sample interval late."""
+    from gyrogen.analysis.sweep.metrics import located, run_chunk
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    text = (
+        MONTE_CARLO_FAILING.replace("max_steps = 40\n", "")
+        .replace(
+            "[1.0, 3000.0]",
+            "[1.0, 60.0] }\nu1 = { uniform = [-0.3, 0.3] }\nu3 = { uniform = [-0.3, 0.3]",
+        )
+        .replace(
+            "time_to = { nutation = 0.3 }", "time_to = { nutation = 0.3, rate = 0.35, u1 = 0.1 }"
+        )
+    )
+    spec = api.load_sweep(text)
+    names = [e.name for e in spec.scene.events]
+    assert names == ["time_to_nutation", "time_to_rate", "time_to_u1"] and not located(spec)
+    model = compiled(scene_sources(spec.scene))
+    cols = run_chunk(model, spec, 0, 20)
+    inp = inputs(spec, 0, 20)
+    found = 0
+    for i in range(20):
+        c = model.setup(inp.p[i])
+        values = {**spec.scene.folded(), **dict(zip(spec.scene.runtime, inp.p[i], strict=True))}
+        lumped = lumped_inertias(
+            *(values[n] for n in ("m_a", "m_b", "I11", "I22", "I33", "I13", "I", "l1", "l3"))
+        )
+        for q, thr in (("nutation", 0.3), ("rate", 0.35), ("u1", 0.1)):
+            at = cols[f"time_to_{q}"][i]
+            if not 0 < at < 10:
+                continue
+            found += 1
+            x, _, code = model.integrate("dop853", inp.x0[i], c, 0.0, at, rtol=1e-13, atol=1e-13)
+            u = x[7:11]
+            if q == "nutation":
+                h = body_momentum(lumped, values["J"], *u)
+                value = np.arctan2(np.hypot(h[0], h[2]), h[1])
+            else:
+                value = np.linalg.norm(u[:3]) if q == "rate" else u[0]
+            assert code == 0 and abs(value - thr) < 1e-8, (q, i, value)
+    assert found >= 10
 
 
 @pytest.mark.slow

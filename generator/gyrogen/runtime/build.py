@@ -101,19 +101,13 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
     per_call = ["rhs", *manifest["outputs"], *(["events"] if manifest.get("events") else [])]
     if "jac" in names:
         per_call.append("jac")
-    grids = ("_grid", "_grid_batch", "_events")
-    integrators = [
-        n
-        for m in manifest["integrators"]
-        for n in (m, f"{m}_batch", *(m + g for g in grids if m + g in names))
-    ]
     linear = ["linear"] if "linear" in names else []
-    declared = ["setup", *per_call, *linear, *integrators]
+    declared = ["setup", *per_call, *linear, *_integrators(manifest["integrators"], names)]
     var = manifest.get("variational")
     augmented = []  # the augmented system's rhs and integrators (<prefix>_var_*)
     if var is not None:
         var_names = var["functions"][language]
-        keys = ["rhs", *(n for m in var["integrators"] for n in (m, f"{m}_batch"))]
+        keys = ["rhs", *_integrators(var["integrators"], var_names)]
         augmented = [(signature_of(k), var_names[k]) for k in keys]
     return {
         "functions": [names[f] for f in per_call],
@@ -122,6 +116,14 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
         "abi": abi,
         "nx": manifest["nx"],
     }
+
+
+def _integrators(methods: list[str], names: dict[str, str]) -> list[str]:
+    """Each method's functions a unit exports: the plain call, _batch, and
+    the output grid's (_grid, _grid_batch, _events) where it has them."""
+    grids = ("_grid", "_grid_batch", "_events")
+    return [n for m in methods
+            for n in (m, f"{m}_batch", *(m + g for g in grids if m + g in names))]  # fmt: skip
 
 
 def _tool_version(tool: str) -> str:

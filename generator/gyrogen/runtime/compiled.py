@@ -797,6 +797,33 @@ class Compiled:
         x, phi = layout.unpack(y)
         return x, phi, stats, codes
 
+    def integrate_var_grid(
+        self,
+        method: str,
+        x0: np.ndarray,
+        c: np.ndarray,
+        times: np.ndarray,
+        **kwargs: Any,
+    ) -> tuple[np.ndarray, np.ndarray, Stats, int]:
+        """`integrate_var` on an output grid, as `integrate_grid`: one
+        integration of x with Phi, both read at each time from the method's
+        dense output (Phi(times[0]) = I: the grid's first time is the start).
+
+        Returns
+        -------
+        x : numpy.ndarray, shape (n, nx)
+        Phi : numpy.ndarray, shape (n, nx, ncol)
+            Rows past the time a failure reached are NaN in both.
+        stats : Stats
+        code : int
+        """
+        var, layout = self._variational
+        y0 = layout.pack(self._state(x0))
+        y, stats, code = var.integrate_grid(method, y0, c, times, **kwargs)
+        x, phi = layout.unpack(y)
+        phi[np.isnan(x[:, 0])] = np.nan
+        return x, phi, stats, code
+
     @cached_property
     def _variational(self) -> tuple[Compiled, Layout]:
         """The augmented system's functions in this build, and its layout."""
@@ -904,6 +931,7 @@ class Compiled:
         h0: float = DEFAULT_CONTROLS["h0"],
         max_steps: int = DEFAULT_CONTROLS["max_steps"],
         capacity: int = 10_000,
+        end: np.ndarray | None = None,
     ) -> tuple[np.ndarray, EventLog, Stats, int]:
         """`integrate_grid` with the scene's [[events]] located.
 
@@ -928,6 +956,9 @@ class Compiled:
             As for `integrate_grid`.
         capacity : int, default 10000
             The most events the log holds.
+        end : numpy.ndarray, shape (nx,), optional
+            Receives the state the run ended at: times[-1]'s, a terminal
+            event's, or on failure the last good one.
 
         Returns
         -------
@@ -965,6 +996,8 @@ class Compiled:
                       buf(_DOUBLES, log_x), nlog, stats)  # fmt: skip
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        if end is not None:
+            end[...] = x
         n = int(nlog[0])
         names = self.event_names
         log = EventLog(log_t[:n].copy(), [names[k] for k in log_k[:n]], log_x[:n].copy())
@@ -982,10 +1015,13 @@ class Compiled:
         atol: float = DEFAULT_CONTROLS["atol"],
         h0: float = DEFAULT_CONTROLS["h0"],
         max_steps: int = DEFAULT_CONTROLS["max_steps"],
+        ends: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """`integrate_grid` for many states over the same times, one set of
         constants; each state's rows equal its `integrate_grid` call's bit
-        for bit, whatever the thread count.
+        for bit, whatever the thread count. ends, an (n, nx) array if
+        given, receives the state each run ended at (times[-1]'s, or on
+        failure the last good one).
 
         Returns
         -------
@@ -1026,6 +1062,8 @@ class Compiled:
                     list(pool.map(run, *parts))
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        if ends is not None:
+            ends[...] = x
         return out, stats, codes
 
     def _grid(self, method: str, kind: str) -> Any:

@@ -2,11 +2,14 @@
 integrator (Compiled.integrate_batch) and reduced to one row each.
 
 The trajectories are grouped by their runtime parameters: setup runs once
-per parameter set, and each set is one batch call per sample interval (a
-Monte Carlo over parameters makes sets of one: a call per trajectory and
-interval, ~6 us each). The sampled metrics look
-at the states at metrics.samples equal intervals of t_end; the integrator
-is restarted at each (every sample is a step end, as in runtime/segment.py).
+per parameter set (a Monte Carlo over parameters makes sets of one). The
+sampled metrics look at the states at metrics.samples equal intervals of
+t_end. An adaptive method reads them from its dense output, one
+integration per trajectory whose steps are not cut at the samples
+(`_grid_batch`; `_events` when the scene's events are located, in the same
+run); a fixed-step method is restarted at each sample (every sample a step
+end, as in runtime/segment.py), and a sweep with nothing to sample is one
+batch call per parameter set (over SIMD lanes).
 
 The columns (one row per trajectory):
 
@@ -23,9 +26,11 @@ The columns (one row per trajectory):
 - invariant_drift: H_drift, the largest | |H| - |H(0)| | / |H(0)| (|H| is
   conserved for every torque law: the motor's torque is internal and
   gravity acts at AB*);
-- time_to: time_to_<quantity>, the first sample time at which the quantity
+- time_to: time_to_<quantity>, the first time at which the quantity
   (nutation, rate, or a state) is on the other side of its threshold from
-  where it started (0 if it starts on it; NaN if never);
+  where it started (0 if it starts on it; NaN if never): with an adaptive
+  method located on the dense output as an event the sweep adds to its
+  scene (spec.threshold_events), with a fixed step the first sample time;
 - pointing: the angle (rad) between the carrier's a3 (a boresight) at the
   end and at the start, in N (any scene, either attitude).
 
@@ -35,15 +40,16 @@ A failed run's metrics cover the samples it reached.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gyrogen import methods
-from gyrogen.abi import unit_and_doc
+from gyrogen.abi import ODE_LOG_FULL, unit_and_doc
 from gyrogen.analysis.sweep.draws import inputs
-from gyrogen.analysis.sweep.spec import SAMPLED, Spec
+from gyrogen.analysis.sweep.spec import SAMPLED, THRESHOLD, Spec
 from gyrogen.oracle.reference import N_STATES, direction_cosines
 from gyrogen.oracle.scene_view import quaternion_dcm
 from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
@@ -81,14 +87,19 @@ def columns(spec: Spec) -> dict[str, np.dtype]:
 
 def located(spec: Spec) -> list[str]:
     """The scene's events the sweep locates (their first time and count
-    columns): all of them with an adaptive method, none with a fixed step."""
+    columns): all of them with an adaptive method, none with a fixed step;
+    not the ones the sweep added for its time_to thresholds (spec.THRESHOLD)."""
     if methods.get(spec.sweep.method).fixed_step:
         return []
-    return [e.name for e in spec.scene.events]
+    return [e.name for e in spec.scene.events if not e.name.startswith(THRESHOLD)]
 
 
 EVENT_CAPACITY = 100_000
 """Events logged per trajectory: a count at it means at least as many."""
+FIRST_CAPACITY = 64
+"""The log a trajectory is run with first: one that fills it is run again
+with EVENT_CAPACITY (a log's buffers are allocated per call, and
+EVENT_CAPACITY's cost ~100 us each)."""
 
 
 _METRIC_DOCS = {
@@ -111,7 +122,8 @@ def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
         if name in _METRIC_DOCS:
             docs[name] = _METRIC_DOCS[name]
         elif name in COUNTERS:
-            docs[name] = ("1", f"{name} of the integrator, summed over the samples' intervals")
+            docs[name] = ("1", f"{name} of the integrator (a fixed-step method's summed "
+                          "over the samples' intervals)")  # fmt: skip
         elif name.startswith("final_"):
             unit, doc = unit_and_doc(name[len("final_") :])
             docs[name] = (unit, f"final value (the last good one on failure) of: {doc}")
@@ -124,7 +136,8 @@ def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
             docs[name] = ("1", f"how often event {name[len('count_') :]} happened, up to a "
                           f"terminal event and at most {EVENT_CAPACITY} events in all")  # fmt: skip
         elif name.startswith("time_to_"):
-            docs[name] = ("s", f"first sample time {name[len('time_to_') :]} crossed its threshold")
+            docs[name] = ("s", f"first time {name[len('time_to_') :]} crossed its threshold "
+                          "(located; a fixed-step method's: the first sample past it)")  # fmt: skip
         else:
             docs[name] = unit_and_doc(name)  # an input: a state or a runtime parameter
     return docs
@@ -166,35 +179,9 @@ def run_chunk(comp: Compiled, spec: Spec, start: int, stop: int) -> dict[str, np
     known = {**spec.scene.folded(), **runtime}
     x0 = inp.x0 if all_ran else inp.x0[ran]
     aim = boresight(spec, x0) if "pointing" in columns(spec) else None  # x0 is integrated in place
-    events = _events(comp, spec, batches, x0) if located(spec) else {}
     runs = _integrate(comp, spec, batches, known, x0)
-    found = _found(spec, runs, aim) | events
+    found = _found(spec, runs, aim)
     return _filled(spec, n, every, None if all_ran else ran, found)
-
-
-def _events(
-    comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]], x0: np.ndarray
-) -> dict[str, np.ndarray]:
-    """Each event's first time and count along each trajectory, from one
-    _events call per trajectory from 0 to t_end (a run of its own beside the
-    batch that samples the metrics: a sweep with events costs about twice
-    one without)."""
-    sweep, names = spec.sweep, located(spec)
-    first = {e: np.full(len(x0), np.nan) for e in names}
-    count = {e: np.zeros(len(x0), dtype=np.int64) for e in names}
-    ends = np.array([0.0, sweep.t_end])
-    for c, rows in batches:
-        for r in rows:
-            _, log, _, _ = comp.integrate_events(
-                sweep.method, x0[r], c, ends, rtol=sweep.rtol, atol=sweep.atol,
-                max_steps=sweep.max_steps, capacity=EVENT_CAPACITY,
-            )  # fmt: skip
-            for t, e in zip(log.times, log.names, strict=True):
-                if not count[e][r]:
-                    first[e][r] = t
-                count[e][r] += 1
-    return {**{f"first_{e}": v for e, v in first.items()},
-            **{f"count_{e}": v for e, v in count.items()}}  # fmt: skip
 
 
 def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -216,26 +203,29 @@ class _Watch:
         self.J = values["J"]
         self.thresholds = spec.sweep.metrics.time_to
         self.states = states
-        self.nutation, self.rate, self.h0 = self._look(x0)
+        every = np.arange(len(x0))
+        self.nutation, self.rate, self.h0 = self._look(x0, every)
         self.nutation_0 = self.nutation.copy()
         self.drift = np.zeros(len(x0))
-        self.start = {q: self._quantity(q, x0) - thr for q, thr in self.thresholds.items()}
+        self.start = {q: self._quantity(q, x0, every) - thr for q, thr in self.thresholds.items()}
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
-    def _momentum(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """H at the states x over a power of two per row, and that power: 1
+    def _momentum(self, x: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """H at the states x of rows over a power of two per row, and that power: 1
         unless the rates reach 2^600 (inertias to 1e50 times rates to 1e300
         overflowed the products, an arctan2 of infinities then 45 degrees)."""
         u = x[:, self.u]
         big = np.max(np.abs(u), axis=1, initial=0.0, where=np.isfinite(u))
         scale = np.ldexp(1.0, np.where(big >= 2.0**600, np.frexp(big)[1], 0))
         u1, u2, u3, u4 = (u / scale[:, None]).T  # exact: a power of two
-        return np.array(body_momentum(self.lumped, self.J, u1, u2, u3, u4)), scale
+        lumped = tuple(v[rows] if np.ndim(v) else v for v in self.lumped)  # per row, or shared
+        J = self.J[rows] if np.ndim(self.J) else self.J
+        return np.array(body_momentum(lumped, J, u1, u2, u3, u4)), scale
 
-    def _look(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The nutation angle, |omega| and |H| at the states x (|H| inf
-        where it is beyond doubles)."""
-        h, scale = self._momentum(x)
+    def _look(self, x: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The nutation angle, |omega| and |H| at the states x of rows (|H|
+        inf where it is beyond doubles)."""
+        h, scale = self._momentum(x, rows)
         transverse = np.hypot(h[0], h[2])
         u1, u2, u3 = (x[:, i] for i in self.u[:3])
         rate = np.hypot(np.hypot(u1, u2), u3)  # no square to overflow: |u| to 1e308
@@ -243,15 +233,14 @@ class _Watch:
             norm = np.hypot(transverse, h[1]) * scale
         return np.arctan2(transverse, h[1]), rate, norm
 
-    def _quantity(self, q: str, x: np.ndarray) -> np.ndarray:
+    def _quantity(self, q: str, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
         if q in ("nutation", "rate"):
-            return self._look(x)[0 if q == "nutation" else 1]
+            return self._look(x, rows)[0 if q == "nutation" else 1]
         return x[:, self.states.index(q)]
 
-    def see(self, t: float, x: np.ndarray, live: np.ndarray) -> None:
-        """The states x[live] at time t."""
-        xs = x[live]
-        nutation, rate, norm = self._look(xs)
+    def see(self, t: float, xs: np.ndarray, live: np.ndarray) -> None:
+        """The states xs of the rows live at time t."""
+        nutation, rate, norm = self._look(xs, live)
         self.nutation[live] = np.fmax(self.nutation[live], nutation)
         self.rate[live] = np.fmax(self.rate[live], rate)
         h0 = self.h0[live]
@@ -259,7 +248,7 @@ class _Watch:
             drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
         self.drift[live] = np.fmax(self.drift[live], drift)
         for q, thr in self.thresholds.items():
-            crossed = np.sign(self._quantity(q, xs) - thr) != np.sign(self.start[q][live])
+            crossed = np.sign(self._quantity(q, xs, live) - thr) != np.sign(self.start[q][live])
             first = live[crossed & np.isnan(self.time_to[q][live])]
             self.time_to[q][first] = t
 
@@ -274,6 +263,30 @@ class _Runs:
     totals: dict[str, np.ndarray]
     watch: _Watch | None
     """None when the sweep keeps no sampled metric: nothing to look at."""
+    events: dict[str, np.ndarray]
+    """first_<event> and count_<event> (empty when none is located)."""
+
+    def ended(self, rows: Any, x: np.ndarray, code: Any, stats: Any) -> None:
+        """Rows' runs ended at x with code and their statistics."""
+        self.x[rows], self.reached[rows], self.code[rows] = x, stats["t"], code
+        for name in COUNTERS:
+            self.totals[name][rows] += stats[name]
+
+    def look(self, times: np.ndarray, rows: np.ndarray, out: np.ndarray) -> None:
+        """The sampled metrics at times[1:] from rows' states there (out[i, k]
+        row rows[i] at times[k]; NaN past a failure: a run's metrics cover
+        the samples it reached)."""
+        if self.watch is None:
+            return
+        for k in range(1, len(times)):
+            reached = ~np.isnan(out[:, k, 0])
+            if reached.any():
+                self.watch.see(float(times[k]), out[reached, k], rows[reached])
+
+
+GRID_BLOCK = 1 << 21
+"""The most doubles of sampled states one grid call holds (16 MB): a
+chunk's rows are run in blocks of this many states times samples."""
 
 
 def _integrate(
@@ -283,24 +296,118 @@ def _integrate(
     values: dict[str, Any],
     x0: np.ndarray,
 ) -> _Runs:
-    """Every trajectory from 0 to t_end, interval by interval: each
-    parameter set's (constants c, rows) live rows in one batch call, then
-    the metrics of all rows at the interval's end in one look. x0 becomes
-    the runs' states (integrated in place)."""
+    """Every trajectory from 0 to t_end. An adaptive method samples the
+    metrics on its dense output: one integration per trajectory over the
+    samples' grid (`_grid_batch`, or `_events` when the scene's events are
+    located, which gives both); a fixed-step one is restarted at each
+    sample, as is a sweep with nothing to sample (the batch call, over SIMD
+    lanes). x0 becomes the runs' states (integrated in place)."""
     sweep = spec.sweep
-    n_samples = sweep.metrics.points
-    times = np.linspace(0.0, sweep.t_end, n_samples + 1)
-    per_interval = -(-(sweep.steps or 1) // n_samples)
-    given = controls(
-        sweep.method, steps=per_interval, rtol=sweep.rtol, atol=sweep.atol,
-        max_steps=sweep.max_steps,
-    )  # fmt: skip
+    times = np.linspace(0.0, sweep.t_end, sweep.metrics.points + 1)
     n = len(x0)
     runs = _Runs(
         x0, np.zeros(n, dtype=np.int32), np.zeros(n),
         {name: np.zeros(n, dtype=np.int64) for name in COUNTERS},
         _Watch(spec, values, x0) if set(sweep.metrics.keep) & set(SAMPLED) else None,
+        {},
     )  # fmt: skip
+    if spec.scene.events and not methods.get(sweep.method).fixed_step:
+        _with_events(comp, spec, batches, runs, times)
+    elif methods.get(sweep.method).fixed_step or len(times) == 2:
+        _restarted(comp, spec, batches, runs, times)
+    else:
+        _on_grid(comp, spec, batches, runs, times)
+    return runs
+
+
+def _adaptive(spec: Spec) -> dict[str, Any]:
+    sweep = spec.sweep
+    return {"rtol": sweep.rtol, "atol": sweep.atol, "max_steps": sweep.max_steps}
+
+
+Sets = list[tuple[np.ndarray, np.ndarray]]
+"""Parameter sets: (constants from setup, the rows that share them)."""
+
+
+def _blocks(batches: Sets, n: int, size: int) -> Iterator[tuple[np.ndarray, Sets]]:
+    """The rows 0..n-1 in blocks of size, each with its parameter sets'
+    (constants, rows) within it (where one look at a block's samples
+    covers many sets: a Monte Carlo's set per trajectory)."""
+    which = np.empty(n, dtype=np.intp)
+    for b, (_, rows) in enumerate(batches):
+        which[rows] = b
+    for at in range(0, n, size):
+        rows = np.arange(at, min(at + size, n))
+        order = np.argsort(which[rows], kind="stable")
+        cut = np.flatnonzero(np.diff(which[rows][order])) + 1
+        yield rows, [(batches[which[part[0]]][0], part) for part in np.split(rows[order], cut)]
+
+
+def _on_grid(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
+             runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
+    """One `_grid_batch` call per parameter set and block of rows."""
+    size = max(1, GRID_BLOCK // (len(times) * comp.nx))
+    for rows, sets in _blocks(batches, len(runs.x), size):
+        out = np.empty((len(rows), len(times), comp.nx))
+        at = rows[0]
+        for c, part in sets:
+            ends = np.empty((len(part), comp.nx))
+            # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
+            out[part - at], stats, codes = comp.integrate_grid_batch(
+                spec.sweep.method, runs.x[part], c, times, threads=1, ends=ends,
+                **_adaptive(spec),
+            )  # fmt: skip
+            runs.ended(part, ends, codes, stats)
+        runs.look(times, rows, out)
+
+
+def _with_events(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
+                 runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
+    """One `_events` call per trajectory over the samples' grid: its states
+    there, its events (first time and count: up to a terminal event, which
+    ends the run with code ODE_EVENT), its time_to crossings (the first of
+    each threshold's event) and its end."""
+    names = [e.name for e in spec.scene.events]
+    first = {e: np.full(len(runs.x), np.nan) for e in names}
+    count = {e: np.zeros(len(runs.x), dtype=np.int64) for e in names}
+    size = max(1, GRID_BLOCK // (len(times) * comp.nx))
+    end = np.empty(comp.nx)
+    for rows, sets in _blocks(batches, len(runs.x), size):
+        out = np.empty((len(rows), len(times), comp.nx))
+        for c, part in sets:
+            for r in part:
+                for capacity in (FIRST_CAPACITY, EVENT_CAPACITY):
+                    out[r - rows[0]], log, stats, code = comp.integrate_events(
+                        spec.sweep.method, runs.x[r], c, times, capacity=capacity, end=end,
+                        **_adaptive(spec),
+                    )  # fmt: skip
+                    if code != ODE_LOG_FULL:
+                        break
+                runs.ended(r, end, code, stats)
+                for t, e in zip(log.times, log.names, strict=True):
+                    if not count[e][r]:
+                        first[e][r] = t
+                    count[e][r] += 1
+        runs.look(times, rows, out)
+    runs.events = {**{f"first_{e}": first[e] for e in located(spec)},
+                   **{f"count_{e}": count[e] for e in located(spec)}}  # fmt: skip
+    if runs.watch is not None:
+        for q, t in runs.watch.time_to.items():
+            at = first[THRESHOLD + q]
+            t[...] = np.where(t == 0.0, 0.0, at)  # 0: it starts on its threshold
+
+
+def _restarted(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
+               runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
+    """Interval by interval: each parameter set's live rows in one batch
+    call, then the metrics of all rows at the interval's end in one look."""
+    sweep = spec.sweep
+    per_interval = -(-(sweep.steps or 1) // (len(times) - 1))
+    given = controls(
+        sweep.method, steps=per_interval, rtol=sweep.rtol, atol=sweep.atol,
+        max_steps=sweep.max_steps,
+    )  # fmt: skip
+    n = len(runs.x)
     alive = np.ones(n, dtype=bool)
     for t0, t1 in itertools.pairwise(times):
         for c, rows in batches:
@@ -313,15 +420,13 @@ def _integrate(
             xl, stats, codes = comp.integrate_batch(
                 sweep.method, runs.x[live], c, t0, t1, threads=1, **given
             )
-            runs.x[live], runs.reached[live], runs.code[live] = xl, stats["t"], codes
-            for name in COUNTERS:
-                runs.totals[name][live] += stats[name]
+            runs.ended(live, xl, codes, stats)
         alive &= runs.code == 0
         if not alive.any():
             break
         if runs.watch is not None:
-            runs.watch.see(float(t1), runs.x, np.flatnonzero(alive))
-    return runs
+            idx = np.flatnonzero(alive)
+            runs.watch.see(float(t1), runs.x[idx], idx)
 
 
 def boresight(spec: Spec, x: np.ndarray) -> np.ndarray:
@@ -349,6 +454,7 @@ def _found(spec: Spec, runs: _Runs, aim: np.ndarray | None) -> dict[str, np.ndar
     start (boresight), when the spec keeps the pointing error."""
     watch = runs.watch
     found = {
+        **runs.events,
         "code": runs.code,
         "t": runs.reached,
         **{f"final_{s}": runs.x[:, i] for i, s in enumerate(spec.scene.states)},

@@ -45,8 +45,10 @@ from gyrogen.limits import (
     MAX_SWEEP_SAMPLES,
     MAX_SWEEP_TRAJECTORIES,
 )
+from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
 from gyrogen.scene import Number, Scene, builtin_names, load_toml, one_line, read_file
 from gyrogen.scene import load as load_scene
+from gyrogen.scene.events import Event
 from gyrogen.scene.rotors import check_axis
 from gyrogen.scene.rules import QUATERNION, check_quaternion
 from gyrogen.setup_checks import first_failure
@@ -222,7 +224,76 @@ def parse(text: str, source: str, name: str, here: Path | None) -> Spec:
         check_against(sweep, scene)
     except ValueError as exc:
         raise SceneError(f"{source}: {exc}") from exc
+    if sweep.metrics.time_to and not methods.get(sweep.method).fixed_step:
+        events = [*scene.events, *threshold_events(sweep.metrics.time_to)]
+        try:
+            scene = Scene.model_validate({**scene.model_dump(), "events": events})
+        except pydantic.ValidationError as exc:
+            raise SceneError(f"{source}: metrics.time_to: {one_line(exc)}") from exc
     return Spec(name, sweep, scene)
+
+
+THRESHOLD = "time_to_"
+"""The events a sweep adds to its scene for its time_to thresholds:
+time_to_<quantity> (a scene's own event of that name is refused)."""
+
+
+class _Text(str):
+    """An expression of the events' grammar that physics' formulas can
+    build: each operation parenthesized."""
+
+    def _op(self, op: str, other: object, right: bool = False) -> _Text:
+        a, b = (other, self) if right else (self, other)
+        return _Text(f"({a} {op} {b})")
+
+    def __add__(self, other: object) -> _Text:
+        return self._op("+", other)
+
+    def __radd__(self, other: object) -> _Text:
+        return self._op("+", other, True)
+
+    def __sub__(self, other: object) -> _Text:
+        return self._op("-", other)
+
+    def __rsub__(self, other: object) -> _Text:
+        return self._op("-", other, True)
+
+    def __mul__(self, other: object) -> _Text:
+        return self._op("*", other)
+
+    def __rmul__(self, other: object) -> _Text:
+        return self._op("*", other, True)
+
+    def __truediv__(self, other: object) -> _Text:
+        return self._op("/", other)
+
+    def __pow__(self, other: object) -> _Text:
+        return self._op("**", other)
+
+
+def threshold_events(time_to: dict[str, float]) -> list[Event]:
+    """An event per time_to threshold, crossing zero where its quantity
+    crosses the threshold (in either direction: the first crossing is the
+    first time it is on the other side): a state's value, |omega|, or the
+    nutation angle, as cos(threshold) |H| - H . a2 (H about AB* in A from
+    the lumped inertias, physics.body_momentum: positive where the angle is
+    past the threshold, no arctangent to locate)."""
+    names = [_Text(n) for n in LUMPED_FROM]
+    u1, u2, u3, u4 = (_Text(f"u{i}") for i in range(1, 5))
+    rate = f"sqrt({u1**2 + u2**2 + u3**2})"
+    h1, h2, h3 = body_momentum(lumped_inertias(*names), _Text("J"), u1, u2, u3, u4)
+    out = []
+    for q, value in time_to.items():
+        thr = f"({float(value)!r})"
+        expr = (
+            f"cos({thr}) * sqrt({h1**2 + h2**2 + h3**2}) - {h2}"
+            if q == "nutation"
+            else f"{rate} - {thr}"
+            if q == "rate"
+            else f"{q} - {thr}"
+        )
+        out.append(Event(name=THRESHOLD + q, expr=expr))
+    return out
 
 
 def _scene(ref: str, source: str, here: Path | None) -> Scene:
