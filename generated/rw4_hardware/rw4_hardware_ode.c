@@ -961,7 +961,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *RW4_HARDWARE_RESTRICT lu,
+                     const int *RW4_HARDWARE_RESTRICT piv, double *RW4_HARDWARE_RESTRICT b)
 {
     double swap;
 
@@ -1024,7 +1025,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
+                                double *RW4_HARDWARE_RESTRICT ai, int *RW4_HARDWARE_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1612,8 +1614,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *RW4_HARDWARE_RESTRICT ar,
+                             const double *RW4_HARDWARE_RESTRICT ai,
+                             const int *RW4_HARDWARE_RESTRICT piv,
+                             double *RW4_HARDWARE_RESTRICT br, double *RW4_HARDWARE_RESTRICT bi)
 {
     double swap;
     double re;

@@ -920,7 +920,9 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *RW4_PYRAMID_FAILED_RESTRICT lu,
+                     const int *RW4_PYRAMID_FAILED_RESTRICT piv,
+                     double *RW4_PYRAMID_FAILED_RESTRICT b)
 {
     double swap;
 
@@ -983,7 +985,9 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *RW4_PYRAMID_FAILED_RESTRICT ar,
+                                double *RW4_PYRAMID_FAILED_RESTRICT ai,
+                                int *RW4_PYRAMID_FAILED_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1592,8 +1596,11 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *RW4_PYRAMID_FAILED_RESTRICT ar,
+                             const double *RW4_PYRAMID_FAILED_RESTRICT ai,
+                             const int *RW4_PYRAMID_FAILED_RESTRICT piv,
+                             double *RW4_PYRAMID_FAILED_RESTRICT br,
+                             double *RW4_PYRAMID_FAILED_RESTRICT bi)
 {
     double swap;
     double re;

@@ -706,7 +706,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *STIFF_WHEEL_RESTRICT lu, const int *STIFF_WHEEL_RESTRICT piv,
+                     double *STIFF_WHEEL_RESTRICT b)
 {
     double swap;
 
@@ -746,7 +747,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_WHEEL_RESTRICT ai,
+                                int *STIFF_WHEEL_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1117,8 +1119,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *STIFF_WHEEL_RESTRICT ar,
+                             const double *STIFF_WHEEL_RESTRICT ai,
+                             const int *STIFF_WHEEL_RESTRICT piv,
+                             double *STIFF_WHEEL_RESTRICT br, double *STIFF_WHEEL_RESTRICT bi)
 {
     double swap;
     double re;

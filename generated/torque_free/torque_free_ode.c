@@ -744,7 +744,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *TORQUE_FREE_RESTRICT lu, const int *TORQUE_FREE_RESTRICT piv,
+                     double *TORQUE_FREE_RESTRICT b)
 {
     double swap;
 
@@ -777,7 +778,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_FREE_RESTRICT ai,
+                                int *TORQUE_FREE_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1095,8 +1097,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *TORQUE_FREE_RESTRICT ar,
+                             const double *TORQUE_FREE_RESTRICT ai,
+                             const int *TORQUE_FREE_RESTRICT piv,
+                             double *TORQUE_FREE_RESTRICT br, double *TORQUE_FREE_RESTRICT bi)
 {
     double swap;
     double re;
