@@ -1626,7 +1626,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int rw3_orthogonal_rk4(double t0, double t1, long steps, double *x, const double *c, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_rk4(double t0, double t1, long steps, double *x, const double *c,
+                       rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -2011,26 +2012,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int rw3_orthogonal_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2039,9 +2042,9 @@ size_t rw3_orthogonal_dopri5_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_dopri5_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_dopri5_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2609,26 +2612,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int rw3_orthogonal_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2637,9 +2642,9 @@ size_t rw3_orthogonal_dop853_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_dop853_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_dop853_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3159,26 +3164,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int rw3_orthogonal_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3187,9 +3194,9 @@ size_t rw3_orthogonal_rodas4_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_rodas4_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_rodas4_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4055,26 +4062,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4083,9 +4092,9 @@ size_t rw3_orthogonal_radau5_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_radau5_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_radau5_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5295,26 +5304,28 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
-int rw3_orthogonal_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_taylor(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5323,9 +5334,9 @@ size_t rw3_orthogonal_taylor_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_taylor_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_taylor_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6634,10 +6645,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        rw3_orthogonal_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                                const double *c, rw3_orthogonal_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6646,7 +6656,7 @@ size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, doub
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw3_orthogonal_rk4(t0, t1, steps, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6658,7 +6668,8 @@ size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, doub
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -6667,16 +6678,17 @@ size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, co
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6685,7 +6697,7 @@ size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x, co
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw3_orthogonal_rodas4(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6694,10 +6706,10 @@ size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x, co
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6706,7 +6718,7 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw3_orthogonal_radau5(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6718,7 +6730,8 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

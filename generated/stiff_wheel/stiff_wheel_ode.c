@@ -1276,7 +1276,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c, stiff_wheel_stats *stats)
+int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c,
+                    stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1659,26 +1660,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -1687,9 +1690,9 @@ size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_dopri5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_dopri5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2255,26 +2258,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2283,9 +2288,9 @@ size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_dop853_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_dop853_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2803,26 +2808,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2831,9 +2838,9 @@ size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_rodas4_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_rodas4_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3697,26 +3704,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3725,9 +3734,9 @@ size_t stiff_wheel_radau5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_radau5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_radau5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4453,10 +4462,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        stiff_wheel_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                             const double *c, stiff_wheel_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4465,7 +4473,7 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = stiff_wheel_rk4(t0, t1, steps, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4477,7 +4485,8 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
 /* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, STIFF_WHEEL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -4486,16 +4495,17 @@ size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const
 /* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, STIFF_WHEEL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4503,8 +4513,8 @@ size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_rodas4(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = stiff_wheel_rodas4(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4513,10 +4523,10 @@ size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4524,8 +4534,8 @@ size_t stiff_wheel_radau5_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_radau5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = stiff_wheel_radau5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
