@@ -167,11 +167,13 @@ def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
     return driver.Interpolant((), points, scaled=False)
 
 
-def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> list[S]:
+def step(
+    m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False, lanes: bool = False
+) -> list[S]:
     """One step of one trajectory, straight-line with selections (the scalar
     integrator loops over it; the lanes print it over every lane). grid: the
     output grid's too (driver.grid_step, and the grid times an accepted step
-    passes, from the series)."""
+    passes, from the series; lanes: out's rows from the lane's base)."""
     t, t1, cd = Var("t"), Var("t1"), Var("code")
     last, run, take, ok, at, jump, retry = (
         Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
@@ -208,7 +210,7 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False
     body: list[S] = [
         Comment("the coefficients at x, and the step they allow (Jorba and Zou)"),
         assign(run, cmp(cd, "<", 0)),
-        *(jet_function(series, jet).body if grid else [Call("taylor_jet", args)]),
+        *(jet_function(series, jet).body if grid and not lanes else [Call("taylor_jet", args)]),
         driver.count("rhs_calls", sel(run, Int(1), Int(0))),
         *bounds(jet, exact),
         *jz.next_h(order, Var("inv"), Var("rp"), Var("rq")),
@@ -240,8 +242,14 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False
     ]
     if not grid:
         return [*body, If(ok, tuple(accepted(quaternion, known=True)))]
-    inside = driver.inside(series_output(jet, exact), t, Var("told"), Var("hs"), grid, counted=True)
-    return [*body, If(ok, (*inside, *accepted(quaternion, known=True), *driver.reached()))]
+    taken = tuple(accepted(quaternion, known=True))
+    dense, told, hs = series_output(jet, exact), Var("told"), Var("hs")
+    if isinstance(grid, driver.Grid) and grid.events:
+        inside = driver.inside(dense, t, told, hs, grid, counted=True)
+        return [*body, If(ok, (*inside, *taken, *driver.reached()))]
+    row = driver.BASE + driver.G if lanes else driver.G
+    passed = driver.passed(ok, dense, t, told, hs, row)
+    return [*body, *passed, If(ok, taken), If(ok, tuple(driver.reached(row)))]
 
 
 UNMEASURED = "unmeasured"
@@ -346,13 +354,14 @@ def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = 
     return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
 
 
-def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
+def lanes_step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func:
     """taylor_step_lanes: one step of every lane of a struct lanes (the
-    shared values computed first, the same on every lane)."""
+    shared values computed first, the same on every lane); with grid,
+    taylor_grid_step_lanes: one step of taylor_grid."""
     series = m.tableau
     assert isinstance(series, Series)
     unused = [] if reads_constants(jet) else [Unused("c")]
-    body = (*unused, *uniform(m, jet), *step(m, jet, quaternion))
+    body = (*unused, *uniform(m, jet), *step(m, jet, quaternion, grid, lanes=True))
     locals_ = (
         *tables(m),
         Decl("order", "int", (), "in"),
@@ -360,9 +369,12 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
         real("scale", "in"),
         *(declare(n) for n in LOCALS),
         *([declare("norm")] if quaternion else []),
+        *(driver.lane_grid_locals(body) if grid else ()),
     )
-    doc = ("One step of taylor_integrate on every lane.",)
-    return Func("taylor_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
+    name = "taylor_grid" if grid else "taylor_integrate"
+    doc = (f"One step of {name} on every lane.",)
+    return Func(f"{name.removesuffix('_integrate')}_step_lanes", driver.LANE_PARAMS, body, None,
+                locals_, doc)  # fmt: skip
 
 
 def lane_state(m: Method, jet: Jet) -> list[Decl]:
