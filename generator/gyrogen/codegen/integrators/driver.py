@@ -251,8 +251,7 @@ def inside(
     (counted: the step is in the statistics already, t its end)."""
     at = theta_at(dense, end, start, step)
     if not (isinstance(grid, Grid) and grid.events):
-        coefficients = [If(due(end), dense.coefficients)] if dense.coefficients else []
-        return [*coefficients, writes(dense, at, end, G)]
+        return [If(due(end), (*dense.coefficients, writes(dense, at, end, G)))]
     return [
         *dense.coefficients,
         *events_in_step(grid, dense, at, start, end),
@@ -288,11 +287,16 @@ def passed(ok: E, dense: Interpolant, end: E, start: E, step: E, row: E = G) -> 
     its selections, t its end: statements each under ok, as the lanes print
     them (values by selection, the rhs when any lane needs it, the grid's
     writes lane by lane): due := ok and a grid time inside the step, the
-    coefficients when due, the grid times written when ok (row: out's row
-    of g, BASE + g over lanes). The step's acceptance and reached follow."""
+    coefficients and the grid times written when due (row: out's row of g,
+    BASE + g over lanes). The step's acceptance and reached follow."""
     at = theta_at(dense, end, start, step)
-    coefficients = [assign(DUE, and_(ok, due(end))), If(DUE, dense.coefficients)]
-    return [*(coefficients if dense.coefficients else []), If(ok, (writes(dense, at, end, row),))]
+    if not dense.coefficients:
+        return [If(ok, (writes(dense, at, end, row),))]
+    return [
+        assign(DUE, and_(ok, due(end))),
+        If(DUE, dense.coefficients),
+        If(DUE, (writes(dense, at, end, row),)),
+    ]
 
 
 # Events
