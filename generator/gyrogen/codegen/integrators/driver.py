@@ -92,10 +92,12 @@ GRID_DOC = (
     "time reached unwritten; a bad grid (ERR_GRID) writes none.",
 )
 GRID_LOCALS = (real("t0", "inout"), real("t1", "inout"), Decl("g", "long"),
-               real("told", "inout"), real("hs", "inout"), real("frac", "inout"))  # fmt: skip
+               real("told", "inout"), real("hs", "inout"), real("frac", "inout"),
+               Decl("due", "bool", (), "inout"))  # fmt: skip
 """What a _grid integration adds to its method's locals: t0 and t1 (the
 grid's ends), g (the next grid time to write), told and hs (the accepted
-step's start and size) and frac (a grid time within it, scaled)."""
+step's start and size), frac (a grid time within it, scaled) and due (a
+branch-free step passes a grid time, passed)."""
 LANE_PARAMS = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
 """<method>_step_lanes's arguments (a lane's t0, x and h0 live in its struct lanes)."""
 
@@ -290,13 +292,8 @@ def passed(ok: E, dense: Interpolant, end: E, start: E, step: E, row: E = G) -> 
     coefficients and the grid times written when due (row: out's row of g,
     BASE + g over lanes). The step's acceptance and reached follow."""
     at = theta_at(dense, end, start, step)
-    if not dense.coefficients:
-        return [If(ok, (writes(dense, at, end, row),))]
-    return [
-        assign(DUE, and_(ok, due(end))),
-        If(DUE, dense.coefficients),
-        If(DUE, (writes(dense, at, end, row),)),
-    ]
+    coefficients = [If(DUE, dense.coefficients)] if dense.coefficients else []
+    return [assign(DUE, and_(ok, due(end))), *coefficients, If(DUE, (writes(dense, at, end, row),))]
 
 
 # Events
@@ -491,11 +488,14 @@ def events_stop(dense: Interpolant, at: Callable[[E], E], counted: bool) -> list
     ]  # fmt: skip
 
 
-def reached(row: E = G) -> list[S]:
+def reached(row: E = G, ok: E | None = None) -> list[S]:
     """After the step, x and t its end: a grid time there gets x itself (the
     last one, t1, so equals _integrate's end state bit for bit; the times
-    before it were written by inside, so <= is ==); row: out's row of g."""
+    before it were written by inside, so <= is ==); row: out's row of g.
+    ok: only after a step taken (a branch-free step's, one test)."""
     there: list[S] = [For("i", NX, (assign(OUT[row, i], x[i]),)), inc(G, 1)]
+    if ok is not None:
+        return [If(and_(ok, cmp(G, "<", NTIMES), cmp(TIMES[G], "<=", t)), tuple(there))]
     return [If(cmp(G, "<", NTIMES), (If(cmp(TIMES[G], "<=", t), tuple(there)),))]
 
 

@@ -176,13 +176,13 @@ def _accept(
         inside = driver.inside(interpolant(m), t, told, hs, grid, counted=True)
         return [If(ok, (*inside, *taken, *driver.reached()))]
     passed = driver.passed(ok, interpolant(m), t, told, hs, row)
-    return [*passed, If(ok, taken), If(ok, tuple(driver.reached(row)))]
+    return [*passed, If(ok, taken), *driver.reached(row, ok)]
 
 
 STATE = ("code", "t", "h", "err_old", "nonfinite", "rejected_last")
 """A pair's values that live from step to step (besides x and stats)."""
-LOCALS = tuple("last err run take lock ok fac grow total err5 err3 deno norm due".split())
-BOOLS = {"nonfinite", "rejected_last", "last", "run", "take", "lock", "ok", "due"}
+LOCALS = tuple("last err run take lock ok fac grow total err5 err3 deno norm".split())
+BOOLS = {"nonfinite", "rejected_last", "last", "run", "take", "lock", "ok"}
 
 
 def declare(name: str) -> Decl:

@@ -249,7 +249,7 @@ def step(
         return [*body, If(ok, (*inside, *taken, *driver.reached()))]
     row = driver.BASE + driver.G if lanes else driver.G
     passed = driver.passed(ok, dense, t, told, hs, row)
-    return [*body, *passed, If(ok, taken), If(ok, tuple(driver.reached(row)))]
+    return [*body, *passed, If(ok, taken), *driver.reached(row, ok)]
 
 
 UNMEASURED = "unmeasured"

@@ -226,10 +226,11 @@ class LanesPrinter(CPrinter):
             args = ", ".join(self.expr(a) for a in (x, c, out))
             return [*times, f"{pad}rhs_lanes(L->ts, {args});"]
         assert isinstance(s, If) and not s.orelse, s
-        if self.lane_by_lane(s):
-            head = f"{pad}for (l = 0; l < {self.width}; ++l) {{"
-            return [head, *self.one_lane((s,), depth + 1), f"{pad}}}"]
         any_lane = self.lane_loop(depth, [f"{pad}{self.indent}need |= {self.expr(s.cond)};"], True)
+        if self.lane_by_lane(s):
+            head = f"{pad}{self.indent}for (l = 0; l < {self.width}; ++l) {{"
+            each = [head, *self.one_lane((s,), depth + 2), f"{pad}{self.indent}}}"]
+            return [f"{pad}need = 0;", *any_lane, f"{pad}if (need) {{", *each, f"{pad}}}"]
         return [
             f"{pad}need = 0;",
             *any_lane,
@@ -275,7 +276,8 @@ class LanesPrinter(CPrinter):
         ]
         loops = sorted({s.var for s in walk_for(func.body)} | {"l"})
         locals_.append(f"int {', '.join(loops)};")
-        if any(isinstance(s, If) and any(isinstance(x, Call) for x in s.then) for s in func.body):
+        if any(isinstance(s, If) and (any(isinstance(x, Call) for x in s.then)
+                                      or p.lane_by_lane(s)) for s in func.body):  # fmt: skip
             locals_.append("int need;")
         doc = [f"/* {d} */" for d in func.doc[:1]]
         body = p.block(func.body, 1)
