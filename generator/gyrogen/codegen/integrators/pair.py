@@ -6,8 +6,8 @@ begin (the step's size and the codes that stop), trial (the stages and the
 error, gyrogen.codegen.integrators.explicit), check (non-finite values, f at
 the new point), control (accept or reject, the new h, by selection) and
 accept (x := xnew). The scalar integrator loops over them; the lanes print
-the same parts over lanes (gyrogen.codegen.ir.lanes), so a batch equals its
-single calls bit for bit.
+the same parts over lanes (gyrogen.codegen.ir.lanes), so a batch (over an
+output grid too) equals its single calls bit for bit.
 """
 
 from __future__ import annotations
