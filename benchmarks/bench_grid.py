@@ -2,6 +2,7 @@
 and against restarting the integrator at every grid time, in C.
 
     python benchmarks/bench_grid.py [--t1 T] [--points N] [--tol TOL] [--repeats R] [--rounds K]
+                                    [--states S]
 
 The default scene, every adaptive method, rtol = atol = TOL, from 0 to T.
 Three raw cffi calls on buffers made once, the state reset from the
@@ -14,7 +15,10 @@ side, timed by the thread's CPU time (a loaded machine still times the calls
 themselves; the load average is printed before and after). The errors, each
 the largest over the states against dop853 at 1e-14 restarted per interval:
 the grid's, runs from 0 stopped at each grid time ("stop err"), and the end
-point's.
+point's. Then a batch of S start states (the scene's, each rate scaled by a
+draw from [0.5, 1.5]) on one thread: `_batch` to T against `_grid_batch`
+over 21 and over N + 1 times (in SIMD lanes for the methods whose `_batch`
+is).
 """
 
 from __future__ import annotations
@@ -73,6 +77,59 @@ def contenders(
     return {"end point": end, "grid": on_grid, "restarted": restarted}
 
 
+def batches(
+    comp: Compiled, method: str, x0s: np.ndarray, c: np.ndarray, times: np.ndarray, tol: float
+) -> dict[str, Callable[[], Any]]:
+    """method's _batch to the end, and its _grid_batch over 21 times and
+    over times, on buffers made once (x reset before each call)."""
+    ffi, n = comp.ffi, len(x0s)
+    x = x0s.copy()
+    xb, cb = ffi.from_buffer("double[]", x), comp.doubles(c)
+    batch, grid = comp.function(f"{method}_batch"), comp.function(f"{method}_grid_batch")
+    t1 = float(times[-1])
+
+    def plain() -> Any:
+        x[:] = x0s
+        return batch(n, 0.0, t1, xb, cb, tol, tol, 0.0, MAX_STEPS, ffi.NULL, ffi.NULL)
+
+    def on_grid(ts: np.ndarray) -> Callable[[], Any]:
+        out = np.zeros((n, ts.size, comp.nx))
+        tb, ob = ffi.from_buffer("double[]", ts), ffi.from_buffer("double[]", out)
+
+        def run() -> Any:
+            x[:] = x0s
+            return grid(n, ts.size, tb, xb, cb, tol, tol, 0.0, MAX_STEPS, ob, ffi.NULL, ffi.NULL)
+
+        return run
+
+    few = np.linspace(0.0, t1, 21)
+    return {"batch": plain, "grid 21": on_grid(few), f"grid {times.size}": on_grid(times)}
+
+
+def batch_table(
+    comp: Compiled, x0: np.ndarray, c: np.ndarray, times: np.ndarray, args: Any
+) -> None:
+    """_batch against _grid_batch for every adaptive method, one thread."""
+    rates = [i for i, name in enumerate(comp.manifest["states"]) if name.startswith("u")]
+    x0s = np.tile(x0, (args.states, 1))
+    x0s[:, rates] *= np.random.default_rng(1).uniform(0.5, 1.5, (args.states, 1))
+    comp.lib.gyrogen_threads(1)
+    many = f"grid {times.size}"
+    print(f"\n{args.states} states, one thread: _batch against _grid_batch")
+    print(f"{'method':<8} {'batch us':>10} {'grid 21 us':>11} {many + ' us':>13} "
+          f"{'21/batch':>9} {str(times.size) + '/batch':>11}")  # fmt: skip
+    for method in methods.ADAPTIVE:
+        runs = batches(comp, method, x0s, c, times, args.tol)
+        best = dict.fromkeys(runs, np.inf)
+        for _ in range(args.rounds):
+            for name, fn in runs.items():
+                best[name] = min(
+                    best[name], best_time(fn, args.repeats, clock=time.thread_time) * 1e6
+                )
+        b, f, m = best["batch"], best["grid 21"], best[many]
+        print(f"{method:<8} {b:10.1f} {f:11.1f} {m:13.1f} {f / b:9.2f} {m / b:11.2f}")
+
+
 def errors(
     comp: Compiled, method: str, x0: np.ndarray, c: np.ndarray, times: np.ndarray, tol: float
 ) -> tuple[float, float, float]:
@@ -102,6 +159,7 @@ def main() -> None:
     ap.add_argument("--tol", type=float, default=1e-10)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--states", type=int, default=500)
     args = ap.parse_args()
     scene = default()
     with tempfile.TemporaryDirectory(prefix="gyrogen-grid-") as tmp:
@@ -127,6 +185,7 @@ def main() -> None:
         e, g, r = best["end point"], best["grid"], best["restarted"]
         print(f"{method:<8} {e:10.1f} {g:10.1f} {r:11.1f} {g / e:9.2f} {r / e:12.1f} "
               f"{grid_err:10.2e} {stop_err:10.2e} {end_err:10.2e}")  # fmt: skip
+    batch_table(comp, x0, c, times, args)
     print(f"\nafter: {load()}")
 
 

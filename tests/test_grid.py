@@ -20,6 +20,8 @@ from gyrogen.scene import builtin_text, default, parse
 
 ADAPTIVE = list(methods.ADAPTIVE)
 ERR_GRID = next(c.value for c in abi.ODE_CODES if c.name == "ODE_ERR_GRID")
+MAX_STEPS = next(c.value for c in abi.ODE_CODES if c.name == "ODE_ERR_MAX_STEPS")
+NONFINITE = next(c.value for c in abi.ODE_CODES if c.name == "ODE_ERR_NONFINITE")
 INTERPOLANT_ORDER = {"dopri5": 4, "dop853": 7, "rodas4": 3, "radau5": 3, "taylor": 5}
 """The order of each method's dense output: Hairer's CONTD5 and CONTD8,
 rodas.f's CONTRO, radau5's collocation polynomial (stage order 3), and the
@@ -196,6 +198,62 @@ def test_a_negative_count_is_a_code(
         1000, model.doubles(out), model.ffi.NULL,
     )  # fmt: skip
     assert code == ERR_GRID
+
+
+LANED = [name for name, m in methods.METHODS.items() if m.lanes]
+
+
+@pytest.mark.parametrize("method", LANED)
+def test_a_lanes_batch_equals_its_single_grids(
+    backends: dict[str, Compiled], problem: tuple[np.ndarray, np.ndarray], method: str
+) -> None:
+    """_grid_batch over SIMD lanes: 37 states (no multiple of a lane width,
+    so lanes are refilled mid-batch) whose rates span a factor of 30 (their
+    steps too), one not finite (refused at the start), a step budget some
+    of them run out of: each state's rows (NaN past a failure), stats and
+    code equal its _grid call's bit for bit, on one thread and on two."""
+    x0, c = problem
+    model = backends["c"]
+    rng = np.random.default_rng(11)
+    starts = np.tile(x0, (37, 1))
+    rates = [i for i, name in enumerate(default().states) if name.startswith("u")]
+    starts[:, rates] *= rng.uniform(0.3, 10.0, (37, 1))
+    starts[5, 0] = np.nan
+    times = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 3.0, 12)), [3.0]])
+    budget = int(np.median([model.integrate(method, x, c, 0.0, 3.0)[1]["accepted"]
+                            for x in starts[[0, 1, 2, 3, 4, 6]]]))  # fmt: skip
+    for threads in (1, 2):
+        states, stats, codes = model.integrate_grid_batch(
+            method, starts, c, times, threads, max_steps=budget
+        )
+        assert set(codes) == {0, MAX_STEPS, NONFINITE}
+        for k, start in enumerate(starts):
+            one, one_stats, code = model.integrate_grid(method, start, c, times, max_steps=budget)
+            assert np.array_equal(states[k], one, equal_nan=True), k
+            assert {f: stats[k][f] for f in one_stats} == dict(one_stats), k
+            assert codes[k] == code, k
+
+
+@pytest.mark.parametrize("method", LANED)
+def test_a_lanes_batch_keeps_the_grids_start(
+    backends: dict[str, Compiled], problem: tuple[np.ndarray, np.ndarray], method: str
+) -> None:
+    """One grid time: each row the start, code OK; a bad grid: every state
+    ERR_GRID, no row written."""
+    x0, c = problem
+    model = backends["c"]
+    starts = x0 * np.linspace(0.5, 1.5, 11)[:, None]
+    states, _, codes = model.integrate_grid_batch(method, starts, c, [0.0])
+    assert list(codes) == [0] * 11 and np.array_equal(states[:, 0], starts)
+    fn = model.function(method + "_grid_batch")
+    bad = np.array([0.0, 2.0, 1.0])
+    out = np.full((11, 3, model.nx), np.nan)
+    codes = np.zeros(11, dtype=np.intc)
+    buf = model.ffi.from_buffer
+    failed = fn(11, 3, buf("double[]", bad), buf("double[]", starts.copy()), buf("double[]", c),
+                1e-6, 1e-6, 0.0, 100000, buf("double[]", out), model.ffi.NULL,
+                buf("int[]", codes))  # fmt: skip
+    assert failed == 11 and list(codes) == [ERR_GRID] * 11 and np.all(np.isnan(out))
 
 
 def test_a_fixed_step_method_has_no_grid(

@@ -1471,6 +1471,7 @@ contains
     real(c_double) :: told
     real(c_double) :: hs
     real(c_double) :: frac
+    logical :: due
     real(c_double) :: e
     integer(c_int) :: i
 
@@ -1609,7 +1610,8 @@ contains
           nonfinite), .not. run .or. (take .and. lock))
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
 
         ! the dense output of order 4
         do i = 0, nx - 1
@@ -1621,6 +1623,8 @@ contains
               3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
               5)) + 2.382468931778144_c_double * k(i, 6))
         end do
+      end if
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -1635,6 +1639,8 @@ contains
           end do
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -1642,14 +1648,12 @@ contains
         do i = 0, nx - 1
           k(i, 0) = k(i, 6)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -2031,6 +2035,7 @@ contains
     real(c_double) :: told
     real(c_double) :: hs
     real(c_double) :: frac
+    logical :: due
     real(c_double) :: e3
     real(c_double) :: e5
     integer(c_int) :: i
@@ -2239,7 +2244,8 @@ contains
           fac), ok), nonfinite), .not. run .or. (take .and. lock))
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
 
         ! the dense output of order 7
         do i = 0, nx - 1
@@ -2304,6 +2310,8 @@ contains
               12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
               14)) - 149.72683625798564_c_double * k(i, 15))
         end do
+      end if
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -2320,6 +2328,8 @@ contains
           end do
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -2327,14 +2337,12 @@ contains
         do i = 0, nx - 1
           k(i, 0) = k(i, 12)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -2942,20 +2950,22 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - t) / h
-          do i = 0, nx - 1
-            out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) * &
-                (dense(i, 0) + frac * dense(i, 1)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - t) / h
+            do i = 0, nx - 1
+              out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) &
+                  * (dense(i, 0) + frac * dense(i, 1)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -3933,20 +3943,22 @@ contains
           ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
           ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
         end do
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - (merge(t1, t + h, last))) / h
-          do i = 0, nx - 1
-            out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
-                (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - (merge(t1, t + h, last))) / h
+            do i = 0, nx - 1
+              out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
+                  (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -4643,12 +4655,13 @@ contains
     real(c_double) :: v51
     real(c_double) :: v53
     real(c_double) :: v54
+    real(c_double) :: acc(0:nx - 1)
     real(c_double) :: t0
     real(c_double) :: t1
     integer(c_long) :: g
     real(c_double) :: told
     real(c_double) :: frac
-    real(c_double) :: acc
+    logical :: due
     integer(c_int) :: i
     integer(c_int) :: j
     integer(c_int) :: n
@@ -4987,7 +5000,8 @@ contains
       stats%accepted = stats%accepted + (merge(1, 0, ok))
       stats%rejected = stats%rejected + (merge(1, 0, retry))
       cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -4997,27 +5011,31 @@ contains
           end if
           frac = times(g) - told
           do i = 0, 6 - 1
-            acc = tay(i, order)
-            do q = 0, order - 1 - 1
-              acc = tay(i, (order - 1) - q) + frac * acc
+            acc(i) = tay(i, order)
+          end do
+          do q = 0, order - 1 - 1
+            do i = 0, 6 - 1
+              acc(i) = tay(i, (order - 1) - q) + frac * acc(i)
             end do
-            out(i, g) = x(i) + frac * acc
+          end do
+          do i = 0, 6 - 1
+            out(i, g) = x(i) + frac * acc(i)
           end do
           out(6, g) = x(6) + frac * tay(6, 1)
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code

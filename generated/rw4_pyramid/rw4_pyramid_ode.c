@@ -1724,6 +1724,1511 @@ static void lu_solve_complex(const double *RW4_PYRAMID_RESTRICT ar,
     br[0] = re;
 }
 
+/* What the lanes of an explicit pair hold: per lane, the values of
+   <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
+   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
+   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
+   doubles then starts on a cache line (on a row that straddles two, the
+   jet of taylor_batch ran 1.4 times slower). */
+struct RW4_PYRAMID_ALIGNED lanes {
+    double ts[RW4_PYRAMID_LANES];  /* the time of an rhs call */
+    size_t traj[RW4_PYRAMID_LANES];
+    double x[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double k[16][RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double y[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double xnew[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double dx[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double comp[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double t[RW4_PYRAMID_LANES];
+    double h[RW4_PYRAMID_LANES];
+    double err_old[RW4_PYRAMID_LANES];
+    double stats_t[RW4_PYRAMID_LANES];
+    double stats_h[RW4_PYRAMID_LANES];
+    long stats_accepted[RW4_PYRAMID_LANES];
+    long stats_rejected[RW4_PYRAMID_LANES];
+    long stats_rhs_calls[RW4_PYRAMID_LANES];
+    double dense[7][RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    long g[RW4_PYRAMID_LANES];
+    long base[RW4_PYRAMID_LANES];
+    int code[RW4_PYRAMID_LANES];
+    int nonfinite[RW4_PYRAMID_LANES];
+    int rejected_last[RW4_PYRAMID_LANES];
+    long ntimes;
+    const double *times;
+    double (*out)[RW4_PYRAMID_NX];
+    int busy[RW4_PYRAMID_LANES];
+};
+
+static void rhs_lanes(const double *RW4_PYRAMID_RESTRICT t,
+                      double (*RW4_PYRAMID_RESTRICT x)[RW4_PYRAMID_LANES],
+                      const double *RW4_PYRAMID_RESTRICT c,
+                      double (*RW4_PYRAMID_RESTRICT dxdt)[RW4_PYRAMID_LANES])
+{
+    int l;
+
+    (void)t;  /* unused in some scenes */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, h1,
+                h2, h3, rel1, net1, rel2, net2, rel3, net3, rel4, net4, f1, f2, f3;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        w1 = x[6][l];
+        w2 = x[7][l];
+        w3 = x[8][l];
+        w4 = x[9][l];
+        tmp0 = 0.5773502691896258 * u1;
+        tmp1 = 0.8164965809277259 * u3;
+        tmp2 = 0.5773502691896258 * u2;
+        tmp3 = -tmp1;
+        tmp4 = rw4_pyramid_sin_lanes(q3);
+        tmp5 = rw4_pyramid_cos_lanes(q3);
+        tmp6 = (tmp5 * u3 - tmp4 * u1) / rw4_pyramid_cos_lanes(q2);
+        h1 = 6.0 * u3 + 421.76382113821137 * u1 + 0.025980762113533163 * (w1 - w3) - 4.0 * u2;
+        h2 = 2.5 * u3 + 381.76382113821137 * u2 + 0.025980762113533163 * (w2 - w4) - 4.0 * u1;
+        h3 = 6.0 * u1 + 2.5 * u2 + 0.036742346141747664 * (w1 + w2 + w3 + w4) + 301.8333333333333
+                * u3;
+        rel1 = w1 - tmp0 - tmp1;
+        net1 = dmin(0.2, dmax(-0.2, c[0] - 0.05 * rel1)) - 2e-05 * rel1;
+        rel2 = w2 - tmp1 - tmp2;
+        net2 = dmin(0.2, dmax(-0.2, c[1] - 0.05 * rel2)) - 2e-05 * rel2;
+        rel3 = tmp0 + tmp3 + w3;
+        net3 = dmin(0.2, dmax(-0.2, c[2] - 0.05 * rel3)) - 2e-05 * rel3;
+        rel4 = tmp2 + tmp3 + w4;
+        net4 = dmin(0.2, dmax(-0.2, c[3] - 0.05 * rel4)) - 2e-05 * rel4;
+        f1 = 0.5773502691896258 * (net3 - net1) + h2 * u3 - h3 * u2;
+        f2 = 0.5773502691896258 * (net4 - net2) + h3 * u1 - h1 * u3;
+        f3 = h1 * u2 - 0.8164965809277259 * (net1 + net2 + net3 + net4) - h2 * u1;
+        dxdt[0][l] = tmp6;
+        dxdt[1][l] = tmp4 * u3 + tmp5 * u1;
+        dxdt[2][l] = u2 - tmp6 * rw4_pyramid_sin_lanes(q2);
+        dxdt[3][l] = 0.002371907568400169 * f1 + 2.5162222823731624e-05 * f2 -
+                4.735842396728992e-05 * f3;
+        dxdt[4][l] = 0.0026198295706604748 * f2 + 2.5162222823731624e-05 * f1 -
+                2.2199493971044426e-05 * f3;
+        dxdt[5][l] = 0.003314211979940579 * f3 - 4.735842396728992e-05 * f1 -
+                2.2199493971044426e-05 * f2;
+        dxdt[6][l] = 22.22222222222222 * net1;
+        dxdt[7][l] = 22.22222222222222 * net2;
+        dxdt[8][l] = 22.22222222222222 * net3;
+        dxdt[9][l] = 22.22222222222222 * net4;
+    }
+}
+
+/* One step of a pair on every lane. */
+typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
+                           long max_steps);
+
+/* One step of dopri5_integrate on every lane. */
+static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    int last[RW4_PYRAMID_LANES];
+    double err[RW4_PYRAMID_LANES];
+    int run[RW4_PYRAMID_LANES];
+    int take[RW4_PYRAMID_LANES];
+    int lock[RW4_PYRAMID_LANES];
+    int ok[RW4_PYRAMID_LANES];
+    double fac[RW4_PYRAMID_LANES];
+    double grow[RW4_PYRAMID_LANES];
+    double total[RW4_PYRAMID_LANES];
+    int i, l;
+
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
+                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.2 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2 * L->k[0][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3: t + 0.3 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l] + 0.225 * L->k[1][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4: t + 0.8 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l] -
+                    3.7333333333333334 * L->k[1][i][l] + 3.5555555555555554 * L->k[2][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5: t + 0.8888888888888888 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l] -
+                    11.595793324188385 * L->k[1][i][l] + 9.822892851699436 * L->k[2][i][l] -
+                    0.2908093278463649 * L->k[3][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8888888888888888 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6: t + h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l] -
+                    10.757575757575758 * L->k[1][i][l] + 8.906422717743473 * L->k[2][i][l] +
+                    0.2784090909090909 * L->k[3][i][l] - 0.2735313036020583 * L->k[4][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7: t + h, the new solution */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l] + 0.44923629829290207 *
+                    L->k[2][i][l] + 0.6510416666666666 * L->k[3][i][l] - 0.322376179245283 *
+                    L->k[4][i][l] + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->xnew, c, L->k[6]);
+
+    /* the error norm (see error_norm) */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
+                    L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
+                    L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
+                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
+                    : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / RW4_PYRAMID_NX);
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 6 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.2 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(5.0, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[6][i][l] : L->k[0][i][l];
+        }
+    }
+}
+
+/* One step of dopri5_grid on every lane. */
+static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int last[RW4_PYRAMID_LANES];
+    double err[RW4_PYRAMID_LANES];
+    int run[RW4_PYRAMID_LANES];
+    int take[RW4_PYRAMID_LANES];
+    int lock[RW4_PYRAMID_LANES];
+    int ok[RW4_PYRAMID_LANES];
+    double fac[RW4_PYRAMID_LANES];
+    double grow[RW4_PYRAMID_LANES];
+    double total[RW4_PYRAMID_LANES];
+    double told[RW4_PYRAMID_LANES];
+    double hs[RW4_PYRAMID_LANES];
+    double frac[RW4_PYRAMID_LANES];
+    int due[RW4_PYRAMID_LANES];
+    int i, l;
+    int need;
+
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
+                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+        told[l] = L->t[l];
+        hs[l] = L->h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.2 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2 * L->k[0][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3: t + 0.3 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l] + 0.225 * L->k[1][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4: t + 0.8 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l] -
+                    3.7333333333333334 * L->k[1][i][l] + 3.5555555555555554 * L->k[2][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5: t + 0.8888888888888888 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l] -
+                    11.595793324188385 * L->k[1][i][l] + 9.822892851699436 * L->k[2][i][l] -
+                    0.2908093278463649 * L->k[3][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8888888888888888 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6: t + h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l] -
+                    10.757575757575758 * L->k[1][i][l] + 8.906422717743473 * L->k[2][i][l] +
+                    0.2784090909090909 * L->k[3][i][l] - 0.2735313036020583 * L->k[4][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7: t + h, the new solution */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l] + 0.44923629829290207 *
+                    L->k[2][i][l] + 0.6510416666666666 * L->k[3][i][l] - 0.322376179245283 *
+                    L->k[4][i][l] + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->xnew, c, L->k[6]);
+
+    /* the error norm (see error_norm) */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
+                    L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
+                    L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
+                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
+                    : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / RW4_PYRAMID_NX);
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 6 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.2 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(5.0, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+    }
+
+    /* the dense output of order 4 */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dense[0][i][l] = due[l] ? L->xnew[i][l] - L->x[i][l] : L->dense[0][i][l];
+            L->dense[1][i][l] = due[l] ? hs[l] * L->k[0][i][l] - L->dense[0][i][l] :
+                    L->dense[1][i][l];
+            L->dense[2][i][l] = due[l] ? L->dense[0][i][l] - hs[l] * L->k[6][i][l] -
+                    L->dense[1][i][l] : L->dense[2][i][l];
+            L->dense[3][i][l] = due[l] ? hs[l] * (-1.1270175653862835 * L->k[0][i][l] +
+                    2.675424484351598 * L->k[2][i][l] - 5.685526961588504 * L->k[3][i][l] +
+                    3.5219323679207912 * L->k[4][i][l] - 1.7672812570757455 * L->k[5][i][l] +
+                    2.382468931778144 * L->k[6][i][l]) : L->dense[3][i][l];
+        }
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < L->t[l])) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
+                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
+                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                                L->dense[3][i][l])));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[6][i][l] : L->k[0][i][l];
+        }
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+}
+
+/* One step of dop853_integrate on every lane. */
+static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    int last[RW4_PYRAMID_LANES];
+    double err[RW4_PYRAMID_LANES];
+    int run[RW4_PYRAMID_LANES];
+    int take[RW4_PYRAMID_LANES];
+    int lock[RW4_PYRAMID_LANES];
+    int ok[RW4_PYRAMID_LANES];
+    double fac[RW4_PYRAMID_LANES];
+    double grow[RW4_PYRAMID_LANES];
+    double err5[RW4_PYRAMID_LANES];
+    double err3[RW4_PYRAMID_LANES];
+    double deno[RW4_PYRAMID_LANES];
+    int i, l;
+    int need;
+
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
+                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.05260015195876773 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.05260015195876773 * L->k[0][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.05260015195876773 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3: t + 0.0789002279381516 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l] +
+                    0.0591751709536137 * L->k[1][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.0789002279381516 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4: t + 0.1183503419072274 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l] +
+                    0.08876275643042054 * L->k[2][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.1183503419072274 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5: t + 0.2816496580927726 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l] -
+                    0.8845494793282861 * L->k[2][i][l] + 0.924834003261792 * L->k[3][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2816496580927726 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6: t + 0.3333333333333333 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l] +
+                    0.17082860872947386 * L->k[3][i][l] + 0.12546768756682242 * L->k[4][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3333333333333333 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7: t + 0.25 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l] +
+                    0.17025221101954405 * L->k[3][i][l] + 0.06021653898045596 * L->k[4][i][l] -
+                    0.017578125 * L->k[5][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.25 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[6]);
+
+    /* stage 8: t + 0.3076923076923077 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l] +
+                    0.17038392571223998 * L->k[3][i][l] + 0.10726203044637328 * L->k[4][i][l] -
+                    0.015319437748624402 * L->k[5][i][l] + 0.008273789163814023 * L->k[6][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3076923076923077 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[7]);
+
+    /* stage 9: t + 0.6512820512820513 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l] -
+                    3.3608926294469414 * L->k[3][i][l] - 0.868219346841726 * L->k[4][i][l] +
+                    27.59209969944671 * L->k[5][i][l] + 20.154067550477894 * L->k[6][i][l] -
+                    43.48988418106996 * L->k[7][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6512820512820513 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[8]);
+
+    /* stage 10: t + 0.6 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l] -
+                    2.4881146199716677 * L->k[3][i][l] - 0.590290826836843 * L->k[4][i][l] +
+                    21.230051448181193 * L->k[5][i][l] + 15.279233632882423 * L->k[6][i][l] -
+                    33.28821096898486 * L->k[7][i][l] - 0.020331201708508627 * L->k[8][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[9]);
+
+    /* stage 11: t + 0.8571428571428571 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l] +
+                    5.186372428844064 * L->k[3][i][l] + 1.0914373489967295 * L->k[4][i][l] -
+                    8.149787010746927 * L->k[5][i][l] - 18.52006565999696 * L->k[6][i][l] +
+                    22.739487099350505 * L->k[7][i][l] + 2.4936055526796523 * L->k[8][i][l] -
+                    3.0467644718982196 * L->k[9][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8571428571428571 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[10]);
+
+    /* stage 12: t + h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l] -
+                    10.53449546673725 * L->k[3][i][l] - 2.0008720582248625 * L->k[4][i][l] -
+                    17.9589318631188 * L->k[5][i][l] + 27.94888452941996 * L->k[6][i][l] -
+                    2.8589982771350235 * L->k[7][i][l] - 8.87285693353063 * L->k[8][i][l] +
+                    12.360567175794303 * L->k[9][i][l] + 0.6433927460157636 * L->k[10][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[11]);
+
+    /* the new solution */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l] + 4.450312892752409 *
+                    L->k[5][i][l] + 1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 *
+                    L->k[7][i][l] + 0.3111643669578199 * L->k[8][i][l] - 0.1521609496625161 *
+                    L->k[9][i][l] + 0.20136540080403034 * L->k[10][i][l] + 0.04471061572777259 *
+                    L->k[11][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+
+    /* the error: DOP853's two estimates, combined */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        err5[l] = 0.0;
+        err3[l] = 0.0;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            double e5, e3;
+            e5 = (0.01312004499419488 * L->k[0][i][l] - 1.2251564463762044 * L->k[5][i][l] -
+                    0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
+                    0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
+                    0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
+                    1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
+                    0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
+                    0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            err5[l] = err5[l] + e5 * e5;
+            err3[l] = err3[l] + e3 * e3;
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        deno[l] = err5[l] + 1e-2 * err3[l];
+        err[l] = deno[l] > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(RW4_PYRAMID_NX * deno[l]) : 0.0;
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 11 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        ok[l] = L->code[l] < 0 && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->k[12]);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX)));
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (ok[l] ? 1 : 0);
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.333 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(3.003003003003003, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[12][i][l] : L->k[0][i][l];
+        }
+    }
+}
+
+/* One step of dop853_grid on every lane. */
+static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int last[RW4_PYRAMID_LANES];
+    double err[RW4_PYRAMID_LANES];
+    int run[RW4_PYRAMID_LANES];
+    int take[RW4_PYRAMID_LANES];
+    int lock[RW4_PYRAMID_LANES];
+    int ok[RW4_PYRAMID_LANES];
+    double fac[RW4_PYRAMID_LANES];
+    double grow[RW4_PYRAMID_LANES];
+    double err5[RW4_PYRAMID_LANES];
+    double err3[RW4_PYRAMID_LANES];
+    double deno[RW4_PYRAMID_LANES];
+    double told[RW4_PYRAMID_LANES];
+    double hs[RW4_PYRAMID_LANES];
+    double frac[RW4_PYRAMID_LANES];
+    int due[RW4_PYRAMID_LANES];
+    int i, l;
+    int need;
+
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
+                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+        told[l] = L->t[l];
+        hs[l] = L->h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.05260015195876773 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.05260015195876773 * L->k[0][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.05260015195876773 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3: t + 0.0789002279381516 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l] +
+                    0.0591751709536137 * L->k[1][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.0789002279381516 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4: t + 0.1183503419072274 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l] +
+                    0.08876275643042054 * L->k[2][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.1183503419072274 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5: t + 0.2816496580927726 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l] -
+                    0.8845494793282861 * L->k[2][i][l] + 0.924834003261792 * L->k[3][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2816496580927726 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6: t + 0.3333333333333333 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l] +
+                    0.17082860872947386 * L->k[3][i][l] + 0.12546768756682242 * L->k[4][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3333333333333333 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7: t + 0.25 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l] +
+                    0.17025221101954405 * L->k[3][i][l] + 0.06021653898045596 * L->k[4][i][l] -
+                    0.017578125 * L->k[5][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.25 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[6]);
+
+    /* stage 8: t + 0.3076923076923077 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l] +
+                    0.17038392571223998 * L->k[3][i][l] + 0.10726203044637328 * L->k[4][i][l] -
+                    0.015319437748624402 * L->k[5][i][l] + 0.008273789163814023 * L->k[6][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3076923076923077 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[7]);
+
+    /* stage 9: t + 0.6512820512820513 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l] -
+                    3.3608926294469414 * L->k[3][i][l] - 0.868219346841726 * L->k[4][i][l] +
+                    27.59209969944671 * L->k[5][i][l] + 20.154067550477894 * L->k[6][i][l] -
+                    43.48988418106996 * L->k[7][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6512820512820513 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[8]);
+
+    /* stage 10: t + 0.6 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l] -
+                    2.4881146199716677 * L->k[3][i][l] - 0.590290826836843 * L->k[4][i][l] +
+                    21.230051448181193 * L->k[5][i][l] + 15.279233632882423 * L->k[6][i][l] -
+                    33.28821096898486 * L->k[7][i][l] - 0.020331201708508627 * L->k[8][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[9]);
+
+    /* stage 11: t + 0.8571428571428571 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l] +
+                    5.186372428844064 * L->k[3][i][l] + 1.0914373489967295 * L->k[4][i][l] -
+                    8.149787010746927 * L->k[5][i][l] - 18.52006565999696 * L->k[6][i][l] +
+                    22.739487099350505 * L->k[7][i][l] + 2.4936055526796523 * L->k[8][i][l] -
+                    3.0467644718982196 * L->k[9][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8571428571428571 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[10]);
+
+    /* stage 12: t + h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l] -
+                    10.53449546673725 * L->k[3][i][l] - 2.0008720582248625 * L->k[4][i][l] -
+                    17.9589318631188 * L->k[5][i][l] + 27.94888452941996 * L->k[6][i][l] -
+                    2.8589982771350235 * L->k[7][i][l] - 8.87285693353063 * L->k[8][i][l] +
+                    12.360567175794303 * L->k[9][i][l] + 0.6433927460157636 * L->k[10][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[11]);
+
+    /* the new solution */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l] + 4.450312892752409 *
+                    L->k[5][i][l] + 1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 *
+                    L->k[7][i][l] + 0.3111643669578199 * L->k[8][i][l] - 0.1521609496625161 *
+                    L->k[9][i][l] + 0.20136540080403034 * L->k[10][i][l] + 0.04471061572777259 *
+                    L->k[11][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+
+    /* the error: DOP853's two estimates, combined */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        err5[l] = 0.0;
+        err3[l] = 0.0;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            double e5, e3;
+            e5 = (0.01312004499419488 * L->k[0][i][l] - 1.2251564463762044 * L->k[5][i][l] -
+                    0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
+                    0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
+                    0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
+                    1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
+                    0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
+                    0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
+                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            err5[l] = err5[l] + e5 * e5;
+            err3[l] = err3[l] + e3 * e3;
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        deno[l] = err5[l] + 1e-2 * err3[l];
+        err[l] = deno[l] > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(RW4_PYRAMID_NX * deno[l]) : 0.0;
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 11 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        ok[l] = L->code[l] < 0 && !L->nonfinite[l] && err[l] <= 1.0;
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->k[12]);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX)));
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (ok[l] ? 1 : 0);
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.333 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(3.003003003003003, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+
+        /* the dense output of order 7 */
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                L->y[i][l] = due[l] ? L->x[i][l] + hs[l] * (0.056167502283047954 * L->k[0][i][l]
+                        + 0.25350021021662483 * L->k[6][i][l] - 0.2462390374708025 *
+                        L->k[7][i][l] - 0.12419142326381637 * L->k[8][i][l] + 0.15329179827876568
+                        * L->k[9][i][l] + 0.00820105229563469 * L->k[10][i][l] +
+                        0.007567897660545699 * L->k[11][i][l] - 0.008298 * L->k[12][i][l]) :
+                        L->y[i][l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = told[l] + 0.1 * hs[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[13]);
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                L->y[i][l] = due[l] ? L->x[i][l] + hs[l] * (0.03183464816350214 * L->k[0][i][l] +
+                        0.028300909672366776 * L->k[5][i][l] + 0.053541988307438566 *
+                        L->k[6][i][l] - 0.05492374857139099 * L->k[7][i][l] -
+                        0.00010834732869724932 * L->k[10][i][l] + 0.0003825710908356584 *
+                        L->k[11][i][l] - 0.00034046500868740456 * L->k[12][i][l] +
+                        0.1413124436746325 * L->k[13][i][l]) : L->y[i][l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = told[l] + 0.2 * hs[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[14]);
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                L->y[i][l] = due[l] ? L->x[i][l] + hs[l] * (-0.42889630158379194 * L->k[0][i][l]
+                        - 4.697621415361164 * L->k[5][i][l] + 7.683421196062599 * L->k[6][i][l] +
+                        4.06898981839711 * L->k[7][i][l] + 0.3567271874552811 * L->k[8][i][l] -
+                        0.0013990241651590145 * L->k[12][i][l] + 2.9475147891527724 *
+                        L->k[13][i][l] - 9.15095847217987 * L->k[14][i][l]) : L->y[i][l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = told[l] + 0.7777777777777778 * hs[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[15]);
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = due[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                L->dense[0][i][l] = due[l] ? L->xnew[i][l] - L->x[i][l] : L->dense[0][i][l];
+                L->dense[1][i][l] = due[l] ? hs[l] * L->k[0][i][l] - L->dense[0][i][l] :
+                        L->dense[1][i][l];
+                L->dense[2][i][l] = due[l] ? L->dense[0][i][l] - hs[l] * L->k[12][i][l] -
+                        L->dense[1][i][l] : L->dense[2][i][l];
+                L->dense[3][i][l] = due[l] ? hs[l] * (-8.428938276109013 * L->k[0][i][l] +
+                        0.5667149535193777 * L->k[5][i][l] - 3.0689499459498917 * L->k[6][i][l] +
+                        2.38466765651207 * L->k[7][i][l] + 2.117034582445028 * L->k[8][i][l] -
+                        0.871391583777973 * L->k[9][i][l] + 2.2404374302607883 * L->k[10][i][l] +
+                        0.6315787787694688 * L->k[11][i][l] - 0.08899033645133331 *
+                        L->k[12][i][l] + 18.148505520854727 * L->k[13][i][l] - 9.194632392478356
+                        * L->k[14][i][l] - 4.436036387594894 * L->k[15][i][l]) : L->dense[3][i][l];
+                L->dense[4][i][l] = due[l] ? hs[l] * (10.427508642579134 * L->k[0][i][l] +
+                        242.28349177525817 * L->k[5][i][l] + 165.20045171727028 * L->k[6][i][l] -
+                        374.5467547226902 * L->k[7][i][l] - 22.113666853125306 * L->k[8][i][l] +
+                        7.733432668472264 * L->k[9][i][l] - 30.674084731089398 * L->k[10][i][l] -
+                        9.332130526430229 * L->k[11][i][l] + 15.697238121770845 * L->k[12][i][l]
+                        - 31.139403219565178 * L->k[13][i][l] - 9.35292435884448 * L->k[14][i][l]
+                        + 35.81684148639408 * L->k[15][i][l]) : L->dense[4][i][l];
+                L->dense[5][i][l] = due[l] ? hs[l] * (19.985053242002433 * L->k[0][i][l] -
+                        387.0373087493518 * L->k[5][i][l] - 189.17813819516758 * L->k[6][i][l] +
+                        527.8081592054236 * L->k[7][i][l] - 11.57390253995963 * L->k[8][i][l] +
+                        6.8812326946963 * L->k[9][i][l] - 1.0006050966910838 * L->k[10][i][l] +
+                        0.7777137798053443 * L->k[11][i][l] - 2.778205752353508 * L->k[12][i][l]
+                        - 60.19669523126412 * L->k[13][i][l] + 84.32040550667716 * L->k[14][i][l]
+                        + 11.99229113618279 * L->k[15][i][l]) : L->dense[5][i][l];
+                L->dense[6][i][l] = due[l] ? hs[l] * (-25.69393346270375 * L->k[0][i][l] -
+                        154.18974869023643 * L->k[5][i][l] - 231.5293791760455 * L->k[6][i][l] +
+                        357.6391179106141 * L->k[7][i][l] + 93.40532418362432 * L->k[8][i][l] -
+                        37.45832313645163 * L->k[9][i][l] + 104.0996495089623 * L->k[10][i][l] +
+                        29.8402934266605 * L->k[11][i][l] - 43.53345659001114 * L->k[12][i][l] +
+                        96.32455395918828 * L->k[13][i][l] - 39.17726167561544 * L->k[14][i][l] -
+                        149.72683625798564 * L->k[15][i][l]) : L->dense[6][i][l];
+            }
+        }
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < L->t[l])) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
+                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
+                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                                (L->dense[3][i][l] + frac[l] * (L->dense[4][i][l] + (1.0 -
+                                frac[l]) * (L->dense[5][i][l] + frac[l] * L->dense[6][i][l]))))));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[12][i][l] : L->k[0][i][l];
+        }
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+}
+
+/* A trajectory into lane l, with ode_start's checks: -1 when the lane took
+   it, else the code it ended with at once (x as given, stats set). Over an
+   output grid (L->out), its rows in out from base = traj ntimes, the first
+   one written unless the start was refused. */
+static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
+                      double t0, double t1, double *xs, const double *c, double rtol,
+                      double atol, double h0, long max_steps, rw4_pyramid_stats *stats)
+{
+    double *x = xs + traj * RW4_PYRAMID_NX;
+    double f0[RW4_PYRAMID_NX], h = 0.0;
+    int i;
+    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
+                               stats);
+    if (code > RW4_PYRAMID_ODE_OK || (code == RW4_PYRAMID_ODE_OK && !L->out)) {
+        return code;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        L->x[i][l] = x[i];
+    }
+    if (L->out) {
+        L->base[l] = (long)traj * L->ntimes;
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            L->out[L->base[l]][i] = L->x[i][l];
+        }
+        L->g[l] = 1;
+    }
+    if (code >= 0) {
+        return code;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        L->k[0][i][l] = f0[i];
+    }
+    L->h[l] = h;
+    L->code[l] = -1;
+    L->t[l] = t0;
+    L->nonfinite[l] = 0;
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        L->comp[i][l] = 0.0;
+    }
+    L->err_old[l] = 1e-4;
+    L->rejected_last[l] = 0;
+    L->stats_t[l] = t0;
+    L->stats_h[l] = stats->h;
+    L->stats_accepted[l] = 0;
+    L->stats_rejected[l] = 0;
+    L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->busy[l] = 1;
+    L->traj[l] = traj;
+    return -1;
+}
+
+/* Trajectory traj's results: its statistics and code (x is in place). */
+static void put_result(size_t traj, int code, const rw4_pyramid_stats *st, rw4_pyramid_stats *stats,
+                       int *codes)
+{
+    if (stats) {
+        stats[traj] = *st;
+    }
+    if (codes) {
+        codes[traj] = code;
+    }
+}
+
+/* The lanes that have a code: their state and statistics out, the lane free. */
+static size_t lanes_finish(struct lanes *L, double t0, double *xs, rw4_pyramid_stats *stats,
+                           int *codes)
+{
+    size_t failed = 0;
+    int i, l;
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        if (L->busy[l] && L->code[l] >= 0) {
+            rw4_pyramid_stats st;
+            stats_start(&st, t0);
+            st.t = L->stats_t[l];
+            st.h = L->stats_h[l];
+            st.accepted = L->stats_accepted[l];
+            st.rejected = L->stats_rejected[l];
+            st.rhs_calls = L->stats_rhs_calls[l];
+            for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                xs[L->traj[l] * RW4_PYRAMID_NX + (size_t)i] = L->x[i][l];
+            }
+            put_result(L->traj[l], L->code[l], &st, stats, codes);
+            failed += (size_t)(L->code[l] != RW4_PYRAMID_ODE_OK);
+            L->busy[l] = 0;
+        }
+    }
+    return failed;
+}
+
+/* Trajectories begin..end-1 of a batch, RW4_PYRAMID_LANES at a time: a lane that
+   finishes takes the next trajectory. Returns how many failed. An output
+   grid's step (<method>_grid_step_lanes) writes out, ntimes rows a
+   trajectory; a plain one has none (out NULL). */
+static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
+                         double t0, double t1, double *xs, const double *c, double rtol,
+                         double atol, double h0, long max_steps, long ntimes,
+                         const double *times, double (*out)[RW4_PYRAMID_NX], rw4_pyramid_stats *stats,
+                         int *codes)
+{
+    struct lanes L;
+    size_t next = begin, failed = 0;
+    int l, busy;
+    memset(&L, 0, sizeof L);  /* idle lanes compute on zeros, not on garbage */
+    L.ntimes = ntimes;
+    L.times = times;
+    L.out = out;
+    for (;;) {
+        busy = 0;
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            while (!L.busy[l] && next < end) {
+                rw4_pyramid_stats st;
+                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
+                                            atol, h0, max_steps, &st);
+                if (code >= 0) {
+                    put_result(next, code, &st, stats, codes);
+                    failed += (size_t)(code != RW4_PYRAMID_ODE_OK);
+                }
+                ++next;
+            }
+            busy += L.busy[l];
+        }
+        if (!busy) {
+            return failed;
+        }
+        step(&L, c, rtol, atol, t1, max_steps);
+        failed += lanes_finish(&L, t0, xs, stats, codes);
+    }
+}
+
+/* A batch over every core when compiled with OpenMP: chunks of about an
+   eighth of a thread's share, taken in turn (a chunk's trajectories are the
+   same whichever thread runs it); else one chunk. */
+static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
+                         double t1, double *xs, const double *c, double rtol, double atol,
+                         double h0, long max_steps, long ntimes, const double *times,
+                         double (*out)[RW4_PYRAMID_NX], rw4_pyramid_stats *stats, int *codes)
+{
+    size_t failed = 0;
+#ifdef _OPENMP
+    const size_t share = n / (8 * (size_t)omp_get_max_threads()) + 1;
+    const size_t chunk = (share + RW4_PYRAMID_LANES - 1) / RW4_PYRAMID_LANES * RW4_PYRAMID_LANES;
+    const long chunks = (long)((n + chunk - 1) / chunk);
+    long b;
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (chunks > 1)
+    for (b = 0; b < chunks; ++b) {
+        const size_t begin = (size_t)b * chunk;
+        const size_t end = n - begin < chunk ? n : begin + chunk;
+        failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
+                             max_steps, ntimes, times, out, stats, codes);
+    }
+#else
+    failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps,
+                        ntimes, times, out, stats, codes);
+#endif
+    return failed;
+}
+
 /* Classic Runge-Kutta (Kutta 1901): four stages, order 4, `steps` equal steps. */
 static int rk4_integrate(double t0, double t1, long steps, double *x, const double *c,
                          rw4_pyramid_stats *stats)
@@ -1999,6 +3504,7 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
     double told;
     double hs;
     double frac;
+    int due;
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -2129,7 +3635,8 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
         h = !run || (take && lock) ? h : nonfinite ? h * 0.2 : ok ? h / grow : h / dmin(5.0, fac);
 
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
-        if (ok) {
+        due = ok && (g < ntimes && times[g] < t);
+        if (due) {
 
             /* the dense output of order 4 */
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
@@ -2140,6 +3647,8 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
                         5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i] -
                         1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
             }
+        }
+        if (due) {
             for (;;) {
                 if (!(g < ntimes)) {
                     break;
@@ -2154,6 +3663,8 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
                 }
                 g = g + 1;
             }
+        }
+        if (ok) {
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
                 comp[i] = xnew[i] - x[i] - dx[i];
                 x[i] = xnew[i];
@@ -2161,14 +3672,12 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
                 k[0][i] = k[6][i];
             }
-            if (g < ntimes) {
-                if (times[g] <= t) {
-                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-                        out[g][i] = x[i];
-                    }
-                    g = g + 1;
-                }
+        }
+        if (ok && g < ntimes && times[g] <= t) {
+            for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                out[g][i] = x[i];
             }
+            g = g + 1;
         }
         if (code >= 0) {
             return code;
@@ -2194,7 +3703,8 @@ int rw4_pyramid_dopri5_grid(long ntimes, const double *times, double *x, const d
             (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes;
+   every core under OpenMP. A bad grid: each state's _grid says so. */
 size_t rw4_pyramid_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, rw4_pyramid_stats *stats,
@@ -2202,6 +3712,11 @@ size_t rw4_pyramid_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
+    if (grid_ok(ntimes, times)) {
+        return pair_batch(dopri5_grid_step_lanes, 5, RW4_PYRAMID_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[RW4_PYRAMID_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -2487,6 +4002,7 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
     double told;
     double hs;
     double frac;
+    int due;
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -2683,7 +4199,8 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                 dmin(3.003003003003003, fac);
 
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
-        if (ok) {
+        due = ok && (g < ntimes && times[g] < t);
+        if (due) {
 
             /* the dense output of order 7 */
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
@@ -2737,6 +4254,8 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                         43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
                         39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
             }
+        }
+        if (due) {
             for (;;) {
                 if (!(g < ntimes)) {
                     break;
@@ -2752,6 +4271,8 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                 }
                 g = g + 1;
             }
+        }
+        if (ok) {
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
                 comp[i] = xnew[i] - x[i] - dx[i];
                 x[i] = xnew[i];
@@ -2759,14 +4280,12 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
                 k[0][i] = k[12][i];
             }
-            if (g < ntimes) {
-                if (times[g] <= t) {
-                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-                        out[g][i] = x[i];
-                    }
-                    g = g + 1;
-                }
+        }
+        if (ok && g < ntimes && times[g] <= t) {
+            for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                out[g][i] = x[i];
             }
+            g = g + 1;
         }
         if (code >= 0) {
             return code;
@@ -2792,7 +4311,8 @@ int rw4_pyramid_dop853_grid(long ntimes, const double *times, double *x, const d
             (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes;
+   every core under OpenMP. A bad grid: each state's _grid says so. */
 size_t rw4_pyramid_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, rw4_pyramid_stats *stats,
@@ -2800,6 +4320,11 @@ size_t rw4_pyramid_dop853_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
+    if (grid_ok(ntimes, times)) {
+        return pair_batch(dop853_grid_step_lanes, 8, RW4_PYRAMID_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[RW4_PYRAMID_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -3279,19 +4804,21 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
+            if (g < ntimes && times[g] < (last ? t1 : t + h)) {
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
+                    }
+                    if (!(times[g] < (last ? t1 : t + h))) {
+                        break;
+                    }
+                    frac = (times[g] - t) / h;
+                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                        out[g][i] = x[i] * (1.0 - frac) + frac * (xnew[i] + (1.0 - frac) *
+                                (dense[0][i] + frac * dense[1][i]));
+                    }
+                    g = g + 1;
                 }
-                if (!(times[g] < (last ? t1 : t + h))) {
-                    break;
-                }
-                frac = (times[g] - t) / h;
-                for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-                    out[g][i] = x[i] * (1.0 - frac) + frac * (xnew[i] + (1.0 - frac) *
-                            (dense[0][i] + frac * dense[1][i]));
-                }
-                g = g + 1;
             }
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
@@ -4157,19 +5684,21 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
                 ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
                 ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
             }
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
+            if (g < ntimes && times[g] < (last ? t1 : t + h)) {
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
+                    }
+                    if (!(times[g] < (last ? t1 : t + h))) {
+                        break;
+                    }
+                    frac = (times[g] - (last ? t1 : t + h)) / h;
+                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                        out[g][i] = xnew[i] + frac * (ak1[i] + (frac + 0.35505102572168223) *
+                                (ak2[i] + (frac + 0.8449489742783178) * ak3[i]));
+                    }
+                    g = g + 1;
                 }
-                if (!(times[g] < (last ? t1 : t + h))) {
-                    break;
-                }
-                frac = (times[g] - (last ? t1 : t + h)) / h;
-                for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-                    out[g][i] = xnew[i] + frac * (ak1[i] + (frac + 0.35505102572168223) * (ak2[i]
-                            + (frac + 0.8449489742783178) * ak3[i]));
-                }
-                g = g + 1;
             }
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
@@ -4262,748 +5791,6 @@ size_t rw4_pyramid_radau5_grid_batch(size_t n, long ntimes, const double *times,
     return failed;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
-   <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
-   busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
-   Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
-   doubles then starts on a cache line (on a row that straddles two, the
-   jet of taylor_batch ran 1.4 times slower). */
-struct RW4_PYRAMID_ALIGNED lanes {
-    double ts[RW4_PYRAMID_LANES];  /* the time of an rhs call */
-    size_t traj[RW4_PYRAMID_LANES];
-    double x[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
-    double k[13][RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
-    double y[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
-    double xnew[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
-    double dx[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
-    double comp[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
-    double t[RW4_PYRAMID_LANES];
-    double h[RW4_PYRAMID_LANES];
-    double err_old[RW4_PYRAMID_LANES];
-    double stats_t[RW4_PYRAMID_LANES];
-    double stats_h[RW4_PYRAMID_LANES];
-    long stats_accepted[RW4_PYRAMID_LANES];
-    long stats_rejected[RW4_PYRAMID_LANES];
-    long stats_rhs_calls[RW4_PYRAMID_LANES];
-    int code[RW4_PYRAMID_LANES];
-    int nonfinite[RW4_PYRAMID_LANES];
-    int rejected_last[RW4_PYRAMID_LANES];
-    int busy[RW4_PYRAMID_LANES];
-};
-
-static void rhs_lanes(const double *RW4_PYRAMID_RESTRICT t,
-                      double (*RW4_PYRAMID_RESTRICT x)[RW4_PYRAMID_LANES],
-                      const double *RW4_PYRAMID_RESTRICT c,
-                      double (*RW4_PYRAMID_RESTRICT dxdt)[RW4_PYRAMID_LANES])
-{
-    int l;
-
-    (void)t;  /* unused in some scenes */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, h1,
-                h2, h3, rel1, net1, rel2, net2, rel3, net3, rel4, net4, f1, f2, f3;
-        q2 = x[1][l];
-        q3 = x[2][l];
-        u1 = x[3][l];
-        u2 = x[4][l];
-        u3 = x[5][l];
-        w1 = x[6][l];
-        w2 = x[7][l];
-        w3 = x[8][l];
-        w4 = x[9][l];
-        tmp0 = 0.5773502691896258 * u1;
-        tmp1 = 0.8164965809277259 * u3;
-        tmp2 = 0.5773502691896258 * u2;
-        tmp3 = -tmp1;
-        tmp4 = rw4_pyramid_sin_lanes(q3);
-        tmp5 = rw4_pyramid_cos_lanes(q3);
-        tmp6 = (tmp5 * u3 - tmp4 * u1) / rw4_pyramid_cos_lanes(q2);
-        h1 = 6.0 * u3 + 421.76382113821137 * u1 + 0.025980762113533163 * (w1 - w3) - 4.0 * u2;
-        h2 = 2.5 * u3 + 381.76382113821137 * u2 + 0.025980762113533163 * (w2 - w4) - 4.0 * u1;
-        h3 = 6.0 * u1 + 2.5 * u2 + 0.036742346141747664 * (w1 + w2 + w3 + w4) + 301.8333333333333
-                * u3;
-        rel1 = w1 - tmp0 - tmp1;
-        net1 = dmin(0.2, dmax(-0.2, c[0] - 0.05 * rel1)) - 2e-05 * rel1;
-        rel2 = w2 - tmp1 - tmp2;
-        net2 = dmin(0.2, dmax(-0.2, c[1] - 0.05 * rel2)) - 2e-05 * rel2;
-        rel3 = tmp0 + tmp3 + w3;
-        net3 = dmin(0.2, dmax(-0.2, c[2] - 0.05 * rel3)) - 2e-05 * rel3;
-        rel4 = tmp2 + tmp3 + w4;
-        net4 = dmin(0.2, dmax(-0.2, c[3] - 0.05 * rel4)) - 2e-05 * rel4;
-        f1 = 0.5773502691896258 * (net3 - net1) + h2 * u3 - h3 * u2;
-        f2 = 0.5773502691896258 * (net4 - net2) + h3 * u1 - h1 * u3;
-        f3 = h1 * u2 - 0.8164965809277259 * (net1 + net2 + net3 + net4) - h2 * u1;
-        dxdt[0][l] = tmp6;
-        dxdt[1][l] = tmp4 * u3 + tmp5 * u1;
-        dxdt[2][l] = u2 - tmp6 * rw4_pyramid_sin_lanes(q2);
-        dxdt[3][l] = 0.002371907568400169 * f1 + 2.5162222823731624e-05 * f2 -
-                4.735842396728992e-05 * f3;
-        dxdt[4][l] = 0.0026198295706604748 * f2 + 2.5162222823731624e-05 * f1 -
-                2.2199493971044426e-05 * f3;
-        dxdt[5][l] = 0.003314211979940579 * f3 - 4.735842396728992e-05 * f1 -
-                2.2199493971044426e-05 * f2;
-        dxdt[6][l] = 22.22222222222222 * net1;
-        dxdt[7][l] = 22.22222222222222 * net2;
-        dxdt[8][l] = 22.22222222222222 * net3;
-        dxdt[9][l] = 22.22222222222222 * net4;
-    }
-}
-
-/* One step of a pair on every lane. */
-typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
-                           long max_steps);
-
-/* One step of dopri5_integrate on every lane. */
-static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
-                              double t1, long max_steps)
-{
-    int last[RW4_PYRAMID_LANES];
-    double err[RW4_PYRAMID_LANES];
-    int run[RW4_PYRAMID_LANES];
-    int take[RW4_PYRAMID_LANES];
-    int lock[RW4_PYRAMID_LANES];
-    int ok[RW4_PYRAMID_LANES];
-    double fac[RW4_PYRAMID_LANES];
-    double grow[RW4_PYRAMID_LANES];
-    double total[RW4_PYRAMID_LANES];
-    int i, l;
-
-    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
-                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
-                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
-                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
-        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
-        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
-        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
-    }
-
-    /* trial */
-
-    /* stage 2: t + 0.2 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2 * L->k[0][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.2 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[1]);
-
-    /* stage 3: t + 0.3 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l] + 0.225 * L->k[1][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.3 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[2]);
-
-    /* stage 4: t + 0.8 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l] -
-                    3.7333333333333334 * L->k[1][i][l] + 3.5555555555555554 * L->k[2][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.8 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[3]);
-
-    /* stage 5: t + 0.8888888888888888 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l] -
-                    11.595793324188385 * L->k[1][i][l] + 9.822892851699436 * L->k[2][i][l] -
-                    0.2908093278463649 * L->k[3][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.8888888888888888 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[4]);
-
-    /* stage 6: t + h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l] -
-                    10.757575757575758 * L->k[1][i][l] + 8.906422717743473 * L->k[2][i][l] +
-                    0.2784090909090909 * L->k[3][i][l] - 0.2735313036020583 * L->k[4][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[5]);
-
-    /* stage 7: t + h, the new solution */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l] + 0.44923629829290207 *
-                    L->k[2][i][l] + 0.6510416666666666 * L->k[3][i][l] - 0.322376179245283 *
-                    L->k[4][i][l] + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
-            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + L->h[l];
-    }
-    rhs_lanes(L->ts, L->xnew, c, L->k[6]);
-
-    /* the error norm (see error_norm) */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        total[l] = 0.0;
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            double e;
-            e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
-                    L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
-                    L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
-            total[l] = total[l] + e * e;
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        err[l] = sqrt(total[l] / RW4_PYRAMID_NX);
-    }
-
-    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 6 : 0);
-        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
-        }
-    }
-
-    /* control: accept or reject by selection, and the next h */
-    /* pow, log, exp: scalar calls, as the single trajectory's */
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        run[l] = L->code[l] < 0;
-        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
-                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
-                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
-                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
-                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
-        ok[l] = take[l] && !lock[l];
-        fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
-        grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
-        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
-        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
-                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
-        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
-        L->stats_t[l] = L->t[l];
-        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
-        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
-        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
-        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
-        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.2 :
-                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(5.0, fac[l]);
-    }
-
-    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
-            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
-        }
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->k[0][i][l] = ok[l] ? L->k[6][i][l] : L->k[0][i][l];
-        }
-    }
-}
-
-/* One step of dop853_integrate on every lane. */
-static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
-                              double t1, long max_steps)
-{
-    int last[RW4_PYRAMID_LANES];
-    double err[RW4_PYRAMID_LANES];
-    int run[RW4_PYRAMID_LANES];
-    int take[RW4_PYRAMID_LANES];
-    int lock[RW4_PYRAMID_LANES];
-    int ok[RW4_PYRAMID_LANES];
-    double fac[RW4_PYRAMID_LANES];
-    double grow[RW4_PYRAMID_LANES];
-    double err5[RW4_PYRAMID_LANES];
-    double err3[RW4_PYRAMID_LANES];
-    double deno[RW4_PYRAMID_LANES];
-    int i, l;
-    int need;
-
-    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
-                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
-                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
-                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
-        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
-        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
-        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
-    }
-
-    /* trial */
-
-    /* stage 2: t + 0.05260015195876773 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.05260015195876773 * L->k[0][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.05260015195876773 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[1]);
-
-    /* stage 3: t + 0.0789002279381516 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l] +
-                    0.0591751709536137 * L->k[1][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.0789002279381516 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[2]);
-
-    /* stage 4: t + 0.1183503419072274 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l] +
-                    0.08876275643042054 * L->k[2][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.1183503419072274 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[3]);
-
-    /* stage 5: t + 0.2816496580927726 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l] -
-                    0.8845494793282861 * L->k[2][i][l] + 0.924834003261792 * L->k[3][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.2816496580927726 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[4]);
-
-    /* stage 6: t + 0.3333333333333333 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l] +
-                    0.17082860872947386 * L->k[3][i][l] + 0.12546768756682242 * L->k[4][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.3333333333333333 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[5]);
-
-    /* stage 7: t + 0.25 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l] +
-                    0.17025221101954405 * L->k[3][i][l] + 0.06021653898045596 * L->k[4][i][l] -
-                    0.017578125 * L->k[5][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.25 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[6]);
-
-    /* stage 8: t + 0.3076923076923077 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l] +
-                    0.17038392571223998 * L->k[3][i][l] + 0.10726203044637328 * L->k[4][i][l] -
-                    0.015319437748624402 * L->k[5][i][l] + 0.008273789163814023 * L->k[6][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.3076923076923077 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[7]);
-
-    /* stage 9: t + 0.6512820512820513 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l] -
-                    3.3608926294469414 * L->k[3][i][l] - 0.868219346841726 * L->k[4][i][l] +
-                    27.59209969944671 * L->k[5][i][l] + 20.154067550477894 * L->k[6][i][l] -
-                    43.48988418106996 * L->k[7][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.6512820512820513 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[8]);
-
-    /* stage 10: t + 0.6 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l] -
-                    2.4881146199716677 * L->k[3][i][l] - 0.590290826836843 * L->k[4][i][l] +
-                    21.230051448181193 * L->k[5][i][l] + 15.279233632882423 * L->k[6][i][l] -
-                    33.28821096898486 * L->k[7][i][l] - 0.020331201708508627 * L->k[8][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.6 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[9]);
-
-    /* stage 11: t + 0.8571428571428571 h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l] +
-                    5.186372428844064 * L->k[3][i][l] + 1.0914373489967295 * L->k[4][i][l] -
-                    8.149787010746927 * L->k[5][i][l] - 18.52006565999696 * L->k[6][i][l] +
-                    22.739487099350505 * L->k[7][i][l] + 2.4936055526796523 * L->k[8][i][l] -
-                    3.0467644718982196 * L->k[9][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + 0.8571428571428571 * L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[10]);
-
-    /* stage 12: t + h */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l] -
-                    10.53449546673725 * L->k[3][i][l] - 2.0008720582248625 * L->k[4][i][l] -
-                    17.9589318631188 * L->k[5][i][l] + 27.94888452941996 * L->k[6][i][l] -
-                    2.8589982771350235 * L->k[7][i][l] - 8.87285693353063 * L->k[8][i][l] +
-                    12.360567175794303 * L->k[9][i][l] + 0.6433927460157636 * L->k[10][i][l]);
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->ts[l] = L->t[l] + L->h[l];
-    }
-    rhs_lanes(L->ts, L->y, c, L->k[11]);
-
-    /* the new solution */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l] + 4.450312892752409 *
-                    L->k[5][i][l] + 1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 *
-                    L->k[7][i][l] + 0.3111643669578199 * L->k[8][i][l] - 0.1521609496625161 *
-                    L->k[9][i][l] + 0.20136540080403034 * L->k[10][i][l] + 0.04471061572777259 *
-                    L->k[11][i][l]) - L->comp[i][l];
-            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
-        }
-    }
-
-    /* the error: DOP853's two estimates, combined */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        err5[l] = 0.0;
-        err3[l] = 0.0;
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            double e5, e3;
-            e5 = (0.01312004499419488 * L->k[0][i][l] - 1.2251564463762044 * L->k[5][i][l] -
-                    0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
-                    0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
-                    0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
-                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
-            e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
-                    1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
-                    0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
-                    0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
-                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
-            err5[l] = err5[l] + e5 * e5;
-            err3[l] = err3[l] + e3 * e3;
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        deno[l] = err5[l] + 1e-2 * err3[l];
-        err[l] = deno[l] > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(RW4_PYRAMID_NX * deno[l]) : 0.0;
-    }
-
-    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 11 : 0);
-        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        ok[l] = L->code[l] < 0 && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
-    }
-    need = 0;
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        need |= ok[l];
-    }
-    if (need) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->ts[l] = L->t[l] + L->h[l];
-        }
-        rhs_lanes(L->ts, L->xnew, c, L->k[12]);
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->nonfinite[l] = (L->nonfinite[l] | (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX)));
-        }
-    }
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (ok[l] ? 1 : 0);
-    }
-
-    /* control: accept or reject by selection, and the next h */
-    RW4_PYRAMID_SIMD
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        run[l] = L->code[l] < 0;
-        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
-        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
-                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
-                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
-                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
-                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
-        ok[l] = take[l] && !lock[l];
-        fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
-        grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));
-        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
-        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
-                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
-        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
-        L->stats_t[l] = L->t[l];
-        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
-        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
-        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
-        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
-        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.333 :
-                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(3.003003003003003, fac[l]);
-    }
-
-    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
-            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
-        }
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        RW4_PYRAMID_SIMD
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            L->k[0][i][l] = ok[l] ? L->k[12][i][l] : L->k[0][i][l];
-        }
-    }
-}
-
-/* A trajectory into lane l, with ode_start's checks: -1 when the lane took
-   it, else the code it ended with at once (x as given, stats set). */
-static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
-                      double t0, double t1, double *xs, const double *c, double rtol,
-                      double atol, double h0, long max_steps, rw4_pyramid_stats *stats)
-{
-    double *x = xs + traj * RW4_PYRAMID_NX;
-    double f0[RW4_PYRAMID_NX], h = 0.0;
-    int i;
-    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
-                               stats);
-    if (code >= 0) {
-        return code;
-    }
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        L->x[i][l] = x[i];
-        L->k[0][i][l] = f0[i];
-    }
-    L->h[l] = h;
-    L->code[l] = -1;
-    L->t[l] = t0;
-    L->nonfinite[l] = 0;
-    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-        L->comp[i][l] = 0.0;
-    }
-    L->err_old[l] = 1e-4;
-    L->rejected_last[l] = 0;
-    L->stats_t[l] = t0;
-    L->stats_h[l] = stats->h;
-    L->stats_accepted[l] = 0;
-    L->stats_rejected[l] = 0;
-    L->stats_rhs_calls[l] = stats->rhs_calls;
-    L->busy[l] = 1;
-    L->traj[l] = traj;
-    return -1;
-}
-
-/* Trajectory traj's results: its statistics and code (x is in place). */
-static void put_result(size_t traj, int code, const rw4_pyramid_stats *st, rw4_pyramid_stats *stats,
-                       int *codes)
-{
-    if (stats) {
-        stats[traj] = *st;
-    }
-    if (codes) {
-        codes[traj] = code;
-    }
-}
-
-/* The lanes that have a code: their state and statistics out, the lane free. */
-static size_t lanes_finish(struct lanes *L, double t0, double *xs, rw4_pyramid_stats *stats,
-                           int *codes)
-{
-    size_t failed = 0;
-    int i, l;
-    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-        if (L->busy[l] && L->code[l] >= 0) {
-            rw4_pyramid_stats st;
-            stats_start(&st, t0);
-            st.t = L->stats_t[l];
-            st.h = L->stats_h[l];
-            st.accepted = L->stats_accepted[l];
-            st.rejected = L->stats_rejected[l];
-            st.rhs_calls = L->stats_rhs_calls[l];
-            for (i = 0; i < RW4_PYRAMID_NX; ++i) {
-                xs[L->traj[l] * RW4_PYRAMID_NX + (size_t)i] = L->x[i][l];
-            }
-            put_result(L->traj[l], L->code[l], &st, stats, codes);
-            failed += (size_t)(L->code[l] != RW4_PYRAMID_ODE_OK);
-            L->busy[l] = 0;
-        }
-    }
-    return failed;
-}
-
-/* Trajectories begin..end-1 of a batch, RW4_PYRAMID_LANES at a time: a lane that
-   finishes takes the next trajectory. Returns how many failed. */
-static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
-                         double t0, double t1, double *xs, const double *c, double rtol,
-                         double atol, double h0, long max_steps, rw4_pyramid_stats *stats, int *codes)
-{
-    struct lanes L;
-    size_t next = begin, failed = 0;
-    int l, busy;
-    memset(&L, 0, sizeof L);  /* idle lanes compute on zeros, not on garbage */
-    for (;;) {
-        busy = 0;
-        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
-            while (!L.busy[l] && next < end) {
-                rw4_pyramid_stats st;
-                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
-                                            atol, h0, max_steps, &st);
-                if (code >= 0) {
-                    put_result(next, code, &st, stats, codes);
-                    failed += (size_t)(code != RW4_PYRAMID_ODE_OK);
-                }
-                ++next;
-            }
-            busy += L.busy[l];
-        }
-        if (!busy) {
-            return failed;
-        }
-        step(&L, c, rtol, atol, t1, max_steps);
-        failed += lanes_finish(&L, t0, xs, stats, codes);
-    }
-}
-
-/* A batch over every core when compiled with OpenMP: chunks of about an
-   eighth of a thread's share, taken in turn (a chunk's trajectories are the
-   same whichever thread runs it); else one chunk. */
-static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
-                         double t1, double *xs, const double *c, double rtol, double atol,
-                         double h0, long max_steps, rw4_pyramid_stats *stats, int *codes)
-{
-    size_t failed = 0;
-#ifdef _OPENMP
-    const size_t share = n / (8 * (size_t)omp_get_max_threads()) + 1;
-    const size_t chunk = (share + RW4_PYRAMID_LANES - 1) / RW4_PYRAMID_LANES * RW4_PYRAMID_LANES;
-    const long chunks = (long)((n + chunk - 1) / chunk);
-    long b;
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (chunks > 1)
-    for (b = 0; b < chunks; ++b) {
-        const size_t begin = (size_t)b * chunk;
-        const size_t end = n - begin < chunk ? n : begin + chunk;
-        failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
-                             max_steps, stats, codes);
-    }
-#else
-    failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps, stats,
-                        codes);
-#endif
-    return failed;
-}
-
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
                              const double *c, rw4_pyramid_stats *stats, int *codes)
@@ -5031,7 +5818,7 @@ size_t rw4_pyramid_dopri5_batch(size_t n, double t0, double t1, double *x, const
                                 rw4_pyramid_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, RW4_PYRAMID_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
+                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
 }
 
 /* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes;
@@ -5041,7 +5828,7 @@ size_t rw4_pyramid_dop853_batch(size_t n, double t0, double t1, double *x, const
                                 rw4_pyramid_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, RW4_PYRAMID_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
+                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */

@@ -92,10 +92,12 @@ GRID_DOC = (
     "time reached unwritten; a bad grid (ERR_GRID) writes none.",
 )
 GRID_LOCALS = (real("t0", "inout"), real("t1", "inout"), Decl("g", "long"),
-               real("told", "inout"), real("hs", "inout"), real("frac", "inout"))  # fmt: skip
+               real("told", "inout"), real("hs", "inout"), real("frac", "inout"),
+               Decl("due", "bool", (), "inout"))  # fmt: skip
 """What a _grid integration adds to its method's locals: t0 and t1 (the
 grid's ends), g (the next grid time to write), told and hs (the accepted
-step's start and size) and frac (a grid time within it, scaled)."""
+step's start and size), frac (a grid time within it, scaled) and due (a
+branch-free step passes a grid time, passed)."""
 LANE_PARAMS = (Decl("c", "double", ("NC",)), *TOLERANCES, real("t1"), Decl("max_steps", "long"))
 """<method>_step_lanes's arguments (a lane's t0, x and h0 live in its struct lanes)."""
 
@@ -120,7 +122,7 @@ def started(m: Method, f0: E, into: Var, grid: bool | Grid = False) -> list[S]:
             Var("h0"), Var("max_steps"), f0, Ref("h"), Var("stats"))  # fmt: skip
     if not grid:
         return [assign(into, fn("ode_start", *args)), stopped(into)]
-    first: list[S] = [For("i", NX, (assign(OUT[Int(0), i], x[i]),)), assign(G, 1)]
+    first = grid_first(Int(0))
     if isinstance(grid, Grid) and grid.events:  # g at the start: a crossing's first side
         first += [Call("events", (t0, x, c, EV_OLD))]
     return [
@@ -142,12 +144,37 @@ G, OUT, TIMES, NTIMES = Var("g"), Var("out"), Var("times"), Var("ntimes")
 i = Var("i")
 
 
+BASE, DUE = Var("base"), Var("due")
+"""Over lanes: a lane's first row in out (its trajectory's), and whether
+its accepted step passes a grid time (its interpolant is then due)."""
+
+
+def grid_first(row: E) -> list[S]:
+    """out[row] := x, the start as ode_start leaves it; the next row g = 1."""
+    return [For("i", NX, (assign(OUT[row, i], x[i]),)), assign(G, 1)]
+
+
+def lane_grid_state() -> tuple[Decl, ...]:
+    """What struct lanes holds for an output grid: per lane g and base (its
+    trajectory's rows of out are base .. base + ntimes - 1), and the same on
+    every lane (intent "in"): the grid's times and the batch's out."""
+    return (Decl("g", "long", (), "inout"), Decl("base", "long", (), "inout"),
+            Decl("ntimes", "long"), Decl("times", "double", ("ntimes",)),
+            Decl("out", "double", ("ntimes", "NX")))  # fmt: skip
+
+
 def grid_locals(body: object, grid: bool | Grid = True) -> tuple[Decl, ...]:
     """The GRID_LOCALS body reads (an unused local is an error under -Werror),
     and with events theirs (event_locals)."""
     text = repr(body)
     used = tuple(d for d in GRID_LOCALS if f"Var(name='{d.name}')" in text)
     return (*used, *event_locals(grid))
+
+
+def lane_grid_locals(body: object) -> tuple[Decl, ...]:
+    """grid_locals of a step over lanes: g and the grid's ends are the
+    struct's and the step's arguments."""
+    return tuple(d for d in grid_locals(body) if d.name not in ("g", "t0", "t1"))
 
 
 def rows(name: str, count: int) -> Decl:
@@ -219,35 +246,54 @@ def inside(
     dense: Interpolant, end: E, start: E, step: E, grid: bool | Grid = True, counted: bool = False
 ) -> list[S]:
     """An accepted step's grid times before its end: out[g] := the
-    interpolant there, g moved on; the coefficients first. With events
-    (grid a Grid with events): first the step's crossings, located and
-    logged in time order (events_in_step), and the grid only up to a stop
-    there (counted: the step is in the statistics already, t its end)."""
-    theta = Var("frac")
+    interpolant there, g moved on; the coefficients first, when the step
+    passes a grid time. With events (grid a Grid with events): the
+    coefficients always, then the step's crossings, located and logged in
+    time order (events_in_step), and the grid only up to a stop there
+    (counted: the step is in the statistics already, t its end)."""
+    at = theta_at(dense, end, start, step)
+    if not (isinstance(grid, Grid) and grid.events):
+        return [If(due(end), (*dense.coefficients, writes(dense, at, end, G)))]
+    return [
+        *dense.coefficients,
+        *events_in_step(grid, dense, at, start, end),
+        writes(dense, at, EV_STOP, G),
+        *events_stop(dense, at, counted),
+    ]
+
+
+def theta_at(dense: Interpolant, end: E, start: E, step: E) -> Callable[[E], E]:
+    """A time as dense's theta on the step from start to end of size step."""
     origin = end if dense.at_end else start
+    return lambda time: (time - origin) / step if dense.scaled else time - origin
 
-    def at(time: E) -> E:
-        return (time - origin) / step if dense.scaled else time - origin
 
-    events = isinstance(grid, Grid) and bool(grid.events)
-    until = EV_STOP if events else end
-    out: list[S] = [*dense.coefficients]
-    if events:
-        assert isinstance(grid, Grid)
-        out += events_in_step(grid, dense, at, start, end)
-    out.append(
-        Loop((
-            If(not_(cmp(G, "<", NTIMES)), (Break(),)),
-            If(not_(cmp(TIMES[G], "<", until)), (Break(),)),
-            assign(theta, at(TIMES[G])),
-            *dense.points(theta, lambda i: OUT[G, i]),
-            inc(G, 1),
-        ))
-    )  # fmt: skip
-    if events:
-        assert isinstance(grid, Grid)
-        out += events_stop(dense, at, counted)
-    return out
+def due(until: E) -> E:
+    """A grid time before until: a step to until passes one."""
+    return and_(cmp(G, "<", NTIMES), cmp(TIMES[G], "<", until))
+
+
+def writes(dense: Interpolant, at: Callable[[E], E], until: E, row: E) -> S:
+    """out[row] := the interpolant at each grid time g before until, g moved on."""
+    return Loop((
+        If(not_(cmp(G, "<", NTIMES)), (Break(),)),
+        If(not_(cmp(TIMES[G], "<", until)), (Break(),)),
+        assign(Var("frac"), at(TIMES[G])),
+        *dense.points(Var("frac"), lambda i: OUT[row, i]),
+        inc(G, 1),
+    ))  # fmt: skip
+
+
+def passed(ok: E, dense: Interpolant, end: E, start: E, step: E, row: E = G) -> list[S]:
+    """inside for a branch-free step (a pair's, the Taylor method's), after
+    its selections, t its end: statements each under ok, as the lanes print
+    them (values by selection, the rhs when any lane needs it, the grid's
+    writes lane by lane): due := ok and a grid time inside the step, the
+    coefficients and the grid times written when due (row: out's row of g,
+    BASE + g over lanes). The step's acceptance and reached follow."""
+    at = theta_at(dense, end, start, step)
+    coefficients = [If(DUE, dense.coefficients)] if dense.coefficients else []
+    return [assign(DUE, and_(ok, due(end))), *coefficients, If(DUE, (writes(dense, at, end, row),))]
 
 
 # Events
@@ -442,11 +488,14 @@ def events_stop(dense: Interpolant, at: Callable[[E], E], counted: bool) -> list
     ]  # fmt: skip
 
 
-def reached() -> list[S]:
+def reached(row: E = G, ok: E | None = None) -> list[S]:
     """After the step, x and t its end: a grid time there gets x itself (the
     last one, t1, so equals _integrate's end state bit for bit; the times
-    before it were written by inside, so <= is ==)."""
-    there: list[S] = [For("i", NX, (assign(OUT[G, i], x[i]),)), inc(G, 1)]
+    before it were written by inside, so <= is ==); row: out's row of g.
+    ok: only after a step taken (a branch-free step's, one test)."""
+    there: list[S] = [For("i", NX, (assign(OUT[row, i], x[i]),)), inc(G, 1)]
+    if ok is not None:
+        return [If(and_(ok, cmp(G, "<", NTIMES), cmp(TIMES[G], "<=", t)), tuple(there))]
     return [If(cmp(G, "<", NTIMES), (If(cmp(TIMES[G], "<=", t), tuple(there)),))]
 
 
@@ -720,6 +769,7 @@ __all__ = [
     "grid_checks",
     "grid_step",
     "inside",
+    "passed",
     "reached",
     "stop_code",
     "stop_tests",

@@ -6,8 +6,8 @@ begin (the step's size and the codes that stop), trial (the stages and the
 error, gyrogen.codegen.integrators.explicit), check (non-finite values, f at
 the new point), control (accept or reject, the new h, by selection) and
 accept (x := xnew). The scalar integrator loops over them; the lanes print
-the same parts over lanes (gyrogen.codegen.ir.lanes), so a batch equals its
-single calls bit for bit.
+the same parts over lanes (gyrogen.codegen.ir.lanes), so a batch (over an
+output grid too) equals its single calls bit for bit.
 """
 
 from __future__ import annotations
@@ -103,10 +103,13 @@ def grid_krows(m: Method, krows: int) -> int:
     return max(krows, m.fnew + 1 + len(tab.dense.nodes))
 
 
-def parts(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> tuple[list[S], list[S]]:
+def parts(
+    m: Method, quaternion: bool, grid: bool | driver.Grid = False, row: E = driver.G
+) -> tuple[list[S], list[S]]:
     """One step of pair m on one trajectory, as the five parts: begin, and
     the other four. grid: the output grid's too (grid_step, f at the last
-    step's end, and the grid times an accepted step passes)."""
+    step's end, and the grid times an accepted step passes; row: out's row
+    of grid time g)."""
     ctl = m.control
     assert isinstance(ctl, registry.PairControl)
     tab = m.tableau
@@ -153,15 +156,27 @@ def parts(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> tupl
         pi.next_h(or_(not_(run), and_(take, lock)), nonfinite, ok),
     ]
     first: list[S] = [For("i", NX, (assign(k[0, i], k[m.fnew, i]),))]
-    inside = (
-        driver.inside(interpolant(m), t, Var("told"), Var("hs"), grid, counted=True) if grid else []
-    )
     accept: list[S] = [
         Comment("accept: x := xnew; f(t + h, xnew) is the next step's first stage"),
-        If(ok, (*inside, *accepted(quaternion, known=True), *first,
-                *(driver.reached() if grid else []))),
-    ]  # fmt: skip
+        *_accept(m, quaternion, grid, ok, first, row),
+    ]
     return begin, [Comment("trial"), *trial(m), *check, *control, *accept]
+
+
+def _accept(
+    m: Method, quaternion: bool, grid: bool | driver.Grid, ok: Var, first: list[S], row: E
+) -> list[S]:
+    """accept, under ok: with the grid, the grid times the step passes first
+    and its end after (driver.passed; with events, driver.inside)."""
+    taken = (*accepted(quaternion, known=True), *first)
+    if not grid:
+        return [If(ok, taken)]
+    told, hs = Var("told"), Var("hs")
+    if isinstance(grid, driver.Grid) and grid.events:
+        inside = driver.inside(interpolant(m), t, told, hs, grid, counted=True)
+        return [If(ok, (*inside, *taken, *driver.reached()))]
+    passed = driver.passed(ok, interpolant(m), t, told, hs, row)
+    return [*passed, If(ok, taken), *driver.reached(row, ok)]
 
 
 STATE = ("code", "t", "h", "err_old", "nonfinite", "rejected_last")
@@ -215,24 +230,33 @@ def integrate(m: Method, quaternion: bool, krows: int, grid: bool | driver.Grid 
     return Func(f"{m.name}_integrate", driver.PARAMS, tuple(body), "int", locals_, doc)
 
 
-def lanes_step(m: Method, quaternion: bool) -> Func:
-    """m.name_step_lanes: one step of every lane of a struct lanes."""
-    begin, rest = parts(m, quaternion)
+def lanes_step(m: Method, quaternion: bool, grid: bool = False) -> Func:
+    """m.name_step_lanes: one step of every lane of a struct lanes; with
+    grid, m.name_grid_step_lanes: one step of m.name_grid (its grid and
+    dense rows in the struct, driver.lane_grid_state)."""
+    begin, rest = parts(m, quaternion, grid, driver.BASE + driver.G)
     step = begin + rest
-    doc = (f"One step of {m.name}_integrate on every lane.",)
-    return Func(
-        f"{m.name}_step_lanes", driver.LANE_PARAMS, tuple(step), None, used_locals(step), doc
-    )
+    if not grid:
+        doc = (f"One step of {m.name}_integrate on every lane.",)
+        return Func(
+            f"{m.name}_step_lanes", driver.LANE_PARAMS, tuple(step), None, used_locals(step), doc
+        )
+    locals_ = (*used_locals(step), *driver.lane_grid_locals(step))
+    doc = (f"One step of {m.name}_grid on every lane.",)
+    return Func(f"{m.name}_grid_step_lanes", driver.LANE_PARAMS, tuple(step), None, locals_, doc)
 
 
-def lane_state(krows: int) -> dict[str, Decl]:
-    """What struct lanes holds per lane: a trajectory's arrays and values."""
+def lane_state(krows: int, pairs: list[Method]) -> dict[str, Decl]:
+    """What struct lanes holds per lane: a trajectory's arrays and values
+    (k's rows for the pairs' grids too, and their interpolants' rows)."""
     values = [declare(n) for n in STATE]
     stats = [
         Decl(f"stats.{n}", "double" if n in ("t", "h") else "long", (), "inout")
         for n in ("t", "h", "accepted", "rejected", "rhs_calls")
     ]
-    return {d.name: d for d in (*state_arrays(krows), *values, *stats)}
+    rows = max([krows, *(grid_krows(m, krows) for m in pairs)])
+    dense = [driver.rows("dense", max(dense_rows(m) for m in pairs))] if pairs else []
+    return {d.name: d for d in (*state_arrays(rows), *values, *stats, *dense)}
 
 
 __all__ = ["integrate", "lane_state", "lanes_step"]

@@ -72,7 +72,7 @@ def _pair(m: Method, g: Given) -> Parts:
             pair.integrate(m, g.quaternion, g.krows, True),
             *([pair.integrate(m, g.quaternion, g.krows, g.events)] if g.events else []),
         ],
-        [pair.lanes_step(m, g.quaternion)],
+        [pair.lanes_step(m, g.quaternion), pair.lanes_step(m, g.quaternion, grid=True)],
         init=[s for s in pair.start_state() if s not in common_start],
     )
 
@@ -107,7 +107,11 @@ def _taylor(m: Method, g: Given) -> Parts:
     common_start = common.start_state()
     return Parts(
         taylor.functions(m, g.jet, g.quaternion, g.events),
-        [taylor_jet.jet_lanes(m, g.jet), taylor.lanes_step(m, g.jet, g.quaternion)],
+        [
+            taylor_jet.jet_lanes(m, g.jet),
+            taylor.lanes_step(m, g.jet, g.quaternion),
+            taylor.lanes_step(m, g.jet, g.quaternion, grid=True),
+        ],
         taylor.lane_state(m, g.jet),
         [s for s in taylor.start_state() if s not in common_start],
     )
@@ -151,7 +155,8 @@ def program(
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
     single = [f for p in parts for f in p.single]
     lanes = [f for p in parts for f in p.lanes]
-    state = {**pair.lane_state(given.krows), **{d.name: d for p in parts for d in p.state}}
+    state = {**pair.lane_state(given.krows, pairs), **{d.name: d for p in parts for d in p.state}}
+    state |= {d.name: d for d in driver.lane_grid_state()} if lanes else {}
     init = common.start_state() if lanes else []
     for s in (s for p in parts for s in p.init):
         init += [] if s in init else [s]
@@ -216,18 +221,25 @@ def c_text(
     lanes = LanesPrinter(prefix, macro, {}, p.state)
     fields = []
     # the 8-byte arrays first, each LANES doubles long, so that in a struct
-    # aligned to 64 bytes every one starts on a cache line (ints last)
-    for d in sorted(p.state.values(), key=lambda d: d.type not in ("double", "long")):
+    # aligned to 64 bytes every one starts on a cache line (ints, then what
+    # every lane shares, last)
+    for d in sorted(p.state.values(), key=lambda d: (d.intent == "in", d.type != "double"
+                                                     and d.type != "long")):  # fmt: skip
+        name = lanes.field(d.name).removeprefix("L->")
+        if d.intent == "in":
+            fields.append(f"{c.declaration(Decl(name, d.type, d.shape), True)};")
+            continue
         dims = "".join(f"[{c.extent(n)}]" for n in d.shape)
         fields.append(
             f"{'double' if d.type == 'double' else 'long' if d.type == 'long' else 'int'} "
-            f"{lanes.field(d.name).removeprefix('L->')}{dims}[{macro}_LANES];"
+            f"{name}{dims}[{macro}_LANES];"
         )
     return {
         **methods_text(p, c, [*p.lanes, *(model or [])]),
         "lanes": by_method(p.lanes, lanes.function),
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
+        "grid_init": "\n".join(lanes.one_lane(tuple(driver.grid_first(driver.BASE)), 2)),
     }
 
 

@@ -144,21 +144,22 @@ def start_state() -> list[S]:
 
 def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
     """The dense output: the series itself at tau = t - told, x + tau (x^[1]
-    + tau (x^[2] + ... + tau x^[p])) by Horner's scheme, and a state of degree
+    + tau (x^[2] + ... + tau x^[p])) by Horner's scheme, an order at a time
+    for every state (acc: the states' chains side by side; a state at a
+    time, its chain of multiplies and adds was about a third of
+    taylor_grid_step_lanes's time at 21 grid times), and a state of degree
     min_order or less by its exact polynomial (its higher coefficients are
     never computed)."""
     deg = jet.degrees()
 
     def points(tau: E, at: Callable[[E], At]) -> list[S]:
         acc, q = Var("acc"), Var("q")
-        horner = (
-            assign(acc, T[order, i]),
-            For("q", order - 1, (assign(acc, T[order - Int(1) - q, i] + tau * acc),)),
-            assign(at(i), x[i] + tau * acc),
-        )
         out: list[S] = [
-            For("i", Int(b), horner, ("acc",), start=Int(a)) for a, b in _runs(jet.nx, exact)
-        ]
+            *_over(jet.nx, exact, assign(acc[i], T[order, i])),
+            For("q", order - 1, tuple(_over(jet.nx, exact, assign(
+                acc[i], T[order - Int(1) - q, i] + tau * acc[i])))),
+            *_over(jet.nx, exact, assign(at(i), x[i] + tau * acc[i])),
+        ]  # fmt: skip
         for n in exact:
             low = T[Int(1), Int(n)] + tau * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
             out.append(assign(at(Int(n)), x[Int(n)] + tau * low))
@@ -167,11 +168,13 @@ def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
     return driver.Interpolant((), points, scaled=False)
 
 
-def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> list[S]:
+def step(
+    m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False, lanes: bool = False
+) -> list[S]:
     """One step of one trajectory, straight-line with selections (the scalar
     integrator loops over it; the lanes print it over every lane). grid: the
     output grid's too (driver.grid_step, and the grid times an accepted step
-    passes, from the series)."""
+    passes, from the series; lanes: out's rows from the lane's base)."""
     t, t1, cd = Var("t"), Var("t1"), Var("code")
     last, run, take, ok, at, jump, retry = (
         Var(n) for n in ("last", "run", "take", "ok", "at", "jump", "retry")
@@ -208,7 +211,7 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False
     body: list[S] = [
         Comment("the coefficients at x, and the step they allow (Jorba and Zou)"),
         assign(run, cmp(cd, "<", 0)),
-        *(jet_function(series, jet).body if grid else [Call("taylor_jet", args)]),
+        *(jet_function(series, jet).body if grid and not lanes else [Call("taylor_jet", args)]),
         driver.count("rhs_calls", sel(run, Int(1), Int(0))),
         *bounds(jet, exact),
         *jz.next_h(order, Var("inv"), Var("rp"), Var("rq")),
@@ -240,8 +243,14 @@ def step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False
     ]
     if not grid:
         return [*body, If(ok, tuple(accepted(quaternion, known=True)))]
-    inside = driver.inside(series_output(jet, exact), t, Var("told"), Var("hs"), grid, counted=True)
-    return [*body, If(ok, (*inside, *accepted(quaternion, known=True), *driver.reached()))]
+    taken = tuple(accepted(quaternion, known=True))
+    dense, told, hs = series_output(jet, exact), Var("told"), Var("hs")
+    if isinstance(grid, driver.Grid) and grid.events:
+        inside = driver.inside(dense, t, told, hs, grid, counted=True)
+        return [*body, If(ok, (*inside, *taken, *driver.reached()))]
+    row = driver.BASE + driver.G if lanes else driver.G
+    passed = driver.passed(ok, dense, t, told, hs, row)
+    return [*body, *passed, If(ok, taken), *driver.reached(row, ok)]
 
 
 UNMEASURED = "unmeasured"
@@ -339,20 +348,22 @@ def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = 
         *([declare("norm")] if quaternion else []),
     )
     if grid:  # the jet's code in place: taylor_jet keeps one caller, which gcc inlines
-        locals_ += (*jet_function(series, jet).locals, *driver.grid_locals(body, grid))
+        locals_ += (*jet_function(series, jet).locals, arr("acc", "inout"),
+                    *driver.grid_locals(body, grid))  # fmt: skip
         doc = (*m.notes, *driver.GRID_DOC)
         name, params = f"taylor_{driver.variant(grid)}", driver.grid_params(grid)
         return Func(name, params, tuple(body), "int", locals_, doc)
     return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
 
 
-def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
+def lanes_step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func:
     """taylor_step_lanes: one step of every lane of a struct lanes (the
-    shared values computed first, the same on every lane)."""
+    shared values computed first, the same on every lane); with grid,
+    taylor_grid_step_lanes: one step of taylor_grid."""
     series = m.tableau
     assert isinstance(series, Series)
     unused = [] if reads_constants(jet) else [Unused("c")]
-    body = (*unused, *uniform(m, jet), *step(m, jet, quaternion))
+    body = (*unused, *uniform(m, jet), *step(m, jet, quaternion, grid, lanes=True))
     locals_ = (
         *tables(m),
         Decl("order", "int", (), "in"),
@@ -360,16 +371,19 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool) -> Func:
         real("scale", "in"),
         *(declare(n) for n in LOCALS),
         *([declare("norm")] if quaternion else []),
+        *(driver.lane_grid_locals(body) if grid else ()),
     )
-    doc = ("One step of taylor_integrate on every lane.",)
-    return Func("taylor_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
+    name = "taylor_grid" if grid else "taylor_integrate"
+    doc = (f"One step of {name} on every lane.",)
+    return Func(f"{name.removesuffix('_integrate')}_step_lanes", driver.LANE_PARAMS, body, None,
+                locals_, doc)  # fmt: skip
 
 
 def lane_state(m: Method, jet: Jet) -> list[Decl]:
     """What struct lanes holds per lane for a Taylor method, beyond a pair's."""
     series = m.tableau
     assert isinstance(series, Series)
-    return [Decl("cap", "double", (), "inout"), coefficients(series, jet)]
+    return [Decl("cap", "double", (), "inout"), coefficients(series, jet), arr("acc", "inout")]
 
 
 def functions(

@@ -10,6 +10,8 @@ call runs it when any lane needs it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from gyrogen.codegen.ir.c import CTYPE, CPrinter, uses
 from gyrogen.codegen.ir.nodes import (
     Assign,
@@ -23,6 +25,7 @@ from gyrogen.codegen.ir.nodes import (
     Func,
     If,
     Int,
+    Loop,
     Row,
     S,
     Sel,
@@ -71,10 +74,17 @@ class LanesPrinter(CPrinter):
     def field(self, name: str) -> str:
         return "L->" + name.replace(".", "_")
 
+    def shared(self, name: str) -> bool:
+        """A value of the struct the same on every lane (intent "in"): the
+        output grid's times and rows."""
+        d = self.state.get(name)
+        return d is not None and d.intent == "in"
+
     def var(self, name: str) -> tuple[str, int]:
         if name in self.state:
             d = self.state[name]
-            return (self.field(name) if d.shape else f"{self.field(name)}[l]"), ATOM
+            whole = d.shape or self.shared(name)
+            return (self.field(name) if whole else f"{self.field(name)}[l]"), ATOM
         if (
             name in self.decls
             and name not in self.scoped
@@ -86,7 +96,8 @@ class LanesPrinter(CPrinter):
 
     def element(self, name: str, index: tuple[str, ...]) -> str:
         base = self.field(name) if name in self.state else name
-        return base + "".join(f"[{i}]" for i in index) + ("[l]" if name in self.state else "")
+        lane = name in self.state and not self.shared(name)
+        return base + "".join(f"[{i}]" for i in index) + ("[l]" if lane else "")
 
     def row(self, name: str, j: str) -> str:
         return f"{self.field(name)}[{j}]"
@@ -141,7 +152,7 @@ class LanesPrinter(CPrinter):
                 lines.extend(self.lane_loop(depth, [*local, *inner], vector(tuple(run))))
                 run.clear()
 
-        for s in converted(body, top=True, own=frozenset(self.decls)):
+        for s in converted(body, top=True, own=frozenset(self.decls), keep=self.lane_by_lane):
             if self.sets_uniform(s):
                 flush()
                 lines += CPrinter.statement(self, s, depth)
@@ -215,15 +226,30 @@ class LanesPrinter(CPrinter):
             args = ", ".join(self.expr(a) for a in (x, c, out))
             return [*times, f"{pad}rhs_lanes(L->ts, {args});"]
         assert isinstance(s, If) and not s.orelse, s
-        assert all(isinstance(x, Call) for x in s.then), "a branch around a call holds calls only"
         any_lane = self.lane_loop(depth, [f"{pad}{self.indent}need |= {self.expr(s.cond)};"], True)
+        if self.lane_by_lane(s):
+            head = f"{pad}{self.indent}for (l = 0; l < {self.width}; ++l) {{"
+            each = [head, *self.one_lane((s,), depth + 2), f"{pad}{self.indent}}}"]
+            return [f"{pad}need = 0;", *any_lane, f"{pad}if (need) {{", *each, f"{pad}}}"]
         return [
             f"{pad}need = 0;",
             *any_lane,
             f"{pad}if (need) {{",
-            *self.block(s.then, depth + 1),
+            *self.block(tuple(converted(s.then, s.cond)), depth + 1),
             f"{pad}}}",
         ]
+
+    def lane_by_lane(self, s: If) -> bool:
+        """A branch run lane by lane, as the single trajectory runs it: one
+        that loops until a break, or writes what every lane shares (a row
+        of the output grid: by selection, a lane would write rows that are
+        not its own). Else a branch around a call runs the call on every
+        lane when any lane needs it, its values by selection."""
+        inner = nested(s)
+        return any(isinstance(x, Loop) for x in inner) or any(
+            isinstance(x, Assign) and isinstance(x.target, At) and self.shared(x.target.name)
+            for x in inner
+        )
 
     def one_lane(self, body: tuple[S, ...], depth: int) -> list[str]:
         """body for lane l alone (l given): no loop over the lanes."""
@@ -250,7 +276,8 @@ class LanesPrinter(CPrinter):
         ]
         loops = sorted({s.var for s in walk_for(func.body)} | {"l"})
         locals_.append(f"int {', '.join(loops)};")
-        if any(isinstance(s, If) and any(isinstance(x, Call) for x in s.then) for s in func.body):
+        if any(isinstance(s, If) and (any(isinstance(x, Call) for x in s.then)
+                                      or p.lane_by_lane(s)) for s in func.body):  # fmt: skip
             locals_.append("int need;")
         doc = [f"/* {d} */" for d in func.doc[:1]]
         body = p.block(func.body, 1)
@@ -282,7 +309,7 @@ def names(e: E) -> set[str]:
 def nested(s: S) -> list[S]:
     if isinstance(s, If):
         return [x for y in (*s.then, *s.orelse) for x in [y, *nested(y)]]
-    if isinstance(s, For):
+    if isinstance(s, (For, Loop)):
         return [x for y in s.body for x in [y, *nested(y)]]
     return []
 
@@ -305,6 +332,8 @@ def walk_for(body: tuple[S, ...]) -> list[For]:
             out += [s, *walk_for(s.body)]
         elif isinstance(s, If):
             out += walk_for((*s.then, *s.orelse))
+        elif isinstance(s, Loop):
+            out += walk_for(s.body)
     return out
 
 
@@ -313,14 +342,16 @@ def converted(
     cond: E | None = None,
     top: bool = False,
     own: frozenset = frozenset(),
+    keep: Callable[[If], bool] = lambda s: False,
 ) -> list[S]:
     """if-conversion: each assignment under cond keeps its old value where
     cond is false. A branch may not assign what its condition reads. At the
-    top, a branch around calls stays a branch. Names in own are the branch's
-    own values (a local first set in it): assigned as they are."""
+    top, a branch around calls stays a branch, and one that keep keeps (run
+    lane by lane). Names in own are the branch's own values (a local first
+    set in it): assigned as they are."""
     out: list[S] = []
     for s in body:
-        if top and isinstance(s, If) and any(isinstance(x, Call) for x in nested(s)):
+        if top and isinstance(s, If) and (any(isinstance(x, Call) for x in nested(s)) or keep(s)):
             out.append(s)
         elif isinstance(s, If):
             written = {repr(x.target) for x in nested(s) if isinstance(x, Assign)}
