@@ -234,7 +234,7 @@ def inside(
     out: list[S] = [*dense.coefficients]
     if events:
         assert isinstance(grid, Grid)
-        out += events_in_step(grid, dense, at, start, end)
+        out = [*needed(grid, end, dense.coefficients), *events_in_step(grid, dense, at, start, end)]
     out.append(
         Loop((
             If(not_(cmp(G, "<", NTIMES)), (Break(),)),
@@ -314,6 +314,7 @@ def event_locals(grid: bool | Grid) -> tuple[Decl, ...]:
         Decl("ev_y", "double", ("NX",), "inout"),
         *(real(f"ev_{n}", "inout") for n in ("a", "b", "ga", "gb", "m", "gm", "stop", "ta", "tb")),
         *(Decl(f"ev_{n}", "int", (), "inout") for n in ("side", "best", "halt", "it", "j")),
+        *([Decl("ev_need", "int", (), "inout")] if EV_SUBINTERVALS == 1 else []),
     )
 
 
@@ -364,23 +365,49 @@ def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) ->
 EV_SUBINTERVALS = 8
 """Each accepted step is searched in this many equal pieces: a crossing is
 seen where g changes sign between two neighbouring points of the
-interpolant (DifferentialEquations.jl's ContinuousCallback looks at 10)."""
+interpolant (DifferentialEquations.jl's ContinuousCallback looks at 10).
+One piece (g at the step's ends, as scipy's solve_ivp looks) would cost
+the default scene's three events 1.1-1.6x the plain run instead of
+1.6-2.5x (`make bench-events`; needed then computes the coefficients only
+for a step with a sign change or a grid time in it), but miss an event
+that oscillates faster than the motion the steps follow: sin(3 t) on
+dual_spin, whose steps span its period, 6 of 95 crossings seen."""
+
+
+def _crossed(k: E, new: E) -> E:
+    """Event k's g went from ev_old[k] to new across 0 as its direction asks
+    (from a g other than 0: a g of 0 at a piece's end is that piece's
+    crossing, never the next one's too)."""
+    up = and_(cmp(Var("ev_dir")[k], "!=", -1), cmp(EV_OLD[k], "<", 0.0), cmp(new, ">=", 0.0))
+    down = and_(cmp(Var("ev_dir")[k], "!=", 1), cmp(EV_OLD[k], ">", 0.0), cmp(new, "<=", 0.0))
+    return or_(up, down)
+
+
+def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]:
+    """g at the step's end (on xnew: no interpolant), and the interpolant's
+    coefficients only when something reads them: a grid time before the
+    end, a sign change (with one piece), or the pieces between the ends."""
+    ne, k, need, g_end = Int(len(grid.events)), Var("ev_k"), Var("ev_need"), Var("ev_end")
+    if EV_SUBINTERVALS > 1:
+        return [Call("events", (end, xnew, c, g_end)), *coefficients]
+    pending = and_(cmp(G, "<", NTIMES), cmp(TIMES[G], "<", end))
+    return [
+        Call("events", (end, xnew, c, g_end)),
+        assign(need, sel(pending, Int(1), Int(0))),
+        For("ev_k", ne, (If(_crossed(k, g_end[k]), (assign(need, 1),)),)),
+        If(cmp(need, "!=", 0), tuple(coefficients)),
+    ]
 
 
 def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: E,
                    end: E) -> list[S]:  # fmt: skip
-    """g at the step's end (on xnew) and at the EV_SUBINTERVALS - 1 points
-    between (on the interpolant); in each piece, each event whose g changed
-    sign as its direction asks (from a g other than 0: a g of 0 at a piece's
-    end is that piece's crossing, never the next one's too), located; the
+    """g at the EV_SUBINTERVALS - 1 points between the step's ends (on the
+    interpolant; g at its end is needed's); in each piece, each event whose
+    g changed sign as its direction asks (_crossed), located; the
     piece's crossings in time order into the log, up to the first terminal
     one or a full log, where the step stops (ev_stop, ev_halt its code)."""
     ne, k, j = Int(len(grid.events)), Var("ev_k"), Var("ev_j")
     ta, tb, g_end = Var("ev_ta"), Var("ev_tb"), Var("ev_end")
-    up = and_(cmp(Var("ev_dir")[k], "!=", -1), cmp(EV_OLD[k], "<", 0.0),
-              cmp(EV_NEW[k], ">=", 0.0))  # fmt: skip
-    down = and_(cmp(Var("ev_dir")[k], "!=", 1), cmp(EV_OLD[k], ">", 0.0),
-                cmp(EV_NEW[k], "<=", 0.0))  # fmt: skip
     best = EV_T[EV_BEST]
     earlier = or_(cmp(EV_BEST, "<", 0), cmp(EV_T[k], "<", best))
     log = [
@@ -392,7 +419,6 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
     ]
     point = start + (end - start) * (fn("real", j) / float(EV_SUBINTERVALS))
     return [
-        Call("events", (end, xnew, c, g_end)),
         assign(EV_STOP, end), assign(EV_HALT, -1), assign(ta, start), assign(j, 0),
         Loop((
             If(cmp(j, ">=", EV_SUBINTERVALS), (Break(),)),
@@ -405,7 +431,7 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
             )),
             For("ev_k", ne, (
                 assign(EV_T[k], Const("HUGE")),
-                If(or_(up, down), tuple(_search(dense, at, k, ta, tb))),
+                If(_crossed(k, EV_NEW[k]), tuple(_search(dense, at, k, ta, tb))),
             )),
             Loop((
                 assign(EV_BEST, -1),
