@@ -268,6 +268,9 @@ class Grid:
     twin, which also locates the scene's events on the interpolant."""
 
     events: tuple[Event, ...] = ()
+    pieces: int = 1
+    """How many equal pieces each accepted step is searched in
+    (EV_SUBINTERVALS where an event reads the time, else 1)."""
 
 
 EV_OLD, EV_NEW, EV_G, EV_T, EV_Y = (Var(n) for n in ("ev_old", "ev_new", "ev_g", "ev_t", "ev_y"))
@@ -314,7 +317,7 @@ def event_locals(grid: bool | Grid) -> tuple[Decl, ...]:
         Decl("ev_y", "double", ("NX",), "inout"),
         *(real(f"ev_{n}", "inout") for n in ("a", "b", "ga", "gb", "m", "gm", "stop", "ta", "tb")),
         *(Decl(f"ev_{n}", "int", (), "inout") for n in ("side", "best", "halt", "it", "j")),
-        *([Decl("ev_need", "int", (), "inout")] if EV_SUBINTERVALS == 1 else []),
+        *([Decl("ev_need", "int", (), "inout")] if grid.pieces == 1 else []),
     )
 
 
@@ -363,15 +366,17 @@ def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) ->
 
 
 EV_SUBINTERVALS = 8
-"""Each accepted step is searched in this many equal pieces: a crossing is
-seen where g changes sign between two neighbouring points of the
-interpolant (DifferentialEquations.jl's ContinuousCallback looks at 10).
-One piece (g at the step's ends, as scipy's solve_ivp looks) would cost
-the default scene's three events 1.1-1.6x the plain run instead of
-1.6-2.5x (`make bench-events`; needed then computes the coefficients only
-for a step with a sign change or a grid time in it), but miss an event
-that oscillates faster than the motion the steps follow: sin(3 t) on
-dual_spin, whose steps span its period, 6 of 95 crossings seen."""
+"""The pieces each accepted step is searched in when an event reads the
+time (or a tabulated input): a crossing is seen where g changes sign
+between two neighbouring points of the interpolant (DifferentialEquations.jl's
+ContinuousCallback looks at 10), so that an event faster than the motion
+the steps follow is still seen (sin(3 t) on dual_spin, whose steps span its
+period: with g at the steps' ends alone, 6 of its 95 crossings). An event
+on the states alone changes no faster than they do, within a step the
+error control keeps smooth: it is searched at the steps' ends alone (as
+scipy's solve_ivp looks), the interpolant's coefficients computed only for
+a step with a sign change or a grid time in it (the default scene's three
+such events: 1.6-2.5x the plain run with 8 pieces, `make bench-events`)."""
 
 
 def _crossed(k: E, new: E) -> E:
@@ -388,7 +393,7 @@ def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]
     coefficients only when something reads them: a grid time before the
     end, a sign change (with one piece), or the pieces between the ends."""
     ne, k, need, g_end = Int(len(grid.events)), Var("ev_k"), Var("ev_need"), Var("ev_end")
-    if EV_SUBINTERVALS > 1:
+    if grid.pieces > 1:
         return [Call("events", (end, xnew, c, g_end)), *coefficients]
     pending = and_(cmp(G, "<", NTIMES), cmp(TIMES[G], "<", end))
     return [
@@ -401,7 +406,7 @@ def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]
 
 def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: E,
                    end: E) -> list[S]:  # fmt: skip
-    """g at the EV_SUBINTERVALS - 1 points between the step's ends (on the
+    """g at the grid.pieces - 1 points between the step's ends (on the
     interpolant; g at its end is needed's); in each piece, each event whose
     g changed sign as its direction asks (_crossed), located; the
     piece's crossings in time order into the log, up to the first terminal
@@ -417,13 +422,13 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
         For("i", NX, (assign(Var("log_x")[NLOG, i], EV_Y[i]),)),
         inc(NLOG, 1),
     ]
-    point = start + (end - start) * (fn("real", j) / float(EV_SUBINTERVALS))
+    point = start + (end - start) * (fn("real", j) / float(grid.pieces))
     return [
         assign(EV_STOP, end), assign(EV_HALT, -1), assign(ta, start), assign(j, 0),
         Loop((
-            If(cmp(j, ">=", EV_SUBINTERVALS), (Break(),)),
+            If(cmp(j, ">=", grid.pieces), (Break(),)),
             inc(j, 1),
-            If(cmp(j, "<", EV_SUBINTERVALS), (
+            If(cmp(j, "<", grid.pieces), (
                 assign(tb, point), *_g_at(dense, at, tb),
                 For("ev_k", ne, (assign(EV_NEW[k], EV_G[k]),)),
             ), (
