@@ -194,11 +194,6 @@ def test_each_integrator_is_written_once() -> None:
 
 HAND_OFF = "hands a batch's trajectories to the printed integrators and back"
 TEMPLATE_FUNCTIONS = {
-    ("c/ode.c.jinja", "P_m_name"): "a public integrator: stats NULL, then its printed _integrate",
-    ("c/ode.c.jinja", "P_name_batch"): HAND_OFF,
-    ("c/ode.c.jinja", "P_m_name_grid"): "a public output grid: stats NULL, then its printed _grid",
-    ("c/ode.c.jinja", "P_m_name_events"): "a public grid with events: stats NULL, then _events",
-    ("c/ode.c.jinja", "P_m_name_grid_batch"): HAND_OFF,
     ("c/lanes.jinja", "lane_start"): HAND_OFF,
     ("c/lanes.jinja", "lanes_finish"): HAND_OFF,
     ("c/lanes.jinja", "pair_lanes"): HAND_OFF,
@@ -210,15 +205,13 @@ TEMPLATE_FUNCTIONS = {
     ("fmu/fmi2.c.jinja", "constants"): "the FMU's parameters into setup",
     ("fmu/fmi2.c.jinja", "outputs"): "the FMU's outputs from the printed output functions",
     ("fmu/fmi2.c.jinja", "set_parameters"): "the FMU's parameters into setup",
-    ("fortran/ode.f90.jinja", "P_m_name"): "a public integrator: stats by pointer, then _integrate",
-    ("fortran/ode.f90.jinja", "P_name_batch"): HAND_OFF,
-    ("fortran/ode.f90.jinja", "P_m_name_grid"): "a public output grid: stats by pointer; _grid",
-    ("fortran/ode.f90.jinja", "P_m_name_events"): "a public grid with events: stats by pointer",
-    ("fortran/ode.f90.jinja", "P_m_name_grid_batch"): HAND_OFF,
 }
 """The functions on doubles the templates may define, and why; any other is
 numerics, whose home is an IR function (codegen/integrators) printed to every
-target. FMI 2.0's entry points (fmi2*) are the standard's interface."""
+target. FMI 2.0's entry points (fmi2*) are the standard's interface. The
+public integrators and their _batch loops are not written out: the macros
+forward and batch (c/_macros.jinja, fortran/_macros.jinja) print their heads
+from abi's signatures."""
 
 
 def double_functions(templates: Path) -> set[tuple[str, str]]:

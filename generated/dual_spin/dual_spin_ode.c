@@ -744,7 +744,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *DUAL_SPIN_RESTRICT lu, const int *DUAL_SPIN_RESTRICT piv,
+                     double *DUAL_SPIN_RESTRICT b)
 {
     double swap;
 
@@ -777,7 +778,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *DUAL_SPIN_RESTRICT ar, double *DUAL_SPIN_RESTRICT ai,
+                                int *DUAL_SPIN_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1095,8 +1097,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *DUAL_SPIN_RESTRICT ar,
+                             const double *DUAL_SPIN_RESTRICT ai,
+                             const int *DUAL_SPIN_RESTRICT piv, double *DUAL_SPIN_RESTRICT br,
+                             double *DUAL_SPIN_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1233,7 +1237,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c, dual_spin_stats *stats)
+int dual_spin_rk4(double t0, double t1, long steps, double *x, const double *c,
+                  dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1617,25 +1622,26 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
 int dual_spin_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, dual_spin_stats *stats)
+                     double h0, long max_steps, dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see dual_spin_ode.h). */
-int dual_spin_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, dual_spin_stats *stats)
+int dual_spin_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                          double rtol, double atol, double h0, long max_steps, double *out,
+                          dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[DUAL_SPIN_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        dual_spin_stats *stats, int *codes)
+                                   const double *c, double rtol, double atol, double h0,
+                                   long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -1644,9 +1650,9 @@ size_t dual_spin_dopri5_grid_batch(size_t n, long ntimes, const double *times, d
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = dual_spin_dopri5_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
-                                                stats ? stats + i : NULL);
+        const int code = dual_spin_dopri5_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2213,25 +2219,26 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
 int dual_spin_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, dual_spin_stats *stats)
+                     double h0, long max_steps, dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see dual_spin_ode.h). */
-int dual_spin_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, dual_spin_stats *stats)
+int dual_spin_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                          double rtol, double atol, double h0, long max_steps, double *out,
+                          dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[DUAL_SPIN_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        dual_spin_stats *stats, int *codes)
+                                   const double *c, double rtol, double atol, double h0,
+                                   long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2240,9 +2247,9 @@ size_t dual_spin_dop853_grid_batch(size_t n, long ntimes, const double *times, d
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = dual_spin_dop853_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
-                                                stats ? stats + i : NULL);
+        const int code = dual_spin_dop853_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2761,25 +2768,26 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
 int dual_spin_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, dual_spin_stats *stats)
+                     double h0, long max_steps, dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see dual_spin_ode.h). */
-int dual_spin_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, dual_spin_stats *stats)
+int dual_spin_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                          double rtol, double atol, double h0, long max_steps, double *out,
+                          dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[DUAL_SPIN_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        dual_spin_stats *stats, int *codes)
+                                   const double *c, double rtol, double atol, double h0,
+                                   long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2788,9 +2796,9 @@ size_t dual_spin_rodas4_grid_batch(size_t n, long ntimes, const double *times, d
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = dual_spin_rodas4_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
-                                                stats ? stats + i : NULL);
+        const int code = dual_spin_rodas4_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3655,25 +3663,26 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
 int dual_spin_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, dual_spin_stats *stats)
+                     double h0, long max_steps, dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see dual_spin_ode.h). */
-int dual_spin_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, dual_spin_stats *stats)
+int dual_spin_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                          double rtol, double atol, double h0, long max_steps, double *out,
+                          dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[DUAL_SPIN_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        dual_spin_stats *stats, int *codes)
+                                   const double *c, double rtol, double atol, double h0,
+                                   long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3682,9 +3691,9 @@ size_t dual_spin_radau5_grid_batch(size_t n, long ntimes, const double *times, d
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = dual_spin_radau5_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
-                                                stats ? stats + i : NULL);
+        const int code = dual_spin_radau5_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4613,25 +4622,26 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
 int dual_spin_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, dual_spin_stats *stats)
+                     double h0, long max_steps, dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see dual_spin_ode.h). */
-int dual_spin_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, dual_spin_stats *stats)
+int dual_spin_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                          double rtol, double atol, double h0, long max_steps, double *out,
+                          dual_spin_stats *stats)
 {
     dual_spin_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[DUAL_SPIN_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        dual_spin_stats *stats, int *codes)
+                                   const double *c, double rtol, double atol, double h0,
+                                   long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4640,9 +4650,9 @@ size_t dual_spin_taylor_grid_batch(size_t n, long ntimes, const double *times, d
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = dual_spin_taylor_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
-                                                stats ? stats + i : NULL);
+        const int code = dual_spin_taylor_grid(ntimes, times, x + (size_t)i * DUAL_SPIN_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * DUAL_SPIN_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5801,10 +5811,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        dual_spin_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                           const double *c, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5813,7 +5822,7 @@ size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = dual_spin_rk4(t0, t1, steps, x + (size_t)i * DUAL_SPIN_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5825,7 +5834,8 @@ size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x
 /* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
+                              double rtol, double atol, double h0, long max_steps,
+                              dual_spin_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, DUAL_SPIN_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -5834,16 +5844,17 @@ size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const d
 /* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t dual_spin_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
+                              double rtol, double atol, double h0, long max_steps,
+                              dual_spin_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, DUAL_SPIN_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
+                              double rtol, double atol, double h0, long max_steps,
+                              dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5851,8 +5862,8 @@ size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const d
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = dual_spin_rodas4(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = dual_spin_rodas4(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol,
+                h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5861,10 +5872,10 @@ size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const d
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
+                              double rtol, double atol, double h0, long max_steps,
+                              dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5872,8 +5883,8 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = dual_spin_radau5(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = dual_spin_radau5(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol,
+                h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5885,7 +5896,8 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
 /* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t dual_spin_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, dual_spin_stats *stats, int *codes)
+                              double rtol, double atol, double h0, long max_steps,
+                              dual_spin_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, DUAL_SPIN_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

@@ -1235,9 +1235,9 @@ contains
   function dual_spin_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -1662,9 +1662,9 @@ contains
   function dual_spin_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -1677,15 +1677,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see dual_spin_ode.h).
-  function dual_spin_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function dual_spin_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="dual_spin_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
@@ -1698,16 +1697,15 @@ contains
   end function dual_spin_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_dopri5_grid_batch")
+  function dual_spin_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="dual_spin_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -1724,11 +1722,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = dual_spin_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = dual_spin_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = dual_spin_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
@@ -2349,9 +2347,9 @@ contains
   function dual_spin_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -2364,15 +2362,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see dual_spin_ode.h).
-  function dual_spin_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function dual_spin_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="dual_spin_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
@@ -2385,16 +2382,15 @@ contains
   end function dual_spin_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_dop853_grid_batch")
+  function dual_spin_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="dual_spin_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2411,11 +2407,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = dual_spin_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = dual_spin_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = dual_spin_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
@@ -2996,9 +2992,9 @@ contains
   function dual_spin_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -3011,15 +3007,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see dual_spin_ode.h).
-  function dual_spin_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function dual_spin_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="dual_spin_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
@@ -3032,16 +3027,15 @@ contains
   end function dual_spin_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_rodas4_grid_batch")
+  function dual_spin_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="dual_spin_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3058,11 +3052,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = dual_spin_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = dual_spin_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = dual_spin_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
@@ -4008,9 +4002,9 @@ contains
   function dual_spin_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -4023,15 +4017,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see dual_spin_ode.h).
-  function dual_spin_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function dual_spin_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="dual_spin_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
@@ -4044,16 +4037,15 @@ contains
   end function dual_spin_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_radau5_grid_batch")
+  function dual_spin_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="dual_spin_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4070,11 +4062,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = dual_spin_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = dual_spin_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = dual_spin_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
@@ -5038,9 +5030,9 @@ contains
   function dual_spin_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="dual_spin_f_taylor")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
     type(dual_spin_stats), pointer :: stats
@@ -5053,15 +5045,14 @@ contains
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
   ! Over an output grid (see dual_spin_ode.h).
-  function dual_spin_taylor_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function dual_spin_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="dual_spin_f_taylor_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a dual_spin_stats, or NULL
     integer(c_int) :: code
@@ -5074,16 +5065,15 @@ contains
   end function dual_spin_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_taylor_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_taylor_grid_batch")
+  function dual_spin_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="dual_spin_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -5100,11 +5090,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = dual_spin_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = dual_spin_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = dual_spin_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= DUAL_SPIN_ODE_OK) failed = failed + 1
@@ -5113,13 +5103,13 @@ contains
   end function dual_spin_taylor_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_rk4_batch")
+  function dual_spin_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="dual_spin_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(dual_spin_stats), pointer :: stats_out(:)
@@ -5135,8 +5125,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = dual_spin_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = dual_spin_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -5147,13 +5136,14 @@ contains
   end function dual_spin_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_dopri5_batch")
+  function dual_spin_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="dual_spin_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(dual_spin_stats), pointer :: stats_out(:)
@@ -5169,8 +5159,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = dual_spin_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = dual_spin_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5181,13 +5170,14 @@ contains
   end function dual_spin_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_dop853_batch")
+  function dual_spin_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="dual_spin_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(dual_spin_stats), pointer :: stats_out(:)
@@ -5203,8 +5193,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = dual_spin_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = dual_spin_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5215,13 +5204,14 @@ contains
   end function dual_spin_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_rodas4_batch")
+  function dual_spin_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="dual_spin_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(dual_spin_stats), pointer :: stats_out(:)
@@ -5237,8 +5227,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = dual_spin_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = dual_spin_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5249,13 +5238,14 @@ contains
   end function dual_spin_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_radau5_batch")
+  function dual_spin_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="dual_spin_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(dual_spin_stats), pointer :: stats_out(:)
@@ -5271,8 +5261,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = dual_spin_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = dual_spin_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5283,13 +5272,14 @@ contains
   end function dual_spin_radau5_batch
 
   ! stats, codes: NULL when not wanted.
-  function dual_spin_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="dual_spin_f_taylor_batch")
+  function dual_spin_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="dual_spin_f_taylor_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(dual_spin_stats), pointer :: stats_out(:)
@@ -5305,8 +5295,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = dual_spin_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = dual_spin_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = dual_spin_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

@@ -933,7 +933,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *GYROSTAT_RESTRICT lu, const int *GYROSTAT_RESTRICT piv,
+                     double *GYROSTAT_RESTRICT b)
 {
     double swap;
 
@@ -973,7 +974,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_RESTRICT ai,
+                                int *GYROSTAT_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1437,8 +1439,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *GYROSTAT_RESTRICT ar,
+                             const double *GYROSTAT_RESTRICT ai,
+                             const int *GYROSTAT_RESTRICT piv, double *GYROSTAT_RESTRICT br,
+                             double *GYROSTAT_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1598,7 +1602,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c, gyrostat_stats *stats)
+int gyrostat_rk4(double t0, double t1, long steps, double *x, const double *c,
+                 gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1982,25 +1987,26 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
 int gyrostat_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, gyrostat_stats *stats)
+                    double h0, long max_steps, gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see gyrostat_ode.h). */
-int gyrostat_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, gyrostat_stats *stats)
+int gyrostat_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps, double *out,
+                         gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[GYROSTAT_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        gyrostat_stats *stats, int *codes)
+                                  const double *c, double rtol, double atol, double h0,
+                                  long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2009,9 +2015,9 @@ size_t gyrostat_dopri5_grid_batch(size_t n, long ntimes, const double *times, do
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = gyrostat_dopri5_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * GYROSTAT_NX,
-                                                stats ? stats + i : NULL);
+        const int code = gyrostat_dopri5_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * GYROSTAT_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2578,25 +2584,26 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
 int gyrostat_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, gyrostat_stats *stats)
+                    double h0, long max_steps, gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see gyrostat_ode.h). */
-int gyrostat_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, gyrostat_stats *stats)
+int gyrostat_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps, double *out,
+                         gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[GYROSTAT_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        gyrostat_stats *stats, int *codes)
+                                  const double *c, double rtol, double atol, double h0,
+                                  long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2605,9 +2612,9 @@ size_t gyrostat_dop853_grid_batch(size_t n, long ntimes, const double *times, do
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = gyrostat_dop853_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * GYROSTAT_NX,
-                                                stats ? stats + i : NULL);
+        const int code = gyrostat_dop853_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * GYROSTAT_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3126,25 +3133,26 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
 int gyrostat_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, gyrostat_stats *stats)
+                    double h0, long max_steps, gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see gyrostat_ode.h). */
-int gyrostat_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, gyrostat_stats *stats)
+int gyrostat_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps, double *out,
+                         gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[GYROSTAT_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        gyrostat_stats *stats, int *codes)
+                                  const double *c, double rtol, double atol, double h0,
+                                  long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3153,9 +3161,9 @@ size_t gyrostat_rodas4_grid_batch(size_t n, long ntimes, const double *times, do
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = gyrostat_rodas4_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * GYROSTAT_NX,
-                                                stats ? stats + i : NULL);
+        const int code = gyrostat_rodas4_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * GYROSTAT_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4020,25 +4028,26 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
 int gyrostat_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, gyrostat_stats *stats)
+                    double h0, long max_steps, gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see gyrostat_ode.h). */
-int gyrostat_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, gyrostat_stats *stats)
+int gyrostat_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps, double *out,
+                         gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[GYROSTAT_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        gyrostat_stats *stats, int *codes)
+                                  const double *c, double rtol, double atol, double h0,
+                                  long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4047,9 +4056,9 @@ size_t gyrostat_radau5_grid_batch(size_t n, long ntimes, const double *times, do
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = gyrostat_radau5_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * GYROSTAT_NX,
-                                                stats ? stats + i : NULL);
+        const int code = gyrostat_radau5_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * GYROSTAT_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5105,25 +5114,26 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
 int gyrostat_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, gyrostat_stats *stats)
+                    double h0, long max_steps, gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see gyrostat_ode.h). */
-int gyrostat_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, gyrostat_stats *stats)
+int gyrostat_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps, double *out,
+                         gyrostat_stats *stats)
 {
     gyrostat_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[GYROSTAT_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        gyrostat_stats *stats, int *codes)
+                                  const double *c, double rtol, double atol, double h0,
+                                  long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5132,9 +5142,9 @@ size_t gyrostat_taylor_grid_batch(size_t n, long ntimes, const double *times, do
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = gyrostat_taylor_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * GYROSTAT_NX,
-                                                stats ? stats + i : NULL);
+        const int code = gyrostat_taylor_grid(ntimes, times, x + (size_t)i * GYROSTAT_NX, c,
+                rtol, atol, h0, max_steps, out + (size_t)i * rows * GYROSTAT_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6381,10 +6391,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        gyrostat_stats *stats, int *codes)
+                          gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6393,7 +6402,7 @@ size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = gyrostat_rk4(t0, t1, steps, x + (size_t)i * GYROSTAT_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6405,7 +6414,8 @@ size_t gyrostat_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
 /* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
+                             double rtol, double atol, double h0, long max_steps,
+                             gyrostat_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, GYROSTAT_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -6414,16 +6424,17 @@ size_t gyrostat_dopri5_batch(size_t n, double t0, double t1, double *x, const do
 /* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
+                             double rtol, double atol, double h0, long max_steps,
+                             gyrostat_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, GYROSTAT_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
+                             double rtol, double atol, double h0, long max_steps,
+                             gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6431,8 +6442,8 @@ size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x, const do
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = gyrostat_rodas4(t0, t1, x + (size_t)i * GYROSTAT_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = gyrostat_rodas4(t0, t1, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
+                max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6441,10 +6452,10 @@ size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x, const do
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
+                             double rtol, double atol, double h0, long max_steps,
+                             gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6452,8 +6463,8 @@ size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const do
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = gyrostat_radau5(t0, t1, x + (size_t)i * GYROSTAT_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = gyrostat_radau5(t0, t1, x + (size_t)i * GYROSTAT_NX, c, rtol, atol, h0,
+                max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6465,7 +6476,8 @@ size_t gyrostat_radau5_batch(size_t n, double t0, double t1, double *x, const do
 /* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t gyrostat_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, gyrostat_stats *stats, int *codes)
+                             double rtol, double atol, double h0, long max_steps,
+                             gyrostat_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, GYROSTAT_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

@@ -1613,9 +1613,9 @@ contains
   function gyrostat_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     type(gyrostat_stats), pointer :: stats
@@ -2040,9 +2040,9 @@ contains
   function gyrostat_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     type(gyrostat_stats), pointer :: stats
@@ -2055,15 +2055,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see gyrostat_ode.h).
-  function gyrostat_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function gyrostat_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
@@ -2076,16 +2075,15 @@ contains
   end function gyrostat_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_dopri5_grid_batch")
+  function gyrostat_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="gyrostat_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2102,11 +2100,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = gyrostat_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -2727,9 +2725,9 @@ contains
   function gyrostat_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     type(gyrostat_stats), pointer :: stats
@@ -2742,15 +2740,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see gyrostat_ode.h).
-  function gyrostat_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function gyrostat_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="gyrostat_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
@@ -2763,16 +2760,15 @@ contains
   end function gyrostat_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_dop853_grid_batch")
+  function gyrostat_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="gyrostat_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2789,11 +2785,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = gyrostat_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -3374,9 +3370,9 @@ contains
   function gyrostat_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     type(gyrostat_stats), pointer :: stats
@@ -3389,15 +3385,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see gyrostat_ode.h).
-  function gyrostat_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function gyrostat_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="gyrostat_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
@@ -3410,16 +3405,15 @@ contains
   end function gyrostat_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_rodas4_grid_batch")
+  function gyrostat_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="gyrostat_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3436,11 +3430,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = gyrostat_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -4386,9 +4380,9 @@ contains
   function gyrostat_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     type(gyrostat_stats), pointer :: stats
@@ -4401,15 +4395,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see gyrostat_ode.h).
-  function gyrostat_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function gyrostat_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="gyrostat_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
@@ -4422,16 +4415,15 @@ contains
   end function gyrostat_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_radau5_grid_batch")
+  function gyrostat_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="gyrostat_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4448,11 +4440,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = gyrostat_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -5542,9 +5534,9 @@ contains
   function gyrostat_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="gyrostat_f_taylor")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
     type(gyrostat_stats), pointer :: stats
@@ -5557,15 +5549,14 @@ contains
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
   ! Over an output grid (see gyrostat_ode.h).
-  function gyrostat_taylor_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function gyrostat_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="gyrostat_f_taylor_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a gyrostat_stats, or NULL
     integer(c_int) :: code
@@ -5578,16 +5569,15 @@ contains
   end function gyrostat_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_taylor_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_taylor_grid_batch")
+  function gyrostat_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="gyrostat_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -5604,11 +5594,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_loc(stats_out(i)))
       else
-        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = gyrostat_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, &
+            :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= GYROSTAT_ODE_OK) failed = failed + 1
@@ -5617,13 +5607,13 @@ contains
   end function gyrostat_taylor_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_rk4_batch")
+  function gyrostat_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="gyrostat_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
@@ -5639,8 +5629,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = gyrostat_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -5651,13 +5640,14 @@ contains
   end function gyrostat_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_dopri5_batch")
+  function gyrostat_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="gyrostat_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
@@ -5673,8 +5663,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = gyrostat_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5685,13 +5674,14 @@ contains
   end function gyrostat_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_dop853_batch")
+  function gyrostat_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="gyrostat_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
@@ -5707,8 +5697,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = gyrostat_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5719,13 +5708,14 @@ contains
   end function gyrostat_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_rodas4_batch")
+  function gyrostat_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="gyrostat_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
@@ -5741,8 +5731,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = gyrostat_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5753,13 +5742,14 @@ contains
   end function gyrostat_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_radau5_batch")
+  function gyrostat_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="gyrostat_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
@@ -5775,8 +5765,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = gyrostat_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5787,13 +5776,14 @@ contains
   end function gyrostat_radau5_batch
 
   ! stats, codes: NULL when not wanted.
-  function gyrostat_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="gyrostat_f_taylor_batch")
+  function gyrostat_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="gyrostat_f_taylor_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(gyrostat_stats), pointer :: stats_out(:)
@@ -5809,8 +5799,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = gyrostat_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = gyrostat_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = gyrostat_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

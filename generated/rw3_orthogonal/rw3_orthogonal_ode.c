@@ -880,7 +880,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *RW3_ORTHOGONAL_RESTRICT lu,
+                     const int *RW3_ORTHOGONAL_RESTRICT piv, double *RW3_ORTHOGONAL_RESTRICT b)
 {
     double swap;
 
@@ -934,7 +935,9 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
+                                double *RW3_ORTHOGONAL_RESTRICT ai,
+                                int *RW3_ORTHOGONAL_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1433,8 +1436,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *RW3_ORTHOGONAL_RESTRICT ar,
+                             const double *RW3_ORTHOGONAL_RESTRICT ai,
+                             const int *RW3_ORTHOGONAL_RESTRICT piv,
+                             double *RW3_ORTHOGONAL_RESTRICT br, double *RW3_ORTHOGONAL_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1621,7 +1626,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int rw3_orthogonal_rk4(double t0, double t1, long steps, double *x, const double *c, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_rk4(double t0, double t1, long steps, double *x, const double *c,
+                       rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -2006,26 +2012,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int rw3_orthogonal_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2034,9 +2042,9 @@ size_t rw3_orthogonal_dopri5_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_dopri5_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_dopri5_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2604,26 +2612,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int rw3_orthogonal_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2632,9 +2642,9 @@ size_t rw3_orthogonal_dop853_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_dop853_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_dop853_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3154,26 +3164,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int rw3_orthogonal_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3182,9 +3194,9 @@ size_t rw3_orthogonal_rodas4_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_rodas4_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_rodas4_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4050,26 +4062,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4078,9 +4092,9 @@ size_t rw3_orthogonal_radau5_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_radau5_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_radau5_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5290,26 +5304,28 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
-int rw3_orthogonal_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_taylor(double t0, double t1, double *x, const double *c, double rtol,
+                          double atol, double h0, long max_steps, rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see rw3_orthogonal_ode.h). */
-int rw3_orthogonal_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw3_orthogonal_stats *stats)
+int rw3_orthogonal_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               rw3_orthogonal_stats *stats)
 {
     rw3_orthogonal_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW3_ORTHOGONAL_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw3_orthogonal_stats *stats, int *codes)
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, rw3_orthogonal_stats *stats,
+                                        int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5318,9 +5334,9 @@ size_t rw3_orthogonal_taylor_grid_batch(size_t n, long ntimes, const double *tim
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw3_orthogonal_taylor_grid(ntimes, times, x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW3_ORTHOGONAL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw3_orthogonal_taylor_grid(ntimes, times,
+                x + (size_t)i * RW3_ORTHOGONAL_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * RW3_ORTHOGONAL_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6629,10 +6645,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        rw3_orthogonal_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                                const double *c, rw3_orthogonal_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6641,7 +6656,7 @@ size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, doub
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw3_orthogonal_rk4(t0, t1, steps, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6653,7 +6668,8 @@ size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, doub
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -6662,16 +6678,17 @@ size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, co
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6680,7 +6697,7 @@ size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x, co
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw3_orthogonal_rodas4(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6689,10 +6706,10 @@ size_t rw3_orthogonal_rodas4_batch(size_t n, double t0, double t1, double *x, co
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6701,7 +6718,7 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw3_orthogonal_radau5(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6713,7 +6730,8 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
 /* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw3_orthogonal_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw3_orthogonal_stats *stats, int *codes)
+                                   double rtol, double atol, double h0, long max_steps,
+                                   rw3_orthogonal_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

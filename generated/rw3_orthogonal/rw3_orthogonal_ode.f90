@@ -1638,9 +1638,9 @@ contains
   function rw3_orthogonal_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
     type(rw3_orthogonal_stats), pointer :: stats
@@ -2067,9 +2067,9 @@ contains
   function rw3_orthogonal_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
     type(rw3_orthogonal_stats), pointer :: stats
@@ -2082,15 +2082,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see rw3_orthogonal_ode.h).
-  function rw3_orthogonal_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw3_orthogonal_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
@@ -2103,16 +2102,15 @@ contains
   end function rw3_orthogonal_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_dopri5_grid_batch")
+  function rw3_orthogonal_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, stats, codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2130,10 +2128,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW3_ORTHOGONAL_ODE_OK) failed = failed + 1
@@ -2756,9 +2754,9 @@ contains
   function rw3_orthogonal_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
     type(rw3_orthogonal_stats), pointer :: stats
@@ -2771,15 +2769,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see rw3_orthogonal_ode.h).
-  function rw3_orthogonal_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw3_orthogonal_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
@@ -2792,16 +2789,15 @@ contains
   end function rw3_orthogonal_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_dop853_grid_batch")
+  function rw3_orthogonal_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, stats, codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2819,10 +2815,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW3_ORTHOGONAL_ODE_OK) failed = failed + 1
@@ -3405,9 +3401,9 @@ contains
   function rw3_orthogonal_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
     type(rw3_orthogonal_stats), pointer :: stats
@@ -3420,15 +3416,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see rw3_orthogonal_ode.h).
-  function rw3_orthogonal_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw3_orthogonal_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
@@ -3441,16 +3436,15 @@ contains
   end function rw3_orthogonal_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_rodas4_grid_batch")
+  function rw3_orthogonal_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, stats, codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3468,10 +3462,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW3_ORTHOGONAL_ODE_OK) failed = failed + 1
@@ -4419,9 +4413,9 @@ contains
   function rw3_orthogonal_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
     type(rw3_orthogonal_stats), pointer :: stats
@@ -4434,15 +4428,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see rw3_orthogonal_ode.h).
-  function rw3_orthogonal_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw3_orthogonal_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
@@ -4455,16 +4448,15 @@ contains
   end function rw3_orthogonal_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_radau5_grid_batch")
+  function rw3_orthogonal_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, stats, codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4482,10 +4474,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW3_ORTHOGONAL_ODE_OK) failed = failed + 1
@@ -5730,9 +5722,9 @@ contains
   function rw3_orthogonal_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_taylor")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
     type(rw3_orthogonal_stats), pointer :: stats
@@ -5745,15 +5737,14 @@ contains
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
   ! Over an output grid (see rw3_orthogonal_ode.h).
-  function rw3_orthogonal_taylor_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw3_orthogonal_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw3_orthogonal_f_taylor_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw3_orthogonal_stats, or NULL
     integer(c_int) :: code
@@ -5766,16 +5757,15 @@ contains
   end function rw3_orthogonal_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_taylor_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_taylor_grid_batch")
+  function rw3_orthogonal_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, stats, codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -5793,10 +5783,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW3_ORTHOGONAL_ODE_OK) failed = failed + 1
@@ -5805,13 +5795,13 @@ contains
   end function rw3_orthogonal_taylor_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_rk4_batch")
+  function rw3_orthogonal_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw3_orthogonal_stats), pointer :: stats_out(:)
@@ -5827,8 +5817,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw3_orthogonal_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = rw3_orthogonal_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -5839,13 +5828,14 @@ contains
   end function rw3_orthogonal_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_dopri5_batch")
+  function rw3_orthogonal_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw3_orthogonal_stats), pointer :: stats_out(:)
@@ -5862,7 +5852,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5873,13 +5863,14 @@ contains
   end function rw3_orthogonal_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_dop853_batch")
+  function rw3_orthogonal_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw3_orthogonal_stats), pointer :: stats_out(:)
@@ -5896,7 +5887,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5907,13 +5898,14 @@ contains
   end function rw3_orthogonal_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_rodas4_batch")
+  function rw3_orthogonal_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw3_orthogonal_stats), pointer :: stats_out(:)
@@ -5930,7 +5922,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5941,13 +5933,14 @@ contains
   end function rw3_orthogonal_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_radau5_batch")
+  function rw3_orthogonal_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw3_orthogonal_stats), pointer :: stats_out(:)
@@ -5964,7 +5957,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5975,13 +5968,14 @@ contains
   end function rw3_orthogonal_radau5_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw3_orthogonal_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw3_orthogonal_f_taylor_batch")
+  function rw3_orthogonal_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw3_orthogonal_f_taylor_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw3_orthogonal_stats), pointer :: stats_out(:)
@@ -5998,7 +5992,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw3_orthogonal_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw3_orthogonal_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

@@ -1866,9 +1866,9 @@ contains
   function rw4_hardware_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
     type(rw4_hardware_stats), pointer :: stats
@@ -2293,9 +2293,9 @@ contains
   function rw4_hardware_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
     type(rw4_hardware_stats), pointer :: stats
@@ -2308,15 +2308,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_hardware_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
@@ -2329,16 +2328,15 @@ contains
   end function rw4_hardware_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_dopri5_grid_batch")
+  function rw4_hardware_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_hardware_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2356,10 +2354,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_hardware_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -2980,9 +2978,9 @@ contains
   function rw4_hardware_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
     type(rw4_hardware_stats), pointer :: stats
@@ -2995,15 +2993,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_hardware_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
@@ -3016,16 +3013,15 @@ contains
   end function rw4_hardware_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_dop853_grid_batch")
+  function rw4_hardware_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_hardware_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3043,10 +3039,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_hardware_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -3627,9 +3623,9 @@ contains
   function rw4_hardware_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
     type(rw4_hardware_stats), pointer :: stats
@@ -3642,15 +3638,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_hardware_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
@@ -3663,16 +3658,15 @@ contains
   end function rw4_hardware_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_rodas4_grid_batch")
+  function rw4_hardware_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_hardware_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3690,10 +3684,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_hardware_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -4639,9 +4633,9 @@ contains
   function rw4_hardware_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
     type(rw4_hardware_stats), pointer :: stats
@@ -4654,15 +4648,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see rw4_hardware_ode.h).
-  function rw4_hardware_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_hardware_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_hardware_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_hardware_stats, or NULL
     integer(c_int) :: code
@@ -4675,16 +4668,15 @@ contains
   end function rw4_hardware_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_radau5_grid_batch")
+  function rw4_hardware_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_hardware_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4702,10 +4694,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_hardware_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_HARDWARE_ODE_OK) failed = failed + 1
@@ -4714,13 +4706,13 @@ contains
   end function rw4_hardware_radau5_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_rk4_batch")
+  function rw4_hardware_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="rw4_hardware_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_hardware_stats), pointer :: stats_out(:)
@@ -4736,8 +4728,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_hardware_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = rw4_hardware_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = rw4_hardware_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -4748,13 +4739,14 @@ contains
   end function rw4_hardware_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_dopri5_batch")
+  function rw4_hardware_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_hardware_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_hardware_stats), pointer :: stats_out(:)
@@ -4771,7 +4763,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_hardware_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4782,13 +4774,14 @@ contains
   end function rw4_hardware_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_dop853_batch")
+  function rw4_hardware_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_hardware_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_hardware_stats), pointer :: stats_out(:)
@@ -4805,7 +4798,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_hardware_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4816,13 +4809,14 @@ contains
   end function rw4_hardware_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_rodas4_batch")
+  function rw4_hardware_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_hardware_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_hardware_stats), pointer :: stats_out(:)
@@ -4839,7 +4833,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_hardware_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4850,13 +4844,14 @@ contains
   end function rw4_hardware_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_hardware_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_hardware_f_radau5_batch")
+  function rw4_hardware_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_hardware_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_hardware_stats), pointer :: stats_out(:)
@@ -4873,7 +4868,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_hardware_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_hardware_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

@@ -929,7 +929,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *RW4_PYRAMID_RESTRICT lu, const int *RW4_PYRAMID_RESTRICT piv,
+                     double *RW4_PYRAMID_RESTRICT b)
 {
     double swap;
 
@@ -992,7 +993,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *RW4_PYRAMID_RESTRICT ar, double *RW4_PYRAMID_RESTRICT ai,
+                                int *RW4_PYRAMID_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1580,8 +1582,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *RW4_PYRAMID_RESTRICT ar,
+                             const double *RW4_PYRAMID_RESTRICT ai,
+                             const int *RW4_PYRAMID_RESTRICT piv,
+                             double *RW4_PYRAMID_RESTRICT br, double *RW4_PYRAMID_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1789,7 +1793,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int rw4_pyramid_rk4(double t0, double t1, long steps, double *x, const double *c, rw4_pyramid_stats *stats)
+int rw4_pyramid_rk4(double t0, double t1, long steps, double *x, const double *c,
+                    rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -2172,26 +2177,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int rw4_pyramid_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw4_pyramid_stats *stats)
+int rw4_pyramid_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see rw4_pyramid_ode.h). */
-int rw4_pyramid_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw4_pyramid_stats *stats)
+int rw4_pyramid_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW4_PYRAMID_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw4_pyramid_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, rw4_pyramid_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2200,9 +2207,9 @@ size_t rw4_pyramid_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw4_pyramid_dopri5_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw4_pyramid_dopri5_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2768,26 +2775,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int rw4_pyramid_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw4_pyramid_stats *stats)
+int rw4_pyramid_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see rw4_pyramid_ode.h). */
-int rw4_pyramid_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw4_pyramid_stats *stats)
+int rw4_pyramid_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW4_PYRAMID_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw4_pyramid_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, rw4_pyramid_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2796,9 +2805,9 @@ size_t rw4_pyramid_dop853_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw4_pyramid_dop853_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw4_pyramid_dop853_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3316,26 +3325,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int rw4_pyramid_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw4_pyramid_stats *stats)
+int rw4_pyramid_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see rw4_pyramid_ode.h). */
-int rw4_pyramid_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw4_pyramid_stats *stats)
+int rw4_pyramid_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW4_PYRAMID_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw4_pyramid_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, rw4_pyramid_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3344,9 +3355,9 @@ size_t rw4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw4_pyramid_rodas4_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw4_pyramid_rodas4_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4210,26 +4221,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int rw4_pyramid_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, rw4_pyramid_stats *stats)
+int rw4_pyramid_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see rw4_pyramid_ode.h). */
-int rw4_pyramid_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, rw4_pyramid_stats *stats)
+int rw4_pyramid_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            rw4_pyramid_stats *stats)
 {
     rw4_pyramid_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[RW4_PYRAMID_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        rw4_pyramid_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, rw4_pyramid_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4238,9 +4251,9 @@ size_t rw4_pyramid_radau5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = rw4_pyramid_radau5_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
-                                                stats ? stats + i : NULL);
+        const int code = rw4_pyramid_radau5_grid(ntimes, times, x + (size_t)i * RW4_PYRAMID_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * RW4_PYRAMID_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4991,10 +5004,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t rw4_pyramid_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        rw4_pyramid_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t rw4_pyramid_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                             const double *c, rw4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5003,7 +5015,7 @@ size_t rw4_pyramid_rk4_batch(size_t n, double t0, double t1, long steps, double 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = rw4_pyramid_rk4(t0, t1, steps, x + (size_t)i * RW4_PYRAMID_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5015,7 +5027,8 @@ size_t rw4_pyramid_rk4_batch(size_t n, double t0, double t1, long steps, double 
 /* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw4_pyramid_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw4_pyramid_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                rw4_pyramid_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, RW4_PYRAMID_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -5024,16 +5037,17 @@ size_t rw4_pyramid_dopri5_batch(size_t n, double t0, double t1, double *x, const
 /* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t rw4_pyramid_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw4_pyramid_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                rw4_pyramid_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, RW4_PYRAMID_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw4_pyramid_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                rw4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5041,8 +5055,8 @@ size_t rw4_pyramid_rodas4_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = rw4_pyramid_rodas4(t0, t1, x + (size_t)i * RW4_PYRAMID_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = rw4_pyramid_rodas4(t0, t1, x + (size_t)i * RW4_PYRAMID_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5051,10 +5065,10 @@ size_t rw4_pyramid_rodas4_batch(size_t n, double t0, double t1, double *x, const
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t rw4_pyramid_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, rw4_pyramid_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                rw4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5062,8 +5076,8 @@ size_t rw4_pyramid_radau5_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = rw4_pyramid_radau5(t0, t1, x + (size_t)i * RW4_PYRAMID_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = rw4_pyramid_radau5(t0, t1, x + (size_t)i * RW4_PYRAMID_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

@@ -1841,9 +1841,9 @@ contains
   function rw4_pyramid_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_stats), pointer :: stats
@@ -2268,9 +2268,9 @@ contains
   function rw4_pyramid_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_stats), pointer :: stats
@@ -2283,15 +2283,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -2304,16 +2303,15 @@ contains
   end function rw4_pyramid_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_dopri5_grid_batch")
+  function rw4_pyramid_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2331,10 +2329,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -2955,9 +2953,9 @@ contains
   function rw4_pyramid_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_stats), pointer :: stats
@@ -2970,15 +2968,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -2991,16 +2988,15 @@ contains
   end function rw4_pyramid_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_dop853_grid_batch")
+  function rw4_pyramid_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3018,10 +3014,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -3602,9 +3598,9 @@ contains
   function rw4_pyramid_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_stats), pointer :: stats
@@ -3617,15 +3613,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -3638,16 +3633,15 @@ contains
   end function rw4_pyramid_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_rodas4_grid_batch")
+  function rw4_pyramid_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3665,10 +3659,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -4614,9 +4608,9 @@ contains
   function rw4_pyramid_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_stats), pointer :: stats
@@ -4629,15 +4623,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see rw4_pyramid_ode.h).
-  function rw4_pyramid_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -4650,16 +4643,15 @@ contains
   end function rw4_pyramid_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_radau5_grid_batch")
+  function rw4_pyramid_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4677,10 +4669,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = rw4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_ODE_OK) failed = failed + 1
@@ -4689,13 +4681,13 @@ contains
   end function rw4_pyramid_radau5_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_rk4_batch")
+  function rw4_pyramid_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_stats), pointer :: stats_out(:)
@@ -4711,8 +4703,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = rw4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -4723,13 +4714,14 @@ contains
   end function rw4_pyramid_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_dopri5_batch")
+  function rw4_pyramid_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_stats), pointer :: stats_out(:)
@@ -4746,7 +4738,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4757,13 +4749,14 @@ contains
   end function rw4_pyramid_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_dop853_batch")
+  function rw4_pyramid_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_stats), pointer :: stats_out(:)
@@ -4780,7 +4773,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4791,13 +4784,14 @@ contains
   end function rw4_pyramid_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_rodas4_batch")
+  function rw4_pyramid_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_stats), pointer :: stats_out(:)
@@ -4814,7 +4808,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4825,13 +4819,14 @@ contains
   end function rw4_pyramid_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_f_radau5_batch")
+  function rw4_pyramid_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_stats), pointer :: stats_out(:)
@@ -4848,7 +4843,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

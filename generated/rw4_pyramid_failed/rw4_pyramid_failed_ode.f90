@@ -1831,9 +1831,9 @@ contains
   function rw4_pyramid_failed_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_failed_stats), pointer :: stats
@@ -2259,12 +2259,13 @@ contains
   end function dopri5_grid
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
-  function rw4_pyramid_failed_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+  function rw4_pyramid_failed_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_failed_stats), pointer :: stats
@@ -2277,15 +2278,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see rw4_pyramid_failed_ode.h).
-  function rw4_pyramid_failed_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_failed_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
@@ -2298,16 +2298,15 @@ contains
   end function rw4_pyramid_failed_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_dopri5_grid_batch")
+  function rw4_pyramid_failed_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, &
+      max_steps, out, stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2324,11 +2323,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_failed_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = rw4_pyramid_failed_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_failed_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_failed_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_FAILED_ODE_OK) failed = failed + 1
@@ -2950,12 +2949,13 @@ contains
   end function dop853_grid
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
-  function rw4_pyramid_failed_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+  function rw4_pyramid_failed_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_failed_stats), pointer :: stats
@@ -2968,15 +2968,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see rw4_pyramid_failed_ode.h).
-  function rw4_pyramid_failed_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_failed_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
@@ -2989,16 +2988,15 @@ contains
   end function rw4_pyramid_failed_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_dop853_grid_batch")
+  function rw4_pyramid_failed_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, &
+      max_steps, out, stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3015,11 +3013,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_failed_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = rw4_pyramid_failed_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_failed_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_failed_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_FAILED_ODE_OK) failed = failed + 1
@@ -3599,12 +3597,13 @@ contains
   end function rodas4_grid
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
-  function rw4_pyramid_failed_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+  function rw4_pyramid_failed_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_failed_stats), pointer :: stats
@@ -3617,15 +3616,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see rw4_pyramid_failed_ode.h).
-  function rw4_pyramid_failed_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_failed_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
@@ -3638,16 +3636,15 @@ contains
   end function rw4_pyramid_failed_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_rodas4_grid_batch")
+  function rw4_pyramid_failed_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, &
+      max_steps, out, stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3664,11 +3661,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_failed_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = rw4_pyramid_failed_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_failed_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_failed_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_FAILED_ODE_OK) failed = failed + 1
@@ -4613,12 +4610,13 @@ contains
   end function radau5_grid
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
-  function rw4_pyramid_failed_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
+  function rw4_pyramid_failed_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
     type(rw4_pyramid_failed_stats), pointer :: stats
@@ -4631,15 +4629,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see rw4_pyramid_failed_ode.h).
-  function rw4_pyramid_failed_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function rw4_pyramid_failed_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="rw4_pyramid_failed_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a rw4_pyramid_failed_stats, or NULL
     integer(c_int) :: code
@@ -4652,16 +4649,15 @@ contains
   end function rw4_pyramid_failed_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_radau5_grid_batch")
+  function rw4_pyramid_failed_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, &
+      max_steps, out, stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4678,11 +4674,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_failed_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = rw4_pyramid_failed_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_loc(stats_out(i)))
       else
-        code = rw4_pyramid_failed_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = rw4_pyramid_failed_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, &
+            max_steps, out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= RW4_PYRAMID_FAILED_ODE_OK) failed = failed + 1
@@ -4691,13 +4687,13 @@ contains
   end function rw4_pyramid_failed_radau5_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_rk4_batch")
+  function rw4_pyramid_failed_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_failed_stats), pointer :: stats_out(:)
@@ -4713,8 +4709,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = rw4_pyramid_failed_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = rw4_pyramid_failed_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = rw4_pyramid_failed_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -4725,13 +4720,14 @@ contains
   end function rw4_pyramid_failed_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_dopri5_batch")
+  function rw4_pyramid_failed_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_failed_stats), pointer :: stats_out(:)
@@ -4748,7 +4744,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_failed_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_failed_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4759,13 +4755,14 @@ contains
   end function rw4_pyramid_failed_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_dop853_batch")
+  function rw4_pyramid_failed_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_failed_stats), pointer :: stats_out(:)
@@ -4782,7 +4779,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_failed_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_failed_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4793,13 +4790,14 @@ contains
   end function rw4_pyramid_failed_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_rodas4_batch")
+  function rw4_pyramid_failed_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_failed_stats), pointer :: stats_out(:)
@@ -4816,7 +4814,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_failed_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_failed_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -4827,13 +4825,14 @@ contains
   end function rw4_pyramid_failed_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function rw4_pyramid_failed_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="rw4_pyramid_failed_f_radau5_batch")
+  function rw4_pyramid_failed_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="rw4_pyramid_failed_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(rw4_pyramid_failed_stats), pointer :: stats_out(:)
@@ -4850,7 +4849,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = rw4_pyramid_failed_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = rw4_pyramid_failed_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

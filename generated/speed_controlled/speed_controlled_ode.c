@@ -788,7 +788,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *SPEED_CONTROLLED_RESTRICT lu,
+                     const int *SPEED_CONTROLLED_RESTRICT piv, double *SPEED_CONTROLLED_RESTRICT b)
 {
     double swap;
 
@@ -828,7 +829,9 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *SPEED_CONTROLLED_RESTRICT ar,
+                                double *SPEED_CONTROLLED_RESTRICT ai,
+                                int *SPEED_CONTROLLED_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1199,8 +1202,11 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *SPEED_CONTROLLED_RESTRICT ar,
+                             const double *SPEED_CONTROLLED_RESTRICT ai,
+                             const int *SPEED_CONTROLLED_RESTRICT piv,
+                             double *SPEED_CONTROLLED_RESTRICT br,
+                             double *SPEED_CONTROLLED_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1354,7 +1360,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int speed_controlled_rk4(double t0, double t1, long steps, double *x, const double *c, speed_controlled_stats *stats)
+int speed_controlled_rk4(double t0, double t1, long steps, double *x, const double *c,
+                         speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1739,26 +1746,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int speed_controlled_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, speed_controlled_stats *stats)
+int speed_controlled_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see speed_controlled_ode.h). */
-int speed_controlled_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, speed_controlled_stats *stats)
+int speed_controlled_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                                 double rtol, double atol, double h0, long max_steps,
+                                 double *out, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[SPEED_CONTROLLED_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        speed_controlled_stats *stats, int *codes)
+                                          const double *c, double rtol, double atol, double h0,
+                                          long max_steps, double *out,
+                                          speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -1767,9 +1776,9 @@ size_t speed_controlled_dopri5_grid_batch(size_t n, long ntimes, const double *t
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = speed_controlled_dopri5_grid(ntimes, times, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * SPEED_CONTROLLED_NX,
-                                                stats ? stats + i : NULL);
+        const int code = speed_controlled_dopri5_grid(ntimes, times,
+                x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * SPEED_CONTROLLED_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2337,26 +2346,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int speed_controlled_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, speed_controlled_stats *stats)
+int speed_controlled_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see speed_controlled_ode.h). */
-int speed_controlled_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, speed_controlled_stats *stats)
+int speed_controlled_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                                 double rtol, double atol, double h0, long max_steps,
+                                 double *out, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[SPEED_CONTROLLED_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        speed_controlled_stats *stats, int *codes)
+                                          const double *c, double rtol, double atol, double h0,
+                                          long max_steps, double *out,
+                                          speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2365,9 +2376,9 @@ size_t speed_controlled_dop853_grid_batch(size_t n, long ntimes, const double *t
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = speed_controlled_dop853_grid(ntimes, times, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * SPEED_CONTROLLED_NX,
-                                                stats ? stats + i : NULL);
+        const int code = speed_controlled_dop853_grid(ntimes, times,
+                x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * SPEED_CONTROLLED_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2888,26 +2899,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int speed_controlled_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, speed_controlled_stats *stats)
+int speed_controlled_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see speed_controlled_ode.h). */
-int speed_controlled_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, speed_controlled_stats *stats)
+int speed_controlled_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                                 double rtol, double atol, double h0, long max_steps,
+                                 double *out, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[SPEED_CONTROLLED_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        speed_controlled_stats *stats, int *codes)
+                                          const double *c, double rtol, double atol, double h0,
+                                          long max_steps, double *out,
+                                          speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2916,9 +2929,9 @@ size_t speed_controlled_rodas4_grid_batch(size_t n, long ntimes, const double *t
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = speed_controlled_rodas4_grid(ntimes, times, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * SPEED_CONTROLLED_NX,
-                                                stats ? stats + i : NULL);
+        const int code = speed_controlled_rodas4_grid(ntimes, times,
+                x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * SPEED_CONTROLLED_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3784,26 +3797,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int speed_controlled_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, speed_controlled_stats *stats)
+int speed_controlled_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see speed_controlled_ode.h). */
-int speed_controlled_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, speed_controlled_stats *stats)
+int speed_controlled_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                                 double rtol, double atol, double h0, long max_steps,
+                                 double *out, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[SPEED_CONTROLLED_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        speed_controlled_stats *stats, int *codes)
+                                          const double *c, double rtol, double atol, double h0,
+                                          long max_steps, double *out,
+                                          speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3812,9 +3827,9 @@ size_t speed_controlled_radau5_grid_batch(size_t n, long ntimes, const double *t
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = speed_controlled_radau5_grid(ntimes, times, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * SPEED_CONTROLLED_NX,
-                                                stats ? stats + i : NULL);
+        const int code = speed_controlled_radau5_grid(ntimes, times,
+                x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * SPEED_CONTROLLED_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4872,26 +4887,28 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
-int speed_controlled_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, speed_controlled_stats *stats)
+int speed_controlled_taylor(double t0, double t1, double *x, const double *c, double rtol,
+                            double atol, double h0, long max_steps, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see speed_controlled_ode.h). */
-int speed_controlled_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, speed_controlled_stats *stats)
+int speed_controlled_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                                 double rtol, double atol, double h0, long max_steps,
+                                 double *out, speed_controlled_stats *stats)
 {
     speed_controlled_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[SPEED_CONTROLLED_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        speed_controlled_stats *stats, int *codes)
+                                          const double *c, double rtol, double atol, double h0,
+                                          long max_steps, double *out,
+                                          speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4900,9 +4917,9 @@ size_t speed_controlled_taylor_grid_batch(size_t n, long ntimes, const double *t
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = speed_controlled_taylor_grid(ntimes, times, x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * SPEED_CONTROLLED_NX,
-                                                stats ? stats + i : NULL);
+        const int code = speed_controlled_taylor_grid(ntimes, times,
+                x + (size_t)i * SPEED_CONTROLLED_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * SPEED_CONTROLLED_NX, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6153,10 +6170,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        speed_controlled_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                                  const double *c, speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6164,8 +6180,8 @@ size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, do
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = speed_controlled_rk4(t0, t1, steps, x + (size_t)i * SPEED_CONTROLLED_NX, c,
-                                           stats ? stats + i : NULL);
+        const int code = speed_controlled_rk4(t0, t1, steps, x + (size_t)i * SPEED_CONTROLLED_NX,
+                c, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6177,7 +6193,8 @@ size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, do
 /* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
+                                     double rtol, double atol, double h0, long max_steps,
+                                     speed_controlled_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -6186,16 +6203,17 @@ size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x, 
 /* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
+                                     double rtol, double atol, double h0, long max_steps,
+                                     speed_controlled_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
+                                     double rtol, double atol, double h0, long max_steps,
+                                     speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6204,7 +6222,7 @@ size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x, 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = speed_controlled_rodas4(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6213,10 +6231,10 @@ size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
+                                     double rtol, double atol, double h0, long max_steps,
+                                     speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6225,7 +6243,7 @@ size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = speed_controlled_radau5(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6237,7 +6255,8 @@ size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, 
 /* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t speed_controlled_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, speed_controlled_stats *stats, int *codes)
+                                     double rtol, double atol, double h0, long max_steps,
+                                     speed_controlled_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, SPEED_CONTROLLED_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

@@ -706,7 +706,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *STIFF_WHEEL_RESTRICT lu, const int *STIFF_WHEEL_RESTRICT piv,
+                     double *STIFF_WHEEL_RESTRICT b)
 {
     double swap;
 
@@ -746,7 +747,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_WHEEL_RESTRICT ai,
+                                int *STIFF_WHEEL_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1117,8 +1119,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *STIFF_WHEEL_RESTRICT ar,
+                             const double *STIFF_WHEEL_RESTRICT ai,
+                             const int *STIFF_WHEEL_RESTRICT piv,
+                             double *STIFF_WHEEL_RESTRICT br, double *STIFF_WHEEL_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1272,7 +1276,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c, stiff_wheel_stats *stats)
+int stiff_wheel_rk4(double t0, double t1, long steps, double *x, const double *c,
+                    stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1655,26 +1660,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -1683,9 +1690,9 @@ size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_dopri5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_dopri5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2251,26 +2258,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2279,9 +2288,9 @@ size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_dop853_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_dop853_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2799,26 +2808,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2827,9 +2838,9 @@ size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_rodas4_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_rodas4_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3693,26 +3704,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, stiff_wheel_stats *stats)
+int stiff_wheel_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see stiff_wheel_ode.h). */
-int stiff_wheel_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, stiff_wheel_stats *stats)
+int stiff_wheel_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            stiff_wheel_stats *stats)
 {
     stiff_wheel_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[STIFF_WHEEL_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        stiff_wheel_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, stiff_wheel_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3721,9 +3734,9 @@ size_t stiff_wheel_radau5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = stiff_wheel_radau5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
-                                                stats ? stats + i : NULL);
+        const int code = stiff_wheel_radau5_grid(ntimes, times, x + (size_t)i * STIFF_WHEEL_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * STIFF_WHEEL_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4449,10 +4462,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        stiff_wheel_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                             const double *c, stiff_wheel_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4461,7 +4473,7 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = stiff_wheel_rk4(t0, t1, steps, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4473,7 +4485,8 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
 /* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, STIFF_WHEEL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -4482,16 +4495,17 @@ size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const
 /* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, STIFF_WHEEL_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4499,8 +4513,8 @@ size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_rodas4(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = stiff_wheel_rodas4(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4509,10 +4523,10 @@ size_t stiff_wheel_rodas4_batch(size_t n, double t0, double t1, double *x, const
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t stiff_wheel_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, stiff_wheel_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                stiff_wheel_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4520,8 +4534,8 @@ size_t stiff_wheel_radau5_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = stiff_wheel_radau5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = stiff_wheel_radau5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }

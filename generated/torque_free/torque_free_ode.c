@@ -744,7 +744,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *TORQUE_FREE_RESTRICT lu, const int *TORQUE_FREE_RESTRICT piv,
+                     double *TORQUE_FREE_RESTRICT b)
 {
     double swap;
 
@@ -777,7 +778,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_FREE_RESTRICT ai,
+                                int *TORQUE_FREE_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1095,8 +1097,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *TORQUE_FREE_RESTRICT ar,
+                             const double *TORQUE_FREE_RESTRICT ai,
+                             const int *TORQUE_FREE_RESTRICT piv,
+                             double *TORQUE_FREE_RESTRICT br, double *TORQUE_FREE_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1233,7 +1237,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c, torque_free_stats *stats)
+int torque_free_rk4(double t0, double t1, long steps, double *x, const double *c,
+                    torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1616,26 +1621,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int torque_free_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, torque_free_stats *stats)
+int torque_free_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see torque_free_ode.h). */
-int torque_free_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, torque_free_stats *stats)
+int torque_free_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[TORQUE_FREE_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        torque_free_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, torque_free_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -1644,9 +1651,9 @@ size_t torque_free_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = torque_free_dopri5_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
-                                                stats ? stats + i : NULL);
+        const int code = torque_free_dopri5_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2212,26 +2219,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int torque_free_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, torque_free_stats *stats)
+int torque_free_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see torque_free_ode.h). */
-int torque_free_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, torque_free_stats *stats)
+int torque_free_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[TORQUE_FREE_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        torque_free_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, torque_free_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2240,9 +2249,9 @@ size_t torque_free_dop853_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = torque_free_dop853_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
-                                                stats ? stats + i : NULL);
+        const int code = torque_free_dop853_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2760,26 +2769,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int torque_free_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, torque_free_stats *stats)
+int torque_free_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see torque_free_ode.h). */
-int torque_free_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, torque_free_stats *stats)
+int torque_free_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[TORQUE_FREE_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        torque_free_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, torque_free_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2788,9 +2799,9 @@ size_t torque_free_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = torque_free_rodas4_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
-                                                stats ? stats + i : NULL);
+        const int code = torque_free_rodas4_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3654,26 +3665,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int torque_free_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, torque_free_stats *stats)
+int torque_free_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see torque_free_ode.h). */
-int torque_free_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, torque_free_stats *stats)
+int torque_free_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[TORQUE_FREE_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        torque_free_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, torque_free_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3682,9 +3695,9 @@ size_t torque_free_radau5_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = torque_free_radau5_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
-                                                stats ? stats + i : NULL);
+        const int code = torque_free_radau5_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4457,26 +4470,28 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
-int torque_free_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, torque_free_stats *stats)
+int torque_free_taylor(double t0, double t1, double *x, const double *c, double rtol,
+                       double atol, double h0, long max_steps, torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see torque_free_ode.h). */
-int torque_free_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, torque_free_stats *stats)
+int torque_free_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                            double rtol, double atol, double h0, long max_steps, double *out,
+                            torque_free_stats *stats)
 {
     torque_free_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[TORQUE_FREE_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        torque_free_stats *stats, int *codes)
+                                     const double *c, double rtol, double atol, double h0,
+                                     long max_steps, double *out, torque_free_stats *stats,
+                                     int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4485,9 +4500,9 @@ size_t torque_free_taylor_grid_batch(size_t n, long ntimes, const double *times,
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = torque_free_taylor_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
-                                                stats ? stats + i : NULL);
+        const int code = torque_free_taylor_grid(ntimes, times, x + (size_t)i * TORQUE_FREE_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * TORQUE_FREE_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5597,10 +5612,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        torque_free_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                             const double *c, torque_free_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5609,7 +5623,7 @@ size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double 
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = torque_free_rk4(t0, t1, steps, x + (size_t)i * TORQUE_FREE_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5621,7 +5635,8 @@ size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double 
 /* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                torque_free_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, TORQUE_FREE_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -5630,16 +5645,17 @@ size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const
 /* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                torque_free_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, TORQUE_FREE_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                torque_free_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5647,8 +5663,8 @@ size_t torque_free_rodas4_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = torque_free_rodas4(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = torque_free_rodas4(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5657,10 +5673,10 @@ size_t torque_free_rodas4_batch(size_t n, double t0, double t1, double *x, const
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t torque_free_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                torque_free_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5668,8 +5684,8 @@ size_t torque_free_radau5_batch(size_t n, double t0, double t1, double *x, const
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = torque_free_radau5(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = torque_free_radau5(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5681,7 +5697,8 @@ size_t torque_free_radau5_batch(size_t n, double t0, double t1, double *x, const
 /* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t torque_free_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, torque_free_stats *stats, int *codes)
+                                double rtol, double atol, double h0, long max_steps,
+                                torque_free_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, TORQUE_FREE_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

@@ -766,7 +766,8 @@ static int lu_decompose(double *a, int *piv)
 
 /* b := A^-1 b from lu_decompose's factors, unrolled over the entries of L
    and V that can be nonzero; each row subtracts the latest b_j last. */
-static void lu_solve(const double *lu, const int *piv, double *b)
+static void lu_solve(const double *WHEEL_SPINUP_RESTRICT lu,
+                     const int *WHEEL_SPINUP_RESTRICT piv, double *WHEEL_SPINUP_RESTRICT b)
 {
     double swap;
 
@@ -800,7 +801,8 @@ static void lu_solve(const double *lu, const int *piv, double *b)
 
 /* lu_decompose for the complex matrix ar + i ai, stored the same way: the
    pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC). */
-static int lu_decompose_complex(double *ar, double *ai, int *piv)
+static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
+                                double *WHEEL_SPINUP_RESTRICT ai, int *WHEEL_SPINUP_RESTRICT piv)
 {
     int p;
     double swap;
@@ -1144,8 +1146,10 @@ static int lu_decompose_complex(double *ar, double *ai, int *piv)
 }
 
 /* lu_solve for lu_decompose_complex's factors: b = br + i bi. */
-static void lu_solve_complex(const double *ar, const double *ai, const int *piv, double *br,
-                             double *bi)
+static void lu_solve_complex(const double *WHEEL_SPINUP_RESTRICT ar,
+                             const double *WHEEL_SPINUP_RESTRICT ai,
+                             const int *WHEEL_SPINUP_RESTRICT piv,
+                             double *WHEEL_SPINUP_RESTRICT br, double *WHEEL_SPINUP_RESTRICT bi)
 {
     double swap;
     double re;
@@ -1287,7 +1291,8 @@ static int rk4_integrate(double t0, double t1, long steps, double *x, const doub
 }
 
 /* Classic Runge-Kutta, order 4, fixed step. */
-int wheel_spinup_rk4(double t0, double t1, long steps, double *x, const double *c, wheel_spinup_stats *stats)
+int wheel_spinup_rk4(double t0, double t1, long steps, double *x, const double *c,
+                     wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return rk4_integrate(t0, t1, steps, x, c, stats ? stats : &own);
@@ -1670,26 +1675,28 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
-int wheel_spinup_dopri5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
+int wheel_spinup_dopri5(double t0, double t1, double *x, const double *c, double rtol,
+                        double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return dopri5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid (see wheel_spinup_ode.h). */
-int wheel_spinup_dopri5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, wheel_spinup_stats *stats)
+int wheel_spinup_dopri5_grid(long ntimes, const double *times, double *x, const double *c,
+                             double rtol, double atol, double h0, long max_steps, double *out,
+                             wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[WHEEL_SPINUP_NX])out,
-                            stats ? stats : &own);
+    return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        wheel_spinup_stats *stats, int *codes)
+                                      const double *c, double rtol, double atol, double h0,
+                                      long max_steps, double *out, wheel_spinup_stats *stats,
+                                      int *codes)
 {
     size_t failed = 0;
     long i;
@@ -1698,9 +1705,9 @@ size_t wheel_spinup_dopri5_grid_batch(size_t n, long ntimes, const double *times
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = wheel_spinup_dopri5_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
-                                                stats ? stats + i : NULL);
+        const int code = wheel_spinup_dopri5_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2266,26 +2273,28 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
-int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
+int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double rtol,
+                        double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return dop853_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid (see wheel_spinup_ode.h). */
-int wheel_spinup_dop853_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, wheel_spinup_stats *stats)
+int wheel_spinup_dop853_grid(long ntimes, const double *times, double *x, const double *c,
+                             double rtol, double atol, double h0, long max_steps, double *out,
+                             wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[WHEEL_SPINUP_NX])out,
-                            stats ? stats : &own);
+    return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        wheel_spinup_stats *stats, int *codes)
+                                      const double *c, double rtol, double atol, double h0,
+                                      long max_steps, double *out, wheel_spinup_stats *stats,
+                                      int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2294,9 +2303,9 @@ size_t wheel_spinup_dop853_grid_batch(size_t n, long ntimes, const double *times
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = wheel_spinup_dop853_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
-                                                stats ? stats + i : NULL);
+        const int code = wheel_spinup_dop853_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -2814,26 +2823,28 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
-int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
+int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol,
+                        double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return rodas4_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid (see wheel_spinup_ode.h). */
-int wheel_spinup_rodas4_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, wheel_spinup_stats *stats)
+int wheel_spinup_rodas4_grid(long ntimes, const double *times, double *x, const double *c,
+                             double rtol, double atol, double h0, long max_steps, double *out,
+                             wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[WHEEL_SPINUP_NX])out,
-                            stats ? stats : &own);
+    return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        wheel_spinup_stats *stats, int *codes)
+                                      const double *c, double rtol, double atol, double h0,
+                                      long max_steps, double *out, wheel_spinup_stats *stats,
+                                      int *codes)
 {
     size_t failed = 0;
     long i;
@@ -2842,9 +2853,9 @@ size_t wheel_spinup_rodas4_grid_batch(size_t n, long ntimes, const double *times
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = wheel_spinup_rodas4_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
-                                                stats ? stats + i : NULL);
+        const int code = wheel_spinup_rodas4_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -3708,26 +3719,28 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
-int wheel_spinup_radau5(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
+int wheel_spinup_radau5(double t0, double t1, double *x, const double *c, double rtol,
+                        double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return radau5_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid (see wheel_spinup_ode.h). */
-int wheel_spinup_radau5_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, wheel_spinup_stats *stats)
+int wheel_spinup_radau5_grid(long ntimes, const double *times, double *x, const double *c,
+                             double rtol, double atol, double h0, long max_steps, double *out,
+                             wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[WHEEL_SPINUP_NX])out,
-                            stats ? stats : &own);
+    return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        wheel_spinup_stats *stats, int *codes)
+                                      const double *c, double rtol, double atol, double h0,
+                                      long max_steps, double *out, wheel_spinup_stats *stats,
+                                      int *codes)
 {
     size_t failed = 0;
     long i;
@@ -3736,9 +3749,9 @@ size_t wheel_spinup_radau5_grid_batch(size_t n, long ntimes, const double *times
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = wheel_spinup_radau5_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
-                                                stats ? stats + i : NULL);
+        const int code = wheel_spinup_radau5_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -4719,26 +4732,28 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
-int wheel_spinup_taylor(double t0, double t1, double *x, const double *c, double rtol, double atol,
-        double h0, long max_steps, wheel_spinup_stats *stats)
+int wheel_spinup_taylor(double t0, double t1, double *x, const double *c, double rtol,
+                        double atol, double h0, long max_steps, wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return taylor_integrate(t0, t1, x, c, rtol, atol, h0, max_steps, stats ? stats : &own);
 }
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid (see wheel_spinup_ode.h). */
-int wheel_spinup_taylor_grid(long ntimes, const double *times, double *x, const double *c, double rtol,
-        double atol, double h0, long max_steps, double *out, wheel_spinup_stats *stats)
+int wheel_spinup_taylor_grid(long ntimes, const double *times, double *x, const double *c,
+                             double rtol, double atol, double h0, long max_steps, double *out,
+                             wheel_spinup_stats *stats)
 {
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
-    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, (double (*)[WHEEL_SPINUP_NX])out,
-                            stats ? stats : &own);
+    return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
-        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
-        wheel_spinup_stats *stats, int *codes)
+                                      const double *c, double rtol, double atol, double h0,
+                                      long max_steps, double *out, wheel_spinup_stats *stats,
+                                      int *codes)
 {
     size_t failed = 0;
     long i;
@@ -4747,9 +4762,9 @@ size_t wheel_spinup_taylor_grid_batch(size_t n, long ntimes, const double *times
 #endif
     for (i = 0; i < (long)n; ++i) {
         const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
-        const int code = wheel_spinup_taylor_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0,
-                                                max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
-                                                stats ? stats + i : NULL);
+        const int code = wheel_spinup_taylor_grid(ntimes, times, x + (size_t)i * WHEEL_SPINUP_NX,
+                c, rtol, atol, h0, max_steps, out + (size_t)i * rows * WHEEL_SPINUP_NX,
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5950,10 +5965,9 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
-size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double *x, const double *c,
-        wheel_spinup_stats *stats, int *codes)
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
+size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double *x,
+                              const double *c, wheel_spinup_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -5962,7 +5976,7 @@ size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double
 #endif
     for (i = 0; i < (long)n; ++i) {
         const int code = wheel_spinup_rk4(t0, t1, steps, x + (size_t)i * WHEEL_SPINUP_NX, c,
-                                           stats ? stats + i : NULL);
+                stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -5974,7 +5988,8 @@ size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+                                 double rtol, double atol, double h0, long max_steps,
+                                 wheel_spinup_stats *stats, int *codes)
 {
     return pair_batch(dopri5_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
@@ -5983,16 +5998,17 @@ size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, cons
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+                                 double rtol, double atol, double h0, long max_steps,
+                                 wheel_spinup_stats *stats, int *codes)
 {
     return pair_batch(dop853_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+                                 double rtol, double atol, double h0, long max_steps,
+                                 wheel_spinup_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6000,8 +6016,8 @@ size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x, cons
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = wheel_spinup_rodas4(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = wheel_spinup_rodas4(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6010,10 +6026,10 @@ size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x, cons
     return failed;
 }
 
-/* NULL stats or codes: not wanted.
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. Every core under OpenMP. */
 size_t wheel_spinup_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+                                 double rtol, double atol, double h0, long max_steps,
+                                 wheel_spinup_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
@@ -6021,8 +6037,8 @@ size_t wheel_spinup_radau5_batch(size_t n, double t0, double t1, double *x, cons
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
     for (i = 0; i < (long)n; ++i) {
-        const int code = wheel_spinup_radau5(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c,
-                                           rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        const int code = wheel_spinup_radau5(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
         if (codes) {
             codes[i] = code;
         }
@@ -6034,7 +6050,8 @@ size_t wheel_spinup_radau5_batch(size_t n, double t0, double t1, double *x, cons
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
    every core under OpenMP. */
 size_t wheel_spinup_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
-        double rtol, double atol, double h0, long max_steps, wheel_spinup_stats *stats, int *codes)
+                                 double rtol, double atol, double h0, long max_steps,
+                                 wheel_spinup_stats *stats, int *codes)
 {
     return pair_batch(taylor_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL, n,
                       t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes);

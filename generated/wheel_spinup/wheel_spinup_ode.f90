@@ -1291,9 +1291,9 @@ contains
   function wheel_spinup_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     type(wheel_spinup_stats), pointer :: stats
@@ -1718,9 +1718,9 @@ contains
   function wheel_spinup_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     type(wheel_spinup_stats), pointer :: stats
@@ -1733,15 +1733,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see wheel_spinup_ode.h).
-  function wheel_spinup_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function wheel_spinup_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
@@ -1754,16 +1753,15 @@ contains
   end function wheel_spinup_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_dopri5_grid_batch")
+  function wheel_spinup_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -1781,10 +1779,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = wheel_spinup_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -2405,9 +2403,9 @@ contains
   function wheel_spinup_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     type(wheel_spinup_stats), pointer :: stats
@@ -2420,15 +2418,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see wheel_spinup_ode.h).
-  function wheel_spinup_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function wheel_spinup_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
@@ -2441,16 +2438,15 @@ contains
   end function wheel_spinup_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_dop853_grid_batch")
+  function wheel_spinup_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -2468,10 +2464,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = wheel_spinup_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -3052,9 +3048,9 @@ contains
   function wheel_spinup_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     type(wheel_spinup_stats), pointer :: stats
@@ -3067,15 +3063,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see wheel_spinup_ode.h).
-  function wheel_spinup_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function wheel_spinup_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
@@ -3088,16 +3083,15 @@ contains
   end function wheel_spinup_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_rodas4_grid_batch")
+  function wheel_spinup_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3115,10 +3109,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = wheel_spinup_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -4064,9 +4058,9 @@ contains
   function wheel_spinup_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     type(wheel_spinup_stats), pointer :: stats
@@ -4079,15 +4073,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see wheel_spinup_ode.h).
-  function wheel_spinup_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function wheel_spinup_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
@@ -4100,16 +4093,15 @@ contains
   end function wheel_spinup_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_radau5_grid_batch")
+  function wheel_spinup_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4127,10 +4119,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = wheel_spinup_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -5145,9 +5137,9 @@ contains
   function wheel_spinup_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_taylor")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
     type(wheel_spinup_stats), pointer :: stats
@@ -5160,15 +5152,14 @@ contains
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
   ! Over an output grid (see wheel_spinup_ode.h).
-  function wheel_spinup_taylor_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function wheel_spinup_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_taylor_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
     integer(c_int) :: code
@@ -5181,16 +5172,15 @@ contains
   end function wheel_spinup_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_taylor_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_taylor_grid_batch")
+  function wheel_spinup_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -5208,10 +5198,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = wheel_spinup_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
@@ -5220,13 +5210,13 @@ contains
   end function wheel_spinup_taylor_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_rk4_batch")
+  function wheel_spinup_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
@@ -5242,8 +5232,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = wheel_spinup_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -5254,13 +5243,14 @@ contains
   end function wheel_spinup_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_dopri5_batch")
+  function wheel_spinup_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="wheel_spinup_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
@@ -5277,7 +5267,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = wheel_spinup_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5288,13 +5278,14 @@ contains
   end function wheel_spinup_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_dop853_batch")
+  function wheel_spinup_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="wheel_spinup_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
@@ -5311,7 +5302,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = wheel_spinup_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5322,13 +5313,14 @@ contains
   end function wheel_spinup_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_rodas4_batch")
+  function wheel_spinup_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="wheel_spinup_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
@@ -5345,7 +5337,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = wheel_spinup_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5356,13 +5348,14 @@ contains
   end function wheel_spinup_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_radau5_batch")
+  function wheel_spinup_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="wheel_spinup_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
@@ -5379,7 +5372,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = wheel_spinup_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -5390,13 +5383,14 @@ contains
   end function wheel_spinup_radau5_batch
 
   ! stats, codes: NULL when not wanted.
-  function wheel_spinup_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="wheel_spinup_f_taylor_batch")
+  function wheel_spinup_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="wheel_spinup_f_taylor_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(wheel_spinup_stats), pointer :: stats_out(:)
@@ -5413,7 +5407,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = wheel_spinup_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = wheel_spinup_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

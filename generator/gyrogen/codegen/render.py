@@ -11,7 +11,8 @@ from typing import Any
 import jinja2
 
 from gyrogen.abi import Signature
-from gyrogen.methods import literal
+from gyrogen.codegen.ir.printer import wrap
+from gyrogen.methods import literal, signature_of
 
 
 def c_double(value: float) -> str:
@@ -109,6 +110,24 @@ def c_prototype(signature: Signature, name: str, prefix: str) -> str:
     return "\n".join(lines)
 
 
+def c_definition(signature: Signature, name: str, prefix: str) -> str:
+    """The head of a definition of name with the signature, continued under
+    its parenthesis as the printers continue a function's head."""
+    head = signature.c(name, prefix)
+    return "\n".join(wrap(head, " " * (head.index("(") + 1)))
+
+
+def c_wrap(line: str, indent: int) -> str:
+    """A line of C (its own indent included) continued on lines indented by
+    indent, as the printers continue a statement."""
+    return "\n".join(wrap(line, " " * indent))
+
+
+def f_wrap(line: str, indent: int) -> str:
+    """The same for Fortran: each continued line ends in " &"."""
+    return "\n".join(wrap(line, " " * indent, continuation=" &"))
+
+
 @cache
 def environment() -> jinja2.Environment:
     root = files("gyrogen") / "templates"
@@ -132,8 +151,12 @@ def environment() -> jinja2.Environment:
         c_string=c_string,
         f_string=f_string,
         xml_attr=xml_attr,
+        c_wrap=c_wrap,
+        f_wrap=f_wrap,
     )
-    env.globals.update(c_prototype=c_prototype)
+    env.globals.update(
+        c_prototype=c_prototype, c_definition=c_definition, signature_of=signature_of
+    )
     return env
 
 

@@ -14,7 +14,6 @@ from gyrogen.codegen.ir.fortran import RESULT, FortranPrinter
 from gyrogen.codegen.ir.nodes import Func
 from gyrogen.codegen.render import render
 from gyrogen.errors import GyrogenError
-from gyrogen.methods import signature_of
 
 
 def _check_names(f: Func) -> None:
@@ -61,7 +60,6 @@ def files(unit: SceneContext) -> dict[str, str]:
         ),
         "abi": abi,
         "registry": methods_registry,
-        "signature_of": signature_of,
     }
     out = {
         f"{unit.prefix}.f90": render("fortran/module.f90.jinja", **ctx),

@@ -7,6 +7,11 @@ nonzero.
 Matrices are flat and row-major, a[i*NX + j], in every target. U = D V is
 stored as 1/u_kk on the diagonal and V's u_kj/u_kk above it, so that each
 row of the back substitution waits on one multiply-add, not on a divide.
+The solves and the complex decomposition say that their arrays never
+overlap (Func.restrict): out of line (radau5_integrate and radau5_grid both
+call them), gcc otherwise reloads an array after each store to another, and
+radau5 took 4-7 % longer a step on stiff_wheel (make bench-methods); the
+real decomposition has one array of doubles.
 """
 
 from __future__ import annotations
@@ -168,7 +173,8 @@ def solve(blocks: Blocks, nx: int) -> Func:
         "b := A^-1 b from lu_decompose's factors, unrolled over the entries of L",
         "and V that can be nonzero; each row subtracts the latest b_j last.",
     )
-    return Func("lu_solve", params, tuple(body), None, (Decl("swap", "double"),), doc)
+    locals_ = (Decl("swap", "double"),)
+    return Func("lu_solve", params, tuple(body), None, locals_, doc, restrict=True)
 
 
 def decompose_complex(blocks: Blocks, nx: int) -> Func:
@@ -221,7 +227,8 @@ def decompose_complex(blocks: Blocks, nx: int) -> Func:
         "lu_decompose for the complex matrix ar + i ai, stored the same way: the",
         "pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC).",
     )
-    return Func("lu_decompose_complex", params, eliminate(blocks, nx, how), "bool", locals_, doc)
+    body = eliminate(blocks, nx, how)
+    return Func("lu_decompose_complex", params, body, "bool", locals_, doc, restrict=True)
 
 
 def solve_complex(blocks: Blocks, nx: int) -> Func:
@@ -253,7 +260,7 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
               Decl("bi", "double", ("NX",), "inout"))  # fmt: skip
     doc = ("lu_solve for lu_decompose_complex's factors: b = br + i bi.",)
     locals_ = (Decl("swap", "double"), Decl("re", "double"))
-    return Func("lu_solve_complex", params, tuple(body), None, locals_, doc)
+    return Func("lu_solve_complex", params, tuple(body), None, locals_, doc, restrict=True)
 
 
 __all__ = ["decompose", "decompose_complex", "solve", "solve_complex"]

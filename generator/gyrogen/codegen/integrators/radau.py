@@ -83,8 +83,8 @@ def pivots(name: str, intent: str = "in") -> Decl:
 # factor, newton and error are inline: radau5_integrate and radau5_grid call
 # them, and gcc inlines a static function of two callers only when told (of
 # one, always): out of line, radau5 took 8 % longer a step (make
-# bench-methods). The complex LU they call (linear.py) stays out of line
-# either way, with two callers: 0 to 6 % a step, the most on stiff_wheel.
+# bench-methods). The complex LU they call (linear.py) stays out of line,
+# with two callers; its restrict arrays make that cost nothing a step.
 
 
 def factor(m: Method) -> Func:

@@ -55,6 +55,22 @@ WRAP = 100
 """A statement continues on a new line before it would pass this column."""
 
 
+def wrap(text: str, cont: str, tail: str = "", continuation: str = "") -> list[str]:
+    """A line of code continued on new lines that start with cont before it
+    would pass WRAP, after a comma where one is in reach, else after a space;
+    each continued line ends with the language's continuation (Fortran's " &")."""
+    lines = []
+    while len(text) > WRAP:
+        cut = text.rfind(", ", len(cont) + 8, WRAP - 2) + 1 or text.rfind(
+            " ", len(cont) + 8, WRAP - 2
+        )
+        if cut < 0:
+            break
+        lines.append(text[:cut] + continuation)
+        text = cont + text[cut + 1 :]
+    return [*lines, text + tail]
+
+
 DOC_WIDTH = 76
 
 
@@ -252,16 +268,7 @@ class Printer:
         return self.wrap(pad + text, pad + self.indent * 2, self.note(note) if note else "")
 
     def wrap(self, text: str, cont: str, tail: str) -> list[str]:
-        lines = []
-        while len(text) > WRAP:
-            cut = text.rfind(", ", len(cont) + 8, WRAP - 2) + 1 or text.rfind(
-                " ", len(cont) + 8, WRAP - 2
-            )
-            if cut < 0:
-                break
-            lines.append(text[:cut] + self.continuation)
-            text = cont + text[cut + 1 :]
-        return [*lines, text + tail]
+        return wrap(text, cont, tail, self.continuation)
 
     continuation = ""
 
