@@ -1574,29 +1574,31 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
 
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
         if (ok) {
+            if (g < ntimes && times[g] < t) {
 
-            /* the dense output of order 4 */
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                dense[0][i] = xnew[i] - x[i];
-                dense[1][i] = hs * k[0][i] - dense[0][i];
-                dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
-                dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 * k[2][i] -
-                        5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i] -
-                        1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
-            }
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
-                frac = (times[g] - told) / hs;
+                /* the dense output of order 4 */
                 for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
-                            (dense[2][i] + (1.0 - frac) * dense[3][i])));
+                    dense[0][i] = xnew[i] - x[i];
+                    dense[1][i] = hs * k[0][i] - dense[0][i];
+                    dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
+                    dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 *
+                            k[2][i] - 5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i]
+                            - 1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
                 }
-                g = g + 1;
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
+                    }
+                    if (!(times[g] < t)) {
+                        break;
+                    }
+                    frac = (times[g] - told) / hs;
+                    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                        out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] +
+                                frac * (dense[2][i] + (1.0 - frac) * dense[3][i])));
+                    }
+                    g = g + 1;
+                }
             }
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 comp[i] = xnew[i] - x[i] - dx[i];
@@ -2127,73 +2129,77 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
 
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
         if (ok) {
+            if (g < ntimes && times[g] < t) {
 
-            /* the dense output of order 7 */
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
-                        k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 * k[8][i] +
-                        0.15329179827876568 * k[9][i] + 0.00820105229563469 * k[10][i] +
-                        0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
-            }
-            dual_spin_rhs(told + 0.1 * hs, y, c, k[13]);
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
-                        k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 * k[7][i]
-                        - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 * k[11][i] -
-                        0.00034046500868740456 * k[12][i] + 0.1413124436746325 * k[13][i]);
-            }
-            dual_spin_rhs(told + 0.2 * hs, y, c, k[14]);
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 * k[5][i]
-                        + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
-                        0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
-                        2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
-            }
-            dual_spin_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
-            stats->rhs_calls = stats->rhs_calls + 3;
-            for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                dense[0][i] = xnew[i] - x[i];
-                dense[1][i] = hs * k[0][i] - dense[0][i];
-                dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
-                dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 * k[5][i] -
-                        3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
-                        2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
-                        2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
-                        0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
-                        9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
-                dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 * k[5][i] +
-                        165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i] -
-                        22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
-                        30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
-                        15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
-                        9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
-                dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 * k[5][i] -
-                        189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i] -
-                        11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
-                        1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
-                        2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
-                        84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
-                dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 * k[5][i] -
-                        231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
-                        93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
-                        104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
-                        43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
-                        39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
-            }
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
-                frac = (times[g] - told) / hs;
+                /* the dense output of order 7 */
                 for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
-                            (dense[2][i] + (1.0 - frac) * (dense[3][i] + frac * (dense[4][i] +
-                            (1.0 - frac) * (dense[5][i] + frac * dense[6][i]))))));
+                    y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
+                            k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 *
+                            k[8][i] + 0.15329179827876568 * k[9][i] + 0.00820105229563469 *
+                            k[10][i] + 0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
                 }
-                g = g + 1;
+                dual_spin_rhs(told + 0.1 * hs, y, c, k[13]);
+                for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                    y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
+                            k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 *
+                            k[7][i] - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 *
+                            k[11][i] - 0.00034046500868740456 * k[12][i] + 0.1413124436746325 *
+                            k[13][i]);
+                }
+                dual_spin_rhs(told + 0.2 * hs, y, c, k[14]);
+                for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                    y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 *
+                            k[5][i] + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
+                            0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
+                            2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
+                }
+                dual_spin_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
+                stats->rhs_calls = stats->rhs_calls + 3;
+                for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                    dense[0][i] = xnew[i] - x[i];
+                    dense[1][i] = hs * k[0][i] - dense[0][i];
+                    dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
+                    dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 *
+                            k[5][i] - 3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
+                            2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
+                            2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
+                            0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
+                            9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
+                    dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 *
+                            k[5][i] + 165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i]
+                            - 22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
+                            30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
+                            15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
+                            9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
+                    dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 *
+                            k[5][i] - 189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i]
+                            - 11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
+                            1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
+                            2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
+                            84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
+                    dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 *
+                            k[5][i] - 231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
+                            93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
+                            104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
+                            43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
+                            39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
+                }
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
+                    }
+                    if (!(times[g] < t)) {
+                        break;
+                    }
+                    frac = (times[g] - told) / hs;
+                    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                        out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] +
+                                frac * (dense[2][i] + (1.0 - frac) * (dense[3][i] + frac *
+                                (dense[4][i] + (1.0 - frac) * (dense[5][i] + frac *
+                                dense[6][i]))))));
+                    }
+                    g = g + 1;
+                }
             }
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 comp[i] = xnew[i] - x[i] - dx[i];
@@ -2721,19 +2727,21 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
+            if (g < ntimes && times[g] < (last ? t1 : t + h)) {
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
+                    }
+                    if (!(times[g] < (last ? t1 : t + h))) {
+                        break;
+                    }
+                    frac = (times[g] - t) / h;
+                    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                        out[g][i] = x[i] * (1.0 - frac) + frac * (xnew[i] + (1.0 - frac) *
+                                (dense[0][i] + frac * dense[1][i]));
+                    }
+                    g = g + 1;
                 }
-                if (!(times[g] < (last ? t1 : t + h))) {
-                    break;
-                }
-                frac = (times[g] - t) / h;
-                for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                    out[g][i] = x[i] * (1.0 - frac) + frac * (xnew[i] + (1.0 - frac) *
-                            (dense[0][i] + frac * dense[1][i]));
-                }
-                g = g + 1;
             }
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
@@ -3598,19 +3606,21 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
                 ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
                 ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
             }
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
+            if (g < ntimes && times[g] < (last ? t1 : t + h)) {
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
+                    }
+                    if (!(times[g] < (last ? t1 : t + h))) {
+                        break;
+                    }
+                    frac = (times[g] - (last ? t1 : t + h)) / h;
+                    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                        out[g][i] = xnew[i] + frac * (ak1[i] + (frac + 0.35505102572168223) *
+                                (ak2[i] + (frac + 0.8449489742783178) * ak3[i]));
+                    }
+                    g = g + 1;
                 }
-                if (!(times[g] < (last ? t1 : t + h))) {
-                    break;
-                }
-                frac = (times[g] - (last ? t1 : t + h)) / h;
-                for (i = 0; i < DUAL_SPIN_NX; ++i) {
-                    out[g][i] = xnew[i] + frac * (ak1[i] + (frac + 0.35505102572168223) * (ak2[i]
-                            + (frac + 0.8449489742783178) * ak3[i]));
-                }
-                g = g + 1;
             }
             accept_step(x, xnew, dx, comp);
             t = last ? t1 : t + h;
@@ -4582,24 +4592,26 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
         stats->rejected = stats->rejected + (retry ? 1 : 0);
         cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
         if (ok) {
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
-                frac = times[g] - told;
-                for (i = 0; i < 6; ++i) {
-                    double acc;
-                    acc = tay[order][i];
-                    for (q = 0; q < order - 1; ++q) {
-                        acc = tay[order - 1 - q][i] + frac * acc;
+            if (g < ntimes && times[g] < t) {
+                for (;;) {
+                    if (!(g < ntimes)) {
+                        break;
                     }
-                    out[g][i] = x[i] + frac * acc;
+                    if (!(times[g] < t)) {
+                        break;
+                    }
+                    frac = times[g] - told;
+                    for (i = 0; i < 6; ++i) {
+                        double acc;
+                        acc = tay[order][i];
+                        for (q = 0; q < order - 1; ++q) {
+                            acc = tay[order - 1 - q][i] + frac * acc;
+                        }
+                        out[g][i] = x[i] + frac * acc;
+                    }
+                    out[g][6] = x[6] + frac * tay[1][6];
+                    g = g + 1;
                 }
-                out[g][6] = x[6] + frac * tay[1][6];
-                g = g + 1;
             }
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 comp[i] = xnew[i] - x[i] - dx[i];

@@ -1666,31 +1666,33 @@ contains
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
+        if (g < ntimes .and. times(g) < t) then
 
-        ! the dense output of order 4
-        do i = 0, nx - 1
-          dense(i, 0) = xnew(i) - x(i)
-          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
-          dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
-          dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
-              0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
-              3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
-              5)) + 2.382468931778144_c_double * k(i, 6))
-        end do
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < t)) then
-            exit
-          end if
-          frac = (times(g) - told) / hs
+          ! the dense output of order 4
           do i = 0, nx - 1
-            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
-                1) + frac * (dense(i, 2) + (1.0_c_double - frac) * dense(i, 3))))
+            dense(i, 0) = xnew(i) - x(i)
+            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+            dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
+            dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
+                0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
+                3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
+                5)) + 2.382468931778144_c_double * k(i, 6))
           end do
-          g = g + 1
-        end do
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < t)) then
+              exit
+            end if
+            frac = (times(g) - told) / hs
+            do i = 0, nx - 1
+              out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+                  1) + frac * (dense(i, 2) + (1.0_c_double - frac) * dense(i, 3))))
+            end do
+            g = g + 1
+          end do
+        end if
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -2296,86 +2298,93 @@ contains
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
+        if (g < ntimes .and. times(g) < t) then
 
-        ! the dense output of order 7
-        do i = 0, nx - 1
-          y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
-              0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
-              7)) - 0.12419142326381637_c_double * k(i, 8)) + 0.15329179827876568_c_double * k(i, &
-              9)) + 0.00820105229563469_c_double * k(i, &
-              10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
-        end do
-        call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
-        do i = 0, nx - 1
-          y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
-              0) + 0.028300909672366776_c_double * k(i, &
-              5)) + 0.053541988307438566_c_double * k(i, &
-              6)) - 0.05492374857139099_c_double * k(i, &
-              7)) - 0.00010834732869724932_c_double * k(i, &
-              10)) + 0.0003825710908356584_c_double * k(i, &
-              11)) - 0.00034046500868740456_c_double * k(i, &
-              12)) + 0.1413124436746325_c_double * k(i, 13))
-        end do
-        call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
-        do i = 0, nx - 1
-          y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
-              0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
-              6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
-              8)) - 0.0013990241651590145_c_double * k(i, &
-              12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, 14))
-        end do
-        call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
-        stats%rhs_calls = stats%rhs_calls + 3
-        do i = 0, nx - 1
-          dense(i, 0) = xnew(i) - x(i)
-          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
-          dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
-          dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
-              0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
-              6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
-              8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
-              10)) + 0.6315787787694688_c_double * k(i, &
-              11)) - 0.08899033645133331_c_double * k(i, &
-              12)) + 18.148505520854727_c_double * k(i, 13)) - 9.194632392478356_c_double * k(i, &
-              14)) - 4.436036387594894_c_double * k(i, 15))
-          dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
-              0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
-              6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
-              8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
-              10)) - 9.332130526430229_c_double * k(i, 11)) + 15.697238121770845_c_double * k(i, &
-              12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
-              14)) + 35.81684148639408_c_double * k(i, 15))
-          dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
-              0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
-              6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
-              8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
-              10)) + 0.7777137798053443_c_double * k(i, 11)) - 2.778205752353508_c_double * k(i, &
-              12)) - 60.19669523126412_c_double * k(i, 13)) + 84.32040550667716_c_double * k(i, &
-              14)) + 11.99229113618279_c_double * k(i, 15))
-          dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
-              0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
-              6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
-              8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
-              10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
-              12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
-              14)) - 149.72683625798564_c_double * k(i, 15))
-        end do
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < t)) then
-            exit
-          end if
-          frac = (times(g) - told) / hs
+          ! the dense output of order 7
           do i = 0, nx - 1
-            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
-                1) + frac * (dense(i, 2) + (1.0_c_double - frac) * (dense(i, &
-                3) + frac * (dense(i, 4) + (1.0_c_double - frac) * (dense(i, 5) + frac * dense(i, &
-                6)))))))
+            y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
+                0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
+                7)) - 0.12419142326381637_c_double * k(i, &
+                8)) + 0.15329179827876568_c_double * k(i, &
+                9)) + 0.00820105229563469_c_double * k(i, &
+                10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
           end do
-          g = g + 1
-        end do
+          call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
+                0) + 0.028300909672366776_c_double * k(i, &
+                5)) + 0.053541988307438566_c_double * k(i, &
+                6)) - 0.05492374857139099_c_double * k(i, &
+                7)) - 0.00010834732869724932_c_double * k(i, &
+                10)) + 0.0003825710908356584_c_double * k(i, &
+                11)) - 0.00034046500868740456_c_double * k(i, &
+                12)) + 0.1413124436746325_c_double * k(i, 13))
+          end do
+          call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
+                0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
+                6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
+                8)) - 0.0013990241651590145_c_double * k(i, &
+                12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, &
+                14))
+          end do
+          call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
+          stats%rhs_calls = stats%rhs_calls + 3
+          do i = 0, nx - 1
+            dense(i, 0) = xnew(i) - x(i)
+            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+            dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
+            dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
+                0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
+                6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
+                8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
+                10)) + 0.6315787787694688_c_double * k(i, &
+                11)) - 0.08899033645133331_c_double * k(i, &
+                12)) + 18.148505520854727_c_double * k(i, &
+                13)) - 9.194632392478356_c_double * k(i, 14)) - 4.436036387594894_c_double * k(i, &
+                15))
+            dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
+                0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
+                6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
+                8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
+                10)) - 9.332130526430229_c_double * k(i, &
+                11)) + 15.697238121770845_c_double * k(i, &
+                12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
+                14)) + 35.81684148639408_c_double * k(i, 15))
+            dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
+                0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
+                6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
+                8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
+                10)) + 0.7777137798053443_c_double * k(i, &
+                11)) - 2.778205752353508_c_double * k(i, 12)) - 60.19669523126412_c_double * k(i, &
+                13)) + 84.32040550667716_c_double * k(i, 14)) + 11.99229113618279_c_double * k(i, &
+                15))
+            dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
+                0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
+                6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
+                8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
+                10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
+                12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
+                14)) - 149.72683625798564_c_double * k(i, 15))
+          end do
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < t)) then
+              exit
+            end if
+            frac = (times(g) - told) / hs
+            do i = 0, nx - 1
+              out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+                  1) + frac * (dense(i, 2) + (1.0_c_double - frac) * (dense(i, &
+                  3) + frac * (dense(i, 4) + (1.0_c_double - frac) * (dense(i, &
+                  5) + frac * dense(i, 6)))))))
+            end do
+            g = g + 1
+          end do
+        end if
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -2998,20 +3007,22 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - t) / h
-          do i = 0, nx - 1
-            out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) * &
-                (dense(i, 0) + frac * dense(i, 1)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - t) / h
+            do i = 0, nx - 1
+              out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) &
+                  * (dense(i, 0) + frac * dense(i, 1)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -3989,20 +4000,22 @@ contains
           ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
           ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
         end do
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - (merge(t1, t + h, last))) / h
-          do i = 0, nx - 1
-            out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
-                (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - (merge(t1, t + h, last))) / h
+            do i = 0, nx - 1
+              out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
+                  (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -5095,24 +5108,26 @@ contains
       stats%rejected = stats%rejected + (merge(1, 0, retry))
       cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
       if (ok) then
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < t)) then
-            exit
-          end if
-          frac = times(g) - told
-          do i = 0, 7 - 1
-            acc = tay(i, order)
-            do q = 0, order - 1 - 1
-              acc = tay(i, (order - 1) - q) + frac * acc
+        if (g < ntimes .and. times(g) < t) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < t)) then
+              exit
+            end if
+            frac = times(g) - told
+            do i = 0, 7 - 1
+              acc = tay(i, order)
+              do q = 0, order - 1 - 1
+                acc = tay(i, (order - 1) - q) + frac * acc
+              end do
+              out(i, g) = x(i) + frac * acc
             end do
-            out(i, g) = x(i) + frac * acc
+            out(7, g) = x(7) + frac * tay(7, 1)
+            g = g + 1
           end do
-          out(7, g) = x(7) + frac * tay(7, 1)
-          g = g + 1
-        end do
+        end if
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)

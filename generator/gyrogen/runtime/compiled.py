@@ -947,8 +947,9 @@ class Compiled:
         Limits: a g of 0 at times[0] is not a crossing (nor is one at a
         step's start: it was the step before's); two crossings of one event
         within one step (an eighth of one for an event that reads t: a
-        double root, a grazing touch) cancel and are not seen, so limit the step (tighter tolerances) where g oscillates
-        faster than the motion; a NaN g never crosses.
+        double root, a grazing touch) cancel and are not seen, so limit the
+        step (tighter tolerances) where g oscillates faster than the
+        motion; a NaN g never crosses.
 
         Parameters
         ----------

@@ -231,23 +231,20 @@ def inside(
 
     events = isinstance(grid, Grid) and bool(grid.events)
     until = EV_STOP if events else end
-    out: list[S] = [*dense.coefficients]
-    if events:
-        assert isinstance(grid, Grid)
-        out = [*needed(grid, end, dense.coefficients), *events_in_step(grid, dense, at, start, end)]
-    out.append(
-        Loop((
-            If(not_(cmp(G, "<", NTIMES)), (Break(),)),
-            If(not_(cmp(TIMES[G], "<", until)), (Break(),)),
-            assign(theta, at(TIMES[G])),
-            *dense.points(theta, lambda i: OUT[G, i]),
-            inc(G, 1),
-        ))
-    )  # fmt: skip
-    if events:
-        assert isinstance(grid, Grid)
-        out += events_stop(dense, at, counted)
-    return out
+    write = Loop((
+        If(not_(cmp(G, "<", NTIMES)), (Break(),)),
+        If(not_(cmp(TIMES[G], "<", until)), (Break(),)),
+        assign(theta, at(TIMES[G])),
+        *dense.points(theta, lambda i: OUT[G, i]),
+        inc(G, 1),
+    ))  # fmt: skip
+    if not events:  # the coefficients only for a step with a grid time in it
+        pending = and_(cmp(G, "<", NTIMES), cmp(TIMES[G], "<", end))
+        return [If(pending, (*dense.coefficients, write))]
+    assert isinstance(grid, Grid)
+    out = [*needed(grid, end, dense.coefficients), *events_in_step(grid, dense, at, start, end)]
+    out.append(write)
+    return [*out, *events_stop(dense, at, counted)]
 
 
 # Events
@@ -395,7 +392,7 @@ def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]
     ne, k, need, g_end = Int(len(grid.events)), Var("ev_k"), Var("ev_need"), Var("ev_end")
     if grid.pieces > 1:
         return [Call("events", (end, xnew, c, g_end)), *coefficients]
-    pending = and_(cmp(G, "<", NTIMES), cmp(TIMES[G], "<", end))
+    pending = and_(cmp(G, "<", NTIMES), cmp(TIMES[G], "<", end))  # a grid time in the step
     return [
         Call("events", (end, xnew, c, g_end)),
         assign(need, sel(pending, Int(1), Int(0))),
