@@ -411,3 +411,31 @@ def test_an_event_nan_where_the_state_makes_it_so_generates(tmp_path: Path, cli)
     )
     code, _, err = cli(["generate", str(scene), "--out", str(tmp_path / "out")])
     assert code == 0, err
+
+
+@pytest.mark.parametrize(
+    ("events", "pieces"),
+    [
+        ('[[events]]\nname = "spun"\nexpr = "q3 - 5"\n', 1),
+        (
+            '[[events]]\nname = "slow"\nexpr = "u4 - 40"\n[[events]]\nname = "e"\n'
+            'expr = "kinetic_energy - 1"\n',
+            1,
+        ),
+        (LOCATED, 8),
+        ('[[events]]\nname = "late"\nexpr = "q3 - t"\n', 8),
+    ],
+)
+def test_an_event_that_reads_the_time_is_searched_between_the_steps_ends(
+    events: str, pieces: int
+) -> None:
+    """Events on the states alone are looked for at each step's ends (the
+    interpolant's coefficients then only for a step with a sign change or a
+    grid time in it); one that reads t, which may change faster than the
+    motion the steps follow, in EV_SUBINTERVALS pieces of each step."""
+    from gyrogen.codegen.context import make_context
+    from gyrogen.codegen.integrators.driver import EV_SUBINTERVALS
+
+    text = builtin_text("dual_spin").replace("kinetic_energy = false", "kinetic_energy = true")
+    grid = make_context(parse(text + "\n" + events, "ev.toml")).event_grid
+    assert grid is not None and grid.pieces == (EV_SUBINTERVALS if pieces > 1 else 1)

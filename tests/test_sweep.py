@@ -53,7 +53,7 @@ def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path])
     for i in (0, 17, spec.size - 1):
         c = model.setup(inp.p[i])
         given = {"rtol": 1e-9, "atol": 1e-9, "max_steps": 10**6}
-        states, stats, code = model.integrate_grid("dop853", inp.x0[i], c, times, **given)
+        states, _, stats, code = model.integrate_events("dop853", inp.x0[i], c, times, **given)
         finals = frame.loc[i, [f"final_{s}" for s in spec.scene.states]].to_numpy(float)
         assert code == 0 and np.array_equal(finals, states[-1])
         assert frame.loc[i, "rhs_calls"] == stats["rhs_calls"]

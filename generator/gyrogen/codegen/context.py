@@ -19,14 +19,14 @@ from gyrogen.abi import (
     unit_and_doc,
 )
 from gyrogen.abi_rotors import AXIS, rotor_name
-from gyrogen.codegen.integrators.driver import Event, Grid
+from gyrogen.codegen.integrators.driver import EV_SUBINTERVALS, Event, Grid
 from gyrogen.codegen.integrators.program import Program, program
 from gyrogen.codegen.integrators.taylor import UNMEASURED, state_scales
 from gyrogen.methods import IMPLICIT, METHODS, Method, needs_jacobian
 from gyrogen.scene import Outputs, Scene
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
-from gyrogen.symbolic.equations import Equations
+from gyrogen.symbolic.equations import TIME, Equations
 from gyrogen.symbolic.jet import Jet, decompose
 from gyrogen.symbolic.optimize import Block, Optimized, optimize
 from gyrogen.symbolic.specialize import specialize
@@ -220,7 +220,10 @@ class SceneContext:
         if not self.scene.events or self.events is None:
             return None
         way = {"up": 1, "down": -1, "any": 0}
-        return Grid(tuple(Event(way[e.direction], e.terminal) for e in self.scene.events))
+        timed = {TIME, *self.equations.inputs}  # the time, or a table of it
+        moving = any(e.free_symbols & timed for e in self.equations.events)
+        pieces = EV_SUBINTERVALS if moving else 1
+        return Grid(tuple(Event(way[e.direction], e.terminal) for e in self.scene.events), pieces)
 
     @property
     def cluster(self) -> bool:

@@ -946,9 +946,10 @@ class Compiled:
 
         Limits: a g of 0 at times[0] is not a crossing (nor is one at a
         step's start: it was the step before's); two crossings of one event
-        within one step (a double root, a grazing touch) cancel and are not
-        seen, so limit the step (tighter tolerances) where g oscillates
-        faster than the motion; a NaN g never crosses.
+        within one step (an eighth of one for an event that reads t: a
+        double root, a grazing touch) cancel and are not seen, so limit the
+        step (tighter tolerances) where g oscillates faster than the
+        motion; a NaN g never crosses.
 
         Parameters
         ----------
