@@ -3831,15 +3831,16 @@ int dual_spin_dopri5_grid(long ntimes, const double *times, double *x, const dou
             (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t dual_spin_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                    const double *c, double rtol, double atol, double h0,
                                    long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, DUAL_SPIN_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[DUAL_SPIN_NX])out, stats, codes);
@@ -4438,15 +4439,16 @@ int dual_spin_dop853_grid(long ntimes, const double *times, double *x, const dou
             (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t dual_spin_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                    const double *c, double rtol, double atol, double h0,
                                    long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, DUAL_SPIN_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[DUAL_SPIN_NX])out, stats, codes);
@@ -6857,15 +6859,16 @@ int dual_spin_taylor_grid(long ntimes, const double *times, double *x, const dou
             (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t dual_spin_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                    const double *c, double rtol, double atol, double h0,
                                    long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(taylor_grid_step_lanes, 0, DUAL_SPIN_ODE_TAYLOR_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[DUAL_SPIN_NX])out, stats, codes);
@@ -6906,24 +6909,56 @@ size_t dual_spin_rk4_batch(size_t n, double t0, double t1, long steps, double *x
     return failed;
 }
 
-/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t dual_spin_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
                               double rtol, double atol, double h0, long max_steps,
                               dual_spin_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, DUAL_SPIN_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, DUAL_SPIN_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = dual_spin_dopri5(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol,
+                h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t dual_spin_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
                               double rtol, double atol, double h0, long max_steps,
                               dual_spin_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, DUAL_SPIN_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, DUAL_SPIN_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = dual_spin_dop853(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol,
+                h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -6968,12 +7003,28 @@ size_t dual_spin_radau5_batch(size_t n, double t0, double t1, double *x, const d
     return failed;
 }
 
-/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t dual_spin_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
                               double rtol, double atol, double h0, long max_steps,
                               dual_spin_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, DUAL_SPIN_ODE_TAYLOR_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(taylor_step_lanes, 0, DUAL_SPIN_ODE_TAYLOR_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = dual_spin_taylor(t0, t1, x + (size_t)i * DUAL_SPIN_NX, c, rtol, atol,
+                h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != DUAL_SPIN_ODE_OK);
+    }
+    return failed;
 }

@@ -4437,8 +4437,9 @@ int rw3_orthogonal_dopri5_grid(long ntimes, const double *times, double *x, cons
             (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t rw3_orthogonal_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, rw3_orthogonal_stats *stats,
@@ -4446,7 +4447,7 @@ size_t rw3_orthogonal_dopri5_grid_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, RW3_ORTHOGONAL_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[RW3_ORTHOGONAL_NX])out, stats, codes);
@@ -5047,8 +5048,9 @@ int rw3_orthogonal_dop853_grid(long ntimes, const double *times, double *x, cons
             (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t rw3_orthogonal_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, rw3_orthogonal_stats *stats,
@@ -5056,7 +5058,7 @@ size_t rw3_orthogonal_dop853_grid_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, RW3_ORTHOGONAL_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[RW3_ORTHOGONAL_NX])out, stats, codes);
@@ -7756,8 +7758,9 @@ int rw3_orthogonal_taylor_grid(long ntimes, const double *times, double *x, cons
             (double (*)[RW3_ORTHOGONAL_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t rw3_orthogonal_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, rw3_orthogonal_stats *stats,
@@ -7765,7 +7768,7 @@ size_t rw3_orthogonal_taylor_grid_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(taylor_grid_step_lanes, 0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[RW3_ORTHOGONAL_NX])out, stats, codes);
@@ -7806,24 +7809,56 @@ size_t rw3_orthogonal_rk4_batch(size_t n, double t0, double t1, long steps, doub
     return failed;
 }
 
-/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t rw3_orthogonal_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
                                    double rtol, double atol, double h0, long max_steps,
                                    rw3_orthogonal_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = rw3_orthogonal_dopri5(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != RW3_ORTHOGONAL_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t rw3_orthogonal_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
                                    double rtol, double atol, double h0, long max_steps,
                                    rw3_orthogonal_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, RW3_ORTHOGONAL_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = rw3_orthogonal_dop853(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != RW3_ORTHOGONAL_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -7868,12 +7903,28 @@ size_t rw3_orthogonal_radau5_batch(size_t n, double t0, double t1, double *x, co
     return failed;
 }
 
-/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW3_ORTHOGONAL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t rw3_orthogonal_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
                                    double rtol, double atol, double h0, long max_steps,
                                    rw3_orthogonal_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(taylor_step_lanes, 0, RW3_ORTHOGONAL_ODE_TAYLOR_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = rw3_orthogonal_taylor(t0, t1, x + (size_t)i * RW3_ORTHOGONAL_NX, c,
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != RW3_ORTHOGONAL_ODE_OK);
+    }
+    return failed;
 }

@@ -3731,8 +3731,9 @@ int rw4_pyramid_failed_dopri5_grid(long ntimes, const double *times, double *x, 
             (double (*)[RW4_PYRAMID_FAILED_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t rw4_pyramid_failed_dopri5_grid_batch(size_t n, long ntimes, const double *times,
                                             double *x, const double *c, double rtol, double atol,
                                             double h0, long max_steps, double *out,
@@ -3740,7 +3741,7 @@ size_t rw4_pyramid_failed_dopri5_grid_batch(size_t n, long ntimes, const double 
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, RW4_PYRAMID_FAILED_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[RW4_PYRAMID_FAILED_NX])out, stats, codes);
@@ -4342,8 +4343,9 @@ int rw4_pyramid_failed_dop853_grid(long ntimes, const double *times, double *x, 
             (double (*)[RW4_PYRAMID_FAILED_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t rw4_pyramid_failed_dop853_grid_batch(size_t n, long ntimes, const double *times,
                                             double *x, const double *c, double rtol, double atol,
                                             double h0, long max_steps, double *out,
@@ -4351,7 +4353,7 @@ size_t rw4_pyramid_failed_dop853_grid_batch(size_t n, long ntimes, const double 
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, RW4_PYRAMID_FAILED_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[RW4_PYRAMID_FAILED_NX])out, stats, codes);
@@ -5851,24 +5853,56 @@ size_t rw4_pyramid_failed_rk4_batch(size_t n, double t0, double t1, long steps, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t rw4_pyramid_failed_dopri5_batch(size_t n, double t0, double t1, double *x,
                                        const double *c, double rtol, double atol, double h0,
                                        long max_steps, rw4_pyramid_failed_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, RW4_PYRAMID_FAILED_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, RW4_PYRAMID_FAILED_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = rw4_pyramid_failed_dopri5(t0, t1, x + (size_t)i * RW4_PYRAMID_FAILED_NX,
+                c, rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != RW4_PYRAMID_FAILED_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_FAILED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t rw4_pyramid_failed_dop853_batch(size_t n, double t0, double t1, double *x,
                                        const double *c, double rtol, double atol, double h0,
                                        long max_steps, rw4_pyramid_failed_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, RW4_PYRAMID_FAILED_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, RW4_PYRAMID_FAILED_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = rw4_pyramid_failed_dop853(t0, t1, x + (size_t)i * RW4_PYRAMID_FAILED_NX,
+                c, rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != RW4_PYRAMID_FAILED_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */

@@ -4111,8 +4111,9 @@ int speed_controlled_dopri5_grid(long ntimes, const double *times, double *x, co
             (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t speed_controlled_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                           const double *c, double rtol, double atol, double h0,
                                           long max_steps, double *out,
@@ -4120,7 +4121,7 @@ size_t speed_controlled_dopri5_grid_batch(size_t n, long ntimes, const double *t
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, SPEED_CONTROLLED_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[SPEED_CONTROLLED_NX])out, stats, codes);
@@ -4721,8 +4722,9 @@ int speed_controlled_dop853_grid(long ntimes, const double *times, double *x, co
             (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t speed_controlled_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                           const double *c, double rtol, double atol, double h0,
                                           long max_steps, double *out,
@@ -4730,7 +4732,7 @@ size_t speed_controlled_dop853_grid_batch(size_t n, long ntimes, const double *t
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, SPEED_CONTROLLED_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[SPEED_CONTROLLED_NX])out, stats, codes);
@@ -7278,8 +7280,9 @@ int speed_controlled_taylor_grid(long ntimes, const double *times, double *x, co
             (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t speed_controlled_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                           const double *c, double rtol, double atol, double h0,
                                           long max_steps, double *out,
@@ -7287,7 +7290,7 @@ size_t speed_controlled_taylor_grid_batch(size_t n, long ntimes, const double *t
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(taylor_grid_step_lanes, 0, SPEED_CONTROLLED_ODE_TAYLOR_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[SPEED_CONTROLLED_NX])out, stats, codes);
@@ -7328,24 +7331,56 @@ size_t speed_controlled_rk4_batch(size_t n, double t0, double t1, long steps, do
     return failed;
 }
 
-/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t speed_controlled_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
                                      double rtol, double atol, double h0, long max_steps,
                                      speed_controlled_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = speed_controlled_dopri5(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t speed_controlled_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
                                      double rtol, double atol, double h0, long max_steps,
                                      speed_controlled_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = speed_controlled_dop853(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -7390,12 +7425,28 @@ size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t speed_controlled_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
                                      double rtol, double atol, double h0, long max_steps,
                                      speed_controlled_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, SPEED_CONTROLLED_ODE_TAYLOR_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(taylor_step_lanes, 0, SPEED_CONTROLLED_ODE_TAYLOR_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = speed_controlled_taylor(t0, t1, x + (size_t)i * SPEED_CONTROLLED_NX, c,
+                rtol, atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != SPEED_CONTROLLED_ODE_OK);
+    }
+    return failed;
 }

@@ -3161,8 +3161,9 @@ int stiff_wheel_dopri5_grid(long ntimes, const double *times, double *x, const d
             (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, stiff_wheel_stats *stats,
@@ -3170,7 +3171,7 @@ size_t stiff_wheel_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, STIFF_WHEEL_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[STIFF_WHEEL_NX])out, stats, codes);
@@ -3769,8 +3770,9 @@ int stiff_wheel_dop853_grid(long ntimes, const double *times, double *x, const d
             (double (*)[STIFF_WHEEL_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, stiff_wheel_stats *stats,
@@ -3778,7 +3780,7 @@ size_t stiff_wheel_dop853_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, STIFF_WHEEL_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[STIFF_WHEEL_NX])out, stats, codes);
@@ -5269,24 +5271,56 @@ size_t stiff_wheel_rk4_batch(size_t n, double t0, double t1, long steps, double 
     return failed;
 }
 
-/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t stiff_wheel_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
                                 double rtol, double atol, double h0, long max_steps,
                                 stiff_wheel_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, STIFF_WHEEL_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, STIFF_WHEEL_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = stiff_wheel_dopri5(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. STIFF_WHEEL_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t stiff_wheel_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
                                 double rtol, double atol, double h0, long max_steps,
                                 stiff_wheel_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, STIFF_WHEEL_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, STIFF_WHEEL_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = stiff_wheel_dop853(t0, t1, x + (size_t)i * STIFF_WHEEL_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != STIFF_WHEEL_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */

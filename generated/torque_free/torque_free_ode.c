@@ -3819,8 +3819,9 @@ int torque_free_dopri5_grid(long ntimes, const double *times, double *x, const d
             (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t torque_free_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, torque_free_stats *stats,
@@ -3828,7 +3829,7 @@ size_t torque_free_dopri5_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, TORQUE_FREE_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[TORQUE_FREE_NX])out, stats, codes);
@@ -4427,8 +4428,9 @@ int torque_free_dop853_grid(long ntimes, const double *times, double *x, const d
             (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t torque_free_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, torque_free_stats *stats,
@@ -4436,7 +4438,7 @@ size_t torque_free_dop853_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, TORQUE_FREE_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[TORQUE_FREE_NX])out, stats, codes);
@@ -6695,8 +6697,9 @@ int torque_free_taylor_grid(long ntimes, const double *times, double *x, const d
             (double (*)[TORQUE_FREE_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t torque_free_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, torque_free_stats *stats,
@@ -6704,7 +6707,7 @@ size_t torque_free_taylor_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(taylor_grid_step_lanes, 0, TORQUE_FREE_ODE_TAYLOR_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[TORQUE_FREE_NX])out, stats, codes);
@@ -6745,24 +6748,56 @@ size_t torque_free_rk4_batch(size_t n, double t0, double t1, long steps, double 
     return failed;
 }
 
-/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t torque_free_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
                                 double rtol, double atol, double h0, long max_steps,
                                 torque_free_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, TORQUE_FREE_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, TORQUE_FREE_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = torque_free_dopri5(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != TORQUE_FREE_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t torque_free_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
                                 double rtol, double atol, double h0, long max_steps,
                                 torque_free_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, TORQUE_FREE_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, TORQUE_FREE_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = torque_free_dop853(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != TORQUE_FREE_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -6807,12 +6842,28 @@ size_t torque_free_radau5_batch(size_t n, double t0, double t1, double *x, const
     return failed;
 }
 
-/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. TORQUE_FREE_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t torque_free_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
                                 double rtol, double atol, double h0, long max_steps,
                                 torque_free_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, TORQUE_FREE_ODE_TAYLOR_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(taylor_step_lanes, 0, TORQUE_FREE_ODE_TAYLOR_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = torque_free_taylor(t0, t1, x + (size_t)i * TORQUE_FREE_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != TORQUE_FREE_ODE_OK);
+    }
+    return failed;
 }

@@ -3961,8 +3961,9 @@ int wheel_spinup_dopri5_grid(long ntimes, const double *times, double *x, const 
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t wheel_spinup_dopri5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                       const double *c, double rtol, double atol, double h0,
                                       long max_steps, double *out, wheel_spinup_stats *stats,
@@ -3970,7 +3971,7 @@ size_t wheel_spinup_dopri5_grid_batch(size_t n, long ntimes, const double *times
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
@@ -4569,8 +4570,9 @@ int wheel_spinup_dop853_grid(long ntimes, const double *times, double *x, const 
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t wheel_spinup_dop853_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                       const double *c, double rtol, double atol, double h0,
                                       long max_steps, double *out, wheel_spinup_stats *stats,
@@ -4578,7 +4580,7 @@ size_t wheel_spinup_dop853_grid_batch(size_t n, long ntimes, const double *times
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
@@ -7044,8 +7046,9 @@ int wheel_spinup_taylor_grid(long ntimes, const double *times, double *x, const 
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. A bad grid: each state's _grid says so. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t wheel_spinup_taylor_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                       const double *c, double rtol, double atol, double h0,
                                       long max_steps, double *out, wheel_spinup_stats *stats,
@@ -7053,7 +7056,7 @@ size_t wheel_spinup_taylor_grid_batch(size_t n, long ntimes, const double *times
 {
     size_t failed = 0;
     long i;
-    if (grid_ok(ntimes, times)) {
+    if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(taylor_grid_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
                           times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
@@ -7094,24 +7097,56 @@ size_t wheel_spinup_rk4_batch(size_t n, double t0, double t1, long steps, double
     return failed;
 }
 
-/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, const double *c,
                                  double rtol, double atol, double h0, long max_steps,
                                  wheel_spinup_stats *stats, int *codes)
 {
-    return pair_batch(dopri5_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dopri5_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = wheel_spinup_dopri5(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
-/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x, const double *c,
                                  double rtol, double atol, double h0, long max_steps,
                                  wheel_spinup_stats *stats, int *codes)
 {
-    return pair_batch(dop853_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(dop853_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = wheel_spinup_dop853(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -7156,12 +7191,28 @@ size_t wheel_spinup_radau5_batch(size_t n, double t0, double t1, double *x, cons
     return failed;
 }
 
-/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes;
-   every core under OpenMP. */
+/* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t wheel_spinup_taylor_batch(size_t n, double t0, double t1, double *x, const double *c,
                                  double rtol, double atol, double h0, long max_steps,
                                  wheel_spinup_stats *stats, int *codes)
 {
-    return pair_batch(taylor_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL, n,
-                      t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    size_t failed = 0;
+    long i;
+    if (n > 1) {
+        return pair_batch(taylor_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const int code = wheel_spinup_taylor(t0, t1, x + (size_t)i * WHEEL_SPINUP_NX, c, rtol,
+                atol, h0, max_steps, stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }

@@ -238,19 +238,27 @@ class _Watch:
             return self._look(x, rows)[0 if q == "nutation" else 1]
         return x[:, self.states.index(q)]
 
-    def see(self, t: float, xs: np.ndarray, live: np.ndarray) -> None:
-        """The states xs of the rows live at time t."""
-        nutation, rate, norm = self._look(xs, live)
-        self.nutation[live] = np.fmax(self.nutation[live], nutation)
-        self.rate[live] = np.fmax(self.rate[live], rate)
-        h0 = self.h0[live]
+    def see(self, times: np.ndarray, xs: np.ndarray, rows: np.ndarray) -> None:
+        """The states xs[i, k] of row rows[i] at times[k] (NaN where its run
+        did not reach: a failed run's metrics cover the samples it reached),
+        all in one look."""
+        n, m, nx = xs.shape
+        flat = xs.reshape(n * m, nx)
+        at = np.repeat(rows, m)
+        nutation, rate, norm = (v.reshape(n, m) for v in self._look(flat, at))
+        reached = ~np.isnan(xs[:, :, 0])
+        every = np.fmax.reduce  # NaN (not reached) skipped; all NaN: NaN
+        self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=1))
+        self.rate[rows] = np.fmax(self.rate[rows], every(rate, axis=1))
+        h0 = self.h0[rows, None]
         with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
             drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
-        self.drift[live] = np.fmax(self.drift[live], drift)
+        self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=1))
         for q, thr in self.thresholds.items():
-            crossed = np.sign(self._quantity(q, xs, live) - thr) != np.sign(self.start[q][live])
-            first = live[crossed & np.isnan(self.time_to[q][live])]
-            self.time_to[q][first] = t
+            value = self._quantity(q, flat, at).reshape(n, m)
+            crossed = (np.sign(value - thr) != np.sign(self.start[q][rows, None])) & reached
+            first = crossed.any(axis=1) & np.isnan(self.time_to[q][rows])
+            self.time_to[q][rows[first]] = times[np.argmax(crossed[first], axis=1)]
 
 
 @dataclass
@@ -276,12 +284,8 @@ class _Runs:
         """The sampled metrics at times[1:] from rows' states there (out[i, k]
         row rows[i] at times[k]; NaN past a failure: a run's metrics cover
         the samples it reached)."""
-        if self.watch is None:
-            return
-        for k in range(1, len(times)):
-            reached = ~np.isnan(out[:, k, 0])
-            if reached.any():
-                self.watch.see(float(times[k]), out[reached, k], rows[reached])
+        if self.watch is not None:
+            self.watch.see(times[1:], out[:, 1:], rows)
 
 
 GRID_BLOCK = 1 << 21
@@ -426,7 +430,7 @@ def _restarted(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.nd
             break
         if runs.watch is not None:
             idx = np.flatnonzero(alive)
-            runs.watch.see(float(t1), runs.x[idx], idx)
+            runs.watch.see(np.array([t1]), runs.x[idx, None], idx)
 
 
 def boresight(spec: Spec, x: np.ndarray) -> np.ndarray:
