@@ -102,18 +102,28 @@ def lumped_inertia(scene: Scene) -> sm.Matrix:
     g_g g_g^T) (scene.rotors.lumped_part; symbolic.gimbals adds the rest)."""
     rotors = [
         (
-            _param(rotor_name("m", k), r.m) + _number(part[0]),
-            _param(rotor_name("I", k), r.I) if r.gimbal is None else _number(float(part[1])),
-            list(_axis(r, k) if r.gimbal is None else _exact(part[2])),
+            _param(rotor_name("m", k), r.m) + mass,
+            inertia,
+            axis,
             [sm.Symbol(rotor_name(key, k), real=True) for key in POSITION]
             if r.position == "runtime"
             else [_number(x) for x in r.position],
         )
         for k, r in enumerate(scene.rotors, 1)
-        for part in [lumped_part(r)]
+        for mass, inertia, axis in [_transverse(r, k)]
     ]
     m_a = _param("m_a", scene.parameters["m_a"])
     return sm.Matrix(physics.cluster_inertia(m_a, _carrier(scene), rotors))
+
+
+def _transverse(r: Rotor, k: int) -> tuple[sm.Expr, sm.Expr, list[sm.Expr]]:
+    """What rotor k adds to I~ beside its mass: a gimbal frame's mass, and
+    the transverse inertia with the axis it is transverse to (a fixed
+    rotor's I about g; a gimbal's IGs about g_g: scene.rotors.lumped_part)."""
+    if r.gimbal is None:
+        return sm.S.Zero, _param(rotor_name("I", k), r.I), list(_axis(r, k))
+    mass, inertia, axis = lumped_part(r)
+    return _number(mass), _number(float(inertia)), list(_exact(axis))
 
 
 LUMPED = ((0, 0, "IC11"), (1, 1, "IC22"), (2, 2, "IC33"), (0, 1, "IC12"), (0, 2, "IC13"),
