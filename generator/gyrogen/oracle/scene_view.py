@@ -113,9 +113,7 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     if scene.rotors:
         out = cluster_reference.rhs(scene, xs, values(scene, p_runtime), t)
         if scene.attitude == "quaternion":
-            out[:, :4] = quaternion_rates(
-                xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)]
-            )
+            out[:, :4] = quaternion_rates(xs[:, :4], xs[:, _body_rates(scene)])
         return out
     x_full = full_states(scene, xs)
     full = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))
@@ -126,6 +124,11 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
         w = x_full[:, [STATES.index(f"u{i}") for i in (1, 2, 3)]]
         out[:, :4] = quaternion_rates(xs[:, :4], w)
     return out
+
+
+def _body_rates(scene: Scene) -> list[int]:
+    """Where u1..u3 sit in a cluster's x[]."""
+    return [scene.states.index(f"u{i}") for i in (1, 2, 3)]
 
 
 def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
@@ -298,7 +301,11 @@ _CLUSTER_DRAWS = {
     "T": lambda rng, n: rng.uniform(-0.5, 0.5, n),
     "k": lambda rng, n: np.exp(rng.uniform(np.log(1e-2), np.log(10.0), n)),
     "w_ref": lambda rng, n: rng.uniform(-300.0, 300.0, n),
+    "Tg": lambda rng, n: rng.uniform(-0.5, 0.5, n),
+    "kg": lambda rng, n: np.exp(rng.uniform(np.log(1e-3), np.log(1.0), n)),
+    "rate_ref": lambda rng, n: rng.uniform(-1.0, 1.0, n),
 }
+"""A runtime torque law's values, by key (a gimbal's Tg, kg and rate_ref too)."""
 
 
 def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -345,17 +352,21 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
 
 
 def _cluster_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
-    """Attitudes away from gimbal lock (or unit quaternions), rotor angles,
-    body rates of order 1 rad/s and wheel rates up to 300 rad/s."""
-    out = np.zeros((n, len(scene.states)))
-    k = len(scene.rotors)
+    """Attitudes away from gimbal lock (or unit quaternions), rotor and
+    gimbal angles, body and gimbal rates of order 1 rad/s and wheel rates up
+    to 300 rad/s."""
+    names = scene.states
+    out = np.zeros((n, len(names)))
     if scene.attitude == "quaternion":
         e = rng.normal(size=(n, 4))
         out[:, :4] = e / np.linalg.norm(e, axis=1, keepdims=True)
     else:
         out[:, :3] = rng.uniform(-1.4, 1.4, (n, 3))
-    if scene.effects.rotor_angle:
-        out[:, -3 - 2 * k : -3 - k] = rng.uniform(-np.pi, np.pi, (n, k))
-    out[:, -3 - k : -k] = rng.normal(size=(n, 3))
-    out[:, -k:] = rng.uniform(-300.0, 300.0, (n, k))
+    for i, name in enumerate(names):
+        if name.startswith(("th", "gam")):
+            out[:, i] = rng.uniform(-np.pi, np.pi, n)
+        elif name.startswith(("u", "gd")):
+            out[:, i] = rng.normal(size=n)
+        elif name.startswith("w"):
+            out[:, i] = rng.uniform(-300.0, 300.0, n)
     return out
