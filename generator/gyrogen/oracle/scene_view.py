@@ -11,7 +11,7 @@ import numpy as np
 
 from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
 from gyrogen.abi_rotors import AXIS_NORM_SLACK
-from gyrogen.oracle import cluster_reference, reference, sampling
+from gyrogen.oracle import cluster_reference, gimbal_view, reference, sampling
 from gyrogen.scene import Scene
 from gyrogen.scene import events as scene_events
 
@@ -111,7 +111,8 @@ def full_parameters(
 def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     xs = np.atleast_2d(xs)
     if scene.rotors:
-        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime), t)
+        cluster = gimbal_view if gimbal_view.has_gimbals(scene) else cluster_reference
+        out = cluster.rhs(scene, xs, values(scene, p_runtime), t)
         if scene.attitude == "quaternion":
             out[:, :4] = quaternion_rates(xs[:, :4], xs[:, _body_rates(scene)])
         return out
@@ -138,7 +139,8 @@ def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -
     xs = np.atleast_2d(xs)
     if not scene.rotors:
         return np.zeros((len(xs), 0))
-    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime), t)
+    cluster = gimbal_view if gimbal_view.has_gimbals(scene) else cluster_reference
+    return cluster.clamp_margins(scene, xs, values(scene, p_runtime), t)
 
 
 def output(
@@ -153,7 +155,8 @@ def output(
             angles = np.zeros((len(xs), len(STATES)))
             angles[:, :3] = xs[:, :3]
             dcm = reference.direction_cosines(angles)
-        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm, t)
+        cluster = gimbal_view if gimbal_view.has_gimbals(scene) else cluster_reference
+        return cluster.outputs(scene, name, xs, values(scene, p_runtime), dcm, t)
     x_full = full_states(scene, xs)
     p = full_parameters(scene, p_runtime, x_full, t)
     if name == "kinetic_energy":
@@ -291,6 +294,8 @@ def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
 def condition(scene: Scene, p_runtime: np.ndarray) -> float:
     """The condition number compare groups parameter sets by: the coupled
     block's (a cluster's: its folded inertia's, ||A||_F ||A^-1||_F)."""
+    if gimbal_view.has_gimbals(scene):
+        return gimbal_view.condition(scene, values(scene, p_runtime))
     if scene.rotors:
         return cluster_reference.condition(scene, values(scene, p_runtime))
     full = full_parameters(scene, p_runtime, np.zeros((1, len(STATES))), 0.0)[0]
