@@ -182,3 +182,44 @@ def test_vscmg3_conserves_energy_and_momentum_over_60_s(method: str) -> None:
                  for k, r in enumerate(scene.rotors, 1))  # fmt: skip
     assert abs(k1 - k0) / (k0 - wheels) < 1e-12
     assert np.abs(x1 - x0).max() > 1e-3  # the gimbals and the carrier have moved
+
+
+@pytest.mark.slow
+def test_a_nan_gimbal_rate_and_a_far_gimbal_angle_at_the_start() -> None:
+    """A NaN rate is the integrators' non-finite start (code 3); an angle of
+    a million turns is integrated as the same angle near 0 (sin and cos
+    reduce it exactly): the carrier's and the wheels' rates agree."""
+    scene = parse(GOOD, "vscmg3.toml")
+    compiled = api.compile(scene)
+    c = compiled.setup(np.zeros(0))
+    x0 = np.array(scene.initial_state())
+    bad = x0.copy()
+    bad[scene.states.index("gd1")] = np.nan
+    for method in ("dop853", "taylor", "radau5"):
+        assert compiled.integrate(method, bad, c, 0.0, 1.0)[2] == 3
+    gam, turns = scene.states.index("gam1"), 1e6 * 2 * np.pi
+    near = x0.copy()
+    near[gam] = 0.3
+    far = near.copy()
+    far[gam] += turns
+    a, _, code_a = compiled.integrate("dop853", near, c, 0.0, 5.0, rtol=1e-12, atol=1e-12)
+    b, _, code_b = compiled.integrate("dop853", far, c, 0.0, 5.0, rtol=1e-12, atol=1e-12)
+    assert code_a == code_b == 0
+    rates = [scene.states.index(s) for s in ("u1", "u2", "u3", "gd1", "gd2", "w1")]
+    # far's angle itself holds only |gam| eps ~ 1e-9 rad: the rates follow it
+    assert np.abs(a[rates] - b[rates]).max() < 1e-6 * np.abs(a[rates]).max()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["vscmg3", "cmg4_pyramid"])
+def test_the_builtin_cmg_scenes_match_the_gimbal_reference(name: str, tmp_path: Path) -> None:
+    from gyrogen.oracle.compare import compare
+    from gyrogen.runtime.scene_build import build_scene
+
+    scene = parse(builtin_text(name), f"{name}.toml")
+    _, backends = build_scene(scene, tmp_path, scene.targets, lambda _: None)
+    report = compare(list(backends.values()), scene, n_states=500, n_params=5, n_ill=0, seed=5)
+    assert report.passed, [r for r in report.rows if not r.passed]
+    assert {"C vs reference", "Fortran vs reference", "C vs reference power"} <= {
+        r.pair for r in report.rows
+    }
