@@ -223,3 +223,14 @@ def test_the_builtin_cmg_scenes_match_the_gimbal_reference(name: str, tmp_path: 
     assert {"C vs reference", "Fortran vs reference", "C vs reference power"} <= {
         r.pair for r in report.rows
     }
+
+
+@pytest.mark.slow
+def test_ops_splits_a_cmg_scene_and_refuses_one_without_gimbals(cli) -> None:
+    code, out, _ = cli(["ops", "vscmg3"])
+    assert code == 0, out
+    ops = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()[1:]}
+    assert ops["(fixed)"] + ops["(solve)"] + ops["(gimbal)"] == ops["(rhs)"]
+    assert 30 <= ops["(solve)"] <= 50  # 6 cofactors, a determinant, 1/det, three rows
+    code, out, err = cli(["ops", "rw3_orthogonal"])
+    assert (code, out) == (1, "") and "rw3_orthogonal: no rotor on a gimbal" in err
