@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 80ec761293095ce1: a hash of the scene, gyrogen and sympy versions
+! Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -49,7 +49,7 @@ module cmg4_pyramid_mod
   public :: cmg4_pyramid_angular_momentum
   public :: cmg4_pyramid_power
 
-  character(len=*), parameter, public :: CMG4_PYRAMID_BUILD_ID = "80ec761293095ce1"
+  character(len=*), parameter, public :: CMG4_PYRAMID_BUILD_ID = "cff2c9d7bec2152d"
   integer, parameter, public :: CMG4_PYRAMID_NX = 18  ! states
   integer, parameter, public :: CMG4_PYRAMID_NP = 2  ! parameters
   integer, parameter, public :: CMG4_PYRAMID_NC = 3  ! hoisted constants

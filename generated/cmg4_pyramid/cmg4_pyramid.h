@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 80ec761293095ce1: a hash of the scene, gyrogen and sympy
+ * Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,7 +19,7 @@
 extern "C" {
 #endif
 
-#define CMG4_PYRAMID_BUILD_ID "80ec761293095ce1"
+#define CMG4_PYRAMID_BUILD_ID "cff2c9d7bec2152d"
 
 #define CMG4_PYRAMID_NX 18   /* states */
 #define CMG4_PYRAMID_NP 2   /* parameters */

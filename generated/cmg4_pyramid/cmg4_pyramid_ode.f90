@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 80ec761293095ce1. The same interface as cmg4_pyramid_ode.h, under
+! Build id cff2c9d7bec2152d. The same interface as cmg4_pyramid_ode.h, under
 ! the bind(C) names cmg4_pyramid_f_<method> and cmg4_pyramid_f_<method>_batch.
 ! Coefficients and their published sources as above each method in cmg4_pyramid_ode.c.
 ! cmg4_pyramid_f.h declares these bind(C) procedures for C callers.
