@@ -211,12 +211,15 @@ def test_a_nan_gimbal_rate_and_a_far_gimbal_angle_at_the_start() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["vscmg3", "cmg4_pyramid"])
-def test_the_builtin_cmg_scenes_match_the_gimbal_reference(name: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED],
+    ids=["vscmg3", "cmg4_pyramid", "mixed"],
+)  # fmt: skip
+def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> None:
     from gyrogen.oracle.compare import compare
     from gyrogen.runtime.scene_build import build_scene
 
-    scene = parse(builtin_text(name), f"{name}.toml")
+    scene = parse(text, "scene.toml")
     _, backends = build_scene(scene, tmp_path, scene.targets, lambda _: None)
     report = compare(list(backends.values()), scene, n_states=500, n_params=5, n_ill=0, seed=5)
     assert report.passed, [r for r in report.rows if not r.passed]
