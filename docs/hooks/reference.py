@@ -126,7 +126,7 @@ def _model_table(model: type[BaseModel], prefix: str) -> str:
 def scene_schema() -> str:
     from gyrogen.scene import Effects, Outputs, Scene, Simulate
     from gyrogen.scene.events import Event
-    from gyrogen.scene.rotors import Rotor
+    from gyrogen.scene.rotors import Gimbal, Rotor
 
     parts = [
         ("Top level", Scene, ""),
@@ -134,6 +134,7 @@ def scene_schema() -> str:
         ("`[outputs]`", Outputs, ""),
         ("`[simulate]`", Simulate, ""),
         ("`[[rotors]]` (one table per wheel of a cluster)", Rotor, ""),
+        ("`[rotors.gimbal]` (a rotor on a gimbal: a control-moment gyro)", Gimbal, "gimbal."),
         ("`[[events]]` (one table per event)", Event, ""),
     ]
     out = []

@@ -83,6 +83,10 @@ def unit_and_doc(name: str) -> tuple[str, str]:
         return UNITS[name]
     if name.startswith("th") and name[2:].isdigit():
         return ("rad", f"angle of rotor B{name[2:]} about g{name[2:]} relative to A")
+    if name.startswith("gam") and name[3:].isdigit():
+        return ("rad", f"angle of gimbal G{name[3:]} about its axis relative to A")
+    if name.startswith("gd") and name[2:].isdigit():
+        return ("rad/s", f"rate of gimbal G{name[2:]} about its axis relative to A")
     if name.startswith("w") and name[1:].isdigit():
         return ("rad/s", f"absolute angular velocity of rotor B{name[1:]}, along g{name[1:]}")
     key, _, k = name.rpartition("_")

@@ -17,13 +17,15 @@ scale."""
 
 def state_group(name: str) -> str:
     """A state's group (STATE_GROUPS), by its unit and whether it is a
-    rotor's (ROTOR_STATES or a cluster's derived name): the carrier's Euler
+    rotor's (ROTOR_STATES or a cluster's derived name; a gimbal's rate is
+    measured with the carrier's): the carrier's Euler
     angles or Euler parameters are its attitude; translation is the mass
     center's position and velocity."""
     unit = unit_and_doc(name)[0]
     if unit in ("m", "m/s"):
         return "translation"
-    rotor = name in ROTOR_STATES or name not in UNITS
+    # a gimbal's rate (gd<k>) is of the carrier's size, not its wheel's
+    rotor = name in ROTOR_STATES or (name not in UNITS and not name.startswith("gd"))
     if unit == "rad/s":
         return "rotor rates" if rotor else "carrier rates"
     return "rotor angles" if rotor else "attitude"

@@ -17,6 +17,13 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
     "k": ("N m s", "speed controller gain of rotor B{k}: T = -k (w{k} - g{k}.w_A - w_ref)"),
     "w_ref": ("rad/s", "speed controller of rotor B{k}: commanded rate relative to A"),
     "tau_max": ("N m", "torque limit of rotor B{k}: the motor torque is clamped to +-tau_max"),
+    "mG": ("kg", "mass of gimbal frame G{k}"),
+    "IGs": ("kg m^2", "inertia of gimbal frame G{k} about its mass center, along g_s"),
+    "IGt": ("kg m^2", "inertia of gimbal frame G{k} about its mass center, along g_t"),
+    "IGg": ("kg m^2", "inertia of gimbal frame G{k} about its mass center, along g_g"),
+    "Tg": ("N m", "gimbal motor torque on G{k} about g_g (minus on A)"),
+    "kg": ("N m s", "gimbal rate servo gain of G{k}: u_g = -kg (gd{k} - rate_ref)"),
+    "rate_ref": ("rad/s", "gimbal rate servo of G{k}: commanded rate relative to A"),
     **{
         f"r{i}": ("m", f'position of B{{k}}* from A*, a{i} component (position = "runtime")')
         for i in (1, 2, 3)
@@ -49,6 +56,18 @@ AXIS_NORM_SLACK = 1e-3
 refused: a folded axis by the scene, a runtime one by setup's code 8)."""
 
 
+GIMBAL_KEYS = {"T": "Tg", "k": "kg", "rate_ref": "rate_ref", "m": "mG"}
+"""A [rotors.gimbal] table's scalar keys by the name they take in p[] and the
+code (<name>_<k>): a gimbal's T is Tg_k, beside its wheel's T_k."""
+GIMBAL_INERTIA = ("IGs", "IGt", "IGg")
+"""A gimbal frame's principal inertias about its mass center, in its axes
+(g_s, g_t = g_g x g_s, g_g): the names of [rotors.gimbal] inertia's values."""
+GIMBAL_PERP_SLACK = 1e-3
+"""A gimbal axis g_g and its wheel's spin axis g_s0 must be perpendicular
+within this (|g_s0 . g_g|, both unit); g_s0 is then made exactly
+perpendicular (a longer miss is a typo, refused by the scene)."""
+
+
 def rotor_name(key: str, k: int) -> str:
     """The name of rotor k's key in p[] and in the code: T_2, w_ref_3."""
     return f"{key}_{k}"
@@ -59,9 +78,15 @@ def axis_keys(k: int) -> str:
     return f"{rotor_name(AXIS[0], k)}..{rotor_name(AXIS[-1], k)}"
 
 
-def cluster_states(n: int, quaternion: bool, angles: bool) -> tuple[str, ...]:
-    """A cluster's states in x[] order: attitude, rotor angles th1..thN (if
-    kept), body rates u1..u3, absolute wheel rates w1..wN."""
+def cluster_states(
+    n: int, quaternion: bool, angles: bool, gimbals: tuple[int, ...] = ()
+) -> tuple[str, ...]:
+    """A cluster's states in x[] order: attitude, the fixed rotors' angles
+    th<k> (if kept; a wheel on a gimbal keeps none), the gimbal angles
+    gam<k> of the rotors on gimbals (gimbals: their k), body rates u1..u3,
+    the gimbal rates gd<k> relative to A, absolute wheel rates w1..wN."""
     attitude = ("e0", "e1", "e2", "e3") if quaternion else ("q1", "q2", "q3")
-    th = tuple(f"th{k}" for k in range(1, n + 1)) if angles else ()
-    return (*attitude, *th, "u1", "u2", "u3", *(f"w{k}" for k in range(1, n + 1)))
+    th = tuple(f"th{k}" for k in range(1, n + 1) if k not in gimbals) if angles else ()
+    gam = tuple(f"gam{k}" for k in gimbals)
+    gd = tuple(f"gd{k}" for k in gimbals)
+    return (*attitude, *th, *gam, "u1", "u2", "u3", *gd, *(f"w{k}" for k in range(1, n + 1)))

@@ -288,7 +288,8 @@ class SceneContext:
 
     @property
     def torque_tables(self) -> list[Table]:
-        """Every T(t) table: the scene's torque, or each cluster rotor's torque_k."""
+        """Every T(t) table: the scene's torque, or each cluster rotor's
+        torque_k, then each gimbal's torqueg_k."""
         if self.torque_table:
             doc = "T(t), piecewise linear through the scene's table, constant outside it."
             return [Table("torque", self.torque_table, doc)]
@@ -301,6 +302,15 @@ class SceneContext:
             )
             for k, r in enumerate(self.scene.rotors, 1)
             if r.torque_table
+        ] + [
+            Table(
+                f"torqueg_{k}",
+                r.gimbal.torque_table,
+                f"Tg_{k}(t), gimbal G{k}'s motor torque, piecewise linear through its table, "
+                "constant outside it.",
+            )
+            for k, r in enumerate(self.scene.rotors, 1)
+            if r.gimbal is not None and r.gimbal.torque_table
         ]
 
     @property

@@ -7,10 +7,26 @@ from typing import Any
 
 import click
 
+from gyrogen.commands.options import SCENE
+from gyrogen.errors import GyrogenError
+from gyrogen.scene import Scene
+
 
 @click.command()
-def ops() -> None:
-    """Op counts of the raw, CSE-only and lumped + hoisted + CSE variants."""
+@click.argument("scene", type=SCENE, required=False)
+def ops(scene: Scene | None) -> None:
+    """Op counts of the raw, CSE-only and lumped + hoisted + CSE variants of
+    the full model; with SCENE, a cluster with rotors on gimbals: its rhs
+    split into the same cluster with fixed axes, the carrier's 3x3 solve
+    and the gimbals' kinematics."""
+    if scene is not None:
+        if not any(r.gimbal is not None for r in scene.rotors):
+            raise GyrogenError(f"{scene.name}: no rotor on a gimbal; `gyrogen ops` alone "
+                               "counts the full model's variants")  # fmt: skip
+        from gyrogen.symbolic.opcounts import gimbal_split
+
+        print_ops(gimbal_split(scene))
+        return
     from gyrogen.codegen.generate import full_model_unit
     from gyrogen.symbolic.opcounts import variants
 

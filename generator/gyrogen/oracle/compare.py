@@ -246,6 +246,7 @@ def _bar(pair: str, cond: float, bar: Callable[[float], float]) -> float:
 def _time_span(scene: Scene) -> tuple[float, float]:
     """Times to evaluate at: across a T(t) table and beyond both its ends."""
     tables = [scene.effects.torque_table, *(r.torque_table for r in scene.rotors)]
+    tables += [r.gimbal.torque_table for r in scene.rotors if r.gimbal is not None]
     times = [t for table in tables if table for t, _ in table]
     if not times:
         return (0.0, 1.0)

@@ -11,7 +11,7 @@ import numpy as np
 
 from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
 from gyrogen.abi_rotors import AXIS_NORM_SLACK
-from gyrogen.oracle import cluster_reference, reference, sampling
+from gyrogen.oracle import cluster_reference, gimbal_view, reference, sampling
 from gyrogen.scene import Scene
 from gyrogen.scene import events as scene_events
 
@@ -111,11 +111,10 @@ def full_parameters(
 def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     xs = np.atleast_2d(xs)
     if scene.rotors:
-        out = cluster_reference.rhs(scene, xs, values(scene, p_runtime), t)
+        cluster = gimbal_view if gimbal_view.has_gimbals(scene) else cluster_reference
+        out = cluster.rhs(scene, xs, values(scene, p_runtime), t)
         if scene.attitude == "quaternion":
-            out[:, :4] = quaternion_rates(
-                xs[:, :4], xs[:, -3 - len(scene.rotors) : -len(scene.rotors)]
-            )
+            out[:, :4] = quaternion_rates(xs[:, :4], xs[:, _body_rates(scene)])
         return out
     x_full = full_states(scene, xs)
     full = reference.rhs(x_full, full_parameters(scene, p_runtime, x_full, t))
@@ -128,6 +127,11 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     return out
 
 
+def _body_rates(scene: Scene) -> list[int]:
+    """Where u1..u3 sit in a cluster's x[]."""
+    return [scene.states.index(f"u{i}") for i in (1, 2, 3)]
+
+
 def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> np.ndarray:
     """(n, K) values whose signs change exactly where the rhs is not smooth
     in the state: a cluster's torque clamps (cluster_reference.clamp_margins);
@@ -135,7 +139,8 @@ def kinks(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -
     xs = np.atleast_2d(xs)
     if not scene.rotors:
         return np.zeros((len(xs), 0))
-    return cluster_reference.clamp_margins(scene, xs, values(scene, p_runtime), t)
+    cluster = gimbal_view if gimbal_view.has_gimbals(scene) else cluster_reference
+    return cluster.clamp_margins(scene, xs, values(scene, p_runtime), t)
 
 
 def output(
@@ -150,7 +155,8 @@ def output(
             angles = np.zeros((len(xs), len(STATES)))
             angles[:, :3] = xs[:, :3]
             dcm = reference.direction_cosines(angles)
-        return cluster_reference.outputs(scene, name, xs, values(scene, p_runtime), dcm, t)
+        cluster = gimbal_view if gimbal_view.has_gimbals(scene) else cluster_reference
+        return cluster.outputs(scene, name, xs, values(scene, p_runtime), dcm, t)
     x_full = full_states(scene, xs)
     p = full_parameters(scene, p_runtime, x_full, t)
     if name == "kinetic_energy":
@@ -288,6 +294,8 @@ def random_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
 def condition(scene: Scene, p_runtime: np.ndarray) -> float:
     """The condition number compare groups parameter sets by: the coupled
     block's (a cluster's: its folded inertia's, ||A||_F ||A^-1||_F)."""
+    if gimbal_view.has_gimbals(scene):
+        return gimbal_view.condition(scene, values(scene, p_runtime))
     if scene.rotors:
         return cluster_reference.condition(scene, values(scene, p_runtime))
     full = full_parameters(scene, p_runtime, np.zeros((1, len(STATES))), 0.0)[0]
@@ -298,7 +306,11 @@ _CLUSTER_DRAWS = {
     "T": lambda rng, n: rng.uniform(-0.5, 0.5, n),
     "k": lambda rng, n: np.exp(rng.uniform(np.log(1e-2), np.log(10.0), n)),
     "w_ref": lambda rng, n: rng.uniform(-300.0, 300.0, n),
+    "Tg": lambda rng, n: rng.uniform(-0.5, 0.5, n),
+    "kg": lambda rng, n: np.exp(rng.uniform(np.log(1e-3), np.log(1.0), n)),
+    "rate_ref": lambda rng, n: rng.uniform(-1.0, 1.0, n),
 }
+"""A runtime torque law's values, by key (a gimbal's Tg, kg and rate_ref too)."""
 
 
 def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
@@ -345,17 +357,21 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
 
 
 def _cluster_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:
-    """Attitudes away from gimbal lock (or unit quaternions), rotor angles,
-    body rates of order 1 rad/s and wheel rates up to 300 rad/s."""
-    out = np.zeros((n, len(scene.states)))
-    k = len(scene.rotors)
+    """Attitudes away from gimbal lock (or unit quaternions), rotor and
+    gimbal angles, body and gimbal rates of order 1 rad/s and wheel rates up
+    to 300 rad/s."""
+    names = scene.states
+    out = np.zeros((n, len(names)))
     if scene.attitude == "quaternion":
         e = rng.normal(size=(n, 4))
         out[:, :4] = e / np.linalg.norm(e, axis=1, keepdims=True)
     else:
         out[:, :3] = rng.uniform(-1.4, 1.4, (n, 3))
-    if scene.effects.rotor_angle:
-        out[:, -3 - 2 * k : -3 - k] = rng.uniform(-np.pi, np.pi, (n, k))
-    out[:, -3 - k : -k] = rng.normal(size=(n, 3))
-    out[:, -k:] = rng.uniform(-300.0, 300.0, (n, k))
+    for i, name in enumerate(names):
+        if name.startswith(("th", "gam")):
+            out[:, i] = rng.uniform(-np.pi, np.pi, n)
+        elif name.startswith(("u", "gd")):
+            out[:, i] = rng.normal(size=n)
+        elif name.startswith("w"):
+            out[:, i] = rng.uniform(-300.0, 300.0, n)
     return out

@@ -264,7 +264,8 @@ class Scene(_Strict):
         rotor keys too)."""
         names = set(self.folded())
         for k, r in enumerate(self.rotors, 1):
-            for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *r.law().items()):
+            for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *r.law().items(),
+                           *rotors.gimbal_law(r).items()):  # fmt: skip
                 if v != "runtime":
                     names.add(rotor_name(key, k))
         return names
@@ -296,6 +297,11 @@ class Scene(_Strict):
         clamped = [k for k, r in enumerate(self.rotors, 1) if r.tau_max is not None]
         if clamped:
             return f"rotor {clamped[0]}'s motor torque is clamped to tau_max"
+        for k, r in enumerate(self.rotors, 1):
+            if r.gimbal is not None and r.gimbal.torque == "table":
+                return f"gimbal {k}'s piecewise-linear torque table"
+            if r.gimbal is not None and r.gimbal.tau_max is not None:
+                return f"gimbal {k}'s motor torque is clamped to tau_max"
         return None
 
     @property

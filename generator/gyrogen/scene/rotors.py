@@ -38,6 +38,8 @@ from gyrogen.abi_rotors import (
     AXIS,
     AXIS_NORM_SLACK,
     CLUSTER_CARRIER,
+    GIMBAL_KEYS,
+    GIMBAL_PERP_SLACK,
     POSITION,
     ROTOR_RUNTIME,
     axis_keys,
@@ -91,6 +93,100 @@ Vector = Annotated[tuple[float, float, float] | Literal["runtime"], BeforeValida
 
 LAW_KEYS = {"none": (), "constant": ("T",), "speed_controller": ("k", "w_ref"), "table": ()}
 """The keys each torque law needs (and allows); a table's points are its torque_table."""
+GIMBAL_LAW_KEYS = {"none": (), "constant": ("T",), "rate_servo": ("k", "rate_ref"), "table": ()}
+"""A gimbal's torque laws and the keys each needs; rate_servo: u_g = -k (gd - rate_ref)."""
+
+
+def _inertia(v: object) -> object:
+    """A gimbal frame's principal inertias [IGs, IGt, IGg]: three folded
+    numbers, each 0 or a folded value's size (checked positive below)."""
+    if not isinstance(v, list | tuple):
+        raise ValueError(f"expected [IGs, IGt, IGg], not {shown(v)}")
+    if len(v) != 3:
+        raise ValueError(
+            f"{len(v)} values, not 3: give the principal inertias [IGs, IGt, IGg] "
+            "(in the gimbal frame's axes g_s, g_t, g_g)"
+        )
+    return tuple(parameter_value(x) for x in v)
+
+
+class Gimbal(BaseModel):
+    """A [rotors.gimbal] table: the rotor's wheel turns on a gimbal frame G
+    about the axis g_g (fixed in A, perpendicular to the spin axis), driven
+    by its own torque law (u_g on G about g_g, minus on A)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    axis: Vector
+    """g_g in A-components: length within AXIS_NORM_SLACK of 1."""
+    inertia: Annotated[tuple[float, float, float], BeforeValidator(_inertia)]
+    """The gimbal frame's principal inertias about its mass center (on the
+    gimbal axis at the rotor's position), kg m^2: [IGs, IGt, IGg]."""
+    m: Annotated[Folded, Field(gt=0)]
+    """The gimbal frame's mass, kg (at the rotor's position), folded."""
+    torque: str = "none"
+    """One of GIMBAL_LAW_KEYS: none, constant (T), rate_servo (k, rate_ref), table."""
+    T: Value | None = None
+    """torque = "constant": the gimbal motor torque, N m."""
+    k: Value | None = None
+    """torque = "rate_servo": the gain, N m s."""
+    rate_ref: Value | None = None
+    """torque = "rate_servo": the commanded gimbal rate relative to A, rad/s."""
+    tau_max: Annotated[Folded, Field(ge=0)] | None = None
+    """|u_g| is clamped to tau_max."""
+    torque_table: list[tuple[Number, Number]] | None = None
+    """torque = "table": (t, T) points of a piecewise-linear u_g(t)."""
+
+    @field_validator("axis")
+    @classmethod
+    def _axis(cls, v: tuple[float, float, float] | str) -> tuple[float, float, float] | str:
+        if v == "runtime":
+            raise ValueError('a gimbal axis is folded: give [x, y, z], not "runtime"')
+        check_axis(v, "")  # type: ignore[arg-type]
+        return v
+
+    @field_validator("torque")
+    @classmethod
+    def _law(cls, v: str) -> str:
+        if v not in GIMBAL_LAW_KEYS:
+            raise ValueError(f"{v!r}: not one of {', '.join(map(repr, GIMBAL_LAW_KEYS))}")
+        return v
+
+    @model_validator(mode="after")
+    def _rules(self) -> Gimbal:
+        check_principal(self.inertia, "inertia")
+        check_table(self.torque, self.torque_table)
+        need = GIMBAL_LAW_KEYS[self.torque]
+        for key in ("T", "k", "rate_ref"):
+            given = getattr(self, key) is not None
+            if given and key not in need:
+                raise ValueError(f"{key}: not used with torque = {self.torque!r}")
+            if not given and key in need:
+                raise ValueError(f"torque = {self.torque!r} needs {key}")
+        return self
+
+    @property
+    def unit_axis(self) -> tuple[Fraction, Fraction, Fraction]:
+        """g_g normalized exactly (exact_unit)."""
+        return exact_unit(self.axis)  # type: ignore[arg-type]
+
+    def law(self) -> dict[str, float | str]:
+        """The torque law's parameters by key."""
+        return {
+            key: v for key in GIMBAL_LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None
+        }
+
+
+def check_principal(moments: tuple[float, float, float], where: str) -> None:
+    """A rigid body's principal inertias: each positive, each at most the sum
+    of the other two (within TRIANGLE_SLACK): a positive-definite tensor."""
+    for name, x in zip(("IGs", "IGt", "IGg"), moments, strict=True):
+        if not x > 0.0:
+            raise ValueError(f"{where}: {name} must be positive (got {x})")
+    total = sum(moments)
+    if 2.0 * max(moments) - total > TRIANGLE_SLACK * total:
+        text = ", ".join(f"{x:.6g}" for x in moments)
+        raise ValueError(f"{where}: principal inertias ({text}) violate the triangle inequality")
 
 
 class Rotor(BaseModel):
@@ -124,13 +220,20 @@ class Rotor(BaseModel):
     torque_table: list[tuple[Number, Number]] | None = None
     """torque = "table": (t, T) points of a piecewise-linear T(t), held
     constant outside (as the single rotor's effects.torque_table)."""
+    gimbal: Gimbal | None = None
+    """[rotors.gimbal]: the wheel turns on a gimbal (a control-moment gyro);
+    axis is then the spin axis g_s0 at gimbal angle 0, position the common
+    mass center of gimbal frame and wheel."""
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: Any) -> Any:
-        """Without a table, the dump of a rotor before tables (its scene's build id)."""
+        """Without a table, the dump of a rotor before tables (its scene's build
+        id); without a gimbal, the dump of a rotor before gimbals."""
         data = handler(self)
         if self.torque_table is None and isinstance(data, dict):
             data.pop("torque_table", None)
+        if self.gimbal is None and isinstance(data, dict):
+            data.pop("gimbal", None)
         return data
 
     @field_validator("axis")
@@ -158,6 +261,8 @@ class Rotor(BaseModel):
         elif self.J != "runtime" and not self.J > 0.0:
             raise ValueError(f"J: must be positive (got {self.J})")
         check_table(self.torque, self.torque_table)
+        if self.gimbal is not None:
+            check_gimbal(self)
         need = LAW_KEYS[self.torque]
         for key in ("T", "k", "w_ref"):
             given = getattr(self, key) is not None
@@ -180,6 +285,22 @@ class Rotor(BaseModel):
     def law(self) -> dict[str, float | str]:
         """The torque law's parameters by key."""
         return {key: v for key in LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None}
+
+
+def check_gimbal(r: Rotor) -> None:
+    """A rotor on a gimbal: a folded spin axis perpendicular to the gimbal
+    axis within GIMBAL_PERP_SLACK."""
+    if r.axis == "runtime":
+        raise ValueError('axis: a rotor on a gimbal has a folded spin axis, not "runtime"')
+    assert r.gimbal is not None
+    dot = abs(
+        sum(float(a) * float(b) for a, b in zip(r.unit_axis, r.gimbal.unit_axis, strict=True))
+    )
+    if not dot <= GIMBAL_PERP_SLACK:
+        raise ValueError(
+            f"gimbal.axis: not perpendicular to the spin axis (|g_s0 . g_g| = {dot:.6g} > "
+            f"{GIMBAL_PERP_SLACK:g}): a gimbal turns the wheel's axis about a perpendicular one"
+        )
 
 
 def check_axis(axis: tuple[float, float, float], where: str) -> None:
@@ -210,9 +331,27 @@ def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) ->
     return carrier + tuple(
         rotor_name(key, k)
         for k, r in enumerate(rotors, 1)
-        for key, v in (("m", r.m), ("I", r.I), ("J", r.J), *_vectors(r), *r.law().items())
+        for key, v in (
+            ("m", r.m),
+            ("I", r.I),
+            ("J", r.J),
+            *_vectors(r),
+            *r.law().items(),
+            *gimbal_law(r).items(),
+        )
         if v == "runtime"
     )
+
+
+def gimbal_law(r: Rotor) -> dict[str, float | str]:
+    """A gimbal's torque law's parameters by their names in p[] (GIMBAL_KEYS:
+    Tg, kg, rate_ref); none without a gimbal."""
+    return {} if r.gimbal is None else {GIMBAL_KEYS[k]: v for k, v in r.gimbal.law().items()}
+
+
+def gimbals(rotors: list[Rotor]) -> tuple[int, ...]:
+    """The rotors on gimbals, by k (1..N)."""
+    return tuple(k for k, r in enumerate(rotors, 1) if r.gimbal is not None)
 
 
 def _vectors(r: Rotor) -> tuple[tuple[str, str], ...]:
@@ -262,7 +401,7 @@ def unit_axes(rotors: list[Rotor], given: Mapping[str, float]) -> np.ndarray:
 
 
 def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:
-    return cluster_states(len(rotors), quaternion, angles)
+    return cluster_states(len(rotors), quaternion, angles, gimbals(rotors))
 
 
 def check_cluster(
@@ -341,8 +480,22 @@ def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -
     return physics.cluster_inertia(
         float(parameters["m_a"]),
         carrier_tensor(parameters),
-        [(float(r.m), float(r.I), [float(x) for x in r.unit_axis], r.position) for r in rotors],
+        [
+            (float(r.m) + mass, float(inertia), [float(x) for x in axis], r.position)
+            for r in rotors
+            for mass, inertia, axis in [lumped_part(r)]
+        ],
     )
+
+
+def lumped_part(r: Rotor) -> tuple[float, float | str, tuple[Fraction, Fraction, Fraction]]:
+    """What a rotor adds to the lumped inertia beside its mass: (the mass of
+    its gimbal frame, the transverse inertia, the axis it is transverse to).
+    A fixed rotor's I about g; a gimbal's constant part, IGs about g_g (the
+    rest turns with the gimbal: symbolic.gimbals)."""
+    if r.gimbal is None:
+        return 0.0, r.I, r.unit_axis
+    return r.gimbal.m, r.gimbal.inertia[0], r.gimbal.unit_axis
 
 
 DENOMINATOR = 10**9

@@ -25,6 +25,7 @@ the proof then holds on the unit sphere (|g_k| = 1 reduces its squares).
 from __future__ import annotations
 
 import dataclasses
+from fractions import Fraction
 
 import sympy as sm
 import sympy.physics.mechanics as me
@@ -39,7 +40,7 @@ from gyrogen.abi_rotors import (
     rotor_name,
 )
 from gyrogen.scene import Scene
-from gyrogen.scene.rotors import Rotor
+from gyrogen.scene.rotors import Rotor, lumped_part
 from gyrogen.symbolic import equations, model
 from gyrogen.symbolic.equations import Equations
 
@@ -54,7 +55,11 @@ def _axis(r: Rotor, k: int) -> sm.Matrix:
     a runtime axis: setup's normalized scalars gn1_k..gn3_k (_unit_axes)."""
     if r.axis == "runtime":
         return sm.Matrix(_plain(tuple(rotor_name(key, k) for key in UNIT_AXIS)))
-    return sm.Matrix([sm.Rational(x.numerator, x.denominator) for x in r.unit_axis])
+    return _exact(r.unit_axis)
+
+
+def _exact(v: tuple[Fraction, Fraction, Fraction]) -> sm.Matrix:
+    return sm.Matrix([sm.Rational(x.numerator, x.denominator) for x in v])
 
 
 def _unit_axes(scene: Scene) -> dict[sm.Symbol, sm.Expr]:
@@ -92,20 +97,33 @@ def _carrier(scene: Scene) -> list[list[sm.Expr]]:
 
 def lumped_inertia(scene: Scene) -> sm.Matrix:
     """I~ about the mass center C, exact: numbers, or expressions in the
-    runtime parameters (carrier tensor, masses, transverse inertias)."""
+    runtime parameters (carrier tensor, masses, transverse inertias); a
+    rotor on a gimbal adds its frame's mass and its constant part IGs (1 -
+    g_g g_g^T) (scene.rotors.lumped_part; symbolic.gimbals adds the rest)."""
     rotors = [
         (
-            _param(rotor_name("m", k), r.m),
-            _param(rotor_name("I", k), r.I),
-            list(_axis(r, k)),
+            _param(rotor_name("m", k), r.m) + mass,
+            inertia,
+            axis,
             [sm.Symbol(rotor_name(key, k), real=True) for key in POSITION]
             if r.position == "runtime"
             else [_number(x) for x in r.position],
         )
         for k, r in enumerate(scene.rotors, 1)
+        for mass, inertia, axis in [_transverse(r, k)]
     ]
     m_a = _param("m_a", scene.parameters["m_a"])
     return sm.Matrix(physics.cluster_inertia(m_a, _carrier(scene), rotors))
+
+
+def _transverse(r: Rotor, k: int) -> tuple[sm.Expr, sm.Expr, list[sm.Expr]]:
+    """What rotor k adds to I~ beside its mass: a gimbal frame's mass, and
+    the transverse inertia with the axis it is transverse to (a fixed
+    rotor's I about g; a gimbal's IGs about g_g: scene.rotors.lumped_part)."""
+    if r.gimbal is None:
+        return sm.S.Zero, _param(rotor_name("I", k), r.I), list(_axis(r, k))
+    mass, inertia, axis = lumped_part(r)
+    return _number(mass), _number(float(inertia)), list(_exact(axis))
 
 
 LUMPED = ((0, 0, "IC11"), (1, 1, "IC22"), (2, 2, "IC33"), (0, 1, "IC12"), (0, 2, "IC13"),
@@ -200,24 +218,24 @@ def inputs(scene: Scene) -> tuple[str, ...]:
 
 
 def _torques(
-    scene: Scene, states: dict[str, sm.Symbol], axes: list[sm.Matrix], perturbed: bool = False
+    scene: Scene, states: dict[str, sm.Symbol], along: list[sm.Expr], perturbed: bool = False
 ) -> dict:
     """Each rotor's net torque, and the named values it reads: rel_k (the
-    rate relative to A) when friction or a speed controller needs it. With
-    perturbed, each rotor's input plus its delta (Equations.perturbed)."""
-    w_a = sm.Matrix([states["u1"], states["u2"], states["u3"]])
+    rate relative to A: w_k - along_k, along_k = g_k . w_A) when friction or
+    a speed controller needs it. With perturbed, each rotor's input plus its
+    delta (Equations.perturbed)."""
     shared: dict[sm.Symbol, sm.Expr] = {}
     nets: list[sm.Expr] = []
     motors: list[sm.Expr] = []
     inputs: list[sm.Symbol] = []
-    for k, (r, g) in enumerate(zip(scene.rotors, axes, strict=True), 1):
+    for k, (r, g_w) in enumerate(zip(scene.rotors, along, strict=True), 1):
         law = {key: _param(rotor_name(key, k), v) for key, v in r.law().items()}
         if perturbed:
             key = "w_ref" if r.torque == "speed_controller" else "T"
             law[key] = law.get(key, sm.S.Zero) + equations.delta(rotor_name(key, k))
         rel = sm.Symbol(f"{SLIP}{k}", real=True)
         if r.b or r.torque == "speed_controller":
-            shared[rel] = states[f"w{k}"] - g.dot(w_a)
+            shared[rel] = states[f"w{k}"] - g_w
         motor = law.get("T", sm.S.Zero)  # constant; a perturbed none or table
         if r.torque == "table":
             table = sm.Symbol(f"{TABLE}_{k}", real=True)
@@ -264,7 +282,8 @@ def _derive(scene: Scene) -> Equations:
         _on_sphere(a - b, axes) != 0 for a, b in zip(forcing, momentum, strict=True)
     ):
         raise AssertionError("internal: Kane's cluster equations differ from the momentum form")
-    torques = _torques(scene, st, axes)
+    along = [g.dot(w_a) for g in axes]
+    torques = _torques(scene, st, along)
     h = sm.Matrix(_plain(("h1", "h2", "h3")))
     f = sm.Matrix(_plain(tuple(f"{FORCING}{i}" for i in (1, 2, 3))))
     f_value = h.cross(w_a) - _by_axis_component(torques["nets"], axes)
@@ -278,7 +297,7 @@ def _derive(scene: Scene) -> Equations:
     eqs = dataclasses.replace(eqs, inputs=torques["inputs"], lumped=lumped)
     if not scene.outputs.linear_model:
         return eqs
-    torques = _torques(scene, st, axes, perturbed=True)
+    torques = _torques(scene, st, along, perturbed=True)
     f_value = h.cross(w_a) - _by_axis_component(torques["nets"], axes)
     shared = {
         **dict(zip(h, h_value, strict=True)),

@@ -12,7 +12,7 @@ import sympy as sm
 from gyrogen.abi import CONTROLLER_PARAMETERS
 from gyrogen.scene import Scene
 from gyrogen.setup_checks import checked_parameters
-from gyrogen.symbolic import cluster, equations, model
+from gyrogen.symbolic import cluster, equations, gimbals, model
 from gyrogen.symbolic import events as symbolic_events
 from gyrogen.symbolic.equations import Equations
 
@@ -59,7 +59,10 @@ def _torque(scene: Scene, v: dict[str, sm.Expr], u: dict[str, sm.Symbol]) -> sm.
 
 
 def specialize(scene: Scene) -> Equations:
-    eqs = cluster.derive(scene) if scene.rotors else _single(scene)
+    if any(r.gimbal is not None for r in scene.rotors):
+        eqs = gimbals.derive(scene)
+    else:
+        eqs = cluster.derive(scene) if scene.rotors else _single(scene)
     if scene.events:
         eqs = dataclasses.replace(eqs, events=symbolic_events.events(scene, eqs))
     return eqs

@@ -21,7 +21,7 @@ import numpy as np
 from gyrogen.abi import STATES
 from gyrogen.abi_rotors import rotor_name
 from gyrogen.analysis.simulate.trajectory import Trajectory, running_integrals
-from gyrogen.oracle import cluster_reference, scene_view
+from gyrogen.oracle import cluster_reference, gimbal_view, scene_view
 from gyrogen.scene import Scene
 
 
@@ -62,6 +62,8 @@ def rates(scene: Scene, p: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarr
     """(m, 2): the power P = dK/dt and the torque T at times t (m,), states
     x (m, nx), from the scene's torque law as the reference applies it."""
     v = scene_view.values(scene, p)
+    if gimbal_view.has_gimbals(scene):  # and each gimbal's torque times its rate
+        return gimbal_view.power_and_torque(scene, x, v, t)
     if scene.rotors:  # dK/dt: every net torque times its wheel's relative rate; wheel 1's
         return cluster_reference.power_and_torque(scene, x, v, t)
     full = scene_view.full_states(scene, x)
@@ -144,12 +146,20 @@ def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariant
     )
 
 
+def _torque_free(scene: Scene) -> bool:
+    """A cluster without motor torques or friction (a gimbal's torque too)."""
+    return all(
+        r.torque == "none" and r.b == 0 and (r.gimbal is None or r.gimbal.torque == "none")
+        for r in scene.rotors
+    )
+
+
 def in_closed_form(scene: Scene) -> bool:
     """Whether series_at_samples has the energy balance and the rate check
     in closed form (no torque or a constant one, a cluster without torque
     or friction); otherwise they take quadrature along the run."""
     if scene.rotors:
-        return all(r.torque == "none" and r.b == 0 for r in scene.rotors)
+        return _torque_free(scene)
     return scene.effects.torque in ("none", "constant")
 
 
@@ -162,7 +172,7 @@ def series_at_samples(
     J, their integrals in closed form."""
     out = {"|H| in N": momentum_drifts(momentum(scene, p, xs))[0]}
     if scene.rotors:  # a cluster's energy is constant when no wheel has torque or friction
-        if all(r.torque == "none" and r.b == 0 for r in scene.rotors):
+        if _torque_free(scene):
             out["energy balance"] = balance(kinetic(scene, p, xs), np.zeros(len(xs)))
         return out
     if scene.effects.torque not in ("none", "constant"):

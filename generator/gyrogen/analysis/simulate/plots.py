@@ -50,11 +50,17 @@ def _wheels(
     ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray, given: Mapping[str, float]
 ) -> None:
     """A cluster: each wheel's rate relative to the carrier, w_k - g_k . w_A
-    (a runtime axis's g_k from the runtime values given)."""
+    (a runtime axis's g_k from the runtime values given); on a gimbal,
+    relative to its gimbal: g_s turned by the gimbal angle gam_k."""
     w_a = np.column_stack([_column(scene, x, f"u{i}") for i in (1, 2, 3)])
-    for k, g in enumerate(unit_axes(scene.rotors, given), 1):
-        ax.plot(t, _column(scene, x, f"w{k}") - w_a @ g, label=f"w{k} - g{k}.w_A")
-    ax.set(title="wheel rates relative to the carrier", ylabel="rad/s")
+    for k, (r, g) in enumerate(zip(scene.rotors, unit_axes(scene.rotors, given), strict=True), 1):
+        along = w_a @ g
+        if r.gimbal is not None:
+            gam = _column(scene, x, f"gam{k}")
+            turned = np.cross([float(v) for v in r.gimbal.unit_axis], g)
+            along = np.cos(gam) * along + np.sin(gam) * (w_a @ turned)
+        ax.plot(t, _column(scene, x, f"w{k}") - along, label=f"w{k} - g{k}.w_A")
+    ax.set(title="wheel rates relative to the carrier (or gimbal)", ylabel="rad/s")
 
 
 def _attitude(ax: Axes, scene: Scene, t: np.ndarray, x: np.ndarray) -> None:

@@ -1,0 +1,247 @@
+"""Control-moment gyros: rotors on gimbals ([rotors.gimbal]), their scene
+rules, the proof of their equations and the compiled code's invariants."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sm
+
+from gyrogen import api
+from gyrogen.scene import Scene, builtin_text, parse
+from gyrogen.scene.rotors import exact_unit
+from gyrogen.symbolic import cluster, gimbals
+
+GOOD = builtin_text("vscmg3")
+
+
+def edit(old: str, new: str, text: str = GOOD) -> str:
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+FIXED = """[[rotors]]
+m = 2.0
+I = 0.01
+J = 0.015
+axis = [0.6, 0.8, 0.0]
+position = [0.2, 0.2, 0.0]
+b = 0.001
+torque = "constant"
+T = 0.01
+
+[simulate]"""
+MIXED = edit(
+    "inertia = [0.3, 0.3, 0.3]\nm = 6.0",
+    'inertia = [0.3, 0.25, 0.2]\nm = 6.0\ntorque = "constant"\nT = 0.02',
+    edit("[simulate]", FIXED, edit("rotor_angle = false", "rotor_angle = true")),
+)
+"""vscmg3 with a fixed rotor beside its gimbals, a gimbal torque, unequal
+gimbal inertias and the fixed rotor's angle kept."""
+RUNTIME = edit(
+    "initial = {",
+    "parameters = { m_1 = 6.0, I_1 = 0.0795, J_1 = 0.159 }\ninitial = {",
+    edit("m = 6.0\nI = 0.0795\nJ = 0.159\naxis = [0.0, 1.0, 0.0]",
+         'm = "runtime"\nI = "runtime"\nJ = "runtime"\naxis = [0.0, 1.0, 0.0]'),
+)  # fmt: skip
+"""vscmg3 with the first CMG's wheel mass and inertias at run time (setup
+checks them: the compare's refusals)."""
+
+G1 = "axis = [1.0, 0.0, 0.0]      # g_g"
+BAD = [
+    ("parallel axes", edit(G1, "axis = [0.0, 1.0, 0.0]"),
+     "rotors.0: gimbal.axis: not perpendicular to the spin axis (|g_s0 . g_g| = 1 > 0.001)"),
+    ("zero inertia", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.0, 0.1, 0.1]"),
+     "rotors.0.gimbal: inertia: IGs must be positive (got 0.0)"),
+    ("huge inertia", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [1e49, 0.1, 0.1]"),
+     "violate the triangle inequality"),
+    ("huge inertias", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [1e49, 1e49, 1e49]"),
+     "rotors: the lumped inertia has condition number"),
+    ("past a double", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [1e51, 1e51, 1e51]"),
+     "a folded value must be 0 or of magnitude 1e-50 to 1e+50"),
+    ("triangle", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.1, 0.1, 0.3]"),
+     "principal inertias (0.1, 0.1, 0.3) violate the triangle inequality"),
+    ("nan inertia", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.1, nan, 0.1]"),
+     "nan is not a finite number"),
+    ("six inertias", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.1, 0.1, 0.1, 0, 0, 0]"),
+     "6 values, not 3: give the principal inertias [IGs, IGt, IGg]"),
+    ("no mass", edit("inertia = [0.1, 0.1, 0.1]   # [IGs, IGt, IGg]\nm = 6.0",
+                     "inertia = [0.1, 0.1, 0.1]\nm = 0.0"),
+     "rotors.0.gimbal.m: Input should be greater than 0"),
+    ("runtime gimbal axis", edit(G1, 'axis = "runtime"'),
+     'a gimbal axis is folded: give [x, y, z], not "runtime"'),
+    ("runtime spin axis", edit("axis = [0.0, 1.0, 0.0]      # g_s0", 'axis = "runtime"'),
+     'a rotor on a gimbal has a folded spin axis, not "runtime"'),
+    ("servo without rate", edit("m = 6.0\n\n[[rotors]]", 'm = 6.0\ntorque = "rate_servo"\n'
+                                "k = 1.0\n\n[[rotors]]"),
+     "torque = 'rate_servo' needs rate_ref"),
+    ("unknown law", edit("m = 6.0\n\n[[rotors]]", 'm = 6.0\ntorque = "pid"\n\n[[rotors]]'),
+     "'pid': not one of 'none', 'constant', 'rate_servo', 'table'"),
+    ("unknown key", edit("m = 6.0\n\n[[rotors]]", "m = 6.0\nIGs = 1.0\n\n[[rotors]]"),
+     "rotors.0.gimbal.IGs: unknown key"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("case", "text", "message"), BAD, ids=[b[0] for b in BAD])
+def test_a_bad_gimbal_is_one_line_exit_2(
+    case: str, text: str, message: str, tmp_path: Path, cli
+) -> None:
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    code, stdout, err = cli(["generate", str(path), "--out", str(tmp_path / "out")])
+    assert code == 2, (case, err)
+    assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: "), err
+    assert message in err, err
+    assert not (tmp_path / "out").exists() and stdout == ""
+
+
+def test_the_states_are_the_gimbals_angles_and_rates() -> None:
+    scene = parse(MIXED, "mixed.toml")
+    assert scene.states == (
+        *("q1", "q2", "q3", "th4", "gam1", "gam2", "gam3", "u1", "u2", "u3"),
+        *("gd1", "gd2", "gd3", "w1", "w2", "w3", "w4"),
+    )
+
+
+def _units(scene: Scene) -> tuple[list[gimbals.Unit], sm.Matrix]:
+    units = [gimbals._unit(r, k) for k, r in enumerate(scene.rotors, 1)]
+    return units, cluster.lumped_inertia(scene)
+
+
+def test_kane_equals_the_momentum_form_with_a_fixed_rotor_beside() -> None:
+    units, lumped = _units(parse(MIXED, "mixed.toml"))
+    qdot = gimbals._prove(units, lumped, gimbals._carrier(units, lumped))
+    assert qdot.shape == (3, 1)
+
+
+def test_a_wrong_momentum_form_is_caught(monkeypatch: pytest.MonkeyPatch) -> None:
+    units, lumped = _units(parse(MIXED, "mixed.toml"))
+    right = gimbals._nd
+    # the gyroscopic term J w at with its sign turned
+    monkeypatch.setattr(gimbals, "_nd", lambda x, ug, w, sa, ta: right(x, ug, -w, sa, ta))
+    with pytest.raises(AssertionError, match="internal: Kane's gimbal equations differ"):
+        gimbals._prove(units, lumped, gimbals._carrier(units, lumped))
+
+
+def test_the_spin_axis_is_made_exactly_perpendicular() -> None:
+    text = edit("axis = [0.0, 1.0, 0.0]      # g_s0", "axis = [0.0004, 0.9999999, 0.0]")
+    (unit, *_), _ = _units(parse(text, "near.toml"))
+    assert unit.g_g is not None and unit.g_t0 is not None
+    assert unit.axis.dot(unit.g_g) == 0 and sm.simplify(unit.axis.dot(unit.axis)) == 1
+
+
+def _energy_rate_and_power(scene: Scene, rng: np.random.Generator) -> list[tuple[float, float]]:
+    """dK/dt at random states (central differences along f, Richardson) and
+    the motors' power less the friction's b Omega^2."""
+    compiled = api.compile(scene)
+    c = compiled.setup(np.array([scene.simulate.parameters[n] for n in scene.runtime]))
+    idx = {s: i for i, s in enumerate(scene.states)}
+    out = []
+    for _ in range(4):
+        x = np.array(scene.initial_state()) + rng.normal(size=len(scene.states)) * 0.3
+        f = compiled.rhs(x, c)
+        h = 1e-3
+
+        def energy(y: np.ndarray) -> float:
+            return float(compiled.output("kinetic_energy", y, c).ravel()[0])
+
+        def central(h: float, x: np.ndarray = x, f: np.ndarray = f) -> float:
+            return (energy(x + h * f) - energy(x - h * f)) / (2 * h)
+
+        rate = (4 * central(h / 2) - central(h)) / 3
+        w_a = x[[idx["u1"], idx["u2"], idx["u3"]]]
+        friction = 0.0
+        for k, r in enumerate(scene.rotors, 1):
+            g = np.array([float(v) for v in exact_unit(r.axis)])  # type: ignore[arg-type]
+            if r.gimbal is not None:
+                g_g = np.array([float(v) for v in r.gimbal.unit_axis])
+                gam = x[idx[f"gam{k}"]]
+                g = np.cos(gam) * g + np.sin(gam) * np.cross(g_g, g)
+            friction += r.b * (x[idx[f"w{k}"]] - g @ w_a) ** 2
+        power = float(compiled.output("power", x, c).sum())
+        out.append((rate, power - friction))
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("text", [builtin_text("cmg4_pyramid"), MIXED], ids=["pyramid", "mixed"])
+def test_the_energy_changes_by_the_motors_power(text: str) -> None:
+    """dK/dt = sum_k (u_s Omega + u_g gd) - b Omega^2, the power output's sum."""
+    for rate, power in _energy_rate_and_power(parse(text, "s.toml"), np.random.default_rng(3)):
+        assert rate == pytest.approx(power, rel=1e-6, abs=1e-12), (rate, power)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["taylor", "dop853"])
+def test_vscmg3_conserves_energy_and_momentum_over_60_s(method: str) -> None:
+    scene = parse(GOOD, "vscmg3.toml")
+    compiled = api.compile(scene)
+    c = compiled.setup(np.zeros(0))
+    x0 = np.array(scene.initial_state())
+    x1, _, code = compiled.integrate(method, x0, c, 0.0, 60.0, rtol=1e-13, atol=1e-13)
+    assert code == 0
+    h0, h1 = (compiled.output("angular_momentum", x, c).ravel() for x in (x0, x1))
+    k0, k1 = (float(compiled.output("kinetic_energy", x, c).ravel()[0]) for x in (x0, x1))
+    assert abs(np.linalg.norm(h1) / np.linalg.norm(h0) - 1) < 1e-13
+    # the wheels' J w^2 / 2 is constant (w' = 0): the balance of the rest
+    wheels = sum(0.5 * r.J * x0[scene.states.index(f"w{k}")] ** 2  # type: ignore[operator]
+                 for k, r in enumerate(scene.rotors, 1))  # fmt: skip
+    assert abs(k1 - k0) / (k0 - wheels) < 1e-12
+    assert np.abs(x1 - x0).max() > 1e-3  # the gimbals and the carrier have moved
+
+
+@pytest.mark.slow
+def test_a_nan_gimbal_rate_and_a_far_gimbal_angle_at_the_start() -> None:
+    """A NaN rate is the integrators' non-finite start (code 3); an angle of
+    a million turns is integrated as the same angle near 0 (sin and cos
+    reduce it exactly): the carrier's and the wheels' rates agree."""
+    scene = parse(GOOD, "vscmg3.toml")
+    compiled = api.compile(scene)
+    c = compiled.setup(np.zeros(0))
+    x0 = np.array(scene.initial_state())
+    bad = x0.copy()
+    bad[scene.states.index("gd1")] = np.nan
+    for method in ("dop853", "taylor", "radau5"):
+        assert compiled.integrate(method, bad, c, 0.0, 1.0)[2] == 3
+    gam, turns = scene.states.index("gam1"), 1e6 * 2 * np.pi
+    near = x0.copy()
+    near[gam] = 0.3
+    far = near.copy()
+    far[gam] += turns
+    a, _, code_a = compiled.integrate("dop853", near, c, 0.0, 5.0, rtol=1e-12, atol=1e-12)
+    b, _, code_b = compiled.integrate("dop853", far, c, 0.0, 5.0, rtol=1e-12, atol=1e-12)
+    assert code_a == code_b == 0
+    rates = [scene.states.index(s) for s in ("u1", "u2", "u3", "gd1", "gd2", "w1")]
+    # far's angle itself holds only |gam| eps ~ 1e-9 rad: the rates follow it
+    assert np.abs(a[rates] - b[rates]).max() < 1e-6 * np.abs(a[rates]).max()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME],
+    ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime"],
+)  # fmt: skip
+def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> None:
+    from gyrogen.oracle.compare import compare
+    from gyrogen.runtime.scene_build import build_scene
+
+    scene = parse(text, "scene.toml")
+    _, backends = build_scene(scene, tmp_path, scene.targets, lambda _: None)
+    report = compare(list(backends.values()), scene, n_states=500, n_params=5, n_ill=0, seed=5)
+    assert report.passed, [r for r in report.rows if not r.passed] + report.refusal_failures
+    assert {"C vs reference", "Fortran vs reference", "C vs reference power"} <= {
+        r.pair for r in report.rows
+    }
+
+
+@pytest.mark.slow
+def test_ops_splits_a_cmg_scene_and_refuses_one_without_gimbals(cli) -> None:
+    code, out, _ = cli(["ops", "vscmg3"])
+    assert code == 0, out
+    ops = {line.split()[0]: int(line.split()[1]) for line in out.splitlines()[1:]}
+    assert ops["(fixed)"] + ops["(solve)"] + ops["(gimbal)"] == ops["(rhs)"]
+    assert 30 <= ops["(solve)"] <= 50  # 6 cofactors, a determinant, 1/det, three rows
+    code, out, err = cli(["ops", "rw3_orthogonal"])
+    assert (code, out) == (1, "") and "rw3_orthogonal: no rotor on a gimbal" in err
