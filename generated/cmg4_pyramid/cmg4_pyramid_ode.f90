@@ -4937,9 +4937,9 @@ contains
   function cmg4_pyramid_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(cmg4_pyramid_stats), pointer :: stats
@@ -5173,6 +5173,7 @@ contains
     real(c_double) :: told
     real(c_double) :: hs
     real(c_double) :: frac
+    logical :: due
     real(c_double) :: e
     integer(c_int) :: i
 
@@ -5311,7 +5312,8 @@ contains
           nonfinite), .not. run .or. (take .and. lock))
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
 
         ! the dense output of order 4
         do i = 0, nx - 1
@@ -5323,6 +5325,8 @@ contains
               3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
               5)) + 2.382468931778144_c_double * k(i, 6))
         end do
+      end if
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -5337,6 +5341,8 @@ contains
           end do
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -5344,14 +5350,12 @@ contains
         do i = 0, nx - 1
           k(i, 0) = k(i, 6)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -5364,9 +5368,9 @@ contains
   function cmg4_pyramid_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(cmg4_pyramid_stats), pointer :: stats
@@ -5379,15 +5383,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see cmg4_pyramid_ode.h).
-  function cmg4_pyramid_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function cmg4_pyramid_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -5400,16 +5403,15 @@ contains
   end function cmg4_pyramid_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_dopri5_grid_batch")
+  function cmg4_pyramid_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -5427,10 +5429,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= CMG4_PYRAMID_ODE_OK) failed = failed + 1
@@ -5735,6 +5737,7 @@ contains
     real(c_double) :: told
     real(c_double) :: hs
     real(c_double) :: frac
+    logical :: due
     real(c_double) :: e3
     real(c_double) :: e5
     integer(c_int) :: i
@@ -5943,7 +5946,8 @@ contains
           fac), ok), nonfinite), .not. run .or. (take .and. lock))
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
 
         ! the dense output of order 7
         do i = 0, nx - 1
@@ -6008,6 +6012,8 @@ contains
               12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
               14)) - 149.72683625798564_c_double * k(i, 15))
         end do
+      end if
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -6024,6 +6030,8 @@ contains
           end do
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -6031,14 +6039,12 @@ contains
         do i = 0, nx - 1
           k(i, 0) = k(i, 12)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -6051,9 +6057,9 @@ contains
   function cmg4_pyramid_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(cmg4_pyramid_stats), pointer :: stats
@@ -6066,15 +6072,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see cmg4_pyramid_ode.h).
-  function cmg4_pyramid_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function cmg4_pyramid_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -6087,16 +6092,15 @@ contains
   end function cmg4_pyramid_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_dop853_grid_batch")
+  function cmg4_pyramid_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -6114,10 +6118,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= CMG4_PYRAMID_ODE_OK) failed = failed + 1
@@ -6648,20 +6652,22 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - t) / h
-          do i = 0, nx - 1
-            out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) * &
-                (dense(i, 0) + frac * dense(i, 1)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - t) / h
+            do i = 0, nx - 1
+              out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) &
+                  * (dense(i, 0) + frac * dense(i, 1)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -6698,9 +6704,9 @@ contains
   function cmg4_pyramid_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(cmg4_pyramid_stats), pointer :: stats
@@ -6713,15 +6719,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see cmg4_pyramid_ode.h).
-  function cmg4_pyramid_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function cmg4_pyramid_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -6734,16 +6739,15 @@ contains
   end function cmg4_pyramid_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_rodas4_grid_batch")
+  function cmg4_pyramid_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -6761,10 +6765,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= CMG4_PYRAMID_ODE_OK) failed = failed + 1
@@ -7641,20 +7645,22 @@ contains
           ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
           ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
         end do
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - (merge(t1, t + h, last))) / h
-          do i = 0, nx - 1
-            out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
-                (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - (merge(t1, t + h, last))) / h
+            do i = 0, nx - 1
+              out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
+                  (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -7710,9 +7716,9 @@ contains
   function cmg4_pyramid_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
     type(cmg4_pyramid_stats), pointer :: stats
@@ -7725,15 +7731,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see cmg4_pyramid_ode.h).
-  function cmg4_pyramid_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function cmg4_pyramid_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="cmg4_pyramid_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a cmg4_pyramid_stats, or NULL
     integer(c_int) :: code
@@ -7746,16 +7751,15 @@ contains
   end function cmg4_pyramid_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_radau5_grid_batch")
+  function cmg4_pyramid_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -7773,10 +7777,10 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+            out(:, :, i), c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+            out(:, :, i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= CMG4_PYRAMID_ODE_OK) failed = failed + 1
@@ -7785,13 +7789,13 @@ contains
   end function cmg4_pyramid_radau5_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_rk4_batch")
+  function cmg4_pyramid_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(cmg4_pyramid_stats), pointer :: stats_out(:)
@@ -7807,8 +7811,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = cmg4_pyramid_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = cmg4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -7819,13 +7822,14 @@ contains
   end function cmg4_pyramid_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_dopri5_batch")
+  function cmg4_pyramid_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(cmg4_pyramid_stats), pointer :: stats_out(:)
@@ -7842,7 +7846,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -7853,13 +7857,14 @@ contains
   end function cmg4_pyramid_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_dop853_batch")
+  function cmg4_pyramid_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(cmg4_pyramid_stats), pointer :: stats_out(:)
@@ -7876,7 +7881,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -7887,13 +7892,14 @@ contains
   end function cmg4_pyramid_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_rodas4_batch")
+  function cmg4_pyramid_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(cmg4_pyramid_stats), pointer :: stats_out(:)
@@ -7910,7 +7916,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -7921,13 +7927,14 @@ contains
   end function cmg4_pyramid_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function cmg4_pyramid_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="cmg4_pyramid_f_radau5_batch")
+  function cmg4_pyramid_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="cmg4_pyramid_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(cmg4_pyramid_stats), pointer :: stats_out(:)
@@ -7944,7 +7951,7 @@ contains
     do i = 1, n
       if (associated(stats_out)) then
         code = cmg4_pyramid_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+            c_loc(stats_out(i)))
       else
         code = cmg4_pyramid_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if

@@ -3193,9 +3193,9 @@ contains
   function vscmg3_rk4(t0, t1, steps, x, c, stats_ptr) result(code) &
       bind(C, name="vscmg3_f_rk4")
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
     type(vscmg3_stats), pointer :: stats
@@ -3429,6 +3429,7 @@ contains
     real(c_double) :: told
     real(c_double) :: hs
     real(c_double) :: frac
+    logical :: due
     real(c_double) :: e
     integer(c_int) :: i
 
@@ -3567,7 +3568,8 @@ contains
           nonfinite), .not. run .or. (take .and. lock))
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
 
         ! the dense output of order 4
         do i = 0, nx - 1
@@ -3579,6 +3581,8 @@ contains
               3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
               5)) + 2.382468931778144_c_double * k(i, 6))
         end do
+      end if
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -3593,6 +3597,8 @@ contains
           end do
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -3600,14 +3606,12 @@ contains
         do i = 0, nx - 1
           k(i, 0) = k(i, 6)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -3620,9 +3624,9 @@ contains
   function vscmg3_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="vscmg3_f_dopri5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
     type(vscmg3_stats), pointer :: stats
@@ -3635,15 +3639,14 @@ contains
 
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   ! Over an output grid (see vscmg3_ode.h).
-  function vscmg3_dopri5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function vscmg3_dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="vscmg3_f_dopri5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
@@ -3656,16 +3659,15 @@ contains
   end function vscmg3_dopri5_grid
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_dopri5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_dopri5_grid_batch")
+  function vscmg3_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="vscmg3_f_dopri5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -3682,11 +3684,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = vscmg3_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_loc(stats_out(i)))
       else
-        code = vscmg3_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = vscmg3_dopri5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= VSCMG3_ODE_OK) failed = failed + 1
@@ -3991,6 +3993,7 @@ contains
     real(c_double) :: told
     real(c_double) :: hs
     real(c_double) :: frac
+    logical :: due
     real(c_double) :: e3
     real(c_double) :: e5
     integer(c_int) :: i
@@ -4199,7 +4202,8 @@ contains
           fac), ok), nonfinite), .not. run .or. (take .and. lock))
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
 
         ! the dense output of order 7
         do i = 0, nx - 1
@@ -4264,6 +4268,8 @@ contains
               12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
               14)) - 149.72683625798564_c_double * k(i, 15))
         end do
+      end if
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -4280,6 +4286,8 @@ contains
           end do
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
@@ -4287,14 +4295,12 @@ contains
         do i = 0, nx - 1
           k(i, 0) = k(i, 12)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -4307,9 +4313,9 @@ contains
   function vscmg3_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="vscmg3_f_dop853")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
     type(vscmg3_stats), pointer :: stats
@@ -4322,15 +4328,14 @@ contains
 
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   ! Over an output grid (see vscmg3_ode.h).
-  function vscmg3_dop853_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function vscmg3_dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="vscmg3_f_dop853_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
@@ -4343,16 +4348,15 @@ contains
   end function vscmg3_dop853_grid
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_dop853_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_dop853_grid_batch")
+  function vscmg3_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="vscmg3_f_dop853_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -4369,11 +4373,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = vscmg3_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_loc(stats_out(i)))
       else
-        code = vscmg3_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = vscmg3_dop853_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= VSCMG3_ODE_OK) failed = failed + 1
@@ -4902,20 +4906,22 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - t) / h
-          do i = 0, nx - 1
-            out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) * &
-                (dense(i, 0) + frac * dense(i, 1)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - t) / h
+            do i = 0, nx - 1
+              out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) &
+                  * (dense(i, 0) + frac * dense(i, 1)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -4952,9 +4958,9 @@ contains
   function vscmg3_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="vscmg3_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
     type(vscmg3_stats), pointer :: stats
@@ -4967,15 +4973,14 @@ contains
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   ! Over an output grid (see vscmg3_ode.h).
-  function vscmg3_rodas4_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function vscmg3_rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="vscmg3_f_rodas4_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
@@ -4988,16 +4993,15 @@ contains
   end function vscmg3_rodas4_grid
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_rodas4_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_rodas4_grid_batch")
+  function vscmg3_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="vscmg3_f_rodas4_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -5014,11 +5018,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = vscmg3_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_loc(stats_out(i)))
       else
-        code = vscmg3_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = vscmg3_rodas4_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= VSCMG3_ODE_OK) failed = failed + 1
@@ -5893,20 +5897,22 @@ contains
           ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
           ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
         end do
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < (merge(t1, t + h, last)))) then
-            exit
-          end if
-          frac = (times(g) - (merge(t1, t + h, last))) / h
-          do i = 0, nx - 1
-            out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
-                (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+        if (g < ntimes .and. times(g) < (merge(t1, t + h, last))) then
+          do
+            if (.not. (g < ntimes)) then
+              exit
+            end if
+            if (.not. (times(g) < (merge(t1, t + h, last)))) then
+              exit
+            end if
+            frac = (times(g) - (merge(t1, t + h, last))) / h
+            do i = 0, nx - 1
+              out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
+                  (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            g = g + 1
           end do
-          g = g + 1
-        end do
+        end if
         call accept_step(x, xnew, dx, comp)
         t = merge(t1, t + h, last)
         stats%t = t
@@ -5962,9 +5968,9 @@ contains
   function vscmg3_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="vscmg3_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
     type(vscmg3_stats), pointer :: stats
@@ -5977,15 +5983,14 @@ contains
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   ! Over an output grid (see vscmg3_ode.h).
-  function vscmg3_radau5_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function vscmg3_radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="vscmg3_f_radau5_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
@@ -5998,16 +6003,15 @@ contains
   end function vscmg3_radau5_grid
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_radau5_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_radau5_grid_batch")
+  function vscmg3_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="vscmg3_f_radau5_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -6024,11 +6028,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = vscmg3_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_loc(stats_out(i)))
       else
-        code = vscmg3_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = vscmg3_radau5_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= VSCMG3_ODE_OK) failed = failed + 1
@@ -7811,12 +7815,13 @@ contains
     real(c_double) :: v254
     real(c_double) :: v255
     real(c_double) :: v256
+    real(c_double) :: acc(0:nx - 1)
     real(c_double) :: t0
     real(c_double) :: t1
     integer(c_long) :: g
     real(c_double) :: told
     real(c_double) :: frac
-    real(c_double) :: acc
+    logical :: due
     integer(c_int) :: i
     integer(c_int) :: j
     integer(c_int) :: n
@@ -8923,7 +8928,8 @@ contains
       stats%accepted = stats%accepted + (merge(1, 0, ok))
       stats%rejected = stats%rejected + (merge(1, 0, retry))
       cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
-      if (ok) then
+      due = ok .and. (g < ntimes .and. times(g) < t)
+      if (due) then
         do
           if (.not. (g < ntimes)) then
             exit
@@ -8933,29 +8939,33 @@ contains
           end if
           frac = times(g) - told
           do i = 0, 12 - 1
-            acc = tay(i, order)
-            do q = 0, order - 1 - 1
-              acc = tay(i, (order - 1) - q) + frac * acc
+            acc(i) = tay(i, order)
+          end do
+          do q = 0, order - 1 - 1
+            do i = 0, 12 - 1
+              acc(i) = tay(i, (order - 1) - q) + frac * acc(i)
             end do
-            out(i, g) = x(i) + frac * acc
+          end do
+          do i = 0, 12 - 1
+            out(i, g) = x(i) + frac * acc(i)
           end do
           out(12, g) = x(12) + frac * tay(12, 1)
           out(13, g) = x(13) + frac * tay(13, 1)
           out(14, g) = x(14) + frac * tay(14, 1)
           g = g + 1
         end do
+      end if
+      if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
           x(i) = xnew(i)
         end do
-        if (g < ntimes) then
-          if (times(g) <= t) then
-            do i = 0, nx - 1
-              out(i, g) = x(i)
-            end do
-            g = g + 1
-          end if
-        end if
+      end if
+      if (ok .and. g < ntimes .and. times(g) <= t) then
+        do i = 0, nx - 1
+          out(i, g) = x(i)
+        end do
+        g = g + 1
       end if
       if (code >= 0) then
         res = code
@@ -8968,9 +8978,9 @@ contains
   function vscmg3_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="vscmg3_f_taylor")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
     type(vscmg3_stats), pointer :: stats
@@ -8983,15 +8993,14 @@ contains
 
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
   ! Over an output grid (see vscmg3_ode.h).
-  function vscmg3_taylor_grid( &
-      ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats_ptr) result(code) &
+  function vscmg3_taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats_ptr) result(code) &
       bind(C, name="vscmg3_f_taylor_grid")
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
     type(c_ptr), value, intent(in) :: stats_ptr  ! a vscmg3_stats, or NULL
     integer(c_int) :: code
@@ -9004,16 +9013,15 @@ contains
   end function vscmg3_taylor_grid
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_taylor_grid_batch( &
-      n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_taylor_grid_batch")
+  function vscmg3_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      stats, codes) result(failed) &
+      bind(C, name="vscmg3_f_taylor_grid_batch")
     integer(c_size_t), value, intent(in) :: n
-    integer(c_long), value, intent(in) :: ntimes
-    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    integer(c_long), value, intent(in) :: ntimes, max_steps
     real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
@@ -9030,11 +9038,11 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_loc(stats_out(i)))
+        code = vscmg3_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_loc(stats_out(i)))
       else
-        code = vscmg3_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
-                 out(:, :, i), c_null_ptr)
+        code = vscmg3_taylor_grid(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, out(:, :, &
+            i), c_null_ptr)
       end if
       if (associated(codes_out)) codes_out(i) = code
       if (code /= VSCMG3_ODE_OK) failed = failed + 1
@@ -9043,13 +9051,13 @@ contains
   end function vscmg3_taylor_grid_batch
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_rk4_batch(n, t0, t1, steps, x, c, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_rk4_batch")
+  function vscmg3_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &
+      bind(C, name="vscmg3_f_rk4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1
+    integer(c_long), value, intent(in) :: steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(vscmg3_stats), pointer :: stats_out(:)
@@ -9065,8 +9073,7 @@ contains
     !$omp parallel do schedule(dynamic, 16) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_rk4(t0, t1, steps, x(:, i), c, &
-                                  c_loc(stats_out(i)))
+        code = vscmg3_rk4(t0, t1, steps, x(:, i), c, c_loc(stats_out(i)))
       else
         code = vscmg3_rk4(t0, t1, steps, x(:, i), c, c_null_ptr)
       end if
@@ -9077,13 +9084,14 @@ contains
   end function vscmg3_rk4_batch
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_dopri5_batch")
+  function vscmg3_dopri5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="vscmg3_f_dopri5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(vscmg3_stats), pointer :: stats_out(:)
@@ -9099,8 +9107,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = vscmg3_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = vscmg3_dopri5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -9111,13 +9118,14 @@ contains
   end function vscmg3_dopri5_batch
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_dop853_batch")
+  function vscmg3_dop853_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="vscmg3_f_dop853_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(vscmg3_stats), pointer :: stats_out(:)
@@ -9133,8 +9141,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = vscmg3_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = vscmg3_dop853(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -9145,13 +9152,14 @@ contains
   end function vscmg3_dop853_batch
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_rodas4_batch")
+  function vscmg3_rodas4_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="vscmg3_f_rodas4_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(vscmg3_stats), pointer :: stats_out(:)
@@ -9167,8 +9175,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = vscmg3_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = vscmg3_rodas4(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -9179,13 +9186,14 @@ contains
   end function vscmg3_rodas4_batch
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_radau5_batch")
+  function vscmg3_radau5_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="vscmg3_f_radau5_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(vscmg3_stats), pointer :: stats_out(:)
@@ -9201,8 +9209,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = vscmg3_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = vscmg3_radau5(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
@@ -9213,13 +9220,14 @@ contains
   end function vscmg3_radau5_batch
 
   ! stats, codes: NULL when not wanted.
-  function vscmg3_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, codes) &
-      result(failed) bind(C, name="vscmg3_f_taylor_batch")
+  function vscmg3_taylor_batch(n, t0, t1, x, c, rtol, atol, h0, max_steps, stats, &
+      codes) result(failed) &
+      bind(C, name="vscmg3_f_taylor_batch")
     integer(c_size_t), value, intent(in) :: n
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
+    integer(c_long), value, intent(in) :: max_steps
     real(c_double), intent(inout) :: x(nx, n)
     real(c_double), intent(in) :: c(nc)
-    integer(c_long), value, intent(in) :: max_steps
     type(c_ptr), value, intent(in) :: stats, codes
     integer(c_size_t) :: failed
     type(vscmg3_stats), pointer :: stats_out(:)
@@ -9235,8 +9243,7 @@ contains
     !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
     do i = 1, n
       if (associated(stats_out)) then
-        code = vscmg3_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, &
-                                  c_loc(stats_out(i)))
+        code = vscmg3_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_loc(stats_out(i)))
       else
         code = vscmg3_taylor(t0, t1, x(:, i), c, rtol, atol, h0, max_steps, c_null_ptr)
       end if
