@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 3e0f1a5c1e7c3a7d: a hash of the scene, gyrogen and sympy
+ * Build id baadc4dea7b8486a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as VSCMG3_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -210,7 +210,7 @@ int vscmg3_setup(const double *p, double *c)
         c[i_] = 0.0;
     }
     (void)p;  /* unused in some scenes */
-    c[0] = 3.173697017535014;
+    c[0] = 3.173559604830286;
     if (!(c[0] <= 10000000000000.0)) {
         return VSCMG3_ERR_MASS_SINGULAR;
     }
@@ -326,41 +326,41 @@ void vscmg3_rhs(double t, const double *x, const double *c, double *dxdt)
     tmp26 = vscmg3_cos(q3);
     tmp27 = (tmp26 * u3 - tmp25 * u1) / vscmg3_cos(q2);
     as1 = tmp0 * u2 + tmp1 * u3;
-    tmp23 = gd1 * (0.159 * w1 - 0.0795 * as1);
+    tmp23 = gd1 * (0.159 * w1 - 0.1795 * as1);
     at1 = tmp0 * u3 - tmp1 * u2;
-    tmp15 = 0.0795 * at1;
+    tmp15 = 0.1795 * at1;
     tmp16 = tmp1 * tmp15;
     tmp19 = tmp0 * tmp15;
     as2 = tmp2 * u1 + tmp3 * u3;
-    tmp22 = gd2 * (0.159 * w2 - 0.0795 * as2);
+    tmp22 = gd2 * (0.159 * w2 - 0.1795 * as2);
     at2 = tmp3 * u1 - tmp2 * u3;
-    tmp8 = 0.0795 * at2;
+    tmp8 = 0.1795 * at2;
     tmp9 = tmp3 * tmp8;
     tmp20 = tmp2 * tmp8;
     as3 = tmp4 * u1 + tmp5 * u2;
-    tmp21 = gd3 * (0.159 * w3 - 0.0795 * as3);
+    tmp21 = gd3 * (0.159 * w3 - 0.1795 * as3);
     at3 = tmp4 * u2 - tmp5 * u1;
-    tmp10 = 0.0795 * at3;
+    tmp10 = 0.1795 * at3;
     tmp11 = tmp10 * tmp5;
     tmp17 = tmp10 * tmp4;
-    nd1 = at1 * (0.8857938718662952 * w1 - 0.4428969359331476 * as1);
-    nd2 = at2 * (0.5688729874776386 * w2 - 0.2844364937388193 * as2);
-    nd3 = at3 * (0.4189723320158103 * w3 - 0.20948616600790515 * as3);
-    h1 = tmp6 + tmp7 + tmp9 + 0.1795 * gd1 + 906.5878969465649 * u1 + tmp12 * tmp2 + tmp13 * tmp4
+    nd1 = at1 * (0.4189723320158103 * w1 - 0.47299077733860345 * as1);
+    nd2 = at2 * (0.4189723320158103 * w2 - 0.47299077733860345 * as2);
+    nd3 = at3 * (0.4189723320158103 * w3 - 0.47299077733860345 * as3);
+    h1 = tmp6 + tmp7 + tmp9 + 906.4878969465649 * u1 + 0.3795 * gd1 + tmp12 * tmp2 + tmp13 * tmp4
             - tmp11;
-    h2 = tmp14 + tmp17 + tmp7 + 0.2795 * gd2 + 806.5878969465649 * u2 + tmp0 * tmp18 + tmp13 *
+    h2 = tmp14 + tmp17 + tmp7 + 806.4878969465649 * u2 + 0.3795 * gd2 + tmp0 * tmp18 + tmp13 *
             tmp5 - tmp16;
-    h3 = tmp14 + tmp19 + tmp6 + 606.5878969465649 * u3 + 0.3795 * gd3 + tmp1 * tmp18 + tmp12 *
+    h3 = tmp14 + tmp19 + tmp6 + 606.4878969465649 * u3 + 0.3795 * gd3 + tmp1 * tmp18 + tmp12 *
             tmp3 - tmp20;
-    f1 = gd2 * tmp20 + gd3 * tmp17 + h2 * u3 + tmp21 * tmp5 - 0.1795 * nd1 - h3 * u2 - tmp22 * tmp3;
-    f2 = gd1 * tmp19 + gd3 * tmp11 + h3 * u1 + tmp1 * tmp23 - 0.2795 * nd2 - h1 * u3 - tmp21 * tmp4;
+    f1 = gd2 * tmp20 + gd3 * tmp17 + h2 * u3 + tmp21 * tmp5 - 0.3795 * nd1 - h3 * u2 - tmp22 * tmp3;
+    f2 = gd1 * tmp19 + gd3 * tmp11 + h3 * u1 + tmp1 * tmp23 - 0.3795 * nd2 - h1 * u3 - tmp21 * tmp4;
     f3 = gd1 * tmp16 + gd2 * tmp9 + h1 * u2 + tmp2 * tmp22 - 0.3795 * nd3 - h2 * u1 - tmp0 * tmp23;
-    Mt11 = 906.4083969465648 + 0.0795 * (tmp3 * tmp3) + 0.0795 * (tmp5 * tmp5);
-    Mt22 = 806.3083969465649 + 0.0795 * (tmp1 * tmp1) + 0.0795 * (tmp4 * tmp4);
-    Mt33 = 606.2083969465649 + 0.0795 * (tmp0 * tmp0) + 0.0795 * (tmp2 * tmp2);
-    Mt12 = 0.04580152671755725 - 0.0795 * tmp4 * tmp5;
-    Mt13 = 0.04580152671755725 - 0.0795 * tmp2 * tmp3;
-    Mt23 = 0.04580152671755725 - 0.0795 * tmp0 * tmp1;
+    Mt11 = 906.1083969465649 + 0.1795 * (tmp3 * tmp3) + 0.1795 * (tmp5 * tmp5);
+    Mt22 = 806.1083969465649 + 0.1795 * (tmp1 * tmp1) + 0.1795 * (tmp4 * tmp4);
+    Mt33 = 606.1083969465649 + 0.1795 * (tmp0 * tmp0) + 0.1795 * (tmp2 * tmp2);
+    Mt12 = 0.04580152671755725 - 0.1795 * tmp4 * tmp5;
+    Mt13 = 0.04580152671755725 - 0.1795 * tmp2 * tmp3;
+    Mt23 = 0.04580152671755725 - 0.1795 * tmp0 * tmp1;
     adj11 = Mt22 * Mt33 - Mt23 * Mt23;
     adj22 = Mt11 * Mt33 - Mt13 * Mt13;
     adj33 = Mt11 * Mt22 - Mt12 * Mt12;
@@ -434,44 +434,44 @@ void vscmg3_rhs_lanes(int n, const double *VSCMG3_RESTRICT t, const double *VSCM
         tmp26 = vscmg3_cos_lanes(q3);
         tmp27 = (tmp26 * u3 - tmp25 * u1) / vscmg3_cos_lanes(q2);
         as1 = tmp0 * u2 + tmp1 * u3;
-        tmp23 = gd1 * (0.159 * w1 - 0.0795 * as1);
+        tmp23 = gd1 * (0.159 * w1 - 0.1795 * as1);
         at1 = tmp0 * u3 - tmp1 * u2;
-        tmp15 = 0.0795 * at1;
+        tmp15 = 0.1795 * at1;
         tmp16 = tmp1 * tmp15;
         tmp19 = tmp0 * tmp15;
         as2 = tmp2 * u1 + tmp3 * u3;
-        tmp22 = gd2 * (0.159 * w2 - 0.0795 * as2);
+        tmp22 = gd2 * (0.159 * w2 - 0.1795 * as2);
         at2 = tmp3 * u1 - tmp2 * u3;
-        tmp8 = 0.0795 * at2;
+        tmp8 = 0.1795 * at2;
         tmp9 = tmp3 * tmp8;
         tmp20 = tmp2 * tmp8;
         as3 = tmp4 * u1 + tmp5 * u2;
-        tmp21 = gd3 * (0.159 * w3 - 0.0795 * as3);
+        tmp21 = gd3 * (0.159 * w3 - 0.1795 * as3);
         at3 = tmp4 * u2 - tmp5 * u1;
-        tmp10 = 0.0795 * at3;
+        tmp10 = 0.1795 * at3;
         tmp11 = tmp10 * tmp5;
         tmp17 = tmp10 * tmp4;
-        nd1 = at1 * (0.8857938718662952 * w1 - 0.4428969359331476 * as1);
-        nd2 = at2 * (0.5688729874776386 * w2 - 0.2844364937388193 * as2);
-        nd3 = at3 * (0.4189723320158103 * w3 - 0.20948616600790515 * as3);
-        h1 = tmp6 + tmp7 + tmp9 + 0.1795 * gd1 + 906.5878969465649 * u1 + tmp12 * tmp2 + tmp13 *
+        nd1 = at1 * (0.4189723320158103 * w1 - 0.47299077733860345 * as1);
+        nd2 = at2 * (0.4189723320158103 * w2 - 0.47299077733860345 * as2);
+        nd3 = at3 * (0.4189723320158103 * w3 - 0.47299077733860345 * as3);
+        h1 = tmp6 + tmp7 + tmp9 + 906.4878969465649 * u1 + 0.3795 * gd1 + tmp12 * tmp2 + tmp13 *
                 tmp4 - tmp11;
-        h2 = tmp14 + tmp17 + tmp7 + 0.2795 * gd2 + 806.5878969465649 * u2 + tmp0 * tmp18 + tmp13
+        h2 = tmp14 + tmp17 + tmp7 + 806.4878969465649 * u2 + 0.3795 * gd2 + tmp0 * tmp18 + tmp13
                 * tmp5 - tmp16;
-        h3 = tmp14 + tmp19 + tmp6 + 606.5878969465649 * u3 + 0.3795 * gd3 + tmp1 * tmp18 + tmp12
+        h3 = tmp14 + tmp19 + tmp6 + 606.4878969465649 * u3 + 0.3795 * gd3 + tmp1 * tmp18 + tmp12
                 * tmp3 - tmp20;
-        f1 = gd2 * tmp20 + gd3 * tmp17 + h2 * u3 + tmp21 * tmp5 - 0.1795 * nd1 - h3 * u2 - tmp22
+        f1 = gd2 * tmp20 + gd3 * tmp17 + h2 * u3 + tmp21 * tmp5 - 0.3795 * nd1 - h3 * u2 - tmp22
                 * tmp3;
-        f2 = gd1 * tmp19 + gd3 * tmp11 + h3 * u1 + tmp1 * tmp23 - 0.2795 * nd2 - h1 * u3 - tmp21
+        f2 = gd1 * tmp19 + gd3 * tmp11 + h3 * u1 + tmp1 * tmp23 - 0.3795 * nd2 - h1 * u3 - tmp21
                 * tmp4;
         f3 = gd1 * tmp16 + gd2 * tmp9 + h1 * u2 + tmp2 * tmp22 - 0.3795 * nd3 - h2 * u1 - tmp0 *
                 tmp23;
-        Mt11 = 906.4083969465648 + 0.0795 * (tmp3 * tmp3) + 0.0795 * (tmp5 * tmp5);
-        Mt22 = 806.3083969465649 + 0.0795 * (tmp1 * tmp1) + 0.0795 * (tmp4 * tmp4);
-        Mt33 = 606.2083969465649 + 0.0795 * (tmp0 * tmp0) + 0.0795 * (tmp2 * tmp2);
-        Mt12 = 0.04580152671755725 - 0.0795 * tmp4 * tmp5;
-        Mt13 = 0.04580152671755725 - 0.0795 * tmp2 * tmp3;
-        Mt23 = 0.04580152671755725 - 0.0795 * tmp0 * tmp1;
+        Mt11 = 906.1083969465649 + 0.1795 * (tmp3 * tmp3) + 0.1795 * (tmp5 * tmp5);
+        Mt22 = 806.1083969465649 + 0.1795 * (tmp1 * tmp1) + 0.1795 * (tmp4 * tmp4);
+        Mt33 = 606.1083969465649 + 0.1795 * (tmp0 * tmp0) + 0.1795 * (tmp2 * tmp2);
+        Mt12 = 0.04580152671755725 - 0.1795 * tmp4 * tmp5;
+        Mt13 = 0.04580152671755725 - 0.1795 * tmp2 * tmp3;
+        Mt23 = 0.04580152671755725 - 0.1795 * tmp0 * tmp1;
         adj11 = Mt22 * Mt33 - Mt23 * Mt23;
         adj22 = Mt11 * Mt33 - Mt13 * Mt13;
         adj33 = Mt11 * Mt22 - Mt12 * Mt12;
@@ -553,20 +553,20 @@ void vscmg3_kinetic_energy(double t, const double *x, const double *c, double *o
     tmp4 = u3 * u3;
     tmp5 = vscmg3_cos(gam3);
     tmp6 = vscmg3_sin(gam3);
-    tmp7 = 0.0795 * u1;
+    tmp7 = 0.1795 * u1;
     tmp8 = vscmg3_cos(gam2);
     tmp9 = vscmg3_sin(gam2);
     tmp10 = vscmg3_cos(gam1);
     tmp11 = vscmg3_sin(gam1);
-    tmp12 = 0.03975 * tmp2;
-    tmp13 = 0.03975 * tmp3;
-    tmp14 = 0.03975 * tmp4;
-    out[0] = 0.08975 * (gd1 * gd1) + 0.13975 * (gd2 * gd2) + 303.29394847328246 * tmp4 + 0.0795 *
-            (w1 * w1) + 0.0795 * (w2 * w2) + 0.0795 * (w3 * w3) + 0.04580152671755725 * tmp1 +
-            0.18975 * (gd3 * gd3) + 403.29394847328246 * tmp3 + 453.29394847328246 * tmp2 + tmp0
-            * u2 + tmp0 * u3 + tmp12 * (tmp6 * tmp6) + tmp12 * (tmp8 * tmp8) + tmp13 * (tmp11 *
+    tmp12 = 0.08975 * tmp2;
+    tmp13 = 0.08975 * tmp3;
+    tmp14 = 0.08975 * tmp4;
+    out[0] = 303.24394847328244 * tmp4 + 403.24394847328244 * tmp3 + 453.24394847328244 * tmp2 +
+            0.0795 * (w1 * w1) + 0.0795 * (w2 * w2) + 0.0795 * (w3 * w3) + 0.04580152671755725 *
+            tmp1 + 0.18975 * (gd1 * gd1) + 0.18975 * (gd2 * gd2) + 0.18975 * (gd3 * gd3) + tmp0 *
+            u2 + tmp0 * u3 + tmp12 * (tmp6 * tmp6) + tmp12 * (tmp8 * tmp8) + tmp13 * (tmp11 *
             tmp11) + tmp13 * (tmp5 * tmp5) + tmp14 * (tmp10 * tmp10) + tmp14 * (tmp9 * tmp9) +
-            0.1795 * gd1 * u1 + 0.2795 * gd2 * u2 + 0.3795 * gd3 * u3 - 0.0795 * tmp1 * tmp10 *
+            0.3795 * gd1 * u1 + 0.3795 * gd2 * u2 + 0.3795 * gd3 * u3 - 0.1795 * tmp1 * tmp10 *
             tmp11 - tmp5 * tmp6 * tmp7 * u2 - tmp7 * tmp8 * tmp9 * u3;
 }
 
@@ -646,13 +646,13 @@ void vscmg3_angular_momentum(double t, const double *x, const double *c, double 
     tmp5 = vscmg3_sin(gam3);
     tmp6 = 0.159 * w3;
     tmp7 = vscmg3_sin(gam1);
-    tmp8 = 0.0795 * u2;
+    tmp8 = 0.1795 * u2;
     tmp9 = vscmg3_cos(gam3);
-    tmp10 = 0.0795 * u1;
+    tmp10 = 0.1795 * u1;
     tmp11 = tmp5 * tmp9;
-    tmp12 = 0.0795 * u3;
+    tmp12 = 0.1795 * u3;
     tmp13 = tmp3 * tmp7;
-    tmp14 = tmp1 + tmp2 + 0.2795 * gd2 + 806.5878969465649 * u2 + tmp3 * tmp4 + tmp5 * tmp6 +
+    tmp14 = tmp1 + tmp2 + 806.4878969465649 * u2 + 0.3795 * gd2 + tmp3 * tmp4 + tmp5 * tmp6 +
             tmp8 * (tmp7 * tmp7) + tmp8 * (tmp9 * tmp9) - tmp10 * tmp11 - tmp12 * tmp13;
     tmp15 = vscmg3_cos(q2);
     tmp16 = tmp14 * tmp15;
@@ -667,10 +667,10 @@ void vscmg3_angular_momentum(double t, const double *x, const double *c, double 
     tmp25 = 0.159 * w2;
     tmp26 = vscmg3_sin(gam2);
     tmp27 = tmp24 * tmp26;
-    tmp28 = tmp1 + tmp23 + 606.5878969465649 * u3 + 0.3795 * gd3 + tmp12 * (tmp26 * tmp26) +
+    tmp28 = tmp1 + tmp23 + 606.4878969465649 * u3 + 0.3795 * gd3 + tmp12 * (tmp26 * tmp26) +
             tmp12 * (tmp3 * tmp3) + tmp24 * tmp25 + tmp4 * tmp7 - tmp10 * tmp27 - tmp13 * tmp8;
     tmp29 = tmp0 * tmp17;
-    tmp30 = tmp2 + tmp23 + 0.1795 * gd1 + 906.5878969465649 * u1 + tmp10 * (tmp24 * tmp24) +
+    tmp30 = tmp2 + tmp23 + 906.4878969465649 * u1 + 0.3795 * gd1 + tmp10 * (tmp24 * tmp24) +
             tmp10 * (tmp5 * tmp5) + tmp25 * tmp26 + tmp6 * tmp9 - tmp11 * tmp8 - tmp12 * tmp27;
     out[0] = tmp28 * (tmp19 + tmp20 * tmp22) + tmp30 * (tmp18 * tmp21 - tmp20 * tmp29) - tmp0 *
             tmp16;

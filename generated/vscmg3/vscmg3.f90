@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 3e0f1a5c1e7c3a7d: a hash of the scene, gyrogen and sympy versions
+! Build id baadc4dea7b8486a: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as VSCMG3_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -44,7 +44,7 @@ module vscmg3_mod
   public :: vscmg3_angular_momentum
   public :: vscmg3_power
 
-  character(len=*), parameter, public :: VSCMG3_BUILD_ID = "3e0f1a5c1e7c3a7d"
+  character(len=*), parameter, public :: VSCMG3_BUILD_ID = "baadc4dea7b8486a"
   integer, parameter, public :: VSCMG3_NX = 15  ! states
   integer, parameter, public :: VSCMG3_NP = 0  ! parameters
   integer, parameter, public :: VSCMG3_NC = 1  ! hoisted constants
@@ -201,7 +201,7 @@ contains
     end do
     associate (unused_p => p)  ! unused in some scenes
     end associate
-    c(0) = 3.173697017535014_c_double
+    c(0) = 3.173559604830286_c_double
     if (.not. (c(0) <= 10000000000000.0_c_double)) then
       res = VSCMG3_ERR_MASS_SINGULAR
       return
@@ -344,47 +344,47 @@ contains
     tmp26 = vscmg3_cos(q3)
     tmp27 = (tmp26 * u3 - tmp25 * u1) / vscmg3_cos(q2)
     as1 = tmp0 * u2 + tmp1 * u3
-    tmp23 = gd1 * (0.159_c_double * w1 - 0.0795_c_double * as1)
+    tmp23 = gd1 * (0.159_c_double * w1 - 0.1795_c_double * as1)
     at1 = tmp0 * u3 - tmp1 * u2
-    tmp15 = 0.0795_c_double * at1
+    tmp15 = 0.1795_c_double * at1
     tmp16 = tmp1 * tmp15
     tmp19 = tmp0 * tmp15
     as2 = tmp2 * u1 + tmp3 * u3
-    tmp22 = gd2 * (0.159_c_double * w2 - 0.0795_c_double * as2)
+    tmp22 = gd2 * (0.159_c_double * w2 - 0.1795_c_double * as2)
     at2 = tmp3 * u1 - tmp2 * u3
-    tmp8 = 0.0795_c_double * at2
+    tmp8 = 0.1795_c_double * at2
     tmp9 = tmp3 * tmp8
     tmp20 = tmp2 * tmp8
     as3 = tmp4 * u1 + tmp5 * u2
-    tmp21 = gd3 * (0.159_c_double * w3 - 0.0795_c_double * as3)
+    tmp21 = gd3 * (0.159_c_double * w3 - 0.1795_c_double * as3)
     at3 = tmp4 * u2 - tmp5 * u1
-    tmp10 = 0.0795_c_double * at3
+    tmp10 = 0.1795_c_double * at3
     tmp11 = tmp10 * tmp5
     tmp17 = tmp10 * tmp4
-    nd1 = at1 * (0.8857938718662952_c_double * w1 - 0.4428969359331476_c_double * as1)
-    nd2 = at2 * (0.5688729874776386_c_double * w2 - 0.2844364937388193_c_double * as2)
-    nd3 = at3 * (0.4189723320158103_c_double * w3 - 0.20948616600790515_c_double * as3)
-    h1 = ((((((tmp6 + tmp7) + tmp9) + 0.1795_c_double * gd1) + 906.5878969465649_c_double * u1) + &
+    nd1 = at1 * (0.4189723320158103_c_double * w1 - 0.47299077733860345_c_double * as1)
+    nd2 = at2 * (0.4189723320158103_c_double * w2 - 0.47299077733860345_c_double * as2)
+    nd3 = at3 * (0.4189723320158103_c_double * w3 - 0.47299077733860345_c_double * as3)
+    h1 = ((((((tmp6 + tmp7) + tmp9) + 906.4878969465649_c_double * u1) + 0.3795_c_double * gd1) + &
         tmp12 * tmp2) + tmp13 * tmp4) - tmp11
-    h2 = ((((((tmp14 + tmp17) + tmp7) + 0.2795_c_double * gd2) + 806.5878969465649_c_double * u2) &
+    h2 = ((((((tmp14 + tmp17) + tmp7) + 806.4878969465649_c_double * u2) + 0.3795_c_double * gd2) &
         + tmp0 * tmp18) + tmp13 * tmp5) - tmp16
-    h3 = ((((((tmp14 + tmp19) + tmp6) + 606.5878969465649_c_double * u3) + 0.3795_c_double * gd3) &
+    h3 = ((((((tmp14 + tmp19) + tmp6) + 606.4878969465649_c_double * u3) + 0.3795_c_double * gd3) &
         + tmp1 * tmp18) + tmp12 * tmp3) - tmp20
-    f1 = (((((gd2 * tmp20 + gd3 * tmp17) + h2 * u3) + tmp21 * tmp5) - 0.1795_c_double * nd1) - h3 &
+    f1 = (((((gd2 * tmp20 + gd3 * tmp17) + h2 * u3) + tmp21 * tmp5) - 0.3795_c_double * nd1) - h3 &
         * u2) - tmp22 * tmp3
-    f2 = (((((gd1 * tmp19 + gd3 * tmp11) + h3 * u1) + tmp1 * tmp23) - 0.2795_c_double * nd2) - h1 &
+    f2 = (((((gd1 * tmp19 + gd3 * tmp11) + h3 * u1) + tmp1 * tmp23) - 0.3795_c_double * nd2) - h1 &
         * u3) - tmp21 * tmp4
     f3 = (((((gd1 * tmp16 + gd2 * tmp9) + h1 * u2) + tmp2 * tmp22) - 0.3795_c_double * nd3) - h2 &
         * u1) - tmp0 * tmp23
-    Mt11 = (906.4083969465648_c_double + 0.0795_c_double * (tmp3 * tmp3)) + 0.0795_c_double * &
+    Mt11 = (906.1083969465649_c_double + 0.1795_c_double * (tmp3 * tmp3)) + 0.1795_c_double * &
         (tmp5 * tmp5)
-    Mt22 = (806.3083969465649_c_double + 0.0795_c_double * (tmp1 * tmp1)) + 0.0795_c_double * &
+    Mt22 = (806.1083969465649_c_double + 0.1795_c_double * (tmp1 * tmp1)) + 0.1795_c_double * &
         (tmp4 * tmp4)
-    Mt33 = (606.2083969465649_c_double + 0.0795_c_double * (tmp0 * tmp0)) + 0.0795_c_double * &
+    Mt33 = (606.1083969465649_c_double + 0.1795_c_double * (tmp0 * tmp0)) + 0.1795_c_double * &
         (tmp2 * tmp2)
-    Mt12 = 0.04580152671755725_c_double - (0.0795_c_double * tmp4) * tmp5
-    Mt13 = 0.04580152671755725_c_double - (0.0795_c_double * tmp2) * tmp3
-    Mt23 = 0.04580152671755725_c_double - (0.0795_c_double * tmp0) * tmp1
+    Mt12 = 0.04580152671755725_c_double - (0.1795_c_double * tmp4) * tmp5
+    Mt13 = 0.04580152671755725_c_double - (0.1795_c_double * tmp2) * tmp3
+    Mt23 = 0.04580152671755725_c_double - (0.1795_c_double * tmp0) * tmp1
     adj11 = Mt22 * Mt33 - Mt23 * Mt23
     adj22 = Mt11 * Mt33 - Mt13 * Mt13
     adj33 = Mt11 * Mt22 - Mt12 * Mt12
@@ -470,24 +470,24 @@ contains
     tmp4 = u3 * u3
     tmp5 = vscmg3_cos(gam3)
     tmp6 = vscmg3_sin(gam3)
-    tmp7 = 0.0795_c_double * u1
+    tmp7 = 0.1795_c_double * u1
     tmp8 = vscmg3_cos(gam2)
     tmp9 = vscmg3_sin(gam2)
     tmp10 = vscmg3_cos(gam1)
     tmp11 = vscmg3_sin(gam1)
-    tmp12 = 0.03975_c_double * tmp2
-    tmp13 = 0.03975_c_double * tmp3
-    tmp14 = 0.03975_c_double * tmp4
-    out(0) = ((((((((((((((((((((((0.08975_c_double * (gd1 * gd1) + 0.13975_c_double * (gd2 * &
-        gd2)) + 303.29394847328246_c_double * tmp4) + 0.0795_c_double * (w1 * w1)) + &
-        0.0795_c_double * (w2 * w2)) + 0.0795_c_double * (w3 * w3)) + &
-        0.04580152671755725_c_double * tmp1) + 0.18975_c_double * (gd3 * gd3)) + &
-        403.29394847328246_c_double * tmp3) + 453.29394847328246_c_double * tmp2) + tmp0 * u2) + &
-        tmp0 * u3) + tmp12 * (tmp6 * tmp6)) + tmp12 * (tmp8 * tmp8)) + tmp13 * (tmp11 * tmp11)) + &
-        tmp13 * (tmp5 * tmp5)) + tmp14 * (tmp10 * tmp10)) + tmp14 * (tmp9 * tmp9)) + &
-        (0.1795_c_double * gd1) * u1) + (0.2795_c_double * gd2) * u2) + (0.3795_c_double * gd3) * &
-        u3) - ((0.0795_c_double * tmp1) * tmp10) * tmp11) - ((tmp5 * tmp6) * tmp7) * u2) - ((tmp7 &
-        * tmp8) * tmp9) * u3
+    tmp12 = 0.08975_c_double * tmp2
+    tmp13 = 0.08975_c_double * tmp3
+    tmp14 = 0.08975_c_double * tmp4
+    out(0) = ((((((((((((((((((((((303.24394847328244_c_double * tmp4 + &
+        403.24394847328244_c_double * tmp3) + 453.24394847328244_c_double * tmp2) + &
+        0.0795_c_double * (w1 * w1)) + 0.0795_c_double * (w2 * w2)) + 0.0795_c_double * (w3 * &
+        w3)) + 0.04580152671755725_c_double * tmp1) + 0.18975_c_double * (gd1 * gd1)) + &
+        0.18975_c_double * (gd2 * gd2)) + 0.18975_c_double * (gd3 * gd3)) + tmp0 * u2) + tmp0 * &
+        u3) + tmp12 * (tmp6 * tmp6)) + tmp12 * (tmp8 * tmp8)) + tmp13 * (tmp11 * tmp11)) + tmp13 &
+        * (tmp5 * tmp5)) + tmp14 * (tmp10 * tmp10)) + tmp14 * (tmp9 * tmp9)) + (0.3795_c_double * &
+        gd1) * u1) + (0.3795_c_double * gd2) * u2) + (0.3795_c_double * gd3) * u3) - &
+        ((0.1795_c_double * tmp1) * tmp10) * tmp11) - ((tmp5 * tmp6) * tmp7) * u2) - ((tmp7 * &
+        tmp8) * tmp9) * u3
   end subroutine vscmg3_kinetic_energy
 
   ! out = angular momentum about the mass center, N components h[0..2] (kg
@@ -571,13 +571,13 @@ contains
     tmp5 = vscmg3_sin(gam3)
     tmp6 = 0.159_c_double * w3
     tmp7 = vscmg3_sin(gam1)
-    tmp8 = 0.0795_c_double * u2
+    tmp8 = 0.1795_c_double * u2
     tmp9 = vscmg3_cos(gam3)
-    tmp10 = 0.0795_c_double * u1
+    tmp10 = 0.1795_c_double * u1
     tmp11 = tmp5 * tmp9
-    tmp12 = 0.0795_c_double * u3
+    tmp12 = 0.1795_c_double * u3
     tmp13 = tmp3 * tmp7
-    tmp14 = ((((((((tmp1 + tmp2) + 0.2795_c_double * gd2) + 806.5878969465649_c_double * u2) + &
+    tmp14 = ((((((((tmp1 + tmp2) + 806.4878969465649_c_double * u2) + 0.3795_c_double * gd2) + &
         tmp3 * tmp4) + tmp5 * tmp6) + tmp8 * (tmp7 * tmp7)) + tmp8 * (tmp9 * tmp9)) - tmp10 * &
         tmp11) - tmp12 * tmp13
     tmp15 = vscmg3_cos(q2)
@@ -593,11 +593,11 @@ contains
     tmp25 = 0.159_c_double * w2
     tmp26 = vscmg3_sin(gam2)
     tmp27 = tmp24 * tmp26
-    tmp28 = ((((((((tmp1 + tmp23) + 606.5878969465649_c_double * u3) + 0.3795_c_double * gd3) + &
+    tmp28 = ((((((((tmp1 + tmp23) + 606.4878969465649_c_double * u3) + 0.3795_c_double * gd3) + &
         tmp12 * (tmp26 * tmp26)) + tmp12 * (tmp3 * tmp3)) + tmp24 * tmp25) + tmp4 * tmp7) - tmp10 &
         * tmp27) - tmp13 * tmp8
     tmp29 = tmp0 * tmp17
-    tmp30 = ((((((((tmp2 + tmp23) + 0.1795_c_double * gd1) + 906.5878969465649_c_double * u1) + &
+    tmp30 = ((((((((tmp2 + tmp23) + 906.4878969465649_c_double * u1) + 0.3795_c_double * gd1) + &
         tmp10 * (tmp24 * tmp24)) + tmp10 * (tmp5 * tmp5)) + tmp25 * tmp26) + tmp6 * tmp9) - tmp11 &
         * tmp8) - tmp12 * tmp27
     out(0) = (tmp28 * (tmp19 + tmp20 * tmp22) + tmp30 * (tmp18 * tmp21 - tmp20 * tmp29)) - tmp0 * &

@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 3e0f1a5c1e7c3a7d: a hash of the scene, gyrogen and sympy
+ * Build id baadc4dea7b8486a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as VSCMG3_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,7 +19,7 @@
 extern "C" {
 #endif
 
-#define VSCMG3_BUILD_ID "3e0f1a5c1e7c3a7d"
+#define VSCMG3_BUILD_ID "baadc4dea7b8486a"
 
 #define VSCMG3_NX 15   /* states */
 #define VSCMG3_NP 0   /* parameters */

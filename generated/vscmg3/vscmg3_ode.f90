@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 3e0f1a5c1e7c3a7d. The same interface as vscmg3_ode.h, under
+! Build id baadc4dea7b8486a. The same interface as vscmg3_ode.h, under
 ! the bind(C) names vscmg3_f_<method> and vscmg3_f_<method>_batch.
 ! Coefficients and their published sources as above each method in vscmg3_ode.c.
 ! vscmg3_f.h declares these bind(C) procedures for C callers.
@@ -126,7 +126,7 @@ contains
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
-  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (941 ops).
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (946 ops).
   subroutine vscmg3_jac(t, x, c, J) bind(C, name="vscmg3_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:14)
@@ -417,6 +417,8 @@ contains
     real(c_double) :: tmp268
     real(c_double) :: tmp269
     real(c_double) :: tmp270
+    real(c_double) :: tmp271
+    real(c_double) :: tmp272
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -450,292 +452,296 @@ contains
     tmp11 = tmp4 * tmp8
     tmp12 = vscmg3_cos(gam3)
     tmp13 = vscmg3_sin(gam3)
-    tmp14 = 0.0795_c_double * tmp13
+    tmp14 = 0.1795_c_double * tmp13
     tmp15 = 0.04580152671755725_c_double - tmp12 * tmp14
-    tmp16 = vscmg3_cos(gam1)
-    tmp17 = vscmg3_sin(gam1)
-    tmp18 = 0.159_c_double * tmp17
-    tmp19 = tmp16 * tmp18
+    tmp16 = 0.359_c_double * tmp15
+    tmp17 = vscmg3_cos(gam1)
+    tmp18 = vscmg3_sin(gam1)
+    tmp19 = tmp17 * tmp18
     tmp20 = vscmg3_cos(gam2)
     tmp21 = vscmg3_sin(gam2)
-    tmp22 = 0.0795_c_double * tmp21
+    tmp22 = 0.1795_c_double * tmp21
     tmp23 = 0.04580152671755725_c_double - tmp20 * tmp22
-    tmp24 = tmp17 * tmp17
-    tmp25 = 0.0795_c_double * tmp24
-    tmp26 = tmp16 * tmp16
-    tmp27 = 0.0795_c_double * tmp26
+    tmp24 = tmp18 * tmp18
+    tmp25 = 0.1795_c_double * tmp24
+    tmp26 = tmp17 * tmp17
+    tmp27 = 0.1795_c_double * tmp26
     tmp28 = tmp25 - tmp27
-    tmp29 = tmp15 * tmp19 + tmp23 * tmp28
-    tmp30 = tmp15 * tmp28 - tmp19 * tmp23
-    tmp31 = tmp13 * tmp13
-    tmp32 = 0.0795_c_double * tmp31
-    tmp33 = tmp20 * tmp20
-    tmp34 = 0.0795_c_double * tmp33
-    tmp35 = tmp32 + tmp34
-    tmp36 = 906.4083969465648_c_double + tmp35
-    tmp37 = tmp12 * tmp12
-    tmp38 = 0.0795_c_double * tmp37
-    tmp39 = tmp25 + tmp38
-    tmp40 = 806.3083969465649_c_double + tmp39
-    tmp41 = tmp21 * tmp21
-    tmp42 = 0.0795_c_double * tmp41
-    tmp43 = tmp27 + tmp42
-    tmp44 = 606.2083969465649_c_double + tmp43
-    tmp45 = 0.0795_c_double * tmp16
-    tmp46 = 0.04580152671755725_c_double - tmp17 * tmp45
-    tmp47 = (((0.159_c_double * tmp16) * tmp17) * tmp44 - tmp19 * tmp40) - tmp46 * &
-        (0.159_c_double * tmp24 - 0.159_c_double * tmp26)
-    tmp48 = ((-tmp15 * tmp29) - tmp23 * tmp30) - tmp36 * tmp47
-    tmp49 = tmp23 * tmp46 - tmp15 * tmp44
-    tmp50 = tmp15 * tmp46 - tmp23 * tmp40
-    tmp51 = tmp40 * tmp44 - tmp46 * tmp46
-    tmp52 = (tmp15 * tmp49 + tmp23 * tmp50) + tmp36 * tmp51
-    tmp53 = 1.0_c_double / (tmp52 * tmp52)
-    tmp54 = 0.159_c_double * w2
-    tmp55 = tmp20 * tmp54
-    tmp56 = tmp20 * u1
-    tmp57 = tmp21 * u3
-    tmp58 = tmp56 - tmp57
-    tmp59 = tmp22 * tmp58
-    tmp60 = tmp55 - tmp59
-    tmp61 = 606.5878969465649_c_double * u3
-    tmp62 = 0.04580152671755725_c_double * u1
-    tmp63 = 0.04580152671755725_c_double * u2
-    tmp64 = 0.3795_c_double * gd3
-    tmp65 = tmp17 * u2
-    tmp66 = tmp16 * u3 - tmp65
-    tmp67 = tmp45 * tmp66
-    tmp68 = 0.159_c_double * w1
-    tmp69 = tmp17 * tmp68
-    tmp70 = tmp67 + tmp69
-    tmp71 = (((tmp61 + tmp62) + tmp63) + tmp64) + tmp70
-    tmp72 = tmp60 + tmp71
-    tmp73 = 0.159_c_double * w3
-    tmp74 = tmp12 * tmp73
-    tmp75 = tmp13 * u1
-    tmp76 = tmp12 * u2 - tmp75
-    tmp77 = tmp14 * tmp76
-    tmp78 = tmp74 - tmp77
-    tmp79 = 0.1795_c_double * gd1
-    tmp80 = 0.04580152671755725_c_double * u3
-    tmp81 = 906.5878969465649_c_double * u1
-    tmp82 = 0.0795_c_double * tmp20
-    tmp83 = tmp58 * tmp82
-    tmp84 = tmp21 * tmp54
-    tmp85 = tmp83 + tmp84
-    tmp86 = (((tmp63 + tmp79) + tmp80) + tmp81) + tmp85
-    tmp87 = tmp78 + tmp86
-    tmp88 = tmp21 * u1
-    tmp89 = tmp20 * u3
-    tmp90 = (0.5688729874776386_c_double * w2 - 0.2844364937388193_c_double * tmp88) - &
-        0.2844364937388193_c_double * tmp89
-    tmp91 = tmp12 * u1
-    tmp92 = tmp13 * u2
-    tmp93 = (0.159_c_double * w3 - 0.0795_c_double * tmp91) - 0.0795_c_double * tmp92
-    tmp94 = tmp12 * tmp93
-    tmp95 = gd3 * tmp94
-    tmp96 = gd3 * tmp77
-    tmp97 = tmp16 * u2
-    tmp98 = tmp17 * u3
-    tmp99 = (0.159_c_double * w1 - 0.0795_c_double * tmp97) - 0.0795_c_double * tmp98
-    tmp100 = tmp17 * tmp99
-    tmp101 = gd1 * tmp100 + gd1 * tmp67
-    tmp102 = ((((tmp101 + tmp96) + tmp72 * u1) - tmp95) - tmp87 * u3) - (0.2795_c_double * tmp58) &
-        * tmp90
-    tmp103 = 0.0795_c_double * tmp12
-    tmp104 = tmp103 * tmp76
-    tmp105 = tmp13 * tmp73
-    tmp106 = tmp104 + tmp105
-    tmp107 = 0.2795_c_double * gd2
-    tmp108 = 806.5878969465649_c_double * u2
-    tmp109 = tmp16 * tmp68
-    tmp110 = 0.0795_c_double * tmp17
-    tmp111 = tmp110 * tmp66
-    tmp112 = tmp109 - tmp111
-    tmp113 = (((tmp107 + tmp108) + tmp112) + tmp62) + tmp80
-    tmp114 = tmp106 + tmp113
-    tmp115 = (0.4189723320158103_c_double * w3 - 0.20948616600790515_c_double * tmp91) - &
-        0.20948616600790515_c_double * tmp92
-    tmp116 = tmp16 * tmp99
-    tmp117 = gd1 * tmp116
-    tmp118 = gd1 * tmp111
-    tmp119 = (0.159_c_double * w2 - 0.0795_c_double * tmp88) - 0.0795_c_double * tmp89
-    tmp120 = tmp119 * tmp21
-    tmp121 = gd2 * tmp120 + gd2 * tmp83
-    tmp122 = ((((tmp118 + tmp121) + tmp87 * u2) - tmp117) - tmp114 * u1) - (0.3795_c_double * &
-        tmp115) * tmp76
-    tmp123 = (0.8857938718662952_c_double * w1 - 0.4428969359331476_c_double * tmp97) - &
-        0.4428969359331476_c_double * tmp98
-    tmp124 = tmp119 * tmp20
-    tmp125 = gd2 * tmp124
-    tmp126 = gd2 * tmp59
-    tmp127 = tmp13 * tmp93
-    tmp128 = gd3 * tmp104 + gd3 * tmp127
-    tmp129 = ((((tmp126 + tmp128) + tmp114 * u3) - tmp125) - tmp72 * u2) - (0.1795_c_double * &
-        tmp123) * tmp66
-    tmp130 = tmp53 * ((tmp102 * tmp49 + tmp122 * tmp50) + tmp129 * tmp51)
-    tmp131 = tmp130 * tmp48
-    tmp132 = 1.0_c_double / tmp52
-    tmp133 = tmp16 * u3
-    tmp134 = gd1 * (0.0795_c_double * tmp65 - 0.0795_c_double * tmp133)
-    tmp135 = (-tmp97) - tmp98
-    tmp136 = tmp135 * tmp45
-    tmp137 = tmp112 + tmp136
-    tmp138 = (((tmp117 + gd1 * tmp136) + tmp134 * tmp17) + tmp137 * u1) - tmp118
-    tmp139 = tmp110 * tmp135
-    tmp140 = (-tmp139) - tmp70
-    tmp141 = ((tmp101 + gd1 * tmp139) - tmp134 * tmp16) - tmp140 * u1
-    tmp142 = tmp66 * (0.4428969359331476_c_double * tmp65 - 0.4428969359331476_c_double * tmp133)
-    tmp143 = tmp123 * tmp135
-    tmp144 = ((tmp140 * u3 - 0.1795_c_double * tmp142) - 0.1795_c_double * tmp143) - tmp137 * u2
-    tmp145 = tmp132 * (((((tmp102 * tmp29 + tmp122 * tmp30) + tmp129 * tmp47) + tmp138 * tmp49) + &
-        tmp141 * tmp50) + tmp144 * tmp51)
-    tmp146 = 0.159_c_double * tmp20
-    tmp147 = tmp146 * tmp21
-    tmp148 = tmp42 - tmp34
-    tmp149 = tmp148 * tmp46 - tmp147 * tmp15
-    tmp150 = ((((tmp148 * tmp23) * tmp40 + ((0.159_c_double * tmp20) * tmp21) * tmp51) - tmp148 * &
-        tmp50) - tmp149 * tmp15) - (tmp147 * tmp36) * tmp40
-    tmp151 = gd2 * ((0.0795_c_double * tmp21) * u3 - 0.0795_c_double * tmp56)
-    tmp152 = (-tmp88) - tmp89
-    tmp153 = tmp152 * tmp82
-    tmp154 = tmp153 + tmp60
-    tmp155 = (((tmp125 + gd2 * tmp153) + tmp151 * tmp21) + tmp154 * u2) - tmp126
-    tmp156 = tmp152 * tmp22
-    tmp157 = (-tmp156) - tmp85
-    tmp158 = ((tmp121 + gd2 * tmp156) - tmp151 * tmp20) - tmp157 * u2
-    tmp159 = tmp58 * ((0.2844364937388193_c_double * tmp21) * u3 - 0.2844364937388193_c_double * &
-        tmp56)
-    tmp160 = tmp152 * tmp90
-    tmp161 = ((tmp157 * u1 - 0.2795_c_double * tmp159) - 0.2795_c_double * tmp160) - tmp154 * u3
-    tmp162 = tmp147 * tmp40
-    tmp163 = tmp148 * tmp40
-    tmp164 = tmp130 * tmp150 + tmp132 * (((((tmp102 * tmp149 + tmp129 * tmp162) + tmp155 * tmp50) &
-        + tmp158 * tmp51) + tmp161 * tmp49) - tmp122 * tmp163)
-    tmp165 = tmp32 - tmp38
-    tmp166 = 0.159_c_double * tmp13
-    tmp167 = tmp12 * tmp166
-    tmp168 = tmp165 * tmp46 + tmp167 * tmp23
-    tmp169 = ((((tmp15 * tmp165) * tmp44 + (((0.159_c_double * tmp12) * tmp13) * tmp36) * tmp44) &
-        - tmp165 * tmp49) - tmp167 * tmp51) - tmp168 * tmp23
-    tmp170 = tmp12 * u2
-    tmp171 = gd3 * (0.0795_c_double * tmp75 - 0.0795_c_double * tmp170)
-    tmp172 = (-tmp91) - tmp92
-    tmp173 = tmp103 * tmp172
-    tmp174 = tmp173 + tmp78
-    tmp175 = (((tmp95 + gd3 * tmp173) + tmp13 * tmp171) + tmp174 * u3) - tmp96
-    tmp176 = tmp14 * tmp172
-    tmp177 = (-tmp106) - tmp176
-    tmp178 = ((tmp128 + gd3 * tmp176) - tmp12 * tmp171) - tmp177 * u3
-    tmp179 = tmp76 * (0.20948616600790515_c_double * tmp75 - 0.20948616600790515_c_double * tmp170)
-    tmp180 = tmp115 * tmp172
-    tmp181 = ((tmp177 * u2 - 0.3795_c_double * tmp179) - 0.3795_c_double * tmp180) - tmp174 * u1
-    tmp182 = tmp167 * tmp44
-    tmp183 = tmp165 * tmp44
-    tmp184 = tmp130 * tmp169 + tmp132 * (((((tmp122 * tmp168 + tmp175 * tmp51) + tmp178 * tmp49) &
-        + tmp181 * tmp50) - tmp102 * tmp183) - tmp129 * tmp182)
-    tmp185 = tmp23 * u2
-    tmp186 = gd2 * tmp146
-    tmp187 = tmp186 * tmp21
-    tmp188 = gd3 * tmp166
-    tmp189 = tmp15 * u3 - tmp12 * tmp188
-    tmp190 = (tmp187 + tmp189) - tmp185
-    tmp191 = 906.5878969465649_c_double + tmp35
-    tmp192 = gd3 * tmp32
-    tmp193 = (((((tmp55 + tmp71) + gd3 * tmp38) + tmp23 * u1) - tmp192) - tmp191 * u3) - &
-        (0.2795_c_double * tmp20) * tmp90
-    tmp194 = gd2 * tmp42
-    tmp195 = (((((tmp191 * u2 + (0.0795_c_double * gd2) * tmp33) + (0.3795_c_double * tmp115) * &
-        tmp13) - tmp105) - tmp113) - tmp194) - tmp15 * u1
-    tmp196 = tmp132 * ((tmp190 * tmp51 + tmp193 * tmp49) + tmp195 * tmp50)
-    tmp197 = gd1 * tmp18
-    tmp198 = tmp16 * tmp197 - tmp46 * u1
-    tmp199 = (-tmp189) - tmp198
-    tmp200 = 806.5878969465649_c_double + tmp39
-    tmp201 = gd1 * tmp25
-    tmp202 = (((((tmp74 + tmp86) + gd1 * tmp27) + tmp15 * u2) - tmp201) - tmp200 * u1) - &
-        (0.3795_c_double * tmp115) * tmp12
-    tmp203 = 1.3877787807814457e-17_c_double * tmp66
-    tmp204 = ((((((((((tmp200 * u3 + (0.1795_c_double * tmp123) * tmp17) + (0.0795_c_double * &
-        gd3) * tmp37) - tmp192) - tmp60) - tmp61) - tmp62) - tmp63) - tmp64) - tmp69) - tmp16 * &
-        tmp203) - tmp46 * u2
-    tmp205 = tmp132 * ((tmp199 * tmp49 + tmp202 * tmp50) + tmp204 * tmp51)
-    tmp206 = (tmp185 + tmp198) - tmp187
-    tmp207 = 606.5878969465649_c_double + tmp43
-    tmp208 = (((((((((tmp207 * u1 + (0.2795_c_double * tmp21) * tmp90) + (0.0795_c_double * gd1) &
-        * tmp26) - tmp201) - tmp63) - tmp78) - tmp79) - tmp80) - tmp81) - tmp84) - tmp23 * u3
-    tmp209 = ((((((((((tmp106 + tmp107) + tmp108) + tmp109) + tmp62) + tmp80) + gd2 * tmp34) + &
-        tmp46 * u3) - tmp194) - tmp17 * tmp203) - tmp207 * u2) - (0.1795_c_double * tmp123) * tmp16
-    tmp210 = tmp132 * ((tmp206 * tmp50 + tmp208 * tmp49) + tmp209 * tmp51)
-    tmp211 = (tmp100 + tmp67) - 0.1795_c_double * u3
-    tmp212 = (tmp111 + 0.1795_c_double * u2) - tmp116
-    tmp213 = tmp132 * (tmp211 * tmp49 + tmp212 * tmp50)
-    tmp214 = (tmp120 + tmp83) - 0.2795_c_double * u1
-    tmp215 = (tmp59 + 0.2795_c_double * u3) - tmp124
-    tmp216 = tmp132 * (tmp214 * tmp50 + tmp215 * tmp51)
-    tmp217 = (tmp104 + tmp127) - 0.3795_c_double * u2
-    tmp218 = (tmp77 + 0.3795_c_double * u1) - tmp94
-    tmp219 = tmp132 * (tmp217 * tmp51 + tmp218 * tmp49)
-    tmp220 = tmp197 + tmp18 * u1
-    tmp221 = 0.159_c_double * tmp16
-    tmp222 = (-gd1 * tmp221) - tmp221 * u1
-    tmp223 = (2.7755575615628914e-17_c_double * tmp16) * u3 - 2.7755575615628914e-17_c_double * &
-        tmp65
-    tmp224 = tmp132 * ((tmp220 * tmp49 + tmp222 * tmp50) + tmp223 * tmp51)
+    tmp29 = tmp16 * tmp19 + tmp23 * tmp28
+    tmp30 = 0.359_c_double * tmp19
+    tmp31 = tmp15 * tmp28 - tmp23 * tmp30
+    tmp32 = tmp13 * tmp13
+    tmp33 = 0.1795_c_double * tmp32
+    tmp34 = tmp20 * tmp20
+    tmp35 = 0.1795_c_double * tmp34
+    tmp36 = tmp33 + tmp35
+    tmp37 = 906.1083969465649_c_double + tmp36
+    tmp38 = tmp12 * tmp12
+    tmp39 = 0.1795_c_double * tmp38
+    tmp40 = tmp25 + tmp39
+    tmp41 = 806.1083969465649_c_double + tmp40
+    tmp42 = tmp21 * tmp21
+    tmp43 = 0.1795_c_double * tmp42
+    tmp44 = tmp27 + tmp43
+    tmp45 = 606.1083969465649_c_double + tmp44
+    tmp46 = 0.1795_c_double * tmp17
+    tmp47 = 0.04580152671755725_c_double - tmp18 * tmp46
+    tmp48 = (((0.359_c_double * tmp17) * tmp18) * tmp45 - tmp30 * tmp41) - tmp47 * &
+        (0.359_c_double * tmp24 - 0.359_c_double * tmp26)
+    tmp49 = ((-tmp15 * tmp29) - tmp23 * tmp31) - tmp37 * tmp48
+    tmp50 = tmp23 * tmp47 - tmp15 * tmp45
+    tmp51 = tmp15 * tmp47 - tmp23 * tmp41
+    tmp52 = tmp41 * tmp45 - tmp47 * tmp47
+    tmp53 = (tmp15 * tmp50 + tmp23 * tmp51) + tmp37 * tmp52
+    tmp54 = 1.0_c_double / (tmp53 * tmp53)
+    tmp55 = 0.159_c_double * w2
+    tmp56 = tmp20 * tmp55
+    tmp57 = tmp20 * u1
+    tmp58 = tmp21 * u3
+    tmp59 = tmp57 - tmp58
+    tmp60 = tmp22 * tmp59
+    tmp61 = tmp56 - tmp60
+    tmp62 = 606.4878969465649_c_double * u3
+    tmp63 = 0.04580152671755725_c_double * u1
+    tmp64 = 0.04580152671755725_c_double * u2
+    tmp65 = 0.3795_c_double * gd3
+    tmp66 = tmp18 * u2
+    tmp67 = tmp17 * u3 - tmp66
+    tmp68 = tmp46 * tmp67
+    tmp69 = 0.159_c_double * w1
+    tmp70 = tmp18 * tmp69
+    tmp71 = tmp68 + tmp70
+    tmp72 = (((tmp62 + tmp63) + tmp64) + tmp65) + tmp71
+    tmp73 = tmp61 + tmp72
+    tmp74 = 0.159_c_double * w3
+    tmp75 = tmp12 * tmp74
+    tmp76 = tmp13 * u1
+    tmp77 = tmp12 * u2 - tmp76
+    tmp78 = tmp14 * tmp77
+    tmp79 = tmp75 - tmp78
+    tmp80 = 906.4878969465649_c_double * u1
+    tmp81 = 0.04580152671755725_c_double * u3
+    tmp82 = 0.3795_c_double * gd1
+    tmp83 = 0.1795_c_double * tmp20
+    tmp84 = tmp59 * tmp83
+    tmp85 = tmp21 * tmp55
+    tmp86 = tmp84 + tmp85
+    tmp87 = (((tmp64 + tmp80) + tmp81) + tmp82) + tmp86
+    tmp88 = tmp79 + tmp87
+    tmp89 = tmp21 * u1
+    tmp90 = tmp20 * u3
+    tmp91 = (0.4189723320158103_c_double * w2 - 0.47299077733860345_c_double * tmp89) - &
+        0.47299077733860345_c_double * tmp90
+    tmp92 = tmp12 * u1
+    tmp93 = tmp13 * u2
+    tmp94 = (0.159_c_double * w3 - 0.1795_c_double * tmp92) - 0.1795_c_double * tmp93
+    tmp95 = tmp12 * tmp94
+    tmp96 = gd3 * tmp95
+    tmp97 = gd3 * tmp78
+    tmp98 = tmp17 * u2
+    tmp99 = tmp18 * u3
+    tmp100 = (0.159_c_double * w1 - 0.1795_c_double * tmp98) - 0.1795_c_double * tmp99
+    tmp101 = tmp100 * tmp18
+    tmp102 = gd1 * tmp101 + gd1 * tmp68
+    tmp103 = ((((tmp102 + tmp97) + tmp73 * u1) - tmp96) - tmp88 * u3) - (0.3795_c_double * tmp59) &
+        * tmp91
+    tmp104 = 0.1795_c_double * tmp12
+    tmp105 = tmp104 * tmp77
+    tmp106 = tmp13 * tmp74
+    tmp107 = tmp105 + tmp106
+    tmp108 = 806.4878969465649_c_double * u2
+    tmp109 = 0.3795_c_double * gd2
+    tmp110 = tmp17 * tmp69
+    tmp111 = 0.1795_c_double * tmp18
+    tmp112 = tmp111 * tmp67
+    tmp113 = tmp110 - tmp112
+    tmp114 = (((tmp108 + tmp109) + tmp113) + tmp63) + tmp81
+    tmp115 = tmp107 + tmp114
+    tmp116 = (0.4189723320158103_c_double * w3 - 0.47299077733860345_c_double * tmp92) - &
+        0.47299077733860345_c_double * tmp93
+    tmp117 = tmp100 * tmp17
+    tmp118 = gd1 * tmp117
+    tmp119 = gd1 * tmp112
+    tmp120 = (0.159_c_double * w2 - 0.1795_c_double * tmp89) - 0.1795_c_double * tmp90
+    tmp121 = tmp120 * tmp21
+    tmp122 = gd2 * tmp121 + gd2 * tmp84
+    tmp123 = ((((tmp119 + tmp122) + tmp88 * u2) - tmp118) - tmp115 * u1) - (0.3795_c_double * &
+        tmp116) * tmp77
+    tmp124 = (0.4189723320158103_c_double * w1 - 0.47299077733860345_c_double * tmp98) - &
+        0.47299077733860345_c_double * tmp99
+    tmp125 = tmp120 * tmp20
+    tmp126 = gd2 * tmp125
+    tmp127 = gd2 * tmp60
+    tmp128 = tmp13 * tmp94
+    tmp129 = gd3 * tmp105 + gd3 * tmp128
+    tmp130 = ((((tmp127 + tmp129) + tmp115 * u3) - tmp126) - tmp73 * u2) - (0.3795_c_double * &
+        tmp124) * tmp67
+    tmp131 = tmp54 * ((tmp103 * tmp50 + tmp123 * tmp51) + tmp130 * tmp52)
+    tmp132 = tmp131 * tmp49
+    tmp133 = 1.0_c_double / tmp53
+    tmp134 = tmp17 * u3
+    tmp135 = gd1 * (0.1795_c_double * tmp66 - 0.1795_c_double * tmp134)
+    tmp136 = (-tmp98) - tmp99
+    tmp137 = tmp136 * tmp46
+    tmp138 = tmp113 + tmp137
+    tmp139 = (((tmp118 + gd1 * tmp137) + tmp135 * tmp18) + tmp138 * u1) - tmp119
+    tmp140 = tmp111 * tmp136
+    tmp141 = (-tmp140) - tmp71
+    tmp142 = ((tmp102 + gd1 * tmp140) - tmp135 * tmp17) - tmp141 * u1
+    tmp143 = tmp67 * (0.47299077733860345_c_double * tmp66 - 0.47299077733860345_c_double * tmp134)
+    tmp144 = tmp124 * tmp136
+    tmp145 = ((tmp141 * u3 - 0.3795_c_double * tmp143) - 0.3795_c_double * tmp144) - tmp138 * u2
+    tmp146 = tmp133 * (((((tmp103 * tmp29 + tmp123 * tmp31) + tmp130 * tmp48) + tmp139 * tmp50) + &
+        tmp142 * tmp51) + tmp145 * tmp52)
+    tmp147 = tmp20 * tmp21
+    tmp148 = 0.359_c_double * tmp147
+    tmp149 = tmp43 - tmp35
+    tmp150 = tmp149 * tmp47 - tmp147 * tmp16
+    tmp151 = ((((tmp149 * tmp23) * tmp41 + ((0.359_c_double * tmp20) * tmp21) * tmp52) - tmp149 * &
+        tmp51) - tmp15 * tmp150) - (tmp148 * tmp37) * tmp41
+    tmp152 = gd2 * ((0.1795_c_double * tmp21) * u3 - 0.1795_c_double * tmp57)
+    tmp153 = (-tmp89) - tmp90
+    tmp154 = tmp153 * tmp83
+    tmp155 = tmp154 + tmp61
+    tmp156 = (((tmp126 + gd2 * tmp154) + tmp152 * tmp21) + tmp155 * u2) - tmp127
+    tmp157 = tmp153 * tmp22
+    tmp158 = (-tmp157) - tmp86
+    tmp159 = ((tmp122 + gd2 * tmp157) - tmp152 * tmp20) - tmp158 * u2
+    tmp160 = tmp59 * ((0.47299077733860345_c_double * tmp21) * u3 - 0.47299077733860345_c_double &
+        * tmp57)
+    tmp161 = tmp153 * tmp91
+    tmp162 = ((tmp158 * u1 - 0.3795_c_double * tmp160) - 0.3795_c_double * tmp161) - tmp155 * u3
+    tmp163 = tmp148 * tmp41
+    tmp164 = tmp149 * tmp41
+    tmp165 = tmp131 * tmp151 + tmp133 * (((((tmp103 * tmp150 + tmp130 * tmp163) + tmp156 * tmp51) &
+        + tmp159 * tmp52) + tmp162 * tmp50) - tmp123 * tmp164)
+    tmp166 = tmp33 - tmp39
+    tmp167 = tmp12 * tmp13
+    tmp168 = 0.359_c_double * tmp167
+    tmp169 = tmp166 * tmp47 + tmp168 * tmp23
+    tmp170 = ((((tmp15 * tmp166) * tmp45 + (((0.359_c_double * tmp12) * tmp13) * tmp37) * tmp45) &
+        - tmp166 * tmp50) - tmp169 * tmp23) - (0.359_c_double * tmp167) * tmp52
+    tmp171 = tmp12 * u2
+    tmp172 = gd3 * (0.1795_c_double * tmp76 - 0.1795_c_double * tmp171)
+    tmp173 = (-tmp92) - tmp93
+    tmp174 = tmp104 * tmp173
+    tmp175 = tmp174 + tmp79
+    tmp176 = (((tmp96 + gd3 * tmp174) + tmp13 * tmp172) + tmp175 * u3) - tmp97
+    tmp177 = tmp14 * tmp173
+    tmp178 = (-tmp107) - tmp177
+    tmp179 = ((tmp129 + gd3 * tmp177) - tmp12 * tmp172) - tmp178 * u3
+    tmp180 = tmp77 * (0.47299077733860345_c_double * tmp76 - 0.47299077733860345_c_double * tmp171)
+    tmp181 = tmp116 * tmp173
+    tmp182 = ((tmp178 * u2 - 0.3795_c_double * tmp180) - 0.3795_c_double * tmp181) - tmp175 * u1
+    tmp183 = tmp168 * tmp45
+    tmp184 = tmp166 * tmp45
+    tmp185 = tmp131 * tmp170 + tmp133 * (((((tmp123 * tmp169 + tmp176 * tmp52) + tmp179 * tmp50) &
+        + tmp182 * tmp51) - tmp103 * tmp184) - tmp130 * tmp183)
+    tmp186 = tmp23 * u2
+    tmp187 = gd2 * tmp148
+    tmp188 = tmp15 * u3 - gd3 * tmp168
+    tmp189 = (tmp187 + tmp188) - tmp186
+    tmp190 = 906.4878969465649_c_double + tmp36
+    tmp191 = gd3 * tmp33
+    tmp192 = ((((((tmp56 + tmp72) + gd3 * tmp39) + tmp23 * u1) + (2.7755575615628914e-17_c_double &
+        * tmp21) * tmp59) - tmp191) - tmp190 * u3) - (0.3795_c_double * tmp20) * tmp91
+    tmp193 = gd2 * tmp43
+    tmp194 = ((((((tmp190 * u2 + (2.7755575615628914e-17_c_double * tmp12) * tmp77) + &
+        (0.1795_c_double * gd2) * tmp34) + (0.3795_c_double * tmp116) * tmp13) - tmp106) - &
+        tmp114) - tmp193) - tmp15 * u1
+    tmp195 = tmp133 * ((tmp189 * tmp52 + tmp192 * tmp50) + tmp194 * tmp51)
+    tmp196 = gd1 * tmp30 - tmp47 * u1
+    tmp197 = (-tmp188) - tmp196
+    tmp198 = 806.4878969465649_c_double + tmp40
+    tmp199 = gd1 * tmp25
+    tmp200 = ((((((tmp75 + tmp87) + gd1 * tmp27) + tmp15 * u2) + (2.7755575615628914e-17_c_double &
+        * tmp13) * tmp77) - tmp199) - tmp198 * u1) - (0.3795_c_double * tmp116) * tmp12
+    tmp201 = ((((((((((tmp198 * u3 + (2.7755575615628914e-17_c_double * tmp17) * tmp67) + &
+        (0.1795_c_double * gd3) * tmp38) + (0.3795_c_double * tmp124) * tmp18) - tmp191) - tmp61) &
+        - tmp62) - tmp63) - tmp64) - tmp65) - tmp70) - tmp47 * u2
+    tmp202 = tmp133 * ((tmp197 * tmp50 + tmp200 * tmp51) + tmp201 * tmp52)
+    tmp203 = (tmp186 + tmp196) - tmp187
+    tmp204 = 606.4878969465649_c_double + tmp44
+    tmp205 = ((((((((((tmp204 * u1 + (2.7755575615628914e-17_c_double * tmp20) * tmp59) + &
+        (0.1795_c_double * gd1) * tmp26) + (0.3795_c_double * tmp21) * tmp91) - tmp199) - tmp64) &
+        - tmp79) - tmp80) - tmp81) - tmp82) - tmp85) - tmp23 * u3
+    tmp206 = ((((((((((tmp107 + tmp108) + tmp109) + tmp110) + tmp63) + tmp81) + gd2 * tmp35) + &
+        tmp47 * u3) + (2.7755575615628914e-17_c_double * tmp18) * tmp67) - tmp193) - tmp204 * u2) &
+        - (0.3795_c_double * tmp124) * tmp17
+    tmp207 = tmp133 * ((tmp203 * tmp51 + tmp205 * tmp50) + tmp206 * tmp52)
+    tmp208 = 0.3795_c_double * u3
+    tmp209 = (tmp101 + tmp68) - tmp208
+    tmp210 = 0.3795_c_double * u2
+    tmp211 = (tmp112 + tmp210) - tmp117
+    tmp212 = tmp133 * (tmp209 * tmp50 + tmp211 * tmp51)
+    tmp213 = 0.3795_c_double * u1
+    tmp214 = (tmp121 + tmp84) - tmp213
+    tmp215 = (tmp208 + tmp60) - tmp125
+    tmp216 = tmp133 * (tmp214 * tmp51 + tmp215 * tmp52)
+    tmp217 = (tmp105 + tmp128) - tmp210
+    tmp218 = (tmp213 + tmp78) - tmp95
+    tmp219 = tmp133 * (tmp217 * tmp52 + tmp218 * tmp50)
+    tmp220 = 0.159_c_double * tmp18
+    tmp221 = gd1 * tmp220 + tmp220 * u1
+    tmp222 = 0.159_c_double * tmp17
+    tmp223 = (-gd1 * tmp222) - tmp222 * u1
+    tmp224 = tmp133 * (tmp221 * tmp50 + tmp223 * tmp51)
     tmp225 = 0.159_c_double * tmp21
     tmp226 = gd2 * tmp225 + tmp225 * u2
-    tmp227 = (-tmp186) - tmp146 * u2
-    tmp228 = tmp132 * (tmp226 * tmp50 + tmp227 * tmp51)
-    tmp229 = 0.159_c_double * tmp12
-    tmp230 = (-gd3 * tmp229) - tmp229 * u3
-    tmp231 = tmp188 + tmp166 * u3
-    tmp232 = tmp132 * (tmp230 * tmp49 + tmp231 * tmp51)
-    tmp233 = tmp15 * tmp23 - tmp36 * tmp46
-    tmp234 = tmp36 * tmp44 - tmp23 * tmp23
-    tmp235 = tmp53 * ((tmp102 * tmp234 + tmp122 * tmp233) + tmp129 * tmp49)
-    tmp236 = tmp19 * tmp36
-    tmp237 = tmp28 * tmp36
-    tmp238 = tmp132 * (((((tmp129 * tmp29 + tmp138 * tmp234) + tmp141 * tmp233) + tmp144 * tmp49) &
-        - tmp102 * tmp236) - tmp122 * tmp237) + tmp235 * tmp48
-    tmp239 = tmp150 * tmp235
-    tmp240 = tmp147 * tmp46 + tmp148 * tmp15
-    tmp241 = tmp132 * (((((tmp102 * ((((0.159_c_double * tmp20) * tmp21) * tmp36 - tmp147 * &
-        tmp44) - tmp23 * (0.159_c_double * tmp41 - 0.159_c_double * tmp33)) + tmp122 * tmp240) + &
-        tmp129 * tmp149) + tmp155 * tmp233) + tmp158 * tmp49) + tmp161 * tmp234)
-    tmp242 = tmp165 * tmp23 - tmp167 * tmp46
-    tmp243 = tmp132 * (((((tmp102 * tmp182 + tmp122 * tmp242) + tmp175 * tmp49) + tmp178 * &
-        tmp234) + tmp181 * tmp233) - tmp129 * tmp183) + tmp169 * tmp235
-    tmp244 = tmp132 * ((tmp190 * tmp49 + tmp193 * tmp234) + tmp195 * tmp233)
-    tmp245 = tmp132 * ((tmp199 * tmp234 + tmp202 * tmp233) + tmp204 * tmp49)
-    tmp246 = tmp132 * ((tmp206 * tmp233 + tmp208 * tmp234) + tmp209 * tmp49)
-    tmp247 = tmp132 * (tmp211 * tmp234 + tmp212 * tmp233)
-    tmp248 = tmp132 * (tmp214 * tmp233 + tmp215 * tmp49)
-    tmp249 = tmp132 * (tmp217 * tmp49 + tmp218 * tmp234)
-    tmp250 = tmp132 * ((tmp220 * tmp234 + tmp222 * tmp233) + tmp223 * tmp49)
-    tmp251 = tmp132 * (tmp226 * tmp233 + tmp227 * tmp49)
-    tmp252 = tmp132 * (tmp230 * tmp234 + tmp231 * tmp49)
-    tmp253 = tmp36 * tmp40 - tmp15 * tmp15
-    tmp254 = tmp53 * ((tmp102 * tmp233 + tmp122 * tmp253) + tmp129 * tmp50)
-    tmp255 = tmp132 * (((((tmp122 * tmp236 + tmp129 * tmp30) + tmp138 * tmp233) + tmp141 * &
-        tmp253) + tmp144 * tmp50) - tmp102 * tmp237) + tmp254 * tmp48
-    tmp256 = tmp132 * (((((tmp102 * tmp240 + tmp155 * tmp253) + tmp158 * tmp50) + tmp161 * &
-        tmp233) - tmp122 * tmp162) - tmp129 * tmp163) + tmp150 * tmp254
-    tmp257 = tmp169 * tmp254
-    tmp258 = tmp132 * (((((tmp102 * tmp242 + tmp122 * ((((0.159_c_double * tmp12) * tmp13) * &
-        tmp40 - tmp15 * (0.159_c_double * tmp31 - 0.159_c_double * tmp37)) - tmp167 * tmp36)) + &
-        tmp129 * tmp168) + tmp175 * tmp50) + tmp178 * tmp233) + tmp181 * tmp253)
-    tmp259 = tmp132 * ((tmp190 * tmp50 + tmp193 * tmp233) + tmp195 * tmp253)
-    tmp260 = tmp132 * ((tmp199 * tmp233 + tmp202 * tmp253) + tmp204 * tmp50)
-    tmp261 = tmp132 * ((tmp206 * tmp253 + tmp208 * tmp233) + tmp209 * tmp50)
-    tmp262 = tmp132 * (tmp211 * tmp233 + tmp212 * tmp253)
-    tmp263 = tmp132 * (tmp214 * tmp253 + tmp215 * tmp50)
-    tmp264 = tmp132 * (tmp217 * tmp50 + tmp218 * tmp233)
-    tmp265 = tmp132 * ((tmp220 * tmp233 + tmp222 * tmp253) + tmp223 * tmp50)
-    tmp266 = tmp132 * (tmp226 * tmp253 + tmp227 * tmp50)
-    tmp267 = tmp132 * (tmp230 * tmp233 + tmp231 * tmp50)
-    tmp268 = 0.4428969359331476_c_double * tmp66
-    tmp269 = 0.2844364937388193_c_double * tmp58
-    tmp270 = 0.20948616600790515_c_double * tmp76
+    tmp227 = 0.159_c_double * tmp20
+    tmp228 = (-gd2 * tmp227) - tmp227 * u2
+    tmp229 = tmp133 * (tmp226 * tmp51 + tmp228 * tmp52)
+    tmp230 = 0.159_c_double * tmp12
+    tmp231 = (-gd3 * tmp230) - tmp230 * u3
+    tmp232 = 0.159_c_double * tmp13
+    tmp233 = gd3 * tmp232 + tmp232 * u3
+    tmp234 = tmp133 * (tmp231 * tmp50 + tmp233 * tmp52)
+    tmp235 = tmp15 * tmp23 - tmp37 * tmp47
+    tmp236 = tmp37 * tmp45 - tmp23 * tmp23
+    tmp237 = tmp54 * ((tmp103 * tmp236 + tmp123 * tmp235) + tmp130 * tmp50)
+    tmp238 = tmp30 * tmp37
+    tmp239 = tmp28 * tmp37
+    tmp240 = tmp133 * (((((tmp130 * tmp29 + tmp139 * tmp236) + tmp142 * tmp235) + tmp145 * tmp50) &
+        - tmp103 * tmp238) - tmp123 * tmp239) + tmp237 * tmp49
+    tmp241 = tmp151 * tmp237
+    tmp242 = tmp148 * tmp47 + tmp149 * tmp15
+    tmp243 = tmp133 * (((((tmp103 * ((((0.359_c_double * tmp20) * tmp21) * tmp37 - tmp148 * &
+        tmp45) - tmp23 * (0.359_c_double * tmp42 - 0.359_c_double * tmp34)) + tmp123 * tmp242) + &
+        tmp130 * tmp150) + tmp156 * tmp235) + tmp159 * tmp50) + tmp162 * tmp236)
+    tmp244 = tmp166 * tmp23 - tmp168 * tmp47
+    tmp245 = tmp133 * (((((tmp103 * tmp183 + tmp123 * tmp244) + tmp176 * tmp50) + tmp179 * &
+        tmp236) + tmp182 * tmp235) - tmp130 * tmp184) + tmp170 * tmp237
+    tmp246 = tmp133 * ((tmp189 * tmp50 + tmp192 * tmp236) + tmp194 * tmp235)
+    tmp247 = tmp133 * ((tmp197 * tmp236 + tmp200 * tmp235) + tmp201 * tmp50)
+    tmp248 = tmp133 * ((tmp203 * tmp235 + tmp205 * tmp236) + tmp206 * tmp50)
+    tmp249 = tmp133 * (tmp209 * tmp236 + tmp211 * tmp235)
+    tmp250 = tmp133 * (tmp214 * tmp235 + tmp215 * tmp50)
+    tmp251 = tmp133 * (tmp217 * tmp50 + tmp218 * tmp236)
+    tmp252 = tmp133 * (tmp221 * tmp236 + tmp223 * tmp235)
+    tmp253 = tmp133 * (tmp226 * tmp235 + tmp228 * tmp50)
+    tmp254 = tmp133 * (tmp231 * tmp236 + tmp233 * tmp50)
+    tmp255 = tmp37 * tmp41 - tmp15 * tmp15
+    tmp256 = tmp54 * ((tmp103 * tmp235 + tmp123 * tmp255) + tmp130 * tmp51)
+    tmp257 = tmp133 * (((((tmp123 * tmp238 + tmp130 * tmp31) + tmp139 * tmp235) + tmp142 * &
+        tmp255) + tmp145 * tmp51) - tmp103 * tmp239) + tmp256 * tmp49
+    tmp258 = tmp133 * (((((tmp103 * tmp242 + tmp156 * tmp255) + tmp159 * tmp51) + tmp162 * &
+        tmp235) - tmp123 * tmp163) - tmp130 * tmp164) + tmp151 * tmp256
+    tmp259 = tmp170 * tmp256
+    tmp260 = tmp133 * (((((tmp103 * tmp244 + tmp123 * ((((0.359_c_double * tmp12) * tmp13) * &
+        tmp41 - tmp15 * (0.359_c_double * tmp32 - 0.359_c_double * tmp38)) - tmp168 * tmp37)) + &
+        tmp130 * tmp169) + tmp176 * tmp51) + tmp179 * tmp235) + tmp182 * tmp255)
+    tmp261 = tmp133 * ((tmp189 * tmp51 + tmp192 * tmp235) + tmp194 * tmp255)
+    tmp262 = tmp133 * ((tmp197 * tmp235 + tmp200 * tmp255) + tmp201 * tmp51)
+    tmp263 = tmp133 * ((tmp203 * tmp255 + tmp205 * tmp235) + tmp206 * tmp51)
+    tmp264 = tmp133 * (tmp209 * tmp235 + tmp211 * tmp255)
+    tmp265 = tmp133 * (tmp214 * tmp255 + tmp215 * tmp51)
+    tmp266 = tmp133 * (tmp217 * tmp51 + tmp218 * tmp235)
+    tmp267 = tmp133 * (tmp221 * tmp235 + tmp223 * tmp255)
+    tmp268 = tmp133 * (tmp226 * tmp255 + tmp228 * tmp51)
+    tmp269 = tmp133 * (tmp231 * tmp235 + tmp233 * tmp51)
+    tmp270 = 0.47299077733860345_c_double * tmp67
+    tmp271 = 0.47299077733860345_c_double * tmp59
+    tmp272 = 0.47299077733860345_c_double * tmp77
     J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
@@ -829,96 +835,96 @@ contains
     J(90) = 0.0_c_double
     J(91) = 0.0_c_double
     J(92) = 0.0_c_double
-    J(93) = tmp131 + tmp145
-    J(94) = tmp164
-    J(95) = tmp184
-    J(96) = tmp196
-    J(97) = tmp205
-    J(98) = tmp210
-    J(99) = tmp213
+    J(93) = tmp132 + tmp146
+    J(94) = tmp165
+    J(95) = tmp185
+    J(96) = tmp195
+    J(97) = tmp202
+    J(98) = tmp207
+    J(99) = tmp212
     J(100) = tmp216
     J(101) = tmp219
     J(102) = tmp224
-    J(103) = tmp228
-    J(104) = tmp232
+    J(103) = tmp229
+    J(104) = tmp234
     J(105) = 0.0_c_double
     J(106) = 0.0_c_double
     J(107) = 0.0_c_double
-    J(108) = tmp238
-    J(109) = tmp239 + tmp241
-    J(110) = tmp243
-    J(111) = tmp244
-    J(112) = tmp245
-    J(113) = tmp246
-    J(114) = tmp247
-    J(115) = tmp248
-    J(116) = tmp249
-    J(117) = tmp250
-    J(118) = tmp251
-    J(119) = tmp252
+    J(108) = tmp240
+    J(109) = tmp241 + tmp243
+    J(110) = tmp245
+    J(111) = tmp246
+    J(112) = tmp247
+    J(113) = tmp248
+    J(114) = tmp249
+    J(115) = tmp250
+    J(116) = tmp251
+    J(117) = tmp252
+    J(118) = tmp253
+    J(119) = tmp254
     J(120) = 0.0_c_double
     J(121) = 0.0_c_double
     J(122) = 0.0_c_double
-    J(123) = tmp255
-    J(124) = tmp256
-    J(125) = tmp257 + tmp258
-    J(126) = tmp259
-    J(127) = tmp260
-    J(128) = tmp261
-    J(129) = tmp262
-    J(130) = tmp263
-    J(131) = tmp264
-    J(132) = tmp265
-    J(133) = tmp266
-    J(134) = tmp267
+    J(123) = tmp257
+    J(124) = tmp258
+    J(125) = tmp259 + tmp260
+    J(126) = tmp261
+    J(127) = tmp262
+    J(128) = tmp263
+    J(129) = tmp264
+    J(130) = tmp265
+    J(131) = tmp266
+    J(132) = tmp267
+    J(133) = tmp268
+    J(134) = tmp269
     J(135) = 0.0_c_double
     J(136) = 0.0_c_double
     J(137) = 0.0_c_double
-    J(138) = ((tmp142 + tmp143) - tmp131) - tmp145
-    J(139) = -tmp164
-    J(140) = -tmp184
-    J(141) = -tmp196
-    J(142) = ((-tmp205) - tmp123 * tmp17) - tmp16 * tmp268
-    J(143) = (tmp123 * tmp16 - tmp210) - tmp17 * tmp268
-    J(144) = -tmp213
+    J(138) = ((tmp143 + tmp144) - tmp132) - tmp146
+    J(139) = -tmp165
+    J(140) = -tmp185
+    J(141) = -tmp195
+    J(142) = ((-tmp202) - tmp124 * tmp18) - tmp17 * tmp270
+    J(143) = (tmp124 * tmp17 - tmp207) - tmp18 * tmp270
+    J(144) = -tmp212
     J(145) = -tmp216
     J(146) = -tmp219
-    J(147) = ((0.8857938718662952_c_double * tmp16) * u3 - tmp224) - 0.8857938718662952_c_double &
-        * tmp65
-    J(148) = -tmp228
-    J(149) = -tmp232
+    J(147) = ((0.4189723320158103_c_double * tmp17) * u3 - tmp224) - 0.4189723320158103_c_double &
+        * tmp66
+    J(148) = -tmp229
+    J(149) = -tmp234
     J(150) = 0.0_c_double
     J(151) = 0.0_c_double
     J(152) = 0.0_c_double
-    J(153) = -tmp238
-    J(154) = ((tmp159 + tmp160) - tmp239) - tmp241
-    J(155) = -tmp243
-    J(156) = (tmp20 * tmp90 - tmp244) - tmp21 * tmp269
-    J(157) = -tmp245
-    J(158) = ((-tmp246) - tmp20 * tmp269) - tmp21 * tmp90
-    J(159) = -tmp247
-    J(160) = -tmp248
-    J(161) = -tmp249
-    J(162) = -tmp250
-    J(163) = ((0.5688729874776386_c_double * tmp20) * u1 - tmp251) - 0.5688729874776386_c_double &
-        * tmp57
-    J(164) = -tmp252
+    J(153) = -tmp240
+    J(154) = ((tmp160 + tmp161) - tmp241) - tmp243
+    J(155) = -tmp245
+    J(156) = (tmp20 * tmp91 - tmp246) - tmp21 * tmp271
+    J(157) = -tmp247
+    J(158) = ((-tmp248) - tmp20 * tmp271) - tmp21 * tmp91
+    J(159) = -tmp249
+    J(160) = -tmp250
+    J(161) = -tmp251
+    J(162) = -tmp252
+    J(163) = ((0.4189723320158103_c_double * tmp20) * u1 - tmp253) - 0.4189723320158103_c_double &
+        * tmp58
+    J(164) = -tmp254
     J(165) = 0.0_c_double
     J(166) = 0.0_c_double
     J(167) = 0.0_c_double
-    J(168) = -tmp255
-    J(169) = -tmp256
-    J(170) = ((tmp179 + tmp180) - tmp257) - tmp258
-    J(171) = ((-tmp259) - tmp115 * tmp13) - tmp12 * tmp270
-    J(172) = (tmp115 * tmp12 - tmp260) - tmp13 * tmp270
-    J(173) = -tmp261
-    J(174) = -tmp262
-    J(175) = -tmp263
-    J(176) = -tmp264
-    J(177) = -tmp265
-    J(178) = -tmp266
-    J(179) = ((0.4189723320158103_c_double * tmp12) * u2 - tmp267) - 0.4189723320158103_c_double &
-        * tmp75
+    J(168) = -tmp257
+    J(169) = -tmp258
+    J(170) = ((tmp180 + tmp181) - tmp259) - tmp260
+    J(171) = ((-tmp261) - tmp116 * tmp13) - tmp12 * tmp272
+    J(172) = (tmp116 * tmp12 - tmp262) - tmp13 * tmp272
+    J(173) = -tmp263
+    J(174) = -tmp264
+    J(175) = -tmp265
+    J(176) = -tmp266
+    J(177) = -tmp267
+    J(178) = -tmp268
+    J(179) = ((0.4189723320158103_c_double * tmp12) * u2 - tmp269) - 0.4189723320158103_c_double &
+        * tmp76
     J(180) = 0.0_c_double
     J(181) = 0.0_c_double
     J(182) = 0.0_c_double
@@ -6040,7 +6046,7 @@ contains
     !$omp end parallel do
   end function vscmg3_radau5_grid_batch
 
-  ! The normalized Taylor coefficients of x and of the rhs's 243
+  ! The normalized Taylor coefficients of x and of the rhs's 237
   ! nodes to the given order (101 of them convolutions).
   subroutine taylor_jet(order, x, inv, tay)
     integer(c_int), intent(in) :: order
@@ -6096,58 +6102,58 @@ contains
     real(c_double) :: acc109
     real(c_double) :: acc110
     real(c_double) :: acc117
-    real(c_double) :: acc127
-    real(c_double) :: acc130
-    real(c_double) :: acc132
+    real(c_double) :: acc126
+    real(c_double) :: acc129
+    real(c_double) :: acc131
+    real(c_double) :: acc133
     real(c_double) :: acc134
-    real(c_double) :: acc135
+    real(c_double) :: acc138
     real(c_double) :: acc139
-    real(c_double) :: acc140
-    real(c_double) :: acc142
-    real(c_double) :: acc153
+    real(c_double) :: acc141
+    real(c_double) :: acc151
+    real(c_double) :: acc154
     real(c_double) :: acc156
     real(c_double) :: acc158
-    real(c_double) :: acc160
-    real(c_double) :: acc161
-    real(c_double) :: acc165
+    real(c_double) :: acc159
+    real(c_double) :: acc163
+    real(c_double) :: acc164
     real(c_double) :: acc166
-    real(c_double) :: acc168
-    real(c_double) :: acc174
-    real(c_double) :: acc177
-    real(c_double) :: acc179
-    real(c_double) :: acc180
+    real(c_double) :: acc170
+    real(c_double) :: acc173
+    real(c_double) :: acc175
+    real(c_double) :: acc176
+    real(c_double) :: acc178
     real(c_double) :: acc182
+    real(c_double) :: acc183
     real(c_double) :: acc186
-    real(c_double) :: acc187
-    real(c_double) :: acc190
+    real(c_double) :: acc194
+    real(c_double) :: acc196
     real(c_double) :: acc198
     real(c_double) :: acc200
     real(c_double) :: acc202
-    real(c_double) :: acc204
-    real(c_double) :: acc206
-    real(c_double) :: acc213
+    real(c_double) :: acc207
+    real(c_double) :: acc210
+    real(c_double) :: acc212
+    real(c_double) :: acc214
     real(c_double) :: acc216
     real(c_double) :: acc218
     real(c_double) :: acc220
     real(c_double) :: acc222
     real(c_double) :: acc224
+    real(c_double) :: acc225
     real(c_double) :: acc226
     real(c_double) :: acc228
     real(c_double) :: acc230
-    real(c_double) :: acc231
     real(c_double) :: acc232
-    real(c_double) :: acc234
-    real(c_double) :: acc236
+    real(c_double) :: acc233
+    real(c_double) :: acc235
+    real(c_double) :: acc237
     real(c_double) :: acc238
     real(c_double) :: acc239
     real(c_double) :: acc241
     real(c_double) :: acc243
-    real(c_double) :: acc244
     real(c_double) :: acc245
     real(c_double) :: acc247
-    real(c_double) :: acc249
-    real(c_double) :: acc251
-    real(c_double) :: acc253
     real(c_double) :: ib22
     real(c_double) :: ub22
     real(c_double) :: ib82
@@ -6214,69 +6220,75 @@ contains
     real(c_double) :: v118
     real(c_double) :: v120
     real(c_double) :: v121
+    real(c_double) :: v122
     real(c_double) :: v123
-    real(c_double) :: v124
+    real(c_double) :: v126
     real(c_double) :: v127
-    real(c_double) :: v128
-    real(c_double) :: v130
+    real(c_double) :: v129
+    real(c_double) :: v131
     real(c_double) :: v132
     real(c_double) :: v133
     real(c_double) :: v134
     real(c_double) :: v135
     real(c_double) :: v136
-    real(c_double) :: v137
+    real(c_double) :: v139
     real(c_double) :: v140
-    real(c_double) :: v141
+    real(c_double) :: v142
     real(c_double) :: v143
     real(c_double) :: v144
     real(c_double) :: v145
-    real(c_double) :: v146
+    real(c_double) :: v147
     real(c_double) :: v148
     real(c_double) :: v149
+    real(c_double) :: v150
     real(c_double) :: v151
     real(c_double) :: v152
-    real(c_double) :: v153
     real(c_double) :: v154
     real(c_double) :: v156
+    real(c_double) :: v157
     real(c_double) :: v158
     real(c_double) :: v159
     real(c_double) :: v160
     real(c_double) :: v161
-    real(c_double) :: v162
-    real(c_double) :: v163
+    real(c_double) :: v164
     real(c_double) :: v166
+    real(c_double) :: v167
     real(c_double) :: v168
     real(c_double) :: v170
+    real(c_double) :: v171
     real(c_double) :: v172
+    real(c_double) :: v173
     real(c_double) :: v174
-    real(c_double) :: v175
     real(c_double) :: v176
     real(c_double) :: v177
     real(c_double) :: v178
+    real(c_double) :: v179
     real(c_double) :: v180
-    real(c_double) :: v181
-    real(c_double) :: v182
     real(c_double) :: v183
     real(c_double) :: v184
+    real(c_double) :: v185
     real(c_double) :: v187
     real(c_double) :: v188
-    real(c_double) :: v189
+    real(c_double) :: v190
     real(c_double) :: v191
     real(c_double) :: v192
     real(c_double) :: v193
     real(c_double) :: v194
+    real(c_double) :: v195
     real(c_double) :: v196
-    real(c_double) :: v197
     real(c_double) :: v198
     real(c_double) :: v199
     real(c_double) :: v200
     real(c_double) :: v202
     real(c_double) :: v203
     real(c_double) :: v204
-    real(c_double) :: v206
+    real(c_double) :: v205
     real(c_double) :: v207
+    real(c_double) :: v208
     real(c_double) :: v209
+    real(c_double) :: v210
     real(c_double) :: v211
+    real(c_double) :: v212
     real(c_double) :: v213
     real(c_double) :: v214
     real(c_double) :: v215
@@ -6285,35 +6297,29 @@ contains
     real(c_double) :: v218
     real(c_double) :: v219
     real(c_double) :: v220
-    real(c_double) :: v221
     real(c_double) :: v222
-    real(c_double) :: v223
     real(c_double) :: v224
     real(c_double) :: v225
     real(c_double) :: v226
+    real(c_double) :: v227
     real(c_double) :: v228
     real(c_double) :: v230
     real(c_double) :: v231
     real(c_double) :: v232
     real(c_double) :: v233
-    real(c_double) :: v234
-    real(c_double) :: v236
+    real(c_double) :: v235
     real(c_double) :: v237
     real(c_double) :: v238
     real(c_double) :: v239
+    real(c_double) :: v240
     real(c_double) :: v241
+    real(c_double) :: v242
     real(c_double) :: v243
-    real(c_double) :: v244
     real(c_double) :: v245
-    real(c_double) :: v246
     real(c_double) :: v247
     real(c_double) :: v248
     real(c_double) :: v249
-    real(c_double) :: v251
-    real(c_double) :: v253
-    real(c_double) :: v254
-    real(c_double) :: v255
-    real(c_double) :: v256
+    real(c_double) :: v250
     integer(c_int) :: j
     integer(c_int) :: n
 
@@ -6349,39 +6355,39 @@ contains
     tay(20, 0) = vscmg3_sin(tay(4, 0))
     tay(21, 0) = vscmg3_cos(tay(4, 0))
     v33 = tay(21, 0) * tay(21, 0)
-    v34 = 0.0795_c_double * v33
-    v35 = 906.4083969465648_c_double + v34
+    v34 = 0.1795_c_double * v33
+    v35 = 906.1083969465649_c_double + v34
     tay(22, 0) = vscmg3_sin(tay(5, 0))
     tay(23, 0) = vscmg3_cos(tay(5, 0))
     v38 = tay(22, 0) * tay(22, 0)
-    v39 = 0.0795_c_double * v38
+    v39 = 0.1795_c_double * v38
     tay(24, 0) = v35 + v39
     tay(25, 0) = vscmg3_sin(tay(3, 0))
     tay(26, 0) = vscmg3_cos(tay(3, 0))
-    tay(27, 0) = 0.0795_c_double * tay(26, 0)
+    tay(27, 0) = 0.1795_c_double * tay(26, 0)
     v45 = tay(27, 0) * tay(25, 0)
     tay(28, 0) = 0.04580152671755725_c_double - v45
     v47 = tay(28, 0) * tay(28, 0)
     v48 = -v47
     v50 = tay(25, 0) * tay(25, 0)
-    v51 = 0.0795_c_double * v50
-    v52 = 806.3083969465649_c_double + v51
+    v51 = 0.1795_c_double * v50
+    v52 = 806.1083969465649_c_double + v51
     v53 = tay(23, 0) * tay(23, 0)
-    v54 = 0.0795_c_double * v53
+    v54 = 0.1795_c_double * v53
     tay(29, 0) = v52 + v54
     v57 = tay(26, 0) * tay(26, 0)
-    v58 = 0.0795_c_double * v57
-    v59 = 606.2083969465649_c_double + v58
+    v58 = 0.1795_c_double * v57
+    v59 = 606.1083969465649_c_double + v58
     v60 = tay(20, 0) * tay(20, 0)
-    v61 = 0.0795_c_double * v60
+    v61 = 0.1795_c_double * v60
     tay(30, 0) = v59 + v61
     v63 = tay(29, 0) * tay(30, 0)
     tay(31, 0) = v48 + v63
     v65 = tay(24, 0) * tay(31, 0)
-    tay(32, 0) = 0.0795_c_double * tay(23, 0)
+    tay(32, 0) = 0.1795_c_double * tay(23, 0)
     v67 = tay(32, 0) * tay(22, 0)
     tay(33, 0) = 0.04580152671755725_c_double - v67
-    tay(34, 0) = 0.0795_c_double * tay(20, 0)
+    tay(34, 0) = 0.1795_c_double * tay(20, 0)
     v70 = tay(34, 0) * tay(21, 0)
     tay(35, 0) = 0.04580152671755725_c_double - v70
     v72 = tay(35, 0) * tay(28, 0)
@@ -6398,26 +6404,26 @@ contains
     v84 = tay(26, 0) * tay(8, 0)
     v85 = tay(25, 0) * tay(7, 0)
     tay(40, 0) = v84 - v85
-    v88 = 0.8857938718662952_c_double * tay(12, 0)
+    v88 = 0.4189723320158103_c_double * tay(12, 0)
     v90 = tay(26, 0) * tay(7, 0)
     v91 = tay(25, 0) * tay(8, 0)
     v92 = v90 + v91
-    v93 = 0.4428969359331476_c_double * v92
+    v93 = 0.47299077733860345_c_double * v92
     tay(41, 0) = v88 - v93
     v95 = tay(40, 0) * tay(41, 0)
-    v96 = 0.1795_c_double * v95
+    v96 = 0.3795_c_double * v95
     v97 = -v96
     v98 = tay(21, 0) * tay(6, 0)
     v99 = tay(20, 0) * tay(8, 0)
     tay(42, 0) = v98 - v99
-    tay(43, 0) = 0.0795_c_double * tay(42, 0)
+    tay(43, 0) = 0.1795_c_double * tay(42, 0)
     tay(44, 0) = tay(20, 0) * tay(43, 0)
     v103 = tay(10, 0) * tay(44, 0)
     v104 = v97 + v103
     v105 = tay(23, 0) * tay(7, 0)
     v106 = tay(22, 0) * tay(6, 0)
     tay(45, 0) = v105 - v106
-    tay(46, 0) = 0.0795_c_double * tay(45, 0)
+    tay(46, 0) = 0.1795_c_double * tay(45, 0)
     tay(47, 0) = tay(46, 0) * tay(23, 0)
     v110 = tay(11, 0) * tay(47, 0)
     v111 = v104 + v110
@@ -6425,137 +6431,137 @@ contains
     v113 = v112 + tay(47, 0)
     v114 = 0.04580152671755725_c_double * tay(8, 0)
     v115 = v113 + v114
-    tay(48, 0) = 0.0795_c_double * tay(40, 0)
+    tay(48, 0) = 0.1795_c_double * tay(40, 0)
     tay(49, 0) = tay(25, 0) * tay(48, 0)
     v118 = v115 - tay(49, 0)
-    v120 = 0.2795_c_double * tay(10, 0)
+    v120 = 806.4878969465649_c_double * tay(7, 0)
     v121 = v118 + v120
-    v123 = 806.5878969465649_c_double * tay(7, 0)
-    v124 = v121 + v123
+    v122 = 0.3795_c_double * tay(10, 0)
+    v123 = v121 + v122
     tay(50, 0) = 0.159_c_double * tay(12, 0)
-    v127 = tay(26, 0) * tay(50, 0)
-    v128 = v124 + v127
+    v126 = tay(26, 0) * tay(50, 0)
+    v127 = v123 + v126
     tay(51, 0) = 0.159_c_double * tay(14, 0)
-    v130 = tay(51, 0) * tay(22, 0)
-    tay(52, 0) = v128 + v130
-    v132 = tay(52, 0) * tay(8, 0)
-    v133 = v111 + v132
-    v134 = tay(23, 0) * tay(6, 0)
-    v135 = tay(22, 0) * tay(7, 0)
-    v136 = v134 + v135
-    v137 = 0.0795_c_double * v136
-    tay(53, 0) = tay(51, 0) - v137
+    v129 = tay(51, 0) * tay(22, 0)
+    tay(52, 0) = v127 + v129
+    v131 = tay(52, 0) * tay(8, 0)
+    v132 = v111 + v131
+    v133 = tay(23, 0) * tay(6, 0)
+    v134 = tay(22, 0) * tay(7, 0)
+    v135 = v133 + v134
+    v136 = 0.1795_c_double * v135
+    tay(53, 0) = tay(51, 0) - v136
     tay(54, 0) = tay(11, 0) * tay(53, 0)
-    v140 = tay(54, 0) * tay(22, 0)
-    v141 = v133 + v140
+    v139 = tay(54, 0) * tay(22, 0)
+    v140 = v132 + v139
     tay(55, 0) = tay(26, 0) * tay(48, 0)
-    v143 = v112 + tay(55, 0)
-    v144 = 0.04580152671755725_c_double * tay(7, 0)
-    v145 = v143 + v144
-    v146 = v145 - tay(44, 0)
-    v148 = 606.5878969465649_c_double * tay(8, 0)
-    v149 = v146 + v148
-    v151 = 0.3795_c_double * tay(11, 0)
-    v152 = v149 + v151
-    v153 = tay(25, 0) * tay(50, 0)
-    v154 = v152 + v153
+    v142 = v112 + tay(55, 0)
+    v143 = 0.04580152671755725_c_double * tay(7, 0)
+    v144 = v142 + v143
+    v145 = v144 - tay(44, 0)
+    v147 = 606.4878969465649_c_double * tay(8, 0)
+    v148 = v145 + v147
+    v149 = 0.3795_c_double * tay(11, 0)
+    v150 = v148 + v149
+    v151 = tay(25, 0) * tay(50, 0)
+    v152 = v150 + v151
     tay(56, 0) = 0.159_c_double * tay(13, 0)
-    v156 = tay(56, 0) * tay(21, 0)
-    tay(57, 0) = v154 + v156
-    v158 = tay(57, 0) * tay(7, 0)
-    v159 = v141 - v158
-    v160 = tay(20, 0) * tay(6, 0)
-    v161 = tay(21, 0) * tay(8, 0)
-    v162 = v160 + v161
-    v163 = 0.0795_c_double * v162
-    tay(58, 0) = tay(56, 0) - v163
+    v154 = tay(56, 0) * tay(21, 0)
+    tay(57, 0) = v152 + v154
+    v156 = tay(57, 0) * tay(7, 0)
+    v157 = v140 - v156
+    v158 = tay(20, 0) * tay(6, 0)
+    v159 = tay(21, 0) * tay(8, 0)
+    v160 = v158 + v159
+    v161 = 0.1795_c_double * v160
+    tay(58, 0) = tay(56, 0) - v161
     tay(59, 0) = tay(10, 0) * tay(58, 0)
-    v166 = tay(59, 0) * tay(21, 0)
-    tay(60, 0) = v159 - v166
-    v168 = tay(31, 0) * tay(60, 0)
-    v170 = 0.5688729874776386_c_double * tay(13, 0)
-    v172 = 0.2844364937388193_c_double * v162
-    tay(61, 0) = v170 - v172
-    v174 = tay(42, 0) * tay(61, 0)
-    v175 = 0.2795_c_double * v174
-    v176 = -v175
-    v177 = tay(9, 0) * tay(55, 0)
-    v178 = v176 + v177
+    v164 = tay(59, 0) * tay(21, 0)
+    tay(60, 0) = v157 - v164
+    v166 = tay(31, 0) * tay(60, 0)
+    v167 = 0.4189723320158103_c_double * tay(13, 0)
+    v168 = 0.47299077733860345_c_double * v160
+    tay(61, 0) = v167 - v168
+    v170 = tay(42, 0) * tay(61, 0)
+    v171 = 0.3795_c_double * v170
+    v172 = -v171
+    v173 = tay(9, 0) * tay(55, 0)
+    v174 = v172 + v173
     tay(62, 0) = tay(46, 0) * tay(22, 0)
-    v180 = tay(11, 0) * tay(62, 0)
-    v181 = v178 + v180
-    v182 = tay(57, 0) * tay(6, 0)
-    v183 = v181 + v182
-    v184 = 0.0795_c_double * v92
-    tay(63, 0) = tay(50, 0) - v184
+    v176 = tay(11, 0) * tay(62, 0)
+    v177 = v174 + v176
+    v178 = tay(57, 0) * tay(6, 0)
+    v179 = v177 + v178
+    v180 = 0.1795_c_double * v92
+    tay(63, 0) = tay(50, 0) - v180
     tay(64, 0) = tay(9, 0) * tay(63, 0)
-    v187 = tay(25, 0) * tay(64, 0)
-    v188 = v183 + v187
-    v189 = v144 + v114
+    v183 = tay(25, 0) * tay(64, 0)
+    v184 = v179 + v183
+    v185 = v143 + v114
     tay(65, 0) = tay(21, 0) * tay(43, 0)
-    v191 = v189 + tay(65, 0)
-    v192 = v191 - tay(62, 0)
-    v193 = 0.1795_c_double * tay(9, 0)
-    v194 = v192 + v193
-    v196 = 906.5878969465649_c_double * tay(6, 0)
-    v197 = v194 + v196
-    v198 = tay(56, 0) * tay(20, 0)
-    v199 = v197 + v198
-    v200 = tay(51, 0) * tay(23, 0)
-    tay(66, 0) = v199 + v200
-    v202 = tay(66, 0) * tay(8, 0)
-    v203 = v188 - v202
-    v204 = tay(54, 0) * tay(23, 0)
-    tay(67, 0) = v203 - v204
-    v206 = tay(36, 0) * tay(67, 0)
-    v207 = v168 + v206
-    v209 = 0.4189723320158103_c_double * tay(14, 0)
-    v211 = 0.20948616600790515_c_double * v136
-    tay(68, 0) = v209 - v211
-    v213 = tay(45, 0) * tay(68, 0)
-    v214 = 0.3795_c_double * v213
-    v215 = -v214
-    v216 = tay(9, 0) * tay(49, 0)
+    v187 = v185 + tay(65, 0)
+    v188 = v187 - tay(62, 0)
+    v190 = 906.4878969465649_c_double * tay(6, 0)
+    v191 = v188 + v190
+    v192 = 0.3795_c_double * tay(9, 0)
+    v193 = v191 + v192
+    v194 = tay(56, 0) * tay(20, 0)
+    v195 = v193 + v194
+    v196 = tay(51, 0) * tay(23, 0)
+    tay(66, 0) = v195 + v196
+    v198 = tay(66, 0) * tay(8, 0)
+    v199 = v184 - v198
+    v200 = tay(54, 0) * tay(23, 0)
+    tay(67, 0) = v199 - v200
+    v202 = tay(36, 0) * tay(67, 0)
+    v203 = v166 + v202
+    v204 = 0.4189723320158103_c_double * tay(14, 0)
+    v205 = 0.47299077733860345_c_double * v135
+    tay(68, 0) = v204 - v205
+    v207 = tay(45, 0) * tay(68, 0)
+    v208 = 0.3795_c_double * v207
+    v209 = -v208
+    v210 = tay(9, 0) * tay(49, 0)
+    v211 = v209 + v210
+    v212 = tay(10, 0) * tay(65, 0)
+    v213 = v211 + v212
+    v214 = tay(66, 0) * tay(7, 0)
+    v215 = v213 + v214
+    v216 = tay(20, 0) * tay(59, 0)
     v217 = v215 + v216
-    v218 = tay(10, 0) * tay(65, 0)
-    v219 = v217 + v218
-    v220 = tay(66, 0) * tay(7, 0)
-    v221 = v219 + v220
-    v222 = tay(20, 0) * tay(59, 0)
-    v223 = v221 + v222
-    v224 = tay(52, 0) * tay(6, 0)
-    v225 = v223 - v224
-    v226 = tay(26, 0) * tay(64, 0)
-    tay(69, 0) = v225 - v226
-    v228 = tay(37, 0) * tay(69, 0)
-    tay(70, 0) = v207 + v228
-    v230 = tay(39, 0) * tay(70, 0)
-    v231 = tay(36, 0) * tay(60, 0)
-    v232 = tay(35, 0) * tay(35, 0)
-    v233 = -v232
-    v234 = tay(24, 0) * tay(30, 0)
-    tay(71, 0) = v233 + v234
-    v236 = tay(71, 0) * tay(67, 0)
-    v237 = v231 + v236
-    v238 = tay(33, 0) * tay(35, 0)
-    v239 = tay(24, 0) * tay(28, 0)
-    tay(72, 0) = v238 - v239
-    v241 = tay(72, 0) * tay(69, 0)
-    tay(73, 0) = v237 + v241
-    v243 = tay(39, 0) * tay(73, 0)
-    v244 = tay(37, 0) * tay(60, 0)
-    v245 = tay(72, 0) * tay(67, 0)
-    v246 = v244 + v245
-    v247 = tay(33, 0) * tay(33, 0)
-    v248 = -v247
-    v249 = tay(24, 0) * tay(29, 0)
-    tay(74, 0) = v248 + v249
-    v251 = tay(74, 0) * tay(69, 0)
-    tay(75, 0) = v246 + v251
-    v253 = tay(39, 0) * tay(75, 0)
-    v254 = v95 - v230
-    v255 = v174 - v243
-    v256 = v213 - v253
+    v218 = tay(52, 0) * tay(6, 0)
+    v219 = v217 - v218
+    v220 = tay(26, 0) * tay(64, 0)
+    tay(69, 0) = v219 - v220
+    v222 = tay(37, 0) * tay(69, 0)
+    tay(70, 0) = v203 + v222
+    v224 = tay(39, 0) * tay(70, 0)
+    v225 = tay(36, 0) * tay(60, 0)
+    v226 = tay(35, 0) * tay(35, 0)
+    v227 = -v226
+    v228 = tay(24, 0) * tay(30, 0)
+    tay(71, 0) = v227 + v228
+    v230 = tay(71, 0) * tay(67, 0)
+    v231 = v225 + v230
+    v232 = tay(33, 0) * tay(35, 0)
+    v233 = tay(24, 0) * tay(28, 0)
+    tay(72, 0) = v232 - v233
+    v235 = tay(72, 0) * tay(69, 0)
+    tay(73, 0) = v231 + v235
+    v237 = tay(39, 0) * tay(73, 0)
+    v238 = tay(37, 0) * tay(60, 0)
+    v239 = tay(72, 0) * tay(67, 0)
+    v240 = v238 + v239
+    v241 = tay(33, 0) * tay(33, 0)
+    v242 = -v241
+    v243 = tay(24, 0) * tay(29, 0)
+    tay(74, 0) = v242 + v243
+    v245 = tay(74, 0) * tay(69, 0)
+    tay(75, 0) = v240 + v245
+    v247 = tay(39, 0) * tay(75, 0)
+    v248 = v95 - v224
+    v249 = v170 - v237
+    v250 = v207 - v247
     ib22 = 1.0_c_double / tay(18, 0)
     ub22 = tay(19, 0) / tay(18, 0)
     ib82 = 1.0_c_double / tay(38, 0)
@@ -6571,12 +6577,12 @@ contains
     tay(79, 1) = tay(4, 1)
     tay(5, 1) = tay(11, 0)
     tay(80, 1) = tay(5, 1)
-    tay(6, 1) = v230
-    tay(7, 1) = v243
-    tay(8, 1) = v253
-    tay(9, 1) = v254
-    tay(10, 1) = v255
-    tay(11, 1) = v256
+    tay(6, 1) = v224
+    tay(7, 1) = v237
+    tay(8, 1) = v247
+    tay(9, 1) = v248
+    tay(10, 1) = v249
+    tay(11, 1) = v250
     tay(12, 1) = 0.0_c_double
     tay(13, 1) = 0.0_c_double
     tay(14, 1) = 0.0_c_double
@@ -6596,39 +6602,39 @@ contains
     tay(20, 1) = tay(4, 1) * tay(21, 0)
     tay(21, 1) = -tay(4, 1) * tay(20, 0)
     v33 = tay(21, 0) * tay(21, 1) + tay(21, 1) * tay(21, 0)
-    v34 = 0.0795_c_double * v33
+    v34 = 0.1795_c_double * v33
     v35 = v34
     tay(22, 1) = tay(5, 1) * tay(23, 0)
     tay(23, 1) = -tay(5, 1) * tay(22, 0)
     v38 = tay(22, 0) * tay(22, 1) + tay(22, 1) * tay(22, 0)
-    v39 = 0.0795_c_double * v38
+    v39 = 0.1795_c_double * v38
     tay(24, 1) = v35 + v39
     tay(25, 1) = tay(3, 1) * tay(26, 0)
     tay(26, 1) = -tay(3, 1) * tay(25, 0)
-    tay(27, 1) = 0.0795_c_double * tay(26, 1)
+    tay(27, 1) = 0.1795_c_double * tay(26, 1)
     v45 = tay(27, 0) * tay(25, 1) + tay(27, 1) * tay(25, 0)
     tay(28, 1) = -v45
     v47 = tay(28, 0) * tay(28, 1) + tay(28, 1) * tay(28, 0)
     v48 = -v47
     v50 = tay(25, 0) * tay(25, 1) + tay(25, 1) * tay(25, 0)
-    v51 = 0.0795_c_double * v50
+    v51 = 0.1795_c_double * v50
     v52 = v51
     v53 = tay(23, 0) * tay(23, 1) + tay(23, 1) * tay(23, 0)
-    v54 = 0.0795_c_double * v53
+    v54 = 0.1795_c_double * v53
     tay(29, 1) = v52 + v54
     v57 = tay(26, 0) * tay(26, 1) + tay(26, 1) * tay(26, 0)
-    v58 = 0.0795_c_double * v57
+    v58 = 0.1795_c_double * v57
     v59 = v58
     v60 = tay(20, 0) * tay(20, 1) + tay(20, 1) * tay(20, 0)
-    v61 = 0.0795_c_double * v60
+    v61 = 0.1795_c_double * v60
     tay(30, 1) = v59 + v61
     v63 = tay(29, 0) * tay(30, 1) + tay(29, 1) * tay(30, 0)
     tay(31, 1) = v48 + v63
     v65 = tay(24, 0) * tay(31, 1) + tay(24, 1) * tay(31, 0)
-    tay(32, 1) = 0.0795_c_double * tay(23, 1)
+    tay(32, 1) = 0.1795_c_double * tay(23, 1)
     v67 = tay(32, 0) * tay(22, 1) + tay(32, 1) * tay(22, 0)
     tay(33, 1) = -v67
-    tay(34, 1) = 0.0795_c_double * tay(20, 1)
+    tay(34, 1) = 0.1795_c_double * tay(20, 1)
     v70 = tay(34, 0) * tay(21, 1) + tay(34, 1) * tay(21, 0)
     tay(35, 1) = -v70
     v72 = tay(35, 0) * tay(28, 1) + tay(35, 1) * tay(28, 0)
@@ -6645,26 +6651,26 @@ contains
     v84 = tay(26, 0) * tay(8, 1) + tay(26, 1) * tay(8, 0)
     v85 = tay(25, 0) * tay(7, 1) + tay(25, 1) * tay(7, 0)
     tay(40, 1) = v84 - v85
-    v88 = 0.8857938718662952_c_double * tay(12, 1)
+    v88 = 0.4189723320158103_c_double * tay(12, 1)
     v90 = tay(26, 0) * tay(7, 1) + tay(26, 1) * tay(7, 0)
     v91 = tay(25, 0) * tay(8, 1) + tay(25, 1) * tay(8, 0)
     v92 = v90 + v91
-    v93 = 0.4428969359331476_c_double * v92
+    v93 = 0.47299077733860345_c_double * v92
     tay(41, 1) = v88 - v93
     v95 = tay(40, 0) * tay(41, 1) + tay(40, 1) * tay(41, 0)
-    v96 = 0.1795_c_double * v95
+    v96 = 0.3795_c_double * v95
     v97 = -v96
     v98 = tay(21, 0) * tay(6, 1) + tay(21, 1) * tay(6, 0)
     v99 = tay(20, 0) * tay(8, 1) + tay(20, 1) * tay(8, 0)
     tay(42, 1) = v98 - v99
-    tay(43, 1) = 0.0795_c_double * tay(42, 1)
+    tay(43, 1) = 0.1795_c_double * tay(42, 1)
     tay(44, 1) = tay(20, 0) * tay(43, 1) + tay(20, 1) * tay(43, 0)
     v103 = tay(10, 0) * tay(44, 1) + tay(10, 1) * tay(44, 0)
     v104 = v97 + v103
     v105 = tay(23, 0) * tay(7, 1) + tay(23, 1) * tay(7, 0)
     v106 = tay(22, 0) * tay(6, 1) + tay(22, 1) * tay(6, 0)
     tay(45, 1) = v105 - v106
-    tay(46, 1) = 0.0795_c_double * tay(45, 1)
+    tay(46, 1) = 0.1795_c_double * tay(45, 1)
     tay(47, 1) = tay(46, 0) * tay(23, 1) + tay(46, 1) * tay(23, 0)
     v110 = tay(11, 0) * tay(47, 1) + tay(11, 1) * tay(47, 0)
     v111 = v104 + v110
@@ -6672,137 +6678,137 @@ contains
     v113 = v112 + tay(47, 1)
     v114 = 0.04580152671755725_c_double * tay(8, 1)
     v115 = v113 + v114
-    tay(48, 1) = 0.0795_c_double * tay(40, 1)
+    tay(48, 1) = 0.1795_c_double * tay(40, 1)
     tay(49, 1) = tay(25, 0) * tay(48, 1) + tay(25, 1) * tay(48, 0)
     v118 = v115 - tay(49, 1)
-    v120 = 0.2795_c_double * tay(10, 1)
+    v120 = 806.4878969465649_c_double * tay(7, 1)
     v121 = v118 + v120
-    v123 = 806.5878969465649_c_double * tay(7, 1)
-    v124 = v121 + v123
+    v122 = 0.3795_c_double * tay(10, 1)
+    v123 = v121 + v122
     tay(50, 1) = 0.159_c_double * tay(12, 1)
-    v127 = tay(26, 0) * tay(50, 1) + tay(26, 1) * tay(50, 0)
-    v128 = v124 + v127
+    v126 = tay(26, 0) * tay(50, 1) + tay(26, 1) * tay(50, 0)
+    v127 = v123 + v126
     tay(51, 1) = 0.159_c_double * tay(14, 1)
-    v130 = tay(51, 0) * tay(22, 1) + tay(51, 1) * tay(22, 0)
-    tay(52, 1) = v128 + v130
-    v132 = tay(52, 0) * tay(8, 1) + tay(52, 1) * tay(8, 0)
-    v133 = v111 + v132
-    v134 = tay(23, 0) * tay(6, 1) + tay(23, 1) * tay(6, 0)
-    v135 = tay(22, 0) * tay(7, 1) + tay(22, 1) * tay(7, 0)
-    v136 = v134 + v135
-    v137 = 0.0795_c_double * v136
-    tay(53, 1) = tay(51, 1) - v137
+    v129 = tay(51, 0) * tay(22, 1) + tay(51, 1) * tay(22, 0)
+    tay(52, 1) = v127 + v129
+    v131 = tay(52, 0) * tay(8, 1) + tay(52, 1) * tay(8, 0)
+    v132 = v111 + v131
+    v133 = tay(23, 0) * tay(6, 1) + tay(23, 1) * tay(6, 0)
+    v134 = tay(22, 0) * tay(7, 1) + tay(22, 1) * tay(7, 0)
+    v135 = v133 + v134
+    v136 = 0.1795_c_double * v135
+    tay(53, 1) = tay(51, 1) - v136
     tay(54, 1) = tay(11, 0) * tay(53, 1) + tay(11, 1) * tay(53, 0)
-    v140 = tay(54, 0) * tay(22, 1) + tay(54, 1) * tay(22, 0)
-    v141 = v133 + v140
+    v139 = tay(54, 0) * tay(22, 1) + tay(54, 1) * tay(22, 0)
+    v140 = v132 + v139
     tay(55, 1) = tay(26, 0) * tay(48, 1) + tay(26, 1) * tay(48, 0)
-    v143 = v112 + tay(55, 1)
-    v144 = 0.04580152671755725_c_double * tay(7, 1)
-    v145 = v143 + v144
-    v146 = v145 - tay(44, 1)
-    v148 = 606.5878969465649_c_double * tay(8, 1)
-    v149 = v146 + v148
-    v151 = 0.3795_c_double * tay(11, 1)
-    v152 = v149 + v151
-    v153 = tay(25, 0) * tay(50, 1) + tay(25, 1) * tay(50, 0)
-    v154 = v152 + v153
+    v142 = v112 + tay(55, 1)
+    v143 = 0.04580152671755725_c_double * tay(7, 1)
+    v144 = v142 + v143
+    v145 = v144 - tay(44, 1)
+    v147 = 606.4878969465649_c_double * tay(8, 1)
+    v148 = v145 + v147
+    v149 = 0.3795_c_double * tay(11, 1)
+    v150 = v148 + v149
+    v151 = tay(25, 0) * tay(50, 1) + tay(25, 1) * tay(50, 0)
+    v152 = v150 + v151
     tay(56, 1) = 0.159_c_double * tay(13, 1)
-    v156 = tay(56, 0) * tay(21, 1) + tay(56, 1) * tay(21, 0)
-    tay(57, 1) = v154 + v156
-    v158 = tay(57, 0) * tay(7, 1) + tay(57, 1) * tay(7, 0)
-    v159 = v141 - v158
-    v160 = tay(20, 0) * tay(6, 1) + tay(20, 1) * tay(6, 0)
-    v161 = tay(21, 0) * tay(8, 1) + tay(21, 1) * tay(8, 0)
-    v162 = v160 + v161
-    v163 = 0.0795_c_double * v162
-    tay(58, 1) = tay(56, 1) - v163
+    v154 = tay(56, 0) * tay(21, 1) + tay(56, 1) * tay(21, 0)
+    tay(57, 1) = v152 + v154
+    v156 = tay(57, 0) * tay(7, 1) + tay(57, 1) * tay(7, 0)
+    v157 = v140 - v156
+    v158 = tay(20, 0) * tay(6, 1) + tay(20, 1) * tay(6, 0)
+    v159 = tay(21, 0) * tay(8, 1) + tay(21, 1) * tay(8, 0)
+    v160 = v158 + v159
+    v161 = 0.1795_c_double * v160
+    tay(58, 1) = tay(56, 1) - v161
     tay(59, 1) = tay(10, 0) * tay(58, 1) + tay(10, 1) * tay(58, 0)
-    v166 = tay(59, 0) * tay(21, 1) + tay(59, 1) * tay(21, 0)
-    tay(60, 1) = v159 - v166
-    v168 = tay(31, 0) * tay(60, 1) + tay(31, 1) * tay(60, 0)
-    v170 = 0.5688729874776386_c_double * tay(13, 1)
-    v172 = 0.2844364937388193_c_double * v162
-    tay(61, 1) = v170 - v172
-    v174 = tay(42, 0) * tay(61, 1) + tay(42, 1) * tay(61, 0)
-    v175 = 0.2795_c_double * v174
-    v176 = -v175
-    v177 = tay(9, 0) * tay(55, 1) + tay(9, 1) * tay(55, 0)
-    v178 = v176 + v177
+    v164 = tay(59, 0) * tay(21, 1) + tay(59, 1) * tay(21, 0)
+    tay(60, 1) = v157 - v164
+    v166 = tay(31, 0) * tay(60, 1) + tay(31, 1) * tay(60, 0)
+    v167 = 0.4189723320158103_c_double * tay(13, 1)
+    v168 = 0.47299077733860345_c_double * v160
+    tay(61, 1) = v167 - v168
+    v170 = tay(42, 0) * tay(61, 1) + tay(42, 1) * tay(61, 0)
+    v171 = 0.3795_c_double * v170
+    v172 = -v171
+    v173 = tay(9, 0) * tay(55, 1) + tay(9, 1) * tay(55, 0)
+    v174 = v172 + v173
     tay(62, 1) = tay(46, 0) * tay(22, 1) + tay(46, 1) * tay(22, 0)
-    v180 = tay(11, 0) * tay(62, 1) + tay(11, 1) * tay(62, 0)
-    v181 = v178 + v180
-    v182 = tay(57, 0) * tay(6, 1) + tay(57, 1) * tay(6, 0)
-    v183 = v181 + v182
-    v184 = 0.0795_c_double * v92
-    tay(63, 1) = tay(50, 1) - v184
+    v176 = tay(11, 0) * tay(62, 1) + tay(11, 1) * tay(62, 0)
+    v177 = v174 + v176
+    v178 = tay(57, 0) * tay(6, 1) + tay(57, 1) * tay(6, 0)
+    v179 = v177 + v178
+    v180 = 0.1795_c_double * v92
+    tay(63, 1) = tay(50, 1) - v180
     tay(64, 1) = tay(9, 0) * tay(63, 1) + tay(9, 1) * tay(63, 0)
-    v187 = tay(25, 0) * tay(64, 1) + tay(25, 1) * tay(64, 0)
-    v188 = v183 + v187
-    v189 = v144 + v114
+    v183 = tay(25, 0) * tay(64, 1) + tay(25, 1) * tay(64, 0)
+    v184 = v179 + v183
+    v185 = v143 + v114
     tay(65, 1) = tay(21, 0) * tay(43, 1) + tay(21, 1) * tay(43, 0)
-    v191 = v189 + tay(65, 1)
-    v192 = v191 - tay(62, 1)
-    v193 = 0.1795_c_double * tay(9, 1)
-    v194 = v192 + v193
-    v196 = 906.5878969465649_c_double * tay(6, 1)
-    v197 = v194 + v196
-    v198 = tay(56, 0) * tay(20, 1) + tay(56, 1) * tay(20, 0)
-    v199 = v197 + v198
-    v200 = tay(51, 0) * tay(23, 1) + tay(51, 1) * tay(23, 0)
-    tay(66, 1) = v199 + v200
-    v202 = tay(66, 0) * tay(8, 1) + tay(66, 1) * tay(8, 0)
-    v203 = v188 - v202
-    v204 = tay(54, 0) * tay(23, 1) + tay(54, 1) * tay(23, 0)
-    tay(67, 1) = v203 - v204
-    v206 = tay(36, 0) * tay(67, 1) + tay(36, 1) * tay(67, 0)
-    v207 = v168 + v206
-    v209 = 0.4189723320158103_c_double * tay(14, 1)
-    v211 = 0.20948616600790515_c_double * v136
-    tay(68, 1) = v209 - v211
-    v213 = tay(45, 0) * tay(68, 1) + tay(45, 1) * tay(68, 0)
-    v214 = 0.3795_c_double * v213
-    v215 = -v214
-    v216 = tay(9, 0) * tay(49, 1) + tay(9, 1) * tay(49, 0)
+    v187 = v185 + tay(65, 1)
+    v188 = v187 - tay(62, 1)
+    v190 = 906.4878969465649_c_double * tay(6, 1)
+    v191 = v188 + v190
+    v192 = 0.3795_c_double * tay(9, 1)
+    v193 = v191 + v192
+    v194 = tay(56, 0) * tay(20, 1) + tay(56, 1) * tay(20, 0)
+    v195 = v193 + v194
+    v196 = tay(51, 0) * tay(23, 1) + tay(51, 1) * tay(23, 0)
+    tay(66, 1) = v195 + v196
+    v198 = tay(66, 0) * tay(8, 1) + tay(66, 1) * tay(8, 0)
+    v199 = v184 - v198
+    v200 = tay(54, 0) * tay(23, 1) + tay(54, 1) * tay(23, 0)
+    tay(67, 1) = v199 - v200
+    v202 = tay(36, 0) * tay(67, 1) + tay(36, 1) * tay(67, 0)
+    v203 = v166 + v202
+    v204 = 0.4189723320158103_c_double * tay(14, 1)
+    v205 = 0.47299077733860345_c_double * v135
+    tay(68, 1) = v204 - v205
+    v207 = tay(45, 0) * tay(68, 1) + tay(45, 1) * tay(68, 0)
+    v208 = 0.3795_c_double * v207
+    v209 = -v208
+    v210 = tay(9, 0) * tay(49, 1) + tay(9, 1) * tay(49, 0)
+    v211 = v209 + v210
+    v212 = tay(10, 0) * tay(65, 1) + tay(10, 1) * tay(65, 0)
+    v213 = v211 + v212
+    v214 = tay(66, 0) * tay(7, 1) + tay(66, 1) * tay(7, 0)
+    v215 = v213 + v214
+    v216 = tay(20, 0) * tay(59, 1) + tay(20, 1) * tay(59, 0)
     v217 = v215 + v216
-    v218 = tay(10, 0) * tay(65, 1) + tay(10, 1) * tay(65, 0)
-    v219 = v217 + v218
-    v220 = tay(66, 0) * tay(7, 1) + tay(66, 1) * tay(7, 0)
-    v221 = v219 + v220
-    v222 = tay(20, 0) * tay(59, 1) + tay(20, 1) * tay(59, 0)
-    v223 = v221 + v222
-    v224 = tay(52, 0) * tay(6, 1) + tay(52, 1) * tay(6, 0)
-    v225 = v223 - v224
-    v226 = tay(26, 0) * tay(64, 1) + tay(26, 1) * tay(64, 0)
-    tay(69, 1) = v225 - v226
-    v228 = tay(37, 0) * tay(69, 1) + tay(37, 1) * tay(69, 0)
-    tay(70, 1) = v207 + v228
-    v230 = tay(39, 0) * tay(70, 1) + tay(39, 1) * tay(70, 0)
-    v231 = tay(36, 0) * tay(60, 1) + tay(36, 1) * tay(60, 0)
-    v232 = tay(35, 0) * tay(35, 1) + tay(35, 1) * tay(35, 0)
-    v233 = -v232
-    v234 = tay(24, 0) * tay(30, 1) + tay(24, 1) * tay(30, 0)
-    tay(71, 1) = v233 + v234
-    v236 = tay(71, 0) * tay(67, 1) + tay(71, 1) * tay(67, 0)
-    v237 = v231 + v236
-    v238 = tay(33, 0) * tay(35, 1) + tay(33, 1) * tay(35, 0)
-    v239 = tay(24, 0) * tay(28, 1) + tay(24, 1) * tay(28, 0)
-    tay(72, 1) = v238 - v239
-    v241 = tay(72, 0) * tay(69, 1) + tay(72, 1) * tay(69, 0)
-    tay(73, 1) = v237 + v241
-    v243 = tay(39, 0) * tay(73, 1) + tay(39, 1) * tay(73, 0)
-    v244 = tay(37, 0) * tay(60, 1) + tay(37, 1) * tay(60, 0)
-    v245 = tay(72, 0) * tay(67, 1) + tay(72, 1) * tay(67, 0)
-    v246 = v244 + v245
-    v247 = tay(33, 0) * tay(33, 1) + tay(33, 1) * tay(33, 0)
-    v248 = -v247
-    v249 = tay(24, 0) * tay(29, 1) + tay(24, 1) * tay(29, 0)
-    tay(74, 1) = v248 + v249
-    v251 = tay(74, 0) * tay(69, 1) + tay(74, 1) * tay(69, 0)
-    tay(75, 1) = v246 + v251
-    v253 = tay(39, 0) * tay(75, 1) + tay(39, 1) * tay(75, 0)
-    v254 = v95 - v230
-    v255 = v174 - v243
-    v256 = v213 - v253
+    v218 = tay(52, 0) * tay(6, 1) + tay(52, 1) * tay(6, 0)
+    v219 = v217 - v218
+    v220 = tay(26, 0) * tay(64, 1) + tay(26, 1) * tay(64, 0)
+    tay(69, 1) = v219 - v220
+    v222 = tay(37, 0) * tay(69, 1) + tay(37, 1) * tay(69, 0)
+    tay(70, 1) = v203 + v222
+    v224 = tay(39, 0) * tay(70, 1) + tay(39, 1) * tay(70, 0)
+    v225 = tay(36, 0) * tay(60, 1) + tay(36, 1) * tay(60, 0)
+    v226 = tay(35, 0) * tay(35, 1) + tay(35, 1) * tay(35, 0)
+    v227 = -v226
+    v228 = tay(24, 0) * tay(30, 1) + tay(24, 1) * tay(30, 0)
+    tay(71, 1) = v227 + v228
+    v230 = tay(71, 0) * tay(67, 1) + tay(71, 1) * tay(67, 0)
+    v231 = v225 + v230
+    v232 = tay(33, 0) * tay(35, 1) + tay(33, 1) * tay(35, 0)
+    v233 = tay(24, 0) * tay(28, 1) + tay(24, 1) * tay(28, 0)
+    tay(72, 1) = v232 - v233
+    v235 = tay(72, 0) * tay(69, 1) + tay(72, 1) * tay(69, 0)
+    tay(73, 1) = v231 + v235
+    v237 = tay(39, 0) * tay(73, 1) + tay(39, 1) * tay(73, 0)
+    v238 = tay(37, 0) * tay(60, 1) + tay(37, 1) * tay(60, 0)
+    v239 = tay(72, 0) * tay(67, 1) + tay(72, 1) * tay(67, 0)
+    v240 = v238 + v239
+    v241 = tay(33, 0) * tay(33, 1) + tay(33, 1) * tay(33, 0)
+    v242 = -v241
+    v243 = tay(24, 0) * tay(29, 1) + tay(24, 1) * tay(29, 0)
+    tay(74, 1) = v242 + v243
+    v245 = tay(74, 0) * tay(69, 1) + tay(74, 1) * tay(69, 0)
+    tay(75, 1) = v240 + v245
+    v247 = tay(39, 0) * tay(75, 1) + tay(39, 1) * tay(75, 0)
+    v248 = v95 - v224
+    v249 = v170 - v237
+    v250 = v207 - v247
     tay(0, 2) = tay(19, 1) * inv(2)
     tay(1, 2) = v25 * inv(2)
     tay(76, 2) = v25
@@ -6814,24 +6820,24 @@ contains
     tay(79, 2) = tay(10, 1)
     tay(5, 2) = tay(11, 1) * inv(2)
     tay(80, 2) = tay(11, 1)
-    tay(6, 2) = v230 * inv(2)
-    tay(7, 2) = v243 * inv(2)
-    tay(8, 2) = v253 * inv(2)
-    tay(9, 2) = v254 * inv(2)
-    tay(10, 2) = v255 * inv(2)
-    tay(11, 2) = v256 * inv(2)
+    tay(6, 2) = v224 * inv(2)
+    tay(7, 2) = v237 * inv(2)
+    tay(8, 2) = v247 * inv(2)
+    tay(9, 2) = v248 * inv(2)
+    tay(10, 2) = v249 * inv(2)
+    tay(11, 2) = v250 * inv(2)
     tay(12, 2) = 0.0_c_double
     tay(13, 2) = 0.0_c_double
     tay(14, 2) = 0.0_c_double
 
     ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
     do n = 2, order - 1
-      acc127 = tay(26, n - 1) * tay(50, n - (n - 1))
-      acc130 = tay(51, 1) * tay(22, n - 1)
-      acc153 = tay(25, n - 1) * tay(50, n - (n - 1))
-      acc156 = tay(56, 1) * tay(21, n - 1)
-      acc198 = tay(56, 1) * tay(20, n - 1)
-      acc200 = tay(51, 1) * tay(23, n - 1)
+      acc126 = tay(26, n - 1) * tay(50, n - (n - 1))
+      acc129 = tay(51, 1) * tay(22, n - 1)
+      acc151 = tay(25, n - 1) * tay(50, n - (n - 1))
+      acc154 = tay(56, 1) * tay(21, n - 1)
+      acc194 = tay(56, 1) * tay(20, n - 1)
+      acc196 = tay(51, 1) * tay(23, n - 1)
       acc15 = 0.0_c_double
       acc16 = 0.0_c_double
       acc17 = 0.0_c_double
@@ -6881,52 +6887,52 @@ contains
       acc109 = 0.0_c_double
       acc110 = 0.0_c_double
       acc117 = 0.0_c_double
-      acc132 = 0.0_c_double
+      acc131 = 0.0_c_double
+      acc133 = 0.0_c_double
       acc134 = 0.0_c_double
-      acc135 = 0.0_c_double
+      acc138 = 0.0_c_double
       acc139 = 0.0_c_double
-      acc140 = 0.0_c_double
-      acc142 = 0.0_c_double
+      acc141 = 0.0_c_double
+      acc156 = 0.0_c_double
       acc158 = 0.0_c_double
-      acc160 = 0.0_c_double
-      acc161 = 0.0_c_double
-      acc165 = 0.0_c_double
+      acc159 = 0.0_c_double
+      acc163 = 0.0_c_double
+      acc164 = 0.0_c_double
       acc166 = 0.0_c_double
-      acc168 = 0.0_c_double
-      acc174 = 0.0_c_double
-      acc177 = 0.0_c_double
-      acc179 = 0.0_c_double
-      acc180 = 0.0_c_double
+      acc170 = 0.0_c_double
+      acc173 = 0.0_c_double
+      acc175 = 0.0_c_double
+      acc176 = 0.0_c_double
+      acc178 = 0.0_c_double
       acc182 = 0.0_c_double
+      acc183 = 0.0_c_double
       acc186 = 0.0_c_double
-      acc187 = 0.0_c_double
-      acc190 = 0.0_c_double
+      acc198 = 0.0_c_double
+      acc200 = 0.0_c_double
       acc202 = 0.0_c_double
-      acc204 = 0.0_c_double
-      acc206 = 0.0_c_double
-      acc213 = 0.0_c_double
+      acc207 = 0.0_c_double
+      acc210 = 0.0_c_double
+      acc212 = 0.0_c_double
+      acc214 = 0.0_c_double
       acc216 = 0.0_c_double
       acc218 = 0.0_c_double
       acc220 = 0.0_c_double
       acc222 = 0.0_c_double
       acc224 = 0.0_c_double
+      acc225 = 0.0_c_double
       acc226 = 0.0_c_double
       acc228 = 0.0_c_double
       acc230 = 0.0_c_double
-      acc231 = 0.0_c_double
       acc232 = 0.0_c_double
-      acc234 = 0.0_c_double
-      acc236 = 0.0_c_double
+      acc233 = 0.0_c_double
+      acc235 = 0.0_c_double
+      acc237 = 0.0_c_double
       acc238 = 0.0_c_double
       acc239 = 0.0_c_double
       acc241 = 0.0_c_double
       acc243 = 0.0_c_double
-      acc244 = 0.0_c_double
       acc245 = 0.0_c_double
       acc247 = 0.0_c_double
-      acc249 = 0.0_c_double
-      acc251 = 0.0_c_double
-      acc253 = 0.0_c_double
       do j = 1, n - 1
         acc15 = acc15 + tay(77, j) * tay(16, n - j)
         acc16 = acc16 + tay(77, j) * tay(15, n - j)
@@ -6977,52 +6983,52 @@ contains
         acc109 = acc109 + tay(46, j) * tay(23, n - j)
         acc110 = acc110 + tay(11, j) * tay(47, n - j)
         acc117 = acc117 + tay(25, j) * tay(48, n - j)
-        acc132 = acc132 + tay(52, j) * tay(8, n - j)
-        acc134 = acc134 + tay(23, j) * tay(6, n - j)
-        acc135 = acc135 + tay(22, j) * tay(7, n - j)
-        acc139 = acc139 + tay(11, j) * tay(53, n - j)
-        acc140 = acc140 + tay(54, j) * tay(22, n - j)
-        acc142 = acc142 + tay(26, j) * tay(48, n - j)
-        acc158 = acc158 + tay(57, j) * tay(7, n - j)
-        acc160 = acc160 + tay(20, j) * tay(6, n - j)
-        acc161 = acc161 + tay(21, j) * tay(8, n - j)
-        acc165 = acc165 + tay(10, j) * tay(58, n - j)
-        acc166 = acc166 + tay(59, j) * tay(21, n - j)
-        acc168 = acc168 + tay(31, j) * tay(60, n - j)
-        acc174 = acc174 + tay(42, j) * tay(61, n - j)
-        acc177 = acc177 + tay(9, j) * tay(55, n - j)
-        acc179 = acc179 + tay(46, j) * tay(22, n - j)
-        acc180 = acc180 + tay(11, j) * tay(62, n - j)
-        acc182 = acc182 + tay(57, j) * tay(6, n - j)
-        acc186 = acc186 + tay(9, j) * tay(63, n - j)
-        acc187 = acc187 + tay(25, j) * tay(64, n - j)
-        acc190 = acc190 + tay(21, j) * tay(43, n - j)
-        acc202 = acc202 + tay(66, j) * tay(8, n - j)
-        acc204 = acc204 + tay(54, j) * tay(23, n - j)
-        acc206 = acc206 + tay(36, j) * tay(67, n - j)
-        acc213 = acc213 + tay(45, j) * tay(68, n - j)
-        acc216 = acc216 + tay(9, j) * tay(49, n - j)
-        acc218 = acc218 + tay(10, j) * tay(65, n - j)
-        acc220 = acc220 + tay(66, j) * tay(7, n - j)
-        acc222 = acc222 + tay(20, j) * tay(59, n - j)
-        acc224 = acc224 + tay(52, j) * tay(6, n - j)
-        acc226 = acc226 + tay(26, j) * tay(64, n - j)
-        acc228 = acc228 + tay(37, j) * tay(69, n - j)
-        acc230 = acc230 + tay(39, j) * tay(70, n - j)
-        acc231 = acc231 + tay(36, j) * tay(60, n - j)
-        acc232 = acc232 + tay(35, j) * tay(35, n - j)
-        acc234 = acc234 + tay(24, j) * tay(30, n - j)
-        acc236 = acc236 + tay(71, j) * tay(67, n - j)
-        acc238 = acc238 + tay(33, j) * tay(35, n - j)
-        acc239 = acc239 + tay(24, j) * tay(28, n - j)
-        acc241 = acc241 + tay(72, j) * tay(69, n - j)
-        acc243 = acc243 + tay(39, j) * tay(73, n - j)
-        acc244 = acc244 + tay(37, j) * tay(60, n - j)
-        acc245 = acc245 + tay(72, j) * tay(67, n - j)
-        acc247 = acc247 + tay(33, j) * tay(33, n - j)
-        acc249 = acc249 + tay(24, j) * tay(29, n - j)
-        acc251 = acc251 + tay(74, j) * tay(69, n - j)
-        acc253 = acc253 + tay(39, j) * tay(75, n - j)
+        acc131 = acc131 + tay(52, j) * tay(8, n - j)
+        acc133 = acc133 + tay(23, j) * tay(6, n - j)
+        acc134 = acc134 + tay(22, j) * tay(7, n - j)
+        acc138 = acc138 + tay(11, j) * tay(53, n - j)
+        acc139 = acc139 + tay(54, j) * tay(22, n - j)
+        acc141 = acc141 + tay(26, j) * tay(48, n - j)
+        acc156 = acc156 + tay(57, j) * tay(7, n - j)
+        acc158 = acc158 + tay(20, j) * tay(6, n - j)
+        acc159 = acc159 + tay(21, j) * tay(8, n - j)
+        acc163 = acc163 + tay(10, j) * tay(58, n - j)
+        acc164 = acc164 + tay(59, j) * tay(21, n - j)
+        acc166 = acc166 + tay(31, j) * tay(60, n - j)
+        acc170 = acc170 + tay(42, j) * tay(61, n - j)
+        acc173 = acc173 + tay(9, j) * tay(55, n - j)
+        acc175 = acc175 + tay(46, j) * tay(22, n - j)
+        acc176 = acc176 + tay(11, j) * tay(62, n - j)
+        acc178 = acc178 + tay(57, j) * tay(6, n - j)
+        acc182 = acc182 + tay(9, j) * tay(63, n - j)
+        acc183 = acc183 + tay(25, j) * tay(64, n - j)
+        acc186 = acc186 + tay(21, j) * tay(43, n - j)
+        acc198 = acc198 + tay(66, j) * tay(8, n - j)
+        acc200 = acc200 + tay(54, j) * tay(23, n - j)
+        acc202 = acc202 + tay(36, j) * tay(67, n - j)
+        acc207 = acc207 + tay(45, j) * tay(68, n - j)
+        acc210 = acc210 + tay(9, j) * tay(49, n - j)
+        acc212 = acc212 + tay(10, j) * tay(65, n - j)
+        acc214 = acc214 + tay(66, j) * tay(7, n - j)
+        acc216 = acc216 + tay(20, j) * tay(59, n - j)
+        acc218 = acc218 + tay(52, j) * tay(6, n - j)
+        acc220 = acc220 + tay(26, j) * tay(64, n - j)
+        acc222 = acc222 + tay(37, j) * tay(69, n - j)
+        acc224 = acc224 + tay(39, j) * tay(70, n - j)
+        acc225 = acc225 + tay(36, j) * tay(60, n - j)
+        acc226 = acc226 + tay(35, j) * tay(35, n - j)
+        acc228 = acc228 + tay(24, j) * tay(30, n - j)
+        acc230 = acc230 + tay(71, j) * tay(67, n - j)
+        acc232 = acc232 + tay(33, j) * tay(35, n - j)
+        acc233 = acc233 + tay(24, j) * tay(28, n - j)
+        acc235 = acc235 + tay(72, j) * tay(69, n - j)
+        acc237 = acc237 + tay(39, j) * tay(73, n - j)
+        acc238 = acc238 + tay(37, j) * tay(60, n - j)
+        acc239 = acc239 + tay(72, j) * tay(67, n - j)
+        acc241 = acc241 + tay(33, j) * tay(33, n - j)
+        acc243 = acc243 + tay(24, j) * tay(29, n - j)
+        acc245 = acc245 + tay(74, j) * tay(69, n - j)
+        acc247 = acc247 + tay(39, j) * tay(75, n - j)
       end do
       tay(15, n) = acc15 * inv(n) + tay(2, n) * tay(16, 0)
       tay(16, n) = (-acc16 * inv(n)) - tay(2, n) * tay(15, 0)
@@ -7040,39 +7046,39 @@ contains
       tay(20, n) = acc31 * inv(n) + tay(4, n) * tay(21, 0)
       tay(21, n) = (-acc32 * inv(n)) - tay(4, n) * tay(20, 0)
       v33 = (acc33 + tay(21, 0) * tay(21, n)) + tay(21, n) * tay(21, 0)
-      v34 = 0.0795_c_double * v33
+      v34 = 0.1795_c_double * v33
       v35 = v34
       tay(22, n) = acc36 * inv(n) + tay(5, n) * tay(23, 0)
       tay(23, n) = (-acc37 * inv(n)) - tay(5, n) * tay(22, 0)
       v38 = (acc38 + tay(22, 0) * tay(22, n)) + tay(22, n) * tay(22, 0)
-      v39 = 0.0795_c_double * v38
+      v39 = 0.1795_c_double * v38
       tay(24, n) = v35 + v39
       tay(25, n) = acc42 * inv(n) + tay(3, n) * tay(26, 0)
       tay(26, n) = (-acc43 * inv(n)) - tay(3, n) * tay(25, 0)
-      tay(27, n) = 0.0795_c_double * tay(26, n)
+      tay(27, n) = 0.1795_c_double * tay(26, n)
       v45 = (acc45 + tay(27, 0) * tay(25, n)) + tay(27, n) * tay(25, 0)
       tay(28, n) = -v45
       v47 = (acc47 + tay(28, 0) * tay(28, n)) + tay(28, n) * tay(28, 0)
       v48 = -v47
       v50 = (acc50 + tay(25, 0) * tay(25, n)) + tay(25, n) * tay(25, 0)
-      v51 = 0.0795_c_double * v50
+      v51 = 0.1795_c_double * v50
       v52 = v51
       v53 = (acc53 + tay(23, 0) * tay(23, n)) + tay(23, n) * tay(23, 0)
-      v54 = 0.0795_c_double * v53
+      v54 = 0.1795_c_double * v53
       tay(29, n) = v52 + v54
       v57 = (acc57 + tay(26, 0) * tay(26, n)) + tay(26, n) * tay(26, 0)
-      v58 = 0.0795_c_double * v57
+      v58 = 0.1795_c_double * v57
       v59 = v58
       v60 = (acc60 + tay(20, 0) * tay(20, n)) + tay(20, n) * tay(20, 0)
-      v61 = 0.0795_c_double * v60
+      v61 = 0.1795_c_double * v60
       tay(30, n) = v59 + v61
       v63 = (acc63 + tay(29, 0) * tay(30, n)) + tay(29, n) * tay(30, 0)
       tay(31, n) = v48 + v63
       v65 = (acc65 + tay(24, 0) * tay(31, n)) + tay(24, n) * tay(31, 0)
-      tay(32, n) = 0.0795_c_double * tay(23, n)
+      tay(32, n) = 0.1795_c_double * tay(23, n)
       v67 = (acc67 + tay(32, 0) * tay(22, n)) + tay(32, n) * tay(22, 0)
       tay(33, n) = -v67
-      tay(34, n) = 0.0795_c_double * tay(20, n)
+      tay(34, n) = 0.1795_c_double * tay(20, n)
       v70 = (acc70 + tay(34, 0) * tay(21, n)) + tay(34, n) * tay(21, 0)
       tay(35, n) = -v70
       v72 = (acc72 + tay(35, 0) * tay(28, n)) + tay(35, n) * tay(28, 0)
@@ -7092,22 +7098,22 @@ contains
       v90 = (acc90 + tay(26, 0) * tay(7, n)) + tay(26, n) * tay(7, 0)
       v91 = (acc91 + tay(25, 0) * tay(8, n)) + tay(25, n) * tay(8, 0)
       v92 = v90 + v91
-      v93 = 0.4428969359331476_c_double * v92
+      v93 = 0.47299077733860345_c_double * v92
       tay(41, n) = -v93
       v95 = (acc95 + tay(40, 0) * tay(41, n)) + tay(40, n) * tay(41, 0)
-      v96 = 0.1795_c_double * v95
+      v96 = 0.3795_c_double * v95
       v97 = -v96
       v98 = (acc98 + tay(21, 0) * tay(6, n)) + tay(21, n) * tay(6, 0)
       v99 = (acc99 + tay(20, 0) * tay(8, n)) + tay(20, n) * tay(8, 0)
       tay(42, n) = v98 - v99
-      tay(43, n) = 0.0795_c_double * tay(42, n)
+      tay(43, n) = 0.1795_c_double * tay(42, n)
       tay(44, n) = (acc102 + tay(20, 0) * tay(43, n)) + tay(20, n) * tay(43, 0)
       v103 = (acc103 + tay(10, 0) * tay(44, n)) + tay(10, n) * tay(44, 0)
       v104 = v97 + v103
       v105 = (acc105 + tay(23, 0) * tay(7, n)) + tay(23, n) * tay(7, 0)
       v106 = (acc106 + tay(22, 0) * tay(6, n)) + tay(22, n) * tay(6, 0)
       tay(45, n) = v105 - v106
-      tay(46, n) = 0.0795_c_double * tay(45, n)
+      tay(46, n) = 0.1795_c_double * tay(45, n)
       tay(47, n) = (acc109 + tay(46, 0) * tay(23, n)) + tay(46, n) * tay(23, 0)
       v110 = (acc110 + tay(11, 0) * tay(47, n)) + tay(11, n) * tay(47, 0)
       v111 = v104 + v110
@@ -7115,132 +7121,132 @@ contains
       v113 = v112 + tay(47, n)
       v114 = 0.04580152671755725_c_double * tay(8, n)
       v115 = v113 + v114
-      tay(48, n) = 0.0795_c_double * tay(40, n)
+      tay(48, n) = 0.1795_c_double * tay(40, n)
       tay(49, n) = (acc117 + tay(25, 0) * tay(48, n)) + tay(25, n) * tay(48, 0)
       v118 = v115 - tay(49, n)
-      v120 = 0.2795_c_double * tay(10, n)
+      v120 = 806.4878969465649_c_double * tay(7, n)
       v121 = v118 + v120
-      v123 = 806.5878969465649_c_double * tay(7, n)
-      v124 = v121 + v123
-      v127 = acc127 + tay(26, n) * tay(50, 0)
-      v128 = v124 + v127
-      v130 = acc130 + tay(51, 0) * tay(22, n)
-      tay(52, n) = v128 + v130
-      v132 = (acc132 + tay(52, 0) * tay(8, n)) + tay(52, n) * tay(8, 0)
-      v133 = v111 + v132
-      v134 = (acc134 + tay(23, 0) * tay(6, n)) + tay(23, n) * tay(6, 0)
-      v135 = (acc135 + tay(22, 0) * tay(7, n)) + tay(22, n) * tay(7, 0)
-      v136 = v134 + v135
-      v137 = 0.0795_c_double * v136
-      tay(53, n) = -v137
-      tay(54, n) = (acc139 + tay(11, 0) * tay(53, n)) + tay(11, n) * tay(53, 0)
-      v140 = (acc140 + tay(54, 0) * tay(22, n)) + tay(54, n) * tay(22, 0)
-      v141 = v133 + v140
-      tay(55, n) = (acc142 + tay(26, 0) * tay(48, n)) + tay(26, n) * tay(48, 0)
-      v143 = v112 + tay(55, n)
-      v144 = 0.04580152671755725_c_double * tay(7, n)
-      v145 = v143 + v144
-      v146 = v145 - tay(44, n)
-      v148 = 606.5878969465649_c_double * tay(8, n)
-      v149 = v146 + v148
-      v151 = 0.3795_c_double * tay(11, n)
-      v152 = v149 + v151
-      v153 = acc153 + tay(25, n) * tay(50, 0)
-      v154 = v152 + v153
-      v156 = acc156 + tay(56, 0) * tay(21, n)
-      tay(57, n) = v154 + v156
-      v158 = (acc158 + tay(57, 0) * tay(7, n)) + tay(57, n) * tay(7, 0)
-      v159 = v141 - v158
-      v160 = (acc160 + tay(20, 0) * tay(6, n)) + tay(20, n) * tay(6, 0)
-      v161 = (acc161 + tay(21, 0) * tay(8, n)) + tay(21, n) * tay(8, 0)
-      v162 = v160 + v161
-      v163 = 0.0795_c_double * v162
-      tay(58, n) = -v163
-      tay(59, n) = (acc165 + tay(10, 0) * tay(58, n)) + tay(10, n) * tay(58, 0)
-      v166 = (acc166 + tay(59, 0) * tay(21, n)) + tay(59, n) * tay(21, 0)
-      tay(60, n) = v159 - v166
-      v168 = (acc168 + tay(31, 0) * tay(60, n)) + tay(31, n) * tay(60, 0)
-      v172 = 0.2844364937388193_c_double * v162
-      tay(61, n) = -v172
-      v174 = (acc174 + tay(42, 0) * tay(61, n)) + tay(42, n) * tay(61, 0)
-      v175 = 0.2795_c_double * v174
-      v176 = -v175
-      v177 = (acc177 + tay(9, 0) * tay(55, n)) + tay(9, n) * tay(55, 0)
-      v178 = v176 + v177
-      tay(62, n) = (acc179 + tay(46, 0) * tay(22, n)) + tay(46, n) * tay(22, 0)
-      v180 = (acc180 + tay(11, 0) * tay(62, n)) + tay(11, n) * tay(62, 0)
-      v181 = v178 + v180
-      v182 = (acc182 + tay(57, 0) * tay(6, n)) + tay(57, n) * tay(6, 0)
-      v183 = v181 + v182
-      v184 = 0.0795_c_double * v92
-      tay(63, n) = -v184
-      tay(64, n) = (acc186 + tay(9, 0) * tay(63, n)) + tay(9, n) * tay(63, 0)
-      v187 = (acc187 + tay(25, 0) * tay(64, n)) + tay(25, n) * tay(64, 0)
-      v188 = v183 + v187
-      v189 = v144 + v114
-      tay(65, n) = (acc190 + tay(21, 0) * tay(43, n)) + tay(21, n) * tay(43, 0)
-      v191 = v189 + tay(65, n)
-      v192 = v191 - tay(62, n)
-      v193 = 0.1795_c_double * tay(9, n)
-      v194 = v192 + v193
-      v196 = 906.5878969465649_c_double * tay(6, n)
-      v197 = v194 + v196
-      v198 = acc198 + tay(56, 0) * tay(20, n)
-      v199 = v197 + v198
-      v200 = acc200 + tay(51, 0) * tay(23, n)
-      tay(66, n) = v199 + v200
-      v202 = (acc202 + tay(66, 0) * tay(8, n)) + tay(66, n) * tay(8, 0)
-      v203 = v188 - v202
-      v204 = (acc204 + tay(54, 0) * tay(23, n)) + tay(54, n) * tay(23, 0)
-      tay(67, n) = v203 - v204
-      v206 = (acc206 + tay(36, 0) * tay(67, n)) + tay(36, n) * tay(67, 0)
-      v207 = v168 + v206
-      v211 = 0.20948616600790515_c_double * v136
-      tay(68, n) = -v211
-      v213 = (acc213 + tay(45, 0) * tay(68, n)) + tay(45, n) * tay(68, 0)
-      v214 = 0.3795_c_double * v213
-      v215 = -v214
-      v216 = (acc216 + tay(9, 0) * tay(49, n)) + tay(9, n) * tay(49, 0)
+      v122 = 0.3795_c_double * tay(10, n)
+      v123 = v121 + v122
+      v126 = acc126 + tay(26, n) * tay(50, 0)
+      v127 = v123 + v126
+      v129 = acc129 + tay(51, 0) * tay(22, n)
+      tay(52, n) = v127 + v129
+      v131 = (acc131 + tay(52, 0) * tay(8, n)) + tay(52, n) * tay(8, 0)
+      v132 = v111 + v131
+      v133 = (acc133 + tay(23, 0) * tay(6, n)) + tay(23, n) * tay(6, 0)
+      v134 = (acc134 + tay(22, 0) * tay(7, n)) + tay(22, n) * tay(7, 0)
+      v135 = v133 + v134
+      v136 = 0.1795_c_double * v135
+      tay(53, n) = -v136
+      tay(54, n) = (acc138 + tay(11, 0) * tay(53, n)) + tay(11, n) * tay(53, 0)
+      v139 = (acc139 + tay(54, 0) * tay(22, n)) + tay(54, n) * tay(22, 0)
+      v140 = v132 + v139
+      tay(55, n) = (acc141 + tay(26, 0) * tay(48, n)) + tay(26, n) * tay(48, 0)
+      v142 = v112 + tay(55, n)
+      v143 = 0.04580152671755725_c_double * tay(7, n)
+      v144 = v142 + v143
+      v145 = v144 - tay(44, n)
+      v147 = 606.4878969465649_c_double * tay(8, n)
+      v148 = v145 + v147
+      v149 = 0.3795_c_double * tay(11, n)
+      v150 = v148 + v149
+      v151 = acc151 + tay(25, n) * tay(50, 0)
+      v152 = v150 + v151
+      v154 = acc154 + tay(56, 0) * tay(21, n)
+      tay(57, n) = v152 + v154
+      v156 = (acc156 + tay(57, 0) * tay(7, n)) + tay(57, n) * tay(7, 0)
+      v157 = v140 - v156
+      v158 = (acc158 + tay(20, 0) * tay(6, n)) + tay(20, n) * tay(6, 0)
+      v159 = (acc159 + tay(21, 0) * tay(8, n)) + tay(21, n) * tay(8, 0)
+      v160 = v158 + v159
+      v161 = 0.1795_c_double * v160
+      tay(58, n) = -v161
+      tay(59, n) = (acc163 + tay(10, 0) * tay(58, n)) + tay(10, n) * tay(58, 0)
+      v164 = (acc164 + tay(59, 0) * tay(21, n)) + tay(59, n) * tay(21, 0)
+      tay(60, n) = v157 - v164
+      v166 = (acc166 + tay(31, 0) * tay(60, n)) + tay(31, n) * tay(60, 0)
+      v168 = 0.47299077733860345_c_double * v160
+      tay(61, n) = -v168
+      v170 = (acc170 + tay(42, 0) * tay(61, n)) + tay(42, n) * tay(61, 0)
+      v171 = 0.3795_c_double * v170
+      v172 = -v171
+      v173 = (acc173 + tay(9, 0) * tay(55, n)) + tay(9, n) * tay(55, 0)
+      v174 = v172 + v173
+      tay(62, n) = (acc175 + tay(46, 0) * tay(22, n)) + tay(46, n) * tay(22, 0)
+      v176 = (acc176 + tay(11, 0) * tay(62, n)) + tay(11, n) * tay(62, 0)
+      v177 = v174 + v176
+      v178 = (acc178 + tay(57, 0) * tay(6, n)) + tay(57, n) * tay(6, 0)
+      v179 = v177 + v178
+      v180 = 0.1795_c_double * v92
+      tay(63, n) = -v180
+      tay(64, n) = (acc182 + tay(9, 0) * tay(63, n)) + tay(9, n) * tay(63, 0)
+      v183 = (acc183 + tay(25, 0) * tay(64, n)) + tay(25, n) * tay(64, 0)
+      v184 = v179 + v183
+      v185 = v143 + v114
+      tay(65, n) = (acc186 + tay(21, 0) * tay(43, n)) + tay(21, n) * tay(43, 0)
+      v187 = v185 + tay(65, n)
+      v188 = v187 - tay(62, n)
+      v190 = 906.4878969465649_c_double * tay(6, n)
+      v191 = v188 + v190
+      v192 = 0.3795_c_double * tay(9, n)
+      v193 = v191 + v192
+      v194 = acc194 + tay(56, 0) * tay(20, n)
+      v195 = v193 + v194
+      v196 = acc196 + tay(51, 0) * tay(23, n)
+      tay(66, n) = v195 + v196
+      v198 = (acc198 + tay(66, 0) * tay(8, n)) + tay(66, n) * tay(8, 0)
+      v199 = v184 - v198
+      v200 = (acc200 + tay(54, 0) * tay(23, n)) + tay(54, n) * tay(23, 0)
+      tay(67, n) = v199 - v200
+      v202 = (acc202 + tay(36, 0) * tay(67, n)) + tay(36, n) * tay(67, 0)
+      v203 = v166 + v202
+      v205 = 0.47299077733860345_c_double * v135
+      tay(68, n) = -v205
+      v207 = (acc207 + tay(45, 0) * tay(68, n)) + tay(45, n) * tay(68, 0)
+      v208 = 0.3795_c_double * v207
+      v209 = -v208
+      v210 = (acc210 + tay(9, 0) * tay(49, n)) + tay(9, n) * tay(49, 0)
+      v211 = v209 + v210
+      v212 = (acc212 + tay(10, 0) * tay(65, n)) + tay(10, n) * tay(65, 0)
+      v213 = v211 + v212
+      v214 = (acc214 + tay(66, 0) * tay(7, n)) + tay(66, n) * tay(7, 0)
+      v215 = v213 + v214
+      v216 = (acc216 + tay(20, 0) * tay(59, n)) + tay(20, n) * tay(59, 0)
       v217 = v215 + v216
-      v218 = (acc218 + tay(10, 0) * tay(65, n)) + tay(10, n) * tay(65, 0)
-      v219 = v217 + v218
-      v220 = (acc220 + tay(66, 0) * tay(7, n)) + tay(66, n) * tay(7, 0)
-      v221 = v219 + v220
-      v222 = (acc222 + tay(20, 0) * tay(59, n)) + tay(20, n) * tay(59, 0)
-      v223 = v221 + v222
-      v224 = (acc224 + tay(52, 0) * tay(6, n)) + tay(52, n) * tay(6, 0)
-      v225 = v223 - v224
-      v226 = (acc226 + tay(26, 0) * tay(64, n)) + tay(26, n) * tay(64, 0)
-      tay(69, n) = v225 - v226
-      v228 = (acc228 + tay(37, 0) * tay(69, n)) + tay(37, n) * tay(69, 0)
-      tay(70, n) = v207 + v228
-      v230 = (acc230 + tay(39, 0) * tay(70, n)) + tay(39, n) * tay(70, 0)
-      v231 = (acc231 + tay(36, 0) * tay(60, n)) + tay(36, n) * tay(60, 0)
-      v232 = (acc232 + tay(35, 0) * tay(35, n)) + tay(35, n) * tay(35, 0)
-      v233 = -v232
-      v234 = (acc234 + tay(24, 0) * tay(30, n)) + tay(24, n) * tay(30, 0)
-      tay(71, n) = v233 + v234
-      v236 = (acc236 + tay(71, 0) * tay(67, n)) + tay(71, n) * tay(67, 0)
-      v237 = v231 + v236
-      v238 = (acc238 + tay(33, 0) * tay(35, n)) + tay(33, n) * tay(35, 0)
-      v239 = (acc239 + tay(24, 0) * tay(28, n)) + tay(24, n) * tay(28, 0)
-      tay(72, n) = v238 - v239
-      v241 = (acc241 + tay(72, 0) * tay(69, n)) + tay(72, n) * tay(69, 0)
-      tay(73, n) = v237 + v241
-      v243 = (acc243 + tay(39, 0) * tay(73, n)) + tay(39, n) * tay(73, 0)
-      v244 = (acc244 + tay(37, 0) * tay(60, n)) + tay(37, n) * tay(60, 0)
-      v245 = (acc245 + tay(72, 0) * tay(67, n)) + tay(72, n) * tay(67, 0)
-      v246 = v244 + v245
-      v247 = (acc247 + tay(33, 0) * tay(33, n)) + tay(33, n) * tay(33, 0)
-      v248 = -v247
-      v249 = (acc249 + tay(24, 0) * tay(29, n)) + tay(24, n) * tay(29, 0)
-      tay(74, n) = v248 + v249
-      v251 = (acc251 + tay(74, 0) * tay(69, n)) + tay(74, n) * tay(69, 0)
-      tay(75, n) = v246 + v251
-      v253 = (acc253 + tay(39, 0) * tay(75, n)) + tay(39, n) * tay(75, 0)
-      v254 = v95 - v230
-      v255 = v174 - v243
-      v256 = v213 - v253
+      v218 = (acc218 + tay(52, 0) * tay(6, n)) + tay(52, n) * tay(6, 0)
+      v219 = v217 - v218
+      v220 = (acc220 + tay(26, 0) * tay(64, n)) + tay(26, n) * tay(64, 0)
+      tay(69, n) = v219 - v220
+      v222 = (acc222 + tay(37, 0) * tay(69, n)) + tay(37, n) * tay(69, 0)
+      tay(70, n) = v203 + v222
+      v224 = (acc224 + tay(39, 0) * tay(70, n)) + tay(39, n) * tay(70, 0)
+      v225 = (acc225 + tay(36, 0) * tay(60, n)) + tay(36, n) * tay(60, 0)
+      v226 = (acc226 + tay(35, 0) * tay(35, n)) + tay(35, n) * tay(35, 0)
+      v227 = -v226
+      v228 = (acc228 + tay(24, 0) * tay(30, n)) + tay(24, n) * tay(30, 0)
+      tay(71, n) = v227 + v228
+      v230 = (acc230 + tay(71, 0) * tay(67, n)) + tay(71, n) * tay(67, 0)
+      v231 = v225 + v230
+      v232 = (acc232 + tay(33, 0) * tay(35, n)) + tay(33, n) * tay(35, 0)
+      v233 = (acc233 + tay(24, 0) * tay(28, n)) + tay(24, n) * tay(28, 0)
+      tay(72, n) = v232 - v233
+      v235 = (acc235 + tay(72, 0) * tay(69, n)) + tay(72, n) * tay(69, 0)
+      tay(73, n) = v231 + v235
+      v237 = (acc237 + tay(39, 0) * tay(73, n)) + tay(39, n) * tay(73, 0)
+      v238 = (acc238 + tay(37, 0) * tay(60, n)) + tay(37, n) * tay(60, 0)
+      v239 = (acc239 + tay(72, 0) * tay(67, n)) + tay(72, n) * tay(67, 0)
+      v240 = v238 + v239
+      v241 = (acc241 + tay(33, 0) * tay(33, n)) + tay(33, n) * tay(33, 0)
+      v242 = -v241
+      v243 = (acc243 + tay(24, 0) * tay(29, n)) + tay(24, n) * tay(29, 0)
+      tay(74, n) = v242 + v243
+      v245 = (acc245 + tay(74, 0) * tay(69, n)) + tay(74, n) * tay(69, 0)
+      tay(75, n) = v240 + v245
+      v247 = (acc247 + tay(39, 0) * tay(75, n)) + tay(39, n) * tay(75, 0)
+      v248 = v95 - v224
+      v249 = v170 - v237
+      v250 = v207 - v247
       tay(0, n + 1) = tay(19, n) * inv(n + 1)
       tay(1, n + 1) = v25 * inv(n + 1)
       tay(76, n + 1) = v25
@@ -7252,12 +7258,12 @@ contains
       tay(79, n + 1) = tay(10, n)
       tay(5, n + 1) = tay(11, n) * inv(n + 1)
       tay(80, n + 1) = tay(11, n)
-      tay(6, n + 1) = v230 * inv(n + 1)
-      tay(7, n + 1) = v243 * inv(n + 1)
-      tay(8, n + 1) = v253 * inv(n + 1)
-      tay(9, n + 1) = v254 * inv(n + 1)
-      tay(10, n + 1) = v255 * inv(n + 1)
-      tay(11, n + 1) = v256 * inv(n + 1)
+      tay(6, n + 1) = v224 * inv(n + 1)
+      tay(7, n + 1) = v237 * inv(n + 1)
+      tay(8, n + 1) = v247 * inv(n + 1)
+      tay(9, n + 1) = v248 * inv(n + 1)
+      tay(10, n + 1) = v249 * inv(n + 1)
+      tay(11, n + 1) = v250 * inv(n + 1)
     end do
   end subroutine taylor_jet
 
@@ -7597,58 +7603,58 @@ contains
     real(c_double) :: acc109
     real(c_double) :: acc110
     real(c_double) :: acc117
-    real(c_double) :: acc127
-    real(c_double) :: acc130
-    real(c_double) :: acc132
+    real(c_double) :: acc126
+    real(c_double) :: acc129
+    real(c_double) :: acc131
+    real(c_double) :: acc133
     real(c_double) :: acc134
-    real(c_double) :: acc135
+    real(c_double) :: acc138
     real(c_double) :: acc139
-    real(c_double) :: acc140
-    real(c_double) :: acc142
-    real(c_double) :: acc153
+    real(c_double) :: acc141
+    real(c_double) :: acc151
+    real(c_double) :: acc154
     real(c_double) :: acc156
     real(c_double) :: acc158
-    real(c_double) :: acc160
-    real(c_double) :: acc161
-    real(c_double) :: acc165
+    real(c_double) :: acc159
+    real(c_double) :: acc163
+    real(c_double) :: acc164
     real(c_double) :: acc166
-    real(c_double) :: acc168
-    real(c_double) :: acc174
-    real(c_double) :: acc177
-    real(c_double) :: acc179
-    real(c_double) :: acc180
+    real(c_double) :: acc170
+    real(c_double) :: acc173
+    real(c_double) :: acc175
+    real(c_double) :: acc176
+    real(c_double) :: acc178
     real(c_double) :: acc182
+    real(c_double) :: acc183
     real(c_double) :: acc186
-    real(c_double) :: acc187
-    real(c_double) :: acc190
+    real(c_double) :: acc194
+    real(c_double) :: acc196
     real(c_double) :: acc198
     real(c_double) :: acc200
     real(c_double) :: acc202
-    real(c_double) :: acc204
-    real(c_double) :: acc206
-    real(c_double) :: acc213
+    real(c_double) :: acc207
+    real(c_double) :: acc210
+    real(c_double) :: acc212
+    real(c_double) :: acc214
     real(c_double) :: acc216
     real(c_double) :: acc218
     real(c_double) :: acc220
     real(c_double) :: acc222
     real(c_double) :: acc224
+    real(c_double) :: acc225
     real(c_double) :: acc226
     real(c_double) :: acc228
     real(c_double) :: acc230
-    real(c_double) :: acc231
     real(c_double) :: acc232
-    real(c_double) :: acc234
-    real(c_double) :: acc236
+    real(c_double) :: acc233
+    real(c_double) :: acc235
+    real(c_double) :: acc237
     real(c_double) :: acc238
     real(c_double) :: acc239
     real(c_double) :: acc241
     real(c_double) :: acc243
-    real(c_double) :: acc244
     real(c_double) :: acc245
     real(c_double) :: acc247
-    real(c_double) :: acc249
-    real(c_double) :: acc251
-    real(c_double) :: acc253
     real(c_double) :: ib22
     real(c_double) :: ub22
     real(c_double) :: ib82
@@ -7715,69 +7721,75 @@ contains
     real(c_double) :: v118
     real(c_double) :: v120
     real(c_double) :: v121
+    real(c_double) :: v122
     real(c_double) :: v123
-    real(c_double) :: v124
+    real(c_double) :: v126
     real(c_double) :: v127
-    real(c_double) :: v128
-    real(c_double) :: v130
+    real(c_double) :: v129
+    real(c_double) :: v131
     real(c_double) :: v132
     real(c_double) :: v133
     real(c_double) :: v134
     real(c_double) :: v135
     real(c_double) :: v136
-    real(c_double) :: v137
+    real(c_double) :: v139
     real(c_double) :: v140
-    real(c_double) :: v141
+    real(c_double) :: v142
     real(c_double) :: v143
     real(c_double) :: v144
     real(c_double) :: v145
-    real(c_double) :: v146
+    real(c_double) :: v147
     real(c_double) :: v148
     real(c_double) :: v149
+    real(c_double) :: v150
     real(c_double) :: v151
     real(c_double) :: v152
-    real(c_double) :: v153
     real(c_double) :: v154
     real(c_double) :: v156
+    real(c_double) :: v157
     real(c_double) :: v158
     real(c_double) :: v159
     real(c_double) :: v160
     real(c_double) :: v161
-    real(c_double) :: v162
-    real(c_double) :: v163
+    real(c_double) :: v164
     real(c_double) :: v166
+    real(c_double) :: v167
     real(c_double) :: v168
     real(c_double) :: v170
+    real(c_double) :: v171
     real(c_double) :: v172
+    real(c_double) :: v173
     real(c_double) :: v174
-    real(c_double) :: v175
     real(c_double) :: v176
     real(c_double) :: v177
     real(c_double) :: v178
+    real(c_double) :: v179
     real(c_double) :: v180
-    real(c_double) :: v181
-    real(c_double) :: v182
     real(c_double) :: v183
     real(c_double) :: v184
+    real(c_double) :: v185
     real(c_double) :: v187
     real(c_double) :: v188
-    real(c_double) :: v189
+    real(c_double) :: v190
     real(c_double) :: v191
     real(c_double) :: v192
     real(c_double) :: v193
     real(c_double) :: v194
+    real(c_double) :: v195
     real(c_double) :: v196
-    real(c_double) :: v197
     real(c_double) :: v198
     real(c_double) :: v199
     real(c_double) :: v200
     real(c_double) :: v202
     real(c_double) :: v203
     real(c_double) :: v204
-    real(c_double) :: v206
+    real(c_double) :: v205
     real(c_double) :: v207
+    real(c_double) :: v208
     real(c_double) :: v209
+    real(c_double) :: v210
     real(c_double) :: v211
+    real(c_double) :: v212
     real(c_double) :: v213
     real(c_double) :: v214
     real(c_double) :: v215
@@ -7786,35 +7798,29 @@ contains
     real(c_double) :: v218
     real(c_double) :: v219
     real(c_double) :: v220
-    real(c_double) :: v221
     real(c_double) :: v222
-    real(c_double) :: v223
     real(c_double) :: v224
     real(c_double) :: v225
     real(c_double) :: v226
+    real(c_double) :: v227
     real(c_double) :: v228
     real(c_double) :: v230
     real(c_double) :: v231
     real(c_double) :: v232
     real(c_double) :: v233
-    real(c_double) :: v234
-    real(c_double) :: v236
+    real(c_double) :: v235
     real(c_double) :: v237
     real(c_double) :: v238
     real(c_double) :: v239
+    real(c_double) :: v240
     real(c_double) :: v241
+    real(c_double) :: v242
     real(c_double) :: v243
-    real(c_double) :: v244
     real(c_double) :: v245
-    real(c_double) :: v246
     real(c_double) :: v247
     real(c_double) :: v248
     real(c_double) :: v249
-    real(c_double) :: v251
-    real(c_double) :: v253
-    real(c_double) :: v254
-    real(c_double) :: v255
-    real(c_double) :: v256
+    real(c_double) :: v250
     real(c_double) :: acc(0:nx - 1)
     real(c_double) :: t0
     real(c_double) :: t1
@@ -7913,39 +7919,39 @@ contains
       tay(20, 0) = vscmg3_sin(tay(4, 0))
       tay(21, 0) = vscmg3_cos(tay(4, 0))
       v33 = tay(21, 0) * tay(21, 0)
-      v34 = 0.0795_c_double * v33
-      v35 = 906.4083969465648_c_double + v34
+      v34 = 0.1795_c_double * v33
+      v35 = 906.1083969465649_c_double + v34
       tay(22, 0) = vscmg3_sin(tay(5, 0))
       tay(23, 0) = vscmg3_cos(tay(5, 0))
       v38 = tay(22, 0) * tay(22, 0)
-      v39 = 0.0795_c_double * v38
+      v39 = 0.1795_c_double * v38
       tay(24, 0) = v35 + v39
       tay(25, 0) = vscmg3_sin(tay(3, 0))
       tay(26, 0) = vscmg3_cos(tay(3, 0))
-      tay(27, 0) = 0.0795_c_double * tay(26, 0)
+      tay(27, 0) = 0.1795_c_double * tay(26, 0)
       v45 = tay(27, 0) * tay(25, 0)
       tay(28, 0) = 0.04580152671755725_c_double - v45
       v47 = tay(28, 0) * tay(28, 0)
       v48 = -v47
       v50 = tay(25, 0) * tay(25, 0)
-      v51 = 0.0795_c_double * v50
-      v52 = 806.3083969465649_c_double + v51
+      v51 = 0.1795_c_double * v50
+      v52 = 806.1083969465649_c_double + v51
       v53 = tay(23, 0) * tay(23, 0)
-      v54 = 0.0795_c_double * v53
+      v54 = 0.1795_c_double * v53
       tay(29, 0) = v52 + v54
       v57 = tay(26, 0) * tay(26, 0)
-      v58 = 0.0795_c_double * v57
-      v59 = 606.2083969465649_c_double + v58
+      v58 = 0.1795_c_double * v57
+      v59 = 606.1083969465649_c_double + v58
       v60 = tay(20, 0) * tay(20, 0)
-      v61 = 0.0795_c_double * v60
+      v61 = 0.1795_c_double * v60
       tay(30, 0) = v59 + v61
       v63 = tay(29, 0) * tay(30, 0)
       tay(31, 0) = v48 + v63
       v65 = tay(24, 0) * tay(31, 0)
-      tay(32, 0) = 0.0795_c_double * tay(23, 0)
+      tay(32, 0) = 0.1795_c_double * tay(23, 0)
       v67 = tay(32, 0) * tay(22, 0)
       tay(33, 0) = 0.04580152671755725_c_double - v67
-      tay(34, 0) = 0.0795_c_double * tay(20, 0)
+      tay(34, 0) = 0.1795_c_double * tay(20, 0)
       v70 = tay(34, 0) * tay(21, 0)
       tay(35, 0) = 0.04580152671755725_c_double - v70
       v72 = tay(35, 0) * tay(28, 0)
@@ -7962,26 +7968,26 @@ contains
       v84 = tay(26, 0) * tay(8, 0)
       v85 = tay(25, 0) * tay(7, 0)
       tay(40, 0) = v84 - v85
-      v88 = 0.8857938718662952_c_double * tay(12, 0)
+      v88 = 0.4189723320158103_c_double * tay(12, 0)
       v90 = tay(26, 0) * tay(7, 0)
       v91 = tay(25, 0) * tay(8, 0)
       v92 = v90 + v91
-      v93 = 0.4428969359331476_c_double * v92
+      v93 = 0.47299077733860345_c_double * v92
       tay(41, 0) = v88 - v93
       v95 = tay(40, 0) * tay(41, 0)
-      v96 = 0.1795_c_double * v95
+      v96 = 0.3795_c_double * v95
       v97 = -v96
       v98 = tay(21, 0) * tay(6, 0)
       v99 = tay(20, 0) * tay(8, 0)
       tay(42, 0) = v98 - v99
-      tay(43, 0) = 0.0795_c_double * tay(42, 0)
+      tay(43, 0) = 0.1795_c_double * tay(42, 0)
       tay(44, 0) = tay(20, 0) * tay(43, 0)
       v103 = tay(10, 0) * tay(44, 0)
       v104 = v97 + v103
       v105 = tay(23, 0) * tay(7, 0)
       v106 = tay(22, 0) * tay(6, 0)
       tay(45, 0) = v105 - v106
-      tay(46, 0) = 0.0795_c_double * tay(45, 0)
+      tay(46, 0) = 0.1795_c_double * tay(45, 0)
       tay(47, 0) = tay(46, 0) * tay(23, 0)
       v110 = tay(11, 0) * tay(47, 0)
       v111 = v104 + v110
@@ -7989,137 +7995,137 @@ contains
       v113 = v112 + tay(47, 0)
       v114 = 0.04580152671755725_c_double * tay(8, 0)
       v115 = v113 + v114
-      tay(48, 0) = 0.0795_c_double * tay(40, 0)
+      tay(48, 0) = 0.1795_c_double * tay(40, 0)
       tay(49, 0) = tay(25, 0) * tay(48, 0)
       v118 = v115 - tay(49, 0)
-      v120 = 0.2795_c_double * tay(10, 0)
+      v120 = 806.4878969465649_c_double * tay(7, 0)
       v121 = v118 + v120
-      v123 = 806.5878969465649_c_double * tay(7, 0)
-      v124 = v121 + v123
+      v122 = 0.3795_c_double * tay(10, 0)
+      v123 = v121 + v122
       tay(50, 0) = 0.159_c_double * tay(12, 0)
-      v127 = tay(26, 0) * tay(50, 0)
-      v128 = v124 + v127
+      v126 = tay(26, 0) * tay(50, 0)
+      v127 = v123 + v126
       tay(51, 0) = 0.159_c_double * tay(14, 0)
-      v130 = tay(51, 0) * tay(22, 0)
-      tay(52, 0) = v128 + v130
-      v132 = tay(52, 0) * tay(8, 0)
-      v133 = v111 + v132
-      v134 = tay(23, 0) * tay(6, 0)
-      v135 = tay(22, 0) * tay(7, 0)
-      v136 = v134 + v135
-      v137 = 0.0795_c_double * v136
-      tay(53, 0) = tay(51, 0) - v137
+      v129 = tay(51, 0) * tay(22, 0)
+      tay(52, 0) = v127 + v129
+      v131 = tay(52, 0) * tay(8, 0)
+      v132 = v111 + v131
+      v133 = tay(23, 0) * tay(6, 0)
+      v134 = tay(22, 0) * tay(7, 0)
+      v135 = v133 + v134
+      v136 = 0.1795_c_double * v135
+      tay(53, 0) = tay(51, 0) - v136
       tay(54, 0) = tay(11, 0) * tay(53, 0)
-      v140 = tay(54, 0) * tay(22, 0)
-      v141 = v133 + v140
+      v139 = tay(54, 0) * tay(22, 0)
+      v140 = v132 + v139
       tay(55, 0) = tay(26, 0) * tay(48, 0)
-      v143 = v112 + tay(55, 0)
-      v144 = 0.04580152671755725_c_double * tay(7, 0)
-      v145 = v143 + v144
-      v146 = v145 - tay(44, 0)
-      v148 = 606.5878969465649_c_double * tay(8, 0)
-      v149 = v146 + v148
-      v151 = 0.3795_c_double * tay(11, 0)
-      v152 = v149 + v151
-      v153 = tay(25, 0) * tay(50, 0)
-      v154 = v152 + v153
+      v142 = v112 + tay(55, 0)
+      v143 = 0.04580152671755725_c_double * tay(7, 0)
+      v144 = v142 + v143
+      v145 = v144 - tay(44, 0)
+      v147 = 606.4878969465649_c_double * tay(8, 0)
+      v148 = v145 + v147
+      v149 = 0.3795_c_double * tay(11, 0)
+      v150 = v148 + v149
+      v151 = tay(25, 0) * tay(50, 0)
+      v152 = v150 + v151
       tay(56, 0) = 0.159_c_double * tay(13, 0)
-      v156 = tay(56, 0) * tay(21, 0)
-      tay(57, 0) = v154 + v156
-      v158 = tay(57, 0) * tay(7, 0)
-      v159 = v141 - v158
-      v160 = tay(20, 0) * tay(6, 0)
-      v161 = tay(21, 0) * tay(8, 0)
-      v162 = v160 + v161
-      v163 = 0.0795_c_double * v162
-      tay(58, 0) = tay(56, 0) - v163
+      v154 = tay(56, 0) * tay(21, 0)
+      tay(57, 0) = v152 + v154
+      v156 = tay(57, 0) * tay(7, 0)
+      v157 = v140 - v156
+      v158 = tay(20, 0) * tay(6, 0)
+      v159 = tay(21, 0) * tay(8, 0)
+      v160 = v158 + v159
+      v161 = 0.1795_c_double * v160
+      tay(58, 0) = tay(56, 0) - v161
       tay(59, 0) = tay(10, 0) * tay(58, 0)
-      v166 = tay(59, 0) * tay(21, 0)
-      tay(60, 0) = v159 - v166
-      v168 = tay(31, 0) * tay(60, 0)
-      v170 = 0.5688729874776386_c_double * tay(13, 0)
-      v172 = 0.2844364937388193_c_double * v162
-      tay(61, 0) = v170 - v172
-      v174 = tay(42, 0) * tay(61, 0)
-      v175 = 0.2795_c_double * v174
-      v176 = -v175
-      v177 = tay(9, 0) * tay(55, 0)
-      v178 = v176 + v177
+      v164 = tay(59, 0) * tay(21, 0)
+      tay(60, 0) = v157 - v164
+      v166 = tay(31, 0) * tay(60, 0)
+      v167 = 0.4189723320158103_c_double * tay(13, 0)
+      v168 = 0.47299077733860345_c_double * v160
+      tay(61, 0) = v167 - v168
+      v170 = tay(42, 0) * tay(61, 0)
+      v171 = 0.3795_c_double * v170
+      v172 = -v171
+      v173 = tay(9, 0) * tay(55, 0)
+      v174 = v172 + v173
       tay(62, 0) = tay(46, 0) * tay(22, 0)
-      v180 = tay(11, 0) * tay(62, 0)
-      v181 = v178 + v180
-      v182 = tay(57, 0) * tay(6, 0)
-      v183 = v181 + v182
-      v184 = 0.0795_c_double * v92
-      tay(63, 0) = tay(50, 0) - v184
+      v176 = tay(11, 0) * tay(62, 0)
+      v177 = v174 + v176
+      v178 = tay(57, 0) * tay(6, 0)
+      v179 = v177 + v178
+      v180 = 0.1795_c_double * v92
+      tay(63, 0) = tay(50, 0) - v180
       tay(64, 0) = tay(9, 0) * tay(63, 0)
-      v187 = tay(25, 0) * tay(64, 0)
-      v188 = v183 + v187
-      v189 = v144 + v114
+      v183 = tay(25, 0) * tay(64, 0)
+      v184 = v179 + v183
+      v185 = v143 + v114
       tay(65, 0) = tay(21, 0) * tay(43, 0)
-      v191 = v189 + tay(65, 0)
-      v192 = v191 - tay(62, 0)
-      v193 = 0.1795_c_double * tay(9, 0)
-      v194 = v192 + v193
-      v196 = 906.5878969465649_c_double * tay(6, 0)
-      v197 = v194 + v196
-      v198 = tay(56, 0) * tay(20, 0)
-      v199 = v197 + v198
-      v200 = tay(51, 0) * tay(23, 0)
-      tay(66, 0) = v199 + v200
-      v202 = tay(66, 0) * tay(8, 0)
-      v203 = v188 - v202
-      v204 = tay(54, 0) * tay(23, 0)
-      tay(67, 0) = v203 - v204
-      v206 = tay(36, 0) * tay(67, 0)
-      v207 = v168 + v206
-      v209 = 0.4189723320158103_c_double * tay(14, 0)
-      v211 = 0.20948616600790515_c_double * v136
-      tay(68, 0) = v209 - v211
-      v213 = tay(45, 0) * tay(68, 0)
-      v214 = 0.3795_c_double * v213
-      v215 = -v214
-      v216 = tay(9, 0) * tay(49, 0)
+      v187 = v185 + tay(65, 0)
+      v188 = v187 - tay(62, 0)
+      v190 = 906.4878969465649_c_double * tay(6, 0)
+      v191 = v188 + v190
+      v192 = 0.3795_c_double * tay(9, 0)
+      v193 = v191 + v192
+      v194 = tay(56, 0) * tay(20, 0)
+      v195 = v193 + v194
+      v196 = tay(51, 0) * tay(23, 0)
+      tay(66, 0) = v195 + v196
+      v198 = tay(66, 0) * tay(8, 0)
+      v199 = v184 - v198
+      v200 = tay(54, 0) * tay(23, 0)
+      tay(67, 0) = v199 - v200
+      v202 = tay(36, 0) * tay(67, 0)
+      v203 = v166 + v202
+      v204 = 0.4189723320158103_c_double * tay(14, 0)
+      v205 = 0.47299077733860345_c_double * v135
+      tay(68, 0) = v204 - v205
+      v207 = tay(45, 0) * tay(68, 0)
+      v208 = 0.3795_c_double * v207
+      v209 = -v208
+      v210 = tay(9, 0) * tay(49, 0)
+      v211 = v209 + v210
+      v212 = tay(10, 0) * tay(65, 0)
+      v213 = v211 + v212
+      v214 = tay(66, 0) * tay(7, 0)
+      v215 = v213 + v214
+      v216 = tay(20, 0) * tay(59, 0)
       v217 = v215 + v216
-      v218 = tay(10, 0) * tay(65, 0)
-      v219 = v217 + v218
-      v220 = tay(66, 0) * tay(7, 0)
-      v221 = v219 + v220
-      v222 = tay(20, 0) * tay(59, 0)
-      v223 = v221 + v222
-      v224 = tay(52, 0) * tay(6, 0)
-      v225 = v223 - v224
-      v226 = tay(26, 0) * tay(64, 0)
-      tay(69, 0) = v225 - v226
-      v228 = tay(37, 0) * tay(69, 0)
-      tay(70, 0) = v207 + v228
-      v230 = tay(39, 0) * tay(70, 0)
-      v231 = tay(36, 0) * tay(60, 0)
-      v232 = tay(35, 0) * tay(35, 0)
-      v233 = -v232
-      v234 = tay(24, 0) * tay(30, 0)
-      tay(71, 0) = v233 + v234
-      v236 = tay(71, 0) * tay(67, 0)
-      v237 = v231 + v236
-      v238 = tay(33, 0) * tay(35, 0)
-      v239 = tay(24, 0) * tay(28, 0)
-      tay(72, 0) = v238 - v239
-      v241 = tay(72, 0) * tay(69, 0)
-      tay(73, 0) = v237 + v241
-      v243 = tay(39, 0) * tay(73, 0)
-      v244 = tay(37, 0) * tay(60, 0)
-      v245 = tay(72, 0) * tay(67, 0)
-      v246 = v244 + v245
-      v247 = tay(33, 0) * tay(33, 0)
-      v248 = -v247
-      v249 = tay(24, 0) * tay(29, 0)
-      tay(74, 0) = v248 + v249
-      v251 = tay(74, 0) * tay(69, 0)
-      tay(75, 0) = v246 + v251
-      v253 = tay(39, 0) * tay(75, 0)
-      v254 = v95 - v230
-      v255 = v174 - v243
-      v256 = v213 - v253
+      v218 = tay(52, 0) * tay(6, 0)
+      v219 = v217 - v218
+      v220 = tay(26, 0) * tay(64, 0)
+      tay(69, 0) = v219 - v220
+      v222 = tay(37, 0) * tay(69, 0)
+      tay(70, 0) = v203 + v222
+      v224 = tay(39, 0) * tay(70, 0)
+      v225 = tay(36, 0) * tay(60, 0)
+      v226 = tay(35, 0) * tay(35, 0)
+      v227 = -v226
+      v228 = tay(24, 0) * tay(30, 0)
+      tay(71, 0) = v227 + v228
+      v230 = tay(71, 0) * tay(67, 0)
+      v231 = v225 + v230
+      v232 = tay(33, 0) * tay(35, 0)
+      v233 = tay(24, 0) * tay(28, 0)
+      tay(72, 0) = v232 - v233
+      v235 = tay(72, 0) * tay(69, 0)
+      tay(73, 0) = v231 + v235
+      v237 = tay(39, 0) * tay(73, 0)
+      v238 = tay(37, 0) * tay(60, 0)
+      v239 = tay(72, 0) * tay(67, 0)
+      v240 = v238 + v239
+      v241 = tay(33, 0) * tay(33, 0)
+      v242 = -v241
+      v243 = tay(24, 0) * tay(29, 0)
+      tay(74, 0) = v242 + v243
+      v245 = tay(74, 0) * tay(69, 0)
+      tay(75, 0) = v240 + v245
+      v247 = tay(39, 0) * tay(75, 0)
+      v248 = v95 - v224
+      v249 = v170 - v237
+      v250 = v207 - v247
       ib22 = 1.0_c_double / tay(18, 0)
       ub22 = tay(19, 0) / tay(18, 0)
       ib82 = 1.0_c_double / tay(38, 0)
@@ -8135,12 +8141,12 @@ contains
       tay(79, 1) = tay(4, 1)
       tay(5, 1) = tay(11, 0)
       tay(80, 1) = tay(5, 1)
-      tay(6, 1) = v230
-      tay(7, 1) = v243
-      tay(8, 1) = v253
-      tay(9, 1) = v254
-      tay(10, 1) = v255
-      tay(11, 1) = v256
+      tay(6, 1) = v224
+      tay(7, 1) = v237
+      tay(8, 1) = v247
+      tay(9, 1) = v248
+      tay(10, 1) = v249
+      tay(11, 1) = v250
       tay(12, 1) = 0.0_c_double
       tay(13, 1) = 0.0_c_double
       tay(14, 1) = 0.0_c_double
@@ -8160,39 +8166,39 @@ contains
       tay(20, 1) = tay(4, 1) * tay(21, 0)
       tay(21, 1) = -tay(4, 1) * tay(20, 0)
       v33 = tay(21, 0) * tay(21, 1) + tay(21, 1) * tay(21, 0)
-      v34 = 0.0795_c_double * v33
+      v34 = 0.1795_c_double * v33
       v35 = v34
       tay(22, 1) = tay(5, 1) * tay(23, 0)
       tay(23, 1) = -tay(5, 1) * tay(22, 0)
       v38 = tay(22, 0) * tay(22, 1) + tay(22, 1) * tay(22, 0)
-      v39 = 0.0795_c_double * v38
+      v39 = 0.1795_c_double * v38
       tay(24, 1) = v35 + v39
       tay(25, 1) = tay(3, 1) * tay(26, 0)
       tay(26, 1) = -tay(3, 1) * tay(25, 0)
-      tay(27, 1) = 0.0795_c_double * tay(26, 1)
+      tay(27, 1) = 0.1795_c_double * tay(26, 1)
       v45 = tay(27, 0) * tay(25, 1) + tay(27, 1) * tay(25, 0)
       tay(28, 1) = -v45
       v47 = tay(28, 0) * tay(28, 1) + tay(28, 1) * tay(28, 0)
       v48 = -v47
       v50 = tay(25, 0) * tay(25, 1) + tay(25, 1) * tay(25, 0)
-      v51 = 0.0795_c_double * v50
+      v51 = 0.1795_c_double * v50
       v52 = v51
       v53 = tay(23, 0) * tay(23, 1) + tay(23, 1) * tay(23, 0)
-      v54 = 0.0795_c_double * v53
+      v54 = 0.1795_c_double * v53
       tay(29, 1) = v52 + v54
       v57 = tay(26, 0) * tay(26, 1) + tay(26, 1) * tay(26, 0)
-      v58 = 0.0795_c_double * v57
+      v58 = 0.1795_c_double * v57
       v59 = v58
       v60 = tay(20, 0) * tay(20, 1) + tay(20, 1) * tay(20, 0)
-      v61 = 0.0795_c_double * v60
+      v61 = 0.1795_c_double * v60
       tay(30, 1) = v59 + v61
       v63 = tay(29, 0) * tay(30, 1) + tay(29, 1) * tay(30, 0)
       tay(31, 1) = v48 + v63
       v65 = tay(24, 0) * tay(31, 1) + tay(24, 1) * tay(31, 0)
-      tay(32, 1) = 0.0795_c_double * tay(23, 1)
+      tay(32, 1) = 0.1795_c_double * tay(23, 1)
       v67 = tay(32, 0) * tay(22, 1) + tay(32, 1) * tay(22, 0)
       tay(33, 1) = -v67
-      tay(34, 1) = 0.0795_c_double * tay(20, 1)
+      tay(34, 1) = 0.1795_c_double * tay(20, 1)
       v70 = tay(34, 0) * tay(21, 1) + tay(34, 1) * tay(21, 0)
       tay(35, 1) = -v70
       v72 = tay(35, 0) * tay(28, 1) + tay(35, 1) * tay(28, 0)
@@ -8209,26 +8215,26 @@ contains
       v84 = tay(26, 0) * tay(8, 1) + tay(26, 1) * tay(8, 0)
       v85 = tay(25, 0) * tay(7, 1) + tay(25, 1) * tay(7, 0)
       tay(40, 1) = v84 - v85
-      v88 = 0.8857938718662952_c_double * tay(12, 1)
+      v88 = 0.4189723320158103_c_double * tay(12, 1)
       v90 = tay(26, 0) * tay(7, 1) + tay(26, 1) * tay(7, 0)
       v91 = tay(25, 0) * tay(8, 1) + tay(25, 1) * tay(8, 0)
       v92 = v90 + v91
-      v93 = 0.4428969359331476_c_double * v92
+      v93 = 0.47299077733860345_c_double * v92
       tay(41, 1) = v88 - v93
       v95 = tay(40, 0) * tay(41, 1) + tay(40, 1) * tay(41, 0)
-      v96 = 0.1795_c_double * v95
+      v96 = 0.3795_c_double * v95
       v97 = -v96
       v98 = tay(21, 0) * tay(6, 1) + tay(21, 1) * tay(6, 0)
       v99 = tay(20, 0) * tay(8, 1) + tay(20, 1) * tay(8, 0)
       tay(42, 1) = v98 - v99
-      tay(43, 1) = 0.0795_c_double * tay(42, 1)
+      tay(43, 1) = 0.1795_c_double * tay(42, 1)
       tay(44, 1) = tay(20, 0) * tay(43, 1) + tay(20, 1) * tay(43, 0)
       v103 = tay(10, 0) * tay(44, 1) + tay(10, 1) * tay(44, 0)
       v104 = v97 + v103
       v105 = tay(23, 0) * tay(7, 1) + tay(23, 1) * tay(7, 0)
       v106 = tay(22, 0) * tay(6, 1) + tay(22, 1) * tay(6, 0)
       tay(45, 1) = v105 - v106
-      tay(46, 1) = 0.0795_c_double * tay(45, 1)
+      tay(46, 1) = 0.1795_c_double * tay(45, 1)
       tay(47, 1) = tay(46, 0) * tay(23, 1) + tay(46, 1) * tay(23, 0)
       v110 = tay(11, 0) * tay(47, 1) + tay(11, 1) * tay(47, 0)
       v111 = v104 + v110
@@ -8236,137 +8242,137 @@ contains
       v113 = v112 + tay(47, 1)
       v114 = 0.04580152671755725_c_double * tay(8, 1)
       v115 = v113 + v114
-      tay(48, 1) = 0.0795_c_double * tay(40, 1)
+      tay(48, 1) = 0.1795_c_double * tay(40, 1)
       tay(49, 1) = tay(25, 0) * tay(48, 1) + tay(25, 1) * tay(48, 0)
       v118 = v115 - tay(49, 1)
-      v120 = 0.2795_c_double * tay(10, 1)
+      v120 = 806.4878969465649_c_double * tay(7, 1)
       v121 = v118 + v120
-      v123 = 806.5878969465649_c_double * tay(7, 1)
-      v124 = v121 + v123
+      v122 = 0.3795_c_double * tay(10, 1)
+      v123 = v121 + v122
       tay(50, 1) = 0.159_c_double * tay(12, 1)
-      v127 = tay(26, 0) * tay(50, 1) + tay(26, 1) * tay(50, 0)
-      v128 = v124 + v127
+      v126 = tay(26, 0) * tay(50, 1) + tay(26, 1) * tay(50, 0)
+      v127 = v123 + v126
       tay(51, 1) = 0.159_c_double * tay(14, 1)
-      v130 = tay(51, 0) * tay(22, 1) + tay(51, 1) * tay(22, 0)
-      tay(52, 1) = v128 + v130
-      v132 = tay(52, 0) * tay(8, 1) + tay(52, 1) * tay(8, 0)
-      v133 = v111 + v132
-      v134 = tay(23, 0) * tay(6, 1) + tay(23, 1) * tay(6, 0)
-      v135 = tay(22, 0) * tay(7, 1) + tay(22, 1) * tay(7, 0)
-      v136 = v134 + v135
-      v137 = 0.0795_c_double * v136
-      tay(53, 1) = tay(51, 1) - v137
+      v129 = tay(51, 0) * tay(22, 1) + tay(51, 1) * tay(22, 0)
+      tay(52, 1) = v127 + v129
+      v131 = tay(52, 0) * tay(8, 1) + tay(52, 1) * tay(8, 0)
+      v132 = v111 + v131
+      v133 = tay(23, 0) * tay(6, 1) + tay(23, 1) * tay(6, 0)
+      v134 = tay(22, 0) * tay(7, 1) + tay(22, 1) * tay(7, 0)
+      v135 = v133 + v134
+      v136 = 0.1795_c_double * v135
+      tay(53, 1) = tay(51, 1) - v136
       tay(54, 1) = tay(11, 0) * tay(53, 1) + tay(11, 1) * tay(53, 0)
-      v140 = tay(54, 0) * tay(22, 1) + tay(54, 1) * tay(22, 0)
-      v141 = v133 + v140
+      v139 = tay(54, 0) * tay(22, 1) + tay(54, 1) * tay(22, 0)
+      v140 = v132 + v139
       tay(55, 1) = tay(26, 0) * tay(48, 1) + tay(26, 1) * tay(48, 0)
-      v143 = v112 + tay(55, 1)
-      v144 = 0.04580152671755725_c_double * tay(7, 1)
-      v145 = v143 + v144
-      v146 = v145 - tay(44, 1)
-      v148 = 606.5878969465649_c_double * tay(8, 1)
-      v149 = v146 + v148
-      v151 = 0.3795_c_double * tay(11, 1)
-      v152 = v149 + v151
-      v153 = tay(25, 0) * tay(50, 1) + tay(25, 1) * tay(50, 0)
-      v154 = v152 + v153
+      v142 = v112 + tay(55, 1)
+      v143 = 0.04580152671755725_c_double * tay(7, 1)
+      v144 = v142 + v143
+      v145 = v144 - tay(44, 1)
+      v147 = 606.4878969465649_c_double * tay(8, 1)
+      v148 = v145 + v147
+      v149 = 0.3795_c_double * tay(11, 1)
+      v150 = v148 + v149
+      v151 = tay(25, 0) * tay(50, 1) + tay(25, 1) * tay(50, 0)
+      v152 = v150 + v151
       tay(56, 1) = 0.159_c_double * tay(13, 1)
-      v156 = tay(56, 0) * tay(21, 1) + tay(56, 1) * tay(21, 0)
-      tay(57, 1) = v154 + v156
-      v158 = tay(57, 0) * tay(7, 1) + tay(57, 1) * tay(7, 0)
-      v159 = v141 - v158
-      v160 = tay(20, 0) * tay(6, 1) + tay(20, 1) * tay(6, 0)
-      v161 = tay(21, 0) * tay(8, 1) + tay(21, 1) * tay(8, 0)
-      v162 = v160 + v161
-      v163 = 0.0795_c_double * v162
-      tay(58, 1) = tay(56, 1) - v163
+      v154 = tay(56, 0) * tay(21, 1) + tay(56, 1) * tay(21, 0)
+      tay(57, 1) = v152 + v154
+      v156 = tay(57, 0) * tay(7, 1) + tay(57, 1) * tay(7, 0)
+      v157 = v140 - v156
+      v158 = tay(20, 0) * tay(6, 1) + tay(20, 1) * tay(6, 0)
+      v159 = tay(21, 0) * tay(8, 1) + tay(21, 1) * tay(8, 0)
+      v160 = v158 + v159
+      v161 = 0.1795_c_double * v160
+      tay(58, 1) = tay(56, 1) - v161
       tay(59, 1) = tay(10, 0) * tay(58, 1) + tay(10, 1) * tay(58, 0)
-      v166 = tay(59, 0) * tay(21, 1) + tay(59, 1) * tay(21, 0)
-      tay(60, 1) = v159 - v166
-      v168 = tay(31, 0) * tay(60, 1) + tay(31, 1) * tay(60, 0)
-      v170 = 0.5688729874776386_c_double * tay(13, 1)
-      v172 = 0.2844364937388193_c_double * v162
-      tay(61, 1) = v170 - v172
-      v174 = tay(42, 0) * tay(61, 1) + tay(42, 1) * tay(61, 0)
-      v175 = 0.2795_c_double * v174
-      v176 = -v175
-      v177 = tay(9, 0) * tay(55, 1) + tay(9, 1) * tay(55, 0)
-      v178 = v176 + v177
+      v164 = tay(59, 0) * tay(21, 1) + tay(59, 1) * tay(21, 0)
+      tay(60, 1) = v157 - v164
+      v166 = tay(31, 0) * tay(60, 1) + tay(31, 1) * tay(60, 0)
+      v167 = 0.4189723320158103_c_double * tay(13, 1)
+      v168 = 0.47299077733860345_c_double * v160
+      tay(61, 1) = v167 - v168
+      v170 = tay(42, 0) * tay(61, 1) + tay(42, 1) * tay(61, 0)
+      v171 = 0.3795_c_double * v170
+      v172 = -v171
+      v173 = tay(9, 0) * tay(55, 1) + tay(9, 1) * tay(55, 0)
+      v174 = v172 + v173
       tay(62, 1) = tay(46, 0) * tay(22, 1) + tay(46, 1) * tay(22, 0)
-      v180 = tay(11, 0) * tay(62, 1) + tay(11, 1) * tay(62, 0)
-      v181 = v178 + v180
-      v182 = tay(57, 0) * tay(6, 1) + tay(57, 1) * tay(6, 0)
-      v183 = v181 + v182
-      v184 = 0.0795_c_double * v92
-      tay(63, 1) = tay(50, 1) - v184
+      v176 = tay(11, 0) * tay(62, 1) + tay(11, 1) * tay(62, 0)
+      v177 = v174 + v176
+      v178 = tay(57, 0) * tay(6, 1) + tay(57, 1) * tay(6, 0)
+      v179 = v177 + v178
+      v180 = 0.1795_c_double * v92
+      tay(63, 1) = tay(50, 1) - v180
       tay(64, 1) = tay(9, 0) * tay(63, 1) + tay(9, 1) * tay(63, 0)
-      v187 = tay(25, 0) * tay(64, 1) + tay(25, 1) * tay(64, 0)
-      v188 = v183 + v187
-      v189 = v144 + v114
+      v183 = tay(25, 0) * tay(64, 1) + tay(25, 1) * tay(64, 0)
+      v184 = v179 + v183
+      v185 = v143 + v114
       tay(65, 1) = tay(21, 0) * tay(43, 1) + tay(21, 1) * tay(43, 0)
-      v191 = v189 + tay(65, 1)
-      v192 = v191 - tay(62, 1)
-      v193 = 0.1795_c_double * tay(9, 1)
-      v194 = v192 + v193
-      v196 = 906.5878969465649_c_double * tay(6, 1)
-      v197 = v194 + v196
-      v198 = tay(56, 0) * tay(20, 1) + tay(56, 1) * tay(20, 0)
-      v199 = v197 + v198
-      v200 = tay(51, 0) * tay(23, 1) + tay(51, 1) * tay(23, 0)
-      tay(66, 1) = v199 + v200
-      v202 = tay(66, 0) * tay(8, 1) + tay(66, 1) * tay(8, 0)
-      v203 = v188 - v202
-      v204 = tay(54, 0) * tay(23, 1) + tay(54, 1) * tay(23, 0)
-      tay(67, 1) = v203 - v204
-      v206 = tay(36, 0) * tay(67, 1) + tay(36, 1) * tay(67, 0)
-      v207 = v168 + v206
-      v209 = 0.4189723320158103_c_double * tay(14, 1)
-      v211 = 0.20948616600790515_c_double * v136
-      tay(68, 1) = v209 - v211
-      v213 = tay(45, 0) * tay(68, 1) + tay(45, 1) * tay(68, 0)
-      v214 = 0.3795_c_double * v213
-      v215 = -v214
-      v216 = tay(9, 0) * tay(49, 1) + tay(9, 1) * tay(49, 0)
+      v187 = v185 + tay(65, 1)
+      v188 = v187 - tay(62, 1)
+      v190 = 906.4878969465649_c_double * tay(6, 1)
+      v191 = v188 + v190
+      v192 = 0.3795_c_double * tay(9, 1)
+      v193 = v191 + v192
+      v194 = tay(56, 0) * tay(20, 1) + tay(56, 1) * tay(20, 0)
+      v195 = v193 + v194
+      v196 = tay(51, 0) * tay(23, 1) + tay(51, 1) * tay(23, 0)
+      tay(66, 1) = v195 + v196
+      v198 = tay(66, 0) * tay(8, 1) + tay(66, 1) * tay(8, 0)
+      v199 = v184 - v198
+      v200 = tay(54, 0) * tay(23, 1) + tay(54, 1) * tay(23, 0)
+      tay(67, 1) = v199 - v200
+      v202 = tay(36, 0) * tay(67, 1) + tay(36, 1) * tay(67, 0)
+      v203 = v166 + v202
+      v204 = 0.4189723320158103_c_double * tay(14, 1)
+      v205 = 0.47299077733860345_c_double * v135
+      tay(68, 1) = v204 - v205
+      v207 = tay(45, 0) * tay(68, 1) + tay(45, 1) * tay(68, 0)
+      v208 = 0.3795_c_double * v207
+      v209 = -v208
+      v210 = tay(9, 0) * tay(49, 1) + tay(9, 1) * tay(49, 0)
+      v211 = v209 + v210
+      v212 = tay(10, 0) * tay(65, 1) + tay(10, 1) * tay(65, 0)
+      v213 = v211 + v212
+      v214 = tay(66, 0) * tay(7, 1) + tay(66, 1) * tay(7, 0)
+      v215 = v213 + v214
+      v216 = tay(20, 0) * tay(59, 1) + tay(20, 1) * tay(59, 0)
       v217 = v215 + v216
-      v218 = tay(10, 0) * tay(65, 1) + tay(10, 1) * tay(65, 0)
-      v219 = v217 + v218
-      v220 = tay(66, 0) * tay(7, 1) + tay(66, 1) * tay(7, 0)
-      v221 = v219 + v220
-      v222 = tay(20, 0) * tay(59, 1) + tay(20, 1) * tay(59, 0)
-      v223 = v221 + v222
-      v224 = tay(52, 0) * tay(6, 1) + tay(52, 1) * tay(6, 0)
-      v225 = v223 - v224
-      v226 = tay(26, 0) * tay(64, 1) + tay(26, 1) * tay(64, 0)
-      tay(69, 1) = v225 - v226
-      v228 = tay(37, 0) * tay(69, 1) + tay(37, 1) * tay(69, 0)
-      tay(70, 1) = v207 + v228
-      v230 = tay(39, 0) * tay(70, 1) + tay(39, 1) * tay(70, 0)
-      v231 = tay(36, 0) * tay(60, 1) + tay(36, 1) * tay(60, 0)
-      v232 = tay(35, 0) * tay(35, 1) + tay(35, 1) * tay(35, 0)
-      v233 = -v232
-      v234 = tay(24, 0) * tay(30, 1) + tay(24, 1) * tay(30, 0)
-      tay(71, 1) = v233 + v234
-      v236 = tay(71, 0) * tay(67, 1) + tay(71, 1) * tay(67, 0)
-      v237 = v231 + v236
-      v238 = tay(33, 0) * tay(35, 1) + tay(33, 1) * tay(35, 0)
-      v239 = tay(24, 0) * tay(28, 1) + tay(24, 1) * tay(28, 0)
-      tay(72, 1) = v238 - v239
-      v241 = tay(72, 0) * tay(69, 1) + tay(72, 1) * tay(69, 0)
-      tay(73, 1) = v237 + v241
-      v243 = tay(39, 0) * tay(73, 1) + tay(39, 1) * tay(73, 0)
-      v244 = tay(37, 0) * tay(60, 1) + tay(37, 1) * tay(60, 0)
-      v245 = tay(72, 0) * tay(67, 1) + tay(72, 1) * tay(67, 0)
-      v246 = v244 + v245
-      v247 = tay(33, 0) * tay(33, 1) + tay(33, 1) * tay(33, 0)
-      v248 = -v247
-      v249 = tay(24, 0) * tay(29, 1) + tay(24, 1) * tay(29, 0)
-      tay(74, 1) = v248 + v249
-      v251 = tay(74, 0) * tay(69, 1) + tay(74, 1) * tay(69, 0)
-      tay(75, 1) = v246 + v251
-      v253 = tay(39, 0) * tay(75, 1) + tay(39, 1) * tay(75, 0)
-      v254 = v95 - v230
-      v255 = v174 - v243
-      v256 = v213 - v253
+      v218 = tay(52, 0) * tay(6, 1) + tay(52, 1) * tay(6, 0)
+      v219 = v217 - v218
+      v220 = tay(26, 0) * tay(64, 1) + tay(26, 1) * tay(64, 0)
+      tay(69, 1) = v219 - v220
+      v222 = tay(37, 0) * tay(69, 1) + tay(37, 1) * tay(69, 0)
+      tay(70, 1) = v203 + v222
+      v224 = tay(39, 0) * tay(70, 1) + tay(39, 1) * tay(70, 0)
+      v225 = tay(36, 0) * tay(60, 1) + tay(36, 1) * tay(60, 0)
+      v226 = tay(35, 0) * tay(35, 1) + tay(35, 1) * tay(35, 0)
+      v227 = -v226
+      v228 = tay(24, 0) * tay(30, 1) + tay(24, 1) * tay(30, 0)
+      tay(71, 1) = v227 + v228
+      v230 = tay(71, 0) * tay(67, 1) + tay(71, 1) * tay(67, 0)
+      v231 = v225 + v230
+      v232 = tay(33, 0) * tay(35, 1) + tay(33, 1) * tay(35, 0)
+      v233 = tay(24, 0) * tay(28, 1) + tay(24, 1) * tay(28, 0)
+      tay(72, 1) = v232 - v233
+      v235 = tay(72, 0) * tay(69, 1) + tay(72, 1) * tay(69, 0)
+      tay(73, 1) = v231 + v235
+      v237 = tay(39, 0) * tay(73, 1) + tay(39, 1) * tay(73, 0)
+      v238 = tay(37, 0) * tay(60, 1) + tay(37, 1) * tay(60, 0)
+      v239 = tay(72, 0) * tay(67, 1) + tay(72, 1) * tay(67, 0)
+      v240 = v238 + v239
+      v241 = tay(33, 0) * tay(33, 1) + tay(33, 1) * tay(33, 0)
+      v242 = -v241
+      v243 = tay(24, 0) * tay(29, 1) + tay(24, 1) * tay(29, 0)
+      tay(74, 1) = v242 + v243
+      v245 = tay(74, 0) * tay(69, 1) + tay(74, 1) * tay(69, 0)
+      tay(75, 1) = v240 + v245
+      v247 = tay(39, 0) * tay(75, 1) + tay(39, 1) * tay(75, 0)
+      v248 = v95 - v224
+      v249 = v170 - v237
+      v250 = v207 - v247
       tay(0, 2) = tay(19, 1) * inv(2)
       tay(1, 2) = v25 * inv(2)
       tay(76, 2) = v25
@@ -8378,24 +8384,24 @@ contains
       tay(79, 2) = tay(10, 1)
       tay(5, 2) = tay(11, 1) * inv(2)
       tay(80, 2) = tay(11, 1)
-      tay(6, 2) = v230 * inv(2)
-      tay(7, 2) = v243 * inv(2)
-      tay(8, 2) = v253 * inv(2)
-      tay(9, 2) = v254 * inv(2)
-      tay(10, 2) = v255 * inv(2)
-      tay(11, 2) = v256 * inv(2)
+      tay(6, 2) = v224 * inv(2)
+      tay(7, 2) = v237 * inv(2)
+      tay(8, 2) = v247 * inv(2)
+      tay(9, 2) = v248 * inv(2)
+      tay(10, 2) = v249 * inv(2)
+      tay(11, 2) = v250 * inv(2)
       tay(12, 2) = 0.0_c_double
       tay(13, 2) = 0.0_c_double
       tay(14, 2) = 0.0_c_double
 
       ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
       do n = 2, order - 1
-        acc127 = tay(26, n - 1) * tay(50, n - (n - 1))
-        acc130 = tay(51, 1) * tay(22, n - 1)
-        acc153 = tay(25, n - 1) * tay(50, n - (n - 1))
-        acc156 = tay(56, 1) * tay(21, n - 1)
-        acc198 = tay(56, 1) * tay(20, n - 1)
-        acc200 = tay(51, 1) * tay(23, n - 1)
+        acc126 = tay(26, n - 1) * tay(50, n - (n - 1))
+        acc129 = tay(51, 1) * tay(22, n - 1)
+        acc151 = tay(25, n - 1) * tay(50, n - (n - 1))
+        acc154 = tay(56, 1) * tay(21, n - 1)
+        acc194 = tay(56, 1) * tay(20, n - 1)
+        acc196 = tay(51, 1) * tay(23, n - 1)
         acc15 = 0.0_c_double
         acc16 = 0.0_c_double
         acc17 = 0.0_c_double
@@ -8445,52 +8451,52 @@ contains
         acc109 = 0.0_c_double
         acc110 = 0.0_c_double
         acc117 = 0.0_c_double
-        acc132 = 0.0_c_double
+        acc131 = 0.0_c_double
+        acc133 = 0.0_c_double
         acc134 = 0.0_c_double
-        acc135 = 0.0_c_double
+        acc138 = 0.0_c_double
         acc139 = 0.0_c_double
-        acc140 = 0.0_c_double
-        acc142 = 0.0_c_double
+        acc141 = 0.0_c_double
+        acc156 = 0.0_c_double
         acc158 = 0.0_c_double
-        acc160 = 0.0_c_double
-        acc161 = 0.0_c_double
-        acc165 = 0.0_c_double
+        acc159 = 0.0_c_double
+        acc163 = 0.0_c_double
+        acc164 = 0.0_c_double
         acc166 = 0.0_c_double
-        acc168 = 0.0_c_double
-        acc174 = 0.0_c_double
-        acc177 = 0.0_c_double
-        acc179 = 0.0_c_double
-        acc180 = 0.0_c_double
+        acc170 = 0.0_c_double
+        acc173 = 0.0_c_double
+        acc175 = 0.0_c_double
+        acc176 = 0.0_c_double
+        acc178 = 0.0_c_double
         acc182 = 0.0_c_double
+        acc183 = 0.0_c_double
         acc186 = 0.0_c_double
-        acc187 = 0.0_c_double
-        acc190 = 0.0_c_double
+        acc198 = 0.0_c_double
+        acc200 = 0.0_c_double
         acc202 = 0.0_c_double
-        acc204 = 0.0_c_double
-        acc206 = 0.0_c_double
-        acc213 = 0.0_c_double
+        acc207 = 0.0_c_double
+        acc210 = 0.0_c_double
+        acc212 = 0.0_c_double
+        acc214 = 0.0_c_double
         acc216 = 0.0_c_double
         acc218 = 0.0_c_double
         acc220 = 0.0_c_double
         acc222 = 0.0_c_double
         acc224 = 0.0_c_double
+        acc225 = 0.0_c_double
         acc226 = 0.0_c_double
         acc228 = 0.0_c_double
         acc230 = 0.0_c_double
-        acc231 = 0.0_c_double
         acc232 = 0.0_c_double
-        acc234 = 0.0_c_double
-        acc236 = 0.0_c_double
+        acc233 = 0.0_c_double
+        acc235 = 0.0_c_double
+        acc237 = 0.0_c_double
         acc238 = 0.0_c_double
         acc239 = 0.0_c_double
         acc241 = 0.0_c_double
         acc243 = 0.0_c_double
-        acc244 = 0.0_c_double
         acc245 = 0.0_c_double
         acc247 = 0.0_c_double
-        acc249 = 0.0_c_double
-        acc251 = 0.0_c_double
-        acc253 = 0.0_c_double
         do j = 1, n - 1
           acc15 = acc15 + tay(77, j) * tay(16, n - j)
           acc16 = acc16 + tay(77, j) * tay(15, n - j)
@@ -8541,52 +8547,52 @@ contains
           acc109 = acc109 + tay(46, j) * tay(23, n - j)
           acc110 = acc110 + tay(11, j) * tay(47, n - j)
           acc117 = acc117 + tay(25, j) * tay(48, n - j)
-          acc132 = acc132 + tay(52, j) * tay(8, n - j)
-          acc134 = acc134 + tay(23, j) * tay(6, n - j)
-          acc135 = acc135 + tay(22, j) * tay(7, n - j)
-          acc139 = acc139 + tay(11, j) * tay(53, n - j)
-          acc140 = acc140 + tay(54, j) * tay(22, n - j)
-          acc142 = acc142 + tay(26, j) * tay(48, n - j)
-          acc158 = acc158 + tay(57, j) * tay(7, n - j)
-          acc160 = acc160 + tay(20, j) * tay(6, n - j)
-          acc161 = acc161 + tay(21, j) * tay(8, n - j)
-          acc165 = acc165 + tay(10, j) * tay(58, n - j)
-          acc166 = acc166 + tay(59, j) * tay(21, n - j)
-          acc168 = acc168 + tay(31, j) * tay(60, n - j)
-          acc174 = acc174 + tay(42, j) * tay(61, n - j)
-          acc177 = acc177 + tay(9, j) * tay(55, n - j)
-          acc179 = acc179 + tay(46, j) * tay(22, n - j)
-          acc180 = acc180 + tay(11, j) * tay(62, n - j)
-          acc182 = acc182 + tay(57, j) * tay(6, n - j)
-          acc186 = acc186 + tay(9, j) * tay(63, n - j)
-          acc187 = acc187 + tay(25, j) * tay(64, n - j)
-          acc190 = acc190 + tay(21, j) * tay(43, n - j)
-          acc202 = acc202 + tay(66, j) * tay(8, n - j)
-          acc204 = acc204 + tay(54, j) * tay(23, n - j)
-          acc206 = acc206 + tay(36, j) * tay(67, n - j)
-          acc213 = acc213 + tay(45, j) * tay(68, n - j)
-          acc216 = acc216 + tay(9, j) * tay(49, n - j)
-          acc218 = acc218 + tay(10, j) * tay(65, n - j)
-          acc220 = acc220 + tay(66, j) * tay(7, n - j)
-          acc222 = acc222 + tay(20, j) * tay(59, n - j)
-          acc224 = acc224 + tay(52, j) * tay(6, n - j)
-          acc226 = acc226 + tay(26, j) * tay(64, n - j)
-          acc228 = acc228 + tay(37, j) * tay(69, n - j)
-          acc230 = acc230 + tay(39, j) * tay(70, n - j)
-          acc231 = acc231 + tay(36, j) * tay(60, n - j)
-          acc232 = acc232 + tay(35, j) * tay(35, n - j)
-          acc234 = acc234 + tay(24, j) * tay(30, n - j)
-          acc236 = acc236 + tay(71, j) * tay(67, n - j)
-          acc238 = acc238 + tay(33, j) * tay(35, n - j)
-          acc239 = acc239 + tay(24, j) * tay(28, n - j)
-          acc241 = acc241 + tay(72, j) * tay(69, n - j)
-          acc243 = acc243 + tay(39, j) * tay(73, n - j)
-          acc244 = acc244 + tay(37, j) * tay(60, n - j)
-          acc245 = acc245 + tay(72, j) * tay(67, n - j)
-          acc247 = acc247 + tay(33, j) * tay(33, n - j)
-          acc249 = acc249 + tay(24, j) * tay(29, n - j)
-          acc251 = acc251 + tay(74, j) * tay(69, n - j)
-          acc253 = acc253 + tay(39, j) * tay(75, n - j)
+          acc131 = acc131 + tay(52, j) * tay(8, n - j)
+          acc133 = acc133 + tay(23, j) * tay(6, n - j)
+          acc134 = acc134 + tay(22, j) * tay(7, n - j)
+          acc138 = acc138 + tay(11, j) * tay(53, n - j)
+          acc139 = acc139 + tay(54, j) * tay(22, n - j)
+          acc141 = acc141 + tay(26, j) * tay(48, n - j)
+          acc156 = acc156 + tay(57, j) * tay(7, n - j)
+          acc158 = acc158 + tay(20, j) * tay(6, n - j)
+          acc159 = acc159 + tay(21, j) * tay(8, n - j)
+          acc163 = acc163 + tay(10, j) * tay(58, n - j)
+          acc164 = acc164 + tay(59, j) * tay(21, n - j)
+          acc166 = acc166 + tay(31, j) * tay(60, n - j)
+          acc170 = acc170 + tay(42, j) * tay(61, n - j)
+          acc173 = acc173 + tay(9, j) * tay(55, n - j)
+          acc175 = acc175 + tay(46, j) * tay(22, n - j)
+          acc176 = acc176 + tay(11, j) * tay(62, n - j)
+          acc178 = acc178 + tay(57, j) * tay(6, n - j)
+          acc182 = acc182 + tay(9, j) * tay(63, n - j)
+          acc183 = acc183 + tay(25, j) * tay(64, n - j)
+          acc186 = acc186 + tay(21, j) * tay(43, n - j)
+          acc198 = acc198 + tay(66, j) * tay(8, n - j)
+          acc200 = acc200 + tay(54, j) * tay(23, n - j)
+          acc202 = acc202 + tay(36, j) * tay(67, n - j)
+          acc207 = acc207 + tay(45, j) * tay(68, n - j)
+          acc210 = acc210 + tay(9, j) * tay(49, n - j)
+          acc212 = acc212 + tay(10, j) * tay(65, n - j)
+          acc214 = acc214 + tay(66, j) * tay(7, n - j)
+          acc216 = acc216 + tay(20, j) * tay(59, n - j)
+          acc218 = acc218 + tay(52, j) * tay(6, n - j)
+          acc220 = acc220 + tay(26, j) * tay(64, n - j)
+          acc222 = acc222 + tay(37, j) * tay(69, n - j)
+          acc224 = acc224 + tay(39, j) * tay(70, n - j)
+          acc225 = acc225 + tay(36, j) * tay(60, n - j)
+          acc226 = acc226 + tay(35, j) * tay(35, n - j)
+          acc228 = acc228 + tay(24, j) * tay(30, n - j)
+          acc230 = acc230 + tay(71, j) * tay(67, n - j)
+          acc232 = acc232 + tay(33, j) * tay(35, n - j)
+          acc233 = acc233 + tay(24, j) * tay(28, n - j)
+          acc235 = acc235 + tay(72, j) * tay(69, n - j)
+          acc237 = acc237 + tay(39, j) * tay(73, n - j)
+          acc238 = acc238 + tay(37, j) * tay(60, n - j)
+          acc239 = acc239 + tay(72, j) * tay(67, n - j)
+          acc241 = acc241 + tay(33, j) * tay(33, n - j)
+          acc243 = acc243 + tay(24, j) * tay(29, n - j)
+          acc245 = acc245 + tay(74, j) * tay(69, n - j)
+          acc247 = acc247 + tay(39, j) * tay(75, n - j)
         end do
         tay(15, n) = acc15 * inv(n) + tay(2, n) * tay(16, 0)
         tay(16, n) = (-acc16 * inv(n)) - tay(2, n) * tay(15, 0)
@@ -8604,39 +8610,39 @@ contains
         tay(20, n) = acc31 * inv(n) + tay(4, n) * tay(21, 0)
         tay(21, n) = (-acc32 * inv(n)) - tay(4, n) * tay(20, 0)
         v33 = (acc33 + tay(21, 0) * tay(21, n)) + tay(21, n) * tay(21, 0)
-        v34 = 0.0795_c_double * v33
+        v34 = 0.1795_c_double * v33
         v35 = v34
         tay(22, n) = acc36 * inv(n) + tay(5, n) * tay(23, 0)
         tay(23, n) = (-acc37 * inv(n)) - tay(5, n) * tay(22, 0)
         v38 = (acc38 + tay(22, 0) * tay(22, n)) + tay(22, n) * tay(22, 0)
-        v39 = 0.0795_c_double * v38
+        v39 = 0.1795_c_double * v38
         tay(24, n) = v35 + v39
         tay(25, n) = acc42 * inv(n) + tay(3, n) * tay(26, 0)
         tay(26, n) = (-acc43 * inv(n)) - tay(3, n) * tay(25, 0)
-        tay(27, n) = 0.0795_c_double * tay(26, n)
+        tay(27, n) = 0.1795_c_double * tay(26, n)
         v45 = (acc45 + tay(27, 0) * tay(25, n)) + tay(27, n) * tay(25, 0)
         tay(28, n) = -v45
         v47 = (acc47 + tay(28, 0) * tay(28, n)) + tay(28, n) * tay(28, 0)
         v48 = -v47
         v50 = (acc50 + tay(25, 0) * tay(25, n)) + tay(25, n) * tay(25, 0)
-        v51 = 0.0795_c_double * v50
+        v51 = 0.1795_c_double * v50
         v52 = v51
         v53 = (acc53 + tay(23, 0) * tay(23, n)) + tay(23, n) * tay(23, 0)
-        v54 = 0.0795_c_double * v53
+        v54 = 0.1795_c_double * v53
         tay(29, n) = v52 + v54
         v57 = (acc57 + tay(26, 0) * tay(26, n)) + tay(26, n) * tay(26, 0)
-        v58 = 0.0795_c_double * v57
+        v58 = 0.1795_c_double * v57
         v59 = v58
         v60 = (acc60 + tay(20, 0) * tay(20, n)) + tay(20, n) * tay(20, 0)
-        v61 = 0.0795_c_double * v60
+        v61 = 0.1795_c_double * v60
         tay(30, n) = v59 + v61
         v63 = (acc63 + tay(29, 0) * tay(30, n)) + tay(29, n) * tay(30, 0)
         tay(31, n) = v48 + v63
         v65 = (acc65 + tay(24, 0) * tay(31, n)) + tay(24, n) * tay(31, 0)
-        tay(32, n) = 0.0795_c_double * tay(23, n)
+        tay(32, n) = 0.1795_c_double * tay(23, n)
         v67 = (acc67 + tay(32, 0) * tay(22, n)) + tay(32, n) * tay(22, 0)
         tay(33, n) = -v67
-        tay(34, n) = 0.0795_c_double * tay(20, n)
+        tay(34, n) = 0.1795_c_double * tay(20, n)
         v70 = (acc70 + tay(34, 0) * tay(21, n)) + tay(34, n) * tay(21, 0)
         tay(35, n) = -v70
         v72 = (acc72 + tay(35, 0) * tay(28, n)) + tay(35, n) * tay(28, 0)
@@ -8656,22 +8662,22 @@ contains
         v90 = (acc90 + tay(26, 0) * tay(7, n)) + tay(26, n) * tay(7, 0)
         v91 = (acc91 + tay(25, 0) * tay(8, n)) + tay(25, n) * tay(8, 0)
         v92 = v90 + v91
-        v93 = 0.4428969359331476_c_double * v92
+        v93 = 0.47299077733860345_c_double * v92
         tay(41, n) = -v93
         v95 = (acc95 + tay(40, 0) * tay(41, n)) + tay(40, n) * tay(41, 0)
-        v96 = 0.1795_c_double * v95
+        v96 = 0.3795_c_double * v95
         v97 = -v96
         v98 = (acc98 + tay(21, 0) * tay(6, n)) + tay(21, n) * tay(6, 0)
         v99 = (acc99 + tay(20, 0) * tay(8, n)) + tay(20, n) * tay(8, 0)
         tay(42, n) = v98 - v99
-        tay(43, n) = 0.0795_c_double * tay(42, n)
+        tay(43, n) = 0.1795_c_double * tay(42, n)
         tay(44, n) = (acc102 + tay(20, 0) * tay(43, n)) + tay(20, n) * tay(43, 0)
         v103 = (acc103 + tay(10, 0) * tay(44, n)) + tay(10, n) * tay(44, 0)
         v104 = v97 + v103
         v105 = (acc105 + tay(23, 0) * tay(7, n)) + tay(23, n) * tay(7, 0)
         v106 = (acc106 + tay(22, 0) * tay(6, n)) + tay(22, n) * tay(6, 0)
         tay(45, n) = v105 - v106
-        tay(46, n) = 0.0795_c_double * tay(45, n)
+        tay(46, n) = 0.1795_c_double * tay(45, n)
         tay(47, n) = (acc109 + tay(46, 0) * tay(23, n)) + tay(46, n) * tay(23, 0)
         v110 = (acc110 + tay(11, 0) * tay(47, n)) + tay(11, n) * tay(47, 0)
         v111 = v104 + v110
@@ -8679,132 +8685,132 @@ contains
         v113 = v112 + tay(47, n)
         v114 = 0.04580152671755725_c_double * tay(8, n)
         v115 = v113 + v114
-        tay(48, n) = 0.0795_c_double * tay(40, n)
+        tay(48, n) = 0.1795_c_double * tay(40, n)
         tay(49, n) = (acc117 + tay(25, 0) * tay(48, n)) + tay(25, n) * tay(48, 0)
         v118 = v115 - tay(49, n)
-        v120 = 0.2795_c_double * tay(10, n)
+        v120 = 806.4878969465649_c_double * tay(7, n)
         v121 = v118 + v120
-        v123 = 806.5878969465649_c_double * tay(7, n)
-        v124 = v121 + v123
-        v127 = acc127 + tay(26, n) * tay(50, 0)
-        v128 = v124 + v127
-        v130 = acc130 + tay(51, 0) * tay(22, n)
-        tay(52, n) = v128 + v130
-        v132 = (acc132 + tay(52, 0) * tay(8, n)) + tay(52, n) * tay(8, 0)
-        v133 = v111 + v132
-        v134 = (acc134 + tay(23, 0) * tay(6, n)) + tay(23, n) * tay(6, 0)
-        v135 = (acc135 + tay(22, 0) * tay(7, n)) + tay(22, n) * tay(7, 0)
-        v136 = v134 + v135
-        v137 = 0.0795_c_double * v136
-        tay(53, n) = -v137
-        tay(54, n) = (acc139 + tay(11, 0) * tay(53, n)) + tay(11, n) * tay(53, 0)
-        v140 = (acc140 + tay(54, 0) * tay(22, n)) + tay(54, n) * tay(22, 0)
-        v141 = v133 + v140
-        tay(55, n) = (acc142 + tay(26, 0) * tay(48, n)) + tay(26, n) * tay(48, 0)
-        v143 = v112 + tay(55, n)
-        v144 = 0.04580152671755725_c_double * tay(7, n)
-        v145 = v143 + v144
-        v146 = v145 - tay(44, n)
-        v148 = 606.5878969465649_c_double * tay(8, n)
-        v149 = v146 + v148
-        v151 = 0.3795_c_double * tay(11, n)
-        v152 = v149 + v151
-        v153 = acc153 + tay(25, n) * tay(50, 0)
-        v154 = v152 + v153
-        v156 = acc156 + tay(56, 0) * tay(21, n)
-        tay(57, n) = v154 + v156
-        v158 = (acc158 + tay(57, 0) * tay(7, n)) + tay(57, n) * tay(7, 0)
-        v159 = v141 - v158
-        v160 = (acc160 + tay(20, 0) * tay(6, n)) + tay(20, n) * tay(6, 0)
-        v161 = (acc161 + tay(21, 0) * tay(8, n)) + tay(21, n) * tay(8, 0)
-        v162 = v160 + v161
-        v163 = 0.0795_c_double * v162
-        tay(58, n) = -v163
-        tay(59, n) = (acc165 + tay(10, 0) * tay(58, n)) + tay(10, n) * tay(58, 0)
-        v166 = (acc166 + tay(59, 0) * tay(21, n)) + tay(59, n) * tay(21, 0)
-        tay(60, n) = v159 - v166
-        v168 = (acc168 + tay(31, 0) * tay(60, n)) + tay(31, n) * tay(60, 0)
-        v172 = 0.2844364937388193_c_double * v162
-        tay(61, n) = -v172
-        v174 = (acc174 + tay(42, 0) * tay(61, n)) + tay(42, n) * tay(61, 0)
-        v175 = 0.2795_c_double * v174
-        v176 = -v175
-        v177 = (acc177 + tay(9, 0) * tay(55, n)) + tay(9, n) * tay(55, 0)
-        v178 = v176 + v177
-        tay(62, n) = (acc179 + tay(46, 0) * tay(22, n)) + tay(46, n) * tay(22, 0)
-        v180 = (acc180 + tay(11, 0) * tay(62, n)) + tay(11, n) * tay(62, 0)
-        v181 = v178 + v180
-        v182 = (acc182 + tay(57, 0) * tay(6, n)) + tay(57, n) * tay(6, 0)
-        v183 = v181 + v182
-        v184 = 0.0795_c_double * v92
-        tay(63, n) = -v184
-        tay(64, n) = (acc186 + tay(9, 0) * tay(63, n)) + tay(9, n) * tay(63, 0)
-        v187 = (acc187 + tay(25, 0) * tay(64, n)) + tay(25, n) * tay(64, 0)
-        v188 = v183 + v187
-        v189 = v144 + v114
-        tay(65, n) = (acc190 + tay(21, 0) * tay(43, n)) + tay(21, n) * tay(43, 0)
-        v191 = v189 + tay(65, n)
-        v192 = v191 - tay(62, n)
-        v193 = 0.1795_c_double * tay(9, n)
-        v194 = v192 + v193
-        v196 = 906.5878969465649_c_double * tay(6, n)
-        v197 = v194 + v196
-        v198 = acc198 + tay(56, 0) * tay(20, n)
-        v199 = v197 + v198
-        v200 = acc200 + tay(51, 0) * tay(23, n)
-        tay(66, n) = v199 + v200
-        v202 = (acc202 + tay(66, 0) * tay(8, n)) + tay(66, n) * tay(8, 0)
-        v203 = v188 - v202
-        v204 = (acc204 + tay(54, 0) * tay(23, n)) + tay(54, n) * tay(23, 0)
-        tay(67, n) = v203 - v204
-        v206 = (acc206 + tay(36, 0) * tay(67, n)) + tay(36, n) * tay(67, 0)
-        v207 = v168 + v206
-        v211 = 0.20948616600790515_c_double * v136
-        tay(68, n) = -v211
-        v213 = (acc213 + tay(45, 0) * tay(68, n)) + tay(45, n) * tay(68, 0)
-        v214 = 0.3795_c_double * v213
-        v215 = -v214
-        v216 = (acc216 + tay(9, 0) * tay(49, n)) + tay(9, n) * tay(49, 0)
+        v122 = 0.3795_c_double * tay(10, n)
+        v123 = v121 + v122
+        v126 = acc126 + tay(26, n) * tay(50, 0)
+        v127 = v123 + v126
+        v129 = acc129 + tay(51, 0) * tay(22, n)
+        tay(52, n) = v127 + v129
+        v131 = (acc131 + tay(52, 0) * tay(8, n)) + tay(52, n) * tay(8, 0)
+        v132 = v111 + v131
+        v133 = (acc133 + tay(23, 0) * tay(6, n)) + tay(23, n) * tay(6, 0)
+        v134 = (acc134 + tay(22, 0) * tay(7, n)) + tay(22, n) * tay(7, 0)
+        v135 = v133 + v134
+        v136 = 0.1795_c_double * v135
+        tay(53, n) = -v136
+        tay(54, n) = (acc138 + tay(11, 0) * tay(53, n)) + tay(11, n) * tay(53, 0)
+        v139 = (acc139 + tay(54, 0) * tay(22, n)) + tay(54, n) * tay(22, 0)
+        v140 = v132 + v139
+        tay(55, n) = (acc141 + tay(26, 0) * tay(48, n)) + tay(26, n) * tay(48, 0)
+        v142 = v112 + tay(55, n)
+        v143 = 0.04580152671755725_c_double * tay(7, n)
+        v144 = v142 + v143
+        v145 = v144 - tay(44, n)
+        v147 = 606.4878969465649_c_double * tay(8, n)
+        v148 = v145 + v147
+        v149 = 0.3795_c_double * tay(11, n)
+        v150 = v148 + v149
+        v151 = acc151 + tay(25, n) * tay(50, 0)
+        v152 = v150 + v151
+        v154 = acc154 + tay(56, 0) * tay(21, n)
+        tay(57, n) = v152 + v154
+        v156 = (acc156 + tay(57, 0) * tay(7, n)) + tay(57, n) * tay(7, 0)
+        v157 = v140 - v156
+        v158 = (acc158 + tay(20, 0) * tay(6, n)) + tay(20, n) * tay(6, 0)
+        v159 = (acc159 + tay(21, 0) * tay(8, n)) + tay(21, n) * tay(8, 0)
+        v160 = v158 + v159
+        v161 = 0.1795_c_double * v160
+        tay(58, n) = -v161
+        tay(59, n) = (acc163 + tay(10, 0) * tay(58, n)) + tay(10, n) * tay(58, 0)
+        v164 = (acc164 + tay(59, 0) * tay(21, n)) + tay(59, n) * tay(21, 0)
+        tay(60, n) = v157 - v164
+        v166 = (acc166 + tay(31, 0) * tay(60, n)) + tay(31, n) * tay(60, 0)
+        v168 = 0.47299077733860345_c_double * v160
+        tay(61, n) = -v168
+        v170 = (acc170 + tay(42, 0) * tay(61, n)) + tay(42, n) * tay(61, 0)
+        v171 = 0.3795_c_double * v170
+        v172 = -v171
+        v173 = (acc173 + tay(9, 0) * tay(55, n)) + tay(9, n) * tay(55, 0)
+        v174 = v172 + v173
+        tay(62, n) = (acc175 + tay(46, 0) * tay(22, n)) + tay(46, n) * tay(22, 0)
+        v176 = (acc176 + tay(11, 0) * tay(62, n)) + tay(11, n) * tay(62, 0)
+        v177 = v174 + v176
+        v178 = (acc178 + tay(57, 0) * tay(6, n)) + tay(57, n) * tay(6, 0)
+        v179 = v177 + v178
+        v180 = 0.1795_c_double * v92
+        tay(63, n) = -v180
+        tay(64, n) = (acc182 + tay(9, 0) * tay(63, n)) + tay(9, n) * tay(63, 0)
+        v183 = (acc183 + tay(25, 0) * tay(64, n)) + tay(25, n) * tay(64, 0)
+        v184 = v179 + v183
+        v185 = v143 + v114
+        tay(65, n) = (acc186 + tay(21, 0) * tay(43, n)) + tay(21, n) * tay(43, 0)
+        v187 = v185 + tay(65, n)
+        v188 = v187 - tay(62, n)
+        v190 = 906.4878969465649_c_double * tay(6, n)
+        v191 = v188 + v190
+        v192 = 0.3795_c_double * tay(9, n)
+        v193 = v191 + v192
+        v194 = acc194 + tay(56, 0) * tay(20, n)
+        v195 = v193 + v194
+        v196 = acc196 + tay(51, 0) * tay(23, n)
+        tay(66, n) = v195 + v196
+        v198 = (acc198 + tay(66, 0) * tay(8, n)) + tay(66, n) * tay(8, 0)
+        v199 = v184 - v198
+        v200 = (acc200 + tay(54, 0) * tay(23, n)) + tay(54, n) * tay(23, 0)
+        tay(67, n) = v199 - v200
+        v202 = (acc202 + tay(36, 0) * tay(67, n)) + tay(36, n) * tay(67, 0)
+        v203 = v166 + v202
+        v205 = 0.47299077733860345_c_double * v135
+        tay(68, n) = -v205
+        v207 = (acc207 + tay(45, 0) * tay(68, n)) + tay(45, n) * tay(68, 0)
+        v208 = 0.3795_c_double * v207
+        v209 = -v208
+        v210 = (acc210 + tay(9, 0) * tay(49, n)) + tay(9, n) * tay(49, 0)
+        v211 = v209 + v210
+        v212 = (acc212 + tay(10, 0) * tay(65, n)) + tay(10, n) * tay(65, 0)
+        v213 = v211 + v212
+        v214 = (acc214 + tay(66, 0) * tay(7, n)) + tay(66, n) * tay(7, 0)
+        v215 = v213 + v214
+        v216 = (acc216 + tay(20, 0) * tay(59, n)) + tay(20, n) * tay(59, 0)
         v217 = v215 + v216
-        v218 = (acc218 + tay(10, 0) * tay(65, n)) + tay(10, n) * tay(65, 0)
-        v219 = v217 + v218
-        v220 = (acc220 + tay(66, 0) * tay(7, n)) + tay(66, n) * tay(7, 0)
-        v221 = v219 + v220
-        v222 = (acc222 + tay(20, 0) * tay(59, n)) + tay(20, n) * tay(59, 0)
-        v223 = v221 + v222
-        v224 = (acc224 + tay(52, 0) * tay(6, n)) + tay(52, n) * tay(6, 0)
-        v225 = v223 - v224
-        v226 = (acc226 + tay(26, 0) * tay(64, n)) + tay(26, n) * tay(64, 0)
-        tay(69, n) = v225 - v226
-        v228 = (acc228 + tay(37, 0) * tay(69, n)) + tay(37, n) * tay(69, 0)
-        tay(70, n) = v207 + v228
-        v230 = (acc230 + tay(39, 0) * tay(70, n)) + tay(39, n) * tay(70, 0)
-        v231 = (acc231 + tay(36, 0) * tay(60, n)) + tay(36, n) * tay(60, 0)
-        v232 = (acc232 + tay(35, 0) * tay(35, n)) + tay(35, n) * tay(35, 0)
-        v233 = -v232
-        v234 = (acc234 + tay(24, 0) * tay(30, n)) + tay(24, n) * tay(30, 0)
-        tay(71, n) = v233 + v234
-        v236 = (acc236 + tay(71, 0) * tay(67, n)) + tay(71, n) * tay(67, 0)
-        v237 = v231 + v236
-        v238 = (acc238 + tay(33, 0) * tay(35, n)) + tay(33, n) * tay(35, 0)
-        v239 = (acc239 + tay(24, 0) * tay(28, n)) + tay(24, n) * tay(28, 0)
-        tay(72, n) = v238 - v239
-        v241 = (acc241 + tay(72, 0) * tay(69, n)) + tay(72, n) * tay(69, 0)
-        tay(73, n) = v237 + v241
-        v243 = (acc243 + tay(39, 0) * tay(73, n)) + tay(39, n) * tay(73, 0)
-        v244 = (acc244 + tay(37, 0) * tay(60, n)) + tay(37, n) * tay(60, 0)
-        v245 = (acc245 + tay(72, 0) * tay(67, n)) + tay(72, n) * tay(67, 0)
-        v246 = v244 + v245
-        v247 = (acc247 + tay(33, 0) * tay(33, n)) + tay(33, n) * tay(33, 0)
-        v248 = -v247
-        v249 = (acc249 + tay(24, 0) * tay(29, n)) + tay(24, n) * tay(29, 0)
-        tay(74, n) = v248 + v249
-        v251 = (acc251 + tay(74, 0) * tay(69, n)) + tay(74, n) * tay(69, 0)
-        tay(75, n) = v246 + v251
-        v253 = (acc253 + tay(39, 0) * tay(75, n)) + tay(39, n) * tay(75, 0)
-        v254 = v95 - v230
-        v255 = v174 - v243
-        v256 = v213 - v253
+        v218 = (acc218 + tay(52, 0) * tay(6, n)) + tay(52, n) * tay(6, 0)
+        v219 = v217 - v218
+        v220 = (acc220 + tay(26, 0) * tay(64, n)) + tay(26, n) * tay(64, 0)
+        tay(69, n) = v219 - v220
+        v222 = (acc222 + tay(37, 0) * tay(69, n)) + tay(37, n) * tay(69, 0)
+        tay(70, n) = v203 + v222
+        v224 = (acc224 + tay(39, 0) * tay(70, n)) + tay(39, n) * tay(70, 0)
+        v225 = (acc225 + tay(36, 0) * tay(60, n)) + tay(36, n) * tay(60, 0)
+        v226 = (acc226 + tay(35, 0) * tay(35, n)) + tay(35, n) * tay(35, 0)
+        v227 = -v226
+        v228 = (acc228 + tay(24, 0) * tay(30, n)) + tay(24, n) * tay(30, 0)
+        tay(71, n) = v227 + v228
+        v230 = (acc230 + tay(71, 0) * tay(67, n)) + tay(71, n) * tay(67, 0)
+        v231 = v225 + v230
+        v232 = (acc232 + tay(33, 0) * tay(35, n)) + tay(33, n) * tay(35, 0)
+        v233 = (acc233 + tay(24, 0) * tay(28, n)) + tay(24, n) * tay(28, 0)
+        tay(72, n) = v232 - v233
+        v235 = (acc235 + tay(72, 0) * tay(69, n)) + tay(72, n) * tay(69, 0)
+        tay(73, n) = v231 + v235
+        v237 = (acc237 + tay(39, 0) * tay(73, n)) + tay(39, n) * tay(73, 0)
+        v238 = (acc238 + tay(37, 0) * tay(60, n)) + tay(37, n) * tay(60, 0)
+        v239 = (acc239 + tay(72, 0) * tay(67, n)) + tay(72, n) * tay(67, 0)
+        v240 = v238 + v239
+        v241 = (acc241 + tay(33, 0) * tay(33, n)) + tay(33, n) * tay(33, 0)
+        v242 = -v241
+        v243 = (acc243 + tay(24, 0) * tay(29, n)) + tay(24, n) * tay(29, 0)
+        tay(74, n) = v242 + v243
+        v245 = (acc245 + tay(74, 0) * tay(69, n)) + tay(74, n) * tay(69, 0)
+        tay(75, n) = v240 + v245
+        v247 = (acc247 + tay(39, 0) * tay(75, n)) + tay(39, n) * tay(75, 0)
+        v248 = v95 - v224
+        v249 = v170 - v237
+        v250 = v207 - v247
         tay(0, n + 1) = tay(19, n) * inv(n + 1)
         tay(1, n + 1) = v25 * inv(n + 1)
         tay(76, n + 1) = v25
@@ -8816,12 +8822,12 @@ contains
         tay(79, n + 1) = tay(10, n)
         tay(5, n + 1) = tay(11, n) * inv(n + 1)
         tay(80, n + 1) = tay(11, n)
-        tay(6, n + 1) = v230 * inv(n + 1)
-        tay(7, n + 1) = v243 * inv(n + 1)
-        tay(8, n + 1) = v253 * inv(n + 1)
-        tay(9, n + 1) = v254 * inv(n + 1)
-        tay(10, n + 1) = v255 * inv(n + 1)
-        tay(11, n + 1) = v256 * inv(n + 1)
+        tay(6, n + 1) = v224 * inv(n + 1)
+        tay(7, n + 1) = v237 * inv(n + 1)
+        tay(8, n + 1) = v247 * inv(n + 1)
+        tay(9, n + 1) = v248 * inv(n + 1)
+        tay(10, n + 1) = v249 * inv(n + 1)
+        tay(11, n + 1) = v250 * inv(n + 1)
       end do
       stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
       rp = huge(1.0_c_double)

@@ -5,7 +5,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 3e0f1a5c1e7c3a7d: a hash of the scene, gyrogen and sympy
+ * Build id baadc4dea7b8486a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as VSCMG3_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -118,7 +118,7 @@ const char *vscmg3_ode_strerror(int code);
    the kinematic rates q1' and q3' in the 7th digit. */
 #define VSCMG3_ODE_GIMBAL_LOCK_COS 1e-09
 
-/* d(dx/dt)/dx, row-major: J[i*VSCMG3_NX + j] = d f_i / d x_j (941 ops). */
+/* d(dx/dt)/dx, row-major: J[i*VSCMG3_NX + j] = d f_i / d x_j (946 ops). */
 void vscmg3_jac(double t, const double *x, const double *c, double *J);
 
 /* Classic Runge-Kutta, order 4, `steps` equal steps; a step that makes a NaN
