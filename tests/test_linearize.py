@@ -470,3 +470,14 @@ def test_api_linearize_refuses_what_the_cli_cannot_be_given(kw: dict, message: s
     with pytest.raises(GyrogenError, match=message) as info:
         api.linearize("dual_spin", **kw)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.slow  # two compilers
+def test_verify_takes_a_scene_with_its_linear_model(tmp_path: Path, cli) -> None:
+    """outputs.linear_model = true in a scene file: verify compares the
+    rhs, the output functions and the Jacobian (before: KeyError
+    'linear_model', the linear model taken for an output function)."""
+    text = builtin_text("dual_spin").replace("[outputs]", "[outputs]\nlinear_model = true", 1)
+    (tmp_path / "lm.toml").write_text(text.replace('name = "dual_spin"', 'name = "lm"'))
+    code, out, err = cli(["verify", str(tmp_path / "lm.toml")])
+    assert code == 0 and "C vs reference kinetic_energy" in out and "linear" not in out, err

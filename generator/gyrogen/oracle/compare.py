@@ -168,7 +168,7 @@ def _pairs(
 ) -> Iterator[tuple[str, float]]:
     """Every backend against the reference, and the backends against each
     other: the rhs, each output function, and the Jacobian."""
-    names = ["rhs", *(n for n, on in scene.outputs.model_dump().items() if on)]
+    names = ["rhs", *scene.outputs.functions]
     names += ["events"] if scene.events else []
     constants = {_label(b): b.setup(p) for b in backends}
     for name in names:

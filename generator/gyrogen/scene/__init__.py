@@ -88,6 +88,12 @@ class Outputs(_Strict):
     state (inputs: each rotor's motor torque, or its speed controller's
     w_ref; outputs: the ones above). `gyrogen linearize` sets it."""
 
+    @property
+    def functions(self) -> tuple[str, ...]:
+        """The output functions switched on, each <prefix>_<name>(t, x, c,
+        out) with a reference counterpart (the linear model is not one)."""
+        return tuple(n for n, on in self.model_dump().items() if on and n != "linear_model")
+
 
 class Simulate(_Strict):
     initial: dict[str, Number] = Field(default_factory=dict)
