@@ -34,7 +34,7 @@ T = 0.01
 
 [simulate]"""
 MIXED = edit(
-    "inertia = [0.3, 0.3, 0.3]\nm = 6.0",
+    "inertia = [0.1, 0.2, 0.3]\nm = 6.0",
     'inertia = [0.3, 0.25, 0.2]\nm = 6.0\ntorque = "constant"\nT = 0.02',
     edit("[simulate]", FIXED, edit("rotor_angle = false", "rotor_angle = true")),
 )
@@ -53,22 +53,22 @@ G1 = "axis = [1.0, 0.0, 0.0]      # g_g"
 BAD = [
     ("parallel axes", edit(G1, "axis = [0.0, 1.0, 0.0]"),
      "rotors.0: gimbal.axis: not perpendicular to the spin axis (|g_s0 . g_g| = 1 > 0.001)"),
-    ("zero inertia", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.0, 0.1, 0.1]"),
+    ("zero inertia", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [0.0, 0.1, 0.1]"),
      "rotors.0.gimbal: inertia: IGs must be positive (got 0.0)"),
-    ("huge inertia", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [1e49, 0.1, 0.1]"),
+    ("huge inertia", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [1e49, 0.1, 0.1]"),
      "violate the triangle inequality"),
-    ("huge inertias", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [1e49, 1e49, 1e49]"),
+    ("huge inertias", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [1e49, 1e49, 1e49]"),
      "rotors: the lumped inertia has condition number"),
-    ("past a double", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [1e51, 1e51, 1e51]"),
+    ("past a double", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [1e51, 1e51, 1e51]"),
      "a folded value must be 0 or of magnitude 1e-50 to 1e+50"),
-    ("triangle", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.1, 0.1, 0.3]"),
+    ("triangle", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [0.1, 0.1, 0.3]"),
      "principal inertias (0.1, 0.1, 0.3) violate the triangle inequality"),
-    ("nan inertia", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.1, nan, 0.1]"),
+    ("nan inertia", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [0.1, nan, 0.1]"),
      "nan is not a finite number"),
-    ("six inertias", edit("inertia = [0.1, 0.1, 0.1]", "inertia = [0.1, 0.1, 0.1, 0, 0, 0]"),
+    ("six inertias", edit("inertia = [0.1, 0.2, 0.3]", "inertia = [0.1, 0.1, 0.1, 0, 0, 0]"),
      "6 values, not 3: give the principal inertias [IGs, IGt, IGg]"),
-    ("no mass", edit("inertia = [0.1, 0.1, 0.1]   # [IGs, IGt, IGg]\nm = 6.0",
-                     "inertia = [0.1, 0.1, 0.1]\nm = 0.0"),
+    ("no mass", edit("inertia = [0.1, 0.2, 0.3]   # [IGs, IGt, IGg]\nm = 6.0",
+                     "inertia = [0.1, 0.2, 0.3]\nm = 0.0"),
      "rotors.0.gimbal.m: Input should be greater than 0"),
     ("runtime gimbal axis", edit(G1, 'axis = "runtime"'),
      'a gimbal axis is folded: give [x, y, z], not "runtime"'),
@@ -170,7 +170,8 @@ def _energy_rate_and_power(scene: Scene, rng: np.random.Generator) -> list[tuple
 def test_the_energy_changes_by_the_motors_power(text: str) -> None:
     """dK/dt = sum_k (u_s Omega + u_g gd) - b Omega^2, the power output's sum."""
     for rate, power in _energy_rate_and_power(parse(text, "s.toml"), np.random.default_rng(3)):
-        assert rate == pytest.approx(power, rel=1e-6, abs=1e-12), (rate, power)
+        # the central differences of K (~4300 J, mostly the wheels') round to ~1e-9 J/s
+        assert rate == pytest.approx(power, rel=1e-5, abs=1e-12), (rate, power)
 
 
 @pytest.mark.slow
@@ -188,7 +189,8 @@ def test_vscmg3_conserves_energy_and_momentum_over_60_s(method: str) -> None:
     # the wheels' J w^2 / 2 is constant (w' = 0): the balance of the rest
     wheels = sum(0.5 * r.J * x0[scene.states.index(f"w{k}")] ** 2  # type: ignore[operator]
                  for k, r in enumerate(scene.rotors, 1))  # fmt: skip
-    assert abs(k1 - k0) / (k0 - wheels) < 1e-12
+    assert abs(k1 - k0) / k0 < 1e-14  # the issue's 1e-13 relative, over 60 s
+    assert abs(k1 - k0) / (k0 - wheels) < 1e-11  # a few ulps of K, of the moving part's 3 J
     assert np.abs(x1 - x0).max() > 1e-3  # the gimbals and the carrier have moved
 
 
