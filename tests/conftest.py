@@ -17,7 +17,7 @@ import pytest
 
 from gyrogen.cli import main
 
-if TYPE_CHECKING:  # imported where used: pytest-xdist's controller loads this module, never sympy
+if TYPE_CHECKING:  # imported in the fixtures: xdist's controller loads conftest, needs no sympy
     from gyrogen.runtime.compiled import Compiled, Language
 
 REPO = Path(__file__).resolve().parents[1]
