@@ -395,6 +395,7 @@ def test_render_failure_writes_nothing(tmp_path: Path, monkeypatch: pytest.Monke
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow  # the proof again: test_model proves it in the fast loop
 def test_prove(cli) -> None:
     code, out, _ = cli(["prove"])
     assert code == 0
