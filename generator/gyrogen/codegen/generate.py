@@ -41,8 +41,8 @@ def render_all(unit: SceneContext, lib: bool = False) -> dict[str, str]:
 
 UNITS_KEPT = 16
 """How many scenes' units a process keeps (the last asked for): a scene
-rendered again in one process (generate's check, then its write; the test
-suite) is derived once."""
+asked for again in one process (a bench's peers after its sources were
+rendered; the test suite) is derived once."""
 _UNITS: dict[str, SceneContext] = {}
 
 
