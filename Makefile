@@ -53,7 +53,8 @@ test: setup lint
 	$(BIN)/python -m pytest
 
 ## test-fast: lint, then the suite without the tests marked slow (the default scene still derived,
-## generated, compiled as C and Fortran and checked against the reference): 30-50 s on 2 cores
+## generated, compiled as C and Fortran and checked against the reference): under a minute on 2 cores
+## (58 s with the machine's load average at 3.4, best of 3)
 test-fast: setup lint
 	$(BIN)/python -m pytest -m "not slow"
 

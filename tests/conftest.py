@@ -11,38 +11,61 @@ import os
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import pytest
 
 from gyrogen.cli import main
-from gyrogen.codegen.generate import generate
-from gyrogen.runtime import build
-from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import default
+
+if TYPE_CHECKING:  # imported in the fixtures: xdist's controller loads conftest, needs no sympy
+    from gyrogen.runtime.compiled import Compiled, Language
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="session")
 def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("cache")
+    """The run's build cache, one for all its xdist workers (an entry is
+    renamed into place whole, so a worker never reads another's half-built
+    one): the same sources are compiled once per run."""
+    cache = shared_dir(tmp_path_factory) / "cache"
+    cache.mkdir(exist_ok=True)
+    return cache
 
 
 @pytest.fixture(scope="session")
 def source_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The default scene as `make generate` writes it: sources, manifest and
     the --lib build files."""
+    from gyrogen.codegen.generate import generate
+    from gyrogen.scene import default
+
     out = tmp_path_factory.mktemp("generated") / default().name
     generate(default(), out, lib=True)
     return out
 
 
 @pytest.fixture(scope="session")
-def backends(source_dir: Path, cache_dir: Path) -> dict[str, Compiled]:
+def backends(
+    source_dir: Path, cache_dir: Path, tmp_path_factory: pytest.TempPathFactory
+) -> dict[str, Compiled]:
+    """The default scene as C and Fortran, each compiled once per run: the
+    odd-numbered xdist workers start with Fortran, so that two workers
+    compile one language each at the same time, then load the other's."""
+    from gyrogen.runtime import build
+
+    languages: list[Language] = ["c", "fortran"]
+    if int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")) % 2:
+        languages.reverse()
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:
+        for lang in languages:
+            built_once(
+                tmp_path_factory,
+                f"default-{lang}",
+                lambda _, lang=lang: build.build(source_dir, lang),
+            )
         return {lang: build.build(source_dir, lang) for lang in ("c", "fortran")}
     finally:
         mp.undo()
@@ -114,6 +137,8 @@ def cli() -> Callable[[list[str]], Outcome]:
 def check_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled]:
     """The C build of each scene the `gyrogen check` cases use, by scene name."""
     from gyrogen.analysis.check.cases import cases
+    from gyrogen.codegen.generate import generate
+    from gyrogen.runtime import build
 
     out = {}
     for case in cases():

@@ -239,6 +239,7 @@ def test_ctrl_c_during_a_multi_scene_generate_writes_no_scene(tmp_path: Path) ->
     assert tree(out) == old
 
 
+@pytest.mark.slow  # a child interpreter derives a scene, then a real SIGINT (in-process: fast)
 def test_ctrl_c_while_a_scene_is_placed_leaves_nothing_written(tmp_path: Path) -> None:
     """A real SIGINT as the one scene's files are being placed: before, exit
     130 "aborted" beside the whole output, written. Now exit 130 and the
@@ -332,7 +333,14 @@ def test_full_disk_while_staging_leaves_no_temporary(
     assert sorted(p.name for p in out_dir.iterdir()) == sorted(old) and _contents(out_dir) == old
 
 
-@pytest.mark.parametrize("mask", [0o022, 0o027, 0o077])
+@pytest.mark.parametrize(
+    "mask",
+    [
+        pytest.param(0o022, marks=pytest.mark.slow),
+        0o027,
+        pytest.param(0o077, marks=pytest.mark.slow),
+    ],
+)  # one mask in the fast loop: each renders the default scene twice
 def test_written_files_have_the_mode_open_gives(
     mask: int, tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -387,6 +395,7 @@ def test_render_failure_writes_nothing(tmp_path: Path, monkeypatch: pytest.Monke
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow  # the proof again: test_model proves it in the fast loop
 def test_prove(cli) -> None:
     code, out, _ = cli(["prove"])
     assert code == 0
@@ -417,6 +426,7 @@ def test_verify_small(tmp_path: Path, cli) -> None:
     assert "setup refusals:" in out
 
 
+@pytest.mark.slow  # a child interpreter derives the default scene (test_compile: fast)
 def test_missing_compiler_from_the_command_line(tmp_path: Path) -> None:
     """A PATH without gcc: one line naming the package, exit 1."""
     env = dict(os.environ, PATH=str(tmp_path), GYROGEN_CACHE=str(tmp_path / "cache"))

@@ -77,7 +77,9 @@ def test_c_and_fortran_match_the_reference_and_refuse_what_setup_must(built) -> 
     assert not report.refusal_failures and report.refusals_checked >= 100
 
 
-@pytest.mark.parametrize("language", ["c", "fortran"])
+@pytest.mark.parametrize(
+    "language", ["c", pytest.param("fortran", marks=pytest.mark.slow)]
+)  # C in the fast loop: each builds rw4_pyramid; Fortran's runtime cluster is checked there too
 def test_at_the_folded_values_it_is_the_folded_scene(
     language: Language, built, tmp_path: Path
 ) -> None:

@@ -166,6 +166,7 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow  # MkDocs builds the whole site
 def test_the_site_builds_with_warnings_as_errors_and_fetches_nothing(site: Path) -> None:
     pages = list(site.rglob("*.html"))
     assert len(pages) >= 15
@@ -181,6 +182,7 @@ def text_of(site: Path, page: str) -> str:
     return (site / page).read_text(encoding="utf-8")
 
 
+@pytest.mark.slow  # MkDocs builds the whole site
 def test_the_reference_holds_what_the_code_registers(site: Path) -> None:
     from gyrogen import abi, api, methods
     from gyrogen.commands.group import cli

@@ -95,6 +95,7 @@ def test_a_scene_without_events_has_no_event_function(tmp_path: Path) -> None:
     assert "events" not in scene.model_dump()  # its build id is as before events
 
 
+@pytest.mark.slow  # a cluster with events derived and compiled; the compiled events stay fast
 def test_a_cluster_reads_its_outputs_and_runtime_axes(tmp_path: Path) -> None:
     """rw4_pyramid's momentum and per-wheel power, and a wheel's rate."""
     extra = """
@@ -328,6 +329,7 @@ def test_a_sweep_counts_each_event_and_keeps_its_first_time(tmp_path: Path) -> N
     assert not any(c.startswith(("first_", "count_")) for c in columns(rk4))
 
 
+@pytest.mark.slow  # the sensitivities' unit of a scene of its own: seconds of sympy
 def test_the_longest_name_keeps_fortran_within_its_columns() -> None:
     """Every Fortran line of a scene named at the longest a name may be, with
     events (their _events twins and wrappers) and sensitivities (the unit

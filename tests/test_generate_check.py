@@ -25,6 +25,7 @@ def test_generate_checks_before_it_writes(tmp_path: Path, cli) -> None:
     assert (tmp_path / "o" / "manifest.json").is_file()
 
 
+@pytest.mark.slow  # a second scene derived, compiled twice and checked; generate's check stays fast
 def test_given_parameters_setup_refuses_are_left_out_of_the_check(tmp_path: Path, cli) -> None:
     """[simulate] parameters whose constants overflow (setup's code 9, which
     the validator cannot see): the code is still checked and written (at the

@@ -121,7 +121,10 @@ def test_lumped_scalars_are_named_in_setup() -> None:
     assert set(names) <= {a.lhs for a in opt.setup.temporaries}
 
 
-@pytest.mark.parametrize("tiny", [5e-6, 1e-9, 1e-12])
+@pytest.mark.parametrize(
+    "tiny",
+    [pytest.param(5e-6, marks=pytest.mark.slow), pytest.param(1e-9, marks=pytest.mark.slow), 1e-12],
+)  # the nearest to singular in the fast loop: each optimizes the full model, exact to 40 digits
 def test_setup_constants_survive_a_nearly_singular_lumped_block(
     backends: dict[str, Compiled], tiny: float
 ) -> None:

@@ -39,15 +39,30 @@ def render_all(unit: SceneContext, lib: bool = False) -> dict[str, str]:
     return files
 
 
+UNITS_KEPT = 16
+"""How many scenes' units a process keeps (the last asked for): a scene
+asked for again in one process (a bench's peers after its sources were
+rendered; the test suite) is derived once."""
+_UNITS: dict[str, SceneContext] = {}
+
+
 def unit_of(scene: Scene) -> SceneContext:
-    """The scene's unit; the default scene's is the full model every
+    """The scene's unit, derived once per process while it is among the
+    last UNITS_KEPT asked for; the default scene's is the full model every
     manifest compares with: built once."""
     if scene == default_scene():
         return full_model_unit()
-    try:
-        return make_context(scene)
-    except LiteralError as exc:
-        raise LiteralError(f"{scene.name}: {exc}") from exc
+    key = scene.model_dump_json()
+    unit = _UNITS.pop(key, None)
+    if unit is None:
+        try:
+            unit = make_context(scene)
+        except LiteralError as exc:
+            raise LiteralError(f"{scene.name}: {exc}") from exc
+    _UNITS[key] = unit  # the most recent last
+    for old in list(_UNITS)[:-UNITS_KEPT]:
+        _UNITS.pop(old, None)
+    return unit
 
 
 def claim(out: Path, prefix: str) -> None:
