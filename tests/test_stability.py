@@ -102,7 +102,7 @@ def test_check_command(tmp_path: Path, cli) -> None:
 UNKNOWN = [
     (["no-such-case"], "no case or scene matches no-such-case (see gyrogen check --list)"),
     (["nominal", "bogus"], "no case or scene matches bogus (see gyrogen check --list)"),
-    (["nope.toml"], "nope.toml: no such file, and no built-in scene of that name (dual_spin, "),
+    (["nope.toml"], "nope.toml: no such file, and no built-in scene of that name (cmg4_pyramid, "),
     (["/proc"], "/proc: is a directory, not a scene file"),
 ]
 
