@@ -148,9 +148,7 @@ class Gimbal(BaseModel):
     @field_validator("torque")
     @classmethod
     def _law(cls, v: str) -> str:
-        if v not in GIMBAL_LAW_KEYS:
-            raise ValueError(f"{v!r}: not one of {', '.join(map(repr, GIMBAL_LAW_KEYS))}")
-        return v
+        return law_name(v, GIMBAL_LAW_KEYS)
 
     @model_validator(mode="after")
     def _rules(self) -> Gimbal:
@@ -246,9 +244,7 @@ class Rotor(BaseModel):
     @field_validator("torque")
     @classmethod
     def _law(cls, v: str) -> str:
-        if v not in LAW_KEYS:
-            raise ValueError(f"{v!r}: not one of {', '.join(map(repr, LAW_KEYS))}")
-        return v
+        return law_name(v, LAW_KEYS)
 
     @model_validator(mode="after")
     def _rules(self) -> Rotor:
@@ -301,6 +297,13 @@ def check_gimbal(r: Rotor) -> None:
             f"gimbal.axis: not perpendicular to the spin axis (|g_s0 . g_g| = {dot:.6g} > "
             f"{GIMBAL_PERP_SLACK:g}): a gimbal turns the wheel's axis about a perpendicular one"
         )
+
+
+def law_name(v: str, laws: Mapping[str, tuple[str, ...]]) -> str:
+    """v if it names one of laws (a torque law), else the ValueError listing them."""
+    if v not in laws:
+        raise ValueError(f"{v!r}: not one of {', '.join(map(repr, laws))}")
+    return v
 
 
 def check_axis(axis: tuple[float, float, float], where: str) -> None:
