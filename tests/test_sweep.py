@@ -138,6 +138,36 @@ def test_a_monte_carlo_whose_runs_fail_midway_keeps_every_row() -> None:
         assert cols["max_rate"][i] == np.max(np.linalg.norm(seen[:, 7:10], axis=1))
 
 
+@pytest.mark.parametrize("method", ["dop853", "taylor", "rodas4"])
+def test_a_sweeps_sampled_rows_are_its_grid_calls(method: str) -> None:
+    """One parameter set, sampled metrics: the chunk is one _grid_batch call
+    (over SIMD lanes for dop853 and taylor, 37 states: the lanes refilled),
+    and each row's final state and statistics are its own integrate_grid
+    call's (the batch's ends read back), its max_rate the grid's."""
+    from gyrogen.analysis.sweep.metrics import run_chunk
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    text = MONTE_CARLO_FAILING.replace('method = "dop853"', f'method = "{method}"')
+    text = text.replace("max_steps = 40\n", "").replace("I11 = { normal = [12.0, 0.3] }\n", "")
+    text = text.replace("samples = 2", "samples = 7").replace("count = 20", "count = 37")
+    spec = api.load_sweep(text.replace("[1.0, 3000.0]", "[1.0, 60.0]").replace(
+        '"invariant_drift", "time_to"]\n', '"invariant_drift"]\n').replace(
+        "time_to = { nutation = 0.3 }\n", ""))  # fmt: skip
+    assert not spec.scene.events and spec.size == 37
+    model = compiled(scene_sources(spec.scene))
+    cols = run_chunk(model, spec, 0, 37)
+    inp = inputs(spec, 0, 37)
+    assert (inp.p == inp.p[0]).all()  # one parameter set: one batch
+    c, times = model.setup(inp.p[0]), np.linspace(0.0, 10.0, 8)
+    for i in range(37):
+        states, stats, code = model.integrate_grid(method, inp.x0[i], c, times, rtol=1e-9,
+                                                   atol=1e-9)  # fmt: skip
+        finals = np.array([cols[f"final_{n}"][i] for n in spec.scene.states])
+        assert code == cols["code"][i] == 0 and np.array_equal(finals, states[-1])
+        assert cols["rhs_calls"][i] == stats["rhs_calls"]
+        assert cols["max_rate"][i] == np.max(np.linalg.norm(states[:, 7:10], axis=1))
+
+
 def test_time_to_is_located_where_the_quantity_is_its_threshold() -> None:
     """time_to's nutation, rate and state thresholds are events the sweep
     adds to its scene, located on the dense output: the compiled integrator
