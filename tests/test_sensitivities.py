@@ -471,7 +471,7 @@ def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, 
     data = tomllib.loads(drawn.text)
     scene = parse(drawn.text, "drawn.toml")
     params = [n for n in scene.runtime if pick.random() < 0.5]
-    data["integrators"] = ["dop853"]
+    data["integrators"], data["targets"] = ["dop853"], ["c"]  # a drawn scene may be Fortran's alone
     data["sensitivities"] = {"wrt": ["state", *params]}
     scene = validate(data, "drawn.toml")
     out = tmp_path_factory.mktemp("drawn") / scene.name
@@ -490,13 +490,25 @@ def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, 
     assume(code == 0 and m.integrate("dop853", x0, m.setup(p), 0.0, t1, rtol=tol, atol=tol)[2] == 0)
     nx = len(x0)
     phi[:, :nx] = phi[:, :nx] @ normalization(x0, scene.attitude == "quaternion")
-    fd = finite_differences(m, "dop853", x0, p, t1, rel=1e-5, tol=tol)
-    assert column_error(phi[:, :nx], fd[:, :nx]).max() < 1e-7, drawn.text
     cols = m.manifest["variational"]["columns"][nx:]
     values = np.array([p[scene.runtime.index(n)] for n in cols])
-    known = ~np.isnan(fd[:, nx:]).any(axis=0)
-    s, ref = phi[:, nx:][:, known], fd[:, nx:][:, known]
-    assert parameter_error(s, ref, values[known], x) < 1e-7, drawn.text
+
+    def errors(rel: float) -> tuple[float, float]:
+        fd = finite_differences(m, "dop853", x0, p, t1, rel=rel, tol=tol)
+        known = ~np.isnan(fd[:, nx:]).any(axis=0)
+        s, ref = phi[:, nx:][:, known], fd[:, nx:][:, known]
+        col = column_error(phi[:, :nx], fd[:, :nx]).max()
+        return col, parameter_error(s, ref, values[known], x)
+
+    # differences err by their truncation at a large step and by the flow's noise over a small
+    # one (a drawn J of 5.6e-5 moved by 1e-5 of itself: 2.5e-7 of noise, by 1e-3: 2e-9; another
+    # scene's J column 1.9e-6 at 1e-5 and 1e-3, 1e-9 at 1e-2): Phi and S must agree with them
+    # at one of three steps
+    found = errors(1e-5)
+    for rel in (1e-3, 1e-2):
+        if max(found) >= 1e-7:
+            found = tuple(min(a, b) for a, b in zip(found, errors(rel), strict=True))
+    assert found[0] < 1e-7 and found[1] < 1e-7, (found, drawn.text)
 
 
 @pytest.mark.slow
