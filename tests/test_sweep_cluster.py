@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from sweep_cases import free_port, long, rows
+from sweep_cases import long, rows
 
 from gyrogen.runtime.scene_build import builds
 
@@ -38,29 +38,51 @@ def cache(cache_dir: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return cache_dir
 
 
+STARTUP = 240
+"""Seconds the scheduler and workers get to come up: on a loaded CI machine
+each `dask` process imports distributed while the suite compiles beside it."""
+
+
+def _wait(what: str, ready, procs: list[subprocess.Popen], log: Path) -> None:
+    """Poll ready() until it holds; fail with the processes' log when one of
+    them exits first or STARTUP passes."""
+    deadline = time.monotonic() + STARTUP
+    while not ready():
+        dead = [p.args[1] for p in procs if p.poll() is not None]
+        if dead or time.monotonic() > deadline:
+            why = f"{dead} exited" if dead else f"not up after {STARTUP} s"
+            pytest.fail(f"{what}: {why}; dask log:\n{log.read_text()[-3000:]}")
+        time.sleep(0.1)
+
+
 @pytest.fixture
 def cluster(tmp_path: Path, cache: Path) -> Iterator[tuple[str, list[subprocess.Popen]]]:
     """A scheduler and two single-thread workers (no nanny: a killed worker
-    stays dead), started here and stopped at the end."""
+    stays dead), started here and stopped at the end. The scheduler picks its
+    own port and writes it to a scheduler file (a port probed free beforehand
+    can be taken by another process before the scheduler binds it)."""
     from distributed import Client
 
-    address = f"tcp://127.0.0.1:{free_port()}"
-    env, log = _environment(cache), open(tmp_path / "dask.log", "w")  # noqa: SIM115
+    info, log_path = tmp_path / "scheduler.json", tmp_path / "dask.log"
+    env, log = _environment(cache), open(log_path, "w")  # noqa: SIM115
     common = {"env": env, "stdout": log, "stderr": subprocess.STDOUT, "cwd": tmp_path}
-    port = address.rsplit(":", 1)[1]
+    where = ["--scheduler-file", str(info), "--no-dashboard"]
     procs = [
         subprocess.Popen(
-            [DASK, "scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"],
+            [DASK, "scheduler", "--host", "127.0.0.1", "--port", "0", *where],
             **common,  # type: ignore[call-overload]
         )
     ]
     try:
+        _wait("the dask scheduler", info.is_file, procs, log_path)
         for name in ("w1", "w2"):
-            cmd = [DASK, "worker", address, "--name", name, "--nthreads", "1", "--no-nanny"]
-            cmd += ["--no-dashboard", "--host", "127.0.0.1", "--local-directory", str(tmp_path)]
+            cmd = [DASK, "worker", "--name", name, "--nthreads", "1", "--no-nanny", *where]
+            cmd += ["--host", "127.0.0.1", "--local-directory", str(tmp_path)]
             procs.append(subprocess.Popen(cmd, **common))  # type: ignore[call-overload]
-        with Client(address, timeout=60) as client:
-            client.wait_for_workers(2, timeout=60)
+        with Client(scheduler_file=str(info), timeout=STARTUP) as client:
+            address = client.scheduler.address
+            _wait("two dask workers", lambda: len(client.scheduler_info()["workers"]) == 2,
+                  procs, log_path)  # fmt: skip
         yield address, procs
     finally:
         for proc in reversed(procs):  # the workers first, then the scheduler
