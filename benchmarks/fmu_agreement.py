@@ -1,5 +1,5 @@
-"""`make fmu-agreement`: the FMU of the default, the quaternion and the stiff
-scene, simulated by FMPy in Co-Simulation (the generated integrator) and
+"""`make fmu-agreement`: the FMU of the default, the quaternion, the stiff
+and the CMG pyramid scene, simulated by FMPy in Co-Simulation (the generated integrator) and
 Model Exchange (FMPy's CVODE), against `gyrogen simulate` (scipy's DOP853,
 or Radau on the stiff scene), over each scene's whole t_end.
 

@@ -1,9 +1,10 @@
-"""The FMU agreement cases: the FMU of the default, the quaternion and the
-stiff scene, simulated by FMPy in Co-Simulation (the generated integrator)
-and Model Exchange (FMPy's CVODE), against `gyrogen simulate` (scipy's
-DOP853, or Radau on the stiff scene). tests/test_fmu.py runs them on a 1 s
-slice, benchmarks/fmu_agreement.py (`make fmu-agreement`) over each
-scene's whole t_end.
+"""The FMU agreement cases: the FMU of the default, the quaternion, the
+stiff and the control-moment-gyro pyramid scene, simulated by FMPy in
+Co-Simulation (the generated integrator) and Model Exchange (FMPy's
+CVODE), against `gyrogen simulate` (scipy's DOP853, or Radau on the stiff
+scene). tests/test_fmu.py runs them on a 1 s slice,
+benchmarks/fmu_agreement.py (`make fmu-agreement`) over each scene's whole
+t_end.
 
 Model Exchange runs CVODE at a tenth of the scene's rtol (CVODE_SHARPER):
 the FMU gives only derivatives there, and at the scene's own rtol CVODE's
@@ -49,6 +50,7 @@ def cases() -> list[Case]:
         Case("default", default(), "taylor", "DOP853"),  # auto: smooth, not stiff
         Case("quaternion", quaternion_scene(), "taylor", "DOP853"),
         Case("stiff", load("stiff_wheel"), "rodas4", "Radau"),
+        Case("cmg", load("cmg4_pyramid"), "dop853", "DOP853"),  # auto: a clamped gimbal servo
     ]
 
 

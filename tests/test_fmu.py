@@ -41,9 +41,9 @@ SCENES = Path(__file__).resolve().parents[1] / "generator" / "gyrogen" / "scenes
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory: pytest.TempPathFactory, cli) -> dict[str, Path]:
-    """The three FMUs, built once per run: the default and the stiff scene's
-    through the command line, the quaternion scene's (no built-in) through
-    its API."""
+    """The four FMUs, built once per run: the default and the stiff scene's
+    through the command line, the quaternion scene's (no built-in) and the
+    CMG pyramid's through the API."""
 
     def make(root: Path) -> None:
         code, out, err = cli(["fmu", "gyrostat", "--out", str(root / "default")])
@@ -54,12 +54,14 @@ def fmus(tmp_path_factory: pytest.TempPathFactory, cli) -> dict[str, Path]:
         )
         assert code == 0, err
         build(CASES["quaternion"], root / "quaternion")
+        build(CASES["cmg"], root / "cmg")
 
     root = built_once(tmp_path_factory, "fmus", make)
     return {
         "default": root / "default" / "gyrostat.fmu",
         "stiff": root / "stiff" / "stiff_wheel.fmu",
         "quaternion": root / "quaternion" / "gyrostat_quat.fmu",
+        "cmg": root / "cmg" / "cmg4_pyramid.fmu",
     }
 
 
