@@ -123,11 +123,11 @@ def test_setup_codes(change: dict[str, float], code: int, built) -> None:
 
 
 def test_a_refused_mass_is_named_as_a_cluster_names_it(built) -> None:
-    """Code 2 in a cluster is m_a or a rotor's m_k (it said m_b, which a
+    """Code 2 in a cluster is m_a, a rotor's m_k or a gimbal's mG_k (not m_b, which a
     cluster does not have): setup's refusal, and the manifest the C and
     Fortran strerror print from."""
     scene, backends = built
-    why = "a mass (m_a or a rotor's m_k) is not positive"
+    why = "a mass (m_a, a rotor's m_k or a gimbal frame's mG_k) is not positive"
     for comp in backends.values():
         assert comp.manifest["setup_codes"]["2"] == why
         with pytest.raises(SetupRefused) as err:

@@ -10,7 +10,7 @@ import pytest
 import sympy as sm
 
 from gyrogen import api
-from gyrogen.scene import Scene, builtin_text, parse
+from gyrogen.scene import Scene, SceneError, builtin_text, parse
 from gyrogen.scene.rotors import exact_unit
 from gyrogen.symbolic import cluster, gimbals
 
@@ -42,12 +42,16 @@ MIXED = edit(
 gimbal inertias and the fixed rotor's angle kept."""
 RUNTIME = edit(
     "initial = {",
-    "parameters = { m_1 = 6.0, I_1 = 0.0795, J_1 = 0.159 }\ninitial = {",
+    "parameters = { m_1 = 6.0, I_1 = 0.0795, J_1 = 0.159, mG_2 = 6.0, IGs_2 = 0.1, "
+    "IGg_2 = 0.3 }\ninitial = {",
     edit("m = 6.0\nI = 0.0795\nJ = 0.159\naxis = [0.0, 1.0, 0.0]",
-         'm = "runtime"\nI = "runtime"\nJ = "runtime"\naxis = [0.0, 1.0, 0.0]'),
+         'm = "runtime"\nI = "runtime"\nJ = "runtime"\naxis = [0.0, 1.0, 0.0]',
+         edit("axis = [0.0, 1.0, 0.0]\ninertia = [0.1, 0.2, 0.3]\nm = 6.0",
+              'axis = [0.0, 1.0, 0.0]\ninertia = ["runtime", 0.2, "runtime"]\nm = "runtime"')),
 )  # fmt: skip
-"""vscmg3 with the first CMG's wheel mass and inertias at run time (setup
-checks them: the compare's refusals)."""
+"""vscmg3 with the first CMG's wheel mass and inertias at run time, and the
+second's gimbal frame's mass and two of its inertias (setup checks them:
+the compare's refusals)."""
 
 G1 = "axis = [1.0, 0.0, 0.0]      # g_g"
 BAD = [
@@ -69,7 +73,9 @@ BAD = [
      "6 values, not 3: give the principal inertias [IGs, IGt, IGg]"),
     ("no mass", edit("inertia = [0.1, 0.2, 0.3]   # [IGs, IGt, IGg]\nm = 6.0",
                      "inertia = [0.1, 0.2, 0.3]\nm = 0.0"),
-     "rotors.0.gimbal.m: Input should be greater than 0"),
+     "rotors.0.gimbal: m: must be positive (got 0.0)"),
+    ("runtime frame", edit("inertia = [0.1, 0.2, 0.3]", 'inertia = ["runtime", -0.2, 0.3]'),
+     "rotors.0.gimbal: inertia: IGt must be positive (got -0.2)"),
     ("runtime gimbal axis", edit(G1, 'axis = "runtime"'),
      'a gimbal axis is folded: give [x, y, z], not "runtime"'),
     ("runtime spin axis", edit("axis = [0.0, 1.0, 0.0]      # g_s0", 'axis = "runtime"'),
@@ -103,6 +109,22 @@ def test_the_states_are_the_gimbals_angles_and_rates() -> None:
         *("q1", "q2", "q3", "th4", "gam1", "gam2", "gam3", "u1", "u2", "u3"),
         *("gd1", "gd2", "gd3", "w1", "w2", "w3", "w4"),
     )
+
+
+def test_a_runtime_gimbal_frame_takes_its_place_in_p_and_its_values_are_checked() -> None:
+    """mG_k, IGs_k, IGt_k, IGg_k follow the rotor's own keys in p[];
+    simulate.parameters' values meet the rules folded ones meet."""
+    assert parse(RUNTIME, "r.toml").runtime == ("m_1", "I_1", "J_1", "mG_2", "IGs_2", "IGg_2")
+    for given, message in [
+        ("IGs_2 = 0.1", "IGs_2 = 1.0"),
+        ("mG_2 = 6.0", "mG_2 = -6.0"),
+    ]:
+        with pytest.raises(SceneError) as err:
+            parse(RUNTIME.replace(given, message), "r.toml")
+        text = str(err.value)
+        assert ("simulate.parameters.IGs_2, IGt_2, IGg_2: principal inertias (1, 0.2, 0.3) "
+                "violate the triangle inequality" in text) if "IGs" in given else (
+                "simulate.parameters.mG_2: must be positive (got -6.0)" in text), text  # fmt: skip
 
 
 def _units(scene: Scene) -> tuple[list[gimbals.Unit], sm.Matrix]:

@@ -208,15 +208,15 @@ const char *rw4_hardware_strerror(int code)
     case RW4_HARDWARE_ERR_NONFINITE:
         return "a parameter is NaN or infinite";
     case RW4_HARDWARE_ERR_MASS:
-        return "a mass (m_a or a rotor's m_k) is not positive";
+        return "a mass (m_a, a rotor's m_k or a gimbal frame's mG_k) is not positive";
     case RW4_HARDWARE_ERR_ROTOR_INERTIA:
-        return "a rotor inertia (I or J) is not positive";
+        return "a rotor inertia (I_k, J_k, or a gimbal frame's IGs_k, IGt_k, IGg_k) is not positive";
     case RW4_HARDWARE_ERR_CARRIER_NOT_PD:
         return "the carrier inertia is not positive definite";
     case RW4_HARDWARE_ERR_CARRIER_TRIANGLE:
         return "the carrier's principal moments violate the triangle inequality";
     case RW4_HARDWARE_ERR_ROTOR_TRIANGLE:
-        return "the rotor violates the triangle inequality (2 I < J)";
+        return "a rotor (2 I_k < J_k) or a gimbal frame violates the triangle inequality";
     case RW4_HARDWARE_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
     case RW4_HARDWARE_ERR_AXIS:

@@ -99,15 +99,15 @@ module rw4_hardware_mod
   integer(c_int), parameter, public :: RW4_HARDWARE_OK = 0
   ! 1: a parameter is NaN or infinite
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_NONFINITE = 1
-  ! 2: a mass (m_a or a rotor's m_k) is not positive
+  ! 2: a mass (m_a, a rotor's m_k or a gimbal frame's mG_k) is not positive
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_MASS = 2
-  ! 3: a rotor inertia (I or J) is not positive
+  ! 3: a rotor inertia (I_k, J_k, or a gimbal frame's IGs_k, IGt_k, IGg_k) is not positive
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_ROTOR_INERTIA = 3
   ! 4: the carrier inertia is not positive definite
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_CARRIER_NOT_PD = 4
   ! 5: the carrier's principal moments violate the triangle inequality
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_CARRIER_TRIANGLE = 5
-  ! 6: the rotor violates the triangle inequality (2 I < J)
+  ! 6: a rotor (2 I_k < J_k) or a gimbal frame violates the triangle inequality
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_ROTOR_TRIANGLE = 6
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_MASS_SINGULAR = 7
@@ -720,15 +720,15 @@ contains
     case (RW4_HARDWARE_ERR_NONFINITE)
       msg = "a parameter is NaN or infinite"
     case (RW4_HARDWARE_ERR_MASS)
-      msg = "a mass (m_a or a rotor's m_k) is not positive"
+      msg = "a mass (m_a, a rotor's m_k or a gimbal frame's mG_k) is not positive"
     case (RW4_HARDWARE_ERR_ROTOR_INERTIA)
-      msg = "a rotor inertia (I or J) is not positive"
+      msg = "a rotor inertia (I_k, J_k, or a gimbal frame's IGs_k, IGt_k, IGg_k) is not positive"
     case (RW4_HARDWARE_ERR_CARRIER_NOT_PD)
       msg = "the carrier inertia is not positive definite"
     case (RW4_HARDWARE_ERR_CARRIER_TRIANGLE)
       msg = "the carrier's principal moments violate the triangle inequality"
     case (RW4_HARDWARE_ERR_ROTOR_TRIANGLE)
-      msg = "the rotor violates the triangle inequality (2 I < J)"
+      msg = "a rotor (2 I_k < J_k) or a gimbal frame violates the triangle inequality"
     case (RW4_HARDWARE_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
     case (RW4_HARDWARE_ERR_AXIS)

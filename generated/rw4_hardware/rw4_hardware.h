@@ -109,11 +109,11 @@ extern "C" {
 /* Return codes of rw4_hardware_setup, checked in this order. */
 #define RW4_HARDWARE_OK                  0  /* parameters accepted */
 #define RW4_HARDWARE_ERR_NONFINITE       1  /* a parameter is NaN or infinite */
-#define RW4_HARDWARE_ERR_MASS            2  /* a mass (m_a or a rotor's m_k) is not positive */
-#define RW4_HARDWARE_ERR_ROTOR_INERTIA   3  /* a rotor inertia (I or J) is not positive */
+#define RW4_HARDWARE_ERR_MASS            2  /* a mass (m_a, a rotor's m_k or a gimbal frame's mG_k) is not positive */
+#define RW4_HARDWARE_ERR_ROTOR_INERTIA   3  /* a rotor inertia (I_k, J_k, or a gimbal frame's IGs_k, IGt_k, IGg_k) is not positive */
 #define RW4_HARDWARE_ERR_CARRIER_NOT_PD  4  /* the carrier inertia is not positive definite */
 #define RW4_HARDWARE_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
-#define RW4_HARDWARE_ERR_ROTOR_TRIANGLE  6  /* the rotor violates the triangle inequality (2 I < J) */
+#define RW4_HARDWARE_ERR_ROTOR_TRIANGLE  6  /* a rotor (2 I_k < J_k) or a gimbal frame violates the triangle inequality */
 #define RW4_HARDWARE_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
 #define RW4_HARDWARE_ERR_AXIS            8  /* a rotor axis is not of unit length (within 0.001) */
 #define RW4_HARDWARE_ERR_OVERFLOW        9  /* a constant derived from the parameters is not finite (together they overflow doubles) */

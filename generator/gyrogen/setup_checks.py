@@ -21,7 +21,7 @@ from typing import Literal
 
 from gyrogen import physics
 from gyrogen.abi import CONTROLLER_PARAMETERS, MAX_CONDITION, PARAMETERS, TRIANGLE_SLACK
-from gyrogen.abi_rotors import AXIS, AXIS_NORM_SLACK
+from gyrogen.abi_rotors import AXIS, AXIS_NORM_SLACK, GIMBAL_INERTIA, GIMBAL_KEYS
 from gyrogen.physics import LUMPED_FROM
 
 
@@ -171,11 +171,12 @@ CHECKS: tuple[Check, ...] = (
 
 def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ...]:
     """A cluster's setup checks, on its inertial values by name (m_a, I11..I23,
-    m_k, I_k, J_k, g1_k: a number or "runtime"; a carrier product missing
-    is 0): every parameter finite; then, where a value is runtime, masses and
-    inertias positive, the carrier positive definite and meeting the
-    triangle inequality (s 1 - T positive definite, s = (1/2 + slack) tr T:
-    Sylvester's leading minors), J_k <= 2 I_k, each runtime axis of length
+    m_k, I_k, J_k, g1_k, a gimbal's mG_k, IGs_k, IGt_k, IGg_k: a number or
+    "runtime"; a carrier product missing is 0): every parameter finite;
+    then, where a value is runtime, masses and inertias positive, the
+    carrier positive definite and meeting the triangle inequality (s 1 - T
+    positive definite, s = (1/2 + slack) tr T: Sylvester's leading minors),
+    J_k <= 2 I_k and a gimbal frame's triangle inequality (code 6), each runtime axis of length
     within AXIS_NORM_SLACK of 1 (code 8); the lumped inertia's condition
     number; the constants finite (code 9). The scene validator checks the
     folded values."""
@@ -192,10 +193,16 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
     )
     out = [finite]
     rotors = [tuple(f"{key}_{k}" for key in ("m", "I", "J")) for k in range(1, n + 1)]
-    masses = runtime("m_a", *(m for m, _, _ in rotors))
+    frames = [
+        tuple(f"{key}_{k}" for key in GIMBAL_INERTIA)
+        for k in range(1, n + 1)
+        if f"{GIMBAL_INERTIA[0]}_{k}" in values
+    ]
+    gimbal_masses = [f"{GIMBAL_KEYS['m']}_{k}" for k in range(1, n + 1)]
+    masses = runtime("m_a", *(m for m, _, _ in rotors), *gimbal_masses)
     if masses:
         out.append(Check(2, "positive", masses, each=True))
-    inertias = runtime(*(x for _, i, j in rotors for x in (i, j)))
+    inertias = runtime(*(x for _, i, j in rotors for x in (i, j)), *(x for f in frames for x in f))
     if inertias:
         out.append(Check(3, "positive", inertias, each=True))
     if runtime(*CARRIER_KEYS):  # the scene validator's messages are its own (rotors.py)
@@ -220,6 +227,11 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
             out.append(
                 Check(6, "slack", (term(j) - Num(2.0) * term(i), Num(2.0) * term(i) + term(j)))
             )
+    for frame in frames:  # the largest principal inertia at most the sum of the other two
+        if runtime(*frame):
+            a, b, c = (term(x) for x in frame)
+            out.append(Check(6, "slack", (2.0 * maximum(maximum(a, b), c) - add(a, b, c),
+                                          add(a, b, c))))  # fmt: skip
     for k in range(1, n + 1):
         if values.get(f"{AXIS[0]}_{k}") == "runtime":
             out.append(_unit_length(k))

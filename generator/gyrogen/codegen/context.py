@@ -247,6 +247,8 @@ class SceneContext:
         values: dict[str, float | str] = dict(self.scene.parameters)
         for k, r in enumerate(self.scene.rotors, 1):
             values.update({rotor_name(key, k): getattr(r, key) for key in ("m", "I", "J")})
+            if r.gimbal is not None:
+                values.update({rotor_name(key, k): v for key, v in r.gimbal.inertial().items()})
             values.update({rotor_name(key, k): r.axis for key in AXIS if r.axis == "runtime"})
         return cluster_checks(values, len(self.scene.rotors))
 

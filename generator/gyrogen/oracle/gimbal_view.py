@@ -71,14 +71,18 @@ def values(scene: Scene, runtime: dict[str, float]) -> gimbal_reference.Values:
         r=np.array(position, dtype=float),
         g_g=np.array([_gimbal_axis(r) for _, r in rotors]),
         b=np.array([r.b for _, r in rotors]),
-        mg=np.array([0.0 if r.gimbal is None else r.gimbal.m for _, r in rotors]),
-        IG=np.array([_frame(r) for _, r in rotors]),
+        mg=np.array([_frame(r, k, runtime)[0] for k, r in rotors]),
+        IG=np.array([np.diag(_frame(r, k, runtime)[1:]) for k, r in rotors]),
     )
 
 
-def _frame(r: Rotor) -> np.ndarray:
-    """A gimbal frame's inertia in its axes (g_s, g_t, g_g); zeros without one."""
-    return np.zeros((3, 3)) if r.gimbal is None else np.diag(r.gimbal.inertia)
+def _frame(r: Rotor, k: int, runtime: dict[str, float]) -> list[float]:
+    """A gimbal frame's mass and principal inertias (g_s, g_t, g_g), the
+    runtime ones from runtime; zeros without a gimbal."""
+    if r.gimbal is None:
+        return [0.0] * 4
+    return [float(runtime[rotor_name(n, k)] if v == "runtime" else v)
+            for n, v in r.gimbal.inertial().items()]  # fmt: skip
 
 
 def _split(scene: Scene, xs: np.ndarray) -> dict[str, np.ndarray]:

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from gyrogen import abi
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
-from gyrogen.abi_rotors import AXIS_NORM_SLACK
+from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_INERTIA, GIMBAL_KEYS, rotor_name
 from gyrogen.oracle.reference import lumped
 from gyrogen.scene import Scene
 
@@ -261,17 +261,19 @@ def invalid_parameters(base: ArrayLike) -> list[tuple[str, Array, int]]:
 
 def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarray, int]]:
     """A cluster's runtime inertial values made unphysical, with setup's code:
-    a mass at 0 (2); I_k or J_k at 0 or negative (3); the carrier not
-    positive definite (4) or past the triangle inequality (5); J_k above 2 I_k (6); a
+    a mass at 0 (2); I_k, J_k or a gimbal frame's inertia at 0 or negative
+    (3); the carrier not positive definite (4) or past the triangle
+    inequality (5); J_k above 2 I_k or a gimbal frame past its triangle
+    inequality (6); a
     runtime axis longer or shorter than the slack allows, or 0 (8)."""
     index = {n: j for j, n in enumerate(scene.runtime)}
     known = {**scene.folded(), **dict(zip(scene.runtime, base, strict=True))}
     edits: list[tuple[dict[str, float], int]] = []
     for name in scene.runtime:
         key = name.rpartition("_")[0]
-        if name == "m_a" or key == "m":
+        if name == "m_a" or key in ("m", GIMBAL_KEYS["m"]):
             edits.append(({name: 0.0}, 2))
-        elif key in ("I", "J"):
+        elif key in ("I", "J", *GIMBAL_INERTIA):
             edits += [({name: 0.0}, 3), ({name: -1e-3}, 3)]
     if "I11" in index:
         edits.append(({"I11": -float(known["I11"])}, 4))
@@ -281,6 +283,12 @@ def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
         if f"J_{k}" in index or f"I_{k}" in index:
             edits.append(({f"J_{k}": 2.01 * float(known[f"I_{k}"] if r.I == "runtime" else r.I)}
                           if f"J_{k}" in index else {f"I_{k}": 0.49 * float(r.J)}, 6))  # fmt: skip
+        frame = [rotor_name(n, k) for n in GIMBAL_INERTIA]
+        if r.gimbal is not None and (first := next((n for n in frame if n in index), None)):
+            values = {n: float(known[n] if n in index else v)
+                      for n, v in zip(frame, r.gimbal.inertia, strict=True)}  # fmt: skip
+            others = sum(v for n, v in values.items() if n != first)
+            edits.append(({first: 1.5 * others}, 6))  # past the sum of the other two
         if f"g1_{k}" in index:
             axis = {f"g{i}_{k}": float(known[f"g{i}_{k}"]) for i in (1, 2, 3)}
             norm = math.sqrt(sum(v * v for v in axis.values()))

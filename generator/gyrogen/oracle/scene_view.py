@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
-from gyrogen.abi_rotors import AXIS_NORM_SLACK
+from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_INERTIA, GIMBAL_KEYS, rotor_name
 from gyrogen.oracle import cluster_reference, gimbal_view, reference, sampling
 from gyrogen.scene import Scene
 from gyrogen.scene import events as scene_events
@@ -328,8 +328,10 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
             cols[name] = scale * rng.uniform(0.8, 1.2, n)
         elif name in ("I12", "I13", "I23"):
             cols[name] = scale * rng.uniform(-0.05, 0.05, n)
-        elif key == "m":
+        elif key in ("m", GIMBAL_KEYS["m"]):
             cols[name] = rng.uniform(1.0, 10.0, n)
+        elif key in GIMBAL_INERTIA:
+            cols[name] = _frame_inertia(scene, int(k), key, cols, rng, n)
         elif key == "I":
             axial = scene.rotors[int(k) - 1].J
             if axial == "runtime":
@@ -354,6 +356,28 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
         else:
             cols[name] = _CLUSTER_DRAWS[key](rng, n)
     return np.stack([cols[name] for name in scene.runtime], axis=1)
+
+
+def _frame_inertia(
+    scene: Scene, k: int, key: str, cols: dict[str, np.ndarray], rng: np.random.Generator, n: int
+) -> np.ndarray:
+    """A gimbal frame's runtime principal inertia (key of GIMBAL_INERTIA),
+    drawn in p[] order after the ones before it: with two others known
+    (folded or drawn), strictly inside the triangle inequality's interval
+    (|a - b|, a + b); else within 0.8..1.2 of the known ones' mean (0.2
+    kg m^2 with none)."""
+    gimbal = scene.rotors[k - 1].gimbal
+    assert gimbal is not None
+    known = [
+        np.full(n, float(v)) if v != "runtime" else cols[rotor_name(other, k)]
+        for other, v in zip(GIMBAL_INERTIA, gimbal.inertia, strict=True)
+        if other != key and (v != "runtime" or rotor_name(other, k) in cols)
+    ]
+    if len(known) == 2:
+        low, high = np.abs(known[0] - known[1]), known[0] + known[1]
+        return low + (high - low) * rng.uniform(0.1, 0.9, n)
+    scale = np.mean(known, axis=0) if known else np.full(n, 0.2)
+    return scale * rng.uniform(0.8, 1.2, n)
 
 
 def _cluster_states(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -7,7 +7,9 @@ torque law and optional torque limit. The torque laws' T, k and w_ref, the
 carrier's mass and tensor and each rotor's m, I and J may be "runtime"
 (checked by setup; the values simulate.parameters gives, here), and so may
 a position (p's r1_k, r2_k, r3_k) and an axis (g1_k, g2_k, g3_k: setup
-checks its length and normalizes it); friction and limits are folded.
+checks its length and normalizes it), and a gimbal frame's mass and
+principal inertias (mG_k, IGs_k, IGt_k, IGg_k); friction, limits and a
+gimbal's axes are folded.
 With every inertial value folded, setup holds the inverse of the constant
 inertia as numbers. No translation:
 the system's mass center is fixed in A and free in N (a free-floating
@@ -38,6 +40,7 @@ from gyrogen.abi_rotors import (
     AXIS,
     AXIS_NORM_SLACK,
     CLUSTER_CARRIER,
+    GIMBAL_INERTIA,
     GIMBAL_KEYS,
     GIMBAL_PERP_SLACK,
     POSITION,
@@ -98,8 +101,8 @@ GIMBAL_LAW_KEYS = {"none": (), "constant": ("T",), "rate_servo": ("k", "rate_ref
 
 
 def _inertia(v: object) -> object:
-    """A gimbal frame's principal inertias [IGs, IGt, IGg]: three folded
-    numbers, each 0 or a folded value's size (checked positive below)."""
+    """A gimbal frame's principal inertias [IGs, IGt, IGg]: each a number
+    (a folded value's size, checked positive below) or "runtime"."""
     if not isinstance(v, list | tuple):
         raise ValueError(f"expected [IGs, IGt, IGg], not {shown(v)}")
     if len(v) != 3:
@@ -119,11 +122,12 @@ class Gimbal(BaseModel):
 
     axis: Vector
     """g_g in A-components: length within AXIS_NORM_SLACK of 1."""
-    inertia: Annotated[tuple[float, float, float], BeforeValidator(_inertia)]
+    inertia: Annotated[tuple[Value, Value, Value], BeforeValidator(_inertia)]
     """The gimbal frame's principal inertias about its mass center (on the
-    gimbal axis at the rotor's position), kg m^2: [IGs, IGt, IGg]."""
-    m: Annotated[Folded, Field(gt=0)]
-    """The gimbal frame's mass, kg (at the rotor's position), folded."""
+    gimbal axis at the rotor's position), kg m^2: [IGs, IGt, IGg]; each may
+    be "runtime" (p's IGs_k, IGt_k, IGg_k: setup checks them)."""
+    m: Value
+    """The gimbal frame's mass, kg (at the rotor's position); "runtime": p's mG_k."""
     torque: str = "none"
     """One of GIMBAL_LAW_KEYS: none, constant (T), rate_servo (k, rate_ref), table."""
     T: Value | None = None
@@ -152,7 +156,14 @@ class Gimbal(BaseModel):
 
     @model_validator(mode="after")
     def _rules(self) -> Gimbal:
-        check_principal(self.inertia, "inertia")
+        if self.m != "runtime" and not self.m > 0.0:
+            raise ValueError(f"m: must be positive (got {self.m})")
+        if "runtime" in self.inertia:  # the runtime ones: setup's checks
+            for name, x in zip(GIMBAL_INERTIA, self.inertia, strict=True):
+                if x != "runtime" and not x > 0.0:
+                    raise ValueError(f"inertia: {name} must be positive (got {x})")
+        else:
+            check_principal(self.inertia, "inertia")  # type: ignore[arg-type]
         check_table(self.torque, self.torque_table)
         need = GIMBAL_LAW_KEYS[self.torque]
         for key in ("T", "k", "rate_ref"):
@@ -174,11 +185,16 @@ class Gimbal(BaseModel):
             key: v for key in GIMBAL_LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None
         }
 
+    def inertial(self) -> dict[str, float | str]:
+        """The frame's mass and principal inertias by their names in p[]
+        (GIMBAL_KEYS' mG, then GIMBAL_INERTIA)."""
+        return {GIMBAL_KEYS["m"]: self.m, **dict(zip(GIMBAL_INERTIA, self.inertia, strict=True))}
+
 
 def check_principal(moments: tuple[float, float, float], where: str) -> None:
     """A rigid body's principal inertias: each positive, each at most the sum
     of the other two (within TRIANGLE_SLACK): a positive-definite tensor."""
-    for name, x in zip(("IGs", "IGt", "IGg"), moments, strict=True):
+    for name, x in zip(GIMBAL_INERTIA, moments, strict=True):
         if not x > 0.0:
             raise ValueError(f"{where}: {name} must be positive (got {x})")
     total = sum(moments)
@@ -329,7 +345,8 @@ def check_axial(inertia: float, axial: float, where: str) -> None:
 
 def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) -> tuple[str, ...]:
     """p[] of a cluster: the carrier's runtime keys (CLUSTER_CARRIER order),
-    then each rotor's, rotor by rotor (m, I, J, then its torque law's)."""
+    then each rotor's, rotor by rotor (m, I, J, a position's and an axis's,
+    its torque law's, then its gimbal's: mG, IGs, IGt, IGg, its torque law's)."""
     carrier = tuple(n for n in CLUSTER_CARRIER if parameters.get(n) == "runtime")
     return carrier + tuple(
         rotor_name(key, k)
@@ -340,6 +357,7 @@ def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) ->
             ("J", r.J),
             *_vectors(r),
             *r.law().items(),
+            *({} if r.gimbal is None else r.gimbal.inertial()).items(),
             *gimbal_law(r).items(),
         )
         if v == "runtime"
@@ -386,6 +404,15 @@ def resolved(
                 if any(rotor_name(key, k) not in given for key in keys):
                     return None
                 update[field] = tuple(float(given[rotor_name(key, k)]) for key in keys)
+        if r.gimbal is not None:
+            frame = {}
+            for name, v in r.gimbal.inertial().items():
+                if v == "runtime" and rotor_name(name, k) not in given:
+                    return None
+                frame[name] = float(given[rotor_name(name, k)] if v == "runtime" else v)
+            inertia = tuple(frame[name] for name in GIMBAL_INERTIA)
+            gimbal = r.gimbal.model_copy(update={"m": frame[GIMBAL_KEYS["m"]], "inertia": inertia})
+            update["gimbal"] = gimbal
         out.append(r.model_copy(update=update))
     return values, out
 
@@ -442,6 +469,12 @@ def check_values(parameters: Mapping[str, float], rotors: list[Rotor], where: st
                                  f"(got {getattr(r, key)})")  # fmt: skip
         check_axial(r.I, r.J, f"{where}.{rotor_name('J', k)}")  # type: ignore[arg-type]
         check_axis(r.axis, f"{where}.{axis_keys(k)}")  # type: ignore[arg-type]
+        if r.gimbal is not None:
+            mass = rotor_name(GIMBAL_KEYS["m"], k)
+            if not r.gimbal.m > 0.0:  # type: ignore[operator]
+                raise ValueError(f"{where}.{mass}: must be positive (got {r.gimbal.m})")
+            names = ", ".join(rotor_name(n, k) for n in GIMBAL_INERTIA)
+            check_principal(r.gimbal.inertia, f"{where}.{names}")  # type: ignore[arg-type]
     carrier = carrier_tensor(parameters)
     if not parameters["m_a"] > 0:
         raise ValueError(f"{where}.m_a: must be positive (got {parameters['m_a']})")
@@ -484,14 +517,16 @@ def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -
         float(parameters["m_a"]),
         carrier_tensor(parameters),
         [
-            (float(r.m) + mass, float(inertia), [float(x) for x in axis], r.position)
+            (float(r.m) + float(mass), float(inertia), [float(x) for x in axis], r.position)
             for r in rotors
             for mass, inertia, axis in [lumped_part(r)]
         ],
     )
 
 
-def lumped_part(r: Rotor) -> tuple[float, float | str, tuple[Fraction, Fraction, Fraction]]:
+def lumped_part(
+    r: Rotor,
+) -> tuple[float | str, float | str, tuple[Fraction, Fraction, Fraction]]:
     """What a rotor adds to the lumped inertia beside its mass: (the mass of
     its gimbal frame, the transverse inertia, the axis it is transverse to).
     A fixed rotor's I about g; a gimbal's constant part, IGs about g_g (the

@@ -34,6 +34,8 @@ from gyrogen import physics
 from gyrogen.abi_rotors import (
     AXIS,
     CLUSTER_CARRIER,
+    GIMBAL_INERTIA,
+    GIMBAL_KEYS,
     POSITION,
     UNIT_AXIS,
     cluster_states,
@@ -123,7 +125,8 @@ def _transverse(r: Rotor, k: int) -> tuple[sm.Expr, sm.Expr, list[sm.Expr]]:
     if r.gimbal is None:
         return sm.S.Zero, _param(rotor_name("I", k), r.I), list(_axis(r, k))
     mass, inertia, axis = lumped_part(r)
-    return _number(mass), _number(float(inertia)), list(_exact(axis))
+    return (_param(rotor_name(GIMBAL_KEYS["m"], k), mass),
+            _param(rotor_name(GIMBAL_INERTIA[0], k), inertia), list(_exact(axis)))  # fmt: skip
 
 
 LUMPED = ((0, 0, "IC11"), (1, 1, "IC22"), (2, 2, "IC33"), (0, 1, "IC12"), (0, 2, "IC13"),
@@ -389,9 +392,11 @@ def _outputs(
 
 
 def _inertial(name: str) -> bool:
-    """A runtime parameter setup's checks read: the carrier's, a mass, an inertia."""
+    """A runtime parameter setup's checks read: the carrier's, a mass, an
+    inertia (a gimbal frame's included)."""
     key = name.rpartition("_")[0]
-    return name in CLUSTER_CARRIER or key in ("m", "I", "J", *POSITION, *AXIS)
+    frame = (GIMBAL_KEYS["m"], *GIMBAL_INERTIA)
+    return name in CLUSTER_CARRIER or key in ("m", "I", "J", *POSITION, *AXIS, *frame)
 
 
 def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:

@@ -38,7 +38,7 @@ import dataclasses
 import sympy as sm
 import sympy.physics.mechanics as me
 
-from gyrogen.abi_rotors import GIMBAL_KEYS, cluster_states, rotor_name
+from gyrogen.abi_rotors import GIMBAL_INERTIA, GIMBAL_KEYS, cluster_states, rotor_name
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import Rotor, gimbals
 from gyrogen.symbolic import cluster, equations, model
@@ -86,7 +86,10 @@ def _unit(r: Rotor, k: int) -> Unit:
     g = g - g.dot(g_g) * g_g  # exactly perpendicular (rotors.check_gimbal: within a slack)
     norm2 = sm.nsimplify(g.dot(g))
     g_s0 = g if norm2 == 1 else g / sm.sqrt(norm2)
-    igs, igt, igg = (cluster._number(x) for x in r.gimbal.inertia)
+    igs, igt, igg = (
+        cluster._param(rotor_name(n, k), x)
+        for n, x in zip(GIMBAL_INERTIA, r.gimbal.inertia, strict=True)
+    )
     return Unit(k, g_s0, J, I, g_g, g_g.cross(g_s0), (igs, igt, igg))
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import sympy as sm
 
 from gyrogen.scene import Scene
+from gyrogen.scene.rotors import Rotor
 from gyrogen.symbolic import equations, model
 from gyrogen.symbolic.optimize import Assignment, count_ops, cse_only
 
@@ -44,6 +45,14 @@ def variants(lumped: Mapping[str, int]) -> list[Variant]:
     ]
 
 
+def _mass(r: Rotor) -> float | str:
+    """A rotor on a gimbal's wheel and frame mass: "runtime" if either is."""
+    assert r.gimbal is not None
+    if "runtime" in (r.m, r.gimbal.m):
+        return "runtime"
+    return float(r.m) + float(r.gimbal.m)
+
+
 def gimbal_split(scene: Scene) -> list[Variant]:
     """A cluster with rotors on gimbals: its rhs's ops split into the same
     cluster with each wheel fixed at its gimbal angle 0 (gimbal frame's mass
@@ -56,9 +65,7 @@ def gimbal_split(scene: Scene) -> list[Variant]:
 
     rhs = optimize(specialize(scene)).rhs
     fixed = [
-        r.model_copy(update={"gimbal": None, "m": r.m + r.gimbal.m})  # type: ignore[operator]
-        if r.gimbal is not None
-        else r
+        r if r.gimbal is None else r.model_copy(update={"gimbal": None, "m": _mass(r)})
         for r in scene.rotors
     ]
     fixed_ops = optimize(specialize(scene.model_copy(update={"rotors": fixed}))).rhs.ops
