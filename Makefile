@@ -149,9 +149,10 @@ verify-axes: setup
 ## FUZZ_TOLERANCE drawn motions on which every adaptive method keeps its tolerance in each state group,
 ## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
 ## without -march=native), then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
-## clusters) with a fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
+## clusters, then FUZZ_CMGS clusters of control-moment gyros) with a fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
 FUZZ_EXAMPLES ?= 2000
 FUZZ_CLUSTERS ?= 200
+FUZZ_CMGS ?= 60
 FUZZ_GIMBAL ?= 10000
 FUZZ_SWEEPS ?= 5000
 FUZZ_AGREE ?= 250
@@ -167,6 +168,7 @@ fuzz: setup
 	  $(BIN)/python -m pytest -q -n auto tests/test_scene_space.py -k every_method
 	$(BIN)/python tools/fuzz_scenes.py --examples $(FUZZ_EXAMPLES) --out fuzz-failures
 	$(BIN)/python tools/fuzz_scenes.py --clusters --examples $(FUZZ_CLUSTERS) --out fuzz-failures
+	$(BIN)/python tools/fuzz_scenes.py --gimbals --examples $(FUZZ_CMGS) --out fuzz-failures
 
 ## fmu-agreement: the FMUs of the default, quaternion and stiff scenes in FMPy (Co-Simulation
 ## and Model Exchange) against `gyrogen simulate` over each scene's t_end (the suite runs 1 s)

@@ -14,6 +14,15 @@ either attitude, the rotor angles or not, any outputs, integrators and
 targets. One draw in four breaks one rotor on purpose (an axis of length 0
 or 1.01, J > 2 I, a negative limit or friction): the validator must refuse
 exactly those, each with one line.
+
+With gimbals=True (control-moment gyros), N = 1 to 3 rotors, the first on a
+gimbal and each other one in two: a gimbal axis anywhere perpendicular to
+the rotor's spin axis, a frame of any principal inertias meeting the
+triangle inequality and any mass (each at times "runtime"), its own torque
+law (none, constant, rate servo, table; T, k and rate_ref at times
+"runtime") and optional clamp, and a start angle and rate. One draw in
+four breaks one gimbal (its axis along the spin axis, or its inertias past
+the triangle inequality) or one rotor as above.
 """
 
 from __future__ import annotations
@@ -26,6 +35,8 @@ from gyrogen.abi_rotors import MAX_ROTORS
 
 LAWS = ("none", "constant", "speed_controller", "table")
 BREAKS = ("axis of length 0", "axis of length 1.01", "J > 2 I", "negative tau_max", "negative b")
+GIMBAL_LAWS = ("none", "constant", "rate_servo", "table")
+GIMBAL_BREAKS = ("gimbal axis along the spin axis", "gimbal inertias past the triangle")
 
 
 def _carrier(rng: np.random.Generator) -> dict[str, float]:
@@ -94,6 +105,59 @@ def _lay_axes(rotors: list[dict[str, object]], layout: str, rng: np.random.Gener
         rotor["axis"] = [float(x) for x in g]
 
 
+def _gimbal(
+    rng: np.random.Generator, rotor: dict[str, object], inertia: float, runtime: set[str], k: int
+) -> tuple[dict[str, object], dict[str, float]]:
+    """A [rotors.gimbal] table for rotor (its axis folded; inertia its I),
+    and the drawn values of the keys made "runtime" (by their names in p[])."""
+    spin = np.array(rotor["axis"], dtype=float)
+    v = rng.normal(size=3)
+    g = v - spin * (v @ spin) / max(float(spin @ spin), 1e-300)
+    size = inertia * 10.0 ** rng.uniform(0, 1)
+    a, b = rng.uniform(0.3, 1.0, 2) * size
+    c = rng.uniform(abs(a - b), a + b)
+    law = str(rng.choice(GIMBAL_LAWS))
+    gimbal: dict[str, object] = {
+        "axis": [float(x) for x in g / np.linalg.norm(g)],
+        "inertia": [float(x) for x in rng.permutation([a, b, c])],
+        "m": float(10.0 ** rng.uniform(-1, 1)),
+        "torque": law,
+    }
+    values: dict[str, float] = {}
+    if rng.random() < 0.25:  # the frame's mass and some of its inertias at run time
+        values[f"mG_{k}"] = float(gimbal["m"])  # type: ignore[arg-type]
+        gimbal["m"] = "runtime"
+        inertia = list(gimbal["inertia"])  # type: ignore[call-overload]
+        for i, name in enumerate(("IGs", "IGt", "IGg")):
+            if rng.random() < 0.5:
+                values[f"{name}_{k}"], inertia[i] = float(inertia[i]), "runtime"
+        gimbal["inertia"] = inertia
+    drawn = {"T": float(rng.uniform(-1, 1) * size), "k": float(size * 10.0 ** rng.uniform(0, 2)),
+             "rate_ref": float(rng.uniform(-0.5, 0.5))}  # fmt: skip
+    if law == "table":
+        times = np.sort(rng.uniform(-0.2, 1.2, rng.integers(2, 7)))
+        torques = rng.uniform(-1, 1, times.size) * size
+        gimbal["torque_table"] = [[float(t), float(x)] for t, x in zip(times, torques, strict=True)]
+    for key in {"constant": ("T",), "rate_servo": ("k", "rate_ref")}.get(law, ()):
+        name = {"T": "Tg", "k": "kg"}.get(key, key)
+        if rng.random() < 0.5:
+            gimbal[key] = "runtime"
+            runtime.add(f"{name}_{k}")
+            values[f"{name}_{k}"] = drawn[key]
+        else:
+            gimbal[key] = drawn[key]
+    if law != "none" and rng.random() < 0.5:
+        gimbal["tau_max"] = float(abs(drawn["T"]) + size * 10.0 ** rng.uniform(-2, 0))
+    return gimbal, values
+
+
+def _break_gimbal(gimbal: dict[str, object], spin: object, how: str) -> None:
+    if how == "gimbal axis along the spin axis":
+        gimbal["axis"] = spin
+    else:
+        gimbal["inertia"] = [0.1, 0.1, 0.3]
+
+
 def _break(rotor: dict[str, object], how: str) -> None:
     if how == "axis of length 0":
         rotor["axis"] = [0.0, 0.0, 0.0]
@@ -108,32 +172,46 @@ def _break(rotor: dict[str, object], how: str) -> None:
 
 
 @st.composite
-def clusters(draw: st.DrawFn) -> Draw:
+def clusters(draw: st.DrawFn, gimbals: bool = False) -> Draw:
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    n = draw(st.integers(1, MAX_ROTORS))
+    n = draw(st.integers(1, 3 if gimbals else MAX_ROTORS))
     carrier = _carrier(rng)
     runtime: set[str] = set()
     rotors = [_rotor(rng, carrier["I11"], runtime, k) for k in range(1, n + 1)]
     _lay_axes(rotors, draw(st.sampled_from(LAYOUTS)), rng)
-    broken = draw(st.sampled_from([None] * 15 + list(BREAKS)))
-    at = draw(st.integers(0, n - 1))
-    if broken is not None:
+    on = [k == 0 or rng.random() < 0.5 for k in range(n)] if gimbals else [False] * n
+    breaks = list(BREAKS) + (list(GIMBAL_BREAKS) if gimbals else [])
+    broken = draw(st.sampled_from([None] * (3 * len(breaks)) + breaks))
+    at = 0 if broken in GIMBAL_BREAKS else draw(st.integers(0, n - 1))
+    if broken is not None and broken not in GIMBAL_BREAKS:
         _break(rotors[at], broken)
-    inertial = _runtime_inertia(carrier, rotors, at if broken else None, rng)
+    inertial = _runtime_inertia(carrier, rotors, at if broken else None, rng, on)
     runtime |= set(inertial)
+    frames: dict[int, dict[str, object]] = {}
+    for k in (k for k in range(1, n + 1) if on[k - 1]):
+        wheel = rotors[k - 1]["I"]
+        inertia = inertial[f"I_{k}"] if wheel == "runtime" else float(wheel)  # type: ignore[arg-type]
+        frames[k], values = _gimbal(rng, rotors[k - 1], inertia, runtime, k)
+        if broken in GIMBAL_BREAKS and k == 1:
+            _break_gimbal(frames[k], rotors[0]["axis"], broken)
+        else:  # a broken gimbal's runtime values would be refused anyway
+            inertial.update(values)
+            runtime |= set(values)
     attitude = draw(st.sampled_from(["euler312", "quaternion"]))
     initial = {f"u{i}": draw(st.floats(-1, 1)) for i in (1, 2, 3)}
     initial.update({f"w{k}": draw(st.floats(-100, 100)) for k in range(1, n + 1)})
+    initial.update({f"gam{k}": draw(st.floats(-4, 4)) for k in frames})
+    initial.update({f"gd{k}": draw(st.floats(-1, 1)) for k in frames})
     params = {name: inertial.get(name, _runtime_value(name, rng)) for name in sorted(runtime)}
+    smooth = all(
+        t.get("tau_max") is None and t.get("torque") != "table" for t in [*rotors, *frames.values()]
+    )
     top = {
-        "name": f"cluster{n}",
-        "description": f"a drawn cluster of {n} rotors",
+        "name": f"cmg{n}" if gimbals else f"cluster{n}",
+        "description": f"a drawn cluster of {n} rotors" + (", on gimbals" if gimbals else ""),
         "attitude": attitude,
         "targets": draw(TARGET_LISTS),
-        "integrators": offered(
-            draw(INTEGRATOR_LISTS),
-            all(r.get("tau_max") is None and r.get("torque") != "table" for r in rotors),
-        ),
+        "integrators": offered(draw(INTEGRATOR_LISTS), smooth),
     }
     tables = {
         "parameters": carrier,
@@ -144,8 +222,12 @@ def clusters(draw: st.DrawFn) -> Draw:
         "simulate": {"t_end": 1.0, "initial": initial, "parameters": params},
     }
     text = to_toml(top, tables)
-    for rotor in rotors:
+    for k, rotor in enumerate(rotors, 1):
         text += "\n[[rotors]]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in rotor.items())
+        if k in frames:
+            text += "[rotors.gimbal]\n" + "".join(
+                f"{key} = {toml_value(v)}\n" for key, v in frames[k].items()
+            )
     return Draw(text, broken is None, broken or "")
 
 
@@ -154,13 +236,14 @@ def _runtime_inertia(
     rotors: list[dict[str, object]],
     broken: int | None,
     rng: np.random.Generator,
+    on: list[bool],
 ) -> dict[str, float]:
     """Make some inertial values "runtime" (setup checks them; the drawn
     values go to simulate.parameters): the carrier's tensor and mass in one
     draw in four, in another one in four some of its diagonal moments alone
     (its products of inertia folded, of either sign), each rotor's m, I, J in
     one in four (not the broken one's), its position in one in four, its axis
-    in one in four (not the broken one's)."""
+    in one in four (not the broken one's, nor one on a gimbal: on)."""
     out: dict[str, float] = {}
     carrier_draw = rng.random()
     if carrier_draw < 0.25:
@@ -181,7 +264,7 @@ def _runtime_inertia(
             at = rotor["position"]
             out.update({f"r{i}_{k}": float(x) for i, x in enumerate(at, 1)})  # type: ignore[arg-type]
             rotor["position"] = "runtime"
-        if k - 1 != broken and rng.random() < 0.25:
+        if k - 1 != broken and not on[k - 1] and rng.random() < 0.25:
             g = rotor["axis"]
             out.update({f"g{i}_{k}": float(x) for i, x in enumerate(g, 1)})  # type: ignore[arg-type]
             rotor["axis"] = "runtime"
@@ -190,6 +273,8 @@ def _runtime_inertia(
 
 def _runtime_value(name: str, rng: np.random.Generator) -> float:
     key = name.rsplit("_", 1)[0]
-    if key == "k":
+    if key in ("k", "kg"):
         return float(10.0 ** rng.uniform(-3, 0))
+    if key == "rate_ref":
+        return float(rng.uniform(-0.5, 0.5))
     return float(rng.uniform(-1, 1) * (200.0 if key == "w_ref" else 1e-2))

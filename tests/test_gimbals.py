@@ -8,10 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sm
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from gyrogen import api
 from gyrogen.scene import Scene, SceneError, builtin_text, parse
-from gyrogen.scene.rotors import exact_unit
+from gyrogen.scene.rotors import exact_perpendicular, exact_unit
 from gyrogen.symbolic import cluster, gimbals
 
 GOOD = builtin_text("vscmg3")
@@ -115,15 +117,15 @@ def test_a_runtime_gimbal_frame_takes_its_place_in_p_and_its_values_are_checked(
     """mG_k, IGs_k, IGt_k, IGg_k follow the rotor's own keys in p[];
     simulate.parameters' values meet the rules folded ones meet."""
     assert parse(RUNTIME, "r.toml").runtime == ("m_1", "I_1", "J_1", "mG_2", "IGs_2", "IGg_2")
-    for given, message in [
+    for old, new in [
         ("IGs_2 = 0.1", "IGs_2 = 1.0"),
         ("mG_2 = 6.0", "mG_2 = -6.0"),
     ]:
         with pytest.raises(SceneError) as err:
-            parse(RUNTIME.replace(given, message), "r.toml")
+            parse(RUNTIME.replace(old, new), "r.toml")
         text = str(err.value)
         assert ("simulate.parameters.IGs_2, IGt_2, IGg_2: principal inertias (1, 0.2, 0.3) "
-                "violate the triangle inequality" in text) if "IGs" in given else (
+                "violate the triangle inequality" in text) if "IGs" in old else (
                 "simulate.parameters.mG_2: must be positive (got -6.0)" in text), text  # fmt: skip
 
 
@@ -152,6 +154,30 @@ def test_the_spin_axis_is_made_exactly_perpendicular() -> None:
     (unit, *_), _ = _units(parse(text, "near.toml"))
     assert unit.g_g is not None and unit.g_t0 is not None
     assert unit.axis.dot(unit.g_g) == 0 and sm.simplify(unit.axis.dot(unit.axis)) == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+    st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+)
+def test_a_spin_axis_is_exactly_unit_and_perpendicular_near_the_one_given(
+    a: list[float], b: list[float]
+) -> None:
+    """exact_perpendicular: rational, |g_s0| = 1 and g_s0 . g_g = 0 exactly,
+    within 1e-15 of the given axis's part perpendicular to g_g (as far as
+    floats know that part)."""
+    g, v = np.array(a), np.array(b)
+    assume(min(np.linalg.norm(g), np.linalg.norm(v)) > 1e-3)
+    g, v = g / np.linalg.norm(g), v / np.linalg.norm(v)  # a scene's axes are of unit length
+    assume(np.linalg.norm(np.cross(g, v)) > 1e-3)
+    g_g = exact_unit(tuple(g))  # type: ignore[arg-type]
+    out = exact_perpendicular(tuple(v), g_g)  # type: ignore[arg-type]
+    assert sum(x * x for x in out) == 1 and sum(x * y for x, y in zip(out, g_g, strict=True)) == 0
+    unit = np.array([float(x) for x in g_g])
+    want = v - (v @ unit) * unit
+    off = np.abs(np.array([float(x) for x in out]) - want / np.linalg.norm(want)).max()
+    assert off < 1e-15 * np.linalg.norm(v) / np.linalg.norm(want)  # the projection's cancellation
 
 
 def _energy_rate_and_power(scene: Scene, rng: np.random.Generator) -> list[tuple[float, float]]:

@@ -46,6 +46,22 @@ def test_every_drawn_cluster_keeps_the_promise(
     assert counts["examples"] == CLUSTER_EXAMPLES and counts["checked"] >= 1, counts
 
 
+CMG_EXAMPLES = 2
+"""Drawn clusters of control-moment gyros in CI (1 to 3 rotors, at least one
+on a gimbal: each derived with KanesMethod and proven equal to the momentum
+form, the slowest draws)."""
+
+
+def test_every_drawn_cmg_cluster_keeps_the_promise(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    drawn = clusters(gimbals=True)
+    counts, failures = run_shard(3000, CMG_EXAMPLES, tmp_path / "failures", drawn)
+    assert not failures, "\n\n".join(failures)
+    assert counts["examples"] == CMG_EXAMPLES and counts["checked"] >= 1, counts
+
+
 REGRESSIONS = sorted((Path(__file__).parent / "regressions").glob("*.toml"))
 
 

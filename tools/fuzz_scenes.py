@@ -1,6 +1,7 @@
 """`make fuzz`: the scene-space property test at scale, with a fresh seed.
 
-    python tools/fuzz_scenes.py [--examples N] [--jobs J] [--seed S] [--out DIR] [--clusters]
+    python tools/fuzz_scenes.py [--examples N] [--jobs J] [--seed S] [--out DIR]
+                                [--clusters | --gimbals]
 
 Draws N scenes (default 2000) in J processes (default: every core), each a
 shard of tests/scene_space.py's strategy with its own seed, checks each
@@ -29,10 +30,12 @@ SHARD = 100
 """Examples per task: small enough that the progress line moves."""
 
 
-def _task(seed: int, examples: int, out: str, clustered: bool) -> tuple[dict[str, int], list[str]]:
+def _task(seed: int, examples: int, out: str, kind: str) -> tuple[dict[str, int], list[str]]:
+    """kind: "scenes", "clusters" or "gimbals" (clusters of control-moment gyros)."""
+    drawn = {"scenes": None, "clusters": clusters(), "gimbals": clusters(gimbals=True)}[kind]
     with tempfile.TemporaryDirectory(prefix="gyrogen-fuzz-cache-") as cache:
         os.environ["GYROGEN_CACHE"] = cache  # builds die with the task: the disk stays clean
-        return run_shard(seed, examples, Path(out), clusters() if clustered else None)
+        return run_shard(seed, examples, Path(out), drawn)
 
 
 def main() -> int:
@@ -41,7 +44,11 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=len(os.sched_getaffinity(0)))
     ap.add_argument("--seed", type=int, default=None, help="default: a fresh one")
     ap.add_argument("--out", type=Path, default=Path("fuzz-failures"))
-    ap.add_argument("--clusters", action="store_true", help="draw [[rotors]] clusters instead")
+    kind = ap.add_mutually_exclusive_group()
+    kind.add_argument("--clusters", action="store_true", help="draw [[rotors]] clusters instead")
+    kind.add_argument(
+        "--gimbals", action="store_true", help="draw clusters of control-moment gyros instead"
+    )
     args = ap.parse_args()
     if args.examples < 1 or args.jobs < 1:
         ap.error("--examples and --jobs must be at least 1")
@@ -49,14 +56,14 @@ def main() -> int:
     sizes = [SHARD] * (args.examples // SHARD) + (
         [args.examples % SHARD] if args.examples % SHARD else []
     )
+    drawn = "clusters" if args.clusters else "gimbals" if args.gimbals else "scenes"
     print(f"fuzz: {args.examples} scenes, seed {base}, {args.jobs} jobs, failures to {args.out}/")
     totals = {"examples": 0, "checked": 0, "refused": 0, "failed": 0}
     failures: list[str] = []
     t0 = time.monotonic()
     with ProcessPoolExecutor(args.jobs) as pool:
         futures = [
-            pool.submit(_task, base + i, n, str(args.out), args.clusters)
-            for i, n in enumerate(sizes)
+            pool.submit(_task, base + i, n, str(args.out), drawn) for i, n in enumerate(sizes)
         ]
         for fut in as_completed(futures):
             counts, found = fut.result()

@@ -5,7 +5,7 @@ scene's states in its order (scene_view calls this for such a scene).
 The wheels' laws are cluster_reference's (on the relative spin Omega); a
 gimbal's is read here from its [rotors.gimbal] table. A spin axis within the
 scene's slack of perpendicular to its gimbal axis is made perpendicular as
-the scene defines it (g_s0 less its g_g part, normalized).
+the scene defines it (Rotor.spin_axis).
 """
 
 from __future__ import annotations
@@ -25,15 +25,14 @@ def has_gimbals(scene: Scene) -> bool:
 
 
 def _axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
+    """A fixed rotor's unit axis; on a gimbal, g_s0 as the scene defines it
+    (Rotor.spin_axis: a gimbal's spin axis is folded)."""
+    if r.gimbal is not None:
+        return np.array([float(x) for x in r.spin_axis])
     if r.axis == "runtime":
         g = np.array([runtime[rotor_name(f"g{i}", k)] for i in (1, 2, 3)], dtype=float)
     else:
         g = np.array(r.axis, dtype=float)
-    g = g / np.linalg.norm(g)
-    if r.gimbal is None:
-        return g
-    g_g = _gimbal_axis(r)
-    g = g - (g @ g_g) * g_g
     return g / np.linalg.norm(g)
 
 

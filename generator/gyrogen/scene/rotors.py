@@ -285,6 +285,14 @@ class Rotor(BaseModel):
         return self
 
     @property
+    def spin_axis(self) -> tuple[Fraction, Fraction, Fraction]:
+        """The spin axis exactly: unit_axis, or on a gimbal g_s0 exactly
+        perpendicular to the gimbal axis (exact_perpendicular)."""
+        if self.gimbal is None:
+            return self.unit_axis
+        return exact_perpendicular(self.axis, self.gimbal.unit_axis)  # type: ignore[arg-type]
+
+    @property
     def unit_axis(self) -> tuple[Fraction, Fraction, Fraction]:
         """g_k normalized exactly: the rational point of the unit sphere
         nearest the axis given (within 1e-15), so that |g| = 1 holds in the
@@ -539,6 +547,41 @@ def lumped_part(
 DENOMINATOR = 10**9
 """The stereographic coordinates of an axis are rationals with at most this
 denominator: the point they map to is within about 1e-17 of the axis."""
+
+
+def exact_perpendicular(
+    v: tuple[float, float, float], g_g: tuple[Fraction, Fraction, Fraction]
+) -> tuple[Fraction, Fraction, Fraction]:
+    """A rational unit vector exactly perpendicular to the rational unit
+    vector g_g, along v's part perpendicular to it: exact_unit(v) itself
+    when that is exactly perpendicular; else a rational orthonormal basis
+    (b1, b2) of the plane (the Householder reflection taking the coordinate
+    axis farthest from g_g onto it is rational and orthogonal), and the
+    rational point of the unit circle nearest v's direction in that plane
+    (stereographic, its coordinate rounded as exact_unit's), so that
+    |g_s0| = 1 and g_s0 . g_g = 0 hold in the algebra (no square roots)."""
+    unit = exact_unit(v)
+    if sum(a * b for a, b in zip(unit, g_g, strict=True)) == 0:
+        return unit
+    k = min(range(3), key=lambda i: g_g[i])
+    w = [g_g[i] - Fraction(int(i == k)) for i in range(3)]  # never 0: g_g[k] < 1
+    ww = sum(x * x for x in w)
+
+    def reflected(i: int) -> list[Fraction]:
+        x = [Fraction(int(i == j)) for j in range(3)]
+        c = 2 * sum((a * b for a, b in zip(w, x, strict=True)), Fraction(0)) / ww
+        return [a - c * b for a, b in zip(x, w, strict=True)]
+
+    b1, b2 = (reflected(i) for i in range(3) if i != k)
+    x, y = (sum(float(a) * b for a, b in zip(basis, v, strict=True)) for basis in (b1, b2))
+    if abs(x) >= abs(y):
+        t = Fraction(y / (math.hypot(x, y) + abs(x))).limit_denominator(DENOMINATOR)
+        c, s = (1 if x > 0 else -1) * (1 - t * t) / (1 + t * t), 2 * t / (1 + t * t)
+    else:
+        t = Fraction(x / (math.hypot(x, y) + abs(y))).limit_denominator(DENOMINATOR)
+        c, s = 2 * t / (1 + t * t), (1 if y > 0 else -1) * (1 - t * t) / (1 + t * t)
+    out = [c * a + s * b for a, b in zip(b1, b2, strict=True)]
+    return (out[0], out[1], out[2])
 
 
 def exact_unit(v: tuple[float, float, float]) -> tuple[Fraction, Fraction, Fraction]:

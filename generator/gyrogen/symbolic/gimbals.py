@@ -81,11 +81,8 @@ def _unit(r: Rotor, k: int) -> Unit:
     I = cluster._param(rotor_name("I", k), r.I)
     if r.gimbal is None:
         return Unit(k, cluster._axis(r, k), J, I)
-    g_g = sm.Matrix([sm.Rational(x.numerator, x.denominator) for x in r.gimbal.unit_axis])
-    g = cluster._axis(r, k)
-    g = g - g.dot(g_g) * g_g  # exactly perpendicular (rotors.check_gimbal: within a slack)
-    norm2 = sm.nsimplify(g.dot(g))
-    g_s0 = g if norm2 == 1 else g / sm.sqrt(norm2)
+    g_g = cluster._exact(r.gimbal.unit_axis)
+    g_s0 = cluster._exact(r.spin_axis)  # exactly perpendicular to g_g
     igs, igt, igg = (
         cluster._param(rotor_name(n, k), x)
         for n, x in zip(GIMBAL_INERTIA, r.gimbal.inertia, strict=True)
