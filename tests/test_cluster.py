@@ -99,10 +99,14 @@ def test_bad_cluster_is_one_line_exit_2(case: str, text: str, message: str, tmp_
 
 
 def test_axes_are_normalized_exactly() -> None:
-    for v in [(1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.5773503, 0.0, 0.8164966), (0.6, 0.8, 1e-4)]:
+    """Within 1e-16 of the axis given, a tilt of 1e-12 or 3e-10 included (no
+    rational of denominator at most 1e9 is near it but 0: it was dropped)."""
+    tilts = [(1e-12, 0.0, 1.0), (0.0, 3e-10, -1.0), (6.123233995736766e-17, 1.0, 0.0)]
+    for v in [(1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.5773503, 0.0, 0.8164966), (0.6, 0.8, 1e-4),
+              *tilts]:  # fmt: skip
         g = exact_unit(v)
         assert sum(x * x for x in g) == 1
-        assert np.allclose([float(x) for x in g], np.array(v) / np.linalg.norm(v), atol=1e-15)
+        assert np.allclose([float(x) for x in g], np.array(v) / np.linalg.norm(v), atol=1e-16), v
 
 
 ONE_ROTOR = """

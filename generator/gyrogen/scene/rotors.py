@@ -546,7 +546,18 @@ def lumped_part(
 
 DENOMINATOR = 10**9
 """The stereographic coordinates of an axis are rationals with at most this
-denominator: the point they map to is within about 1e-17 of the axis."""
+denominator where one is within ROUNDED of the coordinate (the point they
+map to is then within about 1e-17 of the axis); else the coordinate's
+float exactly (a component below 1/DENOMINATOR, a tilt of 1e-12, has no
+such rational but 0)."""
+ROUNDED = Fraction(1, 10**17)
+
+
+def _rational(x: float) -> Fraction:
+    """x as a short rational (DENOMINATOR) when one is within ROUNDED, else exactly."""
+    exact = Fraction(x)
+    near = exact.limit_denominator(DENOMINATOR)
+    return near if abs(near - exact) <= ROUNDED else exact
 
 
 def exact_perpendicular(
@@ -575,10 +586,10 @@ def exact_perpendicular(
     b1, b2 = (reflected(i) for i in range(3) if i != k)
     x, y = (sum(float(a) * b for a, b in zip(basis, v, strict=True)) for basis in (b1, b2))
     if abs(x) >= abs(y):
-        t = Fraction(y / (math.hypot(x, y) + abs(x))).limit_denominator(DENOMINATOR)
+        t = _rational(y / (math.hypot(x, y) + abs(x)))
         c, s = (1 if x > 0 else -1) * (1 - t * t) / (1 + t * t), 2 * t / (1 + t * t)
     else:
-        t = Fraction(x / (math.hypot(x, y) + abs(y))).limit_denominator(DENOMINATOR)
+        t = _rational(x / (math.hypot(x, y) + abs(y)))
         c, s = 2 * t / (1 + t * t), (1 if y > 0 else -1) * (1 - t * t) / (1 + t * t)
     out = [c * a + s * b for a, b in zip(b1, b2, strict=True)]
     return (out[0], out[1], out[2])
@@ -594,7 +605,7 @@ def exact_unit(v: tuple[float, float, float]) -> tuple[Fraction, Fraction, Fract
     big = max(range(3), key=lambda i: abs(g[i]))
     sign = 1 if g[big] > 0 else -1
     others = [i for i in range(3) if i != big]
-    s, t = (Fraction(g[i] / (1.0 + abs(g[big]))).limit_denominator(DENOMINATOR) for i in others)
+    s, t = (_rational(g[i] / (1.0 + abs(g[big]))) for i in others)
     d = 1 + s * s + t * t
     out = [Fraction(0)] * 3
     out[others[0]], out[others[1]] = 2 * s / d, 2 * t / d
