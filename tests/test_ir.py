@@ -140,3 +140,16 @@ def test_the_printers_write_numbers_of_every_sign(language: str, tmp_path: Path)
     signed = _signed()
     got = compiled_expressions.values(language, [printer.expr(e) for e, _ in signed], tmp_path)
     assert got == [v for _, v in signed]
+
+
+def test_a_run_of_parentheses_is_wrapped_after_one() -> None:
+    """A long sum's grouping (Fortran keeps C's order with parentheses) left
+    no comma or space within WRAP columns: the line stayed 2016 columns long,
+    past Fortran's 132."""
+    from gyrogen.codegen.ir.printer import WRAP, wrap
+
+    text = "out(0) = " + "(" * 150 + " + ".join(f"a{i})" for i in range(150)) + ";"
+    lines = wrap(text, "    ", continuation=" &")
+    assert all(len(line) <= WRAP for line in lines), max(map(len, lines))
+    joined = "".join(line.removesuffix(" &") for line in lines)
+    assert joined.replace(" ", "") == text.replace(" ", "")

@@ -19,7 +19,7 @@ import sympy as sm
 from gyrogen.abi import SIGNATURES, Arg
 from gyrogen.codegen.checks import LOOP
 from gyrogen.codegen.checks import lowered as lowered_checks
-from gyrogen.codegen.context import Local, SceneContext
+from gyrogen.codegen.context import Local, SceneContext, Table
 from gyrogen.codegen.integrators.trig import VARIANTS
 from gyrogen.codegen.ir.nodes import (
     At,
@@ -404,6 +404,15 @@ def _parameter(v: Local) -> E:
         return At("p", (Int(v.index),))
     assert v.value is not None, v
     return Num(v.value)
+
+
+def tables_used(unit: SceneContext, funcs: Iterable[Func | None]) -> list[Table]:
+    """The torque tables (unit.torque_tables) funcs read: the ODE unit's
+    Jacobian reads one where the rates' derivatives depend on a tabulated
+    torque (a gimbal's solve multiplies the torques by functions of the
+    angles), and a file defines or imports only those."""
+    names = called([f for f in funcs if f is not None])
+    return [tb for tb in unit.torque_tables if f"{unit.prefix}_{tb.name}" in names]
 
 
 def trig_used(funcs: Iterable[Func | None]) -> list[str]:

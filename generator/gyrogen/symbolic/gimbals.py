@@ -283,7 +283,9 @@ def _forcing(units: list[Unit], h: sm.Matrix, v: dict) -> sm.Matrix:
 
 def _on_circles(e: sm.Expr, units: list[Unit]) -> sm.Expr:
     """e with cos and sin of every gimbal angle as c, s, expanded, s^2 as
-    1 - c^2: its normal form (0 when e vanishes for every angle)."""
+    1 - c^2, and a fixed rotor's runtime axis on its unit sphere
+    (cluster._on_sphere): its normal form (0 when e vanishes for every angle
+    and axis)."""
     swap = {}
     for x in units:
         if x.g_g is not None:
@@ -300,7 +302,7 @@ def _on_circles(e: sm.Expr, units: list[Unit]) -> sm.Expr:
                 lambda a, sx=sx, cx=cx: (1 - cx**2) ** (a.exp // 2) * sx ** (a.exp % 2),
             )
         )
-    return e
+    return cluster._on_sphere(e, [x.axis for x in units if x.g_g is None])
 
 
 def _prove(units: list[Unit], lumped: sm.Matrix, carrier: sm.Matrix) -> sm.Matrix:

@@ -51,6 +51,9 @@ def files(unit: SceneContext) -> dict[str, str]:
         "source": "\n".join(printer.function(f) for f in model),
         "jac": None if jac is None else printer.function(jac),
         "rhs_lanes": None if lanes_ode is None else printer.function(lanes_ode),
+        "ode_tables": tables_text(
+            "c", unit.prefix, unit.macro, statements.tables_used(unit, ode_model)
+        ),
         "ode_trig": trig_text("c", unit.prefix, unit.macro, [v for v in VARIANTS if v in ode_trig]),
         "methods": unit.methods,
         "ir": c_text(

@@ -46,6 +46,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "tables": tables_text("fortran", unit.prefix, unit.macro, unit.torque_tables),
         "trig": trig_text("fortran", unit.prefix, unit.macro, trig),
         "trig_names": trig,
+        "ode_table_names": [tb.name for tb in statements.tables_used(unit, [jac])],
         "ode_trig_names": used([jac, *([rhs] if unit.jet is not None else [])], gimbal),
         "setup": printer.function(setup),
         "rhs": printer.function(rhs),

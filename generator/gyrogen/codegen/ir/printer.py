@@ -57,17 +57,21 @@ WRAP = 100
 
 def wrap(text: str, cont: str, tail: str = "", continuation: str = "") -> list[str]:
     """A line of code continued on new lines that start with cont before it
-    would pass WRAP, after a comma where one is in reach, else after a space;
-    each continued line ends with the language's continuation (Fortran's " &")."""
+    would pass WRAP, after a comma where one is in reach, else after a space,
+    else after an opening parenthesis (a run of them: Fortran's grouping of a
+    long sum); each continued line ends with the language's continuation
+    (Fortran's " &")."""
     lines = []
     while len(text) > WRAP:
-        cut = text.rfind(", ", len(cont) + 8, WRAP - 2) + 1 or text.rfind(
-            " ", len(cont) + 8, WRAP - 2
-        )
+        start = len(cont) + 8
+        cut = text.rfind(", ", start, WRAP - 2) + 1 or text.rfind(" ", start, WRAP - 2)
+        rest = cut + 1  # the space at cut is dropped
         if cut < 0:
-            break
+            cut = rest = text.rfind("(", start, WRAP - 2) + 1
+            if cut <= 0:
+                break
         lines.append(text[:cut] + continuation)
-        text = cont + text[cut + 1 :]
+        text = cont + text[rest:]
     return [*lines, text + tail]
 
 
