@@ -105,9 +105,10 @@ bench-auto: setup
 bench-call: setup
 	$(BIN)/python benchmarks/bench_call.py
 
-## bench-grid: an output grid (_grid, 1001 times) against the end point alone and 1000 restarted calls
+## bench-grid: an output grid (_grid, 1001 times) against the end point alone and 1000 restarted calls,
+## then taylor's and dop853's against heyoka's propagate_grid at equal error
 bench-grid: setup
-	$(BIN)/python benchmarks/bench_grid.py
+	$(BIN)/python benchmarks/bench_grid.py --heyoka
 
 ## bench-events: three non-terminal events (nutation, wheel rate, q2 thresholds) against the plain run, per method
 bench-events: setup

@@ -19,6 +19,17 @@ point's. Then a batch of S start states (the scene's, each rate scaled by a
 draw from [0.5, 1.5]) on one thread: `_batch` to T against `_grid_batch`
 over 21 and over N + 1 times (in SIMD lanes for the methods whose `_batch`
 is).
+
+Then (`--heyoka`, with heyoka installed: the `bench` extra) the grid
+against heyoka's `propagate_grid` over the same N + 1 times, read at equal
+error: taylor and dop853's `_grid` (raw cffi calls) and heyoka's
+`taylor_adaptive.propagate_grid` (one Python call) at each tolerance of a
+ladder, the error the largest over every grid time and state of
+|x - ref| / (1 + |ref|) against heyoka's real128 integrator at 1e-32 (checked
+against a second run at 1e-28), each contender's time read along its
+work-precision front by log-log interpolation at equal error (no
+extrapolation), and heyoka's own propagate_grid / propagate_until at each
+tolerance beside it (the issue's anchor: 12.6 at 1e-10).
 """
 
 from __future__ import annotations
@@ -152,6 +163,94 @@ def errors(
     )
 
 
+LADDER = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)
+"""The tolerances of the heyoka comparison (rtol = atol; heyoka's one tol)."""
+LEVELS = (1e-6, 1e-8, 1e-10, 1e-12)
+"""The error levels the fronts are read at."""
+
+
+def grid_reference(hy: Any, peer: Any, x0: np.ndarray, c: np.ndarray, times: np.ndarray,
+                   tol: float) -> np.ndarray:  # fmt: skip
+    """The states at times by heyoka's real128 integrator at tol (compact
+    mode), from the double x0, rounded to double."""
+    q = hy.real128
+    ta = hy.taylor_adaptive(
+        peer.pairs, np.array([q(float(v)) for v in x0]), tol=q(tol), fp_type=q,
+        compact_mode=True, pars=np.array([q(float(v)) for v in c[: peer.npars]]),
+    )  # fmt: skip
+    out = ta.propagate_grid(np.array([q(float(t)) for t in times]))
+    if out[0] != hy.taylor_outcome.time_limit:
+        raise RuntimeError(f"heyoka's real128 grid stopped: {out[0]}")
+    return np.array([[float(v) for v in row] for row in out[-1]])
+
+
+def heyoka_table(comp: Compiled, x0: np.ndarray, c: np.ndarray, times: np.ndarray,
+                 args: Any) -> None:  # fmt: skip
+    """taylor and dop853's _grid against heyoka's propagate_grid, at equal error."""
+    from gyrogen.analysis.bench import heyoka_peer
+    from gyrogen.analysis.bench.workprec import Run, seconds_at
+    from gyrogen.codegen.generate import unit_of
+
+    hy = heyoka_peer.module()
+    if hy is None:
+        print("\nheyoka: not installed (the bench extra); no comparison")
+        return
+    heyoka_peer.one_thread()
+    peer = heyoka_peer.system(hy, unit_of(default()))
+    heyoka_peer.check(peer, comp.rhs, c, x0, print)
+    ref = grid_reference(hy, peer, x0, c, times, heyoka_peer.QUAD_TOL)
+    check = grid_reference(hy, peer, x0, c, times, heyoka_peer.QUAD_CHECK_TOL)
+    print(f"reference: heyoka {hy.__version__} real128 at {heyoka_peer.QUAD_TOL:g}, "
+          f"{np.max(np.abs(check - ref) / (1 + np.abs(ref))):.1e} from a run at "
+          f"{heyoka_peer.QUAD_CHECK_TOL:g}")  # fmt: skip
+    runs: dict[str, list[Run]] = {"taylor": [], "dop853": [], "heyoka": []}
+    anchor: list[str] = []
+    t1 = float(times[-1])
+    for tol in LADDER:
+        for method in ("taylor", "dop853"):
+            if tol < methods.get(method).rtol_floor:
+                continue
+            grid = contenders(comp, method, x0, c, times, tol)["grid"]
+            seconds = min(best_time(grid, args.repeats, clock=time.thread_time)
+                          for _ in range(args.rounds))  # fmt: skip
+            states, _, code = comp.integrate_grid(method, x0, c, times, rtol=tol, atol=tol)
+            err = float(np.max(np.abs(states - ref) / (1 + np.abs(ref))))
+            runs[method].append(Run(method, "c", tol, err, seconds, 0, "ok" if code == 0 else
+                                    f"code {code}"))  # fmt: skip
+        ta = heyoka_peer.Scalar(peer, x0, c, t1, tol).ta
+
+        def on_grid(ta: Any = ta) -> Any:
+            ta.time = 0.0
+            ta.state[:] = x0
+            return ta.propagate_grid(times)
+
+        def until(ta: Any = ta) -> Any:
+            ta.time = 0.0
+            ta.state[:] = x0
+            return ta.propagate_until(t1)
+
+        grid_s = min(best_time(on_grid, args.repeats, clock=time.thread_time)
+                     for _ in range(args.rounds))  # fmt: skip
+        until_s = min(best_time(until, args.repeats, clock=time.thread_time)
+                      for _ in range(args.rounds))  # fmt: skip
+        err = float(np.max(np.abs(on_grid()[-1] - ref) / (1 + np.abs(ref))))
+        runs["heyoka"].append(Run("heyoka", "llvm", tol, err, grid_s, 0))
+        anchor.append(f"{tol:g}: {grid_s / until_s:.1f}")
+    print(
+        f"\nheyoka's propagate_grid / propagate_until over {times.size} times, by tol: "
+        + ", ".join(anchor)
+    )
+    print("\nread at equal error (error over every grid time and state), one thread, us:")
+    print(f"{'error':>8} {'taylor':>10} {'dop853':>10} {'heyoka':>10} "
+          f"{'heyoka/taylor':>14} {'heyoka/dop853':>14}")  # fmt: skip
+    for level in LEVELS:
+        at = {name: seconds_at(rs, level) for name, rs in runs.items()}
+        cells = [f"{v * 1e6:10.1f}" if v else f"{'-':>10}" for v in at.values()]
+        ratio = [f"{at['heyoka'] / at[m]:14.2f}" if at["heyoka"] and at[m] else f"{'-':>14}"
+                 for m in ("taylor", "dop853")]  # fmt: skip
+        print(f"{level:8.0e} {' '.join(cells)} {' '.join(ratio)}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--t1", type=float, default=10.0)
@@ -160,6 +259,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--states", type=int, default=500)
+    ap.add_argument("--heyoka", action="store_true", help="and against heyoka's propagate_grid")
     args = ap.parse_args()
     scene = default()
     with tempfile.TemporaryDirectory(prefix="gyrogen-grid-") as tmp:
@@ -186,6 +286,8 @@ def main() -> None:
         print(f"{method:<8} {e:10.1f} {g:10.1f} {r:11.1f} {g / e:9.2f} {r / e:12.1f} "
               f"{grid_err:10.2e} {stop_err:10.2e} {end_err:10.2e}")  # fmt: skip
     batch_table(comp, x0, c, times, args)
+    if args.heyoka:
+        heyoka_table(comp, x0, c, times, args)
     print(f"\nafter: {load()}")
 
 
