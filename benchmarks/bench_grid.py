@@ -29,7 +29,11 @@ ladder, the error the largest over every grid time and state of
 against a second run at 1e-28), each contender's time read along its
 work-precision front by log-log interpolation at equal error (no
 extrapolation), and heyoka's own propagate_grid / propagate_until at each
-tolerance beside it (the issue's anchor: 12.6 at 1e-10).
+tolerance beside it (the issue's anchor: 12.6 at 1e-10). The same in
+batch (`--heyoka-states` S, default 16): `_grid_batch` over S start states
+against heyoka's `taylor_adaptive_batch.propagate_grid` at its recommended
+SIMD width, a Python loop over its batches, one thread each, the error the
+largest over every state, grid time and start against real128 grids.
 """
 
 from __future__ import annotations
@@ -121,9 +125,7 @@ def batch_table(
     comp: Compiled, x0: np.ndarray, c: np.ndarray, times: np.ndarray, args: Any
 ) -> None:
     """_batch against _grid_batch for every adaptive method, one thread."""
-    rates = [i for i, name in enumerate(comp.manifest["states"]) if name.startswith("u")]
-    x0s = np.tile(x0, (args.states, 1))
-    x0s[:, rates] *= np.random.default_rng(1).uniform(0.5, 1.5, (args.states, 1))
+    x0s = starts(comp, x0, args.states)
     comp.lib.gyrogen_threads(1)
     many = f"grid {times.size}"
     print(f"\n{args.states} states, one thread: _batch against _grid_batch")
@@ -184,11 +186,83 @@ def grid_reference(hy: Any, peer: Any, x0: np.ndarray, c: np.ndarray, times: np.
     return np.array([[float(v) for v in row] for row in out[-1]])
 
 
+def starts(comp: Compiled, x0: np.ndarray, n: int) -> np.ndarray:
+    """n start states: x0 with each body and wheel rate scaled by a draw from [0.5, 1.5]."""
+    rates = [i for i, name in enumerate(comp.manifest["states"]) if name.startswith("u")]
+    x0s = np.tile(x0, (n, 1))
+    x0s[:, rates] *= np.random.default_rng(1).uniform(0.5, 1.5, (n, 1))
+    return x0s
+
+
+def read(runs: dict[str, list[Any]], title: str) -> None:
+    """Each contender's time at LEVELS along its front, and heyoka's over ours."""
+    from gyrogen.analysis.bench.workprec import seconds_at
+
+    print(f"\n{title}, us:")
+    print(f"{'error':>8} {'taylor':>10} {'dop853':>10} {'heyoka':>10} "
+          f"{'heyoka/taylor':>14} {'heyoka/dop853':>14}")  # fmt: skip
+    for level in LEVELS:
+        at = {name: seconds_at(rs, level) for name, rs in runs.items()}
+        cells = [f"{v * 1e6:10.1f}" if v else f"{'-':>10}" for v in at.values()]
+        ratio = [f"{at['heyoka'] / at[m]:14.2f}" if at["heyoka"] and at[m] else f"{'-':>14}"
+                 for m in ("taylor", "dop853")]  # fmt: skip
+        print(f"{level:8.0e} {' '.join(cells)} {' '.join(ratio)}")
+
+
+def heyoka_batch(comp: Compiled, peer: Any, x0: np.ndarray, c: np.ndarray, times: np.ndarray,
+                 args: Any) -> None:  # fmt: skip
+    """_grid_batch against heyoka's taylor_adaptive_batch.propagate_grid."""
+    from gyrogen.analysis.bench import heyoka_peer
+    from gyrogen.analysis.bench.workprec import Run
+
+    hy, n = peer.hy, args.heyoka_states
+    x0s = starts(comp, x0, n)
+    refs = np.array([grid_reference(hy, peer, x, c, times, heyoka_peer.QUAD_TOL) for x in x0s])
+    comp.lib.gyrogen_threads(1)
+    runs: dict[str, list[Run]] = {"taylor": [], "dop853": [], "heyoka": []}
+    for tol in LADDER:
+        for method in ("taylor", "dop853"):
+            if tol < methods.get(method).rtol_floor:
+                continue
+            run = batches(comp, method, x0s, c, times, tol)[f"grid {times.size}"]
+            seconds = min(best_time(run, args.repeats, clock=time.thread_time)
+                          for _ in range(args.rounds))  # fmt: skip
+            states, _, codes = comp.integrate_grid_batch(method, x0s, c, times, rtol=tol,
+                                                         atol=tol)  # fmt: skip
+            err = float(np.max(np.abs(states - refs) / (1 + np.abs(refs))))
+            ok = "ok" if not np.any(codes) else "failed"
+            runs[method].append(Run(method, "c", tol, err, seconds, 0, ok))
+        batch = heyoka_peer.Batch(peer, x0, c, float(times[-1]), tol)
+        w, ta = batch.width, batch.ta
+        pad = -n % w
+        xs = np.concatenate([x0s, np.repeat(x0s[-1:], pad, axis=0)]) if pad else x0s
+        grid = np.ascontiguousarray(np.repeat(times[:, None], w, axis=1))
+        out = np.empty((len(xs), times.size, comp.nx))
+
+        def on_grid(ta: Any = ta, w: int = w, xs: np.ndarray = xs, grid: np.ndarray = grid,
+                    out: np.ndarray | None = None) -> None:  # fmt: skip
+            """Every batch over the grid (out: the states kept, outside the timing)."""
+            for i in range(0, len(xs), w):
+                ta.set_time(0.0)
+                ta.state[:] = xs[i : i + w].T
+                states = ta.propagate_grid(grid)[1]
+                if out is not None:
+                    out[i : i + w] = np.moveaxis(states, 2, 0)
+
+        seconds = min(best_time(on_grid, args.repeats, clock=time.thread_time)
+                      for _ in range(args.rounds))  # fmt: skip
+        on_grid(out=out)
+        err = float(np.max(np.abs(out[:n] - refs) / (1 + np.abs(refs))))
+        runs["heyoka"].append(Run("heyoka", "llvm", tol, err, seconds, 0))
+    read(runs, f"batch of {n} starts on one thread, read at equal error (heyoka's SIMD width "
+               f"{hy.recommended_simd_size()})")  # fmt: skip
+
+
 def heyoka_table(comp: Compiled, x0: np.ndarray, c: np.ndarray, times: np.ndarray,
                  args: Any) -> None:  # fmt: skip
     """taylor and dop853's _grid against heyoka's propagate_grid, at equal error."""
     from gyrogen.analysis.bench import heyoka_peer
-    from gyrogen.analysis.bench.workprec import Run, seconds_at
+    from gyrogen.analysis.bench.workprec import Run
     from gyrogen.codegen.generate import unit_of
 
     hy = heyoka_peer.module()
@@ -240,15 +314,9 @@ def heyoka_table(comp: Compiled, x0: np.ndarray, c: np.ndarray, times: np.ndarra
         f"\nheyoka's propagate_grid / propagate_until over {times.size} times, by tol: "
         + ", ".join(anchor)
     )
-    print("\nread at equal error (error over every grid time and state), one thread, us:")
-    print(f"{'error':>8} {'taylor':>10} {'dop853':>10} {'heyoka':>10} "
-          f"{'heyoka/taylor':>14} {'heyoka/dop853':>14}")  # fmt: skip
-    for level in LEVELS:
-        at = {name: seconds_at(rs, level) for name, rs in runs.items()}
-        cells = [f"{v * 1e6:10.1f}" if v else f"{'-':>10}" for v in at.values()]
-        ratio = [f"{at['heyoka'] / at[m]:14.2f}" if at["heyoka"] and at[m] else f"{'-':>14}"
-                 for m in ("taylor", "dop853")]  # fmt: skip
-        print(f"{level:8.0e} {' '.join(cells)} {' '.join(ratio)}")
+    read(runs, "one trajectory on one thread, read at equal error (error over every grid time "
+               "and state)")  # fmt: skip
+    heyoka_batch(comp, peer, x0, c, times, args)
 
 
 def main() -> None:
@@ -260,6 +328,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--states", type=int, default=500)
     ap.add_argument("--heyoka", action="store_true", help="and against heyoka's propagate_grid")
+    ap.add_argument("--heyoka-states", type=int, default=16, help="the batch against heyoka's")
     args = ap.parse_args()
     scene = default()
     with tempfile.TemporaryDirectory(prefix="gyrogen-grid-") as tmp:
