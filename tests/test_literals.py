@@ -48,6 +48,18 @@ def test_scaled_up_fractions_become_the_ratio_they_mean() -> None:
     assert float(f.subs(at)) == pytest.approx(float(e.subs(at)), rel=4e-16)
 
 
+def test_a_sum_of_exact_rationals_of_huge_denominators_keeps_its_terms() -> None:
+    """The content of a sum of rationals whose denominators' lcm is past
+    double range (a CMG's exact axes: 1/5.5e530) is not pulled out of a
+    power of it: each term's coefficient is a double. It was refused as a
+    constant outside double range, though every term is of order one."""
+    q1, q2 = sm.Integer(3) ** 560, sm.Integer(7) ** 330
+    e = 2 * (sm.Rational(q1 + 1, q1) * x + sm.Rational(q2 - 1, q2)) ** 2
+    f = writable_form(e)
+    assert writable(f)
+    assert float(f.subs(x, 0.5)) == pytest.approx(float(e.subs(x, 0.5)), rel=1e-15)
+
+
 def test_large_integers_become_doubles_and_small_ones_stay() -> None:
     assert as_double(sm.Integer(3)) == 3 and isinstance(as_double(sm.Integer(3)), sm.Integer)
     big = as_double(sm.Integer(2**40 + 1))

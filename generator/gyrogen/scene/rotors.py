@@ -547,17 +547,18 @@ def lumped_part(
 DENOMINATOR = 10**9
 """The stereographic coordinates of an axis are rationals with at most this
 denominator where one is within ROUNDED of the coordinate (the point they
-map to is then within about 1e-17 of the axis); else the coordinate's
-float exactly (a component below 1/DENOMINATOR, a tilt of 1e-12, has no
-such rational but 0)."""
+map to is then within about 1e-17 of the axis); else, a coordinate below
+1/DENOMINATOR (a tilt of 1e-12 has no such rational but 0), with at most
+FINE_DENOMINATOR."""
+FINE_DENOMINATOR = 10**17
 ROUNDED = Fraction(1, 10**17)
 
 
 def _rational(x: float) -> Fraction:
-    """x as a short rational (DENOMINATOR) when one is within ROUNDED, else exactly."""
+    """x as a short rational within ROUNDED of it (module docstring)."""
     exact = Fraction(x)
     near = exact.limit_denominator(DENOMINATOR)
-    return near if abs(near - exact) <= ROUNDED else exact
+    return near if abs(near - exact) <= ROUNDED else exact.limit_denominator(FINE_DENOMINATOR)
 
 
 def exact_perpendicular(

@@ -114,19 +114,33 @@ def _rewrite(e: sm.Expr) -> sm.Expr:
     return e.func(*(_rewrite(a) for a in e.args))
 
 
+def _normal(value: sm.Expr) -> bool:
+    """value is a double within range (as_double would take it)."""
+    try:
+        x = float(value)
+    except OverflowError:
+        return False
+    return math.isfinite(x) and (x == 0.0) == (value == 0) and (x == 0.0 or abs(x) >= 2.0**-1022)
+
+
 def _product(e: sm.Mul) -> sm.Expr:
-    """The numbers of a product, and the integer contents of the sums in it
-    (raised to their powers), gathered into one coefficient."""
+    """The numbers of a product (a root of a number too: an exact rational's
+    sqrt(p/q) is sqrt(p q)/q, each part maybe past double range where the
+    whole is not), and the integer contents of the sums in it (raised to
+    their powers), gathered into one coefficient."""
     coeff: sm.Expr = sm.S.One
     rest: list[sm.Expr] = []
     for factor in e.args:
         base, exp = factor.as_base_exp()
-        if isinstance(factor, sm.Number):
+        if isinstance(factor, sm.Number) or factor.is_number:
             coeff *= factor
-        elif isinstance(base, sm.Add) and exp.is_Integer:
-            content, primitive = base.as_content_primitive()
-            coeff *= content**exp
-            rest.append(sm.Pow(_rewrite(primitive), exp))
+        elif (
+            isinstance(base, sm.Add)
+            and exp.is_Integer
+            and _normal((split := base.as_content_primitive())[0] ** exp)
+        ):  # an exact rational's content (1/lcm of the terms' denominators) may not be
+            coeff *= split[0] ** exp
+            rest.append(sm.Pow(_rewrite(split[1]), exp))
         else:
             rest.append(_rewrite(factor))
     body = sm.Mul(*rest)
