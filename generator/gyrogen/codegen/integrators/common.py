@@ -11,8 +11,11 @@ gimbal_lock (the Euler parameters' is quaternion.py)."""
 from __future__ import annotations
 
 import math
+import sys
+from collections.abc import Sequence
 
 from gyrogen import abi
+from gyrogen.abi_groups import ANGLE_SCALE, StateKind
 from gyrogen.codegen.integrators import quaternion as euler_parameters
 from gyrogen.codegen.ir.nodes import (
     Bool,
@@ -193,9 +196,36 @@ def larger(a: E, b: E) -> E:
     return sel(cmp(b, ">", a), b, a)
 
 
+CAP = Var("scale_cap")
+"""Each state's largest size in an error scale (cap_table): ANGLE_SCALE for
+an angle, DBL_MAX for the rest."""
+
+
+def cap_table(kinds: Sequence[StateKind]) -> Decl:
+    """CAP's constant table for states of these kinds (abi_groups.state_kind);
+    program.program declares it in every function that reads CAP."""
+    caps = tuple(ANGLE_SCALE if k == "angle" else sys.float_info.max for k in kinds)
+    return Decl(CAP.name, "double", (len(caps),), values=caps)
+
+
+def capped(size: E, cap: E) -> E:
+    """min(size, cap), a NaN size kept (one compare and a select, as larger)."""
+    return sel(cmp(size, ">", cap), cap, size)
+
+
+def size(at: E, *of: Var) -> E:
+    """State at's size in an error scale: the largest |v[at]| of the vectors
+    of (NaN where the last is), an angle's at most ANGLE_SCALE (CAP)."""
+    out: E = fn("abs", of[0][at])
+    for v in of[1:]:
+        out = larger(out, fn("abs", v[at]))
+    return capped(out, CAP[at])
+
+
 def scaled(e: E, at: E) -> E:
-    """e / (atol + rtol max(|x_i|, |xnew_i|)); x is finite, xnew may not be."""
-    return e / (atol + rtol * larger(fn("abs", x[at]), fn("abs", xnew[at])))
+    """e / (atol + rtol max(|x_i|, |xnew_i|)), an angle's max at most
+    ANGLE_SCALE; x is finite, xnew may not be."""
+    return e / (atol + rtol * size(at, x, xnew))
 
 
 def error_norm() -> Func:
@@ -207,7 +237,8 @@ def error_norm() -> Func:
     )
     doc = (
         "The standard error norm: sqrt(mean((err_i / sk_i)^2)) with",
-        "sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1.",
+        "sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi",
+        "(scale_cap); a step is accepted when <= 1.",
     )
     params = (arr("err"), arr("x"), arr("xnew"), *TOLERANCES)
     return Func("error_norm", params, body, "double", (real("total"),), doc)
@@ -215,8 +246,8 @@ def error_norm() -> Func:
 
 def initial_step() -> Func:
     f0, f1, x1 = Var("f0"), Var("f1"), Var("x1")
-    dnf, dny, der2, der12, h1, sk, d = (
-        Var(n) for n in ("dnf", "dny", "der2", "der12", "h1", "sk", "d")
+    dnf, dny, der2, der12, h1, sk, d, xs = (
+        Var(n) for n in ("dnf", "dny", "der2", "der12", "h1", "sk", "d", "xs")
     )
     order = Var("order")
     body = (
@@ -226,11 +257,12 @@ def initial_step() -> Func:
             "i",
             NX,
             (
-                assign(sk, atol + rtol * fn("abs", x[i])),
+                assign(xs, size(i, x)),
+                assign(sk, atol + rtol * xs),
                 assign(dnf, dnf + (f0[i] / sk) * (f0[i] / sk)),
-                assign(dny, dny + (x[i] / sk) * (x[i] / sk)),
+                assign(dny, dny + (xs / sk) * (xs / sk)),
             ),
-            ("sk",),
+            ("xs", "sk"),
         ),
         assign(
             h,
@@ -249,7 +281,7 @@ def initial_step() -> Func:
             "i",
             NX,
             (
-                assign(d, (f1[i] - f0[i]) / (atol + rtol * fn("abs", x[i]))),
+                assign(d, (f1[i] - f0[i]) / (atol + rtol * size(i, x))),
                 assign(der2, der2 + d * d),
             ),
             ("d",),
@@ -287,7 +319,8 @@ def initial_step() -> Func:
     )
     doc = (
         "Hairer's HINIT (dopri5.f): the first step h such that",
-        "h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step.",
+        "h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;",
+        "|x| and the scale read an angle's size at most pi (scale_cap).",
     )
     return Func("initial_step", params, body, "double", locals_, doc)
 
