@@ -11,7 +11,6 @@ gimbal_lock (the Euler parameters' is quaternion.py)."""
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Sequence
 
 from gyrogen import abi
@@ -196,30 +195,34 @@ def larger(a: E, b: E) -> E:
     return sel(cmp(b, ">", a), b, a)
 
 
-CAP = Var("scale_cap")
-"""Each state's largest size in an error scale (cap_table): ANGLE_SCALE for
-an angle, DBL_MAX for the rest."""
+ANGLE = Var("is_angle")
+"""Each state's 1.0 when it is an angle, else 0.0 (angle_table): the error
+scales cap an angle's size at ANGLE_SCALE (size)."""
 
 
-def cap_table(kinds: Sequence[StateKind]) -> Decl:
-    """CAP's constant table for states of these kinds (abi_groups.state_kind);
-    program.program declares it in every function that reads CAP."""
-    caps = tuple(ANGLE_SCALE if k == "angle" else sys.float_info.max for k in kinds)
-    return Decl(CAP.name, "double", (len(caps),), values=caps)
+def angle_table(kinds: Sequence[StateKind]) -> Decl:
+    """ANGLE's constant table for states of these kinds (abi_groups.state_kind);
+    program.program declares it in every function that reads ANGLE."""
+    flags = tuple(1.0 if k == "angle" else 0.0 for k in kinds)
+    return Decl(ANGLE.name, "double", (len(flags),), values=flags)
 
 
-def capped(size: E, cap: E) -> E:
-    """min(size, cap), a NaN size kept (one compare and a select, as larger)."""
-    return sel(cmp(size, ">", cap), cap, size)
+def capped(size: E, flag: E | None = None) -> E:
+    """size at most ANGLE_SCALE where flag is 1 (an angle), size itself where
+    it is 0 (0 size is never above it; 0 Inf is NaN, not above it either): a
+    NaN or an Inf magnitude is kept, one multiply, compare and select. No
+    flag: an angle."""
+    scale = Num(ANGLE_SCALE)
+    return sel(cmp(size if flag is None else flag * size, ">", scale), scale, size)
 
 
 def size(at: E, *of: Var) -> E:
     """State at's size in an error scale: the largest |v[at]| of the vectors
-    of (NaN where the last is), an angle's at most ANGLE_SCALE (CAP)."""
+    of (NaN where the last is), an angle's at most ANGLE_SCALE (ANGLE)."""
     out: E = fn("abs", of[0][at])
     for v in of[1:]:
         out = larger(out, fn("abs", v[at]))
-    return capped(out, CAP[at])
+    return capped(out, ANGLE[at])
 
 
 def scaled(e: E, at: E) -> E:
@@ -238,7 +241,7 @@ def error_norm() -> Func:
     doc = (
         "The standard error norm: sqrt(mean((err_i / sk_i)^2)) with",
         "sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi",
-        "(scale_cap); a step is accepted when <= 1.",
+        "(is_angle); a step is accepted when <= 1.",
     )
     params = (arr("err"), arr("x"), arr("xnew"), *TOLERANCES)
     return Func("error_norm", params, body, "double", (real("total"),), doc)
@@ -320,7 +323,7 @@ def initial_step() -> Func:
     doc = (
         "Hairer's HINIT (dopri5.f): the first step h such that",
         "h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;",
-        "|x| and the scale read an angle's size at most pi (scale_cap).",
+        "|x| and the scale read an angle's size at most pi (is_angle).",
     )
     return Func("initial_step", params, body, "double", locals_, doc)
 

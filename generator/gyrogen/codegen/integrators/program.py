@@ -153,7 +153,7 @@ def program(
     """The methods' functions, the lanes' and the shared ones they call;
     measured: how many leading states the error norms measure (all: None);
     kinds: each state's (abi_groups.state_kind), the error scales' caps
-    (common.cap_table, declared by each function that reads it)."""
+    (common.angle_table, declared by each function that reads it)."""
     pairs = [m for m in methods if m.pair]
     given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet, events)
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
@@ -187,12 +187,12 @@ def program(
 
 
 def with_caps(f: Func, kinds: Sequence[StateKind]) -> Func:
-    """f with the error scales' caps (common.cap_table) among its locals
+    """f with the error scales' angles (common.angle_table) among its locals
     when it reads them."""
-    if not any(isinstance(n, At) and n.name == common.CAP.name for s in f.body for n in walk(s)):
+    if not any(isinstance(n, At) and n.name == common.ANGLE.name for s in f.body for n in walk(s)):
         return f
-    assert kinds, f"{f.name} reads the caps: program needs the states' kinds"
-    return replace(f, locals=(*f.locals, common.cap_table(kinds)))
+    assert kinds, f"{f.name} reads the angles: program needs the states' kinds"
+    return replace(f, locals=(*f.locals, common.angle_table(kinds)))
 
 
 def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:

@@ -16,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from gyrogen import methods as registry
-from gyrogen.abi_groups import ANGLE_SCALE, StateKind, state_group, state_kind
+from gyrogen.abi_groups import StateKind, state_group, state_kind
 from gyrogen.codegen.integrators import common, driver
 from gyrogen.codegen.integrators.common import (
     NX,
@@ -250,7 +250,7 @@ UNMEASURED = "unmeasured"
 system's variational part when its error is not measured (it rides on x's
 steps)."""
 
-SIZES = {"magnitude": fn("abs", x[i]), "angle": common.capped(fn("abs", x[i]), Num(ANGLE_SCALE))}
+SIZES = {"magnitude": fn("abs", x[i]), "angle": common.capped(fn("abs", x[i]))}
 """How a state of each kind (state_scales) enters its group's xmax."""
 
 
