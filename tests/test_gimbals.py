@@ -89,6 +89,9 @@ BAD = [
      "'pid': not one of 'none', 'constant', 'rate_servo', 'table'"),
     ("unknown key", edit("m = 6.0\n\n[[rotors]]", "m = 6.0\nIGs = 1.0\n\n[[rotors]]"),
      "rotors.0.gimbal.IGs: unknown key"),
+    ("wound gimbal", edit("initial = { u1 = 0.08,", "initial = { gam1 = 6.3e6, u1 = 0.08,"),
+     "simulate.initial.gam1 = 6.3e+06 rad: more than 2607 turns (16384 rad), where a double"
+     " holds the angle only to 4.7e-10 rad; give it modulo 2 pi"),
 ]  # fmt: skip
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gyrogen.abi_groups import MAX_START_ANGLE
 from gyrogen.codegen.generate import generate
 from gyrogen.errors import BuildError, SceneError
 from gyrogen.limits import MAX_OUTPUT_POINTS, MAX_SCENE_BYTES
@@ -97,6 +98,13 @@ BAD = [
     ("attitude", edit('targets = ["c"', 'attitude = "rodrigues"\ntargets = ["c"'), "attitude"),
     ("initial", edit("initial = { u1", "initial = { u9 = 1.0, u1"), "u9 is not a state"),
     (
+        "wound rotor angle",
+        edit("initial = { u1", "initial = { q4 = 1e5, u1"),
+        "simulate.initial.q4 = 100000 rad: more than 2607 turns (16384 rad), where a double "
+        "holds the angle only to 7.3e-12 rad; give it modulo 2 pi",
+    ),
+    ("wound attitude", edit("initial = { u1", "initial = { q1 = -16385.0, u1"), "q1 = -16385 rad"),
+    (
         "table T 1e300",
         edit('"table"', '"table"\ntorque_table = [[0, 0], [1, 1e300]]', TABLED),
         "effects: torque_table[1]: T = 1e+300 at t = 1: a folded value must be 0 or of magnitude",
@@ -173,6 +181,12 @@ def test_bad_scene_is_one_line_exit_2_nothing_written(
     assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: ")
     assert message in err, err
     assert not out.exists() and stdout == ""
+
+
+def test_a_start_angle_at_the_bound_is_accepted() -> None:
+    """abi_groups.MAX_START_ANGLE itself, either way."""
+    text = edit("initial = { u1", "initial = { q4 = 16384.0, q3 = -16384.0, u1")
+    assert parse(text, "x.toml").simulate.initial["q4"] == MAX_START_ANGLE
 
 
 def test_output_points_at_the_limit_are_accepted() -> None:

@@ -145,6 +145,7 @@ BAD = [
     ("count", sweep_text().replace("count = 2", "count = 0"), "draws.count: Input should be"),
     ("parameters", sweep_text(tail="[parameters]\nzz = 1.0"), "parameters.zz: not a runtime"),
     ("initial", sweep_text(tail="[initial]\nq9 = 1.0"), "initial.q9: not a state of scene"),
+    ("wound", sweep_text(tail="[initial]\nq4 = 1e7"), "initial.q4 = 1e+07 rad: more than 2607"),
     ("keep", sweep_text(tail='[metrics]\nkeep = ["energy"]'), "metrics.keep.0: Input should be"),
     ("time_to keep", sweep_text(tail="[metrics]\ntime_to = { rate = 1.0 }"),
      "metrics.time_to.rate: add 'time_to' to metrics.keep"),

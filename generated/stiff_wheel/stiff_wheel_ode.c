@@ -431,24 +431,29 @@ static int step_underflow(double h, double t)
 }
 
 /* The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
-   sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1. */
+   sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi
+   (is_angle); a step is accepted when <= 1. */
 static double error_norm(const double *err, const double *x, const double *xnew, double rtol,
                          double atol)
 {
     double total;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     total = 0.0;
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         double e;
-        e = err[i] / (atol + rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+        e = err[i] / (atol + rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i])
+                ? fabs(xnew[i]) : fabs(x[i])));
         total = total + e * e;
     }
     return sqrt(total / STIFF_WHEEL_NX);
 }
 
 /* Hairer's HINIT (dopri5.f): the first step h such that
-   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step. */
+   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;
+   |x| and the scale read an angle's size at most pi (is_angle). */
 static double initial_step(int order, double t0, double t1, const double *x, const double *f0,
                            const double *c, double rtol, double atol, stiff_wheel_stats *stats)
 {
@@ -460,15 +465,17 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     double der12;
     double h;
     double h1;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     dnf = 0.0;
     dny = 0.0;
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        double sk;
-        sk = atol + rtol * fabs(x[i]);
+        double xs, sk;
+        xs = is_angle[i] * fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i]);
+        sk = atol + rtol * xs;
         dnf = dnf + f0[i] / sk * (f0[i] / sk);
-        dny = dny + x[i] / sk * (x[i] / sk);
+        dny = dny + xs / sk * (xs / sk);
     }
     h = dnf <= 1e-10 || dny <= 1e-10 ? 1e-6 : 1e-2 * sqrt(dny / dnf);
     h = dmin(h, t1 - t0);
@@ -480,7 +487,8 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     der2 = 0.0;
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
         double d;
-        d = (f1[i] - f0[i]) / (atol + rtol * fabs(x[i]));
+        d = (f1[i] - f0[i]) / (atol + rtol * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i])));
         der2 = der2 + d * d;
     }
     der2 = sqrt(der2) / h;
@@ -1293,6 +1301,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double fac[STIFF_WHEEL_LANES];
     double grow[STIFF_WHEEL_LANES];
     double total[STIFF_WHEEL_LANES];
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
 
     /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1407,8 +1416,10 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -1489,6 +1500,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double hs[STIFF_WHEEL_LANES];
     double frac[STIFF_WHEEL_LANES];
     int due[STIFF_WHEEL_LANES];
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -1606,8 +1618,10 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -1748,6 +1762,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double err5[STIFF_WHEEL_LANES];
     double err3[STIFF_WHEEL_LANES];
     double deno[STIFF_WHEEL_LANES];
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -1957,13 +1972,17 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
@@ -2075,6 +2094,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double hs[STIFF_WHEEL_LANES];
     double frac[STIFF_WHEEL_LANES];
     int due[STIFF_WHEEL_LANES];
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -2286,13 +2306,17 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
@@ -2790,6 +2814,7 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double fac;
     double grow;
     double total;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     code = ode_start(5, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
@@ -2870,8 +2895,10 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
             double e;
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
-                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / STIFF_WHEEL_NX);
@@ -2963,6 +2990,7 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
     double hs;
     double frac;
     int due;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -3058,8 +3086,10 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
             double e;
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
-                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / STIFF_WHEEL_NX);
@@ -3221,6 +3251,7 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double err5;
     double err3;
     double deno;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     code = ode_start(8, STIFF_WHEEL_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
@@ -3352,12 +3383,16 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -3462,6 +3497,7 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
     double hs;
     double frac;
     int due;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -3608,12 +3644,16 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -4562,6 +4602,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int outcome;
     int singular;
     int start;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
     int k;
 
@@ -4601,7 +4642,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     }
     #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
     }
     for (;;) {
         if (need_jac) {
@@ -4795,7 +4837,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
             }
             fresh_jac = 0;
             h_new = dmin(h_new, t1 - t0);
@@ -4908,6 +4951,7 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     double t1;
     long g;
     double frac;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
     int k;
 
@@ -4960,7 +5004,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     }
     #pragma GCC unroll 1
     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
     }
     for (;;) {
         if (need_jac) {
@@ -5178,7 +5223,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
             #pragma GCC unroll 1
             for (i = 0; i < STIFF_WHEEL_NX; ++i) {
                 f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
             }
             fresh_jac = 0;
             h_new = dmin(h_new, t1 - t0);

@@ -454,24 +454,29 @@ static int step_underflow(double h, double t)
 }
 
 /* The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
-   sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1. */
+   sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi
+   (is_angle); a step is accepted when <= 1. */
 static double error_norm(const double *err, const double *x, const double *xnew, double rtol,
                          double atol)
 {
     double total;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     total = 0.0;
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
         double e;
-        e = err[i] / (atol + rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+        e = err[i] / (atol + rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i])
+                ? fabs(xnew[i]) : fabs(x[i])));
         total = total + e * e;
     }
     return sqrt(total / TORQUE_FREE_NX);
 }
 
 /* Hairer's HINIT (dopri5.f): the first step h such that
-   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step. */
+   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;
+   |x| and the scale read an angle's size at most pi (is_angle). */
 static double initial_step(int order, double t0, double t1, const double *x, const double *f0,
                            const double *c, double rtol, double atol, torque_free_stats *stats)
 {
@@ -483,15 +488,17 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     double der12;
     double h;
     double h1;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     dnf = 0.0;
     dny = 0.0;
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
-        double sk;
-        sk = atol + rtol * fabs(x[i]);
+        double xs, sk;
+        xs = is_angle[i] * fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i]);
+        sk = atol + rtol * xs;
         dnf = dnf + f0[i] / sk * (f0[i] / sk);
-        dny = dny + x[i] / sk * (x[i] / sk);
+        dny = dny + xs / sk * (xs / sk);
     }
     h = dnf <= 1e-10 || dny <= 1e-10 ? 1e-6 : 1e-2 * sqrt(dny / dnf);
     h = dmin(h, t1 - t0);
@@ -503,7 +510,8 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     der2 = 0.0;
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
         double d;
-        d = (f1[i] - f0[i]) / (atol + rtol * fabs(x[i]));
+        d = (f1[i] - f0[i]) / (atol + rtol * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i])));
         der2 = der2 + d * d;
     }
     der2 = sqrt(der2) / h;
@@ -1255,6 +1263,7 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double fac[TORQUE_FREE_LANES];
     double grow[TORQUE_FREE_LANES];
     double total[TORQUE_FREE_LANES];
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
 
     /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -1369,8 +1378,10 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -1451,6 +1462,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double hs[TORQUE_FREE_LANES];
     double frac[TORQUE_FREE_LANES];
     int due[TORQUE_FREE_LANES];
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -1568,8 +1580,10 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -1710,6 +1724,7 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double err5[TORQUE_FREE_LANES];
     double err3[TORQUE_FREE_LANES];
     double deno[TORQUE_FREE_LANES];
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -1919,13 +1934,17 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
@@ -2037,6 +2056,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double hs[TORQUE_FREE_LANES];
     double frac[TORQUE_FREE_LANES];
     int due[TORQUE_FREE_LANES];
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -2248,13 +2268,17 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
@@ -2706,9 +2730,9 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < 3; ++i) {
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-            xmax[l] = dmin(fabs(L->x[i][l]),
-                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
-                    3.141592653589793) : xmax[l];
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
         }
     }
     TORQUE_FREE_SIMD
@@ -2958,9 +2982,9 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     for (i = 0; i < 3; ++i) {
         TORQUE_FREE_SIMD
         for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-            xmax[l] = dmin(fabs(L->x[i][l]),
-                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
-                    3.141592653589793) : xmax[l];
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
         }
     }
     TORQUE_FREE_SIMD
@@ -3448,6 +3472,7 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double fac;
     double grow;
     double total;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     code = ode_start(5, TORQUE_FREE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
@@ -3528,8 +3553,10 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
             double e;
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
-                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / TORQUE_FREE_NX);
@@ -3621,6 +3648,7 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
     double hs;
     double frac;
     int due;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -3716,8 +3744,10 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
             double e;
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
-                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / TORQUE_FREE_NX);
@@ -3879,6 +3909,7 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double err5;
     double err3;
     double deno;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     code = ode_start(8, TORQUE_FREE_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
@@ -4010,12 +4041,16 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -4120,6 +4155,7 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
     double hs;
     double frac;
     int due;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -4266,12 +4302,16 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -5220,6 +5260,7 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int outcome;
     int singular;
     int start;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
     int k;
 
@@ -5259,7 +5300,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     }
     #pragma GCC unroll 1
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
     }
     for (;;) {
         if (need_jac) {
@@ -5453,7 +5495,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             #pragma GCC unroll 1
             for (i = 0; i < TORQUE_FREE_NX; ++i) {
                 f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
             }
             fresh_jac = 0;
             h_new = dmin(h_new, t1 - t0);
@@ -5566,6 +5609,7 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     double t1;
     long g;
     double frac;
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i;
     int k;
 
@@ -5618,7 +5662,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     }
     #pragma GCC unroll 1
     for (i = 0; i < TORQUE_FREE_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
     }
     for (;;) {
         if (need_jac) {
@@ -5836,7 +5881,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
             #pragma GCC unroll 1
             for (i = 0; i < TORQUE_FREE_NX; ++i) {
                 f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
             }
             fresh_jac = 0;
             h_new = dmin(h_new, t1 - t0);
@@ -6159,8 +6205,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         /* the bound the attitude set */
         xmax = 0.0;
         for (i = 0; i < 3; ++i) {
-            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
-                    3.141592653589793) : xmax;
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
         }
         dp = 0.0;
         dq = 0.0;
@@ -6533,8 +6579,8 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
         /* the bound the attitude set */
         xmax = 0.0;
         for (i = 0; i < 3; ++i) {
-            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
-                    3.141592653589793) : xmax;
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
         }
         dp = 0.0;
         dq = 0.0;

@@ -362,7 +362,8 @@ contains
   end function step_underflow
 
   ! The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
-  ! sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1.
+  ! sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi
+  ! (is_angle); a step is accepted when <= 1.
   function error_norm(err, x, xnew, rtol, atol) result(res)
     real(c_double), intent(in) :: rtol
     real(c_double), intent(in) :: atol
@@ -371,12 +372,16 @@ contains
     real(c_double), intent(in) :: xnew(0:nx - 1)
     real(c_double) :: res
     real(c_double) :: total
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e
     integer(c_int) :: i
 
     total = 0.0_c_double
     do i = 0, nx - 1
-      e = err(i) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+      e = err(i) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+          abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+          abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
       total = total + e * e
     end do
     res = sqrt(total / nx)
@@ -384,7 +389,8 @@ contains
   end function error_norm
 
   ! Hairer's HINIT (dopri5.f): the first step h such that
-  ! h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step.
+  ! h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;
+  ! |x| and the scale read an angle's size at most pi (is_angle).
   function initial_step(order, t0, t1, x, f0, c, rtol, atol, stats) result(res)
     integer(c_int), intent(in) :: order
     real(c_double), intent(in) :: t0
@@ -404,16 +410,21 @@ contains
     real(c_double) :: der12
     real(c_double) :: h
     real(c_double) :: h1
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: d
     real(c_double) :: sk
+    real(c_double) :: xs
     integer(c_int) :: i
 
     dnf = 0.0_c_double
     dny = 0.0_c_double
     do i = 0, nx - 1
-      sk = atol + rtol * abs(x(i))
+      xs = merge(3.141592653589793_c_double, abs(x(i)), &
+          is_angle(i) * abs(x(i)) > 3.141592653589793_c_double)
+      sk = atol + rtol * xs
       dnf = dnf + (f0(i) / sk) * (f0(i) / sk)
-      dny = dny + (x(i) / sk) * (x(i) / sk)
+      dny = dny + (xs / sk) * (xs / sk)
     end do
     h = merge(1e-6_c_double, 1e-2_c_double * sqrt(dny / dnf), &
         dnf <= 1e-10_c_double .or. dny <= 1e-10_c_double)
@@ -425,7 +436,8 @@ contains
     stats%rhs_calls = stats%rhs_calls + 1
     der2 = 0.0_c_double
     do i = 0, nx - 1
-      d = (f1(i) - f0(i)) / (atol + rtol * abs(x(i)))
+      d = (f1(i) - f0(i)) / (atol + rtol * (merge(3.141592653589793_c_double, abs(x(i)), &
+          is_angle(i) * abs(x(i)) > 3.141592653589793_c_double)))
       der2 = der2 + d * d
     end do
     der2 = sqrt(der2) / h
@@ -1283,6 +1295,8 @@ contains
     real(c_double) :: fac
     real(c_double) :: grow
     real(c_double) :: total
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e
     integer(c_int) :: i
 
@@ -1367,8 +1381,10 @@ contains
         e = (h * (((((0.0012326388888888888_c_double * k(i, &
             0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
             3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
-            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), &
-            abs(xnew(i)) > abs(x(i)))))
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(3.141592653589793_c_double, &
+            merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i))), &
+            is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
         total = total + e * e
       end do
       err = sqrt(total / nx)
@@ -1472,6 +1488,8 @@ contains
     real(c_double) :: hs
     real(c_double) :: frac
     logical :: due
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e
     integer(c_int) :: i
 
@@ -1572,8 +1590,10 @@ contains
         e = (h * (((((0.0012326388888888888_c_double * k(i, &
             0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
             3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
-            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), &
-            abs(xnew(i)) > abs(x(i)))))
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(3.141592653589793_c_double, &
+            merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i))), &
+            is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
         total = total + e * e
       end do
       err = sqrt(total / nx)
@@ -1775,6 +1795,8 @@ contains
     real(c_double) :: err5
     real(c_double) :: err3
     real(c_double) :: deno
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e3
     real(c_double) :: e5
     integer(c_int) :: i
@@ -1915,12 +1937,16 @@ contains
             5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
             7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
             9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
-            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+            11)) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+            abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
         e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
             5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
             7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
             9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
-            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+            11)) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+            abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
         err5 = err5 + e5 * e5
         err3 = err3 + e3 * e3
       end do
@@ -2036,6 +2062,8 @@ contains
     real(c_double) :: hs
     real(c_double) :: frac
     logical :: due
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e3
     real(c_double) :: e5
     integer(c_int) :: i
@@ -2192,12 +2220,16 @@ contains
             5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
             7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
             9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
-            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+            11)) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+            abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
         e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
             5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
             7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
             9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
-            11)) / (atol + rtol * (merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i)))))
+            11)) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+            abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
         err5 = err5 + e5 * e5
         err3 = err3 + e3 * e3
       end do
@@ -3328,6 +3360,8 @@ contains
     integer(c_int) :: outcome
     integer(c_int) :: singular
     integer(c_int) :: start
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: a1
     real(c_double) :: a2
     real(c_double) :: a3
@@ -3373,7 +3407,8 @@ contains
     end if
     !GCC$ unroll 1
     do i = 0, nx - 1
-      scal(i) = atol_e + rtol_e * abs(x(i))
+      scal(i) = atol_e + rtol_e * (merge(3.141592653589793_c_double, abs(x(i)), &
+          is_angle(i) * abs(x(i)) > 3.141592653589793_c_double))
     end do
     do
       if (need_jac) then
@@ -3573,7 +3608,8 @@ contains
         !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
-          scal(i) = atol_e + rtol_e * abs(x(i))
+          scal(i) = atol_e + rtol_e * (merge(3.141592653589793_c_double, abs(x(i)), &
+              is_angle(i) * abs(x(i)) > 3.141592653589793_c_double))
         end do
         fresh_jac = .false.
         h_new = min(h_new, t1 - t0)
@@ -3695,6 +3731,8 @@ contains
     real(c_double) :: t1
     integer(c_long) :: g
     real(c_double) :: frac
+    real(c_double), parameter :: is_angle(0:6) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: a1
     real(c_double) :: a2
     real(c_double) :: a3
@@ -3754,7 +3792,8 @@ contains
     end if
     !GCC$ unroll 1
     do i = 0, nx - 1
-      scal(i) = atol_e + rtol_e * abs(x(i))
+      scal(i) = atol_e + rtol_e * (merge(3.141592653589793_c_double, abs(x(i)), &
+          is_angle(i) * abs(x(i)) > 3.141592653589793_c_double))
     end do
     do
       if (need_jac) then
@@ -3978,7 +4017,8 @@ contains
         !GCC$ unroll 1
         do i = 0, nx - 1
           f0(i) = fnew(i)
-          scal(i) = atol_e + rtol_e * abs(x(i))
+          scal(i) = atol_e + rtol_e * (merge(3.141592653589793_c_double, abs(x(i)), &
+              is_angle(i) * abs(x(i)) > 3.141592653589793_c_double))
         end do
         fresh_jac = .false.
         h_new = min(h_new, t1 - t0)
@@ -4352,8 +4392,9 @@ contains
       ! the bound the attitude set
       xmax = 0.0_c_double
       do i = 0, 3 - 1
-        xmax = merge(min(abs(x(i)), 3.141592653589793_c_double), xmax, min(abs(x(i)), &
-            3.141592653589793_c_double) > xmax)
+        xmax = merge(merge(3.141592653589793_c_double, abs(x(i)), &
+            abs(x(i)) > 3.141592653589793_c_double), xmax, (merge(3.141592653589793_c_double, &
+            abs(x(i)), abs(x(i)) > 3.141592653589793_c_double)) > xmax)
       end do
       dp = 0.0_c_double
       dq = 0.0_c_double
@@ -4742,8 +4783,9 @@ contains
       ! the bound the attitude set
       xmax = 0.0_c_double
       do i = 0, 3 - 1
-        xmax = merge(min(abs(x(i)), 3.141592653589793_c_double), xmax, min(abs(x(i)), &
-            3.141592653589793_c_double) > xmax)
+        xmax = merge(merge(3.141592653589793_c_double, abs(x(i)), &
+            abs(x(i)) > 3.141592653589793_c_double), xmax, (merge(3.141592653589793_c_double, &
+            abs(x(i)), abs(x(i)) > 3.141592653589793_c_double)) > xmax)
       end do
       dp = 0.0_c_double
       dq = 0.0_c_double

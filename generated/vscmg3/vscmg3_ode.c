@@ -1185,24 +1185,30 @@ static int step_underflow(double h, double t)
 }
 
 /* The standard error norm: sqrt(mean((err_i / sk_i)^2)) with
-   sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1. */
+   sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi
+   (is_angle); a step is accepted when <= 1. */
 static double error_norm(const double *err, const double *x, const double *xnew, double rtol,
                          double atol)
 {
     double total;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
 
     total = 0.0;
     for (i = 0; i < VSCMG3_NX; ++i) {
         double e;
-        e = err[i] / (atol + rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+        e = err[i] / (atol + rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i])
+                ? fabs(xnew[i]) : fabs(x[i])));
         total = total + e * e;
     }
     return sqrt(total / VSCMG3_NX);
 }
 
 /* Hairer's HINIT (dopri5.f): the first step h such that
-   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step. */
+   h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;
+   |x| and the scale read an angle's size at most pi (is_angle). */
 static double initial_step(int order, double t0, double t1, const double *x, const double *f0,
                            const double *c, double rtol, double atol, vscmg3_stats *stats)
 {
@@ -1214,15 +1220,18 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     double der12;
     double h;
     double h1;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
 
     dnf = 0.0;
     dny = 0.0;
     for (i = 0; i < VSCMG3_NX; ++i) {
-        double sk;
-        sk = atol + rtol * fabs(x[i]);
+        double xs, sk;
+        xs = is_angle[i] * fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i]);
+        sk = atol + rtol * xs;
         dnf = dnf + f0[i] / sk * (f0[i] / sk);
-        dny = dny + x[i] / sk * (x[i] / sk);
+        dny = dny + xs / sk * (xs / sk);
     }
     h = dnf <= 1e-10 || dny <= 1e-10 ? 1e-6 : 1e-2 * sqrt(dny / dnf);
     h = dmin(h, t1 - t0);
@@ -1234,7 +1243,8 @@ static double initial_step(int order, double t0, double t1, const double *x, con
     der2 = 0.0;
     for (i = 0; i < VSCMG3_NX; ++i) {
         double d;
-        d = (f1[i] - f0[i]) / (atol + rtol * fabs(x[i]));
+        d = (f1[i] - f0[i]) / (atol + rtol * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i])));
         der2 = der2 + d * d;
     }
     der2 = sqrt(der2) / h;
@@ -3263,6 +3273,8 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double fac[VSCMG3_LANES];
     double grow[VSCMG3_LANES];
     double total[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i, l;
 
     /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
@@ -3377,8 +3389,10 @@ static void dopri5_step_lanes(struct lanes *L, const double *c, double rtol, dou
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -3459,6 +3473,8 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double hs[VSCMG3_LANES];
     double frac[VSCMG3_LANES];
     int due[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -3576,8 +3592,10 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
             e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
                     L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
                     L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
-                    (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ? fabs(L->xnew[i][l])
-                    : fabs(L->x[i][l])));
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             total[l] = total[l] + e * e;
         }
     }
@@ -3718,6 +3736,8 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double err5[VSCMG3_LANES];
     double err3[VSCMG3_LANES];
     double deno[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -3927,13 +3947,17 @@ static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, dou
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
@@ -4045,6 +4069,8 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double hs[VSCMG3_LANES];
     double frac[VSCMG3_LANES];
     int due[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i, l;
     int need;
 
@@ -4256,13 +4282,17 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
                     0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
                     0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
                     0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
                     1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
                     0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
                     0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
-                    / (atol + rtol * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
                     fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
             err5[l] = err5[l] + e5 * e5;
             err3[l] = err3[l] + e3 * e3;
@@ -5588,9 +5618,9 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 0; i < 3; ++i) {
         VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            xmax[l] = dmin(fabs(L->x[i][l]),
-                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
-                    3.141592653589793) : xmax[l];
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
         }
     }
     VSCMG3_SIMD
@@ -5620,9 +5650,9 @@ static void taylor_step_lanes(struct lanes *L, const double *c, double rtol, dou
     for (i = 3; i < 6; ++i) {
         VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            xmax[l] = dmin(fabs(L->x[i][l]),
-                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
-                    3.141592653589793) : xmax[l];
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
         }
     }
     VSCMG3_SIMD
@@ -5847,9 +5877,9 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     for (i = 0; i < 3; ++i) {
         VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            xmax[l] = dmin(fabs(L->x[i][l]),
-                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
-                    3.141592653589793) : xmax[l];
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
         }
     }
     VSCMG3_SIMD
@@ -5879,9 +5909,9 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     for (i = 3; i < 6; ++i) {
         VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            xmax[l] = dmin(fabs(L->x[i][l]),
-                    3.141592653589793) > xmax[l] ? dmin(fabs(L->x[i][l]),
-                    3.141592653589793) : xmax[l];
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
         }
     }
     VSCMG3_SIMD
@@ -6335,6 +6365,8 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
     double fac;
     double grow;
     double total;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
 
     code = ode_start(5, VSCMG3_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
@@ -6415,8 +6447,10 @@ static int dopri5_integrate(double t0, double t1, double *x, const double *c, do
             double e;
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
-                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / VSCMG3_NX);
@@ -6507,6 +6541,8 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
     double hs;
     double frac;
     int due;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -6602,8 +6638,10 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
             double e;
             e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
                     0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
-                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol *
-                    (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
             total = total + e * e;
         }
         err = sqrt(total / VSCMG3_NX);
@@ -6761,6 +6799,8 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
     double err5;
     double err3;
     double deno;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
 
     code = ode_start(8, VSCMG3_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0], &h,
@@ -6892,12 +6932,16 @@ static int dop853_integrate(double t0, double t1, double *x, const double *c, do
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -7001,6 +7045,8 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
     double hs;
     double frac;
     int due;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
 
     if (!grid_ok(ntimes, times)) {
@@ -7147,12 +7193,16 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                     0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
                     0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
                     0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
                     1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
                     0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
                     0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
-                    rtol * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
             err5 = err5 + e5 * e5;
             err3 = err3 + e3 * e3;
         }
@@ -8094,6 +8144,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     int outcome;
     int singular;
     int start;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
     int k;
 
@@ -8133,7 +8185,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
     }
     #pragma GCC unroll 1
     for (i = 0; i < VSCMG3_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
     }
     for (;;) {
         if (need_jac) {
@@ -8327,7 +8380,8 @@ static int radau5_integrate(double t0, double t1, double *x, const double *c, do
             #pragma GCC unroll 1
             for (i = 0; i < VSCMG3_NX; ++i) {
                 f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
             }
             fresh_jac = 0;
             h_new = dmin(h_new, t1 - t0);
@@ -8440,6 +8494,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     double t1;
     long g;
     double frac;
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
     int i;
     int k;
 
@@ -8492,7 +8548,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     }
     #pragma GCC unroll 1
     for (i = 0; i < VSCMG3_NX; ++i) {
-        scal[i] = atol_e + rtol_e * fabs(x[i]);
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
     }
     for (;;) {
         if (need_jac) {
@@ -8710,7 +8767,8 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
             #pragma GCC unroll 1
             for (i = 0; i < VSCMG3_NX; ++i) {
                 f0[i] = fnew[i];
-                scal[i] = atol_e + rtol_e * fabs(x[i]);
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
             }
             fresh_jac = 0;
             h_new = dmin(h_new, t1 - t0);
@@ -10095,8 +10153,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         /* the bound the attitude set */
         xmax = 0.0;
         for (i = 0; i < 3; ++i) {
-            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
-                    3.141592653589793) : xmax;
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
         }
         dp = 0.0;
         dq = 0.0;
@@ -10111,8 +10169,8 @@ static int taylor_integrate(double t0, double t1, double *x, const double *c, do
         /* the bound the rotor angles set */
         xmax = 0.0;
         for (i = 3; i < 6; ++i) {
-            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
-                    3.141592653589793) : xmax;
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
         }
         dp = 0.0;
         dq = 0.0;
@@ -11538,8 +11596,8 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
         /* the bound the attitude set */
         xmax = 0.0;
         for (i = 0; i < 3; ++i) {
-            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
-                    3.141592653589793) : xmax;
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
         }
         dp = 0.0;
         dq = 0.0;
@@ -11554,8 +11612,8 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
         /* the bound the rotor angles set */
         xmax = 0.0;
         for (i = 3; i < 6; ++i) {
-            xmax = dmin(fabs(x[i]), 3.141592653589793) > xmax ? dmin(fabs(x[i]),
-                    3.141592653589793) : xmax;
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
         }
         dp = 0.0;
         dq = 0.0;

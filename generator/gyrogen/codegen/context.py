@@ -18,6 +18,7 @@ from gyrogen.abi import (
     setup_codes_of,
     unit_and_doc,
 )
+from gyrogen.abi_groups import StateKind, state_kind
 from gyrogen.abi_rotors import AXIS, rotor_name
 from gyrogen.codegen.integrators.driver import EV_SUBINTERVALS, Event, Grid
 from gyrogen.codegen.integrators.program import Program, program
@@ -212,7 +213,13 @@ class SceneContext:
             self.jet,
             self.event_grid,
             self.measured,
+            self.kinds,
         )
+
+    @property
+    def kinds(self) -> tuple[StateKind, ...]:
+        """How each state enters an error scale (abi_groups.state_kind)."""
+        return tuple(state_kind(s.name) for s in self.states)
 
     @property
     def event_grid(self) -> Grid | None:
@@ -408,6 +415,13 @@ class VariationalContext(SceneContext):
     def measured(self) -> int | None:
         """x alone with the scene's sensitivities.error = "state"."""
         return self.nx_state if self.layout.error == "state" else None
+
+    @property
+    def kinds(self) -> tuple[StateKind, ...]:
+        """x's kinds, then Phi's and S's entries: magnitudes."""
+        x = tuple(state_kind(s.name) for s in self.states[: self.nx_state])
+        phi: list[StateKind] = ["magnitude"] * self.layout.nv
+        return (*x, *phi)
 
     @property
     def state_rows(self) -> list[Row]:

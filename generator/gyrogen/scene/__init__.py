@@ -42,6 +42,7 @@ from gyrogen.scene.rotors import Rotor
 from gyrogen.scene.rules import (
     QUATERNION,
     Number,
+    check_angles,
     check_description,
     check_name,
     check_output_grid,
@@ -244,6 +245,7 @@ class Scene(_Strict):
             bad = sorted(set(point) - set(self.states))
             if bad:
                 raise ValueError(f"{key}: {', '.join(bad)} is not a state of this scene")
+            check_angles(point, key)
             if self.attitude == "quaternion":
                 check_quaternion(point, key)  # the start; linearize's point
         bad = sorted(set(self.simulate.parameters) - set(self.runtime))

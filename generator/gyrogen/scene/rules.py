@@ -21,6 +21,7 @@ from gyrogen.abi import (
     NAME_MAX_LENGTH,
     QUATERNION_NORM_SLACK,
 )
+from gyrogen.abi_groups import MAX_START_ANGLE, state_kind
 from gyrogen.limits import MAX_OUTPUT_POINTS, MIN_OUTPUT_STEP
 from gyrogen.setup_checks import first_failure
 
@@ -203,6 +204,19 @@ def check_quaternion(initial: dict[str, float], key: str = "simulate.initial") -
             f"{key}: e0..e3 = ({', '.join(f'{x:g}' for x in e)}) has norm "
             f"{norm:.9g}, not 1 (within {QUATERNION_NORM_SLACK:g}): give a unit quaternion"
         )
+
+
+def check_angles(point: Mapping[str, float], key: str) -> None:
+    """Every angle of a start state (or an equilibrium) given within
+    MAX_START_ANGLE, where a double still holds it to verify's bar; point's
+    names are the scene's states (checked before)."""
+    for name, v in point.items():
+        if state_kind(name) == "angle" and not abs(v) <= MAX_START_ANGLE:
+            raise ValueError(
+                f"{key}.{name} = {v:.6g} rad: more than {int(MAX_START_ANGLE / (2 * math.pi))} "
+                f"turns ({MAX_START_ANGLE:g} rad), where a double holds the angle only to "
+                f"{math.ulp(v) / 2:.2g} rad; give it modulo 2 pi"
+            )
 
 
 def check_physics(p: Mapping[str, float | str]) -> None:

@@ -50,7 +50,7 @@ from gyrogen.scene import Number, Scene, builtin_names, load_toml, one_line, rea
 from gyrogen.scene import load as load_scene
 from gyrogen.scene.events import Event
 from gyrogen.scene.rotors import check_axis
-from gyrogen.scene.rules import QUATERNION, check_quaternion
+from gyrogen.scene.rules import QUATERNION, check_angles, check_quaternion
 from gyrogen.setup_checks import first_failure
 from gyrogen.sweep_values import Axis, Distribution, Misalignment
 
@@ -407,10 +407,12 @@ def _check_names(scene: Scene, sweep: Sweep) -> None:
 
 def _check_values(scene: Scene, sweep: Sweep) -> None:
     """The values every trajectory shares, checked as a scene file's are: the
-    start's Euler parameters, and setup's checks on the parameters that are
+    start's angles and Euler parameters, and setup's checks on the parameters that are
     neither on the grid nor drawn (a grid or a draw may still reach values
     setup refuses: those rows carry its code)."""
     swept = set(sweep.grid) | set(sweep.draws.variables if sweep.draws else ())
+    if sweep.initial is not None:
+        check_angles(sweep.initial, "initial")
     if scene.attitude == "quaternion" and sweep.initial is not None:
         check_quaternion(sweep.initial, "initial")
     if not scene.rotors:

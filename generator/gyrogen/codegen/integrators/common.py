@@ -11,8 +11,10 @@ gimbal_lock (the Euler parameters' is quaternion.py)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from gyrogen import abi
+from gyrogen.abi_groups import ANGLE_SCALE, StateKind
 from gyrogen.codegen.integrators import quaternion as euler_parameters
 from gyrogen.codegen.ir.nodes import (
     Bool,
@@ -193,9 +195,40 @@ def larger(a: E, b: E) -> E:
     return sel(cmp(b, ">", a), b, a)
 
 
+ANGLE = Var("is_angle")
+"""Each state's 1.0 when it is an angle, else 0.0 (angle_table): the error
+scales cap an angle's size at ANGLE_SCALE (size)."""
+
+
+def angle_table(kinds: Sequence[StateKind]) -> Decl:
+    """ANGLE's constant table for states of these kinds (abi_groups.state_kind);
+    program.program declares it in every function that reads ANGLE."""
+    flags = tuple(1.0 if k == "angle" else 0.0 for k in kinds)
+    return Decl(ANGLE.name, "double", (len(flags),), values=flags)
+
+
+def capped(size: E, flag: E | None = None) -> E:
+    """size at most ANGLE_SCALE where flag is 1 (an angle), size itself where
+    it is 0 (0 size is never above it; 0 Inf is NaN, not above it either): a
+    NaN or an Inf magnitude is kept, one multiply, compare and select. No
+    flag: an angle."""
+    scale = Num(ANGLE_SCALE)
+    return sel(cmp(size if flag is None else flag * size, ">", scale), scale, size)
+
+
+def size(at: E, *of: Var) -> E:
+    """State at's size in an error scale: the largest |v[at]| of the vectors
+    of (NaN where the last is), an angle's at most ANGLE_SCALE (ANGLE)."""
+    out: E = fn("abs", of[0][at])
+    for v in of[1:]:
+        out = larger(out, fn("abs", v[at]))
+    return capped(out, ANGLE[at])
+
+
 def scaled(e: E, at: E) -> E:
-    """e / (atol + rtol max(|x_i|, |xnew_i|)); x is finite, xnew may not be."""
-    return e / (atol + rtol * larger(fn("abs", x[at]), fn("abs", xnew[at])))
+    """e / (atol + rtol max(|x_i|, |xnew_i|)), an angle's max at most
+    ANGLE_SCALE; x is finite, xnew may not be."""
+    return e / (atol + rtol * size(at, x, xnew))
 
 
 def error_norm() -> Func:
@@ -207,7 +240,8 @@ def error_norm() -> Func:
     )
     doc = (
         "The standard error norm: sqrt(mean((err_i / sk_i)^2)) with",
-        "sk_i = atol + rtol max(|x_i|, |xnew_i|); a step is accepted when <= 1.",
+        "sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi",
+        "(is_angle); a step is accepted when <= 1.",
     )
     params = (arr("err"), arr("x"), arr("xnew"), *TOLERANCES)
     return Func("error_norm", params, body, "double", (real("total"),), doc)
@@ -215,8 +249,8 @@ def error_norm() -> Func:
 
 def initial_step() -> Func:
     f0, f1, x1 = Var("f0"), Var("f1"), Var("x1")
-    dnf, dny, der2, der12, h1, sk, d = (
-        Var(n) for n in ("dnf", "dny", "der2", "der12", "h1", "sk", "d")
+    dnf, dny, der2, der12, h1, sk, d, xs = (
+        Var(n) for n in ("dnf", "dny", "der2", "der12", "h1", "sk", "d", "xs")
     )
     order = Var("order")
     body = (
@@ -226,11 +260,12 @@ def initial_step() -> Func:
             "i",
             NX,
             (
-                assign(sk, atol + rtol * fn("abs", x[i])),
+                assign(xs, size(i, x)),
+                assign(sk, atol + rtol * xs),
                 assign(dnf, dnf + (f0[i] / sk) * (f0[i] / sk)),
-                assign(dny, dny + (x[i] / sk) * (x[i] / sk)),
+                assign(dny, dny + (xs / sk) * (xs / sk)),
             ),
-            ("sk",),
+            ("xs", "sk"),
         ),
         assign(
             h,
@@ -249,7 +284,7 @@ def initial_step() -> Func:
             "i",
             NX,
             (
-                assign(d, (f1[i] - f0[i]) / (atol + rtol * fn("abs", x[i]))),
+                assign(d, (f1[i] - f0[i]) / (atol + rtol * size(i, x))),
                 assign(der2, der2 + d * d),
             ),
             ("d",),
@@ -287,7 +322,8 @@ def initial_step() -> Func:
     )
     doc = (
         "Hairer's HINIT (dopri5.f): the first step h such that",
-        "h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step.",
+        "h^order max(|f|, |f'|) = 0.01 in the scaled norm, f' by an Euler step;",
+        "|x| and the scale read an angle's size at most pi (is_angle).",
     )
     return Func("initial_step", params, body, "double", locals_, doc)
 

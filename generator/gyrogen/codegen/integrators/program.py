@@ -8,8 +8,9 @@ The templates only place these texts and the public wrappers.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+from gyrogen.abi_groups import StateKind
 from gyrogen.codegen.integrators import (
     common,
     driver,
@@ -29,7 +30,7 @@ from gyrogen.codegen.integrators.tables import Table, lookup
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Decl, Func, Int, S, called, substituted
+from gyrogen.codegen.ir.nodes import At, Decl, Func, Int, S, called, substituted, walk
 from gyrogen.methods import Kind, Method
 from gyrogen.symbolic.blocks import Blocks
 from gyrogen.symbolic.jet import Jet
@@ -147,9 +148,12 @@ def program(
     jet: Jet | None = None,
     events: driver.Grid | None = None,
     measured: int | None = None,
+    kinds: Sequence[StateKind] = (),
 ) -> Program:
     """The methods' functions, the lanes' and the shared ones they call;
-    measured: how many leading states the error norms measure (all: None)."""
+    measured: how many leading states the error norms measure (all: None);
+    kinds: each state's (abi_groups.state_kind), the error scales' caps
+    (common.angle_table, declared by each function that reads it)."""
     pairs = [m for m in methods if m.pair]
     given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet, events)
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
@@ -177,9 +181,18 @@ def program(
             wanted |= called([f])
     shared = [f for f in candidates if f.name in wanted]
     size = common.NX if measured is None else Int(measured)
-    single, lanes, shared = ([substituted(f, common.NE, size) for f in fs]
+    single, lanes, shared = ([with_caps(substituted(f, common.NE, size), kinds) for f in fs]
                              for fs in (single, lanes, shared))  # fmt: skip
     return Program(shared, single, lanes, state, init)
+
+
+def with_caps(f: Func, kinds: Sequence[StateKind]) -> Func:
+    """f with the error scales' angles (common.angle_table) among its locals
+    when it reads them."""
+    if not any(isinstance(n, At) and n.name == common.ANGLE.name for s in f.body for n in walk(s)):
+        return f
+    assert kinds, f"{f.name} reads the angles: program needs the states' kinds"
+    return replace(f, locals=(*f.locals, common.angle_table(kinds)))
 
 
 def by_method(funcs: list[Func], text: Callable[[Func], str]) -> dict[str, str]:

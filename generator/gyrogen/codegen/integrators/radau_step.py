@@ -12,6 +12,7 @@ from gyrogen.codegen.integrators.common import (
     finite_state,
     h,
     i,
+    size,
     x,
     xnew,
 )
@@ -190,7 +191,7 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
         *driver.accepted(quaternion, last, [assign(v["first"], False), *predictive], interpolant,
                          collocation(R) if grid else None, grid),
         each(assign(v["f0"][i], v["fnew"][i]),
-             assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * fn("abs", x[i]))),
+             assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * size(i, x))),
         assign(v["fresh_jac"], False),
         assign(h_new, fn("min", h_new, v["t1"] - v["t0"])),
         If(v["reject"], (assign(h_new, fn("min", h_new, h)),)),
@@ -242,7 +243,7 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
         assign(v["newton_tol"], fn("max", Num(ctl.newton_tol[0]) * EPS / v["rtol_e"],
                                    fn("min", ctl.newton_tol[1], fn("sqrt", v["rtol_e"])))),
         If(driver.last_step(), (assign(h, v["t1"] - t), assign(last, True))),
-        each(assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * fn("abs", x[i]))),
+        each(assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * size(i, x))),
         Loop(tuple(loop)),
     )  # fmt: skip
     doubles = (

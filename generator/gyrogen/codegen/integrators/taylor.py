@@ -13,12 +13,10 @@ h halved.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
-from gyrogen import abi
 from gyrogen import methods as registry
-from gyrogen.abi_groups import state_group
+from gyrogen.abi_groups import StateKind, state_group, state_kind
 from gyrogen.codegen.integrators import common, driver
 from gyrogen.codegen.integrators.common import (
     NX,
@@ -73,24 +71,18 @@ from gyrogen.methods import Method
 from gyrogen.symbolic.jet import Jet
 from gyrogen.tableaus import Series
 
-ANGLE_SCALE = math.pi
-"""An angle enters the step's relative scale by at most this: its magnitude
-past half a turn is bookkeeping (a rotor angle grows without bound), and
-it would loosen the tolerance of every other state of its group."""
 
-
-def state_scales(names: Sequence[str]) -> tuple[tuple[str, str], ...]:
+def state_scales(names: Sequence[str]) -> tuple[tuple[str, StateKind], ...]:
     """Each state's group (gyrogen.abi_groups.state_group) and how it enters its
-    group's scale xmax: "magnitude" (a rate, a wheel speed, an Euler
-    parameter, a position) or "angle" (at most ANGLE_SCALE). Jorba and Zou
+    group's scale xmax (abi_groups.state_kind: a magnitude, or an angle at
+    most ANGLE_SCALE). Jorba and Zou
     scale the tolerance by the largest state of all; the step here meets it
     in each group by the group's own largest state (bounds), so neither a
     wheel at 1e6 rad/s (it made the body rates err by 3e7 times the
     tolerance) nor a satellite's 7e6 m (the attitude's, 1e5 times) loosens
     the other groups' tolerance. Translation is a polynomial in t in every
     scene, stepped exactly: it sets no bound."""
-    return tuple((state_group(n), "angle" if abi.unit_and_doc(n)[0] == "rad" else "magnitude")
-                 for n in names)  # fmt: skip
+    return tuple((state_group(n), state_kind(n)) for n in names)
 
 
 def uniform(m: Method, jet: Jet) -> list[S]:
@@ -258,7 +250,7 @@ UNMEASURED = "unmeasured"
 system's variational part when its error is not measured (it rides on x's
 steps)."""
 
-SIZES = {"magnitude": fn("abs", x[i]), "angle": fn("min", fn("abs", x[i]), Num(ANGLE_SCALE))}
+SIZES = {"magnitude": fn("abs", x[i]), "angle": common.capped(fn("abs", x[i]))}
 """How a state of each kind (state_scales) enters its group's xmax."""
 
 
