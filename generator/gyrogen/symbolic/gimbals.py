@@ -37,6 +37,9 @@ import dataclasses
 
 import sympy as sm
 import sympy.physics.mechanics as me
+from sympy.polys.domains import QQ
+from sympy.polys.orderings import lex
+from sympy.polys.rings import PolyElement, ring
 
 from gyrogen.abi_rotors import GIMBAL_KEYS, cluster_states, rotor_name
 from gyrogen.scene import Scene
@@ -281,26 +284,25 @@ def _forcing(units: list[Unit], h: sm.Matrix, v: dict) -> sm.Matrix:
     return out
 
 
-def _on_circles(e: sm.Expr, units: list[Unit]) -> sm.Expr:
-    """e with cos and sin of every gimbal angle as c, s, expanded, s^2 as
-    1 - c^2: its normal form (0 when e vanishes for every angle)."""
-    swap = {}
+def _on_circles(e: sm.Expr, units: list[Unit]) -> PolyElement:
+    """e with cos and sin of every gimbal angle as c, s, a polynomial over
+    the rationals (or the field of its radicals) reduced modulo each
+    s^2 + c^2 - 1: its normal form, zero exactly when e vanishes for every
+    angle (the circles' polynomials, in s_k^2 leading, are a Groebner basis
+    of a prime ideal whose real points are dense in its variety)."""
+    swap, pairs = {}, []
     for x in units:
         if x.g_g is not None:
             cos, sin = _trig(x.k)
             swap[cos], swap[sin] = sm.Symbol(f"c{x.k}"), sm.Symbol(f"s{x.k}")
-    e = sm.expand(e.xreplace(swap))
-    for x in units:
-        if x.g_g is None:
-            continue
-        sx, cx = sm.Symbol(f"s{x.k}"), sm.Symbol(f"c{x.k}")
-        e = sm.expand(
-            e.replace(
-                lambda a, sx=sx: a.is_Pow and a.base == sx and a.exp >= 2,
-                lambda a, sx=sx, cx=cx: (1 - cx**2) ** (a.exp // 2) * sx ** (a.exp % 2),
-            )
-        )
-    return e
+            pairs.append((swap[sin], swap[cos]))
+    e = e.xreplace(swap)
+    angles = [v for pair in pairs for v in pair]
+    radicals = [a for a in e.atoms(sm.Pow) if not a.free_symbols]
+    field = QQ.algebraic_field(*radicals) if radicals else QQ
+    gens = [*angles, *sorted(e.free_symbols - set(angles), key=str)]
+    r, *_ = ring(gens, field, lex)
+    return r.from_expr(e).rem([r.from_expr(s**2 + c**2 - 1) for s, c in pairs])
 
 
 def _prove(units: list[Unit], lumped: sm.Matrix, carrier: sm.Matrix) -> sm.Matrix:
