@@ -62,15 +62,29 @@ def term_sizes(f: Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
     states' entries and the runtime parameters, by forward differences."""
     base = f(states, p)
     size = np.zeros_like(base)
-    for j in range(states.shape[1]):
-        moved = states.copy()
-        moved[:, j] *= 1.0 + STEP
-        size += np.abs(f(moved, p) - base)
+    nx = states.shape[1]
+    moved = np.repeat(states[None], nx, axis=0)
+    moved[np.arange(nx), :, np.arange(nx)] *= 1.0 + STEP
+    size += np.abs(_stacked(f, moved, p) - base).sum(0)
     for j in range(len(p)):
         q = p.copy()
         q[j] *= 1.0 + STEP
         size += np.abs(f(states, q) - base)
     return size / STEP
+
+
+def _stacked(f: Function, moved: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """f at each of the (k, n, nx) moved copies of n states, (k, n, m): one
+    call over all of them (f is vectorized row by row), in chunks of at most
+    CHUNK rows."""
+    k, n, nx = moved.shape
+    rows = moved.reshape(k * n, nx)
+    out = [f(rows[i : i + CHUNK], p) for i in range(0, k * n, CHUNK)]
+    return np.concatenate(out).reshape(k, n, -1)
+
+
+CHUNK = 20_000
+"""Rows per call of a stacked evaluation (bounds the reference's temporaries)."""
 
 
 def size_scaled_error(a: np.ndarray, b: np.ndarray, f: Function, states: np.ndarray,
@@ -96,39 +110,65 @@ def jacobian_error(
     p): values whose signs change where f is not smooth (a torque clamp); a
     column whose differences would straddle one is not compared there (a
     difference across a kink is no derivative of either side)."""
-    fine, coarse = _differences(f, states, p, 1.0), _differences(f, states, p, 2.0)
-    rows = 1.0 + np.sum(np.abs(fine) * (1.0 + np.abs(states[:, None, :])), axis=2, keepdims=True)
-    slack = np.abs(fine - coarse) / JAC_TOLERANCE
-    err = np.abs(jac - fine) / (rows + slack)
-    if kinks is not None:
-        err = np.where(_smooth(kinks, states, p)[:, None, :], err, 0.0)
-    return float(np.max(err))
+    return ReferenceJacobian.of(f, states, p, kinks).error(jac)
+
+
+@dataclass(frozen=True)
+class ReferenceJacobian:
+    """What jacobian_error measures a Jacobian against, taken once for any
+    number of them: the fine differences, the bar's denominator, and where
+    the differences are smooth (None: everywhere)."""
+
+    fine: np.ndarray
+    scale: np.ndarray
+    smooth: np.ndarray | None
+
+    @classmethod
+    def of(
+        cls, f: Function, states: np.ndarray, p: np.ndarray, kinks: Function | None = None
+    ) -> ReferenceJacobian:
+        fine, coarse = _differences(f, states, p, 1.0), _differences(f, states, p, 2.0)
+        rows = 1.0 + np.sum(
+            np.abs(fine) * (1.0 + np.abs(states[:, None, :])), axis=2, keepdims=True
+        )
+        slack = np.abs(fine - coarse) / JAC_TOLERANCE
+        smooth = None if kinks is None else _smooth(kinks, states, p)[:, None, :]
+        return cls(fine, rows + slack, smooth)
+
+    def error(self, jac: np.ndarray) -> float:
+        err = np.abs(jac - self.fine) / self.scale
+        if self.smooth is not None:
+            err = np.where(self.smooth, err, 0.0)
+        return float(np.max(err))
+
+
+def _shifts(states: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(up, down, h): the states with x_j + h_j and x_j - h_j, h_j =
+    scale STEP (1 + |x_j|), in each entry j in turn, (nx, n, nx); h (nx, n)."""
+    nx = states.shape[1]
+    h = scale * STEP * (1.0 + np.abs(states.T))
+    up, down = np.repeat(states[None], nx, axis=0), np.repeat(states[None], nx, axis=0)
+    up[np.arange(nx), :, np.arange(nx)] += h
+    down[np.arange(nx), :, np.arange(nx)] -= h
+    return up, down, h
 
 
 def _smooth(kinks: Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
     """(n, nx): whether every kink keeps its side over x_j +- 2 STEP (1 + |x_j|),
     the widest differences jacobian_error takes."""
     side = np.sign(kinks(states, p))
-    smooth = np.ones(states.shape, dtype=bool)
-    for j in range(states.shape[1]):
-        h = 2.0 * STEP * (1.0 + np.abs(states[:, j]))
-        for shift in (h, -h):
-            moved = states.copy()
-            moved[:, j] += shift
-            smooth[:, j] &= np.all(np.sign(kinks(moved, p)) == side, axis=1)
-    return smooth
+    up, down, h = _shifts(states, 2.0)
+    moved = np.sign(_stacked(kinks, np.concatenate([up, down]), p))
+    same = np.all(moved == side, axis=2)  # (2 nx, n)
+    return (same[: len(h)] & same[len(h) :]).T
 
 
 def _differences(f: Function, states: np.ndarray, p: np.ndarray, scale: float) -> np.ndarray:
-    n, nx = states.shape
-    fd = np.empty((n, nx, nx))
-    for j in range(nx):
-        h = scale * STEP * (1.0 + np.abs(states[:, j]))
-        up, down = states.copy(), states.copy()
-        up[:, j] += h
-        down[:, j] -= h
-        fd[:, :, j] = (f(up, p) - f(down, p)) / (2.0 * h[:, None])
-    return fd
+    up, down, h = _shifts(states, scale)
+    nx = len(h)
+    both = _stacked(f, np.concatenate([up, down]), p)  # (2 nx, n, m)
+    fd = (both[:nx] - both[nx:]) / (2.0 * h[:, :, None])  # (nx, n, m)
+    return fd.transpose(1, 2, 0)
 
 
 @dataclass(frozen=True)
@@ -189,15 +229,14 @@ def _pairs(
         if len(out) == 2:
             c_vs_f = size_scaled_error(out["C"], out["Fortran"], f, states, p)
             yield f"C vs Fortran{tag}", c_vs_f
+    few, reference = states[:JAC_STATES], None
     for b in backends:
         if "jac" in b.manifest["functions"][b.language]:
-            few = states[:JAC_STATES]
+            if reference is None:
+                kinks = lambda xs, q: scene_view.kinks(scene, xs, q, t)  # noqa: E731
+                reference = ReferenceJacobian.of(_reference(scene, "rhs", t), few, p, kinks)
             jac = np.array([b.jacobian(x, constants[_label(b)], t) for x in few])
-            kinks = lambda xs, q: scene_view.kinks(scene, xs, q, t)  # noqa: E731
-            yield (
-                f"{_label(b)} vs reference jac",
-                jacobian_error(jac, _reference(scene, "rhs", t), few, p, kinks),
-            )
+            yield f"{_label(b)} vs reference jac", reference.error(jac)
 
 
 JAC_STATES = 200

@@ -37,6 +37,9 @@ import dataclasses
 
 import sympy as sm
 import sympy.physics.mechanics as me
+from sympy.polys.domains import QQ
+from sympy.polys.orderings import lex
+from sympy.polys.rings import PolyElement, ring
 
 from gyrogen.abi_rotors import GIMBAL_INERTIA, GIMBAL_KEYS, cluster_states, rotor_name
 from gyrogen.scene import Scene
@@ -281,28 +284,36 @@ def _forcing(units: list[Unit], h: sm.Matrix, v: dict) -> sm.Matrix:
     return out
 
 
-def _on_circles(e: sm.Expr, units: list[Unit]) -> sm.Expr:
-    """e with cos and sin of every gimbal angle as c, s, expanded, s^2 as
-    1 - c^2, and a fixed rotor's runtime axis on its unit sphere
-    (cluster._on_sphere): its normal form (0 when e vanishes for every angle
-    and axis)."""
-    swap = {}
+def _on_circles(e: sm.Expr, units: list[Unit]) -> PolyElement:
+    """e with cos and sin of every gimbal angle as c, s, a polynomial over
+    the rationals (or the field of its radicals) reduced modulo each
+    s^2 + c^2 - 1 and each fixed rotor's runtime axis's g3^2 + g1^2 + g2^2 - 1
+    (it is normalized by setup): its normal form, zero exactly when e
+    vanishes for every angle and axis (those polynomials, in s_k^2 and g3^2
+    leading, have pairwise coprime leading terms: a Groebner basis of a
+    prime ideal whose real points are dense in its variety)."""
+    swap, pairs = {}, []
     for x in units:
         if x.g_g is not None:
             cos, sin = _trig(x.k)
             swap[cos], swap[sin] = sm.Symbol(f"c{x.k}"), sm.Symbol(f"s{x.k}")
-    e = sm.expand(e.xreplace(swap))
-    for x in units:
-        if x.g_g is None:
-            continue
-        sx, cx = sm.Symbol(f"s{x.k}"), sm.Symbol(f"c{x.k}")
-        e = sm.expand(
-            e.replace(
-                lambda a, sx=sx: a.is_Pow and a.base == sx and a.exp >= 2,
-                lambda a, sx=sx, cx=cx: (1 - cx**2) ** (a.exp // 2) * sx ** (a.exp % 2),
-            )
-        )
-    return cluster._on_sphere(e, [x.axis for x in units if x.g_g is None])
+            pairs.append((swap[sin], swap[cos]))
+    e = e.xreplace(swap)
+    angles = [v for pair in pairs for v in pair]
+    axes = [list(x.axis) for x in units if x.g_g is None and not x.axis[0].is_number]
+    spheres = [v for g1, g2, g3 in axes for v in (g3, g1, g2)]
+    radicals = [a for a in e.atoms(sm.Pow) if not a.free_symbols]
+    field = QQ.algebraic_field(*radicals) if radicals else QQ
+    others = sorted(e.free_symbols - {*angles, *spheres}, key=str)
+    divisors = [s**2 + c**2 - 1 for s, c in pairs] + [
+        g3**2 + g1**2 + g2**2 - 1 for g1, g2, g3 in axes
+    ]
+    try:  # a polynomial in every symbol
+        r, *_ = ring([*angles, *spheres, *others], field, lex)
+        return r.from_expr(e).rem([r.from_expr(x) for x in divisors])
+    except ValueError:  # a runtime mass in a denominator: its rational functions as coefficients
+        r, *_ = ring([*angles, *spheres], field.frac_field(*others) if others else field, lex)
+        return r.from_expr(e).rem([r.from_expr(x) for x in divisors])
 
 
 def _prove(units: list[Unit], lumped: sm.Matrix, carrier: sm.Matrix) -> sm.Matrix:
