@@ -262,3 +262,36 @@ def test_cluster_parallel_axes_warned_then_refused(compiled: dict[str, Compiled]
     res = engine.run_case(refused, None)
     assert res.verdict == "refused" and res.passed
     assert "rotors: the lumped inertia has condition number 4.71e+14 > 1e+13" in res.diagnosis
+
+
+def test_the_pyramids_steering_singularity_vanishes_at_its_singular_set() -> None:
+    """det(A A^T) of the unit torque directions g_g x g_s: regular at gimbal
+    angles 0, zero (to rounding) at the check case's set, where the four
+    directions lie in one plane."""
+    from gyrogen.analysis.check.clusters import SINGULAR_SET
+    from gyrogen.oracle import gimbal_view
+    from gyrogen.scene import load
+
+    scene = load("cmg4_pyramid")
+    xs = np.zeros((2, len(scene.states)))
+    for k, angle in enumerate(SINGULAR_SET, 1):
+        xs[1, scene.states.index(f"gam{k}")] = np.radians(angle)
+    regular, singular = gimbal_view.steering_singularity(scene, xs)
+    assert regular == pytest.approx(1.1848, rel=1e-4) and abs(singular) < 1e-30
+
+
+@pytest.mark.slow
+def test_the_singular_pyramid_runs_regular_and_says_its_measure(
+    compiled: dict[str, Compiled],
+) -> None:
+    """Started at a singular gimbal set, the CMG pyramid's dynamics stay
+    regular (energy balance and |H| to rounding); check reports the steering
+    singularity measure, 0 at the start, and no wheel-axes span warning
+    (a gimbal's spin axis turns)."""
+    case = _quick("CMG pyramid at a singular gimbal set")
+    res = engine.run_case(case, compiled[case.scene.name])
+    assert res.passed and max(res.drift.values()) < 1e-12, (res.verdict, res.drift)
+    said = res.diagnosis
+    assert said.startswith("steering singularity det(A A^T) ") and "span" not in said, said
+    start = float(said.split("det(A A^T) ")[1].split(" at the start")[0])
+    assert abs(start) < 1e-30, said

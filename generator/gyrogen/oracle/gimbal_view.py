@@ -151,6 +151,23 @@ def clamp_margins(
     return np.concatenate([np.abs(u_s) - wheel, np.abs(u_g) - gimbal], axis=1)
 
 
+def steering_singularity(scene: Scene, xs: np.ndarray) -> np.ndarray:
+    """(M,) det(A A^T) of the gimbals' unit torque directions, A (3, G) with
+    column k = g_g x g_s(gam_k) (what a unit gimbal rate of CMG k turns its
+    unit spin momentum by): 0 where the steering law loses a direction (a
+    singular gimbal set), 1.18 for cmg4_pyramid at gimbal angles 0. Scale
+    by h^6 for wheels of equal momentum h; fixed rotors take no part (a
+    gimbal's axes are folded: no runtime value is read)."""
+    on = [k for k, r in enumerate(scene.rotors, 1) if r.gimbal is not None]
+    gam = _split(scene, np.atleast_2d(xs))["gam"][:, [k - 1 for k in on]]
+    g_s0 = np.array([_axis(scene.rotors[k - 1], k, {}) for k in on])
+    g_g = np.array([_gimbal_axis(scene.rotors[k - 1]) for k in on])
+    g_t0 = np.cross(g_g, g_s0)
+    spin = np.cos(gam)[..., None] * g_s0 + np.sin(gam)[..., None] * g_t0  # (M, G, 3)
+    a = np.cross(g_g[None], spin)  # (M, G, 3): A's columns
+    return np.linalg.det(np.einsum("mgi,mgj->mij", a, a))
+
+
 def rhs(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.0) -> np.ndarray:
     """dx/dt in the scene's state order; the quaternion rates are the caller's."""
     v, s = values(scene, runtime), _split(scene, xs)

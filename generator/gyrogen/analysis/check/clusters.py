@@ -1,6 +1,8 @@
 """`gyrogen check`'s cases for reaction-wheel clusters, variants of the
 rw4_pyramid scene: torque-free, stiff speed controllers, saturating motors,
-nearly parallel axes (warned, then refused).
+nearly parallel axes (warned, then refused); and the control-moment gyros'
+pyramid started at a singular gimbal set (its steering singularity measure
+reported).
 
 A cluster folds its mass properties into the code, so a value the scene's
 own rules refuse (a numerically singular lumped inertia) is refused when the
@@ -20,7 +22,7 @@ import numpy as np
 from gyrogen.abi import AXES_SPAN_WARN
 from gyrogen.analysis.check.engine import Case, Extreme
 from gyrogen.errors import SceneError
-from gyrogen.oracle import cluster_reference
+from gyrogen.oracle import cluster_reference, gimbal_view
 from gyrogen.scene import Scene, builtin_text, load, validate
 
 PYRAMID_START = {"u1": 0.3, "u2": -0.2, "u3": 0.5, "w1": 90.0, "w2": -40.0, "w3": 60.0, "w4": 30.0}
@@ -55,6 +57,27 @@ CLAMP = Extreme(
     clamp_margin,
     marks=((0.0, "above: the clamp holds a motor at tau_max"),),
 )
+
+
+STEERING = Extreme(
+    "steering singularity det(A A^T), A = [g_g x g_s]",
+    lambda case, xs: gimbal_view.steering_singularity(case.scene, xs),
+    log=True,
+)
+SINGULAR_SET = (-90.0, 0.0, 90.0, 0.0)
+"""cmg4_pyramid's gimbal angles (deg) where det(A A^T) = 0: its torque
+directions g_g x g_s all lie in one plane."""
+
+
+def singular_pyramid() -> Case:
+    """cmg4_pyramid started at SINGULAR_SET, gimbals 1 and 3 held (rate_ref
+    0), 2 and 4 turning at their -0.2 rad/s: the steering law's singularity
+    is not the dynamics', which stay regular (energy balance, |H|)."""
+    initial = {**tomllib.loads(builtin_text("cmg4_pyramid"))["simulate"]["initial"]}
+    initial.update({f"gam{k}": math.radians(a) for k, a in enumerate(SINGULAR_SET, 1)})
+    return Case("CMG pyramid at a singular gimbal set", load("cmg4_pyramid"),
+                {"rate_ref_1": 0.0, "rate_ref_3": 0.0}, initial, 10.0, "pass", samples=100,
+                quadrature=True, extreme=STEERING)  # fmt: skip
 
 
 def span_text(axes: list[Any], carrier: float) -> Extreme:
@@ -131,6 +154,7 @@ def cases(quick: bool) -> list[Case]:
     out.append(Case(name, load("rw4_pyramid"), sat, start, 10.0, "pass", samples=200,
                     quadrature=True, extreme=CLAMP))  # fmt: skip
     out += _parallel()
+    out.append(singular_pyramid())
     return out
 
 

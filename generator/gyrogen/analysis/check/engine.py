@@ -35,7 +35,7 @@ from gyrogen.analysis.simulate.trajectory import (
     sample_times,
     steps_of_segments,
 )
-from gyrogen.oracle import scene_view
+from gyrogen.oracle import gimbal_view, scene_view
 from gyrogen.oracle.cluster_reference import clamp_margins
 from gyrogen.physics import LUMPED_FROM, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, Controls, controls
@@ -229,11 +229,17 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
             f"warning: mass matrix condition number {res.condition:.2g} > {WARN_CONDITION:g}"
         )
     span = axes_span(scene, dict(zip(scene.runtime, p, strict=True)))
-    if span < AXES_SPAN_WARN:
+    if span < AXES_SPAN_WARN and not gimbal_view.has_gimbals(scene):  # CMGs: the steering's
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
             f"warning: the wheel axes nearly fail to span space (singular values of "
             f"[g_1 .. g_N] in ratio {span:.2g} < {AXES_SPAN_WARN:g}): "
             "too little torque about some direction"
+        )
+    if gimbal_view.has_gimbals(scene):
+        measure = gimbal_view.steering_singularity(scene, xs)
+        res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
+            f"steering singularity det(A A^T) {measure[0]:.2g} at the start, "
+            f"{measure.min():.2g} to {measure.max():.2g} along the run"
         )
     if _near_gimbal_lock(scene, xs).any() and not res.diagnosis:
         res.diagnosis = "passes near gimbal lock: quaternions would be cheaper"
