@@ -116,7 +116,7 @@ def test_make_run_prints_each_program(source_dir: Path, programs: Path) -> None:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     headers = [line for line in proc.stdout.splitlines() if line.startswith("== ")]
     names = [Path(h[3:]).name for h in headers]
-    assert names == ["embed_c", "embed_fortran", "embed_cpp", "embed_cluster"]
+    assert names == ["embed_c", "embed_fortran", "embed_cpp", "embed_cluster", "steer_cmg"]
 
 
 def test_programs_come_from_the_installed_package(programs: Path) -> None:
@@ -125,6 +125,30 @@ def test_programs_come_from_the_installed_package(programs: Path) -> None:
     assert f"gyrostat_DIR:PATH={programs}/prefix/lib/cmake/gyrostat" in cache
     assert (programs / "prefix" / "include" / "gyrostat" / "gyrostat_mod.mod").is_file()
     assert f"rw4_pyramid_DIR:PATH={programs}/prefix/lib/cmake/rw4_pyramid" in cache
+    assert f"cmg4_pyramid_DIR:PATH={programs}/prefix/lib/cmake/cmg4_pyramid" in cache
+
+
+def test_cmg_steering_converges_and_its_damping_rises_near_the_singular_set(
+    programs: Path,
+) -> None:
+    """steer_cmg: the pyramid slewed 12 deg by the singularity-robust law,
+    from gimbal angles near the singular set: the pointing error falls by
+    three orders of magnitude in 60 s; lambda = 0.01 exp(-10 det) peaks where
+    det(A A^T) is least, which stays above 0 (the law never meets the
+    singularity), and the gimbals end far from it."""
+    proc = subprocess.run([str(programs / "steer_cmg")], capture_output=True, text=True,
+                          check=False)  # fmt: skip
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    lines = proc.stdout.splitlines()
+    table = [line.split() for line in lines[1:] if len(line.split()) == 8]
+    rows = np.array([[float(v) for v in row] for row in table])
+    out = parse("\n".join(line for line in lines if len(line.split()) == 2))
+    assert rows[0, 0] == 0.0 and rows[-1, 0] == 60.0 and rows[0, 1] > 10.0
+    assert out["final_error_deg"] == pytest.approx(rows[-1, 1], rel=1e-3)
+    assert out["final_error_deg"] < 1e-3 * rows[0, 1]
+    assert 0.0 < out["min_det"] < 0.01 < 0.1 < out["final_det"]
+    assert out["max_lambda"] == pytest.approx(0.01 * np.exp(-10.0 * out["min_det"]), rel=1e-5)
+    assert np.all(np.abs(rows[:, 3] - 0.01 * np.exp(-10.0 * rows[:, 2])) <= 1e-3 * rows[:, 3])
 
 
 CLUSTER = "rw4_pyramid"

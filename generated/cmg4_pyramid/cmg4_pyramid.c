@@ -5,12 +5,12 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy
+ * Build id 7396b3ba4468424a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   cmg4_pyramid_setup: 2 ops, once per parameter set
- *   cmg4_pyramid_rhs:   424 ops per call
+ *   cmg4_pyramid_setup: 4 ops, once per parameter set
+ *   cmg4_pyramid_rhs:   422 ops per call
  */
 #include "cmg4_pyramid.h"
 
@@ -215,32 +215,38 @@ const char *cmg4_pyramid_strerror(int code)
     }
 }
 
-/* Checks p and computes the constants c that cmg4_pyramid_rhs needs (2 ops,
+/* Checks p and computes the constants c that cmg4_pyramid_rhs needs (4 ops,
    plus the checks). Returns CMG4_PYRAMID_OK or the first failing check's code;
    c is then not to be used. */
 int cmg4_pyramid_setup(const double *p, double *c)
 {
     double rate_ref_1;
+    double rate_ref_2;
     double rate_ref_3;
+    double rate_ref_4;
     int i_;
 
-    for (i_ = 0; i_ < 3; ++i_) {
+    for (i_ = 0; i_ < 5; ++i_) {
         c[i_] = 0.0;
     }
-    for (i_ = 0; i_ < 2; ++i_) {
+    for (i_ = 0; i_ < 4; ++i_) {
         if (!(fabs(p[i_]) <= DBL_MAX)) {
             return CMG4_PYRAMID_ERR_NONFINITE;
         }
     }
     rate_ref_1 = p[0];
-    rate_ref_3 = p[1];
+    rate_ref_2 = p[1];
+    rate_ref_3 = p[2];
+    rate_ref_4 = p[3];
     c[0] = rate_ref_1 / 250.0;
-    c[1] = rate_ref_3 / 250.0;
-    c[2] = 3.1063487806599444;
-    if (!(c[2] <= 10000000000000.0)) {
+    c[1] = rate_ref_2 / 250.0;
+    c[2] = rate_ref_3 / 250.0;
+    c[3] = rate_ref_4 / 250.0;
+    c[4] = 3.1063487806599444;
+    if (!(c[4] <= 10000000000000.0)) {
         return CMG4_PYRAMID_ERR_MASS_SINGULAR;
     }
-    for (i_ = 0; i_ < 3; ++i_) {
+    for (i_ = 0; i_ < 5; ++i_) {
         if (!(fabs(c[i_]) <= DBL_MAX)) {
             return CMG4_PYRAMID_ERR_OVERFLOW;
         }
@@ -248,7 +254,7 @@ int cmg4_pyramid_setup(const double *p, double *c)
     return CMG4_PYRAMID_OK;
 }
 
-/* dxdt = f(t, x) for the constants c from cmg4_pyramid_setup (424 ops). */
+/* dxdt = f(t, x) for the constants c from cmg4_pyramid_setup (422 ops). */
 void cmg4_pyramid_rhs(double t, const double *x, const double *c, double *dxdt)
 {
     double q2;
@@ -454,11 +460,11 @@ void cmg4_pyramid_rhs(double t, const double *x, const double *c, double *dxdt)
     tmp36 = tmp10 * tmp28;
     ug1 = dmin(1e-2, dmax(-0.01, c[0] - 0.004 * gd1));
     nd1 = 11111.111111111111 * ug1 + at1 * (1.2222222222222223 * w1 - 0.7777777777777778 * as1);
-    ug2 = dmin(1e-2, dmax(-0.01, -0.0008 - 0.004 * gd2));
+    ug2 = dmin(1e-2, dmax(-0.01, c[1] - 0.004 * gd2));
     nd2 = 11111.111111111111 * ug2 + at2 * (1.2222222222222223 * w2 - 0.7777777777777778 * as2);
-    ug3 = dmin(1e-2, dmax(-0.01, c[1] - 0.004 * gd3));
+    ug3 = dmin(1e-2, dmax(-0.01, c[2] - 0.004 * gd3));
     nd3 = 11111.111111111111 * ug3 + at3 * (1.2222222222222223 * w3 - 0.7777777777777778 * as3);
-    ug4 = dmin(1e-2, dmax(-0.01, -0.0008 - 0.004 * gd4));
+    ug4 = dmin(1e-2, dmax(-0.01, c[3] - 0.004 * gd4));
     nd4 = 11111.111111111111 * ug4 + at4 * (1.2222222222222223 * w4 - 0.7777777777777778 * as4);
     h1 = 2.5321631624393657 * u1 + 4.041013984598835e-05 * tmp13 + 6.350164832941026e-05 * tmp16
             + 7.348867306971716e-05 * gd1 + tmp12 * tmp5 + 0.00011 * tmp9 * w4 -
@@ -637,11 +643,11 @@ void cmg4_pyramid_rhs_lanes(int n, const double *CMG4_PYRAMID_RESTRICT t,
         tmp36 = tmp10 * tmp28;
         ug1 = dmin(1e-2, dmax(-0.01, c[0] - 0.004 * gd1));
         nd1 = 11111.111111111111 * ug1 + at1 * (1.2222222222222223 * w1 - 0.7777777777777778 * as1);
-        ug2 = dmin(1e-2, dmax(-0.01, -0.0008 - 0.004 * gd2));
+        ug2 = dmin(1e-2, dmax(-0.01, c[1] - 0.004 * gd2));
         nd2 = 11111.111111111111 * ug2 + at2 * (1.2222222222222223 * w2 - 0.7777777777777778 * as2);
-        ug3 = dmin(1e-2, dmax(-0.01, c[1] - 0.004 * gd3));
+        ug3 = dmin(1e-2, dmax(-0.01, c[2] - 0.004 * gd3));
         nd3 = 11111.111111111111 * ug3 + at3 * (1.2222222222222223 * w3 - 0.7777777777777778 * as3);
-        ug4 = dmin(1e-2, dmax(-0.01, -0.0008 - 0.004 * gd4));
+        ug4 = dmin(1e-2, dmax(-0.01, c[3] - 0.004 * gd4));
         nd4 = 11111.111111111111 * ug4 + at4 * (1.2222222222222223 * w4 - 0.7777777777777778 * as4);
         h1 = 2.5321631624393657 * u1 + 4.041013984598835e-05 * tmp13 + 6.350164832941026e-05 *
                 tmp16 + 7.348867306971716e-05 * gd1 + tmp12 * tmp5 + 0.00011 * tmp9 * w4 -
@@ -989,7 +995,7 @@ void cmg4_pyramid_angular_momentum(double t, const double *x, const double *c, d
     out[2] = tmp22 * tmp27 + tmp23 * tmp26 * tmp45 - tmp23 * tmp28 * tmp37;
 }
 
-/* out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 104 ops. */
+/* out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 102 ops. */
 void cmg4_pyramid_power(double t, const double *x, const double *c, double *out)
 {
     double gam1;
@@ -1059,15 +1065,15 @@ void cmg4_pyramid_power(double t, const double *x, const double *c, double *out)
             tmp2) * (2.0943951023931953 + 0.0016330816237714926 * tmp2 + 0.002 * tmp3 - 0.002 *
             w1 - 0.0011545754241710957 * tmp1);
     out[1] = gd2 * dmin(1e-2, dmax(-0.01,
-            -0.0008 - 0.004 * gd2)) + (tmp4 + w2 + 0.5772877120855479 * tmp6 - 0.8165408118857462
-            * tmp5 * u3) * (2.0943951023931953 + 0.0016330816237714926 * tmp5 * u3 - 0.002 * tmp4
-            - 0.002 * w2 - 0.0011545754241710957 * tmp6);
+            c[1] - 0.004 * gd2)) + (tmp4 + w2 + 0.5772877120855479 * tmp6 - 0.8165408118857462 *
+            tmp5 * u3) * (2.0943951023931953 + 0.0016330816237714926 * tmp5 * u3 - 0.002 * tmp4 -
+            0.002 * w2 - 0.0011545754241710957 * tmp6);
     out[2] = gd3 * dmin(1e-2, dmax(-0.01,
-            c[1] - 0.004 * gd3)) + (w3 + tmp10 * u2 - 0.8165408118857462 * tmp9 -
+            c[2] - 0.004 * gd3)) + (w3 + tmp10 * u2 - 0.8165408118857462 * tmp9 -
             0.5772877120855479 * tmp8) * (2.0943951023931953 + 0.0016330816237714926 * tmp9 +
             0.0011545754241710957 * tmp8 - 0.002 * w3 - 0.002 * tmp10 * u2);
     out[3] = gd4 * dmin(1e-2, dmax(-0.01,
-            -0.0008 - 0.004 * gd4)) + (w4 - tmp11 - 0.8165408118857462 * tmp14 -
-            0.5772877120855479 * tmp13) * (2.0943951023931953 + 0.0016330816237714926 * tmp14 +
-            0.002 * tmp11 + 0.0011545754241710957 * tmp13 - 0.002 * w4);
+            c[3] - 0.004 * gd4)) + (w4 - tmp11 - 0.8165408118857462 * tmp14 - 0.5772877120855479
+            * tmp13) * (2.0943951023931953 + 0.0016330816237714926 * tmp14 + 0.002 * tmp11 +
+            0.0011545754241710957 * tmp13 - 0.002 * w4);
 }

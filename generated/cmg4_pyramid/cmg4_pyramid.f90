@@ -4,12 +4,12 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy versions
+! Build id 7396b3ba4468424a: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
-!   cmg4_pyramid_f_setup: 2 ops, once per parameter set
-!   cmg4_pyramid_f_rhs:   424 ops per call
+!   cmg4_pyramid_f_setup: 4 ops, once per parameter set
+!   cmg4_pyramid_f_rhs:   422 ops per call
 !
 ! The same interface as cmg4_pyramid.h, callable from C under the bind(C)
 ! names cmg4_pyramid_f_setup and cmg4_pyramid_f_rhs (declared for C in
@@ -32,9 +32,11 @@
 !   x(16)  w2   rad/s   absolute angular velocity of rotor B2, along g2
 !   x(17)  w3   rad/s   absolute angular velocity of rotor B3, along g3
 !   x(18)  w4   rad/s   absolute angular velocity of rotor B4, along g4
-! Parameter order p(1:2):
+! Parameter order p(1:4):
 !   p( 1)  rate_ref_1 rad/s   gimbal rate servo of G1: commanded rate relative to A
-!   p( 2)  rate_ref_3 rad/s   gimbal rate servo of G3: commanded rate relative to A
+!   p( 2)  rate_ref_2 rad/s   gimbal rate servo of G2: commanded rate relative to A
+!   p( 3)  rate_ref_3 rad/s   gimbal rate servo of G3: commanded rate relative to A
+!   p( 4)  rate_ref_4 rad/s   gimbal rate servo of G4: commanded rate relative to A
 module cmg4_pyramid_mod
   use, intrinsic :: iso_c_binding, only: c_double, c_int
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite, ieee_value, ieee_quiet_nan
@@ -49,12 +51,12 @@ module cmg4_pyramid_mod
   public :: cmg4_pyramid_angular_momentum
   public :: cmg4_pyramid_power
 
-  character(len=*), parameter, public :: CMG4_PYRAMID_BUILD_ID = "cff2c9d7bec2152d"
+  character(len=*), parameter, public :: CMG4_PYRAMID_BUILD_ID = "7396b3ba4468424a"
   integer, parameter, public :: CMG4_PYRAMID_NX = 18  ! states
-  integer, parameter, public :: CMG4_PYRAMID_NP = 2  ! parameters
-  integer, parameter, public :: CMG4_PYRAMID_NC = 3  ! hoisted constants
+  integer, parameter, public :: CMG4_PYRAMID_NP = 4  ! parameters
+  integer, parameter, public :: CMG4_PYRAMID_NC = 5  ! hoisted constants
   ! c(CMG4_PYRAMID_COND): condition number of the lumped inertia I~ (3x3)
-  integer, parameter, public :: CMG4_PYRAMID_COND = 3
+  integer, parameter, public :: CMG4_PYRAMID_COND = 5
 
   ! Return codes of cmg4_pyramid_setup, checked in this order.
   ! 0: parameters accepted
@@ -194,36 +196,42 @@ contains
     return
   end function cmg4_pyramid_cos
 
-  ! Checks p and computes the constants c that cmg4_pyramid_rhs needs (2 ops,
+  ! Checks p and computes the constants c that cmg4_pyramid_rhs needs (4 ops,
   ! plus the checks). Returns CMG4_PYRAMID_OK or the first failing check's code;
   ! c is then not to be used.
   function cmg4_pyramid_setup(p, c) result(res) bind(C, name="cmg4_pyramid_f_setup")
-    real(c_double), intent(in) :: p(0:1)
-    real(c_double), intent(out) :: c(0:2)
+    real(c_double), intent(in) :: p(0:3)
+    real(c_double), intent(out) :: c(0:4)
     integer(c_int) :: res
     real(c_double) :: rate_ref_1
+    real(c_double) :: rate_ref_2
     real(c_double) :: rate_ref_3
+    real(c_double) :: rate_ref_4
     integer(c_int) :: i_
 
-    do i_ = 0, 3 - 1
+    do i_ = 0, 5 - 1
       c(i_) = 0.0_c_double
     end do
-    do i_ = 0, 2 - 1
+    do i_ = 0, 4 - 1
       if (.not. ieee_is_finite(p(i_))) then
         res = CMG4_PYRAMID_ERR_NONFINITE
         return
       end if
     end do
     rate_ref_1 = p(0)
-    rate_ref_3 = p(1)
+    rate_ref_2 = p(1)
+    rate_ref_3 = p(2)
+    rate_ref_4 = p(3)
     c(0) = rate_ref_1 / 250.0_c_double
-    c(1) = rate_ref_3 / 250.0_c_double
-    c(2) = 3.1063487806599444_c_double
-    if (.not. (c(2) <= 10000000000000.0_c_double)) then
+    c(1) = rate_ref_2 / 250.0_c_double
+    c(2) = rate_ref_3 / 250.0_c_double
+    c(3) = rate_ref_4 / 250.0_c_double
+    c(4) = 3.1063487806599444_c_double
+    if (.not. (c(4) <= 10000000000000.0_c_double)) then
       res = CMG4_PYRAMID_ERR_MASS_SINGULAR
       return
     end if
-    do i_ = 0, 3 - 1
+    do i_ = 0, 5 - 1
       if (.not. ieee_is_finite(c(i_))) then
         res = CMG4_PYRAMID_ERR_OVERFLOW
         return
@@ -255,11 +263,11 @@ contains
 
   ! Pure: no allocation, no saved state. 3-1-2 angles x(1:3): singular at
   ! cos(q2) = 0 (gimbal lock; use attitude = "quaternion" near it).
-  ! dxdt = f(t, x) for the constants c from cmg4_pyramid_setup (424 ops).
+  ! dxdt = f(t, x) for the constants c from cmg4_pyramid_setup (422 ops).
   subroutine cmg4_pyramid_rhs(t, x, c, dxdt) bind(C, name="cmg4_pyramid_f_rhs")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:17)
-    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(in) :: c(0:4)
     real(c_double), intent(out) :: dxdt(0:17)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -466,13 +474,13 @@ contains
     ug1 = min(1e-2_c_double, max(-0.01_c_double, c(0) - 0.004_c_double * gd1))
     nd1 = 11111.111111111111_c_double * ug1 + at1 * (1.2222222222222223_c_double * w1 - &
         0.7777777777777778_c_double * as1)
-    ug2 = min(1e-2_c_double, max(-0.01_c_double, (-0.0008_c_double) - 0.004_c_double * gd2))
+    ug2 = min(1e-2_c_double, max(-0.01_c_double, c(1) - 0.004_c_double * gd2))
     nd2 = 11111.111111111111_c_double * ug2 + at2 * (1.2222222222222223_c_double * w2 - &
         0.7777777777777778_c_double * as2)
-    ug3 = min(1e-2_c_double, max(-0.01_c_double, c(1) - 0.004_c_double * gd3))
+    ug3 = min(1e-2_c_double, max(-0.01_c_double, c(2) - 0.004_c_double * gd3))
     nd3 = 11111.111111111111_c_double * ug3 + at3 * (1.2222222222222223_c_double * w3 - &
         0.7777777777777778_c_double * as3)
-    ug4 = min(1e-2_c_double, max(-0.01_c_double, (-0.0008_c_double) - 0.004_c_double * gd4))
+    ug4 = min(1e-2_c_double, max(-0.01_c_double, c(3) - 0.004_c_double * gd4))
     nd4 = 11111.111111111111_c_double * ug4 + at4 * (1.2222222222222223_c_double * w4 - &
         0.7777777777777778_c_double * as4)
     h1 = (((((((((2.5321631624393657_c_double * u1 + 4.041013984598835e-05_c_double * tmp13) + &
@@ -560,7 +568,7 @@ contains
   subroutine cmg4_pyramid_kinetic_energy(t, x, c, out) bind(C, name="cmg4_pyramid_f_kinetic_energy")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:17)
-    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(in) :: c(0:4)
     real(c_double), intent(out) :: out(0:0)
     real(c_double) :: gam1
     real(c_double) :: gam2
@@ -685,7 +693,7 @@ contains
           name="cmg4_pyramid_f_angular_momentum")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:17)
-    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(in) :: c(0:4)
     real(c_double), intent(out) :: out(0:2)
     real(c_double) :: q1
     real(c_double) :: q2
@@ -844,11 +852,11 @@ contains
     out(2) = (tmp22 * tmp27 + (tmp23 * tmp26) * tmp45) - (tmp23 * tmp28) * tmp37
   end subroutine cmg4_pyramid_angular_momentum
 
-  ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 104 ops.
+  ! out = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W): 102 ops.
   subroutine cmg4_pyramid_power(t, x, c, out) bind(C, name="cmg4_pyramid_f_power")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:17)
-    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(in) :: c(0:4)
     real(c_double), intent(out) :: out(0:3)
     real(c_double) :: gam1
     real(c_double) :: gam2
@@ -919,20 +927,20 @@ contains
         0.0016330816237714926_c_double * tmp2) + 0.002_c_double * tmp3) - 0.002_c_double * w1) - &
         0.0011545754241710957_c_double * tmp1)
     out(1) = gd2 * min(1e-2_c_double, max(-0.01_c_double, &
-        (-0.0008_c_double) - 0.004_c_double * gd2)) + (((tmp4 + w2) + 0.5772877120855479_c_double &
-        * tmp6) - (0.8165408118857462_c_double * tmp5) * u3) * ((((2.0943951023931953_c_double + &
+        c(1) - 0.004_c_double * gd2)) + (((tmp4 + w2) + 0.5772877120855479_c_double * tmp6) - &
+        (0.8165408118857462_c_double * tmp5) * u3) * ((((2.0943951023931953_c_double + &
         (0.0016330816237714926_c_double * tmp5) * u3) - 0.002_c_double * tmp4) - 0.002_c_double * &
         w2) - 0.0011545754241710957_c_double * tmp6)
     out(2) = gd3 * min(1e-2_c_double, max(-0.01_c_double, &
-        c(1) - 0.004_c_double * gd3)) + (((w3 + tmp10 * u2) - 0.8165408118857462_c_double * tmp9) &
+        c(2) - 0.004_c_double * gd3)) + (((w3 + tmp10 * u2) - 0.8165408118857462_c_double * tmp9) &
         - 0.5772877120855479_c_double * tmp8) * ((((2.0943951023931953_c_double + &
         0.0016330816237714926_c_double * tmp9) + 0.0011545754241710957_c_double * tmp8) - &
         0.002_c_double * w3) - (0.002_c_double * tmp10) * u2)
     out(3) = gd4 * min(1e-2_c_double, max(-0.01_c_double, &
-        (-0.0008_c_double) - 0.004_c_double * gd4)) + (((w4 - tmp11) - &
-        0.8165408118857462_c_double * tmp14) - 0.5772877120855479_c_double * tmp13) * &
-        ((((2.0943951023931953_c_double + 0.0016330816237714926_c_double * tmp14) + &
-        0.002_c_double * tmp11) + 0.0011545754241710957_c_double * tmp13) - 0.002_c_double * w4)
+        c(3) - 0.004_c_double * gd4)) + (((w4 - tmp11) - 0.8165408118857462_c_double * tmp14) - &
+        0.5772877120855479_c_double * tmp13) * ((((2.0943951023931953_c_double + &
+        0.0016330816237714926_c_double * tmp14) + 0.002_c_double * tmp11) + &
+        0.0011545754241710957_c_double * tmp13) - 0.002_c_double * w4)
   end subroutine cmg4_pyramid_power
 
 end module cmg4_pyramid_mod

@@ -5,12 +5,12 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy
+ * Build id 7396b3ba4468424a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   cmg4_pyramid_setup: 2 ops, once per parameter set
- *   cmg4_pyramid_rhs:   424 ops per call
+ *   cmg4_pyramid_setup: 4 ops, once per parameter set
+ *   cmg4_pyramid_rhs:   422 ops per call
  */
 #ifndef CMG4_PYRAMID_H
 #define CMG4_PYRAMID_H
@@ -19,12 +19,12 @@
 extern "C" {
 #endif
 
-#define CMG4_PYRAMID_BUILD_ID "cff2c9d7bec2152d"
+#define CMG4_PYRAMID_BUILD_ID "7396b3ba4468424a"
 
 #define CMG4_PYRAMID_NX 18   /* states */
-#define CMG4_PYRAMID_NP 2   /* parameters */
-#define CMG4_PYRAMID_NC 3   /* hoisted constants */
-#define CMG4_PYRAMID_COND 2  /* c[CMG4_PYRAMID_COND]: condition number of the lumped
+#define CMG4_PYRAMID_NP 4   /* parameters */
+#define CMG4_PYRAMID_NC 5   /* hoisted constants */
+#define CMG4_PYRAMID_COND 4  /* c[CMG4_PYRAMID_COND]: condition number of the lumped
                            inertia I~ (3x3), ||I~||_F ||I~^-1||_F */
 
 /*
@@ -50,7 +50,9 @@ extern "C" {
  *
  * Parameter vector p[CMG4_PYRAMID_NP] (SI units):
  *   p[ 0]  rate_ref_1 rad/s   gimbal rate servo of G1: commanded rate relative to A
- *   p[ 1]  rate_ref_3 rad/s   gimbal rate servo of G3: commanded rate relative to A
+ *   p[ 1]  rate_ref_2 rad/s   gimbal rate servo of G2: commanded rate relative to A
+ *   p[ 2]  rate_ref_3 rad/s   gimbal rate servo of G3: commanded rate relative to A
+ *   p[ 3]  rate_ref_4 rad/s   gimbal rate servo of G4: commanded rate relative to A
  *
  * Folded into the code:
  *   m_a = 50.0, I11 = 2.5, I22 = 2.2, I33 = 1.8
@@ -114,7 +116,7 @@ void cmg4_pyramid_kinetic_energy(double t, const double *x, const double *c, dou
 /* out[0..2] = angular momentum about the mass center, N components h[0..2] (kg m^2/s); 193 ops. */
 void cmg4_pyramid_angular_momentum(double t, const double *x, const double *c, double *out);
 
-/* out[0..3] = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W); 104 ops. */
+/* out[0..3] = power of each motor, T_k (w_k - g_k.w_A), out[k-1] (W); 102 ops. */
 void cmg4_pyramid_power(double t, const double *x, const double *c, double *out);
 
 #ifdef __cplusplus

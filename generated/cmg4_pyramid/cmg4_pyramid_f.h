@@ -5,12 +5,12 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy
+ * Build id 7396b3ba4468424a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   cmg4_pyramid_setup: 2 ops, once per parameter set
- *   cmg4_pyramid_rhs:   424 ops per call
+ *   cmg4_pyramid_setup: 4 ops, once per parameter set
+ *   cmg4_pyramid_rhs:   422 ops per call
  */
 #ifndef CMG4_PYRAMID_F_H
 #define CMG4_PYRAMID_F_H
@@ -33,8 +33,8 @@ extern "C" {
  * so that they may be included together.
  */
 #define CMG4_PYRAMID_NX 18
-#define CMG4_PYRAMID_NP 2
-#define CMG4_PYRAMID_NC 3
+#define CMG4_PYRAMID_NP 4
+#define CMG4_PYRAMID_NC 5
 
 #define CMG4_PYRAMID_OK                  0  /* parameters accepted */
 #define CMG4_PYRAMID_ERR_NONFINITE       1  /* a parameter is NaN or infinite */

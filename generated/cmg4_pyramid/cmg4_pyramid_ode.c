@@ -5,12 +5,12 @@
  * template c/ode.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy
+ * Build id 7396b3ba4468424a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   cmg4_pyramid_setup: 2 ops, once per parameter set
- *   cmg4_pyramid_rhs:   424 ops per call
+ *   cmg4_pyramid_setup: 4 ops, once per parameter set
+ *   cmg4_pyramid_rhs:   422 ops per call
  */
 #include "cmg4_pyramid_ode.h"
 
@@ -232,7 +232,7 @@ const char *cmg4_pyramid_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2415 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2413 ops). */
 void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
 {
     double q2;
@@ -872,7 +872,7 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     tmp59 = c[0] - 0.004 * gd1;
     tmp60 = dmax(-0.01, tmp59);
     tmp61 = dmin(1e-2, tmp60);
-    tmp62 = c[1] - 0.004 * gd3;
+    tmp62 = c[2] - 0.004 * gd3;
     tmp63 = dmax(-0.01, tmp62);
     tmp64 = dmin(1e-2, tmp63);
     tmp65 = tmp20 * u1;
@@ -963,11 +963,11 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
             0.5772877120855479 * tmp75 + 7.348867306971716e-05 * tmp91 + tmp122 * u3 + gd4 *
             tmp35 * tmp68 - tmp114 - tmp85 - 0.8165408118857462 * tmp61 - 0.5772877120855479 *
             tmp105 - 0.5772877120855479 * tmp80 - 7.348867306971716e-05 * tmp95 - tmp138 * u2;
-    tmp140 = 0.004 * gd2;
-    tmp141 = dmax(-0.01, -0.0008 - tmp140);
+    tmp140 = c[1] - 0.004 * gd2;
+    tmp141 = dmax(-0.01, tmp140);
     tmp142 = dmin(1e-2, tmp141);
-    tmp143 = 0.004 * gd4;
-    tmp144 = dmax(-0.01, -0.0008 - tmp143);
+    tmp143 = c[3] - 0.004 * gd4;
+    tmp144 = dmax(-0.01, tmp143);
     tmp145 = dmin(1e-2, tmp144);
     tmp146 = tmp12 * tmp73;
     tmp147 = gd1 * tmp146;
@@ -1292,7 +1292,7 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     tmp378 = tmp18 * tmp214 - tmp366 - tmp373 - tmp84;
     tmp379 = 7.348867306971716e-05 * u1;
     tmp380 = tmp214 * tmp32;
-    tmp381 = 0.0092 - tmp140 > 0.0 ? 1.0 : 0.0;
+    tmp381 = 1e-2 + tmp140 > 0.0 ? 1.0 : 0.0;
     tmp382 = 1e-2 - tmp141 > 0.0 ? 1.0 : 0.0;
     tmp383 = tmp18 * tmp83;
     tmp384 = 0.0023091508483421915 * tmp381 * tmp382 - tmp379 - 0.8165408118857462 * tmp380 -
@@ -1314,7 +1314,7 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     tmp396 = tmp177 * (tmp31 * tmp393 + tmp394 * tmp45 + tmp395 * tmp41);
     tmp397 = tmp35 * tmp68 - tmp287 - tmp366 - tmp372;
     tmp398 = tmp276 * tmp35;
-    tmp399 = (0.0092 - tmp143 > 0.0 ? 1.0 : 0.0) * (1e-2 - tmp144 > 0.0 ? 1.0 : 0.0);
+    tmp399 = (1e-2 + tmp143 > 0.0 ? 1.0 : 0.0) * (1e-2 - tmp144 > 0.0 ? 1.0 : 0.0);
     tmp400 = tmp20 * tmp68;
     tmp401 = tmp379 + 0.0023091508483421915 * tmp399 - 0.8165408118857462 * tmp398 -
             0.8165408118857462 * tmp400;
@@ -4879,11 +4879,11 @@ static void rhs_lanes(const double *CMG4_PYRAMID_RESTRICT t,
         tmp36 = tmp10 * tmp28;
         ug1 = dmin(1e-2, dmax(-0.01, c[0] - 0.004 * gd1));
         nd1 = 11111.111111111111 * ug1 + at1 * (1.2222222222222223 * w1 - 0.7777777777777778 * as1);
-        ug2 = dmin(1e-2, dmax(-0.01, -0.0008 - 0.004 * gd2));
+        ug2 = dmin(1e-2, dmax(-0.01, c[1] - 0.004 * gd2));
         nd2 = 11111.111111111111 * ug2 + at2 * (1.2222222222222223 * w2 - 0.7777777777777778 * as2);
-        ug3 = dmin(1e-2, dmax(-0.01, c[1] - 0.004 * gd3));
+        ug3 = dmin(1e-2, dmax(-0.01, c[2] - 0.004 * gd3));
         nd3 = 11111.111111111111 * ug3 + at3 * (1.2222222222222223 * w3 - 0.7777777777777778 * as3);
-        ug4 = dmin(1e-2, dmax(-0.01, -0.0008 - 0.004 * gd4));
+        ug4 = dmin(1e-2, dmax(-0.01, c[3] - 0.004 * gd4));
         nd4 = 11111.111111111111 * ug4 + at4 * (1.2222222222222223 * w4 - 0.7777777777777778 * as4);
         h1 = 2.5321631624393657 * u1 + 4.041013984598835e-05 * tmp13 + 6.350164832941026e-05 *
                 tmp16 + 7.348867306971716e-05 * gd1 + tmp12 * tmp5 + 0.00011 * tmp9 * w4 -

@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id cff2c9d7bec2152d. The same interface as cmg4_pyramid_ode.h, under
+! Build id 7396b3ba4468424a. The same interface as cmg4_pyramid_ode.h, under
 ! the bind(C) names cmg4_pyramid_f_<method> and cmg4_pyramid_f_<method>_batch.
 ! Coefficients and their published sources as above each method in cmg4_pyramid_ode.c.
 ! cmg4_pyramid_f.h declares these bind(C) procedures for C callers.
@@ -124,11 +124,11 @@ contains
   ! The memory order is C's, row by row: read as an array Jm(nx, nx) (Fortran's
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
-  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2415 ops).
+  ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2413 ops).
   subroutine cmg4_pyramid_jac(t, x, c, J) bind(C, name="cmg4_pyramid_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:17)
-    real(c_double), intent(in) :: c(0:2)
+    real(c_double), intent(in) :: c(0:4)
     real(c_double), intent(out) :: J(0:323)
     real(c_double) :: q2
     real(c_double) :: q3
@@ -772,7 +772,7 @@ contains
     tmp59 = c(0) - 0.004_c_double * gd1
     tmp60 = max(-0.01_c_double, tmp59)
     tmp61 = min(1e-2_c_double, tmp60)
-    tmp62 = c(1) - 0.004_c_double * gd3
+    tmp62 = c(2) - 0.004_c_double * gd3
     tmp63 = max(-0.01_c_double, tmp62)
     tmp64 = min(1e-2_c_double, tmp63)
     tmp65 = tmp20 * u1
@@ -870,11 +870,11 @@ contains
         7.348867306971716e-05_c_double * tmp91) + tmp122 * u3) + (gd4 * tmp35) * tmp68) - tmp114) &
         - tmp85) - 0.8165408118857462_c_double * tmp61) - 0.5772877120855479_c_double * tmp105) - &
         0.5772877120855479_c_double * tmp80) - 7.348867306971716e-05_c_double * tmp95) - tmp138 * u2
-    tmp140 = 0.004_c_double * gd2
-    tmp141 = max(-0.01_c_double, (-0.0008_c_double) - tmp140)
+    tmp140 = c(1) - 0.004_c_double * gd2
+    tmp141 = max(-0.01_c_double, tmp140)
     tmp142 = min(1e-2_c_double, tmp141)
-    tmp143 = 0.004_c_double * gd4
-    tmp144 = max(-0.01_c_double, (-0.0008_c_double) - tmp143)
+    tmp143 = c(3) - 0.004_c_double * gd4
+    tmp144 = max(-0.01_c_double, tmp143)
     tmp145 = min(1e-2_c_double, tmp144)
     tmp146 = tmp12 * tmp73
     tmp147 = gd1 * tmp146
@@ -1242,7 +1242,7 @@ contains
     tmp378 = ((tmp18 * tmp214 - tmp366) - tmp373) - tmp84
     tmp379 = 7.348867306971716e-05_c_double * u1
     tmp380 = tmp214 * tmp32
-    tmp381 = merge(1.0_c_double, 0.0_c_double, 0.0092_c_double - tmp140 > 0.0_c_double)
+    tmp381 = merge(1.0_c_double, 0.0_c_double, 1e-2_c_double + tmp140 > 0.0_c_double)
     tmp382 = merge(1.0_c_double, 0.0_c_double, 1e-2_c_double - tmp141 > 0.0_c_double)
     tmp383 = tmp18 * tmp83
     tmp384 = (((0.0023091508483421915_c_double * tmp381) * tmp382 - tmp379) - &
@@ -1265,7 +1265,7 @@ contains
     tmp397 = ((tmp35 * tmp68 - tmp287) - tmp366) - tmp372
     tmp398 = tmp276 * tmp35
     tmp399 = (merge(1.0_c_double, 0.0_c_double, &
-        0.0092_c_double - tmp143 > 0.0_c_double)) * (merge(1.0_c_double, 0.0_c_double, &
+        1e-2_c_double + tmp143 > 0.0_c_double)) * (merge(1.0_c_double, 0.0_c_double, &
         1e-2_c_double - tmp144 > 0.0_c_double))
     tmp400 = tmp20 * tmp68
     tmp401 = ((tmp379 + 0.0023091508483421915_c_double * tmp399) - 0.8165408118857462_c_double * &

@@ -5,12 +5,12 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id cff2c9d7bec2152d: a hash of the scene, gyrogen and sympy
+ * Build id 7396b3ba4468424a: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as CMG4_PYRAMID_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
- *   cmg4_pyramid_setup: 2 ops, once per parameter set
- *   cmg4_pyramid_rhs:   424 ops per call
+ *   cmg4_pyramid_setup: 4 ops, once per parameter set
+ *   cmg4_pyramid_rhs:   422 ops per call
  */
 #ifndef CMG4_PYRAMID_ODE_H
 #define CMG4_PYRAMID_ODE_H
@@ -118,7 +118,7 @@ const char *cmg4_pyramid_ode_strerror(int code);
    the kinematic rates q1' and q3' in the 7th digit. */
 #define CMG4_PYRAMID_ODE_GIMBAL_LOCK_COS 1e-09
 
-/* d(dx/dt)/dx, row-major: J[i*CMG4_PYRAMID_NX + j] = d f_i / d x_j (2415 ops). */
+/* d(dx/dt)/dx, row-major: J[i*CMG4_PYRAMID_NX + j] = d f_i / d x_j (2413 ops). */
 void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J);
 
 /* Classic Runge-Kutta, order 4, `steps` equal steps; a step that makes a NaN

@@ -76,7 +76,8 @@ def singular_pyramid() -> Case:
     initial = {**tomllib.loads(builtin_text("cmg4_pyramid"))["simulate"]["initial"]}
     initial.update({f"gam{k}": math.radians(a) for k, a in enumerate(SINGULAR_SET, 1)})
     return Case("CMG pyramid at a singular gimbal set", load("cmg4_pyramid"),
-                {"rate_ref_1": 0.0, "rate_ref_3": 0.0}, initial, 10.0, "pass", samples=100,
+                {"rate_ref_1": 0.0, "rate_ref_2": -0.2, "rate_ref_3": 0.0, "rate_ref_4": -0.2},
+                initial, 10.0, "pass", samples=100,
                 quadrature=True, extreme=STEERING)  # fmt: skip
 
 
