@@ -278,6 +278,10 @@ def test_the_pyramids_steering_singularity_vanishes_at_its_singular_set() -> Non
         xs[1, scene.states.index(f"gam{k}")] = np.radians(angle)
     regular, singular = gimbal_view.steering_singularity(scene, xs)
     assert regular == pytest.approx(1.1848, rel=1e-4) and abs(singular) < 1e-30
+    two = load("vscmg3")  # two gimbals: det(A^T A), |g_t1 x g_t2|^2, not the 3x3's 0
+    two = two.model_copy(update={"rotors": two.rotors[:2]})
+    (measure,) = gimbal_view.steering_singularity(two, np.zeros((1, len(two.states))))
+    assert measure == pytest.approx(1.0)
 
 
 @pytest.mark.slow

@@ -157,7 +157,9 @@ def steering_singularity(scene: Scene, xs: np.ndarray) -> np.ndarray:
     unit spin momentum by): 0 where the steering law loses a direction (a
     singular gimbal set), 1.18 for cmg4_pyramid at gimbal angles 0. Scale
     by h^6 for wheels of equal momentum h; fixed rotors take no part (a
-    gimbal's axes are folded: no runtime value is read)."""
+    gimbal's axes are folded: no runtime value is read). With fewer than
+    three gimbals A A^T is always singular: det(A^T A) then, 0 where their
+    torque directions turn parallel."""
     on = [k for k, r in enumerate(scene.rotors, 1) if r.gimbal is not None]
     gam = _split(scene, np.atleast_2d(xs))["gam"][:, [k - 1 for k in on]]
     g_s0 = np.array([_axis(scene.rotors[k - 1], k, {}) for k in on])
@@ -165,6 +167,8 @@ def steering_singularity(scene: Scene, xs: np.ndarray) -> np.ndarray:
     g_t0 = np.cross(g_g, g_s0)
     spin = np.cos(gam)[..., None] * g_s0 + np.sin(gam)[..., None] * g_t0  # (M, G, 3)
     a = np.cross(g_g[None], spin)  # (M, G, 3): A's columns
+    if len(on) < 3:
+        return np.linalg.det(np.einsum("mgi,mhi->mgh", a, a))
     return np.linalg.det(np.einsum("mgi,mgj->mij", a, a))
 
 
