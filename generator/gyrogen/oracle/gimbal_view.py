@@ -151,6 +151,12 @@ def clamp_margins(
     return np.concatenate([np.abs(u_s) - wheel, np.abs(u_g) - gimbal], axis=1)
 
 
+def steering_gram(scene: Scene) -> str:
+    """Which Gram matrix steering_singularity takes the determinant of:
+    "A A^T" with three gimbals or more, else "A^T A"."""
+    return "A A^T" if sum(r.gimbal is not None for r in scene.rotors) >= 3 else "A^T A"
+
+
 def steering_singularity(scene: Scene, xs: np.ndarray) -> np.ndarray:
     """(M,) det(A A^T) of the gimbals' unit torque directions, A (3, G) with
     column k = g_g x g_s(gam_k) (what a unit gimbal rate of CMG k turns its
@@ -167,9 +173,8 @@ def steering_singularity(scene: Scene, xs: np.ndarray) -> np.ndarray:
     g_t0 = np.cross(g_g, g_s0)
     spin = np.cos(gam)[..., None] * g_s0 + np.sin(gam)[..., None] * g_t0  # (M, G, 3)
     a = np.cross(g_g[None], spin)  # (M, G, 3): A's columns
-    if len(on) < 3:
-        return np.linalg.det(np.einsum("mgi,mhi->mgh", a, a))
-    return np.linalg.det(np.einsum("mgi,mgj->mij", a, a))
+    gram = "mgi,mgj->mij" if steering_gram(scene) == "A A^T" else "mgi,mhi->mgh"
+    return np.linalg.det(np.einsum(gram, a, a))
 
 
 def rhs(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.0) -> np.ndarray:

@@ -237,9 +237,9 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
         )
     if gimbal_view.has_gimbals(scene):
         measure = gimbal_view.steering_singularity(scene, xs)
-        gram = "A A^T" if sum(r.gimbal is not None for r in scene.rotors) >= 3 else "A^T A"
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
-            f"steering singularity det({gram}) {measure[0]:.2g} at the start, "
+            f"steering singularity det({gimbal_view.steering_gram(scene)}) {measure[0]:.2g} "
+            "at the start, "
             f"{measure.min():.2g} to {measure.max():.2g} along the run"
         )
     if _near_gimbal_lock(scene, xs).any() and not res.diagnosis:
