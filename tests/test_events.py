@@ -86,6 +86,19 @@ def test_the_manifest_and_header_name_the_events(
         header
     )
     assert "out[1]  tilted: cos(q2)*cos(q1) - 0.9 (down)" in header
+    ode_h = " ".join((tmp_path / f"{scene.name}_ode.h").read_text().replace("*", " ").split())
+    assert "each accepted step is searched in 8 equal pieces" in ode_h  # energy_and_time reads t
+
+
+def test_the_header_says_events_on_the_states_are_looked_for_at_step_ends(
+    tmp_path: Path,
+) -> None:
+    """The header's promise follows the scene: no pieces unless an event reads t."""
+    scene = _scene("dual_spin", extra='[[events]]\nname = "tilted"\nexpr = "cos(q2) - 0.9"\n')
+    generate(scene, tmp_path)
+    ode_h = " ".join((tmp_path / "dual_spin_ode.h").read_text().replace("*", " ").split())
+    assert "g is evaluated at each accepted step's end" in ode_h
+    assert "equal pieces" not in ode_h
 
 
 def test_a_scene_without_events_has_no_event_function(tmp_path: Path) -> None:
