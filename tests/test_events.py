@@ -4,11 +4,13 @@ numpy reference, which reads the same expressions on its own."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gyrogen.analysis.simulate import engine
 from gyrogen.codegen.generate import generate
 from gyrogen.errors import SceneError
 from gyrogen.oracle import scene_view
@@ -441,3 +443,21 @@ def test_an_event_that_reads_the_time_is_searched_between_the_steps_ends(
     text = builtin_text("dual_spin").replace("kinetic_energy = false", "kinetic_energy = true")
     grid = make_context(parse(text + "\n" + events, "ev.toml")).event_grid
     assert grid is not None and grid.pieces == (EV_SUBINTERVALS if pieces > 1 else 1)
+
+
+def test_simulate_says_when_the_log_is_full(tmp_path: Path, cli, monkeypatch) -> None:
+    """A log full before the run's end (here at 2 events: sin(3 t)'s second
+    crossing at pi/3 fills it, and rising at 2 pi/3 has no room) is
+    said in the summary and summary.json, never passed off as every event."""
+    monkeypatch.setattr(engine, "EVENT_CAPACITY", 2)
+    scene = tmp_path / "spun.toml"
+    scene.write_text(builtin_text("dual_spin").replace('name = "dual_spin"', 'name = "spun"')
+                     + LOCATED)  # fmt: skip
+    code, out, err = cli(["simulate", str(scene), "--out", str(tmp_path / "sim"), "--no-plot",
+                          "--t-end", "10", "--dt", "1", "--method", "dop853"])  # fmt: skip
+    assert code == 0, err
+    assert "2 located (events.csv); the log is full (at most 2): none located from t = 2.094" in out
+    said = json.loads((tmp_path / "sim" / "summary.json").read_text())["events"]
+    assert said["located"] == 2 and said["terminal"] is None
+    assert said["log_full_from_t"] == pytest.approx(2 * np.pi / 3, rel=1e-12)
+    assert len((tmp_path / "sim" / "events.csv").read_text().splitlines()) == 3
