@@ -461,3 +461,30 @@ def test_simulate_says_when_the_log_is_full(tmp_path: Path, cli, monkeypatch) ->
     assert said["located"] == 2 and said["terminal"] is None
     assert said["log_full_from_t"] == pytest.approx(2 * np.pi / 3, rel=1e-12)
     assert len((tmp_path / "sim" / "events.csv").read_text().splitlines()) == 3
+
+
+@pytest.mark.parametrize(
+    ("expr", "crossing"),
+    [
+        ("sqrt(2 - t) - 0.5", "t == 1.75"),
+        pytest.param("sqrt(5.01 - q3) - 0.05", "q3 == 5.0075", marks=pytest.mark.slow),
+    ],
+)
+def test_a_crossing_before_g_turns_nan_in_the_step_is_located(
+    tmp_path: Path, expr: str, crossing: str
+) -> None:
+    """g crosses 0 and turns NaN a little later, within one step (or one of
+    its pieces, for an event that reads t): the crossing is located (it was
+    seen only where a step ended between the two), in C and Fortran alike."""
+    scene = _scene("dual_spin", f'[[events]]\nname = "gone"\nexpr = "{expr}"\n')
+    generate(scene, tmp_path)
+    builds = [build.build(tmp_path, lang) for lang in ("c", "fortran")]
+    x0, c = np.array(scene.initial_state()), builds[0].setup([])
+    for method in ADAPTIVE:
+        logs = [b.integrate_events(method, x0, c, [0.0, 200.0])[1] for b in builds]
+        assert logs[0].names == ["gone"], (method, logs[0].times)
+        assert np.array_equal(logs[0].times, logs[1].times)
+        if crossing.startswith("t"):
+            assert abs(logs[0].times[0] - 1.75) <= 4 * np.spacing(1.75), method
+        else:
+            assert abs(logs[0].states[0, 2] - 5.0075) < 1e-12, method

@@ -949,7 +949,9 @@ class Compiled:
         within one step (an eighth of one for an event that reads t: a
         double root, a grazing touch) cancel and are not seen, so limit the
         step (tighter tolerances) where g oscillates faster than the
-        motion; a NaN g never crosses.
+        motion; a NaN g never crosses (a crossing before g turns NaN
+        within a step is located: the step is searched up to g's last
+        finite point).
 
         Parameters
         ----------
