@@ -286,6 +286,16 @@ def test_integrate_events_refuses_what_it_cannot_do(
         c_build.integrate_events("rk4", x0, c, [0.0, 1.0])
     with pytest.raises(ValueError):
         c_build.integrate_events("dop853", x0, c, [1.0, 0.0])
+    # an int array took the end state truncated (u1 = 0.002 -> 0), a list or
+    # a wrong shape failed only after the run, in numpy's words
+    wrong = [(np.zeros(7, dtype=np.int64), "int64 array of shape (7,)"), ([0.0] * 7, "list"),
+             (np.zeros((7, 1)), "float64 array of shape (7, 1)")]  # fmt: skip
+    for end, got in wrong:
+        with pytest.raises(ValueError) as err:
+            c_build.integrate_events("dop853", x0, c, [0.0, 1.0], end=end)
+        assert str(err.value) == f"end must be a float64 numpy array of shape (7,) (got: {got})"
+    with pytest.raises(ValueError, match=r"ends must be a float64 numpy array of shape \(2, 7\)"):
+        c_build.integrate_grid_batch("dop853", [x0, x0], c, [0.0, 1.0], ends=np.zeros((2, 7), "i8"))
 
 
 def test_simulate_writes_and_prints_the_event_log(tmp_path: Path, cli) -> None:
