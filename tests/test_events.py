@@ -4,11 +4,13 @@ numpy reference, which reads the same expressions on its own."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gyrogen.analysis.simulate import engine
 from gyrogen.codegen.generate import generate
 from gyrogen.errors import SceneError
 from gyrogen.oracle import scene_view
@@ -297,6 +299,16 @@ def test_integrate_events_refuses_what_it_cannot_do(
         c_build.integrate_events("rk4", x0, c, [0.0, 1.0])
     with pytest.raises(ValueError):
         c_build.integrate_events("dop853", x0, c, [1.0, 0.0])
+    # an int array took the end state truncated (u1 = 0.002 -> 0), a list or
+    # a wrong shape failed only after the run, in numpy's words
+    wrong = [(np.zeros(7, dtype=np.int64), "int64 array of shape (7,)"), ([0.0] * 7, "list"),
+             (np.zeros((7, 1)), "float64 array of shape (7, 1)")]  # fmt: skip
+    for end, got in wrong:
+        with pytest.raises(ValueError) as err:
+            c_build.integrate_events("dop853", x0, c, [0.0, 1.0], end=end)
+        assert str(err.value) == f"end must be a float64 numpy array of shape (7,) (got: {got})"
+    with pytest.raises(ValueError, match=r"ends must be a float64 numpy array of shape \(2, 7\)"):
+        c_build.integrate_grid_batch("dop853", [x0, x0], c, [0.0, 1.0], ends=np.zeros((2, 7), "i8"))
 
 
 def test_simulate_writes_and_prints_the_event_log(tmp_path: Path, cli) -> None:
@@ -454,3 +466,48 @@ def test_an_event_that_reads_the_time_is_searched_between_the_steps_ends(
     text = builtin_text("dual_spin").replace("kinetic_energy = false", "kinetic_energy = true")
     grid = make_context(parse(text + "\n" + events, "ev.toml")).event_grid
     assert grid is not None and grid.pieces == (EV_SUBINTERVALS if pieces > 1 else 1)
+
+
+def test_simulate_says_when_the_log_is_full(tmp_path: Path, cli, monkeypatch) -> None:
+    """A log full before the run's end (here at 2 events: sin(3 t)'s second
+    crossing at pi/3 fills it, and rising at 2 pi/3 has no room) is
+    said in the summary and summary.json, never passed off as every event."""
+    monkeypatch.setattr(engine, "EVENT_CAPACITY", 2)
+    scene = tmp_path / "spun.toml"
+    scene.write_text(builtin_text("dual_spin").replace('name = "dual_spin"', 'name = "spun"')
+                     + LOCATED)  # fmt: skip
+    code, out, err = cli(["simulate", str(scene), "--out", str(tmp_path / "sim"), "--no-plot",
+                          "--t-end", "10", "--dt", "1", "--method", "dop853"])  # fmt: skip
+    assert code == 0, err
+    assert "2 located (events.csv); the log is full (at most 2): none located from t = 2.094" in out
+    said = json.loads((tmp_path / "sim" / "summary.json").read_text())["events"]
+    assert said["located"] == 2 and said["terminal"] is None
+    assert said["log_full_from_t"] == pytest.approx(2 * np.pi / 3, rel=1e-12)
+    assert len((tmp_path / "sim" / "events.csv").read_text().splitlines()) == 3
+
+
+@pytest.mark.parametrize(
+    ("expr", "crossing"),
+    [
+        ("sqrt(2 - t) - 0.5", "t == 1.75"),
+        pytest.param("sqrt(5.01 - q3) - 0.05", "q3 == 5.0075", marks=pytest.mark.slow),
+    ],
+)
+def test_a_crossing_before_g_turns_nan_in_the_step_is_located(
+    tmp_path: Path, expr: str, crossing: str
+) -> None:
+    """g crosses 0 and turns NaN a little later, within one step (or one of
+    its pieces, for an event that reads t): the crossing is located (it was
+    seen only where a step ended between the two), in C and Fortran alike."""
+    scene = _scene("dual_spin", f'[[events]]\nname = "gone"\nexpr = "{expr}"\n')
+    generate(scene, tmp_path)
+    builds = [build.build(tmp_path, lang) for lang in ("c", "fortran")]
+    x0, c = np.array(scene.initial_state()), builds[0].setup([])
+    for method in ADAPTIVE:
+        logs = [b.integrate_events(method, x0, c, [0.0, 200.0])[1] for b in builds]
+        assert logs[0].names == ["gone"], (method, logs[0].times)
+        assert np.array_equal(logs[0].times, logs[1].times)
+        if crossing.startswith("t"):
+            assert abs(logs[0].times[0] - 1.75) <= 4 * np.spacing(1.75), method
+        else:
+            assert abs(logs[0].states[0, 2] - 5.0075) < 1e-12, method

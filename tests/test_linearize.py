@@ -210,6 +210,8 @@ def test_command_writes_npz_and_pole_map(tmp_path: Path, cli) -> None:
         (["--at", "u4=1e308"], "state u4 = 1e+308: beyond 1e+100 rad/s"),
         (["--at", "q2=1.5707963267948966"], "at gimbal lock (|cos q2| < 1e-09)"),
         (["--at", "q2=-4.71238898038469"], "at gimbal lock"),
+        (["--at", "q3=1e7"], "state q3 = 1e+07 rad: more than 2607 turns (16384 rad)"),
+        (["--state", "0,0,-20000,0,1,0,0"], "state q3 = -20000 rad: more than 2607 turns"),
     ],
 )
 def test_bad_points_are_one_line_exit_2(argv: list[str], message: str, tmp_path: Path, cli) -> None:

@@ -210,8 +210,11 @@ ODE_CODES: tuple[Code, ...] = (
 on failure x holds the last good state."""
 
 ODE_ATTITUDE_SINGULAR = next(c.value for c in ODE_CODES if c.name == "ODE_ERR_ATTITUDE_SINGULAR")
-ODE_LOG_FULL = next(c.value for c in ODE_CODES if c.name == "ODE_ERR_EVENT_LOG_FULL")
 """<PREFIX>_ODE_ERR_ATTITUDE_SINGULAR: 3-1-2 angles at gimbal lock (GIMBAL_LOCK_COS)."""
+ODE_EVENT = next(c.value for c in ODE_CODES if c.name == "ODE_EVENT")
+"""<PREFIX>_ODE_EVENT: an _events call stopped at a terminal event."""
+ODE_LOG_FULL = next(c.value for c in ODE_CODES if c.name == "ODE_ERR_EVENT_LOG_FULL")
+"""<PREFIX>_ODE_ERR_EVENT_LOG_FULL: an _events call's log had no room for a crossing."""
 
 
 UNKNOWN_CODE = "unknown return code"

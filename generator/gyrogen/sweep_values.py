@@ -64,11 +64,7 @@ class Distribution(_Strict):
             raise ValueError(f"uniform = [{a:g}, {b:g}]: low must be below high")
         if self.kind != "uniform" and not b > 0:
             raise ValueError(f"{self.kind} = [{a:g}, {b:g}]: the spread must be > 0")
-        reach = {
-            "uniform": max(abs(a), abs(b), abs(b - a)),
-            "normal": abs(a) + TAIL * b,
-            "lognormal": math.exp(min(a + TAIL * b, 709.0)) if a + TAIL * b < 709.0 else math.inf,
-        }[self.kind]
+        reach = self.spread_reach
         if not reach <= MAX_VALUE:
             raise ValueError(
                 f"{self.kind} = [{a:g}, {b:g}]: draws would reach {reach:.3g}, beyond "
@@ -81,6 +77,26 @@ class Distribution(_Strict):
             if not self.cdf(hi) - self.cdf(lo) > 1e-12:
                 raise ValueError(f"truncate = [{lo:g}, {hi:g}] leaves no probability")
         return self
+
+    @property
+    def spread_reach(self) -> float:
+        """The largest |draw| (or |high - low|) the distribution reaches
+        untruncated: TAIL spreads out for a normal or lognormal one."""
+        a, b = self.args
+        return {
+            "uniform": max(abs(a), abs(b), abs(b - a)),
+            "normal": abs(a) + TAIL * b,
+            "lognormal": math.exp(min(a + TAIL * b, 709.0)) if a + TAIL * b < 709.0 else math.inf,
+        }[self.kind]
+
+    @property
+    def reach(self) -> float:
+        """The largest |draw|: spread_reach's, within the truncation."""
+        a, b = self.args
+        untruncated = max(abs(a), abs(b)) if self.kind == "uniform" else self.spread_reach
+        if self.truncate is None:
+            return untruncated
+        return min(untruncated, max(map(abs, self.truncate)))
 
 
 class Axis(_Strict):
@@ -115,6 +131,14 @@ class Axis(_Strict):
     @property
     def size(self) -> int:
         return len(self.values) if self.values is not None else self.spaced[2]
+
+    @property
+    def reach(self) -> float:
+        """The largest |value| on the axis (one of its values)."""
+        if self.values is not None:
+            return max(map(abs, self.values))
+        a, b, _ = self.spaced
+        return max(abs(a), abs(b)) if self.linspace is not None else 10.0 ** max(a, b)
 
 
 MAX_TILT_DEG = 90.0

@@ -73,3 +73,19 @@ def grid_times(times: Any) -> np.ndarray:
             f"after times[{k - 1}] = {float(t[k - 1])!r})"
         )
     return t
+
+
+def receiver(a: Any, shape: tuple[int, ...], what: str) -> None:
+    """A one-line ValueError unless a (an array a call writes its result
+    into) is a writable float64 numpy array of shape: numpy would cast the
+    doubles into another dtype (an int array truncates them) or fail to
+    broadcast only after the run."""
+    if a is None:
+        return
+    if not isinstance(a, np.ndarray) or a.dtype != np.float64 or a.shape != shape:
+        got = (
+            f"{a.dtype} array of shape {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
+        )
+        raise ValueError(f"{what} must be a float64 numpy array of shape {shape} (got: {got})")
+    if not a.flags.writeable:
+        raise ValueError(f"{what} must be writable")

@@ -14,7 +14,13 @@ import numpy as np
 
 from gyrogen import abi, methods
 from gyrogen.errors import BuildError, SetupRefused
-from gyrogen.runtime.call_checks import THREADS_MAX, controls_error, grid_times, real_only
+from gyrogen.runtime.call_checks import (
+    THREADS_MAX,
+    controls_error,
+    grid_times,
+    real_only,
+    receiver,
+)
 from gyrogen.runtime.variational import Layout
 
 Language = Literal["c", "fortran"]
@@ -949,7 +955,9 @@ class Compiled:
         within one step (an eighth of one for an event that reads t: a
         double root, a grazing touch) cancel and are not seen, so limit the
         step (tighter tolerances) where g oscillates faster than the
-        motion; a NaN g never crosses.
+        motion; a NaN g never crosses (a crossing before g turns NaN
+        within a step is located: the step is searched up to g's last
+        finite point).
 
         Parameters
         ----------
@@ -974,8 +982,9 @@ class Compiled:
         Raises
         ------
         ValueError
-            As for `integrate_grid`, the scene declares no events, or
-            capacity is not an integer from 0 to 10^8.
+            As for `integrate_grid`, the scene declares no events,
+            capacity is not an integer from 0 to 10^8, or end is not a
+            writable float64 array of shape (nx,).
         """
         if not self.event_names:
             raise ValueError("this build's scene declares no [[events]]")
@@ -984,6 +993,7 @@ class Compiled:
         fn = self._grid(method, "_events")
         t = grid_times(times)
         x = self._state(x0)
+        receiver(end, (self.nx,), "end")
         out = np.full((t.size, self.nx), np.nan)
         log_t, log_k = np.zeros(max(capacity, 1)), np.zeros(max(capacity, 1), dtype=np.intc)
         log_x = np.zeros((max(capacity, 1), self.nx))
@@ -1034,12 +1044,14 @@ class Compiled:
         Raises
         ------
         ValueError
-            As for `integrate_grid` and `integrate_batch`.
+            As for `integrate_grid` and `integrate_batch`, or ends is not a
+            writable float64 array of shape (n, nx).
         """
         fn = self._grid(method, "_grid_batch")
         t = grid_times(times)
         x = self._start_states(x0s)
         n = x.shape[0]
+        receiver(ends, (n, self.nx), "ends")
         out = np.full((n, t.size, self.nx), np.nan)
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)

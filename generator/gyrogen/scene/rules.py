@@ -206,14 +206,17 @@ def check_quaternion(initial: dict[str, float], key: str = "simulate.initial") -
         )
 
 
-def check_angles(point: Mapping[str, float], key: str) -> None:
-    """Every angle of a start state (or an equilibrium) given within
-    MAX_START_ANGLE, where a double still holds it to verify's bar; point's
-    names are the scene's states (checked before)."""
+def check_angles(point: Mapping[str, float], key: str, relation: str = "=") -> None:
+    """Every angle of a start state (or an equilibrium, or how far a sweep's
+    values of it reach: relation "reaches") given within MAX_START_ANGLE,
+    where a double still holds it to verify's bar; point's names are the
+    scene's states (checked before), named in the error as key.name (name
+    alone for an empty key)."""
     for name, v in point.items():
         if state_kind(name) == "angle" and not abs(v) <= MAX_START_ANGLE:
             raise ValueError(
-                f"{key}.{name} = {v:.6g} rad: more than {int(MAX_START_ANGLE / (2 * math.pi))} "
+                f"{f'{key}.' if key else ''}{name} {relation} {v:.6g} rad: more than "
+                f"{int(MAX_START_ANGLE / (2 * math.pi))} "
                 f"turns ({MAX_START_ANGLE:g} rad), where a double holds the angle only to "
                 f"{math.ulp(v) / 2:.2g} rad; give it modulo 2 pi"
             )

@@ -33,7 +33,7 @@ from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import Scene, validate
 from gyrogen.scene.rotors import lumped_inertia, resolved, unit_axes
-from gyrogen.scene.rules import QUATERNION, check_quaternion
+from gyrogen.scene.rules import QUATERNION, check_angles, check_quaternion
 
 RESIDUAL_BAR = 1e-9
 """A point is an equilibrium when each kept state's rate is at most this
@@ -137,6 +137,10 @@ def state_of(
         start = {"e0": 1.0, **named}
         x = np.array([float(start.get(s, 0.0)) for s in scene.states])
     _finite(x, scene.states, "state")
+    try:  # as a scene's start: each angle within MAX_START_ANGLE
+        check_angles(dict(zip(scene.states, x, strict=True)), "")
+    except ValueError as exc:
+        raise SceneError(f"state {exc}") from None
     if scene.attitude == "quaternion":  # as a scene's start: |e| within the slack, normalized
         e = [scene.states.index(n) for n in QUATERNION]
         try:

@@ -27,7 +27,7 @@ import scipy.integrate
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
-from gyrogen.abi import MIN_RTOL, ODE_CODES, message
+from gyrogen.abi import MIN_RTOL, ODE_CODES, ODE_EVENT, ODE_LOG_FULL, message
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import files
 from gyrogen.analysis.simulate.invariants import along_trajectory, words
@@ -319,13 +319,13 @@ def run(
         method = choice.method or ("Radau" if choice.stiff else "DOP853")
         echo(f"method {method}: {choice.why}")
         settings = replace(settings, method=method)
-    log, stopped = None, False
+    log, stopped, full = None, False, None
     if (
         scene.events
         and settings.method in methods.NAMES
         and not methods.get(settings.method).fixed_step
     ):
-        log, stopped = located(start, settings)
+        log, stopped, full = located(start, settings)
         if stopped:  # the output grid ends at the event (its last time clipped to it)
             t_event = float(log.times[-1])
             settings = replace(settings, t_end=t_event, dt=min(settings.dt, t_event))
@@ -339,7 +339,7 @@ def run(
     inv = along_trajectory(scene, p, traj)
     paths = tuple(out / n for n in names)
     res = Result(
-        scene, out, comp.language, sources.build_id, settings, traj, inv, paths, log, stopped
+        scene, out, comp.language, sources.build_id, settings, traj, inv, paths, log, stopped, full
     )
     contents = files.contents(res, p)
     with transaction():  # the sources and the results, all or nothing
@@ -348,18 +348,20 @@ def run(
     return res
 
 
-def located(start: Start, settings: Settings) -> tuple[EventLog, bool]:
+def located(start: Start, settings: Settings) -> tuple[EventLog, bool, float | None]:
     """The scene's events over the output grid (one _events call with the
-    run's method and tolerances), and whether a terminal one stopped it."""
+    run's method and tolerances), whether a terminal one stopped it, and
+    the time of the first crossing a full log left out (None: the log
+    holds every crossing)."""
     grid = output_grid(settings.t_end, settings.dt)
     rtol, atol = start.tol
-    _, log, _, code = start.comp.integrate_events(
+    _, log, stats, code = start.comp.integrate_events(
         settings.method, start.x0, start.c, grid, rtol=rtol, atol=atol, capacity=EVENT_CAPACITY
     )
-    if code not in (0, 8, 9):
+    if code not in (0, ODE_EVENT, ODE_LOG_FULL):
         why = message(ODE_CODES, code)
         raise SceneError(f"locating the events: {settings.method} stopped (code {code}: {why})")
-    return log, code == 8
+    return log, code == ODE_EVENT, (float(stats["t"]) if code == ODE_LOG_FULL else None)
 
 
 EVENT_CAPACITY = 100_000
@@ -375,6 +377,9 @@ def event_lines(res: Result) -> list[str]:
     head = f"  events          {len(log)} located (events.csv)"
     if res.stopped:
         head += f"; terminal {log.names[-1]} at t = {log.times[-1]:.17g} s ended the run"
+    if res.full is not None:
+        head += (f"; the log is full (at most {EVENT_CAPACITY}): none located from "
+                 f"t = {res.full:.17g} s on")  # fmt: skip
     shown = [f"    t = {t:<24.17g} {n}" for t, n in zip(log.times, log.names, strict=True)]
     more = [f"    ... {len(log) - EVENTS_SHOWN} more"] if len(log) > EVENTS_SHOWN else []
     return [head, *shown[:EVENTS_SHOWN], *more]

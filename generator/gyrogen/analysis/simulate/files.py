@@ -89,6 +89,20 @@ def summary(res: Result, p: np.ndarray) -> dict[str, Any]:
         "quadrature_unresolved": list(res.invariants.unresolved),
         "invariants_note": note(s),
         "files": [f.name for f in res.files],
+        **({} if res.events is None else {"events": events_summary(res)}),
+    }
+
+
+def events_summary(res: Result) -> dict[str, Any]:
+    """summary.json's events: how many events.csv holds, the terminal one
+    that ended the run (or null), and the time from which a full log
+    located none (or null: events.csv holds every crossing)."""
+    log = res.events
+    assert log is not None
+    return {
+        "located": len(log),
+        "terminal": log.names[-1] if res.stopped else None,
+        "log_full_from_t": res.full,
     }
 
 

@@ -61,3 +61,6 @@ class Result:
     without that call)."""
     stopped: bool = False
     """A terminal event ended the run: the output grid stops at its time."""
+    full: float | None = None
+    """The time of the first crossing the event log had no room for (the
+    events from it on are not located), or None: the log holds them all."""

@@ -409,10 +409,15 @@ def _check_values(scene: Scene, sweep: Sweep) -> None:
     """The values every trajectory shares, checked as a scene file's are: the
     start's angles and Euler parameters, and setup's checks on the parameters that are
     neither on the grid nor drawn (a grid or a draw may still reach values
-    setup refuses: those rows carry its code)."""
+    setup refuses: those rows carry its code); the angles a grid axis or a
+    draw reaches within MAX_START_ANGLE too."""
     swept = set(sweep.grid) | set(sweep.draws.variables if sweep.draws else ())
     if sweep.initial is not None:
         check_angles(sweep.initial, "initial")
+    check_angles({n: axis.reach for n, axis in sweep.grid.items()}, "grid", "reaches")
+    if sweep.draws is not None:
+        drawn = sweep.draws.variables.items()
+        check_angles({n: d.reach for n, d in drawn}, "draws", "reaches")
     if scene.attitude == "quaternion" and sweep.initial is not None:
         check_quaternion(sweep.initial, "initial")
     if not scene.rotors:

@@ -325,6 +325,7 @@ EV_A, EV_B, EV_GA, EV_GB, EV_M, EV_GM = (Var(f"ev_{n}") for n in ("a", "b", "ga"
 EV_SIDE, EV_BEST, EV_STOP, EV_HALT, EV_IT = (
     Var(f"ev_{n}") for n in ("side", "best", "stop", "halt", "it")
 )
+EV_F, EV_GF = Var("ev_f"), Var("ev_gf")
 NLOG, CAPACITY = Var("nlog"), Var("capacity")
 EV_ITERATIONS = 200
 """A crossing's search stops after this many evaluations, or sooner where
@@ -362,7 +363,10 @@ def event_locals(grid: bool | Grid) -> tuple[Decl, ...]:
         Decl("ev_term", "int", (ne,), values=tuple(int(e.terminal) for e in grid.events)),
         *(Decl(f"ev_{n}", "double", (ne,), "inout") for n in ("old", "new", "end", "g", "t")),
         Decl("ev_y", "double", ("NX",), "inout"),
-        *(real(f"ev_{n}", "inout") for n in ("a", "b", "ga", "gb", "m", "gm", "stop", "ta", "tb")),
+        *(
+            real(f"ev_{n}", "inout")
+            for n in ("a", "b", "ga", "gb", "m", "gm", "f", "gf", "stop", "ta", "tb")
+        ),
         *(Decl(f"ev_{n}", "int", (), "inout") for n in ("side", "best", "halt", "it", "j")),
         *([Decl("ev_need", "int", (), "inout")] if grid.pieces == 1 else []),
     )
@@ -378,18 +382,20 @@ def _g_at(dense: Interpolant, at: Callable[[E], E], time: E) -> list[S]:
     return [*_state_at(dense, at, time), Call("events", (time, EV_Y, c, EV_G))]
 
 
-def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) -> list[S]:
-    """ev_t[k] := where event k's g crosses 0 within [start, end]: the
-    Illinois method (regula falsi that halves the side it keeps), a
-    bisection where its point leaves the bracket, until the bracket holds no
-    double between its ends or ev_iterations evaluations; the crossing is
-    the bracket's right end, the first time g is on its new side (or 0)."""
+def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E,
+            g_end: E) -> list[S]:  # fmt: skip
+    """ev_t[k] := where event k's g crosses 0 within [start, end] (g_end its
+    g at end): the Illinois method (regula falsi that halves the side it
+    keeps), a bisection where its point leaves the bracket, until the
+    bracket holds no double between its ends or ev_iterations evaluations;
+    the crossing is the bracket's right end, the first time g is on its new
+    side (or 0)."""
     inner = and_(cmp(EV_M, ">", EV_A), cmp(EV_M, "<", EV_B))
     pos_m, pos_a = cmp(EV_GM, ">", 0.0), cmp(EV_GA, ">", 0.0)
     same = or_(and_(pos_m, pos_a), and_(not_(pos_m), not_(pos_a)))
     return [
         assign(EV_A, start), assign(EV_B, end), assign(EV_GA, EV_OLD[k]),
-        assign(EV_GB, EV_NEW[k]), assign(EV_SIDE, 0), assign(EV_IT, 0),
+        assign(EV_GB, g_end), assign(EV_SIDE, 0), assign(EV_IT, 0),
         Loop((
             If(or_(cmp(fn("abs", EV_GB), "<=", 0.0), cmp(EV_IT, ">=", EV_ITERATIONS)), (Break(),)),
             inc(EV_IT, 1),
@@ -426,6 +432,32 @@ a step with a sign change or a grid time in it (the default scene's three
 such events: 1.6-2.5x the plain run with 8 pieces, `make bench-events`)."""
 
 
+def _last_finite(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) -> list[S]:
+    """ev_f, ev_gf := the last time within [start, end] found where event
+    k's g is finite, and g there, by bisection between start (g finite:
+    ev_old[k]) and end (not finite), until no double lies between or
+    ev_iterations evaluations: where g turns NaN within a piece, a crossing
+    before that is searched in [start, ev_f]."""
+    return [
+        assign(EV_F, start), assign(EV_GF, EV_OLD[k]), assign(EV_B, end), assign(EV_IT, 0),
+        Loop((
+            If(cmp(EV_IT, ">=", EV_ITERATIONS), (Break(),)),
+            inc(EV_IT, 1),
+            assign(EV_M, EV_F + 0.5 * (EV_B - EV_F)),
+            If(not_(and_(cmp(EV_M, ">", EV_F), cmp(EV_M, "<", EV_B))), (Break(),)),
+            *_g_at(dense, at, EV_M),
+            If(fn("finite", EV_G[k]), (assign(EV_F, EV_M), assign(EV_GF, EV_G[k])), (
+                assign(EV_B, EV_M),)),
+        )),
+    ]  # fmt: skip
+
+
+def _turned_nan(k: E, new: E) -> E:
+    """Event k's g was finite at a piece's start (ev_old[k]) and is not at
+    its end (new)."""
+    return and_(fn("finite", EV_OLD[k]), not_(fn("finite", new)))
+
+
 def _crossed(k: E, new: E) -> E:
     """Event k's g went from ev_old[k] to new across 0 as its direction asks
     (from a g other than 0: a g of 0 at a piece's end is that piece's
@@ -445,7 +477,11 @@ def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]
     return [
         Call("events", (end, xnew, c, g_end)),
         assign(need, sel(due(end), Int(1), Int(0))),
-        For("ev_k", ne, (If(_crossed(k, g_end[k]), (assign(need, 1),)),)),
+        For(
+            "ev_k",
+            ne,
+            (If(or_(_crossed(k, g_end[k]), _turned_nan(k, g_end[k])), (assign(need, 1),)),),
+        ),
         If(cmp(need, "!=", 0), tuple(coefficients)),
     ]
 
@@ -454,8 +490,9 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
                    end: E) -> list[S]:  # fmt: skip
     """g at the grid.pieces - 1 points between the step's ends (on the
     interpolant; g at its end is needed's); in each piece, each event whose
-    g changed sign as its direction asks (_crossed), located; the
-    piece's crossings in time order into the log, up to the first terminal
+    g changed sign as its direction asks (_crossed), located (or whose g
+    turned NaN or infinite there: a crossing before its last finite point,
+    _last_finite); the piece's crossings in time order into the log, up to the first terminal
     one or a full log, where the step stops (ev_stop, ev_halt its code)."""
     ne, k, j = Int(len(grid.events)), Var("ev_k"), Var("ev_j")
     ta, tb, g_end = Var("ev_ta"), Var("ev_tb"), Var("ev_end")
@@ -482,7 +519,12 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
             )),
             For("ev_k", ne, (
                 assign(EV_T[k], Const("HUGE")),
-                If(_crossed(k, EV_NEW[k]), tuple(_search(dense, at, k, ta, tb))),
+                If(_crossed(k, EV_NEW[k]), tuple(_search(dense, at, k, ta, tb, EV_NEW[k])), (
+                    If(_turned_nan(k, EV_NEW[k]), (
+                        *_last_finite(dense, at, k, ta, tb),
+                        If(_crossed(k, EV_GF), tuple(_search(dense, at, k, ta, EV_F, EV_GF))),
+                    )),
+                )),
             )),
             Loop((
                 assign(EV_BEST, -1),
