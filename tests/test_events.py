@@ -253,6 +253,45 @@ def test_a_full_log_stops_with_its_code(located: tuple[list[Compiled], Scene]) -
     assert code == 9 and len(none) == 0
 
 
+@pytest.mark.parametrize("method", ["dop853", "taylor", "rodas4"])
+def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], method: str) -> None:
+    """_events_batch, C and Fortran, on one and two threads: each state's
+    rows, log, statistics and code are its _events call's bit for bit, over
+    drawn spins (a terminal event for the fast ones), a NaN start, a step
+    budget some runs exhaust and logs that fill (codes 0, 2, 3, 8 and 9)."""
+    builds, scene = located
+    rng = np.random.default_rng(11)
+    x0s = np.tile(np.array(scene.initial_state()), (13, 1))
+    x0s[:, 4] = rng.uniform(0.0, 3.0, 13)  # u2: q3 reaches 5 rad before t = 4 above ~1.3 rad/s
+    x0s[:, 3] = rng.uniform(-0.1, 0.1, 13)
+    x0s[5, 3] = np.nan
+    times = np.linspace(0.0, 4.0, 9)
+    c = builds[0].setup([])
+    steps = [builds[0].integrate_events(method, x, c, times)[2] for x in x0s]
+    budget = int(np.median([s["accepted"] + s["rejected"] for s in steps]))
+    codes = set()
+    for comp in builds:
+        for capacity, max_steps, threads in ((3, 10**6, 1), (5, budget, 2), (0, 10**6, 1)):
+            given = {"rtol": 1e-10, "atol": 1e-10, "max_steps": max_steps}
+            ends = np.empty_like(x0s)
+            states, logs, stats, code = comp.integrate_events_batch(
+                method, x0s, c, times, threads, capacity=capacity, ends=ends, **given
+            )
+            assert len(logs) == len(x0s)
+            for i, x0 in enumerate(x0s):
+                end = np.empty(comp.nx)
+                one, log, one_stats, one_code = comp.integrate_events(
+                    method, x0, c, times, capacity=capacity, end=end, **given
+                )
+                assert code[i] == one_code and np.array_equal(states[i], one, equal_nan=True)
+                assert np.array_equal(ends[i], end, equal_nan=True)
+                assert dict(one_stats) == {k: stats[k][i] for k in one_stats}
+                assert logs[i].names == log.names and np.array_equal(logs[i].times, log.times)
+                assert np.array_equal(logs[i].states, log.states)
+            codes |= set(code.tolist())
+    assert {0, 2, 3, 8, 9} <= codes, codes
+
+
 def test_zero_at_the_start_and_nan_never_fire(tmp_path: Path) -> None:
     """g = t is 0 at t0 (not a crossing) and positive after; g NaN everywhere
     never crosses: the runs end with code 0 and empty logs."""

@@ -100,6 +100,33 @@ class EventLog:
 
 
 @dataclass(frozen=True)
+class EventLogs:
+    """The events an `integrate_events_batch` run located: a log per state,
+    each of `capacity` entries of which the first counts[i] are state i's,
+    in time order (the rest are not written)."""
+
+    times: np.ndarray
+    """When each happened (s), shape (n, capacity)."""
+    which: np.ndarray
+    """Which event, by its index in names, shape (n, capacity)."""
+    states: np.ndarray
+    """The state at each, shape (n, capacity, nx)."""
+    counts: np.ndarray
+    """How many events each state's log holds, shape (n,)."""
+    names: list[str]
+    """The scene's events by name."""
+
+    def __len__(self) -> int:
+        return len(self.counts)
+
+    def __getitem__(self, i: int) -> EventLog:
+        """State i's log, as `integrate_events` gives it."""
+        k = int(self.counts[i])
+        return EventLog(self.times[i, :k].copy(), [self.names[j] for j in self.which[i, :k]],
+                        self.states[i, :k].copy())  # fmt: skip
+
+
+@dataclass(frozen=True)
 class Compiled:
     """One backend (C or Fortran) of a scene, loaded in this process.
 
@@ -702,12 +729,7 @@ class Compiled:
                 fn(len(x), t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
 
         try:
-            if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-                run(x, stats, codes)  # OpenMP, or one thread
-            else:
-                cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
-                with ThreadPoolExecutor(len(cuts) + 1) as pool:
-                    list(pool.map(run, *(np.split(a, cuts) for a in (x, stats, codes))))
+            self._spread(run, count, x, stats, codes)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t0, t1, rtol, atol, h0, max_steps, steps) from None
         return x, stats, codes
@@ -977,11 +999,7 @@ class Compiled:
             As for `integrate_grid`, the scene declares no events, or
             capacity is not an integer from 0 to 10^8.
         """
-        if not self.event_names:
-            raise ValueError("this build's scene declares no [[events]]")
-        if not isinstance(capacity, (int, np.integer)) or not 0 <= capacity <= 10**8:
-            raise ValueError(f"capacity must be an integer from 0 to 10^8, not {capacity!r}")
-        fn = self._grid(method, "_events")
+        fn = self._events(method, "_events", capacity)
         t = grid_times(times)
         x = self._state(x0)
         out = np.full((t.size, self.nx), np.nan)
@@ -1054,22 +1072,118 @@ class Compiled:
                buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
 
         try:
-            if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-                run(x, out, stats, codes)  # OpenMP, or one thread
-            else:
-                cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
-                with ThreadPoolExecutor(len(cuts) + 1) as pool:
-                    parts = (np.split(a, cuts) for a in (x, out, stats, codes))
-                    list(pool.map(run, *parts))
+            self._spread(run, count, x, out, stats, codes)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
         if ends is not None:
             ends[...] = x
         return out, stats, codes
 
+    def integrate_events_batch(
+        self,
+        method: str,
+        x0s: np.ndarray,
+        c: np.ndarray,
+        times: np.ndarray,
+        threads: int | None = None,
+        *,
+        rtol: float = DEFAULT_CONTROLS["rtol"],
+        atol: float = DEFAULT_CONTROLS["atol"],
+        h0: float = DEFAULT_CONTROLS["h0"],
+        max_steps: int = DEFAULT_CONTROLS["max_steps"],
+        capacity: int = 100,
+        ends: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, EventLogs, np.ndarray, np.ndarray]:
+        """`integrate_events` for many states over the same times, one set
+        of constants, in one call: each state's rows, log, statistics and
+        code equal its `integrate_events` call's (with this capacity) bit
+        for bit, whatever the thread count. ends, an (n, nx) array if
+        given, receives the state each run ended at.
+
+        Parameters
+        ----------
+        capacity : int, default 100
+            The most events each state's log holds (its buffers are
+            allocated for every state: n capacity (nx + 2) doubles).
+
+        Returns
+        -------
+        states : numpy.ndarray, shape (n, len(times), nx)
+        logs : EventLogs
+            logs[i] is state i's EventLog.
+        stats : numpy.ndarray, shape (n,)
+            As `integrate_batch`'s.
+        codes : numpy.ndarray, shape (n,)
+
+        Raises
+        ------
+        ValueError
+            As for `integrate_events` and `integrate_batch`.
+        """
+        fn = self._events(method, "_events_batch", capacity)
+        t = grid_times(times)
+        x = self._start_states(x0s)
+        n, room = x.shape[0], max(capacity, 1)
+        out = np.full((n, t.size, self.nx), np.nan)
+        logs = EventLogs(np.empty((n, room)), np.empty((n, room), dtype=np.intc),
+                         np.empty((n, room, self.nx)), np.zeros(n, dtype=np.dtype(self._long)),
+                         self.event_names)  # fmt: skip
+        stats = np.zeros(n, dtype=self._stats_dtype)
+        codes = np.zeros(n, dtype=np.intc)
+        held = self._c_held
+        cb = held[1] if held[0] is c else self._c_buffer(c)
+        buf = self.ffi.from_buffer
+        count = self._thread_count(threads)
+        tb = buf(_DOUBLES, t)
+
+        def run(x: np.ndarray, out: np.ndarray, log_t: np.ndarray, log_k: np.ndarray,
+                log_x: np.ndarray, nlog: np.ndarray, stats: np.ndarray, codes: np.ndarray,
+                ) -> None:  # fmt: skip
+            fn(len(x), t.size, tb, buf(_DOUBLES, x), cb, rtol, atol, h0, max_steps,
+               buf(_DOUBLES, out), capacity, buf(_DOUBLES, log_t), buf(_INTS, log_k),
+               buf(_DOUBLES, log_x), buf("long[]", nlog), buf(_STATS, stats),
+               buf(_INTS, codes))  # fmt: skip
+
+        try:
+            self._spread(run, count, x, out, logs.times, logs.which, logs.states, logs.counts,
+                         stats, codes)  # fmt: skip
+        except (OverflowError, TypeError) as exc:
+            raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        if ends is not None:
+            ends[...] = x
+        return out, logs, stats, codes
+
+    def _spread(self, run: Callable[..., None], count: int, *arrays: np.ndarray) -> None:
+        """run(*arrays) on count cores: one call (OpenMP splits it in C, or
+        one thread), or one call per slice of the arrays' rows from Python
+        threads (cffi releases the GIL)."""
+        n = len(arrays[0])
+        if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
+            run(*arrays)
+        else:
+            cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
+            with ThreadPoolExecutor(len(cuts) + 1) as pool:
+                list(pool.map(run, *(np.split(a, cuts) for a in arrays)))
+
+    @cached_property
+    def _long(self) -> str:
+        """C's long as numpy's dtype string."""
+        return f"i{self.ffi.sizeof('long')}"
+
+    def _events(self, method: str, kind: str, capacity: Any) -> Any:
+        """method's _events or _events_batch function; a one-line ValueError
+        as for `_grid`, for a scene without events, or a capacity not an
+        integer from 0 to 10^8."""
+        if not self.event_names:
+            raise ValueError("this build's scene declares no [[events]]")
+        if not isinstance(capacity, (int, np.integer)) or not 0 <= capacity <= 10**8:
+            raise ValueError(f"capacity must be an integer from 0 to 10^8, not {capacity!r}")
+        return self._grid(method, kind)
+
     def _grid(self, method: str, kind: str) -> Any:
-        """method's _grid or _grid_batch function; a one-line ValueError for
-        a method this build lacks or one without an output grid (rk4)."""
+        """method's function of an output grid by its kind (_grid,
+        _grid_batch, _events, _events_batch); a one-line ValueError for a
+        method this build lacks or one without an output grid (rk4)."""
         if method not in self.manifest["integrators"]:
             self._check_method(method, None)  # raises, saying why
         if methods.get(method).fixed_step:
@@ -1113,12 +1227,11 @@ class Compiled:
     @cached_property
     def _stats_dtype(self) -> np.dtype:
         """gyrogen_stats as numpy sees it, offsets and size from cffi."""
-        long = f"i{self.ffi.sizeof('long')}"
         fields = abi.STATS_FIELDS
         return np.dtype(
             {
                 "names": [f.name for f in fields],
-                "formats": ["f8" if f.ctype == "double" else long for f in fields],
+                "formats": ["f8" if f.ctype == "double" else self._long for f in fields],
                 "offsets": [self.ffi.offsetof("gyrogen_stats", f.name) for f in fields],
                 "itemsize": self.ffi.sizeof("gyrogen_stats"),
             }
