@@ -368,6 +368,45 @@ def test_a_sweep_counts_each_event_and_keeps_its_first_time(tmp_path: Path) -> N
     assert not any(c.startswith(("first_", "count_")) for c in columns(rk4))
 
 
+def test_a_sweeps_event_rows_are_its_events_calls(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """run_chunk's events come from one _events_batch call: each row's code,
+    time, final state, statistics and event columns are its own _events
+    call's, also for the rows whose first log (2 entries here) fills and
+    which are run again with EVENT_CAPACITY."""
+    from gyrogen.analysis.sweep import metrics
+    from gyrogen.analysis.sweep.draws import inputs
+    from gyrogen.analysis.sweep.spec import parse as parse_sweep
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    events = LOCATED.replace('expr = "q3 - 5"', 'expr = "q3 - 3"')
+    (tmp_path / "ev.toml").write_text(builtin_text("dual_spin") + events)
+    grid = "[grid]\nu2 = { list = [0.05, 0.3, 0.6, 0.9, 1.5, 3.0] }\n"
+    text = 'scene = "ev.toml"\nt_end = 6.0\nmethod = "dop853"\n' + grid
+    s = parse_sweep(text, "x", "x", tmp_path)
+    comp = compiled(scene_sources(s.scene, False))
+    whole = metrics.run_chunk(comp, s, 0, 6)
+    monkeypatch.setattr(metrics, "FIRST_CAPACITY", 2)
+    cols = metrics.run_chunk(comp, s, 0, 6)
+    assert all(np.array_equal(cols[k], whole[k], equal_nan=True) for k in whole)
+    inp = inputs(s, 0, 6)
+    c, times = comp.setup([]), np.linspace(0.0, 6.0, s.sweep.metrics.points + 1)
+    given = {"rtol": s.sweep.rtol, "atol": s.sweep.atol, "max_steps": s.sweep.max_steps}
+    for i in range(6):
+        states, log, stats, code = comp.integrate_events("dop853", inp.x0[i], c, times,
+                                                         capacity=100, **given)  # fmt: skip
+        assert cols["code"][i] == code and cols["t"][i] == stats["t"]
+        assert cols["rhs_calls"][i] == stats["rhs_calls"]
+        finals = [cols[f"final_{n}"][i] for n in s.scene.states]
+        assert np.array_equal(finals, log.states[-1] if code == 8 else states[-1])
+        for e in ("third", "rising", "spun"):
+            at = [t for t, n in zip(log.times, log.names, strict=True) if n == e]
+            assert cols[f"count_{e}"][i] == len(at)
+            assert np.array_equal(cols[f"first_{e}"][i], at[0] if at else np.nan, equal_nan=True)
+    assert set(cols["code"]) == {0, 8} and max(cols["count_third"]) > 2  # a log filled
+
+
 @pytest.mark.slow  # the sensitivities' unit of a scene of its own: seconds of sympy
 def test_the_longest_name_keeps_fortran_within_its_columns() -> None:
     """Every Fortran line of a scene named at the longest a name may be, with
