@@ -292,6 +292,47 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
     assert {0, 2, 3, 8, 9} <= codes, codes
 
 
+def test_a_batch_takes_a_set_of_constants_per_state(
+    compiled: tuple[list[Compiled], Scene],
+) -> None:
+    """c of shape (n, nc): _events_batch and _grid_batch run each stretch of
+    states with equal constants in one call, each state its own single
+    call's bit for bit (three sets of inertias, one of them twice apart,
+    one start NaN); a wrong shape or a NaN constant is one line."""
+    (c_build, f_build), scene = compiled
+    rng = np.random.default_rng(3)
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    sets = []
+    for scale in (1.0, 1.02, 0.97):
+        q = p.copy()
+        q[scene.runtime.index("I11")] *= scale
+        sets.append(c_build.setup(q))
+    cs = np.array([sets[k] for k in (0, 0, 1, 1, 1, 2, 0)])
+    x0s = scene_view.random_states(scene, rng, 7)
+    x0s[3, 0] = np.nan
+    times = np.linspace(0.0, 3.0, 7)
+    for comp in (c_build, f_build):
+        for threads in (1, 2):
+            states, logs, stats, codes = comp.integrate_events_batch("dop853", x0s, cs, times,
+                                                                     threads)  # fmt: skip
+            grid, grid_stats, grid_codes = comp.integrate_grid_batch("dop853", x0s, cs, times,
+                                                                     threads)  # fmt: skip
+            for i, (x0, c) in enumerate(zip(x0s, cs, strict=True)):
+                one, log, one_stats, code = comp.integrate_events("dop853", x0, c, times)
+                assert codes[i] == code and np.array_equal(states[i], one, equal_nan=True)
+                assert logs[i].names == log.names and np.array_equal(logs[i].times, log.times)
+                assert dict(one_stats) == {k: stats[k][i] for k in one_stats}
+                one, one_stats, code = comp.integrate_grid("dop853", x0, c, times)
+                assert grid_codes[i] == code and np.array_equal(grid[i], one, equal_nan=True)
+                assert dict(one_stats) == {k: grid_stats[k][i] for k in one_stats}
+    assert set(codes) == {0, 3} and sum(len(logs[i]) for i in range(7))
+    with pytest.raises(ValueError, match=r"the constants c must have shape \(\d+,\) or \(7, "):
+        c_build.integrate_events_batch("dop853", x0s, cs[:6], times)
+    cs[4, 2] = np.nan
+    with pytest.raises(ValueError, match=r"the constants c are not all finite \(row 4\)"):
+        c_build.integrate_grid_batch("dop853", x0s, cs, times)
+
+
 def test_zero_at_the_start_and_nan_never_fire(tmp_path: Path) -> None:
     """g = t is 0 at t0 (not a crossing) and positive after; g NaN everywhere
     never crosses: the runs end with code 0 and empty logs."""

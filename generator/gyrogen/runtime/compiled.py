@@ -3,6 +3,7 @@ the Jacobian and the integrators, called through cffi on numpy arrays."""
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -67,6 +68,15 @@ class Stats(Mapping[str, float | int]):
 def _bad(a: np.ndarray) -> int:
     """The first index of a whose value is not finite."""
     return int(np.flatnonzero(~np.isfinite(a))[0])
+
+
+def _within(
+    stretches: list[tuple[int, int, Any]], lo: int, hi: int
+) -> Iterator[tuple[int, int, Any]]:
+    """The stretches (start, stop, constants) cut to the states lo..hi-1."""
+    for a, b, cb in stretches:
+        if max(a, lo) < min(b, hi):
+            yield max(a, lo), min(b, hi), cb
 
 
 def controls(method: str, *, steps: int, rtol: float, atol: float, max_steps: int) -> Controls:
@@ -721,15 +731,16 @@ class Compiled:
         if not isinstance(count, (int, np.integer)) or not 1 <= count <= THREADS_MAX:
             raise ValueError(f"threads must be an integer from 1 to {THREADS_MAX}, not {count!r}")
 
-        def run(x: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
-            xb, sb, kb = buf(_DOUBLES, x), buf(_STATS, stats), buf(_INTS, codes)
+        def run(lo: int, hi: int) -> None:
+            xb, sb = buf(_DOUBLES, x[lo:hi]), buf(_STATS, stats[lo:hi])
+            kb = buf(_INTS, codes[lo:hi])
             if fixed:
-                fn(len(x), t0, t1, steps, xb, cb, sb, kb)
+                fn(hi - lo, t0, t1, steps, xb, cb, sb, kb)
             else:
-                fn(len(x), t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
+                fn(hi - lo, t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
 
         try:
-            self._spread(run, count, x, stats, codes)
+            self._spread(run, count, n)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t0, t1, rtol, atol, h0, max_steps, steps) from None
         return x, stats, codes
@@ -1036,11 +1047,13 @@ class Compiled:
         max_steps: int = DEFAULT_CONTROLS["max_steps"],
         ends: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """`integrate_grid` for many states over the same times, one set of
-        constants; each state's rows equal its `integrate_grid` call's bit
-        for bit, whatever the thread count. ends, an (n, nx) array if
-        given, receives the state each run ended at (times[-1]'s, or on
-        failure the last good one).
+        """`integrate_grid` for many states over the same times; each
+        state's rows equal its `integrate_grid` call's bit for bit, whatever
+        the thread count. c, the constants from `setup`: shape (nc,), one
+        set for every state, or (n, nc), a set per state (each stretch of
+        states with equal rows one call of the compiled batch). ends, an
+        (n, nx) array if given, receives the state each run ended at
+        (times[-1]'s, or on failure the last good one).
 
         Returns
         -------
@@ -1061,18 +1074,20 @@ class Compiled:
         out = np.full((n, t.size, self.nx), np.nan)
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)
-        held = self._c_held
-        cb = held[1] if held[0] is c else self._c_buffer(c)
+        stretches = self._stretches(c, n)
         buf = self.ffi.from_buffer
         count = self._thread_count(threads)
         tb = buf(_DOUBLES, t)
+        rows = (buf(_DOUBLES, x), buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))
+        widths = (self.nx, t.size * self.nx, 1, 1)  # each array's elements per state
 
-        def run(x: np.ndarray, out: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
-            fn(len(x), t.size, tb, buf(_DOUBLES, x), cb, rtol, atol, h0, max_steps,
-               buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
+        def run(lo: int, hi: int) -> None:
+            for a, b, cb in _within(stretches, lo, hi):
+                xb, ob, sb, kb = (r + a * w for r, w in zip(rows, widths, strict=True))
+                fn(b - a, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, sb, kb)
 
         try:
-            self._spread(run, count, x, out, stats, codes)
+            self._spread(run, count, n)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
         if ends is not None:
@@ -1094,11 +1109,12 @@ class Compiled:
         capacity: int = 100,
         ends: np.ndarray | None = None,
     ) -> tuple[np.ndarray, EventLogs, np.ndarray, np.ndarray]:
-        """`integrate_events` for many states over the same times, one set
-        of constants, in one call: each state's rows, log, statistics and
-        code equal its `integrate_events` call's (with this capacity) bit
-        for bit, whatever the thread count. ends, an (n, nx) array if
-        given, receives the state each run ended at.
+        """`integrate_events` for many states over the same times: each
+        state's rows, log, statistics and code equal its `integrate_events`
+        call's (with this capacity) bit for bit, whatever the thread count.
+        c as for `integrate_grid_batch` (one set, or a set per state).
+        ends, an (n, nx) array if given, receives the state each run ended
+        at.
 
         Parameters
         ----------
@@ -1130,40 +1146,56 @@ class Compiled:
                          self.event_names)  # fmt: skip
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)
-        held = self._c_held
-        cb = held[1] if held[0] is c else self._c_buffer(c)
+        stretches = self._stretches(c, n)
         buf = self.ffi.from_buffer
         count = self._thread_count(threads)
         tb = buf(_DOUBLES, t)
+        rows = (buf(_DOUBLES, x), buf(_DOUBLES, out), buf(_DOUBLES, logs.times),
+                buf(_INTS, logs.which), buf(_DOUBLES, logs.states), buf("long[]", logs.counts),
+                buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
+        widths = (self.nx, t.size * self.nx, room, room, room * self.nx, 1, 1, 1)
 
-        def run(x: np.ndarray, out: np.ndarray, log_t: np.ndarray, log_k: np.ndarray,
-                log_x: np.ndarray, nlog: np.ndarray, stats: np.ndarray, codes: np.ndarray,
-                ) -> None:  # fmt: skip
-            fn(len(x), t.size, tb, buf(_DOUBLES, x), cb, rtol, atol, h0, max_steps,
-               buf(_DOUBLES, out), capacity, buf(_DOUBLES, log_t), buf(_INTS, log_k),
-               buf(_DOUBLES, log_x), buf("long[]", nlog), buf(_STATS, stats),
-               buf(_INTS, codes))  # fmt: skip
+        def run(lo: int, hi: int) -> None:
+            for a, b, cb in _within(stretches, lo, hi):
+                xb, ob, *log, sb, kb = (r + a * w for r, w in zip(rows, widths, strict=True))
+                fn(b - a, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, capacity, *log, sb,
+                   kb)  # fmt: skip
 
         try:
-            self._spread(run, count, x, out, logs.times, logs.which, logs.states, logs.counts,
-                         stats, codes)  # fmt: skip
+            self._spread(run, count, n)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
         if ends is not None:
             ends[...] = x
         return out, logs, stats, codes
 
-    def _spread(self, run: Callable[..., None], count: int, *arrays: np.ndarray) -> None:
-        """run(*arrays) on count cores: one call (OpenMP splits it in C, or
-        one thread), or one call per slice of the arrays' rows from Python
-        threads (cffi releases the GIL)."""
-        n = len(arrays[0])
+    def _spread(self, run: Callable[[int, int], None], count: int, n: int) -> None:
+        """run(lo, hi) over states 0..n-1 on count cores: one call (OpenMP
+        splits it in C, or one thread), or one per slice of the states from
+        Python threads (cffi releases the GIL)."""
         if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-            run(*arrays)
+            run(0, n)
         else:
-            cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
-            with ThreadPoolExecutor(len(cuts) + 1) as pool:
-                list(pool.map(run, *(np.split(a, cuts) for a in arrays)))
+            cuts = np.linspace(0, n, min(count, n) + 1).astype(int).tolist()
+            with ThreadPoolExecutor(len(cuts) - 1) as pool:
+                list(pool.map(run, cuts[:-1], cuts[1:]))
+
+    def _stretches(self, c: Any, n: int) -> list[tuple[int, int, Any]]:
+        """States 0..n-1 by the constants they share: (start, stop, c's
+        cffi buffer), one stretch for c of shape (nc,), one per run of
+        equal rows for c of shape (n, nc); a one-line ValueError otherwise."""
+        if np.ndim(c) != 2:
+            held = self._c_held
+            return [(0, n, held[1] if held[0] is c else self._c_buffer(c))]
+        arr = np.ascontiguousarray(real_only(c, "the constants c"), dtype=np.float64)
+        if arr.shape != (n, self.nc):
+            raise ValueError(f"the constants c must have shape ({self.nc},) or "
+                             f"({n}, {self.nc}), not {arr.shape}")  # fmt: skip
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"the constants c are not all finite (row {_bad(arr) // self.nc})")
+        cuts = np.flatnonzero((arr[1:] != arr[:-1]).any(axis=1)) + 1
+        edges = [0, *cuts.tolist(), n]
+        return [(a, b, self.doubles(arr[a])) for a, b in itertools.pairwise(edges)]
 
     @cached_property
     def _long(self) -> str:

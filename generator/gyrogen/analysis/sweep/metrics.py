@@ -347,55 +347,59 @@ def _blocks(batches: Sets, n: int, size: int) -> Iterator[tuple[np.ndarray, Sets
         yield rows, [(batches[which[part[0]]][0], part) for part in np.split(rows[order], cut)]
 
 
+def _gathered(sets: Sets) -> tuple[np.ndarray, np.ndarray]:
+    """A block's rows set by set, and their constants: the one set's, or a
+    row per state (the compiled batch runs each set's stretch in one call)."""
+    order = np.concatenate([part for _, part in sets])
+    if len(sets) == 1:
+        return order, sets[0][0]
+    return order, np.repeat([c for c, _ in sets], [len(part) for _, part in sets], axis=0)
+
+
 def _on_grid(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
              runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
-    """One `_grid_batch` call per parameter set and block of rows."""
+    """One `_grid_batch` call per block of rows."""
     size = max(1, GRID_BLOCK // (len(times) * comp.nx))
-    for rows, sets in _blocks(batches, len(runs.x), size):
-        out = np.empty((len(rows), len(times), comp.nx))
-        at = rows[0]
-        for c, part in sets:
-            ends = np.empty((len(part), comp.nx))
-            # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
-            out[part - at], stats, codes = comp.integrate_grid_batch(
-                spec.sweep.method, runs.x[part], c, times, threads=1, ends=ends,
-                **_adaptive(spec),
-            )  # fmt: skip
-            runs.ended(part, ends, codes, stats)
+    for _, sets in _blocks(batches, len(runs.x), size):
+        rows, c = _gathered(sets)
+        ends = np.empty((len(rows), comp.nx))
+        # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
+        out, stats, codes = comp.integrate_grid_batch(
+            spec.sweep.method, runs.x[rows], c, times, threads=1, ends=ends, **_adaptive(spec),
+        )  # fmt: skip
+        runs.ended(rows, ends, codes, stats)
         runs.look(times, rows, out)
 
 
 def _with_events(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
                  runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
-    """One `_events_batch` call per parameter set and block of rows over the
-    samples' grid (a state whose log fills run again alone, with room):
-    their states there, their events (first time and count: up to a
-    terminal event, which ends the run with code ODE_EVENT), their time_to
-    crossings (the first of each threshold's event) and their ends."""
+    """One `_events_batch` call per block of rows over the samples' grid (a
+    state whose log fills run again alone, with room): their states there,
+    their events (first time and count: up to a terminal event, which ends
+    the run with code ODE_EVENT), their time_to crossings (the first of each
+    threshold's event) and their ends."""
     names = [e.name for e in spec.scene.events]
     first = {e: np.full(len(runs.x), np.nan) for e in names}
     count = {e: np.zeros(len(runs.x), dtype=np.int64) for e in names}
     per_row = len(times) * comp.nx + FIRST_CAPACITY * (comp.nx + 2)  # the grid's and the log's
-    for rows, sets in _blocks(batches, len(runs.x), max(1, GRID_BLOCK // per_row)):
-        out = np.empty((len(rows), len(times), comp.nx))
-        for c, part in sets:
-            starts, ends = runs.x[part], np.empty((len(part), comp.nx))
-            # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
-            states, logs, stats, codes = comp.integrate_events_batch(
-                spec.sweep.method, starts, c, times, threads=1, capacity=FIRST_CAPACITY,
-                ends=ends, **_adaptive(spec),
+    for _, sets in _blocks(batches, len(runs.x), max(1, GRID_BLOCK // per_row)):
+        rows, c = _gathered(sets)
+        starts, ends = runs.x[rows], np.empty((len(rows), comp.nx))
+        # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
+        out, logs, stats, codes = comp.integrate_events_batch(
+            spec.sweep.method, starts, c, times, threads=1, capacity=FIRST_CAPACITY, ends=ends,
+            **_adaptive(spec),
+        )  # fmt: skip
+        full = codes == ODE_LOG_FULL
+        _tally(logs, ~full, rows, first, count)
+        for j in np.flatnonzero(full):
+            one = slice(j, j + 1)
+            out[one], again, stats[one], codes[one] = comp.integrate_events_batch(
+                spec.sweep.method, starts[one], c if c.ndim == 1 else c[one], times, threads=1,
+                capacity=EVENT_CAPACITY, ends=ends[one], **_adaptive(spec),
             )  # fmt: skip
-            full = codes == ODE_LOG_FULL
-            _tally(logs, ~full, part, first, count)
-            for j in np.flatnonzero(full):
-                one = slice(j, j + 1)
-                states[one], again, stats[one], codes[one] = comp.integrate_events_batch(
-                    spec.sweep.method, starts[one], c, times, threads=1,
-                    capacity=EVENT_CAPACITY, ends=ends[one], **_adaptive(spec),
-                )  # fmt: skip
-                _tally(again, np.ones(1, dtype=bool), part[one], first, count)
-            out[part - rows[0]] = states
-            runs.ended(part, ends, codes, stats)
+            _tally(again, np.ones(1, dtype=bool), rows[one], first, count)
+        runs.ended(rows, ends, codes, stats)
         runs.look(times, rows, out)
     runs.events = {**{f"first_{e}": first[e] for e in located(spec)},
                    **{f"count_{e}": count[e] for e in located(spec)}}  # fmt: skip
