@@ -11,8 +11,9 @@ invariant_drift over 20 samples: the output grid) and time_to (and the
 first time the nutation reaches 0.3 rad: an event located); with one
 parameter set, and with a set per trajectory (I11 and J drawn too). Each
 figure is the best of R repeats in each of K rounds, run in a process of
-its own; with --baseline, gyrogen as of REV (a git archive of its
-generator/ and templates/) runs in the rounds between, so that the two are
+its own, timed by the thread's CPU time (run_chunk runs on one thread);
+with --baseline, gyrogen as of REV (a git archive of its generator/ and
+templates/) runs in the rounds between, so that the two are
 measured side by side. The ratios are of one tree's figures. The load
 average is printed before and after.
 """
@@ -81,10 +82,10 @@ def worker(methods: list[str], repeats: int) -> None:
             comps = {name: compiled(scene_sources(s.scene)) for name, s in specs.items()}
             for _ in range(repeats):  # the sweeps interleaved
                 for name, spec in specs.items():
-                    t = time.perf_counter()
+                    t = time.thread_time()
                     run_chunk(comps[name], spec, 0, 500)
                     key = f"{method}|{case}|{name}"
-                    best[key] = min(best.get(key, float("inf")), time.perf_counter() - t)
+                    best[key] = min(best.get(key, float("inf")), time.thread_time() - t)
     print(json.dumps(best))
 
 
@@ -97,7 +98,7 @@ def rounds(env: dict[str, str], args: argparse.Namespace) -> dict[str, float]:
 
 
 def table(label: str, best: dict[str, float], methods: list[str]) -> None:
-    print(f"\n{label}: run_chunk of 500 trajectories, ms, and the ratio to end")
+    print(f"\n{label}: run_chunk of 500 trajectories, CPU ms, and the ratio to end")
     print(f"  {'method':8} {'parameters':15} {'end ms':>8} {'sampled':>8} {'time_to':>8}")
     for method in methods:
         for case in CASES:
