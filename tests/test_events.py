@@ -333,6 +333,37 @@ def test_a_batch_takes_a_set_of_constants_per_state(
         c_build.integrate_grid_batch("dop853", x0s, cs, times)
 
 
+def test_python_threads_cut_the_stretches_of_constants(
+    compiled: tuple[list[Compiled], Scene],
+) -> None:
+    """A build without OpenMP splits a batch over Python threads: slices of
+    the states that cut a stretch of equal constants give what one call
+    gives, for the grid's and the events' batches."""
+    import dataclasses
+
+    class NoOpenMP:
+        def __init__(self, lib: object) -> None:
+            self.lib = lib
+
+        def gyrogen_threads(self, n: int) -> int:
+            return 0  # what the glue says when built without OpenMP
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.lib, name)
+
+    comp, scene = compiled[0][0], compiled[1]
+    threaded = dataclasses.replace(comp, lib=NoOpenMP(comp.lib))
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    cs = np.array([comp.setup(p * (1 + 0.01 * (k // 4))) for k in range(11)])  # stretches of 4
+    x0s = scene_view.random_states(scene, np.random.default_rng(8), 11)
+    times = np.linspace(0.0, 2.0, 5)
+    for name in ("integrate_grid_batch", "integrate_events_batch"):
+        one = getattr(comp, name)("dop853", x0s, cs, times, 1)
+        split = getattr(threaded, name)("dop853", x0s, cs, times, 3)  # rows 0-2, 3-6, 7-10
+        assert np.array_equal(one[0], split[0], equal_nan=True)
+        assert all(np.array_equal(a, b) for a, b in zip(one[-2:], split[-2:], strict=True))
+
+
 def test_zero_at_the_start_and_nan_never_fire(tmp_path: Path) -> None:
     """g = t is 0 at t0 (not a crossing) and positive after; g NaN everywhere
     never crosses: the runs end with code 0 and empty logs."""
