@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-grid bench-events bench-var bench-methods bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-grid bench-events bench-sweep-metrics bench-var bench-methods bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -113,6 +113,12 @@ bench-grid: setup
 ## bench-events: three non-terminal events (nutation, wheel rate, q2 thresholds) against the plain run, per method
 bench-events: setup
 	$(BIN)/python benchmarks/bench_events.py
+
+## bench-sweep-metrics: a chunk's sampled metrics and located events (time_to) against its final
+## state alone, one parameter set and one per trajectory; BASELINE=REV runs gyrogen as of REV beside
+## this tree
+bench-sweep-metrics: setup
+	$(BIN)/python benchmarks/sweep_metrics.py $(if $(BASELINE),--baseline $(BASELINE))
 
 ## bench-var: the state transition matrix's cost over the plain trajectory, per method (error of Phi with x or not)
 bench-var: setup

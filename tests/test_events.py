@@ -268,6 +268,117 @@ def test_a_full_log_stops_with_its_code(located: tuple[list[Compiled], Scene]) -
     assert code == 9 and len(none) == 0
 
 
+@pytest.mark.parametrize("method", ["dop853", "taylor", "rodas4"])
+def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], method: str) -> None:
+    """_events_batch, C and Fortran, on one and two threads: each state's
+    rows, log, statistics and code are its _events call's bit for bit, over
+    drawn spins (a terminal event for the fast ones), a NaN start, a step
+    budget some runs exhaust and logs that fill (codes 0, 2, 3, 8 and 9)."""
+    builds, scene = located
+    rng = np.random.default_rng(11)
+    x0s = np.tile(np.array(scene.initial_state()), (13, 1))
+    x0s[:, 4] = rng.uniform(0.0, 3.0, 13)  # u2: q3 reaches 5 rad before t = 4 above ~1.3 rad/s
+    x0s[:, 3] = rng.uniform(-0.1, 0.1, 13)
+    x0s[5, 3] = np.nan
+    times = np.linspace(0.0, 4.0, 9)
+    c = builds[0].setup([])
+    steps = [builds[0].integrate_events(method, x, c, times)[2] for x in x0s]
+    budget = int(np.median([s["accepted"] + s["rejected"] for s in steps]))
+    codes = set()
+    for comp in builds:
+        for capacity, max_steps, threads in ((3, 10**6, 1), (5, budget, 2), (0, 10**6, 1)):
+            given = {"rtol": 1e-10, "atol": 1e-10, "max_steps": max_steps}
+            ends = np.empty_like(x0s)
+            states, logs, stats, code = comp.integrate_events_batch(
+                method, x0s, c, times, threads, capacity=capacity, ends=ends, **given
+            )
+            assert len(logs) == len(x0s)
+            for i, x0 in enumerate(x0s):
+                end = np.empty(comp.nx)
+                one, log, one_stats, one_code = comp.integrate_events(
+                    method, x0, c, times, capacity=capacity, end=end, **given
+                )
+                assert code[i] == one_code and np.array_equal(states[i], one, equal_nan=True)
+                assert np.array_equal(ends[i], end, equal_nan=True)
+                assert dict(one_stats) == {k: stats[k][i] for k in one_stats}
+                assert logs[i].names == log.names and np.array_equal(logs[i].times, log.times)
+                assert np.array_equal(logs[i].states, log.states)
+            codes |= set(code.tolist())
+    assert {0, 2, 3, 8, 9} <= codes, codes
+
+
+def test_a_batch_takes_a_set_of_constants_per_state(
+    compiled: tuple[list[Compiled], Scene],
+) -> None:
+    """c of shape (n, nc): _events_batch and _grid_batch run each stretch of
+    states with equal constants in one call, each state its own single
+    call's bit for bit (three sets of inertias, one of them twice apart,
+    one start NaN); a wrong shape or a NaN constant is one line."""
+    (c_build, f_build), scene = compiled
+    rng = np.random.default_rng(3)
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    sets = []
+    for scale in (1.0, 1.02, 0.97):
+        q = p.copy()
+        q[scene.runtime.index("I11")] *= scale
+        sets.append(c_build.setup(q))
+    cs = np.array([sets[k] for k in (0, 0, 1, 1, 1, 2, 0)])
+    x0s = scene_view.random_states(scene, rng, 7)
+    x0s[3, 0] = np.nan
+    times = np.linspace(0.0, 3.0, 7)
+    for comp in (c_build, f_build):
+        for threads in (1, 2):
+            states, logs, stats, codes = comp.integrate_events_batch("dop853", x0s, cs, times,
+                                                                     threads)  # fmt: skip
+            grid, grid_stats, grid_codes = comp.integrate_grid_batch("dop853", x0s, cs, times,
+                                                                     threads)  # fmt: skip
+            for i, (x0, c) in enumerate(zip(x0s, cs, strict=True)):
+                one, log, one_stats, code = comp.integrate_events("dop853", x0, c, times)
+                assert codes[i] == code and np.array_equal(states[i], one, equal_nan=True)
+                assert logs[i].names == log.names and np.array_equal(logs[i].times, log.times)
+                assert dict(one_stats) == {k: stats[k][i] for k in one_stats}
+                one, one_stats, code = comp.integrate_grid("dop853", x0, c, times)
+                assert grid_codes[i] == code and np.array_equal(grid[i], one, equal_nan=True)
+                assert dict(one_stats) == {k: grid_stats[k][i] for k in one_stats}
+    assert set(codes) == {0, 3} and sum(len(logs[i]) for i in range(7))
+    with pytest.raises(ValueError, match=r"the constants c must have shape \(\d+,\) or \(7, "):
+        c_build.integrate_events_batch("dop853", x0s, cs[:6], times)
+    cs[4, 2] = np.nan
+    with pytest.raises(ValueError, match=r"the constants c are not all finite \(row 4\)"):
+        c_build.integrate_grid_batch("dop853", x0s, cs, times)
+
+
+def test_python_threads_cut_the_stretches_of_constants(
+    compiled: tuple[list[Compiled], Scene],
+) -> None:
+    """A build without OpenMP splits a batch over Python threads: slices of
+    the states that cut a stretch of equal constants give what one call
+    gives, for the grid's and the events' batches."""
+    import dataclasses
+
+    class NoOpenMP:
+        def __init__(self, lib: object) -> None:
+            self.lib = lib
+
+        def gyrogen_threads(self, n: int) -> int:
+            return 0  # what the glue says when built without OpenMP
+
+        def __getattr__(self, name: str) -> object:
+            return getattr(self.lib, name)
+
+    comp, scene = compiled[0][0], compiled[1]
+    threaded = dataclasses.replace(comp, lib=NoOpenMP(comp.lib))
+    p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
+    cs = np.array([comp.setup(p * (1 + 0.01 * (k // 4))) for k in range(11)])  # stretches of 4
+    x0s = scene_view.random_states(scene, np.random.default_rng(8), 11)
+    times = np.linspace(0.0, 2.0, 5)
+    for name in ("integrate_grid_batch", "integrate_events_batch"):
+        one = getattr(comp, name)("dop853", x0s, cs, times, 1)
+        split = getattr(threaded, name)("dop853", x0s, cs, times, 3)  # rows 0-2, 3-6, 7-10
+        assert np.array_equal(one[0], split[0], equal_nan=True)
+        assert all(np.array_equal(a, b) for a, b in zip(one[-2:], split[-2:], strict=True))
+
+
 def test_zero_at_the_start_and_nan_never_fire(tmp_path: Path) -> None:
     """g = t is 0 at t0 (not a crossing) and positive after; g NaN everywhere
     never crosses: the runs end with code 0 and empty logs."""
@@ -352,6 +463,45 @@ def test_a_sweep_counts_each_event_and_keeps_its_first_time(tmp_path: Path) -> N
     fixed = 'scene = "ev.toml"\nt_end = 4.0\nmethod = "rk4"\nsteps = 100\n' + grid
     rk4 = parse_sweep(fixed, "x", "x", tmp_path)
     assert not any(c.startswith(("first_", "count_")) for c in columns(rk4))
+
+
+def test_a_sweeps_event_rows_are_its_events_calls(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """run_chunk's events come from one _events_batch call: each row's code,
+    time, final state, statistics and event columns are its own _events
+    call's, also for the rows whose first log (2 entries here) fills and
+    which are run again with EVENT_CAPACITY."""
+    from gyrogen.analysis.sweep import metrics
+    from gyrogen.analysis.sweep.draws import inputs
+    from gyrogen.analysis.sweep.spec import parse as parse_sweep
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    events = LOCATED.replace('expr = "q3 - 5"', 'expr = "q3 - 3"')
+    (tmp_path / "ev.toml").write_text(builtin_text("dual_spin") + events)
+    grid = "[grid]\nu2 = { list = [0.05, 0.3, 0.6, 0.9, 1.5, 3.0] }\n"
+    text = 'scene = "ev.toml"\nt_end = 6.0\nmethod = "dop853"\n' + grid
+    s = parse_sweep(text, "x", "x", tmp_path)
+    comp = compiled(scene_sources(s.scene, False))
+    whole = metrics.run_chunk(comp, s, 0, 6)
+    monkeypatch.setattr(metrics, "FIRST_CAPACITY", 2)
+    cols = metrics.run_chunk(comp, s, 0, 6)
+    assert all(np.array_equal(cols[k], whole[k], equal_nan=True) for k in whole)
+    inp = inputs(s, 0, 6)
+    c, times = comp.setup([]), np.linspace(0.0, 6.0, s.sweep.metrics.points + 1)
+    given = {"rtol": s.sweep.rtol, "atol": s.sweep.atol, "max_steps": s.sweep.max_steps}
+    for i in range(6):
+        states, log, stats, code = comp.integrate_events("dop853", inp.x0[i], c, times,
+                                                         capacity=100, **given)  # fmt: skip
+        assert cols["code"][i] == code and cols["t"][i] == stats["t"]
+        assert cols["rhs_calls"][i] == stats["rhs_calls"]
+        finals = [cols[f"final_{n}"][i] for n in s.scene.states]
+        assert np.array_equal(finals, log.states[-1] if code == 8 else states[-1])
+        for e in ("third", "rising", "spun"):
+            at = [t for t, n in zip(log.times, log.names, strict=True) if n == e]
+            assert cols[f"count_{e}"][i] == len(at)
+            assert np.array_equal(cols[f"first_{e}"][i], at[0] if at else np.nan, equal_nan=True)
+    assert set(cols["code"]) == {0, 8} and max(cols["count_third"]) > 2  # a log filled
 
 
 @pytest.mark.slow  # the sensitivities' unit of a scene of its own: seconds of sympy

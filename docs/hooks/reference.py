@@ -235,6 +235,7 @@ def signatures() -> str:
         "grid": "<prefix>_<method>_grid",
         "grid_batch": "<prefix>_<method>_grid_batch",
         "grid_events": "<prefix>_<method>_events",
+        "grid_events_batch": "<prefix>_<method>_events_batch",
     }
     out = []
     for key, sig in SIGNATURES.items():

@@ -329,12 +329,21 @@ SIGNATURES: dict[str, Signature] = {
               "double *log_t:capacity", "int *log_k:capacity", "double *log_x:capacity*nx",
               "long *nlog:1", "{prefix}_stats *stats:1"),
     ),
+    "grid_events_batch": Signature(
+        "size_t",
+        _args("size_t n", "long ntimes", "const double *times:ntimes", "double *x:n*nx",
+              "const double *c:nc", *_TOLERANCES, "double *out:n*ntimes*nx", "long capacity",
+              "double *log_t:n*capacity", "int *log_k:n*capacity",
+              "double *log_x:n*capacity*nx", "long *nlog:n", "{prefix}_stats *stats:n",
+              "int *codes:n"),
+    ),
 }  # fmt: skip
 """setup, rhs, each output function (energy, momentum, power), the Jacobian,
 the linear model (outputs.linear_model: nu inputs, ny outputs, C only),
 the two strerror functions (setup's codes, the integrators'), and the
-integrators: fixed-step (rk4) or adaptive, each with its _batch variant.
-The integrators' stats and codes may be NULL."""
+integrators: fixed-step (rk4) or adaptive (and those over an output grid,
+without and with the scene's events), each with its _batch variant. The
+integrators' stats and codes may be NULL."""
 
 
 @dataclass(frozen=True)

@@ -369,8 +369,10 @@ def signature_of(function: str) -> Signature:
     (codegen.context.SceneContext.functions): an integrator's by its kind."""
     batch = function.endswith("_batch")
     method = METHODS.get(function.removesuffix("_batch"))
-    if function.endswith("_events") and function.removesuffix("_events") in METHODS:
-        return SIGNATURES["grid_events"]  # an _events twin (the scene's events: "events")
+    single = function.removesuffix("_batch")
+    if single.endswith("_events") and single.removesuffix("_events") in METHODS:
+        # an _events twin or its batch (the scene's events alone: "events")
+        return SIGNATURES["grid_events" + "_batch" * batch]
     grid = METHODS.get(function.removesuffix("_batch").removesuffix("_grid"))
     if method is None and grid is not None and function.removesuffix("_batch").endswith("_grid"):
         return SIGNATURES["grid" + "_batch" * batch]

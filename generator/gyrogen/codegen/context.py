@@ -388,7 +388,8 @@ class SceneContext:
                 for g in (f"{m}_grid", f"{m}_grid_batch"):
                     c[g], f[g] = f"{p}_{g}", f"{p}_f_{g}"
                 if self.event_grid is not None:  # the grid with the events located
-                    c[f"{m}_events"], f[f"{m}_events"] = f"{p}_{m}_events", f"{p}_f_{m}_events"
+                    for g in (f"{m}_events", f"{m}_events_batch"):
+                        c[g], f[g] = f"{p}_{g}", f"{p}_f_{g}"
         if self.scene.integrators:
             c["ode_strerror"] = f"{p}_ode_strerror"
         return {"c": c, "fortran": f}

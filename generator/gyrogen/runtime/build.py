@@ -120,8 +120,9 @@ def _glue_context(manifest: dict[str, Any], language: Language) -> dict[str, Any
 
 def _integrators(methods: list[str], names: dict[str, str]) -> list[str]:
     """Each method's functions a unit exports: the plain call, _batch, and
-    the output grid's (_grid, _grid_batch, _events) where it has them."""
-    grids = ("_grid", "_grid_batch", "_events")
+    the output grid's (_grid, _grid_batch, _events, _events_batch) where it
+    has them."""
+    grids = ("_grid", "_grid_batch", "_events", "_events_batch")
     return [n for m in methods
             for n in (m, f"{m}_batch", *(m + g for g in grids if m + g in names))]  # fmt: skip
 

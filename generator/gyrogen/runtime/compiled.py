@@ -3,6 +3,7 @@ the Jacobian and the integrators, called through cffi on numpy arrays."""
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -75,6 +76,15 @@ def _bad(a: np.ndarray) -> int:
     return int(np.flatnonzero(~np.isfinite(a))[0])
 
 
+def _within(
+    stretches: list[tuple[int, int, Any]], lo: int, hi: int
+) -> Iterator[tuple[int, int, Any]]:
+    """The stretches (start, stop, constants) cut to the states lo..hi-1."""
+    for a, b, cb in stretches:
+        if max(a, lo) < min(b, hi):
+            yield max(a, lo), min(b, hi), cb
+
+
 def controls(method: str, *, steps: int, rtol: float, atol: float, max_steps: int) -> Controls:
     """The controls method takes: steps for a fixed-step method, the
     tolerances and the step budget for the others."""
@@ -103,6 +113,33 @@ class EventLog:
 
     def __len__(self) -> int:
         return len(self.names)
+
+
+@dataclass(frozen=True)
+class EventLogs:
+    """The events an `integrate_events_batch` run located: a log per state,
+    each of `capacity` entries of which the first counts[i] are state i's,
+    in time order (the rest are not written)."""
+
+    times: np.ndarray
+    """When each happened (s), shape (n, capacity)."""
+    which: np.ndarray
+    """Which event, by its index in names, shape (n, capacity)."""
+    states: np.ndarray
+    """The state at each, shape (n, capacity, nx)."""
+    counts: np.ndarray
+    """How many events each state's log holds, shape (n,)."""
+    names: list[str]
+    """The scene's events by name."""
+
+    def __len__(self) -> int:
+        return len(self.counts)
+
+    def __getitem__(self, i: int) -> EventLog:
+        """State i's log, as `integrate_events` gives it."""
+        k = int(self.counts[i])
+        return EventLog(self.times[i, :k].copy(), [self.names[j] for j in self.which[i, :k]],
+                        self.states[i, :k].copy())  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -700,20 +737,16 @@ class Compiled:
         if not isinstance(count, (int, np.integer)) or not 1 <= count <= THREADS_MAX:
             raise ValueError(f"threads must be an integer from 1 to {THREADS_MAX}, not {count!r}")
 
-        def run(x: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
-            xb, sb, kb = buf(_DOUBLES, x), buf(_STATS, stats), buf(_INTS, codes)
+        def run(lo: int, hi: int) -> None:
+            xb, sb = buf(_DOUBLES, x[lo:hi]), buf(_STATS, stats[lo:hi])
+            kb = buf(_INTS, codes[lo:hi])
             if fixed:
-                fn(len(x), t0, t1, steps, xb, cb, sb, kb)
+                fn(hi - lo, t0, t1, steps, xb, cb, sb, kb)
             else:
-                fn(len(x), t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
+                fn(hi - lo, t0, t1, xb, cb, rtol, atol, h0, max_steps, sb, kb)
 
         try:
-            if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-                run(x, stats, codes)  # OpenMP, or one thread
-            else:
-                cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
-                with ThreadPoolExecutor(len(cuts) + 1) as pool:
-                    list(pool.map(run, *(np.split(a, cuts) for a in (x, stats, codes))))
+            self._spread(run, count, n)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t0, t1, rtol, atol, h0, max_steps, steps) from None
         return x, stats, codes
@@ -986,11 +1019,7 @@ class Compiled:
             capacity is not an integer from 0 to 10^8, or end is not a
             writable float64 array of shape (nx,).
         """
-        if not self.event_names:
-            raise ValueError("this build's scene declares no [[events]]")
-        if not isinstance(capacity, (int, np.integer)) or not 0 <= capacity <= 10**8:
-            raise ValueError(f"capacity must be an integer from 0 to 10^8, not {capacity!r}")
-        fn = self._grid(method, "_events")
+        fn = self._events(method, "_events", capacity)
         t = grid_times(times)
         x = self._state(x0)
         receiver(end, (self.nx,), "end")
@@ -1028,11 +1057,13 @@ class Compiled:
         max_steps: int = DEFAULT_CONTROLS["max_steps"],
         ends: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """`integrate_grid` for many states over the same times, one set of
-        constants; each state's rows equal its `integrate_grid` call's bit
-        for bit, whatever the thread count. ends, an (n, nx) array if
-        given, receives the state each run ended at (times[-1]'s, or on
-        failure the last good one).
+        """`integrate_grid` for many states over the same times; each
+        state's rows equal its `integrate_grid` call's bit for bit, whatever
+        the thread count. c, the constants from `setup`: shape (nc,), one
+        set for every state, or (n, nc), a set per state (each stretch of
+        states with equal rows one call of the compiled batch). ends, an
+        (n, nx) array if given, receives the state each run ended at
+        (times[-1]'s, or on failure the last good one).
 
         Returns
         -------
@@ -1055,33 +1086,148 @@ class Compiled:
         out = np.full((n, t.size, self.nx), np.nan)
         stats = np.zeros(n, dtype=self._stats_dtype)
         codes = np.zeros(n, dtype=np.intc)
-        held = self._c_held
-        cb = held[1] if held[0] is c else self._c_buffer(c)
+        stretches = self._stretches(c, n)
         buf = self.ffi.from_buffer
         count = self._thread_count(threads)
         tb = buf(_DOUBLES, t)
+        rows = (buf(_DOUBLES, x), buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))
+        widths = (self.nx, t.size * self.nx, 1, 1)  # each array's elements per state
 
-        def run(x: np.ndarray, out: np.ndarray, stats: np.ndarray, codes: np.ndarray) -> None:
-            fn(len(x), t.size, tb, buf(_DOUBLES, x), cb, rtol, atol, h0, max_steps,
-               buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
+        def run(lo: int, hi: int) -> None:
+            for a, b, cb in _within(stretches, lo, hi):
+                xb, ob, sb, kb = (r + a * w for r, w in zip(rows, widths, strict=True))
+                fn(b - a, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, sb, kb)
 
         try:
-            if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
-                run(x, out, stats, codes)  # OpenMP, or one thread
-            else:
-                cuts = np.linspace(0, n, min(count, n) + 1).astype(int)[1:-1]
-                with ThreadPoolExecutor(len(cuts) + 1) as pool:
-                    parts = (np.split(a, cuts) for a in (x, out, stats, codes))
-                    list(pool.map(run, *parts))
+            self._spread(run, count, n)
         except (OverflowError, TypeError) as exc:
             raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
         if ends is not None:
             ends[...] = x
         return out, stats, codes
 
+    def integrate_events_batch(
+        self,
+        method: str,
+        x0s: np.ndarray,
+        c: np.ndarray,
+        times: np.ndarray,
+        threads: int | None = None,
+        *,
+        rtol: float = DEFAULT_CONTROLS["rtol"],
+        atol: float = DEFAULT_CONTROLS["atol"],
+        h0: float = DEFAULT_CONTROLS["h0"],
+        max_steps: int = DEFAULT_CONTROLS["max_steps"],
+        capacity: int = 100,
+        ends: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, EventLogs, np.ndarray, np.ndarray]:
+        """`integrate_events` for many states over the same times: each
+        state's rows, log, statistics and code equal its `integrate_events`
+        call's (with this capacity) bit for bit, whatever the thread count.
+        c as for `integrate_grid_batch` (one set, or a set per state).
+        ends, an (n, nx) array if given, receives the state each run ended
+        at.
+
+        Parameters
+        ----------
+        capacity : int, default 100
+            The most events each state's log holds (its buffers are
+            allocated for every state: n capacity (nx + 2) doubles).
+
+        Returns
+        -------
+        states : numpy.ndarray, shape (n, len(times), nx)
+        logs : EventLogs
+            logs[i] is state i's EventLog.
+        stats : numpy.ndarray, shape (n,)
+            As `integrate_batch`'s.
+        codes : numpy.ndarray, shape (n,)
+
+        Raises
+        ------
+        ValueError
+            As for `integrate_events` and `integrate_batch`.
+        """
+        fn = self._events(method, "_events_batch", capacity)
+        t = grid_times(times)
+        x = self._start_states(x0s)
+        n, room = x.shape[0], max(capacity, 1)
+        out = np.full((n, t.size, self.nx), np.nan)
+        logs = EventLogs(np.empty((n, room)), np.empty((n, room), dtype=np.intc),
+                         np.empty((n, room, self.nx)), np.zeros(n, dtype=np.dtype(self._long)),
+                         self.event_names)  # fmt: skip
+        stats = np.zeros(n, dtype=self._stats_dtype)
+        codes = np.zeros(n, dtype=np.intc)
+        stretches = self._stretches(c, n)
+        buf = self.ffi.from_buffer
+        count = self._thread_count(threads)
+        tb = buf(_DOUBLES, t)
+        rows = (buf(_DOUBLES, x), buf(_DOUBLES, out), buf(_DOUBLES, logs.times),
+                buf(_INTS, logs.which), buf(_DOUBLES, logs.states), buf("long[]", logs.counts),
+                buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
+        widths = (self.nx, t.size * self.nx, room, room, room * self.nx, 1, 1, 1)
+
+        def run(lo: int, hi: int) -> None:
+            for a, b, cb in _within(stretches, lo, hi):
+                xb, ob, *log, sb, kb = (r + a * w for r, w in zip(rows, widths, strict=True))
+                fn(b - a, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, capacity, *log, sb,
+                   kb)  # fmt: skip
+
+        try:
+            self._spread(run, count, n)
+        except (OverflowError, TypeError) as exc:
+            raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        if ends is not None:
+            ends[...] = x
+        return out, logs, stats, codes
+
+    def _spread(self, run: Callable[[int, int], None], count: int, n: int) -> None:
+        """run(lo, hi) over states 0..n-1 on count cores: one call (OpenMP
+        splits it in C, or one thread), or one per slice of the states from
+        Python threads (cffi releases the GIL)."""
+        if self.lib.gyrogen_threads(count) or count == 1 or n < 2:
+            run(0, n)
+        else:
+            cuts = np.linspace(0, n, min(count, n) + 1).astype(int).tolist()
+            with ThreadPoolExecutor(len(cuts) - 1) as pool:
+                list(pool.map(run, cuts[:-1], cuts[1:]))
+
+    def _stretches(self, c: Any, n: int) -> list[tuple[int, int, Any]]:
+        """States 0..n-1 by the constants they share: (start, stop, c's
+        cffi buffer), one stretch for c of shape (nc,), one per run of
+        equal rows for c of shape (n, nc); a one-line ValueError otherwise."""
+        if np.ndim(c) != 2:
+            held = self._c_held
+            return [(0, n, held[1] if held[0] is c else self._c_buffer(c))]
+        arr = np.ascontiguousarray(real_only(c, "the constants c"), dtype=np.float64)
+        if arr.shape != (n, self.nc):
+            raise ValueError(f"the constants c must have shape ({self.nc},) or "
+                             f"({n}, {self.nc}), not {arr.shape}")  # fmt: skip
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"the constants c are not all finite (row {_bad(arr) // self.nc})")
+        cuts = np.flatnonzero((arr[1:] != arr[:-1]).any(axis=1)) + 1
+        edges = [0, *cuts.tolist(), n]
+        return [(a, b, self.doubles(arr[a])) for a, b in itertools.pairwise(edges)]
+
+    @cached_property
+    def _long(self) -> str:
+        """C's long as numpy's dtype string."""
+        return f"i{self.ffi.sizeof('long')}"
+
+    def _events(self, method: str, kind: str, capacity: Any) -> Any:
+        """method's _events or _events_batch function; a one-line ValueError
+        as for `_grid`, for a scene without events, or a capacity not an
+        integer from 0 to 10^8."""
+        if not self.event_names:
+            raise ValueError("this build's scene declares no [[events]]")
+        if not isinstance(capacity, (int, np.integer)) or not 0 <= capacity <= 10**8:
+            raise ValueError(f"capacity must be an integer from 0 to 10^8, not {capacity!r}")
+        return self._grid(method, kind)
+
     def _grid(self, method: str, kind: str) -> Any:
-        """method's _grid or _grid_batch function; a one-line ValueError for
-        a method this build lacks or one without an output grid (rk4)."""
+        """method's function of an output grid by its kind (_grid,
+        _grid_batch, _events, _events_batch); a one-line ValueError for a
+        method this build lacks or one without an output grid (rk4)."""
         if method not in self.manifest["integrators"]:
             self._check_method(method, None)  # raises, saying why
         if methods.get(method).fixed_step:
@@ -1125,12 +1271,11 @@ class Compiled:
     @cached_property
     def _stats_dtype(self) -> np.dtype:
         """gyrogen_stats as numpy sees it, offsets and size from cffi."""
-        long = f"i{self.ffi.sizeof('long')}"
         fields = abi.STATS_FIELDS
         return np.dtype(
             {
                 "names": [f.name for f in fields],
-                "formats": ["f8" if f.ctype == "double" else long for f in fields],
+                "formats": ["f8" if f.ctype == "double" else self._long for f in fields],
                 "offsets": [self.ffi.offsetof("gyrogen_stats", f.name) for f in fields],
                 "itemsize": self.ffi.sizeof("gyrogen_stats"),
             }

@@ -6,8 +6,8 @@ per parameter set (a Monte Carlo over parameters makes sets of one). The
 sampled metrics look at the states at metrics.samples equal intervals of
 t_end. An adaptive method reads them from its dense output, one
 integration per trajectory whose steps are not cut at the samples
-(`_grid_batch`; `_events` when the scene's events are located, in the same
-run); a fixed-step method is restarted at each sample (every sample a step
+(`_grid_batch`; `_events_batch` when the scene's events are located, in
+the same run); a fixed-step method is restarted at each sample (every sample a step
 end, as in runtime/segment.py), and a sweep with nothing to sample is one
 batch call per parameter set (over SIMD lanes).
 
@@ -53,7 +53,7 @@ from gyrogen.analysis.sweep.spec import SAMPLED, THRESHOLD, Spec
 from gyrogen.oracle.reference import N_STATES, direction_cosines
 from gyrogen.oracle.scene_view import quaternion_dcm
 from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
-from gyrogen.runtime.compiled import Compiled, controls
+from gyrogen.runtime.compiled import Compiled, EventLogs, controls
 from gyrogen.runtime.segment import COUNTERS
 
 NOT_RUN = -1
@@ -98,8 +98,8 @@ EVENT_CAPACITY = 100_000
 """Events logged per trajectory: a count at it means at least as many."""
 FIRST_CAPACITY = 64
 """The log a trajectory is run with first: one that fills it is run again
-with EVENT_CAPACITY (a log's buffers are allocated per call, and
-EVENT_CAPACITY's cost ~100 us each)."""
+alone with EVENT_CAPACITY (a batch's logs are allocated for every state it
+holds, EVENT_CAPACITY's ~100 us and ~10 MB each)."""
 
 
 _METRIC_DOCS = {
@@ -302,8 +302,8 @@ def _integrate(
 ) -> _Runs:
     """Every trajectory from 0 to t_end. An adaptive method samples the
     metrics on its dense output: one integration per trajectory over the
-    samples' grid (`_grid_batch`, or `_events` when the scene's events are
-    located, which gives both); a fixed-step one is restarted at each
+    samples' grid (`_grid_batch`, or `_events_batch` when the scene's events
+    are located, which gives both); a fixed-step one is restarted at each
     sample, as is a sweep with nothing to sample (the batch call, over SIMD
     lanes). x0 becomes the runs' states (integrated in place)."""
     sweep = spec.sweep
@@ -347,51 +347,59 @@ def _blocks(batches: Sets, n: int, size: int) -> Iterator[tuple[np.ndarray, Sets
         yield rows, [(batches[which[part[0]]][0], part) for part in np.split(rows[order], cut)]
 
 
+def _gathered(sets: Sets) -> tuple[np.ndarray, np.ndarray]:
+    """A block's rows set by set, and their constants: the one set's, or a
+    row per state (the compiled batch runs each set's stretch in one call)."""
+    order = np.concatenate([part for _, part in sets])
+    if len(sets) == 1:
+        return order, sets[0][0]
+    return order, np.repeat([c for c, _ in sets], [len(part) for _, part in sets], axis=0)
+
+
 def _on_grid(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
              runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
-    """One `_grid_batch` call per parameter set and block of rows."""
+    """One `_grid_batch` call per block of rows."""
     size = max(1, GRID_BLOCK // (len(times) * comp.nx))
-    for rows, sets in _blocks(batches, len(runs.x), size):
-        out = np.empty((len(rows), len(times), comp.nx))
-        at = rows[0]
-        for c, part in sets:
-            ends = np.empty((len(part), comp.nx))
-            # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
-            out[part - at], stats, codes = comp.integrate_grid_batch(
-                spec.sweep.method, runs.x[part], c, times, threads=1, ends=ends,
-                **_adaptive(spec),
-            )  # fmt: skip
-            runs.ended(part, ends, codes, stats)
+    for _, sets in _blocks(batches, len(runs.x), size):
+        rows, c = _gathered(sets)
+        ends = np.empty((len(rows), comp.nx))
+        # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
+        out, stats, codes = comp.integrate_grid_batch(
+            spec.sweep.method, runs.x[rows], c, times, threads=1, ends=ends, **_adaptive(spec),
+        )  # fmt: skip
+        runs.ended(rows, ends, codes, stats)
         runs.look(times, rows, out)
 
 
 def _with_events(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
                  runs: _Runs, times: np.ndarray) -> None:  # fmt: skip
-    """One `_events` call per trajectory over the samples' grid: its states
-    there, its events (first time and count: up to a terminal event, which
-    ends the run with code ODE_EVENT), its time_to crossings (the first of
-    each threshold's event) and its end."""
+    """One `_events_batch` call per block of rows over the samples' grid (a
+    state whose log fills run again alone, with room): their states there,
+    their events (first time and count: up to a terminal event, which ends
+    the run with code ODE_EVENT), their time_to crossings (the first of each
+    threshold's event) and their ends."""
     names = [e.name for e in spec.scene.events]
     first = {e: np.full(len(runs.x), np.nan) for e in names}
     count = {e: np.zeros(len(runs.x), dtype=np.int64) for e in names}
-    size = max(1, GRID_BLOCK // (len(times) * comp.nx))
-    end = np.empty(comp.nx)
-    for rows, sets in _blocks(batches, len(runs.x), size):
-        out = np.empty((len(rows), len(times), comp.nx))
-        for c, part in sets:
-            for r in part:
-                for capacity in (FIRST_CAPACITY, EVENT_CAPACITY):
-                    out[r - rows[0]], log, stats, code = comp.integrate_events(
-                        spec.sweep.method, runs.x[r], c, times, capacity=capacity, end=end,
-                        **_adaptive(spec),
-                    )  # fmt: skip
-                    if code != ODE_LOG_FULL:
-                        break
-                runs.ended(r, end, code, stats)
-                for t, e in zip(log.times, log.names, strict=True):
-                    if not count[e][r]:
-                        first[e][r] = t
-                    count[e][r] += 1
+    per_row = len(times) * comp.nx + FIRST_CAPACITY * (comp.nx + 2)  # the grid's and the log's
+    for _, sets in _blocks(batches, len(runs.x), max(1, GRID_BLOCK // per_row)):
+        rows, c = _gathered(sets)
+        starts, ends = runs.x[rows], np.empty((len(rows), comp.nx))
+        # one core: Dask runs one chunk per core already (OpenMP inside would oversubscribe)
+        out, logs, stats, codes = comp.integrate_events_batch(
+            spec.sweep.method, starts, c, times, threads=1, capacity=FIRST_CAPACITY, ends=ends,
+            **_adaptive(spec),
+        )  # fmt: skip
+        full = codes == ODE_LOG_FULL
+        _tally(logs, ~full, rows, first, count)
+        for j in np.flatnonzero(full):
+            one = slice(j, j + 1)
+            out[one], again, stats[one], codes[one] = comp.integrate_events_batch(
+                spec.sweep.method, starts[one], c if c.ndim == 1 else c[one], times, threads=1,
+                capacity=EVENT_CAPACITY, ends=ends[one], **_adaptive(spec),
+            )  # fmt: skip
+            _tally(again, np.ones(1, dtype=bool), rows[one], first, count)
+        runs.ended(rows, ends, codes, stats)
         runs.look(times, rows, out)
     runs.events = {**{f"first_{e}": first[e] for e in located(spec)},
                    **{f"count_{e}": count[e] for e in located(spec)}}  # fmt: skip
@@ -399,6 +407,17 @@ def _with_events(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.
         for q, t in runs.watch.time_to.items():
             at = first[THRESHOLD + q]
             t[...] = np.where(t == 0.0, 0.0, at)  # 0: it starts on its threshold
+
+
+def _tally(logs: EventLogs, kept: np.ndarray, rows: np.ndarray, first: dict[str, np.ndarray],
+           count: dict[str, np.ndarray]) -> None:  # fmt: skip
+    """Each event's first time and count in the logs kept, rows' (in order)."""
+    held = np.arange(logs.which.shape[1]) < logs.counts[kept, None]
+    for k, e in enumerate(logs.names):
+        hit = held & (logs.which[kept] == k)
+        count[e][rows[kept]] = hit.sum(axis=1)
+        seen = hit.any(axis=1)
+        first[e][rows[kept][seen]] = logs.times[kept][seen, np.argmax(hit[seen], axis=1)]
 
 
 def _restarted(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
