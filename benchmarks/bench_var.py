@@ -2,7 +2,7 @@
 trajectory, per compiled method, and what measuring Phi's error does.
 
     python benchmarks/bench_var.py [--t1 T] [--tol TOL] [--repeats R] [--rounds K]
-        [--baseline REV]
+        [--baseline REV] [--clock cpu|wall]
 
 The default scene with [sensitivities] wrt = ["state"] (Phi 14 x 14), built
 in C twice: error = "all" (the step control measures x and Phi) and error =
@@ -19,6 +19,9 @@ With --baseline REV, gyrogen as of REV (methods.rev_tree: a git worktree in a
 temp dir) renders the same two scenes, built by this tree's build path and
 flags (the generated code's share alone); its calls run interleaved with this
 tree's in the same rounds, each method's rows new and old one under the other.
+--clock cpu (the default) times with the thread's CPU time, as
+`make bench-methods` does (a loaded machine still times the calls
+themselves); --clock wall with the wall clock.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
-from methods import GYROGEN, rev_tree, run
+from methods import CLOCKS, GYROGEN, rev_tree, run
 
 from gyrogen.analysis.bench import heyoka_peer
 from gyrogen.analysis.bench.timing import best_time
@@ -90,6 +93,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--baseline", metavar="REV", default="")
+    ap.add_argument("--clock", choices=sorted(CLOCKS), default="cpu")
     args = ap.parse_args()
     scene = parse(builtin_text("gyrostat"), "gyrostat.toml")
     x0, p = np.array(scene.initial_state()), runtime_values(scene)
@@ -137,7 +141,7 @@ def timed(
                     },
                 }
                 for key, call in calls.items():
-                    t = best_time(call, args.repeats)
+                    t = best_time(call, args.repeats, clock=CLOCKS[args.clock])
                     best[(name, m, key)] = min(best.get((name, m, key), np.inf), t)
     return best
 
@@ -184,7 +188,8 @@ def lanes(m: Compiled, x0: np.ndarray, c: np.ndarray, args: argparse.Namespace) 
         def batch(method: str = method) -> None:
             m.integrate_var_batch(method, starts, c, 0.0, args.t1, threads=1, **tol)
 
-        t_each, t_batch = best_time(each, args.repeats), best_time(batch, args.repeats)
+        clock = CLOCKS[args.clock]
+        t_each, t_batch = (best_time(f, args.repeats, clock=clock) for f in (each, batch))
         print(f"{method:8} loop {t_each * 1e3:8.2f} ms  lanes {t_batch * 1e3:8.2f} ms  "
               f"{t_each / t_batch:5.2f}x")  # fmt: skip
 
@@ -216,11 +221,12 @@ def heyoka(
 
         run()
         theirs = column_error(ta.state[nx:].reshape(nx, nx), ref)
-        t_theirs = best_time(run, args.repeats)
+        t_theirs = best_time(run, args.repeats, clock=CLOCKS[args.clock])
         ours = m.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=tol, atol=tol)[1]
         t_ours = best_time(
             lambda tol=tol: m.integrate_var("taylor", x0, c, 0.0, args.t1, rtol=tol, atol=tol),
             args.repeats,
+            clock=CLOCKS[args.clock],
         )
         print(f"tol {tol:g}: heyoka {t_theirs * 1e6:8.0f} us err {theirs:.1e}   "
               f"gyrogen {t_ours * 1e6:8.0f} us err {column_error(ours, ref):.1e}")  # fmt: skip
