@@ -12,8 +12,9 @@ import sympy as sm
 from gyrogen import methods
 from gyrogen.analysis.check.cases import quaternion_scene
 from gyrogen.codegen.context import make_context
+from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
-from gyrogen.scene import Scene, builtin_names, load
+from gyrogen.scene import Scene, builtin_names, builtin_text, load, parse
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 
 
@@ -151,6 +152,41 @@ def test_generated_lu_solves_block_systems(name: str, tmp_path: Path) -> None:
     for _ in range(5):
         ar, ai = block_matrix(blocks, rng), block_matrix(blocks, rng)
         br, bi = rng.uniform(-1.0, 1.0, (2, len(ar)))
+        given = " ".join(repr(float(v)) for v in (*ar.ravel(), *ai.ravel(), *br, *bi))
+        out = subprocess.run([str(exe)], input=given, capture_output=True, text=True, check=True)
+        got = np.array(out.stdout.split(), dtype=float).reshape(3, -1)
+        np.testing.assert_allclose(got[0], np.linalg.solve(ar, br), rtol=1e-9, atol=1e-9)
+        want = np.linalg.solve(ar + 1j * ai, br + 1j * bi)
+        np.testing.assert_allclose(got[1] + 1j * got[2], want, rtol=1e-9, atol=1e-9)
+
+
+def pattern_matrix(entries: list[sm.Expr], n: int, rng: np.random.Generator) -> np.ndarray:
+    """A random matrix nonzero where J's entries can be (and on the diagonal,
+    there small: every block with a row below it pivots)."""
+    a = np.array([rng.uniform(-1.0, 1.0) if e != 0 else 0.0 for e in entries]).reshape(n, n)
+    a[np.diag_indices(n)] = 1e-3 * rng.uniform(0.5, 1.0, n)
+    return a
+
+
+@pytest.mark.slow
+def test_generated_lu_solves_an_augmented_system(tmp_path: Path) -> None:
+    """The variational unit's LU (x, then Phi's entries, which read x: the
+    coupling below x's rows) solves random systems of its Jacobian's pattern
+    with rows exchanged in x's blocks and in Phi's, as numpy does."""
+    text = builtin_text("gyrostat") + '\n[sensitivities]\nwrt = ["state"]\n'
+    unit = generate(parse(text, "gyrostat.toml"), tmp_path / "src").variational
+    assert unit is not None and unit.optimized.jacobian is not None
+    entries, n = list(unit.optimized.jacobian.outputs), unit.nx
+    harness = tmp_path / "lu.c"
+    harness.write_text(HARNESS.format(prefix=unit.prefix, macro=unit.prefix.upper()))
+    exe = tmp_path / "lu"
+    src = tmp_path / "src"
+    subprocess.run(["gcc", "-std=c99", "-O2", "-I", str(src), "-o", str(exe), str(harness),
+                    str(src / f"{unit.prefix}.c"), "-lm"], check=True)  # fmt: skip
+    rng = np.random.default_rng(12)
+    for _ in range(5):
+        ar, ai = pattern_matrix(entries, n, rng), pattern_matrix(entries, n, rng)
+        br, bi = rng.uniform(-1.0, 1.0, (2, n))
         given = " ".join(repr(float(v)) for v in (*ar.ravel(), *ai.ravel(), *br, *bi))
         out = subprocess.run([str(exe)], input=given, capture_output=True, text=True, check=True)
         got = np.array(out.stdout.split(), dtype=float).reshape(3, -1)

@@ -232,7 +232,9 @@ const char *cmg4_pyramid_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2413 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2413 ops).
+   A loop zeroes J, then the entries that can be nonzero are written (one
+   store each: an augmented system's J is mostly zeros). */
 void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
 {
     double q2;
@@ -785,6 +787,7 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     double tmp530;
     double tmp531;
     double tmp532;
+    int i_;
 
     (void)t;  /* unused in some scenes */
     q2 = x[1];
@@ -804,6 +807,9 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     w2 = x[15];
     w3 = x[16];
     w4 = x[17];
+    for (i_ = 0; i_ < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i_) {
+        J[i_] = 0.0;
+    }
     tmp0 = cmg4_pyramid_sin(q2);
     tmp1 = cmg4_pyramid_cos(q2);
     tmp2 = cmg4_pyramid_sin(q3);
@@ -1478,135 +1484,22 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     tmp530 = 0.8165408118857462 * tmp453;
     tmp531 = 0.8165408118857462 * tmp454;
     tmp532 = tmp20 * u2;
-    J[0] = 0.0;
     J[1] = tmp0 * tmp7;
     J[2] = tmp9;
-    J[3] = 0.0;
-    J[4] = 0.0;
-    J[5] = 0.0;
-    J[6] = 0.0;
     J[7] = -tmp10;
-    J[8] = 0.0;
     J[9] = tmp11;
-    J[10] = 0.0;
-    J[11] = 0.0;
-    J[12] = 0.0;
-    J[13] = 0.0;
-    J[14] = 0.0;
-    J[15] = 0.0;
-    J[16] = 0.0;
-    J[17] = 0.0;
-    J[18] = 0.0;
-    J[19] = 0.0;
     J[20] = tmp6;
-    J[21] = 0.0;
-    J[22] = 0.0;
-    J[23] = 0.0;
-    J[24] = 0.0;
     J[25] = tmp4;
-    J[26] = 0.0;
     J[27] = tmp2;
-    J[28] = 0.0;
-    J[29] = 0.0;
-    J[30] = 0.0;
-    J[31] = 0.0;
-    J[32] = 0.0;
-    J[33] = 0.0;
-    J[34] = 0.0;
-    J[35] = 0.0;
-    J[36] = 0.0;
     J[37] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
     J[38] = -(tmp0 * tmp9);
-    J[39] = 0.0;
-    J[40] = 0.0;
-    J[41] = 0.0;
-    J[42] = 0.0;
     J[43] = tmp0 * tmp10;
     J[44] = 1.0;
     J[45] = -(tmp0 * tmp11);
-    J[46] = 0.0;
-    J[47] = 0.0;
-    J[48] = 0.0;
-    J[49] = 0.0;
-    J[50] = 0.0;
-    J[51] = 0.0;
-    J[52] = 0.0;
-    J[53] = 0.0;
-    J[54] = 0.0;
-    J[55] = 0.0;
-    J[56] = 0.0;
-    J[57] = 0.0;
-    J[58] = 0.0;
-    J[59] = 0.0;
-    J[60] = 0.0;
-    J[61] = 0.0;
-    J[62] = 0.0;
-    J[63] = 0.0;
     J[64] = 1.0;
-    J[65] = 0.0;
-    J[66] = 0.0;
-    J[67] = 0.0;
-    J[68] = 0.0;
-    J[69] = 0.0;
-    J[70] = 0.0;
-    J[71] = 0.0;
-    J[72] = 0.0;
-    J[73] = 0.0;
-    J[74] = 0.0;
-    J[75] = 0.0;
-    J[76] = 0.0;
-    J[77] = 0.0;
-    J[78] = 0.0;
-    J[79] = 0.0;
-    J[80] = 0.0;
-    J[81] = 0.0;
-    J[82] = 0.0;
     J[83] = 1.0;
-    J[84] = 0.0;
-    J[85] = 0.0;
-    J[86] = 0.0;
-    J[87] = 0.0;
-    J[88] = 0.0;
-    J[89] = 0.0;
-    J[90] = 0.0;
-    J[91] = 0.0;
-    J[92] = 0.0;
-    J[93] = 0.0;
-    J[94] = 0.0;
-    J[95] = 0.0;
-    J[96] = 0.0;
-    J[97] = 0.0;
-    J[98] = 0.0;
-    J[99] = 0.0;
-    J[100] = 0.0;
-    J[101] = 0.0;
     J[102] = 1.0;
-    J[103] = 0.0;
-    J[104] = 0.0;
-    J[105] = 0.0;
-    J[106] = 0.0;
-    J[107] = 0.0;
-    J[108] = 0.0;
-    J[109] = 0.0;
-    J[110] = 0.0;
-    J[111] = 0.0;
-    J[112] = 0.0;
-    J[113] = 0.0;
-    J[114] = 0.0;
-    J[115] = 0.0;
-    J[116] = 0.0;
-    J[117] = 0.0;
-    J[118] = 0.0;
-    J[119] = 0.0;
-    J[120] = 0.0;
     J[121] = 1.0;
-    J[122] = 0.0;
-    J[123] = 0.0;
-    J[124] = 0.0;
-    J[125] = 0.0;
-    J[126] = 0.0;
-    J[127] = 0.0;
-    J[128] = 0.0;
     J[129] = tmp176 + tmp200;
     J[130] = tmp213 + tmp233;
     J[131] = tmp242 + tmp264;
@@ -1622,9 +1515,6 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     J[141] = tmp415;
     J[142] = tmp420;
     J[143] = tmp425;
-    J[144] = 0.0;
-    J[145] = 0.0;
-    J[146] = 0.0;
     J[147] = tmp429 + tmp433;
     J[148] = tmp434 + tmp436;
     J[149] = tmp437 + tmp440;
@@ -1640,9 +1530,6 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     J[159] = tmp452;
     J[160] = tmp453;
     J[161] = tmp454;
-    J[162] = 0.0;
-    J[163] = 0.0;
-    J[164] = 0.0;
     J[165] = tmp457 + tmp458;
     J[166] = tmp459 + tmp460;
     J[167] = tmp461 + tmp462;
@@ -1658,9 +1545,6 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     J[177] = tmp473;
     J[178] = tmp474;
     J[179] = tmp475;
-    J[180] = 0.0;
-    J[181] = 0.0;
-    J[182] = 0.0;
     J[183] = tmp182 * tmp92 + tmp193 * tmp94 - tmp478 - tmp479;
     J[184] = -tmp480 - tmp481 - tmp482;
     J[185] = -tmp485 - tmp486;
@@ -1677,9 +1561,6 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     J[195] = -tmp508 - tmp509;
     J[196] = -tmp510 - tmp511;
     J[197] = -tmp512 - tmp513;
-    J[198] = 0.0;
-    J[199] = 0.0;
-    J[200] = 0.0;
     J[201] = -tmp478 - tmp514 - tmp515;
     J[202] = tmp155 * tmp216 + tmp226 * tmp99 - tmp482 - tmp516 - tmp517;
     J[203] = -tmp485 - tmp518 - tmp519;
@@ -1696,9 +1577,6 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
             - 0.7055738703267808 * tmp411;
     J[214] = -tmp511 - tmp530;
     J[215] = -tmp512 - tmp531;
-    J[216] = 0.0;
-    J[217] = 0.0;
-    J[218] = 0.0;
     J[219] = tmp479 - tmp476 - tmp477;
     J[220] = tmp480 + tmp481 - tmp482;
     J[221] = tmp261 + tmp262 + tmp486 - tmp483 - tmp484;
@@ -1715,9 +1593,6 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     J[232] = tmp510 + 1.2222222222222223 * tmp87 + 0.7055738703267808 * tmp243 +
             0.9979943256381344 * tmp416 - tmp511;
     J[233] = tmp513 - tmp512;
-    J[234] = 0.0;
-    J[235] = 0.0;
-    J[236] = 0.0;
     J[237] = tmp514 + tmp515 - tmp478;
     J[238] = tmp516 + tmp517 - tmp482;
     J[239] = tmp518 + tmp519 - tmp485;
@@ -1734,78 +1609,26 @@ void cmg4_pyramid_jac(double t, const double *x, const double *c, double *J)
     J[250] = tmp530 - tmp511;
     J[251] = tmp531 + 0.7055738703267808 * tmp532 + 0.9979943256381344 * tmp422 - tmp512 -
             1.2222222222222223 * tmp110;
-    J[252] = 0.0;
-    J[253] = 0.0;
-    J[254] = 0.0;
     J[255] = 14.85361967803071 * tmp13 * u3 - 18.19090909090909 * tmp93 - 10.501388289847101 *
             tmp178;
-    J[256] = 0.0;
-    J[257] = 0.0;
-    J[258] = 0.0;
     J[259] = -(10.501388289847101 * tmp12);
     J[260] = 18.19090909090909 * tmp13;
     J[261] = 14.85361967803071 * tmp12;
-    J[262] = 0.0;
-    J[263] = 0.0;
-    J[264] = 0.0;
-    J[265] = 0.0;
     J[266] = -18.19090909090909;
-    J[267] = 0.0;
-    J[268] = 0.0;
-    J[269] = 0.0;
-    J[270] = 0.0;
-    J[271] = 0.0;
-    J[272] = 0.0;
-    J[273] = 0.0;
     J[274] = 14.85361967803071 * tmp412 + 18.19090909090909 * tmp97 - 10.501388289847101 * tmp411;
-    J[275] = 0.0;
-    J[276] = 0.0;
     J[277] = -(18.19090909090909 * tmp18);
     J[278] = -(10.501388289847101 * tmp32);
     J[279] = 14.85361967803071 * tmp32;
-    J[280] = 0.0;
-    J[281] = 0.0;
-    J[282] = 0.0;
-    J[283] = 0.0;
-    J[284] = 0.0;
     J[285] = -18.19090909090909;
-    J[286] = 0.0;
-    J[287] = 0.0;
-    J[288] = 0.0;
-    J[289] = 0.0;
-    J[290] = 0.0;
-    J[291] = 0.0;
-    J[292] = 0.0;
     J[293] = 14.85361967803071 * tmp416 + 18.19090909090909 * tmp87 + 10.501388289847101 * tmp243;
-    J[294] = 0.0;
     J[295] = 10.501388289847101 * tmp15;
     J[296] = -(18.19090909090909 * tmp16);
     J[297] = 14.85361967803071 * tmp15;
-    J[298] = 0.0;
-    J[299] = 0.0;
-    J[300] = 0.0;
-    J[301] = 0.0;
-    J[302] = 0.0;
-    J[303] = 0.0;
     J[304] = -18.19090909090909;
-    J[305] = 0.0;
-    J[306] = 0.0;
-    J[307] = 0.0;
-    J[308] = 0.0;
-    J[309] = 0.0;
-    J[310] = 0.0;
-    J[311] = 0.0;
     J[312] = 14.85361967803071 * tmp422 + 10.501388289847101 * tmp532 - 18.19090909090909 * tmp110;
     J[313] = 18.19090909090909 * tmp20;
     J[314] = 10.501388289847101 * tmp35;
     J[315] = 14.85361967803071 * tmp35;
-    J[316] = 0.0;
-    J[317] = 0.0;
-    J[318] = 0.0;
-    J[319] = 0.0;
-    J[320] = 0.0;
-    J[321] = 0.0;
-    J[322] = 0.0;
     J[323] = -18.19090909090909;
 }
 
@@ -1822,17 +1645,19 @@ static void stats_start(cmg4_pyramid_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
-/* 1 when no element of v is NaN or Inf. */
+/* 1 when no element of v is NaN or Inf. The whole of v by selection, no
+   early exit: a loop the compiler vectorizes (an implicit method checks
+   its NX x NX Jacobian at every step). */
 static int all_finite(const double *v, int n)
 {
+    int ok;
     int i;
 
+    ok = 1;
     for (i = 0; i < n; ++i) {
-        if (!(fabs(v[i]) <= DBL_MAX)) {
-            return 0;
-        }
+        ok = (fabs(v[i]) <= DBL_MAX) ? ok : 0;
     }
-    return 1;
+    return ok;
 }
 
 /* x := xnew, the step's x + dx. Every method sums its steps with Kahan's

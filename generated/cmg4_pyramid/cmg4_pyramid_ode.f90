@@ -125,6 +125,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (2413 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine cmg4_pyramid_jac(t, x, c, J) bind(C, name="cmg4_pyramid_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:17)
@@ -680,6 +682,7 @@ contains
     real(c_double) :: tmp530
     real(c_double) :: tmp531
     real(c_double) :: tmp532
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -700,6 +703,9 @@ contains
     w2 = x(15)
     w3 = x(16)
     w4 = x(17)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = cmg4_pyramid_sin(q2)
     tmp1 = cmg4_pyramid_cos(q2)
     tmp2 = cmg4_pyramid_sin(q3)
@@ -1441,135 +1447,22 @@ contains
     tmp530 = 0.8165408118857462_c_double * tmp453
     tmp531 = 0.8165408118857462_c_double * tmp454
     tmp532 = tmp20 * u2
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
-    J(3) = 0.0_c_double
-    J(4) = 0.0_c_double
-    J(5) = 0.0_c_double
-    J(6) = 0.0_c_double
     J(7) = -tmp10
-    J(8) = 0.0_c_double
     J(9) = tmp11
-    J(10) = 0.0_c_double
-    J(11) = 0.0_c_double
-    J(12) = 0.0_c_double
-    J(13) = 0.0_c_double
-    J(14) = 0.0_c_double
-    J(15) = 0.0_c_double
-    J(16) = 0.0_c_double
-    J(17) = 0.0_c_double
-    J(18) = 0.0_c_double
-    J(19) = 0.0_c_double
     J(20) = tmp6
-    J(21) = 0.0_c_double
-    J(22) = 0.0_c_double
-    J(23) = 0.0_c_double
-    J(24) = 0.0_c_double
     J(25) = tmp4
-    J(26) = 0.0_c_double
     J(27) = tmp2
-    J(28) = 0.0_c_double
-    J(29) = 0.0_c_double
-    J(30) = 0.0_c_double
-    J(31) = 0.0_c_double
-    J(32) = 0.0_c_double
-    J(33) = 0.0_c_double
-    J(34) = 0.0_c_double
-    J(35) = 0.0_c_double
-    J(36) = 0.0_c_double
     J(37) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(38) = -tmp0 * tmp9
-    J(39) = 0.0_c_double
-    J(40) = 0.0_c_double
-    J(41) = 0.0_c_double
-    J(42) = 0.0_c_double
     J(43) = tmp0 * tmp10
     J(44) = 1.0_c_double
     J(45) = -tmp0 * tmp11
-    J(46) = 0.0_c_double
-    J(47) = 0.0_c_double
-    J(48) = 0.0_c_double
-    J(49) = 0.0_c_double
-    J(50) = 0.0_c_double
-    J(51) = 0.0_c_double
-    J(52) = 0.0_c_double
-    J(53) = 0.0_c_double
-    J(54) = 0.0_c_double
-    J(55) = 0.0_c_double
-    J(56) = 0.0_c_double
-    J(57) = 0.0_c_double
-    J(58) = 0.0_c_double
-    J(59) = 0.0_c_double
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
-    J(63) = 0.0_c_double
     J(64) = 1.0_c_double
-    J(65) = 0.0_c_double
-    J(66) = 0.0_c_double
-    J(67) = 0.0_c_double
-    J(68) = 0.0_c_double
-    J(69) = 0.0_c_double
-    J(70) = 0.0_c_double
-    J(71) = 0.0_c_double
-    J(72) = 0.0_c_double
-    J(73) = 0.0_c_double
-    J(74) = 0.0_c_double
-    J(75) = 0.0_c_double
-    J(76) = 0.0_c_double
-    J(77) = 0.0_c_double
-    J(78) = 0.0_c_double
-    J(79) = 0.0_c_double
-    J(80) = 0.0_c_double
-    J(81) = 0.0_c_double
-    J(82) = 0.0_c_double
     J(83) = 1.0_c_double
-    J(84) = 0.0_c_double
-    J(85) = 0.0_c_double
-    J(86) = 0.0_c_double
-    J(87) = 0.0_c_double
-    J(88) = 0.0_c_double
-    J(89) = 0.0_c_double
-    J(90) = 0.0_c_double
-    J(91) = 0.0_c_double
-    J(92) = 0.0_c_double
-    J(93) = 0.0_c_double
-    J(94) = 0.0_c_double
-    J(95) = 0.0_c_double
-    J(96) = 0.0_c_double
-    J(97) = 0.0_c_double
-    J(98) = 0.0_c_double
-    J(99) = 0.0_c_double
-    J(100) = 0.0_c_double
-    J(101) = 0.0_c_double
     J(102) = 1.0_c_double
-    J(103) = 0.0_c_double
-    J(104) = 0.0_c_double
-    J(105) = 0.0_c_double
-    J(106) = 0.0_c_double
-    J(107) = 0.0_c_double
-    J(108) = 0.0_c_double
-    J(109) = 0.0_c_double
-    J(110) = 0.0_c_double
-    J(111) = 0.0_c_double
-    J(112) = 0.0_c_double
-    J(113) = 0.0_c_double
-    J(114) = 0.0_c_double
-    J(115) = 0.0_c_double
-    J(116) = 0.0_c_double
-    J(117) = 0.0_c_double
-    J(118) = 0.0_c_double
-    J(119) = 0.0_c_double
-    J(120) = 0.0_c_double
     J(121) = 1.0_c_double
-    J(122) = 0.0_c_double
-    J(123) = 0.0_c_double
-    J(124) = 0.0_c_double
-    J(125) = 0.0_c_double
-    J(126) = 0.0_c_double
-    J(127) = 0.0_c_double
-    J(128) = 0.0_c_double
     J(129) = tmp176 + tmp200
     J(130) = tmp213 + tmp233
     J(131) = tmp242 + tmp264
@@ -1585,9 +1478,6 @@ contains
     J(141) = tmp415
     J(142) = tmp420
     J(143) = tmp425
-    J(144) = 0.0_c_double
-    J(145) = 0.0_c_double
-    J(146) = 0.0_c_double
     J(147) = tmp429 + tmp433
     J(148) = tmp434 + tmp436
     J(149) = tmp437 + tmp440
@@ -1603,9 +1493,6 @@ contains
     J(159) = tmp452
     J(160) = tmp453
     J(161) = tmp454
-    J(162) = 0.0_c_double
-    J(163) = 0.0_c_double
-    J(164) = 0.0_c_double
     J(165) = tmp457 + tmp458
     J(166) = tmp459 + tmp460
     J(167) = tmp461 + tmp462
@@ -1621,9 +1508,6 @@ contains
     J(177) = tmp473
     J(178) = tmp474
     J(179) = tmp475
-    J(180) = 0.0_c_double
-    J(181) = 0.0_c_double
-    J(182) = 0.0_c_double
     J(183) = ((tmp182 * tmp92 + tmp193 * tmp94) - tmp478) - tmp479
     J(184) = ((-tmp480) - tmp481) - tmp482
     J(185) = (-tmp485) - tmp486
@@ -1642,9 +1526,6 @@ contains
     J(195) = (-tmp508) - tmp509
     J(196) = (-tmp510) - tmp511
     J(197) = (-tmp512) - tmp513
-    J(198) = 0.0_c_double
-    J(199) = 0.0_c_double
-    J(200) = 0.0_c_double
     J(201) = ((-tmp478) - tmp514) - tmp515
     J(202) = (((tmp155 * tmp216 + tmp226 * tmp99) - tmp482) - tmp516) - tmp517
     J(203) = ((-tmp485) - tmp518) - tmp519
@@ -1663,9 +1544,6 @@ contains
         tmp18) * u3) - tmp508) - tmp529) - 0.7055738703267808_c_double * tmp411
     J(214) = (-tmp511) - tmp530
     J(215) = (-tmp512) - tmp531
-    J(216) = 0.0_c_double
-    J(217) = 0.0_c_double
-    J(218) = 0.0_c_double
     J(219) = (tmp479 - tmp476) - tmp477
     J(220) = (tmp480 + tmp481) - tmp482
     J(221) = (((tmp261 + tmp262) + tmp486) - tmp483) - tmp484
@@ -1684,9 +1562,6 @@ contains
     J(232) = (((tmp510 + 1.2222222222222223_c_double * tmp87) + 0.7055738703267808_c_double * &
         tmp243) + 0.9979943256381344_c_double * tmp416) - tmp511
     J(233) = tmp513 - tmp512
-    J(234) = 0.0_c_double
-    J(235) = 0.0_c_double
-    J(236) = 0.0_c_double
     J(237) = (tmp514 + tmp515) - tmp478
     J(238) = (tmp516 + tmp517) - tmp482
     J(239) = (tmp518 + tmp519) - tmp485
@@ -1705,81 +1580,29 @@ contains
     J(250) = tmp530 - tmp511
     J(251) = (((tmp531 + 0.7055738703267808_c_double * tmp532) + 0.9979943256381344_c_double * &
         tmp422) - tmp512) - 1.2222222222222223_c_double * tmp110
-    J(252) = 0.0_c_double
-    J(253) = 0.0_c_double
-    J(254) = 0.0_c_double
     J(255) = ((14.85361967803071_c_double * tmp13) * u3 - 18.19090909090909_c_double * tmp93) - &
         10.501388289847101_c_double * tmp178
-    J(256) = 0.0_c_double
-    J(257) = 0.0_c_double
-    J(258) = 0.0_c_double
     J(259) = -10.501388289847101_c_double * tmp12
     J(260) = 18.19090909090909_c_double * tmp13
     J(261) = 14.85361967803071_c_double * tmp12
-    J(262) = 0.0_c_double
-    J(263) = 0.0_c_double
-    J(264) = 0.0_c_double
-    J(265) = 0.0_c_double
     J(266) = -18.19090909090909_c_double
-    J(267) = 0.0_c_double
-    J(268) = 0.0_c_double
-    J(269) = 0.0_c_double
-    J(270) = 0.0_c_double
-    J(271) = 0.0_c_double
-    J(272) = 0.0_c_double
-    J(273) = 0.0_c_double
     J(274) = (14.85361967803071_c_double * tmp412 + 18.19090909090909_c_double * tmp97) - &
         10.501388289847101_c_double * tmp411
-    J(275) = 0.0_c_double
-    J(276) = 0.0_c_double
     J(277) = -18.19090909090909_c_double * tmp18
     J(278) = -10.501388289847101_c_double * tmp32
     J(279) = 14.85361967803071_c_double * tmp32
-    J(280) = 0.0_c_double
-    J(281) = 0.0_c_double
-    J(282) = 0.0_c_double
-    J(283) = 0.0_c_double
-    J(284) = 0.0_c_double
     J(285) = -18.19090909090909_c_double
-    J(286) = 0.0_c_double
-    J(287) = 0.0_c_double
-    J(288) = 0.0_c_double
-    J(289) = 0.0_c_double
-    J(290) = 0.0_c_double
-    J(291) = 0.0_c_double
-    J(292) = 0.0_c_double
     J(293) = (14.85361967803071_c_double * tmp416 + 18.19090909090909_c_double * tmp87) + &
         10.501388289847101_c_double * tmp243
-    J(294) = 0.0_c_double
     J(295) = 10.501388289847101_c_double * tmp15
     J(296) = -18.19090909090909_c_double * tmp16
     J(297) = 14.85361967803071_c_double * tmp15
-    J(298) = 0.0_c_double
-    J(299) = 0.0_c_double
-    J(300) = 0.0_c_double
-    J(301) = 0.0_c_double
-    J(302) = 0.0_c_double
-    J(303) = 0.0_c_double
     J(304) = -18.19090909090909_c_double
-    J(305) = 0.0_c_double
-    J(306) = 0.0_c_double
-    J(307) = 0.0_c_double
-    J(308) = 0.0_c_double
-    J(309) = 0.0_c_double
-    J(310) = 0.0_c_double
-    J(311) = 0.0_c_double
     J(312) = (14.85361967803071_c_double * tmp422 + 10.501388289847101_c_double * tmp532) - &
         18.19090909090909_c_double * tmp110
     J(313) = 18.19090909090909_c_double * tmp20
     J(314) = 10.501388289847101_c_double * tmp35
     J(315) = 14.85361967803071_c_double * tmp35
-    J(316) = 0.0_c_double
-    J(317) = 0.0_c_double
-    J(318) = 0.0_c_double
-    J(319) = 0.0_c_double
-    J(320) = 0.0_c_double
-    J(321) = 0.0_c_double
-    J(322) = 0.0_c_double
     J(323) = -18.19090909090909_c_double
   end subroutine cmg4_pyramid_jac
 
@@ -1811,20 +1634,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

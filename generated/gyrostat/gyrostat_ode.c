@@ -270,7 +270,9 @@ const char *gyrostat_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (58 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (58 ops).
+   A loop zeroes J, then the entries that can be nonzero are written (one
+   store each: an augmented system's J is mostly zeros). */
 void gyrostat_jac(double t, const double *x, const double *c, double *J)
 {
     double q2;
@@ -293,6 +295,7 @@ void gyrostat_jac(double t, const double *x, const double *c, double *J)
     double tmp11;
     double tmp12;
     double tmp13;
+    int i_;
 
     (void)t;  /* unused in some scenes */
     q2 = x[1];
@@ -301,6 +304,9 @@ void gyrostat_jac(double t, const double *x, const double *c, double *J)
     u2 = x[8];
     u3 = x[9];
     u4 = x[10];
+    for (i_ = 0; i_ < GYROSTAT_NX * GYROSTAT_NX; ++i_) {
+        J[i_] = 0.0;
+    }
     tmp0 = gyrostat_sin(q2);
     tmp1 = gyrostat_cos(q2);
     tmp2 = gyrostat_sin(q3);
@@ -315,202 +321,33 @@ void gyrostat_jac(double t, const double *x, const double *c, double *J)
     tmp11 = tmp4 * tmp8;
     tmp12 = c[0] * u2 + c[1] * u4;
     tmp13 = 2.0 * c[4];
-    J[0] = 0.0;
     J[1] = tmp0 * tmp7;
     J[2] = tmp9;
-    J[3] = 0.0;
-    J[4] = 0.0;
-    J[5] = 0.0;
-    J[6] = 0.0;
     J[7] = -tmp10;
-    J[8] = 0.0;
     J[9] = tmp11;
-    J[10] = 0.0;
-    J[11] = 0.0;
-    J[12] = 0.0;
-    J[13] = 0.0;
-    J[14] = 0.0;
-    J[15] = 0.0;
     J[16] = tmp6;
-    J[17] = 0.0;
-    J[18] = 0.0;
-    J[19] = 0.0;
-    J[20] = 0.0;
     J[21] = tmp4;
-    J[22] = 0.0;
     J[23] = tmp2;
-    J[24] = 0.0;
-    J[25] = 0.0;
-    J[26] = 0.0;
-    J[27] = 0.0;
-    J[28] = 0.0;
     J[29] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
     J[30] = -(tmp0 * tmp9);
-    J[31] = 0.0;
-    J[32] = 0.0;
-    J[33] = 0.0;
-    J[34] = 0.0;
     J[35] = tmp0 * tmp10;
     J[36] = 1.0;
     J[37] = -(tmp0 * tmp11);
-    J[38] = 0.0;
-    J[39] = 0.0;
-    J[40] = 0.0;
-    J[41] = 0.0;
-    J[42] = 0.0;
-    J[43] = 0.0;
-    J[44] = 0.0;
-    J[45] = 0.0;
-    J[46] = 0.0;
-    J[47] = 0.0;
-    J[48] = 0.0;
-    J[49] = 0.0;
     J[50] = -1.0;
-    J[51] = 0.0;
     J[52] = 1.0;
-    J[53] = 0.0;
-    J[54] = 0.0;
-    J[55] = 0.0;
-    J[56] = 0.0;
-    J[57] = 0.0;
-    J[58] = 0.0;
-    J[59] = 0.0;
-    J[60] = 0.0;
-    J[61] = 0.0;
-    J[62] = 0.0;
-    J[63] = 0.0;
-    J[64] = 0.0;
-    J[65] = 0.0;
-    J[66] = 0.0;
     J[67] = 1.0;
-    J[68] = 0.0;
-    J[69] = 0.0;
-    J[70] = 0.0;
-    J[71] = 0.0;
-    J[72] = 0.0;
-    J[73] = 0.0;
-    J[74] = 0.0;
-    J[75] = 0.0;
-    J[76] = 0.0;
-    J[77] = 0.0;
-    J[78] = 0.0;
-    J[79] = 0.0;
-    J[80] = 0.0;
-    J[81] = 0.0;
     J[82] = 1.0;
-    J[83] = 0.0;
-    J[84] = 0.0;
-    J[85] = 0.0;
-    J[86] = 0.0;
-    J[87] = 0.0;
-    J[88] = 0.0;
-    J[89] = 0.0;
-    J[90] = 0.0;
-    J[91] = 0.0;
-    J[92] = 0.0;
-    J[93] = 0.0;
-    J[94] = 0.0;
-    J[95] = 0.0;
-    J[96] = 0.0;
     J[97] = 1.0;
-    J[98] = 0.0;
-    J[99] = 0.0;
-    J[100] = 0.0;
-    J[101] = 0.0;
-    J[102] = 0.0;
-    J[103] = 0.0;
-    J[104] = 0.0;
     J[105] = tmp12;
     J[106] = c[0] * u1 + c[2] * u3;
     J[107] = c[2] * u2 + c[3] * u4;
     J[108] = c[1] * u1 + c[3] * u3;
-    J[109] = 0.0;
-    J[110] = 0.0;
-    J[111] = 0.0;
-    J[112] = 0.0;
-    J[113] = 0.0;
-    J[114] = 0.0;
-    J[115] = 0.0;
-    J[116] = 0.0;
-    J[117] = 0.0;
-    J[118] = 0.0;
     J[119] = c[5] * u3 + tmp13 * u1;
-    J[120] = 0.0;
     J[121] = c[5] * u1 - tmp13 * u3;
-    J[122] = 0.0;
-    J[123] = 0.0;
-    J[124] = 0.0;
-    J[125] = 0.0;
-    J[126] = 0.0;
-    J[127] = 0.0;
-    J[128] = 0.0;
-    J[129] = 0.0;
-    J[130] = 0.0;
-    J[131] = 0.0;
-    J[132] = 0.0;
     J[133] = c[7] * u2 + c[8] * u4;
     J[134] = c[7] * u1 - c[0] * u3;
     J[135] = -tmp12;
     J[136] = c[8] * u1 - c[1] * u3;
-    J[137] = 0.0;
-    J[138] = 0.0;
-    J[139] = 0.0;
-    J[140] = 0.0;
-    J[141] = 0.0;
-    J[142] = 0.0;
-    J[143] = 0.0;
-    J[144] = 0.0;
-    J[145] = 0.0;
-    J[146] = 0.0;
-    J[147] = 0.0;
-    J[148] = 0.0;
-    J[149] = 0.0;
-    J[150] = 0.0;
-    J[151] = 0.0;
-    J[152] = 0.0;
-    J[153] = 0.0;
-    J[154] = 0.0;
-    J[155] = 0.0;
-    J[156] = 0.0;
-    J[157] = 0.0;
-    J[158] = 0.0;
-    J[159] = 0.0;
-    J[160] = 0.0;
-    J[161] = 0.0;
-    J[162] = 0.0;
-    J[163] = 0.0;
-    J[164] = 0.0;
-    J[165] = 0.0;
-    J[166] = 0.0;
-    J[167] = 0.0;
-    J[168] = 0.0;
-    J[169] = 0.0;
-    J[170] = 0.0;
-    J[171] = 0.0;
-    J[172] = 0.0;
-    J[173] = 0.0;
-    J[174] = 0.0;
-    J[175] = 0.0;
-    J[176] = 0.0;
-    J[177] = 0.0;
-    J[178] = 0.0;
-    J[179] = 0.0;
-    J[180] = 0.0;
-    J[181] = 0.0;
-    J[182] = 0.0;
-    J[183] = 0.0;
-    J[184] = 0.0;
-    J[185] = 0.0;
-    J[186] = 0.0;
-    J[187] = 0.0;
-    J[188] = 0.0;
-    J[189] = 0.0;
-    J[190] = 0.0;
-    J[191] = 0.0;
-    J[192] = 0.0;
-    J[193] = 0.0;
-    J[194] = 0.0;
-    J[195] = 0.0;
 }
 
 
@@ -526,17 +363,19 @@ static void stats_start(gyrostat_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
-/* 1 when no element of v is NaN or Inf. */
+/* 1 when no element of v is NaN or Inf. The whole of v by selection, no
+   early exit: a loop the compiler vectorizes (an implicit method checks
+   its NX x NX Jacobian at every step). */
 static int all_finite(const double *v, int n)
 {
+    int ok;
     int i;
 
+    ok = 1;
     for (i = 0; i < n; ++i) {
-        if (!(fabs(v[i]) <= DBL_MAX)) {
-            return 0;
-        }
+        ok = (fabs(v[i]) <= DBL_MAX) ? ok : 0;
     }
-    return 1;
+    return ok;
 }
 
 /* x := xnew, the step's x + dx. Every method sums its steps with Kahan's

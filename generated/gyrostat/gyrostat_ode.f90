@@ -127,6 +127,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (58 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine gyrostat_jac(t, x, c, J) bind(C, name="gyrostat_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:13)
@@ -152,6 +154,7 @@ contains
     real(c_double) :: tmp11
     real(c_double) :: tmp12
     real(c_double) :: tmp13
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -161,6 +164,9 @@ contains
     u2 = x(8)
     u3 = x(9)
     u4 = x(10)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = gyrostat_sin(q2)
     tmp1 = gyrostat_cos(q2)
     tmp2 = gyrostat_sin(q3)
@@ -175,202 +181,33 @@ contains
     tmp11 = tmp4 * tmp8
     tmp12 = c(0) * u2 + c(1) * u4
     tmp13 = 2.0_c_double * c(4)
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
-    J(3) = 0.0_c_double
-    J(4) = 0.0_c_double
-    J(5) = 0.0_c_double
-    J(6) = 0.0_c_double
     J(7) = -tmp10
-    J(8) = 0.0_c_double
     J(9) = tmp11
-    J(10) = 0.0_c_double
-    J(11) = 0.0_c_double
-    J(12) = 0.0_c_double
-    J(13) = 0.0_c_double
-    J(14) = 0.0_c_double
-    J(15) = 0.0_c_double
     J(16) = tmp6
-    J(17) = 0.0_c_double
-    J(18) = 0.0_c_double
-    J(19) = 0.0_c_double
-    J(20) = 0.0_c_double
     J(21) = tmp4
-    J(22) = 0.0_c_double
     J(23) = tmp2
-    J(24) = 0.0_c_double
-    J(25) = 0.0_c_double
-    J(26) = 0.0_c_double
-    J(27) = 0.0_c_double
-    J(28) = 0.0_c_double
     J(29) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(30) = -tmp0 * tmp9
-    J(31) = 0.0_c_double
-    J(32) = 0.0_c_double
-    J(33) = 0.0_c_double
-    J(34) = 0.0_c_double
     J(35) = tmp0 * tmp10
     J(36) = 1.0_c_double
     J(37) = -tmp0 * tmp11
-    J(38) = 0.0_c_double
-    J(39) = 0.0_c_double
-    J(40) = 0.0_c_double
-    J(41) = 0.0_c_double
-    J(42) = 0.0_c_double
-    J(43) = 0.0_c_double
-    J(44) = 0.0_c_double
-    J(45) = 0.0_c_double
-    J(46) = 0.0_c_double
-    J(47) = 0.0_c_double
-    J(48) = 0.0_c_double
-    J(49) = 0.0_c_double
     J(50) = -1.0_c_double
-    J(51) = 0.0_c_double
     J(52) = 1.0_c_double
-    J(53) = 0.0_c_double
-    J(54) = 0.0_c_double
-    J(55) = 0.0_c_double
-    J(56) = 0.0_c_double
-    J(57) = 0.0_c_double
-    J(58) = 0.0_c_double
-    J(59) = 0.0_c_double
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
-    J(63) = 0.0_c_double
-    J(64) = 0.0_c_double
-    J(65) = 0.0_c_double
-    J(66) = 0.0_c_double
     J(67) = 1.0_c_double
-    J(68) = 0.0_c_double
-    J(69) = 0.0_c_double
-    J(70) = 0.0_c_double
-    J(71) = 0.0_c_double
-    J(72) = 0.0_c_double
-    J(73) = 0.0_c_double
-    J(74) = 0.0_c_double
-    J(75) = 0.0_c_double
-    J(76) = 0.0_c_double
-    J(77) = 0.0_c_double
-    J(78) = 0.0_c_double
-    J(79) = 0.0_c_double
-    J(80) = 0.0_c_double
-    J(81) = 0.0_c_double
     J(82) = 1.0_c_double
-    J(83) = 0.0_c_double
-    J(84) = 0.0_c_double
-    J(85) = 0.0_c_double
-    J(86) = 0.0_c_double
-    J(87) = 0.0_c_double
-    J(88) = 0.0_c_double
-    J(89) = 0.0_c_double
-    J(90) = 0.0_c_double
-    J(91) = 0.0_c_double
-    J(92) = 0.0_c_double
-    J(93) = 0.0_c_double
-    J(94) = 0.0_c_double
-    J(95) = 0.0_c_double
-    J(96) = 0.0_c_double
     J(97) = 1.0_c_double
-    J(98) = 0.0_c_double
-    J(99) = 0.0_c_double
-    J(100) = 0.0_c_double
-    J(101) = 0.0_c_double
-    J(102) = 0.0_c_double
-    J(103) = 0.0_c_double
-    J(104) = 0.0_c_double
     J(105) = tmp12
     J(106) = c(0) * u1 + c(2) * u3
     J(107) = c(2) * u2 + c(3) * u4
     J(108) = c(1) * u1 + c(3) * u3
-    J(109) = 0.0_c_double
-    J(110) = 0.0_c_double
-    J(111) = 0.0_c_double
-    J(112) = 0.0_c_double
-    J(113) = 0.0_c_double
-    J(114) = 0.0_c_double
-    J(115) = 0.0_c_double
-    J(116) = 0.0_c_double
-    J(117) = 0.0_c_double
-    J(118) = 0.0_c_double
     J(119) = c(5) * u3 + tmp13 * u1
-    J(120) = 0.0_c_double
     J(121) = c(5) * u1 - tmp13 * u3
-    J(122) = 0.0_c_double
-    J(123) = 0.0_c_double
-    J(124) = 0.0_c_double
-    J(125) = 0.0_c_double
-    J(126) = 0.0_c_double
-    J(127) = 0.0_c_double
-    J(128) = 0.0_c_double
-    J(129) = 0.0_c_double
-    J(130) = 0.0_c_double
-    J(131) = 0.0_c_double
-    J(132) = 0.0_c_double
     J(133) = c(7) * u2 + c(8) * u4
     J(134) = c(7) * u1 - c(0) * u3
     J(135) = -tmp12
     J(136) = c(8) * u1 - c(1) * u3
-    J(137) = 0.0_c_double
-    J(138) = 0.0_c_double
-    J(139) = 0.0_c_double
-    J(140) = 0.0_c_double
-    J(141) = 0.0_c_double
-    J(142) = 0.0_c_double
-    J(143) = 0.0_c_double
-    J(144) = 0.0_c_double
-    J(145) = 0.0_c_double
-    J(146) = 0.0_c_double
-    J(147) = 0.0_c_double
-    J(148) = 0.0_c_double
-    J(149) = 0.0_c_double
-    J(150) = 0.0_c_double
-    J(151) = 0.0_c_double
-    J(152) = 0.0_c_double
-    J(153) = 0.0_c_double
-    J(154) = 0.0_c_double
-    J(155) = 0.0_c_double
-    J(156) = 0.0_c_double
-    J(157) = 0.0_c_double
-    J(158) = 0.0_c_double
-    J(159) = 0.0_c_double
-    J(160) = 0.0_c_double
-    J(161) = 0.0_c_double
-    J(162) = 0.0_c_double
-    J(163) = 0.0_c_double
-    J(164) = 0.0_c_double
-    J(165) = 0.0_c_double
-    J(166) = 0.0_c_double
-    J(167) = 0.0_c_double
-    J(168) = 0.0_c_double
-    J(169) = 0.0_c_double
-    J(170) = 0.0_c_double
-    J(171) = 0.0_c_double
-    J(172) = 0.0_c_double
-    J(173) = 0.0_c_double
-    J(174) = 0.0_c_double
-    J(175) = 0.0_c_double
-    J(176) = 0.0_c_double
-    J(177) = 0.0_c_double
-    J(178) = 0.0_c_double
-    J(179) = 0.0_c_double
-    J(180) = 0.0_c_double
-    J(181) = 0.0_c_double
-    J(182) = 0.0_c_double
-    J(183) = 0.0_c_double
-    J(184) = 0.0_c_double
-    J(185) = 0.0_c_double
-    J(186) = 0.0_c_double
-    J(187) = 0.0_c_double
-    J(188) = 0.0_c_double
-    J(189) = 0.0_c_double
-    J(190) = 0.0_c_double
-    J(191) = 0.0_c_double
-    J(192) = 0.0_c_double
-    J(193) = 0.0_c_double
-    J(194) = 0.0_c_double
-    J(195) = 0.0_c_double
   end subroutine gyrostat_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -401,20 +238,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

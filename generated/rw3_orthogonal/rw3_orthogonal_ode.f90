@@ -127,6 +127,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (138 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine rw3_orthogonal_jac(t, x, c, J) bind(C, name="rw3_orthogonal_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:8)
@@ -158,6 +160,7 @@ contains
     real(c_double) :: tmp15
     real(c_double) :: tmp16
     real(c_double) :: tmp17
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -171,6 +174,9 @@ contains
     w1 = x(6)
     w2 = x(7)
     w3 = x(8)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = rw3_orthogonal_sin(q2)
     tmp1 = rw3_orthogonal_cos(q2)
     tmp2 = rw3_orthogonal_sin(q3)
@@ -189,36 +195,18 @@ contains
     tmp15 = 6.668975323431402e-07_c_double * u3
     tmp16 = 5.424273135921467e-07_c_double * w1
     tmp17 = 5.424273135921467e-07_c_double * u1
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
     J(3) = -tmp10
-    J(4) = 0.0_c_double
     J(5) = tmp11
-    J(6) = 0.0_c_double
-    J(7) = 0.0_c_double
-    J(8) = 0.0_c_double
-    J(9) = 0.0_c_double
-    J(10) = 0.0_c_double
     J(11) = tmp6
     J(12) = tmp4
-    J(13) = 0.0_c_double
     J(14) = tmp2
-    J(15) = 0.0_c_double
-    J(16) = 0.0_c_double
-    J(17) = 0.0_c_double
-    J(18) = 0.0_c_double
     J(19) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(20) = -tmp0 * tmp9
     J(21) = tmp0 * tmp10
     J(22) = 1.0_c_double
     J(23) = -tmp0 * tmp11
-    J(24) = 0.0_c_double
-    J(25) = 0.0_c_double
-    J(26) = 0.0_c_double
-    J(27) = 0.0_c_double
-    J(28) = 0.0_c_double
-    J(29) = 0.0_c_double
     J(30) = (((0.007550627875277421_c_double * u3 + 0.008336377129634543_c_double * u2) - tmp12) &
         - tmp13) - 4.699133747337101e-05_c_double * u1
     J(31) = (((0.008336377129634545_c_double * u1 + 0.3327988462904027_c_double * u3) + &
@@ -231,9 +219,6 @@ contains
     J(34) = 0.000116013683567337_c_double * u3 - 1.458308855152276e-06_c_double * u1
     J(35) = (4.166596729006503e-09_c_double - 0.000116013683567337_c_double * u2) - &
         6.668975323431402e-07_c_double * u1
-    J(36) = 0.0_c_double
-    J(37) = 0.0_c_double
-    J(38) = 0.0_c_double
     J(39) = (((5.424273135921467e-07_c_double * w2 + 0.004549590061738773_c_double * u2) + &
         9.951128625026586e-05_c_double * w3) - 0.017856992801851313_c_double * u1) - &
         0.14339795997248841_c_double * u3
@@ -246,9 +231,6 @@ contains
     J(43) = tmp17 - tmp15
     J(44) = (9.951128625026586e-05_c_double * u1 + 6.668975323431402e-07_c_double * u2) - &
         1.5497923245489903e-09_c_double
-    J(45) = 0.0_c_double
-    J(46) = 0.0_c_double
-    J(47) = 0.0_c_double
     J(48) = ((((-0.015861141468348716_c_double * u1) - 5.424273135921467e-07_c_double * w3) - &
         0.004502598724265401_c_double * u3) - 0.19887734770270193_c_double * u2) - &
         0.00013929142133070315_c_double * w2
@@ -261,32 +243,7 @@ contains
     J(51) = 5.424273135921467e-07_c_double * u3 + 0.00013929142133070315_c_double * u2
     J(52) = 1.458308855152276e-06_c_double * u3 - 0.00013929142133070315_c_double * u1
     J(53) = (3.979754895162947e-07_c_double - tmp14) - tmp17
-    J(54) = 0.0_c_double
-    J(55) = 0.0_c_double
-    J(56) = 0.0_c_double
-    J(57) = 0.0_c_double
-    J(58) = 0.0_c_double
-    J(59) = 0.0_c_double
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
-    J(63) = 0.0_c_double
-    J(64) = 0.0_c_double
-    J(65) = 0.0_c_double
-    J(66) = 0.0_c_double
-    J(67) = 0.0_c_double
-    J(68) = 0.0_c_double
-    J(69) = 0.0_c_double
-    J(70) = 0.0_c_double
-    J(71) = 0.0_c_double
-    J(72) = 0.0_c_double
-    J(73) = 0.0_c_double
-    J(74) = 0.0_c_double
-    J(75) = 0.0_c_double
-    J(76) = 0.0_c_double
     J(77) = 0.0028571428571428576_c_double
-    J(78) = 0.0_c_double
-    J(79) = 0.0_c_double
     J(80) = -0.0028571428571428576_c_double
   end subroutine rw3_orthogonal_jac
 
@@ -318,20 +275,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

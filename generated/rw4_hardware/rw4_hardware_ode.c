@@ -233,7 +233,9 @@ const char *rw4_hardware_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (481 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (481 ops).
+   A loop zeroes J, then the entries that can be nonzero are written (one
+   store each: an augmented system's J is mostly zeros). */
 void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
 {
     double q2;
@@ -317,6 +319,7 @@ void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
     double tmp69;
     double tmp70;
     double tmp71;
+    int i_;
 
     (void)t;  /* unused in some scenes */
     q2 = x[1];
@@ -328,6 +331,9 @@ void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
     w2 = x[7];
     w3 = x[8];
     w4 = x[9];
+    for (i_ = 0; i_ < RW4_HARDWARE_NX * RW4_HARDWARE_NX; ++i_) {
+        J[i_] = 0.0;
+    }
     tmp0 = rw4_hardware_sin(q2);
     tmp1 = rw4_hardware_cos(q2);
     tmp2 = rw4_hardware_sin(q3);
@@ -406,39 +412,18 @@ void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
     tmp69 = c[22] * u3 + c[40] * tmp68 - c[27] * u2;
     tmp70 = c[27] * u1 + c[41] * tmp68 - c[16] * u3;
     tmp71 = c[16] * u2 + c[42] * tmp68 - c[22] * u1;
-    J[0] = 0.0;
     J[1] = tmp0 * tmp7;
     J[2] = tmp9;
     J[3] = -tmp10;
-    J[4] = 0.0;
     J[5] = tmp11;
-    J[6] = 0.0;
-    J[7] = 0.0;
-    J[8] = 0.0;
-    J[9] = 0.0;
-    J[10] = 0.0;
-    J[11] = 0.0;
     J[12] = tmp6;
     J[13] = tmp4;
-    J[14] = 0.0;
     J[15] = tmp2;
-    J[16] = 0.0;
-    J[17] = 0.0;
-    J[18] = 0.0;
-    J[19] = 0.0;
-    J[20] = 0.0;
     J[21] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
     J[22] = -(tmp0 * tmp9);
     J[23] = tmp0 * tmp10;
     J[24] = 1.0;
     J[25] = -(tmp0 * tmp11);
-    J[26] = 0.0;
-    J[27] = 0.0;
-    J[28] = 0.0;
-    J[29] = 0.0;
-    J[30] = 0.0;
-    J[31] = 0.0;
-    J[32] = 0.0;
     J[33] = c[0] * tmp29 + c[1] * tmp33 + c[2] * tmp37;
     J[34] = c[0] * tmp48 + c[1] * tmp43 + c[2] * tmp47;
     J[35] = c[0] * tmp54 + c[1] * tmp55 + c[2] * tmp53;
@@ -446,9 +431,6 @@ void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
     J[37] = c[0] * tmp61 + c[1] * tmp62 + c[2] * tmp63;
     J[38] = c[0] * tmp65 + c[1] * tmp66 + c[2] * tmp67;
     J[39] = c[0] * tmp69 + c[1] * tmp70 + c[2] * tmp71;
-    J[40] = 0.0;
-    J[41] = 0.0;
-    J[42] = 0.0;
     J[43] = c[1] * tmp29 + c[3] * tmp33 + c[4] * tmp37;
     J[44] = c[1] * tmp48 + c[3] * tmp43 + c[4] * tmp47;
     J[45] = c[1] * tmp54 + c[3] * tmp55 + c[4] * tmp53;
@@ -456,9 +438,6 @@ void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
     J[47] = c[1] * tmp61 + c[3] * tmp62 + c[4] * tmp63;
     J[48] = c[1] * tmp65 + c[3] * tmp66 + c[4] * tmp67;
     J[49] = c[1] * tmp69 + c[3] * tmp70 + c[4] * tmp71;
-    J[50] = 0.0;
-    J[51] = 0.0;
-    J[52] = 0.0;
     J[53] = c[2] * tmp29 + c[4] * tmp33 + c[5] * tmp37;
     J[54] = c[2] * tmp48 + c[4] * tmp43 + c[5] * tmp47;
     J[55] = c[2] * tmp54 + c[4] * tmp55 + c[5] * tmp53;
@@ -466,45 +445,21 @@ void rw4_hardware_jac(double t, const double *x, const double *c, double *J)
     J[57] = c[2] * tmp61 + c[4] * tmp62 + c[5] * tmp63;
     J[58] = c[2] * tmp65 + c[4] * tmp66 + c[5] * tmp67;
     J[59] = c[2] * tmp69 + c[4] * tmp70 + c[5] * tmp71;
-    J[60] = 0.0;
-    J[61] = 0.0;
-    J[62] = 0.0;
     J[63] = c[6] * tmp19;
     J[64] = c[6] * tmp39;
     J[65] = c[6] * tmp49;
     J[66] = c[6] * tmp56;
-    J[67] = 0.0;
-    J[68] = 0.0;
-    J[69] = 0.0;
-    J[70] = 0.0;
-    J[71] = 0.0;
-    J[72] = 0.0;
     J[73] = c[7] * tmp22;
     J[74] = c[7] * tmp40;
     J[75] = c[7] * tmp50;
-    J[76] = 0.0;
     J[77] = c[7] * tmp60;
-    J[78] = 0.0;
-    J[79] = 0.0;
-    J[80] = 0.0;
-    J[81] = 0.0;
-    J[82] = 0.0;
     J[83] = c[8] * tmp25;
     J[84] = c[8] * tmp41;
     J[85] = c[8] * tmp51;
-    J[86] = 0.0;
-    J[87] = 0.0;
     J[88] = c[8] * tmp64;
-    J[89] = 0.0;
-    J[90] = 0.0;
-    J[91] = 0.0;
-    J[92] = 0.0;
     J[93] = c[9] * tmp28;
     J[94] = c[9] * tmp42;
     J[95] = c[9] * tmp52;
-    J[96] = 0.0;
-    J[97] = 0.0;
-    J[98] = 0.0;
     J[99] = c[9] * tmp68;
 }
 
@@ -521,17 +476,19 @@ static void stats_start(rw4_hardware_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
-/* 1 when no element of v is NaN or Inf. */
+/* 1 when no element of v is NaN or Inf. The whole of v by selection, no
+   early exit: a loop the compiler vectorizes (an implicit method checks
+   its NX x NX Jacobian at every step). */
 static int all_finite(const double *v, int n)
 {
+    int ok;
     int i;
 
+    ok = 1;
     for (i = 0; i < n; ++i) {
-        if (!(fabs(v[i]) <= DBL_MAX)) {
-            return 0;
-        }
+        ok = (fabs(v[i]) <= DBL_MAX) ? ok : 0;
     }
-    return 1;
+    return ok;
 }
 
 /* x := xnew, the step's x + dx. Every method sums its steps with Kahan's

@@ -125,6 +125,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (481 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine rw4_hardware_jac(t, x, c, J) bind(C, name="rw4_hardware_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:9)
@@ -211,6 +213,7 @@ contains
     real(c_double) :: tmp69
     real(c_double) :: tmp70
     real(c_double) :: tmp71
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -223,6 +226,9 @@ contains
     w2 = x(7)
     w3 = x(8)
     w4 = x(9)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = rw4_hardware_sin(q2)
     tmp1 = rw4_hardware_cos(q2)
     tmp2 = rw4_hardware_sin(q3)
@@ -309,39 +315,18 @@ contains
     tmp69 = (c(22) * u3 + c(40) * tmp68) - c(27) * u2
     tmp70 = (c(27) * u1 + c(41) * tmp68) - c(16) * u3
     tmp71 = (c(16) * u2 + c(42) * tmp68) - c(22) * u1
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
     J(3) = -tmp10
-    J(4) = 0.0_c_double
     J(5) = tmp11
-    J(6) = 0.0_c_double
-    J(7) = 0.0_c_double
-    J(8) = 0.0_c_double
-    J(9) = 0.0_c_double
-    J(10) = 0.0_c_double
-    J(11) = 0.0_c_double
     J(12) = tmp6
     J(13) = tmp4
-    J(14) = 0.0_c_double
     J(15) = tmp2
-    J(16) = 0.0_c_double
-    J(17) = 0.0_c_double
-    J(18) = 0.0_c_double
-    J(19) = 0.0_c_double
-    J(20) = 0.0_c_double
     J(21) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(22) = -tmp0 * tmp9
     J(23) = tmp0 * tmp10
     J(24) = 1.0_c_double
     J(25) = -tmp0 * tmp11
-    J(26) = 0.0_c_double
-    J(27) = 0.0_c_double
-    J(28) = 0.0_c_double
-    J(29) = 0.0_c_double
-    J(30) = 0.0_c_double
-    J(31) = 0.0_c_double
-    J(32) = 0.0_c_double
     J(33) = (c(0) * tmp29 + c(1) * tmp33) + c(2) * tmp37
     J(34) = (c(0) * tmp48 + c(1) * tmp43) + c(2) * tmp47
     J(35) = (c(0) * tmp54 + c(1) * tmp55) + c(2) * tmp53
@@ -349,9 +334,6 @@ contains
     J(37) = (c(0) * tmp61 + c(1) * tmp62) + c(2) * tmp63
     J(38) = (c(0) * tmp65 + c(1) * tmp66) + c(2) * tmp67
     J(39) = (c(0) * tmp69 + c(1) * tmp70) + c(2) * tmp71
-    J(40) = 0.0_c_double
-    J(41) = 0.0_c_double
-    J(42) = 0.0_c_double
     J(43) = (c(1) * tmp29 + c(3) * tmp33) + c(4) * tmp37
     J(44) = (c(1) * tmp48 + c(3) * tmp43) + c(4) * tmp47
     J(45) = (c(1) * tmp54 + c(3) * tmp55) + c(4) * tmp53
@@ -359,9 +341,6 @@ contains
     J(47) = (c(1) * tmp61 + c(3) * tmp62) + c(4) * tmp63
     J(48) = (c(1) * tmp65 + c(3) * tmp66) + c(4) * tmp67
     J(49) = (c(1) * tmp69 + c(3) * tmp70) + c(4) * tmp71
-    J(50) = 0.0_c_double
-    J(51) = 0.0_c_double
-    J(52) = 0.0_c_double
     J(53) = (c(2) * tmp29 + c(4) * tmp33) + c(5) * tmp37
     J(54) = (c(2) * tmp48 + c(4) * tmp43) + c(5) * tmp47
     J(55) = (c(2) * tmp54 + c(4) * tmp55) + c(5) * tmp53
@@ -369,45 +348,21 @@ contains
     J(57) = (c(2) * tmp61 + c(4) * tmp62) + c(5) * tmp63
     J(58) = (c(2) * tmp65 + c(4) * tmp66) + c(5) * tmp67
     J(59) = (c(2) * tmp69 + c(4) * tmp70) + c(5) * tmp71
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
     J(63) = c(6) * tmp19
     J(64) = c(6) * tmp39
     J(65) = c(6) * tmp49
     J(66) = c(6) * tmp56
-    J(67) = 0.0_c_double
-    J(68) = 0.0_c_double
-    J(69) = 0.0_c_double
-    J(70) = 0.0_c_double
-    J(71) = 0.0_c_double
-    J(72) = 0.0_c_double
     J(73) = c(7) * tmp22
     J(74) = c(7) * tmp40
     J(75) = c(7) * tmp50
-    J(76) = 0.0_c_double
     J(77) = c(7) * tmp60
-    J(78) = 0.0_c_double
-    J(79) = 0.0_c_double
-    J(80) = 0.0_c_double
-    J(81) = 0.0_c_double
-    J(82) = 0.0_c_double
     J(83) = c(8) * tmp25
     J(84) = c(8) * tmp41
     J(85) = c(8) * tmp51
-    J(86) = 0.0_c_double
-    J(87) = 0.0_c_double
     J(88) = c(8) * tmp64
-    J(89) = 0.0_c_double
-    J(90) = 0.0_c_double
-    J(91) = 0.0_c_double
-    J(92) = 0.0_c_double
     J(93) = c(9) * tmp28
     J(94) = c(9) * tmp42
     J(95) = c(9) * tmp52
-    J(96) = 0.0_c_double
-    J(97) = 0.0_c_double
-    J(98) = 0.0_c_double
     J(99) = c(9) * tmp68
   end subroutine rw4_hardware_jac
 
@@ -439,20 +394,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

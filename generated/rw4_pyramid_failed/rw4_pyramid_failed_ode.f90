@@ -125,6 +125,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (335 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine rw4_pyramid_failed_jac(t, x, c, J) bind(C, name="rw4_pyramid_failed_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:9)
@@ -174,6 +176,7 @@ contains
     real(c_double) :: tmp32
     real(c_double) :: tmp33
     real(c_double) :: tmp34
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -186,6 +189,9 @@ contains
     w2 = x(7)
     w3 = x(8)
     w4 = x(9)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = rw4_pyramid_failed_sin(q2)
     tmp1 = rw4_pyramid_failed_cos(q2)
     tmp2 = rw4_pyramid_failed_sin(q3)
@@ -225,39 +231,18 @@ contains
     tmp32 = 5.767597719025189e-07_c_double * u3
     tmp33 = 1.740059606133805e-06_c_double * u2
     tmp34 = 1.2304079471660068e-06_c_double * u3
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
     J(3) = -tmp10
-    J(4) = 0.0_c_double
     J(5) = tmp11
-    J(6) = 0.0_c_double
-    J(7) = 0.0_c_double
-    J(8) = 0.0_c_double
-    J(9) = 0.0_c_double
-    J(10) = 0.0_c_double
-    J(11) = 0.0_c_double
     J(12) = tmp6
     J(13) = tmp4
-    J(14) = 0.0_c_double
     J(15) = tmp2
-    J(16) = 0.0_c_double
-    J(17) = 0.0_c_double
-    J(18) = 0.0_c_double
-    J(19) = 0.0_c_double
-    J(20) = 0.0_c_double
     J(21) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(22) = -tmp0 * tmp9
     J(23) = tmp0 * tmp10
     J(24) = 1.0_c_double
     J(25) = -tmp0 * tmp11
-    J(26) = 0.0_c_double
-    J(27) = 0.0_c_double
-    J(28) = 0.0_c_double
-    J(29) = 0.0_c_double
-    J(30) = 0.0_c_double
-    J(31) = 0.0_c_double
-    J(32) = 0.0_c_double
     J(33) = ((((((((2.1549270478513374e-06_c_double * w2 + 9.245191006853307e-07_c_double * w1) + &
         9.245191006853307e-07_c_double * w3) - 3.1625434245335595e-08_c_double) - &
         7.692071785353986e-05_c_double * u1) - 3.0588884648067615e-07_c_double * w4) - &
@@ -282,9 +267,6 @@ contains
         8.591904094722402e-05_c_double * u2) - 7.040447321780832e-05_c_double * tmp19
     J(39) = (((-1.0639081473621739e-09_c_double) - tmp26) - tmp27) - &
         3.0588884648067615e-07_c_double * u1
-    J(40) = 0.0_c_double
-    J(41) = 0.0_c_double
-    J(42) = 0.0_c_double
     J(43) = ((((((((9.568192514569082e-05_c_double * w4 + 0.031260358896157345_c_double * u1) + &
         9.683544468949584e-05_c_double * w2) + 1.0387671046565256e-07_c_double * tmp15) + &
         0.005510620830867021_c_double * u2) + 9.625868491759333e-05_c_double * w1) + &
@@ -308,9 +290,6 @@ contains
     J(48) = (((tmp29 - 6.530645409274848e-10_c_double) - tmp28) - 1.6326613523187123e-06_c_double &
         * tmp19) - 3.477593287828118e-07_c_double * u2
     J(49) = ((9.568192514569082e-05_c_double * u1 - 3.061370237554901e-08_c_double) - tmp24) - tmp30
-    J(50) = 0.0_c_double
-    J(51) = 0.0_c_double
-    J(52) = 0.0_c_double
     J(53) = ((((((((6.314456528971991e-10_c_double + 0.13279713100649926_c_double * u2) + &
         7.890603257631074e-05_c_double * tmp19) + 0.0262473019118721_c_double * u1) + &
         8.529009155300216e-05_c_double * w4) - 0.00543370011301348_c_double * u3) - &
@@ -334,45 +313,17 @@ contains
     J(58) = (((5.466770297834206e-08_c_double + (0.00013666925744585515_c_double * tmp17) * &
         tmp18) - tmp31) - tmp32) - 8.436569343852411e-05_c_double * u2
     J(59) = ((5.437719267822496e-08_c_double + tmp33) + tmp34) + 8.529009155300216e-05_c_double * u1
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
     J(63) = 0.0002566001196398337_c_double + 0.6415002990995843_c_double * tmp15
-    J(64) = 0.0_c_double
     J(65) = 0.0003628873693012115_c_double + 0.9072184232530288_c_double * tmp15
     J(66) = (-0.00044444444444444447_c_double) - 1.1111111111111112_c_double * tmp15
-    J(67) = 0.0_c_double
-    J(68) = 0.0_c_double
-    J(69) = 0.0_c_double
-    J(70) = 0.0_c_double
-    J(71) = 0.0_c_double
-    J(72) = 0.0_c_double
-    J(73) = 0.0_c_double
     J(74) = 0.0002566001196398337_c_double + 0.6415002990995843_c_double * tmp23
     J(75) = 0.0003628873693012115_c_double + 0.9072184232530288_c_double * tmp23
-    J(76) = 0.0_c_double
     J(77) = (-0.00044444444444444447_c_double) - 1.1111111111111112_c_double * tmp23
-    J(78) = 0.0_c_double
-    J(79) = 0.0_c_double
-    J(80) = 0.0_c_double
-    J(81) = 0.0_c_double
-    J(82) = 0.0_c_double
     J(83) = (-0.0002566001196398337_c_double) - 0.6415002990995843_c_double * tmp19
-    J(84) = 0.0_c_double
     J(85) = 0.0003628873693012115_c_double + 0.9072184232530288_c_double * tmp19
-    J(86) = 0.0_c_double
-    J(87) = 0.0_c_double
     J(88) = (-0.00044444444444444447_c_double) - 1.1111111111111112_c_double * tmp19
-    J(89) = 0.0_c_double
-    J(90) = 0.0_c_double
-    J(91) = 0.0_c_double
-    J(92) = 0.0_c_double
-    J(93) = 0.0_c_double
     J(94) = -0.0002566001196398337_c_double
     J(95) = 0.0003628873693012115_c_double
-    J(96) = 0.0_c_double
-    J(97) = 0.0_c_double
-    J(98) = 0.0_c_double
     J(99) = -0.00044444444444444447_c_double
   end subroutine rw4_pyramid_failed_jac
 
@@ -404,20 +355,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

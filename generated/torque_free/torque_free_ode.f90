@@ -127,6 +127,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (38 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine torque_free_jac(t, x, c, J) bind(C, name="torque_free_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:6)
@@ -151,6 +153,7 @@ contains
     real(c_double) :: tmp10
     real(c_double) :: tmp11
     real(c_double) :: tmp12
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -162,6 +165,9 @@ contains
     u2 = x(4)
     u3 = x(5)
     u4 = x(6)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = torque_free_sin(q2)
     tmp1 = torque_free_cos(q2)
     tmp2 = torque_free_sin(q3)
@@ -175,55 +181,24 @@ contains
     tmp10 = tmp2 * tmp8
     tmp11 = tmp4 * tmp8
     tmp12 = 0.3114754098360656_c_double * u2 + 0.02622950819672131_c_double * u4
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
     J(3) = -tmp10
-    J(4) = 0.0_c_double
     J(5) = tmp11
-    J(6) = 0.0_c_double
-    J(7) = 0.0_c_double
-    J(8) = 0.0_c_double
     J(9) = tmp6
     J(10) = tmp4
-    J(11) = 0.0_c_double
     J(12) = tmp2
-    J(13) = 0.0_c_double
-    J(14) = 0.0_c_double
     J(15) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(16) = -tmp0 * tmp9
     J(17) = tmp0 * tmp10
     J(18) = 1.0_c_double
     J(19) = -tmp0 * tmp11
-    J(20) = 0.0_c_double
-    J(21) = 0.0_c_double
-    J(22) = 0.0_c_double
-    J(23) = 0.0_c_double
-    J(24) = 0.0_c_double
     J(25) = 0.3114754098360656_c_double * u3
     J(26) = tmp12
     J(27) = 0.02622950819672131_c_double * u3
-    J(28) = 0.0_c_double
-    J(29) = 0.0_c_double
-    J(30) = 0.0_c_double
-    J(31) = 0.0_c_double
-    J(32) = 0.0_c_double
-    J(33) = 0.0_c_double
-    J(34) = 0.0_c_double
-    J(35) = 0.0_c_double
-    J(36) = 0.0_c_double
-    J(37) = 0.0_c_double
     J(38) = -tmp12
     J(39) = -0.3114754098360656_c_double * u1
-    J(40) = 0.0_c_double
     J(41) = -0.02622950819672131_c_double * u1
-    J(42) = 0.0_c_double
-    J(43) = 0.0_c_double
-    J(44) = 0.0_c_double
-    J(45) = 0.0_c_double
-    J(46) = 0.0_c_double
-    J(47) = 0.0_c_double
-    J(48) = 0.0_c_double
   end subroutine torque_free_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -254,20 +229,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

@@ -270,7 +270,9 @@ const char *vscmg3_ode_strerror(int code)
 }
 
 
-/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (946 ops). */
+/* d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (946 ops).
+   A loop zeroes J, then the entries that can be nonzero are written (one
+   store each: an augmented system's J is mostly zeros). */
 void vscmg3_jac(double t, const double *x, const double *c, double *J)
 {
     double q2;
@@ -560,6 +562,7 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     double tmp270;
     double tmp271;
     double tmp272;
+    int i_;
 
     (void)t;  /* unused in some scenes */
     (void)c;  /* unused in some scenes */
@@ -577,6 +580,9 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     w1 = x[12];
     w2 = x[13];
     w3 = x[14];
+    for (i_ = 0; i_ < VSCMG3_NX * VSCMG3_NX; ++i_) {
+        J[i_] = 0.0;
+    }
     tmp0 = vscmg3_sin(q2);
     tmp1 = vscmg3_cos(q2);
     tmp2 = vscmg3_sin(q3);
@@ -869,99 +875,21 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     tmp270 = 0.47299077733860345 * tmp67;
     tmp271 = 0.47299077733860345 * tmp59;
     tmp272 = 0.47299077733860345 * tmp77;
-    J[0] = 0.0;
     J[1] = tmp0 * tmp7;
     J[2] = tmp9;
-    J[3] = 0.0;
-    J[4] = 0.0;
-    J[5] = 0.0;
     J[6] = -tmp10;
-    J[7] = 0.0;
     J[8] = tmp11;
-    J[9] = 0.0;
-    J[10] = 0.0;
-    J[11] = 0.0;
-    J[12] = 0.0;
-    J[13] = 0.0;
-    J[14] = 0.0;
-    J[15] = 0.0;
-    J[16] = 0.0;
     J[17] = tmp6;
-    J[18] = 0.0;
-    J[19] = 0.0;
-    J[20] = 0.0;
     J[21] = tmp4;
-    J[22] = 0.0;
     J[23] = tmp2;
-    J[24] = 0.0;
-    J[25] = 0.0;
-    J[26] = 0.0;
-    J[27] = 0.0;
-    J[28] = 0.0;
-    J[29] = 0.0;
-    J[30] = 0.0;
     J[31] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
     J[32] = -(tmp0 * tmp9);
-    J[33] = 0.0;
-    J[34] = 0.0;
-    J[35] = 0.0;
     J[36] = tmp0 * tmp10;
     J[37] = 1.0;
     J[38] = -(tmp0 * tmp11);
-    J[39] = 0.0;
-    J[40] = 0.0;
-    J[41] = 0.0;
-    J[42] = 0.0;
-    J[43] = 0.0;
-    J[44] = 0.0;
-    J[45] = 0.0;
-    J[46] = 0.0;
-    J[47] = 0.0;
-    J[48] = 0.0;
-    J[49] = 0.0;
-    J[50] = 0.0;
-    J[51] = 0.0;
-    J[52] = 0.0;
-    J[53] = 0.0;
     J[54] = 1.0;
-    J[55] = 0.0;
-    J[56] = 0.0;
-    J[57] = 0.0;
-    J[58] = 0.0;
-    J[59] = 0.0;
-    J[60] = 0.0;
-    J[61] = 0.0;
-    J[62] = 0.0;
-    J[63] = 0.0;
-    J[64] = 0.0;
-    J[65] = 0.0;
-    J[66] = 0.0;
-    J[67] = 0.0;
-    J[68] = 0.0;
-    J[69] = 0.0;
     J[70] = 1.0;
-    J[71] = 0.0;
-    J[72] = 0.0;
-    J[73] = 0.0;
-    J[74] = 0.0;
-    J[75] = 0.0;
-    J[76] = 0.0;
-    J[77] = 0.0;
-    J[78] = 0.0;
-    J[79] = 0.0;
-    J[80] = 0.0;
-    J[81] = 0.0;
-    J[82] = 0.0;
-    J[83] = 0.0;
-    J[84] = 0.0;
-    J[85] = 0.0;
     J[86] = 1.0;
-    J[87] = 0.0;
-    J[88] = 0.0;
-    J[89] = 0.0;
-    J[90] = 0.0;
-    J[91] = 0.0;
-    J[92] = 0.0;
     J[93] = tmp132 + tmp146;
     J[94] = tmp165;
     J[95] = tmp185;
@@ -974,9 +902,6 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     J[102] = tmp224;
     J[103] = tmp229;
     J[104] = tmp234;
-    J[105] = 0.0;
-    J[106] = 0.0;
-    J[107] = 0.0;
     J[108] = tmp240;
     J[109] = tmp241 + tmp243;
     J[110] = tmp245;
@@ -989,9 +914,6 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     J[117] = tmp252;
     J[118] = tmp253;
     J[119] = tmp254;
-    J[120] = 0.0;
-    J[121] = 0.0;
-    J[122] = 0.0;
     J[123] = tmp257;
     J[124] = tmp258;
     J[125] = tmp259 + tmp260;
@@ -1004,9 +926,6 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     J[132] = tmp267;
     J[133] = tmp268;
     J[134] = tmp269;
-    J[135] = 0.0;
-    J[136] = 0.0;
-    J[137] = 0.0;
     J[138] = tmp143 + tmp144 - tmp132 - tmp146;
     J[139] = -tmp165;
     J[140] = -tmp185;
@@ -1019,9 +938,6 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     J[147] = 0.4189723320158103 * tmp17 * u3 - tmp224 - 0.4189723320158103 * tmp66;
     J[148] = -tmp229;
     J[149] = -tmp234;
-    J[150] = 0.0;
-    J[151] = 0.0;
-    J[152] = 0.0;
     J[153] = -tmp240;
     J[154] = tmp160 + tmp161 - tmp241 - tmp243;
     J[155] = -tmp245;
@@ -1034,9 +950,6 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     J[162] = -tmp252;
     J[163] = 0.4189723320158103 * tmp20 * u1 - tmp253 - 0.4189723320158103 * tmp58;
     J[164] = -tmp254;
-    J[165] = 0.0;
-    J[166] = 0.0;
-    J[167] = 0.0;
     J[168] = -tmp257;
     J[169] = -tmp258;
     J[170] = tmp180 + tmp181 - tmp259 - tmp260;
@@ -1049,51 +962,6 @@ void vscmg3_jac(double t, const double *x, const double *c, double *J)
     J[177] = -tmp267;
     J[178] = -tmp268;
     J[179] = 0.4189723320158103 * tmp12 * u2 - tmp269 - 0.4189723320158103 * tmp76;
-    J[180] = 0.0;
-    J[181] = 0.0;
-    J[182] = 0.0;
-    J[183] = 0.0;
-    J[184] = 0.0;
-    J[185] = 0.0;
-    J[186] = 0.0;
-    J[187] = 0.0;
-    J[188] = 0.0;
-    J[189] = 0.0;
-    J[190] = 0.0;
-    J[191] = 0.0;
-    J[192] = 0.0;
-    J[193] = 0.0;
-    J[194] = 0.0;
-    J[195] = 0.0;
-    J[196] = 0.0;
-    J[197] = 0.0;
-    J[198] = 0.0;
-    J[199] = 0.0;
-    J[200] = 0.0;
-    J[201] = 0.0;
-    J[202] = 0.0;
-    J[203] = 0.0;
-    J[204] = 0.0;
-    J[205] = 0.0;
-    J[206] = 0.0;
-    J[207] = 0.0;
-    J[208] = 0.0;
-    J[209] = 0.0;
-    J[210] = 0.0;
-    J[211] = 0.0;
-    J[212] = 0.0;
-    J[213] = 0.0;
-    J[214] = 0.0;
-    J[215] = 0.0;
-    J[216] = 0.0;
-    J[217] = 0.0;
-    J[218] = 0.0;
-    J[219] = 0.0;
-    J[220] = 0.0;
-    J[221] = 0.0;
-    J[222] = 0.0;
-    J[223] = 0.0;
-    J[224] = 0.0;
 }
 
 
@@ -1109,17 +977,19 @@ static void stats_start(vscmg3_stats *stats, double t0)
     stats->decompositions = 0;
 }
 
-/* 1 when no element of v is NaN or Inf. */
+/* 1 when no element of v is NaN or Inf. The whole of v by selection, no
+   early exit: a loop the compiler vectorizes (an implicit method checks
+   its NX x NX Jacobian at every step). */
 static int all_finite(const double *v, int n)
 {
+    int ok;
     int i;
 
+    ok = 1;
     for (i = 0; i < n; ++i) {
-        if (!(fabs(v[i]) <= DBL_MAX)) {
-            return 0;
-        }
+        ok = (fabs(v[i]) <= DBL_MAX) ? ok : 0;
     }
-    return 1;
+    return ok;
 }
 
 /* x := xnew, the step's x + dx. Every method sums its steps with Kahan's

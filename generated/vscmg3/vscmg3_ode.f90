@@ -127,6 +127,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (946 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine vscmg3_jac(t, x, c, J) bind(C, name="vscmg3_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:14)
@@ -419,6 +421,7 @@ contains
     real(c_double) :: tmp270
     real(c_double) :: tmp271
     real(c_double) :: tmp272
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -438,6 +441,9 @@ contains
     w1 = x(12)
     w2 = x(13)
     w3 = x(14)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = vscmg3_sin(q2)
     tmp1 = vscmg3_cos(q2)
     tmp2 = vscmg3_sin(q3)
@@ -742,99 +748,21 @@ contains
     tmp270 = 0.47299077733860345_c_double * tmp67
     tmp271 = 0.47299077733860345_c_double * tmp59
     tmp272 = 0.47299077733860345_c_double * tmp77
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
-    J(3) = 0.0_c_double
-    J(4) = 0.0_c_double
-    J(5) = 0.0_c_double
     J(6) = -tmp10
-    J(7) = 0.0_c_double
     J(8) = tmp11
-    J(9) = 0.0_c_double
-    J(10) = 0.0_c_double
-    J(11) = 0.0_c_double
-    J(12) = 0.0_c_double
-    J(13) = 0.0_c_double
-    J(14) = 0.0_c_double
-    J(15) = 0.0_c_double
-    J(16) = 0.0_c_double
     J(17) = tmp6
-    J(18) = 0.0_c_double
-    J(19) = 0.0_c_double
-    J(20) = 0.0_c_double
     J(21) = tmp4
-    J(22) = 0.0_c_double
     J(23) = tmp2
-    J(24) = 0.0_c_double
-    J(25) = 0.0_c_double
-    J(26) = 0.0_c_double
-    J(27) = 0.0_c_double
-    J(28) = 0.0_c_double
-    J(29) = 0.0_c_double
-    J(30) = 0.0_c_double
     J(31) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(32) = -tmp0 * tmp9
-    J(33) = 0.0_c_double
-    J(34) = 0.0_c_double
-    J(35) = 0.0_c_double
     J(36) = tmp0 * tmp10
     J(37) = 1.0_c_double
     J(38) = -tmp0 * tmp11
-    J(39) = 0.0_c_double
-    J(40) = 0.0_c_double
-    J(41) = 0.0_c_double
-    J(42) = 0.0_c_double
-    J(43) = 0.0_c_double
-    J(44) = 0.0_c_double
-    J(45) = 0.0_c_double
-    J(46) = 0.0_c_double
-    J(47) = 0.0_c_double
-    J(48) = 0.0_c_double
-    J(49) = 0.0_c_double
-    J(50) = 0.0_c_double
-    J(51) = 0.0_c_double
-    J(52) = 0.0_c_double
-    J(53) = 0.0_c_double
     J(54) = 1.0_c_double
-    J(55) = 0.0_c_double
-    J(56) = 0.0_c_double
-    J(57) = 0.0_c_double
-    J(58) = 0.0_c_double
-    J(59) = 0.0_c_double
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
-    J(63) = 0.0_c_double
-    J(64) = 0.0_c_double
-    J(65) = 0.0_c_double
-    J(66) = 0.0_c_double
-    J(67) = 0.0_c_double
-    J(68) = 0.0_c_double
-    J(69) = 0.0_c_double
     J(70) = 1.0_c_double
-    J(71) = 0.0_c_double
-    J(72) = 0.0_c_double
-    J(73) = 0.0_c_double
-    J(74) = 0.0_c_double
-    J(75) = 0.0_c_double
-    J(76) = 0.0_c_double
-    J(77) = 0.0_c_double
-    J(78) = 0.0_c_double
-    J(79) = 0.0_c_double
-    J(80) = 0.0_c_double
-    J(81) = 0.0_c_double
-    J(82) = 0.0_c_double
-    J(83) = 0.0_c_double
-    J(84) = 0.0_c_double
-    J(85) = 0.0_c_double
     J(86) = 1.0_c_double
-    J(87) = 0.0_c_double
-    J(88) = 0.0_c_double
-    J(89) = 0.0_c_double
-    J(90) = 0.0_c_double
-    J(91) = 0.0_c_double
-    J(92) = 0.0_c_double
     J(93) = tmp132 + tmp146
     J(94) = tmp165
     J(95) = tmp185
@@ -847,9 +775,6 @@ contains
     J(102) = tmp224
     J(103) = tmp229
     J(104) = tmp234
-    J(105) = 0.0_c_double
-    J(106) = 0.0_c_double
-    J(107) = 0.0_c_double
     J(108) = tmp240
     J(109) = tmp241 + tmp243
     J(110) = tmp245
@@ -862,9 +787,6 @@ contains
     J(117) = tmp252
     J(118) = tmp253
     J(119) = tmp254
-    J(120) = 0.0_c_double
-    J(121) = 0.0_c_double
-    J(122) = 0.0_c_double
     J(123) = tmp257
     J(124) = tmp258
     J(125) = tmp259 + tmp260
@@ -877,9 +799,6 @@ contains
     J(132) = tmp267
     J(133) = tmp268
     J(134) = tmp269
-    J(135) = 0.0_c_double
-    J(136) = 0.0_c_double
-    J(137) = 0.0_c_double
     J(138) = ((tmp143 + tmp144) - tmp132) - tmp146
     J(139) = -tmp165
     J(140) = -tmp185
@@ -893,9 +812,6 @@ contains
         * tmp66
     J(148) = -tmp229
     J(149) = -tmp234
-    J(150) = 0.0_c_double
-    J(151) = 0.0_c_double
-    J(152) = 0.0_c_double
     J(153) = -tmp240
     J(154) = ((tmp160 + tmp161) - tmp241) - tmp243
     J(155) = -tmp245
@@ -909,9 +825,6 @@ contains
     J(163) = ((0.4189723320158103_c_double * tmp20) * u1 - tmp253) - 0.4189723320158103_c_double &
         * tmp58
     J(164) = -tmp254
-    J(165) = 0.0_c_double
-    J(166) = 0.0_c_double
-    J(167) = 0.0_c_double
     J(168) = -tmp257
     J(169) = -tmp258
     J(170) = ((tmp180 + tmp181) - tmp259) - tmp260
@@ -925,51 +838,6 @@ contains
     J(178) = -tmp268
     J(179) = ((0.4189723320158103_c_double * tmp12) * u2 - tmp269) - 0.4189723320158103_c_double &
         * tmp76
-    J(180) = 0.0_c_double
-    J(181) = 0.0_c_double
-    J(182) = 0.0_c_double
-    J(183) = 0.0_c_double
-    J(184) = 0.0_c_double
-    J(185) = 0.0_c_double
-    J(186) = 0.0_c_double
-    J(187) = 0.0_c_double
-    J(188) = 0.0_c_double
-    J(189) = 0.0_c_double
-    J(190) = 0.0_c_double
-    J(191) = 0.0_c_double
-    J(192) = 0.0_c_double
-    J(193) = 0.0_c_double
-    J(194) = 0.0_c_double
-    J(195) = 0.0_c_double
-    J(196) = 0.0_c_double
-    J(197) = 0.0_c_double
-    J(198) = 0.0_c_double
-    J(199) = 0.0_c_double
-    J(200) = 0.0_c_double
-    J(201) = 0.0_c_double
-    J(202) = 0.0_c_double
-    J(203) = 0.0_c_double
-    J(204) = 0.0_c_double
-    J(205) = 0.0_c_double
-    J(206) = 0.0_c_double
-    J(207) = 0.0_c_double
-    J(208) = 0.0_c_double
-    J(209) = 0.0_c_double
-    J(210) = 0.0_c_double
-    J(211) = 0.0_c_double
-    J(212) = 0.0_c_double
-    J(213) = 0.0_c_double
-    J(214) = 0.0_c_double
-    J(215) = 0.0_c_double
-    J(216) = 0.0_c_double
-    J(217) = 0.0_c_double
-    J(218) = 0.0_c_double
-    J(219) = 0.0_c_double
-    J(220) = 0.0_c_double
-    J(221) = 0.0_c_double
-    J(222) = 0.0_c_double
-    J(223) = 0.0_c_double
-    J(224) = 0.0_c_double
   end subroutine vscmg3_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -1000,20 +868,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

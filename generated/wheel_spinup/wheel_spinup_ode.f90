@@ -127,6 +127,8 @@ contains
   ! column-major order) it is the transpose, Jm(j, i) = d f_i / d x_j; take
   ! transpose(reshape(J, [nx, nx])) for the Jacobian itself.
   ! d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j (60 ops).
+  ! A loop zeroes J, then the entries that can be nonzero are written (one
+  ! store each: an augmented system's J is mostly zeros).
   subroutine wheel_spinup_jac(t, x, c, J) bind(C, name="wheel_spinup_f_jac")
     real(c_double), value, intent(in) :: t
     real(c_double), intent(in) :: x(0:7)
@@ -151,6 +153,7 @@ contains
     real(c_double) :: tmp10
     real(c_double) :: tmp11
     real(c_double) :: tmp12
+    integer(c_int) :: i_
 
     associate (unused_t => t)  ! unused in some scenes
     end associate
@@ -162,6 +165,9 @@ contains
     u2 = x(5)
     u3 = x(6)
     u4 = x(7)
+    do i_ = 0, nx * nx - 1
+      J(i_) = 0.0_c_double
+    end do
     tmp0 = wheel_spinup_sin(q2)
     tmp1 = wheel_spinup_cos(q2)
     tmp2 = wheel_spinup_sin(q3)
@@ -175,70 +181,30 @@ contains
     tmp10 = tmp2 * tmp8
     tmp11 = tmp4 * tmp8
     tmp12 = 0.014646230145692387_c_double * u2 - 1.6873537034207817e-05_c_double * u4
-    J(0) = 0.0_c_double
     J(1) = tmp0 * tmp7
     J(2) = tmp9
-    J(3) = 0.0_c_double
     J(4) = -tmp10
-    J(5) = 0.0_c_double
     J(6) = tmp11
-    J(7) = 0.0_c_double
-    J(8) = 0.0_c_double
-    J(9) = 0.0_c_double
     J(10) = tmp6
-    J(11) = 0.0_c_double
     J(12) = tmp4
-    J(13) = 0.0_c_double
     J(14) = tmp2
-    J(15) = 0.0_c_double
-    J(16) = 0.0_c_double
     J(17) = (tmp3 - tmp5) - tmp7 * (tmp0 * tmp0)
     J(18) = -tmp0 * tmp9
-    J(19) = 0.0_c_double
     J(20) = tmp0 * tmp10
     J(21) = 1.0_c_double
     J(22) = -tmp0 * tmp11
-    J(23) = 0.0_c_double
-    J(24) = 0.0_c_double
-    J(25) = 0.0_c_double
-    J(26) = 0.0_c_double
-    J(27) = 0.0_c_double
-    J(28) = 0.0_c_double
     J(29) = -1.0_c_double
-    J(30) = 0.0_c_double
     J(31) = 1.0_c_double
-    J(32) = 0.0_c_double
-    J(33) = 0.0_c_double
-    J(34) = 0.0_c_double
-    J(35) = 0.0_c_double
     J(36) = -tmp12
     J(37) = 0.3499793829482495_c_double * u3 - 0.014646230145692387_c_double * u1
     J(38) = 0.3499793829482495_c_double * u2 + 0.0007488716786310489_c_double * u4
     J(39) = 1.6873537034207817e-05_c_double * u1 + 0.0007488716786310489_c_double * u3
-    J(40) = 0.0_c_double
-    J(41) = 0.0_c_double
-    J(42) = 0.0_c_double
-    J(43) = 0.0_c_double
     J(44) = 0.03255813953488372_c_double * u1 - 0.06976744186046512_c_double * u3
-    J(45) = 0.0_c_double
     J(46) = (-0.03255813953488372_c_double * u3) - 0.06976744186046512_c_double * u1
-    J(47) = 0.0_c_double
-    J(48) = 0.0_c_double
-    J(49) = 0.0_c_double
-    J(50) = 0.0_c_double
-    J(51) = 0.0_c_double
     J(52) = (-0.0008211868373490824_c_double * u4) - 0.2872098251809964_c_double * u2
     J(53) = 0.014646230145692387_c_double * u3 - 0.2872098251809964_c_double * u1
     J(54) = tmp12
     J(55) = (-0.0008211868373490824_c_double * u1) - 1.6873537034207817e-05_c_double * u3
-    J(56) = 0.0_c_double
-    J(57) = 0.0_c_double
-    J(58) = 0.0_c_double
-    J(59) = 0.0_c_double
-    J(60) = 0.0_c_double
-    J(61) = 0.0_c_double
-    J(62) = 0.0_c_double
-    J(63) = 0.0_c_double
   end subroutine wheel_spinup_jac
 
   ! floor(y) as a real (no integer overflow, for any y)
@@ -269,20 +235,21 @@ contains
     stats%decompositions = 0
   end subroutine stats_start
 
-  ! 1 when no element of v is NaN or Inf.
+  ! 1 when no element of v is NaN or Inf. The whole of v by selection, no
+  ! early exit: a loop the compiler vectorizes (an implicit method checks
+  ! its NX x NX Jacobian at every step).
   function all_finite(v, n) result(res)
     integer(c_int), intent(in) :: n
     real(c_double), intent(in) :: v(0:n - 1)
     logical :: res
+    logical :: ok
     integer(c_int) :: i
 
+    ok = .true.
     do i = 0, n - 1
-      if (.not. ieee_is_finite(v(i))) then
-        res = .false.
-        return
-      end if
+      ok = merge(ok, .false., ieee_is_finite(v(i)))
     end do
-    res = .true.
+    res = ok
     return
   end function all_finite
 

@@ -441,8 +441,9 @@ class VariationalContext(SceneContext):
     @cached_property
     def lu_blocks(self) -> Blocks | None:
         """The diagonal blocks of the augmented Jacobian: x's, then each
-        column's of Phi; the variational part's reads of x are eliminated
-        below them (symbolic.blocks.diagonal_blocks' coupled_from)."""
+        column's of Phi; the variational part's reads of x are not
+        factored but subtracted in the solve, once x's part is solved
+        (symbolic.blocks.diagonal_blocks' coupled_from, Blocks.coupled)."""
         jac = self.optimized.jacobian
         return None if jac is None else diagonal_blocks(jac.outputs, self.nx, self.nx_state)
 

@@ -12,7 +12,7 @@ in Fortran x**2 is x*x, pow(x, 2) is not).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 
 import sympy as sm
 
@@ -157,14 +157,23 @@ def symbol_names(nc: int) -> Names:
 
 
 def block(
-    b: Block, output: Callable[[int], At], names: Names, lanes: bool = False
+    b: Block,
+    output: Callable[[int], At],
+    names: Names,
+    lanes: bool = False,
+    zeroed: bool = False,
 ) -> tuple[list[str], list[S]]:
-    """b's temporaries (their names, then their assignments) and one store per output."""
+    """b's temporaries (their names, then their assignments) and one store per
+    output (zeroed: per output that is not 0, the output already zero)."""
     temps = [str(a.lhs) for a in b.temporaries]
     body: list[S] = [
         assign(Var(str(a.lhs)), expression(a.rhs, names, lanes)) for a in b.temporaries
     ]
-    body += [assign(output(i), expression(e, names, lanes)) for i, e in enumerate(b.outputs)]
+    body += [
+        assign(output(i), expression(e, names, lanes))
+        for i, e in enumerate(b.outputs)
+        if not (zeroed and e == 0)
+    ]
     return temps, body
 
 
@@ -198,14 +207,17 @@ def _per_call(
     output: Callable[[int], At],
     doc: tuple[str, ...],
     out: int = 0,
+    zeroed: Sequence[S] = (),
 ) -> Func:
     """A per-call function (rhs, an output, the Jacobian, the linear model):
-    the states and tabulated torques it reads as locals, then b."""
+    the states and tabulated torques it reads as locals, then b (with zeroed,
+    the statements that zero the output: then only b's outputs that are not 0)."""
     names = symbol_names(unit.nc)
     free = b.free_symbols
     states = [(i, s.name) for i, s in enumerate(unit.states) if s in free]
     tables = [s.name for s in unit.equations.inputs if s in free]
-    temps, body = block(b, output, names)
+    temps, body = block(b, output, names, zeroed=bool(zeroed))
+    body = [*zeroed, *body]
     reads = [assign(Var(n), At("x", (Int(i),))) for i, n in states]
     reads += [assign(Var(n), fn(f"{unit.prefix}_{n}", Var("t"))) for n in tables]
     unused: list[S] = [Unused(v) for v in ("t", "c") if not _reads([*body, *reads], v)]
@@ -259,8 +271,13 @@ def jacobian(unit: SceneContext) -> Func | None:
     b = unit.optimized.jacobian
     if b is None:
         return None
-    doc = (f"d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j ({unit.ops['jac']} ops).",)
-    return _per_call(unit, "jac", "jac", b, _store("J"), doc)
+    doc = (
+        f"d(dx/dt)/dx, row-major: J[i*nx + j] = d f_i / d x_j ({unit.ops['jac']} ops).",
+        "A loop zeroes J, then the entries that can be nonzero are written (one",
+        "store each: an augmented system's J is mostly zeros).",
+    )
+    zero = For(LOOP, Const("NX2"), (assign(At("J", (Var(LOOP),)), 0.0),))
+    return _per_call(unit, "jac", "jac", b, _store("J"), doc, zeroed=(zero,))
 
 
 def linear(unit: SceneContext) -> Func | None:

@@ -8,6 +8,10 @@ later block and L has no entry outside the diagonal blocks, so the generated
 LU eliminates within a block only and the forward substitution stops at the
 block's first column: about sum(size^2) n work instead of n^3 / 3. The
 solves are unrolled over the entries that can be nonzero.
+
+An augmented system (x, then the variational part, which reads x and
+which x does not read) is block lower triangular on top: its coupling
+is not factored but subtracted in the solve, x's solution first.
 """
 
 from __future__ import annotations
@@ -26,10 +30,15 @@ class Blocks:
     upper: tuple[tuple[int, ...], ...]
     """Per row i: the columns j > i where U can be nonzero: the rest of the
     block (fill-in), and beyond it any column some row of the block uses."""
-    below: tuple[tuple[int, ...], ...] = ()
-    """Per column k: the rows past k's block where L can be nonzero (an
-    augmented system's coupling, diagonal_blocks' coupled_from, and its
-    fill-in); empty for a block upper triangular matrix."""
+    coupled: tuple[tuple[int, ...], ...] = ()
+    """Per row of an augmented system's part past coupled_from: the columns
+    left of coupled_from where the matrix can be nonzero (its reads of x).
+    The decomposition leaves them as they are; the solve subtracts them,
+    times x's solution, from the row before it solves the part's blocks
+    (block forward substitution: no fill-in, and a row exchange within a
+    block of the part never meets them). Empty for a block upper
+    triangular matrix."""
+    coupled_from: int = 0
 
     @property
     def start(self) -> list[int]:
@@ -43,13 +52,15 @@ class Blocks:
 
     @property
     def lower(self) -> list[list[int]]:
-        """Per row i: the columns j < i where L can be nonzero: those below
-        which it is coupled (below), then its block's."""
-        coupled: list[list[int]] = [[] for _ in self.start]
-        for k, rows in enumerate(self.below):
-            for i in rows:
-                coupled[i].append(k)
-        return [coupled[i] + list(range(s, i)) for i, s in enumerate(self.start)]
+        """Per row i: the columns j < i where L can be nonzero: its block's."""
+        return [list(range(s, i)) for i, s in enumerate(self.start)]
+
+    @property
+    def parts(self) -> list[tuple[int, int]]:
+        """The rows [start, end) solved one after the other: x, then what
+        reads it (coupled_from), or every row at once."""
+        n = len(self.upper)
+        return [(0, self.coupled_from), (self.coupled_from, n)] if self.coupled_from else [(0, n)]
 
 
 def diagonal_blocks(entries: Sequence[sm.Expr], n: int, coupled_from: int = 0) -> Blocks:
@@ -59,8 +70,8 @@ def diagonal_blocks(entries: Sequence[sm.Expr], n: int, coupled_from: int = 0) -
 
     With coupled_from (an augmented system: x, then its variational part,
     which reads x while x reads none of it), an entry with j < coupled_from
-    <= i joins no blocks: the decomposition eliminates it as a row below
-    its column's block (Blocks.below), pivoting within the blocks still."""
+    <= i joins no blocks: it is one of the row's coupled columns
+    (Blocks.coupled), which the decomposition does not eliminate."""
     if len(entries) != n * n:
         raise ValueError(f"expected {n * n} Jacobian entries, got {len(entries)}")
 
@@ -80,23 +91,8 @@ def diagonal_blocks(entries: Sequence[sm.Expr], n: int, coupled_from: int = 0) -
         upper += [tuple(j for j in range(i + 1, n) if j < e or j in used) for i in range(s, e)]
     if not coupled_from:
         return Blocks(tuple(spans), tuple(upper))
-    return Blocks(tuple(spans), tuple(upper), _below(entries, n, spans, upper))
-
-
-def _below(
-    entries: Sequence[sm.Expr],
-    n: int,
-    spans: list[tuple[int, int]],
-    upper: list[tuple[int, ...]],
-) -> tuple[tuple[int, ...], ...]:
-    """Per column k, the rows past k's block that are nonzero in column k
-    when the decomposition reaches it: the coupling entries, and what
-    eliminating earlier columns fills in (row k's U pattern, upper[k])."""
-    nonzero = {(i, j) for i in range(n) for j in range(n) if entries[i * n + j] != 0}
-    end = [e for s, e in spans for _ in range(s, e)]
-    out = []
-    for k in range(n):
-        rows = tuple(i for i in range(end[k], n) if (i, k) in nonzero)
-        nonzero |= {(i, c) for i in rows for c in upper[k]}
-        out.append(rows)
-    return tuple(out)
+    coupled = tuple(
+        tuple(j for j in range(coupled_from) if i >= coupled_from and entries[i * n + j] != 0)
+        for i in range(n)
+    )
+    return Blocks(tuple(spans), tuple(upper), coupled, coupled_from)

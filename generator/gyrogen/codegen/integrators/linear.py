@@ -3,7 +3,8 @@
 E = I/(h gamma) - J is block upper triangular in state order
 (gyrogen.symbolic.blocks): the decomposition pivots within a row's block;
 both it and the solve are unrolled over the entries of L and U that can be
-nonzero.
+nonzero. An augmented system's rows that read x (Blocks.coupled) are solved
+after x, less those reads times x's solution, by their own blocks.
 Matrices are flat and row-major, a[i*NX + j], in every target. U = D V is
 stored as 1/u_kk on the diagonal and V's u_kj/u_kk above it, so that each
 row of the back substitution waits on one multiply-add, not on a divide.
@@ -80,9 +81,9 @@ def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
     """Gaussian elimination with partial pivoting within the diagonal blocks,
     unrolled over the columns k and over the entries of U that can be
     nonzero (Blocks.upper: what the solves read); the rows of a block as a
-    loop, and each coupled row past it (Blocks.below) unrolled. Entries
-    outside that pattern stay zero, as they would under the loop over every
-    column (l_ik times a zero)."""
+    loop. Entries outside that pattern stay zero, as they would under the
+    loop over every column (l_ik times a zero); an augmented system's
+    coupled entries (Blocks.coupled) stay as they are, for the solve."""
     body: list[S] = []
     piv = Var("piv")
     for k in range(nx):
@@ -106,11 +107,6 @@ def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
                 assign(piv[k], k),
                 If(not_(cmp(how.size(kk), ">", 0.0)), (Return(Bool(True), "singular"),)),
                 *how.inverse(kk),
-            ]
-        for r in blocks.below[k] if blocks.below else ():  # coupled rows past the block
-            body += [
-                *how.multiplier(Int(r * nx + k), kk),
-                *(st for c in up for st in how.update(Int(r * nx + c), k * nx + c)),
             ]
         body += [st for c in up for st in how.scale(k * nx + c, kk)]
     return (*body, Return(Bool(False)))
@@ -137,7 +133,7 @@ def decompose(blocks: Blocks, nx: int) -> Func:
     return Func("lu_decompose", params, eliminate(blocks, nx, how), "bool", locals_, doc)
 
 
-def permute(blocks: Blocks, nx: int, names: tuple[Var, ...]) -> list[S]:
+def permute(blocks: Blocks, rows: range, names: tuple[Var, ...]) -> list[S]:
     """b's rows exchanged as the decomposition exchanged them: only a row
     with a row below it in its block can have been."""
     piv, swap = Var("piv"), Var("swap")
@@ -146,24 +142,32 @@ def permute(blocks: Blocks, nx: int, names: tuple[Var, ...]) -> list[S]:
             s for b in names
             for s in (assign(swap, b[r]), assign(b[r], b[piv[r]]), assign(b[piv[r]], swap))
         ))
-        for r in range(nx) if blocks.end[r] - r > 1
+        for r in rows if blocks.end[r] - r > 1
     ]  # fmt: skip
 
 
 def solve(blocks: Blocks, nx: int) -> Func:
     b, lu = Var("b"), Var("lu")
-    body = permute(blocks, nx, (b,))
-    for r in range(nx):
-        if blocks.lower[r]:
-            value: E = b[r]
-            for c in blocks.lower[r]:
+    body: list[S] = []
+    for first, end in blocks.parts:
+        for r in range(first, end):  # the part's reads of x, solved already
+            if blocks.coupled and blocks.coupled[r]:
+                value: E = b[r]
+                for c in blocks.coupled[r]:
+                    value = value - lu[r * nx + c] * b[c]
+                body.append(assign(b[r], value))
+        body += permute(blocks, range(first, end), (b,))
+        for r in range(first, end):
+            if blocks.lower[r]:
+                value = b[r]
+                for c in blocks.lower[r]:
+                    value = value - lu[r * nx + c] * b[c]
+                body.append(assign(b[r], value))
+        for r in range(end - 1, first - 1, -1):
+            value = b[r] * lu[r * nx + r]
+            for c in reversed(blocks.upper[r]):
                 value = value - lu[r * nx + c] * b[c]
             body.append(assign(b[r], value))
-    for r in range(nx - 1, -1, -1):
-        value = b[r] * lu[r * nx + r]
-        for c in reversed(blocks.upper[r]):
-            value = value - lu[r * nx + c] * b[c]
-        body.append(assign(b[r], value))
     params = (
         Decl("lu", "double", ("NX2",)),
         Decl("piv", "int", ("NX",)),
@@ -172,7 +176,12 @@ def solve(blocks: Blocks, nx: int) -> Func:
     doc = (
         "b := A^-1 b from lu_decompose's factors, unrolled over the entries of L",
         "and V that can be nonzero; each row subtracts the latest b_j last.",
-    )
+        *(
+            (f"Rows 0 .. {blocks.coupled_from - 1} first; then the rows past them, less their",
+             "coupled entries times that solution, by their own blocks.")
+            if blocks.coupled_from else ()
+        ),
+    )  # fmt: skip
     locals_ = (Decl("swap", "double"),)
     return Func("lu_solve", params, tuple(body), None, locals_, doc, restrict=True)
 
@@ -233,7 +242,7 @@ def decompose_complex(blocks: Blocks, nx: int) -> Func:
 
 def solve_complex(blocks: Blocks, nx: int) -> Func:
     ar, ai, br, bi, re = (Var(n) for n in ("ar", "ai", "br", "bi", "re"))
-    body = permute(blocks, nx, (br, bi))
+    body: list[S] = []
 
     def minus(value: E, row: int, cols: list[int], part: str) -> E:
         for c in cols:
@@ -244,17 +253,25 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
                 value = value - ar[q] * bi[c] - ai[q] * br[c]
         return value
 
-    for r in range(nx):
-        if blocks.lower[r]:
-            body += [assign(br[r], minus(br[r], r, blocks.lower[r], "re")),
-                     assign(bi[r], minus(bi[r], r, blocks.lower[r], "im"))]  # fmt: skip
-    for r in range(nx - 1, -1, -1):
-        up, q = list(reversed(blocks.upper[r])), r * nx + r
-        body += [
-            assign(re, minus(br[r] * ar[q] - bi[r] * ai[q], r, up, "re")),
-            assign(bi[r], minus(bi[r] * ar[q] + br[r] * ai[q], r, up, "im")),
-            assign(br[r], re),
-        ]
+    def forward(r: int, cols: list[int]) -> list[S]:
+        if not cols:
+            return []
+        return [assign(br[r], minus(br[r], r, cols, "re")),
+                assign(bi[r], minus(bi[r], r, cols, "im"))]  # fmt: skip
+
+    for first, end in blocks.parts:
+        for r in range(first, end):  # the part's reads of x, solved already
+            body += forward(r, list(blocks.coupled[r]) if blocks.coupled else [])
+        body += permute(blocks, range(first, end), (br, bi))
+        for r in range(first, end):
+            body += forward(r, blocks.lower[r])
+        for r in range(end - 1, first - 1, -1):
+            up, q = list(reversed(blocks.upper[r])), r * nx + r
+            body += [
+                assign(re, minus(br[r] * ar[q] - bi[r] * ai[q], r, up, "re")),
+                assign(bi[r], minus(bi[r] * ar[q] + br[r] * ai[q], r, up, "im")),
+                assign(br[r], re),
+            ]
     params = (Decl("ar", "double", ("NX2",)), Decl("ai", "double", ("NX2",)),
               Decl("piv", "int", ("NX",)), Decl("br", "double", ("NX",), "inout"),
               Decl("bi", "double", ("NX",), "inout"))  # fmt: skip
