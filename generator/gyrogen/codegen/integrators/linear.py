@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 from gyrogen.codegen.integrators.common import NX
 from gyrogen.codegen.ir.nodes import (
+    At,
     Bool,
     Comment,
     Decl,
@@ -37,6 +38,8 @@ from gyrogen.codegen.ir.nodes import (
     cmp,
     fn,
     not_,
+    or_,
+    sel,
 )
 from gyrogen.symbolic.blocks import Blocks
 
@@ -76,25 +79,24 @@ class Elimination:
     """u_kj := u_kj / u_kk (row k's entry, the diagonal)."""
 
 
-def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
+def eliminate(
+    blocks: Blocks, nx: int, how: Elimination, singular: Var | None = None
+) -> tuple[S, ...]:
     """Gaussian elimination with partial pivoting within the diagonal blocks,
     unrolled over the columns k and over the entries of U that can be
     nonzero (Blocks.upper: what the solves read); the rows of a block as a
     loop, and each coupled row past it (Blocks.below) unrolled. Entries
     outside that pattern stay zero, as they would under the loop over every
-    column (l_ik times a zero)."""
+    column (l_ik times a zero). With singular, branch-free (pivoting): a
+    zero pivot sets singular and the elimination goes on (its factors are
+    not to be used), no return."""
     body: list[S] = []
     piv = Var("piv")
     for k in range(nx):
         s, e, kk, up = blocks.start[k], blocks.end[k], k * nx + k, blocks.upper[k]
         if e - k > 1:
             body += [
-                assign(p, k),
-                For("i", Int(e), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
-                                     (assign(p, i),)),), start=Int(k + 1)),
-                assign(piv[k], p),
-                If(not_(cmp(how.size(p * NX + k), ">", 0.0)), (Return(Bool(True), "singular"),)),
-                swap_rows(how.names, k, s),
+                *pivoting(how, k, s, e, singular),
                 *how.inverse(kk),
                 For("i", Int(e), (
                     *how.multiplier(i * NX + k, kk),
@@ -102,30 +104,84 @@ def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
                 ), start=Int(k + 1)),
             ]  # fmt: skip
         else:
-            body += [
-                assign(piv[k], k),
-                If(not_(cmp(how.size(kk), ">", 0.0)), (Return(Bool(True), "singular"),)),
-                *how.inverse(kk),
-            ]
+            body += [assign(piv[k], k), zero_pivot(how.size(kk), singular), *how.inverse(kk)]
         for r in blocks.below[k] if blocks.below else ():  # coupled rows past the block
             body += [
                 *how.multiplier(Int(r * nx + k), kk),
                 *(st for c in up for st in how.update(Int(r * nx + c), k * nx + c)),
             ]
         body += [st for c in up for st in how.scale(k * nx + c, kk)]
-    return (*body, Return(Bool(False)))
+    return tuple(body) if singular is not None else (*body, Return(Bool(False)))
 
 
-def decompose(blocks: Blocks, nx: int) -> Func:
-    a, m = Var("a"), Var("m")
-    how = Elimination(
-        names=("a",),
+def zero_pivot(size: E, singular: Var | None) -> S:
+    """A pivot of size 0 (or NaN): singular, returned at once or remembered."""
+    zero = not_(cmp(size, ">", 0.0))
+    if singular is None:
+        return If(zero, (Return(Bool(True), "singular"),))
+    return assign(singular, or_(singular, zero))
+
+
+def pivoting(how: Elimination, k: int, start: int, end: int, singular: Var | None) -> list[S]:
+    """Column k's pivot p, the largest of rows k..end-1 (the first of equal
+    ones), into piv[k], and rows k and p exchanged. With singular, by
+    selection: the running largest size in best (the size at p, as the
+    search compares), and each row below k exchanged where it is p."""
+    piv = Var("piv")
+    if singular is None:
+        return [
+            assign(p, k),
+            For("i", Int(end), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
+                                   (assign(p, i),)),), start=Int(k + 1)),
+            assign(piv[k], p),
+            zero_pivot(how.size(p * NX + k), None),
+            swap_rows(how.names, k, start),
+        ]  # fmt: skip
+    best, q, swap = Var("best"), Var("q"), Var("held")
+    larger = cmp(how.size(i * NX + k), ">", best)
+    exchanged: list[S] = []
+    for a in how.names:
+        at_k, at_q = Var(a)[k * NX + j], Var(a)[q * NX + j]
+        exchanged += [
+            assign(swap, at_k),
+            assign(at_k, sel(cmp(p, "==", q), at_q, at_k)),
+            assign(at_q, sel(cmp(p, "==", q), swap, at_q)),
+        ]
+    return [
+        assign(p, k),
+        assign(best, how.size(k * NX + k)),
+        For(
+            "i",
+            Int(end),
+            (assign(p, sel(larger, i, p)), assign(best, sel(larger, how.size(i * NX + k), best))),
+            start=Int(k + 1),
+        ),
+        assign(piv[k], p),
+        zero_pivot(best, singular),
+        For(
+            "q",
+            Int(end),
+            (For("j", NX, tuple(exchanged), ("held",), start=Int(start)),),
+            start=Int(k + 1),
+        ),
+    ]
+
+
+def real(name: str) -> Elimination:
+    """The real decomposition's arithmetic on the matrix name."""
+    a, m = Var(name), Var("m")
+    return Elimination(
+        names=(name,),
         size=lambda q: fn("abs", a[q]),
         inverse=lambda kk: (assign(a[kk], Num(1.0) / a[kk]),),
         multiplier=lambda ik, kk: (assign(m, a[ik] * a[kk]), assign(a[ik], m)),
         update=lambda ij, kj: (assign(a[ij], a[ij] - m * a[kj]),),
         scale=lambda kj, kk: (assign(a[kj], a[kj] * a[kk]),),
     )
+
+
+def decompose(blocks: Blocks, nx: int) -> Func:
+    how = real("a")
     params = (Decl("a", "double", ("NX2",), "inout"), Decl("piv", "int", ("NX",), "out"))
     locals_ = (Decl("p", "int"), Decl("m", "double"), Decl("swap", "double"))
     doc = (
@@ -150,20 +206,45 @@ def permute(blocks: Blocks, nx: int, names: tuple[Var, ...]) -> list[S]:
     ]  # fmt: skip
 
 
-def solve(blocks: Blocks, nx: int) -> Func:
-    b, lu = Var("b"), Var("lu")
-    body = permute(blocks, nx, (b,))
+Rows = Callable[[int], At]
+"""A right-hand side's entry by its row."""
+
+
+def permute_selected(blocks: Blocks, nx: int, b: Rows) -> list[S]:
+    """permute by selection (no index read from piv): each row q below r in
+    its block exchanged with row r where piv[r] is q."""
+    piv, swap = Var("piv"), Var("swap")
+    out: list[S] = []
+    for r in range(nx):
+        for q in range(r + 1, blocks.end[r]):
+            there = cmp(piv[r], "==", q)
+            out += [assign(swap, b(r)), assign(b(r), sel(there, b(q), b(r))),
+                    assign(b(q), sel(there, swap, b(q)))]  # fmt: skip
+    return out
+
+
+def substitution(blocks: Blocks, nx: int, b: Rows) -> list[S]:
+    """b := U^-1 L^-1 b (b permuted already), unrolled over the entries of L
+    and V that can be nonzero; each row subtracts the latest b_j last."""
+    lu = Var("lu")
+    body: list[S] = []
     for r in range(nx):
         if blocks.lower[r]:
-            value: E = b[r]
+            value: E = b(r)
             for c in blocks.lower[r]:
-                value = value - lu[r * nx + c] * b[c]
-            body.append(assign(b[r], value))
+                value = value - lu[r * nx + c] * b(c)
+            body.append(assign(b(r), value))
     for r in range(nx - 1, -1, -1):
-        value = b[r] * lu[r * nx + r]
+        value = b(r) * lu[r * nx + r]
         for c in reversed(blocks.upper[r]):
-            value = value - lu[r * nx + c] * b[c]
-        body.append(assign(b[r], value))
+            value = value - lu[r * nx + c] * b(c)
+        body.append(assign(b(r), value))
+    return body
+
+
+def solve(blocks: Blocks, nx: int) -> Func:
+    b = Var("b")
+    body = [*permute(blocks, nx, (b,)), *substitution(blocks, nx, lambda r: b[r])]
     params = (
         Decl("lu", "double", ("NX2",)),
         Decl("piv", "int", ("NX",)),
@@ -175,6 +256,12 @@ def solve(blocks: Blocks, nx: int) -> Func:
     )
     locals_ = (Decl("swap", "double"),)
     return Func("lu_solve", params, tuple(body), None, locals_, doc, restrict=True)
+
+
+def solve_selected(blocks: Blocks, nx: int, b: Rows) -> list[S]:
+    """lu_solve's statements, branch-free, on the rows b (over lanes: each
+    lane's pivots its own)."""
+    return [*permute_selected(blocks, nx, b), *substitution(blocks, nx, b)]
 
 
 def decompose_complex(blocks: Blocks, nx: int) -> Func:
@@ -263,4 +350,4 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
     return Func("lu_solve_complex", params, tuple(body), None, locals_, doc, restrict=True)
 
 
-__all__ = ["decompose", "decompose_complex", "solve", "solve_complex"]
+__all__ = ["decompose", "decompose_complex", "real", "solve", "solve_complex", "solve_selected"]
