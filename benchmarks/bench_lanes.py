@@ -4,6 +4,7 @@ states, on one core, on the default scene and on stiff_wheel.
 
     python benchmarks/bench_lanes.py [--scenes A,B] [--methods M,N]
         [--tolerances 1e-6,1e-9] [--n N] [--t1-fraction F] [--repeats R] [--rounds K]
+        [--grid]
 
 Each scene is built with every method it offers (its `integrators` key left
 out) and this machine's flags. N start states: the scene's start with its
@@ -11,7 +12,9 @@ carrier rates (u1..u3, or the scene's first three rates) scaled by uniform
 factors in [0.9, 1.1]. Each method integrates them from 0 to F t_end at
 each tolerance (rtol = atol): `<method>_batch` with one thread
 (Compiled.integrate_batch, threads=1) and `gyrogen_each` (the cffi glue's
-loop of `<method>` calls, one state after another). Printed: us per
+loop of `<method>` calls, one state after another); with --grid also
+`<method>_grid_batch` over 101 times against a loop of `<method>_grid`
+calls. Printed: us per
 trajectory of each, the best of R repeats in K rounds, side by side (the
 order swapped every other round), and loop / lanes (above 1: the lanes
 win); the steps per trajectory (mean); the load average before and after.
@@ -38,6 +41,8 @@ from gyrogen.runtime.scene_build import compiled, scene_sources
 from gyrogen.scene import builtin_text, default, parse
 
 MAX_STEPS = 1_000_000
+GRID = 101
+"""The output grid's times (`--grid`): t1 / 100 apart."""
 STEPPED = [m.name for m in methods.METHODS.values() if m.lanes and (m.pair or m.implicit)]
 """The laned methods with the adaptive signature (the Taylor method's takes its order too)."""
 
@@ -75,6 +80,41 @@ def contenders(
     return {"lanes": lanes, "loop": loop}
 
 
+def grid_contenders(
+    comp: Compiled, method: str, x0s: np.ndarray, c: np.ndarray, t1: float, tol: float
+) -> dict[str, Callable[[], Any]]:
+    """The same over an output grid of GRID times: _grid_batch on one thread,
+    and a Python loop of raw _grid calls (cffi, buffers made once: its own
+    cost a call is well under a microsecond, against tens a trajectory)."""
+    times = np.linspace(0.0, t1, GRID)
+    grid = comp.function(f"{method}_grid")
+    ts, cb = comp.doubles(times), comp.doubles(np.ascontiguousarray(c))
+    out = np.empty((len(x0s), GRID, comp.nx))
+    rows = [comp.doubles(out[k]) for k in range(len(x0s))]
+    x = np.array(x0s, order="C")
+    xs = [comp.doubles(x[k]) for k in range(len(x0s))]
+    null = comp.ffi.NULL
+
+    def lanes() -> None:
+        comp.integrate_grid_batch(method, x0s, c, times, 1, rtol=tol, atol=tol, max_steps=MAX_STEPS)
+
+    def loop() -> None:
+        x[:] = x0s
+        for k in range(len(x0s)):
+            grid(GRID, ts, xs[k], cb, tol, tol, 0.0, MAX_STEPS, rows[k], null)
+
+    return {"lanes": lanes, "loop": loop}
+
+
+def timed(calls: dict[str, Callable[[], Any]], repeats: int, rounds: int) -> dict[str, float]:
+    """Each call's best time, side by side: the order swapped every other round."""
+    best = dict.fromkeys(calls, math.inf)
+    for k in range(rounds):
+        for who in calls if k % 2 == 0 else list(calls)[::-1]:
+            best[who] = min(best[who], best_time(calls[who], repeats, clock=time.thread_time))
+    return best
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=f"{default().name},stiff_wheel")
@@ -84,11 +124,12 @@ def main() -> None:
     ap.add_argument("--t1-fraction", type=float, default=0.1)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--grid", action="store_true", help=f"_grid_batch over {GRID} times too")
     args = ap.parse_args()
     print(f"before: {load_average()}")
     print(f"{args.n} trajectories, one core, best of {args.repeats} x {args.rounds} rounds "
           "(thread CPU time); loop / lanes above 1: the lanes win")  # fmt: skip
-    print(f"{'scene':<12} {'method':<8} {'tol':>6} {'steps':>8} {'lanes us':>10} "
+    print(f"{'scene':<12} {'method':<12} {'tol':>6} {'steps':>8} {'lanes us':>10} "
           f"{'loop us':>10} {'loop/lanes':>10}")  # fmt: skip
     for name in args.scenes.split(","):
         text = re.sub(r"(?m)^integrators\s*=.*\n", "", builtin_text(name))
@@ -105,16 +146,14 @@ def main() -> None:
                     method, x0s, c, 0.0, t1, 1, rtol=tol, atol=tol, max_steps=MAX_STEPS
                 )
                 steps = float(np.mean(stats["accepted"] + stats["rejected"]))
-                calls = contenders(comp, method, x0s, c, t1, tol)
-                best = dict.fromkeys(calls, math.inf)
-                for k in range(args.rounds):
-                    for who in calls if k % 2 == 0 else list(calls)[::-1]:
-                        secs = best_time(calls[who], args.repeats, clock=time.thread_time)
-                        best[who] = min(best[who], secs)
-                us = {who: best[who] / args.n * 1e6 for who in best}
                 bad = f"  ({np.count_nonzero(codes)} failed)" if np.any(codes) else ""
-                print(f"{name:<12} {method:<8} {tol:>6.0e} {steps:>8.0f} {us['lanes']:>10.1f} "
-                      f"{us['loop']:>10.1f} {us['loop'] / us['lanes']:>10.2f}{bad}")  # fmt: skip
+                kinds = [("", contenders)] + [("_grid", grid_contenders)] * args.grid
+                for suffix, make in kinds:
+                    us = timed(make(comp, method, x0s, c, t1, tol), args.repeats, args.rounds)
+                    us = {who: secs / args.n * 1e6 for who, secs in us.items()}
+                    print(f"{name:<12} {method + suffix:<12} {tol:>6.0e} {steps:>8.0f} "
+                          f"{us['lanes']:>10.1f} {us['loop']:>10.1f} "
+                          f"{us['loop'] / us['lanes']:>10.2f}{bad}")  # fmt: skip
     print(f"after: {load_average()}")
 
 

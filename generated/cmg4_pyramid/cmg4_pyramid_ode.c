@@ -11316,6 +11316,4020 @@ static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int p[CMG4_PYRAMID_LANES];
+    double best[CMG4_PYRAMID_LANES];
+    double m[CMG4_PYRAMID_LANES];
+    double swap[CMG4_PYRAMID_LANES];
+    double inv_h[CMG4_PYRAMID_LANES];
+    double err[CMG4_PYRAMID_LANES];
+    double fac[CMG4_PYRAMID_LANES];
+    double gus[CMG4_PYRAMID_LANES];
+    double total[CMG4_PYRAMID_LANES];
+    int go[CMG4_PYRAMID_LANES];
+    int fresh[CMG4_PYRAMID_LANES];
+    int bad[CMG4_PYRAMID_LANES];
+    int sing[CMG4_PYRAMID_LANES];
+    int last[CMG4_PYRAMID_LANES];
+    int retry[CMG4_PYRAMID_LANES];
+    int ok[CMG4_PYRAMID_LANES];
+    int take[CMG4_PYRAMID_LANES];
+    int lock[CMG4_PYRAMID_LANES];
+    int rej[CMG4_PYRAMID_LANES];
+    double frac[CMG4_PYRAMID_LANES];
+    int due[CMG4_PYRAMID_LANES];
+    static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE :
+                CMG4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? CMG4_PYRAMID_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i * CMG4_PYRAMID_NX + i][l] = L->lu[i * CMG4_PYRAMID_NX + i][l] + 1.0 /
+                    (L->h[l] * 0.25);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * CMG4_PYRAMID_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 1][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[1 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[19][l] = 1.0 / L->lu[19][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 1][l] * L->lu[19][l];
+            L->lu[i * CMG4_PYRAMID_NX + 1][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 2][l] = L->lu[i * CMG4_PYRAMID_NX + 2][l] - m[l] *
+                    L->lu[20][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[25][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[26][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[27][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[20][l] = L->lu[20][l] * L->lu[19][l];
+        L->lu[25][l] = L->lu[25][l] * L->lu[19][l];
+        L->lu[26][l] = L->lu[26][l] * L->lu[19][l];
+        L->lu[27][l] = L->lu[27][l] * L->lu[19][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[38][l]) > 0.0));
+        L->lu[38][l] = 1.0 / L->lu[38][l];
+        L->lu[43][l] = L->lu[43][l] * L->lu[38][l];
+        L->lu[44][l] = L->lu[44][l] * L->lu[38][l];
+        L->lu[45][l] = L->lu[45][l] * L->lu[38][l];
+        p[l] = 3;
+        best[l] = fabs(L->lu[3 * CMG4_PYRAMID_NX + 3][l]);
+    }
+    for (i = 4; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 3][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 3][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 3][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[3][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 4; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[3 * CMG4_PYRAMID_NX + j][l];
+                L->lu[3 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[3 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[57][l] = 1.0 / L->lu[57][l];
+    }
+    for (i = 4; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 3][l] * L->lu[57][l];
+            L->lu[i * CMG4_PYRAMID_NX + 3][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 4][l] = L->lu[i * CMG4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[58][l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[59][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[60][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[61][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[62][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[63][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[64][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[65][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[66][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[67][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[68][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[69][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[70][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[71][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[58][l] = L->lu[58][l] * L->lu[57][l];
+        L->lu[59][l] = L->lu[59][l] * L->lu[57][l];
+        L->lu[60][l] = L->lu[60][l] * L->lu[57][l];
+        L->lu[61][l] = L->lu[61][l] * L->lu[57][l];
+        L->lu[62][l] = L->lu[62][l] * L->lu[57][l];
+        L->lu[63][l] = L->lu[63][l] * L->lu[57][l];
+        L->lu[64][l] = L->lu[64][l] * L->lu[57][l];
+        L->lu[65][l] = L->lu[65][l] * L->lu[57][l];
+        L->lu[66][l] = L->lu[66][l] * L->lu[57][l];
+        L->lu[67][l] = L->lu[67][l] * L->lu[57][l];
+        L->lu[68][l] = L->lu[68][l] * L->lu[57][l];
+        L->lu[69][l] = L->lu[69][l] * L->lu[57][l];
+        L->lu[70][l] = L->lu[70][l] * L->lu[57][l];
+        L->lu[71][l] = L->lu[71][l] * L->lu[57][l];
+        p[l] = 4;
+        best[l] = fabs(L->lu[4 * CMG4_PYRAMID_NX + 4][l]);
+    }
+    for (i = 5; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 4][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 4][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 4][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[4][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 5; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[4 * CMG4_PYRAMID_NX + j][l];
+                L->lu[4 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[4 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[76][l] = 1.0 / L->lu[76][l];
+    }
+    for (i = 5; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 4][l] * L->lu[76][l];
+            L->lu[i * CMG4_PYRAMID_NX + 4][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[77][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[78][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[79][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[80][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[81][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[82][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[83][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[84][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[85][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[86][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[87][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[88][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[89][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[77][l] = L->lu[77][l] * L->lu[76][l];
+        L->lu[78][l] = L->lu[78][l] * L->lu[76][l];
+        L->lu[79][l] = L->lu[79][l] * L->lu[76][l];
+        L->lu[80][l] = L->lu[80][l] * L->lu[76][l];
+        L->lu[81][l] = L->lu[81][l] * L->lu[76][l];
+        L->lu[82][l] = L->lu[82][l] * L->lu[76][l];
+        L->lu[83][l] = L->lu[83][l] * L->lu[76][l];
+        L->lu[84][l] = L->lu[84][l] * L->lu[76][l];
+        L->lu[85][l] = L->lu[85][l] * L->lu[76][l];
+        L->lu[86][l] = L->lu[86][l] * L->lu[76][l];
+        L->lu[87][l] = L->lu[87][l] * L->lu[76][l];
+        L->lu[88][l] = L->lu[88][l] * L->lu[76][l];
+        L->lu[89][l] = L->lu[89][l] * L->lu[76][l];
+        p[l] = 5;
+        best[l] = fabs(L->lu[5 * CMG4_PYRAMID_NX + 5][l]);
+    }
+    for (i = 6; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 5][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 5][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 5][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[5][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 6; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[5 * CMG4_PYRAMID_NX + j][l];
+                L->lu[5 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[5 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[95][l] = 1.0 / L->lu[95][l];
+    }
+    for (i = 6; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] * L->lu[95][l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[96][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[97][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[98][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[99][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[100][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[101][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[102][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[103][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[104][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[105][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[106][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[107][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[96][l] = L->lu[96][l] * L->lu[95][l];
+        L->lu[97][l] = L->lu[97][l] * L->lu[95][l];
+        L->lu[98][l] = L->lu[98][l] * L->lu[95][l];
+        L->lu[99][l] = L->lu[99][l] * L->lu[95][l];
+        L->lu[100][l] = L->lu[100][l] * L->lu[95][l];
+        L->lu[101][l] = L->lu[101][l] * L->lu[95][l];
+        L->lu[102][l] = L->lu[102][l] * L->lu[95][l];
+        L->lu[103][l] = L->lu[103][l] * L->lu[95][l];
+        L->lu[104][l] = L->lu[104][l] * L->lu[95][l];
+        L->lu[105][l] = L->lu[105][l] * L->lu[95][l];
+        L->lu[106][l] = L->lu[106][l] * L->lu[95][l];
+        L->lu[107][l] = L->lu[107][l] * L->lu[95][l];
+        p[l] = 6;
+        best[l] = fabs(L->lu[6 * CMG4_PYRAMID_NX + 6][l]);
+    }
+    for (i = 7; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 6][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 6][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 6][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[6][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 7; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[6 * CMG4_PYRAMID_NX + j][l];
+                L->lu[6 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[6 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[114][l] = 1.0 / L->lu[114][l];
+    }
+    for (i = 7; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] * L->lu[114][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[115][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[116][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[117][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[118][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[119][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[120][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[121][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[122][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[123][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[124][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[125][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[115][l] = L->lu[115][l] * L->lu[114][l];
+        L->lu[116][l] = L->lu[116][l] * L->lu[114][l];
+        L->lu[117][l] = L->lu[117][l] * L->lu[114][l];
+        L->lu[118][l] = L->lu[118][l] * L->lu[114][l];
+        L->lu[119][l] = L->lu[119][l] * L->lu[114][l];
+        L->lu[120][l] = L->lu[120][l] * L->lu[114][l];
+        L->lu[121][l] = L->lu[121][l] * L->lu[114][l];
+        L->lu[122][l] = L->lu[122][l] * L->lu[114][l];
+        L->lu[123][l] = L->lu[123][l] * L->lu[114][l];
+        L->lu[124][l] = L->lu[124][l] * L->lu[114][l];
+        L->lu[125][l] = L->lu[125][l] * L->lu[114][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * CMG4_PYRAMID_NX + 7][l]);
+    }
+    for (i = 8; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 7][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 7][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[7 * CMG4_PYRAMID_NX + j][l];
+                L->lu[7 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[7 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[133][l] = 1.0 / L->lu[133][l];
+    }
+    for (i = 8; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] * L->lu[133][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[134][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[135][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[136][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[137][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[138][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[139][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[140][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[141][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[142][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[143][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[134][l] = L->lu[134][l] * L->lu[133][l];
+        L->lu[135][l] = L->lu[135][l] * L->lu[133][l];
+        L->lu[136][l] = L->lu[136][l] * L->lu[133][l];
+        L->lu[137][l] = L->lu[137][l] * L->lu[133][l];
+        L->lu[138][l] = L->lu[138][l] * L->lu[133][l];
+        L->lu[139][l] = L->lu[139][l] * L->lu[133][l];
+        L->lu[140][l] = L->lu[140][l] * L->lu[133][l];
+        L->lu[141][l] = L->lu[141][l] * L->lu[133][l];
+        L->lu[142][l] = L->lu[142][l] * L->lu[133][l];
+        L->lu[143][l] = L->lu[143][l] * L->lu[133][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * CMG4_PYRAMID_NX + 8][l]);
+    }
+    for (i = 9; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 8][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 8][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[8 * CMG4_PYRAMID_NX + j][l];
+                L->lu[8 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[8 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[152][l] = 1.0 / L->lu[152][l];
+    }
+    for (i = 9; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] * L->lu[152][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[153][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[154][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[155][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[156][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[157][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[158][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[159][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[160][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[161][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[153][l] = L->lu[153][l] * L->lu[152][l];
+        L->lu[154][l] = L->lu[154][l] * L->lu[152][l];
+        L->lu[155][l] = L->lu[155][l] * L->lu[152][l];
+        L->lu[156][l] = L->lu[156][l] * L->lu[152][l];
+        L->lu[157][l] = L->lu[157][l] * L->lu[152][l];
+        L->lu[158][l] = L->lu[158][l] * L->lu[152][l];
+        L->lu[159][l] = L->lu[159][l] * L->lu[152][l];
+        L->lu[160][l] = L->lu[160][l] * L->lu[152][l];
+        L->lu[161][l] = L->lu[161][l] * L->lu[152][l];
+        p[l] = 9;
+        best[l] = fabs(L->lu[9 * CMG4_PYRAMID_NX + 9][l]);
+    }
+    for (i = 10; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 9][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 9][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 9][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[9][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 10; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[9 * CMG4_PYRAMID_NX + j][l];
+                L->lu[9 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[9 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[171][l] = 1.0 / L->lu[171][l];
+    }
+    for (i = 10; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] * L->lu[171][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[172][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[173][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[174][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[175][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[176][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[177][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[178][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[179][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[172][l] = L->lu[172][l] * L->lu[171][l];
+        L->lu[173][l] = L->lu[173][l] * L->lu[171][l];
+        L->lu[174][l] = L->lu[174][l] * L->lu[171][l];
+        L->lu[175][l] = L->lu[175][l] * L->lu[171][l];
+        L->lu[176][l] = L->lu[176][l] * L->lu[171][l];
+        L->lu[177][l] = L->lu[177][l] * L->lu[171][l];
+        L->lu[178][l] = L->lu[178][l] * L->lu[171][l];
+        L->lu[179][l] = L->lu[179][l] * L->lu[171][l];
+        p[l] = 10;
+        best[l] = fabs(L->lu[10 * CMG4_PYRAMID_NX + 10][l]);
+    }
+    for (i = 11; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 10][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 10][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 10][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[10][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 11; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[10 * CMG4_PYRAMID_NX + j][l];
+                L->lu[10 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[10 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[190][l] = 1.0 / L->lu[190][l];
+    }
+    for (i = 11; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] * L->lu[190][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[191][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[192][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[193][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[194][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[195][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[196][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[197][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[191][l] = L->lu[191][l] * L->lu[190][l];
+        L->lu[192][l] = L->lu[192][l] * L->lu[190][l];
+        L->lu[193][l] = L->lu[193][l] * L->lu[190][l];
+        L->lu[194][l] = L->lu[194][l] * L->lu[190][l];
+        L->lu[195][l] = L->lu[195][l] * L->lu[190][l];
+        L->lu[196][l] = L->lu[196][l] * L->lu[190][l];
+        L->lu[197][l] = L->lu[197][l] * L->lu[190][l];
+        p[l] = 11;
+        best[l] = fabs(L->lu[11 * CMG4_PYRAMID_NX + 11][l]);
+    }
+    for (i = 12; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 11][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 11][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 11][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[11][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 12; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[11 * CMG4_PYRAMID_NX + j][l];
+                L->lu[11 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[11 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[209][l] = 1.0 / L->lu[209][l];
+    }
+    for (i = 12; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] * L->lu[209][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[210][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[211][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[212][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[213][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[214][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[215][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[210][l] = L->lu[210][l] * L->lu[209][l];
+        L->lu[211][l] = L->lu[211][l] * L->lu[209][l];
+        L->lu[212][l] = L->lu[212][l] * L->lu[209][l];
+        L->lu[213][l] = L->lu[213][l] * L->lu[209][l];
+        L->lu[214][l] = L->lu[214][l] * L->lu[209][l];
+        L->lu[215][l] = L->lu[215][l] * L->lu[209][l];
+        p[l] = 12;
+        best[l] = fabs(L->lu[12 * CMG4_PYRAMID_NX + 12][l]);
+    }
+    for (i = 13; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 12][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 12][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 12][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[12][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 13; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[12 * CMG4_PYRAMID_NX + j][l];
+                L->lu[12 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[12 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[228][l] = 1.0 / L->lu[228][l];
+    }
+    for (i = 13; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] * L->lu[228][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[229][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[230][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[231][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[232][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[233][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[229][l] = L->lu[229][l] * L->lu[228][l];
+        L->lu[230][l] = L->lu[230][l] * L->lu[228][l];
+        L->lu[231][l] = L->lu[231][l] * L->lu[228][l];
+        L->lu[232][l] = L->lu[232][l] * L->lu[228][l];
+        L->lu[233][l] = L->lu[233][l] * L->lu[228][l];
+        p[l] = 13;
+        best[l] = fabs(L->lu[13 * CMG4_PYRAMID_NX + 13][l]);
+    }
+    for (i = 14; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 13][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 13][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 13][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[13][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 14; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[13 * CMG4_PYRAMID_NX + j][l];
+                L->lu[13 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[13 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[247][l] = 1.0 / L->lu[247][l];
+    }
+    for (i = 14; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] * L->lu[247][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[248][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[249][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[250][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[251][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[248][l] = L->lu[248][l] * L->lu[247][l];
+        L->lu[249][l] = L->lu[249][l] * L->lu[247][l];
+        L->lu[250][l] = L->lu[250][l] * L->lu[247][l];
+        L->lu[251][l] = L->lu[251][l] * L->lu[247][l];
+        p[l] = 14;
+        best[l] = fabs(L->lu[14 * CMG4_PYRAMID_NX + 14][l]);
+    }
+    for (i = 15; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 14][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 14][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 14][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[14][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 15; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[14 * CMG4_PYRAMID_NX + j][l];
+                L->lu[14 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[14 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[266][l] = 1.0 / L->lu[266][l];
+    }
+    for (i = 15; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] * L->lu[266][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[267][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[268][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[269][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[267][l] = L->lu[267][l] * L->lu[266][l];
+        L->lu[268][l] = L->lu[268][l] * L->lu[266][l];
+        L->lu[269][l] = L->lu[269][l] * L->lu[266][l];
+        p[l] = 15;
+        best[l] = fabs(L->lu[15 * CMG4_PYRAMID_NX + 15][l]);
+    }
+    for (i = 16; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 15][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 15][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 15][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[15][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 16; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[15 * CMG4_PYRAMID_NX + j][l];
+                L->lu[15 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[15 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[285][l] = 1.0 / L->lu[285][l];
+    }
+    for (i = 16; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] * L->lu[285][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[286][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[287][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[286][l] = L->lu[286][l] * L->lu[285][l];
+        L->lu[287][l] = L->lu[287][l] * L->lu[285][l];
+        p[l] = 16;
+        best[l] = fabs(L->lu[16 * CMG4_PYRAMID_NX + 16][l]);
+    }
+    for (i = 17; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 16][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 16][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 16][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[16][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 17; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[16 * CMG4_PYRAMID_NX + j][l];
+                L->lu[16 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[16 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[304][l] = 1.0 / L->lu[304][l];
+    }
+    for (i = 17; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] * L->lu[304][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[305][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[305][l] = L->lu[305][l] * L->lu[304][l];
+        L->piv[17][l] = 17;
+        sing[l] = (sing[l] | !(fabs(L->lu[323][l]) > 0.0));
+        L->lu[323][l] = 1.0 / L->lu[323][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? CMG4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 4 ? L->k[0][4][l] : L->k[0][3][l];
+        L->k[0][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[0][4][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 5 ? L->k[0][5][l] : L->k[0][3][l];
+        L->k[0][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 6 ? L->k[0][6][l] : L->k[0][3][l];
+        L->k[0][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 7 ? L->k[0][7][l] : L->k[0][3][l];
+        L->k[0][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 8 ? L->k[0][8][l] : L->k[0][3][l];
+        L->k[0][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 9 ? L->k[0][9][l] : L->k[0][3][l];
+        L->k[0][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 10 ? L->k[0][10][l] : L->k[0][3][l];
+        L->k[0][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 11 ? L->k[0][11][l] : L->k[0][3][l];
+        L->k[0][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 12 ? L->k[0][12][l] : L->k[0][3][l];
+        L->k[0][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 13 ? L->k[0][13][l] : L->k[0][3][l];
+        L->k[0][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 14 ? L->k[0][14][l] : L->k[0][3][l];
+        L->k[0][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 15 ? L->k[0][15][l] : L->k[0][3][l];
+        L->k[0][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 16 ? L->k[0][16][l] : L->k[0][3][l];
+        L->k[0][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 17 ? L->k[0][17][l] : L->k[0][3][l];
+        L->k[0][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 5 ? L->k[0][5][l] : L->k[0][4][l];
+        L->k[0][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 6 ? L->k[0][6][l] : L->k[0][4][l];
+        L->k[0][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 7 ? L->k[0][7][l] : L->k[0][4][l];
+        L->k[0][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 8 ? L->k[0][8][l] : L->k[0][4][l];
+        L->k[0][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 9 ? L->k[0][9][l] : L->k[0][4][l];
+        L->k[0][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 10 ? L->k[0][10][l] : L->k[0][4][l];
+        L->k[0][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 11 ? L->k[0][11][l] : L->k[0][4][l];
+        L->k[0][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 12 ? L->k[0][12][l] : L->k[0][4][l];
+        L->k[0][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 13 ? L->k[0][13][l] : L->k[0][4][l];
+        L->k[0][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 14 ? L->k[0][14][l] : L->k[0][4][l];
+        L->k[0][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 15 ? L->k[0][15][l] : L->k[0][4][l];
+        L->k[0][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 16 ? L->k[0][16][l] : L->k[0][4][l];
+        L->k[0][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 17 ? L->k[0][17][l] : L->k[0][4][l];
+        L->k[0][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 6 ? L->k[0][6][l] : L->k[0][5][l];
+        L->k[0][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 7 ? L->k[0][7][l] : L->k[0][5][l];
+        L->k[0][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 8 ? L->k[0][8][l] : L->k[0][5][l];
+        L->k[0][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 9 ? L->k[0][9][l] : L->k[0][5][l];
+        L->k[0][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 10 ? L->k[0][10][l] : L->k[0][5][l];
+        L->k[0][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 11 ? L->k[0][11][l] : L->k[0][5][l];
+        L->k[0][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 12 ? L->k[0][12][l] : L->k[0][5][l];
+        L->k[0][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 13 ? L->k[0][13][l] : L->k[0][5][l];
+        L->k[0][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 14 ? L->k[0][14][l] : L->k[0][5][l];
+        L->k[0][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 15 ? L->k[0][15][l] : L->k[0][5][l];
+        L->k[0][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 16 ? L->k[0][16][l] : L->k[0][5][l];
+        L->k[0][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 17 ? L->k[0][17][l] : L->k[0][5][l];
+        L->k[0][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 7 ? L->k[0][7][l] : L->k[0][6][l];
+        L->k[0][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 8 ? L->k[0][8][l] : L->k[0][6][l];
+        L->k[0][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 9 ? L->k[0][9][l] : L->k[0][6][l];
+        L->k[0][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 10 ? L->k[0][10][l] : L->k[0][6][l];
+        L->k[0][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 11 ? L->k[0][11][l] : L->k[0][6][l];
+        L->k[0][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 12 ? L->k[0][12][l] : L->k[0][6][l];
+        L->k[0][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 13 ? L->k[0][13][l] : L->k[0][6][l];
+        L->k[0][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 14 ? L->k[0][14][l] : L->k[0][6][l];
+        L->k[0][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 15 ? L->k[0][15][l] : L->k[0][6][l];
+        L->k[0][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 16 ? L->k[0][16][l] : L->k[0][6][l];
+        L->k[0][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 17 ? L->k[0][17][l] : L->k[0][6][l];
+        L->k[0][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 10 ? L->k[0][10][l] : L->k[0][7][l];
+        L->k[0][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 11 ? L->k[0][11][l] : L->k[0][7][l];
+        L->k[0][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 12 ? L->k[0][12][l] : L->k[0][7][l];
+        L->k[0][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 13 ? L->k[0][13][l] : L->k[0][7][l];
+        L->k[0][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 14 ? L->k[0][14][l] : L->k[0][7][l];
+        L->k[0][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 15 ? L->k[0][15][l] : L->k[0][7][l];
+        L->k[0][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 16 ? L->k[0][16][l] : L->k[0][7][l];
+        L->k[0][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 17 ? L->k[0][17][l] : L->k[0][7][l];
+        L->k[0][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 10 ? L->k[0][10][l] : L->k[0][8][l];
+        L->k[0][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 11 ? L->k[0][11][l] : L->k[0][8][l];
+        L->k[0][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 12 ? L->k[0][12][l] : L->k[0][8][l];
+        L->k[0][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 13 ? L->k[0][13][l] : L->k[0][8][l];
+        L->k[0][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 14 ? L->k[0][14][l] : L->k[0][8][l];
+        L->k[0][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 15 ? L->k[0][15][l] : L->k[0][8][l];
+        L->k[0][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 16 ? L->k[0][16][l] : L->k[0][8][l];
+        L->k[0][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 17 ? L->k[0][17][l] : L->k[0][8][l];
+        L->k[0][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 10 ? L->k[0][10][l] : L->k[0][9][l];
+        L->k[0][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 11 ? L->k[0][11][l] : L->k[0][9][l];
+        L->k[0][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 12 ? L->k[0][12][l] : L->k[0][9][l];
+        L->k[0][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 13 ? L->k[0][13][l] : L->k[0][9][l];
+        L->k[0][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 14 ? L->k[0][14][l] : L->k[0][9][l];
+        L->k[0][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 15 ? L->k[0][15][l] : L->k[0][9][l];
+        L->k[0][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 16 ? L->k[0][16][l] : L->k[0][9][l];
+        L->k[0][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 17 ? L->k[0][17][l] : L->k[0][9][l];
+        L->k[0][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 11 ? L->k[0][11][l] : L->k[0][10][l];
+        L->k[0][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 12 ? L->k[0][12][l] : L->k[0][10][l];
+        L->k[0][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 13 ? L->k[0][13][l] : L->k[0][10][l];
+        L->k[0][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 14 ? L->k[0][14][l] : L->k[0][10][l];
+        L->k[0][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 15 ? L->k[0][15][l] : L->k[0][10][l];
+        L->k[0][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 16 ? L->k[0][16][l] : L->k[0][10][l];
+        L->k[0][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 17 ? L->k[0][17][l] : L->k[0][10][l];
+        L->k[0][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 12 ? L->k[0][12][l] : L->k[0][11][l];
+        L->k[0][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 13 ? L->k[0][13][l] : L->k[0][11][l];
+        L->k[0][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 14 ? L->k[0][14][l] : L->k[0][11][l];
+        L->k[0][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 15 ? L->k[0][15][l] : L->k[0][11][l];
+        L->k[0][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 16 ? L->k[0][16][l] : L->k[0][11][l];
+        L->k[0][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 17 ? L->k[0][17][l] : L->k[0][11][l];
+        L->k[0][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 13 ? L->k[0][13][l] : L->k[0][12][l];
+        L->k[0][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 14 ? L->k[0][14][l] : L->k[0][12][l];
+        L->k[0][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 15 ? L->k[0][15][l] : L->k[0][12][l];
+        L->k[0][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 16 ? L->k[0][16][l] : L->k[0][12][l];
+        L->k[0][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 17 ? L->k[0][17][l] : L->k[0][12][l];
+        L->k[0][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 14 ? L->k[0][14][l] : L->k[0][13][l];
+        L->k[0][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 15 ? L->k[0][15][l] : L->k[0][13][l];
+        L->k[0][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 16 ? L->k[0][16][l] : L->k[0][13][l];
+        L->k[0][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 17 ? L->k[0][17][l] : L->k[0][13][l];
+        L->k[0][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 15 ? L->k[0][15][l] : L->k[0][14][l];
+        L->k[0][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 16 ? L->k[0][16][l] : L->k[0][14][l];
+        L->k[0][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 17 ? L->k[0][17][l] : L->k[0][14][l];
+        L->k[0][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][15][l];
+        L->k[0][15][l] = L->piv[15][l] == 16 ? L->k[0][16][l] : L->k[0][15][l];
+        L->k[0][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][15][l];
+        L->k[0][15][l] = L->piv[15][l] == 17 ? L->k[0][17][l] : L->k[0][15][l];
+        L->k[0][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][16][l];
+        L->k[0][16][l] = L->piv[16][l] == 17 ? L->k[0][17][l] : L->k[0][16][l];
+        L->k[0][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[0][17][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[37][l] * L->k[0][1][l];
+        L->k[0][4][l] = L->k[0][4][l] - L->lu[75][l] * L->k[0][3][l];
+        L->k[0][5][l] = L->k[0][5][l] - L->lu[93][l] * L->k[0][3][l] - L->lu[94][l] * L->k[0][4][l];
+        L->k[0][6][l] = L->k[0][6][l] - L->lu[111][l] * L->k[0][3][l] - L->lu[112][l] *
+                L->k[0][4][l] - L->lu[113][l] * L->k[0][5][l];
+        L->k[0][7][l] = L->k[0][7][l] - L->lu[129][l] * L->k[0][3][l] - L->lu[130][l] *
+                L->k[0][4][l] - L->lu[131][l] * L->k[0][5][l] - L->lu[132][l] * L->k[0][6][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[147][l] * L->k[0][3][l] - L->lu[148][l] *
+                L->k[0][4][l] - L->lu[149][l] * L->k[0][5][l] - L->lu[150][l] * L->k[0][6][l] -
+                L->lu[151][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[165][l] * L->k[0][3][l] - L->lu[166][l] *
+                L->k[0][4][l] - L->lu[167][l] * L->k[0][5][l] - L->lu[168][l] * L->k[0][6][l] -
+                L->lu[169][l] * L->k[0][7][l] - L->lu[170][l] * L->k[0][8][l];
+        L->k[0][10][l] = L->k[0][10][l] - L->lu[183][l] * L->k[0][3][l] - L->lu[184][l] *
+                L->k[0][4][l] - L->lu[185][l] * L->k[0][5][l] - L->lu[186][l] * L->k[0][6][l] -
+                L->lu[187][l] * L->k[0][7][l] - L->lu[188][l] * L->k[0][8][l] - L->lu[189][l] *
+                L->k[0][9][l];
+        L->k[0][11][l] = L->k[0][11][l] - L->lu[201][l] * L->k[0][3][l] - L->lu[202][l] *
+                L->k[0][4][l] - L->lu[203][l] * L->k[0][5][l] - L->lu[204][l] * L->k[0][6][l] -
+                L->lu[205][l] * L->k[0][7][l] - L->lu[206][l] * L->k[0][8][l] - L->lu[207][l] *
+                L->k[0][9][l] - L->lu[208][l] * L->k[0][10][l];
+        L->k[0][12][l] = L->k[0][12][l] - L->lu[219][l] * L->k[0][3][l] - L->lu[220][l] *
+                L->k[0][4][l] - L->lu[221][l] * L->k[0][5][l] - L->lu[222][l] * L->k[0][6][l] -
+                L->lu[223][l] * L->k[0][7][l] - L->lu[224][l] * L->k[0][8][l] - L->lu[225][l] *
+                L->k[0][9][l] - L->lu[226][l] * L->k[0][10][l] - L->lu[227][l] * L->k[0][11][l];
+        L->k[0][13][l] = L->k[0][13][l] - L->lu[237][l] * L->k[0][3][l] - L->lu[238][l] *
+                L->k[0][4][l] - L->lu[239][l] * L->k[0][5][l] - L->lu[240][l] * L->k[0][6][l] -
+                L->lu[241][l] * L->k[0][7][l] - L->lu[242][l] * L->k[0][8][l] - L->lu[243][l] *
+                L->k[0][9][l] - L->lu[244][l] * L->k[0][10][l] - L->lu[245][l] * L->k[0][11][l] -
+                L->lu[246][l] * L->k[0][12][l];
+        L->k[0][14][l] = L->k[0][14][l] - L->lu[255][l] * L->k[0][3][l] - L->lu[256][l] *
+                L->k[0][4][l] - L->lu[257][l] * L->k[0][5][l] - L->lu[258][l] * L->k[0][6][l] -
+                L->lu[259][l] * L->k[0][7][l] - L->lu[260][l] * L->k[0][8][l] - L->lu[261][l] *
+                L->k[0][9][l] - L->lu[262][l] * L->k[0][10][l] - L->lu[263][l] * L->k[0][11][l] -
+                L->lu[264][l] * L->k[0][12][l] - L->lu[265][l] * L->k[0][13][l];
+        L->k[0][15][l] = L->k[0][15][l] - L->lu[273][l] * L->k[0][3][l] - L->lu[274][l] *
+                L->k[0][4][l] - L->lu[275][l] * L->k[0][5][l] - L->lu[276][l] * L->k[0][6][l] -
+                L->lu[277][l] * L->k[0][7][l] - L->lu[278][l] * L->k[0][8][l] - L->lu[279][l] *
+                L->k[0][9][l] - L->lu[280][l] * L->k[0][10][l] - L->lu[281][l] * L->k[0][11][l] -
+                L->lu[282][l] * L->k[0][12][l] - L->lu[283][l] * L->k[0][13][l] - L->lu[284][l] *
+                L->k[0][14][l];
+        L->k[0][16][l] = L->k[0][16][l] - L->lu[291][l] * L->k[0][3][l] - L->lu[292][l] *
+                L->k[0][4][l] - L->lu[293][l] * L->k[0][5][l] - L->lu[294][l] * L->k[0][6][l] -
+                L->lu[295][l] * L->k[0][7][l] - L->lu[296][l] * L->k[0][8][l] - L->lu[297][l] *
+                L->k[0][9][l] - L->lu[298][l] * L->k[0][10][l] - L->lu[299][l] * L->k[0][11][l] -
+                L->lu[300][l] * L->k[0][12][l] - L->lu[301][l] * L->k[0][13][l] - L->lu[302][l] *
+                L->k[0][14][l] - L->lu[303][l] * L->k[0][15][l];
+        L->k[0][17][l] = L->k[0][17][l] - L->lu[309][l] * L->k[0][3][l] - L->lu[310][l] *
+                L->k[0][4][l] - L->lu[311][l] * L->k[0][5][l] - L->lu[312][l] * L->k[0][6][l] -
+                L->lu[313][l] * L->k[0][7][l] - L->lu[314][l] * L->k[0][8][l] - L->lu[315][l] *
+                L->k[0][9][l] - L->lu[316][l] * L->k[0][10][l] - L->lu[317][l] * L->k[0][11][l] -
+                L->lu[318][l] * L->k[0][12][l] - L->lu[319][l] * L->k[0][13][l] - L->lu[320][l] *
+                L->k[0][14][l] - L->lu[321][l] * L->k[0][15][l] - L->lu[322][l] * L->k[0][16][l];
+        L->k[0][17][l] = L->k[0][17][l] * L->lu[323][l];
+        L->k[0][16][l] = L->k[0][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[0][17][l];
+        L->k[0][15][l] = L->k[0][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[0][17][l] -
+                L->lu[286][l] * L->k[0][16][l];
+        L->k[0][14][l] = L->k[0][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[0][17][l] -
+                L->lu[268][l] * L->k[0][16][l] - L->lu[267][l] * L->k[0][15][l];
+        L->k[0][13][l] = L->k[0][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[0][17][l] -
+                L->lu[250][l] * L->k[0][16][l] - L->lu[249][l] * L->k[0][15][l] - L->lu[248][l] *
+                L->k[0][14][l];
+        L->k[0][12][l] = L->k[0][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[0][17][l] -
+                L->lu[232][l] * L->k[0][16][l] - L->lu[231][l] * L->k[0][15][l] - L->lu[230][l] *
+                L->k[0][14][l] - L->lu[229][l] * L->k[0][13][l];
+        L->k[0][11][l] = L->k[0][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[0][17][l] -
+                L->lu[214][l] * L->k[0][16][l] - L->lu[213][l] * L->k[0][15][l] - L->lu[212][l] *
+                L->k[0][14][l] - L->lu[211][l] * L->k[0][13][l] - L->lu[210][l] * L->k[0][12][l];
+        L->k[0][10][l] = L->k[0][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[0][17][l] -
+                L->lu[196][l] * L->k[0][16][l] - L->lu[195][l] * L->k[0][15][l] - L->lu[194][l] *
+                L->k[0][14][l] - L->lu[193][l] * L->k[0][13][l] - L->lu[192][l] * L->k[0][12][l]
+                - L->lu[191][l] * L->k[0][11][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[0][17][l] -
+                L->lu[178][l] * L->k[0][16][l] - L->lu[177][l] * L->k[0][15][l] - L->lu[176][l] *
+                L->k[0][14][l] - L->lu[175][l] * L->k[0][13][l] - L->lu[174][l] * L->k[0][12][l]
+                - L->lu[173][l] * L->k[0][11][l] - L->lu[172][l] * L->k[0][10][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[0][17][l] -
+                L->lu[160][l] * L->k[0][16][l] - L->lu[159][l] * L->k[0][15][l] - L->lu[158][l] *
+                L->k[0][14][l] - L->lu[157][l] * L->k[0][13][l] - L->lu[156][l] * L->k[0][12][l]
+                - L->lu[155][l] * L->k[0][11][l] - L->lu[154][l] * L->k[0][10][l] - L->lu[153][l]
+                * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[0][17][l] -
+                L->lu[142][l] * L->k[0][16][l] - L->lu[141][l] * L->k[0][15][l] - L->lu[140][l] *
+                L->k[0][14][l] - L->lu[139][l] * L->k[0][13][l] - L->lu[138][l] * L->k[0][12][l]
+                - L->lu[137][l] * L->k[0][11][l] - L->lu[136][l] * L->k[0][10][l] - L->lu[135][l]
+                * L->k[0][9][l] - L->lu[134][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[0][17][l] -
+                L->lu[124][l] * L->k[0][16][l] - L->lu[123][l] * L->k[0][15][l] - L->lu[122][l] *
+                L->k[0][14][l] - L->lu[121][l] * L->k[0][13][l] - L->lu[120][l] * L->k[0][12][l]
+                - L->lu[119][l] * L->k[0][11][l] - L->lu[118][l] * L->k[0][10][l] - L->lu[117][l]
+                * L->k[0][9][l] - L->lu[116][l] * L->k[0][8][l] - L->lu[115][l] * L->k[0][7][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[0][17][l] -
+                L->lu[106][l] * L->k[0][16][l] - L->lu[105][l] * L->k[0][15][l] - L->lu[104][l] *
+                L->k[0][14][l] - L->lu[103][l] * L->k[0][13][l] - L->lu[102][l] * L->k[0][12][l]
+                - L->lu[101][l] * L->k[0][11][l] - L->lu[100][l] * L->k[0][10][l] - L->lu[99][l]
+                * L->k[0][9][l] - L->lu[98][l] * L->k[0][8][l] - L->lu[97][l] * L->k[0][7][l] -
+                L->lu[96][l] * L->k[0][6][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[0][17][l] -
+                L->lu[88][l] * L->k[0][16][l] - L->lu[87][l] * L->k[0][15][l] - L->lu[86][l] *
+                L->k[0][14][l] - L->lu[85][l] * L->k[0][13][l] - L->lu[84][l] * L->k[0][12][l] -
+                L->lu[83][l] * L->k[0][11][l] - L->lu[82][l] * L->k[0][10][l] - L->lu[81][l] *
+                L->k[0][9][l] - L->lu[80][l] * L->k[0][8][l] - L->lu[79][l] * L->k[0][7][l] -
+                L->lu[78][l] * L->k[0][6][l] - L->lu[77][l] * L->k[0][5][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[0][17][l] -
+                L->lu[70][l] * L->k[0][16][l] - L->lu[69][l] * L->k[0][15][l] - L->lu[68][l] *
+                L->k[0][14][l] - L->lu[67][l] * L->k[0][13][l] - L->lu[66][l] * L->k[0][12][l] -
+                L->lu[65][l] * L->k[0][11][l] - L->lu[64][l] * L->k[0][10][l] - L->lu[63][l] *
+                L->k[0][9][l] - L->lu[62][l] * L->k[0][8][l] - L->lu[61][l] * L->k[0][7][l] -
+                L->lu[60][l] * L->k[0][6][l] - L->lu[59][l] * L->k[0][5][l] - L->lu[58][l] *
+                L->k[0][4][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[0][9][l] -
+                L->lu[44][l] * L->k[0][8][l] - L->lu[43][l] * L->k[0][7][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[0][9][l] -
+                L->lu[26][l] * L->k[0][8][l] - L->lu[25][l] * L->k[0][7][l] - L->lu[20][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[0][9][l] - L->lu[7][l] *
+                L->k[0][7][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 4 ? L->k[1][4][l] : L->k[1][3][l];
+        L->k[1][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[1][4][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 5 ? L->k[1][5][l] : L->k[1][3][l];
+        L->k[1][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 6 ? L->k[1][6][l] : L->k[1][3][l];
+        L->k[1][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 7 ? L->k[1][7][l] : L->k[1][3][l];
+        L->k[1][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 8 ? L->k[1][8][l] : L->k[1][3][l];
+        L->k[1][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 9 ? L->k[1][9][l] : L->k[1][3][l];
+        L->k[1][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 10 ? L->k[1][10][l] : L->k[1][3][l];
+        L->k[1][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 11 ? L->k[1][11][l] : L->k[1][3][l];
+        L->k[1][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 12 ? L->k[1][12][l] : L->k[1][3][l];
+        L->k[1][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 13 ? L->k[1][13][l] : L->k[1][3][l];
+        L->k[1][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 14 ? L->k[1][14][l] : L->k[1][3][l];
+        L->k[1][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 15 ? L->k[1][15][l] : L->k[1][3][l];
+        L->k[1][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 16 ? L->k[1][16][l] : L->k[1][3][l];
+        L->k[1][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 17 ? L->k[1][17][l] : L->k[1][3][l];
+        L->k[1][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 5 ? L->k[1][5][l] : L->k[1][4][l];
+        L->k[1][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 6 ? L->k[1][6][l] : L->k[1][4][l];
+        L->k[1][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 7 ? L->k[1][7][l] : L->k[1][4][l];
+        L->k[1][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 8 ? L->k[1][8][l] : L->k[1][4][l];
+        L->k[1][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 9 ? L->k[1][9][l] : L->k[1][4][l];
+        L->k[1][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 10 ? L->k[1][10][l] : L->k[1][4][l];
+        L->k[1][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 11 ? L->k[1][11][l] : L->k[1][4][l];
+        L->k[1][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 12 ? L->k[1][12][l] : L->k[1][4][l];
+        L->k[1][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 13 ? L->k[1][13][l] : L->k[1][4][l];
+        L->k[1][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 14 ? L->k[1][14][l] : L->k[1][4][l];
+        L->k[1][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 15 ? L->k[1][15][l] : L->k[1][4][l];
+        L->k[1][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 16 ? L->k[1][16][l] : L->k[1][4][l];
+        L->k[1][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 17 ? L->k[1][17][l] : L->k[1][4][l];
+        L->k[1][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 6 ? L->k[1][6][l] : L->k[1][5][l];
+        L->k[1][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 7 ? L->k[1][7][l] : L->k[1][5][l];
+        L->k[1][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 8 ? L->k[1][8][l] : L->k[1][5][l];
+        L->k[1][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 9 ? L->k[1][9][l] : L->k[1][5][l];
+        L->k[1][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 10 ? L->k[1][10][l] : L->k[1][5][l];
+        L->k[1][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 11 ? L->k[1][11][l] : L->k[1][5][l];
+        L->k[1][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 12 ? L->k[1][12][l] : L->k[1][5][l];
+        L->k[1][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 13 ? L->k[1][13][l] : L->k[1][5][l];
+        L->k[1][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 14 ? L->k[1][14][l] : L->k[1][5][l];
+        L->k[1][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 15 ? L->k[1][15][l] : L->k[1][5][l];
+        L->k[1][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 16 ? L->k[1][16][l] : L->k[1][5][l];
+        L->k[1][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 17 ? L->k[1][17][l] : L->k[1][5][l];
+        L->k[1][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 7 ? L->k[1][7][l] : L->k[1][6][l];
+        L->k[1][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 8 ? L->k[1][8][l] : L->k[1][6][l];
+        L->k[1][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 9 ? L->k[1][9][l] : L->k[1][6][l];
+        L->k[1][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 10 ? L->k[1][10][l] : L->k[1][6][l];
+        L->k[1][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 11 ? L->k[1][11][l] : L->k[1][6][l];
+        L->k[1][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 12 ? L->k[1][12][l] : L->k[1][6][l];
+        L->k[1][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 13 ? L->k[1][13][l] : L->k[1][6][l];
+        L->k[1][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 14 ? L->k[1][14][l] : L->k[1][6][l];
+        L->k[1][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 15 ? L->k[1][15][l] : L->k[1][6][l];
+        L->k[1][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 16 ? L->k[1][16][l] : L->k[1][6][l];
+        L->k[1][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 17 ? L->k[1][17][l] : L->k[1][6][l];
+        L->k[1][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 10 ? L->k[1][10][l] : L->k[1][7][l];
+        L->k[1][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 11 ? L->k[1][11][l] : L->k[1][7][l];
+        L->k[1][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 12 ? L->k[1][12][l] : L->k[1][7][l];
+        L->k[1][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 13 ? L->k[1][13][l] : L->k[1][7][l];
+        L->k[1][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 14 ? L->k[1][14][l] : L->k[1][7][l];
+        L->k[1][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 15 ? L->k[1][15][l] : L->k[1][7][l];
+        L->k[1][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 16 ? L->k[1][16][l] : L->k[1][7][l];
+        L->k[1][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 17 ? L->k[1][17][l] : L->k[1][7][l];
+        L->k[1][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 10 ? L->k[1][10][l] : L->k[1][8][l];
+        L->k[1][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 11 ? L->k[1][11][l] : L->k[1][8][l];
+        L->k[1][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 12 ? L->k[1][12][l] : L->k[1][8][l];
+        L->k[1][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 13 ? L->k[1][13][l] : L->k[1][8][l];
+        L->k[1][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 14 ? L->k[1][14][l] : L->k[1][8][l];
+        L->k[1][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 15 ? L->k[1][15][l] : L->k[1][8][l];
+        L->k[1][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 16 ? L->k[1][16][l] : L->k[1][8][l];
+        L->k[1][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 17 ? L->k[1][17][l] : L->k[1][8][l];
+        L->k[1][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 10 ? L->k[1][10][l] : L->k[1][9][l];
+        L->k[1][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 11 ? L->k[1][11][l] : L->k[1][9][l];
+        L->k[1][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 12 ? L->k[1][12][l] : L->k[1][9][l];
+        L->k[1][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 13 ? L->k[1][13][l] : L->k[1][9][l];
+        L->k[1][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 14 ? L->k[1][14][l] : L->k[1][9][l];
+        L->k[1][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 15 ? L->k[1][15][l] : L->k[1][9][l];
+        L->k[1][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 16 ? L->k[1][16][l] : L->k[1][9][l];
+        L->k[1][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 17 ? L->k[1][17][l] : L->k[1][9][l];
+        L->k[1][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 11 ? L->k[1][11][l] : L->k[1][10][l];
+        L->k[1][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 12 ? L->k[1][12][l] : L->k[1][10][l];
+        L->k[1][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 13 ? L->k[1][13][l] : L->k[1][10][l];
+        L->k[1][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 14 ? L->k[1][14][l] : L->k[1][10][l];
+        L->k[1][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 15 ? L->k[1][15][l] : L->k[1][10][l];
+        L->k[1][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 16 ? L->k[1][16][l] : L->k[1][10][l];
+        L->k[1][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 17 ? L->k[1][17][l] : L->k[1][10][l];
+        L->k[1][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 12 ? L->k[1][12][l] : L->k[1][11][l];
+        L->k[1][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 13 ? L->k[1][13][l] : L->k[1][11][l];
+        L->k[1][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 14 ? L->k[1][14][l] : L->k[1][11][l];
+        L->k[1][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 15 ? L->k[1][15][l] : L->k[1][11][l];
+        L->k[1][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 16 ? L->k[1][16][l] : L->k[1][11][l];
+        L->k[1][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 17 ? L->k[1][17][l] : L->k[1][11][l];
+        L->k[1][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 13 ? L->k[1][13][l] : L->k[1][12][l];
+        L->k[1][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 14 ? L->k[1][14][l] : L->k[1][12][l];
+        L->k[1][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 15 ? L->k[1][15][l] : L->k[1][12][l];
+        L->k[1][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 16 ? L->k[1][16][l] : L->k[1][12][l];
+        L->k[1][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 17 ? L->k[1][17][l] : L->k[1][12][l];
+        L->k[1][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 14 ? L->k[1][14][l] : L->k[1][13][l];
+        L->k[1][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 15 ? L->k[1][15][l] : L->k[1][13][l];
+        L->k[1][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 16 ? L->k[1][16][l] : L->k[1][13][l];
+        L->k[1][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 17 ? L->k[1][17][l] : L->k[1][13][l];
+        L->k[1][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 15 ? L->k[1][15][l] : L->k[1][14][l];
+        L->k[1][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 16 ? L->k[1][16][l] : L->k[1][14][l];
+        L->k[1][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 17 ? L->k[1][17][l] : L->k[1][14][l];
+        L->k[1][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][15][l];
+        L->k[1][15][l] = L->piv[15][l] == 16 ? L->k[1][16][l] : L->k[1][15][l];
+        L->k[1][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][15][l];
+        L->k[1][15][l] = L->piv[15][l] == 17 ? L->k[1][17][l] : L->k[1][15][l];
+        L->k[1][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][16][l];
+        L->k[1][16][l] = L->piv[16][l] == 17 ? L->k[1][17][l] : L->k[1][16][l];
+        L->k[1][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[1][17][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[37][l] * L->k[1][1][l];
+        L->k[1][4][l] = L->k[1][4][l] - L->lu[75][l] * L->k[1][3][l];
+        L->k[1][5][l] = L->k[1][5][l] - L->lu[93][l] * L->k[1][3][l] - L->lu[94][l] * L->k[1][4][l];
+        L->k[1][6][l] = L->k[1][6][l] - L->lu[111][l] * L->k[1][3][l] - L->lu[112][l] *
+                L->k[1][4][l] - L->lu[113][l] * L->k[1][5][l];
+        L->k[1][7][l] = L->k[1][7][l] - L->lu[129][l] * L->k[1][3][l] - L->lu[130][l] *
+                L->k[1][4][l] - L->lu[131][l] * L->k[1][5][l] - L->lu[132][l] * L->k[1][6][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[147][l] * L->k[1][3][l] - L->lu[148][l] *
+                L->k[1][4][l] - L->lu[149][l] * L->k[1][5][l] - L->lu[150][l] * L->k[1][6][l] -
+                L->lu[151][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[165][l] * L->k[1][3][l] - L->lu[166][l] *
+                L->k[1][4][l] - L->lu[167][l] * L->k[1][5][l] - L->lu[168][l] * L->k[1][6][l] -
+                L->lu[169][l] * L->k[1][7][l] - L->lu[170][l] * L->k[1][8][l];
+        L->k[1][10][l] = L->k[1][10][l] - L->lu[183][l] * L->k[1][3][l] - L->lu[184][l] *
+                L->k[1][4][l] - L->lu[185][l] * L->k[1][5][l] - L->lu[186][l] * L->k[1][6][l] -
+                L->lu[187][l] * L->k[1][7][l] - L->lu[188][l] * L->k[1][8][l] - L->lu[189][l] *
+                L->k[1][9][l];
+        L->k[1][11][l] = L->k[1][11][l] - L->lu[201][l] * L->k[1][3][l] - L->lu[202][l] *
+                L->k[1][4][l] - L->lu[203][l] * L->k[1][5][l] - L->lu[204][l] * L->k[1][6][l] -
+                L->lu[205][l] * L->k[1][7][l] - L->lu[206][l] * L->k[1][8][l] - L->lu[207][l] *
+                L->k[1][9][l] - L->lu[208][l] * L->k[1][10][l];
+        L->k[1][12][l] = L->k[1][12][l] - L->lu[219][l] * L->k[1][3][l] - L->lu[220][l] *
+                L->k[1][4][l] - L->lu[221][l] * L->k[1][5][l] - L->lu[222][l] * L->k[1][6][l] -
+                L->lu[223][l] * L->k[1][7][l] - L->lu[224][l] * L->k[1][8][l] - L->lu[225][l] *
+                L->k[1][9][l] - L->lu[226][l] * L->k[1][10][l] - L->lu[227][l] * L->k[1][11][l];
+        L->k[1][13][l] = L->k[1][13][l] - L->lu[237][l] * L->k[1][3][l] - L->lu[238][l] *
+                L->k[1][4][l] - L->lu[239][l] * L->k[1][5][l] - L->lu[240][l] * L->k[1][6][l] -
+                L->lu[241][l] * L->k[1][7][l] - L->lu[242][l] * L->k[1][8][l] - L->lu[243][l] *
+                L->k[1][9][l] - L->lu[244][l] * L->k[1][10][l] - L->lu[245][l] * L->k[1][11][l] -
+                L->lu[246][l] * L->k[1][12][l];
+        L->k[1][14][l] = L->k[1][14][l] - L->lu[255][l] * L->k[1][3][l] - L->lu[256][l] *
+                L->k[1][4][l] - L->lu[257][l] * L->k[1][5][l] - L->lu[258][l] * L->k[1][6][l] -
+                L->lu[259][l] * L->k[1][7][l] - L->lu[260][l] * L->k[1][8][l] - L->lu[261][l] *
+                L->k[1][9][l] - L->lu[262][l] * L->k[1][10][l] - L->lu[263][l] * L->k[1][11][l] -
+                L->lu[264][l] * L->k[1][12][l] - L->lu[265][l] * L->k[1][13][l];
+        L->k[1][15][l] = L->k[1][15][l] - L->lu[273][l] * L->k[1][3][l] - L->lu[274][l] *
+                L->k[1][4][l] - L->lu[275][l] * L->k[1][5][l] - L->lu[276][l] * L->k[1][6][l] -
+                L->lu[277][l] * L->k[1][7][l] - L->lu[278][l] * L->k[1][8][l] - L->lu[279][l] *
+                L->k[1][9][l] - L->lu[280][l] * L->k[1][10][l] - L->lu[281][l] * L->k[1][11][l] -
+                L->lu[282][l] * L->k[1][12][l] - L->lu[283][l] * L->k[1][13][l] - L->lu[284][l] *
+                L->k[1][14][l];
+        L->k[1][16][l] = L->k[1][16][l] - L->lu[291][l] * L->k[1][3][l] - L->lu[292][l] *
+                L->k[1][4][l] - L->lu[293][l] * L->k[1][5][l] - L->lu[294][l] * L->k[1][6][l] -
+                L->lu[295][l] * L->k[1][7][l] - L->lu[296][l] * L->k[1][8][l] - L->lu[297][l] *
+                L->k[1][9][l] - L->lu[298][l] * L->k[1][10][l] - L->lu[299][l] * L->k[1][11][l] -
+                L->lu[300][l] * L->k[1][12][l] - L->lu[301][l] * L->k[1][13][l] - L->lu[302][l] *
+                L->k[1][14][l] - L->lu[303][l] * L->k[1][15][l];
+        L->k[1][17][l] = L->k[1][17][l] - L->lu[309][l] * L->k[1][3][l] - L->lu[310][l] *
+                L->k[1][4][l] - L->lu[311][l] * L->k[1][5][l] - L->lu[312][l] * L->k[1][6][l] -
+                L->lu[313][l] * L->k[1][7][l] - L->lu[314][l] * L->k[1][8][l] - L->lu[315][l] *
+                L->k[1][9][l] - L->lu[316][l] * L->k[1][10][l] - L->lu[317][l] * L->k[1][11][l] -
+                L->lu[318][l] * L->k[1][12][l] - L->lu[319][l] * L->k[1][13][l] - L->lu[320][l] *
+                L->k[1][14][l] - L->lu[321][l] * L->k[1][15][l] - L->lu[322][l] * L->k[1][16][l];
+        L->k[1][17][l] = L->k[1][17][l] * L->lu[323][l];
+        L->k[1][16][l] = L->k[1][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[1][17][l];
+        L->k[1][15][l] = L->k[1][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[1][17][l] -
+                L->lu[286][l] * L->k[1][16][l];
+        L->k[1][14][l] = L->k[1][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[1][17][l] -
+                L->lu[268][l] * L->k[1][16][l] - L->lu[267][l] * L->k[1][15][l];
+        L->k[1][13][l] = L->k[1][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[1][17][l] -
+                L->lu[250][l] * L->k[1][16][l] - L->lu[249][l] * L->k[1][15][l] - L->lu[248][l] *
+                L->k[1][14][l];
+        L->k[1][12][l] = L->k[1][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[1][17][l] -
+                L->lu[232][l] * L->k[1][16][l] - L->lu[231][l] * L->k[1][15][l] - L->lu[230][l] *
+                L->k[1][14][l] - L->lu[229][l] * L->k[1][13][l];
+        L->k[1][11][l] = L->k[1][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[1][17][l] -
+                L->lu[214][l] * L->k[1][16][l] - L->lu[213][l] * L->k[1][15][l] - L->lu[212][l] *
+                L->k[1][14][l] - L->lu[211][l] * L->k[1][13][l] - L->lu[210][l] * L->k[1][12][l];
+        L->k[1][10][l] = L->k[1][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[1][17][l] -
+                L->lu[196][l] * L->k[1][16][l] - L->lu[195][l] * L->k[1][15][l] - L->lu[194][l] *
+                L->k[1][14][l] - L->lu[193][l] * L->k[1][13][l] - L->lu[192][l] * L->k[1][12][l]
+                - L->lu[191][l] * L->k[1][11][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[1][17][l] -
+                L->lu[178][l] * L->k[1][16][l] - L->lu[177][l] * L->k[1][15][l] - L->lu[176][l] *
+                L->k[1][14][l] - L->lu[175][l] * L->k[1][13][l] - L->lu[174][l] * L->k[1][12][l]
+                - L->lu[173][l] * L->k[1][11][l] - L->lu[172][l] * L->k[1][10][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[1][17][l] -
+                L->lu[160][l] * L->k[1][16][l] - L->lu[159][l] * L->k[1][15][l] - L->lu[158][l] *
+                L->k[1][14][l] - L->lu[157][l] * L->k[1][13][l] - L->lu[156][l] * L->k[1][12][l]
+                - L->lu[155][l] * L->k[1][11][l] - L->lu[154][l] * L->k[1][10][l] - L->lu[153][l]
+                * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[1][17][l] -
+                L->lu[142][l] * L->k[1][16][l] - L->lu[141][l] * L->k[1][15][l] - L->lu[140][l] *
+                L->k[1][14][l] - L->lu[139][l] * L->k[1][13][l] - L->lu[138][l] * L->k[1][12][l]
+                - L->lu[137][l] * L->k[1][11][l] - L->lu[136][l] * L->k[1][10][l] - L->lu[135][l]
+                * L->k[1][9][l] - L->lu[134][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[1][17][l] -
+                L->lu[124][l] * L->k[1][16][l] - L->lu[123][l] * L->k[1][15][l] - L->lu[122][l] *
+                L->k[1][14][l] - L->lu[121][l] * L->k[1][13][l] - L->lu[120][l] * L->k[1][12][l]
+                - L->lu[119][l] * L->k[1][11][l] - L->lu[118][l] * L->k[1][10][l] - L->lu[117][l]
+                * L->k[1][9][l] - L->lu[116][l] * L->k[1][8][l] - L->lu[115][l] * L->k[1][7][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[1][17][l] -
+                L->lu[106][l] * L->k[1][16][l] - L->lu[105][l] * L->k[1][15][l] - L->lu[104][l] *
+                L->k[1][14][l] - L->lu[103][l] * L->k[1][13][l] - L->lu[102][l] * L->k[1][12][l]
+                - L->lu[101][l] * L->k[1][11][l] - L->lu[100][l] * L->k[1][10][l] - L->lu[99][l]
+                * L->k[1][9][l] - L->lu[98][l] * L->k[1][8][l] - L->lu[97][l] * L->k[1][7][l] -
+                L->lu[96][l] * L->k[1][6][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[1][17][l] -
+                L->lu[88][l] * L->k[1][16][l] - L->lu[87][l] * L->k[1][15][l] - L->lu[86][l] *
+                L->k[1][14][l] - L->lu[85][l] * L->k[1][13][l] - L->lu[84][l] * L->k[1][12][l] -
+                L->lu[83][l] * L->k[1][11][l] - L->lu[82][l] * L->k[1][10][l] - L->lu[81][l] *
+                L->k[1][9][l] - L->lu[80][l] * L->k[1][8][l] - L->lu[79][l] * L->k[1][7][l] -
+                L->lu[78][l] * L->k[1][6][l] - L->lu[77][l] * L->k[1][5][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[1][17][l] -
+                L->lu[70][l] * L->k[1][16][l] - L->lu[69][l] * L->k[1][15][l] - L->lu[68][l] *
+                L->k[1][14][l] - L->lu[67][l] * L->k[1][13][l] - L->lu[66][l] * L->k[1][12][l] -
+                L->lu[65][l] * L->k[1][11][l] - L->lu[64][l] * L->k[1][10][l] - L->lu[63][l] *
+                L->k[1][9][l] - L->lu[62][l] * L->k[1][8][l] - L->lu[61][l] * L->k[1][7][l] -
+                L->lu[60][l] * L->k[1][6][l] - L->lu[59][l] * L->k[1][5][l] - L->lu[58][l] *
+                L->k[1][4][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[1][9][l] -
+                L->lu[44][l] * L->k[1][8][l] - L->lu[43][l] * L->k[1][7][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[1][9][l] -
+                L->lu[26][l] * L->k[1][8][l] - L->lu[25][l] * L->k[1][7][l] - L->lu[20][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[1][9][l] - L->lu[7][l] *
+                L->k[1][7][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 4 ? L->k[2][4][l] : L->k[2][3][l];
+        L->k[2][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[2][4][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 5 ? L->k[2][5][l] : L->k[2][3][l];
+        L->k[2][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 6 ? L->k[2][6][l] : L->k[2][3][l];
+        L->k[2][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 7 ? L->k[2][7][l] : L->k[2][3][l];
+        L->k[2][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 8 ? L->k[2][8][l] : L->k[2][3][l];
+        L->k[2][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 9 ? L->k[2][9][l] : L->k[2][3][l];
+        L->k[2][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 10 ? L->k[2][10][l] : L->k[2][3][l];
+        L->k[2][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 11 ? L->k[2][11][l] : L->k[2][3][l];
+        L->k[2][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 12 ? L->k[2][12][l] : L->k[2][3][l];
+        L->k[2][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 13 ? L->k[2][13][l] : L->k[2][3][l];
+        L->k[2][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 14 ? L->k[2][14][l] : L->k[2][3][l];
+        L->k[2][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 15 ? L->k[2][15][l] : L->k[2][3][l];
+        L->k[2][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 16 ? L->k[2][16][l] : L->k[2][3][l];
+        L->k[2][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 17 ? L->k[2][17][l] : L->k[2][3][l];
+        L->k[2][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 5 ? L->k[2][5][l] : L->k[2][4][l];
+        L->k[2][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 6 ? L->k[2][6][l] : L->k[2][4][l];
+        L->k[2][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 7 ? L->k[2][7][l] : L->k[2][4][l];
+        L->k[2][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 8 ? L->k[2][8][l] : L->k[2][4][l];
+        L->k[2][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 9 ? L->k[2][9][l] : L->k[2][4][l];
+        L->k[2][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 10 ? L->k[2][10][l] : L->k[2][4][l];
+        L->k[2][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 11 ? L->k[2][11][l] : L->k[2][4][l];
+        L->k[2][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 12 ? L->k[2][12][l] : L->k[2][4][l];
+        L->k[2][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 13 ? L->k[2][13][l] : L->k[2][4][l];
+        L->k[2][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 14 ? L->k[2][14][l] : L->k[2][4][l];
+        L->k[2][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 15 ? L->k[2][15][l] : L->k[2][4][l];
+        L->k[2][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 16 ? L->k[2][16][l] : L->k[2][4][l];
+        L->k[2][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 17 ? L->k[2][17][l] : L->k[2][4][l];
+        L->k[2][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 6 ? L->k[2][6][l] : L->k[2][5][l];
+        L->k[2][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 7 ? L->k[2][7][l] : L->k[2][5][l];
+        L->k[2][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 8 ? L->k[2][8][l] : L->k[2][5][l];
+        L->k[2][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 9 ? L->k[2][9][l] : L->k[2][5][l];
+        L->k[2][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 10 ? L->k[2][10][l] : L->k[2][5][l];
+        L->k[2][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 11 ? L->k[2][11][l] : L->k[2][5][l];
+        L->k[2][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 12 ? L->k[2][12][l] : L->k[2][5][l];
+        L->k[2][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 13 ? L->k[2][13][l] : L->k[2][5][l];
+        L->k[2][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 14 ? L->k[2][14][l] : L->k[2][5][l];
+        L->k[2][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 15 ? L->k[2][15][l] : L->k[2][5][l];
+        L->k[2][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 16 ? L->k[2][16][l] : L->k[2][5][l];
+        L->k[2][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 17 ? L->k[2][17][l] : L->k[2][5][l];
+        L->k[2][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 7 ? L->k[2][7][l] : L->k[2][6][l];
+        L->k[2][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 8 ? L->k[2][8][l] : L->k[2][6][l];
+        L->k[2][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 9 ? L->k[2][9][l] : L->k[2][6][l];
+        L->k[2][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 10 ? L->k[2][10][l] : L->k[2][6][l];
+        L->k[2][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 11 ? L->k[2][11][l] : L->k[2][6][l];
+        L->k[2][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 12 ? L->k[2][12][l] : L->k[2][6][l];
+        L->k[2][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 13 ? L->k[2][13][l] : L->k[2][6][l];
+        L->k[2][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 14 ? L->k[2][14][l] : L->k[2][6][l];
+        L->k[2][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 15 ? L->k[2][15][l] : L->k[2][6][l];
+        L->k[2][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 16 ? L->k[2][16][l] : L->k[2][6][l];
+        L->k[2][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 17 ? L->k[2][17][l] : L->k[2][6][l];
+        L->k[2][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 10 ? L->k[2][10][l] : L->k[2][7][l];
+        L->k[2][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 11 ? L->k[2][11][l] : L->k[2][7][l];
+        L->k[2][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 12 ? L->k[2][12][l] : L->k[2][7][l];
+        L->k[2][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 13 ? L->k[2][13][l] : L->k[2][7][l];
+        L->k[2][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 14 ? L->k[2][14][l] : L->k[2][7][l];
+        L->k[2][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 15 ? L->k[2][15][l] : L->k[2][7][l];
+        L->k[2][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 16 ? L->k[2][16][l] : L->k[2][7][l];
+        L->k[2][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 17 ? L->k[2][17][l] : L->k[2][7][l];
+        L->k[2][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 10 ? L->k[2][10][l] : L->k[2][8][l];
+        L->k[2][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 11 ? L->k[2][11][l] : L->k[2][8][l];
+        L->k[2][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 12 ? L->k[2][12][l] : L->k[2][8][l];
+        L->k[2][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 13 ? L->k[2][13][l] : L->k[2][8][l];
+        L->k[2][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 14 ? L->k[2][14][l] : L->k[2][8][l];
+        L->k[2][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 15 ? L->k[2][15][l] : L->k[2][8][l];
+        L->k[2][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 16 ? L->k[2][16][l] : L->k[2][8][l];
+        L->k[2][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 17 ? L->k[2][17][l] : L->k[2][8][l];
+        L->k[2][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 10 ? L->k[2][10][l] : L->k[2][9][l];
+        L->k[2][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 11 ? L->k[2][11][l] : L->k[2][9][l];
+        L->k[2][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 12 ? L->k[2][12][l] : L->k[2][9][l];
+        L->k[2][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 13 ? L->k[2][13][l] : L->k[2][9][l];
+        L->k[2][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 14 ? L->k[2][14][l] : L->k[2][9][l];
+        L->k[2][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 15 ? L->k[2][15][l] : L->k[2][9][l];
+        L->k[2][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 16 ? L->k[2][16][l] : L->k[2][9][l];
+        L->k[2][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 17 ? L->k[2][17][l] : L->k[2][9][l];
+        L->k[2][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 11 ? L->k[2][11][l] : L->k[2][10][l];
+        L->k[2][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 12 ? L->k[2][12][l] : L->k[2][10][l];
+        L->k[2][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 13 ? L->k[2][13][l] : L->k[2][10][l];
+        L->k[2][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 14 ? L->k[2][14][l] : L->k[2][10][l];
+        L->k[2][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 15 ? L->k[2][15][l] : L->k[2][10][l];
+        L->k[2][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 16 ? L->k[2][16][l] : L->k[2][10][l];
+        L->k[2][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 17 ? L->k[2][17][l] : L->k[2][10][l];
+        L->k[2][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 12 ? L->k[2][12][l] : L->k[2][11][l];
+        L->k[2][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 13 ? L->k[2][13][l] : L->k[2][11][l];
+        L->k[2][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 14 ? L->k[2][14][l] : L->k[2][11][l];
+        L->k[2][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 15 ? L->k[2][15][l] : L->k[2][11][l];
+        L->k[2][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 16 ? L->k[2][16][l] : L->k[2][11][l];
+        L->k[2][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 17 ? L->k[2][17][l] : L->k[2][11][l];
+        L->k[2][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 13 ? L->k[2][13][l] : L->k[2][12][l];
+        L->k[2][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 14 ? L->k[2][14][l] : L->k[2][12][l];
+        L->k[2][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 15 ? L->k[2][15][l] : L->k[2][12][l];
+        L->k[2][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 16 ? L->k[2][16][l] : L->k[2][12][l];
+        L->k[2][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 17 ? L->k[2][17][l] : L->k[2][12][l];
+        L->k[2][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 14 ? L->k[2][14][l] : L->k[2][13][l];
+        L->k[2][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 15 ? L->k[2][15][l] : L->k[2][13][l];
+        L->k[2][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 16 ? L->k[2][16][l] : L->k[2][13][l];
+        L->k[2][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 17 ? L->k[2][17][l] : L->k[2][13][l];
+        L->k[2][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 15 ? L->k[2][15][l] : L->k[2][14][l];
+        L->k[2][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 16 ? L->k[2][16][l] : L->k[2][14][l];
+        L->k[2][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 17 ? L->k[2][17][l] : L->k[2][14][l];
+        L->k[2][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][15][l];
+        L->k[2][15][l] = L->piv[15][l] == 16 ? L->k[2][16][l] : L->k[2][15][l];
+        L->k[2][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][15][l];
+        L->k[2][15][l] = L->piv[15][l] == 17 ? L->k[2][17][l] : L->k[2][15][l];
+        L->k[2][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][16][l];
+        L->k[2][16][l] = L->piv[16][l] == 17 ? L->k[2][17][l] : L->k[2][16][l];
+        L->k[2][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[2][17][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[37][l] * L->k[2][1][l];
+        L->k[2][4][l] = L->k[2][4][l] - L->lu[75][l] * L->k[2][3][l];
+        L->k[2][5][l] = L->k[2][5][l] - L->lu[93][l] * L->k[2][3][l] - L->lu[94][l] * L->k[2][4][l];
+        L->k[2][6][l] = L->k[2][6][l] - L->lu[111][l] * L->k[2][3][l] - L->lu[112][l] *
+                L->k[2][4][l] - L->lu[113][l] * L->k[2][5][l];
+        L->k[2][7][l] = L->k[2][7][l] - L->lu[129][l] * L->k[2][3][l] - L->lu[130][l] *
+                L->k[2][4][l] - L->lu[131][l] * L->k[2][5][l] - L->lu[132][l] * L->k[2][6][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[147][l] * L->k[2][3][l] - L->lu[148][l] *
+                L->k[2][4][l] - L->lu[149][l] * L->k[2][5][l] - L->lu[150][l] * L->k[2][6][l] -
+                L->lu[151][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[165][l] * L->k[2][3][l] - L->lu[166][l] *
+                L->k[2][4][l] - L->lu[167][l] * L->k[2][5][l] - L->lu[168][l] * L->k[2][6][l] -
+                L->lu[169][l] * L->k[2][7][l] - L->lu[170][l] * L->k[2][8][l];
+        L->k[2][10][l] = L->k[2][10][l] - L->lu[183][l] * L->k[2][3][l] - L->lu[184][l] *
+                L->k[2][4][l] - L->lu[185][l] * L->k[2][5][l] - L->lu[186][l] * L->k[2][6][l] -
+                L->lu[187][l] * L->k[2][7][l] - L->lu[188][l] * L->k[2][8][l] - L->lu[189][l] *
+                L->k[2][9][l];
+        L->k[2][11][l] = L->k[2][11][l] - L->lu[201][l] * L->k[2][3][l] - L->lu[202][l] *
+                L->k[2][4][l] - L->lu[203][l] * L->k[2][5][l] - L->lu[204][l] * L->k[2][6][l] -
+                L->lu[205][l] * L->k[2][7][l] - L->lu[206][l] * L->k[2][8][l] - L->lu[207][l] *
+                L->k[2][9][l] - L->lu[208][l] * L->k[2][10][l];
+        L->k[2][12][l] = L->k[2][12][l] - L->lu[219][l] * L->k[2][3][l] - L->lu[220][l] *
+                L->k[2][4][l] - L->lu[221][l] * L->k[2][5][l] - L->lu[222][l] * L->k[2][6][l] -
+                L->lu[223][l] * L->k[2][7][l] - L->lu[224][l] * L->k[2][8][l] - L->lu[225][l] *
+                L->k[2][9][l] - L->lu[226][l] * L->k[2][10][l] - L->lu[227][l] * L->k[2][11][l];
+        L->k[2][13][l] = L->k[2][13][l] - L->lu[237][l] * L->k[2][3][l] - L->lu[238][l] *
+                L->k[2][4][l] - L->lu[239][l] * L->k[2][5][l] - L->lu[240][l] * L->k[2][6][l] -
+                L->lu[241][l] * L->k[2][7][l] - L->lu[242][l] * L->k[2][8][l] - L->lu[243][l] *
+                L->k[2][9][l] - L->lu[244][l] * L->k[2][10][l] - L->lu[245][l] * L->k[2][11][l] -
+                L->lu[246][l] * L->k[2][12][l];
+        L->k[2][14][l] = L->k[2][14][l] - L->lu[255][l] * L->k[2][3][l] - L->lu[256][l] *
+                L->k[2][4][l] - L->lu[257][l] * L->k[2][5][l] - L->lu[258][l] * L->k[2][6][l] -
+                L->lu[259][l] * L->k[2][7][l] - L->lu[260][l] * L->k[2][8][l] - L->lu[261][l] *
+                L->k[2][9][l] - L->lu[262][l] * L->k[2][10][l] - L->lu[263][l] * L->k[2][11][l] -
+                L->lu[264][l] * L->k[2][12][l] - L->lu[265][l] * L->k[2][13][l];
+        L->k[2][15][l] = L->k[2][15][l] - L->lu[273][l] * L->k[2][3][l] - L->lu[274][l] *
+                L->k[2][4][l] - L->lu[275][l] * L->k[2][5][l] - L->lu[276][l] * L->k[2][6][l] -
+                L->lu[277][l] * L->k[2][7][l] - L->lu[278][l] * L->k[2][8][l] - L->lu[279][l] *
+                L->k[2][9][l] - L->lu[280][l] * L->k[2][10][l] - L->lu[281][l] * L->k[2][11][l] -
+                L->lu[282][l] * L->k[2][12][l] - L->lu[283][l] * L->k[2][13][l] - L->lu[284][l] *
+                L->k[2][14][l];
+        L->k[2][16][l] = L->k[2][16][l] - L->lu[291][l] * L->k[2][3][l] - L->lu[292][l] *
+                L->k[2][4][l] - L->lu[293][l] * L->k[2][5][l] - L->lu[294][l] * L->k[2][6][l] -
+                L->lu[295][l] * L->k[2][7][l] - L->lu[296][l] * L->k[2][8][l] - L->lu[297][l] *
+                L->k[2][9][l] - L->lu[298][l] * L->k[2][10][l] - L->lu[299][l] * L->k[2][11][l] -
+                L->lu[300][l] * L->k[2][12][l] - L->lu[301][l] * L->k[2][13][l] - L->lu[302][l] *
+                L->k[2][14][l] - L->lu[303][l] * L->k[2][15][l];
+        L->k[2][17][l] = L->k[2][17][l] - L->lu[309][l] * L->k[2][3][l] - L->lu[310][l] *
+                L->k[2][4][l] - L->lu[311][l] * L->k[2][5][l] - L->lu[312][l] * L->k[2][6][l] -
+                L->lu[313][l] * L->k[2][7][l] - L->lu[314][l] * L->k[2][8][l] - L->lu[315][l] *
+                L->k[2][9][l] - L->lu[316][l] * L->k[2][10][l] - L->lu[317][l] * L->k[2][11][l] -
+                L->lu[318][l] * L->k[2][12][l] - L->lu[319][l] * L->k[2][13][l] - L->lu[320][l] *
+                L->k[2][14][l] - L->lu[321][l] * L->k[2][15][l] - L->lu[322][l] * L->k[2][16][l];
+        L->k[2][17][l] = L->k[2][17][l] * L->lu[323][l];
+        L->k[2][16][l] = L->k[2][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[2][17][l];
+        L->k[2][15][l] = L->k[2][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[2][17][l] -
+                L->lu[286][l] * L->k[2][16][l];
+        L->k[2][14][l] = L->k[2][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[2][17][l] -
+                L->lu[268][l] * L->k[2][16][l] - L->lu[267][l] * L->k[2][15][l];
+        L->k[2][13][l] = L->k[2][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[2][17][l] -
+                L->lu[250][l] * L->k[2][16][l] - L->lu[249][l] * L->k[2][15][l] - L->lu[248][l] *
+                L->k[2][14][l];
+        L->k[2][12][l] = L->k[2][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[2][17][l] -
+                L->lu[232][l] * L->k[2][16][l] - L->lu[231][l] * L->k[2][15][l] - L->lu[230][l] *
+                L->k[2][14][l] - L->lu[229][l] * L->k[2][13][l];
+        L->k[2][11][l] = L->k[2][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[2][17][l] -
+                L->lu[214][l] * L->k[2][16][l] - L->lu[213][l] * L->k[2][15][l] - L->lu[212][l] *
+                L->k[2][14][l] - L->lu[211][l] * L->k[2][13][l] - L->lu[210][l] * L->k[2][12][l];
+        L->k[2][10][l] = L->k[2][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[2][17][l] -
+                L->lu[196][l] * L->k[2][16][l] - L->lu[195][l] * L->k[2][15][l] - L->lu[194][l] *
+                L->k[2][14][l] - L->lu[193][l] * L->k[2][13][l] - L->lu[192][l] * L->k[2][12][l]
+                - L->lu[191][l] * L->k[2][11][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[2][17][l] -
+                L->lu[178][l] * L->k[2][16][l] - L->lu[177][l] * L->k[2][15][l] - L->lu[176][l] *
+                L->k[2][14][l] - L->lu[175][l] * L->k[2][13][l] - L->lu[174][l] * L->k[2][12][l]
+                - L->lu[173][l] * L->k[2][11][l] - L->lu[172][l] * L->k[2][10][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[2][17][l] -
+                L->lu[160][l] * L->k[2][16][l] - L->lu[159][l] * L->k[2][15][l] - L->lu[158][l] *
+                L->k[2][14][l] - L->lu[157][l] * L->k[2][13][l] - L->lu[156][l] * L->k[2][12][l]
+                - L->lu[155][l] * L->k[2][11][l] - L->lu[154][l] * L->k[2][10][l] - L->lu[153][l]
+                * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[2][17][l] -
+                L->lu[142][l] * L->k[2][16][l] - L->lu[141][l] * L->k[2][15][l] - L->lu[140][l] *
+                L->k[2][14][l] - L->lu[139][l] * L->k[2][13][l] - L->lu[138][l] * L->k[2][12][l]
+                - L->lu[137][l] * L->k[2][11][l] - L->lu[136][l] * L->k[2][10][l] - L->lu[135][l]
+                * L->k[2][9][l] - L->lu[134][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[2][17][l] -
+                L->lu[124][l] * L->k[2][16][l] - L->lu[123][l] * L->k[2][15][l] - L->lu[122][l] *
+                L->k[2][14][l] - L->lu[121][l] * L->k[2][13][l] - L->lu[120][l] * L->k[2][12][l]
+                - L->lu[119][l] * L->k[2][11][l] - L->lu[118][l] * L->k[2][10][l] - L->lu[117][l]
+                * L->k[2][9][l] - L->lu[116][l] * L->k[2][8][l] - L->lu[115][l] * L->k[2][7][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[2][17][l] -
+                L->lu[106][l] * L->k[2][16][l] - L->lu[105][l] * L->k[2][15][l] - L->lu[104][l] *
+                L->k[2][14][l] - L->lu[103][l] * L->k[2][13][l] - L->lu[102][l] * L->k[2][12][l]
+                - L->lu[101][l] * L->k[2][11][l] - L->lu[100][l] * L->k[2][10][l] - L->lu[99][l]
+                * L->k[2][9][l] - L->lu[98][l] * L->k[2][8][l] - L->lu[97][l] * L->k[2][7][l] -
+                L->lu[96][l] * L->k[2][6][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[2][17][l] -
+                L->lu[88][l] * L->k[2][16][l] - L->lu[87][l] * L->k[2][15][l] - L->lu[86][l] *
+                L->k[2][14][l] - L->lu[85][l] * L->k[2][13][l] - L->lu[84][l] * L->k[2][12][l] -
+                L->lu[83][l] * L->k[2][11][l] - L->lu[82][l] * L->k[2][10][l] - L->lu[81][l] *
+                L->k[2][9][l] - L->lu[80][l] * L->k[2][8][l] - L->lu[79][l] * L->k[2][7][l] -
+                L->lu[78][l] * L->k[2][6][l] - L->lu[77][l] * L->k[2][5][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[2][17][l] -
+                L->lu[70][l] * L->k[2][16][l] - L->lu[69][l] * L->k[2][15][l] - L->lu[68][l] *
+                L->k[2][14][l] - L->lu[67][l] * L->k[2][13][l] - L->lu[66][l] * L->k[2][12][l] -
+                L->lu[65][l] * L->k[2][11][l] - L->lu[64][l] * L->k[2][10][l] - L->lu[63][l] *
+                L->k[2][9][l] - L->lu[62][l] * L->k[2][8][l] - L->lu[61][l] * L->k[2][7][l] -
+                L->lu[60][l] * L->k[2][6][l] - L->lu[59][l] * L->k[2][5][l] - L->lu[58][l] *
+                L->k[2][4][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[2][9][l] -
+                L->lu[44][l] * L->k[2][8][l] - L->lu[43][l] * L->k[2][7][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[2][9][l] -
+                L->lu[26][l] * L->k[2][8][l] - L->lu[25][l] * L->k[2][7][l] - L->lu[20][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[2][9][l] - L->lu[7][l] *
+                L->k[2][7][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 4 ? L->k[3][4][l] : L->k[3][3][l];
+        L->k[3][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[3][4][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 5 ? L->k[3][5][l] : L->k[3][3][l];
+        L->k[3][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 6 ? L->k[3][6][l] : L->k[3][3][l];
+        L->k[3][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 7 ? L->k[3][7][l] : L->k[3][3][l];
+        L->k[3][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 8 ? L->k[3][8][l] : L->k[3][3][l];
+        L->k[3][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 9 ? L->k[3][9][l] : L->k[3][3][l];
+        L->k[3][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 10 ? L->k[3][10][l] : L->k[3][3][l];
+        L->k[3][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 11 ? L->k[3][11][l] : L->k[3][3][l];
+        L->k[3][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 12 ? L->k[3][12][l] : L->k[3][3][l];
+        L->k[3][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 13 ? L->k[3][13][l] : L->k[3][3][l];
+        L->k[3][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 14 ? L->k[3][14][l] : L->k[3][3][l];
+        L->k[3][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 15 ? L->k[3][15][l] : L->k[3][3][l];
+        L->k[3][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 16 ? L->k[3][16][l] : L->k[3][3][l];
+        L->k[3][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 17 ? L->k[3][17][l] : L->k[3][3][l];
+        L->k[3][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 5 ? L->k[3][5][l] : L->k[3][4][l];
+        L->k[3][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 6 ? L->k[3][6][l] : L->k[3][4][l];
+        L->k[3][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 7 ? L->k[3][7][l] : L->k[3][4][l];
+        L->k[3][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 8 ? L->k[3][8][l] : L->k[3][4][l];
+        L->k[3][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 9 ? L->k[3][9][l] : L->k[3][4][l];
+        L->k[3][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 10 ? L->k[3][10][l] : L->k[3][4][l];
+        L->k[3][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 11 ? L->k[3][11][l] : L->k[3][4][l];
+        L->k[3][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 12 ? L->k[3][12][l] : L->k[3][4][l];
+        L->k[3][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 13 ? L->k[3][13][l] : L->k[3][4][l];
+        L->k[3][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 14 ? L->k[3][14][l] : L->k[3][4][l];
+        L->k[3][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 15 ? L->k[3][15][l] : L->k[3][4][l];
+        L->k[3][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 16 ? L->k[3][16][l] : L->k[3][4][l];
+        L->k[3][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 17 ? L->k[3][17][l] : L->k[3][4][l];
+        L->k[3][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 6 ? L->k[3][6][l] : L->k[3][5][l];
+        L->k[3][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 7 ? L->k[3][7][l] : L->k[3][5][l];
+        L->k[3][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 8 ? L->k[3][8][l] : L->k[3][5][l];
+        L->k[3][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 9 ? L->k[3][9][l] : L->k[3][5][l];
+        L->k[3][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 10 ? L->k[3][10][l] : L->k[3][5][l];
+        L->k[3][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 11 ? L->k[3][11][l] : L->k[3][5][l];
+        L->k[3][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 12 ? L->k[3][12][l] : L->k[3][5][l];
+        L->k[3][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 13 ? L->k[3][13][l] : L->k[3][5][l];
+        L->k[3][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 14 ? L->k[3][14][l] : L->k[3][5][l];
+        L->k[3][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 15 ? L->k[3][15][l] : L->k[3][5][l];
+        L->k[3][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 16 ? L->k[3][16][l] : L->k[3][5][l];
+        L->k[3][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 17 ? L->k[3][17][l] : L->k[3][5][l];
+        L->k[3][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 7 ? L->k[3][7][l] : L->k[3][6][l];
+        L->k[3][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 8 ? L->k[3][8][l] : L->k[3][6][l];
+        L->k[3][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 9 ? L->k[3][9][l] : L->k[3][6][l];
+        L->k[3][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 10 ? L->k[3][10][l] : L->k[3][6][l];
+        L->k[3][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 11 ? L->k[3][11][l] : L->k[3][6][l];
+        L->k[3][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 12 ? L->k[3][12][l] : L->k[3][6][l];
+        L->k[3][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 13 ? L->k[3][13][l] : L->k[3][6][l];
+        L->k[3][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 14 ? L->k[3][14][l] : L->k[3][6][l];
+        L->k[3][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 15 ? L->k[3][15][l] : L->k[3][6][l];
+        L->k[3][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 16 ? L->k[3][16][l] : L->k[3][6][l];
+        L->k[3][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 17 ? L->k[3][17][l] : L->k[3][6][l];
+        L->k[3][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 10 ? L->k[3][10][l] : L->k[3][7][l];
+        L->k[3][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 11 ? L->k[3][11][l] : L->k[3][7][l];
+        L->k[3][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 12 ? L->k[3][12][l] : L->k[3][7][l];
+        L->k[3][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 13 ? L->k[3][13][l] : L->k[3][7][l];
+        L->k[3][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 14 ? L->k[3][14][l] : L->k[3][7][l];
+        L->k[3][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 15 ? L->k[3][15][l] : L->k[3][7][l];
+        L->k[3][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 16 ? L->k[3][16][l] : L->k[3][7][l];
+        L->k[3][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 17 ? L->k[3][17][l] : L->k[3][7][l];
+        L->k[3][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 10 ? L->k[3][10][l] : L->k[3][8][l];
+        L->k[3][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 11 ? L->k[3][11][l] : L->k[3][8][l];
+        L->k[3][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 12 ? L->k[3][12][l] : L->k[3][8][l];
+        L->k[3][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 13 ? L->k[3][13][l] : L->k[3][8][l];
+        L->k[3][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 14 ? L->k[3][14][l] : L->k[3][8][l];
+        L->k[3][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 15 ? L->k[3][15][l] : L->k[3][8][l];
+        L->k[3][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 16 ? L->k[3][16][l] : L->k[3][8][l];
+        L->k[3][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 17 ? L->k[3][17][l] : L->k[3][8][l];
+        L->k[3][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 10 ? L->k[3][10][l] : L->k[3][9][l];
+        L->k[3][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 11 ? L->k[3][11][l] : L->k[3][9][l];
+        L->k[3][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 12 ? L->k[3][12][l] : L->k[3][9][l];
+        L->k[3][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 13 ? L->k[3][13][l] : L->k[3][9][l];
+        L->k[3][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 14 ? L->k[3][14][l] : L->k[3][9][l];
+        L->k[3][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 15 ? L->k[3][15][l] : L->k[3][9][l];
+        L->k[3][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 16 ? L->k[3][16][l] : L->k[3][9][l];
+        L->k[3][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 17 ? L->k[3][17][l] : L->k[3][9][l];
+        L->k[3][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 11 ? L->k[3][11][l] : L->k[3][10][l];
+        L->k[3][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 12 ? L->k[3][12][l] : L->k[3][10][l];
+        L->k[3][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 13 ? L->k[3][13][l] : L->k[3][10][l];
+        L->k[3][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 14 ? L->k[3][14][l] : L->k[3][10][l];
+        L->k[3][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 15 ? L->k[3][15][l] : L->k[3][10][l];
+        L->k[3][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 16 ? L->k[3][16][l] : L->k[3][10][l];
+        L->k[3][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 17 ? L->k[3][17][l] : L->k[3][10][l];
+        L->k[3][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 12 ? L->k[3][12][l] : L->k[3][11][l];
+        L->k[3][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 13 ? L->k[3][13][l] : L->k[3][11][l];
+        L->k[3][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 14 ? L->k[3][14][l] : L->k[3][11][l];
+        L->k[3][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 15 ? L->k[3][15][l] : L->k[3][11][l];
+        L->k[3][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 16 ? L->k[3][16][l] : L->k[3][11][l];
+        L->k[3][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 17 ? L->k[3][17][l] : L->k[3][11][l];
+        L->k[3][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 13 ? L->k[3][13][l] : L->k[3][12][l];
+        L->k[3][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 14 ? L->k[3][14][l] : L->k[3][12][l];
+        L->k[3][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 15 ? L->k[3][15][l] : L->k[3][12][l];
+        L->k[3][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 16 ? L->k[3][16][l] : L->k[3][12][l];
+        L->k[3][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 17 ? L->k[3][17][l] : L->k[3][12][l];
+        L->k[3][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 14 ? L->k[3][14][l] : L->k[3][13][l];
+        L->k[3][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 15 ? L->k[3][15][l] : L->k[3][13][l];
+        L->k[3][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 16 ? L->k[3][16][l] : L->k[3][13][l];
+        L->k[3][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 17 ? L->k[3][17][l] : L->k[3][13][l];
+        L->k[3][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 15 ? L->k[3][15][l] : L->k[3][14][l];
+        L->k[3][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 16 ? L->k[3][16][l] : L->k[3][14][l];
+        L->k[3][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 17 ? L->k[3][17][l] : L->k[3][14][l];
+        L->k[3][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][15][l];
+        L->k[3][15][l] = L->piv[15][l] == 16 ? L->k[3][16][l] : L->k[3][15][l];
+        L->k[3][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][15][l];
+        L->k[3][15][l] = L->piv[15][l] == 17 ? L->k[3][17][l] : L->k[3][15][l];
+        L->k[3][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][16][l];
+        L->k[3][16][l] = L->piv[16][l] == 17 ? L->k[3][17][l] : L->k[3][16][l];
+        L->k[3][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[3][17][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[37][l] * L->k[3][1][l];
+        L->k[3][4][l] = L->k[3][4][l] - L->lu[75][l] * L->k[3][3][l];
+        L->k[3][5][l] = L->k[3][5][l] - L->lu[93][l] * L->k[3][3][l] - L->lu[94][l] * L->k[3][4][l];
+        L->k[3][6][l] = L->k[3][6][l] - L->lu[111][l] * L->k[3][3][l] - L->lu[112][l] *
+                L->k[3][4][l] - L->lu[113][l] * L->k[3][5][l];
+        L->k[3][7][l] = L->k[3][7][l] - L->lu[129][l] * L->k[3][3][l] - L->lu[130][l] *
+                L->k[3][4][l] - L->lu[131][l] * L->k[3][5][l] - L->lu[132][l] * L->k[3][6][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[147][l] * L->k[3][3][l] - L->lu[148][l] *
+                L->k[3][4][l] - L->lu[149][l] * L->k[3][5][l] - L->lu[150][l] * L->k[3][6][l] -
+                L->lu[151][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[165][l] * L->k[3][3][l] - L->lu[166][l] *
+                L->k[3][4][l] - L->lu[167][l] * L->k[3][5][l] - L->lu[168][l] * L->k[3][6][l] -
+                L->lu[169][l] * L->k[3][7][l] - L->lu[170][l] * L->k[3][8][l];
+        L->k[3][10][l] = L->k[3][10][l] - L->lu[183][l] * L->k[3][3][l] - L->lu[184][l] *
+                L->k[3][4][l] - L->lu[185][l] * L->k[3][5][l] - L->lu[186][l] * L->k[3][6][l] -
+                L->lu[187][l] * L->k[3][7][l] - L->lu[188][l] * L->k[3][8][l] - L->lu[189][l] *
+                L->k[3][9][l];
+        L->k[3][11][l] = L->k[3][11][l] - L->lu[201][l] * L->k[3][3][l] - L->lu[202][l] *
+                L->k[3][4][l] - L->lu[203][l] * L->k[3][5][l] - L->lu[204][l] * L->k[3][6][l] -
+                L->lu[205][l] * L->k[3][7][l] - L->lu[206][l] * L->k[3][8][l] - L->lu[207][l] *
+                L->k[3][9][l] - L->lu[208][l] * L->k[3][10][l];
+        L->k[3][12][l] = L->k[3][12][l] - L->lu[219][l] * L->k[3][3][l] - L->lu[220][l] *
+                L->k[3][4][l] - L->lu[221][l] * L->k[3][5][l] - L->lu[222][l] * L->k[3][6][l] -
+                L->lu[223][l] * L->k[3][7][l] - L->lu[224][l] * L->k[3][8][l] - L->lu[225][l] *
+                L->k[3][9][l] - L->lu[226][l] * L->k[3][10][l] - L->lu[227][l] * L->k[3][11][l];
+        L->k[3][13][l] = L->k[3][13][l] - L->lu[237][l] * L->k[3][3][l] - L->lu[238][l] *
+                L->k[3][4][l] - L->lu[239][l] * L->k[3][5][l] - L->lu[240][l] * L->k[3][6][l] -
+                L->lu[241][l] * L->k[3][7][l] - L->lu[242][l] * L->k[3][8][l] - L->lu[243][l] *
+                L->k[3][9][l] - L->lu[244][l] * L->k[3][10][l] - L->lu[245][l] * L->k[3][11][l] -
+                L->lu[246][l] * L->k[3][12][l];
+        L->k[3][14][l] = L->k[3][14][l] - L->lu[255][l] * L->k[3][3][l] - L->lu[256][l] *
+                L->k[3][4][l] - L->lu[257][l] * L->k[3][5][l] - L->lu[258][l] * L->k[3][6][l] -
+                L->lu[259][l] * L->k[3][7][l] - L->lu[260][l] * L->k[3][8][l] - L->lu[261][l] *
+                L->k[3][9][l] - L->lu[262][l] * L->k[3][10][l] - L->lu[263][l] * L->k[3][11][l] -
+                L->lu[264][l] * L->k[3][12][l] - L->lu[265][l] * L->k[3][13][l];
+        L->k[3][15][l] = L->k[3][15][l] - L->lu[273][l] * L->k[3][3][l] - L->lu[274][l] *
+                L->k[3][4][l] - L->lu[275][l] * L->k[3][5][l] - L->lu[276][l] * L->k[3][6][l] -
+                L->lu[277][l] * L->k[3][7][l] - L->lu[278][l] * L->k[3][8][l] - L->lu[279][l] *
+                L->k[3][9][l] - L->lu[280][l] * L->k[3][10][l] - L->lu[281][l] * L->k[3][11][l] -
+                L->lu[282][l] * L->k[3][12][l] - L->lu[283][l] * L->k[3][13][l] - L->lu[284][l] *
+                L->k[3][14][l];
+        L->k[3][16][l] = L->k[3][16][l] - L->lu[291][l] * L->k[3][3][l] - L->lu[292][l] *
+                L->k[3][4][l] - L->lu[293][l] * L->k[3][5][l] - L->lu[294][l] * L->k[3][6][l] -
+                L->lu[295][l] * L->k[3][7][l] - L->lu[296][l] * L->k[3][8][l] - L->lu[297][l] *
+                L->k[3][9][l] - L->lu[298][l] * L->k[3][10][l] - L->lu[299][l] * L->k[3][11][l] -
+                L->lu[300][l] * L->k[3][12][l] - L->lu[301][l] * L->k[3][13][l] - L->lu[302][l] *
+                L->k[3][14][l] - L->lu[303][l] * L->k[3][15][l];
+        L->k[3][17][l] = L->k[3][17][l] - L->lu[309][l] * L->k[3][3][l] - L->lu[310][l] *
+                L->k[3][4][l] - L->lu[311][l] * L->k[3][5][l] - L->lu[312][l] * L->k[3][6][l] -
+                L->lu[313][l] * L->k[3][7][l] - L->lu[314][l] * L->k[3][8][l] - L->lu[315][l] *
+                L->k[3][9][l] - L->lu[316][l] * L->k[3][10][l] - L->lu[317][l] * L->k[3][11][l] -
+                L->lu[318][l] * L->k[3][12][l] - L->lu[319][l] * L->k[3][13][l] - L->lu[320][l] *
+                L->k[3][14][l] - L->lu[321][l] * L->k[3][15][l] - L->lu[322][l] * L->k[3][16][l];
+        L->k[3][17][l] = L->k[3][17][l] * L->lu[323][l];
+        L->k[3][16][l] = L->k[3][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[3][17][l];
+        L->k[3][15][l] = L->k[3][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[3][17][l] -
+                L->lu[286][l] * L->k[3][16][l];
+        L->k[3][14][l] = L->k[3][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[3][17][l] -
+                L->lu[268][l] * L->k[3][16][l] - L->lu[267][l] * L->k[3][15][l];
+        L->k[3][13][l] = L->k[3][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[3][17][l] -
+                L->lu[250][l] * L->k[3][16][l] - L->lu[249][l] * L->k[3][15][l] - L->lu[248][l] *
+                L->k[3][14][l];
+        L->k[3][12][l] = L->k[3][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[3][17][l] -
+                L->lu[232][l] * L->k[3][16][l] - L->lu[231][l] * L->k[3][15][l] - L->lu[230][l] *
+                L->k[3][14][l] - L->lu[229][l] * L->k[3][13][l];
+        L->k[3][11][l] = L->k[3][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[3][17][l] -
+                L->lu[214][l] * L->k[3][16][l] - L->lu[213][l] * L->k[3][15][l] - L->lu[212][l] *
+                L->k[3][14][l] - L->lu[211][l] * L->k[3][13][l] - L->lu[210][l] * L->k[3][12][l];
+        L->k[3][10][l] = L->k[3][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[3][17][l] -
+                L->lu[196][l] * L->k[3][16][l] - L->lu[195][l] * L->k[3][15][l] - L->lu[194][l] *
+                L->k[3][14][l] - L->lu[193][l] * L->k[3][13][l] - L->lu[192][l] * L->k[3][12][l]
+                - L->lu[191][l] * L->k[3][11][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[3][17][l] -
+                L->lu[178][l] * L->k[3][16][l] - L->lu[177][l] * L->k[3][15][l] - L->lu[176][l] *
+                L->k[3][14][l] - L->lu[175][l] * L->k[3][13][l] - L->lu[174][l] * L->k[3][12][l]
+                - L->lu[173][l] * L->k[3][11][l] - L->lu[172][l] * L->k[3][10][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[3][17][l] -
+                L->lu[160][l] * L->k[3][16][l] - L->lu[159][l] * L->k[3][15][l] - L->lu[158][l] *
+                L->k[3][14][l] - L->lu[157][l] * L->k[3][13][l] - L->lu[156][l] * L->k[3][12][l]
+                - L->lu[155][l] * L->k[3][11][l] - L->lu[154][l] * L->k[3][10][l] - L->lu[153][l]
+                * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[3][17][l] -
+                L->lu[142][l] * L->k[3][16][l] - L->lu[141][l] * L->k[3][15][l] - L->lu[140][l] *
+                L->k[3][14][l] - L->lu[139][l] * L->k[3][13][l] - L->lu[138][l] * L->k[3][12][l]
+                - L->lu[137][l] * L->k[3][11][l] - L->lu[136][l] * L->k[3][10][l] - L->lu[135][l]
+                * L->k[3][9][l] - L->lu[134][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[3][17][l] -
+                L->lu[124][l] * L->k[3][16][l] - L->lu[123][l] * L->k[3][15][l] - L->lu[122][l] *
+                L->k[3][14][l] - L->lu[121][l] * L->k[3][13][l] - L->lu[120][l] * L->k[3][12][l]
+                - L->lu[119][l] * L->k[3][11][l] - L->lu[118][l] * L->k[3][10][l] - L->lu[117][l]
+                * L->k[3][9][l] - L->lu[116][l] * L->k[3][8][l] - L->lu[115][l] * L->k[3][7][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[3][17][l] -
+                L->lu[106][l] * L->k[3][16][l] - L->lu[105][l] * L->k[3][15][l] - L->lu[104][l] *
+                L->k[3][14][l] - L->lu[103][l] * L->k[3][13][l] - L->lu[102][l] * L->k[3][12][l]
+                - L->lu[101][l] * L->k[3][11][l] - L->lu[100][l] * L->k[3][10][l] - L->lu[99][l]
+                * L->k[3][9][l] - L->lu[98][l] * L->k[3][8][l] - L->lu[97][l] * L->k[3][7][l] -
+                L->lu[96][l] * L->k[3][6][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[3][17][l] -
+                L->lu[88][l] * L->k[3][16][l] - L->lu[87][l] * L->k[3][15][l] - L->lu[86][l] *
+                L->k[3][14][l] - L->lu[85][l] * L->k[3][13][l] - L->lu[84][l] * L->k[3][12][l] -
+                L->lu[83][l] * L->k[3][11][l] - L->lu[82][l] * L->k[3][10][l] - L->lu[81][l] *
+                L->k[3][9][l] - L->lu[80][l] * L->k[3][8][l] - L->lu[79][l] * L->k[3][7][l] -
+                L->lu[78][l] * L->k[3][6][l] - L->lu[77][l] * L->k[3][5][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[3][17][l] -
+                L->lu[70][l] * L->k[3][16][l] - L->lu[69][l] * L->k[3][15][l] - L->lu[68][l] *
+                L->k[3][14][l] - L->lu[67][l] * L->k[3][13][l] - L->lu[66][l] * L->k[3][12][l] -
+                L->lu[65][l] * L->k[3][11][l] - L->lu[64][l] * L->k[3][10][l] - L->lu[63][l] *
+                L->k[3][9][l] - L->lu[62][l] * L->k[3][8][l] - L->lu[61][l] * L->k[3][7][l] -
+                L->lu[60][l] * L->k[3][6][l] - L->lu[59][l] * L->k[3][5][l] - L->lu[58][l] *
+                L->k[3][4][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[3][9][l] -
+                L->lu[44][l] * L->k[3][8][l] - L->lu[43][l] * L->k[3][7][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[3][9][l] -
+                L->lu[26][l] * L->k[3][8][l] - L->lu[25][l] * L->k[3][7][l] - L->lu[20][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[3][9][l] - L->lu[7][l] *
+                L->k[3][7][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 4 ? L->k[4][4][l] : L->k[4][3][l];
+        L->k[4][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[4][4][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 5 ? L->k[4][5][l] : L->k[4][3][l];
+        L->k[4][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 6 ? L->k[4][6][l] : L->k[4][3][l];
+        L->k[4][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 7 ? L->k[4][7][l] : L->k[4][3][l];
+        L->k[4][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 8 ? L->k[4][8][l] : L->k[4][3][l];
+        L->k[4][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 9 ? L->k[4][9][l] : L->k[4][3][l];
+        L->k[4][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 10 ? L->k[4][10][l] : L->k[4][3][l];
+        L->k[4][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 11 ? L->k[4][11][l] : L->k[4][3][l];
+        L->k[4][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 12 ? L->k[4][12][l] : L->k[4][3][l];
+        L->k[4][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 13 ? L->k[4][13][l] : L->k[4][3][l];
+        L->k[4][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 14 ? L->k[4][14][l] : L->k[4][3][l];
+        L->k[4][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 15 ? L->k[4][15][l] : L->k[4][3][l];
+        L->k[4][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 16 ? L->k[4][16][l] : L->k[4][3][l];
+        L->k[4][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 17 ? L->k[4][17][l] : L->k[4][3][l];
+        L->k[4][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 5 ? L->k[4][5][l] : L->k[4][4][l];
+        L->k[4][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 6 ? L->k[4][6][l] : L->k[4][4][l];
+        L->k[4][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 7 ? L->k[4][7][l] : L->k[4][4][l];
+        L->k[4][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 8 ? L->k[4][8][l] : L->k[4][4][l];
+        L->k[4][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 9 ? L->k[4][9][l] : L->k[4][4][l];
+        L->k[4][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 10 ? L->k[4][10][l] : L->k[4][4][l];
+        L->k[4][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 11 ? L->k[4][11][l] : L->k[4][4][l];
+        L->k[4][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 12 ? L->k[4][12][l] : L->k[4][4][l];
+        L->k[4][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 13 ? L->k[4][13][l] : L->k[4][4][l];
+        L->k[4][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 14 ? L->k[4][14][l] : L->k[4][4][l];
+        L->k[4][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 15 ? L->k[4][15][l] : L->k[4][4][l];
+        L->k[4][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 16 ? L->k[4][16][l] : L->k[4][4][l];
+        L->k[4][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 17 ? L->k[4][17][l] : L->k[4][4][l];
+        L->k[4][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 6 ? L->k[4][6][l] : L->k[4][5][l];
+        L->k[4][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 7 ? L->k[4][7][l] : L->k[4][5][l];
+        L->k[4][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 8 ? L->k[4][8][l] : L->k[4][5][l];
+        L->k[4][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 9 ? L->k[4][9][l] : L->k[4][5][l];
+        L->k[4][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 10 ? L->k[4][10][l] : L->k[4][5][l];
+        L->k[4][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 11 ? L->k[4][11][l] : L->k[4][5][l];
+        L->k[4][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 12 ? L->k[4][12][l] : L->k[4][5][l];
+        L->k[4][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 13 ? L->k[4][13][l] : L->k[4][5][l];
+        L->k[4][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 14 ? L->k[4][14][l] : L->k[4][5][l];
+        L->k[4][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 15 ? L->k[4][15][l] : L->k[4][5][l];
+        L->k[4][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 16 ? L->k[4][16][l] : L->k[4][5][l];
+        L->k[4][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 17 ? L->k[4][17][l] : L->k[4][5][l];
+        L->k[4][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 7 ? L->k[4][7][l] : L->k[4][6][l];
+        L->k[4][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 8 ? L->k[4][8][l] : L->k[4][6][l];
+        L->k[4][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 9 ? L->k[4][9][l] : L->k[4][6][l];
+        L->k[4][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 10 ? L->k[4][10][l] : L->k[4][6][l];
+        L->k[4][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 11 ? L->k[4][11][l] : L->k[4][6][l];
+        L->k[4][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 12 ? L->k[4][12][l] : L->k[4][6][l];
+        L->k[4][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 13 ? L->k[4][13][l] : L->k[4][6][l];
+        L->k[4][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 14 ? L->k[4][14][l] : L->k[4][6][l];
+        L->k[4][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 15 ? L->k[4][15][l] : L->k[4][6][l];
+        L->k[4][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 16 ? L->k[4][16][l] : L->k[4][6][l];
+        L->k[4][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 17 ? L->k[4][17][l] : L->k[4][6][l];
+        L->k[4][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 10 ? L->k[4][10][l] : L->k[4][7][l];
+        L->k[4][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 11 ? L->k[4][11][l] : L->k[4][7][l];
+        L->k[4][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 12 ? L->k[4][12][l] : L->k[4][7][l];
+        L->k[4][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 13 ? L->k[4][13][l] : L->k[4][7][l];
+        L->k[4][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 14 ? L->k[4][14][l] : L->k[4][7][l];
+        L->k[4][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 15 ? L->k[4][15][l] : L->k[4][7][l];
+        L->k[4][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 16 ? L->k[4][16][l] : L->k[4][7][l];
+        L->k[4][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 17 ? L->k[4][17][l] : L->k[4][7][l];
+        L->k[4][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 10 ? L->k[4][10][l] : L->k[4][8][l];
+        L->k[4][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 11 ? L->k[4][11][l] : L->k[4][8][l];
+        L->k[4][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 12 ? L->k[4][12][l] : L->k[4][8][l];
+        L->k[4][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 13 ? L->k[4][13][l] : L->k[4][8][l];
+        L->k[4][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 14 ? L->k[4][14][l] : L->k[4][8][l];
+        L->k[4][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 15 ? L->k[4][15][l] : L->k[4][8][l];
+        L->k[4][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 16 ? L->k[4][16][l] : L->k[4][8][l];
+        L->k[4][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 17 ? L->k[4][17][l] : L->k[4][8][l];
+        L->k[4][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 10 ? L->k[4][10][l] : L->k[4][9][l];
+        L->k[4][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 11 ? L->k[4][11][l] : L->k[4][9][l];
+        L->k[4][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 12 ? L->k[4][12][l] : L->k[4][9][l];
+        L->k[4][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 13 ? L->k[4][13][l] : L->k[4][9][l];
+        L->k[4][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 14 ? L->k[4][14][l] : L->k[4][9][l];
+        L->k[4][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 15 ? L->k[4][15][l] : L->k[4][9][l];
+        L->k[4][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 16 ? L->k[4][16][l] : L->k[4][9][l];
+        L->k[4][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 17 ? L->k[4][17][l] : L->k[4][9][l];
+        L->k[4][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 11 ? L->k[4][11][l] : L->k[4][10][l];
+        L->k[4][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 12 ? L->k[4][12][l] : L->k[4][10][l];
+        L->k[4][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 13 ? L->k[4][13][l] : L->k[4][10][l];
+        L->k[4][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 14 ? L->k[4][14][l] : L->k[4][10][l];
+        L->k[4][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 15 ? L->k[4][15][l] : L->k[4][10][l];
+        L->k[4][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 16 ? L->k[4][16][l] : L->k[4][10][l];
+        L->k[4][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 17 ? L->k[4][17][l] : L->k[4][10][l];
+        L->k[4][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 12 ? L->k[4][12][l] : L->k[4][11][l];
+        L->k[4][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 13 ? L->k[4][13][l] : L->k[4][11][l];
+        L->k[4][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 14 ? L->k[4][14][l] : L->k[4][11][l];
+        L->k[4][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 15 ? L->k[4][15][l] : L->k[4][11][l];
+        L->k[4][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 16 ? L->k[4][16][l] : L->k[4][11][l];
+        L->k[4][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 17 ? L->k[4][17][l] : L->k[4][11][l];
+        L->k[4][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 13 ? L->k[4][13][l] : L->k[4][12][l];
+        L->k[4][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 14 ? L->k[4][14][l] : L->k[4][12][l];
+        L->k[4][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 15 ? L->k[4][15][l] : L->k[4][12][l];
+        L->k[4][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 16 ? L->k[4][16][l] : L->k[4][12][l];
+        L->k[4][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 17 ? L->k[4][17][l] : L->k[4][12][l];
+        L->k[4][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 14 ? L->k[4][14][l] : L->k[4][13][l];
+        L->k[4][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 15 ? L->k[4][15][l] : L->k[4][13][l];
+        L->k[4][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 16 ? L->k[4][16][l] : L->k[4][13][l];
+        L->k[4][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 17 ? L->k[4][17][l] : L->k[4][13][l];
+        L->k[4][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 15 ? L->k[4][15][l] : L->k[4][14][l];
+        L->k[4][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 16 ? L->k[4][16][l] : L->k[4][14][l];
+        L->k[4][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 17 ? L->k[4][17][l] : L->k[4][14][l];
+        L->k[4][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][15][l];
+        L->k[4][15][l] = L->piv[15][l] == 16 ? L->k[4][16][l] : L->k[4][15][l];
+        L->k[4][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][15][l];
+        L->k[4][15][l] = L->piv[15][l] == 17 ? L->k[4][17][l] : L->k[4][15][l];
+        L->k[4][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][16][l];
+        L->k[4][16][l] = L->piv[16][l] == 17 ? L->k[4][17][l] : L->k[4][16][l];
+        L->k[4][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[4][17][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[37][l] * L->k[4][1][l];
+        L->k[4][4][l] = L->k[4][4][l] - L->lu[75][l] * L->k[4][3][l];
+        L->k[4][5][l] = L->k[4][5][l] - L->lu[93][l] * L->k[4][3][l] - L->lu[94][l] * L->k[4][4][l];
+        L->k[4][6][l] = L->k[4][6][l] - L->lu[111][l] * L->k[4][3][l] - L->lu[112][l] *
+                L->k[4][4][l] - L->lu[113][l] * L->k[4][5][l];
+        L->k[4][7][l] = L->k[4][7][l] - L->lu[129][l] * L->k[4][3][l] - L->lu[130][l] *
+                L->k[4][4][l] - L->lu[131][l] * L->k[4][5][l] - L->lu[132][l] * L->k[4][6][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[147][l] * L->k[4][3][l] - L->lu[148][l] *
+                L->k[4][4][l] - L->lu[149][l] * L->k[4][5][l] - L->lu[150][l] * L->k[4][6][l] -
+                L->lu[151][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[165][l] * L->k[4][3][l] - L->lu[166][l] *
+                L->k[4][4][l] - L->lu[167][l] * L->k[4][5][l] - L->lu[168][l] * L->k[4][6][l] -
+                L->lu[169][l] * L->k[4][7][l] - L->lu[170][l] * L->k[4][8][l];
+        L->k[4][10][l] = L->k[4][10][l] - L->lu[183][l] * L->k[4][3][l] - L->lu[184][l] *
+                L->k[4][4][l] - L->lu[185][l] * L->k[4][5][l] - L->lu[186][l] * L->k[4][6][l] -
+                L->lu[187][l] * L->k[4][7][l] - L->lu[188][l] * L->k[4][8][l] - L->lu[189][l] *
+                L->k[4][9][l];
+        L->k[4][11][l] = L->k[4][11][l] - L->lu[201][l] * L->k[4][3][l] - L->lu[202][l] *
+                L->k[4][4][l] - L->lu[203][l] * L->k[4][5][l] - L->lu[204][l] * L->k[4][6][l] -
+                L->lu[205][l] * L->k[4][7][l] - L->lu[206][l] * L->k[4][8][l] - L->lu[207][l] *
+                L->k[4][9][l] - L->lu[208][l] * L->k[4][10][l];
+        L->k[4][12][l] = L->k[4][12][l] - L->lu[219][l] * L->k[4][3][l] - L->lu[220][l] *
+                L->k[4][4][l] - L->lu[221][l] * L->k[4][5][l] - L->lu[222][l] * L->k[4][6][l] -
+                L->lu[223][l] * L->k[4][7][l] - L->lu[224][l] * L->k[4][8][l] - L->lu[225][l] *
+                L->k[4][9][l] - L->lu[226][l] * L->k[4][10][l] - L->lu[227][l] * L->k[4][11][l];
+        L->k[4][13][l] = L->k[4][13][l] - L->lu[237][l] * L->k[4][3][l] - L->lu[238][l] *
+                L->k[4][4][l] - L->lu[239][l] * L->k[4][5][l] - L->lu[240][l] * L->k[4][6][l] -
+                L->lu[241][l] * L->k[4][7][l] - L->lu[242][l] * L->k[4][8][l] - L->lu[243][l] *
+                L->k[4][9][l] - L->lu[244][l] * L->k[4][10][l] - L->lu[245][l] * L->k[4][11][l] -
+                L->lu[246][l] * L->k[4][12][l];
+        L->k[4][14][l] = L->k[4][14][l] - L->lu[255][l] * L->k[4][3][l] - L->lu[256][l] *
+                L->k[4][4][l] - L->lu[257][l] * L->k[4][5][l] - L->lu[258][l] * L->k[4][6][l] -
+                L->lu[259][l] * L->k[4][7][l] - L->lu[260][l] * L->k[4][8][l] - L->lu[261][l] *
+                L->k[4][9][l] - L->lu[262][l] * L->k[4][10][l] - L->lu[263][l] * L->k[4][11][l] -
+                L->lu[264][l] * L->k[4][12][l] - L->lu[265][l] * L->k[4][13][l];
+        L->k[4][15][l] = L->k[4][15][l] - L->lu[273][l] * L->k[4][3][l] - L->lu[274][l] *
+                L->k[4][4][l] - L->lu[275][l] * L->k[4][5][l] - L->lu[276][l] * L->k[4][6][l] -
+                L->lu[277][l] * L->k[4][7][l] - L->lu[278][l] * L->k[4][8][l] - L->lu[279][l] *
+                L->k[4][9][l] - L->lu[280][l] * L->k[4][10][l] - L->lu[281][l] * L->k[4][11][l] -
+                L->lu[282][l] * L->k[4][12][l] - L->lu[283][l] * L->k[4][13][l] - L->lu[284][l] *
+                L->k[4][14][l];
+        L->k[4][16][l] = L->k[4][16][l] - L->lu[291][l] * L->k[4][3][l] - L->lu[292][l] *
+                L->k[4][4][l] - L->lu[293][l] * L->k[4][5][l] - L->lu[294][l] * L->k[4][6][l] -
+                L->lu[295][l] * L->k[4][7][l] - L->lu[296][l] * L->k[4][8][l] - L->lu[297][l] *
+                L->k[4][9][l] - L->lu[298][l] * L->k[4][10][l] - L->lu[299][l] * L->k[4][11][l] -
+                L->lu[300][l] * L->k[4][12][l] - L->lu[301][l] * L->k[4][13][l] - L->lu[302][l] *
+                L->k[4][14][l] - L->lu[303][l] * L->k[4][15][l];
+        L->k[4][17][l] = L->k[4][17][l] - L->lu[309][l] * L->k[4][3][l] - L->lu[310][l] *
+                L->k[4][4][l] - L->lu[311][l] * L->k[4][5][l] - L->lu[312][l] * L->k[4][6][l] -
+                L->lu[313][l] * L->k[4][7][l] - L->lu[314][l] * L->k[4][8][l] - L->lu[315][l] *
+                L->k[4][9][l] - L->lu[316][l] * L->k[4][10][l] - L->lu[317][l] * L->k[4][11][l] -
+                L->lu[318][l] * L->k[4][12][l] - L->lu[319][l] * L->k[4][13][l] - L->lu[320][l] *
+                L->k[4][14][l] - L->lu[321][l] * L->k[4][15][l] - L->lu[322][l] * L->k[4][16][l];
+        L->k[4][17][l] = L->k[4][17][l] * L->lu[323][l];
+        L->k[4][16][l] = L->k[4][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[4][17][l];
+        L->k[4][15][l] = L->k[4][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[4][17][l] -
+                L->lu[286][l] * L->k[4][16][l];
+        L->k[4][14][l] = L->k[4][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[4][17][l] -
+                L->lu[268][l] * L->k[4][16][l] - L->lu[267][l] * L->k[4][15][l];
+        L->k[4][13][l] = L->k[4][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[4][17][l] -
+                L->lu[250][l] * L->k[4][16][l] - L->lu[249][l] * L->k[4][15][l] - L->lu[248][l] *
+                L->k[4][14][l];
+        L->k[4][12][l] = L->k[4][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[4][17][l] -
+                L->lu[232][l] * L->k[4][16][l] - L->lu[231][l] * L->k[4][15][l] - L->lu[230][l] *
+                L->k[4][14][l] - L->lu[229][l] * L->k[4][13][l];
+        L->k[4][11][l] = L->k[4][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[4][17][l] -
+                L->lu[214][l] * L->k[4][16][l] - L->lu[213][l] * L->k[4][15][l] - L->lu[212][l] *
+                L->k[4][14][l] - L->lu[211][l] * L->k[4][13][l] - L->lu[210][l] * L->k[4][12][l];
+        L->k[4][10][l] = L->k[4][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[4][17][l] -
+                L->lu[196][l] * L->k[4][16][l] - L->lu[195][l] * L->k[4][15][l] - L->lu[194][l] *
+                L->k[4][14][l] - L->lu[193][l] * L->k[4][13][l] - L->lu[192][l] * L->k[4][12][l]
+                - L->lu[191][l] * L->k[4][11][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[4][17][l] -
+                L->lu[178][l] * L->k[4][16][l] - L->lu[177][l] * L->k[4][15][l] - L->lu[176][l] *
+                L->k[4][14][l] - L->lu[175][l] * L->k[4][13][l] - L->lu[174][l] * L->k[4][12][l]
+                - L->lu[173][l] * L->k[4][11][l] - L->lu[172][l] * L->k[4][10][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[4][17][l] -
+                L->lu[160][l] * L->k[4][16][l] - L->lu[159][l] * L->k[4][15][l] - L->lu[158][l] *
+                L->k[4][14][l] - L->lu[157][l] * L->k[4][13][l] - L->lu[156][l] * L->k[4][12][l]
+                - L->lu[155][l] * L->k[4][11][l] - L->lu[154][l] * L->k[4][10][l] - L->lu[153][l]
+                * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[4][17][l] -
+                L->lu[142][l] * L->k[4][16][l] - L->lu[141][l] * L->k[4][15][l] - L->lu[140][l] *
+                L->k[4][14][l] - L->lu[139][l] * L->k[4][13][l] - L->lu[138][l] * L->k[4][12][l]
+                - L->lu[137][l] * L->k[4][11][l] - L->lu[136][l] * L->k[4][10][l] - L->lu[135][l]
+                * L->k[4][9][l] - L->lu[134][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[4][17][l] -
+                L->lu[124][l] * L->k[4][16][l] - L->lu[123][l] * L->k[4][15][l] - L->lu[122][l] *
+                L->k[4][14][l] - L->lu[121][l] * L->k[4][13][l] - L->lu[120][l] * L->k[4][12][l]
+                - L->lu[119][l] * L->k[4][11][l] - L->lu[118][l] * L->k[4][10][l] - L->lu[117][l]
+                * L->k[4][9][l] - L->lu[116][l] * L->k[4][8][l] - L->lu[115][l] * L->k[4][7][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[4][17][l] -
+                L->lu[106][l] * L->k[4][16][l] - L->lu[105][l] * L->k[4][15][l] - L->lu[104][l] *
+                L->k[4][14][l] - L->lu[103][l] * L->k[4][13][l] - L->lu[102][l] * L->k[4][12][l]
+                - L->lu[101][l] * L->k[4][11][l] - L->lu[100][l] * L->k[4][10][l] - L->lu[99][l]
+                * L->k[4][9][l] - L->lu[98][l] * L->k[4][8][l] - L->lu[97][l] * L->k[4][7][l] -
+                L->lu[96][l] * L->k[4][6][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[4][17][l] -
+                L->lu[88][l] * L->k[4][16][l] - L->lu[87][l] * L->k[4][15][l] - L->lu[86][l] *
+                L->k[4][14][l] - L->lu[85][l] * L->k[4][13][l] - L->lu[84][l] * L->k[4][12][l] -
+                L->lu[83][l] * L->k[4][11][l] - L->lu[82][l] * L->k[4][10][l] - L->lu[81][l] *
+                L->k[4][9][l] - L->lu[80][l] * L->k[4][8][l] - L->lu[79][l] * L->k[4][7][l] -
+                L->lu[78][l] * L->k[4][6][l] - L->lu[77][l] * L->k[4][5][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[4][17][l] -
+                L->lu[70][l] * L->k[4][16][l] - L->lu[69][l] * L->k[4][15][l] - L->lu[68][l] *
+                L->k[4][14][l] - L->lu[67][l] * L->k[4][13][l] - L->lu[66][l] * L->k[4][12][l] -
+                L->lu[65][l] * L->k[4][11][l] - L->lu[64][l] * L->k[4][10][l] - L->lu[63][l] *
+                L->k[4][9][l] - L->lu[62][l] * L->k[4][8][l] - L->lu[61][l] * L->k[4][7][l] -
+                L->lu[60][l] * L->k[4][6][l] - L->lu[59][l] * L->k[4][5][l] - L->lu[58][l] *
+                L->k[4][4][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[4][9][l] -
+                L->lu[44][l] * L->k[4][8][l] - L->lu[43][l] * L->k[4][7][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[4][9][l] -
+                L->lu[26][l] * L->k[4][8][l] - L->lu[25][l] * L->k[4][7][l] - L->lu[20][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[4][9][l] - L->lu[7][l] *
+                L->k[4][7][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 4 ? L->k[5][4][l] : L->k[5][3][l];
+        L->k[5][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[5][4][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 5 ? L->k[5][5][l] : L->k[5][3][l];
+        L->k[5][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 6 ? L->k[5][6][l] : L->k[5][3][l];
+        L->k[5][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 7 ? L->k[5][7][l] : L->k[5][3][l];
+        L->k[5][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 8 ? L->k[5][8][l] : L->k[5][3][l];
+        L->k[5][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 9 ? L->k[5][9][l] : L->k[5][3][l];
+        L->k[5][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 10 ? L->k[5][10][l] : L->k[5][3][l];
+        L->k[5][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 11 ? L->k[5][11][l] : L->k[5][3][l];
+        L->k[5][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 12 ? L->k[5][12][l] : L->k[5][3][l];
+        L->k[5][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 13 ? L->k[5][13][l] : L->k[5][3][l];
+        L->k[5][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 14 ? L->k[5][14][l] : L->k[5][3][l];
+        L->k[5][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 15 ? L->k[5][15][l] : L->k[5][3][l];
+        L->k[5][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 16 ? L->k[5][16][l] : L->k[5][3][l];
+        L->k[5][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 17 ? L->k[5][17][l] : L->k[5][3][l];
+        L->k[5][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 5 ? L->k[5][5][l] : L->k[5][4][l];
+        L->k[5][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 6 ? L->k[5][6][l] : L->k[5][4][l];
+        L->k[5][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 7 ? L->k[5][7][l] : L->k[5][4][l];
+        L->k[5][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 8 ? L->k[5][8][l] : L->k[5][4][l];
+        L->k[5][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 9 ? L->k[5][9][l] : L->k[5][4][l];
+        L->k[5][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 10 ? L->k[5][10][l] : L->k[5][4][l];
+        L->k[5][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 11 ? L->k[5][11][l] : L->k[5][4][l];
+        L->k[5][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 12 ? L->k[5][12][l] : L->k[5][4][l];
+        L->k[5][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 13 ? L->k[5][13][l] : L->k[5][4][l];
+        L->k[5][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 14 ? L->k[5][14][l] : L->k[5][4][l];
+        L->k[5][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 15 ? L->k[5][15][l] : L->k[5][4][l];
+        L->k[5][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 16 ? L->k[5][16][l] : L->k[5][4][l];
+        L->k[5][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 17 ? L->k[5][17][l] : L->k[5][4][l];
+        L->k[5][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 6 ? L->k[5][6][l] : L->k[5][5][l];
+        L->k[5][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 7 ? L->k[5][7][l] : L->k[5][5][l];
+        L->k[5][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 8 ? L->k[5][8][l] : L->k[5][5][l];
+        L->k[5][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 9 ? L->k[5][9][l] : L->k[5][5][l];
+        L->k[5][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 10 ? L->k[5][10][l] : L->k[5][5][l];
+        L->k[5][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 11 ? L->k[5][11][l] : L->k[5][5][l];
+        L->k[5][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 12 ? L->k[5][12][l] : L->k[5][5][l];
+        L->k[5][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 13 ? L->k[5][13][l] : L->k[5][5][l];
+        L->k[5][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 14 ? L->k[5][14][l] : L->k[5][5][l];
+        L->k[5][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 15 ? L->k[5][15][l] : L->k[5][5][l];
+        L->k[5][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 16 ? L->k[5][16][l] : L->k[5][5][l];
+        L->k[5][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 17 ? L->k[5][17][l] : L->k[5][5][l];
+        L->k[5][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 7 ? L->k[5][7][l] : L->k[5][6][l];
+        L->k[5][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 8 ? L->k[5][8][l] : L->k[5][6][l];
+        L->k[5][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 9 ? L->k[5][9][l] : L->k[5][6][l];
+        L->k[5][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 10 ? L->k[5][10][l] : L->k[5][6][l];
+        L->k[5][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 11 ? L->k[5][11][l] : L->k[5][6][l];
+        L->k[5][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 12 ? L->k[5][12][l] : L->k[5][6][l];
+        L->k[5][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 13 ? L->k[5][13][l] : L->k[5][6][l];
+        L->k[5][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 14 ? L->k[5][14][l] : L->k[5][6][l];
+        L->k[5][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 15 ? L->k[5][15][l] : L->k[5][6][l];
+        L->k[5][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 16 ? L->k[5][16][l] : L->k[5][6][l];
+        L->k[5][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 17 ? L->k[5][17][l] : L->k[5][6][l];
+        L->k[5][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 10 ? L->k[5][10][l] : L->k[5][7][l];
+        L->k[5][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 11 ? L->k[5][11][l] : L->k[5][7][l];
+        L->k[5][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 12 ? L->k[5][12][l] : L->k[5][7][l];
+        L->k[5][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 13 ? L->k[5][13][l] : L->k[5][7][l];
+        L->k[5][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 14 ? L->k[5][14][l] : L->k[5][7][l];
+        L->k[5][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 15 ? L->k[5][15][l] : L->k[5][7][l];
+        L->k[5][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 16 ? L->k[5][16][l] : L->k[5][7][l];
+        L->k[5][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 17 ? L->k[5][17][l] : L->k[5][7][l];
+        L->k[5][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 10 ? L->k[5][10][l] : L->k[5][8][l];
+        L->k[5][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 11 ? L->k[5][11][l] : L->k[5][8][l];
+        L->k[5][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 12 ? L->k[5][12][l] : L->k[5][8][l];
+        L->k[5][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 13 ? L->k[5][13][l] : L->k[5][8][l];
+        L->k[5][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 14 ? L->k[5][14][l] : L->k[5][8][l];
+        L->k[5][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 15 ? L->k[5][15][l] : L->k[5][8][l];
+        L->k[5][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 16 ? L->k[5][16][l] : L->k[5][8][l];
+        L->k[5][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 17 ? L->k[5][17][l] : L->k[5][8][l];
+        L->k[5][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 10 ? L->k[5][10][l] : L->k[5][9][l];
+        L->k[5][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 11 ? L->k[5][11][l] : L->k[5][9][l];
+        L->k[5][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 12 ? L->k[5][12][l] : L->k[5][9][l];
+        L->k[5][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 13 ? L->k[5][13][l] : L->k[5][9][l];
+        L->k[5][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 14 ? L->k[5][14][l] : L->k[5][9][l];
+        L->k[5][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 15 ? L->k[5][15][l] : L->k[5][9][l];
+        L->k[5][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 16 ? L->k[5][16][l] : L->k[5][9][l];
+        L->k[5][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 17 ? L->k[5][17][l] : L->k[5][9][l];
+        L->k[5][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 11 ? L->k[5][11][l] : L->k[5][10][l];
+        L->k[5][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 12 ? L->k[5][12][l] : L->k[5][10][l];
+        L->k[5][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 13 ? L->k[5][13][l] : L->k[5][10][l];
+        L->k[5][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 14 ? L->k[5][14][l] : L->k[5][10][l];
+        L->k[5][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 15 ? L->k[5][15][l] : L->k[5][10][l];
+        L->k[5][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 16 ? L->k[5][16][l] : L->k[5][10][l];
+        L->k[5][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 17 ? L->k[5][17][l] : L->k[5][10][l];
+        L->k[5][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 12 ? L->k[5][12][l] : L->k[5][11][l];
+        L->k[5][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 13 ? L->k[5][13][l] : L->k[5][11][l];
+        L->k[5][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 14 ? L->k[5][14][l] : L->k[5][11][l];
+        L->k[5][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 15 ? L->k[5][15][l] : L->k[5][11][l];
+        L->k[5][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 16 ? L->k[5][16][l] : L->k[5][11][l];
+        L->k[5][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 17 ? L->k[5][17][l] : L->k[5][11][l];
+        L->k[5][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 13 ? L->k[5][13][l] : L->k[5][12][l];
+        L->k[5][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 14 ? L->k[5][14][l] : L->k[5][12][l];
+        L->k[5][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 15 ? L->k[5][15][l] : L->k[5][12][l];
+        L->k[5][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 16 ? L->k[5][16][l] : L->k[5][12][l];
+        L->k[5][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 17 ? L->k[5][17][l] : L->k[5][12][l];
+        L->k[5][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 14 ? L->k[5][14][l] : L->k[5][13][l];
+        L->k[5][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 15 ? L->k[5][15][l] : L->k[5][13][l];
+        L->k[5][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 16 ? L->k[5][16][l] : L->k[5][13][l];
+        L->k[5][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 17 ? L->k[5][17][l] : L->k[5][13][l];
+        L->k[5][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 15 ? L->k[5][15][l] : L->k[5][14][l];
+        L->k[5][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 16 ? L->k[5][16][l] : L->k[5][14][l];
+        L->k[5][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 17 ? L->k[5][17][l] : L->k[5][14][l];
+        L->k[5][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][15][l];
+        L->k[5][15][l] = L->piv[15][l] == 16 ? L->k[5][16][l] : L->k[5][15][l];
+        L->k[5][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][15][l];
+        L->k[5][15][l] = L->piv[15][l] == 17 ? L->k[5][17][l] : L->k[5][15][l];
+        L->k[5][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][16][l];
+        L->k[5][16][l] = L->piv[16][l] == 17 ? L->k[5][17][l] : L->k[5][16][l];
+        L->k[5][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[5][17][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[37][l] * L->k[5][1][l];
+        L->k[5][4][l] = L->k[5][4][l] - L->lu[75][l] * L->k[5][3][l];
+        L->k[5][5][l] = L->k[5][5][l] - L->lu[93][l] * L->k[5][3][l] - L->lu[94][l] * L->k[5][4][l];
+        L->k[5][6][l] = L->k[5][6][l] - L->lu[111][l] * L->k[5][3][l] - L->lu[112][l] *
+                L->k[5][4][l] - L->lu[113][l] * L->k[5][5][l];
+        L->k[5][7][l] = L->k[5][7][l] - L->lu[129][l] * L->k[5][3][l] - L->lu[130][l] *
+                L->k[5][4][l] - L->lu[131][l] * L->k[5][5][l] - L->lu[132][l] * L->k[5][6][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[147][l] * L->k[5][3][l] - L->lu[148][l] *
+                L->k[5][4][l] - L->lu[149][l] * L->k[5][5][l] - L->lu[150][l] * L->k[5][6][l] -
+                L->lu[151][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[165][l] * L->k[5][3][l] - L->lu[166][l] *
+                L->k[5][4][l] - L->lu[167][l] * L->k[5][5][l] - L->lu[168][l] * L->k[5][6][l] -
+                L->lu[169][l] * L->k[5][7][l] - L->lu[170][l] * L->k[5][8][l];
+        L->k[5][10][l] = L->k[5][10][l] - L->lu[183][l] * L->k[5][3][l] - L->lu[184][l] *
+                L->k[5][4][l] - L->lu[185][l] * L->k[5][5][l] - L->lu[186][l] * L->k[5][6][l] -
+                L->lu[187][l] * L->k[5][7][l] - L->lu[188][l] * L->k[5][8][l] - L->lu[189][l] *
+                L->k[5][9][l];
+        L->k[5][11][l] = L->k[5][11][l] - L->lu[201][l] * L->k[5][3][l] - L->lu[202][l] *
+                L->k[5][4][l] - L->lu[203][l] * L->k[5][5][l] - L->lu[204][l] * L->k[5][6][l] -
+                L->lu[205][l] * L->k[5][7][l] - L->lu[206][l] * L->k[5][8][l] - L->lu[207][l] *
+                L->k[5][9][l] - L->lu[208][l] * L->k[5][10][l];
+        L->k[5][12][l] = L->k[5][12][l] - L->lu[219][l] * L->k[5][3][l] - L->lu[220][l] *
+                L->k[5][4][l] - L->lu[221][l] * L->k[5][5][l] - L->lu[222][l] * L->k[5][6][l] -
+                L->lu[223][l] * L->k[5][7][l] - L->lu[224][l] * L->k[5][8][l] - L->lu[225][l] *
+                L->k[5][9][l] - L->lu[226][l] * L->k[5][10][l] - L->lu[227][l] * L->k[5][11][l];
+        L->k[5][13][l] = L->k[5][13][l] - L->lu[237][l] * L->k[5][3][l] - L->lu[238][l] *
+                L->k[5][4][l] - L->lu[239][l] * L->k[5][5][l] - L->lu[240][l] * L->k[5][6][l] -
+                L->lu[241][l] * L->k[5][7][l] - L->lu[242][l] * L->k[5][8][l] - L->lu[243][l] *
+                L->k[5][9][l] - L->lu[244][l] * L->k[5][10][l] - L->lu[245][l] * L->k[5][11][l] -
+                L->lu[246][l] * L->k[5][12][l];
+        L->k[5][14][l] = L->k[5][14][l] - L->lu[255][l] * L->k[5][3][l] - L->lu[256][l] *
+                L->k[5][4][l] - L->lu[257][l] * L->k[5][5][l] - L->lu[258][l] * L->k[5][6][l] -
+                L->lu[259][l] * L->k[5][7][l] - L->lu[260][l] * L->k[5][8][l] - L->lu[261][l] *
+                L->k[5][9][l] - L->lu[262][l] * L->k[5][10][l] - L->lu[263][l] * L->k[5][11][l] -
+                L->lu[264][l] * L->k[5][12][l] - L->lu[265][l] * L->k[5][13][l];
+        L->k[5][15][l] = L->k[5][15][l] - L->lu[273][l] * L->k[5][3][l] - L->lu[274][l] *
+                L->k[5][4][l] - L->lu[275][l] * L->k[5][5][l] - L->lu[276][l] * L->k[5][6][l] -
+                L->lu[277][l] * L->k[5][7][l] - L->lu[278][l] * L->k[5][8][l] - L->lu[279][l] *
+                L->k[5][9][l] - L->lu[280][l] * L->k[5][10][l] - L->lu[281][l] * L->k[5][11][l] -
+                L->lu[282][l] * L->k[5][12][l] - L->lu[283][l] * L->k[5][13][l] - L->lu[284][l] *
+                L->k[5][14][l];
+        L->k[5][16][l] = L->k[5][16][l] - L->lu[291][l] * L->k[5][3][l] - L->lu[292][l] *
+                L->k[5][4][l] - L->lu[293][l] * L->k[5][5][l] - L->lu[294][l] * L->k[5][6][l] -
+                L->lu[295][l] * L->k[5][7][l] - L->lu[296][l] * L->k[5][8][l] - L->lu[297][l] *
+                L->k[5][9][l] - L->lu[298][l] * L->k[5][10][l] - L->lu[299][l] * L->k[5][11][l] -
+                L->lu[300][l] * L->k[5][12][l] - L->lu[301][l] * L->k[5][13][l] - L->lu[302][l] *
+                L->k[5][14][l] - L->lu[303][l] * L->k[5][15][l];
+        L->k[5][17][l] = L->k[5][17][l] - L->lu[309][l] * L->k[5][3][l] - L->lu[310][l] *
+                L->k[5][4][l] - L->lu[311][l] * L->k[5][5][l] - L->lu[312][l] * L->k[5][6][l] -
+                L->lu[313][l] * L->k[5][7][l] - L->lu[314][l] * L->k[5][8][l] - L->lu[315][l] *
+                L->k[5][9][l] - L->lu[316][l] * L->k[5][10][l] - L->lu[317][l] * L->k[5][11][l] -
+                L->lu[318][l] * L->k[5][12][l] - L->lu[319][l] * L->k[5][13][l] - L->lu[320][l] *
+                L->k[5][14][l] - L->lu[321][l] * L->k[5][15][l] - L->lu[322][l] * L->k[5][16][l];
+        L->k[5][17][l] = L->k[5][17][l] * L->lu[323][l];
+        L->k[5][16][l] = L->k[5][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[5][17][l];
+        L->k[5][15][l] = L->k[5][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[5][17][l] -
+                L->lu[286][l] * L->k[5][16][l];
+        L->k[5][14][l] = L->k[5][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[5][17][l] -
+                L->lu[268][l] * L->k[5][16][l] - L->lu[267][l] * L->k[5][15][l];
+        L->k[5][13][l] = L->k[5][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[5][17][l] -
+                L->lu[250][l] * L->k[5][16][l] - L->lu[249][l] * L->k[5][15][l] - L->lu[248][l] *
+                L->k[5][14][l];
+        L->k[5][12][l] = L->k[5][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[5][17][l] -
+                L->lu[232][l] * L->k[5][16][l] - L->lu[231][l] * L->k[5][15][l] - L->lu[230][l] *
+                L->k[5][14][l] - L->lu[229][l] * L->k[5][13][l];
+        L->k[5][11][l] = L->k[5][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[5][17][l] -
+                L->lu[214][l] * L->k[5][16][l] - L->lu[213][l] * L->k[5][15][l] - L->lu[212][l] *
+                L->k[5][14][l] - L->lu[211][l] * L->k[5][13][l] - L->lu[210][l] * L->k[5][12][l];
+        L->k[5][10][l] = L->k[5][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[5][17][l] -
+                L->lu[196][l] * L->k[5][16][l] - L->lu[195][l] * L->k[5][15][l] - L->lu[194][l] *
+                L->k[5][14][l] - L->lu[193][l] * L->k[5][13][l] - L->lu[192][l] * L->k[5][12][l]
+                - L->lu[191][l] * L->k[5][11][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[5][17][l] -
+                L->lu[178][l] * L->k[5][16][l] - L->lu[177][l] * L->k[5][15][l] - L->lu[176][l] *
+                L->k[5][14][l] - L->lu[175][l] * L->k[5][13][l] - L->lu[174][l] * L->k[5][12][l]
+                - L->lu[173][l] * L->k[5][11][l] - L->lu[172][l] * L->k[5][10][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[5][17][l] -
+                L->lu[160][l] * L->k[5][16][l] - L->lu[159][l] * L->k[5][15][l] - L->lu[158][l] *
+                L->k[5][14][l] - L->lu[157][l] * L->k[5][13][l] - L->lu[156][l] * L->k[5][12][l]
+                - L->lu[155][l] * L->k[5][11][l] - L->lu[154][l] * L->k[5][10][l] - L->lu[153][l]
+                * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[5][17][l] -
+                L->lu[142][l] * L->k[5][16][l] - L->lu[141][l] * L->k[5][15][l] - L->lu[140][l] *
+                L->k[5][14][l] - L->lu[139][l] * L->k[5][13][l] - L->lu[138][l] * L->k[5][12][l]
+                - L->lu[137][l] * L->k[5][11][l] - L->lu[136][l] * L->k[5][10][l] - L->lu[135][l]
+                * L->k[5][9][l] - L->lu[134][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[5][17][l] -
+                L->lu[124][l] * L->k[5][16][l] - L->lu[123][l] * L->k[5][15][l] - L->lu[122][l] *
+                L->k[5][14][l] - L->lu[121][l] * L->k[5][13][l] - L->lu[120][l] * L->k[5][12][l]
+                - L->lu[119][l] * L->k[5][11][l] - L->lu[118][l] * L->k[5][10][l] - L->lu[117][l]
+                * L->k[5][9][l] - L->lu[116][l] * L->k[5][8][l] - L->lu[115][l] * L->k[5][7][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[5][17][l] -
+                L->lu[106][l] * L->k[5][16][l] - L->lu[105][l] * L->k[5][15][l] - L->lu[104][l] *
+                L->k[5][14][l] - L->lu[103][l] * L->k[5][13][l] - L->lu[102][l] * L->k[5][12][l]
+                - L->lu[101][l] * L->k[5][11][l] - L->lu[100][l] * L->k[5][10][l] - L->lu[99][l]
+                * L->k[5][9][l] - L->lu[98][l] * L->k[5][8][l] - L->lu[97][l] * L->k[5][7][l] -
+                L->lu[96][l] * L->k[5][6][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[5][17][l] -
+                L->lu[88][l] * L->k[5][16][l] - L->lu[87][l] * L->k[5][15][l] - L->lu[86][l] *
+                L->k[5][14][l] - L->lu[85][l] * L->k[5][13][l] - L->lu[84][l] * L->k[5][12][l] -
+                L->lu[83][l] * L->k[5][11][l] - L->lu[82][l] * L->k[5][10][l] - L->lu[81][l] *
+                L->k[5][9][l] - L->lu[80][l] * L->k[5][8][l] - L->lu[79][l] * L->k[5][7][l] -
+                L->lu[78][l] * L->k[5][6][l] - L->lu[77][l] * L->k[5][5][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[5][17][l] -
+                L->lu[70][l] * L->k[5][16][l] - L->lu[69][l] * L->k[5][15][l] - L->lu[68][l] *
+                L->k[5][14][l] - L->lu[67][l] * L->k[5][13][l] - L->lu[66][l] * L->k[5][12][l] -
+                L->lu[65][l] * L->k[5][11][l] - L->lu[64][l] * L->k[5][10][l] - L->lu[63][l] *
+                L->k[5][9][l] - L->lu[62][l] * L->k[5][8][l] - L->lu[61][l] * L->k[5][7][l] -
+                L->lu[60][l] * L->k[5][6][l] - L->lu[59][l] * L->k[5][5][l] - L->lu[58][l] *
+                L->k[5][4][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[5][9][l] -
+                L->lu[44][l] * L->k[5][8][l] - L->lu[43][l] * L->k[5][7][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[5][9][l] -
+                L->lu[26][l] * L->k[5][8][l] - L->lu[25][l] * L->k[5][7][l] - L->lu[20][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[5][9][l] - L->lu[7][l] *
+                L->k[5][7][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / CMG4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(cmg4_pyramid_cos_lanes(L->xnew[1][l])) < CMG4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? CMG4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? CMG4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). Over an
    output grid (L->out), its rows in out from base = traj ntimes, the first
@@ -13146,7 +17160,9 @@ int cmg4_pyramid_rodas4_grid(long ntimes, const double *times, double *x, const 
             (double (*)[CMG4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. CMG4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                       const double *c, double rtol, double atol, double h0,
                                       long max_steps, double *out, cmg4_pyramid_stats *stats,
@@ -13154,6 +17170,11 @@ size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, CMG4_PYRAMID_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[CMG4_PYRAMID_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

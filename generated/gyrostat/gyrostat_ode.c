@@ -3916,6 +3916,843 @@ static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, dou
     }
 }
 
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int p[GYROSTAT_LANES];
+    double best[GYROSTAT_LANES];
+    double m[GYROSTAT_LANES];
+    double swap[GYROSTAT_LANES];
+    double inv_h[GYROSTAT_LANES];
+    double err[GYROSTAT_LANES];
+    double fac[GYROSTAT_LANES];
+    double gus[GYROSTAT_LANES];
+    double total[GYROSTAT_LANES];
+    int go[GYROSTAT_LANES];
+    int fresh[GYROSTAT_LANES];
+    int bad[GYROSTAT_LANES];
+    int sing[GYROSTAT_LANES];
+    int last[GYROSTAT_LANES];
+    int retry[GYROSTAT_LANES];
+    int ok[GYROSTAT_LANES];
+    int take[GYROSTAT_LANES];
+    int lock[GYROSTAT_LANES];
+    int rej[GYROSTAT_LANES];
+    double frac[GYROSTAT_LANES];
+    int due[GYROSTAT_LANES];
+    static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? GYROSTAT_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? GYROSTAT_ODE_ERR_NONFINITE :
+                GYROSTAT_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? GYROSTAT_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->lu[i * GYROSTAT_NX + i][l] = L->lu[i * GYROSTAT_NX + i][l] + 1.0 / (L->h[l] * 0.25);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * GYROSTAT_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 1][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 1][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[1 * GYROSTAT_NX + j][l];
+                L->lu[1 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[1 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[15][l] = 1.0 / L->lu[15][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 1][l] * L->lu[15][l];
+            L->lu[i * GYROSTAT_NX + 1][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 2][l] = L->lu[i * GYROSTAT_NX + 2][l] - m[l] * L->lu[16][l];
+            L->lu[i * GYROSTAT_NX + 7][l] = L->lu[i * GYROSTAT_NX + 7][l] - m[l] * L->lu[21][l];
+            L->lu[i * GYROSTAT_NX + 8][l] = L->lu[i * GYROSTAT_NX + 8][l] - m[l] * L->lu[22][l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[23][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[16][l] = L->lu[16][l] * L->lu[15][l];
+        L->lu[21][l] = L->lu[21][l] * L->lu[15][l];
+        L->lu[22][l] = L->lu[22][l] * L->lu[15][l];
+        L->lu[23][l] = L->lu[23][l] * L->lu[15][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[30][l]) > 0.0));
+        L->lu[30][l] = 1.0 / L->lu[30][l];
+        L->lu[35][l] = L->lu[35][l] * L->lu[30][l];
+        L->lu[36][l] = L->lu[36][l] * L->lu[30][l];
+        L->lu[37][l] = L->lu[37][l] * L->lu[30][l];
+        L->piv[3][l] = 3;
+        sing[l] = (sing[l] | !(fabs(L->lu[45][l]) > 0.0));
+        L->lu[45][l] = 1.0 / L->lu[45][l];
+        L->lu[50][l] = L->lu[50][l] * L->lu[45][l];
+        L->lu[52][l] = L->lu[52][l] * L->lu[45][l];
+        L->piv[4][l] = 4;
+        sing[l] = (sing[l] | !(fabs(L->lu[60][l]) > 0.0));
+        L->lu[60][l] = 1.0 / L->lu[60][l];
+        L->lu[67][l] = L->lu[67][l] * L->lu[60][l];
+        L->piv[5][l] = 5;
+        sing[l] = (sing[l] | !(fabs(L->lu[75][l]) > 0.0));
+        L->lu[75][l] = 1.0 / L->lu[75][l];
+        L->lu[82][l] = L->lu[82][l] * L->lu[75][l];
+        L->piv[6][l] = 6;
+        sing[l] = (sing[l] | !(fabs(L->lu[90][l]) > 0.0));
+        L->lu[90][l] = 1.0 / L->lu[90][l];
+        L->lu[97][l] = L->lu[97][l] * L->lu[90][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * GYROSTAT_NX + 7][l]);
+    }
+    for (i = 8; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 7][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 7][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 10; ++q) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[7 * GYROSTAT_NX + j][l];
+                L->lu[7 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[7 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[105][l] = 1.0 / L->lu[105][l];
+    }
+    for (i = 8; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 7][l] * L->lu[105][l];
+            L->lu[i * GYROSTAT_NX + 7][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 8][l] = L->lu[i * GYROSTAT_NX + 8][l] - m[l] * L->lu[106][l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[107][l];
+            L->lu[i * GYROSTAT_NX + 10][l] = L->lu[i * GYROSTAT_NX + 10][l] - m[l] * L->lu[108][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[106][l] = L->lu[106][l] * L->lu[105][l];
+        L->lu[107][l] = L->lu[107][l] * L->lu[105][l];
+        L->lu[108][l] = L->lu[108][l] * L->lu[105][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * GYROSTAT_NX + 8][l]);
+    }
+    for (i = 9; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 8][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 8][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 10; ++q) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[8 * GYROSTAT_NX + j][l];
+                L->lu[8 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[8 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[120][l] = 1.0 / L->lu[120][l];
+    }
+    for (i = 9; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 8][l] * L->lu[120][l];
+            L->lu[i * GYROSTAT_NX + 8][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[121][l];
+            L->lu[i * GYROSTAT_NX + 10][l] = L->lu[i * GYROSTAT_NX + 10][l] - m[l] * L->lu[122][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[121][l] = L->lu[121][l] * L->lu[120][l];
+        L->lu[122][l] = L->lu[122][l] * L->lu[120][l];
+        L->piv[9][l] = 9;
+        sing[l] = (sing[l] | !(fabs(L->lu[135][l]) > 0.0));
+        L->lu[135][l] = 1.0 / L->lu[135][l];
+        L->lu[136][l] = L->lu[136][l] * L->lu[135][l];
+        L->piv[10][l] = 10;
+        sing[l] = (sing[l] | !(fabs(L->lu[150][l]) > 0.0));
+        L->lu[150][l] = 1.0 / L->lu[150][l];
+        L->piv[11][l] = 11;
+        sing[l] = (sing[l] | !(fabs(L->lu[165][l]) > 0.0));
+        L->lu[165][l] = 1.0 / L->lu[165][l];
+        L->piv[12][l] = 12;
+        sing[l] = (sing[l] | !(fabs(L->lu[180][l]) > 0.0));
+        L->lu[180][l] = 1.0 / L->lu[180][l];
+        L->piv[13][l] = 13;
+        sing[l] = (sing[l] | !(fabs(L->lu[195][l]) > 0.0));
+        L->lu[195][l] = 1.0 / L->lu[195][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? GYROSTAT_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[29][l] * L->k[0][1][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[119][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[133][l] * L->k[0][7][l] - L->lu[134][l] *
+                L->k[0][8][l];
+        L->k[0][13][l] = L->k[0][13][l] * L->lu[195][l];
+        L->k[0][12][l] = L->k[0][12][l] * L->lu[180][l];
+        L->k[0][11][l] = L->k[0][11][l] * L->lu[165][l];
+        L->k[0][10][l] = L->k[0][10][l] * L->lu[150][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[0][10][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[0][10][l] -
+                L->lu[121][l] * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[0][10][l] -
+                L->lu[107][l] * L->k[0][9][l] - L->lu[106][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[0][13][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[0][12][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[0][11][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[0][10][l] -
+                L->lu[50][l] * L->k[0][8][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[0][9][l] -
+                L->lu[36][l] * L->k[0][8][l] - L->lu[35][l] * L->k[0][7][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[0][9][l] -
+                L->lu[22][l] * L->k[0][8][l] - L->lu[21][l] * L->k[0][7][l] - L->lu[16][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[0][9][l] - L->lu[7][l] *
+                L->k[0][7][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[29][l] * L->k[1][1][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[119][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[133][l] * L->k[1][7][l] - L->lu[134][l] *
+                L->k[1][8][l];
+        L->k[1][13][l] = L->k[1][13][l] * L->lu[195][l];
+        L->k[1][12][l] = L->k[1][12][l] * L->lu[180][l];
+        L->k[1][11][l] = L->k[1][11][l] * L->lu[165][l];
+        L->k[1][10][l] = L->k[1][10][l] * L->lu[150][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[1][10][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[1][10][l] -
+                L->lu[121][l] * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[1][10][l] -
+                L->lu[107][l] * L->k[1][9][l] - L->lu[106][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[1][13][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[1][12][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[1][11][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[1][10][l] -
+                L->lu[50][l] * L->k[1][8][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[1][9][l] -
+                L->lu[36][l] * L->k[1][8][l] - L->lu[35][l] * L->k[1][7][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[1][9][l] -
+                L->lu[22][l] * L->k[1][8][l] - L->lu[21][l] * L->k[1][7][l] - L->lu[16][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[1][9][l] - L->lu[7][l] *
+                L->k[1][7][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[29][l] * L->k[2][1][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[119][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[133][l] * L->k[2][7][l] - L->lu[134][l] *
+                L->k[2][8][l];
+        L->k[2][13][l] = L->k[2][13][l] * L->lu[195][l];
+        L->k[2][12][l] = L->k[2][12][l] * L->lu[180][l];
+        L->k[2][11][l] = L->k[2][11][l] * L->lu[165][l];
+        L->k[2][10][l] = L->k[2][10][l] * L->lu[150][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[2][10][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[2][10][l] -
+                L->lu[121][l] * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[2][10][l] -
+                L->lu[107][l] * L->k[2][9][l] - L->lu[106][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[2][13][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[2][12][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[2][11][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[2][10][l] -
+                L->lu[50][l] * L->k[2][8][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[2][9][l] -
+                L->lu[36][l] * L->k[2][8][l] - L->lu[35][l] * L->k[2][7][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[2][9][l] -
+                L->lu[22][l] * L->k[2][8][l] - L->lu[21][l] * L->k[2][7][l] - L->lu[16][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[2][9][l] - L->lu[7][l] *
+                L->k[2][7][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[29][l] * L->k[3][1][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[119][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[133][l] * L->k[3][7][l] - L->lu[134][l] *
+                L->k[3][8][l];
+        L->k[3][13][l] = L->k[3][13][l] * L->lu[195][l];
+        L->k[3][12][l] = L->k[3][12][l] * L->lu[180][l];
+        L->k[3][11][l] = L->k[3][11][l] * L->lu[165][l];
+        L->k[3][10][l] = L->k[3][10][l] * L->lu[150][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[3][10][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[3][10][l] -
+                L->lu[121][l] * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[3][10][l] -
+                L->lu[107][l] * L->k[3][9][l] - L->lu[106][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[3][13][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[3][12][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[3][11][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[3][10][l] -
+                L->lu[50][l] * L->k[3][8][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[3][9][l] -
+                L->lu[36][l] * L->k[3][8][l] - L->lu[35][l] * L->k[3][7][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[3][9][l] -
+                L->lu[22][l] * L->k[3][8][l] - L->lu[21][l] * L->k[3][7][l] - L->lu[16][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[3][9][l] - L->lu[7][l] *
+                L->k[3][7][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[29][l] * L->k[4][1][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[119][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[133][l] * L->k[4][7][l] - L->lu[134][l] *
+                L->k[4][8][l];
+        L->k[4][13][l] = L->k[4][13][l] * L->lu[195][l];
+        L->k[4][12][l] = L->k[4][12][l] * L->lu[180][l];
+        L->k[4][11][l] = L->k[4][11][l] * L->lu[165][l];
+        L->k[4][10][l] = L->k[4][10][l] * L->lu[150][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[4][10][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[4][10][l] -
+                L->lu[121][l] * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[4][10][l] -
+                L->lu[107][l] * L->k[4][9][l] - L->lu[106][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[4][13][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[4][12][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[4][11][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[4][10][l] -
+                L->lu[50][l] * L->k[4][8][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[4][9][l] -
+                L->lu[36][l] * L->k[4][8][l] - L->lu[35][l] * L->k[4][7][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[4][9][l] -
+                L->lu[22][l] * L->k[4][8][l] - L->lu[21][l] * L->k[4][7][l] - L->lu[16][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[4][9][l] - L->lu[7][l] *
+                L->k[4][7][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[29][l] * L->k[5][1][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[119][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[133][l] * L->k[5][7][l] - L->lu[134][l] *
+                L->k[5][8][l];
+        L->k[5][13][l] = L->k[5][13][l] * L->lu[195][l];
+        L->k[5][12][l] = L->k[5][12][l] * L->lu[180][l];
+        L->k[5][11][l] = L->k[5][11][l] * L->lu[165][l];
+        L->k[5][10][l] = L->k[5][10][l] * L->lu[150][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[5][10][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[5][10][l] -
+                L->lu[121][l] * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[5][10][l] -
+                L->lu[107][l] * L->k[5][9][l] - L->lu[106][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[5][13][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[5][12][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[5][11][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[5][10][l] -
+                L->lu[50][l] * L->k[5][8][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[5][9][l] -
+                L->lu[36][l] * L->k[5][8][l] - L->lu[35][l] * L->k[5][7][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[5][9][l] -
+                L->lu[22][l] * L->k[5][8][l] - L->lu[21][l] * L->k[5][7][l] - L->lu[16][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[5][9][l] - L->lu[7][l] *
+                L->k[5][7][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        err[l] = sqrt(total[l] / GYROSTAT_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(gyrostat_cos_lanes(L->xnew[1][l])) < GYROSTAT_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < GYROSTAT_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < GYROSTAT_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l] ?
+                GYROSTAT_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* The normalized Taylor coefficients of x and of the rhs's 52 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
@@ -6606,13 +7443,20 @@ int gyrostat_rodas4_grid(long ntimes, const double *times, double *x, const doub
             (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t gyrostat_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                   const double *c, double rtol, double atol, double h0,
                                   long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, GYROSTAT_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[GYROSTAT_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

@@ -90,7 +90,10 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
             rosenbrock.integrate(m, g.quaternion, g.uses_time, grid=True),
             *([rosenbrock.integrate(m, g.quaternion, g.uses_time, g.events)] if g.events else []),
         ],
-        [rosenbrock.lanes_step(m, g.quaternion, g.uses_time, g.blocks)],
+        [
+            rosenbrock.lanes_step(m, g.quaternion, g.uses_time, g.blocks),
+            rosenbrock.lanes_step(m, g.quaternion, g.uses_time, g.blocks, grid=True),
+        ],
         rosenbrock.lane_state(m, g.uses_time),
         rosenbrock.lane_start(m),
     )

@@ -313,12 +313,17 @@ def lanes_point(uses_time: bool) -> list[S]:
     ]
 
 
-def lanes_step(m: Method, quaternion: bool, uses_time: bool, blocks: Blocks) -> Func:
+def lanes_step(
+    m: Method, quaternion: bool, uses_time: bool, blocks: Blocks, grid: bool = False
+) -> Func:
     """m.name_step_lanes: one turn of m.name_integrate's loop on every lane,
     each branch a selection (a lane that stopped, or whose E is singular or
     whose trial is not finite, computes on and keeps nothing); E's LU by
     selection too (each lane its own pivots: linear.eliminate with singular),
-    so each lane takes m.name_integrate's steps bit for bit."""
+    so each lane takes m.name_integrate's steps bit for bit. With grid,
+    m.name_grid_step_lanes: m.name_grid's (the grid and the interpolant's
+    rows in the struct, driver.lane_grid_state; the grid's writes lane by
+    lane, driver.passed)."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Rosenbrock) and isinstance(ctl, registry.RosenbrockControl)
     names = "code go bad sing last retry ok take lock rej err fac rejected_last singular t1"
@@ -326,7 +331,7 @@ def lanes_step(m: Method, quaternion: bool, uses_time: bool, blocks: Blocks) -> 
         Var(n) for n in names.split()
     )
     nonfinite, fnew, new_point = Var("nonfinite"), Var("fnew"), Var("new_point")
-    nx, final = len(blocks.end), R.stages - 1
+    nx, final, row = len(blocks.end), R.stages - 1, driver.BASE + driver.G
     control = driver.Gustafsson(ctl)
     sums, norm = mean_square(lambda at: k[final, at])
 
@@ -354,6 +359,7 @@ def lanes_step(m: Method, quaternion: bool, uses_time: bool, blocks: Blocks) -> 
     ]
     trial: list[S] = [
         *stages(R, uses_time, lambda s: linear.solve_selected(blocks, nx, lambda r: k[s, r])),
+        *([dense_rows(R)] if grid else []),
         driver.count("rhs_calls", sel(go, Int(R.stages - 1), Int(0))),
         *sums,
         assign(err, norm),
@@ -389,8 +395,10 @@ def lanes_step(m: Method, quaternion: bool, uses_time: bool, blocks: Blocks) -> 
         assign(lock, Bool(False) if quaternion else locked(x, xnew)),
         assign(ok, and_(take, not_(lock))),
         *control.predictive_selected(ok, fac, err),
+        *(driver.passed(ok, interpolant(R), sel(last, t1, t + h), t, h, row) if grid else []),
         If(ok, tuple(accepted(quaternion))),
         *driver.counted(ok, rej, last),
+        *(driver.reached(row, ok) if grid else []),
         assign(cd, driver.ended(and_(take, lock), ok, last, cd)),
         Comment("a branch's locals are its own over lanes: fac by selection"),
         assign(fac, sel(and_(ok, rejected_last), fn("max", fac, 1.0), fac)),
@@ -404,6 +412,10 @@ def lanes_step(m: Method, quaternion: bool, uses_time: bool, blocks: Blocks) -> 
     doubles += ["norm"] * quaternion
     locals_ = (*ints, *(real(n, "inout") for n in doubles),
                *(Decl(n, "bool", (), "inout") for n in STEP_BOOLS))  # fmt: skip
+    if grid:
+        locals_ += driver.lane_grid_locals(body)
+        doc = (f"One turn of {m.name}_grid's loop on every lane.",)
+        return Func(f"{m.name}_grid_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
     doc = (f"One turn of {m.name}_integrate's loop on every lane.",)
     return Func(f"{m.name}_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
 
@@ -417,8 +429,9 @@ def lane_state(m: Method, uses_time: bool) -> list[Decl]:
     values = [Decl(n, "bool", (), "inout") for n in STATE_BOOLS]
     values += [real(n, "inout") for n in STATE_REALS] + [Decl("singular", "int", (), "inout")]
     stats = [Decl(f"stats.{n}", "long", (), "inout") for n in ("jac_calls", "decompositions")]
-    return [*square, Decl("piv", "int", ("NX",), "inout"), *rows, *values, *stats,
-            Decl("k", "double", (R.stages, "NX"), "inout")]  # fmt: skip
+    stages = Decl("k", "double", (R.stages, "NX"), "inout")
+    dense = driver.rows("dense", len(R.dense))
+    return [*square, Decl("piv", "int", ("NX",), "inout"), *rows, *values, *stats, stages, dense]
 
 
 def lane_start(m: Method) -> list[S]:
