@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen import methods
+from gyrogen.analysis.bench.ensemble import each_call
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.runtime.compiled import Compiled
@@ -67,17 +68,11 @@ def contenders(
     comp: Compiled, method: str, x0s: np.ndarray, c: np.ndarray, t1: float, tol: float
 ) -> dict[str, Callable[[], Any]]:
     """The batch on one thread and the loop of single calls (each on a fresh copy)."""
-    each = comp.ffi.cast("gyrogen_adaptive", comp.ffi.addressof(comp.lib, comp.symbol(method)))
-    cb = comp.doubles(np.ascontiguousarray(c))
 
     def lanes() -> None:
         comp.integrate_batch(method, x0s, c, 0.0, t1, 1, rtol=tol, atol=tol, max_steps=MAX_STEPS)
 
-    def loop() -> None:
-        x = np.array(x0s, order="C")
-        comp.lib.gyrogen_each(each, len(x), 0.0, t1, comp.doubles(x), cb, tol, tol, MAX_STEPS)
-
-    return {"lanes": lanes, "loop": loop}
+    return {"lanes": lanes, "loop": each_call(comp, method, x0s, c, t1, tol, MAX_STEPS)}
 
 
 def grid_contenders(

@@ -1764,7 +1764,7 @@ static void lu_solve_complex(const double *RW4_HARDWARE_RESTRICT ar,
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES

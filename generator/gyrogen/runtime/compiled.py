@@ -780,7 +780,7 @@ class Compiled:
         **kwargs: Any,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """`integrate_var` for many states with one set of constants, as
-        `integrate_batch` (SIMD lanes for the pairs and the Taylor method).
+        `integrate_batch` (SIMD lanes for the pairs, the Taylor method and rodas4).
 
         Returns
         -------
