@@ -4566,7 +4566,7 @@ static void lu_solve_complex(const double *CMG4_PYRAMID_RESTRICT ar,
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
@@ -4590,11 +4590,23 @@ struct CMG4_PYRAMID_ALIGNED lanes {
     long stats_rejected[CMG4_PYRAMID_LANES];
     long stats_rhs_calls[CMG4_PYRAMID_LANES];
     double dense[7][CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double J[CMG4_PYRAMID_NX * CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double lu[CMG4_PYRAMID_NX * CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double f0[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double fnew[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double fy[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double h_acc[CMG4_PYRAMID_LANES];
+    double err_acc[CMG4_PYRAMID_LANES];
+    long stats_jac_calls[CMG4_PYRAMID_LANES];
+    long stats_decompositions[CMG4_PYRAMID_LANES];
     long g[CMG4_PYRAMID_LANES];
     long base[CMG4_PYRAMID_LANES];
     int code[CMG4_PYRAMID_LANES];
     int nonfinite[CMG4_PYRAMID_LANES];
     int rejected_last[CMG4_PYRAMID_LANES];
+    int piv[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    int new_point[CMG4_PYRAMID_LANES];
+    int singular[CMG4_PYRAMID_LANES];
     long ntimes;
     const double *times;
     double (*out)[CMG4_PYRAMID_NX];
@@ -4785,7 +4797,1118 @@ static void rhs_lanes(const double *CMG4_PYRAMID_RESTRICT t,
     }
 }
 
-/* One step of a pair on every lane. */
+static void jac_lanes(const double *CMG4_PYRAMID_RESTRICT t,
+                      double (*CMG4_PYRAMID_RESTRICT x)[CMG4_PYRAMID_LANES],
+                      const double *CMG4_PYRAMID_RESTRICT c,
+                      double (*CMG4_PYRAMID_RESTRICT J)[CMG4_PYRAMID_LANES])
+{
+    int l;
+
+    (void)t;  /* unused in some scenes */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        double q2, q3, gam1, gam2, gam3, gam4, u1, u2, u3, gd1, gd2, gd3, gd4, w1, w2, w3, w4,
+                tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, tmp7, tmp8, tmp9, tmp10, tmp11, tmp12,
+                tmp13, tmp14, tmp15, tmp16, tmp17, tmp18, tmp19, tmp20, tmp21, tmp22, tmp23,
+                tmp24, tmp25, tmp26, tmp27, tmp28, tmp29, tmp30, tmp31, tmp32, tmp33, tmp34,
+                tmp35, tmp36, tmp37, tmp38, tmp39, tmp40, tmp41, tmp42, tmp43, tmp44, tmp45,
+                tmp46, tmp47, tmp48, tmp49, tmp50, tmp51, tmp52, tmp53, tmp54, tmp55, tmp56,
+                tmp57, tmp58, tmp59, tmp60, tmp61, tmp62, tmp63, tmp64, tmp65, tmp66, tmp67,
+                tmp68, tmp69, tmp70, tmp71, tmp72, tmp73, tmp74, tmp75, tmp76, tmp77, tmp78,
+                tmp79, tmp80, tmp81, tmp82, tmp83, tmp84, tmp85, tmp86, tmp87, tmp88, tmp89,
+                tmp90, tmp91, tmp92, tmp93, tmp94, tmp95, tmp96, tmp97, tmp98, tmp99, tmp100,
+                tmp101, tmp102, tmp103, tmp104, tmp105, tmp106, tmp107, tmp108, tmp109, tmp110,
+                tmp111, tmp112, tmp113, tmp114, tmp115, tmp116, tmp117, tmp118, tmp119, tmp120,
+                tmp121, tmp122, tmp123, tmp124, tmp125, tmp126, tmp127, tmp128, tmp129, tmp130,
+                tmp131, tmp132, tmp133, tmp134, tmp135, tmp136, tmp137, tmp138, tmp139, tmp140,
+                tmp141, tmp142, tmp143, tmp144, tmp145, tmp146, tmp147, tmp148, tmp149, tmp150,
+                tmp151, tmp152, tmp153, tmp154, tmp155, tmp156, tmp157, tmp158, tmp159, tmp160,
+                tmp161, tmp162, tmp163, tmp164, tmp165, tmp166, tmp167, tmp168, tmp169, tmp170,
+                tmp171, tmp172, tmp173, tmp174, tmp175, tmp176, tmp177, tmp178, tmp179, tmp180,
+                tmp181, tmp182, tmp183, tmp184, tmp185, tmp186, tmp187, tmp188, tmp189, tmp190,
+                tmp191, tmp192, tmp193, tmp194, tmp195, tmp196, tmp197, tmp198, tmp199, tmp200,
+                tmp201, tmp202, tmp203, tmp204, tmp205, tmp206, tmp207, tmp208, tmp209, tmp210,
+                tmp211, tmp212, tmp213, tmp214, tmp215, tmp216, tmp217, tmp218, tmp219, tmp220,
+                tmp221, tmp222, tmp223, tmp224, tmp225, tmp226, tmp227, tmp228, tmp229, tmp230,
+                tmp231, tmp232, tmp233, tmp234, tmp235, tmp236, tmp237, tmp238, tmp239, tmp240,
+                tmp241, tmp242, tmp243, tmp244, tmp245, tmp246, tmp247, tmp248, tmp249, tmp250,
+                tmp251, tmp252, tmp253, tmp254, tmp255, tmp256, tmp257, tmp258, tmp259, tmp260,
+                tmp261, tmp262, tmp263, tmp264, tmp265, tmp266, tmp267, tmp268, tmp269, tmp270,
+                tmp271, tmp272, tmp273, tmp274, tmp275, tmp276, tmp277, tmp278, tmp279, tmp280,
+                tmp281, tmp282, tmp283, tmp284, tmp285, tmp286, tmp287, tmp288, tmp289, tmp290,
+                tmp291, tmp292, tmp293, tmp294, tmp295, tmp296, tmp297, tmp298, tmp299, tmp300,
+                tmp301, tmp302, tmp303, tmp304, tmp305, tmp306, tmp307, tmp308, tmp309, tmp310,
+                tmp311, tmp312, tmp313, tmp314, tmp315, tmp316, tmp317, tmp318, tmp319, tmp320,
+                tmp321, tmp322, tmp323, tmp324, tmp325, tmp326, tmp327, tmp328, tmp329, tmp330,
+                tmp331, tmp332, tmp333, tmp334, tmp335, tmp336, tmp337, tmp338, tmp339, tmp340,
+                tmp341, tmp342, tmp343, tmp344, tmp345, tmp346, tmp347, tmp348, tmp349, tmp350,
+                tmp351, tmp352, tmp353, tmp354, tmp355, tmp356, tmp357, tmp358, tmp359, tmp360,
+                tmp361, tmp362, tmp363, tmp364, tmp365, tmp366, tmp367, tmp368, tmp369, tmp370,
+                tmp371, tmp372, tmp373, tmp374, tmp375, tmp376, tmp377, tmp378, tmp379, tmp380,
+                tmp381, tmp382, tmp383, tmp384, tmp385, tmp386, tmp387, tmp388, tmp389, tmp390,
+                tmp391, tmp392, tmp393, tmp394, tmp395, tmp396, tmp397, tmp398, tmp399, tmp400,
+                tmp401, tmp402, tmp403, tmp404, tmp405, tmp406, tmp407, tmp408, tmp409, tmp410,
+                tmp411, tmp412, tmp413, tmp414, tmp415, tmp416, tmp417, tmp418, tmp419, tmp420,
+                tmp421, tmp422, tmp423, tmp424, tmp425, tmp426, tmp427, tmp428, tmp429, tmp430,
+                tmp431, tmp432, tmp433, tmp434, tmp435, tmp436, tmp437, tmp438, tmp439, tmp440,
+                tmp441, tmp442, tmp443, tmp444, tmp445, tmp446, tmp447, tmp448, tmp449, tmp450,
+                tmp451, tmp452, tmp453, tmp454, tmp455, tmp456, tmp457, tmp458, tmp459, tmp460,
+                tmp461, tmp462, tmp463, tmp464, tmp465, tmp466, tmp467, tmp468, tmp469, tmp470,
+                tmp471, tmp472, tmp473, tmp474, tmp475, tmp476, tmp477, tmp478, tmp479, tmp480,
+                tmp481, tmp482, tmp483, tmp484, tmp485, tmp486, tmp487, tmp488, tmp489, tmp490,
+                tmp491, tmp492, tmp493, tmp494, tmp495, tmp496, tmp497, tmp498, tmp499, tmp500,
+                tmp501, tmp502, tmp503, tmp504, tmp505, tmp506, tmp507, tmp508, tmp509, tmp510,
+                tmp511, tmp512, tmp513, tmp514, tmp515, tmp516, tmp517, tmp518, tmp519, tmp520,
+                tmp521, tmp522, tmp523, tmp524, tmp525, tmp526, tmp527, tmp528, tmp529, tmp530,
+                tmp531, tmp532;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        gam1 = x[3][l];
+        gam2 = x[4][l];
+        gam3 = x[5][l];
+        gam4 = x[6][l];
+        u1 = x[7][l];
+        u2 = x[8][l];
+        u3 = x[9][l];
+        gd1 = x[10][l];
+        gd2 = x[11][l];
+        gd3 = x[12][l];
+        gd4 = x[13][l];
+        w1 = x[14][l];
+        w2 = x[15][l];
+        w3 = x[16][l];
+        w4 = x[17][l];
+        tmp0 = cmg4_pyramid_sin_lanes(q2);
+        tmp1 = cmg4_pyramid_cos_lanes(q2);
+        tmp2 = cmg4_pyramid_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = cmg4_pyramid_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = cmg4_pyramid_sin_lanes(gam1);
+        tmp13 = cmg4_pyramid_cos_lanes(gam1);
+        tmp14 = tmp12 * tmp13;
+        tmp15 = cmg4_pyramid_sin_lanes(gam3);
+        tmp16 = cmg4_pyramid_cos_lanes(gam3);
+        tmp17 = 5.7157856832002236e-05 * tmp14 - 5.7157856832002236e-05 * tmp15 * tmp16;
+        tmp18 = cmg4_pyramid_cos_lanes(gam2);
+        tmp19 = tmp18 * tmp18;
+        tmp20 = cmg4_pyramid_cos_lanes(gam4);
+        tmp21 = tmp20 * tmp20;
+        tmp22 = 3.299652839825987e-05 * tmp19 - 3.299652839825987e-05 * tmp21;
+        tmp23 = -tmp17 - tmp22;
+        tmp24 = tmp12 * tmp12;
+        tmp25 = tmp15 * tmp15;
+        tmp26 = 7e-05 * tmp24 + 7e-05 * tmp25 + 2.3328277176747646e-05 * tmp19 +
+                2.3328277176747646e-05 * tmp21;
+        tmp27 = 2.2320431494378203 + tmp26;
+        tmp28 = tmp13 * tmp13;
+        tmp29 = tmp16 * tmp16;
+        tmp30 = 1.834666678223596 + 4.667172282325236e-05 * tmp19 + 4.667172282325236e-05 * tmp21
+                + 4.667172282325236e-05 * tmp28 + 4.667172282325236e-05 * tmp29;
+        tmp31 = tmp27 * tmp30 - tmp23 * tmp23;
+        tmp32 = cmg4_pyramid_sin_lanes(gam2);
+        tmp33 = tmp18 * tmp32;
+        tmp34 = tmp15 * tmp16;
+        tmp35 = cmg4_pyramid_sin_lanes(gam4);
+        tmp36 = tmp20 * tmp35;
+        tmp37 = 4.041013984598835e-05 * tmp14 + 4.041013984598835e-05 * tmp34 -
+                4.041013984598835e-05 * tmp33 - 4.041013984598835e-05 * tmp36;
+        tmp38 = 5.7157856832002236e-05 * tmp33 - 5.7157856832002236e-05 * tmp36;
+        tmp39 = 3.299652839825987e-05 * tmp29 - 3.299652839825987e-05 * tmp28;
+        tmp40 = tmp38 + tmp39;
+        tmp41 = tmp23 * tmp37 - tmp27 * tmp40;
+        tmp42 = 6.599305679651973e-05 * tmp14;
+        tmp43 = 4.041013984598835e-05 * tmp24;
+        tmp44 = 4.041013984598835e-05 * tmp28 - tmp43;
+        tmp45 = tmp23 * tmp40 - tmp30 * tmp37;
+        tmp46 = tmp32 * tmp32;
+        tmp47 = tmp35 * tmp35;
+        tmp48 = 7e-05 * tmp46 + 7e-05 * tmp47 + 2.3328277176747646e-05 * tmp28 +
+                2.3328277176747646e-05 * tmp29;
+        tmp49 = 2.53204314943782 + tmp48;
+        tmp50 = tmp14 * tmp27;
+        tmp51 = 0.00014 * tmp12 * tmp13 * tmp30 - 9.334344564650472e-05 * tmp50 - tmp23 *
+                (0.00011431571366400447 * tmp24 - 0.00011431571366400447 * tmp28);
+        tmp52 = 5.7157856832002236e-05 * tmp24 - 5.7157856832002236e-05 * tmp28;
+        tmp53 = tmp23 * tmp44 + tmp37 * tmp52 - 6.599305679651973e-05 * tmp50 - 0.00014 * tmp14 *
+                tmp40;
+        tmp54 = 9.334344564650472e-05 * tmp37;
+        tmp55 = tmp14 * tmp54 + tmp23 * tmp42 + tmp40 * tmp52 - tmp30 * tmp44;
+        tmp56 = 4.665655435349529e-05 * tmp12 * tmp13 * tmp31 - tmp37 * tmp55 - tmp40 * tmp53 -
+                tmp41 * tmp42 - tmp44 * tmp45 - tmp49 * tmp51;
+        tmp57 = tmp31 * tmp49 + tmp37 * tmp45 + tmp40 * tmp41;
+        tmp58 = 1.0 / (tmp57 * tmp57);
+        tmp59 = c[0] - 0.004 * gd1;
+        tmp60 = dmax(-0.01, tmp59);
+        tmp61 = dmin(1e-2, tmp60);
+        tmp62 = c[2] - 0.004 * gd3;
+        tmp63 = dmax(-0.01, tmp62);
+        tmp64 = dmin(1e-2, tmp63);
+        tmp65 = tmp20 * u1;
+        tmp66 = 4.041013984598835e-05 * u2;
+        tmp67 = 5.715785683200223e-05 * u3;
+        tmp68 = 0.00011 * w4 - 7e-05 * tmp65 - tmp35 * tmp66 - tmp35 * tmp67;
+        tmp69 = 0.00011 * w1;
+        tmp70 = tmp12 * u1;
+        tmp71 = tmp13 * u2;
+        tmp72 = tmp12 * u3;
+        tmp73 = tmp69 + 4.041013984598835e-05 * tmp70 - 7e-05 * tmp71 - 5.715785683200223e-05 *
+                tmp72;
+        tmp74 = gd1 * tmp13;
+        tmp75 = tmp73 * tmp74;
+        tmp76 = tmp15 * u1;
+        tmp77 = tmp15 * u3;
+        tmp78 = 0.00011 * w3 + 7e-05 * tmp16 * u2 - 4.041013984598835e-05 * tmp76 -
+                5.715785683200223e-05 * tmp77;
+        tmp79 = gd3 * tmp16;
+        tmp80 = tmp78 * tmp79;
+        tmp81 = 0.00011 * w2;
+        tmp82 = tmp18 * u1;
+        tmp83 = tmp81 + 7e-05 * tmp82 + tmp32 * tmp66 - tmp32 * tmp67;
+        tmp84 = tmp32 * tmp83;
+        tmp85 = gd2 * tmp84;
+        tmp86 = 1.2222222222222223 * w3 + 0.7777777777777778 * tmp16 * u2 - 0.6350872981333582 *
+                tmp77 - 0.449001553844315 * tmp76;
+        tmp87 = tmp15 * u2;
+        tmp88 = 0.5772877120855479 * u1;
+        tmp89 = 0.8165408118857462 * u3;
+        tmp90 = tmp87 + tmp16 * tmp88 + tmp16 * tmp89;
+        tmp91 = tmp86 * tmp90;
+        tmp92 = 1.2222222222222223 * w1 + 0.449001553844315 * tmp70 - 0.6350872981333582 * tmp72
+                - 0.7777777777777778 * tmp71;
+        tmp93 = tmp12 * u2;
+        tmp94 = 0.8165408118857462 * tmp13 * u3 - tmp93 - tmp13 * tmp88;
+        tmp95 = tmp92 * tmp94;
+        tmp96 = 0.0011551527118831813 * tmp32;
+        tmp97 = tmp32 * u1;
+        tmp98 = 0.5772877120855479 * u2;
+        tmp99 = tmp97 + tmp18 * tmp89 - tmp18 * tmp98;
+        tmp100 = 7e-05 * tmp99;
+        tmp101 = 2.0943951023931953 + 0.0016338981645833783 * tmp32 * u3 - 0.002001 * tmp82 -
+                0.002001 * w2 - gd2 * tmp100 - tmp96 * u2;
+        tmp102 = tmp101 * tmp18;
+        tmp103 = 7e-05 * tmp90;
+        tmp104 = 2.0943951023931953 + 0.0011551527118831813 * tmp15 * u1 + 0.0016338981645833783
+                * tmp15 * u3 - 0.002001 * w3 - gd3 * tmp103 - 0.002001 * tmp16 * u2;
+        tmp105 = tmp104 * tmp15;
+        tmp106 = 0.0011551527118831813 * tmp12;
+        tmp107 = 7e-05 * tmp94;
+        tmp108 = 2.0943951023931953 + 0.002001 * tmp13 * u2 + 0.0016338981645833783 * tmp12 * u3
+                - 0.002001 * w1 - gd1 * tmp107 - tmp106 * u1;
+        tmp109 = tmp108 * tmp12;
+        tmp110 = tmp35 * u1;
+        tmp111 = tmp20 * tmp89 + tmp20 * tmp98 - tmp110;
+        tmp112 = 7e-05 * tmp111;
+        tmp113 = 2.0943951023931953 + 0.002001 * tmp65 + 0.0011551527118831813 * tmp35 * u2 +
+                0.0016338981645833783 * tmp35 * u3 - 0.002001 * w4 - gd4 * tmp112;
+        tmp114 = tmp113 * tmp20;
+        tmp115 = tmp111 * tmp20;
+        tmp116 = tmp18 * tmp99;
+        tmp117 = tmp35 * w4;
+        tmp118 = tmp32 * w2;
+        tmp119 = 0.00011 * w3;
+        tmp120 = 2.232163162439366 * u2 + 6.350164832941026e-05 * tmp117 + 7.348867306971716e-05
+                * gd2 + tmp13 * tmp69 - 6.350164832941026e-05 * tmp118 - 7.348867306971716e-05 *
+                gd4 - tmp119 * tmp16;
+        tmp121 = tmp120 + 4.041013984598835e-05 * tmp115 - 4.041013984598835e-05 * tmp116;
+        tmp122 = tmp121 + tmp103 * tmp15 - tmp107 * tmp12;
+        tmp123 = 5.19558940876993e-05 * gd1;
+        tmp124 = 5.19558940876993e-05 * gd2;
+        tmp125 = 5.19558940876993e-05 * gd3;
+        tmp126 = 5.19558940876993e-05 * gd4;
+        tmp127 = 1.834786652220505 * u3;
+        tmp128 = tmp16 * tmp90;
+        tmp129 = tmp13 * tmp94;
+        tmp130 = tmp12 * w1;
+        tmp131 = 8.981948930743208e-05 * tmp130;
+        tmp132 = 8.981948930743208e-05 * tmp118;
+        tmp133 = tmp15 * w3;
+        tmp134 = 8.981948930743208e-05 * tmp133;
+        tmp135 = 8.981948930743208e-05 * tmp117;
+        tmp136 = tmp123 + tmp124 + tmp125 + tmp126 + tmp127 + tmp131 + tmp132 + tmp134 + tmp135 +
+                5.7157856832002236e-05 * tmp128 + 5.7157856832002236e-05 * tmp129;
+        tmp137 = 5.7157856832002236e-05 * tmp115 + 5.7157856832002236e-05 * tmp116;
+        tmp138 = tmp136 + tmp137;
+        tmp139 = tmp102 + 0.8165408118857462 * tmp64 + 0.5772877120855479 * tmp109 +
+                0.5772877120855479 * tmp75 + 7.348867306971716e-05 * tmp91 + tmp122 * u3 + gd4 *
+                tmp35 * tmp68 - tmp114 - tmp85 - 0.8165408118857462 * tmp61 - 0.5772877120855479
+                * tmp105 - 0.5772877120855479 * tmp80 - 7.348867306971716e-05 * tmp95 - tmp138 * u2;
+        tmp140 = c[1] - 0.004 * gd2;
+        tmp141 = dmax(-0.01, tmp140);
+        tmp142 = dmin(1e-2, tmp141);
+        tmp143 = c[3] - 0.004 * gd4;
+        tmp144 = dmax(-0.01, tmp143);
+        tmp145 = dmin(1e-2, tmp144);
+        tmp146 = tmp12 * tmp73;
+        tmp147 = gd1 * tmp146;
+        tmp148 = gd2 * tmp18;
+        tmp149 = tmp148 * tmp83;
+        tmp150 = gd4 * tmp20;
+        tmp151 = tmp150 * tmp68;
+        tmp152 = tmp15 * tmp78;
+        tmp153 = 0.449001553844315 * u2;
+        tmp154 = 0.6350872981333582 * u3;
+        tmp155 = 1.2222222222222223 * w2 + 0.7777777777777778 * tmp82 + tmp153 * tmp32 - tmp154 *
+                tmp32;
+        tmp156 = tmp155 * tmp99;
+        tmp157 = 1.2222222222222223 * w4 - 0.7777777777777778 * tmp65 - tmp153 * tmp35 - tmp154 *
+                tmp35;
+        tmp158 = tmp111 * tmp157;
+        tmp159 = tmp104 * tmp16;
+        tmp160 = tmp101 * tmp32;
+        tmp161 = tmp113 * tmp35;
+        tmp162 = tmp108 * tmp13;
+        tmp163 = 2.5321631624393657 * u1;
+        tmp164 = 7.348867306971716e-05 * gd1;
+        tmp165 = 7.348867306971716e-05 * gd3;
+        tmp166 = 6.350164832941026e-05 * tmp133;
+        tmp167 = 0.00011 * w4;
+        tmp168 = tmp167 * tmp20;
+        tmp169 = 6.350164832941026e-05 * tmp130;
+        tmp170 = tmp18 * tmp81;
+        tmp171 = tmp163 + tmp164 + tmp166 + tmp168 + 4.041013984598835e-05 * tmp128 - tmp165 -
+                tmp169 - tmp170 - 4.041013984598835e-05 * tmp129;
+        tmp172 = tmp171 + tmp100 * tmp32 - tmp112 * tmp35;
+        tmp173 = tmp147 + tmp159 + 0.8165408118857462 * tmp145 + 0.5772877120855479 * tmp149 +
+                0.5772877120855479 * tmp160 + 7.348867306971716e-05 * tmp158 + tmp138 * u1 -
+                tmp162 - 0.8165408118857462 * tmp142 - 0.5772877120855479 * tmp151 -
+                0.5772877120855479 * tmp161 - 7.348867306971716e-05 * tmp156 - gd3 * tmp152 -
+                tmp172 * u3;
+        tmp174 = tmp172 * u2 - 0.8165408118857462 * tmp105 - 0.8165408118857462 * tmp109 -
+                0.8165408118857462 * tmp149 - 0.8165408118857462 * tmp151 - 0.8165408118857462 *
+                tmp160 - 0.8165408118857462 * tmp161 - 0.8165408118857462 * tmp75 -
+                0.8165408118857462 * tmp80 - 5.19558940876993e-05 * tmp156 - 5.19558940876993e-05
+                * tmp158 - 5.19558940876993e-05 * tmp91 - 5.19558940876993e-05 * tmp95 -
+                0.5772877120855479 * tmp142 - 0.5772877120855479 * tmp145 - 0.5772877120855479 *
+                tmp61 - 0.5772877120855479 * tmp64 - tmp122 * u1;
+        tmp175 = tmp58 * (tmp139 * tmp31 + tmp173 * tmp45 + tmp174 * tmp41);
+        tmp176 = tmp175 * tmp56;
+        tmp177 = 1.0 / tmp57;
+        tmp178 = tmp13 * u1;
+        tmp179 = tmp13 * u3;
+        tmp180 = 7e-05 * tmp93 + 4.041013984598835e-05 * tmp178 - 5.715785683200223e-05 * tmp179;
+        tmp181 = gd1 * tmp12;
+        tmp182 = 0.5772877120855479 * tmp12 * u1 - tmp71 - tmp12 * tmp89;
+        tmp183 = 7e-05 * tmp182;
+        tmp184 = 0.0016338981645833783 * tmp13 * u3 - 0.0011551527118831813 * tmp178 - 0.002001 *
+                tmp93 - gd1 * tmp183;
+        tmp185 = tmp13 * w1;
+        tmp186 = tmp13 * tmp182;
+        tmp187 = tmp12 * tmp94;
+        tmp188 = 5.7157856832002236e-05 * tmp186 + 8.981948930743208e-05 * tmp185 -
+                5.7157856832002236e-05 * tmp187;
+        tmp189 = 4.041013984598835e-05 * tmp12 * tmp94 - 4.041013984598835e-05 * tmp186 -
+                6.350164832941026e-05 * tmp185;
+        tmp190 = tmp109 + tmp75 + tmp180 * tmp181 + tmp188 * u1 - tmp13 * tmp184 - tmp189 * u3;
+        tmp191 = tmp13 * tmp180;
+        tmp192 = gd1 * tmp191;
+        tmp193 = 0.7777777777777778 * tmp93 + 0.449001553844315 * tmp178 - 0.6350872981333582 *
+                tmp179;
+        tmp194 = tmp193 * tmp94;
+        tmp195 = tmp182 * tmp92;
+        tmp196 = tmp12 * tmp184;
+        tmp197 = -(tmp107 * tmp13) - tmp12 * tmp183 - tmp12 * tmp69;
+        tmp198 = 0.5772877120855479 * tmp162 + 0.5772877120855479 * tmp192 + 0.5772877120855479 *
+                tmp196 + tmp197 * u3 - 0.5772877120855479 * tmp147 - 7.348867306971716e-05 *
+                tmp194 - 7.348867306971716e-05 * tmp195 - tmp188 * u2;
+        tmp199 = tmp189 * u2 + 0.8165408118857462 * gd1 * tmp12 * tmp73 - 0.8165408118857462 *
+                tmp162 - 0.8165408118857462 * tmp192 - 0.8165408118857462 * tmp196 -
+                5.19558940876993e-05 * tmp194 - 5.19558940876993e-05 * tmp195 - tmp197 * u1;
+        tmp200 = tmp177 * (tmp139 * tmp51 + tmp173 * tmp55 + tmp174 * tmp53 + tmp190 * tmp45 +
+                tmp198 * tmp31 + tmp199 * tmp41);
+        tmp201 = 0.00014 * tmp31;
+        tmp202 = 5.7157856832002236e-05 * tmp19 - 5.7157856832002236e-05 * tmp46;
+        tmp203 = 4.041013984598835e-05 * tmp46;
+        tmp204 = 4.041013984598835e-05 * tmp19;
+        tmp205 = tmp203 - tmp204;
+        tmp206 = 9.334344564650472e-05 * tmp27;
+        tmp207 = 4.665655435349529e-05 * tmp33;
+        tmp208 = -(tmp206 * tmp33) - tmp207 * tmp30 - 0.00013198611359303947 * tmp23 * tmp33;
+        tmp209 = 6.599305679651973e-05 * tmp33;
+        tmp210 = tmp202 * tmp23 + tmp209 * tmp40 + tmp33 * tmp54 - tmp205 * tmp30;
+        tmp211 = tmp205 * tmp23 + tmp207 * tmp40 + tmp209 * tmp37 - tmp202 * tmp27;
+        tmp212 = -(tmp201 * tmp33) - tmp202 * tmp41 - tmp205 * tmp45 - tmp208 * tmp49 - tmp210 *
+                tmp37 - tmp211 * tmp40;
+        tmp213 = tmp175 * tmp212;
+        tmp214 = 4.041013984598835e-05 * tmp18 * u2 - 7e-05 * tmp97 - tmp18 * tmp67;
+        tmp215 = gd2 * tmp32;
+        tmp216 = tmp82 + tmp32 * tmp98 - tmp32 * tmp89;
+        tmp217 = 7e-05 * tmp216;
+        tmp218 = 0.002001 * tmp32 * u1 + 0.0016338981645833783 * tmp18 * u3 - gd2 * tmp217 -
+                0.0011551527118831813 * tmp18 * u2;
+        tmp219 = tmp18 * w2;
+        tmp220 = tmp32 * tmp99;
+        tmp221 = tmp18 * tmp216;
+        tmp222 = 5.7157856832002236e-05 * tmp221 + 8.981948930743208e-05 * tmp219 -
+                5.7157856832002236e-05 * tmp220;
+        tmp223 = 4.041013984598835e-05 * tmp32 * tmp99 - 4.041013984598835e-05 * tmp221 -
+                6.350164832941026e-05 * tmp219;
+        tmp224 = tmp18 * tmp218 + tmp223 * u3 - tmp149 - tmp160 - tmp214 * tmp215 - tmp222 * u2;
+        tmp225 = gd2 * tmp18 * tmp214;
+        tmp226 = 0.449001553844315 * tmp18 * u2 - 0.7777777777777778 * tmp97 - tmp154 * tmp18;
+        tmp227 = tmp226 * tmp99;
+        tmp228 = tmp155 * tmp216;
+        tmp229 = tmp218 * tmp32;
+        tmp230 = 7e-05 * tmp116 + tmp217 * tmp32 + tmp32 * tmp81;
+        tmp231 = tmp230 * u2 + 0.8165408118857462 * gd2 * tmp32 * tmp83 - 0.8165408118857462 *
+                tmp102 - 0.8165408118857462 * tmp225 - 0.8165408118857462 * tmp229 -
+                5.19558940876993e-05 * tmp227 - 5.19558940876993e-05 * tmp228 - tmp223 * u1;
+        tmp232 = 0.5772877120855479 * tmp102 + 0.5772877120855479 * tmp225 + 0.5772877120855479 *
+                tmp229 + tmp222 * u1 - 0.5772877120855479 * tmp85 - 7.348867306971716e-05 *
+                tmp227 - 7.348867306971716e-05 * tmp228 - tmp230 * u3;
+        tmp233 = tmp177 * (tmp139 * tmp208 + tmp173 * tmp210 + tmp174 * tmp211 + tmp224 * tmp31 +
+                tmp231 * tmp41 + tmp232 * tmp45);
+        tmp234 = 4.041013984598835e-05 * tmp25;
+        tmp235 = 4.041013984598835e-05 * tmp29 - tmp234;
+        tmp236 = 0.00014 * tmp15 * tmp16 * tmp30 - tmp206 * tmp34 - tmp23 *
+                (0.00011431571366400447 * tmp29 - 0.00011431571366400447 * tmp25);
+        tmp237 = 6.599305679651973e-05 * tmp34;
+        tmp238 = 5.7157856832002236e-05 * tmp29 - 5.7157856832002236e-05 * tmp25;
+        tmp239 = tmp23 * tmp235 + tmp237 * tmp27 + tmp238 * tmp37 - 0.00014 * tmp34 * tmp40;
+        tmp240 = tmp238 * tmp40 + tmp34 * tmp54 - tmp23 * tmp237 - tmp235 * tmp30;
+        tmp241 = 6.599305679651973e-05 * tmp15 * tmp16 * tmp41 + 4.665655435349529e-05 * tmp15 *
+                tmp16 * tmp31 - tmp235 * tmp45 - tmp236 * tmp49 - tmp239 * tmp40 - tmp240 * tmp37;
+        tmp242 = tmp175 * tmp241;
+        tmp243 = tmp16 * u1;
+        tmp244 = -(7e-05 * tmp87) - 4.041013984598835e-05 * tmp243 - tmp16 * tmp67;
+        tmp245 = gd3 * tmp15;
+        tmp246 = tmp16 * u2 - tmp15 * tmp88 - tmp15 * tmp89;
+        tmp247 = 7e-05 * tmp246;
+        tmp248 = 0.0011551527118831813 * tmp243 + 0.002001 * tmp87 + 0.0016338981645833783 *
+                tmp16 * u3 - gd3 * tmp247;
+        tmp249 = tmp16 * w3;
+        tmp250 = tmp16 * tmp246;
+        tmp251 = tmp15 * tmp90;
+        tmp252 = 4.041013984598835e-05 * tmp250 + 6.350164832941026e-05 * tmp249 -
+                4.041013984598835e-05 * tmp251;
+        tmp253 = 5.7157856832002236e-05 * tmp250 + 8.981948930743208e-05 * tmp249 -
+                5.7157856832002236e-05 * tmp251;
+        tmp254 = tmp16 * tmp248 + tmp253 * u1 - tmp105 - tmp80 - tmp244 * tmp245 - tmp252 * u3;
+        tmp255 = tmp16 * tmp244;
+        tmp256 = gd3 * tmp255;
+        tmp257 = -(0.7777777777777778 * tmp87) - 0.449001553844315 * tmp243 - tmp154 * tmp16;
+        tmp258 = tmp15 * tmp248;
+        tmp259 = tmp103 * tmp16 + tmp119 * tmp15 + tmp15 * tmp247;
+        tmp260 = tmp259 * u3 + 7.348867306971716e-05 * tmp246 * tmp86 + 7.348867306971716e-05 *
+                tmp257 * tmp90 + 0.5772877120855479 * gd3 * tmp15 * tmp78 - 0.5772877120855479 *
+                tmp159 - 0.5772877120855479 * tmp256 - 0.5772877120855479 * tmp258 - tmp253 * u2;
+        tmp261 = tmp257 * tmp90;
+        tmp262 = tmp246 * tmp86;
+        tmp263 = tmp252 * u2 + 0.8165408118857462 * gd3 * tmp15 * tmp78 - 0.8165408118857462 *
+                tmp159 - 0.8165408118857462 * tmp256 - 0.8165408118857462 * tmp258 -
+                5.19558940876993e-05 * tmp261 - 5.19558940876993e-05 * tmp262 - tmp259 * u1;
+        tmp264 = tmp177 * (tmp139 * tmp236 + tmp173 * tmp240 + tmp174 * tmp239 + tmp254 * tmp45 +
+                tmp260 * tmp31 + tmp263 * tmp41);
+        tmp265 = 5.7157856832002236e-05 * tmp47 - 5.7157856832002236e-05 * tmp21;
+        tmp266 = 4.041013984598835e-05 * tmp47;
+        tmp267 = 4.041013984598835e-05 * tmp21;
+        tmp268 = tmp266 - tmp267;
+        tmp269 = 4.665655435349529e-05 * tmp36;
+        tmp270 = 0.00013198611359303947 * tmp20 * tmp23 * tmp35 - tmp206 * tmp36 - tmp269 * tmp30;
+        tmp271 = 6.599305679651973e-05 * tmp36;
+        tmp272 = tmp23 * tmp268 + tmp269 * tmp40 - tmp265 * tmp27 - tmp271 * tmp37;
+        tmp273 = tmp23 * tmp265 + 9.334344564650472e-05 * tmp20 * tmp35 * tmp37 - tmp268 * tmp30
+                - tmp271 * tmp40;
+        tmp274 = -(tmp201 * tmp36) - tmp265 * tmp41 - tmp268 * tmp45 - tmp270 * tmp49 - tmp272 *
+                tmp40 - tmp273 * tmp37;
+        tmp275 = tmp175 * tmp274;
+        tmp276 = 7e-05 * tmp35 * u1 - tmp20 * tmp66 - tmp20 * tmp67;
+        tmp277 = gd4 * tmp35;
+        tmp278 = -tmp65 - tmp35 * tmp89 - tmp35 * tmp98;
+        tmp279 = 7e-05 * tmp278;
+        tmp280 = 0.0011551527118831813 * tmp20 * u2 + 0.0016338981645833783 * tmp20 * u3 -
+                0.002001 * tmp110 - gd4 * tmp279;
+        tmp281 = tmp20 * w4;
+        tmp282 = tmp111 * tmp35;
+        tmp283 = tmp20 * tmp278;
+        tmp284 = 4.041013984598835e-05 * tmp283 + 6.350164832941026e-05 * tmp281 -
+                4.041013984598835e-05 * tmp282;
+        tmp285 = 5.7157856832002236e-05 * tmp283 + 8.981948930743208e-05 * tmp281 -
+                5.7157856832002236e-05 * tmp282;
+        tmp286 = tmp151 + tmp161 + tmp276 * tmp277 + tmp284 * u3 - tmp20 * tmp280 - tmp285 * u2;
+        tmp287 = tmp20 * tmp276;
+        tmp288 = gd4 * tmp287;
+        tmp289 = 0.7777777777777778 * tmp35 * u1 - tmp153 * tmp20 - tmp154 * tmp20;
+        tmp290 = tmp111 * tmp289;
+        tmp291 = tmp157 * tmp278;
+        tmp292 = tmp280 * tmp35;
+        tmp293 = -(7e-05 * tmp115) - tmp167 * tmp35 - tmp279 * tmp35;
+        tmp294 = tmp293 * u2 + 0.8165408118857462 * gd4 * tmp35 * tmp68 - 0.8165408118857462 *
+                tmp114 - 0.8165408118857462 * tmp288 - 0.8165408118857462 * tmp292 -
+                5.19558940876993e-05 * tmp290 - 5.19558940876993e-05 * tmp291 - tmp284 * u1;
+        tmp295 = tmp285 * u1 + 7.348867306971716e-05 * tmp111 * tmp289 + 7.348867306971716e-05 *
+                tmp157 * tmp278 + 0.5772877120855479 * gd4 * tmp35 * tmp68 - 0.5772877120855479 *
+                tmp114 - 0.5772877120855479 * tmp288 - 0.5772877120855479 * tmp292 - tmp293 * u3;
+        tmp296 = tmp177 * (tmp139 * tmp270 + tmp173 * tmp273 + tmp174 * tmp272 + tmp286 * tmp31 +
+                tmp294 * tmp41 + tmp295 * tmp45);
+        tmp297 = gd1 * tmp14;
+        tmp298 = gd2 * tmp33;
+        tmp299 = gd3 * tmp34;
+        tmp300 = gd4 * tmp36;
+        tmp301 = 0.002001 * tmp18;
+        tmp302 = -tmp301 - 7e-05 * tmp215;
+        tmp303 = -tmp106;
+        tmp304 = tmp303 + 4.041013984598835e-05 * tmp74;
+        tmp305 = tmp12 * tmp304;
+        tmp306 = 0.0011551527118831813 * tmp15 - 4.041013984598835e-05 * tmp79;
+        tmp307 = tmp15 * tmp306;
+        tmp308 = 0.002001 * tmp20;
+        tmp309 = tmp308 + 7e-05 * tmp277;
+        tmp310 = tmp13 * tmp92;
+        tmp311 = 4.2424107940619834e-05 * tmp310;
+        tmp312 = tmp16 * tmp86;
+        tmp313 = 4.2424107940619834e-05 * tmp312;
+        tmp314 = tmp37 * u3;
+        tmp315 = tmp38 + 3.2996528398259874e-05 * tmp29 - 3.2996528398259874e-05 * tmp28;
+        tmp316 = tmp311 + tmp313 + tmp314 + 0.5772877120855479 * tmp305 + 2.3328277176747646e-05
+                * tmp297 + 2.3328277176747646e-05 * tmp299 + tmp18 * tmp302 -
+                3.2996528398259874e-05 * tmp187 - 3.2996528398259874e-05 * tmp251 - 7e-05 *
+                tmp298 - 7e-05 * tmp300 - 0.5772877120855479 * tmp307 - tmp20 * tmp309 - tmp315 *
+                u2;
+        tmp317 = 2.5321631624393657 + tmp48;
+        tmp318 = tmp302 * tmp32;
+        tmp319 = tmp309 * tmp35;
+        tmp320 = tmp155 * tmp32;
+        tmp321 = tmp157 * tmp35;
+        tmp322 = tmp136 + 0.5772877120855479 * tmp318 + gd1 * tmp43 + gd2 * tmp204 + gd3 * tmp234
+                + gd4 * tmp267 + tmp16 * tmp306 + tmp315 * u1 - 0.5772877120855479 * tmp319 -
+                7.348867306971716e-05 * tmp320 - 7.348867306971716e-05 * tmp321 - tmp13 * tmp304
+                - tmp317 * u3;
+        tmp323 = 5.715785683200223e-05 * gd2;
+        tmp324 = 3.299652839825987e-05 * tmp297;
+        tmp325 = tmp317 * u2 + 4.6671722823252344e-05 * tmp12 * tmp94 + 5.19558940876993e-05 *
+                tmp157 * tmp35 + 2.9993499227246974e-05 * tmp13 * tmp92 + 5.715785683200223e-05 *
+                gd4 * tmp21 + 3.299652839825987e-05 * gd3 * tmp15 * tmp16 - tmp120 - tmp324 -
+                4.6671722823252344e-05 * tmp251 - 0.8165408118857462 * tmp305 -
+                0.8165408118857462 * tmp307 - 0.8165408118857462 * tmp318 - 0.8165408118857462 *
+                tmp319 - 5.19558940876993e-05 * tmp320 - 2.9993499227246974e-05 * tmp312 - tmp19
+                * tmp323 - tmp37 * u1;
+        tmp326 = tmp177 * (tmp31 * tmp316 + tmp322 * tmp45 + tmp325 * tmp41);
+        tmp327 = 0.002001 * tmp13;
+        tmp328 = tmp327 + 7e-05 * tmp181;
+        tmp329 = 3.2996528398259874e-05 * tmp21 - tmp17 - 3.2996528398259874e-05 * tmp19;
+        tmp330 = 0.002001 * tmp16;
+        tmp331 = -tmp330 - 7e-05 * tmp245;
+        tmp332 = -(0.0011551527118831813 * tmp35);
+        tmp333 = -tmp332 - 4.041013984598835e-05 * tmp150;
+        tmp334 = tmp333 * tmp35;
+        tmp335 = -tmp96;
+        tmp336 = tmp335 + 4.041013984598835e-05 * tmp148;
+        tmp337 = tmp155 * tmp18;
+        tmp338 = tmp157 * tmp20;
+        tmp339 = -(4.2424107940619834e-05 * tmp337) - 4.2424107940619834e-05 * tmp338;
+        tmp340 = tmp16 * tmp331 + tmp329 * u1 + 0.5772877120855479 * tmp32 * tmp336 +
+                2.3328277176747646e-05 * gd2 * tmp18 * tmp32 + 2.3328277176747646e-05 * gd4 *
+                tmp20 * tmp35 - tmp314 - tmp339 - 3.2996528398259874e-05 * tmp220 -
+                3.2996528398259874e-05 * tmp282 - 7e-05 * tmp297 - 7e-05 * tmp299 -
+                0.5772877120855479 * tmp334 - tmp13 * tmp328;
+        tmp341 = 2.232163162439366 + tmp26;
+        tmp342 = tmp15 * tmp331;
+        tmp343 = tmp18 * tmp336 + tmp341 * u3 + 0.5772877120855479 * tmp12 * tmp328 +
+                7.348867306971716e-05 * tmp12 * tmp92 + 7.348867306971716e-05 * tmp15 * tmp86 -
+                tmp123 - tmp124 - tmp125 - tmp126 - tmp127 - tmp131 - tmp132 - tmp134 - tmp135 -
+                tmp137 - 0.5772877120855479 * tmp342 - gd2 * tmp203 - gd4 * tmp266 - tmp20 *
+                tmp333 - tmp329 * u2 - 4.041013984598835e-05 * gd1 * tmp28 -
+                4.041013984598835e-05 * gd3 * tmp29;
+        tmp344 = tmp15 * tmp86;
+        tmp345 = 3.299652839825987e-05 * tmp298 - 3.299652839825987e-05 * gd4 * tmp20 * tmp35;
+        tmp346 = tmp163 + tmp164 + tmp166 + tmp168 + tmp37 * u2 + 4.6671722823252344e-05 * tmp32
+                * tmp99 + 5.19558940876993e-05 * tmp12 * tmp92 + 2.9993499227246974e-05 * tmp155
+                * tmp18 + 5.715785683200223e-05 * gd1 * tmp28 - tmp165 - tmp169 - tmp170 - tmp345
+                - 4.6671722823252344e-05 * tmp282 - 0.8165408118857462 * tmp334 -
+                0.8165408118857462 * tmp342 - 5.19558940876993e-05 * tmp344 -
+                2.9993499227246974e-05 * tmp338 - tmp341 * u1 - 0.8165408118857462 * tmp12 *
+                tmp328 - 0.8165408118857462 * tmp32 * tmp336 - 5.715785683200223e-05 * gd3 * tmp29;
+        tmp347 = tmp177 * (tmp31 * tmp343 + tmp340 * tmp45 + tmp346 * tmp41);
+        tmp348 = 5.715785683200223e-05 * tmp15 * tmp16 - tmp22 - 5.715785683200223e-05 * tmp14;
+        tmp349 = -(0.0016338981645833783 * tmp32);
+        tmp350 = -tmp349 - 5.715785683200223e-05 * tmp148;
+        tmp351 = 1.834786652220505 + 4.667172282325235e-05 * tmp19 + 4.667172282325235e-05 *
+                tmp21 + 4.667172282325235e-05 * tmp28 + 4.667172282325235e-05 * tmp29;
+        tmp352 = -(0.0016338981645833783 * tmp35);
+        tmp353 = -tmp352 - 5.715785683200223e-05 * tmp150;
+        tmp354 = -(0.0016338981645833783 * tmp12);
+        tmp355 = -tmp354 - 5.715785683200223e-05 * tmp74;
+        tmp356 = tmp12 * tmp355;
+        tmp357 = -(0.0016338981645833783 * tmp15);
+        tmp358 = -tmp357 - 5.715785683200223e-05 * tmp79;
+        tmp359 = tmp15 * tmp358;
+        tmp360 = tmp121 + 6.0006500772753025e-05 * tmp312 + 2.3328277176747643e-05 * tmp251 +
+                3.299652839825987e-05 * tmp299 + 0.5772877120855479 * tmp356 + tmp18 * tmp350 +
+                tmp323 * tmp46 + tmp348 * u3 - tmp324 - 6.0006500772753025e-05 * tmp310 -
+                2.3328277176747643e-05 * tmp187 - 0.5772877120855479 * tmp359 - tmp20 * tmp353 -
+                tmp351 * u2 - 5.715785683200223e-05 * gd4 * tmp47;
+        tmp361 = tmp39 + 5.715785683200223e-05 * tmp33 - 5.715785683200223e-05 * tmp36;
+        tmp362 = tmp35 * tmp353;
+        tmp363 = tmp16 * tmp358 + tmp351 * u1 + 6.0006500772753025e-05 * tmp157 * tmp20 +
+                2.3328277176747643e-05 * tmp111 * tmp35 + 0.5772877120855479 * tmp32 * tmp350 +
+                5.715785683200223e-05 * gd3 * tmp25 - tmp171 - tmp345 - 6.0006500772753025e-05 *
+                tmp337 - 2.3328277176747643e-05 * tmp220 - 0.5772877120855479 * tmp362 - tmp13 *
+                tmp355 - tmp361 * u3 - 5.715785683200223e-05 * gd1 * tmp24;
+        tmp364 = tmp339 + 4.6671722823252344e-05 * tmp297 + 4.6671722823252344e-05 * tmp298 +
+                4.6671722823252344e-05 * tmp299 + 4.6671722823252344e-05 * tmp300 +
+                3.299652839825987e-05 * tmp187 + 3.299652839825987e-05 * tmp220 +
+                3.299652839825987e-05 * tmp251 + 3.299652839825987e-05 * tmp282 + tmp361 * u2 -
+                tmp311 - tmp313 - 0.8165408118857462 * tmp356 - 0.8165408118857462 * tmp359 -
+                0.8165408118857462 * tmp362 - tmp348 * u1 - 0.8165408118857462 * tmp32 * tmp350;
+        tmp365 = tmp177 * (tmp31 * tmp360 + tmp363 * tmp45 + tmp364 * tmp41);
+        tmp366 = 5.19558940876993e-05 * u2;
+        tmp367 = tmp12 * tmp180;
+        tmp368 = (1e-2 + tmp59 > 0.0 ? 1.0 : 0.0) * (1e-2 - tmp60 > 0.0 ? 1.0 : 0.0);
+        tmp369 = tmp13 * tmp73;
+        tmp370 = 0.003266163247542985 * tmp368 + 0.5772877120855479 * tmp367 + 0.5772877120855479
+                * tmp369 - tmp366;
+        tmp371 = 5.19558940876993e-05 * u1;
+        tmp372 = 7.348867306971716e-05 * u3;
+        tmp373 = -tmp372;
+        tmp374 = tmp146 + tmp371 + tmp373 - tmp191;
+        tmp375 = 7.348867306971716e-05 * u2;
+        tmp376 = tmp375 + 0.0023091508483421915 * tmp368 - 0.8165408118857462 * tmp367 -
+                0.8165408118857462 * tmp369;
+        tmp377 = tmp177 * (tmp31 * tmp370 + tmp374 * tmp45 + tmp376 * tmp41);
+        tmp378 = tmp18 * tmp214 - tmp366 - tmp373 - tmp84;
+        tmp379 = 7.348867306971716e-05 * u1;
+        tmp380 = tmp214 * tmp32;
+        tmp381 = 1e-2 + tmp140 > 0.0 ? 1.0 : 0.0;
+        tmp382 = 1e-2 - tmp141 > 0.0 ? 1.0 : 0.0;
+        tmp383 = tmp18 * tmp83;
+        tmp384 = 0.0023091508483421915 * tmp381 * tmp382 - tmp379 - 0.8165408118857462 * tmp380 -
+                0.8165408118857462 * tmp383;
+        tmp385 = tmp381 * tmp382;
+        tmp386 = tmp371 + 0.003266163247542985 * tmp385 + 0.5772877120855479 * tmp380 +
+                0.5772877120855479 * tmp383;
+        tmp387 = tmp177 * (tmp31 * tmp378 + tmp384 * tmp41 + tmp386 * tmp45);
+        tmp388 = tmp15 * tmp244;
+        tmp389 = 1e-2 - tmp63 > 0.0 ? 1.0 : 0.0;
+        tmp390 = 1e-2 + tmp62 > 0.0 ? 1.0 : 0.0;
+        tmp391 = tmp389 * tmp390;
+        tmp392 = tmp16 * tmp78;
+        tmp393 = -tmp366 - 0.003266163247542985 * tmp391 - 0.5772877120855479 * tmp388 -
+                0.5772877120855479 * tmp392;
+        tmp394 = tmp255 + tmp371 + tmp372 - tmp152;
+        tmp395 = 0.0023091508483421915 * tmp389 * tmp390 - tmp375 - 0.8165408118857462 * tmp388 -
+                0.8165408118857462 * tmp392;
+        tmp396 = tmp177 * (tmp31 * tmp393 + tmp394 * tmp45 + tmp395 * tmp41);
+        tmp397 = tmp35 * tmp68 - tmp287 - tmp366 - tmp372;
+        tmp398 = tmp276 * tmp35;
+        tmp399 = (1e-2 + tmp143 > 0.0 ? 1.0 : 0.0) * (1e-2 - tmp144 > 0.0 ? 1.0 : 0.0);
+        tmp400 = tmp20 * tmp68;
+        tmp401 = tmp379 + 0.0023091508483421915 * tmp399 - 0.8165408118857462 * tmp398 -
+                0.8165408118857462 * tmp400;
+        tmp402 = 5.19558940876993e-05 * u1 - 0.003266163247542985 * tmp399 - 0.5772877120855479 *
+                tmp398 - 0.5772877120855479 * tmp400;
+        tmp403 = tmp177 * (tmp31 * tmp397 + tmp401 * tmp41 + tmp402 * tmp45);
+        tmp404 = tmp303 + 1.3552527156068805e-20 * tmp93 + 6.350164832941027e-05 * tmp74 +
+                5.185168748297981e-05 * tmp178 + 3.66587212777463e-05 * tmp179;
+        tmp405 = -tmp354 - 7.33412787222537e-05 * tmp178 - 5.1851687482979794e-05 * tmp179 -
+                8.981948930743208e-05 * tmp74;
+        tmp406 = tmp327 + 6.350164832941026e-05 * tmp72 + 8.981948930743208e-05 * tmp70 + 0.00011
+                * tmp181;
+        tmp407 = tmp177 * (tmp31 * tmp404 + tmp405 * tmp41 + tmp406 * tmp45);
+        tmp408 = 8.981948930743208e-05 * u2;
+        tmp409 = 6.350164832941026e-05 * u3;
+        tmp410 = -tmp301 - 0.00011 * tmp215 - tmp32 * tmp408 - tmp32 * tmp409;
+        tmp411 = tmp18 * u2;
+        tmp412 = tmp18 * u3;
+        tmp413 = -tmp349 - 7.33412787222537e-05 * tmp411 - 5.1851687482979794e-05 * tmp412 -
+                8.981948930743208e-05 * tmp148;
+        tmp414 = tmp335 + 6.350164832941027e-05 * tmp148 + 5.185168748297981e-05 * tmp411 +
+                3.66587212777463e-05 * tmp412 - 1.3552527156068805e-20 * tmp97;
+        tmp415 = tmp177 * (tmp31 * tmp410 + tmp41 * tmp413 + tmp414 * tmp45);
+        tmp416 = tmp16 * u3;
+        tmp417 = 1.3552527156068805e-20 * tmp87 + 0.0011551527118831813 * tmp15 +
+                5.185168748297981e-05 * tmp243 - 6.350164832941027e-05 * tmp79 -
+                3.66587212777463e-05 * tmp416;
+        tmp418 = 7.33412787222537e-05 * tmp16 * u1 - tmp357 - 5.1851687482979794e-05 * tmp416 -
+                8.981948930743208e-05 * tmp79;
+        tmp419 = 8.981948930743208e-05 * tmp15 * u1 - tmp330 - 6.350164832941026e-05 * tmp77 -
+                0.00011 * tmp245;
+        tmp420 = tmp177 * (tmp31 * tmp417 + tmp41 * tmp418 + tmp419 * tmp45);
+        tmp421 = tmp308 + 0.00011 * tmp277 + tmp35 * tmp409 - tmp35 * tmp408;
+        tmp422 = tmp20 * u3;
+        tmp423 = 7.33412787222537e-05 * tmp20 * u2 - tmp352 - 5.1851687482979794e-05 * tmp422 -
+                8.981948930743208e-05 * tmp150;
+        tmp424 = 5.185168748297981e-05 * tmp20 * u2 - tmp332 - 1.3552527156068805e-20 * tmp110 -
+                6.350164832941027e-05 * tmp150 - 3.66587212777463e-05 * tmp422;
+        tmp425 = tmp177 * (tmp31 * tmp421 + tmp41 * tmp423 + tmp424 * tmp45);
+        tmp426 = tmp30 * tmp49 - tmp40 * tmp40;
+        tmp427 = tmp37 * tmp40 - tmp23 * tmp49;
+        tmp428 = tmp58 * (tmp139 * tmp45 + tmp173 * tmp426 + tmp174 * tmp427);
+        tmp429 = tmp428 * tmp56;
+        tmp430 = 9.334344564650472e-05 * tmp49;
+        tmp431 = 4.665655435349529e-05 * tmp14;
+        tmp432 = tmp23 * tmp431 + tmp37 * tmp42 + tmp40 * tmp44 - tmp49 * tmp52;
+        tmp433 = tmp177 * (tmp139 * tmp55 + tmp173 * (-(tmp14 * tmp430) - tmp30 * tmp431 -
+                0.00013198611359303947 * tmp14 * tmp40) + tmp174 * tmp432 + tmp190 * tmp426 +
+                tmp198 * tmp45 + tmp199 * tmp427);
+        tmp434 = tmp212 * tmp428;
+        tmp435 = tmp202 * tmp37 + tmp205 * tmp40 - tmp209 * tmp49 - 0.00014 * tmp23 * tmp33;
+        tmp436 = tmp177 * (tmp139 * tmp210 + tmp173 * (0.00014 * tmp18 * tmp30 * tmp32 - tmp33 *
+                tmp430 - tmp40 * (0.00011431571366400447 * tmp19 - 0.00011431571366400447 *
+                tmp46)) + tmp174 * tmp435 + tmp224 * tmp45 + tmp231 * tmp427 + tmp232 * tmp426);
+        tmp437 = tmp241 * tmp428;
+        tmp438 = 4.665655435349529e-05 * tmp34;
+        tmp439 = tmp235 * tmp40 + 4.665655435349529e-05 * tmp15 * tmp16 * tmp23 - tmp237 * tmp37
+                - tmp238 * tmp49;
+        tmp440 = tmp177 * (tmp139 * tmp240 + tmp173 * (0.00013198611359303947 * tmp15 * tmp16 *
+                tmp40 - tmp30 * tmp438 - tmp34 * tmp430) + tmp174 * tmp439 + tmp254 * tmp426 +
+                tmp260 * tmp45 + tmp263 * tmp427);
+        tmp441 = tmp274 * tmp428;
+        tmp442 = tmp265 * tmp37 + tmp268 * tmp40 + tmp271 * tmp49 - 0.00014 * tmp23 * tmp36;
+        tmp443 = tmp177 * (tmp139 * tmp273 + tmp173 * (0.00014 * tmp20 * tmp30 * tmp35 - tmp36 *
+                tmp430 - tmp40 * (0.00011431571366400447 * tmp47 - 0.00011431571366400447 *
+                tmp21)) + tmp174 * tmp442 + tmp286 * tmp45 + tmp294 * tmp427 + tmp295 * tmp426);
+        tmp444 = tmp177 * (tmp316 * tmp45 + tmp322 * tmp426 + tmp325 * tmp427);
+        tmp445 = tmp177 * (tmp340 * tmp426 + tmp343 * tmp45 + tmp346 * tmp427);
+        tmp446 = tmp177 * (tmp360 * tmp45 + tmp363 * tmp426 + tmp364 * tmp427);
+        tmp447 = tmp177 * (tmp370 * tmp45 + tmp374 * tmp426 + tmp376 * tmp427);
+        tmp448 = tmp177 * (tmp378 * tmp45 + tmp384 * tmp427 + tmp386 * tmp426);
+        tmp449 = tmp177 * (tmp393 * tmp45 + tmp394 * tmp426 + tmp395 * tmp427);
+        tmp450 = tmp177 * (tmp397 * tmp45 + tmp401 * tmp427 + tmp402 * tmp426);
+        tmp451 = tmp177 * (tmp404 * tmp45 + tmp405 * tmp427 + tmp406 * tmp426);
+        tmp452 = tmp177 * (tmp410 * tmp45 + tmp413 * tmp427 + tmp414 * tmp426);
+        tmp453 = tmp177 * (tmp417 * tmp45 + tmp418 * tmp427 + tmp419 * tmp426);
+        tmp454 = tmp177 * (tmp421 * tmp45 + tmp423 * tmp427 + tmp424 * tmp426);
+        tmp455 = tmp27 * tmp49 - tmp37 * tmp37;
+        tmp456 = tmp58 * (tmp139 * tmp41 + tmp173 * tmp427 + tmp174 * tmp455);
+        tmp457 = tmp456 * tmp56;
+        tmp458 = tmp177 * (tmp139 * tmp53 + tmp173 * tmp432 + tmp174 * (0.00014 * tmp12 * tmp13 *
+                tmp49 - 4.665655435349529e-05 * tmp50 - tmp37 * (8.08202796919767e-05 * tmp28 -
+                8.08202796919767e-05 * tmp24)) + tmp190 * tmp427 + tmp198 * tmp41 + tmp199 *
+                tmp455);
+        tmp459 = tmp212 * tmp456;
+        tmp460 = tmp177 * (tmp139 * tmp211 + tmp173 * tmp435 + tmp174 * (0.00014 * tmp18 * tmp27
+                * tmp32 - tmp207 * tmp49 - tmp37 * (8.08202796919767e-05 * tmp46 -
+                8.08202796919767e-05 * tmp19)) + tmp224 * tmp41 + tmp231 * tmp455 + tmp232 *
+                tmp427);
+        tmp461 = tmp241 * tmp456;
+        tmp462 = tmp177 * (tmp139 * tmp239 + tmp173 * tmp439 + tmp174 * (0.00014 * tmp15 * tmp16
+                * tmp49 - tmp27 * tmp438 - tmp37 * (8.08202796919767e-05 * tmp29 -
+                8.08202796919767e-05 * tmp25)) + tmp254 * tmp427 + tmp260 * tmp41 + tmp263 *
+                tmp455);
+        tmp463 = tmp274 * tmp456;
+        tmp464 = tmp177 * (tmp139 * tmp272 + tmp173 * tmp442 + tmp174 * (0.00014 * tmp20 * tmp27
+                * tmp35 - tmp269 * tmp49 - tmp37 * (8.08202796919767e-05 * tmp47 -
+                8.08202796919767e-05 * tmp21)) + tmp286 * tmp41 + tmp294 * tmp455 + tmp295 *
+                tmp427);
+        tmp465 = tmp177 * (tmp316 * tmp41 + tmp322 * tmp427 + tmp325 * tmp455);
+        tmp466 = tmp177 * (tmp340 * tmp427 + tmp343 * tmp41 + tmp346 * tmp455);
+        tmp467 = tmp177 * (tmp360 * tmp41 + tmp363 * tmp427 + tmp364 * tmp455);
+        tmp468 = tmp177 * (tmp370 * tmp41 + tmp374 * tmp427 + tmp376 * tmp455);
+        tmp469 = tmp177 * (tmp378 * tmp41 + tmp384 * tmp455 + tmp386 * tmp427);
+        tmp470 = tmp177 * (tmp393 * tmp41 + tmp394 * tmp427 + tmp395 * tmp455);
+        tmp471 = tmp177 * (tmp397 * tmp41 + tmp401 * tmp455 + tmp402 * tmp427);
+        tmp472 = tmp177 * (tmp404 * tmp41 + tmp405 * tmp455 + tmp406 * tmp427);
+        tmp473 = tmp177 * (tmp41 * tmp410 + tmp413 * tmp455 + tmp414 * tmp427);
+        tmp474 = tmp177 * (tmp41 * tmp417 + tmp418 * tmp455 + tmp419 * tmp427);
+        tmp475 = tmp177 * (tmp41 * tmp421 + tmp423 * tmp455 + tmp424 * tmp427);
+        tmp476 = 0.5772877120855479 * tmp458;
+        tmp477 = 0.5772877120855479 * tmp457;
+        tmp478 = tmp476 + tmp477;
+        tmp479 = 0.8165408118857462 * tmp176 + 0.8165408118857462 * tmp200;
+        tmp480 = 0.8165408118857462 * tmp233;
+        tmp481 = 0.8165408118857462 * tmp213;
+        tmp482 = 0.5772877120855479 * tmp459 + 0.5772877120855479 * tmp460;
+        tmp483 = 0.5772877120855479 * tmp462;
+        tmp484 = 0.5772877120855479 * tmp461;
+        tmp485 = tmp483 + tmp484;
+        tmp486 = 0.8165408118857462 * tmp242 + 0.8165408118857462 * tmp264;
+        tmp487 = 0.8165408118857462 * tmp296;
+        tmp488 = 0.8165408118857462 * tmp275;
+        tmp489 = 0.5772877120855479 * tmp464;
+        tmp490 = 0.5772877120855479 * tmp463;
+        tmp491 = tmp489 + tmp490;
+        tmp492 = 0.5772877120855479 * tmp465;
+        tmp493 = 0.8165408118857462 * tmp326;
+        tmp494 = 0.5772877120855479 * tmp466;
+        tmp495 = 0.8165408118857462 * tmp347;
+        tmp496 = 0.8165408118857462 * tmp365;
+        tmp497 = 0.5772877120855479 * tmp467;
+        tmp498 = 0.5772877120855479 * tmp468;
+        tmp499 = 0.8165408118857462 * tmp377;
+        tmp500 = 0.8165408118857462 * tmp387;
+        tmp501 = 0.5772877120855479 * tmp469;
+        tmp502 = 0.8165408118857462 * tmp396;
+        tmp503 = 0.5772877120855479 * tmp470;
+        tmp504 = 0.8165408118857462 * tmp403;
+        tmp505 = 0.5772877120855479 * tmp471;
+        tmp506 = 0.8165408118857462 * tmp407;
+        tmp507 = 0.5772877120855479 * tmp472;
+        tmp508 = 0.5772877120855479 * tmp473;
+        tmp509 = 0.8165408118857462 * tmp415;
+        tmp510 = 0.8165408118857462 * tmp420;
+        tmp511 = 0.5772877120855479 * tmp474;
+        tmp512 = 0.5772877120855479 * tmp475;
+        tmp513 = 0.8165408118857462 * tmp425;
+        tmp514 = 0.8165408118857462 * tmp433;
+        tmp515 = 0.8165408118857462 * tmp429;
+        tmp516 = 0.8165408118857462 * tmp436;
+        tmp517 = 0.8165408118857462 * tmp434;
+        tmp518 = 0.8165408118857462 * tmp440;
+        tmp519 = 0.8165408118857462 * tmp437;
+        tmp520 = 0.8165408118857462 * tmp441 + 0.8165408118857462 * tmp443;
+        tmp521 = -(0.8165408118857462 * tmp444);
+        tmp522 = 0.8165408118857462 * tmp445;
+        tmp523 = 0.8165408118857462 * tmp446;
+        tmp524 = 0.8165408118857462 * tmp447;
+        tmp525 = 0.8165408118857462 * tmp448;
+        tmp526 = 0.8165408118857462 * tmp449;
+        tmp527 = 0.8165408118857462 * tmp450;
+        tmp528 = 0.8165408118857462 * tmp451;
+        tmp529 = 0.8165408118857462 * tmp452;
+        tmp530 = 0.8165408118857462 * tmp453;
+        tmp531 = 0.8165408118857462 * tmp454;
+        tmp532 = tmp20 * u2;
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = 0.0;
+        J[4][l] = 0.0;
+        J[5][l] = 0.0;
+        J[6][l] = 0.0;
+        J[7][l] = -tmp10;
+        J[8][l] = 0.0;
+        J[9][l] = tmp11;
+        J[10][l] = 0.0;
+        J[11][l] = 0.0;
+        J[12][l] = 0.0;
+        J[13][l] = 0.0;
+        J[14][l] = 0.0;
+        J[15][l] = 0.0;
+        J[16][l] = 0.0;
+        J[17][l] = 0.0;
+        J[18][l] = 0.0;
+        J[19][l] = 0.0;
+        J[20][l] = tmp6;
+        J[21][l] = 0.0;
+        J[22][l] = 0.0;
+        J[23][l] = 0.0;
+        J[24][l] = 0.0;
+        J[25][l] = tmp4;
+        J[26][l] = 0.0;
+        J[27][l] = tmp2;
+        J[28][l] = 0.0;
+        J[29][l] = 0.0;
+        J[30][l] = 0.0;
+        J[31][l] = 0.0;
+        J[32][l] = 0.0;
+        J[33][l] = 0.0;
+        J[34][l] = 0.0;
+        J[35][l] = 0.0;
+        J[36][l] = 0.0;
+        J[37][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[38][l] = -(tmp0 * tmp9);
+        J[39][l] = 0.0;
+        J[40][l] = 0.0;
+        J[41][l] = 0.0;
+        J[42][l] = 0.0;
+        J[43][l] = tmp0 * tmp10;
+        J[44][l] = 1.0;
+        J[45][l] = -(tmp0 * tmp11);
+        J[46][l] = 0.0;
+        J[47][l] = 0.0;
+        J[48][l] = 0.0;
+        J[49][l] = 0.0;
+        J[50][l] = 0.0;
+        J[51][l] = 0.0;
+        J[52][l] = 0.0;
+        J[53][l] = 0.0;
+        J[54][l] = 0.0;
+        J[55][l] = 0.0;
+        J[56][l] = 0.0;
+        J[57][l] = 0.0;
+        J[58][l] = 0.0;
+        J[59][l] = 0.0;
+        J[60][l] = 0.0;
+        J[61][l] = 0.0;
+        J[62][l] = 0.0;
+        J[63][l] = 0.0;
+        J[64][l] = 1.0;
+        J[65][l] = 0.0;
+        J[66][l] = 0.0;
+        J[67][l] = 0.0;
+        J[68][l] = 0.0;
+        J[69][l] = 0.0;
+        J[70][l] = 0.0;
+        J[71][l] = 0.0;
+        J[72][l] = 0.0;
+        J[73][l] = 0.0;
+        J[74][l] = 0.0;
+        J[75][l] = 0.0;
+        J[76][l] = 0.0;
+        J[77][l] = 0.0;
+        J[78][l] = 0.0;
+        J[79][l] = 0.0;
+        J[80][l] = 0.0;
+        J[81][l] = 0.0;
+        J[82][l] = 0.0;
+        J[83][l] = 1.0;
+        J[84][l] = 0.0;
+        J[85][l] = 0.0;
+        J[86][l] = 0.0;
+        J[87][l] = 0.0;
+        J[88][l] = 0.0;
+        J[89][l] = 0.0;
+        J[90][l] = 0.0;
+        J[91][l] = 0.0;
+        J[92][l] = 0.0;
+        J[93][l] = 0.0;
+        J[94][l] = 0.0;
+        J[95][l] = 0.0;
+        J[96][l] = 0.0;
+        J[97][l] = 0.0;
+        J[98][l] = 0.0;
+        J[99][l] = 0.0;
+        J[100][l] = 0.0;
+        J[101][l] = 0.0;
+        J[102][l] = 1.0;
+        J[103][l] = 0.0;
+        J[104][l] = 0.0;
+        J[105][l] = 0.0;
+        J[106][l] = 0.0;
+        J[107][l] = 0.0;
+        J[108][l] = 0.0;
+        J[109][l] = 0.0;
+        J[110][l] = 0.0;
+        J[111][l] = 0.0;
+        J[112][l] = 0.0;
+        J[113][l] = 0.0;
+        J[114][l] = 0.0;
+        J[115][l] = 0.0;
+        J[116][l] = 0.0;
+        J[117][l] = 0.0;
+        J[118][l] = 0.0;
+        J[119][l] = 0.0;
+        J[120][l] = 0.0;
+        J[121][l] = 1.0;
+        J[122][l] = 0.0;
+        J[123][l] = 0.0;
+        J[124][l] = 0.0;
+        J[125][l] = 0.0;
+        J[126][l] = 0.0;
+        J[127][l] = 0.0;
+        J[128][l] = 0.0;
+        J[129][l] = tmp176 + tmp200;
+        J[130][l] = tmp213 + tmp233;
+        J[131][l] = tmp242 + tmp264;
+        J[132][l] = tmp275 + tmp296;
+        J[133][l] = tmp326;
+        J[134][l] = tmp347;
+        J[135][l] = tmp365;
+        J[136][l] = tmp377;
+        J[137][l] = tmp387;
+        J[138][l] = tmp396;
+        J[139][l] = tmp403;
+        J[140][l] = tmp407;
+        J[141][l] = tmp415;
+        J[142][l] = tmp420;
+        J[143][l] = tmp425;
+        J[144][l] = 0.0;
+        J[145][l] = 0.0;
+        J[146][l] = 0.0;
+        J[147][l] = tmp429 + tmp433;
+        J[148][l] = tmp434 + tmp436;
+        J[149][l] = tmp437 + tmp440;
+        J[150][l] = tmp441 + tmp443;
+        J[151][l] = tmp444;
+        J[152][l] = tmp445;
+        J[153][l] = tmp446;
+        J[154][l] = tmp447;
+        J[155][l] = tmp448;
+        J[156][l] = tmp449;
+        J[157][l] = tmp450;
+        J[158][l] = tmp451;
+        J[159][l] = tmp452;
+        J[160][l] = tmp453;
+        J[161][l] = tmp454;
+        J[162][l] = 0.0;
+        J[163][l] = 0.0;
+        J[164][l] = 0.0;
+        J[165][l] = tmp457 + tmp458;
+        J[166][l] = tmp459 + tmp460;
+        J[167][l] = tmp461 + tmp462;
+        J[168][l] = tmp463 + tmp464;
+        J[169][l] = tmp465;
+        J[170][l] = tmp466;
+        J[171][l] = tmp467;
+        J[172][l] = tmp468;
+        J[173][l] = tmp469;
+        J[174][l] = tmp470;
+        J[175][l] = tmp471;
+        J[176][l] = tmp472;
+        J[177][l] = tmp473;
+        J[178][l] = tmp474;
+        J[179][l] = tmp475;
+        J[180][l] = 0.0;
+        J[181][l] = 0.0;
+        J[182][l] = 0.0;
+        J[183][l] = tmp182 * tmp92 + tmp193 * tmp94 - tmp478 - tmp479;
+        J[184][l] = -tmp480 - tmp481 - tmp482;
+        J[185][l] = -tmp485 - tmp486;
+        J[186][l] = -tmp487 - tmp488 - tmp491;
+        J[187][l] = 0.449001553844315 * tmp12 * tmp94 - tmp492 - tmp493 - 0.5772877120855479 *
+                tmp310;
+        J[188][l] = -tmp494 - tmp495 - 0.7777777777777778 * tmp129 - tmp12 * tmp92;
+        J[189][l] = 0.8165408118857462 * tmp13 * tmp92 - tmp496 - tmp497 - 0.6350872981333582 *
+                tmp187;
+        J[190][l] = -tmp498 - tmp499 - 44.44444444444444 * tmp368;
+        J[191][l] = -tmp500 - tmp501;
+        J[192][l] = -tmp502 - tmp503;
+        J[193][l] = -tmp504 - tmp505;
+        J[194][l] = 0.9979943256381344 * tmp13 * u3 - tmp506 - tmp507 - 1.2222222222222223 *
+                tmp93 - 0.7055738703267808 * tmp178;
+        J[195][l] = -tmp508 - tmp509;
+        J[196][l] = -tmp510 - tmp511;
+        J[197][l] = -tmp512 - tmp513;
+        J[198][l] = 0.0;
+        J[199][l] = 0.0;
+        J[200][l] = 0.0;
+        J[201][l] = -tmp478 - tmp514 - tmp515;
+        J[202][l] = tmp155 * tmp216 + tmp226 * tmp99 - tmp482 - tmp516 - tmp517;
+        J[203][l] = -tmp485 - tmp518 - tmp519;
+        J[204][l] = -tmp491 - tmp520;
+        J[205][l] = tmp320 + tmp521 + 0.7777777777777778 * tmp116 - tmp492;
+        J[206][l] = 0.449001553844315 * tmp32 * tmp99 - tmp494 - tmp522 - 0.5772877120855479 *
+                tmp337;
+        J[207][l] = 0.8165408118857462 * tmp155 * tmp18 - tmp497 - tmp523 - 0.6350872981333582 *
+                tmp220;
+        J[208][l] = -tmp498 - tmp524;
+        J[209][l] = -tmp501 - tmp525 - 44.44444444444444 * tmp385;
+        J[210][l] = -tmp503 - tmp526;
+        J[211][l] = -tmp505 - tmp527;
+        J[212][l] = -tmp507 - tmp528;
+        J[213][l] = 1.2222222222222223 * tmp32 * u1 + 0.9979943256381344 * tmp18 * u3 - tmp508 -
+                tmp529 - 0.7055738703267808 * tmp411;
+        J[214][l] = -tmp511 - tmp530;
+        J[215][l] = -tmp512 - tmp531;
+        J[216][l] = 0.0;
+        J[217][l] = 0.0;
+        J[218][l] = 0.0;
+        J[219][l] = tmp479 - tmp476 - tmp477;
+        J[220][l] = tmp480 + tmp481 - tmp482;
+        J[221][l] = tmp261 + tmp262 + tmp486 - tmp483 - tmp484;
+        J[222][l] = tmp487 + tmp488 - tmp491;
+        J[223][l] = tmp493 + 0.5772877120855479 * tmp16 * tmp86 - tmp492 - 0.449001553844315 *
+                tmp251;
+        J[224][l] = tmp344 + tmp495 + 0.7777777777777778 * tmp128 - tmp494;
+        J[225][l] = tmp496 + 0.8165408118857462 * tmp16 * tmp86 - tmp497 - 0.6350872981333582 *
+                tmp251;
+        J[226][l] = tmp499 - tmp498;
+        J[227][l] = tmp500 - tmp501;
+        J[228][l] = tmp502 - tmp503 - 44.44444444444444 * tmp391;
+        J[229][l] = tmp504 - tmp505;
+        J[230][l] = tmp506 - tmp507;
+        J[231][l] = tmp509 - tmp508;
+        J[232][l] = tmp510 + 1.2222222222222223 * tmp87 + 0.7055738703267808 * tmp243 +
+                0.9979943256381344 * tmp416 - tmp511;
+        J[233][l] = tmp513 - tmp512;
+        J[234][l] = 0.0;
+        J[235][l] = 0.0;
+        J[236][l] = 0.0;
+        J[237][l] = tmp514 + tmp515 - tmp478;
+        J[238][l] = tmp516 + tmp517 - tmp482;
+        J[239][l] = tmp518 + tmp519 - tmp485;
+        J[240][l] = tmp290 + tmp291 + tmp520 - tmp489 - tmp490;
+        J[241][l] = -tmp321 - tmp492 - tmp521 - 0.7777777777777778 * tmp115;
+        J[242][l] = tmp522 + 0.5772877120855479 * tmp157 * tmp20 - tmp494 - 0.449001553844315 *
+                tmp282;
+        J[243][l] = tmp523 + 0.8165408118857462 * tmp157 * tmp20 - tmp497 - 0.6350872981333582 *
+                tmp282;
+        J[244][l] = tmp524 - tmp498;
+        J[245][l] = tmp525 - tmp501;
+        J[246][l] = tmp526 - tmp503;
+        J[247][l] = tmp527 - tmp505 - 44.44444444444444 * tmp399;
+        J[248][l] = tmp528 - tmp507;
+        J[249][l] = tmp529 - tmp508;
+        J[250][l] = tmp530 - tmp511;
+        J[251][l] = tmp531 + 0.7055738703267808 * tmp532 + 0.9979943256381344 * tmp422 - tmp512 -
+                1.2222222222222223 * tmp110;
+        J[252][l] = 0.0;
+        J[253][l] = 0.0;
+        J[254][l] = 0.0;
+        J[255][l] = 14.85361967803071 * tmp13 * u3 - 18.19090909090909 * tmp93 -
+                10.501388289847101 * tmp178;
+        J[256][l] = 0.0;
+        J[257][l] = 0.0;
+        J[258][l] = 0.0;
+        J[259][l] = -(10.501388289847101 * tmp12);
+        J[260][l] = 18.19090909090909 * tmp13;
+        J[261][l] = 14.85361967803071 * tmp12;
+        J[262][l] = 0.0;
+        J[263][l] = 0.0;
+        J[264][l] = 0.0;
+        J[265][l] = 0.0;
+        J[266][l] = -18.19090909090909;
+        J[267][l] = 0.0;
+        J[268][l] = 0.0;
+        J[269][l] = 0.0;
+        J[270][l] = 0.0;
+        J[271][l] = 0.0;
+        J[272][l] = 0.0;
+        J[273][l] = 0.0;
+        J[274][l] = 14.85361967803071 * tmp412 + 18.19090909090909 * tmp97 - 10.501388289847101 *
+                tmp411;
+        J[275][l] = 0.0;
+        J[276][l] = 0.0;
+        J[277][l] = -(18.19090909090909 * tmp18);
+        J[278][l] = -(10.501388289847101 * tmp32);
+        J[279][l] = 14.85361967803071 * tmp32;
+        J[280][l] = 0.0;
+        J[281][l] = 0.0;
+        J[282][l] = 0.0;
+        J[283][l] = 0.0;
+        J[284][l] = 0.0;
+        J[285][l] = -18.19090909090909;
+        J[286][l] = 0.0;
+        J[287][l] = 0.0;
+        J[288][l] = 0.0;
+        J[289][l] = 0.0;
+        J[290][l] = 0.0;
+        J[291][l] = 0.0;
+        J[292][l] = 0.0;
+        J[293][l] = 14.85361967803071 * tmp416 + 18.19090909090909 * tmp87 + 10.501388289847101 *
+                tmp243;
+        J[294][l] = 0.0;
+        J[295][l] = 10.501388289847101 * tmp15;
+        J[296][l] = -(18.19090909090909 * tmp16);
+        J[297][l] = 14.85361967803071 * tmp15;
+        J[298][l] = 0.0;
+        J[299][l] = 0.0;
+        J[300][l] = 0.0;
+        J[301][l] = 0.0;
+        J[302][l] = 0.0;
+        J[303][l] = 0.0;
+        J[304][l] = -18.19090909090909;
+        J[305][l] = 0.0;
+        J[306][l] = 0.0;
+        J[307][l] = 0.0;
+        J[308][l] = 0.0;
+        J[309][l] = 0.0;
+        J[310][l] = 0.0;
+        J[311][l] = 0.0;
+        J[312][l] = 14.85361967803071 * tmp422 + 10.501388289847101 * tmp532 - 18.19090909090909
+                * tmp110;
+        J[313][l] = 18.19090909090909 * tmp20;
+        J[314][l] = 10.501388289847101 * tmp35;
+        J[315][l] = 14.85361967803071 * tmp35;
+        J[316][l] = 0.0;
+        J[317][l] = 0.0;
+        J[318][l] = 0.0;
+        J[319][l] = 0.0;
+        J[320][l] = 0.0;
+        J[321][l] = 0.0;
+        J[322][l] = 0.0;
+        J[323][l] = -18.19090909090909;
+    }
+}
+
+/* One step of a method on every lane. */
 typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
                            long max_steps);
 
@@ -6063,6 +7186,7975 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of rodas4_integrate's loop on every lane. */
+static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    int p[CMG4_PYRAMID_LANES];
+    double best[CMG4_PYRAMID_LANES];
+    double m[CMG4_PYRAMID_LANES];
+    double swap[CMG4_PYRAMID_LANES];
+    double inv_h[CMG4_PYRAMID_LANES];
+    double err[CMG4_PYRAMID_LANES];
+    double fac[CMG4_PYRAMID_LANES];
+    double gus[CMG4_PYRAMID_LANES];
+    double total[CMG4_PYRAMID_LANES];
+    int go[CMG4_PYRAMID_LANES];
+    int fresh[CMG4_PYRAMID_LANES];
+    int bad[CMG4_PYRAMID_LANES];
+    int sing[CMG4_PYRAMID_LANES];
+    int last[CMG4_PYRAMID_LANES];
+    int retry[CMG4_PYRAMID_LANES];
+    int ok[CMG4_PYRAMID_LANES];
+    int take[CMG4_PYRAMID_LANES];
+    int lock[CMG4_PYRAMID_LANES];
+    int rej[CMG4_PYRAMID_LANES];
+    static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE :
+                CMG4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? CMG4_PYRAMID_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i * CMG4_PYRAMID_NX + i][l] = L->lu[i * CMG4_PYRAMID_NX + i][l] + 1.0 /
+                    (L->h[l] * 0.25);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * CMG4_PYRAMID_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 1][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[1 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[19][l] = 1.0 / L->lu[19][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 1][l] * L->lu[19][l];
+            L->lu[i * CMG4_PYRAMID_NX + 1][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 2][l] = L->lu[i * CMG4_PYRAMID_NX + 2][l] - m[l] *
+                    L->lu[20][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[25][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[26][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[27][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[20][l] = L->lu[20][l] * L->lu[19][l];
+        L->lu[25][l] = L->lu[25][l] * L->lu[19][l];
+        L->lu[26][l] = L->lu[26][l] * L->lu[19][l];
+        L->lu[27][l] = L->lu[27][l] * L->lu[19][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[38][l]) > 0.0));
+        L->lu[38][l] = 1.0 / L->lu[38][l];
+        L->lu[43][l] = L->lu[43][l] * L->lu[38][l];
+        L->lu[44][l] = L->lu[44][l] * L->lu[38][l];
+        L->lu[45][l] = L->lu[45][l] * L->lu[38][l];
+        p[l] = 3;
+        best[l] = fabs(L->lu[3 * CMG4_PYRAMID_NX + 3][l]);
+    }
+    for (i = 4; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 3][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 3][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 3][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[3][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 4; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[3 * CMG4_PYRAMID_NX + j][l];
+                L->lu[3 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[3 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[57][l] = 1.0 / L->lu[57][l];
+    }
+    for (i = 4; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 3][l] * L->lu[57][l];
+            L->lu[i * CMG4_PYRAMID_NX + 3][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 4][l] = L->lu[i * CMG4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[58][l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[59][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[60][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[61][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[62][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[63][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[64][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[65][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[66][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[67][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[68][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[69][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[70][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[71][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[58][l] = L->lu[58][l] * L->lu[57][l];
+        L->lu[59][l] = L->lu[59][l] * L->lu[57][l];
+        L->lu[60][l] = L->lu[60][l] * L->lu[57][l];
+        L->lu[61][l] = L->lu[61][l] * L->lu[57][l];
+        L->lu[62][l] = L->lu[62][l] * L->lu[57][l];
+        L->lu[63][l] = L->lu[63][l] * L->lu[57][l];
+        L->lu[64][l] = L->lu[64][l] * L->lu[57][l];
+        L->lu[65][l] = L->lu[65][l] * L->lu[57][l];
+        L->lu[66][l] = L->lu[66][l] * L->lu[57][l];
+        L->lu[67][l] = L->lu[67][l] * L->lu[57][l];
+        L->lu[68][l] = L->lu[68][l] * L->lu[57][l];
+        L->lu[69][l] = L->lu[69][l] * L->lu[57][l];
+        L->lu[70][l] = L->lu[70][l] * L->lu[57][l];
+        L->lu[71][l] = L->lu[71][l] * L->lu[57][l];
+        p[l] = 4;
+        best[l] = fabs(L->lu[4 * CMG4_PYRAMID_NX + 4][l]);
+    }
+    for (i = 5; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 4][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 4][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 4][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[4][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 5; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[4 * CMG4_PYRAMID_NX + j][l];
+                L->lu[4 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[4 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[76][l] = 1.0 / L->lu[76][l];
+    }
+    for (i = 5; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 4][l] * L->lu[76][l];
+            L->lu[i * CMG4_PYRAMID_NX + 4][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[77][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[78][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[79][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[80][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[81][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[82][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[83][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[84][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[85][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[86][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[87][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[88][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[89][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[77][l] = L->lu[77][l] * L->lu[76][l];
+        L->lu[78][l] = L->lu[78][l] * L->lu[76][l];
+        L->lu[79][l] = L->lu[79][l] * L->lu[76][l];
+        L->lu[80][l] = L->lu[80][l] * L->lu[76][l];
+        L->lu[81][l] = L->lu[81][l] * L->lu[76][l];
+        L->lu[82][l] = L->lu[82][l] * L->lu[76][l];
+        L->lu[83][l] = L->lu[83][l] * L->lu[76][l];
+        L->lu[84][l] = L->lu[84][l] * L->lu[76][l];
+        L->lu[85][l] = L->lu[85][l] * L->lu[76][l];
+        L->lu[86][l] = L->lu[86][l] * L->lu[76][l];
+        L->lu[87][l] = L->lu[87][l] * L->lu[76][l];
+        L->lu[88][l] = L->lu[88][l] * L->lu[76][l];
+        L->lu[89][l] = L->lu[89][l] * L->lu[76][l];
+        p[l] = 5;
+        best[l] = fabs(L->lu[5 * CMG4_PYRAMID_NX + 5][l]);
+    }
+    for (i = 6; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 5][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 5][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 5][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[5][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 6; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[5 * CMG4_PYRAMID_NX + j][l];
+                L->lu[5 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[5 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[95][l] = 1.0 / L->lu[95][l];
+    }
+    for (i = 6; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] * L->lu[95][l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[96][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[97][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[98][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[99][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[100][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[101][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[102][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[103][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[104][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[105][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[106][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[107][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[96][l] = L->lu[96][l] * L->lu[95][l];
+        L->lu[97][l] = L->lu[97][l] * L->lu[95][l];
+        L->lu[98][l] = L->lu[98][l] * L->lu[95][l];
+        L->lu[99][l] = L->lu[99][l] * L->lu[95][l];
+        L->lu[100][l] = L->lu[100][l] * L->lu[95][l];
+        L->lu[101][l] = L->lu[101][l] * L->lu[95][l];
+        L->lu[102][l] = L->lu[102][l] * L->lu[95][l];
+        L->lu[103][l] = L->lu[103][l] * L->lu[95][l];
+        L->lu[104][l] = L->lu[104][l] * L->lu[95][l];
+        L->lu[105][l] = L->lu[105][l] * L->lu[95][l];
+        L->lu[106][l] = L->lu[106][l] * L->lu[95][l];
+        L->lu[107][l] = L->lu[107][l] * L->lu[95][l];
+        p[l] = 6;
+        best[l] = fabs(L->lu[6 * CMG4_PYRAMID_NX + 6][l]);
+    }
+    for (i = 7; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 6][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 6][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 6][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[6][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 7; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[6 * CMG4_PYRAMID_NX + j][l];
+                L->lu[6 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[6 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[114][l] = 1.0 / L->lu[114][l];
+    }
+    for (i = 7; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] * L->lu[114][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[115][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[116][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[117][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[118][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[119][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[120][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[121][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[122][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[123][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[124][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[125][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[115][l] = L->lu[115][l] * L->lu[114][l];
+        L->lu[116][l] = L->lu[116][l] * L->lu[114][l];
+        L->lu[117][l] = L->lu[117][l] * L->lu[114][l];
+        L->lu[118][l] = L->lu[118][l] * L->lu[114][l];
+        L->lu[119][l] = L->lu[119][l] * L->lu[114][l];
+        L->lu[120][l] = L->lu[120][l] * L->lu[114][l];
+        L->lu[121][l] = L->lu[121][l] * L->lu[114][l];
+        L->lu[122][l] = L->lu[122][l] * L->lu[114][l];
+        L->lu[123][l] = L->lu[123][l] * L->lu[114][l];
+        L->lu[124][l] = L->lu[124][l] * L->lu[114][l];
+        L->lu[125][l] = L->lu[125][l] * L->lu[114][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * CMG4_PYRAMID_NX + 7][l]);
+    }
+    for (i = 8; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 7][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 7][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[7 * CMG4_PYRAMID_NX + j][l];
+                L->lu[7 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[7 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[133][l] = 1.0 / L->lu[133][l];
+    }
+    for (i = 8; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] * L->lu[133][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[134][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[135][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[136][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[137][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[138][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[139][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[140][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[141][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[142][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[143][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[134][l] = L->lu[134][l] * L->lu[133][l];
+        L->lu[135][l] = L->lu[135][l] * L->lu[133][l];
+        L->lu[136][l] = L->lu[136][l] * L->lu[133][l];
+        L->lu[137][l] = L->lu[137][l] * L->lu[133][l];
+        L->lu[138][l] = L->lu[138][l] * L->lu[133][l];
+        L->lu[139][l] = L->lu[139][l] * L->lu[133][l];
+        L->lu[140][l] = L->lu[140][l] * L->lu[133][l];
+        L->lu[141][l] = L->lu[141][l] * L->lu[133][l];
+        L->lu[142][l] = L->lu[142][l] * L->lu[133][l];
+        L->lu[143][l] = L->lu[143][l] * L->lu[133][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * CMG4_PYRAMID_NX + 8][l]);
+    }
+    for (i = 9; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 8][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 8][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[8 * CMG4_PYRAMID_NX + j][l];
+                L->lu[8 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[8 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[152][l] = 1.0 / L->lu[152][l];
+    }
+    for (i = 9; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] * L->lu[152][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[153][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[154][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[155][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[156][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[157][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[158][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[159][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[160][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[161][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[153][l] = L->lu[153][l] * L->lu[152][l];
+        L->lu[154][l] = L->lu[154][l] * L->lu[152][l];
+        L->lu[155][l] = L->lu[155][l] * L->lu[152][l];
+        L->lu[156][l] = L->lu[156][l] * L->lu[152][l];
+        L->lu[157][l] = L->lu[157][l] * L->lu[152][l];
+        L->lu[158][l] = L->lu[158][l] * L->lu[152][l];
+        L->lu[159][l] = L->lu[159][l] * L->lu[152][l];
+        L->lu[160][l] = L->lu[160][l] * L->lu[152][l];
+        L->lu[161][l] = L->lu[161][l] * L->lu[152][l];
+        p[l] = 9;
+        best[l] = fabs(L->lu[9 * CMG4_PYRAMID_NX + 9][l]);
+    }
+    for (i = 10; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 9][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 9][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 9][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[9][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 10; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[9 * CMG4_PYRAMID_NX + j][l];
+                L->lu[9 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[9 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[171][l] = 1.0 / L->lu[171][l];
+    }
+    for (i = 10; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] * L->lu[171][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[172][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[173][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[174][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[175][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[176][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[177][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[178][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[179][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[172][l] = L->lu[172][l] * L->lu[171][l];
+        L->lu[173][l] = L->lu[173][l] * L->lu[171][l];
+        L->lu[174][l] = L->lu[174][l] * L->lu[171][l];
+        L->lu[175][l] = L->lu[175][l] * L->lu[171][l];
+        L->lu[176][l] = L->lu[176][l] * L->lu[171][l];
+        L->lu[177][l] = L->lu[177][l] * L->lu[171][l];
+        L->lu[178][l] = L->lu[178][l] * L->lu[171][l];
+        L->lu[179][l] = L->lu[179][l] * L->lu[171][l];
+        p[l] = 10;
+        best[l] = fabs(L->lu[10 * CMG4_PYRAMID_NX + 10][l]);
+    }
+    for (i = 11; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 10][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 10][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 10][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[10][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 11; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[10 * CMG4_PYRAMID_NX + j][l];
+                L->lu[10 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[10 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[190][l] = 1.0 / L->lu[190][l];
+    }
+    for (i = 11; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] * L->lu[190][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[191][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[192][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[193][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[194][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[195][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[196][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[197][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[191][l] = L->lu[191][l] * L->lu[190][l];
+        L->lu[192][l] = L->lu[192][l] * L->lu[190][l];
+        L->lu[193][l] = L->lu[193][l] * L->lu[190][l];
+        L->lu[194][l] = L->lu[194][l] * L->lu[190][l];
+        L->lu[195][l] = L->lu[195][l] * L->lu[190][l];
+        L->lu[196][l] = L->lu[196][l] * L->lu[190][l];
+        L->lu[197][l] = L->lu[197][l] * L->lu[190][l];
+        p[l] = 11;
+        best[l] = fabs(L->lu[11 * CMG4_PYRAMID_NX + 11][l]);
+    }
+    for (i = 12; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 11][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 11][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 11][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[11][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 12; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[11 * CMG4_PYRAMID_NX + j][l];
+                L->lu[11 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[11 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[209][l] = 1.0 / L->lu[209][l];
+    }
+    for (i = 12; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] * L->lu[209][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[210][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[211][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[212][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[213][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[214][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[215][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[210][l] = L->lu[210][l] * L->lu[209][l];
+        L->lu[211][l] = L->lu[211][l] * L->lu[209][l];
+        L->lu[212][l] = L->lu[212][l] * L->lu[209][l];
+        L->lu[213][l] = L->lu[213][l] * L->lu[209][l];
+        L->lu[214][l] = L->lu[214][l] * L->lu[209][l];
+        L->lu[215][l] = L->lu[215][l] * L->lu[209][l];
+        p[l] = 12;
+        best[l] = fabs(L->lu[12 * CMG4_PYRAMID_NX + 12][l]);
+    }
+    for (i = 13; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 12][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 12][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 12][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[12][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 13; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[12 * CMG4_PYRAMID_NX + j][l];
+                L->lu[12 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[12 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[228][l] = 1.0 / L->lu[228][l];
+    }
+    for (i = 13; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] * L->lu[228][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[229][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[230][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[231][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[232][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[233][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[229][l] = L->lu[229][l] * L->lu[228][l];
+        L->lu[230][l] = L->lu[230][l] * L->lu[228][l];
+        L->lu[231][l] = L->lu[231][l] * L->lu[228][l];
+        L->lu[232][l] = L->lu[232][l] * L->lu[228][l];
+        L->lu[233][l] = L->lu[233][l] * L->lu[228][l];
+        p[l] = 13;
+        best[l] = fabs(L->lu[13 * CMG4_PYRAMID_NX + 13][l]);
+    }
+    for (i = 14; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 13][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 13][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 13][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[13][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 14; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[13 * CMG4_PYRAMID_NX + j][l];
+                L->lu[13 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[13 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[247][l] = 1.0 / L->lu[247][l];
+    }
+    for (i = 14; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] * L->lu[247][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[248][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[249][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[250][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[251][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[248][l] = L->lu[248][l] * L->lu[247][l];
+        L->lu[249][l] = L->lu[249][l] * L->lu[247][l];
+        L->lu[250][l] = L->lu[250][l] * L->lu[247][l];
+        L->lu[251][l] = L->lu[251][l] * L->lu[247][l];
+        p[l] = 14;
+        best[l] = fabs(L->lu[14 * CMG4_PYRAMID_NX + 14][l]);
+    }
+    for (i = 15; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 14][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 14][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 14][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[14][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 15; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[14 * CMG4_PYRAMID_NX + j][l];
+                L->lu[14 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[14 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[266][l] = 1.0 / L->lu[266][l];
+    }
+    for (i = 15; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] * L->lu[266][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[267][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[268][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[269][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[267][l] = L->lu[267][l] * L->lu[266][l];
+        L->lu[268][l] = L->lu[268][l] * L->lu[266][l];
+        L->lu[269][l] = L->lu[269][l] * L->lu[266][l];
+        p[l] = 15;
+        best[l] = fabs(L->lu[15 * CMG4_PYRAMID_NX + 15][l]);
+    }
+    for (i = 16; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 15][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 15][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 15][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[15][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 16; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[15 * CMG4_PYRAMID_NX + j][l];
+                L->lu[15 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[15 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[285][l] = 1.0 / L->lu[285][l];
+    }
+    for (i = 16; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] * L->lu[285][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[286][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[287][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[286][l] = L->lu[286][l] * L->lu[285][l];
+        L->lu[287][l] = L->lu[287][l] * L->lu[285][l];
+        p[l] = 16;
+        best[l] = fabs(L->lu[16 * CMG4_PYRAMID_NX + 16][l]);
+    }
+    for (i = 17; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 16][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 16][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 16][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[16][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 17; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[16 * CMG4_PYRAMID_NX + j][l];
+                L->lu[16 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[16 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[304][l] = 1.0 / L->lu[304][l];
+    }
+    for (i = 17; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] * L->lu[304][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[305][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[305][l] = L->lu[305][l] * L->lu[304][l];
+        L->piv[17][l] = 17;
+        sing[l] = (sing[l] | !(fabs(L->lu[323][l]) > 0.0));
+        L->lu[323][l] = 1.0 / L->lu[323][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? CMG4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 4 ? L->k[0][4][l] : L->k[0][3][l];
+        L->k[0][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[0][4][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 5 ? L->k[0][5][l] : L->k[0][3][l];
+        L->k[0][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 6 ? L->k[0][6][l] : L->k[0][3][l];
+        L->k[0][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 7 ? L->k[0][7][l] : L->k[0][3][l];
+        L->k[0][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 8 ? L->k[0][8][l] : L->k[0][3][l];
+        L->k[0][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 9 ? L->k[0][9][l] : L->k[0][3][l];
+        L->k[0][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 10 ? L->k[0][10][l] : L->k[0][3][l];
+        L->k[0][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 11 ? L->k[0][11][l] : L->k[0][3][l];
+        L->k[0][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 12 ? L->k[0][12][l] : L->k[0][3][l];
+        L->k[0][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 13 ? L->k[0][13][l] : L->k[0][3][l];
+        L->k[0][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 14 ? L->k[0][14][l] : L->k[0][3][l];
+        L->k[0][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 15 ? L->k[0][15][l] : L->k[0][3][l];
+        L->k[0][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 16 ? L->k[0][16][l] : L->k[0][3][l];
+        L->k[0][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 17 ? L->k[0][17][l] : L->k[0][3][l];
+        L->k[0][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 5 ? L->k[0][5][l] : L->k[0][4][l];
+        L->k[0][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 6 ? L->k[0][6][l] : L->k[0][4][l];
+        L->k[0][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 7 ? L->k[0][7][l] : L->k[0][4][l];
+        L->k[0][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 8 ? L->k[0][8][l] : L->k[0][4][l];
+        L->k[0][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 9 ? L->k[0][9][l] : L->k[0][4][l];
+        L->k[0][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 10 ? L->k[0][10][l] : L->k[0][4][l];
+        L->k[0][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 11 ? L->k[0][11][l] : L->k[0][4][l];
+        L->k[0][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 12 ? L->k[0][12][l] : L->k[0][4][l];
+        L->k[0][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 13 ? L->k[0][13][l] : L->k[0][4][l];
+        L->k[0][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 14 ? L->k[0][14][l] : L->k[0][4][l];
+        L->k[0][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 15 ? L->k[0][15][l] : L->k[0][4][l];
+        L->k[0][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 16 ? L->k[0][16][l] : L->k[0][4][l];
+        L->k[0][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 17 ? L->k[0][17][l] : L->k[0][4][l];
+        L->k[0][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 6 ? L->k[0][6][l] : L->k[0][5][l];
+        L->k[0][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 7 ? L->k[0][7][l] : L->k[0][5][l];
+        L->k[0][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 8 ? L->k[0][8][l] : L->k[0][5][l];
+        L->k[0][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 9 ? L->k[0][9][l] : L->k[0][5][l];
+        L->k[0][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 10 ? L->k[0][10][l] : L->k[0][5][l];
+        L->k[0][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 11 ? L->k[0][11][l] : L->k[0][5][l];
+        L->k[0][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 12 ? L->k[0][12][l] : L->k[0][5][l];
+        L->k[0][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 13 ? L->k[0][13][l] : L->k[0][5][l];
+        L->k[0][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 14 ? L->k[0][14][l] : L->k[0][5][l];
+        L->k[0][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 15 ? L->k[0][15][l] : L->k[0][5][l];
+        L->k[0][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 16 ? L->k[0][16][l] : L->k[0][5][l];
+        L->k[0][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 17 ? L->k[0][17][l] : L->k[0][5][l];
+        L->k[0][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 7 ? L->k[0][7][l] : L->k[0][6][l];
+        L->k[0][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 8 ? L->k[0][8][l] : L->k[0][6][l];
+        L->k[0][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 9 ? L->k[0][9][l] : L->k[0][6][l];
+        L->k[0][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 10 ? L->k[0][10][l] : L->k[0][6][l];
+        L->k[0][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 11 ? L->k[0][11][l] : L->k[0][6][l];
+        L->k[0][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 12 ? L->k[0][12][l] : L->k[0][6][l];
+        L->k[0][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 13 ? L->k[0][13][l] : L->k[0][6][l];
+        L->k[0][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 14 ? L->k[0][14][l] : L->k[0][6][l];
+        L->k[0][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 15 ? L->k[0][15][l] : L->k[0][6][l];
+        L->k[0][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 16 ? L->k[0][16][l] : L->k[0][6][l];
+        L->k[0][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 17 ? L->k[0][17][l] : L->k[0][6][l];
+        L->k[0][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 10 ? L->k[0][10][l] : L->k[0][7][l];
+        L->k[0][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 11 ? L->k[0][11][l] : L->k[0][7][l];
+        L->k[0][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 12 ? L->k[0][12][l] : L->k[0][7][l];
+        L->k[0][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 13 ? L->k[0][13][l] : L->k[0][7][l];
+        L->k[0][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 14 ? L->k[0][14][l] : L->k[0][7][l];
+        L->k[0][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 15 ? L->k[0][15][l] : L->k[0][7][l];
+        L->k[0][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 16 ? L->k[0][16][l] : L->k[0][7][l];
+        L->k[0][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 17 ? L->k[0][17][l] : L->k[0][7][l];
+        L->k[0][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 10 ? L->k[0][10][l] : L->k[0][8][l];
+        L->k[0][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 11 ? L->k[0][11][l] : L->k[0][8][l];
+        L->k[0][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 12 ? L->k[0][12][l] : L->k[0][8][l];
+        L->k[0][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 13 ? L->k[0][13][l] : L->k[0][8][l];
+        L->k[0][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 14 ? L->k[0][14][l] : L->k[0][8][l];
+        L->k[0][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 15 ? L->k[0][15][l] : L->k[0][8][l];
+        L->k[0][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 16 ? L->k[0][16][l] : L->k[0][8][l];
+        L->k[0][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 17 ? L->k[0][17][l] : L->k[0][8][l];
+        L->k[0][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 10 ? L->k[0][10][l] : L->k[0][9][l];
+        L->k[0][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 11 ? L->k[0][11][l] : L->k[0][9][l];
+        L->k[0][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 12 ? L->k[0][12][l] : L->k[0][9][l];
+        L->k[0][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 13 ? L->k[0][13][l] : L->k[0][9][l];
+        L->k[0][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 14 ? L->k[0][14][l] : L->k[0][9][l];
+        L->k[0][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 15 ? L->k[0][15][l] : L->k[0][9][l];
+        L->k[0][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 16 ? L->k[0][16][l] : L->k[0][9][l];
+        L->k[0][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 17 ? L->k[0][17][l] : L->k[0][9][l];
+        L->k[0][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 11 ? L->k[0][11][l] : L->k[0][10][l];
+        L->k[0][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 12 ? L->k[0][12][l] : L->k[0][10][l];
+        L->k[0][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 13 ? L->k[0][13][l] : L->k[0][10][l];
+        L->k[0][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 14 ? L->k[0][14][l] : L->k[0][10][l];
+        L->k[0][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 15 ? L->k[0][15][l] : L->k[0][10][l];
+        L->k[0][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 16 ? L->k[0][16][l] : L->k[0][10][l];
+        L->k[0][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 17 ? L->k[0][17][l] : L->k[0][10][l];
+        L->k[0][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 12 ? L->k[0][12][l] : L->k[0][11][l];
+        L->k[0][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 13 ? L->k[0][13][l] : L->k[0][11][l];
+        L->k[0][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 14 ? L->k[0][14][l] : L->k[0][11][l];
+        L->k[0][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 15 ? L->k[0][15][l] : L->k[0][11][l];
+        L->k[0][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 16 ? L->k[0][16][l] : L->k[0][11][l];
+        L->k[0][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 17 ? L->k[0][17][l] : L->k[0][11][l];
+        L->k[0][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 13 ? L->k[0][13][l] : L->k[0][12][l];
+        L->k[0][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 14 ? L->k[0][14][l] : L->k[0][12][l];
+        L->k[0][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 15 ? L->k[0][15][l] : L->k[0][12][l];
+        L->k[0][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 16 ? L->k[0][16][l] : L->k[0][12][l];
+        L->k[0][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 17 ? L->k[0][17][l] : L->k[0][12][l];
+        L->k[0][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 14 ? L->k[0][14][l] : L->k[0][13][l];
+        L->k[0][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 15 ? L->k[0][15][l] : L->k[0][13][l];
+        L->k[0][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 16 ? L->k[0][16][l] : L->k[0][13][l];
+        L->k[0][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 17 ? L->k[0][17][l] : L->k[0][13][l];
+        L->k[0][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 15 ? L->k[0][15][l] : L->k[0][14][l];
+        L->k[0][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 16 ? L->k[0][16][l] : L->k[0][14][l];
+        L->k[0][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 17 ? L->k[0][17][l] : L->k[0][14][l];
+        L->k[0][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][15][l];
+        L->k[0][15][l] = L->piv[15][l] == 16 ? L->k[0][16][l] : L->k[0][15][l];
+        L->k[0][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][15][l];
+        L->k[0][15][l] = L->piv[15][l] == 17 ? L->k[0][17][l] : L->k[0][15][l];
+        L->k[0][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][16][l];
+        L->k[0][16][l] = L->piv[16][l] == 17 ? L->k[0][17][l] : L->k[0][16][l];
+        L->k[0][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[0][17][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[37][l] * L->k[0][1][l];
+        L->k[0][4][l] = L->k[0][4][l] - L->lu[75][l] * L->k[0][3][l];
+        L->k[0][5][l] = L->k[0][5][l] - L->lu[93][l] * L->k[0][3][l] - L->lu[94][l] * L->k[0][4][l];
+        L->k[0][6][l] = L->k[0][6][l] - L->lu[111][l] * L->k[0][3][l] - L->lu[112][l] *
+                L->k[0][4][l] - L->lu[113][l] * L->k[0][5][l];
+        L->k[0][7][l] = L->k[0][7][l] - L->lu[129][l] * L->k[0][3][l] - L->lu[130][l] *
+                L->k[0][4][l] - L->lu[131][l] * L->k[0][5][l] - L->lu[132][l] * L->k[0][6][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[147][l] * L->k[0][3][l] - L->lu[148][l] *
+                L->k[0][4][l] - L->lu[149][l] * L->k[0][5][l] - L->lu[150][l] * L->k[0][6][l] -
+                L->lu[151][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[165][l] * L->k[0][3][l] - L->lu[166][l] *
+                L->k[0][4][l] - L->lu[167][l] * L->k[0][5][l] - L->lu[168][l] * L->k[0][6][l] -
+                L->lu[169][l] * L->k[0][7][l] - L->lu[170][l] * L->k[0][8][l];
+        L->k[0][10][l] = L->k[0][10][l] - L->lu[183][l] * L->k[0][3][l] - L->lu[184][l] *
+                L->k[0][4][l] - L->lu[185][l] * L->k[0][5][l] - L->lu[186][l] * L->k[0][6][l] -
+                L->lu[187][l] * L->k[0][7][l] - L->lu[188][l] * L->k[0][8][l] - L->lu[189][l] *
+                L->k[0][9][l];
+        L->k[0][11][l] = L->k[0][11][l] - L->lu[201][l] * L->k[0][3][l] - L->lu[202][l] *
+                L->k[0][4][l] - L->lu[203][l] * L->k[0][5][l] - L->lu[204][l] * L->k[0][6][l] -
+                L->lu[205][l] * L->k[0][7][l] - L->lu[206][l] * L->k[0][8][l] - L->lu[207][l] *
+                L->k[0][9][l] - L->lu[208][l] * L->k[0][10][l];
+        L->k[0][12][l] = L->k[0][12][l] - L->lu[219][l] * L->k[0][3][l] - L->lu[220][l] *
+                L->k[0][4][l] - L->lu[221][l] * L->k[0][5][l] - L->lu[222][l] * L->k[0][6][l] -
+                L->lu[223][l] * L->k[0][7][l] - L->lu[224][l] * L->k[0][8][l] - L->lu[225][l] *
+                L->k[0][9][l] - L->lu[226][l] * L->k[0][10][l] - L->lu[227][l] * L->k[0][11][l];
+        L->k[0][13][l] = L->k[0][13][l] - L->lu[237][l] * L->k[0][3][l] - L->lu[238][l] *
+                L->k[0][4][l] - L->lu[239][l] * L->k[0][5][l] - L->lu[240][l] * L->k[0][6][l] -
+                L->lu[241][l] * L->k[0][7][l] - L->lu[242][l] * L->k[0][8][l] - L->lu[243][l] *
+                L->k[0][9][l] - L->lu[244][l] * L->k[0][10][l] - L->lu[245][l] * L->k[0][11][l] -
+                L->lu[246][l] * L->k[0][12][l];
+        L->k[0][14][l] = L->k[0][14][l] - L->lu[255][l] * L->k[0][3][l] - L->lu[256][l] *
+                L->k[0][4][l] - L->lu[257][l] * L->k[0][5][l] - L->lu[258][l] * L->k[0][6][l] -
+                L->lu[259][l] * L->k[0][7][l] - L->lu[260][l] * L->k[0][8][l] - L->lu[261][l] *
+                L->k[0][9][l] - L->lu[262][l] * L->k[0][10][l] - L->lu[263][l] * L->k[0][11][l] -
+                L->lu[264][l] * L->k[0][12][l] - L->lu[265][l] * L->k[0][13][l];
+        L->k[0][15][l] = L->k[0][15][l] - L->lu[273][l] * L->k[0][3][l] - L->lu[274][l] *
+                L->k[0][4][l] - L->lu[275][l] * L->k[0][5][l] - L->lu[276][l] * L->k[0][6][l] -
+                L->lu[277][l] * L->k[0][7][l] - L->lu[278][l] * L->k[0][8][l] - L->lu[279][l] *
+                L->k[0][9][l] - L->lu[280][l] * L->k[0][10][l] - L->lu[281][l] * L->k[0][11][l] -
+                L->lu[282][l] * L->k[0][12][l] - L->lu[283][l] * L->k[0][13][l] - L->lu[284][l] *
+                L->k[0][14][l];
+        L->k[0][16][l] = L->k[0][16][l] - L->lu[291][l] * L->k[0][3][l] - L->lu[292][l] *
+                L->k[0][4][l] - L->lu[293][l] * L->k[0][5][l] - L->lu[294][l] * L->k[0][6][l] -
+                L->lu[295][l] * L->k[0][7][l] - L->lu[296][l] * L->k[0][8][l] - L->lu[297][l] *
+                L->k[0][9][l] - L->lu[298][l] * L->k[0][10][l] - L->lu[299][l] * L->k[0][11][l] -
+                L->lu[300][l] * L->k[0][12][l] - L->lu[301][l] * L->k[0][13][l] - L->lu[302][l] *
+                L->k[0][14][l] - L->lu[303][l] * L->k[0][15][l];
+        L->k[0][17][l] = L->k[0][17][l] - L->lu[309][l] * L->k[0][3][l] - L->lu[310][l] *
+                L->k[0][4][l] - L->lu[311][l] * L->k[0][5][l] - L->lu[312][l] * L->k[0][6][l] -
+                L->lu[313][l] * L->k[0][7][l] - L->lu[314][l] * L->k[0][8][l] - L->lu[315][l] *
+                L->k[0][9][l] - L->lu[316][l] * L->k[0][10][l] - L->lu[317][l] * L->k[0][11][l] -
+                L->lu[318][l] * L->k[0][12][l] - L->lu[319][l] * L->k[0][13][l] - L->lu[320][l] *
+                L->k[0][14][l] - L->lu[321][l] * L->k[0][15][l] - L->lu[322][l] * L->k[0][16][l];
+        L->k[0][17][l] = L->k[0][17][l] * L->lu[323][l];
+        L->k[0][16][l] = L->k[0][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[0][17][l];
+        L->k[0][15][l] = L->k[0][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[0][17][l] -
+                L->lu[286][l] * L->k[0][16][l];
+        L->k[0][14][l] = L->k[0][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[0][17][l] -
+                L->lu[268][l] * L->k[0][16][l] - L->lu[267][l] * L->k[0][15][l];
+        L->k[0][13][l] = L->k[0][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[0][17][l] -
+                L->lu[250][l] * L->k[0][16][l] - L->lu[249][l] * L->k[0][15][l] - L->lu[248][l] *
+                L->k[0][14][l];
+        L->k[0][12][l] = L->k[0][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[0][17][l] -
+                L->lu[232][l] * L->k[0][16][l] - L->lu[231][l] * L->k[0][15][l] - L->lu[230][l] *
+                L->k[0][14][l] - L->lu[229][l] * L->k[0][13][l];
+        L->k[0][11][l] = L->k[0][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[0][17][l] -
+                L->lu[214][l] * L->k[0][16][l] - L->lu[213][l] * L->k[0][15][l] - L->lu[212][l] *
+                L->k[0][14][l] - L->lu[211][l] * L->k[0][13][l] - L->lu[210][l] * L->k[0][12][l];
+        L->k[0][10][l] = L->k[0][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[0][17][l] -
+                L->lu[196][l] * L->k[0][16][l] - L->lu[195][l] * L->k[0][15][l] - L->lu[194][l] *
+                L->k[0][14][l] - L->lu[193][l] * L->k[0][13][l] - L->lu[192][l] * L->k[0][12][l]
+                - L->lu[191][l] * L->k[0][11][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[0][17][l] -
+                L->lu[178][l] * L->k[0][16][l] - L->lu[177][l] * L->k[0][15][l] - L->lu[176][l] *
+                L->k[0][14][l] - L->lu[175][l] * L->k[0][13][l] - L->lu[174][l] * L->k[0][12][l]
+                - L->lu[173][l] * L->k[0][11][l] - L->lu[172][l] * L->k[0][10][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[0][17][l] -
+                L->lu[160][l] * L->k[0][16][l] - L->lu[159][l] * L->k[0][15][l] - L->lu[158][l] *
+                L->k[0][14][l] - L->lu[157][l] * L->k[0][13][l] - L->lu[156][l] * L->k[0][12][l]
+                - L->lu[155][l] * L->k[0][11][l] - L->lu[154][l] * L->k[0][10][l] - L->lu[153][l]
+                * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[0][17][l] -
+                L->lu[142][l] * L->k[0][16][l] - L->lu[141][l] * L->k[0][15][l] - L->lu[140][l] *
+                L->k[0][14][l] - L->lu[139][l] * L->k[0][13][l] - L->lu[138][l] * L->k[0][12][l]
+                - L->lu[137][l] * L->k[0][11][l] - L->lu[136][l] * L->k[0][10][l] - L->lu[135][l]
+                * L->k[0][9][l] - L->lu[134][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[0][17][l] -
+                L->lu[124][l] * L->k[0][16][l] - L->lu[123][l] * L->k[0][15][l] - L->lu[122][l] *
+                L->k[0][14][l] - L->lu[121][l] * L->k[0][13][l] - L->lu[120][l] * L->k[0][12][l]
+                - L->lu[119][l] * L->k[0][11][l] - L->lu[118][l] * L->k[0][10][l] - L->lu[117][l]
+                * L->k[0][9][l] - L->lu[116][l] * L->k[0][8][l] - L->lu[115][l] * L->k[0][7][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[0][17][l] -
+                L->lu[106][l] * L->k[0][16][l] - L->lu[105][l] * L->k[0][15][l] - L->lu[104][l] *
+                L->k[0][14][l] - L->lu[103][l] * L->k[0][13][l] - L->lu[102][l] * L->k[0][12][l]
+                - L->lu[101][l] * L->k[0][11][l] - L->lu[100][l] * L->k[0][10][l] - L->lu[99][l]
+                * L->k[0][9][l] - L->lu[98][l] * L->k[0][8][l] - L->lu[97][l] * L->k[0][7][l] -
+                L->lu[96][l] * L->k[0][6][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[0][17][l] -
+                L->lu[88][l] * L->k[0][16][l] - L->lu[87][l] * L->k[0][15][l] - L->lu[86][l] *
+                L->k[0][14][l] - L->lu[85][l] * L->k[0][13][l] - L->lu[84][l] * L->k[0][12][l] -
+                L->lu[83][l] * L->k[0][11][l] - L->lu[82][l] * L->k[0][10][l] - L->lu[81][l] *
+                L->k[0][9][l] - L->lu[80][l] * L->k[0][8][l] - L->lu[79][l] * L->k[0][7][l] -
+                L->lu[78][l] * L->k[0][6][l] - L->lu[77][l] * L->k[0][5][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[0][17][l] -
+                L->lu[70][l] * L->k[0][16][l] - L->lu[69][l] * L->k[0][15][l] - L->lu[68][l] *
+                L->k[0][14][l] - L->lu[67][l] * L->k[0][13][l] - L->lu[66][l] * L->k[0][12][l] -
+                L->lu[65][l] * L->k[0][11][l] - L->lu[64][l] * L->k[0][10][l] - L->lu[63][l] *
+                L->k[0][9][l] - L->lu[62][l] * L->k[0][8][l] - L->lu[61][l] * L->k[0][7][l] -
+                L->lu[60][l] * L->k[0][6][l] - L->lu[59][l] * L->k[0][5][l] - L->lu[58][l] *
+                L->k[0][4][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[0][9][l] -
+                L->lu[44][l] * L->k[0][8][l] - L->lu[43][l] * L->k[0][7][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[0][9][l] -
+                L->lu[26][l] * L->k[0][8][l] - L->lu[25][l] * L->k[0][7][l] - L->lu[20][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[0][9][l] - L->lu[7][l] *
+                L->k[0][7][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 4 ? L->k[1][4][l] : L->k[1][3][l];
+        L->k[1][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[1][4][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 5 ? L->k[1][5][l] : L->k[1][3][l];
+        L->k[1][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 6 ? L->k[1][6][l] : L->k[1][3][l];
+        L->k[1][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 7 ? L->k[1][7][l] : L->k[1][3][l];
+        L->k[1][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 8 ? L->k[1][8][l] : L->k[1][3][l];
+        L->k[1][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 9 ? L->k[1][9][l] : L->k[1][3][l];
+        L->k[1][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 10 ? L->k[1][10][l] : L->k[1][3][l];
+        L->k[1][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 11 ? L->k[1][11][l] : L->k[1][3][l];
+        L->k[1][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 12 ? L->k[1][12][l] : L->k[1][3][l];
+        L->k[1][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 13 ? L->k[1][13][l] : L->k[1][3][l];
+        L->k[1][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 14 ? L->k[1][14][l] : L->k[1][3][l];
+        L->k[1][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 15 ? L->k[1][15][l] : L->k[1][3][l];
+        L->k[1][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 16 ? L->k[1][16][l] : L->k[1][3][l];
+        L->k[1][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 17 ? L->k[1][17][l] : L->k[1][3][l];
+        L->k[1][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 5 ? L->k[1][5][l] : L->k[1][4][l];
+        L->k[1][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 6 ? L->k[1][6][l] : L->k[1][4][l];
+        L->k[1][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 7 ? L->k[1][7][l] : L->k[1][4][l];
+        L->k[1][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 8 ? L->k[1][8][l] : L->k[1][4][l];
+        L->k[1][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 9 ? L->k[1][9][l] : L->k[1][4][l];
+        L->k[1][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 10 ? L->k[1][10][l] : L->k[1][4][l];
+        L->k[1][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 11 ? L->k[1][11][l] : L->k[1][4][l];
+        L->k[1][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 12 ? L->k[1][12][l] : L->k[1][4][l];
+        L->k[1][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 13 ? L->k[1][13][l] : L->k[1][4][l];
+        L->k[1][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 14 ? L->k[1][14][l] : L->k[1][4][l];
+        L->k[1][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 15 ? L->k[1][15][l] : L->k[1][4][l];
+        L->k[1][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 16 ? L->k[1][16][l] : L->k[1][4][l];
+        L->k[1][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 17 ? L->k[1][17][l] : L->k[1][4][l];
+        L->k[1][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 6 ? L->k[1][6][l] : L->k[1][5][l];
+        L->k[1][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 7 ? L->k[1][7][l] : L->k[1][5][l];
+        L->k[1][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 8 ? L->k[1][8][l] : L->k[1][5][l];
+        L->k[1][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 9 ? L->k[1][9][l] : L->k[1][5][l];
+        L->k[1][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 10 ? L->k[1][10][l] : L->k[1][5][l];
+        L->k[1][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 11 ? L->k[1][11][l] : L->k[1][5][l];
+        L->k[1][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 12 ? L->k[1][12][l] : L->k[1][5][l];
+        L->k[1][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 13 ? L->k[1][13][l] : L->k[1][5][l];
+        L->k[1][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 14 ? L->k[1][14][l] : L->k[1][5][l];
+        L->k[1][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 15 ? L->k[1][15][l] : L->k[1][5][l];
+        L->k[1][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 16 ? L->k[1][16][l] : L->k[1][5][l];
+        L->k[1][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 17 ? L->k[1][17][l] : L->k[1][5][l];
+        L->k[1][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 7 ? L->k[1][7][l] : L->k[1][6][l];
+        L->k[1][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 8 ? L->k[1][8][l] : L->k[1][6][l];
+        L->k[1][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 9 ? L->k[1][9][l] : L->k[1][6][l];
+        L->k[1][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 10 ? L->k[1][10][l] : L->k[1][6][l];
+        L->k[1][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 11 ? L->k[1][11][l] : L->k[1][6][l];
+        L->k[1][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 12 ? L->k[1][12][l] : L->k[1][6][l];
+        L->k[1][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 13 ? L->k[1][13][l] : L->k[1][6][l];
+        L->k[1][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 14 ? L->k[1][14][l] : L->k[1][6][l];
+        L->k[1][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 15 ? L->k[1][15][l] : L->k[1][6][l];
+        L->k[1][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 16 ? L->k[1][16][l] : L->k[1][6][l];
+        L->k[1][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 17 ? L->k[1][17][l] : L->k[1][6][l];
+        L->k[1][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 10 ? L->k[1][10][l] : L->k[1][7][l];
+        L->k[1][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 11 ? L->k[1][11][l] : L->k[1][7][l];
+        L->k[1][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 12 ? L->k[1][12][l] : L->k[1][7][l];
+        L->k[1][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 13 ? L->k[1][13][l] : L->k[1][7][l];
+        L->k[1][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 14 ? L->k[1][14][l] : L->k[1][7][l];
+        L->k[1][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 15 ? L->k[1][15][l] : L->k[1][7][l];
+        L->k[1][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 16 ? L->k[1][16][l] : L->k[1][7][l];
+        L->k[1][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 17 ? L->k[1][17][l] : L->k[1][7][l];
+        L->k[1][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 10 ? L->k[1][10][l] : L->k[1][8][l];
+        L->k[1][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 11 ? L->k[1][11][l] : L->k[1][8][l];
+        L->k[1][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 12 ? L->k[1][12][l] : L->k[1][8][l];
+        L->k[1][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 13 ? L->k[1][13][l] : L->k[1][8][l];
+        L->k[1][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 14 ? L->k[1][14][l] : L->k[1][8][l];
+        L->k[1][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 15 ? L->k[1][15][l] : L->k[1][8][l];
+        L->k[1][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 16 ? L->k[1][16][l] : L->k[1][8][l];
+        L->k[1][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 17 ? L->k[1][17][l] : L->k[1][8][l];
+        L->k[1][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 10 ? L->k[1][10][l] : L->k[1][9][l];
+        L->k[1][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 11 ? L->k[1][11][l] : L->k[1][9][l];
+        L->k[1][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 12 ? L->k[1][12][l] : L->k[1][9][l];
+        L->k[1][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 13 ? L->k[1][13][l] : L->k[1][9][l];
+        L->k[1][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 14 ? L->k[1][14][l] : L->k[1][9][l];
+        L->k[1][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 15 ? L->k[1][15][l] : L->k[1][9][l];
+        L->k[1][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 16 ? L->k[1][16][l] : L->k[1][9][l];
+        L->k[1][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 17 ? L->k[1][17][l] : L->k[1][9][l];
+        L->k[1][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 11 ? L->k[1][11][l] : L->k[1][10][l];
+        L->k[1][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 12 ? L->k[1][12][l] : L->k[1][10][l];
+        L->k[1][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 13 ? L->k[1][13][l] : L->k[1][10][l];
+        L->k[1][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 14 ? L->k[1][14][l] : L->k[1][10][l];
+        L->k[1][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 15 ? L->k[1][15][l] : L->k[1][10][l];
+        L->k[1][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 16 ? L->k[1][16][l] : L->k[1][10][l];
+        L->k[1][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 17 ? L->k[1][17][l] : L->k[1][10][l];
+        L->k[1][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 12 ? L->k[1][12][l] : L->k[1][11][l];
+        L->k[1][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 13 ? L->k[1][13][l] : L->k[1][11][l];
+        L->k[1][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 14 ? L->k[1][14][l] : L->k[1][11][l];
+        L->k[1][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 15 ? L->k[1][15][l] : L->k[1][11][l];
+        L->k[1][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 16 ? L->k[1][16][l] : L->k[1][11][l];
+        L->k[1][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 17 ? L->k[1][17][l] : L->k[1][11][l];
+        L->k[1][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 13 ? L->k[1][13][l] : L->k[1][12][l];
+        L->k[1][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 14 ? L->k[1][14][l] : L->k[1][12][l];
+        L->k[1][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 15 ? L->k[1][15][l] : L->k[1][12][l];
+        L->k[1][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 16 ? L->k[1][16][l] : L->k[1][12][l];
+        L->k[1][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 17 ? L->k[1][17][l] : L->k[1][12][l];
+        L->k[1][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 14 ? L->k[1][14][l] : L->k[1][13][l];
+        L->k[1][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 15 ? L->k[1][15][l] : L->k[1][13][l];
+        L->k[1][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 16 ? L->k[1][16][l] : L->k[1][13][l];
+        L->k[1][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 17 ? L->k[1][17][l] : L->k[1][13][l];
+        L->k[1][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 15 ? L->k[1][15][l] : L->k[1][14][l];
+        L->k[1][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 16 ? L->k[1][16][l] : L->k[1][14][l];
+        L->k[1][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 17 ? L->k[1][17][l] : L->k[1][14][l];
+        L->k[1][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][15][l];
+        L->k[1][15][l] = L->piv[15][l] == 16 ? L->k[1][16][l] : L->k[1][15][l];
+        L->k[1][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][15][l];
+        L->k[1][15][l] = L->piv[15][l] == 17 ? L->k[1][17][l] : L->k[1][15][l];
+        L->k[1][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][16][l];
+        L->k[1][16][l] = L->piv[16][l] == 17 ? L->k[1][17][l] : L->k[1][16][l];
+        L->k[1][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[1][17][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[37][l] * L->k[1][1][l];
+        L->k[1][4][l] = L->k[1][4][l] - L->lu[75][l] * L->k[1][3][l];
+        L->k[1][5][l] = L->k[1][5][l] - L->lu[93][l] * L->k[1][3][l] - L->lu[94][l] * L->k[1][4][l];
+        L->k[1][6][l] = L->k[1][6][l] - L->lu[111][l] * L->k[1][3][l] - L->lu[112][l] *
+                L->k[1][4][l] - L->lu[113][l] * L->k[1][5][l];
+        L->k[1][7][l] = L->k[1][7][l] - L->lu[129][l] * L->k[1][3][l] - L->lu[130][l] *
+                L->k[1][4][l] - L->lu[131][l] * L->k[1][5][l] - L->lu[132][l] * L->k[1][6][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[147][l] * L->k[1][3][l] - L->lu[148][l] *
+                L->k[1][4][l] - L->lu[149][l] * L->k[1][5][l] - L->lu[150][l] * L->k[1][6][l] -
+                L->lu[151][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[165][l] * L->k[1][3][l] - L->lu[166][l] *
+                L->k[1][4][l] - L->lu[167][l] * L->k[1][5][l] - L->lu[168][l] * L->k[1][6][l] -
+                L->lu[169][l] * L->k[1][7][l] - L->lu[170][l] * L->k[1][8][l];
+        L->k[1][10][l] = L->k[1][10][l] - L->lu[183][l] * L->k[1][3][l] - L->lu[184][l] *
+                L->k[1][4][l] - L->lu[185][l] * L->k[1][5][l] - L->lu[186][l] * L->k[1][6][l] -
+                L->lu[187][l] * L->k[1][7][l] - L->lu[188][l] * L->k[1][8][l] - L->lu[189][l] *
+                L->k[1][9][l];
+        L->k[1][11][l] = L->k[1][11][l] - L->lu[201][l] * L->k[1][3][l] - L->lu[202][l] *
+                L->k[1][4][l] - L->lu[203][l] * L->k[1][5][l] - L->lu[204][l] * L->k[1][6][l] -
+                L->lu[205][l] * L->k[1][7][l] - L->lu[206][l] * L->k[1][8][l] - L->lu[207][l] *
+                L->k[1][9][l] - L->lu[208][l] * L->k[1][10][l];
+        L->k[1][12][l] = L->k[1][12][l] - L->lu[219][l] * L->k[1][3][l] - L->lu[220][l] *
+                L->k[1][4][l] - L->lu[221][l] * L->k[1][5][l] - L->lu[222][l] * L->k[1][6][l] -
+                L->lu[223][l] * L->k[1][7][l] - L->lu[224][l] * L->k[1][8][l] - L->lu[225][l] *
+                L->k[1][9][l] - L->lu[226][l] * L->k[1][10][l] - L->lu[227][l] * L->k[1][11][l];
+        L->k[1][13][l] = L->k[1][13][l] - L->lu[237][l] * L->k[1][3][l] - L->lu[238][l] *
+                L->k[1][4][l] - L->lu[239][l] * L->k[1][5][l] - L->lu[240][l] * L->k[1][6][l] -
+                L->lu[241][l] * L->k[1][7][l] - L->lu[242][l] * L->k[1][8][l] - L->lu[243][l] *
+                L->k[1][9][l] - L->lu[244][l] * L->k[1][10][l] - L->lu[245][l] * L->k[1][11][l] -
+                L->lu[246][l] * L->k[1][12][l];
+        L->k[1][14][l] = L->k[1][14][l] - L->lu[255][l] * L->k[1][3][l] - L->lu[256][l] *
+                L->k[1][4][l] - L->lu[257][l] * L->k[1][5][l] - L->lu[258][l] * L->k[1][6][l] -
+                L->lu[259][l] * L->k[1][7][l] - L->lu[260][l] * L->k[1][8][l] - L->lu[261][l] *
+                L->k[1][9][l] - L->lu[262][l] * L->k[1][10][l] - L->lu[263][l] * L->k[1][11][l] -
+                L->lu[264][l] * L->k[1][12][l] - L->lu[265][l] * L->k[1][13][l];
+        L->k[1][15][l] = L->k[1][15][l] - L->lu[273][l] * L->k[1][3][l] - L->lu[274][l] *
+                L->k[1][4][l] - L->lu[275][l] * L->k[1][5][l] - L->lu[276][l] * L->k[1][6][l] -
+                L->lu[277][l] * L->k[1][7][l] - L->lu[278][l] * L->k[1][8][l] - L->lu[279][l] *
+                L->k[1][9][l] - L->lu[280][l] * L->k[1][10][l] - L->lu[281][l] * L->k[1][11][l] -
+                L->lu[282][l] * L->k[1][12][l] - L->lu[283][l] * L->k[1][13][l] - L->lu[284][l] *
+                L->k[1][14][l];
+        L->k[1][16][l] = L->k[1][16][l] - L->lu[291][l] * L->k[1][3][l] - L->lu[292][l] *
+                L->k[1][4][l] - L->lu[293][l] * L->k[1][5][l] - L->lu[294][l] * L->k[1][6][l] -
+                L->lu[295][l] * L->k[1][7][l] - L->lu[296][l] * L->k[1][8][l] - L->lu[297][l] *
+                L->k[1][9][l] - L->lu[298][l] * L->k[1][10][l] - L->lu[299][l] * L->k[1][11][l] -
+                L->lu[300][l] * L->k[1][12][l] - L->lu[301][l] * L->k[1][13][l] - L->lu[302][l] *
+                L->k[1][14][l] - L->lu[303][l] * L->k[1][15][l];
+        L->k[1][17][l] = L->k[1][17][l] - L->lu[309][l] * L->k[1][3][l] - L->lu[310][l] *
+                L->k[1][4][l] - L->lu[311][l] * L->k[1][5][l] - L->lu[312][l] * L->k[1][6][l] -
+                L->lu[313][l] * L->k[1][7][l] - L->lu[314][l] * L->k[1][8][l] - L->lu[315][l] *
+                L->k[1][9][l] - L->lu[316][l] * L->k[1][10][l] - L->lu[317][l] * L->k[1][11][l] -
+                L->lu[318][l] * L->k[1][12][l] - L->lu[319][l] * L->k[1][13][l] - L->lu[320][l] *
+                L->k[1][14][l] - L->lu[321][l] * L->k[1][15][l] - L->lu[322][l] * L->k[1][16][l];
+        L->k[1][17][l] = L->k[1][17][l] * L->lu[323][l];
+        L->k[1][16][l] = L->k[1][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[1][17][l];
+        L->k[1][15][l] = L->k[1][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[1][17][l] -
+                L->lu[286][l] * L->k[1][16][l];
+        L->k[1][14][l] = L->k[1][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[1][17][l] -
+                L->lu[268][l] * L->k[1][16][l] - L->lu[267][l] * L->k[1][15][l];
+        L->k[1][13][l] = L->k[1][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[1][17][l] -
+                L->lu[250][l] * L->k[1][16][l] - L->lu[249][l] * L->k[1][15][l] - L->lu[248][l] *
+                L->k[1][14][l];
+        L->k[1][12][l] = L->k[1][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[1][17][l] -
+                L->lu[232][l] * L->k[1][16][l] - L->lu[231][l] * L->k[1][15][l] - L->lu[230][l] *
+                L->k[1][14][l] - L->lu[229][l] * L->k[1][13][l];
+        L->k[1][11][l] = L->k[1][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[1][17][l] -
+                L->lu[214][l] * L->k[1][16][l] - L->lu[213][l] * L->k[1][15][l] - L->lu[212][l] *
+                L->k[1][14][l] - L->lu[211][l] * L->k[1][13][l] - L->lu[210][l] * L->k[1][12][l];
+        L->k[1][10][l] = L->k[1][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[1][17][l] -
+                L->lu[196][l] * L->k[1][16][l] - L->lu[195][l] * L->k[1][15][l] - L->lu[194][l] *
+                L->k[1][14][l] - L->lu[193][l] * L->k[1][13][l] - L->lu[192][l] * L->k[1][12][l]
+                - L->lu[191][l] * L->k[1][11][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[1][17][l] -
+                L->lu[178][l] * L->k[1][16][l] - L->lu[177][l] * L->k[1][15][l] - L->lu[176][l] *
+                L->k[1][14][l] - L->lu[175][l] * L->k[1][13][l] - L->lu[174][l] * L->k[1][12][l]
+                - L->lu[173][l] * L->k[1][11][l] - L->lu[172][l] * L->k[1][10][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[1][17][l] -
+                L->lu[160][l] * L->k[1][16][l] - L->lu[159][l] * L->k[1][15][l] - L->lu[158][l] *
+                L->k[1][14][l] - L->lu[157][l] * L->k[1][13][l] - L->lu[156][l] * L->k[1][12][l]
+                - L->lu[155][l] * L->k[1][11][l] - L->lu[154][l] * L->k[1][10][l] - L->lu[153][l]
+                * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[1][17][l] -
+                L->lu[142][l] * L->k[1][16][l] - L->lu[141][l] * L->k[1][15][l] - L->lu[140][l] *
+                L->k[1][14][l] - L->lu[139][l] * L->k[1][13][l] - L->lu[138][l] * L->k[1][12][l]
+                - L->lu[137][l] * L->k[1][11][l] - L->lu[136][l] * L->k[1][10][l] - L->lu[135][l]
+                * L->k[1][9][l] - L->lu[134][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[1][17][l] -
+                L->lu[124][l] * L->k[1][16][l] - L->lu[123][l] * L->k[1][15][l] - L->lu[122][l] *
+                L->k[1][14][l] - L->lu[121][l] * L->k[1][13][l] - L->lu[120][l] * L->k[1][12][l]
+                - L->lu[119][l] * L->k[1][11][l] - L->lu[118][l] * L->k[1][10][l] - L->lu[117][l]
+                * L->k[1][9][l] - L->lu[116][l] * L->k[1][8][l] - L->lu[115][l] * L->k[1][7][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[1][17][l] -
+                L->lu[106][l] * L->k[1][16][l] - L->lu[105][l] * L->k[1][15][l] - L->lu[104][l] *
+                L->k[1][14][l] - L->lu[103][l] * L->k[1][13][l] - L->lu[102][l] * L->k[1][12][l]
+                - L->lu[101][l] * L->k[1][11][l] - L->lu[100][l] * L->k[1][10][l] - L->lu[99][l]
+                * L->k[1][9][l] - L->lu[98][l] * L->k[1][8][l] - L->lu[97][l] * L->k[1][7][l] -
+                L->lu[96][l] * L->k[1][6][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[1][17][l] -
+                L->lu[88][l] * L->k[1][16][l] - L->lu[87][l] * L->k[1][15][l] - L->lu[86][l] *
+                L->k[1][14][l] - L->lu[85][l] * L->k[1][13][l] - L->lu[84][l] * L->k[1][12][l] -
+                L->lu[83][l] * L->k[1][11][l] - L->lu[82][l] * L->k[1][10][l] - L->lu[81][l] *
+                L->k[1][9][l] - L->lu[80][l] * L->k[1][8][l] - L->lu[79][l] * L->k[1][7][l] -
+                L->lu[78][l] * L->k[1][6][l] - L->lu[77][l] * L->k[1][5][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[1][17][l] -
+                L->lu[70][l] * L->k[1][16][l] - L->lu[69][l] * L->k[1][15][l] - L->lu[68][l] *
+                L->k[1][14][l] - L->lu[67][l] * L->k[1][13][l] - L->lu[66][l] * L->k[1][12][l] -
+                L->lu[65][l] * L->k[1][11][l] - L->lu[64][l] * L->k[1][10][l] - L->lu[63][l] *
+                L->k[1][9][l] - L->lu[62][l] * L->k[1][8][l] - L->lu[61][l] * L->k[1][7][l] -
+                L->lu[60][l] * L->k[1][6][l] - L->lu[59][l] * L->k[1][5][l] - L->lu[58][l] *
+                L->k[1][4][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[1][9][l] -
+                L->lu[44][l] * L->k[1][8][l] - L->lu[43][l] * L->k[1][7][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[1][9][l] -
+                L->lu[26][l] * L->k[1][8][l] - L->lu[25][l] * L->k[1][7][l] - L->lu[20][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[1][9][l] - L->lu[7][l] *
+                L->k[1][7][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 4 ? L->k[2][4][l] : L->k[2][3][l];
+        L->k[2][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[2][4][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 5 ? L->k[2][5][l] : L->k[2][3][l];
+        L->k[2][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 6 ? L->k[2][6][l] : L->k[2][3][l];
+        L->k[2][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 7 ? L->k[2][7][l] : L->k[2][3][l];
+        L->k[2][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 8 ? L->k[2][8][l] : L->k[2][3][l];
+        L->k[2][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 9 ? L->k[2][9][l] : L->k[2][3][l];
+        L->k[2][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 10 ? L->k[2][10][l] : L->k[2][3][l];
+        L->k[2][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 11 ? L->k[2][11][l] : L->k[2][3][l];
+        L->k[2][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 12 ? L->k[2][12][l] : L->k[2][3][l];
+        L->k[2][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 13 ? L->k[2][13][l] : L->k[2][3][l];
+        L->k[2][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 14 ? L->k[2][14][l] : L->k[2][3][l];
+        L->k[2][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 15 ? L->k[2][15][l] : L->k[2][3][l];
+        L->k[2][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 16 ? L->k[2][16][l] : L->k[2][3][l];
+        L->k[2][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 17 ? L->k[2][17][l] : L->k[2][3][l];
+        L->k[2][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 5 ? L->k[2][5][l] : L->k[2][4][l];
+        L->k[2][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 6 ? L->k[2][6][l] : L->k[2][4][l];
+        L->k[2][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 7 ? L->k[2][7][l] : L->k[2][4][l];
+        L->k[2][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 8 ? L->k[2][8][l] : L->k[2][4][l];
+        L->k[2][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 9 ? L->k[2][9][l] : L->k[2][4][l];
+        L->k[2][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 10 ? L->k[2][10][l] : L->k[2][4][l];
+        L->k[2][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 11 ? L->k[2][11][l] : L->k[2][4][l];
+        L->k[2][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 12 ? L->k[2][12][l] : L->k[2][4][l];
+        L->k[2][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 13 ? L->k[2][13][l] : L->k[2][4][l];
+        L->k[2][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 14 ? L->k[2][14][l] : L->k[2][4][l];
+        L->k[2][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 15 ? L->k[2][15][l] : L->k[2][4][l];
+        L->k[2][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 16 ? L->k[2][16][l] : L->k[2][4][l];
+        L->k[2][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 17 ? L->k[2][17][l] : L->k[2][4][l];
+        L->k[2][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 6 ? L->k[2][6][l] : L->k[2][5][l];
+        L->k[2][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 7 ? L->k[2][7][l] : L->k[2][5][l];
+        L->k[2][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 8 ? L->k[2][8][l] : L->k[2][5][l];
+        L->k[2][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 9 ? L->k[2][9][l] : L->k[2][5][l];
+        L->k[2][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 10 ? L->k[2][10][l] : L->k[2][5][l];
+        L->k[2][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 11 ? L->k[2][11][l] : L->k[2][5][l];
+        L->k[2][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 12 ? L->k[2][12][l] : L->k[2][5][l];
+        L->k[2][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 13 ? L->k[2][13][l] : L->k[2][5][l];
+        L->k[2][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 14 ? L->k[2][14][l] : L->k[2][5][l];
+        L->k[2][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 15 ? L->k[2][15][l] : L->k[2][5][l];
+        L->k[2][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 16 ? L->k[2][16][l] : L->k[2][5][l];
+        L->k[2][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 17 ? L->k[2][17][l] : L->k[2][5][l];
+        L->k[2][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 7 ? L->k[2][7][l] : L->k[2][6][l];
+        L->k[2][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 8 ? L->k[2][8][l] : L->k[2][6][l];
+        L->k[2][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 9 ? L->k[2][9][l] : L->k[2][6][l];
+        L->k[2][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 10 ? L->k[2][10][l] : L->k[2][6][l];
+        L->k[2][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 11 ? L->k[2][11][l] : L->k[2][6][l];
+        L->k[2][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 12 ? L->k[2][12][l] : L->k[2][6][l];
+        L->k[2][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 13 ? L->k[2][13][l] : L->k[2][6][l];
+        L->k[2][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 14 ? L->k[2][14][l] : L->k[2][6][l];
+        L->k[2][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 15 ? L->k[2][15][l] : L->k[2][6][l];
+        L->k[2][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 16 ? L->k[2][16][l] : L->k[2][6][l];
+        L->k[2][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 17 ? L->k[2][17][l] : L->k[2][6][l];
+        L->k[2][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 10 ? L->k[2][10][l] : L->k[2][7][l];
+        L->k[2][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 11 ? L->k[2][11][l] : L->k[2][7][l];
+        L->k[2][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 12 ? L->k[2][12][l] : L->k[2][7][l];
+        L->k[2][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 13 ? L->k[2][13][l] : L->k[2][7][l];
+        L->k[2][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 14 ? L->k[2][14][l] : L->k[2][7][l];
+        L->k[2][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 15 ? L->k[2][15][l] : L->k[2][7][l];
+        L->k[2][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 16 ? L->k[2][16][l] : L->k[2][7][l];
+        L->k[2][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 17 ? L->k[2][17][l] : L->k[2][7][l];
+        L->k[2][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 10 ? L->k[2][10][l] : L->k[2][8][l];
+        L->k[2][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 11 ? L->k[2][11][l] : L->k[2][8][l];
+        L->k[2][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 12 ? L->k[2][12][l] : L->k[2][8][l];
+        L->k[2][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 13 ? L->k[2][13][l] : L->k[2][8][l];
+        L->k[2][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 14 ? L->k[2][14][l] : L->k[2][8][l];
+        L->k[2][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 15 ? L->k[2][15][l] : L->k[2][8][l];
+        L->k[2][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 16 ? L->k[2][16][l] : L->k[2][8][l];
+        L->k[2][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 17 ? L->k[2][17][l] : L->k[2][8][l];
+        L->k[2][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 10 ? L->k[2][10][l] : L->k[2][9][l];
+        L->k[2][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 11 ? L->k[2][11][l] : L->k[2][9][l];
+        L->k[2][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 12 ? L->k[2][12][l] : L->k[2][9][l];
+        L->k[2][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 13 ? L->k[2][13][l] : L->k[2][9][l];
+        L->k[2][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 14 ? L->k[2][14][l] : L->k[2][9][l];
+        L->k[2][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 15 ? L->k[2][15][l] : L->k[2][9][l];
+        L->k[2][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 16 ? L->k[2][16][l] : L->k[2][9][l];
+        L->k[2][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 17 ? L->k[2][17][l] : L->k[2][9][l];
+        L->k[2][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 11 ? L->k[2][11][l] : L->k[2][10][l];
+        L->k[2][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 12 ? L->k[2][12][l] : L->k[2][10][l];
+        L->k[2][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 13 ? L->k[2][13][l] : L->k[2][10][l];
+        L->k[2][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 14 ? L->k[2][14][l] : L->k[2][10][l];
+        L->k[2][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 15 ? L->k[2][15][l] : L->k[2][10][l];
+        L->k[2][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 16 ? L->k[2][16][l] : L->k[2][10][l];
+        L->k[2][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 17 ? L->k[2][17][l] : L->k[2][10][l];
+        L->k[2][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 12 ? L->k[2][12][l] : L->k[2][11][l];
+        L->k[2][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 13 ? L->k[2][13][l] : L->k[2][11][l];
+        L->k[2][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 14 ? L->k[2][14][l] : L->k[2][11][l];
+        L->k[2][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 15 ? L->k[2][15][l] : L->k[2][11][l];
+        L->k[2][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 16 ? L->k[2][16][l] : L->k[2][11][l];
+        L->k[2][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 17 ? L->k[2][17][l] : L->k[2][11][l];
+        L->k[2][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 13 ? L->k[2][13][l] : L->k[2][12][l];
+        L->k[2][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 14 ? L->k[2][14][l] : L->k[2][12][l];
+        L->k[2][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 15 ? L->k[2][15][l] : L->k[2][12][l];
+        L->k[2][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 16 ? L->k[2][16][l] : L->k[2][12][l];
+        L->k[2][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 17 ? L->k[2][17][l] : L->k[2][12][l];
+        L->k[2][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 14 ? L->k[2][14][l] : L->k[2][13][l];
+        L->k[2][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 15 ? L->k[2][15][l] : L->k[2][13][l];
+        L->k[2][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 16 ? L->k[2][16][l] : L->k[2][13][l];
+        L->k[2][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 17 ? L->k[2][17][l] : L->k[2][13][l];
+        L->k[2][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 15 ? L->k[2][15][l] : L->k[2][14][l];
+        L->k[2][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 16 ? L->k[2][16][l] : L->k[2][14][l];
+        L->k[2][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 17 ? L->k[2][17][l] : L->k[2][14][l];
+        L->k[2][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][15][l];
+        L->k[2][15][l] = L->piv[15][l] == 16 ? L->k[2][16][l] : L->k[2][15][l];
+        L->k[2][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][15][l];
+        L->k[2][15][l] = L->piv[15][l] == 17 ? L->k[2][17][l] : L->k[2][15][l];
+        L->k[2][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][16][l];
+        L->k[2][16][l] = L->piv[16][l] == 17 ? L->k[2][17][l] : L->k[2][16][l];
+        L->k[2][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[2][17][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[37][l] * L->k[2][1][l];
+        L->k[2][4][l] = L->k[2][4][l] - L->lu[75][l] * L->k[2][3][l];
+        L->k[2][5][l] = L->k[2][5][l] - L->lu[93][l] * L->k[2][3][l] - L->lu[94][l] * L->k[2][4][l];
+        L->k[2][6][l] = L->k[2][6][l] - L->lu[111][l] * L->k[2][3][l] - L->lu[112][l] *
+                L->k[2][4][l] - L->lu[113][l] * L->k[2][5][l];
+        L->k[2][7][l] = L->k[2][7][l] - L->lu[129][l] * L->k[2][3][l] - L->lu[130][l] *
+                L->k[2][4][l] - L->lu[131][l] * L->k[2][5][l] - L->lu[132][l] * L->k[2][6][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[147][l] * L->k[2][3][l] - L->lu[148][l] *
+                L->k[2][4][l] - L->lu[149][l] * L->k[2][5][l] - L->lu[150][l] * L->k[2][6][l] -
+                L->lu[151][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[165][l] * L->k[2][3][l] - L->lu[166][l] *
+                L->k[2][4][l] - L->lu[167][l] * L->k[2][5][l] - L->lu[168][l] * L->k[2][6][l] -
+                L->lu[169][l] * L->k[2][7][l] - L->lu[170][l] * L->k[2][8][l];
+        L->k[2][10][l] = L->k[2][10][l] - L->lu[183][l] * L->k[2][3][l] - L->lu[184][l] *
+                L->k[2][4][l] - L->lu[185][l] * L->k[2][5][l] - L->lu[186][l] * L->k[2][6][l] -
+                L->lu[187][l] * L->k[2][7][l] - L->lu[188][l] * L->k[2][8][l] - L->lu[189][l] *
+                L->k[2][9][l];
+        L->k[2][11][l] = L->k[2][11][l] - L->lu[201][l] * L->k[2][3][l] - L->lu[202][l] *
+                L->k[2][4][l] - L->lu[203][l] * L->k[2][5][l] - L->lu[204][l] * L->k[2][6][l] -
+                L->lu[205][l] * L->k[2][7][l] - L->lu[206][l] * L->k[2][8][l] - L->lu[207][l] *
+                L->k[2][9][l] - L->lu[208][l] * L->k[2][10][l];
+        L->k[2][12][l] = L->k[2][12][l] - L->lu[219][l] * L->k[2][3][l] - L->lu[220][l] *
+                L->k[2][4][l] - L->lu[221][l] * L->k[2][5][l] - L->lu[222][l] * L->k[2][6][l] -
+                L->lu[223][l] * L->k[2][7][l] - L->lu[224][l] * L->k[2][8][l] - L->lu[225][l] *
+                L->k[2][9][l] - L->lu[226][l] * L->k[2][10][l] - L->lu[227][l] * L->k[2][11][l];
+        L->k[2][13][l] = L->k[2][13][l] - L->lu[237][l] * L->k[2][3][l] - L->lu[238][l] *
+                L->k[2][4][l] - L->lu[239][l] * L->k[2][5][l] - L->lu[240][l] * L->k[2][6][l] -
+                L->lu[241][l] * L->k[2][7][l] - L->lu[242][l] * L->k[2][8][l] - L->lu[243][l] *
+                L->k[2][9][l] - L->lu[244][l] * L->k[2][10][l] - L->lu[245][l] * L->k[2][11][l] -
+                L->lu[246][l] * L->k[2][12][l];
+        L->k[2][14][l] = L->k[2][14][l] - L->lu[255][l] * L->k[2][3][l] - L->lu[256][l] *
+                L->k[2][4][l] - L->lu[257][l] * L->k[2][5][l] - L->lu[258][l] * L->k[2][6][l] -
+                L->lu[259][l] * L->k[2][7][l] - L->lu[260][l] * L->k[2][8][l] - L->lu[261][l] *
+                L->k[2][9][l] - L->lu[262][l] * L->k[2][10][l] - L->lu[263][l] * L->k[2][11][l] -
+                L->lu[264][l] * L->k[2][12][l] - L->lu[265][l] * L->k[2][13][l];
+        L->k[2][15][l] = L->k[2][15][l] - L->lu[273][l] * L->k[2][3][l] - L->lu[274][l] *
+                L->k[2][4][l] - L->lu[275][l] * L->k[2][5][l] - L->lu[276][l] * L->k[2][6][l] -
+                L->lu[277][l] * L->k[2][7][l] - L->lu[278][l] * L->k[2][8][l] - L->lu[279][l] *
+                L->k[2][9][l] - L->lu[280][l] * L->k[2][10][l] - L->lu[281][l] * L->k[2][11][l] -
+                L->lu[282][l] * L->k[2][12][l] - L->lu[283][l] * L->k[2][13][l] - L->lu[284][l] *
+                L->k[2][14][l];
+        L->k[2][16][l] = L->k[2][16][l] - L->lu[291][l] * L->k[2][3][l] - L->lu[292][l] *
+                L->k[2][4][l] - L->lu[293][l] * L->k[2][5][l] - L->lu[294][l] * L->k[2][6][l] -
+                L->lu[295][l] * L->k[2][7][l] - L->lu[296][l] * L->k[2][8][l] - L->lu[297][l] *
+                L->k[2][9][l] - L->lu[298][l] * L->k[2][10][l] - L->lu[299][l] * L->k[2][11][l] -
+                L->lu[300][l] * L->k[2][12][l] - L->lu[301][l] * L->k[2][13][l] - L->lu[302][l] *
+                L->k[2][14][l] - L->lu[303][l] * L->k[2][15][l];
+        L->k[2][17][l] = L->k[2][17][l] - L->lu[309][l] * L->k[2][3][l] - L->lu[310][l] *
+                L->k[2][4][l] - L->lu[311][l] * L->k[2][5][l] - L->lu[312][l] * L->k[2][6][l] -
+                L->lu[313][l] * L->k[2][7][l] - L->lu[314][l] * L->k[2][8][l] - L->lu[315][l] *
+                L->k[2][9][l] - L->lu[316][l] * L->k[2][10][l] - L->lu[317][l] * L->k[2][11][l] -
+                L->lu[318][l] * L->k[2][12][l] - L->lu[319][l] * L->k[2][13][l] - L->lu[320][l] *
+                L->k[2][14][l] - L->lu[321][l] * L->k[2][15][l] - L->lu[322][l] * L->k[2][16][l];
+        L->k[2][17][l] = L->k[2][17][l] * L->lu[323][l];
+        L->k[2][16][l] = L->k[2][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[2][17][l];
+        L->k[2][15][l] = L->k[2][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[2][17][l] -
+                L->lu[286][l] * L->k[2][16][l];
+        L->k[2][14][l] = L->k[2][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[2][17][l] -
+                L->lu[268][l] * L->k[2][16][l] - L->lu[267][l] * L->k[2][15][l];
+        L->k[2][13][l] = L->k[2][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[2][17][l] -
+                L->lu[250][l] * L->k[2][16][l] - L->lu[249][l] * L->k[2][15][l] - L->lu[248][l] *
+                L->k[2][14][l];
+        L->k[2][12][l] = L->k[2][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[2][17][l] -
+                L->lu[232][l] * L->k[2][16][l] - L->lu[231][l] * L->k[2][15][l] - L->lu[230][l] *
+                L->k[2][14][l] - L->lu[229][l] * L->k[2][13][l];
+        L->k[2][11][l] = L->k[2][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[2][17][l] -
+                L->lu[214][l] * L->k[2][16][l] - L->lu[213][l] * L->k[2][15][l] - L->lu[212][l] *
+                L->k[2][14][l] - L->lu[211][l] * L->k[2][13][l] - L->lu[210][l] * L->k[2][12][l];
+        L->k[2][10][l] = L->k[2][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[2][17][l] -
+                L->lu[196][l] * L->k[2][16][l] - L->lu[195][l] * L->k[2][15][l] - L->lu[194][l] *
+                L->k[2][14][l] - L->lu[193][l] * L->k[2][13][l] - L->lu[192][l] * L->k[2][12][l]
+                - L->lu[191][l] * L->k[2][11][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[2][17][l] -
+                L->lu[178][l] * L->k[2][16][l] - L->lu[177][l] * L->k[2][15][l] - L->lu[176][l] *
+                L->k[2][14][l] - L->lu[175][l] * L->k[2][13][l] - L->lu[174][l] * L->k[2][12][l]
+                - L->lu[173][l] * L->k[2][11][l] - L->lu[172][l] * L->k[2][10][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[2][17][l] -
+                L->lu[160][l] * L->k[2][16][l] - L->lu[159][l] * L->k[2][15][l] - L->lu[158][l] *
+                L->k[2][14][l] - L->lu[157][l] * L->k[2][13][l] - L->lu[156][l] * L->k[2][12][l]
+                - L->lu[155][l] * L->k[2][11][l] - L->lu[154][l] * L->k[2][10][l] - L->lu[153][l]
+                * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[2][17][l] -
+                L->lu[142][l] * L->k[2][16][l] - L->lu[141][l] * L->k[2][15][l] - L->lu[140][l] *
+                L->k[2][14][l] - L->lu[139][l] * L->k[2][13][l] - L->lu[138][l] * L->k[2][12][l]
+                - L->lu[137][l] * L->k[2][11][l] - L->lu[136][l] * L->k[2][10][l] - L->lu[135][l]
+                * L->k[2][9][l] - L->lu[134][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[2][17][l] -
+                L->lu[124][l] * L->k[2][16][l] - L->lu[123][l] * L->k[2][15][l] - L->lu[122][l] *
+                L->k[2][14][l] - L->lu[121][l] * L->k[2][13][l] - L->lu[120][l] * L->k[2][12][l]
+                - L->lu[119][l] * L->k[2][11][l] - L->lu[118][l] * L->k[2][10][l] - L->lu[117][l]
+                * L->k[2][9][l] - L->lu[116][l] * L->k[2][8][l] - L->lu[115][l] * L->k[2][7][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[2][17][l] -
+                L->lu[106][l] * L->k[2][16][l] - L->lu[105][l] * L->k[2][15][l] - L->lu[104][l] *
+                L->k[2][14][l] - L->lu[103][l] * L->k[2][13][l] - L->lu[102][l] * L->k[2][12][l]
+                - L->lu[101][l] * L->k[2][11][l] - L->lu[100][l] * L->k[2][10][l] - L->lu[99][l]
+                * L->k[2][9][l] - L->lu[98][l] * L->k[2][8][l] - L->lu[97][l] * L->k[2][7][l] -
+                L->lu[96][l] * L->k[2][6][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[2][17][l] -
+                L->lu[88][l] * L->k[2][16][l] - L->lu[87][l] * L->k[2][15][l] - L->lu[86][l] *
+                L->k[2][14][l] - L->lu[85][l] * L->k[2][13][l] - L->lu[84][l] * L->k[2][12][l] -
+                L->lu[83][l] * L->k[2][11][l] - L->lu[82][l] * L->k[2][10][l] - L->lu[81][l] *
+                L->k[2][9][l] - L->lu[80][l] * L->k[2][8][l] - L->lu[79][l] * L->k[2][7][l] -
+                L->lu[78][l] * L->k[2][6][l] - L->lu[77][l] * L->k[2][5][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[2][17][l] -
+                L->lu[70][l] * L->k[2][16][l] - L->lu[69][l] * L->k[2][15][l] - L->lu[68][l] *
+                L->k[2][14][l] - L->lu[67][l] * L->k[2][13][l] - L->lu[66][l] * L->k[2][12][l] -
+                L->lu[65][l] * L->k[2][11][l] - L->lu[64][l] * L->k[2][10][l] - L->lu[63][l] *
+                L->k[2][9][l] - L->lu[62][l] * L->k[2][8][l] - L->lu[61][l] * L->k[2][7][l] -
+                L->lu[60][l] * L->k[2][6][l] - L->lu[59][l] * L->k[2][5][l] - L->lu[58][l] *
+                L->k[2][4][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[2][9][l] -
+                L->lu[44][l] * L->k[2][8][l] - L->lu[43][l] * L->k[2][7][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[2][9][l] -
+                L->lu[26][l] * L->k[2][8][l] - L->lu[25][l] * L->k[2][7][l] - L->lu[20][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[2][9][l] - L->lu[7][l] *
+                L->k[2][7][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 4 ? L->k[3][4][l] : L->k[3][3][l];
+        L->k[3][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[3][4][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 5 ? L->k[3][5][l] : L->k[3][3][l];
+        L->k[3][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 6 ? L->k[3][6][l] : L->k[3][3][l];
+        L->k[3][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 7 ? L->k[3][7][l] : L->k[3][3][l];
+        L->k[3][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 8 ? L->k[3][8][l] : L->k[3][3][l];
+        L->k[3][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 9 ? L->k[3][9][l] : L->k[3][3][l];
+        L->k[3][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 10 ? L->k[3][10][l] : L->k[3][3][l];
+        L->k[3][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 11 ? L->k[3][11][l] : L->k[3][3][l];
+        L->k[3][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 12 ? L->k[3][12][l] : L->k[3][3][l];
+        L->k[3][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 13 ? L->k[3][13][l] : L->k[3][3][l];
+        L->k[3][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 14 ? L->k[3][14][l] : L->k[3][3][l];
+        L->k[3][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 15 ? L->k[3][15][l] : L->k[3][3][l];
+        L->k[3][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 16 ? L->k[3][16][l] : L->k[3][3][l];
+        L->k[3][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 17 ? L->k[3][17][l] : L->k[3][3][l];
+        L->k[3][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 5 ? L->k[3][5][l] : L->k[3][4][l];
+        L->k[3][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 6 ? L->k[3][6][l] : L->k[3][4][l];
+        L->k[3][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 7 ? L->k[3][7][l] : L->k[3][4][l];
+        L->k[3][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 8 ? L->k[3][8][l] : L->k[3][4][l];
+        L->k[3][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 9 ? L->k[3][9][l] : L->k[3][4][l];
+        L->k[3][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 10 ? L->k[3][10][l] : L->k[3][4][l];
+        L->k[3][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 11 ? L->k[3][11][l] : L->k[3][4][l];
+        L->k[3][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 12 ? L->k[3][12][l] : L->k[3][4][l];
+        L->k[3][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 13 ? L->k[3][13][l] : L->k[3][4][l];
+        L->k[3][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 14 ? L->k[3][14][l] : L->k[3][4][l];
+        L->k[3][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 15 ? L->k[3][15][l] : L->k[3][4][l];
+        L->k[3][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 16 ? L->k[3][16][l] : L->k[3][4][l];
+        L->k[3][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 17 ? L->k[3][17][l] : L->k[3][4][l];
+        L->k[3][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 6 ? L->k[3][6][l] : L->k[3][5][l];
+        L->k[3][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 7 ? L->k[3][7][l] : L->k[3][5][l];
+        L->k[3][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 8 ? L->k[3][8][l] : L->k[3][5][l];
+        L->k[3][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 9 ? L->k[3][9][l] : L->k[3][5][l];
+        L->k[3][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 10 ? L->k[3][10][l] : L->k[3][5][l];
+        L->k[3][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 11 ? L->k[3][11][l] : L->k[3][5][l];
+        L->k[3][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 12 ? L->k[3][12][l] : L->k[3][5][l];
+        L->k[3][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 13 ? L->k[3][13][l] : L->k[3][5][l];
+        L->k[3][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 14 ? L->k[3][14][l] : L->k[3][5][l];
+        L->k[3][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 15 ? L->k[3][15][l] : L->k[3][5][l];
+        L->k[3][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 16 ? L->k[3][16][l] : L->k[3][5][l];
+        L->k[3][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 17 ? L->k[3][17][l] : L->k[3][5][l];
+        L->k[3][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 7 ? L->k[3][7][l] : L->k[3][6][l];
+        L->k[3][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 8 ? L->k[3][8][l] : L->k[3][6][l];
+        L->k[3][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 9 ? L->k[3][9][l] : L->k[3][6][l];
+        L->k[3][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 10 ? L->k[3][10][l] : L->k[3][6][l];
+        L->k[3][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 11 ? L->k[3][11][l] : L->k[3][6][l];
+        L->k[3][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 12 ? L->k[3][12][l] : L->k[3][6][l];
+        L->k[3][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 13 ? L->k[3][13][l] : L->k[3][6][l];
+        L->k[3][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 14 ? L->k[3][14][l] : L->k[3][6][l];
+        L->k[3][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 15 ? L->k[3][15][l] : L->k[3][6][l];
+        L->k[3][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 16 ? L->k[3][16][l] : L->k[3][6][l];
+        L->k[3][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 17 ? L->k[3][17][l] : L->k[3][6][l];
+        L->k[3][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 10 ? L->k[3][10][l] : L->k[3][7][l];
+        L->k[3][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 11 ? L->k[3][11][l] : L->k[3][7][l];
+        L->k[3][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 12 ? L->k[3][12][l] : L->k[3][7][l];
+        L->k[3][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 13 ? L->k[3][13][l] : L->k[3][7][l];
+        L->k[3][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 14 ? L->k[3][14][l] : L->k[3][7][l];
+        L->k[3][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 15 ? L->k[3][15][l] : L->k[3][7][l];
+        L->k[3][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 16 ? L->k[3][16][l] : L->k[3][7][l];
+        L->k[3][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 17 ? L->k[3][17][l] : L->k[3][7][l];
+        L->k[3][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 10 ? L->k[3][10][l] : L->k[3][8][l];
+        L->k[3][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 11 ? L->k[3][11][l] : L->k[3][8][l];
+        L->k[3][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 12 ? L->k[3][12][l] : L->k[3][8][l];
+        L->k[3][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 13 ? L->k[3][13][l] : L->k[3][8][l];
+        L->k[3][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 14 ? L->k[3][14][l] : L->k[3][8][l];
+        L->k[3][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 15 ? L->k[3][15][l] : L->k[3][8][l];
+        L->k[3][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 16 ? L->k[3][16][l] : L->k[3][8][l];
+        L->k[3][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 17 ? L->k[3][17][l] : L->k[3][8][l];
+        L->k[3][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 10 ? L->k[3][10][l] : L->k[3][9][l];
+        L->k[3][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 11 ? L->k[3][11][l] : L->k[3][9][l];
+        L->k[3][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 12 ? L->k[3][12][l] : L->k[3][9][l];
+        L->k[3][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 13 ? L->k[3][13][l] : L->k[3][9][l];
+        L->k[3][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 14 ? L->k[3][14][l] : L->k[3][9][l];
+        L->k[3][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 15 ? L->k[3][15][l] : L->k[3][9][l];
+        L->k[3][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 16 ? L->k[3][16][l] : L->k[3][9][l];
+        L->k[3][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 17 ? L->k[3][17][l] : L->k[3][9][l];
+        L->k[3][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 11 ? L->k[3][11][l] : L->k[3][10][l];
+        L->k[3][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 12 ? L->k[3][12][l] : L->k[3][10][l];
+        L->k[3][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 13 ? L->k[3][13][l] : L->k[3][10][l];
+        L->k[3][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 14 ? L->k[3][14][l] : L->k[3][10][l];
+        L->k[3][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 15 ? L->k[3][15][l] : L->k[3][10][l];
+        L->k[3][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 16 ? L->k[3][16][l] : L->k[3][10][l];
+        L->k[3][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 17 ? L->k[3][17][l] : L->k[3][10][l];
+        L->k[3][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 12 ? L->k[3][12][l] : L->k[3][11][l];
+        L->k[3][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 13 ? L->k[3][13][l] : L->k[3][11][l];
+        L->k[3][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 14 ? L->k[3][14][l] : L->k[3][11][l];
+        L->k[3][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 15 ? L->k[3][15][l] : L->k[3][11][l];
+        L->k[3][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 16 ? L->k[3][16][l] : L->k[3][11][l];
+        L->k[3][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 17 ? L->k[3][17][l] : L->k[3][11][l];
+        L->k[3][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 13 ? L->k[3][13][l] : L->k[3][12][l];
+        L->k[3][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 14 ? L->k[3][14][l] : L->k[3][12][l];
+        L->k[3][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 15 ? L->k[3][15][l] : L->k[3][12][l];
+        L->k[3][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 16 ? L->k[3][16][l] : L->k[3][12][l];
+        L->k[3][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 17 ? L->k[3][17][l] : L->k[3][12][l];
+        L->k[3][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 14 ? L->k[3][14][l] : L->k[3][13][l];
+        L->k[3][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 15 ? L->k[3][15][l] : L->k[3][13][l];
+        L->k[3][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 16 ? L->k[3][16][l] : L->k[3][13][l];
+        L->k[3][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 17 ? L->k[3][17][l] : L->k[3][13][l];
+        L->k[3][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 15 ? L->k[3][15][l] : L->k[3][14][l];
+        L->k[3][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 16 ? L->k[3][16][l] : L->k[3][14][l];
+        L->k[3][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 17 ? L->k[3][17][l] : L->k[3][14][l];
+        L->k[3][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][15][l];
+        L->k[3][15][l] = L->piv[15][l] == 16 ? L->k[3][16][l] : L->k[3][15][l];
+        L->k[3][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][15][l];
+        L->k[3][15][l] = L->piv[15][l] == 17 ? L->k[3][17][l] : L->k[3][15][l];
+        L->k[3][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][16][l];
+        L->k[3][16][l] = L->piv[16][l] == 17 ? L->k[3][17][l] : L->k[3][16][l];
+        L->k[3][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[3][17][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[37][l] * L->k[3][1][l];
+        L->k[3][4][l] = L->k[3][4][l] - L->lu[75][l] * L->k[3][3][l];
+        L->k[3][5][l] = L->k[3][5][l] - L->lu[93][l] * L->k[3][3][l] - L->lu[94][l] * L->k[3][4][l];
+        L->k[3][6][l] = L->k[3][6][l] - L->lu[111][l] * L->k[3][3][l] - L->lu[112][l] *
+                L->k[3][4][l] - L->lu[113][l] * L->k[3][5][l];
+        L->k[3][7][l] = L->k[3][7][l] - L->lu[129][l] * L->k[3][3][l] - L->lu[130][l] *
+                L->k[3][4][l] - L->lu[131][l] * L->k[3][5][l] - L->lu[132][l] * L->k[3][6][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[147][l] * L->k[3][3][l] - L->lu[148][l] *
+                L->k[3][4][l] - L->lu[149][l] * L->k[3][5][l] - L->lu[150][l] * L->k[3][6][l] -
+                L->lu[151][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[165][l] * L->k[3][3][l] - L->lu[166][l] *
+                L->k[3][4][l] - L->lu[167][l] * L->k[3][5][l] - L->lu[168][l] * L->k[3][6][l] -
+                L->lu[169][l] * L->k[3][7][l] - L->lu[170][l] * L->k[3][8][l];
+        L->k[3][10][l] = L->k[3][10][l] - L->lu[183][l] * L->k[3][3][l] - L->lu[184][l] *
+                L->k[3][4][l] - L->lu[185][l] * L->k[3][5][l] - L->lu[186][l] * L->k[3][6][l] -
+                L->lu[187][l] * L->k[3][7][l] - L->lu[188][l] * L->k[3][8][l] - L->lu[189][l] *
+                L->k[3][9][l];
+        L->k[3][11][l] = L->k[3][11][l] - L->lu[201][l] * L->k[3][3][l] - L->lu[202][l] *
+                L->k[3][4][l] - L->lu[203][l] * L->k[3][5][l] - L->lu[204][l] * L->k[3][6][l] -
+                L->lu[205][l] * L->k[3][7][l] - L->lu[206][l] * L->k[3][8][l] - L->lu[207][l] *
+                L->k[3][9][l] - L->lu[208][l] * L->k[3][10][l];
+        L->k[3][12][l] = L->k[3][12][l] - L->lu[219][l] * L->k[3][3][l] - L->lu[220][l] *
+                L->k[3][4][l] - L->lu[221][l] * L->k[3][5][l] - L->lu[222][l] * L->k[3][6][l] -
+                L->lu[223][l] * L->k[3][7][l] - L->lu[224][l] * L->k[3][8][l] - L->lu[225][l] *
+                L->k[3][9][l] - L->lu[226][l] * L->k[3][10][l] - L->lu[227][l] * L->k[3][11][l];
+        L->k[3][13][l] = L->k[3][13][l] - L->lu[237][l] * L->k[3][3][l] - L->lu[238][l] *
+                L->k[3][4][l] - L->lu[239][l] * L->k[3][5][l] - L->lu[240][l] * L->k[3][6][l] -
+                L->lu[241][l] * L->k[3][7][l] - L->lu[242][l] * L->k[3][8][l] - L->lu[243][l] *
+                L->k[3][9][l] - L->lu[244][l] * L->k[3][10][l] - L->lu[245][l] * L->k[3][11][l] -
+                L->lu[246][l] * L->k[3][12][l];
+        L->k[3][14][l] = L->k[3][14][l] - L->lu[255][l] * L->k[3][3][l] - L->lu[256][l] *
+                L->k[3][4][l] - L->lu[257][l] * L->k[3][5][l] - L->lu[258][l] * L->k[3][6][l] -
+                L->lu[259][l] * L->k[3][7][l] - L->lu[260][l] * L->k[3][8][l] - L->lu[261][l] *
+                L->k[3][9][l] - L->lu[262][l] * L->k[3][10][l] - L->lu[263][l] * L->k[3][11][l] -
+                L->lu[264][l] * L->k[3][12][l] - L->lu[265][l] * L->k[3][13][l];
+        L->k[3][15][l] = L->k[3][15][l] - L->lu[273][l] * L->k[3][3][l] - L->lu[274][l] *
+                L->k[3][4][l] - L->lu[275][l] * L->k[3][5][l] - L->lu[276][l] * L->k[3][6][l] -
+                L->lu[277][l] * L->k[3][7][l] - L->lu[278][l] * L->k[3][8][l] - L->lu[279][l] *
+                L->k[3][9][l] - L->lu[280][l] * L->k[3][10][l] - L->lu[281][l] * L->k[3][11][l] -
+                L->lu[282][l] * L->k[3][12][l] - L->lu[283][l] * L->k[3][13][l] - L->lu[284][l] *
+                L->k[3][14][l];
+        L->k[3][16][l] = L->k[3][16][l] - L->lu[291][l] * L->k[3][3][l] - L->lu[292][l] *
+                L->k[3][4][l] - L->lu[293][l] * L->k[3][5][l] - L->lu[294][l] * L->k[3][6][l] -
+                L->lu[295][l] * L->k[3][7][l] - L->lu[296][l] * L->k[3][8][l] - L->lu[297][l] *
+                L->k[3][9][l] - L->lu[298][l] * L->k[3][10][l] - L->lu[299][l] * L->k[3][11][l] -
+                L->lu[300][l] * L->k[3][12][l] - L->lu[301][l] * L->k[3][13][l] - L->lu[302][l] *
+                L->k[3][14][l] - L->lu[303][l] * L->k[3][15][l];
+        L->k[3][17][l] = L->k[3][17][l] - L->lu[309][l] * L->k[3][3][l] - L->lu[310][l] *
+                L->k[3][4][l] - L->lu[311][l] * L->k[3][5][l] - L->lu[312][l] * L->k[3][6][l] -
+                L->lu[313][l] * L->k[3][7][l] - L->lu[314][l] * L->k[3][8][l] - L->lu[315][l] *
+                L->k[3][9][l] - L->lu[316][l] * L->k[3][10][l] - L->lu[317][l] * L->k[3][11][l] -
+                L->lu[318][l] * L->k[3][12][l] - L->lu[319][l] * L->k[3][13][l] - L->lu[320][l] *
+                L->k[3][14][l] - L->lu[321][l] * L->k[3][15][l] - L->lu[322][l] * L->k[3][16][l];
+        L->k[3][17][l] = L->k[3][17][l] * L->lu[323][l];
+        L->k[3][16][l] = L->k[3][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[3][17][l];
+        L->k[3][15][l] = L->k[3][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[3][17][l] -
+                L->lu[286][l] * L->k[3][16][l];
+        L->k[3][14][l] = L->k[3][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[3][17][l] -
+                L->lu[268][l] * L->k[3][16][l] - L->lu[267][l] * L->k[3][15][l];
+        L->k[3][13][l] = L->k[3][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[3][17][l] -
+                L->lu[250][l] * L->k[3][16][l] - L->lu[249][l] * L->k[3][15][l] - L->lu[248][l] *
+                L->k[3][14][l];
+        L->k[3][12][l] = L->k[3][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[3][17][l] -
+                L->lu[232][l] * L->k[3][16][l] - L->lu[231][l] * L->k[3][15][l] - L->lu[230][l] *
+                L->k[3][14][l] - L->lu[229][l] * L->k[3][13][l];
+        L->k[3][11][l] = L->k[3][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[3][17][l] -
+                L->lu[214][l] * L->k[3][16][l] - L->lu[213][l] * L->k[3][15][l] - L->lu[212][l] *
+                L->k[3][14][l] - L->lu[211][l] * L->k[3][13][l] - L->lu[210][l] * L->k[3][12][l];
+        L->k[3][10][l] = L->k[3][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[3][17][l] -
+                L->lu[196][l] * L->k[3][16][l] - L->lu[195][l] * L->k[3][15][l] - L->lu[194][l] *
+                L->k[3][14][l] - L->lu[193][l] * L->k[3][13][l] - L->lu[192][l] * L->k[3][12][l]
+                - L->lu[191][l] * L->k[3][11][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[3][17][l] -
+                L->lu[178][l] * L->k[3][16][l] - L->lu[177][l] * L->k[3][15][l] - L->lu[176][l] *
+                L->k[3][14][l] - L->lu[175][l] * L->k[3][13][l] - L->lu[174][l] * L->k[3][12][l]
+                - L->lu[173][l] * L->k[3][11][l] - L->lu[172][l] * L->k[3][10][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[3][17][l] -
+                L->lu[160][l] * L->k[3][16][l] - L->lu[159][l] * L->k[3][15][l] - L->lu[158][l] *
+                L->k[3][14][l] - L->lu[157][l] * L->k[3][13][l] - L->lu[156][l] * L->k[3][12][l]
+                - L->lu[155][l] * L->k[3][11][l] - L->lu[154][l] * L->k[3][10][l] - L->lu[153][l]
+                * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[3][17][l] -
+                L->lu[142][l] * L->k[3][16][l] - L->lu[141][l] * L->k[3][15][l] - L->lu[140][l] *
+                L->k[3][14][l] - L->lu[139][l] * L->k[3][13][l] - L->lu[138][l] * L->k[3][12][l]
+                - L->lu[137][l] * L->k[3][11][l] - L->lu[136][l] * L->k[3][10][l] - L->lu[135][l]
+                * L->k[3][9][l] - L->lu[134][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[3][17][l] -
+                L->lu[124][l] * L->k[3][16][l] - L->lu[123][l] * L->k[3][15][l] - L->lu[122][l] *
+                L->k[3][14][l] - L->lu[121][l] * L->k[3][13][l] - L->lu[120][l] * L->k[3][12][l]
+                - L->lu[119][l] * L->k[3][11][l] - L->lu[118][l] * L->k[3][10][l] - L->lu[117][l]
+                * L->k[3][9][l] - L->lu[116][l] * L->k[3][8][l] - L->lu[115][l] * L->k[3][7][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[3][17][l] -
+                L->lu[106][l] * L->k[3][16][l] - L->lu[105][l] * L->k[3][15][l] - L->lu[104][l] *
+                L->k[3][14][l] - L->lu[103][l] * L->k[3][13][l] - L->lu[102][l] * L->k[3][12][l]
+                - L->lu[101][l] * L->k[3][11][l] - L->lu[100][l] * L->k[3][10][l] - L->lu[99][l]
+                * L->k[3][9][l] - L->lu[98][l] * L->k[3][8][l] - L->lu[97][l] * L->k[3][7][l] -
+                L->lu[96][l] * L->k[3][6][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[3][17][l] -
+                L->lu[88][l] * L->k[3][16][l] - L->lu[87][l] * L->k[3][15][l] - L->lu[86][l] *
+                L->k[3][14][l] - L->lu[85][l] * L->k[3][13][l] - L->lu[84][l] * L->k[3][12][l] -
+                L->lu[83][l] * L->k[3][11][l] - L->lu[82][l] * L->k[3][10][l] - L->lu[81][l] *
+                L->k[3][9][l] - L->lu[80][l] * L->k[3][8][l] - L->lu[79][l] * L->k[3][7][l] -
+                L->lu[78][l] * L->k[3][6][l] - L->lu[77][l] * L->k[3][5][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[3][17][l] -
+                L->lu[70][l] * L->k[3][16][l] - L->lu[69][l] * L->k[3][15][l] - L->lu[68][l] *
+                L->k[3][14][l] - L->lu[67][l] * L->k[3][13][l] - L->lu[66][l] * L->k[3][12][l] -
+                L->lu[65][l] * L->k[3][11][l] - L->lu[64][l] * L->k[3][10][l] - L->lu[63][l] *
+                L->k[3][9][l] - L->lu[62][l] * L->k[3][8][l] - L->lu[61][l] * L->k[3][7][l] -
+                L->lu[60][l] * L->k[3][6][l] - L->lu[59][l] * L->k[3][5][l] - L->lu[58][l] *
+                L->k[3][4][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[3][9][l] -
+                L->lu[44][l] * L->k[3][8][l] - L->lu[43][l] * L->k[3][7][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[3][9][l] -
+                L->lu[26][l] * L->k[3][8][l] - L->lu[25][l] * L->k[3][7][l] - L->lu[20][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[3][9][l] - L->lu[7][l] *
+                L->k[3][7][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 4 ? L->k[4][4][l] : L->k[4][3][l];
+        L->k[4][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[4][4][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 5 ? L->k[4][5][l] : L->k[4][3][l];
+        L->k[4][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 6 ? L->k[4][6][l] : L->k[4][3][l];
+        L->k[4][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 7 ? L->k[4][7][l] : L->k[4][3][l];
+        L->k[4][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 8 ? L->k[4][8][l] : L->k[4][3][l];
+        L->k[4][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 9 ? L->k[4][9][l] : L->k[4][3][l];
+        L->k[4][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 10 ? L->k[4][10][l] : L->k[4][3][l];
+        L->k[4][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 11 ? L->k[4][11][l] : L->k[4][3][l];
+        L->k[4][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 12 ? L->k[4][12][l] : L->k[4][3][l];
+        L->k[4][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 13 ? L->k[4][13][l] : L->k[4][3][l];
+        L->k[4][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 14 ? L->k[4][14][l] : L->k[4][3][l];
+        L->k[4][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 15 ? L->k[4][15][l] : L->k[4][3][l];
+        L->k[4][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 16 ? L->k[4][16][l] : L->k[4][3][l];
+        L->k[4][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 17 ? L->k[4][17][l] : L->k[4][3][l];
+        L->k[4][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 5 ? L->k[4][5][l] : L->k[4][4][l];
+        L->k[4][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 6 ? L->k[4][6][l] : L->k[4][4][l];
+        L->k[4][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 7 ? L->k[4][7][l] : L->k[4][4][l];
+        L->k[4][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 8 ? L->k[4][8][l] : L->k[4][4][l];
+        L->k[4][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 9 ? L->k[4][9][l] : L->k[4][4][l];
+        L->k[4][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 10 ? L->k[4][10][l] : L->k[4][4][l];
+        L->k[4][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 11 ? L->k[4][11][l] : L->k[4][4][l];
+        L->k[4][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 12 ? L->k[4][12][l] : L->k[4][4][l];
+        L->k[4][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 13 ? L->k[4][13][l] : L->k[4][4][l];
+        L->k[4][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 14 ? L->k[4][14][l] : L->k[4][4][l];
+        L->k[4][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 15 ? L->k[4][15][l] : L->k[4][4][l];
+        L->k[4][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 16 ? L->k[4][16][l] : L->k[4][4][l];
+        L->k[4][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 17 ? L->k[4][17][l] : L->k[4][4][l];
+        L->k[4][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 6 ? L->k[4][6][l] : L->k[4][5][l];
+        L->k[4][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 7 ? L->k[4][7][l] : L->k[4][5][l];
+        L->k[4][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 8 ? L->k[4][8][l] : L->k[4][5][l];
+        L->k[4][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 9 ? L->k[4][9][l] : L->k[4][5][l];
+        L->k[4][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 10 ? L->k[4][10][l] : L->k[4][5][l];
+        L->k[4][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 11 ? L->k[4][11][l] : L->k[4][5][l];
+        L->k[4][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 12 ? L->k[4][12][l] : L->k[4][5][l];
+        L->k[4][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 13 ? L->k[4][13][l] : L->k[4][5][l];
+        L->k[4][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 14 ? L->k[4][14][l] : L->k[4][5][l];
+        L->k[4][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 15 ? L->k[4][15][l] : L->k[4][5][l];
+        L->k[4][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 16 ? L->k[4][16][l] : L->k[4][5][l];
+        L->k[4][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 17 ? L->k[4][17][l] : L->k[4][5][l];
+        L->k[4][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 7 ? L->k[4][7][l] : L->k[4][6][l];
+        L->k[4][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 8 ? L->k[4][8][l] : L->k[4][6][l];
+        L->k[4][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 9 ? L->k[4][9][l] : L->k[4][6][l];
+        L->k[4][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 10 ? L->k[4][10][l] : L->k[4][6][l];
+        L->k[4][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 11 ? L->k[4][11][l] : L->k[4][6][l];
+        L->k[4][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 12 ? L->k[4][12][l] : L->k[4][6][l];
+        L->k[4][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 13 ? L->k[4][13][l] : L->k[4][6][l];
+        L->k[4][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 14 ? L->k[4][14][l] : L->k[4][6][l];
+        L->k[4][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 15 ? L->k[4][15][l] : L->k[4][6][l];
+        L->k[4][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 16 ? L->k[4][16][l] : L->k[4][6][l];
+        L->k[4][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 17 ? L->k[4][17][l] : L->k[4][6][l];
+        L->k[4][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 10 ? L->k[4][10][l] : L->k[4][7][l];
+        L->k[4][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 11 ? L->k[4][11][l] : L->k[4][7][l];
+        L->k[4][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 12 ? L->k[4][12][l] : L->k[4][7][l];
+        L->k[4][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 13 ? L->k[4][13][l] : L->k[4][7][l];
+        L->k[4][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 14 ? L->k[4][14][l] : L->k[4][7][l];
+        L->k[4][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 15 ? L->k[4][15][l] : L->k[4][7][l];
+        L->k[4][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 16 ? L->k[4][16][l] : L->k[4][7][l];
+        L->k[4][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 17 ? L->k[4][17][l] : L->k[4][7][l];
+        L->k[4][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 10 ? L->k[4][10][l] : L->k[4][8][l];
+        L->k[4][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 11 ? L->k[4][11][l] : L->k[4][8][l];
+        L->k[4][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 12 ? L->k[4][12][l] : L->k[4][8][l];
+        L->k[4][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 13 ? L->k[4][13][l] : L->k[4][8][l];
+        L->k[4][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 14 ? L->k[4][14][l] : L->k[4][8][l];
+        L->k[4][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 15 ? L->k[4][15][l] : L->k[4][8][l];
+        L->k[4][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 16 ? L->k[4][16][l] : L->k[4][8][l];
+        L->k[4][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 17 ? L->k[4][17][l] : L->k[4][8][l];
+        L->k[4][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 10 ? L->k[4][10][l] : L->k[4][9][l];
+        L->k[4][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 11 ? L->k[4][11][l] : L->k[4][9][l];
+        L->k[4][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 12 ? L->k[4][12][l] : L->k[4][9][l];
+        L->k[4][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 13 ? L->k[4][13][l] : L->k[4][9][l];
+        L->k[4][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 14 ? L->k[4][14][l] : L->k[4][9][l];
+        L->k[4][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 15 ? L->k[4][15][l] : L->k[4][9][l];
+        L->k[4][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 16 ? L->k[4][16][l] : L->k[4][9][l];
+        L->k[4][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 17 ? L->k[4][17][l] : L->k[4][9][l];
+        L->k[4][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 11 ? L->k[4][11][l] : L->k[4][10][l];
+        L->k[4][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 12 ? L->k[4][12][l] : L->k[4][10][l];
+        L->k[4][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 13 ? L->k[4][13][l] : L->k[4][10][l];
+        L->k[4][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 14 ? L->k[4][14][l] : L->k[4][10][l];
+        L->k[4][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 15 ? L->k[4][15][l] : L->k[4][10][l];
+        L->k[4][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 16 ? L->k[4][16][l] : L->k[4][10][l];
+        L->k[4][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 17 ? L->k[4][17][l] : L->k[4][10][l];
+        L->k[4][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 12 ? L->k[4][12][l] : L->k[4][11][l];
+        L->k[4][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 13 ? L->k[4][13][l] : L->k[4][11][l];
+        L->k[4][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 14 ? L->k[4][14][l] : L->k[4][11][l];
+        L->k[4][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 15 ? L->k[4][15][l] : L->k[4][11][l];
+        L->k[4][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 16 ? L->k[4][16][l] : L->k[4][11][l];
+        L->k[4][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 17 ? L->k[4][17][l] : L->k[4][11][l];
+        L->k[4][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 13 ? L->k[4][13][l] : L->k[4][12][l];
+        L->k[4][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 14 ? L->k[4][14][l] : L->k[4][12][l];
+        L->k[4][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 15 ? L->k[4][15][l] : L->k[4][12][l];
+        L->k[4][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 16 ? L->k[4][16][l] : L->k[4][12][l];
+        L->k[4][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 17 ? L->k[4][17][l] : L->k[4][12][l];
+        L->k[4][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 14 ? L->k[4][14][l] : L->k[4][13][l];
+        L->k[4][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 15 ? L->k[4][15][l] : L->k[4][13][l];
+        L->k[4][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 16 ? L->k[4][16][l] : L->k[4][13][l];
+        L->k[4][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 17 ? L->k[4][17][l] : L->k[4][13][l];
+        L->k[4][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 15 ? L->k[4][15][l] : L->k[4][14][l];
+        L->k[4][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 16 ? L->k[4][16][l] : L->k[4][14][l];
+        L->k[4][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 17 ? L->k[4][17][l] : L->k[4][14][l];
+        L->k[4][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][15][l];
+        L->k[4][15][l] = L->piv[15][l] == 16 ? L->k[4][16][l] : L->k[4][15][l];
+        L->k[4][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][15][l];
+        L->k[4][15][l] = L->piv[15][l] == 17 ? L->k[4][17][l] : L->k[4][15][l];
+        L->k[4][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][16][l];
+        L->k[4][16][l] = L->piv[16][l] == 17 ? L->k[4][17][l] : L->k[4][16][l];
+        L->k[4][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[4][17][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[37][l] * L->k[4][1][l];
+        L->k[4][4][l] = L->k[4][4][l] - L->lu[75][l] * L->k[4][3][l];
+        L->k[4][5][l] = L->k[4][5][l] - L->lu[93][l] * L->k[4][3][l] - L->lu[94][l] * L->k[4][4][l];
+        L->k[4][6][l] = L->k[4][6][l] - L->lu[111][l] * L->k[4][3][l] - L->lu[112][l] *
+                L->k[4][4][l] - L->lu[113][l] * L->k[4][5][l];
+        L->k[4][7][l] = L->k[4][7][l] - L->lu[129][l] * L->k[4][3][l] - L->lu[130][l] *
+                L->k[4][4][l] - L->lu[131][l] * L->k[4][5][l] - L->lu[132][l] * L->k[4][6][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[147][l] * L->k[4][3][l] - L->lu[148][l] *
+                L->k[4][4][l] - L->lu[149][l] * L->k[4][5][l] - L->lu[150][l] * L->k[4][6][l] -
+                L->lu[151][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[165][l] * L->k[4][3][l] - L->lu[166][l] *
+                L->k[4][4][l] - L->lu[167][l] * L->k[4][5][l] - L->lu[168][l] * L->k[4][6][l] -
+                L->lu[169][l] * L->k[4][7][l] - L->lu[170][l] * L->k[4][8][l];
+        L->k[4][10][l] = L->k[4][10][l] - L->lu[183][l] * L->k[4][3][l] - L->lu[184][l] *
+                L->k[4][4][l] - L->lu[185][l] * L->k[4][5][l] - L->lu[186][l] * L->k[4][6][l] -
+                L->lu[187][l] * L->k[4][7][l] - L->lu[188][l] * L->k[4][8][l] - L->lu[189][l] *
+                L->k[4][9][l];
+        L->k[4][11][l] = L->k[4][11][l] - L->lu[201][l] * L->k[4][3][l] - L->lu[202][l] *
+                L->k[4][4][l] - L->lu[203][l] * L->k[4][5][l] - L->lu[204][l] * L->k[4][6][l] -
+                L->lu[205][l] * L->k[4][7][l] - L->lu[206][l] * L->k[4][8][l] - L->lu[207][l] *
+                L->k[4][9][l] - L->lu[208][l] * L->k[4][10][l];
+        L->k[4][12][l] = L->k[4][12][l] - L->lu[219][l] * L->k[4][3][l] - L->lu[220][l] *
+                L->k[4][4][l] - L->lu[221][l] * L->k[4][5][l] - L->lu[222][l] * L->k[4][6][l] -
+                L->lu[223][l] * L->k[4][7][l] - L->lu[224][l] * L->k[4][8][l] - L->lu[225][l] *
+                L->k[4][9][l] - L->lu[226][l] * L->k[4][10][l] - L->lu[227][l] * L->k[4][11][l];
+        L->k[4][13][l] = L->k[4][13][l] - L->lu[237][l] * L->k[4][3][l] - L->lu[238][l] *
+                L->k[4][4][l] - L->lu[239][l] * L->k[4][5][l] - L->lu[240][l] * L->k[4][6][l] -
+                L->lu[241][l] * L->k[4][7][l] - L->lu[242][l] * L->k[4][8][l] - L->lu[243][l] *
+                L->k[4][9][l] - L->lu[244][l] * L->k[4][10][l] - L->lu[245][l] * L->k[4][11][l] -
+                L->lu[246][l] * L->k[4][12][l];
+        L->k[4][14][l] = L->k[4][14][l] - L->lu[255][l] * L->k[4][3][l] - L->lu[256][l] *
+                L->k[4][4][l] - L->lu[257][l] * L->k[4][5][l] - L->lu[258][l] * L->k[4][6][l] -
+                L->lu[259][l] * L->k[4][7][l] - L->lu[260][l] * L->k[4][8][l] - L->lu[261][l] *
+                L->k[4][9][l] - L->lu[262][l] * L->k[4][10][l] - L->lu[263][l] * L->k[4][11][l] -
+                L->lu[264][l] * L->k[4][12][l] - L->lu[265][l] * L->k[4][13][l];
+        L->k[4][15][l] = L->k[4][15][l] - L->lu[273][l] * L->k[4][3][l] - L->lu[274][l] *
+                L->k[4][4][l] - L->lu[275][l] * L->k[4][5][l] - L->lu[276][l] * L->k[4][6][l] -
+                L->lu[277][l] * L->k[4][7][l] - L->lu[278][l] * L->k[4][8][l] - L->lu[279][l] *
+                L->k[4][9][l] - L->lu[280][l] * L->k[4][10][l] - L->lu[281][l] * L->k[4][11][l] -
+                L->lu[282][l] * L->k[4][12][l] - L->lu[283][l] * L->k[4][13][l] - L->lu[284][l] *
+                L->k[4][14][l];
+        L->k[4][16][l] = L->k[4][16][l] - L->lu[291][l] * L->k[4][3][l] - L->lu[292][l] *
+                L->k[4][4][l] - L->lu[293][l] * L->k[4][5][l] - L->lu[294][l] * L->k[4][6][l] -
+                L->lu[295][l] * L->k[4][7][l] - L->lu[296][l] * L->k[4][8][l] - L->lu[297][l] *
+                L->k[4][9][l] - L->lu[298][l] * L->k[4][10][l] - L->lu[299][l] * L->k[4][11][l] -
+                L->lu[300][l] * L->k[4][12][l] - L->lu[301][l] * L->k[4][13][l] - L->lu[302][l] *
+                L->k[4][14][l] - L->lu[303][l] * L->k[4][15][l];
+        L->k[4][17][l] = L->k[4][17][l] - L->lu[309][l] * L->k[4][3][l] - L->lu[310][l] *
+                L->k[4][4][l] - L->lu[311][l] * L->k[4][5][l] - L->lu[312][l] * L->k[4][6][l] -
+                L->lu[313][l] * L->k[4][7][l] - L->lu[314][l] * L->k[4][8][l] - L->lu[315][l] *
+                L->k[4][9][l] - L->lu[316][l] * L->k[4][10][l] - L->lu[317][l] * L->k[4][11][l] -
+                L->lu[318][l] * L->k[4][12][l] - L->lu[319][l] * L->k[4][13][l] - L->lu[320][l] *
+                L->k[4][14][l] - L->lu[321][l] * L->k[4][15][l] - L->lu[322][l] * L->k[4][16][l];
+        L->k[4][17][l] = L->k[4][17][l] * L->lu[323][l];
+        L->k[4][16][l] = L->k[4][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[4][17][l];
+        L->k[4][15][l] = L->k[4][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[4][17][l] -
+                L->lu[286][l] * L->k[4][16][l];
+        L->k[4][14][l] = L->k[4][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[4][17][l] -
+                L->lu[268][l] * L->k[4][16][l] - L->lu[267][l] * L->k[4][15][l];
+        L->k[4][13][l] = L->k[4][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[4][17][l] -
+                L->lu[250][l] * L->k[4][16][l] - L->lu[249][l] * L->k[4][15][l] - L->lu[248][l] *
+                L->k[4][14][l];
+        L->k[4][12][l] = L->k[4][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[4][17][l] -
+                L->lu[232][l] * L->k[4][16][l] - L->lu[231][l] * L->k[4][15][l] - L->lu[230][l] *
+                L->k[4][14][l] - L->lu[229][l] * L->k[4][13][l];
+        L->k[4][11][l] = L->k[4][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[4][17][l] -
+                L->lu[214][l] * L->k[4][16][l] - L->lu[213][l] * L->k[4][15][l] - L->lu[212][l] *
+                L->k[4][14][l] - L->lu[211][l] * L->k[4][13][l] - L->lu[210][l] * L->k[4][12][l];
+        L->k[4][10][l] = L->k[4][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[4][17][l] -
+                L->lu[196][l] * L->k[4][16][l] - L->lu[195][l] * L->k[4][15][l] - L->lu[194][l] *
+                L->k[4][14][l] - L->lu[193][l] * L->k[4][13][l] - L->lu[192][l] * L->k[4][12][l]
+                - L->lu[191][l] * L->k[4][11][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[4][17][l] -
+                L->lu[178][l] * L->k[4][16][l] - L->lu[177][l] * L->k[4][15][l] - L->lu[176][l] *
+                L->k[4][14][l] - L->lu[175][l] * L->k[4][13][l] - L->lu[174][l] * L->k[4][12][l]
+                - L->lu[173][l] * L->k[4][11][l] - L->lu[172][l] * L->k[4][10][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[4][17][l] -
+                L->lu[160][l] * L->k[4][16][l] - L->lu[159][l] * L->k[4][15][l] - L->lu[158][l] *
+                L->k[4][14][l] - L->lu[157][l] * L->k[4][13][l] - L->lu[156][l] * L->k[4][12][l]
+                - L->lu[155][l] * L->k[4][11][l] - L->lu[154][l] * L->k[4][10][l] - L->lu[153][l]
+                * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[4][17][l] -
+                L->lu[142][l] * L->k[4][16][l] - L->lu[141][l] * L->k[4][15][l] - L->lu[140][l] *
+                L->k[4][14][l] - L->lu[139][l] * L->k[4][13][l] - L->lu[138][l] * L->k[4][12][l]
+                - L->lu[137][l] * L->k[4][11][l] - L->lu[136][l] * L->k[4][10][l] - L->lu[135][l]
+                * L->k[4][9][l] - L->lu[134][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[4][17][l] -
+                L->lu[124][l] * L->k[4][16][l] - L->lu[123][l] * L->k[4][15][l] - L->lu[122][l] *
+                L->k[4][14][l] - L->lu[121][l] * L->k[4][13][l] - L->lu[120][l] * L->k[4][12][l]
+                - L->lu[119][l] * L->k[4][11][l] - L->lu[118][l] * L->k[4][10][l] - L->lu[117][l]
+                * L->k[4][9][l] - L->lu[116][l] * L->k[4][8][l] - L->lu[115][l] * L->k[4][7][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[4][17][l] -
+                L->lu[106][l] * L->k[4][16][l] - L->lu[105][l] * L->k[4][15][l] - L->lu[104][l] *
+                L->k[4][14][l] - L->lu[103][l] * L->k[4][13][l] - L->lu[102][l] * L->k[4][12][l]
+                - L->lu[101][l] * L->k[4][11][l] - L->lu[100][l] * L->k[4][10][l] - L->lu[99][l]
+                * L->k[4][9][l] - L->lu[98][l] * L->k[4][8][l] - L->lu[97][l] * L->k[4][7][l] -
+                L->lu[96][l] * L->k[4][6][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[4][17][l] -
+                L->lu[88][l] * L->k[4][16][l] - L->lu[87][l] * L->k[4][15][l] - L->lu[86][l] *
+                L->k[4][14][l] - L->lu[85][l] * L->k[4][13][l] - L->lu[84][l] * L->k[4][12][l] -
+                L->lu[83][l] * L->k[4][11][l] - L->lu[82][l] * L->k[4][10][l] - L->lu[81][l] *
+                L->k[4][9][l] - L->lu[80][l] * L->k[4][8][l] - L->lu[79][l] * L->k[4][7][l] -
+                L->lu[78][l] * L->k[4][6][l] - L->lu[77][l] * L->k[4][5][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[4][17][l] -
+                L->lu[70][l] * L->k[4][16][l] - L->lu[69][l] * L->k[4][15][l] - L->lu[68][l] *
+                L->k[4][14][l] - L->lu[67][l] * L->k[4][13][l] - L->lu[66][l] * L->k[4][12][l] -
+                L->lu[65][l] * L->k[4][11][l] - L->lu[64][l] * L->k[4][10][l] - L->lu[63][l] *
+                L->k[4][9][l] - L->lu[62][l] * L->k[4][8][l] - L->lu[61][l] * L->k[4][7][l] -
+                L->lu[60][l] * L->k[4][6][l] - L->lu[59][l] * L->k[4][5][l] - L->lu[58][l] *
+                L->k[4][4][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[4][9][l] -
+                L->lu[44][l] * L->k[4][8][l] - L->lu[43][l] * L->k[4][7][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[4][9][l] -
+                L->lu[26][l] * L->k[4][8][l] - L->lu[25][l] * L->k[4][7][l] - L->lu[20][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[4][9][l] - L->lu[7][l] *
+                L->k[4][7][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 4 ? L->k[5][4][l] : L->k[5][3][l];
+        L->k[5][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[5][4][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 5 ? L->k[5][5][l] : L->k[5][3][l];
+        L->k[5][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 6 ? L->k[5][6][l] : L->k[5][3][l];
+        L->k[5][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 7 ? L->k[5][7][l] : L->k[5][3][l];
+        L->k[5][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 8 ? L->k[5][8][l] : L->k[5][3][l];
+        L->k[5][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 9 ? L->k[5][9][l] : L->k[5][3][l];
+        L->k[5][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 10 ? L->k[5][10][l] : L->k[5][3][l];
+        L->k[5][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 11 ? L->k[5][11][l] : L->k[5][3][l];
+        L->k[5][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 12 ? L->k[5][12][l] : L->k[5][3][l];
+        L->k[5][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 13 ? L->k[5][13][l] : L->k[5][3][l];
+        L->k[5][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 14 ? L->k[5][14][l] : L->k[5][3][l];
+        L->k[5][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 15 ? L->k[5][15][l] : L->k[5][3][l];
+        L->k[5][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 16 ? L->k[5][16][l] : L->k[5][3][l];
+        L->k[5][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 17 ? L->k[5][17][l] : L->k[5][3][l];
+        L->k[5][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 5 ? L->k[5][5][l] : L->k[5][4][l];
+        L->k[5][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 6 ? L->k[5][6][l] : L->k[5][4][l];
+        L->k[5][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 7 ? L->k[5][7][l] : L->k[5][4][l];
+        L->k[5][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 8 ? L->k[5][8][l] : L->k[5][4][l];
+        L->k[5][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 9 ? L->k[5][9][l] : L->k[5][4][l];
+        L->k[5][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 10 ? L->k[5][10][l] : L->k[5][4][l];
+        L->k[5][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 11 ? L->k[5][11][l] : L->k[5][4][l];
+        L->k[5][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 12 ? L->k[5][12][l] : L->k[5][4][l];
+        L->k[5][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 13 ? L->k[5][13][l] : L->k[5][4][l];
+        L->k[5][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 14 ? L->k[5][14][l] : L->k[5][4][l];
+        L->k[5][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 15 ? L->k[5][15][l] : L->k[5][4][l];
+        L->k[5][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 16 ? L->k[5][16][l] : L->k[5][4][l];
+        L->k[5][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 17 ? L->k[5][17][l] : L->k[5][4][l];
+        L->k[5][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 6 ? L->k[5][6][l] : L->k[5][5][l];
+        L->k[5][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 7 ? L->k[5][7][l] : L->k[5][5][l];
+        L->k[5][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 8 ? L->k[5][8][l] : L->k[5][5][l];
+        L->k[5][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 9 ? L->k[5][9][l] : L->k[5][5][l];
+        L->k[5][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 10 ? L->k[5][10][l] : L->k[5][5][l];
+        L->k[5][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 11 ? L->k[5][11][l] : L->k[5][5][l];
+        L->k[5][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 12 ? L->k[5][12][l] : L->k[5][5][l];
+        L->k[5][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 13 ? L->k[5][13][l] : L->k[5][5][l];
+        L->k[5][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 14 ? L->k[5][14][l] : L->k[5][5][l];
+        L->k[5][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 15 ? L->k[5][15][l] : L->k[5][5][l];
+        L->k[5][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 16 ? L->k[5][16][l] : L->k[5][5][l];
+        L->k[5][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 17 ? L->k[5][17][l] : L->k[5][5][l];
+        L->k[5][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 7 ? L->k[5][7][l] : L->k[5][6][l];
+        L->k[5][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 8 ? L->k[5][8][l] : L->k[5][6][l];
+        L->k[5][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 9 ? L->k[5][9][l] : L->k[5][6][l];
+        L->k[5][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 10 ? L->k[5][10][l] : L->k[5][6][l];
+        L->k[5][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 11 ? L->k[5][11][l] : L->k[5][6][l];
+        L->k[5][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 12 ? L->k[5][12][l] : L->k[5][6][l];
+        L->k[5][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 13 ? L->k[5][13][l] : L->k[5][6][l];
+        L->k[5][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 14 ? L->k[5][14][l] : L->k[5][6][l];
+        L->k[5][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 15 ? L->k[5][15][l] : L->k[5][6][l];
+        L->k[5][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 16 ? L->k[5][16][l] : L->k[5][6][l];
+        L->k[5][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 17 ? L->k[5][17][l] : L->k[5][6][l];
+        L->k[5][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 10 ? L->k[5][10][l] : L->k[5][7][l];
+        L->k[5][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 11 ? L->k[5][11][l] : L->k[5][7][l];
+        L->k[5][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 12 ? L->k[5][12][l] : L->k[5][7][l];
+        L->k[5][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 13 ? L->k[5][13][l] : L->k[5][7][l];
+        L->k[5][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 14 ? L->k[5][14][l] : L->k[5][7][l];
+        L->k[5][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 15 ? L->k[5][15][l] : L->k[5][7][l];
+        L->k[5][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 16 ? L->k[5][16][l] : L->k[5][7][l];
+        L->k[5][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 17 ? L->k[5][17][l] : L->k[5][7][l];
+        L->k[5][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 10 ? L->k[5][10][l] : L->k[5][8][l];
+        L->k[5][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 11 ? L->k[5][11][l] : L->k[5][8][l];
+        L->k[5][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 12 ? L->k[5][12][l] : L->k[5][8][l];
+        L->k[5][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 13 ? L->k[5][13][l] : L->k[5][8][l];
+        L->k[5][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 14 ? L->k[5][14][l] : L->k[5][8][l];
+        L->k[5][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 15 ? L->k[5][15][l] : L->k[5][8][l];
+        L->k[5][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 16 ? L->k[5][16][l] : L->k[5][8][l];
+        L->k[5][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 17 ? L->k[5][17][l] : L->k[5][8][l];
+        L->k[5][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 10 ? L->k[5][10][l] : L->k[5][9][l];
+        L->k[5][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 11 ? L->k[5][11][l] : L->k[5][9][l];
+        L->k[5][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 12 ? L->k[5][12][l] : L->k[5][9][l];
+        L->k[5][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 13 ? L->k[5][13][l] : L->k[5][9][l];
+        L->k[5][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 14 ? L->k[5][14][l] : L->k[5][9][l];
+        L->k[5][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 15 ? L->k[5][15][l] : L->k[5][9][l];
+        L->k[5][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 16 ? L->k[5][16][l] : L->k[5][9][l];
+        L->k[5][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 17 ? L->k[5][17][l] : L->k[5][9][l];
+        L->k[5][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 11 ? L->k[5][11][l] : L->k[5][10][l];
+        L->k[5][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 12 ? L->k[5][12][l] : L->k[5][10][l];
+        L->k[5][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 13 ? L->k[5][13][l] : L->k[5][10][l];
+        L->k[5][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 14 ? L->k[5][14][l] : L->k[5][10][l];
+        L->k[5][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 15 ? L->k[5][15][l] : L->k[5][10][l];
+        L->k[5][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 16 ? L->k[5][16][l] : L->k[5][10][l];
+        L->k[5][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 17 ? L->k[5][17][l] : L->k[5][10][l];
+        L->k[5][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 12 ? L->k[5][12][l] : L->k[5][11][l];
+        L->k[5][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 13 ? L->k[5][13][l] : L->k[5][11][l];
+        L->k[5][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 14 ? L->k[5][14][l] : L->k[5][11][l];
+        L->k[5][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 15 ? L->k[5][15][l] : L->k[5][11][l];
+        L->k[5][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 16 ? L->k[5][16][l] : L->k[5][11][l];
+        L->k[5][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 17 ? L->k[5][17][l] : L->k[5][11][l];
+        L->k[5][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 13 ? L->k[5][13][l] : L->k[5][12][l];
+        L->k[5][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 14 ? L->k[5][14][l] : L->k[5][12][l];
+        L->k[5][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 15 ? L->k[5][15][l] : L->k[5][12][l];
+        L->k[5][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 16 ? L->k[5][16][l] : L->k[5][12][l];
+        L->k[5][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 17 ? L->k[5][17][l] : L->k[5][12][l];
+        L->k[5][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 14 ? L->k[5][14][l] : L->k[5][13][l];
+        L->k[5][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 15 ? L->k[5][15][l] : L->k[5][13][l];
+        L->k[5][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 16 ? L->k[5][16][l] : L->k[5][13][l];
+        L->k[5][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 17 ? L->k[5][17][l] : L->k[5][13][l];
+        L->k[5][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 15 ? L->k[5][15][l] : L->k[5][14][l];
+        L->k[5][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 16 ? L->k[5][16][l] : L->k[5][14][l];
+        L->k[5][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 17 ? L->k[5][17][l] : L->k[5][14][l];
+        L->k[5][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][15][l];
+        L->k[5][15][l] = L->piv[15][l] == 16 ? L->k[5][16][l] : L->k[5][15][l];
+        L->k[5][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][15][l];
+        L->k[5][15][l] = L->piv[15][l] == 17 ? L->k[5][17][l] : L->k[5][15][l];
+        L->k[5][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][16][l];
+        L->k[5][16][l] = L->piv[16][l] == 17 ? L->k[5][17][l] : L->k[5][16][l];
+        L->k[5][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[5][17][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[37][l] * L->k[5][1][l];
+        L->k[5][4][l] = L->k[5][4][l] - L->lu[75][l] * L->k[5][3][l];
+        L->k[5][5][l] = L->k[5][5][l] - L->lu[93][l] * L->k[5][3][l] - L->lu[94][l] * L->k[5][4][l];
+        L->k[5][6][l] = L->k[5][6][l] - L->lu[111][l] * L->k[5][3][l] - L->lu[112][l] *
+                L->k[5][4][l] - L->lu[113][l] * L->k[5][5][l];
+        L->k[5][7][l] = L->k[5][7][l] - L->lu[129][l] * L->k[5][3][l] - L->lu[130][l] *
+                L->k[5][4][l] - L->lu[131][l] * L->k[5][5][l] - L->lu[132][l] * L->k[5][6][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[147][l] * L->k[5][3][l] - L->lu[148][l] *
+                L->k[5][4][l] - L->lu[149][l] * L->k[5][5][l] - L->lu[150][l] * L->k[5][6][l] -
+                L->lu[151][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[165][l] * L->k[5][3][l] - L->lu[166][l] *
+                L->k[5][4][l] - L->lu[167][l] * L->k[5][5][l] - L->lu[168][l] * L->k[5][6][l] -
+                L->lu[169][l] * L->k[5][7][l] - L->lu[170][l] * L->k[5][8][l];
+        L->k[5][10][l] = L->k[5][10][l] - L->lu[183][l] * L->k[5][3][l] - L->lu[184][l] *
+                L->k[5][4][l] - L->lu[185][l] * L->k[5][5][l] - L->lu[186][l] * L->k[5][6][l] -
+                L->lu[187][l] * L->k[5][7][l] - L->lu[188][l] * L->k[5][8][l] - L->lu[189][l] *
+                L->k[5][9][l];
+        L->k[5][11][l] = L->k[5][11][l] - L->lu[201][l] * L->k[5][3][l] - L->lu[202][l] *
+                L->k[5][4][l] - L->lu[203][l] * L->k[5][5][l] - L->lu[204][l] * L->k[5][6][l] -
+                L->lu[205][l] * L->k[5][7][l] - L->lu[206][l] * L->k[5][8][l] - L->lu[207][l] *
+                L->k[5][9][l] - L->lu[208][l] * L->k[5][10][l];
+        L->k[5][12][l] = L->k[5][12][l] - L->lu[219][l] * L->k[5][3][l] - L->lu[220][l] *
+                L->k[5][4][l] - L->lu[221][l] * L->k[5][5][l] - L->lu[222][l] * L->k[5][6][l] -
+                L->lu[223][l] * L->k[5][7][l] - L->lu[224][l] * L->k[5][8][l] - L->lu[225][l] *
+                L->k[5][9][l] - L->lu[226][l] * L->k[5][10][l] - L->lu[227][l] * L->k[5][11][l];
+        L->k[5][13][l] = L->k[5][13][l] - L->lu[237][l] * L->k[5][3][l] - L->lu[238][l] *
+                L->k[5][4][l] - L->lu[239][l] * L->k[5][5][l] - L->lu[240][l] * L->k[5][6][l] -
+                L->lu[241][l] * L->k[5][7][l] - L->lu[242][l] * L->k[5][8][l] - L->lu[243][l] *
+                L->k[5][9][l] - L->lu[244][l] * L->k[5][10][l] - L->lu[245][l] * L->k[5][11][l] -
+                L->lu[246][l] * L->k[5][12][l];
+        L->k[5][14][l] = L->k[5][14][l] - L->lu[255][l] * L->k[5][3][l] - L->lu[256][l] *
+                L->k[5][4][l] - L->lu[257][l] * L->k[5][5][l] - L->lu[258][l] * L->k[5][6][l] -
+                L->lu[259][l] * L->k[5][7][l] - L->lu[260][l] * L->k[5][8][l] - L->lu[261][l] *
+                L->k[5][9][l] - L->lu[262][l] * L->k[5][10][l] - L->lu[263][l] * L->k[5][11][l] -
+                L->lu[264][l] * L->k[5][12][l] - L->lu[265][l] * L->k[5][13][l];
+        L->k[5][15][l] = L->k[5][15][l] - L->lu[273][l] * L->k[5][3][l] - L->lu[274][l] *
+                L->k[5][4][l] - L->lu[275][l] * L->k[5][5][l] - L->lu[276][l] * L->k[5][6][l] -
+                L->lu[277][l] * L->k[5][7][l] - L->lu[278][l] * L->k[5][8][l] - L->lu[279][l] *
+                L->k[5][9][l] - L->lu[280][l] * L->k[5][10][l] - L->lu[281][l] * L->k[5][11][l] -
+                L->lu[282][l] * L->k[5][12][l] - L->lu[283][l] * L->k[5][13][l] - L->lu[284][l] *
+                L->k[5][14][l];
+        L->k[5][16][l] = L->k[5][16][l] - L->lu[291][l] * L->k[5][3][l] - L->lu[292][l] *
+                L->k[5][4][l] - L->lu[293][l] * L->k[5][5][l] - L->lu[294][l] * L->k[5][6][l] -
+                L->lu[295][l] * L->k[5][7][l] - L->lu[296][l] * L->k[5][8][l] - L->lu[297][l] *
+                L->k[5][9][l] - L->lu[298][l] * L->k[5][10][l] - L->lu[299][l] * L->k[5][11][l] -
+                L->lu[300][l] * L->k[5][12][l] - L->lu[301][l] * L->k[5][13][l] - L->lu[302][l] *
+                L->k[5][14][l] - L->lu[303][l] * L->k[5][15][l];
+        L->k[5][17][l] = L->k[5][17][l] - L->lu[309][l] * L->k[5][3][l] - L->lu[310][l] *
+                L->k[5][4][l] - L->lu[311][l] * L->k[5][5][l] - L->lu[312][l] * L->k[5][6][l] -
+                L->lu[313][l] * L->k[5][7][l] - L->lu[314][l] * L->k[5][8][l] - L->lu[315][l] *
+                L->k[5][9][l] - L->lu[316][l] * L->k[5][10][l] - L->lu[317][l] * L->k[5][11][l] -
+                L->lu[318][l] * L->k[5][12][l] - L->lu[319][l] * L->k[5][13][l] - L->lu[320][l] *
+                L->k[5][14][l] - L->lu[321][l] * L->k[5][15][l] - L->lu[322][l] * L->k[5][16][l];
+        L->k[5][17][l] = L->k[5][17][l] * L->lu[323][l];
+        L->k[5][16][l] = L->k[5][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[5][17][l];
+        L->k[5][15][l] = L->k[5][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[5][17][l] -
+                L->lu[286][l] * L->k[5][16][l];
+        L->k[5][14][l] = L->k[5][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[5][17][l] -
+                L->lu[268][l] * L->k[5][16][l] - L->lu[267][l] * L->k[5][15][l];
+        L->k[5][13][l] = L->k[5][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[5][17][l] -
+                L->lu[250][l] * L->k[5][16][l] - L->lu[249][l] * L->k[5][15][l] - L->lu[248][l] *
+                L->k[5][14][l];
+        L->k[5][12][l] = L->k[5][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[5][17][l] -
+                L->lu[232][l] * L->k[5][16][l] - L->lu[231][l] * L->k[5][15][l] - L->lu[230][l] *
+                L->k[5][14][l] - L->lu[229][l] * L->k[5][13][l];
+        L->k[5][11][l] = L->k[5][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[5][17][l] -
+                L->lu[214][l] * L->k[5][16][l] - L->lu[213][l] * L->k[5][15][l] - L->lu[212][l] *
+                L->k[5][14][l] - L->lu[211][l] * L->k[5][13][l] - L->lu[210][l] * L->k[5][12][l];
+        L->k[5][10][l] = L->k[5][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[5][17][l] -
+                L->lu[196][l] * L->k[5][16][l] - L->lu[195][l] * L->k[5][15][l] - L->lu[194][l] *
+                L->k[5][14][l] - L->lu[193][l] * L->k[5][13][l] - L->lu[192][l] * L->k[5][12][l]
+                - L->lu[191][l] * L->k[5][11][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[5][17][l] -
+                L->lu[178][l] * L->k[5][16][l] - L->lu[177][l] * L->k[5][15][l] - L->lu[176][l] *
+                L->k[5][14][l] - L->lu[175][l] * L->k[5][13][l] - L->lu[174][l] * L->k[5][12][l]
+                - L->lu[173][l] * L->k[5][11][l] - L->lu[172][l] * L->k[5][10][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[5][17][l] -
+                L->lu[160][l] * L->k[5][16][l] - L->lu[159][l] * L->k[5][15][l] - L->lu[158][l] *
+                L->k[5][14][l] - L->lu[157][l] * L->k[5][13][l] - L->lu[156][l] * L->k[5][12][l]
+                - L->lu[155][l] * L->k[5][11][l] - L->lu[154][l] * L->k[5][10][l] - L->lu[153][l]
+                * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[5][17][l] -
+                L->lu[142][l] * L->k[5][16][l] - L->lu[141][l] * L->k[5][15][l] - L->lu[140][l] *
+                L->k[5][14][l] - L->lu[139][l] * L->k[5][13][l] - L->lu[138][l] * L->k[5][12][l]
+                - L->lu[137][l] * L->k[5][11][l] - L->lu[136][l] * L->k[5][10][l] - L->lu[135][l]
+                * L->k[5][9][l] - L->lu[134][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[5][17][l] -
+                L->lu[124][l] * L->k[5][16][l] - L->lu[123][l] * L->k[5][15][l] - L->lu[122][l] *
+                L->k[5][14][l] - L->lu[121][l] * L->k[5][13][l] - L->lu[120][l] * L->k[5][12][l]
+                - L->lu[119][l] * L->k[5][11][l] - L->lu[118][l] * L->k[5][10][l] - L->lu[117][l]
+                * L->k[5][9][l] - L->lu[116][l] * L->k[5][8][l] - L->lu[115][l] * L->k[5][7][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[5][17][l] -
+                L->lu[106][l] * L->k[5][16][l] - L->lu[105][l] * L->k[5][15][l] - L->lu[104][l] *
+                L->k[5][14][l] - L->lu[103][l] * L->k[5][13][l] - L->lu[102][l] * L->k[5][12][l]
+                - L->lu[101][l] * L->k[5][11][l] - L->lu[100][l] * L->k[5][10][l] - L->lu[99][l]
+                * L->k[5][9][l] - L->lu[98][l] * L->k[5][8][l] - L->lu[97][l] * L->k[5][7][l] -
+                L->lu[96][l] * L->k[5][6][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[5][17][l] -
+                L->lu[88][l] * L->k[5][16][l] - L->lu[87][l] * L->k[5][15][l] - L->lu[86][l] *
+                L->k[5][14][l] - L->lu[85][l] * L->k[5][13][l] - L->lu[84][l] * L->k[5][12][l] -
+                L->lu[83][l] * L->k[5][11][l] - L->lu[82][l] * L->k[5][10][l] - L->lu[81][l] *
+                L->k[5][9][l] - L->lu[80][l] * L->k[5][8][l] - L->lu[79][l] * L->k[5][7][l] -
+                L->lu[78][l] * L->k[5][6][l] - L->lu[77][l] * L->k[5][5][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[5][17][l] -
+                L->lu[70][l] * L->k[5][16][l] - L->lu[69][l] * L->k[5][15][l] - L->lu[68][l] *
+                L->k[5][14][l] - L->lu[67][l] * L->k[5][13][l] - L->lu[66][l] * L->k[5][12][l] -
+                L->lu[65][l] * L->k[5][11][l] - L->lu[64][l] * L->k[5][10][l] - L->lu[63][l] *
+                L->k[5][9][l] - L->lu[62][l] * L->k[5][8][l] - L->lu[61][l] * L->k[5][7][l] -
+                L->lu[60][l] * L->k[5][6][l] - L->lu[59][l] * L->k[5][5][l] - L->lu[58][l] *
+                L->k[5][4][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[5][9][l] -
+                L->lu[44][l] * L->k[5][8][l] - L->lu[43][l] * L->k[5][7][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[5][9][l] -
+                L->lu[26][l] * L->k[5][8][l] - L->lu[25][l] * L->k[5][7][l] - L->lu[20][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[5][9][l] - L->lu[7][l] *
+                L->k[5][7][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / CMG4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(cmg4_pyramid_cos_lanes(L->xnew[1][l])) < CMG4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? CMG4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? CMG4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int p[CMG4_PYRAMID_LANES];
+    double best[CMG4_PYRAMID_LANES];
+    double m[CMG4_PYRAMID_LANES];
+    double swap[CMG4_PYRAMID_LANES];
+    double inv_h[CMG4_PYRAMID_LANES];
+    double err[CMG4_PYRAMID_LANES];
+    double fac[CMG4_PYRAMID_LANES];
+    double gus[CMG4_PYRAMID_LANES];
+    double total[CMG4_PYRAMID_LANES];
+    int go[CMG4_PYRAMID_LANES];
+    int fresh[CMG4_PYRAMID_LANES];
+    int bad[CMG4_PYRAMID_LANES];
+    int sing[CMG4_PYRAMID_LANES];
+    int last[CMG4_PYRAMID_LANES];
+    int retry[CMG4_PYRAMID_LANES];
+    int ok[CMG4_PYRAMID_LANES];
+    int take[CMG4_PYRAMID_LANES];
+    int lock[CMG4_PYRAMID_LANES];
+    int rej[CMG4_PYRAMID_LANES];
+    double frac[CMG4_PYRAMID_LANES];
+    int due[CMG4_PYRAMID_LANES];
+    static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE :
+                CMG4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? CMG4_PYRAMID_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i * CMG4_PYRAMID_NX + i][l] = L->lu[i * CMG4_PYRAMID_NX + i][l] + 1.0 /
+                    (L->h[l] * 0.25);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * CMG4_PYRAMID_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 1][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[1 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[19][l] = 1.0 / L->lu[19][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 1][l] * L->lu[19][l];
+            L->lu[i * CMG4_PYRAMID_NX + 1][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 2][l] = L->lu[i * CMG4_PYRAMID_NX + 2][l] - m[l] *
+                    L->lu[20][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[25][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[26][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[27][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[20][l] = L->lu[20][l] * L->lu[19][l];
+        L->lu[25][l] = L->lu[25][l] * L->lu[19][l];
+        L->lu[26][l] = L->lu[26][l] * L->lu[19][l];
+        L->lu[27][l] = L->lu[27][l] * L->lu[19][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[38][l]) > 0.0));
+        L->lu[38][l] = 1.0 / L->lu[38][l];
+        L->lu[43][l] = L->lu[43][l] * L->lu[38][l];
+        L->lu[44][l] = L->lu[44][l] * L->lu[38][l];
+        L->lu[45][l] = L->lu[45][l] * L->lu[38][l];
+        p[l] = 3;
+        best[l] = fabs(L->lu[3 * CMG4_PYRAMID_NX + 3][l]);
+    }
+    for (i = 4; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 3][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 3][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 3][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[3][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 4; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[3 * CMG4_PYRAMID_NX + j][l];
+                L->lu[3 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[3 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[57][l] = 1.0 / L->lu[57][l];
+    }
+    for (i = 4; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 3][l] * L->lu[57][l];
+            L->lu[i * CMG4_PYRAMID_NX + 3][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 4][l] = L->lu[i * CMG4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[58][l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[59][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[60][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[61][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[62][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[63][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[64][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[65][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[66][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[67][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[68][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[69][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[70][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[71][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[58][l] = L->lu[58][l] * L->lu[57][l];
+        L->lu[59][l] = L->lu[59][l] * L->lu[57][l];
+        L->lu[60][l] = L->lu[60][l] * L->lu[57][l];
+        L->lu[61][l] = L->lu[61][l] * L->lu[57][l];
+        L->lu[62][l] = L->lu[62][l] * L->lu[57][l];
+        L->lu[63][l] = L->lu[63][l] * L->lu[57][l];
+        L->lu[64][l] = L->lu[64][l] * L->lu[57][l];
+        L->lu[65][l] = L->lu[65][l] * L->lu[57][l];
+        L->lu[66][l] = L->lu[66][l] * L->lu[57][l];
+        L->lu[67][l] = L->lu[67][l] * L->lu[57][l];
+        L->lu[68][l] = L->lu[68][l] * L->lu[57][l];
+        L->lu[69][l] = L->lu[69][l] * L->lu[57][l];
+        L->lu[70][l] = L->lu[70][l] * L->lu[57][l];
+        L->lu[71][l] = L->lu[71][l] * L->lu[57][l];
+        p[l] = 4;
+        best[l] = fabs(L->lu[4 * CMG4_PYRAMID_NX + 4][l]);
+    }
+    for (i = 5; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 4][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 4][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 4][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[4][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 5; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[4 * CMG4_PYRAMID_NX + j][l];
+                L->lu[4 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[4 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[76][l] = 1.0 / L->lu[76][l];
+    }
+    for (i = 5; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 4][l] * L->lu[76][l];
+            L->lu[i * CMG4_PYRAMID_NX + 4][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[77][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[78][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[79][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[80][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[81][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[82][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[83][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[84][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[85][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[86][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[87][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[88][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[89][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[77][l] = L->lu[77][l] * L->lu[76][l];
+        L->lu[78][l] = L->lu[78][l] * L->lu[76][l];
+        L->lu[79][l] = L->lu[79][l] * L->lu[76][l];
+        L->lu[80][l] = L->lu[80][l] * L->lu[76][l];
+        L->lu[81][l] = L->lu[81][l] * L->lu[76][l];
+        L->lu[82][l] = L->lu[82][l] * L->lu[76][l];
+        L->lu[83][l] = L->lu[83][l] * L->lu[76][l];
+        L->lu[84][l] = L->lu[84][l] * L->lu[76][l];
+        L->lu[85][l] = L->lu[85][l] * L->lu[76][l];
+        L->lu[86][l] = L->lu[86][l] * L->lu[76][l];
+        L->lu[87][l] = L->lu[87][l] * L->lu[76][l];
+        L->lu[88][l] = L->lu[88][l] * L->lu[76][l];
+        L->lu[89][l] = L->lu[89][l] * L->lu[76][l];
+        p[l] = 5;
+        best[l] = fabs(L->lu[5 * CMG4_PYRAMID_NX + 5][l]);
+    }
+    for (i = 6; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 5][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 5][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 5][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[5][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 6; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[5 * CMG4_PYRAMID_NX + j][l];
+                L->lu[5 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[5 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[95][l] = 1.0 / L->lu[95][l];
+    }
+    for (i = 6; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 5][l] * L->lu[95][l];
+            L->lu[i * CMG4_PYRAMID_NX + 5][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[96][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[97][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[98][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[99][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[100][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[101][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[102][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[103][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[104][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[105][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[106][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[107][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[96][l] = L->lu[96][l] * L->lu[95][l];
+        L->lu[97][l] = L->lu[97][l] * L->lu[95][l];
+        L->lu[98][l] = L->lu[98][l] * L->lu[95][l];
+        L->lu[99][l] = L->lu[99][l] * L->lu[95][l];
+        L->lu[100][l] = L->lu[100][l] * L->lu[95][l];
+        L->lu[101][l] = L->lu[101][l] * L->lu[95][l];
+        L->lu[102][l] = L->lu[102][l] * L->lu[95][l];
+        L->lu[103][l] = L->lu[103][l] * L->lu[95][l];
+        L->lu[104][l] = L->lu[104][l] * L->lu[95][l];
+        L->lu[105][l] = L->lu[105][l] * L->lu[95][l];
+        L->lu[106][l] = L->lu[106][l] * L->lu[95][l];
+        L->lu[107][l] = L->lu[107][l] * L->lu[95][l];
+        p[l] = 6;
+        best[l] = fabs(L->lu[6 * CMG4_PYRAMID_NX + 6][l]);
+    }
+    for (i = 7; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 6][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 6][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 6][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[6][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 7; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[6 * CMG4_PYRAMID_NX + j][l];
+                L->lu[6 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[6 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[114][l] = 1.0 / L->lu[114][l];
+    }
+    for (i = 7; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 6][l] * L->lu[114][l];
+            L->lu[i * CMG4_PYRAMID_NX + 6][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[115][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[116][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[117][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[118][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[119][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[120][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[121][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[122][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[123][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[124][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[125][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[115][l] = L->lu[115][l] * L->lu[114][l];
+        L->lu[116][l] = L->lu[116][l] * L->lu[114][l];
+        L->lu[117][l] = L->lu[117][l] * L->lu[114][l];
+        L->lu[118][l] = L->lu[118][l] * L->lu[114][l];
+        L->lu[119][l] = L->lu[119][l] * L->lu[114][l];
+        L->lu[120][l] = L->lu[120][l] * L->lu[114][l];
+        L->lu[121][l] = L->lu[121][l] * L->lu[114][l];
+        L->lu[122][l] = L->lu[122][l] * L->lu[114][l];
+        L->lu[123][l] = L->lu[123][l] * L->lu[114][l];
+        L->lu[124][l] = L->lu[124][l] * L->lu[114][l];
+        L->lu[125][l] = L->lu[125][l] * L->lu[114][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * CMG4_PYRAMID_NX + 7][l]);
+    }
+    for (i = 8; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 7][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 7][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[7 * CMG4_PYRAMID_NX + j][l];
+                L->lu[7 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[7 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[133][l] = 1.0 / L->lu[133][l];
+    }
+    for (i = 8; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] * L->lu[133][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[134][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[135][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[136][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[137][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[138][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[139][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[140][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[141][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[142][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[143][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[134][l] = L->lu[134][l] * L->lu[133][l];
+        L->lu[135][l] = L->lu[135][l] * L->lu[133][l];
+        L->lu[136][l] = L->lu[136][l] * L->lu[133][l];
+        L->lu[137][l] = L->lu[137][l] * L->lu[133][l];
+        L->lu[138][l] = L->lu[138][l] * L->lu[133][l];
+        L->lu[139][l] = L->lu[139][l] * L->lu[133][l];
+        L->lu[140][l] = L->lu[140][l] * L->lu[133][l];
+        L->lu[141][l] = L->lu[141][l] * L->lu[133][l];
+        L->lu[142][l] = L->lu[142][l] * L->lu[133][l];
+        L->lu[143][l] = L->lu[143][l] * L->lu[133][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * CMG4_PYRAMID_NX + 8][l]);
+    }
+    for (i = 9; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 8][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 8][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[8 * CMG4_PYRAMID_NX + j][l];
+                L->lu[8 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[8 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[152][l] = 1.0 / L->lu[152][l];
+    }
+    for (i = 9; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] * L->lu[152][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[153][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[154][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[155][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[156][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[157][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[158][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[159][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[160][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[161][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[153][l] = L->lu[153][l] * L->lu[152][l];
+        L->lu[154][l] = L->lu[154][l] * L->lu[152][l];
+        L->lu[155][l] = L->lu[155][l] * L->lu[152][l];
+        L->lu[156][l] = L->lu[156][l] * L->lu[152][l];
+        L->lu[157][l] = L->lu[157][l] * L->lu[152][l];
+        L->lu[158][l] = L->lu[158][l] * L->lu[152][l];
+        L->lu[159][l] = L->lu[159][l] * L->lu[152][l];
+        L->lu[160][l] = L->lu[160][l] * L->lu[152][l];
+        L->lu[161][l] = L->lu[161][l] * L->lu[152][l];
+        p[l] = 9;
+        best[l] = fabs(L->lu[9 * CMG4_PYRAMID_NX + 9][l]);
+    }
+    for (i = 10; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 9][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 9][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 9][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[9][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 10; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[9 * CMG4_PYRAMID_NX + j][l];
+                L->lu[9 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[9 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[171][l] = 1.0 / L->lu[171][l];
+    }
+    for (i = 10; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] * L->lu[171][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] - m[l] *
+                    L->lu[172][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[173][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[174][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[175][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[176][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[177][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[178][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[179][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[172][l] = L->lu[172][l] * L->lu[171][l];
+        L->lu[173][l] = L->lu[173][l] * L->lu[171][l];
+        L->lu[174][l] = L->lu[174][l] * L->lu[171][l];
+        L->lu[175][l] = L->lu[175][l] * L->lu[171][l];
+        L->lu[176][l] = L->lu[176][l] * L->lu[171][l];
+        L->lu[177][l] = L->lu[177][l] * L->lu[171][l];
+        L->lu[178][l] = L->lu[178][l] * L->lu[171][l];
+        L->lu[179][l] = L->lu[179][l] * L->lu[171][l];
+        p[l] = 10;
+        best[l] = fabs(L->lu[10 * CMG4_PYRAMID_NX + 10][l]);
+    }
+    for (i = 11; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 10][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 10][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 10][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[10][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 11; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[10 * CMG4_PYRAMID_NX + j][l];
+                L->lu[10 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[10 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[190][l] = 1.0 / L->lu[190][l];
+    }
+    for (i = 11; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 10][l] * L->lu[190][l];
+            L->lu[i * CMG4_PYRAMID_NX + 10][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] - m[l] *
+                    L->lu[191][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[192][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[193][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[194][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[195][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[196][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[197][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[191][l] = L->lu[191][l] * L->lu[190][l];
+        L->lu[192][l] = L->lu[192][l] * L->lu[190][l];
+        L->lu[193][l] = L->lu[193][l] * L->lu[190][l];
+        L->lu[194][l] = L->lu[194][l] * L->lu[190][l];
+        L->lu[195][l] = L->lu[195][l] * L->lu[190][l];
+        L->lu[196][l] = L->lu[196][l] * L->lu[190][l];
+        L->lu[197][l] = L->lu[197][l] * L->lu[190][l];
+        p[l] = 11;
+        best[l] = fabs(L->lu[11 * CMG4_PYRAMID_NX + 11][l]);
+    }
+    for (i = 12; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 11][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 11][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 11][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[11][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 12; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[11 * CMG4_PYRAMID_NX + j][l];
+                L->lu[11 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[11 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[209][l] = 1.0 / L->lu[209][l];
+    }
+    for (i = 12; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 11][l] * L->lu[209][l];
+            L->lu[i * CMG4_PYRAMID_NX + 11][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] - m[l] *
+                    L->lu[210][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[211][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[212][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[213][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[214][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[215][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[210][l] = L->lu[210][l] * L->lu[209][l];
+        L->lu[211][l] = L->lu[211][l] * L->lu[209][l];
+        L->lu[212][l] = L->lu[212][l] * L->lu[209][l];
+        L->lu[213][l] = L->lu[213][l] * L->lu[209][l];
+        L->lu[214][l] = L->lu[214][l] * L->lu[209][l];
+        L->lu[215][l] = L->lu[215][l] * L->lu[209][l];
+        p[l] = 12;
+        best[l] = fabs(L->lu[12 * CMG4_PYRAMID_NX + 12][l]);
+    }
+    for (i = 13; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 12][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 12][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 12][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[12][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 13; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[12 * CMG4_PYRAMID_NX + j][l];
+                L->lu[12 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[12 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[228][l] = 1.0 / L->lu[228][l];
+    }
+    for (i = 13; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 12][l] * L->lu[228][l];
+            L->lu[i * CMG4_PYRAMID_NX + 12][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] - m[l] *
+                    L->lu[229][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[230][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[231][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[232][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[233][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[229][l] = L->lu[229][l] * L->lu[228][l];
+        L->lu[230][l] = L->lu[230][l] * L->lu[228][l];
+        L->lu[231][l] = L->lu[231][l] * L->lu[228][l];
+        L->lu[232][l] = L->lu[232][l] * L->lu[228][l];
+        L->lu[233][l] = L->lu[233][l] * L->lu[228][l];
+        p[l] = 13;
+        best[l] = fabs(L->lu[13 * CMG4_PYRAMID_NX + 13][l]);
+    }
+    for (i = 14; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 13][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 13][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 13][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[13][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 14; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[13 * CMG4_PYRAMID_NX + j][l];
+                L->lu[13 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[13 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[247][l] = 1.0 / L->lu[247][l];
+    }
+    for (i = 14; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 13][l] * L->lu[247][l];
+            L->lu[i * CMG4_PYRAMID_NX + 13][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] - m[l] *
+                    L->lu[248][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[249][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[250][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[251][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[248][l] = L->lu[248][l] * L->lu[247][l];
+        L->lu[249][l] = L->lu[249][l] * L->lu[247][l];
+        L->lu[250][l] = L->lu[250][l] * L->lu[247][l];
+        L->lu[251][l] = L->lu[251][l] * L->lu[247][l];
+        p[l] = 14;
+        best[l] = fabs(L->lu[14 * CMG4_PYRAMID_NX + 14][l]);
+    }
+    for (i = 15; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 14][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 14][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 14][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[14][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 15; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[14 * CMG4_PYRAMID_NX + j][l];
+                L->lu[14 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[14 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[266][l] = 1.0 / L->lu[266][l];
+    }
+    for (i = 15; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 14][l] * L->lu[266][l];
+            L->lu[i * CMG4_PYRAMID_NX + 14][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] - m[l] *
+                    L->lu[267][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[268][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[269][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[267][l] = L->lu[267][l] * L->lu[266][l];
+        L->lu[268][l] = L->lu[268][l] * L->lu[266][l];
+        L->lu[269][l] = L->lu[269][l] * L->lu[266][l];
+        p[l] = 15;
+        best[l] = fabs(L->lu[15 * CMG4_PYRAMID_NX + 15][l]);
+    }
+    for (i = 16; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 15][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 15][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 15][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[15][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 16; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[15 * CMG4_PYRAMID_NX + j][l];
+                L->lu[15 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[15 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[285][l] = 1.0 / L->lu[285][l];
+    }
+    for (i = 16; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 15][l] * L->lu[285][l];
+            L->lu[i * CMG4_PYRAMID_NX + 15][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] - m[l] *
+                    L->lu[286][l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[287][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[286][l] = L->lu[286][l] * L->lu[285][l];
+        L->lu[287][l] = L->lu[287][l] * L->lu[285][l];
+        p[l] = 16;
+        best[l] = fabs(L->lu[16 * CMG4_PYRAMID_NX + 16][l]);
+    }
+    for (i = 17; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 16][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 16][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 16][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[16][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 17; q < 18; ++q) {
+        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[16 * CMG4_PYRAMID_NX + j][l];
+                L->lu[16 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                        j][l] : L->lu[16 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[304][l] = 1.0 / L->lu[304][l];
+    }
+    for (i = 17; i < 18; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 16][l] * L->lu[304][l];
+            L->lu[i * CMG4_PYRAMID_NX + 16][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 17][l] = L->lu[i * CMG4_PYRAMID_NX + 17][l] - m[l] *
+                    L->lu[305][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[305][l] = L->lu[305][l] * L->lu[304][l];
+        L->piv[17][l] = 17;
+        sing[l] = (sing[l] | !(fabs(L->lu[323][l]) > 0.0));
+        L->lu[323][l] = 1.0 / L->lu[323][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? CMG4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 4 ? L->k[0][4][l] : L->k[0][3][l];
+        L->k[0][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[0][4][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 5 ? L->k[0][5][l] : L->k[0][3][l];
+        L->k[0][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 6 ? L->k[0][6][l] : L->k[0][3][l];
+        L->k[0][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 7 ? L->k[0][7][l] : L->k[0][3][l];
+        L->k[0][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 8 ? L->k[0][8][l] : L->k[0][3][l];
+        L->k[0][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 9 ? L->k[0][9][l] : L->k[0][3][l];
+        L->k[0][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 10 ? L->k[0][10][l] : L->k[0][3][l];
+        L->k[0][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 11 ? L->k[0][11][l] : L->k[0][3][l];
+        L->k[0][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 12 ? L->k[0][12][l] : L->k[0][3][l];
+        L->k[0][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 13 ? L->k[0][13][l] : L->k[0][3][l];
+        L->k[0][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 14 ? L->k[0][14][l] : L->k[0][3][l];
+        L->k[0][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 15 ? L->k[0][15][l] : L->k[0][3][l];
+        L->k[0][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 16 ? L->k[0][16][l] : L->k[0][3][l];
+        L->k[0][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 17 ? L->k[0][17][l] : L->k[0][3][l];
+        L->k[0][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 5 ? L->k[0][5][l] : L->k[0][4][l];
+        L->k[0][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 6 ? L->k[0][6][l] : L->k[0][4][l];
+        L->k[0][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 7 ? L->k[0][7][l] : L->k[0][4][l];
+        L->k[0][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 8 ? L->k[0][8][l] : L->k[0][4][l];
+        L->k[0][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 9 ? L->k[0][9][l] : L->k[0][4][l];
+        L->k[0][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 10 ? L->k[0][10][l] : L->k[0][4][l];
+        L->k[0][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 11 ? L->k[0][11][l] : L->k[0][4][l];
+        L->k[0][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 12 ? L->k[0][12][l] : L->k[0][4][l];
+        L->k[0][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 13 ? L->k[0][13][l] : L->k[0][4][l];
+        L->k[0][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 14 ? L->k[0][14][l] : L->k[0][4][l];
+        L->k[0][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 15 ? L->k[0][15][l] : L->k[0][4][l];
+        L->k[0][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 16 ? L->k[0][16][l] : L->k[0][4][l];
+        L->k[0][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 17 ? L->k[0][17][l] : L->k[0][4][l];
+        L->k[0][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 6 ? L->k[0][6][l] : L->k[0][5][l];
+        L->k[0][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 7 ? L->k[0][7][l] : L->k[0][5][l];
+        L->k[0][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 8 ? L->k[0][8][l] : L->k[0][5][l];
+        L->k[0][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 9 ? L->k[0][9][l] : L->k[0][5][l];
+        L->k[0][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 10 ? L->k[0][10][l] : L->k[0][5][l];
+        L->k[0][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 11 ? L->k[0][11][l] : L->k[0][5][l];
+        L->k[0][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 12 ? L->k[0][12][l] : L->k[0][5][l];
+        L->k[0][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 13 ? L->k[0][13][l] : L->k[0][5][l];
+        L->k[0][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 14 ? L->k[0][14][l] : L->k[0][5][l];
+        L->k[0][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 15 ? L->k[0][15][l] : L->k[0][5][l];
+        L->k[0][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 16 ? L->k[0][16][l] : L->k[0][5][l];
+        L->k[0][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 17 ? L->k[0][17][l] : L->k[0][5][l];
+        L->k[0][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 7 ? L->k[0][7][l] : L->k[0][6][l];
+        L->k[0][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 8 ? L->k[0][8][l] : L->k[0][6][l];
+        L->k[0][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 9 ? L->k[0][9][l] : L->k[0][6][l];
+        L->k[0][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 10 ? L->k[0][10][l] : L->k[0][6][l];
+        L->k[0][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 11 ? L->k[0][11][l] : L->k[0][6][l];
+        L->k[0][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 12 ? L->k[0][12][l] : L->k[0][6][l];
+        L->k[0][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 13 ? L->k[0][13][l] : L->k[0][6][l];
+        L->k[0][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 14 ? L->k[0][14][l] : L->k[0][6][l];
+        L->k[0][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 15 ? L->k[0][15][l] : L->k[0][6][l];
+        L->k[0][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 16 ? L->k[0][16][l] : L->k[0][6][l];
+        L->k[0][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 17 ? L->k[0][17][l] : L->k[0][6][l];
+        L->k[0][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 10 ? L->k[0][10][l] : L->k[0][7][l];
+        L->k[0][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 11 ? L->k[0][11][l] : L->k[0][7][l];
+        L->k[0][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 12 ? L->k[0][12][l] : L->k[0][7][l];
+        L->k[0][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 13 ? L->k[0][13][l] : L->k[0][7][l];
+        L->k[0][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 14 ? L->k[0][14][l] : L->k[0][7][l];
+        L->k[0][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 15 ? L->k[0][15][l] : L->k[0][7][l];
+        L->k[0][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 16 ? L->k[0][16][l] : L->k[0][7][l];
+        L->k[0][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 17 ? L->k[0][17][l] : L->k[0][7][l];
+        L->k[0][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 10 ? L->k[0][10][l] : L->k[0][8][l];
+        L->k[0][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 11 ? L->k[0][11][l] : L->k[0][8][l];
+        L->k[0][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 12 ? L->k[0][12][l] : L->k[0][8][l];
+        L->k[0][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 13 ? L->k[0][13][l] : L->k[0][8][l];
+        L->k[0][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 14 ? L->k[0][14][l] : L->k[0][8][l];
+        L->k[0][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 15 ? L->k[0][15][l] : L->k[0][8][l];
+        L->k[0][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 16 ? L->k[0][16][l] : L->k[0][8][l];
+        L->k[0][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 17 ? L->k[0][17][l] : L->k[0][8][l];
+        L->k[0][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 10 ? L->k[0][10][l] : L->k[0][9][l];
+        L->k[0][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[0][10][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 11 ? L->k[0][11][l] : L->k[0][9][l];
+        L->k[0][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 12 ? L->k[0][12][l] : L->k[0][9][l];
+        L->k[0][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 13 ? L->k[0][13][l] : L->k[0][9][l];
+        L->k[0][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 14 ? L->k[0][14][l] : L->k[0][9][l];
+        L->k[0][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 15 ? L->k[0][15][l] : L->k[0][9][l];
+        L->k[0][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 16 ? L->k[0][16][l] : L->k[0][9][l];
+        L->k[0][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][9][l];
+        L->k[0][9][l] = L->piv[9][l] == 17 ? L->k[0][17][l] : L->k[0][9][l];
+        L->k[0][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 11 ? L->k[0][11][l] : L->k[0][10][l];
+        L->k[0][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[0][11][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 12 ? L->k[0][12][l] : L->k[0][10][l];
+        L->k[0][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 13 ? L->k[0][13][l] : L->k[0][10][l];
+        L->k[0][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 14 ? L->k[0][14][l] : L->k[0][10][l];
+        L->k[0][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 15 ? L->k[0][15][l] : L->k[0][10][l];
+        L->k[0][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 16 ? L->k[0][16][l] : L->k[0][10][l];
+        L->k[0][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][10][l];
+        L->k[0][10][l] = L->piv[10][l] == 17 ? L->k[0][17][l] : L->k[0][10][l];
+        L->k[0][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 12 ? L->k[0][12][l] : L->k[0][11][l];
+        L->k[0][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[0][12][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 13 ? L->k[0][13][l] : L->k[0][11][l];
+        L->k[0][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 14 ? L->k[0][14][l] : L->k[0][11][l];
+        L->k[0][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 15 ? L->k[0][15][l] : L->k[0][11][l];
+        L->k[0][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 16 ? L->k[0][16][l] : L->k[0][11][l];
+        L->k[0][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][11][l];
+        L->k[0][11][l] = L->piv[11][l] == 17 ? L->k[0][17][l] : L->k[0][11][l];
+        L->k[0][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 13 ? L->k[0][13][l] : L->k[0][12][l];
+        L->k[0][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[0][13][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 14 ? L->k[0][14][l] : L->k[0][12][l];
+        L->k[0][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 15 ? L->k[0][15][l] : L->k[0][12][l];
+        L->k[0][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 16 ? L->k[0][16][l] : L->k[0][12][l];
+        L->k[0][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][12][l];
+        L->k[0][12][l] = L->piv[12][l] == 17 ? L->k[0][17][l] : L->k[0][12][l];
+        L->k[0][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 14 ? L->k[0][14][l] : L->k[0][13][l];
+        L->k[0][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[0][14][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 15 ? L->k[0][15][l] : L->k[0][13][l];
+        L->k[0][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 16 ? L->k[0][16][l] : L->k[0][13][l];
+        L->k[0][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][13][l];
+        L->k[0][13][l] = L->piv[13][l] == 17 ? L->k[0][17][l] : L->k[0][13][l];
+        L->k[0][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 15 ? L->k[0][15][l] : L->k[0][14][l];
+        L->k[0][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[0][15][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 16 ? L->k[0][16][l] : L->k[0][14][l];
+        L->k[0][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][14][l];
+        L->k[0][14][l] = L->piv[14][l] == 17 ? L->k[0][17][l] : L->k[0][14][l];
+        L->k[0][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][15][l];
+        L->k[0][15][l] = L->piv[15][l] == 16 ? L->k[0][16][l] : L->k[0][15][l];
+        L->k[0][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[0][16][l];
+        swap[l] = L->k[0][15][l];
+        L->k[0][15][l] = L->piv[15][l] == 17 ? L->k[0][17][l] : L->k[0][15][l];
+        L->k[0][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[0][17][l];
+        swap[l] = L->k[0][16][l];
+        L->k[0][16][l] = L->piv[16][l] == 17 ? L->k[0][17][l] : L->k[0][16][l];
+        L->k[0][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[0][17][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[37][l] * L->k[0][1][l];
+        L->k[0][4][l] = L->k[0][4][l] - L->lu[75][l] * L->k[0][3][l];
+        L->k[0][5][l] = L->k[0][5][l] - L->lu[93][l] * L->k[0][3][l] - L->lu[94][l] * L->k[0][4][l];
+        L->k[0][6][l] = L->k[0][6][l] - L->lu[111][l] * L->k[0][3][l] - L->lu[112][l] *
+                L->k[0][4][l] - L->lu[113][l] * L->k[0][5][l];
+        L->k[0][7][l] = L->k[0][7][l] - L->lu[129][l] * L->k[0][3][l] - L->lu[130][l] *
+                L->k[0][4][l] - L->lu[131][l] * L->k[0][5][l] - L->lu[132][l] * L->k[0][6][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[147][l] * L->k[0][3][l] - L->lu[148][l] *
+                L->k[0][4][l] - L->lu[149][l] * L->k[0][5][l] - L->lu[150][l] * L->k[0][6][l] -
+                L->lu[151][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[165][l] * L->k[0][3][l] - L->lu[166][l] *
+                L->k[0][4][l] - L->lu[167][l] * L->k[0][5][l] - L->lu[168][l] * L->k[0][6][l] -
+                L->lu[169][l] * L->k[0][7][l] - L->lu[170][l] * L->k[0][8][l];
+        L->k[0][10][l] = L->k[0][10][l] - L->lu[183][l] * L->k[0][3][l] - L->lu[184][l] *
+                L->k[0][4][l] - L->lu[185][l] * L->k[0][5][l] - L->lu[186][l] * L->k[0][6][l] -
+                L->lu[187][l] * L->k[0][7][l] - L->lu[188][l] * L->k[0][8][l] - L->lu[189][l] *
+                L->k[0][9][l];
+        L->k[0][11][l] = L->k[0][11][l] - L->lu[201][l] * L->k[0][3][l] - L->lu[202][l] *
+                L->k[0][4][l] - L->lu[203][l] * L->k[0][5][l] - L->lu[204][l] * L->k[0][6][l] -
+                L->lu[205][l] * L->k[0][7][l] - L->lu[206][l] * L->k[0][8][l] - L->lu[207][l] *
+                L->k[0][9][l] - L->lu[208][l] * L->k[0][10][l];
+        L->k[0][12][l] = L->k[0][12][l] - L->lu[219][l] * L->k[0][3][l] - L->lu[220][l] *
+                L->k[0][4][l] - L->lu[221][l] * L->k[0][5][l] - L->lu[222][l] * L->k[0][6][l] -
+                L->lu[223][l] * L->k[0][7][l] - L->lu[224][l] * L->k[0][8][l] - L->lu[225][l] *
+                L->k[0][9][l] - L->lu[226][l] * L->k[0][10][l] - L->lu[227][l] * L->k[0][11][l];
+        L->k[0][13][l] = L->k[0][13][l] - L->lu[237][l] * L->k[0][3][l] - L->lu[238][l] *
+                L->k[0][4][l] - L->lu[239][l] * L->k[0][5][l] - L->lu[240][l] * L->k[0][6][l] -
+                L->lu[241][l] * L->k[0][7][l] - L->lu[242][l] * L->k[0][8][l] - L->lu[243][l] *
+                L->k[0][9][l] - L->lu[244][l] * L->k[0][10][l] - L->lu[245][l] * L->k[0][11][l] -
+                L->lu[246][l] * L->k[0][12][l];
+        L->k[0][14][l] = L->k[0][14][l] - L->lu[255][l] * L->k[0][3][l] - L->lu[256][l] *
+                L->k[0][4][l] - L->lu[257][l] * L->k[0][5][l] - L->lu[258][l] * L->k[0][6][l] -
+                L->lu[259][l] * L->k[0][7][l] - L->lu[260][l] * L->k[0][8][l] - L->lu[261][l] *
+                L->k[0][9][l] - L->lu[262][l] * L->k[0][10][l] - L->lu[263][l] * L->k[0][11][l] -
+                L->lu[264][l] * L->k[0][12][l] - L->lu[265][l] * L->k[0][13][l];
+        L->k[0][15][l] = L->k[0][15][l] - L->lu[273][l] * L->k[0][3][l] - L->lu[274][l] *
+                L->k[0][4][l] - L->lu[275][l] * L->k[0][5][l] - L->lu[276][l] * L->k[0][6][l] -
+                L->lu[277][l] * L->k[0][7][l] - L->lu[278][l] * L->k[0][8][l] - L->lu[279][l] *
+                L->k[0][9][l] - L->lu[280][l] * L->k[0][10][l] - L->lu[281][l] * L->k[0][11][l] -
+                L->lu[282][l] * L->k[0][12][l] - L->lu[283][l] * L->k[0][13][l] - L->lu[284][l] *
+                L->k[0][14][l];
+        L->k[0][16][l] = L->k[0][16][l] - L->lu[291][l] * L->k[0][3][l] - L->lu[292][l] *
+                L->k[0][4][l] - L->lu[293][l] * L->k[0][5][l] - L->lu[294][l] * L->k[0][6][l] -
+                L->lu[295][l] * L->k[0][7][l] - L->lu[296][l] * L->k[0][8][l] - L->lu[297][l] *
+                L->k[0][9][l] - L->lu[298][l] * L->k[0][10][l] - L->lu[299][l] * L->k[0][11][l] -
+                L->lu[300][l] * L->k[0][12][l] - L->lu[301][l] * L->k[0][13][l] - L->lu[302][l] *
+                L->k[0][14][l] - L->lu[303][l] * L->k[0][15][l];
+        L->k[0][17][l] = L->k[0][17][l] - L->lu[309][l] * L->k[0][3][l] - L->lu[310][l] *
+                L->k[0][4][l] - L->lu[311][l] * L->k[0][5][l] - L->lu[312][l] * L->k[0][6][l] -
+                L->lu[313][l] * L->k[0][7][l] - L->lu[314][l] * L->k[0][8][l] - L->lu[315][l] *
+                L->k[0][9][l] - L->lu[316][l] * L->k[0][10][l] - L->lu[317][l] * L->k[0][11][l] -
+                L->lu[318][l] * L->k[0][12][l] - L->lu[319][l] * L->k[0][13][l] - L->lu[320][l] *
+                L->k[0][14][l] - L->lu[321][l] * L->k[0][15][l] - L->lu[322][l] * L->k[0][16][l];
+        L->k[0][17][l] = L->k[0][17][l] * L->lu[323][l];
+        L->k[0][16][l] = L->k[0][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[0][17][l];
+        L->k[0][15][l] = L->k[0][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[0][17][l] -
+                L->lu[286][l] * L->k[0][16][l];
+        L->k[0][14][l] = L->k[0][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[0][17][l] -
+                L->lu[268][l] * L->k[0][16][l] - L->lu[267][l] * L->k[0][15][l];
+        L->k[0][13][l] = L->k[0][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[0][17][l] -
+                L->lu[250][l] * L->k[0][16][l] - L->lu[249][l] * L->k[0][15][l] - L->lu[248][l] *
+                L->k[0][14][l];
+        L->k[0][12][l] = L->k[0][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[0][17][l] -
+                L->lu[232][l] * L->k[0][16][l] - L->lu[231][l] * L->k[0][15][l] - L->lu[230][l] *
+                L->k[0][14][l] - L->lu[229][l] * L->k[0][13][l];
+        L->k[0][11][l] = L->k[0][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[0][17][l] -
+                L->lu[214][l] * L->k[0][16][l] - L->lu[213][l] * L->k[0][15][l] - L->lu[212][l] *
+                L->k[0][14][l] - L->lu[211][l] * L->k[0][13][l] - L->lu[210][l] * L->k[0][12][l];
+        L->k[0][10][l] = L->k[0][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[0][17][l] -
+                L->lu[196][l] * L->k[0][16][l] - L->lu[195][l] * L->k[0][15][l] - L->lu[194][l] *
+                L->k[0][14][l] - L->lu[193][l] * L->k[0][13][l] - L->lu[192][l] * L->k[0][12][l]
+                - L->lu[191][l] * L->k[0][11][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[0][17][l] -
+                L->lu[178][l] * L->k[0][16][l] - L->lu[177][l] * L->k[0][15][l] - L->lu[176][l] *
+                L->k[0][14][l] - L->lu[175][l] * L->k[0][13][l] - L->lu[174][l] * L->k[0][12][l]
+                - L->lu[173][l] * L->k[0][11][l] - L->lu[172][l] * L->k[0][10][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[0][17][l] -
+                L->lu[160][l] * L->k[0][16][l] - L->lu[159][l] * L->k[0][15][l] - L->lu[158][l] *
+                L->k[0][14][l] - L->lu[157][l] * L->k[0][13][l] - L->lu[156][l] * L->k[0][12][l]
+                - L->lu[155][l] * L->k[0][11][l] - L->lu[154][l] * L->k[0][10][l] - L->lu[153][l]
+                * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[0][17][l] -
+                L->lu[142][l] * L->k[0][16][l] - L->lu[141][l] * L->k[0][15][l] - L->lu[140][l] *
+                L->k[0][14][l] - L->lu[139][l] * L->k[0][13][l] - L->lu[138][l] * L->k[0][12][l]
+                - L->lu[137][l] * L->k[0][11][l] - L->lu[136][l] * L->k[0][10][l] - L->lu[135][l]
+                * L->k[0][9][l] - L->lu[134][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[0][17][l] -
+                L->lu[124][l] * L->k[0][16][l] - L->lu[123][l] * L->k[0][15][l] - L->lu[122][l] *
+                L->k[0][14][l] - L->lu[121][l] * L->k[0][13][l] - L->lu[120][l] * L->k[0][12][l]
+                - L->lu[119][l] * L->k[0][11][l] - L->lu[118][l] * L->k[0][10][l] - L->lu[117][l]
+                * L->k[0][9][l] - L->lu[116][l] * L->k[0][8][l] - L->lu[115][l] * L->k[0][7][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[0][17][l] -
+                L->lu[106][l] * L->k[0][16][l] - L->lu[105][l] * L->k[0][15][l] - L->lu[104][l] *
+                L->k[0][14][l] - L->lu[103][l] * L->k[0][13][l] - L->lu[102][l] * L->k[0][12][l]
+                - L->lu[101][l] * L->k[0][11][l] - L->lu[100][l] * L->k[0][10][l] - L->lu[99][l]
+                * L->k[0][9][l] - L->lu[98][l] * L->k[0][8][l] - L->lu[97][l] * L->k[0][7][l] -
+                L->lu[96][l] * L->k[0][6][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[0][17][l] -
+                L->lu[88][l] * L->k[0][16][l] - L->lu[87][l] * L->k[0][15][l] - L->lu[86][l] *
+                L->k[0][14][l] - L->lu[85][l] * L->k[0][13][l] - L->lu[84][l] * L->k[0][12][l] -
+                L->lu[83][l] * L->k[0][11][l] - L->lu[82][l] * L->k[0][10][l] - L->lu[81][l] *
+                L->k[0][9][l] - L->lu[80][l] * L->k[0][8][l] - L->lu[79][l] * L->k[0][7][l] -
+                L->lu[78][l] * L->k[0][6][l] - L->lu[77][l] * L->k[0][5][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[0][17][l] -
+                L->lu[70][l] * L->k[0][16][l] - L->lu[69][l] * L->k[0][15][l] - L->lu[68][l] *
+                L->k[0][14][l] - L->lu[67][l] * L->k[0][13][l] - L->lu[66][l] * L->k[0][12][l] -
+                L->lu[65][l] * L->k[0][11][l] - L->lu[64][l] * L->k[0][10][l] - L->lu[63][l] *
+                L->k[0][9][l] - L->lu[62][l] * L->k[0][8][l] - L->lu[61][l] * L->k[0][7][l] -
+                L->lu[60][l] * L->k[0][6][l] - L->lu[59][l] * L->k[0][5][l] - L->lu[58][l] *
+                L->k[0][4][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[0][9][l] -
+                L->lu[44][l] * L->k[0][8][l] - L->lu[43][l] * L->k[0][7][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[0][9][l] -
+                L->lu[26][l] * L->k[0][8][l] - L->lu[25][l] * L->k[0][7][l] - L->lu[20][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[0][9][l] - L->lu[7][l] *
+                L->k[0][7][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 4 ? L->k[1][4][l] : L->k[1][3][l];
+        L->k[1][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[1][4][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 5 ? L->k[1][5][l] : L->k[1][3][l];
+        L->k[1][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 6 ? L->k[1][6][l] : L->k[1][3][l];
+        L->k[1][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 7 ? L->k[1][7][l] : L->k[1][3][l];
+        L->k[1][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 8 ? L->k[1][8][l] : L->k[1][3][l];
+        L->k[1][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 9 ? L->k[1][9][l] : L->k[1][3][l];
+        L->k[1][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 10 ? L->k[1][10][l] : L->k[1][3][l];
+        L->k[1][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 11 ? L->k[1][11][l] : L->k[1][3][l];
+        L->k[1][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 12 ? L->k[1][12][l] : L->k[1][3][l];
+        L->k[1][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 13 ? L->k[1][13][l] : L->k[1][3][l];
+        L->k[1][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 14 ? L->k[1][14][l] : L->k[1][3][l];
+        L->k[1][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 15 ? L->k[1][15][l] : L->k[1][3][l];
+        L->k[1][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 16 ? L->k[1][16][l] : L->k[1][3][l];
+        L->k[1][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 17 ? L->k[1][17][l] : L->k[1][3][l];
+        L->k[1][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 5 ? L->k[1][5][l] : L->k[1][4][l];
+        L->k[1][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 6 ? L->k[1][6][l] : L->k[1][4][l];
+        L->k[1][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 7 ? L->k[1][7][l] : L->k[1][4][l];
+        L->k[1][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 8 ? L->k[1][8][l] : L->k[1][4][l];
+        L->k[1][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 9 ? L->k[1][9][l] : L->k[1][4][l];
+        L->k[1][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 10 ? L->k[1][10][l] : L->k[1][4][l];
+        L->k[1][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 11 ? L->k[1][11][l] : L->k[1][4][l];
+        L->k[1][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 12 ? L->k[1][12][l] : L->k[1][4][l];
+        L->k[1][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 13 ? L->k[1][13][l] : L->k[1][4][l];
+        L->k[1][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 14 ? L->k[1][14][l] : L->k[1][4][l];
+        L->k[1][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 15 ? L->k[1][15][l] : L->k[1][4][l];
+        L->k[1][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 16 ? L->k[1][16][l] : L->k[1][4][l];
+        L->k[1][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 17 ? L->k[1][17][l] : L->k[1][4][l];
+        L->k[1][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 6 ? L->k[1][6][l] : L->k[1][5][l];
+        L->k[1][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 7 ? L->k[1][7][l] : L->k[1][5][l];
+        L->k[1][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 8 ? L->k[1][8][l] : L->k[1][5][l];
+        L->k[1][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 9 ? L->k[1][9][l] : L->k[1][5][l];
+        L->k[1][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 10 ? L->k[1][10][l] : L->k[1][5][l];
+        L->k[1][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 11 ? L->k[1][11][l] : L->k[1][5][l];
+        L->k[1][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 12 ? L->k[1][12][l] : L->k[1][5][l];
+        L->k[1][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 13 ? L->k[1][13][l] : L->k[1][5][l];
+        L->k[1][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 14 ? L->k[1][14][l] : L->k[1][5][l];
+        L->k[1][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 15 ? L->k[1][15][l] : L->k[1][5][l];
+        L->k[1][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 16 ? L->k[1][16][l] : L->k[1][5][l];
+        L->k[1][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 17 ? L->k[1][17][l] : L->k[1][5][l];
+        L->k[1][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 7 ? L->k[1][7][l] : L->k[1][6][l];
+        L->k[1][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 8 ? L->k[1][8][l] : L->k[1][6][l];
+        L->k[1][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 9 ? L->k[1][9][l] : L->k[1][6][l];
+        L->k[1][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 10 ? L->k[1][10][l] : L->k[1][6][l];
+        L->k[1][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 11 ? L->k[1][11][l] : L->k[1][6][l];
+        L->k[1][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 12 ? L->k[1][12][l] : L->k[1][6][l];
+        L->k[1][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 13 ? L->k[1][13][l] : L->k[1][6][l];
+        L->k[1][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 14 ? L->k[1][14][l] : L->k[1][6][l];
+        L->k[1][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 15 ? L->k[1][15][l] : L->k[1][6][l];
+        L->k[1][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 16 ? L->k[1][16][l] : L->k[1][6][l];
+        L->k[1][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 17 ? L->k[1][17][l] : L->k[1][6][l];
+        L->k[1][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 10 ? L->k[1][10][l] : L->k[1][7][l];
+        L->k[1][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 11 ? L->k[1][11][l] : L->k[1][7][l];
+        L->k[1][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 12 ? L->k[1][12][l] : L->k[1][7][l];
+        L->k[1][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 13 ? L->k[1][13][l] : L->k[1][7][l];
+        L->k[1][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 14 ? L->k[1][14][l] : L->k[1][7][l];
+        L->k[1][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 15 ? L->k[1][15][l] : L->k[1][7][l];
+        L->k[1][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 16 ? L->k[1][16][l] : L->k[1][7][l];
+        L->k[1][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 17 ? L->k[1][17][l] : L->k[1][7][l];
+        L->k[1][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 10 ? L->k[1][10][l] : L->k[1][8][l];
+        L->k[1][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 11 ? L->k[1][11][l] : L->k[1][8][l];
+        L->k[1][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 12 ? L->k[1][12][l] : L->k[1][8][l];
+        L->k[1][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 13 ? L->k[1][13][l] : L->k[1][8][l];
+        L->k[1][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 14 ? L->k[1][14][l] : L->k[1][8][l];
+        L->k[1][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 15 ? L->k[1][15][l] : L->k[1][8][l];
+        L->k[1][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 16 ? L->k[1][16][l] : L->k[1][8][l];
+        L->k[1][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 17 ? L->k[1][17][l] : L->k[1][8][l];
+        L->k[1][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 10 ? L->k[1][10][l] : L->k[1][9][l];
+        L->k[1][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[1][10][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 11 ? L->k[1][11][l] : L->k[1][9][l];
+        L->k[1][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 12 ? L->k[1][12][l] : L->k[1][9][l];
+        L->k[1][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 13 ? L->k[1][13][l] : L->k[1][9][l];
+        L->k[1][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 14 ? L->k[1][14][l] : L->k[1][9][l];
+        L->k[1][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 15 ? L->k[1][15][l] : L->k[1][9][l];
+        L->k[1][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 16 ? L->k[1][16][l] : L->k[1][9][l];
+        L->k[1][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][9][l];
+        L->k[1][9][l] = L->piv[9][l] == 17 ? L->k[1][17][l] : L->k[1][9][l];
+        L->k[1][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 11 ? L->k[1][11][l] : L->k[1][10][l];
+        L->k[1][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[1][11][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 12 ? L->k[1][12][l] : L->k[1][10][l];
+        L->k[1][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 13 ? L->k[1][13][l] : L->k[1][10][l];
+        L->k[1][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 14 ? L->k[1][14][l] : L->k[1][10][l];
+        L->k[1][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 15 ? L->k[1][15][l] : L->k[1][10][l];
+        L->k[1][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 16 ? L->k[1][16][l] : L->k[1][10][l];
+        L->k[1][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][10][l];
+        L->k[1][10][l] = L->piv[10][l] == 17 ? L->k[1][17][l] : L->k[1][10][l];
+        L->k[1][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 12 ? L->k[1][12][l] : L->k[1][11][l];
+        L->k[1][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[1][12][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 13 ? L->k[1][13][l] : L->k[1][11][l];
+        L->k[1][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 14 ? L->k[1][14][l] : L->k[1][11][l];
+        L->k[1][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 15 ? L->k[1][15][l] : L->k[1][11][l];
+        L->k[1][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 16 ? L->k[1][16][l] : L->k[1][11][l];
+        L->k[1][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][11][l];
+        L->k[1][11][l] = L->piv[11][l] == 17 ? L->k[1][17][l] : L->k[1][11][l];
+        L->k[1][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 13 ? L->k[1][13][l] : L->k[1][12][l];
+        L->k[1][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[1][13][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 14 ? L->k[1][14][l] : L->k[1][12][l];
+        L->k[1][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 15 ? L->k[1][15][l] : L->k[1][12][l];
+        L->k[1][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 16 ? L->k[1][16][l] : L->k[1][12][l];
+        L->k[1][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][12][l];
+        L->k[1][12][l] = L->piv[12][l] == 17 ? L->k[1][17][l] : L->k[1][12][l];
+        L->k[1][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 14 ? L->k[1][14][l] : L->k[1][13][l];
+        L->k[1][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[1][14][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 15 ? L->k[1][15][l] : L->k[1][13][l];
+        L->k[1][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 16 ? L->k[1][16][l] : L->k[1][13][l];
+        L->k[1][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][13][l];
+        L->k[1][13][l] = L->piv[13][l] == 17 ? L->k[1][17][l] : L->k[1][13][l];
+        L->k[1][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 15 ? L->k[1][15][l] : L->k[1][14][l];
+        L->k[1][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[1][15][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 16 ? L->k[1][16][l] : L->k[1][14][l];
+        L->k[1][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][14][l];
+        L->k[1][14][l] = L->piv[14][l] == 17 ? L->k[1][17][l] : L->k[1][14][l];
+        L->k[1][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][15][l];
+        L->k[1][15][l] = L->piv[15][l] == 16 ? L->k[1][16][l] : L->k[1][15][l];
+        L->k[1][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[1][16][l];
+        swap[l] = L->k[1][15][l];
+        L->k[1][15][l] = L->piv[15][l] == 17 ? L->k[1][17][l] : L->k[1][15][l];
+        L->k[1][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[1][17][l];
+        swap[l] = L->k[1][16][l];
+        L->k[1][16][l] = L->piv[16][l] == 17 ? L->k[1][17][l] : L->k[1][16][l];
+        L->k[1][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[1][17][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[37][l] * L->k[1][1][l];
+        L->k[1][4][l] = L->k[1][4][l] - L->lu[75][l] * L->k[1][3][l];
+        L->k[1][5][l] = L->k[1][5][l] - L->lu[93][l] * L->k[1][3][l] - L->lu[94][l] * L->k[1][4][l];
+        L->k[1][6][l] = L->k[1][6][l] - L->lu[111][l] * L->k[1][3][l] - L->lu[112][l] *
+                L->k[1][4][l] - L->lu[113][l] * L->k[1][5][l];
+        L->k[1][7][l] = L->k[1][7][l] - L->lu[129][l] * L->k[1][3][l] - L->lu[130][l] *
+                L->k[1][4][l] - L->lu[131][l] * L->k[1][5][l] - L->lu[132][l] * L->k[1][6][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[147][l] * L->k[1][3][l] - L->lu[148][l] *
+                L->k[1][4][l] - L->lu[149][l] * L->k[1][5][l] - L->lu[150][l] * L->k[1][6][l] -
+                L->lu[151][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[165][l] * L->k[1][3][l] - L->lu[166][l] *
+                L->k[1][4][l] - L->lu[167][l] * L->k[1][5][l] - L->lu[168][l] * L->k[1][6][l] -
+                L->lu[169][l] * L->k[1][7][l] - L->lu[170][l] * L->k[1][8][l];
+        L->k[1][10][l] = L->k[1][10][l] - L->lu[183][l] * L->k[1][3][l] - L->lu[184][l] *
+                L->k[1][4][l] - L->lu[185][l] * L->k[1][5][l] - L->lu[186][l] * L->k[1][6][l] -
+                L->lu[187][l] * L->k[1][7][l] - L->lu[188][l] * L->k[1][8][l] - L->lu[189][l] *
+                L->k[1][9][l];
+        L->k[1][11][l] = L->k[1][11][l] - L->lu[201][l] * L->k[1][3][l] - L->lu[202][l] *
+                L->k[1][4][l] - L->lu[203][l] * L->k[1][5][l] - L->lu[204][l] * L->k[1][6][l] -
+                L->lu[205][l] * L->k[1][7][l] - L->lu[206][l] * L->k[1][8][l] - L->lu[207][l] *
+                L->k[1][9][l] - L->lu[208][l] * L->k[1][10][l];
+        L->k[1][12][l] = L->k[1][12][l] - L->lu[219][l] * L->k[1][3][l] - L->lu[220][l] *
+                L->k[1][4][l] - L->lu[221][l] * L->k[1][5][l] - L->lu[222][l] * L->k[1][6][l] -
+                L->lu[223][l] * L->k[1][7][l] - L->lu[224][l] * L->k[1][8][l] - L->lu[225][l] *
+                L->k[1][9][l] - L->lu[226][l] * L->k[1][10][l] - L->lu[227][l] * L->k[1][11][l];
+        L->k[1][13][l] = L->k[1][13][l] - L->lu[237][l] * L->k[1][3][l] - L->lu[238][l] *
+                L->k[1][4][l] - L->lu[239][l] * L->k[1][5][l] - L->lu[240][l] * L->k[1][6][l] -
+                L->lu[241][l] * L->k[1][7][l] - L->lu[242][l] * L->k[1][8][l] - L->lu[243][l] *
+                L->k[1][9][l] - L->lu[244][l] * L->k[1][10][l] - L->lu[245][l] * L->k[1][11][l] -
+                L->lu[246][l] * L->k[1][12][l];
+        L->k[1][14][l] = L->k[1][14][l] - L->lu[255][l] * L->k[1][3][l] - L->lu[256][l] *
+                L->k[1][4][l] - L->lu[257][l] * L->k[1][5][l] - L->lu[258][l] * L->k[1][6][l] -
+                L->lu[259][l] * L->k[1][7][l] - L->lu[260][l] * L->k[1][8][l] - L->lu[261][l] *
+                L->k[1][9][l] - L->lu[262][l] * L->k[1][10][l] - L->lu[263][l] * L->k[1][11][l] -
+                L->lu[264][l] * L->k[1][12][l] - L->lu[265][l] * L->k[1][13][l];
+        L->k[1][15][l] = L->k[1][15][l] - L->lu[273][l] * L->k[1][3][l] - L->lu[274][l] *
+                L->k[1][4][l] - L->lu[275][l] * L->k[1][5][l] - L->lu[276][l] * L->k[1][6][l] -
+                L->lu[277][l] * L->k[1][7][l] - L->lu[278][l] * L->k[1][8][l] - L->lu[279][l] *
+                L->k[1][9][l] - L->lu[280][l] * L->k[1][10][l] - L->lu[281][l] * L->k[1][11][l] -
+                L->lu[282][l] * L->k[1][12][l] - L->lu[283][l] * L->k[1][13][l] - L->lu[284][l] *
+                L->k[1][14][l];
+        L->k[1][16][l] = L->k[1][16][l] - L->lu[291][l] * L->k[1][3][l] - L->lu[292][l] *
+                L->k[1][4][l] - L->lu[293][l] * L->k[1][5][l] - L->lu[294][l] * L->k[1][6][l] -
+                L->lu[295][l] * L->k[1][7][l] - L->lu[296][l] * L->k[1][8][l] - L->lu[297][l] *
+                L->k[1][9][l] - L->lu[298][l] * L->k[1][10][l] - L->lu[299][l] * L->k[1][11][l] -
+                L->lu[300][l] * L->k[1][12][l] - L->lu[301][l] * L->k[1][13][l] - L->lu[302][l] *
+                L->k[1][14][l] - L->lu[303][l] * L->k[1][15][l];
+        L->k[1][17][l] = L->k[1][17][l] - L->lu[309][l] * L->k[1][3][l] - L->lu[310][l] *
+                L->k[1][4][l] - L->lu[311][l] * L->k[1][5][l] - L->lu[312][l] * L->k[1][6][l] -
+                L->lu[313][l] * L->k[1][7][l] - L->lu[314][l] * L->k[1][8][l] - L->lu[315][l] *
+                L->k[1][9][l] - L->lu[316][l] * L->k[1][10][l] - L->lu[317][l] * L->k[1][11][l] -
+                L->lu[318][l] * L->k[1][12][l] - L->lu[319][l] * L->k[1][13][l] - L->lu[320][l] *
+                L->k[1][14][l] - L->lu[321][l] * L->k[1][15][l] - L->lu[322][l] * L->k[1][16][l];
+        L->k[1][17][l] = L->k[1][17][l] * L->lu[323][l];
+        L->k[1][16][l] = L->k[1][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[1][17][l];
+        L->k[1][15][l] = L->k[1][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[1][17][l] -
+                L->lu[286][l] * L->k[1][16][l];
+        L->k[1][14][l] = L->k[1][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[1][17][l] -
+                L->lu[268][l] * L->k[1][16][l] - L->lu[267][l] * L->k[1][15][l];
+        L->k[1][13][l] = L->k[1][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[1][17][l] -
+                L->lu[250][l] * L->k[1][16][l] - L->lu[249][l] * L->k[1][15][l] - L->lu[248][l] *
+                L->k[1][14][l];
+        L->k[1][12][l] = L->k[1][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[1][17][l] -
+                L->lu[232][l] * L->k[1][16][l] - L->lu[231][l] * L->k[1][15][l] - L->lu[230][l] *
+                L->k[1][14][l] - L->lu[229][l] * L->k[1][13][l];
+        L->k[1][11][l] = L->k[1][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[1][17][l] -
+                L->lu[214][l] * L->k[1][16][l] - L->lu[213][l] * L->k[1][15][l] - L->lu[212][l] *
+                L->k[1][14][l] - L->lu[211][l] * L->k[1][13][l] - L->lu[210][l] * L->k[1][12][l];
+        L->k[1][10][l] = L->k[1][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[1][17][l] -
+                L->lu[196][l] * L->k[1][16][l] - L->lu[195][l] * L->k[1][15][l] - L->lu[194][l] *
+                L->k[1][14][l] - L->lu[193][l] * L->k[1][13][l] - L->lu[192][l] * L->k[1][12][l]
+                - L->lu[191][l] * L->k[1][11][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[1][17][l] -
+                L->lu[178][l] * L->k[1][16][l] - L->lu[177][l] * L->k[1][15][l] - L->lu[176][l] *
+                L->k[1][14][l] - L->lu[175][l] * L->k[1][13][l] - L->lu[174][l] * L->k[1][12][l]
+                - L->lu[173][l] * L->k[1][11][l] - L->lu[172][l] * L->k[1][10][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[1][17][l] -
+                L->lu[160][l] * L->k[1][16][l] - L->lu[159][l] * L->k[1][15][l] - L->lu[158][l] *
+                L->k[1][14][l] - L->lu[157][l] * L->k[1][13][l] - L->lu[156][l] * L->k[1][12][l]
+                - L->lu[155][l] * L->k[1][11][l] - L->lu[154][l] * L->k[1][10][l] - L->lu[153][l]
+                * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[1][17][l] -
+                L->lu[142][l] * L->k[1][16][l] - L->lu[141][l] * L->k[1][15][l] - L->lu[140][l] *
+                L->k[1][14][l] - L->lu[139][l] * L->k[1][13][l] - L->lu[138][l] * L->k[1][12][l]
+                - L->lu[137][l] * L->k[1][11][l] - L->lu[136][l] * L->k[1][10][l] - L->lu[135][l]
+                * L->k[1][9][l] - L->lu[134][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[1][17][l] -
+                L->lu[124][l] * L->k[1][16][l] - L->lu[123][l] * L->k[1][15][l] - L->lu[122][l] *
+                L->k[1][14][l] - L->lu[121][l] * L->k[1][13][l] - L->lu[120][l] * L->k[1][12][l]
+                - L->lu[119][l] * L->k[1][11][l] - L->lu[118][l] * L->k[1][10][l] - L->lu[117][l]
+                * L->k[1][9][l] - L->lu[116][l] * L->k[1][8][l] - L->lu[115][l] * L->k[1][7][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[1][17][l] -
+                L->lu[106][l] * L->k[1][16][l] - L->lu[105][l] * L->k[1][15][l] - L->lu[104][l] *
+                L->k[1][14][l] - L->lu[103][l] * L->k[1][13][l] - L->lu[102][l] * L->k[1][12][l]
+                - L->lu[101][l] * L->k[1][11][l] - L->lu[100][l] * L->k[1][10][l] - L->lu[99][l]
+                * L->k[1][9][l] - L->lu[98][l] * L->k[1][8][l] - L->lu[97][l] * L->k[1][7][l] -
+                L->lu[96][l] * L->k[1][6][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[1][17][l] -
+                L->lu[88][l] * L->k[1][16][l] - L->lu[87][l] * L->k[1][15][l] - L->lu[86][l] *
+                L->k[1][14][l] - L->lu[85][l] * L->k[1][13][l] - L->lu[84][l] * L->k[1][12][l] -
+                L->lu[83][l] * L->k[1][11][l] - L->lu[82][l] * L->k[1][10][l] - L->lu[81][l] *
+                L->k[1][9][l] - L->lu[80][l] * L->k[1][8][l] - L->lu[79][l] * L->k[1][7][l] -
+                L->lu[78][l] * L->k[1][6][l] - L->lu[77][l] * L->k[1][5][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[1][17][l] -
+                L->lu[70][l] * L->k[1][16][l] - L->lu[69][l] * L->k[1][15][l] - L->lu[68][l] *
+                L->k[1][14][l] - L->lu[67][l] * L->k[1][13][l] - L->lu[66][l] * L->k[1][12][l] -
+                L->lu[65][l] * L->k[1][11][l] - L->lu[64][l] * L->k[1][10][l] - L->lu[63][l] *
+                L->k[1][9][l] - L->lu[62][l] * L->k[1][8][l] - L->lu[61][l] * L->k[1][7][l] -
+                L->lu[60][l] * L->k[1][6][l] - L->lu[59][l] * L->k[1][5][l] - L->lu[58][l] *
+                L->k[1][4][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[1][9][l] -
+                L->lu[44][l] * L->k[1][8][l] - L->lu[43][l] * L->k[1][7][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[1][9][l] -
+                L->lu[26][l] * L->k[1][8][l] - L->lu[25][l] * L->k[1][7][l] - L->lu[20][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[1][9][l] - L->lu[7][l] *
+                L->k[1][7][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 4 ? L->k[2][4][l] : L->k[2][3][l];
+        L->k[2][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[2][4][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 5 ? L->k[2][5][l] : L->k[2][3][l];
+        L->k[2][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 6 ? L->k[2][6][l] : L->k[2][3][l];
+        L->k[2][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 7 ? L->k[2][7][l] : L->k[2][3][l];
+        L->k[2][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 8 ? L->k[2][8][l] : L->k[2][3][l];
+        L->k[2][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 9 ? L->k[2][9][l] : L->k[2][3][l];
+        L->k[2][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 10 ? L->k[2][10][l] : L->k[2][3][l];
+        L->k[2][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 11 ? L->k[2][11][l] : L->k[2][3][l];
+        L->k[2][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 12 ? L->k[2][12][l] : L->k[2][3][l];
+        L->k[2][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 13 ? L->k[2][13][l] : L->k[2][3][l];
+        L->k[2][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 14 ? L->k[2][14][l] : L->k[2][3][l];
+        L->k[2][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 15 ? L->k[2][15][l] : L->k[2][3][l];
+        L->k[2][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 16 ? L->k[2][16][l] : L->k[2][3][l];
+        L->k[2][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 17 ? L->k[2][17][l] : L->k[2][3][l];
+        L->k[2][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 5 ? L->k[2][5][l] : L->k[2][4][l];
+        L->k[2][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 6 ? L->k[2][6][l] : L->k[2][4][l];
+        L->k[2][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 7 ? L->k[2][7][l] : L->k[2][4][l];
+        L->k[2][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 8 ? L->k[2][8][l] : L->k[2][4][l];
+        L->k[2][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 9 ? L->k[2][9][l] : L->k[2][4][l];
+        L->k[2][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 10 ? L->k[2][10][l] : L->k[2][4][l];
+        L->k[2][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 11 ? L->k[2][11][l] : L->k[2][4][l];
+        L->k[2][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 12 ? L->k[2][12][l] : L->k[2][4][l];
+        L->k[2][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 13 ? L->k[2][13][l] : L->k[2][4][l];
+        L->k[2][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 14 ? L->k[2][14][l] : L->k[2][4][l];
+        L->k[2][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 15 ? L->k[2][15][l] : L->k[2][4][l];
+        L->k[2][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 16 ? L->k[2][16][l] : L->k[2][4][l];
+        L->k[2][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 17 ? L->k[2][17][l] : L->k[2][4][l];
+        L->k[2][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 6 ? L->k[2][6][l] : L->k[2][5][l];
+        L->k[2][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 7 ? L->k[2][7][l] : L->k[2][5][l];
+        L->k[2][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 8 ? L->k[2][8][l] : L->k[2][5][l];
+        L->k[2][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 9 ? L->k[2][9][l] : L->k[2][5][l];
+        L->k[2][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 10 ? L->k[2][10][l] : L->k[2][5][l];
+        L->k[2][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 11 ? L->k[2][11][l] : L->k[2][5][l];
+        L->k[2][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 12 ? L->k[2][12][l] : L->k[2][5][l];
+        L->k[2][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 13 ? L->k[2][13][l] : L->k[2][5][l];
+        L->k[2][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 14 ? L->k[2][14][l] : L->k[2][5][l];
+        L->k[2][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 15 ? L->k[2][15][l] : L->k[2][5][l];
+        L->k[2][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 16 ? L->k[2][16][l] : L->k[2][5][l];
+        L->k[2][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 17 ? L->k[2][17][l] : L->k[2][5][l];
+        L->k[2][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 7 ? L->k[2][7][l] : L->k[2][6][l];
+        L->k[2][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 8 ? L->k[2][8][l] : L->k[2][6][l];
+        L->k[2][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 9 ? L->k[2][9][l] : L->k[2][6][l];
+        L->k[2][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 10 ? L->k[2][10][l] : L->k[2][6][l];
+        L->k[2][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 11 ? L->k[2][11][l] : L->k[2][6][l];
+        L->k[2][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 12 ? L->k[2][12][l] : L->k[2][6][l];
+        L->k[2][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 13 ? L->k[2][13][l] : L->k[2][6][l];
+        L->k[2][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 14 ? L->k[2][14][l] : L->k[2][6][l];
+        L->k[2][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 15 ? L->k[2][15][l] : L->k[2][6][l];
+        L->k[2][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 16 ? L->k[2][16][l] : L->k[2][6][l];
+        L->k[2][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 17 ? L->k[2][17][l] : L->k[2][6][l];
+        L->k[2][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 10 ? L->k[2][10][l] : L->k[2][7][l];
+        L->k[2][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 11 ? L->k[2][11][l] : L->k[2][7][l];
+        L->k[2][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 12 ? L->k[2][12][l] : L->k[2][7][l];
+        L->k[2][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 13 ? L->k[2][13][l] : L->k[2][7][l];
+        L->k[2][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 14 ? L->k[2][14][l] : L->k[2][7][l];
+        L->k[2][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 15 ? L->k[2][15][l] : L->k[2][7][l];
+        L->k[2][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 16 ? L->k[2][16][l] : L->k[2][7][l];
+        L->k[2][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 17 ? L->k[2][17][l] : L->k[2][7][l];
+        L->k[2][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 10 ? L->k[2][10][l] : L->k[2][8][l];
+        L->k[2][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 11 ? L->k[2][11][l] : L->k[2][8][l];
+        L->k[2][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 12 ? L->k[2][12][l] : L->k[2][8][l];
+        L->k[2][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 13 ? L->k[2][13][l] : L->k[2][8][l];
+        L->k[2][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 14 ? L->k[2][14][l] : L->k[2][8][l];
+        L->k[2][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 15 ? L->k[2][15][l] : L->k[2][8][l];
+        L->k[2][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 16 ? L->k[2][16][l] : L->k[2][8][l];
+        L->k[2][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 17 ? L->k[2][17][l] : L->k[2][8][l];
+        L->k[2][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 10 ? L->k[2][10][l] : L->k[2][9][l];
+        L->k[2][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[2][10][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 11 ? L->k[2][11][l] : L->k[2][9][l];
+        L->k[2][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 12 ? L->k[2][12][l] : L->k[2][9][l];
+        L->k[2][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 13 ? L->k[2][13][l] : L->k[2][9][l];
+        L->k[2][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 14 ? L->k[2][14][l] : L->k[2][9][l];
+        L->k[2][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 15 ? L->k[2][15][l] : L->k[2][9][l];
+        L->k[2][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 16 ? L->k[2][16][l] : L->k[2][9][l];
+        L->k[2][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][9][l];
+        L->k[2][9][l] = L->piv[9][l] == 17 ? L->k[2][17][l] : L->k[2][9][l];
+        L->k[2][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 11 ? L->k[2][11][l] : L->k[2][10][l];
+        L->k[2][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[2][11][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 12 ? L->k[2][12][l] : L->k[2][10][l];
+        L->k[2][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 13 ? L->k[2][13][l] : L->k[2][10][l];
+        L->k[2][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 14 ? L->k[2][14][l] : L->k[2][10][l];
+        L->k[2][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 15 ? L->k[2][15][l] : L->k[2][10][l];
+        L->k[2][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 16 ? L->k[2][16][l] : L->k[2][10][l];
+        L->k[2][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][10][l];
+        L->k[2][10][l] = L->piv[10][l] == 17 ? L->k[2][17][l] : L->k[2][10][l];
+        L->k[2][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 12 ? L->k[2][12][l] : L->k[2][11][l];
+        L->k[2][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[2][12][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 13 ? L->k[2][13][l] : L->k[2][11][l];
+        L->k[2][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 14 ? L->k[2][14][l] : L->k[2][11][l];
+        L->k[2][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 15 ? L->k[2][15][l] : L->k[2][11][l];
+        L->k[2][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 16 ? L->k[2][16][l] : L->k[2][11][l];
+        L->k[2][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][11][l];
+        L->k[2][11][l] = L->piv[11][l] == 17 ? L->k[2][17][l] : L->k[2][11][l];
+        L->k[2][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 13 ? L->k[2][13][l] : L->k[2][12][l];
+        L->k[2][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[2][13][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 14 ? L->k[2][14][l] : L->k[2][12][l];
+        L->k[2][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 15 ? L->k[2][15][l] : L->k[2][12][l];
+        L->k[2][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 16 ? L->k[2][16][l] : L->k[2][12][l];
+        L->k[2][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][12][l];
+        L->k[2][12][l] = L->piv[12][l] == 17 ? L->k[2][17][l] : L->k[2][12][l];
+        L->k[2][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 14 ? L->k[2][14][l] : L->k[2][13][l];
+        L->k[2][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[2][14][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 15 ? L->k[2][15][l] : L->k[2][13][l];
+        L->k[2][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 16 ? L->k[2][16][l] : L->k[2][13][l];
+        L->k[2][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][13][l];
+        L->k[2][13][l] = L->piv[13][l] == 17 ? L->k[2][17][l] : L->k[2][13][l];
+        L->k[2][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 15 ? L->k[2][15][l] : L->k[2][14][l];
+        L->k[2][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[2][15][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 16 ? L->k[2][16][l] : L->k[2][14][l];
+        L->k[2][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][14][l];
+        L->k[2][14][l] = L->piv[14][l] == 17 ? L->k[2][17][l] : L->k[2][14][l];
+        L->k[2][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][15][l];
+        L->k[2][15][l] = L->piv[15][l] == 16 ? L->k[2][16][l] : L->k[2][15][l];
+        L->k[2][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[2][16][l];
+        swap[l] = L->k[2][15][l];
+        L->k[2][15][l] = L->piv[15][l] == 17 ? L->k[2][17][l] : L->k[2][15][l];
+        L->k[2][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[2][17][l];
+        swap[l] = L->k[2][16][l];
+        L->k[2][16][l] = L->piv[16][l] == 17 ? L->k[2][17][l] : L->k[2][16][l];
+        L->k[2][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[2][17][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[37][l] * L->k[2][1][l];
+        L->k[2][4][l] = L->k[2][4][l] - L->lu[75][l] * L->k[2][3][l];
+        L->k[2][5][l] = L->k[2][5][l] - L->lu[93][l] * L->k[2][3][l] - L->lu[94][l] * L->k[2][4][l];
+        L->k[2][6][l] = L->k[2][6][l] - L->lu[111][l] * L->k[2][3][l] - L->lu[112][l] *
+                L->k[2][4][l] - L->lu[113][l] * L->k[2][5][l];
+        L->k[2][7][l] = L->k[2][7][l] - L->lu[129][l] * L->k[2][3][l] - L->lu[130][l] *
+                L->k[2][4][l] - L->lu[131][l] * L->k[2][5][l] - L->lu[132][l] * L->k[2][6][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[147][l] * L->k[2][3][l] - L->lu[148][l] *
+                L->k[2][4][l] - L->lu[149][l] * L->k[2][5][l] - L->lu[150][l] * L->k[2][6][l] -
+                L->lu[151][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[165][l] * L->k[2][3][l] - L->lu[166][l] *
+                L->k[2][4][l] - L->lu[167][l] * L->k[2][5][l] - L->lu[168][l] * L->k[2][6][l] -
+                L->lu[169][l] * L->k[2][7][l] - L->lu[170][l] * L->k[2][8][l];
+        L->k[2][10][l] = L->k[2][10][l] - L->lu[183][l] * L->k[2][3][l] - L->lu[184][l] *
+                L->k[2][4][l] - L->lu[185][l] * L->k[2][5][l] - L->lu[186][l] * L->k[2][6][l] -
+                L->lu[187][l] * L->k[2][7][l] - L->lu[188][l] * L->k[2][8][l] - L->lu[189][l] *
+                L->k[2][9][l];
+        L->k[2][11][l] = L->k[2][11][l] - L->lu[201][l] * L->k[2][3][l] - L->lu[202][l] *
+                L->k[2][4][l] - L->lu[203][l] * L->k[2][5][l] - L->lu[204][l] * L->k[2][6][l] -
+                L->lu[205][l] * L->k[2][7][l] - L->lu[206][l] * L->k[2][8][l] - L->lu[207][l] *
+                L->k[2][9][l] - L->lu[208][l] * L->k[2][10][l];
+        L->k[2][12][l] = L->k[2][12][l] - L->lu[219][l] * L->k[2][3][l] - L->lu[220][l] *
+                L->k[2][4][l] - L->lu[221][l] * L->k[2][5][l] - L->lu[222][l] * L->k[2][6][l] -
+                L->lu[223][l] * L->k[2][7][l] - L->lu[224][l] * L->k[2][8][l] - L->lu[225][l] *
+                L->k[2][9][l] - L->lu[226][l] * L->k[2][10][l] - L->lu[227][l] * L->k[2][11][l];
+        L->k[2][13][l] = L->k[2][13][l] - L->lu[237][l] * L->k[2][3][l] - L->lu[238][l] *
+                L->k[2][4][l] - L->lu[239][l] * L->k[2][5][l] - L->lu[240][l] * L->k[2][6][l] -
+                L->lu[241][l] * L->k[2][7][l] - L->lu[242][l] * L->k[2][8][l] - L->lu[243][l] *
+                L->k[2][9][l] - L->lu[244][l] * L->k[2][10][l] - L->lu[245][l] * L->k[2][11][l] -
+                L->lu[246][l] * L->k[2][12][l];
+        L->k[2][14][l] = L->k[2][14][l] - L->lu[255][l] * L->k[2][3][l] - L->lu[256][l] *
+                L->k[2][4][l] - L->lu[257][l] * L->k[2][5][l] - L->lu[258][l] * L->k[2][6][l] -
+                L->lu[259][l] * L->k[2][7][l] - L->lu[260][l] * L->k[2][8][l] - L->lu[261][l] *
+                L->k[2][9][l] - L->lu[262][l] * L->k[2][10][l] - L->lu[263][l] * L->k[2][11][l] -
+                L->lu[264][l] * L->k[2][12][l] - L->lu[265][l] * L->k[2][13][l];
+        L->k[2][15][l] = L->k[2][15][l] - L->lu[273][l] * L->k[2][3][l] - L->lu[274][l] *
+                L->k[2][4][l] - L->lu[275][l] * L->k[2][5][l] - L->lu[276][l] * L->k[2][6][l] -
+                L->lu[277][l] * L->k[2][7][l] - L->lu[278][l] * L->k[2][8][l] - L->lu[279][l] *
+                L->k[2][9][l] - L->lu[280][l] * L->k[2][10][l] - L->lu[281][l] * L->k[2][11][l] -
+                L->lu[282][l] * L->k[2][12][l] - L->lu[283][l] * L->k[2][13][l] - L->lu[284][l] *
+                L->k[2][14][l];
+        L->k[2][16][l] = L->k[2][16][l] - L->lu[291][l] * L->k[2][3][l] - L->lu[292][l] *
+                L->k[2][4][l] - L->lu[293][l] * L->k[2][5][l] - L->lu[294][l] * L->k[2][6][l] -
+                L->lu[295][l] * L->k[2][7][l] - L->lu[296][l] * L->k[2][8][l] - L->lu[297][l] *
+                L->k[2][9][l] - L->lu[298][l] * L->k[2][10][l] - L->lu[299][l] * L->k[2][11][l] -
+                L->lu[300][l] * L->k[2][12][l] - L->lu[301][l] * L->k[2][13][l] - L->lu[302][l] *
+                L->k[2][14][l] - L->lu[303][l] * L->k[2][15][l];
+        L->k[2][17][l] = L->k[2][17][l] - L->lu[309][l] * L->k[2][3][l] - L->lu[310][l] *
+                L->k[2][4][l] - L->lu[311][l] * L->k[2][5][l] - L->lu[312][l] * L->k[2][6][l] -
+                L->lu[313][l] * L->k[2][7][l] - L->lu[314][l] * L->k[2][8][l] - L->lu[315][l] *
+                L->k[2][9][l] - L->lu[316][l] * L->k[2][10][l] - L->lu[317][l] * L->k[2][11][l] -
+                L->lu[318][l] * L->k[2][12][l] - L->lu[319][l] * L->k[2][13][l] - L->lu[320][l] *
+                L->k[2][14][l] - L->lu[321][l] * L->k[2][15][l] - L->lu[322][l] * L->k[2][16][l];
+        L->k[2][17][l] = L->k[2][17][l] * L->lu[323][l];
+        L->k[2][16][l] = L->k[2][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[2][17][l];
+        L->k[2][15][l] = L->k[2][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[2][17][l] -
+                L->lu[286][l] * L->k[2][16][l];
+        L->k[2][14][l] = L->k[2][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[2][17][l] -
+                L->lu[268][l] * L->k[2][16][l] - L->lu[267][l] * L->k[2][15][l];
+        L->k[2][13][l] = L->k[2][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[2][17][l] -
+                L->lu[250][l] * L->k[2][16][l] - L->lu[249][l] * L->k[2][15][l] - L->lu[248][l] *
+                L->k[2][14][l];
+        L->k[2][12][l] = L->k[2][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[2][17][l] -
+                L->lu[232][l] * L->k[2][16][l] - L->lu[231][l] * L->k[2][15][l] - L->lu[230][l] *
+                L->k[2][14][l] - L->lu[229][l] * L->k[2][13][l];
+        L->k[2][11][l] = L->k[2][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[2][17][l] -
+                L->lu[214][l] * L->k[2][16][l] - L->lu[213][l] * L->k[2][15][l] - L->lu[212][l] *
+                L->k[2][14][l] - L->lu[211][l] * L->k[2][13][l] - L->lu[210][l] * L->k[2][12][l];
+        L->k[2][10][l] = L->k[2][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[2][17][l] -
+                L->lu[196][l] * L->k[2][16][l] - L->lu[195][l] * L->k[2][15][l] - L->lu[194][l] *
+                L->k[2][14][l] - L->lu[193][l] * L->k[2][13][l] - L->lu[192][l] * L->k[2][12][l]
+                - L->lu[191][l] * L->k[2][11][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[2][17][l] -
+                L->lu[178][l] * L->k[2][16][l] - L->lu[177][l] * L->k[2][15][l] - L->lu[176][l] *
+                L->k[2][14][l] - L->lu[175][l] * L->k[2][13][l] - L->lu[174][l] * L->k[2][12][l]
+                - L->lu[173][l] * L->k[2][11][l] - L->lu[172][l] * L->k[2][10][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[2][17][l] -
+                L->lu[160][l] * L->k[2][16][l] - L->lu[159][l] * L->k[2][15][l] - L->lu[158][l] *
+                L->k[2][14][l] - L->lu[157][l] * L->k[2][13][l] - L->lu[156][l] * L->k[2][12][l]
+                - L->lu[155][l] * L->k[2][11][l] - L->lu[154][l] * L->k[2][10][l] - L->lu[153][l]
+                * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[2][17][l] -
+                L->lu[142][l] * L->k[2][16][l] - L->lu[141][l] * L->k[2][15][l] - L->lu[140][l] *
+                L->k[2][14][l] - L->lu[139][l] * L->k[2][13][l] - L->lu[138][l] * L->k[2][12][l]
+                - L->lu[137][l] * L->k[2][11][l] - L->lu[136][l] * L->k[2][10][l] - L->lu[135][l]
+                * L->k[2][9][l] - L->lu[134][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[2][17][l] -
+                L->lu[124][l] * L->k[2][16][l] - L->lu[123][l] * L->k[2][15][l] - L->lu[122][l] *
+                L->k[2][14][l] - L->lu[121][l] * L->k[2][13][l] - L->lu[120][l] * L->k[2][12][l]
+                - L->lu[119][l] * L->k[2][11][l] - L->lu[118][l] * L->k[2][10][l] - L->lu[117][l]
+                * L->k[2][9][l] - L->lu[116][l] * L->k[2][8][l] - L->lu[115][l] * L->k[2][7][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[2][17][l] -
+                L->lu[106][l] * L->k[2][16][l] - L->lu[105][l] * L->k[2][15][l] - L->lu[104][l] *
+                L->k[2][14][l] - L->lu[103][l] * L->k[2][13][l] - L->lu[102][l] * L->k[2][12][l]
+                - L->lu[101][l] * L->k[2][11][l] - L->lu[100][l] * L->k[2][10][l] - L->lu[99][l]
+                * L->k[2][9][l] - L->lu[98][l] * L->k[2][8][l] - L->lu[97][l] * L->k[2][7][l] -
+                L->lu[96][l] * L->k[2][6][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[2][17][l] -
+                L->lu[88][l] * L->k[2][16][l] - L->lu[87][l] * L->k[2][15][l] - L->lu[86][l] *
+                L->k[2][14][l] - L->lu[85][l] * L->k[2][13][l] - L->lu[84][l] * L->k[2][12][l] -
+                L->lu[83][l] * L->k[2][11][l] - L->lu[82][l] * L->k[2][10][l] - L->lu[81][l] *
+                L->k[2][9][l] - L->lu[80][l] * L->k[2][8][l] - L->lu[79][l] * L->k[2][7][l] -
+                L->lu[78][l] * L->k[2][6][l] - L->lu[77][l] * L->k[2][5][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[2][17][l] -
+                L->lu[70][l] * L->k[2][16][l] - L->lu[69][l] * L->k[2][15][l] - L->lu[68][l] *
+                L->k[2][14][l] - L->lu[67][l] * L->k[2][13][l] - L->lu[66][l] * L->k[2][12][l] -
+                L->lu[65][l] * L->k[2][11][l] - L->lu[64][l] * L->k[2][10][l] - L->lu[63][l] *
+                L->k[2][9][l] - L->lu[62][l] * L->k[2][8][l] - L->lu[61][l] * L->k[2][7][l] -
+                L->lu[60][l] * L->k[2][6][l] - L->lu[59][l] * L->k[2][5][l] - L->lu[58][l] *
+                L->k[2][4][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[2][9][l] -
+                L->lu[44][l] * L->k[2][8][l] - L->lu[43][l] * L->k[2][7][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[2][9][l] -
+                L->lu[26][l] * L->k[2][8][l] - L->lu[25][l] * L->k[2][7][l] - L->lu[20][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[2][9][l] - L->lu[7][l] *
+                L->k[2][7][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 4 ? L->k[3][4][l] : L->k[3][3][l];
+        L->k[3][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[3][4][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 5 ? L->k[3][5][l] : L->k[3][3][l];
+        L->k[3][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 6 ? L->k[3][6][l] : L->k[3][3][l];
+        L->k[3][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 7 ? L->k[3][7][l] : L->k[3][3][l];
+        L->k[3][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 8 ? L->k[3][8][l] : L->k[3][3][l];
+        L->k[3][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 9 ? L->k[3][9][l] : L->k[3][3][l];
+        L->k[3][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 10 ? L->k[3][10][l] : L->k[3][3][l];
+        L->k[3][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 11 ? L->k[3][11][l] : L->k[3][3][l];
+        L->k[3][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 12 ? L->k[3][12][l] : L->k[3][3][l];
+        L->k[3][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 13 ? L->k[3][13][l] : L->k[3][3][l];
+        L->k[3][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 14 ? L->k[3][14][l] : L->k[3][3][l];
+        L->k[3][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 15 ? L->k[3][15][l] : L->k[3][3][l];
+        L->k[3][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 16 ? L->k[3][16][l] : L->k[3][3][l];
+        L->k[3][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 17 ? L->k[3][17][l] : L->k[3][3][l];
+        L->k[3][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 5 ? L->k[3][5][l] : L->k[3][4][l];
+        L->k[3][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 6 ? L->k[3][6][l] : L->k[3][4][l];
+        L->k[3][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 7 ? L->k[3][7][l] : L->k[3][4][l];
+        L->k[3][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 8 ? L->k[3][8][l] : L->k[3][4][l];
+        L->k[3][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 9 ? L->k[3][9][l] : L->k[3][4][l];
+        L->k[3][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 10 ? L->k[3][10][l] : L->k[3][4][l];
+        L->k[3][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 11 ? L->k[3][11][l] : L->k[3][4][l];
+        L->k[3][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 12 ? L->k[3][12][l] : L->k[3][4][l];
+        L->k[3][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 13 ? L->k[3][13][l] : L->k[3][4][l];
+        L->k[3][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 14 ? L->k[3][14][l] : L->k[3][4][l];
+        L->k[3][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 15 ? L->k[3][15][l] : L->k[3][4][l];
+        L->k[3][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 16 ? L->k[3][16][l] : L->k[3][4][l];
+        L->k[3][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 17 ? L->k[3][17][l] : L->k[3][4][l];
+        L->k[3][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 6 ? L->k[3][6][l] : L->k[3][5][l];
+        L->k[3][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 7 ? L->k[3][7][l] : L->k[3][5][l];
+        L->k[3][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 8 ? L->k[3][8][l] : L->k[3][5][l];
+        L->k[3][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 9 ? L->k[3][9][l] : L->k[3][5][l];
+        L->k[3][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 10 ? L->k[3][10][l] : L->k[3][5][l];
+        L->k[3][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 11 ? L->k[3][11][l] : L->k[3][5][l];
+        L->k[3][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 12 ? L->k[3][12][l] : L->k[3][5][l];
+        L->k[3][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 13 ? L->k[3][13][l] : L->k[3][5][l];
+        L->k[3][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 14 ? L->k[3][14][l] : L->k[3][5][l];
+        L->k[3][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 15 ? L->k[3][15][l] : L->k[3][5][l];
+        L->k[3][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 16 ? L->k[3][16][l] : L->k[3][5][l];
+        L->k[3][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 17 ? L->k[3][17][l] : L->k[3][5][l];
+        L->k[3][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 7 ? L->k[3][7][l] : L->k[3][6][l];
+        L->k[3][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 8 ? L->k[3][8][l] : L->k[3][6][l];
+        L->k[3][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 9 ? L->k[3][9][l] : L->k[3][6][l];
+        L->k[3][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 10 ? L->k[3][10][l] : L->k[3][6][l];
+        L->k[3][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 11 ? L->k[3][11][l] : L->k[3][6][l];
+        L->k[3][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 12 ? L->k[3][12][l] : L->k[3][6][l];
+        L->k[3][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 13 ? L->k[3][13][l] : L->k[3][6][l];
+        L->k[3][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 14 ? L->k[3][14][l] : L->k[3][6][l];
+        L->k[3][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 15 ? L->k[3][15][l] : L->k[3][6][l];
+        L->k[3][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 16 ? L->k[3][16][l] : L->k[3][6][l];
+        L->k[3][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 17 ? L->k[3][17][l] : L->k[3][6][l];
+        L->k[3][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 10 ? L->k[3][10][l] : L->k[3][7][l];
+        L->k[3][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 11 ? L->k[3][11][l] : L->k[3][7][l];
+        L->k[3][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 12 ? L->k[3][12][l] : L->k[3][7][l];
+        L->k[3][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 13 ? L->k[3][13][l] : L->k[3][7][l];
+        L->k[3][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 14 ? L->k[3][14][l] : L->k[3][7][l];
+        L->k[3][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 15 ? L->k[3][15][l] : L->k[3][7][l];
+        L->k[3][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 16 ? L->k[3][16][l] : L->k[3][7][l];
+        L->k[3][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 17 ? L->k[3][17][l] : L->k[3][7][l];
+        L->k[3][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 10 ? L->k[3][10][l] : L->k[3][8][l];
+        L->k[3][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 11 ? L->k[3][11][l] : L->k[3][8][l];
+        L->k[3][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 12 ? L->k[3][12][l] : L->k[3][8][l];
+        L->k[3][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 13 ? L->k[3][13][l] : L->k[3][8][l];
+        L->k[3][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 14 ? L->k[3][14][l] : L->k[3][8][l];
+        L->k[3][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 15 ? L->k[3][15][l] : L->k[3][8][l];
+        L->k[3][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 16 ? L->k[3][16][l] : L->k[3][8][l];
+        L->k[3][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 17 ? L->k[3][17][l] : L->k[3][8][l];
+        L->k[3][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 10 ? L->k[3][10][l] : L->k[3][9][l];
+        L->k[3][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[3][10][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 11 ? L->k[3][11][l] : L->k[3][9][l];
+        L->k[3][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 12 ? L->k[3][12][l] : L->k[3][9][l];
+        L->k[3][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 13 ? L->k[3][13][l] : L->k[3][9][l];
+        L->k[3][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 14 ? L->k[3][14][l] : L->k[3][9][l];
+        L->k[3][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 15 ? L->k[3][15][l] : L->k[3][9][l];
+        L->k[3][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 16 ? L->k[3][16][l] : L->k[3][9][l];
+        L->k[3][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][9][l];
+        L->k[3][9][l] = L->piv[9][l] == 17 ? L->k[3][17][l] : L->k[3][9][l];
+        L->k[3][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 11 ? L->k[3][11][l] : L->k[3][10][l];
+        L->k[3][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[3][11][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 12 ? L->k[3][12][l] : L->k[3][10][l];
+        L->k[3][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 13 ? L->k[3][13][l] : L->k[3][10][l];
+        L->k[3][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 14 ? L->k[3][14][l] : L->k[3][10][l];
+        L->k[3][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 15 ? L->k[3][15][l] : L->k[3][10][l];
+        L->k[3][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 16 ? L->k[3][16][l] : L->k[3][10][l];
+        L->k[3][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][10][l];
+        L->k[3][10][l] = L->piv[10][l] == 17 ? L->k[3][17][l] : L->k[3][10][l];
+        L->k[3][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 12 ? L->k[3][12][l] : L->k[3][11][l];
+        L->k[3][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[3][12][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 13 ? L->k[3][13][l] : L->k[3][11][l];
+        L->k[3][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 14 ? L->k[3][14][l] : L->k[3][11][l];
+        L->k[3][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 15 ? L->k[3][15][l] : L->k[3][11][l];
+        L->k[3][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 16 ? L->k[3][16][l] : L->k[3][11][l];
+        L->k[3][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][11][l];
+        L->k[3][11][l] = L->piv[11][l] == 17 ? L->k[3][17][l] : L->k[3][11][l];
+        L->k[3][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 13 ? L->k[3][13][l] : L->k[3][12][l];
+        L->k[3][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[3][13][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 14 ? L->k[3][14][l] : L->k[3][12][l];
+        L->k[3][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 15 ? L->k[3][15][l] : L->k[3][12][l];
+        L->k[3][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 16 ? L->k[3][16][l] : L->k[3][12][l];
+        L->k[3][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][12][l];
+        L->k[3][12][l] = L->piv[12][l] == 17 ? L->k[3][17][l] : L->k[3][12][l];
+        L->k[3][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 14 ? L->k[3][14][l] : L->k[3][13][l];
+        L->k[3][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[3][14][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 15 ? L->k[3][15][l] : L->k[3][13][l];
+        L->k[3][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 16 ? L->k[3][16][l] : L->k[3][13][l];
+        L->k[3][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][13][l];
+        L->k[3][13][l] = L->piv[13][l] == 17 ? L->k[3][17][l] : L->k[3][13][l];
+        L->k[3][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 15 ? L->k[3][15][l] : L->k[3][14][l];
+        L->k[3][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[3][15][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 16 ? L->k[3][16][l] : L->k[3][14][l];
+        L->k[3][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][14][l];
+        L->k[3][14][l] = L->piv[14][l] == 17 ? L->k[3][17][l] : L->k[3][14][l];
+        L->k[3][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][15][l];
+        L->k[3][15][l] = L->piv[15][l] == 16 ? L->k[3][16][l] : L->k[3][15][l];
+        L->k[3][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[3][16][l];
+        swap[l] = L->k[3][15][l];
+        L->k[3][15][l] = L->piv[15][l] == 17 ? L->k[3][17][l] : L->k[3][15][l];
+        L->k[3][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[3][17][l];
+        swap[l] = L->k[3][16][l];
+        L->k[3][16][l] = L->piv[16][l] == 17 ? L->k[3][17][l] : L->k[3][16][l];
+        L->k[3][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[3][17][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[37][l] * L->k[3][1][l];
+        L->k[3][4][l] = L->k[3][4][l] - L->lu[75][l] * L->k[3][3][l];
+        L->k[3][5][l] = L->k[3][5][l] - L->lu[93][l] * L->k[3][3][l] - L->lu[94][l] * L->k[3][4][l];
+        L->k[3][6][l] = L->k[3][6][l] - L->lu[111][l] * L->k[3][3][l] - L->lu[112][l] *
+                L->k[3][4][l] - L->lu[113][l] * L->k[3][5][l];
+        L->k[3][7][l] = L->k[3][7][l] - L->lu[129][l] * L->k[3][3][l] - L->lu[130][l] *
+                L->k[3][4][l] - L->lu[131][l] * L->k[3][5][l] - L->lu[132][l] * L->k[3][6][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[147][l] * L->k[3][3][l] - L->lu[148][l] *
+                L->k[3][4][l] - L->lu[149][l] * L->k[3][5][l] - L->lu[150][l] * L->k[3][6][l] -
+                L->lu[151][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[165][l] * L->k[3][3][l] - L->lu[166][l] *
+                L->k[3][4][l] - L->lu[167][l] * L->k[3][5][l] - L->lu[168][l] * L->k[3][6][l] -
+                L->lu[169][l] * L->k[3][7][l] - L->lu[170][l] * L->k[3][8][l];
+        L->k[3][10][l] = L->k[3][10][l] - L->lu[183][l] * L->k[3][3][l] - L->lu[184][l] *
+                L->k[3][4][l] - L->lu[185][l] * L->k[3][5][l] - L->lu[186][l] * L->k[3][6][l] -
+                L->lu[187][l] * L->k[3][7][l] - L->lu[188][l] * L->k[3][8][l] - L->lu[189][l] *
+                L->k[3][9][l];
+        L->k[3][11][l] = L->k[3][11][l] - L->lu[201][l] * L->k[3][3][l] - L->lu[202][l] *
+                L->k[3][4][l] - L->lu[203][l] * L->k[3][5][l] - L->lu[204][l] * L->k[3][6][l] -
+                L->lu[205][l] * L->k[3][7][l] - L->lu[206][l] * L->k[3][8][l] - L->lu[207][l] *
+                L->k[3][9][l] - L->lu[208][l] * L->k[3][10][l];
+        L->k[3][12][l] = L->k[3][12][l] - L->lu[219][l] * L->k[3][3][l] - L->lu[220][l] *
+                L->k[3][4][l] - L->lu[221][l] * L->k[3][5][l] - L->lu[222][l] * L->k[3][6][l] -
+                L->lu[223][l] * L->k[3][7][l] - L->lu[224][l] * L->k[3][8][l] - L->lu[225][l] *
+                L->k[3][9][l] - L->lu[226][l] * L->k[3][10][l] - L->lu[227][l] * L->k[3][11][l];
+        L->k[3][13][l] = L->k[3][13][l] - L->lu[237][l] * L->k[3][3][l] - L->lu[238][l] *
+                L->k[3][4][l] - L->lu[239][l] * L->k[3][5][l] - L->lu[240][l] * L->k[3][6][l] -
+                L->lu[241][l] * L->k[3][7][l] - L->lu[242][l] * L->k[3][8][l] - L->lu[243][l] *
+                L->k[3][9][l] - L->lu[244][l] * L->k[3][10][l] - L->lu[245][l] * L->k[3][11][l] -
+                L->lu[246][l] * L->k[3][12][l];
+        L->k[3][14][l] = L->k[3][14][l] - L->lu[255][l] * L->k[3][3][l] - L->lu[256][l] *
+                L->k[3][4][l] - L->lu[257][l] * L->k[3][5][l] - L->lu[258][l] * L->k[3][6][l] -
+                L->lu[259][l] * L->k[3][7][l] - L->lu[260][l] * L->k[3][8][l] - L->lu[261][l] *
+                L->k[3][9][l] - L->lu[262][l] * L->k[3][10][l] - L->lu[263][l] * L->k[3][11][l] -
+                L->lu[264][l] * L->k[3][12][l] - L->lu[265][l] * L->k[3][13][l];
+        L->k[3][15][l] = L->k[3][15][l] - L->lu[273][l] * L->k[3][3][l] - L->lu[274][l] *
+                L->k[3][4][l] - L->lu[275][l] * L->k[3][5][l] - L->lu[276][l] * L->k[3][6][l] -
+                L->lu[277][l] * L->k[3][7][l] - L->lu[278][l] * L->k[3][8][l] - L->lu[279][l] *
+                L->k[3][9][l] - L->lu[280][l] * L->k[3][10][l] - L->lu[281][l] * L->k[3][11][l] -
+                L->lu[282][l] * L->k[3][12][l] - L->lu[283][l] * L->k[3][13][l] - L->lu[284][l] *
+                L->k[3][14][l];
+        L->k[3][16][l] = L->k[3][16][l] - L->lu[291][l] * L->k[3][3][l] - L->lu[292][l] *
+                L->k[3][4][l] - L->lu[293][l] * L->k[3][5][l] - L->lu[294][l] * L->k[3][6][l] -
+                L->lu[295][l] * L->k[3][7][l] - L->lu[296][l] * L->k[3][8][l] - L->lu[297][l] *
+                L->k[3][9][l] - L->lu[298][l] * L->k[3][10][l] - L->lu[299][l] * L->k[3][11][l] -
+                L->lu[300][l] * L->k[3][12][l] - L->lu[301][l] * L->k[3][13][l] - L->lu[302][l] *
+                L->k[3][14][l] - L->lu[303][l] * L->k[3][15][l];
+        L->k[3][17][l] = L->k[3][17][l] - L->lu[309][l] * L->k[3][3][l] - L->lu[310][l] *
+                L->k[3][4][l] - L->lu[311][l] * L->k[3][5][l] - L->lu[312][l] * L->k[3][6][l] -
+                L->lu[313][l] * L->k[3][7][l] - L->lu[314][l] * L->k[3][8][l] - L->lu[315][l] *
+                L->k[3][9][l] - L->lu[316][l] * L->k[3][10][l] - L->lu[317][l] * L->k[3][11][l] -
+                L->lu[318][l] * L->k[3][12][l] - L->lu[319][l] * L->k[3][13][l] - L->lu[320][l] *
+                L->k[3][14][l] - L->lu[321][l] * L->k[3][15][l] - L->lu[322][l] * L->k[3][16][l];
+        L->k[3][17][l] = L->k[3][17][l] * L->lu[323][l];
+        L->k[3][16][l] = L->k[3][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[3][17][l];
+        L->k[3][15][l] = L->k[3][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[3][17][l] -
+                L->lu[286][l] * L->k[3][16][l];
+        L->k[3][14][l] = L->k[3][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[3][17][l] -
+                L->lu[268][l] * L->k[3][16][l] - L->lu[267][l] * L->k[3][15][l];
+        L->k[3][13][l] = L->k[3][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[3][17][l] -
+                L->lu[250][l] * L->k[3][16][l] - L->lu[249][l] * L->k[3][15][l] - L->lu[248][l] *
+                L->k[3][14][l];
+        L->k[3][12][l] = L->k[3][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[3][17][l] -
+                L->lu[232][l] * L->k[3][16][l] - L->lu[231][l] * L->k[3][15][l] - L->lu[230][l] *
+                L->k[3][14][l] - L->lu[229][l] * L->k[3][13][l];
+        L->k[3][11][l] = L->k[3][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[3][17][l] -
+                L->lu[214][l] * L->k[3][16][l] - L->lu[213][l] * L->k[3][15][l] - L->lu[212][l] *
+                L->k[3][14][l] - L->lu[211][l] * L->k[3][13][l] - L->lu[210][l] * L->k[3][12][l];
+        L->k[3][10][l] = L->k[3][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[3][17][l] -
+                L->lu[196][l] * L->k[3][16][l] - L->lu[195][l] * L->k[3][15][l] - L->lu[194][l] *
+                L->k[3][14][l] - L->lu[193][l] * L->k[3][13][l] - L->lu[192][l] * L->k[3][12][l]
+                - L->lu[191][l] * L->k[3][11][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[3][17][l] -
+                L->lu[178][l] * L->k[3][16][l] - L->lu[177][l] * L->k[3][15][l] - L->lu[176][l] *
+                L->k[3][14][l] - L->lu[175][l] * L->k[3][13][l] - L->lu[174][l] * L->k[3][12][l]
+                - L->lu[173][l] * L->k[3][11][l] - L->lu[172][l] * L->k[3][10][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[3][17][l] -
+                L->lu[160][l] * L->k[3][16][l] - L->lu[159][l] * L->k[3][15][l] - L->lu[158][l] *
+                L->k[3][14][l] - L->lu[157][l] * L->k[3][13][l] - L->lu[156][l] * L->k[3][12][l]
+                - L->lu[155][l] * L->k[3][11][l] - L->lu[154][l] * L->k[3][10][l] - L->lu[153][l]
+                * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[3][17][l] -
+                L->lu[142][l] * L->k[3][16][l] - L->lu[141][l] * L->k[3][15][l] - L->lu[140][l] *
+                L->k[3][14][l] - L->lu[139][l] * L->k[3][13][l] - L->lu[138][l] * L->k[3][12][l]
+                - L->lu[137][l] * L->k[3][11][l] - L->lu[136][l] * L->k[3][10][l] - L->lu[135][l]
+                * L->k[3][9][l] - L->lu[134][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[3][17][l] -
+                L->lu[124][l] * L->k[3][16][l] - L->lu[123][l] * L->k[3][15][l] - L->lu[122][l] *
+                L->k[3][14][l] - L->lu[121][l] * L->k[3][13][l] - L->lu[120][l] * L->k[3][12][l]
+                - L->lu[119][l] * L->k[3][11][l] - L->lu[118][l] * L->k[3][10][l] - L->lu[117][l]
+                * L->k[3][9][l] - L->lu[116][l] * L->k[3][8][l] - L->lu[115][l] * L->k[3][7][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[3][17][l] -
+                L->lu[106][l] * L->k[3][16][l] - L->lu[105][l] * L->k[3][15][l] - L->lu[104][l] *
+                L->k[3][14][l] - L->lu[103][l] * L->k[3][13][l] - L->lu[102][l] * L->k[3][12][l]
+                - L->lu[101][l] * L->k[3][11][l] - L->lu[100][l] * L->k[3][10][l] - L->lu[99][l]
+                * L->k[3][9][l] - L->lu[98][l] * L->k[3][8][l] - L->lu[97][l] * L->k[3][7][l] -
+                L->lu[96][l] * L->k[3][6][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[3][17][l] -
+                L->lu[88][l] * L->k[3][16][l] - L->lu[87][l] * L->k[3][15][l] - L->lu[86][l] *
+                L->k[3][14][l] - L->lu[85][l] * L->k[3][13][l] - L->lu[84][l] * L->k[3][12][l] -
+                L->lu[83][l] * L->k[3][11][l] - L->lu[82][l] * L->k[3][10][l] - L->lu[81][l] *
+                L->k[3][9][l] - L->lu[80][l] * L->k[3][8][l] - L->lu[79][l] * L->k[3][7][l] -
+                L->lu[78][l] * L->k[3][6][l] - L->lu[77][l] * L->k[3][5][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[3][17][l] -
+                L->lu[70][l] * L->k[3][16][l] - L->lu[69][l] * L->k[3][15][l] - L->lu[68][l] *
+                L->k[3][14][l] - L->lu[67][l] * L->k[3][13][l] - L->lu[66][l] * L->k[3][12][l] -
+                L->lu[65][l] * L->k[3][11][l] - L->lu[64][l] * L->k[3][10][l] - L->lu[63][l] *
+                L->k[3][9][l] - L->lu[62][l] * L->k[3][8][l] - L->lu[61][l] * L->k[3][7][l] -
+                L->lu[60][l] * L->k[3][6][l] - L->lu[59][l] * L->k[3][5][l] - L->lu[58][l] *
+                L->k[3][4][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[3][9][l] -
+                L->lu[44][l] * L->k[3][8][l] - L->lu[43][l] * L->k[3][7][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[3][9][l] -
+                L->lu[26][l] * L->k[3][8][l] - L->lu[25][l] * L->k[3][7][l] - L->lu[20][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[3][9][l] - L->lu[7][l] *
+                L->k[3][7][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 4 ? L->k[4][4][l] : L->k[4][3][l];
+        L->k[4][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[4][4][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 5 ? L->k[4][5][l] : L->k[4][3][l];
+        L->k[4][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 6 ? L->k[4][6][l] : L->k[4][3][l];
+        L->k[4][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 7 ? L->k[4][7][l] : L->k[4][3][l];
+        L->k[4][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 8 ? L->k[4][8][l] : L->k[4][3][l];
+        L->k[4][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 9 ? L->k[4][9][l] : L->k[4][3][l];
+        L->k[4][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 10 ? L->k[4][10][l] : L->k[4][3][l];
+        L->k[4][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 11 ? L->k[4][11][l] : L->k[4][3][l];
+        L->k[4][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 12 ? L->k[4][12][l] : L->k[4][3][l];
+        L->k[4][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 13 ? L->k[4][13][l] : L->k[4][3][l];
+        L->k[4][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 14 ? L->k[4][14][l] : L->k[4][3][l];
+        L->k[4][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 15 ? L->k[4][15][l] : L->k[4][3][l];
+        L->k[4][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 16 ? L->k[4][16][l] : L->k[4][3][l];
+        L->k[4][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 17 ? L->k[4][17][l] : L->k[4][3][l];
+        L->k[4][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 5 ? L->k[4][5][l] : L->k[4][4][l];
+        L->k[4][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 6 ? L->k[4][6][l] : L->k[4][4][l];
+        L->k[4][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 7 ? L->k[4][7][l] : L->k[4][4][l];
+        L->k[4][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 8 ? L->k[4][8][l] : L->k[4][4][l];
+        L->k[4][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 9 ? L->k[4][9][l] : L->k[4][4][l];
+        L->k[4][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 10 ? L->k[4][10][l] : L->k[4][4][l];
+        L->k[4][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 11 ? L->k[4][11][l] : L->k[4][4][l];
+        L->k[4][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 12 ? L->k[4][12][l] : L->k[4][4][l];
+        L->k[4][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 13 ? L->k[4][13][l] : L->k[4][4][l];
+        L->k[4][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 14 ? L->k[4][14][l] : L->k[4][4][l];
+        L->k[4][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 15 ? L->k[4][15][l] : L->k[4][4][l];
+        L->k[4][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 16 ? L->k[4][16][l] : L->k[4][4][l];
+        L->k[4][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 17 ? L->k[4][17][l] : L->k[4][4][l];
+        L->k[4][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 6 ? L->k[4][6][l] : L->k[4][5][l];
+        L->k[4][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 7 ? L->k[4][7][l] : L->k[4][5][l];
+        L->k[4][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 8 ? L->k[4][8][l] : L->k[4][5][l];
+        L->k[4][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 9 ? L->k[4][9][l] : L->k[4][5][l];
+        L->k[4][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 10 ? L->k[4][10][l] : L->k[4][5][l];
+        L->k[4][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 11 ? L->k[4][11][l] : L->k[4][5][l];
+        L->k[4][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 12 ? L->k[4][12][l] : L->k[4][5][l];
+        L->k[4][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 13 ? L->k[4][13][l] : L->k[4][5][l];
+        L->k[4][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 14 ? L->k[4][14][l] : L->k[4][5][l];
+        L->k[4][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 15 ? L->k[4][15][l] : L->k[4][5][l];
+        L->k[4][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 16 ? L->k[4][16][l] : L->k[4][5][l];
+        L->k[4][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 17 ? L->k[4][17][l] : L->k[4][5][l];
+        L->k[4][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 7 ? L->k[4][7][l] : L->k[4][6][l];
+        L->k[4][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 8 ? L->k[4][8][l] : L->k[4][6][l];
+        L->k[4][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 9 ? L->k[4][9][l] : L->k[4][6][l];
+        L->k[4][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 10 ? L->k[4][10][l] : L->k[4][6][l];
+        L->k[4][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 11 ? L->k[4][11][l] : L->k[4][6][l];
+        L->k[4][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 12 ? L->k[4][12][l] : L->k[4][6][l];
+        L->k[4][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 13 ? L->k[4][13][l] : L->k[4][6][l];
+        L->k[4][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 14 ? L->k[4][14][l] : L->k[4][6][l];
+        L->k[4][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 15 ? L->k[4][15][l] : L->k[4][6][l];
+        L->k[4][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 16 ? L->k[4][16][l] : L->k[4][6][l];
+        L->k[4][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 17 ? L->k[4][17][l] : L->k[4][6][l];
+        L->k[4][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 10 ? L->k[4][10][l] : L->k[4][7][l];
+        L->k[4][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 11 ? L->k[4][11][l] : L->k[4][7][l];
+        L->k[4][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 12 ? L->k[4][12][l] : L->k[4][7][l];
+        L->k[4][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 13 ? L->k[4][13][l] : L->k[4][7][l];
+        L->k[4][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 14 ? L->k[4][14][l] : L->k[4][7][l];
+        L->k[4][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 15 ? L->k[4][15][l] : L->k[4][7][l];
+        L->k[4][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 16 ? L->k[4][16][l] : L->k[4][7][l];
+        L->k[4][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 17 ? L->k[4][17][l] : L->k[4][7][l];
+        L->k[4][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 10 ? L->k[4][10][l] : L->k[4][8][l];
+        L->k[4][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 11 ? L->k[4][11][l] : L->k[4][8][l];
+        L->k[4][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 12 ? L->k[4][12][l] : L->k[4][8][l];
+        L->k[4][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 13 ? L->k[4][13][l] : L->k[4][8][l];
+        L->k[4][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 14 ? L->k[4][14][l] : L->k[4][8][l];
+        L->k[4][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 15 ? L->k[4][15][l] : L->k[4][8][l];
+        L->k[4][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 16 ? L->k[4][16][l] : L->k[4][8][l];
+        L->k[4][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 17 ? L->k[4][17][l] : L->k[4][8][l];
+        L->k[4][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 10 ? L->k[4][10][l] : L->k[4][9][l];
+        L->k[4][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[4][10][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 11 ? L->k[4][11][l] : L->k[4][9][l];
+        L->k[4][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 12 ? L->k[4][12][l] : L->k[4][9][l];
+        L->k[4][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 13 ? L->k[4][13][l] : L->k[4][9][l];
+        L->k[4][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 14 ? L->k[4][14][l] : L->k[4][9][l];
+        L->k[4][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 15 ? L->k[4][15][l] : L->k[4][9][l];
+        L->k[4][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 16 ? L->k[4][16][l] : L->k[4][9][l];
+        L->k[4][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][9][l];
+        L->k[4][9][l] = L->piv[9][l] == 17 ? L->k[4][17][l] : L->k[4][9][l];
+        L->k[4][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 11 ? L->k[4][11][l] : L->k[4][10][l];
+        L->k[4][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[4][11][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 12 ? L->k[4][12][l] : L->k[4][10][l];
+        L->k[4][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 13 ? L->k[4][13][l] : L->k[4][10][l];
+        L->k[4][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 14 ? L->k[4][14][l] : L->k[4][10][l];
+        L->k[4][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 15 ? L->k[4][15][l] : L->k[4][10][l];
+        L->k[4][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 16 ? L->k[4][16][l] : L->k[4][10][l];
+        L->k[4][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][10][l];
+        L->k[4][10][l] = L->piv[10][l] == 17 ? L->k[4][17][l] : L->k[4][10][l];
+        L->k[4][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 12 ? L->k[4][12][l] : L->k[4][11][l];
+        L->k[4][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[4][12][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 13 ? L->k[4][13][l] : L->k[4][11][l];
+        L->k[4][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 14 ? L->k[4][14][l] : L->k[4][11][l];
+        L->k[4][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 15 ? L->k[4][15][l] : L->k[4][11][l];
+        L->k[4][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 16 ? L->k[4][16][l] : L->k[4][11][l];
+        L->k[4][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][11][l];
+        L->k[4][11][l] = L->piv[11][l] == 17 ? L->k[4][17][l] : L->k[4][11][l];
+        L->k[4][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 13 ? L->k[4][13][l] : L->k[4][12][l];
+        L->k[4][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[4][13][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 14 ? L->k[4][14][l] : L->k[4][12][l];
+        L->k[4][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 15 ? L->k[4][15][l] : L->k[4][12][l];
+        L->k[4][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 16 ? L->k[4][16][l] : L->k[4][12][l];
+        L->k[4][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][12][l];
+        L->k[4][12][l] = L->piv[12][l] == 17 ? L->k[4][17][l] : L->k[4][12][l];
+        L->k[4][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 14 ? L->k[4][14][l] : L->k[4][13][l];
+        L->k[4][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[4][14][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 15 ? L->k[4][15][l] : L->k[4][13][l];
+        L->k[4][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 16 ? L->k[4][16][l] : L->k[4][13][l];
+        L->k[4][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][13][l];
+        L->k[4][13][l] = L->piv[13][l] == 17 ? L->k[4][17][l] : L->k[4][13][l];
+        L->k[4][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 15 ? L->k[4][15][l] : L->k[4][14][l];
+        L->k[4][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[4][15][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 16 ? L->k[4][16][l] : L->k[4][14][l];
+        L->k[4][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][14][l];
+        L->k[4][14][l] = L->piv[14][l] == 17 ? L->k[4][17][l] : L->k[4][14][l];
+        L->k[4][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][15][l];
+        L->k[4][15][l] = L->piv[15][l] == 16 ? L->k[4][16][l] : L->k[4][15][l];
+        L->k[4][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[4][16][l];
+        swap[l] = L->k[4][15][l];
+        L->k[4][15][l] = L->piv[15][l] == 17 ? L->k[4][17][l] : L->k[4][15][l];
+        L->k[4][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[4][17][l];
+        swap[l] = L->k[4][16][l];
+        L->k[4][16][l] = L->piv[16][l] == 17 ? L->k[4][17][l] : L->k[4][16][l];
+        L->k[4][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[4][17][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[37][l] * L->k[4][1][l];
+        L->k[4][4][l] = L->k[4][4][l] - L->lu[75][l] * L->k[4][3][l];
+        L->k[4][5][l] = L->k[4][5][l] - L->lu[93][l] * L->k[4][3][l] - L->lu[94][l] * L->k[4][4][l];
+        L->k[4][6][l] = L->k[4][6][l] - L->lu[111][l] * L->k[4][3][l] - L->lu[112][l] *
+                L->k[4][4][l] - L->lu[113][l] * L->k[4][5][l];
+        L->k[4][7][l] = L->k[4][7][l] - L->lu[129][l] * L->k[4][3][l] - L->lu[130][l] *
+                L->k[4][4][l] - L->lu[131][l] * L->k[4][5][l] - L->lu[132][l] * L->k[4][6][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[147][l] * L->k[4][3][l] - L->lu[148][l] *
+                L->k[4][4][l] - L->lu[149][l] * L->k[4][5][l] - L->lu[150][l] * L->k[4][6][l] -
+                L->lu[151][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[165][l] * L->k[4][3][l] - L->lu[166][l] *
+                L->k[4][4][l] - L->lu[167][l] * L->k[4][5][l] - L->lu[168][l] * L->k[4][6][l] -
+                L->lu[169][l] * L->k[4][7][l] - L->lu[170][l] * L->k[4][8][l];
+        L->k[4][10][l] = L->k[4][10][l] - L->lu[183][l] * L->k[4][3][l] - L->lu[184][l] *
+                L->k[4][4][l] - L->lu[185][l] * L->k[4][5][l] - L->lu[186][l] * L->k[4][6][l] -
+                L->lu[187][l] * L->k[4][7][l] - L->lu[188][l] * L->k[4][8][l] - L->lu[189][l] *
+                L->k[4][9][l];
+        L->k[4][11][l] = L->k[4][11][l] - L->lu[201][l] * L->k[4][3][l] - L->lu[202][l] *
+                L->k[4][4][l] - L->lu[203][l] * L->k[4][5][l] - L->lu[204][l] * L->k[4][6][l] -
+                L->lu[205][l] * L->k[4][7][l] - L->lu[206][l] * L->k[4][8][l] - L->lu[207][l] *
+                L->k[4][9][l] - L->lu[208][l] * L->k[4][10][l];
+        L->k[4][12][l] = L->k[4][12][l] - L->lu[219][l] * L->k[4][3][l] - L->lu[220][l] *
+                L->k[4][4][l] - L->lu[221][l] * L->k[4][5][l] - L->lu[222][l] * L->k[4][6][l] -
+                L->lu[223][l] * L->k[4][7][l] - L->lu[224][l] * L->k[4][8][l] - L->lu[225][l] *
+                L->k[4][9][l] - L->lu[226][l] * L->k[4][10][l] - L->lu[227][l] * L->k[4][11][l];
+        L->k[4][13][l] = L->k[4][13][l] - L->lu[237][l] * L->k[4][3][l] - L->lu[238][l] *
+                L->k[4][4][l] - L->lu[239][l] * L->k[4][5][l] - L->lu[240][l] * L->k[4][6][l] -
+                L->lu[241][l] * L->k[4][7][l] - L->lu[242][l] * L->k[4][8][l] - L->lu[243][l] *
+                L->k[4][9][l] - L->lu[244][l] * L->k[4][10][l] - L->lu[245][l] * L->k[4][11][l] -
+                L->lu[246][l] * L->k[4][12][l];
+        L->k[4][14][l] = L->k[4][14][l] - L->lu[255][l] * L->k[4][3][l] - L->lu[256][l] *
+                L->k[4][4][l] - L->lu[257][l] * L->k[4][5][l] - L->lu[258][l] * L->k[4][6][l] -
+                L->lu[259][l] * L->k[4][7][l] - L->lu[260][l] * L->k[4][8][l] - L->lu[261][l] *
+                L->k[4][9][l] - L->lu[262][l] * L->k[4][10][l] - L->lu[263][l] * L->k[4][11][l] -
+                L->lu[264][l] * L->k[4][12][l] - L->lu[265][l] * L->k[4][13][l];
+        L->k[4][15][l] = L->k[4][15][l] - L->lu[273][l] * L->k[4][3][l] - L->lu[274][l] *
+                L->k[4][4][l] - L->lu[275][l] * L->k[4][5][l] - L->lu[276][l] * L->k[4][6][l] -
+                L->lu[277][l] * L->k[4][7][l] - L->lu[278][l] * L->k[4][8][l] - L->lu[279][l] *
+                L->k[4][9][l] - L->lu[280][l] * L->k[4][10][l] - L->lu[281][l] * L->k[4][11][l] -
+                L->lu[282][l] * L->k[4][12][l] - L->lu[283][l] * L->k[4][13][l] - L->lu[284][l] *
+                L->k[4][14][l];
+        L->k[4][16][l] = L->k[4][16][l] - L->lu[291][l] * L->k[4][3][l] - L->lu[292][l] *
+                L->k[4][4][l] - L->lu[293][l] * L->k[4][5][l] - L->lu[294][l] * L->k[4][6][l] -
+                L->lu[295][l] * L->k[4][7][l] - L->lu[296][l] * L->k[4][8][l] - L->lu[297][l] *
+                L->k[4][9][l] - L->lu[298][l] * L->k[4][10][l] - L->lu[299][l] * L->k[4][11][l] -
+                L->lu[300][l] * L->k[4][12][l] - L->lu[301][l] * L->k[4][13][l] - L->lu[302][l] *
+                L->k[4][14][l] - L->lu[303][l] * L->k[4][15][l];
+        L->k[4][17][l] = L->k[4][17][l] - L->lu[309][l] * L->k[4][3][l] - L->lu[310][l] *
+                L->k[4][4][l] - L->lu[311][l] * L->k[4][5][l] - L->lu[312][l] * L->k[4][6][l] -
+                L->lu[313][l] * L->k[4][7][l] - L->lu[314][l] * L->k[4][8][l] - L->lu[315][l] *
+                L->k[4][9][l] - L->lu[316][l] * L->k[4][10][l] - L->lu[317][l] * L->k[4][11][l] -
+                L->lu[318][l] * L->k[4][12][l] - L->lu[319][l] * L->k[4][13][l] - L->lu[320][l] *
+                L->k[4][14][l] - L->lu[321][l] * L->k[4][15][l] - L->lu[322][l] * L->k[4][16][l];
+        L->k[4][17][l] = L->k[4][17][l] * L->lu[323][l];
+        L->k[4][16][l] = L->k[4][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[4][17][l];
+        L->k[4][15][l] = L->k[4][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[4][17][l] -
+                L->lu[286][l] * L->k[4][16][l];
+        L->k[4][14][l] = L->k[4][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[4][17][l] -
+                L->lu[268][l] * L->k[4][16][l] - L->lu[267][l] * L->k[4][15][l];
+        L->k[4][13][l] = L->k[4][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[4][17][l] -
+                L->lu[250][l] * L->k[4][16][l] - L->lu[249][l] * L->k[4][15][l] - L->lu[248][l] *
+                L->k[4][14][l];
+        L->k[4][12][l] = L->k[4][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[4][17][l] -
+                L->lu[232][l] * L->k[4][16][l] - L->lu[231][l] * L->k[4][15][l] - L->lu[230][l] *
+                L->k[4][14][l] - L->lu[229][l] * L->k[4][13][l];
+        L->k[4][11][l] = L->k[4][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[4][17][l] -
+                L->lu[214][l] * L->k[4][16][l] - L->lu[213][l] * L->k[4][15][l] - L->lu[212][l] *
+                L->k[4][14][l] - L->lu[211][l] * L->k[4][13][l] - L->lu[210][l] * L->k[4][12][l];
+        L->k[4][10][l] = L->k[4][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[4][17][l] -
+                L->lu[196][l] * L->k[4][16][l] - L->lu[195][l] * L->k[4][15][l] - L->lu[194][l] *
+                L->k[4][14][l] - L->lu[193][l] * L->k[4][13][l] - L->lu[192][l] * L->k[4][12][l]
+                - L->lu[191][l] * L->k[4][11][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[4][17][l] -
+                L->lu[178][l] * L->k[4][16][l] - L->lu[177][l] * L->k[4][15][l] - L->lu[176][l] *
+                L->k[4][14][l] - L->lu[175][l] * L->k[4][13][l] - L->lu[174][l] * L->k[4][12][l]
+                - L->lu[173][l] * L->k[4][11][l] - L->lu[172][l] * L->k[4][10][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[4][17][l] -
+                L->lu[160][l] * L->k[4][16][l] - L->lu[159][l] * L->k[4][15][l] - L->lu[158][l] *
+                L->k[4][14][l] - L->lu[157][l] * L->k[4][13][l] - L->lu[156][l] * L->k[4][12][l]
+                - L->lu[155][l] * L->k[4][11][l] - L->lu[154][l] * L->k[4][10][l] - L->lu[153][l]
+                * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[4][17][l] -
+                L->lu[142][l] * L->k[4][16][l] - L->lu[141][l] * L->k[4][15][l] - L->lu[140][l] *
+                L->k[4][14][l] - L->lu[139][l] * L->k[4][13][l] - L->lu[138][l] * L->k[4][12][l]
+                - L->lu[137][l] * L->k[4][11][l] - L->lu[136][l] * L->k[4][10][l] - L->lu[135][l]
+                * L->k[4][9][l] - L->lu[134][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[4][17][l] -
+                L->lu[124][l] * L->k[4][16][l] - L->lu[123][l] * L->k[4][15][l] - L->lu[122][l] *
+                L->k[4][14][l] - L->lu[121][l] * L->k[4][13][l] - L->lu[120][l] * L->k[4][12][l]
+                - L->lu[119][l] * L->k[4][11][l] - L->lu[118][l] * L->k[4][10][l] - L->lu[117][l]
+                * L->k[4][9][l] - L->lu[116][l] * L->k[4][8][l] - L->lu[115][l] * L->k[4][7][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[4][17][l] -
+                L->lu[106][l] * L->k[4][16][l] - L->lu[105][l] * L->k[4][15][l] - L->lu[104][l] *
+                L->k[4][14][l] - L->lu[103][l] * L->k[4][13][l] - L->lu[102][l] * L->k[4][12][l]
+                - L->lu[101][l] * L->k[4][11][l] - L->lu[100][l] * L->k[4][10][l] - L->lu[99][l]
+                * L->k[4][9][l] - L->lu[98][l] * L->k[4][8][l] - L->lu[97][l] * L->k[4][7][l] -
+                L->lu[96][l] * L->k[4][6][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[4][17][l] -
+                L->lu[88][l] * L->k[4][16][l] - L->lu[87][l] * L->k[4][15][l] - L->lu[86][l] *
+                L->k[4][14][l] - L->lu[85][l] * L->k[4][13][l] - L->lu[84][l] * L->k[4][12][l] -
+                L->lu[83][l] * L->k[4][11][l] - L->lu[82][l] * L->k[4][10][l] - L->lu[81][l] *
+                L->k[4][9][l] - L->lu[80][l] * L->k[4][8][l] - L->lu[79][l] * L->k[4][7][l] -
+                L->lu[78][l] * L->k[4][6][l] - L->lu[77][l] * L->k[4][5][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[4][17][l] -
+                L->lu[70][l] * L->k[4][16][l] - L->lu[69][l] * L->k[4][15][l] - L->lu[68][l] *
+                L->k[4][14][l] - L->lu[67][l] * L->k[4][13][l] - L->lu[66][l] * L->k[4][12][l] -
+                L->lu[65][l] * L->k[4][11][l] - L->lu[64][l] * L->k[4][10][l] - L->lu[63][l] *
+                L->k[4][9][l] - L->lu[62][l] * L->k[4][8][l] - L->lu[61][l] * L->k[4][7][l] -
+                L->lu[60][l] * L->k[4][6][l] - L->lu[59][l] * L->k[4][5][l] - L->lu[58][l] *
+                L->k[4][4][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[4][9][l] -
+                L->lu[44][l] * L->k[4][8][l] - L->lu[43][l] * L->k[4][7][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[4][9][l] -
+                L->lu[26][l] * L->k[4][8][l] - L->lu[25][l] * L->k[4][7][l] - L->lu[20][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[4][9][l] - L->lu[7][l] *
+                L->k[4][7][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 4 ? L->k[5][4][l] : L->k[5][3][l];
+        L->k[5][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[5][4][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 5 ? L->k[5][5][l] : L->k[5][3][l];
+        L->k[5][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 6 ? L->k[5][6][l] : L->k[5][3][l];
+        L->k[5][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 7 ? L->k[5][7][l] : L->k[5][3][l];
+        L->k[5][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 8 ? L->k[5][8][l] : L->k[5][3][l];
+        L->k[5][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 9 ? L->k[5][9][l] : L->k[5][3][l];
+        L->k[5][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 10 ? L->k[5][10][l] : L->k[5][3][l];
+        L->k[5][10][l] = L->piv[3][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 11 ? L->k[5][11][l] : L->k[5][3][l];
+        L->k[5][11][l] = L->piv[3][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 12 ? L->k[5][12][l] : L->k[5][3][l];
+        L->k[5][12][l] = L->piv[3][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 13 ? L->k[5][13][l] : L->k[5][3][l];
+        L->k[5][13][l] = L->piv[3][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 14 ? L->k[5][14][l] : L->k[5][3][l];
+        L->k[5][14][l] = L->piv[3][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 15 ? L->k[5][15][l] : L->k[5][3][l];
+        L->k[5][15][l] = L->piv[3][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 16 ? L->k[5][16][l] : L->k[5][3][l];
+        L->k[5][16][l] = L->piv[3][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 17 ? L->k[5][17][l] : L->k[5][3][l];
+        L->k[5][17][l] = L->piv[3][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 5 ? L->k[5][5][l] : L->k[5][4][l];
+        L->k[5][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 6 ? L->k[5][6][l] : L->k[5][4][l];
+        L->k[5][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 7 ? L->k[5][7][l] : L->k[5][4][l];
+        L->k[5][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 8 ? L->k[5][8][l] : L->k[5][4][l];
+        L->k[5][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 9 ? L->k[5][9][l] : L->k[5][4][l];
+        L->k[5][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 10 ? L->k[5][10][l] : L->k[5][4][l];
+        L->k[5][10][l] = L->piv[4][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 11 ? L->k[5][11][l] : L->k[5][4][l];
+        L->k[5][11][l] = L->piv[4][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 12 ? L->k[5][12][l] : L->k[5][4][l];
+        L->k[5][12][l] = L->piv[4][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 13 ? L->k[5][13][l] : L->k[5][4][l];
+        L->k[5][13][l] = L->piv[4][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 14 ? L->k[5][14][l] : L->k[5][4][l];
+        L->k[5][14][l] = L->piv[4][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 15 ? L->k[5][15][l] : L->k[5][4][l];
+        L->k[5][15][l] = L->piv[4][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 16 ? L->k[5][16][l] : L->k[5][4][l];
+        L->k[5][16][l] = L->piv[4][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 17 ? L->k[5][17][l] : L->k[5][4][l];
+        L->k[5][17][l] = L->piv[4][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 6 ? L->k[5][6][l] : L->k[5][5][l];
+        L->k[5][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 7 ? L->k[5][7][l] : L->k[5][5][l];
+        L->k[5][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 8 ? L->k[5][8][l] : L->k[5][5][l];
+        L->k[5][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 9 ? L->k[5][9][l] : L->k[5][5][l];
+        L->k[5][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 10 ? L->k[5][10][l] : L->k[5][5][l];
+        L->k[5][10][l] = L->piv[5][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 11 ? L->k[5][11][l] : L->k[5][5][l];
+        L->k[5][11][l] = L->piv[5][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 12 ? L->k[5][12][l] : L->k[5][5][l];
+        L->k[5][12][l] = L->piv[5][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 13 ? L->k[5][13][l] : L->k[5][5][l];
+        L->k[5][13][l] = L->piv[5][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 14 ? L->k[5][14][l] : L->k[5][5][l];
+        L->k[5][14][l] = L->piv[5][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 15 ? L->k[5][15][l] : L->k[5][5][l];
+        L->k[5][15][l] = L->piv[5][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 16 ? L->k[5][16][l] : L->k[5][5][l];
+        L->k[5][16][l] = L->piv[5][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 17 ? L->k[5][17][l] : L->k[5][5][l];
+        L->k[5][17][l] = L->piv[5][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 7 ? L->k[5][7][l] : L->k[5][6][l];
+        L->k[5][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 8 ? L->k[5][8][l] : L->k[5][6][l];
+        L->k[5][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 9 ? L->k[5][9][l] : L->k[5][6][l];
+        L->k[5][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 10 ? L->k[5][10][l] : L->k[5][6][l];
+        L->k[5][10][l] = L->piv[6][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 11 ? L->k[5][11][l] : L->k[5][6][l];
+        L->k[5][11][l] = L->piv[6][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 12 ? L->k[5][12][l] : L->k[5][6][l];
+        L->k[5][12][l] = L->piv[6][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 13 ? L->k[5][13][l] : L->k[5][6][l];
+        L->k[5][13][l] = L->piv[6][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 14 ? L->k[5][14][l] : L->k[5][6][l];
+        L->k[5][14][l] = L->piv[6][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 15 ? L->k[5][15][l] : L->k[5][6][l];
+        L->k[5][15][l] = L->piv[6][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 16 ? L->k[5][16][l] : L->k[5][6][l];
+        L->k[5][16][l] = L->piv[6][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 17 ? L->k[5][17][l] : L->k[5][6][l];
+        L->k[5][17][l] = L->piv[6][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 10 ? L->k[5][10][l] : L->k[5][7][l];
+        L->k[5][10][l] = L->piv[7][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 11 ? L->k[5][11][l] : L->k[5][7][l];
+        L->k[5][11][l] = L->piv[7][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 12 ? L->k[5][12][l] : L->k[5][7][l];
+        L->k[5][12][l] = L->piv[7][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 13 ? L->k[5][13][l] : L->k[5][7][l];
+        L->k[5][13][l] = L->piv[7][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 14 ? L->k[5][14][l] : L->k[5][7][l];
+        L->k[5][14][l] = L->piv[7][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 15 ? L->k[5][15][l] : L->k[5][7][l];
+        L->k[5][15][l] = L->piv[7][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 16 ? L->k[5][16][l] : L->k[5][7][l];
+        L->k[5][16][l] = L->piv[7][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 17 ? L->k[5][17][l] : L->k[5][7][l];
+        L->k[5][17][l] = L->piv[7][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 10 ? L->k[5][10][l] : L->k[5][8][l];
+        L->k[5][10][l] = L->piv[8][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 11 ? L->k[5][11][l] : L->k[5][8][l];
+        L->k[5][11][l] = L->piv[8][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 12 ? L->k[5][12][l] : L->k[5][8][l];
+        L->k[5][12][l] = L->piv[8][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 13 ? L->k[5][13][l] : L->k[5][8][l];
+        L->k[5][13][l] = L->piv[8][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 14 ? L->k[5][14][l] : L->k[5][8][l];
+        L->k[5][14][l] = L->piv[8][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 15 ? L->k[5][15][l] : L->k[5][8][l];
+        L->k[5][15][l] = L->piv[8][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 16 ? L->k[5][16][l] : L->k[5][8][l];
+        L->k[5][16][l] = L->piv[8][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 17 ? L->k[5][17][l] : L->k[5][8][l];
+        L->k[5][17][l] = L->piv[8][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 10 ? L->k[5][10][l] : L->k[5][9][l];
+        L->k[5][10][l] = L->piv[9][l] == 10 ? swap[l] : L->k[5][10][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 11 ? L->k[5][11][l] : L->k[5][9][l];
+        L->k[5][11][l] = L->piv[9][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 12 ? L->k[5][12][l] : L->k[5][9][l];
+        L->k[5][12][l] = L->piv[9][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 13 ? L->k[5][13][l] : L->k[5][9][l];
+        L->k[5][13][l] = L->piv[9][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 14 ? L->k[5][14][l] : L->k[5][9][l];
+        L->k[5][14][l] = L->piv[9][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 15 ? L->k[5][15][l] : L->k[5][9][l];
+        L->k[5][15][l] = L->piv[9][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 16 ? L->k[5][16][l] : L->k[5][9][l];
+        L->k[5][16][l] = L->piv[9][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][9][l];
+        L->k[5][9][l] = L->piv[9][l] == 17 ? L->k[5][17][l] : L->k[5][9][l];
+        L->k[5][17][l] = L->piv[9][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 11 ? L->k[5][11][l] : L->k[5][10][l];
+        L->k[5][11][l] = L->piv[10][l] == 11 ? swap[l] : L->k[5][11][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 12 ? L->k[5][12][l] : L->k[5][10][l];
+        L->k[5][12][l] = L->piv[10][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 13 ? L->k[5][13][l] : L->k[5][10][l];
+        L->k[5][13][l] = L->piv[10][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 14 ? L->k[5][14][l] : L->k[5][10][l];
+        L->k[5][14][l] = L->piv[10][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 15 ? L->k[5][15][l] : L->k[5][10][l];
+        L->k[5][15][l] = L->piv[10][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 16 ? L->k[5][16][l] : L->k[5][10][l];
+        L->k[5][16][l] = L->piv[10][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][10][l];
+        L->k[5][10][l] = L->piv[10][l] == 17 ? L->k[5][17][l] : L->k[5][10][l];
+        L->k[5][17][l] = L->piv[10][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 12 ? L->k[5][12][l] : L->k[5][11][l];
+        L->k[5][12][l] = L->piv[11][l] == 12 ? swap[l] : L->k[5][12][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 13 ? L->k[5][13][l] : L->k[5][11][l];
+        L->k[5][13][l] = L->piv[11][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 14 ? L->k[5][14][l] : L->k[5][11][l];
+        L->k[5][14][l] = L->piv[11][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 15 ? L->k[5][15][l] : L->k[5][11][l];
+        L->k[5][15][l] = L->piv[11][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 16 ? L->k[5][16][l] : L->k[5][11][l];
+        L->k[5][16][l] = L->piv[11][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][11][l];
+        L->k[5][11][l] = L->piv[11][l] == 17 ? L->k[5][17][l] : L->k[5][11][l];
+        L->k[5][17][l] = L->piv[11][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 13 ? L->k[5][13][l] : L->k[5][12][l];
+        L->k[5][13][l] = L->piv[12][l] == 13 ? swap[l] : L->k[5][13][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 14 ? L->k[5][14][l] : L->k[5][12][l];
+        L->k[5][14][l] = L->piv[12][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 15 ? L->k[5][15][l] : L->k[5][12][l];
+        L->k[5][15][l] = L->piv[12][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 16 ? L->k[5][16][l] : L->k[5][12][l];
+        L->k[5][16][l] = L->piv[12][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][12][l];
+        L->k[5][12][l] = L->piv[12][l] == 17 ? L->k[5][17][l] : L->k[5][12][l];
+        L->k[5][17][l] = L->piv[12][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 14 ? L->k[5][14][l] : L->k[5][13][l];
+        L->k[5][14][l] = L->piv[13][l] == 14 ? swap[l] : L->k[5][14][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 15 ? L->k[5][15][l] : L->k[5][13][l];
+        L->k[5][15][l] = L->piv[13][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 16 ? L->k[5][16][l] : L->k[5][13][l];
+        L->k[5][16][l] = L->piv[13][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][13][l];
+        L->k[5][13][l] = L->piv[13][l] == 17 ? L->k[5][17][l] : L->k[5][13][l];
+        L->k[5][17][l] = L->piv[13][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 15 ? L->k[5][15][l] : L->k[5][14][l];
+        L->k[5][15][l] = L->piv[14][l] == 15 ? swap[l] : L->k[5][15][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 16 ? L->k[5][16][l] : L->k[5][14][l];
+        L->k[5][16][l] = L->piv[14][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][14][l];
+        L->k[5][14][l] = L->piv[14][l] == 17 ? L->k[5][17][l] : L->k[5][14][l];
+        L->k[5][17][l] = L->piv[14][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][15][l];
+        L->k[5][15][l] = L->piv[15][l] == 16 ? L->k[5][16][l] : L->k[5][15][l];
+        L->k[5][16][l] = L->piv[15][l] == 16 ? swap[l] : L->k[5][16][l];
+        swap[l] = L->k[5][15][l];
+        L->k[5][15][l] = L->piv[15][l] == 17 ? L->k[5][17][l] : L->k[5][15][l];
+        L->k[5][17][l] = L->piv[15][l] == 17 ? swap[l] : L->k[5][17][l];
+        swap[l] = L->k[5][16][l];
+        L->k[5][16][l] = L->piv[16][l] == 17 ? L->k[5][17][l] : L->k[5][16][l];
+        L->k[5][17][l] = L->piv[16][l] == 17 ? swap[l] : L->k[5][17][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[37][l] * L->k[5][1][l];
+        L->k[5][4][l] = L->k[5][4][l] - L->lu[75][l] * L->k[5][3][l];
+        L->k[5][5][l] = L->k[5][5][l] - L->lu[93][l] * L->k[5][3][l] - L->lu[94][l] * L->k[5][4][l];
+        L->k[5][6][l] = L->k[5][6][l] - L->lu[111][l] * L->k[5][3][l] - L->lu[112][l] *
+                L->k[5][4][l] - L->lu[113][l] * L->k[5][5][l];
+        L->k[5][7][l] = L->k[5][7][l] - L->lu[129][l] * L->k[5][3][l] - L->lu[130][l] *
+                L->k[5][4][l] - L->lu[131][l] * L->k[5][5][l] - L->lu[132][l] * L->k[5][6][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[147][l] * L->k[5][3][l] - L->lu[148][l] *
+                L->k[5][4][l] - L->lu[149][l] * L->k[5][5][l] - L->lu[150][l] * L->k[5][6][l] -
+                L->lu[151][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[165][l] * L->k[5][3][l] - L->lu[166][l] *
+                L->k[5][4][l] - L->lu[167][l] * L->k[5][5][l] - L->lu[168][l] * L->k[5][6][l] -
+                L->lu[169][l] * L->k[5][7][l] - L->lu[170][l] * L->k[5][8][l];
+        L->k[5][10][l] = L->k[5][10][l] - L->lu[183][l] * L->k[5][3][l] - L->lu[184][l] *
+                L->k[5][4][l] - L->lu[185][l] * L->k[5][5][l] - L->lu[186][l] * L->k[5][6][l] -
+                L->lu[187][l] * L->k[5][7][l] - L->lu[188][l] * L->k[5][8][l] - L->lu[189][l] *
+                L->k[5][9][l];
+        L->k[5][11][l] = L->k[5][11][l] - L->lu[201][l] * L->k[5][3][l] - L->lu[202][l] *
+                L->k[5][4][l] - L->lu[203][l] * L->k[5][5][l] - L->lu[204][l] * L->k[5][6][l] -
+                L->lu[205][l] * L->k[5][7][l] - L->lu[206][l] * L->k[5][8][l] - L->lu[207][l] *
+                L->k[5][9][l] - L->lu[208][l] * L->k[5][10][l];
+        L->k[5][12][l] = L->k[5][12][l] - L->lu[219][l] * L->k[5][3][l] - L->lu[220][l] *
+                L->k[5][4][l] - L->lu[221][l] * L->k[5][5][l] - L->lu[222][l] * L->k[5][6][l] -
+                L->lu[223][l] * L->k[5][7][l] - L->lu[224][l] * L->k[5][8][l] - L->lu[225][l] *
+                L->k[5][9][l] - L->lu[226][l] * L->k[5][10][l] - L->lu[227][l] * L->k[5][11][l];
+        L->k[5][13][l] = L->k[5][13][l] - L->lu[237][l] * L->k[5][3][l] - L->lu[238][l] *
+                L->k[5][4][l] - L->lu[239][l] * L->k[5][5][l] - L->lu[240][l] * L->k[5][6][l] -
+                L->lu[241][l] * L->k[5][7][l] - L->lu[242][l] * L->k[5][8][l] - L->lu[243][l] *
+                L->k[5][9][l] - L->lu[244][l] * L->k[5][10][l] - L->lu[245][l] * L->k[5][11][l] -
+                L->lu[246][l] * L->k[5][12][l];
+        L->k[5][14][l] = L->k[5][14][l] - L->lu[255][l] * L->k[5][3][l] - L->lu[256][l] *
+                L->k[5][4][l] - L->lu[257][l] * L->k[5][5][l] - L->lu[258][l] * L->k[5][6][l] -
+                L->lu[259][l] * L->k[5][7][l] - L->lu[260][l] * L->k[5][8][l] - L->lu[261][l] *
+                L->k[5][9][l] - L->lu[262][l] * L->k[5][10][l] - L->lu[263][l] * L->k[5][11][l] -
+                L->lu[264][l] * L->k[5][12][l] - L->lu[265][l] * L->k[5][13][l];
+        L->k[5][15][l] = L->k[5][15][l] - L->lu[273][l] * L->k[5][3][l] - L->lu[274][l] *
+                L->k[5][4][l] - L->lu[275][l] * L->k[5][5][l] - L->lu[276][l] * L->k[5][6][l] -
+                L->lu[277][l] * L->k[5][7][l] - L->lu[278][l] * L->k[5][8][l] - L->lu[279][l] *
+                L->k[5][9][l] - L->lu[280][l] * L->k[5][10][l] - L->lu[281][l] * L->k[5][11][l] -
+                L->lu[282][l] * L->k[5][12][l] - L->lu[283][l] * L->k[5][13][l] - L->lu[284][l] *
+                L->k[5][14][l];
+        L->k[5][16][l] = L->k[5][16][l] - L->lu[291][l] * L->k[5][3][l] - L->lu[292][l] *
+                L->k[5][4][l] - L->lu[293][l] * L->k[5][5][l] - L->lu[294][l] * L->k[5][6][l] -
+                L->lu[295][l] * L->k[5][7][l] - L->lu[296][l] * L->k[5][8][l] - L->lu[297][l] *
+                L->k[5][9][l] - L->lu[298][l] * L->k[5][10][l] - L->lu[299][l] * L->k[5][11][l] -
+                L->lu[300][l] * L->k[5][12][l] - L->lu[301][l] * L->k[5][13][l] - L->lu[302][l] *
+                L->k[5][14][l] - L->lu[303][l] * L->k[5][15][l];
+        L->k[5][17][l] = L->k[5][17][l] - L->lu[309][l] * L->k[5][3][l] - L->lu[310][l] *
+                L->k[5][4][l] - L->lu[311][l] * L->k[5][5][l] - L->lu[312][l] * L->k[5][6][l] -
+                L->lu[313][l] * L->k[5][7][l] - L->lu[314][l] * L->k[5][8][l] - L->lu[315][l] *
+                L->k[5][9][l] - L->lu[316][l] * L->k[5][10][l] - L->lu[317][l] * L->k[5][11][l] -
+                L->lu[318][l] * L->k[5][12][l] - L->lu[319][l] * L->k[5][13][l] - L->lu[320][l] *
+                L->k[5][14][l] - L->lu[321][l] * L->k[5][15][l] - L->lu[322][l] * L->k[5][16][l];
+        L->k[5][17][l] = L->k[5][17][l] * L->lu[323][l];
+        L->k[5][16][l] = L->k[5][16][l] * L->lu[304][l] - L->lu[305][l] * L->k[5][17][l];
+        L->k[5][15][l] = L->k[5][15][l] * L->lu[285][l] - L->lu[287][l] * L->k[5][17][l] -
+                L->lu[286][l] * L->k[5][16][l];
+        L->k[5][14][l] = L->k[5][14][l] * L->lu[266][l] - L->lu[269][l] * L->k[5][17][l] -
+                L->lu[268][l] * L->k[5][16][l] - L->lu[267][l] * L->k[5][15][l];
+        L->k[5][13][l] = L->k[5][13][l] * L->lu[247][l] - L->lu[251][l] * L->k[5][17][l] -
+                L->lu[250][l] * L->k[5][16][l] - L->lu[249][l] * L->k[5][15][l] - L->lu[248][l] *
+                L->k[5][14][l];
+        L->k[5][12][l] = L->k[5][12][l] * L->lu[228][l] - L->lu[233][l] * L->k[5][17][l] -
+                L->lu[232][l] * L->k[5][16][l] - L->lu[231][l] * L->k[5][15][l] - L->lu[230][l] *
+                L->k[5][14][l] - L->lu[229][l] * L->k[5][13][l];
+        L->k[5][11][l] = L->k[5][11][l] * L->lu[209][l] - L->lu[215][l] * L->k[5][17][l] -
+                L->lu[214][l] * L->k[5][16][l] - L->lu[213][l] * L->k[5][15][l] - L->lu[212][l] *
+                L->k[5][14][l] - L->lu[211][l] * L->k[5][13][l] - L->lu[210][l] * L->k[5][12][l];
+        L->k[5][10][l] = L->k[5][10][l] * L->lu[190][l] - L->lu[197][l] * L->k[5][17][l] -
+                L->lu[196][l] * L->k[5][16][l] - L->lu[195][l] * L->k[5][15][l] - L->lu[194][l] *
+                L->k[5][14][l] - L->lu[193][l] * L->k[5][13][l] - L->lu[192][l] * L->k[5][12][l]
+                - L->lu[191][l] * L->k[5][11][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[171][l] - L->lu[179][l] * L->k[5][17][l] -
+                L->lu[178][l] * L->k[5][16][l] - L->lu[177][l] * L->k[5][15][l] - L->lu[176][l] *
+                L->k[5][14][l] - L->lu[175][l] * L->k[5][13][l] - L->lu[174][l] * L->k[5][12][l]
+                - L->lu[173][l] * L->k[5][11][l] - L->lu[172][l] * L->k[5][10][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[152][l] - L->lu[161][l] * L->k[5][17][l] -
+                L->lu[160][l] * L->k[5][16][l] - L->lu[159][l] * L->k[5][15][l] - L->lu[158][l] *
+                L->k[5][14][l] - L->lu[157][l] * L->k[5][13][l] - L->lu[156][l] * L->k[5][12][l]
+                - L->lu[155][l] * L->k[5][11][l] - L->lu[154][l] * L->k[5][10][l] - L->lu[153][l]
+                * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[133][l] - L->lu[143][l] * L->k[5][17][l] -
+                L->lu[142][l] * L->k[5][16][l] - L->lu[141][l] * L->k[5][15][l] - L->lu[140][l] *
+                L->k[5][14][l] - L->lu[139][l] * L->k[5][13][l] - L->lu[138][l] * L->k[5][12][l]
+                - L->lu[137][l] * L->k[5][11][l] - L->lu[136][l] * L->k[5][10][l] - L->lu[135][l]
+                * L->k[5][9][l] - L->lu[134][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[114][l] - L->lu[125][l] * L->k[5][17][l] -
+                L->lu[124][l] * L->k[5][16][l] - L->lu[123][l] * L->k[5][15][l] - L->lu[122][l] *
+                L->k[5][14][l] - L->lu[121][l] * L->k[5][13][l] - L->lu[120][l] * L->k[5][12][l]
+                - L->lu[119][l] * L->k[5][11][l] - L->lu[118][l] * L->k[5][10][l] - L->lu[117][l]
+                * L->k[5][9][l] - L->lu[116][l] * L->k[5][8][l] - L->lu[115][l] * L->k[5][7][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[95][l] - L->lu[107][l] * L->k[5][17][l] -
+                L->lu[106][l] * L->k[5][16][l] - L->lu[105][l] * L->k[5][15][l] - L->lu[104][l] *
+                L->k[5][14][l] - L->lu[103][l] * L->k[5][13][l] - L->lu[102][l] * L->k[5][12][l]
+                - L->lu[101][l] * L->k[5][11][l] - L->lu[100][l] * L->k[5][10][l] - L->lu[99][l]
+                * L->k[5][9][l] - L->lu[98][l] * L->k[5][8][l] - L->lu[97][l] * L->k[5][7][l] -
+                L->lu[96][l] * L->k[5][6][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[76][l] - L->lu[89][l] * L->k[5][17][l] -
+                L->lu[88][l] * L->k[5][16][l] - L->lu[87][l] * L->k[5][15][l] - L->lu[86][l] *
+                L->k[5][14][l] - L->lu[85][l] * L->k[5][13][l] - L->lu[84][l] * L->k[5][12][l] -
+                L->lu[83][l] * L->k[5][11][l] - L->lu[82][l] * L->k[5][10][l] - L->lu[81][l] *
+                L->k[5][9][l] - L->lu[80][l] * L->k[5][8][l] - L->lu[79][l] * L->k[5][7][l] -
+                L->lu[78][l] * L->k[5][6][l] - L->lu[77][l] * L->k[5][5][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[57][l] - L->lu[71][l] * L->k[5][17][l] -
+                L->lu[70][l] * L->k[5][16][l] - L->lu[69][l] * L->k[5][15][l] - L->lu[68][l] *
+                L->k[5][14][l] - L->lu[67][l] * L->k[5][13][l] - L->lu[66][l] * L->k[5][12][l] -
+                L->lu[65][l] * L->k[5][11][l] - L->lu[64][l] * L->k[5][10][l] - L->lu[63][l] *
+                L->k[5][9][l] - L->lu[62][l] * L->k[5][8][l] - L->lu[61][l] * L->k[5][7][l] -
+                L->lu[60][l] * L->k[5][6][l] - L->lu[59][l] * L->k[5][5][l] - L->lu[58][l] *
+                L->k[5][4][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[38][l] - L->lu[45][l] * L->k[5][9][l] -
+                L->lu[44][l] * L->k[5][8][l] - L->lu[43][l] * L->k[5][7][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[19][l] - L->lu[27][l] * L->k[5][9][l] -
+                L->lu[26][l] * L->k[5][8][l] - L->lu[25][l] * L->k[5][7][l] - L->lu[20][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[5][9][l] - L->lu[7][l] *
+                L->k[5][7][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / CMG4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(cmg4_pyramid_cos_lanes(L->xnew[1][l])) < CMG4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? CMG4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? CMG4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). Over an
    output grid (L->out), its rows in out from base = traj ntimes, the first
@@ -6095,6 +15187,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
         L->k[0][i][l] = f0[i];
     }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        L->f0[i][l] = f0[i];
+    }
     L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
@@ -6104,11 +15199,17 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     }
     L->err_old[l] = 1e-4;
     L->rejected_last[l] = 0;
+    L->h_acc[l] = 0.0;
+    L->err_acc[l] = 1e-2;
+    L->singular[l] = 0;
+    L->new_point[l] = 1;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->stats_jac_calls[l] = stats->jac_calls;
+    L->stats_decompositions[l] = stats->decompositions;
     L->busy[l] = 1;
     L->traj[l] = traj;
     return -1;
@@ -6141,6 +15242,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, cmg4_pyramid_
             st.accepted = L->stats_accepted[l];
             st.rejected = L->stats_rejected[l];
             st.rhs_calls = L->stats_rhs_calls[l];
+            st.jac_calls = L->stats_jac_calls[l];
+            st.decompositions = L->stats_decompositions[l];
             for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
                 xs[L->traj[l] * CMG4_PYRAMID_NX + (size_t)i] = L->x[i][l];
             }
@@ -7882,7 +16985,9 @@ int cmg4_pyramid_rodas4_grid(long ntimes, const double *times, double *x, const 
             (double (*)[CMG4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. CMG4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                       const double *c, double rtol, double atol, double h0,
                                       long max_steps, double *out, cmg4_pyramid_stats *stats,
@@ -7890,6 +16995,11 @@ size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, CMG4_PYRAMID_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[CMG4_PYRAMID_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -8884,13 +17994,18 @@ size_t cmg4_pyramid_dop853_batch(size_t n, double t0, double t1, double *x, cons
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. CMG4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t cmg4_pyramid_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
                                  double rtol, double atol, double h0, long max_steps,
                                  cmg4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(rodas4_step_lanes, 4, CMG4_PYRAMID_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

@@ -1382,7 +1382,7 @@ static void lu_solve_complex(const double *GYROSTAT_RESTRICT ar,
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
@@ -1406,6 +1406,15 @@ struct GYROSTAT_ALIGNED lanes {
     long stats_rejected[GYROSTAT_LANES];
     long stats_rhs_calls[GYROSTAT_LANES];
     double dense[7][GYROSTAT_NX][GYROSTAT_LANES];
+    double J[GYROSTAT_NX * GYROSTAT_NX][GYROSTAT_LANES];
+    double lu[GYROSTAT_NX * GYROSTAT_NX][GYROSTAT_LANES];
+    double f0[GYROSTAT_NX][GYROSTAT_LANES];
+    double fnew[GYROSTAT_NX][GYROSTAT_LANES];
+    double fy[GYROSTAT_NX][GYROSTAT_LANES];
+    double h_acc[GYROSTAT_LANES];
+    double err_acc[GYROSTAT_LANES];
+    long stats_jac_calls[GYROSTAT_LANES];
+    long stats_decompositions[GYROSTAT_LANES];
     double cap[GYROSTAT_LANES];
     double tay[21][26][GYROSTAT_LANES];
     double acc[GYROSTAT_NX][GYROSTAT_LANES];
@@ -1414,6 +1423,9 @@ struct GYROSTAT_ALIGNED lanes {
     int code[GYROSTAT_LANES];
     int nonfinite[GYROSTAT_LANES];
     int rejected_last[GYROSTAT_LANES];
+    int piv[GYROSTAT_NX][GYROSTAT_LANES];
+    int new_point[GYROSTAT_LANES];
+    int singular[GYROSTAT_LANES];
     long ntimes;
     const double *times;
     double (*out)[GYROSTAT_NX];
@@ -1460,7 +1472,238 @@ static void rhs_lanes(const double *GYROSTAT_RESTRICT t,
     }
 }
 
-/* One step of a pair on every lane. */
+static void jac_lanes(const double *GYROSTAT_RESTRICT t,
+                      double (*GYROSTAT_RESTRICT x)[GYROSTAT_LANES],
+                      const double *GYROSTAT_RESTRICT c,
+                      double (*GYROSTAT_RESTRICT J)[GYROSTAT_LANES])
+{
+    int l;
+
+    (void)t;  /* unused in some scenes */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, tmp7, tmp8,
+                tmp9, tmp10, tmp11, tmp12, tmp13;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[7][l];
+        u2 = x[8][l];
+        u3 = x[9][l];
+        u4 = x[10][l];
+        tmp0 = gyrostat_sin_lanes(q2);
+        tmp1 = gyrostat_cos_lanes(q2);
+        tmp2 = gyrostat_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = gyrostat_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = c[0] * u2 + c[1] * u4;
+        tmp13 = 2.0 * c[4];
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = 0.0;
+        J[4][l] = 0.0;
+        J[5][l] = 0.0;
+        J[6][l] = 0.0;
+        J[7][l] = -tmp10;
+        J[8][l] = 0.0;
+        J[9][l] = tmp11;
+        J[10][l] = 0.0;
+        J[11][l] = 0.0;
+        J[12][l] = 0.0;
+        J[13][l] = 0.0;
+        J[14][l] = 0.0;
+        J[15][l] = 0.0;
+        J[16][l] = tmp6;
+        J[17][l] = 0.0;
+        J[18][l] = 0.0;
+        J[19][l] = 0.0;
+        J[20][l] = 0.0;
+        J[21][l] = tmp4;
+        J[22][l] = 0.0;
+        J[23][l] = tmp2;
+        J[24][l] = 0.0;
+        J[25][l] = 0.0;
+        J[26][l] = 0.0;
+        J[27][l] = 0.0;
+        J[28][l] = 0.0;
+        J[29][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[30][l] = -(tmp0 * tmp9);
+        J[31][l] = 0.0;
+        J[32][l] = 0.0;
+        J[33][l] = 0.0;
+        J[34][l] = 0.0;
+        J[35][l] = tmp0 * tmp10;
+        J[36][l] = 1.0;
+        J[37][l] = -(tmp0 * tmp11);
+        J[38][l] = 0.0;
+        J[39][l] = 0.0;
+        J[40][l] = 0.0;
+        J[41][l] = 0.0;
+        J[42][l] = 0.0;
+        J[43][l] = 0.0;
+        J[44][l] = 0.0;
+        J[45][l] = 0.0;
+        J[46][l] = 0.0;
+        J[47][l] = 0.0;
+        J[48][l] = 0.0;
+        J[49][l] = 0.0;
+        J[50][l] = -1.0;
+        J[51][l] = 0.0;
+        J[52][l] = 1.0;
+        J[53][l] = 0.0;
+        J[54][l] = 0.0;
+        J[55][l] = 0.0;
+        J[56][l] = 0.0;
+        J[57][l] = 0.0;
+        J[58][l] = 0.0;
+        J[59][l] = 0.0;
+        J[60][l] = 0.0;
+        J[61][l] = 0.0;
+        J[62][l] = 0.0;
+        J[63][l] = 0.0;
+        J[64][l] = 0.0;
+        J[65][l] = 0.0;
+        J[66][l] = 0.0;
+        J[67][l] = 1.0;
+        J[68][l] = 0.0;
+        J[69][l] = 0.0;
+        J[70][l] = 0.0;
+        J[71][l] = 0.0;
+        J[72][l] = 0.0;
+        J[73][l] = 0.0;
+        J[74][l] = 0.0;
+        J[75][l] = 0.0;
+        J[76][l] = 0.0;
+        J[77][l] = 0.0;
+        J[78][l] = 0.0;
+        J[79][l] = 0.0;
+        J[80][l] = 0.0;
+        J[81][l] = 0.0;
+        J[82][l] = 1.0;
+        J[83][l] = 0.0;
+        J[84][l] = 0.0;
+        J[85][l] = 0.0;
+        J[86][l] = 0.0;
+        J[87][l] = 0.0;
+        J[88][l] = 0.0;
+        J[89][l] = 0.0;
+        J[90][l] = 0.0;
+        J[91][l] = 0.0;
+        J[92][l] = 0.0;
+        J[93][l] = 0.0;
+        J[94][l] = 0.0;
+        J[95][l] = 0.0;
+        J[96][l] = 0.0;
+        J[97][l] = 1.0;
+        J[98][l] = 0.0;
+        J[99][l] = 0.0;
+        J[100][l] = 0.0;
+        J[101][l] = 0.0;
+        J[102][l] = 0.0;
+        J[103][l] = 0.0;
+        J[104][l] = 0.0;
+        J[105][l] = tmp12;
+        J[106][l] = c[0] * u1 + c[2] * u3;
+        J[107][l] = c[2] * u2 + c[3] * u4;
+        J[108][l] = c[1] * u1 + c[3] * u3;
+        J[109][l] = 0.0;
+        J[110][l] = 0.0;
+        J[111][l] = 0.0;
+        J[112][l] = 0.0;
+        J[113][l] = 0.0;
+        J[114][l] = 0.0;
+        J[115][l] = 0.0;
+        J[116][l] = 0.0;
+        J[117][l] = 0.0;
+        J[118][l] = 0.0;
+        J[119][l] = c[5] * u3 + tmp13 * u1;
+        J[120][l] = 0.0;
+        J[121][l] = c[5] * u1 - tmp13 * u3;
+        J[122][l] = 0.0;
+        J[123][l] = 0.0;
+        J[124][l] = 0.0;
+        J[125][l] = 0.0;
+        J[126][l] = 0.0;
+        J[127][l] = 0.0;
+        J[128][l] = 0.0;
+        J[129][l] = 0.0;
+        J[130][l] = 0.0;
+        J[131][l] = 0.0;
+        J[132][l] = 0.0;
+        J[133][l] = c[7] * u2 + c[8] * u4;
+        J[134][l] = c[7] * u1 - c[0] * u3;
+        J[135][l] = -tmp12;
+        J[136][l] = c[8] * u1 - c[1] * u3;
+        J[137][l] = 0.0;
+        J[138][l] = 0.0;
+        J[139][l] = 0.0;
+        J[140][l] = 0.0;
+        J[141][l] = 0.0;
+        J[142][l] = 0.0;
+        J[143][l] = 0.0;
+        J[144][l] = 0.0;
+        J[145][l] = 0.0;
+        J[146][l] = 0.0;
+        J[147][l] = 0.0;
+        J[148][l] = 0.0;
+        J[149][l] = 0.0;
+        J[150][l] = 0.0;
+        J[151][l] = 0.0;
+        J[152][l] = 0.0;
+        J[153][l] = 0.0;
+        J[154][l] = 0.0;
+        J[155][l] = 0.0;
+        J[156][l] = 0.0;
+        J[157][l] = 0.0;
+        J[158][l] = 0.0;
+        J[159][l] = 0.0;
+        J[160][l] = 0.0;
+        J[161][l] = 0.0;
+        J[162][l] = 0.0;
+        J[163][l] = 0.0;
+        J[164][l] = 0.0;
+        J[165][l] = 0.0;
+        J[166][l] = 0.0;
+        J[167][l] = 0.0;
+        J[168][l] = 0.0;
+        J[169][l] = 0.0;
+        J[170][l] = 0.0;
+        J[171][l] = 0.0;
+        J[172][l] = 0.0;
+        J[173][l] = 0.0;
+        J[174][l] = 0.0;
+        J[175][l] = 0.0;
+        J[176][l] = 0.0;
+        J[177][l] = 0.0;
+        J[178][l] = 0.0;
+        J[179][l] = 0.0;
+        J[180][l] = 0.0;
+        J[181][l] = 0.0;
+        J[182][l] = 0.0;
+        J[183][l] = 0.0;
+        J[184][l] = 0.0;
+        J[185][l] = 0.0;
+        J[186][l] = 0.0;
+        J[187][l] = 0.0;
+        J[188][l] = 0.0;
+        J[189][l] = 0.0;
+        J[190][l] = 0.0;
+        J[191][l] = 0.0;
+        J[192][l] = 0.0;
+        J[193][l] = 0.0;
+        J[194][l] = 0.0;
+        J[195][l] = 0.0;
+    }
+}
+
+/* One step of a method on every lane. */
 typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
                            long max_steps);
 
@@ -2734,6 +2977,1621 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of rodas4_integrate's loop on every lane. */
+static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    int p[GYROSTAT_LANES];
+    double best[GYROSTAT_LANES];
+    double m[GYROSTAT_LANES];
+    double swap[GYROSTAT_LANES];
+    double inv_h[GYROSTAT_LANES];
+    double err[GYROSTAT_LANES];
+    double fac[GYROSTAT_LANES];
+    double gus[GYROSTAT_LANES];
+    double total[GYROSTAT_LANES];
+    int go[GYROSTAT_LANES];
+    int fresh[GYROSTAT_LANES];
+    int bad[GYROSTAT_LANES];
+    int sing[GYROSTAT_LANES];
+    int last[GYROSTAT_LANES];
+    int retry[GYROSTAT_LANES];
+    int ok[GYROSTAT_LANES];
+    int take[GYROSTAT_LANES];
+    int lock[GYROSTAT_LANES];
+    int rej[GYROSTAT_LANES];
+    static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? GYROSTAT_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? GYROSTAT_ODE_ERR_NONFINITE :
+                GYROSTAT_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? GYROSTAT_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->lu[i * GYROSTAT_NX + i][l] = L->lu[i * GYROSTAT_NX + i][l] + 1.0 / (L->h[l] * 0.25);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * GYROSTAT_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 1][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 1][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[1 * GYROSTAT_NX + j][l];
+                L->lu[1 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[1 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[15][l] = 1.0 / L->lu[15][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 1][l] * L->lu[15][l];
+            L->lu[i * GYROSTAT_NX + 1][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 2][l] = L->lu[i * GYROSTAT_NX + 2][l] - m[l] * L->lu[16][l];
+            L->lu[i * GYROSTAT_NX + 7][l] = L->lu[i * GYROSTAT_NX + 7][l] - m[l] * L->lu[21][l];
+            L->lu[i * GYROSTAT_NX + 8][l] = L->lu[i * GYROSTAT_NX + 8][l] - m[l] * L->lu[22][l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[23][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[16][l] = L->lu[16][l] * L->lu[15][l];
+        L->lu[21][l] = L->lu[21][l] * L->lu[15][l];
+        L->lu[22][l] = L->lu[22][l] * L->lu[15][l];
+        L->lu[23][l] = L->lu[23][l] * L->lu[15][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[30][l]) > 0.0));
+        L->lu[30][l] = 1.0 / L->lu[30][l];
+        L->lu[35][l] = L->lu[35][l] * L->lu[30][l];
+        L->lu[36][l] = L->lu[36][l] * L->lu[30][l];
+        L->lu[37][l] = L->lu[37][l] * L->lu[30][l];
+        L->piv[3][l] = 3;
+        sing[l] = (sing[l] | !(fabs(L->lu[45][l]) > 0.0));
+        L->lu[45][l] = 1.0 / L->lu[45][l];
+        L->lu[50][l] = L->lu[50][l] * L->lu[45][l];
+        L->lu[52][l] = L->lu[52][l] * L->lu[45][l];
+        L->piv[4][l] = 4;
+        sing[l] = (sing[l] | !(fabs(L->lu[60][l]) > 0.0));
+        L->lu[60][l] = 1.0 / L->lu[60][l];
+        L->lu[67][l] = L->lu[67][l] * L->lu[60][l];
+        L->piv[5][l] = 5;
+        sing[l] = (sing[l] | !(fabs(L->lu[75][l]) > 0.0));
+        L->lu[75][l] = 1.0 / L->lu[75][l];
+        L->lu[82][l] = L->lu[82][l] * L->lu[75][l];
+        L->piv[6][l] = 6;
+        sing[l] = (sing[l] | !(fabs(L->lu[90][l]) > 0.0));
+        L->lu[90][l] = 1.0 / L->lu[90][l];
+        L->lu[97][l] = L->lu[97][l] * L->lu[90][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * GYROSTAT_NX + 7][l]);
+    }
+    for (i = 8; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 7][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 7][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 10; ++q) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[7 * GYROSTAT_NX + j][l];
+                L->lu[7 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[7 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[105][l] = 1.0 / L->lu[105][l];
+    }
+    for (i = 8; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 7][l] * L->lu[105][l];
+            L->lu[i * GYROSTAT_NX + 7][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 8][l] = L->lu[i * GYROSTAT_NX + 8][l] - m[l] * L->lu[106][l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[107][l];
+            L->lu[i * GYROSTAT_NX + 10][l] = L->lu[i * GYROSTAT_NX + 10][l] - m[l] * L->lu[108][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[106][l] = L->lu[106][l] * L->lu[105][l];
+        L->lu[107][l] = L->lu[107][l] * L->lu[105][l];
+        L->lu[108][l] = L->lu[108][l] * L->lu[105][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * GYROSTAT_NX + 8][l]);
+    }
+    for (i = 9; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 8][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 8][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 10; ++q) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[8 * GYROSTAT_NX + j][l];
+                L->lu[8 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[8 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[120][l] = 1.0 / L->lu[120][l];
+    }
+    for (i = 9; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 8][l] * L->lu[120][l];
+            L->lu[i * GYROSTAT_NX + 8][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[121][l];
+            L->lu[i * GYROSTAT_NX + 10][l] = L->lu[i * GYROSTAT_NX + 10][l] - m[l] * L->lu[122][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[121][l] = L->lu[121][l] * L->lu[120][l];
+        L->lu[122][l] = L->lu[122][l] * L->lu[120][l];
+        L->piv[9][l] = 9;
+        sing[l] = (sing[l] | !(fabs(L->lu[135][l]) > 0.0));
+        L->lu[135][l] = 1.0 / L->lu[135][l];
+        L->lu[136][l] = L->lu[136][l] * L->lu[135][l];
+        L->piv[10][l] = 10;
+        sing[l] = (sing[l] | !(fabs(L->lu[150][l]) > 0.0));
+        L->lu[150][l] = 1.0 / L->lu[150][l];
+        L->piv[11][l] = 11;
+        sing[l] = (sing[l] | !(fabs(L->lu[165][l]) > 0.0));
+        L->lu[165][l] = 1.0 / L->lu[165][l];
+        L->piv[12][l] = 12;
+        sing[l] = (sing[l] | !(fabs(L->lu[180][l]) > 0.0));
+        L->lu[180][l] = 1.0 / L->lu[180][l];
+        L->piv[13][l] = 13;
+        sing[l] = (sing[l] | !(fabs(L->lu[195][l]) > 0.0));
+        L->lu[195][l] = 1.0 / L->lu[195][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? GYROSTAT_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[29][l] * L->k[0][1][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[119][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[133][l] * L->k[0][7][l] - L->lu[134][l] *
+                L->k[0][8][l];
+        L->k[0][13][l] = L->k[0][13][l] * L->lu[195][l];
+        L->k[0][12][l] = L->k[0][12][l] * L->lu[180][l];
+        L->k[0][11][l] = L->k[0][11][l] * L->lu[165][l];
+        L->k[0][10][l] = L->k[0][10][l] * L->lu[150][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[0][10][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[0][10][l] -
+                L->lu[121][l] * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[0][10][l] -
+                L->lu[107][l] * L->k[0][9][l] - L->lu[106][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[0][13][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[0][12][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[0][11][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[0][10][l] -
+                L->lu[50][l] * L->k[0][8][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[0][9][l] -
+                L->lu[36][l] * L->k[0][8][l] - L->lu[35][l] * L->k[0][7][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[0][9][l] -
+                L->lu[22][l] * L->k[0][8][l] - L->lu[21][l] * L->k[0][7][l] - L->lu[16][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[0][9][l] - L->lu[7][l] *
+                L->k[0][7][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[29][l] * L->k[1][1][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[119][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[133][l] * L->k[1][7][l] - L->lu[134][l] *
+                L->k[1][8][l];
+        L->k[1][13][l] = L->k[1][13][l] * L->lu[195][l];
+        L->k[1][12][l] = L->k[1][12][l] * L->lu[180][l];
+        L->k[1][11][l] = L->k[1][11][l] * L->lu[165][l];
+        L->k[1][10][l] = L->k[1][10][l] * L->lu[150][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[1][10][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[1][10][l] -
+                L->lu[121][l] * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[1][10][l] -
+                L->lu[107][l] * L->k[1][9][l] - L->lu[106][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[1][13][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[1][12][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[1][11][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[1][10][l] -
+                L->lu[50][l] * L->k[1][8][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[1][9][l] -
+                L->lu[36][l] * L->k[1][8][l] - L->lu[35][l] * L->k[1][7][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[1][9][l] -
+                L->lu[22][l] * L->k[1][8][l] - L->lu[21][l] * L->k[1][7][l] - L->lu[16][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[1][9][l] - L->lu[7][l] *
+                L->k[1][7][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[29][l] * L->k[2][1][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[119][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[133][l] * L->k[2][7][l] - L->lu[134][l] *
+                L->k[2][8][l];
+        L->k[2][13][l] = L->k[2][13][l] * L->lu[195][l];
+        L->k[2][12][l] = L->k[2][12][l] * L->lu[180][l];
+        L->k[2][11][l] = L->k[2][11][l] * L->lu[165][l];
+        L->k[2][10][l] = L->k[2][10][l] * L->lu[150][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[2][10][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[2][10][l] -
+                L->lu[121][l] * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[2][10][l] -
+                L->lu[107][l] * L->k[2][9][l] - L->lu[106][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[2][13][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[2][12][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[2][11][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[2][10][l] -
+                L->lu[50][l] * L->k[2][8][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[2][9][l] -
+                L->lu[36][l] * L->k[2][8][l] - L->lu[35][l] * L->k[2][7][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[2][9][l] -
+                L->lu[22][l] * L->k[2][8][l] - L->lu[21][l] * L->k[2][7][l] - L->lu[16][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[2][9][l] - L->lu[7][l] *
+                L->k[2][7][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[29][l] * L->k[3][1][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[119][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[133][l] * L->k[3][7][l] - L->lu[134][l] *
+                L->k[3][8][l];
+        L->k[3][13][l] = L->k[3][13][l] * L->lu[195][l];
+        L->k[3][12][l] = L->k[3][12][l] * L->lu[180][l];
+        L->k[3][11][l] = L->k[3][11][l] * L->lu[165][l];
+        L->k[3][10][l] = L->k[3][10][l] * L->lu[150][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[3][10][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[3][10][l] -
+                L->lu[121][l] * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[3][10][l] -
+                L->lu[107][l] * L->k[3][9][l] - L->lu[106][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[3][13][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[3][12][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[3][11][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[3][10][l] -
+                L->lu[50][l] * L->k[3][8][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[3][9][l] -
+                L->lu[36][l] * L->k[3][8][l] - L->lu[35][l] * L->k[3][7][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[3][9][l] -
+                L->lu[22][l] * L->k[3][8][l] - L->lu[21][l] * L->k[3][7][l] - L->lu[16][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[3][9][l] - L->lu[7][l] *
+                L->k[3][7][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[29][l] * L->k[4][1][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[119][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[133][l] * L->k[4][7][l] - L->lu[134][l] *
+                L->k[4][8][l];
+        L->k[4][13][l] = L->k[4][13][l] * L->lu[195][l];
+        L->k[4][12][l] = L->k[4][12][l] * L->lu[180][l];
+        L->k[4][11][l] = L->k[4][11][l] * L->lu[165][l];
+        L->k[4][10][l] = L->k[4][10][l] * L->lu[150][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[4][10][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[4][10][l] -
+                L->lu[121][l] * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[4][10][l] -
+                L->lu[107][l] * L->k[4][9][l] - L->lu[106][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[4][13][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[4][12][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[4][11][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[4][10][l] -
+                L->lu[50][l] * L->k[4][8][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[4][9][l] -
+                L->lu[36][l] * L->k[4][8][l] - L->lu[35][l] * L->k[4][7][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[4][9][l] -
+                L->lu[22][l] * L->k[4][8][l] - L->lu[21][l] * L->k[4][7][l] - L->lu[16][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[4][9][l] - L->lu[7][l] *
+                L->k[4][7][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[29][l] * L->k[5][1][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[119][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[133][l] * L->k[5][7][l] - L->lu[134][l] *
+                L->k[5][8][l];
+        L->k[5][13][l] = L->k[5][13][l] * L->lu[195][l];
+        L->k[5][12][l] = L->k[5][12][l] * L->lu[180][l];
+        L->k[5][11][l] = L->k[5][11][l] * L->lu[165][l];
+        L->k[5][10][l] = L->k[5][10][l] * L->lu[150][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[5][10][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[5][10][l] -
+                L->lu[121][l] * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[5][10][l] -
+                L->lu[107][l] * L->k[5][9][l] - L->lu[106][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[5][13][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[5][12][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[5][11][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[5][10][l] -
+                L->lu[50][l] * L->k[5][8][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[5][9][l] -
+                L->lu[36][l] * L->k[5][8][l] - L->lu[35][l] * L->k[5][7][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[5][9][l] -
+                L->lu[22][l] * L->k[5][8][l] - L->lu[21][l] * L->k[5][7][l] - L->lu[16][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[5][9][l] - L->lu[7][l] *
+                L->k[5][7][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        err[l] = sqrt(total[l] / GYROSTAT_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(gyrostat_cos_lanes(L->xnew[1][l])) < GYROSTAT_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l] ?
+                GYROSTAT_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int p[GYROSTAT_LANES];
+    double best[GYROSTAT_LANES];
+    double m[GYROSTAT_LANES];
+    double swap[GYROSTAT_LANES];
+    double inv_h[GYROSTAT_LANES];
+    double err[GYROSTAT_LANES];
+    double fac[GYROSTAT_LANES];
+    double gus[GYROSTAT_LANES];
+    double total[GYROSTAT_LANES];
+    int go[GYROSTAT_LANES];
+    int fresh[GYROSTAT_LANES];
+    int bad[GYROSTAT_LANES];
+    int sing[GYROSTAT_LANES];
+    int last[GYROSTAT_LANES];
+    int retry[GYROSTAT_LANES];
+    int ok[GYROSTAT_LANES];
+    int take[GYROSTAT_LANES];
+    int lock[GYROSTAT_LANES];
+    int rej[GYROSTAT_LANES];
+    double frac[GYROSTAT_LANES];
+    int due[GYROSTAT_LANES];
+    static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? GYROSTAT_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? GYROSTAT_ODE_ERR_NONFINITE :
+                GYROSTAT_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? GYROSTAT_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->lu[i * GYROSTAT_NX + i][l] = L->lu[i * GYROSTAT_NX + i][l] + 1.0 / (L->h[l] * 0.25);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * GYROSTAT_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 1][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 1][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[1 * GYROSTAT_NX + j][l];
+                L->lu[1 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[1 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[15][l] = 1.0 / L->lu[15][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 1][l] * L->lu[15][l];
+            L->lu[i * GYROSTAT_NX + 1][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 2][l] = L->lu[i * GYROSTAT_NX + 2][l] - m[l] * L->lu[16][l];
+            L->lu[i * GYROSTAT_NX + 7][l] = L->lu[i * GYROSTAT_NX + 7][l] - m[l] * L->lu[21][l];
+            L->lu[i * GYROSTAT_NX + 8][l] = L->lu[i * GYROSTAT_NX + 8][l] - m[l] * L->lu[22][l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[23][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[16][l] = L->lu[16][l] * L->lu[15][l];
+        L->lu[21][l] = L->lu[21][l] * L->lu[15][l];
+        L->lu[22][l] = L->lu[22][l] * L->lu[15][l];
+        L->lu[23][l] = L->lu[23][l] * L->lu[15][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[30][l]) > 0.0));
+        L->lu[30][l] = 1.0 / L->lu[30][l];
+        L->lu[35][l] = L->lu[35][l] * L->lu[30][l];
+        L->lu[36][l] = L->lu[36][l] * L->lu[30][l];
+        L->lu[37][l] = L->lu[37][l] * L->lu[30][l];
+        L->piv[3][l] = 3;
+        sing[l] = (sing[l] | !(fabs(L->lu[45][l]) > 0.0));
+        L->lu[45][l] = 1.0 / L->lu[45][l];
+        L->lu[50][l] = L->lu[50][l] * L->lu[45][l];
+        L->lu[52][l] = L->lu[52][l] * L->lu[45][l];
+        L->piv[4][l] = 4;
+        sing[l] = (sing[l] | !(fabs(L->lu[60][l]) > 0.0));
+        L->lu[60][l] = 1.0 / L->lu[60][l];
+        L->lu[67][l] = L->lu[67][l] * L->lu[60][l];
+        L->piv[5][l] = 5;
+        sing[l] = (sing[l] | !(fabs(L->lu[75][l]) > 0.0));
+        L->lu[75][l] = 1.0 / L->lu[75][l];
+        L->lu[82][l] = L->lu[82][l] * L->lu[75][l];
+        L->piv[6][l] = 6;
+        sing[l] = (sing[l] | !(fabs(L->lu[90][l]) > 0.0));
+        L->lu[90][l] = 1.0 / L->lu[90][l];
+        L->lu[97][l] = L->lu[97][l] * L->lu[90][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * GYROSTAT_NX + 7][l]);
+    }
+    for (i = 8; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 7][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 7][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 10; ++q) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[7 * GYROSTAT_NX + j][l];
+                L->lu[7 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[7 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[105][l] = 1.0 / L->lu[105][l];
+    }
+    for (i = 8; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 7][l] * L->lu[105][l];
+            L->lu[i * GYROSTAT_NX + 7][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 8][l] = L->lu[i * GYROSTAT_NX + 8][l] - m[l] * L->lu[106][l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[107][l];
+            L->lu[i * GYROSTAT_NX + 10][l] = L->lu[i * GYROSTAT_NX + 10][l] - m[l] * L->lu[108][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[106][l] = L->lu[106][l] * L->lu[105][l];
+        L->lu[107][l] = L->lu[107][l] * L->lu[105][l];
+        L->lu[108][l] = L->lu[108][l] * L->lu[105][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * GYROSTAT_NX + 8][l]);
+    }
+    for (i = 9; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            p[l] = fabs(L->lu[i * GYROSTAT_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * GYROSTAT_NX + 8][l]) > best[l] ? fabs(L->lu[i * GYROSTAT_NX
+                    + 8][l]) : best[l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 10; ++q) {
+        for (j = 7; j < GYROSTAT_NX; ++j) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                double held;
+                held = L->lu[8 * GYROSTAT_NX + j][l];
+                L->lu[8 * GYROSTAT_NX + j][l] = p[l] == q ? L->lu[q * GYROSTAT_NX + j][l] :
+                        L->lu[8 * GYROSTAT_NX + j][l];
+                L->lu[q * GYROSTAT_NX + j][l] = p[l] == q ? held : L->lu[q * GYROSTAT_NX + j][l];
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[120][l] = 1.0 / L->lu[120][l];
+    }
+    for (i = 9; i < 10; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            m[l] = L->lu[i * GYROSTAT_NX + 8][l] * L->lu[120][l];
+            L->lu[i * GYROSTAT_NX + 8][l] = m[l];
+            L->lu[i * GYROSTAT_NX + 9][l] = L->lu[i * GYROSTAT_NX + 9][l] - m[l] * L->lu[121][l];
+            L->lu[i * GYROSTAT_NX + 10][l] = L->lu[i * GYROSTAT_NX + 10][l] - m[l] * L->lu[122][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->lu[121][l] = L->lu[121][l] * L->lu[120][l];
+        L->lu[122][l] = L->lu[122][l] * L->lu[120][l];
+        L->piv[9][l] = 9;
+        sing[l] = (sing[l] | !(fabs(L->lu[135][l]) > 0.0));
+        L->lu[135][l] = 1.0 / L->lu[135][l];
+        L->lu[136][l] = L->lu[136][l] * L->lu[135][l];
+        L->piv[10][l] = 10;
+        sing[l] = (sing[l] | !(fabs(L->lu[150][l]) > 0.0));
+        L->lu[150][l] = 1.0 / L->lu[150][l];
+        L->piv[11][l] = 11;
+        sing[l] = (sing[l] | !(fabs(L->lu[165][l]) > 0.0));
+        L->lu[165][l] = 1.0 / L->lu[165][l];
+        L->piv[12][l] = 12;
+        sing[l] = (sing[l] | !(fabs(L->lu[180][l]) > 0.0));
+        L->lu[180][l] = 1.0 / L->lu[180][l];
+        L->piv[13][l] = 13;
+        sing[l] = (sing[l] | !(fabs(L->lu[195][l]) > 0.0));
+        L->lu[195][l] = 1.0 / L->lu[195][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? GYROSTAT_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[29][l] * L->k[0][1][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[119][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[133][l] * L->k[0][7][l] - L->lu[134][l] *
+                L->k[0][8][l];
+        L->k[0][13][l] = L->k[0][13][l] * L->lu[195][l];
+        L->k[0][12][l] = L->k[0][12][l] * L->lu[180][l];
+        L->k[0][11][l] = L->k[0][11][l] * L->lu[165][l];
+        L->k[0][10][l] = L->k[0][10][l] * L->lu[150][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[0][10][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[0][10][l] -
+                L->lu[121][l] * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[0][10][l] -
+                L->lu[107][l] * L->k[0][9][l] - L->lu[106][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[0][13][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[0][12][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[0][11][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[0][10][l] -
+                L->lu[50][l] * L->k[0][8][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[0][9][l] -
+                L->lu[36][l] * L->k[0][8][l] - L->lu[35][l] * L->k[0][7][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[0][9][l] -
+                L->lu[22][l] * L->k[0][8][l] - L->lu[21][l] * L->k[0][7][l] - L->lu[16][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[0][9][l] - L->lu[7][l] *
+                L->k[0][7][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[29][l] * L->k[1][1][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[119][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[133][l] * L->k[1][7][l] - L->lu[134][l] *
+                L->k[1][8][l];
+        L->k[1][13][l] = L->k[1][13][l] * L->lu[195][l];
+        L->k[1][12][l] = L->k[1][12][l] * L->lu[180][l];
+        L->k[1][11][l] = L->k[1][11][l] * L->lu[165][l];
+        L->k[1][10][l] = L->k[1][10][l] * L->lu[150][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[1][10][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[1][10][l] -
+                L->lu[121][l] * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[1][10][l] -
+                L->lu[107][l] * L->k[1][9][l] - L->lu[106][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[1][13][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[1][12][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[1][11][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[1][10][l] -
+                L->lu[50][l] * L->k[1][8][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[1][9][l] -
+                L->lu[36][l] * L->k[1][8][l] - L->lu[35][l] * L->k[1][7][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[1][9][l] -
+                L->lu[22][l] * L->k[1][8][l] - L->lu[21][l] * L->k[1][7][l] - L->lu[16][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[1][9][l] - L->lu[7][l] *
+                L->k[1][7][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[29][l] * L->k[2][1][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[119][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[133][l] * L->k[2][7][l] - L->lu[134][l] *
+                L->k[2][8][l];
+        L->k[2][13][l] = L->k[2][13][l] * L->lu[195][l];
+        L->k[2][12][l] = L->k[2][12][l] * L->lu[180][l];
+        L->k[2][11][l] = L->k[2][11][l] * L->lu[165][l];
+        L->k[2][10][l] = L->k[2][10][l] * L->lu[150][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[2][10][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[2][10][l] -
+                L->lu[121][l] * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[2][10][l] -
+                L->lu[107][l] * L->k[2][9][l] - L->lu[106][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[2][13][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[2][12][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[2][11][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[2][10][l] -
+                L->lu[50][l] * L->k[2][8][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[2][9][l] -
+                L->lu[36][l] * L->k[2][8][l] - L->lu[35][l] * L->k[2][7][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[2][9][l] -
+                L->lu[22][l] * L->k[2][8][l] - L->lu[21][l] * L->k[2][7][l] - L->lu[16][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[2][9][l] - L->lu[7][l] *
+                L->k[2][7][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[29][l] * L->k[3][1][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[119][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[133][l] * L->k[3][7][l] - L->lu[134][l] *
+                L->k[3][8][l];
+        L->k[3][13][l] = L->k[3][13][l] * L->lu[195][l];
+        L->k[3][12][l] = L->k[3][12][l] * L->lu[180][l];
+        L->k[3][11][l] = L->k[3][11][l] * L->lu[165][l];
+        L->k[3][10][l] = L->k[3][10][l] * L->lu[150][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[3][10][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[3][10][l] -
+                L->lu[121][l] * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[3][10][l] -
+                L->lu[107][l] * L->k[3][9][l] - L->lu[106][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[3][13][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[3][12][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[3][11][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[3][10][l] -
+                L->lu[50][l] * L->k[3][8][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[3][9][l] -
+                L->lu[36][l] * L->k[3][8][l] - L->lu[35][l] * L->k[3][7][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[3][9][l] -
+                L->lu[22][l] * L->k[3][8][l] - L->lu[21][l] * L->k[3][7][l] - L->lu[16][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[3][9][l] - L->lu[7][l] *
+                L->k[3][7][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[29][l] * L->k[4][1][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[119][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[133][l] * L->k[4][7][l] - L->lu[134][l] *
+                L->k[4][8][l];
+        L->k[4][13][l] = L->k[4][13][l] * L->lu[195][l];
+        L->k[4][12][l] = L->k[4][12][l] * L->lu[180][l];
+        L->k[4][11][l] = L->k[4][11][l] * L->lu[165][l];
+        L->k[4][10][l] = L->k[4][10][l] * L->lu[150][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[4][10][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[4][10][l] -
+                L->lu[121][l] * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[4][10][l] -
+                L->lu[107][l] * L->k[4][9][l] - L->lu[106][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[4][13][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[4][12][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[4][11][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[4][10][l] -
+                L->lu[50][l] * L->k[4][8][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[4][9][l] -
+                L->lu[36][l] * L->k[4][8][l] - L->lu[35][l] * L->k[4][7][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[4][9][l] -
+                L->lu[22][l] * L->k[4][8][l] - L->lu[21][l] * L->k[4][7][l] - L->lu[16][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[4][9][l] - L->lu[7][l] *
+                L->k[4][7][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[29][l] * L->k[5][1][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[119][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[133][l] * L->k[5][7][l] - L->lu[134][l] *
+                L->k[5][8][l];
+        L->k[5][13][l] = L->k[5][13][l] * L->lu[195][l];
+        L->k[5][12][l] = L->k[5][12][l] * L->lu[180][l];
+        L->k[5][11][l] = L->k[5][11][l] * L->lu[165][l];
+        L->k[5][10][l] = L->k[5][10][l] * L->lu[150][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[135][l] - L->lu[136][l] * L->k[5][10][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[120][l] - L->lu[122][l] * L->k[5][10][l] -
+                L->lu[121][l] * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[105][l] - L->lu[108][l] * L->k[5][10][l] -
+                L->lu[107][l] * L->k[5][9][l] - L->lu[106][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[90][l] - L->lu[97][l] * L->k[5][13][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[75][l] - L->lu[82][l] * L->k[5][12][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[60][l] - L->lu[67][l] * L->k[5][11][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[45][l] - L->lu[52][l] * L->k[5][10][l] -
+                L->lu[50][l] * L->k[5][8][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[30][l] - L->lu[37][l] * L->k[5][9][l] -
+                L->lu[36][l] * L->k[5][8][l] - L->lu[35][l] * L->k[5][7][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[15][l] - L->lu[23][l] * L->k[5][9][l] -
+                L->lu[22][l] * L->k[5][8][l] - L->lu[21][l] * L->k[5][7][l] - L->lu[16][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[9][l] * L->k[5][9][l] - L->lu[7][l] *
+                L->k[5][7][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        err[l] = sqrt(total[l] / GYROSTAT_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < GYROSTAT_NX; ++i) {
+            GYROSTAT_SIMD
+            for (l = 0; l < GYROSTAT_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(gyrostat_cos_lanes(L->xnew[1][l])) < GYROSTAT_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < GYROSTAT_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < GYROSTAT_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? GYROSTAT_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l] ?
+                GYROSTAT_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        GYROSTAT_SIMD
+        for (l = 0; l < GYROSTAT_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    GYROSTAT_SIMD
+    for (l = 0; l < GYROSTAT_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* The normalized Taylor coefficients of x and of the rhs's 52 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
@@ -3627,6 +5485,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     for (i = 0; i < GYROSTAT_NX; ++i) {
         L->k[0][i][l] = f0[i];
     }
+    for (i = 0; i < GYROSTAT_NX; ++i) {
+        L->f0[i][l] = f0[i];
+    }
     L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
@@ -3636,12 +5497,18 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     }
     L->err_old[l] = 1e-4;
     L->rejected_last[l] = 0;
+    L->h_acc[l] = 0.0;
+    L->err_acc[l] = 1e-2;
+    L->singular[l] = 0;
+    L->new_point[l] = 1;
     L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->stats_jac_calls[l] = stats->jac_calls;
+    L->stats_decompositions[l] = stats->decompositions;
     L->busy[l] = 1;
     L->traj[l] = traj;
     return -1;
@@ -3674,6 +5541,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, gyrostat_stat
             st.accepted = L->stats_accepted[l];
             st.rejected = L->stats_rejected[l];
             st.rhs_calls = L->stats_rhs_calls[l];
+            st.jac_calls = L->stats_jac_calls[l];
+            st.decompositions = L->stats_decompositions[l];
             for (i = 0; i < GYROSTAT_NX; ++i) {
                 xs[L->traj[l] * GYROSTAT_NX + (size_t)i] = L->x[i][l];
             }
@@ -5413,13 +7282,20 @@ int gyrostat_rodas4_grid(long ntimes, const double *times, double *x, const doub
             (double (*)[GYROSTAT_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t gyrostat_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                   const double *c, double rtol, double atol, double h0,
                                   long max_steps, double *out, gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, GYROSTAT_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[GYROSTAT_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -7513,13 +9389,18 @@ size_t gyrostat_dop853_batch(size_t n, double t0, double t1, double *x, const do
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. GYROSTAT_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t gyrostat_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
                              double rtol, double atol, double h0, long max_steps,
                              gyrostat_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(rodas4_step_lanes, 4, GYROSTAT_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

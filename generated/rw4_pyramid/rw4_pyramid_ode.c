@@ -1685,7 +1685,7 @@ static void lu_solve_complex(const double *RW4_PYRAMID_RESTRICT ar,
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
@@ -1709,11 +1709,23 @@ struct RW4_PYRAMID_ALIGNED lanes {
     long stats_rejected[RW4_PYRAMID_LANES];
     long stats_rhs_calls[RW4_PYRAMID_LANES];
     double dense[7][RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double J[RW4_PYRAMID_NX * RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double lu[RW4_PYRAMID_NX * RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double f0[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double fnew[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double fy[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    double h_acc[RW4_PYRAMID_LANES];
+    double err_acc[RW4_PYRAMID_LANES];
+    long stats_jac_calls[RW4_PYRAMID_LANES];
+    long stats_decompositions[RW4_PYRAMID_LANES];
     long g[RW4_PYRAMID_LANES];
     long base[RW4_PYRAMID_LANES];
     int code[RW4_PYRAMID_LANES];
     int nonfinite[RW4_PYRAMID_LANES];
     int rejected_last[RW4_PYRAMID_LANES];
+    int piv[RW4_PYRAMID_NX][RW4_PYRAMID_LANES];
+    int new_point[RW4_PYRAMID_LANES];
+    int singular[RW4_PYRAMID_LANES];
     long ntimes;
     const double *times;
     double (*out)[RW4_PYRAMID_NX];
@@ -1779,7 +1791,213 @@ static void rhs_lanes(const double *RW4_PYRAMID_RESTRICT t,
     }
 }
 
-/* One step of a pair on every lane. */
+static void jac_lanes(const double *RW4_PYRAMID_RESTRICT t,
+                      double (*RW4_PYRAMID_RESTRICT x)[RW4_PYRAMID_LANES],
+                      const double *RW4_PYRAMID_RESTRICT c,
+                      double (*RW4_PYRAMID_RESTRICT J)[RW4_PYRAMID_LANES])
+{
+    int l;
+
+    (void)t;  /* unused in some scenes */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6,
+                tmp7, tmp8, tmp9, tmp10, tmp11, tmp12, tmp13, tmp14, tmp15, tmp16, tmp17, tmp18,
+                tmp19, tmp20, tmp21, tmp22, tmp23, tmp24, tmp25, tmp26, tmp27, tmp28, tmp29,
+                tmp30, tmp31, tmp32, tmp33, tmp34, tmp35, tmp36, tmp37;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        w1 = x[6][l];
+        w2 = x[7][l];
+        w3 = x[8][l];
+        w4 = x[9][l];
+        tmp0 = rw4_pyramid_sin_lanes(q2);
+        tmp1 = rw4_pyramid_cos_lanes(q2);
+        tmp2 = rw4_pyramid_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = rw4_pyramid_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = 0.028867513459481294 * u1;
+        tmp13 = 0.0408248290463863 * u3;
+        tmp14 = c[0] + tmp12 + tmp13 - 0.05 * w1;
+        tmp15 = (0.2 + tmp14 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, tmp14) > 0.0 ? 1.0 : 0.0);
+        tmp16 = c[2] + tmp13 - tmp12 - 0.05 * w3;
+        tmp17 = 0.2 - dmax(-0.2, tmp16) > 0.0 ? 1.0 : 0.0;
+        tmp18 = 0.2 + tmp16 > 0.0 ? 1.0 : 0.0;
+        tmp19 = tmp17 * tmp18;
+        tmp20 = 0.028867513459481294 * u2;
+        tmp21 = c[1] + tmp13 + tmp20 - 0.05 * w2;
+        tmp22 = 0.2 + tmp21 > 0.0 ? 1.0 : 0.0;
+        tmp23 = 0.2 - dmax(-0.2, tmp21) > 0.0 ? 1.0 : 0.0;
+        tmp24 = c[3] + tmp13 - tmp20 - 0.05 * w4;
+        tmp25 = (0.2 + tmp24 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2, tmp24) > 0.0 ? 1.0 : 0.0);
+        tmp26 = tmp22 * tmp23;
+        tmp27 = 6.53733725431086e-07 * u3;
+        tmp28 = -tmp27;
+        tmp29 = 8.714944889439003e-05 * u2;
+        tmp30 = 6.162396628989367e-05 * u3;
+        tmp31 = -(9.625868491759333e-05 * u1);
+        tmp32 = 6.806516885332952e-05 * u3;
+        tmp33 = 9.245191006853307e-07 * u2;
+        tmp34 = 8.156614916557547e-07 * u1;
+        tmp35 = 5.767597719025189e-07 * u3;
+        tmp36 = 1.740059606133805e-06 * u2;
+        tmp37 = 1.2304079471660068e-06 * u3;
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = -tmp10;
+        J[4][l] = 0.0;
+        J[5][l] = tmp11;
+        J[6][l] = 0.0;
+        J[7][l] = 0.0;
+        J[8][l] = 0.0;
+        J[9][l] = 0.0;
+        J[10][l] = 0.0;
+        J[11][l] = 0.0;
+        J[12][l] = tmp6;
+        J[13][l] = tmp4;
+        J[14][l] = 0.0;
+        J[15][l] = tmp2;
+        J[16][l] = 0.0;
+        J[17][l] = 0.0;
+        J[18][l] = 0.0;
+        J[19][l] = 0.0;
+        J[20][l] = 0.0;
+        J[21][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[22][l] = -(tmp0 * tmp9);
+        J[23][l] = tmp0 * tmp10;
+        J[24][l] = 1.0;
+        J[25][l] = -(tmp0 * tmp11);
+        J[26][l] = 0.0;
+        J[27][l] = 0.0;
+        J[28][l] = 0.0;
+        J[29][l] = 0.0;
+        J[30][l] = 0.0;
+        J[31][l] = 0.0;
+        J[32][l] = 0.0;
+        J[33][l] = 2.1549270478513374e-06 * w2 + 9.245191006853307e-07 * w1 +
+                9.245191006853307e-07 * w3 - 3.1625434245335595e-08 - 7.692071785353986e-05 * u1
+                - 3.0588884648067615e-07 * w4 - 0.01606287681203328 * u2 - 3.841554404888355e-05
+                * tmp15 - 4.064804156445544e-05 * tmp19 - 0.01238695187118762 * u3;
+        J[34][l] = 0.18940422731779893 * u3 + 6.968783773904135e-07 * tmp22 * tmp23 -
+                3.3549630431642173e-10 - 8.591904094722402e-05 * w3 - 0.016062876812033285 * u1 -
+                8.837985684155604e-05 * w1 - 8.714944889439003e-05 * w2 - 8.714944889439003e-05 *
+                w4 - 0.011480670450262525 * u2 - 1.535619138181468e-06 * tmp25;
+        J[35][l] = 2.5257826115887954e-09 + 6.53733725431086e-07 * w3 + 5.748501166435814e-05 *
+                tmp19 + 9.855348526300785e-07 * tmp26 + 0.011557591168116065 * u3 +
+                6.162396628989367e-05 * w2 + 2.171693411855915e-06 * tmp25 + 0.18940422731779896
+                * u2 - 6.53733725431086e-07 * w1 - 6.162396628989367e-05 * w4 -
+                0.01238695187118762 * u1 - 5.4327783399872144e-05 * tmp15;
+        J[36][l] = 2.661506963722661e-08 + tmp28 + 6.653767409306653e-05 * tmp15 +
+                9.245191006853307e-07 * u1 - 8.837985684155604e-05 * u2;
+        J[37][l] = tmp30 + 2.1549270478513374e-06 * u1 - 4.828115025345418e-10 - tmp29 -
+                1.2070287563363544e-06 * tmp26;
+        J[38][l] = 9.245191006853307e-07 * u1 - 2.8161789287123327e-08 - tmp28 -
+                8.591904094722402e-05 * u2 - 7.040447321780832e-05 * tmp19;
+        J[39][l] = -1.0639081473621739e-09 - tmp29 - tmp30 - 2.6597703684054344e-06 * tmp25 -
+                3.0588884648067615e-07 * u1;
+        J[40][l] = 0.0;
+        J[41][l] = 0.0;
+        J[42][l] = 0.0;
+        J[43][l] = 9.568192514569082e-05 * w4 + 0.031260358896157345 * u1 + 9.683544468949584e-05
+                * w2 + 1.0387671046565256e-07 * tmp15 + 0.005510620830867021 * u2 +
+                9.625868491759333e-05 * w1 + 9.625868491759333e-05 * w3 - 3.3549630431642173e-10
+                - 0.31424258853132236 * u3 - 9.42617471256707e-07 * tmp19;
+        J[44][l] = 0.005510620830867022 * u1 + 5.1784837649697276e-05 * u2 + 0.012357350063371539
+                * u3 - 3.4931060942139676e-08 - 4.314057908681341e-05 * tmp26 -
+                3.477593287828118e-07 * w3 - 1.5012788725878497e-06 * w1 - 4.418707326853578e-05
+                * tmp25 - 9.245191006853307e-07 * w2 - 9.245191006853307e-07 * w4;
+        J[45][l] = 1.183973011789036e-09 + 1.3330624119810659e-06 * tmp19 + 6.53733725431086e-07
+                * w2 + 6.248995829793693e-05 * tmp25 + 0.012357350063371537 * u2 +
+                6.806516885332952e-05 * w3 + 1.4690385275522902e-07 * tmp15 -
+                6.53733725431086e-07 * w4 - 6.100999203320062e-05 * tmp26 - 0.031312143733807044
+                * u3 - 0.31424258853132236 * u1 - 6.806516885332952e-05 * w1;
+        J[46][l] = -7.196789609985278e-11 - tmp31 - tmp32 - 1.7991974024963193e-07 * tmp15 -
+                1.5012788725878497e-06 * u2;
+        J[47][l] = 2.988866993852167e-08 + tmp27 + 9.683544468949584e-05 * u1 +
+                7.472167484630418e-05 * tmp26 - tmp33;
+        J[48][l] = tmp32 - 6.530645409274848e-10 - tmp31 - 1.6326613523187123e-06 * tmp19 -
+                3.477593287828118e-07 * u2;
+        J[49][l] = 9.568192514569082e-05 * u1 - 3.061370237554901e-08 - tmp27 - tmp33 -
+                7.653425593887254e-05 * tmp25;
+        J[50][l] = 0.0;
+        J[51][l] = 0.0;
+        J[52][l] = 0.0;
+        J[53][l] = 6.314456528971991e-10 + 0.13279713100649926 * u2 + 7.890603257631074e-05 *
+                tmp19 + 0.0262473019118721 * u1 + 8.529009155300216e-05 * w4 -
+                0.00543370011301348 * u3 - 7.732741844406775e-05 * tmp15 - 8.156614916557547e-07
+                * w1 - 8.156614916557547e-07 * w3 - 8.692141453631369e-05 * w2;
+        J[54][l] = 2.959932529472591e-10 + 8.784581265079174e-05 * w1 + 0.13279713100649926 * u1
+                + 0.016011091974383586 * u3 + 7.848671707637332e-05 * tmp25 +
+                1.740059606133805e-06 * w2 + 1.740059606133805e-06 * w4 - 8.436569343852411e-05 *
+                w3 - 0.02627690371968818 * u2 - 7.774673394400518e-05 * tmp26;
+        J[55][l] = 2.960180781608348e-05 * u3 + 0.01601109197438358 * u2 + 1.2304079471660068e-06
+                * w4 + 5.767597719025189e-07 * w1 - 1.767579722634975e-07 -
+                0.00011158998142247187 * tmp19 - 1.2304079471660068e-06 * w2 -
+                5.767597719025189e-07 * w3 - 0.005433700113013481 * u1 - 0.0001093574839069 *
+                tmp15 - 0.00010995048557382475 * tmp26 - 0.00011099697975554711 * tmp25;
+        J[56][l] = 5.357400702530561e-08 + tmp35 + 8.784581265079174e-05 * u2 +
+                0.00013393501756326403 * tmp15 - tmp34;
+        J[57][l] = 5.3864517325422714e-08 + tmp36 + 0.0001346612933135568 * tmp26 - tmp37 -
+                8.692141453631369e-05 * u1;
+        J[58][l] = 5.466770297834206e-08 + 0.00013666925744585515 * tmp17 * tmp18 - tmp34 - tmp35
+                - 8.436569343852411e-05 * u2;
+        J[59][l] = 5.437719267822496e-08 + tmp36 + tmp37 + 0.00013594298169556239 * tmp25 +
+                8.529009155300216e-05 * u1;
+        J[60][l] = 0.0;
+        J[61][l] = 0.0;
+        J[62][l] = 0.0;
+        J[63][l] = 0.0002566001196398337 + 0.6415002990995843 * tmp15;
+        J[64][l] = 0.0;
+        J[65][l] = 0.0003628873693012115 + 0.9072184232530288 * tmp15;
+        J[66][l] = -0.00044444444444444447 - 1.1111111111111112 * tmp15;
+        J[67][l] = 0.0;
+        J[68][l] = 0.0;
+        J[69][l] = 0.0;
+        J[70][l] = 0.0;
+        J[71][l] = 0.0;
+        J[72][l] = 0.0;
+        J[73][l] = 0.0;
+        J[74][l] = 0.0002566001196398337 + 0.6415002990995843 * tmp26;
+        J[75][l] = 0.0003628873693012115 + 0.9072184232530288 * tmp26;
+        J[76][l] = 0.0;
+        J[77][l] = -0.00044444444444444447 - 1.1111111111111112 * tmp26;
+        J[78][l] = 0.0;
+        J[79][l] = 0.0;
+        J[80][l] = 0.0;
+        J[81][l] = 0.0;
+        J[82][l] = 0.0;
+        J[83][l] = -0.0002566001196398337 - 0.6415002990995843 * tmp19;
+        J[84][l] = 0.0;
+        J[85][l] = 0.0003628873693012115 + 0.9072184232530288 * tmp19;
+        J[86][l] = 0.0;
+        J[87][l] = 0.0;
+        J[88][l] = -0.00044444444444444447 - 1.1111111111111112 * tmp19;
+        J[89][l] = 0.0;
+        J[90][l] = 0.0;
+        J[91][l] = 0.0;
+        J[92][l] = 0.0;
+        J[93][l] = 0.0;
+        J[94][l] = -0.0002566001196398337 - 0.6415002990995843 * tmp25;
+        J[95][l] = 0.0003628873693012115 + 0.9072184232530288 * tmp25;
+        J[96][l] = 0.0;
+        J[97][l] = 0.0;
+        J[98][l] = 0.0;
+        J[99][l] = -0.00044444444444444447 - 1.1111111111111112 * tmp25;
+    }
+}
+
+/* One step of a method on every lane. */
 typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
                            long max_steps);
 
@@ -3049,6 +3267,2787 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of rodas4_integrate's loop on every lane. */
+static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    int p[RW4_PYRAMID_LANES];
+    double best[RW4_PYRAMID_LANES];
+    double m[RW4_PYRAMID_LANES];
+    double swap[RW4_PYRAMID_LANES];
+    double inv_h[RW4_PYRAMID_LANES];
+    double err[RW4_PYRAMID_LANES];
+    double fac[RW4_PYRAMID_LANES];
+    double gus[RW4_PYRAMID_LANES];
+    double total[RW4_PYRAMID_LANES];
+    int go[RW4_PYRAMID_LANES];
+    int fresh[RW4_PYRAMID_LANES];
+    int bad[RW4_PYRAMID_LANES];
+    int sing[RW4_PYRAMID_LANES];
+    int last[RW4_PYRAMID_LANES];
+    int retry[RW4_PYRAMID_LANES];
+    int ok[RW4_PYRAMID_LANES];
+    int take[RW4_PYRAMID_LANES];
+    int lock[RW4_PYRAMID_LANES];
+    int rej[RW4_PYRAMID_LANES];
+    static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < RW4_PYRAMID_NX * RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
+                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < RW4_PYRAMID_NX * RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->lu[i * RW4_PYRAMID_NX + i][l] = L->lu[i * RW4_PYRAMID_NX + i][l] + 1.0 / (L->h[l]
+                    * 0.25);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[3][l] = L->lu[3][l] * L->lu[0][l];
+        L->lu[5][l] = L->lu[5][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * RW4_PYRAMID_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 1][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[1 * RW4_PYRAMID_NX + j][l];
+                L->lu[1 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[1 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[11][l] = 1.0 / L->lu[11][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 1][l] * L->lu[11][l];
+            L->lu[i * RW4_PYRAMID_NX + 1][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 2][l] = L->lu[i * RW4_PYRAMID_NX + 2][l] - m[l] *
+                    L->lu[12][l];
+            L->lu[i * RW4_PYRAMID_NX + 3][l] = L->lu[i * RW4_PYRAMID_NX + 3][l] - m[l] *
+                    L->lu[13][l];
+            L->lu[i * RW4_PYRAMID_NX + 4][l] = L->lu[i * RW4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[14][l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = L->lu[i * RW4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[15][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[12][l] = L->lu[12][l] * L->lu[11][l];
+        L->lu[13][l] = L->lu[13][l] * L->lu[11][l];
+        L->lu[14][l] = L->lu[14][l] * L->lu[11][l];
+        L->lu[15][l] = L->lu[15][l] * L->lu[11][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[22][l]) > 0.0));
+        L->lu[22][l] = 1.0 / L->lu[22][l];
+        L->lu[23][l] = L->lu[23][l] * L->lu[22][l];
+        L->lu[24][l] = L->lu[24][l] * L->lu[22][l];
+        L->lu[25][l] = L->lu[25][l] * L->lu[22][l];
+        p[l] = 3;
+        best[l] = fabs(L->lu[3 * RW4_PYRAMID_NX + 3][l]);
+    }
+    for (i = 4; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 3][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 3][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 3][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[3][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 4; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[3 * RW4_PYRAMID_NX + j][l];
+                L->lu[3 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[3 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[33][l] = 1.0 / L->lu[33][l];
+    }
+    for (i = 4; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 3][l] * L->lu[33][l];
+            L->lu[i * RW4_PYRAMID_NX + 3][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 4][l] = L->lu[i * RW4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[34][l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = L->lu[i * RW4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[35][l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = L->lu[i * RW4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[36][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[37][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[38][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[39][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[34][l] = L->lu[34][l] * L->lu[33][l];
+        L->lu[35][l] = L->lu[35][l] * L->lu[33][l];
+        L->lu[36][l] = L->lu[36][l] * L->lu[33][l];
+        L->lu[37][l] = L->lu[37][l] * L->lu[33][l];
+        L->lu[38][l] = L->lu[38][l] * L->lu[33][l];
+        L->lu[39][l] = L->lu[39][l] * L->lu[33][l];
+        p[l] = 4;
+        best[l] = fabs(L->lu[4 * RW4_PYRAMID_NX + 4][l]);
+    }
+    for (i = 5; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 4][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 4][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 4][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[4][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 5; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[4 * RW4_PYRAMID_NX + j][l];
+                L->lu[4 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[4 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[44][l] = 1.0 / L->lu[44][l];
+    }
+    for (i = 5; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 4][l] * L->lu[44][l];
+            L->lu[i * RW4_PYRAMID_NX + 4][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = L->lu[i * RW4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[45][l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = L->lu[i * RW4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[46][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[47][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[48][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[49][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[45][l] = L->lu[45][l] * L->lu[44][l];
+        L->lu[46][l] = L->lu[46][l] * L->lu[44][l];
+        L->lu[47][l] = L->lu[47][l] * L->lu[44][l];
+        L->lu[48][l] = L->lu[48][l] * L->lu[44][l];
+        L->lu[49][l] = L->lu[49][l] * L->lu[44][l];
+        p[l] = 5;
+        best[l] = fabs(L->lu[5 * RW4_PYRAMID_NX + 5][l]);
+    }
+    for (i = 6; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 5][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 5][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 5][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[5][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 6; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[5 * RW4_PYRAMID_NX + j][l];
+                L->lu[5 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[5 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[55][l] = 1.0 / L->lu[55][l];
+    }
+    for (i = 6; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 5][l] * L->lu[55][l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = L->lu[i * RW4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[56][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[57][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[58][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[59][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[56][l] = L->lu[56][l] * L->lu[55][l];
+        L->lu[57][l] = L->lu[57][l] * L->lu[55][l];
+        L->lu[58][l] = L->lu[58][l] * L->lu[55][l];
+        L->lu[59][l] = L->lu[59][l] * L->lu[55][l];
+        p[l] = 6;
+        best[l] = fabs(L->lu[6 * RW4_PYRAMID_NX + 6][l]);
+    }
+    for (i = 7; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 6][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 6][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 6][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[6][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 7; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[6 * RW4_PYRAMID_NX + j][l];
+                L->lu[6 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[6 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[66][l] = 1.0 / L->lu[66][l];
+    }
+    for (i = 7; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 6][l] * L->lu[66][l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[67][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[68][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[69][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[67][l] = L->lu[67][l] * L->lu[66][l];
+        L->lu[68][l] = L->lu[68][l] * L->lu[66][l];
+        L->lu[69][l] = L->lu[69][l] * L->lu[66][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * RW4_PYRAMID_NX + 7][l]);
+    }
+    for (i = 8; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 7][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 7][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[7 * RW4_PYRAMID_NX + j][l];
+                L->lu[7 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[7 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[77][l] = 1.0 / L->lu[77][l];
+    }
+    for (i = 8; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 7][l] * L->lu[77][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[78][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[79][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[78][l] = L->lu[78][l] * L->lu[77][l];
+        L->lu[79][l] = L->lu[79][l] * L->lu[77][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * RW4_PYRAMID_NX + 8][l]);
+    }
+    for (i = 9; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 8][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 8][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[8 * RW4_PYRAMID_NX + j][l];
+                L->lu[8 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[8 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[88][l] = 1.0 / L->lu[88][l];
+    }
+    for (i = 9; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 8][l] * L->lu[88][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[89][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[89][l] = L->lu[89][l] * L->lu[88][l];
+        L->piv[9][l] = 9;
+        sing[l] = (sing[l] | !(fabs(L->lu[99][l]) > 0.0));
+        L->lu[99][l] = 1.0 / L->lu[99][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? RW4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 4 ? L->k[0][4][l] : L->k[0][3][l];
+        L->k[0][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[0][4][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 5 ? L->k[0][5][l] : L->k[0][3][l];
+        L->k[0][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 6 ? L->k[0][6][l] : L->k[0][3][l];
+        L->k[0][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 7 ? L->k[0][7][l] : L->k[0][3][l];
+        L->k[0][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 8 ? L->k[0][8][l] : L->k[0][3][l];
+        L->k[0][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 9 ? L->k[0][9][l] : L->k[0][3][l];
+        L->k[0][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 5 ? L->k[0][5][l] : L->k[0][4][l];
+        L->k[0][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 6 ? L->k[0][6][l] : L->k[0][4][l];
+        L->k[0][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 7 ? L->k[0][7][l] : L->k[0][4][l];
+        L->k[0][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 8 ? L->k[0][8][l] : L->k[0][4][l];
+        L->k[0][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 9 ? L->k[0][9][l] : L->k[0][4][l];
+        L->k[0][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 6 ? L->k[0][6][l] : L->k[0][5][l];
+        L->k[0][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 7 ? L->k[0][7][l] : L->k[0][5][l];
+        L->k[0][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 8 ? L->k[0][8][l] : L->k[0][5][l];
+        L->k[0][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 9 ? L->k[0][9][l] : L->k[0][5][l];
+        L->k[0][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 7 ? L->k[0][7][l] : L->k[0][6][l];
+        L->k[0][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 8 ? L->k[0][8][l] : L->k[0][6][l];
+        L->k[0][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 9 ? L->k[0][9][l] : L->k[0][6][l];
+        L->k[0][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[21][l] * L->k[0][1][l];
+        L->k[0][4][l] = L->k[0][4][l] - L->lu[43][l] * L->k[0][3][l];
+        L->k[0][5][l] = L->k[0][5][l] - L->lu[53][l] * L->k[0][3][l] - L->lu[54][l] * L->k[0][4][l];
+        L->k[0][6][l] = L->k[0][6][l] - L->lu[63][l] * L->k[0][3][l] - L->lu[64][l] *
+                L->k[0][4][l] - L->lu[65][l] * L->k[0][5][l];
+        L->k[0][7][l] = L->k[0][7][l] - L->lu[73][l] * L->k[0][3][l] - L->lu[74][l] *
+                L->k[0][4][l] - L->lu[75][l] * L->k[0][5][l] - L->lu[76][l] * L->k[0][6][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[83][l] * L->k[0][3][l] - L->lu[84][l] *
+                L->k[0][4][l] - L->lu[85][l] * L->k[0][5][l] - L->lu[86][l] * L->k[0][6][l] -
+                L->lu[87][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[93][l] * L->k[0][3][l] - L->lu[94][l] *
+                L->k[0][4][l] - L->lu[95][l] * L->k[0][5][l] - L->lu[96][l] * L->k[0][6][l] -
+                L->lu[97][l] * L->k[0][7][l] - L->lu[98][l] * L->k[0][8][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[99][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[0][9][l] -
+                L->lu[78][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[0][9][l] -
+                L->lu[68][l] * L->k[0][8][l] - L->lu[67][l] * L->k[0][7][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[0][9][l] -
+                L->lu[58][l] * L->k[0][8][l] - L->lu[57][l] * L->k[0][7][l] - L->lu[56][l] *
+                L->k[0][6][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[0][9][l] -
+                L->lu[48][l] * L->k[0][8][l] - L->lu[47][l] * L->k[0][7][l] - L->lu[46][l] *
+                L->k[0][6][l] - L->lu[45][l] * L->k[0][5][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[0][9][l] -
+                L->lu[38][l] * L->k[0][8][l] - L->lu[37][l] * L->k[0][7][l] - L->lu[36][l] *
+                L->k[0][6][l] - L->lu[35][l] * L->k[0][5][l] - L->lu[34][l] * L->k[0][4][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[0][5][l] -
+                L->lu[24][l] * L->k[0][4][l] - L->lu[23][l] * L->k[0][3][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[0][5][l] -
+                L->lu[14][l] * L->k[0][4][l] - L->lu[13][l] * L->k[0][3][l] - L->lu[12][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[0][5][l] - L->lu[3][l] *
+                L->k[0][3][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 4 ? L->k[1][4][l] : L->k[1][3][l];
+        L->k[1][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[1][4][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 5 ? L->k[1][5][l] : L->k[1][3][l];
+        L->k[1][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 6 ? L->k[1][6][l] : L->k[1][3][l];
+        L->k[1][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 7 ? L->k[1][7][l] : L->k[1][3][l];
+        L->k[1][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 8 ? L->k[1][8][l] : L->k[1][3][l];
+        L->k[1][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 9 ? L->k[1][9][l] : L->k[1][3][l];
+        L->k[1][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 5 ? L->k[1][5][l] : L->k[1][4][l];
+        L->k[1][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 6 ? L->k[1][6][l] : L->k[1][4][l];
+        L->k[1][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 7 ? L->k[1][7][l] : L->k[1][4][l];
+        L->k[1][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 8 ? L->k[1][8][l] : L->k[1][4][l];
+        L->k[1][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 9 ? L->k[1][9][l] : L->k[1][4][l];
+        L->k[1][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 6 ? L->k[1][6][l] : L->k[1][5][l];
+        L->k[1][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 7 ? L->k[1][7][l] : L->k[1][5][l];
+        L->k[1][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 8 ? L->k[1][8][l] : L->k[1][5][l];
+        L->k[1][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 9 ? L->k[1][9][l] : L->k[1][5][l];
+        L->k[1][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 7 ? L->k[1][7][l] : L->k[1][6][l];
+        L->k[1][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 8 ? L->k[1][8][l] : L->k[1][6][l];
+        L->k[1][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 9 ? L->k[1][9][l] : L->k[1][6][l];
+        L->k[1][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[21][l] * L->k[1][1][l];
+        L->k[1][4][l] = L->k[1][4][l] - L->lu[43][l] * L->k[1][3][l];
+        L->k[1][5][l] = L->k[1][5][l] - L->lu[53][l] * L->k[1][3][l] - L->lu[54][l] * L->k[1][4][l];
+        L->k[1][6][l] = L->k[1][6][l] - L->lu[63][l] * L->k[1][3][l] - L->lu[64][l] *
+                L->k[1][4][l] - L->lu[65][l] * L->k[1][5][l];
+        L->k[1][7][l] = L->k[1][7][l] - L->lu[73][l] * L->k[1][3][l] - L->lu[74][l] *
+                L->k[1][4][l] - L->lu[75][l] * L->k[1][5][l] - L->lu[76][l] * L->k[1][6][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[83][l] * L->k[1][3][l] - L->lu[84][l] *
+                L->k[1][4][l] - L->lu[85][l] * L->k[1][5][l] - L->lu[86][l] * L->k[1][6][l] -
+                L->lu[87][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[93][l] * L->k[1][3][l] - L->lu[94][l] *
+                L->k[1][4][l] - L->lu[95][l] * L->k[1][5][l] - L->lu[96][l] * L->k[1][6][l] -
+                L->lu[97][l] * L->k[1][7][l] - L->lu[98][l] * L->k[1][8][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[99][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[1][9][l] -
+                L->lu[78][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[1][9][l] -
+                L->lu[68][l] * L->k[1][8][l] - L->lu[67][l] * L->k[1][7][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[1][9][l] -
+                L->lu[58][l] * L->k[1][8][l] - L->lu[57][l] * L->k[1][7][l] - L->lu[56][l] *
+                L->k[1][6][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[1][9][l] -
+                L->lu[48][l] * L->k[1][8][l] - L->lu[47][l] * L->k[1][7][l] - L->lu[46][l] *
+                L->k[1][6][l] - L->lu[45][l] * L->k[1][5][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[1][9][l] -
+                L->lu[38][l] * L->k[1][8][l] - L->lu[37][l] * L->k[1][7][l] - L->lu[36][l] *
+                L->k[1][6][l] - L->lu[35][l] * L->k[1][5][l] - L->lu[34][l] * L->k[1][4][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[1][5][l] -
+                L->lu[24][l] * L->k[1][4][l] - L->lu[23][l] * L->k[1][3][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[1][5][l] -
+                L->lu[14][l] * L->k[1][4][l] - L->lu[13][l] * L->k[1][3][l] - L->lu[12][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[1][5][l] - L->lu[3][l] *
+                L->k[1][3][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 4 ? L->k[2][4][l] : L->k[2][3][l];
+        L->k[2][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[2][4][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 5 ? L->k[2][5][l] : L->k[2][3][l];
+        L->k[2][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 6 ? L->k[2][6][l] : L->k[2][3][l];
+        L->k[2][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 7 ? L->k[2][7][l] : L->k[2][3][l];
+        L->k[2][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 8 ? L->k[2][8][l] : L->k[2][3][l];
+        L->k[2][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 9 ? L->k[2][9][l] : L->k[2][3][l];
+        L->k[2][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 5 ? L->k[2][5][l] : L->k[2][4][l];
+        L->k[2][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 6 ? L->k[2][6][l] : L->k[2][4][l];
+        L->k[2][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 7 ? L->k[2][7][l] : L->k[2][4][l];
+        L->k[2][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 8 ? L->k[2][8][l] : L->k[2][4][l];
+        L->k[2][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 9 ? L->k[2][9][l] : L->k[2][4][l];
+        L->k[2][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 6 ? L->k[2][6][l] : L->k[2][5][l];
+        L->k[2][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 7 ? L->k[2][7][l] : L->k[2][5][l];
+        L->k[2][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 8 ? L->k[2][8][l] : L->k[2][5][l];
+        L->k[2][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 9 ? L->k[2][9][l] : L->k[2][5][l];
+        L->k[2][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 7 ? L->k[2][7][l] : L->k[2][6][l];
+        L->k[2][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 8 ? L->k[2][8][l] : L->k[2][6][l];
+        L->k[2][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 9 ? L->k[2][9][l] : L->k[2][6][l];
+        L->k[2][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[21][l] * L->k[2][1][l];
+        L->k[2][4][l] = L->k[2][4][l] - L->lu[43][l] * L->k[2][3][l];
+        L->k[2][5][l] = L->k[2][5][l] - L->lu[53][l] * L->k[2][3][l] - L->lu[54][l] * L->k[2][4][l];
+        L->k[2][6][l] = L->k[2][6][l] - L->lu[63][l] * L->k[2][3][l] - L->lu[64][l] *
+                L->k[2][4][l] - L->lu[65][l] * L->k[2][5][l];
+        L->k[2][7][l] = L->k[2][7][l] - L->lu[73][l] * L->k[2][3][l] - L->lu[74][l] *
+                L->k[2][4][l] - L->lu[75][l] * L->k[2][5][l] - L->lu[76][l] * L->k[2][6][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[83][l] * L->k[2][3][l] - L->lu[84][l] *
+                L->k[2][4][l] - L->lu[85][l] * L->k[2][5][l] - L->lu[86][l] * L->k[2][6][l] -
+                L->lu[87][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[93][l] * L->k[2][3][l] - L->lu[94][l] *
+                L->k[2][4][l] - L->lu[95][l] * L->k[2][5][l] - L->lu[96][l] * L->k[2][6][l] -
+                L->lu[97][l] * L->k[2][7][l] - L->lu[98][l] * L->k[2][8][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[99][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[2][9][l] -
+                L->lu[78][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[2][9][l] -
+                L->lu[68][l] * L->k[2][8][l] - L->lu[67][l] * L->k[2][7][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[2][9][l] -
+                L->lu[58][l] * L->k[2][8][l] - L->lu[57][l] * L->k[2][7][l] - L->lu[56][l] *
+                L->k[2][6][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[2][9][l] -
+                L->lu[48][l] * L->k[2][8][l] - L->lu[47][l] * L->k[2][7][l] - L->lu[46][l] *
+                L->k[2][6][l] - L->lu[45][l] * L->k[2][5][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[2][9][l] -
+                L->lu[38][l] * L->k[2][8][l] - L->lu[37][l] * L->k[2][7][l] - L->lu[36][l] *
+                L->k[2][6][l] - L->lu[35][l] * L->k[2][5][l] - L->lu[34][l] * L->k[2][4][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[2][5][l] -
+                L->lu[24][l] * L->k[2][4][l] - L->lu[23][l] * L->k[2][3][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[2][5][l] -
+                L->lu[14][l] * L->k[2][4][l] - L->lu[13][l] * L->k[2][3][l] - L->lu[12][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[2][5][l] - L->lu[3][l] *
+                L->k[2][3][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 4 ? L->k[3][4][l] : L->k[3][3][l];
+        L->k[3][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[3][4][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 5 ? L->k[3][5][l] : L->k[3][3][l];
+        L->k[3][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 6 ? L->k[3][6][l] : L->k[3][3][l];
+        L->k[3][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 7 ? L->k[3][7][l] : L->k[3][3][l];
+        L->k[3][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 8 ? L->k[3][8][l] : L->k[3][3][l];
+        L->k[3][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 9 ? L->k[3][9][l] : L->k[3][3][l];
+        L->k[3][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 5 ? L->k[3][5][l] : L->k[3][4][l];
+        L->k[3][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 6 ? L->k[3][6][l] : L->k[3][4][l];
+        L->k[3][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 7 ? L->k[3][7][l] : L->k[3][4][l];
+        L->k[3][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 8 ? L->k[3][8][l] : L->k[3][4][l];
+        L->k[3][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 9 ? L->k[3][9][l] : L->k[3][4][l];
+        L->k[3][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 6 ? L->k[3][6][l] : L->k[3][5][l];
+        L->k[3][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 7 ? L->k[3][7][l] : L->k[3][5][l];
+        L->k[3][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 8 ? L->k[3][8][l] : L->k[3][5][l];
+        L->k[3][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 9 ? L->k[3][9][l] : L->k[3][5][l];
+        L->k[3][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 7 ? L->k[3][7][l] : L->k[3][6][l];
+        L->k[3][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 8 ? L->k[3][8][l] : L->k[3][6][l];
+        L->k[3][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 9 ? L->k[3][9][l] : L->k[3][6][l];
+        L->k[3][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[21][l] * L->k[3][1][l];
+        L->k[3][4][l] = L->k[3][4][l] - L->lu[43][l] * L->k[3][3][l];
+        L->k[3][5][l] = L->k[3][5][l] - L->lu[53][l] * L->k[3][3][l] - L->lu[54][l] * L->k[3][4][l];
+        L->k[3][6][l] = L->k[3][6][l] - L->lu[63][l] * L->k[3][3][l] - L->lu[64][l] *
+                L->k[3][4][l] - L->lu[65][l] * L->k[3][5][l];
+        L->k[3][7][l] = L->k[3][7][l] - L->lu[73][l] * L->k[3][3][l] - L->lu[74][l] *
+                L->k[3][4][l] - L->lu[75][l] * L->k[3][5][l] - L->lu[76][l] * L->k[3][6][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[83][l] * L->k[3][3][l] - L->lu[84][l] *
+                L->k[3][4][l] - L->lu[85][l] * L->k[3][5][l] - L->lu[86][l] * L->k[3][6][l] -
+                L->lu[87][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[93][l] * L->k[3][3][l] - L->lu[94][l] *
+                L->k[3][4][l] - L->lu[95][l] * L->k[3][5][l] - L->lu[96][l] * L->k[3][6][l] -
+                L->lu[97][l] * L->k[3][7][l] - L->lu[98][l] * L->k[3][8][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[99][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[3][9][l] -
+                L->lu[78][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[3][9][l] -
+                L->lu[68][l] * L->k[3][8][l] - L->lu[67][l] * L->k[3][7][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[3][9][l] -
+                L->lu[58][l] * L->k[3][8][l] - L->lu[57][l] * L->k[3][7][l] - L->lu[56][l] *
+                L->k[3][6][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[3][9][l] -
+                L->lu[48][l] * L->k[3][8][l] - L->lu[47][l] * L->k[3][7][l] - L->lu[46][l] *
+                L->k[3][6][l] - L->lu[45][l] * L->k[3][5][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[3][9][l] -
+                L->lu[38][l] * L->k[3][8][l] - L->lu[37][l] * L->k[3][7][l] - L->lu[36][l] *
+                L->k[3][6][l] - L->lu[35][l] * L->k[3][5][l] - L->lu[34][l] * L->k[3][4][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[3][5][l] -
+                L->lu[24][l] * L->k[3][4][l] - L->lu[23][l] * L->k[3][3][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[3][5][l] -
+                L->lu[14][l] * L->k[3][4][l] - L->lu[13][l] * L->k[3][3][l] - L->lu[12][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[3][5][l] - L->lu[3][l] *
+                L->k[3][3][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 4 ? L->k[4][4][l] : L->k[4][3][l];
+        L->k[4][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[4][4][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 5 ? L->k[4][5][l] : L->k[4][3][l];
+        L->k[4][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 6 ? L->k[4][6][l] : L->k[4][3][l];
+        L->k[4][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 7 ? L->k[4][7][l] : L->k[4][3][l];
+        L->k[4][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 8 ? L->k[4][8][l] : L->k[4][3][l];
+        L->k[4][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 9 ? L->k[4][9][l] : L->k[4][3][l];
+        L->k[4][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 5 ? L->k[4][5][l] : L->k[4][4][l];
+        L->k[4][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 6 ? L->k[4][6][l] : L->k[4][4][l];
+        L->k[4][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 7 ? L->k[4][7][l] : L->k[4][4][l];
+        L->k[4][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 8 ? L->k[4][8][l] : L->k[4][4][l];
+        L->k[4][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 9 ? L->k[4][9][l] : L->k[4][4][l];
+        L->k[4][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 6 ? L->k[4][6][l] : L->k[4][5][l];
+        L->k[4][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 7 ? L->k[4][7][l] : L->k[4][5][l];
+        L->k[4][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 8 ? L->k[4][8][l] : L->k[4][5][l];
+        L->k[4][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 9 ? L->k[4][9][l] : L->k[4][5][l];
+        L->k[4][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 7 ? L->k[4][7][l] : L->k[4][6][l];
+        L->k[4][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 8 ? L->k[4][8][l] : L->k[4][6][l];
+        L->k[4][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 9 ? L->k[4][9][l] : L->k[4][6][l];
+        L->k[4][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[21][l] * L->k[4][1][l];
+        L->k[4][4][l] = L->k[4][4][l] - L->lu[43][l] * L->k[4][3][l];
+        L->k[4][5][l] = L->k[4][5][l] - L->lu[53][l] * L->k[4][3][l] - L->lu[54][l] * L->k[4][4][l];
+        L->k[4][6][l] = L->k[4][6][l] - L->lu[63][l] * L->k[4][3][l] - L->lu[64][l] *
+                L->k[4][4][l] - L->lu[65][l] * L->k[4][5][l];
+        L->k[4][7][l] = L->k[4][7][l] - L->lu[73][l] * L->k[4][3][l] - L->lu[74][l] *
+                L->k[4][4][l] - L->lu[75][l] * L->k[4][5][l] - L->lu[76][l] * L->k[4][6][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[83][l] * L->k[4][3][l] - L->lu[84][l] *
+                L->k[4][4][l] - L->lu[85][l] * L->k[4][5][l] - L->lu[86][l] * L->k[4][6][l] -
+                L->lu[87][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[93][l] * L->k[4][3][l] - L->lu[94][l] *
+                L->k[4][4][l] - L->lu[95][l] * L->k[4][5][l] - L->lu[96][l] * L->k[4][6][l] -
+                L->lu[97][l] * L->k[4][7][l] - L->lu[98][l] * L->k[4][8][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[99][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[4][9][l] -
+                L->lu[78][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[4][9][l] -
+                L->lu[68][l] * L->k[4][8][l] - L->lu[67][l] * L->k[4][7][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[4][9][l] -
+                L->lu[58][l] * L->k[4][8][l] - L->lu[57][l] * L->k[4][7][l] - L->lu[56][l] *
+                L->k[4][6][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[4][9][l] -
+                L->lu[48][l] * L->k[4][8][l] - L->lu[47][l] * L->k[4][7][l] - L->lu[46][l] *
+                L->k[4][6][l] - L->lu[45][l] * L->k[4][5][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[4][9][l] -
+                L->lu[38][l] * L->k[4][8][l] - L->lu[37][l] * L->k[4][7][l] - L->lu[36][l] *
+                L->k[4][6][l] - L->lu[35][l] * L->k[4][5][l] - L->lu[34][l] * L->k[4][4][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[4][5][l] -
+                L->lu[24][l] * L->k[4][4][l] - L->lu[23][l] * L->k[4][3][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[4][5][l] -
+                L->lu[14][l] * L->k[4][4][l] - L->lu[13][l] * L->k[4][3][l] - L->lu[12][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[4][5][l] - L->lu[3][l] *
+                L->k[4][3][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 4 ? L->k[5][4][l] : L->k[5][3][l];
+        L->k[5][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[5][4][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 5 ? L->k[5][5][l] : L->k[5][3][l];
+        L->k[5][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 6 ? L->k[5][6][l] : L->k[5][3][l];
+        L->k[5][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 7 ? L->k[5][7][l] : L->k[5][3][l];
+        L->k[5][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 8 ? L->k[5][8][l] : L->k[5][3][l];
+        L->k[5][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 9 ? L->k[5][9][l] : L->k[5][3][l];
+        L->k[5][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 5 ? L->k[5][5][l] : L->k[5][4][l];
+        L->k[5][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 6 ? L->k[5][6][l] : L->k[5][4][l];
+        L->k[5][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 7 ? L->k[5][7][l] : L->k[5][4][l];
+        L->k[5][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 8 ? L->k[5][8][l] : L->k[5][4][l];
+        L->k[5][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 9 ? L->k[5][9][l] : L->k[5][4][l];
+        L->k[5][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 6 ? L->k[5][6][l] : L->k[5][5][l];
+        L->k[5][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 7 ? L->k[5][7][l] : L->k[5][5][l];
+        L->k[5][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 8 ? L->k[5][8][l] : L->k[5][5][l];
+        L->k[5][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 9 ? L->k[5][9][l] : L->k[5][5][l];
+        L->k[5][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 7 ? L->k[5][7][l] : L->k[5][6][l];
+        L->k[5][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 8 ? L->k[5][8][l] : L->k[5][6][l];
+        L->k[5][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 9 ? L->k[5][9][l] : L->k[5][6][l];
+        L->k[5][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[21][l] * L->k[5][1][l];
+        L->k[5][4][l] = L->k[5][4][l] - L->lu[43][l] * L->k[5][3][l];
+        L->k[5][5][l] = L->k[5][5][l] - L->lu[53][l] * L->k[5][3][l] - L->lu[54][l] * L->k[5][4][l];
+        L->k[5][6][l] = L->k[5][6][l] - L->lu[63][l] * L->k[5][3][l] - L->lu[64][l] *
+                L->k[5][4][l] - L->lu[65][l] * L->k[5][5][l];
+        L->k[5][7][l] = L->k[5][7][l] - L->lu[73][l] * L->k[5][3][l] - L->lu[74][l] *
+                L->k[5][4][l] - L->lu[75][l] * L->k[5][5][l] - L->lu[76][l] * L->k[5][6][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[83][l] * L->k[5][3][l] - L->lu[84][l] *
+                L->k[5][4][l] - L->lu[85][l] * L->k[5][5][l] - L->lu[86][l] * L->k[5][6][l] -
+                L->lu[87][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[93][l] * L->k[5][3][l] - L->lu[94][l] *
+                L->k[5][4][l] - L->lu[95][l] * L->k[5][5][l] - L->lu[96][l] * L->k[5][6][l] -
+                L->lu[97][l] * L->k[5][7][l] - L->lu[98][l] * L->k[5][8][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[99][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[5][9][l] -
+                L->lu[78][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[5][9][l] -
+                L->lu[68][l] * L->k[5][8][l] - L->lu[67][l] * L->k[5][7][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[5][9][l] -
+                L->lu[58][l] * L->k[5][8][l] - L->lu[57][l] * L->k[5][7][l] - L->lu[56][l] *
+                L->k[5][6][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[5][9][l] -
+                L->lu[48][l] * L->k[5][8][l] - L->lu[47][l] * L->k[5][7][l] - L->lu[46][l] *
+                L->k[5][6][l] - L->lu[45][l] * L->k[5][5][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[5][9][l] -
+                L->lu[38][l] * L->k[5][8][l] - L->lu[37][l] * L->k[5][7][l] - L->lu[36][l] *
+                L->k[5][6][l] - L->lu[35][l] * L->k[5][5][l] - L->lu[34][l] * L->k[5][4][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[5][5][l] -
+                L->lu[24][l] * L->k[5][4][l] - L->lu[23][l] * L->k[5][3][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[5][5][l] -
+                L->lu[14][l] * L->k[5][4][l] - L->lu[13][l] * L->k[5][3][l] - L->lu[12][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[5][5][l] - L->lu[3][l] *
+                L->k[5][3][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / RW4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    int p[RW4_PYRAMID_LANES];
+    double best[RW4_PYRAMID_LANES];
+    double m[RW4_PYRAMID_LANES];
+    double swap[RW4_PYRAMID_LANES];
+    double inv_h[RW4_PYRAMID_LANES];
+    double err[RW4_PYRAMID_LANES];
+    double fac[RW4_PYRAMID_LANES];
+    double gus[RW4_PYRAMID_LANES];
+    double total[RW4_PYRAMID_LANES];
+    int go[RW4_PYRAMID_LANES];
+    int fresh[RW4_PYRAMID_LANES];
+    int bad[RW4_PYRAMID_LANES];
+    int sing[RW4_PYRAMID_LANES];
+    int last[RW4_PYRAMID_LANES];
+    int retry[RW4_PYRAMID_LANES];
+    int ok[RW4_PYRAMID_LANES];
+    int take[RW4_PYRAMID_LANES];
+    int lock[RW4_PYRAMID_LANES];
+    int rej[RW4_PYRAMID_LANES];
+    double frac[RW4_PYRAMID_LANES];
+    int due[RW4_PYRAMID_LANES];
+    static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, j, l, q;
+    int need;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < RW4_PYRAMID_NX * RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? RW4_PYRAMID_ODE_ERR_NONFINITE :
+                RW4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? RW4_PYRAMID_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < RW4_PYRAMID_NX * RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->lu[i * RW4_PYRAMID_NX + i][l] = L->lu[i * RW4_PYRAMID_NX + i][l] + 1.0 / (L->h[l]
+                    * 0.25);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+        sing[l] = 0;
+        L->piv[0][l] = 0;
+        sing[l] = (sing[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[3][l] = L->lu[3][l] * L->lu[0][l];
+        L->lu[5][l] = L->lu[5][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * RW4_PYRAMID_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 1][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[1 * RW4_PYRAMID_NX + j][l];
+                L->lu[1 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[1 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[11][l] = 1.0 / L->lu[11][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 1][l] * L->lu[11][l];
+            L->lu[i * RW4_PYRAMID_NX + 1][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 2][l] = L->lu[i * RW4_PYRAMID_NX + 2][l] - m[l] *
+                    L->lu[12][l];
+            L->lu[i * RW4_PYRAMID_NX + 3][l] = L->lu[i * RW4_PYRAMID_NX + 3][l] - m[l] *
+                    L->lu[13][l];
+            L->lu[i * RW4_PYRAMID_NX + 4][l] = L->lu[i * RW4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[14][l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = L->lu[i * RW4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[15][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[12][l] = L->lu[12][l] * L->lu[11][l];
+        L->lu[13][l] = L->lu[13][l] * L->lu[11][l];
+        L->lu[14][l] = L->lu[14][l] * L->lu[11][l];
+        L->lu[15][l] = L->lu[15][l] * L->lu[11][l];
+        L->piv[2][l] = 2;
+        sing[l] = (sing[l] | !(fabs(L->lu[22][l]) > 0.0));
+        L->lu[22][l] = 1.0 / L->lu[22][l];
+        L->lu[23][l] = L->lu[23][l] * L->lu[22][l];
+        L->lu[24][l] = L->lu[24][l] * L->lu[22][l];
+        L->lu[25][l] = L->lu[25][l] * L->lu[22][l];
+        p[l] = 3;
+        best[l] = fabs(L->lu[3 * RW4_PYRAMID_NX + 3][l]);
+    }
+    for (i = 4; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 3][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 3][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 3][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[3][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 4; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[3 * RW4_PYRAMID_NX + j][l];
+                L->lu[3 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[3 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[33][l] = 1.0 / L->lu[33][l];
+    }
+    for (i = 4; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 3][l] * L->lu[33][l];
+            L->lu[i * RW4_PYRAMID_NX + 3][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 4][l] = L->lu[i * RW4_PYRAMID_NX + 4][l] - m[l] *
+                    L->lu[34][l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = L->lu[i * RW4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[35][l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = L->lu[i * RW4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[36][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[37][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[38][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[39][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[34][l] = L->lu[34][l] * L->lu[33][l];
+        L->lu[35][l] = L->lu[35][l] * L->lu[33][l];
+        L->lu[36][l] = L->lu[36][l] * L->lu[33][l];
+        L->lu[37][l] = L->lu[37][l] * L->lu[33][l];
+        L->lu[38][l] = L->lu[38][l] * L->lu[33][l];
+        L->lu[39][l] = L->lu[39][l] * L->lu[33][l];
+        p[l] = 4;
+        best[l] = fabs(L->lu[4 * RW4_PYRAMID_NX + 4][l]);
+    }
+    for (i = 5; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 4][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 4][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 4][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[4][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 5; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[4 * RW4_PYRAMID_NX + j][l];
+                L->lu[4 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[4 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[44][l] = 1.0 / L->lu[44][l];
+    }
+    for (i = 5; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 4][l] * L->lu[44][l];
+            L->lu[i * RW4_PYRAMID_NX + 4][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = L->lu[i * RW4_PYRAMID_NX + 5][l] - m[l] *
+                    L->lu[45][l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = L->lu[i * RW4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[46][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[47][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[48][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[49][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[45][l] = L->lu[45][l] * L->lu[44][l];
+        L->lu[46][l] = L->lu[46][l] * L->lu[44][l];
+        L->lu[47][l] = L->lu[47][l] * L->lu[44][l];
+        L->lu[48][l] = L->lu[48][l] * L->lu[44][l];
+        L->lu[49][l] = L->lu[49][l] * L->lu[44][l];
+        p[l] = 5;
+        best[l] = fabs(L->lu[5 * RW4_PYRAMID_NX + 5][l]);
+    }
+    for (i = 6; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 5][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 5][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 5][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[5][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 6; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[5 * RW4_PYRAMID_NX + j][l];
+                L->lu[5 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[5 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[55][l] = 1.0 / L->lu[55][l];
+    }
+    for (i = 6; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 5][l] * L->lu[55][l];
+            L->lu[i * RW4_PYRAMID_NX + 5][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = L->lu[i * RW4_PYRAMID_NX + 6][l] - m[l] *
+                    L->lu[56][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[57][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[58][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[59][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[56][l] = L->lu[56][l] * L->lu[55][l];
+        L->lu[57][l] = L->lu[57][l] * L->lu[55][l];
+        L->lu[58][l] = L->lu[58][l] * L->lu[55][l];
+        L->lu[59][l] = L->lu[59][l] * L->lu[55][l];
+        p[l] = 6;
+        best[l] = fabs(L->lu[6 * RW4_PYRAMID_NX + 6][l]);
+    }
+    for (i = 7; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 6][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 6][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 6][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[6][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 7; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[6 * RW4_PYRAMID_NX + j][l];
+                L->lu[6 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[6 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[66][l] = 1.0 / L->lu[66][l];
+    }
+    for (i = 7; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 6][l] * L->lu[66][l];
+            L->lu[i * RW4_PYRAMID_NX + 6][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = L->lu[i * RW4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[67][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[68][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[69][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[67][l] = L->lu[67][l] * L->lu[66][l];
+        L->lu[68][l] = L->lu[68][l] * L->lu[66][l];
+        L->lu[69][l] = L->lu[69][l] * L->lu[66][l];
+        p[l] = 7;
+        best[l] = fabs(L->lu[7 * RW4_PYRAMID_NX + 7][l]);
+    }
+    for (i = 8; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 7][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 7][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 7][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[7][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 8; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[7 * RW4_PYRAMID_NX + j][l];
+                L->lu[7 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[7 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[77][l] = 1.0 / L->lu[77][l];
+    }
+    for (i = 8; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 7][l] * L->lu[77][l];
+            L->lu[i * RW4_PYRAMID_NX + 7][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = L->lu[i * RW4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[78][l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[79][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[78][l] = L->lu[78][l] * L->lu[77][l];
+        L->lu[79][l] = L->lu[79][l] * L->lu[77][l];
+        p[l] = 8;
+        best[l] = fabs(L->lu[8 * RW4_PYRAMID_NX + 8][l]);
+    }
+    for (i = 9; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 8][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * RW4_PYRAMID_NX + 8][l]) > best[l] ? fabs(L->lu[i *
+                    RW4_PYRAMID_NX + 8][l]) : best[l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->piv[8][l] = p[l];
+        sing[l] = (sing[l] | !(best[l] > 0.0));
+    }
+    for (q = 9; q < 10; ++q) {
+        for (j = 3; j < RW4_PYRAMID_NX; ++j) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[8 * RW4_PYRAMID_NX + j][l];
+                L->lu[8 * RW4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * RW4_PYRAMID_NX + j][l] :
+                        L->lu[8 * RW4_PYRAMID_NX + j][l];
+                L->lu[q * RW4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * RW4_PYRAMID_NX +
+                        j][l];
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[88][l] = 1.0 / L->lu[88][l];
+    }
+    for (i = 9; i < 10; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * RW4_PYRAMID_NX + 8][l] * L->lu[88][l];
+            L->lu[i * RW4_PYRAMID_NX + 8][l] = m[l];
+            L->lu[i * RW4_PYRAMID_NX + 9][l] = L->lu[i * RW4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[89][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->lu[89][l] = L->lu[89][l] * L->lu[88][l];
+        L->piv[9][l] = 9;
+        sing[l] = (sing[l] | !(fabs(L->lu[99][l]) > 0.0));
+        L->lu[99][l] = 1.0 / L->lu[99][l];
+    }
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && sing[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? RW4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !sing[l];
+    }
+
+    /* trial */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[0][1][l];
+        L->k[0][1][l] = L->piv[1][l] == 2 ? L->k[0][2][l] : L->k[0][1][l];
+        L->k[0][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[0][2][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 4 ? L->k[0][4][l] : L->k[0][3][l];
+        L->k[0][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[0][4][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 5 ? L->k[0][5][l] : L->k[0][3][l];
+        L->k[0][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 6 ? L->k[0][6][l] : L->k[0][3][l];
+        L->k[0][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 7 ? L->k[0][7][l] : L->k[0][3][l];
+        L->k[0][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 8 ? L->k[0][8][l] : L->k[0][3][l];
+        L->k[0][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][3][l];
+        L->k[0][3][l] = L->piv[3][l] == 9 ? L->k[0][9][l] : L->k[0][3][l];
+        L->k[0][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 5 ? L->k[0][5][l] : L->k[0][4][l];
+        L->k[0][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[0][5][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 6 ? L->k[0][6][l] : L->k[0][4][l];
+        L->k[0][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 7 ? L->k[0][7][l] : L->k[0][4][l];
+        L->k[0][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 8 ? L->k[0][8][l] : L->k[0][4][l];
+        L->k[0][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][4][l];
+        L->k[0][4][l] = L->piv[4][l] == 9 ? L->k[0][9][l] : L->k[0][4][l];
+        L->k[0][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 6 ? L->k[0][6][l] : L->k[0][5][l];
+        L->k[0][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[0][6][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 7 ? L->k[0][7][l] : L->k[0][5][l];
+        L->k[0][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 8 ? L->k[0][8][l] : L->k[0][5][l];
+        L->k[0][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][5][l];
+        L->k[0][5][l] = L->piv[5][l] == 9 ? L->k[0][9][l] : L->k[0][5][l];
+        L->k[0][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 7 ? L->k[0][7][l] : L->k[0][6][l];
+        L->k[0][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[0][7][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 8 ? L->k[0][8][l] : L->k[0][6][l];
+        L->k[0][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][6][l];
+        L->k[0][6][l] = L->piv[6][l] == 9 ? L->k[0][9][l] : L->k[0][6][l];
+        L->k[0][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 8 ? L->k[0][8][l] : L->k[0][7][l];
+        L->k[0][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[0][8][l];
+        swap[l] = L->k[0][7][l];
+        L->k[0][7][l] = L->piv[7][l] == 9 ? L->k[0][9][l] : L->k[0][7][l];
+        L->k[0][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[0][9][l];
+        swap[l] = L->k[0][8][l];
+        L->k[0][8][l] = L->piv[8][l] == 9 ? L->k[0][9][l] : L->k[0][8][l];
+        L->k[0][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[0][9][l];
+        L->k[0][2][l] = L->k[0][2][l] - L->lu[21][l] * L->k[0][1][l];
+        L->k[0][4][l] = L->k[0][4][l] - L->lu[43][l] * L->k[0][3][l];
+        L->k[0][5][l] = L->k[0][5][l] - L->lu[53][l] * L->k[0][3][l] - L->lu[54][l] * L->k[0][4][l];
+        L->k[0][6][l] = L->k[0][6][l] - L->lu[63][l] * L->k[0][3][l] - L->lu[64][l] *
+                L->k[0][4][l] - L->lu[65][l] * L->k[0][5][l];
+        L->k[0][7][l] = L->k[0][7][l] - L->lu[73][l] * L->k[0][3][l] - L->lu[74][l] *
+                L->k[0][4][l] - L->lu[75][l] * L->k[0][5][l] - L->lu[76][l] * L->k[0][6][l];
+        L->k[0][8][l] = L->k[0][8][l] - L->lu[83][l] * L->k[0][3][l] - L->lu[84][l] *
+                L->k[0][4][l] - L->lu[85][l] * L->k[0][5][l] - L->lu[86][l] * L->k[0][6][l] -
+                L->lu[87][l] * L->k[0][7][l];
+        L->k[0][9][l] = L->k[0][9][l] - L->lu[93][l] * L->k[0][3][l] - L->lu[94][l] *
+                L->k[0][4][l] - L->lu[95][l] * L->k[0][5][l] - L->lu[96][l] * L->k[0][6][l] -
+                L->lu[97][l] * L->k[0][7][l] - L->lu[98][l] * L->k[0][8][l];
+        L->k[0][9][l] = L->k[0][9][l] * L->lu[99][l];
+        L->k[0][8][l] = L->k[0][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[0][9][l];
+        L->k[0][7][l] = L->k[0][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[0][9][l] -
+                L->lu[78][l] * L->k[0][8][l];
+        L->k[0][6][l] = L->k[0][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[0][9][l] -
+                L->lu[68][l] * L->k[0][8][l] - L->lu[67][l] * L->k[0][7][l];
+        L->k[0][5][l] = L->k[0][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[0][9][l] -
+                L->lu[58][l] * L->k[0][8][l] - L->lu[57][l] * L->k[0][7][l] - L->lu[56][l] *
+                L->k[0][6][l];
+        L->k[0][4][l] = L->k[0][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[0][9][l] -
+                L->lu[48][l] * L->k[0][8][l] - L->lu[47][l] * L->k[0][7][l] - L->lu[46][l] *
+                L->k[0][6][l] - L->lu[45][l] * L->k[0][5][l];
+        L->k[0][3][l] = L->k[0][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[0][9][l] -
+                L->lu[38][l] * L->k[0][8][l] - L->lu[37][l] * L->k[0][7][l] - L->lu[36][l] *
+                L->k[0][6][l] - L->lu[35][l] * L->k[0][5][l] - L->lu[34][l] * L->k[0][4][l];
+        L->k[0][2][l] = L->k[0][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[0][5][l] -
+                L->lu[24][l] * L->k[0][4][l] - L->lu[23][l] * L->k[0][3][l];
+        L->k[0][1][l] = L->k[0][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[0][5][l] -
+                L->lu[14][l] * L->k[0][4][l] - L->lu[13][l] * L->k[0][3][l] - L->lu[12][l] *
+                L->k[0][2][l];
+        L->k[0][0][l] = L->k[0][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[0][5][l] - L->lu[3][l] *
+                L->k[0][3][l] - L->lu[2][l] * L->k[0][2][l] - L->lu[1][l] * L->k[0][1][l];
+    }
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[1][1][l];
+        L->k[1][1][l] = L->piv[1][l] == 2 ? L->k[1][2][l] : L->k[1][1][l];
+        L->k[1][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[1][2][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 4 ? L->k[1][4][l] : L->k[1][3][l];
+        L->k[1][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[1][4][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 5 ? L->k[1][5][l] : L->k[1][3][l];
+        L->k[1][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 6 ? L->k[1][6][l] : L->k[1][3][l];
+        L->k[1][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 7 ? L->k[1][7][l] : L->k[1][3][l];
+        L->k[1][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 8 ? L->k[1][8][l] : L->k[1][3][l];
+        L->k[1][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][3][l];
+        L->k[1][3][l] = L->piv[3][l] == 9 ? L->k[1][9][l] : L->k[1][3][l];
+        L->k[1][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 5 ? L->k[1][5][l] : L->k[1][4][l];
+        L->k[1][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[1][5][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 6 ? L->k[1][6][l] : L->k[1][4][l];
+        L->k[1][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 7 ? L->k[1][7][l] : L->k[1][4][l];
+        L->k[1][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 8 ? L->k[1][8][l] : L->k[1][4][l];
+        L->k[1][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][4][l];
+        L->k[1][4][l] = L->piv[4][l] == 9 ? L->k[1][9][l] : L->k[1][4][l];
+        L->k[1][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 6 ? L->k[1][6][l] : L->k[1][5][l];
+        L->k[1][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[1][6][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 7 ? L->k[1][7][l] : L->k[1][5][l];
+        L->k[1][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 8 ? L->k[1][8][l] : L->k[1][5][l];
+        L->k[1][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][5][l];
+        L->k[1][5][l] = L->piv[5][l] == 9 ? L->k[1][9][l] : L->k[1][5][l];
+        L->k[1][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 7 ? L->k[1][7][l] : L->k[1][6][l];
+        L->k[1][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[1][7][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 8 ? L->k[1][8][l] : L->k[1][6][l];
+        L->k[1][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][6][l];
+        L->k[1][6][l] = L->piv[6][l] == 9 ? L->k[1][9][l] : L->k[1][6][l];
+        L->k[1][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 8 ? L->k[1][8][l] : L->k[1][7][l];
+        L->k[1][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[1][8][l];
+        swap[l] = L->k[1][7][l];
+        L->k[1][7][l] = L->piv[7][l] == 9 ? L->k[1][9][l] : L->k[1][7][l];
+        L->k[1][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[1][9][l];
+        swap[l] = L->k[1][8][l];
+        L->k[1][8][l] = L->piv[8][l] == 9 ? L->k[1][9][l] : L->k[1][8][l];
+        L->k[1][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[1][9][l];
+        L->k[1][2][l] = L->k[1][2][l] - L->lu[21][l] * L->k[1][1][l];
+        L->k[1][4][l] = L->k[1][4][l] - L->lu[43][l] * L->k[1][3][l];
+        L->k[1][5][l] = L->k[1][5][l] - L->lu[53][l] * L->k[1][3][l] - L->lu[54][l] * L->k[1][4][l];
+        L->k[1][6][l] = L->k[1][6][l] - L->lu[63][l] * L->k[1][3][l] - L->lu[64][l] *
+                L->k[1][4][l] - L->lu[65][l] * L->k[1][5][l];
+        L->k[1][7][l] = L->k[1][7][l] - L->lu[73][l] * L->k[1][3][l] - L->lu[74][l] *
+                L->k[1][4][l] - L->lu[75][l] * L->k[1][5][l] - L->lu[76][l] * L->k[1][6][l];
+        L->k[1][8][l] = L->k[1][8][l] - L->lu[83][l] * L->k[1][3][l] - L->lu[84][l] *
+                L->k[1][4][l] - L->lu[85][l] * L->k[1][5][l] - L->lu[86][l] * L->k[1][6][l] -
+                L->lu[87][l] * L->k[1][7][l];
+        L->k[1][9][l] = L->k[1][9][l] - L->lu[93][l] * L->k[1][3][l] - L->lu[94][l] *
+                L->k[1][4][l] - L->lu[95][l] * L->k[1][5][l] - L->lu[96][l] * L->k[1][6][l] -
+                L->lu[97][l] * L->k[1][7][l] - L->lu[98][l] * L->k[1][8][l];
+        L->k[1][9][l] = L->k[1][9][l] * L->lu[99][l];
+        L->k[1][8][l] = L->k[1][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[1][9][l];
+        L->k[1][7][l] = L->k[1][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[1][9][l] -
+                L->lu[78][l] * L->k[1][8][l];
+        L->k[1][6][l] = L->k[1][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[1][9][l] -
+                L->lu[68][l] * L->k[1][8][l] - L->lu[67][l] * L->k[1][7][l];
+        L->k[1][5][l] = L->k[1][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[1][9][l] -
+                L->lu[58][l] * L->k[1][8][l] - L->lu[57][l] * L->k[1][7][l] - L->lu[56][l] *
+                L->k[1][6][l];
+        L->k[1][4][l] = L->k[1][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[1][9][l] -
+                L->lu[48][l] * L->k[1][8][l] - L->lu[47][l] * L->k[1][7][l] - L->lu[46][l] *
+                L->k[1][6][l] - L->lu[45][l] * L->k[1][5][l];
+        L->k[1][3][l] = L->k[1][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[1][9][l] -
+                L->lu[38][l] * L->k[1][8][l] - L->lu[37][l] * L->k[1][7][l] - L->lu[36][l] *
+                L->k[1][6][l] - L->lu[35][l] * L->k[1][5][l] - L->lu[34][l] * L->k[1][4][l];
+        L->k[1][2][l] = L->k[1][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[1][5][l] -
+                L->lu[24][l] * L->k[1][4][l] - L->lu[23][l] * L->k[1][3][l];
+        L->k[1][1][l] = L->k[1][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[1][5][l] -
+                L->lu[14][l] * L->k[1][4][l] - L->lu[13][l] * L->k[1][3][l] - L->lu[12][l] *
+                L->k[1][2][l];
+        L->k[1][0][l] = L->k[1][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[1][5][l] - L->lu[3][l] *
+                L->k[1][3][l] - L->lu[2][l] * L->k[1][2][l] - L->lu[1][l] * L->k[1][1][l];
+    }
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[2][1][l];
+        L->k[2][1][l] = L->piv[1][l] == 2 ? L->k[2][2][l] : L->k[2][1][l];
+        L->k[2][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[2][2][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 4 ? L->k[2][4][l] : L->k[2][3][l];
+        L->k[2][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[2][4][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 5 ? L->k[2][5][l] : L->k[2][3][l];
+        L->k[2][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 6 ? L->k[2][6][l] : L->k[2][3][l];
+        L->k[2][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 7 ? L->k[2][7][l] : L->k[2][3][l];
+        L->k[2][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 8 ? L->k[2][8][l] : L->k[2][3][l];
+        L->k[2][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][3][l];
+        L->k[2][3][l] = L->piv[3][l] == 9 ? L->k[2][9][l] : L->k[2][3][l];
+        L->k[2][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 5 ? L->k[2][5][l] : L->k[2][4][l];
+        L->k[2][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[2][5][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 6 ? L->k[2][6][l] : L->k[2][4][l];
+        L->k[2][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 7 ? L->k[2][7][l] : L->k[2][4][l];
+        L->k[2][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 8 ? L->k[2][8][l] : L->k[2][4][l];
+        L->k[2][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][4][l];
+        L->k[2][4][l] = L->piv[4][l] == 9 ? L->k[2][9][l] : L->k[2][4][l];
+        L->k[2][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 6 ? L->k[2][6][l] : L->k[2][5][l];
+        L->k[2][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[2][6][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 7 ? L->k[2][7][l] : L->k[2][5][l];
+        L->k[2][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 8 ? L->k[2][8][l] : L->k[2][5][l];
+        L->k[2][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][5][l];
+        L->k[2][5][l] = L->piv[5][l] == 9 ? L->k[2][9][l] : L->k[2][5][l];
+        L->k[2][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 7 ? L->k[2][7][l] : L->k[2][6][l];
+        L->k[2][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[2][7][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 8 ? L->k[2][8][l] : L->k[2][6][l];
+        L->k[2][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][6][l];
+        L->k[2][6][l] = L->piv[6][l] == 9 ? L->k[2][9][l] : L->k[2][6][l];
+        L->k[2][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 8 ? L->k[2][8][l] : L->k[2][7][l];
+        L->k[2][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[2][8][l];
+        swap[l] = L->k[2][7][l];
+        L->k[2][7][l] = L->piv[7][l] == 9 ? L->k[2][9][l] : L->k[2][7][l];
+        L->k[2][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[2][9][l];
+        swap[l] = L->k[2][8][l];
+        L->k[2][8][l] = L->piv[8][l] == 9 ? L->k[2][9][l] : L->k[2][8][l];
+        L->k[2][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[2][9][l];
+        L->k[2][2][l] = L->k[2][2][l] - L->lu[21][l] * L->k[2][1][l];
+        L->k[2][4][l] = L->k[2][4][l] - L->lu[43][l] * L->k[2][3][l];
+        L->k[2][5][l] = L->k[2][5][l] - L->lu[53][l] * L->k[2][3][l] - L->lu[54][l] * L->k[2][4][l];
+        L->k[2][6][l] = L->k[2][6][l] - L->lu[63][l] * L->k[2][3][l] - L->lu[64][l] *
+                L->k[2][4][l] - L->lu[65][l] * L->k[2][5][l];
+        L->k[2][7][l] = L->k[2][7][l] - L->lu[73][l] * L->k[2][3][l] - L->lu[74][l] *
+                L->k[2][4][l] - L->lu[75][l] * L->k[2][5][l] - L->lu[76][l] * L->k[2][6][l];
+        L->k[2][8][l] = L->k[2][8][l] - L->lu[83][l] * L->k[2][3][l] - L->lu[84][l] *
+                L->k[2][4][l] - L->lu[85][l] * L->k[2][5][l] - L->lu[86][l] * L->k[2][6][l] -
+                L->lu[87][l] * L->k[2][7][l];
+        L->k[2][9][l] = L->k[2][9][l] - L->lu[93][l] * L->k[2][3][l] - L->lu[94][l] *
+                L->k[2][4][l] - L->lu[95][l] * L->k[2][5][l] - L->lu[96][l] * L->k[2][6][l] -
+                L->lu[97][l] * L->k[2][7][l] - L->lu[98][l] * L->k[2][8][l];
+        L->k[2][9][l] = L->k[2][9][l] * L->lu[99][l];
+        L->k[2][8][l] = L->k[2][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[2][9][l];
+        L->k[2][7][l] = L->k[2][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[2][9][l] -
+                L->lu[78][l] * L->k[2][8][l];
+        L->k[2][6][l] = L->k[2][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[2][9][l] -
+                L->lu[68][l] * L->k[2][8][l] - L->lu[67][l] * L->k[2][7][l];
+        L->k[2][5][l] = L->k[2][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[2][9][l] -
+                L->lu[58][l] * L->k[2][8][l] - L->lu[57][l] * L->k[2][7][l] - L->lu[56][l] *
+                L->k[2][6][l];
+        L->k[2][4][l] = L->k[2][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[2][9][l] -
+                L->lu[48][l] * L->k[2][8][l] - L->lu[47][l] * L->k[2][7][l] - L->lu[46][l] *
+                L->k[2][6][l] - L->lu[45][l] * L->k[2][5][l];
+        L->k[2][3][l] = L->k[2][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[2][9][l] -
+                L->lu[38][l] * L->k[2][8][l] - L->lu[37][l] * L->k[2][7][l] - L->lu[36][l] *
+                L->k[2][6][l] - L->lu[35][l] * L->k[2][5][l] - L->lu[34][l] * L->k[2][4][l];
+        L->k[2][2][l] = L->k[2][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[2][5][l] -
+                L->lu[24][l] * L->k[2][4][l] - L->lu[23][l] * L->k[2][3][l];
+        L->k[2][1][l] = L->k[2][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[2][5][l] -
+                L->lu[14][l] * L->k[2][4][l] - L->lu[13][l] * L->k[2][3][l] - L->lu[12][l] *
+                L->k[2][2][l];
+        L->k[2][0][l] = L->k[2][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[2][5][l] - L->lu[3][l] *
+                L->k[2][3][l] - L->lu[2][l] * L->k[2][2][l] - L->lu[1][l] * L->k[2][1][l];
+    }
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[3][1][l];
+        L->k[3][1][l] = L->piv[1][l] == 2 ? L->k[3][2][l] : L->k[3][1][l];
+        L->k[3][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[3][2][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 4 ? L->k[3][4][l] : L->k[3][3][l];
+        L->k[3][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[3][4][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 5 ? L->k[3][5][l] : L->k[3][3][l];
+        L->k[3][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 6 ? L->k[3][6][l] : L->k[3][3][l];
+        L->k[3][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 7 ? L->k[3][7][l] : L->k[3][3][l];
+        L->k[3][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 8 ? L->k[3][8][l] : L->k[3][3][l];
+        L->k[3][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][3][l];
+        L->k[3][3][l] = L->piv[3][l] == 9 ? L->k[3][9][l] : L->k[3][3][l];
+        L->k[3][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 5 ? L->k[3][5][l] : L->k[3][4][l];
+        L->k[3][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[3][5][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 6 ? L->k[3][6][l] : L->k[3][4][l];
+        L->k[3][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 7 ? L->k[3][7][l] : L->k[3][4][l];
+        L->k[3][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 8 ? L->k[3][8][l] : L->k[3][4][l];
+        L->k[3][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][4][l];
+        L->k[3][4][l] = L->piv[4][l] == 9 ? L->k[3][9][l] : L->k[3][4][l];
+        L->k[3][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 6 ? L->k[3][6][l] : L->k[3][5][l];
+        L->k[3][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[3][6][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 7 ? L->k[3][7][l] : L->k[3][5][l];
+        L->k[3][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 8 ? L->k[3][8][l] : L->k[3][5][l];
+        L->k[3][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][5][l];
+        L->k[3][5][l] = L->piv[5][l] == 9 ? L->k[3][9][l] : L->k[3][5][l];
+        L->k[3][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 7 ? L->k[3][7][l] : L->k[3][6][l];
+        L->k[3][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[3][7][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 8 ? L->k[3][8][l] : L->k[3][6][l];
+        L->k[3][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][6][l];
+        L->k[3][6][l] = L->piv[6][l] == 9 ? L->k[3][9][l] : L->k[3][6][l];
+        L->k[3][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 8 ? L->k[3][8][l] : L->k[3][7][l];
+        L->k[3][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[3][8][l];
+        swap[l] = L->k[3][7][l];
+        L->k[3][7][l] = L->piv[7][l] == 9 ? L->k[3][9][l] : L->k[3][7][l];
+        L->k[3][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[3][9][l];
+        swap[l] = L->k[3][8][l];
+        L->k[3][8][l] = L->piv[8][l] == 9 ? L->k[3][9][l] : L->k[3][8][l];
+        L->k[3][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[3][9][l];
+        L->k[3][2][l] = L->k[3][2][l] - L->lu[21][l] * L->k[3][1][l];
+        L->k[3][4][l] = L->k[3][4][l] - L->lu[43][l] * L->k[3][3][l];
+        L->k[3][5][l] = L->k[3][5][l] - L->lu[53][l] * L->k[3][3][l] - L->lu[54][l] * L->k[3][4][l];
+        L->k[3][6][l] = L->k[3][6][l] - L->lu[63][l] * L->k[3][3][l] - L->lu[64][l] *
+                L->k[3][4][l] - L->lu[65][l] * L->k[3][5][l];
+        L->k[3][7][l] = L->k[3][7][l] - L->lu[73][l] * L->k[3][3][l] - L->lu[74][l] *
+                L->k[3][4][l] - L->lu[75][l] * L->k[3][5][l] - L->lu[76][l] * L->k[3][6][l];
+        L->k[3][8][l] = L->k[3][8][l] - L->lu[83][l] * L->k[3][3][l] - L->lu[84][l] *
+                L->k[3][4][l] - L->lu[85][l] * L->k[3][5][l] - L->lu[86][l] * L->k[3][6][l] -
+                L->lu[87][l] * L->k[3][7][l];
+        L->k[3][9][l] = L->k[3][9][l] - L->lu[93][l] * L->k[3][3][l] - L->lu[94][l] *
+                L->k[3][4][l] - L->lu[95][l] * L->k[3][5][l] - L->lu[96][l] * L->k[3][6][l] -
+                L->lu[97][l] * L->k[3][7][l] - L->lu[98][l] * L->k[3][8][l];
+        L->k[3][9][l] = L->k[3][9][l] * L->lu[99][l];
+        L->k[3][8][l] = L->k[3][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[3][9][l];
+        L->k[3][7][l] = L->k[3][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[3][9][l] -
+                L->lu[78][l] * L->k[3][8][l];
+        L->k[3][6][l] = L->k[3][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[3][9][l] -
+                L->lu[68][l] * L->k[3][8][l] - L->lu[67][l] * L->k[3][7][l];
+        L->k[3][5][l] = L->k[3][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[3][9][l] -
+                L->lu[58][l] * L->k[3][8][l] - L->lu[57][l] * L->k[3][7][l] - L->lu[56][l] *
+                L->k[3][6][l];
+        L->k[3][4][l] = L->k[3][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[3][9][l] -
+                L->lu[48][l] * L->k[3][8][l] - L->lu[47][l] * L->k[3][7][l] - L->lu[46][l] *
+                L->k[3][6][l] - L->lu[45][l] * L->k[3][5][l];
+        L->k[3][3][l] = L->k[3][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[3][9][l] -
+                L->lu[38][l] * L->k[3][8][l] - L->lu[37][l] * L->k[3][7][l] - L->lu[36][l] *
+                L->k[3][6][l] - L->lu[35][l] * L->k[3][5][l] - L->lu[34][l] * L->k[3][4][l];
+        L->k[3][2][l] = L->k[3][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[3][5][l] -
+                L->lu[24][l] * L->k[3][4][l] - L->lu[23][l] * L->k[3][3][l];
+        L->k[3][1][l] = L->k[3][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[3][5][l] -
+                L->lu[14][l] * L->k[3][4][l] - L->lu[13][l] * L->k[3][3][l] - L->lu[12][l] *
+                L->k[3][2][l];
+        L->k[3][0][l] = L->k[3][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[3][5][l] - L->lu[3][l] *
+                L->k[3][3][l] - L->lu[2][l] * L->k[3][2][l] - L->lu[1][l] * L->k[3][1][l];
+    }
+
+    /* stage 5: t + h */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[4][1][l];
+        L->k[4][1][l] = L->piv[1][l] == 2 ? L->k[4][2][l] : L->k[4][1][l];
+        L->k[4][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[4][2][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 4 ? L->k[4][4][l] : L->k[4][3][l];
+        L->k[4][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[4][4][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 5 ? L->k[4][5][l] : L->k[4][3][l];
+        L->k[4][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 6 ? L->k[4][6][l] : L->k[4][3][l];
+        L->k[4][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 7 ? L->k[4][7][l] : L->k[4][3][l];
+        L->k[4][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 8 ? L->k[4][8][l] : L->k[4][3][l];
+        L->k[4][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][3][l];
+        L->k[4][3][l] = L->piv[3][l] == 9 ? L->k[4][9][l] : L->k[4][3][l];
+        L->k[4][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 5 ? L->k[4][5][l] : L->k[4][4][l];
+        L->k[4][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[4][5][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 6 ? L->k[4][6][l] : L->k[4][4][l];
+        L->k[4][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 7 ? L->k[4][7][l] : L->k[4][4][l];
+        L->k[4][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 8 ? L->k[4][8][l] : L->k[4][4][l];
+        L->k[4][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][4][l];
+        L->k[4][4][l] = L->piv[4][l] == 9 ? L->k[4][9][l] : L->k[4][4][l];
+        L->k[4][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 6 ? L->k[4][6][l] : L->k[4][5][l];
+        L->k[4][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[4][6][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 7 ? L->k[4][7][l] : L->k[4][5][l];
+        L->k[4][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 8 ? L->k[4][8][l] : L->k[4][5][l];
+        L->k[4][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][5][l];
+        L->k[4][5][l] = L->piv[5][l] == 9 ? L->k[4][9][l] : L->k[4][5][l];
+        L->k[4][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 7 ? L->k[4][7][l] : L->k[4][6][l];
+        L->k[4][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[4][7][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 8 ? L->k[4][8][l] : L->k[4][6][l];
+        L->k[4][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][6][l];
+        L->k[4][6][l] = L->piv[6][l] == 9 ? L->k[4][9][l] : L->k[4][6][l];
+        L->k[4][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 8 ? L->k[4][8][l] : L->k[4][7][l];
+        L->k[4][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[4][8][l];
+        swap[l] = L->k[4][7][l];
+        L->k[4][7][l] = L->piv[7][l] == 9 ? L->k[4][9][l] : L->k[4][7][l];
+        L->k[4][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[4][9][l];
+        swap[l] = L->k[4][8][l];
+        L->k[4][8][l] = L->piv[8][l] == 9 ? L->k[4][9][l] : L->k[4][8][l];
+        L->k[4][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[4][9][l];
+        L->k[4][2][l] = L->k[4][2][l] - L->lu[21][l] * L->k[4][1][l];
+        L->k[4][4][l] = L->k[4][4][l] - L->lu[43][l] * L->k[4][3][l];
+        L->k[4][5][l] = L->k[4][5][l] - L->lu[53][l] * L->k[4][3][l] - L->lu[54][l] * L->k[4][4][l];
+        L->k[4][6][l] = L->k[4][6][l] - L->lu[63][l] * L->k[4][3][l] - L->lu[64][l] *
+                L->k[4][4][l] - L->lu[65][l] * L->k[4][5][l];
+        L->k[4][7][l] = L->k[4][7][l] - L->lu[73][l] * L->k[4][3][l] - L->lu[74][l] *
+                L->k[4][4][l] - L->lu[75][l] * L->k[4][5][l] - L->lu[76][l] * L->k[4][6][l];
+        L->k[4][8][l] = L->k[4][8][l] - L->lu[83][l] * L->k[4][3][l] - L->lu[84][l] *
+                L->k[4][4][l] - L->lu[85][l] * L->k[4][5][l] - L->lu[86][l] * L->k[4][6][l] -
+                L->lu[87][l] * L->k[4][7][l];
+        L->k[4][9][l] = L->k[4][9][l] - L->lu[93][l] * L->k[4][3][l] - L->lu[94][l] *
+                L->k[4][4][l] - L->lu[95][l] * L->k[4][5][l] - L->lu[96][l] * L->k[4][6][l] -
+                L->lu[97][l] * L->k[4][7][l] - L->lu[98][l] * L->k[4][8][l];
+        L->k[4][9][l] = L->k[4][9][l] * L->lu[99][l];
+        L->k[4][8][l] = L->k[4][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[4][9][l];
+        L->k[4][7][l] = L->k[4][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[4][9][l] -
+                L->lu[78][l] * L->k[4][8][l];
+        L->k[4][6][l] = L->k[4][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[4][9][l] -
+                L->lu[68][l] * L->k[4][8][l] - L->lu[67][l] * L->k[4][7][l];
+        L->k[4][5][l] = L->k[4][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[4][9][l] -
+                L->lu[58][l] * L->k[4][8][l] - L->lu[57][l] * L->k[4][7][l] - L->lu[56][l] *
+                L->k[4][6][l];
+        L->k[4][4][l] = L->k[4][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[4][9][l] -
+                L->lu[48][l] * L->k[4][8][l] - L->lu[47][l] * L->k[4][7][l] - L->lu[46][l] *
+                L->k[4][6][l] - L->lu[45][l] * L->k[4][5][l];
+        L->k[4][3][l] = L->k[4][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[4][9][l] -
+                L->lu[38][l] * L->k[4][8][l] - L->lu[37][l] * L->k[4][7][l] - L->lu[36][l] *
+                L->k[4][6][l] - L->lu[35][l] * L->k[4][5][l] - L->lu[34][l] * L->k[4][4][l];
+        L->k[4][2][l] = L->k[4][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[4][5][l] -
+                L->lu[24][l] * L->k[4][4][l] - L->lu[23][l] * L->k[4][3][l];
+        L->k[4][1][l] = L->k[4][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[4][5][l] -
+                L->lu[14][l] * L->k[4][4][l] - L->lu[13][l] * L->k[4][3][l] - L->lu[12][l] *
+                L->k[4][2][l];
+        L->k[4][0][l] = L->k[4][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[4][5][l] - L->lu[3][l] *
+                L->k[4][3][l] - L->lu[2][l] * L->k[4][2][l] - L->lu[1][l] * L->k[4][1][l];
+    }
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        swap[l] = L->k[5][1][l];
+        L->k[5][1][l] = L->piv[1][l] == 2 ? L->k[5][2][l] : L->k[5][1][l];
+        L->k[5][2][l] = L->piv[1][l] == 2 ? swap[l] : L->k[5][2][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 4 ? L->k[5][4][l] : L->k[5][3][l];
+        L->k[5][4][l] = L->piv[3][l] == 4 ? swap[l] : L->k[5][4][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 5 ? L->k[5][5][l] : L->k[5][3][l];
+        L->k[5][5][l] = L->piv[3][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 6 ? L->k[5][6][l] : L->k[5][3][l];
+        L->k[5][6][l] = L->piv[3][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 7 ? L->k[5][7][l] : L->k[5][3][l];
+        L->k[5][7][l] = L->piv[3][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 8 ? L->k[5][8][l] : L->k[5][3][l];
+        L->k[5][8][l] = L->piv[3][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][3][l];
+        L->k[5][3][l] = L->piv[3][l] == 9 ? L->k[5][9][l] : L->k[5][3][l];
+        L->k[5][9][l] = L->piv[3][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 5 ? L->k[5][5][l] : L->k[5][4][l];
+        L->k[5][5][l] = L->piv[4][l] == 5 ? swap[l] : L->k[5][5][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 6 ? L->k[5][6][l] : L->k[5][4][l];
+        L->k[5][6][l] = L->piv[4][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 7 ? L->k[5][7][l] : L->k[5][4][l];
+        L->k[5][7][l] = L->piv[4][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 8 ? L->k[5][8][l] : L->k[5][4][l];
+        L->k[5][8][l] = L->piv[4][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][4][l];
+        L->k[5][4][l] = L->piv[4][l] == 9 ? L->k[5][9][l] : L->k[5][4][l];
+        L->k[5][9][l] = L->piv[4][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 6 ? L->k[5][6][l] : L->k[5][5][l];
+        L->k[5][6][l] = L->piv[5][l] == 6 ? swap[l] : L->k[5][6][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 7 ? L->k[5][7][l] : L->k[5][5][l];
+        L->k[5][7][l] = L->piv[5][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 8 ? L->k[5][8][l] : L->k[5][5][l];
+        L->k[5][8][l] = L->piv[5][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][5][l];
+        L->k[5][5][l] = L->piv[5][l] == 9 ? L->k[5][9][l] : L->k[5][5][l];
+        L->k[5][9][l] = L->piv[5][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 7 ? L->k[5][7][l] : L->k[5][6][l];
+        L->k[5][7][l] = L->piv[6][l] == 7 ? swap[l] : L->k[5][7][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 8 ? L->k[5][8][l] : L->k[5][6][l];
+        L->k[5][8][l] = L->piv[6][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][6][l];
+        L->k[5][6][l] = L->piv[6][l] == 9 ? L->k[5][9][l] : L->k[5][6][l];
+        L->k[5][9][l] = L->piv[6][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 8 ? L->k[5][8][l] : L->k[5][7][l];
+        L->k[5][8][l] = L->piv[7][l] == 8 ? swap[l] : L->k[5][8][l];
+        swap[l] = L->k[5][7][l];
+        L->k[5][7][l] = L->piv[7][l] == 9 ? L->k[5][9][l] : L->k[5][7][l];
+        L->k[5][9][l] = L->piv[7][l] == 9 ? swap[l] : L->k[5][9][l];
+        swap[l] = L->k[5][8][l];
+        L->k[5][8][l] = L->piv[8][l] == 9 ? L->k[5][9][l] : L->k[5][8][l];
+        L->k[5][9][l] = L->piv[8][l] == 9 ? swap[l] : L->k[5][9][l];
+        L->k[5][2][l] = L->k[5][2][l] - L->lu[21][l] * L->k[5][1][l];
+        L->k[5][4][l] = L->k[5][4][l] - L->lu[43][l] * L->k[5][3][l];
+        L->k[5][5][l] = L->k[5][5][l] - L->lu[53][l] * L->k[5][3][l] - L->lu[54][l] * L->k[5][4][l];
+        L->k[5][6][l] = L->k[5][6][l] - L->lu[63][l] * L->k[5][3][l] - L->lu[64][l] *
+                L->k[5][4][l] - L->lu[65][l] * L->k[5][5][l];
+        L->k[5][7][l] = L->k[5][7][l] - L->lu[73][l] * L->k[5][3][l] - L->lu[74][l] *
+                L->k[5][4][l] - L->lu[75][l] * L->k[5][5][l] - L->lu[76][l] * L->k[5][6][l];
+        L->k[5][8][l] = L->k[5][8][l] - L->lu[83][l] * L->k[5][3][l] - L->lu[84][l] *
+                L->k[5][4][l] - L->lu[85][l] * L->k[5][5][l] - L->lu[86][l] * L->k[5][6][l] -
+                L->lu[87][l] * L->k[5][7][l];
+        L->k[5][9][l] = L->k[5][9][l] - L->lu[93][l] * L->k[5][3][l] - L->lu[94][l] *
+                L->k[5][4][l] - L->lu[95][l] * L->k[5][5][l] - L->lu[96][l] * L->k[5][6][l] -
+                L->lu[97][l] * L->k[5][7][l] - L->lu[98][l] * L->k[5][8][l];
+        L->k[5][9][l] = L->k[5][9][l] * L->lu[99][l];
+        L->k[5][8][l] = L->k[5][8][l] * L->lu[88][l] - L->lu[89][l] * L->k[5][9][l];
+        L->k[5][7][l] = L->k[5][7][l] * L->lu[77][l] - L->lu[79][l] * L->k[5][9][l] -
+                L->lu[78][l] * L->k[5][8][l];
+        L->k[5][6][l] = L->k[5][6][l] * L->lu[66][l] - L->lu[69][l] * L->k[5][9][l] -
+                L->lu[68][l] * L->k[5][8][l] - L->lu[67][l] * L->k[5][7][l];
+        L->k[5][5][l] = L->k[5][5][l] * L->lu[55][l] - L->lu[59][l] * L->k[5][9][l] -
+                L->lu[58][l] * L->k[5][8][l] - L->lu[57][l] * L->k[5][7][l] - L->lu[56][l] *
+                L->k[5][6][l];
+        L->k[5][4][l] = L->k[5][4][l] * L->lu[44][l] - L->lu[49][l] * L->k[5][9][l] -
+                L->lu[48][l] * L->k[5][8][l] - L->lu[47][l] * L->k[5][7][l] - L->lu[46][l] *
+                L->k[5][6][l] - L->lu[45][l] * L->k[5][5][l];
+        L->k[5][3][l] = L->k[5][3][l] * L->lu[33][l] - L->lu[39][l] * L->k[5][9][l] -
+                L->lu[38][l] * L->k[5][8][l] - L->lu[37][l] * L->k[5][7][l] - L->lu[36][l] *
+                L->k[5][6][l] - L->lu[35][l] * L->k[5][5][l] - L->lu[34][l] * L->k[5][4][l];
+        L->k[5][2][l] = L->k[5][2][l] * L->lu[22][l] - L->lu[25][l] * L->k[5][5][l] -
+                L->lu[24][l] * L->k[5][4][l] - L->lu[23][l] * L->k[5][3][l];
+        L->k[5][1][l] = L->k[5][1][l] * L->lu[11][l] - L->lu[15][l] * L->k[5][5][l] -
+                L->lu[14][l] * L->k[5][4][l] - L->lu[13][l] * L->k[5][3][l] - L->lu[12][l] *
+                L->k[5][2][l];
+        L->k[5][0][l] = L->k[5][0][l] * L->lu[0][l] - L->lu[5][l] * L->k[5][5][l] - L->lu[3][l] *
+                L->k[5][3][l] - L->lu[2][l] * L->k[5][2][l] - L->lu[1][l] * L->k[5][1][l];
+    }
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / RW4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+            RW4_PYRAMID_SIMD
+            for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(rw4_pyramid_cos_lanes(L->xnew[1][l])) < RW4_PYRAMID_ODE_GIMBAL_LOCK_COS : 0)
+                || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? RW4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? RW4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        RW4_PYRAMID_SIMD
+        for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    RW4_PYRAMID_SIMD
+    for (l = 0; l < RW4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). Over an
    output grid (L->out), its rows in out from base = traj ntimes, the first
@@ -3081,6 +6080,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     for (i = 0; i < RW4_PYRAMID_NX; ++i) {
         L->k[0][i][l] = f0[i];
     }
+    for (i = 0; i < RW4_PYRAMID_NX; ++i) {
+        L->f0[i][l] = f0[i];
+    }
     L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
@@ -3090,11 +6092,17 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     }
     L->err_old[l] = 1e-4;
     L->rejected_last[l] = 0;
+    L->h_acc[l] = 0.0;
+    L->err_acc[l] = 1e-2;
+    L->singular[l] = 0;
+    L->new_point[l] = 1;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->stats_jac_calls[l] = stats->jac_calls;
+    L->stats_decompositions[l] = stats->decompositions;
     L->busy[l] = 1;
     L->traj[l] = traj;
     return -1;
@@ -3127,6 +6135,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, rw4_pyramid_s
             st.accepted = L->stats_accepted[l];
             st.rejected = L->stats_rejected[l];
             st.rhs_calls = L->stats_rhs_calls[l];
+            st.jac_calls = L->stats_jac_calls[l];
+            st.decompositions = L->stats_decompositions[l];
             for (i = 0; i < RW4_PYRAMID_NX; ++i) {
                 xs[L->traj[l] * RW4_PYRAMID_NX + (size_t)i] = L->x[i][l];
             }
@@ -4864,7 +7874,9 @@ int rw4_pyramid_rodas4_grid(long ntimes, const double *times, double *x, const d
             (double (*)[RW4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t rw4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                      const double *c, double rtol, double atol, double h0,
                                      long max_steps, double *out, rw4_pyramid_stats *stats,
@@ -4872,6 +7884,11 @@ size_t rw4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, RW4_PYRAMID_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[RW4_PYRAMID_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -5864,13 +8881,18 @@ size_t rw4_pyramid_dop853_batch(size_t n, double t0, double t1, double *x, const
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. RW4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t rw4_pyramid_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
                                 double rtol, double atol, double h0, long max_steps,
                                 rw4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(rodas4_step_lanes, 4, RW4_PYRAMID_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
