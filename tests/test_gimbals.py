@@ -149,6 +149,35 @@ def test_runtime_gimbal_axes_take_their_place_in_p() -> None:
     assert scene.runtime == ("g1_1", "g2_1", "g3_1", "gg1_1", "gg2_1", "gg3_1")
 
 
+def one_cmg(text: str) -> str:
+    """text (vscmg3 edited) with its first CMG alone."""
+    first = text.index("[[rotors]]", text.index("[[rotors]]") + 1)
+    out = text[:first] + text[text.index("[simulate]") :]
+    return out.replace(", gd2 = 0.011, gd3 = -0.003", "").replace(
+        ", w2 = 36.651914291880914, w3 = -94.16777960769379", "")  # fmt: skip
+
+
+RUNTIME_AXES = one_cmg(runtime_axes("gg1_1 = 1.0, gg2_1 = 0.0, gg3_1 = 0.0"))
+"""One CMG, its spin axis and gimbal axis at run time (the proof on the
+orthonormal pairs: minutes to derive)."""
+
+
+def test_runtime_gimbal_axes_are_refused_by_setup_when_not_unit_or_not_perpendicular() -> None:
+    """verify's refusals: each runtime axis too long, too short or 0 (8), the
+    spin axis turned toward the gimbal axis past the slack (10)."""
+    from gyrogen.oracle import sampling, scene_view
+
+    scene = parse(RUNTIME_AXES, "r.toml")
+    base = scene_view.random_runtime(scene, np.random.default_rng(1), 1)[0]
+    g_g, g_s = base[3:], base[:3]
+    assert abs(g_g @ g_s) <= 1e-3 * np.linalg.norm(g_g) * np.linalg.norm(g_s)
+    cases = sampling.invalid_cluster(scene, base)
+    assert [code for _, _, code in cases] == [8] * 6 + [10]
+    _, turned, _ = cases[-1]
+    cosine = abs(turned[3:] @ turned[:3]) / np.linalg.norm(turned[3:]) / np.linalg.norm(turned[:3])
+    assert 2e-3 < cosine < 4e-3
+
+
 def _units(scene: Scene) -> tuple[list[gimbals.Unit], sm.Matrix]:
     units = [gimbals._unit(r, k) for k, r in enumerate(scene.rotors, 1)]
     return units, cluster.lumped_inertia(scene)
@@ -290,8 +319,8 @@ def test_a_nan_gimbal_rate_and_a_far_gimbal_angle_at_the_start() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME],
-    ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime"],
+    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME, RUNTIME_AXES],
+    ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime", "runtime axes"],
 )  # fmt: skip
 def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> None:
     from gyrogen.oracle.compare import compare

@@ -29,11 +29,7 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
         for i in (1, 2, 3)
     },
     **{
-        f"g{i}": (
-            "-",
-            f"spin axis g{{k}} of rotor B{{k}} (on a gimbal: g_s0, at gimbal angle 0), "
-            f'a{i} component (axis = "runtime")',
-        )
+        f"g{i}": ("-", f'spin axis g{{k}} of rotor B{{k}}, a{i} component (axis = "runtime")')
         for i in (1, 2, 3)
     },
     **{
