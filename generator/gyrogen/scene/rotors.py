@@ -441,7 +441,7 @@ def resolved(
                     return None
                 frame[name] = float(given[rotor_name(name, k)] if v == "runtime" else v)
             inertia = tuple(frame[name] for name in GIMBAL_INERTIA)
-            axis = r.gimbal.axis
+            axis: object = r.gimbal.axis
             if axis == "runtime":
                 if any(rotor_name(key, k) not in given for key in GIMBAL_AXIS):
                     return None

@@ -129,7 +129,7 @@ def _pair_axes(scene: Scene) -> dict[sm.Symbol, sm.Expr]:
         if r.axis == "runtime":
             spin = sm.Matrix(_plain(_names(AXIS, k)))
         else:
-            spin = sm.Matrix([cluster._number(x) for x in r.axis])  # type: ignore[union-attr]
+            spin = sm.Matrix([cluster._number(x) for x in r.axis])
         along = spin - spin.dot(g_g) * g_g
         g_s0 = sm.Matrix(_plain(_names(UNIT_AXIS, k)))
         out.update(zip(g_s0, along / sm.sqrt(along.dot(along)), strict=True))
