@@ -56,6 +56,16 @@ second's gimbal frame's mass and two of its inertias (setup checks them:
 the compare's refusals)."""
 
 G1 = "axis = [1.0, 0.0, 0.0]      # g_g"
+
+
+def runtime_axes(gimbal_axis: str) -> str:
+    """vscmg3 with its first CMG's spin axis (a2) and gimbal axis at run time."""
+    both = edit(G1, 'axis = "runtime"', edit("axis = [0.0, 1.0, 0.0]      # g_s0",
+                                             'axis = "runtime"'))  # fmt: skip
+    given = f"parameters = {{ g1_1 = 0.0, g2_1 = 1.0, g3_1 = 0.0, {gimbal_axis} }}\ninitial = {{"
+    return edit("initial = {", given, both)
+
+
 BAD = [
     ("parallel axes", edit(G1, "axis = [0.0, 1.0, 0.0]"),
      "rotors.0: gimbal.axis: not perpendicular to the spin axis (|g_s0 . g_g| = 1 > 0.001)"),
@@ -78,10 +88,10 @@ BAD = [
      "rotors.0.gimbal: m: must be positive (got 0.0)"),
     ("runtime frame", edit("inertia = [0.1, 0.2, 0.3]", 'inertia = ["runtime", -0.2, 0.3]'),
      "rotors.0.gimbal: inertia: IGt must be positive (got -0.2)"),
-    ("runtime gimbal axis", edit(G1, 'axis = "runtime"'),
-     'a gimbal axis is folded: give [x, y, z], not "runtime"'),
-    ("runtime spin axis", edit("axis = [0.0, 1.0, 0.0]      # g_s0", 'axis = "runtime"'),
-     'a rotor on a gimbal has a folded spin axis, not "runtime"'),
+    ("runtime axes off", runtime_axes("gg1_1 = 1.01, gg2_1 = 0.0, gg3_1 = 0.0"),
+     "simulate.parameters.gg1_1..gg3_1: length 1.01 is not 1 (within 0.001)"),
+    ("runtime axes parallel", runtime_axes("gg1_1 = 0.0, gg2_1 = 1.0, gg3_1 = 0.0"),
+     "simulate.parameters.gg1_1..gg3_1: not perpendicular to the spin axis (|g_s0 . g_g| = 1"),
     ("servo without rate", edit("m = 6.0\n\n[[rotors]]", 'm = 6.0\ntorque = "rate_servo"\n'
                                 "k = 1.0\n\n[[rotors]]"),
      "torque = 'rate_servo' needs rate_ref"),
@@ -130,6 +140,42 @@ def test_a_runtime_gimbal_frame_takes_its_place_in_p_and_its_values_are_checked(
         assert ("simulate.parameters.IGs_2, IGt_2, IGg_2: principal inertias (1, 0.2, 0.3) "
                 "violate the triangle inequality" in text) if "IGs" in old else (
                 "simulate.parameters.mG_2: must be positive (got -6.0)" in text), text  # fmt: skip
+
+
+def test_runtime_gimbal_axes_take_their_place_in_p() -> None:
+    """A runtime spin axis g1_k..g3_k where a fixed rotor's is; a runtime
+    gimbal axis gg1_k..gg3_k first among its gimbal's keys."""
+    scene = parse(runtime_axes("gg1_1 = 1.0, gg2_1 = 0.0, gg3_1 = 0.0"), "r.toml")
+    assert scene.runtime == ("g1_1", "g2_1", "g3_1", "gg1_1", "gg2_1", "gg3_1")
+
+
+def one_cmg(text: str) -> str:
+    """text (vscmg3 edited) with its first CMG alone."""
+    first = text.index("[[rotors]]", text.index("[[rotors]]") + 1)
+    out = text[:first] + text[text.index("[simulate]") :]
+    return out.replace(", gd2 = 0.011, gd3 = -0.003", "").replace(
+        ", w2 = 36.651914291880914, w3 = -94.16777960769379", "")  # fmt: skip
+
+
+RUNTIME_AXES = one_cmg(runtime_axes("gg1_1 = 1.0, gg2_1 = 0.0, gg3_1 = 0.0"))
+"""One CMG, its spin axis and gimbal axis at run time (the proof on the
+orthonormal pairs: minutes to derive)."""
+
+
+def test_runtime_gimbal_axes_are_refused_by_setup_when_not_unit_or_not_perpendicular() -> None:
+    """verify's refusals: each runtime axis too long, too short or 0 (8), the
+    spin axis turned toward the gimbal axis past the slack (10)."""
+    from gyrogen.oracle import sampling, scene_view
+
+    scene = parse(RUNTIME_AXES, "r.toml")
+    base = scene_view.random_runtime(scene, np.random.default_rng(1), 1)[0]
+    g_g, g_s = base[3:], base[:3]
+    assert abs(g_g @ g_s) <= 1e-3 * np.linalg.norm(g_g) * np.linalg.norm(g_s)
+    cases = sampling.invalid_cluster(scene, base)
+    assert [code for _, _, code in cases] == [8] * 6 + [10]
+    _, turned, _ = cases[-1]
+    cosine = abs(turned[3:] @ turned[:3]) / np.linalg.norm(turned[3:]) / np.linalg.norm(turned[:3])
+    assert 2e-3 < cosine < 4e-3
 
 
 def _units(scene: Scene) -> tuple[list[gimbals.Unit], sm.Matrix]:
@@ -273,8 +319,8 @@ def test_a_nan_gimbal_rate_and_a_far_gimbal_angle_at_the_start() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME],
-    ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime"],
+    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME, RUNTIME_AXES],
+    ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime", "runtime axes"],
 )  # fmt: skip
 def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> None:
     from gyrogen.oracle.compare import compare

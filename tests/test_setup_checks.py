@@ -61,13 +61,16 @@ def test_one_declaration_three_interpretations(
         assert compiled == expected, what
         assert python_code(p) == (0 if expected == 9 else expected), what
         codes.add(expected)
-    assert codes == {c.value for c in SETUP_CODES if c.value != 8}  # 8: a cluster's axis
+    assert codes == {c.value for c in SETUP_CODES if c.value not in (8, 10)}  # a cluster's axes
 
 
 def test_every_setup_code_but_ok_has_its_check() -> None:
-    """The single rotor's checks in code order; a cluster's runtime axis adds 8."""
-    assert [c.code for c in CHECKS] == [c.value for c in SETUP_CODES if c.value not in (0, 8)]
-    axis = cluster_checks({"g1_1": "runtime"}, 1)
+    """The single rotor's checks in code order; a cluster's runtime axis adds
+    8, a gimbal's runtime axis 10 (its spin axis perpendicular to it)."""
+    assert [c.code for c in CHECKS] == [c.value for c in SETUP_CODES if c.value not in (0, 8, 10)]
+    gimbal = {f"{key}{i}_1": "runtime" for key in ("g", "gg") for i in (1, 2, 3)}
+    axis = cluster_checks(gimbal, 1)
+    assert [c.code for c in axis if c.code in (8, 10)] == [8, 8, 10]
     made = {c.code for c in (*CHECKS, *axis)}
     assert sorted(made) == [c.value for c in SETUP_CODES if c.value]
 

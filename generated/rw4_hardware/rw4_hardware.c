@@ -220,7 +220,7 @@ const char *rw4_hardware_strerror(int code)
     case RW4_HARDWARE_ERR_MASS_SINGULAR:
         return "the mass matrix is not numerically positive definite (condition number above 1e13)";
     case RW4_HARDWARE_ERR_AXIS:
-        return "a rotor axis is not of unit length (within 0.001)";
+        return "a rotor's axis or a gimbal axis is not of unit length (within 0.001)";
     case RW4_HARDWARE_ERR_OVERFLOW:
         return "a constant derived from the parameters is not finite (together they overflow doubles)";
     default:

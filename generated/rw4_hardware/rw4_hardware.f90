@@ -111,7 +111,7 @@ module rw4_hardware_mod
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_ROTOR_TRIANGLE = 6
   ! 7: the mass matrix is not numerically positive definite (condition number above 1e13)
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_MASS_SINGULAR = 7
-  ! 8: a rotor axis is not of unit length (within 0.001)
+  ! 8: a rotor's axis or a gimbal axis is not of unit length (within 0.001)
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_AXIS = 8
   ! 9: a constant derived from the parameters is not finite (together they overflow doubles)
   integer(c_int), parameter, public :: RW4_HARDWARE_ERR_OVERFLOW = 9
@@ -732,7 +732,7 @@ contains
     case (RW4_HARDWARE_ERR_MASS_SINGULAR)
       msg = "the mass matrix is not numerically positive definite (condition number above 1e13)"
     case (RW4_HARDWARE_ERR_AXIS)
-      msg = "a rotor axis is not of unit length (within 0.001)"
+      msg = "a rotor's axis or a gimbal axis is not of unit length (within 0.001)"
     case (RW4_HARDWARE_ERR_OVERFLOW)
       msg = "a constant derived from the parameters is not finite (together they overflow doubles)"
     case default

@@ -115,7 +115,7 @@ extern "C" {
 #define RW4_HARDWARE_ERR_CARRIER_TRIANGLE 5  /* the carrier's principal moments violate the triangle inequality */
 #define RW4_HARDWARE_ERR_ROTOR_TRIANGLE  6  /* a rotor (2 I_k < J_k) or a gimbal frame violates the triangle inequality */
 #define RW4_HARDWARE_ERR_MASS_SINGULAR   7  /* the mass matrix is not numerically positive definite (condition number above 1e13) */
-#define RW4_HARDWARE_ERR_AXIS            8  /* a rotor axis is not of unit length (within 0.001) */
+#define RW4_HARDWARE_ERR_AXIS            8  /* a rotor's axis or a gimbal axis is not of unit length (within 0.001) */
 #define RW4_HARDWARE_ERR_OVERFLOW        9  /* a constant derived from the parameters is not finite (together they overflow doubles) */
 
 /* The one line a return code of rw4_hardware_setup means ("unknown return code"

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from gyrogen.abi_rotors import AXIS_NORM_SLACK, ROTOR_KEYS
+from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_PERP_SLACK, ROTOR_KEYS
 
 STATES: tuple[str, ...] = tuple(f"q{i}" for i in range(1, 8)) + tuple(f"u{i}" for i in range(1, 8))
 """q1..q3: 3-1-2 Euler angles of the carrier A in N; q4: rotor angle about a2
@@ -147,13 +147,18 @@ SETUP_CODES: tuple[Code, ...] = (
          cluster="a rotor (2 I_k < J_k) or a gimbal frame violates the triangle inequality"),
     Code(7, "ERR_MASS_SINGULAR",
          "the mass matrix is not numerically positive definite (condition number above 1e13)"),
-    Code(8, "ERR_AXIS", f"a rotor axis is not of unit length (within {AXIS_NORM_SLACK:g})"),
+    Code(8, "ERR_AXIS", f"a rotor axis is not of unit length (within {AXIS_NORM_SLACK:g})",
+         cluster=f"a rotor's axis or a gimbal axis is not of unit length (within "
+         f"{AXIS_NORM_SLACK:g})"),
     Code(9, "ERR_OVERFLOW",
          "a constant derived from the parameters is not finite (together they overflow doubles)"),
+    Code(10, "ERR_GIMBAL_PERP",
+         f"a gimbal's spin axis is not perpendicular to its gimbal axis (within "
+         f"{GIMBAL_PERP_SLACK:g})"),
 )  # fmt: skip
 """Return codes of <prefix>_setup, checked in this order (a runtime axis, 8,
-before the condition number, 7, which reads the axes; the constants, 9,
-last, once computed); the first failure wins."""
+and a gimbal's pair, 10, before the condition number, 7, which reads the
+axes; the constants, 9, last, once computed); the first failure wins."""
 
 
 def setup_codes_of(cluster: bool) -> tuple[Code, ...]:

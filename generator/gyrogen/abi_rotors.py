@@ -32,6 +32,10 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
         f"g{i}": ("-", f'spin axis g{{k}} of rotor B{{k}}, a{i} component (axis = "runtime")')
         for i in (1, 2, 3)
     },
+    **{
+        f"gg{i}": ("-", f'gimbal axis g_g of G{{k}}, a{i} component (gimbal axis = "runtime")')
+        for i in (1, 2, 3)
+    },
 }
 """A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
 ROTOR_RUNTIME = ("m", "I", "J", "T", "k", "w_ref")
@@ -47,7 +51,9 @@ AXIS = ("g1", "g2", "g3")
 """axis = "runtime": g_k's A-components in p[] (g1_k, g2_k, g3_k), of length
 within AXIS_NORM_SLACK of 1; setup normalizes them into UNIT_AXIS."""
 UNIT_AXIS = ("gn1", "gn2", "gn3")
-"""A runtime axis normalized: named scalars of setup (gn1_k, gn2_k, gn3_k)."""
+"""A runtime axis normalized: named scalars of setup (gn1_k, gn2_k, gn3_k);
+on a gimbal whose axes are not both folded, g_s0 made perpendicular to the
+unit gimbal axis and normalized (Gram-Schmidt)."""
 MAX_ROTORS = 6
 """Rotors a cluster scene may have."""
 AXIS_NORM_SLACK = 1e-3
@@ -62,10 +68,20 @@ code (<name>_<k>): a gimbal's T is Tg_k, beside its wheel's T_k."""
 GIMBAL_INERTIA = ("IGs", "IGt", "IGg")
 """A gimbal frame's principal inertias about its mass center, in its axes
 (g_s, g_t = g_g x g_s, g_g): the names of [rotors.gimbal] inertia's values."""
+GIMBAL_AXIS = ("gg1", "gg2", "gg3")
+"""[rotors.gimbal] axis = "runtime": g_g's A-components in p[] (gg1_k, gg2_k,
+gg3_k), of length within AXIS_NORM_SLACK of 1; setup normalizes them into
+UNIT_GIMBAL_AXIS."""
+UNIT_GIMBAL_AXIS = ("ggn1", "ggn2", "ggn3")
+"""A runtime gimbal axis normalized: named scalars of setup (ggn1_k..ggn3_k)."""
+CROSS_AXIS = ("gtn1", "gtn2", "gtn3")
+"""g_t0 = g_g x g_s0 of a gimbal whose axes are not both folded: named
+scalars of setup (gtn1_k..gtn3_k)."""
 GIMBAL_PERP_SLACK = 1e-3
 """A gimbal axis g_g and its wheel's spin axis g_s0 must be perpendicular
-within this (|g_s0 . g_g|, both unit); g_s0 is then made exactly
-perpendicular (a longer miss is a typo, refused by the scene)."""
+within this (|g_s0 . g_g| / (|g_s0| |g_g|)); g_s0 is then made perpendicular
+(exactly when both are folded, by setup when one is runtime; a longer miss
+is a typo, refused: folded by the scene, runtime by setup's code 10)."""
 
 
 def rotor_name(key: str, k: int) -> str:
@@ -73,9 +89,10 @@ def rotor_name(key: str, k: int) -> str:
     return f"{key}_{k}"
 
 
-def axis_keys(k: int) -> str:
-    """Rotor k's runtime axis keys as a message names them: g1_k..g3_k."""
-    return f"{rotor_name(AXIS[0], k)}..{rotor_name(AXIS[-1], k)}"
+def axis_keys(k: int, keys: tuple[str, str, str] = AXIS) -> str:
+    """Rotor k's runtime axis keys as a message names them: g1_k..g3_k (or
+    a gimbal axis's, keys GIMBAL_AXIS: gg1_k..gg3_k)."""
+    return f"{rotor_name(keys[0], k)}..{rotor_name(keys[-1], k)}"
 
 
 def cluster_states(

@@ -21,7 +21,14 @@ from typing import Literal
 
 from gyrogen import physics
 from gyrogen.abi import CONTROLLER_PARAMETERS, MAX_CONDITION, PARAMETERS, TRIANGLE_SLACK
-from gyrogen.abi_rotors import AXIS, AXIS_NORM_SLACK, GIMBAL_INERTIA, GIMBAL_KEYS
+from gyrogen.abi_rotors import (
+    AXIS,
+    AXIS_NORM_SLACK,
+    GIMBAL_AXIS,
+    GIMBAL_INERTIA,
+    GIMBAL_KEYS,
+    GIMBAL_PERP_SLACK,
+)
 from gyrogen.physics import LUMPED_FROM
 
 
@@ -171,13 +178,16 @@ CHECKS: tuple[Check, ...] = (
 
 def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ...]:
     """A cluster's setup checks, on its inertial values by name (m_a, I11..I23,
-    m_k, I_k, J_k, g1_k, a gimbal's mG_k, IGs_k, IGt_k, IGg_k: a number or
-    "runtime"; a carrier product missing is 0): every parameter finite;
+    m_k, I_k, J_k, g1_k, a gimbal's mG_k, IGs_k, IGt_k, IGg_k, and with
+    either of a gimbal's axes runtime both axes' g1_k..g3_k, gg1_k..gg3_k: a
+    number or "runtime"; a carrier product missing is 0): every parameter finite;
     then, where a value is runtime, masses and inertias positive, the
     carrier positive definite and meeting the triangle inequality (s 1 - T
     positive definite, s = (1/2 + slack) tr T: Sylvester's leading minors),
     J_k <= 2 I_k and a gimbal frame's triangle inequality (code 6), each runtime axis of length
-    within AXIS_NORM_SLACK of 1 (code 8); the lumped inertia's condition
+    within AXIS_NORM_SLACK of 1 (code 8: a spin axis, then a gimbal axis), a
+    gimbal's spin axis perpendicular to its gimbal axis within
+    GIMBAL_PERP_SLACK when either is runtime (code 10); the lumped inertia's condition
     number; the constants finite (code 9). The scene validator checks the
     folded values."""
 
@@ -234,21 +244,45 @@ def cluster_checks(values: Mapping[str, float | str], n: int) -> tuple[Check, ..
                                           add(a, b, c))))  # fmt: skip
     for k in range(1, n + 1):
         if values.get(f"{AXIS[0]}_{k}") == "runtime":
-            out.append(_unit_length(k))
+            out.append(_unit_length(k, AXIS, "norm", "axis"))
+        if values.get(f"{GIMBAL_AXIS[0]}_{k}") == "runtime":
+            out.append(_unit_length(k, GIMBAL_AXIS, "gnorm", "gimbal axis"))
+        if f"{GIMBAL_AXIS[0]}_{k}" in values:
+            spin, gimbal = ([term(f"{key}_{k}") for key in keys] for keys in (AXIS, GIMBAL_AXIS))
+            out.append(_perpendicular(k, spin, gimbal))
     return (*out, bound, constants)
 
 
-def _unit_length(k: int) -> Check:
-    """Rotor k's runtime axis (g1_k, g2_k, g3_k) of length within
-    AXIS_NORM_SLACK of 1: |norm_k - 1| <= slack (setup then normalizes it)."""
-    norm = Sym(f"norm_{k}")
-    length = sqrt(add(*(square(Sym(f"{key}_{k}")) for key in AXIS)))
+def _unit_length(k: int, keys: tuple[str, ...], name: str, what: str) -> Check:
+    """Rotor k's runtime axis (keys: g1_k, g2_k, g3_k, or a gimbal axis's
+    gg1_k..gg3_k) of length within AXIS_NORM_SLACK of 1: |norm_k - 1| <=
+    slack (setup then normalizes it)."""
+    norm = Sym(f"{name}_{k}")
+    length = sqrt(add(*(square(Sym(f"{key}_{k}")) for key in keys)))
     return Check(
         8,
         "bound",
         (maximum(norm - Num(1.0), Num(1.0) - norm), Num(AXIS_NORM_SLACK)),
-        locals=((f"norm_{k}", length),),
-        comment=(f"Rotor {k}'s axis: of unit length within the slack.",),
+        locals=((f"{name}_{k}", length),),
+        comment=(f"Rotor {k}'s {what}: of unit length within the slack.",),
+    )
+
+
+def _perpendicular(k: int, spin: list[Expr], gimbal: list[Expr]) -> Check:
+    """Gimbal k's spin axis and gimbal axis (each runtime or folded)
+    perpendicular within GIMBAL_PERP_SLACK, the cosine of their angle:
+    (s . g)^2 <= slack^2 |s|^2 |g|^2 (no division; setup then makes them
+    orthonormal)."""
+    dot = Sym(f"perp_{k}")
+    return Check(
+        10,
+        "bound",
+        (
+            square(dot),
+            Num(GIMBAL_PERP_SLACK**2) * add(*map(square, spin)) * add(*map(square, gimbal)),
+        ),
+        locals=((f"perp_{k}", add(*(a * b for a, b in zip(spin, gimbal, strict=True)))),),
+        comment=(f"Gimbal {k}: its spin axis perpendicular to its axis within the slack.",),
     )
 
 

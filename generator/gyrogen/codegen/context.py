@@ -19,7 +19,7 @@ from gyrogen.abi import (
     unit_and_doc,
 )
 from gyrogen.abi_groups import StateKind, state_kind
-from gyrogen.abi_rotors import AXIS, rotor_name
+from gyrogen.abi_rotors import AXIS, GIMBAL_AXIS, rotor_name
 from gyrogen.codegen.integrators.driver import EV_SUBINTERVALS, Event, Grid
 from gyrogen.codegen.integrators.program import Program, program
 from gyrogen.codegen.integrators.taylor import UNMEASURED, state_scales
@@ -257,6 +257,10 @@ class SceneContext:
             if r.gimbal is not None:
                 values.update({rotor_name(key, k): v for key, v in r.gimbal.inertial().items()})
             values.update({rotor_name(key, k): r.axis for key in AXIS if r.axis == "runtime"})
+            if r.gimbal is not None and r.axes_at_runtime:  # the pair's perpendicularity
+                for keys, axis in ((AXIS, r.axis), (GIMBAL_AXIS, r.gimbal.axis)):
+                    parts = ("runtime",) * 3 if axis == "runtime" else axis
+                    values.update(zip((rotor_name(key, k) for key in keys), parts, strict=True))
         return cluster_checks(values, len(self.scene.rotors))
 
     @property

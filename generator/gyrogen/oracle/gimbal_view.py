@@ -24,22 +24,30 @@ def has_gimbals(scene: Scene) -> bool:
     return any(r.gimbal is not None for r in scene.rotors)
 
 
+def _raw(v: object, key: str, k: int, runtime: dict[str, float]) -> np.ndarray:
+    """An axis as given: folded, or its runtime components key1_k..key3_k."""
+    if v == "runtime":
+        return np.array([runtime[rotor_name(f"{key}{i}", k)] for i in (1, 2, 3)], dtype=float)
+    return np.array(v, dtype=float)
+
+
 def _axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
-    """A fixed rotor's unit axis; on a gimbal, g_s0 as the scene defines it
-    (Rotor.spin_axis: a gimbal's spin axis is folded)."""
-    if r.gimbal is not None:
+    """A fixed rotor's unit axis; on a gimbal, g_s0 as the scene defines it:
+    both axes folded, Rotor.spin_axis; else the given spin axis less its
+    part along the unit gimbal axis, normalized."""
+    if r.gimbal is not None and "runtime" not in (r.axis, r.gimbal.axis):
         return np.array([float(x) for x in r.spin_axis])
-    if r.axis == "runtime":
-        g = np.array([runtime[rotor_name(f"g{i}", k)] for i in (1, 2, 3)], dtype=float)
-    else:
-        g = np.array(r.axis, dtype=float)
+    g = _raw(r.axis, "g", k, runtime)
+    if r.gimbal is not None:
+        g_g = _gimbal_axis(r, k, runtime)
+        g = g - np.dot(g, g_g) * g_g
     return g / np.linalg.norm(g)
 
 
-def _gimbal_axis(r: Rotor) -> np.ndarray:
+def _gimbal_axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
     if r.gimbal is None:
         return np.zeros(3)
-    g = np.array(r.gimbal.axis, dtype=float)
+    g = _raw(r.gimbal.axis, "gg", k, runtime)
     return g / np.linalg.norm(g)
 
 
@@ -68,7 +76,7 @@ def values(scene: Scene, runtime: dict[str, float]) -> gimbal_reference.Values:
         J=each("J"),
         g_s0=np.array([_axis(r, k, runtime) for k, r in rotors]),
         r=np.array(position, dtype=float),
-        g_g=np.array([_gimbal_axis(r) for _, r in rotors]),
+        g_g=np.array([_gimbal_axis(r, k, runtime) for k, r in rotors]),
         b=np.array([r.b for _, r in rotors]),
         mg=np.array([_frame(r, k, runtime)[0] for k, r in rotors]),
         IG=np.array([np.diag(_frame(r, k, runtime)[1:]) for k, r in rotors]),
@@ -157,19 +165,22 @@ def steering_gram(scene: Scene) -> str:
     return "A A^T" if sum(r.gimbal is not None for r in scene.rotors) >= 3 else "A^T A"
 
 
-def steering_singularity(scene: Scene, xs: np.ndarray) -> np.ndarray:
+def steering_singularity(
+    scene: Scene, xs: np.ndarray, runtime: dict[str, float] | None = None
+) -> np.ndarray:
     """(M,) det(A A^T) of the gimbals' unit torque directions, A (3, G) with
     column k = g_g x g_s(gam_k) (what a unit gimbal rate of CMG k turns its
     unit spin momentum by): 0 where the steering law loses a direction (a
     singular gimbal set), 1.18 for cmg4_pyramid at gimbal angles 0. Scale
-    by h^6 for wheels of equal momentum h; fixed rotors take no part (a
-    gimbal's axes are folded: no runtime value is read). With fewer than
+    by h^6 for wheels of equal momentum h; fixed rotors take no part
+    (runtime: a runtime axis's values). With fewer than
     three gimbals A A^T is always singular: det(A^T A) then, 0 where their
     torque directions turn parallel."""
     on = [k for k, r in enumerate(scene.rotors, 1) if r.gimbal is not None]
     gam = _split(scene, np.atleast_2d(xs))["gam"][:, [k - 1 for k in on]]
-    g_s0 = np.array([_axis(scene.rotors[k - 1], k, {}) for k in on])
-    g_g = np.array([_gimbal_axis(scene.rotors[k - 1]) for k in on])
+    given = runtime or {}
+    g_s0 = np.array([_axis(scene.rotors[k - 1], k, given) for k in on])
+    g_g = np.array([_gimbal_axis(scene.rotors[k - 1], k, given) for k in on])
     g_t0 = np.cross(g_g, g_s0)
     spin = np.cos(gam)[..., None] * g_s0 + np.sin(gam)[..., None] * g_t0  # (M, G, 3)
     a = np.cross(g_g[None], spin)  # (M, G, 3): A's columns

@@ -14,9 +14,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from gyrogen import abi
 from gyrogen.abi import MAX_CONDITION, TRIANGLE_SLACK
-from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_INERTIA, GIMBAL_KEYS, rotor_name
+from gyrogen.abi_rotors import (
+    AXIS_NORM_SLACK,
+    GIMBAL_INERTIA,
+    GIMBAL_KEYS,
+    GIMBAL_PERP_SLACK,
+    rotor_name,
+)
 from gyrogen.oracle.reference import lumped
 from gyrogen.scene import Scene
+from gyrogen.scene.rotors import Rotor
 
 __all__ = ["invalid_parameters", "random_parameters", "random_states", "setup_code"]
 
@@ -289,11 +296,14 @@ def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
                       for n, v in zip(frame, r.gimbal.inertia, strict=True)}  # fmt: skip
             others = sum(v for n, v in values.items() if n != first)
             edits.append(({first: 1.5 * others}, 6))  # past the sum of the other two
-        if f"g1_{k}" in index:
-            axis = {f"g{i}_{k}": float(known[f"g{i}_{k}"]) for i in (1, 2, 3)}
-            norm = math.sqrt(sum(v * v for v in axis.values()))
-            for length in (1.0 + 3.0 * AXIS_NORM_SLACK, 1.0 - 3.0 * AXIS_NORM_SLACK, 0.0):
-                edits.append(({n: v * length / norm for n, v in axis.items()}, 8))
+        for key in ("g", "gg"):
+            if f"{key}1_{k}" in index:
+                axis = {f"{key}{i}_{k}": float(known[f"{key}{i}_{k}"]) for i in (1, 2, 3)}
+                norm = math.sqrt(sum(v * v for v in axis.values()))
+                for length in (1.0 + 3.0 * AXIS_NORM_SLACK, 1.0 - 3.0 * AXIS_NORM_SLACK, 0.0):
+                    edits.append(({n: v * length / norm for n, v in axis.items()}, 8))
+        if r.gimbal is not None and (f"g1_{k}" in index or f"gg1_{k}" in index):
+            edits.append((_lost_perpendicular(r, k, known, index), 10))
     cases = []
     for edit, code in edits:
         p = base.copy()
@@ -302,3 +312,23 @@ def invalid_cluster(scene: Scene, base: np.ndarray) -> list[tuple[str, np.ndarra
         what = ", ".join(f"{n} = {v:g}" for n, v in edit.items())
         cases.append((what, p, code))
     return cases
+
+
+def _lost_perpendicular(
+    r: Rotor, k: int, known: dict[str, float | str], index: dict[str, int]
+) -> dict[str, float]:
+    """Gimbal k's runtime axis (the spin axis if runtime, else the gimbal
+    axis) turned toward the other by 3 GIMBAL_PERP_SLACK (a cosine past the
+    slack), its length kept."""
+    spin = f"g1_{k}" in index
+    key, other = ("g", "gg") if spin else ("gg", "g")
+    v = np.array([float(known[f"{key}{i}_{k}"]) for i in (1, 2, 3)])
+    if f"{other}1_{k}" in index:
+        w = np.array([float(known[f"{other}{i}_{k}"]) for i in (1, 2, 3)])
+    else:
+        assert r.gimbal is not None
+        w = np.array(r.gimbal.axis if spin else r.axis, dtype=float)
+    w = w / np.linalg.norm(w)
+    turned = v + 3.0 * GIMBAL_PERP_SLACK * np.linalg.norm(v) * w
+    turned *= np.linalg.norm(v) / np.linalg.norm(turned)
+    return {f"{key}{i}_{k}": float(turned[i - 1]) for i in (1, 2, 3)}

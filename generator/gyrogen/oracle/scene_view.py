@@ -10,7 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES
-from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_INERTIA, GIMBAL_KEYS, rotor_name
+from gyrogen.abi_rotors import (
+    AXIS_NORM_SLACK,
+    GIMBAL_INERTIA,
+    GIMBAL_KEYS,
+    GIMBAL_PERP_SLACK,
+    rotor_name,
+)
 from gyrogen.oracle import cluster_reference, gimbal_view, reference, sampling
 from gyrogen.scene import Scene
 from gyrogen.scene import events as scene_events
@@ -340,6 +346,8 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
                 cols[name] = float(axial) * rng.uniform(0.5, 2.5, n)
         elif key in ("r1", "r2", "r3"):
             cols[name] = rng.uniform(-0.5, 0.5, n)
+        elif key in ("g1", "gg1") and scene.rotors[int(k) - 1].gimbal is not None:
+            cols.update(_gimbal_pair(scene, int(k), key, cols, rng, n))
         elif key == "g1":  # a direction anywhere, its length within the slack of 1
             g = rng.normal(size=(n, 3))
             g *= rng.uniform(1.0 - AXIS_NORM_SLACK, 1.0 + AXIS_NORM_SLACK, (n, 1)) / np.linalg.norm(
@@ -347,8 +355,8 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
             )
             for i in (1, 2, 3):
                 cols[f"g{i}_{k}"] = g[:, i - 1]
-        elif key in ("g2", "g3"):
-            pass  # drawn with g1
+        elif key in ("g2", "g3", "gg2", "gg3"):
+            pass  # drawn with g1 or gg1
         elif key == "J":
             inertia = scene.rotors[int(k) - 1].I
             base = cols[f"I_{k}"] if inertia == "runtime" else float(inertia)
@@ -356,6 +364,44 @@ def _cluster_runtime(scene: Scene, rng: np.random.Generator, n: int) -> np.ndarr
         else:
             cols[name] = _CLUSTER_DRAWS[key](rng, n)
     return np.stack([cols[name] for name in scene.runtime], axis=1)
+
+
+def _gimbal_pair(
+    scene: Scene, k: int, key: str, cols: dict[str, np.ndarray], rng: np.random.Generator, n: int
+) -> dict[str, np.ndarray]:
+    """A gimbal's runtime spin axis (key g1) or gimbal axis (gg1): anywhere
+    perpendicular to the other (folded, or drawn: the spin axis comes first
+    in p[]), tilted from it by up to half GIMBAL_PERP_SLACK, its length
+    within the slack of 1."""
+    r = scene.rotors[k - 1]
+    assert r.gimbal is not None
+    other = r.gimbal.axis if key == "g1" else r.axis
+    if other == "runtime":
+        other_key = "gg" if key == "g1" else "g"
+        if f"{other_key}1_{k}" not in cols:  # the first of the pair: anywhere
+            return _unit_draws(key[:-1], k, rng.normal(size=(n, 3)), rng, n)
+        base = np.column_stack([cols[f"{other_key}{i}_{k}"] for i in (1, 2, 3)])
+    else:
+        base = np.tile(np.array(other, dtype=float), (n, 1))
+    base /= np.linalg.norm(base, axis=1, keepdims=True)
+    g = rng.normal(size=(n, 3))
+    g -= (g * base).sum(1, keepdims=True) * base
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    g += rng.uniform(-0.5, 0.5, (n, 1)) * GIMBAL_PERP_SLACK * base
+    return _unit_draws(key[:-1], k, g, rng, n)
+
+
+def _unit_draws(
+    key: str, k: int, g: np.ndarray, rng: np.random.Generator, n: int
+) -> dict[str, np.ndarray]:
+    """Directions g (n, 3) scaled to a length within the slack of 1, as
+    columns key1_k..key3_k."""
+    g = (
+        g
+        * rng.uniform(1.0 - AXIS_NORM_SLACK, 1.0 + AXIS_NORM_SLACK, (n, 1))
+        / np.linalg.norm(g, axis=1, keepdims=True)
+    )
+    return {f"{key}{i}_{k}": g[:, i - 1] for i in (1, 2, 3)}
 
 
 def _frame_inertia(

@@ -7,9 +7,10 @@ torque law and optional torque limit. The torque laws' T, k and w_ref, the
 carrier's mass and tensor and each rotor's m, I and J may be "runtime"
 (checked by setup; the values simulate.parameters gives, here), and so may
 a position (p's r1_k, r2_k, r3_k) and an axis (g1_k, g2_k, g3_k: setup
-checks its length and normalizes it), and a gimbal frame's mass and
-principal inertias (mG_k, IGs_k, IGt_k, IGg_k); friction, limits and a
-gimbal's axes are folded.
+checks its length and normalizes it), a gimbal axis (gg1_k, gg2_k, gg3_k:
+setup checks its length and that the spin axis is perpendicular to it, and
+makes them orthonormal) and a gimbal frame's mass and principal inertias
+(mG_k, IGs_k, IGt_k, IGg_k); friction and limits are folded.
 With every inertial value folded, setup holds the inverse of the constant
 inertia as numbers. No translation:
 the system's mass center is fixed in A and free in N (a free-floating
@@ -40,6 +41,7 @@ from gyrogen.abi_rotors import (
     AXIS,
     AXIS_NORM_SLACK,
     CLUSTER_CARRIER,
+    GIMBAL_AXIS,
     GIMBAL_INERTIA,
     GIMBAL_KEYS,
     GIMBAL_PERP_SLACK,
@@ -121,7 +123,8 @@ class Gimbal(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     axis: Vector
-    """g_g in A-components: length within AXIS_NORM_SLACK of 1."""
+    """g_g in A-components: length within AXIS_NORM_SLACK of 1; "runtime":
+    p's gg1_k, gg2_k, gg3_k (setup checks and normalizes them)."""
     inertia: Annotated[tuple[Value, Value, Value], BeforeValidator(_inertia)]
     """The gimbal frame's principal inertias about its mass center (on the
     gimbal axis at the rotor's position), kg m^2: [IGs, IGt, IGg]; each may
@@ -144,9 +147,8 @@ class Gimbal(BaseModel):
     @field_validator("axis")
     @classmethod
     def _axis(cls, v: tuple[float, float, float] | str) -> tuple[float, float, float] | str:
-        if v == "runtime":
-            raise ValueError('a gimbal axis is folded: give [x, y, z], not "runtime"')
-        check_axis(v, "")  # type: ignore[arg-type]
+        if v != "runtime":
+            check_axis(v, "")  # type: ignore[arg-type]
         return v
 
     @field_validator("torque")
@@ -176,8 +178,10 @@ class Gimbal(BaseModel):
 
     @property
     def unit_axis(self) -> tuple[Fraction, Fraction, Fraction]:
-        """g_g normalized exactly (exact_unit)."""
-        return exact_unit(self.axis)  # type: ignore[arg-type]
+        """g_g normalized exactly (exact_unit); a runtime one has none here."""
+        if self.axis == "runtime":
+            raise ValueError('gimbal.axis: "runtime" (its values come with the parameters)')
+        return exact_unit(self.axis)
 
     def law(self) -> dict[str, float | str]:
         """The torque law's parameters by key."""
@@ -287,10 +291,19 @@ class Rotor(BaseModel):
     @property
     def spin_axis(self) -> tuple[Fraction, Fraction, Fraction]:
         """The spin axis exactly: unit_axis, or on a gimbal g_s0 exactly
-        perpendicular to the gimbal axis (exact_perpendicular)."""
+        perpendicular to the gimbal axis (exact_perpendicular); with either
+        axis runtime there is none here (setup makes the pair: gimbal_axes)."""
         if self.gimbal is None:
             return self.unit_axis
+        if self.axes_at_runtime:
+            raise ValueError('axis: "runtime" on a gimbal (its values come with the parameters)')
         return exact_perpendicular(self.axis, self.gimbal.unit_axis)  # type: ignore[arg-type]
+
+    @property
+    def axes_at_runtime(self) -> bool:
+        """On a gimbal, the spin axis or the gimbal axis is "runtime": setup
+        makes the pair orthonormal (gimbal_axes)."""
+        return self.gimbal is not None and "runtime" in (self.axis, self.gimbal.axis)
 
     @property
     def unit_axis(self) -> tuple[Fraction, Fraction, Fraction]:
@@ -307,18 +320,19 @@ class Rotor(BaseModel):
         return {key: v for key in LAW_KEYS[self.torque] if (v := getattr(self, key)) is not None}
 
 
-def check_gimbal(r: Rotor) -> None:
-    """A rotor on a gimbal: a folded spin axis perpendicular to the gimbal
-    axis within GIMBAL_PERP_SLACK."""
-    if r.axis == "runtime":
-        raise ValueError('axis: a rotor on a gimbal has a folded spin axis, not "runtime"')
+def check_gimbal(r: Rotor, where: str = "gimbal.axis") -> None:
+    """A rotor on a gimbal: its spin axis perpendicular to the gimbal axis
+    within GIMBAL_PERP_SLACK (the cosine of their angle), when both are
+    known (a runtime one: setup's code 10, or check_values on given values)."""
     assert r.gimbal is not None
+    if r.axes_at_runtime:
+        return
     dot = abs(
         sum(float(a) * float(b) for a, b in zip(r.unit_axis, r.gimbal.unit_axis, strict=True))
     )
     if not dot <= GIMBAL_PERP_SLACK:
         raise ValueError(
-            f"gimbal.axis: not perpendicular to the spin axis (|g_s0 . g_g| = {dot:.6g} > "
+            f"{where}: not perpendicular to the spin axis (|g_s0 . g_g| = {dot:.6g} > "
             f"{GIMBAL_PERP_SLACK:g}): a gimbal turns the wheel's axis about a perpendicular one"
         )
 
@@ -354,7 +368,8 @@ def check_axial(inertia: float, axial: float, where: str) -> None:
 def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) -> tuple[str, ...]:
     """p[] of a cluster: the carrier's runtime keys (CLUSTER_CARRIER order),
     then each rotor's, rotor by rotor (m, I, J, a position's and an axis's,
-    its torque law's, then its gimbal's: mG, IGs, IGt, IGg, its torque law's)."""
+    its torque law's, then its gimbal's: its axis's gg1..gg3, mG, IGs, IGt,
+    IGg, its torque law's)."""
     carrier = tuple(n for n in CLUSTER_CARRIER if parameters.get(n) == "runtime")
     return carrier + tuple(
         rotor_name(key, k)
@@ -365,6 +380,7 @@ def runtime_names(parameters: Mapping[str, float | str], rotors: list[Rotor]) ->
             ("J", r.J),
             *_vectors(r),
             *r.law().items(),
+            *_gimbal_vector(r),
             *({} if r.gimbal is None else r.gimbal.inertial()).items(),
             *gimbal_law(r).items(),
         )
@@ -381,6 +397,12 @@ def gimbal_law(r: Rotor) -> dict[str, float | str]:
 def gimbals(rotors: list[Rotor]) -> tuple[int, ...]:
     """The rotors on gimbals, by k (1..N)."""
     return tuple(k for k, r in enumerate(rotors, 1) if r.gimbal is not None)
+
+
+def _gimbal_vector(r: Rotor) -> tuple[tuple[str, str], ...]:
+    """A runtime gimbal axis's keys."""
+    runtime = r.gimbal is not None and r.gimbal.axis == "runtime"
+    return tuple((key, "runtime") for key in GIMBAL_AXIS) if runtime else ()
 
 
 def _vectors(r: Rotor) -> tuple[tuple[str, str], ...]:
@@ -419,7 +441,14 @@ def resolved(
                     return None
                 frame[name] = float(given[rotor_name(name, k)] if v == "runtime" else v)
             inertia = tuple(frame[name] for name in GIMBAL_INERTIA)
-            gimbal = r.gimbal.model_copy(update={"m": frame[GIMBAL_KEYS["m"]], "inertia": inertia})
+            axis: object = r.gimbal.axis
+            if axis == "runtime":
+                if any(rotor_name(key, k) not in given for key in GIMBAL_AXIS):
+                    return None
+                axis = tuple(float(given[rotor_name(key, k)]) for key in GIMBAL_AXIS)
+            gimbal = r.gimbal.model_copy(
+                update={"m": frame[GIMBAL_KEYS["m"]], "inertia": inertia, "axis": axis}
+            )
             update["gimbal"] = gimbal
         out.append(r.model_copy(update=update))
     return values, out
@@ -427,15 +456,37 @@ def resolved(
 
 def unit_axes(rotors: list[Rotor], given: Mapping[str, float]) -> np.ndarray:
     """(N, 3) each rotor's unit axis in floats: a folded one's exact unit
-    vector, a runtime one's g1_k..g3_k from given, normalized as setup does."""
+    vector, a runtime one's g1_k..g3_k from given, normalized as setup does;
+    on a gimbal, g_s0 (gimbal_axes)."""
     out = []
     for k, r in enumerate(rotors, 1):
-        if r.axis == "runtime":
-            g = np.array([float(given[rotor_name(key, k)]) for key in AXIS])
+        if r.gimbal is not None:
+            out.append(gimbal_axes(r, k, given)[1])
+        elif r.axis == "runtime":
+            g = _given(k, AXIS, given)
             out.append(g / np.sqrt(g @ g))
         else:
             out.append(np.array([float(x) for x in r.unit_axis]))
     return np.array(out).reshape(len(rotors), 3)
+
+
+def _given(k: int, keys: tuple[str, ...], given: Mapping[str, float]) -> np.ndarray:
+    return np.array([float(given[rotor_name(key, k)]) for key in keys])
+
+
+def gimbal_axes(r: Rotor, k: int, given: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Rotor k's unit gimbal axis g_g and spin axis g_s0 in floats: folded,
+    the exact pair (spin_axis); with either runtime (from given), as setup
+    makes them: g_g normalized, g_s0 less its part along g_g, normalized."""
+    assert r.gimbal is not None
+    if not r.axes_at_runtime:
+        return (np.array([float(x) for x in r.gimbal.unit_axis]),
+                np.array([float(x) for x in r.spin_axis]))  # fmt: skip
+    g_g = _given(k, GIMBAL_AXIS, given) if r.gimbal.axis == "runtime" else np.array(r.gimbal.axis)
+    g_g = g_g / np.sqrt(g_g @ g_g)
+    spin = _given(k, AXIS, given) if r.axis == "runtime" else np.array(r.axis, dtype=float)
+    spin = spin - (spin @ g_g) * g_g
+    return g_g, spin / np.sqrt(spin @ spin)
 
 
 def states(rotors: list[Rotor], quaternion: bool, angles: bool) -> tuple[str, ...]:
@@ -478,6 +529,8 @@ def check_values(parameters: Mapping[str, float], rotors: list[Rotor], where: st
         check_axial(r.I, r.J, f"{where}.{rotor_name('J', k)}")  # type: ignore[arg-type]
         check_axis(r.axis, f"{where}.{axis_keys(k)}")  # type: ignore[arg-type]
         if r.gimbal is not None:
+            check_axis(r.gimbal.axis, f"{where}.{axis_keys(k, GIMBAL_AXIS)}")  # type: ignore[arg-type]
+            check_gimbal(r, f"{where}.{axis_keys(k, GIMBAL_AXIS)}")
             mass = rotor_name(GIMBAL_KEYS["m"], k)
             if not r.gimbal.m > 0.0:  # type: ignore[operator]
                 raise ValueError(f"{where}.{mass}: must be positive (got {r.gimbal.m})")
@@ -534,14 +587,15 @@ def lumped_inertia(parameters: Mapping[str, float | str], rotors: list[Rotor]) -
 
 def lumped_part(
     r: Rotor,
-) -> tuple[float | str, float | str, tuple[Fraction, Fraction, Fraction]]:
+) -> tuple[float | str, float | str, tuple[Fraction, Fraction, Fraction] | str]:
     """What a rotor adds to the lumped inertia beside its mass: (the mass of
     its gimbal frame, the transverse inertia, the axis it is transverse to).
     A fixed rotor's I about g; a gimbal's constant part, IGs about g_g (the
-    rest turns with the gimbal: symbolic.gimbals)."""
+    rest turns with the gimbal: symbolic.gimbals), "runtime" for a runtime g_g."""
     if r.gimbal is None:
         return 0.0, r.I, r.unit_axis
-    return r.gimbal.m, r.gimbal.inertia[0], r.gimbal.unit_axis
+    axis = "runtime" if r.gimbal.axis == "runtime" else r.gimbal.unit_axis
+    return r.gimbal.m, r.gimbal.inertia[0], axis
 
 
 DENOMINATOR = 10**9

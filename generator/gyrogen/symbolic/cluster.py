@@ -34,10 +34,12 @@ from gyrogen import physics
 from gyrogen.abi_rotors import (
     AXIS,
     CLUSTER_CARRIER,
+    GIMBAL_AXIS,
     GIMBAL_INERTIA,
     GIMBAL_KEYS,
     POSITION,
     UNIT_AXIS,
+    UNIT_GIMBAL_AXIS,
     cluster_states,
     rotor_name,
 )
@@ -65,10 +67,11 @@ def _exact(v: tuple[Fraction, Fraction, Fraction]) -> sm.Matrix:
 
 
 def _unit_axes(scene: Scene) -> dict[sm.Symbol, sm.Expr]:
-    """Each runtime axis normalized by setup: gn_i_k = g_i_k / |g_k|."""
+    """Each fixed rotor's runtime axis normalized by setup: gn_i_k = g_i_k /
+    |g_k| (a gimbal's pair: symbolic.gimbals)."""
     out: dict[sm.Symbol, sm.Expr] = {}
     for k, r in enumerate(scene.rotors, 1):
-        if r.axis == "runtime":
+        if r.axis == "runtime" and r.gimbal is None:
             g = _plain(tuple(rotor_name(key, k) for key in AXIS))
             norm = sm.sqrt(sm.Add(*(x**2 for x in g)))
             out.update(zip(_axis(r, k), (x / norm for x in g), strict=True))
@@ -125,8 +128,16 @@ def _transverse(r: Rotor, k: int) -> tuple[sm.Expr, sm.Expr, list[sm.Expr]]:
     if r.gimbal is None:
         return sm.S.Zero, _param(rotor_name("I", k), r.I), list(_axis(r, k))
     mass, inertia, axis = lumped_part(r)
-    return (_param(rotor_name(GIMBAL_KEYS["m"], k), mass),
-            _param(rotor_name(GIMBAL_INERTIA[0], k), inertia), list(_exact(axis)))  # fmt: skip
+    frame = _param(rotor_name(GIMBAL_KEYS["m"], k), mass)
+    return frame, _param(rotor_name(GIMBAL_INERTIA[0], k), inertia), list(gimbal_axis(axis, k))
+
+
+def gimbal_axis(axis: tuple[Fraction, Fraction, Fraction] | str, k: int) -> sm.Matrix:
+    """Rotor k's unit gimbal axis g_g: exact (rotors.exact_unit), or a
+    runtime one as setup's normalized scalars ggn1_k..ggn3_k."""
+    if axis == "runtime":
+        return sm.Matrix(_plain(tuple(rotor_name(key, k) for key in UNIT_GIMBAL_AXIS)))
+    return _exact(axis)  # type: ignore[arg-type]
 
 
 LUMPED = ((0, 0, "IC11"), (1, 1, "IC22"), (2, 2, "IC33"), (0, 1, "IC12"), (0, 2, "IC13"),
@@ -396,7 +407,8 @@ def _inertial(name: str) -> bool:
     inertia (a gimbal frame's included)."""
     key = name.rpartition("_")[0]
     frame = (GIMBAL_KEYS["m"], *GIMBAL_INERTIA)
-    return name in CLUSTER_CARRIER or key in ("m", "I", "J", *POSITION, *AXIS, *frame)
+    axes = (*AXIS, *GIMBAL_AXIS)
+    return name in CLUSTER_CARRIER or key in ("m", "I", "J", *POSITION, *axes, *frame)
 
 
 def _expanded(shared: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Expr]:

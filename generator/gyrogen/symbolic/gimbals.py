@@ -34,6 +34,7 @@ is the solved u'.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import sympy as sm
 import sympy.physics.mechanics as me
@@ -41,9 +42,18 @@ from sympy.polys.domains import QQ
 from sympy.polys.orderings import lex
 from sympy.polys.rings import PolyElement, ring
 
-from gyrogen.abi_rotors import GIMBAL_INERTIA, GIMBAL_KEYS, cluster_states, rotor_name
+from gyrogen.abi_rotors import (
+    AXIS,
+    CROSS_AXIS,
+    GIMBAL_AXIS,
+    GIMBAL_INERTIA,
+    GIMBAL_KEYS,
+    UNIT_AXIS,
+    cluster_states,
+    rotor_name,
+)
 from gyrogen.scene import Scene
-from gyrogen.scene.rotors import Rotor, gimbals
+from gyrogen.scene.rotors import Rotor, gimbals, lumped_part
 from gyrogen.symbolic import cluster, equations, model
 from gyrogen.symbolic.equations import Equations
 
@@ -80,17 +90,51 @@ class Unit:
 
 
 def _unit(r: Rotor, k: int) -> Unit:
+    """Rotor k's unit: on a gimbal with a runtime axis, g_g, g_s0 and
+    g_t0 = g_g x g_s0 setup's scalars (_pair_axes; the proof knows their
+    relations: _relations)."""
     J = cluster._param(rotor_name("J", k), r.J)
     I = cluster._param(rotor_name("I", k), r.I)
     if r.gimbal is None:
         return Unit(k, cluster._axis(r, k), J, I)
-    g_g = cluster._exact(r.gimbal.unit_axis)
-    g_s0 = cluster._exact(r.spin_axis)  # exactly perpendicular to g_g
+    g_g = cluster.gimbal_axis(lumped_part(r)[2], k)
     igs, igt, igg = (
         cluster._param(rotor_name(n, k), x)
         for n, x in zip(GIMBAL_INERTIA, r.gimbal.inertia, strict=True)
     )
-    return Unit(k, g_s0, J, I, g_g, g_g.cross(g_s0), (igs, igt, igg))
+    frame = (igs, igt, igg)
+    if r.axes_at_runtime:  # setup's g_s0 and g_t0 (_pair_axes)
+        g_s0, g_t0 = (sm.Matrix(_plain(_names(keys, k))) for keys in (UNIT_AXIS, CROSS_AXIS))
+        return Unit(k, g_s0, J, I, g_g, g_t0, frame)
+    g_s0 = cluster._exact(r.spin_axis)  # exactly perpendicular to g_g
+    return Unit(k, g_s0, J, I, g_g, g_g.cross(g_s0), frame)
+
+
+def _names(keys: tuple[str, ...], k: int) -> tuple[str, ...]:
+    return tuple(rotor_name(key, k) for key in keys)
+
+
+def _pair_axes(scene: Scene) -> dict[sm.Symbol, sm.Expr]:
+    """Each gimbal's pair with a runtime axis, as setup makes it orthonormal:
+    g_g normalized (ggn_k, a runtime one), g_s0 less its part along g_g,
+    normalized (gn_k: Gram-Schmidt), g_t0 = g_g x g_s0 (gtn_k)."""
+    out: dict[sm.Symbol, sm.Expr] = {}
+    for k, r in enumerate(scene.rotors, 1):
+        if r.gimbal is None or not r.axes_at_runtime:
+            continue
+        g_g = cluster.gimbal_axis(lumped_part(r)[2], k)
+        if r.gimbal.axis == "runtime":
+            raw = sm.Matrix(_plain(_names(GIMBAL_AXIS, k)))
+            out.update(zip(g_g, raw / sm.sqrt(raw.dot(raw)), strict=True))
+        if r.axis == "runtime":
+            spin = sm.Matrix(_plain(_names(AXIS, k)))
+        else:
+            spin = sm.Matrix([cluster._number(x) for x in r.axis])
+        along = spin - spin.dot(g_g) * g_g
+        g_s0 = sm.Matrix(_plain(_names(UNIT_AXIS, k)))
+        out.update(zip(g_s0, along / sm.sqrt(along.dot(along)), strict=True))
+        out.update(zip(_plain(_names(CROSS_AXIS, k)), g_g.cross(g_s0), strict=True))
+    return out
 
 
 def _trig(k: int) -> tuple[sm.Expr, sm.Expr]:
@@ -284,36 +328,104 @@ def _forcing(units: list[Unit], h: sm.Matrix, v: dict) -> sm.Matrix:
     return out
 
 
-def _on_circles(e: sm.Expr, units: list[Unit]) -> PolyElement:
-    """e with cos and sin of every gimbal angle as c, s, a polynomial over
-    the rationals (or the field of its radicals) reduced modulo each
-    s^2 + c^2 - 1 and each fixed rotor's runtime axis's g3^2 + g1^2 + g2^2 - 1
-    (it is normalized by setup): its normal form, zero exactly when e
-    vanishes for every angle and axis (those polynomials, in s_k^2 and g3^2
-    leading, have pairwise coprime leading terms: a Groebner basis of a
-    prime ideal whose real points are dense in its variety)."""
-    swap, pairs = {}, []
+@dataclasses.dataclass(frozen=True)
+class Relations:
+    """What the gimbal angles and the runtime axes satisfy, in blocks of
+    their own variables: each angle's s, c (s^2 + c^2 - 1); a fixed
+    rotor's runtime axis (g3^2 + g1^2 + g2^2 - 1); a gimbal's pair with a
+    runtime axis (g_t0 = g_g x g_s0, leading in g_t0's own symbols, then
+    |g_g| = 1, |g_s0| = 1, g_s0 . g_g = 0 for those of it that are
+    symbols). Each block's polynomials are a lex Groebner basis of a prime
+    ideal (a circle, a sphere, a conic, or the orthonormal pairs, SO(3)
+    over C: smooth complete intersections) whose real points are dense in
+    its variety; the blocks share no variable, so the union of their bases
+    is one (leading terms in disjoint variables are coprime: Buchberger's
+    first criterion), and a polynomial vanishes at every real angle and
+    axis exactly when its normal form is zero."""
+
+    swap: dict[sm.Expr, sm.Symbol]
+    """cos and sin of each gimbal angle as the plain c<k>, s<k>."""
+    variables: tuple[sm.Symbol, ...]
+    """The blocks' variables in order: the ring's first (lex)."""
+    blocks: tuple[tuple[int, int, tuple[sm.Expr, ...]], ...]
+    """Each block: its variables' slice of variables, and its basis."""
+
+
+def _relations(units: list[Unit]) -> Relations:
+    swap: dict[sm.Expr, sm.Symbol] = {}
+    variables: list[sm.Symbol] = []
+    blocks: list[tuple[int, int, tuple[sm.Expr, ...]]] = []
+
+    def block(names: list[sm.Symbol], basis: list[sm.Expr]) -> None:
+        blocks.append((len(variables), len(variables) + len(names), tuple(basis)))
+        variables.extend(names)
+
     for x in units:
         if x.g_g is not None:
             cos, sin = _trig(x.k)
             swap[cos], swap[sin] = sm.Symbol(f"c{x.k}"), sm.Symbol(f"s{x.k}")
-            pairs.append((swap[sin], swap[cos]))
-    e = e.xreplace(swap)
-    angles = [v for pair in pairs for v in pair]
-    axes = [list(x.axis) for x in units if x.g_g is None and not x.axis[0].is_number]
-    spheres = [v for g1, g2, g3 in axes for v in (g3, g1, g2)]
+            block([swap[sin], swap[cos]], [swap[sin] ** 2 + swap[cos] ** 2 - 1])
+    for x in units:
+        if x.axis[0].is_number:
+            continue
+        if x.g_g is None:
+            g1, g2, g3 = x.axis
+            block([g3, g1, g2], [g3**2 + g1**2 + g2**2 - 1])
+            continue
+        assert x.g_t0 is not None
+        pair = [*(() if x.g_g[0].is_number else x.g_g), *x.axis]
+        equations = [x.axis.dot(x.axis) - 1, x.axis.dot(x.g_g)]
+        if not x.g_g[0].is_number:
+            equations.append(x.g_g.dot(x.g_g) - 1)
+        order = [*pair[2::-1], *pair[3:][::-1]] if len(pair) == 6 else pair[::-1]
+        basis = sm.groebner(equations, *order, order="lex").exprs
+        block([*x.g_t0, *order], [*(x.g_t0 - x.g_g.cross(x.axis)), *basis])
+    return Relations(swap, tuple(variables), tuple(blocks))
+
+
+def _on_circles(e: sm.Expr, rel: Relations) -> PolyElement:
+    """e with cos and sin of every gimbal angle as c, s, a polynomial over
+    the rationals (or the field of its radicals) reduced modulo rel's bases
+    (each runtime axis is normalized by setup, a gimbal's pair made
+    orthonormal): its normal form, zero exactly when e vanishes for every
+    angle and axis."""
+    e = e.xreplace(rel.swap)
     radicals = [a for a in e.atoms(sm.Pow) if not a.free_symbols]
     field = QQ.algebraic_field(*radicals) if radicals else QQ
-    others = sorted(e.free_symbols - {*angles, *spheres}, key=str)
-    divisors = [s**2 + c**2 - 1 for s, c in pairs] + [
-        g3**2 + g1**2 + g2**2 - 1 for g1, g2, g3 in axes
-    ]
+    others = sorted(e.free_symbols - set(rel.variables), key=str)
     try:  # a polynomial in every symbol
-        r, *_ = ring([*angles, *spheres, *others], field, lex)
-        return r.from_expr(e).rem([r.from_expr(x) for x in divisors])
+        r, *_ = ring([*rel.variables, *others], field, lex)
+        p = r.from_expr(e)
     except ValueError:  # a runtime mass in a denominator: its rational functions as coefficients
-        r, *_ = ring([*angles, *spheres], field.frac_field(*others) if others else field, lex)
-        return r.from_expr(e).rem([r.from_expr(x) for x in divisors])
+        domain = field.frac_field(*others) if others else field
+        r, *_ = ring(list(rel.variables), domain, lex)
+        p = r.from_expr(e)
+    for start, stop, basis in rel.blocks:
+        p = _reduced(p, [r.from_expr(x) for x in basis], start, stop)
+    return p
+
+
+def _reduced(p: PolyElement, basis: list[PolyElement], start: int, stop: int) -> PolyElement:
+    """p's normal form modulo basis, a Groebner basis in the ring's
+    variables start..stop-1 (lex), term by term: the normal form is
+    linear, and a term's is its part in those variables' (reduced once per
+    such monomial) times the rest, which no leading term of the basis
+    divides; a term reduced modulo another block stays so.
+    (PolyElement.rem would look for the leading term of all of p at each
+    step: quadratic in p's terms.)"""
+    r = p.ring
+    one = r.domain.one
+    cache: dict[tuple[int, ...], PolyElement] = {}
+    out: dict[tuple[int, ...], Any] = {}
+    for expv, coeff in p.items():
+        head = expv[start:stop]
+        if head not in cache:
+            mono = (0,) * start + head + (0,) * (r.ngens - stop)
+            cache[head] = r({mono: one}).rem(basis)
+        for term, c in cache[head].items():
+            key = expv[:start] + term[start:stop] + expv[stop:]
+            out[key] = out.get(key, r.domain.zero) + coeff * c
+    return r({key: c for key, c in out.items() if c})
 
 
 def _prove(units: list[Unit], lumped: sm.Matrix, carrier: sm.Matrix) -> sm.Matrix:
@@ -340,8 +452,9 @@ def _prove(units: list[Unit], lumped: sm.Matrix, carrier: sm.Matrix) -> sm.Matri
     expected = sm.diag(lumped + turning, *(x.c for x in gim), *(x.J for x in units))
     f = _forcing(units, _momentum(units, lumped, v), v)
     momentum = [*f, *(x.c * v["nd"][x.k] for x in gim), *(v["net"][x.k] for x in units)]
-    if any(_on_circles(e, units) != 0 for e in mm - expected) or any(
-        _on_circles(a - b, units) != 0 for a, b in zip(forcing, momentum, strict=True)
+    rel = _relations(units)
+    if any(_on_circles(e, rel) != 0 for e in mm - expected) or any(
+        _on_circles(a - b, rel) != 0 for a, b in zip(forcing, momentum, strict=True)
     ):
         raise AssertionError("internal: Kane's gimbal equations differ from the momentum form")
     return qdot
@@ -439,7 +552,7 @@ def derive(scene: Scene) -> Equations:
         mass_matrix=sm.eye(n_u),
         forcing=code["rates"],
         kinematics=sm.Matrix([kin[s] for s in kept[: len(kept) - n_u]]),
-        lumped={**cluster._unit_axes(scene), **named},
+        lumped={**cluster._unit_axes(scene), **_pair_axes(scene), **named},
         inputs=code["inputs"],
         outputs=_outputs(scene, st, units, code),
         shared=code["shared"],

@@ -236,7 +236,8 @@ def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
             "too little torque about some direction"
         )
     if gimbal_view.has_gimbals(scene):
-        measure = gimbal_view.steering_singularity(scene, xs)
+        given = dict(zip(scene.runtime, p, strict=True))
+        measure = gimbal_view.steering_singularity(scene, xs, given)
         res.diagnosis = (res.diagnosis + "; " if res.diagnosis else "") + (
             f"steering singularity det({gimbal_view.steering_gram(scene)}) {measure[0]:.2g} "
             "at the start, "

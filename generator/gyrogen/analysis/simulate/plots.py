@@ -14,7 +14,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from gyrogen.scene import Scene
-from gyrogen.scene.rotors import unit_axes
+from gyrogen.scene.rotors import gimbal_axes, unit_axes
 
 SIZE_INCHES = (12.0, 8.0)
 DPI = 100
@@ -57,7 +57,7 @@ def _wheels(
         along = w_a @ g
         if r.gimbal is not None:
             gam = _column(scene, x, f"gam{k}")
-            turned = np.cross([float(v) for v in r.gimbal.unit_axis], g)
+            turned = np.cross(gimbal_axes(r, k, given)[0], g)
             along = np.cos(gam) * along + np.sin(gam) * (w_a @ turned)
         ax.plot(t, _column(scene, x, f"w{k}") - along, label=f"w{k} - g{k}.w_A")
     ax.set(title="wheel rates relative to the carrier (or gimbal)", ylabel="rad/s")
