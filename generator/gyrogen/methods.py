@@ -209,9 +209,8 @@ class Method:
 
     @property
     def lanes(self) -> bool:
-        """Its batch runs trajectories in SIMD lanes (an explicit pair,
-        Taylor, a Rosenbrock method)."""
-        return self.pair or self.taylor or self.rosenbrock
+        """Its batch runs trajectories in SIMD lanes (an explicit pair, Taylor)."""
+        return self.pair or self.taylor
 
     @property
     def start_order(self) -> int:

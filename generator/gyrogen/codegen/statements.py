@@ -341,22 +341,6 @@ def rhs_lanes_ode(unit: SceneContext) -> Func:
     return Func(f.name, _lane_params(), f.body, restrict=True)
 
 
-def jacobian_lanes(unit: SceneContext) -> Func:
-    """<prefix>_jac over the lanes of struct lanes (ode.c, a Rosenbrock
-    method's): rows J[i*NX + j] of LANES values, the same statements lane by
-    lane, over sin and cos's branch-free twins (the scalar ones' bits)."""
-    b = unit.optimized.jacobian
-    assert b is not None, "a Jacobian over lanes needs the scene's Jacobian"
-    l_ = Var("l")
-
-    def at(name: str) -> Callable[[int], At]:
-        return lambda i: At(name, (Int(i), l_))
-
-    f = _lanes(unit, "jac_lanes", Const("LANES"), at, At("t", (l_,)), False, b, "J")
-    params = (*_lane_params()[:3], Decl("J", "double", ("NX2", "LANES"), "out"))
-    return Func(f.name, params, f.body, restrict=True)
-
-
 def _lane_params() -> tuple[Decl, ...]:
     return (
         Decl("t", "double", ("LANES",)),
@@ -373,16 +357,13 @@ def _lanes(
     at: Callable[[str], Callable[[int], At]],
     t: At,
     public: bool,
-    block_: Block | None = None,
-    out: str = "dxdt",
 ) -> Func:
-    """block_ (the rhs unless given) for n states at once, its outputs into out."""
     names = symbol_names(unit.nc)
-    b = unit.optimized.rhs if block_ is None else block_
+    b = unit.optimized.rhs
     free = b.free_symbols
     states = [(i, s.name) for i, s in enumerate(unit.states) if s in free]
     tables = [s.name for s in unit.equations.inputs if s in free]
-    temps, body = block(b, at(out), names, lanes=True)
+    temps, body = block(b, at("dxdt"), names, lanes=True)
     reads = [assign(Var(v), at("x")(i)) for i, v in states]
     reads += [assign(Var(v), fn(f"{unit.prefix}_{v}", t)) for v in tables]
     loop = For(

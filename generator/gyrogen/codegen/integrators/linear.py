@@ -22,7 +22,6 @@ from dataclasses import dataclass
 
 from gyrogen.codegen.integrators.common import NX
 from gyrogen.codegen.ir.nodes import (
-    At,
     Bool,
     Comment,
     Decl,
@@ -39,8 +38,6 @@ from gyrogen.codegen.ir.nodes import (
     cmp,
     fn,
     not_,
-    or_,
-    sel,
 )
 from gyrogen.symbolic.blocks import Blocks
 
@@ -80,24 +77,25 @@ class Elimination:
     """u_kj := u_kj / u_kk (row k's entry, the diagonal)."""
 
 
-def eliminate(
-    blocks: Blocks, nx: int, how: Elimination, singular: Var | None = None
-) -> tuple[S, ...]:
+def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
     """Gaussian elimination with partial pivoting within the diagonal blocks,
     unrolled over the columns k and over the entries of U that can be
     nonzero (Blocks.upper: what the solves read); the rows of a block as a
     loop. Entries outside that pattern stay zero, as they would under the
     loop over every column (l_ik times a zero); an augmented system's
-    coupled entries (Blocks.coupled) stay as they are, for the solve. With
-    singular, branch-free (pivoting): a zero pivot sets singular and the
-    elimination goes on (its factors are not to be used), no return."""
+    coupled entries (Blocks.coupled) stay as they are, for the solve."""
     body: list[S] = []
     piv = Var("piv")
     for k in range(nx):
         s, e, kk, up = blocks.start[k], blocks.end[k], k * nx + k, blocks.upper[k]
         if e - k > 1:
             body += [
-                *pivoting(how, k, s, e, singular),
+                assign(p, k),
+                For("i", Int(e), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
+                                     (assign(p, i),)),), start=Int(k + 1)),
+                assign(piv[k], p),
+                If(not_(cmp(how.size(p * NX + k), ">", 0.0)), (Return(Bool(True), "singular"),)),
+                swap_rows(how.names, k, s),
                 *how.inverse(kk),
                 For("i", Int(e), (
                     *how.multiplier(i * NX + k, kk),
@@ -105,79 +103,25 @@ def eliminate(
                 ), start=Int(k + 1)),
             ]  # fmt: skip
         else:
-            body += [assign(piv[k], k), zero_pivot(how.size(kk), singular), *how.inverse(kk)]
+            body += [
+                assign(piv[k], k),
+                If(not_(cmp(how.size(kk), ">", 0.0)), (Return(Bool(True), "singular"),)),
+                *how.inverse(kk),
+            ]
         body += [st for c in up for st in how.scale(k * nx + c, kk)]
-    return tuple(body) if singular is not None else (*body, Return(Bool(False)))
+    return (*body, Return(Bool(False)))
 
 
-def zero_pivot(size: E, singular: Var | None) -> S:
-    """A pivot of size 0 (or NaN): singular, returned at once or remembered."""
-    zero = not_(cmp(size, ">", 0.0))
-    if singular is None:
-        return If(zero, (Return(Bool(True), "singular"),))
-    return assign(singular, or_(singular, zero))
-
-
-def pivoting(how: Elimination, k: int, start: int, end: int, singular: Var | None) -> list[S]:
-    """Column k's pivot p, the largest of rows k..end-1 (the first of equal
-    ones), into piv[k], and rows k and p exchanged. With singular, by
-    selection: the running largest size in best (the size at p, as the
-    search compares), and each row below k exchanged where it is p."""
-    piv = Var("piv")
-    if singular is None:
-        return [
-            assign(p, k),
-            For("i", Int(end), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
-                                   (assign(p, i),)),), start=Int(k + 1)),
-            assign(piv[k], p),
-            zero_pivot(how.size(p * NX + k), None),
-            swap_rows(how.names, k, start),
-        ]  # fmt: skip
-    best, q, swap = Var("best"), Var("q"), Var("held")
-    larger = cmp(how.size(i * NX + k), ">", best)
-    exchanged: list[S] = []
-    for a in how.names:
-        at_k, at_q = Var(a)[k * NX + j], Var(a)[q * NX + j]
-        exchanged += [
-            assign(swap, at_k),
-            assign(at_k, sel(cmp(p, "==", q), at_q, at_k)),
-            assign(at_q, sel(cmp(p, "==", q), swap, at_q)),
-        ]
-    return [
-        assign(p, k),
-        assign(best, how.size(k * NX + k)),
-        For(
-            "i",
-            Int(end),
-            (assign(p, sel(larger, i, p)), assign(best, sel(larger, how.size(i * NX + k), best))),
-            start=Int(k + 1),
-        ),
-        assign(piv[k], p),
-        zero_pivot(best, singular),
-        For(
-            "q",
-            Int(end),
-            (For("j", NX, tuple(exchanged), ("held",), start=Int(start)),),
-            start=Int(k + 1),
-        ),
-    ]
-
-
-def real(name: str) -> Elimination:
-    """The real decomposition's arithmetic on the matrix name."""
-    a, m = Var(name), Var("m")
-    return Elimination(
-        names=(name,),
+def decompose(blocks: Blocks, nx: int) -> Func:
+    a, m = Var("a"), Var("m")
+    how = Elimination(
+        names=("a",),
         size=lambda q: fn("abs", a[q]),
         inverse=lambda kk: (assign(a[kk], Num(1.0) / a[kk]),),
         multiplier=lambda ik, kk: (assign(m, a[ik] * a[kk]), assign(a[ik], m)),
         update=lambda ij, kj: (assign(a[ij], a[ij] - m * a[kj]),),
         scale=lambda kj, kk: (assign(a[kj], a[kj] * a[kk]),),
     )
-
-
-def decompose(blocks: Blocks, nx: int) -> Func:
-    how = real("a")
     params = (Decl("a", "double", ("NX2",), "inout"), Decl("piv", "int", ("NX",), "out"))
     locals_ = (Decl("p", "int"), Decl("m", "double"), Decl("swap", "double"))
     doc = (
@@ -202,57 +146,28 @@ def permute(blocks: Blocks, rows: range, names: tuple[Var, ...]) -> list[S]:
     ]  # fmt: skip
 
 
-Rows = Callable[[int], At]
-"""A right-hand side's entry by its row."""
-
-
-def permute_selected(blocks: Blocks, rows: range, b: Rows) -> list[S]:
-    """permute by selection (no index read from piv): each row q below r in
-    its block exchanged with row r where piv[r] is q."""
-    piv, swap = Var("piv"), Var("swap")
-    out: list[S] = []
-    for r in rows:
-        for q in range(r + 1, blocks.end[r]):
-            there = cmp(piv[r], "==", q)
-            out += [assign(swap, b(r)), assign(b(r), sel(there, b(q), b(r))),
-                    assign(b(q), sel(there, swap, b(q)))]  # fmt: skip
-    return out
-
-
-def substitution(
-    blocks: Blocks, nx: int, b: Rows, permuting: Callable[[range], list[S]]
-) -> list[S]:
-    """b := A^-1 b, part by part (Blocks.parts): the part's reads of x, solved
-    already, subtracted; its rows permuted (permuting); then L^-1 and U^-1,
-    unrolled over the entries of L and V that can be nonzero; each row
-    subtracts the latest b_j last."""
-    lu = Var("lu")
+def solve(blocks: Blocks, nx: int) -> Func:
+    b, lu = Var("b"), Var("lu")
     body: list[S] = []
     for first, end in blocks.parts:
-        for r in range(first, end):
+        for r in range(first, end):  # the part's reads of x, solved already
             if blocks.coupled and blocks.coupled[r]:
-                value: E = b(r)
+                value: E = b[r]
                 for c in blocks.coupled[r]:
-                    value = value - lu[r * nx + c] * b(c)
-                body.append(assign(b(r), value))
-        body += permuting(range(first, end))
+                    value = value - lu[r * nx + c] * b[c]
+                body.append(assign(b[r], value))
+        body += permute(blocks, range(first, end), (b,))
         for r in range(first, end):
             if blocks.lower[r]:
-                value = b(r)
+                value = b[r]
                 for c in blocks.lower[r]:
-                    value = value - lu[r * nx + c] * b(c)
-                body.append(assign(b(r), value))
+                    value = value - lu[r * nx + c] * b[c]
+                body.append(assign(b[r], value))
         for r in range(end - 1, first - 1, -1):
-            value = b(r) * lu[r * nx + r]
+            value = b[r] * lu[r * nx + r]
             for c in reversed(blocks.upper[r]):
-                value = value - lu[r * nx + c] * b(c)
-            body.append(assign(b(r), value))
-    return body
-
-
-def solve(blocks: Blocks, nx: int) -> Func:
-    b = Var("b")
-    body = substitution(blocks, nx, lambda r: b[r], lambda rows: permute(blocks, rows, (b,)))
+                value = value - lu[r * nx + c] * b[c]
+            body.append(assign(b[r], value))
     params = (
         Decl("lu", "double", ("NX2",)),
         Decl("piv", "int", ("NX",)),
@@ -269,12 +184,6 @@ def solve(blocks: Blocks, nx: int) -> Func:
     )  # fmt: skip
     locals_ = (Decl("swap", "double"),)
     return Func("lu_solve", params, tuple(body), None, locals_, doc, restrict=True)
-
-
-def solve_selected(blocks: Blocks, nx: int, b: Rows) -> list[S]:
-    """lu_solve's statements, branch-free, on the rows b (over lanes: each
-    lane's pivots its own)."""
-    return substitution(blocks, nx, b, lambda rows: permute_selected(blocks, rows, b))
 
 
 def decompose_complex(blocks: Blocks, nx: int) -> Func:
@@ -371,4 +280,4 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
     return Func("lu_solve_complex", params, tuple(body), None, locals_, doc, restrict=True)
 
 
-__all__ = ["decompose", "decompose_complex", "real", "solve", "solve_complex", "solve_selected"]
+__all__ = ["decompose", "decompose_complex", "solve", "solve_complex"]
