@@ -132,7 +132,7 @@ def test_setup_codes(scale: float, code: int, built) -> None:
         got = comp.setup_code(_p(scene, **axis))
         assert got[0] == code, (comp.language, scale, got)
     if code:
-        with pytest.raises(ValueError, match=r"rotor axis is not of unit length|NaN or infinite"):
+        with pytest.raises(ValueError, match=r"axis is not of unit length|NaN or infinite"):
             backends["c"].setup(_p(scene, **axis))
 
 
