@@ -420,6 +420,8 @@ def test_integrate_events_refuses_what_it_cannot_do(
         assert str(err.value) == f"end must be a float64 numpy array of shape (7,) (got: {got})"
     with pytest.raises(ValueError, match=r"ends must be a float64 numpy array of shape \(2, 7\)"):
         c_build.integrate_grid_batch("dop853", [x0, x0], c, [0.0, 1.0], ends=np.zeros((2, 7), "i8"))
+    with pytest.raises(ValueError, match=r"ends must be a float64 numpy array of shape \(2, 7\)"):
+        c_build.integrate_events_batch("dop853", [x0, x0], c, [0, 1], ends=np.zeros((2, 7), "i8"))
 
 
 def test_simulate_writes_and_prints_the_event_log(tmp_path: Path, cli) -> None:

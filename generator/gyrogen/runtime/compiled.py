@@ -1146,12 +1146,14 @@ class Compiled:
         Raises
         ------
         ValueError
-            As for `integrate_events` and `integrate_batch`.
+            As for `integrate_events` and `integrate_batch`, or ends is not a
+            writable float64 array of shape (n, nx).
         """
         fn = self._events(method, "_events_batch", capacity)
         t = grid_times(times)
         x = self._start_states(x0s)
         n, room = x.shape[0], max(capacity, 1)
+        receiver(ends, (n, self.nx), "ends")
         out = np.full((n, t.size, self.nx), np.nan)
         logs = EventLogs(np.empty((n, room)), np.empty((n, room), dtype=np.intc),
                          np.empty((n, room, self.nx)), np.zeros(n, dtype=np.dtype(self._long)),
