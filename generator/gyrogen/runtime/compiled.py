@@ -1093,15 +1093,11 @@ class Compiled:
         rows = (buf(_DOUBLES, x), buf(_DOUBLES, out), buf(_STATS, stats), buf(_INTS, codes))
         widths = (self.nx, t.size * self.nx, 1, 1)  # each array's elements per state
 
-        def run(lo: int, hi: int) -> None:
-            for a, b, cb in _within(stretches, lo, hi):
-                xb, ob, sb, kb = (r + a * w for r, w in zip(rows, widths, strict=True))
-                fn(b - a, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, sb, kb)
+        def call(k: int, cb: Any, xb: Any, ob: Any, sb: Any, kb: Any) -> None:
+            fn(k, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, sb, kb)
 
-        try:
-            self._spread(run, count, n)
-        except (OverflowError, TypeError) as exc:
-            raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
+        self._over_stretches(call, stretches, rows, widths, count, n,
+                             (t[0], t[-1], rtol, atol, h0, max_steps))  # fmt: skip
         if ends is not None:
             ends[...] = x
         return out, stats, codes
@@ -1169,19 +1165,39 @@ class Compiled:
                 buf(_STATS, stats), buf(_INTS, codes))  # fmt: skip
         widths = (self.nx, t.size * self.nx, room, room, room * self.nx, 1, 1, 1)
 
+        def call(k: int, cb: Any, xb: Any, ob: Any, *rest: Any) -> None:  # rest: log, stats, codes
+            fn(k, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, capacity, *rest)
+
+        self._over_stretches(call, stretches, rows, widths, count, n,
+                             (t[0], t[-1], rtol, atol, h0, max_steps))  # fmt: skip
+        if ends is not None:
+            ends[...] = x
+        return out, logs, stats, codes
+
+    def _over_stretches(
+        self,
+        call: Callable[..., None],
+        stretches: list[tuple[int, int, Any]],
+        rows: tuple[Any, ...],
+        widths: tuple[int, ...],
+        count: int,
+        n: int,
+        limits: tuple[float, float, float, float, float, int],
+    ) -> None:
+        """call(k, c's buffer, *rows at the stretch's first state) for each
+        stretch of k states with equal constants (rows: each array's buffer,
+        widths: its elements per state), spread over count cores; a control
+        the C call cannot take (limits: t0, t1, rtol, atol, h0, max_steps) is
+        one line, as `integrate`'s."""
+
         def run(lo: int, hi: int) -> None:
             for a, b, cb in _within(stretches, lo, hi):
-                xb, ob, *log, sb, kb = (r + a * w for r, w in zip(rows, widths, strict=True))
-                fn(b - a, t.size, tb, xb, cb, rtol, atol, h0, max_steps, ob, capacity, *log, sb,
-                   kb)  # fmt: skip
+                call(b - a, cb, *(r + a * w for r, w in zip(rows, widths, strict=True)))
 
         try:
             self._spread(run, count, n)
         except (OverflowError, TypeError) as exc:
-            raise controls_error(exc, t[0], t[-1], rtol, atol, h0, max_steps, None) from None
-        if ends is not None:
-            ends[...] = x
-        return out, logs, stats, codes
+            raise controls_error(exc, *limits, None) from None
 
     def _spread(self, run: Callable[[int, int], None], count: int, n: int) -> None:
         """run(lo, hi) over states 0..n-1 on count cores: one call (OpenMP
