@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-grid bench-events bench-sweep-metrics bench-var bench-methods bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-grid bench-events bench-sweep-metrics bench-var bench-methods bench-lanes bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -133,6 +133,11 @@ SAME_FLAGS ?=
 bench-methods: setup
 	$(BIN)/python benchmarks/methods.py $(if $(BASELINE),--baseline $(BASELINE)) \
 	  $(if $(SAME_FLAGS),--same-flags)
+
+## bench-lanes: each laned method's _batch on one core against a C loop of its single calls
+## (default scene and stiff_wheel; loop / lanes above 1: the lanes win)
+bench-lanes: setup
+	$(BIN)/python benchmarks/bench_lanes.py
 
 ## bench-ensemble: lane-batched ensembles and the single trajectory against numbalsoda and diffrax
 bench-ensemble: setup

@@ -466,6 +466,41 @@ def test_batch_equals_single_calls(compiled: Get, language: str) -> None:
         assert list(codes[:2]) == [OK, OK] and codes[2] != OK
 
 
+@pytest.mark.slow
+def test_rodas4_lanes_equal_single_calls(compiled: Get, tmp_path: Path, cache_dir: Path) -> None:
+    """rodas4_batch runs the states in SIMD lanes: each state's end, stats
+    and code equal rodas4's on it alone, bit for bit, on a quaternion scene
+    and under a tabled torque (f_t over lanes), with a NaN start and a step
+    budget that some states exhaust."""
+    generate(tabled(["rodas4"]), tmp_path / "tabled")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    try:
+        scenes = [(compiled("rw3_orthogonal", "c"), problem("rw3_orthogonal")[1:], 5.0),
+                  (build.build(tmp_path / "tabled", "c"), (None, np.zeros(0)), 2.0)]  # fmt: skip
+    finally:
+        mp.undo()
+    rng = np.random.default_rng(5)
+    for b, (x0, p), t1 in scenes:
+        start = np.array(x0 if x0 is not None else [0.0] * b.nx)
+        if x0 is None:
+            start[[b.manifest["states"].index(s) for s in ("u1", "u2", "u3", "u4")]] = (
+                0.02, 0.1, -0.01, 10.0)  # fmt: skip
+        x0s = start * (1 + 0.1 * rng.uniform(-1, 1, (19, b.nx)))
+        x0s[4, 0] = np.nan
+        c = b.setup(p)
+        for budget in (100000, 3):
+            kw = {"rtol": 1e-8, "atol": 1e-8, "max_steps": budget}
+            xs, stats, codes = b.integrate_batch("rodas4", x0s, c, 0.0, t1, 1, **kw)
+            for i in range(len(x0s)):
+                x, st, code = b.integrate("rodas4", x0s[i], c, 0.0, t1, **kw)
+                np.testing.assert_array_equal(xs[i], x)
+                assert code == codes[i]
+                assert {f.name: stats[f.name][i] for f in abi.STATS_FIELDS} == st
+            assert codes[4] == NONFINITE
+            assert set(codes) == ({OK, NONFINITE} if budget > 3 else {MAX_STEPS, NONFINITE})
+
+
 @pytest.mark.parametrize("language", LANGUAGES)
 def test_batch_accepts_null_stats_and_codes(compiled: Get, language: str) -> None:
     b = compiled("gyrostat", language)
@@ -626,7 +661,9 @@ def _run(cmd: list[str], cwd: Path) -> None:
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
 
 
-@pytest.mark.parametrize("integrators", [None, ["rk4"], ["dop853"], ["dopri5", "rodas4"]], ids=str)
+@pytest.mark.parametrize(
+    "integrators", [None, ["rk4"], ["dop853"], ["rodas4"], ["dopri5", "rodas4"]], ids=str
+)
 def test_strict_builds(integrators: list[str] | None, tmp_path: Path) -> None:
     """The default scene (all four methods) and subsets of the methods on a
     time-dependent scene compile clean: no helper is left unused."""

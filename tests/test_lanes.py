@@ -75,6 +75,9 @@ def test_results_do_not_depend_on_lanes_or_threads(
     assert dop853[NAN_TRAJ] == NONFINITE and np.count_nonzero(dop853) == 1
     assert set(budget) == {0, MAX_STEPS, NONFINITE}
     assert rk4[LOCKED_TRAJ] == ATTITUDE and np.count_nonzero(rk4) == 2
+    rodas4, rodas4_budget = _codes(batch, 4), _codes(batch, 5)
+    assert rodas4[NAN_TRAJ] == NONFINITE and np.count_nonzero(rodas4) == 1
+    assert set(rodas4_budget) == {MAX_STEPS, NONFINITE}
 
 
 def test_batch_agrees_with_single_through_python(backends: dict[str, Compiled]) -> None:

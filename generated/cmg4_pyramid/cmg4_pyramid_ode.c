@@ -4566,7 +4566,7 @@ static void lu_solve_complex(const double *CMG4_PYRAMID_RESTRICT ar,
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
@@ -4590,11 +4590,24 @@ struct CMG4_PYRAMID_ALIGNED lanes {
     long stats_rejected[CMG4_PYRAMID_LANES];
     long stats_rhs_calls[CMG4_PYRAMID_LANES];
     double dense[7][CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double J[CMG4_PYRAMID_NX * CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double lu[CMG4_PYRAMID_NX * CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double f0[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double fnew[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double fy[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    double h_acc[CMG4_PYRAMID_LANES];
+    double err_acc[CMG4_PYRAMID_LANES];
+    long stats_jac_calls[CMG4_PYRAMID_LANES];
+    long stats_decompositions[CMG4_PYRAMID_LANES];
     long g[CMG4_PYRAMID_LANES];
     long base[CMG4_PYRAMID_LANES];
     int code[CMG4_PYRAMID_LANES];
     int nonfinite[CMG4_PYRAMID_LANES];
     int rejected_last[CMG4_PYRAMID_LANES];
+    int piv[CMG4_PYRAMID_NX][CMG4_PYRAMID_LANES];
+    int zero_pivot[CMG4_PYRAMID_LANES];
+    int new_point[CMG4_PYRAMID_LANES];
+    int singular[CMG4_PYRAMID_LANES];
     long ntimes;
     const double *times;
     double (*out)[CMG4_PYRAMID_NX];
@@ -4785,7 +4798,319 @@ static void rhs_lanes(const double *CMG4_PYRAMID_RESTRICT t,
     }
 }
 
-/* One step of a pair on every lane. */
+static void jac_lanes(const double *CMG4_PYRAMID_RESTRICT t,
+                      double (*CMG4_PYRAMID_RESTRICT x)[CMG4_PYRAMID_LANES],
+                      const double *CMG4_PYRAMID_RESTRICT c,
+                      double (*CMG4_PYRAMID_RESTRICT J)[CMG4_PYRAMID_LANES])
+{
+    double xl[CMG4_PYRAMID_NX];
+    double Jl[CMG4_PYRAMID_NX * CMG4_PYRAMID_NX];
+    int i;
+    int l;
+
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+            xl[i] = x[i][l];
+        }
+        cmg4_pyramid_jac(t[l], xl, c, Jl);
+        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+            J[i][l] = Jl[i];
+        }
+    }
+}
+
+/* lu_decompose on every lane: its pivots by selection, a zero one in zero_pivot. */
+static void lu_decompose_lanes(struct lanes *L)
+{
+    int p[CMG4_PYRAMID_LANES];
+    double best[CMG4_PYRAMID_LANES];
+    double m[CMG4_PYRAMID_LANES];
+    int col, i, j, l, q;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->zero_pivot[l] = 0;
+        L->piv[0][l] = 0;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[7][l] = L->lu[7][l] * L->lu[0][l];
+        L->lu[9][l] = L->lu[9][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * CMG4_PYRAMID_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    CMG4_PYRAMID_NX + 1][l]) : best[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < CMG4_PYRAMID_NX; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double held;
+                held = L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[1 * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX + j][l]
+                        : L->lu[1 * CMG4_PYRAMID_NX + j][l];
+                L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q * CMG4_PYRAMID_NX
+                        + j][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[19][l] = 1.0 / L->lu[19][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            m[l] = L->lu[i * CMG4_PYRAMID_NX + 1][l] * L->lu[19][l];
+            L->lu[i * CMG4_PYRAMID_NX + 1][l] = m[l];
+            L->lu[i * CMG4_PYRAMID_NX + 2][l] = L->lu[i * CMG4_PYRAMID_NX + 2][l] - m[l] *
+                    L->lu[20][l];
+            L->lu[i * CMG4_PYRAMID_NX + 7][l] = L->lu[i * CMG4_PYRAMID_NX + 7][l] - m[l] *
+                    L->lu[25][l];
+            L->lu[i * CMG4_PYRAMID_NX + 8][l] = L->lu[i * CMG4_PYRAMID_NX + 8][l] - m[l] *
+                    L->lu[26][l];
+            L->lu[i * CMG4_PYRAMID_NX + 9][l] = L->lu[i * CMG4_PYRAMID_NX + 9][l] - m[l] *
+                    L->lu[27][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->lu[20][l] = L->lu[20][l] * L->lu[19][l];
+        L->lu[25][l] = L->lu[25][l] * L->lu[19][l];
+        L->lu[26][l] = L->lu[26][l] * L->lu[19][l];
+        L->lu[27][l] = L->lu[27][l] * L->lu[19][l];
+        L->piv[2][l] = 2;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[38][l]) > 0.0));
+        L->lu[38][l] = 1.0 / L->lu[38][l];
+        L->lu[43][l] = L->lu[43][l] * L->lu[38][l];
+        L->lu[44][l] = L->lu[44][l] * L->lu[38][l];
+        L->lu[45][l] = L->lu[45][l] * L->lu[38][l];
+    }
+    for (col = 3; col < 17; ++col) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            p[l] = col;
+            best[l] = fabs(L->lu[col * CMG4_PYRAMID_NX + col][l]);
+        }
+        for (i = col + 1; i < 18; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                p[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + col][l]) > best[l] ? i : p[l];
+                best[l] = fabs(L->lu[i * CMG4_PYRAMID_NX + col][l]) > best[l] ? fabs(L->lu[i *
+                        CMG4_PYRAMID_NX + col][l]) : best[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->piv[col][l] = p[l];
+            L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+        }
+        for (q = col + 1; q < 18; ++q) {
+            for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+                CMG4_PYRAMID_SIMD
+                for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                    double held;
+                    held = L->lu[col * CMG4_PYRAMID_NX + j][l];
+                    L->lu[col * CMG4_PYRAMID_NX + j][l] = p[l] == q ? L->lu[q * CMG4_PYRAMID_NX +
+                            j][l] : L->lu[col * CMG4_PYRAMID_NX + j][l];
+                    L->lu[q * CMG4_PYRAMID_NX + j][l] = p[l] == q ? held : L->lu[q *
+                            CMG4_PYRAMID_NX + j][l];
+                }
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[col * CMG4_PYRAMID_NX + col][l] = 1.0 / L->lu[col * CMG4_PYRAMID_NX + col][l];
+        }
+        for (i = col + 1; i < 18; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                m[l] = L->lu[i * CMG4_PYRAMID_NX + col][l] * L->lu[col * CMG4_PYRAMID_NX + col][l];
+                L->lu[i * CMG4_PYRAMID_NX + col][l] = m[l];
+            }
+            for (j = col + 1; j < 18; ++j) {
+                CMG4_PYRAMID_SIMD
+                for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                    L->lu[i * CMG4_PYRAMID_NX + j][l] = L->lu[i * CMG4_PYRAMID_NX + j][l] - m[l]
+                            * L->lu[col * CMG4_PYRAMID_NX + j][l];
+                }
+            }
+        }
+        for (j = col + 1; j < 18; ++j) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                L->lu[col * CMG4_PYRAMID_NX + j][l] = L->lu[col * CMG4_PYRAMID_NX + j][l] *
+                        L->lu[col * CMG4_PYRAMID_NX + col][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->piv[17][l] = 17;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[323][l]) > 0.0));
+        L->lu[323][l] = 1.0 / L->lu[323][l];
+    }
+}
+
+/* lu_solve on every lane's row s of k, its rows exchanged by selection. */
+static void lu_solve_lanes(struct lanes *L, int s)
+{
+    int l, q, r;
+    for (r = 1; r < 2; ++r) {
+        for (q = r + 1; q < 3; ++q) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double swap;
+                swap = L->k[s][r][l];
+                L->k[s][r][l] = L->piv[r][l] == q ? L->k[s][q][l] : L->k[s][r][l];
+                L->k[s][q][l] = L->piv[r][l] == q ? swap : L->k[s][q][l];
+            }
+        }
+    }
+    for (r = 3; r < 17; ++r) {
+        for (q = r + 1; q < 18; ++q) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                double swap;
+                swap = L->k[s][r][l];
+                L->k[s][r][l] = L->piv[r][l] == q ? L->k[s][q][l] : L->k[s][r][l];
+                L->k[s][q][l] = L->piv[r][l] == q ? swap : L->k[s][q][l];
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        double b0, b1, b2, b3, b4, b5, b6, b7, b8, b9, b10, b11, b12, b13, b14, b15, b16, b17;
+        b0 = L->k[s][0][l];
+        b1 = L->k[s][1][l];
+        b2 = L->k[s][2][l];
+        b3 = L->k[s][3][l];
+        b4 = L->k[s][4][l];
+        b5 = L->k[s][5][l];
+        b6 = L->k[s][6][l];
+        b7 = L->k[s][7][l];
+        b8 = L->k[s][8][l];
+        b9 = L->k[s][9][l];
+        b10 = L->k[s][10][l];
+        b11 = L->k[s][11][l];
+        b12 = L->k[s][12][l];
+        b13 = L->k[s][13][l];
+        b14 = L->k[s][14][l];
+        b15 = L->k[s][15][l];
+        b16 = L->k[s][16][l];
+        b17 = L->k[s][17][l];
+        b2 = b2 - L->lu[37][l] * b1;
+        b4 = b4 - L->lu[75][l] * b3;
+        b5 = b5 - L->lu[93][l] * b3 - L->lu[94][l] * b4;
+        b6 = b6 - L->lu[111][l] * b3 - L->lu[112][l] * b4 - L->lu[113][l] * b5;
+        b7 = b7 - L->lu[129][l] * b3 - L->lu[130][l] * b4 - L->lu[131][l] * b5 - L->lu[132][l] * b6;
+        b8 = b8 - L->lu[147][l] * b3 - L->lu[148][l] * b4 - L->lu[149][l] * b5 - L->lu[150][l] *
+                b6 - L->lu[151][l] * b7;
+        b9 = b9 - L->lu[165][l] * b3 - L->lu[166][l] * b4 - L->lu[167][l] * b5 - L->lu[168][l] *
+                b6 - L->lu[169][l] * b7 - L->lu[170][l] * b8;
+        b10 = b10 - L->lu[183][l] * b3 - L->lu[184][l] * b4 - L->lu[185][l] * b5 - L->lu[186][l]
+                * b6 - L->lu[187][l] * b7 - L->lu[188][l] * b8 - L->lu[189][l] * b9;
+        b11 = b11 - L->lu[201][l] * b3 - L->lu[202][l] * b4 - L->lu[203][l] * b5 - L->lu[204][l]
+                * b6 - L->lu[205][l] * b7 - L->lu[206][l] * b8 - L->lu[207][l] * b9 -
+                L->lu[208][l] * b10;
+        b12 = b12 - L->lu[219][l] * b3 - L->lu[220][l] * b4 - L->lu[221][l] * b5 - L->lu[222][l]
+                * b6 - L->lu[223][l] * b7 - L->lu[224][l] * b8 - L->lu[225][l] * b9 -
+                L->lu[226][l] * b10 - L->lu[227][l] * b11;
+        b13 = b13 - L->lu[237][l] * b3 - L->lu[238][l] * b4 - L->lu[239][l] * b5 - L->lu[240][l]
+                * b6 - L->lu[241][l] * b7 - L->lu[242][l] * b8 - L->lu[243][l] * b9 -
+                L->lu[244][l] * b10 - L->lu[245][l] * b11 - L->lu[246][l] * b12;
+        b14 = b14 - L->lu[255][l] * b3 - L->lu[256][l] * b4 - L->lu[257][l] * b5 - L->lu[258][l]
+                * b6 - L->lu[259][l] * b7 - L->lu[260][l] * b8 - L->lu[261][l] * b9 -
+                L->lu[262][l] * b10 - L->lu[263][l] * b11 - L->lu[264][l] * b12 - L->lu[265][l] *
+                b13;
+        b15 = b15 - L->lu[273][l] * b3 - L->lu[274][l] * b4 - L->lu[275][l] * b5 - L->lu[276][l]
+                * b6 - L->lu[277][l] * b7 - L->lu[278][l] * b8 - L->lu[279][l] * b9 -
+                L->lu[280][l] * b10 - L->lu[281][l] * b11 - L->lu[282][l] * b12 - L->lu[283][l] *
+                b13 - L->lu[284][l] * b14;
+        b16 = b16 - L->lu[291][l] * b3 - L->lu[292][l] * b4 - L->lu[293][l] * b5 - L->lu[294][l]
+                * b6 - L->lu[295][l] * b7 - L->lu[296][l] * b8 - L->lu[297][l] * b9 -
+                L->lu[298][l] * b10 - L->lu[299][l] * b11 - L->lu[300][l] * b12 - L->lu[301][l] *
+                b13 - L->lu[302][l] * b14 - L->lu[303][l] * b15;
+        b17 = b17 - L->lu[309][l] * b3 - L->lu[310][l] * b4 - L->lu[311][l] * b5 - L->lu[312][l]
+                * b6 - L->lu[313][l] * b7 - L->lu[314][l] * b8 - L->lu[315][l] * b9 -
+                L->lu[316][l] * b10 - L->lu[317][l] * b11 - L->lu[318][l] * b12 - L->lu[319][l] *
+                b13 - L->lu[320][l] * b14 - L->lu[321][l] * b15 - L->lu[322][l] * b16;
+        b17 = b17 * L->lu[323][l];
+        b16 = b16 * L->lu[304][l] - L->lu[305][l] * b17;
+        b15 = b15 * L->lu[285][l] - L->lu[287][l] * b17 - L->lu[286][l] * b16;
+        b14 = b14 * L->lu[266][l] - L->lu[269][l] * b17 - L->lu[268][l] * b16 - L->lu[267][l] * b15;
+        b13 = b13 * L->lu[247][l] - L->lu[251][l] * b17 - L->lu[250][l] * b16 - L->lu[249][l] *
+                b15 - L->lu[248][l] * b14;
+        b12 = b12 * L->lu[228][l] - L->lu[233][l] * b17 - L->lu[232][l] * b16 - L->lu[231][l] *
+                b15 - L->lu[230][l] * b14 - L->lu[229][l] * b13;
+        b11 = b11 * L->lu[209][l] - L->lu[215][l] * b17 - L->lu[214][l] * b16 - L->lu[213][l] *
+                b15 - L->lu[212][l] * b14 - L->lu[211][l] * b13 - L->lu[210][l] * b12;
+        b10 = b10 * L->lu[190][l] - L->lu[197][l] * b17 - L->lu[196][l] * b16 - L->lu[195][l] *
+                b15 - L->lu[194][l] * b14 - L->lu[193][l] * b13 - L->lu[192][l] * b12 -
+                L->lu[191][l] * b11;
+        b9 = b9 * L->lu[171][l] - L->lu[179][l] * b17 - L->lu[178][l] * b16 - L->lu[177][l] * b15
+                - L->lu[176][l] * b14 - L->lu[175][l] * b13 - L->lu[174][l] * b12 - L->lu[173][l]
+                * b11 - L->lu[172][l] * b10;
+        b8 = b8 * L->lu[152][l] - L->lu[161][l] * b17 - L->lu[160][l] * b16 - L->lu[159][l] * b15
+                - L->lu[158][l] * b14 - L->lu[157][l] * b13 - L->lu[156][l] * b12 - L->lu[155][l]
+                * b11 - L->lu[154][l] * b10 - L->lu[153][l] * b9;
+        b7 = b7 * L->lu[133][l] - L->lu[143][l] * b17 - L->lu[142][l] * b16 - L->lu[141][l] * b15
+                - L->lu[140][l] * b14 - L->lu[139][l] * b13 - L->lu[138][l] * b12 - L->lu[137][l]
+                * b11 - L->lu[136][l] * b10 - L->lu[135][l] * b9 - L->lu[134][l] * b8;
+        b6 = b6 * L->lu[114][l] - L->lu[125][l] * b17 - L->lu[124][l] * b16 - L->lu[123][l] * b15
+                - L->lu[122][l] * b14 - L->lu[121][l] * b13 - L->lu[120][l] * b12 - L->lu[119][l]
+                * b11 - L->lu[118][l] * b10 - L->lu[117][l] * b9 - L->lu[116][l] * b8 -
+                L->lu[115][l] * b7;
+        b5 = b5 * L->lu[95][l] - L->lu[107][l] * b17 - L->lu[106][l] * b16 - L->lu[105][l] * b15
+                - L->lu[104][l] * b14 - L->lu[103][l] * b13 - L->lu[102][l] * b12 - L->lu[101][l]
+                * b11 - L->lu[100][l] * b10 - L->lu[99][l] * b9 - L->lu[98][l] * b8 -
+                L->lu[97][l] * b7 - L->lu[96][l] * b6;
+        b4 = b4 * L->lu[76][l] - L->lu[89][l] * b17 - L->lu[88][l] * b16 - L->lu[87][l] * b15 -
+                L->lu[86][l] * b14 - L->lu[85][l] * b13 - L->lu[84][l] * b12 - L->lu[83][l] * b11
+                - L->lu[82][l] * b10 - L->lu[81][l] * b9 - L->lu[80][l] * b8 - L->lu[79][l] * b7
+                - L->lu[78][l] * b6 - L->lu[77][l] * b5;
+        b3 = b3 * L->lu[57][l] - L->lu[71][l] * b17 - L->lu[70][l] * b16 - L->lu[69][l] * b15 -
+                L->lu[68][l] * b14 - L->lu[67][l] * b13 - L->lu[66][l] * b12 - L->lu[65][l] * b11
+                - L->lu[64][l] * b10 - L->lu[63][l] * b9 - L->lu[62][l] * b8 - L->lu[61][l] * b7
+                - L->lu[60][l] * b6 - L->lu[59][l] * b5 - L->lu[58][l] * b4;
+        b2 = b2 * L->lu[38][l] - L->lu[45][l] * b9 - L->lu[44][l] * b8 - L->lu[43][l] * b7;
+        b1 = b1 * L->lu[19][l] - L->lu[27][l] * b9 - L->lu[26][l] * b8 - L->lu[25][l] * b7 -
+                L->lu[20][l] * b2;
+        b0 = b0 * L->lu[0][l] - L->lu[9][l] * b9 - L->lu[7][l] * b7 - L->lu[2][l] * b2 -
+                L->lu[1][l] * b1;
+        L->k[s][0][l] = b0;
+        L->k[s][1][l] = b1;
+        L->k[s][2][l] = b2;
+        L->k[s][3][l] = b3;
+        L->k[s][4][l] = b4;
+        L->k[s][5][l] = b5;
+        L->k[s][6][l] = b6;
+        L->k[s][7][l] = b7;
+        L->k[s][8][l] = b8;
+        L->k[s][9][l] = b9;
+        L->k[s][10][l] = b10;
+        L->k[s][11][l] = b11;
+        L->k[s][12][l] = b12;
+        L->k[s][13][l] = b13;
+        L->k[s][14][l] = b14;
+        L->k[s][15][l] = b15;
+        L->k[s][16][l] = b16;
+        L->k[s][17][l] = b17;
+    }
+}
+
+/* One step of a method on every lane. */
 typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
                            long max_steps);
 
@@ -6063,6 +6388,775 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of rodas4_integrate's loop on every lane. */
+static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv_h[CMG4_PYRAMID_LANES];
+    double err[CMG4_PYRAMID_LANES];
+    double fac[CMG4_PYRAMID_LANES];
+    double gus[CMG4_PYRAMID_LANES];
+    double total[CMG4_PYRAMID_LANES];
+    int go[CMG4_PYRAMID_LANES];
+    int fresh[CMG4_PYRAMID_LANES];
+    int bad[CMG4_PYRAMID_LANES];
+    int last[CMG4_PYRAMID_LANES];
+    int retry[CMG4_PYRAMID_LANES];
+    int ok[CMG4_PYRAMID_LANES];
+    int take[CMG4_PYRAMID_LANES];
+    int lock[CMG4_PYRAMID_LANES];
+    int rej[CMG4_PYRAMID_LANES];
+    static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, l;
+    int need;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE :
+                CMG4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? CMG4_PYRAMID_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i * CMG4_PYRAMID_NX + i][l] = L->lu[i * CMG4_PYRAMID_NX + i][l] + 1.0 /
+                    (L->h[l] * 0.25);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? CMG4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / CMG4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(cmg4_pyramid_cos_lanes(L->xnew[1][l])) < CMG4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? CMG4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? CMG4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    double inv_h[CMG4_PYRAMID_LANES];
+    double err[CMG4_PYRAMID_LANES];
+    double fac[CMG4_PYRAMID_LANES];
+    double gus[CMG4_PYRAMID_LANES];
+    double total[CMG4_PYRAMID_LANES];
+    int go[CMG4_PYRAMID_LANES];
+    int fresh[CMG4_PYRAMID_LANES];
+    int bad[CMG4_PYRAMID_LANES];
+    int last[CMG4_PYRAMID_LANES];
+    int retry[CMG4_PYRAMID_LANES];
+    int ok[CMG4_PYRAMID_LANES];
+    int take[CMG4_PYRAMID_LANES];
+    int lock[CMG4_PYRAMID_LANES];
+    int rej[CMG4_PYRAMID_LANES];
+    double frac[CMG4_PYRAMID_LANES];
+    int due[CMG4_PYRAMID_LANES];
+    static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+    int i, l;
+    int need;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? CMG4_PYRAMID_ODE_ERR_NONFINITE :
+                CMG4_PYRAMID_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? CMG4_PYRAMID_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->lu[i * CMG4_PYRAMID_NX + i][l] = L->lu[i * CMG4_PYRAMID_NX + i][l] + 1.0 /
+                    (L->h[l] * 0.25);
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? CMG4_PYRAMID_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        err[l] = sqrt(total[l] / CMG4_PYRAMID_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+            CMG4_PYRAMID_SIMD
+            for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(cmg4_pyramid_cos_lanes(L->xnew[1][l])) < CMG4_PYRAMID_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? CMG4_PYRAMID_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? CMG4_PYRAMID_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        CMG4_PYRAMID_SIMD
+        for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    CMG4_PYRAMID_SIMD
+    for (l = 0; l < CMG4_PYRAMID_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* A trajectory into lane l, with ode_start's checks: -1 when the lane took
    it, else the code it ended with at once (x as given, stats set). Over an
    output grid (L->out), its rows in out from base = traj ntimes, the first
@@ -6095,6 +7189,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
         L->k[0][i][l] = f0[i];
     }
+    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
+        L->f0[i][l] = f0[i];
+    }
     L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
@@ -6104,11 +7201,17 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     }
     L->err_old[l] = 1e-4;
     L->rejected_last[l] = 0;
+    L->h_acc[l] = 0.0;
+    L->err_acc[l] = 1e-2;
+    L->singular[l] = 0;
+    L->new_point[l] = 1;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->stats_jac_calls[l] = stats->jac_calls;
+    L->stats_decompositions[l] = stats->decompositions;
     L->busy[l] = 1;
     L->traj[l] = traj;
     return -1;
@@ -6141,6 +7244,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, cmg4_pyramid_
             st.accepted = L->stats_accepted[l];
             st.rejected = L->stats_rejected[l];
             st.rhs_calls = L->stats_rhs_calls[l];
+            st.jac_calls = L->stats_jac_calls[l];
+            st.decompositions = L->stats_decompositions[l];
             for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
                 xs[L->traj[l] * CMG4_PYRAMID_NX + (size_t)i] = L->x[i][l];
             }
@@ -7882,7 +8987,9 @@ int cmg4_pyramid_rodas4_grid(long ntimes, const double *times, double *x, const 
             (double (*)[CMG4_PYRAMID_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. CMG4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                       const double *c, double rtol, double atol, double h0,
                                       long max_steps, double *out, cmg4_pyramid_stats *stats,
@@ -7890,6 +8997,11 @@ size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, CMG4_PYRAMID_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[CMG4_PYRAMID_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -8884,13 +9996,18 @@ size_t cmg4_pyramid_dop853_batch(size_t n, double t0, double t1, double *x, cons
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. CMG4_PYRAMID_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t cmg4_pyramid_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
                                  double rtol, double atol, double h0, long max_steps,
                                  cmg4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(rodas4_step_lanes, 4, CMG4_PYRAMID_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

@@ -1157,7 +1157,7 @@ static void lu_solve_complex(const double *DUAL_SPIN_RESTRICT ar,
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
@@ -1181,6 +1181,15 @@ struct DUAL_SPIN_ALIGNED lanes {
     long stats_rejected[DUAL_SPIN_LANES];
     long stats_rhs_calls[DUAL_SPIN_LANES];
     double dense[7][DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    double J[DUAL_SPIN_NX * DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    double lu[DUAL_SPIN_NX * DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    double f0[DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    double fnew[DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    double fy[DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    double h_acc[DUAL_SPIN_LANES];
+    double err_acc[DUAL_SPIN_LANES];
+    long stats_jac_calls[DUAL_SPIN_LANES];
+    long stats_decompositions[DUAL_SPIN_LANES];
     double cap[DUAL_SPIN_LANES];
     double tay[21][19][DUAL_SPIN_LANES];
     double acc[DUAL_SPIN_NX][DUAL_SPIN_LANES];
@@ -1189,6 +1198,10 @@ struct DUAL_SPIN_ALIGNED lanes {
     int code[DUAL_SPIN_LANES];
     int nonfinite[DUAL_SPIN_LANES];
     int rejected_last[DUAL_SPIN_LANES];
+    int piv[DUAL_SPIN_NX][DUAL_SPIN_LANES];
+    int zero_pivot[DUAL_SPIN_LANES];
+    int new_point[DUAL_SPIN_LANES];
+    int singular[DUAL_SPIN_LANES];
     long ntimes;
     const double *times;
     double (*out)[DUAL_SPIN_NX];
@@ -1228,7 +1241,239 @@ static void rhs_lanes(const double *DUAL_SPIN_RESTRICT t,
     }
 }
 
-/* One step of a pair on every lane. */
+static void jac_lanes(const double *DUAL_SPIN_RESTRICT t,
+                      double (*DUAL_SPIN_RESTRICT x)[DUAL_SPIN_LANES],
+                      const double *DUAL_SPIN_RESTRICT c,
+                      double (*DUAL_SPIN_RESTRICT J)[DUAL_SPIN_LANES])
+{
+    double xl[DUAL_SPIN_NX];
+    double Jl[DUAL_SPIN_NX * DUAL_SPIN_NX];
+    int i;
+    int l;
+
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            xl[i] = x[i][l];
+        }
+        dual_spin_jac(t[l], xl, c, Jl);
+        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+            J[i][l] = Jl[i];
+        }
+    }
+}
+
+/* lu_decompose on every lane: its pivots by selection, a zero one in zero_pivot. */
+static void lu_decompose_lanes(struct lanes *L)
+{
+    int p[DUAL_SPIN_LANES];
+    double best[DUAL_SPIN_LANES];
+    double m[DUAL_SPIN_LANES];
+    int col, i, j, l, q;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->zero_pivot[l] = 0;
+        L->piv[0][l] = 0;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[3][l] = L->lu[3][l] * L->lu[0][l];
+        L->lu[5][l] = L->lu[5][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * DUAL_SPIN_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            p[l] = fabs(L->lu[i * DUAL_SPIN_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * DUAL_SPIN_NX + 1][l]) > best[l] ? fabs(L->lu[i *
+                    DUAL_SPIN_NX + 1][l]) : best[l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < DUAL_SPIN_NX; ++j) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                double held;
+                held = L->lu[1 * DUAL_SPIN_NX + j][l];
+                L->lu[1 * DUAL_SPIN_NX + j][l] = p[l] == q ? L->lu[q * DUAL_SPIN_NX + j][l] :
+                        L->lu[1 * DUAL_SPIN_NX + j][l];
+                L->lu[q * DUAL_SPIN_NX + j][l] = p[l] == q ? held : L->lu[q * DUAL_SPIN_NX + j][l];
+            }
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->lu[8][l] = 1.0 / L->lu[8][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            m[l] = L->lu[i * DUAL_SPIN_NX + 1][l] * L->lu[8][l];
+            L->lu[i * DUAL_SPIN_NX + 1][l] = m[l];
+            L->lu[i * DUAL_SPIN_NX + 2][l] = L->lu[i * DUAL_SPIN_NX + 2][l] - m[l] * L->lu[9][l];
+            L->lu[i * DUAL_SPIN_NX + 3][l] = L->lu[i * DUAL_SPIN_NX + 3][l] - m[l] * L->lu[10][l];
+            L->lu[i * DUAL_SPIN_NX + 4][l] = L->lu[i * DUAL_SPIN_NX + 4][l] - m[l] * L->lu[11][l];
+            L->lu[i * DUAL_SPIN_NX + 5][l] = L->lu[i * DUAL_SPIN_NX + 5][l] - m[l] * L->lu[12][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->lu[9][l] = L->lu[9][l] * L->lu[8][l];
+        L->lu[10][l] = L->lu[10][l] * L->lu[8][l];
+        L->lu[11][l] = L->lu[11][l] * L->lu[8][l];
+        L->lu[12][l] = L->lu[12][l] * L->lu[8][l];
+        L->piv[2][l] = 2;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[16][l]) > 0.0));
+        L->lu[16][l] = 1.0 / L->lu[16][l];
+        L->lu[17][l] = L->lu[17][l] * L->lu[16][l];
+        L->lu[18][l] = L->lu[18][l] * L->lu[16][l];
+        L->lu[19][l] = L->lu[19][l] * L->lu[16][l];
+    }
+    for (col = 3; col < 5; ++col) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            p[l] = col;
+            best[l] = fabs(L->lu[col * DUAL_SPIN_NX + col][l]);
+        }
+        for (i = col + 1; i < 6; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                p[l] = fabs(L->lu[i * DUAL_SPIN_NX + col][l]) > best[l] ? i : p[l];
+                best[l] = fabs(L->lu[i * DUAL_SPIN_NX + col][l]) > best[l] ? fabs(L->lu[i *
+                        DUAL_SPIN_NX + col][l]) : best[l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->piv[col][l] = p[l];
+            L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+        }
+        for (q = col + 1; q < 6; ++q) {
+            for (j = 3; j < DUAL_SPIN_NX; ++j) {
+                DUAL_SPIN_SIMD
+                for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                    double held;
+                    held = L->lu[col * DUAL_SPIN_NX + j][l];
+                    L->lu[col * DUAL_SPIN_NX + j][l] = p[l] == q ? L->lu[q * DUAL_SPIN_NX + j][l]
+                            : L->lu[col * DUAL_SPIN_NX + j][l];
+                    L->lu[q * DUAL_SPIN_NX + j][l] = p[l] == q ? held : L->lu[q * DUAL_SPIN_NX +
+                            j][l];
+                }
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->lu[col * DUAL_SPIN_NX + col][l] = 1.0 / L->lu[col * DUAL_SPIN_NX + col][l];
+        }
+        for (i = col + 1; i < 6; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                m[l] = L->lu[i * DUAL_SPIN_NX + col][l] * L->lu[col * DUAL_SPIN_NX + col][l];
+                L->lu[i * DUAL_SPIN_NX + col][l] = m[l];
+            }
+            for (j = col + 1; j < 6; ++j) {
+                DUAL_SPIN_SIMD
+                for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                    L->lu[i * DUAL_SPIN_NX + j][l] = L->lu[i * DUAL_SPIN_NX + j][l] - m[l] *
+                            L->lu[col * DUAL_SPIN_NX + j][l];
+                }
+            }
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                L->lu[i * DUAL_SPIN_NX + 6][l] = L->lu[i * DUAL_SPIN_NX + 6][l] - m[l] *
+                        L->lu[col * DUAL_SPIN_NX + 6][l];
+            }
+        }
+        for (j = col + 1; j < 6; ++j) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                L->lu[col * DUAL_SPIN_NX + j][l] = L->lu[col * DUAL_SPIN_NX + j][l] * L->lu[col *
+                        DUAL_SPIN_NX + col][l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->lu[col * DUAL_SPIN_NX + 6][l] = L->lu[col * DUAL_SPIN_NX + 6][l] * L->lu[col *
+                    DUAL_SPIN_NX + col][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->piv[5][l] = 5;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[40][l]) > 0.0));
+        L->lu[40][l] = 1.0 / L->lu[40][l];
+        L->lu[41][l] = L->lu[41][l] * L->lu[40][l];
+        L->piv[6][l] = 6;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[48][l]) > 0.0));
+        L->lu[48][l] = 1.0 / L->lu[48][l];
+    }
+}
+
+/* lu_solve on every lane's row s of k, its rows exchanged by selection. */
+static void lu_solve_lanes(struct lanes *L, int s)
+{
+    int l, q, r;
+    for (r = 1; r < 2; ++r) {
+        for (q = r + 1; q < 3; ++q) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                double swap;
+                swap = L->k[s][r][l];
+                L->k[s][r][l] = L->piv[r][l] == q ? L->k[s][q][l] : L->k[s][r][l];
+                L->k[s][q][l] = L->piv[r][l] == q ? swap : L->k[s][q][l];
+            }
+        }
+    }
+    for (r = 3; r < 5; ++r) {
+        for (q = r + 1; q < 6; ++q) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                double swap;
+                swap = L->k[s][r][l];
+                L->k[s][r][l] = L->piv[r][l] == q ? L->k[s][q][l] : L->k[s][r][l];
+                L->k[s][q][l] = L->piv[r][l] == q ? swap : L->k[s][q][l];
+            }
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        double b0, b1, b2, b3, b4, b5, b6;
+        b0 = L->k[s][0][l];
+        b1 = L->k[s][1][l];
+        b2 = L->k[s][2][l];
+        b3 = L->k[s][3][l];
+        b4 = L->k[s][4][l];
+        b5 = L->k[s][5][l];
+        b6 = L->k[s][6][l];
+        b2 = b2 - L->lu[15][l] * b1;
+        b4 = b4 - L->lu[31][l] * b3;
+        b5 = b5 - L->lu[38][l] * b3 - L->lu[39][l] * b4;
+        b6 = b6 * L->lu[48][l];
+        b5 = b5 * L->lu[40][l] - L->lu[41][l] * b6;
+        b4 = b4 * L->lu[32][l] - L->lu[34][l] * b6 - L->lu[33][l] * b5;
+        b3 = b3 * L->lu[24][l] - L->lu[27][l] * b6 - L->lu[26][l] * b5 - L->lu[25][l] * b4;
+        b2 = b2 * L->lu[16][l] - L->lu[19][l] * b5 - L->lu[18][l] * b4 - L->lu[17][l] * b3;
+        b1 = b1 * L->lu[8][l] - L->lu[12][l] * b5 - L->lu[11][l] * b4 - L->lu[10][l] * b3 -
+                L->lu[9][l] * b2;
+        b0 = b0 * L->lu[0][l] - L->lu[5][l] * b5 - L->lu[3][l] * b3 - L->lu[2][l] * b2 -
+                L->lu[1][l] * b1;
+        L->k[s][0][l] = b0;
+        L->k[s][1][l] = b1;
+        L->k[s][2][l] = b2;
+        L->k[s][3][l] = b3;
+        L->k[s][4][l] = b4;
+        L->k[s][5][l] = b5;
+        L->k[s][6][l] = b6;
+    }
+}
+
+/* One step of a method on every lane. */
 typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
                            long max_steps);
 
@@ -2498,6 +2743,771 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of rodas4_integrate's loop on every lane. */
+static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv_h[DUAL_SPIN_LANES];
+    double err[DUAL_SPIN_LANES];
+    double fac[DUAL_SPIN_LANES];
+    double gus[DUAL_SPIN_LANES];
+    double total[DUAL_SPIN_LANES];
+    int go[DUAL_SPIN_LANES];
+    int fresh[DUAL_SPIN_LANES];
+    int bad[DUAL_SPIN_LANES];
+    int last[DUAL_SPIN_LANES];
+    int retry[DUAL_SPIN_LANES];
+    int ok[DUAL_SPIN_LANES];
+    int take[DUAL_SPIN_LANES];
+    int lock[DUAL_SPIN_LANES];
+    int rej[DUAL_SPIN_LANES];
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int i, l;
+    int need;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? DUAL_SPIN_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? DUAL_SPIN_ODE_ERR_NONFINITE :
+                DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? DUAL_SPIN_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->lu[i * DUAL_SPIN_NX + i][l] = L->lu[i * DUAL_SPIN_NX + i][l] + 1.0 / (L->h[l] *
+                    0.25);
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? DUAL_SPIN_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        err[l] = sqrt(total[l] / DUAL_SPIN_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(dual_spin_cos_lanes(L->xnew[1][l])) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l]
+                ? DUAL_SPIN_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    double inv_h[DUAL_SPIN_LANES];
+    double err[DUAL_SPIN_LANES];
+    double fac[DUAL_SPIN_LANES];
+    double gus[DUAL_SPIN_LANES];
+    double total[DUAL_SPIN_LANES];
+    int go[DUAL_SPIN_LANES];
+    int fresh[DUAL_SPIN_LANES];
+    int bad[DUAL_SPIN_LANES];
+    int last[DUAL_SPIN_LANES];
+    int retry[DUAL_SPIN_LANES];
+    int ok[DUAL_SPIN_LANES];
+    int take[DUAL_SPIN_LANES];
+    int lock[DUAL_SPIN_LANES];
+    int rej[DUAL_SPIN_LANES];
+    double frac[DUAL_SPIN_LANES];
+    int due[DUAL_SPIN_LANES];
+    static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int i, l;
+    int need;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? DUAL_SPIN_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? DUAL_SPIN_ODE_ERR_NONFINITE :
+                DUAL_SPIN_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l]
+                >= max_steps ? DUAL_SPIN_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->lu[i * DUAL_SPIN_NX + i][l] = L->lu[i * DUAL_SPIN_NX + i][l] + 1.0 / (L->h[l] *
+                    0.25);
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? DUAL_SPIN_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        err[l] = sqrt(total[l] / DUAL_SPIN_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < DUAL_SPIN_NX; ++i) {
+            DUAL_SPIN_SIMD
+            for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(dual_spin_cos_lanes(L->xnew[1][l])) < DUAL_SPIN_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < DUAL_SPIN_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? DUAL_SPIN_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l]
+                ? DUAL_SPIN_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        DUAL_SPIN_SIMD
+        for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    DUAL_SPIN_SIMD
+    for (l = 0; l < DUAL_SPIN_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* The normalized Taylor coefficients of x and of the rhs's 49 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
 {
@@ -3236,6 +4246,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     for (i = 0; i < DUAL_SPIN_NX; ++i) {
         L->k[0][i][l] = f0[i];
     }
+    for (i = 0; i < DUAL_SPIN_NX; ++i) {
+        L->f0[i][l] = f0[i];
+    }
     L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
@@ -3245,12 +4258,18 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     }
     L->err_old[l] = 1e-4;
     L->rejected_last[l] = 0;
+    L->h_acc[l] = 0.0;
+    L->err_acc[l] = 1e-2;
+    L->singular[l] = 0;
+    L->new_point[l] = 1;
     L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->stats_jac_calls[l] = stats->jac_calls;
+    L->stats_decompositions[l] = stats->decompositions;
     L->busy[l] = 1;
     L->traj[l] = traj;
     return -1;
@@ -3283,6 +4302,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, dual_spin_sta
             st.accepted = L->stats_accepted[l];
             st.rejected = L->stats_rejected[l];
             st.rhs_calls = L->stats_rhs_calls[l];
+            st.jac_calls = L->stats_jac_calls[l];
+            st.decompositions = L->stats_decompositions[l];
             for (i = 0; i < DUAL_SPIN_NX; ++i) {
                 xs[L->traj[l] * DUAL_SPIN_NX + (size_t)i] = L->x[i][l];
             }
@@ -5018,13 +6039,20 @@ int dual_spin_rodas4_grid(long ntimes, const double *times, double *x, const dou
             (double (*)[DUAL_SPIN_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t dual_spin_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                    const double *c, double rtol, double atol, double h0,
                                    long max_steps, double *out, dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, DUAL_SPIN_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[DUAL_SPIN_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -6988,13 +8016,18 @@ size_t dual_spin_dop853_batch(size_t n, double t0, double t1, double *x, const d
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. DUAL_SPIN_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t dual_spin_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
                               double rtol, double atol, double h0, long max_steps,
                               dual_spin_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(rodas4_step_lanes, 4, DUAL_SPIN_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

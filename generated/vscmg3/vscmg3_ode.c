@@ -2976,7 +2976,7 @@ static void lu_solve_complex(const double *VSCMG3_RESTRICT ar, const double *VSC
     br[0] = re;
 }
 
-/* What the lanes of an explicit pair hold: per lane, the values of
+/* What the lanes of a method hold: per lane, the values of
    <method>_integrate (stored by state: [i][l] is x_i of lane l). A lane is
    busy with trajectory traj until code >= 0; an idle lane's code is >= 0.
    Aligned to 64 bytes, with the 8-byte arrays first: each row of LANES
@@ -3000,6 +3000,15 @@ struct VSCMG3_ALIGNED lanes {
     long stats_rejected[VSCMG3_LANES];
     long stats_rhs_calls[VSCMG3_LANES];
     double dense[7][VSCMG3_NX][VSCMG3_LANES];
+    double J[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double lu[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double f0[VSCMG3_NX][VSCMG3_LANES];
+    double fnew[VSCMG3_NX][VSCMG3_LANES];
+    double fy[VSCMG3_NX][VSCMG3_LANES];
+    double h_acc[VSCMG3_LANES];
+    double err_acc[VSCMG3_LANES];
+    long stats_jac_calls[VSCMG3_LANES];
+    long stats_decompositions[VSCMG3_LANES];
     double cap[VSCMG3_LANES];
     double tay[21][81][VSCMG3_LANES];
     double acc[VSCMG3_NX][VSCMG3_LANES];
@@ -3008,6 +3017,10 @@ struct VSCMG3_ALIGNED lanes {
     int code[VSCMG3_LANES];
     int nonfinite[VSCMG3_LANES];
     int rejected_last[VSCMG3_LANES];
+    int piv[VSCMG3_NX][VSCMG3_LANES];
+    int zero_pivot[VSCMG3_LANES];
+    int new_point[VSCMG3_LANES];
+    int singular[VSCMG3_LANES];
     long ntimes;
     const double *times;
     double (*out)[VSCMG3_NX];
@@ -3126,7 +3139,300 @@ static void rhs_lanes(const double *VSCMG3_RESTRICT t, double (*VSCMG3_RESTRICT 
     }
 }
 
-/* One step of a pair on every lane. */
+static void jac_lanes(const double *VSCMG3_RESTRICT t, double (*VSCMG3_RESTRICT x)[VSCMG3_LANES],
+                      const double *VSCMG3_RESTRICT c, double (*VSCMG3_RESTRICT J)[VSCMG3_LANES])
+{
+    double xl[VSCMG3_NX];
+    double Jl[VSCMG3_NX * VSCMG3_NX];
+    int i;
+    int l;
+
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            xl[i] = x[i][l];
+        }
+        vscmg3_jac(t[l], xl, c, Jl);
+        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+            J[i][l] = Jl[i];
+        }
+    }
+}
+
+/* lu_decompose on every lane: its pivots by selection, a zero one in zero_pivot. */
+static void lu_decompose_lanes(struct lanes *L)
+{
+    int p[VSCMG3_LANES];
+    double best[VSCMG3_LANES];
+    double m[VSCMG3_LANES];
+    int col, i, j, l, q;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->zero_pivot[l] = 0;
+        L->piv[0][l] = 0;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[0][l]) > 0.0));
+        L->lu[0][l] = 1.0 / L->lu[0][l];
+        L->lu[1][l] = L->lu[1][l] * L->lu[0][l];
+        L->lu[2][l] = L->lu[2][l] * L->lu[0][l];
+        L->lu[6][l] = L->lu[6][l] * L->lu[0][l];
+        L->lu[8][l] = L->lu[8][l] * L->lu[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->lu[1 * VSCMG3_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            p[l] = fabs(L->lu[i * VSCMG3_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->lu[i * VSCMG3_NX + 1][l]) > best[l] ? fabs(L->lu[i * VSCMG3_NX +
+                    1][l]) : best[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->piv[1][l] = p[l];
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < VSCMG3_NX; ++j) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                double held;
+                held = L->lu[1 * VSCMG3_NX + j][l];
+                L->lu[1 * VSCMG3_NX + j][l] = p[l] == q ? L->lu[q * VSCMG3_NX + j][l] : L->lu[1 *
+                        VSCMG3_NX + j][l];
+                L->lu[q * VSCMG3_NX + j][l] = p[l] == q ? held : L->lu[q * VSCMG3_NX + j][l];
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->lu[16][l] = 1.0 / L->lu[16][l];
+    }
+    for (i = 2; i < 3; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            m[l] = L->lu[i * VSCMG3_NX + 1][l] * L->lu[16][l];
+            L->lu[i * VSCMG3_NX + 1][l] = m[l];
+            L->lu[i * VSCMG3_NX + 2][l] = L->lu[i * VSCMG3_NX + 2][l] - m[l] * L->lu[17][l];
+            L->lu[i * VSCMG3_NX + 6][l] = L->lu[i * VSCMG3_NX + 6][l] - m[l] * L->lu[21][l];
+            L->lu[i * VSCMG3_NX + 7][l] = L->lu[i * VSCMG3_NX + 7][l] - m[l] * L->lu[22][l];
+            L->lu[i * VSCMG3_NX + 8][l] = L->lu[i * VSCMG3_NX + 8][l] - m[l] * L->lu[23][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->lu[17][l] = L->lu[17][l] * L->lu[16][l];
+        L->lu[21][l] = L->lu[21][l] * L->lu[16][l];
+        L->lu[22][l] = L->lu[22][l] * L->lu[16][l];
+        L->lu[23][l] = L->lu[23][l] * L->lu[16][l];
+        L->piv[2][l] = 2;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[32][l]) > 0.0));
+        L->lu[32][l] = 1.0 / L->lu[32][l];
+        L->lu[36][l] = L->lu[36][l] * L->lu[32][l];
+        L->lu[37][l] = L->lu[37][l] * L->lu[32][l];
+        L->lu[38][l] = L->lu[38][l] * L->lu[32][l];
+    }
+    for (col = 3; col < 11; ++col) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            p[l] = col;
+            best[l] = fabs(L->lu[col * VSCMG3_NX + col][l]);
+        }
+        for (i = col + 1; i < 12; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                p[l] = fabs(L->lu[i * VSCMG3_NX + col][l]) > best[l] ? i : p[l];
+                best[l] = fabs(L->lu[i * VSCMG3_NX + col][l]) > best[l] ? fabs(L->lu[i *
+                        VSCMG3_NX + col][l]) : best[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->piv[col][l] = p[l];
+            L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+        }
+        for (q = col + 1; q < 12; ++q) {
+            for (j = 3; j < VSCMG3_NX; ++j) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double held;
+                    held = L->lu[col * VSCMG3_NX + j][l];
+                    L->lu[col * VSCMG3_NX + j][l] = p[l] == q ? L->lu[q * VSCMG3_NX + j][l] :
+                            L->lu[col * VSCMG3_NX + j][l];
+                    L->lu[q * VSCMG3_NX + j][l] = p[l] == q ? held : L->lu[q * VSCMG3_NX + j][l];
+                }
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->lu[col * VSCMG3_NX + col][l] = 1.0 / L->lu[col * VSCMG3_NX + col][l];
+        }
+        for (i = col + 1; i < 12; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                m[l] = L->lu[i * VSCMG3_NX + col][l] * L->lu[col * VSCMG3_NX + col][l];
+                L->lu[i * VSCMG3_NX + col][l] = m[l];
+            }
+            for (j = col + 1; j < 12; ++j) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->lu[i * VSCMG3_NX + j][l] = L->lu[i * VSCMG3_NX + j][l] - m[l] * L->lu[col
+                            * VSCMG3_NX + j][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[i * VSCMG3_NX + 12][l] = L->lu[i * VSCMG3_NX + 12][l] - m[l] * L->lu[col *
+                        VSCMG3_NX + 12][l];
+                L->lu[i * VSCMG3_NX + 13][l] = L->lu[i * VSCMG3_NX + 13][l] - m[l] * L->lu[col *
+                        VSCMG3_NX + 13][l];
+                L->lu[i * VSCMG3_NX + 14][l] = L->lu[i * VSCMG3_NX + 14][l] - m[l] * L->lu[col *
+                        VSCMG3_NX + 14][l];
+            }
+        }
+        for (j = col + 1; j < 12; ++j) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[col * VSCMG3_NX + j][l] = L->lu[col * VSCMG3_NX + j][l] * L->lu[col *
+                        VSCMG3_NX + col][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->lu[col * VSCMG3_NX + 12][l] = L->lu[col * VSCMG3_NX + 12][l] * L->lu[col *
+                    VSCMG3_NX + col][l];
+            L->lu[col * VSCMG3_NX + 13][l] = L->lu[col * VSCMG3_NX + 13][l] * L->lu[col *
+                    VSCMG3_NX + col][l];
+            L->lu[col * VSCMG3_NX + 14][l] = L->lu[col * VSCMG3_NX + 14][l] * L->lu[col *
+                    VSCMG3_NX + col][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->piv[11][l] = 11;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[176][l]) > 0.0));
+        L->lu[176][l] = 1.0 / L->lu[176][l];
+        L->lu[177][l] = L->lu[177][l] * L->lu[176][l];
+        L->lu[178][l] = L->lu[178][l] * L->lu[176][l];
+        L->lu[179][l] = L->lu[179][l] * L->lu[176][l];
+        L->piv[12][l] = 12;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[192][l]) > 0.0));
+        L->lu[192][l] = 1.0 / L->lu[192][l];
+        L->piv[13][l] = 13;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[208][l]) > 0.0));
+        L->lu[208][l] = 1.0 / L->lu[208][l];
+        L->piv[14][l] = 14;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->lu[224][l]) > 0.0));
+        L->lu[224][l] = 1.0 / L->lu[224][l];
+    }
+}
+
+/* lu_solve on every lane's row s of k, its rows exchanged by selection. */
+static void lu_solve_lanes(struct lanes *L, int s)
+{
+    int l, q, r;
+    for (r = 1; r < 2; ++r) {
+        for (q = r + 1; q < 3; ++q) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                double swap;
+                swap = L->k[s][r][l];
+                L->k[s][r][l] = L->piv[r][l] == q ? L->k[s][q][l] : L->k[s][r][l];
+                L->k[s][q][l] = L->piv[r][l] == q ? swap : L->k[s][q][l];
+            }
+        }
+    }
+    for (r = 3; r < 11; ++r) {
+        for (q = r + 1; q < 12; ++q) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                double swap;
+                swap = L->k[s][r][l];
+                L->k[s][r][l] = L->piv[r][l] == q ? L->k[s][q][l] : L->k[s][r][l];
+                L->k[s][q][l] = L->piv[r][l] == q ? swap : L->k[s][q][l];
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        double b0, b1, b2, b3, b4, b5, b6, b7, b8, b9, b10, b11, b12, b13, b14;
+        b0 = L->k[s][0][l];
+        b1 = L->k[s][1][l];
+        b2 = L->k[s][2][l];
+        b3 = L->k[s][3][l];
+        b4 = L->k[s][4][l];
+        b5 = L->k[s][5][l];
+        b6 = L->k[s][6][l];
+        b7 = L->k[s][7][l];
+        b8 = L->k[s][8][l];
+        b9 = L->k[s][9][l];
+        b10 = L->k[s][10][l];
+        b11 = L->k[s][11][l];
+        b12 = L->k[s][12][l];
+        b13 = L->k[s][13][l];
+        b14 = L->k[s][14][l];
+        b2 = b2 - L->lu[31][l] * b1;
+        b4 = b4 - L->lu[63][l] * b3;
+        b5 = b5 - L->lu[78][l] * b3 - L->lu[79][l] * b4;
+        b6 = b6 - L->lu[93][l] * b3 - L->lu[94][l] * b4 - L->lu[95][l] * b5;
+        b7 = b7 - L->lu[108][l] * b3 - L->lu[109][l] * b4 - L->lu[110][l] * b5 - L->lu[111][l] * b6;
+        b8 = b8 - L->lu[123][l] * b3 - L->lu[124][l] * b4 - L->lu[125][l] * b5 - L->lu[126][l] *
+                b6 - L->lu[127][l] * b7;
+        b9 = b9 - L->lu[138][l] * b3 - L->lu[139][l] * b4 - L->lu[140][l] * b5 - L->lu[141][l] *
+                b6 - L->lu[142][l] * b7 - L->lu[143][l] * b8;
+        b10 = b10 - L->lu[153][l] * b3 - L->lu[154][l] * b4 - L->lu[155][l] * b5 - L->lu[156][l]
+                * b6 - L->lu[157][l] * b7 - L->lu[158][l] * b8 - L->lu[159][l] * b9;
+        b11 = b11 - L->lu[168][l] * b3 - L->lu[169][l] * b4 - L->lu[170][l] * b5 - L->lu[171][l]
+                * b6 - L->lu[172][l] * b7 - L->lu[173][l] * b8 - L->lu[174][l] * b9 -
+                L->lu[175][l] * b10;
+        b14 = b14 * L->lu[224][l];
+        b13 = b13 * L->lu[208][l];
+        b12 = b12 * L->lu[192][l];
+        b11 = b11 * L->lu[176][l] - L->lu[179][l] * b14 - L->lu[178][l] * b13 - L->lu[177][l] * b12;
+        b10 = b10 * L->lu[160][l] - L->lu[164][l] * b14 - L->lu[163][l] * b13 - L->lu[162][l] *
+                b12 - L->lu[161][l] * b11;
+        b9 = b9 * L->lu[144][l] - L->lu[149][l] * b14 - L->lu[148][l] * b13 - L->lu[147][l] * b12
+                - L->lu[146][l] * b11 - L->lu[145][l] * b10;
+        b8 = b8 * L->lu[128][l] - L->lu[134][l] * b14 - L->lu[133][l] * b13 - L->lu[132][l] * b12
+                - L->lu[131][l] * b11 - L->lu[130][l] * b10 - L->lu[129][l] * b9;
+        b7 = b7 * L->lu[112][l] - L->lu[119][l] * b14 - L->lu[118][l] * b13 - L->lu[117][l] * b12
+                - L->lu[116][l] * b11 - L->lu[115][l] * b10 - L->lu[114][l] * b9 - L->lu[113][l]
+                * b8;
+        b6 = b6 * L->lu[96][l] - L->lu[104][l] * b14 - L->lu[103][l] * b13 - L->lu[102][l] * b12
+                - L->lu[101][l] * b11 - L->lu[100][l] * b10 - L->lu[99][l] * b9 - L->lu[98][l] *
+                b8 - L->lu[97][l] * b7;
+        b5 = b5 * L->lu[80][l] - L->lu[89][l] * b14 - L->lu[88][l] * b13 - L->lu[87][l] * b12 -
+                L->lu[86][l] * b11 - L->lu[85][l] * b10 - L->lu[84][l] * b9 - L->lu[83][l] * b8 -
+                L->lu[82][l] * b7 - L->lu[81][l] * b6;
+        b4 = b4 * L->lu[64][l] - L->lu[74][l] * b14 - L->lu[73][l] * b13 - L->lu[72][l] * b12 -
+                L->lu[71][l] * b11 - L->lu[70][l] * b10 - L->lu[69][l] * b9 - L->lu[68][l] * b8 -
+                L->lu[67][l] * b7 - L->lu[66][l] * b6 - L->lu[65][l] * b5;
+        b3 = b3 * L->lu[48][l] - L->lu[59][l] * b14 - L->lu[58][l] * b13 - L->lu[57][l] * b12 -
+                L->lu[56][l] * b11 - L->lu[55][l] * b10 - L->lu[54][l] * b9 - L->lu[53][l] * b8 -
+                L->lu[52][l] * b7 - L->lu[51][l] * b6 - L->lu[50][l] * b5 - L->lu[49][l] * b4;
+        b2 = b2 * L->lu[32][l] - L->lu[38][l] * b8 - L->lu[37][l] * b7 - L->lu[36][l] * b6;
+        b1 = b1 * L->lu[16][l] - L->lu[23][l] * b8 - L->lu[22][l] * b7 - L->lu[21][l] * b6 -
+                L->lu[17][l] * b2;
+        b0 = b0 * L->lu[0][l] - L->lu[8][l] * b8 - L->lu[6][l] * b6 - L->lu[2][l] * b2 -
+                L->lu[1][l] * b1;
+        L->k[s][0][l] = b0;
+        L->k[s][1][l] = b1;
+        L->k[s][2][l] = b2;
+        L->k[s][3][l] = b3;
+        L->k[s][4][l] = b4;
+        L->k[s][5][l] = b5;
+        L->k[s][6][l] = b6;
+        L->k[s][7][l] = b7;
+        L->k[s][8][l] = b8;
+        L->k[s][9][l] = b9;
+        L->k[s][10][l] = b10;
+        L->k[s][11][l] = b11;
+        L->k[s][12][l] = b12;
+        L->k[s][13][l] = b13;
+        L->k[s][14][l] = b14;
+    }
+}
+
+/* One step of a method on every lane. */
 typedef void (*lanes_step)(struct lanes *L, const double *c, double rtol, double atol, double t1,
                            long max_steps);
 
@@ -4397,6 +4703,769 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->g[l] = L->g[l] + 1;
             }
         }
+    }
+}
+
+/* One turn of rodas4_integrate's loop on every lane. */
+static void rodas4_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double inv_h[VSCMG3_LANES];
+    double err[VSCMG3_LANES];
+    double fac[VSCMG3_LANES];
+    double gus[VSCMG3_LANES];
+    double total[VSCMG3_LANES];
+    int go[VSCMG3_LANES];
+    int fresh[VSCMG3_LANES];
+    int bad[VSCMG3_LANES];
+    int last[VSCMG3_LANES];
+    int retry[VSCMG3_LANES];
+    int ok[VSCMG3_LANES];
+    int take[VSCMG3_LANES];
+    int lock[VSCMG3_LANES];
+    int rej[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
+    int i, l;
+    int need;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? VSCMG3_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? VSCMG3_ODE_ERR_NONFINITE :
+                VSCMG3_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? VSCMG3_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->lu[i * VSCMG3_NX + i][l] = L->lu[i * VSCMG3_NX + i][l] + 1.0 / (L->h[l] * 0.25);
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? VSCMG3_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        err[l] = sqrt(total[l] / VSCMG3_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(vscmg3_cos_lanes(L->xnew[1][l])) < VSCMG3_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? VSCMG3_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l] ?
+                VSCMG3_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
+/* One turn of rodas4_grid's loop on every lane. */
+static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    double inv_h[VSCMG3_LANES];
+    double err[VSCMG3_LANES];
+    double fac[VSCMG3_LANES];
+    double gus[VSCMG3_LANES];
+    double total[VSCMG3_LANES];
+    int go[VSCMG3_LANES];
+    int fresh[VSCMG3_LANES];
+    int bad[VSCMG3_LANES];
+    int last[VSCMG3_LANES];
+    int retry[VSCMG3_LANES];
+    int ok[VSCMG3_LANES];
+    int take[VSCMG3_LANES];
+    int lock[VSCMG3_LANES];
+    int rej[VSCMG3_LANES];
+    double frac[VSCMG3_LANES];
+    int due[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
+    int i, l;
+    int need;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? VSCMG3_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? VSCMG3_ODE_ERR_NONFINITE :
+                VSCMG3_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? VSCMG3_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->lu[i * VSCMG3_NX + i][l] = L->lu[i * VSCMG3_NX + i][l] + 1.0 / (L->h[l] * 0.25);
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? VSCMG3_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        err[l] = sqrt(total[l] / VSCMG3_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(vscmg3_cos_lanes(L->xnew[1][l])) < VSCMG3_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
+                L->h[l]));
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= due[l];
+    }
+    if (need) {
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            if (due[l]) {
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+                    for (i = 0; i < VSCMG3_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < VSCMG3_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? VSCMG3_ODE_ERR_ATTITUDE_SINGULAR : ok[l] && last[l] ?
+                VSCMG3_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
     }
 }
 
@@ -6007,6 +7076,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     for (i = 0; i < VSCMG3_NX; ++i) {
         L->k[0][i][l] = f0[i];
     }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        L->f0[i][l] = f0[i];
+    }
     L->h[l] = h;
     L->code[l] = -1;
     L->t[l] = t0;
@@ -6016,12 +7088,18 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     }
     L->err_old[l] = 1e-4;
     L->rejected_last[l] = 0;
+    L->h_acc[l] = 0.0;
+    L->err_acc[l] = 1e-2;
+    L->singular[l] = 0;
+    L->new_point[l] = 1;
     L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
     L->stats_rhs_calls[l] = stats->rhs_calls;
+    L->stats_jac_calls[l] = stats->jac_calls;
+    L->stats_decompositions[l] = stats->decompositions;
     L->busy[l] = 1;
     L->traj[l] = traj;
     return -1;
@@ -6054,6 +7132,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, vscmg3_stats 
             st.accepted = L->stats_accepted[l];
             st.rejected = L->stats_rejected[l];
             st.rhs_calls = L->stats_rhs_calls[l];
+            st.jac_calls = L->stats_jac_calls[l];
+            st.decompositions = L->stats_decompositions[l];
             for (i = 0; i < VSCMG3_NX; ++i) {
                 xs[L->traj[l] * VSCMG3_NX + (size_t)i] = L->x[i][l];
             }
@@ -7783,13 +8863,20 @@ int vscmg3_rodas4_grid(long ntimes, const double *times, double *x, const double
             (double (*)[VSCMG3_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. VSCMG3_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t vscmg3_rodas4_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                 const double *c, double rtol, double atol, double h0,
                                 long max_steps, double *out, vscmg3_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_grid_step_lanes, 4, VSCMG3_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[VSCMG3_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -11726,13 +12813,18 @@ size_t vscmg3_dop853_batch(size_t n, double t0, double t1, double *x, const doub
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. VSCMG3_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t vscmg3_rodas4_batch(size_t n, double t0, double t1, double *x, const double *c,
                            double rtol, double atol, double h0, long max_steps,
                            vscmg3_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(rodas4_step_lanes, 4, VSCMG3_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

@@ -209,8 +209,9 @@ class Method:
 
     @property
     def lanes(self) -> bool:
-        """Its batch runs trajectories in SIMD lanes (an explicit pair, Taylor)."""
-        return self.pair or self.taylor
+        """Its batch runs trajectories in SIMD lanes (an explicit pair,
+        Taylor, a Rosenbrock method)."""
+        return self.pair or self.taylor or self.rosenbrock
 
     @property
     def start_order(self) -> int:

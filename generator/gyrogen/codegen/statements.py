@@ -341,6 +341,26 @@ def rhs_lanes_ode(unit: SceneContext) -> Func:
     return Func(f.name, _lane_params(), f.body, restrict=True)
 
 
+def jacobian_lanes(unit: SceneContext) -> Func:
+    """<prefix>_jac on the lanes of struct lanes (ode.c, a Rosenbrock
+    method's), one lane after another: its x gathered, the scalar Jacobian
+    (the single trajectory's bits), its J into rows J[i*NX + j] of LANES
+    values. J is computed once a step, the rhs six times: printed over the
+    lanes from the model as rhs_lanes is, it made cmg4_pyramid_ode.c 58 KB
+    larger, more than the rest of rodas4's lanes together."""
+    lane, i, t, x, c, J = (Var(n) for n in ("l", "i", "t", "x", "c", "J"))
+    one_x, one_j = Var("xl"), Var("Jl")
+    each = (
+        For("i", Const("NX"), (assign(one_x[i], x[i, lane]),)),
+        Call("jac", (t[lane], one_x, c, one_j)),
+        For("i", Const("NX2"), (assign(J[i, lane], one_j[i]),)),
+    )
+    params = (*_lane_params()[:3], Decl("J", "double", ("NX2", "LANES"), "out"))
+    locals_ = (Decl("xl", "double", ("NX",)), Decl("Jl", "double", ("NX2",)))
+    return Func("jac_lanes", params, (For("l", Const("LANES"), each),), None, locals_,
+                restrict=True)  # fmt: skip
+
+
 def _lane_params() -> tuple[Decl, ...]:
     return (
         Decl("t", "double", ("LANES",)),

@@ -94,15 +94,25 @@ def batch_us(prob: Problem, x0s: np.ndarray, tol: float, threads: int, repeats: 
 def loop_us(prob: Problem, x0s: np.ndarray, tol: float, repeats: int) -> float:
     """us per trajectory of a C loop of single-trajectory calls on one core
     (the batch before issue 12; gyrogen_each in the cffi glue)."""
-    comp = prob.comp
-    fn = comp.ffi.cast("gyrogen_adaptive", comp.ffi.addressof(comp.lib, comp.symbol("dop853")))
-    cb = comp.doubles(np.ascontiguousarray(prob.c))
+    run = each_call(prob.comp, "dop853", x0s, prob.c, prob.t1, tol, MAX_STEPS)
+    return best_time(run, repeats, min_total=0.05) / len(x0s) * 1e6
+
+
+def each_call(
+    comp: Compiled, method: str, x0s: np.ndarray, c: np.ndarray, t1: float, tol: float,
+    max_steps: int,
+) -> Callable[[], None]:  # fmt: skip
+    """A C loop of method's single-trajectory calls over x0s, one after
+    another on this thread (gyrogen_each in the cffi glue), each run on a
+    fresh copy: what a caller without the lanes would write."""
+    fn = comp.ffi.cast("gyrogen_adaptive", comp.ffi.addressof(comp.lib, comp.symbol(method)))
+    cb = comp.doubles(np.ascontiguousarray(c))
 
     def run() -> None:
         x = np.array(x0s, order="C")  # a copy: integrated in place
-        comp.lib.gyrogen_each(fn, len(x), 0.0, prob.t1, comp.doubles(x), cb, tol, tol, MAX_STEPS)
+        comp.lib.gyrogen_each(fn, len(x), 0.0, t1, comp.doubles(x), cb, tol, tol, max_steps)
 
-    return best_time(run, repeats, min_total=0.05) / len(x0s) * 1e6
+    return run
 
 
 def scaling(

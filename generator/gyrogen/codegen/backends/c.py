@@ -33,16 +33,17 @@ def files(unit: SceneContext) -> dict[str, str]:
     ]
     model = [f for f in source if f is not None]
     jac = statements.jacobian(unit)
-    pairs = any(m.pair for m in unit.methods)
-    lanes_ode = statements.rhs_lanes_ode(unit) if pairs else None
+    stepped = [m for m in unit.methods if m.lanes and not m.taylor]  # on the rhs over lanes
+    lanes_ode = statements.rhs_lanes_ode(unit) if stepped else None
+    jac_lanes = statements.jacobian_lanes(unit) if any(m.implicit for m in stepped) else None
     # the Taylor jet calls the rhs's sin and cos, scalar and over lanes
     rhs_trig = statements.trig_used([rhs])
     expanded = [*rhs_trig, *(v + "_lanes" for v in rhs_trig)] if unit.jet is not None else []
-    ode_trig = statements.trig_used([jac, lanes_ode]) + expanded
+    ode_trig = statements.trig_used([jac, lanes_ode, jac_lanes]) + expanded
     gimbal_checks = ["cos", "cos_lanes"] if any(m.lanes for m in unit.methods) else ["cos"]
     if not unit.quaternion:  # the gimbal-lock checks
         ode_trig += gimbal_checks
-    ode_model = [f for f in (jac, lanes_ode) if f is not None]
+    ode_model = [f for f in (jac, lanes_ode, jac_lanes) if f is not None]
     ctx = {
         "unit": unit,
         "tables": tables_text("c", unit.prefix, unit.macro, unit.torque_tables),
@@ -51,6 +52,7 @@ def files(unit: SceneContext) -> dict[str, str]:
         "source": "\n".join(printer.function(f) for f in model),
         "jac": None if jac is None else printer.function(jac),
         "rhs_lanes": None if lanes_ode is None else printer.function(lanes_ode),
+        "jac_lanes": None if jac_lanes is None else printer.function(jac_lanes),
         "ode_tables": tables_text(
             "c", unit.prefix, unit.macro, statements.tables_used(unit, ode_model)
         ),

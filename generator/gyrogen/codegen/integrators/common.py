@@ -11,7 +11,7 @@ gimbal_lock (the Euler parameters' is quaternion.py)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from gyrogen import abi
 from gyrogen.abi_groups import ANGLE_SCALE, StateKind
@@ -236,13 +236,20 @@ def scaled(e: E, at: E) -> E:
     return e / (atol + rtol * size(at, x, xnew))
 
 
-def error_norm() -> Func:
-    err, total, e = Var("err"), Var("total"), Var("e")
-    body = (
+def mean_square(err: Callable[[E], E]) -> tuple[list[S], E]:
+    """The standard error norm of the estimates err(i): the statements that
+    sum their squares in total, and the norm from it."""
+    total, e = Var("total"), Var("e")
+    return [
         assign(total, 0.0),
-        For("i", NE, (assign(e, scaled(err[i], i)), assign(total, total + e * e)), ("e",)),
-        Return(fn("sqrt", total / NE)),
-    )
+        For("i", NE, (assign(e, scaled(err(i), i)), assign(total, total + e * e)), ("e",)),
+    ], fn("sqrt", total / NE)
+
+
+def error_norm() -> Func:
+    err = Var("err")
+    sums, norm = mean_square(lambda at: err[at])
+    body = (*sums, Return(norm))
     doc = (
         "The standard error norm: sqrt(mean((err_i / sk_i)^2)) with",
         "sk_i = atol + rtol max(|x_i|, |xnew_i|), an angle's max at most pi",

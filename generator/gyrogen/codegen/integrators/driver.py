@@ -632,6 +632,16 @@ def singular_stop(singular: Var, tries: int) -> list[S]:
     return [inc(singular, 1), If(cmp(singular, "==", tries), (Return(ERR_SINGULAR),))]
 
 
+def singular_selected(singular: Var, retry: E, tried: E, cd: Var, tries: int) -> list[S]:
+    """singular_stop by selection (over lanes): retry, a singular matrix,
+    counts one more in a row and tries of them stop; tried, a decomposition
+    that went through, starts the count again."""
+    return [
+        assign(singular, sel(retry, singular + 1, sel(tried, 0, singular))),
+        assign(cd, sel(and_(retry, cmp(singular, "==", tries)), ERR_SINGULAR, cd)),
+    ]
+
+
 def next_f(fnew: Var, nonfinite: Var) -> list[S]:
     """f(t + h, xnew), where the next step starts; not finite: the step is not."""
     return [
@@ -769,15 +779,31 @@ class Gustafsson:
         """After an accepted step: quot := the larger h/h_new (then then,
         after the first accepted step); h_acc and err_acc remembered."""
         ctl, gus = self.ctl, Var("gus")
-        ratio = (self.h_acc / h) * fn("pow", err * err / self.err_acc, ctl.exponent)
         return [
             If(cmp(stat("accepted"), ">", 0), (
-                assign(gus, ratio / Num(ctl.safety)),
+                assign(gus, self.ratio(err)),
                 assign(quot, fn("max", quot, clamp(ctl, gus))),
                 *then,
             )),
             assign(self.h_acc, h),
             assign(self.err_acc, fn("max", ctl.err_floor, err)),
+        ]  # fmt: skip
+
+    def ratio(self, err: Var) -> E:
+        """Gustafsson's h/h_new, before the clamp."""
+        ctl = self.ctl
+        ratio = (self.h_acc / h) * fn("pow", err * err / self.err_acc, ctl.exponent)
+        return ratio / Num(ctl.safety)
+
+    def predictive_selected(self, ok: E, quot: Var, err: Var) -> list[S]:
+        """predictive as selections, where ok (a step over lanes)."""
+        ctl, gus = self.ctl, Var("gus")
+        return [
+            assign(gus, self.ratio(err)),
+            assign(quot, sel(and_(ok, cmp(stat("accepted"), ">", 0)),
+                             fn("max", quot, clamp(ctl, gus)), quot)),
+            assign(self.h_acc, sel(ok, h, self.h_acc)),
+            assign(self.err_acc, sel(ok, fn("max", ctl.err_floor, err), self.err_acc)),
         ]  # fmt: skip
 
 

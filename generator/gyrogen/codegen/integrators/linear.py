@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 from gyrogen.codegen.integrators.common import NX
 from gyrogen.codegen.ir.nodes import (
+    At,
     Bool,
     Comment,
     Decl,
@@ -38,6 +39,8 @@ from gyrogen.codegen.ir.nodes import (
     cmp,
     fn,
     not_,
+    or_,
+    sel,
 )
 from gyrogen.symbolic.blocks import Blocks
 
@@ -60,6 +63,10 @@ def swap_rows(names: tuple[str, ...], k: int, start: int) -> S:
     return If(cmp(p, "!=", k), (For("j", NX, tuple(body), start=Int(start)),))
 
 
+Index = int | E
+"""A row or column: a number, or a loop's variable."""
+
+
 @dataclass(frozen=True)
 class Elimination:
     """What a decomposition does to entries, by their flat indices: the
@@ -67,61 +74,163 @@ class Elimination:
 
     names: tuple[str, ...]
     size: Entry
-    inverse: Callable[[int], tuple[S, ...]]
+    inverse: Callable[[Index], tuple[S, ...]]
     """u_kk := 1/u_kk."""
-    multiplier: Callable[[E, int], tuple[S, ...]]
+    multiplier: Callable[[E, Index], tuple[S, ...]]
     """l_ik := a_ik / u_kk (a product with the inverse), held in locals too."""
-    update: Callable[[E, int], tuple[S, ...]]
+    update: Callable[[E, Index], tuple[S, ...]]
     """a_ij -= l_ik u_kj (row i's entry, row k's)."""
-    scale: Callable[[int, int], tuple[S, ...]]
+    scale: Callable[[Index, Index], tuple[S, ...]]
     """u_kj := u_kj / u_kk (row k's entry, the diagonal)."""
 
 
-def eliminate(blocks: Blocks, nx: int, how: Elimination) -> tuple[S, ...]:
+def eliminate(
+    blocks: Blocks, nx: int, how: Elimination, singular: Var | None = None, looped: bool = False
+) -> tuple[S, ...]:
     """Gaussian elimination with partial pivoting within the diagonal blocks,
     unrolled over the columns k and over the entries of U that can be
     nonzero (Blocks.upper: what the solves read); the rows of a block as a
     loop. Entries outside that pattern stay zero, as they would under the
     loop over every column (l_ik times a zero); an augmented system's
-    coupled entries (Blocks.coupled) stay as they are, for the solve."""
+    coupled entries (Blocks.coupled) stay as they are, for the solve. With
+    singular, branch-free (pivoting): a zero pivot sets singular and the
+    elimination goes on (its factors are not to be used), no return.
+    looped: a block of more than two columns a loop over them but the last,
+    and over the rest of the block in each row (Blocks.upper's fill-in; the
+    columns past the block unrolled): each entry's arithmetic as unrolled,
+    in the same order, in text that does not grow with the block's size
+    squared (over lanes: the decomposition's text grew 45 KB on a 15-state
+    block)."""
     body: list[S] = []
-    piv = Var("piv")
-    for k in range(nx):
-        s, e, kk, up = blocks.start[k], blocks.end[k], k * nx + k, blocks.upper[k]
-        if e - k > 1:
-            body += [
-                assign(p, k),
-                For("i", Int(e), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
-                                     (assign(p, i),)),), start=Int(k + 1)),
-                assign(piv[k], p),
-                If(not_(cmp(how.size(p * NX + k), ">", 0.0)), (Return(Bool(True), "singular"),)),
-                swap_rows(how.names, k, s),
-                *how.inverse(kk),
-                For("i", Int(e), (
-                    *how.multiplier(i * NX + k, kk),
-                    *(st for c in up for st in how.update(i * NX + c, k * nx + c)),
-                ), start=Int(k + 1)),
-            ]  # fmt: skip
-        else:
-            body += [
-                assign(piv[k], k),
-                If(not_(cmp(how.size(kk), ">", 0.0)), (Return(Bool(True), "singular"),)),
-                *how.inverse(kk),
-            ]
-        body += [st for c in up for st in how.scale(k * nx + c, kk)]
-    return (*body, Return(Bool(False)))
+    for first, end in blocks.spans:
+        past = blocks.upper[end - 1]  # the columns past the block its rows use
+        columns: list[Index] = list(range(first, end))
+        if looped and end - first > 2:
+            k = Var("col")  # not k: over lanes, the stages' rows
+            body.append(For("col", Int(end - 1),
+                            tuple(column(how, k, first, end, past, nx, singular)),
+                            start=Int(first)))  # fmt: skip
+            columns = [end - 1]
+        for c in columns:
+            body += column(how, c, first, end, past, nx, singular)
+    return tuple(body) if singular is not None else (*body, Return(Bool(False)))
 
 
-def decompose(blocks: Blocks, nx: int) -> Func:
-    a, m = Var("a"), Var("m")
-    how = Elimination(
-        names=("a",),
+def flat(row: Index, col: Index, nx: int) -> Index:
+    """An entry's flat index: a number when both are."""
+    if isinstance(row, int) and isinstance(col, int):
+        return row * nx + col
+    return row * NX + col
+
+
+def column(
+    how: Elimination,
+    k: Index,
+    first: int,
+    end: int,
+    past: tuple[int, ...],
+    nx: int,
+    singular: Var | None,
+) -> list[S]:
+    """Column k of the block [first, end): its pivot, its multipliers and
+    the updates of the rows below, row k of U scaled. A number k unrolls
+    the rest of the block (k + 1 .. end - 1); a variable loops over it."""
+    piv, kk = Var("piv"), flat(k, k, nx)
+    if isinstance(k, int) and end - k == 1:
+        return [
+            assign(piv[k], k),
+            zero_pivot(how.size(kk), singular),
+            *how.inverse(kk),
+            *(st for c in past for st in how.scale(flat(k, c, nx), kk)),
+        ]
+    after = Int(k + 1) if isinstance(k, int) else k + 1
+
+    def each(f: Callable[[int | E], tuple[S, ...]]) -> list[S]:
+        """f on the rest of the block's columns, then on those past it."""
+        if isinstance(k, int):
+            return [st for c in (*range(k + 1, end), *past) for st in f(c)]
+        return [For("j", Int(end), f(j), start=after), *(st for c in past for st in f(c))]
+
+    return [
+        *pivoting(how, k, first, end, singular),
+        *how.inverse(kk),
+        For("i", Int(end), (
+            *how.multiplier(i * NX + k, kk),
+            *each(lambda c: how.update(i * NX + c, flat(k, c, nx))),
+        ), start=after),
+        *each(lambda c: how.scale(flat(k, c, nx), kk)),
+    ]  # fmt: skip
+
+
+def zero_pivot(size: E, singular: Var | None) -> S:
+    """A pivot of size 0 (or NaN): singular, returned at once or remembered."""
+    zero = not_(cmp(size, ">", 0.0))
+    if singular is None:
+        return If(zero, (Return(Bool(True), "singular"),))
+    return assign(singular, or_(singular, zero))
+
+
+def pivoting(how: Elimination, k: Index, start: int, end: int, singular: Var | None) -> list[S]:
+    """Column k's pivot p, the largest of rows k..end-1 (the first of equal
+    ones), into piv[k], and rows k and p exchanged. With singular, by
+    selection: the running largest size in best (the size at p, as the
+    search compares), and each row below k exchanged where it is p."""
+    piv, after = Var("piv"), Int(k + 1) if isinstance(k, int) else k + 1
+    if singular is None:
+        assert isinstance(k, int), "a branching pivot search is unrolled"
+        return [
+            assign(p, k),
+            For("i", Int(end), (If(cmp(how.size(i * NX + k), ">", how.size(p * NX + k)),
+                                   (assign(p, i),)),), start=Int(k + 1)),
+            assign(piv[k], p),
+            zero_pivot(how.size(p * NX + k), None),
+            swap_rows(how.names, k, start),
+        ]  # fmt: skip
+    best, q, swap = Var("best"), Var("q"), Var("held")
+    larger = cmp(how.size(i * NX + k), ">", best)
+    exchanged: list[S] = []
+    for a in how.names:
+        at_k, at_q = Var(a)[k * NX + j], Var(a)[q * NX + j]
+        exchanged += [
+            assign(swap, at_k),
+            assign(at_k, sel(cmp(p, "==", q), at_q, at_k)),
+            assign(at_q, sel(cmp(p, "==", q), swap, at_q)),
+        ]
+    return [
+        assign(p, k),
+        assign(best, how.size(k * NX + k)),
+        For(
+            "i",
+            Int(end),
+            (assign(p, sel(larger, i, p)), assign(best, sel(larger, how.size(i * NX + k), best))),
+            start=after,
+        ),
+        assign(piv[k], p),
+        zero_pivot(best, singular),
+        For(
+            "q",
+            Int(end),
+            (For("j", NX, tuple(exchanged), ("held",), start=Int(start)),),
+            start=after,
+        ),
+    ]
+
+
+def real(name: str) -> Elimination:
+    """The real decomposition's arithmetic on the matrix name."""
+    a, m = Var(name), Var("m")
+    return Elimination(
+        names=(name,),
         size=lambda q: fn("abs", a[q]),
         inverse=lambda kk: (assign(a[kk], Num(1.0) / a[kk]),),
         multiplier=lambda ik, kk: (assign(m, a[ik] * a[kk]), assign(a[ik], m)),
         update=lambda ij, kj: (assign(a[ij], a[ij] - m * a[kj]),),
         scale=lambda kj, kk: (assign(a[kj], a[kj] * a[kk]),),
     )
+
+
+def decompose(blocks: Blocks, nx: int) -> Func:
+    how = real("a")
     params = (Decl("a", "double", ("NX2",), "inout"), Decl("piv", "int", ("NX",), "out"))
     locals_ = (Decl("p", "int"), Decl("m", "double"), Decl("swap", "double"))
     doc = (
@@ -146,28 +255,68 @@ def permute(blocks: Blocks, rows: range, names: tuple[Var, ...]) -> list[S]:
     ]  # fmt: skip
 
 
-def solve(blocks: Blocks, nx: int) -> Func:
-    b, lu = Var("b"), Var("lu")
+Rows = Callable[[int | E], At | Var]
+"""A right-hand side's entry by its row."""
+
+
+def permute_selected(blocks: Blocks, rows: range, b: Rows) -> list[S]:
+    """permute by selection (no index read from piv): each row q below r in
+    its block exchanged with row r where piv[r] is q; one loop over r and q
+    a block (17 loops over q on a block of 15 rows took gcc a quarter of a
+    second)."""
+    piv, q, r, swap = Var("piv"), Var("q"), Var("r"), Var("swap")
+    there = cmp(piv[r], "==", q)
+    exchange = (assign(swap, b(r)), assign(b(r), sel(there, b(q), b(r))),
+                assign(b(q), sel(there, swap, b(q))))  # fmt: skip
+    return [
+        For("r", Int(end - 1), (For("q", Int(end), exchange, ("swap",), start=r + 1),),
+            start=Int(first))
+        for first, end in blocks.spans if end - first > 1 and first in rows
+    ]  # fmt: skip
+
+
+def substitution(
+    blocks: Blocks,
+    nx: int,
+    b: Rows,
+    permuting: Callable[[range], list[S]],
+    stored: Rows | None = None,
+) -> list[S]:
+    """b := A^-1 b, part by part (Blocks.parts): the part's reads of x, solved
+    already, subtracted; its rows permuted (permuting); then L^-1 and U^-1,
+    unrolled over the entries of L and V that can be nonzero; each row
+    subtracts the latest b_j last. stored: where the rows live, when b is
+    a copy of a part's rows (over lanes, values in registers: loaded after
+    the part's permutation, stored after its solve)."""
+    lu, at = Var("lu"), stored or b
     body: list[S] = []
     for first, end in blocks.parts:
-        for r in range(first, end):  # the part's reads of x, solved already
+        for r in range(first, end):
             if blocks.coupled and blocks.coupled[r]:
-                value: E = b[r]
+                value: E = at(r)
                 for c in blocks.coupled[r]:
-                    value = value - lu[r * nx + c] * b[c]
-                body.append(assign(b[r], value))
-        body += permute(blocks, range(first, end), (b,))
+                    value = value - lu[r * nx + c] * at(c)
+                body.append(assign(at(r), value))
+        body += permuting(range(first, end))
+        body += [assign(b(r), at(r)) for r in range(first, end) if stored]
         for r in range(first, end):
             if blocks.lower[r]:
-                value = b[r]
+                value = b(r)
                 for c in blocks.lower[r]:
-                    value = value - lu[r * nx + c] * b[c]
-                body.append(assign(b[r], value))
+                    value = value - lu[r * nx + c] * b(c)
+                body.append(assign(b(r), value))
         for r in range(end - 1, first - 1, -1):
-            value = b[r] * lu[r * nx + r]
+            value = b(r) * lu[r * nx + r]
             for c in reversed(blocks.upper[r]):
-                value = value - lu[r * nx + c] * b[c]
-            body.append(assign(b[r], value))
+                value = value - lu[r * nx + c] * b(c)
+            body.append(assign(b(r), value))
+        body += [assign(at(r), b(r)) for r in range(first, end) if stored]
+    return body
+
+
+def solve(blocks: Blocks, nx: int) -> Func:
+    b = Var("b")
+    body = substitution(blocks, nx, lambda r: b[r], lambda rows: permute(blocks, rows, (b,)))
     params = (
         Decl("lu", "double", ("NX2",)),
         Decl("piv", "int", ("NX",)),
@@ -193,7 +342,7 @@ def decompose_complex(blocks: Blocks, nx: int) -> Func:
     re, im, r, d = Var("re"), Var("im"), Var("r"), Var("d")
     lr, li, ur, ui = Var("lr"), Var("li"), Var("ur"), Var("ui")
 
-    def inverse(kk: int) -> tuple[S, ...]:
+    def inverse(kk: Index) -> tuple[S, ...]:
         return (
             Comment("1/u_kk by Smith's division (no overflow in re^2 + im^2)", False),
             assign(re, ar[kk]),
@@ -280,4 +429,64 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
     return Func("lu_solve_complex", params, tuple(body), None, locals_, doc, restrict=True)
 
 
-__all__ = ["decompose", "decompose_complex", "solve", "solve_complex"]
+# Over SIMD lanes (gyrogen.codegen.ir.lanes): the factors, the pivots and
+# the right-hand sides are struct lanes' own, each lane's pivots its own.
+# One function each, out of line, called by every step over lanes: unrolled
+# into each, they made the file 2.4 times larger and its compile 11 times
+# longer (cmg4_pyramid).
+
+ZERO_PIVOT = Var("zero_pivot")
+"""Over lanes, the lane's E has a zero pivot (its factors are not to be used)."""
+
+
+def decompose_lanes(blocks: Blocks, nx: int) -> Func:
+    """lu_decompose on every lane's lu, branch-free: each lane's pivots by
+    selection (eliminate with singular), a zero pivot in ZERO_PIVOT."""
+    body = (assign(ZERO_PIVOT, False), *eliminate(blocks, nx, real("lu"), ZERO_PIVOT, True))
+    locals_ = (
+        Decl("p", "int", (), "inout"),
+        *(Decl(n, "double", (), "inout") for n in ("best", "m")),
+    )
+    doc = ("lu_decompose on every lane: its pivots by selection, a zero one in zero_pivot.",)
+    return Func("lu_decompose_lanes", (), body, None, locals_, doc)
+
+
+def solve_lanes(blocks: Blocks, nx: int) -> Func:
+    """lu_solve's statements on every lane's row s of k (the stages), the
+    rows exchanged by selection (no index read from a lane's pivots), then
+    solved in registers (b0, b1, ...: one loop over the lanes of values,
+    which gcc compiled in a third of the time the same loop on the rows in
+    memory took)."""
+    k, s = Var("k"), Var("s")
+
+    def row(r: int | E) -> At:
+        return k[s, r]
+
+    def held(r: int | E) -> Var:
+        return Var(f"b{r}")
+
+    rows = substitution(blocks, nx, held, lambda rs: permute_selected(blocks, rs, row), row)
+    doc = ("lu_solve on every lane's row s of k, its rows exchanged by selection.",)
+    locals_ = tuple(Decl(f"b{r}", "double", (), "tmp") for r in range(nx))
+    return Func("lu_solve_lanes", (Decl("s", "int"),), tuple(rows), None, locals_, doc)
+
+
+def lanes_state() -> list[Decl]:
+    """What struct lanes holds for the decomposition, per lane."""
+    return [
+        Decl("lu", "double", ("NX2",), "inout"),
+        Decl("piv", "int", ("NX",), "inout"),
+        Decl(ZERO_PIVOT.name, "bool", (), "inout"),
+    ]
+
+
+__all__ = [
+    "decompose",
+    "decompose_complex",
+    "decompose_lanes",
+    "lanes_state",
+    "real",
+    "solve",
+    "solve_complex",
+    "solve_lanes",
+]

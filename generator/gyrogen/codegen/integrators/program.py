@@ -47,6 +47,8 @@ class Given:
     jet: Jet | None
     events: driver.Grid | None = None
     """The scene's events: each adaptive method's _events twin besides."""
+    blocks: Blocks | None = None
+    """The Jacobian's diagonal blocks (the implicit methods' LU)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,7 @@ def _pair(m: Method, g: Given) -> Parts:
 
 
 def _rosenbrock(m: Method, g: Given) -> Parts:
+    assert g.blocks is not None, "an implicit method needs the Jacobian's blocks"
     return Parts(
         [
             rosenbrock.trial(m, g.uses_time),
@@ -86,7 +89,13 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
             rosenbrock.integrate(m, g.quaternion, g.uses_time),
             rosenbrock.integrate(m, g.quaternion, g.uses_time, grid=True),
             *([rosenbrock.integrate(m, g.quaternion, g.uses_time, g.events)] if g.events else []),
-        ]
+        ],
+        [
+            rosenbrock.lanes_step(m, g.quaternion, g.uses_time),
+            rosenbrock.lanes_step(m, g.quaternion, g.uses_time, grid=True),
+        ],
+        rosenbrock.lane_state(m, g.uses_time),
+        rosenbrock.lane_start(m),
     )
 
 
@@ -134,6 +143,9 @@ class Program:
     methods: list[Func]
     """One trajectory's functions of every method (<method>_...)."""
     lanes: list[Func]
+    lanes_shared: list[Func]
+    """What the lanes' steps call over lanes (E's LU and its solve), out of
+    line as the scalar ones."""
     state: dict[str, Decl]
     """What struct lanes holds per lane (its arrays [..][LANES])."""
     init: list[S]
@@ -155,11 +167,14 @@ def program(
     kinds: each state's (abi_groups.state_kind), the error scales' caps
     (common.angle_table, declared by each function that reads it)."""
     pairs = [m for m in methods if m.pair]
-    given = Given(quaternion, uses_time, explicit.rows(pairs) if pairs else 0, jet, events)
+    krows = explicit.rows(pairs) if pairs else 0
+    given = Given(quaternion, uses_time, krows, jet, events, blocks)
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
     single = [f for p in parts for f in p.single]
     lanes = [f for p in parts for f in p.lanes]
-    state = {**pair.lane_state(given.krows, pairs), **{d.name: d for p in parts for d in p.state}}
+    state = pair.lane_state(given.krows, pairs)
+    for d in (d for p in parts for d in p.state):
+        state[d.name] = larger(state.get(d.name), d)
     state |= {d.name: d for d in driver.lane_grid_state()} if lanes else {}
     init = common.start_state() if lanes else []
     for s in (s for p in parts for s in p.init):
@@ -180,10 +195,31 @@ def program(
         if f.name in wanted:
             wanted |= called([f])
     shared = [f for f in candidates if f.name in wanted]
+    over_lanes = called(lanes)  # a call of f over lanes prints f_lanes(L, ...)
+    lanes_shared = [
+        f for f in lane_candidates(blocks) if f.name.removesuffix("_lanes") in over_lanes
+    ]
     size = common.NX if measured is None else Int(measured)
     single, lanes, shared = ([with_caps(substituted(f, common.NE, size), kinds) for f in fs]
                              for fs in (single, lanes, shared))  # fmt: skip
-    return Program(shared, single, lanes, state, init)
+    return Program(shared, single, lanes, lanes_shared, state, init)
+
+
+def lane_candidates(blocks: Blocks | None) -> list[Func]:
+    """The shared functions over lanes a step may call."""
+    if blocks is None:
+        return []
+    nx = len(blocks.end)
+    return [linear.decompose_lanes(blocks, nx), linear.solve_lanes(blocks, nx)]
+
+
+def larger(old: Decl | None, new: Decl) -> Decl:
+    """A value of struct lanes two methods hold: the one with more rows (k:
+    a pair's stages and a Rosenbrock method's)."""
+    if old is None or old == new:
+        return new
+    assert old.shape[1:] == new.shape[1:] and old.type == new.type, (old, new)
+    return max(old, new, key=lambda d: int(d.shape[0]))
 
 
 def with_caps(f: Func, kinds: Sequence[StateKind]) -> Func:
@@ -248,8 +284,13 @@ def c_text(
             f"{name}{dims}[{macro}_LANES];"
         )
     return {
-        **methods_text(p, c, [*p.lanes, *(model or [])]),
+        **methods_text(p, c, [*p.lanes, *p.lanes_shared, *(model or [])]),
         "lanes": by_method(p.lanes, lanes.function),
+        "lanes_shared": "\n".join(lanes.function(f) for f in p.lanes_shared),
+        "lane_names": [f.name for f in p.lanes],
+        "lane_stats": [
+            d.name.removeprefix("stats.") for d in p.state.values() if d.name.startswith("stats.")
+        ],
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
         "grid_init": "\n".join(lanes.one_lane(tuple(driver.grid_first(driver.BASE)), 2)),

@@ -5,7 +5,7 @@ A run of statements on values becomes one loop over the lanes; a loop over
 the states holds a loop over the lanes; a branch becomes a selection per
 lane (if-conversion: both sides computed, each lane keeps its own); a call
 of the rhs runs on every lane with each lane's time, and a branch around a
-call runs it when any lane needs it.
+call runs it when any lane needs it (the Jacobian's too).
 """
 
 from __future__ import annotations
@@ -35,6 +35,10 @@ from gyrogen.codegen.ir.nodes import (
     not_,
 )
 from gyrogen.codegen.ir.printer import ATOM
+
+MODEL = ("rhs", "jac")
+"""The model's functions of (t, x, c, out): over lanes, one call with each
+lane's time (rhs_lanes, jac_lanes on rows of LANES values)."""
 
 
 class LanesPrinter(CPrinter):
@@ -216,7 +220,7 @@ class LanesPrinter(CPrinter):
                 *loop,
                 f"{pad}}}",
             ]
-        if isinstance(s, Call) and s.name != "rhs":
+        if isinstance(s, Call) and s.name not in MODEL:
             kept = [a for a in s.args if not (isinstance(a, Var) and a.name in self.state)]
             args = ", ".join(["L", *(self.expr(a) for a in kept)])
             return [f"{pad}{s.name}_lanes({args});"]
@@ -224,7 +228,7 @@ class LanesPrinter(CPrinter):
             t, x, c, out = s.args
             times = self.lane_loop(depth, [f"{pad}{self.indent}L->ts[l] = {self.expr(t)};"], True)
             args = ", ".join(self.expr(a) for a in (x, c, out))
-            return [*times, f"{pad}rhs_lanes(L->ts, {args});"]
+            return [*times, f"{pad}{s.name}_lanes(L->ts, {args});"]
         assert isinstance(s, If) and not s.orelse, s
         any_lane = self.lane_loop(depth, [f"{pad}{self.indent}need |= {self.expr(s.cond)};"], True)
         if self.lane_by_lane(s):
