@@ -1828,19 +1828,209 @@ static void jac_lanes(const double *RW4_HARDWARE_RESTRICT t,
                       const double *RW4_HARDWARE_RESTRICT c,
                       double (*RW4_HARDWARE_RESTRICT J)[RW4_HARDWARE_LANES])
 {
-    double xl[RW4_HARDWARE_NX];
-    double Jl[RW4_HARDWARE_NX * RW4_HARDWARE_NX];
-    int i;
     int l;
 
+    (void)t;  /* unused in some scenes */
+    RW4_HARDWARE_SIMD
     for (l = 0; l < RW4_HARDWARE_LANES; ++l) {
-        for (i = 0; i < RW4_HARDWARE_NX; ++i) {
-            xl[i] = x[i][l];
-        }
-        rw4_hardware_jac(t[l], xl, c, Jl);
-        for (i = 0; i < RW4_HARDWARE_NX * RW4_HARDWARE_NX; ++i) {
-            J[i][l] = Jl[i];
-        }
+        double q2, q3, u1, u2, u3, w1, w2, w3, w4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6,
+                tmp7, tmp8, tmp9, tmp10, tmp11, tmp12, tmp13, tmp14, tmp15, tmp16, tmp17, tmp18,
+                tmp19, tmp20, tmp21, tmp22, tmp23, tmp24, tmp25, tmp26, tmp27, tmp28, tmp29,
+                tmp30, tmp31, tmp32, tmp33, tmp34, tmp35, tmp36, tmp37, tmp38, tmp39, tmp40,
+                tmp41, tmp42, tmp43, tmp44, tmp45, tmp46, tmp47, tmp48, tmp49, tmp50, tmp51,
+                tmp52, tmp53, tmp54, tmp55, tmp56, tmp57, tmp58, tmp59, tmp60, tmp61, tmp62,
+                tmp63, tmp64, tmp65, tmp66, tmp67, tmp68, tmp69, tmp70, tmp71;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        w1 = x[6][l];
+        w2 = x[7][l];
+        w3 = x[8][l];
+        w4 = x[9][l];
+        tmp0 = rw4_hardware_sin_lanes(q2);
+        tmp1 = rw4_hardware_cos_lanes(q2);
+        tmp2 = rw4_hardware_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = rw4_hardware_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = c[11] * u3;
+        tmp13 = c[12] * u2;
+        tmp14 = 0.05 * u1;
+        tmp15 = 0.05 * u2;
+        tmp16 = 0.05 * u3;
+        tmp17 = 0.05 * w1 + c[28] * tmp14 + c[29] * tmp15 + c[30] * tmp16 - c[31];
+        tmp18 = 0.05 * (0.2 - tmp17 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2,
+                -tmp17) > 0.0 ? 1.0 : 0.0);
+        tmp19 = -(2e-05 * c[28]) - c[28] * tmp18;
+        tmp20 = 0.05 * w2 + c[32] * tmp14 + c[33] * tmp15 + c[34] * tmp16 - c[35];
+        tmp21 = 0.05 * (0.2 - tmp20 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2,
+                -tmp20) > 0.0 ? 1.0 : 0.0);
+        tmp22 = -(2e-05 * c[32]) - c[32] * tmp21;
+        tmp23 = 0.05 * w3 + c[36] * tmp14 + c[37] * tmp15 + c[38] * tmp16 - c[39];
+        tmp24 = 0.05 * (0.2 - tmp23 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2,
+                -tmp23) > 0.0 ? 1.0 : 0.0);
+        tmp25 = -(2e-05 * c[36]) - c[36] * tmp24;
+        tmp26 = 0.05 * w4 + c[40] * tmp14 + c[41] * tmp15 + c[42] * tmp16 - c[43];
+        tmp27 = 0.05 * (0.2 - tmp26 > 0.0 ? 1.0 : 0.0) * (0.2 - dmax(-0.2,
+                -tmp26) > 0.0 ? 1.0 : 0.0);
+        tmp28 = -(2e-05 * c[40]) - c[40] * tmp27;
+        tmp29 = tmp12 + c[28] * tmp19 + c[32] * tmp22 + c[36] * tmp25 + c[40] * tmp28 - tmp13;
+        tmp30 = c[18] * u2;
+        tmp31 = c[12] * u1;
+        tmp32 = c[23] * u3 + c[24] * w1 + c[25] * w2 + c[26] * w3 + c[27] * w4;
+        tmp33 = tmp30 + tmp32 + 2.0 * tmp31 + c[29] * tmp19 + c[33] * tmp22 + c[37] * tmp25 +
+                c[41] * tmp28 - c[10] * u3;
+        tmp34 = c[18] * u3;
+        tmp35 = c[11] * u1;
+        tmp36 = c[17] * u2 + c[19] * w1 + c[20] * w2 + c[21] * w3 + c[22] * w4;
+        tmp37 = c[10] * u2 + c[30] * tmp19 + c[34] * tmp22 + c[38] * tmp25 + c[42] * tmp28 -
+                tmp34 - tmp36 - 2.0 * tmp35;
+        tmp38 = c[18] * u1;
+        tmp39 = -(2e-05 * c[29]) - c[29] * tmp18;
+        tmp40 = -(2e-05 * c[33]) - c[33] * tmp21;
+        tmp41 = -(2e-05 * c[37]) - c[37] * tmp24;
+        tmp42 = -(2e-05 * c[41]) - c[41] * tmp27;
+        tmp43 = tmp38 + c[29] * tmp39 + c[33] * tmp40 + c[37] * tmp41 + c[41] * tmp42 - tmp12;
+        tmp44 = c[12] * u3;
+        tmp45 = c[11] * u2;
+        tmp46 = c[10] * u1 + c[13] * w1 + c[14] * w2 + c[15] * w3 + c[16] * w4;
+        tmp47 = tmp44 + tmp46 + 2.0 * tmp45 + c[30] * tmp39 + c[34] * tmp40 + c[38] * tmp41 +
+                c[42] * tmp42 - c[17] * u1;
+        tmp48 = c[17] * u3 + c[28] * tmp39 + c[32] * tmp40 + c[36] * tmp41 + c[40] * tmp42 -
+                tmp31 - tmp32 - 2.0 * tmp30;
+        tmp49 = -(2e-05 * c[30]) - c[30] * tmp18;
+        tmp50 = -(2e-05 * c[34]) - c[34] * tmp21;
+        tmp51 = -(2e-05 * c[38]) - c[38] * tmp24;
+        tmp52 = -(2e-05 * c[42]) - c[42] * tmp27;
+        tmp53 = tmp13 + c[30] * tmp49 + c[34] * tmp50 + c[38] * tmp51 + c[42] * tmp52 - tmp38;
+        tmp54 = tmp35 + tmp36 + 2.0 * tmp34 + c[28] * tmp49 + c[32] * tmp50 + c[36] * tmp51 +
+                c[40] * tmp52 - c[23] * u2;
+        tmp55 = c[23] * u1 + c[29] * tmp49 + c[33] * tmp50 + c[37] * tmp51 + c[41] * tmp52 -
+                tmp45 - tmp46 - 2.0 * tmp44;
+        tmp56 = -2e-05 - tmp18;
+        tmp57 = c[19] * u3 + c[28] * tmp56 - c[24] * u2;
+        tmp58 = c[24] * u1 + c[29] * tmp56 - c[13] * u3;
+        tmp59 = c[13] * u2 + c[30] * tmp56 - c[19] * u1;
+        tmp60 = -2e-05 - tmp21;
+        tmp61 = c[20] * u3 + c[32] * tmp60 - c[25] * u2;
+        tmp62 = c[25] * u1 + c[33] * tmp60 - c[14] * u3;
+        tmp63 = c[14] * u2 + c[34] * tmp60 - c[20] * u1;
+        tmp64 = -2e-05 - tmp24;
+        tmp65 = c[21] * u3 + c[36] * tmp64 - c[26] * u2;
+        tmp66 = c[26] * u1 + c[37] * tmp64 - c[15] * u3;
+        tmp67 = c[15] * u2 + c[38] * tmp64 - c[21] * u1;
+        tmp68 = -2e-05 - tmp27;
+        tmp69 = c[22] * u3 + c[40] * tmp68 - c[27] * u2;
+        tmp70 = c[27] * u1 + c[41] * tmp68 - c[16] * u3;
+        tmp71 = c[16] * u2 + c[42] * tmp68 - c[22] * u1;
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = -tmp10;
+        J[4][l] = 0.0;
+        J[5][l] = tmp11;
+        J[6][l] = 0.0;
+        J[7][l] = 0.0;
+        J[8][l] = 0.0;
+        J[9][l] = 0.0;
+        J[10][l] = 0.0;
+        J[11][l] = 0.0;
+        J[12][l] = tmp6;
+        J[13][l] = tmp4;
+        J[14][l] = 0.0;
+        J[15][l] = tmp2;
+        J[16][l] = 0.0;
+        J[17][l] = 0.0;
+        J[18][l] = 0.0;
+        J[19][l] = 0.0;
+        J[20][l] = 0.0;
+        J[21][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[22][l] = -(tmp0 * tmp9);
+        J[23][l] = tmp0 * tmp10;
+        J[24][l] = 1.0;
+        J[25][l] = -(tmp0 * tmp11);
+        J[26][l] = 0.0;
+        J[27][l] = 0.0;
+        J[28][l] = 0.0;
+        J[29][l] = 0.0;
+        J[30][l] = 0.0;
+        J[31][l] = 0.0;
+        J[32][l] = 0.0;
+        J[33][l] = c[0] * tmp29 + c[1] * tmp33 + c[2] * tmp37;
+        J[34][l] = c[0] * tmp48 + c[1] * tmp43 + c[2] * tmp47;
+        J[35][l] = c[0] * tmp54 + c[1] * tmp55 + c[2] * tmp53;
+        J[36][l] = c[0] * tmp57 + c[1] * tmp58 + c[2] * tmp59;
+        J[37][l] = c[0] * tmp61 + c[1] * tmp62 + c[2] * tmp63;
+        J[38][l] = c[0] * tmp65 + c[1] * tmp66 + c[2] * tmp67;
+        J[39][l] = c[0] * tmp69 + c[1] * tmp70 + c[2] * tmp71;
+        J[40][l] = 0.0;
+        J[41][l] = 0.0;
+        J[42][l] = 0.0;
+        J[43][l] = c[1] * tmp29 + c[3] * tmp33 + c[4] * tmp37;
+        J[44][l] = c[1] * tmp48 + c[3] * tmp43 + c[4] * tmp47;
+        J[45][l] = c[1] * tmp54 + c[3] * tmp55 + c[4] * tmp53;
+        J[46][l] = c[1] * tmp57 + c[3] * tmp58 + c[4] * tmp59;
+        J[47][l] = c[1] * tmp61 + c[3] * tmp62 + c[4] * tmp63;
+        J[48][l] = c[1] * tmp65 + c[3] * tmp66 + c[4] * tmp67;
+        J[49][l] = c[1] * tmp69 + c[3] * tmp70 + c[4] * tmp71;
+        J[50][l] = 0.0;
+        J[51][l] = 0.0;
+        J[52][l] = 0.0;
+        J[53][l] = c[2] * tmp29 + c[4] * tmp33 + c[5] * tmp37;
+        J[54][l] = c[2] * tmp48 + c[4] * tmp43 + c[5] * tmp47;
+        J[55][l] = c[2] * tmp54 + c[4] * tmp55 + c[5] * tmp53;
+        J[56][l] = c[2] * tmp57 + c[4] * tmp58 + c[5] * tmp59;
+        J[57][l] = c[2] * tmp61 + c[4] * tmp62 + c[5] * tmp63;
+        J[58][l] = c[2] * tmp65 + c[4] * tmp66 + c[5] * tmp67;
+        J[59][l] = c[2] * tmp69 + c[4] * tmp70 + c[5] * tmp71;
+        J[60][l] = 0.0;
+        J[61][l] = 0.0;
+        J[62][l] = 0.0;
+        J[63][l] = c[6] * tmp19;
+        J[64][l] = c[6] * tmp39;
+        J[65][l] = c[6] * tmp49;
+        J[66][l] = c[6] * tmp56;
+        J[67][l] = 0.0;
+        J[68][l] = 0.0;
+        J[69][l] = 0.0;
+        J[70][l] = 0.0;
+        J[71][l] = 0.0;
+        J[72][l] = 0.0;
+        J[73][l] = c[7] * tmp22;
+        J[74][l] = c[7] * tmp40;
+        J[75][l] = c[7] * tmp50;
+        J[76][l] = 0.0;
+        J[77][l] = c[7] * tmp60;
+        J[78][l] = 0.0;
+        J[79][l] = 0.0;
+        J[80][l] = 0.0;
+        J[81][l] = 0.0;
+        J[82][l] = 0.0;
+        J[83][l] = c[8] * tmp25;
+        J[84][l] = c[8] * tmp41;
+        J[85][l] = c[8] * tmp51;
+        J[86][l] = 0.0;
+        J[87][l] = 0.0;
+        J[88][l] = c[8] * tmp64;
+        J[89][l] = 0.0;
+        J[90][l] = 0.0;
+        J[91][l] = 0.0;
+        J[92][l] = 0.0;
+        J[93][l] = c[9] * tmp28;
+        J[94][l] = c[9] * tmp42;
+        J[95][l] = c[9] * tmp52;
+        J[96][l] = 0.0;
+        J[97][l] = 0.0;
+        J[98][l] = 0.0;
+        J[99][l] = c[9] * tmp68;
     }
 }
 

@@ -1274,19 +1274,96 @@ static void jac_lanes(const double *STIFF_WHEEL_RESTRICT t,
                       const double *STIFF_WHEEL_RESTRICT c,
                       double (*STIFF_WHEEL_RESTRICT J)[STIFF_WHEEL_LANES])
 {
-    double xl[STIFF_WHEEL_NX];
-    double Jl[STIFF_WHEEL_NX * STIFF_WHEEL_NX];
-    int i;
     int l;
 
+    (void)t;  /* unused in some scenes */
+    STIFF_WHEEL_SIMD
     for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-            xl[i] = x[i][l];
-        }
-        stiff_wheel_jac(t[l], xl, c, Jl);
-        for (i = 0; i < STIFF_WHEEL_NX * STIFF_WHEEL_NX; ++i) {
-            J[i][l] = Jl[i];
-        }
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, tmp7, tmp8,
+                tmp9, tmp10, tmp11, tmp12;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[4][l];
+        u2 = x[5][l];
+        u3 = x[6][l];
+        u4 = x[7][l];
+        tmp0 = stiff_wheel_sin_lanes(q2);
+        tmp1 = stiff_wheel_cos_lanes(q2);
+        tmp2 = stiff_wheel_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = stiff_wheel_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = 0.016919114337701612 * u2 - 1.2676659094182028e-05 * u4;
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = 0.0;
+        J[4][l] = -tmp10;
+        J[5][l] = 0.0;
+        J[6][l] = tmp11;
+        J[7][l] = 0.0;
+        J[8][l] = 0.0;
+        J[9][l] = 0.0;
+        J[10][l] = tmp6;
+        J[11][l] = 0.0;
+        J[12][l] = tmp4;
+        J[13][l] = 0.0;
+        J[14][l] = tmp2;
+        J[15][l] = 0.0;
+        J[16][l] = 0.0;
+        J[17][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[18][l] = -(tmp0 * tmp9);
+        J[19][l] = 0.0;
+        J[20][l] = tmp0 * tmp10;
+        J[21][l] = 1.0;
+        J[22][l] = -(tmp0 * tmp11);
+        J[23][l] = 0.0;
+        J[24][l] = 0.0;
+        J[25][l] = 0.0;
+        J[26][l] = 0.0;
+        J[27][l] = 0.0;
+        J[28][l] = 0.0;
+        J[29][l] = -1.0;
+        J[30][l] = 0.0;
+        J[31][l] = 1.0;
+        J[32][l] = 0.0;
+        J[33][l] = 0.0;
+        J[34][l] = 0.0;
+        J[35][l] = 0.0;
+        J[36][l] = -tmp12;
+        J[37][l] = 0.33522655090705017 * u3 - 0.016919114337701612 * u1;
+        J[38][l] = 0.0004980820048148975 * u4 + 0.33522655090705017 * u2;
+        J[39][l] = 1.2676659094182028e-05 * u1 + 0.0004980820048148975 * u3;
+        J[40][l] = 0.0;
+        J[41][l] = 0.0;
+        J[42][l] = 0.0;
+        J[43][l] = 0.0;
+        J[44][l] = 0.037226373050203175 * u1 - 0.06916590204045965 * u3;
+        J[45][l] = -c[0];
+        J[46][l] = -(0.06916590204045965 * u1) - 0.037226373050203175 * u3;
+        J[47][l] = c[0];
+        J[48][l] = 0.0;
+        J[49][l] = 0.0;
+        J[50][l] = 0.0;
+        J[51][l] = 0.0;
+        J[52][l] = -(0.2723557574878444 * u2) - 0.0005451879938902264 * u4;
+        J[53][l] = 0.016919114337701612 * u3 - 0.2723557574878444 * u1;
+        J[54][l] = tmp12;
+        J[55][l] = -(1.2676659094182028e-05 * u3) - 0.0005451879938902264 * u1;
+        J[56][l] = 0.0;
+        J[57][l] = 0.0;
+        J[58][l] = 0.0;
+        J[59][l] = 0.0;
+        J[60][l] = 0.0;
+        J[61][l] = -c[1];
+        J[62][l] = 0.0;
+        J[63][l] = c[1];
     }
 }
 

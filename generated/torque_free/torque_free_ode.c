@@ -1241,19 +1241,82 @@ static void jac_lanes(const double *TORQUE_FREE_RESTRICT t,
                       const double *TORQUE_FREE_RESTRICT c,
                       double (*TORQUE_FREE_RESTRICT J)[TORQUE_FREE_LANES])
 {
-    double xl[TORQUE_FREE_NX];
-    double Jl[TORQUE_FREE_NX * TORQUE_FREE_NX];
-    int i;
     int l;
 
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    TORQUE_FREE_SIMD
     for (l = 0; l < TORQUE_FREE_LANES; ++l) {
-        for (i = 0; i < TORQUE_FREE_NX; ++i) {
-            xl[i] = x[i][l];
-        }
-        torque_free_jac(t[l], xl, c, Jl);
-        for (i = 0; i < TORQUE_FREE_NX * TORQUE_FREE_NX; ++i) {
-            J[i][l] = Jl[i];
-        }
+        double q2, q3, u1, u2, u3, u4, tmp0, tmp1, tmp2, tmp3, tmp4, tmp5, tmp6, tmp7, tmp8,
+                tmp9, tmp10, tmp11, tmp12;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        u1 = x[3][l];
+        u2 = x[4][l];
+        u3 = x[5][l];
+        u4 = x[6][l];
+        tmp0 = torque_free_sin_lanes(q2);
+        tmp1 = torque_free_cos_lanes(q2);
+        tmp2 = torque_free_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = torque_free_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = 0.3114754098360656 * u2 + 0.02622950819672131 * u4;
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = -tmp10;
+        J[4][l] = 0.0;
+        J[5][l] = tmp11;
+        J[6][l] = 0.0;
+        J[7][l] = 0.0;
+        J[8][l] = 0.0;
+        J[9][l] = tmp6;
+        J[10][l] = tmp4;
+        J[11][l] = 0.0;
+        J[12][l] = tmp2;
+        J[13][l] = 0.0;
+        J[14][l] = 0.0;
+        J[15][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[16][l] = -(tmp0 * tmp9);
+        J[17][l] = tmp0 * tmp10;
+        J[18][l] = 1.0;
+        J[19][l] = -(tmp0 * tmp11);
+        J[20][l] = 0.0;
+        J[21][l] = 0.0;
+        J[22][l] = 0.0;
+        J[23][l] = 0.0;
+        J[24][l] = 0.0;
+        J[25][l] = 0.3114754098360656 * u3;
+        J[26][l] = tmp12;
+        J[27][l] = 0.02622950819672131 * u3;
+        J[28][l] = 0.0;
+        J[29][l] = 0.0;
+        J[30][l] = 0.0;
+        J[31][l] = 0.0;
+        J[32][l] = 0.0;
+        J[33][l] = 0.0;
+        J[34][l] = 0.0;
+        J[35][l] = 0.0;
+        J[36][l] = 0.0;
+        J[37][l] = 0.0;
+        J[38][l] = -tmp12;
+        J[39][l] = -(0.3114754098360656 * u1);
+        J[40][l] = 0.0;
+        J[41][l] = -(0.02622950819672131 * u1);
+        J[42][l] = 0.0;
+        J[43][l] = 0.0;
+        J[44][l] = 0.0;
+        J[45][l] = 0.0;
+        J[46][l] = 0.0;
+        J[47][l] = 0.0;
+        J[48][l] = 0.0;
     }
 }
 

@@ -3142,19 +3142,576 @@ static void rhs_lanes(const double *VSCMG3_RESTRICT t, double (*VSCMG3_RESTRICT 
 static void jac_lanes(const double *VSCMG3_RESTRICT t, double (*VSCMG3_RESTRICT x)[VSCMG3_LANES],
                       const double *VSCMG3_RESTRICT c, double (*VSCMG3_RESTRICT J)[VSCMG3_LANES])
 {
-    double xl[VSCMG3_NX];
-    double Jl[VSCMG3_NX * VSCMG3_NX];
-    int i;
     int l;
 
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    VSCMG3_SIMD
     for (l = 0; l < VSCMG3_LANES; ++l) {
-        for (i = 0; i < VSCMG3_NX; ++i) {
-            xl[i] = x[i][l];
-        }
-        vscmg3_jac(t[l], xl, c, Jl);
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
-            J[i][l] = Jl[i];
-        }
+        double q2, q3, gam1, gam2, gam3, u1, u2, u3, gd1, gd2, gd3, w1, w2, w3, tmp0, tmp1, tmp2,
+                tmp3, tmp4, tmp5, tmp6, tmp7, tmp8, tmp9, tmp10, tmp11, tmp12, tmp13, tmp14,
+                tmp15, tmp16, tmp17, tmp18, tmp19, tmp20, tmp21, tmp22, tmp23, tmp24, tmp25,
+                tmp26, tmp27, tmp28, tmp29, tmp30, tmp31, tmp32, tmp33, tmp34, tmp35, tmp36,
+                tmp37, tmp38, tmp39, tmp40, tmp41, tmp42, tmp43, tmp44, tmp45, tmp46, tmp47,
+                tmp48, tmp49, tmp50, tmp51, tmp52, tmp53, tmp54, tmp55, tmp56, tmp57, tmp58,
+                tmp59, tmp60, tmp61, tmp62, tmp63, tmp64, tmp65, tmp66, tmp67, tmp68, tmp69,
+                tmp70, tmp71, tmp72, tmp73, tmp74, tmp75, tmp76, tmp77, tmp78, tmp79, tmp80,
+                tmp81, tmp82, tmp83, tmp84, tmp85, tmp86, tmp87, tmp88, tmp89, tmp90, tmp91,
+                tmp92, tmp93, tmp94, tmp95, tmp96, tmp97, tmp98, tmp99, tmp100, tmp101, tmp102,
+                tmp103, tmp104, tmp105, tmp106, tmp107, tmp108, tmp109, tmp110, tmp111, tmp112,
+                tmp113, tmp114, tmp115, tmp116, tmp117, tmp118, tmp119, tmp120, tmp121, tmp122,
+                tmp123, tmp124, tmp125, tmp126, tmp127, tmp128, tmp129, tmp130, tmp131, tmp132,
+                tmp133, tmp134, tmp135, tmp136, tmp137, tmp138, tmp139, tmp140, tmp141, tmp142,
+                tmp143, tmp144, tmp145, tmp146, tmp147, tmp148, tmp149, tmp150, tmp151, tmp152,
+                tmp153, tmp154, tmp155, tmp156, tmp157, tmp158, tmp159, tmp160, tmp161, tmp162,
+                tmp163, tmp164, tmp165, tmp166, tmp167, tmp168, tmp169, tmp170, tmp171, tmp172,
+                tmp173, tmp174, tmp175, tmp176, tmp177, tmp178, tmp179, tmp180, tmp181, tmp182,
+                tmp183, tmp184, tmp185, tmp186, tmp187, tmp188, tmp189, tmp190, tmp191, tmp192,
+                tmp193, tmp194, tmp195, tmp196, tmp197, tmp198, tmp199, tmp200, tmp201, tmp202,
+                tmp203, tmp204, tmp205, tmp206, tmp207, tmp208, tmp209, tmp210, tmp211, tmp212,
+                tmp213, tmp214, tmp215, tmp216, tmp217, tmp218, tmp219, tmp220, tmp221, tmp222,
+                tmp223, tmp224, tmp225, tmp226, tmp227, tmp228, tmp229, tmp230, tmp231, tmp232,
+                tmp233, tmp234, tmp235, tmp236, tmp237, tmp238, tmp239, tmp240, tmp241, tmp242,
+                tmp243, tmp244, tmp245, tmp246, tmp247, tmp248, tmp249, tmp250, tmp251, tmp252,
+                tmp253, tmp254, tmp255, tmp256, tmp257, tmp258, tmp259, tmp260, tmp261, tmp262,
+                tmp263, tmp264, tmp265, tmp266, tmp267, tmp268, tmp269, tmp270, tmp271, tmp272;
+        q2 = x[1][l];
+        q3 = x[2][l];
+        gam1 = x[3][l];
+        gam2 = x[4][l];
+        gam3 = x[5][l];
+        u1 = x[6][l];
+        u2 = x[7][l];
+        u3 = x[8][l];
+        gd1 = x[9][l];
+        gd2 = x[10][l];
+        gd3 = x[11][l];
+        w1 = x[12][l];
+        w2 = x[13][l];
+        w3 = x[14][l];
+        tmp0 = vscmg3_sin_lanes(q2);
+        tmp1 = vscmg3_cos_lanes(q2);
+        tmp2 = vscmg3_sin_lanes(q3);
+        tmp3 = tmp2 * u1;
+        tmp4 = vscmg3_cos_lanes(q3);
+        tmp5 = tmp4 * u3;
+        tmp6 = tmp5 - tmp3;
+        tmp7 = tmp6 / (tmp1 * tmp1);
+        tmp8 = 1.0 / tmp1;
+        tmp9 = tmp8 * (-(tmp2 * u3) - tmp4 * u1);
+        tmp10 = tmp2 * tmp8;
+        tmp11 = tmp4 * tmp8;
+        tmp12 = vscmg3_cos_lanes(gam3);
+        tmp13 = vscmg3_sin_lanes(gam3);
+        tmp14 = 0.1795 * tmp13;
+        tmp15 = 0.04580152671755725 - tmp12 * tmp14;
+        tmp16 = 0.359 * tmp15;
+        tmp17 = vscmg3_cos_lanes(gam1);
+        tmp18 = vscmg3_sin_lanes(gam1);
+        tmp19 = tmp17 * tmp18;
+        tmp20 = vscmg3_cos_lanes(gam2);
+        tmp21 = vscmg3_sin_lanes(gam2);
+        tmp22 = 0.1795 * tmp21;
+        tmp23 = 0.04580152671755725 - tmp20 * tmp22;
+        tmp24 = tmp18 * tmp18;
+        tmp25 = 0.1795 * tmp24;
+        tmp26 = tmp17 * tmp17;
+        tmp27 = 0.1795 * tmp26;
+        tmp28 = tmp25 - tmp27;
+        tmp29 = tmp16 * tmp19 + tmp23 * tmp28;
+        tmp30 = 0.359 * tmp19;
+        tmp31 = tmp15 * tmp28 - tmp23 * tmp30;
+        tmp32 = tmp13 * tmp13;
+        tmp33 = 0.1795 * tmp32;
+        tmp34 = tmp20 * tmp20;
+        tmp35 = 0.1795 * tmp34;
+        tmp36 = tmp33 + tmp35;
+        tmp37 = 906.1083969465649 + tmp36;
+        tmp38 = tmp12 * tmp12;
+        tmp39 = 0.1795 * tmp38;
+        tmp40 = tmp25 + tmp39;
+        tmp41 = 806.1083969465649 + tmp40;
+        tmp42 = tmp21 * tmp21;
+        tmp43 = 0.1795 * tmp42;
+        tmp44 = tmp27 + tmp43;
+        tmp45 = 606.1083969465649 + tmp44;
+        tmp46 = 0.1795 * tmp17;
+        tmp47 = 0.04580152671755725 - tmp18 * tmp46;
+        tmp48 = 0.359 * tmp17 * tmp18 * tmp45 - tmp30 * tmp41 - tmp47 * (0.359 * tmp24 - 0.359 *
+                tmp26);
+        tmp49 = -(tmp15 * tmp29) - tmp23 * tmp31 - tmp37 * tmp48;
+        tmp50 = tmp23 * tmp47 - tmp15 * tmp45;
+        tmp51 = tmp15 * tmp47 - tmp23 * tmp41;
+        tmp52 = tmp41 * tmp45 - tmp47 * tmp47;
+        tmp53 = tmp15 * tmp50 + tmp23 * tmp51 + tmp37 * tmp52;
+        tmp54 = 1.0 / (tmp53 * tmp53);
+        tmp55 = 0.159 * w2;
+        tmp56 = tmp20 * tmp55;
+        tmp57 = tmp20 * u1;
+        tmp58 = tmp21 * u3;
+        tmp59 = tmp57 - tmp58;
+        tmp60 = tmp22 * tmp59;
+        tmp61 = tmp56 - tmp60;
+        tmp62 = 606.4878969465649 * u3;
+        tmp63 = 0.04580152671755725 * u1;
+        tmp64 = 0.04580152671755725 * u2;
+        tmp65 = 0.3795 * gd3;
+        tmp66 = tmp18 * u2;
+        tmp67 = tmp17 * u3 - tmp66;
+        tmp68 = tmp46 * tmp67;
+        tmp69 = 0.159 * w1;
+        tmp70 = tmp18 * tmp69;
+        tmp71 = tmp68 + tmp70;
+        tmp72 = tmp62 + tmp63 + tmp64 + tmp65 + tmp71;
+        tmp73 = tmp61 + tmp72;
+        tmp74 = 0.159 * w3;
+        tmp75 = tmp12 * tmp74;
+        tmp76 = tmp13 * u1;
+        tmp77 = tmp12 * u2 - tmp76;
+        tmp78 = tmp14 * tmp77;
+        tmp79 = tmp75 - tmp78;
+        tmp80 = 906.4878969465649 * u1;
+        tmp81 = 0.04580152671755725 * u3;
+        tmp82 = 0.3795 * gd1;
+        tmp83 = 0.1795 * tmp20;
+        tmp84 = tmp59 * tmp83;
+        tmp85 = tmp21 * tmp55;
+        tmp86 = tmp84 + tmp85;
+        tmp87 = tmp64 + tmp80 + tmp81 + tmp82 + tmp86;
+        tmp88 = tmp79 + tmp87;
+        tmp89 = tmp21 * u1;
+        tmp90 = tmp20 * u3;
+        tmp91 = 0.4189723320158103 * w2 - 0.47299077733860345 * tmp89 - 0.47299077733860345 * tmp90;
+        tmp92 = tmp12 * u1;
+        tmp93 = tmp13 * u2;
+        tmp94 = 0.159 * w3 - 0.1795 * tmp92 - 0.1795 * tmp93;
+        tmp95 = tmp12 * tmp94;
+        tmp96 = gd3 * tmp95;
+        tmp97 = gd3 * tmp78;
+        tmp98 = tmp17 * u2;
+        tmp99 = tmp18 * u3;
+        tmp100 = 0.159 * w1 - 0.1795 * tmp98 - 0.1795 * tmp99;
+        tmp101 = tmp100 * tmp18;
+        tmp102 = gd1 * tmp101 + gd1 * tmp68;
+        tmp103 = tmp102 + tmp97 + tmp73 * u1 - tmp96 - tmp88 * u3 - 0.3795 * tmp59 * tmp91;
+        tmp104 = 0.1795 * tmp12;
+        tmp105 = tmp104 * tmp77;
+        tmp106 = tmp13 * tmp74;
+        tmp107 = tmp105 + tmp106;
+        tmp108 = 806.4878969465649 * u2;
+        tmp109 = 0.3795 * gd2;
+        tmp110 = tmp17 * tmp69;
+        tmp111 = 0.1795 * tmp18;
+        tmp112 = tmp111 * tmp67;
+        tmp113 = tmp110 - tmp112;
+        tmp114 = tmp108 + tmp109 + tmp113 + tmp63 + tmp81;
+        tmp115 = tmp107 + tmp114;
+        tmp116 = 0.4189723320158103 * w3 - 0.47299077733860345 * tmp92 - 0.47299077733860345 *
+                tmp93;
+        tmp117 = tmp100 * tmp17;
+        tmp118 = gd1 * tmp117;
+        tmp119 = gd1 * tmp112;
+        tmp120 = 0.159 * w2 - 0.1795 * tmp89 - 0.1795 * tmp90;
+        tmp121 = tmp120 * tmp21;
+        tmp122 = gd2 * tmp121 + gd2 * tmp84;
+        tmp123 = tmp119 + tmp122 + tmp88 * u2 - tmp118 - tmp115 * u1 - 0.3795 * tmp116 * tmp77;
+        tmp124 = 0.4189723320158103 * w1 - 0.47299077733860345 * tmp98 - 0.47299077733860345 *
+                tmp99;
+        tmp125 = tmp120 * tmp20;
+        tmp126 = gd2 * tmp125;
+        tmp127 = gd2 * tmp60;
+        tmp128 = tmp13 * tmp94;
+        tmp129 = gd3 * tmp105 + gd3 * tmp128;
+        tmp130 = tmp127 + tmp129 + tmp115 * u3 - tmp126 - tmp73 * u2 - 0.3795 * tmp124 * tmp67;
+        tmp131 = tmp54 * (tmp103 * tmp50 + tmp123 * tmp51 + tmp130 * tmp52);
+        tmp132 = tmp131 * tmp49;
+        tmp133 = 1.0 / tmp53;
+        tmp134 = tmp17 * u3;
+        tmp135 = gd1 * (0.1795 * tmp66 - 0.1795 * tmp134);
+        tmp136 = -tmp98 - tmp99;
+        tmp137 = tmp136 * tmp46;
+        tmp138 = tmp113 + tmp137;
+        tmp139 = tmp118 + gd1 * tmp137 + tmp135 * tmp18 + tmp138 * u1 - tmp119;
+        tmp140 = tmp111 * tmp136;
+        tmp141 = -tmp140 - tmp71;
+        tmp142 = tmp102 + gd1 * tmp140 - tmp135 * tmp17 - tmp141 * u1;
+        tmp143 = tmp67 * (0.47299077733860345 * tmp66 - 0.47299077733860345 * tmp134);
+        tmp144 = tmp124 * tmp136;
+        tmp145 = tmp141 * u3 - 0.3795 * tmp143 - 0.3795 * tmp144 - tmp138 * u2;
+        tmp146 = tmp133 * (tmp103 * tmp29 + tmp123 * tmp31 + tmp130 * tmp48 + tmp139 * tmp50 +
+                tmp142 * tmp51 + tmp145 * tmp52);
+        tmp147 = tmp20 * tmp21;
+        tmp148 = 0.359 * tmp147;
+        tmp149 = tmp43 - tmp35;
+        tmp150 = tmp149 * tmp47 - tmp147 * tmp16;
+        tmp151 = tmp149 * tmp23 * tmp41 + 0.359 * tmp20 * tmp21 * tmp52 - tmp149 * tmp51 - tmp15
+                * tmp150 - tmp148 * tmp37 * tmp41;
+        tmp152 = gd2 * (0.1795 * tmp21 * u3 - 0.1795 * tmp57);
+        tmp153 = -tmp89 - tmp90;
+        tmp154 = tmp153 * tmp83;
+        tmp155 = tmp154 + tmp61;
+        tmp156 = tmp126 + gd2 * tmp154 + tmp152 * tmp21 + tmp155 * u2 - tmp127;
+        tmp157 = tmp153 * tmp22;
+        tmp158 = -tmp157 - tmp86;
+        tmp159 = tmp122 + gd2 * tmp157 - tmp152 * tmp20 - tmp158 * u2;
+        tmp160 = tmp59 * (0.47299077733860345 * tmp21 * u3 - 0.47299077733860345 * tmp57);
+        tmp161 = tmp153 * tmp91;
+        tmp162 = tmp158 * u1 - 0.3795 * tmp160 - 0.3795 * tmp161 - tmp155 * u3;
+        tmp163 = tmp148 * tmp41;
+        tmp164 = tmp149 * tmp41;
+        tmp165 = tmp131 * tmp151 + tmp133 * (tmp103 * tmp150 + tmp130 * tmp163 + tmp156 * tmp51 +
+                tmp159 * tmp52 + tmp162 * tmp50 - tmp123 * tmp164);
+        tmp166 = tmp33 - tmp39;
+        tmp167 = tmp12 * tmp13;
+        tmp168 = 0.359 * tmp167;
+        tmp169 = tmp166 * tmp47 + tmp168 * tmp23;
+        tmp170 = tmp15 * tmp166 * tmp45 + 0.359 * tmp12 * tmp13 * tmp37 * tmp45 - tmp166 * tmp50
+                - tmp169 * tmp23 - 0.359 * tmp167 * tmp52;
+        tmp171 = tmp12 * u2;
+        tmp172 = gd3 * (0.1795 * tmp76 - 0.1795 * tmp171);
+        tmp173 = -tmp92 - tmp93;
+        tmp174 = tmp104 * tmp173;
+        tmp175 = tmp174 + tmp79;
+        tmp176 = tmp96 + gd3 * tmp174 + tmp13 * tmp172 + tmp175 * u3 - tmp97;
+        tmp177 = tmp14 * tmp173;
+        tmp178 = -tmp107 - tmp177;
+        tmp179 = tmp129 + gd3 * tmp177 - tmp12 * tmp172 - tmp178 * u3;
+        tmp180 = tmp77 * (0.47299077733860345 * tmp76 - 0.47299077733860345 * tmp171);
+        tmp181 = tmp116 * tmp173;
+        tmp182 = tmp178 * u2 - 0.3795 * tmp180 - 0.3795 * tmp181 - tmp175 * u1;
+        tmp183 = tmp168 * tmp45;
+        tmp184 = tmp166 * tmp45;
+        tmp185 = tmp131 * tmp170 + tmp133 * (tmp123 * tmp169 + tmp176 * tmp52 + tmp179 * tmp50 +
+                tmp182 * tmp51 - tmp103 * tmp184 - tmp130 * tmp183);
+        tmp186 = tmp23 * u2;
+        tmp187 = gd2 * tmp148;
+        tmp188 = tmp15 * u3 - gd3 * tmp168;
+        tmp189 = tmp187 + tmp188 - tmp186;
+        tmp190 = 906.4878969465649 + tmp36;
+        tmp191 = gd3 * tmp33;
+        tmp192 = tmp56 + tmp72 + gd3 * tmp39 + tmp23 * u1 + 2.7755575615628914e-17 * tmp21 *
+                tmp59 - tmp191 - tmp190 * u3 - 0.3795 * tmp20 * tmp91;
+        tmp193 = gd2 * tmp43;
+        tmp194 = tmp190 * u2 + 2.7755575615628914e-17 * tmp12 * tmp77 + 0.1795 * gd2 * tmp34 +
+                0.3795 * tmp116 * tmp13 - tmp106 - tmp114 - tmp193 - tmp15 * u1;
+        tmp195 = tmp133 * (tmp189 * tmp52 + tmp192 * tmp50 + tmp194 * tmp51);
+        tmp196 = gd1 * tmp30 - tmp47 * u1;
+        tmp197 = -tmp188 - tmp196;
+        tmp198 = 806.4878969465649 + tmp40;
+        tmp199 = gd1 * tmp25;
+        tmp200 = tmp75 + tmp87 + gd1 * tmp27 + tmp15 * u2 + 2.7755575615628914e-17 * tmp13 *
+                tmp77 - tmp199 - tmp198 * u1 - 0.3795 * tmp116 * tmp12;
+        tmp201 = tmp198 * u3 + 2.7755575615628914e-17 * tmp17 * tmp67 + 0.1795 * gd3 * tmp38 +
+                0.3795 * tmp124 * tmp18 - tmp191 - tmp61 - tmp62 - tmp63 - tmp64 - tmp65 - tmp70
+                - tmp47 * u2;
+        tmp202 = tmp133 * (tmp197 * tmp50 + tmp200 * tmp51 + tmp201 * tmp52);
+        tmp203 = tmp186 + tmp196 - tmp187;
+        tmp204 = 606.4878969465649 + tmp44;
+        tmp205 = tmp204 * u1 + 2.7755575615628914e-17 * tmp20 * tmp59 + 0.1795 * gd1 * tmp26 +
+                0.3795 * tmp21 * tmp91 - tmp199 - tmp64 - tmp79 - tmp80 - tmp81 - tmp82 - tmp85 -
+                tmp23 * u3;
+        tmp206 = tmp107 + tmp108 + tmp109 + tmp110 + tmp63 + tmp81 + gd2 * tmp35 + tmp47 * u3 +
+                2.7755575615628914e-17 * tmp18 * tmp67 - tmp193 - tmp204 * u2 - 0.3795 * tmp124 *
+                tmp17;
+        tmp207 = tmp133 * (tmp203 * tmp51 + tmp205 * tmp50 + tmp206 * tmp52);
+        tmp208 = 0.3795 * u3;
+        tmp209 = tmp101 + tmp68 - tmp208;
+        tmp210 = 0.3795 * u2;
+        tmp211 = tmp112 + tmp210 - tmp117;
+        tmp212 = tmp133 * (tmp209 * tmp50 + tmp211 * tmp51);
+        tmp213 = 0.3795 * u1;
+        tmp214 = tmp121 + tmp84 - tmp213;
+        tmp215 = tmp208 + tmp60 - tmp125;
+        tmp216 = tmp133 * (tmp214 * tmp51 + tmp215 * tmp52);
+        tmp217 = tmp105 + tmp128 - tmp210;
+        tmp218 = tmp213 + tmp78 - tmp95;
+        tmp219 = tmp133 * (tmp217 * tmp52 + tmp218 * tmp50);
+        tmp220 = 0.159 * tmp18;
+        tmp221 = gd1 * tmp220 + tmp220 * u1;
+        tmp222 = 0.159 * tmp17;
+        tmp223 = -(gd1 * tmp222) - tmp222 * u1;
+        tmp224 = tmp133 * (tmp221 * tmp50 + tmp223 * tmp51);
+        tmp225 = 0.159 * tmp21;
+        tmp226 = gd2 * tmp225 + tmp225 * u2;
+        tmp227 = 0.159 * tmp20;
+        tmp228 = -(gd2 * tmp227) - tmp227 * u2;
+        tmp229 = tmp133 * (tmp226 * tmp51 + tmp228 * tmp52);
+        tmp230 = 0.159 * tmp12;
+        tmp231 = -(gd3 * tmp230) - tmp230 * u3;
+        tmp232 = 0.159 * tmp13;
+        tmp233 = gd3 * tmp232 + tmp232 * u3;
+        tmp234 = tmp133 * (tmp231 * tmp50 + tmp233 * tmp52);
+        tmp235 = tmp15 * tmp23 - tmp37 * tmp47;
+        tmp236 = tmp37 * tmp45 - tmp23 * tmp23;
+        tmp237 = tmp54 * (tmp103 * tmp236 + tmp123 * tmp235 + tmp130 * tmp50);
+        tmp238 = tmp30 * tmp37;
+        tmp239 = tmp28 * tmp37;
+        tmp240 = tmp133 * (tmp130 * tmp29 + tmp139 * tmp236 + tmp142 * tmp235 + tmp145 * tmp50 -
+                tmp103 * tmp238 - tmp123 * tmp239) + tmp237 * tmp49;
+        tmp241 = tmp151 * tmp237;
+        tmp242 = tmp148 * tmp47 + tmp149 * tmp15;
+        tmp243 = tmp133 * (tmp103 * (0.359 * tmp20 * tmp21 * tmp37 - tmp148 * tmp45 - tmp23 *
+                (0.359 * tmp42 - 0.359 * tmp34)) + tmp123 * tmp242 + tmp130 * tmp150 + tmp156 *
+                tmp235 + tmp159 * tmp50 + tmp162 * tmp236);
+        tmp244 = tmp166 * tmp23 - tmp168 * tmp47;
+        tmp245 = tmp133 * (tmp103 * tmp183 + tmp123 * tmp244 + tmp176 * tmp50 + tmp179 * tmp236 +
+                tmp182 * tmp235 - tmp130 * tmp184) + tmp170 * tmp237;
+        tmp246 = tmp133 * (tmp189 * tmp50 + tmp192 * tmp236 + tmp194 * tmp235);
+        tmp247 = tmp133 * (tmp197 * tmp236 + tmp200 * tmp235 + tmp201 * tmp50);
+        tmp248 = tmp133 * (tmp203 * tmp235 + tmp205 * tmp236 + tmp206 * tmp50);
+        tmp249 = tmp133 * (tmp209 * tmp236 + tmp211 * tmp235);
+        tmp250 = tmp133 * (tmp214 * tmp235 + tmp215 * tmp50);
+        tmp251 = tmp133 * (tmp217 * tmp50 + tmp218 * tmp236);
+        tmp252 = tmp133 * (tmp221 * tmp236 + tmp223 * tmp235);
+        tmp253 = tmp133 * (tmp226 * tmp235 + tmp228 * tmp50);
+        tmp254 = tmp133 * (tmp231 * tmp236 + tmp233 * tmp50);
+        tmp255 = tmp37 * tmp41 - tmp15 * tmp15;
+        tmp256 = tmp54 * (tmp103 * tmp235 + tmp123 * tmp255 + tmp130 * tmp51);
+        tmp257 = tmp133 * (tmp123 * tmp238 + tmp130 * tmp31 + tmp139 * tmp235 + tmp142 * tmp255 +
+                tmp145 * tmp51 - tmp103 * tmp239) + tmp256 * tmp49;
+        tmp258 = tmp133 * (tmp103 * tmp242 + tmp156 * tmp255 + tmp159 * tmp51 + tmp162 * tmp235 -
+                tmp123 * tmp163 - tmp130 * tmp164) + tmp151 * tmp256;
+        tmp259 = tmp170 * tmp256;
+        tmp260 = tmp133 * (tmp103 * tmp244 + tmp123 * (0.359 * tmp12 * tmp13 * tmp41 - tmp15 *
+                (0.359 * tmp32 - 0.359 * tmp38) - tmp168 * tmp37) + tmp130 * tmp169 + tmp176 *
+                tmp51 + tmp179 * tmp235 + tmp182 * tmp255);
+        tmp261 = tmp133 * (tmp189 * tmp51 + tmp192 * tmp235 + tmp194 * tmp255);
+        tmp262 = tmp133 * (tmp197 * tmp235 + tmp200 * tmp255 + tmp201 * tmp51);
+        tmp263 = tmp133 * (tmp203 * tmp255 + tmp205 * tmp235 + tmp206 * tmp51);
+        tmp264 = tmp133 * (tmp209 * tmp235 + tmp211 * tmp255);
+        tmp265 = tmp133 * (tmp214 * tmp255 + tmp215 * tmp51);
+        tmp266 = tmp133 * (tmp217 * tmp51 + tmp218 * tmp235);
+        tmp267 = tmp133 * (tmp221 * tmp235 + tmp223 * tmp255);
+        tmp268 = tmp133 * (tmp226 * tmp255 + tmp228 * tmp51);
+        tmp269 = tmp133 * (tmp231 * tmp235 + tmp233 * tmp51);
+        tmp270 = 0.47299077733860345 * tmp67;
+        tmp271 = 0.47299077733860345 * tmp59;
+        tmp272 = 0.47299077733860345 * tmp77;
+        J[0][l] = 0.0;
+        J[1][l] = tmp0 * tmp7;
+        J[2][l] = tmp9;
+        J[3][l] = 0.0;
+        J[4][l] = 0.0;
+        J[5][l] = 0.0;
+        J[6][l] = -tmp10;
+        J[7][l] = 0.0;
+        J[8][l] = tmp11;
+        J[9][l] = 0.0;
+        J[10][l] = 0.0;
+        J[11][l] = 0.0;
+        J[12][l] = 0.0;
+        J[13][l] = 0.0;
+        J[14][l] = 0.0;
+        J[15][l] = 0.0;
+        J[16][l] = 0.0;
+        J[17][l] = tmp6;
+        J[18][l] = 0.0;
+        J[19][l] = 0.0;
+        J[20][l] = 0.0;
+        J[21][l] = tmp4;
+        J[22][l] = 0.0;
+        J[23][l] = tmp2;
+        J[24][l] = 0.0;
+        J[25][l] = 0.0;
+        J[26][l] = 0.0;
+        J[27][l] = 0.0;
+        J[28][l] = 0.0;
+        J[29][l] = 0.0;
+        J[30][l] = 0.0;
+        J[31][l] = tmp3 - tmp5 - tmp7 * (tmp0 * tmp0);
+        J[32][l] = -(tmp0 * tmp9);
+        J[33][l] = 0.0;
+        J[34][l] = 0.0;
+        J[35][l] = 0.0;
+        J[36][l] = tmp0 * tmp10;
+        J[37][l] = 1.0;
+        J[38][l] = -(tmp0 * tmp11);
+        J[39][l] = 0.0;
+        J[40][l] = 0.0;
+        J[41][l] = 0.0;
+        J[42][l] = 0.0;
+        J[43][l] = 0.0;
+        J[44][l] = 0.0;
+        J[45][l] = 0.0;
+        J[46][l] = 0.0;
+        J[47][l] = 0.0;
+        J[48][l] = 0.0;
+        J[49][l] = 0.0;
+        J[50][l] = 0.0;
+        J[51][l] = 0.0;
+        J[52][l] = 0.0;
+        J[53][l] = 0.0;
+        J[54][l] = 1.0;
+        J[55][l] = 0.0;
+        J[56][l] = 0.0;
+        J[57][l] = 0.0;
+        J[58][l] = 0.0;
+        J[59][l] = 0.0;
+        J[60][l] = 0.0;
+        J[61][l] = 0.0;
+        J[62][l] = 0.0;
+        J[63][l] = 0.0;
+        J[64][l] = 0.0;
+        J[65][l] = 0.0;
+        J[66][l] = 0.0;
+        J[67][l] = 0.0;
+        J[68][l] = 0.0;
+        J[69][l] = 0.0;
+        J[70][l] = 1.0;
+        J[71][l] = 0.0;
+        J[72][l] = 0.0;
+        J[73][l] = 0.0;
+        J[74][l] = 0.0;
+        J[75][l] = 0.0;
+        J[76][l] = 0.0;
+        J[77][l] = 0.0;
+        J[78][l] = 0.0;
+        J[79][l] = 0.0;
+        J[80][l] = 0.0;
+        J[81][l] = 0.0;
+        J[82][l] = 0.0;
+        J[83][l] = 0.0;
+        J[84][l] = 0.0;
+        J[85][l] = 0.0;
+        J[86][l] = 1.0;
+        J[87][l] = 0.0;
+        J[88][l] = 0.0;
+        J[89][l] = 0.0;
+        J[90][l] = 0.0;
+        J[91][l] = 0.0;
+        J[92][l] = 0.0;
+        J[93][l] = tmp132 + tmp146;
+        J[94][l] = tmp165;
+        J[95][l] = tmp185;
+        J[96][l] = tmp195;
+        J[97][l] = tmp202;
+        J[98][l] = tmp207;
+        J[99][l] = tmp212;
+        J[100][l] = tmp216;
+        J[101][l] = tmp219;
+        J[102][l] = tmp224;
+        J[103][l] = tmp229;
+        J[104][l] = tmp234;
+        J[105][l] = 0.0;
+        J[106][l] = 0.0;
+        J[107][l] = 0.0;
+        J[108][l] = tmp240;
+        J[109][l] = tmp241 + tmp243;
+        J[110][l] = tmp245;
+        J[111][l] = tmp246;
+        J[112][l] = tmp247;
+        J[113][l] = tmp248;
+        J[114][l] = tmp249;
+        J[115][l] = tmp250;
+        J[116][l] = tmp251;
+        J[117][l] = tmp252;
+        J[118][l] = tmp253;
+        J[119][l] = tmp254;
+        J[120][l] = 0.0;
+        J[121][l] = 0.0;
+        J[122][l] = 0.0;
+        J[123][l] = tmp257;
+        J[124][l] = tmp258;
+        J[125][l] = tmp259 + tmp260;
+        J[126][l] = tmp261;
+        J[127][l] = tmp262;
+        J[128][l] = tmp263;
+        J[129][l] = tmp264;
+        J[130][l] = tmp265;
+        J[131][l] = tmp266;
+        J[132][l] = tmp267;
+        J[133][l] = tmp268;
+        J[134][l] = tmp269;
+        J[135][l] = 0.0;
+        J[136][l] = 0.0;
+        J[137][l] = 0.0;
+        J[138][l] = tmp143 + tmp144 - tmp132 - tmp146;
+        J[139][l] = -tmp165;
+        J[140][l] = -tmp185;
+        J[141][l] = -tmp195;
+        J[142][l] = -tmp202 - tmp124 * tmp18 - tmp17 * tmp270;
+        J[143][l] = tmp124 * tmp17 - tmp207 - tmp18 * tmp270;
+        J[144][l] = -tmp212;
+        J[145][l] = -tmp216;
+        J[146][l] = -tmp219;
+        J[147][l] = 0.4189723320158103 * tmp17 * u3 - tmp224 - 0.4189723320158103 * tmp66;
+        J[148][l] = -tmp229;
+        J[149][l] = -tmp234;
+        J[150][l] = 0.0;
+        J[151][l] = 0.0;
+        J[152][l] = 0.0;
+        J[153][l] = -tmp240;
+        J[154][l] = tmp160 + tmp161 - tmp241 - tmp243;
+        J[155][l] = -tmp245;
+        J[156][l] = tmp20 * tmp91 - tmp246 - tmp21 * tmp271;
+        J[157][l] = -tmp247;
+        J[158][l] = -tmp248 - tmp20 * tmp271 - tmp21 * tmp91;
+        J[159][l] = -tmp249;
+        J[160][l] = -tmp250;
+        J[161][l] = -tmp251;
+        J[162][l] = -tmp252;
+        J[163][l] = 0.4189723320158103 * tmp20 * u1 - tmp253 - 0.4189723320158103 * tmp58;
+        J[164][l] = -tmp254;
+        J[165][l] = 0.0;
+        J[166][l] = 0.0;
+        J[167][l] = 0.0;
+        J[168][l] = -tmp257;
+        J[169][l] = -tmp258;
+        J[170][l] = tmp180 + tmp181 - tmp259 - tmp260;
+        J[171][l] = -tmp261 - tmp116 * tmp13 - tmp12 * tmp272;
+        J[172][l] = tmp116 * tmp12 - tmp262 - tmp13 * tmp272;
+        J[173][l] = -tmp263;
+        J[174][l] = -tmp264;
+        J[175][l] = -tmp265;
+        J[176][l] = -tmp266;
+        J[177][l] = -tmp267;
+        J[178][l] = -tmp268;
+        J[179][l] = 0.4189723320158103 * tmp12 * u2 - tmp269 - 0.4189723320158103 * tmp76;
+        J[180][l] = 0.0;
+        J[181][l] = 0.0;
+        J[182][l] = 0.0;
+        J[183][l] = 0.0;
+        J[184][l] = 0.0;
+        J[185][l] = 0.0;
+        J[186][l] = 0.0;
+        J[187][l] = 0.0;
+        J[188][l] = 0.0;
+        J[189][l] = 0.0;
+        J[190][l] = 0.0;
+        J[191][l] = 0.0;
+        J[192][l] = 0.0;
+        J[193][l] = 0.0;
+        J[194][l] = 0.0;
+        J[195][l] = 0.0;
+        J[196][l] = 0.0;
+        J[197][l] = 0.0;
+        J[198][l] = 0.0;
+        J[199][l] = 0.0;
+        J[200][l] = 0.0;
+        J[201][l] = 0.0;
+        J[202][l] = 0.0;
+        J[203][l] = 0.0;
+        J[204][l] = 0.0;
+        J[205][l] = 0.0;
+        J[206][l] = 0.0;
+        J[207][l] = 0.0;
+        J[208][l] = 0.0;
+        J[209][l] = 0.0;
+        J[210][l] = 0.0;
+        J[211][l] = 0.0;
+        J[212][l] = 0.0;
+        J[213][l] = 0.0;
+        J[214][l] = 0.0;
+        J[215][l] = 0.0;
+        J[216][l] = 0.0;
+        J[217][l] = 0.0;
+        J[218][l] = 0.0;
+        J[219][l] = 0.0;
+        J[220][l] = 0.0;
+        J[221][l] = 0.0;
+        J[222][l] = 0.0;
+        J[223][l] = 0.0;
+        J[224][l] = 0.0;
     }
 }
 

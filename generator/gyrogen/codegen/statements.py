@@ -341,21 +341,38 @@ def rhs_lanes_ode(unit: SceneContext) -> Func:
     return Func(f.name, _lane_params(), f.body, restrict=True)
 
 
+JAC_LANES_MAX_OPS = 1000
+"""The most operations (Block.ops) of a Jacobian printed over lanes from the
+model; a larger one runs the scalar <prefix>_jac lane by lane. J is computed
+once a step, the rhs six times: over lanes, gyrostat's (58 ops) took its
+rodas4 batch from 17.1 to 13.3 us a state, while cmg4_pyramid's (2413)
+made its file 58 KB larger, more than the rest of rodas4's lanes together
+(bench_lanes.py, gcc -O2)."""
+
+
 def jacobian_lanes(unit: SceneContext) -> Func:
     """<prefix>_jac on the lanes of struct lanes (ode.c, a Rosenbrock
-    method's), one lane after another: its x gathered, the scalar Jacobian
-    (the single trajectory's bits), its J into rows J[i*NX + j] of LANES
-    values. J is computed once a step, the rhs six times: printed over the
-    lanes from the model as rhs_lanes is, it made cmg4_pyramid_ode.c 58 KB
-    larger, more than the rest of rodas4's lanes together."""
+    method's): rows J[i*NX + j] of LANES values. Up to JAC_LANES_MAX_OPS,
+    the same statements lane by lane, over sin and cos's branch-free twins
+    (the scalar ones' bits); past it, the scalar Jacobian on each lane in
+    turn (its x gathered, its J scattered)."""
+    b = unit.optimized.jacobian
+    assert b is not None, "a Jacobian over lanes needs the scene's Jacobian"
+    params = (*_lane_params()[:3], Decl("J", "double", ("NX2", "LANES"), "out"))
     lane, i, t, x, c, J = (Var(n) for n in ("l", "i", "t", "x", "c", "J"))
+    if b.ops <= JAC_LANES_MAX_OPS:
+
+        def at(name: str) -> Callable[[int], At]:
+            return lambda i: At(name, (Int(i), lane))
+
+        f = _lanes(unit, "jac_lanes", Const("LANES"), at, At("t", (lane,)), False, b, "J")
+        return Func(f.name, params, f.body, restrict=True)
     one_x, one_j = Var("xl"), Var("Jl")
     each = (
         For("i", Const("NX"), (assign(one_x[i], x[i, lane]),)),
         Call("jac", (t[lane], one_x, c, one_j)),
         For("i", Const("NX2"), (assign(J[i, lane], one_j[i]),)),
     )
-    params = (*_lane_params()[:3], Decl("J", "double", ("NX2", "LANES"), "out"))
     locals_ = (Decl("xl", "double", ("NX",)), Decl("Jl", "double", ("NX2",)))
     return Func("jac_lanes", params, (For("l", Const("LANES"), each),), None, locals_,
                 restrict=True)  # fmt: skip
@@ -377,13 +394,16 @@ def _lanes(
     at: Callable[[str], Callable[[int], At]],
     t: At,
     public: bool,
+    block_: Block | None = None,
+    out: str = "dxdt",
 ) -> Func:
+    """block_ (the rhs unless given) for n states at once, its outputs into out."""
     names = symbol_names(unit.nc)
-    b = unit.optimized.rhs
+    b = unit.optimized.rhs if block_ is None else block_
     free = b.free_symbols
     states = [(i, s.name) for i, s in enumerate(unit.states) if s in free]
     tables = [s.name for s in unit.equations.inputs if s in free]
-    temps, body = block(b, at("dxdt"), names, lanes=True)
+    temps, body = block(b, at(out), names, lanes=True)
     reads = [assign(Var(v), at("x")(i)) for i, v in states]
     reads += [assign(Var(v), fn(f"{unit.prefix}_{v}", t)) for v in tables]
     loop = For(
