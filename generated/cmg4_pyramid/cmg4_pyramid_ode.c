@@ -2101,7 +2101,9 @@ static void lu_shift(const double *CMG4_PYRAMID_RESTRICT J, double d,
     a[323] = d - J[323];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *CMG4_PYRAMID_RESTRICT J, double dr, double di,
                              double *CMG4_PYRAMID_RESTRICT ar, double *CMG4_PYRAMID_RESTRICT ai)
 {

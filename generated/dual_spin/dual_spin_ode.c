@@ -638,7 +638,9 @@ static void lu_shift(const double *DUAL_SPIN_RESTRICT J, double d, double *DUAL_
     a[48] = d - J[48];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *DUAL_SPIN_RESTRICT J, double dr, double di,
                              double *DUAL_SPIN_RESTRICT ar, double *DUAL_SPIN_RESTRICT ai)
 {

@@ -658,7 +658,9 @@ static void lu_shift(const double *GYROSTAT_RESTRICT J, double d, double *GYROST
     a[195] = d - J[195];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *GYROSTAT_RESTRICT J, double dr, double di,
                              double *GYROSTAT_RESTRICT ar, double *GYROSTAT_RESTRICT ai)
 {

@@ -696,7 +696,9 @@ static void lu_shift(const double *RW3_ORTHOGONAL_RESTRICT J, double d,
     a[80] = d - J[80];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *RW3_ORTHOGONAL_RESTRICT J, double dr, double di,
                              double *RW3_ORTHOGONAL_RESTRICT ar, double *RW3_ORTHOGONAL_RESTRICT ai)
 {

@@ -754,7 +754,9 @@ static void lu_shift(const double *RW4_HARDWARE_RESTRICT J, double d,
     a[99] = d - J[99];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *RW4_HARDWARE_RESTRICT J, double dr, double di,
                              double *RW4_HARDWARE_RESTRICT ar, double *RW4_HARDWARE_RESTRICT ai)
 {

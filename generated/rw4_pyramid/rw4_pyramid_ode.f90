@@ -723,7 +723,9 @@ contains
     a(99) = d - J(99)
   end subroutine lu_shift
 
-  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J.
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
   subroutine lu_shift_complex(J, dr, di, ar, ai)
     real(c_double), intent(in) :: dr
     real(c_double), intent(in) :: di

@@ -655,7 +655,9 @@ static void lu_shift(const double *SPEED_CONTROLLED_RESTRICT J, double d,
     a[63] = d - J[63];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *SPEED_CONTROLLED_RESTRICT J, double dr, double di,
                              double *SPEED_CONTROLLED_RESTRICT ar,
                              double *SPEED_CONTROLLED_RESTRICT ai)

@@ -572,7 +572,9 @@ static void lu_shift(const double *STIFF_WHEEL_RESTRICT J, double d, double *STI
     a[63] = d - J[63];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *STIFF_WHEEL_RESTRICT J, double dr, double di,
                              double *STIFF_WHEEL_RESTRICT ar, double *STIFF_WHEEL_RESTRICT ai)
 {

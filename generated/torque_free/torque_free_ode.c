@@ -634,7 +634,9 @@ static void lu_shift(const double *TORQUE_FREE_RESTRICT J, double d, double *TOR
     a[48] = d - J[48];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *TORQUE_FREE_RESTRICT J, double dr, double di,
                              double *TORQUE_FREE_RESTRICT ar, double *TORQUE_FREE_RESTRICT ai)
 {

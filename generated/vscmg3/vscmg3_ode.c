@@ -1358,7 +1358,9 @@ static void lu_shift(const double *VSCMG3_RESTRICT J, double d, double *VSCMG3_R
     a[224] = d - J[224];
 }
 
-/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J. */
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
 static void lu_shift_complex(const double *VSCMG3_RESTRICT J, double dr, double di,
                              double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTRICT ai)
 {

@@ -141,8 +141,10 @@ def shift(blocks: Blocks, nx: int) -> Func:
 
 
 def shift_complex(blocks: Blocks, nx: int) -> Func:
-    """lu_shift for (dr + i di) I - J, into ar + i ai."""
+    """lu_shift for (dr + i di) I - J, into ar + i ai; the coupled entries
+    are real, -J, and lu_solve_complex reads ar alone there."""
     J, dr, di, ar, ai = (Var(n) for n in ("J", "dr", "di", "ar", "ai"))
+    coupled = blocks.coupled or tuple(() for _ in blocks.upper)
     body = tuple(
         st
         for r, cols in enumerate(blocks.stored)
@@ -151,6 +153,8 @@ def shift_complex(blocks: Blocks, nx: int) -> Func:
         for st in (
             (assign(ar[q], dr - J[q]), assign(ai[q], di))
             if c == r
+            else (assign(ar[q], -J[q]),)
+            if c in coupled[r]
             else (assign(ar[q], -J[q]), assign(ai[q], 0.0))
         )
     )
@@ -158,7 +162,11 @@ def shift_complex(blocks: Blocks, nx: int) -> Func:
         Decl("J", "double", ("NX2",)), Decl("dr", "double"), Decl("di", "double"),
         Decl("ar", "double", ("NX2",), "out"), Decl("ai", "double", ("NX2",), "out"),
     )  # fmt: skip
-    doc = ("lu_shift for the complex matrix ar + i ai := (dr + i di) I - J.",)
+    doc = (
+        "lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is",
+        "left as it is where the matrix is real, -J, for lu_solve_complex (a row's",
+        "reads of the state, in an augmented system).",
+    )
     return Func("lu_shift_complex", params, body, None, (), doc, restrict=True)
 
 
@@ -294,24 +302,26 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
     ar, ai, br, bi, re = (Var(n) for n in ("ar", "ai", "br", "bi", "re"))
     body: list[S] = []
 
-    def minus(value: E, row: int, cols: list[int], part: str) -> E:
+    def minus(value: E, row: int, cols: list[int], part: str, real: bool = False) -> E:
         for c in cols:
             q = row * nx + c
-            if part == "re":
+            if real:
+                value = value - ar[q] * (br[c] if part == "re" else bi[c])
+            elif part == "re":
                 value = value - ar[q] * br[c] + ai[q] * bi[c]
             else:
                 value = value - ar[q] * bi[c] - ai[q] * br[c]
         return value
 
-    def forward(r: int, cols: list[int]) -> list[S]:
+    def forward(r: int, cols: list[int], real: bool = False) -> list[S]:
         if not cols:
             return []
-        return [assign(br[r], minus(br[r], r, cols, "re")),
-                assign(bi[r], minus(bi[r], r, cols, "im"))]  # fmt: skip
+        return [assign(br[r], minus(br[r], r, cols, "re", real)),
+                assign(bi[r], minus(bi[r], r, cols, "im", real))]  # fmt: skip
 
     for first, end in blocks.parts:
-        for r in range(first, end):  # the part's reads of x, solved already
-            body += forward(r, list(blocks.coupled[r]) if blocks.coupled else [])
+        for r in range(first, end):  # the part's reads of x (real: -J), solved already
+            body += forward(r, list(blocks.coupled[r]) if blocks.coupled else [], real=True)
         body += permute(blocks, range(first, end), (br, bi))
         for r in range(first, end):
             body += forward(r, blocks.lower[r])
