@@ -174,7 +174,6 @@ def integrate(
         If(rejected_last, (assign(fac, fn("max", fac, 1.0)),)),
         assign(rejected_last, False),
     ]
-    ii = lu[i * NX + i]
     loop: list[S] = [
         If(new_point, (*point, assign(new_point, False))),
         *driver.stop_tests(nonfinite),
@@ -182,8 +181,7 @@ def integrate(
         If(last, (assign(h, t1 - t),)),
         assign(driver.stat("h"), h),
         Comment("E = I/(h gamma) - J"),
-        For("i", Const("NX2"), (assign(lu[i], -J[i]),)),
-        For("i", NX, (assign(ii, ii + Num(1.0) / (h * Num(R.gamma))),)),
+        Call("lu_shift", (J, Num(1.0) / (h * Num(R.gamma)), lu)),
         driver.count("decompositions", 1),
         If(fn("lu_decompose", lu, piv), (
             *reject, *driver.singular_stop(singular, ctl.singular_tries),
