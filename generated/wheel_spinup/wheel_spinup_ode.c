@@ -6555,12 +6555,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            lu[i * WHEEL_SPINUP_NX + i] = lu[i * WHEEL_SPINUP_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;

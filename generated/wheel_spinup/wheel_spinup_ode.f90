@@ -4659,12 +4659,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
