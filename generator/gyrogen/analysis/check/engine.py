@@ -29,9 +29,10 @@ from gyrogen.abi import (
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import invariants
 from gyrogen.analysis.simulate.trajectory import Trajectory
-from gyrogen.oracle import gimbal_view
+from gyrogen.oracle import gimbal_view, scene_view
+from gyrogen.oracle.cluster_reference import clamp_margins
 from gyrogen.physics import LUMPED_FROM, lumped_inertias
-from gyrogen.runtime.compiled import Compiled, controls
+from gyrogen.runtime.compiled import Compiled, Controls, controls
 from gyrogen.runtime.segment import integrate_segments, resampled
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import unit_axes
@@ -137,6 +138,8 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     ts = np.linspace(0.0, case.t_end, case.samples + 1)
     steps = max(1, case.steps // case.samples)
     given = controls(res.method, steps=steps, rtol=TOL, atol=TOL, max_steps=10**8)
+    if case.quadrature:
+        ts = _with_clamp_switches(comp, res.method, (x0, c, p), ts, given, scene)
     seg = integrate_segments(comp, res.method, x0, c, ts, given)
     res.stats, res.code, res.stopped = seg.totals, seg.code, seg.stopped
     res.intervals = tuple(dict(s) for s in seg.intervals)
@@ -148,6 +151,31 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
         res.drift_series = invariants.by_quadrature(scene, p, traj)
     _judge(res, p, c, comp)
     return res
+
+
+def _with_clamp_switches(
+    comp: Compiled, method: str, start: tuple[np.ndarray, ...], ts: np.ndarray,
+    given: Controls, scene: Scene,
+) -> np.ndarray:  # fmt: skip
+    """ts and the times a wheel's motor enters or leaves its clamp, found by
+    bisection on the integrated state to rounding: the power's slope jumps
+    there, and quadrature keeps its order only on either side of a jump."""
+    x0, c, p = start
+    if not any(r.tau_max is not None for r in scene.rotors):
+        return ts
+    runtime = scene_view.values(scene, p)
+    xs = integrate_segments(comp, method, x0, c, ts, given).states
+    held = clamp_margins(scene, xs, runtime) > 0
+    switches = []
+    for i, k in zip(*np.nonzero(held[1:] != held[:-1]), strict=True):
+        a, b = float(ts[i]), float(ts[i + 1])
+        while a < (mid := 0.5 * (a + b)) < b:
+            x, _, _ = comp.integrate(method, xs[i], c, float(ts[i]), mid, **given)
+            a, b = (
+                (mid, b) if (clamp_margins(scene, x, runtime)[0, k] > 0) == held[i, k] else (a, mid)
+            )
+        switches.append(0.5 * (a + b))
+    return np.union1d(ts, switches)
 
 
 def _judge(res: Result, p: np.ndarray, c: np.ndarray, comp: Compiled) -> None:
