@@ -2,18 +2,19 @@
 any other time (its dense output), and integrals over time by adaptive
 quadrature on that dense output.
 
-The run is one function of time: a compiled adaptive method's segment run
-again as a `_grid` call takes the same steps whatever times it is asked for
-between its ends, and solve_ivp's dense output is kept
-(runtime/segment.resampled, engine.py). An
+The run is one function of time: a compiled adaptive method's segment, run
+again from its start as a `_grid` call, takes the same steps whatever
+times it is asked for between its ends (rk4: every time a step end), and
+solve_ivp's dense output is kept (runtime/segment.resampled, engine.py). An
 integral is taken piece by piece, each output interval cut first at the
 integrand's known kinks (a torque table's points): on a piece, Gauss-Legendre
 with QUAD_NODES nodes, checked against Gauss-Lobatto with QUAD_NODES + 1
 (the piece's ends and QUAD_NODES - 1 nodes between, the same degree
 2 QUAD_NODES - 1). Where they disagree by more than the error allowed (QUAD_TOL
-of the integral's scale over the run, spread by length; how far the rates are
-known; rounding), the piece is cut into SPLIT and sampled again, in passes
-of one run each, at most MAX_PASSES. The Lobatto rule's ends see a transient
+of the integral's scale over the run, spread by length; rounding; on a piece
+no longer than a step, how far the rates are known: NOISE), the piece is cut
+into SPLIT and sampled again, in passes (each segment holding pieces run once
+a pass), at most MAX_PASSES. The Lobatto rule's ends see a transient
 shorter than the Gauss nodes' spacing at a piece's edge (stiff_wheel's 1e-5 s
 spin-up at the start); a kink (a clamped motor) makes the rules differ until
 the piece holding it is short; an oscillation of many periods to an
@@ -45,28 +46,28 @@ to its scale (the balance's normalizer), spread over the run by length;
 and at least ROUNDING of each piece's |integrand| times its length."""
 ROUNDING = 1e3 * np.finfo(float).eps
 NOISE = 1.0
-"""The rules agree when they differ by at most this times how far the
-rates are known (_known) times the width, or the integrator's step where
-the piece is longer: the interpolant's slope jumps at each step's end,
-which a piece across it sees, are of that size over a step (with no
-floor, stiff_wheel's pieces went on being cut past 16 passes; with the
-width however long, its nutation at dt = 1000 s was taken 5e-5 of max K
-off, aliased)."""
+"""On a piece no longer than the integrator's mean step across it, the
+rules agree when they differ by at most this times how far the rates are
+known (_known) times the width: the interpolant's slope jumps at each
+step's end, which a piece across it sees, are of that size over a step.
+Without it stiff_wheel's pieces went on being cut past 16 passes; allowed
+on longer pieces too, its nutation at dt = 1000 s was taken 5e-5 of max K
+off (aliased), and with 10 its 1e-5 s transient 1e-8."""
 SPLIT = 8
 """Pieces a piece whose rules disagree is cut into, for the next pass."""
 MAX_PASSES = 16
-"""Passes (runs sampled again) at most: SPLIT^16 ~ 3e14, a piece down to
-rounding of its interval."""
+"""Passes at most: SPLIT^16 ~ 3e14, a piece down to the rounding of its
+interval."""
 MAX_PIECES = 10**5
 """Pieces cut in one pass at most (those whose rules disagree most); the
 others keep their Gauss sums, and the integrals say so."""
 CHUNK = 20_000
-"""Pieces sampled at a time (their states in memory; one run each)."""
+"""Pieces sampled at a time (their states in memory)."""
 QUADRATURE = (
     f"Gauss-Legendre, {QUAD_NODES} nodes a piece, on the run's dense output (the compiled "
     "integrator's interpolant, each segment run again as a _grid call, or solve_ivp's); each "
-    "output interval cut "
-    f"at the torque tables' points; a piece cut into {SPLIT} and sampled again where "
+    f"output interval cut at the torque tables' points; a piece cut into {SPLIT} and sampled "
+    "again where "
     f"Gauss-Lobatto with {QUAD_NODES + 1} nodes (its ends among them) disagrees by more than "
     f"{QUAD_TOL:g} of the scale (a transient, a kink, an oscillation)"
 )
