@@ -109,17 +109,20 @@ def resampled(
 
     def at(times: np.ndarray) -> np.ndarray:
         times = np.asarray(times, dtype=np.float64)
-        which = np.clip(np.searchsorted(ends, times, "right") - 1, 0, len(ends) - 2)
+        order = np.argsort(times, kind="stable")
+        sorted_times = times[order]
+        which = np.clip(np.searchsorted(ends, sorted_times, "right") - 1, 0, len(ends) - 2)
+        cuts = np.flatnonzero(np.diff(which)) + 1
         out = np.empty((times.size, states.shape[1]))
-        for k in np.unique(which):
-            a, b = ends[k], ends[k + 1]
-            inner = np.unique(times[which == k])
-            every = np.concatenate([[a], inner[(inner > a) & (inner < b)], [b]])
+        for lo, hi in itertools.pairwise([0, *cuts, times.size]):
+            k = which[lo]
+            a, b, inner = ends[k], ends[k + 1], sorted_times[lo:hi]
+            every = np.unique(np.concatenate([[a], inner, [b]]))
             seg = run_at(comp, method, states[k], c, every, given)
             if seg.code != 0:
                 why = abi.message(abi.ODE_CODES, seg.code)
                 raise GyrogenError(f"{method} run again from t = {a:.17g} s failed: {why}")
-            out[which == k] = seg.states[np.searchsorted(every, times[which == k])]
+            out[order[lo:hi]] = seg.states[np.searchsorted(every, inner)]
         return out
 
     return at
