@@ -284,12 +284,10 @@ def _bar(pair: str, cond: float, bar: Callable[[float], float]) -> float:
 
 def _time_span(scene: Scene) -> tuple[float, float]:
     """Times to evaluate at: across a T(t) table and beyond both its ends."""
-    tables = [scene.effects.torque_table, *(r.torque_table for r in scene.rotors)]
-    tables += [r.gimbal.torque_table for r in scene.rotors if r.gimbal is not None]
-    times = [t for table in tables if table for t, _ in table]
-    if not times:
+    times = scene_view.table_times(scene)
+    if not times.size:
         return (0.0, 1.0)
-    t0, t1 = min(times), max(times)
+    t0, t1 = float(times[0]), float(times[-1])
     return (t0 - 0.1 * (t1 - t0) - 1.0, t1 + 0.1 * (t1 - t0) + 1.0)
 
 
