@@ -187,8 +187,13 @@ def names() -> str:
         "|---|---|---|",
     ]
     out += [f"| `{k}` | {u} | {d.format(k='k')} |" for k, (u, d) in ROTOR_KEYS.items()]
-    out += ["", "On a rotor on a gimbal these keys mean:", "", "| key | unit | meaning |",
-            "|---|---|---|"]
+    out += [
+        "",
+        "On a rotor on a gimbal these keys mean:",
+        "",
+        "| key | unit | meaning |",
+        "|---|---|---|",
+    ]
     out += [f"| `{k}` | {u} | {d.format(k='k')} |" for k, (u, d) in ON_GIMBAL.items()]
     return "\n".join(out)  # fmt: skip
 
