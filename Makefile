@@ -148,9 +148,13 @@ report: setup
 	$(BIN)/gyrogen bench-ensemble --out report
 
 ## verify-axes: rw4_pyramid with every cluster property runtime (axes too) against the Newton-Euler
-## reference at the issue's size, 10^4 states x 100 parameter sets, C and Fortran, to 1e-13
+## reference at the issue's size, 10^4 states x 100 parameter sets, C and Fortran, to 1e-13; then the
+## scenes whose gimbal axes are runtime (minutes each to derive): one CMG against the gimbal reference,
+## and a sweep with a misalignment cone on cmg4_pyramid's first gimbal
 verify-axes: setup
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_cluster_axes.py -k issues_size
+	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_gimbals.py \
+	  tests/test_sweep_misalign.py -k "reference and axes or pyramid_gimbal_runs"
 
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
